@@ -1,0 +1,177 @@
+"""Quaternion algebra in (x, y, z, w) order, scalar last, and orientation kinematics.
+
+R(q) maps body coordinates to world coordinates (R_WB). Intrinsic XYZ Euler angles (a, b, c)
+mean R = Rx(a) Ry(b) Rz(c), in radians. Angular velocity in rad/s; omega_w in the world frame,
+omega_b in the body frame.
+"""
+from __future__ import annotations
+
+import sympy as sp
+
+from .kernel import Arg, Kernel, scalar, vec
+
+
+def qmul(a: sp.Matrix, b: sp.Matrix) -> sp.Matrix:
+    """Hamilton product a ⊗ b of (x, y, z, w) quaternions."""
+    av, aw = a[:3, 0], a[3]
+    bv, bw = b[:3, 0], b[3]
+    v = aw * bv + bw * av + av.cross(bv)
+    return sp.Matrix([v[0], v[1], v[2], aw * bw - av.dot(bv)])
+
+
+def qconj(q: sp.Matrix) -> sp.Matrix:
+    return sp.Matrix([-q[0], -q[1], -q[2], q[3]])
+
+
+def pure(v: sp.Matrix) -> sp.Matrix:
+    """The pure quaternion [v, 0]."""
+    return sp.Matrix([v[0], v[1], v[2], 0])
+
+
+def rotation_matrix(q: sp.Matrix) -> sp.Matrix:
+    """R_WB of a unit quaternion (x, y, z, w)."""
+    x, y, z, w = q
+    return sp.Matrix([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+    ])
+
+
+def rotate(q: sp.Matrix, v: sp.Matrix) -> sp.Matrix:
+    """R(q) v, written as the vector part of q ⊗ [v,0] ⊗ q*, expanded to R v (unit q)."""
+    return rotation_matrix(q) * v
+
+
+def rot_x(a):
+    c, s = sp.cos(a), sp.sin(a)
+    return sp.Matrix([[1, 0, 0], [0, c, -s], [0, s, c]])
+
+
+def rot_y(b):
+    c, s = sp.cos(b), sp.sin(b)
+    return sp.Matrix([[c, 0, s], [0, 1, 0], [-s, 0, c]])
+
+
+def rot_z(c_):
+    c, s = sp.cos(c_), sp.sin(c_)
+    return sp.Matrix([[c, -s, 0], [s, c, 0], [0, 0, 1]])
+
+
+def axis_angle_quat(u: sp.Matrix, theta) -> sp.Matrix:
+    s = sp.sin(theta / 2)
+    return sp.Matrix([u[0] * s, u[1] * s, u[2] * s, sp.cos(theta / 2)])
+
+
+def _check_identities() -> None:
+    """Derivation-time proofs: R(q) from the sandwich product; Euler XYZ quaternion gives Rx Ry Rz."""
+    q = vec("q", 4)
+    v = vec("v", 3)
+    sandwich = qmul(qmul(q, pure(v)), qconj(q))[:3, 0]
+    unit = {q[3] ** 2: 1 - q[0] ** 2 - q[1] ** 2 - q[2] ** 2}
+    diff = (sandwich - rotation_matrix(q) * v).applyfunc(lambda e: sp.expand(sp.expand(e).subs(unit)))
+    if diff != sp.zeros(3, 1):
+        raise RuntimeError("derive: R(q) v does not equal q ⊗ [v,0] ⊗ q*")
+    a, b, c = sp.symbols("a b c", real=True)
+    qe = euler_xyz_quat(a, b, c)
+    d = (rotation_matrix(qe) - rot_x(a) * rot_y(b) * rot_z(c)).applyfunc(
+        lambda e: sp.simplify(sp.expand_trig(e)))
+    if d != sp.zeros(3, 3):
+        raise RuntimeError("derive: Euler XYZ quaternion does not reproduce Rx Ry Rz")
+
+
+def euler_xyz_quat(a, b, c) -> sp.Matrix:
+    """Quaternion of intrinsic XYZ angles: qx(a) ⊗ qy(b) ⊗ qz(c)."""
+    ex, ey, ez = sp.Matrix([1, 0, 0]), sp.Matrix([0, 1, 0]), sp.Matrix([0, 0, 1])
+    return qmul(qmul(axis_angle_quat(ex, a), axis_angle_quat(ey, b)), axis_angle_quat(ez, c))
+
+
+def kernels() -> list[Kernel]:
+    _check_identities()
+    g = "Quaternions and orientation kinematics"
+    a, b, q = vec("a", 4), vec("b", 4), vec("q", 4)
+    v_b, omega_w, omega_b, u = vec("v_b", 3), vec("omega_w", 3), vec("omega_b", 3), vec("axis", 3)
+    R = vec("R", 9)
+    Rm = sp.Matrix(3, 3, list(R))
+    dt, theta = scalar("dt", positive=True), scalar("angle")
+    ea, eb, ec = scalar("roll"), scalar("pitch"), scalar("yaw")
+    qd_world = qmul(pure(omega_w), q) / 2
+    qd_body = qmul(q, pure(omega_b)) / 2
+    q_step = q + dt * qd_world
+    norm = sp.sqrt(q_step.dot(q_step))
+    qnorm = sp.sqrt(q.dot(q))
+
+    # Rotation matrix → quaternion (Shepperd): pick the largest of w², x², y², z² to divide by.
+    tr = Rm[0, 0] + Rm[1, 1] + Rm[2, 2]
+    def _branch(k):
+        if k == 3:
+            s = 2 * sp.sqrt(1 + tr)
+            return [(Rm[2, 1] - Rm[1, 2]) / s, (Rm[0, 2] - Rm[2, 0]) / s, (Rm[1, 0] - Rm[0, 1]) / s, s / 4]
+        i, j, k2 = k, (k + 1) % 3, (k + 2) % 3
+        s = 2 * sp.sqrt(1 + Rm[i, i] - Rm[j, j] - Rm[k2, k2])
+        out = [0, 0, 0, 0]
+        out[i] = s / 4
+        out[j] = (Rm[j, i] + Rm[i, j]) / s
+        out[k2] = (Rm[k2, i] + Rm[i, k2]) / s
+        out[3] = (Rm[k2, j] - Rm[j, k2]) / s
+        return out
+    br = [_branch(k) for k in (3, 0, 1, 2)]
+    c_w = sp.And(tr >= Rm[0, 0], tr >= Rm[1, 1], tr >= Rm[2, 2])
+    c_x = sp.And(Rm[0, 0] >= Rm[1, 1], Rm[0, 0] >= Rm[2, 2])
+    c_y = Rm[1, 1] >= Rm[2, 2]
+    from_R = sp.Matrix([sp.Piecewise((br[0][i], c_w), (br[1][i], c_x), (br[2][i], c_y), (br[3][i], True))
+                        for i in range(4)])
+
+    # Quaternion → intrinsic XYZ angles. R02 = sin(pitch); at |R02| = 1 (gimbal lock) roll and yaw
+    # are not separable: yaw is set to 0 and roll carries the whole rotation about x.
+    Rq = rotation_matrix(q)
+    s_pitch = sp.Min(1, sp.Max(-1, Rq[0, 2]))
+    lock = sp.Abs(Rq[0, 2]) >= 1 - sp.Rational(1, 10**12)
+    to_euler = sp.Matrix([
+        sp.Piecewise((sp.atan2(Rq[2, 1], Rq[1, 1]), lock), (sp.atan2(-Rq[1, 2], Rq[2, 2]), True)),
+        sp.asin(s_pitch),
+        sp.Piecewise((0, lock), (sp.atan2(-Rq[0, 1], Rq[0, 0]), True)),
+    ])
+    vnorm = sp.sqrt(q[0] ** 2 + q[1] ** 2 + q[2] ** 2)
+    half = sp.atan2(vnorm, q[3])
+    small = vnorm <= sp.Rational(1, 10**300)
+    to_axis = sp.Matrix([sp.Piecewise((1 if i == 0 else 0, small), (q[i] / vnorm, True)) for i in range(3)])
+
+    Q = "quaternion (x, y, z, w), scalar last"
+    return [
+        Kernel("quat_mul", "Hamilton product", r"a \otimes b = \begin{bmatrix} a_w b_v + b_w a_v + a_v \times b_v \\ a_w b_w - a_v \cdot b_v \end{bmatrix}",
+               [Arg("a", a, Q), Arg("b", b, Q)], [Arg("ab", qmul(a, b), Q)], g),
+        Kernel("quat_conj", "Conjugate (inverse of a unit quaternion)", r"q^* = [-q_v, q_w]",
+               [Arg("q", q, Q)], [Arg("q_conj", qconj(q), Q)], g),
+        Kernel("quat_normalize", "Scale to unit length", r"\hat q = q / \lVert q \rVert",
+               [Arg("q", q, Q)], [Arg("q_unit", q / qnorm, Q)], g),
+        Kernel("quat_rotate", "Rotate a body vector into the world frame", r"v_w = R(q)\,v_b = (q \otimes [v_b,0] \otimes q^*)_v",
+               [Arg("q", q, Q + ", unit, R_WB", "unit_quaternion"), Arg("v_b", v_b, "vector, body frame")],
+               [Arg("v_w", rotate(q, v_b), "vector, world frame")], g),
+        Kernel("quat_to_matrix", "Rotation matrix R_WB", r"R(q) = (q_w^2 - q_v^T q_v)\mathbf{1} + 2 q_v q_v^T + 2 q_w [q_v]_\times",
+               [Arg("q", q, Q + ", unit", "unit_quaternion")], [Arg("R_wb", rotation_matrix(q), "3×3 rotation, body → world, row-major")], g),
+        Kernel("matrix_to_quat", "Quaternion of a rotation matrix (Shepperd's branch on the largest component)",
+               r"q_w = \tfrac12\sqrt{1+\operatorname{tr}R},\; q_v = \frac{1}{4q_w}\begin{bmatrix}R_{21}-R_{12}\\R_{02}-R_{20}\\R_{10}-R_{01}\end{bmatrix}\ \text{(or the analogous branch)}",
+               [Arg("R_wb", Rm, "3×3 rotation, body → world, row-major", "real")], [Arg("q", from_R, Q)], g,
+               notes=["Input must be a rotation matrix; tests draw it from a random unit quaternion."]),
+        Kernel("axis_angle_to_quat", "Quaternion of a rotation by angle about a unit axis", r"q = [\hat u \sin(\theta/2), \cos(\theta/2)]",
+               [Arg("axis", u, "unit axis (any frame)", "unit_vector"), Arg("angle", theta, "angle, rad")],
+               [Arg("q", axis_angle_quat(u, theta), Q)], g),
+        Kernel("quat_to_axis_angle", "Unit axis and angle in [0, 2π] of a unit quaternion", r"\theta = 2\,\operatorname{atan2}(\lVert q_v\rVert, q_w),\ \hat u = q_v/\lVert q_v\rVert",
+               [Arg("q", q, Q + ", unit", "unit_quaternion")],
+               [Arg("axis", to_axis, "unit axis ([1,0,0] for the identity)"), Arg("angle", 2 * half, "angle, rad")], g),
+        Kernel("euler_xyz_to_quat", "Quaternion of intrinsic XYZ Euler angles, R = Rx(roll) Ry(pitch) Rz(yaw)",
+               r"q = q_x(a) \otimes q_y(b) \otimes q_z(c)",
+               [Arg("roll", ea, "rad"), Arg("pitch", eb, "rad"), Arg("yaw", ec, "rad")], [Arg("q", euler_xyz_quat(ea, eb, ec), Q)], g),
+        Kernel("quat_to_euler_xyz", "Intrinsic XYZ Euler angles of a unit quaternion (yaw = 0 at gimbal lock)",
+               r"b = \arcsin R_{02},\ a = \operatorname{atan2}(-R_{12}, R_{22}),\ c = \operatorname{atan2}(-R_{01}, R_{00})",
+               [Arg("q", q, Q + ", unit", "unit_quaternion")], [Arg("rpy", to_euler, "(roll, pitch, yaw), rad")], g),
+        Kernel("quat_derivative_world", "Quaternion rate from world-frame angular velocity", r"\dot q = \tfrac12 [\omega_w, 0] \otimes q",
+               [Arg("q", q, Q), Arg("omega_w", omega_w, "angular velocity, world frame, rad/s")], [Arg("q_dot", qd_world, "1/s")], g),
+        Kernel("quat_derivative_body", "Quaternion rate from body-frame angular velocity", r"\dot q = \tfrac12 q \otimes [\omega_b, 0]",
+               [Arg("q", q, Q), Arg("omega_b", omega_b, "angular velocity, body frame, rad/s")], [Arg("q_dot", qd_body, "1/s")], g),
+        Kernel("integrate_orientation", "One explicit world-form step, then normalization (the chapter's default)",
+               r"q_{n+1} = \frac{q_n + \Delta t\,\tfrac12[\omega_w,0]\otimes q_n}{\lVert q_n + \Delta t\,\tfrac12[\omega_w,0]\otimes q_n \rVert}",
+               [Arg("q", q, Q), Arg("omega_w", omega_w, "angular velocity, world frame, rad/s"), Arg("dt", dt, "time step, s", "positive")],
+               [Arg("q_next", q_step / norm, Q + ", unit")], g),
+    ]
