@@ -1,0 +1,18 @@
+"""Exceptions of the runtime (input validation errors live in lavendersim.validate)."""
+from __future__ import annotations
+
+
+class DivergenceError(FloatingPointError):
+    """A step produced a non-finite state. The simulator's state is left as it was before the call.
+
+    Attributes: step (0-based index within the call), body (index), body_name (or None), cause."""
+
+    def __init__(self, step: int, body: int, cause: str, body_name: str | None = None, t: float | None = None):
+        self.step, self.body, self.cause, self.body_name, self.t = step, body, cause, body_name, t
+        who = f"body {body}" + (f" ({body_name!r})" if body_name else "")
+        when = f"step {step}" + (f" (t = {t:.6g} s)" if t is not None else "")
+        super().__init__(f"simulation diverged at {when}, {who}: {cause}")
+
+
+class StaleBuildError(ImportError):
+    """The compiled C backend was built from other generated/ sources than the ones on disk."""
