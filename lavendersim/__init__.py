@@ -1,0 +1,15 @@
+"""LavenderSim: 3D rigid-body mechanics with SymPy-derived, generated C and NumPy kernels.
+
+Conventions: quaternions (x, y, z, w), scalar last; R_WB maps body to world; suffixes _w/_b name
+the frame; SI units; float64.
+"""
+from .bodies import Body, BodyState
+from .effects import AngularDamping, AppliedTorque, ForceAtPoint, Gravity, LinearDamping
+from .errors import DivergenceError, StaleBuildError
+from .scene import Scene
+from .sim import Sim, Trajectory
+from .validate import LavenderInputError
+
+__all__ = ["Body", "BodyState", "Scene", "Sim", "Trajectory", "AppliedTorque", "ForceAtPoint", "Gravity",
+           "LinearDamping", "AngularDamping", "DivergenceError", "StaleBuildError", "LavenderInputError"]
+__version__ = "0.1.0"

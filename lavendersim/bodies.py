@@ -1,0 +1,87 @@
+"""Rigid bodies: mass, principal inertia, shape, and an initial state.
+
+Body frame at the centre of mass along the principal axes. Units: kg, m, kg·m², m/s, rad/s.
+Orientation q = R_WB as (x, y, z, w). The state vector layout is derive/rigid_body.py's:
+x = [p_w(3), q(4), v_w(3), omega_b(3)].
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from . import validate as V
+from .kernels import K
+
+STATE_SIZE = 13
+P, Q, VEL, W = slice(0, 3), slice(3, 7), slice(7, 10), slice(10, 13)
+
+
+class Body:
+    """A rigid body with diagonal (principal) inertia I_b and its initial state.
+
+    Give at most one of omega_b (body frame) and omega_w (world frame); the other follows from q.
+    """
+
+    def __init__(self, name: str, mass, inertia, *, p_w=(0, 0, 0), q=(0, 0, 0, 1), v_w=(0, 0, 0),
+                 omega_b=None, omega_w=None, shape: tuple | None = None):
+        if not isinstance(name, str) or not name:
+            raise V.LavenderInputError("name", "must be a non-empty string", f", got {name!r}")
+        mass = V.positive("mass", mass)
+        I_b = V.inertia("inertia", inertia)
+        x = np.empty(STATE_SIZE)
+        x[P] = V.vector("p_w", p_w)
+        x[Q] = V.quaternion("q", q)
+        x[VEL] = V.vector("v_w", v_w)
+        if omega_b is not None and omega_w is not None:
+            raise V.LavenderInputError("omega_w", "give omega_b or omega_w, not both")
+        if omega_w is not None:
+            x[W] = K.world_to_body(x[Q], V.vector("omega_w", omega_w))
+        else:
+            x[W] = V.vector("omega_b", (0, 0, 0) if omega_b is None else omega_b)
+        self.name, self.mass, self.I_b, self.shape = name, mass, I_b, shape
+        self.x0 = x
+
+    @classmethod
+    def box(cls, name: str, mass, size, **state) -> "Body":
+        """Solid box with full side lengths size = (w, h, d) along body x, y, z (m)."""
+        w, h, d = (V.positive(f"size[{i}]", s) for i, s in enumerate(V.vector("size", size)))
+        return cls(name, mass, K.inertia_box(V.positive("mass", mass), w, h, d), shape=("box", (w, h, d)), **state)
+
+    @classmethod
+    def cylinder(cls, name: str, mass, radius, height, **state) -> "Body":
+        """Solid cylinder along body z."""
+        r, h = V.positive("radius", radius), V.positive("height", height)
+        return cls(name, mass, K.inertia_cylinder(V.positive("mass", mass), r, h), shape=("cylinder", (r, h)), **state)
+
+    @classmethod
+    def sphere(cls, name: str, mass, radius, **state) -> "Body":
+        r = V.positive("radius", radius)
+        return cls(name, mass, K.inertia_sphere(V.positive("mass", mass), r), shape=("sphere", (r,)), **state)
+
+    @property
+    def params(self) -> np.ndarray:
+        """[m, I_x, I_y, I_z], the per-body parameter row the backends take."""
+        return np.concatenate(([self.mass], self.I_b))
+
+    def __repr__(self) -> str:
+        return f"Body({self.name!r}, mass={self.mass:g}, I_b={np.array2string(self.I_b, precision=6)})"
+
+
+class BodyState:
+    """A view of one body's state (or trajectory: leading time axis) with derived quantities."""
+
+    def __init__(self, x: np.ndarray):
+        self.x = x
+
+    p_w = property(lambda s: s.x[..., P], doc="COM position, world, m")
+    q = property(lambda s: s.x[..., Q], doc="orientation R_WB (x, y, z, w)")
+    v_w = property(lambda s: s.x[..., VEL], doc="COM velocity, world, m/s")
+    omega_b = property(lambda s: s.x[..., W], doc="angular velocity, body frame, rad/s")
+
+    @property
+    def omega_w(self) -> np.ndarray:
+        """Angular velocity, world frame, rad/s."""
+        return K.quat_rotate(self.q, self.omega_b)
+
+    @property
+    def R_wb(self) -> np.ndarray:
+        return K.quat_to_matrix(self.q)

@@ -1,0 +1,51 @@
+"""A scene: bodies plus the effects it declares, and nothing else."""
+from __future__ import annotations
+
+import numpy as np
+
+from . import validate as V
+from .bodies import Body
+from .effects import Effect, make
+
+
+class Scene:
+    def __init__(self):
+        self.bodies: dict[str, Body] = {}
+        self.effects: list[Effect] = []
+
+    def add_body(self, body: Body) -> Body:
+        if not isinstance(body, Body):
+            raise V.LavenderInputError("body", "must be a lavendersim.Body", f", got {type(body).__name__}")
+        if body.name in self.bodies:
+            raise V.LavenderInputError("body.name", f"duplicate name {body.name!r}")
+        self.bodies[body.name] = body
+        return body
+
+    def add_effect(self, effect: Effect | str, body: str | None = None, **params) -> Effect:
+        """Declare an effect: an Effect instance, or its name plus parameters."""
+        if isinstance(effect, str):
+            effect = make(effect, body=body, **params)
+        elif not isinstance(effect, Effect):
+            raise V.LavenderInputError("effect", "must be an effect name or a lavendersim Effect", f", got {type(effect).__name__}")
+        elif body is not None or params:
+            raise V.LavenderInputError("effect", "pass parameters either in the Effect instance or with a name, not both")
+        if effect.body is not None and effect.body not in self.bodies:
+            raise V.LavenderInputError(f"{effect.name}.body", f"unknown body {effect.body!r}; bodies: {', '.join(self.bodies) or 'none'}")
+        self.effects.append(effect)
+        return effect
+
+    def index(self, name: str) -> int:
+        if name not in self.bodies:
+            raise V.LavenderInputError("body", f"unknown body {name!r}; bodies: {', '.join(self.bodies) or 'none'}")
+        return list(self.bodies).index(name)
+
+    def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(state (nb, 13), params (nb, 4) = [m, I_x, I_y, I_z], effects (ne, 8)) for the backends."""
+        if not self.bodies:
+            raise V.LavenderInputError("scene.bodies", "a scene needs at least one body")
+        bodies = list(self.bodies.values())
+        state = np.ascontiguousarray(np.stack([b.x0 for b in bodies]))
+        params = np.ascontiguousarray(np.stack([b.params for b in bodies]))
+        rows = [e.row(-1 if e.body is None else self.index(e.body)) for e in self.effects]
+        effects = np.ascontiguousarray(np.array(rows, dtype=np.float64).reshape(len(rows), 8))
+        return state, params, effects
