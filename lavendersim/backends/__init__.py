@@ -24,8 +24,9 @@ def get(name: str):
 
 def divergence_cause(x_before: np.ndarray, dt: float, integrator: str) -> str:
     """A plain guess at why one body's step went non-finite, from its state before the step."""
-    w = float(np.linalg.norm(x_before[10:13]))
-    v = float(np.linalg.norm(x_before[7:10]))
+    with np.errstate(over="ignore", invalid="ignore"):
+        w = float(np.linalg.norm(x_before[10:13]))
+        v = float(np.linalg.norm(x_before[7:10]))
     if not np.all(np.isfinite(x_before)):
         return "the state was already non-finite before the step"
     wdt = w * dt

@@ -107,10 +107,15 @@ class NumpyBackend:
     def advance(self, state, params, effects, integrator: str, normalize: bool, dt: float, n_steps: int) -> None:
         plan = self.plan(params, effects)
         x = state.copy()
+        with np.errstate(over="ignore", invalid="ignore"):  # non-finite results are caught below
+            self._loop(plan, x, integrator, normalize, dt, n_steps)
+        state[...] = x
+
+    @staticmethod
+    def _loop(plan, x, integrator, normalize, dt, n_steps) -> None:
         for i in range(n_steps):
             xn = step(plan, x, integrator, normalize, dt)
             if not np.isfinite(xn).all():
                 b = int(np.flatnonzero(~np.isfinite(xn).all(axis=1))[0])
                 raise DivergenceError(i, b, divergence_cause(x[b], dt, integrator))
-            x = xn
-        state[...] = x
+            x[...] = xn

@@ -1,0 +1,170 @@
+"""C backend: the step loop runs inside the compiled extension `lavendersim._lavender_c`.
+
+One `advance` call advances every body by n_steps steps without returning to Python (bodies outer,
+steps inner). The extension embeds the sha256 of the generated/kernels.c and kernels.h it was built
+from; importing this module compares it with the files on disk and raises StaleBuildError (naming
+the rebuild command) when they differ. If the extension was never built, the ImportError says how.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import DivergenceError, StaleBuildError
+
+REBUILD = "pip install -e ."
+HASHED = ("kernels.c", "kernels.h")
+INTEGRATOR_CODES = {"euler": 0, "semi_implicit_euler": 1, "rk4": 2}
+EFFECT_CODES = {"applied_torque": 1, "force_at_point": 2, "gravity": 3, "linear_damping": 4, "angular_damping": 5}
+
+try:
+    from .. import _lavender_c as _c
+except ImportError as exc:  # not built (or built for another interpreter)
+    raise ImportError(
+        "lavendersim's C backend (lavendersim._lavender_c) is not built or failed to load "
+        f"({exc}). Build it from the repository root with `{REBUILD}` (needs a C99 compiler and the "
+        "Python headers), or use the NumPy backend (backend='numpy')."
+    ) from exc
+
+
+def generated_dir() -> Path:
+    import lavendersim.generated as g
+
+    return Path(g.__file__).resolve().parent
+
+
+def generated_hash(gen_dir: Path) -> str:
+    """sha256 over the per-file sha256 of kernels.c and kernels.h (same recipe as setup.py)."""
+    h = hashlib.sha256()
+    for name in HASHED:
+        h.update(f"{name} {hashlib.sha256((gen_dir / name).read_bytes()).hexdigest()}\n".encode())
+    return h.hexdigest()
+
+
+def _generated_inconsistent(gen_dir: Path) -> list[str]:
+    """Files of gen_dir whose sha256 differs from manifest.json (hand-edited or half-regenerated)."""
+    try:
+        man = json.loads((gen_dir / "manifest.json").read_text(encoding="utf-8"))
+        want = man["outputs_sha256"]
+    except (OSError, ValueError, KeyError, TypeError):
+        return ["manifest.json"]
+    bad = []
+    for name in HASHED:
+        p = gen_dir / name
+        if name not in want or not p.is_file() or hashlib.sha256(p.read_bytes()).hexdigest() != want[name]:
+            bad.append(name)
+    return bad
+
+
+def check_build(gen_dir: Path | None = None, built_hash: str | None = None) -> None:
+    """Raise StaleBuildError if the extension was built from other generated sources than gen_dir's."""
+    gen_dir = generated_dir() if gen_dir is None else Path(gen_dir)
+    built = _c.GENERATED_HASH if built_hash is None else built_hash
+    try:
+        current = generated_hash(gen_dir)
+    except OSError as exc:
+        raise StaleBuildError(f"cannot read the generated C sources in {gen_dir} ({exc}); "
+                              f"run `lavendersim derive`, then rebuild with `{REBUILD}`") from exc
+    if built == current:
+        return
+    msg = (f"lavendersim._lavender_c is stale: it was built from other generated C kernels than "
+           f"{gen_dir}/kernels.c and kernels.h (built {built[:12]}…, on disk {current[:12]}…). "
+           f"Rebuild it from the repository root with `{REBUILD}`.")
+    bad = _generated_inconsistent(gen_dir)
+    if bad:
+        msg += (f" generated/ itself does not match its manifest ({', '.join(bad)}): "
+                f"regenerate it with `lavendersim derive` first, then run `{REBUILD}`.")
+    raise StaleBuildError(msg)
+
+
+check_build()
+
+
+def _kernel_index() -> dict[str, tuple[int, int, int]]:
+    return {name: (i, n_in, n_out) for i, (name, n_in, n_out) in enumerate(_c.kernels())}
+
+
+_INDEX = _kernel_index()
+
+
+def eval_kernel(name: str, *inputs):
+    """Evaluate generated kernel `name` through C, broadcasting leading batch axes like
+    generated/kernels_numpy.py. Returns the outputs (a tuple when there are several), shaped like
+    the NumPy kernel's: batch + output shape."""
+    from lavendersim.generated.kernels_numpy import KERNELS
+
+    if name not in KERNELS or name not in _INDEX:
+        raise KeyError(f"eval_kernel: unknown kernel {name!r}")
+    _, in_spec, out_spec = KERNELS[name]
+    index, n_in, n_out = _INDEX[name]
+    if len(inputs) != len(in_spec):
+        raise TypeError(f"eval_kernel({name}): expected {len(in_spec)} inputs "
+                        f"({', '.join(n for n, _ in in_spec)}), got {len(inputs)}")
+    arrs, batches = [], []
+    for (arg, shape), value in zip(in_spec, inputs):
+        a = np.asarray(value, dtype=np.float64)
+        k = len(shape)
+        if a.ndim < k or tuple(a.shape[a.ndim - k:]) != tuple(shape):
+            raise ValueError(f"eval_kernel({name}): input {arg} must end in shape {shape}, got {a.shape}")
+        arrs.append(a)
+        batches.append(a.shape[:a.ndim - k])
+    batch = np.broadcast_shapes(*batches)
+    rows = int(np.prod(batch, dtype=np.int64))
+    packed = np.empty((rows, n_in))
+    col = 0
+    for (arg, shape), a in zip(in_spec, arrs):
+        size = int(np.prod(shape, dtype=np.int64))
+        packed[:, col:col + size] = np.broadcast_to(a, batch + tuple(shape)).reshape(rows, size)
+        col += size
+    if col != n_in:
+        raise RuntimeError(f"eval_kernel({name}): NumPy kernel table packs {col} inputs, C table {n_in}; "
+                           f"rebuild with `{REBUILD}`")
+    out = np.empty((rows, n_out))
+    _c.eval_kernel(index, packed, out)
+    results, col = [], 0
+    for arg, shape in out_spec:
+        size = int(np.prod(shape, dtype=np.int64))
+        results.append(out[:, col:col + size].reshape(batch + tuple(shape)).copy())
+        col += size
+    return results[0] if len(results) == 1 else tuple(results)
+
+
+def _cause(pre: np.ndarray, params: np.ndarray, effects: np.ndarray, body: int, dt: float, integrator: str) -> str:
+    if not np.all(np.isfinite(params[body])):
+        return f"non-finite input: params of body {body} are {params[body].tolist()}"
+    mine = effects[(effects[:, 1] == -1) | (effects[:, 1] == body)] if effects.shape[0] else effects
+    if mine.size and not np.all(np.isfinite(mine)):
+        return f"non-finite input: an effect acting on body {body} has non-finite parameters"
+    if not np.all(np.isfinite(pre)):
+        return "non-finite input: the state was already non-finite before the step"
+    from . import divergence_cause
+
+    return divergence_cause(pre, dt, integrator)
+
+
+class CBackend:
+    """advance(state, params, effects, integrator, normalize, dt, n_steps) inside C; see module doc."""
+
+    name = "c"
+
+    def advance(self, state, params, effects, integrator: str, normalize: bool, dt: float, n_steps: int) -> None:
+        if integrator not in INTEGRATOR_CODES:
+            raise ValueError(f"integrator: must be one of {', '.join(INTEGRATOR_CODES)}, got {integrator!r}")
+        if not isinstance(state, np.ndarray) or state.dtype != np.float64 or not state.flags.c_contiguous \
+                or not state.flags.writeable:
+            raise TypeError("state must be a writable C-contiguous float64 numpy array of shape (nb, 13)")
+        params = np.ascontiguousarray(params, dtype=np.float64)
+        effects = np.ascontiguousarray(effects, dtype=np.float64)
+        if effects.size == 0:
+            effects = effects.reshape(0, 8)
+        snapshot = state.copy()
+        status, step, body = _c.simulate(state, params, effects, INTEGRATOR_CODES[integrator],
+                                         1 if normalize else 0, float(dt), int(n_steps))
+        if status == 0:
+            return
+        pre = state[body].copy()  # the failing body is left at its last finite state
+        state[...] = snapshot
+        raise DivergenceError(step, body, _cause(pre, params, effects, body, float(dt), integrator))
