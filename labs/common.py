@@ -1,0 +1,274 @@
+"""Shared plumbing of the labs: figure checks, results.json, PNG plots, printing.
+
+A lab's ``run(out_dir, backend=..., **options)`` returns a :class:`LabResult`: a ``dict`` whose
+items are exactly what is written to ``OUT/NAME/results.json`` (a flat object of named figures,
+the parameters used, one ``check_<name>`` bool per check and ``passed``), plus attributes
+``checks`` (list of :class:`Check`), ``files`` (paths written) and ``passed``. ``run`` never
+raises because a figure is off; the CLI turns ``passed == False`` into exit code 1 and prints
+a message naming the figure, its value, the expected value and the tolerance.
+"""
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from lavendersim import validate as V
+
+DEFAULT_OUT = "lab-output"
+BACKENDS = ("c", "numpy")
+
+
+# --------------------------------------------------------------------------
+# checks
+# --------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Check:
+    """One acceptance check of a figure.
+
+    kind: ``"close"`` (|value - expected| <= tol), ``"max"`` (value <= limit), ``"below"``
+    (value < limit), ``"min"`` (value >= limit), ``"above"`` (value > limit) or ``"true"``
+    (a paw-check assertion; value is a bool).
+    """
+
+    name: str
+    value: float | bool
+    kind: str
+    expected: float | None = None
+    tol: float | None = None
+    note: str = ""
+
+    @property
+    def passed(self) -> bool:
+        v = self.value
+        if self.kind == "true":
+            return bool(v)
+        if not isinstance(v, (int, float, np.floating, np.integer)) or not math.isfinite(float(v)):
+            return False
+        v = float(v)
+        if self.kind == "close":
+            return abs(v - self.expected) <= self.tol
+        if self.kind == "max":
+            return v <= self.expected
+        if self.kind == "below":
+            return v < self.expected
+        if self.kind == "min":
+            return v >= self.expected
+        if self.kind == "above":
+            return v > self.expected
+        raise ValueError(f"unknown check kind {self.kind!r}")
+
+    def describe(self) -> str:
+        """``name = value (expected ...)`` in words, for PASS and FAIL lines alike."""
+        if self.kind == "true":
+            text = f"{self.name}: {'holds' if self.value else 'does NOT hold'}"
+        else:
+            v = _fmt(self.value)
+            if self.kind == "close":
+                off = abs(float(self.value) - self.expected) if _finite(self.value) else float("nan")
+                text = (f"{self.name} = {v}, expected {_fmt(self.expected)} ± {_fmt(self.tol)}"
+                        f" (off by {_fmt(off)})")
+            else:
+                op = {"max": "<=", "below": "<", "min": ">=", "above": ">"}[self.kind]
+                text = f"{self.name} = {v}, expected {op} {_fmt(self.expected)}"
+        return text + (f" — {self.note}" if self.note else "")
+
+
+def _finite(x) -> bool:
+    try:
+        return math.isfinite(float(x))
+    except (TypeError, ValueError):
+        return False
+
+
+def _fmt(x) -> str:
+    if isinstance(x, (bool, np.bool_)):
+        return str(bool(x))
+    x = float(x)
+    if x == 0:
+        return "0"
+    if not math.isfinite(x):
+        return repr(x)
+    if 1e-4 <= abs(x) < 1e6:
+        return f"{x:.10g}"
+    return f"{x:.6e}"
+
+
+def close(name, value, expected, tol, note="") -> Check:
+    """|value - expected| <= tol."""
+    return Check(name, float(value), "close", float(expected), float(tol), note)
+
+
+def at_most(name, value, limit, note="") -> Check:
+    return Check(name, float(value), "max", float(limit), None, note)
+
+
+def below(name, value, limit, note="") -> Check:
+    return Check(name, float(value), "below", float(limit), None, note)
+
+
+def at_least(name, value, limit, note="") -> Check:
+    return Check(name, float(value), "min", float(limit), None, note)
+
+
+def above(name, value, limit, note="") -> Check:
+    return Check(name, float(value), "above", float(limit), None, note)
+
+
+def holds(name, condition, note="") -> Check:
+    """A paw-check or failure-mode assertion."""
+    return Check(name, bool(condition), "true", None, None, note)
+
+
+# --------------------------------------------------------------------------
+# results
+# --------------------------------------------------------------------------
+
+
+class LabResult(dict):
+    """Flat results (exactly the content of results.json) plus ``checks``, ``files``, ``passed``."""
+
+    def __init__(self, lab: str, out_dir: Path, items: dict, checks: list[Check]):
+        super().__init__(items)
+        self.lab = lab
+        self.out_dir = Path(out_dir)
+        self.checks = list(checks)
+        self.files: list[Path] = []
+        self.param_names: list[str] = []
+        self.figure_names: list[str] = []
+
+    @property
+    def passed(self) -> bool:
+        return all(c.passed for c in self.checks)
+
+    @property
+    def failures(self) -> list[Check]:
+        return [c for c in self.checks if not c.passed]
+
+
+def _json_value(name: str, v):
+    """JSON-ready scalar (float/int/bool/str) or list of floats; rejects anything nested deeper."""
+    if isinstance(v, (bool, np.bool_)):
+        return bool(v)
+    if isinstance(v, (int, np.integer)):
+        return int(v)
+    if isinstance(v, (float, np.floating)):
+        f = float(v)
+        if not math.isfinite(f):
+            return str(f)  # JSON has no nan/inf; keep it visible rather than invalid
+        return f
+    if isinstance(v, str):
+        return v
+    arr = np.asarray(v)
+    if arr.ndim == 1 and arr.dtype.kind in "iuf":
+        return [_json_value(name, x) for x in arr]
+    raise TypeError(f"results.json: {name!r} must be a number, bool, string or flat vector, got {type(v).__name__}")
+
+
+def finish(lab: str, out_dir, figures: dict, params: dict, checks: list[Check], plots: dict) -> LabResult:
+    """Write ``OUT/lab/results.json`` and the PNGs; return the :class:`LabResult`.
+
+    ``figures`` and ``params`` are flat dicts (a name clash is an error); ``plots`` maps a PNG
+    file name to a ``matplotlib.figure.Figure``.
+    """
+    clash = set(figures) & set(params)
+    if clash:
+        raise ValueError(f"lab {lab}: names used as both figure and parameter: {sorted(clash)}")
+    d = Path(out_dir) / lab
+    d.mkdir(parents=True, exist_ok=True)
+    items: dict = {"lab": lab}
+    for k, v in {**params, **figures}.items():
+        items[k] = _json_value(k, v)
+    for c in checks:
+        items[f"check_{c.name}"] = c.passed
+    result = LabResult(lab, d, items, checks)
+    result.param_names = list(params)
+    result.figure_names = list(figures)
+    result["passed"] = result.passed
+    path = d / "results.json"
+    path.write_text(json.dumps(dict(result), indent=2, allow_nan=False) + "\n")
+    result.files.append(path)
+    for fname, fig in plots.items():
+        p = d / fname
+        fig.savefig(p, dpi=110)
+        result.files.append(p)
+    return result
+
+
+# --------------------------------------------------------------------------
+# plotting (no pyplot: no global state, no display needed)
+# --------------------------------------------------------------------------
+
+
+def new_figure(nrows: int = 1, ncols: int = 1, *, size=(8.0, 4.5), title: str | None = None):
+    """A headless matplotlib Figure (Agg canvas) and its axes array."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=size, layout="constrained")
+    FigureCanvasAgg(fig)
+    axes = fig.subplots(nrows, ncols, squeeze=False)
+    if title:
+        fig.suptitle(title)
+    return fig, axes
+
+
+# --------------------------------------------------------------------------
+# option validation and small numerical helpers
+# --------------------------------------------------------------------------
+
+
+def check_backend(backend) -> str:
+    return V.choice("backend", backend, BACKENDS)
+
+
+def angle_between_deg(K, q_a, q_b):
+    """Rotation angle (degrees, in [0, 180]) between two orientations; q and -q are the same.
+
+    Both are normalized first (an unnormalized state still names an orientation)."""
+    qa = K.quat_normalize(q_a)
+    qb = K.quat_normalize(q_b)
+    _, ang = K.quat_to_axis_angle(K.quat_mul(K.quat_conj(qb), qa))
+    ang = np.asarray(ang, dtype=float)
+    ang = np.minimum(ang, 2 * np.pi - ang)
+    return np.degrees(ang)
+
+
+# --------------------------------------------------------------------------
+# printing
+# --------------------------------------------------------------------------
+
+
+def _show(v) -> str:
+    if isinstance(v, list):
+        return "[" + ", ".join(x if isinstance(x, str) else _fmt(x) for x in v) + "]"
+    if isinstance(v, (float, int)) and not isinstance(v, bool):
+        return _fmt(v)
+    return str(v)
+
+
+def report(result: LabResult, stream=None) -> int:
+    """Print parameters, figures and every check; return 0 if all checks pass, else 1."""
+    import sys
+
+    out = stream or sys.stdout
+    print(f"== lab {result.lab} -> {result.out_dir}", file=out)
+    print("  parameters: " + ", ".join(f"{k}={_show(result[k])}" for k in result.param_names), file=out)
+    for k in result.figure_names:
+        print(f"  {k} = {_show(result[k])}", file=out)
+    for c in result.checks:
+        print(f"  {'PASS' if c.passed else 'FAIL'}  {c.describe()}", file=out)
+    for p in result.files:
+        print(f"  wrote {p}", file=out)
+    if result.passed:
+        print(f"lab {result.lab}: all {len(result.checks)} checks pass", file=out)
+        return 0
+    for c in result.failures:
+        print(f"lab {result.lab}: figure {c.describe()}", file=sys.stderr)
+    print(f"lab {result.lab}: {len(result.failures)} of {len(result.checks)} checks FAILED", file=sys.stderr)
+    return 1

@@ -1,0 +1,169 @@
+"""Off-center force: a force F applied at an offset r from the COM produces torque tau = r x F.
+
+Chapter figure: r = [0.3, 0, 0] m, F = [0, 5, 0] N  ->  tau = [0, 0, 1.5] N·m (exact to 1e-12).
+A force along the lever arm gives zero torque. Paw-check 2: the same force at r = [-0.3, 0, 0] m
+gives [0, 0, -1.5] N·m.
+
+Then through the simulator: a body at rest (the chapter's 0.8 x 0.2 x 0.2 m, 1 kg rod, whose long
+axis is body x, so the 0.3 m offset lies inside it) gets a force_at_point effect. After one RK4 step
+of a tiny dt from rest, omega_w / dt is the angular acceleration up to O(dt^2) (at rest the
+gyroscopic term and the rotation of the lever arm enter only at second order); it must equal
+I_w^-1 tau from the apply_inv_inertia kernel. A second copy in a general orientation checks the
+body-frame offset and the world inertia, and the COM acceleration must be F / m.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+import lavendersim as lv
+from lavendersim import validate as V
+from lavendersim.kernels import K
+
+from . import common as C
+
+NAME = "force"
+TITLE = "off-center force: torque = r x F, zero along the lever arm, reversed at -r; checked in the simulator"
+
+R_W = (0.3, 0.0, 0.0)
+F_W = (0.0, 5.0, 0.0)
+TAU_EXPECTED = (0.0, 0.0, 1.5)
+EXACT_TOL = 1e-12
+ROD_SIZE = (0.8, 0.2, 0.2)
+ROD_MASS = 1.0
+# a general orientation for the second simulated rod: 0.7 rad about (1, 2, 3)/|.|
+TILT_AXIS = (1.0, 2.0, 3.0)
+TILT_ANGLE = 0.7
+SIM_DT = 1e-6
+SIM_REL_TOL = 1e-8  # O(dt^2) truncation of omega(dt)/dt at dt = 1e-6, with margin
+
+
+def add_arguments(parser) -> None:
+    parser.add_argument("--offset", type=float, default=R_W[0], metavar="X",
+                        help="lever arm along x in m (default 0.3; paw-check 2 is always run at -0.3)")
+
+
+def options_from_args(args) -> dict:
+    return {"offset": args.offset}
+
+
+def run(out_dir=C.DEFAULT_OUT, backend: str = "c", offset: float = R_W[0]) -> C.LabResult:
+    backend = C.check_backend(backend)
+    x = V.scalar("offset", offset)
+    r = np.array([x, 0.0, 0.0])
+    F = np.array(F_W)
+    chapter = x == R_W[0]
+
+    # --- pure kernels -------------------------------------------------------------------
+    tau = K.torque_from_force(r, F)
+    F_along = np.array([5.0, 0.0, 0.0])  # same magnitude, along the lever arm
+    tau_along = K.torque_from_force(r, F_along)
+    r_neg = np.array([-R_W[0], 0.0, 0.0])
+    tau_neg = K.torque_from_force(r_neg, F)  # paw-check 2
+    # only the perpendicular part contributes: F = [3, 4, 0] at r gives the torque of [0, 4, 0]
+    F_mixed = np.array([3.0, 4.0, 0.0])
+    tau_mixed = K.torque_from_force(r, F_mixed)
+    tau_perp = K.torque_from_force(r, np.array([0.0, 4.0, 0.0]))
+
+    # --- through the simulator -----------------------------------------------------------
+    q_tilt = K.axis_angle_to_quat(np.array(TILT_AXIS) / np.linalg.norm(TILT_AXIS), TILT_ANGLE)
+    scene = lv.Scene()
+    rod = scene.add_body(lv.Body.box("rod", mass=ROD_MASS, size=ROD_SIZE))
+    scene.add_body(lv.Body.box("rod_tilted", mass=ROD_MASS, size=ROD_SIZE, q=q_tilt, p_w=[0.0, 1.0, 0.0]))
+    scene.add_effect("force_at_point", body="rod", r_b=r, F_w=F)
+    scene.add_effect("force_at_point", body="rod_tilted", r_b=r, F_w=F)
+    sim = lv.Sim(scene, dt=SIM_DT, integrator="rk4", backend=backend)
+    pipeline = sim.pipeline
+    sim.step()
+    I_b = rod.I_b
+    alpha_pred = K.apply_inv_inertia(np.array([0.0, 0.0, 0.0, 1.0]), I_b, K.force_at_point(np.array([0, 0, 0, 1.0]), r, F))
+    alpha_sim = sim.state("rod").omega_w / SIM_DT
+    tau_tilt = K.force_at_point(q_tilt, r, F)  # = torque_from_force(R r_b, F)
+    alpha_pred_tilt = K.apply_inv_inertia(q_tilt, I_b, tau_tilt)
+    alpha_sim_tilt = sim.state("rod_tilted").omega_w / SIM_DT
+    # I_w^-1 tau by a matrix inverse of world_inertia, as an independent cross-check of the kernel
+    alpha_matrix_tilt = np.linalg.solve(K.world_inertia(q_tilt, I_b), tau_tilt)
+    a_com_sim = sim.state("rod").v_w / SIM_DT
+
+    def rel(a, b):
+        return float(np.max(np.abs(a - b)) / max(np.max(np.abs(b)), 1e-300))
+
+    figures = {
+        "torque": tau,
+        "torque_along_lever_arm": tau_along,
+        "torque_at_minus_offset": tau_neg,
+        "torque_mixed_force": tau_mixed,
+        "alpha_predicted_w": alpha_pred,
+        "alpha_simulated_w": alpha_sim,
+        "alpha_rel_error": rel(alpha_sim, alpha_pred),
+        "alpha_tilted_predicted_w": alpha_pred_tilt,
+        "alpha_tilted_simulated_w": alpha_sim_tilt,
+        "alpha_tilted_rel_error": rel(alpha_sim_tilt, alpha_pred_tilt),
+        "apply_inv_inertia_vs_matrix_inverse": rel(alpha_pred_tilt, alpha_matrix_tilt),
+        "com_acceleration_w": a_com_sim,
+    }
+    params = {
+        "backend": backend, "r_w": r, "F_w": F, "F_along_lever_w": F_along, "paw_check_r_w": r_neg,
+        "body": "box", "body_size": np.array(ROD_SIZE), "body_mass": ROD_MASS, "I_b": I_b,
+        "tilt_axis": np.array(TILT_AXIS), "tilt_angle": TILT_ANGLE, "sim_dt": SIM_DT, "integrator": "rk4",
+        "pipeline": " | ".join(pipeline),
+    }
+    checks = []
+    if chapter:
+        checks.append(C.at_most("torque", np.max(np.abs(tau - TAU_EXPECTED)), EXACT_TOL,
+                                "max |tau - [0, 0, 1.5]| N·m (chapter)"))
+    else:
+        checks.append(C.at_most("torque_z_equals_x_Fy", abs(tau[2] - x * F[1]) + abs(tau[0]) + abs(tau[1]), EXACT_TOL,
+                                f"offset {x} m: tau should be [0, 0, {x * F[1]}]"))
+    checks += [
+        C.at_most("torque_along_lever_arm", np.max(np.abs(tau_along)), EXACT_TOL, "force along the lever arm gives zero torque"),
+        C.at_most("paw2_torque_at_minus_0.3", np.max(np.abs(tau_neg - np.array([0.0, 0.0, -1.5]))), EXACT_TOL,
+                  "paw-check 2: F at -0.3 m gives [0, 0, -1.5] N·m"),
+        C.at_most("perpendicular_part_only", np.max(np.abs(tau_mixed - tau_perp)), EXACT_TOL,
+                  "F = [3, 4, 0] N gives the torque of its perpendicular part [0, 4, 0] N"),
+        C.at_most("alpha_sim_vs_apply_inv_inertia", rel(alpha_sim, alpha_pred), SIM_REL_TOL,
+                  "relative, body at rest in identity orientation"),
+        C.at_most("alpha_tilted_sim_vs_apply_inv_inertia", rel(alpha_sim_tilt, alpha_pred_tilt), SIM_REL_TOL,
+                  "relative, body at rest in a general orientation"),
+        C.at_most("apply_inv_inertia_equals_inverse_world_inertia", rel(alpha_pred_tilt, alpha_matrix_tilt), 1e-12,
+                  "apply_inv_inertia(q, I_b, tau) == world_inertia(q, I_b)^-1 tau"),
+        C.at_most("com_acceleration_F_over_m", np.max(np.abs(a_com_sim - F / ROD_MASS)), 1e-9,
+                  "the force also accelerates the COM: a = F / m, m/s²"),
+    ]
+
+    # --- plot ----------------------------------------------------------------------------
+    fig, ax = C.new_figure(1, 2, size=(10, 4.2), title="Off-center force: torque = r × F")
+    a = ax[0, 0]
+    a.add_patch(_rect(ROD_SIZE[0], ROD_SIZE[1]))
+    a.annotate("", xy=(r[0], 0), xytext=(0, 0), arrowprops=dict(arrowstyle="->", color="k"))
+    a.annotate("", xy=(r[0], 0.1 * F[1]), xytext=(r[0], 0), arrowprops=dict(arrowstyle="->", color="tab:red", lw=2))
+    a.annotate("", xy=(-R_W[0], 0.1 * F[1]), xytext=(-R_W[0], 0),
+               arrowprops=dict(arrowstyle="->", color="tab:purple", lw=2))
+    a.annotate("", xy=(r[0] + 0.1 * F_along[0], 0), xytext=(r[0], 0),
+               arrowprops=dict(arrowstyle="->", color="tab:gray", lw=2))
+    a.plot([0], [0], "ko")
+    a.text(r[0], -0.12, f"r = [{r[0]:g}, 0, 0] m", ha="center")
+    a.text(r[0] + 0.02, 0.1 * F[1], "F = [0, 5, 0] N", color="tab:red")
+    a.text(-R_W[0] - 0.02, 0.1 * F[1], "paw-check 2: at −0.3 m", color="tab:purple", ha="right")
+    a.text(r[0] + 0.05, 0.03, "F along r", color="tab:gray")
+    a.set_xlim(-1.25, 1.1)
+    a.set_ylim(-0.4, 0.7)
+    a.set_aspect("equal")
+    a.set_xlabel("x (m)")
+    a.set_ylabel("y (m)")
+    a.set_title("rod 0.8 × 0.2 × 0.2 m, top view (scale 0.1 m/N)")
+    b = ax[0, 1]
+    labels = ["F⊥ at +0.3 m", "F along r", "F⊥ at −0.3 m", "[3,4,0] N at +0.3"]
+    vals = [tau[2], tau_along[2], tau_neg[2], tau_mixed[2]]
+    b.bar(labels, vals, color=["tab:red", "tab:gray", "tab:purple", "tab:orange"])
+    b.axhline(0, color="k", lw=0.8)
+    b.set_ylabel("torque τ_z (N·m)")
+    b.set_title("τ = r × F (torque_from_force kernel)")
+    b.tick_params(axis="x", labelsize=8)
+    result = C.finish(NAME, out_dir, figures, params, checks, {"force.png": fig})
+    return result
+
+
+def _rect(w, h):
+    from matplotlib.patches import Rectangle
+
+    return Rectangle((-w / 2, -h / 2), w, h, fill=True, alpha=0.25, color="tab:blue")
