@@ -1,0 +1,241 @@
+/* lavendersim._lavender_c: CPython glue for the generated kernels and the C stepping loop.
+   Arrays arrive through the buffer protocol (no NumPy headers): C-contiguous float64. */
+#define PY_SSIZE_T_CLEAN
+#include <Python.h>
+#include <math.h>
+#include <string.h>
+
+#include "kernels.h"
+#include "step.h"
+
+#ifndef LV_GENERATED_HASH
+#error "LV_GENERATED_HASH must be defined by the build (sha256 of generated/kernels.c + kernels.h)"
+#endif
+
+static int is_float64_format(const char *fmt)
+{
+    if (fmt == NULL) return 1; /* no format requested/provided means unsigned bytes; reject below */
+    if (fmt[0] == '@' || fmt[0] == '=') fmt++;
+#if PY_LITTLE_ENDIAN
+    else if (fmt[0] == '<') fmt++;
+#else
+    else if (fmt[0] == '>' || fmt[0] == '!') fmt++;
+#endif
+    return strcmp(fmt, "d") == 0;
+}
+
+/* Get a C-contiguous float64 buffer; on failure set a clear exception naming `what`. */
+static int get_f64(PyObject *obj, Py_buffer *view, int writable, const char *what)
+{
+    int flags = PyBUF_C_CONTIGUOUS | PyBUF_FORMAT | (writable ? PyBUF_WRITABLE : 0);
+    if (PyObject_GetBuffer(obj, view, flags) != 0) {
+        PyObject *exc, *val, *tb;
+        PyErr_Fetch(&exc, &val, &tb);
+        Py_XDECREF(tb);
+        PyErr_Format(PyExc_TypeError,
+                     "%s must be a C-contiguous%s float64 buffer (e.g. a numpy array), got %.200s (%S)",
+                     what, writable ? ", writable" : "", Py_TYPE(obj)->tp_name, val ? val : Py_None);
+        Py_XDECREF(exc);
+        Py_XDECREF(val);
+        return -1;
+    }
+    if (view->format == NULL || !is_float64_format(view->format) || view->itemsize != 8) {
+        PyErr_Format(PyExc_TypeError, "%s must have dtype float64 (buffer format 'd'), got format '%s'",
+                     what, view->format ? view->format : "B");
+        PyBuffer_Release(view);
+        return -1;
+    }
+    return 0;
+}
+
+/* Require shape (rows, cols) with cols fixed; rows returned. A 1-D empty buffer counts as (0, cols). */
+static int rows_of(Py_buffer *v, Py_ssize_t cols, const char *what, const char *layout, Py_ssize_t *rows)
+{
+    if (v->ndim == 2 && v->shape[1] == cols) {
+        *rows = v->shape[0];
+        return 0;
+    }
+    if (v->ndim == 1 && v->shape[0] == 0) {
+        *rows = 0;
+        return 0;
+    }
+    if (v->ndim == 2)
+        PyErr_Format(PyExc_ValueError, "%s must have shape (n, %zd) %s, got (%zd, %zd)",
+                     what, cols, layout, v->shape[0], v->shape[1]);
+    else
+        PyErr_Format(PyExc_ValueError, "%s must be 2-D with shape (n, %zd) %s, got %d-D",
+                     what, cols, layout, v->ndim);
+    return -1;
+}
+
+static PyObject *py_kernels(PyObject *self, PyObject *noargs)
+{
+    PyObject *out = PyList_New(LV_KERNEL_COUNT);
+    int i;
+    (void)self; (void)noargs;
+    if (out == NULL) return NULL;
+    for (i = 0; i < LV_KERNEL_COUNT; i++) {
+        PyObject *t = Py_BuildValue("(sii)", lv_kernel_table[i].name, lv_kernel_table[i].n_in,
+                                    lv_kernel_table[i].n_out);
+        if (t == NULL) { Py_DECREF(out); return NULL; }
+        PyList_SET_ITEM(out, i, t);
+    }
+    return out;
+}
+
+static PyObject *py_eval_kernel(PyObject *self, PyObject *args)
+{
+    int index;
+    PyObject *inp_obj, *out_obj;
+    Py_buffer inp, out;
+    Py_ssize_t n_in_total, n_out_total, rows, r;
+    const lv_kernel_info *k;
+    (void)self;
+    if (!PyArg_ParseTuple(args, "iOO:eval_kernel", &index, &inp_obj, &out_obj)) return NULL;
+    if (index < 0 || index >= LV_KERNEL_COUNT) {
+        PyErr_Format(PyExc_ValueError, "eval_kernel: kernel index %d out of range [0, %d)", index, LV_KERNEL_COUNT);
+        return NULL;
+    }
+    k = &lv_kernel_table[index];
+    if (get_f64(inp_obj, &inp, 0, "eval_kernel: inp") != 0) return NULL;
+    if (get_f64(out_obj, &out, 1, "eval_kernel: out") != 0) { PyBuffer_Release(&inp); return NULL; }
+    n_in_total = inp.len / 8;
+    n_out_total = out.len / 8;
+    if (n_in_total % k->n_in != 0) {
+        PyErr_Format(PyExc_ValueError, "eval_kernel(%s): inp holds %zd doubles, not a multiple of n_in = %d",
+                     k->name, n_in_total, k->n_in);
+        goto fail;
+    }
+    rows = n_in_total / k->n_in;
+    if (n_out_total != rows * k->n_out) {
+        PyErr_Format(PyExc_ValueError, "eval_kernel(%s): out holds %zd doubles, expected %zd rows x n_out %d = %zd",
+                     k->name, n_out_total, rows, k->n_out, rows * k->n_out);
+        goto fail;
+    }
+    {
+        const double *ip = (const double *)inp.buf;
+        double *op = (double *)out.buf;
+        Py_BEGIN_ALLOW_THREADS
+        for (r = 0; r < rows; r++) k->packed(ip + r * k->n_in, op + r * k->n_out);
+        Py_END_ALLOW_THREADS
+    }
+    PyBuffer_Release(&inp);
+    PyBuffer_Release(&out);
+    Py_RETURN_NONE;
+fail:
+    PyBuffer_Release(&inp);
+    PyBuffer_Release(&out);
+    return NULL;
+}
+
+static PyObject *py_simulate(PyObject *self, PyObject *args)
+{
+    PyObject *state_obj, *params_obj, *effects_obj;
+    int integrator, normalize;
+    double dt;
+    long long n_steps_ll;
+    Py_buffer st, pr, ef;
+    Py_ssize_t nb, np_rows, ne, e;
+    long fail_step = -1, fail_body = -1;
+    int status;
+    (void)self;
+    if (!PyArg_ParseTuple(args, "OOOipdL:simulate", &state_obj, &params_obj, &effects_obj, &integrator,
+                          &normalize, &dt, &n_steps_ll))
+        return NULL;
+    if (integrator < 0 || integrator > 2) {
+        PyErr_Format(PyExc_ValueError,
+                     "simulate: integrator code must be 0 (euler), 1 (semi_implicit_euler) or 2 (rk4), got %d", integrator);
+        return NULL;
+    }
+    if (n_steps_ll < 0 || n_steps_ll > (long long)LONG_MAX) {
+        PyErr_Format(PyExc_ValueError, "simulate: n_steps must be >= 0, got %lld", n_steps_ll);
+        return NULL;
+    }
+    if (!isfinite(dt)) {
+        PyErr_SetString(PyExc_ValueError, "simulate: dt must be finite");
+        return NULL;
+    }
+    if (get_f64(state_obj, &st, 1, "simulate: state") != 0) return NULL;
+    if (get_f64(params_obj, &pr, 0, "simulate: params") != 0) { PyBuffer_Release(&st); return NULL; }
+    if (get_f64(effects_obj, &ef, 0, "simulate: effects") != 0) {
+        PyBuffer_Release(&st); PyBuffer_Release(&pr); return NULL;
+    }
+    if (rows_of(&st, LV_STATE_SIZE, "simulate: state", "[p_w(3), q(4), v_w(3), omega_b(3)]", &nb) != 0) goto fail;
+    if (rows_of(&pr, LV_PARAM_SIZE, "simulate: params", "[m, I_x, I_y, I_z]", &np_rows) != 0) goto fail;
+    if (rows_of(&ef, LV_EFFECT_SIZE, "simulate: effects", "[kind, body, p0..p5]", &ne) != 0) goto fail;
+    if (np_rows != nb) {
+        PyErr_Format(PyExc_ValueError, "simulate: params has %zd rows but state has %zd bodies", np_rows, nb);
+        goto fail;
+    }
+    for (e = 0; e < ne; e++) {
+        const double *row = (const double *)ef.buf + e * LV_EFFECT_SIZE;
+        const double kind = row[0], body = row[1];
+        if (!(kind >= 1 && kind <= 5 && kind == floor(kind))) {
+            PyObject *ko = PyFloat_FromDouble(kind);
+            PyErr_Format(PyExc_ValueError,
+                         "simulate: effects[%zd] kind must be 1 (applied_torque), 2 (force_at_point), 3 (gravity), "
+                         "4 (linear_damping) or 5 (angular_damping), got %R", e, ko);
+            Py_XDECREF(ko);
+            goto fail;
+        }
+        if (!(body == -1 || (body >= 0 && body < (double)nb && body == floor(body)))) {
+            PyObject *bo = PyFloat_FromDouble(body);
+            PyErr_Format(PyExc_ValueError, "simulate: effects[%zd] body must be -1 (every body) or an index in [0, %zd), got %R",
+                         e, nb, bo);
+            Py_XDECREF(bo);
+            goto fail;
+        }
+    }
+    Py_BEGIN_ALLOW_THREADS
+    status = lv_simulate((double *)st.buf, (const double *)pr.buf, (long)nb, (const double *)ef.buf, (long)ne,
+                         integrator, normalize, dt, (long)n_steps_ll, &fail_step, &fail_body);
+    Py_END_ALLOW_THREADS
+    PyBuffer_Release(&st);
+    PyBuffer_Release(&pr);
+    PyBuffer_Release(&ef);
+    if (status < 0) {
+        PyErr_SetString(PyExc_ValueError, "simulate: lv_simulate rejected its arguments");
+        return NULL;
+    }
+    if (status == LV_OK) return Py_BuildValue("(iii)", 0, -1, -1);
+    return Py_BuildValue("(ill)", status, fail_step, fail_body);
+fail:
+    PyBuffer_Release(&st);
+    PyBuffer_Release(&pr);
+    PyBuffer_Release(&ef);
+    return NULL;
+}
+
+static PyMethodDef methods[] = {
+    {"kernels", py_kernels, METH_NOARGS,
+     "kernels() -> list of (name, n_in, n_out), in the order of the generated lv_kernel_table."},
+    {"eval_kernel", py_eval_kernel, METH_VARARGS,
+     "eval_kernel(index, inp, out): run packed kernel `index` over N rows; inp holds N*n_in float64 "
+     "(C-contiguous), out N*n_out (writable)."},
+    {"simulate", py_simulate, METH_VARARGS,
+     "simulate(state, params, effects, integrator, normalize, dt, n_steps) -> (status, step, body).\n"
+     "state (nb,13) advanced in place; params (nb,4) [m, I_x, I_y, I_z]; effects (ne,8) [kind, body, p0..p5].\n"
+     "integrator 0 euler, 1 semi-implicit euler, 2 rk4. status 0 ok (step = body = -1); status 1: the\n"
+     "state of `body` became non-finite at 0-based `step`: earlier bodies are fully advanced, that body\n"
+     "holds its last finite state, later bodies are untouched."},
+    {NULL, NULL, 0, NULL}};
+
+static struct PyModuleDef moduledef = {
+    PyModuleDef_HEAD_INIT, "_lavender_c",
+    "LavenderSim compiled backend: the generated C kernels and the C stepping loop.", -1, methods,
+    NULL, NULL, NULL, NULL};
+
+PyMODINIT_FUNC PyInit__lavender_c(void)
+{
+    PyObject *m = PyModule_Create(&moduledef);
+    if (m == NULL) return NULL;
+    if (PyModule_AddStringConstant(m, "GENERATED_HASH", LV_GENERATED_HASH) != 0 ||
+        PyModule_AddIntConstant(m, "KERNEL_COUNT", LV_KERNEL_COUNT) != 0 ||
+        PyModule_AddIntConstant(m, "EULER", LV_INTEGRATOR_EULER) != 0 ||
+        PyModule_AddIntConstant(m, "SEMI_IMPLICIT_EULER", LV_INTEGRATOR_SEMI_IMPLICIT_EULER) != 0 ||
+        PyModule_AddIntConstant(m, "RK4", LV_INTEGRATOR_RK4) != 0) {
+        Py_DECREF(m);
+        return NULL;
+    }
+    return m;
+}

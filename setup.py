@@ -1,0 +1,92 @@
+"""Build of LavenderSim's compiled backend, `lavendersim._lavender_c` (metadata lives in pyproject.toml).
+
+The extension is the generated C kernels (generated/kernels.c) plus the hand-written stepping loop and
+CPython glue (lavendersim/csrc/*.c). The sha256 of generated/kernels.c and kernels.h is embedded as
+`_lavender_c.GENERATED_HASH`, so importing lavendersim.backends.c_backend can tell a stale build.
+
+    pip install -e .                  # editable install; builds the extension in place
+    LAVENDERSIM_BUILD_C=0 pip install -e .   # explicit opt-out: NumPy backend only, no compiler needed
+    LAVENDERSIM_NATIVE=1 pip install -e .    # add -march=native (not portable; see the measurements)
+
+A missing or failing C compiler stops the build with an explanation; it is never skipped silently.
+"""
+from __future__ import annotations
+
+import hashlib
+import os
+import sys
+from pathlib import Path
+
+from setuptools import Extension, setup
+from setuptools.command.build_ext import build_ext
+
+HERE = Path(__file__).resolve().parent
+GENERATED = "generated"
+CSRC = "lavendersim/csrc"
+HASHED = ("kernels.c", "kernels.h")
+
+
+def generated_hash(gen_dir: Path) -> str:
+    """sha256 over the per-file sha256 of generated/kernels.c and kernels.h.
+
+    Mirrors lavendersim.backends.c_backend.generated_hash; keep the two identical."""
+    h = hashlib.sha256()
+    for name in HASHED:
+        h.update(f"{name} {hashlib.sha256((gen_dir / name).read_bytes()).hexdigest()}\n".encode())
+    return h.hexdigest()
+
+
+def _flag(name: str) -> bool:
+    return os.environ.get(name, "").strip().lower() in ("1", "true", "yes", "on")
+
+
+class BuildExt(build_ext):
+    """build_ext that turns compiler problems into a clear, fatal error."""
+
+    def run(self):
+        try:
+            super().run()
+        except Exception as exc:  # noqa: BLE001 - re-raised with context, never swallowed
+            raise SystemExit(_explain(exc)) from exc
+
+    def build_extension(self, ext):
+        try:
+            super().build_extension(ext)
+        except Exception as exc:  # noqa: BLE001 - re-raised with context, never swallowed
+            raise SystemExit(_explain(exc)) from exc
+
+
+def _explain(exc: Exception) -> str:
+    return (
+        f"\nerror: building LavenderSim's C backend (lavendersim._lavender_c) failed: {exc}\n"
+        "It needs a C99 compiler (gcc or clang) and the Python development headers, e.g.\n"
+        "  Debian/Ubuntu: apt-get install build-essential python3-dev\n"
+        "  macOS: xcode-select --install\n"
+        "To install without the C backend (NumPy backend only), set LAVENDERSIM_BUILD_C=0 explicitly.\n"
+    )
+
+
+def extensions() -> list[Extension]:
+    if os.environ.get("LAVENDERSIM_BUILD_C", "1").strip().lower() in ("0", "false", "no", "off"):
+        print("LAVENDERSIM_BUILD_C=0: not building lavendersim._lavender_c (C backend disabled)", file=sys.stderr)
+        return []
+    for name in HASHED:
+        if not (HERE / GENERATED / name).is_file():
+            raise SystemExit(f"error: {GENERATED}/{name} is missing; run `lavendersim derive` first "
+                             "(or `python -c \"from pathlib import Path; from derive import codegen; "
+                             "codegen.write(Path('generated'))\"` from the repo root)")
+    csrc = sorted(p.name for p in (HERE / CSRC).glob("*.c"))
+    args = ["-O3", "-std=c99", "-fno-math-errno"]  # never -ffast-math: it breaks isfinite and IEEE rules
+    if _flag("LAVENDERSIM_NATIVE"):
+        args.append("-march=native")
+    return [Extension(
+        "lavendersim._lavender_c",
+        sources=[f"{GENERATED}/kernels.c"] + [f"{CSRC}/{n}" for n in csrc],
+        include_dirs=[GENERATED, CSRC],
+        depends=[f"{GENERATED}/kernels.h", f"{CSRC}/step.h"],
+        define_macros=[("LV_GENERATED_HASH", '"%s"' % generated_hash(HERE / GENERATED))],
+        extra_compile_args=args,
+    )]
+
+
+setup(ext_modules=extensions(), cmdclass={"build_ext": BuildExt})
