@@ -132,17 +132,30 @@ def eval_kernel(name: str, *inputs):
     return results[0] if len(results) == 1 else tuple(results)
 
 
-def _cause(pre: np.ndarray, params: np.ndarray, effects: np.ndarray, body: int, dt: float, integrator: str) -> str:
+def _norm(v: np.ndarray) -> float:
+    """Euclidean norm without overflow for huge finite components."""
+    s = float(np.max(np.abs(v))) if v.size else 0.0
+    return 0.0 if s == 0.0 or not np.isfinite(s) else s * float(np.sqrt(np.sum((v / s) ** 2)))
+
+
+def _cause(start: np.ndarray, pre: np.ndarray, params: np.ndarray, effects: np.ndarray, body: int,
+           step: int, dt: float, integrator: str) -> str:
+    """Likely cause, from the body's state at the start of the call (`start`) and just before the
+    failing step (`pre`, its last finite state)."""
     if not np.all(np.isfinite(params[body])):
         return f"non-finite input: params of body {body} are {params[body].tolist()}"
-    mine = effects[(effects[:, 1] == -1) | (effects[:, 1] == body)] if effects.shape[0] else effects
+    mine = effects[(effects[:, 1] == -1) | (effects[:, 1] == body)]
     if mine.size and not np.all(np.isfinite(mine)):
         return f"non-finite input: an effect acting on body {body} has non-finite parameters"
-    if not np.all(np.isfinite(pre)):
+    if not np.all(np.isfinite(start)):
         return "non-finite input: the state was already non-finite before the step"
     from . import divergence_cause
 
-    return divergence_cause(pre, dt, integrator)
+    cause = divergence_cause(start, dt, integrator)
+    if step > 0:
+        cause += (f" (just before step {step}: |omega|*dt = {_norm(pre[10:13]) * dt:.3g}, "
+                  f"|v| = {_norm(pre[7:10]):.3g} m/s)")
+    return cause
 
 
 class CBackend:
@@ -167,4 +180,5 @@ class CBackend:
             return
         pre = state[body].copy()  # the failing body is left at its last finite state
         state[...] = snapshot
-        raise DivergenceError(step, body, _cause(pre, params, effects, body, float(dt), integrator))
+        raise DivergenceError(step, body, _cause(snapshot[body], pre, params, effects, body, step,
+                                                 float(dt), integrator))
