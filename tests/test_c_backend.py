@@ -1,0 +1,384 @@
+"""The compiled backend (lavendersim._lavender_c + lavendersim.backends.c_backend) against a plain
+reference written here with the generated NumPy kernels, one body and one step at a time."""
+from __future__ import annotations
+
+import importlib
+import shutil
+
+import numpy as np
+import pytest
+
+from lavendersim.errors import DivergenceError, StaleBuildError
+from lavendersim.generated import kernels_numpy as K
+
+c_backend = pytest.importorskip("lavendersim.backends.c_backend",
+                                reason="C backend not built (pip install -e .)")
+_c = c_backend._c
+CBackend = c_backend.CBackend
+
+INTEGRATORS = ("euler", "semi_implicit_euler", "rk4")
+TOL = 1e-12
+
+
+# ---------------------------------------------------------------- reference (straightforward, per body)
+
+def ref_rhs(x, prm, effects, b):
+    m, I = prm[0], prm[1:4]
+    mine = [e for e in effects if int(e[1]) in (-1, b)]
+    if not mine:
+        return K.rigid_body_rhs_free(x, I)
+    F, tau = np.zeros(3), np.zeros(3)
+    for e in mine:
+        kind, p = int(e[0]), e[2:8]
+        if kind == 1:
+            tau = tau + p[0:3]
+        elif kind == 2:
+            F = F + p[3:6]
+            tau = tau + K.force_at_point(x[3:7], p[0:3], p[3:6])
+        elif kind == 3:
+            F = F + K.gravity_force(m, p[0:3])
+        elif kind == 4:
+            F = F + K.linear_damping(p[0], x[7:10])
+        elif kind == 5:
+            tau = tau + K.angular_damping(x[3:7], p[0], x[10:13])
+        else:
+            raise AssertionError(kind)
+    return K.rigid_body_rhs(x, m, I, F, tau)
+
+
+def ref_step(x, prm, effects, b, integrator, normalize, dt):
+    f = lambda y: ref_rhs(y, prm, effects, b)  # noqa: E731
+    if integrator == "euler":
+        xn = x + dt * f(x)
+    elif integrator == "semi_implicit_euler":
+        k = f(x)
+        xn = x.copy()
+        xn[7:13] = x[7:13] + dt * k[7:13]
+        xn[0:3] = x[0:3] + dt * xn[7:10]
+        xn[3:7] = x[3:7] + dt * K.quat_derivative_body(x[3:7], xn[10:13])
+    else:
+        k1 = f(x)
+        k2 = f(x + dt / 2 * k1)
+        k3 = f(x + dt / 2 * k2)
+        k4 = f(x + dt * k3)
+        xn = x + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+    if normalize:
+        xn[3:7] = xn[3:7] / np.sqrt(np.sum(xn[3:7] ** 2))
+    return xn
+
+
+def ref_advance(state, params, effects, integrator, normalize, dt, n_steps):
+    out = state.copy()
+    for b in range(state.shape[0]):
+        x = state[b].copy()
+        for _ in range(n_steps):
+            x = ref_step(x, params[b], effects, b, integrator, normalize, dt)
+        out[b] = x
+    return out
+
+
+def random_bodies(rng, nb):
+    state = np.zeros((nb, 13))
+    state[:, 0:3] = rng.uniform(-1, 1, (nb, 3))
+    q = rng.normal(size=(nb, 4))
+    state[:, 3:7] = q / np.linalg.norm(q, axis=1, keepdims=True)
+    state[:, 7:10] = rng.uniform(-1, 1, (nb, 3))
+    state[:, 10:13] = rng.uniform(-3, 3, (nb, 3))
+    params = np.column_stack([rng.uniform(0.5, 2, nb), rng.uniform(0.5, 1, nb),
+                              rng.uniform(1, 1.5, nb), rng.uniform(1.5, 2, nb)])
+    return state, params
+
+
+def effect(kind, body, *p):
+    row = np.zeros(8)
+    row[0], row[1] = kind, body
+    row[2:2 + len(p)] = p
+    return row
+
+
+EFFECTS = {
+    "none": [],
+    "applied_torque": [effect(1, -1, 0.3, -0.2, 0.5)],
+    "force_at_point": [effect(2, 0, 0.1, 0.2, -0.3, 1.0, -2.0, 0.5), effect(2, 1, -0.2, 0.0, 0.4, 0.0, 0.0, 3.0)],
+    "gravity": [effect(3, -1, 0.0, 0.0, -9.81)],
+    "linear_damping": [effect(4, 1, 0.7)],
+    "angular_damping": [effect(5, -1, 0.4)],
+    "all": [effect(3, -1, 0, 0, -9.81), effect(1, 0, 0.1, 0.2, 0.3), effect(5, 1, 0.2),
+            effect(2, 0, 0.1, 0, 0, 0, 1, 0), effect(4, -1, 0.3), effect(1, 0, -0.05, 0, 0.02)],
+}
+
+
+def effects_array(name):
+    rows = EFFECTS[name]
+    return np.array(rows, dtype=np.float64).reshape(len(rows), 8)
+
+
+# ---------------------------------------------------------------- agreement with the reference
+
+@pytest.mark.parametrize("effects_name", list(EFFECTS))
+@pytest.mark.parametrize("integrator", INTEGRATORS)
+@pytest.mark.parametrize("normalize", [True, False])
+def test_matches_reference(integrator, effects_name, normalize):
+    rng = np.random.default_rng(42)
+    state, params = random_bodies(rng, 3)  # body 2 has no effect in several sets: the free path
+    effects = effects_array(effects_name)
+    want = ref_advance(state, params, effects, integrator, normalize, 0.01, 25)
+    got = state.copy()
+    CBackend().advance(got, params, effects, integrator, normalize, 0.01, 25)
+    scale = max(1.0, np.max(np.abs(want)))
+    assert np.max(np.abs(got - want)) <= TOL * scale
+    assert not np.array_equal(got, state)
+
+
+def test_effects_change_the_motion():
+    """Each effect kind actually acts (so the comparisons above are not vacuously free motion)."""
+    rng = np.random.default_rng(3)
+    state, params = random_bodies(rng, 2)
+    free = state.copy()
+    CBackend().advance(free, params, effects_array("none"), "rk4", True, 0.01, 10)
+    for name in ("applied_torque", "force_at_point", "gravity", "linear_damping", "angular_damping"):
+        s = state.copy()
+        CBackend().advance(s, params, effects_array(name), "rk4", True, 0.01, 10)
+        assert np.max(np.abs(s - free)) > 1e-6, name
+
+
+def test_effect_order_and_targeting():
+    rng = np.random.default_rng(5)
+    state, params = random_bodies(rng, 4)
+    eff = np.array([effect(1, 2, 1.0, 0, 0), effect(3, 3, 0, 0, -1)])
+    got = state.copy()
+    CBackend().advance(got, params, eff, "rk4", True, 0.01, 5)
+    untouched = state[[0, 1]].copy()
+    CBackend().advance(untouched, params[[0, 1]], np.zeros((0, 8)), "rk4", True, 0.01, 5)
+    np.testing.assert_array_equal(got[[0, 1]], untouched)  # free kernel: bit-identical
+
+
+def test_many_bodies_equal_separate_calls():
+    rng = np.random.default_rng(7)
+    state, params = random_bodies(rng, 50)
+    eff = effects_array("all")  # targets bodies 0 and 1 specifically, the rest via -1
+    for integrator in INTEGRATORS:
+        together = state.copy()
+        CBackend().advance(together, params, eff, integrator, True, 0.005, 40)
+        for b in range(state.shape[0]):
+            one = state[b:b + 1].copy()
+            # re-target this body's effects to index 0 in a one-body call
+            e = eff.copy()
+            keep = (e[:, 1] == -1) | (e[:, 1] == b)
+            e = e[keep]
+            e[:, 1] = np.where(e[:, 1] == -1, -1, 0)
+            CBackend().advance(one, params[b:b + 1], e, integrator, True, 0.005, 40)
+            np.testing.assert_array_equal(together[b], one[0])
+
+
+def test_one_call_equals_many_calls():
+    rng = np.random.default_rng(8)
+    state, params = random_bodies(rng, 5)
+    eff = effects_array("all")
+    a, b = state.copy(), state.copy()
+    CBackend().advance(a, params, eff, "rk4", True, 0.01, 30)
+    for _ in range(30):
+        CBackend().advance(b, params, eff, "rk4", True, 0.01, 1)
+    np.testing.assert_array_equal(a, b)
+
+
+def test_zero_steps_and_zero_bodies():
+    rng = np.random.default_rng(9)
+    state, params = random_bodies(rng, 3)
+    s = state.copy()
+    CBackend().advance(s, params, effects_array("gravity"), "rk4", True, 0.01, 0)
+    np.testing.assert_array_equal(s, state)
+    empty = np.zeros((0, 13))
+    CBackend().advance(empty, np.zeros((0, 4)), np.zeros((0, 8)), "euler", False, 0.01, 10)
+
+
+# ---------------------------------------------------------------- normalization
+
+@pytest.mark.parametrize("integrator", INTEGRATORS)
+def test_normalize_on_off(integrator):
+    rng = np.random.default_rng(11)
+    state, params = random_bodies(rng, 4)
+    on, off = state.copy(), state.copy()
+    CBackend().advance(on, params, np.zeros((0, 8)), integrator, True, 0.02, 200)
+    CBackend().advance(off, params, np.zeros((0, 8)), integrator, False, 0.02, 200)
+    n_on = np.linalg.norm(on[:, 3:7], axis=1)
+    n_off = np.linalg.norm(off[:, 3:7], axis=1)
+    assert np.max(np.abs(n_on - 1)) <= 4e-16
+    assert np.max(np.abs(n_off - 1)) > 1e-12  # drift left in place without normalization
+    if integrator != "rk4":  # explicit-form steps only ever lengthen q
+        assert np.all(n_off > 1)
+    want = ref_advance(state, params, np.zeros((0, 8)), integrator, False, 0.02, 200)
+    assert np.max(np.abs(off - want)) <= TOL * max(1.0, np.max(np.abs(want)))
+
+
+# ---------------------------------------------------------------- divergence
+
+def diverging_setup():
+    rng = np.random.default_rng(13)
+    state, params = random_bodies(rng, 3)
+    state[1, 10:13] = [300.0, 200.0, 100.0]  # only body 1 blows up under explicit Euler
+    return state, params
+
+
+def test_divergence_raises_and_restores():
+    state, params = diverging_setup()
+    s = state.copy()
+    with pytest.raises(DivergenceError) as info:
+        CBackend().advance(s, params, effects_array("angular_damping"), "euler", False, 0.05, 200)
+    err = info.value
+    assert isinstance(err, FloatingPointError)
+    assert err.body == 1
+    assert 0 <= err.step < 200
+    np.testing.assert_array_equal(s, state)  # nothing half-applied (body 0 was advanced, then restored)
+    msg = str(err)
+    assert f"step {err.step}" in msg and "body 1" in msg
+    # the step index is exact: err.step steps are fine, one more diverges
+    ok = state.copy()
+    CBackend().advance(ok, params, effects_array("angular_damping"), "euler", False, 0.05, err.step)
+    assert np.all(np.isfinite(ok))
+    with pytest.raises(DivergenceError) as again:
+        CBackend().advance(ok, params, effects_array("angular_damping"), "euler", False, 0.05, 1)
+    assert again.value.step == 0 and again.value.body == 1
+    assert "omega" in str(again.value) and "euler" in str(again.value)
+
+
+def test_divergence_low_level_contract():
+    state, params = diverging_setup()
+    s = state.copy()
+    status, step, body = _c.simulate(s, params, np.zeros((0, 8)), 0, 0, 0.05, 200)
+    assert (status, body) == (1, 1)
+    assert np.all(np.isfinite(s))
+    ref = state.copy()
+    _c.simulate(ref, params, np.zeros((0, 8)), 0, 0, 0.05, step)
+    np.testing.assert_array_equal(s[:2], np.vstack([s[0], ref[1]]))  # body 1 at its last finite step
+    np.testing.assert_array_equal(s[2], state[2])  # later bodies untouched
+    assert _c.simulate(s[:1].copy(), params[:1], np.zeros((0, 8)), 0, 0, 0.05, 1) == (0, -1, -1)
+
+
+def test_non_finite_input():
+    state, params = diverging_setup()
+    state[2, 0] = np.nan
+    s = state.copy()
+    with pytest.raises(DivergenceError) as info:
+        CBackend().advance(s, params, np.zeros((0, 8)), "rk4", True, 0.01, 10)
+    assert info.value.step == 0 and info.value.body == 2
+    assert "non-finite" in str(info.value)
+    np.testing.assert_array_equal(np.isnan(s), np.isnan(state))
+    np.testing.assert_array_equal(np.nan_to_num(s), np.nan_to_num(state))
+    p = params.copy()
+    p[0, 0] = np.inf
+    state[2, 0] = 0.0
+    with pytest.raises(DivergenceError, match="non-finite input"):
+        CBackend().advance(state.copy(), p, effects_array("gravity"), "rk4", True, 0.01, 10)
+
+
+# ---------------------------------------------------------------- argument checking
+
+def test_bad_buffers():
+    rng = np.random.default_rng(17)
+    state, params = random_bodies(rng, 2)
+    E = np.zeros((0, 8))
+    with pytest.raises(TypeError, match="float64"):
+        _c.simulate(state.astype(np.float32), params, E, 2, 1, 0.01, 1)
+    with pytest.raises(TypeError, match="C-contiguous"):
+        _c.simulate(np.asfortranarray(np.zeros((3, 13))), np.zeros((3, 4)), E, 2, 1, 0.01, 1)
+    ro = state.copy()
+    ro.flags.writeable = False
+    with pytest.raises(TypeError, match="writable"):
+        _c.simulate(ro, params, E, 2, 1, 0.01, 1)
+    with pytest.raises(ValueError, match=r"\(n, 13\)"):
+        _c.simulate(np.zeros((2, 12)), params, E, 2, 1, 0.01, 1)
+    with pytest.raises(ValueError, match="params has 3 rows"):
+        _c.simulate(state.copy(), np.ones((3, 4)), E, 2, 1, 0.01, 1)
+    with pytest.raises(ValueError, match="kind"):
+        _c.simulate(state.copy(), params, np.array([effect(9, -1)]), 2, 1, 0.01, 1)
+    with pytest.raises(ValueError, match="body"):
+        _c.simulate(state.copy(), params, np.array([effect(1, 2)]), 2, 1, 0.01, 1)
+    with pytest.raises(ValueError, match="body"):
+        _c.simulate(state.copy(), params, np.array([effect(1, 0.5)]), 2, 1, 0.01, 1)
+    with pytest.raises(ValueError, match="integrator"):
+        _c.simulate(state.copy(), params, E, 3, 1, 0.01, 1)
+    with pytest.raises(ValueError, match="n_steps"):
+        _c.simulate(state.copy(), params, E, 2, 1, 0.01, -1)
+    with pytest.raises(ValueError, match="dt"):
+        _c.simulate(state.copy(), params, E, 2, 1, float("nan"), 1)
+    with pytest.raises(TypeError):
+        _c.simulate([[0.0] * 13], params[:1], E, 2, 1, 0.01, 1)
+    with pytest.raises(ValueError, match="integrator"):
+        CBackend().advance(state.copy(), params, E, "verlet", True, 0.01, 1)
+    with pytest.raises(TypeError, match="state"):
+        CBackend().advance(state[:, ::-1], params, E, "rk4", True, 0.01, 1)
+    # eval_kernel
+    idx = {n: i for i, (n, _, _) in enumerate(_c.kernels())}
+    with pytest.raises(ValueError, match="multiple of n_in"):
+        _c.eval_kernel(idx["quat_mul"], np.zeros(7), np.zeros(4))
+    with pytest.raises(ValueError, match="out holds"):
+        _c.eval_kernel(idx["quat_mul"], np.zeros(16), np.zeros(4))
+    with pytest.raises(ValueError, match="out of range"):
+        _c.eval_kernel(len(idx), np.zeros(8), np.zeros(4))
+    with pytest.raises(TypeError, match="float64"):
+        _c.eval_kernel(idx["quat_mul"], np.zeros(8, np.int64), np.zeros(4))
+    with pytest.raises(ValueError, match="shape"):
+        c_backend.eval_kernel("quat_mul", np.zeros(3), np.zeros(4))
+
+
+def test_eval_kernel_broadcasts_like_numpy():
+    rng = np.random.default_rng(19)
+    q = rng.normal(size=(5, 1, 4))
+    v = rng.normal(size=(3, 3))
+    np.testing.assert_allclose(c_backend.eval_kernel("quat_rotate", q, v), K.quat_rotate(q, v), rtol=0, atol=1e-14)
+    axis, angle = c_backend.eval_kernel("quat_to_axis_angle", K.quat_normalize(q))
+    ax2, an2 = K.quat_to_axis_angle(K.quat_normalize(q))
+    assert axis.shape == ax2.shape == (5, 1, 3) and angle.shape == an2.shape == (5, 1)
+    assert c_backend.eval_kernel("kinetic_energy", 2.0, [1, 2, 3], [1, 0, 0], [0, 1, 0]).shape == ()
+
+
+def test_kernel_table_matches_numpy():
+    table = _c.kernels()
+    assert len(table) == _c.KERNEL_COUNT == len(K.KERNELS)
+    for (name, n_in, n_out), (kname, (_, ins, outs)) in zip(table, K.KERNELS.items()):
+        assert name == kname
+        assert n_in == sum(int(np.prod(s, dtype=int)) for _, s in ins)
+        assert n_out == sum(int(np.prod(s, dtype=int)) for _, s in outs)
+
+
+# ---------------------------------------------------------------- staleness
+
+def test_build_is_current():
+    assert _c.GENERATED_HASH == c_backend.generated_hash(c_backend.generated_dir())
+    c_backend.check_build()
+
+
+def test_stale_copy_of_generated(tmp_path):
+    gen = c_backend.generated_dir()
+    for f in gen.iterdir():
+        if f.is_file():
+            shutil.copy(f, tmp_path / f.name)
+    c_backend.check_build(tmp_path)  # an identical copy is current
+    with open(tmp_path / "kernels.c", "a") as fh:
+        fh.write("/* changed */\n")
+    with pytest.raises(StaleBuildError) as info:
+        c_backend.check_build(tmp_path)
+    msg = str(info.value)
+    assert "pip install -e ." in msg
+    assert "lavendersim derive" in msg  # the edit also broke generated/'s own manifest
+    assert isinstance(info.value, ImportError)
+
+
+def test_stale_hash_on_import(monkeypatch):
+    monkeypatch.setattr(_c, "GENERATED_HASH", "0" * 64)
+    try:
+        with pytest.raises(StaleBuildError, match=r"pip install -e \."):
+            importlib.reload(c_backend)
+    finally:
+        monkeypatch.undo()
+        importlib.reload(c_backend)
+    assert "lavendersim derive" not in _stale_message_for_current_generated()
+
+
+def _stale_message_for_current_generated():
+    try:
+        c_backend.check_build(built_hash="f" * 64)
+    except StaleBuildError as exc:
+        return str(exc)
+    raise AssertionError("check_build accepted a wrong hash")
