@@ -23,6 +23,7 @@ from .common import BACKENDS, DEFAULT_OUT, LabResult, report
 LABS: dict[str, str] = {
     "force": "force",
     "momentum": "momentum",
+    "02": "lab02_orientation",
 }
 
 __all__ = ["LABS", "lab_module", "run", "register_cli", "LabResult"]

@@ -1,0 +1,213 @@
+"""Experiment 02: integrate a constant world angular velocity — Euler-angle addition vs quaternions.
+
+Parameters (SPEC, resolved from the chapter's figures): omega_w = [1.2, 0.7, 0.9] rad/s constant,
+dt = 0.01 s, T = 4 s, start at the identity. Three integrations:
+  * naive: add dt * omega to intrinsic XYZ Euler angles (R = Rx(a) Ry(b) Rz(c), euler_xyz_to_quat);
+  * quaternion: integrate_orientation (explicit step q += dt 1/2 [omega_w, 0] ⊗ q, then normalize);
+  * unnormalized: the same explicit step (quat_derivative_world) without normalizing.
+Exact answer: R(T) = exp(T [omega_w]x), i.e. axis_angle_to_quat(omega/|omega|, |omega| T).
+Errors are the rotation angle between the computed and exact orientations, in degrees
+(q and -q are the same orientation; the unnormalized state is normalized before comparing).
+Chapter figures: 87.6° (naive), 0.0087° (quaternion), |q| = 1.0138 (unnormalized).
+
+Closed forms, printed alongside: each normalized explicit step turns by 2 atan(|w| dt / 2) about
+the fixed axis instead of |w| dt, so the quaternion error is n (|w| dt - 2 atan(|w| dt / 2)); each
+unnormalized step multiplies |q| by sqrt(1 + (|w| dt / 2)^2).
+
+Paw-check 4: with body-frame angular velocity the product moves to the other side,
+q_dot = 1/2 q ⊗ [omega_b, 0]; for a constant world omega, omega_b = R^T omega_w (world_to_body).
+Started from a 90° rotation about y, that trajectory equals the world-form one to ~1e-12, and the
+wrong order (1/2 [omega_b, 0] ⊗ q) diverges. From the identity start the wrong order happens to
+agree, because then omega_b = omega_w and q stays a rotation about omega — which commutes with
+[omega, 0]: a start at identity hides the bug, so the paw-check uses a rotated start.
+
+Failure modes: --single-axis (omega = [|omega|, 0, 0]: Euler-angle addition is then exact and
+the bug is hidden, while the quaternion figures stay the same because they depend only on
+|omega|); --dt larger (the quaternion error grows, ~dt^2).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from lavendersim import validate as V
+from lavendersim.kernels import K
+
+from . import common as C
+
+NAME = "02"
+TITLE = "Euler-angle addition vs quaternion integration of a constant world angular velocity (paw-check 4)"
+
+OMEGA_W = (1.2, 0.7, 0.9)
+DT = 0.01
+T_END = 4.0
+# chapter figures, SPEC tolerances
+NAIVE_DEG, NAIVE_TOL = 87.63, 0.05
+QUAT_DEG, QUAT_TOL = 0.00866, 0.00005
+NORM, NORM_TOL = 1.01379, 0.00005
+PAW4_TOL = 1e-12
+PAW4_Q0_AXIS, PAW4_Q0_ANGLE = (0.0, 1.0, 0.0), math.pi / 2
+
+
+def add_arguments(parser) -> None:
+    parser.add_argument("--dt", type=float, default=DT, help="time step in s (default 0.01); T / dt must be an integer")
+    parser.add_argument("--single-axis", action="store_true",
+                        help="failure mode: omega = [|omega|, 0, 0] rad/s, which hides the Euler-angle bug")
+
+
+def options_from_args(args) -> dict:
+    return {"dt": args.dt, "single_axis": args.single_axis}
+
+
+def _steps(dt: float) -> int:
+    n = int(round(T_END / dt))
+    if n < 1 or abs(n * dt - T_END) > 1e-9 * T_END:
+        raise V.LavenderInputError("dt", f"T = {T_END:g} s must be a whole number of steps", f", got dt = {dt!r}")
+    return n
+
+
+def integrate(omega_w, dt: float, n: int, q0=(0.0, 0.0, 0.0, 1.0)):
+    """All methods over n steps; returns dict of (n+1, 4) quaternion histories (and Euler angles)."""
+    w = np.asarray(omega_w, float)
+    q0 = np.asarray(q0, float)
+    H = {k: np.empty((n + 1, 4)) for k in ("quaternion", "unnormalized", "naive", "body", "wrong_order")}
+    for k in H:
+        H[k][0] = q0
+    angles = np.asarray(K.quat_to_euler_xyz(q0), float)
+    for i in range(n):
+        H["quaternion"][i + 1] = K.integrate_orientation(H["quaternion"][i], w, dt)
+        qu = H["unnormalized"][i]
+        H["unnormalized"][i + 1] = qu + dt * K.quat_derivative_world(qu, w)
+        angles = angles + dt * w  # the deliberate mistake: omega treated as Euler-angle rates
+        H["naive"][i + 1] = K.euler_xyz_to_quat(angles[0], angles[1], angles[2])
+        # paw-check 4: body-frame omega with the body-form product, and with the wrong order
+        qb = H["body"][i]
+        wb = K.world_to_body(qb, w)
+        H["body"][i + 1] = K.quat_normalize(qb + dt * K.quat_derivative_body(qb, wb))
+        qx = H["wrong_order"][i]
+        wbx = K.world_to_body(qx, w)
+        H["wrong_order"][i + 1] = K.quat_normalize(qx + dt * K.quat_derivative_world(qx, wbx))
+    return H
+
+
+def exact(omega_w, t, q0=(0.0, 0.0, 0.0, 1.0)):
+    """exp(t [omega]x) R0 as quaternions, shape (len(t), 4)."""
+    w = np.asarray(omega_w, float)
+    speed = float(np.linalg.norm(w))
+    axis = w / speed
+    q_rot = K.axis_angle_to_quat(np.broadcast_to(axis, (len(t), 3)), speed * np.asarray(t))
+    return K.quat_mul(q_rot, np.broadcast_to(np.asarray(q0, float), (len(t), 4)))
+
+
+def run(out_dir=C.DEFAULT_OUT, backend: str = "c", dt: float = DT, single_axis: bool = False) -> C.LabResult:
+    backend = C.check_backend(backend)  # recorded; this lab calls the kernels directly
+    dt = V.dt("dt", dt)
+    if not isinstance(single_axis, (bool, np.bool_)):
+        raise V.LavenderInputError("single_axis", "must be True or False", f", got {single_axis!r}")
+    n = _steps(dt)
+    w_mixed = np.array(OMEGA_W)
+    speed = float(np.linalg.norm(w_mixed))
+    w = np.array([speed, 0.0, 0.0]) if single_axis else w_mixed
+    t = np.arange(n + 1) * dt
+
+    H = integrate(w, dt, n)
+    Q = exact(w, t)
+    err_naive = C.angle_between_deg(K, H["naive"], Q)
+    err_quat = C.angle_between_deg(K, H["quaternion"], Q)
+    err_unnorm = C.angle_between_deg(K, H["unnormalized"], Q)
+    norm_unnorm = np.linalg.norm(H["unnormalized"], axis=1)
+    quat_closed = math.degrees(n * (speed * dt - 2 * math.atan(speed * dt / 2)))
+    norm_closed = (1 + (speed * dt / 2) ** 2) ** (n / 2)
+
+    # paw-check 4 from a rotated start, and (to show why) from the identity
+    q0 = K.axis_angle_to_quat(np.array(PAW4_Q0_AXIS), PAW4_Q0_ANGLE)
+    H4 = integrate(w, dt, n, q0)
+    Q4 = exact(w, t, q0)
+    body_vs_world = float(np.max(np.abs(H4["body"] - H4["quaternion"])))
+    body_err = C.angle_between_deg(K, H4["body"], Q4)
+    wrong_err = C.angle_between_deg(K, H4["wrong_order"], Q4)
+    body_vs_world_id = float(np.max(np.abs(H["body"] - H["quaternion"])))
+    wrong_err_id = C.angle_between_deg(K, H["wrong_order"], Q)
+
+    figures = {
+        "naive_euler_error_deg": float(err_naive[-1]),
+        "quaternion_error_deg": float(err_quat[-1]),
+        "quaternion_error_deg_closed_form": quat_closed,
+        "unnormalized_norm": float(norm_unnorm[-1]),
+        "unnormalized_norm_closed_form": norm_closed,
+        "unnormalized_error_deg": float(err_unnorm[-1]),
+        "naive_euler_max_error_deg": float(np.max(err_naive)),
+        "paw4_body_vs_world_max_abs": body_vs_world,
+        "paw4_body_form_error_deg": float(body_err[-1]),
+        "paw4_wrong_order_error_deg": float(wrong_err[-1]),
+        "paw4_identity_start_body_vs_world_max_abs": body_vs_world_id,
+        "paw4_identity_start_wrong_order_error_deg": float(wrong_err_id[-1]),
+    }
+    params = {
+        "backend": backend, "omega_w": w, "dt": dt, "T": T_END, "n_steps": n, "q0": np.array([0.0, 0.0, 0.0, 1.0]),
+        "single_axis": bool(single_axis), "euler_convention": "intrinsic XYZ, R = Rx(roll) Ry(pitch) Rz(yaw)",
+        "paw4_q0": q0,
+    }
+
+    default = dt == DT and not single_axis
+    checks = []
+    if default or (single_axis and dt == DT):
+        # the quaternion figures depend only on |omega| and dt, so they hold for --single-axis too
+        checks += [
+            C.close("quaternion_error_deg", err_quat[-1], QUAT_DEG, QUAT_TOL, "chapter 0.0087°"),
+            C.close("unnormalized_norm", norm_unnorm[-1], NORM, NORM_TOL, "chapter 1.0138"),
+        ]
+    if default:
+        checks.insert(0, C.close("naive_euler_error_deg", err_naive[-1], NAIVE_DEG, NAIVE_TOL, "chapter 87.6°"))
+    if single_axis:
+        checks.append(C.at_most("single_axis_hides_euler_bug", err_naive[-1], 1e-9,
+                                "failure mode: Euler-angle addition is exact for a single-axis rotation (deg)"))
+    if dt != DT:
+        ref = integrate(w, DT, _steps(DT))
+        ref_err = float(C.angle_between_deg(K, ref["quaternion"][-1:], exact(w, [T_END]))[0])
+        figures["quaternion_error_deg_at_dt_0.01"] = ref_err
+        figures["quaternion_error_ratio_vs_dt_0.01"] = float(err_quat[-1]) / ref_err
+        if dt > DT:
+            checks.append(C.above("larger_dt_increases_quaternion_error", float(err_quat[-1]) / ref_err, 1.0,
+                                  f"failure mode: error at dt = {dt:g} s over error at dt = 0.01 s"))
+    checks += [
+        C.close("quaternion_error_matches_closed_form", err_quat[-1], quat_closed, 1e-9,
+                "n (|w| dt - 2 atan(|w| dt / 2)), deg"),
+        C.close("unnormalized_norm_matches_closed_form", norm_unnorm[-1], norm_closed, 1e-12,
+                "(1 + (|w| dt / 2)^2)^(n / 2)"),
+        C.at_most("paw4_body_form_equals_world_form", body_vs_world, PAW4_TOL,
+                  "max |q_body - q_world| over the run, start 90° about y"),
+        C.above("paw4_wrong_order_diverges", wrong_err[-1], 1.0,
+                "body omega with the world-form order: error at T in degrees"),
+    ]
+
+    fig, ax = C.new_figure(1, 3, size=(14, 4.4),
+                           title=f"Constant world ω = {np.array2string(w, precision=3)} rad/s, dt = {dt:g} s"
+                                 + (" (single axis)" if single_axis else ""))
+    a = ax[0, 0]
+    a.semilogy(t[1:], np.maximum(err_naive[1:], 1e-12), label="naive Euler-angle addition", color="tab:red")
+    a.semilogy(t[1:], np.maximum(err_quat[1:], 1e-12), label="quaternion, normalized", color="tab:blue")
+    a.semilogy(t[1:], np.maximum(err_unnorm[1:], 1e-12), "--", label="quaternion, unnormalized (normalized to compare)",
+               color="tab:cyan")
+    a.set_xlabel("time t (s)")
+    a.set_ylabel("orientation error (deg)")
+    a.set_title(f"error vs exp(t[ω]×): {err_naive[-1]:.2f}° vs {err_quat[-1]:.5f}° at {T_END:g} s")
+    a.legend(fontsize=8)
+    b = ax[0, 1]
+    b.plot(t, norm_unnorm, color="tab:cyan", label="unnormalized")
+    b.plot(t, np.linalg.norm(H["quaternion"], axis=1), color="tab:blue", label="normalized")
+    b.set_xlabel("time t (s)")
+    b.set_ylabel("|q| (dimensionless)")
+    b.set_title(f"norm drift: |q(T)| = {norm_unnorm[-1]:.5f}")
+    b.legend(fontsize=8)
+    c = ax[0, 2]
+    c.semilogy(t[1:], np.maximum(body_err[1:], 1e-12), color="tab:green", label="body ω, ½ q⊗[ω_b,0] (correct)")
+    c.semilogy(t[1:], np.maximum(C.angle_between_deg(K, H4["quaternion"], Q4)[1:], 1e-12), ":", color="k",
+               label="world ω, ½ [ω_w,0]⊗q")
+    c.semilogy(t[1:], np.maximum(wrong_err[1:], 1e-12), color="tab:orange", label="body ω, ½ [ω_b,0]⊗q (wrong order)")
+    c.set_xlabel("time t (s)")
+    c.set_ylabel("orientation error (deg)")
+    c.set_title("paw-check 4: start 90° about y")
+    c.legend(fontsize=8)
+    return C.finish(NAME, out_dir, figures, params, checks, {"orientation.png": fig})
