@@ -23,6 +23,7 @@ from .common import BACKENDS, DEFAULT_OUT, LabResult, report
 LABS: dict[str, str] = {
     "force": "force",
     "momentum": "momentum",
+    "01": "lab01_equal_torque",
     "02": "lab02_orientation",
 }
 
