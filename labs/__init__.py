@@ -25,6 +25,7 @@ LABS: dict[str, str] = {
     "momentum": "momentum",
     "01": "lab01_equal_torque",
     "02": "lab02_orientation",
+    "03": "lab03_torque_free",
 }
 
 __all__ = ["LABS", "lab_module", "run", "register_cli", "LabResult"]
