@@ -4,7 +4,7 @@
 """
 from __future__ import annotations
 
-MODULES = ("particles", "inertia", "effects", "quaternion", "rigid_body")
+MODULES = ("particles", "inertia", "effects", "quaternion", "rigid_body", "wheel_cube")
 
 
 def all_kernels():

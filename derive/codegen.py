@@ -14,6 +14,7 @@ from pathlib import Path
 import sympy as sp
 from sympy.printing.c import C99CodePrinter
 from sympy.printing.numpy import NumPyPrinter
+from sympy.printing.pycode import PythonCodePrinter
 
 from .kernel import Kernel
 
@@ -67,6 +68,65 @@ class NpPrinter(NumPyPrinter):
 
     def _print_Max(self, expr):
         return self._minmax(expr, "maximum")
+
+
+class CasadiPrinter(PythonCodePrinter):
+    """Python source over casadi symbols (SX/MX/DM): branches become casadi.if_else."""
+
+    _fn = {"sqrt": "sqrt", "sin": "sin", "cos": "cos", "tan": "tan", "atan2": "atan2", "asin": "asin",
+           "acos": "acos", "atan": "atan", "exp": "exp", "log": "log"}
+
+    def _print_Pow(self, expr, rational=False):
+        return _small_pow(self, expr, "*", "1.0", "casadi.sqrt") or f"casadi.power({self._print(expr.base)}, {self._print(expr.exp)})"
+
+    def _print_Rational(self, expr):
+        return f"({float(expr.p)!r}/{float(expr.q)!r})"
+
+    def _module_format(self, fqn, register=True):
+        mod, _, fn = fqn.rpartition(".")
+        if mod == "math" and fn in self._fn:
+            return f"casadi.{self._fn[fn]}"
+        raise NotImplementedError(f"casadi printer: no mapping for {fqn}")
+
+    def _print_Abs(self, expr):
+        return f"casadi.fabs({self._print(expr.args[0])})"
+
+    def _minmax(self, expr, fn):
+        out = self._print(expr.args[0])
+        for a in expr.args[1:]:
+            out = f"casadi.{fn}({out}, {self._print(a)})"
+        return out
+
+    def _print_Min(self, expr):
+        return self._minmax(expr, "fmin")
+
+    def _print_Max(self, expr):
+        return self._minmax(expr, "fmax")
+
+    def _print_And(self, expr):
+        out = self._print(expr.args[0])
+        for a in expr.args[1:]:
+            out = f"casadi.logic_and({out}, {self._print(a)})"
+        return out
+
+    def _print_Piecewise(self, expr):
+        *head, (last, _) = expr.args
+        out = self._print(last)
+        for e, c in reversed(head):
+            out = f"casadi.if_else({self._print(c)}, {self._print(e)}, {out})"
+        return out
+
+
+def _unpack(k: Kernel, used: set, emit) -> None:
+    """Bind each used input symbol once (a symmetric matrix repeats symbols: first entry wins)."""
+    seen = set()
+    for a in k.inputs:
+        if a.shape == ():
+            continue
+        for i, s in enumerate(a.flat):
+            if s in used and s not in seen:
+                seen.add(s)
+                emit(a, i, s)
 
 
 class Printed:
@@ -123,11 +183,7 @@ def print_c(printed: list[Printed]) -> tuple[str, str]:
         h.append(_c_sig(k) + ";")
         h.append("")
         c.append(_c_sig(k) + " {")
-        for a in k.inputs:
-            if a.shape != ():
-                for i, s in enumerate(a.flat):
-                    if s in p.used:
-                        c.append(f"    const double {s} = {a.name}[{i}];")
+        _unpack(k, p.used, lambda a, i, s: c.append(f"    const double {s} = {a.name}[{i}];"))
         for t, e in p.temps:
             c.append(f"    const double {t} = {pr.doprint(e)};")
         idx = 0
@@ -181,14 +237,10 @@ def print_numpy(printed: list[Printed]) -> str:
             nd = len(a.shape)
             lead.append(f"{a.name}.shape" if nd == 0 else f"{a.name}.shape[:-{nd}]")
         out.append(f"    batch = numpy.broadcast_shapes({', '.join(lead)})")
-        for a in k.inputs:
-            if a.shape == ():
-                continue
-            for i, s in enumerate(a.flat):
-                if s not in p.used:
-                    continue
-                ix = f"{i}" if len(a.shape) == 1 else f"{i // a.shape[1]}, {i % a.shape[1]}"
-                out.append(f"    {s} = {a.name}[..., {ix}]")
+        def emit(a, i, s):
+            ix = f"{i}" if len(a.shape) == 1 else f"{i // a.shape[1]}, {i % a.shape[1]}"
+            out.append(f"    {s} = {a.name}[..., {ix}]")
+        _unpack(k, p.used, emit)
         ind = "    "
         if p.has_piecewise:
             out.append("    with numpy.errstate(invalid='ignore', divide='ignore'):  # numpy.select evaluates every branch")
@@ -221,6 +273,29 @@ def print_numpy(printed: list[Printed]) -> str:
     out.extend(meta)
     out.append("}")
     return "\n".join(out) + "\n"
+
+
+def print_casadi(printed: list[Printed]) -> str:
+    pr = CasadiPrinter()
+    out = [f'"""{HEADER}', "", "LavenderSim kernels for CasADi: the same expressions as kernels.c, over casadi SX/MX/DM.",
+           "Each input is a column vector (matrices flattened row-major, scalars as scalars); each output",
+           'is returned as a column vector (casadi.vertcat), several outputs as a tuple."""', "import casadi", "", ""]
+    for p in printed:
+        k = p.k
+        out.append(f"def {k.name}({', '.join(a.name for a in k.inputs)}):")
+        out.append('    """' + "\n    ".join(_doc_lines(k)) + '"""')
+        _unpack(k, p.used, lambda a, i, s: out.append(f"    {s} = {a.name}[{i}]"))
+        for t, e in p.temps:
+            out.append(f"    {t} = {pr.doprint(e)}")
+        idx, rets = 0, []
+        for a in k.outputs:
+            items = [pr.doprint(p.reduced[idx + i]) for i in range(a.size)]
+            idx += a.size
+            rets.append(f"casadi.vertcat({', '.join(items)})" if a.shape != () else f"casadi.vertcat({items[0]})")
+        out.append(f"    return {', '.join(rets)}")
+        out.append("")
+        out.append("")
+    return "\n".join(out).rstrip() + "\n"
 
 
 def print_markdown(printed: list[Printed]) -> str:
@@ -266,6 +341,7 @@ def render() -> dict[str, str]:
     printed = [Printed(k) for k in all_kernels()]
     h, c = print_c(printed)
     files = {"kernels.h": h, "kernels.c": c, "kernels_numpy.py": print_numpy(printed),
+             "kernels_casadi.py": print_casadi(printed),
              "EQUATIONS.md": print_markdown(printed), "__init__.py": f'"""{HEADER}"""\n'}
     return files
 

@@ -39,7 +39,9 @@ def _flat(value) -> list:
 
 
 # Domains tell tests (and readers) which inputs are meaningful: random sampling draws from them.
-DOMAINS = ("real", "positive", "unit_quaternion", "unit_vector", "spd_diag", "small")
+# inertia_sym: a symmetric 3×3 inertia, diagonally dominant and larger than any "positive" draw
+# (so that I − J stays positive definite for wheel inertias J).
+DOMAINS = ("real", "positive", "unit_quaternion", "unit_vector", "spd_diag", "small", "inertia_sym")
 
 
 @dataclass

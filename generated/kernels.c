@@ -750,6 +750,266 @@ void lv_angular_momentum_world(const double *q, const double *I_b, const double 
     L_w[2] = t10*(t5 - t6) + t4*(q_1*t2 + t11) + t7*(-t12 - t8 + 1);
 }
 
+void lv_pivot_body_rhs(const double *q, const double *omega_b, const double *I_p, const double *r_b, const double *F_w, const double *tau_w, double *q_dot, double *omega_dot_b) {
+    const double q_0 = q[0];
+    const double q_1 = q[1];
+    const double q_2 = q[2];
+    const double q_3 = q[3];
+    const double omega_b_0 = omega_b[0];
+    const double omega_b_1 = omega_b[1];
+    const double omega_b_2 = omega_b[2];
+    const double I_p_00 = I_p[0];
+    const double I_p_01 = I_p[1];
+    const double I_p_02 = I_p[2];
+    const double I_p_11 = I_p[4];
+    const double I_p_12 = I_p[5];
+    const double I_p_22 = I_p[8];
+    const double r_b_0 = r_b[0];
+    const double r_b_1 = r_b[1];
+    const double r_b_2 = r_b[2];
+    const double F_w_0 = F_w[0];
+    const double F_w_1 = F_w[1];
+    const double F_w_2 = F_w[2];
+    const double tau_w_0 = tau_w[0];
+    const double tau_w_1 = tau_w[1];
+    const double tau_w_2 = tau_w[2];
+    const double t0 = ((1.0/2.0))*omega_b_0;
+    const double t1 = ((1.0/2.0))*omega_b_1;
+    const double t2 = ((1.0/2.0))*omega_b_2;
+    const double t3 = (I_p_12*I_p_12);
+    const double t4 = (I_p_01*I_p_01);
+    const double t5 = (I_p_02*I_p_02);
+    const double t6 = (1.0/(I_p_00*I_p_11*I_p_22 - I_p_00*t3 + 2*I_p_01*I_p_02*I_p_12 - I_p_11*t5 - I_p_22*t4));
+    const double t7 = I_p_01*I_p_12 - I_p_02*I_p_11;
+    const double t8 = 2*q_0;
+    const double t9 = q_2*t8;
+    const double t10 = 2*q_1;
+    const double t11 = q_3*t10;
+    const double t12 = t11 + t9;
+    const double t13 = q_3*t8;
+    const double t14 = 2*q_1*q_2 - t13;
+    const double t15 = I_p_00*omega_b_0 + I_p_01*omega_b_1 + I_p_02*omega_b_2;
+    const double t16 = I_p_01*omega_b_0 + I_p_11*omega_b_1 + I_p_12*omega_b_2;
+    const double t17 = 2*(q_0*q_0);
+    const double t18 = 2*(q_1*q_1) - 1;
+    const double t19 = -t17 - t18;
+    const double t20 = q_1*t8;
+    const double t21 = 2*q_2*q_3;
+    const double t22 = t20 - t21;
+    const double t23 = q_2*t10 + t13;
+    const double t24 = 2*(q_2*q_2);
+    const double t25 = -t17 - t24 + 1;
+    const double t26 = F_w_0*t22 + F_w_1*t25 + F_w_2*t23;
+    const double t27 = t20 + t21;
+    const double t28 = -t11 + t9;
+    const double t29 = -t18 - t24;
+    const double t30 = F_w_0*t29 + F_w_1*t27 + F_w_2*t28;
+    const double t31 = -omega_b_0*t16 + omega_b_1*t15 + r_b_0*t26 - r_b_1*t30 + t12*tau_w_0 + t14*tau_w_1 + t19*tau_w_2;
+    const double t32 = -I_p_01*I_p_22 + I_p_02*I_p_12;
+    const double t33 = I_p_02*omega_b_0 + I_p_12*omega_b_1 + I_p_22*omega_b_2;
+    const double t34 = F_w_0*t12 + F_w_1*t14 + F_w_2*t19;
+    const double t35 = omega_b_0*t33 - omega_b_2*t15 - r_b_0*t34 + r_b_2*t30 + t22*tau_w_0 + t23*tau_w_2 + t25*tau_w_1;
+    const double t36 = -omega_b_1*t33 + omega_b_2*t16 + r_b_1*t34 - r_b_2*t26 + t27*tau_w_1 + t28*tau_w_2 + t29*tau_w_0;
+    const double t37 = -I_p_00*I_p_12 + I_p_01*I_p_02;
+    q_dot[0] = q_1*t2 - q_2*t1 + q_3*t0;
+    q_dot[1] = -q_0*t2 + q_2*t0 + q_3*t1;
+    q_dot[2] = q_0*t1 - q_1*t0 + q_3*t2;
+    q_dot[3] = -q_0*t0 - q_1*t1 - q_2*t2;
+    omega_dot_b[0] = t6*(t31*t7 + t32*t35 + t36*(I_p_11*I_p_22 - t3));
+    omega_dot_b[1] = t6*(t31*t37 + t32*t36 + t35*(I_p_00*I_p_22 - t5));
+    omega_dot_b[2] = t6*(t31*(I_p_00*I_p_11 - t4) + t35*t37 + t36*t7);
+}
+
+void lv_wheel_body_rhs(const double *q, const double *omega_b, const double *Omega, const double *I_p, const double *J, const double *r_b, const double *F_w, const double *tau_w, const double *u, double c_w, double *q_dot, double *omega_dot_b, double *Omega_dot) {
+    const double q_0 = q[0];
+    const double q_1 = q[1];
+    const double q_2 = q[2];
+    const double q_3 = q[3];
+    const double omega_b_0 = omega_b[0];
+    const double omega_b_1 = omega_b[1];
+    const double omega_b_2 = omega_b[2];
+    const double Omega_0 = Omega[0];
+    const double Omega_1 = Omega[1];
+    const double Omega_2 = Omega[2];
+    const double I_p_00 = I_p[0];
+    const double I_p_01 = I_p[1];
+    const double I_p_02 = I_p[2];
+    const double I_p_11 = I_p[4];
+    const double I_p_12 = I_p[5];
+    const double I_p_22 = I_p[8];
+    const double J_0 = J[0];
+    const double J_1 = J[1];
+    const double J_2 = J[2];
+    const double r_b_0 = r_b[0];
+    const double r_b_1 = r_b[1];
+    const double r_b_2 = r_b[2];
+    const double F_w_0 = F_w[0];
+    const double F_w_1 = F_w[1];
+    const double F_w_2 = F_w[2];
+    const double tau_w_0 = tau_w[0];
+    const double tau_w_1 = tau_w[1];
+    const double tau_w_2 = tau_w[2];
+    const double u_0 = u[0];
+    const double u_1 = u[1];
+    const double u_2 = u[2];
+    const double t0 = ((1.0/2.0))*omega_b_0;
+    const double t1 = ((1.0/2.0))*omega_b_1;
+    const double t2 = ((1.0/2.0))*omega_b_2;
+    const double t3 = I_p_11*I_p_22;
+    const double t4 = J_1*J_2;
+    const double t5 = I_p_11*J_2;
+    const double t6 = I_p_22*J_1;
+    const double t7 = (I_p_01*I_p_01);
+    const double t8 = (I_p_02*I_p_02);
+    const double t9 = (I_p_12*I_p_12);
+    const double t10 = I_p_01*I_p_12;
+    const double t11 = (1.0/(I_p_00*t3 + I_p_00*t4 - I_p_00*t5 - I_p_00*t6 - I_p_00*t9 + 2*I_p_02*t10 - I_p_11*t8 - I_p_22*t7 - J_0*t3 - J_0*t4 + J_0*t5 + J_0*t6 + J_0*t9 + J_1*t8 + J_2*t7));
+    const double t12 = -I_p_02*I_p_11 + I_p_02*J_1 + t10;
+    const double t13 = I_p_00*omega_b_0 + I_p_01*omega_b_1 + I_p_02*omega_b_2 + J_0*Omega_0;
+    const double t14 = 2*q_1;
+    const double t15 = q_0*t14;
+    const double t16 = 2*q_3;
+    const double t17 = q_2*t16;
+    const double t18 = t15 - t17;
+    const double t19 = q_0*t16;
+    const double t20 = q_2*t14 + t19;
+    const double t21 = 2*(q_2*q_2);
+    const double t22 = 2*(q_0*q_0) - 1;
+    const double t23 = -t21 - t22;
+    const double t24 = F_w_0*t18 + F_w_1*t23 + F_w_2*t20;
+    const double t25 = 2*q_0*q_2;
+    const double t26 = q_1*t16;
+    const double t27 = t25 + t26;
+    const double t28 = 2*q_1*q_2 - t19;
+    const double t29 = 2*(q_1*q_1);
+    const double t30 = -t22 - t29;
+    const double t31 = I_p_01*omega_b_0 + I_p_11*omega_b_1 + I_p_12*omega_b_2 + J_1*Omega_1;
+    const double t32 = t15 + t17;
+    const double t33 = t25 - t26;
+    const double t34 = -t21 - t29 + 1;
+    const double t35 = F_w_0*t34 + F_w_1*t32 + F_w_2*t33;
+    const double t36 = Omega_2*c_w - u_2;
+    const double t37 = -omega_b_0*t31 + omega_b_1*t13 + r_b_0*t24 - r_b_1*t35 + t27*tau_w_0 + t28*tau_w_1 + t30*tau_w_2 + t36;
+    const double t38 = -I_p_01*I_p_22 + I_p_01*J_2 + I_p_02*I_p_12;
+    const double t39 = I_p_02*omega_b_0 + I_p_12*omega_b_1 + I_p_22*omega_b_2 + J_2*Omega_2;
+    const double t40 = F_w_0*t27 + F_w_1*t28 + F_w_2*t30;
+    const double t41 = Omega_1*c_w - u_1;
+    const double t42 = omega_b_0*t39 - omega_b_2*t13 - r_b_0*t40 + r_b_2*t35 + t18*tau_w_0 + t20*tau_w_2 + t23*tau_w_1 + t41;
+    const double t43 = Omega_0*c_w - u_0;
+    const double t44 = -omega_b_1*t39 + omega_b_2*t31 + r_b_1*t40 - r_b_2*t24 + t32*tau_w_1 + t33*tau_w_2 + t34*tau_w_0 + t43;
+    const double t45 = t11*(t12*t37 + t38*t42 + t44*(I_p_11*I_p_22 + J_1*J_2 - t5 - t6 - t9));
+    const double t46 = -I_p_00*I_p_12 + I_p_01*I_p_02 + I_p_12*J_0;
+    const double t47 = t11*(t37*t46 + t38*t44 + t42*(I_p_00*I_p_22 - I_p_00*J_2 - I_p_22*J_0 + J_0*J_2 - t8));
+    const double t48 = t11*(t12*t44 + t37*(I_p_00*I_p_11 - I_p_00*J_1 - I_p_11*J_0 + J_0*J_1 - t7) + t42*t46);
+    q_dot[0] = q_1*t2 - q_2*t1 + q_3*t0;
+    q_dot[1] = -q_0*t2 + q_2*t0 + q_3*t1;
+    q_dot[2] = q_0*t1 - q_1*t0 + q_3*t2;
+    q_dot[3] = -q_0*t0 - q_1*t1 - q_2*t2;
+    omega_dot_b[0] = t45;
+    omega_dot_b[1] = t47;
+    omega_dot_b[2] = t48;
+    Omega_dot[0] = -t45 - t43/J_0;
+    Omega_dot[1] = -t47 - t41/J_1;
+    Omega_dot[2] = -t48 - t36/J_2;
+}
+
+void lv_wheel_momentum(const double *q, const double *omega_b, const double *Omega, const double *I_p, const double *J, double *L_body_w, double *L_wheels_w) {
+    const double q_0 = q[0];
+    const double q_1 = q[1];
+    const double q_2 = q[2];
+    const double q_3 = q[3];
+    const double omega_b_0 = omega_b[0];
+    const double omega_b_1 = omega_b[1];
+    const double omega_b_2 = omega_b[2];
+    const double Omega_0 = Omega[0];
+    const double Omega_1 = Omega[1];
+    const double Omega_2 = Omega[2];
+    const double I_p_00 = I_p[0];
+    const double I_p_01 = I_p[1];
+    const double I_p_02 = I_p[2];
+    const double I_p_11 = I_p[4];
+    const double I_p_12 = I_p[5];
+    const double I_p_22 = I_p[8];
+    const double J_0 = J[0];
+    const double J_1 = J[1];
+    const double J_2 = J[2];
+    const double t0 = 2*q_1;
+    const double t1 = q_0*t0;
+    const double t2 = 2*q_2;
+    const double t3 = q_3*t2;
+    const double t4 = t1 - t3;
+    const double t5 = I_p_01*omega_b_0 + I_p_12*omega_b_2 + omega_b_1*(I_p_11 - J_1);
+    const double t6 = q_0*t2;
+    const double t7 = q_3*t0;
+    const double t8 = t6 + t7;
+    const double t9 = I_p_02*omega_b_0 + I_p_12*omega_b_1 + omega_b_2*(I_p_22 - J_2);
+    const double t10 = 2*(q_1*q_1);
+    const double t11 = 2*(q_2*q_2) - 1;
+    const double t12 = -t10 - t11;
+    const double t13 = I_p_01*omega_b_1 + I_p_02*omega_b_2 + omega_b_0*(I_p_00 - J_0);
+    const double t14 = t1 + t3;
+    const double t15 = 2*q_0*q_3;
+    const double t16 = 2*q_1*q_2 - t15;
+    const double t17 = 2*(q_0*q_0);
+    const double t18 = -t11 - t17;
+    const double t19 = t6 - t7;
+    const double t20 = q_1*t2 + t15;
+    const double t21 = -t10 - t17 + 1;
+    const double t22 = J_1*(Omega_1 + omega_b_1);
+    const double t23 = J_2*(Omega_2 + omega_b_2);
+    const double t24 = J_0*(Omega_0 + omega_b_0);
+    L_body_w[0] = t12*t13 + t4*t5 + t8*t9;
+    L_body_w[1] = t13*t14 + t16*t9 + t18*t5;
+    L_body_w[2] = t13*t19 + t20*t5 + t21*t9;
+    L_wheels_w[0] = t12*t24 + t22*t4 + t23*t8;
+    L_wheels_w[1] = t14*t24 + t16*t23 + t18*t22;
+    L_wheels_w[2] = t19*t24 + t20*t22 + t21*t23;
+}
+
+void lv_pivot_kinematics(const double *q, const double *omega_b, const double *anchor_w, const double *r_b, double *p_w, double *v_w) {
+    const double q_0 = q[0];
+    const double q_1 = q[1];
+    const double q_2 = q[2];
+    const double q_3 = q[3];
+    const double omega_b_0 = omega_b[0];
+    const double omega_b_1 = omega_b[1];
+    const double omega_b_2 = omega_b[2];
+    const double anchor_w_0 = anchor_w[0];
+    const double anchor_w_1 = anchor_w[1];
+    const double anchor_w_2 = anchor_w[2];
+    const double r_b_0 = r_b[0];
+    const double r_b_1 = r_b[1];
+    const double r_b_2 = r_b[2];
+    const double t0 = 2*q_1;
+    const double t1 = q_0*t0;
+    const double t2 = 2*q_2;
+    const double t3 = q_3*t2;
+    const double t4 = t1 - t3;
+    const double t5 = q_0*t2;
+    const double t6 = q_3*t0;
+    const double t7 = t5 + t6;
+    const double t8 = 2*(q_1*q_1);
+    const double t9 = 2*(q_2*q_2) - 1;
+    const double t10 = -t8 - t9;
+    const double t11 = t1 + t3;
+    const double t12 = 2*q_0*q_3;
+    const double t13 = 2*q_1*q_2 - t12;
+    const double t14 = 2*(q_0*q_0);
+    const double t15 = -t14 - t9;
+    const double t16 = t5 - t6;
+    const double t17 = q_1*t2 + t12;
+    const double t18 = -t14 - t8 + 1;
+    const double t19 = omega_b_0*r_b_1 - omega_b_1*r_b_0;
+    const double t20 = -omega_b_0*r_b_2 + omega_b_2*r_b_0;
+    const double t21 = omega_b_1*r_b_2 - omega_b_2*r_b_1;
+    p_w[0] = anchor_w_0 + r_b_0*t10 + r_b_1*t4 + r_b_2*t7;
+    p_w[1] = anchor_w_1 + r_b_0*t11 + r_b_1*t15 + r_b_2*t13;
+    p_w[2] = anchor_w_2 + r_b_0*t16 + r_b_1*t17 + r_b_2*t18;
+    v_w[0] = t10*t21 + t19*t7 + t20*t4;
+    v_w[1] = t11*t21 + t13*t19 + t15*t20;
+    v_w[2] = t16*t21 + t17*t20 + t18*t19;
+}
+
 static void packed_particle_moments(const double *in, double *out) { lv_particle_moments(in[0], in + 1, in + 4, out + 0, out + 3); }
 static void packed_particle_angular_momentum(const double *in, double *out) { lv_particle_angular_momentum(in[0], in + 1, in + 4, in + 7, in + 10, out + 0); }
 static void packed_inertia_box(const double *in, double *out) { lv_inertia_box(in[0], in[1], in[2], in[3], out + 0); }
@@ -782,6 +1042,10 @@ static void packed_apply_inv_inertia(const double *in, double *out) { lv_apply_i
 static void packed_world_to_body(const double *in, double *out) { lv_world_to_body(in + 0, in + 4, out + 0); }
 static void packed_kinetic_energy(const double *in, double *out) { lv_kinetic_energy(in[0], in + 1, in + 4, in + 7, out + 0); }
 static void packed_angular_momentum_world(const double *in, double *out) { lv_angular_momentum_world(in + 0, in + 4, in + 7, out + 0); }
+static void packed_pivot_body_rhs(const double *in, double *out) { lv_pivot_body_rhs(in + 0, in + 4, in + 7, in + 16, in + 19, in + 22, out + 0, out + 4); }
+static void packed_wheel_body_rhs(const double *in, double *out) { lv_wheel_body_rhs(in + 0, in + 4, in + 7, in + 10, in + 19, in + 22, in + 25, in + 28, in + 31, in[34], out + 0, out + 4, out + 7); }
+static void packed_wheel_momentum(const double *in, double *out) { lv_wheel_momentum(in + 0, in + 4, in + 7, in + 10, in + 19, out + 0, out + 3); }
+static void packed_pivot_kinematics(const double *in, double *out) { lv_pivot_kinematics(in + 0, in + 4, in + 7, in + 10, out + 0, out + 3); }
 
 const lv_kernel_info lv_kernel_table[LV_KERNEL_COUNT] = {
     {"particle_moments", 7, 6, packed_particle_moments},
@@ -816,4 +1080,8 @@ const lv_kernel_info lv_kernel_table[LV_KERNEL_COUNT] = {
     {"world_to_body", 7, 3, packed_world_to_body},
     {"kinetic_energy", 10, 1, packed_kinetic_energy},
     {"angular_momentum_world", 10, 3, packed_angular_momentum_world},
+    {"pivot_body_rhs", 25, 7, packed_pivot_body_rhs},
+    {"wheel_body_rhs", 35, 10, packed_wheel_body_rhs},
+    {"wheel_momentum", 22, 6, packed_wheel_momentum},
+    {"pivot_kinematics", 13, 6, packed_pivot_kinematics},
 };

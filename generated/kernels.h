@@ -11,7 +11,7 @@ typedef struct {
     void (*packed)(const double *in, double *out);
 } lv_kernel_info;
 
-#define LV_KERNEL_COUNT 32
+#define LV_KERNEL_COUNT 36
 extern const lv_kernel_info lv_kernel_table[LV_KERNEL_COUNT];
 
 /* particle_moments: One particle's mass moment and momentum (summed: m r_COM and p).
@@ -221,5 +221,51 @@ void lv_kinetic_energy(double m, const double *I_b, const double *v_w, const dou
      in  omega_b [3]: angular velocity, body frame, rad/s
      out L_w [3]: angular momentum, world frame, kg·m²/s */
 void lv_angular_momentum_world(const double *q, const double *I_b, const double *omega_b, double *L_w);
+
+/* pivot_body_rhs: Rotation about a world-anchored spherical joint (no wheels).
+     in  q [4]: orientation (x, y, z, w), R_WB
+     in  omega_b [3]: angular velocity, body frame, rad/s
+     in  I_p [3×3]: inertia about the pivot (wheels locked), body frame, kg·m², symmetric row-major
+     in  r_b [3]: pivot → COM, body frame, m
+     in  F_w [3]: total force at the COM, world frame, N
+     in  tau_w [3]: total torque about the COM, world frame, N·m
+     out q_dot [4]: 1/s
+     out omega_dot_b [3]: rad/s², body frame */
+void lv_pivot_body_rhs(const double *q, const double *omega_b, const double *I_p, const double *r_b, const double *F_w, const double *tau_w, double *q_dot, double *omega_dot_b);
+
+/* wheel_body_rhs: Body with three body-axis reaction wheels rotating about a pivot.
+     in  q [4]: orientation (x, y, z, w), R_WB
+     in  omega_b [3]: angular velocity, body frame, rad/s
+     in  Omega [3]: wheel rates relative to the body, rad/s
+     in  I_p [3×3]: inertia about the pivot (wheels locked), body frame, kg·m², symmetric row-major
+     in  J [3]: wheel spin inertias, kg·m²
+     in  r_b [3]: pivot → COM, body frame, m
+     in  F_w [3]: total force at the COM, world frame, N
+     in  tau_w [3]: total torque about the COM, world frame, N·m
+     in  u [3]: motor torques on the wheels (body gets −u), N·m
+     in  c_w scalar: wheel damping, N·m·s/rad
+     out q_dot [4]: 1/s
+     out omega_dot_b [3]: rad/s², body frame
+     out Omega_dot [3]: rad/s² */
+void lv_wheel_body_rhs(const double *q, const double *omega_b, const double *Omega, const double *I_p, const double *J, const double *r_b, const double *F_w, const double *tau_w, const double *u, double c_w, double *q_dot, double *omega_dot_b, double *Omega_dot);
+
+/* wheel_momentum: World angular momentum about the pivot of the body (wheels locked) and of the wheels' spin.
+     in  q [4]: orientation (x, y, z, w), R_WB
+     in  omega_b [3]: angular velocity, body frame, rad/s
+     in  Omega [3]: wheel rates relative to the body, rad/s
+     in  I_p [3×3]: inertia about the pivot (wheels locked), body frame, kg·m², symmetric row-major
+     in  J [3]: wheel spin inertias, kg·m²
+     out L_body_w [3]: kg·m²/s, world
+     out L_wheels_w [3]: kg·m²/s, world */
+void lv_wheel_momentum(const double *q, const double *omega_b, const double *Omega, const double *I_p, const double *J, double *L_body_w, double *L_wheels_w);
+
+/* pivot_kinematics: COM position and velocity of a body on a spherical joint.
+     in  q [4]: orientation (x, y, z, w), R_WB
+     in  omega_b [3]: angular velocity, body frame, rad/s
+     in  anchor_w [3]: joint anchor, world frame, m
+     in  r_b [3]: pivot → COM, body frame, m
+     out p_w [3]: COM position, world, m
+     out v_w [3]: COM velocity, world, m/s */
+void lv_pivot_kinematics(const double *q, const double *omega_b, const double *anchor_w, const double *r_b, double *p_w, double *v_w);
 
 #endif

@@ -1008,6 +1008,346 @@ def angular_momentum_world(q, I_b, omega_b):
     return L_w_out
 
 
+def pivot_body_rhs(q, omega_b, I_p, r_b, F_w, tau_w):
+    """pivot_body_rhs: Rotation about a world-anchored spherical joint (no wheels).
+      in  q [4]: orientation (x, y, z, w), R_WB
+      in  omega_b [3]: angular velocity, body frame, rad/s
+      in  I_p [3×3]: inertia about the pivot (wheels locked), body frame, kg·m², symmetric row-major
+      in  r_b [3]: pivot → COM, body frame, m
+      in  F_w [3]: total force at the COM, world frame, N
+      in  tau_w [3]: total torque about the COM, world frame, N·m
+      out q_dot [4]: 1/s
+      out omega_dot_b [3]: rad/s², body frame"""
+    q = numpy.asarray(q, dtype=numpy.float64)
+    omega_b = numpy.asarray(omega_b, dtype=numpy.float64)
+    I_p = numpy.asarray(I_p, dtype=numpy.float64)
+    r_b = numpy.asarray(r_b, dtype=numpy.float64)
+    F_w = numpy.asarray(F_w, dtype=numpy.float64)
+    tau_w = numpy.asarray(tau_w, dtype=numpy.float64)
+    batch = numpy.broadcast_shapes(q.shape[:-1], omega_b.shape[:-1], I_p.shape[:-2], r_b.shape[:-1], F_w.shape[:-1], tau_w.shape[:-1])
+    q_0 = q[..., 0]
+    q_1 = q[..., 1]
+    q_2 = q[..., 2]
+    q_3 = q[..., 3]
+    omega_b_0 = omega_b[..., 0]
+    omega_b_1 = omega_b[..., 1]
+    omega_b_2 = omega_b[..., 2]
+    I_p_00 = I_p[..., 0, 0]
+    I_p_01 = I_p[..., 0, 1]
+    I_p_02 = I_p[..., 0, 2]
+    I_p_11 = I_p[..., 1, 1]
+    I_p_12 = I_p[..., 1, 2]
+    I_p_22 = I_p[..., 2, 2]
+    r_b_0 = r_b[..., 0]
+    r_b_1 = r_b[..., 1]
+    r_b_2 = r_b[..., 2]
+    F_w_0 = F_w[..., 0]
+    F_w_1 = F_w[..., 1]
+    F_w_2 = F_w[..., 2]
+    tau_w_0 = tau_w[..., 0]
+    tau_w_1 = tau_w[..., 1]
+    tau_w_2 = tau_w[..., 2]
+    t0 = ((1.0/2.0))*omega_b_0
+    t1 = ((1.0/2.0))*omega_b_1
+    t2 = ((1.0/2.0))*omega_b_2
+    t3 = (I_p_12*I_p_12)
+    t4 = (I_p_01*I_p_01)
+    t5 = (I_p_02*I_p_02)
+    t6 = (1.0/(I_p_00*I_p_11*I_p_22 - I_p_00*t3 + 2*I_p_01*I_p_02*I_p_12 - I_p_11*t5 - I_p_22*t4))
+    t7 = I_p_01*I_p_12 - I_p_02*I_p_11
+    t8 = 2*q_0
+    t9 = q_2*t8
+    t10 = 2*q_1
+    t11 = q_3*t10
+    t12 = t11 + t9
+    t13 = q_3*t8
+    t14 = 2*q_1*q_2 - t13
+    t15 = I_p_00*omega_b_0 + I_p_01*omega_b_1 + I_p_02*omega_b_2
+    t16 = I_p_01*omega_b_0 + I_p_11*omega_b_1 + I_p_12*omega_b_2
+    t17 = 2*(q_0*q_0)
+    t18 = 2*(q_1*q_1) - 1
+    t19 = -t17 - t18
+    t20 = q_1*t8
+    t21 = 2*q_2*q_3
+    t22 = t20 - t21
+    t23 = q_2*t10 + t13
+    t24 = 2*(q_2*q_2)
+    t25 = -t17 - t24 + 1
+    t26 = F_w_0*t22 + F_w_1*t25 + F_w_2*t23
+    t27 = t20 + t21
+    t28 = -t11 + t9
+    t29 = -t18 - t24
+    t30 = F_w_0*t29 + F_w_1*t27 + F_w_2*t28
+    t31 = -omega_b_0*t16 + omega_b_1*t15 + r_b_0*t26 - r_b_1*t30 + t12*tau_w_0 + t14*tau_w_1 + t19*tau_w_2
+    t32 = -I_p_01*I_p_22 + I_p_02*I_p_12
+    t33 = I_p_02*omega_b_0 + I_p_12*omega_b_1 + I_p_22*omega_b_2
+    t34 = F_w_0*t12 + F_w_1*t14 + F_w_2*t19
+    t35 = omega_b_0*t33 - omega_b_2*t15 - r_b_0*t34 + r_b_2*t30 + t22*tau_w_0 + t23*tau_w_2 + t25*tau_w_1
+    t36 = -omega_b_1*t33 + omega_b_2*t16 + r_b_1*t34 - r_b_2*t26 + t27*tau_w_1 + t28*tau_w_2 + t29*tau_w_0
+    t37 = -I_p_00*I_p_12 + I_p_01*I_p_02
+    q_dot_out = numpy.empty(batch + (4,))
+    q_dot_out[..., 0] = q_1*t2 - q_2*t1 + q_3*t0
+    q_dot_out[..., 1] = -q_0*t2 + q_2*t0 + q_3*t1
+    q_dot_out[..., 2] = q_0*t1 - q_1*t0 + q_3*t2
+    q_dot_out[..., 3] = -q_0*t0 - q_1*t1 - q_2*t2
+    omega_dot_b_out = numpy.empty(batch + (3,))
+    omega_dot_b_out[..., 0] = t6*(t31*t7 + t32*t35 + t36*(I_p_11*I_p_22 - t3))
+    omega_dot_b_out[..., 1] = t6*(t31*t37 + t32*t36 + t35*(I_p_00*I_p_22 - t5))
+    omega_dot_b_out[..., 2] = t6*(t31*(I_p_00*I_p_11 - t4) + t35*t37 + t36*t7)
+    return q_dot_out, omega_dot_b_out
+
+
+def wheel_body_rhs(q, omega_b, Omega, I_p, J, r_b, F_w, tau_w, u, c_w):
+    """wheel_body_rhs: Body with three body-axis reaction wheels rotating about a pivot.
+      in  q [4]: orientation (x, y, z, w), R_WB
+      in  omega_b [3]: angular velocity, body frame, rad/s
+      in  Omega [3]: wheel rates relative to the body, rad/s
+      in  I_p [3×3]: inertia about the pivot (wheels locked), body frame, kg·m², symmetric row-major
+      in  J [3]: wheel spin inertias, kg·m²
+      in  r_b [3]: pivot → COM, body frame, m
+      in  F_w [3]: total force at the COM, world frame, N
+      in  tau_w [3]: total torque about the COM, world frame, N·m
+      in  u [3]: motor torques on the wheels (body gets −u), N·m
+      in  c_w scalar: wheel damping, N·m·s/rad
+      out q_dot [4]: 1/s
+      out omega_dot_b [3]: rad/s², body frame
+      out Omega_dot [3]: rad/s²"""
+    q = numpy.asarray(q, dtype=numpy.float64)
+    omega_b = numpy.asarray(omega_b, dtype=numpy.float64)
+    Omega = numpy.asarray(Omega, dtype=numpy.float64)
+    I_p = numpy.asarray(I_p, dtype=numpy.float64)
+    J = numpy.asarray(J, dtype=numpy.float64)
+    r_b = numpy.asarray(r_b, dtype=numpy.float64)
+    F_w = numpy.asarray(F_w, dtype=numpy.float64)
+    tau_w = numpy.asarray(tau_w, dtype=numpy.float64)
+    u = numpy.asarray(u, dtype=numpy.float64)
+    c_w = numpy.asarray(c_w, dtype=numpy.float64)
+    batch = numpy.broadcast_shapes(q.shape[:-1], omega_b.shape[:-1], Omega.shape[:-1], I_p.shape[:-2], J.shape[:-1], r_b.shape[:-1], F_w.shape[:-1], tau_w.shape[:-1], u.shape[:-1], c_w.shape)
+    q_0 = q[..., 0]
+    q_1 = q[..., 1]
+    q_2 = q[..., 2]
+    q_3 = q[..., 3]
+    omega_b_0 = omega_b[..., 0]
+    omega_b_1 = omega_b[..., 1]
+    omega_b_2 = omega_b[..., 2]
+    Omega_0 = Omega[..., 0]
+    Omega_1 = Omega[..., 1]
+    Omega_2 = Omega[..., 2]
+    I_p_00 = I_p[..., 0, 0]
+    I_p_01 = I_p[..., 0, 1]
+    I_p_02 = I_p[..., 0, 2]
+    I_p_11 = I_p[..., 1, 1]
+    I_p_12 = I_p[..., 1, 2]
+    I_p_22 = I_p[..., 2, 2]
+    J_0 = J[..., 0]
+    J_1 = J[..., 1]
+    J_2 = J[..., 2]
+    r_b_0 = r_b[..., 0]
+    r_b_1 = r_b[..., 1]
+    r_b_2 = r_b[..., 2]
+    F_w_0 = F_w[..., 0]
+    F_w_1 = F_w[..., 1]
+    F_w_2 = F_w[..., 2]
+    tau_w_0 = tau_w[..., 0]
+    tau_w_1 = tau_w[..., 1]
+    tau_w_2 = tau_w[..., 2]
+    u_0 = u[..., 0]
+    u_1 = u[..., 1]
+    u_2 = u[..., 2]
+    t0 = ((1.0/2.0))*omega_b_0
+    t1 = ((1.0/2.0))*omega_b_1
+    t2 = ((1.0/2.0))*omega_b_2
+    t3 = I_p_11*I_p_22
+    t4 = J_1*J_2
+    t5 = I_p_11*J_2
+    t6 = I_p_22*J_1
+    t7 = (I_p_01*I_p_01)
+    t8 = (I_p_02*I_p_02)
+    t9 = (I_p_12*I_p_12)
+    t10 = I_p_01*I_p_12
+    t11 = (1.0/(I_p_00*t3 + I_p_00*t4 - I_p_00*t5 - I_p_00*t6 - I_p_00*t9 + 2*I_p_02*t10 - I_p_11*t8 - I_p_22*t7 - J_0*t3 - J_0*t4 + J_0*t5 + J_0*t6 + J_0*t9 + J_1*t8 + J_2*t7))
+    t12 = -I_p_02*I_p_11 + I_p_02*J_1 + t10
+    t13 = I_p_00*omega_b_0 + I_p_01*omega_b_1 + I_p_02*omega_b_2 + J_0*Omega_0
+    t14 = 2*q_1
+    t15 = q_0*t14
+    t16 = 2*q_3
+    t17 = q_2*t16
+    t18 = t15 - t17
+    t19 = q_0*t16
+    t20 = q_2*t14 + t19
+    t21 = 2*(q_2*q_2)
+    t22 = 2*(q_0*q_0) - 1
+    t23 = -t21 - t22
+    t24 = F_w_0*t18 + F_w_1*t23 + F_w_2*t20
+    t25 = 2*q_0*q_2
+    t26 = q_1*t16
+    t27 = t25 + t26
+    t28 = 2*q_1*q_2 - t19
+    t29 = 2*(q_1*q_1)
+    t30 = -t22 - t29
+    t31 = I_p_01*omega_b_0 + I_p_11*omega_b_1 + I_p_12*omega_b_2 + J_1*Omega_1
+    t32 = t15 + t17
+    t33 = t25 - t26
+    t34 = -t21 - t29 + 1
+    t35 = F_w_0*t34 + F_w_1*t32 + F_w_2*t33
+    t36 = Omega_2*c_w - u_2
+    t37 = -omega_b_0*t31 + omega_b_1*t13 + r_b_0*t24 - r_b_1*t35 + t27*tau_w_0 + t28*tau_w_1 + t30*tau_w_2 + t36
+    t38 = -I_p_01*I_p_22 + I_p_01*J_2 + I_p_02*I_p_12
+    t39 = I_p_02*omega_b_0 + I_p_12*omega_b_1 + I_p_22*omega_b_2 + J_2*Omega_2
+    t40 = F_w_0*t27 + F_w_1*t28 + F_w_2*t30
+    t41 = Omega_1*c_w - u_1
+    t42 = omega_b_0*t39 - omega_b_2*t13 - r_b_0*t40 + r_b_2*t35 + t18*tau_w_0 + t20*tau_w_2 + t23*tau_w_1 + t41
+    t43 = Omega_0*c_w - u_0
+    t44 = -omega_b_1*t39 + omega_b_2*t31 + r_b_1*t40 - r_b_2*t24 + t32*tau_w_1 + t33*tau_w_2 + t34*tau_w_0 + t43
+    t45 = t11*(t12*t37 + t38*t42 + t44*(I_p_11*I_p_22 + J_1*J_2 - t5 - t6 - t9))
+    t46 = -I_p_00*I_p_12 + I_p_01*I_p_02 + I_p_12*J_0
+    t47 = t11*(t37*t46 + t38*t44 + t42*(I_p_00*I_p_22 - I_p_00*J_2 - I_p_22*J_0 + J_0*J_2 - t8))
+    t48 = t11*(t12*t44 + t37*(I_p_00*I_p_11 - I_p_00*J_1 - I_p_11*J_0 + J_0*J_1 - t7) + t42*t46)
+    q_dot_out = numpy.empty(batch + (4,))
+    q_dot_out[..., 0] = q_1*t2 - q_2*t1 + q_3*t0
+    q_dot_out[..., 1] = -q_0*t2 + q_2*t0 + q_3*t1
+    q_dot_out[..., 2] = q_0*t1 - q_1*t0 + q_3*t2
+    q_dot_out[..., 3] = -q_0*t0 - q_1*t1 - q_2*t2
+    omega_dot_b_out = numpy.empty(batch + (3,))
+    omega_dot_b_out[..., 0] = t45
+    omega_dot_b_out[..., 1] = t47
+    omega_dot_b_out[..., 2] = t48
+    Omega_dot_out = numpy.empty(batch + (3,))
+    Omega_dot_out[..., 0] = -t45 - t43/J_0
+    Omega_dot_out[..., 1] = -t47 - t41/J_1
+    Omega_dot_out[..., 2] = -t48 - t36/J_2
+    return q_dot_out, omega_dot_b_out, Omega_dot_out
+
+
+def wheel_momentum(q, omega_b, Omega, I_p, J):
+    """wheel_momentum: World angular momentum about the pivot of the body (wheels locked) and of the wheels' spin.
+      in  q [4]: orientation (x, y, z, w), R_WB
+      in  omega_b [3]: angular velocity, body frame, rad/s
+      in  Omega [3]: wheel rates relative to the body, rad/s
+      in  I_p [3×3]: inertia about the pivot (wheels locked), body frame, kg·m², symmetric row-major
+      in  J [3]: wheel spin inertias, kg·m²
+      out L_body_w [3]: kg·m²/s, world
+      out L_wheels_w [3]: kg·m²/s, world"""
+    q = numpy.asarray(q, dtype=numpy.float64)
+    omega_b = numpy.asarray(omega_b, dtype=numpy.float64)
+    Omega = numpy.asarray(Omega, dtype=numpy.float64)
+    I_p = numpy.asarray(I_p, dtype=numpy.float64)
+    J = numpy.asarray(J, dtype=numpy.float64)
+    batch = numpy.broadcast_shapes(q.shape[:-1], omega_b.shape[:-1], Omega.shape[:-1], I_p.shape[:-2], J.shape[:-1])
+    q_0 = q[..., 0]
+    q_1 = q[..., 1]
+    q_2 = q[..., 2]
+    q_3 = q[..., 3]
+    omega_b_0 = omega_b[..., 0]
+    omega_b_1 = omega_b[..., 1]
+    omega_b_2 = omega_b[..., 2]
+    Omega_0 = Omega[..., 0]
+    Omega_1 = Omega[..., 1]
+    Omega_2 = Omega[..., 2]
+    I_p_00 = I_p[..., 0, 0]
+    I_p_01 = I_p[..., 0, 1]
+    I_p_02 = I_p[..., 0, 2]
+    I_p_11 = I_p[..., 1, 1]
+    I_p_12 = I_p[..., 1, 2]
+    I_p_22 = I_p[..., 2, 2]
+    J_0 = J[..., 0]
+    J_1 = J[..., 1]
+    J_2 = J[..., 2]
+    t0 = 2*q_1
+    t1 = q_0*t0
+    t2 = 2*q_2
+    t3 = q_3*t2
+    t4 = t1 - t3
+    t5 = I_p_01*omega_b_0 + I_p_12*omega_b_2 + omega_b_1*(I_p_11 - J_1)
+    t6 = q_0*t2
+    t7 = q_3*t0
+    t8 = t6 + t7
+    t9 = I_p_02*omega_b_0 + I_p_12*omega_b_1 + omega_b_2*(I_p_22 - J_2)
+    t10 = 2*(q_1*q_1)
+    t11 = 2*(q_2*q_2) - 1
+    t12 = -t10 - t11
+    t13 = I_p_01*omega_b_1 + I_p_02*omega_b_2 + omega_b_0*(I_p_00 - J_0)
+    t14 = t1 + t3
+    t15 = 2*q_0*q_3
+    t16 = 2*q_1*q_2 - t15
+    t17 = 2*(q_0*q_0)
+    t18 = -t11 - t17
+    t19 = t6 - t7
+    t20 = q_1*t2 + t15
+    t21 = -t10 - t17 + 1
+    t22 = J_1*(Omega_1 + omega_b_1)
+    t23 = J_2*(Omega_2 + omega_b_2)
+    t24 = J_0*(Omega_0 + omega_b_0)
+    L_body_w_out = numpy.empty(batch + (3,))
+    L_body_w_out[..., 0] = t12*t13 + t4*t5 + t8*t9
+    L_body_w_out[..., 1] = t13*t14 + t16*t9 + t18*t5
+    L_body_w_out[..., 2] = t13*t19 + t20*t5 + t21*t9
+    L_wheels_w_out = numpy.empty(batch + (3,))
+    L_wheels_w_out[..., 0] = t12*t24 + t22*t4 + t23*t8
+    L_wheels_w_out[..., 1] = t14*t24 + t16*t23 + t18*t22
+    L_wheels_w_out[..., 2] = t19*t24 + t20*t22 + t21*t23
+    return L_body_w_out, L_wheels_w_out
+
+
+def pivot_kinematics(q, omega_b, anchor_w, r_b):
+    """pivot_kinematics: COM position and velocity of a body on a spherical joint.
+      in  q [4]: orientation (x, y, z, w), R_WB
+      in  omega_b [3]: angular velocity, body frame, rad/s
+      in  anchor_w [3]: joint anchor, world frame, m
+      in  r_b [3]: pivot → COM, body frame, m
+      out p_w [3]: COM position, world, m
+      out v_w [3]: COM velocity, world, m/s"""
+    q = numpy.asarray(q, dtype=numpy.float64)
+    omega_b = numpy.asarray(omega_b, dtype=numpy.float64)
+    anchor_w = numpy.asarray(anchor_w, dtype=numpy.float64)
+    r_b = numpy.asarray(r_b, dtype=numpy.float64)
+    batch = numpy.broadcast_shapes(q.shape[:-1], omega_b.shape[:-1], anchor_w.shape[:-1], r_b.shape[:-1])
+    q_0 = q[..., 0]
+    q_1 = q[..., 1]
+    q_2 = q[..., 2]
+    q_3 = q[..., 3]
+    omega_b_0 = omega_b[..., 0]
+    omega_b_1 = omega_b[..., 1]
+    omega_b_2 = omega_b[..., 2]
+    anchor_w_0 = anchor_w[..., 0]
+    anchor_w_1 = anchor_w[..., 1]
+    anchor_w_2 = anchor_w[..., 2]
+    r_b_0 = r_b[..., 0]
+    r_b_1 = r_b[..., 1]
+    r_b_2 = r_b[..., 2]
+    t0 = 2*q_1
+    t1 = q_0*t0
+    t2 = 2*q_2
+    t3 = q_3*t2
+    t4 = t1 - t3
+    t5 = q_0*t2
+    t6 = q_3*t0
+    t7 = t5 + t6
+    t8 = 2*(q_1*q_1)
+    t9 = 2*(q_2*q_2) - 1
+    t10 = -t8 - t9
+    t11 = t1 + t3
+    t12 = 2*q_0*q_3
+    t13 = 2*q_1*q_2 - t12
+    t14 = 2*(q_0*q_0)
+    t15 = -t14 - t9
+    t16 = t5 - t6
+    t17 = q_1*t2 + t12
+    t18 = -t14 - t8 + 1
+    t19 = omega_b_0*r_b_1 - omega_b_1*r_b_0
+    t20 = -omega_b_0*r_b_2 + omega_b_2*r_b_0
+    t21 = omega_b_1*r_b_2 - omega_b_2*r_b_1
+    p_w_out = numpy.empty(batch + (3,))
+    p_w_out[..., 0] = anchor_w_0 + r_b_0*t10 + r_b_1*t4 + r_b_2*t7
+    p_w_out[..., 1] = anchor_w_1 + r_b_0*t11 + r_b_1*t15 + r_b_2*t13
+    p_w_out[..., 2] = anchor_w_2 + r_b_0*t16 + r_b_1*t17 + r_b_2*t18
+    v_w_out = numpy.empty(batch + (3,))
+    v_w_out[..., 0] = t10*t21 + t19*t7 + t20*t4
+    v_w_out[..., 1] = t11*t21 + t13*t19 + t15*t20
+    v_w_out[..., 2] = t16*t21 + t17*t20 + t18*t19
+    return p_w_out, v_w_out
+
+
 # name -> (function, [(input, shape)], [(output, shape)]), in the order of the C kernel table
 KERNELS = {
     'particle_moments': (particle_moments, [('m', ()), ('r_w', (3,)), ('v_w', (3,))], [('m_r', (3,)), ('p', (3,))]),
@@ -1042,4 +1382,8 @@ KERNELS = {
     'world_to_body': (world_to_body, [('q', (4,)), ('v_w', (3,))], [('v_b', (3,))]),
     'kinetic_energy': (kinetic_energy, [('m', ()), ('I_b', (3,)), ('v_w', (3,)), ('omega_b', (3,))], [('T', ())]),
     'angular_momentum_world': (angular_momentum_world, [('q', (4,)), ('I_b', (3,)), ('omega_b', (3,))], [('L_w', (3,))]),
+    'pivot_body_rhs': (pivot_body_rhs, [('q', (4,)), ('omega_b', (3,)), ('I_p', (3, 3)), ('r_b', (3,)), ('F_w', (3,)), ('tau_w', (3,))], [('q_dot', (4,)), ('omega_dot_b', (3,))]),
+    'wheel_body_rhs': (wheel_body_rhs, [('q', (4,)), ('omega_b', (3,)), ('Omega', (3,)), ('I_p', (3, 3)), ('J', (3,)), ('r_b', (3,)), ('F_w', (3,)), ('tau_w', (3,)), ('u', (3,)), ('c_w', ())], [('q_dot', (4,)), ('omega_dot_b', (3,)), ('Omega_dot', (3,))]),
+    'wheel_momentum': (wheel_momentum, [('q', (4,)), ('omega_b', (3,)), ('Omega', (3,)), ('I_p', (3, 3)), ('J', (3,))], [('L_body_w', (3,)), ('L_wheels_w', (3,))]),
+    'pivot_kinematics': (pivot_kinematics, [('q', (4,)), ('omega_b', (3,)), ('anchor_w', (3,)), ('r_b', (3,))], [('p_w', (3,)), ('v_w', (3,))]),
 }

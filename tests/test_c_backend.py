@@ -11,8 +11,7 @@ import pytest
 from lavendersim.errors import DivergenceError, StaleBuildError
 from lavendersim.generated import kernels_numpy as K
 
-c_backend = pytest.importorskip("lavendersim.backends.c_backend",
-                                reason="C backend not built (pip install -e .)")
+from lavendersim.backends import c_backend  # required, never skipped: `pip install -e .` builds it
 _c = c_backend._c
 CBackend = c_backend.CBackend
 

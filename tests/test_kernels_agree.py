@@ -1,4 +1,4 @@
-"""Every generated kernel agrees through C, through NumPy and as the SymPy expression at 30 digits.
+"""Every generated kernel agrees through C, NumPy and CasADi and as the SymPy expression at 30 digits.
 
 Inputs are drawn (seeded) from each input's declared domain on the SymPy side. Tolerance, per output:
 |value - ref| <= 1e-12 * max(1, max |ref| of that output).
@@ -16,8 +16,10 @@ except ImportError:  # package mapping not installed: run from the repo root
 
 from lavendersim.generated import kernels_numpy
 
-c_backend = pytest.importorskip("lavendersim.backends.c_backend",
-                                reason="C backend not built (pip install -e .)")
+import casadi
+
+from lavendersim.backends import c_backend  # required: the C build is part of `pip install -e .`
+from lavendersim.generated import kernels_casadi
 
 N_POINTS = 6
 DPS = 30
@@ -49,6 +51,10 @@ def draw(rng, domain: str, shape: tuple) -> np.ndarray:
             v = rng.uniform(0.2, 3.0, n)
             if n != 3 or all(v[i] <= v[(i + 1) % 3] + v[(i + 2) % 3] for i in range(3)):
                 break
+    elif domain == "inertia_sym":  # symmetric, diagonally dominant, diagonal above any "positive" draw
+        d = np.diag(rng.uniform(4.0, 6.0, 3))
+        off = np.triu(rng.uniform(-0.3, 0.3, (3, 3)), 1)
+        v = (d + off + off.T).ravel()
     else:
         raise AssertionError(f"unknown domain {domain!r}")
     return v.reshape(shape)
@@ -104,13 +110,17 @@ def test_kernel_agrees(name, sympy_kernels):
     batched = [np.stack([p[j] for p in points]) for j in range(len(in_spec))]
     c_out = as_list(c_backend.eval_kernel(name, *batched))
     np_out = as_list(fn(*batched))
+    cas = getattr(kernels_casadi, name)
     for i, p in enumerate(points):
         ref = sympy_reference(kernel, p)
-        for (oname, shape), r, c, n in zip(out_spec, ref, c_out, np_out):
+        cas_out = as_list(cas(*[casadi.DM(np.ravel(v)) if np.ndim(v) else float(v) for v in p]))
+        for (oname, shape), r, c, n, ca in zip(out_spec, ref, c_out, np_out, cas_out):
+            ca = np.array(casadi.DM(ca)).ravel().reshape(r.shape)
             tol = RTOL * max(1.0, float(np.max(np.abs(r))))
             assert c[i].shape == r.shape and n[i].shape == r.shape
             assert np.max(np.abs(c[i] - r)) <= tol, f"C {name}.{oname} at point {i}: {c[i]} vs {r}"
             assert np.max(np.abs(n[i] - r)) <= tol, f"NumPy {name}.{oname} at point {i}: {n[i]} vs {r}"
+            assert np.max(np.abs(ca - r)) <= tol, f"CasADi {name}.{oname} at point {i}: {ca} vs {r}"
 
 
 def test_reference_can_fail(sympy_kernels):
