@@ -94,13 +94,16 @@ def _run_all(args) -> int:
 
 def register_cli(subparsers) -> None:
     """Add ``lab NAME|all`` to the ``lavendersim`` command line (each leaf sets ``fn``)."""
+    import argparse
+
     parent = _common_parent()
     lab = subparsers.add_parser("lab", help="run a chapter lab (or `all`); exits non-zero if a figure is off",
                                 description=__doc__.split("\n\n")[0])
     names = lab.add_subparsers(dest="lab_name", required=True, metavar="NAME")
     for name in LABS:
         mod = lab_module(name)
-        p = names.add_parser(name, parents=[parent], help=mod.TITLE, description=mod.__doc__)
+        p = names.add_parser(name, parents=[parent], help=mod.TITLE, description=mod.__doc__,
+                             formatter_class=argparse.RawDescriptionHelpFormatter)
         mod.add_arguments(p)
         p.set_defaults(fn=_run_one)
     a = names.add_parser("all", parents=[parent], help="run every lab with its chapter parameters; print a summary")

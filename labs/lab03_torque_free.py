@@ -13,8 +13,8 @@ distance over the run (max_t |omega_b(t) - omega_b(0)|).
 Why these parameters. The chapter states the figure (3.30 rad/s) but not the body, omega(0), T
 or the definition. Torque-free body-frame motion depends only on I_b ratios, omega(0) and T, so
 we searched a small set of natural candidates (see ``search_candidates``; ``--search`` reruns it):
-13 boxes (the chapter's rod and cube-sized boxes with side ratios 1:2:3, 1:2:4, 1:1:2, 1:4:2 in
-several orders), 24 simple omega(0) with entries in {0, 0.1, 0.2, 0.5, 1, 2, 3}, T in {1, 2, 3, 4,
+13 boxes (the chapter's rod and boxes with side ratios 1:2:3, 1:2:4, 1:1:2, 2:1:1, 1:4:2, 4:1:2
+in several orders), 24 simple omega(0) with entries in {0, 0.1, 0.2, 0.5, 1, 2, 3}, T in {1, 2, 3, 4,
 5, 6, 8, 10} s, and 5 definitions of "change" (|w(T) - w0|, max_t |w(t) - w0|, the largest and the
 summed component ranges, the largest component excursion). Exactly one combination lands on
 3.30 at two decimals: the chapter's own rod, omega(0) = [3, 2, 1] rad/s, T = 3 s, |w(T) - w0| =
