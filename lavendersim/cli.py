@@ -1,4 +1,4 @@
-"""Command line: `lavendersim derive [--check]`, `lavendersim lab NAME|all`."""
+"""Command line: `lavendersim derive [--check]`, `lavendersim lab NAME|all`, `lavendersim view NAME`."""
 from __future__ import annotations
 
 import argparse
@@ -35,6 +35,32 @@ def _derive(args) -> int:
     return 0
 
 
+def _view(args) -> int:
+    from lavendersim import viewer
+    from lavendersim.validate import LavenderInputError
+
+    try:
+        viewer.run_scene(args.scene, duration=args.duration, host=args.host, port=args.port, rate_hz=args.rate)
+    except LavenderInputError as exc:
+        print(f"view: {exc}", file=sys.stderr)
+        return 2
+    return 0
+
+
+def _add_view(sub) -> None:
+    from lavendersim.viewer import DEFAULT_HOST, DEFAULT_PORT, SCENES
+
+    v = sub.add_parser("view", help="run a scene live in the browser viewer (viser) at http://HOST:PORT",
+                       description="Run a scene in real time and stream it to a browser page "
+                                   f"(scenes: {', '.join(SCENES)}).")
+    v.add_argument("scene", metavar="NAME", help=f"scene to run: {', '.join(SCENES)}")
+    v.add_argument("--duration", type=float, default=None, help="simulated seconds to run (default: until Ctrl-C)")
+    v.add_argument("--host", default=DEFAULT_HOST, help=f"interface to bind (default {DEFAULT_HOST}: this machine only)")
+    v.add_argument("--port", type=int, default=DEFAULT_PORT, help=f"TCP port (default {DEFAULT_PORT}; 0 = any free port)")
+    v.add_argument("--rate", type=float, default=60.0, help="frames published per second of simulated time (default 60)")
+    v.set_defaults(fn=_view)
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(prog="lavendersim", description=__doc__)
     sub = p.add_subparsers(dest="cmd", required=True)
@@ -46,6 +72,10 @@ def main(argv=None) -> int:
     from lavendersim.labs import register_cli
 
     register_cli(sub)
+    from lavendersim.control import register_cli as register_lqr
+
+    register_lqr(sub)
+    _add_view(sub)
     args = p.parse_args(argv)
     return int(args.fn(args) or 0)
 
