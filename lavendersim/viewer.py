@@ -1,0 +1,556 @@
+"""Live browser viewer: a viser page that shows a Sim's bodies plus Python-chosen axes and vectors.
+
+    viewer = Viewer(port=8080)                 # serves http://127.0.0.1:8080 (host/port configurable)
+    viewer.publish_frame(sim, overlays={
+        "axes": [{"body": "cube", "scale": 0.34}],
+        "vectors": [{"label": "angular velocity", "origin": p.tolist(), "vector": w.tolist(),
+                     "scale": 0.12, "color": [0.51, 0.87, 0.76, 0.95]}],
+    })
+
+Bodies are drawn from the scene at their authoritative transforms (position p_w, orientation q);
+a box with its side lengths, a cylinder (along body z) with its radius and height, a sphere with
+its radius, and a body without a shape as its inertia-equivalent box. An axes triad (x red,
+y green, z blue; length = scale in m) follows its body. A vector is drawn in world coordinates as
+an arrow from ``origin`` to ``origin + scale * vector`` in colour ``[r, g, b, a]`` (each in
+[0, 1]; a is the opacity) with its label at the tip.
+
+Overlay payload (keys outside these are errors):
+  axes:    list of {"body": name (required), "scale": m > 0 (default 0.3)}; one entry per body.
+  vectors: list (at most MAX_VECTORS) of {"label": str (default ""), "origin": 3 reals (required),
+           "vector": 3 reals (required), "scale": real > 0 (default 1), "color": 4 reals in [0, 1]
+           (default DEFAULT_COLOR)}.
+The whole payload is validated before anything is stored: a bad one raises
+:class:`~lavendersim.validate.LavenderInputError` naming the field (``overlays.vectors[1].color``)
+and the previously published frame stays on screen, untouched.
+
+Publishing never waits for a browser. ``publish_frame`` validates, copies the poses (a few
+microseconds) and stores the frame as the *latest*; a background thread applies the latest frame
+to the viser scene at most ``max_rate_hz`` times per second (older unapplied frames are dropped —
+coalesced, latest wins — and counted in ``stats()``). viser itself keeps one buffered message per
+scene-node property, so a stalled or slow browser holds at most one pending state per node, and
+every connected tab (any number) receives the same shared scene.
+
+Conventions: our quaternions are (x, y, z, w); viser's are (w, x, y, z) — converted here, once.
+World frame z up. Units m.
+"""
+from __future__ import annotations
+
+import difflib
+import math
+import sys
+import threading
+import time
+from collections.abc import Mapping, Sequence
+
+import numpy as np
+
+from . import validate as V
+
+__all__ = ["Viewer", "validate_overlays", "xyzw_to_wxyz", "DEFAULT_COLOR", "MAX_VECTORS", "SCENES", "run_scene"]
+
+DEFAULT_HOST = "127.0.0.1"
+DEFAULT_PORT = 8080
+DEFAULT_RATE_HZ = 30.0
+DEFAULT_AXES_SCALE = 0.3
+DEFAULT_COLOR = (0.95, 0.75, 0.2, 1.0)
+MAX_VECTORS = 64
+MAX_LABEL = 200
+BODY_COLORS = [(186, 160, 220), (150, 190, 230), (230, 200, 150), (170, 215, 170), (225, 170, 180)]
+
+_AXES_KEYS = {"body", "scale"}
+_VECTOR_KEYS = {"label", "origin", "vector", "scale", "color"}
+_TOP_KEYS = {"axes", "vectors"}
+
+
+# --------------------------------------------------------------------------
+# payload validation (pure; no viser needed)
+# --------------------------------------------------------------------------
+
+
+def _keys(field: str, item, allowed: set, required: set = frozenset()) -> None:
+    if not isinstance(item, Mapping):
+        raise V.LavenderInputError(field, "expected a dict", f", got {V._describe(item)}")
+    for k in item:
+        if k not in allowed:
+            close = difflib.get_close_matches(str(k), sorted(allowed), n=1) if isinstance(k, str) else []
+            hint = f" (did you mean {close[0]!r}?)" if close else ""
+            raise V.LavenderInputError(f"{field}", f"unknown key {k!r}{hint}", f"; allowed: {', '.join(sorted(allowed))}")
+    for k in sorted(required):
+        if k not in item:
+            raise V.LavenderInputError(f"{field}.{k}", "is required")
+
+
+def _list(field: str, value) -> list:
+    if isinstance(value, (str, bytes, Mapping)) or not isinstance(value, Sequence):
+        raise V.LavenderInputError(field, "expected a list", f", got {V._describe(value)}")
+    return list(value)
+
+
+def _vec(field: str, value, n: int = 3) -> np.ndarray:
+    """V.vector with a fast path for the common case: a list/tuple of n finite Python floats/ints."""
+    if type(value) in (list, tuple) and len(value) == n and all(type(x) in (float, int) for x in value):
+        if all(math.isfinite(x) for x in value):
+            return np.array(value, dtype=float)
+    return V.vector(field, value, n)
+
+
+def _pos(field: str, value) -> float:
+    if type(value) in (float, int) and math.isfinite(value) and value > 0:
+        return float(value)
+    return V.positive(field, value)
+
+
+def validate_overlays(overlays, body_names) -> dict:
+    """Check an overlay payload against the bodies of a scene; return a normalized copy.
+
+    Result: ``{"axes": [{"body": str, "scale": float}], "vectors": [{"label": str, "origin":
+    ndarray(3), "vector": ndarray(3), "scale": float, "color": ndarray(4)}]}``. Raises
+    LavenderInputError naming the first bad field; the input is never mutated."""
+    names = list(body_names)
+    if overlays is None:
+        return {"axes": [], "vectors": []}
+    _keys("overlays", overlays, _TOP_KEYS)
+    axes, seen = [], set()
+    for i, a in enumerate(_list("overlays.axes", overlays.get("axes", []))):
+        f = f"overlays.axes[{i}]"
+        _keys(f, a, _AXES_KEYS, {"body"})
+        body = a["body"]
+        if not isinstance(body, str):
+            raise V.LavenderInputError(f"{f}.body", "expected a body name (str)", f", got {V._describe(body)}")
+        if body not in names:
+            raise V.LavenderInputError(f"{f}.body", f"unknown body {body!r}", f"; bodies: {', '.join(names)}")
+        if body in seen:
+            raise V.LavenderInputError(f"{f}.body", f"axes for body {body!r} given twice")
+        seen.add(body)
+        axes.append({"body": body, "scale": _pos(f"{f}.scale", a.get("scale", DEFAULT_AXES_SCALE))})
+    vectors = []
+    raw = _list("overlays.vectors", overlays.get("vectors", []))
+    if len(raw) > MAX_VECTORS:
+        raise V.LavenderInputError("overlays.vectors", f"at most {MAX_VECTORS} vectors", f", got {len(raw)}")
+    for i, v in enumerate(raw):
+        f = f"overlays.vectors[{i}]"
+        _keys(f, v, _VECTOR_KEYS, {"origin", "vector"})
+        label = v.get("label", "")
+        if not isinstance(label, str):
+            raise V.LavenderInputError(f"{f}.label", "expected a str", f", got {V._describe(label)}")
+        if len(label) > MAX_LABEL:
+            raise V.LavenderInputError(f"{f}.label", f"at most {MAX_LABEL} characters", f", got {len(label)}")
+        color = _vec(f"{f}.color", v.get("color", DEFAULT_COLOR), 4)
+        if not all(0.0 <= c <= 1.0 for c in color):
+            bad = np.flatnonzero((color < 0) | (color > 1))
+            raise V.LavenderInputError(f"{f}.color", "each of r, g, b, a must be in [0, 1]",
+                                       f", got {V._nums(color)} (index {int(bad[0])})")
+        vectors.append({
+            "label": label,
+            "origin": _vec(f"{f}.origin", v["origin"]),
+            "vector": _vec(f"{f}.vector", v["vector"]),
+            "scale": _pos(f"{f}.scale", v.get("scale", 1.0)),
+            "color": color,
+        })
+    return {"axes": axes, "vectors": vectors}
+
+
+# --------------------------------------------------------------------------
+# geometry helpers
+# --------------------------------------------------------------------------
+
+
+def xyzw_to_wxyz(q) -> np.ndarray:
+    """Our (x, y, z, w) quaternion as viser's (w, x, y, z)."""
+    q = np.asarray(q, dtype=float)
+    return np.array([q[3], q[0], q[1], q[2]])
+
+
+def _z_to(d: np.ndarray) -> np.ndarray:
+    """wxyz quaternion of the shortest rotation taking +z onto the unit vector d."""
+    z = np.array([0.0, 0.0, 1.0])
+    c = float(np.dot(z, d))
+    if c < -1 + 1e-12:  # antiparallel: half turn about x
+        return np.array([0.0, 1.0, 0.0, 0.0])
+    axis = np.cross(z, d)
+    q = np.array([1.0 + c, *axis])
+    return q / np.linalg.norm(q)
+
+
+def _cylinder_mesh(radius: float, z0: float, z1: float, n: int = 24):
+    """Closed cylinder along z from z0 to z1."""
+    a = np.linspace(0, 2 * np.pi, n, endpoint=False)
+    ring = np.stack([radius * np.cos(a), radius * np.sin(a)], 1)
+    verts = np.concatenate([np.c_[ring, np.full(n, z0)], np.c_[ring, np.full(n, z1)], [[0, 0, z0], [0, 0, z1]]])
+    faces = []
+    for i in range(n):
+        j = (i + 1) % n
+        faces += [[i, j, n + j], [i, n + j, n + i], [2 * n, j, i], [2 * n + 1, n + i, n + j]]
+    return verts.astype(np.float32), np.array(faces, dtype=np.uint32)
+
+
+def _cone_mesh(radius: float, n: int = 24):
+    """Cone with its base (radius) at z = 0 and its tip at z = 1."""
+    a = np.linspace(0, 2 * np.pi, n, endpoint=False)
+    verts = np.concatenate([np.c_[radius * np.cos(a), radius * np.sin(a), np.zeros(n)], [[0, 0, 1], [0, 0, 0]]])
+    faces = []
+    for i in range(n):
+        j = (i + 1) % n
+        faces += [[i, j, n], [n + 1, j, i]]
+    return verts.astype(np.float32), np.array(faces, dtype=np.uint32)
+
+
+def _shape_of(body) -> tuple:
+    """(kind, dims) to draw: the body's shape, or the box with its mass and principal moments."""
+    shape = getattr(body, "shape", None)
+    if shape and shape[0] in ("box", "cylinder", "sphere"):
+        return shape[0], tuple(float(x) for x in shape[1])
+    m, I = float(body.mass), np.asarray(body.I_b, dtype=float)
+    sq = [max(6.0 * (I[(k + 1) % 3] + I[(k + 2) % 3] - I[k]) / m, 1e-6) for k in range(3)]
+    return "box", tuple(math.sqrt(s) for s in sq)
+
+
+def _extent(kind: str, dims: tuple) -> float:
+    return max(dims) if kind == "box" else (2 * max(dims) if kind == "sphere" else max(2 * dims[0], dims[1]))
+
+
+# --------------------------------------------------------------------------
+# the viewer
+# --------------------------------------------------------------------------
+
+
+class _Frame:
+    __slots__ = ("number", "t", "names", "shapes", "pose", "overlays", "published_at")
+
+
+class Viewer:
+    """A live viser page at http://HOST:PORT; see the module docstring.
+
+    host: interface to bind (default 127.0.0.1: this machine only). port: TCP port (0 = any free
+    one; if the port is taken viser uses the next free one — ``viewer.port`` is the bound one).
+    max_rate_hz: most scene updates per second sent to browsers (frames in between coalesce).
+    arrow_radius: shaft radius of vector arrows in m (default: 2.5% of the largest body).
+    """
+
+    def __init__(self, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT, *, max_rate_hz: float = DEFAULT_RATE_HZ,
+                 label: str = "LavenderSim", arrow_radius: float | None = None, verbose: bool = False):
+        if not isinstance(host, str) or not host:
+            raise V.LavenderInputError("host", "expected an interface address (str)", f", got {host!r}")
+        port = V.integer("port", port, minimum=0)
+        if port > 65535:
+            raise V.LavenderInputError("port", "must be in 0..65535", f", got {port}")
+        self.max_rate_hz = V.positive("max_rate_hz", max_rate_hz)
+        self._arrow_radius = None if arrow_radius is None else V.positive("arrow_radius", arrow_radius)
+        import viser
+
+        self.server = viser.ViserServer(host=host, port=port, label=label, verbose=verbose)
+        self.host, self.port = host, int(self.server.get_port())
+        self.server.gui.configure_theme(show_share_button=False, show_logo=False)
+        self._status = self.server.gui.add_markdown("waiting for the first frame")
+        self._lock = threading.Lock()
+        self._wake = threading.Event()
+        self._stop = threading.Event()
+        self._applied_cv = threading.Condition()
+        self._pending: _Frame | None = None
+        self._published = 0
+        self._applied = 0
+        self._applied_number = 0
+        self._dropped = 0
+        self.last_error: BaseException | None = None
+        # scene bookkeeping (touched only by the apply thread, read under _state_lock)
+        self._state_lock = threading.Lock()
+        self._signature = None
+        self._bodies: dict = {}     # name -> {"node", "shape", "axes"}
+        self._vectors: list = []    # [{"node", "shaft", "head", "label"}]
+        self._cache: dict = {}      # (handle id, prop) -> last value assigned
+        self._state: dict = {"frame": 0, "t": None, "bodies": {}, "axes": {}, "vectors": []}
+        self._thread = threading.Thread(target=self._run, name="lavendersim-viewer", daemon=True)
+        self._thread.start()
+
+    # ---- public ---------------------------------------------------------------------------
+    @property
+    def url(self) -> str:
+        host = "127.0.0.1" if self.host in ("0.0.0.0", "") else self.host
+        return f"http://{host}:{self.port}/"
+
+    def publish_frame(self, sim, overlays=None) -> int:
+        """Validate ``overlays`` against ``sim``'s bodies, snapshot the poses, store as the latest
+        frame and return its number. Never waits for a browser or for the scene update."""
+        names, x, bodies = self._sim_parts(sim)
+        ov = validate_overlays(overlays, names)
+        f = _Frame()
+        f.t = float(getattr(sim, "t", 0.0))
+        f.names = tuple(names)
+        f.shapes = tuple(_shape_of(bodies[n]) for n in names)
+        f.pose = np.array(x[:, 0:7], dtype=float)
+        if not np.all(np.isfinite(f.pose)):
+            raise V.LavenderInputError("sim", "state is not finite (diverged?); nothing published")
+        f.overlays = ov
+        f.published_at = time.perf_counter()
+        with self._lock:
+            if self._stop.is_set():
+                raise RuntimeError("viewer is closed")
+            self._published += 1
+            f.number = self._published
+            if self._pending is not None:
+                self._dropped += 1
+            self._pending = f
+        self._wake.set()
+        return f.number
+
+    def wait_applied(self, number: int, timeout: float = 5.0) -> bool:
+        """Block until frame ``number`` (or a later one) is in the viser scene; False on timeout.
+        For tests and scripts; the simulation loop never needs it."""
+        deadline = time.monotonic() + timeout
+        with self._applied_cv:
+            while self._applied_number < number:
+                left = deadline - time.monotonic()
+                if left <= 0 or self._stop.is_set():
+                    return False
+                self._applied_cv.wait(left)
+        return True
+
+    def scene_state(self) -> dict:
+        """What the viser scene shows now (deep copy): frame number, t, per-body position and
+        wxyz, axes per body, and the drawn vectors (label, start, end, rgb, opacity)."""
+        import copy
+
+        with self._state_lock:
+            return copy.deepcopy(self._state)
+
+    def handles(self) -> dict:
+        """The viser scene handles: {"bodies": {name: node}, "axes": {name: frame handle},
+        "vectors": [{"node", "shaft", "head", "label"}]} (read them, don't assign)."""
+        with self._state_lock:
+            return {"bodies": {n: b["node"] for n, b in self._bodies.items()},
+                    "axes": {n: b["axes"] for n, b in self._bodies.items()},
+                    "vectors": [dict(v) for v in self._vectors]}
+
+    def clients(self) -> int:
+        return len(self.server.get_clients())
+
+    def stats(self) -> dict:
+        with self._lock:
+            return {"published": self._published, "applied": self._applied, "dropped": self._dropped,
+                    "clients": self.clients(), "last_error": repr(self.last_error) if self.last_error else None}
+
+    def close(self) -> None:
+        if self._stop.is_set():
+            return
+        self._stop.set()
+        self._wake.set()
+        with self._applied_cv:
+            self._applied_cv.notify_all()
+        self._thread.join(timeout=5)
+        self.server.stop()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+    # ---- internals ------------------------------------------------------------------------
+    @staticmethod
+    def _sim_parts(sim):
+        names = getattr(sim, "names", None)
+        x = getattr(sim, "x", None)
+        bodies = getattr(sim, "bodies", None)
+        if names is None or x is None or bodies is None:
+            raise V.LavenderInputError("sim", "expected a lavendersim.Sim (names, bodies, x)", f", got {type(sim).__name__}")
+        x = np.asarray(x)
+        if x.ndim != 2 or x.shape[0] != len(names) or x.shape[1] < 7:
+            raise V.LavenderInputError("sim", f"state must have shape ({len(names)}, 13)", f", got {x.shape}")
+        return list(names), x, bodies
+
+    def _run(self) -> None:
+        period = 1.0 / self.max_rate_hz
+        next_at = 0.0
+        while not self._stop.is_set():
+            self._wake.wait(timeout=0.5)
+            if self._stop.is_set():
+                break
+            delay = next_at - time.monotonic()
+            if delay > 0 and self._stop.wait(delay):
+                break
+            with self._lock:
+                f, self._pending = self._pending, None
+                self._wake.clear()
+            if f is None:
+                continue
+            next_at = time.monotonic() + period
+            try:
+                self._apply(f)
+            except Exception as exc:  # keep serving; report once per distinct error
+                if repr(exc) != repr(self.last_error):
+                    print(f"lavendersim viewer: could not draw frame {f.number}: {exc!r}", file=sys.stderr)
+                self.last_error = exc
+            with self._lock:
+                self._applied += 1
+            with self._applied_cv:
+                self._applied_number = f.number
+                self._applied_cv.notify_all()
+
+    def _set(self, handle, prop: str, value) -> None:
+        """Assign a handle property only when it changed (keeps the websocket traffic small)."""
+        key = (id(handle), prop)
+        v = tuple(np.round(np.asarray(value, dtype=float).ravel(), 7)) if not isinstance(value, (str, bool, type(None))) else value
+        if self._cache.get(key, object()) != v:
+            setattr(handle, prop, value)
+            self._cache[key] = v
+
+    def _build(self, f: _Frame) -> None:
+        sc = self.server.scene
+        for b in self._bodies.values():
+            b["node"].remove()
+        self._bodies, self._cache = {}, {}
+        ext = max(_extent(k, d) for k, d in f.shapes)
+        self._ref = ext
+        for i, (name, (kind, dims)) in enumerate(zip(f.names, f.shapes)):
+            node_name = f"/bodies/{name.replace('/', '_')}"
+            node = sc.add_frame(node_name, show_axes=False)
+            color = BODY_COLORS[i % len(BODY_COLORS)]
+            if kind == "box":
+                sc.add_box(f"{node_name}/shape", color=color, dimensions=dims)
+            elif kind == "sphere":
+                sc.add_icosphere(f"{node_name}/shape", radius=dims[0], color=color, subdivisions=3)
+            else:
+                v, fc = _cylinder_mesh(dims[0], -dims[1] / 2, dims[1] / 2, 32)
+                sc.add_mesh_simple(f"{node_name}/shape", v, fc, color=color, flat_shading=False)
+            axes = sc.add_frame(f"{node_name}/axes", axes_length=DEFAULT_AXES_SCALE, axes_radius=0.012, visible=False)
+            self._bodies[name] = {"node": node, "shape": (kind, dims), "axes": axes}
+        centre = f.pose[:, 0:3].mean(axis=0)
+        span = max(ext, float(np.ptp(f.pose[:, 0:3], axis=0).max()) if len(f.names) > 1 else ext)
+        self.server.initial_camera.look_at = tuple(centre)
+        self.server.initial_camera.position = tuple(centre + span * np.array([1.6, -2.2, 1.3]))
+        self._signature = (f.names, f.shapes)
+
+    def _vector_handles(self, k: int) -> dict:
+        while len(self._vectors) <= k:
+            sc, i = self.server.scene, len(self._vectors)
+            r = self._arrow_radius or max(0.004, 0.025 * self._ref)
+            node = sc.add_frame(f"/vectors/{i}", show_axes=False)
+            sv, sf = _cylinder_mesh(r, 0.0, 1.0, 20)
+            hv, hf = _cone_mesh(2.4 * r, 20)
+            self._vectors.append({
+                "node": node,
+                "shaft": sc.add_mesh_simple(f"/vectors/{i}/shaft", sv, sf, cast_shadow=False, receive_shadow=False),
+                "head": sc.add_mesh_simple(f"/vectors/{i}/head", hv, hf, cast_shadow=False, receive_shadow=False),
+                "label": sc.add_label(f"/vectors/{i}/label", "", anchor="bottom-left"),
+                "radius": r,
+            })
+        return self._vectors[k]
+
+    def _apply(self, f: _Frame) -> None:
+        state = {"frame": f.number, "t": f.t, "bodies": {}, "axes": {}, "vectors": []}
+        with self.server.atomic():
+            if (f.names, f.shapes) != self._signature:
+                self._build(f)
+            for i, name in enumerate(f.names):
+                b = self._bodies[name]
+                pos, wxyz = f.pose[i, 0:3], xyzw_to_wxyz(f.pose[i, 3:7])
+                b["node"].position = pos
+                b["node"].wxyz = wxyz
+                state["bodies"][name] = {"position": pos.tolist(), "wxyz": wxyz.tolist(), "shape": b["shape"]}
+            axes = {a["body"]: a["scale"] for a in f.overlays["axes"]}
+            for name, b in self._bodies.items():
+                on = name in axes
+                if on:
+                    self._set(b["axes"], "axes_length", axes[name])
+                    self._set(b["axes"], "axes_radius", 0.04 * axes[name])
+                    self._set(b["axes"], "origin_radius", 0.06 * axes[name])
+                    state["axes"][name] = axes[name]
+                self._set(b["axes"], "visible", on)
+            for k, v in enumerate(f.overlays["vectors"]):
+                h = self._vector_handles(k)
+                d = v["scale"] * v["vector"]
+                length = float(np.linalg.norm(d))
+                rgb = tuple(int(round(255 * c)) for c in v["color"][:3])
+                alpha = float(v["color"][3])
+                state["vectors"].append({"label": v["label"], "start": v["origin"].tolist(),
+                                         "end": (v["origin"] + d).tolist(), "rgb": rgb, "opacity": alpha})
+                if length < 1e-9:
+                    self._set(h["node"], "visible", False)
+                    continue
+                head = min(6.0 * h["radius"], 0.5 * length)
+                h["node"].position = v["origin"]
+                h["node"].wxyz = _z_to(d / length)
+                self._set(h["shaft"], "scale", (1.0, 1.0, length - head))
+                self._set(h["head"], "position", (0.0, 0.0, length - head))
+                self._set(h["head"], "scale", (1.0, 1.0, head))
+                for part in ("shaft", "head"):
+                    self._set(h[part], "color", rgb)
+                    self._set(h[part], "opacity", None if alpha >= 1.0 else alpha)
+                self._set(h["label"], "text", v["label"])
+                self._set(h["label"], "position", (0.0, 0.0, length + 0.5 * h["radius"]))
+                self._set(h["node"], "visible", True)
+            for h in self._vectors[len(f.overlays["vectors"]):]:
+                self._set(h["node"], "visible", False)
+            self._status.content = f"**frame {f.number}** · t = {f.t:.3f} s"
+        with self._state_lock:
+            self._state = state
+
+
+# --------------------------------------------------------------------------
+# live scenes for `lavendersim view NAME`
+# --------------------------------------------------------------------------
+
+
+def _tumble_scene():
+    """A torque-free box (0.4 x 0.25 x 0.1 m, 1 kg) tumbling near its intermediate axis: body axes,
+    angular velocity (world) and the conserved world angular momentum."""
+    import lavendersim as lv
+
+    scene = lv.Scene()
+    scene.add_body(lv.Body.box("box", 1.0, (0.4, 0.25, 0.1), omega_b=(0.05, 4.0, 0.05)))
+    sim = lv.Sim(scene, dt=1e-3)
+
+    def overlays(sim):
+        s = sim.state("box")
+        L = sim.angular_momentum_w("box")
+        return {"axes": [{"body": "box", "scale": 0.3}],
+                "vectors": [
+                    {"label": "angular velocity ω", "origin": s.p_w.tolist(), "vector": s.omega_w.tolist(),
+                     "scale": 0.08, "color": [0.51, 0.87, 0.76, 0.95]},
+                    {"label": "angular momentum L (conserved)", "origin": s.p_w.tolist(), "vector": L.tolist(),
+                     "scale": 20.0, "color": [0.95, 0.66, 0.77, 0.95]}]}
+
+    return sim, overlays, lambda sim, dt: sim.run_for(dt)
+
+
+SCENES = {"tumble": _tumble_scene}
+
+
+def _wheel_scene():
+    """Lab 04's reaction-wheel cube (needs lavendersim.envs)."""
+    from lavendersim import envs  # noqa: F401  (raises ImportError until lab 04 exists)
+
+    raise NotImplementedError
+
+
+def run_scene(name: str, *, duration: float | None = None, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT,
+              rate_hz: float = 60.0, viewer: Viewer | None = None, out=sys.stdout) -> dict:
+    """Run scene ``name`` in real time, publishing ``rate_hz`` frames per second, for ``duration``
+    seconds of simulated time (None: until interrupted). Returns the viewer's stats."""
+    V.choice("scene", name, SCENES)
+    if duration is not None:
+        duration = V.scalar("duration", duration, nonnegative=True)
+    rate_hz = V.positive("rate_hz", rate_hz)
+    sim, overlays, advance = SCENES[name]()
+    own = viewer is None
+    viewer = viewer or Viewer(host, port)
+    print(f"lavendersim view {name}: open {viewer.url}  (Ctrl-C to stop)", file=out, flush=True)
+    step = 1.0 / rate_hz
+    t0 = time.monotonic()
+    try:
+        while duration is None or sim.t < duration - 1e-12:
+            viewer.publish_frame(sim, overlays(sim))
+            advance(sim, step if duration is None else min(step, duration - sim.t))
+            lag = (t0 + sim.t) - time.monotonic()
+            if lag > 0:
+                time.sleep(lag)
+        viewer.publish_frame(sim, overlays(sim))
+    except KeyboardInterrupt:
+        pass
+    finally:
+        stats = viewer.stats()
+        if own:
+            viewer.close()
+    print(f"lavendersim view {name}: t = {sim.t:.3f} s, {stats['published']} frames published, "
+          f"{stats['applied']} sent, {stats['dropped']} coalesced", file=out)
+    return stats
