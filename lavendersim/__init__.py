@@ -13,3 +13,7 @@ from .validate import LavenderInputError
 __all__ = ["Body", "BodyState", "Scene", "Sim", "Trajectory", "AppliedTorque", "ForceAtPoint", "Gravity",
            "LinearDamping", "AngularDamping", "DivergenceError", "StaleBuildError", "LavenderInputError"]
 __version__ = "0.1.0"
+
+from .envs import register as _register_envs  # noqa: E402
+
+_register_envs()  # ReactionWheelCube-v0 (gymnasium.make("lavendersim:ReactionWheelCube-v0"))

@@ -1,0 +1,215 @@
+"""ReactionWheelCube-v0: a cube with three body-axis reaction wheels on a world-anchored spherical
+joint, stepped by the LavenderSim runtime (C backend by default, NumPy optional).
+
+Tasks
+  * ``task="center"`` (default): joint at the cube's centre (no gravity torque); hold the target
+    attitude (identity unless ``target_q`` is given). Episodes start at rest, rotated by a uniform
+    random angle in [0, ``init_angle_deg``] (default 20°) about a uniformly random axis.
+  * ``task="corner"``: Cubli-like balancing on one corner under gravity (joint at the corner
+    −s/2 (1,1,1), target: body diagonal vertical). Episodes start at rest, tilted by a uniform
+    random angle in [0, ``init_angle_deg``] (default 3°) about a random horizontal axis.
+
+Model (lavendersim.control.CubeModel): 15 cm, 1 kg cube, wheel spin inertia 5.7e-4 kg·m², motor
+torque limit 0.2 N·m, wheel speed limit 400 rad/s, cube angular damping ``damping`` = 1e-3 N·m·s/rad.
+
+Action: ``Box(-1, 1, (3,), float32)`` — wheel motor torques as fractions of the torque limit
+(x, y, z wheels). Values outside [-1, 1] are saturated (clipped); the simulator saturates again at
+the wheel speed limit (no torque that would spin a wheel at the limit faster). An action of the
+wrong shape or with NaN/inf raises ``LavenderInputError`` naming ``action``.
+
+Observation: ``Box(float32, (10,))`` = cube attitude q (x, y, z, w) (in [-1, 1]), cube body rates
+omega_b (rad/s, 3, within ±200), wheel speeds relative to the cube Omega (rad/s, 3, within ±2 ×
+the speed limit).
+
+Reward (per step): ``-(theta² + 0.05 |omega_b|² + 0.01 |action|²)`` with theta the rotation angle
+(rad) between the cube and the target attitude — 0 is perfect holding.
+
+Termination: the simulator diverged (non-finite state; ``info["diverged"]`` holds the message),
+a rate left the observation bounds (``info["out_of_bounds"]``), or, for the corner task, the tilt of the body diagonal from vertical exceeds ``max_tilt_deg``
+(default 20°). Truncation: ``max_episode_steps`` = 1000 steps (10 s at the default 0.01 s control
+period) through gymnasium's TimeLimit when made with ``gymnasium.make``; the unwrapped env does
+not truncate by itself.
+
+Seeding: ``reset(seed=...)`` seeds ``self.np_random``; the same seed gives the same episode.
+``reset(options={"q": ..., "omega_b": ..., "Omega": ...})`` sets the initial state explicitly.
+
+Rendering: ``render_mode="rgb_array"`` returns an (H, W, 3) uint8 image drawn with matplotlib's
+Agg canvas (cube edges and body axes; no display needed); ``None`` renders nothing.
+"""
+from __future__ import annotations
+
+import math
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+from .. import control as lc
+from .. import validate as V
+from ..errors import DivergenceError
+from ..kernels import K
+
+BODY = lc.BODY
+
+
+class ReactionWheelCubeEnv(gym.Env):
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 50}
+
+    def __init__(self, task: str = "center", backend: str = "c", render_mode: str | None = None, *,
+                 control_dt: float = 0.01, dt: float = 1e-3, damping: float = 1e-3, init_angle_deg: float | None = None,
+                 max_tilt_deg: float = 20.0, target_q=None, model: lc.CubeModel | None = None, **model_params):
+        super().__init__()
+        task = V.choice("task", task, lc.SCENARIOS)
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise V.LavenderInputError("render_mode", "must be None or 'rgb_array'", f", got {render_mode!r}")
+        self.render_mode = render_mode
+        self.backend = V.choice("backend", backend, ("c", "numpy"))
+        self.model = model or lc.CubeModel(scenario=task, damping=damping, **model_params)
+        self.task = self.model.scenario
+        self.dt = V.dt("dt", dt)
+        self.control_dt = V.dt("control_dt", control_dt)
+        self.substeps = int(round(self.control_dt / self.dt))
+        if self.substeps < 1 or abs(self.substeps * self.dt - self.control_dt) > 1e-9 * self.control_dt:
+            raise V.LavenderInputError("control_dt", f"must be a whole multiple of dt = {self.dt:g}", f", got {control_dt!r}")
+        self.init_angle_deg = V.scalar("init_angle_deg", (20.0 if self.task == "center" else 3.0)
+                                       if init_angle_deg is None else init_angle_deg, nonnegative=True)
+        self.max_tilt_deg = V.positive("max_tilt_deg", max_tilt_deg)
+        if target_q is not None and self.task == "corner":
+            raise V.LavenderInputError("target_q", "the corner task's target is fixed (body diagonal vertical)")
+        self.target_q = self.model.upright_q() if target_q is None else V.quaternion("target_q", target_q)
+        self.action_space = spaces.Box(-1.0, 1.0, shape=(3,), dtype=np.float32)
+        # finite bounds (gymnasium's checker rejects infinite ones): leaving them ends the episode
+        self.rate_bound = 200.0                               # rad/s, cube
+        self.wheel_bound = 2.0 * self.model.speed_limit       # rad/s
+        hi = np.array([1.0] * 4 + [self.rate_bound] * 3 + [self.wheel_bound] * 3, dtype=np.float32)
+        self.observation_space = spaces.Box(-hi, hi, dtype=np.float32)
+        self.sim = None
+        self._fig = None
+        self._last_u = np.zeros(3)
+
+    # ---- helpers --------------------------------------------------------------------------
+    def _obs(self) -> np.ndarray:
+        st = self.sim.state(BODY)
+        raw = np.concatenate([st.q, st.omega_b, self.sim.wheel_rates(BODY)])
+        return np.clip(raw, self.observation_space.low, self.observation_space.high).astype(np.float32)
+
+    def _out_of_bounds(self) -> bool:
+        st = self.sim.state(BODY)
+        return bool(np.max(np.abs(st.omega_b)) > self.rate_bound or np.max(np.abs(self.sim.wheel_rates(BODY))) > self.wheel_bound)
+
+    def angle_error_deg(self) -> float:
+        return float(lc.error_angle_deg(self.sim.state(BODY).q, self.target_q))
+
+    def tilt_deg(self) -> float:
+        """Corner task: angle of the body diagonal (pivot → COM) from vertical, degrees."""
+        d = K.quat_rotate(self.sim.state(BODY).q, np.ones(3) / math.sqrt(3.0))
+        return float(math.degrees(math.acos(max(-1.0, min(1.0, float(d[2]))))))
+
+    def _initial_q(self) -> np.ndarray:
+        rng = self.np_random
+        angle = float(rng.uniform(0.0, self.init_angle_deg))
+        if self.task == "center":
+            axis = rng.normal(size=3)
+            while np.linalg.norm(axis) < 1e-9:
+                axis = rng.normal(size=3)
+            return lc.rotated(self.target_q, axis, angle)
+        phi = float(rng.uniform(0.0, 2 * math.pi))
+        axis_w = np.array([math.cos(phi), math.sin(phi), 0.0])
+        axis_b = K.world_to_body(self.target_q, axis_w)
+        return lc.rotated(self.target_q, axis_b, angle)
+
+    # ---- gymnasium API --------------------------------------------------------------------
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        super().reset(seed=seed)
+        options = dict(options or {})
+        unknown = sorted(set(options) - {"q", "omega_b", "Omega"})
+        if unknown:
+            raise V.LavenderInputError(f"options.{unknown[0]}", "unknown reset option; known: q, omega_b, Omega")
+        q0 = V.quaternion("options.q", options["q"]) if "q" in options else self._initial_q()
+        w0 = V.vector("options.omega_b", options.get("omega_b", (0.0, 0.0, 0.0)))
+        Om0 = V.vector("options.Omega", options.get("Omega", (0.0, 0.0, 0.0)))
+        if np.max(np.abs(w0)) > self.rate_bound:
+            raise V.LavenderInputError("options.omega_b", f"must be within ±{self.rate_bound:g} rad/s (the observation bounds)")
+        if np.max(np.abs(Om0)) > self.wheel_bound:
+            raise V.LavenderInputError("options.Omega", f"must be within ±{self.wheel_bound:g} rad/s (the observation bounds)")
+        self.sim = self.model.make_sim(q0, w0, Om0, dt=self.dt, backend=self.backend)
+        self._last_u = np.zeros(3)
+        return self._obs(), self._info()
+
+    def _info(self, **extra) -> dict:
+        info = {"t": float(self.sim.t), "angle_error_deg": self.angle_error_deg(),
+                "torque_applied": np.asarray(self._last_u, dtype=float)}
+        if self.task == "corner":
+            info["tilt_deg"] = self.tilt_deg()
+        info.update(extra)
+        return info
+
+    def step(self, action):
+        if self.sim is None:
+            raise RuntimeError("ReactionWheelCube-v0: call reset() before step()")
+        try:
+            a = np.asarray(action, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise V.LavenderInputError("action", "must be 3 numbers (wheel torques as fractions of the limit)",
+                                       f", got {action!r}") from None
+        if a.shape != (3,):
+            raise V.LavenderInputError("action", "must have shape (3,)", f", got shape {a.shape}")
+        if not np.all(np.isfinite(a)):
+            raise V.LavenderInputError("action", "must be finite (no NaN or inf)", f", got {a.tolist()}")
+        a = np.clip(a, -1.0, 1.0)
+        self.sim.set_wheel_command(BODY, a * self.model.torque_limit)
+        terminated, extra = False, {}
+        try:
+            self.sim.run(self.substeps)
+        except DivergenceError as exc:
+            terminated, extra = True, {"diverged": str(exc)}
+        self._last_u = self.sim.wheel_command_applied(BODY)
+        obs = self._obs()
+        if terminated or not np.all(np.isfinite(obs)):
+            obs = np.nan_to_num(obs, nan=0.0, posinf=0.0, neginf=0.0)
+            extra.setdefault("diverged", "non-finite state")
+            return obs, -1e3, True, False, self._info(**extra)
+        theta = math.radians(self.angle_error_deg())
+        w = self.sim.state(BODY).omega_b
+        reward = -(theta * theta + 0.05 * float(w @ w) + 0.01 * float(a @ a))
+        extra = {}
+        if self._out_of_bounds():
+            terminated, extra = True, {"out_of_bounds": True}
+        if self.task == "corner" and self.tilt_deg() > self.max_tilt_deg:
+            terminated = True
+        return obs, float(reward), terminated, False, self._info(**extra)
+
+    def render(self):
+        if self.render_mode is None:
+            return None
+        if self._fig is None:
+            from matplotlib.backends.backend_agg import FigureCanvasAgg
+            from matplotlib.figure import Figure
+
+            self._fig = Figure(figsize=(3.2, 3.2), dpi=100)
+            FigureCanvasAgg(self._fig)
+            self._ax = self._fig.add_subplot(projection="3d")
+        ax = self._ax
+        ax.cla()
+        s = self.model.size
+        st = self.sim.state(BODY) if self.sim is not None else None
+        q = st.q if st is not None else self.target_q
+        R = K.quat_to_matrix(q)
+        com = R @ self.model.r_b
+        corners = np.array([[i, j, k] for i in (-1, 1) for j in (-1, 1) for k in (-1, 1)], float) * s / 2
+        pts = com + corners @ R.T
+        for a_ in range(8):
+            for b_ in range(a_ + 1, 8):
+                if np.sum(corners[a_] != corners[b_]) == 1:
+                    ax.plot(*pts[[a_, b_]].T, color="0.4", lw=1)
+        for i, col in enumerate(("tab:red", "tab:green", "tab:blue")):
+            ax.quiver(*com, *(R[:, i] * s * 0.9), color=col, lw=2)
+        lim = s * 1.2
+        ax.set_xlim(-lim, lim); ax.set_ylim(-lim, lim); ax.set_zlim(-lim * (0.3 if self.task == "corner" else 1), lim * (1.7 if self.task == "corner" else 1))
+        ax.set_title(f"t = {0 if self.sim is None else self.sim.t:.2f} s", fontsize=8)
+        self._fig.canvas.draw()
+        return np.asarray(self._fig.canvas.buffer_rgba())[..., :3].copy()
+
+    def close(self):
+        self._fig = None
+        self.sim = None

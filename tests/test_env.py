@@ -1,0 +1,155 @@
+"""ReactionWheelCube-v0: registration, gymnasium's env checker (warnings as errors), spaces,
+seeding, reward/termination, rendering without a display, bad actions, both backends."""
+from __future__ import annotations
+
+import warnings
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import lavendersim
+from lavendersim.envs.reaction_wheel_cube import ReactionWheelCubeEnv
+from lavendersim.validate import LavenderInputError
+
+BACKENDS = ("c", "numpy")
+
+
+def test_registered_on_import():
+    assert "ReactionWheelCube-v0" in gym.registry
+    lavendersim.envs.register()  # idempotent
+    env = gym.make("lavendersim:ReactionWheelCube-v0")
+    assert isinstance(env.unwrapped, ReactionWheelCubeEnv)
+    assert env.spec.max_episode_steps == 1000
+    env.close()
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+@pytest.mark.parametrize("task", ["center", "corner"])
+@pytest.mark.parametrize("render_mode", [None, "rgb_array"])
+def test_check_env_warnings_as_errors(backend, task, render_mode):
+    from gymnasium.utils.env_checker import check_env
+
+    env = gym.make("lavendersim:ReactionWheelCube-v0", backend=backend, task=task, render_mode=render_mode)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        check_env(env.unwrapped)
+    env.close()
+
+
+def test_spaces_and_observation():
+    env = gym.make("lavendersim:ReactionWheelCube-v0").unwrapped
+    assert env.action_space == gym.spaces.Box(-1, 1, (3,), np.float32)
+    assert env.observation_space.shape == (10,) and env.observation_space.dtype == np.float32
+    obs, info = env.reset(seed=3)
+    assert obs.dtype == np.float32 and obs in env.observation_space
+    st = env.sim.state("cube")
+    assert np.allclose(obs[0:4], st.q, atol=1e-7) and np.all(obs[4:] == 0)
+    assert 0 <= info["angle_error_deg"] <= 20.0
+
+
+def test_seeding_reproduces_episodes():
+    env = gym.make("lavendersim:ReactionWheelCube-v0").unwrapped
+    a = np.array([0.3, -0.5, 0.9], np.float32)
+    o1, _ = env.reset(seed=42)
+    s1 = [env.step(a)[0] for _ in range(5)]
+    o2, _ = env.reset(seed=42)
+    s2 = [env.step(a)[0] for _ in range(5)]
+    o3, _ = env.reset(seed=43)
+    assert np.array_equal(o1, o2) and all(np.array_equal(x, y) for x, y in zip(s1, s2))
+    assert not np.array_equal(o1, o3)
+
+
+def test_positive_x_action_spins_wheel_positive_cube_negative():
+    env = gym.make("lavendersim:ReactionWheelCube-v0").unwrapped
+    env.reset(seed=0, options={"q": [0, 0, 0, 1]})
+    for _ in range(10):
+        obs, *_ = env.step(np.array([0.5, 0, 0], np.float32))
+        assert obs[7] > 0 and obs[4] < 0
+
+
+def test_action_is_scaled_and_saturated():
+    env = gym.make("lavendersim:ReactionWheelCube-v0").unwrapped
+    env.reset(seed=0)
+    _, _, _, _, info = env.step(np.array([0.5, -1.0, 0.0], np.float32))
+    assert np.allclose(info["torque_applied"], [0.1, -0.2, 0.0])
+    _, _, _, _, info = env.step(np.array([7.0, -3.0, 0.25]))  # outside the box: saturated
+    assert np.allclose(info["torque_applied"], [0.2, -0.2, 0.05])
+
+
+def test_wheel_speed_limit_reaches_the_env():
+    env = gym.make("lavendersim:ReactionWheelCube-v0").unwrapped
+    env.reset(seed=0, options={"Omega": [400.0, 0, 0]})
+    _, _, _, _, info = env.step(np.array([1.0, 0, 0], np.float32))
+    assert info["torque_applied"][0] == 0.0
+
+
+@pytest.mark.parametrize("bad", [np.zeros(2), np.zeros((3, 1)), np.array([0, np.nan, 0]), np.array([np.inf, 0, 0]), "abc", None])
+def test_bad_actions_raise(bad):
+    env = gym.make("lavendersim:ReactionWheelCube-v0").unwrapped
+    env.reset(seed=0)
+    with pytest.raises(LavenderInputError) as e:
+        env.step(bad)
+    assert e.value.field == "action"
+
+
+def test_bad_constructor_and_reset_options():
+    with pytest.raises(LavenderInputError) as e:
+        ReactionWheelCubeEnv(backend="gpu")
+    assert e.value.field == "backend"
+    with pytest.raises(LavenderInputError) as e:
+        ReactionWheelCubeEnv(render_mode="human")
+    assert e.value.field == "render_mode"
+    with pytest.raises(LavenderInputError) as e:
+        ReactionWheelCubeEnv(task="edge")
+    assert e.value.field == "task"
+    env = ReactionWheelCubeEnv()
+    with pytest.raises(LavenderInputError) as e:
+        env.reset(options={"spin": 1})
+    assert e.value.field == "options.spin"
+    with pytest.raises(LavenderInputError):
+        env.reset(options={"q": [0, 0, 0, 0]})
+
+
+def test_reward_is_zero_at_target_and_negative_elsewhere():
+    env = gym.make("lavendersim:ReactionWheelCube-v0").unwrapped
+    env.reset(seed=0, options={"q": [0, 0, 0, 1]})
+    _, r, *_ = env.step(np.zeros(3, np.float32))
+    assert r == 0.0
+    env.reset(seed=0, options={"q": [np.sin(0.05), 0, 0, np.cos(0.05)]})
+    _, r, *_ = env.step(np.zeros(3, np.float32))
+    assert r == pytest.approx(-(0.1 ** 2), rel=1e-3)
+
+
+def test_corner_task_terminates_when_it_falls_and_truncates_at_max_steps():
+    env = gym.make("lavendersim:ReactionWheelCube-v0", task="corner", max_tilt_deg=10.0)
+    env.reset(seed=0)
+    term, n = False, 0
+    while not term and n < 500:
+        _, _, term, trunc, info = env.step(np.zeros(3, np.float32))
+        n += 1
+    assert term and info["tilt_deg"] > 10.0 and not trunc
+    env = gym.make("lavendersim:ReactionWheelCube-v0", max_episode_steps=3)
+    env.reset(seed=0)
+    out = [env.step(np.zeros(3, np.float32)) for _ in range(3)]
+    assert [o[3] for o in out] == [False, False, True]
+
+
+def test_render_rgb_array_without_display():
+    env = gym.make("lavendersim:ReactionWheelCube-v0", render_mode="rgb_array")
+    env.reset(seed=0)
+    img = env.render()
+    assert img.dtype == np.uint8 and img.ndim == 3 and img.shape[2] == 3 and img.std() > 0
+    env2 = gym.make("lavendersim:ReactionWheelCube-v0")
+    env2.reset(seed=0)
+    assert env2.render() is None
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_backends_agree(backend):
+    envs = [gym.make("lavendersim:ReactionWheelCube-v0", backend=b).unwrapped for b in ("c", backend)]
+    outs = []
+    for env in envs:
+        env.reset(seed=7)
+        outs.append([env.step(np.array([0.2, -0.7, 0.4], np.float32))[0] for _ in range(20)])
+    assert np.max(np.abs(np.array(outs[0]) - np.array(outs[1]))) < 1e-5
