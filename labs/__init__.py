@@ -26,6 +26,7 @@ LABS: dict[str, str] = {
     "01": "lab01_equal_torque",
     "02": "lab02_orientation",
     "03": "lab03_torque_free",
+    "04": "lab04_reaction_wheel",
 }
 
 __all__ = ["LABS", "lab_module", "run", "register_cli", "LabResult"]

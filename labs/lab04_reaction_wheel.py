@@ -1,0 +1,208 @@
+"""Experiment 04: can an internal actuator rotate a body without pushing on the outside world?
+
+The ReactionWheelCube-v0 model (lavendersim.control.CubeModel, task "center"): a 15 cm, 1 kg cube
+(I = m s²/6 = 3.75e-3 kg·m², wheels locked) on a spherical joint at its centre, three body-axis
+wheels of spin inertia J = 5.7e-4 kg·m², motor limit 0.2 N·m, wheel speed limit 400 rad/s, cube
+angular damping c = 1e-3 N·m·s/rad (the chapter's environment has damping and the joint). Each run
+starts at rest, holds a wheel torque command for T = 1 s (dt = 1 ms, RK4), and records every step.
+
+  * positive x-wheel command u = +0.05 N·m: every recorded wheel sample Omega_x > 0 and every cube
+    sample omega_x < 0 (samples t in (0, T]; at t = 0 both are exactly 0, the rest state). The
+    magnitudes differ — |Omega_x| / |omega_x| = I/J = 6.6 without damping, 7.5 with it — because the wheel's
+    spin inertia is much smaller than the cube's.
+  * paw-check 6: the reversed command u = −0.05 N·m reverses both signs everywhere (and the run is
+    the exact mirror: |Omega_rev + Omega_pos| and |omega_rev + omega_pos| are reported).
+  * two wheels at once (x and y, +0.05 N·m each): the reported cross-axis coupling is the z response
+    and the departure from superposition of the x-only and y-only runs. For this isotropic cube
+    with equal wheels it is ~0 (omega, Omega and the damping torque all stay along (1, 1, 0), so
+    omega × H has no component to excite z); the lab then shows real gyroscopic coupling: with the
+    z wheel pre-spun at 100 rad/s, an x command turns the cube about y (omega × J Omega).
+  * saturation: a 0.5 N·m command is clipped to the 0.2 N·m limit (the applied torque is checked),
+    and held for 1.5 s the x wheel reaches the 400 rad/s speed limit, where the motor stops adding
+    speed (Omega_x stays within one step's increment of the limit).
+  * beyond the chapter: damping off, joint at the centre (no external torque), a cube spinning at
+    omega_b = (0.3, −0.2, 0.5) rad/s and time-varying commands on all three wheels: the exchange is
+    exact, ΔL_cube = −ΔL_wheels in the world frame (wheel_momentum kernel), max over the run of
+    |ΔL_cube + ΔL_wheels| / max |ΔL_wheels| ≤ 1e-9.
+
+Options: --torque U (command magnitude, N·m, default 0.05; must stay below the limit) and --T.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from lavendersim import control as lc
+from lavendersim import validate as V
+
+from . import common as C
+
+NAME = "04"
+TITLE = "reaction wheel: cube and wheel spin opposite ways (paw-check 6: reversed command), coupling, saturation, exact momentum exchange"
+
+TORQUE = 0.05
+T_END = 1.0
+T_SAT = 1.5
+DT = 1e-3
+DAMPING = 1e-3
+BODY = lc.BODY
+
+
+def add_arguments(parser) -> None:
+    parser.add_argument("--torque", type=float, default=TORQUE, metavar="U",
+                        help="x-wheel command in N·m (default 0.05; below the 0.2 N·m limit)")
+    parser.add_argument("--T", type=float, default=T_END, help="duration of the sign runs in s (default 1)")
+
+
+def options_from_args(args) -> dict:
+    return {"torque": args.torque, "T": args.T}
+
+
+def _run(model, u_of_t, T, backend, omega_b=(0, 0, 0), Omega=(0, 0, 0), momentum=False):
+    """Hold u_of_t(t) per step; record t, omega_b, Omega, applied torque (and momenta)."""
+    sim = model.make_sim(None, omega_b, Omega, dt=DT, backend=backend)
+    n = int(round(T / DT))
+    t = np.empty(n + 1)
+    w, Om, ua = np.empty((n + 1, 3)), np.empty((n + 1, 3)), np.zeros((n + 1, 3))
+    Lb, Lw = np.empty((n + 1, 3)), np.empty((n + 1, 3))
+    for k in range(n + 1):
+        t[k], w[k], Om[k] = sim.t, sim.state(BODY).omega_b, sim.wheel_rates(BODY)
+        if momentum:
+            Lb[k], Lw[k] = sim.wheel_momentum_w(BODY)
+        if k == n:
+            break
+        sim.set_wheel_command(BODY, u_of_t(sim.t))
+        sim.step()
+        ua[k + 1] = sim.wheel_command_applied(BODY)
+    return {"t": t, "w": w, "Om": Om, "u": ua, "Lb": Lb, "Lw": Lw}
+
+
+def run(out_dir=C.DEFAULT_OUT, backend: str = "c", torque: float = TORQUE, T: float = T_END) -> C.LabResult:
+    backend = C.check_backend(backend)
+    U = V.positive("torque", torque)
+    T = V.positive("T", T)
+    model = lc.CubeModel(scenario="center", damping=DAMPING)
+    if U >= model.torque_limit:
+        raise V.LavenderInputError("torque", f"must be below the motor limit {model.torque_limit:g} N·m for the sign runs "
+                                   "(saturation has its own run)", f", got {U!r}")
+    if int(round(T / DT)) < 2:
+        raise V.LavenderInputError("T", f"must be at least 2 steps of {DT:g} s", f", got {T!r}")
+    const = lambda u: (lambda t: np.asarray(u, float))  # noqa: E731
+
+    pos = _run(model, const([U, 0, 0]), T, backend)
+    rev = _run(model, const([-U, 0, 0]), T, backend)
+    xs, ys = pos, _run(model, const([0, U, 0]), T, backend)
+    xy = _run(model, const([U, U, 0]), T, backend)
+    gyro = _run(model, const([U, 0, 0]), T, backend, Omega=(0, 0, 100.0))
+    sat = _run(model, const([0.5, 0, 0]), T_SAT, backend)
+    free = lc.CubeModel(scenario="center", damping=0.0)
+    ex = _run(free, lambda t: np.array([0.08 * math.sin(7 * t), -0.05, 0.12 * math.cos(3 * t)]), T, backend,
+              omega_b=(0.3, -0.2, 0.5), momentum=True)
+
+    s = slice(1, None)  # samples after the command starts (t = 0 is the rest state, exactly 0)
+    wheel_all_positive = bool(np.all(pos["Om"][s, 0] > 0))
+    cube_all_negative = bool(np.all(pos["w"][s, 0] < 0))
+    rev_wheel_negative = bool(np.all(rev["Om"][s, 0] < 0))
+    rev_cube_positive = bool(np.all(rev["w"][s, 0] > 0))
+    mirror_err = float(max(np.max(np.abs(rev["Om"] + pos["Om"])), np.max(np.abs(rev["w"] + pos["w"]))))
+    reversed_ok = rev_wheel_negative and rev_cube_positive and mirror_err <= 1e-9 * np.max(np.abs(pos["Om"]))
+    other_axes = float(max(np.max(np.abs(pos["w"][:, 1:])), np.max(np.abs(pos["Om"][:, 1:]))))
+    ratio = float(pos["Om"][-1, 0] / -pos["w"][-1, 0])
+
+    coupling_z = float(max(np.max(np.abs(xy["w"][:, 2])), np.max(np.abs(xy["Om"][:, 2]))))
+    superposition = float(max(np.max(np.abs(xy["w"] - xs["w"] - ys["w"])), np.max(np.abs(xy["Om"] - xs["Om"] - ys["Om"]))))
+    gyro_ratio = float(np.max(np.abs(gyro["w"][:, 1])) / np.max(np.abs(gyro["w"][:, 0])))
+
+    sat_applied_max = float(np.max(np.abs(sat["u"])))
+    sat_first = float(sat["u"][1, 0])
+    sat_peak_speed = float(np.max(np.abs(sat["Om"][:, 0])))
+    reach = np.flatnonzero(sat["Om"][:, 0] >= model.speed_limit)
+    t_reach = float(sat["t"][reach[0]]) if reach.size else math.inf
+    # the largest one-step increase of Omega_x under full torque bounds the overshoot past the limit
+    step_incr = float(np.max(np.diff(sat["Om"][:, 0])))
+
+    dLb, dLw = ex["Lb"] - ex["Lb"][0], ex["Lw"] - ex["Lw"][0]
+    scale = float(np.max(np.linalg.norm(dLw, axis=1)))
+    exchange_err = float(np.max(np.linalg.norm(dLb + dLw, axis=1)) / scale)
+    L_tot = ex["Lb"] + ex["Lw"]
+    total_drift = float(np.max(np.linalg.norm(L_tot - L_tot[0], axis=1)) / np.linalg.norm(L_tot[0]))
+
+    figures = {
+        "wheel_all_positive": wheel_all_positive, "cube_all_negative": cube_all_negative,
+        "reversed_wheel_all_negative": rev_wheel_negative, "reversed_cube_all_positive": rev_cube_positive,
+        "reversed_ok": bool(reversed_ok), "reversed_mirror_error": mirror_err,
+        "omega_x_T": float(pos["w"][-1, 0]), "Omega_x_T": float(pos["Om"][-1, 0]), "wheel_to_cube_rate_ratio": ratio,
+        "single_wheel_other_axes_max": other_axes,
+        "two_wheels_cross_axis_coupling": coupling_z, "two_wheels_superposition_error": superposition,
+        "two_wheels_omega_T": xy["w"][-1], "two_wheels_Omega_T": xy["Om"][-1],
+        "gyro_coupling_omega_y_over_omega_x": gyro_ratio, "gyro_omega_T": gyro["w"][-1],
+        "saturation_command": 0.5, "saturation_applied_max": sat_applied_max, "saturation_applied_first": sat_first,
+        "saturation_peak_wheel_speed": sat_peak_speed, "saturation_time_to_speed_limit": t_reach,
+        "saturation_step_increment": step_incr,
+        "momentum_exchange_error": exchange_err, "momentum_exchange_scale": scale, "total_momentum_drift": total_drift,
+    }
+    params = {"backend": backend, "torque": U, "T": T, "dt": DT, "integrator": "rk4", "damping": DAMPING,
+              "mass": model.mass, "size": model.size, "J": model.J, "I_cube": model.I_c,
+              "torque_limit": model.torque_limit, "speed_limit": model.speed_limit,
+              "gyro_Omega_z0": 100.0, "exchange_omega_b0": np.array([0.3, -0.2, 0.5]), "exchange_damping": 0.0}
+    checks = [
+        C.holds("wheel_all_positive", wheel_all_positive, f"every x-wheel sample in (0, {T:g}] s > 0"),
+        C.holds("cube_all_negative", cube_all_negative, f"every cube omega_x sample in (0, {T:g}] s < 0"),
+        C.holds("paw6_reversed_command_reverses_both", reversed_ok,
+                "reversed command: wheel all < 0, cube all > 0, an exact mirror of the positive run"),
+        C.above("wheel_faster_than_cube", ratio, 1.0, "|Omega_x| / |omega_x| at T: different magnitudes"),
+        C.at_most("single_wheel_stays_on_axis", other_axes, 1e-12, "y, z rates of the x-only run (rad/s)"),
+        C.at_most("two_wheels_z_coupling", coupling_z, 1e-9,
+                  "isotropic cube, equal wheels: no z response (rad/s)"),
+        C.above("gyroscopic_coupling_shown", gyro_ratio, 0.01,
+                "z wheel pre-spun at 100 rad/s: an x command turns the cube about y"),
+        C.close("saturation_clips_to_limit", sat_applied_max, model.torque_limit, 1e-15, "0.5 N·m command -> applied (N·m)"),
+        C.at_most("saturation_speed_limit", sat_peak_speed, model.speed_limit + step_incr,
+                  "x wheel stays within one step's increment of the 400 rad/s limit"),
+        C.below("saturation_reaches_speed_limit", t_reach, T_SAT, "time for the wheel to reach the speed limit (s)"),
+        C.at_most("momentum_exchange_error", exchange_err, 1e-9,
+                  "damping off, joint at the centre: max |ΔL_cube + ΔL_wheels| / max |ΔL_wheels|, world frame"),
+    ]
+
+    fig, ax = C.new_figure(2, 3, size=(15, 8), title=f"Experiment 04: reaction-wheel cube ({backend} backend)")
+    a = ax[0, 0]
+    a.plot(pos["t"], pos["w"][:, 0], color="tab:blue", label="cube ω_x (< 0)")
+    a.plot(pos["t"], pos["Om"][:, 0], color="tab:orange", label="wheel Ω_x (> 0)")
+    a.set_xlabel("t (s)"); a.set_ylabel("rad/s"); a.legend(fontsize=8)
+    a.set_title(f"+{U:g} N·m x-wheel: opposite signs, ratio {ratio:.2f}")
+    a.axhline(0, color="k", lw=0.5)
+    a = ax[0, 1]
+    for run_, ls, lab in ((pos, "-", "+u"), (rev, "--", "−u (paw-check 6)")):
+        a.plot(run_["t"], run_["w"][:, 0] * 10, ls, color="tab:blue", label=f"cube ω_x ×10, {lab}")
+        a.plot(run_["t"], run_["Om"][:, 0], ls, color="tab:orange", label=f"wheel Ω_x, {lab}")
+    a.axhline(0, color="k", lw=0.5); a.set_xlabel("t (s)"); a.set_ylabel("rad/s"); a.legend(fontsize=7)
+    a.set_title("reversed command reverses both")
+    a = ax[0, 2]
+    for i, c in enumerate("xyz"):
+        a.plot(xy["t"], xy["w"][:, i], label=f"two wheels: ω_{c}")
+    for i, c in enumerate("xyz"):
+        a.plot(gyro["t"], gyro["w"][:, i], "--", label=f"x cmd, z wheel at 100 rad/s: ω_{c}")
+    a.set_xlabel("t (s)"); a.set_ylabel("cube ω_b (rad/s)"); a.legend(fontsize=7)
+    a.set_title(f"coupling: two wheels |ω_z| {coupling_z:.0e}; gyro |ω_y|/|ω_x| {gyro_ratio:.2f}", fontsize=10)
+    a = ax[1, 0]
+    a.plot(sat["t"], sat["u"][:, 0], color="tab:red", label="applied u_x (command 0.5)")
+    a.axhline(model.torque_limit, color="k", ls=":", lw=0.8)
+    a.set_xlabel("t (s)"); a.set_ylabel("applied torque (N·m)")
+    b = a.twinx()
+    b.plot(sat["t"], sat["Om"][:, 0], color="tab:orange", label="wheel Ω_x")
+    b.axhline(model.speed_limit, color="tab:orange", ls=":", lw=0.8)
+    b.set_ylabel("wheel Ω_x (rad/s)")
+    a.set_title("saturation: torque limit, then speed limit")
+    a = ax[1, 1]
+    for i, c in enumerate("xyz"):
+        a.plot(ex["t"], dLb[:, i], color=f"C{i}", label=f"ΔL_cube,{c}")
+        a.plot(ex["t"], -dLw[:, i], ":", color="k", lw=1)
+    a.set_xlabel("t (s)"); a.set_ylabel("kg·m²/s (world)"); a.legend(fontsize=7)
+    a.set_title("no damping: ΔL_cube (colour) = −ΔL_wheels (dotted)")
+    a = ax[1, 2]
+    a.semilogy(ex["t"][1:], np.maximum(np.linalg.norm(dLb + dLw, axis=1)[1:] / scale, 1e-18))
+    a.axhline(1e-9, color="tab:red", ls=":", label="1e-9")
+    a.set_xlabel("t (s)"); a.set_ylabel("|ΔL_cube + ΔL_wheels| / max|ΔL_wheels|"); a.legend(fontsize=7)
+    a.set_title(f"exchange error {exchange_err:.1e}")
+    return C.finish(NAME, out_dir, figures, params, checks, {"reaction_wheel.png": fig})

@@ -1,0 +1,76 @@
+"""Lab 04 (reaction wheel): the chapter's sign checks, paw-check 6, coupling, saturation, the exact
+momentum exchange, files, CLI exit codes, both backends."""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from lavendersim import labs
+from lavendersim.validate import LavenderInputError
+
+
+@pytest.mark.parametrize("backend", ["c", "numpy"])
+def test_lab04(tmp_path, backend):
+    r = labs.run("04", tmp_path, backend=backend)
+    assert r.passed, "; ".join(c.describe() for c in r.failures)
+    data = json.loads((tmp_path / "04" / "results.json").read_text())
+    assert data == json.loads(json.dumps(dict(r)))
+    for key in ("wheel_all_positive", "cube_all_negative", "reversed_ok"):
+        assert data[key] is True
+    assert data["momentum_exchange_error"] <= 1e-9
+    assert data["reversed_mirror_error"] == 0.0
+    assert data["wheel_to_cube_rate_ratio"] > 5          # different magnitudes
+    assert data["two_wheels_cross_axis_coupling"] <= 1e-9  # isotropic cube: none
+    assert data["gyro_coupling_omega_y_over_omega_x"] > 0.1  # pre-spun z wheel: gyroscopic coupling
+    assert data["saturation_applied_max"] == 0.2
+    assert data["saturation_peak_wheel_speed"] <= 400 + data["saturation_step_increment"]
+    png = tmp_path / "04" / "reaction_wheel.png"
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png.stat().st_size > 1000
+
+
+def test_lab04_backends_agree(tmp_path):
+    a = labs.run("04", tmp_path / "c", backend="c")
+    b = labs.run("04", tmp_path / "n", backend="numpy")
+    assert abs(a["omega_x_T"] - b["omega_x_T"]) < 1e-9 and abs(a["Omega_x_T"] - b["Omega_x_T"]) < 1e-9
+
+
+def test_lab04_torque_option_and_bad_options(tmp_path):
+    r = labs.run("04", tmp_path, backend="c", torque=0.1, T=0.5)
+    assert r.passed and r["Omega_x_T"] > 0 and r["omega_x_T"] < 0
+    for kw, field in (({"torque": 0.3}, "torque"), ({"torque": -0.1}, "torque"), ({"T": float("nan")}, "T")):
+        with pytest.raises(LavenderInputError) as e:
+            labs.run("04", tmp_path, **kw)
+        assert e.value.field == field
+
+
+def test_lab04_cli(tmp_path):
+    p = subprocess.run([sys.executable, "-m", "lavendersim.cli", "lab", "04", "--out", str(tmp_path)],
+                       capture_output=True, text=True, timeout=300)
+    assert p.returncode == 0, p.stderr
+    assert "lab 04: all" in p.stdout
+    p = subprocess.run([sys.executable, "-m", "lavendersim.cli", "lab", "04", "--out", str(tmp_path), "--torque", "0.5"],
+                       capture_output=True, text=True, timeout=300)
+    assert p.returncode == 2 and "torque" in p.stderr
+
+
+def test_lab04_failing_check_exits_nonzero(tmp_path, monkeypatch, capsys):
+    """A reversed trend (wheel rates with the wrong sign) fails the sign checks and exits 1."""
+    from lavendersim.labs import common as C
+    from lavendersim.labs import lab04_reaction_wheel as L
+
+    real = L._run
+
+    def flipped(*a, **k):
+        out = real(*a, **k)
+        out["Om"] = -out["Om"]
+        return out
+
+    monkeypatch.setattr(L, "_run", flipped)
+    r = L.run(tmp_path, backend="c")
+    assert not r.passed and r["wheel_all_positive"] is False
+    assert C.report(r) == 1
+    assert "wheel_all_positive" in capsys.readouterr().err
