@@ -77,6 +77,7 @@ class ReactionWheelCubeEnv(gym.Env):
         if target_q is not None and self.task == "corner":
             raise V.LavenderInputError("target_q", "the corner task's target is fixed (body diagonal vertical)")
         self.target_q = self.model.upright_q() if target_q is None else V.quaternion("target_q", target_q)
+        self._tq = [float(v) for v in self.target_q]
         self.action_space = spaces.Box(-1.0, 1.0, shape=(3,), dtype=np.float32)
         # finite bounds (gymnasium's checker rejects infinite ones): leaving them ends the episode
         self.rate_bound = 200.0                               # rad/s, cube
@@ -88,22 +89,30 @@ class ReactionWheelCubeEnv(gym.Env):
         self._last_u = np.zeros(3)
 
     # ---- helpers --------------------------------------------------------------------------
-    def _obs(self) -> np.ndarray:
+    def _raw(self) -> np.ndarray:
         st = self.sim.state(BODY)
-        raw = np.concatenate([st.q, st.omega_b, self.sim.wheel_rates(BODY)])
+        return np.concatenate([st.q, st.omega_b, self.sim.wheel_rates(BODY)])
+
+    def _obs(self, raw=None) -> np.ndarray:
+        raw = self._raw() if raw is None else raw
         return np.clip(raw, self.observation_space.low, self.observation_space.high).astype(np.float32)
 
-    def _out_of_bounds(self) -> bool:
-        st = self.sim.state(BODY)
-        return bool(np.max(np.abs(st.omega_b)) > self.rate_bound or np.max(np.abs(self.sim.wheel_rates(BODY))) > self.wheel_bound)
+    def angle_error_deg(self, q=None) -> float:
+        """Rotation angle between the cube and the target attitude, degrees: 4 atan2(|q − s q_t|,
+        |q + s q_t|) with s = sign(q·q_t) (accurate at small angles, cheap per step)."""
+        q = self.sim.state(BODY).q if q is None else q
+        t = self._tq
+        d = q[0] * t[0] + q[1] * t[1] + q[2] * t[2] + q[3] * t[3]
+        s = 1.0 if d >= 0 else -1.0
+        a = math.sqrt(sum((q[i] - s * t[i]) ** 2 for i in range(4)))
+        b = math.sqrt(sum((q[i] + s * t[i]) ** 2 for i in range(4)))
+        return math.degrees(4.0 * math.atan2(a, b))
 
-    def angle_error_deg(self) -> float:
-        return float(lc.error_angle_deg(self.sim.state(BODY).q, self.target_q))
-
-    def tilt_deg(self) -> float:
+    def tilt_deg(self, q=None) -> float:
         """Corner task: angle of the body diagonal (pivot → COM) from vertical, degrees."""
-        d = K.quat_rotate(self.sim.state(BODY).q, np.ones(3) / math.sqrt(3.0))
-        return float(math.degrees(math.acos(max(-1.0, min(1.0, float(d[2]))))))
+        q = self.sim.state(BODY).q if q is None else q
+        d = K.quat_rotate(q, np.ones(3) / math.sqrt(3.0))
+        return float(math.degrees(math.atan2(math.hypot(float(d[0]), float(d[1])), float(d[2]))))
 
     def _initial_q(self) -> np.ndarray:
         rng = self.np_random
@@ -136,11 +145,11 @@ class ReactionWheelCubeEnv(gym.Env):
         self._last_u = np.zeros(3)
         return self._obs(), self._info()
 
-    def _info(self, **extra) -> dict:
-        info = {"t": float(self.sim.t), "angle_error_deg": self.angle_error_deg(),
+    def _info(self, angle=None, tilt=None, **extra) -> dict:
+        info = {"t": float(self.sim.t), "angle_error_deg": self.angle_error_deg() if angle is None else angle,
                 "torque_applied": np.asarray(self._last_u, dtype=float)}
         if self.task == "corner":
-            info["tilt_deg"] = self.tilt_deg()
+            info["tilt_deg"] = self.tilt_deg() if tilt is None else tilt
         info.update(extra)
         return info
 
@@ -164,20 +173,22 @@ class ReactionWheelCubeEnv(gym.Env):
         except DivergenceError as exc:
             terminated, extra = True, {"diverged": str(exc)}
         self._last_u = self.sim.wheel_command_applied(BODY)
-        obs = self._obs()
-        if terminated or not np.all(np.isfinite(obs)):
-            obs = np.nan_to_num(obs, nan=0.0, posinf=0.0, neginf=0.0)
+        raw = self._raw()
+        if terminated or not np.all(np.isfinite(raw)):
+            obs = np.nan_to_num(self._obs(raw), nan=0.0, posinf=0.0, neginf=0.0)
             extra.setdefault("diverged", "non-finite state")
-            return obs, -1e3, True, False, self._info(**extra)
-        theta = math.radians(self.angle_error_deg())
-        w = self.sim.state(BODY).omega_b
+            return obs, -1e3, True, False, self._info(angle=float("nan"), tilt=float("nan"), **extra)
+        q, w, Om = raw[0:4], raw[4:7], raw[7:10]
+        angle = self.angle_error_deg(q)
+        theta = math.radians(angle)
         reward = -(theta * theta + 0.05 * float(w @ w) + 0.01 * float(a @ a))
-        extra = {}
-        if self._out_of_bounds():
+        if np.max(np.abs(w)) > self.rate_bound or np.max(np.abs(Om)) > self.wheel_bound:
             terminated, extra = True, {"out_of_bounds": True}
-        if self.task == "corner" and self.tilt_deg() > self.max_tilt_deg:
-            terminated = True
-        return obs, float(reward), terminated, False, self._info(**extra)
+        tilt = None
+        if self.task == "corner":
+            tilt = self.tilt_deg(q)
+            terminated = terminated or tilt > self.max_tilt_deg
+        return self._obs(raw), float(reward), terminated, False, self._info(angle, tilt, **extra)
 
     def render(self):
         if self.render_mode is None:
