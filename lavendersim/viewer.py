@@ -417,7 +417,7 @@ class Viewer:
         centre = f.pose[:, 0:3].mean(axis=0)
         span = max(ext, float(np.ptp(f.pose[:, 0:3], axis=0).max()) if len(f.names) > 1 else ext)
         self.server.initial_camera.look_at = tuple(centre)
-        self.server.initial_camera.position = tuple(centre + span * np.array([1.6, -2.2, 1.3]))
+        self.server.initial_camera.position = tuple(centre + span * np.array([1.3, -1.8, 1.0]))
         self._signature = (f.names, f.shapes)
 
     def _vector_handles(self, k: int) -> dict:
@@ -431,7 +431,7 @@ class Viewer:
                 "node": node,
                 "shaft": sc.add_mesh_simple(f"/vectors/{i}/shaft", sv, sf, cast_shadow=False, receive_shadow=False),
                 "head": sc.add_mesh_simple(f"/vectors/{i}/head", hv, hf, cast_shadow=False, receive_shadow=False),
-                "label": sc.add_label(f"/vectors/{i}/label", "", anchor="bottom-left"),
+                "label": sc.add_label(f"/vectors/{i}/label", "", anchor="center-left"),
                 "radius": r,
             })
         return self._vectors[k]
@@ -477,7 +477,7 @@ class Viewer:
                     self._set(h[part], "color", rgb)
                     self._set(h[part], "opacity", None if alpha >= 1.0 else alpha)
                 self._set(h["label"], "text", v["label"])
-                self._set(h["label"], "position", (0.0, 0.0, length + 0.5 * h["radius"]))
+                self._set(h["label"], "position", (0.0, 0.0, length + 4.0 * h["radius"]))
                 self._set(h["node"], "visible", True)
             for h in self._vectors[len(f.overlays["vectors"]):]:
                 self._set(h["node"], "visible", False)
@@ -503,10 +503,10 @@ def _tumble_scene():
     def overlays(sim):
         s = sim.state("box")
         L = sim.angular_momentum_w("box")
-        return {"axes": [{"body": "box", "scale": 0.3}],
+        return {"axes": [{"body": "box", "scale": 0.4}],
                 "vectors": [
                     {"label": "angular velocity ω", "origin": s.p_w.tolist(), "vector": s.omega_w.tolist(),
-                     "scale": 0.08, "color": [0.51, 0.87, 0.76, 0.95]},
+                     "scale": 0.15, "color": [0.51, 0.87, 0.76, 0.95]},
                     {"label": "angular momentum L (conserved)", "origin": s.p_w.tolist(), "vector": L.tolist(),
                      "scale": 20.0, "color": [0.95, 0.66, 0.77, 0.95]}]}
 
