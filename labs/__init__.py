@@ -52,6 +52,13 @@ def _common_parent():
                    help=f"output directory; the lab writes DIR/NAME/results.json and PNGs (default: ./{DEFAULT_OUT})")
     p.add_argument("--backend", default="c", choices=BACKENDS,
                    help="simulator backend for the labs that step a scene (default: c)")
+    v = p.add_argument_group("live view (lavendersim.viewer; labs with a view: 03)")
+    v.add_argument("--view", action="store_true",
+                   help="after the lab, run its scene live in the browser viewer at http://VIEW_HOST:VIEW_PORT")
+    v.add_argument("--view-host", default="127.0.0.1", help="interface for --view (default 127.0.0.1)")
+    v.add_argument("--view-port", type=int, default=8080, help="port for --view (default 8080; 0 = any free)")
+    v.add_argument("--view-duration", type=float, default=None,
+                   help="simulated seconds to stream with --view (default: until Ctrl-C)")
     return p
 
 
@@ -59,13 +66,29 @@ def _run_one(args) -> int:
     from lavendersim.validate import LavenderInputError
 
     mod = lab_module(args.lab_name)
+    if getattr(args, "view", False):
+        from lavendersim.viewer import LAB_VIEWS
+
+        if args.lab_name not in LAB_VIEWS:
+            print(f"lab {args.lab_name}: no live view (--view works for labs {', '.join(LAB_VIEWS)})", file=sys.stderr)
+            return 2
     try:
         options = mod.options_from_args(args)
         result = mod.run(args.out, backend=args.backend, **options)
     except LavenderInputError as exc:
         print(f"lab {args.lab_name}: invalid option: {exc}", file=sys.stderr)
         return 2
-    return report(result)
+    code = report(result)
+    if getattr(args, "view", False):
+        from lavendersim import viewer
+
+        try:
+            viewer.run_scene(viewer.LAB_VIEWS[args.lab_name], duration=args.view_duration, host=args.view_host,
+                             port=args.view_port)
+        except LavenderInputError as exc:
+            print(f"lab {args.lab_name}: invalid option: {exc}", file=sys.stderr)
+            return 2
+    return code
 
 
 def _run_all(args) -> int:

@@ -46,7 +46,8 @@ import numpy as np
 
 from . import validate as V
 
-__all__ = ["Viewer", "validate_overlays", "xyzw_to_wxyz", "DEFAULT_COLOR", "MAX_VECTORS", "SCENES", "run_scene"]
+__all__ = ["Viewer", "validate_overlays", "xyzw_to_wxyz", "DEFAULT_COLOR", "MAX_VECTORS", "SCENES", "LAB_VIEWS",
+           "run_scene"]
 
 DEFAULT_HOST = "127.0.0.1"
 DEFAULT_PORT = 8080
@@ -513,14 +514,33 @@ def _tumble_scene():
     return sim, overlays, lambda sim, dt: sim.run_for(dt)
 
 
-SCENES = {"tumble": _tumble_scene}
+def _lab03_scene():
+    """Lab 03's two rods side by side: steady spin about the long axis ([3, 0, 0] rad/s) and the
+    mixed spin ([3, 2, 1] rad/s) that tumbles while its world angular momentum stays fixed."""
+    import lavendersim as lv
+    from lavendersim.labs import lab03_torque_free as L3
+
+    scene = lv.Scene()
+    scene.add_body(lv.Body.box("principal", L3.MASS, L3.ROD_SIZE, p_w=(0.0, -0.6, 0.0), omega_b=L3.OMEGA_PRINCIPAL))
+    scene.add_body(lv.Body.box("mixed", L3.MASS, L3.ROD_SIZE, p_w=(0.0, 0.6, 0.0), omega_b=L3.OMEGA_MIXED))
+    sim = lv.Sim(scene, dt=L3.DT, integrator=L3.INTEGRATOR)
+
+    def overlays(sim):
+        vecs = []
+        for name in ("principal", "mixed"):
+            s = sim.state(name)
+            vecs += [{"label": f"{name}: ω", "origin": s.p_w.tolist(), "vector": s.omega_w.tolist(), "scale": 0.12,
+                      "color": [0.51, 0.87, 0.76, 0.95]},
+                     {"label": f"{name}: L", "origin": s.p_w.tolist(), "vector": sim.angular_momentum_w(name).tolist(),
+                      "scale": 2.0, "color": [0.95, 0.66, 0.77, 0.95]}]
+        return {"axes": [{"body": "principal", "scale": 0.35}, {"body": "mixed", "scale": 0.35}], "vectors": vecs}
+
+    return sim, overlays, lambda sim, dt: sim.run_for(dt)
 
 
-def _wheel_scene():
-    """Lab 04's reaction-wheel cube (needs lavendersim.envs)."""
-    from lavendersim import envs  # noqa: F401  (raises ImportError until lab 04 exists)
-
-    raise NotImplementedError
+SCENES = {"tumble": _tumble_scene, "lab03": _lab03_scene}
+# lab name -> scene that `lavendersim lab NAME --view` streams after the lab has run
+LAB_VIEWS = {"03": "lab03"}
 
 
 def run_scene(name: str, *, duration: float | None = None, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT,

@@ -426,3 +426,24 @@ def test_tumble_scene_conserves_momentum_vector():
     VW.validate_overlays(ov, sim.names)
     assert np.allclose(ov["vectors"][1]["vector"], L0, rtol=1e-9)
     assert not np.allclose(ov["vectors"][0]["vector"], w0, atol=1e-2)   # it tumbles
+
+
+def test_lab_view_option_streams_lab03(tmp_path):
+    r = subprocess.run([sys.executable, "-m", "lavendersim.cli", "lab", "03", "--out", str(tmp_path),
+                        "--view", "--view-port", "0", "--view-duration", "0.3"],
+                       capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    assert "lavendersim view lab03: open http://127.0.0.1:" in r.stdout and "t = 0.300 s" in r.stdout
+
+
+def test_lab_view_option_refused_for_a_lab_without_view():
+    r = subprocess.run([sys.executable, "-m", "lavendersim.cli", "lab", "force", "--view"],
+                       capture_output=True, text=True, timeout=60)
+    assert r.returncode == 2 and "no live view" in r.stderr
+
+
+def test_lab03_scene_payload_is_valid():
+    sim, overlays, advance = VW.SCENES["lab03"]()
+    advance(sim, 0.5)
+    ov = VW.validate_overlays(overlays(sim), sim.names)
+    assert [a["body"] for a in ov["axes"]] == ["principal", "mixed"] and len(ov["vectors"]) == 4
