@@ -67,10 +67,13 @@ class Body:
 
 
 class BodyState:
-    """A view of one body's state (or trajectory: leading time axis) with derived quantities."""
+    """A view of one body's state (or trajectory: leading time axis) with derived quantities.
 
-    def __init__(self, x: np.ndarray):
+    Omega: wheel rates relative to the body (rad/s), zeros for a body without reaction wheels."""
+
+    def __init__(self, x: np.ndarray, Omega: np.ndarray | None = None):
         self.x = x
+        self.Omega = np.zeros(x.shape[:-1] + (3,)) if Omega is None else Omega
 
     p_w = property(lambda s: s.x[..., P], doc="COM position, world, m")
     q = property(lambda s: s.x[..., Q], doc="orientation R_WB (x, y, z, w)")

@@ -1,9 +1,16 @@
 """Scene effects: what a scene declares is all the simulator evaluates.
 
-Each effect acts on one named body or, with body=None, on every body. Codes and parameter rows
-are the contract with the backends: a row is [code, body index (-1: all), p0 … p5].
+Each force effect acts on one named body or, with body=None, on every body. Codes and parameter
+rows are the contract with the backends: a row is [code, body index (-1: all), p0 … p5].
 Frames and units: torque_w N·m (world), r_b m (body frame offset from the COM), F_w N (world),
 g_w m/s² (world), linear damping c N·s/m, angular damping c N·m·s/rad.
+
+Two effects change a body's model instead of adding a force (`per_body = True`; body= required,
+at most one of each per body): `spherical_joint` (anchor_w, m, world) pins the body point that
+coincides with anchor_w at the start to that world point; `reaction_wheels` (J kg·m² about body
+x, y, z; torque_limit N·m; speed_limit rad/s on |Omega_i|; c_w N·m·s/rad bearing damping) adds
+three wheels on the body axes. The Sim turns them into per-body model rows (see
+lavendersim.backends.MODEL_LAYOUT); they never appear in the force-effect table.
 """
 from __future__ import annotations
 
@@ -17,13 +24,17 @@ ROW = 8
 class Effect:
     name = ""
     code = 0
+    per_body = False  # True: changes the body's model (joint, wheels); body= required
     fields: tuple[str, ...] = ()
     defaults: dict = {}
 
     def __init__(self, body: str | None = None, **params):
         params = {**self.defaults, **params}
+        if self.per_body and body is None:
+            raise V.LavenderInputError(f"{self.name}.body", "is required (the name of the body it acts on)")
         if body is not None and (not isinstance(body, str) or not body):
-            raise V.LavenderInputError(f"{self.name}.body", "must be a body name or None (every body)", f", got {body!r}")
+            rule = "must be a body name" + ("" if self.per_body else " or None (every body)")
+            raise V.LavenderInputError(f"{self.name}.body", rule, f", got {body!r}")
         unknown = sorted(set(params) - set(self.fields))
         if unknown:
             raise V.LavenderInputError(f"{self.name}.{unknown[0]}", f"unknown parameter; known: {', '.join(self.fields)}")
@@ -79,7 +90,44 @@ class AngularDamping(_Damping):
     name, code = "angular_damping", 5
 
 
-EFFECTS = {cls.name: cls for cls in (AppliedTorque, ForceAtPoint, Gravity, LinearDamping, AngularDamping)}
+class SphericalJoint(Effect):
+    """World-anchored ball joint: the body point at anchor_w (m, world) when the Sim starts stays there."""
+    name, code, fields, per_body = "spherical_joint", 6, ("anchor_w",), True
+
+
+class ReactionWheels(Effect):
+    """Three reaction wheels on the body x, y, z axes; the body's mass and inertia include them (locked).
+
+    J (3,) spin inertias, kg·m², each > 0 and below the body's principal moment about that axis;
+    torque_limit N·m (> 0) clips each motor command; speed_limit rad/s (> 0): a wheel with
+    |Omega_i| >= speed_limit is not driven further (u_i·Omega_i > 0 → u_i = 0); c_w N·m·s/rad (>= 0)."""
+    name, code, fields, per_body = "reaction_wheels", 7, ("J", "torque_limit", "speed_limit", "c_w"), True
+    defaults = {"c_w": 0.0}
+
+    def _check(self, f, v):
+        field = f"{self.name}.{f}"
+        if f == "J":
+            J = V.vector(field, v)
+            if not np.all(J > 0):
+                raise V.LavenderInputError(field, "each wheel inertia must be > 0", f", got {J.tolist()}")
+            return J
+        if f == "c_w":
+            return V.scalar(field, v, nonnegative=True)
+        return V.scalar(field, v, positive=True)
+
+    def check_body(self, I_b: np.ndarray) -> None:
+        """J_i < I_b[i]: the body with its wheels free must keep a positive inertia about each axis."""
+        J = self.values["J"]
+        bad = np.flatnonzero(J >= I_b)
+        if bad.size:
+            i = int(bad[0])
+            raise V.LavenderInputError(f"{self.name}.J", f"J[{i}] must be below the body's principal moment "
+                                       f"I_b[{i}] = {I_b[i]:g} kg·m² (the body's inertia includes its wheels)",
+                                       f", got {J[i]:g}")
+
+
+EFFECTS = {cls.name: cls for cls in (AppliedTorque, ForceAtPoint, Gravity, LinearDamping, AngularDamping,
+                                     SphericalJoint, ReactionWheels)}
 
 
 def make(name: str, body: str | None = None, **params) -> Effect:

@@ -31,6 +31,14 @@ class Scene:
             raise V.LavenderInputError("effect", "pass parameters either in the Effect instance or with a name, not both")
         if effect.body is not None and effect.body not in self.bodies:
             raise V.LavenderInputError(f"{effect.name}.body", f"unknown body {effect.body!r}; bodies: {', '.join(self.bodies) or 'none'}")
+        if effect.per_body:
+            if effect.body is None:  # an Effect built by hand without a body
+                raise V.LavenderInputError(f"{effect.name}.body", "is required (the name of the body it acts on)")
+            if any(e.name == effect.name and e.body == effect.body for e in self.effects):
+                raise V.LavenderInputError(f"{effect.name}.body", f"body {effect.body!r} already has a {effect.name}; "
+                                           "at most one per body")
+            if hasattr(effect, "check_body"):
+                effect.check_body(self.bodies[effect.body].I_b)
         self.effects.append(effect)
         return effect
 
@@ -39,13 +47,19 @@ class Scene:
             raise V.LavenderInputError("body", f"unknown body {name!r}; bodies: {', '.join(self.bodies) or 'none'}")
         return list(self.bodies).index(name)
 
+    def model_effects(self, name: str) -> dict:
+        """The per-body (model) effects declared on body `name`: {"spherical_joint": e, "reaction_wheels": e}."""
+        return {e.name: e for e in self.effects if e.per_body and e.body == name}
+
     def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(state (nb, 13), params (nb, 4) = [m, I_x, I_y, I_z], effects (ne, 8)) for the backends."""
+        """(state (nb, 13), params (nb, 4) = [m, I_x, I_y, I_z], effects (ne, 8)) for the backends.
+        The force-effect table holds only force effects; joints and wheels are per-body model rows
+        that the Sim builds (they need the initial state)."""
         if not self.bodies:
             raise V.LavenderInputError("scene.bodies", "a scene needs at least one body")
         bodies = list(self.bodies.values())
         state = np.ascontiguousarray(np.stack([b.x0 for b in bodies]))
         params = np.ascontiguousarray(np.stack([b.params for b in bodies]))
-        rows = [e.row(-1 if e.body is None else self.index(e.body)) for e in self.effects]
+        rows = [e.row(-1 if e.body is None else self.index(e.body)) for e in self.effects if not e.per_body]
         effects = np.ascontiguousarray(np.array(rows, dtype=np.float64).reshape(len(rows), 8))
         return state, params, effects

@@ -2,6 +2,13 @@
 
 The scene is read once at construction (bodies, initial states, declared effects); later edits to
 the scene do not affect an existing Sim. Times in s.
+
+Joints and reaction wheels: a body's mass and I_b are the whole body with its wheels locked, about
+its COM. With a spherical_joint at anchor a, the Sim fixes r_b = R^T (p_w − a) (pivot → COM, body
+frame) from the body's initial state and I_p = parallel_axis(diag(I_b), m, −r_b); the body's p_w,
+v_w then follow the joint (pivot_kinematics) and are not integrated. A wheeled body without a joint
+rotates about its COM (I_p = diag(I_b), r_b = 0) and translates freely. Wheel commands are held
+(zero-order) until changed and saturated at the start of every step.
 """
 from __future__ import annotations
 
@@ -9,6 +16,7 @@ import numpy as np
 
 from . import backends
 from . import validate as V
+from .backends import KIND_JOINT, KIND_WHEELS, MODEL_LAYOUT, Models
 from .bodies import BodyState
 from .errors import DivergenceError
 from .kernels import K
@@ -18,15 +26,17 @@ _EFFECT_NAMES = {1: "applied_torque", 2: "force_at_point", 3: "gravity", 4: "lin
 
 
 class Trajectory:
-    """Recorded samples: t (T,), x (T, nb, 13)."""
+    """Recorded samples: t (T,), x (T, nb, 13), Omega (T, nb, 3) wheel rates (zeros without wheels)."""
 
-    def __init__(self, names: list[str], t: np.ndarray, x: np.ndarray):
+    def __init__(self, names: list[str], t: np.ndarray, x: np.ndarray, Omega: np.ndarray | None = None):
         self.names, self.t, self.x = names, t, x
+        self.Omega = np.zeros(x.shape[:-1] + (3,)) if Omega is None else Omega
 
     def body(self, name: str) -> BodyState:
         if name not in self.names:
             raise V.LavenderInputError("body", f"unknown body {name!r}; bodies: {', '.join(self.names)}")
-        return BodyState(self.x[:, self.names.index(name)])
+        i = self.names.index(name)
+        return BodyState(self.x[:, i], self.Omega[:, i])
 
 
 class Sim:
@@ -43,8 +53,38 @@ class Sim:
         self.bodies = dict(scene.bodies)
         self.x, self.params, self.effects = scene.arrays()
         self._effect_objs = list(scene.effects)
+        self._models = self._build_models(scene)
         self.t = 0.0
         self.steps = 0
+
+    def _build_models(self, scene: Scene) -> Models:
+        """Per-body model rows (kind, I_p, r_b, anchor, J, limits, c_w) from the joint/wheel effects."""
+        nb = len(self.names)
+        models = Models.empty(nb)
+        rows = models.rows
+        for i, name in enumerate(self.names):
+            m, I_b = self.params[i, 0], self.params[i, 1:4]
+            me = scene.model_effects(name)
+            kind, I_p, r_b, anchor = 0, np.diag(I_b), np.zeros(3), np.zeros(3)
+            if "spherical_joint" in me:
+                kind |= KIND_JOINT
+                anchor = me["spherical_joint"].values["anchor_w"]
+                r_b = K.quat_to_matrix(self.x[i, 3:7]).T @ (self.x[i, 0:3] - anchor)
+                I_p = K.parallel_axis(np.diag(I_b), m, -r_b)
+                self.x[i, 0:3], self.x[i, 7:10] = K.pivot_kinematics(self.x[i, 3:7], self.x[i, 10:13], anchor, r_b)
+            if "reaction_wheels" in me:
+                kind |= KIND_WHEELS
+                w = me["reaction_wheels"].values
+                rows[i, MODEL_LAYOUT["J"]] = w["J"]
+                rows[i, 19:22] = w["torque_limit"], w["speed_limit"], w["c_w"]
+            rows[i, 0] = kind
+            rows[i, MODEL_LAYOUT["I_p"]] = np.asarray(I_p).reshape(9)
+            rows[i, MODEL_LAYOUT["r_b"]] = r_b
+            rows[i, MODEL_LAYOUT["anchor_w"]] = anchor
+        return models
+
+    def _kind(self, i: int) -> int:
+        return int(self._models.rows[i, 0])
 
     # ---- what runs -------------------------------------------------------------------------
     @property
@@ -55,7 +95,23 @@ class Sim:
                  + (", then normalize q" if self.normalize else ", q not normalized")]
         for i, name in enumerate(self.names):
             mine = [e for e in self._effect_objs if e.body in (None, name)]
-            if not mine:
+            kind = self._kind(i)
+            if kind:
+                model = [e for e in mine if e.per_body]
+                forces = [e for e in mine if not e.per_body]
+                kernel = "wheel_body_rhs" if kind & KIND_WHEELS else "pivot_body_rhs"
+                terms = " + ".join(e.describe() for e in model + forces)
+                extra = []
+                if kind & KIND_WHEELS:
+                    extra.append("wheel torques saturated per step (zero-order hold)")
+                if kind & KIND_JOINT:
+                    r_b = self._models.rows[i, MODEL_LAYOUT["r_b"]]
+                    extra.append(f"r_b={np.array2string(r_b, precision=4)}; p_w, v_w from pivot_kinematics after each step"
+                                 + (" and for linear damping" if any(e.name == "linear_damping" for e in forces) else ""))
+                else:
+                    extra.append("translation: v_dot = F/m")
+                lines.append(f"{name}: {terms} -> {kernel} ({'; '.join(extra)})")
+            elif not mine:
                 lines.append(f"{name}: rigid_body_rhs_free (torque- and force-free; no effect terms)")
             else:
                 terms = " + ".join(e.describe() for e in mine)
@@ -64,8 +120,9 @@ class Sim:
 
     # ---- stepping -------------------------------------------------------------------------
     def _advance(self, n: int) -> None:
+        models = self._models if self._models.rows[:, 0].any() else None
         try:
-            self.backend.advance(self.x, self.params, self.effects, self.integrator, self.normalize, self.dt, n)
+            self.backend.advance(self.x, self.params, self.effects, self.integrator, self.normalize, self.dt, n, models)
         except DivergenceError as e:
             raise DivergenceError(self.steps + e.step, e.body, e.cause, self.names[e.body],
                                   t=(self.steps + e.step + 1) * self.dt) from None
@@ -90,21 +147,32 @@ class Sim:
         every = V.integer("every", every, minimum=1)
         if n % every:
             raise V.LavenderInputError("every", f"must divide n_steps ({n})", f", got {every}")
-        xs, ts = [self.x.copy()], [self.t]
+        xs, Ws, ts = [self.x.copy()], [self._models.Omega.copy()], [self.t]
         for _ in range(n // every):
             self._advance(every)
             xs.append(self.x.copy())
+            Ws.append(self._models.Omega.copy())
             ts.append(self.t)
-        return Trajectory(self.names, np.array(ts), np.stack(xs))
+        return Trajectory(self.names, np.array(ts), np.stack(xs), np.stack(Ws))
 
     # ---- state access ---------------------------------------------------------------------
     def state(self, name: str) -> BodyState:
-        return BodyState(self.x[self._i(name)].copy())
-
-    def set_state(self, name: str, *, p_w=None, q=None, v_w=None, omega_b=None, omega_w=None) -> None:
-        """Set parts of one body's state; everything is validated before anything changes."""
         i = self._i(name)
+        return BodyState(self.x[i].copy(), self._models.Omega[i].copy())
+
+    def set_state(self, name: str, *, p_w=None, q=None, v_w=None, omega_b=None, omega_w=None, Omega=None) -> None:
+        """Set parts of one body's state; everything is validated before anything changes.
+
+        Omega (wheel rates, rad/s) only for a body with reaction_wheels. A jointed body's p_w and v_w
+        follow from q and omega (pivot_kinematics) and cannot be set."""
+        i = self._i(name)
+        kind = self._kind(i)
         x = self.x[i].copy()
+        if kind & KIND_JOINT:
+            for field, value in (("p_w", p_w), ("v_w", v_w)):
+                if value is not None:
+                    raise V.LavenderInputError(field, f"body {name!r} is on a spherical_joint: its p_w and v_w follow "
+                                               "from q and omega; set those instead")
         if p_w is not None:
             x[0:3] = V.vector("p_w", p_w)
         if q is not None:
@@ -117,7 +185,49 @@ class Sim:
             x[10:13] = V.vector("omega_b", omega_b)
         if omega_w is not None:
             x[10:13] = K.world_to_body(x[3:7], V.vector("omega_w", omega_w))
+        W = None
+        if Omega is not None:
+            if not kind & KIND_WHEELS:
+                raise V.LavenderInputError("Omega", f"body {name!r} has no reaction_wheels")
+            W = V.vector("Omega", Omega)
+        if kind & KIND_JOINT:
+            r = self._models.rows[i]
+            x[0:3], x[7:10] = K.pivot_kinematics(x[3:7], x[10:13], r[MODEL_LAYOUT["anchor_w"]], r[MODEL_LAYOUT["r_b"]])
         self.x[i] = x
+        if W is not None:
+            self._models.Omega[i] = W
+
+    # ---- reaction wheels ------------------------------------------------------------------
+    def _wheeled(self, name: str) -> int:
+        i = self._i(name)
+        if not self._kind(i) & KIND_WHEELS:
+            raise V.LavenderInputError("body", f"body {name!r} has no reaction_wheels")
+        return i
+
+    def set_wheel_command(self, name: str, u) -> None:
+        """Motor torques on the wheels (N·m, body x, y, z), held until changed; saturated every step."""
+        i = self._wheeled(name)
+        self._models.command[i] = V.vector("u", u)
+
+    def wheel_command(self, name: str) -> np.ndarray:
+        """The commanded (unsaturated) wheel torques, N·m."""
+        return self._models.command[self._wheeled(name)].copy()
+
+    def wheel_command_applied(self, name: str) -> np.ndarray:
+        """The saturated wheel torques used in the most recent step (zeros before the first), N·m."""
+        return self._models.applied[self._wheeled(name)].copy()
+
+    def wheel_rates(self, name: str) -> np.ndarray:
+        """Wheel rates relative to the body, Omega (3,), rad/s."""
+        return self._models.Omega[self._wheeled(name)].copy()
+
+    def wheel_momentum_w(self, name: str) -> tuple[np.ndarray, np.ndarray]:
+        """(L_body_w, L_wheels_w), world frame, kg·m²/s, from the wheel_momentum kernel: about the
+        joint's pivot for a jointed body, about the COM otherwise; L_wheels_w is zero without wheels."""
+        i = self._i(name)
+        r = self._models.rows[i]
+        return K.wheel_momentum(self.x[i, 3:7], self.x[i, 10:13], self._models.Omega[i],
+                                r[MODEL_LAYOUT["I_p"]].reshape(3, 3), r[MODEL_LAYOUT["J"]])
 
     def _i(self, name: str) -> int:
         if name not in self.names:
@@ -125,7 +235,8 @@ class Sim:
         return self.names.index(name)
 
     def kinetic_energy(self, name: str | None = None) -> float:
-        """Kinetic energy of one body, or of all bodies (name=None), J."""
+        """Kinetic energy of one body, or of all bodies (name=None), J: ½ m|v|² + ½ ωᵀ I_b ω with
+        wheels locked (a jointed body's v_w is its kinematic COM velocity; wheel spin not included)."""
         idx = range(len(self.names)) if name is None else [self._i(name)]
         return float(sum(K.kinetic_energy(self.params[i, 0], self.params[i, 1:4], self.x[i, 7:10], self.x[i, 10:13]) for i in idx))
 

@@ -391,3 +391,119 @@ def _stale_message_for_current_generated():
     except StaleBuildError as exc:
         return str(exc)
     raise AssertionError("check_build accepted a wrong hash")
+
+
+# ---------------------------------------------------------------- joint / wheel models through the C loop
+
+from lavendersim.backends import KIND_JOINT, KIND_WHEELS, MODEL_SIZE, Models  # noqa: E402
+from lavendersim.backends.numpy_backend import NumpyBackend  # noqa: E402
+
+
+def random_models(rng, state, params, kinds):
+    """Model rows for the given kinds (joint anchored 0.1-0.3 m from the COM; wheels ~5% of I)."""
+    nb = state.shape[0]
+    md = Models.empty(nb)
+    for b, kind in enumerate(kinds):
+        I_b = params[b, 1:4]
+        r_b = rng.uniform(-0.3, 0.3, 3) if kind & KIND_JOINT else np.zeros(3)
+        anchor = state[b, 0:3] - K.quat_rotate(state[b, 3:7], r_b)
+        md.rows[b, 0] = kind
+        md.rows[b, 1:10] = K.parallel_axis(np.diag(I_b), params[b, 0], -r_b).reshape(9)
+        md.rows[b, 10:13], md.rows[b, 13:16] = r_b, anchor
+        if kind & KIND_WHEELS:
+            md.rows[b, 16:19] = 0.05 * I_b
+            md.rows[b, 19:22] = 0.3, 40.0, 1e-3
+            md.Omega[b] = rng.uniform(-5, 5, 3)
+            md.command[b] = rng.uniform(-0.5, 0.5, 3)
+    return md
+
+
+def copy_models(md):
+    return Models(md.rows.copy(), md.Omega.copy(), md.command.copy(), md.applied.copy())
+
+
+@pytest.mark.parametrize("integrator", INTEGRATORS)
+@pytest.mark.parametrize("effects_name", ["none", "all"])
+def test_models_match_the_numpy_backend(integrator, effects_name):
+    """Plain, jointed, wheeled and jointed+wheeled bodies interleaved (plain runs are blocked in C)."""
+    rng = np.random.default_rng(21)
+    kinds = [0, 3, 0, 0, 2, 1, 0, 0, 0, 0, 3]
+    state, params = random_bodies(rng, len(kinds))
+    md = random_models(rng, state, params, kinds)
+    effects = effects_array(effects_name)
+    a, ma = state.copy(), copy_models(md)
+    b, mb = state.copy(), copy_models(md)
+    NumpyBackend().advance(a, params, effects, integrator, True, 0.005, 60, ma)
+    CBackend().advance(b, params, effects, integrator, True, 0.005, 60, mb)
+    assert np.max(np.abs(a - b)) <= TOL * max(1.0, np.max(np.abs(a)))
+    assert np.max(np.abs(ma.Omega - mb.Omega)) <= TOL * max(1.0, np.max(np.abs(ma.Omega)))
+    np.testing.assert_array_equal(ma.applied, mb.applied)
+    assert np.all(mb.applied[[1, 4, 10]] != 0) and np.all(mb.applied[[0, 2, 5]] == 0)
+    # plain bodies are bit-identical to a call without models
+    plain = state.copy()
+    CBackend().advance(plain, params, effects, integrator, True, 0.005, 60)
+    idx = [i for i, k in enumerate(kinds) if k == 0]
+    np.testing.assert_array_equal(b[idx], plain[idx])
+
+
+def test_model_divergence_low_level_contract():
+    rng = np.random.default_rng(23)
+    kinds = [0, 2, 3, 0, 0]
+    state, params = random_bodies(rng, len(kinds))
+    md = random_models(rng, state, params, kinds)
+    md.rows[2, 21] = 1e3  # wheel damping far beyond explicit Euler's limit: body 2's wheels blow up
+    s, m2 = state.copy(), copy_models(md)
+    status, step, body = _c.simulate(s, params, np.zeros((0, 8)), 0, 0, 0.01, 300, m2.rows, m2.Omega, m2.command, m2.applied)
+    assert (status, body) == (1, 2) and step > 0
+    assert np.all(np.isfinite(s)) and np.all(np.isfinite(m2.Omega))
+    full, mf = state.copy(), copy_models(md)
+    mf.rows[2, 21] = 1e-3
+    _c.simulate(full, params, np.zeros((0, 8)), 0, 0, 0.01, 300, mf.rows, mf.Omega, mf.command, mf.applied)
+    np.testing.assert_array_equal(s[:2], full[:2])               # earlier bodies fully advanced
+    np.testing.assert_array_equal(m2.Omega[:2], mf.Omega[:2])
+    np.testing.assert_array_equal(s[3:], state[3:])               # later ones untouched
+    np.testing.assert_array_equal(m2.applied[2], md.applied[2])   # failing body's applied untouched
+    one, m1 = state.copy(), copy_models(md)                       # the failing body holds its last finite state
+    _c.simulate(one, params, np.zeros((0, 8)), 0, 0, 0.01, step, m1.rows, m1.Omega, m1.command, m1.applied)
+    np.testing.assert_array_equal(s[2], one[2])
+    np.testing.assert_array_equal(m2.Omega[2], m1.Omega[2])
+    # through CBackend everything is restored and the cause names the wheel damping
+    s, m3 = state.copy(), copy_models(md)
+    with pytest.raises(DivergenceError, match="wheel damping") as info:
+        CBackend().advance(s, params, np.zeros((0, 8)), "euler", False, 0.01, 300, m3)
+    assert info.value.body == 2 and info.value.step == step
+    np.testing.assert_array_equal(s, state)
+    np.testing.assert_array_equal(m3.Omega, md.Omega)
+    np.testing.assert_array_equal(m3.applied, md.applied)
+
+
+def test_bad_model_buffers():
+    rng = np.random.default_rng(29)
+    state, params = random_bodies(rng, 2)
+    md = random_models(rng, state, params, [3, 0])
+    E = np.zeros((0, 8))
+    W3 = np.zeros((2, 3))
+    with pytest.raises(ValueError, match="all four"):
+        _c.simulate(state.copy(), params, E, 2, 1, 0.01, 1, md.rows)
+    with pytest.raises(ValueError, match=r"model_rows must have shape \(n, 22\)"):
+        _c.simulate(state.copy(), params, E, 2, 1, 0.01, 1, md.rows[:, :21].copy(), W3.copy(), W3, W3.copy())
+    with pytest.raises(ValueError, match="model_rows has 1 rows"):
+        _c.simulate(state.copy(), params, E, 2, 1, 0.01, 1, md.rows[:1].copy(), W3.copy(), W3, W3.copy())
+    with pytest.raises(ValueError, match="Omega has 1 rows"):
+        _c.simulate(state.copy(), params, E, 2, 1, 0.01, 1, md.rows, np.zeros((1, 3)), W3, W3.copy())
+    bad = md.rows.copy()
+    bad[1, 0] = 4
+    with pytest.raises(ValueError, match="kind"):
+        _c.simulate(state.copy(), params, E, 2, 1, 0.01, 1, bad, W3.copy(), W3, W3.copy())
+    ro = W3.copy()
+    ro.flags.writeable = False
+    with pytest.raises(TypeError, match="writable"):
+        _c.simulate(state.copy(), params, E, 2, 1, 0.01, 1, md.rows, ro, W3, W3.copy())
+    with pytest.raises(TypeError, match="float64"):
+        _c.simulate(state.copy(), params, E, 2, 1, 0.01, 1, md.rows, W3.copy(), W3.astype(np.float32), W3.copy())
+    with pytest.raises(TypeError, match="models.Omega"):
+        CBackend().advance(state.copy(), params, E, "rk4", True, 0.01, 1,
+                           Models(md.rows, W3.astype(np.float32), W3, W3.copy()))
+    with pytest.raises(ValueError, match=r"models.rows must have shape \(2, 22\)"):
+        CBackend().advance(state.copy(), params, E, "rk4", True, 0.01, 1, Models(md.rows[:, :20], W3.copy(), W3, W3.copy()))
+    assert MODEL_SIZE == 22

@@ -1,6 +1,16 @@
-"""Backends advance the state arrays of a scene: `advance(state, params, effects, integrator,
-normalize, dt, n_steps)` mutates state (nb, 13) in place or raises DivergenceError and leaves it
-unchanged. "numpy" needs no compiler; "c" steps inside C."""
+"""Backends advance the state arrays of a scene:
+
+    advance(state, params, effects, integrator, normalize, dt, n_steps, models=None)
+
+mutates state (nb, 13) (and, with `models`, models.Omega and models.applied) in place, or raises
+DivergenceError and leaves every array unchanged. "numpy" needs no compiler; "c" steps inside C.
+
+`models` (a `Models`, or None when no body has a joint or wheels) carries the per-body model:
+rows (nb, MODEL_SIZE) laid out as MODEL_LAYOUT; Omega (nb, 3) wheel rates relative to the body,
+rad/s (integrated); command (nb, 3) motor torque commands, N·m, held over the whole call;
+applied (nb, 3) written with the saturated torques of the last step. A body of kind 0 uses the
+plain rigid-body paths and ignores its row; bodies of different kinds mix freely.
+"""
 from __future__ import annotations
 
 import numpy as np
@@ -9,6 +19,36 @@ from .. import validate as V
 
 INTEGRATORS = {"euler": 1, "semi_implicit_euler": 1, "rk4": 4}  # name -> RHS evaluations per step
 BACKENDS = ("c", "numpy")
+
+# Per-body model row (float64): kind is a bit set, KIND_JOINT | KIND_WHEELS.
+KIND_JOINT, KIND_WHEELS = 1, 2
+MODEL_LAYOUT = {"kind": slice(0, 1), "I_p": slice(1, 10), "r_b": slice(10, 13), "anchor_w": slice(13, 16),
+                "J": slice(16, 19), "torque_limit": slice(19, 20), "speed_limit": slice(20, 21), "c_w": slice(21, 22)}
+MODEL_SIZE = 22
+
+
+class Models:
+    """Per-body model arrays shared by both backends (see the module docstring)."""
+
+    def __init__(self, rows: np.ndarray, Omega: np.ndarray, command: np.ndarray, applied: np.ndarray):
+        self.rows, self.Omega, self.command, self.applied = rows, Omega, command, applied
+
+    @classmethod
+    def empty(cls, nb: int) -> "Models":
+        return cls(np.zeros((nb, MODEL_SIZE)), np.zeros((nb, 3)), np.zeros((nb, 3)), np.zeros((nb, 3)))
+
+    @property
+    def kind(self) -> np.ndarray:
+        return self.rows[:, 0].astype(np.int64)
+
+
+def saturate(command: np.ndarray, Omega: np.ndarray, torque_limit, speed_limit) -> np.ndarray:
+    """Motor torques actually applied this step: clip to ±torque_limit, and zero where a wheel at or
+    beyond speed_limit would be driven faster (u_i·Omega_i > 0). Broadcasts over leading axes."""
+    tl = np.asarray(torque_limit, dtype=np.float64)[..., None]
+    sl = np.asarray(speed_limit, dtype=np.float64)[..., None]
+    u = np.minimum(np.maximum(command, -tl), tl)
+    return np.where((np.abs(Omega) >= sl) & (u * Omega > 0), 0.0, u)
 
 
 def get(name: str):
@@ -22,16 +62,27 @@ def get(name: str):
     return CBackend()
 
 
-def divergence_cause(x_before: np.ndarray, dt: float, integrator: str) -> str:
-    """A plain guess at why one body's step went non-finite, from its state before the step."""
+def divergence_cause(x_before: np.ndarray, dt: float, integrator: str, Omega_before: np.ndarray | None = None,
+                     wheels: tuple | None = None) -> str:
+    """A plain guess at why one body's step went non-finite, from its state before the step
+    (and, for a body with reaction wheels, its wheel rates and wheels = (J, c_w))."""
     with np.errstate(over="ignore", invalid="ignore"):
         w = float(np.linalg.norm(x_before[10:13]))
         v = float(np.linalg.norm(x_before[7:10]))
-    if not np.all(np.isfinite(x_before)):
+        W = None if Omega_before is None else float(np.linalg.norm(Omega_before))
+    if not np.all(np.isfinite(x_before)) or (Omega_before is not None and not np.all(np.isfinite(Omega_before))):
         return "the state was already non-finite before the step"
+    if wheels is not None:
+        J, c_w = np.asarray(wheels[0], dtype=np.float64), float(wheels[1])
+        stiff = c_w * dt / float(np.min(J))
+        wlimit = {"euler": 2.0, "semi_implicit_euler": 2.0, "rk4": 2.78}.get(integrator, 2.0)
+        if stiff > wlimit:
+            return (f"wheel damping c_w*dt/J = {stiff:.3g} is beyond the stability limit of {integrator} "
+                    f"(~{wlimit}); the wheel rates Omega blew up: reduce dt or c_w")
     wdt = w * dt
     limit = {"euler": 0.1, "semi_implicit_euler": 0.1, "rk4": 1.0}.get(integrator, 1.0)
     if wdt > limit:
         return f"|omega|*dt = {wdt:.3g} is too large for {integrator} (keep it below ~{limit}); reduce dt"
-    return (f"state grew without bound (|omega| = {w:.3g} rad/s, |v| = {v:.3g} m/s, dt = {dt:g} s); "
-            "check effect strengths (damping c*dt/I, forces) and the integrator")
+    wheels = "" if W is None else f", |Omega| = {W:.3g} rad/s"
+    return (f"state grew without bound (|omega| = {w:.3g} rad/s{wheels}, |v| = {v:.3g} m/s, dt = {dt:g} s); "
+            "check effect strengths (damping c*dt/I, wheel damping c_w*dt/J, forces) and the integrator")

@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import DivergenceError, StaleBuildError
+from . import KIND_WHEELS, Models
 
 REBUILD = "pip install -e ."
 HASHED = ("kernels.c", "kernels.h")
@@ -139,31 +140,52 @@ def _norm(v: np.ndarray) -> float:
 
 
 def _cause(start: np.ndarray, pre: np.ndarray, params: np.ndarray, effects: np.ndarray, body: int,
-           step: int, dt: float, integrator: str) -> str:
+           step: int, dt: float, integrator: str, model: tuple | None = None) -> str:
     """Likely cause, from the body's state at the start of the call (`start`) and just before the
-    failing step (`pre`, its last finite state)."""
+    failing step (`pre`, its last finite state). model = (row, Omega at start, Omega before the
+    failing step, command) for a body with a joint or wheels; the Omega entries are None without wheels."""
     if not np.all(np.isfinite(params[body])):
         return f"non-finite input: params of body {body} are {params[body].tolist()}"
     mine = effects[(effects[:, 1] == -1) | (effects[:, 1] == body)]
     if mine.size and not np.all(np.isfinite(mine)):
         return f"non-finite input: an effect acting on body {body} has non-finite parameters"
-    if not np.all(np.isfinite(start)):
+    if model is not None and not np.all(np.isfinite(model[0])):
+        return f"non-finite input: the joint/wheel model row of body {body} has non-finite entries"
+    if model is not None and not np.all(np.isfinite(model[3])):
+        return f"non-finite input: the wheel command of body {body} is {model[3].tolist()}"
+    W0 = None if model is None else model[1]
+    if not np.all(np.isfinite(start)) or (W0 is not None and not np.all(np.isfinite(W0))):
         return "non-finite input: the state was already non-finite before the step"
     from . import divergence_cause
 
-    cause = divergence_cause(start, dt, integrator)
+    wheels = None if W0 is None else (model[0][16:19], model[0][21])
+    cause = divergence_cause(start, dt, integrator, W0, wheels)
     if step > 0:
+        wtxt = "" if W0 is None else f", |Omega| = {_norm(model[2]):.3g} rad/s"
         cause += (f" (just before step {step}: |omega|*dt = {_norm(pre[10:13]) * dt:.3g}, "
-                  f"|v| = {_norm(pre[7:10]):.3g} m/s)")
+                  f"|v| = {_norm(pre[7:10]):.3g} m/s{wtxt})")
     return cause
 
 
+def _f64_rows(name: str, a, cols: int, nb: int, writable: bool = False) -> np.ndarray:
+    if writable:
+        if not isinstance(a, np.ndarray) or a.dtype != np.float64 or not a.flags.c_contiguous or not a.flags.writeable:
+            raise TypeError(f"models.{name} must be a writable C-contiguous float64 numpy array of shape ({nb}, {cols})")
+    else:
+        a = np.ascontiguousarray(a, dtype=np.float64)
+    if a.shape != (nb, cols):
+        raise ValueError(f"models.{name} must have shape ({nb}, {cols}), got {a.shape}")
+    return a
+
+
 class CBackend:
-    """advance(state, params, effects, integrator, normalize, dt, n_steps) inside C; see module doc."""
+    """advance(state, params, effects, integrator, normalize, dt, n_steps, models=None) inside C;
+    see the module doc and lavendersim.backends."""
 
     name = "c"
 
-    def advance(self, state, params, effects, integrator: str, normalize: bool, dt: float, n_steps: int) -> None:
+    def advance(self, state, params, effects, integrator: str, normalize: bool, dt: float, n_steps: int,
+                models: Models | None = None) -> None:
         if integrator not in INTEGRATOR_CODES:
             raise ValueError(f"integrator: must be one of {', '.join(INTEGRATOR_CODES)}, got {integrator!r}")
         if not isinstance(state, np.ndarray) or state.dtype != np.float64 or not state.flags.c_contiguous \
@@ -174,11 +196,28 @@ class CBackend:
         if effects.size == 0:
             effects = effects.reshape(0, 8)
         snapshot = state.copy()
+        extra = ()
+        if models is not None:
+            nb = state.shape[0]
+            rows = _f64_rows("rows", models.rows, 22, nb)
+            Omega = _f64_rows("Omega", models.Omega, 3, nb, writable=True)
+            command = _f64_rows("command", models.command, 3, nb)
+            applied = _f64_rows("applied", models.applied, 3, nb, writable=True)
+            extra = (rows, Omega, command, applied)
+            snap_W, snap_u = Omega.copy(), applied.copy()
         status, step, body = _c.simulate(state, params, effects, INTEGRATOR_CODES[integrator],
-                                         1 if normalize else 0, float(dt), int(n_steps))
+                                         1 if normalize else 0, float(dt), int(n_steps), *extra)
         if status == 0:
             return
         pre = state[body].copy()  # the failing body is left at its last finite state
         state[...] = snapshot
+        model = None
+        if models is not None:
+            pre_W = Omega[body].copy()
+            Omega[...] = snap_W
+            applied[...] = snap_u
+            if int(rows[body, 0]):
+                W0 = snap_W[body] if int(rows[body, 0]) & KIND_WHEELS else None
+                model = (rows[body], W0, None if W0 is None else pre_W, command[body])
         raise DivergenceError(step, body, _cause(snapshot[body], pre, params, effects, body, step,
-                                                 float(dt), integrator))
+                                                 float(dt), integrator, model))

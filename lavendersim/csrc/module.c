@@ -131,17 +131,26 @@ fail:
 static PyObject *py_simulate(PyObject *self, PyObject *args)
 {
     PyObject *state_obj, *params_obj, *effects_obj;
-    int integrator, normalize;
+    PyObject *rows_obj = Py_None, *omega_obj = Py_None, *cmd_obj = Py_None, *app_obj = Py_None;
+    int integrator, normalize, n_models;
     double dt;
     long long n_steps_ll;
-    Py_buffer st, pr, ef;
-    Py_ssize_t nb, np_rows, ne, e;
+    Py_buffer st, pr, ef, mr, om, cm, ap;
+    int have_mr = 0, have_om = 0, have_cm = 0, have_ap = 0;
+    Py_ssize_t nb, np_rows, ne, e, rows_n;
     long fail_step = -1, fail_body = -1;
+    lv_models models;
     int status;
     (void)self;
-    if (!PyArg_ParseTuple(args, "OOOipdL:simulate", &state_obj, &params_obj, &effects_obj, &integrator,
-                          &normalize, &dt, &n_steps_ll))
+    if (!PyArg_ParseTuple(args, "OOOipdL|OOOO:simulate", &state_obj, &params_obj, &effects_obj, &integrator,
+                          &normalize, &dt, &n_steps_ll, &rows_obj, &omega_obj, &cmd_obj, &app_obj))
         return NULL;
+    n_models = (rows_obj != Py_None) + (omega_obj != Py_None) + (cmd_obj != Py_None) + (app_obj != Py_None);
+    if (n_models != 0 && n_models != 4) {
+        PyErr_SetString(PyExc_ValueError,
+                        "simulate: give all four of model_rows, Omega, command, applied, or none of them");
+        return NULL;
+    }
     if (integrator < 0 || integrator > 2) {
         PyErr_Format(PyExc_ValueError,
                      "simulate: integrator code must be 0 (euler), 1 (semi_implicit_euler) or 2 (rk4), got %d", integrator);
@@ -160,12 +169,60 @@ static PyObject *py_simulate(PyObject *self, PyObject *args)
     if (get_f64(effects_obj, &ef, 0, "simulate: effects") != 0) {
         PyBuffer_Release(&st); PyBuffer_Release(&pr); return NULL;
     }
+    if (n_models) {
+        if (get_f64(rows_obj, &mr, 0, "simulate: model_rows") != 0) goto fail;
+        have_mr = 1;
+        if (get_f64(omega_obj, &om, 1, "simulate: Omega") != 0) goto fail;
+        have_om = 1;
+        if (get_f64(cmd_obj, &cm, 0, "simulate: command") != 0) goto fail;
+        have_cm = 1;
+        if (get_f64(app_obj, &ap, 1, "simulate: applied") != 0) goto fail;
+        have_ap = 1;
+    }
     if (rows_of(&st, LV_STATE_SIZE, "simulate: state", "[p_w(3), q(4), v_w(3), omega_b(3)]", &nb) != 0) goto fail;
     if (rows_of(&pr, LV_PARAM_SIZE, "simulate: params", "[m, I_x, I_y, I_z]", &np_rows) != 0) goto fail;
     if (rows_of(&ef, LV_EFFECT_SIZE, "simulate: effects", "[kind, body, p0..p5]", &ne) != 0) goto fail;
     if (np_rows != nb) {
         PyErr_Format(PyExc_ValueError, "simulate: params has %zd rows but state has %zd bodies", np_rows, nb);
         goto fail;
+    }
+    if (n_models) {
+        if (rows_of(&mr, LV_MODEL_SIZE, "simulate: model_rows",
+                    "[kind, I_p(9), r_b(3), anchor_w(3), J(3), torque_limit, speed_limit, c_w]", &rows_n) != 0) goto fail;
+        if (rows_n != nb) {
+            PyErr_Format(PyExc_ValueError, "simulate: model_rows has %zd rows but state has %zd bodies", rows_n, nb);
+            goto fail;
+        }
+        if (rows_of(&om, 3, "simulate: Omega", "[Omega_x, Omega_y, Omega_z]", &rows_n) != 0) goto fail;
+        if (rows_n != nb) {
+            PyErr_Format(PyExc_ValueError, "simulate: Omega has %zd rows but state has %zd bodies", rows_n, nb);
+            goto fail;
+        }
+        if (rows_of(&cm, 3, "simulate: command", "[u_x, u_y, u_z]", &rows_n) != 0) goto fail;
+        if (rows_n != nb) {
+            PyErr_Format(PyExc_ValueError, "simulate: command has %zd rows but state has %zd bodies", rows_n, nb);
+            goto fail;
+        }
+        if (rows_of(&ap, 3, "simulate: applied", "[u_x, u_y, u_z]", &rows_n) != 0) goto fail;
+        if (rows_n != nb) {
+            PyErr_Format(PyExc_ValueError, "simulate: applied has %zd rows but state has %zd bodies", rows_n, nb);
+            goto fail;
+        }
+        for (e = 0; e < nb; e++) {
+            const double kind = ((const double *)mr.buf)[e * LV_MODEL_SIZE];
+            if (!(kind == 0 || kind == 1 || kind == 2 || kind == 3)) {
+                PyObject *ko = PyFloat_FromDouble(kind);
+                PyErr_Format(PyExc_ValueError,
+                             "simulate: model_rows[%zd] kind must be 0 (plain), 1 (joint), 2 (wheels) or 3 (joint + wheels), got %R",
+                             e, ko);
+                Py_XDECREF(ko);
+                goto fail;
+            }
+        }
+        models.rows = (const double *)mr.buf;
+        models.Omega = (double *)om.buf;
+        models.command = (const double *)cm.buf;
+        models.applied = (double *)ap.buf;
     }
     for (e = 0; e < ne; e++) {
         const double *row = (const double *)ef.buf + e * LV_EFFECT_SIZE;
@@ -188,11 +245,15 @@ static PyObject *py_simulate(PyObject *self, PyObject *args)
     }
     Py_BEGIN_ALLOW_THREADS
     status = lv_simulate((double *)st.buf, (const double *)pr.buf, (long)nb, (const double *)ef.buf, (long)ne,
-                         integrator, normalize, dt, (long)n_steps_ll, &fail_step, &fail_body);
+                         n_models ? &models : NULL, integrator, normalize, dt, (long)n_steps_ll, &fail_step, &fail_body);
     Py_END_ALLOW_THREADS
     PyBuffer_Release(&st);
     PyBuffer_Release(&pr);
     PyBuffer_Release(&ef);
+    if (have_mr) PyBuffer_Release(&mr);
+    if (have_om) PyBuffer_Release(&om);
+    if (have_cm) PyBuffer_Release(&cm);
+    if (have_ap) PyBuffer_Release(&ap);
     if (status < 0) {
         PyErr_SetString(PyExc_ValueError, "simulate: lv_simulate rejected its arguments");
         return NULL;
@@ -203,6 +264,10 @@ fail:
     PyBuffer_Release(&st);
     PyBuffer_Release(&pr);
     PyBuffer_Release(&ef);
+    if (have_mr) PyBuffer_Release(&mr);
+    if (have_om) PyBuffer_Release(&om);
+    if (have_cm) PyBuffer_Release(&cm);
+    if (have_ap) PyBuffer_Release(&ap);
     return NULL;
 }
 
@@ -213,11 +278,15 @@ static PyMethodDef methods[] = {
      "eval_kernel(index, inp, out): run packed kernel `index` over N rows; inp holds N*n_in float64 "
      "(C-contiguous), out N*n_out (writable)."},
     {"simulate", py_simulate, METH_VARARGS,
-     "simulate(state, params, effects, integrator, normalize, dt, n_steps) -> (status, step, body).\n"
+     "simulate(state, params, effects, integrator, normalize, dt, n_steps[, model_rows, Omega, command, applied])\n"
+     "  -> (status, step, body).\n"
      "state (nb,13) advanced in place; params (nb,4) [m, I_x, I_y, I_z]; effects (ne,8) [kind, body, p0..p5].\n"
+     "Optional, all four or none: model_rows (nb,22) [kind (0 plain, 1 joint, 2 wheels, 3 both), I_p(9), r_b(3),\n"
+     "anchor_w(3), J(3), torque_limit, speed_limit, c_w]; Omega (nb,3) advanced in place; command (nb,3) held;\n"
+     "applied (nb,3) receives the saturated wheel torques of the last step.\n"
      "integrator 0 euler, 1 semi-implicit euler, 2 rk4. status 0 ok (step = body = -1); status 1: the\n"
      "state of `body` became non-finite at 0-based `step`: earlier bodies are fully advanced, that body\n"
-     "holds its last finite state, later bodies are untouched."},
+     "holds its last finite state (and wheel rates), later bodies are untouched."},
     {NULL, NULL, 0, NULL}};
 
 static struct PyModuleDef moduledef = {

@@ -5,19 +5,13 @@
 #include "kernels.h"
 #include "step.h"
 
-/* d/dt of one body's state: the free kernel when no effect applies, else the effects' force and
-   torque summed in table order and passed to the full right-hand side. */
-static void body_rhs(const double *x, const double *prm, const double *effects, long ne, long b,
-                     int has_effects, double *xdot)
+/* Force at the COM and torque about it (world), summed over the effects acting on body b in table
+   order. v_w is the COM velocity the linear damping sees (the state's, or a joint's kinematic one). */
+static inline void effect_sums(const double *x, const double *v_w, double m, const double *effects, long ne,
+                               long b, double *F, double *tau)
 {
-    const double m = prm[0];
-    const double *I_b = prm + 1;
-    double F[3] = {0.0, 0.0, 0.0}, tau[3] = {0.0, 0.0, 0.0}, c[3];
+    double c[3];
     long e;
-    if (!has_effects) {
-        lv_rigid_body_rhs_free(x, I_b, xdot);
-        return;
-    }
     for (e = 0; e < ne; e++) {
         const double *row = effects + e * LV_EFFECT_SIZE;
         const long target = (long)row[1];
@@ -37,7 +31,7 @@ static void body_rhs(const double *x, const double *prm, const double *effects, 
             F[0] += c[0]; F[1] += c[1]; F[2] += c[2];
             break;
         case LV_EFFECT_LINEAR_DAMPING:
-            lv_linear_damping(p[0], x + 7, c);
+            lv_linear_damping(p[0], v_w, c);
             F[0] += c[0]; F[1] += c[1]; F[2] += c[2];
             break;
         case LV_EFFECT_ANGULAR_DAMPING:
@@ -48,6 +42,21 @@ static void body_rhs(const double *x, const double *prm, const double *effects, 
             break; /* validated by the caller */
         }
     }
+}
+
+/* d/dt of one plain body's state: the free kernel when no effect applies, else the effects' force and
+   torque summed in table order and passed to the full right-hand side. */
+static void body_rhs(const double *x, const double *prm, const double *effects, long ne, long b,
+                     int has_effects, double *xdot)
+{
+    const double m = prm[0];
+    const double *I_b = prm + 1;
+    double F[3] = {0.0, 0.0, 0.0}, tau[3] = {0.0, 0.0, 0.0};
+    if (!has_effects) {
+        lv_rigid_body_rhs_free(x, I_b, xdot);
+        return;
+    }
+    effect_sums(x, x + 7, m, effects, ne, b, F, tau);
     lv_rigid_body_rhs(x, m, I_b, F, tau, xdot);
 }
 
@@ -139,19 +148,146 @@ static long advance_block(double *state, const double *params, long b0, int n,
     return -1;
 }
 
+/* ---- bodies with a spherical joint and/or reaction wheels ------------------------------------ */
+
+/* extended state: x[13] then Omega[3] */
+#define LV_XS 16
+
+/* d/dt of [x, Omega] for a body of nonzero kind; u = this step's applied wheel torques.
+   r = its model row. A jointed body's p, v derivatives are zero (set from the joint after the step);
+   its linear damping sees the kinematic COM velocity (computed only when needs_v). */
+static void model_rhs(const double *y, const double *u, double m, const double *r, int kind, int needs_v,
+                      const double *effects, long ne, long b, double *yd)
+{
+    double F[3] = {0.0, 0.0, 0.0}, tau[3] = {0.0, 0.0, 0.0}, pk[3], vk[3];
+    const double *v = y + 7;
+    int i;
+    if (needs_v) {
+        lv_pivot_kinematics(y + 3, y + 10, r + 13, r + 10, pk, vk);
+        v = vk;
+    }
+    effect_sums(y, v, m, effects, ne, b, F, tau);
+    if (kind & LV_KIND_WHEELS) {
+        lv_wheel_body_rhs(y + 3, y + 10, y + 13, r + 1, r + 16, r + 10, F, tau, u, r[21], yd + 3, yd + 10, yd + 13);
+    } else {
+        lv_pivot_body_rhs(y + 3, y + 10, r + 1, r + 10, F, tau, yd + 3, yd + 10);
+        yd[13] = yd[14] = yd[15] = 0.0;
+    }
+    if (kind & LV_KIND_JOINT) {
+        for (i = 0; i < 3; i++) yd[i] = yd[7 + i] = 0.0;
+    } else {
+        for (i = 0; i < 3; i++) { yd[i] = y[7 + i]; yd[7 + i] = F[i] / m; }
+    }
+}
+
+/* Zero-order-hold saturation: clip to +-torque_limit; no drive beyond speed_limit. */
+static void saturate(const double *cmd, const double *Omega, double tl, double sl, double *u)
+{
+    int i;
+    for (i = 0; i < 3; i++) {
+        double c = cmd[i];
+        c = c < -tl ? -tl : (c > tl ? tl : c);
+        if (fabs(Omega[i]) >= sl && c * Omega[i] > 0.0) c = 0.0;
+        u[i] = c;
+    }
+}
+
+/* Advance body b (nonzero kind) by n_steps. Its rows are written only on success; returns -1, or the
+   0-based failing step with last[] = its last finite [x, Omega]. */
+static long advance_model(double *state, const double *params, long b, const lv_models *md,
+                          const double *effects, long ne, int integrator, int normalize,
+                          double dt, long n_steps, double *last)
+{
+    const double *r = md->rows + b * LV_MODEL_SIZE;
+    const int kind = (int)r[0];
+    const double m = params[b * LV_PARAM_SIZE];
+    const double *cmd = md->command + 3 * b;
+    double y[LV_XS], yn[LV_XS], k1[LV_XS], k2[LV_XS], k3[LV_XS], k4[LV_XS], tmp[LV_XS];
+    double u[3] = {0.0, 0.0, 0.0}, applied[3];
+    const double h2 = 0.5 * dt, h6 = dt / 6.0;
+    int needs_v = 0;
+    long s, e;
+    int i;
+    if (kind & LV_KIND_JOINT)
+        for (e = 0; e < ne; e++) {
+            const double *row = effects + e * LV_EFFECT_SIZE;
+            if ((int)row[0] == LV_EFFECT_LINEAR_DAMPING && ((long)row[1] == -1 || (long)row[1] == b)) needs_v = 1;
+        }
+    memcpy(y, state + b * LV_STATE_SIZE, LV_STATE_SIZE * sizeof(double));
+    memcpy(y + LV_STATE_SIZE, md->Omega + 3 * b, 3 * sizeof(double));
+    memcpy(applied, md->applied + 3 * b, sizeof applied);
+#define MRHS(in, out) model_rhs(in, u, m, r, kind, needs_v, effects, ne, b, out)
+    for (s = 0; s < n_steps; s++) {
+        if (kind & LV_KIND_WHEELS) saturate(cmd, y + 13, r[19], r[20], u);
+        switch (integrator) {
+        case LV_INTEGRATOR_EULER:
+            MRHS(y, k1);
+            for (i = 0; i < LV_XS; i++) yn[i] = y[i] + dt * k1[i];
+            break;
+        case LV_INTEGRATOR_SEMI_IMPLICIT_EULER:
+            MRHS(y, k1);
+            for (i = 7; i < LV_XS; i++) yn[i] = y[i] + dt * k1[i];    /* v', omega', Omega' */
+            for (i = 0; i < 3; i++) yn[i] = y[i] + dt * yn[7 + i];    /* p' = p + dt v' */
+            lv_quat_derivative_body(y + 3, yn + 10, tmp);              /* q rate at omega' */
+            for (i = 0; i < 4; i++) yn[3 + i] = y[3 + i] + dt * tmp[i];
+            break;
+        default: /* LV_INTEGRATOR_RK4 */
+            MRHS(y, k1);
+            for (i = 0; i < LV_XS; i++) tmp[i] = y[i] + h2 * k1[i];
+            MRHS(tmp, k2);
+            for (i = 0; i < LV_XS; i++) tmp[i] = y[i] + h2 * k2[i];
+            MRHS(tmp, k3);
+            for (i = 0; i < LV_XS; i++) tmp[i] = y[i] + dt * k3[i];
+            MRHS(tmp, k4);
+            for (i = 0; i < LV_XS; i++) yn[i] = y[i] + h6 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
+            break;
+        }
+        if (normalize) lv_quat_normalize(yn + 3, yn + 3);
+        if (kind & LV_KIND_JOINT) lv_pivot_kinematics(yn + 3, yn + 10, r + 13, r + 10, yn, yn + 7);
+        for (i = 0; i < LV_XS; i++) {
+            if (!isfinite(yn[i])) {
+                memcpy(last, y, sizeof y);
+                return s;
+            }
+        }
+        memcpy(y, yn, sizeof y);
+        memcpy(applied, u, sizeof u);
+    }
+#undef MRHS
+    memcpy(state + b * LV_STATE_SIZE, y, LV_STATE_SIZE * sizeof(double));
+    memcpy(md->Omega + 3 * b, y + LV_STATE_SIZE, 3 * sizeof(double));
+    memcpy(md->applied + 3 * b, applied, sizeof applied);
+    return -1;
+}
+
 int lv_simulate(double *state, const double *params, long nb,
-                const double *effects, long ne,
+                const double *effects, long ne, const lv_models *models,
                 int integrator, int normalize, double dt, long n_steps,
                 long *fail_step, long *fail_body)
 {
     double last[LV_BLOCK][LV_STATE_SIZE];
     long b0, b, s;
-    int j;
+    int j, n;
     if (integrator != LV_INTEGRATOR_EULER && integrator != LV_INTEGRATOR_SEMI_IMPLICIT_EULER
         && integrator != LV_INTEGRATOR_RK4)
         return LV_BAD_ARGUMENT;
-    for (b0 = 0; b0 < nb; b0 += LV_BLOCK) {
-        const int n = (int)(nb - b0 < LV_BLOCK ? nb - b0 : LV_BLOCK);
+    for (b0 = 0; b0 < nb; b0 += n) {
+        if (models != NULL && (int)models->rows[b0 * LV_MODEL_SIZE] != 0) {
+            double lastm[LV_XS];
+            n = 1;
+            s = advance_model(state, params, b0, models, effects, ne, integrator, normalize, dt, n_steps, lastm);
+            if (s < 0) continue;
+            memcpy(state + b0 * LV_STATE_SIZE, lastm, LV_STATE_SIZE * sizeof(double));
+            memcpy(models->Omega + 3 * b0, lastm + LV_STATE_SIZE, 3 * sizeof(double));
+            *fail_step = s;
+            *fail_body = b0;
+            return LV_DIVERGED;
+        }
+        /* a run of up to LV_BLOCK consecutive plain bodies */
+        n = (int)(nb - b0 < LV_BLOCK ? nb - b0 : LV_BLOCK);
+        if (models != NULL)
+            for (j = 1; j < n; j++)
+                if ((int)models->rows[(b0 + j) * LV_MODEL_SIZE] != 0) { n = j; break; }
         /* constant block sizes let the compiler specialize (clone) advance_block */
         if (n == LV_BLOCK)
             s = advance_block(state, params, b0, LV_BLOCK, effects, ne, integrator, normalize, dt, n_steps, &j, last);

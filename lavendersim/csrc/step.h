@@ -18,6 +18,25 @@ enum {
     LV_EFFECT_ANGULAR_DAMPING = 5  /* p0 = c */
 };
 
+/* model row (22), per body: kind, I_p[9] (about the pivot, body frame, row-major), r_b[3] (pivot -> COM,
+   body frame), anchor_w[3], J[3], torque_limit, speed_limit, c_w. kind is a bit set of the flags
+   below; a body of kind 0 is a plain rigid body (its row is ignored). */
+#define LV_MODEL_SIZE 22
+enum {
+    LV_KIND_JOINT = 1,   /* world-anchored spherical joint: p_w, v_w follow from q, omega */
+    LV_KIND_WHEELS = 2   /* three body-axis reaction wheels: Omega integrated, motor torques saturated */
+};
+
+/* Per-body model data for bodies with a joint and/or wheels (all arrays nb rows).
+   Omega (nb x 3) is advanced in place; command (nb x 3) is held over the call (zero-order hold);
+   applied (nb x 3) receives the saturated torques of the last step. */
+typedef struct {
+    const double *rows;     /* nb x LV_MODEL_SIZE */
+    double *Omega;          /* nb x 3, wheel rates relative to the body, rad/s */
+    const double *command;  /* nb x 3, motor torque commands, N m */
+    double *applied;        /* nb x 3, saturated torques used in the last step, N m */
+} lv_models;
+
 enum {
     LV_INTEGRATOR_EULER = 0,
     LV_INTEGRATOR_SEMI_IMPLICIT_EULER = 1,
@@ -32,13 +51,17 @@ enum {
 
 /* Advance nb bodies (state: nb x 13, in place) by n_steps steps of size dt.
    Bodies are independent: the outer loop runs over bodies, the inner over steps.
-   After every step all 13 numbers of the body are checked; on a non-finite value the function
-   returns LV_DIVERGED with *fail_step (0-based) and *fail_body set. Then bodies < fail_body have been
-   advanced fully, body fail_body holds its last finite state (before step fail_step), and bodies
-   > fail_body are untouched. Effect kinds/bodies must be valid (the caller validates);
-   an unknown integrator returns LV_BAD_ARGUMENT. */
+   models may be NULL (every body plain). A body of nonzero kind steps [x, Omega] (16 numbers) with
+   wheel_body_rhs (wheels) or pivot_body_rhs (joint only); its wheel torques are saturated at the
+   start of each step; a jointed body's p_w, v_w are set from pivot_kinematics after each step.
+   After every step all numbers of the body (13, or 16 with its wheel rates) are checked; on a
+   non-finite value the function returns LV_DIVERGED with *fail_step (0-based) and *fail_body set.
+   Then bodies < fail_body have been advanced fully (state, Omega, applied), body fail_body holds its
+   last finite state and wheel rates (before step fail_step; its applied row untouched), and bodies
+   > fail_body are untouched. Effect kinds/bodies and model kinds must be valid (the caller
+   validates); an unknown integrator returns LV_BAD_ARGUMENT. */
 int lv_simulate(double *state, const double *params, long nb,
-                const double *effects, long ne,
+                const double *effects, long ne, const lv_models *models,
                 int integrator, int normalize, double dt, long n_steps,
                 long *fail_step, long *fail_body);
 
