@@ -45,6 +45,7 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 
 from . import validate as V
+from .kernels import K as KN
 
 __all__ = ["Viewer", "validate_overlays", "xyzw_to_wxyz", "DEFAULT_COLOR", "MAX_VECTORS", "SCENES", "LAB_VIEWS",
            "run_scene"]
@@ -538,9 +539,41 @@ def _lab03_scene():
     return sim, overlays, lambda sim, dt: sim.run_for(dt)
 
 
-SCENES = {"tumble": _tumble_scene, "lab03": _lab03_scene}
+def _wheel_scene():
+    """The reaction-wheel cube balancing on its corner (lavendersim.control's Cubli-like model,
+    15 cm, 1 kg) from a 3° tilt under LQR wheel control: cube axes, angular velocity and the
+    motor torque acting on the cube (−u), as in the chapter's example payload."""
+    from lavendersim import control as C
+
+    model = C.CubeModel("corner")
+    lin = C.linearize(model)
+    K, _, _ = C.lqr(lin, *C.default_weights(model))
+    sim = model.make_sim(C.rotated(lin.q_ref, (1.0, -1.0, 0.0), 3.0), dt=1e-3)
+    control_dt, lim = 2e-3, model.torque_limit
+
+    def advance(sim, dt):
+        for _ in range(max(1, int(round(dt / control_dt)))):
+            st = sim.state(C.BODY)
+            x = lin.state(st.q, st.omega_b, sim.wheel_rates(C.BODY))
+            sim.set_wheel_command(C.BODY, np.clip(lin.feedback(K, x), -lim, lim))
+            sim.run(int(round(control_dt / sim.dt)))
+
+    def overlays(sim):
+        s = sim.state(C.BODY)
+        tau_cube_w = -np.asarray(KN.quat_rotate(s.q, sim.wheel_command_applied(C.BODY)))
+        return {"axes": [{"body": C.BODY, "scale": 0.34}],
+                "vectors": [
+                    {"label": "angular velocity", "origin": s.p_w.tolist(), "vector": s.omega_w.tolist(),
+                     "scale": 0.12, "color": [0.51, 0.87, 0.76, 0.95]},
+                    {"label": "torque", "origin": s.p_w.tolist(), "vector": tau_cube_w.tolist(),
+                     "scale": 3.0, "color": [0.95, 0.66, 0.77, 0.95]}]}
+
+    return sim, overlays, advance
+
+
+SCENES = {"tumble": _tumble_scene, "lab03": _lab03_scene, "wheel": _wheel_scene}
 # lab name -> scene that `lavendersim lab NAME --view` streams after the lab has run
-LAB_VIEWS = {"03": "lab03"}
+LAB_VIEWS = {"03": "lab03", "04": "wheel"}
 
 
 def run_scene(name: str, *, duration: float | None = None, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT,

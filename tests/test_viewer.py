@@ -448,3 +448,21 @@ def test_lab03_scene_payload_is_valid():
     advance(sim, 0.5)
     ov = VW.validate_overlays(overlays(sim), sim.names)
     assert [a["body"] for a in ov["axes"]] == ["principal", "mixed"] and len(ov["vectors"]) == 4
+
+
+def test_wheel_scene_balances_the_cube_and_draws_the_chapter_payload():
+    from lavendersim import control as C
+
+    sim, overlays, advance = VW.SCENES["wheel"]()
+    ov0 = VW.validate_overlays(overlays(sim), sim.names)
+    assert [v["label"] for v in ov0["vectors"]] == ["angular velocity", "torque"]
+    lin = C.linearize(C.CubeModel("corner"))
+    tilt0 = C.error_angle_deg(sim.state("cube").q, lin.q_ref)
+    advance(sim, 1.0)
+    ov = VW.validate_overlays(overlays(sim), sim.names)
+    tilt = C.error_angle_deg(sim.state("cube").q, lin.q_ref)
+    assert abs(tilt0 - 3.0) < 1e-9 and tilt < 0.1               # the controller brought it upright
+    # the torque arrow is the motor torque on the cube: minus the applied wheel torque, in world
+    u = sim.wheel_command_applied("cube")
+    np.testing.assert_allclose(ov["vectors"][1]["vector"], -(sim.state("cube").R_wb @ u), atol=1e-15)
+    assert VW.LAB_VIEWS["04"] == "wheel"
