@@ -27,6 +27,7 @@ LABS: dict[str, str] = {
     "02": "lab02_orientation",
     "03": "lab03_torque_free",
     "04": "lab04_reaction_wheel",
+    "hard": "hard_cases",
 }
 
 __all__ = ["LABS", "lab_module", "run", "register_cli", "LabResult"]
