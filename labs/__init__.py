@@ -28,6 +28,7 @@ LABS: dict[str, str] = {
     "03": "lab03_torque_free",
     "04": "lab04_reaction_wheel",
     "hard": "hard_cases",
+    "accuracy": "accuracy",
 }
 
 __all__ = ["LABS", "lab_module", "run", "register_cli", "LabResult"]

@@ -1,0 +1,993 @@
+"""Lab accuracy: what accuracy costs in time — work-precision of every integrator, both backends, and peers.
+
+Cases (torque-free, start at identity, T = 10 s; the reference is the exact motion of
+lavendersim.reference.torque_free, Jacobi elliptic functions):
+  * box_w1, box_w2: the chapter's box 0.8 x 0.2 x 0.2 m, 1 kg (I_b = [0.08, 0.68, 0.68]/12 kg·m²),
+    omega_b(0) = [1, 0.5, 0.2] and [0.1, 2, 0.1] rad/s;
+  * diag_w1, diag_w2: I_b = diag(1, 2, 3) kg·m², 1 kg, the same two omega_b(0).
+
+Methods, each measured in the same run on this machine:
+  * every integrator of lavendersim.backends.INTEGRATORS (discovered at run time) on both backends
+    ("c": the stepping loop runs inside C, timed around Sim.run; "numpy": vectorized NumPy, one
+    Python step per dt), fixed step dt = 2^-4 ... 2^-12 s (the NumPy backend stops earlier when one
+    run would take longer than a budget; see numpy_run_budget_s); an adaptive integrator (one that
+    Sim accepts rtol/atol for) sweeps rtol = 1e-3 ... 1e-12 instead (atol = rtol);
+  * scipy.integrate.solve_ivp RK45 and DOP853 on the generated NumPy kernel rigid_body_rhs_free
+    (the same right-hand side), rtol = 1e-3 ... 1e-12 (atol = rtol);
+  * MuJoCo's Euler, implicitfast and RK4 when the `mujoco` package is importable (pip install -e
+    '.[bench]'): one free body with the same mass and principal inertia in an MJCF string, no
+    gravity, contacts and constraints disabled, stepped inside C by mujoco.rollout, dt = 2^-4 ...
+    2^-12 s. Its free-joint quaternion (w, x, y, z) is converted to ours (x, y, z, w); its angular
+    velocity is in the body frame like ours.
+  * float32: not measured — both backends step in float64 only (no float32 path exists).
+
+Measures per point (a method at one dt or rtol, one case):
+  * attitude error at T: attitude_error(q(T), q_exact(T)) in rad; omega error |omega_b(T) -
+    omega_exact(T)| in rad/s;
+  * energy drift max_t |E(t) - E(0)| / E(0) and world angular-momentum drift
+    max_t |L_w(t) - L_w(0)| / |L_w(0)| (lavendersim.reference.relative_drift) over every step (every
+    accepted step for scipy; every dt-sample for an adaptive Sim); q normalized before L_w for scipy;
+  * wall time per simulated second: the minimum over repeats of one whole run's wall time / T
+    (repeats are interleaved round-robin across all points so slow drifts of the machine's load
+    hit every method alike); Sim construction is outside the timed region, Python call overhead
+    of Sim.run / solve_ivp / rollout inside it;
+  * RHS evaluations over the run: sim.rhs_evals when the Sim counts them, else steps x stages from
+    INTEGRATORS; solve_ivp's nfev; MuJoCo: forward-dynamics evaluations (1 per step, 4 for RK4).
+
+Verdict (per case, on attitude error vs wall time per simulated second). A point B dominates a
+point A when B belongs to another method, err(B) <= err(A) and time(B) < time(A), errors being
+clamped below at error_floor = 1e-11 rad (the reference agrees with DOP853 to ~1e-12 and rounding
+over 10^4 steps is ~1e-12 .. 1e-11, so differences below it are noise, not accuracy). Only points with err <= error_ceiling = 1e-2 rad take part (a cheap answer wrong by
+more than half a degree is not on anyone's menu). A method is "on the Pareto front" in a case when
+at least one of its points there is not dominated, "beaten" when every one of them is (the
+output names the methods that dominate), and "out of range" when it never reaches the ceiling.
+The plain verdict per method: "on the Pareto front" if it is on the front in at least one case,
+else "beaten" if it is beaten in at least one case, else "out of range". The same verdicts against RHS evaluations instead of time are in the JSON.
+
+Checks (the exit code; never timings): the exact reference agrees with DOP853 at rtol = atol =
+1e-13; RK4 on the C backend at the smallest dt is within 1e-9 (rad, rad/s) of the exact solution;
+the NumPy and C backends agree at every common point; the measured convergence orders (least-squares
+slope of log attitude error vs log dt over the asymptotic window 1e-10 < err < 0.2 rad) match
+euler 1, semi_implicit_euler 1, rk4 4 (and the other known integrators' orders) within 0.35;
+every adaptive method (ours, scipy's RK45 and DOP853) at its
+tightest rtol within 100 x rtol of the exact attitude; MuJoCo (when installed) converges to the same reference: RK4 within 1e-8
+at the smallest dt with order 4, Euler with order 1; the verdicts are consistent with the points.
+
+--quick: two cases (box_w1, diag_w2), dt 2^-4 ... 2^-10 s on C and MuJoCo (2^-4 ... 2^-6 on NumPy),
+rtol 1e-3 ... 1e-8, one repeat: every method and check, in well under 20 s.
+From Python, ``run(out_dir)`` runs the quick sweep (what ``lavendersim lab all`` runs);
+``run(out_dir, quick=False)`` and the command line without --quick run the full sweep. The lab
+measures both backends whatever --backend says.
+
+Files: OUT/accuracy/results.json (the lab's flat figures and checks, plus "machine", "table",
+"verdicts" and "points": every measured point), points.csv, work_precision_time.png (error vs
+wall time per simulated second), work_precision_rhs.png (error vs RHS evaluations),
+work_precision_omega.png (omega error vs time), drift_vs_time.png (energy and momentum drift
+over the run at dt = 2^-6 s / rtol = 1e-6).
+"""
+from __future__ import annotations
+
+import csv
+import inspect
+import json
+import math
+import os
+import platform
+import subprocess
+import sys
+import sysconfig
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+import lavendersim as lv
+from lavendersim import backends as B
+from lavendersim import reference as R
+from lavendersim import validate as V
+from lavendersim.errors import DivergenceError
+from lavendersim.kernels import K
+
+from . import common as C
+
+NAME = "accuracy"
+TITLE = "what accuracy costs in time: work-precision of every integrator x dt x backend, scipy and MuJoCo"
+
+T_END = 10.0
+MASS = 1.0
+BOX_SIZE = (0.8, 0.2, 0.2)
+OMEGAS = {"w1": (1.0, 0.5, 0.2), "w2": (0.1, 2.0, 0.1)}
+ERROR_FLOOR = 1e-11       # rad: below this errors count as equal (reference ~1e-12, rounding over 1e4 steps)
+ERROR_CEILING = 1e-2      # rad: points less accurate than this take no part in the verdict
+ORDER_WINDOW = (1e-10, 0.2)
+ORDER_TOL = 0.35
+# expected convergence order of attitude error in dt for integrators we know by name
+EXPECTED_ORDER = {"euler": 1, "semi_implicit_euler": 1, "rk4": 4, "midpoint": 2, "implicit_midpoint": 2,
+                  "splitting": 2, "implicit_gyro": 1, "strang": 2, "lie_poisson": 2, "rkmk4": 4, "heun": 2, "rk2": 2}
+ADAPTIVE_ERROR_FACTOR = 100.0
+ADAPTIVE_NAMES = {"dopri5", "dopri45", "rk45", "rkf45", "adaptive", "bs23", "dop853", "cash_karp"}
+DRIFT_DT_EXP, DRIFT_RTOL = 6, 1e-6        # the runs drawn in drift_vs_time.png
+NUMPY_RUN_BUDGET_S = 0.8                  # one NumPy run longer than this ends its dt sweep (full mode)
+
+FULL = dict(cases=("box_w1", "box_w2", "diag_w1", "diag_w2"), dt_exps=tuple(range(4, 13)),
+            numpy_dt_exps=tuple(range(4, 13)), numpy_budget=NUMPY_RUN_BUDGET_S,
+            rtols=tuple(10.0 ** -k for k in range(3, 13)), numpy_rtols=tuple(10.0 ** -k for k in range(3, 13)),
+            mj_dt_exps=tuple(range(4, 13)), repeats=5, time_budget=0.25)
+QUICK = dict(cases=("box_w1", "diag_w2"), dt_exps=tuple(range(4, 11)), numpy_dt_exps=(4, 5, 6), numpy_budget=0.3,
+             rtols=tuple(10.0 ** -k for k in range(3, 9)), numpy_rtols=(1e-3, 1e-4, 1e-5), mj_dt_exps=tuple(range(4, 11)),
+             repeats=1,
+             time_budget=0.0)
+
+
+@dataclass(frozen=True)
+class Case:
+    name: str
+    label: str
+    I_b: np.ndarray
+    omega_b0: np.ndarray
+
+
+def cases() -> dict[str, Case]:
+    I_box = np.asarray(K.inertia_box(MASS, *BOX_SIZE), dtype=float)
+    I_diag = np.array([1.0, 2.0, 3.0])
+    out = {}
+    for bname, I, blabel in (("box", I_box, "box 0.8x0.2x0.2 m"), ("diag", I_diag, "diag(1,2,3)")):
+        for wname, w in OMEGAS.items():
+            out[f"{bname}_{wname}"] = Case(f"{bname}_{wname}", f"{blabel}, w0={list(w)}", I, np.array(w, float))
+    return out
+
+
+@dataclass
+class Method:
+    label: str            # e.g. "rk4 [c]", "scipy DOP853", "MuJoCo RK4"
+    family: str           # lavendersim | scipy | mujoco
+    integrator: str
+    backend: str          # c | numpy | scipy | mujoco
+    param: str            # dt | rtol
+    stages: int | None = None
+
+
+@dataclass
+class Point:
+    case: str
+    method: str
+    param: str
+    value: float
+    steps: int | None = None
+    rhs_evals: int | None = None
+    rhs_evals_source: str = ""
+    attitude_error: float | None = None
+    omega_error: float | None = None
+    energy_drift: float | None = None
+    momentum_drift: float | None = None
+    wall_s: float | None = None
+    wall_per_sim_s: float | None = None
+    repeats: int = 0
+    diverged: str | None = None
+    final_x: list | None = field(default=None, repr=False)
+
+    @property
+    def ok(self) -> bool:
+        return self.diverged is None and self.attitude_error is not None and math.isfinite(self.attitude_error)
+
+
+# ------------------------------------------------------------------------------------------ options
+
+def add_arguments(parser) -> None:
+    parser.add_argument("--quick", action="store_true",
+                        help="reduced sweep (2 cases, dt 2^-4..2^-9, 1 repeat; < 20 s) for tests")
+    parser.add_argument("--no-mujoco", action="store_true", help="skip MuJoCo even when it is installed")
+    parser.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
+
+
+def options_from_args(args) -> dict:
+    return {"quick": args.quick, "mujoco": not args.no_mujoco, "progress": not args.quiet}
+
+
+# ------------------------------------------------------------------------------------------ discovery
+
+def _sim_accepts_tolerances() -> bool:
+    params = inspect.signature(lv.Sim.__init__).parameters
+    return "rtol" in params and "atol" in params
+
+
+def adaptive_integrators() -> list[str]:
+    """Integrators that take rtol/atol: those the backends package lists as ADAPTIVE, else by name."""
+    if not _sim_accepts_tolerances():
+        return []
+    listed = getattr(B, "ADAPTIVE", None)
+    names = set(listed) if listed is not None else ADAPTIVE_NAMES
+    return [n for n in B.INTEGRATORS if n in names]
+
+
+def _probe(m: "Method") -> str | None:
+    """None if the Sim can step this integrator on this backend, else why not."""
+    listed = getattr(B, "ADAPTIVE", ())
+    if m.integrator in listed and m.param != "rtol":
+        return "adaptive, but Sim takes no rtol/atol yet"
+    try:
+        sim = _make_sim(cases()["diag_w1"], m, 1e-6 if m.param == "rtol" else 2.0 ** -4)
+        sim.run(1)
+    except Exception as exc:  # an integrator that does not work here is reported, not fatal
+        return f"{type(exc).__name__}: {exc}"
+    return None
+
+
+def methods(mujoco_ok: bool) -> tuple[list[Method], dict]:
+    """The methods to measure and {label: reason} for the integrators that cannot run here."""
+    out, unavailable = [], {}
+    adaptive = adaptive_integrators()
+    for backend in ("c", "numpy"):
+        for name, stages in B.INTEGRATORS.items():
+            param = "rtol" if name in adaptive else "dt"
+            m = Method(f"{name} [{backend}]", "lavendersim", name, backend, param,
+                       None if stages is None else int(stages))
+            why = _probe(m)
+            if why:
+                unavailable[m.label] = why
+            else:
+                out.append(m)
+    for name in ("RK45", "DOP853"):
+        out.append(Method(f"scipy {name}", "scipy", name, "scipy", "rtol"))
+    if mujoco_ok:
+        for name, stages in (("Euler", 1), ("implicitfast", 1), ("RK4", 4)):
+            out.append(Method(f"MuJoCo {name}", "mujoco", name, "mujoco", "dt", stages))
+    return out, unavailable
+
+
+def _mujoco():
+    try:
+        import mujoco  # noqa: F401
+        from mujoco import rollout  # noqa: F401
+        return mujoco, None
+    except Exception as exc:  # not installed or broken: the lab says so and runs without it
+        return None, f"{type(exc).__name__}: {exc}"
+
+
+# ------------------------------------------------------------------------------------------ measures
+
+def _invariants(I_b, q, w):
+    """Energy (T,) and world angular momentum (T, 3) of samples q (T, 4), omega_b (T, 3)."""
+    E = 0.5 * np.sum(I_b * w * w, axis=-1)
+    q = q / np.linalg.norm(q, axis=-1, keepdims=True)
+    L = K.angular_momentum_world(q, I_b, w)
+    return E, L
+
+
+def _envelope(series: np.ndarray, t: np.ndarray, n: int = 200):
+    """(t, max-of-bin) of a series downsampled to at most n bins, for the drift plot."""
+    if len(series) <= n:
+        return t, series
+    edges = np.linspace(0, len(series), n + 1).astype(int)
+    return (np.array([t[b - 1] for b in edges[1:]]),
+            np.array([series[a:b].max() for a, b in zip(edges[:-1], edges[1:])]))
+
+
+def _score(pt: Point, case: Case, exact, t, q, w, keep_drift: bool, drifts: dict):
+    E, L = _invariants(case.I_b, q, w)
+    pt.attitude_error = float(R.attitude_error(q[-1], exact.q[-1]))
+    pt.omega_error = float(np.linalg.norm(w[-1] - exact.omega_b[-1]))
+    pt.energy_drift = R.relative_drift(E)
+    pt.momentum_drift = R.relative_drift(L)
+    if keep_drift:
+        e_rel = np.abs(E - E[0]) / E[0]
+        l_rel = np.linalg.norm(L - L[0], axis=-1) / np.linalg.norm(L[0])
+        te, ee = _envelope(e_rel, t)
+        _, le = _envelope(l_rel, t)
+        drifts[(case.name, pt.method)] = {"t": te.tolist(), "energy": ee.tolist(), "momentum": le.tolist(),
+                                          "at": f"{pt.param} = {_param_text(pt.param, pt.value)}"}
+
+
+def _param_text(param, value) -> str:
+    if param == "dt":
+        k = -math.log2(value)
+        return f"2^-{k:.0f} s" if abs(k - round(k)) < 1e-12 else f"{value:g} s"
+    return f"{value:.0e}"
+
+
+# ------------------------------------------------------------------------------------------ runners
+
+def _scene(case: Case):
+    sc = lv.Scene()
+    sc.add_body(lv.Body("b", MASS, case.I_b, omega_b=case.omega_b0))
+    return sc
+
+
+ADAPTIVE_SAMPLE_DT = 0.25   # s: output interval of the adaptive Sim's second (drift) run
+
+
+def _make_sim(case, m: Method, value, dt: float | None = None):
+    """Fixed step: dt = value. Adaptive: rtol = atol = value and dt the output interval (default T:
+    one output step, so the integrator's own step sequence is never clipped at output times)."""
+    if m.param == "rtol":
+        return lv.Sim(_scene(case), dt=T_END if dt is None else dt, integrator=m.integrator, backend=m.backend,
+                      rtol=value, atol=value)
+    return lv.Sim(_scene(case), dt=value, integrator=m.integrator, backend=m.backend)
+
+
+def _rhs_count(sim, m: Method) -> tuple[int | None, str]:
+    n = getattr(sim, "rhs_evals", None)
+    if n is not None:
+        return int(n), "sim.rhs_evals"
+    if m.param == "rtol" or m.stages is None:
+        return None, "not counted (adaptive; sim.rhs_evals missing)"
+    return int(sim.steps * m.stages), "steps x stages (INTEGRATORS)"
+
+
+def _measure_sim(case, m, value, exact, drifts, keep_drift):
+    """Fixed step: one run recorded at every step gives the error at T and the drifts. Adaptive: the
+    error at T and the RHS count come from one output step of T; the drifts from a second run with
+    output every ADAPTIVE_SAMPLE_DT (sampled there; its clipping at output times changes the step
+    sequence slightly). Timing: a fresh Sim per repeat (construction outside the timed region)."""
+    pt = Point(case.name, m.label, m.param, float(value))
+    adaptive = m.param == "rtol"
+    n = 1 if adaptive else int(round(T_END / value))
+    sim = _make_sim(case, m, value)
+    try:
+        if adaptive:
+            sim.run(1)
+            sample_dt = ADAPTIVE_SAMPLE_DT
+            dsim = _make_sim(case, m, value, dt=sample_dt)
+            traj = dsim.record(int(round(T_END / sample_dt)))
+        else:
+            traj = sim.record(n)
+    except DivergenceError as exc:
+        pt.diverged = str(exc)
+        return pt, None
+    x = traj.x[:, 0]
+    pt.steps = None if adaptive else int(sim.steps)
+    pt.rhs_evals, pt.rhs_evals_source = _rhs_count(sim, m)
+    xT = sim.x[0].copy()
+    pt.final_x = xT.tolist()
+    _score(pt, case, exact, traj.t, x[:, 3:7], x[:, 10:13], keep_drift, drifts)
+    if adaptive:   # the error at T is the unclipped run's (_score used the sampled run's last sample)
+        pt.attitude_error = float(R.attitude_error(xT[3:7], exact.q[-1]))
+        pt.omega_error = float(np.linalg.norm(xT[10:13] - exact.omega_b[-1]))
+        pt.rhs_evals_source += " (one output step of T)"
+
+    def job():
+        s = _make_sim(case, m, value)
+        t0 = time.perf_counter()
+        s.run(n)
+        return time.perf_counter() - t0
+
+    return pt, job
+
+
+def _measure_scipy(case, m, rtol, exact, drifts, keep_drift):
+    from scipy.integrate import solve_ivp
+
+    from lavendersim.generated import kernels_numpy as KN
+
+    I_b = case.I_b
+    x0 = np.zeros(13)
+    x0[6] = 1.0
+    x0[10:13] = case.omega_b0
+
+    def rhs(_t, x):
+        return KN.rigid_body_rhs_free(x, I_b)
+
+    def solve():
+        return solve_ivp(rhs, (0.0, T_END), x0, method=m.integrator, rtol=rtol, atol=rtol)
+
+    pt = Point(case.name, m.label, "rtol", float(rtol))
+    sol = solve()
+    if not sol.success:
+        pt.diverged = f"solve_ivp failed: {sol.message}"
+        return pt, None
+    y = sol.y.T
+    pt.steps = len(sol.t) - 1
+    pt.rhs_evals, pt.rhs_evals_source = int(sol.nfev), "solve_ivp nfev"
+    q = y[:, 3:7] / np.linalg.norm(y[:, 3:7], axis=1, keepdims=True)
+    pt.final_x = np.concatenate([y[-1, :3], q[-1], y[-1, 7:]]).tolist()
+    _score(pt, case, exact, sol.t, q, y[:, 10:13], keep_drift, drifts)
+
+    def job():
+        t0 = time.perf_counter()
+        solve()
+        return time.perf_counter() - t0
+
+    return pt, job
+
+
+MJCF = """<mujoco model="accuracy_free_body">
+  <option timestep="{dt!r}" gravity="0 0 0" integrator="{integrator}">
+    <flag contact="disable" constraint="disable"/>
+  </option>
+  <worldbody>
+    <body name="b">
+      <freejoint/>
+      <inertial pos="0 0 0" mass="{mass!r}" diaginertia="{I0!r} {I1!r} {I2!r}"/>
+    </body>
+  </worldbody>
+</mujoco>"""
+
+
+def mujoco_model(mujoco, case: Case, integrator: str, dt: float):
+    """A single free body with the case's mass and principal inertia (body frame = principal frame)."""
+    xml = MJCF.format(dt=float(dt), integrator=integrator, mass=float(MASS), I0=float(case.I_b[0]),
+                      I1=float(case.I_b[1]), I2=float(case.I_b[2]))
+    return mujoco.MjModel.from_xml_string(xml)
+
+
+def _measure_mujoco(mujoco, case, m, dt, exact, drifts, keep_drift):
+    from mujoco import rollout
+
+    model = mujoco_model(mujoco, case, m.integrator, dt)
+    data = mujoco.MjData(model)
+    data.qpos[:] = [0, 0, 0, 1, 0, 0, 0]             # position, quaternion (w, x, y, z)
+    data.qvel[:] = np.concatenate([[0, 0, 0], case.omega_b0])  # linear (world), angular (body frame)
+    spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
+    s0 = np.empty(mujoco.mj_stateSize(model, spec))
+    mujoco.mj_getState(model, data, s0, spec)
+    n = int(round(T_END / dt))
+    nq = model.nq
+    state, _ = rollout.rollout(model, data, s0[None, :], nstep=n)
+    st = np.vstack([s0[None, :], state[0]])        # FULLPHYSICS: time, qpos (7), qvel (6), ...
+    pt = Point(case.name, m.label, "dt", float(dt), steps=n)
+    qpos, qvel = st[:, 1:1 + nq], st[:, 1 + nq:1 + nq + model.nv]
+    if not np.all(np.isfinite(qpos)) or not np.all(np.isfinite(qvel)):
+        pt.diverged = "MuJoCo state went non-finite"
+        return pt, None
+    if abs(st[-1, 0] - T_END) > 1e-9:
+        raise RuntimeError(f"MuJoCo rollout ended at t = {st[-1, 0]!r}, expected {T_END}")
+    q = qpos[:, [4, 5, 6, 3]]                        # (w, x, y, z) -> (x, y, z, w)
+    w = qvel[:, 3:6]
+    pt.rhs_evals, pt.rhs_evals_source = n * m.stages, "MuJoCo forward evaluations (steps x 4 for RK4, else steps)"
+    pt.final_x = np.concatenate([qpos[-1, :3], q[-1] / np.linalg.norm(q[-1]), qvel[-1, :3], w[-1]]).tolist()
+    _score(pt, case, exact, st[:, 0], q, w, keep_drift, drifts)
+
+    def job():
+        t0 = time.perf_counter()
+        rollout.rollout(model, data, s0[None, :], nstep=n)
+        return time.perf_counter() - t0
+
+    return pt, job
+
+
+# ------------------------------------------------------------------------------------------ timing
+
+def _time_jobs(jobs: list, repeats: int, budget: float, say) -> list[tuple[float, int]]:
+    """Run every job `repeats` times round-robin (each round visits all jobs once) and return
+    (min wall time, repeats done) per job. A job whose single run exceeds `budget` s stops
+    after its first repeat (its minimum is then that run)."""
+    best = [math.inf] * len(jobs)
+    done = [0] * len(jobs)
+    for r in range(max(1, repeats)):
+        t_round = time.perf_counter()
+        for i, job in enumerate(jobs):
+            if job is None or (done[i] and best[i] > budget):
+                continue
+            best[i] = min(best[i], job())
+            done[i] += 1
+        say(f"timing round {r + 1}/{max(1, repeats)} done in {time.perf_counter() - t_round:.1f} s")
+    return list(zip(best, done))
+
+
+# ------------------------------------------------------------------------------------------ analysis
+
+def convergence_order(points: list[Point], window=ORDER_WINDOW) -> float | None:
+    """Least-squares slope of log attitude error vs log dt (or log rtol) over the points inside the
+    window (at least 3, else None)."""
+    xs, ys = [], []
+    for p in points:
+        if p.ok and window[0] < p.attitude_error < window[1]:
+            xs.append(math.log(p.value))
+            ys.append(math.log(p.attitude_error))
+    if len(xs) < 3:
+        return None
+    return float(np.polyfit(xs, ys, 1)[0])
+
+
+def _clamped(e: float) -> float:
+    return max(e, ERROR_FLOOR)
+
+
+def dominated_by(p_err: float, p_cost: float, own: str, pool: list[tuple[str, float, float]]) -> list[str]:
+    """Methods other than `own` with a point at least as accurate (errors clamped at ERROR_FLOOR)
+    and strictly cheaper than (p_err, p_cost)."""
+    return sorted({m for m, e, c in pool if m != own and _clamped(e) <= _clamped(p_err) and c < p_cost})
+
+
+def verdicts(points: list[Point], cost: str = "wall_per_sim_s") -> dict:
+    """Per case and method: "on the Pareto front", "beaten" (with the dominating methods) or
+    "out of range" (never within ERROR_CEILING), by attitude error against `cost`."""
+    out: dict = {}
+    for case in sorted({p.case for p in points}):
+        pts = [p for p in points if p.case == case and p.ok and getattr(p, cost) is not None
+               and p.attitude_error <= ERROR_CEILING]
+        pool = [(p.method, p.attitude_error, getattr(p, cost)) for p in pts]
+        per = {}
+        for method in sorted({p.method for p in points if p.case == case}):
+            mine = [p for p in pts if p.method == method]
+            if not mine:
+                per[method] = {"verdict": "out of range", "beaten_by": [], "front_points": []}
+                continue
+            by, front = set(), []
+            for p in mine:
+                d = dominated_by(p.attitude_error, getattr(p, cost), method, pool)
+                if d:
+                    by.update(d)
+                else:
+                    front.append(p.value)
+            # methods that dominate every one of this method's points
+            whole = sorted(m for m in by if all(m in dominated_by(p.attitude_error, getattr(p, cost), method, pool)
+                                                 for p in mine))
+            per[method] = {"verdict": "on the Pareto front" if front else "beaten",
+                           "beaten_by": sorted(by) if not front else [], "beaten_everywhere_by": whole if not front else [],
+                           "front_points": front}
+        out[case] = per
+    return out
+
+
+def overall_verdicts(per_case: dict, method_labels: list[str]) -> dict:
+    out = {}
+    for m in method_labels:
+        vs = {c: per_case[c][m]["verdict"] for c in per_case if m in per_case[c]}
+        front = [c for c, v in vs.items() if v == "on the Pareto front"]
+        if front:
+            text = "on the Pareto front" + (f" (in {len(front)}/{len(vs)} cases: {', '.join(front)})"
+                                            if len(front) < len(vs) else f" (all {len(vs)} cases)")
+            out[m] = {"verdict": "on the Pareto front", "text": text, "cases": vs}
+        elif all(v == "out of range" for v in vs.values()):
+            out[m] = {"verdict": "out of range", "cases": vs,
+                      "text": f"out of range (never within {ERROR_CEILING:g} rad in the sweep)"}
+        else:
+            by = sorted(set().union(*(per_case[c][m]["beaten_by"] for c in vs)) if vs else set())
+            every = set.intersection(*(set(per_case[c][m]["beaten_everywhere_by"]) for c in vs
+                                       if vs[c] == "beaten")) if any(v == "beaten" for v in vs.values()) else set()
+            oor = [c for c, v in vs.items() if v == "out of range"]
+            text = "beaten" + (f" (every point by: {', '.join(sorted(every))})" if every else
+                               f" (by: {', '.join(by)})" if by else "")
+            if oor:
+                text += f"; never within {ERROR_CEILING:g} rad in {', '.join(oor)}"
+            out[m] = {"verdict": "beaten", "text": text, "cases": vs, "beaten_by": by,
+                      "beaten_everywhere_by": sorted(every)}
+    return out
+
+
+def cost_to_reach(points: list[Point], tol: float, cost: str = "wall_per_sim_s") -> float | None:
+    """Cheapest cost among the points with attitude error <= tol (None if none reaches it)."""
+    c = [getattr(p, cost) for p in points if p.ok and p.attitude_error <= tol and getattr(p, cost) is not None]
+    return min(c) if c else None
+
+
+# ------------------------------------------------------------------------------------------ machine
+
+def _git(args, cwd) -> str:
+    try:
+        return subprocess.run(["git", *args], cwd=cwd, capture_output=True, text=True, timeout=10).stdout.strip()
+    except Exception:
+        return ""
+
+
+def machine_stamp(mujoco) -> dict:
+    cpu = platform.processor() or ""
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    import scipy
+
+    cc = (sysconfig.get_config_var("CC") or "cc").split()[0]
+    try:
+        cc_version = subprocess.run([cc, "--version"], capture_output=True, text=True, timeout=10).stdout.splitlines()[0]
+    except Exception:
+        cc_version = "unknown"
+    repo = Path(lv.__file__).resolve().parents[1]
+    commit = _git(["rev-parse", "HEAD"], repo)
+    dirty = bool(_git(["status", "--porcelain", "--untracked-files=no"], repo))
+    return {
+        "cpu": cpu, "logical_cores": os.cpu_count(),
+        "affinity_cores": len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else None,
+        "platform": platform.platform(), "python": platform.python_version(), "numpy": np.__version__,
+        "scipy": scipy.__version__, "mujoco": getattr(mujoco, "__version__", None) if mujoco else None,
+        "compiler": f"{cc}: {cc_version}", "c_flags": sysconfig.get_config_var("CFLAGS") or "",
+        "git_commit": commit + (" (with uncommitted changes)" if dirty else ""),
+        "loadavg_start": list(os.getloadavg()) if hasattr(os, "getloadavg") else None,
+    }
+
+
+# ------------------------------------------------------------------------------------------ run
+
+def run(out_dir=C.DEFAULT_OUT, backend: str = "c", quick: bool = True, mujoco: bool = True,
+        progress: bool = False) -> C.LabResult:
+    """Run the study; ``quick=True`` (the Python default, what ``lab all`` runs) is the reduced
+    sweep, ``quick=False`` the full one (the command line's default). ``backend`` is accepted for
+    the labs' common interface and ignored: both backends are always measured."""
+    C.check_backend(backend)
+    for name, v in (("quick", quick), ("mujoco", mujoco), ("progress", progress)):
+        if not isinstance(v, (bool, np.bool_)):
+            raise V.LavenderInputError(name, "must be True or False", f", got {v!r}")
+    cfg = QUICK if quick else FULL
+    t_start = time.perf_counter()
+
+    def say(msg):
+        if progress:
+            print(f"[accuracy {time.perf_counter() - t_start:6.1f} s] {msg}", file=sys.stderr, flush=True)
+
+    mj, mj_missing = (None, "skipped (mujoco=False)") if not mujoco else _mujoco()
+    all_cases = cases()
+    use = [all_cases[c] for c in cfg["cases"]]
+    meths, unavailable = methods(mj is not None)
+    labels = [m.label for m in meths]
+    stamp = machine_stamp(mj)
+    for label, why in unavailable.items():
+        say(f"not measured: {label}: {why}")
+    say(f"{len(use)} cases x {len(meths)} methods; integrators {list(B.INTEGRATORS)}; "
+        f"adaptive {adaptive_integrators() or 'none'}; MuJoCo {stamp['mujoco'] or 'not available: ' + str(mj_missing)}")
+
+    checks: list[C.Check] = []
+    figures: dict = {}
+    exacts = {}
+    for case in use:
+        exact = R.torque_free(case.I_b, case.omega_b0, [0, 0, 0, 1], [0.0, T_END])
+        ref = R.dop853(case.I_b, case.omega_b0, [0, 0, 0, 1], [T_END])
+        exacts[case.name] = exact
+        att = float(R.attitude_error(ref.q[-1], exact.q[-1]))
+        dw = float(np.linalg.norm(ref.omega_b[-1] - exact.omega_b[-1]))
+        figures[f"reference_vs_dop853_attitude_{case.name}"] = att
+        figures[f"reference_vs_dop853_omega_{case.name}"] = dw
+        checks.append(C.at_most(f"reference_vs_dop853_{case.name}", max(att, dw), 1e-10,
+                                f"exact (Jacobi) vs DOP853 rtol=atol=1e-13 at T: attitude {att:.2e} rad, "
+                                f"omega {dw:.2e} rad/s ({exact.kind})"))
+    say("exact references agree with DOP853")
+
+    points: list[Point] = []
+    jobs: list = []
+    drifts: dict = {}
+    skipped: list[str] = []
+    for case in use:
+        exact = exacts[case.name]
+        for m in meths:
+            t_m = time.perf_counter()
+            if m.family == "lavendersim":
+                if m.param == "rtol":
+                    values = list(cfg["rtols"] if m.backend == "c" else cfg["numpy_rtols"])
+                else:
+                    exps = cfg["dt_exps"] if m.backend == "c" else cfg["numpy_dt_exps"]
+                    values = [2.0 ** -k for k in exps]
+            elif m.family == "scipy":
+                values = list(cfg["rtols"]) + ([1e-13] if m.integrator == "DOP853" and not quick else [])
+            else:
+                values = [2.0 ** -k for k in cfg["mj_dt_exps"]]
+            for v in values:
+                keep = (m.param == "dt" and abs(v - 2.0 ** -DRIFT_DT_EXP) < 1e-15) or \
+                       (m.param == "rtol" and abs(v / DRIFT_RTOL - 1) < 1e-9)
+                t0 = time.perf_counter()
+                if m.family == "lavendersim":
+                    pt, job = _measure_sim(case, m, v, exact, drifts, keep)
+                elif m.family == "scipy":
+                    pt, job = _measure_scipy(case, m, v, exact, drifts, keep)
+                else:
+                    pt, job = _measure_mujoco(mj, case, m, v, exact, drifts, keep)
+                took = time.perf_counter() - t0
+                points.append(pt)
+                jobs.append(job)
+                if m.backend == "numpy" and m.param == "dt" and took > cfg["numpy_budget"] and v != values[-1]:
+                    rest = [_param_text("dt", x) for x in values if x < v]
+                    skipped.append(f"{case.name} {m.label}: {', '.join(rest)} (one run took {took:.2f} s)")
+                    break
+            say(f"{case.name}: {m.label} ({len(values)} {m.param} values) in {time.perf_counter() - t_m:.1f} s")
+
+    say(f"timing {sum(j is not None for j in jobs)} runs x {cfg['repeats']} interleaved repeats")
+    timed = _time_jobs(jobs, cfg["repeats"], cfg["time_budget"] if cfg["time_budget"] else 0.0, say)
+    for pt, (best, done) in zip(points, timed):
+        if pt.ok and done:
+            pt.wall_s, pt.repeats = best, done
+            pt.wall_per_sim_s = best / T_END
+    stamp["loadavg_end"] = list(os.getloadavg()) if hasattr(os, "getloadavg") else None
+
+    # ---------------------------------------------------------------- orders and checks
+    by = {}
+    for p in points:
+        by.setdefault((p.case, p.method), []).append(p)
+    meth_of = {m.label: m for m in meths}
+    orders = {}
+    for (case, label), pts in by.items():
+        orders[(case, label)] = convergence_order(pts)
+
+    smallest = {}
+    for case in use:
+        for m in meths:
+            pts = [p for p in by.get((case.name, m.label), []) if p.ok]
+            if not pts:
+                continue
+            tight = min(pts, key=lambda p: p.value)
+            smallest[(case.name, m.label)] = tight
+            o = orders[(case.name, m.label)]
+            if m.family == "lavendersim" and m.param == "dt" and m.backend == "c" and m.integrator in EXPECTED_ORDER:
+                exp_o = EXPECTED_ORDER[m.integrator]
+                checks.append(C.close(f"order_{m.integrator}_{case.name}", o if o is not None else math.nan, exp_o,
+                                      ORDER_TOL, f"slope of log attitude error vs log dt, C backend"))
+            if m.family == "lavendersim" and m.integrator == "rk4" and m.backend == "c":
+                checks.append(C.at_most(f"rk4_smallest_dt_{case.name}", max(tight.attitude_error, tight.omega_error),
+                                        1e-9, f"RK4 [c] at dt = {_param_text('dt', tight.value)}: attitude "
+                                              f"{tight.attitude_error:.2e} rad, omega {tight.omega_error:.2e} rad/s"))
+            if m.param == "rtol":
+                # an adaptive method converges to the same reference: global error within 100 x rtol
+                checks.append(C.at_most(f"tightest_rtol_{_key(m.label)}_{case.name}", tight.attitude_error,
+                                        max(ADAPTIVE_ERROR_FACTOR * tight.value, ERROR_FLOOR),
+                                        f"{m.label} at rtol = {tight.value:.0e}: attitude error within "
+                                        f"{ADAPTIVE_ERROR_FACTOR:g} x rtol of the exact solution"))
+            if m.family == "mujoco" and m.integrator == "RK4":
+                checks.append(C.at_most(f"mujoco_rk4_smallest_dt_{case.name}",
+                                        max(tight.attitude_error, tight.omega_error), 1e-8,
+                                        f"MuJoCo RK4 converges to the exact solution (attitude "
+                                        f"{tight.attitude_error:.2e} rad, omega {tight.omega_error:.2e} rad/s)"))
+            if m.family == "mujoco" and m.integrator in ("RK4", "Euler"):
+                checks.append(C.close(f"mujoco_{m.integrator.lower()}_order_{case.name}",
+                                      o if o is not None else math.nan, 4 if m.integrator == "RK4" else 1, ORDER_TOL,
+                                      "MuJoCo: slope of log attitude error vs log dt"))
+        # numpy vs c at every common point
+        for name in B.INTEGRATORS:
+            pc = {p.value: p for p in by.get((case.name, f"{name} [c]"), [])}
+            pn = {p.value: p for p in by.get((case.name, f"{name} [numpy]"), [])}
+            common = set(pc) & set(pn)
+            if not common:
+                continue
+            adaptive = name in adaptive_integrators()
+            worst = 0.0      # largest difference over its allowance
+            for v in common:
+                a, b = pc[v], pn[v]
+                allow = max(1e-9, ADAPTIVE_ERROR_FACTOR * v) if adaptive else 1e-9
+                if a.ok != b.ok:
+                    worst = math.inf
+                elif a.ok:
+                    xa, xb = np.array(a.final_x), np.array(b.final_x)
+                    d = max(float(R.attitude_error(xa[3:7], xb[3:7])), float(np.linalg.norm(xa[10:13] - xb[10:13])))
+                    worst = max(worst, d / allow)
+            what = (f"allowance max(1e-9, {ADAPTIVE_ERROR_FACTOR:g} x rtol): C steps each body with its own step "
+                    "size, NumPy with one shared step (equal to the tolerance, not bitwise)" if adaptive
+                    else "allowance 1e-9 (same algorithm)")
+            checks.append(C.at_most(f"backends_agree_{name}_{case.name}", worst, 1.0,
+                                    f"max over {len(common)} common points of the C vs NumPy difference at T (attitude "
+                                    f"rad, omega rad/s) over its {what}"))
+
+    per_case = verdicts(points)
+    per_case_rhs = verdicts([p for p in points if p.rhs_evals is not None], cost="rhs_evals")
+    overall = overall_verdicts(per_case, labels)
+    consistent = verdicts_consistent(points, per_case)
+    checks.append(C.holds("verdicts_consistent", consistent,
+                          "every 'beaten' method's points are each dominated by another method's point; every "
+                          "'on the Pareto front' method has an undominated point"))
+
+    # ---------------------------------------------------------------- table
+    table = []
+    for m in meths:
+        row = {"method": m.label, "param": m.param, "verdict": overall[m.label]["verdict"],
+               "verdict_text": overall[m.label]["text"]}
+        os_ = [orders[(c.name, m.label)] for c in use if orders.get((c.name, m.label)) is not None]
+        row["order"] = float(np.median(os_)) if os_ else None
+        for tol in (1e-3, 1e-6, 1e-9):
+            cs = [cost_to_reach(by.get((c.name, m.label), []), tol) for c in use]
+            row[f"us_per_sim_s_to_{tol:.0e}"] = None if any(x is None for x in cs) else 1e6 * max(cs)
+            es = [cost_to_reach(by.get((c.name, m.label), []), tol, "rhs_evals") for c in use]
+            row[f"rhs_evals_to_{tol:.0e}"] = None if any(x is None for x in es) else int(max(es))
+        errs = [p.attitude_error for c in use for p in by.get((c.name, m.label), []) if p.ok]
+        row["best_attitude_error"] = max(min(p.attitude_error for p in by.get((c.name, m.label), []) if p.ok)
+                                         for c in use) if errs else None
+        dr = [p for c in use for p in by.get((c.name, m.label), []) if p.ok and
+              abs(p.value - (2.0 ** -DRIFT_DT_EXP if m.param == "dt" else DRIFT_RTOL)) <= 1e-9 * p.value]
+        row["energy_drift_at_drift_point"] = max(p.energy_drift for p in dr) if dr else None
+        row["momentum_drift_at_drift_point"] = max(p.momentum_drift for p in dr) if dr else None
+        table.append(row)
+    table_text = format_table(table)
+
+    # ---------------------------------------------------------------- figures and params
+    for label, why in unavailable.items():
+        figures[f"unavailable_{_key(label)}"] = why
+    figures["float32"] = "not measured: no float32 path exists (both backends step in float64)"
+    figures["mujoco"] = (f"measured (mujoco {stamp['mujoco']})" if mj is not None
+                         else f"not measured: {mj_missing}; pip install -e '.[bench]'")
+    for m in meths:
+        figures[f"verdict_{_key(m.label)}"] = overall[m.label]["text"]
+    for (case, label), o in sorted(orders.items()):
+        if o is not None and meth_of[label].param == "dt":
+            figures[f"order_{_key(label)}_{case}"] = o
+    for i, line in enumerate(table_text.splitlines()):
+        figures[f"table_{i:02d}"] = line
+    if skipped:
+        figures["numpy_sweep_shortened"] = "; ".join(skipped)
+    params = {
+        "mode": "quick" if quick else "full", "cases": ", ".join(f"{c.name}: {c.label}" for c in use), "T": T_END,
+        "mass": MASS, "integrators": ", ".join(B.INTEGRATORS), "adaptive": ", ".join(adaptive_integrators()) or "none",
+        "dt_sweep": ", ".join(_param_text("dt", 2.0 ** -k) for k in cfg["dt_exps"]),
+        "numpy_dt_sweep": ", ".join(_param_text("dt", 2.0 ** -k) for k in cfg["numpy_dt_exps"]),
+        "rtol_sweep": ", ".join(f"{r:.0e}" for r in cfg["rtols"]), "repeats": cfg["repeats"],
+        "error_floor": ERROR_FLOOR, "error_ceiling": ERROR_CEILING,
+        "cpu": stamp["cpu"], "logical_cores": stamp["logical_cores"], "git_commit": stamp["git_commit"],
+        "versions": f"python {stamp['python']}, numpy {stamp['numpy']}, scipy {stamp['scipy']}, "
+                    f"mujoco {stamp['mujoco']}, {stamp['compiler']}",
+    }
+
+    plots = make_plots(use, meths, points, drifts, per_case)
+    result = C.finish(NAME, out_dir, figures, params, checks, plots)
+    # the nested data: added to the returned dict and written into the same results.json
+    result["machine"] = stamp
+    result["table"] = table
+    result["verdicts"] = {"by_wall_time": {"overall": overall, "per_case": per_case},
+                          "by_rhs_evals": {"per_case": per_case_rhs},
+                          "definition": {"metric": "attitude error at T (rad) vs wall time per simulated second",
+                                         "dominates": "another method's point with error <= and time <",
+                                         "error_floor": ERROR_FLOOR, "error_ceiling": ERROR_CEILING}}
+    result["methods"] = [{"label": m.label, "family": m.family, "integrator": m.integrator, "backend": m.backend,
+                          "param": m.param, "stages": m.stages} for m in meths]
+    result["points"] = [_point_json(p) for p in points]
+    result["drift_series"] = [{"case": c, "method": lab, **d} for (c, lab), d in drifts.items()]
+    path = result.out_dir / "results.json"
+    path.write_text(json.dumps(dict(result), indent=1, allow_nan=False) + "\n")
+    csv_path = result.out_dir / "points.csv"
+    with csv_path.open("w", newline="") as f:
+        cols = [k for k in _point_json(points[0]) if k != "final_x"]
+        w = csv.DictWriter(f, fieldnames=cols, extrasaction="ignore")
+        w.writeheader()
+        for p in points:
+            w.writerow(_point_json(p))
+    result.files.append(csv_path)
+    result.table_text = table_text
+    say(f"done in {time.perf_counter() - t_start:.1f} s")
+    return result
+
+
+def _key(label: str) -> str:
+    return "".join(ch if ch.isalnum() else "_" for ch in label.lower()).strip("_").replace("__", "_")
+
+
+def _num(x):
+    if x is None:
+        return None
+    x = float(x)
+    return x if math.isfinite(x) else None
+
+
+def _point_json(p: Point) -> dict:
+    return {"case": p.case, "method": p.method, "param": p.param, "value": p.value, "steps": p.steps,
+            "rhs_evals": p.rhs_evals, "rhs_evals_source": p.rhs_evals_source,
+            "attitude_error": _num(p.attitude_error), "omega_error": _num(p.omega_error),
+            "energy_drift": _num(p.energy_drift), "momentum_drift": _num(p.momentum_drift),
+            "wall_s": _num(p.wall_s), "wall_per_sim_s": _num(p.wall_per_sim_s), "repeats": p.repeats,
+            "diverged": p.diverged, "final_x": p.final_x}
+
+
+def verdicts_consistent(points: list[Point], per_case: dict) -> bool:
+    """Recheck every verdict against the points directly (independent of `verdicts`' bookkeeping)."""
+    for case, per in per_case.items():
+        eligible = [p for p in points if p.case == case and p.ok and p.wall_per_sim_s is not None
+                    and p.attitude_error <= ERROR_CEILING]
+        for method, v in per.items():
+            mine = [p for p in eligible if p.method == method]
+            others = [p for p in eligible if p.method != method]
+
+            def dom(p):
+                return any(_clamped(o.attitude_error) <= _clamped(p.attitude_error)
+                           and o.wall_per_sim_s < p.wall_per_sim_s for o in others)
+            if v["verdict"] == "beaten" and not (mine and all(dom(p) for p in mine)):
+                return False
+            if v["verdict"] == "on the Pareto front" and all(dom(p) for p in mine):
+                return False
+            if v["verdict"] == "out of range" and mine:
+                return False
+    return True
+
+
+def _fmt(x, unit="") -> str:
+    if x is None:
+        return "-"
+    if isinstance(x, int):
+        return f"{x:d}"
+    return f"{x:.3g}{unit}"
+
+
+def format_table(table: list[dict]) -> str:
+    head = (f"{'method':<26} {'order':>5} {'us/sim-s to 1e-3':>16} {'to 1e-6':>9} {'to 1e-9':>9} "
+            f"{'RHS to 1e-6':>11} {'best err':>9} {'E drift':>9} {'L drift':>9}  verdict")
+    lines = [head, "-" * len(head)]
+    for r in table:
+        lines.append(f"{r['method']:<26} {_fmt(r['order']):>5} {_fmt(r['us_per_sim_s_to_1e-03']):>16} "
+                     f"{_fmt(r['us_per_sim_s_to_1e-06']):>9} {_fmt(r['us_per_sim_s_to_1e-09']):>9} "
+                     f"{_fmt(r['rhs_evals_to_1e-06']):>11} {_fmt(r['best_attitude_error']):>9} "
+                     f"{_fmt(r['energy_drift_at_drift_point']):>9} {_fmt(r['momentum_drift_at_drift_point']):>9}  "
+                     f"{r['verdict_text']}")
+    lines.append("order: median over cases of the slope of log attitude error vs log dt (vs log rtol for "
+                 "adaptive/scipy); us/sim-s to X: worst case over cases of the cheapest wall time per simulated "
+                 "second (us) with attitude error <= X rad; RHS to 1e-6: evaluations over T; best err: worst case "
+                 f"of the smallest attitude error reached (rad); E/L drift: max relative drift at dt = 2^-{DRIFT_DT_EXP} s "
+                 f"or rtol = {DRIFT_RTOL:.0e} (worst case)")
+    return "\n".join(lines)
+
+
+# ------------------------------------------------------------------------------------------ plots
+
+_FAMILY_STYLE = {"c": "-", "numpy": "--", "scipy": ":", "mujoco": "-."}
+
+
+_PALETTE = ("#1f77b4", "#17becf", "#ff7f0e", "#d62728", "#2ca02c", "#9467bd", "#e377c2", "#8c564b",
+            "#7f7f7f", "#bcbd22", "#000000", "#aec7e8", "#ffbb78", "#98df8a")
+
+
+def _colors(meths):
+    names = []
+    for m in meths:
+        key = m.integrator if m.family == "lavendersim" else m.label
+        if key not in names:
+            names.append(key)
+    return {n: _PALETTE[i % len(_PALETTE)] for i, n in enumerate(names)}
+
+
+def make_plots(use, meths, points, drifts, per_case) -> dict:
+    colors = _colors(meths)
+    plots = {}
+    n = len(use)
+    ncols = 2
+    nrows = (n + 1) // 2
+    specs = (("work_precision_time.png", "wall_per_sim_s", 1e6, "wall time per simulated second (µs)",
+              "attitude_error", "attitude error at T (rad)", True),
+             ("work_precision_rhs.png", "rhs_evals", 1.0, "RHS evaluations over T = 10 s",
+              "attitude_error", "attitude error at T (rad)", False),
+             ("work_precision_omega.png", "wall_per_sim_s", 1e6, "wall time per simulated second (µs)",
+              "omega_error", "|ω(T) − ω_exact(T)| (rad/s)", True))
+    for fname, xkey, xscale, xlabel, ykey, ylabel, both_backends in specs:
+        fig, axes = C.new_figure(nrows, ncols, size=(15, 5.2 * nrows),
+                                 title=f"{ylabel.split(' (')[0]} vs {xlabel.split(' (')[0]}, torque-free, T = {T_END:g} s")
+        for k, case in enumerate(use):
+            ax = axes[k // ncols, k % ncols]
+            for m in meths:
+                if not both_backends and m.backend == "numpy":
+                    continue          # same RHS counts and errors as the C backend
+                pts = [p for p in points if p.case == case.name and p.method == m.label and p.ok
+                       and getattr(p, xkey) is not None and getattr(p, ykey) is not None]
+                if not pts:
+                    continue
+                pts.sort(key=lambda p: -p.value)          # along the sweep: coarse to fine
+                x = np.array([getattr(p, xkey) for p in pts]) * xscale
+                y = np.maximum([getattr(p, ykey) for p in pts], 1e-17)
+                key = m.integrator if m.family == "lavendersim" else m.label
+                lab = m.label if both_backends else (m.integrator if m.family == "lavendersim" else m.label)
+                verdict = per_case[case.name].get(m.label, {}).get("verdict", "")
+                ax.loglog(x, y, _FAMILY_STYLE[m.backend], marker="o" if verdict == "on the Pareto front" else ".",
+                          color=colors[key], ms=5 if verdict == "on the Pareto front" else 3, lw=1.2,
+                          label=lab + (" *" if verdict == "on the Pareto front" and both_backends else ""))
+            if ykey == "attitude_error":
+                ax.axhline(ERROR_CEILING, color="gray", lw=0.6, ls=":")
+                ax.axhline(ERROR_FLOOR, color="gray", lw=0.6, ls=":")
+            ax.set_xlabel(xlabel)
+            ax.set_ylabel(ylabel)
+            ax.set_title(case.label, fontsize=10)
+            ax.grid(True, which="major", alpha=0.3)
+        for k in range(n, nrows * ncols):
+            axes[k // ncols, k % ncols].set_visible(False)
+        handles, labs_ = axes[0, 0].get_legend_handles_labels()
+        fig.legend(handles, labs_, loc="outside right center", fontsize=7,
+                   title="* on the Pareto front\nc solid, numpy dashed,\nscipy dotted, MuJoCo dash-dot"
+                   if both_backends else "numpy = c (same\ncounts and errors)", title_fontsize=7)
+        plots[fname] = fig
+
+    fig, axes = C.new_figure(2, n, size=(4.2 * n + 3, 8),
+                             title=f"relative drift over the run (C backend at dt = 2^-{DRIFT_DT_EXP} s; "
+                                   f"rtol = {DRIFT_RTOL:.0e} for adaptive/scipy; MuJoCo at dt = 2^-{DRIFT_DT_EXP} s)")
+    for k, case in enumerate(use):
+        for row, what in enumerate(("energy", "momentum")):
+            ax = axes[row, k]
+            for m in meths:
+                if m.backend == "numpy":
+                    continue
+                d = drifts.get((case.name, m.label))
+                if not d:
+                    continue
+                key = m.integrator if m.family == "lavendersim" else m.label
+                yv = np.asarray(d[what], float)
+                ax.semilogy(d["t"], np.where(yv > 0, yv, np.nan), _FAMILY_STYLE[m.backend], color=colors[key], lw=1,
+                            label=m.label.replace(" [c]", ""))
+            ax.set_xlabel("time t (s)")
+            ax.set_ylabel("|E(t) − E(0)| / E(0)" if what == "energy" else "|L_w(t) − L_w(0)| / |L_w(0)|")
+            ax.set_title(f"{case.label}: {what}", fontsize=9)
+            ax.grid(True, alpha=0.3)
+    handles, labs_ = axes[0, 0].get_legend_handles_labels()
+    fig.legend(handles, labs_, loc="outside right center", fontsize=7)
+    plots["drift_vs_time.png"] = fig
+    return plots
