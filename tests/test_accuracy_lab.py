@@ -131,10 +131,16 @@ def test_adaptive_and_peers_converge_to_the_reference(quick):
             assert min(p["attitude_error"] for p in pts) < 1e-9
 
 
-def _dominated(p, others):
-    floor = A.ERROR_FLOOR
-    return any(max(o["attitude_error"], floor) <= max(p["attitude_error"], floor)
-               and o["wall_per_sim_s"] < p["wall_per_sim_s"] for o in others)
+def _dominated(p, others, definition):
+    """Another point at least as accurate (errors clamped at the floor) and faster by more than the
+    timing margin, or strictly more accurate and within the margin — as the JSON defines it."""
+    floor, margin = definition["error_floor"], definition["time_margin"]
+    ep, tp = max(p["attitude_error"], floor), p["wall_per_sim_s"]
+    for o in others:
+        eo, to = max(o["attitude_error"], floor), o["wall_per_sim_s"]
+        if eo <= ep and (to * (1 + margin) < tp or (eo < ep and to <= tp * (1 + margin))):
+            return True
+    return False
 
 
 def test_verdicts_are_consistent_with_the_points(quick):
@@ -142,18 +148,20 @@ def test_verdicts_are_consistent_with_the_points(quick):
     dominated by another method's point; an 'on the Pareto front' method has one that is not."""
     _, data = quick
     per_case = data["verdicts"]["by_wall_time"]["per_case"]
+    definition = data["verdicts"]["definition"]
     ceiling = data["error_ceiling"]
+    assert definition["error_ceiling"] == ceiling
     for case, per in per_case.items():
         eligible = [p for p in _points(data, case) if p["diverged"] is None and p["attitude_error"] <= ceiling]
         for method, v in per.items():
             mine = [p for p in eligible if p["method"] == method]
             others = [p for p in eligible if p["method"] != method]
             if v["verdict"] == "beaten":
-                assert mine and all(_dominated(p, others) for p in mine), (case, method)
+                assert mine and all(_dominated(p, others, definition) for p in mine), (case, method)
                 for p in mine:  # the named dominators really dominate
-                    assert any(_dominated(p, [o for o in others if o["method"] == b]) for b in v["beaten_by"])
+                    assert any(_dominated(p, [o for o in others if o["method"] == b], definition) for b in v["beaten_by"])
             elif v["verdict"] == "on the Pareto front":
-                assert any(not _dominated(p, others) for p in mine), (case, method)
+                assert any(not _dominated(p, others, definition) for p in mine), (case, method)
             else:
                 assert v["verdict"] == "out of range" and not mine, (case, method)
     overall = data["verdicts"]["by_wall_time"]["overall"]
@@ -181,9 +189,16 @@ def test_verdict_rules_on_synthetic_points():
            P("c", "cheap_bad", "dt", 1.0, attitude_error=0.5, wall_per_sim_s=0.1),  # above the ceiling
            P("c", "niche", "dt", 1.0, attitude_error=1e-3, wall_per_sim_s=0.5)]     # cheapest at 1e-3
     pts.append(P("c", "fast", "dt", 0.1, attitude_error=5e-12, wall_per_sim_s=5.0))
+    # within the 10% timing margin: strictly more accurate wins; equally accurate is a tie (no one wins)
+    pts.append(P("c", "close_but_worse", "dt", 1.0, attitude_error=2e-6, wall_per_sim_s=0.97))
+    pts.append(P("c", "tie", "dt", 1.0, attitude_error=1e-9, wall_per_sim_s=1.9))
     v = A.verdicts(pts)["c"]
+    assert v["close_but_worse"]["verdict"] == "beaten" and v["close_but_worse"]["beaten_by"] == ["fast"]
+    assert v["tie"]["verdict"] == "on the Pareto front" and v["fast"]["verdict"] == "on the Pareto front"
+    assert A.dominates(1e-6, 1.0, 2e-6, 0.97) and not A.dominates(2e-6, 0.97, 1e-6, 1.0)
+    assert not A.dominates(1e-9, 2.0, 1e-9, 1.9) and not A.dominates(1e-9, 1.9, 1e-9, 2.0)
     assert v["fast"]["verdict"] == "on the Pareto front"
-    assert v["slow"]["verdict"] == "beaten" and v["slow"]["beaten_everywhere_by"] == ["fast"]
+    assert v["slow"]["verdict"] == "beaten" and v["slow"]["beaten_everywhere_by"] == ["fast", "tie"]
     assert v["precise"]["verdict"] == "beaten"            # 1e-13 and 5e-12 are both at the floor; fast is cheaper
     assert v["cheap_bad"]["verdict"] == "out of range"
     assert v["niche"]["verdict"] == "on the Pareto front"
