@@ -836,7 +836,7 @@ def run(out_dir=C.DEFAULT_OUT, backend: str = "c", quick: bool = True, mujoco: b
                     f"mujoco {stamp['mujoco']}, {stamp['compiler']}",
     }
 
-    plots = make_plots(use, meths, points, drifts, per_case)
+    plots = make_plots(use, meths, points, drifts, per_case, per_case_rhs)
     result = C.finish(NAME, out_dir, figures, params, checks, plots)
     # the nested data: added to the returned dict and written into the same results.json
     result["machine"] = stamp
@@ -953,7 +953,9 @@ def _colors(meths):
     return {n: _PALETTE[i % len(_PALETTE)] for i, n in enumerate(names)}
 
 
-def make_plots(use, meths, points, drifts, per_case) -> dict:
+def make_plots(use, meths, points, drifts, per_case, per_case_rhs) -> dict:
+    """The PNGs; big markers are points of methods on the front of that plot's own verdict (attitude
+    error vs time, or vs RHS evaluations); the omega plot marks none."""
     colors = _colors(meths)
     plots = {}
     n = len(use)
@@ -982,10 +984,12 @@ def make_plots(use, meths, points, drifts, per_case) -> dict:
                 y = np.maximum([getattr(p, ykey) for p in pts], 1e-17)
                 key = m.integrator if m.family == "lavendersim" else m.label
                 lab = m.label if both_backends else (m.integrator if m.family == "lavendersim" else m.label)
-                verdict = per_case[case.name].get(m.label, {}).get("verdict", "")
-                ax.loglog(x, y, _FAMILY_STYLE[m.backend], marker="o" if verdict == "on the Pareto front" else ".",
-                          color=colors[key], ms=5 if verdict == "on the Pareto front" else 3, lw=1.2,
-                          label=lab + (" *" if verdict == "on the Pareto front" and both_backends else ""))
+                marks = {"wall_per_sim_s": per_case, "rhs_evals": per_case_rhs}[xkey] if ykey == "attitude_error" else {}
+                front = set(marks.get(case.name, {}).get(m.label, {}).get("front_points", []))
+                ax.loglog(x, y, _FAMILY_STYLE[m.backend], marker=".", color=colors[key], ms=3, lw=1.2, label=lab)
+                on = np.array([p.value in front for p in pts], bool)
+                if on.any():
+                    ax.loglog(x[on], y[on], "o", color=colors[key], ms=7, mfc="none", mew=1.5)
             if ykey == "attitude_error":
                 ax.axhline(ERROR_CEILING, color="gray", lw=0.6, ls=":")
                 ax.axhline(ERROR_FLOOR, color="gray", lw=0.6, ls=":")
@@ -997,8 +1001,9 @@ def make_plots(use, meths, points, drifts, per_case) -> dict:
             axes[k // ncols, k % ncols].set_visible(False)
         handles, labs_ = axes[0, 0].get_legend_handles_labels()
         fig.legend(handles, labs_, loc="outside right center", fontsize=7,
-                   title="* on the Pareto front\nc solid, numpy dashed,\nscipy dotted, MuJoCo dash-dot"
-                   if both_backends else "numpy = c (same\ncounts and errors)", title_fontsize=7)
+                   title=("circled: undominated points\n" if ykey == "attitude_error" else "")
+                   + ("c solid, numpy dashed,\nscipy dotted, MuJoCo dash-dot" if both_backends
+                      else "numpy = c (same\ncounts and errors)"), title_fontsize=7)
         plots[fname] = fig
 
     fig, axes = C.new_figure(2, n, size=(4.2 * n + 3, 8),
