@@ -1,4 +1,5 @@
-"""Command line: `lavendersim derive [--check]`, `lavendersim lab NAME|all`, `lavendersim view NAME`."""
+"""Command line: `lavendersim derive [--check]`, `lavendersim lab NAME|all`, `lavendersim view NAME`,
+`lavendersim bench [--quick] [--json PATH]`."""
 from __future__ import annotations
 
 import argparse
@@ -61,6 +62,22 @@ def _add_view(sub) -> None:
     v.set_defaults(fn=_view)
 
 
+def _add_bench(sub) -> None:
+    b = sub.add_parser("bench", help="speed as ratios measured in one run (C, NumPy, hand-written C, MuJoCo)",
+                       description="Speed of LavenderSim as ratios against references measured in the same run; "
+                                   "prints PASS/MISS against the targets of issue 4 (a miss never fails the command).")
+
+    def _bench(args) -> int:
+        from lavendersim.bench import command
+
+        return command(args)
+
+    from lavendersim.bench import add_arguments
+
+    add_arguments(b)
+    b.set_defaults(fn=_bench)
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(prog="lavendersim", description=__doc__)
     sub = p.add_subparsers(dest="cmd", required=True)
@@ -76,6 +93,7 @@ def main(argv=None) -> int:
 
     register_lqr(sub)
     _add_view(sub)
+    _add_bench(sub)
     args = p.parse_args(argv)
     return int(args.fn(args) or 0)
 

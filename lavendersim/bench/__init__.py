@@ -1,0 +1,651 @@
+"""`lavendersim bench` — speed, as ratios measured in one run.
+
+    lavendersim bench [--quick] [--json PATH] [--rounds R] [--no-mujoco]
+    python -m lavendersim.bench ...
+
+Everything is measured in one process on one (shared, noisy) machine, so the figures that matter
+are ratios against references measured in the same run. Repetitions are interleaved (round-robin
+over all cases of a section, R rounds), and each figure is the minimum over the rounds (the median
+is kept too); ratios are of minima.
+
+Sections (one body: a solid box 2 kg, 0.8 x 0.4 x 0.2 m, asymmetric, omega_b0 = (1, 0.5, 0.2) rad/s,
+v0 = (0.1, 0, 0) m/s, dt = 1e-3 s, RK4, q normalized each step):
+* single body — LavenderSim C (`Sim.run(n)`: one C call, n >= 1e6 steps), the hand-written C99
+  reference (handwritten_rk4.c, compiled now with the system `cc -O3`, called through ctypes with
+  n >= 1e6 steps), NumPy (`Sim.run(n)`, fewer steps), one Python `sim.step()` call (c and numpy),
+  and MuJoCo (when installed) on the same free body: `mj_step` in a Python loop and
+  `mujoco.rollout` (steps inside C), integrators RK4, Euler and implicitfast;
+* batched — N bodies in one C call (`Sim.run`), N = 1 … 1e5, ns per body-step; NumPy batched too;
+* effects — the step cost of cumulative effect sets on one body in C: torque-free, + applied
+  torque, + damping (linear + angular), + gravity, + spherical joint, + reaction wheels;
+* agreement — the hand-written kernel against the Sim (same trajectory to ~1e-12), and MuJoCo's
+  trajectory against ours and against the exact torque-free motion over 1 s.
+
+The targets of issue 4 are printed as PASS/MISS lines; a miss never changes the exit status.
+`--quick` is a short version (small step counts, N up to 1e3) for tests: they check that it runs
+and that its output and JSON are well formed, never the timings.
+"""
+from __future__ import annotations
+
+import argparse
+import ctypes
+import datetime as _dt
+import json
+import os
+import platform
+import shutil
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+SCHEMA = "lavendersim-bench/1"
+HERE = Path(__file__).resolve().parent
+KERNEL_SOURCE = HERE / "handwritten_rk4.c"
+CFLAGS = ["-O3", "-std=c99", "-fno-math-errno", "-fPIC", "-shared"]  # the extension's math flags (setup.py)
+
+# The body every section uses.
+MASS = 2.0
+SIZE = (0.8, 0.4, 0.2)
+OMEGA_B0 = (1.0, 0.5, 0.2)
+V_W0 = (0.1, 0.0, 0.0)
+Q0 = tuple((np.array([0.1, 0.2, 0.3, 0.9]) / np.linalg.norm([0.1, 0.2, 0.3, 0.9])).tolist())
+DT = 1e-3
+
+TARGETS = {
+    "c_single_rk4_ns": 100.0,          # ns per step, at most
+    "mujoco_rk4_speedup": 40.0,        # MuJoCo RK4 ns / LavenderSim C ns, at least
+    "batched_ns_per_body_step": 40.0,  # at most, every N >= 1e3
+    "torque_free_vs_handwritten": 1.15,  # LavenderSim C / hand-written, at most
+}
+BATCH_SIZES_FULL = (1, 10, 100, 1_000, 10_000, 100_000)
+BATCH_SIZES_QUICK = (1, 10, 100, 1_000)
+MUJOCO_INTEGRATORS = ("RK4", "Euler", "implicitfast")
+
+EFFECT_SETS = (
+    ("torque-free", []),
+    ("+ applied torque", [("applied_torque", {"torque_w": [1e-3, 2e-3, -1e-3]})]),
+    ("+ damping", [("linear_damping", {"c": 0.05}), ("angular_damping", {"c": 2e-3})]),
+    ("+ gravity", [("gravity", {})]),
+    ("+ spherical joint", [("spherical_joint", {"anchor_w": [0.0, 0.0, 0.3]})]),
+    ("+ reaction wheels", [("reaction_wheels", {"J": [1e-3, 1e-3, 1e-3], "torque_limit": 0.01,
+                                                "speed_limit": 300.0, "c_w": 1e-5})]),
+)
+WHEEL_COMMAND = (1e-3, -5e-4, 2e-4)
+
+
+def _progress(msg: str) -> None:
+    print(f"  … {msg}", file=sys.stderr, flush=True)
+
+
+# --------------------------------------------------------------------------- machine stamp
+
+def _run(cmd: list[str], cwd=None) -> str | None:
+    try:
+        r = subprocess.run(cmd, capture_output=True, text=True, timeout=20, cwd=cwd)
+    except (OSError, subprocess.SubprocessError):
+        return None
+    return r.stdout.strip() if r.returncode == 0 else None
+
+
+def compiler() -> str | None:
+    """The C compiler the bench uses: $CC, else cc, else gcc (None if none is found)."""
+    for c in (os.environ.get("CC"), "cc", "gcc"):
+        if c and shutil.which(c.split()[0]):
+            return c
+    return None
+
+
+def machine_stamp() -> dict:
+    cpu = None
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.lower().startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    cc = compiler()
+    cc_version = (_run(cc.split() + ["--version"]) or "").splitlines()[0] if cc else None
+    repo = HERE.parent.parent
+    commit = _run(["git", "rev-parse", "HEAD"], cwd=repo) if (repo / ".git").exists() else None
+    dirty = None
+    if commit:
+        st = _run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=repo)
+        dirty = bool(st) if st is not None else None
+    try:
+        affinity = len(os.sched_getaffinity(0))
+    except AttributeError:
+        affinity = None
+    try:
+        load = [round(x, 2) for x in os.getloadavg()]
+    except OSError:
+        load = None
+    try:
+        import mujoco
+        mj = mujoco.__version__
+    except Exception:  # noqa: BLE001 - optional extra; any import failure means "not available"
+        mj = None
+    import lavendersim
+    return {
+        "cpu": cpu or platform.processor() or platform.machine(),
+        "cores": os.cpu_count(), "cores_usable": affinity, "loadavg": load,
+        "platform": platform.platform(),
+        "python": f"{platform.python_implementation()} {platform.python_version()}",
+        "numpy": np.__version__, "mujoco": mj, "lavendersim": lavendersim.__version__,
+        "compiler": cc, "compiler_version": cc_version,
+        "git_commit": commit, "git_dirty": dirty,
+        "date": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+    }
+
+
+# --------------------------------------------------------------------------- timing
+
+def _stats(seconds: list[float], units: int) -> dict:
+    ns = [s / units * 1e9 for s in seconds]
+    return {"ns_min": min(ns), "ns_median": statistics.median(ns), "units_per_call": units,
+            "rounds": len(ns), "ns_samples": ns}
+
+
+def interleaved(cases: dict, rounds: int, label: str = "") -> dict:
+    """cases: name -> (fn, units). Warm each once, then `rounds` rounds, each timing every case once
+    in turn (round-robin, so a noisy stretch hits all cases alike). Returns name -> _stats."""
+    for fn, _ in cases.values():
+        fn()
+    times = {k: [] for k in cases}
+    for r in range(rounds):
+        if label:
+            _progress(f"{label}: round {r + 1}/{rounds}")
+        for k, (fn, _) in cases.items():
+            t0 = time.perf_counter()
+            fn()
+            times[k].append(time.perf_counter() - t0)
+    return {k: _stats(times[k], cases[k][1]) for k in cases}
+
+
+# --------------------------------------------------------------------------- scenes
+
+def body(name: str = "body"):
+    import lavendersim as lv
+    return lv.Body.box(name, MASS, SIZE, q=Q0, omega_b=OMEGA_B0, v_w=V_W0)
+
+
+def inertia() -> np.ndarray:
+    return np.asarray(body().I_b, dtype=float)
+
+
+def initial_state() -> np.ndarray:
+    return np.asarray(body().x0, dtype=float).copy()
+
+
+def single_sim(backend: str = "c", integrator: str = "rk4", effects=()):
+    import lavendersim as lv
+    scene = lv.Scene()
+    scene.add_body(body())
+    for name, params in effects:
+        scene.add_effect(name, body="body", **params)
+    sim = lv.Sim(scene, dt=DT, integrator=integrator, backend=backend)
+    if any(name == "reaction_wheels" for name, _ in effects):
+        sim.set_wheel_command("body", WHEEL_COMMAND)
+    return sim
+
+
+def batch_sim(n: int, backend: str):
+    """n copies of the body with slightly different spins (independent trajectories)."""
+    import lavendersim as lv
+    scene = lv.Scene()
+    rng = np.random.default_rng(n)
+    for i in range(n):
+        w = np.asarray(OMEGA_B0) * (1.0 + 0.1 * rng.standard_normal(3))
+        scene.add_body(lv.Body.box(f"b{i}", MASS, SIZE, q=Q0, omega_b=w, v_w=V_W0))
+    return lv.Sim(scene, dt=DT, integrator="rk4", backend=backend)
+
+
+# --------------------------------------------------------------------------- hand-written reference
+
+class HandwrittenKernel:
+    """handwritten_rk4.c compiled now into a temporary shared library, called through ctypes."""
+
+    def __init__(self, cc: str | None = None):
+        self.cc = cc or compiler()
+        if self.cc is None:
+            raise RuntimeError("no C compiler found (set CC, or install cc/gcc)")
+        self.flags = list(CFLAGS)
+        self._dir = tempfile.mkdtemp(prefix="lavendersim-bench-")
+        lib = Path(self._dir) / "handwritten_rk4.so"
+        cmd = self.cc.split() + self.flags + [str(KERNEL_SOURCE), "-o", str(lib), "-lm"]
+        r = subprocess.run(cmd, capture_output=True, text=True)
+        if r.returncode != 0:
+            raise RuntimeError(f"compiling {KERNEL_SOURCE.name} failed ({' '.join(cmd)}):\n{r.stderr.strip()}")
+        self.command = " ".join(cmd)
+        self._lib = ctypes.CDLL(str(lib))
+        shutil.rmtree(self._dir, ignore_errors=True)  # the library stays mapped
+        f = self._lib.lv_ref_rk4_free
+        f.argtypes = [ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_double),
+                      ctypes.c_double, ctypes.c_long, ctypes.c_int]
+        f.restype = ctypes.c_long
+        self._f = f
+
+    def advance(self, x: np.ndarray, I_b: np.ndarray, dt: float, n_steps: int, check: bool = False) -> int:
+        """Advance x (13,) float64 in place; returns -1, or the step at which it went non-finite."""
+        if x.dtype != np.float64 or x.shape != (13,) or not x.flags.c_contiguous:
+            raise TypeError("x must be a C-contiguous float64 array of shape (13,)")
+        I_b = np.ascontiguousarray(I_b, dtype=np.float64)
+        dp = ctypes.POINTER(ctypes.c_double)
+        return int(self._f(x.ctypes.data_as(dp), I_b.ctypes.data_as(dp), float(dt), int(n_steps), 1 if check else 0))
+
+
+def handwritten_agreement(kernel: HandwrittenKernel, n_steps: int = 10_000, every: int = 1_000,
+                          backend: str = "c") -> dict:
+    """The hand-written kernel and the Sim (torque-free scene, RK4) from the same state: the largest
+    difference of any state number at every `every` steps over n_steps."""
+    sim = single_sim(backend)
+    traj = sim.record(n_steps, every=every)
+    x = initial_state()
+    I_b = inertia()
+    worst, worst_rel = 0.0, 0.0
+    for k in range(1, n_steps // every + 1):
+        kernel.advance(x, I_b, DT, every)
+        d = np.abs(traj.x[k, 0] - x)
+        worst = max(worst, float(d.max()))
+        worst_rel = max(worst_rel, float((d / np.maximum(np.abs(x), 1.0)).max()))
+    return {"backend": backend, "steps": n_steps, "sampled_every": every, "max_abs_diff": worst,
+            "max_rel_diff": worst_rel}
+
+
+# --------------------------------------------------------------------------- MuJoCo
+
+def mujoco_model_xml(integrator: str, dt: float = DT) -> str:
+    """The same free body in MJCF: inertial frame = body frame = principal axes, no geoms, no gravity,
+    contacts disabled."""
+    I = inertia()
+    return (f'<mujoco model="lavendersim-bench"><option timestep="{float(dt)!r}" integrator="{integrator}" '
+            f'gravity="0 0 0"><flag contact="disable"/></option><worldbody><body name="body"><freejoint/>'
+            f'<inertial pos="0 0 0" mass="{float(MASS)!r}" diaginertia="{float(I[0])!r} {float(I[1])!r} {float(I[2])!r}"/>'
+            f'</body></worldbody></mujoco>')
+
+
+def mujoco_available() -> tuple[bool, str]:
+    try:
+        import mujoco  # noqa: F401
+    except Exception as exc:  # noqa: BLE001
+        return False, f"mujoco is not installed or does not import ({type(exc).__name__}: {exc}); " \
+                      "install it with `pip install -e '.[bench]'`"
+    return True, ""
+
+
+class MujocoBody:
+    """One MuJoCo free body set to our initial state. MuJoCo's free joint: qpos = [p_w (3), q (w, x,
+    y, z)], qvel = [v_w (3, world), omega (3, body frame)] (MuJoCo docs, overview "Floating objects")."""
+
+    def __init__(self, integrator: str):
+        import mujoco
+        self.mj = mujoco
+        self.m = mujoco.MjModel.from_xml_string(mujoco_model_xml(integrator))
+        self.d = mujoco.MjData(self.m)
+        self.reset()
+        try:
+            from mujoco import rollout
+            self.rollout = rollout
+        except Exception:  # noqa: BLE001 - older mujoco without rollout
+            self.rollout = None
+        spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
+        self.spec = spec
+        self.nstate = mujoco.mj_stateSize(self.m, spec)
+        self.s0 = np.empty(self.nstate)
+        mujoco.mj_getState(self.m, self.d, self.s0, spec)
+
+    def reset(self) -> None:
+        x = initial_state()
+        self.mj.mj_resetData(self.m, self.d)
+        self.d.qpos[0:3] = x[0:3]
+        self.d.qpos[3:7] = [x[6], x[3], x[4], x[5]]  # (x, y, z, w) -> (w, x, y, z)
+        self.d.qvel[0:3] = x[7:10]
+        self.d.qvel[3:6] = x[10:13]
+
+    def step_loop(self, n: int) -> None:
+        step, m, d = self.mj.mj_step, self.m, self.d
+        for _ in range(n):
+            step(m, d)
+
+    def rollout_states(self, n: int, out: np.ndarray | None = None) -> np.ndarray:
+        """n steps inside C from the initial state; returns (n, nstate) = [time, qpos (7), qvel (6)]."""
+        if out is None:
+            out = np.empty((1, n, self.nstate))
+        self.rollout.rollout(self.m, self.d, self.s0[None], nstep=n, state=out)
+        return out[0]
+
+
+def mujoco_agreement(n_steps: int = 1000) -> dict:
+    """MuJoCo (each integrator) against LavenderSim's C RK4 and against the exact torque-free motion
+    (lavendersim.reference.torque_free) over n_steps steps from the same state."""
+    from lavendersim import reference as ref
+    t = DT * np.arange(1, n_steps + 1)
+    exact = ref.torque_free(inertia(), OMEGA_B0, Q0, t)
+    ours = single_sim("c").record(n_steps).x[1:, 0]
+    x0 = initial_state()
+    p_exact = x0[0:3] + t[:, None] * x0[7:10]
+
+    def errors(q, w, p, v, q_ref, w_ref, p_ref, v_ref):
+        return {"attitude_rad_max": float(np.max(ref.attitude_error(q, q_ref))),
+                "omega_b_max": float(np.max(np.abs(w - w_ref))),
+                "p_w_max": float(np.max(np.abs(p - p_ref))), "v_w_max": float(np.max(np.abs(v - v_ref)))}
+
+    out = {"steps": n_steps, "seconds": n_steps * DT,
+           "lavendersim_rk4_vs_exact": errors(ours[:, 3:7], ours[:, 10:13], ours[:, 0:3], ours[:, 7:10],
+                                              exact.q, exact.omega_b, p_exact, np.broadcast_to(x0[7:10], (n_steps, 3)))}
+    for integ in MUJOCO_INTEGRATORS:
+        mb = MujocoBody(integ)
+        if mb.rollout is not None:
+            s = mb.rollout_states(n_steps)
+            qpos, qvel = s[:, 1:8], s[:, 8:14]
+        else:
+            qpos, qvel = np.empty((n_steps, 7)), np.empty((n_steps, 6))
+            for k in range(n_steps):
+                mb.mj.mj_step(mb.m, mb.d)
+                qpos[k], qvel[k] = mb.d.qpos, mb.d.qvel
+        q = np.concatenate([qpos[:, 4:7], qpos[:, 3:4]], axis=1)  # (w, x, y, z) -> (x, y, z, w)
+        w, p, v = qvel[:, 3:6], qpos[:, 0:3], qvel[:, 0:3]
+        out[f"mujoco_{integ}_vs_lavendersim_rk4"] = errors(q, w, p, v, ours[:, 3:7], ours[:, 10:13],
+                                                            ours[:, 0:3], ours[:, 7:10])
+        out[f"mujoco_{integ}_vs_exact"] = errors(q, w, p, v, exact.q, exact.omega_b, p_exact,
+                                                 np.broadcast_to(x0[7:10], (n_steps, 3)))
+    return out
+
+
+# --------------------------------------------------------------------------- the run
+
+def settings(quick: bool) -> dict:
+    if quick:
+        return {"rounds": 2, "c_steps": 20_000, "numpy_steps": 200, "py_step_calls": 500,
+                "batch_sizes": BATCH_SIZES_QUICK, "c_body_steps": 40_000, "numpy_body_steps": 4_000,
+                "effect_steps": 20_000, "mj_step_steps": 300, "mj_rollout_steps": 1_000,
+                "agreement_steps": 2_000, "mujoco_agreement_steps": 200}
+    return {"rounds": 5, "c_steps": 2_000_000, "numpy_steps": 10_000, "py_step_calls": 20_000,
+            "batch_sizes": BATCH_SIZES_FULL, "c_body_steps": 4_000_000, "numpy_body_steps": 400_000,
+            "effect_steps": 1_000_000, "mj_step_steps": 20_000, "mj_rollout_steps": 50_000,
+            "agreement_steps": 10_000, "mujoco_agreement_steps": 1_000}
+
+
+def run(quick: bool = False, rounds: int | None = None, use_mujoco: bool = True) -> dict:
+    cfg = settings(quick)
+    if rounds is not None:
+        cfg["rounds"] = max(1, int(rounds))
+    R = cfg["rounds"]
+    res: dict = {"schema": SCHEMA, "quick": quick, "machine": machine_stamp(),
+                 "config": {"body": {"shape": "box", "mass": MASS, "size": list(SIZE), "I_b": inertia().tolist(),
+                                     "q0": list(Q0), "omega_b0": list(OMEGA_B0), "v_w0": list(V_W0)},
+                            "dt": DT, "integrator": "rk4", "normalize": True, "statistic": "min over rounds",
+                            **{k: (list(v) if isinstance(v, tuple) else v) for k, v in cfg.items()}},
+                 "targets": TARGETS}
+
+    # ---- hand-written reference
+    hw = {"available": False, "source": str(KERNEL_SOURCE)}
+    kernel = None
+    try:
+        kernel = HandwrittenKernel()
+        hw.update(available=True, compile_command=kernel.command)
+        _progress("hand-written kernel compiled; checking it against the Sim")
+        hw["agreement"] = handwritten_agreement(kernel, cfg["agreement_steps"], max(1, cfg["agreement_steps"] // 10))
+    except Exception as exc:  # noqa: BLE001 - reported in the output, the rest still runs
+        hw["error"] = f"{type(exc).__name__}: {exc}"
+    res["handwritten"] = hw
+
+    # ---- MuJoCo availability
+    mj_ok, mj_why = mujoco_available() if use_mujoco else (False, "skipped (--no-mujoco)")
+    mj = {"available": mj_ok}
+    if not mj_ok:
+        mj["reason"] = mj_why
+
+    # ---- single body, all cases interleaved
+    n_c, n_np, n_py = cfg["c_steps"], cfg["numpy_steps"], cfg["py_step_calls"]
+    sim_c, sim_np = single_sim("c"), single_sim("numpy")
+    sim_pc, sim_pn = single_sim("c"), single_sim("numpy")
+    cases = {
+        "c_rk4": (lambda: sim_c.run(n_c), n_c),
+        "numpy_rk4": (lambda: sim_np.run(n_np), n_np),
+        "python_step_c": (lambda: [sim_pc.step() for _ in range(n_py)], n_py),
+        "python_step_numpy": (lambda: [sim_pn.step() for _ in range(max(1, n_py // 10))], max(1, n_py // 10)),
+    }
+    if kernel is not None:
+        xh, xhc, I_b = initial_state(), initial_state(), inertia()
+        cases["handwritten_c"] = (lambda: kernel.advance(xh, I_b, DT, n_c), n_c)
+        cases["handwritten_c_checked"] = (lambda: kernel.advance(xhc, I_b, DT, n_c, check=True), n_c)
+    mj_bodies = {}
+    if mj_ok:
+        try:
+            for integ in MUJOCO_INTEGRATORS:
+                mb = MujocoBody(integ)
+                mj_bodies[integ] = mb
+                n_s = cfg["mj_step_steps"]
+                cases[f"mujoco_{integ}_mj_step"] = (lambda mb=mb, n_s=n_s: mb.step_loop(n_s), n_s)
+                if mb.rollout is not None:
+                    n_r = cfg["mj_rollout_steps"]
+                    buf = np.empty((1, n_r, mb.nstate))
+                    cases[f"mujoco_{integ}_rollout"] = (lambda mb=mb, n_r=n_r, buf=buf: mb.rollout_states(n_r, buf), n_r)
+            mj["version"] = mj_bodies["RK4"].mj.__version__
+            mj["rollout"] = mj_bodies["RK4"].rollout is not None
+        except Exception as exc:  # noqa: BLE001
+            mj = {"available": False, "reason": f"mujoco imported but failed: {type(exc).__name__}: {exc}"}
+            cases = {k: v for k, v in cases.items() if not k.startswith("mujoco_")}
+            mj_ok = False
+    _progress(f"single body: {len(cases)} cases interleaved, {R} rounds")
+    single = interleaved(cases, R, "single body")
+    res["single_body"] = single
+
+    # ---- batched
+    batched = []
+    for n in cfg["batch_sizes"]:
+        _progress(f"batched: N = {n}: building scenes")
+        sc, sn = batch_sim(n, "c"), batch_sim(n, "numpy")
+        steps_c = max(2, cfg["c_body_steps"] // n)
+        steps_n = max(2, min(2_000, cfg["numpy_body_steps"] // n))
+        t = interleaved({"c": (lambda sc=sc, s=steps_c: sc.run(s), steps_c * n),
+                         "numpy": (lambda sn=sn, s=steps_n: sn.run(s), steps_n * n)}, R, f"batched N = {n}")
+        batched.append({"n_bodies": n, "c_steps": steps_c, "numpy_steps": steps_n,
+                        "c": t["c"], "numpy": t["numpy"]})
+        del sc, sn
+    res["batched"] = batched
+
+    # ---- effect sets (cumulative), all interleaved
+    eff_cases, acc = {}, []
+    n_e = cfg["effect_steps"]
+    for name, effs in EFFECT_SETS:
+        acc = acc + effs
+        s = single_sim("c", effects=list(acc))
+        eff_cases[name] = (lambda s=s: s.run(n_e), n_e)
+    _progress(f"effects: {len(eff_cases)} sets interleaved, {R} rounds")
+    et = interleaved(eff_cases, R, "effects")
+    base = et["torque-free"]["ns_min"]
+    acc = []
+    res["effects"] = []
+    for name, effs in EFFECT_SETS:
+        acc = acc + effs
+        res["effects"].append({"name": name, "effects": [e for e, _ in acc], **et[name],
+                               "ratio_to_torque_free": et[name]["ns_min"] / base})
+
+    # ---- MuJoCo trajectory agreement
+    if mj_ok:
+        try:
+            _progress("MuJoCo trajectory agreement")
+            mj["agreement"] = mujoco_agreement(cfg["mujoco_agreement_steps"])
+        except Exception as exc:  # noqa: BLE001
+            mj["agreement_error"] = f"{type(exc).__name__}: {exc}"
+    res["mujoco"] = mj
+
+    res["ratios"] = ratios(res)
+    res["standing"] = standing(res)
+    return res
+
+
+def _ns(res, key):
+    v = res["single_body"].get(key)
+    return None if v is None else v["ns_min"]
+
+
+def ratios(res: dict) -> dict:
+    c = _ns(res, "c_rk4")
+    r = {}
+    for k in ("handwritten_c", "handwritten_c_checked"):
+        if _ns(res, k):
+            r[f"c_rk4_over_{k}"] = c / _ns(res, k)
+    for k in ("numpy_rk4", "python_step_c", "python_step_numpy"):
+        r[f"{k}_over_c_rk4"] = _ns(res, k) / c
+    for integ in MUJOCO_INTEGRATORS:
+        for how in ("mj_step", "rollout"):
+            v = _ns(res, f"mujoco_{integ}_{how}")
+            if v:
+                r[f"mujoco_{integ}_{how}_over_c_rk4"] = v / c
+    for b in res["batched"]:
+        n = b["n_bodies"]
+        r[f"batched_{n}_c_ns_per_body_step_over_single"] = b["c"]["ns_min"] / c
+        r[f"batched_{n}_numpy_over_c"] = b["numpy"]["ns_min"] / b["c"]["ns_min"]
+    for e in res["effects"]:
+        r[f"effects[{e['name']}]_over_torque_free"] = e["ratio_to_torque_free"]
+    return r
+
+
+def _line(name, value, limit, kind, unit, basis):
+    if value is None:
+        return {"name": name, "status": "N/A", "value": None, "limit": limit, "unit": unit, "basis": basis}
+    ok = value <= limit if kind == "max" else value >= limit
+    return {"name": name, "status": "PASS" if ok else "MISS", "value": value, "limit": limit,
+            "kind": kind, "unit": unit, "basis": basis}
+
+
+def standing(res: dict) -> list[dict]:
+    c = _ns(res, "c_rk4")
+    out = [_line("C single-body RK4", c, TARGETS["c_single_rk4_ns"], "max", "ns/step",
+                 "Sim.run(n), one C call, min over rounds")]
+    mj_step, mj_roll = _ns(res, "mujoco_RK4_mj_step"), _ns(res, "mujoco_RK4_rollout")
+    out.append(_line("faster than MuJoCo RK4 (mj_step loop)", None if mj_step is None else mj_step / c,
+                     TARGETS["mujoco_rk4_speedup"], "min", "x", "MuJoCo mj_step in a Python loop / LavenderSim C"))
+    out.append(_line("faster than MuJoCo RK4 (rollout, in C)", None if mj_roll is None else mj_roll / c,
+                     TARGETS["mujoco_rk4_speedup"], "min", "x", "mujoco.rollout / LavenderSim C"))
+    big = [b for b in res["batched"] if b["n_bodies"] >= 1000]
+    worst = max((b["c"]["ns_min"] for b in big), default=None)
+    out.append(_line("batched ns per body-step (worst of N >= 1e3)", worst, TARGETS["batched_ns_per_body_step"],
+                     "max", "ns/body-step", "N = " + ", ".join(f"{b['n_bodies']:g}" for b in big)))
+    hw = _ns(res, "handwritten_c")
+    out.append(_line("torque-free scene / hand-written C kernel", None if hw is None else c / hw,
+                     TARGETS["torque_free_vs_handwritten"], "max", "x", "LavenderSim C / handwritten_rk4.c (no checks)"))
+    return out
+
+
+# --------------------------------------------------------------------------- report
+
+def _f(ns: float) -> str:
+    if ns >= 1e6:
+        return f"{ns / 1e6:9.2f} ms"
+    if ns >= 1e3:
+        return f"{ns / 1e3:9.2f} µs"
+    return f"{ns:9.1f} ns"
+
+
+def report(res: dict) -> str:
+    m = res["machine"]
+    L = [f"lavendersim bench{' --quick' if res['quick'] else ''} — speed as ratios measured in one run",
+         f"machine : {m['cpu']}; {m['cores']} cores ({m['cores_usable']} usable); load {m['loadavg']}",
+         f"software: {m['python']}, numpy {m['numpy']}, mujoco {m['mujoco'] or 'not installed'}, "
+         f"lavendersim {m['lavendersim']}; compiler {m['compiler_version'] or 'none'}",
+         f"commit  : {m['git_commit'] or 'unknown'}{' (dirty)' if m['git_dirty'] else ''}; {m['date']}",
+         f"body    : box {MASS} kg {SIZE} m, I_b = {np.array2string(inertia(), precision=5)}, "
+         f"omega_b0 = {OMEGA_B0}, dt = {DT} s, RK4, q normalized; min of {res['config']['rounds']} interleaved rounds",
+         ""]
+    s = res["single_body"]
+    c = s["c_rk4"]["ns_min"]
+    hw = res["handwritten"]
+    L.append("single body                                         per step     median   x C")
+    rows = [("c_rk4", f"LavenderSim C, Sim.run({s['c_rk4']['units_per_call']:.0e} steps)"),
+            ("handwritten_c", "hand-written C99 RK4 (ctypes, 1 call)"),
+            ("handwritten_c_checked", "hand-written + finite check each step"),
+            ("numpy_rk4", f"LavenderSim NumPy, Sim.run({s['numpy_rk4']['units_per_call']})"),
+            ("python_step_c", "one Python sim.step() call, c backend"),
+            ("python_step_numpy", "one Python sim.step() call, numpy backend")]
+    for integ in MUJOCO_INTEGRATORS:
+        rows += [(f"mujoco_{integ}_mj_step", f"MuJoCo {integ}: mj_step in a Python loop"),
+                 (f"mujoco_{integ}_rollout", f"MuJoCo {integ}: rollout (steps in C)")]
+    for key, label in rows:
+        if key in s:
+            L.append(f"  {label:<48}{_f(s[key]['ns_min'])} {_f(s[key]['ns_median'])} {s[key]['ns_min'] / c:7.2f}")
+    if not hw["available"]:
+        L.append(f"  hand-written reference unavailable: {hw.get('error')}")
+    elif "agreement" in hw:
+        a = hw["agreement"]
+        L.append(f"  hand-written vs Sim ({a['steps']} steps): max |Δx| = {a['max_abs_diff']:.2e}")
+    mj = res["mujoco"]
+    if not mj["available"]:
+        L.append(f"  MuJoCo: not measured — {mj.get('reason')}")
+    L.append("")
+    L.append("batched: N bodies in one C call                 C ns/body-step  NumPy ns/body-step  NumPy/C")
+    for b in res["batched"]:
+        L.append(f"  N = {b['n_bodies']:<8g} ({b['c_steps']:>8} steps C, {b['numpy_steps']:>5} NumPy) "
+                 f"{b['c']['ns_min']:10.1f}  {b['numpy']['ns_min']:14.1f}  {b['numpy']['ns_min'] / b['c']['ns_min']:10.1f}")
+    L.append("")
+    L.append("effect sets on one body, C (cumulative)           ns/step   x torque-free")
+    for e in res["effects"]:
+        L.append(f"  {e['name']:<46}{e['ns_min']:8.1f}   {e['ratio_to_torque_free']:6.2f}")
+    if mj["available"] and "agreement" in mj:
+        a = mj["agreement"]
+        L.append("")
+        L.append(f"trajectory agreement over {a['seconds']:g} s ({a['steps']} steps), max over the run: "
+                 "attitude rad, |Δω_b| rad/s, |Δp| m, |Δv| m/s")
+
+        def row(label, e):
+            return (f"  {label:<40}{e['attitude_rad_max']:10.2e} {e['omega_b_max']:10.2e} "
+                    f"{e['p_w_max']:10.2e} {e['v_w_max']:10.2e}")
+        L.append(row("LavenderSim RK4 vs exact", a["lavendersim_rk4_vs_exact"]))
+        for integ in MUJOCO_INTEGRATORS:
+            L.append(row(f"MuJoCo {integ} vs LavenderSim RK4", a[f"mujoco_{integ}_vs_lavendersim_rk4"]))
+            L.append(row(f"MuJoCo {integ} vs exact", a[f"mujoco_{integ}_vs_exact"]))
+    elif "agreement_error" in mj:
+        L.append(f"MuJoCo agreement failed: {mj['agreement_error']}")
+    L.append("")
+    L.append("targets (issue 4)")
+    for t in res["standing"]:
+        if t["value"] is None:
+            L.append(f"  N/A   {t['name']}: not measured ({t['basis']})")
+            continue
+        op = "<=" if t["kind"] == "max" else ">="
+        L.append(f"  {t['status']:<5} {t['name']}: {t['value']:.3g} {t['unit']} (target {op} {t['limit']:g}; {t['basis']})")
+    return "\n".join(L)
+
+
+def _jsonable(o):
+    if isinstance(o, dict):
+        return {str(k): _jsonable(v) for k, v in o.items()}
+    if isinstance(o, (list, tuple)):
+        return [_jsonable(v) for v in o]
+    if isinstance(o, (np.floating, np.integer)):
+        return o.item()
+    if isinstance(o, float) and not np.isfinite(o):
+        return None
+    return o
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--quick", action="store_true", help="short run (small step counts, N up to 1e3) for tests")
+    p.add_argument("--json", metavar="PATH", help="write every figure to PATH as JSON")
+    p.add_argument("--rounds", type=int, default=None, help="interleaved rounds per section (default 5; 2 with --quick)")
+    p.add_argument("--no-mujoco", action="store_true", help="skip MuJoCo even when it is installed")
+
+
+def command(args) -> int:
+    res = run(quick=args.quick, rounds=args.rounds, use_mujoco=not args.no_mujoco)
+    print(report(res), flush=True)
+    if args.json:
+        path = Path(args.json)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps(_jsonable(res), indent=1) + "\n", encoding="utf-8")
+        print(f"\nwrote {path}")
+    return 0  # a missed target is reported, never an error
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(prog="python -m lavendersim.bench", description=__doc__.split("\n\n")[0])
+    add_arguments(p)
+    return command(p.parse_args(argv))

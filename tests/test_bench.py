@@ -1,0 +1,97 @@
+"""`lavendersim bench`: the quick run works and its output/JSON are well formed (timings are never
+checked), and the hand-written reference kernel computes the Sim's trajectory (so the ratio against
+it is honest)."""
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from lavendersim import bench
+
+needs_cc = pytest.mark.skipif(bench.compiler() is None, reason="no C compiler (cc/gcc) for the hand-written kernel")
+
+
+@pytest.fixture(scope="module")
+def quick(tmp_path_factory):
+    path = tmp_path_factory.mktemp("bench") / "bench.json"
+    r = subprocess.run([sys.executable, "-m", "lavendersim.cli", "bench", "--quick", "--json", str(path)],
+                       capture_output=True, text=True, timeout=300)
+    return r, path
+
+
+def test_quick_runs_and_prints_its_standing(quick):
+    r, _ = quick
+    assert r.returncode == 0, r.stderr
+    out = r.stdout
+    for heading in ("machine :", "single body", "batched: N bodies in one C call", "effect sets on one body",
+                    "targets (issue 4)"):
+        assert heading in out
+    lines = [ln.split() for ln in out.splitlines()]
+    status = [ln[0] for ln in lines if ln and ln[0] in ("PASS", "MISS", "N/A")]
+    assert len(status) == 5  # one line per target, whatever the timings
+    assert "round" in r.stderr  # progress
+
+
+def test_quick_json_is_well_formed(quick):
+    _, path = quick
+    d = json.loads(path.read_text())
+    assert d["schema"] == bench.SCHEMA and d["quick"] is True
+    for key in ("cpu", "cores", "python", "numpy", "compiler_version", "git_commit", "date"):
+        assert key in d["machine"]
+    for key in ("c_rk4", "numpy_rk4", "python_step_c", "python_step_numpy"):
+        s = d["single_body"][key]
+        assert s["ns_min"] > 0 and s["ns_min"] <= s["ns_median"] and len(s["ns_samples"]) == s["rounds"]
+    assert [b["n_bodies"] for b in d["batched"]] == list(bench.BATCH_SIZES_QUICK)
+    for b in d["batched"]:
+        assert b["c"]["ns_min"] > 0 and b["numpy"]["ns_min"] > 0
+    assert [e["name"] for e in d["effects"]] == [name for name, _ in bench.EFFECT_SETS]
+    assert d["effects"][0]["ratio_to_torque_free"] == 1.0
+    assert d["effects"][-1]["effects"] == ["applied_torque", "linear_damping", "angular_damping", "gravity",
+                                           "spherical_joint", "reaction_wheels"]
+    assert [t["status"] in ("PASS", "MISS", "N/A") for t in d["standing"]] == [True] * 5
+    assert all(math.isfinite(v) for v in d["ratios"].values())
+    hw = d["handwritten"]
+    if hw["available"]:
+        assert "handwritten_c" in d["single_body"] and "c_rk4_over_handwritten_c" in d["ratios"]
+        assert hw["agreement"]["max_abs_diff"] <= 1e-12
+    mj = d["mujoco"]
+    if mj["available"]:
+        assert "mujoco_RK4_mj_step" in d["single_body"] and "mujoco_RK4_mj_step_over_c_rk4" in d["ratios"]
+        assert "mujoco_RK4_vs_lavendersim_rk4" in mj["agreement"]
+    else:
+        assert mj["reason"]
+
+
+@needs_cc
+@pytest.mark.parametrize("backend", ["c", "numpy"])
+def test_handwritten_kernel_computes_the_sims_trajectory(backend):
+    kernel = bench.HandwrittenKernel()
+    a = bench.handwritten_agreement(kernel, n_steps=20_000, every=2_000, backend=backend)
+    assert a["max_abs_diff"] <= 1e-12, a
+
+
+@needs_cc
+def test_handwritten_kernel_reports_divergence_with_check():
+    kernel = bench.HandwrittenKernel()
+    x = bench.initial_state()
+    x[10:13] = [1e200, 1e200, 1e200]  # overflows in the first step
+    start = x.copy()
+    assert kernel.advance(x, bench.inertia(), bench.DT, 10, check=True) == 0
+    np.testing.assert_array_equal(x, start)  # left at the last finite state
+
+
+def test_mujoco_model_matches_the_body():
+    pytest.importorskip("mujoco")
+    mb = bench.MujocoBody("RK4")
+    np.testing.assert_allclose(mb.m.body_mass[1], bench.MASS)
+    np.testing.assert_allclose(mb.m.body_inertia[1], bench.inertia(), rtol=1e-12)
+    x = bench.initial_state()
+    np.testing.assert_allclose(mb.d.qpos[3:7], [x[6], x[3], x[4], x[5]])  # MuJoCo's (w, x, y, z)
+    a = bench.mujoco_agreement(100)
+    assert a["mujoco_RK4_vs_lavendersim_rk4"]["attitude_rad_max"] < 1e-10
+    assert a["mujoco_RK4_vs_lavendersim_rk4"]["omega_b_max"] < 1e-10
