@@ -9,6 +9,31 @@ frame) from the body's initial state and I_p = parallel_axis(diag(I_b), m, −r_
 v_w then follow the joint (pivot_kinematics) and are not integrated. A wheeled body without a joint
 rotates about its COM (I_p = diag(I_b), r_b = 0) and translates freely. Wheel commands are held
 (zero-order) until changed and saturated at the start of every step.
+
+Integrators (`integrator=`; `sim.rhs_evals` counts right-hand-side evaluations, cumulative):
+* "euler", "semi_implicit_euler" (1 evaluation per step), "rk4" (4): fixed step dt, any body.
+* "dopri5": adaptive Dormand–Prince 5(4) with FSAL and error control (`rtol`, default 1e-6; `atol`,
+  default 1e-9; the error of each accepted substep is at most 1 in Hairer's RMS norm of
+  err_i / (atol + rtol max(|y_i|, |y_new_i|)) over the body's numbers). dt is the output interval:
+  every step advances exactly dt with as many accepted substeps as needed (controller: safety 0.9,
+  growth in [0.2, 5], no growth right after a rejection; the proposal is kept between steps). A
+  substep below dt·1e-12, or more than 10⁶ substeps in one step, raises DivergenceError naming the
+  step and body ("could not meet rtol/atol"). Any body (joints and wheels too; wheel torques held
+  over each dt). The C backend chooses each body's step sizes independently; NumPy uses one shared
+  step (the largest body error decides), so results agree to the tolerance, not bitwise. rhs_evals
+  is the largest per-body count (C), or the shared count (NumPy) — per body for a single body.
+* "splitting": second-order Strang splitting of the free rigid body into the exact flows of
+  L_a²/(2I_a) about the principal axes, 1(h/2) 2(h/2) 3(h) 2(h/2) 1(h/2) (q by exact axis rotations,
+  unit by construction; torque-free, world L and |L_b| conserved to rounding, energy oscillates
+  boundedly), effects as half kicks of v and ω (explicit midpoint when damping makes them depend
+  on v or ω), p drifted by h v. Plain bodies only (no spherical_joint / reaction_wheels).
+* "implicit_gyro": the gyroscopic term implicit in the body frame, I(ω⁺ − ω)/dt + ω⁺ × Iω⁺ = τ_b,
+  solved by Newton's method to rounding (Catto, GDC 2015; Bullet's implicit gyroscopic force);
+  q ← q ⊗ exp(dt ω⁺/2); v, p semi-implicit Euler; loads at the start of the step. First order; a
+  torque-free step never gains energy (E − E⁺ = ½(ω − ω⁺)ᵀI(ω − ω⁺)), stable at large |ω|·dt.
+  Plain bodies only.
+Unsupported combinations (splitting / implicit_gyro with a joint or wheels; rtol/atol with a fixed-step
+integrator) raise LavenderInputError at construction.
 """
 from __future__ import annotations
 
@@ -16,7 +41,7 @@ import numpy as np
 
 from . import backends
 from . import validate as V
-from .backends import KIND_JOINT, KIND_WHEELS, MODEL_LAYOUT, Models
+from .backends import ADAPTIVE, KIND_JOINT, KIND_WHEELS, MODEL_LAYOUT, PLAIN_ONLY, Adaptive, Models
 from .bodies import BodyState
 from .errors import DivergenceError
 from .kernels import K
@@ -40,7 +65,8 @@ class Trajectory:
 
 
 class Sim:
-    def __init__(self, scene: Scene, dt: float = 1e-3, integrator: str = "rk4", backend: str = "c", normalize: bool = True):
+    def __init__(self, scene: Scene, dt: float = 1e-3, integrator: str = "rk4", backend: str = "c", normalize: bool = True,
+                 rtol: float | None = None, atol: float | None = None):
         if not isinstance(scene, Scene):
             raise V.LavenderInputError("scene", "must be a lavendersim.Scene", f", got {type(scene).__name__}")
         self.dt = V.dt("dt", dt)
@@ -54,8 +80,38 @@ class Sim:
         self.x, self.params, self.effects = scene.arrays()
         self._effect_objs = list(scene.effects)
         self._models = self._build_models(scene)
+        self._adaptive = None
+        if self.integrator in ADAPTIVE:
+            rtol = 1e-6 if rtol is None else V.scalar("rtol", rtol, positive=True)
+            atol = 1e-9 if atol is None else V.scalar("atol", atol, nonnegative=True)
+            if not 1e-14 <= rtol < 1:
+                raise V.LavenderInputError("rtol", "must be in [1e-14, 1) (below 1e-14 rounding dominates)", f", got {rtol!r}")
+            self._adaptive = Adaptive(rtol, atol, len(self.names))
+        else:
+            for field, value in (("rtol", rtol), ("atol", atol)):
+                if value is not None:
+                    raise V.LavenderInputError(field, f"applies to the adaptive integrators ({', '.join(ADAPTIVE)}) only; "
+                                               f"{self.integrator!r} uses the fixed step dt")
+        if self.integrator in PLAIN_ONLY:
+            for i, name in enumerate(self.names):
+                kind = self._kind(i)
+                if kind:
+                    what = " and ".join(w for f, w in ((KIND_JOINT, "a spherical_joint"), (KIND_WHEELS, "reaction_wheels")) if kind & f)
+                    raise V.LavenderInputError(
+                        "integrator", f"{self.integrator!r} steps plain rigid bodies only, but body {name!r} has {what}; "
+                        "use rk4 or dopri5 for jointed or wheeled bodies")
+        self._per_step = backends.rhs_per_step(self.integrator, self.effects, len(self.names))
         self.t = 0.0
         self.steps = 0
+        self.rhs_evals = 0
+
+    @property
+    def rtol(self) -> float | None:
+        return None if self._adaptive is None else self._adaptive.rtol
+
+    @property
+    def atol(self) -> float | None:
+        return None if self._adaptive is None else self._adaptive.atol
 
     def _build_models(self, scene: Scene) -> Models:
         """Per-body model rows (kind, I_p, r_b, anchor, J, limits, c_w) from the joint/wheel effects."""
@@ -90,9 +146,14 @@ class Sim:
     @property
     def pipeline(self) -> list[str]:
         """Each line is work done per step: the integrator, then per body its RHS kernels."""
-        n = backends.INTEGRATORS[self.integrator]
-        lines = [f"{self.integrator}: {n} RHS evaluation{'s' if n > 1 else ''} per step on the {self.backend.name} backend"
-                 + (", then normalize q" if self.normalize else ", q not normalized")]
+        n = self._per_step
+        if n is None:
+            head = (f"{self.integrator}: adaptive (rtol={self.rtol:g}, atol={self.atol:g}), RHS evaluations counted, "
+                    f"each step advances exactly dt on the {self.backend.name} backend"
+                    + (" (per-body step sizes)" if self.backend.name == "c" else " (one shared step size)"))
+        else:
+            head = f"{self.integrator}: {n} RHS evaluation{'s' if n > 1 else ''} per step on the {self.backend.name} backend"
+        lines = [head + (", then normalize q" if self.normalize else ", q not normalized")]
         for i, name in enumerate(self.names):
             mine = [e for e in self._effect_objs if e.body in (None, name)]
             kind = self._kind(i)
@@ -121,11 +182,15 @@ class Sim:
     # ---- stepping -------------------------------------------------------------------------
     def _advance(self, n: int) -> None:
         models = self._models if self._models.rows[:, 0].any() else None
+        ad = self._adaptive
+        before = None if ad is None else ad.nfev.copy()
         try:
-            self.backend.advance(self.x, self.params, self.effects, self.integrator, self.normalize, self.dt, n, models)
+            self.backend.advance(self.x, self.params, self.effects, self.integrator, self.normalize, self.dt, n, models,
+                                 *(() if ad is None else (ad,)))
         except DivergenceError as e:
             raise DivergenceError(self.steps + e.step, e.body, e.cause, self.names[e.body],
                                   t=(self.steps + e.step + 1) * self.dt) from None
+        self.rhs_evals += n * self._per_step if ad is None else int(np.max(ad.nfev - before, initial=0))
         self.steps += n
         self.t = self.steps * self.dt
 

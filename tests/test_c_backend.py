@@ -306,7 +306,13 @@ def test_bad_buffers():
     with pytest.raises(ValueError, match="body"):
         _c.simulate(state.copy(), params, np.array([effect(1, 0.5)]), 2, 1, 0.01, 1)
     with pytest.raises(ValueError, match="integrator"):
+        _c.simulate(state.copy(), params, E, 6, 1, 0.01, 1)
+    with pytest.raises(ValueError, match="dopri5 needs h"):
         _c.simulate(state.copy(), params, E, 3, 1, 0.01, 1)
+    with pytest.raises(ValueError, match="rtol > 0"):
+        _c.simulate(state.copy(), params, E, 3, 1, 0.01, 1, None, None, None, None, np.zeros(2), np.zeros(2), 0.0, 1e-9)
+    with pytest.raises(ValueError, match="one float64 per body"):
+        _c.simulate(state.copy(), params, E, 3, 1, 0.01, 1, None, None, None, None, np.zeros(3), np.zeros(2), 1e-6, 1e-9)
     with pytest.raises(ValueError, match="n_steps"):
         _c.simulate(state.copy(), params, E, 2, 1, 0.01, -1)
     with pytest.raises(ValueError, match="dt"):

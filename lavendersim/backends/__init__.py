@@ -1,9 +1,11 @@
 """Backends advance the state arrays of a scene:
 
-    advance(state, params, effects, integrator, normalize, dt, n_steps, models=None)
+    advance(state, params, effects, integrator, normalize, dt, n_steps, models=None, adaptive=None)
 
-mutates state (nb, 13) (and, with `models`, models.Omega and models.applied) in place, or raises
-DivergenceError and leaves every array unchanged. "numpy" needs no compiler; "c" steps inside C.
+mutates state (nb, 13) (and, with `models`, models.Omega and models.applied; with `adaptive`,
+adaptive.h and adaptive.nfev) in place, or raises DivergenceError and leaves every array unchanged.
+"numpy" needs no compiler; "c" steps inside C. dopri5 needs `adaptive` (an Adaptive); splitting and
+implicit_gyro accept plain bodies only (ValueError otherwise; Sim raises LavenderInputError first).
 
 `models` (a `Models`, or None when no body has a joint or wheels) carries the per-body model:
 rows (nb, MODEL_SIZE) laid out as MODEL_LAYOUT; Omega (nb, 3) wheel rates relative to the body,
@@ -17,8 +19,41 @@ import numpy as np
 
 from .. import validate as V
 
-INTEGRATORS = {"euler": 1, "semi_implicit_euler": 1, "rk4": 4}  # name -> RHS evaluations per step
+# name -> RHS evaluations per step (None: adaptive, counted as it runs). See rhs_per_step for how the
+# structure-preserving methods are counted.
+INTEGRATORS = {"euler": 1, "semi_implicit_euler": 1, "rk4": 4, "dopri5": None, "splitting": 1, "implicit_gyro": 1}
+ADAPTIVE = ("dopri5",)
+# Integrators that step plain rigid bodies only (no spherical_joint, no reaction_wheels): their exact
+# sub-flows / implicit solve use the diagonal principal inertia of a free body.
+PLAIN_ONLY = ("splitting", "implicit_gyro")
 BACKENDS = ("c", "numpy")
+
+DOPRI5_HMIN_REL = 1e-12         # a substep below dt * this means the tolerance cannot be met
+DOPRI5_MAX_SUBSTEPS = 1_000_000  # ... as do more substeps than this within one output step
+
+
+class Adaptive:
+    """Adaptive-stepping arrays shared by both backends: rtol, atol; h (nb,) each body's step-size
+    proposal carried between calls (0: choose one); nfev (nb,) RHS evaluations spent per body."""
+
+    def __init__(self, rtol: float, atol: float, nb: int):
+        self.rtol, self.atol = float(rtol), float(atol)
+        self.h = np.zeros(nb)
+        self.nfev = np.zeros(nb)
+
+
+def rhs_per_step(integrator: str, effects: np.ndarray, nb: int) -> int | None:
+    """RHS evaluations per step of the fixed-step integrators (None for adaptive ones).
+
+    splitting: its torque-free part (three exact axis rotations) is counted as 1; a body with effects
+    evaluates them once per half kick (2 per step), twice per half kick with linear or angular damping
+    (4 per step). implicit_gyro: 1 (the effects once, then a 3×3 Newton solve of the gyroscopic term to
+    rounding, typically 3–6 iterations, not counted). The scene's count is the largest body's."""
+    n = INTEGRATORS[integrator]
+    if integrator != "splitting" or n is None or len(effects) == 0:
+        return n
+    codes = effects[:, 0].astype(int)
+    return 4 if np.isin(codes, (4, 5)).any() else 2
 
 # Per-body model row (float64): kind is a bit set, KIND_JOINT | KIND_WHEELS.
 KIND_JOINT, KIND_WHEELS = 1, 2
@@ -75,12 +110,12 @@ def divergence_cause(x_before: np.ndarray, dt: float, integrator: str, Omega_bef
     if wheels is not None:
         J, c_w = np.asarray(wheels[0], dtype=np.float64), float(wheels[1])
         stiff = c_w * dt / float(np.min(J))
-        wlimit = {"euler": 2.0, "semi_implicit_euler": 2.0, "rk4": 2.78}.get(integrator, 2.0)
+        wlimit = {"euler": 2.0, "semi_implicit_euler": 2.0, "rk4": 2.78, "dopri5": 3.3}.get(integrator, 2.0)
         if stiff > wlimit:
             return (f"wheel damping c_w*dt/J = {stiff:.3g} is beyond the stability limit of {integrator} "
                     f"(~{wlimit}); the wheel rates Omega blew up: reduce dt or c_w")
     wdt = w * dt
-    limit = {"euler": 0.1, "semi_implicit_euler": 0.1, "rk4": 1.0}.get(integrator, 1.0)
+    limit = {"euler": 0.1, "semi_implicit_euler": 0.1, "rk4": 1.0, "splitting": 3.0, "implicit_gyro": 10.0}.get(integrator, 1.0)
     if wdt > limit:
         return f"|omega|*dt = {wdt:.3g} is too large for {integrator} (keep it below ~{limit}); reduce dt"
     wheels = "" if W is None else f", |Omega| = {W:.3g} rad/s"

@@ -14,11 +14,11 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import DivergenceError, StaleBuildError
-from . import KIND_WHEELS, Models
+from . import DOPRI5_HMIN_REL, DOPRI5_MAX_SUBSTEPS, KIND_WHEELS, PLAIN_ONLY, Adaptive, Models
 
 REBUILD = "pip install -e ."
 HASHED = ("kernels.c", "kernels.h")
-INTEGRATOR_CODES = {"euler": 0, "semi_implicit_euler": 1, "rk4": 2}
+INTEGRATOR_CODES = {"euler": 0, "semi_implicit_euler": 1, "rk4": 2, "dopri5": 3, "splitting": 4, "implicit_gyro": 5}
 EFFECT_CODES = {"applied_torque": 1, "force_at_point": 2, "gravity": 3, "linear_damping": 4, "angular_damping": 5}
 
 try:
@@ -178,6 +178,15 @@ def _f64_rows(name: str, a, cols: int, nb: int, writable: bool = False) -> np.nd
     return a
 
 
+def tolerance_cause(adaptive: Adaptive, h: float, dt: float, x: np.ndarray) -> str:
+    """Why dopri5 stopped: the requested tolerance could not be met."""
+    w = _norm(np.asarray(x[10:13], dtype=np.float64))
+    return (f"dopri5 could not meet rtol={adaptive.rtol:g}, atol={adaptive.atol:g}: the step size fell to "
+            f"{h:.3g} s (below dt*{DOPRI5_HMIN_REL:g} = {dt * DOPRI5_HMIN_REL:.3g} s) or one step of dt = {dt:g} s "
+            f"needed over {DOPRI5_MAX_SUBSTEPS:,} substeps (|omega| = {w:.3g} rad/s); loosen rtol/atol, check "
+            "effect strengths (stiff damping), or use implicit_gyro for very fast spin")
+
+
 class CBackend:
     """advance(state, params, effects, integrator, normalize, dt, n_steps, models=None) inside C;
     see the module doc and lavendersim.backends."""
@@ -185,9 +194,13 @@ class CBackend:
     name = "c"
 
     def advance(self, state, params, effects, integrator: str, normalize: bool, dt: float, n_steps: int,
-                models: Models | None = None) -> None:
+                models: Models | None = None, adaptive: Adaptive | None = None) -> None:
         if integrator not in INTEGRATOR_CODES:
             raise ValueError(f"integrator: must be one of {', '.join(INTEGRATOR_CODES)}, got {integrator!r}")
+        if integrator == "dopri5" and adaptive is None:
+            raise ValueError("integrator: dopri5 needs adaptive (a lavendersim.backends.Adaptive)")
+        if integrator in PLAIN_ONLY and models is not None and np.any(np.asarray(models.rows)[:, 0] != 0):
+            raise ValueError(f"integrator: {integrator} steps plain rigid bodies only (no spherical_joint or reaction_wheels)")
         if not isinstance(state, np.ndarray) or state.dtype != np.float64 or not state.flags.c_contiguous \
                 or not state.flags.writeable:
             raise TypeError("state must be a writable C-contiguous float64 numpy array of shape (nb, 13)")
@@ -205,10 +218,21 @@ class CBackend:
             applied = _f64_rows("applied", models.applied, 3, nb, writable=True)
             extra = (rows, Omega, command, applied)
             snap_W, snap_u = Omega.copy(), applied.copy()
+        if adaptive is not None and integrator == "dopri5":
+            snap_h, snap_n = adaptive.h.copy(), adaptive.nfev.copy()
+            if not extra:
+                extra = (None, None, None, None)
+            extra = extra + (adaptive.h, adaptive.nfev, adaptive.rtol, adaptive.atol)
         status, step, body = _c.simulate(state, params, effects, INTEGRATOR_CODES[integrator],
                                          1 if normalize else 0, float(dt), int(n_steps), *extra)
         if status == 0:
             return
+        tol_cause = None
+        if adaptive is not None and integrator == "dopri5":
+            if status == 2:
+                tol_cause = tolerance_cause(adaptive, float(adaptive.h[body]), float(dt), state[body])
+            adaptive.h[...] = snap_h
+            adaptive.nfev[...] = snap_n
         pre = state[body].copy()  # the failing body is left at its last finite state
         state[...] = snapshot
         model = None
@@ -219,5 +243,7 @@ class CBackend:
             if int(rows[body, 0]):
                 W0 = snap_W[body] if int(rows[body, 0]) & KIND_WHEELS else None
                 model = (rows[body], W0, None if W0 is None else pre_W, command[body])
+        if tol_cause is not None:
+            raise DivergenceError(step, body, tol_cause)
         raise DivergenceError(step, body, _cause(snapshot[body], pre, params, effects, body, step,
                                                  float(dt), integrator, model))

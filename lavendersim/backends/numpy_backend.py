@@ -14,7 +14,8 @@ import numpy as np
 
 from ..errors import DivergenceError
 from ..kernels import K
-from . import KIND_JOINT, KIND_WHEELS, MODEL_LAYOUT as L, Models, divergence_cause, saturate
+from . import (DOPRI5_HMIN_REL, DOPRI5_MAX_SUBSTEPS, KIND_JOINT, KIND_WHEELS, MODEL_LAYOUT as L, PLAIN_ONLY,
+               Adaptive, Models, divergence_cause, saturate)
 
 
 def _terms(effects: np.ndarray, idx: np.ndarray) -> list:
@@ -99,6 +100,12 @@ class _Plan:
         self.forced = np.flatnonzero(plain & touched)
         self.terms = _terms(effects, self.forced)
         self.m_f, self.I_f = self.m[self.forced], self.I[self.forced]
+        damped = np.zeros(nb, bool)  # bodies with a velocity-dependent effect (linear/angular damping)
+        for row in effects:
+            if int(row[0]) in (4, 5):
+                damped[slice(None) if row[1] < 0 else int(row[1])] = True
+        self.damped_f = damped[self.forced]
+        self.wheeled = (kind & KIND_WHEELS) != 0
         self.I_free = self.I[self.free]
         wheels = np.flatnonzero((kind & KIND_WHEELS) != 0)
         pivot = np.flatnonzero(kind == KIND_JOINT)
@@ -141,6 +148,16 @@ class _Plan:
             out[g.idx] = o
         return out
 
+    def loads(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Plain bodies: (F_w, tau_b) of their effects, (nb, 3) each; zeros for bodies without effects."""
+        F = np.zeros((x.shape[0], 3))
+        tau_b = np.zeros((x.shape[0], 3))
+        if self.forced.size:
+            xf = x[self.forced]
+            Ff, tf = _sums(self.terms, self.m_f, xf[:, 3:7], xf[:, 7:10], xf[:, 10:13])
+            F[self.forced], tau_b[self.forced] = Ff, K.world_to_body(xf[:, 3:7], tf)
+        return F, tau_b
+
     def applied(self, x: np.ndarray, command: np.ndarray) -> np.ndarray | None:
         """Saturated wheel torques for this step (zero-order hold), for the wheeled bodies."""
         g = self.wheels
@@ -167,6 +184,94 @@ def _normalize(x: np.ndarray) -> None:
     x[:, 3:7] = K.quat_normalize(x[:, 3:7])
 
 
+def _axis_flow(I, q, Lb, a, h):
+    """Exact flow for time h of H_a = L_a²/(2 I_a): L_b turns about body axis a by −h L_a/I_a, the
+    attitude by +h L_a/I_a about it (q ← q ⊗ [sin(θ/2) e_a, cos(θ/2)]). Same arithmetic as step.c."""
+    th = h * Lb[:, a] / I[:, a]
+    j, k = (a + 1) % 3, (a + 2) % 3
+    sh, ch = np.sin(0.5 * th), np.cos(0.5 * th)
+    c, s = 1.0 - 2.0 * sh * sh, 2.0 * sh * ch
+    Lj, Lk = Lb[:, j].copy(), Lb[:, k].copy()
+    Lb[:, j], Lb[:, k] = c * Lj + s * Lk, -s * Lj + c * Lk
+    hq = np.zeros((th.size, 4))
+    hq[:, a], hq[:, 3] = sh, ch
+    return K.quat_mul(q, hq)
+
+
+def _kick(plan, x, h):
+    """Half kick of the splitting (q, p fixed): exact for position-only loads; explicit midpoint for
+    bodies with linear or angular damping."""
+    m, I = plan.m[:, None], plan.I
+    F, tb = plan.loads(x)
+    if plan.damped_f.any():
+        xm = x.copy()
+        xm[:, 7:10] += 0.5 * h * F / m
+        xm[:, 10:13] += 0.5 * h * tb / I
+        F2, tb2 = plan.loads(xm)
+        d = np.zeros(x.shape[0], bool)
+        d[plan.forced[plan.damped_f]] = True
+        F, tb = np.where(d[:, None], F2, F), np.where(d[:, None], tb2, tb)
+    x[:, 7:10] += h * F / m
+    x[:, 10:13] += h * tb / I
+
+
+def _splitting(plan, x, h):
+    """kick(h/2); p += h v; free rotation by Strang 1(h/2) 2(h/2) 3(h) 2(h/2) 1(h/2); kick(h/2)."""
+    xn = x.copy()
+    forced = plan.forced.size > 0
+    if forced:
+        _kick(plan, xn, 0.5 * h)
+    I = plan.I
+    xn[:, 0:3] += h * xn[:, 7:10]
+    Lb = I * xn[:, 10:13]
+    q = xn[:, 3:7]
+    for a, f in ((0, 0.5), (1, 0.5), (2, 1.0), (1, 0.5), (0, 0.5)):
+        q = _axis_flow(I, q, Lb, a, f * h)
+    xn[:, 3:7], xn[:, 10:13] = q, Lb / I
+    if forced:
+        _kick(plan, xn, 0.5 * h)
+    return xn
+
+
+def gyro_newton(I, w, tau_b, h, iterations: int = 30):
+    """Solve I(w1 − w) + h w1 × (I w1) = h tau_b for w1 (rows of bodies) by Newton's method from w1 = w,
+    to rounding. Solved exactly the torque-free step never gains energy: E − E1 = ½(w − w1)ᵀI(w − w1)."""
+    w1 = w.copy()
+    eye = np.eye(3)
+    for _ in range(iterations):
+        Lw = I * w1
+        g = I * (w1 - w) + h * np.cross(w1, Lw) - h * tau_b
+        J = eye * I[:, None, :] + h * (_skew(w1) * I[:, None, :] - _skew(Lw))
+        d = np.linalg.solve(J, g[..., None])[..., 0]
+        w1 = w1 - d
+        if not np.any(np.sum(d * d, axis=1) > 1e-32 * np.sum(w1 * w1, axis=1)):
+            break
+    return w1
+
+
+def _skew(a):
+    z = np.zeros(a.shape[0])
+    return np.stack([np.stack([z, -a[:, 2], a[:, 1]], 1), np.stack([a[:, 2], z, -a[:, 0]], 1),
+                     np.stack([-a[:, 1], a[:, 0], z], 1)], 1)
+
+
+def _implicit_gyro(plan, x, h):
+    """Loads at the start; w1 by gyro_newton; q ← q ⊗ exp(h w1/2); v += h F/m; p += h v."""
+    F, tb = plan.loads(x)
+    w1 = gyro_newton(plan.I, x[:, 10:13], tb, h)
+    n = np.sqrt(np.sum(w1 * w1, axis=1))
+    a = 0.5 * h * n
+    with np.errstate(invalid="ignore", divide="ignore"):
+        sa = np.where(a > 1e-8, np.sin(a) / np.where(n > 0, n, 1.0), 0.5 * h * (1.0 - a * a / 6.0))
+    e = np.concatenate([sa[:, None] * w1, np.cos(a)[:, None]], axis=1)
+    xn = x.copy()
+    xn[:, 3:7] = K.quat_mul(x[:, 3:7], e)
+    xn[:, 10:13] = w1
+    xn[:, 7:10] += h * F / plan.m[:, None]
+    xn[:, 0:3] += h * xn[:, 7:10]
+    return xn
+
+
 def step(plan: _Plan, x: np.ndarray, integrator: str, normalize: bool, dt: float, u=None) -> np.ndarray:
     """One step of every body; returns the new state array. x is (nb, 13), or (nb, 16) = [x, Omega]
     with u the wheeled bodies' applied torques when the plan has joints or wheels."""
@@ -179,6 +284,10 @@ def step(plan: _Plan, x: np.ndarray, integrator: str, normalize: bool, dt: float
         xn[:, 7:] += dt * k[:, 7:]  # v, omega (and Omega) first
         xn[:, 0:3] += dt * xn[:, 7:10]
         xn[:, 3:7] += dt * K.quat_derivative_body(x[:, 3:7], xn[:, 10:13])
+    elif integrator == "splitting":
+        xn = _splitting(plan, x, dt)
+    elif integrator == "implicit_gyro":
+        xn = _implicit_gyro(plan, x, dt)
     elif integrator == "rk4":
         h = dt / 2
         k1 = f(x)
@@ -209,21 +318,33 @@ class NumpyBackend:
         return self._plan
 
     def advance(self, state, params, effects, integrator: str, normalize: bool, dt: float, n_steps: int,
-                models: Models | None = None) -> None:
+                models: Models | None = None, adaptive: Adaptive | None = None) -> None:
         plan = self.plan(params, effects, None if models is None else models.rows)
+        if integrator in PLAIN_ONLY and plan.has_models:
+            raise ValueError(f"integrator: {integrator} steps plain rigid bodies only (no spherical_joint or reaction_wheels)")
+        if integrator == "dopri5" and adaptive is None:
+            raise ValueError("integrator: dopri5 needs adaptive (a lavendersim.backends.Adaptive)")
+        loop = self._loop
+        if integrator == "dopri5":
+            h, nfev = adaptive.h.copy(), adaptive.nfev.copy()
+
+            def loop(plan, x, integrator, normalize, dt, n_steps, command=None, applied=None):  # noqa: E306
+                _dopri5(plan, x, normalize, dt, n_steps, adaptive.rtol, adaptive.atol, h, nfev, command, applied)
         if not plan.has_models:
             x = state.copy()
             with np.errstate(over="ignore", invalid="ignore", divide="ignore"):  # non-finite results are caught below
-                self._loop(plan, x, integrator, normalize, dt, n_steps)
+                loop(plan, x, integrator, normalize, dt, n_steps)
             state[...] = x
-            return
-        x = np.concatenate([state, models.Omega], axis=1)
-        applied = models.applied.copy()
-        with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
-            self._loop(plan, x, integrator, normalize, dt, n_steps, models.command, applied)
-        state[...] = x[:, :13]
-        models.Omega[...] = x[:, 13:16]
-        models.applied[...] = applied
+        else:
+            x = np.concatenate([state, models.Omega], axis=1)
+            applied = models.applied.copy()
+            with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+                loop(plan, x, integrator, normalize, dt, n_steps, models.command, applied)
+            state[...] = x[:, :13]
+            models.Omega[...] = x[:, 13:16]
+            models.applied[...] = applied
+        if integrator == "dopri5":
+            adaptive.h[...], adaptive.nfev[...] = h, nfev
 
     @staticmethod
     def _loop(plan, x, integrator, normalize, dt, n_steps, command=None, applied=None) -> None:
@@ -236,3 +357,105 @@ class NumpyBackend:
             x[...] = xn
             if u is not None:
                 applied[plan.wheels.idx] = u
+
+
+# Dormand–Prince 5(4) (Hairer, Nørsett & Wanner, Solving ODEs I, table 5.2), as in step.c.
+_DP_A = [[], [1 / 5], [3 / 40, 9 / 40], [44 / 45, -56 / 15, 32 / 9],
+         [19372 / 6561, -25360 / 2187, 64448 / 6561, -212 / 729],
+         [9017 / 3168, -355 / 33, 46732 / 5247, 49 / 176, -5103 / 18656],
+         [35 / 384, 0.0, 500 / 1113, 125 / 192, -2187 / 6784, 11 / 84]]
+_DP_E = [71 / 57600, 0.0, -71 / 16695, 71 / 1920, -17253 / 339200, 22 / 525, -1 / 40]
+_SAFETY, _FACMIN, _FACMAX = 0.9, 0.2, 5.0
+
+
+def _dp_norms(e, y, yn, rtol, atol, ncols):
+    """Per body RMS of e / (atol + rtol max(|y|, |yn|)) over its ncols numbers (13, or 16 with wheels)."""
+    sc = atol + rtol * np.maximum(np.abs(y), np.abs(yn))
+    z = np.divide(e, sc, out=np.zeros_like(e), where=e != 0)  # an exact zero counts 0 (even with atol = 0)
+    return np.sqrt(np.sum(z * z, axis=1) / ncols)  # plain bodies' Omega columns are exactly 0
+
+
+def _dopri5(plan, x, normalize, dt, n_steps, rtol, atol, hs, nfev, command=None, applied=None):
+    """Advance every body by n_steps output steps of exactly dt with one shared step size: the error
+    norm is the largest body's. hs (nb,) holds the proposal (all equal), nfev (nb,) the count; both
+    updated in place. k1 is reused (FSAL) within the call, recomputed each output step with wheels
+    (their held torque may change)."""
+    nb = x.shape[0]
+    ncols = np.where(plan.wheeled, 16.0, 13.0) if x.shape[1] > 13 else np.full(nb, 13.0)
+    hmin = DOPRI5_HMIN_REL * dt
+    h = float(hs[0]) if nb else dt
+    k1 = None
+    count = 0
+    u = None
+    for i in range(n_steps):
+        if command is not None:
+            u = plan.applied(x, command)
+            if plan.wheels is not None:
+                k1 = None
+        f = (lambda y: plan.rhs(y, u)) if plan.has_models else plan.rhs  # noqa: E731
+        if k1 is None:
+            k1 = f(x)
+            count += 1
+        if not (h > 0.0 and np.isfinite(h)):
+            h, n_init = _initial_h(f, x, k1, rtol, atol, dt, ncols)
+            count += n_init
+        t, sub, rejected = 0.0, 0, False
+        while t < dt:
+            rem = dt - t
+            clipped = h >= rem
+            hh = rem if clipped else h
+            k = [k1]
+            for s_ in range(1, 7):
+                acc = sum(a * kj for a, kj in zip(_DP_A[s_], k) if a != 0.0)
+                k.append(f(x + hh * acc))
+            count += 6
+            yn = x + hh * sum(a * kj for a, kj in zip(_DP_A[6], k) if a != 0.0)
+            err = hh * sum(e * kj for e, kj in zip(_DP_E, k) if e != 0.0)
+            norms = _dp_norms(err, x, yn, rtol, atol, ncols)
+            e = float(np.max(norms)) if np.all(np.isfinite(norms)) else np.inf
+            if e <= 1.0:
+                fac = _FACMAX if e == 0.0 else min(_FACMAX, max(_FACMIN, _SAFETY * e ** -0.2))
+                if rejected:
+                    fac = min(fac, 1.0)
+                t = dt if clipped else t + hh
+                if not (clipped and fac >= 1.0 and h > hh * fac):
+                    h = hh * fac
+                if normalize:
+                    _normalize(yn)
+                if plan.has_models:
+                    plan.constrain(yn)
+                if not np.isfinite(yn).all():
+                    b = int(np.flatnonzero(~np.isfinite(yn).all(axis=1))[0])
+                    raise DivergenceError(i, b, divergence_cause(x[b, :13], dt, "dopri5", *plan.wheel_info(x, b)))
+                x[...] = yn
+                k1 = k[6]
+                rejected = False
+            else:
+                fac = max(_FACMIN, _SAFETY * e ** -0.2) if np.isfinite(e) else _FACMIN
+                h = hh * min(fac, 1.0)
+                rejected = True
+            sub += 1
+            if h < hmin or sub > DOPRI5_MAX_SUBSTEPS:
+                from .c_backend import tolerance_cause  # noqa: PLC0415 - shared wording
+
+                bad = ~np.isfinite(norms)
+                b = int(np.flatnonzero(bad)[0]) if bad.any() else int(np.argmax(norms))
+                raise DivergenceError(i, b, tolerance_cause(Adaptive(rtol, atol, 0), h, dt, x[b]))
+        if u is not None:
+            applied[plan.wheels.idx] = u
+    hs[...] = h
+    nfev += count
+
+
+def _initial_h(f, x, f0, rtol, atol, dt, ncols):
+    """Hairer's starting step (Solving ODEs I, II.4), shared by all bodies (the smallest); 1 evaluation."""
+    d0 = float(np.min(_dp_norms(x, x, x, rtol, atol, ncols)))
+    d1 = float(np.max(_dp_norms(f0, x, x, rtol, atol, ncols)))
+    h0 = 1e-6 if (d0 < 1e-5 or d1 < 1e-5) else 0.01 * d0 / d1
+    h0 = min(h0, dt)
+    f1 = f(x + h0 * f0)
+    d2 = float(np.max(_dp_norms((f1 - f0) / h0, x, x, rtol, atol, ncols)))
+    mx = max(d1, d2)
+    h1 = max(1e-6, h0 * 1e-3) if mx <= 1e-15 else (0.01 / mx) ** 0.2
+    h = min(100 * h0, h1)
+    return (h if np.isfinite(h) and h > 0 else dt), 1

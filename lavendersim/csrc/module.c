@@ -132,6 +132,11 @@ static PyObject *py_simulate(PyObject *self, PyObject *args)
 {
     PyObject *state_obj, *params_obj, *effects_obj;
     PyObject *rows_obj = Py_None, *omega_obj = Py_None, *cmd_obj = Py_None, *app_obj = Py_None;
+    PyObject *h_obj = Py_None, *nfev_obj = Py_None;
+    double rtol = 0.0, atol = 0.0;
+    Py_buffer hb, nf;
+    int have_h = 0, have_nf = 0;
+    lv_adaptive adaptive;
     int integrator, normalize, n_models;
     double dt;
     long long n_steps_ll;
@@ -142,8 +147,9 @@ static PyObject *py_simulate(PyObject *self, PyObject *args)
     lv_models models;
     int status;
     (void)self;
-    if (!PyArg_ParseTuple(args, "OOOipdL|OOOO:simulate", &state_obj, &params_obj, &effects_obj, &integrator,
-                          &normalize, &dt, &n_steps_ll, &rows_obj, &omega_obj, &cmd_obj, &app_obj))
+    if (!PyArg_ParseTuple(args, "OOOipdL|OOOOOOdd:simulate", &state_obj, &params_obj, &effects_obj, &integrator,
+                          &normalize, &dt, &n_steps_ll, &rows_obj, &omega_obj, &cmd_obj, &app_obj,
+                          &h_obj, &nfev_obj, &rtol, &atol))
         return NULL;
     n_models = (rows_obj != Py_None) + (omega_obj != Py_None) + (cmd_obj != Py_None) + (app_obj != Py_None);
     if (n_models != 0 && n_models != 4) {
@@ -151,9 +157,18 @@ static PyObject *py_simulate(PyObject *self, PyObject *args)
                         "simulate: give all four of model_rows, Omega, command, applied, or none of them");
         return NULL;
     }
-    if (integrator < 0 || integrator > 2) {
+    if (integrator < 0 || integrator > LV_INTEGRATOR_LAST) {
         PyErr_Format(PyExc_ValueError,
-                     "simulate: integrator code must be 0 (euler), 1 (semi_implicit_euler) or 2 (rk4), got %d", integrator);
+                     "simulate: integrator code must be 0 (euler), 1 (semi_implicit_euler), 2 (rk4), 3 (dopri5), "
+                     "4 (splitting) or 5 (implicit_gyro), got %d", integrator);
+        return NULL;
+    }
+    if (integrator == LV_INTEGRATOR_DOPRI5 && (h_obj == Py_None || nfev_obj == Py_None)) {
+        PyErr_SetString(PyExc_ValueError, "simulate: dopri5 needs h (nb,) and nfev (nb,) float64 arrays, rtol and atol");
+        return NULL;
+    }
+    if (integrator == LV_INTEGRATOR_DOPRI5 && !(rtol > 0.0 && isfinite(rtol) && atol >= 0.0 && isfinite(atol))) {
+        PyErr_SetString(PyExc_ValueError, "simulate: dopri5 needs finite rtol > 0 and atol >= 0");
         return NULL;
     }
     if (n_steps_ll < 0 || n_steps_ll > (long long)LONG_MAX) {
@@ -179,12 +194,29 @@ static PyObject *py_simulate(PyObject *self, PyObject *args)
         if (get_f64(app_obj, &ap, 1, "simulate: applied") != 0) goto fail;
         have_ap = 1;
     }
+    if (integrator == LV_INTEGRATOR_DOPRI5) {
+        if (get_f64(h_obj, &hb, 1, "simulate: h") != 0) goto fail;
+        have_h = 1;
+        if (get_f64(nfev_obj, &nf, 1, "simulate: nfev") != 0) goto fail;
+        have_nf = 1;
+    }
     if (rows_of(&st, LV_STATE_SIZE, "simulate: state", "[p_w(3), q(4), v_w(3), omega_b(3)]", &nb) != 0) goto fail;
     if (rows_of(&pr, LV_PARAM_SIZE, "simulate: params", "[m, I_x, I_y, I_z]", &np_rows) != 0) goto fail;
     if (rows_of(&ef, LV_EFFECT_SIZE, "simulate: effects", "[kind, body, p0..p5]", &ne) != 0) goto fail;
     if (np_rows != nb) {
         PyErr_Format(PyExc_ValueError, "simulate: params has %zd rows but state has %zd bodies", np_rows, nb);
         goto fail;
+    }
+    if (have_h && (hb.len / 8 != nb || nf.len / 8 != nb)) {
+        PyErr_Format(PyExc_ValueError, "simulate: h and nfev must hold one float64 per body (%zd), got %zd and %zd",
+                     nb, (Py_ssize_t)(hb.len / 8), (Py_ssize_t)(nf.len / 8));
+        goto fail;
+    }
+    if (have_h) {
+        adaptive.rtol = rtol;
+        adaptive.atol = atol;
+        adaptive.h = (double *)hb.buf;
+        adaptive.nfev = (double *)nf.buf;
     }
     if (n_models) {
         if (rows_of(&mr, LV_MODEL_SIZE, "simulate: model_rows",
@@ -245,7 +277,8 @@ static PyObject *py_simulate(PyObject *self, PyObject *args)
     }
     Py_BEGIN_ALLOW_THREADS
     status = lv_simulate((double *)st.buf, (const double *)pr.buf, (long)nb, (const double *)ef.buf, (long)ne,
-                         n_models ? &models : NULL, integrator, normalize, dt, (long)n_steps_ll, &fail_step, &fail_body);
+                         n_models ? &models : NULL, integrator, normalize, dt, (long)n_steps_ll,
+                         have_h ? &adaptive : NULL, &fail_step, &fail_body);
     Py_END_ALLOW_THREADS
     PyBuffer_Release(&st);
     PyBuffer_Release(&pr);
@@ -254,8 +287,11 @@ static PyObject *py_simulate(PyObject *self, PyObject *args)
     if (have_om) PyBuffer_Release(&om);
     if (have_cm) PyBuffer_Release(&cm);
     if (have_ap) PyBuffer_Release(&ap);
+    if (have_h) PyBuffer_Release(&hb);
+    if (have_nf) PyBuffer_Release(&nf);
     if (status < 0) {
-        PyErr_SetString(PyExc_ValueError, "simulate: lv_simulate rejected its arguments");
+        PyErr_SetString(PyExc_ValueError, "simulate: lv_simulate rejected its arguments "
+                        "(splitting and implicit_gyro step plain bodies only: no joint or wheels)");
         return NULL;
     }
     if (status == LV_OK) return Py_BuildValue("(iii)", 0, -1, -1);
@@ -268,6 +304,8 @@ fail:
     if (have_om) PyBuffer_Release(&om);
     if (have_cm) PyBuffer_Release(&cm);
     if (have_ap) PyBuffer_Release(&ap);
+    if (have_h) PyBuffer_Release(&hb);
+    if (have_nf) PyBuffer_Release(&nf);
     return NULL;
 }
 
@@ -278,13 +316,17 @@ static PyMethodDef methods[] = {
      "eval_kernel(index, inp, out): run packed kernel `index` over N rows; inp holds N*n_in float64 "
      "(C-contiguous), out N*n_out (writable)."},
     {"simulate", py_simulate, METH_VARARGS,
-     "simulate(state, params, effects, integrator, normalize, dt, n_steps[, model_rows, Omega, command, applied])\n"
+     "simulate(state, params, effects, integrator, normalize, dt, n_steps[, model_rows, Omega, command, applied,\n"
+     "         h, nfev, rtol, atol])\n"
      "  -> (status, step, body).\n"
      "state (nb,13) advanced in place; params (nb,4) [m, I_x, I_y, I_z]; effects (ne,8) [kind, body, p0..p5].\n"
      "Optional, all four or none: model_rows (nb,22) [kind (0 plain, 1 joint, 2 wheels, 3 both), I_p(9), r_b(3),\n"
      "anchor_w(3), J(3), torque_limit, speed_limit, c_w]; Omega (nb,3) advanced in place; command (nb,3) held;\n"
      "applied (nb,3) receives the saturated wheel torques of the last step.\n"
-     "integrator 0 euler, 1 semi-implicit euler, 2 rk4. status 0 ok (step = body = -1); status 1: the\n"
+     "The model arrays may be None (all four). dopri5 needs h (nb,) (per-body step proposals, in/out; <= 0:\n"
+     "choose) and nfev (nb,) (RHS evaluations added per body), rtol > 0, atol >= 0.\n"
+     "integrator 0 euler, 1 semi-implicit euler, 2 rk4, 3 dopri5, 4 splitting, 5 implicit_gyro (4, 5: plain\n"
+     "bodies only). status 2: dopri5 could not meet the tolerance (h[body] = the step that was too small). status 0 ok (step = body = -1); status 1: the\n"
      "state of `body` became non-finite at 0-based `step`: earlier bodies are fully advanced, that body\n"
      "holds its last finite state (and wheel rates), later bodies are untouched."},
     {NULL, NULL, 0, NULL}};
@@ -302,7 +344,10 @@ PyMODINIT_FUNC PyInit__lavender_c(void)
         PyModule_AddIntConstant(m, "KERNEL_COUNT", LV_KERNEL_COUNT) != 0 ||
         PyModule_AddIntConstant(m, "EULER", LV_INTEGRATOR_EULER) != 0 ||
         PyModule_AddIntConstant(m, "SEMI_IMPLICIT_EULER", LV_INTEGRATOR_SEMI_IMPLICIT_EULER) != 0 ||
-        PyModule_AddIntConstant(m, "RK4", LV_INTEGRATOR_RK4) != 0) {
+        PyModule_AddIntConstant(m, "RK4", LV_INTEGRATOR_RK4) != 0 ||
+        PyModule_AddIntConstant(m, "DOPRI5", LV_INTEGRATOR_DOPRI5) != 0 ||
+        PyModule_AddIntConstant(m, "SPLITTING", LV_INTEGRATOR_SPLITTING) != 0 ||
+        PyModule_AddIntConstant(m, "IMPLICIT_GYRO", LV_INTEGRATOR_IMPLICIT_GYRO) != 0) {
         Py_DECREF(m);
         return NULL;
     }

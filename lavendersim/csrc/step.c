@@ -260,17 +260,424 @@ static long advance_model(double *state, const double *params, long b, const lv_
     return -1;
 }
 
+/* ---- per-body integrators: dopri5 (any kind), splitting and implicit_gyro (plain bodies) ------- */
+
+/* One body's right-hand side on the extended state [x, Omega] (16): plain bodies get Omega' = 0. */
+typedef struct {
+    long b;
+    int kind, has, needs_v;
+    double m;
+    const double *prm, *r, *effects;
+    long ne;
+    double u[3];
+} body_ctx;
+
+static void ctx_rhs(const body_ctx *c, const double *y, double *yd)
+{
+    if (c->kind == 0) {
+        body_rhs(y, c->prm, c->effects, c->ne, c->b, c->has, yd);
+        yd[13] = yd[14] = yd[15] = 0.0;
+    } else {
+        model_rhs(y, c->u, c->m, c->r, c->kind, c->needs_v, c->effects, c->ne, c->b, yd);
+    }
+}
+
+static void ctx_init(body_ctx *c, const double *params, long b, const lv_models *md, const double *effects, long ne)
+{
+    long e;
+    c->b = b;
+    c->prm = params + b * LV_PARAM_SIZE;
+    c->m = c->prm[0];
+    c->effects = effects;
+    c->ne = ne;
+    c->kind = md != NULL ? (int)md->rows[b * LV_MODEL_SIZE] : 0;
+    c->r = md != NULL ? md->rows + b * LV_MODEL_SIZE : NULL;
+    c->has = 0;
+    c->needs_v = 0;
+    c->u[0] = c->u[1] = c->u[2] = 0.0;
+    for (e = 0; e < ne; e++) {
+        const double *row = effects + e * LV_EFFECT_SIZE;
+        if ((long)row[1] != -1 && (long)row[1] != b) continue;
+        c->has = 1;
+        if ((c->kind & LV_KIND_JOINT) && (int)row[0] == LV_EFFECT_LINEAR_DAMPING) c->needs_v = 1;
+    }
+}
+
+/* Dormand-Prince 5(4) tableau (Hairer, Norsett & Wanner, Solving ODEs I, table 5.2). */
+static const double DP_C[7] = {0.0, 1.0 / 5, 3.0 / 10, 4.0 / 5, 8.0 / 9, 1.0, 1.0};
+static const double DP_A[7][6] = {
+    {0, 0, 0, 0, 0, 0},
+    {1.0 / 5, 0, 0, 0, 0, 0},
+    {3.0 / 40, 9.0 / 40, 0, 0, 0, 0},
+    {44.0 / 45, -56.0 / 15, 32.0 / 9, 0, 0, 0},
+    {19372.0 / 6561, -25360.0 / 2187, 64448.0 / 6561, -212.0 / 729, 0, 0},
+    {9017.0 / 3168, -355.0 / 33, 46732.0 / 5247, 49.0 / 176, -5103.0 / 18656, 0},
+    {35.0 / 384, 0, 500.0 / 1113, 125.0 / 192, -2187.0 / 6784, 11.0 / 84}};
+/* error weights: b5 - b4 */
+static const double DP_E[7] = {71.0 / 57600, 0.0, -71.0 / 16695, 71.0 / 1920, -17253.0 / 339200, 22.0 / 525, -1.0 / 40};
+
+#define DP_SAFETY 0.9
+#define DP_FACMIN 0.2
+#define DP_FACMAX 5.0
+#define DP_HMIN_REL 1e-12
+#define DP_MAX_SUBSTEPS 1000000L
+
+/* RMS of e / (atol + rtol max(|y|, |yn|)) over the first n numbers (Hairer's norm). */
+static double dp_norm(const double *e, const double *y, const double *yn, int n, double rtol, double atol)
+{
+    double s = 0.0;
+    int i;
+    for (i = 0; i < n; i++) {
+        const double a = fabs(y[i]), bb = fabs(yn[i]);
+        const double sc = atol + rtol * (a > bb ? a : bb);
+        if (e[i] != 0.0) { /* an exact zero counts 0, even with atol = 0 */
+            const double z = e[i] / sc;
+            s += z * z;
+        }
+    }
+    return sqrt(s / n);
+}
+
+/* Hairer's starting step (Solving ODEs I, II.4): from f0 = f(y) and one more evaluation. */
+static double dp_initial_h(const body_ctx *c, const double *y, const double *f0, int n, double rtol, double atol,
+                           double dt, double *nfev)
+{
+    double y1[LV_XS], f1[LV_XS], d[LV_XS], d0, d1, d2, h0, h1, mx;
+    int i;
+    for (i = 0; i < n; i++) d[i] = 0.0;
+    d0 = dp_norm(y, y, y, n, rtol, atol);
+    d1 = dp_norm(f0, y, y, n, rtol, atol);
+    h0 = (d0 < 1e-5 || d1 < 1e-5) ? 1e-6 : 0.01 * d0 / d1;
+    if (h0 > dt) h0 = dt;
+    for (i = 0; i < LV_XS; i++) y1[i] = y[i] + h0 * f0[i];
+    ctx_rhs(c, y1, f1);
+    *nfev += 1;
+    for (i = 0; i < n; i++) d[i] = (f1[i] - f0[i]) / h0;
+    d2 = dp_norm(d, y, y, n, rtol, atol);
+    mx = d1 > d2 ? d1 : d2;
+    h1 = mx <= 1e-15 ? (h0 * 1e-3 > 1e-6 ? h0 * 1e-3 : 1e-6) : pow(0.01 / mx, 0.2);
+    h0 = 100.0 * h0 < h1 ? 100.0 * h0 : h1;
+    return isfinite(h0) && h0 > 0.0 ? h0 : dt;
+}
+
+/* After an accepted substep: normalize q, put a jointed body back on its joint. */
+static void ctx_finish(const body_ctx *c, double *y, int normalize)
+{
+    if (normalize) lv_quat_normalize(y + 3, y + 3);
+    if (c->kind & LV_KIND_JOINT) lv_pivot_kinematics(y + 3, y + 10, c->r + 13, c->r + 10, y, y + 7);
+}
+
+/* Advance body b by n_steps output steps of dt with dopri5. Returns -1 on success (rows written), else
+   the failing step with *why = LV_DIVERGED or LV_TOLERANCE and last[] = its last accepted state. */
+static long advance_dopri5(double *state, const double *params, long b, const lv_models *md, const double *effects,
+                           long ne, int normalize, double dt, long n_steps, const lv_adaptive *ad, int *why, double *last)
+{
+    body_ctx c;
+    double y[LV_XS], yn[LV_XS], k[7][LV_XS], tmp[LV_XS], err[LV_XS], applied[3];
+    double h, nfev = 0.0;
+    const double rtol = ad->rtol, atol = ad->atol, hmin = DP_HMIN_REL * dt;
+    const double *cmd = NULL;
+    int have_k1 = 0, n, i, s2, j;
+    long s;
+    ctx_init(&c, params, b, md, effects, ne);
+    n = c.kind & LV_KIND_WHEELS ? LV_XS : LV_STATE_SIZE;
+    memcpy(y, state + b * LV_STATE_SIZE, LV_STATE_SIZE * sizeof(double));
+    y[13] = y[14] = y[15] = 0.0;
+    if (c.kind) {
+        memcpy(y + LV_STATE_SIZE, md->Omega + 3 * b, 3 * sizeof(double));
+        memcpy(applied, md->applied + 3 * b, sizeof applied);
+        cmd = md->command + 3 * b;
+    }
+    h = ad->h[b];
+    for (s = 0; s < n_steps; s++) {
+        double t = 0.0;
+        long sub = 0;
+        int rejected = 0;
+        if (c.kind & LV_KIND_WHEELS) {
+            saturate(cmd, y + 13, c.r[19], c.r[20], c.u);
+            have_k1 = 0; /* the held torque may change at each output step */
+        }
+        if (!have_k1) {
+            ctx_rhs(&c, y, k[0]);
+            nfev += 1;
+            have_k1 = 1;
+        }
+        if (!(h > 0.0) || !isfinite(h)) h = dp_initial_h(&c, y, k[0], n, rtol, atol, dt, &nfev);
+        while (t < dt) {
+            const double rem = dt - t;
+            const int clipped = h >= rem;
+            const double hs = clipped ? rem : h;
+            double e;
+            for (s2 = 1; s2 < 7; s2++) {
+                for (i = 0; i < LV_XS; i++) {
+                    double acc = 0.0;
+                    for (j = 0; j < s2; j++) acc += DP_A[s2][j] * k[j][i];
+                    tmp[i] = y[i] + hs * acc;
+                }
+                ctx_rhs(&c, tmp, k[s2]);
+            }
+            nfev += 6;
+            for (i = 0; i < LV_XS; i++) yn[i] = tmp[i]; /* stage 7 is evaluated at the 5th-order solution */
+            for (i = 0; i < LV_XS; i++) {
+                double acc = 0.0;
+                for (j = 0; j < 7; j++) acc += DP_E[j] * k[j][i];
+                err[i] = hs * acc;
+            }
+            e = dp_norm(err, y, yn, n, rtol, atol);
+            if (e <= 1.0) {
+                double fac = e == 0.0 ? DP_FACMAX : DP_SAFETY * pow(e, -0.2);
+                if (fac > DP_FACMAX) fac = DP_FACMAX;
+                if (fac < DP_FACMIN) fac = DP_FACMIN;
+                if (rejected && fac > 1.0) fac = 1.0;
+                t = clipped ? dt : t + hs;
+                /* a step shortened to land on the output time does not shrink the proposal */
+                if (!(clipped && fac >= 1.0 && h > hs * fac)) h = hs * fac;
+                ctx_finish(&c, yn, normalize);
+                for (i = 0; i < LV_XS; i++) {
+                    if (!isfinite(yn[i])) {
+                        *why = LV_DIVERGED;
+                        memcpy(last, y, sizeof y);
+                        ad->nfev[b] += nfev;
+                        return s;
+                    }
+                }
+                memcpy(y, yn, sizeof y);
+                memcpy(k[0], k[6], sizeof k[0]); /* FSAL: f at the new (un-normalized) point */
+                rejected = 0;
+            } else {
+                double fac = isfinite(e) ? DP_SAFETY * pow(e, -0.2) : DP_FACMIN;
+                if (fac < DP_FACMIN) fac = DP_FACMIN;
+                if (fac > 1.0) fac = 1.0;
+                h = hs * fac;
+                rejected = 1;
+            }
+            if (h < hmin || ++sub > DP_MAX_SUBSTEPS) {
+                *why = LV_TOLERANCE;
+                memcpy(last, y, sizeof y);
+                ad->h[b] = h;
+                ad->nfev[b] += nfev;
+                return s;
+            }
+        }
+        if (c.kind) memcpy(applied, c.u, sizeof applied);
+    }
+    memcpy(state + b * LV_STATE_SIZE, y, LV_STATE_SIZE * sizeof(double));
+    if (c.kind) {
+        memcpy(md->Omega + 3 * b, y + LV_STATE_SIZE, 3 * sizeof(double));
+        memcpy(md->applied + 3 * b, applied, sizeof applied);
+    }
+    ad->h[b] = h;
+    ad->nfev[b] += nfev;
+    return -1;
+}
+
+/* Exact flow for time h of H_a = L_a^2 / (2 I_a): body momentum L turns about body axis a by -h L_a/I_a
+   and the attitude turns about it by +h L_a/I_a (q <- q (x) [sin(th/2) e_a, cos(th/2)]). */
+static void axis_flow(const double *I, double *q, double *L, int a, double h)
+{
+    const double th = h * L[a] / I[a];
+    const int j = (a + 1) % 3, k = (a + 2) % 3;
+    const double sh = sin(0.5 * th), ch = cos(0.5 * th);
+    const double c = 1.0 - 2.0 * sh * sh, s = 2.0 * sh * ch;
+    const double Lj = L[j], Lk = L[k];
+    double hq[4] = {0.0, 0.0, 0.0, 0.0};
+    L[j] = c * Lj + s * Lk;
+    L[k] = -s * Lj + c * Lk;
+    hq[a] = sh;
+    hq[3] = ch;
+    lv_quat_mul(q, hq, q);
+}
+
+/* Force at the COM (world) and torque (body frame) of the effects on a plain body. */
+static void plain_loads(const body_ctx *c, const double *x, double *F, double *tau_b)
+{
+    double tau_w[3] = {0.0, 0.0, 0.0};
+    F[0] = F[1] = F[2] = 0.0;
+    effect_sums(x, x + 7, c->m, c->effects, c->ne, c->b, F, tau_w);
+    lv_world_to_body(x + 3, tau_w, tau_b);
+}
+
+/* Half kick of the splitting: v and omega (q, p fixed) under the effects for time h. One evaluation
+   when the loads do not depend on v or omega (then exact); the explicit midpoint rule (two) with
+   linear or angular damping, which keeps the composition symmetric to second order. */
+static void kick(const body_ctx *c, double *x, double h, int damped)
+{
+    const double *I = c->prm + 1;
+    double F[3], tb[3], xm[LV_STATE_SIZE];
+    int i;
+    plain_loads(c, x, F, tb);
+    if (damped) {
+        memcpy(xm, x, sizeof xm);
+        for (i = 0; i < 3; i++) {
+            xm[7 + i] += 0.5 * h * F[i] / c->m;
+            xm[10 + i] += 0.5 * h * tb[i] / I[i];
+        }
+        plain_loads(c, xm, F, tb);
+    }
+    for (i = 0; i < 3; i++) {
+        x[7 + i] += h * F[i] / c->m;
+        x[10 + i] += h * tb[i] / I[i];
+    }
+}
+
+/* One splitting step: kick(h/2), drift p by h v, free rotation by Strang 1(h/2) 2(h/2) 3(h) 2(h/2) 1(h/2),
+   kick(h/2). Second order, symmetric; torque-free it conserves L_w and |L_b| exactly (to rounding). */
+static void splitting_step(const body_ctx *c, double *x, double h, int damped)
+{
+    const double *I = c->prm + 1;
+    double L[3];
+    int i;
+    if (c->has) kick(c, x, 0.5 * h, damped);
+    for (i = 0; i < 3; i++) {
+        x[i] += h * x[7 + i];
+        L[i] = I[i] * x[10 + i];
+    }
+    axis_flow(I, x + 3, L, 0, 0.5 * h);
+    axis_flow(I, x + 3, L, 1, 0.5 * h);
+    axis_flow(I, x + 3, L, 2, h);
+    axis_flow(I, x + 3, L, 1, 0.5 * h);
+    axis_flow(I, x + 3, L, 0, 0.5 * h);
+    for (i = 0; i < 3; i++) x[10 + i] = L[i] / I[i];
+    if (c->has) kick(c, x, 0.5 * h, damped);
+}
+
+/* Solve I (w1 - w) + h w1 x (I w1) = h tau_b for w1 by Newton's method (to rounding, at most 30
+   iterations), starting from w1 = w. Solved exactly, the torque-free step never gains energy:
+   E - E1 = (w - w1)^T I (w - w1) / 2 >= 0. */
+static void gyro_newton(const double *I, const double *w, const double *tau_b, double h, double *w1)
+{
+    int it, r, col;
+    w1[0] = w[0]; w1[1] = w[1]; w1[2] = w[2];
+    for (it = 0; it < 30; it++) {
+        const double L[3] = {I[0] * w1[0], I[1] * w1[1], I[2] * w1[2]};
+        double g[3], J[3][3], d[3], det, A[3][3], nd, nw;
+        g[0] = I[0] * (w1[0] - w[0]) + h * (w1[1] * L[2] - w1[2] * L[1]) - h * tau_b[0];
+        g[1] = I[1] * (w1[1] - w[1]) + h * (w1[2] * L[0] - w1[0] * L[2]) - h * tau_b[1];
+        g[2] = I[2] * (w1[2] - w[2]) + h * (w1[0] * L[1] - w1[1] * L[0]) - h * tau_b[2];
+        /* J = I + h (skew(w1) I - skew(I w1)) */
+        J[0][0] = I[0];                       J[0][1] = h * (-w1[2] * I[1] + L[2]); J[0][2] = h * (w1[1] * I[2] - L[1]);
+        J[1][0] = h * (w1[2] * I[0] - L[2]);  J[1][1] = I[1];                       J[1][2] = h * (-w1[0] * I[2] + L[0]);
+        J[2][0] = h * (-w1[1] * I[0] + L[1]); J[2][1] = h * (w1[0] * I[1] - L[0]);  J[2][2] = I[2];
+        A[0][0] = J[1][1] * J[2][2] - J[1][2] * J[2][1];
+        A[0][1] = J[0][2] * J[2][1] - J[0][1] * J[2][2];
+        A[0][2] = J[0][1] * J[1][2] - J[0][2] * J[1][1];
+        A[1][0] = J[1][2] * J[2][0] - J[1][0] * J[2][2];
+        A[1][1] = J[0][0] * J[2][2] - J[0][2] * J[2][0];
+        A[1][2] = J[0][2] * J[1][0] - J[0][0] * J[1][2];
+        A[2][0] = J[1][0] * J[2][1] - J[1][1] * J[2][0];
+        A[2][1] = J[0][1] * J[2][0] - J[0][0] * J[2][1];
+        A[2][2] = J[0][0] * J[1][1] - J[0][1] * J[1][0];
+        det = J[0][0] * A[0][0] + J[0][1] * A[1][0] + J[0][2] * A[2][0];
+        nd = nw = 0.0;
+        for (r = 0; r < 3; r++) {
+            d[r] = 0.0;
+            for (col = 0; col < 3; col++) d[r] += A[r][col] * g[col];
+            d[r] /= det;
+        }
+        for (r = 0; r < 3; r++) {
+            w1[r] -= d[r];
+            nd += d[r] * d[r];
+            nw += w1[r] * w1[r];
+        }
+        if (!(nd > 1e-32 * nw)) break; /* |dw| <= 1e-16 |w1| (or non-finite: caught by the caller) */
+    }
+}
+
+/* One implicit_gyro step: loads at the start (explicit), w1 from gyro_newton, q <- q (x) exp(h w1 / 2)
+   (unit by construction), then v += h F/m, p += h v (semi-implicit). */
+static void gyro_step(const body_ctx *c, double *x, double h)
+{
+    const double *I = c->prm + 1;
+    double F[3] = {0.0, 0.0, 0.0}, tb[3] = {0.0, 0.0, 0.0}, w1[3], e[4], nrm, a, sa;
+    int i;
+    if (c->has) plain_loads(c, x, F, tb);
+    gyro_newton(I, x + 10, tb, h, w1);
+    nrm = sqrt(w1[0] * w1[0] + w1[1] * w1[1] + w1[2] * w1[2]);
+    a = 0.5 * h * nrm;
+    sa = a > 1e-8 ? sin(a) / nrm : 0.5 * h * (1.0 - a * a / 6.0); /* sin(a)/|w1| */
+    e[0] = sa * w1[0]; e[1] = sa * w1[1]; e[2] = sa * w1[2]; e[3] = cos(a);
+    lv_quat_mul(x + 3, e, x + 3);
+    for (i = 0; i < 3; i++) {
+        x[10 + i] = w1[i];
+        x[7 + i] += h * F[i] / c->m;
+        x[i] += h * x[7 + i];
+    }
+}
+
+/* Advance plain body b by n_steps of splitting or implicit_gyro; contract as advance_block with n = 1. */
+static long advance_structured(double *state, const double *params, long b, const double *effects, long ne,
+                               int integrator, int normalize, double dt, long n_steps, double *last)
+{
+    body_ctx c;
+    double x[LV_STATE_SIZE], xn[LV_STATE_SIZE];
+    int damped = 0, i;
+    long s, e;
+    ctx_init(&c, params, b, NULL, effects, ne);
+    for (e = 0; e < ne; e++) {
+        const double *row = effects + e * LV_EFFECT_SIZE;
+        const int k = (int)row[0];
+        if (((long)row[1] == -1 || (long)row[1] == b) && (k == LV_EFFECT_LINEAR_DAMPING || k == LV_EFFECT_ANGULAR_DAMPING))
+            damped = 1;
+    }
+    memcpy(x, state + b * LV_STATE_SIZE, sizeof x);
+    for (s = 0; s < n_steps; s++) {
+        memcpy(xn, x, sizeof x);
+        if (integrator == LV_INTEGRATOR_SPLITTING)
+            splitting_step(&c, xn, dt, damped);
+        else
+            gyro_step(&c, xn, dt);
+        if (normalize) lv_quat_normalize(xn + 3, xn + 3);
+        for (i = 0; i < LV_STATE_SIZE; i++) {
+            if (!isfinite(xn[i])) {
+                memcpy(last, x, sizeof x);
+                return s;
+            }
+        }
+        memcpy(x, xn, sizeof x);
+    }
+    memcpy(state + b * LV_STATE_SIZE, x, sizeof x);
+    return -1;
+}
+
 int lv_simulate(double *state, const double *params, long nb,
                 const double *effects, long ne, const lv_models *models,
                 int integrator, int normalize, double dt, long n_steps,
-                long *fail_step, long *fail_body)
+                const lv_adaptive *adaptive, long *fail_step, long *fail_body)
 {
     double last[LV_BLOCK][LV_STATE_SIZE];
     long b0, b, s;
     int j, n;
-    if (integrator != LV_INTEGRATOR_EULER && integrator != LV_INTEGRATOR_SEMI_IMPLICIT_EULER
-        && integrator != LV_INTEGRATOR_RK4)
-        return LV_BAD_ARGUMENT;
+    if (integrator < LV_INTEGRATOR_EULER || integrator > LV_INTEGRATOR_LAST) return LV_BAD_ARGUMENT;
+    if (integrator == LV_INTEGRATOR_DOPRI5) {
+        if (adaptive == NULL || !(adaptive->rtol > 0.0) || !(adaptive->atol >= 0.0)) return LV_BAD_ARGUMENT;
+        for (b = 0; b < nb; b++) {
+            double lastx[LV_XS];
+            int why = LV_DIVERGED;
+            s = advance_dopri5(state, params, b, models, effects, ne, normalize, dt, n_steps, adaptive, &why, lastx);
+            if (s < 0) continue;
+            memcpy(state + b * LV_STATE_SIZE, lastx, LV_STATE_SIZE * sizeof(double));
+            if (models != NULL && (int)models->rows[b * LV_MODEL_SIZE] != 0)
+                memcpy(models->Omega + 3 * b, lastx + LV_STATE_SIZE, 3 * sizeof(double));
+            *fail_step = s;
+            *fail_body = b;
+            return why;
+        }
+        return LV_OK;
+    }
+    if (integrator == LV_INTEGRATOR_SPLITTING || integrator == LV_INTEGRATOR_IMPLICIT_GYRO) {
+        if (models != NULL)
+            for (b = 0; b < nb; b++)
+                if ((int)models->rows[b * LV_MODEL_SIZE] != 0) return LV_BAD_ARGUMENT;
+        for (b = 0; b < nb; b++) {
+            s = advance_structured(state, params, b, effects, ne, integrator, normalize, dt, n_steps, last[0]);
+            if (s < 0) continue;
+            memcpy(state + b * LV_STATE_SIZE, last[0], sizeof last[0]);
+            *fail_step = s;
+            *fail_body = b;
+            return LV_DIVERGED;
+        }
+        return LV_OK;
+    }
     for (b0 = 0; b0 < nb; b0 += n) {
         if (models != NULL && (int)models->rows[b0 * LV_MODEL_SIZE] != 0) {
             double lastm[LV_XS];

@@ -40,12 +40,29 @@ typedef struct {
 enum {
     LV_INTEGRATOR_EULER = 0,
     LV_INTEGRATOR_SEMI_IMPLICIT_EULER = 1,
-    LV_INTEGRATOR_RK4 = 2
+    LV_INTEGRATOR_RK4 = 2,
+    LV_INTEGRATOR_DOPRI5 = 3,        /* adaptive Dormand-Prince 5(4), FSAL; needs an lv_adaptive */
+    LV_INTEGRATOR_SPLITTING = 4,     /* Strang splitting, exact axis sub-flows; plain bodies only */
+    LV_INTEGRATOR_IMPLICIT_GYRO = 5  /* implicit gyroscopic term (Newton), exp-map q; plain bodies only */
 };
+#define LV_INTEGRATOR_LAST LV_INTEGRATOR_IMPLICIT_GYRO
+
+/* Adaptive stepping (dopri5): every body is stepped with its own step sizes; each of the n_steps
+   steps advances it by exactly dt with as many accepted substeps as its error estimate needs.
+   h (nb) carries each body's step-size proposal between calls (<= 0: choose an initial one);
+   nfev (nb) is incremented by the right-hand-side evaluations spent on each body. */
+typedef struct {
+    double rtol, atol;
+    double *h;
+    double *nfev;
+} lv_adaptive;
 
 enum {
     LV_OK = 0,
     LV_DIVERGED = 1,    /* a state became non-finite; see fail_step / fail_body */
+    LV_TOLERANCE = 2,   /* dopri5: the step size fell below dt*1e-12 (or over 10^6 substeps in one step)
+                           without meeting rtol/atol; same state contract as LV_DIVERGED, and h[fail_body]
+                           holds the step size that was too small */
     LV_BAD_ARGUMENT = -1
 };
 
@@ -59,10 +76,11 @@ enum {
    Then bodies < fail_body have been advanced fully (state, Omega, applied), body fail_body holds its
    last finite state and wheel rates (before step fail_step; its applied row untouched), and bodies
    > fail_body are untouched. Effect kinds/bodies and model kinds must be valid (the caller
-   validates); an unknown integrator returns LV_BAD_ARGUMENT. */
+   validates); an unknown integrator, dopri5 without `adaptive`, or splitting / implicit_gyro with a body
+   of nonzero kind returns LV_BAD_ARGUMENT (nothing changed). `adaptive` is read only by dopri5. */
 int lv_simulate(double *state, const double *params, long nb,
                 const double *effects, long ne, const lv_models *models,
                 int integrator, int normalize, double dt, long n_steps,
-                long *fail_step, long *fail_body);
+                const lv_adaptive *adaptive, long *fail_step, long *fail_body);
 
 #endif
