@@ -21,7 +21,10 @@ Integrators (`integrator=`; `sim.rhs_evals` counts right-hand-side evaluations, 
   step and body ("could not meet rtol/atol"). Any body (joints and wheels too; wheel torques held
   over each dt). The C backend chooses each body's step sizes independently; NumPy uses one shared
   step (the largest body error decides), so results agree to the tolerance, not bitwise. rhs_evals
-  is the largest per-body count (C), or the shared count (NumPy) — per body for a single body.
+  is the largest per-body count (C), or the shared count (NumPy) — per body for a single body. FSAL:
+  the last stage is the next substep's first, within one run()/step() call; each call starts with
+  one fresh evaluation (the state may have been set in between), as does every output step of a
+  body with wheels (its held torque may change). q is normalized after every accepted substep.
 * "splitting": second-order Strang splitting of the free rigid body into the exact flows of
   L_a²/(2I_a) about the principal axes, 1(h/2) 2(h/2) 3(h) 2(h/2) 1(h/2) (q by exact axis rotations,
   unit by construction; torque-free, world L and |L_b| conserved to rounding, energy oscillates
