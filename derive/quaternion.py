@@ -122,15 +122,20 @@ def kernels() -> list[Kernel]:
     from_R = sp.Matrix([sp.Piecewise((br[0][i], c_w), (br[1][i], c_x), (br[2][i], c_y), (br[3][i], True))
                         for i in range(4)])
 
-    # Quaternion → intrinsic XYZ angles. R02 = sin(pitch); at |R02| = 1 (gimbal lock) roll and yaw
-    # are not separable: yaw is set to 0 and roll carries the whole rotation about x.
+    # Quaternion → intrinsic XYZ angles, branch-free near gimbal lock (Shoemake's residual method):
+    # pitch = atan2(R02, |cos pitch|) with |cos pitch| = hypot(R12, R22); roll = atan2(−R12, R22);
+    # yaw from what is left, Rx(roll)ᵀ R = Ry Rz, whose row 1 is (sin yaw, cos yaw, 0). At ±90° pitch
+    # roll is whatever the rounding of R12, R22 says and yaw absorbs the rest, so the rotation is
+    # reproduced to rounding. Only an exactly zero hypot takes the (roll = 0) branch.
     Rq = rotation_matrix(q)
-    s_pitch = sp.Min(1, sp.Max(-1, Rq[0, 2]))
-    lock = sp.Abs(Rq[0, 2]) >= 1 - sp.Rational(1, 10**12)
+    n = sp.sqrt(Rq[1, 2] ** 2 + Rq[2, 2] ** 2)
+    exact_lock = sp.Eq(n, 0)
+    s_roll = sp.Piecewise((0, exact_lock), (-Rq[1, 2] / n, True))
+    c_roll = sp.Piecewise((1, exact_lock), (Rq[2, 2] / n, True))
     to_euler = sp.Matrix([
-        sp.Piecewise((sp.atan2(Rq[2, 1], Rq[1, 1]), lock), (sp.atan2(-Rq[1, 2], Rq[2, 2]), True)),
-        sp.asin(s_pitch),
-        sp.Piecewise((0, lock), (sp.atan2(-Rq[0, 1], Rq[0, 0]), True)),
+        sp.atan2(-Rq[1, 2], Rq[2, 2]),
+        sp.atan2(Rq[0, 2], n),
+        sp.atan2(c_roll * Rq[1, 0] + s_roll * Rq[2, 0], c_roll * Rq[1, 1] + s_roll * Rq[2, 1]),
     ])
     vnorm = sp.sqrt(q[0] ** 2 + q[1] ** 2 + q[2] ** 2)
     half = sp.atan2(vnorm, q[3])
@@ -163,8 +168,9 @@ def kernels() -> list[Kernel]:
         Kernel("euler_xyz_to_quat", "Quaternion of intrinsic XYZ Euler angles, R = Rx(roll) Ry(pitch) Rz(yaw)",
                r"q = q_x(a) \otimes q_y(b) \otimes q_z(c)",
                [Arg("roll", ea, "rad"), Arg("pitch", eb, "rad"), Arg("yaw", ec, "rad")], [Arg("q", euler_xyz_quat(ea, eb, ec), Q)], g),
-        Kernel("quat_to_euler_xyz", "Intrinsic XYZ Euler angles of a unit quaternion (yaw = 0 at gimbal lock)",
-               r"b = \arcsin R_{02},\ a = \operatorname{atan2}(-R_{12}, R_{22}),\ c = \operatorname{atan2}(-R_{01}, R_{00})",
+        Kernel("quat_to_euler_xyz", "Intrinsic XYZ Euler angles of a unit quaternion, exact through gimbal lock",
+               r"a = \operatorname{atan2}(-R_{12}, R_{22}),\ b = \operatorname{atan2}(R_{02}, \sqrt{R_{12}^2 + R_{22}^2}),\ "
+               r"c = \operatorname{atan2}(\cos a\,R_{10} + \sin a\,R_{20},\ \cos a\,R_{11} + \sin a\,R_{21})",
                [Arg("q", q, Q + ", unit", "unit_quaternion")], [Arg("rpy", to_euler, "(roll, pitch, yaw), rad")], g),
         Kernel("quat_derivative_world", "Quaternion rate from world-frame angular velocity", r"\dot q = \tfrac12 [\omega_w, 0] \otimes q",
                [Arg("q", q, Q), Arg("omega_w", omega_w, "angular velocity, world frame, rad/s")], [Arg("q_dot", qd_world, "1/s")], g),

@@ -458,28 +458,33 @@ void lv_quat_to_euler_xyz(const double *q, double *rpy) {
     const double q_1 = q[1];
     const double q_2 = q[2];
     const double q_3 = q[3];
-    const double t0 = 2*q_0;
-    const double t1 = q_3*t0;
-    const double t2 = 2*q_1;
-    const double t3 = q_2*t2;
-    const double t4 = 2*(q_2*q_2);
+    const double t0 = 2*q_3;
+    const double t1 = q_0*t0;
+    const double t2 = 2*q_2;
+    const double t3 = q_1*t2;
+    const double t4 = t1 - t3;
     const double t5 = 2*(q_0*q_0) - 1;
-    const double t6 = q_2*t0 + q_3*t2;
-    const double t7 = fabs(t6) >= (999999999999.0/1000000000000.0);
-    const double t8 = 2*(q_1*q_1);
-    rpy[0] = ((t7) ? (
-   atan2(t1 + t3, -t4 - t5)
-)
-: (
-   atan2(t1 - t3, -t5 - t8)
-));
-    rpy[1] = asin(fmin(1, fmax(-1, t6)));
-    rpy[2] = ((t7) ? (
+    const double t6 = -2*(q_1*q_1) - t5;
+    const double t7 = q_0*t2;
+    const double t8 = q_1*t0;
+    const double t9 = sqrt((t4*t4) + (t6*t6));
+    const double t10 = t9 == 0;
+    const double t11 = (1.0/t9);
+    const double t12 = ((t10) ? (
    0
 )
 : (
-   atan2(-q_1*t0 + 2*q_2*q_3, -t4 - t8 + 1)
+   t11*t4
 ));
+    const double t13 = ((t10) ? (
+   1
+)
+: (
+   t11*t6
+));
+    rpy[0] = atan2(t4, t6);
+    rpy[1] = atan2(t7 + t8, t9);
+    rpy[2] = atan2(t12*(t7 - t8) + t13*(2*q_0*q_1 + q_3*t2), t12*(t1 + t3) + t13*(-2*(q_2*q_2) - t5));
 }
 
 void lv_quat_derivative_world(const double *q, const double *omega_w, double *q_dot) {

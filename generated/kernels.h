@@ -148,7 +148,7 @@ void lv_quat_to_axis_angle(const double *q, double *axis, double *angle);
      out q [4]: quaternion (x, y, z, w), scalar last */
 void lv_euler_xyz_to_quat(double roll, double pitch, double yaw, double *q);
 
-/* quat_to_euler_xyz: Intrinsic XYZ Euler angles of a unit quaternion (yaw = 0 at gimbal lock).
+/* quat_to_euler_xyz: Intrinsic XYZ Euler angles of a unit quaternion, exact through gimbal lock.
      in  q [4]: quaternion (x, y, z, w), scalar last, unit
      out rpy [3]: (roll, pitch, yaw), rad */
 void lv_quat_to_euler_xyz(const double *q, double *rpy);

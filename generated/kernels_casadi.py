@@ -421,23 +421,28 @@ def euler_xyz_to_quat(roll, pitch, yaw):
 
 
 def quat_to_euler_xyz(q):
-    """quat_to_euler_xyz: Intrinsic XYZ Euler angles of a unit quaternion (yaw = 0 at gimbal lock).
+    """quat_to_euler_xyz: Intrinsic XYZ Euler angles of a unit quaternion, exact through gimbal lock.
       in  q [4]: quaternion (x, y, z, w), scalar last, unit
       out rpy [3]: (roll, pitch, yaw), rad"""
     q_0 = q[0]
     q_1 = q[1]
     q_2 = q[2]
     q_3 = q[3]
-    t0 = 2*q_0
-    t1 = q_3*t0
-    t2 = 2*q_1
-    t3 = q_2*t2
-    t4 = 2*(q_2*q_2)
+    t0 = 2*q_3
+    t1 = q_0*t0
+    t2 = 2*q_2
+    t3 = q_1*t2
+    t4 = t1 - t3
     t5 = 2*(q_0*q_0) - 1
-    t6 = q_2*t0 + q_3*t2
-    t7 = (casadi.fabs(t6) >= (999999999999.0/1000000000000.0))
-    t8 = 2*(q_1*q_1)
-    return casadi.vertcat(casadi.if_else(t7, casadi.atan2(t1 + t3, -t4 - t5), casadi.atan2(t1 - t3, -t5 - t8)), casadi.asin(casadi.fmin(1, casadi.fmax(-1, t6))), casadi.if_else(t7, 0, casadi.atan2(-q_1*t0 + 2*q_2*q_3, -t4 - t8 + 1)))
+    t6 = -2*(q_1*q_1) - t5
+    t7 = q_0*t2
+    t8 = q_1*t0
+    t9 = casadi.sqrt((t4*t4) + (t6*t6))
+    t10 = (t9 == 0)
+    t11 = (1.0/t9)
+    t12 = casadi.if_else(t10, 0, t11*t4)
+    t13 = casadi.if_else(t10, 1, t11*t6)
+    return casadi.vertcat(casadi.atan2(t4, t6), casadi.atan2(t7 + t8, t9), casadi.atan2(t12*(t7 - t8) + t13*(2*q_0*q_1 + q_3*t2), t12*(t1 + t3) + t13*(-2*(q_2*q_2) - t5)))
 
 
 def quat_derivative_world(q, omega_w):

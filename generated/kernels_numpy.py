@@ -606,7 +606,7 @@ def euler_xyz_to_quat(roll, pitch, yaw):
 
 
 def quat_to_euler_xyz(q):
-    """quat_to_euler_xyz: Intrinsic XYZ Euler angles of a unit quaternion (yaw = 0 at gimbal lock).
+    """quat_to_euler_xyz: Intrinsic XYZ Euler angles of a unit quaternion, exact through gimbal lock.
       in  q [4]: quaternion (x, y, z, w), scalar last, unit
       out rpy [3]: (roll, pitch, yaw), rad"""
     q = numpy.asarray(q, dtype=numpy.float64)
@@ -616,19 +616,24 @@ def quat_to_euler_xyz(q):
     q_2 = q[..., 2]
     q_3 = q[..., 3]
     with numpy.errstate(invalid='ignore', divide='ignore'):  # numpy.select evaluates every branch
-        t0 = 2*q_0
-        t1 = q_3*t0
-        t2 = 2*q_1
-        t3 = q_2*t2
-        t4 = 2*(q_2*q_2)
+        t0 = 2*q_3
+        t1 = q_0*t0
+        t2 = 2*q_2
+        t3 = q_1*t2
+        t4 = t1 - t3
         t5 = 2*(q_0*q_0) - 1
-        t6 = q_2*t0 + q_3*t2
-        t7 = numpy.greater_equal(abs(t6), (999999999999.0/1000000000000.0))
-        t8 = 2*(q_1*q_1)
+        t6 = -2*(q_1*q_1) - t5
+        t7 = q_0*t2
+        t8 = q_1*t0
+        t9 = numpy.sqrt((t4*t4) + (t6*t6))
+        t10 = numpy.equal(t9, 0)
+        t11 = (1.0/t9)
+        t12 = numpy.select([t10,True], [0,t11*t4], default=numpy.nan)
+        t13 = numpy.select([t10,True], [1,t11*t6], default=numpy.nan)
         rpy_out = numpy.empty(batch + (3,))
-        rpy_out[..., 0] = numpy.select([t7,True], [numpy.arctan2(t1 + t3, -t4 - t5),numpy.arctan2(t1 - t3, -t5 - t8)], default=numpy.nan)
-        rpy_out[..., 1] = numpy.arcsin(numpy.minimum(1, numpy.maximum(-1, t6)))
-        rpy_out[..., 2] = numpy.select([t7,True], [0,numpy.arctan2(-q_1*t0 + 2*q_2*q_3, -t4 - t8 + 1)], default=numpy.nan)
+        rpy_out[..., 0] = numpy.arctan2(t4, t6)
+        rpy_out[..., 1] = numpy.arctan2(t7 + t8, t9)
+        rpy_out[..., 2] = numpy.arctan2(t12*(t7 - t8) + t13*(2*q_0*q_1 + q_3*t2), t12*(t1 + t3) + t13*(-2*(q_2*q_2) - t5))
     return rpy_out
 
 

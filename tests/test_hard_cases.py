@@ -132,11 +132,6 @@ def test_near_antipodal_quaternions(lab):
     assert lab["antipodal_trajectory_sign_mismatch"] <= 1e-15
 
 
-@pytest.mark.xfail(strict=True, raises=AssertionError,
-                   reason="generated quat_to_euler_xyz: pitch = asin(R02) loses ~3e-8 rad at ±90° (sqrt sensitivity) "
-                          "and the lock branch |R02| >= 1 - 1e-12 sets yaw = 0 within 1.4e-6 rad of ±90°, "
-                          "dropping a rotation of ~2e-6 rad; fix in derive/quaternion.py (pitch = atan2(R02, "
-                          "hypot(R12, R22)), yaw from the residual rotation). Remove this mark when fixed.")
 def test_euler_at_gimbal_lock(lab):
     assert all(np.isfinite(v) for k, v in lab.items() if k.startswith("gimbal_pitch_"))
     _assert_checks(lab, "gimbal_")
