@@ -38,6 +38,14 @@ def _small_pow(printer, expr, mul: str, inv: str, sqrt: str):
     return None
 
 
+def _fold(printer, expr, fn: str) -> str:
+    """An n-ary expression as nested binary calls: fn(fn(a, b), c)."""
+    out = printer._print(expr.args[0])
+    for a in expr.args[1:]:
+        out = f"{fn}({out}, {printer._print(a)})"
+    return out
+
+
 class CPrinter(C99CodePrinter):
     def _print_Pow(self, expr):
         return _small_pow(self, expr, "*", "1.0", "sqrt") or super()._print_Pow(expr)
@@ -56,18 +64,11 @@ class NpPrinter(NumPyPrinter):
     def _print_Rational(self, expr):
         return f"({float(expr.p)!r}/{float(expr.q)!r})"
 
-    def _minmax(self, expr, fn):
-        args = [self._print(a) for a in expr.args]
-        out = args[0]
-        for a in args[1:]:
-            out = f"numpy.{fn}({out}, {a})"
-        return out
-
     def _print_Min(self, expr):
-        return self._minmax(expr, "minimum")
+        return _fold(self, expr, "numpy.minimum")
 
     def _print_Max(self, expr):
-        return self._minmax(expr, "maximum")
+        return _fold(self, expr, "numpy.maximum")
 
 
 class CasadiPrinter(PythonCodePrinter):
@@ -91,23 +92,14 @@ class CasadiPrinter(PythonCodePrinter):
     def _print_Abs(self, expr):
         return f"casadi.fabs({self._print(expr.args[0])})"
 
-    def _minmax(self, expr, fn):
-        out = self._print(expr.args[0])
-        for a in expr.args[1:]:
-            out = f"casadi.{fn}({out}, {self._print(a)})"
-        return out
-
     def _print_Min(self, expr):
-        return self._minmax(expr, "fmin")
+        return _fold(self, expr, "casadi.fmin")
 
     def _print_Max(self, expr):
-        return self._minmax(expr, "fmax")
+        return _fold(self, expr, "casadi.fmax")
 
     def _print_And(self, expr):
-        out = self._print(expr.args[0])
-        for a in expr.args[1:]:
-            out = f"casadi.logic_and({out}, {self._print(a)})"
-        return out
+        return _fold(self, expr, "casadi.logic_and")
 
     def _print_Piecewise(self, expr):
         *head, (last, _) = expr.args
