@@ -644,80 +644,77 @@ int lv_simulate(double *state, const double *params, long nb,
                 int integrator, int normalize, double dt, long n_steps,
                 const lv_adaptive *adaptive, long *fail_step, long *fail_body)
 {
+    /* Divergence is reported at the earliest failing step over all bodies, then the lowest body index
+       at that step (as the NumPy backend, which steps every body in lockstep). Bodies are visited in
+       index order and each one is advanced by at most `limit` steps, the earliest failure so far: a
+       later body wins only by failing strictly earlier, so nothing past `limit` can change the answer. */
     double last[LV_BLOCK][LV_STATE_SIZE];
-    long b0, b, s;
-    int j, n;
+    long b0, b, s, limit = n_steps, best_body = -1;
+    int j, n, status = LV_OK;
     if (integrator < LV_INTEGRATOR_EULER || integrator > LV_INTEGRATOR_LAST) return LV_BAD_ARGUMENT;
     if (integrator == LV_INTEGRATOR_DOPRI5) {
         if (adaptive == NULL || !(adaptive->rtol > 0.0) || !(adaptive->atol >= 0.0)) return LV_BAD_ARGUMENT;
-        for (b = 0; b < nb; b++) {
+        for (b = 0; b < nb && limit > 0; b++) {
             double lastx[LV_XS];
             int why = LV_DIVERGED;
-            s = advance_dopri5(state, params, b, models, effects, ne, normalize, dt, n_steps, adaptive, &why, lastx);
+            s = advance_dopri5(state, params, b, models, effects, ne, normalize, dt, limit, adaptive, &why, lastx);
             if (s < 0) continue;
             memcpy(state + b * LV_STATE_SIZE, lastx, LV_STATE_SIZE * sizeof(double));
             if (models != NULL && (int)models->rows[b * LV_MODEL_SIZE] != 0)
                 memcpy(models->Omega + 3 * b, lastx + LV_STATE_SIZE, 3 * sizeof(double));
-            *fail_step = s;
-            *fail_body = b;
-            return why;
+            limit = s;
+            best_body = b;
+            status = why;
         }
-        return LV_OK;
-    }
-    if (integrator == LV_INTEGRATOR_SPLITTING || integrator == LV_INTEGRATOR_IMPLICIT_GYRO) {
+    } else if (integrator == LV_INTEGRATOR_SPLITTING || integrator == LV_INTEGRATOR_IMPLICIT_GYRO) {
         if (models != NULL)
             for (b = 0; b < nb; b++)
                 if ((int)models->rows[b * LV_MODEL_SIZE] != 0) return LV_BAD_ARGUMENT;
-        for (b = 0; b < nb; b++) {
-            s = advance_structured(state, params, b, effects, ne, integrator, normalize, dt, n_steps, last[0]);
+        for (b = 0; b < nb && limit > 0; b++) {
+            s = advance_structured(state, params, b, effects, ne, integrator, normalize, dt, limit, last[0]);
             if (s < 0) continue;
             memcpy(state + b * LV_STATE_SIZE, last[0], sizeof last[0]);
-            *fail_step = s;
-            *fail_body = b;
-            return LV_DIVERGED;
+            limit = s;
+            best_body = b;
+            status = LV_DIVERGED;
         }
-        return LV_OK;
-    }
-    for (b0 = 0; b0 < nb; b0 += n) {
-        if (models != NULL && (int)models->rows[b0 * LV_MODEL_SIZE] != 0) {
-            double lastm[LV_XS];
-            n = 1;
-            s = advance_model(state, params, b0, models, effects, ne, integrator, normalize, dt, n_steps, lastm);
-            if (s < 0) continue;
-            memcpy(state + b0 * LV_STATE_SIZE, lastm, LV_STATE_SIZE * sizeof(double));
-            memcpy(models->Omega + 3 * b0, lastm + LV_STATE_SIZE, 3 * sizeof(double));
-            *fail_step = s;
-            *fail_body = b0;
-            return LV_DIVERGED;
-        }
-        /* a run of up to LV_BLOCK consecutive plain bodies */
-        n = (int)(nb - b0 < LV_BLOCK ? nb - b0 : LV_BLOCK);
-        if (models != NULL)
-            for (j = 1; j < n; j++)
-                if ((int)models->rows[(b0 + j) * LV_MODEL_SIZE] != 0) { n = j; break; }
-        /* constant block sizes let the compiler specialize (clone) advance_block */
-        if (n == LV_BLOCK)
-            s = advance_block(state, params, b0, LV_BLOCK, effects, ne, integrator, normalize, dt, n_steps, &j, last);
-        else if (n == 1)
-            s = advance_block(state, params, b0, 1, effects, ne, integrator, normalize, dt, n_steps, &j, last);
-        else
-            s = advance_block(state, params, b0, n, effects, ne, integrator, normalize, dt, n_steps, &j, last);
-        if (s < 0) continue;
-        /* A body of this block diverged; rows are untouched. Redo the block body by body so that
-           earlier bodies end fully advanced and the failing one holds its last finite state. */
-        for (b = b0; b < b0 + n; b++) {
-            s = advance_block(state, params, b, 1, effects, ne, integrator, normalize, dt, n_steps, &j, last);
-            if (s >= 0) {
-                memcpy(state + b * LV_STATE_SIZE, last[0], sizeof last[0]);
-                *fail_step = s;
-                *fail_body = b;
-                return LV_DIVERGED;
+    } else {
+        for (b0 = 0; b0 < nb && limit > 0; b0 += n) {
+            if (models != NULL && (int)models->rows[b0 * LV_MODEL_SIZE] != 0) {
+                double lastm[LV_XS];
+                n = 1;
+                s = advance_model(state, params, b0, models, effects, ne, integrator, normalize, dt, limit, lastm);
+                if (s < 0) continue;
+                memcpy(state + b0 * LV_STATE_SIZE, lastm, LV_STATE_SIZE * sizeof(double));
+                memcpy(models->Omega + 3 * b0, lastm + LV_STATE_SIZE, 3 * sizeof(double));
+                limit = s;
+                best_body = b0;
+                status = LV_DIVERGED;
+                continue;
             }
+            /* a run of up to LV_BLOCK consecutive plain bodies */
+            n = (int)(nb - b0 < LV_BLOCK ? nb - b0 : LV_BLOCK);
+            if (models != NULL)
+                for (j = 1; j < n; j++)
+                    if ((int)models->rows[(b0 + j) * LV_MODEL_SIZE] != 0) { n = j; break; }
+            /* constant block sizes let the compiler specialize (clone) advance_block */
+            if (n == LV_BLOCK)
+                s = advance_block(state, params, b0, LV_BLOCK, effects, ne, integrator, normalize, dt, limit, &j, last);
+            else if (n == 1)
+                s = advance_block(state, params, b0, 1, effects, ne, integrator, normalize, dt, limit, &j, last);
+            else
+                s = advance_block(state, params, b0, n, effects, ne, integrator, normalize, dt, limit, &j, last);
+            if (s < 0) continue;
+            /* the block stops at its first failing step, j its lowest failing body there (lockstep) */
+            memcpy(state + (b0 + j) * LV_STATE_SIZE, last[j], sizeof last[j]);
+            limit = s;
+            best_body = b0 + j;
+            status = LV_DIVERGED;
         }
-        /* unreachable for a deterministic build; report the block's first failure if it happens */
-        *fail_step = -1;
-        *fail_body = b0;
-        return LV_DIVERGED;
     }
-    return LV_OK;
+    if (status != LV_OK) {
+        *fail_step = limit;
+        *fail_body = best_body;
+    }
+    return status;
 }

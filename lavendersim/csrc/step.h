@@ -67,15 +67,17 @@ enum {
 };
 
 /* Advance nb bodies (state: nb x 13, in place) by n_steps steps of size dt.
-   Bodies are independent: the outer loop runs over bodies, the inner over steps.
+   Bodies are independent: the outer loop runs over bodies (blocks of them), the inner over steps.
    models may be NULL (every body plain). A body of nonzero kind steps [x, Omega] (16 numbers) with
    wheel_body_rhs (wheels) or pivot_body_rhs (joint only); its wheel torques are saturated at the
    start of each step; a jointed body's p_w, v_w are set from pivot_kinematics after each step.
    After every step all numbers of the body (13, or 16 with its wheel rates) are checked; on a
-   non-finite value the function returns LV_DIVERGED with *fail_step (0-based) and *fail_body set.
-   Then bodies < fail_body have been advanced fully (state, Omega, applied), body fail_body holds its
-   last finite state and wheel rates (before step fail_step; its applied row untouched), and bodies
-   > fail_body are untouched. Effect kinds/bodies and model kinds must be valid (the caller
+   non-finite value the function returns LV_DIVERGED with *fail_step (0-based) and *fail_body set:
+   the earliest failing step over all bodies, then the lowest body index failing at that step (the
+   NumPy backend's order). Then body fail_body holds its last finite state and wheel rates (before
+   step fail_step; its applied row untouched) and, for LV_TOLERANCE, h[fail_body] as above; every
+   other body's rows (state, Omega, applied, h, nfev) are unspecified (advanced by some number of
+   steps): the caller restores them from its snapshot. Effect kinds/bodies and model kinds must be valid (the caller
    validates); an unknown integrator, dopri5 without `adaptive`, or splitting / implicit_gyro with a body
    of nonzero kind returns LV_BAD_ARGUMENT (nothing changed). `adaptive` is read only by dopri5. */
 int lv_simulate(double *state, const double *params, long nb,
