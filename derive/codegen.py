@@ -367,7 +367,8 @@ def check(outdir: Path, full: bool = False) -> list[str]:
 
     Fast path: when the manifest records this exact derive/ source hash and tool versions, and every
     output still has its recorded hash, generated/ is current without re-deriving. Otherwise (or
-    with full=True) derive in memory and compare byte for byte."""
+    with full=True) derive in memory and compare every output byte for byte, and the manifest's
+    source and output hashes (not its tool versions)."""
     man_path = outdir / "manifest.json"
     try:
         man = json.loads(man_path.read_text(encoding="utf-8"))
@@ -382,14 +383,11 @@ def check(outdir: Path, full: bool = False) -> list[str]:
         if not stale:
             return []
     files = render()
-    files["manifest.json"] = manifest_for(files)
-    stale = []
-    for name, text in sorted(files.items()):
-        p = outdir / name
-        if not p.exists() or p.read_text(encoding="utf-8") != text:
-            stale.append(name)
-    if stale == ["manifest.json"] and man is not None:
-        # Only the manifest differs: the outputs are what derive/ produces (e.g. another sympy
-        # version printed them identically); the manifest's provenance is stale.
-        return stale
+    stale = [name for name, text in sorted(files.items())
+             if not (outdir / name).exists() or (outdir / name).read_text(encoding="utf-8") != text]
+    # The manifest must record these derive/ sources and these outputs. The tool versions it
+    # records are provenance only: another Python or SymPy that prints identical files is current.
+    want = json.loads(manifest_for(files))
+    if man is None or any(man.get(k) != want[k] for k in ("header", "derive_sources_sha256", "outputs_sha256")):
+        stale.append("manifest.json")
     return stale

@@ -95,3 +95,17 @@ def test_simulation_path_never_imports_sympy():
             "assert 'sympy' not in sys.modules, 'sympy imported'\n")
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
+
+
+def test_other_tool_versions_printing_identical_files_are_current(tmp_path):
+    import json
+
+    out = tmp_path / "gen"
+    shutil.copytree(GEN, out, ignore=shutil.ignore_patterns("__pycache__"))
+    man = json.loads((out / "manifest.json").read_text())
+    man["tools"] = {"python": "3.11.99", "sympy": "9.9"}
+    (out / "manifest.json").write_text(json.dumps(man, indent=2, sort_keys=True) + "\n")
+    assert codegen.check(out) == []                     # falls back to a full derivation: identical
+    man["derive_sources_sha256"] = "0" * 64
+    (out / "manifest.json").write_text(json.dumps(man, indent=2, sort_keys=True) + "\n")
+    assert codegen.check(out) == ["manifest.json"]
