@@ -77,13 +77,17 @@ def extensions() -> list[Extension]:
                              "codegen.write(Path('generated'))\"` from the repo root)")
     csrc = sorted(p.name for p in (HERE / CSRC).glob("*.c"))
     args = ["-O3", "-std=c99", "-fno-math-errno"]  # never -ffast-math: it breaks isfinite and IEEE rules
+    # only PyInit_ is exported (PyMODINIT_FUNC); hidden symbols cannot be interposed, so -fPIC code
+    # calls and inlines the kernels directly (same effect as -fno-semantic-interposition, older compilers too)
+    args.append("-fvisibility=hidden")
     if _flag("LAVENDERSIM_NATIVE"):
         args.append("-march=native")
     return [Extension(
         "lavendersim._lavender_c",
-        sources=[f"{GENERATED}/kernels.c"] + [f"{CSRC}/{n}" for n in csrc],
+        # generated/kernels.c is #included by step.c (one translation unit, so its kernels inline)
+        sources=[f"{CSRC}/{n}" for n in csrc],
         include_dirs=[GENERATED, CSRC],
-        depends=[f"{GENERATED}/kernels.h", f"{CSRC}/step.h"],
+        depends=[f"{GENERATED}/kernels.c", f"{GENERATED}/kernels.h", f"{CSRC}/step.h"],
         define_macros=[("LV_GENERATED_HASH", '"%s"' % generated_hash(HERE / GENERATED))],
         extra_compile_args=args,
     )]
