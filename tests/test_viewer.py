@@ -329,7 +329,9 @@ def test_publish_is_fast_and_coalesces_with_no_client():
         sim = _sim()
         us = _publish_cost(v, sim, 0.6)
         st = v.stats()
-        assert st["published"] == len(us) > 1000
+        # > 60 publishes in 0.6 s outpaces the 30 Hz apply rate even on a loaded machine
+        assert st["published"] == len(us) > 60
+        assert st["dropped"] > 0
         assert st["applied"] <= 0.6 * 30 + 3                      # bounded rate
         assert st["dropped"] >= st["published"] - st["applied"] - 1  # the rest coalesced
 
