@@ -333,7 +333,9 @@ def test_publish_is_fast_and_coalesces_with_no_client():
         assert st["published"] == len(us) > 60
         assert st["dropped"] > 0
         assert st["applied"] <= 0.6 * 30 + 3                      # bounded rate
-        assert st["dropped"] >= st["published"] - st["applied"] - 1  # the rest coalesced
+        # the rest coalesced; at most two are in flight when stats() is read (one waiting, one
+        # being applied by the viewer thread)
+        assert st["dropped"] >= st["published"] - st["applied"] - 2
 
 
 MANY = {"axes": [{"body": "cube"}], "vectors": [
