@@ -4,7 +4,6 @@ Forces in N, torques in N·m, damping coefficients c in N·s/m (linear) and N·m
 """
 from __future__ import annotations
 
-import sympy as sp
 
 from .kernel import Arg, Kernel, scalar, vec
 from .quaternion import rotation_matrix

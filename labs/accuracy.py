@@ -739,7 +739,7 @@ def run(out_dir=C.DEFAULT_OUT, backend: str = "c", quick: bool = True, mujoco: b
             if m.family == "lavendersim" and m.param == "dt" and m.backend == "c" and m.integrator in EXPECTED_ORDER:
                 exp_o = EXPECTED_ORDER[m.integrator]
                 checks.append(C.close(f"order_{m.integrator}_{case.name}", o if o is not None else math.nan, exp_o,
-                                      ORDER_TOL, f"slope of log attitude error vs log dt, C backend"))
+                                      ORDER_TOL, "slope of log attitude error vs log dt, C backend"))
             if m.family == "lavendersim" and m.integrator == "rk4" and m.backend == "c":
                 checks.append(C.at_most(f"rk4_smallest_dt_{case.name}", max(tight.attitude_error, tight.omega_error),
                                         1e-9, f"RK4 [c] at dt = {_param_text('dt', tight.value)}: attitude "

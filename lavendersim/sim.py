@@ -50,8 +50,6 @@ from .errors import DivergenceError
 from .kernels import K
 from .scene import Scene
 
-_EFFECT_NAMES = {1: "applied_torque", 2: "force_at_point", 3: "gravity", 4: "linear_damping", 5: "angular_damping"}
-
 
 class Trajectory:
     """Recorded samples: t (T,), x (T, nb, 13), Omega (T, nb, 3) wheel rates (zeros without wheels)."""

@@ -2,10 +2,8 @@
 import shutil
 import subprocess
 import sys
-from pathlib import Path
 
 import numpy as np
-import pytest
 
 from lavendersim.cli import generated_dir
 from lavendersim.derive import codegen
