@@ -575,3 +575,25 @@ def test_bad_model_buffers():
     with pytest.raises(ValueError, match=r"models.rows must have shape \(2, 22\)"):
         CBackend().advance(state.copy(), params, E, "rk4", True, 0.01, 1, Models(md.rows[:, :20], W3.copy(), W3, W3.copy()))
     assert MODEL_SIZE == 22
+
+
+@pytest.mark.parametrize("calm", [0, 9])   # the diverging body alone, or in the second block of 8
+def test_late_rk4_divergence_is_found_at_its_step_across_check_chunks(calm):
+    """The torque-free RK4 fast path checks finiteness once per chunk of steps and replays the chunk
+    to find the step; a divergence hundreds of steps in must still be reported at the same step,
+    body and restored state as the NumPy backend's per-step check."""
+    import lavendersim as lv
+
+    got = {}
+    for backend in ("c", "numpy"):
+        s = lv.Scene()
+        for i in range(calm):
+            s.add_body(lv.Body.sphere(f"calm{i}", 1.0, 0.1))
+        s.add_body(lv.Body("spin", 1.0, (1.0, 2.0, 3.0), omega_b=(0.01, 0.01, 28.4)))   # |ω|·dt just past RK4's limit
+        sim = lv.Sim(s, dt=0.1, integrator="rk4", backend=backend)
+        before = sim.x.copy()
+        with pytest.raises(DivergenceError) as e:
+            sim.run(5000)
+        assert np.array_equal(sim.x, before)
+        got[backend] = (e.value.step, e.value.body)
+    assert got["c"] == got["numpy"] == (204, calm)
