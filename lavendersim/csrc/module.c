@@ -133,6 +133,7 @@ static PyObject *py_simulate(PyObject *self, PyObject *args)
     PyObject *state_obj, *params_obj, *effects_obj;
     PyObject *rows_obj = Py_None, *omega_obj = Py_None, *cmd_obj = Py_None, *app_obj = Py_None;
     PyObject *h_obj = Py_None, *nfev_obj = Py_None;
+    PyObject *result = NULL;
     double rtol = 0.0, atol = 0.0;
     Py_buffer hb, nf;
     int have_h = 0, have_nf = 0;
@@ -280,23 +281,14 @@ static PyObject *py_simulate(PyObject *self, PyObject *args)
                          n_models ? &models : NULL, integrator, normalize, dt, (long)n_steps_ll,
                          have_h ? &adaptive : NULL, &fail_step, &fail_body);
     Py_END_ALLOW_THREADS
-    PyBuffer_Release(&st);
-    PyBuffer_Release(&pr);
-    PyBuffer_Release(&ef);
-    if (have_mr) PyBuffer_Release(&mr);
-    if (have_om) PyBuffer_Release(&om);
-    if (have_cm) PyBuffer_Release(&cm);
-    if (have_ap) PyBuffer_Release(&ap);
-    if (have_h) PyBuffer_Release(&hb);
-    if (have_nf) PyBuffer_Release(&nf);
-    if (status < 0) {
+    if (status < 0)
         PyErr_SetString(PyExc_ValueError, "simulate: lv_simulate rejected its arguments "
                         "(splitting and implicit_gyro step plain bodies only: no joint or wheels)");
-        return NULL;
-    }
-    if (status == LV_OK) return Py_BuildValue("(iii)", 0, -1, -1);
-    return Py_BuildValue("(ill)", status, fail_step, fail_body);
-fail:
+    else if (status == LV_OK)
+        result = Py_BuildValue("(iii)", 0, -1, -1);
+    else
+        result = Py_BuildValue("(ill)", status, fail_step, fail_body);
+fail: /* every exit releases the buffers it holds; result stays NULL on an error */
     PyBuffer_Release(&st);
     PyBuffer_Release(&pr);
     PyBuffer_Release(&ef);
@@ -306,7 +298,7 @@ fail:
     if (have_ap) PyBuffer_Release(&ap);
     if (have_h) PyBuffer_Release(&hb);
     if (have_nf) PyBuffer_Release(&nf);
-    return NULL;
+    return result;
 }
 
 static PyMethodDef methods[] = {
