@@ -12,7 +12,7 @@ from .validate import LavenderInputError
 
 __all__ = ["Body", "BodyState", "Scene", "Sim", "Trajectory", "AppliedTorque", "ForceAtPoint", "Gravity",
            "LinearDamping", "AngularDamping", "DivergenceError", "StaleBuildError", "LavenderInputError"]
-__version__ = "0.1.0"
+from ._version import __version__  # noqa: E402
 
 from .envs import register as _register_envs  # noqa: E402
 
