@@ -388,8 +388,8 @@ static void ctx_init(body_ctx *c, const double *params, long b, const lv_models 
     }
 }
 
-/* Dormand-Prince 5(4) tableau (Hairer, Norsett & Wanner, Solving ODEs I, table 5.2). */
-static const double DP_C[7] = {0.0, 1.0 / 5, 3.0 / 10, 4.0 / 5, 8.0 / 9, 1.0, 1.0};
+/* Dormand-Prince 5(4) tableau (Hairer, Norsett & Wanner, Solving ODEs I, table 5.2). The nodes c_i
+   are not needed: the right-hand side does not depend on time. */
 static const double DP_A[7][6] = {
     {0, 0, 0, 0, 0, 0},
     {1.0 / 5, 0, 0, 0, 0, 0},
