@@ -41,7 +41,7 @@ def lab_module(name: str):
     return importlib.import_module(f"{__name__}.{LABS[name]}")
 
 
-def run(name: str, out_dir=DEFAULT_OUT, backend: str = "c", **options) -> LabResult:
+def run(name: str, out_dir=DEFAULT_OUT, backend: str = "auto", **options) -> LabResult:
     """Run lab ``name`` and return its results (see the module docstring)."""
     return lab_module(name).run(out_dir, backend=backend, **options)
 
@@ -52,8 +52,8 @@ def _common_parent():
     p = argparse.ArgumentParser(add_help=False)
     p.add_argument("--out", default=DEFAULT_OUT, metavar="DIR",
                    help=f"output directory; the lab writes DIR/NAME/results.json and PNGs (default: ./{DEFAULT_OUT})")
-    p.add_argument("--backend", default="c", choices=BACKENDS,
-                   help="simulator backend for the labs that step a scene (default: c)")
+    p.add_argument("--backend", default="auto", choices=BACKENDS,
+                   help="simulator backend for the labs that step a scene (default auto: C when built, else NumPy with a warning)")
     v = p.add_argument_group("live view (lavendersim.viewer; labs with a view: 03)")
     v.add_argument("--view", action="store_true",
                    help="after the lab, run its scene live in the browser viewer at http://VIEW_HOST:VIEW_PORT")

@@ -630,7 +630,7 @@ def machine_stamp(mujoco) -> dict:
 
 # ------------------------------------------------------------------------------------------ run
 
-def run(out_dir=C.DEFAULT_OUT, backend: str = "c", quick: bool = True, mujoco: bool = True,
+def run(out_dir=C.DEFAULT_OUT, backend: str = "auto", quick: bool = True, mujoco: bool = True,
         progress: bool = False) -> C.LabResult:
     """Run the study; ``quick=True`` (the Python default, what ``lab all`` runs) is the reduced
     sweep, ``quick=False`` the full one (the command line's default). ``backend`` is accepted for

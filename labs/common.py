@@ -16,10 +16,10 @@ from pathlib import Path
 
 import numpy as np
 
-from lavendersim import validate as V
+from lavendersim import backends
 
 DEFAULT_OUT = "lab-output"
-BACKENDS = ("c", "numpy")
+BACKENDS = backends.BACKEND_CHOICES  # "auto" (default), "c", "numpy"
 
 
 # --------------------------------------------------------------------------
@@ -224,7 +224,7 @@ def new_figure(nrows: int = 1, ncols: int = 1, *, size=(8.0, 4.5), title: str | 
 
 
 def check_backend(backend) -> str:
-    return V.choice("backend", backend, BACKENDS)
+    return backends.resolve(backend)
 
 
 def angle_between_deg(K, q_a, q_b):

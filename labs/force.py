@@ -46,7 +46,7 @@ def options_from_args(args) -> dict:
     return {"offset": args.offset}
 
 
-def run(out_dir=C.DEFAULT_OUT, backend: str = "c", offset: float = R_W[0]) -> C.LabResult:
+def run(out_dir=C.DEFAULT_OUT, backend: str = "auto", offset: float = R_W[0]) -> C.LabResult:
     backend = C.check_backend(backend)
     x = V.scalar("offset", offset)
     r = np.array([x, 0.0, 0.0])

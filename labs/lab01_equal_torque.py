@@ -84,7 +84,7 @@ def run_error(backend: str, dt: float, integrator: str) -> float:
     return max(abs(theta - 0.5 * a_cube * T_END ** 2), abs(sim.state("rod_y90").omega_w[2] / T_END - a_y90))
 
 
-def run(out_dir=C.DEFAULT_OUT, backend: str = "c", dt: float = DT, integrator: str = INTEGRATOR,
+def run(out_dir=C.DEFAULT_OUT, backend: str = "auto", dt: float = DT, integrator: str = INTEGRATOR,
         damping: float = 0.0) -> C.LabResult:
     backend = C.check_backend(backend)
     dt = V.dt("dt", dt)

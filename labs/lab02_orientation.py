@@ -100,7 +100,7 @@ def exact(omega_w, t, q0=(0.0, 0.0, 0.0, 1.0)):
     return K.quat_mul(q_rot, np.broadcast_to(np.asarray(q0, float), (len(t), 4)))
 
 
-def run(out_dir=C.DEFAULT_OUT, backend: str = "c", dt: float = DT, single_axis: bool = False) -> C.LabResult:
+def run(out_dir=C.DEFAULT_OUT, backend: str = "auto", dt: float = DT, single_axis: bool = False) -> C.LabResult:
     backend = C.check_backend(backend)  # recorded; this lab calls the kernels directly
     dt = V.dt("dt", dt)
     if not isinstance(single_axis, (bool, np.bool_)):

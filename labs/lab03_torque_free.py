@@ -160,7 +160,7 @@ def _invariants(traj, name, body):
     return L, E
 
 
-def run(out_dir=C.DEFAULT_OUT, backend: str = "c", dt: float = DT, integrator: str = INTEGRATOR,
+def run(out_dir=C.DEFAULT_OUT, backend: str = "auto", dt: float = DT, integrator: str = INTEGRATOR,
         normalize: bool = True, search: bool = False) -> C.LabResult:
     backend = C.check_backend(backend)
     dt = V.dt("dt", dt)

@@ -78,7 +78,7 @@ def _run(model, u_of_t, T, backend, omega_b=(0, 0, 0), Omega=(0, 0, 0), momentum
     return {"t": t, "w": w, "Om": Om, "u": ua, "Lb": Lb, "Lw": Lw}
 
 
-def run(out_dir=C.DEFAULT_OUT, backend: str = "c", torque: float = TORQUE, T: float = T_END) -> C.LabResult:
+def run(out_dir=C.DEFAULT_OUT, backend: str = "auto", torque: float = TORQUE, T: float = T_END) -> C.LabResult:
     backend = C.check_backend(backend)
     U = V.positive("torque", torque)
     T = V.positive("T", T)

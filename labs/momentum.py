@@ -53,7 +53,7 @@ def _rel(a, b) -> float:
     return float(np.max(np.abs(a - b)) / max(float(np.max(np.abs(b))), 1e-300))
 
 
-def run(out_dir=C.DEFAULT_OUT, backend: str = "c", mass_scale: float = 2.0) -> C.LabResult:
+def run(out_dir=C.DEFAULT_OUT, backend: str = "auto", mass_scale: float = 2.0) -> C.LabResult:
     backend = C.check_backend(backend)  # recorded; this lab needs no simulator
     s = V.scalar("mass_scale", mass_scale, positive=True)
     m = np.array(MASSES)

@@ -2,18 +2,57 @@
 
 Conventions: quaternions (x, y, z, w), scalar last; R_WB maps body to world; suffixes _w/_b name
 the frame; SI units; float64.
+
+The public names below are loaded on first use (``lavendersim.Sim`` imports the simulator then),
+so ``import lavendersim`` and the ``lavendersim`` command start fast; ``import lavendersim`` never
+imports gymnasium, SymPy or scipy.integrate.
 """
-from .bodies import Body, BodyState
-from .effects import AngularDamping, AppliedTorque, ForceAtPoint, Gravity, LinearDamping
-from .errors import DivergenceError, StaleBuildError
-from .scene import Scene
-from .sim import Sim, Trajectory
-from .validate import LavenderInputError
+from __future__ import annotations
 
-__all__ = ["Body", "BodyState", "Scene", "Sim", "Trajectory", "AppliedTorque", "ForceAtPoint", "Gravity",
-           "LinearDamping", "AngularDamping", "DivergenceError", "StaleBuildError", "LavenderInputError"]
-from ._version import __version__  # noqa: E402
+import importlib
+from typing import TYPE_CHECKING
 
-from .envs import register as _register_envs  # noqa: E402
+from ._version import __version__
 
-_register_envs()  # ReactionWheelCube-v0 (gymnasium.make("lavendersim:ReactionWheelCube-v0"))
+# public name -> the module that defines it
+_EXPORTS = {
+    "Body": "bodies", "BodyState": "bodies",
+    "AppliedTorque": "effects", "ForceAtPoint": "effects", "Gravity": "effects", "LinearDamping": "effects",
+    "AngularDamping": "effects",
+    "DivergenceError": "errors", "StaleBuildError": "errors",
+    "Scene": "scene",
+    "Sim": "sim", "Trajectory": "sim",
+    "LavenderInputError": "validate",
+    "MissingExtraError": "_install",
+}
+
+__all__ = ["Body", "BodyState", "AppliedTorque", "ForceAtPoint", "Gravity", "LinearDamping", "AngularDamping",
+           "DivergenceError", "StaleBuildError", "Scene", "Sim", "Trajectory", "LavenderInputError",
+           "MissingExtraError", "__version__"]
+
+if TYPE_CHECKING:  # for type checkers and IDEs; at run time the names load lazily
+    from ._install import MissingExtraError
+    from .bodies import Body, BodyState
+    from .effects import AngularDamping, AppliedTorque, ForceAtPoint, Gravity, LinearDamping
+    from .errors import DivergenceError, StaleBuildError
+    from .scene import Scene
+    from .sim import Sim, Trajectory
+    from .validate import LavenderInputError
+
+
+def __getattr__(name: str):
+    module = _EXPORTS.get(name)
+    if module is None:
+        raise AttributeError(f"module 'lavendersim' has no attribute {name!r}")
+    value = getattr(importlib.import_module(f".{module}", __name__), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_EXPORTS))
+
+
+from .envs import register as _register_envs  # noqa: E402  (light: never imports gymnasium)
+
+_register_envs()  # ReactionWheelCube-v0: gymnasium.make("lavendersim:ReactionWheelCube-v0")

@@ -1,11 +1,28 @@
-"""Command line: `lavendersim derive [--check]`, `lavendersim lab NAME|all`, `lavendersim view NAME`,
-`lavendersim bench [--quick] [--json PATH]`."""
+"""lavendersim — 3D rigid-body mechanics: derive the equations, run the chapter's labs, design LQR
+wheel controllers, view scenes live, measure speed.
+
+The top-level parser imports nothing heavy: each command's own parser (and its modules) is built
+only when that command runs, so ``lavendersim --help`` answers at once. Every error a user can
+cause — a bad option value, a missing optional extra, an unbuildable backend — is one line on
+stderr and exit code 2, never a traceback.
+"""
 from __future__ import annotations
 
 import argparse
 import sys
 import time
 from pathlib import Path
+
+from ._version import __version__
+
+# command -> one-line help (the command's full parser is built by BUILDERS[command] when it runs)
+COMMANDS = {
+    "derive": "derive the equations with SymPy and print them into generated/",
+    "lab": "run a chapter lab (or `all`); exits 1 if a figure is off",
+    "lqr": "design an LQR wheel controller for the reaction-wheel cube and run it (control extra)",
+    "view": "run a scene live in the browser viewer (viewer extra)",
+    "bench": "speed as ratios against peers measured in the same run",
+}
 
 
 def generated_dir() -> Path:
@@ -15,6 +32,7 @@ def generated_dir() -> Path:
 
 
 def _derive(args) -> int:
+    from lavendersim._install import rebuild_command
     from lavendersim.derive import codegen
 
     out = Path(args.out) if args.out else generated_dir()
@@ -24,7 +42,8 @@ def _derive(args) -> int:
         dt = time.perf_counter() - t0
         if stale:
             print(f"generated/ is stale ({out}): {', '.join(stale)} differ from what derive/ produces.", file=sys.stderr)
-            print("Run `lavendersim derive` to regenerate, then rebuild the C backend with `pip install -e .`.", file=sys.stderr)
+            print(f"Run `lavendersim derive` to regenerate, then rebuild the C backend with `{rebuild_command()}`.",
+                  file=sys.stderr)
             return 1
         print(f"generated/ is current ({out}; {dt:.2f} s)")
         return 0
@@ -32,28 +51,31 @@ def _derive(args) -> int:
     dt = time.perf_counter() - t0
     print(f"derived into {out} in {dt:.2f} s; changed: {', '.join(changed) if changed else 'nothing'}")
     if changed and any(n.startswith("kernels.") for n in changed):
-        print("C kernels changed: rebuild the compiled backend with `pip install -e .`")
+        print(f"C kernels changed: rebuild the compiled backend with `{rebuild_command()}`")
     return 0
+
+
+def _add_derive(sub) -> None:
+    d = sub.add_parser("derive", help=COMMANDS["derive"], description=COMMANDS["derive"] + ".")
+    d.add_argument("--check", action="store_true", help="write nothing; exit 1 and name the stale files if generated/ is not current")
+    d.add_argument("--full", action="store_true", help="with --check: always re-derive in memory (skip the manifest fast path)")
+    d.add_argument("--out", help="output directory (default: the package's generated/)")
+    d.set_defaults(fn=_derive)
 
 
 def _view(args) -> int:
     from lavendersim import viewer
-    from lavendersim.validate import LavenderInputError
 
-    try:
-        viewer.run_scene(args.scene, duration=args.duration, host=args.host, port=args.port, rate_hz=args.rate)
-    except LavenderInputError as exc:
-        print(f"view: {exc}", file=sys.stderr)
-        return 2
+    viewer.run_scene(args.scene, duration=args.duration, host=args.host, port=args.port, rate_hz=args.rate)
     return 0
 
 
 def _add_view(sub) -> None:
     from lavendersim.viewer import DEFAULT_HOST, DEFAULT_PORT, SCENES
 
-    v = sub.add_parser("view", help="run a scene live in the browser viewer (viser) at http://HOST:PORT",
+    v = sub.add_parser("view", help=COMMANDS["view"],
                        description="Run a scene in real time and stream it to a browser page "
-                                   f"(scenes: {', '.join(SCENES)}).")
+                                   f"(scenes: {', '.join(SCENES)}). Needs the viewer extra: pip install 'lavendersim[viewer]'.")
     v.add_argument("scene", metavar="NAME", help=f"scene to run: {', '.join(SCENES)}")
     v.add_argument("--duration", type=float, default=None, help="simulated seconds to run (default: until Ctrl-C)")
     v.add_argument("--host", default=DEFAULT_HOST, help=f"interface to bind (default {DEFAULT_HOST}: this machine only)")
@@ -63,39 +85,73 @@ def _add_view(sub) -> None:
 
 
 def _add_bench(sub) -> None:
-    b = sub.add_parser("bench", help="speed as ratios measured in one run (C, NumPy, hand-written C, MuJoCo)",
-                       description="Speed of LavenderSim as ratios against references measured in the same run; "
-                                   "prints PASS/MISS against the targets of issue 4 (a miss never fails the command).")
+    from lavendersim.bench import add_arguments, command
 
-    def _bench(args) -> int:
-        from lavendersim.bench import command
-
-        return command(args)
-
-    from lavendersim.bench import add_arguments
-
+    b = sub.add_parser("bench", help=COMMANDS["bench"],
+                       description="Speed of LavenderSim as ratios against peers measured in the same run; prints "
+                                   "PASS/MISS against the project's speed targets (a miss never fails the command). "
+                                   "MuJoCo is measured when the bench extra is installed: pip install 'lavendersim[bench]'.")
     add_arguments(b)
-    b.set_defaults(fn=_bench)
+    b.set_defaults(fn=command)
 
 
-def main(argv=None) -> int:
-    p = argparse.ArgumentParser(prog="lavendersim", description=__doc__)
-    sub = p.add_subparsers(dest="cmd", required=True)
-    d = sub.add_parser("derive", help="derive the equations with SymPy and print them into generated/")
-    d.add_argument("--check", action="store_true", help="write nothing; exit 1 and name the stale files if generated/ is not current")
-    d.add_argument("--full", action="store_true", help="with --check: always re-derive in memory (skip the manifest fast path)")
-    d.add_argument("--out", help="output directory (default: the package's generated/)")
-    d.set_defaults(fn=_derive)
+def _add_lab(sub) -> None:
     from lavendersim.labs import register_cli
 
     register_cli(sub)
-    from lavendersim.control import register_cli as register_lqr
 
-    register_lqr(sub)
-    _add_view(sub)
-    _add_bench(sub)
-    args = p.parse_args(argv)
-    return int(args.fn(args) or 0)
+
+def _add_lqr(sub) -> None:
+    from lavendersim.control import register_cli
+
+    register_cli(sub)
+
+
+BUILDERS = {"derive": _add_derive, "lab": _add_lab, "lqr": _add_lqr, "view": _add_view, "bench": _add_bench}
+
+
+def _top_parser(full: str | None) -> argparse.ArgumentParser:
+    """The parser; `full` names the one command whose own parser is built (None: names only)."""
+    p = argparse.ArgumentParser(prog="lavendersim", description=__doc__.split("\n\n")[0],
+                                epilog="`lavendersim COMMAND --help` describes a command.")
+    p.add_argument("--version", action="version", version=f"lavendersim {__version__}")
+    sub = p.add_subparsers(dest="cmd", required=True, metavar="COMMAND")
+    for name, text in COMMANDS.items():
+        if name == full:
+            BUILDERS[name](sub)
+        else:
+            sub.add_parser(name, help=text, add_help=False)
+    return p
+
+
+def _fail(message: str) -> int:
+    print(f"lavendersim: {message}", file=sys.stderr)
+    return 2
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the command line; returns the exit code (0 ok, 1 a figure or check failed, 2 bad usage)."""
+    from ._install import MissingExtraError
+
+    argv = list(sys.argv[1:] if argv is None else argv)
+    command = next((a for a in argv if not a.startswith("-")), None)
+    try:
+        parser = _top_parser(command if command in COMMANDS else None)
+        args = parser.parse_args(argv)
+        return int(args.fn(args) or 0)
+    except MissingExtraError as exc:
+        return _fail(str(exc))
+    except ValueError as exc:  # LavenderInputError is a ValueError naming the field and the rule
+        from .validate import LavenderInputError
+
+        if not isinstance(exc, LavenderInputError):
+            raise
+        return _fail(f"{command}: invalid input: {exc}")
+    except ImportError as exc:  # the C backend asked for by name and not usable: says how to build it
+        return _fail(f"{command}: {exc}")
+    except KeyboardInterrupt:
+        print("lavendersim: interrupted", file=sys.stderr)
+        return 130
 
 
 if __name__ == "__main__":

@@ -42,6 +42,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import validate as V
+from ._install import require
 from .kernels import K as KN
 
 SCENARIOS = ("center", "corner")
@@ -149,7 +150,7 @@ class CubeModel:
             scene.add_effect("angular_damping", body=BODY, c=self.damping)
         return scene
 
-    def make_sim(self, q0=None, omega_b=(0, 0, 0), Omega=(0, 0, 0), dt=1e-3, backend="c", integrator="rk4"):
+    def make_sim(self, q0=None, omega_b=(0, 0, 0), Omega=(0, 0, 0), dt=1e-3, backend="auto", integrator="rk4"):
         import lavendersim as lv
 
         sim = lv.Sim(self.scene(q0, omega_b), dt=dt, integrator=integrator, backend=backend)
@@ -262,8 +263,7 @@ class Linearization:
 
 def casadi_rhs(model: CubeModel, q_ref, Omega0=(0, 0, 0)):
     """CasADi Function f(x, du) -> x_dot in error coordinates, built from kernels_casadi."""
-    import casadi as ca
-
+    ca = require("casadi", "control", "the CasADi linearization")
     from .generated import kernels_casadi as KC
 
     q_ref = ca.DM(np.asarray(q_ref, float))
@@ -319,8 +319,7 @@ def controllable_basis(A, B, tol: float = 1e-9) -> np.ndarray:
 
 def linearize(model: CubeModel, q_ref=None, Omega0=(0, 0, 0), tol: float = 1e-9) -> Linearization:
     """A = ∂f/∂x, B = ∂f/∂u at (q_ref, omega = 0, Omega = Omega0, u = c_w Omega0), by CasADi AD."""
-    import casadi as ca
-
+    ca = require("casadi", "control", "the CasADi linearization")
     q_ref = model.upright_q() if q_ref is None else V.quaternion("q_ref", q_ref)
     Omega0 = V.vector("Omega0", Omega0)
     f, u0 = casadi_rhs(model, q_ref, Omega0)
@@ -375,8 +374,7 @@ def lqr(lin: Linearization, Q, R):
     """(K, S, E) of python-control's lqr, on the controllable subspace when rank < n (see the
     module docstring). E are the closed-loop eigenvalues of A − B K (the uncontrollable conserved
     modes included, at 0)."""
-    import control as ct
-
+    ct = require("control", "control", "LQR design (python-control)")
     n, m = lin.B.shape
     Q = _weight("Q", Q, n, definite=False)
     R = _weight("R", R, m, definite=True)
@@ -426,7 +424,7 @@ class Response:
 
 
 def closed_loop(model: CubeModel, lin: Linearization, K, q0, T: float = 5.0, *, omega0=(0, 0, 0), Omega0=None,
-                dt: float = 1e-3, control_dt: float = 2e-3, backend: str = "c", sim=None) -> Response:
+                dt: float = 1e-3, control_dt: float = 2e-3, backend: str = "auto", sim=None) -> Response:
     """Run u = u0 − K x (clipped to ±torque_limit) with a zero-order hold of control_dt in the
     nonlinear simulator (the Sim's reaction_wheels effect saturates again, speed limit included).
     `sim` may be given (any object with the Sim's wheel API) instead of building one."""
@@ -548,7 +546,7 @@ CORNER_AXIS = (1.0, 1.0, -2.0)  # perpendicular to the body diagonal: a pure til
 
 
 def design(scenario: str = "center", Q=None, R=None, *, theta0_deg: float | None = None, axis=None,
-           T: float | None = None, threshold_deg: float = 0.1, backend: str = "c", dt: float = 1e-3,
+           T: float | None = None, threshold_deg: float = 0.1, backend: str = "auto", dt: float = 1e-3,
            control_dt: float = 2e-3, model: CubeModel | None = None, sim=None, **model_params) -> DesignResult:
     """Linearize, design the LQR gain, run the closed loop from an initial error of theta0_deg
     about the body axis `axis` (defaults: 20° about (1, 2, 3) centre; 3° about (1, 1, −2), a pure
@@ -575,7 +573,7 @@ def design(scenario: str = "center", Q=None, R=None, *, theta0_deg: float | None
 # ----------------------------------------------------------------------------------------------
 
 
-def finite_difference_AB(model: CubeModel, lin: Linearization, *, backend: str = "c", h: float = 1e-5,
+def finite_difference_AB(model: CubeModel, lin: Linearization, *, backend: str = "auto", h: float = 1e-5,
                          dt: float = 1e-3, make_sim=None):
     """A and B by central finite differences of the runtime simulator's right-hand side.
 
@@ -667,7 +665,8 @@ def register_cli(subparsers) -> None:
                    "1,1,-2 corner: a pure tilt)")
     p.add_argument("--T", type=float, default=None, help="simulated time, s (default 5 center, 6 corner)")
     p.add_argument("--threshold", type=float, default=0.1, help="settling threshold, deg (default 0.1)")
-    p.add_argument("--backend", default="c", choices=("c", "numpy"))
+    p.add_argument("--backend", default="auto", choices=("auto", "c", "numpy"),
+                   help="simulator backend (default auto: C when built, else NumPy with a warning)")
     p.add_argument("--plot", default="lqr-response.png", help="response plot PNG path (default lqr-response.png)")
     p.add_argument("--json", action="store_true", help="print the figures as JSON")
     p.set_defaults(fn=_cli)

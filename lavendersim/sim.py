@@ -66,7 +66,7 @@ class Trajectory:
 
 
 class Sim:
-    def __init__(self, scene: Scene, dt: float = 1e-3, integrator: str = "rk4", backend: str = "c", normalize: bool = True,
+    def __init__(self, scene: Scene, dt: float = 1e-3, integrator: str = "rk4", backend: str = "auto", normalize: bool = True,
                  rtol: float | None = None, atol: float | None = None):
         if not isinstance(scene, Scene):
             raise V.LavenderInputError("scene", "must be a lavendersim.Scene", f", got {type(scene).__name__}")

@@ -45,6 +45,7 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 
 from . import validate as V
+from ._install import require
 from .kernels import K as KN
 
 __all__ = ["Viewer", "validate_overlays", "xyzw_to_wxyz", "DEFAULT_COLOR", "MAX_VECTORS", "SCENES", "LAB_VIEWS",
@@ -238,8 +239,7 @@ class Viewer:
             raise V.LavenderInputError("port", "must be in 0..65535", f", got {port}")
         self.max_rate_hz = V.positive("max_rate_hz", max_rate_hz)
         self._arrow_radius = None if arrow_radius is None else V.positive("arrow_radius", arrow_radius)
-        import viser
-
+        viser = require("viser", "viewer", "the browser viewer")
         self.server = viser.ViserServer(host=host, port=port, label=label, verbose=verbose)
         self.host, self.port = host, int(self.server.get_port())
         self.server.gui.configure_theme(show_share_button=False, show_logo=False)

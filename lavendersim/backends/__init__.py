@@ -86,8 +86,54 @@ def saturate(command: np.ndarray, Omega: np.ndarray, torque_limit, speed_limit) 
     return np.where((np.abs(Omega) >= sl) & (u * Omega > 0), 0.0, u)
 
 
-def get(name: str):
-    name = V.choice("backend", name, BACKENDS)
+BACKEND_CHOICES = ("auto",) + BACKENDS
+_UNSET = object()
+_c_problem: object = _UNSET   # why the C backend cannot be used (str), None if it can; looked up once
+_fallback_warned = False
+
+
+class BackendFallbackWarning(UserWarning):
+    """backend="auto" chose the NumPy backend because the C backend cannot be used (the text says why)."""
+
+
+def c_unavailable() -> str | None:
+    """Why the C backend cannot be used in this process (not built, failed to load, stale), or None.
+
+    Looked up once per process; importing the C backend checks that the build matches generated/."""
+    global _c_problem
+    if _c_problem is _UNSET:
+        try:
+            from . import c_backend  # noqa: F401  (ImportError, or StaleBuildError which is one)
+            _c_problem = None
+        except ImportError as exc:
+            _c_problem = str(exc)
+    return _c_problem  # type: ignore[return-value]
+
+
+def resolve(name: str = "auto") -> str:
+    """The backend a name stands for: "c", "numpy", or for "auto" C when its extension is built and
+    current, else NumPy with one warning per process (a BackendFallbackWarning that says why).
+
+    An explicit "c" that cannot load raises ImportError / StaleBuildError with the fix."""
+    global _fallback_warned
+    name = V.choice("backend", name, BACKEND_CHOICES)
+    if name != "auto":
+        return name
+    why = c_unavailable()
+    if why is None:
+        return "c"
+    if not _fallback_warned:
+        import warnings
+
+        _fallback_warned = True
+        warnings.warn(f"LavenderSim runs on the NumPy backend (much slower): the C backend is unavailable: {why}",
+                      BackendFallbackWarning, stacklevel=3)
+    return "numpy"
+
+
+def get(name: str = "auto"):
+    """A backend object for `name` ("auto", "c" or "numpy"; see resolve)."""
+    name = resolve(name)
     if name == "numpy":
         from .numpy_backend import NumpyBackend
 
@@ -95,6 +141,21 @@ def get(name: str):
     from .c_backend import CBackend
 
     return CBackend()
+
+
+def norm_safe(v: np.ndarray) -> float:
+    """Euclidean norm without overflow for huge finite components (0 for non-finite input)."""
+    s = float(np.max(np.abs(v))) if v.size else 0.0
+    return 0.0 if s == 0.0 or not np.isfinite(s) else s * float(np.sqrt(np.sum((v / s) ** 2)))
+
+
+def tolerance_cause(adaptive: Adaptive, h: float, dt: float, x: np.ndarray) -> str:
+    """Why dopri5 stopped: the requested tolerance could not be met."""
+    w = norm_safe(np.asarray(x[10:13], dtype=np.float64))
+    return (f"dopri5 could not meet rtol={adaptive.rtol:g}, atol={adaptive.atol:g}: the step size fell to "
+            f"{h:.3g} s (below dt*{DOPRI5_HMIN_REL:g} = {dt * DOPRI5_HMIN_REL:.3g} s) or one step of dt = {dt:g} s "
+            f"needed over {DOPRI5_MAX_SUBSTEPS:,} substeps (|omega| = {w:.3g} rad/s); loosen rtol/atol, check "
+            "effect strengths (stiff damping), or use implicit_gyro for very fast spin")
 
 
 def divergence_cause(x_before: np.ndarray, dt: float, integrator: str, Omega_before: np.ndarray | None = None,

@@ -14,9 +14,10 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import DivergenceError, StaleBuildError
-from . import DOPRI5_HMIN_REL, DOPRI5_MAX_SUBSTEPS, KIND_WHEELS, PLAIN_ONLY, Adaptive, Models
+from .._install import rebuild_command
+from . import KIND_WHEELS, PLAIN_ONLY, Adaptive, Models, norm_safe, tolerance_cause
 
-REBUILD = "pip install -e ."
+REBUILD = rebuild_command()
 HASHED = ("kernels.c", "kernels.h")
 INTEGRATOR_CODES = {"euler": 0, "semi_implicit_euler": 1, "rk4": 2, "dopri5": 3, "splitting": 4, "implicit_gyro": 5}
 EFFECT_CODES = {"applied_torque": 1, "force_at_point": 2, "gravity": 3, "linear_damping": 4, "angular_damping": 5}
@@ -26,8 +27,8 @@ try:
 except ImportError as exc:  # not built (or built for another interpreter)
     raise ImportError(
         "lavendersim's C backend (lavendersim._lavender_c) is not built or failed to load "
-        f"({exc}). Build it from the repository root with `{REBUILD}` (needs a C99 compiler and the "
-        "Python headers), or use the NumPy backend (backend='numpy')."
+        f"({exc}). Build it with `{REBUILD}` (needs a C99 compiler and the Python headers), or use the "
+        "NumPy backend (backend='numpy'; backend='auto', the default, falls back to it)."
     ) from exc
 
 
@@ -73,7 +74,7 @@ def check_build(gen_dir: Path | None = None, built_hash: str | None = None) -> N
         return
     msg = (f"lavendersim._lavender_c is stale: it was built from other generated C kernels than "
            f"{gen_dir}/kernels.c and kernels.h (built {built[:12]}…, on disk {current[:12]}…). "
-           f"Rebuild it from the repository root with `{REBUILD}`.")
+           f"Rebuild it with `{REBUILD}`.")
     bad = _generated_inconsistent(gen_dir)
     if bad:
         msg += (f" generated/ itself does not match its manifest ({', '.join(bad)}): "
@@ -133,12 +134,6 @@ def eval_kernel(name: str, *inputs):
     return results[0] if len(results) == 1 else tuple(results)
 
 
-def _norm(v: np.ndarray) -> float:
-    """Euclidean norm without overflow for huge finite components."""
-    s = float(np.max(np.abs(v))) if v.size else 0.0
-    return 0.0 if s == 0.0 or not np.isfinite(s) else s * float(np.sqrt(np.sum((v / s) ** 2)))
-
-
 def _cause(start: np.ndarray, pre: np.ndarray, params: np.ndarray, effects: np.ndarray, body: int,
            step: int, dt: float, integrator: str, model: tuple | None = None) -> str:
     """Likely cause, from the body's state at the start of the call (`start`) and just before the
@@ -161,9 +156,9 @@ def _cause(start: np.ndarray, pre: np.ndarray, params: np.ndarray, effects: np.n
     wheels = None if W0 is None else (model[0][16:19], model[0][21])
     cause = divergence_cause(start, dt, integrator, W0, wheels)
     if step > 0:
-        wtxt = "" if W0 is None else f", |Omega| = {_norm(model[2]):.3g} rad/s"
-        cause += (f" (just before step {step}: |omega|*dt = {_norm(pre[10:13]) * dt:.3g}, "
-                  f"|v| = {_norm(pre[7:10]):.3g} m/s{wtxt})")
+        wtxt = "" if W0 is None else f", |Omega| = {norm_safe(model[2]):.3g} rad/s"
+        cause += (f" (just before step {step}: |omega|*dt = {norm_safe(pre[10:13]) * dt:.3g}, "
+                  f"|v| = {norm_safe(pre[7:10]):.3g} m/s{wtxt})")
     return cause
 
 
@@ -176,15 +171,6 @@ def _f64_rows(name: str, a, cols: int, nb: int, writable: bool = False) -> np.nd
     if a.shape != (nb, cols):
         raise ValueError(f"models.{name} must have shape ({nb}, {cols}), got {a.shape}")
     return a
-
-
-def tolerance_cause(adaptive: Adaptive, h: float, dt: float, x: np.ndarray) -> str:
-    """Why dopri5 stopped: the requested tolerance could not be met."""
-    w = _norm(np.asarray(x[10:13], dtype=np.float64))
-    return (f"dopri5 could not meet rtol={adaptive.rtol:g}, atol={adaptive.atol:g}: the step size fell to "
-            f"{h:.3g} s (below dt*{DOPRI5_HMIN_REL:g} = {dt * DOPRI5_HMIN_REL:.3g} s) or one step of dt = {dt:g} s "
-            f"needed over {DOPRI5_MAX_SUBSTEPS:,} substeps (|omega| = {w:.3g} rad/s); loosen rtol/atol, check "
-            "effect strengths (stiff damping), or use implicit_gyro for very fast spin")
 
 
 class CBackend:

@@ -15,7 +15,7 @@ import numpy as np
 from ..errors import DivergenceError
 from ..kernels import K
 from . import (DOPRI5_HMIN_REL, DOPRI5_MAX_SUBSTEPS, KIND_JOINT, KIND_WHEELS, MODEL_LAYOUT as L, PLAIN_ONLY,
-               Adaptive, Models, divergence_cause, saturate)
+               Adaptive, Models, divergence_cause, saturate, tolerance_cause)
 
 
 def _terms(effects: np.ndarray, idx: np.ndarray) -> list:
@@ -436,8 +436,6 @@ def _dopri5(plan, x, normalize, dt, n_steps, rtol, atol, hs, nfev, command=None,
                 rejected = True
             sub += 1
             if h < hmin or sub > DOPRI5_MAX_SUBSTEPS:
-                from .c_backend import tolerance_cause  # noqa: PLC0415 - shared wording
-
                 bad = ~np.isfinite(norms)
                 b = int(np.flatnonzero(bad)[0]) if bad.any() else int(np.argmax(norms))
                 raise DivergenceError(i, b, tolerance_cause(Adaptive(rtol, atol, 0), h, dt, x[b]))

@@ -1,25 +1,66 @@
-"""Gymnasium environments built on the LavenderSim runtime.
+"""Gymnasium environments built on the LavenderSim runtime (the ``gym`` extra).
 
-``ReactionWheelCube-v0`` is registered when ``lavendersim`` is imported (if gymnasium is
-installed) and is reachable as ``gymnasium.make("lavendersim:ReactionWheelCube-v0")``.
+``ReactionWheelCube-v0`` is reachable as ``gymnasium.make("lavendersim:ReactionWheelCube-v0")``.
+``import lavendersim`` does not import gymnasium: it registers the environment at once when
+gymnasium is already imported, and otherwise as soon as gymnasium is imported (a one-shot import
+hook), so the id works whichever of the two is imported first.
 """
 from __future__ import annotations
+
+import importlib.abc
+import importlib.machinery
+import sys
 
 ENV_ID = "ReactionWheelCube-v0"
 ENTRY_POINT = "lavendersim.envs.reaction_wheel_cube:ReactionWheelCubeEnv"
 MAX_EPISODE_STEPS = 1000
 
 
-def register() -> bool:
-    """Register ReactionWheelCube-v0 with gymnasium unless it already is; False if gymnasium is
-    not installed."""
-    try:
-        import gymnasium
-    except ImportError:
-        return False
+def _register_now(gymnasium) -> None:
     if ENV_ID not in gymnasium.registry:
         gymnasium.register(id=ENV_ID, entry_point=ENTRY_POINT, max_episode_steps=MAX_EPISODE_STEPS)
-    return True
+
+
+class _RegisteringLoader(importlib.abc.Loader):
+    """Runs gymnasium's own loader, then registers our environments in the fresh module."""
+
+    def __init__(self, loader):
+        self._loader = loader
+
+    def create_module(self, spec):
+        return self._loader.create_module(spec)
+
+    def exec_module(self, module):
+        self._loader.exec_module(module)
+        _register_now(module)
+
+
+class _GymnasiumImportHook(importlib.abc.MetaPathFinder):
+    """A meta-path finder that only ever answers for the top-level ``gymnasium`` package, once."""
+
+    def find_spec(self, fullname, path, target=None):
+        if fullname != "gymnasium":
+            return None
+        _remove_hook()
+        spec = importlib.machinery.PathFinder.find_spec(fullname, path)
+        if spec is not None and spec.loader is not None:
+            spec.loader = _RegisteringLoader(spec.loader)
+        return spec
+
+
+def _remove_hook() -> None:
+    sys.meta_path[:] = [f for f in sys.meta_path if not isinstance(f, _GymnasiumImportHook)]
+
+
+def register() -> None:
+    """Register ReactionWheelCube-v0 with gymnasium now if it is imported, else when it is.
+
+    Never imports gymnasium itself (``import lavendersim`` stays light)."""
+    gymnasium = sys.modules.get("gymnasium")
+    if gymnasium is not None:
+        _register_now(gymnasium)
+    elif not any(isinstance(f, _GymnasiumImportHook) for f in sys.meta_path):
+        sys.meta_path.insert(0, _GymnasiumImportHook())
 
 
 def __getattr__(name):

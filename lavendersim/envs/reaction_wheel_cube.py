@@ -40,14 +40,17 @@ from __future__ import annotations
 
 import math
 
-import gymnasium as gym
 import numpy as np
-from gymnasium import spaces
 
+from .. import backends
 from .. import control as lc
 from .. import validate as V
+from .._install import require
 from ..errors import DivergenceError
 from ..kernels import K
+
+gym = require("gymnasium", "gym", "the ReactionWheelCube-v0 environment")
+spaces = require("gymnasium.spaces", "gym", "the ReactionWheelCube-v0 environment")
 
 BODY = lc.BODY
 
@@ -55,7 +58,7 @@ BODY = lc.BODY
 class ReactionWheelCubeEnv(gym.Env):
     metadata = {"render_modes": ["rgb_array"], "render_fps": 50}
 
-    def __init__(self, task: str = "center", backend: str = "c", render_mode: str | None = None, *,
+    def __init__(self, task: str = "center", backend: str = "auto", render_mode: str | None = None, *,
                  control_dt: float = 0.01, dt: float = 1e-3, damping: float = 1e-3, init_angle_deg: float | None = None,
                  max_tilt_deg: float = 20.0, target_q=None, model: lc.CubeModel | None = None, **model_params):
         super().__init__()
@@ -63,7 +66,7 @@ class ReactionWheelCubeEnv(gym.Env):
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise V.LavenderInputError("render_mode", "must be None or 'rgb_array'", f", got {render_mode!r}")
         self.render_mode = render_mode
-        self.backend = V.choice("backend", backend, ("c", "numpy"))
+        self.backend = backends.resolve(backend)
         self.model = model or lc.CubeModel(scenario=task, damping=damping, **model_params)
         self.task = self.model.scenario
         self.dt = V.dt("dt", dt)

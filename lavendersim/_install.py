@@ -1,0 +1,91 @@
+"""What this installation of LavenderSim has: optional extras, and how to rebuild it.
+
+The core (``pip install lavendersim``) runs the simulator, the kernels, the chapter's labs and
+``lavendersim derive``. Heavier features live in extras; a feature whose extra is missing raises
+:class:`MissingExtraError` naming the extra and the command that installs it (the CLI prints that
+one line and exits 2).
+"""
+from __future__ import annotations
+
+import importlib
+import json
+from pathlib import Path
+from types import ModuleType
+from urllib.parse import unquote, urlparse
+
+# extra -> the packages it installs (as imported)
+EXTRAS = {
+    "control": ("casadi", "control"),
+    "viewer": ("viser",),
+    "gym": ("gymnasium",),
+    "bench": ("mujoco",),
+    "distributed": ("dask", "distributed"),
+}
+
+
+class MissingExtraError(ImportError):
+    """A feature needs an optional extra that is not installed.
+
+    Attributes: ``feature`` (what was asked for), ``extra`` (its name), ``module`` (what failed to
+    import). The message is one line: ``"<feature> needs the <extra> extra: pip install
+    'lavendersim[<extra>]'"``."""
+
+    def __init__(self, feature: str, extra: str, module: str):
+        self.feature, self.extra, self.module = feature, extra, module
+        super().__init__(f"{feature} needs the {extra} extra: pip install 'lavendersim[{extra}]' "
+                         f"(module {module!r} is not installed)", name=module)
+
+
+def require(module: str, extra: str, feature: str) -> ModuleType:
+    """Import ``module`` (a package of ``extra``) or raise MissingExtraError naming the extra.
+
+    Parameters
+    ----------
+    module : str
+        The module to import, e.g. ``"casadi"``.
+    extra : str
+        The extra that installs it (a key of :data:`EXTRAS`).
+    feature : str
+        What needs it, as the user asked for it, e.g. ``"lavendersim lqr"``.
+    """
+    if extra not in EXTRAS or module.split(".")[0] not in EXTRAS[extra]:
+        raise ValueError(f"require: {module!r} is not a package of the {extra!r} extra")
+    try:
+        return importlib.import_module(module)
+    except ModuleNotFoundError as exc:
+        if exc.name is None or exc.name.split(".")[0] != module.split(".")[0]:
+            raise  # the extra is there but one of *its* dependencies is broken: show that as it is
+        raise MissingExtraError(feature, extra, module) from None
+
+
+def _direct_url() -> dict | None:
+    from importlib import metadata
+
+    try:
+        text = metadata.distribution("lavendersim").read_text("direct_url.json")
+    except metadata.PackageNotFoundError:
+        return None
+    try:
+        return json.loads(text) if text else None
+    except ValueError:
+        return None
+
+
+def rebuild_command() -> str:
+    """The command that rebuilds the compiled backend for the way this copy was installed.
+
+    Editable install: ``pip install -e <its source folder>``; installed from a local folder:
+    ``pip install --force-reinstall <that folder>``; from an index or a wheel: ``pip install
+    --force-reinstall --no-deps lavendersim``; not installed (run from a source tree):
+    ``pip install -e .`` from the repository root."""
+    info = _direct_url()
+    if info is None:
+        return "pip install -e .  (from the repository root)"
+    url = info.get("url", "")
+    parsed = urlparse(url)
+    local = parsed.scheme == "file" and Path(unquote(parsed.path)).is_dir()
+    if local and info.get("dir_info", {}).get("editable"):
+        return f"pip install -e {unquote(parsed.path)}"
+    if local:
+        return f"pip install --force-reinstall --no-deps {unquote(parsed.path)}"
+    return "pip install --force-reinstall --no-deps lavendersim"
