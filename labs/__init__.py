@@ -1,7 +1,7 @@
 """The chapter's labs: each reproduces a figure of chapter 03 as a command and a Python call.
 
-    lavendersim lab NAME [--out DIR] [--backend c|numpy] [lab options]
-    lavendersim lab all  [--out DIR] [--backend c|numpy]
+    lavendersim lab NAME [--out DIR] [--backend auto|c|numpy] [lab options]
+    lavendersim lab all  [--out DIR] [--backend auto|c|numpy]
 
 From Python: ``lavendersim.labs.run("01", out_dir, backend="numpy", damping=0.01)`` or the lab
 module's own ``run(out_dir, backend=..., **options)``; both return a
@@ -54,7 +54,14 @@ def _common_parent():
                    help=f"output directory; the lab writes DIR/NAME/results.json and PNGs (default: ./{DEFAULT_OUT})")
     p.add_argument("--backend", default="auto", choices=BACKENDS,
                    help="simulator backend for the labs that step a scene (default auto: C when built, else NumPy with a warning)")
-    v = p.add_argument_group("live view (lavendersim.viewer; labs with a view: 03)")
+    return p
+
+
+def _view_parent(scene: str):
+    import argparse
+
+    p = argparse.ArgumentParser(add_help=False)
+    v = p.add_argument_group(f"live view (the viewer extra; scene {scene!r} of lavendersim.viewer)")
     v.add_argument("--view", action="store_true",
                    help="after the lab, run its scene live in the browser viewer at http://VIEW_HOST:VIEW_PORT")
     v.add_argument("--view-host", default="127.0.0.1", help="interface for --view (default 127.0.0.1)")
@@ -69,11 +76,9 @@ def _run_one(args) -> int:
 
     mod = lab_module(args.lab_name)
     if getattr(args, "view", False):
-        from lavendersim.viewer import LAB_VIEWS
+        from lavendersim._install import require
 
-        if args.lab_name not in LAB_VIEWS:
-            print(f"lab {args.lab_name}: no live view (--view works for labs {', '.join(LAB_VIEWS)})", file=sys.stderr)
-            return 2
+        require("viser", "viewer", f"lavendersim lab {args.lab_name} --view")  # before the lab runs, not after
     try:
         options = mod.options_from_args(args)
         result = mod.run(args.out, backend=args.backend, **options)
@@ -122,13 +127,16 @@ def register_cli(subparsers) -> None:
     """Add ``lab NAME|all`` to the ``lavendersim`` command line (each leaf sets ``fn``)."""
     import argparse
 
+    from lavendersim.viewer import LAB_VIEWS
+
     parent = _common_parent()
     lab = subparsers.add_parser("lab", help="run a chapter lab (or `all`); exits non-zero if a figure is off",
                                 description=__doc__.split("\n\n")[0])
     names = lab.add_subparsers(dest="lab_name", required=True, metavar="NAME")
     for name in LABS:
         mod = lab_module(name)
-        p = names.add_parser(name, parents=[parent], help=mod.TITLE, description=mod.__doc__,
+        parents = [parent] + ([_view_parent(LAB_VIEWS[name])] if name in LAB_VIEWS else [])
+        p = names.add_parser(name, parents=parents, help=mod.TITLE, description=mod.__doc__,
                              formatter_class=argparse.RawDescriptionHelpFormatter)
         mod.add_arguments(p)
         p.set_defaults(fn=_run_one)

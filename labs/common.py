@@ -20,6 +20,8 @@ from lavendersim import backends
 
 DEFAULT_OUT = "lab-output"
 BACKENDS = backends.BACKEND_CHOICES  # "auto" (default), "c", "numpy"
+# what a lab that steps no scene records as its backend (--backend does not apply to it)
+NO_SIMULATOR = "none (kernels evaluated directly with the generated NumPy kernels)"
 
 
 # --------------------------------------------------------------------------

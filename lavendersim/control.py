@@ -667,7 +667,7 @@ def register_cli(subparsers) -> None:
     p.add_argument("--threshold", type=float, default=0.1, help="settling threshold, deg (default 0.1)")
     p.add_argument("--backend", default="auto", choices=("auto", "c", "numpy"),
                    help="simulator backend (default auto: C when built, else NumPy with a warning)")
-    p.add_argument("--plot", default="lqr-response.png", help="response plot PNG path (default lqr-response.png)")
+    p.add_argument("--plot", default=None, metavar="PATH", help="write the response plot to PATH (PNG; default: no plot)")
     p.add_argument("--json", action="store_true", help="print the figures as JSON")
     p.set_defaults(fn=_cli)
 

@@ -4,7 +4,7 @@ Every check raises :class:`LavenderInputError` (a ``ValueError``) naming the
 offending field; none uses ``assert`` (which ``python -O`` strips). Inputs are
 never mutated, and array results are fresh C-contiguous float64 copies.
 
-Conventions (see SPEC.md): SI units; quaternions are ``(x, y, z, w)``, scalar
+Conventions (README.md, "Conventions"): SI units; quaternions are ``(x, y, z, w)``, scalar
 last; inertia is in kg*m^2, given in the body frame.
 """
 

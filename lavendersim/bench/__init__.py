@@ -21,7 +21,7 @@ v0 = (0.1, 0, 0) m/s, dt = 1e-3 s, RK4, q normalized each step):
 * agreement — the hand-written kernel against the Sim (same trajectory to ~1e-12), and MuJoCo's
   trajectory against ours and against the exact torque-free motion over 1 s.
 
-The targets of issue 4 are printed as PASS/MISS lines; a miss never changes the exit status.
+The project's speed targets are printed as PASS/MISS lines; a miss never changes the exit status.
 `--quick` is a short version (small step counts, N up to 1e3) for tests: they check that it runs
 and that its output and JSON are well formed, never the timings.
 """
@@ -605,7 +605,7 @@ def report(res: dict) -> str:
     elif "agreement_error" in mj:
         L.append(f"MuJoCo agreement failed: {mj['agreement_error']}")
     L.append("")
-    L.append("targets (issue 4)")
+    L.append("targets")
     for t in res["standing"]:
         if t["value"] is None:
             L.append(f"  N/A   {t['name']}: not measured ({t['basis']})")
