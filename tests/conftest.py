@@ -7,9 +7,10 @@ Some tests need a tool that a fresh machine may lack. Each has one name here (TO
     chromium  /usr/bin/chromium (Debian's package) and the playwright package (the viewer in a browser)
     mujoco    the `mujoco` package (bench extra: the peer comparison)
     cc        a C compiler, cc/gcc or $CC (the bench's hand-written reference kernel)
-    control   casadi and python-control (control extra: linearization, LQR, lab 04, the CasADi kernels)
+    control   casadi and python-control (control extra: linearization, LQR, the CasADi kernels)
     viewer    viser (viewer extra: the live browser viewer)
     gym       gymnasium (gym extra: the ReactionWheelCube-v0 environment)
+    distributed  dask and distributed (distributed extra)
 
 A test says what it needs in one of three ways, all handled by :func:`require`:
 
@@ -18,7 +19,7 @@ A test says what it needs in one of three ways, all handled by :func:`require`:
     if have("mujoco"): ...                        # a test that checks both the with- and without-branch
 
 When a tool is missing the test is SKIPPED with a one-line reason naming how to install it —
-unless the environment variable CI is "true" (CI installs every extra, see .ci/run): then the test
+unless the environment variable CI is "true" (or 1/yes; CI installs every extra, see .ci/run): then the test
 FAILS with that reason, so a missing tool in CI is never a silent skip. `have()` returns False
 outside CI and fails in CI.
 
@@ -51,7 +52,7 @@ from pathlib import Path
 
 import pytest
 
-IN_CI = os.environ.get("CI", "").strip().lower() == "true"
+IN_CI = os.environ.get("CI", "").strip().lower() in ("true", "1", "yes")   # CI services set CI=true
 
 CHROMIUM = "/usr/bin/chromium"
 
@@ -93,6 +94,7 @@ TOOLS = {
     "control": (_modules("casadi", "control"), "pip install -e '.[control]'"),
     "viewer": (_modules("viser"), "pip install -e '.[viewer]'"),
     "gym": (_modules("gymnasium"), "pip install -e '.[gym]'"),
+    "distributed": (_modules("dask", "distributed"), "pip install -e '.[distributed]'"),
 }
 
 _missing: dict[str, str | None] = {}
