@@ -41,7 +41,7 @@ from typing import Any
 from . import validate as V
 from ._version import __version__
 
-__all__ = ["Executor", "WorkerMismatchError", "local_cores", "resolve", "map_tasks", "SERIAL", "PROCESSES", "DASK"]
+__all__ = ["DASK", "PROCESSES", "SERIAL", "Executor", "WorkerMismatchError", "local_cores", "map_tasks", "resolve"]
 
 SERIAL, PROCESSES, DASK = "serial", "processes", "dask"
 DASK_CONNECT_TIMEOUT_S = 30.0
