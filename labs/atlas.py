@@ -117,7 +117,6 @@ BOUNDS = {"energy_drift": H.ROD_BOUNDS["energy_drift"][0], "L_world_drift": H.RO
 ENERGY_GAIN_BOUND = 1e-12        # lab hard's fast_major_spin_dt1e-2 bound for implicit_gyro
 EPS = float(np.finfo(float).eps)
 SPLITTING_L_PER_STEP = 4.0       # world-L drift of splitting ≤ 4 ε per step: rounding, linear in the steps
-DOPRI5_DRIFT_FACTOR = 1e3
 RK4_SMALL_WDT = 1e-3
 STATUSES = ("ok", "diverged", "blew_up", "silent_nan", "error")
 
@@ -177,7 +176,25 @@ def _num(x):
 
 
 def cell_metrics(I_b: np.ndarray, w0: np.ndarray, x: np.ndarray, ref) -> dict:
-    """Drifts and errors of one run's samples x (S, 13) against the exact motion `ref` (or None)."""
+    """Drifts and errors of one run's samples.
+
+    Parameters
+    ----------
+    I_b : ndarray (3,)
+        Principal moments, kg·m².
+    w0 : ndarray (3,)
+        ω_b(0), rad/s.
+    x : ndarray (S, 13)
+        The body's sampled states (finite).
+    ref : TorqueFreeMotion or None
+        The exact motion at the same times; None leaves attitude_error and omega_error None.
+
+    Returns
+    -------
+    dict
+        energy_drift, energy_gain, L_norm_drift, L_norm_gain, L_world_drift, attitude_error (rad),
+        omega_error (relative to |ω0|); a value that overflows is None.
+    """
     q, w = x[:, 3:7], x[:, 10:13]
     with np.errstate(over="ignore", invalid="ignore"):
         E = 0.5 * np.sum(I_b * w * w, axis=1)
@@ -201,7 +218,30 @@ def _blew_up(m: dict) -> bool:
 
 def run_cell(integrator: str, wdt: float, ratio: float, axis: str, backend: str, rtol: float, atol: float,
              ref=None) -> dict:
-    """Run one cell of the atlas and return its JSON row (never raises for a numerical failure)."""
+    """Run one cell of the atlas; never raises for a numerical failure (it is the cell's status).
+
+    Parameters
+    ----------
+    integrator : str
+        A name of lavendersim.backends.INTEGRATORS.
+    wdt : float
+        |ω|·dt, rad per step (dt = wdt / OMEGA; the output interval for an adaptive integrator).
+    ratio : float
+        I_max / I_min of the body (:func:`inertia`).
+    axis : {"major", "intermediate", "minor"}
+        The principal axis of the near-axis spin (:func:`initial_omega`).
+    backend : str
+        Backend for runs of at most 5 000 steps (longer ones use C when it is built).
+    rtol, atol : float
+        Tolerances of an adaptive integrator (ignored by the others).
+    ref : TorqueFreeMotion or None
+        The exact motion at the cell's sample times, for the attitude and ω errors.
+
+    Returns
+    -------
+    dict
+        The cell's row of results.json (see the module docstring).
+    """
     I_b, w0 = inertia(ratio), initial_omega(axis)
     dt, n = wdt / OMEGA, horizon_steps(wdt)
     adaptive = integrator in B.ADAPTIVE
@@ -235,9 +275,20 @@ def run_cell(integrator: str, wdt: float, ratio: float, axis: str, backend: str,
 
 
 def run_group(task: tuple) -> list[dict]:
-    """Every integrator at one (|ω|·dt, ratio, axis): the executor's unit of work (module level, picklable).
+    """Every integrator at one (|ω|·dt, ratio, axis): the executor's unit of work.
 
-    The exact reference is computed once for the group (all integrators sample the same times)."""
+    Parameters
+    ----------
+    task : tuple
+        ``(wdt, ratio, axis, integrators, backend, rtol, atol)`` as made by :func:`make_tasks`.
+
+    Returns
+    -------
+    list of dict
+        One cell per integrator, in the order of ``integrators``. The exact reference is computed
+        once for the group (all integrators sample the same times); where it cannot be, the cells
+        say so in "reference" and carry no attitude error.
+    """
     wdt, ratio, axis, integrators, backend, rtol, atol = task
     n = horizon_steps(wdt)
     every = n // SAMPLES
@@ -255,11 +306,32 @@ def run_group(task: tuple) -> list[dict]:
 
 
 def cell_key(cell: dict, integrators) -> tuple:
+    """Sort key of a cell: (integrator's index, axis index, ratio, |ω|·dt)."""
     return (list(integrators).index(cell["integrator"]), AXES.index(cell["axis"]), cell["ratio"], cell["omega_dt"])
 
 
 def compute_cells(wdts, ratios, integrators, backend, rtol, atol, executor: X.Executor) -> list[dict]:
-    """Every cell of the grid on `executor`, sorted by cell_key (independent of completion order)."""
+    """Every cell of a grid, computed on `executor`.
+
+    Parameters
+    ----------
+    wdts, ratios : sequence of float
+        The |ω|·dt and inertia-ratio values.
+    integrators : list of str
+        The integrators to run (rows of the pictures).
+    backend : str
+        Backend of the short runs (see :func:`run_cell`).
+    rtol, atol : float
+        Adaptive tolerances.
+    executor : lavendersim.executor.Executor
+        Where the groups run.
+
+    Returns
+    -------
+    list of dict
+        The cells sorted by :func:`cell_key` (integrator, axis, ratio, |ω|·dt): the same list
+        whatever the executor and the completion order.
+    """
     tasks = make_tasks(wdts, ratios, integrators, backend, rtol, atol)
     groups = executor.map(run_group, tasks, feature="lavendersim lab atlas --dask")
     cells = [c for g in groups for c in g]
@@ -301,65 +373,96 @@ def _available(name, integrators, checks) -> bool:
     return False
 
 
+def _unstable_at_top(cells, integ, name) -> C.Check:
+    """`integ` at |ω|·dt = 10 on every non-spherical body: diverged or blew up, never quietly finite."""
+    top = _select(cells, integ, omega_dt=lambda w: w >= 10.0 * (1 - 1e-9), ratio=lambda r: r > 1.0)
+    calm = [c for c in top if c["status"] not in ("diverged", "blew_up")]
+    return C.holds(name, not calm and bool(top),
+                   f"{integ} at |ω|·dt = 10 on every non-spherical body diverges or blows up ({len(top)} cells)"
+                   + (f"; quietly finite: {_where(calm)}" if calm else ""))
+
+
+def _rk4_checks(cells, checks, fig) -> None:
+    small = _select(cells, "rk4", omega_dt=lambda w: w <= RK4_SMALL_WDT * (1 + 1e-9))
+    not_ok = [c for c in small if c["status"] != "ok"]
+    checks.append(C.holds("rk4_small_steps_ok", not not_ok and bool(small),
+                          f"rk4 at |ω|·dt ≤ {RK4_SMALL_WDT:g}: ok for every ratio and axis ({len(small)} cells)"
+                          + (f"; not ok: {_where(not_ok)}" if not_ok else "")))
+    for key, bound in BOUNDS.items():
+        fig[f"rk4_small_steps_worst_{key}"] = w = _worst(small, key)
+        checks.append(C.at_most(f"rk4_small_steps_{key}", w, bound,
+                                f"rk4, |ω|·dt ≤ {RK4_SMALL_WDT:g}, every ratio and axis, {ROTATIONS} rotations: "
+                                "the catalogue's bound (lab hard ROD_BOUNDS)"))
+    checks.append(_unstable_at_top(cells, "rk4", "rk4_beyond_stability_not_silent"))
+
+
+def _implicit_gyro_checks(cells, checks, fig) -> None:
+    ran = _select(cells, "implicit_gyro", status=("ok", "blew_up"))
+    fig["implicit_gyro_max_energy_gain"] = g = _worst(ran, "energy_gain")
+    gained = [c for c in ran if c["energy_gain"] is None or c["energy_gain"] > ENERGY_GAIN_BOUND]
+    checks.append(C.at_most("implicit_gyro_never_gains_energy", g, ENERGY_GAIN_BOUND,
+                            f"max over the {len(ran)} cells where implicit_gyro ran of max_t E(t)/E(0) − 1 "
+                            "(at the samples; lab hard's bound)" + (f"; gains in {_where(gained)}" if gained else "")))
+
+
+def _splitting_checks(cells, checks, fig) -> None:
+    ran = _select(cells, "splitting", status=("ok", "blew_up"))
+    fig["splitting_max_L_world_drift"] = _worst(ran, "L_world_drift")
+    per_step = [None if c["L_world_drift"] is None else c["L_world_drift"] / (c["steps"] * EPS) for c in ran]
+    fig["splitting_max_L_world_drift_per_step_eps"] = d = (math.inf if None in per_step
+                                                           else max(per_step, default=0.0))
+    checks.append(C.at_most("splitting_conserves_L", d, SPLITTING_L_PER_STEP,
+                            f"max over the {len(ran)} cells where splitting ran (blow-ups included: exact axis "
+                            "rotations keep L_w whatever |ω|·dt) of world-L drift / (steps × machine epsilon): "
+                            "rounding only, however large |ω|·dt"))
+
+
+def _adaptive_checks(cells, name, rtol, checks, fig) -> None:
+    mine = _select(cells, name)
+    not_ok = [c for c in mine if c["status"] != "ok"]
+    checks.append(C.holds(f"{name}_ok_everywhere", not not_ok and bool(mine),
+                          f"{name} (rtol {rtol:g}) ok in every cell" + (f"; not ok: {_where(not_ok)}" if not_ok else "")))
+    short = [c for c in mine if horizon_steps(c["omega_dt"]) > MIN_STEPS]
+    d = max(_worst(short, "energy_drift"), _worst(short, "L_world_drift"))
+    fig[f"{name}_worst_drift_{ROTATIONS}_rotations"] = d
+    checks.append(C.at_most(f"{name}_drift_within_rtol", d, rtol,
+                            f"{name}: max energy and world-L drift over the cells whose horizon is {ROTATIONS} "
+                            f"rotations (|ω|·dt ≤ {ROTATIONS * 2 * math.pi / MIN_STEPS:.3g}) ≤ rtol"))
+
+
 def atlas_checks(cells: list[dict], integrators, rtol: float) -> tuple[list[C.Check], dict]:
-    """The lab's checks and the figures they are drawn from (see the module docstring)."""
+    """The lab's checks (see the module docstring) and the figures they are drawn from.
+
+    Parameters
+    ----------
+    cells : list of dict
+        Every cell of the atlas (as in results.json).
+    integrators : list of str
+        The integrators that ran; a check about a missing one fails, naming it.
+    rtol : float
+        The adaptive integrators' rtol.
+
+    Returns
+    -------
+    (list of Check, dict)
+        The checks and a flat dict of the figures they measured.
+    """
     checks, fig = [], {}
     bad = [c for c in cells if c["status"] in ("silent_nan", "error")]
     checks.append(C.holds("no_silent_nan_or_error", not bad,
                           "every non-finite run raised DivergenceError and no integrator refused a cell"
                           + (f"; found: {_where(bad)}" if bad else "")))
-    aspherical = {"ratio": lambda r: r > 1.0}
     if _available("rk4", integrators, checks):
-        small = _select(cells, "rk4", omega_dt=lambda w: w <= RK4_SMALL_WDT * (1 + 1e-9))
-        not_ok = [c for c in small if c["status"] != "ok"]
-        checks.append(C.holds("rk4_small_steps_ok", not not_ok and bool(small),
-                              f"rk4 at |ω|·dt ≤ {RK4_SMALL_WDT:g}: ok for every ratio and axis ({len(small)} cells)"
-                              + (f"; not ok: {_where(not_ok)}" if not_ok else "")))
-        for key, bound in BOUNDS.items():
-            fig[f"rk4_small_steps_worst_{key}"] = w = _worst(small, key)
-            checks.append(C.at_most(f"rk4_small_steps_{key}", w, bound,
-                                    f"rk4, |ω|·dt ≤ {RK4_SMALL_WDT:g}, every ratio and axis, 5 rotations: the catalogue's "
-                                    f"bound (lab hard ROD_BOUNDS)"))
-        top = _select(cells, "rk4", omega_dt=lambda w: w >= 10.0 * (1 - 1e-9), **aspherical)
-        calm = [c for c in top if c["status"] not in ("diverged", "blew_up")]
-        checks.append(C.holds("rk4_beyond_stability_not_silent", not calm and bool(top),
-                              f"rk4 at |ω|·dt = 10 (> 2√2) on every non-spherical body diverges or blows up "
-                              f"({len(top)} cells)" + (f"; quietly finite: {_where(calm)}" if calm else "")))
+        _rk4_checks(cells, checks, fig)
     if _available("euler", integrators, checks):
-        top = _select(cells, "euler", omega_dt=lambda w: w >= 10.0 * (1 - 1e-9), **aspherical)
-        calm = [c for c in top if c["status"] not in ("diverged", "blew_up")]
-        checks.append(C.holds("euler_unstable_at_large_steps", not calm and bool(top),
-                              f"euler at |ω|·dt = 10 on every non-spherical body diverges or blows up ({len(top)} cells)"
-                              + (f"; quietly finite: {_where(calm)}" if calm else "")))
+        checks.append(_unstable_at_top(cells, "euler", "euler_unstable_at_large_steps"))
     if _available("implicit_gyro", integrators, checks):
-        ran = _select(cells, "implicit_gyro", status=("ok", "blew_up"))
-        fig["implicit_gyro_max_energy_gain"] = g = _worst(ran, "energy_gain")
-        checks.append(C.at_most("implicit_gyro_never_gains_energy", g, ENERGY_GAIN_BOUND,
-                                f"max over the {len(ran)} cells where implicit_gyro ran of max_t E(t)/E(0) − 1 "
-                                "(at the samples; lab hard's bound)"))
+        _implicit_gyro_checks(cells, checks, fig)
     if _available("splitting", integrators, checks):
-        ran = _select(cells, "splitting", status=("ok", "blew_up"))
-        fig["splitting_max_L_world_drift"] = _worst(ran, "L_world_drift")
-        per_step = [None if c["L_world_drift"] is None else c["L_world_drift"] / (c["steps"] * EPS) for c in ran]
-        fig["splitting_max_L_world_drift_per_step_eps"] = d = (math.inf if None in per_step
-                                                               else max(per_step, default=0.0))
-        checks.append(C.at_most("splitting_conserves_L", d, SPLITTING_L_PER_STEP,
-                                f"max over the {len(ran)} cells where splitting ran (blow-ups included: exact axis "
-                                "rotations keep L_w whatever |ω|·dt) of world-L drift / (steps × machine epsilon): "
-                                "rounding only, however large |ω|·dt"))
+        _splitting_checks(cells, checks, fig)
     for name in B.ADAPTIVE:
-        if not _available(name, integrators, checks):
-            continue
-        mine = _select(cells, name)
-        not_ok = [c for c in mine if c["status"] != "ok"]
-        checks.append(C.holds(f"{name}_ok_everywhere", not not_ok and bool(mine),
-                              f"{name} (rtol {rtol:g}) ok in every cell" + (f"; not ok: {_where(not_ok)}" if not_ok else "")))
-        short = [c for c in mine if horizon_steps(c["omega_dt"]) > MIN_STEPS]
-        d = max(_worst(short, "energy_drift"), _worst(short, "L_world_drift"))
-        fig[f"{name}_worst_drift_5_rotations"] = d
-        checks.append(C.at_most(f"{name}_drift_within_rtol", d, rtol,
-                                f"{name}: max energy and world-L drift over the cells whose horizon is 5 rotations "
-                                f"(|ω|·dt ≤ {ROTATIONS * 2 * math.pi / MIN_STEPS:.3g}) ≤ rtol"))
+        if _available(name, integrators, checks):
+            _adaptive_checks(cells, name, rtol, checks, fig)
     return checks, fig
 
 
@@ -490,12 +593,16 @@ def _decorate(ax, integ, axis, row, col, nrows, xe, ye, hard_points) -> None:
                     mfc="white", mec="k", mew=0.8, zorder=5)
 
 
-def _legend_handles(extra: list) -> list:
+def _legend_handles(extra: list, hatched: bool = False) -> list:
+    """Legend entries: `extra` first, then the statuses and the lines and markers of _decorate."""
     from matplotlib.lines import Line2D
     from matplotlib.patches import Patch
 
     hs = list(extra) + [Patch(facecolor=STATUS_COLORS[k], edgecolor="k", lw=0.5, label=STATUS_TEXT[k])
                         for k in ("diverged", "blew_up", "silent_nan", "error")]
+    if hatched:     # metric maps: a blown-up cell keeps its value's colour under red hatching
+        hs[len(extra) + 1] = Patch(facecolor="white", edgecolor=STATUS_COLORS["blew_up"], hatch="xxx",
+                                   label=STATUS_TEXT["blew_up"] + " (value underneath; solid red: value overflowed)")
     hs += [Line2D([], [], color="0.35", ls=":", label=f"horizon: left {ROTATIONS} rotations, right {MIN_STEPS} steps"),
            Line2D([], [], color="k", ls="--", label="RK4 stability limit |ω|·dt = 2√2 (rk4 rows)"),
            Line2D([], [], ls="", marker="*", ms=9, mfc="white", mec="k", label="lab hard trial, on the row of its asserted integrator"),
@@ -519,8 +626,38 @@ def _figure(integrators, title):
     return fig, axes
 
 
+def _metric_value(cell, metric) -> float:
+    """What a metric panel colours: the value of a cell that ran (ok or blew up), else NaN."""
+    if cell is None or cell["status"] not in ("ok", "blew_up") or cell[metric] is None:
+        return math.nan
+    return max(cell[metric], FLOOR)
+
+
+def _status_code(cell, metric, codes) -> float:
+    """The flat colour of a cell without a value (diverged, silent NaN, error, no reference), else NaN."""
+    if cell is None:
+        return codes["error"]
+    if cell["status"] in ("ok", "blew_up"):
+        if cell[metric] is not None:
+            return math.nan
+        return codes["blew_up" if cell["status"] == "blew_up" else "no_reference"]
+    return codes[cell["status"]]
+
+
+def _hatch_blowups(ax, cells, integ, axis, wdts, ratios, xe, ye) -> None:
+    """Red cross-hatching over the blown-up cells (their value stays visible underneath)."""
+    from matplotlib.patches import Rectangle
+
+    blown = _grid(cells, integ, axis, wdts, ratios, lambda x: x is not None and x["status"] == "blew_up")
+    for i, j in zip(*np.nonzero(blown)):
+        ax.add_patch(Rectangle((xe[j], ye[i]), xe[j + 1] - xe[j], ye[i + 1] - ye[i], fill=False, hatch="xxx",
+                               edgecolor=STATUS_COLORS["blew_up"], lw=1.2, zorder=3))
+
+
 def metric_figure(metric: str, cells, integrators, wdts, ratios, hard_points):
-    """Heat maps of one metric: rows = integrators, columns = spin axes, one colour bar."""
+    """Heat maps of one metric: rows = integrators, columns = spin axes, one colour bar.
+
+    Returns (file name, matplotlib Figure)."""
     from matplotlib.colors import ListedColormap, LogNorm
     from matplotlib.lines import Line2D
     from matplotlib.patches import Patch
@@ -537,17 +674,15 @@ def metric_figure(metric: str, cells, integrators, wdts, ratios, hard_points):
     for r, integ in enumerate(integrators):
         for c, axis in enumerate(AXES):
             ax = axes[r, c]
-            val = _grid(cells, integ, axis, wdts, ratios,
-                        lambda x: math.nan if x is None or x["status"] != "ok" or x[metric] is None
-                        else max(x[metric], FLOOR))
-            st = _grid(cells, integ, axis, wdts, ratios,
-                       lambda x: codes["error"] if x is None else codes.get(x["status"], math.nan)
-                       if x["status"] != "ok" else (codes["no_reference"] if x[metric] is None else math.nan))
+            val = _grid(cells, integ, axis, wdts, ratios, lambda x: _metric_value(x, metric))
+            st = _grid(cells, integ, axis, wdts, ratios, lambda x: _status_code(x, metric, codes))
             mesh = ax.pcolormesh(xe, ye, np.ma.masked_invalid(val), cmap="viridis", norm=norm)
             ax.pcolormesh(xe, ye, np.ma.masked_invalid(st), cmap=cat, vmin=-0.5, vmax=len(codes) - 0.5,
                           edgecolors="face")
-            _outline(ax, np.nan_to_num(val, nan=np.inf) <= bound, xe, ye, colors="k", linewidths=1.6)
-            _outline(ax, np.nan_to_num(val, nan=np.inf) <= bound, xe, ye, colors="w", linewidths=0.6)
+            _hatch_blowups(ax, cells, integ, axis, wdts, ratios, xe, ye)
+            inside = np.nan_to_num(val, nan=np.inf) <= bound
+            _outline(ax, inside, xe, ye, colors="k", linewidths=1.6, zorder=4)
+            _outline(ax, inside, xe, ye, colors="w", linewidths=0.6, zorder=4)
             _decorate(ax, integ, axis, r, c, len(integrators), xe, ye, hard_points)
     cb = fig.colorbar(mesh, ax=axes, location="right", shrink=0.5, pad=0.01, extend="both")
     cb.set_label(label + f"  (values < {FLOOR:.0e}, incl. 0, at the bottom)", fontsize=8)
@@ -556,7 +691,8 @@ def metric_figure(metric: str, cells, integrators, wdts, ratios, hard_points):
     if any(c["status"] == "ok" and c[metric] is None for c in cells):
         extra.append(Patch(facecolor=STATUS_COLORS["no_reference"], edgecolor="k", lw=0.5,
                            label=STATUS_TEXT["no_reference"]))
-    fig.legend(handles=_legend_handles(extra), loc="outside lower center", ncols=3, fontsize=7.5, frameon=False)
+    fig.legend(handles=_legend_handles(extra, hatched=True), loc="outside lower center", ncols=3, fontsize=7.5,
+               frameon=False)
     return fname, fig
 
 

@@ -85,6 +85,7 @@ def test_json_schema(serial):
     assert data["grid"] == {"omega_dt": list(wdts), "ratio": list(ratios), "axis": list(A.AXES),
                             "integrators": integrators}
     assert wdts[0] == 1e-4 and wdts[-1] == 10.0 and ratios[0] == 1.0 and ratios[-1] == 1e6
+    assert set(wdts) <= set(A.FULL_WDT) and set(ratios) <= set(A.FULL_RATIOS)   # quick cells are full-grid cells
     cells = data["cells"]
     assert len(cells) == len(integrators) * len(wdts) * len(ratios) * len(A.AXES)
     assert len({(c["integrator"], c["axis"], c["ratio"], c["omega_dt"]) for c in cells}) == len(cells)
