@@ -132,6 +132,10 @@ def _map_processes(fn, tasks: list, workers: int) -> list:
     from concurrent.futures.process import BrokenProcessPool
 
     ctx = multiprocessing.get_context(_start_method())
+    if ctx.get_start_method() == "forkserver":
+        # the server imports these once; every worker forks from it with them loaded (no per-worker import)
+        module = getattr(fn, "__module__", None)
+        ctx.set_forkserver_preload(["lavendersim"] + ([module] if module and module != "__main__" else []))
     with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
         try:
             return list(pool.map(fn, tasks, chunksize=1))       # map yields in task order
