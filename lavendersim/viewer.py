@@ -40,14 +40,19 @@ import math
 import sys
 import threading
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
+from typing import TYPE_CHECKING, Any, Self, TextIO
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from . import validate as V
 from ._install import require
 from .generated import layout as LY
 from .kernels import K as KN
+
+if TYPE_CHECKING:  # annotations only: the Sim loads lazily
+    from .sim import Sim
 
 __all__ = ["Viewer", "validate_overlays", "xyzw_to_wxyz", "DEFAULT_COLOR", "MAX_VECTORS", "SCENES", "LAB_VIEWS",
            "run_scene"]
@@ -104,7 +109,7 @@ def _pos(field: str, value) -> float:
     return V.positive(field, value)
 
 
-def validate_overlays(overlays, body_names) -> dict:
+def validate_overlays(overlays: Mapping[str, Any] | None, body_names: Iterable[str]) -> dict[str, list[dict[str, Any]]]:
     """Check an overlay payload against the bodies of a scene; return a normalized copy.
 
     Result: ``{"axes": [{"body": str, "scale": float}], "vectors": [{"label": str, "origin":
@@ -159,7 +164,7 @@ def validate_overlays(overlays, body_names) -> dict:
 # --------------------------------------------------------------------------
 
 
-def xyzw_to_wxyz(q) -> np.ndarray:
+def xyzw_to_wxyz(q: ArrayLike) -> np.ndarray:
     """Our (x, y, z, w) quaternion as viser's (w, x, y, z)."""
     q = np.asarray(q, dtype=float)
     return np.array([q[3], q[0], q[1], q[2]])
@@ -237,7 +242,7 @@ class Viewer:
     """
 
     def __init__(self, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT, *, max_rate_hz: float = DEFAULT_RATE_HZ,
-                 label: str = "LavenderSim", arrow_radius: float | None = None, verbose: bool = False):
+                 label: str = "LavenderSim", arrow_radius: float | None = None, verbose: bool = False) -> None:
         if not isinstance(host, str) or not host:
             raise V.LavenderInputError("host", "expected an interface address (str)", f", got {host!r}")
         port = V.integer("port", port, minimum=0)
@@ -276,7 +281,7 @@ class Viewer:
         host = "127.0.0.1" if self.host in ("0.0.0.0", "") else self.host
         return f"http://{host}:{self.port}/"
 
-    def publish_frame(self, sim, overlays=None) -> int:
+    def publish_frame(self, sim: Sim, overlays: Mapping[str, Any] | None = None) -> int:
         """Validate ``overlays`` against ``sim``'s bodies, snapshot the poses, store as the latest
         frame and return its number. Never waits for a browser or for the scene update."""
         names, x, bodies = self._sim_parts(sim)
@@ -313,7 +318,7 @@ class Viewer:
                 self._applied_cv.wait(left)
         return True
 
-    def scene_state(self) -> dict:
+    def scene_state(self) -> dict[str, Any]:
         """What the viser scene shows now (deep copy): frame number, t, per-body position and
         wxyz, axes per body, and the drawn vectors (label, start, end, rgb, opacity)."""
         import copy
@@ -321,7 +326,7 @@ class Viewer:
         with self._state_lock:
             return copy.deepcopy(self._state)
 
-    def handles(self) -> dict:
+    def handles(self) -> dict[str, Any]:
         """The viser scene handles: {"bodies": {name: node}, "axes": {name: frame handle},
         "vectors": [{"node", "shaft", "head", "label"}]} (read them, don't assign)."""
         with self._state_lock:
@@ -332,7 +337,7 @@ class Viewer:
     def clients(self) -> int:
         return len(self.server.get_clients())
 
-    def stats(self) -> dict:
+    def stats(self) -> dict[str, Any]:
         with self._lock:
             return {"published": self._published, "applied": self._applied, "dropped": self._dropped,
                     "clients": self.clients(), "last_error": repr(self.last_error) if self.last_error else None}
@@ -347,10 +352,10 @@ class Viewer:
         self._thread.join(timeout=5)
         self.server.stop()
 
-    def __enter__(self):
+    def __enter__(self) -> Self:
         return self
 
-    def __exit__(self, *exc):
+    def __exit__(self, *exc: object) -> None:
         self.close()
 
     # ---- internals ------------------------------------------------------------------------
@@ -583,7 +588,7 @@ LAB_VIEWS = {"03": "lab03", "04": "wheel"}
 
 
 def run_scene(name: str, *, duration: float | None = None, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT,
-              rate_hz: float = 60.0, viewer: Viewer | None = None, out=sys.stdout) -> dict:
+              rate_hz: float = 60.0, viewer: Viewer | None = None, out: TextIO = sys.stdout) -> dict[str, Any]:
     """Run scene ``name`` in real time, publishing ``rate_hz`` frames per second, for ``duration``
     seconds of simulated time (None: until interrupted). Returns the viewer's stats."""
     V.choice("scene", name, SCENES)

@@ -19,6 +19,8 @@ from wheel_reference import RefSim  # noqa: E402
 
 BACKENDS = ("c", "numpy")
 
+pytestmark = pytest.mark.needs("control")   # casadi + python-control (tests/conftest.py)
+
 
 # ------------------------------------------------------------------------ linearization
 

@@ -4,13 +4,17 @@ from __future__ import annotations
 
 import warnings
 
-import gymnasium as gym
 import numpy as np
 import pytest
 
-import lavendersim
-from lavendersim.envs.reaction_wheel_cube import ReactionWheelCubeEnv
-from lavendersim.validate import LavenderInputError
+from conftest import require
+
+require("gym")        # the gym extra; skipped without it (failed under CI=true), see tests/conftest.py
+import gymnasium as gym  # noqa: E402
+
+import lavendersim  # noqa: E402
+from lavendersim.envs.reaction_wheel_cube import ReactionWheelCubeEnv  # noqa: E402
+from lavendersim.validate import LavenderInputError  # noqa: E402
 
 BACKENDS = ("c", "numpy")
 

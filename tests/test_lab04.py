@@ -12,11 +12,21 @@ from lavendersim import labs
 from lavendersim.validate import LavenderInputError
 
 
+@pytest.fixture(scope="module")
+def lab04(tmp_path_factory):
+    """Lab 04 run once per backend, shared by the checks below: {backend: (result, out dir)}."""
+    out = {}
+    for backend in ("c", "numpy"):
+        d = tmp_path_factory.mktemp(f"lab04_{backend}")
+        out[backend] = labs.run("04", d, backend=backend), d
+    return out
+
+
 @pytest.mark.parametrize("backend", ["c", "numpy"])
-def test_lab04(tmp_path, backend):
-    r = labs.run("04", tmp_path, backend=backend)
+def test_lab04(lab04, backend):
+    r, out = lab04[backend]
     assert r.passed, "; ".join(c.describe() for c in r.failures)
-    data = json.loads((tmp_path / "04" / "results.json").read_text())
+    data = json.loads((out / "04" / "results.json").read_text())
     assert data == json.loads(json.dumps(dict(r)))
     for key in ("wheel_all_positive", "cube_all_negative", "reversed_ok"):
         assert data[key] is True
@@ -27,13 +37,12 @@ def test_lab04(tmp_path, backend):
     assert data["gyro_coupling_omega_y_over_omega_x"] > 0.1  # pre-spun z wheel: gyroscopic coupling
     assert data["saturation_applied_max"] == 0.2
     assert data["saturation_peak_wheel_speed"] <= 400 + data["saturation_step_increment"]
-    png = tmp_path / "04" / "reaction_wheel.png"
+    png = out / "04" / "reaction_wheel.png"
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png.stat().st_size > 1000
 
 
-def test_lab04_backends_agree(tmp_path):
-    a = labs.run("04", tmp_path / "c", backend="c")
-    b = labs.run("04", tmp_path / "n", backend="numpy")
+def test_lab04_backends_agree(lab04):
+    (a, _), (b, _) = lab04["c"], lab04["numpy"]
     assert abs(a["omega_x_T"] - b["omega_x_T"]) < 1e-9 and abs(a["Omega_x_T"] - b["Omega_x_T"]) < 1e-9
 
 

@@ -236,9 +236,10 @@ def test_cli_bad_option_exits_2(tmp_path):
     assert out.returncode == 2 and "dt" in out.stderr
 
 
+@pytest.mark.slow   # every lab end to end on NumPy (minutes); each lab has its own faster tests here
 def test_cli_all(tmp_path):
     out = subprocess.run([sys.executable, "-m", "lavendersim.cli", "lab", "all", "--out", str(tmp_path),
-                          "--backend", "numpy"], capture_output=True, text=True, timeout=600)
+                          "--backend", "numpy"], capture_output=True, text=True, timeout=3600)
     assert out.returncode == 0, out.stdout + out.stderr
     assert f"all {len(labs.LABS)} labs pass" in out.stdout
     for name in labs.LABS:
