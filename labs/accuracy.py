@@ -499,7 +499,19 @@ def _measure_mujoco(mujoco, case, m, dt, exact, drifts, keep_drift):
 # ------------------------------------------------------------------------------------------ sweeps
 
 def sweep_values(m: Method, cfg: dict) -> list[float]:
-    """The dt (or rtol) values of one method's sweep, coarse to fine."""
+    """The dt (or rtol) values of one method's sweep, coarse to fine.
+
+    Parameters
+    ----------
+    m : Method
+        The method (its family, backend and parameter decide which list of ``cfg`` applies).
+    cfg : dict
+        QUICK or FULL.
+
+    Returns
+    -------
+    list of float
+    """
     if m.family == "lavendersim":
         if m.param == "rtol":
             return list(cfg["rtols"] if m.backend == "c" else cfg["numpy_rtols"])
@@ -511,19 +523,48 @@ def sweep_values(m: Method, cfg: dict) -> list[float]:
 
 
 def sweep_tasks(use: list[Case], meths: list[Method], cfg: dict, exacts: dict) -> list[tuple]:
-    """One task per case x method (case-major, the order of the points in results.json)."""
+    """The tasks of :func:`measure_sweep`: one per case x method.
+
+    Parameters
+    ----------
+    use : list of Case
+    meths : list of Method
+    cfg : dict
+        QUICK or FULL (possibly edited): the sweep values and the NumPy run budget come from it.
+    exacts : dict
+        Case name -> the exact motion at [0, T_END].
+
+    Returns
+    -------
+    list of tuple
+        ``(case, method, values, exact, numpy_budget)``, case-major: the order of the points in
+        results.json.
+    """
     return [(case, m, sweep_values(m, cfg), exacts[case.name], cfg["numpy_budget"]) for case in use for m in meths]
 
 
 def measure_sweep(task: tuple) -> dict:
-    """The errors of one method's sweep in one case: the executor's unit of work (module level, picklable).
+    """The errors of one method's sweep in one case: the executor's unit of work.
 
-    ``task = (case, method, values, exact, numpy_budget)``. Returns {"points": [Point] in sweep
-    order, "drifts": the drift series kept, "skipped": why a NumPy dt sweep stopped early (or
-    None), "seconds": wall time of the sweep}. A NumPy dt sweep stops after a run longer than
-    numpy_budget s (that run's wall time is measured where the sweep runs: under parallel workers
-    it can stop a point earlier than serially; the points it keeps are the same numbers). Nothing
-    here is a timing result: the timed runs happen afterwards, serially, in the calling process."""
+    Parameters
+    ----------
+    task : tuple
+        ``(case, method, values, exact, numpy_budget)`` from :func:`sweep_tasks`.
+
+    Returns
+    -------
+    dict
+        "points": the Points in sweep order (no wall times); "drifts": the drift series kept
+        for drift_vs_time.png; "skipped": why a NumPy dt sweep stopped early, or None; "seconds":
+        the wall time of the sweep (progress only).
+
+    Notes
+    -----
+    A NumPy dt sweep stops after a run longer than numpy_budget s; that run's wall time is
+    measured where the sweep runs, so under busy parallel workers it can stop a point earlier
+    than serially (the points it keeps are the same numbers). Nothing here is a timing result:
+    the timed runs happen afterwards, serially, in the calling process.
+    """
     case, m, values, exact, numpy_budget = task
     mj = _mujoco()[0] if m.family == "mujoco" else None
     points, drifts, skipped = [], {}, None

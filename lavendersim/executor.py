@@ -41,7 +41,7 @@ from typing import Any
 from . import validate as V
 from ._version import __version__
 
-__all__ = ["Executor", "WorkerMismatchError", "local_cores", "resolve", "map_tasks", "SERIAL", "PROCESSES", "DASK"]
+__all__ = ["DASK", "PROCESSES", "SERIAL", "Executor", "WorkerMismatchError", "local_cores", "map_tasks", "resolve"]
 
 SERIAL, PROCESSES, DASK = "serial", "processes", "dask"
 DASK_CONNECT_TIMEOUT_S = 30.0
@@ -132,6 +132,10 @@ def _map_processes(fn, tasks: list, workers: int) -> list:
     from concurrent.futures.process import BrokenProcessPool
 
     ctx = multiprocessing.get_context(_start_method())
+    if ctx.get_start_method() == "forkserver":
+        # the server imports these once; every worker forks from it with them loaded (no per-worker import)
+        module = getattr(fn, "__module__", None)
+        ctx.set_forkserver_preload(["lavendersim"] + ([module] if module and module != "__main__" else []))
     with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
         try:
             return list(pool.map(fn, tasks, chunksize=1))       # map yields in task order

@@ -132,6 +132,14 @@ def have(tool: str) -> bool:
     return why is None
 
 
+# ---- the slow set ---------------------------------------------------------------------------------
+
+#: `@pytest.mark.parametrize("backend", NUMPY_SLOW)`: for a long run whose NumPy variant repeats the C
+#: one end to end (C and NumPy agreement is tested on its own, quickly): C in the default set, NumPy
+#: in the slow set. Test ids stay [numpy] and [c].
+NUMPY_SLOW = [pytest.param("numpy", marks=pytest.mark.slow), "c"]
+
+
 # ---- one derivation per session -----------------------------------------------------------------
 
 @pytest.fixture(scope="session")

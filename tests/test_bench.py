@@ -14,7 +14,7 @@ import sys
 import numpy as np
 import pytest
 
-from conftest import have
+from conftest import NUMPY_SLOW, have
 from lavendersim import bench
 
 
@@ -72,7 +72,7 @@ def test_quick_json_is_well_formed(quick):
 
 
 @pytest.mark.needs("cc")
-@pytest.mark.parametrize("backend", ["c", "numpy"])
+@pytest.mark.parametrize("backend", NUMPY_SLOW)    # 20 000 NumPy steps: the slow set
 def test_handwritten_kernel_computes_the_sims_trajectory(backend):
     kernel = bench.HandwrittenKernel()
     a = bench.handwritten_agreement(kernel, n_steps=20_000, every=2_000, backend=backend)

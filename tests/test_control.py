@@ -17,6 +17,10 @@ from lavendersim.validate import LavenderInputError
 sys.path.insert(0, __import__("os").path.dirname(__file__))
 from wheel_reference import RefSim  # noqa: E402
 
+# The closed loops' NumPy runs are in the slow set (NUMPY_SLOW: tests/conftest.py); the C runs stay,
+# and test_closed_loop_matches_an_independent_reference_stepper checks the loop itself quickly.
+from conftest import NUMPY_SLOW  # noqa: E402
+
 BACKENDS = ("c", "numpy")
 
 pytestmark = pytest.mark.needs("control")   # casadi + python-control (tests/conftest.py)
@@ -100,7 +104,8 @@ def test_full_rank_model_goes_straight_to_control_lqr():
 # ------------------------------------------------------------------------ closed loops
 
 
-@pytest.mark.parametrize("backend", BACKENDS)
+@pytest.mark.needs("gym")
+@pytest.mark.parametrize("backend", NUMPY_SLOW)
 def test_attitude_regulation_reaction_wheel_cube_v0(backend):
     """(a) ReactionWheelCube-v0 (joint at the centre, damping 1e-3): 20° about (1,2,3) to below
     0.1° within 1 s (measured 0.40 s), applied torque never beyond the 0.2 N·m limit."""
@@ -132,7 +137,7 @@ def test_attitude_regulation_reaction_wheel_cube_v0(backend):
     assert max(speeds) < m.speed_limit
 
 
-@pytest.mark.parametrize("backend", BACKENDS)
+@pytest.mark.parametrize("backend", NUMPY_SLOW)
 def test_corner_balancing(backend):
     """(b) Cubli-like corner balance (15 cm, 1 kg, J = 5.7e-4 kg·m², 0.2 N·m, 400 rad/s) from a
     3° tilt: settles below 0.1° (measured 0.16 s) and stays there, within motor and wheel limits."""

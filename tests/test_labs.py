@@ -175,6 +175,7 @@ def _check_lab03(r):
     assert data["omega_b0_mixed"] == [3.0, 2.0, 1.0] and data["T"] == 3.0
 
 
+@pytest.mark.slow   # the same lab on NumPy; test_lab03_c_backend checks the same figures
 def test_lab03_numpy(tmp_path):
     _check_lab03(labs.run("03", tmp_path, backend="numpy"))
 
