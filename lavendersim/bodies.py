@@ -1,8 +1,8 @@
 """Rigid bodies: mass, principal inertia, shape, and an initial state.
 
 Body frame at the centre of mass along the principal axes. Units: kg, m, kg·m², m/s, rad/s.
-Orientation q = R_WB as (x, y, z, w). The state vector layout is derive/rigid_body.py's:
-x = [p_w(3), q(4), v_w(3), omega_b(3)].
+Orientation q = R_WB as (x, y, z, w). The state vector layout is declared in derive/layout.py and
+printed as lavendersim.generated.layout: x = [p_w(3), q(4), v_w(3), omega_b(3)].
 """
 from __future__ import annotations
 
@@ -12,10 +12,8 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from . import validate as V
+from .generated.layout import STATE_OMEGA_B as W, STATE_P_W as P, STATE_Q as Q, STATE_SIZE, STATE_V_W as VEL  # noqa: F401
 from .kernels import K
-
-STATE_SIZE = 13
-P, Q, VEL, W = slice(0, 3), slice(3, 7), slice(7, 10), slice(10, 13)
 
 
 class Body:

@@ -48,6 +48,7 @@ from numpy.typing import ArrayLike
 
 from . import validate as V
 from ._install import require
+from .generated import layout as LY
 from .kernels import K as KN
 
 if TYPE_CHECKING:  # annotations only: the Sim loads lazily
@@ -222,6 +223,11 @@ def _extent(kind: str, dims: tuple) -> float:
 # --------------------------------------------------------------------------
 
 
+# a published frame's pose row: the body's p_w then q (x, y, z, w), taken from the state by name
+POSE_P = slice(0, LY.STATE_P_W.stop - LY.STATE_P_W.start)
+POSE_Q = slice(POSE_P.stop, POSE_P.stop + LY.STATE_Q.stop - LY.STATE_Q.start)
+
+
 class _Frame:
     __slots__ = ("number", "t", "names", "shapes", "pose", "overlays", "published_at")
 
@@ -284,7 +290,7 @@ class Viewer:
         f.t = float(getattr(sim, "t", 0.0))
         f.names = tuple(names)
         f.shapes = tuple(_shape_of(bodies[n]) for n in names)
-        f.pose = np.array(x[:, 0:7], dtype=float)
+        f.pose = np.concatenate([x[:, LY.STATE_P_W], x[:, LY.STATE_Q]], axis=1).astype(float)  # POSE_P, POSE_Q
         if not np.all(np.isfinite(f.pose)):
             raise V.LavenderInputError("sim", "state is not finite (diverged?); nothing published")
         f.overlays = ov
@@ -361,8 +367,8 @@ class Viewer:
         if names is None or x is None or bodies is None:
             raise V.LavenderInputError("sim", "expected a lavendersim.Sim (names, bodies, x)", f", got {type(sim).__name__}")
         x = np.asarray(x)
-        if x.ndim != 2 or x.shape[0] != len(names) or x.shape[1] < 7:
-            raise V.LavenderInputError("sim", f"state must have shape ({len(names)}, 13)", f", got {x.shape}")
+        if x.ndim != 2 or x.shape[0] != len(names) or x.shape[1] < max(LY.STATE_P_W.stop, LY.STATE_Q.stop):
+            raise V.LavenderInputError("sim", f"state must have shape ({len(names)}, {LY.STATE_SIZE})", f", got {x.shape}")
         return list(names), x, bodies
 
     def _run(self) -> None:
@@ -421,8 +427,8 @@ class Viewer:
                 sc.add_mesh_simple(f"{node_name}/shape", v, fc, color=color, flat_shading=False)
             axes = sc.add_frame(f"{node_name}/axes", axes_length=DEFAULT_AXES_SCALE, axes_radius=0.012, visible=False)
             self._bodies[name] = {"node": node, "shape": (kind, dims), "axes": axes}
-        centre = f.pose[:, 0:3].mean(axis=0)
-        span = max(ext, float(np.ptp(f.pose[:, 0:3], axis=0).max()) if len(f.names) > 1 else ext)
+        centre = f.pose[:, POSE_P].mean(axis=0)
+        span = max(ext, float(np.ptp(f.pose[:, POSE_P], axis=0).max()) if len(f.names) > 1 else ext)
         self.server.initial_camera.look_at = tuple(centre)
         self.server.initial_camera.position = tuple(centre + span * np.array([1.3, -1.8, 1.0]))
         self._signature = (f.names, f.shapes)
@@ -450,7 +456,7 @@ class Viewer:
                 self._build(f)
             for i, name in enumerate(f.names):
                 b = self._bodies[name]
-                pos, wxyz = f.pose[i, 0:3], xyzw_to_wxyz(f.pose[i, 3:7])
+                pos, wxyz = f.pose[i, POSE_P], xyzw_to_wxyz(f.pose[i, POSE_Q])
                 b["node"].position = pos
                 b["node"].wxyz = wxyz
                 state["bodies"][name] = {"position": pos.tolist(), "wxyz": wxyz.tolist(), "shape": b["shape"]}

@@ -322,7 +322,8 @@ def test_divergence_earliest_step_models_and_structured():
         CBackend().advance(s0, params[:1], np.zeros((0, 8)), "euler", False, 0.01, 300, m0)
     assert late.value.step > got["c"][0]
     # splitting (one body at a time in C): angular damping beyond its limit on body 0 (fails at step
-    # 252) and, stronger, on body 2 (fails at step 76)
+    # ~250) and, stronger, on body 2 (fails at step 75). The exploding attitude is chaotic, so the exact
+    # step follows the rounding of the derived splitting kernels (it was 76 with the hand-written flows).
     pst, pp = random_bodies(np.random.default_rng(37), 3)
     eff = np.array([effect(5, 0, 150.0), effect(5, 2, 400.0)])
     res = {}
@@ -330,7 +331,7 @@ def test_divergence_earliest_step_models_and_structured():
         with pytest.raises(DivergenceError) as info:
             backend.advance(pst.copy(), pp, eff, "splitting", True, 0.05, 400)
         res[backend.name] = (info.value.step, info.value.body)
-    assert res["c"] == res["numpy"] == (76, 2)
+    assert res["c"] == res["numpy"] == (75, 2)
 
 
 def test_non_finite_input():

@@ -3,10 +3,11 @@
 #ifndef LAVENDERSIM_STEP_H
 #define LAVENDERSIM_STEP_H
 
-/* state row (13): p_w[3], q[4] (x,y,z,w), v_w[3], omega_b[3] */
-#define LV_STATE_SIZE 13
-/* params row (4): m, I_x, I_y, I_z */
-#define LV_PARAM_SIZE 4
+/* The state row (LV_STATE_*: p_w[3], q[4] (x,y,z,w), v_w[3], omega_b[3]), the params row (LV_PARAM_*: m,
+   I_x, I_y, I_z), the per-body model row (LV_MODEL_*) and the extended state [x, Omega] (LV_XS_*) are
+   declared in derive/layout.py and printed as named offsets in generated/layout.h. */
+#include "layout.h"
+
 /* effect row (8): kind, body (index, or -1 for every body), p0..p5 */
 #define LV_EFFECT_SIZE 8
 
@@ -18,14 +19,10 @@ enum {
     LV_EFFECT_ANGULAR_DAMPING = 5  /* p0 = c */
 };
 
-/* model row (22), per body: kind, I_p[9] (about the pivot, body frame, row-major), r_b[3] (pivot -> COM,
-   body frame), anchor_w[3], J[3], torque_limit, speed_limit, c_w. kind is a bit set of the flags
-   below; a body of kind 0 is a plain rigid body (its row is ignored). */
-#define LV_MODEL_SIZE 22
-enum {
-    LV_KIND_JOINT = 1,   /* world-anchored spherical joint: p_w, v_w follow from q, omega */
-    LV_KIND_WHEELS = 2   /* three body-axis reaction wheels: Omega integrated, motor torques saturated */
-};
+/* The model row (LV_MODEL_SIZE), per body: kind, I_p[9] (about the pivot, body frame, row-major), r_b[3]
+   (pivot -> COM, body frame), anchor_w[3], J[3], torque_limit, speed_limit, c_w (offsets LV_MODEL_*).
+   kind is a bit set of LV_KIND_JOINT and LV_KIND_WHEELS; a body of kind 0 is a plain rigid body (its row
+   is ignored). */
 
 /* Per-body model data for bodies with a joint and/or wheels (all arrays nb rows).
    Omega (nb x 3) is advanced in place; command (nb x 3) is held over the call (zero-order hold);
