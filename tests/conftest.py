@@ -15,8 +15,17 @@ Some tests need a tool that a fresh machine may lack. Each has one name here (TO
 A test says what it needs in one of three ways, all handled by :func:`require`:
 
     @pytest.mark.needs("viewer", "control")       # a test, a class, or `pytestmark = ...` for a module
-    require("gym")                                # imperatively, also at module level before an import
+    require("gym")                                # imperatively, inside a test or fixture
     if have("mujoco"): ...                        # a test that checks both the with- and without-branch
+
+A module that imports an optional package at top level marks itself and guards the import:
+
+    pytestmark = pytest.mark.needs("gym")
+    if missing("gym") is None:
+        import gymnasium as gym
+
+(`require()` at module level also works, but under CI=true its failure is a collection error, which
+stops pytest before it runs anything else.)
 
 When a tool is missing the test is SKIPPED with a one-line reason naming how to install it —
 unless the environment variable CI is "true" (or 1/yes; CI installs every extra, see .ci/run): then the test
