@@ -64,9 +64,10 @@ distributed extra). The cells are deterministic, so results.json is byte-identic
 executor ran it; how it ran (executor, wall time) goes to run.json beside it.
 
 --quick: the coarse grid (6 × 3 × 3 cells per integrator, a subset of the full grid with the same
-numbers in each shared cell): ~20 s on one core. From Python, ``run(out_dir)`` is the quick atlas —
-what ``lavendersim lab all`` runs; the command line without --quick runs the full atlas (16 × 13 × 3
-cells per integrator, a few minutes on one core).
+numbers in each shared cell): ~21 s of CPU on one core (the cells ~15 s, the four pictures the
+rest). From Python, ``run(out_dir)`` is the quick atlas — what ``lavendersim lab all`` runs; the
+command line without --quick runs the full atlas (16 × 13 × 3 cells per integrator: the cells take
+~3.5 min on one core, measured on a loaded 2-core Xeon).
 
 Files: OUT/atlas/results.json (flat figures and checks, plus "grid", "cells", "bounds",
 "hard_case_points"), run.json, atlas_status.png, atlas_energy.png, atlas_momentum.png,
@@ -124,7 +125,7 @@ STATUSES = ("ok", "diverged", "blew_up", "silent_nan", "error")
 
 def add_arguments(parser) -> None:
     parser.add_argument("--quick", action="store_true",
-                        help="coarse grid: |ω|·dt 1e-4…10 one per decade, ratios 1, 1e3, 1e6 (~20 s on one core)")
+                        help="coarse grid: |ω|·dt 1e-4…10 one per decade, ratios 1, 1e3, 1e6 (~20 s on one core; what lab all runs)")
     parser.add_argument("--workers", type=int, default=None, metavar="N",
                         help="local worker processes (default: every core; 1 = serial in this process)")
     parser.add_argument("--dask", default=None, metavar="ADDRESS",

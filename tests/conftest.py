@@ -33,16 +33,17 @@ deriving again.
 
 The `slow` set
 --------------
-`@pytest.mark.slow` marks end-to-end repeats of what faster tests already cover (the whole
-`lab all` command, full sweeps). Plain `pytest` DESELECTS them, so the README's test command stays
-quick; they run with
+`@pytest.mark.slow` marks end-to-end repeats of what faster tests already cover: the whole
+`lab all` command, a lab again through its CLI, a long run on the NumPy backend whose C twin stays
+(`@pytest.mark.parametrize("backend", NUMPY_SLOW)`; NumPy = C is checked quickly elsewhere). Plain
+`pytest` DESELECTS them, so the README's test command stays within minutes; they run with
 
-    pytest -m slow             # only the slow set (CI runs this after the README test command)
-    pytest --run-slow          # everything
-    pytest -m "slow or not slow"  # any -m expression given: the expression alone decides
+    pytest -m slow                # only the slow set (.ci/run runs it after the README test command)
+    pytest --run-slow             # everything
+    pytest -m EXPR                # any -m expression alone decides ("slow or not slow": all)
 
 and a slow test named by node id on the command line (`pytest tests/test_labs.py::test_cli_all`)
-runs too. The test-session header says how many were deselected.
+runs too. The session header says that slow tests are deselected; the summary counts them.
 """
 from __future__ import annotations
 
@@ -225,7 +226,8 @@ def pytest_collection_modifyitems(config, items):
 
 
 def pytest_report_header(config):
-    lines = [f"optional tools: CI={'true: missing ones fail' if IN_CI else 'unset: missing ones skip'}"]
+    lines = ["optional tools: " + ("CI=true, a missing one FAILS its tests" if IN_CI
+                                   else "a missing one skips its tests (they fail under CI=true)")]
     if _slow_deselected(config):
         lines.append("slow tests deselected (run them with `pytest -m slow`, or everything with --run-slow)")
     return lines

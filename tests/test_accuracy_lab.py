@@ -220,7 +220,8 @@ def test_runs_and_says_so_without_mujoco(tmp_path, monkeypatch):
     monkeypatch.setattr(A, "_mujoco", lambda: (None, "ModuleNotFoundError: No module named 'mujoco'"))
     monkeypatch.setattr(A, "QUICK", dict(A.QUICK, cases=("diag_w2",), dt_exps=(6, 7, 8, 9), numpy_dt_exps=(6,),
                                          rtols=(1e-4, 1e-6), numpy_rtols=(1e-4,), mj_dt_exps=(6,)))
-    result = labs.run("accuracy", tmp_path, quick=True)
+    # workers=1: in this process, where the monkeypatched _mujoco applies (and no worker pool to start)
+    result = labs.run("accuracy", tmp_path, quick=True, workers=1)
     data = json.loads((tmp_path / "accuracy" / "results.json").read_text())
     assert data["mujoco"].startswith("not measured") and "No module named 'mujoco'" in data["mujoco"]
     assert data["machine"]["mujoco"] is None

@@ -153,6 +153,7 @@ def local_cluster():
         yield cluster
 
 
+@pytest.mark.slow   # the whole quick atlas again on a 2-worker cluster (~25 s); processes: the test below
 def test_dask_cluster_gives_identical_json(serial, local_cluster, tmp_path):
     _, text, _ = serial
     result = labs.run("atlas", tmp_path, quick=True, dask=local_cluster.scheduler_address)
