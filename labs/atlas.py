@@ -86,6 +86,7 @@ import numpy as np
 import lavendersim as lv
 from lavendersim import backends as B
 from lavendersim import executor as X
+from lavendersim.generated import layout as LY
 from lavendersim import reference as R
 from lavendersim import validate as V
 from lavendersim.errors import DivergenceError
@@ -196,7 +197,7 @@ def cell_metrics(I_b: np.ndarray, w0: np.ndarray, x: np.ndarray, ref) -> dict:
         energy_drift, energy_gain, L_norm_drift, L_norm_gain, L_world_drift, attitude_error (rad),
         omega_error (relative to |ω0|); a value that overflows is None.
     """
-    q, w = x[:, 3:7], x[:, 10:13]
+    q, w = x[:, LY.STATE_Q], x[:, LY.STATE_OMEGA_B]
     with np.errstate(over="ignore", invalid="ignore"):
         E = 0.5 * np.sum(I_b * w * w, axis=1)
         Ln = np.linalg.norm(I_b * w, axis=1)
