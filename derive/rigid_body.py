@@ -15,6 +15,18 @@ from .kernel import Arg, Kernel, scalar, vec
 from .quaternion import pure, qmul, rotation_matrix
 
 STATE = "state (p_w[3] m, q[4] (x,y,z,w), v_w[3] m/s, omega_b[3] rad/s)"
+# The state layout above, as (field, size) in order: the one place its offsets come from.
+STATE_FIELDS = (("p_w", 3), ("q", 4), ("v_w", 3), ("omega_b", 3))
+
+
+def state_offset(name: str) -> int:
+    """Offset of a field of STATE_FIELDS within the state x."""
+    o = 0
+    for f, n in STATE_FIELDS:
+        if f == name:
+            return o
+        o += n
+    raise KeyError(f"state has no field {name!r}")
 
 
 def euler_rhs(I_b: sp.Matrix, w: sp.Matrix, tau_b) -> sp.Matrix:
