@@ -45,7 +45,8 @@ USER_CODE_BASE = 1000
 # Bits of an effect's flags (C and Python): which state values its force or torque reads.
 FLAG_USES_V = 1       # reads v_w (a jointed body then needs its kinematic COM velocity)
 FLAG_USES_OMEGA = 2   # reads omega_b
-FLAGS = {"uses_v_w": FLAG_USES_V, "uses_omega_b": FLAG_USES_OMEGA}
+FLAG_FORCE = 4        # adds a force (a body whose effects add none may use the torque-only right-hand side)
+FLAGS = {"uses_v_w": FLAG_USES_V, "uses_omega_b": FLAG_USES_OMEGA, "adds_force": FLAG_FORCE}
 # Version of the calling convention of printed effect functions (checked when a user library loads).
 ABI_VERSION = 1
 _NAME = re.compile(r"^[a-z][a-z0-9_]*$")
@@ -205,7 +206,8 @@ class EffectDecl:
     @property
     def flags(self) -> int:
         used = self.state_inputs
-        return (FLAG_USES_V if "v_w" in used else 0) | (FLAG_USES_OMEGA if "omega_b" in used else 0)
+        return ((FLAG_USES_V if "v_w" in used else 0) | (FLAG_USES_OMEGA if "omega_b" in used else 0)
+                | (FLAG_FORCE if self.force_w is not None else 0))
 
     @property
     def n_params(self) -> int:

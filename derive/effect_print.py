@@ -65,16 +65,18 @@ def c_header(effects: list[tuple[int, E.EffectDecl]]) -> list[str]:
          f"#define LV_EFFECT_USER_BASE {E.USER_CODE_BASE} /* codes of user effects (loaded at run time) start here */",
          f"#define LV_EFFECT_ABI {E.ABI_VERSION}          /* version of the calling convention below */",
          f"#define LV_EFFECT_USES_V {E.FLAG_USES_V}       /* flag: the effect reads v_w */",
-         f"#define LV_EFFECT_USES_OMEGA {E.FLAG_USES_OMEGA}   /* flag: the effect reads omega_b */"]
+         f"#define LV_EFFECT_USES_OMEGA {E.FLAG_USES_OMEGA}   /* flag: the effect reads omega_b */",
+         f"#define LV_EFFECT_FORCE {E.FLAG_FORCE}        /* flag: the effect adds a force */"]
     for code, d in effects:
         h.append(f"#define LV_EFFECT_{d.name.upper()} {code} /* p = [{', '.join(f'{p.name}({p.size})' for p in d.params)}] */")
     h += ["/* An effect adds its force at the COM (F, world, N) and torque about it (tau, world, N·m) for one",
           "   body: p its parameters, x the body state, v_w the COM velocity it sees (the state's, or a joint's",
           "   kinematic one), m and I_b the body's mass and principal moments. */",
           f"typedef void (*lv_effect_fn)({C_ARGS});",
-          "/* Add built-in effect `code`'s force and torque; returns 0, or -1 for a code that is not a built-in",
+          "/* The dispatch, static inline int lv_effect_apply(int code, <the arguments above>), is defined in",
+          "   kernels.c (compile kernels.c into the translation unit that steps, so it inlines): it adds built-in",
+          "   effect `code`'s force and torque and returns 0, or returns -1 for a code that is not a built-in",
           "   effect (then nothing is added: the caller reports it). */",
-          f"int lv_effect_apply(int code, {C_ARGS});",
           "/* Built-in effect `code`: its number of parameters, its LV_EFFECT_USES_* flags, its name; -1 (NULL)",
           "   for a code that is not a built-in effect. */",
           "int lv_effect_n_params(int code);", "int lv_effect_flags(int code);", "const char *lv_effect_name(int code);", ""]
@@ -93,8 +95,9 @@ def c_source(effects: list[tuple[int, E.EffectDecl]], prefix: str) -> list[str]:
     """kernels.c: each built-in effect's accumulating function and the generated dispatch."""
     c = ["/* ---- Scene effects: accumulating functions and dispatch -------------------------------------- */"]
     for _, d in effects:
-        c += c_effect_functions(d, prefix, f"lv_effect_acc_{d.name}", "static ") + [""]
-    c += [f"int lv_effect_apply(int code, {C_ARGS})", "{", "    switch (code) {"]
+        c += c_effect_functions(d, prefix, f"lv_effect_acc_{d.name}", "static inline ") + [""]
+    c += ["/* Add built-in effect `code`'s force and torque; 0, or -1 for a code that is not a built-in effect. */",
+          f"static inline int lv_effect_apply(int code, {C_ARGS})", "{", "    switch (code) {"]
     for _, d in effects:
         c.append(f"    case LV_EFFECT_{d.name.upper()}: lv_effect_acc_{d.name}(p, x, v_w, m, I_b, F, tau); return 0;")
     c += ["    default: return -1; /* not a built-in effect: the caller reports it */", "    }", "}", ""]
@@ -184,7 +187,7 @@ def meta_module(effects: list[tuple[int | None, E.EffectDecl]], header: str, ext
              f"ROW_CODE, ROW_BODY, ROW_PARAMS = {E.ROW_CODE}, {E.ROW_BODY}, {E.ROW_PARAMS}",
              f"ROW_MIN_PARAMS = {E.ROW_MIN_PARAMS}", f"USER_CODE_BASE = {E.USER_CODE_BASE}",
              f"ABI_VERSION = {E.ABI_VERSION}",
-             f"FLAG_USES_V, FLAG_USES_OMEGA = {E.FLAG_USES_V}, {E.FLAG_USES_OMEGA}",
+             f"FLAG_USES_V, FLAG_USES_OMEGA, FLAG_FORCE = {E.FLAG_USES_V}, {E.FLAG_USES_OMEGA}, {E.FLAG_FORCE}",
              f"STATE_FIELDS = {tuple(STATE_FIELDS)!r}"]
     for k, v in (extra or {}).items():
         lines.append(f"{k.upper()} = {v!r}")
@@ -200,7 +203,8 @@ def markdown_params(d: E.EffectDecl, code: int | None) -> list[str]:
     what = "user effect (code assigned when loaded)" if code is None else f"code {code}"
     reads = ", ".join(f"`{s}`" for s in d.state_inputs) or "no state"
     out = [f"Effect `{d.name}` ({d.kind}, {what}); "
-           + (f"reads {reads}" + ("; velocity-dependent (splitting kicks by explicit midpoint)" if d.flags else "")
+           + (f"reads {reads}" + ("; velocity-dependent (splitting kicks by explicit midpoint)"
+                                  if d.flags & (E.FLAG_USES_V | E.FLAG_USES_OMEGA) else "")
               if d.kind == "force" else "its equations are the kernels of its model") + ".", "",
            "| parameter | shape | unit | rule | default | offset | meaning |", "|---|---|---|---|---|---|---|"]
     off = d.offsets()

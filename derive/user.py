@@ -76,7 +76,7 @@ def render_user(path) -> tuple[str, dict[str, str]]:
     coded = [(None, e) for e in effects]
     extra = {"set_name": set_name, "declaration": str(path),
              "declaration_sha256": hashlib.sha256(path.read_bytes()).hexdigest(),
-             "kernels": tuple(p.k.name for p in printed)}
+             "kernels": tuple(k.name for k in kernels)}
     files = {"kernels.h": h, "kernels.c": c,
              "kernels_numpy.py": codegen.print_numpy(printed, coded, header=header),
              "kernels_casadi.py": codegen.print_casadi(printed, header=header),

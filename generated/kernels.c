@@ -796,6 +796,52 @@ void lv_angular_momentum_world(const double *q, const double *I_b, const double 
     L_w[2] = t10*(t5 - t6) + t4*(q_1*t2 + t11) + t7*(-t12 - t8 + 1);
 }
 
+void lv_rigid_body_rhs_torque(const double *x, const double *I_b, const double *tau_w, double *x_dot) {
+    const double x_3 = x[3];
+    const double x_4 = x[4];
+    const double x_5 = x[5];
+    const double x_6 = x[6];
+    const double x_7 = x[7];
+    const double x_8 = x[8];
+    const double x_9 = x[9];
+    const double x_10 = x[10];
+    const double x_11 = x[11];
+    const double x_12 = x[12];
+    const double I_b_0 = I_b[0];
+    const double I_b_1 = I_b[1];
+    const double I_b_2 = I_b[2];
+    const double tau_w_0 = tau_w[0];
+    const double tau_w_1 = tau_w[1];
+    const double tau_w_2 = tau_w[2];
+    const double t0 = ((1.0/2.0))*x_10;
+    const double t1 = ((1.0/2.0))*x_11;
+    const double t2 = ((1.0/2.0))*x_12;
+    const double t3 = -I_b_2;
+    const double t4 = 2*x_4;
+    const double t5 = t4*x_3;
+    const double t6 = 2*x_5;
+    const double t7 = t6*x_6;
+    const double t8 = t6*x_3;
+    const double t9 = t4*x_6;
+    const double t10 = 2*(x_4*x_4);
+    const double t11 = 2*(x_5*x_5) - 1;
+    const double t12 = 2*x_3*x_6;
+    const double t13 = 2*(x_3*x_3);
+    x_dot[0] = x_7;
+    x_dot[1] = x_8;
+    x_dot[2] = x_9;
+    x_dot[3] = t0*x_6 - t1*x_5 + t2*x_4;
+    x_dot[4] = t0*x_5 + t1*x_6 - t2*x_3;
+    x_dot[5] = -t0*x_4 + t1*x_3 + t2*x_6;
+    x_dot[6] = -t0*x_3 - t1*x_4 - t2*x_5;
+    x_dot[7] = 0;
+    x_dot[8] = 0;
+    x_dot[9] = 0;
+    x_dot[10] = (tau_w_0*(-t10 - t11) + tau_w_1*(t5 + t7) + tau_w_2*(t8 - t9) + x_11*x_12*(I_b_1 + t3))/I_b_0;
+    x_dot[11] = (tau_w_0*(t5 - t7) + tau_w_1*(-t11 - t13) + tau_w_2*(t12 + t4*x_5) + x_10*x_12*(-I_b_0 - t3))/I_b_1;
+    x_dot[12] = (tau_w_0*(t8 + t9) + tau_w_1*(-t12 + 2*x_4*x_5) + tau_w_2*(-t10 - t13 + 1) + x_10*x_11*(I_b_0 - I_b_1))/I_b_2;
+}
+
 void lv_pivot_body_rhs(const double *q, const double *omega_b, const double *I_p, const double *r_b, const double *F_w, const double *tau_w, double *q_dot, double *omega_dot_b) {
     const double q_0 = q[0];
     const double q_1 = q[1];
@@ -1058,7 +1104,7 @@ void lv_pivot_kinematics(const double *q, const double *omega_b, const double *a
 
 /* ---- Scene effects: accumulating functions and dispatch -------------------------------------- */
 /* applied_torque: adds tau_com_w for one body. p = [torque_w(3)] */
-static void lv_effect_acc_applied_torque(const double *p, const double *x, const double *v_w, double m, const double *I_b, double *F, double *tau)
+static inline void lv_effect_acc_applied_torque(const double *p, const double *x, const double *v_w, double m, const double *I_b, double *F, double *tau)
 {
     double tau_com_w[3];
     (void)x; (void)v_w; (void)m; (void)I_b; (void)F;
@@ -1067,7 +1113,7 @@ static void lv_effect_acc_applied_torque(const double *p, const double *x, const
 }
 
 /* force_at_point: adds F_com_w and tau_com_w for one body. p = [r_b(3), F_w(3)] */
-static void lv_effect_acc_force_at_point(const double *p, const double *x, const double *v_w, double m, const double *I_b, double *F, double *tau)
+static inline void lv_effect_acc_force_at_point(const double *p, const double *x, const double *v_w, double m, const double *I_b, double *F, double *tau)
 {
     double F_com_w[3];
     double tau_com_w[3];
@@ -1078,7 +1124,7 @@ static void lv_effect_acc_force_at_point(const double *p, const double *x, const
 }
 
 /* gravity: adds F_com_w for one body. p = [g_w(3)] */
-static void lv_effect_acc_gravity(const double *p, const double *x, const double *v_w, double m, const double *I_b, double *F, double *tau)
+static inline void lv_effect_acc_gravity(const double *p, const double *x, const double *v_w, double m, const double *I_b, double *F, double *tau)
 {
     double F_com_w[3];
     (void)x; (void)v_w; (void)I_b; (void)tau;
@@ -1087,7 +1133,7 @@ static void lv_effect_acc_gravity(const double *p, const double *x, const double
 }
 
 /* linear_damping: adds F_com_w for one body. p = [c(1)] */
-static void lv_effect_acc_linear_damping(const double *p, const double *x, const double *v_w, double m, const double *I_b, double *F, double *tau)
+static inline void lv_effect_acc_linear_damping(const double *p, const double *x, const double *v_w, double m, const double *I_b, double *F, double *tau)
 {
     double F_com_w[3];
     (void)x; (void)m; (void)I_b; (void)tau;
@@ -1096,7 +1142,7 @@ static void lv_effect_acc_linear_damping(const double *p, const double *x, const
 }
 
 /* angular_damping: adds tau_com_w for one body. p = [c(1)] */
-static void lv_effect_acc_angular_damping(const double *p, const double *x, const double *v_w, double m, const double *I_b, double *F, double *tau)
+static inline void lv_effect_acc_angular_damping(const double *p, const double *x, const double *v_w, double m, const double *I_b, double *F, double *tau)
 {
     double tau_com_w[3];
     (void)v_w; (void)m; (void)I_b; (void)F;
@@ -1104,7 +1150,8 @@ static void lv_effect_acc_angular_damping(const double *p, const double *x, cons
     tau[0] += tau_com_w[0]; tau[1] += tau_com_w[1]; tau[2] += tau_com_w[2];
 }
 
-int lv_effect_apply(int code, const double *p, const double *x, const double *v_w, double m, const double *I_b, double *F, double *tau)
+/* Add built-in effect `code`'s force and torque; 0, or -1 for a code that is not a built-in effect. */
+static inline int lv_effect_apply(int code, const double *p, const double *x, const double *v_w, double m, const double *I_b, double *F, double *tau)
 {
     switch (code) {
     case LV_EFFECT_APPLIED_TORQUE: lv_effect_acc_applied_torque(p, x, v_w, m, I_b, F, tau); return 0;
@@ -1132,9 +1179,9 @@ int lv_effect_flags(int code)
 {
     switch (code) {
     case LV_EFFECT_APPLIED_TORQUE: return 0;
-    case LV_EFFECT_FORCE_AT_POINT: return 0;
-    case LV_EFFECT_GRAVITY: return 0;
-    case LV_EFFECT_LINEAR_DAMPING: return 1;
+    case LV_EFFECT_FORCE_AT_POINT: return 4;
+    case LV_EFFECT_GRAVITY: return 4;
+    case LV_EFFECT_LINEAR_DAMPING: return 5;
     case LV_EFFECT_ANGULAR_DAMPING: return 2;
     default: return -1;
     }
@@ -1186,6 +1233,7 @@ static void packed_apply_inv_inertia(const double *in, double *out) { lv_apply_i
 static void packed_world_to_body(const double *in, double *out) { lv_world_to_body(in + 0, in + 4, out + 0); }
 static void packed_kinetic_energy(const double *in, double *out) { lv_kinetic_energy(in[0], in + 1, in + 4, in + 7, out + 0); }
 static void packed_angular_momentum_world(const double *in, double *out) { lv_angular_momentum_world(in + 0, in + 4, in + 7, out + 0); }
+static void packed_rigid_body_rhs_torque(const double *in, double *out) { lv_rigid_body_rhs_torque(in + 0, in + 13, in + 16, out + 0); }
 static void packed_pivot_body_rhs(const double *in, double *out) { lv_pivot_body_rhs(in + 0, in + 4, in + 7, in + 16, in + 19, in + 22, out + 0, out + 4); }
 static void packed_wheel_body_rhs(const double *in, double *out) { lv_wheel_body_rhs(in + 0, in + 4, in + 7, in + 10, in + 19, in + 22, in + 25, in + 28, in + 31, in[34], out + 0, out + 4, out + 7); }
 static void packed_wheel_momentum(const double *in, double *out) { lv_wheel_momentum(in + 0, in + 4, in + 7, in + 10, in + 19, out + 0, out + 3); }
@@ -1226,6 +1274,7 @@ const lv_kernel_info lv_kernel_table[LV_KERNEL_COUNT] = {
     {"world_to_body", 7, 3, packed_world_to_body},
     {"kinetic_energy", 10, 1, packed_kinetic_energy},
     {"angular_momentum_world", 10, 3, packed_angular_momentum_world},
+    {"rigid_body_rhs_torque", 19, 13, packed_rigid_body_rhs_torque},
     {"pivot_body_rhs", 25, 7, packed_pivot_body_rhs},
     {"wheel_body_rhs", 35, 10, packed_wheel_body_rhs},
     {"wheel_momentum", 22, 6, packed_wheel_momentum},

@@ -11,7 +11,7 @@ typedef struct {
     void (*packed)(const double *in, double *out);
 } lv_kernel_info;
 
-#define LV_KERNEL_COUNT 38
+#define LV_KERNEL_COUNT 39
 extern const lv_kernel_info lv_kernel_table[LV_KERNEL_COUNT];
 
 /* particle_moments: One particle's mass moment and momentum (summed: m r_COM and p).
@@ -235,6 +235,13 @@ void lv_kinetic_energy(double m, const double *I_b, const double *v_w, const dou
      out L_w [3]: angular momentum, world frame, kg·m²/s */
 void lv_angular_momentum_world(const double *q, const double *I_b, const double *omega_b, double *L_w);
 
+/* rigid_body_rhs_torque: State derivative under a world torque only (rigid_body_rhs with F_W = 0, for bodies whose effects add no force).
+     in  x [13]: state (p_w[3] m, q[4] (x,y,z,w), v_w[3] m/s, omega_b[3] rad/s)
+     in  I_b [3]: principal moments, body frame, kg·m²
+     in  tau_w [3]: total torque about the COM, world frame, N·m
+     out x_dot [13]: d/dt of the state */
+void lv_rigid_body_rhs_torque(const double *x, const double *I_b, const double *tau_w, double *x_dot);
+
 /* pivot_body_rhs: Rotation about a world-anchored spherical joint (no wheels).
      in  q [4]: orientation (x, y, z, w), R_WB
      in  omega_b [3]: angular velocity, body frame, rad/s
@@ -290,6 +297,7 @@ void lv_pivot_kinematics(const double *q, const double *omega_b, const double *a
 #define LV_EFFECT_ABI 1          /* version of the calling convention below */
 #define LV_EFFECT_USES_V 1       /* flag: the effect reads v_w */
 #define LV_EFFECT_USES_OMEGA 2   /* flag: the effect reads omega_b */
+#define LV_EFFECT_FORCE 4        /* flag: the effect adds a force */
 #define LV_EFFECT_APPLIED_TORQUE 1 /* p = [torque_w(3)] */
 #define LV_EFFECT_FORCE_AT_POINT 2 /* p = [r_b(3), F_w(3)] */
 #define LV_EFFECT_GRAVITY 3 /* p = [g_w(3)] */
@@ -299,9 +307,10 @@ void lv_pivot_kinematics(const double *q, const double *omega_b, const double *a
    body: p its parameters, x the body state, v_w the COM velocity it sees (the state's, or a joint's
    kinematic one), m and I_b the body's mass and principal moments. */
 typedef void (*lv_effect_fn)(const double *p, const double *x, const double *v_w, double m, const double *I_b, double *F, double *tau);
-/* Add built-in effect `code`'s force and torque; returns 0, or -1 for a code that is not a built-in
+/* The dispatch, static inline int lv_effect_apply(int code, <the arguments above>), is defined in
+   kernels.c (compile kernels.c into the translation unit that steps, so it inlines): it adds built-in
+   effect `code`'s force and torque and returns 0, or returns -1 for a code that is not a built-in
    effect (then nothing is added: the caller reports it). */
-int lv_effect_apply(int code, const double *p, const double *x, const double *v_w, double m, const double *I_b, double *F, double *tau);
 /* Built-in effect `code`: its number of parameters, its LV_EFFECT_USES_* flags, its name; -1 (NULL)
    for a code that is not a built-in effect. */
 int lv_effect_n_params(int code);

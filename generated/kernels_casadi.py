@@ -764,6 +764,45 @@ def angular_momentum_world(q, I_b, omega_b):
     return casadi.vertcat(t10*(-t8 - t9) + t4*(t1 - t3) + t7*(t5 + t6), t10*(t1 + t3) + t4*(-t12 - t9) + t7*(2*q_1*q_2 - t11), t10*(t5 - t6) + t4*(q_1*t2 + t11) + t7*(-t12 - t8 + 1))
 
 
+def rigid_body_rhs_torque(x, I_b, tau_w):
+    """rigid_body_rhs_torque: State derivative under a world torque only (rigid_body_rhs with F_W = 0, for bodies whose effects add no force).
+      in  x [13]: state (p_w[3] m, q[4] (x,y,z,w), v_w[3] m/s, omega_b[3] rad/s)
+      in  I_b [3]: principal moments, body frame, kg·m²
+      in  tau_w [3]: total torque about the COM, world frame, N·m
+      out x_dot [13]: d/dt of the state"""
+    x_3 = x[3]
+    x_4 = x[4]
+    x_5 = x[5]
+    x_6 = x[6]
+    x_7 = x[7]
+    x_8 = x[8]
+    x_9 = x[9]
+    x_10 = x[10]
+    x_11 = x[11]
+    x_12 = x[12]
+    I_b_0 = I_b[0]
+    I_b_1 = I_b[1]
+    I_b_2 = I_b[2]
+    tau_w_0 = tau_w[0]
+    tau_w_1 = tau_w[1]
+    tau_w_2 = tau_w[2]
+    t0 = ((1.0/2.0))*x_10
+    t1 = ((1.0/2.0))*x_11
+    t2 = ((1.0/2.0))*x_12
+    t3 = -I_b_2
+    t4 = 2*x_4
+    t5 = t4*x_3
+    t6 = 2*x_5
+    t7 = t6*x_6
+    t8 = t6*x_3
+    t9 = t4*x_6
+    t10 = 2*(x_4*x_4)
+    t11 = 2*(x_5*x_5) - 1
+    t12 = 2*x_3*x_6
+    t13 = 2*(x_3*x_3)
+    return casadi.vertcat(x_7, x_8, x_9, t0*x_6 - t1*x_5 + t2*x_4, t0*x_5 + t1*x_6 - t2*x_3, -t0*x_4 + t1*x_3 + t2*x_6, -t0*x_3 - t1*x_4 - t2*x_5, 0, 0, 0, (tau_w_0*(-t10 - t11) + tau_w_1*(t5 + t7) + tau_w_2*(t8 - t9) + x_11*x_12*(I_b_1 + t3))/I_b_0, (tau_w_0*(t5 - t7) + tau_w_1*(-t11 - t13) + tau_w_2*(t12 + t4*x_5) + x_10*x_12*(-I_b_0 - t3))/I_b_1, (tau_w_0*(t8 + t9) + tau_w_1*(-t12 + 2*x_4*x_5) + tau_w_2*(-t10 - t13 + 1) + x_10*x_11*(I_b_0 - I_b_1))/I_b_2)
+
+
 def pivot_body_rhs(q, omega_b, I_p, r_b, F_w, tau_w):
     """pivot_body_rhs: Rotation about a world-anchored spherical joint (no wheels).
       in  q [4]: orientation (x, y, z, w), R_WB

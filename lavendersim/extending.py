@@ -94,6 +94,7 @@ class UserSet:
         self._casadi = None
         self._lib = None
         self.library_path: Path | None = None
+        self.library_built_now: bool | None = None  # True: compiled by this process; False: reused from the cache
 
     def check_current(self) -> None:
         """Raise if the declaration this set was derived from exists and has changed since."""
@@ -115,7 +116,7 @@ class UserSet:
     def library(self) -> ctypes.CDLL:
         """The compiled library (built now if missing or out of date with the printed C)."""
         if self._lib is None:
-            self.library_path = build(self.directory)
+            self.library_path, self.library_built_now = _build(self.directory)
             lib = ctypes.CDLL(str(self.library_path))
             abi = ctypes.c_int.in_dll(lib, "lvu_abi_version").value
             from .generated import effects_meta
@@ -144,11 +145,15 @@ def _library_name(directory: Path, cmd: list[str]) -> str:
 def build(directory) -> Path:
     """Compile a set's kernels.c into build/lib<set>-<hash>.so; reuse it when the printed C and the
     compiler command are unchanged. A failing compile raises UserBuildError with its full output."""
+    return _build(directory)[0]
+
+
+def _build(directory) -> tuple[Path, bool]:
     directory = Path(directory).resolve()
     cmd = compiler() + CFLAGS
     out = directory / "build" / _library_name(directory, cmd)
     if out.is_file():
-        return out
+        return out, False
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = out.with_name(out.name + f".tmp{os.getpid()}")
     full = cmd + [str(directory / "kernels.c"), "-o", str(tmp), "-lm"]
@@ -161,7 +166,7 @@ def build(directory) -> Path:
         raise UserBuildError(f"compiling the user set {directory.name!r} failed (exit {r.returncode}):\n"
                              f"$ {' '.join(full)}\n{r.stdout}{r.stderr}".rstrip())
     os.replace(tmp, out)
-    return out
+    return out, True
 
 
 def derive(declaration, out=None, compile: bool = True) -> UserSet:
@@ -176,9 +181,10 @@ def derive(declaration, out=None, compile: bool = True) -> UserSet:
         p = directory / name
         if not p.exists() or p.read_text(encoding="utf-8") != text:
             p.write_text(text, encoding="utf-8")
+    s = load(directory, reload=True)
     if compile:
-        build(directory)
-    return load(directory, reload=True)
+        s.library()
+    return s
 
 
 def load(path, reload: bool = False) -> UserSet:

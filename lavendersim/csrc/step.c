@@ -156,7 +156,7 @@ static int all_finite(const double *x)
    and written only on success. Returns -1 on success, else the 0-based failing step; then *fail_j is the
    first (lowest-index) body of the block that went non-finite at that step and last[] holds the block's
    last finite states. */
-static long advance_block(double *state, const double *params, const long *ids, int n,
+static inline long advance_block(double *state, const double *params, const long *ids, int n,
                           const lv_effect_index *ix, int integrator, int normalize,
                           double dt, long n_steps, int *fail_j, double last[][LV_STATE_SIZE])
 {
@@ -225,20 +225,40 @@ static long advance_block(double *state, const double *params, const long *ids, 
     return -1;
 }
 
-/* One torque-free RK4 step of bodies 0 .. n-1: x -> xn (the free kernel, the RK4 combination, q
-   normalized with the generated kernel when asked). */
+/* Right-hand sides on the lockstep RK4 path (`forced`): LV_RHS_FREE the free kernel; else each body's
+   effects summed in table order, then LV_RHS_FULL the full kernel (as body_rhs), or LV_RHS_TORQUE the
+   torque-only one for bodies whose effects add no force (bitwise the full kernel with F = 0). */
+enum { LV_RHS_FREE = 0, LV_RHS_TORQUE = 1, LV_RHS_FULL = 2 };
+#define LV_RK4_RHS(in, out)                                                                             \
+    do {                                                                                                \
+        if (forced == LV_RHS_FREE) {                                                                    \
+            for (j = 0; j < n; j++) lv_rigid_body_rhs_free(in[j], I[j], out[j]);                        \
+        } else {                                                                                        \
+            for (j = 0; j < n; j++) {                                                                   \
+                F[j][0] = F[j][1] = F[j][2] = tau[j][0] = tau[j][1] = tau[j][2] = 0.0;                  \
+                effect_sums(in[j], in[j] + 7, m[j], I[j], refs[j], n_refs[j], F[j], tau[j]);            \
+            }                                                                                           \
+            if (forced == LV_RHS_TORQUE)                                                                \
+                for (j = 0; j < n; j++) lv_rigid_body_rhs_torque(in[j], I[j], tau[j], out[j]);          \
+            else                                                                                        \
+                for (j = 0; j < n; j++) lv_rigid_body_rhs(in[j], m[j], I[j], F[j], tau[j], out[j]);     \
+        }                                                                                               \
+    } while (0)
+
+/* One RK4 step of bodies 0 .. n-1: x -> xn (LV_RK4_RHS, the RK4 combination, q normalized with the
+   generated kernel when asked). */
 #define LV_FREE_RK4_STEP()                                                                              \
     do {                                                                                                \
-        for (j = 0; j < n; j++) lv_rigid_body_rhs_free(x[j], I[j], k1[j]);                              \
+        LV_RK4_RHS(x, k1);                                                                              \
         for (j = 0; j < n; j++)                                                                         \
             for (i = 0; i < LV_STATE_SIZE; i++) tmp[j][i] = x[j][i] + h2 * k1[j][i];                    \
-        for (j = 0; j < n; j++) lv_rigid_body_rhs_free(tmp[j], I[j], k2[j]);                            \
+        LV_RK4_RHS(tmp, k2);                                                                            \
         for (j = 0; j < n; j++)                                                                         \
             for (i = 0; i < LV_STATE_SIZE; i++) tmp[j][i] = x[j][i] + h2 * k2[j][i];                    \
-        for (j = 0; j < n; j++) lv_rigid_body_rhs_free(tmp[j], I[j], k3[j]);                            \
+        LV_RK4_RHS(tmp, k3);                                                                            \
         for (j = 0; j < n; j++)                                                                         \
             for (i = 0; i < LV_STATE_SIZE; i++) tmp[j][i] = x[j][i] + dt * k3[j][i];                    \
-        for (j = 0; j < n; j++) lv_rigid_body_rhs_free(tmp[j], I[j], k4[j]);                            \
+        LV_RK4_RHS(tmp, k4);                                                                            \
         for (j = 0; j < n; j++)                                                                         \
             for (i = 0; i < LV_STATE_SIZE; i++)                                                         \
                 xn[j][i] = x[j][i] + h6 * (k1[j][i] + 2.0 * k2[j][i] + 2.0 * k3[j][i] + k4[j][i]);      \
@@ -246,39 +266,57 @@ static long advance_block(double *state, const double *params, const long *ids, 
             for (j = 0; j < n; j++) lv_quat_normalize(xn[j] + 3, xn[j] + 3);                            \
     } while (0)
 
+/* LV_FLATTEN: inline every call in the function (its kernels included), so each call with constant block
+   size, kind and normalize flag compiles to its own straight-line loop (GCC and clang; elsewhere a
+   plain function). */
+#if defined(__GNUC__) || defined(__clang__)
+#define LV_FLATTEN __attribute__((flatten))
+#else
+#define LV_FLATTEN
+#endif
+
 /* Steps between finiteness checks on the torque-free path (see advance_free_rk4). */
 #define LV_FREE_CHUNK 64
 
-/* Torque-free fast path: RK4 on plain bodies that no effect acts on (the common free-flight scene).
-   The same arithmetic as advance_block (the free kernel, the same RK4 combination, q normalized with
-   the generated kernel), so results are bitwise identical; without the per-stage effect dispatch and
-   integrator switch the loop is a straight chain the compiler can schedule (and, for a block, overlap).
-   Same contract as advance_block.
+/* RK4 fast path on plain bodies, `forced` (LV_RHS_*) of them all: torque-free (no effect acts on them;
+   the common free-flight scene), or with effects, each body summed over its own (from the index ix).
+   The same arithmetic as advance_block (the same right-hand side, RK4 combination, q normalized with
+   the generated kernel), so results are bitwise identical; without the integrator switch the loop is a
+   straight chain the compiler can schedule (and, for a block, overlap). Inlined into
+   advance_rk4_group with constant n, forced (and, free, normalize). Same contract as advance_block.
 
    Finiteness is checked once per chunk of LV_FREE_CHUNK steps instead of after every step (the 13 tests
    per body-step cost ~10% of a step). This is exact because on this path a non-finite number never
    becomes finite again: every new number is old + (something) (inf + finite = inf; inf + -inf, NaN + any
    = NaN), and normalization maps a q with an inf or NaN component to one with a NaN (1/sqrt(inf) = 0 and
-   inf * 0 = NaN; NaN propagates). So if any state in the chunk went non-finite its end state is
+   inf * 0 = NaN; NaN propagates) — whatever the right-hand side, effects included. So if any state in
+   the chunk went non-finite its end state is
    non-finite too; then the chunk is re-run from its start with a check after every step, which
    recomputes the same bits (deterministic arithmetic) and finds the first failing step and body. */
-static inline long advance_free_rk4(double *state, const double *params, const long *ids, int n, int normalize,
+static inline long advance_free_rk4(double *state, const double *params, const long *ids, int n,
+                                    const lv_effect_index *ix, int forced, int normalize,
                                     double dt, long n_steps, int *fail_j, double last[][LV_STATE_SIZE])
 {
     double x[LV_BLOCK][LV_STATE_SIZE], xn[LV_BLOCK][LV_STATE_SIZE], k1[LV_BLOCK][LV_STATE_SIZE],
         k2[LV_BLOCK][LV_STATE_SIZE], k3[LV_BLOCK][LV_STATE_SIZE], k4[LV_BLOCK][LV_STATE_SIZE],
         tmp[LV_BLOCK][LV_STATE_SIZE], I[LV_BLOCK][3], snap[LV_BLOCK][LV_STATE_SIZE];
+    double F[LV_BLOCK][3], tau[LV_BLOCK][3], m[LV_BLOCK];
+    const lv_effect_ref *refs[LV_BLOCK];
+    long n_refs[LV_BLOCK];
     const double h2 = 0.5 * dt, h6 = dt / 6.0;
-    long s, c, m;
+    long s, c, cm;
     int i, j, ok;
     for (j = 0; j < n; j++) {
         memcpy(x[j], state + ids[j] * LV_STATE_SIZE, sizeof x[j]);
         memcpy(I[j], params + ids[j] * LV_PARAM_SIZE + 1, sizeof I[j]);
+        m[j] = params[ids[j] * LV_PARAM_SIZE];
+        refs[j] = ix->refs + ix->start[ids[j]];
+        n_refs[j] = ix->start[ids[j] + 1] - ix->start[ids[j]];
     }
-    for (c = 0; c < n_steps; c += m) {
-        m = n_steps - c < LV_FREE_CHUNK ? n_steps - c : LV_FREE_CHUNK;
+    for (c = 0; c < n_steps; c += cm) {
+        cm = n_steps - c < LV_FREE_CHUNK ? n_steps - c : LV_FREE_CHUNK;
         memcpy(snap, x, (size_t)n * sizeof x[0]);
-        for (s = 0; s < m; s++) {
+        for (s = 0; s < cm; s++) {
             LV_FREE_RK4_STEP();
             memcpy(x, xn, (size_t)n * sizeof x[0]);
         }
@@ -287,7 +325,7 @@ static inline long advance_free_rk4(double *state, const double *params, const l
         if (ok) continue;
         /* some body went non-finite in this chunk: redo it step by step from its start */
         memcpy(x, snap, (size_t)n * sizeof x[0]);
-        for (s = 0; s < m; s++) {
+        for (s = 0; s < cm; s++) {
             LV_FREE_RK4_STEP();
             for (j = 0; j < n; j++) {
                 if (!all_finite(xn[j])) {
@@ -304,6 +342,7 @@ static inline long advance_free_rk4(double *state, const double *params, const l
     return -1;
 }
 #undef LV_FREE_RK4_STEP
+#undef LV_RK4_RHS
 
 /* ---- bodies with a spherical joint and/or reaction wheels ------------------------------------ */
 
@@ -799,21 +838,46 @@ static long run_limit(long lowest, long limit, long best, long n_steps)
     return (best >= 0 && lowest < best && limit < n_steps) ? limit + 1 : limit;
 }
 
-/* Up to LV_BLOCK bodies of ids (ascending) in lockstep: free ones (no effect, plain) on the torque-free
-   RK4 path when `free_rk4`, else the generic block. Constant block sizes let the compiler specialize. */
+/* RK4 on up to LV_BLOCK plain bodies of ids with effects, in lockstep, all of one right-hand side kind
+   (LV_RHS_TORQUE or LV_RHS_FULL). Every call below has constant arguments and is inlined with its
+   kernels and the effect dispatch (flatten), so each block size and kind compiles to its own loop. */
+LV_FLATTEN static long advance_forced_rk4(double *state, const double *params, const long *ids, int n,
+                                          const lv_effect_index *ix, int kind, int normalize, double dt, long n_steps,
+                                          int *fail_j, double last[][LV_STATE_SIZE])
+{
+    if (kind == LV_RHS_TORQUE)
+        return n == LV_BLOCK ? advance_free_rk4(state, params, ids, LV_BLOCK, ix, LV_RHS_TORQUE, normalize, dt, n_steps, fail_j, last)
+                             : advance_free_rk4(state, params, ids, n, ix, LV_RHS_TORQUE, normalize, dt, n_steps, fail_j, last);
+    return n == LV_BLOCK ? advance_free_rk4(state, params, ids, LV_BLOCK, ix, LV_RHS_FULL, normalize, dt, n_steps, fail_j, last)
+                         : advance_free_rk4(state, params, ids, n, ix, LV_RHS_FULL, normalize, dt, n_steps, fail_j, last);
+}
+
+/* RK4 on up to LV_BLOCK plain bodies of ids in lockstep, all of one right-hand side kind (LV_RHS_*). The
+   torque-free calls have constant block sizes and normalize flags, so the compiler specializes them. */
+static long advance_rk4_group(double *state, const double *params, const long *ids, int n, const lv_effect_index *ix,
+                              int kind, int normalize, double dt, long n_steps, int *fail_j,
+                              double last[][LV_STATE_SIZE])
+{
+    if (kind != LV_RHS_FREE)
+        return advance_forced_rk4(state, params, ids, n, ix, kind, normalize, dt, n_steps, fail_j, last);
+    if (n == LV_BLOCK)
+        return normalize ? advance_free_rk4(state, params, ids, LV_BLOCK, ix, LV_RHS_FREE, 1, dt, n_steps, fail_j, last)
+                         : advance_free_rk4(state, params, ids, LV_BLOCK, ix, LV_RHS_FREE, 0, dt, n_steps, fail_j, last);
+    if (n == 1)
+        return normalize ? advance_free_rk4(state, params, ids, 1, ix, LV_RHS_FREE, 1, dt, n_steps, fail_j, last)
+                         : advance_free_rk4(state, params, ids, 1, ix, LV_RHS_FREE, 0, dt, n_steps, fail_j, last);
+    return advance_free_rk4(state, params, ids, n, ix, LV_RHS_FREE, normalize, dt, n_steps, fail_j, last);
+}
+
+/* Up to LV_BLOCK plain bodies of ids (ascending) in lockstep, all of one right-hand side kind (LV_RHS_*):
+   RK4 on the fast path, the other integrators on the generic block (constant block sizes let the
+   compiler specialize it). */
 static long advance_group(double *state, const double *params, const long *ids, int n, const lv_effect_index *ix,
-                          int free_rk4, int integrator, int normalize, double dt, long n_steps, int *fail_j,
+                          int kind, int integrator, int normalize, double dt, long n_steps, int *fail_j,
                           double last[][LV_STATE_SIZE])
 {
-    if (free_rk4) {
-        if (n == LV_BLOCK)
-            return normalize ? advance_free_rk4(state, params, ids, LV_BLOCK, 1, dt, n_steps, fail_j, last)
-                             : advance_free_rk4(state, params, ids, LV_BLOCK, 0, dt, n_steps, fail_j, last);
-        if (n == 1)
-            return normalize ? advance_free_rk4(state, params, ids, 1, 1, dt, n_steps, fail_j, last)
-                             : advance_free_rk4(state, params, ids, 1, 0, dt, n_steps, fail_j, last);
-        return advance_free_rk4(state, params, ids, n, normalize, dt, n_steps, fail_j, last);
-    }
+    if (integrator == LV_INTEGRATOR_RK4)
+        return advance_rk4_group(state, params, ids, n, ix, kind, normalize, dt, n_steps, fail_j, last);
     if (n == LV_BLOCK)
         return advance_block(state, params, ids, LV_BLOCK, ix, integrator, normalize, dt, n_steps, fail_j, last);
     if (n == 1)
@@ -821,17 +885,25 @@ static long advance_group(double *state, const double *params, const long *ids, 
     return advance_block(state, params, ids, n, ix, integrator, normalize, dt, n_steps, fail_j, last);
 }
 
+/* The right-hand side kind of plain body b (LV_RHS_*). */
+static int rhs_kind(const lv_effect_index *ix, long b)
+{
+    if (ix->start[b + 1] == ix->start[b]) return LV_RHS_FREE;
+    return (ix->flags[b] & LV_EFFECT_FORCE) ? LV_RHS_FULL : LV_RHS_TORQUE;
+}
+
 /* euler, semi-implicit Euler, rk4 over every body. Bodies with a joint or wheels are stepped one by one;
-   plain bodies in lockstep blocks gathered by their work: those no effect acts on together (RK4: the
-   torque-free fast path), those with effects together, so a plain body never leaves its path because
-   of a neighbour. ids: scratch for nb indices. Returns the status; *limit, *best as in lv_simulate. */
+   plain bodies in lockstep blocks gathered by their work (rhs_kind): those no effect acts on together
+   (RK4: the torque-free fast path), those with effects by kind, so a plain body never leaves its path
+   because of a neighbour. ids: scratch for nb indices. Returns the status; *limit, *best as in
+   lv_simulate. */
 static int advance_fixed(double *state, const double *params, long nb, const lv_effect_index *ix,
                          const lv_models *models, int integrator, int normalize, double dt, long n_steps,
                          long *ids, long *limit, long *best)
 {
     double last[LV_BLOCK][LV_STATE_SIZE], lastm[LV_XS];
-    long b, k, s, lim, n_free = 0, n_forced = 0;
-    int j, n, pass, status = LV_OK;
+    long b, k, s, lim, count[3] = {0, 0, 0}, first[3];
+    int j, n, kind, status = LV_OK;
     for (b = 0; b < nb; b++) {
         if (models != NULL && (int)models->rows[b * LV_MODEL_SIZE] != 0) {
             lim = run_limit(b, *limit, *best, n_steps);
@@ -843,24 +915,22 @@ static int advance_fixed(double *state, const double *params, long nb, const lv_
             *limit = s;
             *best = b;
             status = LV_DIVERGED;
-        } else if (ix->start[b + 1] == ix->start[b]) {
-            ids[n_free++] = b;
         } else {
-            n_forced++;
+            count[rhs_kind(ix, b)]++;
         }
     }
-    for (b = 0, k = n_free; b < nb; b++) /* the plain bodies with effects, after the free ones */
-        if ((models == NULL || (int)models->rows[b * LV_MODEL_SIZE] == 0) && ix->start[b + 1] != ix->start[b])
-            ids[k++] = b;
-    for (pass = 0; pass < 2; pass++) {
-        const long *list = pass == 0 ? ids : ids + n_free;
-        const long count = pass == 0 ? n_free : n_forced;
-        for (k = 0; k < count; k += n) {
-            n = (int)(count - k < LV_BLOCK ? count - k : LV_BLOCK);
+    first[0] = 0; /* ids: the plain bodies grouped by kind, ascending within each */
+    first[1] = count[0];
+    first[2] = count[0] + count[1];
+    for (b = 0; b < nb; b++)
+        if (models == NULL || (int)models->rows[b * LV_MODEL_SIZE] == 0) ids[first[rhs_kind(ix, b)]++] = b;
+    for (kind = 0; kind < 3; kind++) {
+        const long *list = ids + first[kind] - count[kind];
+        for (k = 0; k < count[kind]; k += n) {
+            n = (int)(count[kind] - k < LV_BLOCK ? count[kind] - k : LV_BLOCK);
             lim = run_limit(list[k], *limit, *best, n_steps);
             if (lim <= 0) continue;
-            s = advance_group(state, params, list + k, n, ix, pass == 0 && integrator == LV_INTEGRATOR_RK4,
-                              integrator, normalize, dt, lim, &j, last);
+            s = advance_group(state, params, list + k, n, ix, kind, integrator, normalize, dt, lim, &j, last);
             /* the block stops at its first failing step, j its lowest failing body there (lockstep) */
             if (s < 0 || !earlier(s, list[k + j], *limit, *best)) continue;
             memcpy(state + list[k + j] * LV_STATE_SIZE, last[j], sizeof last[j]);
