@@ -12,6 +12,8 @@ derive.rigid_body.STATE_FIELDS, the parameter offsets from the declaration.
 """
 from __future__ import annotations
 
+import pprint
+
 from . import effect as E
 from .rigid_body import STATE_FIELDS, state_offset
 
@@ -193,7 +195,8 @@ def meta_module(effects: list[tuple[int | None, E.EffectDecl]], header: str, ext
         lines.append(f"{k.upper()} = {v!r}")
     lines += ["", "EFFECTS = ("]
     for code, d in effects:
-        lines.append(f"    {meta_entry(code, d)!r},")
+        text = pprint.pformat(meta_entry(code, d), width=110, sort_dicts=False)
+        lines.append("    " + text.replace("\n", "\n    ") + ",")
     lines.append(")")
     return "\n".join(lines) + "\n"
 

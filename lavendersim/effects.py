@@ -321,8 +321,7 @@ def casadi_function(name: str):
     sizes = {"p_w": 3, "q": 4, "v_w": 3, "omega_b": 3, "m": 1, "I_b": 3}
     syms = {s: casadi.SX.sym(s, sizes[s]) for s in spec.state_inputs}
     syms.update({p.name: casadi.SX.sym(p.name, p.size) for p in spec.params})
-    F, tau = casadi_expr(name, **{k: (v[0] if v.numel() == 1 and (k == "m" or k in {p.name for p in spec.params if not p.shape}) else v)
-                                  for k, v in syms.items()})
+    F, tau = casadi_expr(name, **syms)
     return casadi.Function(f"effect_{name}", list(syms.values()), [F, tau], list(syms), ["F_w", "tau_w"])
 
 
@@ -331,7 +330,6 @@ def _force_spec(name: str) -> EffectSpec:
         from . import extending
 
         extending.discover(name)
-    spec = REGISTRY[V.choice("effect", name, [n for n, s in REGISTRY.items() if s.kind == "force"])]
-    if spec.kind != "force":
+    if isinstance(name, str) and name in REGISTRY and REGISTRY[name].kind != "force":
         raise V.LavenderInputError("effect", f"{name!r} is a model effect: it has no force or torque expression")
-    return spec
+    return REGISTRY[V.choice("effect", name, [n for n, s in REGISTRY.items() if s.kind == "force"])]
