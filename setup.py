@@ -1,7 +1,7 @@
 """Build of LavenderSim's compiled backend, `lavendersim._lavender_c` (metadata lives in pyproject.toml).
 
 The extension is the generated C kernels (generated/kernels.c) plus the hand-written stepping loop and
-CPython glue (lavendersim/csrc/*.c). The sha256 of generated/kernels.c and kernels.h is embedded as
+CPython glue (lavendersim/csrc/*.c). The sha256 of the generated C sources (HASHED) is embedded as
 `_lavender_c.GENERATED_HASH`, so importing lavendersim.backends.c_backend can tell a stale build.
 
     pip install -e .                  # editable install; builds the extension in place
@@ -23,11 +23,11 @@ from setuptools.command.build_ext import build_ext
 HERE = Path(__file__).resolve().parent
 GENERATED = "generated"
 CSRC = "lavendersim/csrc"
-HASHED = ("kernels.c", "kernels.h")
+HASHED = ("kernels.c", "kernels.h", "layout.h", "tableaux.h")
 
 
 def generated_hash(gen_dir: Path) -> str:
-    """sha256 over the per-file sha256 of generated/kernels.c and kernels.h.
+    """sha256 over the per-file sha256 of the generated C sources (HASHED).
 
     Mirrors lavendersim.backends.c_backend.generated_hash; keep the two identical."""
     h = hashlib.sha256()
@@ -87,7 +87,7 @@ def extensions() -> list[Extension]:
         # generated/kernels.c is #included by step.c (one translation unit, so its kernels inline)
         sources=[f"{CSRC}/{n}" for n in csrc],
         include_dirs=[GENERATED, CSRC],
-        depends=[f"{GENERATED}/kernels.c", f"{GENERATED}/kernels.h", f"{CSRC}/step.h"],
+        depends=[f"{GENERATED}/{n}" for n in HASHED] + [f"{CSRC}/step.h"],
         define_macros=[("LV_GENERATED_HASH", '"%s"' % generated_hash(HERE / GENERATED))],
         extra_compile_args=args,
     )]

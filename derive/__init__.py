@@ -5,7 +5,7 @@
 """
 from __future__ import annotations
 
-MODULES = ("particles", "inertia", "effects", "quaternion", "rigid_body", "wheel_cube")
+MODULES = ("particles", "inertia", "effects", "quaternion", "rigid_body", "wheel_cube", "integrator_physics")
 
 
 def all_kernels():

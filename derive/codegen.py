@@ -512,7 +512,16 @@ def render() -> dict[str, str]:
     files = {"kernels.h": h, "kernels.c": c, "kernels_numpy.py": print_numpy(printed, forces),
              "kernels_casadi.py": print_casadi(printed), "effects_meta.py": meta_module(effects, HEADER),
              "EQUATIONS.md": print_markdown(printed, effects), "__init__.py": f'"""{HEADER}"""\n'}
+    files.update(contract_files())
     return files
+
+
+def contract_files() -> dict[str, str]:
+    """The row layouts and the integrator tableaux, for C (headers) and Python (modules)."""
+    from . import layout, tableaux
+
+    return {"layout.h": layout.print_c(), "layout.py": layout.print_python(),
+            "tableaux.h": tableaux.print_c(), "tableaux.py": tableaux.print_python()}
 
 
 def digest(text: str) -> str:

@@ -32,6 +32,8 @@ from dataclasses import dataclass, field
 import sympy as sp
 
 from .kernel import Arg, Kernel, scalar, vec
+from .layout import PARAM as LAYOUT_PARAM
+from .layout import STATE as LAYOUT_STATE
 from .quaternion import rotation_matrix
 
 RULES = ("finite", "nonnegative", "positive")
@@ -56,7 +58,7 @@ _PARAM_NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
 class _State:
     """Symbols of the body state and model that an effect may use (see the module docstring)."""
 
-    FIELDS = ("p_w", "q", "v_w", "omega_b", "m", "I_b")
+    FIELDS = tuple(f.name for f in LAYOUT_STATE.fields) + tuple(f.name for f in LAYOUT_PARAM.fields)
     DOCS = {"p_w": ("COM position, world frame, m", "real"),
             "q": ("orientation (x, y, z, w), R_WB, unit", "unit_quaternion"),
             "v_w": ("COM velocity, world frame, m/s", "real"),
@@ -65,6 +67,8 @@ class _State:
             "I_b": ("principal moments of inertia about the COM, body frame, kg·m²", "positive")}
 
     def __init__(self):
+        if self.FIELDS != ("p_w", "q", "v_w", "omega_b", "m", "I_b"):
+            raise RuntimeError("derive: the effect symbols follow derive/layout.py's STATE and PARAM fields")
         self.p_w, self.q, self.v_w, self.omega_b = vec("p_w", 3), vec("q", 4), vec("v_w", 3), vec("omega_b", 3)
         self.m = scalar("m", positive=True)
         self.I_b = vec("I_b", 3)

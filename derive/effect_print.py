@@ -8,29 +8,29 @@ Every effect is printed as an *accumulating* function of one calling convention,
 
 p the effect's parameters (its row after [code, body]), x the body state, v_w the COM velocity the
 effect sees, m and I_b the body's mass and principal moments: the state offsets come from
-derive.rigid_body.STATE_FIELDS, the parameter offsets from the declaration.
+derive.layout.STATE, the parameter offsets from the declaration.
 """
 from __future__ import annotations
 
 import pprint
 
 from . import effect as E
-from .rigid_body import STATE_FIELDS, state_offset
+from .layout import STATE
 
 C_ARGS = ("const double *p, const double *x, const double *v_w, double m, const double *I_b, "
           "double *F, double *tau")
 
 
-def _state_size(name: str) -> int:
-    return dict(STATE_FIELDS)[name]
+def _in_state(name: str) -> bool:
+    return any(f.name == name for f in STATE.fields)
 
 
 def _c_arg(decl: E.EffectDecl, a) -> str:
     """C expression passed for kernel input a of an effect kernel."""
     if a.name in ("v_w", "m", "I_b"):
         return a.name
-    if a.name in dict(STATE_FIELDS):
-        return f"x + {state_offset(a.name)} /* {a.name} */"
+    if _in_state(a.name):
+        return f"x + {STATE.offset(a.name)} /* LV_STATE_{a.name.upper()} */"
     o = decl.offsets()[a.name]
     return f"p[{o}]" if a.shape == () else f"p + {o}"
 
@@ -123,9 +123,9 @@ def c_user_source(effects: list[E.EffectDecl], prefix: str) -> list[str]:
 def _np_arg(decl: E.EffectDecl, a) -> str:
     if a.name in ("v_w", "m", "I_b"):
         return a.name
-    if a.name in dict(STATE_FIELDS):
-        o = state_offset(a.name)
-        return f"x[..., {o}:{o + _state_size(a.name)}]"
+    if _in_state(a.name):
+        sl = STATE.slice(a.name)
+        return f"x[..., {sl.start}:{sl.stop}]"
     o = decl.offsets()[a.name]
     return f"p[..., {o}]" if a.shape == () else f"p[..., {o}:{o + a.size}]"
 
@@ -189,8 +189,7 @@ def meta_module(effects: list[tuple[int | None, E.EffectDecl]], header: str, ext
              f"ROW_CODE, ROW_BODY, ROW_PARAMS = {E.ROW_CODE}, {E.ROW_BODY}, {E.ROW_PARAMS}",
              f"ROW_MIN_PARAMS = {E.ROW_MIN_PARAMS}", f"USER_CODE_BASE = {E.USER_CODE_BASE}",
              f"ABI_VERSION = {E.ABI_VERSION}",
-             f"FLAG_USES_V, FLAG_USES_OMEGA, FLAG_FORCE = {E.FLAG_USES_V}, {E.FLAG_USES_OMEGA}, {E.FLAG_FORCE}",
-             f"STATE_FIELDS = {tuple(STATE_FIELDS)!r}"]
+             f"FLAG_USES_V, FLAG_USES_OMEGA, FLAG_FORCE = {E.FLAG_USES_V}, {E.FLAG_USES_OMEGA}, {E.FLAG_FORCE}"]
     for k, v in (extra or {}).items():
         lines.append(f"{k.upper()} = {v!r}")
     lines += ["", "EFFECTS = ("]

@@ -1,10 +1,9 @@
 """Rigid-body dynamics: Euler's rotation equations, the state right-hand side, energy, momentum.
 
-State x (13 numbers), the layout every integrator and backend uses:
-  x[0:3]   p_w      position of the centre of mass, world frame, m
-  x[3:7]   q        orientation R_WB as (x, y, z, w), unit
-  x[7:10]  v_w      velocity of the centre of mass, world frame, m/s
-  x[10:13] omega_b  angular velocity, body frame, rad/s
+State x (13 numbers), the layout every integrator and backend uses (declared in derive/layout.py,
+printed as generated/layout.h and layout.py): p_w (3) position of the centre of mass, world frame,
+m; q (4) orientation R_WB as (x, y, z, w), unit; v_w (3) velocity of the centre of mass, world
+frame, m/s; omega_b (3) angular velocity, body frame, rad/s.
 Inertia is diagonal in the body frame (principal axes): I_b = (I_x, I_y, I_z), kg·m².
 """
 from __future__ import annotations
@@ -12,21 +11,10 @@ from __future__ import annotations
 import sympy as sp
 
 from .kernel import Arg, Kernel, scalar, vec
+from .layout import STATE as X
 from .quaternion import pure, qmul, rotation_matrix
 
 STATE = "state (p_w[3] m, q[4] (x,y,z,w), v_w[3] m/s, omega_b[3] rad/s)"
-# The state layout above, as (field, size) in order: the one place its offsets come from.
-STATE_FIELDS = (("p_w", 3), ("q", 4), ("v_w", 3), ("omega_b", 3))
-
-
-def state_offset(name: str) -> int:
-    """Offset of a field of STATE_FIELDS within the state x."""
-    o = 0
-    for f, n in STATE_FIELDS:
-        if f == name:
-            return o
-        o += n
-    raise KeyError(f"state has no field {name!r}")
 
 
 def euler_rhs(I_b: sp.Matrix, w: sp.Matrix, tau_b) -> sp.Matrix:
@@ -49,16 +37,16 @@ def _check_euler(I_b, w, tau):
 
 def kernels() -> list[Kernel]:
     g = "Rigid-body dynamics"
-    x = vec("x", 13)
+    x = vec("x", X.size)
     m = scalar("m", positive=True)
     I_b, F_w, tau_w, tau_b = vec("I_b", 3), vec("F_w", 3), vec("tau_w", 3), vec("tau_b", 3)
     omega_b, v_w, q, vec_w = vec("omega_b", 3), vec("v_w", 3), vec("q", 4), vec("v", 3)
     _check_euler(I_b, omega_b, tau_b)
-    xq, xv, xw = x[3:7, 0], x[7:10, 0], x[10:13, 0]
+    xq, xv, xw = X.part(x, "q"), X.part(x, "v_w"), X.part(x, "omega_b")
     R = rotation_matrix(xq)
     qdot = qmul(xq, pure(xw)) / 2
-    full = sp.Matrix.vstack(xv, qdot, F_w / m, euler_rhs(I_b, xw, R.T * tau_w))
-    free = sp.Matrix.vstack(xv, qdot, sp.zeros(3, 1), euler_rhs(I_b, xw, sp.zeros(3, 1)))
+    full = X.assemble(p_w=xv, q=qdot, v_w=F_w / m, omega_b=euler_rhs(I_b, xw, R.T * tau_w))
+    free = X.assemble(p_w=xv, q=qdot, v_w=sp.zeros(3, 1), omega_b=euler_rhs(I_b, xw, sp.zeros(3, 1)))
     Rq = rotation_matrix(q)
     inv_apply = Rq * sp.diag(*[1 / I_b[i] for i in range(3)]) * Rq.T * vec_w
     ke = (m * v_w.dot(v_w) + sum(I_b[i] * omega_b[i] ** 2 for i in range(3))) / 2

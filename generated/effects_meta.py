@@ -9,7 +9,6 @@ ROW_MIN_PARAMS = 6
 USER_CODE_BASE = 1000
 ABI_VERSION = 1
 FLAG_USES_V, FLAG_USES_OMEGA, FLAG_FORCE = 1, 2, 4
-STATE_FIELDS = (('p_w', 3), ('q', 4), ('v_w', 3), ('omega_b', 3))
 
 EFFECTS = (
     {'name': 'applied_torque',

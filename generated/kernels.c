@@ -1102,6 +1102,363 @@ void lv_pivot_kinematics(const double *q, const double *omega_b, const double *a
     v_w[2] = t16*t21 + t17*t20 + t18*t19;
 }
 
+void lv_splitting_rotation(const double *I_b, const double *q, const double *omega_b, double h, double *q_next, double *omega_next) {
+    const double I_b_0 = I_b[0];
+    const double I_b_1 = I_b[1];
+    const double I_b_2 = I_b[2];
+    const double q_0 = q[0];
+    const double q_1 = q[1];
+    const double q_2 = q[2];
+    const double q_3 = q[3];
+    const double omega_b_0 = omega_b[0];
+    const double omega_b_1 = omega_b[1];
+    const double omega_b_2 = omega_b[2];
+    const double t0 = ((1.0/4.0))*h;
+    const double t1 = omega_b_0*t0;
+    const double t2 = cos(t1);
+    const double t3 = sin(t1);
+    const double t4 = q_1*t2 + q_2*t3;
+    const double t5 = 1 - 2*(t3*t3);
+    const double t6 = I_b_1*omega_b_1;
+    const double t7 = 2*t2*t3;
+    const double t8 = I_b_2*omega_b_2*t7 + t5*t6;
+    const double t9 = (1.0/I_b_1);
+    const double t10 = t0*t9;
+    const double t11 = t10*t8;
+    const double t12 = cos(t11);
+    const double t13 = -q_0*t3 + q_3*t2;
+    const double t14 = sin(t11);
+    const double t15 = t12*t4 + t13*t14;
+    const double t16 = (1.0/I_b_2);
+    const double t17 = I_b_2*omega_b_2*t5 - t6*t7;
+    const double t18 = 1 - 2*(t14*t14);
+    const double t19 = I_b_0*omega_b_0;
+    const double t20 = 2*t12*t14;
+    const double t21 = t17*t18 + t19*t20;
+    const double t22 = ((1.0/2.0))*h*t16*t21;
+    const double t23 = sin(t22);
+    const double t24 = q_0*t2 + q_3*t3;
+    const double t25 = -q_1*t3 + q_2*t2;
+    const double t26 = t12*t24 - t14*t25;
+    const double t27 = cos(t22);
+    const double t28 = t15*t23 + t26*t27;
+    const double t29 = 1 - 2*(t23*t23);
+    const double t30 = -t17*t20 + t18*t19;
+    const double t31 = 2*t23*t27;
+    const double t32 = t29*t8 - t30*t31;
+    const double t33 = t10*t32;
+    const double t34 = cos(t33);
+    const double t35 = t12*t25 + t14*t24;
+    const double t36 = t12*t13 - t14*t4;
+    const double t37 = t23*t36 + t27*t35;
+    const double t38 = sin(t33);
+    const double t39 = t28*t34 - t37*t38;
+    const double t40 = t29*t30 + t31*t8;
+    const double t41 = 1 - 2*(t38*t38);
+    const double t42 = 2*t34*t38;
+    const double t43 = (-t21*t42 + t40*t41)/I_b_0;
+    const double t44 = t0*t43;
+    const double t45 = cos(t44);
+    const double t46 = t15*t27 - t23*t26;
+    const double t47 = -t23*t35 + t27*t36;
+    const double t48 = t34*t47 - t38*t46;
+    const double t49 = sin(t44);
+    const double t50 = t28*t38 + t34*t37;
+    const double t51 = t34*t46 + t38*t47;
+    const double t52 = 1 - 2*(t49*t49);
+    const double t53 = t21*t41 + t40*t42;
+    const double t54 = 2*t45*t49;
+    q_next[0] = t39*t45 + t48*t49;
+    q_next[1] = t45*t51 + t49*t50;
+    q_next[2] = t45*t50 - t49*t51;
+    q_next[3] = -t39*t49 + t45*t48;
+    omega_next[0] = t43;
+    omega_next[1] = t9*(t32*t52 + t53*t54);
+    omega_next[2] = t16*(-t32*t54 + t52*t53);
+}
+
+void lv_splitting_kick(double m, const double *I_b, const double *v_w, const double *omega_b, const double *F_w, const double *tau_b, double h, double *v_next, double *omega_next) {
+    const double I_b_0 = I_b[0];
+    const double I_b_1 = I_b[1];
+    const double I_b_2 = I_b[2];
+    const double v_w_0 = v_w[0];
+    const double v_w_1 = v_w[1];
+    const double v_w_2 = v_w[2];
+    const double omega_b_0 = omega_b[0];
+    const double omega_b_1 = omega_b[1];
+    const double omega_b_2 = omega_b[2];
+    const double F_w_0 = F_w[0];
+    const double F_w_1 = F_w[1];
+    const double F_w_2 = F_w[2];
+    const double tau_b_0 = tau_b[0];
+    const double tau_b_1 = tau_b[1];
+    const double tau_b_2 = tau_b[2];
+    const double t0 = h/m;
+    v_next[0] = F_w_0*t0 + v_w_0;
+    v_next[1] = F_w_1*t0 + v_w_1;
+    v_next[2] = F_w_2*t0 + v_w_2;
+    omega_next[0] = omega_b_0 + h*tau_b_0/I_b_0;
+    omega_next[1] = omega_b_1 + h*tau_b_1/I_b_1;
+    omega_next[2] = omega_b_2 + h*tau_b_2/I_b_2;
+}
+
+void lv_translation_drift(const double *p_w, const double *v_w, double h, double *p_next) {
+    const double p_w_0 = p_w[0];
+    const double p_w_1 = p_w[1];
+    const double p_w_2 = p_w[2];
+    const double v_w_0 = v_w[0];
+    const double v_w_1 = v_w[1];
+    const double v_w_2 = v_w[2];
+    p_next[0] = h*v_w_0 + p_w_0;
+    p_next[1] = h*v_w_1 + p_w_1;
+    p_next[2] = h*v_w_2 + p_w_2;
+}
+
+void lv_semi_implicit_translation(double m, const double *p_w, const double *v_w, const double *F_w, double h, double *p_next, double *v_next) {
+    const double p_w_0 = p_w[0];
+    const double p_w_1 = p_w[1];
+    const double p_w_2 = p_w[2];
+    const double v_w_0 = v_w[0];
+    const double v_w_1 = v_w[1];
+    const double v_w_2 = v_w[2];
+    const double F_w_0 = F_w[0];
+    const double F_w_1 = F_w[1];
+    const double F_w_2 = F_w[2];
+    const double t0 = h/m;
+    const double t1 = F_w_0*t0 + v_w_0;
+    const double t2 = F_w_1*t0 + v_w_1;
+    const double t3 = F_w_2*t0 + v_w_2;
+    p_next[0] = h*t1 + p_w_0;
+    p_next[1] = h*t2 + p_w_1;
+    p_next[2] = h*t3 + p_w_2;
+    v_next[0] = t1;
+    v_next[1] = t2;
+    v_next[2] = t3;
+}
+
+void lv_translation_rhs(double m, const double *v_w, const double *F_w, double *p_dot, double *v_dot) {
+    const double v_w_0 = v_w[0];
+    const double v_w_1 = v_w[1];
+    const double v_w_2 = v_w[2];
+    const double F_w_0 = F_w[0];
+    const double F_w_1 = F_w[1];
+    const double F_w_2 = F_w[2];
+    const double t0 = (1.0/m);
+    p_dot[0] = v_w_0;
+    p_dot[1] = v_w_1;
+    p_dot[2] = v_w_2;
+    v_dot[0] = F_w_0*t0;
+    v_dot[1] = F_w_1*t0;
+    v_dot[2] = F_w_2*t0;
+}
+
+void lv_implicit_gyro_residual(const double *I_b, const double *omega_b, const double *tau_b, double h, const double *omega_next, double *g) {
+    const double I_b_0 = I_b[0];
+    const double I_b_1 = I_b[1];
+    const double I_b_2 = I_b[2];
+    const double omega_b_0 = omega_b[0];
+    const double omega_b_1 = omega_b[1];
+    const double omega_b_2 = omega_b[2];
+    const double tau_b_0 = tau_b[0];
+    const double tau_b_1 = tau_b[1];
+    const double tau_b_2 = tau_b[2];
+    const double omega_next_0 = omega_next[0];
+    const double omega_next_1 = omega_next[1];
+    const double omega_next_2 = omega_next[2];
+    const double t0 = omega_next_0*omega_next_2;
+    g[0] = I_b_0*(-omega_b_0 + omega_next_0) - h*tau_b_0 + h*(-I_b_1*omega_next_1*omega_next_2 + I_b_2*omega_next_1*omega_next_2);
+    g[1] = I_b_1*(-omega_b_1 + omega_next_1) - h*tau_b_1 + h*(I_b_0*t0 - I_b_2*t0);
+    g[2] = I_b_2*(-omega_b_2 + omega_next_2) - h*tau_b_2 + h*(-I_b_0*omega_next_0*omega_next_1 + I_b_1*omega_next_0*omega_next_1);
+}
+
+void lv_implicit_gyro_jacobian(const double *I_b, double h, const double *omega_next, double *J) {
+    const double I_b_0 = I_b[0];
+    const double I_b_1 = I_b[1];
+    const double I_b_2 = I_b[2];
+    const double omega_next_0 = omega_next[0];
+    const double omega_next_1 = omega_next[1];
+    const double omega_next_2 = omega_next[2];
+    const double t0 = -I_b_2*omega_next_2;
+    const double t1 = I_b_1*omega_next_1;
+    const double t2 = I_b_0*omega_next_0;
+    J[0] = I_b_0;
+    J[1] = h*(-I_b_1*omega_next_2 - t0);
+    J[2] = h*(I_b_2*omega_next_1 - t1);
+    J[3] = h*(I_b_0*omega_next_2 + t0);
+    J[4] = I_b_1;
+    J[5] = h*(-I_b_2*omega_next_0 + t2);
+    J[6] = h*(-I_b_0*omega_next_1 + t1);
+    J[7] = h*(I_b_1*omega_next_0 - t2);
+    J[8] = I_b_2;
+}
+
+void lv_implicit_gyro_newton(const double *I_b, const double *omega_b, const double *tau_b, double h, const double *omega_next, double *omega_new, double *delta) {
+    const double I_b_0 = I_b[0];
+    const double I_b_1 = I_b[1];
+    const double I_b_2 = I_b[2];
+    const double omega_b_0 = omega_b[0];
+    const double omega_b_1 = omega_b[1];
+    const double omega_b_2 = omega_b[2];
+    const double tau_b_0 = tau_b[0];
+    const double tau_b_1 = tau_b[1];
+    const double tau_b_2 = tau_b[2];
+    const double omega_next_0 = omega_next[0];
+    const double omega_next_1 = omega_next[1];
+    const double omega_next_2 = omega_next[2];
+    const double t0 = I_b_0*omega_next_0;
+    const double t1 = I_b_2*omega_next_0;
+    const double t2 = t0 - t1;
+    const double t3 = (h*h);
+    const double t4 = I_b_1*omega_next_0 - t0;
+    const double t5 = I_b_1*I_b_2 - t2*t3*t4;
+    const double t6 = I_b_1*omega_next_1;
+    const double t7 = I_b_2*omega_next_1 - t6;
+    const double t8 = -I_b_0*omega_next_1 + t6;
+    const double t9 = I_b_1*h;
+    const double t10 = -I_b_2*omega_next_2;
+    const double t11 = I_b_0*omega_next_2 + t10;
+    const double t12 = t11*t3*t4 - t8*t9;
+    const double t13 = -I_b_1*omega_next_2 - t10;
+    const double t14 = I_b_2*h;
+    const double t15 = -t11*t14 + t2*t3*t8;
+    const double t16 = (1.0/(I_b_0*t5 + h*t12*t7 + h*t13*t15));
+    const double t17 = I_b_0*(-omega_b_0 + omega_next_0) - h*tau_b_0 + h*(I_b_2*omega_next_1*omega_next_2 - omega_next_2*t6);
+    const double t18 = I_b_2*(-omega_b_2 + omega_next_2) - h*tau_b_2 + h*(I_b_1*omega_next_0*omega_next_1 - omega_next_1*t0);
+    const double t19 = I_b_1*(-omega_b_1 + omega_next_1) - h*tau_b_1 + h*(omega_next_2*t0 - omega_next_2*t1);
+    const double t20 = t16*(t17*t5 + t18*(t13*t2*t3 - t7*t9) + t19*(-t13*t14 + t3*t4*t7));
+    const double t21 = I_b_0*h;
+    const double t22 = t16*(t15*t17 + t18*(t11*t3*t7 - t2*t21) + t19*(I_b_0*I_b_2 - t3*t7*t8));
+    const double t23 = t16*(t12*t17 + t18*(I_b_0*I_b_1 - t11*t13*t3) + t19*(t13*t3*t8 - t21*t4));
+    omega_new[0] = omega_next_0 - t20;
+    omega_new[1] = omega_next_1 - t22;
+    omega_new[2] = omega_next_2 - t23;
+    delta[0] = t20;
+    delta[1] = t22;
+    delta[2] = t23;
+}
+
+void lv_quat_exp_step(const double *q, const double *omega_b, double h, double *q_next) {
+    const double q_0 = q[0];
+    const double q_1 = q[1];
+    const double q_2 = q[2];
+    const double q_3 = q[3];
+    const double omega_b_0 = omega_b[0];
+    const double omega_b_1 = omega_b[1];
+    const double omega_b_2 = omega_b[2];
+    const double t0 = (omega_b_0*omega_b_0) + (omega_b_1*omega_b_1) + (omega_b_2*omega_b_2);
+    const double t1 = sqrt(t0);
+    const double t2 = h*t1;
+    const double t3 = ((1.0/2.0))*t2;
+    const double t4 = cos(t3);
+    const double t5 = ((t2 > (1.0/50000000.0)) ? (
+   sin(t3)/t1
+)
+: (
+   ((1.0/2.0))*h*(-(1.0/24.0)*(h*h)*t0 + 1)
+));
+    const double t6 = omega_b_0*t5;
+    const double t7 = omega_b_2*t5;
+    const double t8 = omega_b_1*t5;
+    q_next[0] = q_0*t4 + q_1*t7 - q_2*t8 + q_3*t6;
+    q_next[1] = -q_0*t7 + q_1*t4 + q_2*t6 + q_3*t8;
+    q_next[2] = q_0*t8 - q_1*t6 + q_2*t4 + q_3*t7;
+    q_next[3] = -q_0*t6 - q_1*t8 - q_2*t7 + q_3*t4;
+}
+
+void lv_wheel_saturation(const double *command, const double *Omega, double torque_limit, double speed_limit, double *u) {
+    const double command_0 = command[0];
+    const double command_1 = command[1];
+    const double command_2 = command[2];
+    const double Omega_0 = Omega[0];
+    const double Omega_1 = Omega[1];
+    const double Omega_2 = Omega[2];
+    const double t0 = -torque_limit;
+    const double t1 = command_0 < t0;
+    const double t2 = speed_limit <= fabs(Omega_0);
+    const double t3 = Omega_0*torque_limit;
+    const double t4 = command_0 > torque_limit;
+    const double t5 = command_1 < t0;
+    const double t6 = speed_limit <= fabs(Omega_1);
+    const double t7 = Omega_1*torque_limit;
+    const double t8 = command_1 > torque_limit;
+    const double t9 = command_2 < t0;
+    const double t10 = speed_limit <= fabs(Omega_2);
+    const double t11 = Omega_2*torque_limit;
+    const double t12 = command_2 > torque_limit;
+    u[0] = ((((t1) ? (
+   t2 && t3 < 0
+)
+: (
+   ((t4) ? (
+      t2 && t3 > 0
+   )
+   : (
+      t2 && Omega_0*command_0 > 0
+   ))
+))) ? (
+   0
+)
+: (
+   ((t1) ? (
+      t0
+   )
+   : ((t4) ? (
+      torque_limit
+   )
+   : (
+      command_0
+   )))
+));
+    u[1] = ((((t5) ? (
+   t6 && t7 < 0
+)
+: (
+   ((t8) ? (
+      t6 && t7 > 0
+   )
+   : (
+      t6 && Omega_1*command_1 > 0
+   ))
+))) ? (
+   0
+)
+: (
+   ((t5) ? (
+      t0
+   )
+   : ((t8) ? (
+      torque_limit
+   )
+   : (
+      command_1
+   )))
+));
+    u[2] = ((((t9) ? (
+   t10 && t11 < 0
+)
+: (
+   ((t12) ? (
+      t10 && t11 > 0
+   )
+   : (
+      t10 && Omega_2*command_2 > 0
+   ))
+))) ? (
+   0
+)
+: (
+   ((t9) ? (
+      t0
+   )
+   : ((t12) ? (
+      torque_limit
+   )
+   : (
+      command_2
+   )))
+));
+}
+
 /* ---- Scene effects: accumulating functions and dispatch -------------------------------------- */
 /* applied_torque: adds tau_com_w for one body. p = [torque_w(3)] */
 static inline void lv_effect_acc_applied_torque(const double *p, const double *x, const double *v_w, double m, const double *I_b, double *F, double *tau)
@@ -1118,7 +1475,7 @@ static inline void lv_effect_acc_force_at_point(const double *p, const double *x
     double F_com_w[3];
     double tau_com_w[3];
     (void)v_w; (void)m; (void)I_b;
-    lv_effect_force_at_point(x + 3 /* q */, p + 0, p + 3, F_com_w, tau_com_w);
+    lv_effect_force_at_point(x + 3 /* LV_STATE_Q */, p + 0, p + 3, F_com_w, tau_com_w);
     F[0] += F_com_w[0]; F[1] += F_com_w[1]; F[2] += F_com_w[2];
     tau[0] += tau_com_w[0]; tau[1] += tau_com_w[1]; tau[2] += tau_com_w[2];
 }
@@ -1146,7 +1503,7 @@ static inline void lv_effect_acc_angular_damping(const double *p, const double *
 {
     double tau_com_w[3];
     (void)v_w; (void)m; (void)I_b; (void)F;
-    lv_effect_angular_damping(x + 3 /* q */, x + 10 /* omega_b */, p[0], tau_com_w);
+    lv_effect_angular_damping(x + 3 /* LV_STATE_Q */, x + 10 /* LV_STATE_OMEGA_B */, p[0], tau_com_w);
     tau[0] += tau_com_w[0]; tau[1] += tau_com_w[1]; tau[2] += tau_com_w[2];
 }
 
@@ -1238,6 +1595,16 @@ static void packed_pivot_body_rhs(const double *in, double *out) { lv_pivot_body
 static void packed_wheel_body_rhs(const double *in, double *out) { lv_wheel_body_rhs(in + 0, in + 4, in + 7, in + 10, in + 19, in + 22, in + 25, in + 28, in + 31, in[34], out + 0, out + 4, out + 7); }
 static void packed_wheel_momentum(const double *in, double *out) { lv_wheel_momentum(in + 0, in + 4, in + 7, in + 10, in + 19, out + 0, out + 3); }
 static void packed_pivot_kinematics(const double *in, double *out) { lv_pivot_kinematics(in + 0, in + 4, in + 7, in + 10, out + 0, out + 3); }
+static void packed_splitting_rotation(const double *in, double *out) { lv_splitting_rotation(in + 0, in + 3, in + 7, in[10], out + 0, out + 4); }
+static void packed_splitting_kick(const double *in, double *out) { lv_splitting_kick(in[0], in + 1, in + 4, in + 7, in + 10, in + 13, in[16], out + 0, out + 3); }
+static void packed_translation_drift(const double *in, double *out) { lv_translation_drift(in + 0, in + 3, in[6], out + 0); }
+static void packed_semi_implicit_translation(const double *in, double *out) { lv_semi_implicit_translation(in[0], in + 1, in + 4, in + 7, in[10], out + 0, out + 3); }
+static void packed_translation_rhs(const double *in, double *out) { lv_translation_rhs(in[0], in + 1, in + 4, out + 0, out + 3); }
+static void packed_implicit_gyro_residual(const double *in, double *out) { lv_implicit_gyro_residual(in + 0, in + 3, in + 6, in[9], in + 10, out + 0); }
+static void packed_implicit_gyro_jacobian(const double *in, double *out) { lv_implicit_gyro_jacobian(in + 0, in[3], in + 4, out + 0); }
+static void packed_implicit_gyro_newton(const double *in, double *out) { lv_implicit_gyro_newton(in + 0, in + 3, in + 6, in[9], in + 10, out + 0, out + 3); }
+static void packed_quat_exp_step(const double *in, double *out) { lv_quat_exp_step(in + 0, in + 4, in[7], out + 0); }
+static void packed_wheel_saturation(const double *in, double *out) { lv_wheel_saturation(in + 0, in + 3, in[6], in[7], out + 0); }
 
 const lv_kernel_info lv_kernel_table[LV_KERNEL_COUNT] = {
     {"particle_moments", 7, 6, packed_particle_moments},
@@ -1279,4 +1646,14 @@ const lv_kernel_info lv_kernel_table[LV_KERNEL_COUNT] = {
     {"wheel_body_rhs", 35, 10, packed_wheel_body_rhs},
     {"wheel_momentum", 22, 6, packed_wheel_momentum},
     {"pivot_kinematics", 13, 6, packed_pivot_kinematics},
+    {"splitting_rotation", 11, 7, packed_splitting_rotation},
+    {"splitting_kick", 17, 6, packed_splitting_kick},
+    {"translation_drift", 7, 3, packed_translation_drift},
+    {"semi_implicit_translation", 11, 6, packed_semi_implicit_translation},
+    {"translation_rhs", 7, 6, packed_translation_rhs},
+    {"implicit_gyro_residual", 13, 3, packed_implicit_gyro_residual},
+    {"implicit_gyro_jacobian", 7, 9, packed_implicit_gyro_jacobian},
+    {"implicit_gyro_newton", 13, 6, packed_implicit_gyro_newton},
+    {"quat_exp_step", 8, 4, packed_quat_exp_step},
+    {"wheel_saturation", 8, 3, packed_wheel_saturation},
 };

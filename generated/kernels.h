@@ -11,7 +11,7 @@ typedef struct {
     void (*packed)(const double *in, double *out);
 } lv_kernel_info;
 
-#define LV_KERNEL_COUNT 39
+#define LV_KERNEL_COUNT 49
 extern const lv_kernel_info lv_kernel_table[LV_KERNEL_COUNT];
 
 /* particle_moments: One particle's mass moment and momentum (summed: m r_COM and p).
@@ -287,6 +287,93 @@ void lv_wheel_momentum(const double *q, const double *omega_b, const double *Ome
      out p_w [3]: COM position, world, m
      out v_w [3]: COM velocity, world, m/s */
 void lv_pivot_kinematics(const double *q, const double *omega_b, const double *anchor_w, const double *r_b, double *p_w, double *v_w);
+
+/* splitting_rotation: Free rotation over h by Strang splitting into exact principal-axis flows.
+     in  I_b [3]: principal moments, body frame, kg·m²
+     in  q [4]: orientation (x, y, z, w), R_WB, unit
+     in  omega_b [3]: angular velocity, body frame, rad/s
+     in  h scalar: time step, s
+     out q_next [4]: orientation after h (unit when q is)
+     out omega_next [3]: rad/s, body frame */
+void lv_splitting_rotation(const double *I_b, const double *q, const double *omega_b, double h, double *q_next, double *omega_next);
+
+/* splitting_kick: Kick of v and ω under a force and a body torque for time h (q, p fixed).
+     in  m scalar: mass, kg
+     in  I_b [3]: principal moments, body frame, kg·m²
+     in  v_w [3]: COM velocity, world frame, m/s
+     in  omega_b [3]: angular velocity, body frame, rad/s
+     in  F_w [3]: force at the COM, world frame, N
+     in  tau_b [3]: torque, body frame, N·m
+     in  h scalar: time step, s
+     out v_next [3]: m/s, world frame
+     out omega_next [3]: rad/s, body frame */
+void lv_splitting_kick(double m, const double *I_b, const double *v_w, const double *omega_b, const double *F_w, const double *tau_b, double h, double *v_next, double *omega_next);
+
+/* translation_drift: Drift of the COM position for time h.
+     in  p_w [3]: COM position, world frame, m
+     in  v_w [3]: COM velocity, world frame, m/s
+     in  h scalar: time step, s
+     out p_next [3]: m, world frame */
+void lv_translation_drift(const double *p_w, const double *v_w, double h, double *p_next);
+
+/* semi_implicit_translation: Semi-implicit Euler step of the COM under a force.
+     in  m scalar: mass, kg
+     in  p_w [3]: COM position, world frame, m
+     in  v_w [3]: COM velocity, world frame, m/s
+     in  F_w [3]: force at the COM, world frame, N
+     in  h scalar: time step, s
+     out p_next [3]: m, world frame
+     out v_next [3]: m/s, world frame */
+void lv_semi_implicit_translation(double m, const double *p_w, const double *v_w, const double *F_w, double h, double *p_next, double *v_next);
+
+/* translation_rhs: COM translation of a free body.
+     in  m scalar: mass, kg
+     in  v_w [3]: COM velocity, world frame, m/s
+     in  F_w [3]: force at the COM, world frame, N
+     out p_dot [3]: m/s, world frame
+     out v_dot [3]: m/s², world frame */
+void lv_translation_rhs(double m, const double *v_w, const double *F_w, double *p_dot, double *v_dot);
+
+/* implicit_gyro_residual: Residual of the implicit gyroscopic step.
+     in  I_b [3]: principal moments, body frame, kg·m²
+     in  omega_b [3]: angular velocity, body frame, rad/s
+     in  tau_b [3]: torque, body frame, N·m
+     in  h scalar: time step, s
+     in  omega_next [3]: current iterate of the new angular velocity ω⁺, body frame, rad/s
+     out g [3]: N·m·s */
+void lv_implicit_gyro_residual(const double *I_b, const double *omega_b, const double *tau_b, double h, const double *omega_next, double *g);
+
+/* implicit_gyro_jacobian: Jacobian of the implicit-gyro residual, differentiated by SymPy.
+     in  I_b [3]: principal moments, body frame, kg·m²
+     in  h scalar: time step, s
+     in  omega_next [3]: current iterate of the new angular velocity ω⁺, body frame, rad/s
+     out J [3×3]: kg·m², row-major */
+void lv_implicit_gyro_jacobian(const double *I_b, double h, const double *omega_next, double *J);
+
+/* implicit_gyro_newton: One Newton update of the implicit gyroscopic step (adjugate solve).
+     in  I_b [3]: principal moments, body frame, kg·m²
+     in  omega_b [3]: angular velocity, body frame, rad/s
+     in  tau_b [3]: torque, body frame, N·m
+     in  h scalar: time step, s
+     in  omega_next [3]: current iterate of the new angular velocity ω⁺, body frame, rad/s
+     out omega_new [3]: next iterate, rad/s, body frame
+     out delta [3]: the Newton step, rad/s */
+void lv_implicit_gyro_newton(const double *I_b, const double *omega_b, const double *tau_b, double h, const double *omega_next, double *omega_new, double *delta);
+
+/* quat_exp_step: Attitude step by the exponential map of a body angular velocity held over h.
+     in  q [4]: orientation (x, y, z, w), R_WB, unit
+     in  omega_b [3]: angular velocity, body frame, rad/s
+     in  h scalar: time step, s
+     out q_next [4]: orientation (unit when q is) */
+void lv_quat_exp_step(const double *q, const double *omega_b, double h, double *q_next);
+
+/* wheel_saturation: Motor torques actually applied: clipped, and cut off beyond the speed limit.
+     in  command [3]: commanded motor torques, N·m
+     in  Omega [3]: wheel rates relative to the body, rad/s
+     in  torque_limit scalar: N·m
+     in  speed_limit scalar: rad/s
+     out u [3]: applied motor torques, N·m */
+void lv_wheel_saturation(const double *command, const double *Omega, double torque_limit, double speed_limit, double *u);
 
 /* ---- Scene effects (derive/effects.py): effect table layout, codes and dispatch ---------------- */
 #define LV_EFFECT_ROW_CODE 0     /* an effect table row: [code, body, parameters...] */

@@ -1074,3 +1074,310 @@ def pivot_kinematics(q, omega_b, anchor_w, r_b):
     t20 = -omega_b_0*r_b_2 + omega_b_2*r_b_0
     t21 = omega_b_1*r_b_2 - omega_b_2*r_b_1
     return casadi.vertcat(anchor_w_0 + r_b_0*t10 + r_b_1*t4 + r_b_2*t7, anchor_w_1 + r_b_0*t11 + r_b_1*t15 + r_b_2*t13, anchor_w_2 + r_b_0*t16 + r_b_1*t17 + r_b_2*t18), casadi.vertcat(t10*t21 + t19*t7 + t20*t4, t11*t21 + t13*t19 + t15*t20, t16*t21 + t17*t20 + t18*t19)
+
+
+def splitting_rotation(I_b, q, omega_b, h):
+    """splitting_rotation: Free rotation over h by Strang splitting into exact principal-axis flows.
+      in  I_b [3]: principal moments, body frame, kg·m²
+      in  q [4]: orientation (x, y, z, w), R_WB, unit
+      in  omega_b [3]: angular velocity, body frame, rad/s
+      in  h scalar: time step, s
+      out q_next [4]: orientation after h (unit when q is)
+      out omega_next [3]: rad/s, body frame"""
+    I_b_0 = I_b[0]
+    I_b_1 = I_b[1]
+    I_b_2 = I_b[2]
+    q_0 = q[0]
+    q_1 = q[1]
+    q_2 = q[2]
+    q_3 = q[3]
+    omega_b_0 = omega_b[0]
+    omega_b_1 = omega_b[1]
+    omega_b_2 = omega_b[2]
+    t0 = ((1.0/4.0))*h
+    t1 = omega_b_0*t0
+    t2 = casadi.cos(t1)
+    t3 = casadi.sin(t1)
+    t4 = q_1*t2 + q_2*t3
+    t5 = 1 - 2*(t3*t3)
+    t6 = I_b_1*omega_b_1
+    t7 = 2*t2*t3
+    t8 = I_b_2*omega_b_2*t7 + t5*t6
+    t9 = (1.0/I_b_1)
+    t10 = t0*t9
+    t11 = t10*t8
+    t12 = casadi.cos(t11)
+    t13 = -q_0*t3 + q_3*t2
+    t14 = casadi.sin(t11)
+    t15 = t12*t4 + t13*t14
+    t16 = (1.0/I_b_2)
+    t17 = I_b_2*omega_b_2*t5 - t6*t7
+    t18 = 1 - 2*(t14*t14)
+    t19 = I_b_0*omega_b_0
+    t20 = 2*t12*t14
+    t21 = t17*t18 + t19*t20
+    t22 = ((1.0/2.0))*h*t16*t21
+    t23 = casadi.sin(t22)
+    t24 = q_0*t2 + q_3*t3
+    t25 = -q_1*t3 + q_2*t2
+    t26 = t12*t24 - t14*t25
+    t27 = casadi.cos(t22)
+    t28 = t15*t23 + t26*t27
+    t29 = 1 - 2*(t23*t23)
+    t30 = -t17*t20 + t18*t19
+    t31 = 2*t23*t27
+    t32 = t29*t8 - t30*t31
+    t33 = t10*t32
+    t34 = casadi.cos(t33)
+    t35 = t12*t25 + t14*t24
+    t36 = t12*t13 - t14*t4
+    t37 = t23*t36 + t27*t35
+    t38 = casadi.sin(t33)
+    t39 = t28*t34 - t37*t38
+    t40 = t29*t30 + t31*t8
+    t41 = 1 - 2*(t38*t38)
+    t42 = 2*t34*t38
+    t43 = (-t21*t42 + t40*t41)/I_b_0
+    t44 = t0*t43
+    t45 = casadi.cos(t44)
+    t46 = t15*t27 - t23*t26
+    t47 = -t23*t35 + t27*t36
+    t48 = t34*t47 - t38*t46
+    t49 = casadi.sin(t44)
+    t50 = t28*t38 + t34*t37
+    t51 = t34*t46 + t38*t47
+    t52 = 1 - 2*(t49*t49)
+    t53 = t21*t41 + t40*t42
+    t54 = 2*t45*t49
+    return casadi.vertcat(t39*t45 + t48*t49, t45*t51 + t49*t50, t45*t50 - t49*t51, -t39*t49 + t45*t48), casadi.vertcat(t43, t9*(t32*t52 + t53*t54), t16*(-t32*t54 + t52*t53))
+
+
+def splitting_kick(m, I_b, v_w, omega_b, F_w, tau_b, h):
+    """splitting_kick: Kick of v and ω under a force and a body torque for time h (q, p fixed).
+      in  m scalar: mass, kg
+      in  I_b [3]: principal moments, body frame, kg·m²
+      in  v_w [3]: COM velocity, world frame, m/s
+      in  omega_b [3]: angular velocity, body frame, rad/s
+      in  F_w [3]: force at the COM, world frame, N
+      in  tau_b [3]: torque, body frame, N·m
+      in  h scalar: time step, s
+      out v_next [3]: m/s, world frame
+      out omega_next [3]: rad/s, body frame"""
+    I_b_0 = I_b[0]
+    I_b_1 = I_b[1]
+    I_b_2 = I_b[2]
+    v_w_0 = v_w[0]
+    v_w_1 = v_w[1]
+    v_w_2 = v_w[2]
+    omega_b_0 = omega_b[0]
+    omega_b_1 = omega_b[1]
+    omega_b_2 = omega_b[2]
+    F_w_0 = F_w[0]
+    F_w_1 = F_w[1]
+    F_w_2 = F_w[2]
+    tau_b_0 = tau_b[0]
+    tau_b_1 = tau_b[1]
+    tau_b_2 = tau_b[2]
+    t0 = h/m
+    return casadi.vertcat(F_w_0*t0 + v_w_0, F_w_1*t0 + v_w_1, F_w_2*t0 + v_w_2), casadi.vertcat(omega_b_0 + h*tau_b_0/I_b_0, omega_b_1 + h*tau_b_1/I_b_1, omega_b_2 + h*tau_b_2/I_b_2)
+
+
+def translation_drift(p_w, v_w, h):
+    """translation_drift: Drift of the COM position for time h.
+      in  p_w [3]: COM position, world frame, m
+      in  v_w [3]: COM velocity, world frame, m/s
+      in  h scalar: time step, s
+      out p_next [3]: m, world frame"""
+    p_w_0 = p_w[0]
+    p_w_1 = p_w[1]
+    p_w_2 = p_w[2]
+    v_w_0 = v_w[0]
+    v_w_1 = v_w[1]
+    v_w_2 = v_w[2]
+    return casadi.vertcat(h*v_w_0 + p_w_0, h*v_w_1 + p_w_1, h*v_w_2 + p_w_2)
+
+
+def semi_implicit_translation(m, p_w, v_w, F_w, h):
+    """semi_implicit_translation: Semi-implicit Euler step of the COM under a force.
+      in  m scalar: mass, kg
+      in  p_w [3]: COM position, world frame, m
+      in  v_w [3]: COM velocity, world frame, m/s
+      in  F_w [3]: force at the COM, world frame, N
+      in  h scalar: time step, s
+      out p_next [3]: m, world frame
+      out v_next [3]: m/s, world frame"""
+    p_w_0 = p_w[0]
+    p_w_1 = p_w[1]
+    p_w_2 = p_w[2]
+    v_w_0 = v_w[0]
+    v_w_1 = v_w[1]
+    v_w_2 = v_w[2]
+    F_w_0 = F_w[0]
+    F_w_1 = F_w[1]
+    F_w_2 = F_w[2]
+    t0 = h/m
+    t1 = F_w_0*t0 + v_w_0
+    t2 = F_w_1*t0 + v_w_1
+    t3 = F_w_2*t0 + v_w_2
+    return casadi.vertcat(h*t1 + p_w_0, h*t2 + p_w_1, h*t3 + p_w_2), casadi.vertcat(t1, t2, t3)
+
+
+def translation_rhs(m, v_w, F_w):
+    """translation_rhs: COM translation of a free body.
+      in  m scalar: mass, kg
+      in  v_w [3]: COM velocity, world frame, m/s
+      in  F_w [3]: force at the COM, world frame, N
+      out p_dot [3]: m/s, world frame
+      out v_dot [3]: m/s², world frame"""
+    v_w_0 = v_w[0]
+    v_w_1 = v_w[1]
+    v_w_2 = v_w[2]
+    F_w_0 = F_w[0]
+    F_w_1 = F_w[1]
+    F_w_2 = F_w[2]
+    t0 = (1.0/m)
+    return casadi.vertcat(v_w_0, v_w_1, v_w_2), casadi.vertcat(F_w_0*t0, F_w_1*t0, F_w_2*t0)
+
+
+def implicit_gyro_residual(I_b, omega_b, tau_b, h, omega_next):
+    """implicit_gyro_residual: Residual of the implicit gyroscopic step.
+      in  I_b [3]: principal moments, body frame, kg·m²
+      in  omega_b [3]: angular velocity, body frame, rad/s
+      in  tau_b [3]: torque, body frame, N·m
+      in  h scalar: time step, s
+      in  omega_next [3]: current iterate of the new angular velocity ω⁺, body frame, rad/s
+      out g [3]: N·m·s"""
+    I_b_0 = I_b[0]
+    I_b_1 = I_b[1]
+    I_b_2 = I_b[2]
+    omega_b_0 = omega_b[0]
+    omega_b_1 = omega_b[1]
+    omega_b_2 = omega_b[2]
+    tau_b_0 = tau_b[0]
+    tau_b_1 = tau_b[1]
+    tau_b_2 = tau_b[2]
+    omega_next_0 = omega_next[0]
+    omega_next_1 = omega_next[1]
+    omega_next_2 = omega_next[2]
+    t0 = omega_next_0*omega_next_2
+    return casadi.vertcat(I_b_0*(-omega_b_0 + omega_next_0) - h*tau_b_0 + h*(-I_b_1*omega_next_1*omega_next_2 + I_b_2*omega_next_1*omega_next_2), I_b_1*(-omega_b_1 + omega_next_1) - h*tau_b_1 + h*(I_b_0*t0 - I_b_2*t0), I_b_2*(-omega_b_2 + omega_next_2) - h*tau_b_2 + h*(-I_b_0*omega_next_0*omega_next_1 + I_b_1*omega_next_0*omega_next_1))
+
+
+def implicit_gyro_jacobian(I_b, h, omega_next):
+    """implicit_gyro_jacobian: Jacobian of the implicit-gyro residual, differentiated by SymPy.
+      in  I_b [3]: principal moments, body frame, kg·m²
+      in  h scalar: time step, s
+      in  omega_next [3]: current iterate of the new angular velocity ω⁺, body frame, rad/s
+      out J [3×3]: kg·m², row-major"""
+    I_b_0 = I_b[0]
+    I_b_1 = I_b[1]
+    I_b_2 = I_b[2]
+    omega_next_0 = omega_next[0]
+    omega_next_1 = omega_next[1]
+    omega_next_2 = omega_next[2]
+    t0 = -I_b_2*omega_next_2
+    t1 = I_b_1*omega_next_1
+    t2 = I_b_0*omega_next_0
+    return casadi.vertcat(I_b_0, h*(-I_b_1*omega_next_2 - t0), h*(I_b_2*omega_next_1 - t1), h*(I_b_0*omega_next_2 + t0), I_b_1, h*(-I_b_2*omega_next_0 + t2), h*(-I_b_0*omega_next_1 + t1), h*(I_b_1*omega_next_0 - t2), I_b_2)
+
+
+def implicit_gyro_newton(I_b, omega_b, tau_b, h, omega_next):
+    """implicit_gyro_newton: One Newton update of the implicit gyroscopic step (adjugate solve).
+      in  I_b [3]: principal moments, body frame, kg·m²
+      in  omega_b [3]: angular velocity, body frame, rad/s
+      in  tau_b [3]: torque, body frame, N·m
+      in  h scalar: time step, s
+      in  omega_next [3]: current iterate of the new angular velocity ω⁺, body frame, rad/s
+      out omega_new [3]: next iterate, rad/s, body frame
+      out delta [3]: the Newton step, rad/s"""
+    I_b_0 = I_b[0]
+    I_b_1 = I_b[1]
+    I_b_2 = I_b[2]
+    omega_b_0 = omega_b[0]
+    omega_b_1 = omega_b[1]
+    omega_b_2 = omega_b[2]
+    tau_b_0 = tau_b[0]
+    tau_b_1 = tau_b[1]
+    tau_b_2 = tau_b[2]
+    omega_next_0 = omega_next[0]
+    omega_next_1 = omega_next[1]
+    omega_next_2 = omega_next[2]
+    t0 = I_b_0*omega_next_0
+    t1 = I_b_2*omega_next_0
+    t2 = t0 - t1
+    t3 = (h*h)
+    t4 = I_b_1*omega_next_0 - t0
+    t5 = I_b_1*I_b_2 - t2*t3*t4
+    t6 = I_b_1*omega_next_1
+    t7 = I_b_2*omega_next_1 - t6
+    t8 = -I_b_0*omega_next_1 + t6
+    t9 = I_b_1*h
+    t10 = -I_b_2*omega_next_2
+    t11 = I_b_0*omega_next_2 + t10
+    t12 = t11*t3*t4 - t8*t9
+    t13 = -I_b_1*omega_next_2 - t10
+    t14 = I_b_2*h
+    t15 = -t11*t14 + t2*t3*t8
+    t16 = (1.0/(I_b_0*t5 + h*t12*t7 + h*t13*t15))
+    t17 = I_b_0*(-omega_b_0 + omega_next_0) - h*tau_b_0 + h*(I_b_2*omega_next_1*omega_next_2 - omega_next_2*t6)
+    t18 = I_b_2*(-omega_b_2 + omega_next_2) - h*tau_b_2 + h*(I_b_1*omega_next_0*omega_next_1 - omega_next_1*t0)
+    t19 = I_b_1*(-omega_b_1 + omega_next_1) - h*tau_b_1 + h*(omega_next_2*t0 - omega_next_2*t1)
+    t20 = t16*(t17*t5 + t18*(t13*t2*t3 - t7*t9) + t19*(-t13*t14 + t3*t4*t7))
+    t21 = I_b_0*h
+    t22 = t16*(t15*t17 + t18*(t11*t3*t7 - t2*t21) + t19*(I_b_0*I_b_2 - t3*t7*t8))
+    t23 = t16*(t12*t17 + t18*(I_b_0*I_b_1 - t11*t13*t3) + t19*(t13*t3*t8 - t21*t4))
+    return casadi.vertcat(omega_next_0 - t20, omega_next_1 - t22, omega_next_2 - t23), casadi.vertcat(t20, t22, t23)
+
+
+def quat_exp_step(q, omega_b, h):
+    """quat_exp_step: Attitude step by the exponential map of a body angular velocity held over h.
+      in  q [4]: orientation (x, y, z, w), R_WB, unit
+      in  omega_b [3]: angular velocity, body frame, rad/s
+      in  h scalar: time step, s
+      out q_next [4]: orientation (unit when q is)"""
+    q_0 = q[0]
+    q_1 = q[1]
+    q_2 = q[2]
+    q_3 = q[3]
+    omega_b_0 = omega_b[0]
+    omega_b_1 = omega_b[1]
+    omega_b_2 = omega_b[2]
+    t0 = (omega_b_0*omega_b_0) + (omega_b_1*omega_b_1) + (omega_b_2*omega_b_2)
+    t1 = casadi.sqrt(t0)
+    t2 = h*t1
+    t3 = ((1.0/2.0))*t2
+    t4 = casadi.cos(t3)
+    t5 = casadi.if_else((t2 > (1.0/50000000.0)), casadi.sin(t3)/t1, ((1.0/2.0))*h*(-(1.0/24.0)*(h*h)*t0 + 1))
+    t6 = omega_b_0*t5
+    t7 = omega_b_2*t5
+    t8 = omega_b_1*t5
+    return casadi.vertcat(q_0*t4 + q_1*t7 - q_2*t8 + q_3*t6, -q_0*t7 + q_1*t4 + q_2*t6 + q_3*t8, q_0*t8 - q_1*t6 + q_2*t4 + q_3*t7, -q_0*t6 - q_1*t8 - q_2*t7 + q_3*t4)
+
+
+def wheel_saturation(command, Omega, torque_limit, speed_limit):
+    """wheel_saturation: Motor torques actually applied: clipped, and cut off beyond the speed limit.
+      in  command [3]: commanded motor torques, N·m
+      in  Omega [3]: wheel rates relative to the body, rad/s
+      in  torque_limit scalar: N·m
+      in  speed_limit scalar: rad/s
+      out u [3]: applied motor torques, N·m"""
+    command_0 = command[0]
+    command_1 = command[1]
+    command_2 = command[2]
+    Omega_0 = Omega[0]
+    Omega_1 = Omega[1]
+    Omega_2 = Omega[2]
+    t0 = -torque_limit
+    t1 = (command_0 < t0)
+    t2 = (speed_limit <= casadi.fabs(Omega_0))
+    t3 = Omega_0*torque_limit
+    t4 = (command_0 > torque_limit)
+    t5 = (command_1 < t0)
+    t6 = (speed_limit <= casadi.fabs(Omega_1))
+    t7 = Omega_1*torque_limit
+    t8 = (command_1 > torque_limit)
+    t9 = (command_2 < t0)
+    t10 = (speed_limit <= casadi.fabs(Omega_2))
+    t11 = Omega_2*torque_limit
+    t12 = (command_2 > torque_limit)
+    return casadi.vertcat(casadi.if_else(casadi.if_else(t1, casadi.logic_and(t2, (t3 < 0)), casadi.if_else(t4, casadi.logic_and(t2, (t3 > 0)), casadi.logic_and(t2, (Omega_0*command_0 > 0)))), 0, casadi.if_else(t1, t0, casadi.if_else(t4, torque_limit, command_0))), casadi.if_else(casadi.if_else(t5, casadi.logic_and(t6, (t7 < 0)), casadi.if_else(t8, casadi.logic_and(t6, (t7 > 0)), casadi.logic_and(t6, (Omega_1*command_1 > 0)))), 0, casadi.if_else(t5, t0, casadi.if_else(t8, torque_limit, command_1))), casadi.if_else(casadi.if_else(t9, casadi.logic_and(t10, (t11 < 0)), casadi.if_else(t12, casadi.logic_and(t10, (t11 > 0)), casadi.logic_and(t10, (Omega_2*command_2 > 0)))), 0, casadi.if_else(t9, t0, casadi.if_else(t12, torque_limit, command_2))))

@@ -29,6 +29,7 @@ LABS: dict[str, str] = {
     "04": "lab04_reaction_wheel",
     "hard": "hard_cases",
     "accuracy": "accuracy",
+    "atlas": "atlas",
 }
 
 __all__ = ["LABS", "lab_module", "run", "register_cli", "LabResult"]

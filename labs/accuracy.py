@@ -58,6 +58,14 @@ method (ours, scipy's RK45 and DOP853) at its tightest rtol within 100 x rtol of
 attitude; MuJoCo (when installed) converges to the same reference: RK4 within 1e-8 at the smallest
 dt with order 4, Euler with order 1; the verdicts are consistent with the points.
 
+Where it runs: the errors, drifts and RHS counts of every point (one task per case x method
+sweep) are computed on lavendersim.executor — every local core by default, --workers 1 in this
+process, --dask ADDRESS on an existing Dask scheduler (the distributed extra); they are the same
+numbers on any executor. The wall times are not: they are measured afterwards, serially in this
+process, once the workers have exited (timing under parallel workers would measure contention for
+the cores, not the method). A NumPy dt sweep's early stop (numpy_run_budget_s) uses the wall time
+of the error run where it ran, so under busy workers it can stop one point earlier.
+
 --quick: two cases (box_w1, diag_w2), dt 2^-4 ... 2^-10 s on C and MuJoCo (2^-4 ... 2^-6 on NumPy),
 rtol 1e-3 ... 1e-8, one repeat: every method and check, in well under 20 s.
 From Python, ``run(out_dir)`` runs the quick sweep (what ``lavendersim lab all`` runs);
@@ -89,6 +97,7 @@ import numpy as np
 
 import lavendersim as lv
 from lavendersim import backends as B
+from lavendersim import executor as X
 from lavendersim import reference as R
 from lavendersim import validate as V
 from lavendersim.errors import DivergenceError
@@ -185,10 +194,17 @@ def add_arguments(parser) -> None:
                         help="reduced sweep (2 cases, dt 2^-4..2^-9, 1 repeat; < 20 s) for tests")
     parser.add_argument("--no-mujoco", action="store_true", help="skip MuJoCo even when it is installed")
     parser.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
+    parser.add_argument("--workers", type=int, default=None, metavar="N",
+                        help="local processes computing the errors (default: every core; 1 = serial); "
+                             "the timing runs are always serial in this process")
+    parser.add_argument("--dask", default=None, metavar="ADDRESS",
+                        help="compute the errors on an existing Dask scheduler, e.g. tcp://host:8786 "
+                             "(the distributed extra); timing stays local and serial")
 
 
 def options_from_args(args) -> dict:
-    return {"quick": args.quick, "mujoco": not args.no_mujoco, "progress": not args.quiet}
+    return {"quick": args.quick, "mujoco": not args.no_mujoco, "progress": not args.quiet,
+            "workers": args.workers, "dask": args.dask}
 
 
 # ------------------------------------------------------------------------------------------ discovery
@@ -340,7 +356,7 @@ def _measure_sim(case, m, value, exact, drifts, keep_drift):
             traj = sim.record(n)
     except DivergenceError as exc:
         pt.diverged = str(exc)
-        return pt, None
+        return pt
     x = traj.x[:, 0]
     pt.steps = None if adaptive else int(sim.steps)
     pt.rhs_evals, pt.rhs_evals_source = _rhs_count(sim, m)
@@ -351,6 +367,12 @@ def _measure_sim(case, m, value, exact, drifts, keep_drift):
         pt.attitude_error = float(R.attitude_error(xT[3:7], exact.q[-1]))
         pt.omega_error = float(np.linalg.norm(xT[10:13] - exact.omega_b[-1]))
         pt.rhs_evals_source += " (one output step of T)"
+    return pt
+
+
+def _sim_job(case, m, value):
+    """The timed run of a Sim point: a fresh Sim (constructed outside the timed region), run to T."""
+    n = 1 if m.param == "rtol" else int(round(T_END / value))
 
     def job():
         s = _make_sim(case, m, value)
@@ -358,10 +380,11 @@ def _measure_sim(case, m, value, exact, drifts, keep_drift):
         s.run(n)
         return time.perf_counter() - t0
 
-    return pt, job
+    return job
 
 
-def _measure_scipy(case, m, rtol, exact, drifts, keep_drift):
+def _scipy_solver(case, m, rtol):
+    """solve() -> solve_ivp's solution of the case with the generated NumPy kernel as RHS."""
     from scipy.integrate import solve_ivp
 
     from lavendersim.generated import kernels_numpy as KN
@@ -377,24 +400,33 @@ def _measure_scipy(case, m, rtol, exact, drifts, keep_drift):
     def solve():
         return solve_ivp(rhs, (0.0, T_END), x0, method=m.integrator, rtol=rtol, atol=rtol)
 
-    pt = Point(case.name, m.label, "rtol", float(rtol))
-    sol = solve()
-    if not sol.success:
-        pt.diverged = f"solve_ivp failed: {sol.message}"
-        return pt, None
-    y = sol.y.T
-    pt.steps = len(sol.t) - 1
-    pt.rhs_evals, pt.rhs_evals_source = int(sol.nfev), "solve_ivp nfev"
-    q = y[:, 3:7] / np.linalg.norm(y[:, 3:7], axis=1, keepdims=True)
-    pt.final_x = np.concatenate([y[-1, :3], q[-1], y[-1, 7:]]).tolist()
-    _score(pt, case, exact, sol.t, q, y[:, 10:13], keep_drift, drifts)
+    return solve
+
+
+def _scipy_job(case, m, rtol):
+    solve = _scipy_solver(case, m, rtol)
 
     def job():
         t0 = time.perf_counter()
         solve()
         return time.perf_counter() - t0
 
-    return pt, job
+    return job
+
+
+def _measure_scipy(case, m, rtol, exact, drifts, keep_drift):
+    pt = Point(case.name, m.label, "rtol", float(rtol))
+    sol = _scipy_solver(case, m, rtol)()
+    if not sol.success:
+        pt.diverged = f"solve_ivp failed: {sol.message}"
+        return pt
+    y = sol.y.T
+    pt.steps = len(sol.t) - 1
+    pt.rhs_evals, pt.rhs_evals_source = int(sol.nfev), "solve_ivp nfev"
+    q = y[:, 3:7] / np.linalg.norm(y[:, 3:7], axis=1, keepdims=True)
+    pt.final_x = np.concatenate([y[-1, :3], q[-1], y[-1, 7:]]).tolist()
+    _score(pt, case, exact, sol.t, q, y[:, 10:13], keep_drift, drifts)
+    return pt
 
 
 MJCF = """<mujoco model="accuracy_free_body">
@@ -417,9 +449,8 @@ def mujoco_model(mujoco, case: Case, integrator: str, dt: float):
     return mujoco.MjModel.from_xml_string(xml)
 
 
-def _measure_mujoco(mujoco, case, m, dt, exact, drifts, keep_drift):
-    from mujoco import rollout
-
+def _mujoco_setup(mujoco, case, m, dt):
+    """(model, data, initial FULLPHYSICS state, steps) of one MuJoCo point."""
     model = mujoco_model(mujoco, case, m.integrator, dt)
     data = mujoco.MjData(model)
     data.qpos[:] = [0, 0, 0, 1, 0, 0, 0]             # position, quaternion (w, x, y, z)
@@ -427,7 +458,26 @@ def _measure_mujoco(mujoco, case, m, dt, exact, drifts, keep_drift):
     spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
     s0 = np.empty(mujoco.mj_stateSize(model, spec))
     mujoco.mj_getState(model, data, s0, spec)
-    n = int(round(T_END / dt))
+    return model, data, s0, int(round(T_END / dt))
+
+
+def _mujoco_job(mujoco, case, m, dt):
+    from mujoco import rollout
+
+    model, data, s0, n = _mujoco_setup(mujoco, case, m, dt)
+
+    def job():
+        t0 = time.perf_counter()
+        rollout.rollout(model, data, s0[None, :], nstep=n)
+        return time.perf_counter() - t0
+
+    return job
+
+
+def _measure_mujoco(mujoco, case, m, dt, exact, drifts, keep_drift):
+    from mujoco import rollout
+
+    model, data, s0, n = _mujoco_setup(mujoco, case, m, dt)
     nq = model.nq
     state, _ = rollout.rollout(model, data, s0[None, :], nstep=n)
     st = np.vstack([s0[None, :], state[0]])        # FULLPHYSICS: time, qpos (7), qvel (6), ...
@@ -435,7 +485,7 @@ def _measure_mujoco(mujoco, case, m, dt, exact, drifts, keep_drift):
     qpos, qvel = st[:, 1:1 + nq], st[:, 1 + nq:1 + nq + model.nv]
     if not np.all(np.isfinite(qpos)) or not np.all(np.isfinite(qvel)):
         pt.diverged = "MuJoCo state went non-finite"
-        return pt, None
+        return pt
     if abs(st[-1, 0] - T_END) > 1e-9:
         raise RuntimeError(f"MuJoCo rollout ended at t = {st[-1, 0]!r}, expected {T_END}")
     q = qpos[:, [4, 5, 6, 3]]                        # (w, x, y, z) -> (x, y, z, w)
@@ -443,13 +493,108 @@ def _measure_mujoco(mujoco, case, m, dt, exact, drifts, keep_drift):
     pt.rhs_evals, pt.rhs_evals_source = n * m.stages, "MuJoCo forward evaluations (steps x 4 for RK4, else steps)"
     pt.final_x = np.concatenate([qpos[-1, :3], q[-1] / np.linalg.norm(q[-1]), qvel[-1, :3], w[-1]]).tolist()
     _score(pt, case, exact, st[:, 0], q, w, keep_drift, drifts)
+    return pt
 
-    def job():
+
+# ------------------------------------------------------------------------------------------ sweeps
+
+def sweep_values(m: Method, cfg: dict) -> list[float]:
+    """The dt (or rtol) values of one method's sweep, coarse to fine.
+
+    Parameters
+    ----------
+    m : Method
+        The method (its family, backend and parameter decide which list of ``cfg`` applies).
+    cfg : dict
+        QUICK or FULL.
+
+    Returns
+    -------
+    list of float
+    """
+    if m.family == "lavendersim":
+        if m.param == "rtol":
+            return list(cfg["rtols"] if m.backend == "c" else cfg["numpy_rtols"])
+        exps = cfg["dt_exps"] if m.backend == "c" else cfg["numpy_dt_exps"]
+        return [2.0 ** -k for k in exps]
+    if m.family == "scipy":
+        return list(cfg["rtols"])
+    return [2.0 ** -k for k in cfg["mj_dt_exps"]]
+
+
+def sweep_tasks(use: list[Case], meths: list[Method], cfg: dict, exacts: dict) -> list[tuple]:
+    """The tasks of :func:`measure_sweep`: one per case x method.
+
+    Parameters
+    ----------
+    use : list of Case
+    meths : list of Method
+    cfg : dict
+        QUICK or FULL (possibly edited): the sweep values and the NumPy run budget come from it.
+    exacts : dict
+        Case name -> the exact motion at [0, T_END].
+
+    Returns
+    -------
+    list of tuple
+        ``(case, method, values, exact, numpy_budget)``, case-major: the order of the points in
+        results.json.
+    """
+    return [(case, m, sweep_values(m, cfg), exacts[case.name], cfg["numpy_budget"]) for case in use for m in meths]
+
+
+def measure_sweep(task: tuple) -> dict:
+    """The errors of one method's sweep in one case: the executor's unit of work.
+
+    Parameters
+    ----------
+    task : tuple
+        ``(case, method, values, exact, numpy_budget)`` from :func:`sweep_tasks`.
+
+    Returns
+    -------
+    dict
+        "points": the Points in sweep order (no wall times); "drifts": the drift series kept
+        for drift_vs_time.png; "skipped": why a NumPy dt sweep stopped early, or None; "seconds":
+        the wall time of the sweep (progress only).
+
+    Notes
+    -----
+    A NumPy dt sweep stops after a run longer than numpy_budget s; that run's wall time is
+    measured where the sweep runs, so under busy parallel workers it can stop a point earlier
+    than serially (the points it keeps are the same numbers). Nothing here is a timing result:
+    the timed runs happen afterwards, serially, in the calling process.
+    """
+    case, m, values, exact, numpy_budget = task
+    mj = _mujoco()[0] if m.family == "mujoco" else None
+    points, drifts, skipped = [], {}, None
+    t_m = time.perf_counter()
+    for v in values:
+        keep = (m.param == "dt" and abs(v - 2.0 ** -DRIFT_DT_EXP) < 1e-15) or \
+               (m.param == "rtol" and abs(v / DRIFT_RTOL - 1) < 1e-9)
         t0 = time.perf_counter()
-        rollout.rollout(model, data, s0[None, :], nstep=n)
-        return time.perf_counter() - t0
+        if m.family == "lavendersim":
+            pt = _measure_sim(case, m, v, exact, drifts, keep)
+        elif m.family == "scipy":
+            pt = _measure_scipy(case, m, v, exact, drifts, keep)
+        else:
+            pt = _measure_mujoco(mj, case, m, v, exact, drifts, keep)
+        took = time.perf_counter() - t0
+        points.append(pt)
+        if m.backend == "numpy" and m.param == "dt" and took > numpy_budget and v != values[-1]:
+            rest = [_param_text("dt", x) for x in values if x < v]
+            skipped = f"{case.name} {m.label}: {', '.join(rest)} (one run took {took:.2f} s)"
+            break
+    return {"points": points, "drifts": drifts, "skipped": skipped, "seconds": time.perf_counter() - t_m}
 
-    return pt, job
+
+def _timing_job(mj, case: Case, m: Method, value: float):
+    """A callable that runs one point once and returns its wall time (s): built and run in this process."""
+    if m.family == "lavendersim":
+        return _sim_job(case, m, value)
+    if m.family == "scipy":
+        return _scipy_job(case, m, value)
+    return _mujoco_job(mj, case, m, value)
 
 
 # ------------------------------------------------------------------------------------------ timing
@@ -631,10 +776,13 @@ def machine_stamp(mujoco) -> dict:
 # ------------------------------------------------------------------------------------------ run
 
 def run(out_dir=C.DEFAULT_OUT, backend: str = "auto", quick: bool = True, mujoco: bool = True,
-        progress: bool = False) -> C.LabResult:
+        progress: bool = False, workers: int | None = None, dask: str | None = None) -> C.LabResult:
     """Run the study; ``quick=True`` (the Python default, what ``lab all`` runs) is the reduced
     sweep, ``quick=False`` the full one (the command line's default). ``backend`` is accepted for
-    the labs' common interface and ignored: both backends are always measured."""
+    the labs' common interface and ignored: both backends are always measured. ``workers`` /
+    ``dask`` choose where the errors are computed (lavendersim.executor.resolve: None = every
+    local core, 1 = this process, or an existing Dask scheduler's address); the timing runs are
+    always serial in this process, after the error computation has finished."""
     C.check_backend(backend)
     for name, v in (("quick", quick), ("mujoco", mujoco), ("progress", progress)):
         if not isinstance(v, (bool, np.bool_)):
@@ -673,42 +821,21 @@ def run(out_dir=C.DEFAULT_OUT, backend: str = "auto", quick: bool = True, mujoco
                                 f"omega {dw:.2e} rad/s ({exact.kind})"))
     say("exact references agree with DOP853")
 
+    ex = X.resolve(workers=workers, dask=dask, feature="lavendersim lab accuracy --dask")
+    tasks = sweep_tasks(use, meths, cfg, exacts)
+    say(f"errors of {len(tasks)} sweeps on {ex.describe()} (timing follows, serially in this process)")
+    sweeps = ex.map(measure_sweep, tasks, feature="lavendersim lab accuracy --dask")
     points: list[Point] = []
     jobs: list = []
     drifts: dict = {}
     skipped: list[str] = []
-    for case in use:
-        exact = exacts[case.name]
-        for m in meths:
-            t_m = time.perf_counter()
-            if m.family == "lavendersim":
-                if m.param == "rtol":
-                    values = list(cfg["rtols"] if m.backend == "c" else cfg["numpy_rtols"])
-                else:
-                    exps = cfg["dt_exps"] if m.backend == "c" else cfg["numpy_dt_exps"]
-                    values = [2.0 ** -k for k in exps]
-            elif m.family == "scipy":
-                values = list(cfg["rtols"])
-            else:
-                values = [2.0 ** -k for k in cfg["mj_dt_exps"]]
-            for v in values:
-                keep = (m.param == "dt" and abs(v - 2.0 ** -DRIFT_DT_EXP) < 1e-15) or \
-                       (m.param == "rtol" and abs(v / DRIFT_RTOL - 1) < 1e-9)
-                t0 = time.perf_counter()
-                if m.family == "lavendersim":
-                    pt, job = _measure_sim(case, m, v, exact, drifts, keep)
-                elif m.family == "scipy":
-                    pt, job = _measure_scipy(case, m, v, exact, drifts, keep)
-                else:
-                    pt, job = _measure_mujoco(mj, case, m, v, exact, drifts, keep)
-                took = time.perf_counter() - t0
-                points.append(pt)
-                jobs.append(job)
-                if m.backend == "numpy" and m.param == "dt" and took > cfg["numpy_budget"] and v != values[-1]:
-                    rest = [_param_text("dt", x) for x in values if x < v]
-                    skipped.append(f"{case.name} {m.label}: {', '.join(rest)} (one run took {took:.2f} s)")
-                    break
-            say(f"{case.name}: {m.label} ({len(values)} {m.param} values) in {time.perf_counter() - t_m:.1f} s")
+    for (case, m, values, _, _), sw in zip(tasks, sweeps):      # in task order, whatever finished first
+        points += sw["points"]
+        jobs += [None if p.diverged is not None else _timing_job(mj, case, m, p.value) for p in sw["points"]]
+        drifts.update(sw["drifts"])
+        if sw["skipped"]:
+            skipped.append(sw["skipped"])
+        say(f"{case.name}: {m.label} ({len(values)} {m.param} values) in {sw['seconds']:.1f} s")
 
     say(f"timing {sum(j is not None for j in jobs)} runs x {cfg['repeats']} interleaved repeats")
     timed = _time_jobs(jobs, cfg["repeats"], cfg["time_budget"] if cfg["time_budget"] else 0.0, say)
@@ -717,6 +844,8 @@ def run(out_dir=C.DEFAULT_OUT, backend: str = "auto", quick: bool = True, mujoco
             pt.wall_s, pt.repeats = best, done
             pt.wall_per_sim_s = best / T_END
     stamp["loadavg_end"] = list(os.getloadavg()) if hasattr(os, "getloadavg") else None
+    stamp["errors_computed_on"] = ex.describe()
+    stamp["timing"] = "serial, in this process, after the error computation"
 
     # ---------------------------------------------------------------- orders and checks
     by = {}

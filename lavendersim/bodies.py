@@ -1,18 +1,19 @@
 """Rigid bodies: mass, principal inertia, shape, and an initial state.
 
 Body frame at the centre of mass along the principal axes. Units: kg, m, kg·m², m/s, rad/s.
-Orientation q = R_WB as (x, y, z, w). The state vector layout is derive/rigid_body.py's:
-x = [p_w(3), q(4), v_w(3), omega_b(3)].
+Orientation q = R_WB as (x, y, z, w). The state vector layout is declared in derive/layout.py and
+printed as lavendersim.generated.layout: x = [p_w(3), q(4), v_w(3), omega_b(3)].
 """
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
+from numpy.typing import ArrayLike
 
 from . import validate as V
+from .generated.layout import STATE_OMEGA_B as W, STATE_P_W as P, STATE_Q as Q, STATE_SIZE, STATE_V_W as VEL  # noqa: F401
 from .kernels import K
-
-STATE_SIZE = 13
-P, Q, VEL, W = slice(0, 3), slice(3, 7), slice(7, 10), slice(10, 13)
 
 
 class Body:
@@ -21,8 +22,9 @@ class Body:
     Give at most one of omega_b (body frame) and omega_w (world frame); the other follows from q.
     """
 
-    def __init__(self, name: str, mass, inertia, *, p_w=(0, 0, 0), q=(0, 0, 0, 1), v_w=(0, 0, 0),
-                 omega_b=None, omega_w=None, shape: tuple | None = None):
+    def __init__(self, name: str, mass: float, inertia: ArrayLike, *, p_w: ArrayLike = (0, 0, 0),
+                 q: ArrayLike = (0, 0, 0, 1), v_w: ArrayLike = (0, 0, 0), omega_b: ArrayLike | None = None,
+                 omega_w: ArrayLike | None = None, shape: tuple[str, tuple[float, ...]] | None = None) -> None:
         if not isinstance(name, str) or not name:
             raise V.LavenderInputError("name", "must be a non-empty string", f", got {name!r}")
         mass = V.positive("mass", mass)
@@ -41,19 +43,19 @@ class Body:
         self.x0 = x
 
     @classmethod
-    def box(cls, name: str, mass, size, **state) -> "Body":
+    def box(cls, name: str, mass: float, size: ArrayLike, **state: Any) -> Body:
         """Solid box with full side lengths size = (w, h, d) along body x, y, z (m)."""
         w, h, d = (V.positive(f"size[{i}]", s) for i, s in enumerate(V.vector("size", size)))
         return cls(name, mass, K.inertia_box(V.positive("mass", mass), w, h, d), shape=("box", (w, h, d)), **state)
 
     @classmethod
-    def cylinder(cls, name: str, mass, radius, height, **state) -> "Body":
+    def cylinder(cls, name: str, mass: float, radius: float, height: float, **state: Any) -> Body:
         """Solid cylinder along body z."""
         r, h = V.positive("radius", radius), V.positive("height", height)
         return cls(name, mass, K.inertia_cylinder(V.positive("mass", mass), r, h), shape=("cylinder", (r, h)), **state)
 
     @classmethod
-    def sphere(cls, name: str, mass, radius, **state) -> "Body":
+    def sphere(cls, name: str, mass: float, radius: float, **state: Any) -> Body:
         r = V.positive("radius", radius)
         return cls(name, mass, K.inertia_sphere(V.positive("mass", mass), r), shape=("sphere", (r,)), **state)
 
@@ -71,14 +73,29 @@ class BodyState:
 
     Omega: wheel rates relative to the body (rad/s), zeros for a body without reaction wheels."""
 
-    def __init__(self, x: np.ndarray, Omega: np.ndarray | None = None):
+    def __init__(self, x: np.ndarray, Omega: np.ndarray | None = None) -> None:
         self.x = x
         self.Omega = np.zeros(x.shape[:-1] + (3,)) if Omega is None else Omega
 
-    p_w = property(lambda s: s.x[..., P], doc="COM position, world, m")
-    q = property(lambda s: s.x[..., Q], doc="orientation R_WB (x, y, z, w)")
-    v_w = property(lambda s: s.x[..., VEL], doc="COM velocity, world, m/s")
-    omega_b = property(lambda s: s.x[..., W], doc="angular velocity, body frame, rad/s")
+    @property
+    def p_w(self) -> np.ndarray:
+        """COM position, world, m"""
+        return self.x[..., P]
+
+    @property
+    def q(self) -> np.ndarray:
+        """orientation R_WB (x, y, z, w)"""
+        return self.x[..., Q]
+
+    @property
+    def v_w(self) -> np.ndarray:
+        """COM velocity, world, m/s"""
+        return self.x[..., VEL]
+
+    @property
+    def omega_b(self) -> np.ndarray:
+        """angular velocity, body frame, rad/s"""
+        return self.x[..., W]
 
     @property
     def omega_w(self) -> np.ndarray:

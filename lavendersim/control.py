@@ -37,13 +37,25 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from . import validate as V
 from ._install import require
 from .kernels import K as KN
+
+if TYPE_CHECKING:  # annotations only: casadi is an optional extra, Scene/Sim load lazily
+    import argparse
+    import os
+
+    import casadi
+
+    from .scene import Scene
+    from .sim import Sim
 
 SCENARIOS = ("center", "corner")
 STATE_LABELS = ("dtheta_x", "dtheta_y", "dtheta_z", "omega_x", "omega_y", "omega_z", "Omega_x", "Omega_y", "Omega_z")
@@ -69,7 +81,7 @@ class CubeModel:
     scenario: str = "center"
     mass: float = 1.0
     size: float = 0.15
-    J: tuple = (5.7e-4, 5.7e-4, 5.7e-4)
+    J: ArrayLike = (5.7e-4, 5.7e-4, 5.7e-4)
     torque_limit: float = 0.2
     speed_limit: float = 400.0
     damping: float = 0.0
@@ -131,7 +143,7 @@ class CubeModel:
         return np.asarray(KN.axis_angle_to_quat(axis / np.linalg.norm(axis), ang), dtype=float)
 
     # runtime scene ------------------------------------------------------------------------
-    def scene(self, q0=None, omega_b=(0, 0, 0), Omega=None):
+    def scene(self, q0: ArrayLike | None = None, omega_b: ArrayLike = (0, 0, 0), Omega: ArrayLike | None = None) -> Scene:
         """The Scene for the runtime simulator: body "cube" (COM placed at anchor + R r_b), a
         spherical joint at the origin, reaction wheels, and the declared damping/gravity."""
         import lavendersim as lv
@@ -150,7 +162,8 @@ class CubeModel:
             scene.add_effect("angular_damping", body=BODY, c=self.damping)
         return scene
 
-    def make_sim(self, q0=None, omega_b=(0, 0, 0), Omega=(0, 0, 0), dt=1e-3, backend="auto", integrator="rk4"):
+    def make_sim(self, q0: ArrayLike | None = None, omega_b: ArrayLike = (0, 0, 0), Omega: ArrayLike = (0, 0, 0),
+                 dt: float = 1e-3, backend: str = "auto", integrator: str = "rk4") -> Sim:
         import lavendersim as lv
 
         sim = lv.Sim(self.scene(q0, omega_b), dt=dt, integrator=integrator, backend=backend)
@@ -158,7 +171,7 @@ class CubeModel:
             sim.set_state(BODY, Omega=V.vector("Omega", Omega))
         return sim
 
-    def as_dict(self) -> dict:
+    def as_dict(self) -> dict[str, Any]:
         return {"scenario": self.scenario, "mass": self.mass, "size": self.size, "J": self.J.tolist(),
                 "torque_limit": self.torque_limit, "speed_limit": self.speed_limit, "damping": self.damping,
                 "wheel_damping": self.wheel_damping, "g": self.g}
@@ -169,21 +182,21 @@ class CubeModel:
 # ----------------------------------------------------------------------------------------------
 
 
-def attitude_error(q, q_ref) -> np.ndarray:
+def attitude_error(q: ArrayLike, q_ref: ArrayLike) -> np.ndarray:
     """dtheta = 2 vec(q_ref* ⊗ q), sign chosen so the scalar part is >= 0 (rad, body frame)."""
     qe = np.asarray(KN.quat_mul(KN.quat_conj(np.asarray(q_ref, float)), np.asarray(q, float)), dtype=float)
     sgn = np.where(qe[..., 3:4] < 0, -1.0, 1.0)
     return 2.0 * sgn * qe[..., 0:3]
 
 
-def error_angle_deg(q, q_ref) -> np.ndarray:
+def error_angle_deg(q: ArrayLike, q_ref: ArrayLike) -> np.ndarray:
     """Rotation angle between q and q_ref, degrees in [0, 180]."""
     qe = np.asarray(KN.quat_mul(KN.quat_conj(np.asarray(q_ref, float)), np.asarray(q, float)), dtype=float)
     s = np.linalg.norm(qe[..., 0:3], axis=-1)
     return np.degrees(2.0 * np.arctan2(s, np.abs(qe[..., 3])))
 
 
-def perturbed(q_ref, dtheta) -> np.ndarray:
+def perturbed(q_ref: ArrayLike, dtheta: ArrayLike) -> np.ndarray:
     """q = q_ref ⊗ [dtheta/2, sqrt(1 - |dtheta/2|²)] (the inverse of attitude_error)."""
     h = np.asarray(dtheta, float) / 2
     n2 = float(h @ h)
@@ -192,7 +205,7 @@ def perturbed(q_ref, dtheta) -> np.ndarray:
     return np.asarray(KN.quat_mul(np.asarray(q_ref, float), np.concatenate([h, [math.sqrt(1 - n2)]])), dtype=float)
 
 
-def rotated(q_ref, axis, angle_deg) -> np.ndarray:
+def rotated(q_ref: ArrayLike, axis: ArrayLike, angle_deg: float) -> np.ndarray:
     """q_ref ⊗ rotation by angle_deg about a body-frame axis (normalized)."""
     axis = V.vector("axis", axis)
     n = np.linalg.norm(axis)
@@ -235,7 +248,7 @@ class Linearization:
         Uf, s, _ = np.linalg.svd(P)
         return Uf[:, : n - self.rank]
 
-    def target(self, x) -> tuple[np.ndarray, np.ndarray]:
+    def target(self, x: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         """(x_ss, du_ss): the equilibrium with dtheta = 0, omega = 0 that has the same conserved
         coordinates Uᵀx as x (wheel speeds Omega_ss absorb the momentum), and the torque holding it.
         Zero when x carries no conserved momentum (e.g. starting at rest without damping)."""
@@ -250,19 +263,20 @@ class Linearization:
             du = np.linalg.lstsq(self.B, -r, rcond=None)[0]
         return x_ss, du
 
-    def feedback(self, K, x) -> np.ndarray:
+    def feedback(self, K: ArrayLike, x: ArrayLike) -> np.ndarray:
         """u = u0 + du_ss − K (x − x_ss) (unsaturated), N·m."""
         x_ss, du = self.target(x)
         return self.u0 + du - np.asarray(K) @ (x - x_ss)
 
-    def state(self, q, omega_b, Omega) -> np.ndarray:
+    def state(self, q: ArrayLike, omega_b: ArrayLike, Omega: ArrayLike) -> np.ndarray:
         """Error-coordinate state x from a simulator state."""
         return np.concatenate([attitude_error(q, self.q_ref), np.asarray(omega_b, float),
                                np.asarray(Omega, float) - self.Omega0])
 
 
-def casadi_rhs(model: CubeModel, q_ref, Omega0=(0, 0, 0)):
-    """CasADi Function f(x, du) -> x_dot in error coordinates, built from kernels_casadi."""
+def casadi_rhs(model: CubeModel, q_ref: ArrayLike, Omega0: ArrayLike = (0, 0, 0)) -> tuple[casadi.Function, np.ndarray]:
+    """(f, u0): the CasADi Function f(x, du) -> x_dot in error coordinates, built from kernels_casadi,
+    and the equilibrium motor torque u0 = c_w Omega0 (3,), N·m."""
     ca = require("casadi", "control", "the CasADi linearization")
     from .generated import kernels_casadi as KC
 
@@ -291,7 +305,7 @@ def casadi_rhs(model: CubeModel, q_ref, Omega0=(0, 0, 0)):
     return ca.Function("wheel_cube_error_rhs", [x, du], [f], ["x", "du"], ["x_dot"]), np.asarray(u0, float).ravel()
 
 
-def controllable_basis(A, B, tol: float = 1e-9) -> np.ndarray:
+def controllable_basis(A: np.ndarray, B: np.ndarray, tol: float = 1e-9) -> np.ndarray:
     """Orthonormal basis of the controllable subspace span[B, AB, A²B, …] (Krylov with
     re-orthogonalization; A and B scaled to unit norm, singular values below tol dropped)."""
     n = A.shape[0]
@@ -317,7 +331,8 @@ def controllable_basis(A, B, tol: float = 1e-9) -> np.ndarray:
     return basis
 
 
-def linearize(model: CubeModel, q_ref=None, Omega0=(0, 0, 0), tol: float = 1e-9) -> Linearization:
+def linearize(model: CubeModel, q_ref: ArrayLike | None = None, Omega0: ArrayLike = (0, 0, 0),
+              tol: float = 1e-9) -> Linearization:
     """A = ∂f/∂x, B = ∂f/∂u at (q_ref, omega = 0, Omega = Omega0, u = c_w Omega0), by CasADi AD."""
     ca = require("casadi", "control", "the CasADi linearization")
     q_ref = model.upright_q() if q_ref is None else V.quaternion("q_ref", q_ref)
@@ -370,7 +385,7 @@ def _weight(name: str, value, n: int, definite: bool) -> np.ndarray:
     return (arr + arr.T) / 2
 
 
-def lqr(lin: Linearization, Q, R):
+def lqr(lin: Linearization, Q: ArrayLike, R: ArrayLike) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(K, S, E) of python-control's lqr, on the controllable subspace when rank < n (see the
     module docstring). E are the closed-loop eigenvalues of A − B K (the uncontrollable conserved
     modes included, at 0)."""
@@ -390,7 +405,7 @@ def lqr(lin: Linearization, Q, R):
     return K, S, E[np.argsort(E.real)]
 
 
-def default_weights(model: CubeModel):
+def default_weights(model: CubeModel) -> tuple[np.ndarray, np.ndarray]:
     """Bryson-style defaults: attitude 1/(2°)², rates 1/(0.5 rad/s)², wheels 1/(0.5·limit)²,
     torque 1/(0.5·limit)² (corner: attitude 1/(0.5°)²)."""
     ang = math.radians(2.0 if model.scenario == "center" else 0.5)
@@ -423,8 +438,9 @@ class Response:
         return float(self.t[above[-1] + 1])
 
 
-def closed_loop(model: CubeModel, lin: Linearization, K, q0, T: float = 5.0, *, omega0=(0, 0, 0), Omega0=None,
-                dt: float = 1e-3, control_dt: float = 2e-3, backend: str = "auto", sim=None) -> Response:
+def closed_loop(model: CubeModel, lin: Linearization, K: ArrayLike, q0: ArrayLike, T: float = 5.0, *,
+                omega0: ArrayLike = (0, 0, 0), Omega0: ArrayLike | None = None, dt: float = 1e-3,
+                control_dt: float = 2e-3, backend: str = "auto", sim: Sim | None = None) -> Response:
     """Run u = u0 − K x (clipped to ±torque_limit) with a zero-order hold of control_dt in the
     nonlinear simulator (the Sim's reaction_wheels effect saturates again, speed limit included).
     `sim` may be given (any object with the Sim's wheel API) instead of building one."""
@@ -493,7 +509,7 @@ class DesignResult:
     def final_error_deg(self) -> float:
         return float(self.response.error_deg[-1])
 
-    def figures(self) -> dict:
+    def figures(self) -> dict[str, Any]:
         p = self.poles
         return {
             "model": self.model.as_dict(), "backend": self.backend,
@@ -513,7 +529,7 @@ class DesignResult:
         fig["settling_time"] = fig["settling_time"] if math.isfinite(fig["settling_time"]) else None
         return json.dumps(fig, indent=2)
 
-    def plot(self, path) -> None:
+    def plot(self, path: str | os.PathLike[str]) -> None:
         from .labs.common import new_figure
 
         r, m = self.response, self.model
@@ -545,9 +561,10 @@ DEFAULT_AXIS = (1.0, 2.0, 3.0)
 CORNER_AXIS = (1.0, 1.0, -2.0)  # perpendicular to the body diagonal: a pure tilt
 
 
-def design(scenario: str = "center", Q=None, R=None, *, theta0_deg: float | None = None, axis=None,
-           T: float | None = None, threshold_deg: float = 0.1, backend: str = "auto", dt: float = 1e-3,
-           control_dt: float = 2e-3, model: CubeModel | None = None, sim=None, **model_params) -> DesignResult:
+def design(scenario: str = "center", Q: ArrayLike | None = None, R: ArrayLike | None = None, *,
+           theta0_deg: float | None = None, axis: ArrayLike | None = None, T: float | None = None,
+           threshold_deg: float = 0.1, backend: str = "auto", dt: float = 1e-3, control_dt: float = 2e-3,
+           model: CubeModel | None = None, sim: Sim | None = None, **model_params: Any) -> DesignResult:
     """Linearize, design the LQR gain, run the closed loop from an initial error of theta0_deg
     about the body axis `axis` (defaults: 20° about (1, 2, 3) centre; 3° about (1, 1, −2), a pure
     tilt, corner), return a DesignResult.
@@ -574,7 +591,8 @@ def design(scenario: str = "center", Q=None, R=None, *, theta0_deg: float | None
 
 
 def finite_difference_AB(model: CubeModel, lin: Linearization, *, backend: str = "auto", h: float = 1e-5,
-                         dt: float = 1e-3, make_sim=None):
+                         dt: float = 1e-3, make_sim: Callable[[np.ndarray, np.ndarray, np.ndarray, float], Sim] | None = None
+                         ) -> tuple[np.ndarray, np.ndarray]:
     """A and B by central finite differences of the runtime simulator's right-hand side.
 
     One explicit-Euler step of the Sim (integrator="euler") from an equilibrium perturbation is
@@ -607,7 +625,7 @@ def finite_difference_AB(model: CubeModel, lin: Linearization, *, backend: str =
     return A, B
 
 
-def linearization_residual(lin: Linearization, A_fd, B_fd) -> dict:
+def linearization_residual(lin: Linearization, A_fd: ArrayLike, B_fd: ArrayLike) -> dict[str, float]:
     """max |A − A_fd|, max |B − B_fd| (absolute) and the same relative to max(1, max |entry|)."""
     ea, eb = float(np.max(np.abs(lin.A - A_fd))), float(np.max(np.abs(lin.B - B_fd)))
     return {"A_abs": ea, "B_abs": eb, "A_rel": ea / max(1.0, float(np.max(np.abs(lin.A)))),
@@ -644,7 +662,7 @@ def _matrix_arg(field_name: str, text: str | None, n: int):
                                f", got {v.size}")
 
 
-def register_cli(subparsers) -> None:
+def register_cli(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser("lqr", help="design an LQR wheel controller for the reaction-wheel cube and run it in the simulator",
                               description=__doc__.split("\n\n")[0] + "\n\nQ and R: one number (times identity), the "
                               "diagonal (9 / 3 numbers, comma-separated) or the full matrix row-major (81 / 9 numbers). "

@@ -16,6 +16,7 @@ world velocities in m/s. Results are world-frame float64 arrays.
 from __future__ import annotations
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from . import validate as V
 from .kernels import K
@@ -40,12 +41,12 @@ def _vectors(field: str, value, n: int) -> np.ndarray:
     return arr
 
 
-def total_mass(m) -> float:
+def total_mass(m: ArrayLike) -> float:
     """Sum of the particle masses, kg."""
     return float(np.sum(_masses(m)))
 
 
-def center_of_mass(m, r_w) -> np.ndarray:
+def center_of_mass(m: ArrayLike, r_w: ArrayLike) -> np.ndarray:
     """Centre of mass, world, m: (sum_i m_i r_i) / (sum_i m_i)."""
     m = _masses(m)
     r = _vectors("r_w", r_w, m.size)
@@ -53,7 +54,7 @@ def center_of_mass(m, r_w) -> np.ndarray:
     return m_r.sum(axis=0) / m.sum()
 
 
-def linear_momentum(m, v_w) -> np.ndarray:
+def linear_momentum(m: ArrayLike, v_w: ArrayLike) -> np.ndarray:
     """Total linear momentum, world, kg·m/s: sum_i m_i v_i."""
     m = _masses(m)
     v = _vectors("v_w", v_w, m.size)
@@ -61,13 +62,13 @@ def linear_momentum(m, v_w) -> np.ndarray:
     return p.sum(axis=0)
 
 
-def com_velocity(m, v_w) -> np.ndarray:
+def com_velocity(m: ArrayLike, v_w: ArrayLike) -> np.ndarray:
     """Velocity of the centre of mass, world, m/s: p / m."""
     m = _masses(m)
     return linear_momentum(m, v_w) / m.sum()
 
 
-def angular_momentum_com(m, r_w, v_w) -> np.ndarray:
+def angular_momentum_com(m: ArrayLike, r_w: ArrayLike, v_w: ArrayLike) -> np.ndarray:
     """Angular momentum about the centre of mass, world, kg·m²/s."""
     m = _masses(m)
     r = _vectors("r_w", r_w, m.size)
@@ -78,7 +79,7 @@ def angular_momentum_com(m, r_w, v_w) -> np.ndarray:
     return K.particle_angular_momentum(m, r, v, r_com, v_com).sum(axis=0)
 
 
-def inertia_com(m, r_w) -> np.ndarray:
+def inertia_com(m: ArrayLike, r_w: ArrayLike) -> np.ndarray:
     """Inertia tensor about the centre of mass, world axes, kg·m² (3, 3).
 
     Each point mass is a zero tensor moved to its offset by the parallel-axis kernel."""

@@ -24,9 +24,11 @@ argument is reduced to [0, K/2] with the quarter-period identities before callin
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
+from numpy.typing import ArrayLike
 from scipy.integrate import solve_ivp
 from scipy.special import elliprf, ellipk, ellipkm1
 
@@ -83,7 +85,7 @@ def _continuous(q: np.ndarray, q_first: np.ndarray) -> np.ndarray:
 
 # --------------------------------------------------------------------------- measures
 
-def attitude_error(q_a, q_b) -> np.ndarray:
+def attitude_error(q_a: ArrayLike, q_b: ArrayLike) -> np.ndarray:
     """Rotation angle (rad, in [0, π]) between orientations q_a and q_b, vectorized; q ≡ −q.
 
     2·atan2(|vec(q_a* ⊗ q_b)|, |w(q_a* ⊗ q_b)|): exact to rounding for tiny angles (no arccos of a
@@ -92,7 +94,7 @@ def attitude_error(q_a, q_b) -> np.ndarray:
     return 2.0 * np.arctan2(np.linalg.norm(d[..., :3], axis=-1), np.abs(d[..., 3]))
 
 
-def relative_drift(series) -> float:
+def relative_drift(series: ArrayLike) -> float:
     """max_t |x(t) − x(0)| / |x(0)| of a scalar series (T,) or a vector series (T, k) (Euclidean
     norm), e.g. energy or world angular momentum. If x(0) = 0 the absolute drift is returned."""
     x = np.asarray(series, dtype=float)
@@ -105,7 +107,7 @@ def relative_drift(series) -> float:
 
 # --------------------------------------------------------------------------- constant ω
 
-def constant_omega(q0, omega_w, t) -> np.ndarray:
+def constant_omega(q0: ArrayLike, omega_w: ArrayLike, t: ArrayLike) -> np.ndarray:
     """Exact attitude under a constant world angular velocity: q(t) = exp(t[ω_w]×) q0, i.e.
     axis_angle_to_quat(ω̂, |ω| t) ⊗ q0. Returns (T, 4) for an array t, (4,) for a scalar."""
     t, scalar = _as_times(t)
@@ -385,7 +387,7 @@ def _nodes_frame(l_b: np.ndarray, axis: int) -> np.ndarray:
     return np.stack([n, np.cross(l_b, n), l_b], axis=-2)
 
 
-def torque_free(I_b, omega_b0, q0, t) -> TorqueFreeMotion:
+def torque_free(I_b: ArrayLike, omega_b0: ArrayLike, q0: ArrayLike, t: ArrayLike) -> TorqueFreeMotion:
     """Exact torque-free motion of a body with principal moments I_b (any order, any equalities)
     from ω_b(0) = omega_b0 and q(0) = q0, sampled at times t (s, any reals).
 
@@ -424,7 +426,7 @@ def torque_free(I_b, omega_b0, q0, t) -> TorqueFreeMotion:
                             details={"euler_axis": axis})
 
 
-def torque_free_period(I_b, omega_b0) -> float:
+def torque_free_period(I_b: ArrayLike, omega_b0: ArrayLike) -> float:
     """Period (s) of the body angular velocity of the torque-free motion: 4K(m)/λ for an
     asymmetric body, 2π/|Ω| (Ω = (I_s − I_t) ω_s / I_t) for a symmetric one; inf at the
     separatrix and when ω_b is constant (sphere, permanent rotation)."""
@@ -449,8 +451,9 @@ class Integrated:
         return self.x[:, 10:13]
 
 
-def dop853(I_b, omega_b0, q0, t, rhs=None, rtol: float = 1e-13, atol: float = 1e-13,
-           x0=None) -> Integrated:
+def dop853(I_b: ArrayLike, omega_b0: ArrayLike, q0: ArrayLike, t: ArrayLike,
+           rhs: Callable[[float, np.ndarray], ArrayLike] | None = None, rtol: float = 1e-13, atol: float = 1e-13,
+           x0: ArrayLike | None = None) -> Integrated:
     """solve_ivp(DOP853) reference on the 13-number state from t = 0, with dense output at t (s,
     any reals: negative times are integrated backward). rhs(t, x) → ẋ (13,) defaults to the
     generated torque-free kernel rigid_body_rhs_free(x, I_b); x0 (13,) overrides the initial

@@ -45,9 +45,10 @@ import numpy as np
 from . import backends
 from . import effects as effects_mod
 from . import validate as V
-from .backends import ADAPTIVE, KIND_JOINT, KIND_WHEELS, MODEL_LAYOUT, PLAIN_ONLY, Adaptive, Models
+from .backends import ADAPTIVE, KIND_JOINT, KIND_WHEELS, PLAIN_ONLY, Adaptive, Models
 from .bodies import BodyState
 from .errors import DivergenceError
+from .generated import layout as LY
 from .kernels import K
 from .scene import Scene
 
@@ -123,28 +124,30 @@ class Sim:
         models = Models.empty(nb)
         rows = models.rows
         for i, name in enumerate(self.names):
-            m, I_b = self.params[i, 0], self.params[i, 1:4]
+            m, I_b = self.params[i, LY.PARAM_M], self.params[i, LY.PARAM_I_B]
             me = scene.model_effects(name)
             kind, I_p, r_b, anchor = 0, np.diag(I_b), np.zeros(3), np.zeros(3)
             if "spherical_joint" in me:
                 kind |= KIND_JOINT
                 anchor = me["spherical_joint"].values["anchor_w"]
-                r_b = K.quat_to_matrix(self.x[i, 3:7]).T @ (self.x[i, 0:3] - anchor)
+                r_b = K.quat_to_matrix(self.x[i, LY.STATE_Q]).T @ (self.x[i, LY.STATE_P_W] - anchor)
                 I_p = K.parallel_axis(np.diag(I_b), m, -r_b)
-                self.x[i, 0:3], self.x[i, 7:10] = K.pivot_kinematics(self.x[i, 3:7], self.x[i, 10:13], anchor, r_b)
+                self.x[i, LY.STATE_P_W], self.x[i, LY.STATE_V_W] = K.pivot_kinematics(
+                    self.x[i, LY.STATE_Q], self.x[i, LY.STATE_OMEGA_B], anchor, r_b)
             if "reaction_wheels" in me:
                 kind |= KIND_WHEELS
                 w = me["reaction_wheels"].values
-                rows[i, MODEL_LAYOUT["J"]] = w["J"]
-                rows[i, 19:22] = w["torque_limit"], w["speed_limit"], w["c_w"]
-            rows[i, 0] = kind
-            rows[i, MODEL_LAYOUT["I_p"]] = np.asarray(I_p).reshape(9)
-            rows[i, MODEL_LAYOUT["r_b"]] = r_b
-            rows[i, MODEL_LAYOUT["anchor_w"]] = anchor
+                rows[i, LY.MODEL_J] = w["J"]
+                rows[i, LY.MODEL_TORQUE_LIMIT], rows[i, LY.MODEL_SPEED_LIMIT] = w["torque_limit"], w["speed_limit"]
+                rows[i, LY.MODEL_C_W] = w["c_w"]
+            rows[i, LY.MODEL_KIND] = kind
+            rows[i, LY.MODEL_I_P] = np.asarray(I_p).reshape(9)
+            rows[i, LY.MODEL_R_B] = r_b
+            rows[i, LY.MODEL_ANCHOR_W] = anchor
         return models
 
     def _kind(self, i: int) -> int:
-        return int(self._models.rows[i, 0])
+        return int(self._models.rows[i, LY.MODEL_KIND])
 
     # ---- what runs -------------------------------------------------------------------------
     @property
@@ -170,7 +173,7 @@ class Sim:
                 if kind & KIND_WHEELS:
                     extra.append("wheel torques saturated per step (zero-order hold)")
                 if kind & KIND_JOINT:
-                    r_b = self._models.rows[i, MODEL_LAYOUT["r_b"]]
+                    r_b = self._models.rows[i, LY.MODEL_R_B]
                     extra.append(f"r_b={np.array2string(r_b, precision=4)}; p_w, v_w from pivot_kinematics after each step"
                                  + (" and for linear damping" if any(e.name == "linear_damping" for e in forces) else ""))
                 else:
@@ -185,7 +188,7 @@ class Sim:
 
     # ---- stepping -------------------------------------------------------------------------
     def _advance(self, n: int) -> None:
-        models = self._models if self._models.rows[:, 0].any() else None
+        models = self._models if self._models.rows[:, LY.MODEL_KIND].any() else None
         ad = self._adaptive
         before = None if ad is None else ad.nfev.copy()
         try:
@@ -243,17 +246,17 @@ class Sim:
                     raise V.LavenderInputError(field, f"body {name!r} is on a spherical_joint: its p_w and v_w follow "
                                                "from q and omega; set those instead")
         if p_w is not None:
-            x[0:3] = V.vector("p_w", p_w)
+            x[LY.STATE_P_W] = V.vector("p_w", p_w)
         if q is not None:
-            x[3:7] = V.quaternion("q", q)
+            x[LY.STATE_Q] = V.quaternion("q", q)
         if v_w is not None:
-            x[7:10] = V.vector("v_w", v_w)
+            x[LY.STATE_V_W] = V.vector("v_w", v_w)
         if omega_b is not None and omega_w is not None:
             raise V.LavenderInputError("omega_w", "give omega_b or omega_w, not both")
         if omega_b is not None:
-            x[10:13] = V.vector("omega_b", omega_b)
+            x[LY.STATE_OMEGA_B] = V.vector("omega_b", omega_b)
         if omega_w is not None:
-            x[10:13] = K.world_to_body(x[3:7], V.vector("omega_w", omega_w))
+            x[LY.STATE_OMEGA_B] = K.world_to_body(x[LY.STATE_Q], V.vector("omega_w", omega_w))
         W = None
         if Omega is not None:
             if not kind & KIND_WHEELS:
@@ -261,7 +264,8 @@ class Sim:
             W = V.vector("Omega", Omega)
         if kind & KIND_JOINT:
             r = self._models.rows[i]
-            x[0:3], x[7:10] = K.pivot_kinematics(x[3:7], x[10:13], r[MODEL_LAYOUT["anchor_w"]], r[MODEL_LAYOUT["r_b"]])
+            x[LY.STATE_P_W], x[LY.STATE_V_W] = K.pivot_kinematics(x[LY.STATE_Q], x[LY.STATE_OMEGA_B],
+                                                                 r[LY.MODEL_ANCHOR_W], r[LY.MODEL_R_B])
         self.x[i] = x
         if W is not None:
             self._models.Omega[i] = W
@@ -295,8 +299,8 @@ class Sim:
         joint's pivot for a jointed body, about the COM otherwise; L_wheels_w is zero without wheels."""
         i = self._i(name)
         r = self._models.rows[i]
-        return K.wheel_momentum(self.x[i, 3:7], self.x[i, 10:13], self._models.Omega[i],
-                                r[MODEL_LAYOUT["I_p"]].reshape(3, 3), r[MODEL_LAYOUT["J"]])
+        return K.wheel_momentum(self.x[i, LY.STATE_Q], self.x[i, LY.STATE_OMEGA_B], self._models.Omega[i],
+                                r[LY.MODEL_I_P].reshape(3, 3), r[LY.MODEL_J])
 
     def _i(self, name: str) -> int:
         if name not in self.names:
@@ -307,13 +311,15 @@ class Sim:
         """Kinetic energy of one body, or of all bodies (name=None), J: ½ m|v|² + ½ ωᵀ I_b ω with
         wheels locked (a jointed body's v_w is its kinematic COM velocity; wheel spin not included)."""
         idx = range(len(self.names)) if name is None else [self._i(name)]
-        return float(sum(K.kinetic_energy(self.params[i, 0], self.params[i, 1:4], self.x[i, 7:10], self.x[i, 10:13]) for i in idx))
+        return float(sum(K.kinetic_energy(self.params[i, LY.PARAM_M], self.params[i, LY.PARAM_I_B], self.x[i, LY.STATE_V_W],
+                                          self.x[i, LY.STATE_OMEGA_B]) for i in idx))
 
     def angular_momentum_w(self, name: str) -> np.ndarray:
         """Angular momentum about the body's COM, world frame, kg·m²/s."""
         i = self._i(name)
-        return K.angular_momentum_world(self.x[i, 3:7], self.params[i, 1:4], self.x[i, 10:13])
+        return K.angular_momentum_world(self.x[i, LY.STATE_Q], self.params[i, LY.PARAM_I_B],
+                                        self.x[i, LY.STATE_OMEGA_B])
 
     def linear_momentum_w(self, name: str) -> np.ndarray:
         i = self._i(name)
-        return self.params[i, 0] * self.x[i, 7:10]
+        return self.params[i, LY.PARAM_M] * self.x[i, LY.STATE_V_W]

@@ -13,8 +13,10 @@ from __future__ import annotations
 import difflib
 import numbers
 from collections.abc import Iterable, Sequence
+from typing import SupportsFloat
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 __all__ = [
     "LavenderInputError",
@@ -51,7 +53,7 @@ class LavenderInputError(ValueError):
     the offending value.
     """
 
-    def __init__(self, field: str, rule: str, detail: str = ""):
+    def __init__(self, field: str, rule: str, detail: str = "") -> None:
         self.field = field
         self.rule = rule
         self.detail = detail
@@ -163,7 +165,7 @@ def _check_finite(field: str, arr: np.ndarray, rule: str = "must be finite") -> 
         raise LavenderInputError(field, rule, f", got {_num(arr[idx])}{where}")
 
 
-def array(field: str, value, shape: Sequence[int | None]) -> np.ndarray:
+def array(field: str, value: ArrayLike, shape: Sequence[int | None]) -> np.ndarray:
     """Validate a finite real array of the given shape; return a float64 copy.
 
     ``shape`` entries may be ``None`` for "any length" in that position, e.g.
@@ -178,7 +180,7 @@ def array(field: str, value, shape: Sequence[int | None]) -> np.ndarray:
     return arr
 
 
-def vector(field: str, value, n: int = 3) -> np.ndarray:
+def vector(field: str, value: ArrayLike, n: int = 3) -> np.ndarray:
     """Validate a finite real vector of shape ``(n,)``; return a float64 copy."""
     return array(field, value, (n,))
 
@@ -188,7 +190,7 @@ def vector(field: str, value, n: int = 3) -> np.ndarray:
 # --------------------------------------------------------------------------
 
 
-def scalar(field: str, value, *, positive: bool = False, nonnegative: bool = False) -> float:
+def scalar(field: str, value: SupportsFloat, *, positive: bool = False, nonnegative: bool = False) -> float:
     """Validate a finite real number (bools rejected); return it as a float.
 
     ``positive=True`` requires > 0; ``nonnegative=True`` requires >= 0.
@@ -219,17 +221,17 @@ def scalar(field: str, value, *, positive: bool = False, nonnegative: bool = Fal
     return x
 
 
-def positive(field: str, value) -> float:
+def positive(field: str, value: SupportsFloat) -> float:
     """Shorthand for ``scalar(field, value, positive=True)`` (e.g. mass in kg)."""
     return scalar(field, value, positive=True)
 
 
-def dt(field: str, value) -> float:
+def dt(field: str, value: SupportsFloat) -> float:
     """Validate a time step in seconds: finite and > 0."""
     return scalar(field, value, positive=True)
 
 
-def integer(field: str, value, *, minimum: int | None = None) -> int:
+def integer(field: str, value: int | np.integer, *, minimum: int | None = None) -> int:
     """Validate a Python or NumPy integer (not bool, not float), optionally >= minimum."""
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
         raise LavenderInputError(field, "expected an integer", f", got {_describe(value)}")
@@ -239,7 +241,7 @@ def integer(field: str, value, *, minimum: int | None = None) -> int:
     return n
 
 
-def choice(field: str, value, allowed: Iterable[str]) -> str:
+def choice(field: str, value: str, allowed: Iterable[str]) -> str:
     """Validate that ``value`` is one of the ``allowed`` names; return it."""
     known = sorted(allowed)
     known_text = ", ".join(known)
@@ -259,7 +261,7 @@ def choice(field: str, value, allowed: Iterable[str]) -> str:
 # --------------------------------------------------------------------------
 
 
-def quaternion(field: str, value) -> np.ndarray:
+def quaternion(field: str, value: ArrayLike) -> np.ndarray:
     """Validate an orientation quaternion ``(x, y, z, w)``, scalar last.
 
     Rejects wrong shape, non-finite entries and zero (norm < 1e-300). A nonzero
@@ -310,7 +312,7 @@ def _checked_tensor(field: str, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, 
     return sym, eig, scale
 
 
-def inertia(field: str, value) -> np.ndarray:
+def inertia(field: str, value: ArrayLike) -> np.ndarray:
     """Validate body-frame inertia (kg*m^2); return principal moments, shape (3,).
 
     Accepts 3 principal moments or a 3x3 tensor. A tensor must be finite,
@@ -338,7 +340,7 @@ def inertia(field: str, value) -> np.ndarray:
     return moments
 
 
-def principal_axes(I, *, field: str = "inertia") -> tuple[np.ndarray, np.ndarray]:
+def principal_axes(I: ArrayLike, *, field: str = "inertia") -> tuple[np.ndarray, np.ndarray]:
     """Principal moments and axes of a symmetric positive definite 3x3 inertia.
 
     Returns ``(moments, R)``: moments (kg*m^2) sorted ascending, and ``R`` a

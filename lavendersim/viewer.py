@@ -40,13 +40,19 @@ import math
 import sys
 import threading
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
+from typing import TYPE_CHECKING, Any, Self, TextIO
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from . import validate as V
 from ._install import require
+from .generated import layout as LY
 from .kernels import K as KN
+
+if TYPE_CHECKING:  # annotations only: the Sim loads lazily
+    from .sim import Sim
 
 __all__ = ["Viewer", "validate_overlays", "xyzw_to_wxyz", "DEFAULT_COLOR", "MAX_VECTORS", "SCENES", "LAB_VIEWS",
            "run_scene"]
@@ -103,7 +109,7 @@ def _pos(field: str, value) -> float:
     return V.positive(field, value)
 
 
-def validate_overlays(overlays, body_names) -> dict:
+def validate_overlays(overlays: Mapping[str, Any] | None, body_names: Iterable[str]) -> dict[str, list[dict[str, Any]]]:
     """Check an overlay payload against the bodies of a scene; return a normalized copy.
 
     Result: ``{"axes": [{"body": str, "scale": float}], "vectors": [{"label": str, "origin":
@@ -158,7 +164,7 @@ def validate_overlays(overlays, body_names) -> dict:
 # --------------------------------------------------------------------------
 
 
-def xyzw_to_wxyz(q) -> np.ndarray:
+def xyzw_to_wxyz(q: ArrayLike) -> np.ndarray:
     """Our (x, y, z, w) quaternion as viser's (w, x, y, z)."""
     q = np.asarray(q, dtype=float)
     return np.array([q[3], q[0], q[1], q[2]])
@@ -217,6 +223,11 @@ def _extent(kind: str, dims: tuple) -> float:
 # --------------------------------------------------------------------------
 
 
+# a published frame's pose row: the body's p_w then q (x, y, z, w), taken from the state by name
+POSE_P = slice(0, LY.STATE_P_W.stop - LY.STATE_P_W.start)
+POSE_Q = slice(POSE_P.stop, POSE_P.stop + LY.STATE_Q.stop - LY.STATE_Q.start)
+
+
 class _Frame:
     __slots__ = ("number", "t", "names", "shapes", "pose", "overlays", "published_at")
 
@@ -231,7 +242,7 @@ class Viewer:
     """
 
     def __init__(self, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT, *, max_rate_hz: float = DEFAULT_RATE_HZ,
-                 label: str = "LavenderSim", arrow_radius: float | None = None, verbose: bool = False):
+                 label: str = "LavenderSim", arrow_radius: float | None = None, verbose: bool = False) -> None:
         if not isinstance(host, str) or not host:
             raise V.LavenderInputError("host", "expected an interface address (str)", f", got {host!r}")
         port = V.integer("port", port, minimum=0)
@@ -270,7 +281,7 @@ class Viewer:
         host = "127.0.0.1" if self.host in ("0.0.0.0", "") else self.host
         return f"http://{host}:{self.port}/"
 
-    def publish_frame(self, sim, overlays=None) -> int:
+    def publish_frame(self, sim: Sim, overlays: Mapping[str, Any] | None = None) -> int:
         """Validate ``overlays`` against ``sim``'s bodies, snapshot the poses, store as the latest
         frame and return its number. Never waits for a browser or for the scene update."""
         names, x, bodies = self._sim_parts(sim)
@@ -279,7 +290,7 @@ class Viewer:
         f.t = float(getattr(sim, "t", 0.0))
         f.names = tuple(names)
         f.shapes = tuple(_shape_of(bodies[n]) for n in names)
-        f.pose = np.array(x[:, 0:7], dtype=float)
+        f.pose = np.concatenate([x[:, LY.STATE_P_W], x[:, LY.STATE_Q]], axis=1).astype(float)  # POSE_P, POSE_Q
         if not np.all(np.isfinite(f.pose)):
             raise V.LavenderInputError("sim", "state is not finite (diverged?); nothing published")
         f.overlays = ov
@@ -307,7 +318,7 @@ class Viewer:
                 self._applied_cv.wait(left)
         return True
 
-    def scene_state(self) -> dict:
+    def scene_state(self) -> dict[str, Any]:
         """What the viser scene shows now (deep copy): frame number, t, per-body position and
         wxyz, axes per body, and the drawn vectors (label, start, end, rgb, opacity)."""
         import copy
@@ -315,7 +326,7 @@ class Viewer:
         with self._state_lock:
             return copy.deepcopy(self._state)
 
-    def handles(self) -> dict:
+    def handles(self) -> dict[str, Any]:
         """The viser scene handles: {"bodies": {name: node}, "axes": {name: frame handle},
         "vectors": [{"node", "shaft", "head", "label"}]} (read them, don't assign)."""
         with self._state_lock:
@@ -326,7 +337,7 @@ class Viewer:
     def clients(self) -> int:
         return len(self.server.get_clients())
 
-    def stats(self) -> dict:
+    def stats(self) -> dict[str, Any]:
         with self._lock:
             return {"published": self._published, "applied": self._applied, "dropped": self._dropped,
                     "clients": self.clients(), "last_error": repr(self.last_error) if self.last_error else None}
@@ -341,10 +352,10 @@ class Viewer:
         self._thread.join(timeout=5)
         self.server.stop()
 
-    def __enter__(self):
+    def __enter__(self) -> Self:
         return self
 
-    def __exit__(self, *exc):
+    def __exit__(self, *exc: object) -> None:
         self.close()
 
     # ---- internals ------------------------------------------------------------------------
@@ -356,8 +367,8 @@ class Viewer:
         if names is None or x is None or bodies is None:
             raise V.LavenderInputError("sim", "expected a lavendersim.Sim (names, bodies, x)", f", got {type(sim).__name__}")
         x = np.asarray(x)
-        if x.ndim != 2 or x.shape[0] != len(names) or x.shape[1] < 7:
-            raise V.LavenderInputError("sim", f"state must have shape ({len(names)}, 13)", f", got {x.shape}")
+        if x.ndim != 2 or x.shape[0] != len(names) or x.shape[1] < max(LY.STATE_P_W.stop, LY.STATE_Q.stop):
+            raise V.LavenderInputError("sim", f"state must have shape ({len(names)}, {LY.STATE_SIZE})", f", got {x.shape}")
         return list(names), x, bodies
 
     def _run(self) -> None:
@@ -416,8 +427,8 @@ class Viewer:
                 sc.add_mesh_simple(f"{node_name}/shape", v, fc, color=color, flat_shading=False)
             axes = sc.add_frame(f"{node_name}/axes", axes_length=DEFAULT_AXES_SCALE, axes_radius=0.012, visible=False)
             self._bodies[name] = {"node": node, "shape": (kind, dims), "axes": axes}
-        centre = f.pose[:, 0:3].mean(axis=0)
-        span = max(ext, float(np.ptp(f.pose[:, 0:3], axis=0).max()) if len(f.names) > 1 else ext)
+        centre = f.pose[:, POSE_P].mean(axis=0)
+        span = max(ext, float(np.ptp(f.pose[:, POSE_P], axis=0).max()) if len(f.names) > 1 else ext)
         self.server.initial_camera.look_at = tuple(centre)
         self.server.initial_camera.position = tuple(centre + span * np.array([1.3, -1.8, 1.0]))
         self._signature = (f.names, f.shapes)
@@ -445,7 +456,7 @@ class Viewer:
                 self._build(f)
             for i, name in enumerate(f.names):
                 b = self._bodies[name]
-                pos, wxyz = f.pose[i, 0:3], xyzw_to_wxyz(f.pose[i, 3:7])
+                pos, wxyz = f.pose[i, POSE_P], xyzw_to_wxyz(f.pose[i, POSE_Q])
                 b["node"].position = pos
                 b["node"].wxyz = wxyz
                 state["bodies"][name] = {"position": pos.tolist(), "wxyz": wxyz.tolist(), "shape": b["shape"]}
@@ -577,7 +588,7 @@ LAB_VIEWS = {"03": "lab03", "04": "wheel"}
 
 
 def run_scene(name: str, *, duration: float | None = None, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT,
-              rate_hz: float = 60.0, viewer: Viewer | None = None, out=sys.stdout) -> dict:
+              rate_hz: float = 60.0, viewer: Viewer | None = None, out: TextIO = sys.stdout) -> dict[str, Any]:
     """Run scene ``name`` in real time, publishing ``rate_hz`` frames per second, for ``duration``
     seconds of simulated time (None: until interrupted). Returns the viewer's stats."""
     V.choice("scene", name, SCENES)

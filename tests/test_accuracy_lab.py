@@ -12,6 +12,7 @@ import math
 import numpy as np
 import pytest
 
+from conftest import have
 from lavendersim import backends as B
 from lavendersim import labs
 from lavendersim.labs import accuracy as A
@@ -75,7 +76,8 @@ def test_every_integrator_backend_and_peer_appears(quick):
         for backend in B.BACKENDS:
             assert f"{name} [{backend}]" in methods, f"{name} [{backend}]"
     assert {"scipy RK45", "scipy DOP853"} <= methods
-    mujoco, _ = A._mujoco()
+    mujoco, why = A._mujoco()
+    assert (mujoco is not None) == have("mujoco"), why     # under CI=true MuJoCo must be measured
     if mujoco is not None:
         assert {"MuJoCo Euler", "MuJoCo implicitfast", "MuJoCo RK4"} <= methods
         assert data["mujoco"].startswith("measured")
@@ -123,8 +125,7 @@ def test_adaptive_and_peers_converge_to_the_reference(quick):
             tight = pts[-1]
             assert tight["attitude_error"] <= 100 * tight["value"], (label, case)
             assert tight["attitude_error"] < pts[0]["attitude_error"], (label, case)
-    mujoco, _ = A._mujoco()
-    if mujoco is not None:
+    if have("mujoco"):
         for case in {p["case"] for p in data["points"]}:
             pts = _points(data, case, "MuJoCo RK4")
             assert abs(_order(pts) - 4) <= 0.35
@@ -219,7 +220,8 @@ def test_runs_and_says_so_without_mujoco(tmp_path, monkeypatch):
     monkeypatch.setattr(A, "_mujoco", lambda: (None, "ModuleNotFoundError: No module named 'mujoco'"))
     monkeypatch.setattr(A, "QUICK", dict(A.QUICK, cases=("diag_w2",), dt_exps=(6, 7, 8, 9), numpy_dt_exps=(6,),
                                          rtols=(1e-4, 1e-6), numpy_rtols=(1e-4,), mj_dt_exps=(6,)))
-    result = labs.run("accuracy", tmp_path, quick=True)
+    # workers=1: in this process, where the monkeypatched _mujoco applies (and no worker pool to start)
+    result = labs.run("accuracy", tmp_path, quick=True, workers=1)
     data = json.loads((tmp_path / "accuracy" / "results.json").read_text())
     assert data["mujoco"].startswith("not measured") and "No module named 'mujoco'" in data["mujoco"]
     assert data["machine"]["mujoco"] is None

@@ -3,6 +3,7 @@ reference written here with the generated NumPy kernels, one body and one step a
 from __future__ import annotations
 
 import importlib
+import re
 import shutil
 
 import numpy as np
@@ -321,7 +322,8 @@ def test_divergence_earliest_step_models_and_structured():
         CBackend().advance(s0, params[:1], np.zeros((0, 8)), "euler", False, 0.01, 300, m0)
     assert late.value.step > got["c"][0]
     # splitting (one body at a time in C): angular damping beyond its limit on body 0 (fails at step
-    # 252) and, stronger, on body 2 (fails at step 76)
+    # ~250) and, stronger, on body 2 (fails at step 75). The exploding attitude is chaotic, so the exact
+    # step follows the rounding of the derived splitting kernels (it was 76 with the hand-written flows).
     pst, pp = random_bodies(np.random.default_rng(37), 3)
     eff = np.array([effect(5, 0, 150.0), effect(5, 2, 400.0)])
     res = {}
@@ -329,7 +331,7 @@ def test_divergence_earliest_step_models_and_structured():
         with pytest.raises(DivergenceError) as info:
             backend.advance(pst.copy(), pp, eff, "splitting", True, 0.05, 400)
         res[backend.name] = (info.value.step, info.value.body)
-    assert res["c"] == res["numpy"] == (76, 2)
+    assert res["c"] == res["numpy"] == (75, 2)
 
 
 def test_non_finite_input():
@@ -443,7 +445,7 @@ def test_stale_copy_of_generated(tmp_path):
     with pytest.raises(StaleBuildError) as info:
         c_backend.check_build(tmp_path)
     msg = str(info.value)
-    assert "pip install -e ." in msg
+    assert f"`{c_backend.REBUILD}`" in msg       # the rebuild command for how this copy was installed
     assert "lavendersim derive" in msg  # the edit also broke generated/'s own manifest
     assert isinstance(info.value, ImportError)
 
@@ -451,7 +453,7 @@ def test_stale_copy_of_generated(tmp_path):
 def test_stale_hash_on_import(monkeypatch):
     monkeypatch.setattr(_c, "GENERATED_HASH", "0" * 64)
     try:
-        with pytest.raises(StaleBuildError, match=r"pip install -e \."):
+        with pytest.raises(StaleBuildError, match=re.escape(f"`{c_backend.REBUILD}`")):
             importlib.reload(c_backend)
     finally:
         monkeypatch.undo()

@@ -24,6 +24,10 @@ from lavendersim import effects as E
 from lavendersim import extending
 from lavendersim.validate import LavenderInputError
 
+from conftest import have, require
+
+pytestmark = pytest.mark.needs("cc")  # the guide's command compiles the C of the set
+
 GUIDE = Path(__file__).resolve().parent.parent / "docs" / "extending.md"
 INTEGRATORS = ("euler", "semi_implicit_euler", "rk4", "dopri5", "splitting", "implicit_gyro")
 RTOL = 1e-12
@@ -285,7 +289,9 @@ def test_c_and_numpy_agree_bitwise_with_built_in_effects_around(guide):
 # ---------------------------------------------------------------- step 4: CasADi
 
 def test_casadi_expression_matches_the_independent_formula(guide):
-    casadi = pytest.importorskip("casadi")
+    require("control")
+    import casadi
+
     x, I_b = random_states(5, seed=7)
     for i in range(5):
         F, tau = E.casadi_expr("gravity_gradient", p_w=x[i, 0:3], q=x[i, 3:7], I_b=I_b[i], mu=MU, center_w=CENTER)
@@ -310,16 +316,8 @@ def test_plain_kernel_of_the_guide(guide):
     want = [3 / 80 * m * (h * h + 4 * R * R)] * 2 + [3 / 10 * m * R * R]
     assert close(I, want)
     lv.Body("cone", m, I)
-    if "casadi" in sys.modules or _has_casadi():
+    if have("control"):
         assert close(np.asarray(my.casadi.inertia_cone(m, R, h)).ravel(), want)
-
-
-def _has_casadi() -> bool:
-    try:
-        import casadi  # noqa: F401
-    except ImportError:
-        return False
-    return True
 
 
 # ---------------------------------------------------------------- what can go wrong

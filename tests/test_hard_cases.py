@@ -95,6 +95,7 @@ def test_thin_rod_and_extreme_ratios(lab, trial):
     assert lab[f"{trial}_reference_vs_dop853_attitude"] <= 1e-10
 
 
+@pytest.mark.slow   # the fast_major_spin case again, on NumPy (the lab fixture runs it on C)
 def test_short_trials_on_numpy_backend():
     # runs of at most C_BACKEND_ABOVE steps use the NumPy backend when asked (here implicit_gyro at dt = 1e-2)
     out = H.run_case("fast_major_spin", backend="numpy")
@@ -180,6 +181,7 @@ def test_no_silent_nan_at_huge_dt():
 # ------------------------------------------------------------------------------------ CLI
 
 
+@pytest.mark.slow   # three CLI runs of cases the lab fixture checks in-process; lab exit codes: test_labs.py
 def test_cli_passes_and_failure_mode_exits_1(tmp_path):
     ok = subprocess.run([sys.executable, "-m", "lavendersim.cli", "lab", "hard", "--out", str(tmp_path),
                          "--cases", "fast_major_spin,long_horizon"], capture_output=True, text=True, timeout=300)

@@ -6,6 +6,10 @@ import pytest
 import lavendersim as lv
 from lavendersim import reference as R
 
+# Long NumPy runs are in the slow set (NUMPY_SLOW: tests/conftest.py); test_c_and_numpy_agree
+# checks quickly that NumPy computes what C computes.
+from conftest import NUMPY_SLOW
+
 BACKENDS = ["numpy", "c"]
 I3 = (1.0, 2.0, 3.0)
 W0 = (1.0, 0.5, 0.2)
@@ -147,7 +151,7 @@ def test_dopri5_that_cannot_meet_its_tolerance_names_the_body_and_restores(backe
 
 # ---------------------------------------------------------------- splitting
 
-@pytest.mark.parametrize("backend", BACKENDS)
+@pytest.mark.parametrize("backend", NUMPY_SLOW)
 def test_splitting_energy_stays_bounded_where_rk4_drifts(backend):
     """dt = 0.3 (|omega| dt ~ 0.35), 10^4 steps: the splitting's energy error oscillates (no secular
     growth) and L_w is conserved to rounding; RK4's energy decays steadily."""
@@ -226,7 +230,7 @@ def test_c_and_numpy_agree(integrator):
     np.testing.assert_allclose(out["c"], out["numpy"], rtol=0, atol=1e-11)
 
 
-@pytest.mark.parametrize("backend", BACKENDS)
+@pytest.mark.parametrize("backend", NUMPY_SLOW)
 def test_splitting_with_effects_converges_at_second_order(backend):
     ref = lv.Sim(forced_scene(), dt=2.5e-4, integrator="rk4", backend=backend)
     ref.run(4000)

@@ -1,7 +1,8 @@
 """Every generated kernel agrees through C, NumPy and CasADi and as the SymPy expression at 30 digits.
 
 Inputs are drawn (seeded) from each input's declared domain on the SymPy side. Tolerance, per output:
-|value - ref| <= 1e-12 * max(1, max |ref| of that output).
+|value - ref| <= 1e-12 * max(1, max |ref| of that output). The CasADi kernels need the control extra
+(`needs("control")`, tests/conftest.py); C and NumPy are checked on every install.
 """
 from __future__ import annotations
 
@@ -9,17 +10,9 @@ import numpy as np
 import pytest
 import sympy as sp
 
-try:
-    from lavendersim.derive import all_kernels
-except ImportError:  # package mapping not installed: run from the repo root
-    from derive import all_kernels
-
 from lavendersim.generated import kernels_numpy
 
-import casadi
-
 from lavendersim.backends import c_backend  # required: the C build is part of `pip install -e .`
-from lavendersim.generated import kernels_casadi
 
 N_POINTS = 6
 DPS = 30
@@ -27,8 +20,25 @@ RTOL = 1e-12
 
 
 @pytest.fixture(scope="module")
-def sympy_kernels():
-    return {k.name: k for k in all_kernels()}
+def sympy_kernels(derivation):
+    """The session's derivation (tests/conftest.py): derive.all_kernels(), computed once."""
+    return {k.name: k for k in derivation.kernels}
+
+
+@pytest.fixture(scope="module")
+def cases(sympy_kernels):
+    """name -> (input points, SymPy reference at 30 digits per point), computed once per kernel and
+    shared by the C/NumPy and the CasADi checks."""
+    memo = {}
+
+    def get(name):
+        if name not in memo:
+            kernel = sympy_kernels[name]
+            rng = np.random.default_rng(sum(map(ord, name)) * 7919)
+            points = [draw_inputs(rng, kernel, i) for i in range(N_POINTS)]
+            memo[name] = points, [sympy_reference(kernel, p) for p in points]
+        return memo[name]
+    return get
 
 
 def _unit(rng, n):
@@ -99,27 +109,40 @@ def test_sympy_and_numpy_tables_match(sympy_kernels):
 
 
 @pytest.mark.parametrize("name", list(kernels_numpy.KERNELS))
-def test_kernel_agrees(name, sympy_kernels):
+def test_kernel_agrees(name, sympy_kernels, cases):
     kernel = sympy_kernels[name]
     fn, in_spec, out_spec = kernels_numpy.KERNELS[name]
     assert [(a.name, a.shape) for a in kernel.inputs] == [(n, tuple(s)) for n, s in in_spec]
     assert [(a.name, a.shape) for a in kernel.outputs] == [(n, tuple(s)) for n, s in out_spec]
-    rng = np.random.default_rng(sum(map(ord, name)) * 7919)
-    points = [draw_inputs(rng, kernel, i) for i in range(N_POINTS)]
+    points, refs = cases(name)
     # evaluate C and NumPy on the whole batch at once (exercises the batch packing too)
     batched = [np.stack([p[j] for p in points]) for j in range(len(in_spec))]
     c_out = as_list(c_backend.eval_kernel(name, *batched))
     np_out = as_list(fn(*batched))
-    cas = getattr(kernels_casadi, name)
-    for i, p in enumerate(points):
-        ref = sympy_reference(kernel, p)
-        cas_out = as_list(cas(*[casadi.DM(np.ravel(v)) if np.ndim(v) else float(v) for v in p]))
-        for (oname, shape), r, c, n, ca in zip(out_spec, ref, c_out, np_out, cas_out):
-            ca = np.array(casadi.DM(ca)).ravel().reshape(r.shape)
+    for i, ref in enumerate(refs):
+        for (oname, shape), r, c, n in zip(out_spec, ref, c_out, np_out):
             tol = RTOL * max(1.0, float(np.max(np.abs(r))))
             assert c[i].shape == r.shape and n[i].shape == r.shape
             assert np.max(np.abs(c[i] - r)) <= tol, f"C {name}.{oname} at point {i}: {c[i]} vs {r}"
             assert np.max(np.abs(n[i] - r)) <= tol, f"NumPy {name}.{oname} at point {i}: {n[i]} vs {r}"
+
+
+@pytest.mark.needs("control")
+@pytest.mark.parametrize("name", list(kernels_numpy.KERNELS))
+def test_casadi_kernel_agrees(name, cases):
+    import casadi
+
+    from lavendersim.generated import kernels_casadi
+
+    _, _, out_spec = kernels_numpy.KERNELS[name]
+    cas = getattr(kernels_casadi, name)
+    points, refs = cases(name)
+    for i, (p, ref) in enumerate(zip(points, refs)):
+        cas_out = as_list(cas(*[casadi.DM(np.ravel(v)) if np.ndim(v) else float(v) for v in p]))
+        assert len(cas_out) == len(out_spec), (name, len(cas_out))
+        for (oname, shape), r, ca in zip(out_spec, ref, cas_out):
+            ca = np.array(casadi.DM(ca)).ravel().reshape(r.shape)
+            tol = RTOL * max(1.0, float(np.max(np.abs(r))))
             assert np.max(np.abs(ca - r)) <= tol, f"CasADi {name}.{oname} at point {i}: {ca} vs {r}"
 
 

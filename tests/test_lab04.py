@@ -8,15 +8,29 @@ import sys
 
 import pytest
 
+from conftest import NUMPY_SLOW
 from lavendersim import labs
 from lavendersim.validate import LavenderInputError
 
 
-@pytest.mark.parametrize("backend", ["c", "numpy"])
-def test_lab04(tmp_path, backend):
-    r = labs.run("04", tmp_path, backend=backend)
+@pytest.fixture(scope="module")
+def lab04(tmp_path_factory):
+    """Lab 04 run at most once per backend, shared by the checks below: backend -> (result, out dir)."""
+    memo = {}
+
+    def run(backend):
+        if backend not in memo:
+            d = tmp_path_factory.mktemp(f"lab04_{backend}")
+            memo[backend] = labs.run("04", d, backend=backend), d
+        return memo[backend]
+    return run
+
+
+@pytest.mark.parametrize("backend", NUMPY_SLOW)   # the NumPy lab takes twice the C one: slow set
+def test_lab04(lab04, backend):
+    r, out = lab04(backend)
     assert r.passed, "; ".join(c.describe() for c in r.failures)
-    data = json.loads((tmp_path / "04" / "results.json").read_text())
+    data = json.loads((out / "04" / "results.json").read_text())
     assert data == json.loads(json.dumps(dict(r)))
     for key in ("wheel_all_positive", "cube_all_negative", "reversed_ok"):
         assert data[key] is True
@@ -27,13 +41,13 @@ def test_lab04(tmp_path, backend):
     assert data["gyro_coupling_omega_y_over_omega_x"] > 0.1  # pre-spun z wheel: gyroscopic coupling
     assert data["saturation_applied_max"] == 0.2
     assert data["saturation_peak_wheel_speed"] <= 400 + data["saturation_step_increment"]
-    png = tmp_path / "04" / "reaction_wheel.png"
+    png = out / "04" / "reaction_wheel.png"
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png.stat().st_size > 1000
 
 
-def test_lab04_backends_agree(tmp_path):
-    a = labs.run("04", tmp_path / "c", backend="c")
-    b = labs.run("04", tmp_path / "n", backend="numpy")
+@pytest.mark.slow   # needs the NumPy lab; NumPy = C for wheels: test_wheels_joint.py (mixed scene)
+def test_lab04_backends_agree(lab04):
+    (a, _), (b, _) = lab04("c"), lab04("numpy")
     assert abs(a["omega_x_T"] - b["omega_x_T"]) < 1e-9 and abs(a["Omega_x_T"] - b["Omega_x_T"]) < 1e-9
 
 
@@ -46,11 +60,15 @@ def test_lab04_torque_option_and_bad_options(tmp_path):
         assert e.value.field == field
 
 
+@pytest.mark.slow   # the whole lab again, through the CLI
 def test_lab04_cli(tmp_path):
     p = subprocess.run([sys.executable, "-m", "lavendersim.cli", "lab", "04", "--out", str(tmp_path)],
-                       capture_output=True, text=True, timeout=300)
+                       capture_output=True, text=True, timeout=1800)
     assert p.returncode == 0, p.stderr
     assert "lab 04: all" in p.stdout
+
+
+def test_lab04_cli_rejects_a_bad_torque(tmp_path):
     p = subprocess.run([sys.executable, "-m", "lavendersim.cli", "lab", "04", "--out", str(tmp_path), "--torque", "0.5"],
                        capture_output=True, text=True, timeout=300)
     assert p.returncode == 2 and "torque" in p.stderr

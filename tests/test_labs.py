@@ -175,6 +175,7 @@ def _check_lab03(r):
     assert data["omega_b0_mixed"] == [3.0, 2.0, 1.0] and data["T"] == 3.0
 
 
+@pytest.mark.slow   # the same lab on NumPy; test_lab03_c_backend checks the same figures
 def test_lab03_numpy(tmp_path):
     _check_lab03(labs.run("03", tmp_path, backend="numpy"))
 
@@ -236,9 +237,10 @@ def test_cli_bad_option_exits_2(tmp_path):
     assert out.returncode == 2 and "dt" in out.stderr
 
 
+@pytest.mark.slow   # every lab end to end on NumPy (minutes); each lab has its own faster tests here
 def test_cli_all(tmp_path):
     out = subprocess.run([sys.executable, "-m", "lavendersim.cli", "lab", "all", "--out", str(tmp_path),
-                          "--backend", "numpy"], capture_output=True, text=True, timeout=600)
+                          "--backend", "numpy"], capture_output=True, text=True, timeout=3600)
     assert out.returncode == 0, out.stdout + out.stderr
     assert f"all {len(labs.LABS)} labs pass" in out.stdout
     for name in labs.LABS:

@@ -1,12 +1,15 @@
 """The live viewer from Python: payload validation, the scene state it draws, and that publishing
 never waits for browsers (none, a stalled one, a slow one, one that disconnects mid-run).
 
-Browser-side checks (a real headless Chromium) are in test_viewer_browser.py.
+Browser-side checks (a real headless Chromium) are in test_viewer_browser.py. Payload validation
+runs everywhere; a live Viewer needs the viewer extra (viser): `@pytest.mark.needs("viewer")`
+(tests/conftest.py: skipped without it, failed without it under CI=true).
 """
 from __future__ import annotations
 
 import base64
 import os
+import re
 import socket
 import subprocess
 import sys
@@ -19,6 +22,8 @@ import pytest
 import lavendersim as lv
 from lavendersim import viewer as VW
 from lavendersim.validate import LavenderInputError
+
+DEADLINE = 60.0   # s, for events waited on: only ever reached when the behaviour is broken
 
 
 def _sim(omega=(1.0, 2.0, 3.0)):
@@ -50,7 +55,7 @@ def viewer():
 
 def _publish(viewer, sim, overlays):
     n = viewer.publish_frame(sim, overlays)
-    assert viewer.wait_applied(n, 10.0), viewer.stats()
+    assert viewer.wait_applied(n, DEADLINE), viewer.stats()
     assert viewer.last_error is None, viewer.last_error
     return viewer.scene_state()
 
@@ -119,6 +124,7 @@ def test_defaults_and_no_mutation():
     assert VW.validate_overlays(None, ["cube"]) == {"axes": [], "vectors": []}
 
 
+@pytest.mark.needs("viewer")
 def test_bad_payload_draws_nothing(viewer):
     sim = _sim()
     before = _publish(viewer, sim, GOOD)
@@ -126,8 +132,8 @@ def test_bad_payload_draws_nothing(viewer):
     sim.run(10)
     with pytest.raises(LavenderInputError, match=r"overlays\.vectors\[1\]\.color"):
         viewer.publish_frame(sim, _bad(color=[1, 0, 0, 2]))
-    time.sleep(0.1)
-    assert viewer.stats()["published"] == published
+    assert viewer.stats()["published"] == published           # not stored: nothing to apply
+    assert viewer.wait_applied(published, DEADLINE)
     assert viewer.scene_state() == before
     with pytest.raises(LavenderInputError, match="sim"):
         viewer.publish_frame(object(), GOOD)
@@ -148,6 +154,7 @@ def test_quaternion_convention():
     assert list(VW.xyzw_to_wxyz([0.1, 0.2, 0.3, 0.9])) == [0.9, 0.1, 0.2, 0.3]
 
 
+@pytest.mark.needs("viewer")
 def test_scene_holds_published_poses(viewer):
     sim = _sim()
     sim.run(700)
@@ -174,6 +181,7 @@ def test_scene_holds_published_poses(viewer):
     assert not np.allclose(st2["bodies"]["cube"]["wxyz"], st["bodies"]["cube"]["wxyz"])
 
 
+@pytest.mark.needs("viewer")
 def test_axes_follow_their_body(viewer):
     sim = _sim()
     st = _publish(viewer, sim, GOOD)
@@ -189,6 +197,7 @@ def test_axes_follow_their_body(viewer):
     assert not h["axes"]["cube"].visible and h["axes"]["ball"].visible
 
 
+@pytest.mark.needs("viewer")
 def test_vectors_in_world_coordinates(viewer):
     sim = _sim()
     st = _publish(viewer, sim, GOOD)
@@ -219,6 +228,7 @@ def test_vectors_in_world_coordinates(viewer):
     assert not h[0]["node"].visible and not h[1]["node"].visible
 
 
+@pytest.mark.needs("viewer")
 def test_anti_parallel_vector(viewer):
     sim = _sim()
     _publish(viewer, sim, {"vectors": [{"origin": [0, 0, 0], "vector": [0, 0, -2]}]})
@@ -227,6 +237,7 @@ def test_anti_parallel_vector(viewer):
     assert 1 - 2 * (x * x + y * y) == pytest.approx(-1.0)   # R[2, 2]: +z maps to -z
 
 
+@pytest.mark.needs("viewer")
 def test_chapter_payload_with_a_wheel_like_sim(viewer):
     """The chapter's exact call shape: tolist() vectors from a running sim."""
     sim = _sim()
@@ -244,18 +255,11 @@ def test_chapter_payload_with_a_wheel_like_sim(viewer):
 
 
 # ---- never stalls -----------------------------------------------------------------------------
-
-def _publish_cost(viewer, sim, seconds=0.6):
-    """Publish as fast as possible for `seconds`; per-call times in µs."""
-    ts = []
-    end = time.perf_counter() + seconds
-    while time.perf_counter() < end:
-        sim.step()
-        t = time.perf_counter()
-        viewer.publish_frame(sim, GOOD)
-        ts.append(time.perf_counter() - t)
-    return np.array(ts) * 1e6
-
+#
+# Behaviour, never durations or counts per time window: every publish_frame call returns, the
+# frames coalesce (latest wins) at a bounded rate, and with a stalled, a slow and a disconnecting
+# client a healthy client still receives the LATEST frame. Waits are for events, with generous
+# deadlines (a loaded 2-core machine may take seconds where an idle one takes milliseconds).
 
 def _camera_message() -> bytes:
     """What a browser sends first; viser counts a client as connected once it arrives."""
@@ -281,6 +285,7 @@ def _stalled_client(port):
 
     s = socket.socket()
     s.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+    s.settimeout(DEADLINE)
     s.connect(("127.0.0.1", port))
     key = base64.b64encode(os.urandom(16)).decode()
     s.sendall((f"GET / HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
@@ -288,117 +293,286 @@ def _stalled_client(port):
                f"Sec-WebSocket-Protocol: viser-v{viser.__version__}\r\n\r\n").encode())
     head = b""
     while b"\r\n\r\n" not in head:
-        head += s.recv(1)
+        chunk = s.recv(1)
+        assert chunk, f"server closed the connection during the handshake: {head!r}"
+        head += chunk
     assert b" 101 " in head.split(b"\r\n")[0], head
     s.sendall(_masked_frame(_camera_message()))
     return s
 
 
-def _reading_client(port, delay=0.0, stop=None, counter=None):
-    """A websocket client that reads every message (sleeping `delay` s after each)."""
-    from websockets.sync.client import connect
-    import viser
+def _queued(sock: socket.socket, ioctl: int) -> int:
+    import fcntl
+    import struct
 
-    ws = connect(f"ws://127.0.0.1:{port}", subprotocols=[f"viser-v{viser.__version__}"], max_size=None)
-    ws.send(_camera_message())
+    return struct.unpack("i", fcntl.ioctl(sock.fileno(), ioctl, struct.pack("i", 0)))[0]
 
-    def loop():
+
+def _backlog(client: socket.socket) -> tuple[int, int]:
+    """(bytes the server has queued for `client` but could not deliver, bytes delivered to `client`'s
+    socket and not read). Both > 0: the connection is backed up end to end — the client's receive
+    window is closed and the server's kernel send queue holds data (Linux: TIOCOUTQ / FIONREAD on
+    the server's end of the connection, found among this process's sockets; the server is ours).
+    The first is -1 once the server has dropped the connection (websockets' keepalive closes a
+    client that answers no ping for ~40 s)."""
+    import termios
+
+    want = client.getsockname()
+    server_q = None
+    for fd in os.listdir("/proc/self/fd"):
         try:
-            while not stop.is_set():
-                ws.recv(timeout=1.0)
-                counter.append(time.monotonic())
-                if delay:
-                    time.sleep(delay)
-        except Exception:
-            pass
+            if not os.readlink(f"/proc/self/fd/{fd}").startswith("socket:"):
+                continue
+            s = socket.socket(fileno=os.dup(int(fd)))
+        except OSError:       # closed meanwhile, or not an inet socket: not the one we look for
+            continue
+        with s:
+            if s.family != socket.AF_INET or s.type != socket.SOCK_STREAM:
+                continue
+            try:
+                peer = s.getpeername()
+            except OSError:   # a listening socket has no peer
+                continue
+            if peer == want:
+                server_q = _queued(s, termios.TIOCOUTQ)
+                break
+    return (-1 if server_q is None else server_q), _queued(client, termios.FIONREAD)
 
-    th = threading.Thread(target=loop, daemon=True)
-    th.start()
-    return ws, th
+
+def _viser_messages(data: bytes) -> bytes:
+    """The msgpack body of one viser websocket message. viser's wire format (viser/infra/_infra.py,
+    `_message_producer`): [8 bytes msgpack size][8 bytes compressed size][zstd(msgpack)][binary
+    buffers], sizes little-endian."""
+    import zstandard
+
+    size, compressed = int.from_bytes(data[0:8], "little"), int.from_bytes(data[8:16], "little")
+    assert 16 + compressed <= len(data), f"not viser's wire format: sizes {size}, {compressed}, {len(data)} bytes"
+    body = zstandard.ZstdDecompressor().decompress(data[16:16 + compressed], max_output_size=size)
+    assert len(body) == size, (len(body), size)
+    return body
 
 
-def _wait_clients(viewer, n, timeout=10.0):
+class _Reader:
+    """A websocket client that reads every message on a helper thread (sleeping `delay` s after
+    each). It records how much it received, the highest viewer frame number it saw (the status
+    line "**frame N**" inside the decompressed message), and why it stopped (`error`: None when
+    stopped by `close()`)."""
+
+    FRAME = re.compile(rb"\*\*frame (\d+)\*\*")
+
+    def __init__(self, port, delay=0.0):
+        from websockets.sync.client import connect
+        import viser
+
+        self.delay = delay
+        self.messages = 0
+        self.bytes = 0
+        self.frame = 0
+        self.error: BaseException | None = None
+        self._cv = threading.Condition()
+        self._closing = threading.Event()
+        self.ws = connect(f"ws://127.0.0.1:{port}", subprotocols=[f"viser-v{viser.__version__}"], max_size=None,
+                          open_timeout=DEADLINE)
+        self.ws.send(_camera_message())
+        self.thread = threading.Thread(target=self._loop, daemon=True)
+        self.thread.start()
+
+    def _loop(self):
+        from websockets.exceptions import ConnectionClosed
+
+        try:
+            while True:
+                try:
+                    msg = self.ws.recv(timeout=1.0)
+                except TimeoutError:   # nothing yet: keep waiting (the publisher may be slow)
+                    continue
+                assert isinstance(msg, bytes), f"viser sends binary messages, got {type(msg).__name__}"
+                frames = [int(n) for n in self.FRAME.findall(_viser_messages(msg))]
+                with self._cv:
+                    self.messages += 1
+                    self.bytes += len(msg)
+                    self.frame = max([self.frame] + frames)
+                    self._cv.notify_all()
+                if self.delay:
+                    time.sleep(self.delay)
+        except ConnectionClosed as exc:
+            if not self._closing.is_set():
+                self.error = exc           # closed by the server, not by us
+        except BaseException as exc:       # recorded, asserted on by the test
+            self.error = exc
+        finally:
+            with self._cv:
+                self._cv.notify_all()
+
+    def wait(self, predicate, timeout=DEADLINE) -> bool:
+        """Wait until predicate(self) holds (True) or the reader stopped / the deadline passed."""
+        end = time.monotonic() + timeout
+        with self._cv:
+            while not predicate(self):
+                left = end - time.monotonic()
+                if left <= 0 or not self.thread.is_alive():
+                    return predicate(self)
+                self._cv.wait(min(left, 1.0))
+        return True
+
+    def close(self):
+        self._closing.set()
+        self.ws.close()
+        self.thread.join(DEADLINE)
+        assert not self.thread.is_alive(), "reader thread did not stop after close()"
+
+    def __repr__(self):
+        return (f"<reader: {self.messages} messages, {self.bytes} bytes, frame {self.frame}, "
+                f"alive={self.thread.is_alive()}, error={self.error!r}>")
+
+
+def _until(predicate, timeout=DEADLINE) -> bool:
+    """Poll predicate() until it holds (True) or the deadline passes (False)."""
+    end = time.monotonic() + timeout
+    while not predicate():
+        if time.monotonic() > end:
+            return predicate()
+        time.sleep(0.02)
+    return True
+
+
+def _wait_clients(viewer, n, timeout=DEADLINE):
     end = time.monotonic() + timeout
     while viewer.clients() != n and time.monotonic() < end:
         time.sleep(0.02)
-    assert viewer.clients() == n
+    assert viewer.clients() == n, (viewer.clients(), n)
 
 
-def test_publish_is_fast_and_coalesces_with_no_client():
+class _Publisher:
+    """Publishes frames on a helper thread until stopped; records every call's number, the call in
+    progress, and why it stopped. A blocked publish_frame shows as a thread that does not finish."""
+
+    def __init__(self, viewer, sim, overlays, each=None):
+        self.viewer, self.sim, self.overlays, self.each = viewer, sim, overlays, each
+        self.returned = 0
+        self.last_number = 0
+        self.error: BaseException | None = None
+        self._stop = threading.Event()
+        self.thread = threading.Thread(target=self._loop, daemon=True)
+        self.thread.start()
+
+    def _loop(self):
+        try:
+            while not self._stop.is_set():
+                self.sim.step()
+                ov = self.overlays(self.sim) if callable(self.overlays) else self.overlays
+                self.last_number = self.viewer.publish_frame(self.sim, ov)
+                self.returned += 1
+                if self.each:
+                    self.each(self)
+                time.sleep(0.001)
+        except BaseException as exc:   # recorded, asserted on by the test
+            self.error = exc
+
+    def stop(self):
+        """Stop; assert the thread finished (every call returned) and raised nothing."""
+        self._stop.set()
+        self.thread.join(DEADLINE)
+        assert not self.thread.is_alive(), \
+            f"publish_frame did not return within {DEADLINE} s ({self.returned} calls returned before)"
+        assert self.error is None, repr(self.error)
+
+
+@pytest.mark.needs("viewer")
+def test_publish_coalesces_latest_wins_at_a_bounded_rate_with_no_client():
+    t_open = time.monotonic()
     with VW.Viewer(port=0, max_rate_hz=30.0) as v:
         sim = _sim()
-        us = _publish_cost(v, sim, 0.6)
+        n = 0
+        end = time.monotonic() + DEADLINE
+        # publishing (microseconds per call) outpaces a 30 Hz apply rate: frames must coalesce
+        while v.stats()["dropped"] < 20 and time.monotonic() < end:
+            sim.step()
+            n = v.publish_frame(sim, GOOD)
         st = v.stats()
-        # > 60 publishes in 0.6 s outpaces the 30 Hz apply rate even on a loaded machine
-        assert st["published"] == len(us) > 60
-        assert st["dropped"] > 0
-        assert st["applied"] <= 0.6 * 30 + 3                      # bounded rate
-        # the rest coalesced; at most two are in flight when stats() is read (one waiting, one
-        # being applied by the viewer thread)
-        assert st["dropped"] >= st["published"] - st["applied"] - 2
-
-
-MANY = {"axes": [{"body": "cube"}], "vectors": [
-    {"label": f"v{i}", "origin": [0.0, 0.0, 0.0], "vector": [float(np.cos(i)), float(np.sin(i)), 0.1 * i],
-     "color": [0.0, 0.0, 1.0, 0.5]} for i in range(VW.MAX_VECTORS)]}
-
-
-def _timed_run(v, sim, seconds, during=None):
-    """Publish big frames (64 labelled vectors, so a stalled socket's buffers fill) for `seconds`,
-    ~1 kHz; returns per-call times in µs. `during(fraction)` is called between frames."""
-    ts = []
-    t_start = time.perf_counter()
-    end = t_start + seconds
-    while (now := time.perf_counter()) < end:
+        elapsed = time.monotonic() - t_open
+        assert st["dropped"] >= 20, st
+        assert st["published"] == n
+        # every frame is dropped (replaced while waiting), applied, or in flight: at most one
+        # waiting and one being applied when stats() is read
+        assert 0 <= st["published"] - st["applied"] - st["dropped"] <= 2, st
+        # the apply thread waits 1/max_rate_hz between frames: a load-proof upper bound on the
+        # count since the viewer opened (load only lengthens `elapsed`)
+        assert st["applied"] <= 1 + elapsed * 30.0, (st, elapsed)
+        # latest wins: the last published frame is the one in the scene
         sim.step()
-        MANY["vectors"][0]["vector"] = sim.state("cube").omega_w.tolist()
-        if during:
-            during((now - t_start) / seconds)
-        t = time.perf_counter()
-        v.publish_frame(sim, MANY)
-        ts.append(time.perf_counter() - t)
-        time.sleep(0.0005)
-    return np.array(ts) * 1e6
+        last = v.publish_frame(sim, GOOD)
+        assert v.wait_applied(last, DEADLINE), v.stats()
+        state = v.scene_state()
+        assert state["frame"] == last and state["t"] == pytest.approx(sim.t)
+        assert np.allclose(state["bodies"]["cube"]["wxyz"], VW.xyzw_to_wxyz(sim.state("cube").q))
+        assert v.last_error is None, v.last_error
 
 
+def _many(sim):
+    """Big frames (64 labelled vectors whose arrows all move every frame), so that the viewer sends
+    a few kB per frame and a stalled client's socket fills."""
+    t = sim.t
+    return {"axes": [{"body": "cube"}], "vectors": [
+        {"label": f"v{i}", "origin": [0.0, 0.0, 0.0],
+         "vector": [float(np.cos(i + 10 * t)), float(np.sin(i + 10 * t)), 0.1 * i], "color": [0.0, 0.0, 1.0, 0.5]}
+        for i in range(VW.MAX_VECTORS)]}
+
+
+@pytest.mark.needs("viewer")
 def test_stalled_slow_and_disconnecting_clients_do_not_stall_publishing():
-    stop = threading.Event()
-    got_slow, got_fast = [], []
     with VW.Viewer(port=0, max_rate_hz=60.0) as v:
         sim = _sim()
-        base = _timed_run(v, sim, 0.5)                       # no client: the reference cost
+        assert v.wait_applied(v.publish_frame(sim, _many(sim)), DEADLINE), v.stats()   # the scene exists
         stalled = _stalled_client(v.port)
-        slow, th1 = _reading_client(v.port, delay=0.3, stop=stop, counter=got_slow)
-        fast, th2 = _reading_client(v.port, stop=stop, counter=got_fast)
-        leaver, th3 = _reading_client(v.port, stop=stop, counter=[])
-        _wait_clients(v, 4)
-        applied0 = v.stats()["applied"]
-        left = []
-
-        def leave(frac):                                     # one client disconnects mid-run
-            if frac > 0.5 and not left:
+        healthy = _Reader(v.port)
+        slow = _Reader(v.port, delay=0.3)
+        leaver = _Reader(v.port)
+        readers = {"healthy": healthy, "slow": slow, "leaver": leaver}
+        try:
+            _wait_clients(v, 4)
+            pub = _Publisher(v, sim, _many)
+            try:
+                # 1. the stalled connection backs up end to end while publishing goes on
+                end = time.monotonic() + DEADLINE
+                while min(_backlog(stalled)) <= 0 and time.monotonic() < end and pub.thread.is_alive():
+                    time.sleep(0.05)
+                backlog = _backlog(stalled)
+                assert min(backlog) > 0, (backlog, v.stats(), pub.returned, readers)
+                # 2. a client disconnects mid-run
                 leaver.close()
-                left.append(1)
+                assert leaver.error is None, leaver
+                # 3. publishing and applying go on: more frames reach the scene and the healthy
+                # client after the stall and the disconnect
+                applied = v.stats()["applied"]
+                mark = pub.last_number
+                assert _until(lambda: v.stats()["applied"] >= applied + 5), (v.stats(), applied)
+                assert v.wait_applied(mark + 10, DEADLINE), (v.stats(), mark)
+                assert healthy.wait(lambda r: r.frame >= mark + 10), (healthy, mark)
+            finally:
+                pub.stop()                  # every publish_frame call returned; nothing raised
+            # 4. the LATEST frame reaches the healthy client (the stalled client is still connected
+            # unless this took long enough for the server's keepalive to drop it; either is fine)
+            sim.step()
+            latest = v.publish_frame(sim, _many(sim))
+            assert v.wait_applied(latest, DEADLINE), v.stats()
+            assert healthy.wait(lambda r: r.frame >= latest), (healthy, latest)
+            assert healthy.frame == latest
+            assert v.scene_state()["frame"] == latest
+            assert v.last_error is None, v.last_error
+            # the slow client is still connected and reading; every reader's thread ran until closed
+            assert slow.thread.is_alive() and slow.error is None and slow.messages > 0, slow
+            assert healthy.thread.is_alive() and healthy.error is None, healthy
+        finally:
+            stalled.close()
+            for r in readers.values():
+                if r.thread.is_alive():
+                    r.close()
+        for name, r in readers.items():
+            assert r.error is None, (name, r)
 
-        us = _timed_run(v, sim, 2.0, leave)
-        st = v.stats()
-        n_fast = len(got_fast)
-        stop.set()
-        stalled.close()
-        slow.close()
-        fast.close()
-        assert v.last_error is None, v.last_error
-        assert left
-        # Never blocked on a client: a send to the stalled socket would block until it reads, i.e.
-        # forever; every call returned and the loop kept publishing at its ~1 kHz pace. (The cost
-        # itself is measured by `python tests/test_viewer_browser.py --measure`, not asserted here.)
-        assert len(us) >= len(base), (len(us), len(base))   # 2 s with clients vs 0.5 s without: >= 1/4 of the pace
-        assert np.max(us) < 1e6, np.max(us)
-        assert st["applied"] - applied0 >= 30          # the scene kept updating at ~60 Hz for 2 s
-        assert n_fast >= 30                             # and a healthy client kept receiving
-        assert len(got_slow) < n_fast
 
-
+@pytest.mark.needs("viewer")
 def test_closed_viewer_refuses_frames():
     v = VW.Viewer(port=0)
     v.close()
@@ -409,16 +583,17 @@ def test_closed_viewer_refuses_frames():
 
 # ---- the command line -------------------------------------------------------------------------
 
+@pytest.mark.needs("viewer")
 def test_view_command_runs_tumble():
     r = subprocess.run([sys.executable, "-m", "lavendersim.cli", "view", "tumble", "--duration", "0.5", "--port", "0"],
-                       capture_output=True, text=True, timeout=60)
+                       capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stderr
     assert "http://127.0.0.1:" in r.stdout and "t = 0.500 s" in r.stdout
 
 
 def test_view_command_rejects_unknown_scene():
     r = subprocess.run([sys.executable, "-m", "lavendersim.cli", "view", "tumbel", "--duration", "0.1"],
-                       capture_output=True, text=True, timeout=60)
+                       capture_output=True, text=True, timeout=300)
     assert r.returncode == 2 and "tumble" in r.stderr
 
 
@@ -433,18 +608,20 @@ def test_tumble_scene_conserves_momentum_vector():
     assert not np.allclose(ov["vectors"][0]["vector"], w0, atol=1e-2)   # it tumbles
 
 
+@pytest.mark.needs("viewer")
 def test_lab_view_option_streams_lab03(tmp_path):
     r = subprocess.run([sys.executable, "-m", "lavendersim.cli", "lab", "03", "--out", str(tmp_path),
                         "--view", "--view-port", "0", "--view-duration", "0.3"],
-                       capture_output=True, text=True, timeout=120)
+                       capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stderr
     assert "lavendersim view lab03: open http://127.0.0.1:" in r.stdout and "t = 0.300 s" in r.stdout
 
 
 def test_lab_view_option_refused_for_a_lab_without_view():
     r = subprocess.run([sys.executable, "-m", "lavendersim.cli", "lab", "force", "--view"],
-                       capture_output=True, text=True, timeout=60)
-    assert r.returncode == 2 and "no live view" in r.stderr
+                       capture_output=True, text=True, timeout=300)
+    # labs without a live view have no --view option: argparse refuses it (one line, exit 2)
+    assert r.returncode == 2 and "unrecognized arguments: --view" in r.stderr, (r.returncode, r.stderr)
 
 
 def test_lab03_scene_payload_is_valid():
@@ -454,6 +631,7 @@ def test_lab03_scene_payload_is_valid():
     assert [a["body"] for a in ov["axes"]] == ["principal", "mixed"] and len(ov["vectors"]) == 4
 
 
+@pytest.mark.needs("control")
 def test_wheel_scene_balances_the_cube_and_draws_the_chapter_payload():
     from lavendersim import control as C
 

@@ -8,7 +8,11 @@ SwiftShader by itself still gets WebGL.
 
 Checks: the page connects; a published pure-red vector shows up as red pixels (pixels classified
 by dominant colour) and disappears when unpublished; a changed vector moves the red pixels;
-several tabs watch at once; frames keep arriving (updates/s measured in the page).
+several tabs watch at once and every one keeps receiving the updates (waited for, never counted
+per time window).
+
+Needs Debian's chromium and the playwright package (`@pytest.mark.needs("chromium")`, see
+tests/conftest.py): skipped without them, failed without them under CI=true.
 
 Also a measurement script (numbers for the notes and README):
 
@@ -24,7 +28,6 @@ import tempfile
 import threading
 import time
 from contextlib import contextmanager
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -39,16 +42,12 @@ CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic"
                  "--disable-backgrounding-occluded-windows"]
 VIEWPORT = {"width": 960, "height": 640}
 RED = [1.0, 0.0, 0.0, 1.0]
+# s, for events waited on (a page connecting, pixels changing). Generous: on a loaded 2-core machine
+# SwiftShader draws slowly and a third tab's first frame (after which viser counts it as a client)
+# took 65 s while two tabs were rendering.
+DEADLINE = 180.0
 
-
-def _require_browser():
-    if not Path(CHROMIUM).exists():
-        pytest.fail(f"{CHROMIUM} is missing: install Debian's chromium (`apt-get update && apt-get install -y "
-                    "chromium`; .ci/run installs it before the tests). Never `playwright install`.")
-    try:
-        import playwright.sync_api  # noqa: F401
-    except ImportError:
-        pytest.fail("playwright is missing: pip install -e '.[test]'")
+pytestmark = pytest.mark.needs("chromium", "viewer")
 
 
 @contextmanager
@@ -59,13 +58,14 @@ def browser():
     with sync_playwright() as p, tempfile.TemporaryDirectory(prefix="lavendersim-chromium-") as profile:
         ctx = p.chromium.launch_persistent_context(profile, executable_path=CHROMIUM, args=CHROMIUM_ARGS,
                                                    headless=True, viewport=VIEWPORT)
+        ctx.set_default_timeout(DEADLINE * 1000)   # screenshots, waits (ms); playwright's 30 s is tight under load
         try:
             yield ctx
         finally:
             ctx.close()
 
 
-def open_tab(ctx, viewer, timeout=30.0):
+def open_tab(ctx, viewer, timeout=DEADLINE):
     """Open the viewer in a new tab and wait until the page shows the connection and a frame."""
     before = set(viewer.server.get_clients())
     page = ctx.new_page()
@@ -75,7 +75,7 @@ def open_tab(ctx, viewer, timeout=30.0):
     while not set(viewer.server.get_clients()) - before:          # viser counts a client once its websocket says hello
         if time.monotonic() > end:
             raise AssertionError(f"the page at {viewer.url} did not connect within {timeout} s")
-        time.sleep(0.05)
+        page.wait_for_timeout(50)     # (lets playwright deliver the page's events meanwhile)
     page.get_by_text("frame ").first.wait_for(timeout=timeout * 1000)   # the viewer's status line
     return page
 
@@ -106,7 +106,20 @@ def _red(vector, scale=1.0):
                          "color": RED}]}
 
 
-def _wait_for(page, predicate, timeout=20.0):
+def _settled(page, timeout=DEADLINE):
+    """A screenshot once the picture has stopped changing (two in a row identical)."""
+    end = time.monotonic() + timeout
+    last = pixels(page)
+    while True:
+        time.sleep(0.2)
+        img = pixels(page)
+        if np.array_equal(img, last):
+            return img
+        assert time.monotonic() < end, f"the page kept changing for {timeout} s"
+        last = img
+
+
+def _wait_for(page, predicate, timeout=DEADLINE):
     """Screenshots until predicate(img) holds; returns the last image (and whether it held)."""
     end = time.monotonic() + timeout
     while True:
@@ -118,12 +131,11 @@ def _wait_for(page, predicate, timeout=20.0):
 
 @pytest.fixture(scope="module")
 def live():
-    _require_browser()
     from lavendersim.viewer import Viewer
 
     v = Viewer(port=0, max_rate_hz=60.0)
     sim = _scene()
-    v.wait_applied(v.publish_frame(sim, None), 10)   # the scene exists (and sets the camera) before tabs open
+    v.wait_applied(v.publish_frame(sim, None), DEADLINE)   # the scene exists (and sets the camera) before tabs open
     with browser() as ctx:
         yield v, sim, ctx
     v.close()
@@ -137,15 +149,12 @@ def test_page_connects_and_arrows_appear(live):
         if (!g) return null; const e = g.getExtension('WEBGL_debug_renderer_info');
         return e ? g.getParameter(e.UNMASKED_RENDERER_WEBGL) : 'webgl2'; }""")
     assert renderer, "no WebGL in headless chromium (see the module docstring)"
-    base, _ = _wait_for(page, lambda im: True, 0)
-    time.sleep(1.0)
-    base = pixels(page)
+    base = _settled(page)
     n_base = int(red_mask(base).sum())          # the corner axes gizmo has a little red
-    v.wait_applied(v.publish_frame(sim, _red([0.6, 0.0, 0.0])), 10)
+    v.wait_applied(v.publish_frame(sim, _red([0.6, 0.0, 0.0])), DEADLINE)
     img, ok = _wait_for(page, lambda im: red_mask(im).sum() > n_base + 400)
     n_x = int(red_mask(img).sum())
     assert ok, f"red arrow not drawn: {n_x} red pixels, {n_base} before"
-    page.screenshot(path="/tmp/vx/red.png")
 
     # a changed vector changes the picture: the red pixels move
     def centroid(im):
@@ -154,13 +163,13 @@ def test_page_connects_and_arrows_appear(live):
         return np.array([xs.mean(), ys.mean()]) if len(xs) else np.array([np.nan, np.nan])
 
     c_x = centroid(img)
-    v.wait_applied(v.publish_frame(sim, _red([0.0, 0.6, 0.0])), 10)
+    v.wait_applied(v.publish_frame(sim, _red([0.0, 0.6, 0.0])), DEADLINE)
     img2, ok = _wait_for(page, lambda im: np.linalg.norm(centroid(im) - c_x) > 40)
     assert ok, f"red pixels did not move: {centroid(img2)} vs {c_x}"
     assert np.abs(img2 - img).max() > 0.5
 
     # unpublished: the red goes away again
-    v.wait_applied(v.publish_frame(sim, None), 10)
+    v.wait_applied(v.publish_frame(sim, None), DEADLINE)
     img3, ok = _wait_for(page, lambda im: red_mask(im).sum() < n_base + 100)
     assert ok, f"red arrow still drawn: {int(red_mask(img3).sum())} red pixels"
     page.close()
@@ -169,12 +178,12 @@ def test_page_connects_and_arrows_appear(live):
 def test_opacity_is_honoured(live):
     v, sim, ctx = live
     page = open_tab(ctx, v)
-    v.wait_applied(v.publish_frame(sim, _red([0.0, 0.0, 0.5])), 10)
+    v.wait_applied(v.publish_frame(sim, _red([0.0, 0.0, 0.5])), DEADLINE)
     opaque, ok = _wait_for(page, lambda im: red_mask(im).sum() > 300)
     assert ok
     faint = dict(_red([0.0, 0.0, 0.5]))
     faint["vectors"][0]["color"] = [1.0, 0.0, 0.0, 0.25]
-    v.wait_applied(v.publish_frame(sim, faint), 10)
+    v.wait_applied(v.publish_frame(sim, faint), DEADLINE)
     # a quarter-opaque red over the white background is pink: it is no longer "red" by our rule
     img, ok = _wait_for(page, lambda im: red_mask(im).sum() < 0.3 * red_mask(opaque).sum())
     assert ok, (int(red_mask(img).sum()), int(red_mask(opaque).sum()))
@@ -186,39 +195,53 @@ def test_opacity_is_honoured(live):
 def test_several_tabs_watch_and_frames_keep_arriving(live):
     v, sim, ctx = live
     pages = [open_tab(ctx, v) for _ in range(3)]
-    end = time.monotonic() + 10
+    end = time.monotonic() + DEADLINE
     while v.clients() < 3 and time.monotonic() < end:
         time.sleep(0.05)
     assert v.clients() >= 3
+    marks = [len(p._ws_times) for p in pages]
+    errors: list = []
     stop = threading.Event()
-    th = threading.Thread(target=_publisher, args=(v, sim, stop), daemon=True)
+    th = threading.Thread(target=_publisher, args=(v, sim, stop, 120.0, errors), daemon=True)
     th.start()
     try:
-        rates = measure_pages(pages, 3.0)
+        # every tab (the background ones too) keeps receiving the scene updates: wait until each has
+        # received 20 more websocket messages than before publishing started
+        end = time.monotonic() + DEADLINE
+        while (got := [len(p._ws_times) - m for p, m in zip(pages, marks)]) and min(got) < 20:
+            assert th.is_alive(), f"publisher stopped: {errors!r}"
+            assert time.monotonic() < end, f"websocket messages received per tab within {DEADLINE} s: {got}"
+            pages[0].wait_for_timeout(100)   # playwright's sync API delivers page events only while it runs
     finally:
         stop.set()
-        th.join()
-    for r in rates:                     # every tab keeps receiving the scene updates
-        assert r["ws_messages_per_s"] >= 5, rates
+        th.join(DEADLINE)
+    assert not th.is_alive(), "publisher did not stop"
+    assert not errors, errors
     for p in pages:
         p.close()
 
 
 # ---- shared by the tests and the measurement script -------------------------------------------
 
-def _publisher(v, sim, stop, hz=120.0):
-    """Tumble the cube in real time and publish `hz` frames/s with axes and an ω arrow."""
+def _publisher(v, sim, stop, hz=120.0, errors=None):
+    """Tumble the cube in real time and publish `hz` frames/s with axes and an ω arrow. Why it
+    stopped, if not by `stop`, is appended to `errors` (and raised)."""
     t0, n = time.monotonic(), 0
-    while not stop.is_set():
-        sim.step()
-        n += 1
-        s = sim.state("cube")
-        v.publish_frame(sim, {"axes": [{"body": "cube", "scale": 0.3}], "vectors": [
-            {"label": "ω", "origin": s.p_w.tolist(), "vector": s.omega_w.tolist(), "scale": 0.3,
-             "color": [0.51, 0.87, 0.76, 0.95]}]})
-        lag = t0 + n / hz - time.monotonic()
-        if lag > 0:
-            time.sleep(lag)
+    try:
+        while not stop.is_set():
+            sim.step()
+            n += 1
+            s = sim.state("cube")
+            v.publish_frame(sim, {"axes": [{"body": "cube", "scale": 0.3}], "vectors": [
+                {"label": "ω", "origin": s.p_w.tolist(), "vector": s.omega_w.tolist(), "scale": 0.3,
+                 "color": [0.51, 0.87, 0.76, 0.95]}]})
+            lag = t0 + n / hz - time.monotonic()
+            if lag > 0:
+                time.sleep(lag)
+    except BaseException as exc:
+        if errors is not None:
+            errors.append(exc)
+        raise
 
 
 _START = """() => {
@@ -289,7 +312,7 @@ def measure() -> None:
     sim = _scene()
     rows = []
     with Viewer(port=0, max_rate_hz=60.0) as v:
-        v.wait_applied(v.publish_frame(sim, None), 10)
+        v.wait_applied(v.publish_frame(sim, None), DEADLINE)
         rows.append(("0 clients", _cost(v, sim), v.stats()))
         with browser() as ctx:
             pages = [open_tab(ctx, v)]
@@ -333,14 +356,12 @@ def screenshot(path: str) -> None:
     sim, overlays, advance = VW.SCENES["tumble"]()
     advance(sim, 1.3)
     with VW.Viewer(port=0) as v, browser() as ctx:
-        v.wait_applied(v.publish_frame(sim, overlays(sim)), 10)
+        v.wait_applied(v.publish_frame(sim, overlays(sim)), DEADLINE)
         page = open_tab(ctx, v)
         time.sleep(3.0)
         for close in page.get_by_role("button", name="Close").all():   # software-WebGL notice, if shown
-            try:
-                close.click(timeout=1000)
-            except Exception:
-                pass
+            if close.is_visible():
+                close.click(timeout=10_000)
         time.sleep(1.0)
         page.screenshot(path=path)
     print(f"wrote {path}")

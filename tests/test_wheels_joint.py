@@ -6,6 +6,10 @@ import lavendersim as lv
 from lavendersim import LavenderInputError as E
 from lavendersim.generated import kernels_numpy as K
 
+# Long NumPy runs are in the slow set (NUMPY_SLOW: tests/conftest.py); test_c_and_numpy_agree_on_a_mixed_scene
+# checks quickly that NumPy computes what C computes.
+from conftest import NUMPY_SLOW
+
 BACKENDS = ["numpy", "c"]
 INTEGRATORS = ["euler", "semi_implicit_euler", "rk4"]
 SIDE, MASS = 0.15, 1.0
@@ -24,7 +28,7 @@ def wheel_cube(joint=True, anchor=(0, 0, 0), J=J3, torque_limit=0.2, speed_limit
 
 # ---------------------------------------------------------------- momentum exchange
 
-@pytest.mark.parametrize("backend", BACKENDS)
+@pytest.mark.parametrize("backend", NUMPY_SLOW)
 @pytest.mark.parametrize("joint", [True, False])
 def test_momentum_exchange_is_exact(backend, joint):
     """No damping, joint at the centre (or none), no other effect: L_body + L_wheels is constant."""
@@ -121,7 +125,7 @@ def pendulum(backend, L=0.4, m=1.3, g=9.81, **kw):
     return lv.Sim(s, dt=1e-3, integrator="rk4", backend=backend), body
 
 
-@pytest.mark.parametrize("backend", BACKENDS)
+@pytest.mark.parametrize("backend", NUMPY_SLOW)
 def test_the_anchored_point_stays_at_the_anchor(backend):
     q0 = K.axis_angle_to_quat(np.array([1.0, 2.0, 2.0]) / 3, 0.6)
     s = lv.Scene()
@@ -143,7 +147,7 @@ def test_the_anchored_point_stays_at_the_anchor(backend):
     assert np.ptp(st.p_w[:, 2]) > 0.05  # it really moved under gravity
 
 
-@pytest.mark.parametrize("backend", BACKENDS)
+@pytest.mark.parametrize("backend", NUMPY_SLOW)
 def test_compound_pendulum_period(backend):
     L, m, g = 0.4, 1.3, 9.81
     sim, body = pendulum(backend, L, m, g)
@@ -161,7 +165,7 @@ def test_compound_pendulum_period(backend):
     assert abs(T_sim / T - 1) > 0 and "pivot_body_rhs" in sim.pipeline[1]
 
 
-@pytest.mark.parametrize("backend", BACKENDS)
+@pytest.mark.parametrize("backend", NUMPY_SLOW)
 def test_pendulum_energy_is_conserved(backend):
     m, g, L = 1.3, 9.81, 0.4
     sim, _ = pendulum(backend, L, m, g, omega_b=(4.0, 6.0, 1.5))
@@ -235,7 +239,7 @@ def reference_run(m, I_b, y0, anchor, r_b, J, c_w, limits, u_cmd, g, c_lin, c_an
     return y, u
 
 
-@pytest.mark.parametrize("backend", BACKENDS)
+@pytest.mark.parametrize("backend", NUMPY_SLOW)
 def test_jointed_wheeled_body_matches_a_plain_reference(backend):
     m, J, c_w, lim, cmd = 1.0, np.array(J3), 2e-5, (0.02, 30.0), np.array([0.05, -0.01, 0.004])
     anchor, p0 = np.array([0.0, 0.0, 0.0]), np.array([0.075, 0.075, 0.075])
@@ -256,7 +260,7 @@ def test_jointed_wheeled_body_matches_a_plain_reference(backend):
     assert abs(y[13]) >= lim[1]  # the x wheel reached its speed limit on the way
 
 
-@pytest.mark.parametrize("backend", BACKENDS)
+@pytest.mark.parametrize("backend", NUMPY_SLOW)
 def test_joint_at_the_com_without_forces_moves_like_the_free_body(backend):
     kw = dict(omega_b=(1.0, 0.5, 0.2), p_w=(0.1, 0.2, 0.3))
     free = lv.Scene()
@@ -272,7 +276,7 @@ def test_joint_at_the_com_without_forces_moves_like_the_free_body(backend):
 
 # ---------------------------------------------------------------- zero strength
 
-@pytest.mark.parametrize("backend", BACKENDS)
+@pytest.mark.parametrize("backend", NUMPY_SLOW)
 @pytest.mark.parametrize("joint", [True, False])
 def test_idle_wheels_change_nothing_when_the_body_does_not_accelerate(backend, joint):
     """u = 0, Omega = 0 on an isotropic cube spinning freely (gravity on the free one): identical motion."""
@@ -292,7 +296,7 @@ def test_idle_wheels_change_nothing_when_the_body_does_not_accelerate(backend, j
     np.testing.assert_allclose(b.wheel_rates("cube"), 0, atol=1e-12)
 
 
-@pytest.mark.parametrize("backend", BACKENDS)
+@pytest.mark.parametrize("backend", NUMPY_SLOW)
 @pytest.mark.parametrize("joint", [True, False])
 def test_idle_wheels_in_the_zero_inertia_limit_match_the_body_without_wheels(backend, joint):
     """Free (u = 0) wheels decouple from the body about their axes, so a torqued body with idle

@@ -18,6 +18,9 @@ from __future__ import annotations
 import numpy as np
 
 from .. import validate as V
+from ..generated import layout as LAYOUT
+from ..generated import tableaux as TABLEAUX
+from ..generated.layout import KIND_JOINT, KIND_WHEELS, MODEL_LAYOUT, MODEL_SIZE  # noqa: F401  (re-exported)
 
 # name -> RHS evaluations per step (None: adaptive, counted as it runs). See rhs_per_step for how the
 # structure-preserving methods are counted.
@@ -28,8 +31,8 @@ ADAPTIVE = ("dopri5",)
 PLAIN_ONLY = ("splitting", "implicit_gyro")
 BACKENDS = ("c", "numpy")
 
-DOPRI5_HMIN_REL = 1e-12         # a substep below dt * this means the tolerance cannot be met
-DOPRI5_MAX_SUBSTEPS = 1_000_000  # ... as do more substeps than this within one output step
+DOPRI5_HMIN_REL = TABLEAUX.DP_HMIN_REL          # a substep below dt * this means the tolerance cannot be met
+DOPRI5_MAX_SUBSTEPS = TABLEAUX.DP_MAX_SUBSTEPS  # ... as do more substeps than this within one output step
 
 
 class Adaptive:
@@ -56,11 +59,8 @@ def rhs_per_step(integrator: str, effects: np.ndarray, nb: int) -> int | None:
 
     return 4 if velocity_dependent(np.unique(effects[:, ROW_CODE].astype(np.int64))) else 2
 
-# Per-body model row (float64): kind is a bit set, KIND_JOINT | KIND_WHEELS.
-KIND_JOINT, KIND_WHEELS = 1, 2
-MODEL_LAYOUT = {"kind": slice(0, 1), "I_p": slice(1, 10), "r_b": slice(10, 13), "anchor_w": slice(13, 16),
-                "J": slice(16, 19), "torque_limit": slice(19, 20), "speed_limit": slice(20, 21), "c_w": slice(21, 22)}
-MODEL_SIZE = 22
+# Per-body model row (float64), MODEL_LAYOUT / MODEL_SIZE printed from derive/layout.py: kind is a bit set,
+# KIND_JOINT | KIND_WHEELS.
 
 
 class Models:
@@ -75,16 +75,7 @@ class Models:
 
     @property
     def kind(self) -> np.ndarray:
-        return self.rows[:, 0].astype(np.int64)
-
-
-def saturate(command: np.ndarray, Omega: np.ndarray, torque_limit, speed_limit) -> np.ndarray:
-    """Motor torques actually applied this step: clip to ±torque_limit, and zero where a wheel at or
-    beyond speed_limit would be driven faster (u_i·Omega_i > 0). Broadcasts over leading axes."""
-    tl = np.asarray(torque_limit, dtype=np.float64)[..., None]
-    sl = np.asarray(speed_limit, dtype=np.float64)[..., None]
-    u = np.minimum(np.maximum(command, -tl), tl)
-    return np.where((np.abs(Omega) >= sl) & (u * Omega > 0), 0.0, u)
+        return self.rows[:, LAYOUT.MODEL_KIND].astype(np.int64)
 
 
 BACKEND_CHOICES = ("auto",) + BACKENDS
@@ -152,7 +143,7 @@ def norm_safe(v: np.ndarray) -> float:
 
 def tolerance_cause(adaptive: Adaptive, h: float, dt: float, x: np.ndarray) -> str:
     """Why dopri5 stopped: the requested tolerance could not be met."""
-    w = norm_safe(np.asarray(x[10:13], dtype=np.float64))
+    w = norm_safe(np.asarray(x[LAYOUT.STATE_OMEGA_B], dtype=np.float64))
     return (f"dopri5 could not meet rtol={adaptive.rtol:g}, atol={adaptive.atol:g}: the step size fell to "
             f"{h:.3g} s (below dt*{DOPRI5_HMIN_REL:g} = {dt * DOPRI5_HMIN_REL:.3g} s) or one step of dt = {dt:g} s "
             f"needed over {DOPRI5_MAX_SUBSTEPS:,} substeps (|omega| = {w:.3g} rad/s); loosen rtol/atol, check "
@@ -164,8 +155,8 @@ def divergence_cause(x_before: np.ndarray, dt: float, integrator: str, Omega_bef
     """A plain guess at why one body's step went non-finite, from its state before the step
     (and, for a body with reaction wheels, its wheel rates and wheels = (J, c_w))."""
     with np.errstate(over="ignore", invalid="ignore"):
-        w = float(np.linalg.norm(x_before[10:13]))
-        v = float(np.linalg.norm(x_before[7:10]))
+        w = float(np.linalg.norm(x_before[LAYOUT.STATE_OMEGA_B]))
+        v = float(np.linalg.norm(x_before[LAYOUT.STATE_V_W]))
         W = None if Omega_before is None else float(np.linalg.norm(Omega_before))
     if not np.all(np.isfinite(x_before)) or (Omega_before is not None and not np.all(np.isfinite(Omega_before))):
         return "the state was already non-finite before the step"

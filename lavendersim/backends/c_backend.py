@@ -1,7 +1,7 @@
 """C backend: the step loop runs inside the compiled extension `lavendersim._lavender_c`.
 
 One `advance` call advances every body by n_steps steps without returning to Python (bodies outer,
-steps inner). The extension embeds the sha256 of the generated/kernels.c and kernels.h it was built
+steps inner). The extension embeds the sha256 of the generated C sources (HASHED) it was built
 from; importing this module compares it with the files on disk and raises StaleBuildError (naming
 the rebuild command) when they differ. If the extension was never built, the ImportError says how.
 """
@@ -16,10 +16,11 @@ import numpy as np
 from ..effects import ROW, ROW_BODY
 from ..errors import DivergenceError, StaleBuildError
 from .._install import rebuild_command
+from ..generated import layout as LY
 from . import KIND_WHEELS, PLAIN_ONLY, Adaptive, Models, norm_safe, tolerance_cause
 
 REBUILD = rebuild_command()
-HASHED = ("kernels.c", "kernels.h")
+HASHED = ("kernels.c", "kernels.h", "layout.h", "tableaux.h")  # every generated file the extension compiles
 INTEGRATOR_CODES = {"euler": 0, "semi_implicit_euler": 1, "rk4": 2, "dopri5": 3, "splitting": 4, "implicit_gyro": 5}
 
 try:
@@ -39,7 +40,7 @@ def generated_dir() -> Path:
 
 
 def generated_hash(gen_dir: Path) -> str:
-    """sha256 over the per-file sha256 of kernels.c and kernels.h (same recipe as setup.py)."""
+    """sha256 over the per-file sha256 of the generated C sources HASHED (same recipe as setup.py)."""
     h = hashlib.sha256()
     for name in HASHED:
         h.update(f"{name} {hashlib.sha256((gen_dir / name).read_bytes()).hexdigest()}\n".encode())
@@ -72,8 +73,8 @@ def check_build(gen_dir: Path | None = None, built_hash: str | None = None) -> N
                               f"run `lavendersim derive`, then rebuild with `{REBUILD}`") from exc
     if built == current:
         return
-    msg = (f"lavendersim._lavender_c is stale: it was built from other generated C kernels than "
-           f"{gen_dir}/kernels.c and kernels.h (built {built[:12]}…, on disk {current[:12]}…). "
+    msg = (f"lavendersim._lavender_c is stale: it was built from other generated C sources than "
+           f"{gen_dir}/ ({', '.join(HASHED)}; built {built[:12]}…, on disk {current[:12]}…). "
            f"Rebuild it with `{REBUILD}`.")
     bad = _generated_inconsistent(gen_dir)
     if bad:
@@ -153,12 +154,12 @@ def _cause(start: np.ndarray, pre: np.ndarray, params: np.ndarray, effects: np.n
         return "non-finite input: the state was already non-finite before the step"
     from . import divergence_cause
 
-    wheels = None if W0 is None else (model[0][16:19], model[0][21])
+    wheels = None if W0 is None else (model[0][LY.MODEL_J], model[0][LY.MODEL_C_W])
     cause = divergence_cause(start, dt, integrator, W0, wheels)
     if step > 0:
         wtxt = "" if W0 is None else f", |Omega| = {norm_safe(model[2]):.3g} rad/s"
-        cause += (f" (just before step {step}: |omega|*dt = {norm_safe(pre[10:13]) * dt:.3g}, "
-                  f"|v| = {norm_safe(pre[7:10]):.3g} m/s{wtxt})")
+        cause += (f" (just before step {step}: |omega|*dt = {norm_safe(pre[LY.STATE_OMEGA_B]) * dt:.3g}, "
+                  f"|v| = {norm_safe(pre[LY.STATE_V_W]):.3g} m/s{wtxt})")
     return cause
 
 
@@ -202,11 +203,11 @@ class CBackend:
             raise ValueError(f"integrator: must be one of {', '.join(INTEGRATOR_CODES)}, got {integrator!r}")
         if integrator == "dopri5" and adaptive is None:
             raise ValueError("integrator: dopri5 needs adaptive (a lavendersim.backends.Adaptive)")
-        if integrator in PLAIN_ONLY and models is not None and np.any(np.asarray(models.rows)[:, 0] != 0):
+        if integrator in PLAIN_ONLY and models is not None and np.any(np.asarray(models.rows)[:, LY.MODEL_KIND] != 0):
             raise ValueError(f"integrator: {integrator} steps plain rigid bodies only (no spherical_joint or reaction_wheels)")
         if not isinstance(state, np.ndarray) or state.dtype != np.float64 or not state.flags.c_contiguous \
                 or not state.flags.writeable:
-            raise TypeError("state must be a writable C-contiguous float64 numpy array of shape (nb, 13)")
+            raise TypeError(f"state must be a writable C-contiguous float64 numpy array of shape (nb, {LY.STATE_SIZE})")
         params = np.ascontiguousarray(params, dtype=np.float64)
         effects = np.ascontiguousarray(effects, dtype=np.float64)
         if effects.size == 0:
@@ -216,7 +217,7 @@ class CBackend:
         extra = ()
         if models is not None:
             nb = state.shape[0]
-            rows = _f64_rows("rows", models.rows, 22, nb)
+            rows = _f64_rows("rows", models.rows, LY.MODEL_SIZE, nb)
             Omega = _f64_rows("Omega", models.Omega, 3, nb, writable=True)
             command = _f64_rows("command", models.command, 3, nb)
             applied = _f64_rows("applied", models.applied, 3, nb, writable=True)
@@ -247,8 +248,8 @@ class CBackend:
             pre_W = Omega[body].copy()
             Omega[...] = snap_W
             applied[...] = snap_u
-            if int(rows[body, 0]):
-                W0 = snap_W[body] if int(rows[body, 0]) & KIND_WHEELS else None
+            if int(rows[body, LY.MODEL_KIND]):
+                W0 = snap_W[body] if int(rows[body, LY.MODEL_KIND]) & KIND_WHEELS else None
                 model = (rows[body], W0, None if W0 is None else pre_W, command[body])
         if tol_cause is not None:
             raise DivergenceError(step, body, tol_cause)

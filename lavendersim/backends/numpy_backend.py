@@ -16,9 +16,14 @@ import numpy as np
 
 from ..effects import ROW_BODY
 from ..errors import DivergenceError
+from ..generated import layout as LY
+from ..generated import tableaux as T
 from ..kernels import K
-from . import (DOPRI5_HMIN_REL, DOPRI5_MAX_SUBSTEPS, KIND_JOINT, KIND_WHEELS, MODEL_LAYOUT as L, PLAIN_ONLY,
-               Adaptive, Models, divergence_cause, saturate, tolerance_cause)
+from . import (DOPRI5_HMIN_REL, DOPRI5_MAX_SUBSTEPS, KIND_JOINT, KIND_WHEELS, PLAIN_ONLY, Adaptive, Models,
+               divergence_cause, tolerance_cause)
+
+P, Q, V, W = LY.STATE_P_W, LY.STATE_Q, LY.STATE_V_W, LY.STATE_OMEGA_B  # state-row fields
+X, OM = LY.XS_X, LY.XS_OMEGA                                               # extended state [x, Omega]
 
 
 class _EffectIndex:
@@ -93,26 +98,28 @@ class _Group:
         self.index = _EffectIndex(effects, idx, m, I)
         self.m = m[idx]
         r = rows[idx]
-        kind = r[:, 0].astype(np.int64)
+        kind = r[:, LY.MODEL_KIND].astype(np.int64)
         self.jointed = (kind & KIND_JOINT) != 0
         # the kinematic COM velocity is only needed by effects that read v_w
         self.needs_v = bool(self.jointed.any()) and self.index.uses_v
-        self.I_p = r[:, L["I_p"]].reshape(-1, 3, 3).copy()
-        self.r_b, self.anchor, self.J = r[:, L["r_b"]].copy(), r[:, L["anchor_w"]].copy(), r[:, L["J"]].copy()
-        self.tl, self.sl, self.c_w = r[:, 19].copy(), r[:, 20].copy(), r[:, 21].copy()
+        self.I_p = r[:, LY.MODEL_I_P].reshape(-1, 3, 3).copy()
+        self.r_b, self.anchor, self.J = r[:, LY.MODEL_R_B].copy(), r[:, LY.MODEL_ANCHOR_W].copy(), r[:, LY.MODEL_J].copy()
+        self.tl, self.sl = r[:, LY.MODEL_TORQUE_LIMIT].copy(), r[:, LY.MODEL_SPEED_LIMIT].copy()
+        self.c_w = r[:, LY.MODEL_C_W].copy()
 
     def velocity(self, x):
         """COM velocity for the effects: kinematic for jointed bodies, the state's otherwise."""
-        v = x[:, 7:10]
+        v = x[:, V]
         if self.needs_v:
-            kin = K.pivot_kinematics(x[:, 3:7], x[:, 10:13], self.anchor, self.r_b)[1]
+            kin = K.pivot_kinematics(x[:, Q], x[:, W], self.anchor, self.r_b)[1]
             v = np.where(self.jointed[:, None], kin, v)
         return v
 
     def translation(self, x, F, out):
         """p, v derivatives: zero for jointed bodies (set from the joint after the step), free otherwise."""
-        out[:, 0:3] = np.where(self.jointed[:, None], 0.0, x[:, 7:10])
-        out[:, 7:10] = np.where(self.jointed[:, None], 0.0, F / self.m[:, None])
+        p_dot, v_dot = K.translation_rhs(self.m, x[:, V], F)
+        out[:, P] = np.where(self.jointed[:, None], 0.0, p_dot)
+        out[:, V] = np.where(self.jointed[:, None], 0.0, v_dot)
 
 
 class _Plan:
@@ -120,8 +127,8 @@ class _Plan:
 
     def __init__(self, params: np.ndarray, effects: np.ndarray, rows: np.ndarray | None = None):
         nb = params.shape[0]
-        self.m, self.I = params[:, 0], params[:, 1:4]
-        kind = np.zeros(nb, np.int64) if rows is None else rows[:, 0].astype(np.int64)
+        self.m, self.I = params[:, LY.PARAM_M], params[:, LY.PARAM_I_B]
+        kind = np.zeros(nb, np.int64) if rows is None else rows[:, LY.MODEL_KIND].astype(np.int64)
         touched = np.zeros(nb, bool)
         body = effects[:, ROW_BODY].astype(np.int64) if len(effects) else np.zeros(0, np.int64)
         touched[body[body >= 0]] = True
@@ -143,36 +150,36 @@ class _Plan:
         self.jointed = np.flatnonzero((kind & KIND_JOINT) != 0)
         if self.jointed.size:
             r = rows[self.jointed]
-            self.j_anchor, self.j_r_b = r[:, L["anchor_w"]].copy(), r[:, L["r_b"]].copy()
+            self.j_anchor, self.j_r_b = r[:, LY.MODEL_ANCHOR_W].copy(), r[:, LY.MODEL_R_B].copy()
 
     def rhs(self, x: np.ndarray, u: np.ndarray | None = None) -> np.ndarray:
         """d/dt of x (nb, 13), or of [x, Omega] (nb, 16) with u (n_wheeled, 3) when bodies have models."""
         if self.all_free:
             return K.rigid_body_rhs_free(x, self.I)
         out = np.empty_like(x)
-        if x.shape[1] > 13:
-            out[:, 13:] = 0.0
+        if x.shape[1] > LY.STATE_SIZE:
+            out[:, OM] = 0.0
         if self.free.size:
-            out[self.free, :13] = K.rigid_body_rhs_free(x[self.free, :13], self.I_free)
+            out[self.free, X] = K.rigid_body_rhs_free(x[self.free, X], self.I_free)
         if self.forced.size:
-            xf = x[self.forced, :13]
-            F, tau = self.index.sums(xf, xf[:, 7:10])
-            out[self.forced, :13] = K.rigid_body_rhs(xf, self.m_f, self.I_f, F, tau)
+            xf = x[self.forced, X]
+            F, tau = self.index.sums(xf, xf[:, V])
+            out[self.forced, X] = K.rigid_body_rhs(xf, self.m_f, self.I_f, F, tau)
         g = self.wheels
         if g is not None:
             xg = x[g.idx]
             F, tau = g.index.sums(xg, g.velocity(xg))
-            o = np.empty((g.idx.size, 16))
-            o[:, 3:7], o[:, 10:13], o[:, 13:16] = K.wheel_body_rhs(
-                xg[:, 3:7], xg[:, 10:13], xg[:, 13:16], g.I_p, g.J, g.r_b, F, tau, u, g.c_w)
+            o = np.empty((g.idx.size, LY.XS_SIZE))
+            o[:, Q], o[:, W], o[:, OM] = K.wheel_body_rhs(
+                xg[:, Q], xg[:, W], xg[:, OM], g.I_p, g.J, g.r_b, F, tau, u, g.c_w)
             g.translation(xg, F, o)
             out[g.idx] = o
         g = self.pivot
         if g is not None:
             xg = x[g.idx]
             F, tau = g.index.sums(xg, g.velocity(xg))
-            o = np.zeros((g.idx.size, 16))
-            o[:, 3:7], o[:, 10:13] = K.pivot_body_rhs(xg[:, 3:7], xg[:, 10:13], g.I_p, g.r_b, F, tau)
+            o = np.zeros((g.idx.size, LY.XS_SIZE))
+            o[:, Q], o[:, W] = K.pivot_body_rhs(xg[:, Q], xg[:, W], g.I_p, g.r_b, F, tau)
             g.translation(xg, F, o)
             out[g.idx] = o
         return out
@@ -183,8 +190,8 @@ class _Plan:
         tau_b = np.zeros((x.shape[0], 3))
         if self.forced.size:
             xf = x[self.forced]
-            Ff, tf = self.index.sums(xf, xf[:, 7:10])
-            F[self.forced], tau_b[self.forced] = Ff, K.world_to_body(xf[:, 3:7], tf)
+            Ff, tf = self.index.sums(xf, xf[:, V])
+            F[self.forced], tau_b[self.forced] = Ff, K.world_to_body(xf[:, Q], tf)
         return F, tau_b
 
     def applied(self, x: np.ndarray, command: np.ndarray) -> np.ndarray | None:
@@ -192,7 +199,7 @@ class _Plan:
         g = self.wheels
         if g is None:
             return None
-        return saturate(command[g.idx], x[g.idx, 13:16], g.tl, g.sl)
+        return K.wheel_saturation(command[g.idx], x[g.idx, OM], g.tl, g.sl)
 
     def wheel_info(self, x: np.ndarray, b: int) -> tuple:
         """(Omega, (J, c_w)) of body b if it has wheels, else (None, None): for divergence_cause."""
@@ -200,104 +207,67 @@ class _Plan:
         if g is None or b not in g.idx:
             return None, None
         k = int(np.flatnonzero(g.idx == b)[0])
-        return x[b, 13:16], (g.J[k], g.c_w[k])
+        return x[b, OM], (g.J[k], g.c_w[k])
 
     def constrain(self, x: np.ndarray) -> None:
         """Jointed bodies: p_w, v_w from the joint kinematics of the new q, omega."""
         if self.jointed.size:
             j = self.jointed
-            x[j, 0:3], x[j, 7:10] = K.pivot_kinematics(x[j, 3:7], x[j, 10:13], self.j_anchor, self.j_r_b)
+            x[j, P], x[j, V] = K.pivot_kinematics(x[j, Q], x[j, W], self.j_anchor, self.j_r_b)
 
 
 def _normalize(x: np.ndarray) -> None:
-    x[:, 3:7] = K.quat_normalize(x[:, 3:7])
-
-
-def _axis_flow(I, q, Lb, a, h):
-    """Exact flow for time h of H_a = L_a²/(2 I_a): L_b turns about body axis a by −h L_a/I_a, the
-    attitude by +h L_a/I_a about it (q ← q ⊗ [sin(θ/2) e_a, cos(θ/2)]). Same arithmetic as step.c."""
-    th = h * Lb[:, a] / I[:, a]
-    j, k = (a + 1) % 3, (a + 2) % 3
-    sh, ch = np.sin(0.5 * th), np.cos(0.5 * th)
-    c, s = 1.0 - 2.0 * sh * sh, 2.0 * sh * ch
-    Lj, Lk = Lb[:, j].copy(), Lb[:, k].copy()
-    Lb[:, j], Lb[:, k] = c * Lj + s * Lk, -s * Lj + c * Lk
-    hq = np.zeros((th.size, 4))
-    hq[:, a], hq[:, 3] = sh, ch
-    return K.quat_mul(q, hq)
+    x[:, Q] = K.quat_normalize(x[:, Q])
 
 
 def _kick(plan, x, h):
-    """Half kick of the splitting (q, p fixed): exact for position-only loads; explicit midpoint for
-    bodies with linear or angular damping."""
-    m, I = plan.m[:, None], plan.I
+    """Kick of the splitting for time h (q, p fixed; splitting_kick): exact for position-only loads;
+    an explicit midpoint step for bodies with linear or angular damping."""
     F, tb = plan.loads(x)
     if plan.damped_f.any():
         xm = x.copy()
-        xm[:, 7:10] += 0.5 * h * F / m
-        xm[:, 10:13] += 0.5 * h * tb / I
+        xm[:, V], xm[:, W] = K.splitting_kick(plan.m, plan.I, x[:, V], x[:, W], F, tb, T.SPLIT_MIDPOINT * h)
         F2, tb2 = plan.loads(xm)
         d = np.zeros(x.shape[0], bool)
         d[plan.forced[plan.damped_f]] = True
         F, tb = np.where(d[:, None], F2, F), np.where(d[:, None], tb2, tb)
-    x[:, 7:10] += h * F / m
-    x[:, 10:13] += h * tb / I
+    x[:, V], x[:, W] = K.splitting_kick(plan.m, plan.I, x[:, V], x[:, W], F, tb, h)
 
 
 def _splitting(plan, x, h):
-    """kick(h/2); p += h v; free rotation by Strang 1(h/2) 2(h/2) 3(h) 2(h/2) 1(h/2); kick(h/2)."""
+    """kick(h/2); p += h v; the free rotation over h (splitting_rotation: the Strang sequence of exact
+    principal-axis flows); kick(h/2)."""
     xn = x.copy()
     forced = plan.forced.size > 0
     if forced:
-        _kick(plan, xn, 0.5 * h)
-    I = plan.I
-    xn[:, 0:3] += h * xn[:, 7:10]
-    Lb = I * xn[:, 10:13]
-    q = xn[:, 3:7]
-    for a, f in ((0, 0.5), (1, 0.5), (2, 1.0), (1, 0.5), (0, 0.5)):
-        q = _axis_flow(I, q, Lb, a, f * h)
-    xn[:, 3:7], xn[:, 10:13] = q, Lb / I
+        _kick(plan, xn, T.SPLIT_KICK * h)
+    xn[:, P] = K.translation_drift(xn[:, P], xn[:, V], h)
+    xn[:, Q], xn[:, W] = K.splitting_rotation(plan.I, xn[:, Q], xn[:, W], h)
     if forced:
-        _kick(plan, xn, 0.5 * h)
+        _kick(plan, xn, T.SPLIT_KICK * h)
     return xn
 
 
-def gyro_newton(I, w, tau_b, h, iterations: int = 30):
+def gyro_newton(I, w, tau_b, h, iterations: int = T.GYRO_MAX_ITER):
     """Solve I(w1 − w) + h w1 × (I w1) = h tau_b for w1 (rows of bodies) by Newton's method from w1 = w,
-    to rounding. Solved exactly the torque-free step never gains energy: E − E1 = ½(w − w1)ᵀI(w − w1)."""
+    to rounding (implicit_gyro_newton: the derived residual, its SymPy Jacobian, the adjugate solve).
+    Solved exactly the torque-free step never gains energy: E − E1 = ½(w − w1)ᵀI(w − w1)."""
     w1 = w.copy()
-    eye = np.eye(3)
     for _ in range(iterations):
-        Lw = I * w1
-        g = I * (w1 - w) + h * np.cross(w1, Lw) - h * tau_b
-        J = eye * I[:, None, :] + h * (_skew(w1) * I[:, None, :] - _skew(Lw))
-        d = np.linalg.solve(J, g[..., None])[..., 0]
-        w1 = w1 - d
-        if not np.any(np.sum(d * d, axis=1) > 1e-32 * np.sum(w1 * w1, axis=1)):
+        w1, d = K.implicit_gyro_newton(I, w, tau_b, h, w1)
+        if not np.any(np.sum(d * d, axis=1) > T.GYRO_TOL_SQ * np.sum(w1 * w1, axis=1)):
             break
     return w1
 
 
-def _skew(a):
-    z = np.zeros(a.shape[0])
-    return np.stack([np.stack([z, -a[:, 2], a[:, 1]], 1), np.stack([a[:, 2], z, -a[:, 0]], 1),
-                     np.stack([-a[:, 1], a[:, 0], z], 1)], 1)
-
-
 def _implicit_gyro(plan, x, h):
-    """Loads at the start; w1 by gyro_newton; q ← q ⊗ exp(h w1/2); v += h F/m; p += h v."""
+    """Loads at the start; w1 by gyro_newton; q ← q ⊗ exp(h w1/2) (quat_exp_step); v += h F/m; p += h v."""
     F, tb = plan.loads(x)
-    w1 = gyro_newton(plan.I, x[:, 10:13], tb, h)
-    n = np.sqrt(np.sum(w1 * w1, axis=1))
-    a = 0.5 * h * n
-    with np.errstate(invalid="ignore", divide="ignore"):
-        sa = np.where(a > 1e-8, np.sin(a) / np.where(n > 0, n, 1.0), 0.5 * h * (1.0 - a * a / 6.0))
-    e = np.concatenate([sa[:, None] * w1, np.cos(a)[:, None]], axis=1)
+    w1 = gyro_newton(plan.I, x[:, W], tb, h)
     xn = x.copy()
-    xn[:, 3:7] = K.quat_mul(x[:, 3:7], e)
-    xn[:, 10:13] = w1
-    xn[:, 7:10] += h * F / plan.m[:, None]
-    xn[:, 0:3] += h * xn[:, 7:10]
+    xn[:, Q] = K.quat_exp_step(x[:, Q], w1, h)
+    xn[:, W] = w1
+    xn[:, P], xn[:, V] = K.semi_implicit_translation(plan.m, x[:, P], x[:, V], F, h)
     return xn
 
 
@@ -310,20 +280,20 @@ def step(plan: _Plan, x: np.ndarray, integrator: str, normalize: bool, dt: float
     elif integrator == "semi_implicit_euler":
         k = f(x)
         xn = x.copy()
-        xn[:, 7:] += dt * k[:, 7:]  # v, omega (and Omega) first
-        xn[:, 0:3] += dt * xn[:, 7:10]
-        xn[:, 3:7] += dt * K.quat_derivative_body(x[:, 3:7], xn[:, 10:13])
+        for part in (V, W) + ((OM,) if x.shape[1] > LY.STATE_SIZE else ()):  # v, omega (and Omega) first
+            xn[:, part] += dt * k[:, part]
+        xn[:, P] = K.translation_drift(x[:, P], xn[:, V], dt)
+        xn[:, Q] += dt * K.quat_derivative_body(x[:, Q], xn[:, W])
     elif integrator == "splitting":
         xn = _splitting(plan, x, dt)
     elif integrator == "implicit_gyro":
         xn = _implicit_gyro(plan, x, dt)
     elif integrator == "rk4":
-        h = dt / 2
         k1 = f(x)
-        k2 = f(x + h * k1)
-        k3 = f(x + h * k2)
-        k4 = f(x + dt * k3)
-        xn = x + (dt / 6) * (k1 + 2 * k2 + 2 * k3 + k4)
+        k2 = f(x + (T.RK4_C1 * dt) * k1)
+        k3 = f(x + (T.RK4_C2 * dt) * k2)
+        k4 = f(x + (T.RK4_C3 * dt) * k3)
+        xn = x + (dt / T.RK4_B_DEN) * (T.RK4_B0 * k1 + T.RK4_B1 * k2 + T.RK4_B2 * k3 + T.RK4_B3 * k4)
     else:  # validated by Sim; kept for direct callers
         raise ValueError(f"integrator: unknown {integrator!r}")
     if normalize:
@@ -369,8 +339,8 @@ class NumpyBackend:
             applied = models.applied.copy()
             with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
                 loop(plan, x, integrator, normalize, dt, n_steps, models.command, applied)
-            state[...] = x[:, :13]
-            models.Omega[...] = x[:, 13:16]
+            state[...] = x[:, X]
+            models.Omega[...] = x[:, OM]
             models.applied[...] = applied
         if integrator == "dopri5":
             adaptive.h[...], adaptive.nfev[...] = h, nfev
@@ -382,19 +352,14 @@ class NumpyBackend:
             xn = step(plan, x, integrator, normalize, dt, u)
             if not np.isfinite(xn).all():
                 b = int(np.flatnonzero(~np.isfinite(xn).all(axis=1))[0])
-                raise DivergenceError(i, b, divergence_cause(x[b, :13], dt, integrator, *plan.wheel_info(x, b)))
+                raise DivergenceError(i, b, divergence_cause(x[b, X], dt, integrator, *plan.wheel_info(x, b)))
             x[...] = xn
             if u is not None:
                 applied[plan.wheels.idx] = u
 
 
-# Dormand–Prince 5(4) (Hairer, Nørsett & Wanner, Solving ODEs I, table 5.2), as in step.c.
-_DP_A = [[], [1 / 5], [3 / 40, 9 / 40], [44 / 45, -56 / 15, 32 / 9],
-         [19372 / 6561, -25360 / 2187, 64448 / 6561, -212 / 729],
-         [9017 / 3168, -355 / 33, 46732 / 5247, 49 / 176, -5103 / 18656],
-         [35 / 384, 0.0, 500 / 1113, 125 / 192, -2187 / 6784, 11 / 84]]
-_DP_E = [71 / 57600, 0.0, -71 / 16695, 71 / 1920, -17253 / 339200, 22 / 525, -1 / 40]
-_SAFETY, _FACMIN, _FACMAX = 0.9, 0.2, 5.0
+# Dormand–Prince 5(4) (Hairer, Nørsett & Wanner, Solving ODEs I, table 5.2): T.DP_A, T.DP_E and the controller
+# constants are printed from derive/tableaux.py, the same doubles as the C step loop's.
 
 
 def _dp_norms(e, y, yn, rtol, atol, ncols):
@@ -410,7 +375,8 @@ def _dopri5(plan, x, normalize, dt, n_steps, rtol, atol, hs, nfev, command=None,
     updated in place. k1 is reused (FSAL) within the call, recomputed each output step with wheels
     (their held torque may change)."""
     nb = x.shape[0]
-    ncols = np.where(plan.wheeled, 16.0, 13.0) if x.shape[1] > 13 else np.full(nb, 13.0)
+    ncols = (np.where(plan.wheeled, float(LY.XS_SIZE), float(LY.STATE_SIZE)) if x.shape[1] > LY.STATE_SIZE
+             else np.full(nb, float(LY.STATE_SIZE)))
     hmin = DOPRI5_HMIN_REL * dt
     h = float(hs[0]) if nb else dt
     k1 = None
@@ -435,15 +401,15 @@ def _dopri5(plan, x, normalize, dt, n_steps, rtol, atol, hs, nfev, command=None,
             hh = rem if clipped else h
             k = [k1]
             for s_ in range(1, 7):
-                acc = sum(a * kj for a, kj in zip(_DP_A[s_], k) if a != 0.0)
+                acc = sum(a * kj for a, kj in zip(T.DP_A[s_], k) if a != 0.0)
                 k.append(f(x + hh * acc))
             count += 6
-            yn = x + hh * sum(a * kj for a, kj in zip(_DP_A[6], k) if a != 0.0)
-            err = hh * sum(e * kj for e, kj in zip(_DP_E, k) if e != 0.0)
+            yn = x + hh * sum(a * kj for a, kj in zip(T.DP_A[6], k) if a != 0.0)
+            err = hh * sum(e * kj for e, kj in zip(T.DP_E, k) if e != 0.0)
             norms = _dp_norms(err, x, yn, rtol, atol, ncols)
             e = float(np.max(norms)) if np.all(np.isfinite(norms)) else np.inf
             if e <= 1.0:
-                fac = _FACMAX if e == 0.0 else min(_FACMAX, max(_FACMIN, _SAFETY * e ** -0.2))
+                fac = T.DP_FACMAX if e == 0.0 else min(T.DP_FACMAX, max(T.DP_FACMIN, T.DP_SAFETY * e ** T.DP_ERR_EXPONENT))
                 if rejected:
                     fac = min(fac, 1.0)
                 t = dt if clipped else t + hh
@@ -455,12 +421,12 @@ def _dopri5(plan, x, normalize, dt, n_steps, rtol, atol, hs, nfev, command=None,
                     plan.constrain(yn)
                 if not np.isfinite(yn).all():
                     b = int(np.flatnonzero(~np.isfinite(yn).all(axis=1))[0])
-                    raise DivergenceError(i, b, divergence_cause(x[b, :13], dt, "dopri5", *plan.wheel_info(x, b)))
+                    raise DivergenceError(i, b, divergence_cause(x[b, X], dt, "dopri5", *plan.wheel_info(x, b)))
                 x[...] = yn
                 k1 = k[6]
                 rejected = False
             else:
-                fac = max(_FACMIN, _SAFETY * e ** -0.2) if np.isfinite(e) else _FACMIN
+                fac = max(T.DP_FACMIN, T.DP_SAFETY * e ** T.DP_ERR_EXPONENT) if np.isfinite(e) else T.DP_FACMIN
                 h = hh * min(fac, 1.0)
                 rejected = True
             sub += 1
@@ -478,11 +444,12 @@ def _initial_h(f, x, f0, rtol, atol, dt, ncols):
     """Hairer's starting step (Solving ODEs I, II.4), shared by all bodies (the smallest); 1 evaluation."""
     d0 = float(np.min(_dp_norms(x, x, x, rtol, atol, ncols)))
     d1 = float(np.max(_dp_norms(f0, x, x, rtol, atol, ncols)))
-    h0 = 1e-6 if (d0 < 1e-5 or d1 < 1e-5) else 0.01 * d0 / d1
+    h0 = T.DP_INIT_TINY_H if (d0 < T.DP_INIT_SMALL or d1 < T.DP_INIT_SMALL) else T.DP_INIT_FRAC * d0 / d1
     h0 = min(h0, dt)
     f1 = f(x + h0 * f0)
     d2 = float(np.max(_dp_norms((f1 - f0) / h0, x, x, rtol, atol, ncols)))
     mx = max(d1, d2)
-    h1 = max(1e-6, h0 * 1e-3) if mx <= 1e-15 else (0.01 / mx) ** 0.2
-    h = min(100 * h0, h1)
+    h1 = (max(T.DP_INIT_TINY_H, h0 * T.DP_INIT_SHRINK) if mx <= T.DP_INIT_FLAT
+          else (T.DP_INIT_FRAC / mx) ** T.DP_INIT_EXPONENT)
+    h = min(T.DP_INIT_GROW * h0, h1)
     return (h if np.isfinite(h) and h > 0 else dt), 1

@@ -46,6 +46,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ..generated import layout as LY
+
 SCHEMA = "lavendersim-bench/1"
 HERE = Path(__file__).resolve().parent
 KERNEL_SOURCE = HERE / "handwritten_rk4.c"
@@ -311,11 +313,12 @@ class MujocoBody:
 
     def reset(self) -> None:
         x = initial_state()
+        q = x[LY.STATE_Q]
         self.mj.mj_resetData(self.m, self.d)
-        self.d.qpos[0:3] = x[0:3]
-        self.d.qpos[3:7] = [x[6], x[3], x[4], x[5]]  # (x, y, z, w) -> (w, x, y, z)
-        self.d.qvel[0:3] = x[7:10]
-        self.d.qvel[3:6] = x[10:13]
+        self.d.qpos[0:3] = x[LY.STATE_P_W]
+        self.d.qpos[3:7] = [q[3], q[0], q[1], q[2]]  # (x, y, z, w) -> (w, x, y, z)
+        self.d.qvel[0:3] = x[LY.STATE_V_W]
+        self.d.qvel[3:6] = x[LY.STATE_OMEGA_B]
 
     def step_loop(self, n: int) -> None:
         step, m, d = self.mj.mj_step, self.m, self.d
@@ -338,7 +341,8 @@ def mujoco_agreement(n_steps: int = 1000) -> dict:
     exact = ref.torque_free(inertia(), OMEGA_B0, Q0, t)
     ours = single_sim("c").record(n_steps).x[1:, 0]
     x0 = initial_state()
-    p_exact = x0[0:3] + t[:, None] * x0[7:10]
+    P, Q, V, W = LY.STATE_P_W, LY.STATE_Q, LY.STATE_V_W, LY.STATE_OMEGA_B
+    p_exact = x0[P] + t[:, None] * x0[V]
 
     def errors(q, w, p, v, q_ref, w_ref, p_ref, v_ref):
         return {"attitude_rad_max": float(np.max(ref.attitude_error(q, q_ref))),
@@ -346,8 +350,8 @@ def mujoco_agreement(n_steps: int = 1000) -> dict:
                 "p_w_max": float(np.max(np.abs(p - p_ref))), "v_w_max": float(np.max(np.abs(v - v_ref)))}
 
     out = {"steps": n_steps, "seconds": n_steps * DT,
-           "lavendersim_rk4_vs_exact": errors(ours[:, 3:7], ours[:, 10:13], ours[:, 0:3], ours[:, 7:10],
-                                              exact.q, exact.omega_b, p_exact, np.broadcast_to(x0[7:10], (n_steps, 3)))}
+           "lavendersim_rk4_vs_exact": errors(ours[:, Q], ours[:, W], ours[:, P], ours[:, V],
+                                              exact.q, exact.omega_b, p_exact, np.broadcast_to(x0[V], (n_steps, 3)))}
     for integ in MUJOCO_INTEGRATORS:
         mb = MujocoBody(integ)
         if mb.rollout is not None:
@@ -360,10 +364,10 @@ def mujoco_agreement(n_steps: int = 1000) -> dict:
                 qpos[k], qvel[k] = mb.d.qpos, mb.d.qvel
         q = np.concatenate([qpos[:, 4:7], qpos[:, 3:4]], axis=1)  # (w, x, y, z) -> (x, y, z, w)
         w, p, v = qvel[:, 3:6], qpos[:, 0:3], qvel[:, 0:3]
-        out[f"mujoco_{integ}_vs_lavendersim_rk4"] = errors(q, w, p, v, ours[:, 3:7], ours[:, 10:13],
-                                                            ours[:, 0:3], ours[:, 7:10])
+        out[f"mujoco_{integ}_vs_lavendersim_rk4"] = errors(q, w, p, v, ours[:, Q], ours[:, W],
+                                                            ours[:, P], ours[:, V])
         out[f"mujoco_{integ}_vs_exact"] = errors(q, w, p, v, exact.q, exact.omega_b, p_exact,
-                                                 np.broadcast_to(x0[7:10], (n_steps, 3)))
+                                                 np.broadcast_to(x0[V], (n_steps, 3)))
     return out
 
 

@@ -11,7 +11,7 @@
 #include "step.h"
 
 #ifndef LV_GENERATED_HASH
-#error "LV_GENERATED_HASH must be defined by the build (sha256 of generated/kernels.c + kernels.h)"
+#error "LV_GENERATED_HASH must be defined by the build (sha256 of the generated C sources)"
 #endif
 
 static int is_float64_format(const char *fmt)
@@ -346,8 +346,8 @@ static PyObject *py_simulate(PyObject *self, PyObject *args)
             goto fail;
         }
         for (e = 0; e < nb; e++) {
-            const double kind = ((const double *)mr.buf)[e * LV_MODEL_SIZE];
-            if (!(kind == 0 || kind == 1 || kind == 2 || kind == 3)) {
+            const double kind = ((const double *)mr.buf)[e * LV_MODEL_SIZE + LV_MODEL_KIND];
+            if (!(kind >= 0 && kind <= (LV_KIND_JOINT | LV_KIND_WHEELS) && kind == floor(kind))) {
                 PyObject *ko = PyFloat_FromDouble(kind);
                 PyErr_Format(PyExc_ValueError,
                              "simulate: model_rows[%zd] kind must be 0 (plain), 1 (joint), 2 (wheels) or 3 (joint + wheels), got %R",

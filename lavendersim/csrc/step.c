@@ -10,6 +10,7 @@
 
 #include "kernels.c"
 #include "step.h"
+#include "tableaux.h"
 
 /* ---- the effect index -------------------------------------------------------------------------
 
@@ -128,14 +129,14 @@ static inline void effect_sums(const double *x, const double *v_w, double m, con
    torque summed in table order and passed to the full right-hand side. */
 static void body_rhs(const double *x, const double *prm, const lv_effect_ref *refs, long n_refs, double *xdot)
 {
-    const double m = prm[0];
-    const double *I_b = prm + 1;
+    const double m = prm[LV_PARAM_M];
+    const double *I_b = prm + LV_PARAM_I_B;
     double F[3] = {0.0, 0.0, 0.0}, tau[3] = {0.0, 0.0, 0.0};
     if (n_refs == 0) {
         lv_rigid_body_rhs_free(x, I_b, xdot);
         return;
     }
-    effect_sums(x, x + 7, m, I_b, refs, n_refs, F, tau);
+    effect_sums(x, x + LV_STATE_V_W, m, I_b, refs, n_refs, F, tau);
     lv_rigid_body_rhs(x, m, I_b, F, tau, xdot);
 }
 
@@ -166,7 +167,7 @@ static inline long advance_block(double *state, const double *params, const long
     const double *prm[LV_BLOCK];
     const lv_effect_ref *refs[LV_BLOCK];
     long n_refs[LV_BLOCK];
-    const double h2 = 0.5 * dt, h6 = dt / 6.0;
+    const double h2 = LV_RK4_C1 * dt, h3 = LV_RK4_C2 * dt, h4 = LV_RK4_C3 * dt, h6 = dt / LV_RK4_B_DEN;
     long s;
     int i, j;
     for (j = 0; j < n; j++) {
@@ -187,10 +188,13 @@ static inline long advance_block(double *state, const double *params, const long
         case LV_INTEGRATOR_SEMI_IMPLICIT_EULER:
             RHS(x, k1);
             for (j = 0; j < n; j++) {
-                for (i = 7; i < 13; i++) xn[j][i] = x[j][i] + dt * k1[j][i];      /* v', omega' */
-                for (i = 0; i < 3; i++) xn[j][i] = x[j][i] + dt * xn[j][7 + i];   /* p' = p + dt v' */
-                lv_quat_derivative_body(x[j] + 3, xn[j] + 10, tmp[j]);          /* q rate at omega' */
-                for (i = 0; i < 4; i++) xn[j][3 + i] = x[j][3 + i] + dt * tmp[j][i];
+                for (i = 0; i < 3; i++) {                                         /* v', omega' */
+                    xn[j][LV_STATE_V_W + i] = x[j][LV_STATE_V_W + i] + dt * k1[j][LV_STATE_V_W + i];
+                    xn[j][LV_STATE_OMEGA_B + i] = x[j][LV_STATE_OMEGA_B + i] + dt * k1[j][LV_STATE_OMEGA_B + i];
+                }
+                lv_translation_drift(x[j] + LV_STATE_P_W, xn[j] + LV_STATE_V_W, dt, xn[j] + LV_STATE_P_W); /* p + dt v' */
+                lv_quat_derivative_body(x[j] + LV_STATE_Q, xn[j] + LV_STATE_OMEGA_B, tmp[j]);          /* q rate at omega' */
+                for (i = 0; i < 4; i++) xn[j][LV_STATE_Q + i] = x[j][LV_STATE_Q + i] + dt * tmp[j][i];
             }
             break;
         default: /* LV_INTEGRATOR_RK4; stage quaternions left unnormalized */
@@ -199,18 +203,19 @@ static inline long advance_block(double *state, const double *params, const long
                 for (i = 0; i < LV_STATE_SIZE; i++) tmp[j][i] = x[j][i] + h2 * k1[j][i];
             RHS(tmp, k2);
             for (j = 0; j < n; j++)
-                for (i = 0; i < LV_STATE_SIZE; i++) tmp[j][i] = x[j][i] + h2 * k2[j][i];
+                for (i = 0; i < LV_STATE_SIZE; i++) tmp[j][i] = x[j][i] + h3 * k2[j][i];
             RHS(tmp, k3);
             for (j = 0; j < n; j++)
-                for (i = 0; i < LV_STATE_SIZE; i++) tmp[j][i] = x[j][i] + dt * k3[j][i];
+                for (i = 0; i < LV_STATE_SIZE; i++) tmp[j][i] = x[j][i] + h4 * k3[j][i];
             RHS(tmp, k4);
             for (j = 0; j < n; j++)
                 for (i = 0; i < LV_STATE_SIZE; i++)
-                    xn[j][i] = x[j][i] + h6 * (k1[j][i] + 2.0 * k2[j][i] + 2.0 * k3[j][i] + k4[j][i]);
+                    xn[j][i] = x[j][i] + h6 * (LV_RK4_B0 * k1[j][i] + LV_RK4_B1 * k2[j][i] + LV_RK4_B2 * k3[j][i]
+                                               + LV_RK4_B3 * k4[j][i]);
             break;
         }
         if (normalize)
-            for (j = 0; j < n; j++) lv_quat_normalize(xn[j] + 3, xn[j] + 3);
+            for (j = 0; j < n; j++) lv_quat_normalize(xn[j] + LV_STATE_Q, xn[j] + LV_STATE_Q);
         for (j = 0; j < n; j++) {
             if (!all_finite(xn[j])) {
                 *fail_j = j;
@@ -254,16 +259,17 @@ enum { LV_RHS_FREE = 0, LV_RHS_TORQUE = 1, LV_RHS_FULL = 2 };
             for (i = 0; i < LV_STATE_SIZE; i++) tmp[j][i] = x[j][i] + h2 * k1[j][i];                    \
         LV_RK4_RHS(tmp, k2);                                                                            \
         for (j = 0; j < n; j++)                                                                         \
-            for (i = 0; i < LV_STATE_SIZE; i++) tmp[j][i] = x[j][i] + h2 * k2[j][i];                    \
+            for (i = 0; i < LV_STATE_SIZE; i++) tmp[j][i] = x[j][i] + h3 * k2[j][i];                    \
         LV_RK4_RHS(tmp, k3);                                                                            \
         for (j = 0; j < n; j++)                                                                         \
-            for (i = 0; i < LV_STATE_SIZE; i++) tmp[j][i] = x[j][i] + dt * k3[j][i];                    \
+            for (i = 0; i < LV_STATE_SIZE; i++) tmp[j][i] = x[j][i] + h4 * k3[j][i];                    \
         LV_RK4_RHS(tmp, k4);                                                                            \
         for (j = 0; j < n; j++)                                                                         \
             for (i = 0; i < LV_STATE_SIZE; i++)                                                         \
-                xn[j][i] = x[j][i] + h6 * (k1[j][i] + 2.0 * k2[j][i] + 2.0 * k3[j][i] + k4[j][i]);      \
+                xn[j][i] = x[j][i] + h6 * (LV_RK4_B0 * k1[j][i] + LV_RK4_B1 * k2[j][i]                  \
+                                           + LV_RK4_B2 * k3[j][i] + LV_RK4_B3 * k4[j][i]);              \
         if (normalize)                                                                                  \
-            for (j = 0; j < n; j++) lv_quat_normalize(xn[j] + 3, xn[j] + 3);                            \
+            for (j = 0; j < n; j++) lv_quat_normalize(xn[j] + LV_STATE_Q, xn[j] + LV_STATE_Q);          \
     } while (0)
 
 /* LV_FLATTEN: inline every call in the function (its kernels included), so each call with constant block
@@ -303,13 +309,13 @@ static inline long advance_free_rk4(double *state, const double *params, const l
     double F[LV_BLOCK][3], tau[LV_BLOCK][3], m[LV_BLOCK];
     const lv_effect_ref *refs[LV_BLOCK];
     long n_refs[LV_BLOCK];
-    const double h2 = 0.5 * dt, h6 = dt / 6.0;
+    const double h2 = LV_RK4_C1 * dt, h3 = LV_RK4_C2 * dt, h4 = LV_RK4_C3 * dt, h6 = dt / LV_RK4_B_DEN;
     long s, c, cm;
     int i, j, ok;
     for (j = 0; j < n; j++) {
         memcpy(x[j], state + ids[j] * LV_STATE_SIZE, sizeof x[j]);
-        memcpy(I[j], params + ids[j] * LV_PARAM_SIZE + 1, sizeof I[j]);
-        m[j] = params[ids[j] * LV_PARAM_SIZE];
+        memcpy(I[j], params + ids[j] * LV_PARAM_SIZE + LV_PARAM_I_B, sizeof I[j]);
+        m[j] = params[ids[j] * LV_PARAM_SIZE + LV_PARAM_M];
         refs[j] = ix->refs + ix->start[ids[j]];
         n_refs[j] = ix->start[ids[j] + 1] - ix->start[ids[j]];
     }
@@ -346,8 +352,6 @@ static inline long advance_free_rk4(double *state, const double *params, const l
 
 /* ---- bodies with a spherical joint and/or reaction wheels ------------------------------------ */
 
-/* extended state: x[13] then Omega[3] */
-#define LV_XS 16
 
 /* d/dt of [x, Omega] for a body of nonzero kind; u = this step's applied wheel torques.
    r = its model row. A jointed body's p, v derivatives are zero (set from the joint after the step);
@@ -356,35 +360,25 @@ static void model_rhs(const double *y, const double *u, double m, const double *
                       int needs_v, const lv_effect_ref *refs, long n_refs, double *yd)
 {
     double F[3] = {0.0, 0.0, 0.0}, tau[3] = {0.0, 0.0, 0.0}, pk[3], vk[3];
-    const double *v = y + 7;
+    const double *v = y + LV_STATE_V_W;
     int i;
     if (needs_v) {
-        lv_pivot_kinematics(y + 3, y + 10, r + 13, r + 10, pk, vk);
+        lv_pivot_kinematics(y + LV_STATE_Q, y + LV_STATE_OMEGA_B, r + LV_MODEL_ANCHOR_W, r + LV_MODEL_R_B, pk, vk);
         v = vk;
     }
     effect_sums(y, v, m, I_b, refs, n_refs, F, tau);
     if (kind & LV_KIND_WHEELS) {
-        lv_wheel_body_rhs(y + 3, y + 10, y + 13, r + 1, r + 16, r + 10, F, tau, u, r[21], yd + 3, yd + 10, yd + 13);
+        lv_wheel_body_rhs(y + LV_STATE_Q, y + LV_STATE_OMEGA_B, y + LV_XS_OMEGA, r + LV_MODEL_I_P, r + LV_MODEL_J,
+                          r + LV_MODEL_R_B, F, tau, u, r[LV_MODEL_C_W], yd + LV_STATE_Q, yd + LV_STATE_OMEGA_B, yd + LV_XS_OMEGA);
     } else {
-        lv_pivot_body_rhs(y + 3, y + 10, r + 1, r + 10, F, tau, yd + 3, yd + 10);
-        yd[13] = yd[14] = yd[15] = 0.0;
+        lv_pivot_body_rhs(y + LV_STATE_Q, y + LV_STATE_OMEGA_B, r + LV_MODEL_I_P, r + LV_MODEL_R_B, F, tau,
+                          yd + LV_STATE_Q, yd + LV_STATE_OMEGA_B);
+        for (i = 0; i < 3; i++) yd[LV_XS_OMEGA + i] = 0.0;
     }
     if (kind & LV_KIND_JOINT) {
-        for (i = 0; i < 3; i++) yd[i] = yd[7 + i] = 0.0;
+        for (i = 0; i < 3; i++) yd[LV_STATE_P_W + i] = yd[LV_STATE_V_W + i] = 0.0;
     } else {
-        for (i = 0; i < 3; i++) { yd[i] = y[7 + i]; yd[7 + i] = F[i] / m; }
-    }
-}
-
-/* Zero-order-hold saturation: clip to +-torque_limit; no drive beyond speed_limit. */
-static void saturate(const double *cmd, const double *Omega, double tl, double sl, double *u)
-{
-    int i;
-    for (i = 0; i < 3; i++) {
-        double c = cmd[i];
-        c = c < -tl ? -tl : (c > tl ? tl : c);
-        if (fabs(Omega[i]) >= sl && c * Omega[i] > 0.0) c = 0.0;
-        u[i] = c;
+        lv_translation_rhs(m, y + LV_STATE_V_W, F, yd + LV_STATE_P_W, yd + LV_STATE_V_W);
     }
 }
 
@@ -395,50 +389,58 @@ static long advance_model(double *state, const double *params, long b, const lv_
                           double dt, long n_steps, double *last)
 {
     const double *r = md->rows + b * LV_MODEL_SIZE;
-    const int kind = (int)r[0];
-    const double m = params[b * LV_PARAM_SIZE];
+    const int kind = (int)r[LV_MODEL_KIND];
+    const double m = params[b * LV_PARAM_SIZE + LV_PARAM_M];
     const double *cmd = md->command + 3 * b;
-    double y[LV_XS], yn[LV_XS], k1[LV_XS], k2[LV_XS], k3[LV_XS], k4[LV_XS], tmp[LV_XS];
+    double y[LV_XS_SIZE], yn[LV_XS_SIZE], k1[LV_XS_SIZE], k2[LV_XS_SIZE], k3[LV_XS_SIZE], k4[LV_XS_SIZE], tmp[LV_XS_SIZE];
     double u[3] = {0.0, 0.0, 0.0}, applied[3];
-    const double h2 = 0.5 * dt, h6 = dt / 6.0;
-    const double *I_b = params + b * LV_PARAM_SIZE + 1;
+    const double h2 = LV_RK4_C1 * dt, h3 = LV_RK4_C2 * dt, h4 = LV_RK4_C3 * dt, h6 = dt / LV_RK4_B_DEN;
+    const double *I_b = params + b * LV_PARAM_SIZE + LV_PARAM_I_B;
     const lv_effect_ref *refs = ix->refs + ix->start[b];
     const long n_refs = ix->start[b + 1] - ix->start[b];
     const int needs_v = (kind & LV_KIND_JOINT) && (ix->flags[b] & LV_EFFECT_USES_V);
     long s;
     int i;
     memcpy(y, state + b * LV_STATE_SIZE, LV_STATE_SIZE * sizeof(double));
-    memcpy(y + LV_STATE_SIZE, md->Omega + 3 * b, 3 * sizeof(double));
+    memcpy(y + LV_XS_OMEGA, md->Omega + 3 * b, 3 * sizeof(double));
     memcpy(applied, md->applied + 3 * b, sizeof applied);
 #define MRHS(in, out) model_rhs(in, u, m, I_b, r, kind, needs_v, refs, n_refs, out)
     for (s = 0; s < n_steps; s++) {
-        if (kind & LV_KIND_WHEELS) saturate(cmd, y + 13, r[19], r[20], u);
+        if (kind & LV_KIND_WHEELS)
+            lv_wheel_saturation(cmd, y + LV_XS_OMEGA, r[LV_MODEL_TORQUE_LIMIT], r[LV_MODEL_SPEED_LIMIT], u);
         switch (integrator) {
         case LV_INTEGRATOR_EULER:
             MRHS(y, k1);
-            for (i = 0; i < LV_XS; i++) yn[i] = y[i] + dt * k1[i];
+            for (i = 0; i < LV_XS_SIZE; i++) yn[i] = y[i] + dt * k1[i];
             break;
         case LV_INTEGRATOR_SEMI_IMPLICIT_EULER:
             MRHS(y, k1);
-            for (i = 7; i < LV_XS; i++) yn[i] = y[i] + dt * k1[i];    /* v', omega', Omega' */
-            for (i = 0; i < 3; i++) yn[i] = y[i] + dt * yn[7 + i];    /* p' = p + dt v' */
-            lv_quat_derivative_body(y + 3, yn + 10, tmp);              /* q rate at omega' */
-            for (i = 0; i < 4; i++) yn[3 + i] = y[3 + i] + dt * tmp[i];
+            for (i = 0; i < 3; i++) {                                    /* v', omega', Omega' */
+                yn[LV_STATE_V_W + i] = y[LV_STATE_V_W + i] + dt * k1[LV_STATE_V_W + i];
+                yn[LV_STATE_OMEGA_B + i] = y[LV_STATE_OMEGA_B + i] + dt * k1[LV_STATE_OMEGA_B + i];
+                yn[LV_XS_OMEGA + i] = y[LV_XS_OMEGA + i] + dt * k1[LV_XS_OMEGA + i];
+            }
+            lv_translation_drift(y + LV_STATE_P_W, yn + LV_STATE_V_W, dt, yn + LV_STATE_P_W); /* p + dt v' */
+            lv_quat_derivative_body(y + LV_STATE_Q, yn + LV_STATE_OMEGA_B, tmp);                /* q rate at omega' */
+            for (i = 0; i < 4; i++) yn[LV_STATE_Q + i] = y[LV_STATE_Q + i] + dt * tmp[i];
             break;
         default: /* LV_INTEGRATOR_RK4 */
             MRHS(y, k1);
-            for (i = 0; i < LV_XS; i++) tmp[i] = y[i] + h2 * k1[i];
+            for (i = 0; i < LV_XS_SIZE; i++) tmp[i] = y[i] + h2 * k1[i];
             MRHS(tmp, k2);
-            for (i = 0; i < LV_XS; i++) tmp[i] = y[i] + h2 * k2[i];
+            for (i = 0; i < LV_XS_SIZE; i++) tmp[i] = y[i] + h3 * k2[i];
             MRHS(tmp, k3);
-            for (i = 0; i < LV_XS; i++) tmp[i] = y[i] + dt * k3[i];
+            for (i = 0; i < LV_XS_SIZE; i++) tmp[i] = y[i] + h4 * k3[i];
             MRHS(tmp, k4);
-            for (i = 0; i < LV_XS; i++) yn[i] = y[i] + h6 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
+            for (i = 0; i < LV_XS_SIZE; i++)
+                yn[i] = y[i] + h6 * (LV_RK4_B0 * k1[i] + LV_RK4_B1 * k2[i] + LV_RK4_B2 * k3[i] + LV_RK4_B3 * k4[i]);
             break;
         }
-        if (normalize) lv_quat_normalize(yn + 3, yn + 3);
-        if (kind & LV_KIND_JOINT) lv_pivot_kinematics(yn + 3, yn + 10, r + 13, r + 10, yn, yn + 7);
-        for (i = 0; i < LV_XS; i++) {
+        if (normalize) lv_quat_normalize(yn + LV_STATE_Q, yn + LV_STATE_Q);
+        if (kind & LV_KIND_JOINT)
+            lv_pivot_kinematics(yn + LV_STATE_Q, yn + LV_STATE_OMEGA_B, r + LV_MODEL_ANCHOR_W, r + LV_MODEL_R_B,
+                                yn + LV_STATE_P_W, yn + LV_STATE_V_W);
+        for (i = 0; i < LV_XS_SIZE; i++) {
             if (!isfinite(yn[i])) {
                 memcpy(last, y, sizeof y);
                 return s;
@@ -449,7 +451,7 @@ static long advance_model(double *state, const double *params, long b, const lv_
     }
 #undef MRHS
     memcpy(state + b * LV_STATE_SIZE, y, LV_STATE_SIZE * sizeof(double));
-    memcpy(md->Omega + 3 * b, y + LV_STATE_SIZE, 3 * sizeof(double));
+    memcpy(md->Omega + 3 * b, y + LV_XS_OMEGA, 3 * sizeof(double));
     memcpy(md->applied + 3 * b, applied, sizeof applied);
     return -1;
 }
@@ -471,9 +473,9 @@ static void ctx_rhs(const body_ctx *c, const double *y, double *yd)
 {
     if (c->kind == 0) {
         body_rhs(y, c->prm, c->refs, c->n_refs, yd);
-        yd[13] = yd[14] = yd[15] = 0.0;
+        yd[LV_XS_OMEGA] = yd[LV_XS_OMEGA + 1] = yd[LV_XS_OMEGA + 2] = 0.0;
     } else {
-        model_rhs(y, c->u, c->m, c->prm + 1, c->r, c->kind, c->needs_v, c->refs, c->n_refs, yd);
+        model_rhs(y, c->u, c->m, c->prm + LV_PARAM_I_B, c->r, c->kind, c->needs_v, c->refs, c->n_refs, yd);
     }
 }
 
@@ -481,35 +483,19 @@ static void ctx_init(body_ctx *c, const double *params, long b, const lv_models 
 {
     c->b = b;
     c->prm = params + b * LV_PARAM_SIZE;
-    c->m = c->prm[0];
+    c->m = c->prm[LV_PARAM_M];
     c->refs = ix->refs + ix->start[b];
     c->n_refs = ix->start[b + 1] - ix->start[b];
     c->flags = ix->flags[b];
-    c->kind = md != NULL ? (int)md->rows[b * LV_MODEL_SIZE] : 0;
+    c->kind = md != NULL ? (int)md->rows[b * LV_MODEL_SIZE + LV_MODEL_KIND] : 0;
     c->r = md != NULL ? md->rows + b * LV_MODEL_SIZE : NULL;
     c->has = c->n_refs > 0;
     c->needs_v = (c->kind & LV_KIND_JOINT) && (c->flags & LV_EFFECT_USES_V);
     c->u[0] = c->u[1] = c->u[2] = 0.0;
 }
 
-/* Dormand-Prince 5(4) tableau (Hairer, Norsett & Wanner, Solving ODEs I, table 5.2). The nodes c_i
-   are not needed: the right-hand side does not depend on time. */
-static const double DP_A[7][6] = {
-    {0, 0, 0, 0, 0, 0},
-    {1.0 / 5, 0, 0, 0, 0, 0},
-    {3.0 / 40, 9.0 / 40, 0, 0, 0, 0},
-    {44.0 / 45, -56.0 / 15, 32.0 / 9, 0, 0, 0},
-    {19372.0 / 6561, -25360.0 / 2187, 64448.0 / 6561, -212.0 / 729, 0, 0},
-    {9017.0 / 3168, -355.0 / 33, 46732.0 / 5247, 49.0 / 176, -5103.0 / 18656, 0},
-    {35.0 / 384, 0, 500.0 / 1113, 125.0 / 192, -2187.0 / 6784, 11.0 / 84}};
-/* error weights: b5 - b4 */
-static const double DP_E[7] = {71.0 / 57600, 0.0, -71.0 / 16695, 71.0 / 1920, -17253.0 / 339200, 22.0 / 525, -1.0 / 40};
-
-#define DP_SAFETY 0.9
-#define DP_FACMIN 0.2
-#define DP_FACMAX 5.0
-#define DP_HMIN_REL 1e-12
-#define DP_MAX_SUBSTEPS 1000000L
+/* Dormand-Prince 5(4): LV_DP_A, LV_DP_E and the controller constants come from generated/tableaux.h
+   (derive/tableaux.py). The nodes c_i are not needed: the right-hand side does not depend on time. */
 
 /* RMS of e / (atol + rtol max(|y|, |yn|)) over the first n numbers (Hairer's norm). */
 static double dp_norm(const double *e, const double *y, const double *yn, int n, double rtol, double atol)
@@ -531,29 +517,32 @@ static double dp_norm(const double *e, const double *y, const double *yn, int n,
 static double dp_initial_h(const body_ctx *c, const double *y, const double *f0, int n, double rtol, double atol,
                            double dt, double *nfev)
 {
-    double y1[LV_XS], f1[LV_XS], d[LV_XS], d0, d1, d2, h0, h1, mx;
+    double y1[LV_XS_SIZE], f1[LV_XS_SIZE], d[LV_XS_SIZE], d0, d1, d2, h0, h1, mx;
     int i;
     for (i = 0; i < n; i++) d[i] = 0.0;
     d0 = dp_norm(y, y, y, n, rtol, atol);
     d1 = dp_norm(f0, y, y, n, rtol, atol);
-    h0 = (d0 < 1e-5 || d1 < 1e-5) ? 1e-6 : 0.01 * d0 / d1;
+    h0 = (d0 < LV_DP_INIT_SMALL || d1 < LV_DP_INIT_SMALL) ? LV_DP_INIT_TINY_H : LV_DP_INIT_FRAC * d0 / d1;
     if (h0 > dt) h0 = dt;
-    for (i = 0; i < LV_XS; i++) y1[i] = y[i] + h0 * f0[i];
+    for (i = 0; i < LV_XS_SIZE; i++) y1[i] = y[i] + h0 * f0[i];
     ctx_rhs(c, y1, f1);
     *nfev += 1;
     for (i = 0; i < n; i++) d[i] = (f1[i] - f0[i]) / h0;
     d2 = dp_norm(d, y, y, n, rtol, atol);
     mx = d1 > d2 ? d1 : d2;
-    h1 = mx <= 1e-15 ? (h0 * 1e-3 > 1e-6 ? h0 * 1e-3 : 1e-6) : pow(0.01 / mx, 0.2);
-    h0 = 100.0 * h0 < h1 ? 100.0 * h0 : h1;
+    h1 = mx <= LV_DP_INIT_FLAT ? (h0 * LV_DP_INIT_SHRINK > LV_DP_INIT_TINY_H ? h0 * LV_DP_INIT_SHRINK : LV_DP_INIT_TINY_H)
+                               : pow(LV_DP_INIT_FRAC / mx, LV_DP_INIT_EXPONENT);
+    h0 = LV_DP_INIT_GROW * h0 < h1 ? LV_DP_INIT_GROW * h0 : h1;
     return isfinite(h0) && h0 > 0.0 ? h0 : dt;
 }
 
 /* After an accepted substep: normalize q, put a jointed body back on its joint. */
 static void ctx_finish(const body_ctx *c, double *y, int normalize)
 {
-    if (normalize) lv_quat_normalize(y + 3, y + 3);
-    if (c->kind & LV_KIND_JOINT) lv_pivot_kinematics(y + 3, y + 10, c->r + 13, c->r + 10, y, y + 7);
+    if (normalize) lv_quat_normalize(y + LV_STATE_Q, y + LV_STATE_Q);
+    if (c->kind & LV_KIND_JOINT)
+        lv_pivot_kinematics(y + LV_STATE_Q, y + LV_STATE_OMEGA_B, c->r + LV_MODEL_ANCHOR_W, c->r + LV_MODEL_R_B,
+                            y + LV_STATE_P_W, y + LV_STATE_V_W);
 }
 
 /* Advance body b by n_steps output steps of dt with dopri5. Returns -1 on success (rows written), else
@@ -562,18 +551,18 @@ static long advance_dopri5(double *state, const double *params, long b, const lv
                            int normalize, double dt, long n_steps, const lv_adaptive *ad, int *why, double *last)
 {
     body_ctx c;
-    double y[LV_XS], yn[LV_XS], k[7][LV_XS], tmp[LV_XS], err[LV_XS], applied[3];
+    double y[LV_XS_SIZE], yn[LV_XS_SIZE], k[7][LV_XS_SIZE], tmp[LV_XS_SIZE], err[LV_XS_SIZE], applied[3];
     double h, nfev = 0.0;
-    const double rtol = ad->rtol, atol = ad->atol, hmin = DP_HMIN_REL * dt;
+    const double rtol = ad->rtol, atol = ad->atol, hmin = LV_DP_HMIN_REL * dt;
     const double *cmd = NULL;
     int have_k1 = 0, n, i, s2, j;
     long s;
     ctx_init(&c, params, b, md, ix);
-    n = c.kind & LV_KIND_WHEELS ? LV_XS : LV_STATE_SIZE;
+    n = c.kind & LV_KIND_WHEELS ? LV_XS_SIZE : LV_STATE_SIZE;
     memcpy(y, state + b * LV_STATE_SIZE, LV_STATE_SIZE * sizeof(double));
-    y[13] = y[14] = y[15] = 0.0;
+    y[LV_XS_OMEGA] = y[LV_XS_OMEGA + 1] = y[LV_XS_OMEGA + 2] = 0.0;
     if (c.kind) {
-        memcpy(y + LV_STATE_SIZE, md->Omega + 3 * b, 3 * sizeof(double));
+        memcpy(y + LV_XS_OMEGA, md->Omega + 3 * b, 3 * sizeof(double));
         memcpy(applied, md->applied + 3 * b, sizeof applied);
         cmd = md->command + 3 * b;
     }
@@ -583,7 +572,7 @@ static long advance_dopri5(double *state, const double *params, long b, const lv
         long sub = 0;
         int rejected = 0;
         if (c.kind & LV_KIND_WHEELS) {
-            saturate(cmd, y + 13, c.r[19], c.r[20], c.u);
+            lv_wheel_saturation(cmd, y + LV_XS_OMEGA, c.r[LV_MODEL_TORQUE_LIMIT], c.r[LV_MODEL_SPEED_LIMIT], c.u);
             have_k1 = 0; /* the held torque may change at each output step */
         }
         if (!have_k1) {
@@ -598,31 +587,31 @@ static long advance_dopri5(double *state, const double *params, long b, const lv
             const double hs = clipped ? rem : h;
             double e;
             for (s2 = 1; s2 < 7; s2++) {
-                for (i = 0; i < LV_XS; i++) {
+                for (i = 0; i < LV_XS_SIZE; i++) {
                     double acc = 0.0;
-                    for (j = 0; j < s2; j++) acc += DP_A[s2][j] * k[j][i];
+                    for (j = 0; j < s2; j++) acc += LV_DP_A[s2][j] * k[j][i];
                     tmp[i] = y[i] + hs * acc;
                 }
                 ctx_rhs(&c, tmp, k[s2]);
             }
             nfev += 6;
-            for (i = 0; i < LV_XS; i++) yn[i] = tmp[i]; /* stage 7 is evaluated at the 5th-order solution */
-            for (i = 0; i < LV_XS; i++) {
+            for (i = 0; i < LV_XS_SIZE; i++) yn[i] = tmp[i]; /* stage 7 is evaluated at the 5th-order solution */
+            for (i = 0; i < LV_XS_SIZE; i++) {
                 double acc = 0.0;
-                for (j = 0; j < 7; j++) acc += DP_E[j] * k[j][i];
+                for (j = 0; j < 7; j++) acc += LV_DP_E[j] * k[j][i];
                 err[i] = hs * acc;
             }
             e = dp_norm(err, y, yn, n, rtol, atol);
             if (e <= 1.0) {
-                double fac = e == 0.0 ? DP_FACMAX : DP_SAFETY * pow(e, -0.2);
-                if (fac > DP_FACMAX) fac = DP_FACMAX;
-                if (fac < DP_FACMIN) fac = DP_FACMIN;
+                double fac = e == 0.0 ? LV_DP_FACMAX : LV_DP_SAFETY * pow(e, LV_DP_ERR_EXPONENT);
+                if (fac > LV_DP_FACMAX) fac = LV_DP_FACMAX;
+                if (fac < LV_DP_FACMIN) fac = LV_DP_FACMIN;
                 if (rejected && fac > 1.0) fac = 1.0;
                 t = clipped ? dt : t + hs;
                 /* a step shortened to land on the output time does not shrink the proposal */
                 if (!(clipped && fac >= 1.0 && h > hs * fac)) h = hs * fac;
                 ctx_finish(&c, yn, normalize);
-                for (i = 0; i < LV_XS; i++) {
+                for (i = 0; i < LV_XS_SIZE; i++) {
                     if (!isfinite(yn[i])) {
                         *why = LV_DIVERGED;
                         memcpy(last, y, sizeof y);
@@ -634,13 +623,13 @@ static long advance_dopri5(double *state, const double *params, long b, const lv
                 memcpy(k[0], k[6], sizeof k[0]); /* FSAL: f at the new (un-normalized) point */
                 rejected = 0;
             } else {
-                double fac = isfinite(e) ? DP_SAFETY * pow(e, -0.2) : DP_FACMIN;
-                if (fac < DP_FACMIN) fac = DP_FACMIN;
+                double fac = isfinite(e) ? LV_DP_SAFETY * pow(e, LV_DP_ERR_EXPONENT) : LV_DP_FACMIN;
+                if (fac < LV_DP_FACMIN) fac = LV_DP_FACMIN;
                 if (fac > 1.0) fac = 1.0;
                 h = hs * fac;
                 rejected = 1;
             }
-            if (h < hmin || ++sub > DP_MAX_SUBSTEPS) {
+            if (h < hmin || ++sub > LV_DP_MAX_SUBSTEPS) {
                 *why = LV_TOLERANCE;
                 memcpy(last, y, sizeof y);
                 ad->h[b] = h;
@@ -652,7 +641,7 @@ static long advance_dopri5(double *state, const double *params, long b, const lv
     }
     memcpy(state + b * LV_STATE_SIZE, y, LV_STATE_SIZE * sizeof(double));
     if (c.kind) {
-        memcpy(md->Omega + 3 * b, y + LV_STATE_SIZE, 3 * sizeof(double));
+        memcpy(md->Omega + 3 * b, y + LV_XS_OMEGA, 3 * sizeof(double));
         memcpy(md->applied + 3 * b, applied, sizeof applied);
     }
     ad->h[b] = h;
@@ -660,138 +649,72 @@ static long advance_dopri5(double *state, const double *params, long b, const lv
     return -1;
 }
 
-/* Exact flow for time h of H_a = L_a^2 / (2 I_a): body momentum L turns about body axis a by -h L_a/I_a
-   and the attitude turns about it by +h L_a/I_a (q <- q (x) [sin(th/2) e_a, cos(th/2)]). */
-static void axis_flow(const double *I, double *q, double *L, int a, double h)
-{
-    const double th = h * L[a] / I[a];
-    const int j = (a + 1) % 3, k = (a + 2) % 3;
-    const double sh = sin(0.5 * th), ch = cos(0.5 * th);
-    const double c = 1.0 - 2.0 * sh * sh, s = 2.0 * sh * ch;
-    const double Lj = L[j], Lk = L[k];
-    double hq[4] = {0.0, 0.0, 0.0, 0.0};
-    L[j] = c * Lj + s * Lk;
-    L[k] = -s * Lj + c * Lk;
-    hq[a] = sh;
-    hq[3] = ch;
-    lv_quat_mul(q, hq, q);
-}
-
 /* Force at the COM (world) and torque (body frame) of the effects on a plain body. */
 static void plain_loads(const body_ctx *c, const double *x, double *F, double *tau_b)
 {
     double tau_w[3] = {0.0, 0.0, 0.0};
     F[0] = F[1] = F[2] = 0.0;
-    effect_sums(x, x + 7, c->m, c->prm + 1, c->refs, c->n_refs, F, tau_w);
-    lv_world_to_body(x + 3, tau_w, tau_b);
+    effect_sums(x, x + LV_STATE_V_W, c->m, c->prm + LV_PARAM_I_B, c->refs, c->n_refs, F, tau_w);
+    lv_world_to_body(x + LV_STATE_Q, tau_w, tau_b);
 }
 
-/* Half kick of the splitting: v and omega (q, p fixed) under the effects for time h. One evaluation
-   when the loads do not depend on v or omega (then exact); the explicit midpoint rule (two) with an
-   effect that reads them (linear or angular damping, ...), which keeps the composition symmetric to
-   second order. */
+/* Kick of the splitting: v and omega (q, p fixed) under the effects for time h (splitting_kick). One
+   evaluation when the loads do not depend on v or omega (then exact); the explicit midpoint rule (two)
+   with an effect that reads them (linear or angular damping, ...), which keeps the composition symmetric
+   to second order. */
 static void kick(const body_ctx *c, double *x, double h, int damped)
 {
-    const double *I = c->prm + 1;
+    const double *I = c->prm + LV_PARAM_I_B;
     double F[3], tb[3], xm[LV_STATE_SIZE];
-    int i;
     plain_loads(c, x, F, tb);
     if (damped) {
         memcpy(xm, x, sizeof xm);
-        for (i = 0; i < 3; i++) {
-            xm[7 + i] += 0.5 * h * F[i] / c->m;
-            xm[10 + i] += 0.5 * h * tb[i] / I[i];
-        }
+        lv_splitting_kick(c->m, I, x + LV_STATE_V_W, x + LV_STATE_OMEGA_B, F, tb, LV_SPLIT_MIDPOINT * h,
+                          xm + LV_STATE_V_W, xm + LV_STATE_OMEGA_B);
         plain_loads(c, xm, F, tb);
     }
-    for (i = 0; i < 3; i++) {
-        x[7 + i] += h * F[i] / c->m;
-        x[10 + i] += h * tb[i] / I[i];
-    }
+    lv_splitting_kick(c->m, I, x + LV_STATE_V_W, x + LV_STATE_OMEGA_B, F, tb, h, x + LV_STATE_V_W, x + LV_STATE_OMEGA_B);
 }
 
-/* One splitting step: kick(h/2), drift p by h v, free rotation by Strang 1(h/2) 2(h/2) 3(h) 2(h/2) 1(h/2),
-   kick(h/2). Second order, symmetric; torque-free it conserves L_w and |L_b| exactly (to rounding). */
+/* One splitting step: kick(h/2), drift p by h v, the free rotation over h (splitting_rotation: the Strang
+   sequence of exact principal-axis flows), kick(h/2). Second order, symmetric; torque-free it conserves L_w
+   and |L_b| exactly (to rounding). */
 static void splitting_step(const body_ctx *c, double *x, double h, int damped)
 {
-    const double *I = c->prm + 1;
-    double L[3];
-    int i;
-    if (c->has) kick(c, x, 0.5 * h, damped);
-    for (i = 0; i < 3; i++) {
-        x[i] += h * x[7 + i];
-        L[i] = I[i] * x[10 + i];
-    }
-    axis_flow(I, x + 3, L, 0, 0.5 * h);
-    axis_flow(I, x + 3, L, 1, 0.5 * h);
-    axis_flow(I, x + 3, L, 2, h);
-    axis_flow(I, x + 3, L, 1, 0.5 * h);
-    axis_flow(I, x + 3, L, 0, 0.5 * h);
-    for (i = 0; i < 3; i++) x[10 + i] = L[i] / I[i];
-    if (c->has) kick(c, x, 0.5 * h, damped);
+    if (c->has) kick(c, x, LV_SPLIT_KICK * h, damped);
+    lv_translation_drift(x + LV_STATE_P_W, x + LV_STATE_V_W, h, x + LV_STATE_P_W);
+    lv_splitting_rotation(c->prm + LV_PARAM_I_B, x + LV_STATE_Q, x + LV_STATE_OMEGA_B, h, x + LV_STATE_Q,
+                          x + LV_STATE_OMEGA_B);
+    if (c->has) kick(c, x, LV_SPLIT_KICK * h, damped);
 }
 
-/* Solve I (w1 - w) + h w1 x (I w1) = h tau_b for w1 by Newton's method (to rounding, at most 30
-   iterations), starting from w1 = w. Solved exactly, the torque-free step never gains energy:
+/* Solve I (w1 - w) + h w1 x (I w1) = h tau_b for w1 by Newton's method (implicit_gyro_newton: the derived
+   residual, its SymPy Jacobian and the adjugate solve) to rounding, at most LV_GYRO_MAX_ITER iterations,
+   starting from w1 = w. Solved exactly, the torque-free step never gains energy:
    E - E1 = (w - w1)^T I (w - w1) / 2 >= 0. */
 static void gyro_newton(const double *I, const double *w, const double *tau_b, double h, double *w1)
 {
-    int it, r, col;
+    double d[3];
+    int it;
     w1[0] = w[0]; w1[1] = w[1]; w1[2] = w[2];
-    for (it = 0; it < 30; it++) {
-        const double L[3] = {I[0] * w1[0], I[1] * w1[1], I[2] * w1[2]};
-        double g[3], J[3][3], d[3], det, A[3][3], nd, nw;
-        g[0] = I[0] * (w1[0] - w[0]) + h * (w1[1] * L[2] - w1[2] * L[1]) - h * tau_b[0];
-        g[1] = I[1] * (w1[1] - w[1]) + h * (w1[2] * L[0] - w1[0] * L[2]) - h * tau_b[1];
-        g[2] = I[2] * (w1[2] - w[2]) + h * (w1[0] * L[1] - w1[1] * L[0]) - h * tau_b[2];
-        /* J = I + h (skew(w1) I - skew(I w1)) */
-        J[0][0] = I[0];                       J[0][1] = h * (-w1[2] * I[1] + L[2]); J[0][2] = h * (w1[1] * I[2] - L[1]);
-        J[1][0] = h * (w1[2] * I[0] - L[2]);  J[1][1] = I[1];                       J[1][2] = h * (-w1[0] * I[2] + L[0]);
-        J[2][0] = h * (-w1[1] * I[0] + L[1]); J[2][1] = h * (w1[0] * I[1] - L[0]);  J[2][2] = I[2];
-        A[0][0] = J[1][1] * J[2][2] - J[1][2] * J[2][1];
-        A[0][1] = J[0][2] * J[2][1] - J[0][1] * J[2][2];
-        A[0][2] = J[0][1] * J[1][2] - J[0][2] * J[1][1];
-        A[1][0] = J[1][2] * J[2][0] - J[1][0] * J[2][2];
-        A[1][1] = J[0][0] * J[2][2] - J[0][2] * J[2][0];
-        A[1][2] = J[0][2] * J[1][0] - J[0][0] * J[1][2];
-        A[2][0] = J[1][0] * J[2][1] - J[1][1] * J[2][0];
-        A[2][1] = J[0][1] * J[2][0] - J[0][0] * J[2][1];
-        A[2][2] = J[0][0] * J[1][1] - J[0][1] * J[1][0];
-        det = J[0][0] * A[0][0] + J[0][1] * A[1][0] + J[0][2] * A[2][0];
-        nd = nw = 0.0;
-        for (r = 0; r < 3; r++) {
-            d[r] = 0.0;
-            for (col = 0; col < 3; col++) d[r] += A[r][col] * g[col];
-            d[r] /= det;
-        }
-        for (r = 0; r < 3; r++) {
-            w1[r] -= d[r];
-            nd += d[r] * d[r];
-            nw += w1[r] * w1[r];
-        }
-        if (!(nd > 1e-32 * nw)) break; /* |dw| <= 1e-16 |w1| (or non-finite: caught by the caller) */
+    for (it = 0; it < LV_GYRO_MAX_ITER; it++) {
+        lv_implicit_gyro_newton(I, w, tau_b, h, w1, w1, d);
+        /* |d| <= 1e-16 |w1| (or non-finite: caught by the caller) */
+        if (!(d[0] * d[0] + d[1] * d[1] + d[2] * d[2] > LV_GYRO_TOL_SQ * (w1[0] * w1[0] + w1[1] * w1[1] + w1[2] * w1[2])))
+            break;
     }
 }
 
 /* One implicit_gyro step: loads at the start (explicit), w1 from gyro_newton, q <- q (x) exp(h w1 / 2)
-   (unit by construction), then v += h F/m, p += h v (semi-implicit). */
+   (quat_exp_step; unit by construction), then v += h F/m, p += h v (semi_implicit_translation). */
 static void gyro_step(const body_ctx *c, double *x, double h)
 {
-    const double *I = c->prm + 1;
-    double F[3] = {0.0, 0.0, 0.0}, tb[3] = {0.0, 0.0, 0.0}, w1[3], e[4], nrm, a, sa;
-    int i;
+    double F[3] = {0.0, 0.0, 0.0}, tb[3] = {0.0, 0.0, 0.0}, w1[3];
     if (c->has) plain_loads(c, x, F, tb);
-    gyro_newton(I, x + 10, tb, h, w1);
-    nrm = sqrt(w1[0] * w1[0] + w1[1] * w1[1] + w1[2] * w1[2]);
-    a = 0.5 * h * nrm;
-    sa = a > 1e-8 ? sin(a) / nrm : 0.5 * h * (1.0 - a * a / 6.0); /* sin(a)/|w1| */
-    e[0] = sa * w1[0]; e[1] = sa * w1[1]; e[2] = sa * w1[2]; e[3] = cos(a);
-    lv_quat_mul(x + 3, e, x + 3);
-    for (i = 0; i < 3; i++) {
-        x[10 + i] = w1[i];
-        x[7 + i] += h * F[i] / c->m;
-        x[i] += h * x[7 + i];
-    }
+    gyro_newton(c->prm + LV_PARAM_I_B, x + LV_STATE_OMEGA_B, tb, h, w1);
+    lv_quat_exp_step(x + LV_STATE_Q, w1, h, x + LV_STATE_Q);
+    memcpy(x + LV_STATE_OMEGA_B, w1, sizeof w1);
+    lv_semi_implicit_translation(c->m, x + LV_STATE_P_W, x + LV_STATE_V_W, F, h, x + LV_STATE_P_W, x + LV_STATE_V_W);
 }
 
 /* Advance plain body b by n_steps of splitting or implicit_gyro; contract as advance_block with n = 1. */
@@ -811,7 +734,7 @@ static long advance_structured(double *state, const double *params, long b, cons
             splitting_step(&c, xn, dt, damped);
         else
             gyro_step(&c, xn, dt);
-        if (normalize) lv_quat_normalize(xn + 3, xn + 3);
+        if (normalize) lv_quat_normalize(xn + LV_STATE_Q, xn + LV_STATE_Q);
         for (i = 0; i < LV_STATE_SIZE; i++) {
             if (!isfinite(xn[i])) {
                 memcpy(last, x, sizeof x);
@@ -901,17 +824,17 @@ static int advance_fixed(double *state, const double *params, long nb, const lv_
                          const lv_models *models, int integrator, int normalize, double dt, long n_steps,
                          long *ids, long *limit, long *best)
 {
-    double last[LV_BLOCK][LV_STATE_SIZE], lastm[LV_XS];
+    double last[LV_BLOCK][LV_STATE_SIZE], lastm[LV_XS_SIZE];
     long b, k, s, lim, count[3] = {0, 0, 0}, first[3];
     int j, n, kind, status = LV_OK;
     for (b = 0; b < nb; b++) {
-        if (models != NULL && (int)models->rows[b * LV_MODEL_SIZE] != 0) {
+        if (models != NULL && (int)models->rows[b * LV_MODEL_SIZE + LV_MODEL_KIND] != 0) {
             lim = run_limit(b, *limit, *best, n_steps);
             if (lim <= 0) continue;
             s = advance_model(state, params, b, models, ix, integrator, normalize, dt, lim, lastm);
             if (s < 0 || !earlier(s, b, *limit, *best)) continue;
             memcpy(state + b * LV_STATE_SIZE, lastm, LV_STATE_SIZE * sizeof(double));
-            memcpy(models->Omega + 3 * b, lastm + LV_STATE_SIZE, 3 * sizeof(double));
+            memcpy(models->Omega + 3 * b, lastm + LV_XS_OMEGA, 3 * sizeof(double));
             *limit = s;
             *best = b;
             status = LV_DIVERGED;
@@ -923,7 +846,7 @@ static int advance_fixed(double *state, const double *params, long nb, const lv_
     first[1] = count[0];
     first[2] = count[0] + count[1];
     for (b = 0; b < nb; b++)
-        if (models == NULL || (int)models->rows[b * LV_MODEL_SIZE] == 0) ids[first[rhs_kind(ix, b)]++] = b;
+        if (models == NULL || (int)models->rows[b * LV_MODEL_SIZE + LV_MODEL_KIND] == 0) ids[first[rhs_kind(ix, b)]++] = b;
     for (kind = 0; kind < 3; kind++) {
         const long *list = ids + first[kind] - count[kind];
         for (k = 0; k < count[kind]; k += n) {
@@ -957,18 +880,18 @@ int lv_simulate(double *state, const double *params, long nb,
         return LV_BAD_ARGUMENT;
     if ((integrator == LV_INTEGRATOR_SPLITTING || integrator == LV_INTEGRATOR_IMPLICIT_GYRO) && models != NULL)
         for (b = 0; b < nb; b++)
-            if ((int)models->rows[b * LV_MODEL_SIZE] != 0) return LV_BAD_ARGUMENT;
+            if ((int)models->rows[b * LV_MODEL_SIZE + LV_MODEL_KIND] != 0) return LV_BAD_ARGUMENT;
     status = index_build(&ix, effects, ne, row_size, nb, user, fail_step);
     if (status != LV_OK) return status;
     if (integrator == LV_INTEGRATOR_DOPRI5) {
         for (b = 0; b < nb && limit > 0; b++) {
-            double lastx[LV_XS];
+            double lastx[LV_XS_SIZE];
             int why = LV_DIVERGED;
             s = advance_dopri5(state, params, b, models, &ix, normalize, dt, limit, adaptive, &why, lastx);
             if (s < 0) continue;
             memcpy(state + b * LV_STATE_SIZE, lastx, LV_STATE_SIZE * sizeof(double));
-            if (models != NULL && (int)models->rows[b * LV_MODEL_SIZE] != 0)
-                memcpy(models->Omega + 3 * b, lastx + LV_STATE_SIZE, 3 * sizeof(double));
+            if (models != NULL && (int)models->rows[b * LV_MODEL_SIZE + LV_MODEL_KIND] != 0)
+                memcpy(models->Omega + 3 * b, lastx + LV_XS_OMEGA, 3 * sizeof(double));
             limit = s;
             best_body = b;
             status = why;

@@ -3,12 +3,12 @@
 #ifndef LAVENDERSIM_STEP_H
 #define LAVENDERSIM_STEP_H
 
+/* The state row (LV_STATE_*: p_w[3], q[4] (x,y,z,w), v_w[3], omega_b[3]), the params row (LV_PARAM_*: m,
+   I_x, I_y, I_z), the per-body model row (LV_MODEL_*) and the extended state [x, Omega] (LV_XS_*) are
+   declared in derive/layout.py and printed as named offsets in generated/layout.h. */
+#include "layout.h"
 #include "kernels.h"
 
-/* state row (13): p_w[3], q[4] (x,y,z,w), v_w[3], omega_b[3] */
-#define LV_STATE_SIZE 13
-/* params row (4): m, I_x, I_y, I_z */
-#define LV_PARAM_SIZE 4
 /* The effect table, its row layout (LV_EFFECT_ROW_*), the built-in codes and their dispatch
    (lv_effect_apply) are generated from the effect declarations (generated/kernels.h). User effects are
    compiled apart and reach the stepping loop through this table: entry i serves code
@@ -16,7 +16,7 @@
 typedef struct {
     lv_effect_fn fn;  /* adds the effect's force and torque (the lv_effect_fn convention) */
     int n_params;     /* parameters it reads from its row */
-    int flags;        /* LV_EFFECT_USES_* */
+    int flags;        /* LV_EFFECT_USES_*, LV_EFFECT_FORCE */
 } lv_user_effect;
 
 typedef struct {
@@ -24,14 +24,10 @@ typedef struct {
     long n;
 } lv_user_effects;
 
-/* model row (22), per body: kind, I_p[9] (about the pivot, body frame, row-major), r_b[3] (pivot -> COM,
-   body frame), anchor_w[3], J[3], torque_limit, speed_limit, c_w. kind is a bit set of the flags
-   below; a body of kind 0 is a plain rigid body (its row is ignored). */
-#define LV_MODEL_SIZE 22
-enum {
-    LV_KIND_JOINT = 1,   /* world-anchored spherical joint: p_w, v_w follow from q, omega */
-    LV_KIND_WHEELS = 2   /* three body-axis reaction wheels: Omega integrated, motor torques saturated */
-};
+/* The model row (LV_MODEL_SIZE), per body: kind, I_p[9] (about the pivot, body frame, row-major), r_b[3]
+   (pivot -> COM, body frame), anchor_w[3], J[3], torque_limit, speed_limit, c_w (offsets LV_MODEL_*).
+   kind is a bit set of LV_KIND_JOINT and LV_KIND_WHEELS; a body of kind 0 is a plain rigid body (its row
+   is ignored). */
 
 /* Per-body model data for bodies with a joint and/or wheels (all arrays nb rows).
    Omega (nb x 3) is advanced in place; command (nb x 3) is held over the call (zero-order hold);

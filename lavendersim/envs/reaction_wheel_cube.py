@@ -39,8 +39,11 @@ Agg canvas (cube edges and body axes; no display needed); ``None`` renders nothi
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .. import backends
 from .. import control as lc
@@ -48,6 +51,9 @@ from .. import validate as V
 from .._install import require
 from ..errors import DivergenceError
 from ..kernels import K
+
+if TYPE_CHECKING:
+    from ..sim import Sim
 
 gym = require("gymnasium", "gym", "the ReactionWheelCube-v0 environment")
 spaces = require("gymnasium.spaces", "gym", "the ReactionWheelCube-v0 environment")
@@ -60,7 +66,8 @@ class ReactionWheelCubeEnv(gym.Env):
 
     def __init__(self, task: str = "center", backend: str = "auto", render_mode: str | None = None, *,
                  control_dt: float = 0.01, dt: float = 1e-3, damping: float = 1e-3, init_angle_deg: float | None = None,
-                 max_tilt_deg: float = 20.0, target_q=None, model: lc.CubeModel | None = None, **model_params):
+                 max_tilt_deg: float = 20.0, target_q: ArrayLike | None = None, model: lc.CubeModel | None = None,
+                 **model_params: Any) -> None:
         super().__init__()
         task = V.choice("task", task, lc.SCENARIOS)
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
@@ -87,7 +94,7 @@ class ReactionWheelCubeEnv(gym.Env):
         self.wheel_bound = 2.0 * self.model.speed_limit       # rad/s
         hi = np.array([1.0] * 4 + [self.rate_bound] * 3 + [self.wheel_bound] * 3, dtype=np.float32)
         self.observation_space = spaces.Box(-hi, hi, dtype=np.float32)
-        self.sim = None
+        self.sim: Sim | None = None
         self._fig = None
         self._last_u = np.zeros(3)
 
@@ -100,7 +107,7 @@ class ReactionWheelCubeEnv(gym.Env):
         raw = self._raw() if raw is None else raw
         return np.clip(raw, self.observation_space.low, self.observation_space.high).astype(np.float32)
 
-    def angle_error_deg(self, q=None) -> float:
+    def angle_error_deg(self, q: Sequence[float] | np.ndarray | None = None) -> float:
         """Rotation angle between the cube and the target attitude, degrees: 4 atan2(|q − s q_t|,
         |q + s q_t|) with s = sign(q·q_t) (accurate at small angles, cheap per step)."""
         q = self.sim.state(BODY).q if q is None else q
@@ -111,7 +118,7 @@ class ReactionWheelCubeEnv(gym.Env):
         b = math.sqrt(sum((q[i] + s * t[i]) ** 2 for i in range(4)))
         return math.degrees(4.0 * math.atan2(a, b))
 
-    def tilt_deg(self, q=None) -> float:
+    def tilt_deg(self, q: ArrayLike | None = None) -> float:
         """Corner task: angle of the body diagonal (pivot → COM) from vertical, degrees."""
         q = self.sim.state(BODY).q if q is None else q
         d = K.quat_rotate(q, np.ones(3) / math.sqrt(3.0))
@@ -131,7 +138,8 @@ class ReactionWheelCubeEnv(gym.Env):
         return lc.rotated(self.target_q, axis_b, angle)
 
     # ---- gymnasium API --------------------------------------------------------------------
-    def reset(self, *, seed: int | None = None, options: dict | None = None):
+    def reset(self, *, seed: int | None = None,
+              options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict[str, Any]]:
         super().reset(seed=seed)
         options = dict(options or {})
         unknown = sorted(set(options) - {"q", "omega_b", "Omega"})
@@ -156,7 +164,7 @@ class ReactionWheelCubeEnv(gym.Env):
         info.update(extra)
         return info
 
-    def step(self, action):
+    def step(self, action: ArrayLike) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         if self.sim is None:
             raise RuntimeError("ReactionWheelCube-v0: call reset() before step()")
         try:
@@ -193,7 +201,7 @@ class ReactionWheelCubeEnv(gym.Env):
             terminated = terminated or tilt > self.max_tilt_deg
         return self._obs(raw), float(reward), terminated, False, self._info(angle, tilt, **extra)
 
-    def render(self):
+    def render(self) -> np.ndarray | None:
         if self.render_mode is None:
             return None
         if self._fig is None:
@@ -224,6 +232,6 @@ class ReactionWheelCubeEnv(gym.Env):
         self._fig.canvas.draw()
         return np.asarray(self._fig.canvas.buffer_rgba())[..., :3].copy()
 
-    def close(self):
+    def close(self) -> None:
         self._fig = None
         self.sim = None

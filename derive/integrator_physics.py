@@ -1,0 +1,175 @@
+"""The physics inside the structure-preserving integrators and the wheel model, derived once.
+
+The backends hold only control flow (loops, Newton iteration count and stopping, step-size
+control); every formula they apply comes from here:
+
+* splitting: the free rotation composed of exact principal-axis flows in the Strang sequence of
+  derive/tableaux.py (flow of H_a = L_a²/(2 I_a) for time τ: the body momentum turns about body axis
+  a by −τ L_a/I_a and the attitude by +τ L_a/I_a, q ← q ⊗ [sin(θ/2) e_a, cos(θ/2)]), the half kick of
+  v and ω under the loads, and the drift of p;
+* implicit_gyro: the residual of I(ω⁺ − ω) + h ω⁺ × Iω⁺ = h τ_B, its Jacobian (differentiated here
+  by SymPy) and one Newton update by the closed-form (adjugate) solve; the exp-map attitude step
+  q ← q ⊗ exp(h ω/2) with its series where the angle is small; the semi-implicit translation;
+* the free translation of a body with a model (ṗ = v, v̇ = F/m), and the reaction-wheel motor
+  saturation (clip to ±torque_limit, no drive beyond speed_limit).
+
+Units: SI; frames as in the argument docs. Quaternions (x, y, z, w), scalar last.
+"""
+from __future__ import annotations
+
+import sympy as sp
+
+from .kernel import Arg, Kernel, mat, scalar, vec
+from .quaternion import qmul
+from .tableaux import STRANG
+
+# Below this half-angle |ω| h / 2 the exp map uses its series: sin(a)/|ω| = (h/2)(1 − a²/6 + a⁴/120 …);
+# the dropped a⁴/120 is below 1e-34 relative there, far under rounding.
+EXP_SERIES_BELOW = sp.Rational(1, 10**8)
+
+
+def axis_flow(I_b, q, L, a: int, tau):
+    """Exact flow for time tau of H_a = L_a²/(2 I_a): returns (q ⊗ [sin(θ/2) e_a, cos(θ/2)], L turned
+    about body axis a by −θ), θ = tau L_a / I_a."""
+    th = tau * L[a] / I_b[a]
+    j, k = (a + 1) % 3, (a + 2) % 3
+    sh, ch = sp.sin(th / 2), sp.cos(th / 2)
+    c, s = 1 - 2 * sh * sh, 2 * sh * ch   # cos θ, sin θ from the half angle (one sin, one cos)
+    L = list(L)
+    L[j], L[k] = c * L[j] + s * L[k], -s * L[j] + c * L[k]
+    e = [0, 0, 0, 0]
+    e[a], e[3] = sh, ch
+    return qmul(q, sp.Matrix(e)), L
+
+
+def strang_rotation(I_b, q, omega_b, h):
+    """The free rotation over h by the Strang sequence of exact axis flows; (q_next, omega_next)."""
+    L = [I_b[i] * omega_b[i] for i in range(3)]
+    for a, frac in STRANG:
+        q, L = axis_flow(I_b, q, L, a, frac * h)
+    return q, sp.Matrix([L[i] / I_b[i] for i in range(3)])
+
+
+def gyro_residual(I_b, omega_b, tau_b, h, w1) -> sp.Matrix:
+    """g(ω⁺) = I(ω⁺ − ω) + h ω⁺ × (I ω⁺) − h τ_B (body frame, diagonal I)."""
+    Iw1 = sp.Matrix([I_b[i] * w1[i] for i in range(3)])
+    return sp.Matrix([I_b[i] * (w1[i] - omega_b[i]) for i in range(3)]) + h * w1.cross(Iw1) - h * tau_b
+
+
+def newton_update(g: sp.Matrix, J: sp.Matrix, w1: sp.Matrix) -> tuple[sp.Matrix, sp.Matrix]:
+    """(w1 − J⁻¹ g, J⁻¹ g) with J⁻¹ g by the adjugate over the determinant (cofactor expansion along the
+    first row, reusing the adjugate), printed over the entries of J and g as shared subexpressions."""
+    Jp, gp = mat("Jp", 3, 3), vec("gp", 3)
+    A = Jp.adjugate()
+    det = sum((Jp[0, c] * A[c, 0] for c in range(3)), sp.Integer(0))
+    d = (A * gp) / det
+    sub = {Jp[r, c]: J[r, c] for r in range(3) for c in range(3)}
+    sub.update({gp[i]: g[i] for i in range(3)})
+    d = d.xreplace(sub)
+    return w1 - d, d
+
+
+def quat_exp_step(q, omega_b, h) -> sp.Matrix:
+    """q ⊗ exp(h ω_B / 2) = q ⊗ [sin(a) ω/|ω|, cos a], a = h|ω|/2; sin(a)/|ω| by its series for small a."""
+    n = sp.sqrt(omega_b.dot(omega_b))
+    a = h * n / 2
+    sa = sp.Piecewise((sp.sin(a) / n, a > EXP_SERIES_BELOW), (h / 2 * (1 - a * a / 6), True))
+    e = sp.Matrix([sa * omega_b[0], sa * omega_b[1], sa * omega_b[2], sp.cos(a)])
+    return qmul(q, e)
+
+
+def saturation(command, Omega, torque_limit, speed_limit) -> sp.Matrix:
+    """Clip each command to ±torque_limit; zero where |Omega_i| ≥ speed_limit and the torque would
+    drive the wheel faster (u_i Omega_i > 0)."""
+    out = []
+    for i in range(3):
+        c = command[i]
+        u = sp.Piecewise((-torque_limit, c < -torque_limit), (torque_limit, c > torque_limit), (c, True))
+        out.append(sp.Piecewise((0, sp.And(sp.Abs(Omega[i]) >= speed_limit, u * Omega[i] > 0)), (u, True)))
+    return sp.Matrix(out)
+
+
+def _check(I_b, w, tau, h, w1) -> None:
+    """Derivation-time proofs: the Jacobian is I + h([ω⁺]ₓ I − [Iω⁺]ₓ); a Strang step of a spin about
+    one principal axis is the exact rotation about it."""
+    def skew(v):
+        return sp.Matrix([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]])
+    I = sp.diag(*I_b)
+    J = gyro_residual(I_b, w, tau, h, w1).jacobian(w1)
+    if (J - (I + h * (skew(w1) * I - skew(I * w1)))).applyfunc(sp.expand) != sp.zeros(3, 3):
+        raise RuntimeError("derive: the implicit-gyro Jacobian differs from I + h([w]x I - [I w]x)")
+    q = vec("q", 4)
+    wz = sp.Matrix([0, 0, w[2]])
+    qn, wn = strang_rotation(I_b, q, wz, h)
+    exact = qmul(q, sp.Matrix([0, 0, sp.sin(h * w[2] / 2), sp.cos(h * w[2] / 2)]))
+    if (qn - exact).applyfunc(sp.simplify) != sp.zeros(4, 1) or (wn - wz).applyfunc(sp.simplify) != sp.zeros(3, 1):
+        raise RuntimeError("derive: the Strang rotation of a principal-axis spin is not the exact rotation")
+
+
+def kernels() -> list[Kernel]:
+    g = "Integrator physics"
+    I_b, q, omega_b, tau_b = vec("I_b", 3), vec("q", 4), vec("omega_b", 3), vec("tau_b", 3)
+    p_w, v_w, F_w, w1 = vec("p_w", 3), vec("v_w", 3), vec("F_w", 3), vec("omega_next", 3)
+    m, h = scalar("m", positive=True), scalar("h")
+    cmd, Om, tl, sl = vec("command", 3), vec("Omega", 3), scalar("torque_limit"), scalar("speed_limit")
+    _check(I_b, omega_b, tau_b, h, w1)
+    q_s, w_s = strang_rotation(I_b, q, omega_b, h)
+    res = gyro_residual(I_b, omega_b, tau_b, h, w1)
+    jac = res.jacobian(w1)
+    w_new, delta = newton_update(res, jac, w1)
+    v_kick = v_w + h * F_w / m
+    seq = r"\,".join(rf"\Phi_{'xyz'[a]}({sp.latex(f)}h)" for a, f in STRANG)
+    IB = ("I_b", I_b, "principal moments, body frame, kg·m²", "positive")
+    Q = ("q", q, "orientation (x, y, z, w), R_WB, unit", "unit_quaternion")
+    W = ("omega_b", omega_b, "angular velocity, body frame, rad/s")
+    H = ("h", h, "time step, s", "positive")
+    M = ("m", m, "mass, kg", "positive")
+    TB = ("tau_b", tau_b, "torque, body frame, N·m")
+    W1 = ("omega_next", w1, "current iterate of the new angular velocity ω⁺, body frame, rad/s")
+    GY = [Arg(*IB), Arg(*W), Arg(*TB), Arg(*H), Arg(*W1)]
+    return [
+        Kernel("splitting_rotation", "Free rotation over h by Strang splitting into exact principal-axis flows",
+               rf"(q, L_B) \leftarrow {seq}\,(q, I_B\omega_B),\quad \Phi_a(\tau):\ \theta = \tau L_a/I_a,\ "
+               r"q \leftarrow q \otimes [\sin\tfrac\theta2 e_a, \cos\tfrac\theta2],\ L_B \leftarrow R_a(-\theta) L_B",
+               [Arg(*IB), Arg(*Q), Arg(*W), Arg(*H)],
+               [Arg("q_next", q_s, "orientation after h (unit when q is)"), Arg("omega_next", w_s, "rad/s, body frame")], g,
+               notes=["Torque-free, it conserves the world angular momentum and |L_B| to rounding; second order."]),
+        Kernel("splitting_kick", "Kick of v and ω under a force and a body torque for time h (q, p fixed)",
+               r"v_W \leftarrow v_W + h F_W/m,\quad \omega_B \leftarrow \omega_B + h I_B^{-1}\tau_B",
+               [Arg(*M), Arg(*IB), Arg("v_w", v_w, "COM velocity, world frame, m/s"), Arg(*W),
+                Arg("F_w", F_w, "force at the COM, world frame, N"), Arg(*TB), Arg(*H)],
+               [Arg("v_next", v_kick, "m/s, world frame"),
+                Arg("omega_next", sp.Matrix([omega_b[i] + h * tau_b[i] / I_b[i] for i in range(3)]), "rad/s, body frame")], g),
+        Kernel("translation_drift", "Drift of the COM position for time h", r"p_W \leftarrow p_W + h\,v_W",
+               [Arg("p_w", p_w, "COM position, world frame, m"), Arg("v_w", v_w, "COM velocity, world frame, m/s"), Arg(*H)],
+               [Arg("p_next", p_w + h * v_w, "m, world frame")], g),
+        Kernel("semi_implicit_translation", "Semi-implicit Euler step of the COM under a force",
+               r"v_W \leftarrow v_W + h F_W/m,\quad p_W \leftarrow p_W + h\,v_W",
+               [Arg(*M), Arg("p_w", p_w, "COM position, world frame, m"), Arg("v_w", v_w, "COM velocity, world frame, m/s"),
+                Arg("F_w", F_w, "force at the COM, world frame, N"), Arg(*H)],
+               [Arg("p_next", p_w + h * v_kick, "m, world frame"), Arg("v_next", v_kick, "m/s, world frame")], g),
+        Kernel("translation_rhs", "COM translation of a free body", r"\dot p_W = v_W,\quad \dot v_W = F_W/m",
+               [Arg(*M), Arg("v_w", v_w, "COM velocity, world frame, m/s"), Arg("F_w", F_w, "force at the COM, world frame, N")],
+               [Arg("p_dot", v_w, "m/s, world frame"), Arg("v_dot", F_w / m, "m/s², world frame")], g),
+        Kernel("implicit_gyro_residual", "Residual of the implicit gyroscopic step",
+               r"g(\omega^+) = I_B(\omega^+ - \omega_B) + h\,\omega^+ \times I_B\omega^+ - h\,\tau_B",
+               GY, [Arg("g", res, "N·m·s")], g),
+        Kernel("implicit_gyro_jacobian", "Jacobian of the implicit-gyro residual, differentiated by SymPy",
+               r"\partial g/\partial\omega^+ = I_B + h([\omega^+]_\times I_B - [I_B\omega^+]_\times)",
+               [Arg(*IB), Arg(*H), Arg(*W1)], [Arg("J", jac, "kg·m², row-major")], g,
+               notes=["The residual is linear in ω and τ_B, so its Jacobian depends on I_B, h and ω⁺ only."]),
+        Kernel("implicit_gyro_newton", "One Newton update of the implicit gyroscopic step (adjugate solve)",
+               r"\delta = (\partial g/\partial\omega^+)^{-1} g(\omega^+) = \operatorname{adj}(J)\,g/\det J,\quad \omega^+ \leftarrow \omega^+ - \delta",
+               GY, [Arg("omega_new", w_new, "next iterate, rad/s, body frame"), Arg("delta", delta, "the Newton step, rad/s")], g,
+               notes=["Solved to rounding, a torque-free step never gains energy: E − E⁺ = ½(ω − ω⁺)ᵀI(ω − ω⁺) ≥ 0."]),
+        Kernel("quat_exp_step", "Attitude step by the exponential map of a body angular velocity held over h",
+               r"q \leftarrow q \otimes \left[\tfrac{\sin a}{\lVert\omega\rVert}\omega_B,\ \cos a\right],\ a = \tfrac h2\lVert\omega_B\rVert"
+               r"\quad\left(\tfrac{\sin a}{\lVert\omega\rVert} \approx \tfrac h2(1 - \tfrac{a^2}{6})\ \text{for}\ a \le 10^{-8}\right)",
+               [Arg(*Q), Arg(*W), Arg(*H)], [Arg("q_next", quat_exp_step(q, omega_b, h), "orientation (unit when q is)")], g),
+        Kernel("wheel_saturation", "Motor torques actually applied: clipped, and cut off beyond the speed limit",
+               r"u_i = \begin{cases} 0 & |\Omega_i| \ge \Omega_{max},\ \bar u_i \Omega_i > 0 \\ \bar u_i & \text{else}\end{cases},"
+               r"\quad \bar u_i = \min(\max(c_i, -u_{max}), u_{max})",
+               [Arg("command", cmd, "commanded motor torques, N·m"), Arg("Omega", Om, "wheel rates relative to the body, rad/s"),
+                Arg("torque_limit", tl, "N·m", "positive"), Arg("speed_limit", sl, "rad/s", "positive")],
+               [Arg("u", saturation(cmd, Om, tl, sl), "applied motor torques, N·m")], g),
+    ]

@@ -1,0 +1,143 @@
+"""Row layouts shared by derive/, the C step loop and the Python runtime, declared once.
+
+Every array the backends exchange is a table of float64 rows. Each layout below names the fields of
+one row in order; `lavendersim derive` prints them as named offsets for C (generated/layout.h,
+`LV_<ROW>_<FIELD>` and `LV_<ROW>_SIZE`) and Python (generated/layout.py, a slice per vector field,
+an index per scalar field, `<ROW>_SIZE` and a `<ROW>_LAYOUT` dict of slices). Backends index rows
+by these names only, never by literal numbers.
+
+The effect-row layout ([code, body, p0 … p5]) is declared with the effects, not here.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import sympy as sp
+
+from .codegen import HEADER
+
+
+@dataclass(frozen=True)
+class Field:
+    name: str
+    size: int
+    doc: str
+
+
+class Layout:
+    """An ordered row of named fields; offsets follow from the declaration order."""
+
+    def __init__(self, prefix: str, title: str, fields: list[Field]):
+        self.prefix, self.title, self.fields = prefix, title, fields
+        names = [f.name for f in fields]
+        if len(set(names)) != len(names):
+            raise RuntimeError(f"derive: layout {prefix} repeats a field name")
+
+    def offset(self, name: str) -> int:
+        off = 0
+        for f in self.fields:
+            if f.name == name:
+                return off
+            off += f.size
+        raise KeyError(f"layout {self.prefix}: no field {name!r}")
+
+    def field(self, name: str) -> Field:
+        return next(f for f in self.fields if f.name == name)
+
+    def slice(self, name: str) -> slice:
+        o = self.offset(name)
+        return slice(o, o + self.field(name).size)
+
+    @property
+    def size(self) -> int:
+        return sum(f.size for f in self.fields)
+
+    def part(self, row: sp.Matrix, name: str) -> sp.Matrix:
+        """The field `name` of a symbolic row (a column Matrix of this layout's size)."""
+        if row.rows != self.size:
+            raise RuntimeError(f"derive: a {self.prefix} row has {self.size} entries, got {row.rows}")
+        return row[self.slice(name), 0]
+
+    def assemble(self, **parts) -> sp.Matrix:
+        """A symbolic row from one column per field, in this layout's order."""
+        if set(parts) != {f.name for f in self.fields}:
+            raise RuntimeError(f"derive: a {self.prefix} row needs exactly the fields {[f.name for f in self.fields]}")
+        cols = [sp.Matrix(parts[f.name]) for f in self.fields]
+        for f, c in zip(self.fields, cols):
+            if c.shape != (f.size, 1):
+                raise RuntimeError(f"derive: {self.prefix}.{f.name} has {f.size} entries, got shape {c.shape}")
+        return sp.Matrix.vstack(*cols)
+
+
+STATE = Layout("STATE", "body state x", [
+    Field("p_w", 3, "position of the centre of mass, world frame, m"),
+    Field("q", 4, "orientation R_WB as (x, y, z, w), unit"),
+    Field("v_w", 3, "velocity of the centre of mass, world frame, m/s"),
+    Field("omega_b", 3, "angular velocity, body frame, rad/s"),
+])
+
+PARAM = Layout("PARAM", "body parameters", [
+    Field("m", 1, "mass, kg"),
+    Field("I_b", 3, "principal moments of inertia (I_x, I_y, I_z), body frame, kg·m²"),
+])
+
+MODEL = Layout("MODEL", "per-body model row (spherical joint and/or reaction wheels)", [
+    Field("kind", 1, "bit set of the KIND_* flags; 0: a plain rigid body (the row is ignored)"),
+    Field("I_p", 9, "inertia about the pivot (wheels locked), body frame, kg·m², row-major"),
+    Field("r_b", 3, "pivot → COM, body frame, m"),
+    Field("anchor_w", 3, "joint anchor, world frame, m"),
+    Field("J", 3, "wheel spin inertias about body x, y, z, kg·m²"),
+    Field("torque_limit", 1, "motor torque limit, N·m"),
+    Field("speed_limit", 1, "no drive beyond this |Omega_i|, rad/s"),
+    Field("c_w", 1, "wheel bearing damping, N·m·s/rad"),
+])
+
+XS = Layout("XS", "extended state of a body with a model: x then the wheel rates", [
+    Field("x", STATE.size, "the body state (STATE layout)"),
+    Field("Omega", 3, "wheel rates relative to the body, rad/s"),
+])
+
+LAYOUTS = (STATE, PARAM, MODEL, XS)
+
+# Model kinds: bits of MODEL.kind.
+KINDS = (("JOINT", 1, "world-anchored spherical joint: p_w, v_w follow from q, omega"),
+         ("WHEELS", 2, "three body-axis reaction wheels: Omega integrated, motor torques saturated"))
+
+
+def print_c() -> str:
+    """generated/layout.h."""
+    out = [f"/* {HEADER} */", "/* Row layouts of the arrays the step loop exchanges with Python (float64 rows):",
+           "   LV_<ROW>_<FIELD> is the offset of a field in its row, LV_<ROW>_SIZE the row length. */",
+           "#ifndef LAVENDERSIM_LAYOUT_H", "#define LAVENDERSIM_LAYOUT_H", ""]
+    for lay in LAYOUTS:
+        out.append(f"/* {lay.title} ({lay.size}) */")
+        for f in lay.fields:
+            out.append(f"#define LV_{lay.prefix}_{f.name.upper()} {lay.offset(f.name)}  /* [{f.size}] {f.doc} */")
+        out.append(f"#define LV_{lay.prefix}_SIZE {lay.size}")
+        out.append("")
+    out.append("/* bits of the model row's kind */")
+    out.append("enum {")
+    out.extend(f"    LV_KIND_{n} = {v},  /* {doc} */" for n, v, doc in KINDS)
+    out.append("};")
+    out += ["", "#endif", ""]
+    return "\n".join(out)
+
+
+def print_python() -> str:
+    """generated/layout.py."""
+    out = [f'"""{HEADER}', "", "Row layouts of the arrays the backends exchange (float64 rows): for each row a slice per",
+           "vector field, an index per scalar field, <ROW>_SIZE, and <ROW>_LAYOUT (field -> slice).", '"""', ""]
+    for lay in LAYOUTS:
+        out.append(f"# {lay.title}")
+        for f in lay.fields:
+            o = lay.offset(f.name)
+            val = str(o) if f.size == 1 else f"slice({o}, {o + f.size})"
+            out.append(f"{lay.prefix}_{f.name.upper()} = {val}  # [{f.size}] {f.doc}")
+        out.append(f"{lay.prefix}_SIZE = {lay.size}")
+        items = ", ".join(f"{f.name!r}: slice({lay.offset(f.name)}, {lay.offset(f.name) + f.size})" for f in lay.fields)
+        out.append(f"{lay.prefix}_LAYOUT = {{{items}}}")
+        out.append("")
+    out.append("# bits of the model row's kind")
+    out.extend(f"KIND_{n} = {v}  # {doc}" for n, v, doc in KINDS)
+    out.append("")
+    return "\n".join(out)

@@ -1,0 +1,151 @@
+"""Integrator tableaux and constants, declared once (exact rationals where they are rationals).
+
+`lavendersim derive` prints them for the C step loop (generated/tableaux.h) and the NumPy backend
+(generated/tableaux.py); neither backend types a coefficient. Each float is the correctly rounded
+value of its rational (Python's int/int division), printed with repr so that C parses the same
+double.
+
+* RK4: the classic tableau; its weights are kept as integers over a common divisor, so that the
+  combination x + (dt/6)(k1 + 2 k2 + 2 k3 + k4) is evaluated the way it always was.
+* Dormand–Prince 5(4) (Hairer, Nørsett & Wanner, Solving ODEs I, table II.5.2): A (its last row is
+  the 5th-order weights b: FSAL), the error weights E = b − b̂, the step-size controller and the
+  starting-step heuristic (Solving ODEs I, II.4).
+* Strang splitting of the free rigid body: the sequence of exact principal-axis flows
+  (axis, fraction of h), from which derive/integrator_physics.py composes the derived rotation, and
+  the half kicks of the loads around it (explicit midpoint steps when damping is declared).
+* implicit_gyro: the Newton iteration's cap and stopping rule.
+"""
+from __future__ import annotations
+
+import sympy as sp
+
+from .codegen import HEADER
+
+R = sp.Rational
+
+RK4_C = (R(0), R(1, 2), R(1, 2), R(1))                 # nodes: stage s is evaluated at x + c_s dt k_{s-1}
+RK4_B_NUM = (1, 2, 2, 1)                               # weights b = RK4_B_NUM / RK4_B_DEN
+RK4_B_DEN = 6
+
+DP_A = (
+    (),
+    (R(1, 5),),
+    (R(3, 40), R(9, 40)),
+    (R(44, 45), R(-56, 15), R(32, 9)),
+    (R(19372, 6561), R(-25360, 2187), R(64448, 6561), R(-212, 729)),
+    (R(9017, 3168), R(-355, 33), R(46732, 5247), R(49, 176), R(-5103, 18656)),
+    (R(35, 384), R(0), R(500, 1113), R(125, 192), R(-2187, 6784), R(11, 84)),
+)
+DP_B_HAT = (R(5179, 57600), R(0), R(7571, 16695), R(393, 640), R(-92097, 339200), R(187, 2100), R(1, 40))
+DP_ORDER_ERR = 4                    # order of the embedded solution: the controller's exponent is -1/(4 + 1)
+
+# step-size controller
+DP_SAFETY = 0.9
+DP_FACMIN = 0.2
+DP_FACMAX = 5.0
+DP_HMIN_REL = 1e-12                 # a substep below dt * this: the tolerance cannot be met
+DP_MAX_SUBSTEPS = 1_000_000         # ... nor with more substeps than this within one output step
+# starting step (Hairer II.4): h0 = 0.01 d0/d1 unless a norm is below 1e-5 (then 1e-6); h1 from
+# (0.01 / max(d1, d2))^(1/5), or max(1e-6, 1e-3 h0) when that maximum is below 1e-15; h = min(100 h0, h1)
+DP_INIT_SMALL = 1e-5
+DP_INIT_TINY_H = 1e-6
+DP_INIT_FRAC = 0.01
+DP_INIT_FLAT = 1e-15
+DP_INIT_SHRINK = 1e-3
+DP_INIT_GROW = 100.0
+
+STRANG = ((0, R(1, 2)), (1, R(1, 2)), (2, R(1)), (1, R(1, 2)), (0, R(1, 2)))
+SPLIT_KICK = R(1, 2)                # the loads kick v and omega for h/2 before and after the free flow
+SPLIT_MIDPOINT = R(1, 2)            # with damping each kick is an explicit midpoint step (its node)
+
+GYRO_MAX_ITER = 30                  # Newton iterations at most
+GYRO_TOL_SQ = 1e-32                 # stop when |delta|^2 <= this * |omega_next|^2 (|delta| <= 1e-16 |omega|)
+
+
+def dp_b() -> tuple:
+    return tuple(DP_A[6]) + (R(0),)
+
+
+def dp_e() -> tuple:
+    """Error weights b − b̂ (the 5th-order minus the embedded 4th-order weights)."""
+    return tuple(b - bh for b, bh in zip(dp_b(), DP_B_HAT))
+
+
+def _check() -> None:
+    """Derivation-time proofs of the order conditions that identify the tableaux."""
+    c = [sum(row, R(0)) for row in DP_A]
+    b, bh = dp_b(), DP_B_HAT
+    for w, p in ((b, 5), (bh, 4)):
+        # bushy-tree conditions Σ b_i c_i^(k-1) = 1/k up to the order
+        for k in range(1, p + 1):
+            if sum(w[i] * c[i] ** (k - 1) for i in range(7)) != R(1, k):
+                raise RuntimeError(f"derive: Dormand–Prince weights fail Σ b c^{k - 1} = 1/{k}")
+    if c[6] != 1 or c[1] != R(1, 5):
+        raise RuntimeError("derive: Dormand–Prince nodes are not (0, 1/5, …, 1)")
+    if sum(R(n, RK4_B_DEN) for n in RK4_B_NUM) != 1:
+        raise RuntimeError("derive: RK4 weights do not sum to 1")
+    if list(STRANG) != list(reversed(STRANG)):
+        raise RuntimeError("derive: the Strang sequence is not symmetric")
+    for axis in range(3):
+        if sum((f for a, f in STRANG if a == axis), R(0)) != 1:
+            raise RuntimeError(f"derive: the Strang sequence does not flow axis {axis} for total time h")
+
+
+def _f(x) -> str:
+    """A rational as a float literal: its correctly rounded double (int / int), shortest repr."""
+    r = sp.Rational(x)
+    return repr(int(r.p) / int(r.q))
+
+
+def _scalars() -> list[tuple[str, str, str]]:
+    """(name, C literal, Python literal) of every scalar constant."""
+    ints = [("DP_MAX_SUBSTEPS", DP_MAX_SUBSTEPS), ("GYRO_MAX_ITER", GYRO_MAX_ITER), ("RK4_B_DEN", RK4_B_DEN)]
+    floats = [("DP_SAFETY", DP_SAFETY), ("DP_FACMIN", DP_FACMIN), ("DP_FACMAX", DP_FACMAX),
+              ("DP_HMIN_REL", DP_HMIN_REL), ("DP_ERR_EXPONENT", -1.0 / (DP_ORDER_ERR + 1)),
+              ("DP_INIT_SMALL", DP_INIT_SMALL), ("DP_INIT_TINY_H", DP_INIT_TINY_H), ("DP_INIT_FRAC", DP_INIT_FRAC),
+              ("DP_INIT_FLAT", DP_INIT_FLAT), ("DP_INIT_SHRINK", DP_INIT_SHRINK), ("DP_INIT_GROW", DP_INIT_GROW),
+              ("DP_INIT_EXPONENT", 1.0 / (DP_ORDER_ERR + 1)), ("GYRO_TOL_SQ", GYRO_TOL_SQ)]
+    out = [(n, f"{v}L" if n == "DP_MAX_SUBSTEPS" else str(v), f"{v:_}") for n, v in ints]
+    out += [(n, f"({float(v)!r})" if v < 0 else repr(float(v)), repr(float(v))) for n, v in floats]
+    out += [("SPLIT_KICK", _f(SPLIT_KICK), _f(SPLIT_KICK)), ("SPLIT_MIDPOINT", _f(SPLIT_MIDPOINT), _f(SPLIT_MIDPOINT))]
+    out += [(f"RK4_C{i}", _f(c), _f(c)) for i, c in enumerate(RK4_C)]
+    out += [(f"RK4_B{i}", _f(n), _f(n)) for i, n in enumerate(RK4_B_NUM)]
+    return out
+
+
+def print_c() -> str:
+    """generated/tableaux.h: #defines for scalars, static const arrays for the tableaux."""
+    _check()
+    out = [f"/* {HEADER} */", "/* Integrator tableaux and constants (derive/tableaux.py). Included by the step loop only. */",
+           "#ifndef LAVENDERSIM_TABLEAUX_H", "#define LAVENDERSIM_TABLEAUX_H", ""]
+    out += [f"#define LV_{n} {c}" for n, c, _ in _scalars()]
+    out += ["", "/* Dormand-Prince 5(4): A (row 6 = the 5th-order weights, FSAL) and E = b - b_hat */",
+            "static const double LV_DP_A[7][6] = {"]
+    for row in DP_A:
+        vals = [_f(a) for a in row] + ["0.0"] * (6 - len(row))
+        out.append("    {" + ", ".join(vals) + "},")
+    out.append("};")
+    out.append("static const double LV_DP_E[7] = {" + ", ".join(_f(e) for e in dp_e()) + "};")
+    seq = " ".join(f"{'xyz'[a]}({'h' if f == 1 else f'{f}*h'})" for a, f in STRANG)
+    out += ["", f"/* Strang splitting of the free rotation, {seq}: composed in derive/ into the kernel",
+            "   lv_splitting_rotation (no table is needed at run time). */", "", "#endif", ""]
+    return "\n".join(out)
+
+
+def print_python() -> str:
+    """generated/tableaux.py."""
+    _check()
+    out = [f'"""{HEADER}', "", "Integrator tableaux and constants (derive/tableaux.py), the same doubles as tableaux.h.", '"""', ""]
+    out += [f"{n} = {p}" for n, _, p in _scalars()]
+    out.append("")
+    out.append("# Dormand-Prince 5(4): DP_A[s] (stage s's coefficients; DP_A[6] = the 5th-order weights, FSAL), DP_E = b - b_hat")
+    out.append("DP_A = (")
+    out.extend("    (" + ", ".join(_f(a) for a in row) + ("," if len(row) == 1 else "") + ")," for row in DP_A)
+    out.append(")")
+    out.append("DP_E = (" + ", ".join(_f(e) for e in dp_e()) + ")")
+    out.append("RK4_C = (" + ", ".join(_f(c) for c in RK4_C) + ")")
+    out.append("RK4_B_NUM = (" + ", ".join(_f(n) for n in RK4_B_NUM) + ")")
+    out.append("# Strang splitting of the free rotation: (axis, fraction of h)")
+    out.append("STRANG = (" + ", ".join(f"({a}, {_f(f)})" for a, f in STRANG) + ")")
+    out.append("")
+    return "\n".join(out)

@@ -1,0 +1,251 @@
+"""Shared test machinery: optional tools, and the `slow` set.
+
+Optional tools
+--------------
+Some tests need a tool that a fresh machine may lack. Each has one name here (TOOLS):
+
+    chromium  /usr/bin/chromium (Debian's package) and the playwright package (the viewer in a browser)
+    mujoco    the `mujoco` package (bench extra: the peer comparison)
+    cc        a C compiler, cc/gcc or $CC (the bench's hand-written reference kernel)
+    control   casadi and python-control (control extra: linearization, LQR, the CasADi kernels)
+    viewer    viser (viewer extra: the live browser viewer)
+    gym       gymnasium (gym extra: the ReactionWheelCube-v0 environment)
+    distributed  dask and distributed (distributed extra)
+
+A test says what it needs in one of three ways, all handled by :func:`require`:
+
+    @pytest.mark.needs("viewer", "control")       # a test, a class, or `pytestmark = ...` for a module
+    require("gym")                                # imperatively, inside a test or fixture
+    if have("mujoco"): ...                        # a test that checks both the with- and without-branch
+
+A module that imports an optional package at top level marks itself and guards the import:
+
+    pytestmark = pytest.mark.needs("gym")
+    if missing("gym") is None:
+        import gymnasium as gym
+
+(`require()` at module level also works, but under CI=true its failure is a collection error, which
+stops pytest before it runs anything else.)
+
+When a tool is missing the test is SKIPPED with a one-line reason naming how to install it —
+unless the environment variable CI is "true" (or 1/yes; CI installs every extra, see .ci/run): then the test
+FAILS with that reason, so a missing tool in CI is never a silent skip. `have()` returns False
+outside CI and fails in CI.
+
+One derivation per session
+--------------------------
+Deriving every kernel with SymPy and printing it takes seconds (a minute on a loaded machine).
+The session fixture `derivation` does it once (`.kernels`: derive.all_kernels(), `.files`:
+codegen.render() of those kernels); `derived_once` makes `codegen.render()` return that result,
+so `codegen.check(..., full=True)` and the CLI's `derive --check` compare against it instead of
+deriving again.
+
+The `slow` set
+--------------
+`@pytest.mark.slow` marks end-to-end repeats of what faster tests already cover: the whole
+`lab all` command, a lab again through its CLI, a long run on the NumPy backend whose C twin stays
+(`@pytest.mark.parametrize("backend", NUMPY_SLOW)`; NumPy = C is checked quickly elsewhere). Plain
+`pytest` DESELECTS them, so the README's test command stays within minutes; they run with
+
+    pytest -m slow                # only the slow set (.ci/run runs it after the README test command)
+    pytest --run-slow             # everything
+    pytest -m EXPR                # any -m expression alone decides ("slow or not slow": all)
+
+and a slow test named by node id on the command line (`pytest tests/test_labs.py::test_cli_all`)
+runs too. The session header says that slow tests are deselected; the summary counts them.
+"""
+from __future__ import annotations
+
+import importlib
+import os
+from pathlib import Path
+
+import pytest
+
+IN_CI = os.environ.get("CI", "").strip().lower() in ("true", "1", "yes")   # CI services set CI=true
+
+CHROMIUM = "/usr/bin/chromium"
+
+
+def _modules(*names: str):
+    """A check that imports `names`; the reason names the first that does not import."""
+    def check() -> str | None:
+        for name in names:
+            try:
+                importlib.import_module(name)
+            except ModuleNotFoundError as exc:
+                if exc.name is not None and exc.name.split(".")[0] == name.split(".")[0]:
+                    return f"{name} is not installed"
+                return f"{name} does not import ({type(exc).__name__}: {exc})"
+            except ImportError as exc:    # installed but broken: say how
+                return f"{name} does not import ({type(exc).__name__}: {exc})"
+        return None
+    return check
+
+
+def _chromium() -> str | None:
+    if not Path(CHROMIUM).exists():
+        return f"{CHROMIUM} is missing"
+    return _modules("playwright.sync_api")()
+
+
+def _cc() -> str | None:
+    from lavendersim import bench
+
+    return None if bench.compiler() is not None else "no C compiler ($CC, cc or gcc) on PATH"
+
+
+# name -> (check returning None or why the tool is missing, how to install it)
+TOOLS = {
+    "chromium": (_chromium, "apt-get install -y chromium (Debian's; never `playwright install`) and "
+                            "pip install -e '.[test]'"),
+    "mujoco": (_modules("mujoco"), "pip install -e '.[bench]'"),
+    "cc": (_cc, "apt-get install -y gcc"),
+    "control": (_modules("casadi", "control"), "pip install -e '.[control]'"),
+    "viewer": (_modules("viser"), "pip install -e '.[viewer]'"),
+    "gym": (_modules("gymnasium"), "pip install -e '.[gym]'"),
+    "distributed": (_modules("dask", "distributed"), "pip install -e '.[distributed]'"),
+}
+
+_missing: dict[str, str | None] = {}
+
+
+def missing(tool: str) -> str | None:
+    """None if `tool` is available, else a one-line reason with the install command (cached)."""
+    if tool not in TOOLS:
+        raise KeyError(f"unknown optional tool {tool!r}; known: {', '.join(TOOLS)}")
+    if tool not in _missing:
+        check, how = TOOLS[tool]
+        why = check()
+        _missing[tool] = None if why is None else f"needs {tool} ({why}): {how}"
+    return _missing[tool]
+
+
+def require(*tools: str) -> None:
+    """Skip the calling test (or module, at module level) when a tool is missing; fail under CI=true."""
+    __tracebackhide__ = True    # reports name the caller's line, not this one
+    for tool in tools:
+        why = missing(tool)
+        if why is None:
+            continue
+        if IN_CI:
+            pytest.fail(f"{why} (CI=true: every optional tool must be present)", pytrace=False)
+        pytest.skip(why, allow_module_level=True)
+
+
+def have(tool: str) -> bool:
+    """True if `tool` is available; False outside CI when missing; fails under CI=true when missing."""
+    __tracebackhide__ = True
+    why = missing(tool)
+    if why is not None and IN_CI:
+        pytest.fail(f"{why} (CI=true: every optional tool must be present)", pytrace=False)
+    return why is None
+
+
+# ---- the slow set ---------------------------------------------------------------------------------
+
+#: `@pytest.mark.parametrize("backend", NUMPY_SLOW)`: for a long run whose NumPy variant repeats the C
+#: one end to end (C and NumPy agreement is tested on its own, quickly): C in the default set, NumPy
+#: in the slow set. Test ids stay [numpy] and [c].
+NUMPY_SLOW = [pytest.param("numpy", marks=pytest.mark.slow), "c"]
+
+
+# ---- one derivation per session -----------------------------------------------------------------
+
+@pytest.fixture(scope="session")
+def derivation():
+    """The full in-memory derivation, once: kernels (derive.all_kernels()) and the text of every
+    generated file printed from them (codegen.render(), a fresh derivation: not read from disk)."""
+    from types import SimpleNamespace
+
+    import lavendersim.derive as D
+    from lavendersim.derive import codegen
+
+    kernels = D.all_kernels()
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(D, "all_kernels", lambda: kernels)    # render() would otherwise derive again
+        files = codegen.render()
+    return SimpleNamespace(kernels=kernels, files=files)
+
+
+@pytest.fixture
+def derived_once(monkeypatch, derivation):
+    """codegen.render() returns (a copy of) the session's derivation instead of deriving again."""
+    from lavendersim.derive import codegen
+
+    monkeypatch.setattr(codegen, "render", lambda: dict(derivation.files))
+    return derivation
+
+
+# ---- hooks --------------------------------------------------------------------------------------
+
+def pytest_addoption(parser):
+    parser.addoption("--run-slow", action="store_true", default=False,
+                     help="also run tests marked slow (plain `pytest` deselects them; `-m slow` runs only them)")
+
+
+def pytest_configure(config):
+    config.addinivalue_line("markers", "needs(*tools): the test needs optional tools (" + ", ".join(TOOLS)
+                            + "); skipped when missing, failed when missing under CI=true")
+    config.addinivalue_line("markers", "slow: an end-to-end repeat of faster tests; deselected by plain `pytest` "
+                                       "(run with -m slow or --run-slow)")
+
+
+def _named_on_command_line(config) -> set[str]:
+    """Node ids given explicitly as arguments (path::name), relative to the rootdir."""
+    out = set()
+    for arg in config.args:
+        if "::" not in arg:
+            continue
+        path, rest = arg.split("::", 1)
+        p = Path(config.invocation_params.dir, path).resolve()
+        try:
+            rel = p.relative_to(config.rootpath).as_posix()
+        except ValueError:
+            continue
+        out.add(f"{rel}::{rest}")
+    return out
+
+
+def _slow_deselected(config) -> bool:
+    return not (config.getoption("--run-slow") or config.getoption("markexpr"))
+
+
+def pytest_collection_modifyitems(config, items):
+    # `needs` markers: outside CI a missing tool becomes a skip marker (reported at the test's own
+    # location); under CI=true pytest_runtest_setup below fails the test instead
+    if not IN_CI:
+        for item in items:
+            for mark in item.iter_markers("needs"):
+                for tool in mark.args:
+                    why = missing(tool)
+                    if why is not None:
+                        item.add_marker(pytest.mark.skip(reason=why))
+    if not _slow_deselected(config):
+        return
+    named = _named_on_command_line(config)
+    keep, drop = [], []
+    for item in items:
+        slow = item.get_closest_marker("slow") is not None
+        explicit = any(item.nodeid == n or item.nodeid.startswith((n + "[", n + "::")) for n in named)
+        (drop if slow and not explicit else keep).append(item)
+    if drop:
+        config.hook.pytest_deselected(items=drop)
+        items[:] = keep
+
+
+def pytest_report_header(config):
+    lines = ["optional tools: " + ("CI=true, a missing one FAILS its tests" if IN_CI
+                                   else "a missing one skips its tests (they fail under CI=true)")]
+    if _slow_deselected(config):
+        lines.append("slow tests deselected (run them with `pytest -m slow`, or everything with --run-slow)")
+    return lines
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_runtest_setup(item):
+    """Before any fixture: a `needs` marker's tools must be present (fail under CI; outside CI the
+    skip markers added at collection have already skipped the test)."""
+    if IN_CI:
+        for mark in item.iter_markers("needs"):
+            require(*mark.args)
