@@ -1,6 +1,7 @@
 """SymPy derivations: the one place where LavenderSim's equations are written down.
 
-`all_kernels()` collects every kernel; `derive.codegen` prints them into generated/.
+`all_kernels()` collects every kernel, `all_effects()` every effect declaration (derive.effect);
+`derive.codegen` prints them into generated/.
 """
 from __future__ import annotations
 
@@ -17,4 +18,15 @@ def all_kernels():
     names = [k.name for k in out]
     if len(set(names)) != len(names):
         raise RuntimeError(f"derive: duplicate kernel names {sorted(n for n in names if names.count(n) > 1)}")
+    return out
+
+
+def all_effects():
+    """Every built-in effect declaration, in code order (code = position + 1)."""
+    from .effects import declarations
+
+    out = declarations()
+    names = [d.name for d in out]
+    if len(set(names)) != len(names):
+        raise RuntimeError(f"derive: duplicate effect names {sorted(n for n in names if names.count(n) > 1)}")
     return out

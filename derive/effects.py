@@ -1,36 +1,65 @@
-"""Force and torque contributions of scene effects, all in the world frame about the COM.
+"""The scene's effects, each declared once (derive.effect), and the force/torque kernels of the force lab.
 
-Forces in N, torques in N·m, damping coefficients c in N·s/m (linear) and N·m·s/rad (angular).
+Force effects contribute a force at the COM and/or a torque about it, both in the world frame (N,
+N·m); their codes are their position in EFFECTS (1, 2, …), the contract between the Python effect
+table and both backends. Model effects (a spherical joint, reaction wheels) change a body's model
+instead; they declare their parameters here and their equations in derive/wheel_cube.py.
+Units: damping coefficients c in N·s/m (linear) and N·m·s/rad (angular).
 """
 from __future__ import annotations
 
-
-from .kernel import Arg, Kernel, scalar, vec
+from .effect import STATE as S
+from .effect import EffectDecl, effect, model_effect, param
+from .kernel import Arg, Kernel, vec
 from .quaternion import rotation_matrix
 
 
-def kernels() -> list[Kernel]:
-    g = "Torque and effects"
-    r_w, F_w, r_b, g_w = vec("r_w", 3), vec("F_w", 3), vec("r_b", 3), vec("g_w", 3)
-    q, v_w, omega_b = vec("q", 4), vec("v_w", 3), vec("omega_b", 3)
-    m, c = scalar("m", positive=True), scalar("c")
-    R = rotation_matrix(q)
-    QU = ("q", q, "orientation (x, y, z, w), R_WB, unit", "unit_quaternion")
+def torque_at_point(q, r_b, F_w):
+    """Torque about the COM of a world force F_w applied at the body point r_b: (R_WB r_b) × F_w."""
+    return (rotation_matrix(q) * r_b).cross(F_w)
+
+
+def declarations() -> list[EffectDecl]:
+    """Every built-in effect, in code order (force effects first)."""
+    torque_w = param("torque_w", 3, "N·m", "torque about the COM, world frame")
+    r_b = param("r_b", 3, "m", "application point relative to the COM, body frame")
+    F_w = param("F_w", 3, "N", "force, world frame")
+    g_w = param("g_w", 3, "m/s²", "gravitational acceleration, world frame", default=(0.0, 0.0, -9.81))
+    c_lin = param("c", (), "N·s/m", "viscous coefficient", rule="nonnegative")
+    c_ang = param("c", (), "N·m·s/rad", "viscous coefficient", rule="nonnegative")
     return [
+        effect("applied_torque", "A torque about the COM, world frame", [torque_w], torque_w=torque_w.symbol),
+        effect("force_at_point", "A world force applied at a body-fixed point: the force acts on the COM plus a torque",
+               [r_b, F_w], force_w=F_w.symbol, torque_w=torque_at_point(S.q, r_b.symbol, F_w.symbol),
+               caption=r"F_{COM} = F_W,\quad \tau_W = (R_{WB} r_B) \times F_W"),
+        effect("gravity", "Uniform gravity acting at the COM", [g_w], force_w=S.m * g_w.symbol, caption=r"F_W = m\,g_W"),
+        effect("linear_damping", "Viscous drag on the COM velocity", [c_lin], force_w=-c_lin.symbol * S.v_w,
+               caption=r"F_W = -c\,v_W"),
+        effect("angular_damping", "Viscous drag on the angular velocity", [c_ang], torque_w=-c_ang.symbol * S.omega_w,
+               caption=r"\tau_W = -c\,R_{WB}\,\omega_B = -c\,\omega_W"),
+        model_effect("spherical_joint", "World-anchored ball joint: the body point at anchor_w when the Sim starts stays there",
+                     [param("anchor_w", 3, "m", "joint anchor, world frame")]),
+        model_effect("reaction_wheels", "Three reaction wheels on the body x, y, z axes (the body's mass and inertia include them, locked)",
+                     [param("J", 3, "kg·m²", "wheel spin inertias about body x, y, z (each below the body's moment)", "positive"),
+                      param("torque_limit", (), "N·m", "motor torque limit (clips each command)", "positive"),
+                      param("speed_limit", (), "rad/s", "a wheel at |Omega_i| >= speed_limit is not driven faster", "positive"),
+                      param("c_w", (), "N·m·s/rad", "wheel bearing damping", "nonnegative", default=0.0)]),
+    ]
+
+
+def kernels() -> list[Kernel]:
+    """The force lab's kernels, then one kernel per force effect (effect_<name>)."""
+    g = "Torque and effects"
+    r_w, F_w, r_b = vec("r_w", 3), vec("F_w", 3), vec("r_b", 3)
+    q = vec("q", 4)
+    QU = ("q", q, "orientation (x, y, z, w), R_WB, unit", "unit_quaternion")
+    plain = [
         Kernel("torque_from_force", "Torque of a force about the COM", r"\tau = r \times F",
                [Arg("r_w", r_w, "application point relative to the COM, world frame, m"), Arg("F_w", F_w, "force, world frame, N")],
                [Arg("tau_w", r_w.cross(F_w), "torque about the COM, world frame, N·m")], g),
-        Kernel("force_at_point", "A world force applied at a body-fixed point: the force acts on the COM plus a torque",
-               r"F_{COM} = F_W,\quad \tau_W = (R_{WB} r_B) \times F_W",
+        Kernel("force_at_point", "Torque about the COM of a world force applied at a body-fixed point",
+               r"\tau_W = (R_{WB} r_B) \times F_W",
                [Arg(*QU), Arg("r_b", r_b, "application point relative to the COM, body frame, m"), Arg("F_w", F_w, "force, world frame, N")],
-               [Arg("tau_w", (R * r_b).cross(F_w), "torque about the COM, world frame, N·m")], g),
-        Kernel("gravity_force", "Uniform gravity acting at the COM", r"F_W = m\,g_W",
-               [Arg("m", m, "mass, kg", "positive"), Arg("g_w", g_w, "gravitational acceleration, world frame, m/s²")],
-               [Arg("F_w", m * g_w, "force, world frame, N")], g),
-        Kernel("linear_damping", "Viscous drag on the COM velocity", r"F_W = -c\,v_W",
-               [Arg("c", c, "coefficient, N·s/m", "positive"), Arg("v_w", v_w, "COM velocity, world frame, m/s")],
-               [Arg("F_w", -c * v_w, "force, world frame, N")], g),
-        Kernel("angular_damping", "Viscous drag on the angular velocity", r"\tau_W = -c\,R_{WB}\,\omega_B = -c\,\omega_W",
-               [Arg(*QU), Arg("c", c, "coefficient, N·m·s/rad", "positive"), Arg("omega_b", omega_b, "angular velocity, body frame, rad/s")],
-               [Arg("tau_w", -c * (R * omega_b), "torque, world frame, N·m")], g),
+               [Arg("tau_w", torque_at_point(q, r_b, F_w), "torque about the COM, world frame, N·m")], g),
     ]
+    return plain + [d.kernel() for d in declarations() if d.kind == "force"]

@@ -73,6 +73,9 @@ class Arg:
 
 @dataclass
 class Kernel:
+    """A kernel: summary, an optional human caption (`latex`, shown beside the equation; EQUATIONS.md
+    prints the equation itself from the outputs with sympy.latex), inputs, outputs, group, notes."""
+
     name: str
     summary: str
     latex: str

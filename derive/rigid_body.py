@@ -79,4 +79,9 @@ def kernels() -> list[Kernel]:
         Kernel("angular_momentum_world", "Angular momentum about the COM in the world frame",
                r"L_W = R_{WB} I_B \omega_B", [Arg(*QU), Arg(*IB), Arg("omega_b", omega_b, "angular velocity, body frame, rad/s")],
                [Arg("L_w", Rq * sp.diag(*I_b) * omega_b, "angular momentum, world frame, kg·m²/s")], g),
+        Kernel("rigid_body_rhs_torque", "State derivative under a world torque only (rigid_body_rhs with F_W = 0, for bodies whose effects add no force)",
+               r"\dot v_W = 0,\ \text{else as rigid\_body\_rhs}",
+               [Arg("x", x, STATE, "real"), Arg(*IB), Arg("tau_w", tau_w, "total torque about the COM, world frame, N·m")],
+               [Arg("x_dot", full.subs({F_w[i]: 0 for i in range(3)}), "d/dt of the state")], g,
+               notes=["Bitwise rigid_body_rhs with F_W = 0 (its v rate F_W/m is then exactly +0)."]),
     ]

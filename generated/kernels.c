@@ -182,25 +182,66 @@ void lv_force_at_point(const double *q, const double *r_b, const double *F_w, do
     tau_w[2] = -F_w_0*t11 + F_w_1*t12;
 }
 
-void lv_gravity_force(double m, const double *g_w, double *F_w) {
+void lv_effect_applied_torque(const double *torque_w, double *tau_com_w) {
+    const double torque_w_0 = torque_w[0];
+    const double torque_w_1 = torque_w[1];
+    const double torque_w_2 = torque_w[2];
+    tau_com_w[0] = torque_w_0;
+    tau_com_w[1] = torque_w_1;
+    tau_com_w[2] = torque_w_2;
+}
+
+void lv_effect_force_at_point(const double *q, const double *r_b, const double *F_w, double *F_com_w, double *tau_com_w) {
+    const double q_0 = q[0];
+    const double q_1 = q[1];
+    const double q_2 = q[2];
+    const double q_3 = q[3];
+    const double r_b_0 = r_b[0];
+    const double r_b_1 = r_b[1];
+    const double r_b_2 = r_b[2];
+    const double F_w_0 = F_w[0];
+    const double F_w_1 = F_w[1];
+    const double F_w_2 = F_w[2];
+    const double t0 = 2*q_0;
+    const double t1 = q_2*t0;
+    const double t2 = 2*q_1*q_3;
+    const double t3 = q_3*t0;
+    const double t4 = 2*q_2;
+    const double t5 = 2*(q_1*q_1);
+    const double t6 = 2*(q_0*q_0) - 1;
+    const double t7 = r_b_0*(t1 - t2) + r_b_1*(q_1*t4 + t3) + r_b_2*(-t5 - t6);
+    const double t8 = q_1*t0;
+    const double t9 = q_3*t4;
+    const double t10 = 2*(q_2*q_2);
+    const double t11 = r_b_0*(t8 + t9) + r_b_1*(-t10 - t6) + r_b_2*(2*q_1*q_2 - t3);
+    const double t12 = r_b_0*(-t10 - t5 + 1) + r_b_1*(t8 - t9) + r_b_2*(t1 + t2);
+    F_com_w[0] = F_w_0;
+    F_com_w[1] = F_w_1;
+    F_com_w[2] = F_w_2;
+    tau_com_w[0] = -F_w_1*t7 + F_w_2*t11;
+    tau_com_w[1] = F_w_0*t7 - F_w_2*t12;
+    tau_com_w[2] = -F_w_0*t11 + F_w_1*t12;
+}
+
+void lv_effect_gravity(double m, const double *g_w, double *F_com_w) {
     const double g_w_0 = g_w[0];
     const double g_w_1 = g_w[1];
     const double g_w_2 = g_w[2];
-    F_w[0] = g_w_0*m;
-    F_w[1] = g_w_1*m;
-    F_w[2] = g_w_2*m;
+    F_com_w[0] = g_w_0*m;
+    F_com_w[1] = g_w_1*m;
+    F_com_w[2] = g_w_2*m;
 }
 
-void lv_linear_damping(double c, const double *v_w, double *F_w) {
+void lv_effect_linear_damping(const double *v_w, double c, double *F_com_w) {
     const double v_w_0 = v_w[0];
     const double v_w_1 = v_w[1];
     const double v_w_2 = v_w[2];
-    F_w[0] = -c*v_w_0;
-    F_w[1] = -c*v_w_1;
-    F_w[2] = -c*v_w_2;
+    F_com_w[0] = -c*v_w_0;
+    F_com_w[1] = -c*v_w_1;
+    F_com_w[2] = -c*v_w_2;
 }
 
-void lv_angular_damping(const double *q, double c, const double *omega_b, double *tau_w) {
+void lv_effect_angular_damping(const double *q, const double *omega_b, double c, double *tau_com_w) {
     const double q_0 = q[0];
     const double q_1 = q[1];
     const double q_2 = q[2];
@@ -218,9 +259,9 @@ void lv_angular_damping(const double *q, double c, const double *omega_b, double
     const double t7 = 2*(q_2*q_2) - 1;
     const double t8 = 2*q_0*q_3;
     const double t9 = 2*(q_0*q_0);
-    tau_w[0] = -c*(omega_b_0*(-t6 - t7) + omega_b_1*(t1 - t3) + omega_b_2*(t4 + t5));
-    tau_w[1] = -c*(omega_b_0*(t1 + t3) + omega_b_1*(-t7 - t9) + omega_b_2*(2*q_1*q_2 - t8));
-    tau_w[2] = -c*(omega_b_0*(t4 - t5) + omega_b_1*(q_1*t2 + t8) + omega_b_2*(-t6 - t9 + 1));
+    tau_com_w[0] = -c*(omega_b_0*(-t6 - t7) + omega_b_1*(t1 - t3) + omega_b_2*(t4 + t5));
+    tau_com_w[1] = -c*(omega_b_0*(t1 + t3) + omega_b_1*(-t7 - t9) + omega_b_2*(2*q_1*q_2 - t8));
+    tau_com_w[2] = -c*(omega_b_0*(t4 - t5) + omega_b_1*(q_1*t2 + t8) + omega_b_2*(-t6 - t9 + 1));
 }
 
 void lv_quat_mul(const double *a, const double *b, double *ab) {
@@ -753,6 +794,52 @@ void lv_angular_momentum_world(const double *q, const double *I_b, const double 
     L_w[0] = t10*(-t8 - t9) + t4*(t1 - t3) + t7*(t5 + t6);
     L_w[1] = t10*(t1 + t3) + t4*(-t12 - t9) + t7*(2*q_1*q_2 - t11);
     L_w[2] = t10*(t5 - t6) + t4*(q_1*t2 + t11) + t7*(-t12 - t8 + 1);
+}
+
+void lv_rigid_body_rhs_torque(const double *x, const double *I_b, const double *tau_w, double *x_dot) {
+    const double x_3 = x[3];
+    const double x_4 = x[4];
+    const double x_5 = x[5];
+    const double x_6 = x[6];
+    const double x_7 = x[7];
+    const double x_8 = x[8];
+    const double x_9 = x[9];
+    const double x_10 = x[10];
+    const double x_11 = x[11];
+    const double x_12 = x[12];
+    const double I_b_0 = I_b[0];
+    const double I_b_1 = I_b[1];
+    const double I_b_2 = I_b[2];
+    const double tau_w_0 = tau_w[0];
+    const double tau_w_1 = tau_w[1];
+    const double tau_w_2 = tau_w[2];
+    const double t0 = ((1.0/2.0))*x_10;
+    const double t1 = ((1.0/2.0))*x_11;
+    const double t2 = ((1.0/2.0))*x_12;
+    const double t3 = -I_b_2;
+    const double t4 = 2*x_4;
+    const double t5 = t4*x_3;
+    const double t6 = 2*x_5;
+    const double t7 = t6*x_6;
+    const double t8 = t6*x_3;
+    const double t9 = t4*x_6;
+    const double t10 = 2*(x_4*x_4);
+    const double t11 = 2*(x_5*x_5) - 1;
+    const double t12 = 2*x_3*x_6;
+    const double t13 = 2*(x_3*x_3);
+    x_dot[0] = x_7;
+    x_dot[1] = x_8;
+    x_dot[2] = x_9;
+    x_dot[3] = t0*x_6 - t1*x_5 + t2*x_4;
+    x_dot[4] = t0*x_5 + t1*x_6 - t2*x_3;
+    x_dot[5] = -t0*x_4 + t1*x_3 + t2*x_6;
+    x_dot[6] = -t0*x_3 - t1*x_4 - t2*x_5;
+    x_dot[7] = 0;
+    x_dot[8] = 0;
+    x_dot[9] = 0;
+    x_dot[10] = (tau_w_0*(-t10 - t11) + tau_w_1*(t5 + t7) + tau_w_2*(t8 - t9) + x_11*x_12*(I_b_1 + t3))/I_b_0;
+    x_dot[11] = (tau_w_0*(t5 - t7) + tau_w_1*(-t11 - t13) + tau_w_2*(t12 + t4*x_5) + x_10*x_12*(-I_b_0 - t3))/I_b_1;
+    x_dot[12] = (tau_w_0*(t8 + t9) + tau_w_1*(-t12 + 2*x_4*x_5) + tau_w_2*(-t10 - t13 + 1) + x_10*x_11*(I_b_0 - I_b_1))/I_b_2;
 }
 
 void lv_pivot_body_rhs(const double *q, const double *omega_b, const double *I_p, const double *r_b, const double *F_w, const double *tau_w, double *q_dot, double *omega_dot_b) {
@@ -1372,6 +1459,103 @@ void lv_wheel_saturation(const double *command, const double *Omega, double torq
 ));
 }
 
+/* ---- Scene effects: accumulating functions and dispatch -------------------------------------- */
+/* applied_torque: adds tau_com_w for one body. p = [torque_w(3)] */
+static inline void lv_effect_acc_applied_torque(const double *p, const double *x, const double *v_w, double m, const double *I_b, double *F, double *tau)
+{
+    double tau_com_w[3];
+    (void)x; (void)v_w; (void)m; (void)I_b; (void)F;
+    lv_effect_applied_torque(p + 0, tau_com_w);
+    tau[0] += tau_com_w[0]; tau[1] += tau_com_w[1]; tau[2] += tau_com_w[2];
+}
+
+/* force_at_point: adds F_com_w and tau_com_w for one body. p = [r_b(3), F_w(3)] */
+static inline void lv_effect_acc_force_at_point(const double *p, const double *x, const double *v_w, double m, const double *I_b, double *F, double *tau)
+{
+    double F_com_w[3];
+    double tau_com_w[3];
+    (void)v_w; (void)m; (void)I_b;
+    lv_effect_force_at_point(x + 3 /* LV_STATE_Q */, p + 0, p + 3, F_com_w, tau_com_w);
+    F[0] += F_com_w[0]; F[1] += F_com_w[1]; F[2] += F_com_w[2];
+    tau[0] += tau_com_w[0]; tau[1] += tau_com_w[1]; tau[2] += tau_com_w[2];
+}
+
+/* gravity: adds F_com_w for one body. p = [g_w(3)] */
+static inline void lv_effect_acc_gravity(const double *p, const double *x, const double *v_w, double m, const double *I_b, double *F, double *tau)
+{
+    double F_com_w[3];
+    (void)x; (void)v_w; (void)I_b; (void)tau;
+    lv_effect_gravity(m, p + 0, F_com_w);
+    F[0] += F_com_w[0]; F[1] += F_com_w[1]; F[2] += F_com_w[2];
+}
+
+/* linear_damping: adds F_com_w for one body. p = [c(1)] */
+static inline void lv_effect_acc_linear_damping(const double *p, const double *x, const double *v_w, double m, const double *I_b, double *F, double *tau)
+{
+    double F_com_w[3];
+    (void)x; (void)m; (void)I_b; (void)tau;
+    lv_effect_linear_damping(v_w, p[0], F_com_w);
+    F[0] += F_com_w[0]; F[1] += F_com_w[1]; F[2] += F_com_w[2];
+}
+
+/* angular_damping: adds tau_com_w for one body. p = [c(1)] */
+static inline void lv_effect_acc_angular_damping(const double *p, const double *x, const double *v_w, double m, const double *I_b, double *F, double *tau)
+{
+    double tau_com_w[3];
+    (void)v_w; (void)m; (void)I_b; (void)F;
+    lv_effect_angular_damping(x + 3 /* LV_STATE_Q */, x + 10 /* LV_STATE_OMEGA_B */, p[0], tau_com_w);
+    tau[0] += tau_com_w[0]; tau[1] += tau_com_w[1]; tau[2] += tau_com_w[2];
+}
+
+/* Add built-in effect `code`'s force and torque; 0, or -1 for a code that is not a built-in effect. */
+static inline int lv_effect_apply(int code, const double *p, const double *x, const double *v_w, double m, const double *I_b, double *F, double *tau)
+{
+    switch (code) {
+    case LV_EFFECT_APPLIED_TORQUE: lv_effect_acc_applied_torque(p, x, v_w, m, I_b, F, tau); return 0;
+    case LV_EFFECT_FORCE_AT_POINT: lv_effect_acc_force_at_point(p, x, v_w, m, I_b, F, tau); return 0;
+    case LV_EFFECT_GRAVITY: lv_effect_acc_gravity(p, x, v_w, m, I_b, F, tau); return 0;
+    case LV_EFFECT_LINEAR_DAMPING: lv_effect_acc_linear_damping(p, x, v_w, m, I_b, F, tau); return 0;
+    case LV_EFFECT_ANGULAR_DAMPING: lv_effect_acc_angular_damping(p, x, v_w, m, I_b, F, tau); return 0;
+    default: return -1; /* not a built-in effect: the caller reports it */
+    }
+}
+
+int lv_effect_n_params(int code)
+{
+    switch (code) {
+    case LV_EFFECT_APPLIED_TORQUE: return 3;
+    case LV_EFFECT_FORCE_AT_POINT: return 6;
+    case LV_EFFECT_GRAVITY: return 3;
+    case LV_EFFECT_LINEAR_DAMPING: return 1;
+    case LV_EFFECT_ANGULAR_DAMPING: return 1;
+    default: return -1;
+    }
+}
+
+int lv_effect_flags(int code)
+{
+    switch (code) {
+    case LV_EFFECT_APPLIED_TORQUE: return 0;
+    case LV_EFFECT_FORCE_AT_POINT: return 4;
+    case LV_EFFECT_GRAVITY: return 4;
+    case LV_EFFECT_LINEAR_DAMPING: return 5;
+    case LV_EFFECT_ANGULAR_DAMPING: return 2;
+    default: return -1;
+    }
+}
+
+const char *lv_effect_name(int code)
+{
+    switch (code) {
+    case LV_EFFECT_APPLIED_TORQUE: return "applied_torque";
+    case LV_EFFECT_FORCE_AT_POINT: return "force_at_point";
+    case LV_EFFECT_GRAVITY: return "gravity";
+    case LV_EFFECT_LINEAR_DAMPING: return "linear_damping";
+    case LV_EFFECT_ANGULAR_DAMPING: return "angular_damping";
+    default: return 0;
+    }
+}
+
 static void packed_particle_moments(const double *in, double *out) { lv_particle_moments(in[0], in + 1, in + 4, out + 0, out + 3); }
 static void packed_particle_angular_momentum(const double *in, double *out) { lv_particle_angular_momentum(in[0], in + 1, in + 4, in + 7, in + 10, out + 0); }
 static void packed_inertia_box(const double *in, double *out) { lv_inertia_box(in[0], in[1], in[2], in[3], out + 0); }
@@ -1381,9 +1565,11 @@ static void packed_parallel_axis(const double *in, double *out) { lv_parallel_ax
 static void packed_world_inertia(const double *in, double *out) { lv_world_inertia(in + 0, in + 4, out + 0); }
 static void packed_torque_from_force(const double *in, double *out) { lv_torque_from_force(in + 0, in + 3, out + 0); }
 static void packed_force_at_point(const double *in, double *out) { lv_force_at_point(in + 0, in + 4, in + 7, out + 0); }
-static void packed_gravity_force(const double *in, double *out) { lv_gravity_force(in[0], in + 1, out + 0); }
-static void packed_linear_damping(const double *in, double *out) { lv_linear_damping(in[0], in + 1, out + 0); }
-static void packed_angular_damping(const double *in, double *out) { lv_angular_damping(in + 0, in[4], in + 5, out + 0); }
+static void packed_effect_applied_torque(const double *in, double *out) { lv_effect_applied_torque(in + 0, out + 0); }
+static void packed_effect_force_at_point(const double *in, double *out) { lv_effect_force_at_point(in + 0, in + 4, in + 7, out + 0, out + 3); }
+static void packed_effect_gravity(const double *in, double *out) { lv_effect_gravity(in[0], in + 1, out + 0); }
+static void packed_effect_linear_damping(const double *in, double *out) { lv_effect_linear_damping(in + 0, in[3], out + 0); }
+static void packed_effect_angular_damping(const double *in, double *out) { lv_effect_angular_damping(in + 0, in + 4, in[7], out + 0); }
 static void packed_quat_mul(const double *in, double *out) { lv_quat_mul(in + 0, in + 4, out + 0); }
 static void packed_quat_conj(const double *in, double *out) { lv_quat_conj(in + 0, out + 0); }
 static void packed_quat_normalize(const double *in, double *out) { lv_quat_normalize(in + 0, out + 0); }
@@ -1404,6 +1590,7 @@ static void packed_apply_inv_inertia(const double *in, double *out) { lv_apply_i
 static void packed_world_to_body(const double *in, double *out) { lv_world_to_body(in + 0, in + 4, out + 0); }
 static void packed_kinetic_energy(const double *in, double *out) { lv_kinetic_energy(in[0], in + 1, in + 4, in + 7, out + 0); }
 static void packed_angular_momentum_world(const double *in, double *out) { lv_angular_momentum_world(in + 0, in + 4, in + 7, out + 0); }
+static void packed_rigid_body_rhs_torque(const double *in, double *out) { lv_rigid_body_rhs_torque(in + 0, in + 13, in + 16, out + 0); }
 static void packed_pivot_body_rhs(const double *in, double *out) { lv_pivot_body_rhs(in + 0, in + 4, in + 7, in + 16, in + 19, in + 22, out + 0, out + 4); }
 static void packed_wheel_body_rhs(const double *in, double *out) { lv_wheel_body_rhs(in + 0, in + 4, in + 7, in + 10, in + 19, in + 22, in + 25, in + 28, in + 31, in[34], out + 0, out + 4, out + 7); }
 static void packed_wheel_momentum(const double *in, double *out) { lv_wheel_momentum(in + 0, in + 4, in + 7, in + 10, in + 19, out + 0, out + 3); }
@@ -1429,9 +1616,11 @@ const lv_kernel_info lv_kernel_table[LV_KERNEL_COUNT] = {
     {"world_inertia", 7, 9, packed_world_inertia},
     {"torque_from_force", 6, 3, packed_torque_from_force},
     {"force_at_point", 10, 3, packed_force_at_point},
-    {"gravity_force", 4, 3, packed_gravity_force},
-    {"linear_damping", 4, 3, packed_linear_damping},
-    {"angular_damping", 8, 3, packed_angular_damping},
+    {"effect_applied_torque", 3, 3, packed_effect_applied_torque},
+    {"effect_force_at_point", 10, 6, packed_effect_force_at_point},
+    {"effect_gravity", 4, 3, packed_effect_gravity},
+    {"effect_linear_damping", 4, 3, packed_effect_linear_damping},
+    {"effect_angular_damping", 8, 3, packed_effect_angular_damping},
     {"quat_mul", 8, 4, packed_quat_mul},
     {"quat_conj", 4, 4, packed_quat_conj},
     {"quat_normalize", 4, 4, packed_quat_normalize},
@@ -1452,6 +1641,7 @@ const lv_kernel_info lv_kernel_table[LV_KERNEL_COUNT] = {
     {"world_to_body", 7, 3, packed_world_to_body},
     {"kinetic_energy", 10, 1, packed_kinetic_energy},
     {"angular_momentum_world", 10, 3, packed_angular_momentum_world},
+    {"rigid_body_rhs_torque", 19, 13, packed_rigid_body_rhs_torque},
     {"pivot_body_rhs", 25, 7, packed_pivot_body_rhs},
     {"wheel_body_rhs", 35, 10, packed_wheel_body_rhs},
     {"wheel_momentum", 22, 6, packed_wheel_momentum},

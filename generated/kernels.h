@@ -11,7 +11,7 @@ typedef struct {
     void (*packed)(const double *in, double *out);
 } lv_kernel_info;
 
-#define LV_KERNEL_COUNT 46
+#define LV_KERNEL_COUNT 49
 extern const lv_kernel_info lv_kernel_table[LV_KERNEL_COUNT];
 
 /* particle_moments: One particle's mass moment and momentum (summed: m r_COM and p).
@@ -71,31 +71,44 @@ void lv_world_inertia(const double *q, const double *I_b, double *I_w);
      out tau_w [3]: torque about the COM, world frame, N·m */
 void lv_torque_from_force(const double *r_w, const double *F_w, double *tau_w);
 
-/* force_at_point: A world force applied at a body-fixed point: the force acts on the COM plus a torque.
+/* force_at_point: Torque about the COM of a world force applied at a body-fixed point.
      in  q [4]: orientation (x, y, z, w), R_WB, unit
      in  r_b [3]: application point relative to the COM, body frame, m
      in  F_w [3]: force, world frame, N
      out tau_w [3]: torque about the COM, world frame, N·m */
 void lv_force_at_point(const double *q, const double *r_b, const double *F_w, double *tau_w);
 
-/* gravity_force: Uniform gravity acting at the COM.
+/* effect_applied_torque: A torque about the COM, world frame.
+     in  torque_w [3]: torque about the COM, world frame, N·m
+     out tau_com_w [3]: torque about the COM, world frame, N·m */
+void lv_effect_applied_torque(const double *torque_w, double *tau_com_w);
+
+/* effect_force_at_point: A world force applied at a body-fixed point: the force acts on the COM plus a torque.
+     in  q [4]: orientation (x, y, z, w), R_WB, unit
+     in  r_b [3]: application point relative to the COM, body frame, m
+     in  F_w [3]: force, world frame, N
+     out F_com_w [3]: force at the COM, world frame, N
+     out tau_com_w [3]: torque about the COM, world frame, N·m */
+void lv_effect_force_at_point(const double *q, const double *r_b, const double *F_w, double *F_com_w, double *tau_com_w);
+
+/* effect_gravity: Uniform gravity acting at the COM.
      in  m scalar: mass, kg
      in  g_w [3]: gravitational acceleration, world frame, m/s²
-     out F_w [3]: force, world frame, N */
-void lv_gravity_force(double m, const double *g_w, double *F_w);
+     out F_com_w [3]: force at the COM, world frame, N */
+void lv_effect_gravity(double m, const double *g_w, double *F_com_w);
 
-/* linear_damping: Viscous drag on the COM velocity.
-     in  c scalar: coefficient, N·s/m
+/* effect_linear_damping: Viscous drag on the COM velocity.
      in  v_w [3]: COM velocity, world frame, m/s
-     out F_w [3]: force, world frame, N */
-void lv_linear_damping(double c, const double *v_w, double *F_w);
+     in  c scalar: viscous coefficient, N·s/m
+     out F_com_w [3]: force at the COM, world frame, N */
+void lv_effect_linear_damping(const double *v_w, double c, double *F_com_w);
 
-/* angular_damping: Viscous drag on the angular velocity.
+/* effect_angular_damping: Viscous drag on the angular velocity.
      in  q [4]: orientation (x, y, z, w), R_WB, unit
-     in  c scalar: coefficient, N·m·s/rad
      in  omega_b [3]: angular velocity, body frame, rad/s
-     out tau_w [3]: torque, world frame, N·m */
-void lv_angular_damping(const double *q, double c, const double *omega_b, double *tau_w);
+     in  c scalar: viscous coefficient, N·m·s/rad
+     out tau_com_w [3]: torque about the COM, world frame, N·m */
+void lv_effect_angular_damping(const double *q, const double *omega_b, double c, double *tau_com_w);
 
 /* quat_mul: Hamilton product.
      in  a [4]: quaternion (x, y, z, w), scalar last
@@ -221,6 +234,13 @@ void lv_kinetic_energy(double m, const double *I_b, const double *v_w, const dou
      in  omega_b [3]: angular velocity, body frame, rad/s
      out L_w [3]: angular momentum, world frame, kg·m²/s */
 void lv_angular_momentum_world(const double *q, const double *I_b, const double *omega_b, double *L_w);
+
+/* rigid_body_rhs_torque: State derivative under a world torque only (rigid_body_rhs with F_W = 0, for bodies whose effects add no force).
+     in  x [13]: state (p_w[3] m, q[4] (x,y,z,w), v_w[3] m/s, omega_b[3] rad/s)
+     in  I_b [3]: principal moments, body frame, kg·m²
+     in  tau_w [3]: total torque about the COM, world frame, N·m
+     out x_dot [13]: d/dt of the state */
+void lv_rigid_body_rhs_torque(const double *x, const double *I_b, const double *tau_w, double *x_dot);
 
 /* pivot_body_rhs: Rotation about a world-anchored spherical joint (no wheels).
      in  q [4]: orientation (x, y, z, w), R_WB
@@ -354,5 +374,34 @@ void lv_quat_exp_step(const double *q, const double *omega_b, double h, double *
      in  speed_limit scalar: rad/s
      out u [3]: applied motor torques, N·m */
 void lv_wheel_saturation(const double *command, const double *Omega, double torque_limit, double speed_limit, double *u);
+
+/* ---- Scene effects (derive/effects.py): effect table layout, codes and dispatch ---------------- */
+#define LV_EFFECT_ROW_CODE 0     /* an effect table row: [code, body, parameters...] */
+#define LV_EFFECT_ROW_BODY 1     /* the body index, or -1 for every body */
+#define LV_EFFECT_ROW_PARAMS 2   /* the effect's parameters start here */
+#define LV_EFFECT_ROW_MIN_PARAMS 6 /* a row holds at least this many parameters */
+#define LV_EFFECT_USER_BASE 1000 /* codes of user effects (loaded at run time) start here */
+#define LV_EFFECT_ABI 1          /* version of the calling convention below */
+#define LV_EFFECT_USES_V 1       /* flag: the effect reads v_w */
+#define LV_EFFECT_USES_OMEGA 2   /* flag: the effect reads omega_b */
+#define LV_EFFECT_FORCE 4        /* flag: the effect adds a force */
+#define LV_EFFECT_APPLIED_TORQUE 1 /* p = [torque_w(3)] */
+#define LV_EFFECT_FORCE_AT_POINT 2 /* p = [r_b(3), F_w(3)] */
+#define LV_EFFECT_GRAVITY 3 /* p = [g_w(3)] */
+#define LV_EFFECT_LINEAR_DAMPING 4 /* p = [c(1)] */
+#define LV_EFFECT_ANGULAR_DAMPING 5 /* p = [c(1)] */
+/* An effect adds its force at the COM (F, world, N) and torque about it (tau, world, N·m) for one
+   body: p its parameters, x the body state, v_w the COM velocity it sees (the state's, or a joint's
+   kinematic one), m and I_b the body's mass and principal moments. */
+typedef void (*lv_effect_fn)(const double *p, const double *x, const double *v_w, double m, const double *I_b, double *F, double *tau);
+/* The dispatch, static inline int lv_effect_apply(int code, <the arguments above>), is defined in
+   kernels.c (compile kernels.c into the translation unit that steps, so it inlines): it adds built-in
+   effect `code`'s force and torque and returns 0, or returns -1 for a code that is not a built-in
+   effect (then nothing is added: the caller reports it). */
+/* Built-in effect `code`: its number of parameters, its LV_EFFECT_USES_* flags, its name; -1 (NULL)
+   for a code that is not a built-in effect. */
+int lv_effect_n_params(int code);
+int lv_effect_flags(int code);
+const char *lv_effect_name(int code);
 
 #endif

@@ -168,7 +168,7 @@ def torque_from_force(r_w, F_w):
 
 
 def force_at_point(q, r_b, F_w):
-    """force_at_point: A world force applied at a body-fixed point: the force acts on the COM plus a torque.
+    """force_at_point: Torque about the COM of a world force applied at a body-fixed point.
       in  q [4]: orientation (x, y, z, w), R_WB, unit
       in  r_b [3]: application point relative to the COM, body frame, m
       in  F_w [3]: force, world frame, N
@@ -199,34 +199,77 @@ def force_at_point(q, r_b, F_w):
     return casadi.vertcat(-F_w_1*t7 + F_w_2*t11, F_w_0*t7 - F_w_2*t12, -F_w_0*t11 + F_w_1*t12)
 
 
-def gravity_force(m, g_w):
-    """gravity_force: Uniform gravity acting at the COM.
+def effect_applied_torque(torque_w):
+    """effect_applied_torque: A torque about the COM, world frame.
+      in  torque_w [3]: torque about the COM, world frame, N·m
+      out tau_com_w [3]: torque about the COM, world frame, N·m"""
+    torque_w_0 = torque_w[0]
+    torque_w_1 = torque_w[1]
+    torque_w_2 = torque_w[2]
+    return casadi.vertcat(torque_w_0, torque_w_1, torque_w_2)
+
+
+def effect_force_at_point(q, r_b, F_w):
+    """effect_force_at_point: A world force applied at a body-fixed point: the force acts on the COM plus a torque.
+      in  q [4]: orientation (x, y, z, w), R_WB, unit
+      in  r_b [3]: application point relative to the COM, body frame, m
+      in  F_w [3]: force, world frame, N
+      out F_com_w [3]: force at the COM, world frame, N
+      out tau_com_w [3]: torque about the COM, world frame, N·m"""
+    q_0 = q[0]
+    q_1 = q[1]
+    q_2 = q[2]
+    q_3 = q[3]
+    r_b_0 = r_b[0]
+    r_b_1 = r_b[1]
+    r_b_2 = r_b[2]
+    F_w_0 = F_w[0]
+    F_w_1 = F_w[1]
+    F_w_2 = F_w[2]
+    t0 = 2*q_0
+    t1 = q_2*t0
+    t2 = 2*q_1*q_3
+    t3 = q_3*t0
+    t4 = 2*q_2
+    t5 = 2*(q_1*q_1)
+    t6 = 2*(q_0*q_0) - 1
+    t7 = r_b_0*(t1 - t2) + r_b_1*(q_1*t4 + t3) + r_b_2*(-t5 - t6)
+    t8 = q_1*t0
+    t9 = q_3*t4
+    t10 = 2*(q_2*q_2)
+    t11 = r_b_0*(t8 + t9) + r_b_1*(-t10 - t6) + r_b_2*(2*q_1*q_2 - t3)
+    t12 = r_b_0*(-t10 - t5 + 1) + r_b_1*(t8 - t9) + r_b_2*(t1 + t2)
+    return casadi.vertcat(F_w_0, F_w_1, F_w_2), casadi.vertcat(-F_w_1*t7 + F_w_2*t11, F_w_0*t7 - F_w_2*t12, -F_w_0*t11 + F_w_1*t12)
+
+
+def effect_gravity(m, g_w):
+    """effect_gravity: Uniform gravity acting at the COM.
       in  m scalar: mass, kg
       in  g_w [3]: gravitational acceleration, world frame, m/s²
-      out F_w [3]: force, world frame, N"""
+      out F_com_w [3]: force at the COM, world frame, N"""
     g_w_0 = g_w[0]
     g_w_1 = g_w[1]
     g_w_2 = g_w[2]
     return casadi.vertcat(g_w_0*m, g_w_1*m, g_w_2*m)
 
 
-def linear_damping(c, v_w):
-    """linear_damping: Viscous drag on the COM velocity.
-      in  c scalar: coefficient, N·s/m
+def effect_linear_damping(v_w, c):
+    """effect_linear_damping: Viscous drag on the COM velocity.
       in  v_w [3]: COM velocity, world frame, m/s
-      out F_w [3]: force, world frame, N"""
+      in  c scalar: viscous coefficient, N·s/m
+      out F_com_w [3]: force at the COM, world frame, N"""
     v_w_0 = v_w[0]
     v_w_1 = v_w[1]
     v_w_2 = v_w[2]
     return casadi.vertcat(-c*v_w_0, -c*v_w_1, -c*v_w_2)
 
 
-def angular_damping(q, c, omega_b):
-    """angular_damping: Viscous drag on the angular velocity.
+def effect_angular_damping(q, omega_b, c):
+    """effect_angular_damping: Viscous drag on the angular velocity.
       in  q [4]: orientation (x, y, z, w), R_WB, unit
-      in  c scalar: coefficient, N·m·s/rad
       in  omega_b [3]: angular velocity, body frame, rad/s
-      out tau_w [3]: torque, world frame, N·m"""
+      in  c scalar: viscous coefficient, N·m·s/rad
+      out tau_com_w [3]: torque about the COM, world frame, N·m"""
     q_0 = q[0]
     q_1 = q[1]
     q_2 = q[2]
@@ -719,6 +762,45 @@ def angular_momentum_world(q, I_b, omega_b):
     t11 = 2*q_0*q_3
     t12 = 2*(q_0*q_0)
     return casadi.vertcat(t10*(-t8 - t9) + t4*(t1 - t3) + t7*(t5 + t6), t10*(t1 + t3) + t4*(-t12 - t9) + t7*(2*q_1*q_2 - t11), t10*(t5 - t6) + t4*(q_1*t2 + t11) + t7*(-t12 - t8 + 1))
+
+
+def rigid_body_rhs_torque(x, I_b, tau_w):
+    """rigid_body_rhs_torque: State derivative under a world torque only (rigid_body_rhs with F_W = 0, for bodies whose effects add no force).
+      in  x [13]: state (p_w[3] m, q[4] (x,y,z,w), v_w[3] m/s, omega_b[3] rad/s)
+      in  I_b [3]: principal moments, body frame, kg·m²
+      in  tau_w [3]: total torque about the COM, world frame, N·m
+      out x_dot [13]: d/dt of the state"""
+    x_3 = x[3]
+    x_4 = x[4]
+    x_5 = x[5]
+    x_6 = x[6]
+    x_7 = x[7]
+    x_8 = x[8]
+    x_9 = x[9]
+    x_10 = x[10]
+    x_11 = x[11]
+    x_12 = x[12]
+    I_b_0 = I_b[0]
+    I_b_1 = I_b[1]
+    I_b_2 = I_b[2]
+    tau_w_0 = tau_w[0]
+    tau_w_1 = tau_w[1]
+    tau_w_2 = tau_w[2]
+    t0 = ((1.0/2.0))*x_10
+    t1 = ((1.0/2.0))*x_11
+    t2 = ((1.0/2.0))*x_12
+    t3 = -I_b_2
+    t4 = 2*x_4
+    t5 = t4*x_3
+    t6 = 2*x_5
+    t7 = t6*x_6
+    t8 = t6*x_3
+    t9 = t4*x_6
+    t10 = 2*(x_4*x_4)
+    t11 = 2*(x_5*x_5) - 1
+    t12 = 2*x_3*x_6
+    t13 = 2*(x_3*x_3)
+    return casadi.vertcat(x_7, x_8, x_9, t0*x_6 - t1*x_5 + t2*x_4, t0*x_5 + t1*x_6 - t2*x_3, -t0*x_4 + t1*x_3 + t2*x_6, -t0*x_3 - t1*x_4 - t2*x_5, 0, 0, 0, (tau_w_0*(-t10 - t11) + tau_w_1*(t5 + t7) + tau_w_2*(t8 - t9) + x_11*x_12*(I_b_1 + t3))/I_b_0, (tau_w_0*(t5 - t7) + tau_w_1*(-t11 - t13) + tau_w_2*(t12 + t4*x_5) + x_10*x_12*(-I_b_0 - t3))/I_b_1, (tau_w_0*(t8 + t9) + tau_w_1*(-t12 + 2*x_4*x_5) + tau_w_2*(-t10 - t13 + 1) + x_10*x_11*(I_b_0 - I_b_1))/I_b_2)
 
 
 def pivot_body_rhs(q, omega_b, I_p, r_b, F_w, tau_w):

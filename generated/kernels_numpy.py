@@ -248,7 +248,7 @@ def torque_from_force(r_w, F_w):
 
 
 def force_at_point(q, r_b, F_w):
-    """force_at_point: A world force applied at a body-fixed point: the force acts on the COM plus a torque.
+    """force_at_point: Torque about the COM of a world force applied at a body-fixed point.
       in  q [4]: orientation (x, y, z, w), R_WB, unit
       in  r_b [3]: application point relative to the COM, body frame, m
       in  F_w [3]: force, world frame, N
@@ -287,52 +287,113 @@ def force_at_point(q, r_b, F_w):
     return tau_w_out
 
 
-def gravity_force(m, g_w):
-    """gravity_force: Uniform gravity acting at the COM.
+def effect_applied_torque(torque_w):
+    """effect_applied_torque: A torque about the COM, world frame.
+      in  torque_w [3]: torque about the COM, world frame, N·m
+      out tau_com_w [3]: torque about the COM, world frame, N·m"""
+    torque_w = numpy.asarray(torque_w, dtype=numpy.float64)
+    batch = numpy.broadcast_shapes(torque_w.shape[:-1])
+    torque_w_0 = torque_w[..., 0]
+    torque_w_1 = torque_w[..., 1]
+    torque_w_2 = torque_w[..., 2]
+    tau_com_w_out = numpy.empty(batch + (3,))
+    tau_com_w_out[..., 0] = torque_w_0
+    tau_com_w_out[..., 1] = torque_w_1
+    tau_com_w_out[..., 2] = torque_w_2
+    return tau_com_w_out
+
+
+def effect_force_at_point(q, r_b, F_w):
+    """effect_force_at_point: A world force applied at a body-fixed point: the force acts on the COM plus a torque.
+      in  q [4]: orientation (x, y, z, w), R_WB, unit
+      in  r_b [3]: application point relative to the COM, body frame, m
+      in  F_w [3]: force, world frame, N
+      out F_com_w [3]: force at the COM, world frame, N
+      out tau_com_w [3]: torque about the COM, world frame, N·m"""
+    q = numpy.asarray(q, dtype=numpy.float64)
+    r_b = numpy.asarray(r_b, dtype=numpy.float64)
+    F_w = numpy.asarray(F_w, dtype=numpy.float64)
+    batch = numpy.broadcast_shapes(q.shape[:-1], r_b.shape[:-1], F_w.shape[:-1])
+    q_0 = q[..., 0]
+    q_1 = q[..., 1]
+    q_2 = q[..., 2]
+    q_3 = q[..., 3]
+    r_b_0 = r_b[..., 0]
+    r_b_1 = r_b[..., 1]
+    r_b_2 = r_b[..., 2]
+    F_w_0 = F_w[..., 0]
+    F_w_1 = F_w[..., 1]
+    F_w_2 = F_w[..., 2]
+    t0 = 2*q_0
+    t1 = q_2*t0
+    t2 = 2*q_1*q_3
+    t3 = q_3*t0
+    t4 = 2*q_2
+    t5 = 2*(q_1*q_1)
+    t6 = 2*(q_0*q_0) - 1
+    t7 = r_b_0*(t1 - t2) + r_b_1*(q_1*t4 + t3) + r_b_2*(-t5 - t6)
+    t8 = q_1*t0
+    t9 = q_3*t4
+    t10 = 2*(q_2*q_2)
+    t11 = r_b_0*(t8 + t9) + r_b_1*(-t10 - t6) + r_b_2*(2*q_1*q_2 - t3)
+    t12 = r_b_0*(-t10 - t5 + 1) + r_b_1*(t8 - t9) + r_b_2*(t1 + t2)
+    F_com_w_out = numpy.empty(batch + (3,))
+    F_com_w_out[..., 0] = F_w_0
+    F_com_w_out[..., 1] = F_w_1
+    F_com_w_out[..., 2] = F_w_2
+    tau_com_w_out = numpy.empty(batch + (3,))
+    tau_com_w_out[..., 0] = -F_w_1*t7 + F_w_2*t11
+    tau_com_w_out[..., 1] = F_w_0*t7 - F_w_2*t12
+    tau_com_w_out[..., 2] = -F_w_0*t11 + F_w_1*t12
+    return F_com_w_out, tau_com_w_out
+
+
+def effect_gravity(m, g_w):
+    """effect_gravity: Uniform gravity acting at the COM.
       in  m scalar: mass, kg
       in  g_w [3]: gravitational acceleration, world frame, m/s²
-      out F_w [3]: force, world frame, N"""
+      out F_com_w [3]: force at the COM, world frame, N"""
     m = numpy.asarray(m, dtype=numpy.float64)
     g_w = numpy.asarray(g_w, dtype=numpy.float64)
     batch = numpy.broadcast_shapes(m.shape, g_w.shape[:-1])
     g_w_0 = g_w[..., 0]
     g_w_1 = g_w[..., 1]
     g_w_2 = g_w[..., 2]
-    F_w_out = numpy.empty(batch + (3,))
-    F_w_out[..., 0] = g_w_0*m
-    F_w_out[..., 1] = g_w_1*m
-    F_w_out[..., 2] = g_w_2*m
-    return F_w_out
+    F_com_w_out = numpy.empty(batch + (3,))
+    F_com_w_out[..., 0] = g_w_0*m
+    F_com_w_out[..., 1] = g_w_1*m
+    F_com_w_out[..., 2] = g_w_2*m
+    return F_com_w_out
 
 
-def linear_damping(c, v_w):
-    """linear_damping: Viscous drag on the COM velocity.
-      in  c scalar: coefficient, N·s/m
+def effect_linear_damping(v_w, c):
+    """effect_linear_damping: Viscous drag on the COM velocity.
       in  v_w [3]: COM velocity, world frame, m/s
-      out F_w [3]: force, world frame, N"""
-    c = numpy.asarray(c, dtype=numpy.float64)
+      in  c scalar: viscous coefficient, N·s/m
+      out F_com_w [3]: force at the COM, world frame, N"""
     v_w = numpy.asarray(v_w, dtype=numpy.float64)
-    batch = numpy.broadcast_shapes(c.shape, v_w.shape[:-1])
+    c = numpy.asarray(c, dtype=numpy.float64)
+    batch = numpy.broadcast_shapes(v_w.shape[:-1], c.shape)
     v_w_0 = v_w[..., 0]
     v_w_1 = v_w[..., 1]
     v_w_2 = v_w[..., 2]
-    F_w_out = numpy.empty(batch + (3,))
-    F_w_out[..., 0] = -c*v_w_0
-    F_w_out[..., 1] = -c*v_w_1
-    F_w_out[..., 2] = -c*v_w_2
-    return F_w_out
+    F_com_w_out = numpy.empty(batch + (3,))
+    F_com_w_out[..., 0] = -c*v_w_0
+    F_com_w_out[..., 1] = -c*v_w_1
+    F_com_w_out[..., 2] = -c*v_w_2
+    return F_com_w_out
 
 
-def angular_damping(q, c, omega_b):
-    """angular_damping: Viscous drag on the angular velocity.
+def effect_angular_damping(q, omega_b, c):
+    """effect_angular_damping: Viscous drag on the angular velocity.
       in  q [4]: orientation (x, y, z, w), R_WB, unit
-      in  c scalar: coefficient, N·m·s/rad
       in  omega_b [3]: angular velocity, body frame, rad/s
-      out tau_w [3]: torque, world frame, N·m"""
+      in  c scalar: viscous coefficient, N·m·s/rad
+      out tau_com_w [3]: torque about the COM, world frame, N·m"""
     q = numpy.asarray(q, dtype=numpy.float64)
-    c = numpy.asarray(c, dtype=numpy.float64)
     omega_b = numpy.asarray(omega_b, dtype=numpy.float64)
-    batch = numpy.broadcast_shapes(q.shape[:-1], c.shape, omega_b.shape[:-1])
+    c = numpy.asarray(c, dtype=numpy.float64)
+    batch = numpy.broadcast_shapes(q.shape[:-1], omega_b.shape[:-1], c.shape)
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -350,11 +411,11 @@ def angular_damping(q, c, omega_b):
     t7 = 2*(q_2*q_2) - 1
     t8 = 2*q_0*q_3
     t9 = 2*(q_0*q_0)
-    tau_w_out = numpy.empty(batch + (3,))
-    tau_w_out[..., 0] = -c*(omega_b_0*(-t6 - t7) + omega_b_1*(t1 - t3) + omega_b_2*(t4 + t5))
-    tau_w_out[..., 1] = -c*(omega_b_0*(t1 + t3) + omega_b_1*(-t7 - t9) + omega_b_2*(2*q_1*q_2 - t8))
-    tau_w_out[..., 2] = -c*(omega_b_0*(t4 - t5) + omega_b_1*(q_1*t2 + t8) + omega_b_2*(-t6 - t9 + 1))
-    return tau_w_out
+    tau_com_w_out = numpy.empty(batch + (3,))
+    tau_com_w_out[..., 0] = -c*(omega_b_0*(-t6 - t7) + omega_b_1*(t1 - t3) + omega_b_2*(t4 + t5))
+    tau_com_w_out[..., 1] = -c*(omega_b_0*(t1 + t3) + omega_b_1*(-t7 - t9) + omega_b_2*(2*q_1*q_2 - t8))
+    tau_com_w_out[..., 2] = -c*(omega_b_0*(t4 - t5) + omega_b_1*(q_1*t2 + t8) + omega_b_2*(-t6 - t9 + 1))
+    return tau_com_w_out
 
 
 def quat_mul(a, b):
@@ -1011,6 +1072,63 @@ def angular_momentum_world(q, I_b, omega_b):
     L_w_out[..., 1] = t10*(t1 + t3) + t4*(-t12 - t9) + t7*(2*q_1*q_2 - t11)
     L_w_out[..., 2] = t10*(t5 - t6) + t4*(q_1*t2 + t11) + t7*(-t12 - t8 + 1)
     return L_w_out
+
+
+def rigid_body_rhs_torque(x, I_b, tau_w):
+    """rigid_body_rhs_torque: State derivative under a world torque only (rigid_body_rhs with F_W = 0, for bodies whose effects add no force).
+      in  x [13]: state (p_w[3] m, q[4] (x,y,z,w), v_w[3] m/s, omega_b[3] rad/s)
+      in  I_b [3]: principal moments, body frame, kg·m²
+      in  tau_w [3]: total torque about the COM, world frame, N·m
+      out x_dot [13]: d/dt of the state"""
+    x = numpy.asarray(x, dtype=numpy.float64)
+    I_b = numpy.asarray(I_b, dtype=numpy.float64)
+    tau_w = numpy.asarray(tau_w, dtype=numpy.float64)
+    batch = numpy.broadcast_shapes(x.shape[:-1], I_b.shape[:-1], tau_w.shape[:-1])
+    x_3 = x[..., 3]
+    x_4 = x[..., 4]
+    x_5 = x[..., 5]
+    x_6 = x[..., 6]
+    x_7 = x[..., 7]
+    x_8 = x[..., 8]
+    x_9 = x[..., 9]
+    x_10 = x[..., 10]
+    x_11 = x[..., 11]
+    x_12 = x[..., 12]
+    I_b_0 = I_b[..., 0]
+    I_b_1 = I_b[..., 1]
+    I_b_2 = I_b[..., 2]
+    tau_w_0 = tau_w[..., 0]
+    tau_w_1 = tau_w[..., 1]
+    tau_w_2 = tau_w[..., 2]
+    t0 = ((1.0/2.0))*x_10
+    t1 = ((1.0/2.0))*x_11
+    t2 = ((1.0/2.0))*x_12
+    t3 = -I_b_2
+    t4 = 2*x_4
+    t5 = t4*x_3
+    t6 = 2*x_5
+    t7 = t6*x_6
+    t8 = t6*x_3
+    t9 = t4*x_6
+    t10 = 2*(x_4*x_4)
+    t11 = 2*(x_5*x_5) - 1
+    t12 = 2*x_3*x_6
+    t13 = 2*(x_3*x_3)
+    x_dot_out = numpy.empty(batch + (13,))
+    x_dot_out[..., 0] = x_7
+    x_dot_out[..., 1] = x_8
+    x_dot_out[..., 2] = x_9
+    x_dot_out[..., 3] = t0*x_6 - t1*x_5 + t2*x_4
+    x_dot_out[..., 4] = t0*x_5 + t1*x_6 - t2*x_3
+    x_dot_out[..., 5] = -t0*x_4 + t1*x_3 + t2*x_6
+    x_dot_out[..., 6] = -t0*x_3 - t1*x_4 - t2*x_5
+    x_dot_out[..., 7] = 0
+    x_dot_out[..., 8] = 0
+    x_dot_out[..., 9] = 0
+    x_dot_out[..., 10] = (tau_w_0*(-t10 - t11) + tau_w_1*(t5 + t7) + tau_w_2*(t8 - t9) + x_11*x_12*(I_b_1 + t3))/I_b_0
+    x_dot_out[..., 11] = (tau_w_0*(t5 - t7) + tau_w_1*(-t11 - t13) + tau_w_2*(t12 + t4*x_5) + x_10*x_12*(-I_b_0 - t3))/I_b_1
+    x_dot_out[..., 12] = (tau_w_0*(t8 + t9) + tau_w_1*(-t12 + 2*x_4*x_5) + tau_w_2*(-t10 - t13 + 1) + x_10*x_11*(I_b_0 - I_b_1))/I_b_2
+    return x_dot_out
 
 
 def pivot_body_rhs(q, omega_b, I_p, r_b, F_w, tau_w):
@@ -1793,9 +1911,11 @@ KERNELS = {
     'world_inertia': (world_inertia, [('q', (4,)), ('I_b', (3,))], [('I_w', (3, 3))]),
     'torque_from_force': (torque_from_force, [('r_w', (3,)), ('F_w', (3,))], [('tau_w', (3,))]),
     'force_at_point': (force_at_point, [('q', (4,)), ('r_b', (3,)), ('F_w', (3,))], [('tau_w', (3,))]),
-    'gravity_force': (gravity_force, [('m', ()), ('g_w', (3,))], [('F_w', (3,))]),
-    'linear_damping': (linear_damping, [('c', ()), ('v_w', (3,))], [('F_w', (3,))]),
-    'angular_damping': (angular_damping, [('q', (4,)), ('c', ()), ('omega_b', (3,))], [('tau_w', (3,))]),
+    'effect_applied_torque': (effect_applied_torque, [('torque_w', (3,))], [('tau_com_w', (3,))]),
+    'effect_force_at_point': (effect_force_at_point, [('q', (4,)), ('r_b', (3,)), ('F_w', (3,))], [('F_com_w', (3,)), ('tau_com_w', (3,))]),
+    'effect_gravity': (effect_gravity, [('m', ()), ('g_w', (3,))], [('F_com_w', (3,))]),
+    'effect_linear_damping': (effect_linear_damping, [('v_w', (3,)), ('c', ())], [('F_com_w', (3,))]),
+    'effect_angular_damping': (effect_angular_damping, [('q', (4,)), ('omega_b', (3,)), ('c', ())], [('tau_com_w', (3,))]),
     'quat_mul': (quat_mul, [('a', (4,)), ('b', (4,))], [('ab', (4,))]),
     'quat_conj': (quat_conj, [('q', (4,))], [('q_conj', (4,))]),
     'quat_normalize': (quat_normalize, [('q', (4,))], [('q_unit', (4,))]),
@@ -1816,6 +1936,7 @@ KERNELS = {
     'world_to_body': (world_to_body, [('q', (4,)), ('v_w', (3,))], [('v_b', (3,))]),
     'kinetic_energy': (kinetic_energy, [('m', ()), ('I_b', (3,)), ('v_w', (3,)), ('omega_b', (3,))], [('T', ())]),
     'angular_momentum_world': (angular_momentum_world, [('q', (4,)), ('I_b', (3,)), ('omega_b', (3,))], [('L_w', (3,))]),
+    'rigid_body_rhs_torque': (rigid_body_rhs_torque, [('x', (13,)), ('I_b', (3,)), ('tau_w', (3,))], [('x_dot', (13,))]),
     'pivot_body_rhs': (pivot_body_rhs, [('q', (4,)), ('omega_b', (3,)), ('I_p', (3, 3)), ('r_b', (3,)), ('F_w', (3,)), ('tau_w', (3,))], [('q_dot', (4,)), ('omega_dot_b', (3,))]),
     'wheel_body_rhs': (wheel_body_rhs, [('q', (4,)), ('omega_b', (3,)), ('Omega', (3,)), ('I_p', (3, 3)), ('J', (3,)), ('r_b', (3,)), ('F_w', (3,)), ('tau_w', (3,)), ('u', (3,)), ('c_w', ())], [('q_dot', (4,)), ('omega_dot_b', (3,)), ('Omega_dot', (3,))]),
     'wheel_momentum': (wheel_momentum, [('q', (4,)), ('omega_b', (3,)), ('Omega', (3,)), ('I_p', (3, 3)), ('J', (3,))], [('L_body_w', (3,)), ('L_wheels_w', (3,))]),
@@ -1831,3 +1952,58 @@ KERNELS = {
     'quat_exp_step': (quat_exp_step, [('q', (4,)), ('omega_b', (3,)), ('h', ())], [('q_next', (4,))]),
     'wheel_saturation': (wheel_saturation, [('command', (3,)), ('Omega', (3,)), ('torque_limit', ()), ('speed_limit', ())], [('u', (3,))]),
 }
+
+
+# ---- Scene effects: apply(p, x, v_w, m, I_b) -> (F_com_w or None, tau_com_w or None), rows
+# vectorized over a leading axis (one row per body the effect acts on). p: the effect's parameters
+# (its row after [code, body]); x: the body states; v_w: the COM velocities it sees; m, I_b.
+
+def effect_apply_applied_torque(p, x, v_w, m, I_b):
+    """applied_torque: A torque about the COM, world frame. p = [torque_w(3)]."""
+    return None, effect_applied_torque(p[..., 0:3])
+
+
+def effect_apply_force_at_point(p, x, v_w, m, I_b):
+    """force_at_point: A world force applied at a body-fixed point: the force acts on the COM plus a torque. p = [r_b(3), F_w(3)]."""
+    return effect_force_at_point(x[..., 3:7], p[..., 0:3], p[..., 3:6])
+
+
+def effect_apply_gravity(p, x, v_w, m, I_b):
+    """gravity: Uniform gravity acting at the COM. p = [g_w(3)]."""
+    return effect_gravity(m, p[..., 0:3]), None
+
+
+def effect_apply_linear_damping(p, x, v_w, m, I_b):
+    """linear_damping: Viscous drag on the COM velocity. p = [c(1)]."""
+    return effect_linear_damping(v_w, p[..., 0]), None
+
+
+def effect_apply_angular_damping(p, x, v_w, m, I_b):
+    """angular_damping: Viscous drag on the angular velocity. p = [c(1)]."""
+    return None, effect_angular_damping(x[..., 3:7], x[..., 10:13], p[..., 0])
+
+
+# effect name -> its apply function
+EFFECT_APPLY = {
+    'applied_torque': effect_apply_applied_torque,
+    'force_at_point': effect_apply_force_at_point,
+    'gravity': effect_apply_gravity,
+    'linear_damping': effect_apply_linear_damping,
+    'angular_damping': effect_apply_angular_damping,
+}
+# built-in effect code -> its apply function
+EFFECT_APPLY_BY_CODE = {
+    1: effect_apply_applied_torque,
+    2: effect_apply_force_at_point,
+    3: effect_apply_gravity,
+    4: effect_apply_linear_damping,
+    5: effect_apply_angular_damping,
+}
+
+
+def effect_apply(code, p, x, v_w, m, I_b):
+    """Dispatch by built-in effect code; a code that is not one raises ValueError (never a no-op)."""
+    fn = EFFECT_APPLY_BY_CODE.get(code)
+    if fn is None:
+        raise ValueError(f"effect code {code!r} is not a built-in effect (built-in codes: 1 applied_torque, 2 force_at_point, 3 gravity, 4 linear_damping, 5 angular_damping)")
+    return fn(p, x, v_w, m, I_b)

@@ -31,10 +31,40 @@ def generated_dir() -> Path:
     return Path(g.__file__).resolve().parent
 
 
+def _derive_user(args) -> int:
+    """derive --user FILE: print the user set of FILE (C, NumPy, CasADi, EQUATIONS.md) and compile it."""
+    from lavendersim import extending
+
+    if args.check:
+        return _fail("derive: --check applies to the built-in equations, not to --user")
+    t0 = time.perf_counter()
+    try:
+        s = extending.derive(args.user, out=args.out)
+    except extending.UserBuildError as exc:
+        print(f"lavendersim derive --user: {exc}", file=sys.stderr)
+        return 1
+    except (FileNotFoundError, SyntaxError) as exc:
+        return _fail(f"derive --user: {exc}")
+    except ValueError as exc:  # a declaration the printers refuse (LavenderInputError is one too)
+        return _fail(f"derive --user: {exc}")
+    cached = "cached, nothing recompiled" if s.library_built_now is False else "compiled"
+    print(f"derived {args.user} into {s.directory} in {time.perf_counter() - t0:.2f} s")
+    if s.effect_names:
+        print(f"effects: {', '.join(s.effect_names)} — scene.add_effect(NAME, body=..., ...) on the c and numpy backends")
+    if s.kernel_names:
+        print(f"kernels: {', '.join(s.kernel_names)} (C: kernels.h; NumPy/CasADi: lavendersim.extending.load(FILE).numpy/.casadi)")
+    print(f"C library: {s.library_path} ({cached})")
+    if args.out:
+        print(f"outside the user directory: load it with lavendersim.effects.load_user({str(s.directory)!r})")
+    return 0
+
+
 def _derive(args) -> int:
     from lavendersim._install import rebuild_command
     from lavendersim.derive import codegen
 
+    if args.user:
+        return _derive_user(args)
     out = Path(args.out) if args.out else generated_dir()
     t0 = time.perf_counter()
     if args.check:
@@ -59,7 +89,10 @@ def _add_derive(sub) -> None:
     d = sub.add_parser("derive", help=COMMANDS["derive"], description=COMMANDS["derive"] + ".")
     d.add_argument("--check", action="store_true", help="write nothing; exit 1 and name the stale files if generated/ is not current")
     d.add_argument("--full", action="store_true", help="with --check: always re-derive in memory (skip the manifest fast path)")
-    d.add_argument("--out", help="output directory (default: the package's generated/)")
+    d.add_argument("--out", help="output directory (default: the package's generated/; with --user: the user "
+                                 "directory's sets/, see lavendersim.extending)")
+    d.add_argument("--user", metavar="FILE", help="derive YOUR declarations (EFFECTS and/or KERNELS in FILE, see "
+                                                  "docs/extending.md): print them and compile their C (cached)")
     d.set_defaults(fn=_derive)
 
 

@@ -1,8 +1,8 @@
 """LQR wheel controllers for the reaction-wheel cube: CasADi linearization + python-control.
 
 The model is the derived one, nothing typed by hand: :func:`linearize` builds the right-hand side
-in CasADi from ``generated/kernels_casadi.py`` — ``wheel_body_rhs`` with ``F_w = gravity_force(m,
-g_w)`` and ``tau_w = angular_damping(q, c, omega_b)``, the inertia from ``inertia_box`` and
+in CasADi from ``generated/kernels_casadi.py`` — ``wheel_body_rhs`` with ``F_w = effect_gravity(m,
+g_w)`` and ``tau_w = effect_angular_damping(q, omega_b, c)``, the inertia from ``inertia_box`` and
 ``parallel_axis`` — and differentiates it at an equilibrium.
 
 State (error coordinates, 9): ``x = [dtheta (3), omega_b (3), Omega - Omega_0 (3)]`` where the
@@ -293,8 +293,8 @@ def casadi_rhs(model: CubeModel, q_ref: ArrayLike, Omega0: ArrayLike = (0, 0, 0)
     Ic_flat = ca.vertcat(Ic[0], 0, 0, 0, Ic[1], 0, 0, 0, Ic[2])
     r_b = ca.DM(model.r_b)
     I_p = KC.parallel_axis(Ic_flat, model.mass, -r_b)
-    F_w = KC.gravity_force(model.mass, ca.DM(model.g_w)) if model.gravity else ca.DM.zeros(3)
-    tau_w = KC.angular_damping(q, model.damping, w)
+    F_w = KC.effect_gravity(model.mass, ca.DM(model.g_w)) if model.gravity else ca.DM.zeros(3)
+    tau_w = KC.effect_angular_damping(q, w, model.damping)
     q_dot, w_dot, Om_dot = KC.wheel_body_rhs(q, w, Om, I_p, ca.DM(model.J), r_b, F_w, tau_w, u, model.wheel_damping)
     # d(dtheta)/dt = (∂e/∂q) q_dot with e(q) = 2 vec(q_ref* ⊗ q) (linear in q: a constant Jacobian)
     qs = ca.SX.sym("q", 4)

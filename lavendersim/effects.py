@@ -1,27 +1,103 @@
 """Scene effects: what a scene declares is all the simulator evaluates.
 
-Each force effect acts on one named body or, with body=None, on every body. Codes and parameter
-rows are the contract with the backends: a row is [code, body index (-1: all), p0 … p5].
-Frames and units: torque_w N·m (world), r_b m (body frame offset from the COM), F_w N (world),
-g_w m/s² (world), linear damping c N·s/m, angular damping c N·m·s/rad.
+Every effect is declared once, in SymPy (built-ins in derive/effects.py; your own in one file outside
+the package, see docs/extending.md), and ``lavendersim derive`` prints from that declaration the
+metadata this module reads (generated/effects_meta.py, or a user set's effects_meta.py): the code,
+the parameters (name, shape, unit, validation rule, default, offset) and what the effect reads. The
+Effect classes below are built from it; no code number or parameter layout is typed here.
 
-Two effects change a body's model instead of adding a force (`per_body = True`; body= required,
-at most one of each per body): `spherical_joint` (anchor_w, m, world) pins the body point that
-coincides with anchor_w at the start to that world point; `reaction_wheels` (J kg·m² about body
-x, y, z; torque_limit N·m; speed_limit rad/s on |Omega_i|; c_w N·m·s/rad bearing damping) adds
-three wheels on the body axes. The Sim turns them into per-body model rows (see
-lavendersim.backends.MODEL_LAYOUT); they never appear in the force-effect table.
+Force effects act on one named body or, with body=None, on every body. Their rows in the effect
+table are [code, body index (-1: all), parameters …] (layout constants ROW_*; a row holds at least
+ROW_MIN_PARAMS parameters). Frames and units: see each effect's parameters (``EFFECTS[name].spec``)
+or generated/EQUATIONS.md.
+
+Two effects change a body's model instead of adding a force (``per_body = True``; body= required,
+at most one of each per body): ``spherical_joint`` pins the body point that coincides with anchor_w
+at the start to that world point; ``reaction_wheels`` adds three wheels on the body axes (J each
+below the body's moment about that axis, checked by ``check_body``). The Sim turns them into
+per-body model rows (lavendersim.backends.MODEL_LAYOUT); they never appear in the effect table.
+
+An effect whose name and code are not declared (an ``Effect`` subclass with a new code) is refused
+by ``Sim`` with a LavenderInputError, and both backends refuse an unknown code in the table.
 """
 from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from . import validate as V
+from .generated import effects_meta as _META
 
-ROW = 8
+ROW_CODE, ROW_BODY, ROW_PARAMS = _META.ROW_CODE, _META.ROW_BODY, _META.ROW_PARAMS
+ROW_MIN_PARAMS = _META.ROW_MIN_PARAMS
+ROW = ROW_PARAMS + ROW_MIN_PARAMS  # the narrowest row (wider when an effect has more parameters)
+USER_CODE_BASE = _META.USER_CODE_BASE
+FLAG_USES_V, FLAG_USES_OMEGA, FLAG_FORCE = _META.FLAG_USES_V, _META.FLAG_USES_OMEGA, _META.FLAG_FORCE
+
+
+@dataclass(frozen=True)
+class ParamSpec:
+    """One declared parameter: shape () or (n,), unit, meaning, rule, default, offset in the row's parameters."""
+
+    name: str
+    shape: tuple
+    unit: str
+    doc: str
+    rule: str
+    default: object
+    offset: int
+
+    @property
+    def size(self) -> int:
+        return self.shape[0] if self.shape else 1
+
+
+@dataclass(frozen=True)
+class EffectSpec:
+    """What derive printed about one effect (see the module docstring); ``source`` is "built-in" or
+    the directory of the user set it was loaded from."""
+
+    name: str
+    code: int
+    kind: str
+    summary: str
+    params: tuple
+    n_params: int
+    outputs: tuple
+    state_inputs: tuple
+    flags: int
+    kernel: str | None
+    source: str = "built-in"
+    user_set: object = field(default=None, repr=False, compare=False)
+
+    @property
+    def velocity_dependent(self) -> bool:
+        """Reads v_w or omega_b (the splitting integrator then kicks by the explicit midpoint rule)."""
+        return bool(self.flags & (FLAG_USES_V | FLAG_USES_OMEGA))
+
+    @property
+    def uses_v_w(self) -> bool:
+        """Reads v_w (a body on a spherical joint then computes its kinematic COM velocity)."""
+        return bool(self.flags & FLAG_USES_V)
+
+    @classmethod
+    def from_meta(cls, entry: dict, code: int | None = None, source: str = "built-in", user_set=None) -> "EffectSpec":
+        params = tuple(ParamSpec(p["name"], tuple(p["shape"]), p["unit"], p["doc"], p["rule"], p["default"], p["offset"])
+                       for p in entry["params"])
+        return cls(entry["name"], entry["code"] if code is None else code, entry["kind"], entry["summary"], params,
+                   entry["n_params"], tuple(entry["outputs"]), tuple(entry["state_inputs"]), entry["flags"],
+                   entry["kernel"], source, user_set)
 
 
 class Effect:
+    """An effect declared on a scene: ``body`` (a name, or None for every body) and validated ``values``.
+
+    Declared effects are subclasses built from their EffectSpec (``spec``); a hand-written subclass
+    without a declaration can be constructed but a Sim refuses it (see the module docstring)."""
+
+    spec: EffectSpec | None = None
     name = ""
     code = 0
     per_body = False  # True: changes the body's model (joint, wheels); body= required
@@ -45,13 +121,32 @@ class Effect:
         self.values = {f: self._check(f, params[f]) for f in self.fields}
 
     def _check(self, f, v):
-        return V.vector(f"{self.name}.{f}", v)
+        """Validate parameter f by its declared shape and rule (a plain finite 3-vector without a spec)."""
+        field_name = f"{self.name}.{f}"
+        p = None if self.spec is None else next(p for p in self.spec.params if p.name == f)
+        if p is None:
+            return V.vector(field_name, v)
+        if not p.shape:
+            return V.scalar(field_name, v, positive=p.rule == "positive", nonnegative=p.rule == "nonnegative")
+        out = V.vector(field_name, v, p.size)
+        bad = np.flatnonzero(~(out > 0) if p.rule == "positive" else ~(out >= 0) if p.rule == "nonnegative"
+                             else np.zeros(p.size, bool))
+        if bad.size:
+            op = ">" if p.rule == "positive" else ">="
+            raise V.LavenderInputError(field_name, f"each entry must be {op} 0", f", got {out.tolist()}")
+        return out
 
-    def row(self, body_index: int) -> np.ndarray:
-        r = np.zeros(ROW)
-        r[0], r[1] = self.code, body_index
-        flat = np.concatenate([np.atleast_1d(self.values[f]) for f in self.fields])
-        r[2:2 + flat.size] = flat
+    def params_flat(self) -> np.ndarray:
+        """The parameters in row order (the declared offsets)."""
+        return np.concatenate([np.atleast_1d(np.asarray(self.values[f], dtype=np.float64)) for f in self.fields]) \
+            if self.fields else np.zeros(0)
+
+    def row(self, body_index: int, width: int = ROW) -> np.ndarray:
+        """This effect's row of the effect table: [code, body index (-1: every body), parameters …]."""
+        flat = self.params_flat()
+        r = np.zeros(max(width, ROW_PARAMS + flat.size))
+        r[ROW_CODE], r[ROW_BODY] = self.code, body_index
+        r[ROW_PARAMS:ROW_PARAMS + flat.size] = flat
         return r
 
     def describe(self) -> str:
@@ -62,58 +157,8 @@ class Effect:
         return f"{type(self).__name__}(body={self.body!r}, {self.describe()})"
 
 
-class AppliedTorque(Effect):
-    name, code, fields = "applied_torque", 1, ("torque_w",)
-
-
-class ForceAtPoint(Effect):
-    name, code, fields = "force_at_point", 2, ("r_b", "F_w")
-
-
-class Gravity(Effect):
-    name, code, fields = "gravity", 3, ("g_w",)
-    defaults = {"g_w": (0.0, 0.0, -9.81)}
-
-
-class _Damping(Effect):
-    fields = ("c",)
-
-    def _check(self, f, v):
-        return V.scalar(f"{self.name}.{f}", v, nonnegative=True)
-
-
-class LinearDamping(_Damping):
-    name, code = "linear_damping", 4
-
-
-class AngularDamping(_Damping):
-    name, code = "angular_damping", 5
-
-
-class SphericalJoint(Effect):
-    """World-anchored ball joint: the body point at anchor_w (m, world) when the Sim starts stays there."""
-    name, code, fields, per_body = "spherical_joint", 6, ("anchor_w",), True
-
-
-class ReactionWheels(Effect):
-    """Three reaction wheels on the body x, y, z axes; the body's mass and inertia include them (locked).
-
-    J (3,) spin inertias, kg·m², each > 0 and below the body's principal moment about that axis;
-    torque_limit N·m (> 0) clips each motor command; speed_limit rad/s (> 0): a wheel with
-    |Omega_i| >= speed_limit is not driven further (u_i·Omega_i > 0 → u_i = 0); c_w N·m·s/rad (>= 0)."""
-    name, code, fields, per_body = "reaction_wheels", 7, ("J", "torque_limit", "speed_limit", "c_w"), True
-    defaults = {"c_w": 0.0}
-
-    def _check(self, f, v):
-        field = f"{self.name}.{f}"
-        if f == "J":
-            J = V.vector(field, v)
-            if not np.all(J > 0):
-                raise V.LavenderInputError(field, "each wheel inertia must be > 0", f", got {J.tolist()}")
-            return J
-        if f == "c_w":
-            return V.scalar(field, v, nonnegative=True)
-        return V.scalar(field, v, positive=True)
+class _WheelsCheck:
+    """Hand-written check of reaction_wheels against its body (a relation the declaration cannot state)."""
 
     def check_body(self, I_b: np.ndarray) -> None:
         """J_i < I_b[i]: the body with its wheels free must keep a positive inertia about each axis."""
@@ -126,10 +171,165 @@ class ReactionWheels(Effect):
                                        f", got {J[i]:g}")
 
 
-EFFECTS = {cls.name: cls for cls in (AppliedTorque, ForceAtPoint, Gravity, LinearDamping, AngularDamping,
-                                     SphericalJoint, ReactionWheels)}
+_HAND_CHECKS = {"reaction_wheels": _WheelsCheck}
+
+REGISTRY: dict[str, EffectSpec] = {}   # name -> spec of every known effect (built-in and loaded user ones)
+BY_CODE: dict[int, EffectSpec] = {}    # code -> spec (user codes stay valid after a set is reloaded)
+EFFECTS: dict[str, type] = {}          # name -> its Effect class
+
+
+def _class_name(name: str) -> str:
+    return "".join(w.capitalize() for w in name.split("_"))
+
+
+def _effect_class(spec: EffectSpec) -> type:
+    params = ", ".join(f"{p.name} ({'scalar' if not p.shape else p.shape[0]}, {p.unit or '-'}, {p.rule})" for p in spec.params)
+    attrs = {"spec": spec, "name": spec.name, "code": spec.code, "per_body": spec.kind == "model",
+             "fields": tuple(p.name for p in spec.params),
+             "defaults": {p.name: p.default for p in spec.params if p.default is not None},
+             "__doc__": f"{spec.summary}. Parameters: {params}. Declared in {spec.source}.",
+             "__module__": __name__}
+    bases = (_HAND_CHECKS[spec.name], Effect) if spec.name in _HAND_CHECKS else (Effect,)
+    return type(_class_name(spec.name), bases, attrs)
+
+
+def register(spec: EffectSpec) -> type:
+    """Add a declared effect to the registry (the built-ins at import; user sets when loaded)."""
+    old = REGISTRY.get(spec.name)
+    if old is not None and old.source != spec.source:
+        raise V.LavenderInputError("effect", f"{spec.name!r} from {spec.source} clashes with the effect of the same "
+                                   f"name from {old.source}; rename one of them")
+    if spec.code in BY_CODE and BY_CODE[spec.code].name != spec.name:
+        raise V.LavenderInputError("effect", f"code {spec.code} of {spec.name!r} is taken by {BY_CODE[spec.code].name!r}")
+    REGISTRY[spec.name] = spec
+    BY_CODE[spec.code] = spec
+    EFFECTS[spec.name] = cls = _effect_class(spec)
+    return cls
+
+
+for _entry in _META.EFFECTS:
+    _cls = register(EffectSpec.from_meta(_entry))
+    globals()[_cls.__name__] = _cls  # AppliedTorque, ForceAtPoint, Gravity, … SphericalJoint, ReactionWheels
+del _entry, _cls
 
 
 def make(name: str, body: str | None = None, **params) -> Effect:
-    """Build an effect by name; unknown names raise naming the known ones."""
+    """Build an effect by name (a built-in, a loaded user effect, or one found in the user directory —
+    see lavendersim.extending); unknown names raise naming the known ones."""
+    if isinstance(name, str) and name not in EFFECTS and re.match(r"^[a-z][a-z0-9_]*$", name):
+        from . import extending
+
+        extending.discover(name)
     return EFFECTS[V.choice("effect", name, EFFECTS)](body=body, **params)
+
+
+def check_declared(effect: Effect) -> EffectSpec:
+    """The spec of a declared effect; LavenderInputError naming an effect that is not declared."""
+    spec = REGISTRY.get(effect.name)
+    if spec is None or spec.code != effect.code or BY_CODE.get(effect.code) is not spec or effect.spec is None:
+        raise V.LavenderInputError(
+            f"effect {effect.name or type(effect).__name__!r}",
+            f"is not a declared effect (class {type(effect).__name__}, code {effect.code!r}): the backends evaluate only "
+            "effects declared in SymPy and printed by `lavendersim derive` — declare it in one file and run "
+            "`lavendersim derive --user FILE` (docs/extending.md)")
+    return spec
+
+
+def spec_for_code(code: int) -> EffectSpec:
+    """The spec of effect code `code` (LavenderInputError if no declared effect has it)."""
+    spec = BY_CODE.get(int(code))
+    if spec is None or spec.kind != "force":
+        known = ", ".join(f"{c} {s.name}" for c, s in sorted(BY_CODE.items()) if s.kind == "force")
+        raise V.LavenderInputError("effects", f"code {code!r} is not a declared force effect (known: {known})")
+    return spec
+
+
+def row_width(effects) -> int:
+    """Width of the effect table for these effects: [code, body] plus the most parameters, at least ROW."""
+    return max([ROW] + [ROW_PARAMS + e.params_flat().size for e in effects])
+
+
+def numpy_apply(code: int):
+    """The NumPy function of effect `code`: apply(p, x, v_w, m, I_b) -> (F_w or None, tau_w or None)."""
+    spec = spec_for_code(code)
+    if spec.user_set is None:
+        from .generated.kernels_numpy import EFFECT_APPLY
+        return EFFECT_APPLY[spec.name]
+    return spec.user_set.numpy.EFFECT_APPLY[spec.name]
+
+
+def velocity_dependent(codes) -> bool:
+    """Whether any of these effect codes reads v_w or omega_b."""
+    return any(spec_for_code(int(c)).velocity_dependent for c in codes)
+
+
+def load_user(path) -> list[str]:
+    """Load the user effects derived from a declaration file or found in a derived directory (see
+    lavendersim.extending.load); returns their names. Effects in the user directory are also found on
+    first use by name, so calling this is needed only for a set kept elsewhere."""
+    from . import extending
+
+    return extending.load(path).effect_names
+
+
+def _casadi_kernel(spec: EffectSpec):
+    from ._install import require
+
+    require("casadi", "control", "the CasADi expression of an effect")
+    if spec.user_set is None:
+        from .generated import kernels_casadi as KC
+        return getattr(KC, spec.kernel)
+    return getattr(spec.user_set.casadi, spec.kernel)
+
+
+def casadi_expr(name: str, **inputs):
+    """The CasADi expression of effect `name` (built-in or user): (F_w, tau_w), each a 3×1 casadi column
+    (zeros for an output the effect does not have), world frame, about the COM.
+
+    Parameters
+    ----------
+    name : str
+        The effect's name.
+    **inputs
+        The state values it reads (any of p_w, q, v_w, omega_b, m, I_b, as in ``EFFECTS[name].spec.state_inputs``)
+        and its parameters by name: numbers, numpy arrays or casadi SX/MX/DM. Missing ones raise.
+    """
+    import casadi
+
+    spec = _force_spec(name)
+    want = list(spec.state_inputs) + [p.name for p in spec.params]
+    missing = [w for w in want if w not in inputs]
+    extra = sorted(set(inputs) - set(want))
+    if missing or extra:
+        raise V.LavenderInputError(f"casadi_expr({name})", f"takes exactly {', '.join(want)}",
+                                   f"; missing {missing}" * bool(missing) + f"; unknown {extra}" * bool(extra))
+    args = [casadi.DM(np.asarray(inputs[w], dtype=np.float64)) if isinstance(inputs[w], (int, float, list, tuple, np.ndarray))
+            else inputs[w] for w in want]
+    out = _casadi_kernel(spec)(*args)
+    out = out if isinstance(out, tuple) else (out,)
+    got = dict(zip(spec.outputs, out))
+    zero = casadi.DM.zeros(3, 1)
+    return got.get("F_w", zero), got.get("tau_w", zero)
+
+
+def casadi_function(name: str):
+    """A casadi.Function of effect `name`: inputs the state values it reads and its parameters (named as
+    in the declaration), outputs F_w and tau_w (world frame, N and N·m)."""
+    import casadi
+
+    spec = _force_spec(name)
+    sizes = {"p_w": 3, "q": 4, "v_w": 3, "omega_b": 3, "m": 1, "I_b": 3}
+    syms = {s: casadi.SX.sym(s, sizes[s]) for s in spec.state_inputs}
+    syms.update({p.name: casadi.SX.sym(p.name, p.size) for p in spec.params})
+    F, tau = casadi_expr(name, **syms)
+    return casadi.Function(f"effect_{name}", list(syms.values()), [F, tau], list(syms), ["F_w", "tau_w"])
+
+
+def _force_spec(name: str) -> EffectSpec:
+    if isinstance(name, str) and name not in REGISTRY:
+        from . import extending
+
+        extending.discover(name)
+    if isinstance(name, str) and name in REGISTRY and REGISTRY[name].kind != "force":
+        raise V.LavenderInputError("effect", f"{name!r} is a model effect: it has no force or torque expression")
+    return REGISTRY[V.choice("effect", name, [n for n, s in REGISTRY.items() if s.kind == "force"])]

@@ -5,7 +5,7 @@ import numpy as np
 
 from . import validate as V
 from .bodies import Body
-from .effects import Effect, make
+from .effects import Effect, make, row_width
 
 
 class Scene:
@@ -52,14 +52,17 @@ class Scene:
         return {e.name: e for e in self.effects if e.per_body and e.body == name}
 
     def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(state (nb, 13), params (nb, 4) = [m, I_x, I_y, I_z], effects (ne, 8)) for the backends.
-        The force-effect table holds only force effects; joints and wheels are per-body model rows
-        that the Sim builds (they need the initial state)."""
+        """(state (nb, 13), params (nb, 4) = [m, I_x, I_y, I_z], effects (ne, width)) for the backends.
+        The effect table holds only force effects, one row each ([code, body, parameters …], see
+        lavendersim.effects; width = the widest, at least effects.ROW); joints and wheels are
+        per-body model rows that the Sim builds (they need the initial state)."""
         if not self.bodies:
             raise V.LavenderInputError("scene.bodies", "a scene needs at least one body")
         bodies = list(self.bodies.values())
         state = np.ascontiguousarray(np.stack([b.x0 for b in bodies]))
         params = np.ascontiguousarray(np.stack([b.params for b in bodies]))
-        rows = [e.row(-1 if e.body is None else self.index(e.body)) for e in self.effects if not e.per_body]
-        effects = np.ascontiguousarray(np.array(rows, dtype=np.float64).reshape(len(rows), 8))
+        forces = [e for e in self.effects if not e.per_body]
+        width = row_width(forces)
+        rows = [e.row(-1 if e.body is None else self.index(e.body), width) for e in forces]
+        effects = np.ascontiguousarray(np.array(rows, dtype=np.float64).reshape(len(rows), width))
         return state, params, effects

@@ -43,6 +43,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import backends
+from . import effects as effects_mod
 from . import validate as V
 from .backends import ADAPTIVE, KIND_JOINT, KIND_WHEELS, PLAIN_ONLY, Adaptive, Models
 from .bodies import BodyState
@@ -79,6 +80,8 @@ class Sim:
         self.backend = backends.get(backend)
         self.names = list(scene.bodies)
         self.bodies = dict(scene.bodies)
+        for e in scene.effects:  # an effect no declaration printed is an error, never a no-op
+            effects_mod.check_declared(e)
         self.x, self.params, self.effects = scene.arrays()
         self._effect_objs = list(scene.effects)
         self._models = self._build_models(scene)

@@ -36,11 +36,11 @@ def ref_rhs(x, prm, effects, b):
             F = F + p[3:6]
             tau = tau + K.force_at_point(x[3:7], p[0:3], p[3:6])
         elif kind == 3:
-            F = F + K.gravity_force(m, p[0:3])
+            F = F + K.effect_gravity(m, p[0:3])
         elif kind == 4:
-            F = F + K.linear_damping(p[0], x[7:10])
+            F = F + K.effect_linear_damping(x[7:10], p[0])
         elif kind == 5:
-            tau = tau + K.angular_damping(x[3:7], p[0], x[10:13])
+            tau = tau + K.effect_angular_damping(x[3:7], x[10:13], p[0])
         else:
             raise AssertionError(kind)
     return K.rigid_body_rhs(x, m, I, F, tau)
@@ -369,7 +369,7 @@ def test_bad_buffers():
         _c.simulate(np.zeros((2, 12)), params, E, 2, 1, 0.01, 1)
     with pytest.raises(ValueError, match="params has 3 rows"):
         _c.simulate(state.copy(), np.ones((3, 4)), E, 2, 1, 0.01, 1)
-    with pytest.raises(ValueError, match="kind"):
+    with pytest.raises(ValueError, match=r"code 9\.0 is not a declared effect \(built-in codes: 1 \(applied_torque\)"):
         _c.simulate(state.copy(), params, np.array([effect(9, -1)]), 2, 1, 0.01, 1)
     with pytest.raises(ValueError, match="body"):
         _c.simulate(state.copy(), params, np.array([effect(1, 2)]), 2, 1, 0.01, 1)

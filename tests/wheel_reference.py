@@ -1,5 +1,5 @@
 """Tests-only reference for the reaction-wheel cube: RK4 on the generated NumPy kernel
-wheel_body_rhs (+ gravity_force / angular_damping), with the Sim's wheel API (set_wheel_command,
+wheel_body_rhs (+ effect_gravity / effect_angular_damping), with the Sim's wheel API (set_wheel_command,
 wheel_command_applied, wheel_rates, state, run, t). An independent stepper the runtime Sim is
 compared against; not used by the package."""
 from __future__ import annotations
@@ -28,8 +28,8 @@ class RefSim:
 
     def _f(self, q, w, Om, u):
         m = self.m
-        F = K.gravity_force(m.mass, m.g_w) if m.gravity else np.zeros(3)
-        tau = K.angular_damping(q, m.damping, w)
+        F = K.effect_gravity(m.mass, m.g_w) if m.gravity else np.zeros(3)
+        tau = K.effect_angular_damping(q, w, m.damping)
         return K.wheel_body_rhs(q, w, Om, m.I_p, m.J, m.r_b, F, tau, u, m.wheel_damping)
 
     def _saturate(self):

@@ -49,14 +49,15 @@ def rhs_per_step(integrator: str, effects: np.ndarray, nb: int) -> int | None:
     """RHS evaluations per step of the fixed-step integrators (None for adaptive ones).
 
     splitting: its torque-free part (three exact axis rotations) is counted as 1; a body with effects
-    evaluates them once per half kick (2 per step), twice per half kick with linear or angular damping
-    (4 per step). implicit_gyro: 1 (the effects once, then a 3×3 Newton solve of the gyroscopic term to
+    evaluates them once per half kick (2 per step), twice per half kick with an effect that reads v_w
+    or omega_b (4 per step; from the effects' declarations, e.g. linear or angular damping). implicit_gyro: 1 (the effects once, then a 3×3 Newton solve of the gyroscopic term to
     rounding, typically 3–6 iterations, not counted). The scene's count is the largest body's."""
     n = INTEGRATORS[integrator]
     if integrator != "splitting" or n is None or len(effects) == 0:
         return n
-    codes = effects[:, 0].astype(int)
-    return 4 if np.isin(codes, (4, 5)).any() else 2
+    from ..effects import ROW_CODE, velocity_dependent
+
+    return 4 if velocity_dependent(np.unique(effects[:, ROW_CODE].astype(np.int64))) else 2
 
 # Per-body model row (float64), MODEL_LAYOUT / MODEL_SIZE printed from derive/layout.py: kind is a bit set,
 # KIND_JOINT | KIND_WHEELS.

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..effects import ROW, ROW_BODY
 from ..errors import DivergenceError, StaleBuildError
 from .._install import rebuild_command
 from ..generated import layout as LY
@@ -21,7 +22,6 @@ from . import KIND_WHEELS, PLAIN_ONLY, Adaptive, Models, norm_safe, tolerance_ca
 REBUILD = rebuild_command()
 HASHED = ("kernels.c", "kernels.h", "layout.h", "tableaux.h")  # every generated file the extension compiles
 INTEGRATOR_CODES = {"euler": 0, "semi_implicit_euler": 1, "rk4": 2, "dopri5": 3, "splitting": 4, "implicit_gyro": 5}
-EFFECT_CODES = {"applied_torque": 1, "force_at_point": 2, "gravity": 3, "linear_damping": 4, "angular_damping": 5}
 
 try:
     from .. import _lavender_c as _c
@@ -142,7 +142,7 @@ def _cause(start: np.ndarray, pre: np.ndarray, params: np.ndarray, effects: np.n
     failing step, command) for a body with a joint or wheels; the Omega entries are None without wheels."""
     if not np.all(np.isfinite(params[body])):
         return f"non-finite input: params of body {body} are {params[body].tolist()}"
-    mine = effects[(effects[:, 1] == -1) | (effects[:, 1] == body)]
+    mine = effects[(effects[:, ROW_BODY] == -1) | (effects[:, ROW_BODY] == body)]
     if mine.size and not np.all(np.isfinite(mine)):
         return f"non-finite input: an effect acting on body {body} has non-finite parameters"
     if model is not None and not np.all(np.isfinite(model[0])):
@@ -161,6 +161,23 @@ def _cause(start: np.ndarray, pre: np.ndarray, params: np.ndarray, effects: np.n
         cause += (f" (just before step {step}: |omega|*dt = {norm_safe(pre[LY.STATE_OMEGA_B]) * dt:.3g}, "
                   f"|v| = {norm_safe(pre[LY.STATE_V_W]):.3g} m/s{wtxt})")
     return cause
+
+
+def user_effect_table(effects: np.ndarray) -> np.ndarray | None:
+    """The C user-effect table for the codes in this effect table: int64 (n, 3) rows [function address,
+    n_params, flags], row i for code USER_CODE_BASE + i; None when no user code appears. Compiles (cached)
+    and loads each user set's library on first use."""
+    from .. import effects as E
+
+    codes = np.unique(effects[:, E.ROW_CODE]).astype(np.int64) if len(effects) else np.zeros(0, np.int64)
+    user = codes[codes >= E.USER_CODE_BASE]
+    if not user.size:
+        return None
+    table = np.zeros((int(user.max()) - E.USER_CODE_BASE + 1, 3), dtype=np.int64)
+    for code in user:
+        spec = E.spec_for_code(int(code))  # LavenderInputError for a code no declaration has
+        table[code - E.USER_CODE_BASE] = (spec.user_set.c_function(spec.name), spec.n_params, spec.flags)
+    return table
 
 
 def _f64_rows(name: str, a, cols: int, nb: int, writable: bool = False) -> np.ndarray:
@@ -194,7 +211,8 @@ class CBackend:
         params = np.ascontiguousarray(params, dtype=np.float64)
         effects = np.ascontiguousarray(effects, dtype=np.float64)
         if effects.size == 0:
-            effects = effects.reshape(0, 8)
+            effects = effects.reshape(0, ROW)
+        user = user_effect_table(effects)
         snapshot = state.copy()
         extra = ()
         if models is not None:
@@ -205,11 +223,14 @@ class CBackend:
             applied = _f64_rows("applied", models.applied, 3, nb, writable=True)
             extra = (rows, Omega, command, applied)
             snap_W, snap_u = Omega.copy(), applied.copy()
+        if not extra:
+            extra = (None, None, None, None)
         if adaptive is not None and integrator == "dopri5":
             snap_h, snap_n = adaptive.h.copy(), adaptive.nfev.copy()
-            if not extra:
-                extra = (None, None, None, None)
             extra = extra + (adaptive.h, adaptive.nfev, adaptive.rtol, adaptive.atol)
+        else:
+            extra = extra + (None, None, 0.0, 0.0)
+        extra = extra + (user,)
         status, step, body = _c.simulate(state, params, effects, INTEGRATOR_CODES[integrator],
                                          1 if normalize else 0, float(dt), int(n_steps), *extra)
         if status == 0:

@@ -1,9 +1,11 @@
 """NumPy backend: every body of a scene stepped at once, vectorized over the body axis.
 
 The right-hand side evaluates only the declared effects: bodies with none use the torque-free
-kernel; the others accumulate F_w and tau_w effect by effect (table order) and use rigid_body_rhs.
+kernel; the others accumulate F_w and tau_w in table order through each effect's printed NumPy
+dispatch (generated/kernels_numpy.py, or a user set's), indexed per body once per plan
+(_EffectIndex), and use rigid_body_rhs. An effect code no declaration has raises.
 Bodies with a spherical joint and/or reaction wheels (kind != 0 in the model rows) accumulate the
-same way (a jointed body's linear damping sees its kinematic COM velocity, pivot_kinematics) and
+same way (a jointed body's effects that read v_w see its kinematic COM velocity) and
 use wheel_body_rhs (wheels) or pivot_body_rhs (joint only). With such bodies the stepped state is
 (nb, 16) = [x (13), Omega (3)]; a jointed body's p_w, v_w are not integrated but set from
 pivot_kinematics after every step.
@@ -12,6 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..effects import ROW_BODY
 from ..errors import DivergenceError
 from ..generated import layout as LY
 from ..generated import tableaux as T
@@ -23,50 +26,82 @@ P, Q, V, W = LY.STATE_P_W, LY.STATE_Q, LY.STATE_V_W, LY.STATE_OMEGA_B  # state-r
 X, OM = LY.XS_X, LY.XS_OMEGA                                               # extended state [x, Omega]
 
 
-def _terms(effects: np.ndarray, idx: np.ndarray) -> list:
-    """Per effect acting on any body of idx: (code, positions within idx or slice(None), parameters)."""
-    pos = {int(b): k for k, b in enumerate(idx)}
-    terms = []
-    for row in effects:
-        b = int(row[1])
-        if b < 0:
-            terms.append((int(row[0]), slice(None), row[2:8].copy()))
-        elif b in pos:
-            terms.append((int(row[0]), np.array([pos[b]]), row[2:8].copy()))
-    return terms
+class _EffectIndex:
+    """The effects acting on bodies idx, indexed per body once (CSR: each body's effects in table
+    order, the every-body ones included). Evaluation is vectorized per effect code over all its
+    (body, effect) pairs; the sums are then taken in each body's table order, so they are bitwise
+    those of the C backend. A body pays for its own effects only; an unknown code raises."""
 
+    def __init__(self, effects: np.ndarray, idx: np.ndarray, m: np.ndarray, I: np.ndarray):
+        from .. import effects as E
 
-def _sums(terms, m, q, v, w):
-    """Total force at the COM and torque about it, world frame, summed in table order."""
-    F = np.zeros((q.shape[0], 3))
-    tau = np.zeros((q.shape[0], 3))
-    for code, at, p in terms:
-        if code == 1:
-            tau[at] += p[0:3]
-        elif code == 2:
-            F[at] += p[3:6]
-            tau[at] += K.force_at_point(q[at], p[0:3], p[3:6])
-        elif code == 3:
-            F[at] += K.gravity_force(m[at], p[0:3])
-        elif code == 4:
-            F[at] += K.linear_damping(p[0], v[at])
-        elif code == 5:
-            tau[at] += K.angular_damping(q[at], p[0], w[at])
-    return F, tau
+        n = idx.size
+        nb = m.shape[0]
+        pos = np.full(nb, -1, np.int64)
+        pos[idx] = np.arange(n)
+        body = effects[:, E.ROW_BODY].astype(np.int64) if len(effects) else np.zeros(0, np.int64)
+        every = np.flatnonzero(body < 0)
+        own = np.flatnonzero(body >= 0)
+        loc = pos[body[own]]
+        pair_row = np.concatenate([np.repeat(every, n), own[loc >= 0]])
+        pair_loc = np.concatenate([np.tile(np.arange(n), every.size), loc[loc >= 0]])
+        order = np.lexsort((pair_row, pair_loc))
+        pair_row, pair_loc = pair_row[order], pair_loc[order]
+        start = np.concatenate([[0], np.cumsum(np.bincount(pair_loc, minlength=n))])
+        rank = np.arange(pair_row.size) - start[pair_loc]
+        codes = effects[pair_row, E.ROW_CODE].astype(np.int64) if pair_row.size else np.zeros(0, np.int64)
+        self.npairs = pair_row.size
+        self.m, self.I = m[idx], I[idx]
+        self.groups = []  # (apply, pair positions, body positions, parameters)
+        has_F, has_T = np.zeros(self.npairs, bool), np.zeros(self.npairs, bool)
+        self.velocity = np.zeros(n, bool)  # bodies with an effect that reads v_w or omega_b
+        self.uses_v = False                # some effect reads v_w
+        for code in np.unique(codes):
+            spec = E.spec_for_code(int(code))  # LavenderInputError for a code no effect declares
+            sel = np.flatnonzero(codes == code)
+            self.groups.append((E.numpy_apply(int(code)), sel, pair_loc[sel], effects[pair_row[sel], E.ROW_PARAMS:].copy()))
+            has_F[sel], has_T[sel] = "F_w" in spec.outputs, "tau_w" in spec.outputs
+            if spec.velocity_dependent:
+                self.velocity[pair_loc[sel]] = True
+            self.uses_v |= spec.uses_v_w
+        self.ranks = []  # per rank k: (bodies, pairs) adding a force, (bodies, pairs) adding a torque
+        for k in range(int(rank.max()) + 1 if rank.size else 0):
+            f = np.flatnonzero((rank == k) & has_F)
+            t = np.flatnonzero((rank == k) & has_T)
+            self.ranks.append((pair_loc[f], f, pair_loc[t], t))
+
+    def sums(self, x: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Total force at the COM and torque about it (world), per body of idx: x their states (n, >= 13),
+        v the COM velocities the effects see."""
+        n = x.shape[0]
+        F, tau = np.zeros((n, 3)), np.zeros((n, 3))
+        if not self.npairs:
+            return F, tau
+        cF, cT = np.empty((self.npairs, 3)), np.empty((self.npairs, 3))
+        for apply, sel, loc, p in self.groups:
+            f, t = apply(p, x[loc], v[loc], self.m[loc], self.I[loc])
+            if f is not None:
+                cF[sel] = f
+            if t is not None:
+                cT[sel] = t
+        for locF, f, locT, t in self.ranks:
+            F[locF] += cF[f]
+            tau[locT] += cT[t]
+        return F, tau
 
 
 class _Group:
     """Bodies with a joint and/or wheels that share one rotational kernel."""
 
-    def __init__(self, idx, effects, m, rows):
+    def __init__(self, idx, effects, m, I, rows):
         self.idx = idx
-        self.terms = _terms(effects, idx)
+        self.index = _EffectIndex(effects, idx, m, I)
         self.m = m[idx]
         r = rows[idx]
         kind = r[:, LY.MODEL_KIND].astype(np.int64)
         self.jointed = (kind & KIND_JOINT) != 0
-        # the kinematic COM velocity is only needed by linear damping
-        self.needs_v = bool(self.jointed.any()) and any(code == 4 for code, _, _ in self.terms)
+        # the kinematic COM velocity is only needed by effects that read v_w
+        self.needs_v = bool(self.jointed.any()) and self.index.uses_v
         self.I_p = r[:, LY.MODEL_I_P].reshape(-1, 3, 3).copy()
         self.r_b, self.anchor, self.J = r[:, LY.MODEL_R_B].copy(), r[:, LY.MODEL_ANCHOR_W].copy(), r[:, LY.MODEL_J].copy()
         self.tl, self.sl = r[:, LY.MODEL_TORQUE_LIMIT].copy(), r[:, LY.MODEL_SPEED_LIMIT].copy()
@@ -95,29 +130,23 @@ class _Plan:
         self.m, self.I = params[:, LY.PARAM_M], params[:, LY.PARAM_I_B]
         kind = np.zeros(nb, np.int64) if rows is None else rows[:, LY.MODEL_KIND].astype(np.int64)
         touched = np.zeros(nb, bool)
-        for row in effects:
-            if row[1] < 0:
-                touched[:] = True
-            else:
-                touched[int(row[1])] = True
+        body = effects[:, ROW_BODY].astype(np.int64) if len(effects) else np.zeros(0, np.int64)
+        touched[body[body >= 0]] = True
+        touched[:] |= bool((body < 0).any())
         plain = kind == 0
         self.has_models = not plain.all()
         self.all_free = not touched.any() and not self.has_models
         self.free = np.flatnonzero(plain & ~touched)
         self.forced = np.flatnonzero(plain & touched)
-        self.terms = _terms(effects, self.forced)
+        self.index = _EffectIndex(effects, self.forced, self.m, self.I)
         self.m_f, self.I_f = self.m[self.forced], self.I[self.forced]
-        damped = np.zeros(nb, bool)  # bodies with a velocity-dependent effect (linear/angular damping)
-        for row in effects:
-            if int(row[0]) in (4, 5):
-                damped[slice(None) if row[1] < 0 else int(row[1])] = True
-        self.damped_f = damped[self.forced]
+        self.damped_f = self.index.velocity  # bodies with an effect that reads v_w or omega_b
         self.wheeled = (kind & KIND_WHEELS) != 0
         self.I_free = self.I[self.free]
         wheels = np.flatnonzero((kind & KIND_WHEELS) != 0)
         pivot = np.flatnonzero(kind == KIND_JOINT)
-        self.wheels = _Group(wheels, effects, self.m, rows) if wheels.size else None
-        self.pivot = _Group(pivot, effects, self.m, rows) if pivot.size else None
+        self.wheels = _Group(wheels, effects, self.m, self.I, rows) if wheels.size else None
+        self.pivot = _Group(pivot, effects, self.m, self.I, rows) if pivot.size else None
         self.jointed = np.flatnonzero((kind & KIND_JOINT) != 0)
         if self.jointed.size:
             r = rows[self.jointed]
@@ -134,12 +163,12 @@ class _Plan:
             out[self.free, X] = K.rigid_body_rhs_free(x[self.free, X], self.I_free)
         if self.forced.size:
             xf = x[self.forced, X]
-            F, tau = _sums(self.terms, self.m_f, xf[:, Q], xf[:, V], xf[:, W])
+            F, tau = self.index.sums(xf, xf[:, V])
             out[self.forced, X] = K.rigid_body_rhs(xf, self.m_f, self.I_f, F, tau)
         g = self.wheels
         if g is not None:
             xg = x[g.idx]
-            F, tau = _sums(g.terms, g.m, xg[:, Q], g.velocity(xg), xg[:, W])
+            F, tau = g.index.sums(xg, g.velocity(xg))
             o = np.empty((g.idx.size, LY.XS_SIZE))
             o[:, Q], o[:, W], o[:, OM] = K.wheel_body_rhs(
                 xg[:, Q], xg[:, W], xg[:, OM], g.I_p, g.J, g.r_b, F, tau, u, g.c_w)
@@ -148,7 +177,7 @@ class _Plan:
         g = self.pivot
         if g is not None:
             xg = x[g.idx]
-            F, tau = _sums(g.terms, g.m, xg[:, Q], g.velocity(xg), xg[:, W])
+            F, tau = g.index.sums(xg, g.velocity(xg))
             o = np.zeros((g.idx.size, LY.XS_SIZE))
             o[:, Q], o[:, W] = K.pivot_body_rhs(xg[:, Q], xg[:, W], g.I_p, g.r_b, F, tau)
             g.translation(xg, F, o)
@@ -161,7 +190,7 @@ class _Plan:
         tau_b = np.zeros((x.shape[0], 3))
         if self.forced.size:
             xf = x[self.forced]
-            Ff, tf = _sums(self.terms, self.m_f, xf[:, Q], xf[:, V], xf[:, W])
+            Ff, tf = self.index.sums(xf, xf[:, V])
             F[self.forced], tau_b[self.forced] = Ff, K.world_to_body(xf[:, Q], tf)
         return F, tau_b
 

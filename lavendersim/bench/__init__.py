@@ -18,6 +18,9 @@ v0 = (0.1, 0, 0) m/s, dt = 1e-3 s, RK4, q normalized each step):
 * batched — N bodies in one C call (`Sim.run`), N = 1 … 1e5, ns per body-step; NumPy batched too;
 * effects — the step cost of cumulative effect sets on one body in C: torque-free, + applied
   torque, + damping (linear + angular), + gravity, + spherical joint, + reaction wheels;
+* per-body effects — N bodies each with its own applied_torque against N plain bodies, in C, at
+  N = 1, 100, 10 000 (quick: 1, 100): ns per body-step and their ratio. The effects are indexed per
+  body, so the ratio must stay flat in N (target <= 1.5);
 * agreement — the hand-written kernel against the Sim (same trajectory to ~1e-12), and MuJoCo's
   trajectory against ours and against the exact torque-free motion over 1 s.
 
@@ -63,7 +66,11 @@ TARGETS = {
     "mujoco_rk4_speedup": 40.0,        # MuJoCo RK4 ns / LavenderSim C ns, at least
     "batched_ns_per_body_step": 40.0,  # at most, every N >= 1e3
     "torque_free_vs_handwritten": 1.15,  # LavenderSim C / hand-written, at most
+    "per_body_effect_ratio": 1.5,      # one applied_torque per body / plain body, ns per body-step, at most
 }
+PER_BODY_SIZES_FULL = (1, 100, 10_000)
+PER_BODY_SIZES_QUICK = (1, 100)
+PER_BODY_TORQUE = (1e-3, 2e-3, -1e-3)
 BATCH_SIZES_FULL = (1, 10, 100, 1_000, 10_000, 100_000)
 BATCH_SIZES_QUICK = (1, 10, 100, 1_000)
 MUJOCO_INTEGRATORS = ("RK4", "Euler", "implicitfast")
@@ -196,14 +203,17 @@ def single_sim(backend: str = "c", integrator: str = "rk4", effects=()):
     return sim
 
 
-def batch_sim(n: int, backend: str):
-    """n copies of the body with slightly different spins (independent trajectories)."""
+def batch_sim(n: int, backend: str, torque: bool = False):
+    """n copies of the body with slightly different spins (independent trajectories); with torque,
+    each body has its own applied_torque (n effects, one per body)."""
     import lavendersim as lv
     scene = lv.Scene()
     rng = np.random.default_rng(n)
     for i in range(n):
         w = np.asarray(OMEGA_B0) * (1.0 + 0.1 * rng.standard_normal(3))
         scene.add_body(lv.Body.box(f"b{i}", MASS, SIZE, q=Q0, omega_b=w, v_w=V_W0))
+        if torque:
+            scene.add_effect("applied_torque", body=f"b{i}", torque_w=PER_BODY_TORQUE)
     return lv.Sim(scene, dt=DT, integrator="rk4", backend=backend)
 
 
@@ -366,11 +376,13 @@ def mujoco_agreement(n_steps: int = 1000) -> dict:
 def settings(quick: bool) -> dict:
     if quick:
         return {"rounds": 2, "c_steps": 20_000, "numpy_steps": 200, "py_step_calls": 500,
-                "batch_sizes": BATCH_SIZES_QUICK, "c_body_steps": 40_000, "numpy_body_steps": 4_000,
+                "batch_sizes": BATCH_SIZES_QUICK, "per_body_sizes": PER_BODY_SIZES_QUICK,
+                "c_body_steps": 40_000, "numpy_body_steps": 4_000,
                 "effect_steps": 20_000, "mj_step_steps": 300, "mj_rollout_steps": 1_000,
                 "agreement_steps": 2_000, "mujoco_agreement_steps": 200}
     return {"rounds": 5, "c_steps": 2_000_000, "numpy_steps": 10_000, "py_step_calls": 20_000,
-            "batch_sizes": BATCH_SIZES_FULL, "c_body_steps": 4_000_000, "numpy_body_steps": 400_000,
+            "batch_sizes": BATCH_SIZES_FULL, "per_body_sizes": PER_BODY_SIZES_FULL,
+            "c_body_steps": 4_000_000, "numpy_body_steps": 400_000,
             "effect_steps": 1_000_000, "mj_step_steps": 20_000, "mj_rollout_steps": 50_000,
             "agreement_steps": 10_000, "mujoco_agreement_steps": 1_000}
 
@@ -472,6 +484,8 @@ def run(quick: bool = False, rounds: int | None = None, use_mujoco: bool = True)
         res["effects"].append({"name": name, "effects": [e for e, _ in acc], **et[name],
                                "ratio_to_torque_free": et[name]["ns_min"] / base})
 
+    res["per_body_effects"] = per_body_effects(cfg["per_body_sizes"], cfg["c_body_steps"], R)
+
     # ---- MuJoCo trajectory agreement
     if mj_ok:
         try:
@@ -484,6 +498,22 @@ def run(quick: bool = False, rounds: int | None = None, use_mujoco: bool = True)
     res["ratios"] = ratios(res)
     res["standing"] = standing(res)
     return res
+
+
+def per_body_effects(sizes, body_steps: int, rounds: int) -> list[dict]:
+    """For each N: N plain bodies and N bodies each with its own applied_torque, in C, interleaved in the
+    same rounds; ns per body-step and the ratio (effected / plain)."""
+    out = []
+    for n in sizes:
+        _progress(f"per-body effects: N = {n}: building scenes")
+        plain, torque = batch_sim(n, "c"), batch_sim(n, "c", torque=True)
+        steps = max(2, body_steps // n)
+        t = interleaved({"plain": (lambda s=plain: s.run(steps), steps * n),
+                         "applied_torque": (lambda s=torque: s.run(steps), steps * n)}, rounds, f"per-body effects N = {n}")
+        out.append({"n_bodies": n, "steps": steps, "plain": t["plain"], "applied_torque": t["applied_torque"],
+                    "ratio": t["applied_torque"]["ns_min"] / t["plain"]["ns_min"]})
+        del plain, torque
+    return out
 
 
 def _ns(res, key):
@@ -510,6 +540,8 @@ def ratios(res: dict) -> dict:
         r[f"batched_{n}_numpy_over_c"] = b["numpy"]["ns_min"] / b["c"]["ns_min"]
     for e in res["effects"]:
         r[f"effects[{e['name']}]_over_torque_free"] = e["ratio_to_torque_free"]
+    for p in res.get("per_body_effects", []):
+        r[f"per_body_applied_torque_{p['n_bodies']}_over_plain"] = p["ratio"]
     return r
 
 
@@ -537,6 +569,9 @@ def standing(res: dict) -> list[dict]:
     hw = _ns(res, "handwritten_c")
     out.append(_line("torque-free scene / hand-written C kernel", None if hw is None else c / hw,
                      TARGETS["torque_free_vs_handwritten"], "max", "x", "LavenderSim C / handwritten_rk4.c (no checks)"))
+    for p in res.get("per_body_effects", []):
+        out.append(_line(f"one applied_torque per body / plain body, N = {p['n_bodies']:g}", p["ratio"],
+                         TARGETS["per_body_effect_ratio"], "max", "x", "ns per body-step, same run"))
     return out
 
 
@@ -593,6 +628,12 @@ def report(res: dict) -> str:
     L.append("effect sets on one body, C (cumulative)           ns/step   x torque-free")
     for e in res["effects"]:
         L.append(f"  {e['name']:<46}{e['ns_min']:8.1f}   {e['ratio_to_torque_free']:6.2f}")
+    if res.get("per_body_effects"):
+        L.append("")
+        L.append("per-body effects, C: one applied_torque per body      plain ns/body-step  torque ns/body-step  ratio")
+        for p in res["per_body_effects"]:
+            L.append(f"  N = {p['n_bodies']:<8g} ({p['steps']:>8} steps)                    {p['plain']['ns_min']:10.1f}"
+                     f"  {p['applied_torque']['ns_min']:19.1f}  {p['ratio']:5.2f}")
     if mj["available"] and "agreement" in mj:
         a = mj["agreement"]
         L.append("")

@@ -3,6 +3,8 @@
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
 #include <math.h>
+#include <stdint.h>
+#include <stdlib.h>
 #include <string.h>
 
 #include "kernels.h"
@@ -66,6 +68,100 @@ static int rows_of(Py_buffer *v, Py_ssize_t cols, const char *what, const char *
         PyErr_Format(PyExc_ValueError, "%s must be 2-D with shape (n, %zd) %s, got %d-D",
                      what, cols, layout, v->ndim);
     return -1;
+}
+
+/* The user-effect table: an int64 buffer (n, 3) of [function address, n_params, flags] rows, row i for
+   code LV_EFFECT_USER_BASE + i (address 0: no such code). On success *out is malloc'ed (or NULL for none). */
+static int get_user_table(PyObject *obj, lv_user_effect **out, long *n)
+{
+    Py_buffer v;
+    Py_ssize_t i;
+    const char *f;
+    *out = NULL;
+    *n = 0;
+    if (obj == Py_None) return 0;
+    if (PyObject_GetBuffer(obj, &v, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT) != 0) return -1;
+    f = v.format ? v.format : "B";
+    if (f[0] == '@' || f[0] == '=' || f[0] == '<') f++;
+    if (v.itemsize != 8 || (strcmp(f, "q") != 0 && strcmp(f, "l") != 0) || v.ndim != 2 || v.shape[1] != 3) {
+        PyErr_SetString(PyExc_TypeError, "simulate: user_effects must be a C-contiguous int64 array of shape (n, 3) "
+                                         "[function address, n_params, flags]");
+        PyBuffer_Release(&v);
+        return -1;
+    }
+    *n = (long)v.shape[0];
+    *out = (lv_user_effect *)calloc((size_t)*n + 1, sizeof(lv_user_effect));
+    if (*out == NULL) { PyBuffer_Release(&v); PyErr_NoMemory(); return -1; }
+    for (i = 0; i < v.shape[0]; i++) {
+        const int64_t *r = (const int64_t *)v.buf + 3 * i;
+        (*out)[i].fn = (lv_effect_fn)(uintptr_t)r[0];
+        (*out)[i].n_params = (int)r[1];
+        (*out)[i].flags = (int)r[2];
+    }
+    PyBuffer_Release(&v);
+    return 0;
+}
+
+/* The built-in effect codes as text, for error messages: "1 (applied_torque), 2 (...), ...". */
+static PyObject *builtin_codes_text(void)
+{
+    PyObject *parts = PyList_New(0), *sep, *out;
+    int code;
+    if (parts == NULL) return NULL;
+    for (code = 0; code < LV_EFFECT_USER_BASE; code++) {
+        const char *name = lv_effect_name(code);
+        PyObject *t;
+        if (name == NULL) continue;
+        t = PyUnicode_FromFormat("%d (%s)", code, name);
+        if (t == NULL || PyList_Append(parts, t) != 0) { Py_XDECREF(t); Py_DECREF(parts); return NULL; }
+        Py_DECREF(t);
+    }
+    sep = PyUnicode_FromString(", ");
+    out = sep ? PyUnicode_Join(sep, parts) : NULL;
+    Py_XDECREF(sep);
+    Py_DECREF(parts);
+    return out;
+}
+
+/* Check every effect row: a declared code (built in, or in the user table) whose parameters fit the row,
+   and a body of -1 or a valid index. Sets ValueError naming the row. */
+static int check_effects(const double *ef, Py_ssize_t ne, Py_ssize_t row_size, Py_ssize_t nb,
+                         const lv_user_effect *user, long n_user)
+{
+    Py_ssize_t e;
+    for (e = 0; e < ne; e++) {
+        const double *row = ef + e * row_size;
+        const double kind = row[LV_EFFECT_ROW_CODE], body = row[LV_EFFECT_ROW_BODY];
+        int np = -1;
+        if (kind == floor(kind) && fabs(kind) < 1e9) {
+            const int code = (int)kind;
+            np = lv_effect_n_params(code);
+            if (np < 0 && code >= LV_EFFECT_USER_BASE && code - LV_EFFECT_USER_BASE < n_user
+                && user[code - LV_EFFECT_USER_BASE].fn != NULL)
+                np = user[code - LV_EFFECT_USER_BASE].n_params;
+        }
+        if (np < 0 || np > row_size - LV_EFFECT_ROW_PARAMS) {
+            PyObject *ko = PyFloat_FromDouble(kind), *known = builtin_codes_text();
+            if (np < 0)
+                PyErr_Format(PyExc_ValueError,
+                             "simulate: effects[%zd] code %R is not a declared effect (built-in codes: %U; user "
+                             "codes from %d need their table, %ld loaded)", e, ko, known, LV_EFFECT_USER_BASE, n_user);
+            else
+                PyErr_Format(PyExc_ValueError, "simulate: effects[%zd] (code %R) needs %d parameters but rows hold %zd",
+                             e, ko, np, row_size - LV_EFFECT_ROW_PARAMS);
+            Py_XDECREF(ko);
+            Py_XDECREF(known);
+            return -1;
+        }
+        if (!(body == -1 || (body >= 0 && body < (double)nb && body == floor(body)))) {
+            PyObject *bo = PyFloat_FromDouble(body);
+            PyErr_Format(PyExc_ValueError, "simulate: effects[%zd] body must be -1 (every body) or an index in [0, %zd), got %R",
+                         e, nb, bo);
+            Py_XDECREF(bo);
+            return -1;
+        }
+    }
+    return 0;
 }
 
 static PyObject *py_kernels(PyObject *self, PyObject *noargs)
@@ -132,8 +228,12 @@ static PyObject *py_simulate(PyObject *self, PyObject *args)
 {
     PyObject *state_obj, *params_obj, *effects_obj;
     PyObject *rows_obj = Py_None, *omega_obj = Py_None, *cmd_obj = Py_None, *app_obj = Py_None;
-    PyObject *h_obj = Py_None, *nfev_obj = Py_None;
+    PyObject *h_obj = Py_None, *nfev_obj = Py_None, *user_obj = Py_None;
     PyObject *result = NULL;
+    lv_user_effect *user_entries = NULL;
+    lv_user_effects user;
+    long n_user = 0;
+    Py_ssize_t row_size = LV_EFFECT_ROW_PARAMS + LV_EFFECT_ROW_MIN_PARAMS;
     double rtol = 0.0, atol = 0.0;
     Py_buffer hb, nf;
     int have_h = 0, have_nf = 0;
@@ -148,9 +248,9 @@ static PyObject *py_simulate(PyObject *self, PyObject *args)
     lv_models models;
     int status;
     (void)self;
-    if (!PyArg_ParseTuple(args, "OOOipdL|OOOOOOdd:simulate", &state_obj, &params_obj, &effects_obj, &integrator,
+    if (!PyArg_ParseTuple(args, "OOOipdL|OOOOOOddO:simulate", &state_obj, &params_obj, &effects_obj, &integrator,
                           &normalize, &dt, &n_steps_ll, &rows_obj, &omega_obj, &cmd_obj, &app_obj,
-                          &h_obj, &nfev_obj, &rtol, &atol))
+                          &h_obj, &nfev_obj, &rtol, &atol, &user_obj))
         return NULL;
     n_models = (rows_obj != Py_None) + (omega_obj != Py_None) + (cmd_obj != Py_None) + (app_obj != Py_None);
     if (n_models != 0 && n_models != 4) {
@@ -180,10 +280,13 @@ static PyObject *py_simulate(PyObject *self, PyObject *args)
         PyErr_SetString(PyExc_ValueError, "simulate: dt must be finite");
         return NULL;
     }
-    if (get_f64(state_obj, &st, 1, "simulate: state") != 0) return NULL;
-    if (get_f64(params_obj, &pr, 0, "simulate: params") != 0) { PyBuffer_Release(&st); return NULL; }
+    if (get_user_table(user_obj, &user_entries, &n_user) != 0) return NULL;
+    user.entries = user_entries;
+    user.n = n_user;
+    if (get_f64(state_obj, &st, 1, "simulate: state") != 0) { free(user_entries); return NULL; }
+    if (get_f64(params_obj, &pr, 0, "simulate: params") != 0) { PyBuffer_Release(&st); free(user_entries); return NULL; }
     if (get_f64(effects_obj, &ef, 0, "simulate: effects") != 0) {
-        PyBuffer_Release(&st); PyBuffer_Release(&pr); return NULL;
+        PyBuffer_Release(&st); PyBuffer_Release(&pr); free(user_entries); return NULL;
     }
     if (n_models) {
         if (get_f64(rows_obj, &mr, 0, "simulate: model_rows") != 0) goto fail;
@@ -203,7 +306,8 @@ static PyObject *py_simulate(PyObject *self, PyObject *args)
     }
     if (rows_of(&st, LV_STATE_SIZE, "simulate: state", "[p_w(3), q(4), v_w(3), omega_b(3)]", &nb) != 0) goto fail;
     if (rows_of(&pr, LV_PARAM_SIZE, "simulate: params", "[m, I_x, I_y, I_z]", &np_rows) != 0) goto fail;
-    if (rows_of(&ef, LV_EFFECT_SIZE, "simulate: effects", "[kind, body, p0..p5]", &ne) != 0) goto fail;
+    if (ef.ndim == 2 && ef.shape[1] >= LV_EFFECT_ROW_PARAMS) row_size = ef.shape[1];
+    if (rows_of(&ef, row_size, "simulate: effects", "[code, body, parameters...]", &ne) != 0) goto fail;
     if (np_rows != nb) {
         PyErr_Format(PyExc_ValueError, "simulate: params has %zd rows but state has %zd bodies", np_rows, nb);
         goto fail;
@@ -257,31 +361,17 @@ static PyObject *py_simulate(PyObject *self, PyObject *args)
         models.command = (const double *)cm.buf;
         models.applied = (double *)ap.buf;
     }
-    for (e = 0; e < ne; e++) {
-        const double *row = (const double *)ef.buf + e * LV_EFFECT_SIZE;
-        const double kind = row[0], body = row[1];
-        if (!(kind >= 1 && kind <= 5 && kind == floor(kind))) {
-            PyObject *ko = PyFloat_FromDouble(kind);
-            PyErr_Format(PyExc_ValueError,
-                         "simulate: effects[%zd] kind must be 1 (applied_torque), 2 (force_at_point), 3 (gravity), "
-                         "4 (linear_damping) or 5 (angular_damping), got %R", e, ko);
-            Py_XDECREF(ko);
-            goto fail;
-        }
-        if (!(body == -1 || (body >= 0 && body < (double)nb && body == floor(body)))) {
-            PyObject *bo = PyFloat_FromDouble(body);
-            PyErr_Format(PyExc_ValueError, "simulate: effects[%zd] body must be -1 (every body) or an index in [0, %zd), got %R",
-                         e, nb, bo);
-            Py_XDECREF(bo);
-            goto fail;
-        }
-    }
+    if (check_effects((const double *)ef.buf, ne, row_size, nb, user_entries, n_user) != 0) goto fail;
     Py_BEGIN_ALLOW_THREADS
     status = lv_simulate((double *)st.buf, (const double *)pr.buf, (long)nb, (const double *)ef.buf, (long)ne,
-                         n_models ? &models : NULL, integrator, normalize, dt, (long)n_steps_ll,
-                         have_h ? &adaptive : NULL, &fail_step, &fail_body);
+                         (long)row_size, n_user ? &user : NULL, n_models ? &models : NULL, integrator, normalize, dt,
+                         (long)n_steps_ll, have_h ? &adaptive : NULL, &fail_step, &fail_body);
     Py_END_ALLOW_THREADS
-    if (status < 0)
+    if (status == LV_NO_MEMORY)
+        PyErr_NoMemory();
+    else if (status == LV_UNKNOWN_EFFECT)
+        PyErr_Format(PyExc_ValueError, "simulate: effects[%ld] has a code no declared effect has", fail_step);
+    else if (status < 0)
         PyErr_SetString(PyExc_ValueError, "simulate: lv_simulate rejected its arguments "
                         "(splitting and implicit_gyro step plain bodies only: no joint or wheels)");
     else if (status == LV_OK)
@@ -298,6 +388,7 @@ fail: /* every exit releases the buffers it holds; result stays NULL on an error
     if (have_ap) PyBuffer_Release(&ap);
     if (have_h) PyBuffer_Release(&hb);
     if (have_nf) PyBuffer_Release(&nf);
+    free(user_entries);
     return result;
 }
 
@@ -309,9 +400,11 @@ static PyMethodDef methods[] = {
      "(C-contiguous), out N*n_out (writable)."},
     {"simulate", py_simulate, METH_VARARGS,
      "simulate(state, params, effects, integrator, normalize, dt, n_steps[, model_rows, Omega, command, applied,\n"
-     "         h, nfev, rtol, atol])\n"
+     "         h, nfev, rtol, atol, user_effects])\n"
      "  -> (status, step, body).\n"
-     "state (nb,13) advanced in place; params (nb,4) [m, I_x, I_y, I_z]; effects (ne,8) [kind, body, p0..p5].\n"
+     "state (nb,13) advanced in place; params (nb,4) [m, I_x, I_y, I_z]; effects (ne, >=2) [code, body, parameters...]\n"
+     "(built-in codes, see generated/kernels.h, or user codes from LV_EFFECT_USER_BASE with user_effects: int64 (n,3)\n"
+     "[function address, n_params, flags] for codes base .. base+n-1; an undeclared code raises ValueError).\n"
      "Optional, all four or none: model_rows (nb,22) [kind (0 plain, 1 joint, 2 wheels, 3 both), I_p(9), r_b(3),\n"
      "anchor_w(3), J(3), torque_limit, speed_limit, c_w]; Omega (nb,3) advanced in place; command (nb,3) held;\n"
      "applied (nb,3) receives the saturated wheel torques of the last step.\n"
@@ -334,6 +427,8 @@ PyMODINIT_FUNC PyInit__lavender_c(void)
     if (m == NULL) return NULL;
     if (PyModule_AddStringConstant(m, "GENERATED_HASH", LV_GENERATED_HASH) != 0 ||
         PyModule_AddIntConstant(m, "KERNEL_COUNT", LV_KERNEL_COUNT) != 0 ||
+        PyModule_AddIntConstant(m, "EFFECT_ABI", LV_EFFECT_ABI) != 0 ||
+        PyModule_AddIntConstant(m, "EFFECT_USER_BASE", LV_EFFECT_USER_BASE) != 0 ||
         PyModule_AddIntConstant(m, "EULER", LV_INTEGRATOR_EULER) != 0 ||
         PyModule_AddIntConstant(m, "SEMI_IMPLICIT_EULER", LV_INTEGRATOR_SEMI_IMPLICIT_EULER) != 0 ||
         PyModule_AddIntConstant(m, "RK4", LV_INTEGRATOR_RK4) != 0 ||

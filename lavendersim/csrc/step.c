@@ -5,64 +5,138 @@
    an out-of-line call per right-hand side (and, under -fPIC, through the PLT) cost ~20% of a
    torque-free RK4 step. Inlining does not change the arithmetic (no -ffast-math, no contraction). */
 #include <math.h>
+#include <stdlib.h>
 #include <string.h>
 
 #include "kernels.c"
 #include "step.h"
 #include "tableaux.h"
 
-/* Force at the COM and torque about it (world), summed over the effects acting on body b in table
-   order. v_w is the COM velocity the linear damping sees (the state's, or a joint's kinematic one). */
-static inline void effect_sums(const double *x, const double *v_w, double m, const double *effects, long ne,
-                               long b, double *F, double *tau)
+/* ---- the effect index -------------------------------------------------------------------------
+
+   One effect acting on one body: its parameters and, for a user effect, its compiled function
+   (NULL: a built-in effect, dispatched by code through the generated lv_effect_apply). */
+typedef struct {
+    const double *p;
+    lv_effect_fn user;
+    int code;
+} lv_effect_ref;
+
+/* The effects of every body, indexed once per lv_simulate call (CSR): body b's effects are
+   refs[start[b] .. start[b+1]-1] in table order (the every-body ones included), and flags[b] is the OR
+   of their LV_EFFECT_USES_* flags. Building it is O(nb + entries); a body's right-hand side then costs
+   its own effects only. */
+typedef struct {
+    long *start;
+    lv_effect_ref *refs;
+    int *flags;
+} lv_effect_index;
+
+/* Number of parameters of effect `code` (built-in, or a user code with an entry in `user`), its flags
+   and, for a user effect, its function; -1 if no declared effect has this code. */
+static int effect_info(int code, const lv_user_effects *user, int *flags, lv_effect_fn *fn)
 {
-    double c[3];
-    long e;
-    for (e = 0; e < ne; e++) {
-        const double *row = effects + e * LV_EFFECT_SIZE;
-        const long target = (long)row[1];
-        const double *p = row + 2;
-        if (target != -1 && target != b) continue;
-        switch ((int)row[0]) {
-        case LV_EFFECT_APPLIED_TORQUE:
-            tau[0] += p[0]; tau[1] += p[1]; tau[2] += p[2];
-            break;
-        case LV_EFFECT_FORCE_AT_POINT:
-            F[0] += p[3]; F[1] += p[4]; F[2] += p[5];
-            lv_force_at_point(x + LV_STATE_Q, p, p + 3, c);
-            tau[0] += c[0]; tau[1] += c[1]; tau[2] += c[2];
-            break;
-        case LV_EFFECT_GRAVITY:
-            lv_gravity_force(m, p, c);
-            F[0] += c[0]; F[1] += c[1]; F[2] += c[2];
-            break;
-        case LV_EFFECT_LINEAR_DAMPING:
-            lv_linear_damping(p[0], v_w, c);
-            F[0] += c[0]; F[1] += c[1]; F[2] += c[2];
-            break;
-        case LV_EFFECT_ANGULAR_DAMPING:
-            lv_angular_damping(x + LV_STATE_Q, p[0], x + LV_STATE_OMEGA_B, c);
-            tau[0] += c[0]; tau[1] += c[1]; tau[2] += c[2];
-            break;
-        default:
-            break; /* validated by the caller */
+    const int n = lv_effect_n_params(code);
+    *fn = NULL;
+    *flags = 0;
+    if (n >= 0) {
+        *flags = lv_effect_flags(code);
+        return n;
+    }
+    if (user != NULL && code >= LV_EFFECT_USER_BASE && code - LV_EFFECT_USER_BASE < user->n) {
+        const lv_user_effect *u = &user->entries[code - LV_EFFECT_USER_BASE];
+        if (u->fn != NULL && u->n_params >= 0) {
+            *fn = u->fn;
+            *flags = u->flags;
+            return u->n_params;
         }
+    }
+    return -1;
+}
+
+static void index_free(lv_effect_index *ix)
+{
+    free(ix->start);
+    free(ix->refs);
+    free(ix->flags);
+    ix->start = NULL;
+    ix->refs = NULL;
+    ix->flags = NULL;
+}
+
+/* Build the index of the effect table (ne rows of row_size doubles). Returns LV_OK; LV_UNKNOWN_EFFECT
+   with *bad_row = the first row whose code no declared effect has (or whose parameters do not fit the
+   row); LV_BAD_ARGUMENT for a body index outside [-1, nb); LV_NO_MEMORY. Nothing to free unless LV_OK. */
+static int index_build(lv_effect_index *ix, const double *effects, long ne, long row_size, long nb,
+                       const lv_user_effects *user, long *bad_row)
+{
+    long e, b, n_every = 0, *fill;
+    lv_effect_fn fn;
+    int flags;
+    ix->start = (long *)calloc((size_t)nb + 1, sizeof(long));
+    ix->flags = (int *)calloc((size_t)nb + 1, sizeof(int));
+    ix->refs = NULL;
+    if (ix->start == NULL || ix->flags == NULL) { index_free(ix); return LV_NO_MEMORY; }
+    for (e = 0; e < ne; e++) {
+        const double *row = effects + e * row_size;
+        const int code = (int)row[LV_EFFECT_ROW_CODE];
+        const long target = (long)row[LV_EFFECT_ROW_BODY];
+        const int np = (double)code == row[LV_EFFECT_ROW_CODE] ? effect_info(code, user, &flags, &fn) : -1;
+        if (np < 0 || np > row_size - LV_EFFECT_ROW_PARAMS) { *bad_row = e; index_free(ix); return LV_UNKNOWN_EFFECT; }
+        if (target < -1 || target >= nb) { *bad_row = e; index_free(ix); return LV_BAD_ARGUMENT; }
+        if (target == -1) n_every++; else ix->start[target + 1]++;
+    }
+    for (b = 0; b < nb; b++) ix->start[b + 1] += ix->start[b] + n_every;
+    ix->refs = (lv_effect_ref *)malloc(((size_t)ix->start[nb] + 1) * sizeof(lv_effect_ref));
+    fill = (long *)malloc(((size_t)nb + 1) * sizeof(long));
+    if (ix->refs == NULL || fill == NULL) { free(fill); index_free(ix); return LV_NO_MEMORY; }
+    memcpy(fill, ix->start, (size_t)nb * sizeof(long));
+    for (e = 0; e < ne; e++) {
+        const double *row = effects + e * row_size;
+        const long target = (long)row[LV_EFFECT_ROW_BODY];
+        lv_effect_ref ref;
+        ref.code = (int)row[LV_EFFECT_ROW_CODE];
+        ref.p = row + LV_EFFECT_ROW_PARAMS;
+        (void)effect_info(ref.code, user, &flags, &fn);
+        ref.user = fn;
+        if (target == -1) {
+            for (b = 0; b < nb; b++) { ix->refs[fill[b]++] = ref; ix->flags[b] |= flags; }
+        } else {
+            ix->refs[fill[target]++] = ref;
+            ix->flags[target] |= flags;
+        }
+    }
+    free(fill);
+    return LV_OK;
+}
+
+/* Force at the COM and torque about it (world), summed over one body's effects in table order. v_w is
+   the COM velocity the effects see (the state's, or a joint's kinematic one). The codes were checked
+   when the index was built, so lv_effect_apply always finds them. */
+static inline void effect_sums(const double *x, const double *v_w, double m, const double *I_b,
+                               const lv_effect_ref *refs, long n, double *F, double *tau)
+{
+    long k;
+    for (k = 0; k < n; k++) {
+        if (refs[k].user != NULL)
+            refs[k].user(refs[k].p, x, v_w, m, I_b, F, tau);
+        else
+            (void)lv_effect_apply(refs[k].code, refs[k].p, x, v_w, m, I_b, F, tau);
     }
 }
 
 /* d/dt of one plain body's state: the free kernel when no effect applies, else the effects' force and
    torque summed in table order and passed to the full right-hand side. */
-static void body_rhs(const double *x, const double *prm, const double *effects, long ne, long b,
-                     int has_effects, double *xdot)
+static void body_rhs(const double *x, const double *prm, const lv_effect_ref *refs, long n_refs, double *xdot)
 {
     const double m = prm[LV_PARAM_M];
     const double *I_b = prm + LV_PARAM_I_B;
     double F[3] = {0.0, 0.0, 0.0}, tau[3] = {0.0, 0.0, 0.0};
-    if (!has_effects) {
+    if (n_refs == 0) {
         lv_rigid_body_rhs_free(x, I_b, xdot);
         return;
     }
-    effect_sums(x, x + LV_STATE_V_W, m, effects, ne, b, F, tau);
+    effect_sums(x, x + LV_STATE_V_W, m, I_b, refs, n_refs, F, tau);
     lv_rigid_body_rhs(x, m, I_b, F, tau, xdot);
 }
 
@@ -79,33 +153,31 @@ static int all_finite(const double *x)
    arithmetic is exactly the single-body sequence, so results do not depend on the blocking. */
 #define LV_BLOCK 8
 
-/* Advance bodies b0 .. b0+n-1 (n <= LV_BLOCK) by n_steps. Their rows are read at the start and written
-   only on success. Returns -1 on success, else the 0-based failing step; then *fail_j is the first
-   (lowest-index) body of the block that went non-finite at that step and last[] holds the block's
+/* Advance bodies ids[0 .. n-1] (n <= LV_BLOCK, ascending) by n_steps. Their rows are read at the start
+   and written only on success. Returns -1 on success, else the 0-based failing step; then *fail_j is the
+   first (lowest-index) body of the block that went non-finite at that step and last[] holds the block's
    last finite states. */
-static long advance_block(double *state, const double *params, long b0, int n,
-                          const double *effects, long ne, int integrator, int normalize,
+static inline long advance_block(double *state, const double *params, const long *ids, int n,
+                          const lv_effect_index *ix, int integrator, int normalize,
                           double dt, long n_steps, int *fail_j, double last[][LV_STATE_SIZE])
 {
     double x[LV_BLOCK][LV_STATE_SIZE], xn[LV_BLOCK][LV_STATE_SIZE], k1[LV_BLOCK][LV_STATE_SIZE],
         k2[LV_BLOCK][LV_STATE_SIZE], k3[LV_BLOCK][LV_STATE_SIZE], k4[LV_BLOCK][LV_STATE_SIZE],
         tmp[LV_BLOCK][LV_STATE_SIZE];
     const double *prm[LV_BLOCK];
-    int has[LV_BLOCK];
+    const lv_effect_ref *refs[LV_BLOCK];
+    long n_refs[LV_BLOCK];
     const double h2 = LV_RK4_C1 * dt, h3 = LV_RK4_C2 * dt, h4 = LV_RK4_C3 * dt, h6 = dt / LV_RK4_B_DEN;
-    long s, e;
+    long s;
     int i, j;
     for (j = 0; j < n; j++) {
-        const long b = b0 + j;
+        const long b = ids[j];
         prm[j] = params + b * LV_PARAM_SIZE;
-        has[j] = 0;
-        for (e = 0; e < ne; e++) {
-            const long target = (long)effects[e * LV_EFFECT_SIZE + 1];
-            if (target == -1 || target == b) { has[j] = 1; break; }
-        }
+        refs[j] = ix->refs + ix->start[b];
+        n_refs[j] = ix->start[b + 1] - ix->start[b];
         memcpy(x[j], state + b * LV_STATE_SIZE, sizeof x[j]);
     }
-#define RHS(in, out) for (j = 0; j < n; j++) body_rhs(in[j], prm[j], effects, ne, b0 + j, has[j], out[j])
+#define RHS(in, out) for (j = 0; j < n; j++) body_rhs(in[j], prm[j], refs[j], n_refs[j], out[j])
     for (s = 0; s < n_steps; s++) {
         switch (integrator) {
         case LV_INTEGRATOR_EULER:
@@ -154,24 +226,44 @@ static long advance_block(double *state, const double *params, long b0, int n,
         memcpy(x, xn, (size_t)n * sizeof x[0]);
     }
 #undef RHS
-    for (j = 0; j < n; j++) memcpy(state + (b0 + j) * LV_STATE_SIZE, x[j], sizeof x[j]);
+    for (j = 0; j < n; j++) memcpy(state + ids[j] * LV_STATE_SIZE, x[j], sizeof x[j]);
     return -1;
 }
 
-/* One torque-free RK4 step of bodies 0 .. n-1: x -> xn (the free kernel, the RK4 combination, q
-   normalized with the generated kernel when asked). */
+/* Right-hand sides on the lockstep RK4 path (`forced`): LV_RHS_FREE the free kernel; else each body's
+   effects summed in table order, then LV_RHS_FULL the full kernel (as body_rhs), or LV_RHS_TORQUE the
+   torque-only one for bodies whose effects add no force (bitwise the full kernel with F = 0). */
+enum { LV_RHS_FREE = 0, LV_RHS_TORQUE = 1, LV_RHS_FULL = 2 };
+#define LV_RK4_RHS(in, out)                                                                             \
+    do {                                                                                                \
+        if (forced == LV_RHS_FREE) {                                                                    \
+            for (j = 0; j < n; j++) lv_rigid_body_rhs_free(in[j], I[j], out[j]);                        \
+        } else {                                                                                        \
+            for (j = 0; j < n; j++) {                                                                   \
+                F[j][0] = F[j][1] = F[j][2] = tau[j][0] = tau[j][1] = tau[j][2] = 0.0;                  \
+                effect_sums(in[j], in[j] + 7, m[j], I[j], refs[j], n_refs[j], F[j], tau[j]);            \
+            }                                                                                           \
+            if (forced == LV_RHS_TORQUE)                                                                \
+                for (j = 0; j < n; j++) lv_rigid_body_rhs_torque(in[j], I[j], tau[j], out[j]);          \
+            else                                                                                        \
+                for (j = 0; j < n; j++) lv_rigid_body_rhs(in[j], m[j], I[j], F[j], tau[j], out[j]);     \
+        }                                                                                               \
+    } while (0)
+
+/* One RK4 step of bodies 0 .. n-1: x -> xn (LV_RK4_RHS, the RK4 combination, q normalized with the
+   generated kernel when asked). */
 #define LV_FREE_RK4_STEP()                                                                              \
     do {                                                                                                \
-        for (j = 0; j < n; j++) lv_rigid_body_rhs_free(x[j], I[j], k1[j]);                              \
+        LV_RK4_RHS(x, k1);                                                                              \
         for (j = 0; j < n; j++)                                                                         \
             for (i = 0; i < LV_STATE_SIZE; i++) tmp[j][i] = x[j][i] + h2 * k1[j][i];                    \
-        for (j = 0; j < n; j++) lv_rigid_body_rhs_free(tmp[j], I[j], k2[j]);                            \
+        LV_RK4_RHS(tmp, k2);                                                                            \
         for (j = 0; j < n; j++)                                                                         \
             for (i = 0; i < LV_STATE_SIZE; i++) tmp[j][i] = x[j][i] + h3 * k2[j][i];                    \
-        for (j = 0; j < n; j++) lv_rigid_body_rhs_free(tmp[j], I[j], k3[j]);                            \
+        LV_RK4_RHS(tmp, k3);                                                                            \
         for (j = 0; j < n; j++)                                                                         \
             for (i = 0; i < LV_STATE_SIZE; i++) tmp[j][i] = x[j][i] + h4 * k3[j][i];                    \
-        for (j = 0; j < n; j++) lv_rigid_body_rhs_free(tmp[j], I[j], k4[j]);                            \
+        LV_RK4_RHS(tmp, k4);                                                                            \
         for (j = 0; j < n; j++)                                                                         \
             for (i = 0; i < LV_STATE_SIZE; i++)                                                         \
                 xn[j][i] = x[j][i] + h6 * (LV_RK4_B0 * k1[j][i] + LV_RK4_B1 * k2[j][i]                  \
@@ -180,39 +272,57 @@ static long advance_block(double *state, const double *params, long b0, int n,
             for (j = 0; j < n; j++) lv_quat_normalize(xn[j] + LV_STATE_Q, xn[j] + LV_STATE_Q);          \
     } while (0)
 
+/* LV_FLATTEN: inline every call in the function (its kernels included), so each call with constant block
+   size, kind and normalize flag compiles to its own straight-line loop (GCC and clang; elsewhere a
+   plain function). */
+#if defined(__GNUC__) || defined(__clang__)
+#define LV_FLATTEN __attribute__((flatten))
+#else
+#define LV_FLATTEN
+#endif
+
 /* Steps between finiteness checks on the torque-free path (see advance_free_rk4). */
 #define LV_FREE_CHUNK 64
 
-/* Torque-free fast path: RK4 on plain bodies that no effect acts on (the common free-flight scene).
-   The same arithmetic as advance_block (the free kernel, the same RK4 combination, q normalized with
-   the generated kernel), so results are bitwise identical; without the per-stage effect dispatch and
-   integrator switch the loop is a straight chain the compiler can schedule (and, for a block, overlap).
-   Same contract as advance_block.
+/* RK4 fast path on plain bodies, `forced` (LV_RHS_*) of them all: torque-free (no effect acts on them;
+   the common free-flight scene), or with effects, each body summed over its own (from the index ix).
+   The same arithmetic as advance_block (the same right-hand side, RK4 combination, q normalized with
+   the generated kernel), so results are bitwise identical; without the integrator switch the loop is a
+   straight chain the compiler can schedule (and, for a block, overlap). Inlined into
+   advance_rk4_group with constant n, forced (and, free, normalize). Same contract as advance_block.
 
    Finiteness is checked once per chunk of LV_FREE_CHUNK steps instead of after every step (the 13 tests
    per body-step cost ~10% of a step). This is exact because on this path a non-finite number never
    becomes finite again: every new number is old + (something) (inf + finite = inf; inf + -inf, NaN + any
    = NaN), and normalization maps a q with an inf or NaN component to one with a NaN (1/sqrt(inf) = 0 and
-   inf * 0 = NaN; NaN propagates). So if any state in the chunk went non-finite its end state is
+   inf * 0 = NaN; NaN propagates) — whatever the right-hand side, effects included. So if any state in
+   the chunk went non-finite its end state is
    non-finite too; then the chunk is re-run from its start with a check after every step, which
    recomputes the same bits (deterministic arithmetic) and finds the first failing step and body. */
-static inline long advance_free_rk4(double *state, const double *params, long b0, int n, int normalize,
+static inline long advance_free_rk4(double *state, const double *params, const long *ids, int n,
+                                    const lv_effect_index *ix, int forced, int normalize,
                                     double dt, long n_steps, int *fail_j, double last[][LV_STATE_SIZE])
 {
     double x[LV_BLOCK][LV_STATE_SIZE], xn[LV_BLOCK][LV_STATE_SIZE], k1[LV_BLOCK][LV_STATE_SIZE],
         k2[LV_BLOCK][LV_STATE_SIZE], k3[LV_BLOCK][LV_STATE_SIZE], k4[LV_BLOCK][LV_STATE_SIZE],
         tmp[LV_BLOCK][LV_STATE_SIZE], I[LV_BLOCK][3], snap[LV_BLOCK][LV_STATE_SIZE];
+    double F[LV_BLOCK][3], tau[LV_BLOCK][3], m[LV_BLOCK];
+    const lv_effect_ref *refs[LV_BLOCK];
+    long n_refs[LV_BLOCK];
     const double h2 = LV_RK4_C1 * dt, h3 = LV_RK4_C2 * dt, h4 = LV_RK4_C3 * dt, h6 = dt / LV_RK4_B_DEN;
-    long s, c, m;
+    long s, c, cm;
     int i, j, ok;
     for (j = 0; j < n; j++) {
-        memcpy(x[j], state + (b0 + j) * LV_STATE_SIZE, sizeof x[j]);
-        memcpy(I[j], params + (b0 + j) * LV_PARAM_SIZE + LV_PARAM_I_B, sizeof I[j]);
+        memcpy(x[j], state + ids[j] * LV_STATE_SIZE, sizeof x[j]);
+        memcpy(I[j], params + ids[j] * LV_PARAM_SIZE + LV_PARAM_I_B, sizeof I[j]);
+        m[j] = params[ids[j] * LV_PARAM_SIZE + LV_PARAM_M];
+        refs[j] = ix->refs + ix->start[ids[j]];
+        n_refs[j] = ix->start[ids[j] + 1] - ix->start[ids[j]];
     }
-    for (c = 0; c < n_steps; c += m) {
-        m = n_steps - c < LV_FREE_CHUNK ? n_steps - c : LV_FREE_CHUNK;
+    for (c = 0; c < n_steps; c += cm) {
+        cm = n_steps - c < LV_FREE_CHUNK ? n_steps - c : LV_FREE_CHUNK;
         memcpy(snap, x, (size_t)n * sizeof x[0]);
-        for (s = 0; s < m; s++) {
+        for (s = 0; s < cm; s++) {
             LV_FREE_RK4_STEP();
             memcpy(x, xn, (size_t)n * sizeof x[0]);
         }
@@ -221,7 +331,7 @@ static inline long advance_free_rk4(double *state, const double *params, long b0
         if (ok) continue;
         /* some body went non-finite in this chunk: redo it step by step from its start */
         memcpy(x, snap, (size_t)n * sizeof x[0]);
-        for (s = 0; s < m; s++) {
+        for (s = 0; s < cm; s++) {
             LV_FREE_RK4_STEP();
             for (j = 0; j < n; j++) {
                 if (!all_finite(xn[j])) {
@@ -234,19 +344,20 @@ static inline long advance_free_rk4(double *state, const double *params, long b0
         }
         /* not reached: the non-finite end state of the chunk must fail on the re-run */
     }
-    for (j = 0; j < n; j++) memcpy(state + (b0 + j) * LV_STATE_SIZE, x[j], sizeof x[j]);
+    for (j = 0; j < n; j++) memcpy(state + ids[j] * LV_STATE_SIZE, x[j], sizeof x[j]);
     return -1;
 }
 #undef LV_FREE_RK4_STEP
+#undef LV_RK4_RHS
 
 /* ---- bodies with a spherical joint and/or reaction wheels ------------------------------------ */
 
 
 /* d/dt of [x, Omega] for a body of nonzero kind; u = this step's applied wheel torques.
    r = its model row. A jointed body's p, v derivatives are zero (set from the joint after the step);
-   its linear damping sees the kinematic COM velocity (computed only when needs_v). */
-static void model_rhs(const double *y, const double *u, double m, const double *r, int kind, int needs_v,
-                      const double *effects, long ne, long b, double *yd)
+   its effects that read v_w see the kinematic COM velocity (computed only when needs_v). */
+static void model_rhs(const double *y, const double *u, double m, const double *I_b, const double *r, int kind,
+                      int needs_v, const lv_effect_ref *refs, long n_refs, double *yd)
 {
     double F[3] = {0.0, 0.0, 0.0}, tau[3] = {0.0, 0.0, 0.0}, pk[3], vk[3];
     const double *v = y + LV_STATE_V_W;
@@ -255,7 +366,7 @@ static void model_rhs(const double *y, const double *u, double m, const double *
         lv_pivot_kinematics(y + LV_STATE_Q, y + LV_STATE_OMEGA_B, r + LV_MODEL_ANCHOR_W, r + LV_MODEL_R_B, pk, vk);
         v = vk;
     }
-    effect_sums(y, v, m, effects, ne, b, F, tau);
+    effect_sums(y, v, m, I_b, refs, n_refs, F, tau);
     if (kind & LV_KIND_WHEELS) {
         lv_wheel_body_rhs(y + LV_STATE_Q, y + LV_STATE_OMEGA_B, y + LV_XS_OMEGA, r + LV_MODEL_I_P, r + LV_MODEL_J,
                           r + LV_MODEL_R_B, F, tau, u, r[LV_MODEL_C_W], yd + LV_STATE_Q, yd + LV_STATE_OMEGA_B, yd + LV_XS_OMEGA);
@@ -274,7 +385,7 @@ static void model_rhs(const double *y, const double *u, double m, const double *
 /* Advance body b (nonzero kind) by n_steps. Its rows are written only on success; returns -1, or the
    0-based failing step with last[] = its last finite [x, Omega]. */
 static long advance_model(double *state, const double *params, long b, const lv_models *md,
-                          const double *effects, long ne, int integrator, int normalize,
+                          const lv_effect_index *ix, int integrator, int normalize,
                           double dt, long n_steps, double *last)
 {
     const double *r = md->rows + b * LV_MODEL_SIZE;
@@ -284,18 +395,16 @@ static long advance_model(double *state, const double *params, long b, const lv_
     double y[LV_XS_SIZE], yn[LV_XS_SIZE], k1[LV_XS_SIZE], k2[LV_XS_SIZE], k3[LV_XS_SIZE], k4[LV_XS_SIZE], tmp[LV_XS_SIZE];
     double u[3] = {0.0, 0.0, 0.0}, applied[3];
     const double h2 = LV_RK4_C1 * dt, h3 = LV_RK4_C2 * dt, h4 = LV_RK4_C3 * dt, h6 = dt / LV_RK4_B_DEN;
-    int needs_v = 0;
-    long s, e;
+    const double *I_b = params + b * LV_PARAM_SIZE + LV_PARAM_I_B;
+    const lv_effect_ref *refs = ix->refs + ix->start[b];
+    const long n_refs = ix->start[b + 1] - ix->start[b];
+    const int needs_v = (kind & LV_KIND_JOINT) && (ix->flags[b] & LV_EFFECT_USES_V);
+    long s;
     int i;
-    if (kind & LV_KIND_JOINT)
-        for (e = 0; e < ne; e++) {
-            const double *row = effects + e * LV_EFFECT_SIZE;
-            if ((int)row[0] == LV_EFFECT_LINEAR_DAMPING && ((long)row[1] == -1 || (long)row[1] == b)) needs_v = 1;
-        }
     memcpy(y, state + b * LV_STATE_SIZE, LV_STATE_SIZE * sizeof(double));
     memcpy(y + LV_XS_OMEGA, md->Omega + 3 * b, 3 * sizeof(double));
     memcpy(applied, md->applied + 3 * b, sizeof applied);
-#define MRHS(in, out) model_rhs(in, u, m, r, kind, needs_v, effects, ne, b, out)
+#define MRHS(in, out) model_rhs(in, u, m, I_b, r, kind, needs_v, refs, n_refs, out)
     for (s = 0; s < n_steps; s++) {
         if (kind & LV_KIND_WHEELS)
             lv_wheel_saturation(cmd, y + LV_XS_OMEGA, r[LV_MODEL_TORQUE_LIMIT], r[LV_MODEL_SPEED_LIMIT], u);
@@ -352,42 +461,37 @@ static long advance_model(double *state, const double *params, long b, const lv_
 /* One body's right-hand side on the extended state [x, Omega] (16): plain bodies get Omega' = 0. */
 typedef struct {
     long b;
-    int kind, has, needs_v;
+    int kind, has, needs_v, flags;
     double m;
-    const double *prm, *r, *effects;
-    long ne;
+    const double *prm, *r;
+    const lv_effect_ref *refs;
+    long n_refs;
     double u[3];
 } body_ctx;
 
 static void ctx_rhs(const body_ctx *c, const double *y, double *yd)
 {
     if (c->kind == 0) {
-        body_rhs(y, c->prm, c->effects, c->ne, c->b, c->has, yd);
+        body_rhs(y, c->prm, c->refs, c->n_refs, yd);
         yd[LV_XS_OMEGA] = yd[LV_XS_OMEGA + 1] = yd[LV_XS_OMEGA + 2] = 0.0;
     } else {
-        model_rhs(y, c->u, c->m, c->r, c->kind, c->needs_v, c->effects, c->ne, c->b, yd);
+        model_rhs(y, c->u, c->m, c->prm + LV_PARAM_I_B, c->r, c->kind, c->needs_v, c->refs, c->n_refs, yd);
     }
 }
 
-static void ctx_init(body_ctx *c, const double *params, long b, const lv_models *md, const double *effects, long ne)
+static void ctx_init(body_ctx *c, const double *params, long b, const lv_models *md, const lv_effect_index *ix)
 {
-    long e;
     c->b = b;
     c->prm = params + b * LV_PARAM_SIZE;
     c->m = c->prm[LV_PARAM_M];
-    c->effects = effects;
-    c->ne = ne;
+    c->refs = ix->refs + ix->start[b];
+    c->n_refs = ix->start[b + 1] - ix->start[b];
+    c->flags = ix->flags[b];
     c->kind = md != NULL ? (int)md->rows[b * LV_MODEL_SIZE + LV_MODEL_KIND] : 0;
     c->r = md != NULL ? md->rows + b * LV_MODEL_SIZE : NULL;
-    c->has = 0;
-    c->needs_v = 0;
+    c->has = c->n_refs > 0;
+    c->needs_v = (c->kind & LV_KIND_JOINT) && (c->flags & LV_EFFECT_USES_V);
     c->u[0] = c->u[1] = c->u[2] = 0.0;
-    for (e = 0; e < ne; e++) {
-        const double *row = effects + e * LV_EFFECT_SIZE;
-        if ((long)row[1] != -1 && (long)row[1] != b) continue;
-        c->has = 1;
-        if ((c->kind & LV_KIND_JOINT) && (int)row[0] == LV_EFFECT_LINEAR_DAMPING) c->needs_v = 1;
-    }
 }
 
 /* Dormand-Prince 5(4): LV_DP_A, LV_DP_E and the controller constants come from generated/tableaux.h
@@ -443,8 +547,8 @@ static void ctx_finish(const body_ctx *c, double *y, int normalize)
 
 /* Advance body b by n_steps output steps of dt with dopri5. Returns -1 on success (rows written), else
    the failing step with *why = LV_DIVERGED or LV_TOLERANCE and last[] = its last accepted state. */
-static long advance_dopri5(double *state, const double *params, long b, const lv_models *md, const double *effects,
-                           long ne, int normalize, double dt, long n_steps, const lv_adaptive *ad, int *why, double *last)
+static long advance_dopri5(double *state, const double *params, long b, const lv_models *md, const lv_effect_index *ix,
+                           int normalize, double dt, long n_steps, const lv_adaptive *ad, int *why, double *last)
 {
     body_ctx c;
     double y[LV_XS_SIZE], yn[LV_XS_SIZE], k[7][LV_XS_SIZE], tmp[LV_XS_SIZE], err[LV_XS_SIZE], applied[3];
@@ -453,7 +557,7 @@ static long advance_dopri5(double *state, const double *params, long b, const lv
     const double *cmd = NULL;
     int have_k1 = 0, n, i, s2, j;
     long s;
-    ctx_init(&c, params, b, md, effects, ne);
+    ctx_init(&c, params, b, md, ix);
     n = c.kind & LV_KIND_WHEELS ? LV_XS_SIZE : LV_STATE_SIZE;
     memcpy(y, state + b * LV_STATE_SIZE, LV_STATE_SIZE * sizeof(double));
     y[LV_XS_OMEGA] = y[LV_XS_OMEGA + 1] = y[LV_XS_OMEGA + 2] = 0.0;
@@ -550,13 +654,14 @@ static void plain_loads(const body_ctx *c, const double *x, double *F, double *t
 {
     double tau_w[3] = {0.0, 0.0, 0.0};
     F[0] = F[1] = F[2] = 0.0;
-    effect_sums(x, x + LV_STATE_V_W, c->m, c->effects, c->ne, c->b, F, tau_w);
+    effect_sums(x, x + LV_STATE_V_W, c->m, c->prm + LV_PARAM_I_B, c->refs, c->n_refs, F, tau_w);
     lv_world_to_body(x + LV_STATE_Q, tau_w, tau_b);
 }
 
 /* Kick of the splitting: v and omega (q, p fixed) under the effects for time h (splitting_kick). One
-   evaluation when the loads do not depend on v or omega (then exact); the explicit midpoint rule (two) with
-   linear or angular damping, which keeps the composition symmetric to second order. */
+   evaluation when the loads do not depend on v or omega (then exact); the explicit midpoint rule (two)
+   with an effect that reads them (linear or angular damping, ...), which keeps the composition symmetric
+   to second order. */
 static void kick(const body_ctx *c, double *x, double h, int damped)
 {
     const double *I = c->prm + LV_PARAM_I_B;
@@ -613,20 +718,15 @@ static void gyro_step(const body_ctx *c, double *x, double h)
 }
 
 /* Advance plain body b by n_steps of splitting or implicit_gyro; contract as advance_block with n = 1. */
-static long advance_structured(double *state, const double *params, long b, const double *effects, long ne,
+static long advance_structured(double *state, const double *params, long b, const lv_effect_index *ix,
                                int integrator, int normalize, double dt, long n_steps, double *last)
 {
     body_ctx c;
     double x[LV_STATE_SIZE], xn[LV_STATE_SIZE];
-    int damped = 0, i;
-    long s, e;
-    ctx_init(&c, params, b, NULL, effects, ne);
-    for (e = 0; e < ne; e++) {
-        const double *row = effects + e * LV_EFFECT_SIZE;
-        const int k = (int)row[0];
-        if (((long)row[1] == -1 || (long)row[1] == b) && (k == LV_EFFECT_LINEAR_DAMPING || k == LV_EFFECT_ANGULAR_DAMPING))
-            damped = 1;
-    }
+    int damped, i;
+    long s;
+    ctx_init(&c, params, b, NULL, ix);
+    damped = (c.flags & (LV_EFFECT_USES_V | LV_EFFECT_USES_OMEGA)) != 0;
     memcpy(x, state + b * LV_STATE_SIZE, sizeof x);
     for (s = 0; s < n_steps; s++) {
         memcpy(xn, x, sizeof x);
@@ -647,36 +747,147 @@ static long advance_structured(double *state, const double *params, long b, cons
     return -1;
 }
 
-/* Whether any effect acts on one of bodies b0 .. b0+n-1. */
-static int any_effect(const double *effects, long ne, long b0, int n)
+/* Divergence is reported at the earliest failing step over all bodies, then the lowest body index (as
+   the NumPy backend, which steps every body in lockstep). Bodies are visited in groups, each advanced
+   only as far as the failure kept so far (limit, best) can still be beaten: up to `limit` steps, one
+   more when the group holds a body below `best` (it would win a tie at step `limit`). */
+static int earlier(long s, long b, long limit, long best)
 {
-    long e;
-    for (e = 0; e < ne; e++) {
-        const long target = (long)effects[e * LV_EFFECT_SIZE + 1];
-        if (target == -1 || (target >= b0 && target < b0 + n)) return 1;
+    return s < limit || (s == limit && b < best);
+}
+
+static long run_limit(long lowest, long limit, long best, long n_steps)
+{
+    return (best >= 0 && lowest < best && limit < n_steps) ? limit + 1 : limit;
+}
+
+/* RK4 on up to LV_BLOCK plain bodies of ids with effects, in lockstep, all of one right-hand side kind
+   (LV_RHS_TORQUE or LV_RHS_FULL). Every call below has constant arguments and is inlined with its
+   kernels and the effect dispatch (flatten), so each block size and kind compiles to its own loop. */
+LV_FLATTEN static long advance_forced_rk4(double *state, const double *params, const long *ids, int n,
+                                          const lv_effect_index *ix, int kind, int normalize, double dt, long n_steps,
+                                          int *fail_j, double last[][LV_STATE_SIZE])
+{
+    if (kind == LV_RHS_TORQUE)
+        return n == LV_BLOCK ? advance_free_rk4(state, params, ids, LV_BLOCK, ix, LV_RHS_TORQUE, normalize, dt, n_steps, fail_j, last)
+                             : advance_free_rk4(state, params, ids, n, ix, LV_RHS_TORQUE, normalize, dt, n_steps, fail_j, last);
+    return n == LV_BLOCK ? advance_free_rk4(state, params, ids, LV_BLOCK, ix, LV_RHS_FULL, normalize, dt, n_steps, fail_j, last)
+                         : advance_free_rk4(state, params, ids, n, ix, LV_RHS_FULL, normalize, dt, n_steps, fail_j, last);
+}
+
+/* RK4 on up to LV_BLOCK plain bodies of ids in lockstep, all of one right-hand side kind (LV_RHS_*). The
+   torque-free calls have constant block sizes and normalize flags, so the compiler specializes them. */
+static long advance_rk4_group(double *state, const double *params, const long *ids, int n, const lv_effect_index *ix,
+                              int kind, int normalize, double dt, long n_steps, int *fail_j,
+                              double last[][LV_STATE_SIZE])
+{
+    if (kind != LV_RHS_FREE)
+        return advance_forced_rk4(state, params, ids, n, ix, kind, normalize, dt, n_steps, fail_j, last);
+    if (n == LV_BLOCK)
+        return normalize ? advance_free_rk4(state, params, ids, LV_BLOCK, ix, LV_RHS_FREE, 1, dt, n_steps, fail_j, last)
+                         : advance_free_rk4(state, params, ids, LV_BLOCK, ix, LV_RHS_FREE, 0, dt, n_steps, fail_j, last);
+    if (n == 1)
+        return normalize ? advance_free_rk4(state, params, ids, 1, ix, LV_RHS_FREE, 1, dt, n_steps, fail_j, last)
+                         : advance_free_rk4(state, params, ids, 1, ix, LV_RHS_FREE, 0, dt, n_steps, fail_j, last);
+    return advance_free_rk4(state, params, ids, n, ix, LV_RHS_FREE, normalize, dt, n_steps, fail_j, last);
+}
+
+/* Up to LV_BLOCK plain bodies of ids (ascending) in lockstep, all of one right-hand side kind (LV_RHS_*):
+   RK4 on the fast path, the other integrators on the generic block (constant block sizes let the
+   compiler specialize it). */
+static long advance_group(double *state, const double *params, const long *ids, int n, const lv_effect_index *ix,
+                          int kind, int integrator, int normalize, double dt, long n_steps, int *fail_j,
+                          double last[][LV_STATE_SIZE])
+{
+    if (integrator == LV_INTEGRATOR_RK4)
+        return advance_rk4_group(state, params, ids, n, ix, kind, normalize, dt, n_steps, fail_j, last);
+    if (n == LV_BLOCK)
+        return advance_block(state, params, ids, LV_BLOCK, ix, integrator, normalize, dt, n_steps, fail_j, last);
+    if (n == 1)
+        return advance_block(state, params, ids, 1, ix, integrator, normalize, dt, n_steps, fail_j, last);
+    return advance_block(state, params, ids, n, ix, integrator, normalize, dt, n_steps, fail_j, last);
+}
+
+/* The right-hand side kind of plain body b (LV_RHS_*). */
+static int rhs_kind(const lv_effect_index *ix, long b)
+{
+    if (ix->start[b + 1] == ix->start[b]) return LV_RHS_FREE;
+    return (ix->flags[b] & LV_EFFECT_FORCE) ? LV_RHS_FULL : LV_RHS_TORQUE;
+}
+
+/* euler, semi-implicit Euler, rk4 over every body. Bodies with a joint or wheels are stepped one by one;
+   plain bodies in lockstep blocks gathered by their work (rhs_kind): those no effect acts on together
+   (RK4: the torque-free fast path), those with effects by kind, so a plain body never leaves its path
+   because of a neighbour. ids: scratch for nb indices. Returns the status; *limit, *best as in
+   lv_simulate. */
+static int advance_fixed(double *state, const double *params, long nb, const lv_effect_index *ix,
+                         const lv_models *models, int integrator, int normalize, double dt, long n_steps,
+                         long *ids, long *limit, long *best)
+{
+    double last[LV_BLOCK][LV_STATE_SIZE], lastm[LV_XS_SIZE];
+    long b, k, s, lim, count[3] = {0, 0, 0}, first[3];
+    int j, n, kind, status = LV_OK;
+    for (b = 0; b < nb; b++) {
+        if (models != NULL && (int)models->rows[b * LV_MODEL_SIZE + LV_MODEL_KIND] != 0) {
+            lim = run_limit(b, *limit, *best, n_steps);
+            if (lim <= 0) continue;
+            s = advance_model(state, params, b, models, ix, integrator, normalize, dt, lim, lastm);
+            if (s < 0 || !earlier(s, b, *limit, *best)) continue;
+            memcpy(state + b * LV_STATE_SIZE, lastm, LV_STATE_SIZE * sizeof(double));
+            memcpy(models->Omega + 3 * b, lastm + LV_XS_OMEGA, 3 * sizeof(double));
+            *limit = s;
+            *best = b;
+            status = LV_DIVERGED;
+        } else {
+            count[rhs_kind(ix, b)]++;
+        }
     }
-    return 0;
+    first[0] = 0; /* ids: the plain bodies grouped by kind, ascending within each */
+    first[1] = count[0];
+    first[2] = count[0] + count[1];
+    for (b = 0; b < nb; b++)
+        if (models == NULL || (int)models->rows[b * LV_MODEL_SIZE + LV_MODEL_KIND] == 0) ids[first[rhs_kind(ix, b)]++] = b;
+    for (kind = 0; kind < 3; kind++) {
+        const long *list = ids + first[kind] - count[kind];
+        for (k = 0; k < count[kind]; k += n) {
+            n = (int)(count[kind] - k < LV_BLOCK ? count[kind] - k : LV_BLOCK);
+            lim = run_limit(list[k], *limit, *best, n_steps);
+            if (lim <= 0) continue;
+            s = advance_group(state, params, list + k, n, ix, kind, integrator, normalize, dt, lim, &j, last);
+            /* the block stops at its first failing step, j its lowest failing body there (lockstep) */
+            if (s < 0 || !earlier(s, list[k + j], *limit, *best)) continue;
+            memcpy(state + list[k + j] * LV_STATE_SIZE, last[j], sizeof last[j]);
+            *limit = s;
+            *best = list[k + j];
+            status = LV_DIVERGED;
+        }
+    }
+    return status;
 }
 
 int lv_simulate(double *state, const double *params, long nb,
-                const double *effects, long ne, const lv_models *models,
-                int integrator, int normalize, double dt, long n_steps,
+                const double *effects, long ne, long row_size, const lv_user_effects *user,
+                const lv_models *models, int integrator, int normalize, double dt, long n_steps,
                 const lv_adaptive *adaptive, long *fail_step, long *fail_body)
 {
-    /* Divergence is reported at the earliest failing step over all bodies, then the lowest body index
-       at that step (as the NumPy backend, which steps every body in lockstep). Bodies are visited in
-       index order and each one is advanced by at most `limit` steps, the earliest failure so far: a
-       later body wins only by failing strictly earlier, so nothing past `limit` can change the answer. */
+    lv_effect_index ix;
     double last[LV_BLOCK][LV_STATE_SIZE];
-    long b0, b, s, limit = n_steps, best_body = -1;
-    int j, n, status = LV_OK;
+    long b, s, limit = n_steps, best_body = -1, *ids = NULL;
+    int status = LV_OK;
     if (integrator < LV_INTEGRATOR_EULER || integrator > LV_INTEGRATOR_LAST) return LV_BAD_ARGUMENT;
+    if (ne > 0 && row_size < LV_EFFECT_ROW_PARAMS) return LV_BAD_ARGUMENT;
+    if (integrator == LV_INTEGRATOR_DOPRI5 && (adaptive == NULL || !(adaptive->rtol > 0.0) || !(adaptive->atol >= 0.0)))
+        return LV_BAD_ARGUMENT;
+    if ((integrator == LV_INTEGRATOR_SPLITTING || integrator == LV_INTEGRATOR_IMPLICIT_GYRO) && models != NULL)
+        for (b = 0; b < nb; b++)
+            if ((int)models->rows[b * LV_MODEL_SIZE + LV_MODEL_KIND] != 0) return LV_BAD_ARGUMENT;
+    status = index_build(&ix, effects, ne, row_size, nb, user, fail_step);
+    if (status != LV_OK) return status;
     if (integrator == LV_INTEGRATOR_DOPRI5) {
-        if (adaptive == NULL || !(adaptive->rtol > 0.0) || !(adaptive->atol >= 0.0)) return LV_BAD_ARGUMENT;
         for (b = 0; b < nb && limit > 0; b++) {
             double lastx[LV_XS_SIZE];
             int why = LV_DIVERGED;
-            s = advance_dopri5(state, params, b, models, effects, ne, normalize, dt, limit, adaptive, &why, lastx);
+            s = advance_dopri5(state, params, b, models, &ix, normalize, dt, limit, adaptive, &why, lastx);
             if (s < 0) continue;
             memcpy(state + b * LV_STATE_SIZE, lastx, LV_STATE_SIZE * sizeof(double));
             if (models != NULL && (int)models->rows[b * LV_MODEL_SIZE + LV_MODEL_KIND] != 0)
@@ -686,11 +897,8 @@ int lv_simulate(double *state, const double *params, long nb,
             status = why;
         }
     } else if (integrator == LV_INTEGRATOR_SPLITTING || integrator == LV_INTEGRATOR_IMPLICIT_GYRO) {
-        if (models != NULL)
-            for (b = 0; b < nb; b++)
-                if ((int)models->rows[b * LV_MODEL_SIZE + LV_MODEL_KIND] != 0) return LV_BAD_ARGUMENT;
         for (b = 0; b < nb && limit > 0; b++) {
-            s = advance_structured(state, params, b, effects, ne, integrator, normalize, dt, limit, last[0]);
+            s = advance_structured(state, params, b, &ix, integrator, normalize, dt, limit, last[0]);
             if (s < 0) continue;
             memcpy(state + b * LV_STATE_SIZE, last[0], sizeof last[0]);
             limit = s;
@@ -698,49 +906,14 @@ int lv_simulate(double *state, const double *params, long nb,
             status = LV_DIVERGED;
         }
     } else {
-        for (b0 = 0; b0 < nb && limit > 0; b0 += n) {
-            if (models != NULL && (int)models->rows[b0 * LV_MODEL_SIZE + LV_MODEL_KIND] != 0) {
-                double lastm[LV_XS_SIZE];
-                n = 1;
-                s = advance_model(state, params, b0, models, effects, ne, integrator, normalize, dt, limit, lastm);
-                if (s < 0) continue;
-                memcpy(state + b0 * LV_STATE_SIZE, lastm, LV_STATE_SIZE * sizeof(double));
-                memcpy(models->Omega + 3 * b0, lastm + LV_XS_OMEGA, 3 * sizeof(double));
-                limit = s;
-                best_body = b0;
-                status = LV_DIVERGED;
-                continue;
-            }
-            /* a run of up to LV_BLOCK consecutive plain bodies */
-            n = (int)(nb - b0 < LV_BLOCK ? nb - b0 : LV_BLOCK);
-            if (models != NULL)
-                for (j = 1; j < n; j++)
-                    if ((int)models->rows[(b0 + j) * LV_MODEL_SIZE + LV_MODEL_KIND] != 0) { n = j; break; }
-            /* constant block sizes let the compiler specialize (clone) advance_block */
-            if (integrator == LV_INTEGRATOR_RK4 && !any_effect(effects, ne, b0, n)) {
-                if (n == LV_BLOCK)
-                    s = normalize ? advance_free_rk4(state, params, b0, LV_BLOCK, 1, dt, limit, &j, last)
-                                  : advance_free_rk4(state, params, b0, LV_BLOCK, 0, dt, limit, &j, last);
-                else if (n == 1)
-                    s = normalize ? advance_free_rk4(state, params, b0, 1, 1, dt, limit, &j, last)
-                                  : advance_free_rk4(state, params, b0, 1, 0, dt, limit, &j, last);
-                else
-                    s = advance_free_rk4(state, params, b0, n, normalize, dt, limit, &j, last);
-            } else if (n == LV_BLOCK)
-                s = advance_block(state, params, b0, LV_BLOCK, effects, ne, integrator, normalize, dt, limit, &j, last);
-            else if (n == 1)
-                s = advance_block(state, params, b0, 1, effects, ne, integrator, normalize, dt, limit, &j, last);
-            else
-                s = advance_block(state, params, b0, n, effects, ne, integrator, normalize, dt, limit, &j, last);
-            if (s < 0) continue;
-            /* the block stops at its first failing step, j its lowest failing body there (lockstep) */
-            memcpy(state + (b0 + j) * LV_STATE_SIZE, last[j], sizeof last[j]);
-            limit = s;
-            best_body = b0 + j;
-            status = LV_DIVERGED;
-        }
+        ids = (long *)malloc(((size_t)nb + 1) * sizeof(long));
+        status = ids == NULL ? LV_NO_MEMORY
+                             : advance_fixed(state, params, nb, &ix, models, integrator, normalize, dt, n_steps, ids,
+                                             &limit, &best_body);
+        free(ids);
     }
-    if (status != LV_OK) {
+    index_free(&ix);
+    if (status != LV_OK && status != LV_NO_MEMORY) {
         *fail_step = limit;
         *fail_body = best_body;
     }

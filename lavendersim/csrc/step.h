@@ -1,5 +1,5 @@
 /* LavenderSim C stepping loop: advances many independent rigid bodies by many steps.
-   Plain C99, no Python; uses only the generated kernels (generated/kernels.h). */
+   Plain C99, no Python; uses only the generated kernels and effect dispatch (generated/kernels.h). */
 #ifndef LAVENDERSIM_STEP_H
 #define LAVENDERSIM_STEP_H
 
@@ -7,17 +7,22 @@
    I_x, I_y, I_z), the per-body model row (LV_MODEL_*) and the extended state [x, Omega] (LV_XS_*) are
    declared in derive/layout.py and printed as named offsets in generated/layout.h. */
 #include "layout.h"
+#include "kernels.h"
 
-/* effect row (8): kind, body (index, or -1 for every body), p0..p5 */
-#define LV_EFFECT_SIZE 8
+/* The effect table, its row layout (LV_EFFECT_ROW_*), the built-in codes and their dispatch
+   (lv_effect_apply) are generated from the effect declarations (generated/kernels.h). User effects are
+   compiled apart and reach the stepping loop through this table: entry i serves code
+   LV_EFFECT_USER_BASE + i (fn NULL: no such code). */
+typedef struct {
+    lv_effect_fn fn;  /* adds the effect's force and torque (the lv_effect_fn convention) */
+    int n_params;     /* parameters it reads from its row */
+    int flags;        /* LV_EFFECT_USES_*, LV_EFFECT_FORCE */
+} lv_user_effect;
 
-enum {
-    LV_EFFECT_APPLIED_TORQUE = 1,  /* p0..2 = tau_w */
-    LV_EFFECT_FORCE_AT_POINT = 2,  /* p0..2 = r_b (body frame), p3..5 = F_w */
-    LV_EFFECT_GRAVITY = 3,         /* p0..2 = g_w */
-    LV_EFFECT_LINEAR_DAMPING = 4,  /* p0 = c */
-    LV_EFFECT_ANGULAR_DAMPING = 5  /* p0 = c */
-};
+typedef struct {
+    const lv_user_effect *entries;
+    long n;
+} lv_user_effects;
 
 /* The model row (LV_MODEL_SIZE), per body: kind, I_p[9] (about the pivot, body frame, row-major), r_b[3]
    (pivot -> COM, body frame), anchor_w[3], J[3], torque_limit, speed_limit, c_w (offsets LV_MODEL_*).
@@ -60,10 +65,15 @@ enum {
     LV_TOLERANCE = 2,   /* dopri5: the step size fell below dt*1e-12 (or over 10^6 substeps in one step)
                            without meeting rtol/atol; same state contract as LV_DIVERGED, and h[fail_body]
                            holds the step size that was too small */
-    LV_BAD_ARGUMENT = -1
+    LV_BAD_ARGUMENT = -1,
+    LV_UNKNOWN_EFFECT = -2, /* an effect row's code is no declared effect's (*fail_step = the row); nothing changed */
+    LV_NO_MEMORY = -3       /* the per-body effect index could not be allocated; nothing changed */
 };
 
 /* Advance nb bodies (state: nb x 13, in place) by n_steps steps of size dt.
+   effects: ne rows of row_size doubles, [code, body (-1: every body), parameters...]; built-in codes
+   and codes of `user` (may be NULL). The effects are indexed per body once per call (O(nb + ne)), so a
+   body's step costs its own effects only.
    Bodies are independent: the outer loop runs over bodies (blocks of them), the inner over steps.
    models may be NULL (every body plain). A body of nonzero kind steps [x, Omega] (16 numbers) with
    wheel_body_rhs (wheels) or pivot_body_rhs (joint only); its wheel torques are saturated at the
@@ -74,12 +84,14 @@ enum {
    NumPy backend's order). Then body fail_body holds its last finite state and wheel rates (before
    step fail_step; its applied row untouched) and, for LV_TOLERANCE, h[fail_body] as above; every
    other body's rows (state, Omega, applied, h, nfev) are unspecified (advanced by some number of
-   steps): the caller restores them from its snapshot. Effect kinds/bodies and model kinds must be valid (the caller
-   validates); an unknown integrator, dopri5 without `adaptive`, or splitting / implicit_gyro with a body
-   of nonzero kind returns LV_BAD_ARGUMENT (nothing changed). `adaptive` is read only by dopri5. */
+   steps): the caller restores them from its snapshot. Model kinds must be valid (the caller validates); an
+   unknown integrator, dopri5 without `adaptive`, splitting / implicit_gyro with a body of nonzero kind, or
+   an effect body outside [-1, nb) returns LV_BAD_ARGUMENT, an effect code no declared effect has (built
+   in or in `user`) LV_UNKNOWN_EFFECT with *fail_step = its row (nothing changed, never a silent no-op).
+   `adaptive` is read only by dopri5. */
 int lv_simulate(double *state, const double *params, long nb,
-                const double *effects, long ne, const lv_models *models,
-                int integrator, int normalize, double dt, long n_steps,
+                const double *effects, long ne, long row_size, const lv_user_effects *user,
+                const lv_models *models, int integrator, int normalize, double dt, long n_steps,
                 const lv_adaptive *adaptive, long *fail_step, long *fail_body);
 
 #endif

@@ -1,0 +1,271 @@
+"""Effect declarations: one per effect, the unit from which every printing of it is made.
+
+An effect contributes a force at the centre of mass and/or a torque about it, both in the world
+frame, written in SymPy over
+
+* the body's state and model, the symbols of :data:`STATE` — ``p_w`` (3, m, world), ``q`` (4,
+  orientation R_WB as (x, y, z, w)), ``v_w`` (3, m/s, world; for a body on a spherical joint the
+  kinematic COM velocity), ``omega_b`` (3, rad/s, body frame), ``m`` (kg), ``I_b`` (3, principal
+  moments about the COM, kg·m²) — plus the helpers ``STATE.R_WB`` and ``STATE.omega_w``;
+* the effect's own named parameters (:func:`param`): a shape (scalar or a vector), a unit, a
+  description, a validation rule (``"finite"``, ``"nonnegative"`` or ``"positive"``, applied to
+  every entry) and an optional default.
+
+``lavendersim derive`` prints, from a declaration: the C kernel ``lv_effect_<name>``, its entry in
+the generated C dispatch ``lv_effect_apply``, the NumPy kernel and dispatch, the CasADi
+expression, the Python metadata (code, parameter layout, rules, and whether the effect reads v or
+ω — from the free symbols of its expressions) and its EQUATIONS.md entry. Model effects (a joint,
+wheels) declare only their parameters: their equations are kernels of their own.
+
+A user declares effects the same way in one file outside the package (see docs/extending.md)::
+
+    from lavendersim.derive.effect import STATE, effect, param
+    c = param("c", unit="N·m·s/rad", doc="drag coefficient", rule="nonnegative")
+    EFFECTS = [effect("spin_drag", "Viscous spin drag", params=[c], torque_w=-c.symbol * STATE.omega_w)]
+"""
+from __future__ import annotations
+
+import keyword
+import re
+from dataclasses import dataclass, field
+
+import sympy as sp
+
+from .kernel import Arg, Kernel, scalar, vec
+from .layout import PARAM as LAYOUT_PARAM
+from .layout import STATE as LAYOUT_STATE
+from .quaternion import rotation_matrix
+
+RULES = ("finite", "nonnegative", "positive")
+KINDS = ("force", "model")
+# Effect table row: [code, body (index, or -1 for every body), parameters...]; a row holds at least
+# ROW_MIN_PARAMS parameters (wider when a declared effect needs more).
+ROW_CODE, ROW_BODY, ROW_PARAMS = 0, 1, 2
+ROW_MIN_PARAMS = 6
+# Codes of effects loaded from user declarations start here (assigned in load order at run time).
+USER_CODE_BASE = 1000
+# Bits of an effect's flags (C and Python): which state values its force or torque reads.
+FLAG_USES_V = 1       # reads v_w (a jointed body then needs its kinematic COM velocity)
+FLAG_USES_OMEGA = 2   # reads omega_b
+FLAG_FORCE = 4        # adds a force (a body whose effects add none may use the torque-only right-hand side)
+FLAGS = {"uses_v_w": FLAG_USES_V, "uses_omega_b": FLAG_USES_OMEGA, "adds_force": FLAG_FORCE}
+# Version of the calling convention of printed effect functions (checked when a user library loads).
+ABI_VERSION = 1
+_NAME = re.compile(r"^[a-z][a-z0-9_]*$")
+_PARAM_NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
+
+
+class _State:
+    """Symbols of the body state and model that an effect may use (see the module docstring)."""
+
+    FIELDS = tuple(f.name for f in LAYOUT_STATE.fields) + tuple(f.name for f in LAYOUT_PARAM.fields)
+    DOCS = {"p_w": ("COM position, world frame, m", "real"),
+            "q": ("orientation (x, y, z, w), R_WB, unit", "unit_quaternion"),
+            "v_w": ("COM velocity, world frame, m/s", "real"),
+            "omega_b": ("angular velocity, body frame, rad/s", "real"),
+            "m": ("mass, kg", "positive"),
+            "I_b": ("principal moments of inertia about the COM, body frame, kg·m²", "positive")}
+
+    def __init__(self):
+        if self.FIELDS != ("p_w", "q", "v_w", "omega_b", "m", "I_b"):
+            raise RuntimeError("derive: the effect symbols follow derive/layout.py's STATE and PARAM fields")
+        self.p_w, self.q, self.v_w, self.omega_b = vec("p_w", 3), vec("q", 4), vec("v_w", 3), vec("omega_b", 3)
+        self.m = scalar("m", positive=True)
+        self.I_b = vec("I_b", 3)
+        self.R_WB = rotation_matrix(self.q)
+        self.omega_w = self.R_WB * self.omega_b
+
+    def value(self, name: str):
+        return getattr(self, name)
+
+    def symbols(self, name: str) -> list[sp.Symbol]:
+        v = self.value(name)
+        return list(v) if isinstance(v, sp.MatrixBase) else [v]
+
+
+STATE = _State()
+
+
+@dataclass
+class Param:
+    """A named effect parameter: shape () or (n,), unit, description, rule, optional default."""
+
+    name: str
+    shape: tuple[int, ...] = ()
+    unit: str = ""
+    doc: str = ""
+    rule: str = "finite"
+    default: object = None
+
+    def __post_init__(self):
+        if isinstance(self.shape, int):
+            self.shape = (self.shape,)
+        self.shape = tuple(int(s) for s in self.shape)
+        if not _PARAM_NAME.match(self.name):
+            raise ValueError(f"param {self.name!r}: a name is letters, digits and _, starting with a letter")
+        if keyword.iskeyword(self.name) or self.name in _State.FIELDS or self.name in _RESERVED:
+            raise ValueError(f"param {self.name!r}: the name is reserved (state symbols: {', '.join(_State.FIELDS)})")
+        if len(self.shape) > 1 or (self.shape and self.shape[0] < 1):
+            raise ValueError(f"param {self.name!r}: shape must be () or (n,), got {self.shape}")
+        if self.rule not in RULES:
+            raise ValueError(f"param {self.name!r}: rule must be one of {', '.join(RULES)}, got {self.rule!r}")
+        if self.default is not None:
+            d = tuple(float(v) for v in self.default) if self.shape else float(self.default)
+            if self.shape and len(d) != self.shape[0]:
+                raise ValueError(f"param {self.name!r}: default must have {self.shape[0]} entries")
+            self.default = d
+        self.symbol = vec(self.name, self.shape[0]) if self.shape else scalar(self.name)
+
+    @property
+    def size(self) -> int:
+        return self.shape[0] if self.shape else 1
+
+    @property
+    def domain(self) -> str:
+        return "real" if self.rule == "finite" else "positive"
+
+
+# Output names of effect kernels, and names the printed dispatch code uses.
+OUT_FORCE, OUT_TORQUE = "F_com_w", "tau_com_w"
+_RESERVED = {"x", "p", "F", "tau", OUT_FORCE, OUT_TORQUE, "code", "body", "numpy", "casadi", "batch"}
+
+
+def param(name: str, shape=(), unit: str = "", doc: str = "", rule: str = "finite", default=None) -> Param:
+    """Declare an effect parameter; its SymPy value is ``.symbol`` (a symbol or a column of them).
+
+    Parameters
+    ----------
+    name : str
+        Parameter name, as the user passes it to ``scene.add_effect(..., name=value)``.
+    shape : int or tuple
+        ``()`` for a scalar, ``3`` or ``(3,)`` for a vector.
+    unit, doc : str
+        Unit and meaning (frame included), shown in EQUATIONS.md and error messages.
+    rule : {"finite", "nonnegative", "positive"}
+        Validation of every entry when an effect is added to a scene.
+    default : float or sequence, optional
+        Value used when the parameter is not given.
+    """
+    return Param(name, shape, unit, doc, rule, default)
+
+
+@dataclass
+class EffectDecl:
+    """One effect: its force (world, at the COM) and torque (world, about the COM) in SymPy."""
+
+    name: str
+    summary: str
+    params: list[Param]
+    force_w: sp.Matrix | None = None
+    torque_w: sp.Matrix | None = None
+    kind: str = "force"
+    caption: str = ""
+    notes: list[str] = field(default_factory=list)
+
+    def __post_init__(self):
+        if not _NAME.match(self.name) or keyword.iskeyword(self.name):
+            raise ValueError(f"effect {self.name!r}: a name is lowercase letters, digits and _, starting with a letter")
+        if self.kind not in KINDS:
+            raise ValueError(f"effect {self.name}: kind must be one of {', '.join(KINDS)}")
+        names = [p.name for p in self.params]
+        if len(set(names)) != len(names):
+            raise ValueError(f"effect {self.name}: duplicate parameter names {names}")
+        for label in ("force_w", "torque_w"):
+            v = getattr(self, label)
+            if v is None:
+                continue
+            v = sp.Matrix(v)
+            if v.shape != (3, 1):
+                raise ValueError(f"effect {self.name}: {label} must be a 3-vector (column), got shape {v.shape}")
+            setattr(self, label, v)
+        if self.kind == "force":
+            if self.force_w is None and self.torque_w is None:
+                raise ValueError(f"effect {self.name}: declare force_w and/or torque_w")
+            allowed = {s for f in _State.FIELDS for s in STATE.symbols(f)} | {s for p in self.params for s in _flat(p.symbol)}
+            unknown = self.free_symbols - allowed
+            if unknown:
+                raise ValueError(f"effect {self.name}: uses undeclared symbols {sorted(map(str, unknown))}; "
+                                 f"declare them with param() or use STATE's ({', '.join(_State.FIELDS)})")
+        elif self.force_w is not None or self.torque_w is not None:
+            raise ValueError(f"effect {self.name}: a model effect declares parameters only")
+
+    @property
+    def outputs(self) -> list[tuple[str, sp.Matrix]]:
+        """(kernel output name, expression) of the declared outputs, the force first."""
+        return [(n, v) for n, v in ((OUT_FORCE, self.force_w), (OUT_TORQUE, self.torque_w)) if v is not None]
+
+    @property
+    def free_symbols(self) -> set:
+        out = set()
+        for _, v in self.outputs:
+            out |= v.free_symbols
+        return out
+
+    @property
+    def state_inputs(self) -> list[str]:
+        """The state fields the expressions read, in STATE order."""
+        free = self.free_symbols
+        return [f for f in _State.FIELDS if free & set(STATE.symbols(f))]
+
+    @property
+    def flags(self) -> int:
+        used = self.state_inputs
+        return ((FLAG_USES_V if "v_w" in used else 0) | (FLAG_USES_OMEGA if "omega_b" in used else 0)
+                | (FLAG_FORCE if self.force_w is not None else 0))
+
+    @property
+    def n_params(self) -> int:
+        return sum(p.size for p in self.params)
+
+    def offsets(self) -> dict[str, int]:
+        """Offset of each parameter within the row's parameter block."""
+        out, o = {}, 0
+        for p in self.params:
+            out[p.name] = o
+            o += p.size
+        return out
+
+    @property
+    def kernel_name(self) -> str:
+        return f"effect_{self.name}"
+
+    def kernel(self, group: str = "Scene effects") -> Kernel:
+        """The effect as a kernel: inputs = the state fields it reads, then its parameters."""
+        if self.kind != "force":
+            raise ValueError(f"effect {self.name}: a model effect has no kernel")
+        ins = [Arg(f, STATE.value(f), *_State.DOCS[f]) for f in self.state_inputs]
+        ins += [Arg(p.name, p.symbol, f"{p.doc}, {p.unit}" if p.unit else p.doc, p.domain) for p in self.params]
+        outs = [Arg(n, v, "force at the COM, world frame, N" if n == OUT_FORCE else "torque about the COM, world frame, N·m")
+                for n, v in self.outputs]
+        return Kernel(self.kernel_name, self.summary, self.caption, ins, outs, group, list(self.notes))
+
+
+def _flat(v) -> list:
+    return list(v) if isinstance(v, sp.MatrixBase) else [v]
+
+
+def effect(name: str, summary: str, params=(), force_w=None, torque_w=None, caption: str = "",
+           notes=()) -> EffectDecl:
+    """Declare a force effect (see the module docstring).
+
+    Parameters
+    ----------
+    name : str
+        The name users pass to ``scene.add_effect``; lowercase, digits and underscores.
+    summary : str
+        One line, shown in EQUATIONS.md and ``sim.pipeline``'s documentation.
+    params : sequence of Param
+        The effect's parameters, in row order.
+    force_w, torque_w : sympy.Matrix (3×1), optional
+        Force at the COM and torque about it, world frame (N, N·m). At least one.
+    caption : str, optional
+        A human LaTeX caption shown beside the printed equation.
+    notes : sequence of str
+        Extra lines for EQUATIONS.md.
+    """
+    return EffectDecl(name, summary, list(params), force_w, torque_w, "force", caption, list(notes))
+
+
+def model_effect(name: str, summary: str, params=(), notes=()) -> EffectDecl:
+    """Declare a per-body model effect (parameters only; its equations are kernels of their own)."""
+    return EffectDecl(name, summary, list(params), None, None, "model", "", list(notes))

@@ -1,0 +1,218 @@
+"""Printing of effect declarations beyond their kernels: the C dispatch, the NumPy dispatch, the
+Python metadata module and the EQUATIONS.md tables. Built-in effects and user effects are printed
+by the same functions (derive.codegen and derive.user call them).
+
+Every effect is printed as an *accumulating* function of one calling convention,
+
+    apply(p, x, v_w, m, I_b, F, tau)      (C: adds into F[3], tau[3]; NumPy: returns (F or None, tau or None))
+
+p the effect's parameters (its row after [code, body]), x the body state, v_w the COM velocity the
+effect sees, m and I_b the body's mass and principal moments: the state offsets come from
+derive.layout.STATE, the parameter offsets from the declaration.
+"""
+from __future__ import annotations
+
+import pprint
+
+from . import effect as E
+from .layout import STATE
+
+C_ARGS = ("const double *p, const double *x, const double *v_w, double m, const double *I_b, "
+          "double *F, double *tau")
+
+
+def _in_state(name: str) -> bool:
+    return any(f.name == name for f in STATE.fields)
+
+
+def _c_arg(decl: E.EffectDecl, a) -> str:
+    """C expression passed for kernel input a of an effect kernel."""
+    if a.name in ("v_w", "m", "I_b"):
+        return a.name
+    if _in_state(a.name):
+        return f"x + {STATE.offset(a.name)} /* LV_STATE_{a.name.upper()} */"
+    o = decl.offsets()[a.name]
+    return f"p[{o}]" if a.shape == () else f"p + {o}"
+
+
+def c_effect_functions(decl: E.EffectDecl, prefix: str, fn_name: str, storage: str) -> list[str]:
+    """The accumulating C function of one effect (calls its kernel, adds its outputs)."""
+    k = decl.kernel()
+    used = {a.name for a in k.inputs}
+    lines = [f"/* {decl.name}: adds {' and '.join(n for n, _ in decl.outputs)} for one body. "
+             f"p = [{', '.join(f'{p.name}({p.size})' for p in decl.params)}] */",
+             f"{storage}void {fn_name}({C_ARGS})", "{"]
+    lines += [f"    double {n}[3];" for n, _ in decl.outputs]
+    unused = [n for n in ("p", "x", "v_w", "m", "I_b") if n not in used and not (n == "x" and used & {"p_w", "q", "omega_b"})
+              and not (n == "p" and decl.params)]
+    unused += [n for n, out in (("F", E.OUT_FORCE), ("tau", E.OUT_TORQUE)) if out not in dict(decl.outputs)]
+    if unused:
+        lines.append("    " + " ".join(f"(void){n};" for n in unused))
+    args = [_c_arg(decl, a) for a in k.inputs] + [n for n, _ in decl.outputs]
+    lines.append(f"    {prefix}{k.name}({', '.join(args)});")
+    for n, _ in decl.outputs:
+        acc = "F" if n == E.OUT_FORCE else "tau"
+        lines.append("    " + " ".join(f"{acc}[{i}] += {n}[{i}];" for i in range(3)))
+    lines.append("}")
+    return lines
+
+
+def c_header(effects: list[tuple[int, E.EffectDecl]]) -> list[str]:
+    """kernels.h: effect table layout, codes, the calling convention and the dispatch prototypes."""
+    h = ["/* ---- Scene effects (derive/effects.py): effect table layout, codes and dispatch ---------------- */",
+         f"#define LV_EFFECT_ROW_CODE {E.ROW_CODE}     /* an effect table row: [code, body, parameters...] */",
+         f"#define LV_EFFECT_ROW_BODY {E.ROW_BODY}     /* the body index, or -1 for every body */",
+         f"#define LV_EFFECT_ROW_PARAMS {E.ROW_PARAMS}   /* the effect's parameters start here */",
+         f"#define LV_EFFECT_ROW_MIN_PARAMS {E.ROW_MIN_PARAMS} /* a row holds at least this many parameters */",
+         f"#define LV_EFFECT_USER_BASE {E.USER_CODE_BASE} /* codes of user effects (loaded at run time) start here */",
+         f"#define LV_EFFECT_ABI {E.ABI_VERSION}          /* version of the calling convention below */",
+         f"#define LV_EFFECT_USES_V {E.FLAG_USES_V}       /* flag: the effect reads v_w */",
+         f"#define LV_EFFECT_USES_OMEGA {E.FLAG_USES_OMEGA}   /* flag: the effect reads omega_b */",
+         f"#define LV_EFFECT_FORCE {E.FLAG_FORCE}        /* flag: the effect adds a force */"]
+    for code, d in effects:
+        h.append(f"#define LV_EFFECT_{d.name.upper()} {code} /* p = [{', '.join(f'{p.name}({p.size})' for p in d.params)}] */")
+    h += ["/* An effect adds its force at the COM (F, world, N) and torque about it (tau, world, N·m) for one",
+          "   body: p its parameters, x the body state, v_w the COM velocity it sees (the state's, or a joint's",
+          "   kinematic one), m and I_b the body's mass and principal moments. */",
+          f"typedef void (*lv_effect_fn)({C_ARGS});",
+          "/* The dispatch, static inline int lv_effect_apply(int code, <the arguments above>), is defined in",
+          "   kernels.c (compile kernels.c into the translation unit that steps, so it inlines): it adds built-in",
+          "   effect `code`'s force and torque and returns 0, or returns -1 for a code that is not a built-in",
+          "   effect (then nothing is added: the caller reports it). */",
+          "/* Built-in effect `code`: its number of parameters, its LV_EFFECT_USES_* flags, its name; -1 (NULL)",
+          "   for a code that is not a built-in effect. */",
+          "int lv_effect_n_params(int code);", "int lv_effect_flags(int code);", "const char *lv_effect_name(int code);", ""]
+    return h
+
+
+def _switch(signature: str, effects, value, default: str) -> list[str]:
+    out = [signature, "{", "    switch (code) {"]
+    for code, d in effects:
+        out.append(f"    case LV_EFFECT_{d.name.upper()}: return {value(d)};")
+    out += [f"    default: return {default};", "    }", "}", ""]
+    return out
+
+
+def c_source(effects: list[tuple[int, E.EffectDecl]], prefix: str) -> list[str]:
+    """kernels.c: each built-in effect's accumulating function and the generated dispatch."""
+    c = ["/* ---- Scene effects: accumulating functions and dispatch -------------------------------------- */"]
+    for _, d in effects:
+        c += c_effect_functions(d, prefix, f"lv_effect_acc_{d.name}", "static inline ") + [""]
+    c += ["/* Add built-in effect `code`'s force and torque; 0, or -1 for a code that is not a built-in effect. */",
+          f"static inline int lv_effect_apply(int code, {C_ARGS})", "{", "    switch (code) {"]
+    for _, d in effects:
+        c.append(f"    case LV_EFFECT_{d.name.upper()}: lv_effect_acc_{d.name}(p, x, v_w, m, I_b, F, tau); return 0;")
+    c += ["    default: return -1; /* not a built-in effect: the caller reports it */", "    }", "}", ""]
+    c += _switch("int lv_effect_n_params(int code)", effects, lambda d: str(d.n_params), "-1")
+    c += _switch("int lv_effect_flags(int code)", effects, lambda d: str(d.flags), "-1")
+    c += _switch("const char *lv_effect_name(int code)", effects, lambda d: f'"{d.name}"', "0")
+    return c
+
+
+def c_user_source(effects: list[E.EffectDecl], prefix: str) -> list[str]:
+    """A user set's exported effect functions (lvu_effect_<name>) and its ABI marker."""
+    c = ["/* ---- User effects: exported accumulating functions (called by lavendersim's C stepping loop) --- */",
+         '#if defined(__GNUC__) || defined(__clang__)', '#define LV_EXPORT __attribute__((visibility("default")))',
+         "#else", "#define LV_EXPORT", "#endif",
+         f"LV_EXPORT const int lvu_abi_version = {E.ABI_VERSION};", ""]
+    for d in effects:
+        c += c_effect_functions(d, prefix, f"lvu_effect_{d.name}", "LV_EXPORT ") + [""]
+    return c
+
+
+def _np_arg(decl: E.EffectDecl, a) -> str:
+    if a.name in ("v_w", "m", "I_b"):
+        return a.name
+    if _in_state(a.name):
+        sl = STATE.slice(a.name)
+        return f"x[..., {sl.start}:{sl.stop}]"
+    o = decl.offsets()[a.name]
+    return f"p[..., {o}]" if a.shape == () else f"p[..., {o}:{o + a.size}]"
+
+
+def numpy_dispatch(effects: list[tuple[int | None, E.EffectDecl]]) -> list[str]:
+    """NumPy: one accumulating function per effect, EFFECT_APPLY by name, and (built-ins) dispatch by code."""
+    out = ["# ---- Scene effects: apply(p, x, v_w, m, I_b) -> (F_com_w or None, tau_com_w or None), rows",
+           "# vectorized over a leading axis (one row per body the effect acts on). p: the effect's parameters",
+           "# (its row after [code, body]); x: the body states; v_w: the COM velocities it sees; m, I_b.", ""]
+    for _, d in effects:
+        k = d.kernel()
+        outs = dict(d.outputs)
+        out.append(f"def effect_apply_{d.name}(p, x, v_w, m, I_b):")
+        out.append(f'    """{d.name}: {d.summary}. p = [{", ".join(f"{p.name}({p.size})" for p in d.params)}]."""')
+        call = f"{k.name}({', '.join(_np_arg(d, a) for a in k.inputs)})"
+        if len(outs) == 2:
+            out.append(f"    return {call}")
+        elif E.OUT_FORCE in outs:
+            out.append(f"    return {call}, None")
+        else:
+            out.append(f"    return None, {call}")
+        out += ["", ""]
+    out.append("# effect name -> its apply function")
+    out.append("EFFECT_APPLY = {")
+    out += [f"    {d.name!r}: effect_apply_{d.name}," for _, d in effects]
+    out.append("}")
+    coded = [(c, d) for c, d in effects if c is not None]
+    if coded:
+        out += ["# built-in effect code -> its apply function", "EFFECT_APPLY_BY_CODE = {"]
+        out += [f"    {c}: effect_apply_{d.name}," for c, d in coded]
+        out += ["}", "", "",
+                "def effect_apply(code, p, x, v_w, m, I_b):",
+                '    """Dispatch by built-in effect code; a code that is not one raises ValueError (never a no-op)."""',
+                "    fn = EFFECT_APPLY_BY_CODE.get(code)",
+                "    if fn is None:",
+                "        raise ValueError(f\"effect code {code!r} is not a built-in effect (built-in codes: "
+                + ", ".join(f"{c} {d.name}" for c, d in coded) + ")\")",
+                "    return fn(p, x, v_w, m, I_b)"]
+    return out
+
+
+def meta_entry(code: int | None, d: E.EffectDecl) -> dict:
+    """The Python metadata of one effect (plain data: printed as a literal, read by lavendersim.effects)."""
+    params, off = [], d.offsets()
+    for p in d.params:
+        params.append({"name": p.name, "shape": tuple(p.shape), "unit": p.unit, "doc": p.doc, "rule": p.rule,
+                       "default": p.default, "offset": off[p.name]})
+    return {"name": d.name, "code": code, "kind": d.kind, "summary": d.summary, "params": tuple(params),
+            "n_params": d.n_params,
+            "outputs": tuple("F_w" if n == E.OUT_FORCE else "tau_w" for n, _ in d.outputs),
+            "state_inputs": tuple(d.state_inputs) if d.kind == "force" else (),
+            "flags": d.flags if d.kind == "force" else 0,
+            "kernel": d.kernel_name if d.kind == "force" else None}
+
+
+def meta_module(effects: list[tuple[int | None, E.EffectDecl]], header: str, extra: dict | None = None) -> str:
+    """A Python module holding the effects' metadata and the table layout constants."""
+    lines = [f'"""{header}', "", "Effect metadata printed from the declarations (derive.effect): codes, parameter layout",
+             "(shape, unit, rule, default, offset within the row's parameters), outputs, the state values each",
+             'effect reads and its flags. lavendersim.effects builds its Effect classes from it."""', "",
+             f"ROW_CODE, ROW_BODY, ROW_PARAMS = {E.ROW_CODE}, {E.ROW_BODY}, {E.ROW_PARAMS}",
+             f"ROW_MIN_PARAMS = {E.ROW_MIN_PARAMS}", f"USER_CODE_BASE = {E.USER_CODE_BASE}",
+             f"ABI_VERSION = {E.ABI_VERSION}",
+             f"FLAG_USES_V, FLAG_USES_OMEGA, FLAG_FORCE = {E.FLAG_USES_V}, {E.FLAG_USES_OMEGA}, {E.FLAG_FORCE}"]
+    for k, v in (extra or {}).items():
+        lines.append(f"{k.upper()} = {v!r}")
+    lines += ["", "EFFECTS = ("]
+    for code, d in effects:
+        text = pprint.pformat(meta_entry(code, d), width=110, sort_dicts=False)
+        lines.append("    " + text.replace("\n", "\n    ") + ",")
+    lines.append(")")
+    return "\n".join(lines) + "\n"
+
+
+def markdown_params(d: E.EffectDecl, code: int | None) -> list[str]:
+    """EQUATIONS.md: an effect's code, parameter table and what it reads."""
+    what = "user effect (code assigned when loaded)" if code is None else f"code {code}"
+    reads = ", ".join(f"`{s}`" for s in d.state_inputs) or "no state"
+    out = [f"Effect `{d.name}` ({d.kind}, {what}); "
+           + (f"reads {reads}" + ("; velocity-dependent (splitting kicks by explicit midpoint)"
+                                  if d.flags & (E.FLAG_USES_V | E.FLAG_USES_OMEGA) else "")
+              if d.kind == "force" else "its equations are the kernels of its model") + ".", "",
+           "| parameter | shape | unit | rule | default | offset | meaning |", "|---|---|---|---|---|---|---|"]
+    off = d.offsets()
+    for p in d.params:
+        shape = "scalar" if not p.shape else f"[{p.shape[0]}]"
+        default = "—" if p.default is None else f"`{p.default}`"
+        out.append(f"| `{p.name}` | {shape} | {p.unit or '—'} | {p.rule} | {default} | {off[p.name]} | {p.doc} |")
+    out.append("")
+    return out

@@ -1,0 +1,368 @@
+"""docs/extending.md followed literally in a temporary folder.
+
+The declaration file and the usage script are the guide's own code blocks (```python my_effects.py,
+```python use_effects.py) and the command is its ```bash block, run with LAVENDERSIM_USER_DIR set to
+the temporary folder. The user effects are then checked against independent NumPy formulas written
+here (to 1e-12), through C (the compiled functions, and stepping) and NumPy, with every integrator,
+and through CasADi when it is installed.
+"""
+from __future__ import annotations
+
+import ctypes
+import os
+import re
+import shlex
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import lavendersim as lv
+from lavendersim import effects as E
+from lavendersim import extending
+from lavendersim.validate import LavenderInputError
+
+from conftest import have, require
+
+pytestmark = pytest.mark.needs("cc")  # the guide's command compiles the C of the set
+
+GUIDE = Path(__file__).resolve().parent.parent / "docs" / "extending.md"
+INTEGRATORS = ("euler", "semi_implicit_euler", "rk4", "dopri5", "splitting", "implicit_gyro")
+RTOL = 1e-12
+
+
+def guide_block(info: str) -> str:
+    """The fenced code block of docs/extending.md whose info string is exactly `info`."""
+    blocks = re.findall(r"^```" + re.escape(info) + r"\n(.*?)^```", GUIDE.read_text(encoding="utf-8"), re.S | re.M)
+    assert len(blocks) == 1, f"docs/extending.md must have exactly one ```{info} block"
+    return blocks[0]
+
+
+def run_lavendersim(args: list[str], cwd, env) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "lavendersim", *args], cwd=cwd, env=env, capture_output=True, text=True)
+
+
+@pytest.fixture(scope="module")
+def guide(tmp_path_factory):
+    """The guide's steps 1 and 2: write my_effects.py, run the documented command."""
+    work = tmp_path_factory.mktemp("guide")
+    user = work / "userdir"
+    (work / "my_effects.py").write_text(guide_block("python my_effects.py"), encoding="utf-8")
+    env = {**os.environ, extending.ENV: str(user)}
+    cmd = shlex.split(guide_block("bash").strip())
+    assert cmd[:3] == ["lavendersim", "derive", "--user"]
+    r = run_lavendersim(cmd[1:], work, env)
+    assert r.returncode == 0, r.stdout + r.stderr
+    old = os.environ.get(extending.ENV)
+    os.environ[extending.ENV] = str(user)  # this process finds the set by name, as a user's would
+    yield {"work": work, "user": user, "env": env, "cmd": cmd, "run": r, "set": user / "sets" / "my_effects"}
+    if old is None:
+        os.environ.pop(extending.ENV, None)
+    else:
+        os.environ[extending.ENV] = old
+
+
+# ---------------------------------------------------------------- independent formulas (NumPy, written here)
+
+def rot(q):
+    x, y, z, w = q / np.linalg.norm(q)
+    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                     [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                     [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
+
+
+def gravity_gradient_w(p_w, q, I_b, mu, center_w):
+    R = rot(q)
+    r_b = R.T @ (np.asarray(p_w) - np.asarray(center_w))
+    r = np.linalg.norm(r_b)
+    n = r_b / r
+    return R @ (3 * mu / r**3 * np.cross(n, I_b * n))
+
+
+def quadratic_drag_w(v_w, rho, cd_area):
+    v = np.asarray(v_w)
+    return -0.5 * rho * cd_area * np.linalg.norm(v) * v
+
+
+MU, CENTER = 2.0, np.array([0.1, 0.2, -0.3])
+RHO, CDA = 1.2, 0.05
+
+
+def reference_rk4(x, m, I_b, dt, n):
+    """RK4 of the rigid body under both user effects, q normalized after each step (as the Sim)."""
+    def f(y):
+        q = y[3:7]
+        w = y[10:13]
+        tau_b = rot(q).T @ gravity_gradient_w(y[0:3], q, I_b, MU, CENTER)
+        qw = np.array([q[3] * w[0] + q[1] * w[2] - q[2] * w[1], q[3] * w[1] + q[2] * w[0] - q[0] * w[2],
+                       q[3] * w[2] + q[0] * w[1] - q[1] * w[0], -q[0] * w[0] - q[1] * w[1] - q[2] * w[2]]) / 2
+        wd = (tau_b - np.cross(w, I_b * w)) / I_b
+        return np.concatenate([y[7:10], qw, quadratic_drag_w(y[7:10], RHO, CDA) / m, wd])
+    for _ in range(n):
+        k1 = f(x)
+        k2 = f(x + dt / 2 * k1)
+        k3 = f(x + dt / 2 * k2)
+        k4 = f(x + dt * k3)
+        x = x + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+        x[3:7] /= np.linalg.norm(x[3:7])
+    return x
+
+
+def make_scene(extra_free: bool = False):
+    s = lv.Scene()
+    s.add_body(lv.Body.box("sat", 3.0, (0.6, 0.3, 0.2), p_w=(2.0, 0.5, -0.3), q=(0.1, 0.2, 0.3, 0.9),
+                           v_w=(3.0, -1.0, 2.0), omega_b=(0.3, -0.2, 0.5)))
+    if extra_free:
+        s.add_body(lv.Body.sphere("ball", 1.0, 0.1, omega_b=(1, 2, 3)))
+    s.add_effect("gravity_gradient", body="sat", mu=MU, center_w=CENTER)
+    s.add_effect("quadratic_drag", body="sat", rho=RHO, cd_area=CDA)
+    return s
+
+
+def close(a, b, rtol=RTOL):
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    return np.max(np.abs(a - b)) <= rtol * max(1.0, float(np.max(np.abs(b))))
+
+
+# ---------------------------------------------------------------- step 2: the command
+
+def test_command_prints_the_set_and_compiles_it(guide):
+    d = guide["set"]
+    for name in ("kernels.c", "kernels.h", "kernels_numpy.py", "kernels_casadi.py", "effects_meta.py", "EQUATIONS.md"):
+        assert (d / name).is_file(), name
+    libs = list((d / "build").glob("libmy_effects-*.so"))
+    assert len(libs) == 1
+    out = guide["run"].stdout
+    assert "gravity_gradient" in out and "quadratic_drag" in out and "inertia_cone" in out
+    md = (d / "EQUATIONS.md").read_text()
+    assert "### `effect_gravity_gradient`" in md and "| `mu` | scalar | m³/s² | positive |" in md
+    c = (d / "kernels.c").read_text()
+    assert "pow(" not in c and "sqrt(" in c  # |r|^-5 printed as 1/(r2*r2*sqrt(r2))
+
+
+def test_running_the_command_again_compiles_nothing(guide):
+    lib = next((guide["set"] / "build").glob("libmy_effects-*.so"))
+    before = lib.stat().st_mtime_ns
+    r = run_lavendersim(guide["cmd"][1:], guide["work"], guide["env"])
+    assert r.returncode == 0, r.stderr
+    assert "cached" in r.stdout
+    assert lib.stat().st_mtime_ns == before and len(list(lib.parent.glob("*.so"))) == 1
+
+
+# ---------------------------------------------------------------- step 3: the guide's script, then numbers
+
+def test_the_guides_script_runs(guide):
+    (guide["work"] / "use_effects.py").write_text(guide_block("python use_effects.py"), encoding="utf-8")
+    r = subprocess.run([sys.executable, "use_effects.py"], cwd=guide["work"], env=guide["env"], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    lines = r.stdout.splitlines()
+    c = np.array(re.findall(r"[-+0-9.e]+", lines[0][2:]), float)
+    n = np.array(re.findall(r"[-+0-9.e]+", lines[1][6:]), float)
+    assert lines[0].startswith("c ") and lines[1].startswith("numpy ") and close(c, n, 1e-6)
+    assert any("gravity_gradient(mu=" in line and "quadratic_drag(rho=" in line for line in lines)
+
+
+def test_found_by_name_in_the_user_directory(guide):
+    s = make_scene()
+    assert {type(e).__name__ for e in s.effects} == {"GravityGradient", "QuadraticDrag"}
+    spec = E.EFFECTS["gravity_gradient"].spec
+    assert spec.code >= E.USER_CODE_BASE and spec.state_inputs == ("p_w", "q", "I_b") and not spec.velocity_dependent
+    assert E.EFFECTS["quadratic_drag"].spec.velocity_dependent and E.EFFECTS["quadratic_drag"].spec.uses_v_w
+    assert np.array_equal(s.effects[0].values["center_w"], CENTER)
+    s.add_effect("gravity_gradient", body="sat", mu=1.0)  # the declared default
+    assert np.array_equal(s.effects[-1].values["center_w"], [0, 0, 0])
+
+
+@pytest.mark.parametrize("params,field", [(dict(mu=-1.0), "gravity_gradient.mu"), (dict(mu=1.0, center_w=[0, 0]),
+                                          "gravity_gradient.center_w"), (dict(), "gravity_gradient.mu"),
+                                          (dict(mu=1.0, radius=2), "gravity_gradient.radius")])
+def test_parameters_are_validated_by_their_declared_rules(guide, params, field):
+    s = make_scene()
+    with pytest.raises(LavenderInputError) as e:
+        s.add_effect("gravity_gradient", body="sat", **params)
+    assert e.value.field == field
+
+
+def random_states(n, seed=1):
+    rng = np.random.default_rng(seed)
+    q = rng.normal(size=(n, 4))
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    x = np.concatenate([rng.uniform(-3, 3, (n, 3)), q, rng.uniform(-5, 5, (n, 3)), rng.uniform(-2, 2, (n, 3))], axis=1)
+    I_b = rng.uniform(0.2, 3.0, (n, 3))
+    return x, I_b
+
+
+def test_numpy_and_c_functions_match_the_independent_formulas(guide):
+    s = extending.load("my_effects.py" if False else guide["set"])
+    x, I_b = random_states(50)
+    m = np.full(50, 2.5)
+    p_gg = np.tile(np.concatenate([[MU], CENTER]), (50, 1))
+    p_dr = np.tile([RHO, CDA], (50, 1))
+    F, tau = s.numpy.EFFECT_APPLY["gravity_gradient"](p_gg, x, x[:, 7:10], m, I_b)
+    assert F is None
+    F2, tau2 = s.numpy.EFFECT_APPLY["quadratic_drag"](p_dr, x, x[:, 7:10], m, I_b)
+    assert tau2 is None
+    lib = s.library()
+    dp = ctypes.POINTER(ctypes.c_double)
+    for i in range(50):
+        want_t = gravity_gradient_w(x[i, 0:3], x[i, 3:7], I_b[i], MU, CENTER)
+        want_f = quadratic_drag_w(x[i, 7:10], RHO, CDA)
+        assert close(tau[i], want_t) and close(F2[i], want_f)
+        for name, p, want, out in (("gravity_gradient", p_gg[i], want_t, 1), ("quadratic_drag", p_dr[i], want_f, 0)):
+            acc = [np.full(3, 0.25), np.full(3, -0.5)]  # the C function adds into F and tau
+            args = [np.ascontiguousarray(a, dtype=np.float64) for a in (p, x[i], x[i, 7:10])]
+            getattr(lib, f"lvu_effect_{name}")(*(a.ctypes.data_as(dp) for a in args), ctypes.c_double(m[i]),
+                                                np.ascontiguousarray(I_b[i]).ctypes.data_as(dp),
+                                                acc[0].ctypes.data_as(dp), acc[1].ctypes.data_as(dp))
+            assert close(acc[out] - (0.25 if out == 0 else -0.5), want)
+            assert np.array_equal(acc[1 - out], np.full(3, -0.5 if out == 0 else 0.25))
+
+
+@pytest.mark.parametrize("backend", ["c", "numpy"])
+def test_stepping_matches_an_independent_rk4(guide, backend):
+    sim = lv.Sim(make_scene(), dt=1e-3, integrator="rk4", backend=backend)
+    x0 = sim.x[0].copy()
+    sim.run(200)
+    want = reference_rk4(x0, sim.params[0, 0], sim.params[0, 1:4], 1e-3, 200)
+    for sl in (slice(0, 3), slice(3, 7), slice(7, 10), slice(10, 13)):
+        assert close(sim.x[0, sl], want[sl]), (backend, sl, sim.x[0, sl] - want[sl])
+    assert np.max(np.abs(sim.x[0, 10:13] - x0[10:13])) > 1e-2  # the torque acted
+
+
+@pytest.mark.parametrize("integrator", INTEGRATORS)
+def test_every_integrator_on_both_backends(guide, integrator):
+    out = {}
+    for backend in ("c", "numpy"):
+        sim = lv.Sim(make_scene(extra_free=True), dt=1e-3, integrator=integrator, backend=backend)
+        sim.run(300)
+        out[backend] = sim.x.copy()
+        assert any("gravity_gradient(mu=" in line and "quadratic_drag(" in line for line in sim.pipeline)
+        if integrator == "splitting":  # quadratic_drag reads v: explicit-midpoint kicks, 2 evaluations each
+            assert sim.rhs_evals == 300 * 4
+    if integrator == "dopri5":  # per-body step sizes in C, one shared step in NumPy: agree to the tolerance
+        assert close(out["c"], out["numpy"], 1e-10)
+    else:  # the same printed expressions in the same order: bitwise
+        assert np.array_equal(out["c"], out["numpy"])
+    free = lv.Scene()
+    free.add_body(lv.Body.box("sat", 3.0, (0.6, 0.3, 0.2), p_w=(2.0, 0.5, -0.3), q=(0.1, 0.2, 0.3, 0.9),
+                              v_w=(3.0, -1.0, 2.0), omega_b=(0.3, -0.2, 0.5)))
+    ref = lv.Sim(free, dt=1e-3, integrator=integrator, backend="numpy")
+    ref.run(300)
+    assert np.max(np.abs(out["c"][0, 10:13] - ref.x[0, 10:13])) > 1e-3  # the effects acted
+    assert np.max(np.abs(out["c"][0, 7:10] - ref.x[0, 7:10])) > 1e-3
+
+
+@pytest.mark.parametrize("backend", ["c", "numpy"])
+def test_on_a_jointed_wheeled_body_drag_sees_the_kinematic_velocity(guide, backend):
+    s = lv.Scene()
+    s.add_body(lv.Body.box("cube", 1.0, (0.15, 0.15, 0.15), p_w=(0, 0, 0.2), omega_b=(2.0, -1.0, 3.0)))
+    s.add_effect("spherical_joint", body="cube", anchor_w=(0, 0, 0))
+    s.add_effect("reaction_wheels", body="cube", J=[1e-4] * 3, torque_limit=0.1, speed_limit=300.0)
+    s.add_effect("quadratic_drag", body="cube", rho=RHO, cd_area=0.5)
+    sims = {i: lv.Sim(s, dt=1e-3, integrator=i, backend=backend) for i in ("rk4", "dopri5")}
+    for sim in sims.values():
+        sim.run(200)
+    no_drag = lv.Scene()
+    no_drag.bodies, no_drag.effects = dict(s.bodies), s.effects[:2]
+    ref = lv.Sim(no_drag, dt=1e-3, integrator="rk4", backend=backend)
+    ref.run(200)
+    w, w0 = np.linalg.norm(sims["rk4"].x[0, 10:13]), np.linalg.norm(ref.x[0, 10:13])
+    assert w < w0 - 1e-4  # drag on the COM (moving about the pivot) slows the spin
+    assert close(sims["dopri5"].x[0], sims["rk4"].x[0], 1e-6)
+
+
+def test_c_and_numpy_agree_bitwise_with_built_in_effects_around(guide):
+    xs = []
+    for backend in ("c", "numpy"):
+        s = make_scene(extra_free=True)
+        s.add_effect("angular_damping", c=0.01)                 # every body, after the user effects
+        s.add_effect("gravity", body="ball")
+        s.add_effect("gravity_gradient", body="ball", mu=0.5, center_w=(5, 0, 0))  # a user effect on a second body
+        sim = lv.Sim(s, dt=1e-3, integrator="rk4", backend=backend)
+        sim.run(100)
+        xs.append(sim.x.copy())
+    assert np.array_equal(xs[0], xs[1])
+
+
+# ---------------------------------------------------------------- step 4: CasADi
+
+def test_casadi_expression_matches_the_independent_formula(guide):
+    require("control")
+    import casadi
+
+    x, I_b = random_states(5, seed=7)
+    for i in range(5):
+        F, tau = E.casadi_expr("gravity_gradient", p_w=x[i, 0:3], q=x[i, 3:7], I_b=I_b[i], mu=MU, center_w=CENTER)
+        assert close(np.asarray(tau).ravel(), gravity_gradient_w(x[i, 0:3], x[i, 3:7], I_b[i], MU, CENTER))
+        assert np.array_equal(np.asarray(F).ravel(), np.zeros(3))
+    f = E.casadi_function("quadratic_drag")
+    assert f.name_in() == ["v_w", "rho", "cd_area"] and f.name_out() == ["F_w", "tau_w"]
+    F, _ = f(x[0, 7:10], RHO, CDA)
+    assert close(np.asarray(F).ravel(), quadratic_drag_w(x[0, 7:10], RHO, CDA))
+    v = casadi.SX.sym("v", 3)  # and it differentiates: dF/dv at v = 0 is 0
+    F, _ = E.casadi_expr("quadratic_drag", v_w=v, rho=RHO, cd_area=CDA)
+    J = casadi.Function("J", [v], [casadi.jacobian(F, v)])
+    assert np.allclose(np.asarray(J([3.0, 0.0, 0.0])), -0.5 * RHO * CDA * np.diag([6.0, 3.0, 3.0]))
+
+
+# ---------------------------------------------------------------- step 5: the plain kernel
+
+def test_plain_kernel_of_the_guide(guide):
+    my = extending.load(guide["work"] / "my_effects.py")
+    m, R, h = 2.0, 0.1, 0.3
+    I = my.numpy.inertia_cone(m, R, h)
+    want = [3 / 80 * m * (h * h + 4 * R * R)] * 2 + [3 / 10 * m * R * R]
+    assert close(I, want)
+    lv.Body("cone", m, I)
+    if have("control"):
+        assert close(np.asarray(my.casadi.inertia_cone(m, R, h)).ravel(), want)
+
+
+# ---------------------------------------------------------------- what can go wrong
+
+def test_an_edited_declaration_is_not_simulated_stale(guide, tmp_path):
+    decl = tmp_path / "drift.py"
+    decl.write_text(guide_block("python my_effects.py").replace("gravity_gradient", "gg_drift")
+                    .replace("quadratic_drag", "qd_drift").replace("inertia_cone", "inertia_cone_drift"))
+    out = tmp_path / "sets"
+    extending.derive(decl, out=out)
+    decl.write_text(decl.read_text() + "\n# edited\n")
+    with pytest.raises(LavenderInputError, match="derive --user"):
+        extending.load(out / "drift", reload=True)
+
+
+def test_a_compiler_error_is_shown_in_full(guide, tmp_path):
+    import shutil
+
+    broken = tmp_path / "broken"
+    shutil.copytree(guide["set"], broken, ignore=shutil.ignore_patterns("build"))
+    (broken / "kernels.c").write_text((broken / "kernels.c").read_text() + "\nthis is not C;\n")
+    with pytest.raises(extending.UserBuildError) as e:
+        extending.build(broken)
+    msg = str(e.value)
+    assert "kernels.c" in msg and "error" in msg and "this is not C" in msg and "-std=c99" in msg
+    assert not list((broken / "build").glob("*.so"))
+
+
+def test_cli_reports_a_compiler_error_and_exits_1(guide, tmp_path):
+    cc = tmp_path / "failcc"
+    cc.write_text("#!/bin/sh\necho 'failcc: something the user must see' >&2\nexit 3\n")
+    cc.chmod(0o755)
+    decl = tmp_path / "cli_fail.py"
+    decl.write_text(guide_block("python my_effects.py").replace("gravity_gradient", "gg_fail")
+                    .replace("quadratic_drag", "qd_fail"))
+    env = {**guide["env"], "CC": str(cc), extending.ENV: str(tmp_path / "u")}
+    r = run_lavendersim(["derive", "--user", str(decl)], tmp_path, env)
+    assert r.returncode == 1
+    assert "failcc: something the user must see" in r.stderr and "exit 3" in r.stderr
+
+
+def test_a_user_effect_cannot_shadow_a_built_in(guide, tmp_path):
+    decl = tmp_path / "shadow.py"
+    decl.write_text("from lavendersim.derive.effect import STATE, effect, param\n"
+                    "c = param('c', rule='nonnegative')\n"
+                    "EFFECTS = [effect('gravity', 'not the real one', params=[c], force_w=-c.symbol * STATE.v_w)]\n")
+    with pytest.raises(LavenderInputError, match="built-in"):
+        extending.derive(decl, out=tmp_path / "sets", compile=False)
