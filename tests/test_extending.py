@@ -288,6 +288,15 @@ def test_c_and_numpy_agree_bitwise_with_built_in_effects_around(guide):
 
 # ---------------------------------------------------------------- step 4: CasADi
 
+def test_the_guides_casadi_example_runs(guide):
+    require("control")
+    (guide["work"] / "casadi_example.py").write_text(guide_block("python casadi_example.py"), encoding="utf-8")
+    r = subprocess.run([sys.executable, "casadi_example.py"], cwd=guide["work"], env=guide["env"],
+                       capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    assert "['p_w', 'q', 'I_b', 'mu', 'center_w'] ['F_w', 'tau_w']" in r.stdout
+
+
 def test_casadi_expression_matches_the_independent_formula(guide):
     require("control")
     import casadi
@@ -308,6 +317,14 @@ def test_casadi_expression_matches_the_independent_formula(guide):
 
 
 # ---------------------------------------------------------------- step 5: the plain kernel
+
+def test_the_guides_cone_example_runs(guide):
+    (guide["work"] / "cone_example.py").write_text(guide_block("python cone_example.py"), encoding="utf-8")
+    r = subprocess.run([sys.executable, "cone_example.py"], cwd=guide["work"], env=guide["env"],
+                       capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.startswith("Body('cone', mass=2, I_b=[")
+
 
 def test_plain_kernel_of_the_guide(guide):
     my = extending.load(guide["work"] / "my_effects.py")
