@@ -85,13 +85,10 @@ import inspect
 import json
 import math
 import os
-import platform
-import subprocess
 import sys
 import sysconfig
 import time
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 
@@ -100,6 +97,7 @@ from lavendersim import backends as B
 from lavendersim import executor as X
 from lavendersim import reference as R
 from lavendersim import validate as V
+from lavendersim._install import extra_command
 from lavendersim.errors import DivergenceError
 from lavendersim.kernels import K
 
@@ -385,9 +383,8 @@ def _sim_job(case, m, value):
 
 def _scipy_solver(case, m, rtol):
     """solve() -> solve_ivp's solution of the case with the generated NumPy kernel as RHS."""
-    from scipy.integrate import solve_ivp
-
     from lavendersim.generated import kernels_numpy as KN
+    from scipy.integrate import solve_ivp
 
     I_b = case.I_b
     x0 = np.zeros(13)
@@ -736,40 +733,24 @@ def cost_to_reach(points: list[Point], tol: float, cost: str = "wall_per_sim_s")
 
 # ------------------------------------------------------------------------------------------ machine
 
-def _git(args, cwd) -> str:
-    try:
-        return subprocess.run(["git", *args], cwd=cwd, capture_output=True, text=True, timeout=10).stdout.strip()
-    except Exception:
-        return ""
-
-
 def machine_stamp(mujoco) -> dict:
-    cpu = platform.processor() or ""
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
+    """The bench's machine stamp (CPU, versions, compiler, commit) plus what this study adds:
+    scipy's version, the compiler flags, the load at the start. ``git_commit`` names the installed
+    version when the package does not run from a git checkout."""
     import scipy
 
-    cc = (sysconfig.get_config_var("CC") or "cc").split()[0]
-    try:
-        cc_version = subprocess.run([cc, "--version"], capture_output=True, text=True, timeout=10).stdout.splitlines()[0]
-    except Exception:
-        cc_version = "unknown"
-    repo = Path(lv.__file__).resolve().parents[1]
-    commit = _git(["rev-parse", "HEAD"], repo)
-    dirty = bool(_git(["status", "--porcelain", "--untracked-files=no"], repo))
+    from lavendersim import bench
+
+    m = bench.machine_stamp()
+    commit = (m["git_commit"] + (" (with uncommitted changes)" if m["git_dirty"] else "")
+              if m["git_commit"] else f"not a git checkout (lavendersim {m['lavendersim']} installed)")
     return {
-        "cpu": cpu, "logical_cores": os.cpu_count(),
-        "affinity_cores": len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else None,
-        "platform": platform.platform(), "python": platform.python_version(), "numpy": np.__version__,
+        "cpu": m["cpu"], "logical_cores": m["cores"], "affinity_cores": m["cores_usable"],
+        "platform": m["platform"], "python": m["python"], "numpy": m["numpy"],
         "scipy": scipy.__version__, "mujoco": getattr(mujoco, "__version__", None) if mujoco else None,
-        "compiler": f"{cc}: {cc_version}", "c_flags": sysconfig.get_config_var("CFLAGS") or "",
-        "git_commit": commit + (" (with uncommitted changes)" if dirty else ""),
-        "loadavg_start": list(os.getloadavg()) if hasattr(os, "getloadavg") else None,
+        "compiler": f"{m['compiler']}: {m['compiler_version']}" if m["compiler"] else "no C compiler found",
+        "c_flags": sysconfig.get_config_var("CFLAGS") or "",
+        "git_commit": commit, "loadavg_start": m["loadavg"],
     }
 
 
@@ -794,6 +775,9 @@ def run(out_dir=C.DEFAULT_OUT, backend: str = "auto", quick: bool = True, mujoco
         if progress:
             print(f"[accuracy {time.perf_counter() - t_start:6.1f} s] {msg}", file=sys.stderr, flush=True)
 
+    # Where the errors are computed is resolved first, so a missing distributed extra or an
+    # unreachable scheduler is reported before any work is done.
+    ex = X.resolve(workers=workers, dask=dask, feature="lavendersim lab accuracy --dask")
     mj, mj_missing = (None, "skipped (mujoco=False)") if not mujoco else _mujoco()
     all_cases = cases()
     use = [all_cases[c] for c in cfg["cases"]]
@@ -821,7 +805,6 @@ def run(out_dir=C.DEFAULT_OUT, backend: str = "auto", quick: bool = True, mujoco
                                 f"omega {dw:.2e} rad/s ({exact.kind})"))
     say("exact references agree with DOP853")
 
-    ex = X.resolve(workers=workers, dask=dask, feature="lavendersim lab accuracy --dask")
     tasks = sweep_tasks(use, meths, cfg, exacts)
     say(f"errors of {len(tasks)} sweeps on {ex.describe()} (timing follows, serially in this process)")
     sweeps = ex.map(measure_sweep, tasks, feature="lavendersim lab accuracy --dask")
@@ -948,7 +931,7 @@ def run(out_dir=C.DEFAULT_OUT, backend: str = "auto", quick: bool = True, mujoco
         figures[f"unavailable_{_key(label)}"] = why
     figures["float32"] = "not measured: no float32 path exists (both backends step in float64)"
     figures["mujoco"] = (f"measured (mujoco {stamp['mujoco']})" if mj is not None
-                         else f"not measured: {mj_missing}; pip install -e '.[bench]'")
+                         else f"not measured: {mj_missing}; {extra_command('bench')}")
     for m in meths:
         figures[f"verdict_{_key(m.label)}"] = overall[m.label]["text"]
     for (case, label), o in sorted(orders.items()):

@@ -23,6 +23,18 @@ EXTRAS = {
 }
 
 
+def extra_command(extra: str) -> str:
+    """The command that installs ``extra``: ``pip install 'lavendersim[<extra>]'``; for an
+    editable install ``pip install -e '<its source folder>[<extra>]'``; run from a source tree
+    that is not installed, ``pip install -e '.[<extra>]'``."""
+    if extra not in EXTRAS and extra not in ("test", "all"):
+        raise ValueError(f"extra_command: unknown extra {extra!r}; known: {sorted(EXTRAS)}")
+    if _direct_url() is None:  # run from a source tree, not installed
+        return f"pip install -e '.[{extra}]'  (from the repository root)"
+    src = _editable_source()
+    return f"pip install -e '{src}[{extra}]'" if src else f"pip install 'lavendersim[{extra}]'"
+
+
 class MissingExtraError(ImportError):
     """A feature needs an optional extra that is not installed.
 
@@ -69,6 +81,15 @@ def _direct_url() -> dict | None:
         return json.loads(text) if text else None
     except ValueError:
         return None
+
+
+def _editable_source() -> str | None:
+    """The source folder of an editable install, else None."""
+    info = _direct_url()
+    if not info or not info.get("dir_info", {}).get("editable"):
+        return None
+    parsed = urlparse(info.get("url", ""))
+    return unquote(parsed.path) if parsed.scheme == "file" else None
 
 
 def rebuild_command() -> str:

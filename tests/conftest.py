@@ -64,6 +64,12 @@ import pytest
 
 IN_CI = os.environ.get("CI", "").strip().lower() in ("true", "1", "yes")   # CI services set CI=true
 
+# Subprocesses the tests start (`python -c`, `python -m lavendersim`) must import the *installed*
+# package, never a source folder that happens to be their working directory: from an unpacked
+# sdist with a regular (non-editable) install, ./lavendersim has no compiled backend and no
+# lavendersim.generated. PYTHONSAFEPATH (Python >= 3.11) keeps the cwd off their sys.path.
+os.environ.setdefault("PYTHONSAFEPATH", "1")
+
 CHROMIUM = "/usr/bin/chromium"
 
 

@@ -46,6 +46,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .._install import extra_command
 from ..generated import layout as LY
 
 SCHEMA = "lavendersim-bench/1"
@@ -109,7 +110,22 @@ def compiler() -> str | None:
     return None
 
 
+def source_commit() -> tuple[str | None, bool | None]:
+    """The git commit this package runs from and whether tracked files differ from it.
+
+    ``(None, None)`` when the package is not run from a git checkout (an installed wheel or
+    sdist): then :func:`machine_stamp` records the installed version only."""
+    repo = HERE.parent.parent
+    commit = _run(["git", "rev-parse", "HEAD"], cwd=repo) if (repo / ".git").exists() else None
+    if not commit:
+        return None, None
+    st = _run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=repo)
+    return commit, (bool(st) if st is not None else None)
+
+
 def machine_stamp() -> dict:
+    """Where and on what a measurement ran: CPU, cores, load, Python/NumPy/MuJoCo/LavenderSim
+    versions, the C compiler, the git commit (None outside a checkout) and the UTC date."""
     cpu = None
     try:
         for line in Path("/proc/cpuinfo").read_text().splitlines():
@@ -120,12 +136,7 @@ def machine_stamp() -> dict:
         pass
     cc = compiler()
     cc_version = (_run(cc.split() + ["--version"]) or "").splitlines()[0] if cc else None
-    repo = HERE.parent.parent
-    commit = _run(["git", "rev-parse", "HEAD"], cwd=repo) if (repo / ".git").exists() else None
-    dirty = None
-    if commit:
-        st = _run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=repo)
-        dirty = bool(st) if st is not None else None
+    commit, dirty = source_commit()
     try:
         affinity = len(os.sched_getaffinity(0))
     except AttributeError:
@@ -286,7 +297,7 @@ def mujoco_available() -> tuple[bool, str]:
         import mujoco  # noqa: F401
     except Exception as exc:  # noqa: BLE001
         return False, f"mujoco is not installed or does not import ({type(exc).__name__}: {exc}); " \
-                      "install it with `pip install -e '.[bench]'`"
+                      f"install it with `{extra_command('bench')}`"
     return True, ""
 
 
