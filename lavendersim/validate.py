@@ -302,7 +302,7 @@ def _eigh(field: str, sym: np.ndarray, scale: float, vectors: bool = False):
     """eigvalsh / eigh of a finite symmetric tensor without overflow: tensors with max|I| outside
     [1e-100, 1e100] are solved scaled to max|I| = 1 (others exactly as numpy computes them).
     A result that is not finite (eigenvalues beyond the float64 range) is rejected naming `field`."""
-    moderate = 1e-100 <= scale <= 1e100
+    moderate = scale == 0 or 1e-100 <= scale <= 1e100
     try:
         out = (np.linalg.eigh if vectors else np.linalg.eigvalsh)(sym if moderate else sym / scale)
     except np.linalg.LinAlgError as exc:  # not expected for a finite symmetric input; never leak it
