@@ -92,8 +92,7 @@ class CubeModel:
         self.scenario = V.choice("scenario", self.scenario, SCENARIOS)
         self.mass = V.positive("mass", self.mass)
         self.size = V.positive("size", self.size)
-        J = np.asarray(self.J, dtype=float) if np.ndim(self.J) else np.full(3, float(self.J))
-        J = V.vector("J", J)
+        J = V.vector("J", self.J) if np.ndim(self.J) else np.full(3, V.scalar("J", self.J))
         if np.any(J <= 0):
             raise V.LavenderInputError("J", "wheel spin inertias must be positive", f", got {J.tolist()}")
         self.J = J

@@ -68,6 +68,7 @@ class Trajectory:
 
 
 class Sim:
+    @V.keywords  # unknown keyword arguments raise LavenderInputError naming them
     def __init__(self, scene: Scene, dt: float = 1e-3, integrator: str = "rk4", backend: str = "auto", normalize: bool = True,
                  rtol: float | None = None, atol: float | None = None):
         if not isinstance(scene, Scene):
