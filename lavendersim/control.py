@@ -437,6 +437,9 @@ class Response:
         return float(self.t[above[-1] + 1])
 
 
+MAX_CONTROL_STEPS = 1_000_000  # closed_loop: control periods per run
+
+
 def closed_loop(model: CubeModel, lin: Linearization, K: ArrayLike, q0: ArrayLike, T: float = 5.0, *,
                 omega0: ArrayLike = (0, 0, 0), Omega0: ArrayLike | None = None, dt: float = 1e-3,
                 control_dt: float = 2e-3, backend: str = "auto", sim: Sim | None = None) -> Response:
@@ -448,7 +451,11 @@ def closed_loop(model: CubeModel, lin: Linearization, K: ArrayLike, q0: ArrayLik
     sub = int(round(control_dt / dt))
     if sub < 1 or abs(sub * dt - control_dt) > 1e-9 * control_dt:
         raise V.LavenderInputError("control_dt", f"must be a whole multiple of dt = {dt:g}", f", got {control_dt!r}")
-    n = int(round(V.positive("T", T) / control_dt))
+    T = V.positive("T", T)
+    if not T / control_dt <= MAX_CONTROL_STEPS:  # stepped in Python and recorded: bounded, never a hang
+        raise V.LavenderInputError("T", f"would take {T / control_dt:.3g} control steps of {control_dt:g} s; at most "
+                                   f"{MAX_CONTROL_STEPS:,} are allowed", f", got {T!r}")
+    n = int(round(T / control_dt))
     Omega0 = lin.Omega0 if Omega0 is None else V.vector("Omega0", Omega0)
     if sim is None:
         sim = model.make_sim(q0, omega0, Omega0, dt=dt, backend=backend)
@@ -699,6 +706,8 @@ def _cli(args) -> int:
         axis = None if args.axis is None else _numbers("axis", args.axis)
         if axis is not None and axis.size != 3:
             raise V.LavenderInputError("axis", "must be 3 numbers", f", got {axis.size}")
+        if args.plot:
+            V.writable_file("plot", args.plot)  # before the design and the run, not after
         for name in ("mass", "size", "torque_limit", "speed_limit", "damping", "wheel_damping", "theta0", "T", "threshold"):
             v = getattr(args, name)
             if v is not None and not math.isfinite(v):

@@ -34,6 +34,8 @@ __all__ = [
     "integer",
     "keywords",
     "safe_norm",
+    "writable_dir",
+    "writable_file",
 ]
 
 # Relative tolerances, scaled by max|I| (inertia) or by the largest moment.
@@ -440,3 +442,43 @@ def keywords(fn):
 
     wrapper.__signature__ = sig
     return wrapper
+
+
+def writable_dir(field: str, path) -> "Path":
+    """Create directory `path` (and parents) if needed and check that a file can be written in it;
+    LavenderInputError naming `field` otherwise (a path through a file, no permission, read-only)."""
+    import os
+    import tempfile
+    from pathlib import Path
+
+    if not isinstance(path, (str, os.PathLike)) or not str(path):
+        raise LavenderInputError(field, "expected a directory path", f", got {_describe(path)}")
+    d = Path(path)
+    for parent in (d, *d.parents):
+        if parent.exists() and not parent.is_dir():
+            raise LavenderInputError(field, f"cannot write to {d}", f" ({parent} is a file, not a directory)")
+    try:
+        d.mkdir(parents=True, exist_ok=True)
+        fd, probe = tempfile.mkstemp(dir=d, prefix=".write-test-")
+        os.close(fd)
+        os.unlink(probe)
+    except OSError as exc:
+        raise LavenderInputError(field, f"cannot write to {d}", f" ({exc.strerror or exc})") from None
+    return d
+
+
+def writable_file(field: str, path) -> "Path":
+    """Check that file `path` can be written (its directory is created if needed, as the writer would);
+    LavenderInputError naming `field` otherwise (a directory, a path through a file, no permission)."""
+    import os
+    from pathlib import Path
+
+    if not isinstance(path, (str, os.PathLike)) or not str(path):
+        raise LavenderInputError(field, "expected a file path", f", got {_describe(path)}")
+    p = Path(path)
+    if p.is_dir():
+        raise LavenderInputError(field, f"cannot write to {p}", " (it is a directory)")
+    writable_dir(field, p.parent if str(p.parent) else ".")
+    if p.exists() and not os.access(p, os.W_OK):
+        raise LavenderInputError(field, f"cannot write to {p}", " (permission denied)")
+    return p

@@ -79,6 +79,7 @@ DEFAULT_AXES_SCALE = 0.3
 DEFAULT_COLOR = (0.95, 0.75, 0.2, 1.0)
 MAX_VECTORS = 64
 MAX_LABEL = 200
+MIN_RATE_HZ = 0.1           # run_scene: frames per simulated second, at least
 FLOAT32_MAX = 3.4e38        # the browser draws in float32: coordinates beyond this would become Infinity
 RESOLVE_TIMEOUT_S = 10.0    # host name resolution
 BIND_TIMEOUT_S = 30.0       # the viser server up and listening
@@ -739,6 +740,9 @@ def run_scene(name: str, *, duration: float | None = None, host: str = DEFAULT_H
         duration = V.scalar("duration", duration, nonnegative=True)
     rate_hz = V.positive("rate_hz", rate_hz)
     sim, overlays, advance = SCENES[name]()
+    if not MIN_RATE_HZ <= rate_hz <= 1.0 / sim.dt:  # a frame must advance at least one step, at most 1/MIN_RATE_HZ s
+        raise V.LavenderInputError("rate_hz", f"must be within [{MIN_RATE_HZ:g}, {1.0 / sim.dt:g}] frames per simulated "
+                                   f"second (scene {name!r} steps dt = {sim.dt:g} s)", f", got {rate_hz!r}")
     own = viewer is None
     viewer = viewer or Viewer(host, port)
     print(f"lavendersim view {name}: open {viewer.url}  (Ctrl-C to stop)", file=out, flush=True)
