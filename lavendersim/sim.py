@@ -233,6 +233,7 @@ class Sim:
         i = self._i(name)
         return BodyState(self.x[i].copy(), self._models.Omega[i].copy())
 
+    @V.keywords  # an unknown keyword (a typo such as omega=) is a LavenderInputError naming it
     def set_state(self, name: str, *, p_w=None, q=None, v_w=None, omega_b=None, omega_w=None, Omega=None) -> None:
         """Set parts of one body's state; everything is validated before anything changes.
 

@@ -78,7 +78,7 @@ class ReactionWheelCubeEnv(gym.Env):
                  **model_params: Any) -> None:
         super().__init__()
         task = V.choice("task", task, lc.SCENARIOS)
-        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+        if render_mode is not None and (not isinstance(render_mode, str) or render_mode not in self.metadata["render_modes"]):
             raise V.LavenderInputError("render_mode", "must be None or 'rgb_array'", f", got {render_mode!r}")
         self.render_mode = render_mode
         known = sorted({f.name for f in dataclasses.fields(lc.CubeModel)} - {"scenario", "damping"})
@@ -160,7 +160,7 @@ class ReactionWheelCubeEnv(gym.Env):
     def reset(self, *, seed: int | None = None,
               options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict[str, Any]]:
         if seed is not None:
-            V.integer("seed", seed, minimum=0)
+            seed = V.integer("seed", seed, minimum=0)  # a Python int (gymnasium refuses numpy integers)
         if options is not None and not isinstance(options, Mapping):
             raise V.LavenderInputError("options", "expected a dict or None", f", got {V._describe(options)}")
         unknown = sorted(str(k) for k in (options or {}) if k not in ("q", "omega_b", "Omega"))
