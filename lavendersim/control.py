@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import json
 import math
+import numbers
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
@@ -92,7 +93,8 @@ class CubeModel:
         self.scenario = V.choice("scenario", self.scenario, SCENARIOS)
         self.mass = V.positive("mass", self.mass)
         self.size = V.positive("size", self.size)
-        J = V.vector("J", self.J) if np.ndim(self.J) else np.full(3, V.scalar("J", self.J))
+        J = np.full(3, V.scalar("J", self.J)) if isinstance(self.J, (numbers.Real, np.ndarray)) and np.ndim(self.J) == 0 \
+            else V.vector("J", self.J)
         if np.any(J <= 0):
             raise V.LavenderInputError("J", "wheel spin inertias must be positive", f", got {J.tolist()}")
         self.J = J

@@ -387,3 +387,29 @@ def test_bench_run_rejects_bad_rounds():
 
 def test_effect_module_bound_is_documented():
     assert E.MAX_LOAD == 1e300
+
+
+def test_env_constructor_regressions_found_by_the_fuzz(gym):
+    """Found by tests/test_fuzz.py with more examples: numpy's ValueError for a ragged J, OverflowError for
+    a subnormal dt, ValueError for an array render_mode, gymnasium's Error for a numpy-integer seed."""
+    from lavendersim.envs.reaction_wheel_cube import ReactionWheelCubeEnv
+
+    for kw, field in [({"J": (None, [], 0.0, 0.0)}, "J"), ({"dt": 5e-324}, "dt"), ({"dt": 1e-8}, "dt"),
+                      ({"render_mode": np.zeros(2)}, "render_mode")]:
+        with pytest.raises(LavenderInputError) as e:
+            ReactionWheelCubeEnv(backend="numpy", **kw)
+        assert e.value.field == field
+    env = ReactionWheelCubeEnv(backend="numpy")
+    env.reset(seed=np.int8(3))
+    a = env.np_random.random()
+    env.reset(seed=3)
+    assert env.np_random.random() == a
+
+
+def test_set_state_unknown_keyword_is_an_input_error():
+    sim = lv.Sim(_scene(), backend="numpy")
+    x = sim.x.copy()
+    with pytest.raises(LavenderInputError) as e:
+        sim.set_state("b", omega=(1, 0, 0))
+    assert e.value.field == "omega"
+    np.testing.assert_array_equal(sim.x, x)

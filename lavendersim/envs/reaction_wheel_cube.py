@@ -66,6 +66,7 @@ gym = require("gymnasium", "gym", "the ReactionWheelCube-v0 environment")
 spaces = require("gymnasium.spaces", "gym", "the ReactionWheelCube-v0 environment")
 
 BODY = lc.BODY
+MAX_SUBSTEPS = 100_000  # simulator steps per control step (control_dt / dt), at most
 
 
 class ReactionWheelCubeEnv(gym.Env):
@@ -97,7 +98,11 @@ class ReactionWheelCubeEnv(gym.Env):
         self.task = self.model.scenario
         self.dt = V.dt("dt", dt)
         self.control_dt = V.dt("control_dt", control_dt)
-        self.substeps = int(round(self.control_dt / self.dt))
+        ratio = self.control_dt / self.dt
+        if not ratio <= MAX_SUBSTEPS:
+            raise V.LavenderInputError("dt", f"control_dt / dt = {ratio:.3g} simulator steps per control step; at most "
+                                       f"{MAX_SUBSTEPS:,} are allowed", f", got dt = {dt!r}")
+        self.substeps = int(round(ratio))
         if self.substeps < 1 or abs(self.substeps * self.dt - self.control_dt) > 1e-9 * self.control_dt:
             raise V.LavenderInputError("control_dt", f"must be a whole multiple of dt = {self.dt:g}", f", got {control_dt!r}")
         self.init_angle_deg = V.scalar("init_angle_deg", (20.0 if self.task == "center" else 3.0)
