@@ -119,6 +119,9 @@ class Effect:
             raise V.LavenderInputError(f"{self.name}.{missing[0]}", "is required")
         self.body = body
         self.values = {f: self._check(f, params[f]) for f in self.fields}
+        for v in self.values.values():  # validated once: read-only, so a later edit cannot bypass the checks
+            if isinstance(v, np.ndarray):
+                v.flags.writeable = False
 
     def _check(self, f, v):
         """Validate parameter f by its declared shape and rule (a plain finite 3-vector without a spec)."""

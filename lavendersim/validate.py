@@ -14,8 +14,10 @@ import difflib
 import functools
 import inspect
 import numbers
-from collections.abc import Iterable, Sequence
-from typing import SupportsFloat
+import os
+from collections.abc import Callable, Iterable, Sequence
+from pathlib import Path
+from typing import Any, SupportsFloat
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -414,7 +416,7 @@ def safe_norm(a: ArrayLike) -> float:
         return float(scale * np.sqrt(np.sum((a / scale) ** 2)))
 
 
-def keywords(fn):
+def keywords(fn: Callable[..., Any]) -> Callable[..., Any]:
     """Decorator: a call with an unknown keyword, a missing argument or too many positional
     arguments raises :class:`LavenderInputError` naming it (and the accepted names), not a
     ``TypeError``. Functions that take ``**kwargs`` check those themselves."""
@@ -447,12 +449,10 @@ def keywords(fn):
     return wrapper
 
 
-def writable_dir(field: str, path) -> "Path":
+def writable_dir(field: str, path: str | os.PathLike[str]) -> Path:
     """Create directory `path` (and parents) if needed and check that a file can be written in it;
     LavenderInputError naming `field` otherwise (a path through a file, no permission, read-only)."""
-    import os
     import tempfile
-    from pathlib import Path
 
     if not isinstance(path, (str, os.PathLike)) or not str(path):
         raise LavenderInputError(field, "expected a directory path", f", got {_describe(path)}")
@@ -470,12 +470,9 @@ def writable_dir(field: str, path) -> "Path":
     return d
 
 
-def writable_file(field: str, path) -> "Path":
+def writable_file(field: str, path: str | os.PathLike[str]) -> Path:
     """Check that file `path` can be written (its directory is created if needed, as the writer would);
     LavenderInputError naming `field` otherwise (a directory, a path through a file, no permission)."""
-    import os
-    from pathlib import Path
-
     if not isinstance(path, (str, os.PathLike)) or not str(path):
         raise LavenderInputError(field, "expected a file path", f", got {_describe(path)}")
     p = Path(path)

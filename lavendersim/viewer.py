@@ -156,7 +156,7 @@ class ViewerError(RuntimeError):
 _HOSTNAME = re.compile(r"^(?=.{1,253}$)([A-Za-z0-9]([A-Za-z0-9-]{0,61}[A-Za-z0-9])?)(\.[A-Za-z0-9]([A-Za-z0-9-]{0,61}[A-Za-z0-9])?)*\.?$")
 
 
-def check_host(host) -> str:
+def check_host(host: object) -> str:
     """Validate an interface to bind: an IP address or a host name that resolves (within
     RESOLVE_TIMEOUT_S) to an address of this machine; LavenderInputError naming ``host`` otherwise."""
     if not isinstance(host, str) or not host:
@@ -349,6 +349,7 @@ class Viewer:
     arrow_radius: shaft radius of vector arrows in m (default: 2.5% of the largest body).
     """
 
+    @V.keywords
     def __init__(self, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT, *, max_rate_hz: float = DEFAULT_RATE_HZ,
                  label: str = "LavenderSim", arrow_radius: float | None = None, verbose: bool = False) -> None:
         port = V.integer("port", port, minimum=0)
@@ -725,6 +726,7 @@ SCENES = {"tumble": _tumble_scene, "lab03": _lab03_scene, "wheel": _wheel_scene}
 LAB_VIEWS = {"03": "lab03", "04": "wheel"}
 
 
+@V.keywords
 def run_scene(name: str, *, duration: float | None = None, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT,
               rate_hz: float = 60.0, viewer: Viewer | None = None, out: TextIO = sys.stdout) -> dict[str, Any]:
     """Run scene ``name`` in real time, publishing ``rate_hz`` frames per second, for ``duration``
