@@ -712,4 +712,8 @@ def command(args) -> int:
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(prog="python -m lavendersim.bench", description=__doc__.split("\n\n")[0])
     add_arguments(p)
-    return command(p.parse_args(argv))
+    try:
+        return command(p.parse_args(argv))
+    except V.LavenderInputError as exc:  # as `lavendersim bench` does: one line, exit 2
+        print(f"python -m lavendersim.bench: invalid input: {exc}", file=sys.stderr)
+        return 2
