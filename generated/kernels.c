@@ -1365,6 +1365,26 @@ void lv_quat_exp_step(const double *q, const double *omega_b, double h, double *
     q_next[3] = -q_0*t6 - q_1*t8 - q_2*t7 + q_3*t4;
 }
 
+void lv_rkmk_dexpinv(const double *u_b, const double *omega_b, double *u_dot) {
+    const double u_b_0 = u_b[0];
+    const double u_b_1 = u_b[1];
+    const double u_b_2 = u_b[2];
+    const double omega_b_0 = omega_b[0];
+    const double omega_b_1 = omega_b[1];
+    const double omega_b_2 = omega_b[2];
+    const double t0 = omega_b_1*u_b_2;
+    const double t1 = omega_b_0*u_b_1;
+    const double t2 = ((1.0/12.0))*omega_b_1*u_b_0 - (1.0/12.0)*t1;
+    const double t3 = omega_b_0*u_b_2;
+    const double t4 = omega_b_2*u_b_0;
+    const double t5 = t3 - t4;
+    const double t6 = ((1.0/12.0))*u_b_2;
+    const double t7 = omega_b_2*u_b_1 - t0;
+    u_dot[0] = omega_b_0 + ((1.0/2.0))*omega_b_2*u_b_1 - (1.0/2.0)*t0 + t2*u_b_1 - t5*t6;
+    u_dot[1] = omega_b_1 - t2*u_b_0 + ((1.0/2.0))*t3 - (1.0/2.0)*t4 + t6*t7;
+    u_dot[2] = ((1.0/2.0))*omega_b_1*u_b_0 + omega_b_2 - (1.0/2.0)*t1 + ((1.0/12.0))*t5*u_b_0 - (1.0/12.0)*t7*u_b_1;
+}
+
 void lv_wheel_saturation(const double *command, const double *Omega, double torque_limit, double speed_limit, double *u) {
     const double command_0 = command[0];
     const double command_1 = command[1];
@@ -1604,6 +1624,7 @@ static void packed_implicit_gyro_residual(const double *in, double *out) { lv_im
 static void packed_implicit_gyro_jacobian(const double *in, double *out) { lv_implicit_gyro_jacobian(in + 0, in[3], in + 4, out + 0); }
 static void packed_implicit_gyro_newton(const double *in, double *out) { lv_implicit_gyro_newton(in + 0, in + 3, in + 6, in[9], in + 10, out + 0, out + 3); }
 static void packed_quat_exp_step(const double *in, double *out) { lv_quat_exp_step(in + 0, in + 4, in[7], out + 0); }
+static void packed_rkmk_dexpinv(const double *in, double *out) { lv_rkmk_dexpinv(in + 0, in + 3, out + 0); }
 static void packed_wheel_saturation(const double *in, double *out) { lv_wheel_saturation(in + 0, in + 3, in[6], in[7], out + 0); }
 
 const lv_kernel_info lv_kernel_table[LV_KERNEL_COUNT] = {
@@ -1655,5 +1676,6 @@ const lv_kernel_info lv_kernel_table[LV_KERNEL_COUNT] = {
     {"implicit_gyro_jacobian", 7, 9, packed_implicit_gyro_jacobian},
     {"implicit_gyro_newton", 13, 6, packed_implicit_gyro_newton},
     {"quat_exp_step", 8, 4, packed_quat_exp_step},
+    {"rkmk_dexpinv", 6, 3, packed_rkmk_dexpinv},
     {"wheel_saturation", 8, 3, packed_wheel_saturation},
 };

@@ -11,7 +11,7 @@ typedef struct {
     void (*packed)(const double *in, double *out);
 } lv_kernel_info;
 
-#define LV_KERNEL_COUNT 49
+#define LV_KERNEL_COUNT 50
 extern const lv_kernel_info lv_kernel_table[LV_KERNEL_COUNT];
 
 /* particle_moments: One particle's mass moment and momentum (summed: m r_COM and p).
@@ -366,6 +366,12 @@ void lv_implicit_gyro_newton(const double *I_b, const double *omega_b, const dou
      in  h scalar: time step, s
      out q_next [4]: orientation (unit when q is) */
 void lv_quat_exp_step(const double *q, const double *omega_b, double h, double *q_next);
+
+/* rkmk_dexpinv: Rate of the attitude's exponential coordinates (RKMK4, truncated dexp inverse).
+     in  u_b [3]: rotation vector of the attitude relative to the step's start, body frame, rad
+     in  omega_b [3]: angular velocity, body frame, rad/s
+     out u_dot [3]: rad/s, body frame */
+void lv_rkmk_dexpinv(const double *u_b, const double *omega_b, double *u_dot);
 
 /* wheel_saturation: Motor torques actually applied: clipped, and cut off beyond the speed limit.
      in  command [3]: commanded motor torques, N·m

@@ -1354,6 +1354,28 @@ def quat_exp_step(q, omega_b, h):
     return casadi.vertcat(q_0*t4 + q_1*t7 - q_2*t8 + q_3*t6, -q_0*t7 + q_1*t4 + q_2*t6 + q_3*t8, q_0*t8 - q_1*t6 + q_2*t4 + q_3*t7, -q_0*t6 - q_1*t8 - q_2*t7 + q_3*t4)
 
 
+def rkmk_dexpinv(u_b, omega_b):
+    """rkmk_dexpinv: Rate of the attitude's exponential coordinates (RKMK4, truncated dexp inverse).
+      in  u_b [3]: rotation vector of the attitude relative to the step's start, body frame, rad
+      in  omega_b [3]: angular velocity, body frame, rad/s
+      out u_dot [3]: rad/s, body frame"""
+    u_b_0 = u_b[0]
+    u_b_1 = u_b[1]
+    u_b_2 = u_b[2]
+    omega_b_0 = omega_b[0]
+    omega_b_1 = omega_b[1]
+    omega_b_2 = omega_b[2]
+    t0 = omega_b_1*u_b_2
+    t1 = omega_b_0*u_b_1
+    t2 = ((1.0/12.0))*omega_b_1*u_b_0 - (1.0/12.0)*t1
+    t3 = omega_b_0*u_b_2
+    t4 = omega_b_2*u_b_0
+    t5 = t3 - t4
+    t6 = ((1.0/12.0))*u_b_2
+    t7 = omega_b_2*u_b_1 - t0
+    return casadi.vertcat(omega_b_0 + ((1.0/2.0))*omega_b_2*u_b_1 - (1.0/2.0)*t0 + t2*u_b_1 - t5*t6, omega_b_1 - t2*u_b_0 + ((1.0/2.0))*t3 - (1.0/2.0)*t4 + t6*t7, ((1.0/2.0))*omega_b_1*u_b_0 + omega_b_2 - (1.0/2.0)*t1 + ((1.0/12.0))*t5*u_b_0 - (1.0/12.0)*t7*u_b_1)
+
+
 def wheel_saturation(command, Omega, torque_limit, speed_limit):
     """wheel_saturation: Motor torques actually applied: clipped, and cut off beyond the speed limit.
       in  command [3]: commanded motor torques, N·m

@@ -1861,6 +1861,35 @@ def quat_exp_step(q, omega_b, h):
     return q_next_out
 
 
+def rkmk_dexpinv(u_b, omega_b):
+    """rkmk_dexpinv: Rate of the attitude's exponential coordinates (RKMK4, truncated dexp inverse).
+      in  u_b [3]: rotation vector of the attitude relative to the step's start, body frame, rad
+      in  omega_b [3]: angular velocity, body frame, rad/s
+      out u_dot [3]: rad/s, body frame"""
+    u_b = numpy.asarray(u_b, dtype=numpy.float64)
+    omega_b = numpy.asarray(omega_b, dtype=numpy.float64)
+    batch = numpy.broadcast_shapes(u_b.shape[:-1], omega_b.shape[:-1])
+    u_b_0 = u_b[..., 0]
+    u_b_1 = u_b[..., 1]
+    u_b_2 = u_b[..., 2]
+    omega_b_0 = omega_b[..., 0]
+    omega_b_1 = omega_b[..., 1]
+    omega_b_2 = omega_b[..., 2]
+    t0 = omega_b_1*u_b_2
+    t1 = omega_b_0*u_b_1
+    t2 = ((1.0/12.0))*omega_b_1*u_b_0 - (1.0/12.0)*t1
+    t3 = omega_b_0*u_b_2
+    t4 = omega_b_2*u_b_0
+    t5 = t3 - t4
+    t6 = ((1.0/12.0))*u_b_2
+    t7 = omega_b_2*u_b_1 - t0
+    u_dot_out = numpy.empty(batch + (3,))
+    u_dot_out[..., 0] = omega_b_0 + ((1.0/2.0))*omega_b_2*u_b_1 - (1.0/2.0)*t0 + t2*u_b_1 - t5*t6
+    u_dot_out[..., 1] = omega_b_1 - t2*u_b_0 + ((1.0/2.0))*t3 - (1.0/2.0)*t4 + t6*t7
+    u_dot_out[..., 2] = ((1.0/2.0))*omega_b_1*u_b_0 + omega_b_2 - (1.0/2.0)*t1 + ((1.0/12.0))*t5*u_b_0 - (1.0/12.0)*t7*u_b_1
+    return u_dot_out
+
+
 def wheel_saturation(command, Omega, torque_limit, speed_limit):
     """wheel_saturation: Motor torques actually applied: clipped, and cut off beyond the speed limit.
       in  command [3]: commanded motor torques, N·m
@@ -1950,6 +1979,7 @@ KERNELS = {
     'implicit_gyro_jacobian': (implicit_gyro_jacobian, [('I_b', (3,)), ('h', ()), ('omega_next', (3,))], [('J', (3, 3))]),
     'implicit_gyro_newton': (implicit_gyro_newton, [('I_b', (3,)), ('omega_b', (3,)), ('tau_b', (3,)), ('h', ()), ('omega_next', (3,))], [('omega_new', (3,)), ('delta', (3,))]),
     'quat_exp_step': (quat_exp_step, [('q', (4,)), ('omega_b', (3,)), ('h', ())], [('q_next', (4,))]),
+    'rkmk_dexpinv': (rkmk_dexpinv, [('u_b', (3,)), ('omega_b', (3,))], [('u_dot', (3,))]),
     'wheel_saturation': (wheel_saturation, [('command', (3,)), ('Omega', (3,)), ('torque_limit', ()), ('speed_limit', ())], [('u', (3,))]),
 }
 

@@ -6,6 +6,7 @@
 #define LV_DP_MAX_SUBSTEPS 1000000L
 #define LV_GYRO_MAX_ITER 30
 #define LV_RK4_B_DEN 6
+#define LV_SPLIT4_STAGES 5
 #define LV_DP_SAFETY 0.9
 #define LV_DP_FACMIN 0.2
 #define LV_DP_FACMAX 5.0
@@ -41,6 +42,10 @@ static const double LV_DP_A[7][6] = {
     {0.09114583333333333, 0.0, 0.44923629829290207, 0.6510416666666666, -0.322376179245283, 0.13095238095238096},
 };
 static const double LV_DP_E[7] = {0.0012326388888888888, 0.0, -0.0042527702905061394, 0.03697916666666667, -0.05086379716981132, 0.0419047619047619, -0.025};
+
+/* splitting4: the Strang step applied LV_SPLIT4_STAGES times with step gamma_i h (symmetric composition,
+   order 4) */
+static const double LV_SPLIT4_GAMMA[LV_SPLIT4_STAGES] = {0.4144907717943757, 0.4144907717943757, -0.657963087177503, 0.4144907717943757, 0.4144907717943757};
 
 /* Strang splitting of the free rotation, x(1/2*h) y(1/2*h) z(h) y(1/2*h) x(1/2*h): composed in derive/ into the kernel
    lv_splitting_rotation (no table is needed at run time). */
