@@ -58,6 +58,22 @@ def strang_rotation(I_b, q, omega_b, h):
     return q, sp.Matrix([L[i] / I_b[i] for i in range(3)])
 
 
+def axis_flow_kernel(a: int, I_b, q, L_b, tau) -> "Kernel":
+    """Kernel axis_flow_{x,y,z}: one exact axis flow on (q, L_B) for time tau (axis_flow)."""
+    qn, Ln = axis_flow(I_b, q, list(L_b), a, tau)
+    n = "xyz"[a]
+    return Kernel(f"axis_flow_{n}", f"Exact flow of H_{n} = L_{n}²/(2 I_{n}) on (q, L_B) for time τ",
+                  rf"\theta = \tau L_{n}/I_{n},\ q \leftarrow q \otimes [\sin\tfrac\theta2 e_{n}, \cos\tfrac\theta2],"
+                  rf"\ L_B \leftarrow R_{n}(-\theta) L_B",
+                  [Arg("I_b", I_b, "principal moments, body frame, kg·m²", "positive"),
+                   Arg("q", q, "orientation (x, y, z, w), R_WB, unit", "unit_quaternion"),
+                   Arg("L_b", L_b, "angular momentum, body frame, kg·m²/s"), Arg("tau", tau, "duration of the flow, s")],
+                  [Arg("q_next", qn, "orientation (unit when q is)"), Arg("L_next", sp.Matrix(Ln), "kg·m²/s, body frame")],
+                  "Integrator physics",
+                  notes=["splitting4 applies the sequence printed in generated/tableaux (SPLIT4_SEQ) of these flows to "
+                         "bodies without effects; each keeps |L_B|, L_W and |q| to rounding."])
+
+
 def gyro_residual(I_b, omega_b, tau_b, h, w1) -> sp.Matrix:
     """g(ω⁺) = I(ω⁺ − ω) + h ω⁺ × (I ω⁺) − h τ_B (body frame, diagonal I)."""
     Iw1 = sp.Matrix([I_b[i] * w1[i] for i in range(3)])
@@ -133,7 +149,7 @@ def kernels() -> list[Kernel]:
     I_b, q, omega_b, tau_b = vec("I_b", 3), vec("q", 4), vec("omega_b", 3), vec("tau_b", 3)
     p_w, v_w, F_w, w1 = vec("p_w", 3), vec("v_w", 3), vec("F_w", 3), vec("omega_next", 3)
     m, h = scalar("m", positive=True), scalar("h")
-    u_b = vec("u_b", 3)
+    u_b, L_b, tau = vec("u_b", 3), vec("L_b", 3), scalar("tau")
     cmd, Om, tl, sl = vec("command", 3), vec("Omega", 3), scalar("torque_limit"), scalar("speed_limit")
     _check(I_b, omega_b, tau_b, h, w1)
     q_s, w_s = strang_rotation(I_b, q, omega_b, h)
@@ -157,6 +173,12 @@ def kernels() -> list[Kernel]:
                [Arg(*IB), Arg(*Q), Arg(*W), Arg(*H)],
                [Arg("q_next", q_s, "orientation after h (unit when q is)"), Arg("omega_next", w_s, "rad/s, body frame")], g,
                notes=["Torque-free, it conserves the world angular momentum and |L_B| to rounding; second order."]),
+        *[axis_flow_kernel(a, I_b, q, L_b, tau) for a in range(3)],
+        Kernel("body_momentum", "Body angular momentum of a body with principal moments I_B", r"L_B = I_B \omega_B",
+               [Arg(*IB), Arg(*W)], [Arg("L_b", sp.Matrix([I_b[i] * omega_b[i] for i in range(3)]), "kg·m²/s, body frame")], g),
+        Kernel("body_rate", "Body angular velocity from the body angular momentum", r"\omega_B = I_B^{-1} L_B",
+               [Arg(*IB), Arg("L_b", L_b, "angular momentum, body frame, kg·m²/s")],
+               [Arg("omega_b", sp.Matrix([L_b[i] / I_b[i] for i in range(3)]), "rad/s, body frame")], g),
         Kernel("splitting_kick", "Kick of v and ω under a force and a body torque for time h (q, p fixed)",
                r"v_W \leftarrow v_W + h F_W/m,\quad \omega_B \leftarrow \omega_B + h I_B^{-1}\tau_B",
                [Arg(*M), Arg(*IB), Arg("v_w", v_w, "COM velocity, world frame, m/s"), Arg(*W),

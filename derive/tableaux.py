@@ -79,6 +79,21 @@ TRIPLE_JUMP = (1 / (2 - _CBRT2), -_CBRT2 / (2 - _CBRT2), 1 / (2 - _CBRT2))
 SUZUKI5 = (1 / (4 - _CBRT4),) * 2 + (1 - 4 / (4 - _CBRT4),) + (1 / (4 - _CBRT4),) * 2
 SPLIT4_GAMMA = SUZUKI5
 
+
+def split4_sequence(gamma=None) -> tuple:
+    """splitting4's torque-free rotation as one sequence of exact axis flows (axis, fraction of h): the
+    Strang sequence of each substep γ_i h in turn, adjacent flows about one axis merged (the flow of one
+    H_a is a one-parameter group, Φ_a(s) Φ_a(t) = Φ_a(s + t)): 21 flows instead of 25 for Suzuki's
+    composition. Fractions exact (algebraic)."""
+    seq: list[list] = []
+    for g in SPLIT4_GAMMA if gamma is None else gamma:
+        for a, f in STRANG:
+            if seq and seq[-1][0] == a:
+                seq[-1][1] += g * f
+            else:
+                seq.append([a, g * f])
+    return tuple((a, f) for a, f in seq)
+
 GYRO_MAX_ITER = 30                  # Newton iterations at most
 GYRO_TOL_SQ = 1e-32                 # stop when |delta|^2 <= this * |omega_next|^2 (|delta| <= 1e-16 |omega|)
 
@@ -117,6 +132,12 @@ def _check() -> None:
         for k, want in ((1, 1), (3, 0)):
             if sp.nsimplify(sp.radsimp(sp.expand(sum(x ** k for x in g)))) != want:
                 raise RuntimeError(f"derive: the {name} composition fails Σγ^{k} = {want}")
+    seq = split4_sequence()
+    if [a for a, _ in seq] != [a for a, _ in reversed(seq)] or any(seq[i][0] == seq[i + 1][0] for i in range(len(seq) - 1)):
+        raise RuntimeError("derive: the merged splitting4 sequence is not symmetric or has unmerged neighbours")
+    for axis in range(3):
+        if sp.nsimplify(sp.radsimp(sp.expand(sum((f for a, f in seq if a == axis), R(0))))) != 1:
+            raise RuntimeError(f"derive: the merged splitting4 sequence does not flow axis {axis} for total time h")
 
 
 def _f(x) -> str:
@@ -133,7 +154,7 @@ def _fa(x) -> str:
 def _scalars() -> list[tuple[str, str, str]]:
     """(name, C literal, Python literal) of every scalar constant."""
     ints = [("DP_MAX_SUBSTEPS", DP_MAX_SUBSTEPS), ("GYRO_MAX_ITER", GYRO_MAX_ITER), ("RK4_B_DEN", RK4_B_DEN),
-            ("SPLIT4_STAGES", len(SPLIT4_GAMMA))]
+            ("SPLIT4_STAGES", len(SPLIT4_GAMMA)), ("SPLIT4_FLOWS", len(split4_sequence()))]
     floats = [("DP_SAFETY", DP_SAFETY), ("DP_FACMIN", DP_FACMIN), ("DP_FACMAX", DP_FACMAX),
               ("DP_HMIN_REL", DP_HMIN_REL), ("DP_ERR_EXPONENT", -1.0 / (DP_ORDER_ERR + 1)),
               ("DP_INIT_SMALL", DP_INIT_SMALL), ("DP_INIT_TINY_H", DP_INIT_TINY_H), ("DP_INIT_FRAC", DP_INIT_FRAC),
@@ -162,7 +183,11 @@ def print_c() -> str:
     out.append("static const double LV_DP_E[7] = {" + ", ".join(_f(e) for e in dp_e()) + "};")
     out += ["", "/* splitting4: the Strang step applied LV_SPLIT4_STAGES times with step gamma_i h (symmetric composition,",
             "   order 4) */",
-            "static const double LV_SPLIT4_GAMMA[LV_SPLIT4_STAGES] = {" + ", ".join(_fa(g) for g in SPLIT4_GAMMA) + "};"]
+            "static const double LV_SPLIT4_GAMMA[LV_SPLIT4_STAGES] = {" + ", ".join(_fa(g) for g in SPLIT4_GAMMA) + "};",
+            "/* splitting4 without effects: the substeps' exact axis flows as one sequence, neighbours about one axis",
+            "   merged: flow k turns about body axis LV_SPLIT4_AXIS[k] for LV_SPLIT4_FRAC[k] * h */",
+            "static const int LV_SPLIT4_AXIS[LV_SPLIT4_FLOWS] = {" + ", ".join(str(a) for a, _ in split4_sequence()) + "};",
+            "static const double LV_SPLIT4_FRAC[LV_SPLIT4_FLOWS] = {" + ", ".join(_fa(f) for _, f in split4_sequence()) + "};"]
     seq = " ".join(f"{'xyz'[a]}({'h' if f == 1 else f'{f}*h'})" for a, f in STRANG)
     out += ["", f"/* Strang splitting of the free rotation, {seq}: composed in derive/ into the kernel",
             "   lv_splitting_rotation (no table is needed at run time). */", "", "#endif", ""]
@@ -186,5 +211,7 @@ def print_python() -> str:
     out.append("STRANG = (" + ", ".join(f"({a}, {_f(f)})" for a, f in STRANG) + ")")
     out.append("# splitting4: the Strang step applied with step gamma_i h, in this order (symmetric composition, order 4)")
     out.append("SPLIT4_GAMMA = (" + ", ".join(_fa(g) for g in SPLIT4_GAMMA) + ")")
+    out.append("# splitting4 without effects: its substeps' axis flows as one sequence (axis, fraction of h), neighbours merged")
+    out.append("SPLIT4_SEQ = (" + ", ".join(f"({a}, {_fa(f)})" for a, f in split4_sequence()) + ")")
     out.append("")
     return "\n".join(out)

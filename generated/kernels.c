@@ -1177,6 +1177,99 @@ void lv_splitting_rotation(const double *I_b, const double *q, const double *ome
     omega_next[2] = t16*(-t32*t54 + t52*t53);
 }
 
+void lv_axis_flow_x(const double *I_b, const double *q, const double *L_b, double tau, double *q_next, double *L_next) {
+    const double I_b_0 = I_b[0];
+    const double q_0 = q[0];
+    const double q_1 = q[1];
+    const double q_2 = q[2];
+    const double q_3 = q[3];
+    const double L_b_0 = L_b[0];
+    const double L_b_1 = L_b[1];
+    const double L_b_2 = L_b[2];
+    const double t0 = ((1.0/2.0))*L_b_0*tau/I_b_0;
+    const double t1 = cos(t0);
+    const double t2 = sin(t0);
+    const double t3 = 1 - 2*(t2*t2);
+    const double t4 = 2*t1*t2;
+    q_next[0] = q_0*t1 + q_3*t2;
+    q_next[1] = q_1*t1 + q_2*t2;
+    q_next[2] = -q_1*t2 + q_2*t1;
+    q_next[3] = -q_0*t2 + q_3*t1;
+    L_next[0] = L_b_0;
+    L_next[1] = L_b_1*t3 + L_b_2*t4;
+    L_next[2] = -L_b_1*t4 + L_b_2*t3;
+}
+
+void lv_axis_flow_y(const double *I_b, const double *q, const double *L_b, double tau, double *q_next, double *L_next) {
+    const double I_b_1 = I_b[1];
+    const double q_0 = q[0];
+    const double q_1 = q[1];
+    const double q_2 = q[2];
+    const double q_3 = q[3];
+    const double L_b_0 = L_b[0];
+    const double L_b_1 = L_b[1];
+    const double L_b_2 = L_b[2];
+    const double t0 = ((1.0/2.0))*L_b_1*tau/I_b_1;
+    const double t1 = cos(t0);
+    const double t2 = sin(t0);
+    const double t3 = 1 - 2*(t2*t2);
+    const double t4 = 2*t1*t2;
+    q_next[0] = q_0*t1 - q_2*t2;
+    q_next[1] = q_1*t1 + q_3*t2;
+    q_next[2] = q_0*t2 + q_2*t1;
+    q_next[3] = -q_1*t2 + q_3*t1;
+    L_next[0] = L_b_0*t3 - L_b_2*t4;
+    L_next[1] = L_b_1;
+    L_next[2] = L_b_0*t4 + L_b_2*t3;
+}
+
+void lv_axis_flow_z(const double *I_b, const double *q, const double *L_b, double tau, double *q_next, double *L_next) {
+    const double I_b_2 = I_b[2];
+    const double q_0 = q[0];
+    const double q_1 = q[1];
+    const double q_2 = q[2];
+    const double q_3 = q[3];
+    const double L_b_0 = L_b[0];
+    const double L_b_1 = L_b[1];
+    const double L_b_2 = L_b[2];
+    const double t0 = ((1.0/2.0))*L_b_2*tau/I_b_2;
+    const double t1 = cos(t0);
+    const double t2 = sin(t0);
+    const double t3 = 1 - 2*(t2*t2);
+    const double t4 = 2*t1*t2;
+    q_next[0] = q_0*t1 + q_1*t2;
+    q_next[1] = -q_0*t2 + q_1*t1;
+    q_next[2] = q_2*t1 + q_3*t2;
+    q_next[3] = -q_2*t2 + q_3*t1;
+    L_next[0] = L_b_0*t3 + L_b_1*t4;
+    L_next[1] = -L_b_0*t4 + L_b_1*t3;
+    L_next[2] = L_b_2;
+}
+
+void lv_body_momentum(const double *I_b, const double *omega_b, double *L_b) {
+    const double I_b_0 = I_b[0];
+    const double I_b_1 = I_b[1];
+    const double I_b_2 = I_b[2];
+    const double omega_b_0 = omega_b[0];
+    const double omega_b_1 = omega_b[1];
+    const double omega_b_2 = omega_b[2];
+    L_b[0] = I_b_0*omega_b_0;
+    L_b[1] = I_b_1*omega_b_1;
+    L_b[2] = I_b_2*omega_b_2;
+}
+
+void lv_body_rate(const double *I_b, const double *L_b, double *omega_b) {
+    const double I_b_0 = I_b[0];
+    const double I_b_1 = I_b[1];
+    const double I_b_2 = I_b[2];
+    const double L_b_0 = L_b[0];
+    const double L_b_1 = L_b[1];
+    const double L_b_2 = L_b[2];
+    omega_b[0] = L_b_0/I_b_0;
+    omega_b[1] = L_b_1/I_b_1;
+    omega_b[2] = L_b_2/I_b_2;
+}
+
 void lv_splitting_kick(double m, const double *I_b, const double *v_w, const double *omega_b, const double *F_w, const double *tau_b, double h, double *v_next, double *omega_next) {
     const double I_b_0 = I_b[0];
     const double I_b_1 = I_b[1];
@@ -1616,6 +1709,11 @@ static void packed_wheel_body_rhs(const double *in, double *out) { lv_wheel_body
 static void packed_wheel_momentum(const double *in, double *out) { lv_wheel_momentum(in + 0, in + 4, in + 7, in + 10, in + 19, out + 0, out + 3); }
 static void packed_pivot_kinematics(const double *in, double *out) { lv_pivot_kinematics(in + 0, in + 4, in + 7, in + 10, out + 0, out + 3); }
 static void packed_splitting_rotation(const double *in, double *out) { lv_splitting_rotation(in + 0, in + 3, in + 7, in[10], out + 0, out + 4); }
+static void packed_axis_flow_x(const double *in, double *out) { lv_axis_flow_x(in + 0, in + 3, in + 7, in[10], out + 0, out + 4); }
+static void packed_axis_flow_y(const double *in, double *out) { lv_axis_flow_y(in + 0, in + 3, in + 7, in[10], out + 0, out + 4); }
+static void packed_axis_flow_z(const double *in, double *out) { lv_axis_flow_z(in + 0, in + 3, in + 7, in[10], out + 0, out + 4); }
+static void packed_body_momentum(const double *in, double *out) { lv_body_momentum(in + 0, in + 3, out + 0); }
+static void packed_body_rate(const double *in, double *out) { lv_body_rate(in + 0, in + 3, out + 0); }
 static void packed_splitting_kick(const double *in, double *out) { lv_splitting_kick(in[0], in + 1, in + 4, in + 7, in + 10, in + 13, in[16], out + 0, out + 3); }
 static void packed_translation_drift(const double *in, double *out) { lv_translation_drift(in + 0, in + 3, in[6], out + 0); }
 static void packed_semi_implicit_translation(const double *in, double *out) { lv_semi_implicit_translation(in[0], in + 1, in + 4, in + 7, in[10], out + 0, out + 3); }
@@ -1668,6 +1766,11 @@ const lv_kernel_info lv_kernel_table[LV_KERNEL_COUNT] = {
     {"wheel_momentum", 22, 6, packed_wheel_momentum},
     {"pivot_kinematics", 13, 6, packed_pivot_kinematics},
     {"splitting_rotation", 11, 7, packed_splitting_rotation},
+    {"axis_flow_x", 11, 7, packed_axis_flow_x},
+    {"axis_flow_y", 11, 7, packed_axis_flow_y},
+    {"axis_flow_z", 11, 7, packed_axis_flow_z},
+    {"body_momentum", 6, 3, packed_body_momentum},
+    {"body_rate", 6, 3, packed_body_rate},
     {"splitting_kick", 17, 6, packed_splitting_kick},
     {"translation_drift", 7, 3, packed_translation_drift},
     {"semi_implicit_translation", 11, 6, packed_semi_implicit_translation},

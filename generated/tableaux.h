@@ -7,6 +7,7 @@
 #define LV_GYRO_MAX_ITER 30
 #define LV_RK4_B_DEN 6
 #define LV_SPLIT4_STAGES 5
+#define LV_SPLIT4_FLOWS 21
 #define LV_DP_SAFETY 0.9
 #define LV_DP_FACMIN 0.2
 #define LV_DP_FACMAX 5.0
@@ -46,6 +47,10 @@ static const double LV_DP_E[7] = {0.0012326388888888888, 0.0, -0.004252770290506
 /* splitting4: the Strang step applied LV_SPLIT4_STAGES times with step gamma_i h (symmetric composition,
    order 4) */
 static const double LV_SPLIT4_GAMMA[LV_SPLIT4_STAGES] = {0.4144907717943757, 0.4144907717943757, -0.657963087177503, 0.4144907717943757, 0.4144907717943757};
+/* splitting4 without effects: the substeps' exact axis flows as one sequence, neighbours about one axis
+   merged: flow k turns about body axis LV_SPLIT4_AXIS[k] for LV_SPLIT4_FRAC[k] * h */
+static const int LV_SPLIT4_AXIS[LV_SPLIT4_FLOWS] = {0, 1, 2, 1, 0, 1, 2, 1, 0, 1, 2, 1, 0, 1, 2, 1, 0, 1, 2, 1, 0};
+static const double LV_SPLIT4_FRAC[LV_SPLIT4_FLOWS] = {0.20724538589718786, 0.20724538589718786, 0.4144907717943757, 0.20724538589718786, 0.4144907717943757, 0.20724538589718786, 0.4144907717943757, 0.20724538589718786, -0.12173615769156361, -0.3289815435887515, -0.657963087177503, -0.3289815435887515, -0.12173615769156361, 0.20724538589718786, 0.4144907717943757, 0.20724538589718786, 0.4144907717943757, 0.20724538589718786, 0.4144907717943757, 0.20724538589718786, 0.20724538589718786};
 
 /* Strang splitting of the free rotation, x(1/2*h) y(1/2*h) z(h) y(1/2*h) x(1/2*h): composed in derive/ into the kernel
    lv_splitting_rotation (no table is needed at run time). */
