@@ -239,15 +239,16 @@ def test_rk4_expmap_keeps_unit_q_without_normalization(backend):
 def test_plain_bodies_only(integrator):
     scene = lv.Scene()
     scene.add_body(lv.Body("w", 1.0, (1.0, 1.0, 1.0)))
-    scene.add_effect("reaction_wheels", body="w", J=[0.01, 0.01, 0.01])
+    scene.add_effect("reaction_wheels", body="w", J=[0.01, 0.01, 0.01], torque_limit=0.1, speed_limit=100.0)
     with pytest.raises(lv.LavenderInputError, match="plain rigid bodies only"):
         lv.Sim(scene, dt=0.01, integrator=integrator)
 
 
-@pytest.mark.parametrize("integrator", HIGH)
-def test_a_blow_up_is_reported_with_the_state_restored(integrator):
+def test_a_blow_up_is_reported_with_the_state_restored():
+    """rk4_expmap overflows like rk4 and is caught. (splitting4, like splitting, stays finite whatever |ω|·dt:
+    its flows are exact rotations; its validity bound is documented in derive/tableaux.py.)"""
     backend = _backends()[0]
-    s = _sim(integrator, 0.01, backend, [("b", I_DIAG, {"omega_b": (1e300, 1e300, 1e300)})])
+    s = _sim("rk4_expmap", 0.01, backend, [("b", I_DIAG, {"omega_b": (1e300, 1e300, 1e300)})])
     x0 = s.x.copy()
     with pytest.raises(lv.DivergenceError):
         s.run(5)
