@@ -4,8 +4,9 @@
 
 mutates state (nb, 13) (and, with `models`, models.Omega and models.applied; with `adaptive`,
 adaptive.h and adaptive.nfev) in place, or raises DivergenceError and leaves every array unchanged.
-"numpy" needs no compiler; "c" steps inside C. dopri5 needs `adaptive` (an Adaptive); splitting and
-implicit_gyro accept plain bodies only (ValueError otherwise; Sim raises LavenderInputError first).
+"numpy" needs no compiler; "c" steps inside C. dopri5 needs `adaptive` (an Adaptive); the PLAIN_ONLY
+integrators (splitting, implicit_gyro, splitting4, rk4_expmap) accept plain bodies only (ValueError
+otherwise; Sim raises LavenderInputError first).
 
 `models` (a `Models`, or None when no body has a joint or wheels) carries the per-body model:
 rows (nb, MODEL_SIZE) laid out as MODEL_LAYOUT; Omega (nb, 3) wheel rates relative to the body,
