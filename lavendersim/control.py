@@ -138,9 +138,7 @@ class CubeModel:
         if self.scenario == "center":
             return np.array([0.0, 0.0, 0.0, 1.0])
         d = np.ones(3) / math.sqrt(3.0)
-        axis = np.cross(d, [0.0, 0.0, 1.0])
-        ang = math.acos(d[2])
-        return np.asarray(KN.axis_angle_to_quat(axis / np.linalg.norm(axis), ang), dtype=float)
+        return np.asarray(KN.quat_from_two_vectors(d, [0.0, 0.0, 1.0]), dtype=float)
 
     # runtime scene ------------------------------------------------------------------------
     def scene(self, q0: ArrayLike | None = None, omega_b: ArrayLike = (0, 0, 0), Omega: ArrayLike | None = None) -> Scene:

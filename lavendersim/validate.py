@@ -352,14 +352,17 @@ def principal_axes(I: ArrayLike, *, field: str = "inertia") -> tuple[np.ndarray,
     sym, _, _ = _checked_tensor(field, t)
     moments, vecs = np.linalg.eigh(sym)
     _check_moments(field, moments)
-    # deterministic signs: largest component of the first two axes positive,
-    # third axis = cross product, so R is a proper rotation
+    # deterministic signs: largest component of the first two axes positive, and the third axis
+    # signed so that det R = +1 (a proper rotation; eigh's columns are orthonormal)
     cols = []
     for c in range(2):
         v = vecs[:, c]
         if v[int(np.argmax(np.abs(v)))] < 0:
             v = -v
         cols.append(v)
-    cols.append(np.cross(cols[0], cols[1]))
-    R = np.ascontiguousarray(np.column_stack(cols), dtype=np.float64)
+    cols.append(vecs[:, 2])
+    R = np.column_stack(cols)
+    if np.linalg.det(R) < 0:
+        R[:, 2] = -R[:, 2]
+    R = np.ascontiguousarray(R, dtype=np.float64)
     return np.array(moments, dtype=np.float64, copy=True), R

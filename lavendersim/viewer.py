@@ -172,13 +172,7 @@ def xyzw_to_wxyz(q: ArrayLike) -> np.ndarray:
 
 def _z_to(d: np.ndarray) -> np.ndarray:
     """wxyz quaternion of the shortest rotation taking +z onto the unit vector d."""
-    z = np.array([0.0, 0.0, 1.0])
-    c = float(np.dot(z, d))
-    if c < -1 + 1e-12:  # antiparallel: half turn about x
-        return np.array([0.0, 1.0, 0.0, 0.0])
-    axis = np.cross(z, d)
-    q = np.array([1.0 + c, *axis])
-    return q / np.linalg.norm(q)
+    return xyzw_to_wxyz(KN.quat_from_two_vectors([0.0, 0.0, 1.0], d))
 
 
 def _cylinder_mesh(radius: float, z0: float, z1: float, n: int = 24):
