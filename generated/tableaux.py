@@ -6,6 +6,8 @@ Integrator tableaux and constants (derive/tableaux.py), the same doubles as tabl
 DP_MAX_SUBSTEPS = 1_000_000
 GYRO_MAX_ITER = 30
 RK4_B_DEN = 6
+SPLIT4_STAGES = 5
+SPLIT4_FLOWS = 21
 DP_SAFETY = 0.9
 DP_FACMIN = 0.2
 DP_FACMAX = 5.0
@@ -45,3 +47,7 @@ RK4_C = (0.0, 0.5, 0.5, 1.0)
 RK4_B_NUM = (1.0, 2.0, 2.0, 1.0)
 # Strang splitting of the free rotation: (axis, fraction of h)
 STRANG = ((0, 0.5), (1, 0.5), (2, 1.0), (1, 0.5), (0, 0.5))
+# splitting4: the Strang step applied with step gamma_i h, in this order (symmetric composition, order 4)
+SPLIT4_GAMMA = (0.4144907717943757, 0.4144907717943757, -0.657963087177503, 0.4144907717943757, 0.4144907717943757)
+# splitting4 without effects: its substeps' axis flows as one sequence (axis, fraction of h), neighbours merged
+SPLIT4_SEQ = ((0, 0.20724538589718786), (1, 0.20724538589718786), (2, 0.4144907717943757), (1, 0.20724538589718786), (0, 0.4144907717943757), (1, 0.20724538589718786), (2, 0.4144907717943757), (1, 0.20724538589718786), (0, -0.12173615769156361), (1, -0.3289815435887515), (2, -0.657963087177503), (1, -0.3289815435887515), (0, -0.12173615769156361), (1, 0.20724538589718786), (2, 0.4144907717943757), (1, 0.20724538589718786), (0, 0.4144907717943757), (1, 0.20724538589718786), (2, 0.4144907717943757), (1, 0.20724538589718786), (0, 0.20724538589718786))
