@@ -295,3 +295,30 @@ def test_exchange_is_available_here():
     if not sys.platform.startswith("linux"):
         pytest.skip("renameat2 is Linux-only; elsewhere the two-rename fallback is used")
     assert atomic._EXCHANGE is not None
+
+
+def test_derive_user_replaces_the_set_folder_whole_and_keeps_its_build_cache(tmp_path):
+    """`lavendersim derive --user FILE` writes the set's folder the same way (its build/ carried over)."""
+    import re
+
+    from lavendersim import extending
+
+    guide = (Path(__file__).resolve().parent.parent / "docs" / "extending.md").read_text(encoding="utf-8")
+    decl_text = re.findall(r"^```python my_effects.py\n(.*?)^```", guide, re.S | re.M)[0]
+    decl = tmp_path / "atomic_set.py"
+    decl.write_text(decl_text.replace("gravity_gradient", "gg_atomic").replace("quadratic_drag", "qd_atomic")
+                    .replace("inertia_cone", "inertia_cone_atomic"), encoding="utf-8")
+    sets = tmp_path / "sets"
+    s = extending.derive(decl, out=sets, compile=False)
+    folder = sets / "atomic_set"
+    assert s.directory == folder.resolve() and (folder / "kernels_numpy.py").is_file()
+    (folder / "build").mkdir()
+    (folder / "build" / "libatomic_set-cached.so").write_bytes(b"cache")
+    (folder / "notes.txt").write_text("mine")
+    with pytest.raises(atomic.OutputFolderError, match="notes.txt"):
+        extending.derive(decl, out=sets, compile=False)
+    (folder / "notes.txt").unlink()
+    decl.write_text(decl.read_text(encoding="utf-8") + "\n# edited: a new declaration hash\n", encoding="utf-8")
+    extending.derive(decl, out=sets, compile=False)
+    assert (folder / "build" / "libatomic_set-cached.so").read_bytes() == b"cache"
+    assert atomic.leftovers(folder) == []
