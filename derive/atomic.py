@@ -114,7 +114,7 @@ def _fsync_dir(path: Path) -> None:
 
 
 def _write_file(path: Path, data: bytes) -> None:
-    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | getattr(os, "O_BINARY", 0), 0o644)
     try:
         view = memoryview(data)
         while view:
@@ -172,7 +172,7 @@ def replace_folder(outdir, files: dict[str, str | bytes], owned=(), keep=()) -> 
     Nothing is written when every file already has its content and nothing owned is to be dropped.
     An entry of outdir that is none of files, owned, keep or __pycache__ raises OutputFolderError
     before anything is written."""
-    outdir = Path(outdir).absolute()
+    outdir = Path(outdir).resolve()   # a symlinked folder: its target is the one replaced
     data = {n: (t.encode("utf-8") if isinstance(t, str) else bytes(t)) for n, t in files.items()}
     for n in data:
         if not n or "/" in n or os.sep in n or n in (".", "..") or n in IGNORED:
