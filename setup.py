@@ -87,7 +87,8 @@ def extensions() -> list[Extension]:
     link_args = []
     if _flag("LAVENDERSIM_SANITIZE"):  # testing build (.ci/sanitize): memory errors and UB abort the process
         sanitize = ["-fsanitize=address,undefined", "-fno-sanitize-recover=undefined"]
-        args = [a for a in args if a != "-O3"] + ["-O1", "-g", "-fno-omit-frame-pointer"] + sanitize
+        # -fno-wrapv: Python's CFLAGS carry -fwrapv, which defines signed overflow and so hides it from UBSan
+        args = [a for a in args if a != "-O3"] + ["-O1", "-g", "-fno-omit-frame-pointer", "-fno-wrapv"] + sanitize
         link_args = sanitize
         print(f"LAVENDERSIM_SANITIZE=1: building lavendersim._lavender_c with {' '.join(sanitize)} (not for use)",
               file=sys.stderr)
