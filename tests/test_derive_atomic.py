@@ -14,13 +14,14 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import queue
 import random
-import select
 import shutil
 import signal
 import subprocess
 import sys
 import textwrap
+import threading
 import time
 from pathlib import Path
 
@@ -40,15 +41,18 @@ FAST_DERIVE = textwrap.dedent("""
     from pathlib import Path
     from lavendersim import cli
     from lavendersim.derive import codegen
-    gen, out, delay = Path(sys.argv[1]), sys.argv[2], float(sys.argv[3])
+    gen, out, delay, pause_at = Path(sys.argv[1]), sys.argv[2], float(sys.argv[3]), int(sys.argv[4])
     files = {p.name: p.read_text(encoding="utf-8") for p in gen.iterdir() if p.is_file() and p.name != "manifest.json"}
     codegen.render = lambda: dict(files)
     _fsync = os.fsync
-    first = []
+    calls = []
     def slow_fsync(fd):
-        if not first:
-            first.append(1)
+        calls.append(fd)
+        if len(calls) == 1:
             print("writing", flush=True)
+        if len(calls) == pause_at:      # stop here for good: the test kills the process at this point
+            print("paused", flush=True)
+            time.sleep(3600)
         time.sleep(delay)
         _fsync(fd)
     os.fsync = slow_fsync
@@ -105,25 +109,37 @@ def state(out: Path, old_man: dict, new_man: dict) -> str:
     return f"a mix (manifest of neither run; not old: {bad_old})"
 
 
-def read_line(proc: subprocess.Popen, deadline: float) -> str:
-    """The next line of proc's stdout ('' at EOF); fails past the deadline (never hangs)."""
-    ready, _, _ = select.select([proc.stdout], [], [], max(0.0, deadline - time.monotonic()))
-    assert ready, "the derive subprocess printed nothing before the deadline"
-    return proc.stdout.readline()
-
-
-def run_fast(out: Path, delay: float, kill_after: float | None, wait_for: str = "started") -> dict:
-    """One fast derive into out; SIGKILL it kill_after s after it printed `wait_for` (None: let it finish)."""
-    proc = subprocess.Popen([sys.executable, "-c", FAST_DERIVE, str(GEN), str(out), str(delay)],
+def run_fast(out: Path, delay: float, kill_after: float | None, wait_for: str = "started", pause_at: int = 0) -> dict:
+    """One fast derive into out; SIGKILL it kill_after s after it printed `wait_for` (None: let it finish).
+    pause_at=k: the derive stops for good in its k-th fsync (and prints "paused"), to be killed there."""
+    proc = subprocess.Popen([sys.executable, "-c", FAST_DERIVE, str(GEN), str(out), str(delay), str(pause_at)],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    lines: queue.Queue = queue.Queue()
+    reader_stop = []            # why the reader thread stopped
+
+    def reader():
+        try:
+            for line in proc.stdout:
+                lines.put(line.strip())
+            reader_stop.append("end of output")
+        except Exception as exc:  # noqa: BLE001 - recorded, reported by the assertion below
+            reader_stop.append(f"{type(exc).__name__}: {exc}")
+        finally:
+            lines.put(None)
+
+    thread = threading.Thread(target=reader, daemon=True)
+    thread.start()
     deadline = time.monotonic() + DEADLINE
     try:
-        while True:
-            line = read_line(proc, deadline)
-            if line.strip() == wait_for or line == "":
+        while True:         # wait (generously) for the line to time the kill from; None: the output ended
+            try:
+                line = lines.get(timeout=max(0.1, deadline - time.monotonic()))
+            except queue.Empty:
+                raise AssertionError(f"derive printed no {wait_for!r} within {DEADLINE} s ({reader_stop})") from None
+            if line is None or line == wait_for:
                 break
         t0 = time.monotonic()
-        if kill_after is not None and line:
+        if kill_after is not None and line is not None:
             time.sleep(kill_after)
             proc.send_signal(signal.SIGKILL)
         rc = proc.wait(timeout=max(1.0, deadline - time.monotonic()))
@@ -132,6 +148,7 @@ def run_fast(out: Path, delay: float, kill_after: float | None, wait_for: str = 
         if proc.poll() is None:
             proc.kill()
             proc.wait()
+        thread.join(timeout=60)
         proc.stdout.close()
         proc.stderr.close()
 
@@ -145,20 +162,29 @@ def test_killed_while_writing_generated_is_old_or_new_never_a_mix(tmp_path):
     calib = run_fast(out, delay, None)     # one uninterrupted run: how long the write phase takes here
     assert calib["rc"] == 0, calib["stderr"]
     assert state(out, old_man, new_man) == "new"
+    n_fsync = len(files) + 1 + 2           # every file, the manifest, the new folder, the parent after the swap
     window = calib["seconds"]
     rng = random.Random(20261123)
     trials = []
-    n = 10
-    for k in range(n):
+    # (a) killed at fixed points: in the first file's fsync, mid-way, in the new folder's fsync (all
+    # written, not yet swapped) and in the parent's fsync right after the swap
+    for k in (1, n_fsync // 2, n_fsync - 1, n_fsync):
         old_man = write_old_generation(out, files)   # leftovers of the previous kill stay: the run cleans them
-        # kill times stratified over 0 … 1.1 × the write phase, half timed from the first fsync
+        r = run_fast(out, delay, 0.0, "paused", pause_at=k)
+        trials.append((f"fsync {k}", r["rc"], state(out, old_man, new_man)))
+    assert all(rc == -signal.SIGKILL for _, rc, _ in trials), trials
+    assert [s for *_, s in trials] == ["old", "old", "old", "new"], trials
+    # (b) killed at seeded times stratified over 0 … 1.1 × the measured write phase, half of them
+    # timed from the start of the command, half from its first fsync
+    n = 8
+    for k in range(n):
+        old_man = write_old_generation(out, files)
         kill_after = window * 1.1 * (k + rng.random()) / n
         wait_for = "writing" if k % 2 else "started"
         r = run_fast(out, delay, kill_after, wait_for)
-        trials.append((round(kill_after, 3), wait_for, r["rc"], state(out, old_man, new_man)))
-    print("\nkill trials (kill after s, from, exit code, generated/):", *trials, sep="\n  ")
+        trials.append((f"{kill_after:.3f} s after {wait_for}", r["rc"], state(out, old_man, new_man)))
+    print("\nkill trials (when, exit code, generated/):", *trials, sep="\n  ")
     assert all(s in ("old", "new") for *_, s in trials), trials
-    assert any(rc == -signal.SIGKILL for _, _, rc, _ in trials), "no trial was killed before it finished"
     # the next, uninterrupted run finishes the job and removes every leftover of the killed ones
     r = run_fast(out, 0.0, None)
     assert r["rc"] == 0, r["stderr"]
