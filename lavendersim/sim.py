@@ -68,6 +68,7 @@ class Trajectory:
 
 
 class Sim:
+    @V.keywords  # unknown keyword arguments raise LavenderInputError naming them
     def __init__(self, scene: Scene, dt: float = 1e-3, integrator: str = "rk4", backend: str = "auto", normalize: bool = True,
                  rtol: float | None = None, atol: float | None = None):
         if not isinstance(scene, Scene):
@@ -232,6 +233,7 @@ class Sim:
         i = self._i(name)
         return BodyState(self.x[i].copy(), self._models.Omega[i].copy())
 
+    @V.keywords  # an unknown keyword (a typo such as omega=) is a LavenderInputError naming it
     def set_state(self, name: str, *, p_w=None, q=None, v_w=None, omega_b=None, omega_w=None, Omega=None) -> None:
         """Set parts of one body's state; everything is validated before anything changes.
 
