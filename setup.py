@@ -7,6 +7,8 @@ CPython glue (lavendersim/csrc/*.c). The sha256 of the generated C sources (HASH
     pip install -e .                  # editable install; builds the extension in place
     LAVENDERSIM_BUILD_C=0 pip install -e .   # explicit opt-out: NumPy backend only, no compiler needed
     LAVENDERSIM_NATIVE=1 pip install -e .    # add -march=native (not portable; see the measurements)
+    LAVENDERSIM_SANITIZE=1 pip install --target DIR .  # AddressSanitizer + UBSan build, for testing only
+        (-O1 -g; run Python with LD_PRELOAD=$(gcc -print-file-name=libasan.so); .ci/sanitize does it all)
 
 A missing or failing C compiler stops the build with an explanation; it is never skipped silently.
 """
@@ -82,6 +84,14 @@ def extensions() -> list[Extension]:
     args.append("-fvisibility=hidden")
     if _flag("LAVENDERSIM_NATIVE"):
         args.append("-march=native")
+    link_args = []
+    if _flag("LAVENDERSIM_SANITIZE"):  # testing build (.ci/sanitize): memory errors and UB abort the process
+        sanitize = ["-fsanitize=address,undefined", "-fno-sanitize-recover=undefined"]
+        # -fno-wrapv: Python's CFLAGS carry -fwrapv, which defines signed overflow and so hides it from UBSan
+        args = [a for a in args if a != "-O3"] + ["-O1", "-g", "-fno-omit-frame-pointer", "-fno-wrapv"] + sanitize
+        link_args = sanitize
+        print(f"LAVENDERSIM_SANITIZE=1: building lavendersim._lavender_c with {' '.join(sanitize)} (not for use)",
+              file=sys.stderr)
     return [Extension(
         "lavendersim._lavender_c",
         # generated/kernels.c is #included by step.c (one translation unit, so its kernels inline)
@@ -90,6 +100,7 @@ def extensions() -> list[Extension]:
         depends=[f"{GENERATED}/{n}" for n in HASHED] + [f"{CSRC}/step.h"],
         define_macros=[("LV_GENERATED_HASH", '"%s"' % generated_hash(HERE / GENERATED))],
         extra_compile_args=args,
+        extra_link_args=link_args,
     )]
 
 

@@ -337,14 +337,24 @@ def _np_kernel(p: Printed, pr: NpPrinter) -> list[str]:
     return out
 
 
-def print_numpy(printed: list[Printed], effects: list | None = None, header: str = HEADER) -> str:
-    """kernels_numpy.py: every kernel vectorized, the KERNELS table and the effects' dispatch."""
+def print_numpy(printed: list[Printed], effects: list | None = None, header: str = HEADER,
+                self_check: bool = False) -> str:
+    """kernels_numpy.py: every kernel vectorized, the KERNELS table and the effects' dispatch.
+
+    self_check: the module's first statement checks its own sha256 against the manifest.json beside it
+    (lavendersim._integrity.check_generated), so a hand edit or a truncation raises at import."""
     from . import effect_print
 
     pr = NpPrinter()
     out = [f'"""{header}', "", "LavenderSim kernels for NumPy, vectorized over leading batch axes: an input of shape",
            "(..., n) broadcasts against the others; scalars may be floats or arrays of the batch shape.",
-           'Quaternions are (x, y, z, w), scalar last; matrices are (..., 3, 3)."""', "import numpy", "", ""]
+           'Quaternions are (x, y, z, w), scalar last; matrices are (..., 3, 3)."""']
+    if self_check:
+        out += ["from lavendersim._integrity import check_generated as _check_generated",
+                "",
+                "_check_generated(__file__)  # this file against manifest.json: edited or truncated -> GeneratedFileError",
+                ""]
+    out += ["import numpy", "", ""]
     meta = []
     for p in printed:
         k = p.k
@@ -509,7 +519,7 @@ def render() -> dict[str, str]:
     effects = list(enumerate(all_effects(), start=1))
     forces = [(c, d) for c, d in effects if d.kind == "force"]
     h, c = print_c(printed, forces)
-    files = {"kernels.h": h, "kernels.c": c, "kernels_numpy.py": print_numpy(printed, forces),
+    files = {"kernels.h": h, "kernels.c": c, "kernels_numpy.py": print_numpy(printed, forces, self_check=True),
              "kernels_casadi.py": print_casadi(printed), "effects_meta.py": meta_module(effects, HEADER),
              "EQUATIONS.md": print_markdown(printed, effects), "__init__.py": f'"""{HEADER}"""\n'}
     files.update(contract_files())
@@ -535,17 +545,25 @@ def manifest_for(files: dict[str, str]) -> str:
 
 
 def write(outdir: Path) -> list[str]:
-    """Write generated/; return the files whose content changed."""
-    outdir.mkdir(parents=True, exist_ok=True)
+    """Write generated/ atomically; return the files whose content changed.
+
+    Every file is printed in memory first, then the folder is replaced as a whole
+    (derive/atomic.py: written into a sibling folder and swapped in), so a run killed at any moment
+    leaves outdir either as it was or complete and consistent with its manifest; leftovers of a
+    killed run are cleaned up (or put back) by the next one. Unchanged files keep their timestamps;
+    nothing is written when nothing changed. outdir may hold only derive's files (and __pycache__):
+    anything else raises atomic.OutputFolderError before anything is written."""
+    from . import atomic
+
+    outdir = Path(outdir)
     files = render()
     files["manifest.json"] = manifest_for(files)
-    changed = []
-    for name, text in sorted(files.items()):
-        path = outdir / name
-        if not path.exists() or path.read_text(encoding="utf-8") != text:
-            path.write_text(text, encoding="utf-8")
-            changed.append(name)
-    return changed
+    owned = set()
+    try:  # files an older derive wrote (listed in its manifest) are derive's to drop
+        owned = set(json.loads((outdir / "manifest.json").read_text(encoding="utf-8")).get("outputs_sha256", {}))
+    except (OSError, ValueError, AttributeError):
+        pass
+    return atomic.replace_folder(outdir, files, owned=owned)
 
 
 def check(outdir: Path, full: bool = False) -> list[str]:

@@ -3,6 +3,10 @@
 LavenderSim kernels for NumPy, vectorized over leading batch axes: an input of shape
 (..., n) broadcasts against the others; scalars may be floats or arrays of the batch shape.
 Quaternions are (x, y, z, w), scalar last; matrices are (..., 3, 3)."""
+from lavendersim._integrity import check_generated as _check_generated
+
+_check_generated(__file__)  # this file against manifest.json: edited or truncated -> GeneratedFileError
+
 import numpy
 
 

@@ -81,7 +81,12 @@ def _derive(args) -> int:
             return 1
         print(f"generated/ is current ({out}; {dt:.2f} s)")
         return 0
-    changed = codegen.write(out)
+    from lavendersim.derive.atomic import OutputFolderError
+
+    try:
+        changed = codegen.write(out)   # atomic: the folder is swapped in whole (derive/atomic.py)
+    except OutputFolderError as exc:
+        return _fail(f"derive: {exc}")
     dt = time.perf_counter() - t0
     print(f"derived into {out} in {dt:.2f} s; changed: {', '.join(changed) if changed else 'nothing'}")
     if changed and any(n.startswith("kernels.") for n in changed):

@@ -16,3 +16,8 @@ class DivergenceError(FloatingPointError):
 
 class StaleBuildError(ImportError):
     """The compiled C backend was built from other generated/ sources than the ones on disk."""
+
+
+class GeneratedFileError(ImportError):
+    """A generated module (generated/kernels_numpy.py) does not match generated/manifest.json: it was
+    edited by hand or half-written. The message names the file and `lavendersim derive`."""

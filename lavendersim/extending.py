@@ -174,13 +174,13 @@ def derive(declaration, out=None, compile: bool = True) -> UserSet:
     C (cached) and load it. Imports SymPy (this is the derive step, not the simulation path)."""
     from .derive.user import render_user
 
+    from .derive.atomic import replace_folder
+
     set_name, files = render_user(declaration)
     directory = (Path(out) if out is not None else sets_dir()) / set_name
-    directory.mkdir(parents=True, exist_ok=True)
-    for name, text in sorted(files.items()):
-        p = directory / name
-        if not p.exists() or p.read_text(encoding="utf-8") != text:
-            p.write_text(text, encoding="utf-8")
+    # the set's folder is swapped in whole (a killed run leaves the old set or the new one), its
+    # compiled-library cache build/ carried over; anything else in it raises before anything is written
+    replace_folder(directory, files, keep=("build",))
     s = load(directory, reload=True)
     if compile:
         s.library()

@@ -1,0 +1,78 @@
+"""Import-time check of generated Python modules against generated/manifest.json.
+
+The C backend embeds the hash of the generated C sources it was built from (StaleBuildError on a
+mismatch). The NumPy kernels are checked the same way when first imported: generated/kernels_numpy.py
+must have the sha256 that manifest.json records for it, else :class:`GeneratedFileError` names the file
+and the command that regenerates it — a hand edit (a box's inertia doubled) or a truncated file never
+runs silently and never surfaces as an AttributeError. One file is hashed once per process (cached
+by size and modification time); ``import lavendersim`` does not trigger it.
+
+The check runs twice over, so that every way of importing the kernels is covered: lavendersim.kernels
+calls :func:`check_generated` before importing the module (this also covers a file truncated to
+nothing), and derive prints a call to :func:`check_generated` as the first statement of
+kernels_numpy.py (a direct ``from lavendersim.generated import kernels_numpy``).
+Standard library only.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+from pathlib import Path
+
+from .errors import GeneratedFileError
+
+_OK: dict[str, tuple[int, int]] = {}   # path -> (size, mtime_ns) of a file found consistent
+
+
+def generated_dir() -> Path:
+    """The package's generated/ folder (found without importing any generated module)."""
+    import importlib.util
+
+    spec = importlib.util.find_spec("lavendersim.generated")
+    if spec is None or not spec.submodule_search_locations:
+        raise GeneratedFileError("lavendersim.generated is missing: the package's generated/ folder is not there; "
+                                 "run `lavendersim derive` from a source checkout (or reinstall lavendersim)")
+    return Path(list(spec.submodule_search_locations)[0])
+
+
+def _fail(path: Path, why: str) -> GeneratedFileError:
+    return GeneratedFileError(
+        f"{path} {why}. Files in generated/ are written only by `lavendersim derive`; it was edited by hand "
+        "or half-written. Regenerate it with `lavendersim derive` (then rebuild the C backend, "
+        "`pip install -e .` in a checkout), or restore the file from your installation.")
+
+
+def check_generated(path) -> None:
+    """Raise GeneratedFileError unless the file at `path` has the sha256 that the manifest.json beside it
+    records for its name.
+
+    Parameters
+    ----------
+    path : path-like
+        A generated file (e.g. ``generated/kernels_numpy.py``, or a module's ``__file__``).
+    """
+    path = Path(path)
+    key = os.fspath(path)
+    try:
+        st = path.stat()
+    except OSError as exc:
+        raise _fail(path, f"cannot be read ({exc.strerror or exc})") from exc
+    sig = (st.st_size, st.st_mtime_ns)
+    if _OK.get(key) == sig:
+        return
+    man_path = path.parent / "manifest.json"
+    try:
+        want = json.loads(man_path.read_text(encoding="utf-8"))["outputs_sha256"][path.name]
+    except OSError as exc:
+        raise _fail(path, f"cannot be checked: {man_path} cannot be read ({exc.strerror or exc})") from exc
+    except (ValueError, KeyError, TypeError) as exc:
+        raise _fail(path, f"cannot be checked: {man_path} is not a derive manifest listing {path.name}") from exc
+    try:
+        got = hashlib.sha256(path.read_bytes()).hexdigest()
+    except OSError as exc:
+        raise _fail(path, f"cannot be read ({exc.strerror or exc})") from exc
+    if got != want:
+        raise _fail(path, f"does not match generated/manifest.json (sha256 {got[:12]}…, manifest {want[:12]}…; "
+                          f"{st.st_size} bytes)")
+    _OK[key] = sig
