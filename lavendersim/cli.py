@@ -66,7 +66,9 @@ def _derive(args) -> int:
     from lavendersim import validate as V
 
     if args.out and not args.check:
-        V.writable_dir("out", args.out)  # exit 2 and one line, before anything is derived
+        out_dir = V.writable_dir("out", args.out)  # exit 2 and one line, before anything is derived
+        # derive swaps a complete sibling folder in (derive/atomic.py): the parent must be writable too
+        V.writable_dir("out", out_dir.resolve().parent)
     if args.user:
         return _derive_user(args)
     out = Path(args.out) if args.out else generated_dir()
