@@ -19,6 +19,7 @@
 #define LV_DP_INIT_GROW 100.0
 #define LV_DP_INIT_EXPONENT 0.2
 #define LV_GYRO_TOL_SQ 1e-32
+#define LV_GYRO_ACCEPT_SQ 1e-20
 #define LV_SPLIT_KICK 0.5
 #define LV_SPLIT_MIDPOINT 0.5
 #define LV_RK4_C0 0.0
@@ -29,6 +30,16 @@
 #define LV_RK4_B1 2.0
 #define LV_RK4_B2 2.0
 #define LV_RK4_B3 1.0
+#define LV_WDT_MAX_EULER 0.1
+#define LV_WDT_RATIO_EXPONENT_EULER 0.0
+#define LV_WDT_MAX_IMPLICIT_GYRO 3.141592653589793
+#define LV_WDT_RATIO_EXPONENT_IMPLICIT_GYRO 0.0
+#define LV_WDT_MAX_RK4 2.8284271247461903
+#define LV_WDT_RATIO_EXPONENT_RK4 0.0
+#define LV_WDT_MAX_SEMI_IMPLICIT_EULER 0.1
+#define LV_WDT_RATIO_EXPONENT_SEMI_IMPLICIT_EULER 0.0
+#define LV_WDT_MAX_SPLITTING 1.0
+#define LV_WDT_RATIO_EXPONENT_SPLITTING 0.25
 
 /* Dormand-Prince 5(4): A (row 6 = the 5th-order weights, FSAL) and E = b - b_hat */
 static const double LV_DP_A[7][6] = {

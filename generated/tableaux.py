@@ -19,6 +19,7 @@ DP_INIT_SHRINK = 0.001
 DP_INIT_GROW = 100.0
 DP_INIT_EXPONENT = 0.2
 GYRO_TOL_SQ = 1e-32
+GYRO_ACCEPT_SQ = 1e-20
 SPLIT_KICK = 0.5
 SPLIT_MIDPOINT = 0.5
 RK4_C0 = 0.0
@@ -29,6 +30,16 @@ RK4_B0 = 1.0
 RK4_B1 = 2.0
 RK4_B2 = 2.0
 RK4_B3 = 1.0
+WDT_MAX_EULER = 0.1
+WDT_RATIO_EXPONENT_EULER = 0.0
+WDT_MAX_IMPLICIT_GYRO = 3.141592653589793
+WDT_RATIO_EXPONENT_IMPLICIT_GYRO = 0.0
+WDT_MAX_RK4 = 2.8284271247461903
+WDT_RATIO_EXPONENT_RK4 = 0.0
+WDT_MAX_SEMI_IMPLICIT_EULER = 0.1
+WDT_RATIO_EXPONENT_SEMI_IMPLICIT_EULER = 0.0
+WDT_MAX_SPLITTING = 1.0
+WDT_RATIO_EXPONENT_SPLITTING = 0.25
 
 # Dormand-Prince 5(4): DP_A[s] (stage s's coefficients; DP_A[6] = the 5th-order weights, FSAL), DP_E = b - b_hat
 DP_A = (
@@ -45,3 +56,6 @@ RK4_C = (0.0, 0.5, 0.5, 1.0)
 RK4_B_NUM = (1.0, 2.0, 2.0, 1.0)
 # Strang splitting of the free rotation: (axis, fraction of h)
 STRANG = ((0, 0.5), (1, 0.5), (2, 1.0), (1, 0.5), (0, 0.5))
+# validity bounds: |omega| dt (I_max/I_min)**WDT_RATIO_EXPONENT[name] <= WDT_MAX[name] (derive/tableaux.py)
+WDT_MAX = {'euler': 0.1, 'implicit_gyro': 3.141592653589793, 'rk4': 2.8284271247461903, 'semi_implicit_euler': 0.1, 'splitting': 1.0}
+WDT_RATIO_EXPONENT = {'euler': 0.0, 'implicit_gyro': 0.0, 'rk4': 0.0, 'semi_implicit_euler': 0.0, 'splitting': 0.25}
