@@ -14,5 +14,9 @@ class DivergenceError(FloatingPointError):
         super().__init__(f"simulation diverged at {when}, {who}: {cause}")
 
 
+class ValidityBoundWarning(UserWarning):
+    """A body ran beyond its integrator's validity bound with Sim(..., on_bound="warn") (the text names it)."""
+
+
 class StaleBuildError(ImportError):
     """The compiled C backend was built from other generated/ sources than the ones on disk."""
