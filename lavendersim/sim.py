@@ -75,7 +75,7 @@ from .scene import Scene
 
 
 MAX_STEPS = 2**53          # steps per call and in total: the step counter and t = steps*dt stay exact in float64
-CHUNK_WORK = 2**18         # right-hand-side evaluations (summed over bodies) per backend call between checks
+CHUNK_WORK = 2**20         # right-hand-side evaluations (summed over bodies) per backend call between checks
 ON_BOUND = ("raise", "warn")
 
 
@@ -147,6 +147,8 @@ class Sim:
                 raise V.LavenderInputError("max_growth", "must be > 1 (or None: no growth check)", f", got {max_growth!r}")
         self.max_growth = max_growth
         self._lock = threading.RLock()
+        self._has_models = bool(self._models.rows[:, LY.MODEL_KIND].any())
+        self._checked = None       # the last state that passed the checks (skips the re-check before a call)
         self._setup_checks()
         self.t = 0.0
         self.steps = 0
@@ -158,6 +160,8 @@ class Sim:
         I = self.params[:, LY.PARAM_I_B]
         self._ratio = (I.max(axis=1) / I.min(axis=1)) if nb else np.zeros(0)
         self._bound = validity_bound(self.integrator)
+        p = 0.0 if self._bound is None else self._bound[1]
+        self._wdt_scale = self.dt * (self._ratio ** p if p else np.ones(nb))
         acted = np.zeros(nb, bool)
         if len(self.effects):
             from .effects import ROW_BODY
@@ -167,23 +171,25 @@ class Sim:
         kind = self._models.rows[:, LY.MODEL_KIND].astype(np.int64) if nb else np.zeros(0, np.int64)
         self._free = ~acted & (kind == 0)                      # E and |L| conserved
         self._free_wheels = ~acted & (kind == KIND_WHEELS)     # total |L| conserved (motor torques are internal)
+        self._free_any = bool(self._free.any())
+        self._free_wheels_idx = [int(i) for i in np.flatnonzero(self._free_wheels)]
         self._warned: set[int] = set()
         evals = self._per_step if self._per_step is not None else 12
         self._chunk = max(1, CHUNK_WORK // max(1, nb * evals))
         self._reference()
 
     def _invariants(self, x: np.ndarray, Omega: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(kinetic energy, |L|) per body: for wheeled bodies |L| is the total (body + wheels)."""
+        """(kinetic energy, |L|) per body, where the growth check reads them (else 0): E of the torque- and
+        force-free plain bodies (kinetic_energy; E catches their blow-ups — splitting keeps |L| exactly —
+        and is the cheaper kernel), |L| (body + wheels, wheel_momentum) of the wheeled ones."""
         nb = len(self.names)
         E, L = np.zeros(nb), np.zeros(nb)
         with np.errstate(over="ignore", invalid="ignore"):
-            if self._free.any():
+            if self._free_any:
                 f = self._free
                 E[f] = K.kinetic_energy(self.params[f, LY.PARAM_M], self.params[f][:, LY.PARAM_I_B],
                                         x[f][:, LY.STATE_V_W], x[f][:, LY.STATE_OMEGA_B])
-                L[f] = np.linalg.norm(K.angular_momentum_world(x[f][:, LY.STATE_Q], self.params[f][:, LY.PARAM_I_B],
-                                                               x[f][:, LY.STATE_OMEGA_B]), axis=-1)
-            for i in np.flatnonzero(self._free_wheels):
+            for i in self._free_wheels_idx:
                 r = self._models.rows[i]
                 Lb, Lw = K.wheel_momentum(x[i, LY.STATE_Q], x[i, LY.STATE_OMEGA_B], Omega[i],
                                           r[LY.MODEL_I_P].reshape(3, 3), r[LY.MODEL_J])
@@ -191,14 +197,29 @@ class Sim:
         return E, L
 
     def _reference(self) -> None:
-        """The growth check's reference values (at construction and after set_state)."""
+        """The growth check's reference values (at construction and after set_state), and per free body the
+        largest |omega| at which its energy cannot exceed max_growth * E0 (E <= T_translation + I_max |omega|^2 / 2,
+        both terms from the kinetic_energy kernel; v is constant on a force-free body): the check evaluates the
+        kernel only for a body above it, so it costs nothing while a run is far from its limit."""
         self._E0, self._L0 = self._invariants(self.x, self._models.Omega)
+        nb = len(self.names)
+        self._w_safe = np.zeros(nb)
+        if self._free_any and self.max_growth is not None:
+            f = self._free
+            I = self.params[f][:, LY.PARAM_I_B]
+            with np.errstate(over="ignore", invalid="ignore"):
+                T = K.kinetic_energy(self.params[f, LY.PARAM_M], I, self.x[f][:, LY.STATE_V_W], np.zeros((int(f.sum()), 3)))
+                half_Imax = K.kinetic_energy(np.zeros(int(f.sum())), np.repeat(I.max(axis=1)[:, None], 3, axis=1),
+                                             np.zeros((int(f.sum()), 3)), np.tile([1.0, 0.0, 0.0], (int(f.sum()), 1)))
+                room = np.maximum(self.max_growth * self._E0[f] - T, 0.0)
+                self._w_safe[f] = np.sqrt(room / half_Imax) * (1 - 1e-12)   # rounding margin: never skip a violation
 
-    def _wdt(self, x: np.ndarray) -> np.ndarray:
-        """Per body |omega|*dt*(I_max/I_min)**p, the quantity the validity bound limits."""
+    def _wdt(self, x: np.ndarray, w: np.ndarray | None = None) -> np.ndarray:
+        """Per body |omega|*dt*(I_max/I_min)**p, the quantity the validity bound limits (w: |omega| if known)."""
         p = 0.0 if self._bound is None else self._bound[1]
-        with np.errstate(over="ignore", invalid="ignore"):
-            w = np.array([backends.norm_safe(x[i, LY.STATE_OMEGA_B]) for i in range(x.shape[0])])
+        with np.errstate(over="ignore", invalid="ignore"):   # an overflowing norm is inf: beyond any bound
+            if w is None:
+                w = np.linalg.norm(x[:, LY.STATE_OMEGA_B], axis=-1)
             return w * self.dt * (self._ratio ** p if p else 1.0)
 
     def _bound_text(self, value: float) -> str:
@@ -207,9 +228,12 @@ class Sim:
         return (f"{what} = {value:.3g} is beyond {self.integrator}'s validity bound {wmax:.4g} (WDT_MAX, "
                 f"derive/tableaux.py); reduce dt" + ("" if self.integrator == "dopri5" else " or use dopri5"))
 
-    def _violation(self, x: np.ndarray, Omega: np.ndarray, warn: bool = True) -> tuple[int, str] | None:
-        """The first body (index, cause) of state x that fails a check, or None."""
-        if self._bound is not None:
+    def _violation(self, x: np.ndarray, Omega: np.ndarray, warn: bool = True, growth: bool = True) -> tuple[int, str] | None:
+        """The first body (index, cause) of state x that fails a check (growth=False: the bound only), or None."""
+        with np.errstate(over="ignore", invalid="ignore"):   # an overflowing norm is inf: beyond any bound
+            om = x[:, LY.STATE_OMEGA_B]
+            w = np.sqrt(np.add.reduce(om * om, axis=1))
+        if self._bound is not None and not w.size == 0 and not float((w * self._wdt_scale).max()) <= self._bound[0]:
             v = self._wdt(x)
             bad = ~(v <= self._bound[0])
             if bad.any():
@@ -223,11 +247,11 @@ class Sim:
                             warnings.warn(f"body {self.names[b]!r}: {self._bound_text(float(v[b]))}; results beyond it "
                                           "are not trusted (on_bound='warn')", ValidityBoundWarning, stacklevel=4)
         g = self.max_growth
-        if g is not None and (self._free.any() or self._free_wheels.any()):
+        if growth and g is not None and (self._free_wheels_idx or (self._free_any and not bool((w <= self._w_safe).all()))):
             E, L = self._invariants(x, Omega)
             with np.errstate(over="ignore", invalid="ignore"):
                 badE = self._free & (self._E0 > 0) & ~(E <= g * self._E0)
-                badL = (self._free | self._free_wheels) & (self._L0 > 0) & ~(L <= g * self._L0)
+                badL = self._free_wheels & (self._L0 > 0) & ~(L <= g * self._L0)
             bad = badE | badL
             if bad.any():
                 b = int(np.flatnonzero(bad)[0])
@@ -376,7 +400,6 @@ class Sim:
         if self.steps + n > MAX_STEPS:
             raise V.LavenderInputError("n_steps", f"the Sim would pass MAX_STEPS = 2**53 steps in total "
                                        f"({self.steps} done + {n})")
-        self._has_models = bool(self._models.rows[:, LY.MODEL_KIND].any())
         start = self._snapshot()
         steps0 = self.steps
 
@@ -385,13 +408,16 @@ class Sim:
             return DivergenceError(steps0 + k, body, cause, self.names[body], t=(steps0 + k + 1) * self.dt)
 
         try:
-            v = self._violation(self.x, self._models.Omega)
-            if v is not None:
-                raise fail(0, v[0], "before the step: " + v[1])
+            # before stepping: the bound (the state may have been written since the last check); the growth
+            # check ran on the end state of the previous call
+            if self._checked is None or not np.array_equal(self._checked, self.x):
+                v = self._violation(self.x, self._models.Omega, growth=False)
+                if v is not None:
+                    raise fail(0, v[0], "before the step: " + v[1])
             done = 0
             while done < n:
                 m = min(self._chunk, n - done)
-                chunk = self._snapshot()
+                chunk = start if done == 0 else self._snapshot()
                 try:
                     self._backend_advance(m)
                 except DivergenceError as e:
@@ -410,6 +436,7 @@ class Sim:
                     del end
                     raise fail(done + hit[0] - 1, hit[1], hit[2]) from None
                 done += m
+            self._checked = self.x.copy()
         except DivergenceError:
             raise
         except BaseException:           # KeyboardInterrupt between chunks, or any error: nothing half-applied
