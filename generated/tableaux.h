@@ -39,7 +39,7 @@
 #define LV_WDT_MAX_SEMI_IMPLICIT_EULER 0.1
 #define LV_WDT_RATIO_EXPONENT_SEMI_IMPLICIT_EULER 0.0
 #define LV_WDT_MAX_SPLITTING 1.0
-#define LV_WDT_RATIO_EXPONENT_SPLITTING 0.25
+#define LV_WDT_RATIO_EXPONENT_SPLITTING 0.5
 
 /* Dormand-Prince 5(4): A (row 6 = the 5th-order weights, FSAL) and E = b - b_hat */
 static const double LV_DP_A[7][6] = {

@@ -39,7 +39,7 @@ WDT_RATIO_EXPONENT_RK4 = 0.0
 WDT_MAX_SEMI_IMPLICIT_EULER = 0.1
 WDT_RATIO_EXPONENT_SEMI_IMPLICIT_EULER = 0.0
 WDT_MAX_SPLITTING = 1.0
-WDT_RATIO_EXPONENT_SPLITTING = 0.25
+WDT_RATIO_EXPONENT_SPLITTING = 0.5
 
 # Dormand-Prince 5(4): DP_A[s] (stage s's coefficients; DP_A[6] = the 5th-order weights, FSAL), DP_E = b - b_hat
 DP_A = (
@@ -58,4 +58,4 @@ RK4_B_NUM = (1.0, 2.0, 2.0, 1.0)
 STRANG = ((0, 0.5), (1, 0.5), (2, 1.0), (1, 0.5), (0, 0.5))
 # validity bounds: |omega| dt (I_max/I_min)**WDT_RATIO_EXPONENT[name] <= WDT_MAX[name] (derive/tableaux.py)
 WDT_MAX = {'euler': 0.1, 'implicit_gyro': 3.141592653589793, 'rk4': 2.8284271247461903, 'semi_implicit_euler': 0.1, 'splitting': 1.0}
-WDT_RATIO_EXPONENT = {'euler': 0.0, 'implicit_gyro': 0.0, 'rk4': 0.0, 'semi_implicit_euler': 0.0, 'splitting': 0.25}
+WDT_RATIO_EXPONENT = {'euler': 0.0, 'implicit_gyro': 0.0, 'rk4': 0.0, 'semi_implicit_euler': 0.0, 'splitting': 0.5}

@@ -101,6 +101,31 @@ class Trajectory:
 
 
 class Sim:
+    """Steps a scene's bodies (see the module docstring).
+
+    Parameters
+    ----------
+    scene : Scene
+        Read once here; later edits to it do not affect this Sim.
+    dt : float
+        Step (s); the output interval of an adaptive integrator.
+    integrator : str
+        One of lavendersim.backends.INTEGRATORS.
+    backend : {"auto", "c", "numpy"}
+    normalize : bool
+        Normalize q after every step.
+    rtol, atol : float, optional
+        Tolerances of the adaptive integrators only.
+    on_bound : {"raise", "warn"}
+        Beyond the integrator's validity bound (|omega|*dt*(I_max/I_min)**p <= WDT_MAX, derive/tableaux.py):
+        "raise" (default) raises DivergenceError at the first step that would run beyond it (set_state:
+        LavenderInputError at the call); "warn" runs on with one ValidityBoundWarning per body.
+    max_growth : float or None
+        A torque- and force-free body whose kinetic energy (a free wheeled body: whose total |L|) exceeds
+        max_growth times its value at construction / the last set_state raises DivergenceError
+        (default 10; None switches the check off).
+    """
+
     def __init__(self, scene: Scene, dt: float = 1e-3, integrator: str = "rk4", backend: str = "auto", normalize: bool = True,
                  rtol: float | None = None, atol: float | None = None, on_bound: str = "raise",
                  max_growth: float | None = 10.0):
@@ -229,7 +254,18 @@ class Sim:
                 f"derive/tableaux.py); reduce dt" + ("" if self.integrator == "dopri5" else " or use dopri5"))
 
     def _violation(self, x: np.ndarray, Omega: np.ndarray, warn: bool = True, growth: bool = True) -> tuple[int, str] | None:
-        """The first body (index, cause) of state x that fails a check (growth=False: the bound only), or None."""
+        """The first body (index, cause) of state x that fails a check (growth=False: the bound only), or None;
+        for a wheeled body whose wheel damping is beyond the integrator's limit the cause says so first."""
+        v = self._violation_raw(x, Omega, warn, growth)
+        if v is not None and self._kind(v[0]) & KIND_WHEELS:
+            r = self._models.rows[v[0]]
+            why = backends.divergence_cause(x[v[0]], self.dt, self.integrator, Omega[v[0]],
+                                            (r[LY.MODEL_J], r[LY.MODEL_C_W]))
+            if "wheel damping" in why:
+                return v[0], f"{why}; {v[1]}"
+        return v
+
+    def _violation_raw(self, x, Omega, warn, growth):
         with np.errstate(over="ignore", invalid="ignore"):   # an overflowing norm is inf: beyond any bound
             om = x[:, LY.STATE_OMEGA_B]
             w = np.sqrt(np.add.reduce(om * om, axis=1))
