@@ -142,6 +142,17 @@ def kernels() -> list[Kernel]:
     small = vnorm <= sp.Rational(1, 10**300)
     to_axis = sp.Matrix([sp.Piecewise((1 if i == 0 else 0, small), (q[i] / vnorm, True)) for i in range(3)])
 
+    # Shortest arc taking the unit vector a onto the unit vector b: q ∝ [a × b, 1 + a·b]. When b is
+    # (nearly) −a that direction is lost to rounding, so the half turn about an axis ⟂ a is taken
+    # instead: a × e_x, or a × e_y when a lies within 45° of e_x.
+    ua, ub = vec("a", 3), vec("b", 3)
+    arc = sp.Matrix([*ua.cross(ub), 1 + ua.dot(ub)])
+    perp = sp.Matrix([sp.Piecewise((e, ua[0] ** 2 <= sp.Rational(1, 2)), (f, True))
+                      for e, f in zip(ua.cross(sp.Matrix([1, 0, 0])), ua.cross(sp.Matrix([0, 1, 0])))])
+    flip = 1 + ua.dot(ub) <= sp.Rational(1, 10**12)
+    from_two = sp.Matrix([sp.Piecewise((perp[i] / sp.sqrt(perp.dot(perp)), flip), (arc[i] / sp.sqrt(arc.dot(arc)), True))
+                          for i in range(3)] + [sp.Piecewise((0, flip), (arc[3] / sp.sqrt(arc.dot(arc)), True))])
+
     Q = "quaternion (x, y, z, w), scalar last"
     return [
         Kernel("quat_mul", "Hamilton product", r"a \otimes b = \begin{bmatrix} a_w b_v + b_w a_v + a_v \times b_v \\ a_w b_w - a_v \cdot b_v \end{bmatrix}",
@@ -162,6 +173,11 @@ def kernels() -> list[Kernel]:
         Kernel("axis_angle_to_quat", "Quaternion of a rotation by angle about a unit axis", r"q = [\hat u \sin(\theta/2), \cos(\theta/2)]",
                [Arg("axis", u, "unit axis (any frame)", "unit_vector"), Arg("angle", theta, "angle, rad")],
                [Arg("q", axis_angle_quat(u, theta), Q)], g),
+        Kernel("quat_from_two_vectors", "Shortest-arc rotation taking one unit vector onto another",
+               r"q = \frac{[a \times b,\ 1 + a \cdot b]}{\lVert [a \times b,\ 1 + a \cdot b] \rVert}"
+               r"\ \text{(a half turn about an axis} \perp a \text{ when } b \approx -a)",
+               [Arg("a", ua, "unit vector (any frame)", "unit_vector"), Arg("b", ub, "unit vector, same frame", "unit_vector")],
+               [Arg("q", from_two, Q + ", unit: R(q) a = b")], g),
         Kernel("quat_to_axis_angle", "Unit axis and angle in [0, 2π] of a unit quaternion", r"\theta = 2\,\operatorname{atan2}(\lVert q_v\rVert, q_w),\ \hat u = q_v/\lVert q_v\rVert",
                [Arg("q", q, Q + ", unit", "unit_quaternion")],
                [Arg("axis", to_axis, "unit axis ([1,0,0] for the identity)"), Arg("angle", 2 * half, "angle, rad")], g),

@@ -446,6 +446,80 @@ void lv_axis_angle_to_quat(const double *axis, double angle, double *q) {
     q[3] = cos(t0);
 }
 
+void lv_quat_from_two_vectors(const double *a, const double *b, double *q) {
+    const double a_0 = a[0];
+    const double a_1 = a[1];
+    const double a_2 = a[2];
+    const double b_0 = b[0];
+    const double b_1 = b[1];
+    const double b_2 = b[2];
+    const double t0 = (a_0*a_0);
+    const double t1 = t0 <= (1.0/2.0);
+    const double t2 = (a_2*a_2);
+    const double t3 = (1.0/sqrt(((t1) ? (
+   0
+)
+: (
+   t2
+)) + ((t1) ? (
+   (a_1*a_1)
+)
+: (
+   t0
+)) + ((t1) ? (
+   t2
+)
+: (
+   0
+))));
+    const double t4 = a_0*b_0 + a_1*b_1 + a_2*b_2;
+    const double t5 = t4 <= (-999999999999.0/1000000000000.0);
+    const double t6 = a_1*b_2 - a_2*b_1;
+    const double t7 = a_0*b_1 - a_1*b_0;
+    const double t8 = -a_0*b_2 + a_2*b_0;
+    const double t9 = t4 + 1;
+    const double t10 = (1.0/sqrt((t6*t6) + (t7*t7) + (t8*t8) + (t9*t9)));
+    q[0] = ((t5) ? (
+   t3*((t1) ? (
+      0
+   )
+   : (
+      -a_2
+   ))
+)
+: (
+   t10*t6
+));
+    q[1] = ((t5) ? (
+   t3*((t1) ? (
+      a_2
+   )
+   : (
+      0
+   ))
+)
+: (
+   t10*t8
+));
+    q[2] = ((t5) ? (
+   t3*((t1) ? (
+      -a_1
+   )
+   : (
+      a_0
+   ))
+)
+: (
+   t10*t7
+));
+    q[3] = ((t5) ? (
+   0
+)
+: (
+   t10*t9
+));
+}
+
 void lv_quat_to_axis_angle(const double *q, double *axis, double *angle) {
     const double q_0 = q[0];
     const double q_1 = q[1];
@@ -1577,6 +1651,7 @@ static void packed_quat_rotate(const double *in, double *out) { lv_quat_rotate(i
 static void packed_quat_to_matrix(const double *in, double *out) { lv_quat_to_matrix(in + 0, out + 0); }
 static void packed_matrix_to_quat(const double *in, double *out) { lv_matrix_to_quat(in + 0, out + 0); }
 static void packed_axis_angle_to_quat(const double *in, double *out) { lv_axis_angle_to_quat(in + 0, in[3], out + 0); }
+static void packed_quat_from_two_vectors(const double *in, double *out) { lv_quat_from_two_vectors(in + 0, in + 3, out + 0); }
 static void packed_quat_to_axis_angle(const double *in, double *out) { lv_quat_to_axis_angle(in + 0, out + 0, out + 3); }
 static void packed_euler_xyz_to_quat(const double *in, double *out) { lv_euler_xyz_to_quat(in[0], in[1], in[2], out + 0); }
 static void packed_quat_to_euler_xyz(const double *in, double *out) { lv_quat_to_euler_xyz(in + 0, out + 0); }
@@ -1628,6 +1703,7 @@ const lv_kernel_info lv_kernel_table[LV_KERNEL_COUNT] = {
     {"quat_to_matrix", 4, 9, packed_quat_to_matrix},
     {"matrix_to_quat", 9, 4, packed_matrix_to_quat},
     {"axis_angle_to_quat", 4, 4, packed_axis_angle_to_quat},
+    {"quat_from_two_vectors", 6, 4, packed_quat_from_two_vectors},
     {"quat_to_axis_angle", 4, 4, packed_quat_to_axis_angle},
     {"euler_xyz_to_quat", 3, 4, packed_euler_xyz_to_quat},
     {"quat_to_euler_xyz", 4, 3, packed_quat_to_euler_xyz},

@@ -11,7 +11,7 @@ typedef struct {
     void (*packed)(const double *in, double *out);
 } lv_kernel_info;
 
-#define LV_KERNEL_COUNT 49
+#define LV_KERNEL_COUNT 50
 extern const lv_kernel_info lv_kernel_table[LV_KERNEL_COUNT];
 
 /* particle_moments: One particle's mass moment and momentum (summed: m r_COM and p).
@@ -147,6 +147,12 @@ void lv_matrix_to_quat(const double *R_wb, double *q);
      in  angle scalar: angle, rad
      out q [4]: quaternion (x, y, z, w), scalar last */
 void lv_axis_angle_to_quat(const double *axis, double angle, double *q);
+
+/* quat_from_two_vectors: Shortest-arc rotation taking one unit vector onto another.
+     in  a [3]: unit vector (any frame)
+     in  b [3]: unit vector, same frame
+     out q [4]: quaternion (x, y, z, w), scalar last, unit: R(q) a = b */
+void lv_quat_from_two_vectors(const double *a, const double *b, double *q);
 
 /* quat_to_axis_angle: Unit axis and angle in [0, 2π] of a unit quaternion.
      in  q [4]: quaternion (x, y, z, w), scalar last, unit

@@ -427,6 +427,31 @@ def axis_angle_to_quat(axis, angle):
     return casadi.vertcat(axis_0*t1, axis_1*t1, axis_2*t1, casadi.cos(t0))
 
 
+def quat_from_two_vectors(a, b):
+    """quat_from_two_vectors: Shortest-arc rotation taking one unit vector onto another.
+      in  a [3]: unit vector (any frame)
+      in  b [3]: unit vector, same frame
+      out q [4]: quaternion (x, y, z, w), scalar last, unit: R(q) a = b"""
+    a_0 = a[0]
+    a_1 = a[1]
+    a_2 = a[2]
+    b_0 = b[0]
+    b_1 = b[1]
+    b_2 = b[2]
+    t0 = (a_0*a_0)
+    t1 = (t0 <= (1.0/2.0))
+    t2 = (a_2*a_2)
+    t3 = (1.0/casadi.sqrt(casadi.if_else(t1, 0, t2) + casadi.if_else(t1, (a_1*a_1), t0) + casadi.if_else(t1, t2, 0)))
+    t4 = a_0*b_0 + a_1*b_1 + a_2*b_2
+    t5 = (t4 <= (-999999999999.0/1000000000000.0))
+    t6 = a_1*b_2 - a_2*b_1
+    t7 = a_0*b_1 - a_1*b_0
+    t8 = -a_0*b_2 + a_2*b_0
+    t9 = t4 + 1
+    t10 = (1.0/casadi.sqrt((t6*t6) + (t7*t7) + (t8*t8) + (t9*t9)))
+    return casadi.vertcat(casadi.if_else(t5, t3*casadi.if_else(t1, 0, -a_2), t10*t6), casadi.if_else(t5, t3*casadi.if_else(t1, a_2, 0), t10*t8), casadi.if_else(t5, t3*casadi.if_else(t1, -a_1, a_0), t10*t7), casadi.if_else(t5, 0, t10*t9))
+
+
 def quat_to_axis_angle(q):
     """quat_to_axis_angle: Unit axis and angle in [0, 2π] of a unit quaternion.
       in  q [4]: quaternion (x, y, z, w), scalar last, unit

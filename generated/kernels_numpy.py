@@ -612,6 +612,40 @@ def axis_angle_to_quat(axis, angle):
     return q_out
 
 
+def quat_from_two_vectors(a, b):
+    """quat_from_two_vectors: Shortest-arc rotation taking one unit vector onto another.
+      in  a [3]: unit vector (any frame)
+      in  b [3]: unit vector, same frame
+      out q [4]: quaternion (x, y, z, w), scalar last, unit: R(q) a = b"""
+    a = numpy.asarray(a, dtype=numpy.float64)
+    b = numpy.asarray(b, dtype=numpy.float64)
+    batch = numpy.broadcast_shapes(a.shape[:-1], b.shape[:-1])
+    a_0 = a[..., 0]
+    a_1 = a[..., 1]
+    a_2 = a[..., 2]
+    b_0 = b[..., 0]
+    b_1 = b[..., 1]
+    b_2 = b[..., 2]
+    with numpy.errstate(invalid='ignore', divide='ignore'):  # numpy.select evaluates every branch
+        t0 = (a_0*a_0)
+        t1 = numpy.less_equal(t0, (1.0/2.0))
+        t2 = (a_2*a_2)
+        t3 = (1.0/numpy.sqrt(numpy.select([t1,True], [0,t2], default=numpy.nan) + numpy.select([t1,True], [(a_1*a_1),t0], default=numpy.nan) + numpy.select([t1,True], [t2,0], default=numpy.nan)))
+        t4 = a_0*b_0 + a_1*b_1 + a_2*b_2
+        t5 = numpy.less_equal(t4, (-999999999999.0/1000000000000.0))
+        t6 = a_1*b_2 - a_2*b_1
+        t7 = a_0*b_1 - a_1*b_0
+        t8 = -a_0*b_2 + a_2*b_0
+        t9 = t4 + 1
+        t10 = (1.0/numpy.sqrt((t6*t6) + (t7*t7) + (t8*t8) + (t9*t9)))
+        q_out = numpy.empty(batch + (4,))
+        q_out[..., 0] = numpy.select([t5,True], [t3*numpy.select([t1,True], [0,-a_2], default=numpy.nan),t10*t6], default=numpy.nan)
+        q_out[..., 1] = numpy.select([t5,True], [t3*numpy.select([t1,True], [a_2,0], default=numpy.nan),t10*t8], default=numpy.nan)
+        q_out[..., 2] = numpy.select([t5,True], [t3*numpy.select([t1,True], [-a_1,a_0], default=numpy.nan),t10*t7], default=numpy.nan)
+        q_out[..., 3] = numpy.select([t5,True], [0,t10*t9], default=numpy.nan)
+    return q_out
+
+
 def quat_to_axis_angle(q):
     """quat_to_axis_angle: Unit axis and angle in [0, 2π] of a unit quaternion.
       in  q [4]: quaternion (x, y, z, w), scalar last, unit
@@ -1923,6 +1957,7 @@ KERNELS = {
     'quat_to_matrix': (quat_to_matrix, [('q', (4,))], [('R_wb', (3, 3))]),
     'matrix_to_quat': (matrix_to_quat, [('R_wb', (3, 3))], [('q', (4,))]),
     'axis_angle_to_quat': (axis_angle_to_quat, [('axis', (3,)), ('angle', ())], [('q', (4,))]),
+    'quat_from_two_vectors': (quat_from_two_vectors, [('a', (3,)), ('b', (3,))], [('q', (4,))]),
     'quat_to_axis_angle': (quat_to_axis_angle, [('q', (4,))], [('axis', (3,)), ('angle', ())]),
     'euler_xyz_to_quat': (euler_xyz_to_quat, [('roll', ()), ('pitch', ()), ('yaw', ())], [('q', (4,))]),
     'quat_to_euler_xyz': (quat_to_euler_xyz, [('q', (4,))], [('rpy', (3,))]),

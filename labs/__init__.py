@@ -75,7 +75,14 @@ def _view_parent(scene: str):
 def _run_one(args) -> int:
     from lavendersim.validate import LavenderInputError
 
+    from .common import check_out_dir
+
     mod = lab_module(args.lab_name)
+    try:
+        check_out_dir(args.out)  # before the lab runs: an unwritable --out is exit 2 at once
+    except LavenderInputError as exc:
+        print(f"lab {args.lab_name}: invalid option: {exc}", file=sys.stderr)
+        return 2
     if getattr(args, "view", False):
         from lavendersim._install import require
 
@@ -100,6 +107,15 @@ def _run_one(args) -> int:
 
 
 def _run_all(args) -> int:
+    from lavendersim.validate import LavenderInputError
+
+    from .common import check_out_dir
+
+    try:
+        check_out_dir(args.out)
+    except LavenderInputError as exc:
+        print(f"lab all: invalid option: {exc}", file=sys.stderr)
+        return 2
     summary = []
     for name in LABS:
         t0 = time.perf_counter()

@@ -11,14 +11,21 @@ from __future__ import annotations
 
 import json
 import math
+import os
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from lavendersim import backends
+from lavendersim import validate as V
 
 DEFAULT_OUT = "lab-output"
+# The most steps a lab's run may take (its duration / dt): labs are demonstrations, and a dt of 1e-300 must
+# be a clear error at once, not a run that never ends (lab 04 steps in Python and records every step:
+# MAX_PY_STEPS).
+MAX_STEPS = 1_000_000
+MAX_PY_STEPS = 200_000
 BACKENDS = backends.BACKEND_CHOICES  # "auto" (default), "c", "numpy"
 # what a lab that steps no scene records as its backend (--backend does not apply to it)
 NO_SIMULATOR = "none (kernels evaluated directly with the generated NumPy kernels)"
@@ -182,7 +189,10 @@ def finish(lab: str, out_dir, figures: dict, params: dict, checks: list[Check], 
     if clash:
         raise ValueError(f"lab {lab}: names used as both figure and parameter: {sorted(clash)}")
     d = Path(out_dir) / lab
-    d.mkdir(parents=True, exist_ok=True)
+    try:
+        d.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise V.LavenderInputError("out", f"cannot write to {d}", f" ({exc.strerror or exc})") from None
     items: dict = {"lab": lab}
     for k, v in {**params, **figures}.items():
         items[k] = _json_value(k, v)
@@ -193,12 +203,15 @@ def finish(lab: str, out_dir, figures: dict, params: dict, checks: list[Check], 
     result.figure_names = list(figures)
     result["passed"] = result.passed
     path = d / "results.json"
-    path.write_text(json.dumps(dict(result), indent=2, allow_nan=False) + "\n")
-    result.files.append(path)
-    for fname, fig in plots.items():
-        p = d / fname
-        fig.savefig(p, dpi=110)
-        result.files.append(p)
+    try:
+        path.write_text(json.dumps(dict(result), indent=2, allow_nan=False) + "\n")
+        result.files.append(path)
+        for fname, fig in plots.items():
+            p = d / fname
+            fig.savefig(p, dpi=110)
+            result.files.append(p)
+    except OSError as exc:
+        raise V.LavenderInputError("out", f"cannot write to {d}", f" ({exc.strerror or exc})") from None
     return result
 
 
@@ -223,6 +236,58 @@ def new_figure(nrows: int = 1, ncols: int = 1, *, size=(8.0, 4.5), title: str | 
 # --------------------------------------------------------------------------
 # option validation and small numerical helpers
 # --------------------------------------------------------------------------
+
+
+# The magnitude a lab's scale-type option (an offset, a mass factor) may take: beyond it the lab's own
+# arithmetic overflows and the run would end in warnings instead of one clear line.
+MAX_OPTION = 1e100
+
+
+def bounded(field: str, value: float, *, positive: bool = False) -> float:
+    """A finite option value with 1/MAX_OPTION <= |value| <= MAX_OPTION (0 allowed unless positive)."""
+    x = V.scalar(field, value, positive=positive)
+    if abs(x) > MAX_OPTION or (x != 0 and abs(x) < 1 / MAX_OPTION):
+        raise V.LavenderInputError(field, f"magnitude must be within [{1 / MAX_OPTION:g}, {MAX_OPTION:g}]"
+                                   + ("" if positive else " (or 0)"), f", got {x!r}")
+    return x
+
+
+def steps(field: str, duration: float, dt: float, *, whole: bool = True, limit: int = MAX_STEPS,
+          value: float | None = None) -> int:
+    """round(duration / dt), rejected (LavenderInputError naming `field`, the bound stated) when it is more
+    than `limit` steps, fewer than 1, or — with whole=True — not a whole number of steps.
+    `value` is what the user gave for `field` (default: dt)."""
+    got = f", got {field} = {dt if value is None else value!r}"
+    with np.errstate(over="ignore"):
+        ratio = float(duration) / float(dt)
+    if not ratio <= limit + 0.5:
+        raise V.LavenderInputError(field, f"would take {ratio:.3g} steps of dt = {dt:g} s over {duration:g} s; "
+                                   f"at most {limit:,} steps are allowed", got)
+    n = int(round(ratio))
+    if n < 1 or (whole and abs(n * dt - duration) > 1e-9 * duration):
+        raise V.LavenderInputError(field, f"T = {duration:g} s must be a whole number of steps", got)
+    return n
+
+
+def check_out_dir(out_dir, lab: str | None = None) -> Path:
+    """Create OUT (and OUT/lab) if needed and make sure a file can be written there; LavenderInputError naming
+    ``out`` otherwise (checked before a lab runs, so a long lab never fails at its very end)."""
+    import tempfile
+
+    if isinstance(out_dir, (bool, int, float)) or out_dir is None:
+        raise V.LavenderInputError("out", "expected a directory path", f", got {out_dir!r}")
+    d = Path(out_dir) / lab if lab else Path(out_dir)
+    for parent in (d, *d.parents):
+        if parent.exists() and not parent.is_dir():
+            raise V.LavenderInputError("out", f"cannot write to {d}", f" ({parent} is a file, not a directory)")
+    try:
+        d.mkdir(parents=True, exist_ok=True)
+        fd, probe = tempfile.mkstemp(dir=d, prefix=".write-test-")
+        os.close(fd)
+        os.unlink(probe)
+    except OSError as exc:
+        raise V.LavenderInputError("out", f"cannot write to {d}", f" ({exc.strerror or exc})") from None
+    return d
 
 
 def check_backend(backend) -> str:

@@ -48,7 +48,7 @@ def options_from_args(args) -> dict:
 
 def run(out_dir=C.DEFAULT_OUT, backend: str = "auto", offset: float = R_W[0]) -> C.LabResult:
     backend = C.check_backend(backend)
-    x = V.scalar("offset", offset)
+    x = C.bounded("offset", offset)
     r = np.array([x, 0.0, 0.0])
     F = np.array(F_W)
     chapter = x == R_W[0]

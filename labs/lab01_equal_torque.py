@@ -90,9 +90,7 @@ def run(out_dir=C.DEFAULT_OUT, backend: str = "auto", dt: float = DT, integrator
     dt = V.dt("dt", dt)
     integrator = V.choice("integrator", integrator, ("euler", "semi_implicit_euler", "rk4"))
     c = V.scalar("damping", damping, nonnegative=True)
-    n = int(round(T_END / dt))
-    if n < 1 or abs(n * dt - T_END) > 1e-9 * T_END:
-        raise V.LavenderInputError("dt", f"T = {T_END:g} s must be a whole number of steps", f", got dt = {dt!r}")
+    n = C.steps("dt", T_END, dt)  # at most C.MAX_STEPS, a whole number of steps
     tau = np.array(TORQUE_W)
     q_y90 = K.axis_angle_to_quat(np.array([0.0, 1.0, 0.0]), math.pi / 2)
     q_y45 = K.axis_angle_to_quat(np.array([0.0, 1.0, 0.0]), math.pi / 4)

@@ -61,10 +61,7 @@ def options_from_args(args) -> dict:
 
 
 def _steps(dt: float) -> int:
-    n = int(round(T_END / dt))
-    if n < 1 or abs(n * dt - T_END) > 1e-9 * T_END:
-        raise V.LavenderInputError("dt", f"T = {T_END:g} s must be a whole number of steps", f", got dt = {dt!r}")
-    return n
+    return C.steps("dt", T_END, dt)  # at most C.MAX_STEPS, a whole number of steps
 
 
 def integrate(omega_w, dt: float, n: int, q0=(0.0, 0.0, 0.0, 1.0)):

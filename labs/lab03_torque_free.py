@@ -167,6 +167,7 @@ def run(out_dir=C.DEFAULT_OUT, backend: str = "auto", dt: float = DT, integrator
     integrator = V.choice("integrator", integrator, ("euler", "semi_implicit_euler", "rk4"))
     if not isinstance(normalize, (bool, np.bool_)) or not isinstance(search, (bool, np.bool_)):
         raise V.LavenderInputError("normalize", "normalize and search must be True or False")
+    C.steps("dt", max(T_END, PAW5_T, *(SEARCH_TIMES if search else ())), dt, whole=False)  # at most C.MAX_STEPS
 
     principal = lv.Body.box("principal", mass=MASS, size=ROD_SIZE, omega_b=OMEGA_PRINCIPAL, p_w=[0, 0, 1])
     mixed = lv.Body.box("mixed", mass=MASS, size=ROD_SIZE, omega_b=OMEGA_MIXED, p_w=[0, 0, -1])

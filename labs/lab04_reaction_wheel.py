@@ -88,6 +88,7 @@ def run(out_dir=C.DEFAULT_OUT, backend: str = "auto", torque: float = TORQUE, T:
                                    "(saturation has its own run)", f", got {U!r}")
     if int(round(T / DT)) < 2:
         raise V.LavenderInputError("T", f"must be at least 2 steps of {DT:g} s", f", got {T!r}")
+    C.steps("T", T, DT, whole=False, limit=C.MAX_PY_STEPS, value=T)  # stepped in Python, every step recorded
     const = lambda u: (lambda t: np.asarray(u, float))  # noqa: E731
 
     pos = _run(model, const([U, 0, 0]), T, backend)

@@ -56,7 +56,7 @@ def _rel(a, b) -> float:
 def run(out_dir=C.DEFAULT_OUT, backend: str = "auto", mass_scale: float = 2.0) -> C.LabResult:
     C.check_backend(backend)  # validated only: this lab evaluates the generated NumPy kernels, no simulator
     backend = C.NO_SIMULATOR
-    s = V.scalar("mass_scale", mass_scale, positive=True)
+    s = C.bounded("mass_scale", mass_scale, positive=True)
     m = np.array(MASSES)
     r = np.array(POSITIONS)
     omega = np.array(OMEGA_W)

@@ -16,17 +16,64 @@ from .generated.layout import STATE_OMEGA_B as W, STATE_P_W as P, STATE_Q as Q, 
 from .kernels import K
 
 
+# shape kind -> (number of dimensions, their names) of Body(shape=(kind, dims)); all in m, > 0
+SHAPES = {"box": (3, "side lengths (w, h, d) along body x, y, z"), "cylinder": (2, "(radius, height), along body z"),
+          "sphere": (1, "(radius,)")}
+_FIELDS = ("name", "mass", "I_b", "shape", "x0")
+
+
+class ImmutableBodyError(V.LavenderInputError, AttributeError):
+    """Assignment to an attribute of a validated Body (a LavenderInputError and an AttributeError)."""
+
+
+def _shape(value) -> tuple[str, tuple[float, ...]] | None:
+    """Validate shape=(kind, dims): kind in SHAPES, dims positive finite lengths of the kind's count."""
+    if value is None:
+        return None
+    if isinstance(value, (str, bytes)) or not isinstance(value, (tuple, list)) or len(value) != 2:
+        raise V.LavenderInputError("shape", "expected None or (kind, dims), kind one of " + ", ".join(SHAPES),
+                                   f", got {V._describe(value)}")
+    kind = V.choice("shape[0]", value[0], SHAPES)
+    n, what = SHAPES[kind]
+    dims = V.vector("shape[1]", value[1], n) if n > 1 or not isinstance(value[1], (int, float)) \
+        else V.vector("shape[1]", (value[1],), 1)
+    for i, d in enumerate(dims):
+        if not d > 0:
+            raise V.LavenderInputError(f"shape[1][{i}]", f"{kind} dimensions {what} must be > 0 m", f", got {float(d)!r}")
+    return kind, tuple(float(d) for d in dims)
+
+
 class Body:
     """A rigid body with diagonal (principal) inertia I_b and its initial state.
 
     Give at most one of omega_b (body frame) and omega_w (world frame); the other follows from q.
+    A Body is immutable once validated: assigning an attribute raises :class:`ImmutableBodyError`
+    (a LavenderInputError naming the field) and its arrays are read-only — build a new Body instead.
+
+    Parameters
+    ----------
+    name : str
+        Non-empty name, unique within a Scene.
+    mass : float
+        kg, finite and > 0.
+    inertia : array_like
+        Principal moments (3,) or a diagonal (3, 3) tensor about the COM, body frame, kg·m².
+    p_w, q, v_w, omega_b, omega_w : array_like
+        Initial COM position (m, world), orientation R_WB (x, y, z, w; normalized), COM velocity
+        (m/s, world), angular velocity (rad/s, body or world frame).
+    shape : tuple, optional
+        ``(kind, dims)`` drawn by the viewer: ``("box", (w, h, d))``, ``("cylinder", (r, h))`` or
+        ``("sphere", (r,))``, lengths in m, > 0. None: drawn as the inertia-equivalent box.
     """
 
+    __slots__ = _FIELDS
+
+    @V.keywords
     def __init__(self, name: str, mass: float, inertia: ArrayLike, *, p_w: ArrayLike = (0, 0, 0),
                  q: ArrayLike = (0, 0, 0, 1), v_w: ArrayLike = (0, 0, 0), omega_b: ArrayLike | None = None,
                  omega_w: ArrayLike | None = None, shape: tuple[str, tuple[float, ...]] | None = None) -> None:
         if not isinstance(name, str) or not name:
-            raise V.LavenderInputError("name", "must be a non-empty string", f", got {name!r}")
+            raise V.LavenderInputError("name", "must be a non-empty string", f", got {V._describe(name)}")
         mass = V.positive("mass", mass)
         I_b = V.inertia("inertia", inertia)
         x = np.empty(STATE_SIZE)
@@ -39,23 +86,54 @@ class Body:
             x[W] = K.world_to_body(x[Q], V.vector("omega_w", omega_w))
         else:
             x[W] = V.vector("omega_b", (0, 0, 0) if omega_b is None else omega_b)
-        self.name, self.mass, self.I_b, self.shape = name, mass, I_b, shape
-        self.x0 = x
+        shape = _shape(shape)
+        I_b.flags.writeable = False
+        x.flags.writeable = False
+        for f, v in zip(_FIELDS, (name, mass, I_b, shape, x)):
+            object.__setattr__(self, f, v)
+
+    def __setattr__(self, field: str, value: Any) -> None:
+        raise ImmutableBodyError(f"body.{field}", "a Body is immutable once validated: build a new Body "
+                                 "(its arrays are read-only too)")
+
+    def __delattr__(self, field: str) -> None:
+        raise ImmutableBodyError(f"body.{field}", "a Body is immutable once validated: build a new Body")
+
+    def __copy__(self) -> Body:
+        return self
+
+    def __deepcopy__(self, memo) -> Body:
+        return self
+
+    def __reduce__(self):
+        return (_rebuild, tuple(getattr(self, f) for f in _FIELDS))
+
+    @staticmethod
+    def _no_shape(state: dict) -> None:
+        if "shape" in state:
+            raise V.LavenderInputError("shape", "is set by Body.box / cylinder / sphere; use Body(...) to give one")
 
     @classmethod
+    @V.keywords
     def box(cls, name: str, mass: float, size: ArrayLike, **state: Any) -> Body:
         """Solid box with full side lengths size = (w, h, d) along body x, y, z (m)."""
+        cls._no_shape(state)
         w, h, d = (V.positive(f"size[{i}]", s) for i, s in enumerate(V.vector("size", size)))
         return cls(name, mass, K.inertia_box(V.positive("mass", mass), w, h, d), shape=("box", (w, h, d)), **state)
 
     @classmethod
+    @V.keywords
     def cylinder(cls, name: str, mass: float, radius: float, height: float, **state: Any) -> Body:
         """Solid cylinder along body z."""
+        cls._no_shape(state)
         r, h = V.positive("radius", radius), V.positive("height", height)
         return cls(name, mass, K.inertia_cylinder(V.positive("mass", mass), r, h), shape=("cylinder", (r, h)), **state)
 
     @classmethod
+    @V.keywords
     def sphere(cls, name: str, mass: float, radius: float, **state: Any) -> Body:
+        """Solid sphere of the given radius (m)."""
+        cls._no_shape(state)
         r = V.positive("radius", radius)
         return cls(name, mass, K.inertia_sphere(V.positive("mass", mass), r), shape=("sphere", (r,)), **state)
 
@@ -66,6 +144,16 @@ class Body:
 
     def __repr__(self) -> str:
         return f"Body({self.name!r}, mass={self.mass:g}, I_b={np.array2string(self.I_b, precision=6)})"
+
+
+def _rebuild(name, mass, I_b, shape, x0) -> Body:
+    """Unpickle a Body without re-running validation twice (its fields were validated)."""
+    b = object.__new__(Body)
+    for f, v in zip(_FIELDS, (name, mass, np.array(I_b), shape, np.array(x0))):
+        if isinstance(v, np.ndarray):
+            v.flags.writeable = False
+        object.__setattr__(b, f, v)
+    return b
 
 
 class BodyState:

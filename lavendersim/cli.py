@@ -43,7 +43,7 @@ def _derive_user(args) -> int:
     except extending.UserBuildError as exc:
         print(f"lavendersim derive --user: {exc}", file=sys.stderr)
         return 1
-    except (FileNotFoundError, SyntaxError) as exc:
+    except (OSError, SyntaxError) as exc:  # missing, a directory, unreadable, or not Python
         return _fail(f"derive --user: {exc}")
     except ValueError as exc:  # a declaration the printers refuse (LavenderInputError is one too)
         return _fail(f"derive --user: {exc}")
@@ -63,6 +63,10 @@ def _derive(args) -> int:
     from lavendersim._install import rebuild_command
     from lavendersim.derive import codegen
 
+    from lavendersim import validate as V
+
+    if args.out and not args.check:
+        V.writable_dir("out", args.out)  # exit 2 and one line, before anything is derived
     if args.user:
         return _derive_user(args)
     out = Path(args.out) if args.out else generated_dir()
@@ -99,7 +103,11 @@ def _add_derive(sub) -> None:
 def _view(args) -> int:
     from lavendersim import viewer
 
-    viewer.run_scene(args.scene, duration=args.duration, host=args.host, port=args.port, rate_hz=args.rate)
+    try:
+        viewer.run_scene(args.scene, duration=args.duration, host=args.host, port=args.port, rate_hz=args.rate)
+    except viewer.ViewerError as exc:  # a frame could not be drawn: one line, exit 1 (not a usage error)
+        print(f"lavendersim view: {exc}", file=sys.stderr)
+        return 1
     return 0
 
 

@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import json
 import math
+import numbers
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
@@ -92,8 +93,8 @@ class CubeModel:
         self.scenario = V.choice("scenario", self.scenario, SCENARIOS)
         self.mass = V.positive("mass", self.mass)
         self.size = V.positive("size", self.size)
-        J = np.asarray(self.J, dtype=float) if np.ndim(self.J) else np.full(3, float(self.J))
-        J = V.vector("J", J)
+        J = np.full(3, V.scalar("J", self.J)) if isinstance(self.J, (numbers.Real, np.ndarray)) and np.ndim(self.J) == 0 \
+            else V.vector("J", self.J)
         if np.any(J <= 0):
             raise V.LavenderInputError("J", "wheel spin inertias must be positive", f", got {J.tolist()}")
         self.J = J
@@ -138,9 +139,7 @@ class CubeModel:
         if self.scenario == "center":
             return np.array([0.0, 0.0, 0.0, 1.0])
         d = np.ones(3) / math.sqrt(3.0)
-        axis = np.cross(d, [0.0, 0.0, 1.0])
-        ang = math.acos(d[2])
-        return np.asarray(KN.axis_angle_to_quat(axis / np.linalg.norm(axis), ang), dtype=float)
+        return np.asarray(KN.quat_from_two_vectors(d, [0.0, 0.0, 1.0]), dtype=float)
 
     # runtime scene ------------------------------------------------------------------------
     def scene(self, q0: ArrayLike | None = None, omega_b: ArrayLike = (0, 0, 0), Omega: ArrayLike | None = None) -> Scene:
@@ -438,6 +437,9 @@ class Response:
         return float(self.t[above[-1] + 1])
 
 
+MAX_CONTROL_STEPS = 1_000_000  # closed_loop: control periods per run
+
+
 def closed_loop(model: CubeModel, lin: Linearization, K: ArrayLike, q0: ArrayLike, T: float = 5.0, *,
                 omega0: ArrayLike = (0, 0, 0), Omega0: ArrayLike | None = None, dt: float = 1e-3,
                 control_dt: float = 2e-3, backend: str = "auto", sim: Sim | None = None) -> Response:
@@ -449,7 +451,11 @@ def closed_loop(model: CubeModel, lin: Linearization, K: ArrayLike, q0: ArrayLik
     sub = int(round(control_dt / dt))
     if sub < 1 or abs(sub * dt - control_dt) > 1e-9 * control_dt:
         raise V.LavenderInputError("control_dt", f"must be a whole multiple of dt = {dt:g}", f", got {control_dt!r}")
-    n = int(round(V.positive("T", T) / control_dt))
+    T = V.positive("T", T)
+    if not T / control_dt <= MAX_CONTROL_STEPS:  # stepped in Python and recorded: bounded, never a hang
+        raise V.LavenderInputError("T", f"would take {T / control_dt:.3g} control steps of {control_dt:g} s; at most "
+                                   f"{MAX_CONTROL_STEPS:,} are allowed", f", got {T!r}")
+    n = int(round(T / control_dt))
     Omega0 = lin.Omega0 if Omega0 is None else V.vector("Omega0", Omega0)
     if sim is None:
         sim = model.make_sim(q0, omega0, Omega0, dt=dt, backend=backend)
@@ -700,6 +706,8 @@ def _cli(args) -> int:
         axis = None if args.axis is None else _numbers("axis", args.axis)
         if axis is not None and axis.size != 3:
             raise V.LavenderInputError("axis", "must be 3 numbers", f", got {axis.size}")
+        if args.plot:
+            V.writable_file("plot", args.plot)  # before the design and the run, not after
         for name in ("mass", "size", "torque_limit", "speed_limit", "damping", "wheel_damping", "theta0", "T", "threshold"):
             v = getattr(args, name)
             if v is not None and not math.isfinite(v):

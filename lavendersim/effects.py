@@ -119,6 +119,9 @@ class Effect:
             raise V.LavenderInputError(f"{self.name}.{missing[0]}", "is required")
         self.body = body
         self.values = {f: self._check(f, params[f]) for f in self.fields}
+        for v in self.values.values():  # validated once: read-only, so a later edit cannot bypass the checks
+            if isinstance(v, np.ndarray):
+                v.flags.writeable = False
 
     def _check(self, f, v):
         """Validate parameter f by its declared shape and rule (a plain finite 3-vector without a spec)."""
@@ -160,8 +163,9 @@ class Effect:
 class _WheelsCheck:
     """Hand-written check of reaction_wheels against its body (a relation the declaration cannot state)."""
 
-    def check_body(self, I_b: np.ndarray) -> None:
+    def check_body(self, body) -> None:
         """J_i < I_b[i]: the body with its wheels free must keep a positive inertia about each axis."""
+        I_b = body.I_b
         J = self.values["J"]
         bad = np.flatnonzero(J >= I_b)
         if bad.size:
@@ -171,7 +175,28 @@ class _WheelsCheck:
                                        f", got {J[i]:g}")
 
 
-_HAND_CHECKS = {"reaction_wheels": _WheelsCheck}
+class _JointCheck:
+    """Hand-written check of spherical_joint against its body: the pivot's model must be finite."""
+
+    def check_body(self, body) -> None:
+        """The inertia about the pivot (parallel axis, m |r_b|²) and the pivot kinematics at the body's
+        initial state must be finite: an anchor_w too far from the COM is rejected here, naming anchor_w."""
+        from .generated.layout import STATE_OMEGA_B, STATE_P_W, STATE_Q
+        from .kernels import K
+
+        anchor = self.values["anchor_w"]
+        x = body.x0
+        with np.errstate(all="ignore"):
+            r_b = K.quat_to_matrix(x[STATE_Q]).T @ (x[STATE_P_W] - anchor)
+            I_p = K.parallel_axis(np.diag(body.I_b), body.mass, -r_b)
+            p_w, v_w = K.pivot_kinematics(x[STATE_Q], x[STATE_OMEGA_B], anchor, r_b)
+        if not all(np.all(np.isfinite(a)) for a in (r_b, I_p, p_w, v_w)):
+            raise V.LavenderInputError(f"{self.name}.anchor_w", f"too far from the COM of body {body.name!r}: the "
+                                       f"inertia about the pivot (m |r_b|², m = {body.mass:g} kg) or the pivot "
+                                       "kinematics overflow a float64", f", got {V._nums(anchor)}")
+
+
+_HAND_CHECKS = {"reaction_wheels": _WheelsCheck, "spherical_joint": _JointCheck}
 
 REGISTRY: dict[str, EffectSpec] = {}   # name -> spec of every known effect (built-in and loaded user ones)
 BY_CODE: dict[int, EffectSpec] = {}    # code -> spec (user codes stay valid after a set is reloaded)
@@ -242,6 +267,54 @@ def spec_for_code(code: int) -> EffectSpec:
         known = ", ".join(f"{c} {s.name}" for c, s in sorted(BY_CODE.items()) if s.kind == "force")
         raise V.LavenderInputError("effects", f"code {code!r} is not a declared force effect (known: {known})")
     return spec
+
+
+def net_load(effects, body) -> tuple[np.ndarray, np.ndarray]:
+    """Sum of the force effects `effects` on `body` at its initial state: (F_w, tau_w), world frame,
+    evaluated with the generated NumPy kernels (overflow gives inf/nan, no warning)."""
+    from .generated.layout import STATE_V_W
+
+    x = body.x0[None]
+    F, tau = np.zeros(3), np.zeros(3)
+    with np.errstate(all="ignore"):
+        for e in effects:
+            f, t = numpy_apply(e.code)(e.params_flat()[None], x, x[:, STATE_V_W], np.array([body.mass]), body.I_b[None])
+            if f is not None:
+                F = F + np.asarray(f, dtype=np.float64).reshape(3)
+            if t is not None:
+                tau = tau + np.asarray(t, dtype=np.float64).reshape(3)
+    return F, tau
+
+
+# The largest net force, torque or acceleration (SI units) a scene may declare: far beyond any physics,
+# and far enough below the float64 limit (1.8e308) that the integrators' stage sums and products with
+# dt cannot overflow from the loads themselves.
+MAX_LOAD = 1e300
+
+
+def load_overflow(effects, body) -> str | None:
+    """Why the force effects `effects` on `body` are too large at its initial state (net force or
+    torque, or the accelerations |F|/m, |tau|/min(I_b), not finite or above MAX_LOAD), or None."""
+    F, tau = net_load(effects, body)
+    with np.errstate(all="ignore"):
+        checks = (("net force", V.safe_norm(F) if np.all(np.isfinite(F)) else np.inf, "N"),
+                  ("net torque", V.safe_norm(tau) if np.all(np.isfinite(tau)) else np.inf, "N·m"),
+                  ("linear acceleration |F|/m", V.safe_norm(F) / body.mass if np.all(np.isfinite(F)) else np.inf, "m/s²"),
+                  ("angular acceleration |tau|/min(I_b)", V.safe_norm(tau) / float(np.min(body.I_b))
+                   if np.all(np.isfinite(tau)) else np.inf, "rad/s²"))
+    for what, value, unit in checks:
+        if not value <= MAX_LOAD:
+            got = "overflows a float64" if not np.isfinite(value) else f"= {value:.3g} {unit}"
+            return f"the {what} on body {body.name!r} at its initial state {got}; the bound is {MAX_LOAD:g} {unit}"
+    return None
+
+
+def largest_param(effect: Effect) -> str:
+    """The field name (effect.param) of the effect's parameter with the largest magnitude."""
+    if not effect.fields:
+        return effect.name
+    mags = [float(np.max(np.abs(np.atleast_1d(effect.values[f])), initial=0.0)) for f in effect.fields]
+    return f"{effect.name}.{effect.fields[int(np.argmax(mags))]}"
 
 
 def row_width(effects) -> int:

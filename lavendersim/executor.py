@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import multiprocessing
 import os
+import re
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from typing import Any
@@ -157,7 +158,11 @@ def _require_distributed(feature: str):
 
 def _map_dask(fn, tasks: list, address: str, feature: str) -> list:
     distributed = _require_distributed(feature)
-    client = distributed.Client(address, timeout=DASK_CONNECT_TIMEOUT_S, set_as_default=False)
+    try:
+        client = distributed.Client(address, timeout=DASK_CONNECT_TIMEOUT_S, set_as_default=False)
+    except (OSError, TimeoutError) as exc:  # unreachable or no scheduler there: one clear line, not a traceback
+        raise V.LavenderInputError("dask", f"cannot connect to a Dask scheduler at {address} within "
+                                   f"{DASK_CONNECT_TIMEOUT_S:g} s", f" ({type(exc).__name__}: {exc})") from None
     try:
         theirs = client.submit(_worker_version, pure=False).result()
         if theirs != __version__:
@@ -199,7 +204,7 @@ def resolve(workers: int | None = None, dask: str | None = None, *, feature: str
         if workers is not None:
             raise V.LavenderInputError("workers", "cannot be combined with a Dask scheduler address "
                                        "(the cluster decides how many workers run)")
-        if not isinstance(dask, str) or not dask.strip():
+        if not isinstance(dask, str) or not re.fullmatch(r"([a-z][a-z0-9+.-]*://)?[A-Za-z0-9._\-\[\]:]+/?", dask.strip()):
             raise V.LavenderInputError("dask", "must be a scheduler address such as tcp://host:8786", f", got {dask!r}")
         _require_distributed(feature)
         return Executor(DASK, 0, dask.strip())

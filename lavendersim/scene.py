@@ -5,19 +5,41 @@ import numpy as np
 
 from . import validate as V
 from .bodies import Body
-from .effects import Effect, make, row_width
+from .effects import Effect, check_declared, largest_param, load_overflow, make, row_width
+
+
+def _declared(effect: Effect) -> bool:
+    try:
+        check_declared(effect)
+    except V.LavenderInputError:
+        return False
+    return True
 
 
 class Scene:
+    """Bodies (by name, in the order added) and the effects declared on them.
+
+    Every add is validated before anything is stored: a rejected call leaves the scene as it was.
+    Force effects whose parameters would overflow — alone or summed with the other effects on a body,
+    as force, torque or acceleration at the body's initial state — are rejected when added."""
+
+    @V.keywords
     def __init__(self):
         self.bodies: dict[str, Body] = {}
         self.effects: list[Effect] = []
 
+    @V.keywords
     def add_body(self, body: Body) -> Body:
+        """Add a (validated, immutable) Body; its name must be new in this scene."""
         if not isinstance(body, Body):
             raise V.LavenderInputError("body", "must be a lavendersim.Body", f", got {type(body).__name__}")
         if body.name in self.bodies:
             raise V.LavenderInputError("body.name", f"duplicate name {body.name!r}")
+        every = [e for e in self.effects if not e.per_body and e.body is None and _declared(e)]
+        why = load_overflow(every, body) if every else None
+        if why:
+            raise V.LavenderInputError("body", f"{why} with the scene's effects on every body "
+                                       f"({', '.join(e.name for e in every)})")
         self.bodies[body.name] = body
         return body
 
@@ -38,7 +60,15 @@ class Scene:
                 raise V.LavenderInputError(f"{effect.name}.body", f"body {effect.body!r} already has a {effect.name}; "
                                            "at most one per body")
             if hasattr(effect, "check_body"):
-                effect.check_body(self.bodies[effect.body].I_b)
+                effect.check_body(self.bodies[effect.body])
+        elif _declared(effect):  # an undeclared effect is refused by Sim (naming how to declare it)
+            targets = list(self.bodies.values()) if effect.body is None else [self.bodies[effect.body]]
+            for b in targets:
+                mine = [e for e in self.effects if not e.per_body and e.body in (None, b.name) and _declared(e)]
+                why = load_overflow([effect], b) or load_overflow(mine + [effect], b)
+                if why:
+                    raise V.LavenderInputError(largest_param(effect), f"too large: {why}"
+                                               + (f" (with {', '.join(e.name for e in mine)})" if mine else ""))
         self.effects.append(effect)
         return effect
 

@@ -126,6 +126,7 @@ class Sim:
         (default 10; None switches the check off).
     """
 
+    @V.keywords  # unknown keyword arguments raise LavenderInputError naming them
     def __init__(self, scene: Scene, dt: float = 1e-3, integrator: str = "rk4", backend: str = "auto", normalize: bool = True,
                  rtol: float | None = None, atol: float | None = None, on_bound: str = "raise",
                  max_growth: float | None = 10.0):
@@ -534,6 +535,7 @@ class Sim:
         i = self._i(name)
         return BodyState(self.x[i].copy(), self._models.Omega[i].copy())
 
+    @V.keywords  # an unknown keyword (a typo such as omega=) is a LavenderInputError naming it
     def set_state(self, name: str, *, p_w=None, q=None, v_w=None, omega_b=None, omega_w=None, Omega=None) -> None:
         """Set parts of one body's state; everything is validated before anything changes.
 

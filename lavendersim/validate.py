@@ -11,9 +11,13 @@ last; inertia is in kg*m^2, given in the body frame.
 from __future__ import annotations
 
 import difflib
+import functools
+import inspect
 import numbers
-from collections.abc import Iterable, Sequence
-from typing import SupportsFloat
+import os
+from collections.abc import Callable, Iterable, Sequence
+from pathlib import Path
+from typing import Any, SupportsFloat
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -30,6 +34,10 @@ __all__ = [
     "principal_axes",
     "choice",
     "integer",
+    "keywords",
+    "safe_norm",
+    "writable_dir",
+    "writable_file",
 ]
 
 # Relative tolerances, scaled by max|I| (inertia) or by the largest moment.
@@ -270,21 +278,23 @@ def quaternion(field: str, value: ArrayLike) -> np.ndarray:
     """
     q = array(field, value, (4,))
     scale = float(np.max(np.abs(q)))
-    # scaled norm: no overflow for huge entries, no underflow for tiny ones
-    norm = scale * float(np.sqrt(np.sum((q / scale) ** 2))) if scale > 0 else 0.0
+    # scaled norm: no overflow for huge entries, no underflow for tiny ones; the true norm
+    # (scale * scaled) is only compared, never divided by (it may overflow to inf for 1e308 entries)
+    scaled = float(np.sqrt(np.sum((q / scale) ** 2))) if scale > 0 else 0.0
+    norm = scale * scaled
     if not norm >= QUATERNION_MIN_NORM:
         raise LavenderInputError(field, f"zero quaternion (norm {norm:g}) cannot be normalized")
-    return (q / scale) / (norm / scale)
+    return (q / scale) / scaled
 
 
 def _check_moments(field: str, m: np.ndarray) -> None:
     """Principal moments: all > 0, each <= sum of the other two (rel. tol.)."""
     if not np.all(m > 0):
         raise LavenderInputError(field, "principal moments must be > 0", f" (got {_nums(m)})")
-    tol = TRIANGLE_RTOL * float(np.max(m))
+    u = m / float(np.max(m))  # relative to the largest: no overflow of I_i + I_j near 1e308
     for k in range(3):
         i, j = [a for a in range(3) if a != k]
-        if m[k] - (m[i] + m[j]) > tol:
+        if u[k] - (u[i] + u[j]) > TRIANGLE_RTOL:
             raise LavenderInputError(
                 field,
                 f"principal moments violate the triangle inequality I{i + 1} + I{j + 1} >= I{k + 1}",
@@ -292,19 +302,40 @@ def _check_moments(field: str, m: np.ndarray) -> None:
             )
 
 
+def _eigh(field: str, sym: np.ndarray, scale: float, vectors: bool = False):
+    """eigvalsh / eigh of a finite symmetric tensor without overflow: tensors with max|I| outside
+    [1e-100, 1e100] are solved scaled to max|I| = 1 (others exactly as numpy computes them).
+    A result that is not finite (eigenvalues beyond the float64 range) is rejected naming `field`."""
+    moderate = scale == 0 or 1e-100 <= scale <= 1e100
+    try:
+        out = (np.linalg.eigh if vectors else np.linalg.eigvalsh)(sym if moderate else sym / scale)
+    except np.linalg.LinAlgError as exc:  # not expected for a finite symmetric input; never leak it
+        raise LavenderInputError(field, "inertia tensor: eigenvalues could not be computed", f" ({exc})") from None
+    eig = out[0] if vectors else out
+    if not moderate:
+        with np.errstate(over="ignore"):
+            eig = eig * scale
+    if not np.all(np.isfinite(eig)):
+        raise LavenderInputError(field, f"inertia tensor entries too large (max |I| = {scale:g}): its "
+                                 "eigenvalues overflow a float64")
+    return (eig, out[1]) if vectors else eig
+
+
 def _checked_tensor(field: str, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
     """Finite (already checked), symmetric and positive definite.
 
-    Returns the symmetrized tensor, its eigenvalues (ascending) and max|I|.
+    Returns the symmetrized tensor, its eigenvalues (ascending) and max|I|. No intermediate
+    overflows for entries near the float64 limit (halves are summed; differences are scaled).
     """
     scale = float(np.max(np.abs(t)))
-    asym = float(np.max(np.abs(t - t.T)))
+    u = t / scale if scale > 0 else t
+    asym = float(np.max(np.abs(u - u.T))) * scale
     if asym > SYMMETRY_RTOL * scale:
         raise LavenderInputError(
             field, "inertia tensor must be symmetric", f" (max |I - I^T| = {asym:g}, max |I| = {scale:g})"
         )
-    sym = 0.5 * (t + t.T)
-    eig = np.linalg.eigvalsh(sym)
+    sym = 0.5 * t + 0.5 * t.T  # == 0.5 * (t + t.T) bitwise, without overflow
+    eig = _eigh(field, sym, scale)
     if not np.all(eig > 0):
         raise LavenderInputError(
             field, "inertia tensor must be positive definite", f" (eigenvalues {_nums(eig)})"
@@ -349,17 +380,105 @@ def principal_axes(I: ArrayLike, *, field: str = "inertia") -> tuple[np.ndarray,
     that ``I`` need not be diagonal.
     """
     t = array(field, I, (3, 3))
-    sym, _, _ = _checked_tensor(field, t)
-    moments, vecs = np.linalg.eigh(sym)
+    sym, _, scale = _checked_tensor(field, t)
+    moments, vecs = _eigh(field, sym, scale, vectors=True)
     _check_moments(field, moments)
-    # deterministic signs: largest component of the first two axes positive,
-    # third axis = cross product, so R is a proper rotation
+    # deterministic signs: largest component of the first two axes positive, and the third axis
+    # signed so that det R = +1 (a proper rotation; eigh's columns are orthonormal)
     cols = []
     for c in range(2):
         v = vecs[:, c]
         if v[int(np.argmax(np.abs(v)))] < 0:
             v = -v
         cols.append(v)
-    cols.append(np.cross(cols[0], cols[1]))
-    R = np.ascontiguousarray(np.column_stack(cols), dtype=np.float64)
+    cols.append(vecs[:, 2])
+    R = np.column_stack(cols)
+    if np.linalg.det(R) < 0:
+        R[:, 2] = -R[:, 2]
+    R = np.ascontiguousarray(R, dtype=np.float64)
     return np.array(moments, dtype=np.float64, copy=True), R
+
+
+# --------------------------------------------------------------------------
+# magnitudes and keyword arguments
+# --------------------------------------------------------------------------
+
+
+def safe_norm(a: ArrayLike) -> float:
+    """Euclidean norm without intermediate overflow or underflow (scaled by max|a|).
+
+    Returns inf only when the norm itself exceeds the largest float64."""
+    a = np.asarray(a, dtype=np.float64).ravel()
+    scale = float(np.max(np.abs(a), initial=0.0))
+    if not scale > 0 or not np.isfinite(scale):
+        return scale
+    with np.errstate(over="ignore"):
+        return float(scale * np.sqrt(np.sum((a / scale) ** 2)))
+
+
+def keywords(fn: Callable[..., Any]) -> Callable[..., Any]:
+    """Decorator: a call with an unknown keyword, a missing argument or too many positional
+    arguments raises :class:`LavenderInputError` naming it (and the accepted names), not a
+    ``TypeError``. Functions that take ``**kwargs`` check those themselves."""
+    sig = inspect.signature(fn)
+    params = sig.parameters
+    takes_var_kw = any(p.kind is p.VAR_KEYWORD for p in params.values())
+    named = [n for n, p in params.items() if p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY) and n not in ("self", "cls")]
+    where = fn.__qualname__.replace(".__init__", "")
+
+    @functools.wraps(fn)
+    def wrapper(*args, **kwargs):
+        try:
+            sig.bind(*args, **kwargs)
+        except TypeError as exc:
+            if not takes_var_kw:
+                unknown = sorted(k for k in kwargs if k not in params or params[k].kind is params[k].POSITIONAL_ONLY)
+                if unknown:
+                    close = difflib.get_close_matches(unknown[0], named, n=1)
+                    hint = f" (did you mean {close[0]!r}?)" if close else ""
+                    raise LavenderInputError(unknown[0], f"unknown keyword argument of {where}{hint}",
+                                             f"; known: {', '.join(named)}") from None
+            missing = [n for n, p in params.items() if p.default is p.empty
+                       and p.kind not in (p.VAR_POSITIONAL, p.VAR_KEYWORD) and n not in kwargs]
+            text = str(exc)
+            field = next((n for n in missing if repr(n) in text), where)
+            raise LavenderInputError(field, f"{where}: {text}") from None
+        return fn(*args, **kwargs)
+
+    wrapper.__signature__ = sig
+    return wrapper
+
+
+def writable_dir(field: str, path: str | os.PathLike[str]) -> Path:
+    """Create directory `path` (and parents) if needed and check that a file can be written in it;
+    LavenderInputError naming `field` otherwise (a path through a file, no permission, read-only)."""
+    import tempfile
+
+    if not isinstance(path, (str, os.PathLike)) or not str(path):
+        raise LavenderInputError(field, "expected a directory path", f", got {_describe(path)}")
+    d = Path(path)
+    for parent in (d, *d.parents):
+        if parent.exists() and not parent.is_dir():
+            raise LavenderInputError(field, f"cannot write to {d}", f" ({parent} is a file, not a directory)")
+    try:
+        d.mkdir(parents=True, exist_ok=True)
+        fd, probe = tempfile.mkstemp(dir=d, prefix=".write-test-")
+        os.close(fd)
+        os.unlink(probe)
+    except OSError as exc:
+        raise LavenderInputError(field, f"cannot write to {d}", f" ({exc.strerror or exc})") from None
+    return d
+
+
+def writable_file(field: str, path: str | os.PathLike[str]) -> Path:
+    """Check that file `path` can be written (its directory is created if needed, as the writer would);
+    LavenderInputError naming `field` otherwise (a directory, a path through a file, no permission)."""
+    if not isinstance(path, (str, os.PathLike)) or not str(path):
+        raise LavenderInputError(field, "expected a file path", f", got {_describe(path)}")
+    p = Path(path)
+    if p.is_dir():
+        raise LavenderInputError(field, f"cannot write to {p}", " (it is a directory)")
+    writable_dir(field, p.parent if str(p.parent) else ".")
+    if p.exists() and not os.access(p, os.W_OK):
+        raise LavenderInputError(field, f"cannot write to {p}", " (permission denied)")
+    return p

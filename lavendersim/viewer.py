@@ -19,7 +19,9 @@ Overlay payload (keys outside these are errors):
   vectors: list (at most MAX_VECTORS) of {"label": str (default ""), "origin": 3 reals (required),
            "vector": 3 reals (required), "scale": real > 0 (default 1), "color": 4 reals in [0, 1]
            (default DEFAULT_COLOR)}.
-The whole payload is validated before anything is stored: a bad one raises
+Every coordinate drawn (origin, origin + scale * vector, the arrow's length, body positions) must lie
+within FLOAT32_MAX (3.4e38; the browser draws in float32): a vector of 1e308 — or one whose length
+overflows — is rejected. The whole payload is validated before anything is stored: a bad one raises
 :class:`~lavendersim.validate.LavenderInputError` naming the field (``overlays.vectors[1].color``)
 and the previously published frame stays on screen, untouched.
 
@@ -30,16 +32,29 @@ coalesced, latest wins — and counted in ``stats()``). viser itself keeps one b
 scene-node property, so a stalled or slow browser holds at most one pending state per node, and
 every connected tab (any number) receives the same shared scene.
 
+A frame that cannot be drawn is never reported as drawn: ``wait_applied`` raises :class:`ViewerError`
+for it, and the next ``publish_frame`` raises it once (naming the frame and the cause); ``stats()``
+counts failures. Body names map injectively to scene nodes (percent-encoded), so any set of distinct
+names draws.
+
+Binding: ``host`` must be an IP address or a host name (checked, and resolved within
+RESOLVE_TIMEOUT_S) that is an address of this machine (a test bind, so 192.0.2.1 fails at once);
+the server must be up within BIND_TIMEOUT_S. Otherwise LavenderInputError names ``host``.
+
 Conventions: our quaternions are (x, y, z, w); viser's are (w, x, y, z) — converted here, once.
 World frame z up. Units m.
 """
 from __future__ import annotations
 
 import difflib
+import ipaddress
 import math
+import re
+import socket
 import sys
 import threading
 import time
+import urllib.parse
 from collections.abc import Iterable, Mapping, Sequence
 from typing import TYPE_CHECKING, Any, Self, TextIO
 
@@ -54,7 +69,7 @@ from .kernels import K as KN
 if TYPE_CHECKING:  # annotations only: the Sim loads lazily
     from .sim import Sim
 
-__all__ = ["Viewer", "validate_overlays", "xyzw_to_wxyz", "DEFAULT_COLOR", "MAX_VECTORS", "SCENES", "LAB_VIEWS",
+__all__ = ["Viewer", "ViewerError", "validate_overlays", "xyzw_to_wxyz", "DEFAULT_COLOR", "MAX_VECTORS", "SCENES", "LAB_VIEWS",
            "run_scene"]
 
 DEFAULT_HOST = "127.0.0.1"
@@ -64,6 +79,10 @@ DEFAULT_AXES_SCALE = 0.3
 DEFAULT_COLOR = (0.95, 0.75, 0.2, 1.0)
 MAX_VECTORS = 64
 MAX_LABEL = 200
+MIN_RATE_HZ = 0.1           # run_scene: frames per simulated second, at least
+FLOAT32_MAX = 3.4e38        # the browser draws in float32: coordinates beyond this would become Infinity
+RESOLVE_TIMEOUT_S = 10.0    # host name resolution
+BIND_TIMEOUT_S = 30.0       # the viser server up and listening
 BODY_COLORS = [(186, 160, 220), (150, 190, 230), (230, 200, 150), (170, 215, 170), (225, 170, 180)]
 
 _AXES_KEYS = {"body", "scale"}
@@ -109,6 +128,78 @@ def _pos(field: str, value) -> float:
     return V.positive(field, value)
 
 
+def _check_drawable(f: str, item: dict) -> None:
+    """origin, origin + scale * vector and the arrow's length within ±FLOAT32_MAX (no overflow)."""
+    o = item["origin"]
+    if np.max(np.abs(o)) > FLOAT32_MAX:
+        raise V.LavenderInputError(f"{f}.origin", f"each coordinate must be within ±{FLOAT32_MAX:g} m (drawn in float32)",
+                                   f", got {V._nums(o)}")
+    with np.errstate(over="ignore", invalid="ignore"):
+        d = item["scale"] * item["vector"]
+        end = o + d
+        length = V.safe_norm(d) if np.all(np.isfinite(d)) else math.inf
+    if not (length <= FLOAT32_MAX and np.all(np.abs(end) <= FLOAT32_MAX)):
+        raise V.LavenderInputError(f"{f}.vector", f"the drawn arrow (origin + scale * vector) and its length must be "
+                                   f"within ±{FLOAT32_MAX:g} m (drawn in float32)",
+                                   f", got vector {V._nums(item['vector'])} with scale {item['scale']:g}")
+
+
+def node_name(body: str) -> str:
+    """The scene node of a body: /bodies/ + its name percent-encoded (injective: "x/y" and "x_y" differ)."""
+    return "/bodies/" + urllib.parse.quote(body, safe="")
+
+
+class ViewerError(RuntimeError):
+    """A published frame could not be drawn in the viser scene (the cause is chained)."""
+
+
+_HOSTNAME = re.compile(r"^(?=.{1,253}$)([A-Za-z0-9]([A-Za-z0-9-]{0,61}[A-Za-z0-9])?)(\.[A-Za-z0-9]([A-Za-z0-9-]{0,61}[A-Za-z0-9])?)*\.?$")
+
+
+def check_host(host: object) -> str:
+    """Validate an interface to bind: an IP address or a host name that resolves (within
+    RESOLVE_TIMEOUT_S) to an address of this machine; LavenderInputError naming ``host`` otherwise."""
+    if not isinstance(host, str) or not host:
+        raise V.LavenderInputError("host", "expected an interface address (str)", f", got {V._describe(host)}")
+    try:
+        addrs = [str(ipaddress.ip_address(host))]
+    except ValueError:
+        if not _HOSTNAME.match(host):
+            raise V.LavenderInputError("host", "is neither an IP address nor a valid host name", f", got {host!r}") from None
+        addrs = _resolve(host)
+    errors = []
+    for a in addrs:
+        fam = socket.AF_INET6 if ":" in a else socket.AF_INET
+        try:
+            with socket.socket(fam, socket.SOCK_STREAM) as sock:
+                sock.bind((a, 0))  # port 0: tests the address only (a taken port is viser's to skip)
+            return host
+        except OSError as exc:
+            errors.append(f"{a}: {exc.strerror or exc}")
+    raise V.LavenderInputError("host", "is not an address of this machine (cannot bind it)",
+                               f", got {host!r} ({'; '.join(errors)})")
+
+
+def _resolve(host: str) -> list[str]:
+    """getaddrinfo in a daemon thread, bounded by RESOLVE_TIMEOUT_S (a stuck resolver never hangs us)."""
+    box: dict = {}
+
+    def work():
+        try:
+            box["ok"] = socket.getaddrinfo(host, None, type=socket.SOCK_STREAM)
+        except OSError as exc:
+            box["err"] = exc
+
+    t = threading.Thread(target=work, name="lavendersim-resolve", daemon=True)
+    t.start()
+    t.join(RESOLVE_TIMEOUT_S)
+    if t.is_alive():
+        raise V.LavenderInputError("host", f"could not be resolved within {RESOLVE_TIMEOUT_S:g} s", f", got {host!r}")
+    if "err" in box:
+        raise V.LavenderInputError("host", "could not be resolved", f", got {host!r} ({box['err']})")
+    return list(dict.fromkeys(info[4][0] for info in box["ok"]))
+
+
 def validate_overlays(overlays: Mapping[str, Any] | None, body_names: Iterable[str]) -> dict[str, list[dict[str, Any]]]:
     """Check an overlay payload against the bodies of a scene; return a normalized copy.
 
@@ -149,13 +240,15 @@ def validate_overlays(overlays: Mapping[str, Any] | None, body_names: Iterable[s
             bad = np.flatnonzero((color < 0) | (color > 1))
             raise V.LavenderInputError(f"{f}.color", "each of r, g, b, a must be in [0, 1]",
                                        f", got {V._nums(color)} (index {int(bad[0])})")
-        vectors.append({
+        item = {
             "label": label,
             "origin": _vec(f"{f}.origin", v["origin"]),
             "vector": _vec(f"{f}.vector", v["vector"]),
             "scale": _pos(f"{f}.scale", v.get("scale", 1.0)),
             "color": color,
-        })
+        }
+        _check_drawable(f, item)
+        vectors.append(item)
     return {"axes": axes, "vectors": vectors}
 
 
@@ -172,13 +265,7 @@ def xyzw_to_wxyz(q: ArrayLike) -> np.ndarray:
 
 def _z_to(d: np.ndarray) -> np.ndarray:
     """wxyz quaternion of the shortest rotation taking +z onto the unit vector d."""
-    z = np.array([0.0, 0.0, 1.0])
-    c = float(np.dot(z, d))
-    if c < -1 + 1e-12:  # antiparallel: half turn about x
-        return np.array([0.0, 1.0, 0.0, 0.0])
-    axis = np.cross(z, d)
-    q = np.array([1.0 + c, *axis])
-    return q / np.linalg.norm(q)
+    return xyzw_to_wxyz(KN.quat_from_two_vectors([0.0, 0.0, 1.0], d))
 
 
 def _cylinder_mesh(radius: float, z0: float, z1: float, n: int = 24):
@@ -232,6 +319,27 @@ class _Frame:
     __slots__ = ("number", "t", "names", "shapes", "pose", "overlays", "published_at")
 
 
+def _start_server(viser, host: str, port: int, label: str, verbose: bool):
+    """ViserServer(...) bounded by BIND_TIMEOUT_S: viser retries 1000 ports and then waits forever."""
+    box: dict = {}
+
+    def work():
+        try:
+            box["server"] = viser.ViserServer(host=host, port=port, label=label, verbose=verbose)
+        except BaseException as exc:  # reported below, in the caller's thread
+            box["err"] = exc
+
+    t = threading.Thread(target=work, name="lavendersim-viewer-bind", daemon=True)
+    t.start()
+    t.join(BIND_TIMEOUT_S)
+    if t.is_alive():
+        raise V.LavenderInputError("host", f"could not bind {host}:{port} (or any of the next ports) within "
+                                   f"{BIND_TIMEOUT_S:g} s", "")
+    if "err" in box:
+        raise box["err"]
+    return box["server"]
+
+
 class Viewer:
     """A live viser page at http://HOST:PORT; see the module docstring.
 
@@ -241,17 +349,19 @@ class Viewer:
     arrow_radius: shaft radius of vector arrows in m (default: 2.5% of the largest body).
     """
 
+    @V.keywords
     def __init__(self, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT, *, max_rate_hz: float = DEFAULT_RATE_HZ,
                  label: str = "LavenderSim", arrow_radius: float | None = None, verbose: bool = False) -> None:
-        if not isinstance(host, str) or not host:
-            raise V.LavenderInputError("host", "expected an interface address (str)", f", got {host!r}")
         port = V.integer("port", port, minimum=0)
         if port > 65535:
             raise V.LavenderInputError("port", "must be in 0..65535", f", got {port}")
         self.max_rate_hz = V.positive("max_rate_hz", max_rate_hz)
         self._arrow_radius = None if arrow_radius is None else V.positive("arrow_radius", arrow_radius)
+        if not isinstance(label, str):
+            raise V.LavenderInputError("label", "expected a str", f", got {V._describe(label)}")
         viser = require("viser", "viewer", "the browser viewer")
-        self.server = viser.ViserServer(host=host, port=port, label=label, verbose=verbose)
+        check_host(host)
+        self.server = _start_server(viser, host, port, label, verbose)
         self.host, self.port = host, int(self.server.get_port())
         self.server.gui.configure_theme(show_share_button=False, show_logo=False)
         self._status = self.server.gui.add_markdown("waiting for the first frame")
@@ -264,6 +374,10 @@ class Viewer:
         self._applied = 0
         self._applied_number = 0
         self._dropped = 0
+        self._failed = 0
+        self._done_number = 0          # the latest frame the apply thread finished (drawn or failed)
+        self._done_failed: BaseException | None = None   # its error, if it failed
+        self._unreported: tuple[int, BaseException] | None = None  # a failure publish_frame has not raised yet
         self.last_error: BaseException | None = None
         # scene bookkeeping (touched only by the apply thread, read under _state_lock)
         self._state_lock = threading.Lock()
@@ -295,9 +409,16 @@ class Viewer:
             raise V.LavenderInputError("sim", "state is not finite (diverged?); nothing published")
         f.overlays = ov
         f.published_at = time.perf_counter()
+        if np.max(np.abs(f.pose[:, POSE_P])) > FLOAT32_MAX:
+            raise V.LavenderInputError("sim", f"a body position is beyond ±{FLOAT32_MAX:g} m (drawn in float32); "
+                                       "nothing published")
         with self._lock:
             if self._stop.is_set():
                 raise RuntimeError("viewer is closed")
+            failed, self._unreported = self._unreported, None
+            if failed is not None:
+                raise ViewerError(f"frame {failed[0]} could not be drawn: {failed[1]!r}; this frame was not "
+                                  "published (the next call publishes)") from failed[1]
             self._published += 1
             f.number = self._published
             if self._pending is not None:
@@ -308,14 +429,24 @@ class Viewer:
 
     def wait_applied(self, number: int, timeout: float = 5.0) -> bool:
         """Block until frame ``number`` (or a later one) is in the viser scene; False on timeout.
-        For tests and scripts; the simulation loop never needs it."""
+        Raises :class:`ViewerError` when the apply thread failed to draw it (the latest frame it
+        processed is ``number`` or later and failed). For tests and scripts; the simulation loop
+        never needs it."""
+        number = V.integer("number", number, minimum=0)
+        timeout = V.scalar("timeout", timeout, nonnegative=True)
         deadline = time.monotonic() + timeout
         with self._applied_cv:
-            while self._applied_number < number:
+            while self._done_number < number:
                 left = deadline - time.monotonic()
                 if left <= 0 or self._stop.is_set():
                     return False
                 self._applied_cv.wait(left)
+            failed, done = self._done_failed, self._done_number
+        if failed is not None:
+            with self._lock:
+                if self._unreported is not None and self._unreported[0] == done:
+                    self._unreported = None  # reported here
+            raise ViewerError(f"frame {done} could not be drawn: {failed!r}") from failed
         return True
 
     def scene_state(self) -> dict[str, Any]:
@@ -339,7 +470,7 @@ class Viewer:
 
     def stats(self) -> dict[str, Any]:
         with self._lock:
-            return {"published": self._published, "applied": self._applied, "dropped": self._dropped,
+            return {"published": self._published, "applied": self._applied, "dropped": self._dropped, "failed": self._failed,
                     "clients": self.clients(), "last_error": repr(self.last_error) if self.last_error else None}
 
     def close(self) -> None:
@@ -387,16 +518,25 @@ class Viewer:
             if f is None:
                 continue
             next_at = time.monotonic() + period
+            error = None
             try:
                 self._apply(f)
-            except Exception as exc:  # keep serving; report once per distinct error
+            except Exception as exc:  # keep serving; publish_frame / wait_applied report it
                 if repr(exc) != repr(self.last_error):
                     print(f"lavendersim viewer: could not draw frame {f.number}: {exc!r}", file=sys.stderr)
-                self.last_error = exc
+                self.last_error = error = exc
+                self._signature = None  # rebuild the scene on the next frame
             with self._lock:
-                self._applied += 1
+                if error is None:
+                    self._applied += 1
+                else:
+                    self._failed += 1
+                    self._unreported = (f.number, error)
             with self._applied_cv:
-                self._applied_number = f.number
+                self._done_number = f.number
+                self._done_failed = error
+                if error is None:
+                    self._applied_number = f.number
                 self._applied_cv.notify_all()
 
     def _set(self, handle, prop: str, value) -> None:
@@ -415,17 +555,16 @@ class Viewer:
         ext = max(_extent(k, d) for k, d in f.shapes)
         self._ref = ext
         for i, (name, (kind, dims)) in enumerate(zip(f.names, f.shapes)):
-            node_name = f"/bodies/{name.replace('/', '_')}"
-            node = sc.add_frame(node_name, show_axes=False)
+            node = sc.add_frame(node_name(name), show_axes=False)
             color = BODY_COLORS[i % len(BODY_COLORS)]
             if kind == "box":
-                sc.add_box(f"{node_name}/shape", color=color, dimensions=dims)
+                sc.add_box(f"{node_name(name)}/shape", color=color, dimensions=dims)
             elif kind == "sphere":
-                sc.add_icosphere(f"{node_name}/shape", radius=dims[0], color=color, subdivisions=3)
+                sc.add_icosphere(f"{node_name(name)}/shape", radius=dims[0], color=color, subdivisions=3)
             else:
                 v, fc = _cylinder_mesh(dims[0], -dims[1] / 2, dims[1] / 2, 32)
-                sc.add_mesh_simple(f"{node_name}/shape", v, fc, color=color, flat_shading=False)
-            axes = sc.add_frame(f"{node_name}/axes", axes_length=DEFAULT_AXES_SCALE, axes_radius=0.012, visible=False)
+                sc.add_mesh_simple(f"{node_name(name)}/shape", v, fc, color=color, flat_shading=False)
+            axes = sc.add_frame(f"{node_name(name)}/axes", axes_length=DEFAULT_AXES_SCALE, axes_radius=0.012, visible=False)
             self._bodies[name] = {"node": node, "shape": (kind, dims), "axes": axes}
         centre = f.pose[:, POSE_P].mean(axis=0)
         span = max(ext, float(np.ptp(f.pose[:, POSE_P], axis=0).max()) if len(f.names) > 1 else ext)
@@ -472,7 +611,7 @@ class Viewer:
             for k, v in enumerate(f.overlays["vectors"]):
                 h = self._vector_handles(k)
                 d = v["scale"] * v["vector"]
-                length = float(np.linalg.norm(d))
+                length = V.safe_norm(d)
                 rgb = tuple(int(round(255 * c)) for c in v["color"][:3])
                 alpha = float(v["color"][3])
                 state["vectors"].append({"label": v["label"], "start": v["origin"].tolist(),
@@ -587,6 +726,7 @@ SCENES = {"tumble": _tumble_scene, "lab03": _lab03_scene, "wheel": _wheel_scene}
 LAB_VIEWS = {"03": "lab03", "04": "wheel"}
 
 
+@V.keywords
 def run_scene(name: str, *, duration: float | None = None, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT,
               rate_hz: float = 60.0, viewer: Viewer | None = None, out: TextIO = sys.stdout) -> dict[str, Any]:
     """Run scene ``name`` in real time, publishing ``rate_hz`` frames per second, for ``duration``
@@ -596,6 +736,9 @@ def run_scene(name: str, *, duration: float | None = None, host: str = DEFAULT_H
         duration = V.scalar("duration", duration, nonnegative=True)
     rate_hz = V.positive("rate_hz", rate_hz)
     sim, overlays, advance = SCENES[name]()
+    if not MIN_RATE_HZ <= rate_hz <= 1.0 / sim.dt:  # a frame must advance at least one step, at most 1/MIN_RATE_HZ s
+        raise V.LavenderInputError("rate_hz", f"must be within [{MIN_RATE_HZ:g}, {1.0 / sim.dt:g}] frames per simulated "
+                                   f"second (scene {name!r} steps dt = {sim.dt:g} s)", f", got {rate_hz!r}")
     own = viewer is None
     viewer = viewer or Viewer(host, port)
     print(f"lavendersim view {name}: open {viewer.url}  (Ctrl-C to stop)", file=out, flush=True)

@@ -294,3 +294,42 @@ def test_no_hand_written_physics_or_tableau_in_the_step_code(path):
     code = re.sub(r"/\*.*?\*/|#[^\n]*|\"\"\".*?\"\"\"", "", text, flags=re.S)  # comments and docstrings
     found = [p for p in HAND_PHYSICS if re.search(p, code)]
     assert not found, f"{path}: {found}"
+
+
+def test_no_cross_product_typed_by_hand_anywhere_in_the_runtime():
+    """Issue 10's grep check: cross products are derived kernels (generated/), never typed in
+    lavendersim/ or csrc/ — reference.py, the deliberately independent reference, excepted."""
+    pkg = ROOT / "lavendersim"
+    files = [p for p in pkg.rglob("*") if p.suffix in (".py", ".c", ".h") and p.name != "reference.py"
+             and "generated" not in p.parts]
+    assert len(files) > 20
+    offenders = []
+    for p in files:
+        code = re.sub(r"/\*.*?\*/|#[^\n]*|\"\"\".*?\"\"\"", "", p.read_text(), flags=re.S)
+        if re.search(r"np\.cross|numpy\.cross|\bcross\(", code):
+            offenders.append(str(p.relative_to(ROOT)))
+    assert not offenders, offenders
+
+
+@pytest.mark.parametrize("a, b", [([0, 0, 1], [0, 0, -1]), ([1, 0, 0], [-1, 0, 0]), ([0.6, 0.8, 0], [0, 0, 1]),
+                                  ([0, 0, 1], [0, 0, 1]), ([1, 1, 1], [1, -1, 1e-13]), ([0, 0.6, 0.8], [0, -0.6, -0.8])])
+def test_quat_from_two_vectors_takes_a_onto_b_also_antiparallel(a, b):
+    from lavendersim.generated import kernels_numpy as KN
+
+    a, b = np.asarray(a, float) / np.linalg.norm(a), np.asarray(b, float) / np.linalg.norm(b)
+    q = np.asarray(KN.quat_from_two_vectors(a, b), dtype=float)
+    assert abs(np.linalg.norm(q) - 1.0) < 1e-15
+    assert np.allclose(np.asarray(KN.quat_rotate(q, a), dtype=float), b, atol=2e-16 * 8)
+
+
+def test_quat_from_two_vectors_on_random_pairs():
+    from lavendersim.generated import kernels_numpy as KN
+
+    rng = np.random.default_rng(7)
+    a, b = rng.normal(size=(2, 500, 3))
+    a /= np.linalg.norm(a, axis=1, keepdims=True)
+    b /= np.linalg.norm(b, axis=1, keepdims=True)
+    q = np.asarray(KN.quat_from_two_vectors(a, b), dtype=float)       # batched over the leading axis
+    got = np.asarray(KN.quat_rotate(q, a), dtype=float)
+    assert got.shape == (500, 3)
+    assert np.max(np.abs(got - b)) < 1e-14

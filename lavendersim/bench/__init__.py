@@ -46,6 +46,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .. import validate as V
 from .._install import extra_command
 from ..generated import layout as LY
 
@@ -61,6 +62,7 @@ OMEGA_B0 = (1.0, 0.5, 0.2)
 V_W0 = (0.1, 0.0, 0.0)
 Q0 = tuple((np.array([0.1, 0.2, 0.3, 0.9]) / np.linalg.norm([0.1, 0.2, 0.3, 0.9])).tolist())
 DT = 1e-3
+MAX_ROUNDS = 1000  # --rounds: interleaved rounds per section, 1..MAX_ROUNDS
 
 TARGETS = {
     "c_single_rk4_ns": 100.0,          # ns per step, at most
@@ -401,7 +403,9 @@ def settings(quick: bool) -> dict:
 def run(quick: bool = False, rounds: int | None = None, use_mujoco: bool = True) -> dict:
     cfg = settings(quick)
     if rounds is not None:
-        cfg["rounds"] = max(1, int(rounds))
+        cfg["rounds"] = V.integer("rounds", rounds, minimum=1)
+        if cfg["rounds"] > MAX_ROUNDS:
+            raise V.LavenderInputError("rounds", f"must be at most {MAX_ROUNDS}", f", got {rounds}")
     R = cfg["rounds"]
     res: dict = {"schema": SCHEMA, "quick": quick, "machine": machine_stamp(),
                  "config": {"body": {"shape": "box", "mass": MASS, "size": list(SIZE), "I_b": inertia().tolist(),
@@ -691,6 +695,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def command(args) -> int:
+    if args.rounds is not None:  # checked before any measurement (run() checks again for Python callers)
+        V.integer("rounds", args.rounds, minimum=1)
+    if args.json:
+        V.writable_file("json", args.json)  # before a run of minutes, not after
     res = run(quick=args.quick, rounds=args.rounds, use_mujoco=not args.no_mujoco)
     print(report(res), flush=True)
     if args.json:
@@ -704,4 +712,8 @@ def command(args) -> int:
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(prog="python -m lavendersim.bench", description=__doc__.split("\n\n")[0])
     add_arguments(p)
-    return command(p.parse_args(argv))
+    try:
+        return command(p.parse_args(argv))
+    except V.LavenderInputError as exc:  # as `lavendersim bench` does: one line, exit 2
+        print(f"python -m lavendersim.bench: invalid input: {exc}", file=sys.stderr)
+        return 2

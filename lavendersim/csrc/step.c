@@ -241,7 +241,7 @@ enum { LV_RHS_FREE = 0, LV_RHS_TORQUE = 1, LV_RHS_FULL = 2 };
         } else {                                                                                        \
             for (j = 0; j < n; j++) {                                                                   \
                 F[j][0] = F[j][1] = F[j][2] = tau[j][0] = tau[j][1] = tau[j][2] = 0.0;                  \
-                effect_sums(in[j], in[j] + 7, m[j], I[j], refs[j], n_refs[j], F[j], tau[j]);            \
+                effect_sums(in[j], in[j] + LV_STATE_V_W, m[j], I[j], refs[j], n_refs[j], F[j], tau[j]);            \
             }                                                                                           \
             if (forced == LV_RHS_TORQUE)                                                                \
                 for (j = 0; j < n; j++) lv_rigid_body_rhs_torque(in[j], I[j], tau[j], out[j]);          \

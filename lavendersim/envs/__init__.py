@@ -12,7 +12,9 @@ import importlib.machinery
 import sys
 
 ENV_ID = "ReactionWheelCube-v0"
-ENTRY_POINT = "lavendersim.envs.reaction_wheel_cube:ReactionWheelCubeEnv"
+# a function, not the class: gymnasium.make then passes render_mode through unchanged (given a class whose
+# metadata lacks the mode, it would swap "human" for "rgb_array" plus its HumanRendering wrapper)
+ENTRY_POINT = "lavendersim.envs.reaction_wheel_cube:make_env"
 MAX_EPISODE_STEPS = 1000
 
 

@@ -34,12 +34,19 @@ Seeding: ``reset(seed=...)`` seeds ``self.np_random``; the same seed gives the s
 ``reset(options={"q": ..., "omega_b": ..., "Omega": ...})`` sets the initial state explicitly.
 
 Rendering: ``render_mode="rgb_array"`` returns an (H, W, 3) uint8 image drawn with matplotlib's
-Agg canvas (cube edges and body axes; no display needed); ``None`` renders nothing.
+Agg canvas (cube edges and body axes; no display needed); ``None`` renders nothing. Any other mode
+(``"human"``, ``"rgb_array_list"``, ...) raises LavenderInputError naming ``render_mode``, also through
+``gymnasium.make`` (the registered entry point is :func:`make_env`, so gymnasium does not swap an
+unsupported mode for a wrapper of its own).
+
+Every argument is validated: unknown keyword arguments (of the env or of the CubeModel it builds),
+a ``model`` that is not a CubeModel, a bad ``seed`` or ``options`` raise LavenderInputError naming it.
 """
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+import dataclasses
+from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -59,26 +66,43 @@ gym = require("gymnasium", "gym", "the ReactionWheelCube-v0 environment")
 spaces = require("gymnasium.spaces", "gym", "the ReactionWheelCube-v0 environment")
 
 BODY = lc.BODY
+MAX_SUBSTEPS = 100_000  # simulator steps per control step (control_dt / dt), at most
 
 
 class ReactionWheelCubeEnv(gym.Env):
     metadata = {"render_modes": ["rgb_array"], "render_fps": 50}
 
+    @V.keywords
     def __init__(self, task: str = "center", backend: str = "auto", render_mode: str | None = None, *,
                  control_dt: float = 0.01, dt: float = 1e-3, damping: float = 1e-3, init_angle_deg: float | None = None,
                  max_tilt_deg: float = 20.0, target_q: ArrayLike | None = None, model: lc.CubeModel | None = None,
                  **model_params: Any) -> None:
         super().__init__()
         task = V.choice("task", task, lc.SCENARIOS)
-        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+        if render_mode is not None and (not isinstance(render_mode, str) or render_mode not in self.metadata["render_modes"]):
             raise V.LavenderInputError("render_mode", "must be None or 'rgb_array'", f", got {render_mode!r}")
         self.render_mode = render_mode
+        known = sorted({f.name for f in dataclasses.fields(lc.CubeModel)} - {"scenario", "damping"})
+        unknown = sorted(set(model_params) - set(known))
+        if unknown:
+            raise V.LavenderInputError(unknown[0], "unknown keyword argument of ReactionWheelCube-v0",
+                                       f"; known: task, backend, render_mode, control_dt, dt, damping, init_angle_deg, "
+                                       f"max_tilt_deg, target_q, model and the CubeModel's {', '.join(known)}")
+        if model is not None and not isinstance(model, lc.CubeModel):
+            raise V.LavenderInputError("model", "must be a lavendersim.control.CubeModel or None",
+                                       f", got {V._describe(model)}")
+        if model is not None and model_params:
+            raise V.LavenderInputError(sorted(model_params)[0], "give either model= or the CubeModel's parameters")
         self.backend = backends.resolve(backend)
         self.model = model or lc.CubeModel(scenario=task, damping=damping, **model_params)
         self.task = self.model.scenario
         self.dt = V.dt("dt", dt)
         self.control_dt = V.dt("control_dt", control_dt)
-        self.substeps = int(round(self.control_dt / self.dt))
+        ratio = self.control_dt / self.dt
+        if not ratio <= MAX_SUBSTEPS:
+            raise V.LavenderInputError("dt", f"control_dt / dt = {ratio:.3g} simulator steps per control step; at most "
+                                       f"{MAX_SUBSTEPS:,} are allowed", f", got dt = {dt!r}")
+        self.substeps = int(round(ratio))
         if self.substeps < 1 or abs(self.substeps * self.dt - self.control_dt) > 1e-9 * self.control_dt:
             raise V.LavenderInputError("control_dt", f"must be a whole multiple of dt = {self.dt:g}", f", got {control_dt!r}")
         self.init_angle_deg = V.scalar("init_angle_deg", (20.0 if self.task == "center" else 3.0)
@@ -140,18 +164,24 @@ class ReactionWheelCubeEnv(gym.Env):
     # ---- gymnasium API --------------------------------------------------------------------
     def reset(self, *, seed: int | None = None,
               options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict[str, Any]]:
-        super().reset(seed=seed)
-        options = dict(options or {})
-        unknown = sorted(set(options) - {"q", "omega_b", "Omega"})
+        if seed is not None:
+            seed = V.integer("seed", seed, minimum=0)  # a Python int (gymnasium refuses numpy integers)
+        if options is not None and not isinstance(options, Mapping):
+            raise V.LavenderInputError("options", "expected a dict or None", f", got {V._describe(options)}")
+        unknown = sorted(str(k) for k in (options or {}) if k not in ("q", "omega_b", "Omega"))
         if unknown:
             raise V.LavenderInputError(f"options.{unknown[0]}", "unknown reset option; known: q, omega_b, Omega")
-        q0 = V.quaternion("options.q", options["q"]) if "q" in options else self._initial_q()
+        options = dict(options or {})
+        # everything is validated before the generator is re-seeded: a rejected reset changes nothing
+        q_given = V.quaternion("options.q", options["q"]) if "q" in options else None
         w0 = V.vector("options.omega_b", options.get("omega_b", (0.0, 0.0, 0.0)))
         Om0 = V.vector("options.Omega", options.get("Omega", (0.0, 0.0, 0.0)))
         if np.max(np.abs(w0)) > self.rate_bound:
             raise V.LavenderInputError("options.omega_b", f"must be within ±{self.rate_bound:g} rad/s (the observation bounds)")
         if np.max(np.abs(Om0)) > self.wheel_bound:
             raise V.LavenderInputError("options.Omega", f"must be within ±{self.wheel_bound:g} rad/s (the observation bounds)")
+        super().reset(seed=seed)
+        q0 = self._initial_q() if q_given is None else q_given
         self.sim = self.model.make_sim(q0, w0, Om0, dt=self.dt, backend=self.backend)
         self._last_u = np.zeros(3)
         return self._obs(), self._info()
@@ -167,16 +197,8 @@ class ReactionWheelCubeEnv(gym.Env):
     def step(self, action: ArrayLike) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         if self.sim is None:
             raise RuntimeError("ReactionWheelCube-v0: call reset() before step()")
-        try:
-            a = np.asarray(action, dtype=np.float64)
-        except (TypeError, ValueError):
-            raise V.LavenderInputError("action", "must be 3 numbers (wheel torques as fractions of the limit)",
-                                       f", got {action!r}") from None
-        if a.shape != (3,):
-            raise V.LavenderInputError("action", "must have shape (3,)", f", got shape {a.shape}")
-        if not np.all(np.isfinite(a)):
-            raise V.LavenderInputError("action", "must be finite (no NaN or inf)", f", got {a.tolist()}")
-        a = np.clip(a, -1.0, 1.0)
+        # real finite numbers of shape (3,): complex, bool, str, None, NaN/inf and other shapes are rejected
+        a = np.clip(V.array("action", action, (3,)), -1.0, 1.0)
         self.sim.set_wheel_command(BODY, a * self.model.torque_limit)
         terminated, extra = False, {}
         try:
@@ -202,6 +224,7 @@ class ReactionWheelCubeEnv(gym.Env):
         return self._obs(raw), float(reward), terminated, False, self._info(angle, tilt, **extra)
 
     def render(self) -> np.ndarray | None:
+        """The current frame as an (H, W, 3) uint8 image (render_mode "rgb_array"), or None."""
         if self.render_mode is None:
             return None
         if self._fig is None:
@@ -235,3 +258,11 @@ class ReactionWheelCubeEnv(gym.Env):
     def close(self) -> None:
         self._fig = None
         self.sim = None
+
+
+def make_env(**kwargs: Any) -> ReactionWheelCubeEnv:
+    """The entry point registered for ReactionWheelCube-v0: builds :class:`ReactionWheelCubeEnv`.
+
+    A plain function (no ``metadata``), so ``gymnasium.make`` passes ``render_mode`` through unchanged and
+    an unsupported mode such as ``"human"`` is rejected by the env instead of wrapped."""
+    return ReactionWheelCubeEnv(**kwargs)
