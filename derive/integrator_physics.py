@@ -10,6 +10,14 @@ control); every formula they apply comes from here:
 * implicit_gyro: the residual of I(ω⁺ − ω) + h ω⁺ × Iω⁺ = h τ_B, its Jacobian (differentiated here
   by SymPy) and one Newton update by the closed-form (adjugate) solve; the exp-map attitude step
   q ← q ⊗ exp(h ω/2) with its series where the angle is small; the semi-implicit translation;
+* rk4_expmap (Runge–Kutta–Munthe-Kaas, RKMK4): RK4 on (p, v, u, ω) where the attitude is
+  q = q₀ ⊗ exp(u/2) with u the body-frame rotation vector relative to the step's start, u̇ given by
+  the inverse derivative of the exponential map, truncated after the order-4 terms
+  u̇ = dexp⁻¹₋ᵤ(ω) ≈ ω + ½ u × ω + (1/12) u × (u × ω) (Bernoulli numbers B₁ = −½, B₂ = 1/6 with ad₋ᵤ;
+  Munthe-Kaas, Appl. Numer. Math. 29 (1999) 115; Hairer, Lubich & Wanner, Geometric Numerical
+  Integration, IV.8): within a step u = O(h), so the dropped terms (B₄ u⁴ …) are O(h⁴) in u̇ and the
+  step stays of order 4; every stage's attitude, and the final one, is q₀ ⊗ exp(u/2) by quat_exp_step
+  (with h = 1), unit to rounding;
 * the free translation of a body with a model (ṗ = v, v̇ = F/m), and the reaction-wheel motor
   saturation (clip to ±torque_limit, no drive beyond speed_limit).
 
@@ -50,6 +58,22 @@ def strang_rotation(I_b, q, omega_b, h):
     return q, sp.Matrix([L[i] / I_b[i] for i in range(3)])
 
 
+def axis_flow_kernel(a: int, I_b, q, L_b, tau) -> "Kernel":
+    """Kernel axis_flow_{x,y,z}: one exact axis flow on (q, L_B) for time tau (axis_flow)."""
+    qn, Ln = axis_flow(I_b, q, list(L_b), a, tau)
+    n = "xyz"[a]
+    return Kernel(f"axis_flow_{n}", f"Exact flow of H_{n} = L_{n}²/(2 I_{n}) on (q, L_B) for time τ",
+                  rf"\theta = \tau L_{n}/I_{n},\ q \leftarrow q \otimes [\sin\tfrac\theta2 e_{n}, \cos\tfrac\theta2],"
+                  rf"\ L_B \leftarrow R_{n}(-\theta) L_B",
+                  [Arg("I_b", I_b, "principal moments, body frame, kg·m²", "positive"),
+                   Arg("q", q, "orientation (x, y, z, w), R_WB, unit", "unit_quaternion"),
+                   Arg("L_b", L_b, "angular momentum, body frame, kg·m²/s"), Arg("tau", tau, "duration of the flow, s")],
+                  [Arg("q_next", qn, "orientation (unit when q is)"), Arg("L_next", sp.Matrix(Ln), "kg·m²/s, body frame")],
+                  "Integrator physics",
+                  notes=["splitting4 applies the sequence printed in generated/tableaux (SPLIT4_SEQ) of these flows to "
+                         "bodies without effects; each keeps |L_B|, L_W and |q| to rounding."])
+
+
 def gyro_residual(I_b, omega_b, tau_b, h, w1) -> sp.Matrix:
     """g(ω⁺) = I(ω⁺ − ω) + h ω⁺ × (I ω⁺) − h τ_B (body frame, diagonal I)."""
     Iw1 = sp.Matrix([I_b[i] * w1[i] for i in range(3)])
@@ -78,6 +102,12 @@ def quat_exp_step(q, omega_b, h) -> sp.Matrix:
     return qmul(q, e)
 
 
+def rkmk_dexpinv(u_b, omega_b) -> sp.Matrix:
+    """u̇ = dexp⁻¹₋ᵤ(ω) truncated for order 4: ω + ½ u × ω + (1/12) u × (u × ω) (q = q₀ ⊗ exp(u/2), q̇ = ½ q ⊗ ω)."""
+    uxw = u_b.cross(omega_b)
+    return omega_b + uxw / 2 + u_b.cross(uxw) / 12
+
+
 def saturation(command, Omega, torque_limit, speed_limit) -> sp.Matrix:
     """Clip each command to ±torque_limit; zero where |Omega_i| ≥ speed_limit and the torque would
     drive the wheel faster (u_i Omega_i > 0)."""
@@ -98,6 +128,14 @@ def _check(I_b, w, tau, h, w1) -> None:
     J = gyro_residual(I_b, w, tau, h, w1).jacobian(w1)
     if (J - (I + h * (skew(w1) * I - skew(I * w1)))).applyfunc(sp.expand) != sp.zeros(3, 3):
         raise RuntimeError("derive: the implicit-gyro Jacobian differs from I + h([w]x I - [I w]x)")
+    # RKMK: with R = R0 exp([u]x) and Rᵀ Ṙ = [ω]x, ω = dexp₋ᵤ(u̇) = u̇ − ½ u × u̇ + (1/6) u × (u × u̇) − …;
+    # the truncated inverse must undo it up to the dropped O(|u|³) terms
+    eps, u = sp.Symbol("eps"), vec("u", 3)
+    ud = rkmk_dexpinv(eps * u, w)
+    back = ud - (eps * u).cross(ud) / 2 + (eps * u).cross((eps * u).cross(ud)) / 6
+    for k in range(3):
+        if (back - w).applyfunc(lambda e: sp.expand(e).coeff(eps, k)) != sp.zeros(3, 1):
+            raise RuntimeError(f"derive: the RKMK dexp inverse is not the inverse of dexp at order eps^{k}")
     q = vec("q", 4)
     wz = sp.Matrix([0, 0, w[2]])
     qn, wn = strang_rotation(I_b, q, wz, h)
@@ -111,6 +149,7 @@ def kernels() -> list[Kernel]:
     I_b, q, omega_b, tau_b = vec("I_b", 3), vec("q", 4), vec("omega_b", 3), vec("tau_b", 3)
     p_w, v_w, F_w, w1 = vec("p_w", 3), vec("v_w", 3), vec("F_w", 3), vec("omega_next", 3)
     m, h = scalar("m", positive=True), scalar("h")
+    u_b, L_b, tau = vec("u_b", 3), vec("L_b", 3), scalar("tau")
     cmd, Om, tl, sl = vec("command", 3), vec("Omega", 3), scalar("torque_limit"), scalar("speed_limit")
     _check(I_b, omega_b, tau_b, h, w1)
     q_s, w_s = strang_rotation(I_b, q, omega_b, h)
@@ -134,6 +173,12 @@ def kernels() -> list[Kernel]:
                [Arg(*IB), Arg(*Q), Arg(*W), Arg(*H)],
                [Arg("q_next", q_s, "orientation after h (unit when q is)"), Arg("omega_next", w_s, "rad/s, body frame")], g,
                notes=["Torque-free, it conserves the world angular momentum and |L_B| to rounding; second order."]),
+        *[axis_flow_kernel(a, I_b, q, L_b, tau) for a in range(3)],
+        Kernel("body_momentum", "Body angular momentum of a body with principal moments I_B", r"L_B = I_B \omega_B",
+               [Arg(*IB), Arg(*W)], [Arg("L_b", sp.Matrix([I_b[i] * omega_b[i] for i in range(3)]), "kg·m²/s, body frame")], g),
+        Kernel("body_rate", "Body angular velocity from the body angular momentum", r"\omega_B = I_B^{-1} L_B",
+               [Arg(*IB), Arg("L_b", L_b, "angular momentum, body frame, kg·m²/s")],
+               [Arg("omega_b", sp.Matrix([L_b[i] / I_b[i] for i in range(3)]), "rad/s, body frame")], g),
         Kernel("splitting_kick", "Kick of v and ω under a force and a body torque for time h (q, p fixed)",
                r"v_W \leftarrow v_W + h F_W/m,\quad \omega_B \leftarrow \omega_B + h I_B^{-1}\tau_B",
                [Arg(*M), Arg(*IB), Arg("v_w", v_w, "COM velocity, world frame, m/s"), Arg(*W),
@@ -166,6 +211,12 @@ def kernels() -> list[Kernel]:
                r"q \leftarrow q \otimes \left[\tfrac{\sin a}{\lVert\omega\rVert}\omega_B,\ \cos a\right],\ a = \tfrac h2\lVert\omega_B\rVert"
                r"\quad\left(\tfrac{\sin a}{\lVert\omega\rVert} \approx \tfrac h2(1 - \tfrac{a^2}{6})\ \text{for}\ a \le 10^{-8}\right)",
                [Arg(*Q), Arg(*W), Arg(*H)], [Arg("q_next", quat_exp_step(q, omega_b, h), "orientation (unit when q is)")], g),
+        Kernel("rkmk_dexpinv", "Rate of the attitude's exponential coordinates (RKMK4, truncated dexp inverse)",
+               r"\dot u_B = \omega_B + \tfrac12\,u_B\times\omega_B + \tfrac1{12}\,u_B\times(u_B\times\omega_B)",
+               [Arg("u_b", u_b, "rotation vector of the attitude relative to the step's start, body frame, rad"), Arg(*W)],
+               [Arg("u_dot", rkmk_dexpinv(u_b, omega_b), "rad/s, body frame")], g,
+               notes=["q = q₀ ⊗ exp(u/2) (quat_exp_step with h = 1); the dexp inverse series is cut after its "
+                      "u² term, exact to O(|u|³ |ω|), which keeps RK4's order 4 since u = O(h) within a step."]),
         Kernel("wheel_saturation", "Motor torques actually applied: clipped, and cut off beyond the speed limit",
                r"u_i = \begin{cases} 0 & |\Omega_i| \ge \Omega_{max},\ \bar u_i \Omega_i > 0 \\ \bar u_i & \text{else}\end{cases},"
                r"\quad \bar u_i = \min(\max(c_i, -u_{max}), u_{max})",

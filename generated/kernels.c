@@ -1251,6 +1251,99 @@ void lv_splitting_rotation(const double *I_b, const double *q, const double *ome
     omega_next[2] = t16*(-t32*t54 + t52*t53);
 }
 
+void lv_axis_flow_x(const double *I_b, const double *q, const double *L_b, double tau, double *q_next, double *L_next) {
+    const double I_b_0 = I_b[0];
+    const double q_0 = q[0];
+    const double q_1 = q[1];
+    const double q_2 = q[2];
+    const double q_3 = q[3];
+    const double L_b_0 = L_b[0];
+    const double L_b_1 = L_b[1];
+    const double L_b_2 = L_b[2];
+    const double t0 = ((1.0/2.0))*L_b_0*tau/I_b_0;
+    const double t1 = cos(t0);
+    const double t2 = sin(t0);
+    const double t3 = 1 - 2*(t2*t2);
+    const double t4 = 2*t1*t2;
+    q_next[0] = q_0*t1 + q_3*t2;
+    q_next[1] = q_1*t1 + q_2*t2;
+    q_next[2] = -q_1*t2 + q_2*t1;
+    q_next[3] = -q_0*t2 + q_3*t1;
+    L_next[0] = L_b_0;
+    L_next[1] = L_b_1*t3 + L_b_2*t4;
+    L_next[2] = -L_b_1*t4 + L_b_2*t3;
+}
+
+void lv_axis_flow_y(const double *I_b, const double *q, const double *L_b, double tau, double *q_next, double *L_next) {
+    const double I_b_1 = I_b[1];
+    const double q_0 = q[0];
+    const double q_1 = q[1];
+    const double q_2 = q[2];
+    const double q_3 = q[3];
+    const double L_b_0 = L_b[0];
+    const double L_b_1 = L_b[1];
+    const double L_b_2 = L_b[2];
+    const double t0 = ((1.0/2.0))*L_b_1*tau/I_b_1;
+    const double t1 = cos(t0);
+    const double t2 = sin(t0);
+    const double t3 = 1 - 2*(t2*t2);
+    const double t4 = 2*t1*t2;
+    q_next[0] = q_0*t1 - q_2*t2;
+    q_next[1] = q_1*t1 + q_3*t2;
+    q_next[2] = q_0*t2 + q_2*t1;
+    q_next[3] = -q_1*t2 + q_3*t1;
+    L_next[0] = L_b_0*t3 - L_b_2*t4;
+    L_next[1] = L_b_1;
+    L_next[2] = L_b_0*t4 + L_b_2*t3;
+}
+
+void lv_axis_flow_z(const double *I_b, const double *q, const double *L_b, double tau, double *q_next, double *L_next) {
+    const double I_b_2 = I_b[2];
+    const double q_0 = q[0];
+    const double q_1 = q[1];
+    const double q_2 = q[2];
+    const double q_3 = q[3];
+    const double L_b_0 = L_b[0];
+    const double L_b_1 = L_b[1];
+    const double L_b_2 = L_b[2];
+    const double t0 = ((1.0/2.0))*L_b_2*tau/I_b_2;
+    const double t1 = cos(t0);
+    const double t2 = sin(t0);
+    const double t3 = 1 - 2*(t2*t2);
+    const double t4 = 2*t1*t2;
+    q_next[0] = q_0*t1 + q_1*t2;
+    q_next[1] = -q_0*t2 + q_1*t1;
+    q_next[2] = q_2*t1 + q_3*t2;
+    q_next[3] = -q_2*t2 + q_3*t1;
+    L_next[0] = L_b_0*t3 + L_b_1*t4;
+    L_next[1] = -L_b_0*t4 + L_b_1*t3;
+    L_next[2] = L_b_2;
+}
+
+void lv_body_momentum(const double *I_b, const double *omega_b, double *L_b) {
+    const double I_b_0 = I_b[0];
+    const double I_b_1 = I_b[1];
+    const double I_b_2 = I_b[2];
+    const double omega_b_0 = omega_b[0];
+    const double omega_b_1 = omega_b[1];
+    const double omega_b_2 = omega_b[2];
+    L_b[0] = I_b_0*omega_b_0;
+    L_b[1] = I_b_1*omega_b_1;
+    L_b[2] = I_b_2*omega_b_2;
+}
+
+void lv_body_rate(const double *I_b, const double *L_b, double *omega_b) {
+    const double I_b_0 = I_b[0];
+    const double I_b_1 = I_b[1];
+    const double I_b_2 = I_b[2];
+    const double L_b_0 = L_b[0];
+    const double L_b_1 = L_b[1];
+    const double L_b_2 = L_b[2];
+    omega_b[0] = L_b_0/I_b_0;
+    omega_b[1] = L_b_1/I_b_1;
+    omega_b[2] = L_b_2/I_b_2;
+}
+
 void lv_splitting_kick(double m, const double *I_b, const double *v_w, const double *omega_b, const double *F_w, const double *tau_b, double h, double *v_next, double *omega_next) {
     const double I_b_0 = I_b[0];
     const double I_b_1 = I_b[1];
@@ -1437,6 +1530,26 @@ void lv_quat_exp_step(const double *q, const double *omega_b, double h, double *
     q_next[1] = -q_0*t7 + q_1*t4 + q_2*t6 + q_3*t8;
     q_next[2] = q_0*t8 - q_1*t6 + q_2*t4 + q_3*t7;
     q_next[3] = -q_0*t6 - q_1*t8 - q_2*t7 + q_3*t4;
+}
+
+void lv_rkmk_dexpinv(const double *u_b, const double *omega_b, double *u_dot) {
+    const double u_b_0 = u_b[0];
+    const double u_b_1 = u_b[1];
+    const double u_b_2 = u_b[2];
+    const double omega_b_0 = omega_b[0];
+    const double omega_b_1 = omega_b[1];
+    const double omega_b_2 = omega_b[2];
+    const double t0 = omega_b_1*u_b_2;
+    const double t1 = omega_b_0*u_b_1;
+    const double t2 = ((1.0/12.0))*omega_b_1*u_b_0 - (1.0/12.0)*t1;
+    const double t3 = omega_b_0*u_b_2;
+    const double t4 = omega_b_2*u_b_0;
+    const double t5 = t3 - t4;
+    const double t6 = ((1.0/12.0))*u_b_2;
+    const double t7 = omega_b_2*u_b_1 - t0;
+    u_dot[0] = omega_b_0 + ((1.0/2.0))*omega_b_2*u_b_1 - (1.0/2.0)*t0 + t2*u_b_1 - t5*t6;
+    u_dot[1] = omega_b_1 - t2*u_b_0 + ((1.0/2.0))*t3 - (1.0/2.0)*t4 + t6*t7;
+    u_dot[2] = ((1.0/2.0))*omega_b_1*u_b_0 + omega_b_2 - (1.0/2.0)*t1 + ((1.0/12.0))*t5*u_b_0 - (1.0/12.0)*t7*u_b_1;
 }
 
 void lv_wheel_saturation(const double *command, const double *Omega, double torque_limit, double speed_limit, double *u) {
@@ -1671,6 +1784,11 @@ static void packed_wheel_body_rhs(const double *in, double *out) { lv_wheel_body
 static void packed_wheel_momentum(const double *in, double *out) { lv_wheel_momentum(in + 0, in + 4, in + 7, in + 10, in + 19, out + 0, out + 3); }
 static void packed_pivot_kinematics(const double *in, double *out) { lv_pivot_kinematics(in + 0, in + 4, in + 7, in + 10, out + 0, out + 3); }
 static void packed_splitting_rotation(const double *in, double *out) { lv_splitting_rotation(in + 0, in + 3, in + 7, in[10], out + 0, out + 4); }
+static void packed_axis_flow_x(const double *in, double *out) { lv_axis_flow_x(in + 0, in + 3, in + 7, in[10], out + 0, out + 4); }
+static void packed_axis_flow_y(const double *in, double *out) { lv_axis_flow_y(in + 0, in + 3, in + 7, in[10], out + 0, out + 4); }
+static void packed_axis_flow_z(const double *in, double *out) { lv_axis_flow_z(in + 0, in + 3, in + 7, in[10], out + 0, out + 4); }
+static void packed_body_momentum(const double *in, double *out) { lv_body_momentum(in + 0, in + 3, out + 0); }
+static void packed_body_rate(const double *in, double *out) { lv_body_rate(in + 0, in + 3, out + 0); }
 static void packed_splitting_kick(const double *in, double *out) { lv_splitting_kick(in[0], in + 1, in + 4, in + 7, in + 10, in + 13, in[16], out + 0, out + 3); }
 static void packed_translation_drift(const double *in, double *out) { lv_translation_drift(in + 0, in + 3, in[6], out + 0); }
 static void packed_semi_implicit_translation(const double *in, double *out) { lv_semi_implicit_translation(in[0], in + 1, in + 4, in + 7, in[10], out + 0, out + 3); }
@@ -1679,6 +1797,7 @@ static void packed_implicit_gyro_residual(const double *in, double *out) { lv_im
 static void packed_implicit_gyro_jacobian(const double *in, double *out) { lv_implicit_gyro_jacobian(in + 0, in[3], in + 4, out + 0); }
 static void packed_implicit_gyro_newton(const double *in, double *out) { lv_implicit_gyro_newton(in + 0, in + 3, in + 6, in[9], in + 10, out + 0, out + 3); }
 static void packed_quat_exp_step(const double *in, double *out) { lv_quat_exp_step(in + 0, in + 4, in[7], out + 0); }
+static void packed_rkmk_dexpinv(const double *in, double *out) { lv_rkmk_dexpinv(in + 0, in + 3, out + 0); }
 static void packed_wheel_saturation(const double *in, double *out) { lv_wheel_saturation(in + 0, in + 3, in[6], in[7], out + 0); }
 
 const lv_kernel_info lv_kernel_table[LV_KERNEL_COUNT] = {
@@ -1723,6 +1842,11 @@ const lv_kernel_info lv_kernel_table[LV_KERNEL_COUNT] = {
     {"wheel_momentum", 22, 6, packed_wheel_momentum},
     {"pivot_kinematics", 13, 6, packed_pivot_kinematics},
     {"splitting_rotation", 11, 7, packed_splitting_rotation},
+    {"axis_flow_x", 11, 7, packed_axis_flow_x},
+    {"axis_flow_y", 11, 7, packed_axis_flow_y},
+    {"axis_flow_z", 11, 7, packed_axis_flow_z},
+    {"body_momentum", 6, 3, packed_body_momentum},
+    {"body_rate", 6, 3, packed_body_rate},
     {"splitting_kick", 17, 6, packed_splitting_kick},
     {"translation_drift", 7, 3, packed_translation_drift},
     {"semi_implicit_translation", 11, 6, packed_semi_implicit_translation},
@@ -1731,5 +1855,6 @@ const lv_kernel_info lv_kernel_table[LV_KERNEL_COUNT] = {
     {"implicit_gyro_jacobian", 7, 9, packed_implicit_gyro_jacobian},
     {"implicit_gyro_newton", 13, 6, packed_implicit_gyro_newton},
     {"quat_exp_step", 8, 4, packed_quat_exp_step},
+    {"rkmk_dexpinv", 6, 3, packed_rkmk_dexpinv},
     {"wheel_saturation", 8, 3, packed_wheel_saturation},
 };

@@ -11,7 +11,7 @@ typedef struct {
     void (*packed)(const double *in, double *out);
 } lv_kernel_info;
 
-#define LV_KERNEL_COUNT 50
+#define LV_KERNEL_COUNT 56
 extern const lv_kernel_info lv_kernel_table[LV_KERNEL_COUNT];
 
 /* particle_moments: One particle's mass moment and momentum (summed: m r_COM and p).
@@ -303,6 +303,45 @@ void lv_pivot_kinematics(const double *q, const double *omega_b, const double *a
      out omega_next [3]: rad/s, body frame */
 void lv_splitting_rotation(const double *I_b, const double *q, const double *omega_b, double h, double *q_next, double *omega_next);
 
+/* axis_flow_x: Exact flow of H_x = L_x²/(2 I_x) on (q, L_B) for time τ.
+     in  I_b [3]: principal moments, body frame, kg·m²
+     in  q [4]: orientation (x, y, z, w), R_WB, unit
+     in  L_b [3]: angular momentum, body frame, kg·m²/s
+     in  tau scalar: duration of the flow, s
+     out q_next [4]: orientation (unit when q is)
+     out L_next [3]: kg·m²/s, body frame */
+void lv_axis_flow_x(const double *I_b, const double *q, const double *L_b, double tau, double *q_next, double *L_next);
+
+/* axis_flow_y: Exact flow of H_y = L_y²/(2 I_y) on (q, L_B) for time τ.
+     in  I_b [3]: principal moments, body frame, kg·m²
+     in  q [4]: orientation (x, y, z, w), R_WB, unit
+     in  L_b [3]: angular momentum, body frame, kg·m²/s
+     in  tau scalar: duration of the flow, s
+     out q_next [4]: orientation (unit when q is)
+     out L_next [3]: kg·m²/s, body frame */
+void lv_axis_flow_y(const double *I_b, const double *q, const double *L_b, double tau, double *q_next, double *L_next);
+
+/* axis_flow_z: Exact flow of H_z = L_z²/(2 I_z) on (q, L_B) for time τ.
+     in  I_b [3]: principal moments, body frame, kg·m²
+     in  q [4]: orientation (x, y, z, w), R_WB, unit
+     in  L_b [3]: angular momentum, body frame, kg·m²/s
+     in  tau scalar: duration of the flow, s
+     out q_next [4]: orientation (unit when q is)
+     out L_next [3]: kg·m²/s, body frame */
+void lv_axis_flow_z(const double *I_b, const double *q, const double *L_b, double tau, double *q_next, double *L_next);
+
+/* body_momentum: Body angular momentum of a body with principal moments I_B.
+     in  I_b [3]: principal moments, body frame, kg·m²
+     in  omega_b [3]: angular velocity, body frame, rad/s
+     out L_b [3]: kg·m²/s, body frame */
+void lv_body_momentum(const double *I_b, const double *omega_b, double *L_b);
+
+/* body_rate: Body angular velocity from the body angular momentum.
+     in  I_b [3]: principal moments, body frame, kg·m²
+     in  L_b [3]: angular momentum, body frame, kg·m²/s
+     out omega_b [3]: rad/s, body frame */
+void lv_body_rate(const double *I_b, const double *L_b, double *omega_b);
+
 /* splitting_kick: Kick of v and ω under a force and a body torque for time h (q, p fixed).
      in  m scalar: mass, kg
      in  I_b [3]: principal moments, body frame, kg·m²
@@ -372,6 +411,12 @@ void lv_implicit_gyro_newton(const double *I_b, const double *omega_b, const dou
      in  h scalar: time step, s
      out q_next [4]: orientation (unit when q is) */
 void lv_quat_exp_step(const double *q, const double *omega_b, double h, double *q_next);
+
+/* rkmk_dexpinv: Rate of the attitude's exponential coordinates (RKMK4, truncated dexp inverse).
+     in  u_b [3]: rotation vector of the attitude relative to the step's start, body frame, rad
+     in  omega_b [3]: angular velocity, body frame, rad/s
+     out u_dot [3]: rad/s, body frame */
+void lv_rkmk_dexpinv(const double *u_b, const double *omega_b, double *u_dot);
 
 /* wheel_saturation: Motor torques actually applied: clipped, and cut off beyond the speed limit.
      in  command [3]: commanded motor torques, N·m

@@ -1177,6 +1177,106 @@ def splitting_rotation(I_b, q, omega_b, h):
     return casadi.vertcat(t39*t45 + t48*t49, t45*t51 + t49*t50, t45*t50 - t49*t51, -t39*t49 + t45*t48), casadi.vertcat(t43, t9*(t32*t52 + t53*t54), t16*(-t32*t54 + t52*t53))
 
 
+def axis_flow_x(I_b, q, L_b, tau):
+    """axis_flow_x: Exact flow of H_x = L_x²/(2 I_x) on (q, L_B) for time τ.
+      in  I_b [3]: principal moments, body frame, kg·m²
+      in  q [4]: orientation (x, y, z, w), R_WB, unit
+      in  L_b [3]: angular momentum, body frame, kg·m²/s
+      in  tau scalar: duration of the flow, s
+      out q_next [4]: orientation (unit when q is)
+      out L_next [3]: kg·m²/s, body frame"""
+    I_b_0 = I_b[0]
+    q_0 = q[0]
+    q_1 = q[1]
+    q_2 = q[2]
+    q_3 = q[3]
+    L_b_0 = L_b[0]
+    L_b_1 = L_b[1]
+    L_b_2 = L_b[2]
+    t0 = ((1.0/2.0))*L_b_0*tau/I_b_0
+    t1 = casadi.cos(t0)
+    t2 = casadi.sin(t0)
+    t3 = 1 - 2*(t2*t2)
+    t4 = 2*t1*t2
+    return casadi.vertcat(q_0*t1 + q_3*t2, q_1*t1 + q_2*t2, -q_1*t2 + q_2*t1, -q_0*t2 + q_3*t1), casadi.vertcat(L_b_0, L_b_1*t3 + L_b_2*t4, -L_b_1*t4 + L_b_2*t3)
+
+
+def axis_flow_y(I_b, q, L_b, tau):
+    """axis_flow_y: Exact flow of H_y = L_y²/(2 I_y) on (q, L_B) for time τ.
+      in  I_b [3]: principal moments, body frame, kg·m²
+      in  q [4]: orientation (x, y, z, w), R_WB, unit
+      in  L_b [3]: angular momentum, body frame, kg·m²/s
+      in  tau scalar: duration of the flow, s
+      out q_next [4]: orientation (unit when q is)
+      out L_next [3]: kg·m²/s, body frame"""
+    I_b_1 = I_b[1]
+    q_0 = q[0]
+    q_1 = q[1]
+    q_2 = q[2]
+    q_3 = q[3]
+    L_b_0 = L_b[0]
+    L_b_1 = L_b[1]
+    L_b_2 = L_b[2]
+    t0 = ((1.0/2.0))*L_b_1*tau/I_b_1
+    t1 = casadi.cos(t0)
+    t2 = casadi.sin(t0)
+    t3 = 1 - 2*(t2*t2)
+    t4 = 2*t1*t2
+    return casadi.vertcat(q_0*t1 - q_2*t2, q_1*t1 + q_3*t2, q_0*t2 + q_2*t1, -q_1*t2 + q_3*t1), casadi.vertcat(L_b_0*t3 - L_b_2*t4, L_b_1, L_b_0*t4 + L_b_2*t3)
+
+
+def axis_flow_z(I_b, q, L_b, tau):
+    """axis_flow_z: Exact flow of H_z = L_z²/(2 I_z) on (q, L_B) for time τ.
+      in  I_b [3]: principal moments, body frame, kg·m²
+      in  q [4]: orientation (x, y, z, w), R_WB, unit
+      in  L_b [3]: angular momentum, body frame, kg·m²/s
+      in  tau scalar: duration of the flow, s
+      out q_next [4]: orientation (unit when q is)
+      out L_next [3]: kg·m²/s, body frame"""
+    I_b_2 = I_b[2]
+    q_0 = q[0]
+    q_1 = q[1]
+    q_2 = q[2]
+    q_3 = q[3]
+    L_b_0 = L_b[0]
+    L_b_1 = L_b[1]
+    L_b_2 = L_b[2]
+    t0 = ((1.0/2.0))*L_b_2*tau/I_b_2
+    t1 = casadi.cos(t0)
+    t2 = casadi.sin(t0)
+    t3 = 1 - 2*(t2*t2)
+    t4 = 2*t1*t2
+    return casadi.vertcat(q_0*t1 + q_1*t2, -q_0*t2 + q_1*t1, q_2*t1 + q_3*t2, -q_2*t2 + q_3*t1), casadi.vertcat(L_b_0*t3 + L_b_1*t4, -L_b_0*t4 + L_b_1*t3, L_b_2)
+
+
+def body_momentum(I_b, omega_b):
+    """body_momentum: Body angular momentum of a body with principal moments I_B.
+      in  I_b [3]: principal moments, body frame, kg·m²
+      in  omega_b [3]: angular velocity, body frame, rad/s
+      out L_b [3]: kg·m²/s, body frame"""
+    I_b_0 = I_b[0]
+    I_b_1 = I_b[1]
+    I_b_2 = I_b[2]
+    omega_b_0 = omega_b[0]
+    omega_b_1 = omega_b[1]
+    omega_b_2 = omega_b[2]
+    return casadi.vertcat(I_b_0*omega_b_0, I_b_1*omega_b_1, I_b_2*omega_b_2)
+
+
+def body_rate(I_b, L_b):
+    """body_rate: Body angular velocity from the body angular momentum.
+      in  I_b [3]: principal moments, body frame, kg·m²
+      in  L_b [3]: angular momentum, body frame, kg·m²/s
+      out omega_b [3]: rad/s, body frame"""
+    I_b_0 = I_b[0]
+    I_b_1 = I_b[1]
+    I_b_2 = I_b[2]
+    L_b_0 = L_b[0]
+    L_b_1 = L_b[1]
+    L_b_2 = L_b[2]
+    return casadi.vertcat(L_b_0/I_b_0, L_b_1/I_b_1, L_b_2/I_b_2)
+
+
 def splitting_kick(m, I_b, v_w, omega_b, F_w, tau_b, h):
     """splitting_kick: Kick of v and ω under a force and a body torque for time h (q, p fixed).
       in  m scalar: mass, kg
@@ -1377,6 +1477,28 @@ def quat_exp_step(q, omega_b, h):
     t7 = omega_b_2*t5
     t8 = omega_b_1*t5
     return casadi.vertcat(q_0*t4 + q_1*t7 - q_2*t8 + q_3*t6, -q_0*t7 + q_1*t4 + q_2*t6 + q_3*t8, q_0*t8 - q_1*t6 + q_2*t4 + q_3*t7, -q_0*t6 - q_1*t8 - q_2*t7 + q_3*t4)
+
+
+def rkmk_dexpinv(u_b, omega_b):
+    """rkmk_dexpinv: Rate of the attitude's exponential coordinates (RKMK4, truncated dexp inverse).
+      in  u_b [3]: rotation vector of the attitude relative to the step's start, body frame, rad
+      in  omega_b [3]: angular velocity, body frame, rad/s
+      out u_dot [3]: rad/s, body frame"""
+    u_b_0 = u_b[0]
+    u_b_1 = u_b[1]
+    u_b_2 = u_b[2]
+    omega_b_0 = omega_b[0]
+    omega_b_1 = omega_b[1]
+    omega_b_2 = omega_b[2]
+    t0 = omega_b_1*u_b_2
+    t1 = omega_b_0*u_b_1
+    t2 = ((1.0/12.0))*omega_b_1*u_b_0 - (1.0/12.0)*t1
+    t3 = omega_b_0*u_b_2
+    t4 = omega_b_2*u_b_0
+    t5 = t3 - t4
+    t6 = ((1.0/12.0))*u_b_2
+    t7 = omega_b_2*u_b_1 - t0
+    return casadi.vertcat(omega_b_0 + ((1.0/2.0))*omega_b_2*u_b_1 - (1.0/2.0)*t0 + t2*u_b_1 - t5*t6, omega_b_1 - t2*u_b_0 + ((1.0/2.0))*t3 - (1.0/2.0)*t4 + t6*t7, ((1.0/2.0))*omega_b_1*u_b_0 + omega_b_2 - (1.0/2.0)*t1 + ((1.0/12.0))*t5*u_b_0 - (1.0/12.0)*t7*u_b_1)
 
 
 def wheel_saturation(command, Omega, torque_limit, speed_limit):

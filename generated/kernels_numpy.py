@@ -1595,6 +1595,162 @@ def splitting_rotation(I_b, q, omega_b, h):
     return q_next_out, omega_next_out
 
 
+def axis_flow_x(I_b, q, L_b, tau):
+    """axis_flow_x: Exact flow of H_x = L_x²/(2 I_x) on (q, L_B) for time τ.
+      in  I_b [3]: principal moments, body frame, kg·m²
+      in  q [4]: orientation (x, y, z, w), R_WB, unit
+      in  L_b [3]: angular momentum, body frame, kg·m²/s
+      in  tau scalar: duration of the flow, s
+      out q_next [4]: orientation (unit when q is)
+      out L_next [3]: kg·m²/s, body frame"""
+    I_b = numpy.asarray(I_b, dtype=numpy.float64)
+    q = numpy.asarray(q, dtype=numpy.float64)
+    L_b = numpy.asarray(L_b, dtype=numpy.float64)
+    tau = numpy.asarray(tau, dtype=numpy.float64)
+    batch = numpy.broadcast_shapes(I_b.shape[:-1], q.shape[:-1], L_b.shape[:-1], tau.shape)
+    I_b_0 = I_b[..., 0]
+    q_0 = q[..., 0]
+    q_1 = q[..., 1]
+    q_2 = q[..., 2]
+    q_3 = q[..., 3]
+    L_b_0 = L_b[..., 0]
+    L_b_1 = L_b[..., 1]
+    L_b_2 = L_b[..., 2]
+    t0 = ((1.0/2.0))*L_b_0*tau/I_b_0
+    t1 = numpy.cos(t0)
+    t2 = numpy.sin(t0)
+    t3 = 1 - 2*(t2*t2)
+    t4 = 2*t1*t2
+    q_next_out = numpy.empty(batch + (4,))
+    q_next_out[..., 0] = q_0*t1 + q_3*t2
+    q_next_out[..., 1] = q_1*t1 + q_2*t2
+    q_next_out[..., 2] = -q_1*t2 + q_2*t1
+    q_next_out[..., 3] = -q_0*t2 + q_3*t1
+    L_next_out = numpy.empty(batch + (3,))
+    L_next_out[..., 0] = L_b_0
+    L_next_out[..., 1] = L_b_1*t3 + L_b_2*t4
+    L_next_out[..., 2] = -L_b_1*t4 + L_b_2*t3
+    return q_next_out, L_next_out
+
+
+def axis_flow_y(I_b, q, L_b, tau):
+    """axis_flow_y: Exact flow of H_y = L_y²/(2 I_y) on (q, L_B) for time τ.
+      in  I_b [3]: principal moments, body frame, kg·m²
+      in  q [4]: orientation (x, y, z, w), R_WB, unit
+      in  L_b [3]: angular momentum, body frame, kg·m²/s
+      in  tau scalar: duration of the flow, s
+      out q_next [4]: orientation (unit when q is)
+      out L_next [3]: kg·m²/s, body frame"""
+    I_b = numpy.asarray(I_b, dtype=numpy.float64)
+    q = numpy.asarray(q, dtype=numpy.float64)
+    L_b = numpy.asarray(L_b, dtype=numpy.float64)
+    tau = numpy.asarray(tau, dtype=numpy.float64)
+    batch = numpy.broadcast_shapes(I_b.shape[:-1], q.shape[:-1], L_b.shape[:-1], tau.shape)
+    I_b_1 = I_b[..., 1]
+    q_0 = q[..., 0]
+    q_1 = q[..., 1]
+    q_2 = q[..., 2]
+    q_3 = q[..., 3]
+    L_b_0 = L_b[..., 0]
+    L_b_1 = L_b[..., 1]
+    L_b_2 = L_b[..., 2]
+    t0 = ((1.0/2.0))*L_b_1*tau/I_b_1
+    t1 = numpy.cos(t0)
+    t2 = numpy.sin(t0)
+    t3 = 1 - 2*(t2*t2)
+    t4 = 2*t1*t2
+    q_next_out = numpy.empty(batch + (4,))
+    q_next_out[..., 0] = q_0*t1 - q_2*t2
+    q_next_out[..., 1] = q_1*t1 + q_3*t2
+    q_next_out[..., 2] = q_0*t2 + q_2*t1
+    q_next_out[..., 3] = -q_1*t2 + q_3*t1
+    L_next_out = numpy.empty(batch + (3,))
+    L_next_out[..., 0] = L_b_0*t3 - L_b_2*t4
+    L_next_out[..., 1] = L_b_1
+    L_next_out[..., 2] = L_b_0*t4 + L_b_2*t3
+    return q_next_out, L_next_out
+
+
+def axis_flow_z(I_b, q, L_b, tau):
+    """axis_flow_z: Exact flow of H_z = L_z²/(2 I_z) on (q, L_B) for time τ.
+      in  I_b [3]: principal moments, body frame, kg·m²
+      in  q [4]: orientation (x, y, z, w), R_WB, unit
+      in  L_b [3]: angular momentum, body frame, kg·m²/s
+      in  tau scalar: duration of the flow, s
+      out q_next [4]: orientation (unit when q is)
+      out L_next [3]: kg·m²/s, body frame"""
+    I_b = numpy.asarray(I_b, dtype=numpy.float64)
+    q = numpy.asarray(q, dtype=numpy.float64)
+    L_b = numpy.asarray(L_b, dtype=numpy.float64)
+    tau = numpy.asarray(tau, dtype=numpy.float64)
+    batch = numpy.broadcast_shapes(I_b.shape[:-1], q.shape[:-1], L_b.shape[:-1], tau.shape)
+    I_b_2 = I_b[..., 2]
+    q_0 = q[..., 0]
+    q_1 = q[..., 1]
+    q_2 = q[..., 2]
+    q_3 = q[..., 3]
+    L_b_0 = L_b[..., 0]
+    L_b_1 = L_b[..., 1]
+    L_b_2 = L_b[..., 2]
+    t0 = ((1.0/2.0))*L_b_2*tau/I_b_2
+    t1 = numpy.cos(t0)
+    t2 = numpy.sin(t0)
+    t3 = 1 - 2*(t2*t2)
+    t4 = 2*t1*t2
+    q_next_out = numpy.empty(batch + (4,))
+    q_next_out[..., 0] = q_0*t1 + q_1*t2
+    q_next_out[..., 1] = -q_0*t2 + q_1*t1
+    q_next_out[..., 2] = q_2*t1 + q_3*t2
+    q_next_out[..., 3] = -q_2*t2 + q_3*t1
+    L_next_out = numpy.empty(batch + (3,))
+    L_next_out[..., 0] = L_b_0*t3 + L_b_1*t4
+    L_next_out[..., 1] = -L_b_0*t4 + L_b_1*t3
+    L_next_out[..., 2] = L_b_2
+    return q_next_out, L_next_out
+
+
+def body_momentum(I_b, omega_b):
+    """body_momentum: Body angular momentum of a body with principal moments I_B.
+      in  I_b [3]: principal moments, body frame, kg·m²
+      in  omega_b [3]: angular velocity, body frame, rad/s
+      out L_b [3]: kg·m²/s, body frame"""
+    I_b = numpy.asarray(I_b, dtype=numpy.float64)
+    omega_b = numpy.asarray(omega_b, dtype=numpy.float64)
+    batch = numpy.broadcast_shapes(I_b.shape[:-1], omega_b.shape[:-1])
+    I_b_0 = I_b[..., 0]
+    I_b_1 = I_b[..., 1]
+    I_b_2 = I_b[..., 2]
+    omega_b_0 = omega_b[..., 0]
+    omega_b_1 = omega_b[..., 1]
+    omega_b_2 = omega_b[..., 2]
+    L_b_out = numpy.empty(batch + (3,))
+    L_b_out[..., 0] = I_b_0*omega_b_0
+    L_b_out[..., 1] = I_b_1*omega_b_1
+    L_b_out[..., 2] = I_b_2*omega_b_2
+    return L_b_out
+
+
+def body_rate(I_b, L_b):
+    """body_rate: Body angular velocity from the body angular momentum.
+      in  I_b [3]: principal moments, body frame, kg·m²
+      in  L_b [3]: angular momentum, body frame, kg·m²/s
+      out omega_b [3]: rad/s, body frame"""
+    I_b = numpy.asarray(I_b, dtype=numpy.float64)
+    L_b = numpy.asarray(L_b, dtype=numpy.float64)
+    batch = numpy.broadcast_shapes(I_b.shape[:-1], L_b.shape[:-1])
+    I_b_0 = I_b[..., 0]
+    I_b_1 = I_b[..., 1]
+    I_b_2 = I_b[..., 2]
+    L_b_0 = L_b[..., 0]
+    L_b_1 = L_b[..., 1]
+    L_b_2 = L_b[..., 2]
+    omega_b_out = numpy.empty(batch + (3,))
+    omega_b_out[..., 0] = L_b_0/I_b_0
+    omega_b_out[..., 1] = L_b_1/I_b_1
+    omega_b_out[..., 2] = L_b_2/I_b_2
+    return omega_b_out
+
+
 def splitting_kick(m, I_b, v_w, omega_b, F_w, tau_b, h):
     """splitting_kick: Kick of v and ω under a force and a body torque for time h (q, p fixed).
       in  m scalar: mass, kg
@@ -1895,6 +2051,35 @@ def quat_exp_step(q, omega_b, h):
     return q_next_out
 
 
+def rkmk_dexpinv(u_b, omega_b):
+    """rkmk_dexpinv: Rate of the attitude's exponential coordinates (RKMK4, truncated dexp inverse).
+      in  u_b [3]: rotation vector of the attitude relative to the step's start, body frame, rad
+      in  omega_b [3]: angular velocity, body frame, rad/s
+      out u_dot [3]: rad/s, body frame"""
+    u_b = numpy.asarray(u_b, dtype=numpy.float64)
+    omega_b = numpy.asarray(omega_b, dtype=numpy.float64)
+    batch = numpy.broadcast_shapes(u_b.shape[:-1], omega_b.shape[:-1])
+    u_b_0 = u_b[..., 0]
+    u_b_1 = u_b[..., 1]
+    u_b_2 = u_b[..., 2]
+    omega_b_0 = omega_b[..., 0]
+    omega_b_1 = omega_b[..., 1]
+    omega_b_2 = omega_b[..., 2]
+    t0 = omega_b_1*u_b_2
+    t1 = omega_b_0*u_b_1
+    t2 = ((1.0/12.0))*omega_b_1*u_b_0 - (1.0/12.0)*t1
+    t3 = omega_b_0*u_b_2
+    t4 = omega_b_2*u_b_0
+    t5 = t3 - t4
+    t6 = ((1.0/12.0))*u_b_2
+    t7 = omega_b_2*u_b_1 - t0
+    u_dot_out = numpy.empty(batch + (3,))
+    u_dot_out[..., 0] = omega_b_0 + ((1.0/2.0))*omega_b_2*u_b_1 - (1.0/2.0)*t0 + t2*u_b_1 - t5*t6
+    u_dot_out[..., 1] = omega_b_1 - t2*u_b_0 + ((1.0/2.0))*t3 - (1.0/2.0)*t4 + t6*t7
+    u_dot_out[..., 2] = ((1.0/2.0))*omega_b_1*u_b_0 + omega_b_2 - (1.0/2.0)*t1 + ((1.0/12.0))*t5*u_b_0 - (1.0/12.0)*t7*u_b_1
+    return u_dot_out
+
+
 def wheel_saturation(command, Omega, torque_limit, speed_limit):
     """wheel_saturation: Motor torques actually applied: clipped, and cut off beyond the speed limit.
       in  command [3]: commanded motor torques, N·m
@@ -1977,6 +2162,11 @@ KERNELS = {
     'wheel_momentum': (wheel_momentum, [('q', (4,)), ('omega_b', (3,)), ('Omega', (3,)), ('I_p', (3, 3)), ('J', (3,))], [('L_body_w', (3,)), ('L_wheels_w', (3,))]),
     'pivot_kinematics': (pivot_kinematics, [('q', (4,)), ('omega_b', (3,)), ('anchor_w', (3,)), ('r_b', (3,))], [('p_w', (3,)), ('v_w', (3,))]),
     'splitting_rotation': (splitting_rotation, [('I_b', (3,)), ('q', (4,)), ('omega_b', (3,)), ('h', ())], [('q_next', (4,)), ('omega_next', (3,))]),
+    'axis_flow_x': (axis_flow_x, [('I_b', (3,)), ('q', (4,)), ('L_b', (3,)), ('tau', ())], [('q_next', (4,)), ('L_next', (3,))]),
+    'axis_flow_y': (axis_flow_y, [('I_b', (3,)), ('q', (4,)), ('L_b', (3,)), ('tau', ())], [('q_next', (4,)), ('L_next', (3,))]),
+    'axis_flow_z': (axis_flow_z, [('I_b', (3,)), ('q', (4,)), ('L_b', (3,)), ('tau', ())], [('q_next', (4,)), ('L_next', (3,))]),
+    'body_momentum': (body_momentum, [('I_b', (3,)), ('omega_b', (3,))], [('L_b', (3,))]),
+    'body_rate': (body_rate, [('I_b', (3,)), ('L_b', (3,))], [('omega_b', (3,))]),
     'splitting_kick': (splitting_kick, [('m', ()), ('I_b', (3,)), ('v_w', (3,)), ('omega_b', (3,)), ('F_w', (3,)), ('tau_b', (3,)), ('h', ())], [('v_next', (3,)), ('omega_next', (3,))]),
     'translation_drift': (translation_drift, [('p_w', (3,)), ('v_w', (3,)), ('h', ())], [('p_next', (3,))]),
     'semi_implicit_translation': (semi_implicit_translation, [('m', ()), ('p_w', (3,)), ('v_w', (3,)), ('F_w', (3,)), ('h', ())], [('p_next', (3,)), ('v_next', (3,))]),
@@ -1985,6 +2175,7 @@ KERNELS = {
     'implicit_gyro_jacobian': (implicit_gyro_jacobian, [('I_b', (3,)), ('h', ()), ('omega_next', (3,))], [('J', (3, 3))]),
     'implicit_gyro_newton': (implicit_gyro_newton, [('I_b', (3,)), ('omega_b', (3,)), ('tau_b', (3,)), ('h', ()), ('omega_next', (3,))], [('omega_new', (3,)), ('delta', (3,))]),
     'quat_exp_step': (quat_exp_step, [('q', (4,)), ('omega_b', (3,)), ('h', ())], [('q_next', (4,))]),
+    'rkmk_dexpinv': (rkmk_dexpinv, [('u_b', (3,)), ('omega_b', (3,))], [('u_dot', (3,))]),
     'wheel_saturation': (wheel_saturation, [('command', (3,)), ('Omega', (3,)), ('torque_limit', ()), ('speed_limit', ())], [('u', (3,))]),
 }
 

@@ -6,6 +6,8 @@ Integrator tableaux and constants (derive/tableaux.py), the same doubles as tabl
 DP_MAX_SUBSTEPS = 1_000_000
 GYRO_MAX_ITER = 30
 RK4_B_DEN = 6
+SPLIT4_STAGES = 5
+SPLIT4_FLOWS = 21
 DP_SAFETY = 0.9
 DP_FACMIN = 0.2
 DP_FACMAX = 5.0
@@ -36,10 +38,14 @@ WDT_MAX_IMPLICIT_GYRO = 3.141592653589793
 WDT_RATIO_EXPONENT_IMPLICIT_GYRO = 0.0
 WDT_MAX_RK4 = 2.8284271247461903
 WDT_RATIO_EXPONENT_RK4 = 0.0
+WDT_MAX_RK4_EXPMAP = 2.8284271247461903
+WDT_RATIO_EXPONENT_RK4_EXPMAP = 0.0
 WDT_MAX_SEMI_IMPLICIT_EULER = 0.1
 WDT_RATIO_EXPONENT_SEMI_IMPLICIT_EULER = 0.0
 WDT_MAX_SPLITTING = 1.0
 WDT_RATIO_EXPONENT_SPLITTING = 0.5
+WDT_MAX_SPLITTING4 = 1.0
+WDT_RATIO_EXPONENT_SPLITTING4 = 0.5
 
 # Dormand-Prince 5(4): DP_A[s] (stage s's coefficients; DP_A[6] = the 5th-order weights, FSAL), DP_E = b - b_hat
 DP_A = (
@@ -56,6 +62,10 @@ RK4_C = (0.0, 0.5, 0.5, 1.0)
 RK4_B_NUM = (1.0, 2.0, 2.0, 1.0)
 # Strang splitting of the free rotation: (axis, fraction of h)
 STRANG = ((0, 0.5), (1, 0.5), (2, 1.0), (1, 0.5), (0, 0.5))
+# splitting4: the Strang step applied with step gamma_i h, in this order (symmetric composition, order 4)
+SPLIT4_GAMMA = (0.4144907717943757, 0.4144907717943757, -0.657963087177503, 0.4144907717943757, 0.4144907717943757)
+# splitting4 without effects: its substeps' axis flows as one sequence (axis, fraction of h), neighbours merged
+SPLIT4_SEQ = ((0, 0.20724538589718786), (1, 0.20724538589718786), (2, 0.4144907717943757), (1, 0.20724538589718786), (0, 0.4144907717943757), (1, 0.20724538589718786), (2, 0.4144907717943757), (1, 0.20724538589718786), (0, -0.12173615769156361), (1, -0.3289815435887515), (2, -0.657963087177503), (1, -0.3289815435887515), (0, -0.12173615769156361), (1, 0.20724538589718786), (2, 0.4144907717943757), (1, 0.20724538589718786), (0, 0.4144907717943757), (1, 0.20724538589718786), (2, 0.4144907717943757), (1, 0.20724538589718786), (0, 0.20724538589718786))
 # validity bounds: |omega| dt (I_max/I_min)**WDT_RATIO_EXPONENT[name] <= WDT_MAX[name] (derive/tableaux.py)
-WDT_MAX = {'euler': 0.1, 'implicit_gyro': 3.141592653589793, 'rk4': 2.8284271247461903, 'semi_implicit_euler': 0.1, 'splitting': 1.0}
-WDT_RATIO_EXPONENT = {'euler': 0.0, 'implicit_gyro': 0.0, 'rk4': 0.0, 'semi_implicit_euler': 0.0, 'splitting': 0.5}
+WDT_MAX = {'euler': 0.1, 'implicit_gyro': 3.141592653589793, 'rk4': 2.8284271247461903, 'rk4_expmap': 2.8284271247461903, 'semi_implicit_euler': 0.1, 'splitting': 1.0, 'splitting4': 1.0}
+WDT_RATIO_EXPONENT = {'euler': 0.0, 'implicit_gyro': 0.0, 'rk4': 0.0, 'rk4_expmap': 0.0, 'semi_implicit_euler': 0.0, 'splitting': 0.5, 'splitting4': 0.5}

@@ -61,6 +61,7 @@ Checks (bounds that hold here and would fail if an integrator regressed):
   * implicit_gyro never gains energy: max energy_gain ≤ 1e-12 over every cell where it ran;
   * splitting conserves world L to rounding wherever it ran, blow-ups included: L_world_drift ≤
     4 ε · steps (ε = 2.2e-16; rounding accumulates linearly, at most ~1e-16 per step here);
+    splitting4 likewise with the same allowance per axis flow: 4 ε · 21/5 · steps (21 flows per step);
   * dopri5 is ok in every cell, and its energy and world-L drift are ≤ rtol wherever the horizon is
     5 rotations (|ω|·dt ≤ 0.031; beyond, 1 000 steps cover up to 1 600 rotations).
 
@@ -94,6 +95,7 @@ import lavendersim as lv
 from lavendersim import backends as B
 from lavendersim import executor as X
 from lavendersim.generated import layout as LY
+from lavendersim.generated import tableaux as TABLEAUX
 from lavendersim import reference as R
 from lavendersim import validate as V
 from lavendersim import sim as S
@@ -127,6 +129,9 @@ BOUNDS = {"energy_drift": H.ROD_BOUNDS["energy_drift"][0], "L_world_drift": H.RO
 ENERGY_GAIN_BOUND = 1e-12        # lab hard's fast_major_spin_dt1e-2 bound for implicit_gyro
 EPS = float(np.finfo(float).eps)
 SPLITTING_L_PER_STEP = 4.0       # world-L drift of splitting ≤ 4 ε per step: rounding, linear in the steps
+# splitting4 (torque-free) applies len(SPLIT4_SEQ) = 21 axis flows per step where splitting applies 5: the same
+# allowance per flow (measured: 2.5 ε per step at most over the quick grid)
+SPLITTING4_L_PER_STEP = SPLITTING_L_PER_STEP * len(TABLEAUX.SPLIT4_SEQ) / len(TABLEAUX.STRANG)
 RK4_SMALL_WDT = 1e-3
 STATUSES = ("ok", "diverged", "blew_up", "silent_nan", "error")
 
@@ -421,14 +426,14 @@ def _implicit_gyro_checks(cells, checks, fig) -> None:
                             "(at the samples; lab hard's bound)" + (f"; gains in {_where(gained)}" if gained else "")))
 
 
-def _splitting_checks(cells, checks, fig) -> None:
-    ran = _select(cells, "splitting", status=("ok", "blew_up"))
-    fig["splitting_max_L_world_drift"] = _worst(ran, "L_world_drift")
+def _splitting_checks(cells, checks, fig, name: str = "splitting", bound: float = SPLITTING_L_PER_STEP) -> None:
+    ran = _select(cells, name, status=("ok", "blew_up"))
+    fig[f"{name}_max_L_world_drift"] = _worst(ran, "L_world_drift")
     per_step = [None if c["L_world_drift"] is None else c["L_world_drift"] / (c["steps"] * EPS) for c in ran]
-    fig["splitting_max_L_world_drift_per_step_eps"] = d = (math.inf if None in per_step
-                                                           else max(per_step, default=0.0))
-    checks.append(C.at_most("splitting_conserves_L", d, SPLITTING_L_PER_STEP,
-                            f"max over the {len(ran)} cells where splitting ran (blow-ups included: exact axis "
+    fig[f"{name}_max_L_world_drift_per_step_eps"] = d = (math.inf if None in per_step
+                                                         else max(per_step, default=0.0))
+    checks.append(C.at_most(f"{name}_conserves_L", d, bound,
+                            f"max over the {len(ran)} cells where {name} ran (blow-ups included: exact axis "
                             "rotations keep L_w whatever |ω|·dt) of world-L drift / (steps × machine epsilon): "
                             "rounding only, however large |ω|·dt"))
 
@@ -483,6 +488,8 @@ def atlas_checks(cells: list[dict], integrators, rtol: float) -> tuple[list[C.Ch
         _implicit_gyro_checks(cells, checks, fig)
     if _available("splitting", integrators, checks):
         _splitting_checks(cells, checks, fig)
+    if _available("splitting4", integrators, checks):
+        _splitting_checks(cells, checks, fig, "splitting4", SPLITTING4_L_PER_STEP)
     for name in B.ADAPTIVE:
         if _available(name, integrators, checks):
             _adaptive_checks(cells, name, rtol, checks, fig)
@@ -846,6 +853,7 @@ def run(out_dir=C.DEFAULT_OUT, backend: str = "auto", quick: bool = True, worker
     result = C.finish(NAME, out_dir, figures, params, checks, plots)
     result["grid"] = {"omega_dt": list(wdts), "ratio": list(ratios), "axis": list(AXES), "integrators": integrators}
     result["bounds"] = {**BOUNDS, "implicit_gyro_energy_gain": ENERGY_GAIN_BOUND, "splitting_L_world_drift_per_step_eps": SPLITTING_L_PER_STEP,
+                        "splitting4_L_world_drift_per_step_eps": SPLITTING4_L_PER_STEP,
                         "rk4_stability_limit_omega_dt": H.RK4_STABILITY}
     result["hard_case_points"] = hard_points
     result["cells"] = cells

@@ -35,8 +35,20 @@ Integrators (`integrator=`; `sim.rhs_evals` counts right-hand-side evaluations, 
   q ← q ⊗ exp(dt ω⁺/2); v, p semi-implicit Euler; loads at the start of the step. First order; a
   torque-free step never gains energy (E − E⁺ = ½(ω − ω⁺)ᵀI(ω − ω⁺)), stable at large |ω|·dt.
   Plain bodies only.
-Unsupported combinations (splitting / implicit_gyro with a joint or wheels; rtol/atol with a fixed-step
-integrator) raise LavenderInputError at construction.
+* "splitting4": fourth order, Suzuki's symmetric composition of the splitting step, steps γ h with
+  γ = (p, p, 1 − 4p, p, p), p = 1/(4 − 4^(1/3)) (Suzuki, Phys. Lett. A 146 (1990) 319). Torque-free:
+  world L, |L_b| and |q| conserved to rounding like splitting (the five substeps' axis flows applied
+  as one sequence of 21 exact rotations). Effects as in splitting, per substep: order 4 with loads
+  that depend on position and attitude only, order 3 with a velocity-dependent effect (damping: the
+  midpoint kick is not symmetric). rhs_evals: 5 per step torque-free, 5 × splitting's with effects.
+  Plain bodies only. Like splitting it never overflows: keep |ω|·dt below ~1 for accuracy.
+* "rk4_expmap": RK4 in the exponential coordinates of the attitude (Runge–Kutta–Munthe-Kaas, order 4):
+  each stage's attitude is q0 ⊗ exp(u/2), u̇ = ω + ½ u × ω + (1/12) u × (u × ω), and the step ends
+  with q = q0 ⊗ exp(u/2): unit to rounding even with normalize=False; p, v, ω exactly as RK4's
+  stages. 4 evaluations per step; its stability limit is RK4's (|ω|·dt ≲ 1 for the gyroscopic term).
+  Plain bodies only.
+Unsupported combinations (splitting / implicit_gyro / splitting4 / rk4_expmap with a joint or wheels;
+rtol/atol with a fixed-step integrator) raise LavenderInputError at construction.
 
 Divergence before infinity (checked per chunk of steps, so the stepping itself is unchanged bit for bit):
 a run is advanced in chunks of about CHUNK_WORK right-hand-side evaluations; after each chunk every body

@@ -4,8 +4,9 @@
 
 mutates state (nb, 13) (and, with `models`, models.Omega and models.applied; with `adaptive`,
 adaptive.h and adaptive.nfev) in place, or raises DivergenceError and leaves every array unchanged.
-"numpy" needs no compiler; "c" steps inside C. dopri5 needs `adaptive` (an Adaptive); splitting and
-implicit_gyro accept plain bodies only (ValueError otherwise; Sim raises LavenderInputError first).
+"numpy" needs no compiler; "c" steps inside C. dopri5 needs `adaptive` (an Adaptive); the PLAIN_ONLY
+integrators (splitting, implicit_gyro, splitting4, rk4_expmap) accept plain bodies only (ValueError
+otherwise; Sim raises LavenderInputError first).
 
 `models` (a `Models`, or None when no body has a joint or wheels) carries the per-body model:
 rows (nb, MODEL_SIZE) laid out as MODEL_LAYOUT; Omega (nb, 3) wheel rates relative to the body,
@@ -24,11 +25,12 @@ from ..generated.layout import KIND_JOINT, KIND_WHEELS, MODEL_LAYOUT, MODEL_SIZE
 
 # name -> RHS evaluations per step (None: adaptive, counted as it runs). See rhs_per_step for how the
 # structure-preserving methods are counted.
-INTEGRATORS = {"euler": 1, "semi_implicit_euler": 1, "rk4": 4, "dopri5": None, "splitting": 1, "implicit_gyro": 1}
+INTEGRATORS = {"euler": 1, "semi_implicit_euler": 1, "rk4": 4, "dopri5": None, "splitting": 1, "implicit_gyro": 1,
+               "splitting4": TABLEAUX.SPLIT4_STAGES, "rk4_expmap": 4}
 ADAPTIVE = ("dopri5",)
 # Integrators that step plain rigid bodies only (no spherical_joint, no reaction_wheels): their exact
 # sub-flows / implicit solve use the diagonal principal inertia of a free body.
-PLAIN_ONLY = ("splitting", "implicit_gyro")
+PLAIN_ONLY = ("splitting", "implicit_gyro", "splitting4", "rk4_expmap")
 BACKENDS = ("c", "numpy")
 
 DOPRI5_HMIN_REL = TABLEAUX.DP_HMIN_REL          # a substep below dt * this means the tolerance cannot be met
@@ -51,13 +53,16 @@ def rhs_per_step(integrator: str, effects: np.ndarray, nb: int) -> int | None:
     splitting: its torque-free part (three exact axis rotations) is counted as 1; a body with effects
     evaluates them once per half kick (2 per step), twice per half kick with an effect that reads v_w
     or omega_b (4 per step; from the effects' declarations, e.g. linear or angular damping). implicit_gyro: 1 (the effects once, then a 3×3 Newton solve of the gyroscopic term to
-    rounding, typically 3–6 iterations, not counted). The scene's count is the largest body's."""
+    rounding, typically 3–6 iterations, not counted). splitting4: SPLIT4_STAGES splitting steps, each
+    counted as splitting's. rk4_expmap: 4 (as rk4; the exp maps and dexp inverses are not counted).
+    The scene's count is the largest body's."""
     n = INTEGRATORS[integrator]
-    if integrator != "splitting" or n is None or len(effects) == 0:
+    if integrator not in ("splitting", "splitting4") or n is None or len(effects) == 0:
         return n
     from ..effects import ROW_CODE, velocity_dependent
 
-    return 4 if velocity_dependent(np.unique(effects[:, ROW_CODE].astype(np.int64))) else 2
+    per = 4 if velocity_dependent(np.unique(effects[:, ROW_CODE].astype(np.int64))) else 2
+    return per * (TABLEAUX.SPLIT4_STAGES if integrator == "splitting4" else 1)
 
 # Per-body model row (float64), MODEL_LAYOUT / MODEL_SIZE printed from derive/layout.py: kind is a bit set,
 # KIND_JOINT | KIND_WHEELS.
@@ -177,7 +182,8 @@ def divergence_cause(x_before: np.ndarray, dt: float, integrator: str, Omega_bef
             return (f"wheel damping c_w*dt/J = {stiff:.3g} is beyond the stability limit of {integrator} "
                     f"(~{wlimit}); the wheel rates Omega blew up: reduce dt or c_w")
     wdt = w * dt
-    limit = {"euler": 0.1, "semi_implicit_euler": 0.1, "rk4": 1.0, "splitting": 3.0, "implicit_gyro": 10.0}.get(integrator, 1.0)
+    limit = {"euler": 0.1, "semi_implicit_euler": 0.1, "rk4": 1.0, "splitting": 3.0, "implicit_gyro": 10.0,
+             "splitting4": 3.0 / max(abs(g) for g in TABLEAUX.SPLIT4_GAMMA), "rk4_expmap": 1.0}.get(integrator, 1.0)
     if wdt > limit:
         return f"|omega|*dt = {wdt:.3g} is too large for {integrator} (keep it below ~{limit}); reduce dt"
     wheels = "" if W is None else f", |Omega| = {W:.3g} rad/s"

@@ -24,6 +24,7 @@ from . import (DOPRI5_HMIN_REL, DOPRI5_MAX_SUBSTEPS, KIND_JOINT, KIND_WHEELS, PL
 
 P, Q, V, W = LY.STATE_P_W, LY.STATE_Q, LY.STATE_V_W, LY.STATE_OMEGA_B  # state-row fields
 X, OM = LY.XS_X, LY.XS_OMEGA                                               # extended state [x, Omega]
+U, U0 = slice(Q.start, Q.start + 3), Q.start + 3  # rk4_expmap: u in q's first three slots, the fourth held at 0
 
 
 class _EffectIndex:
@@ -248,6 +249,59 @@ def _splitting(plan, x, h):
     return xn
 
 
+_AXIS_FLOWS = (K.axis_flow_x, K.axis_flow_y, K.axis_flow_z)
+
+
+def _splitting4(plan, x, h):
+    """splitting4: the splitting step (_splitting) applied with steps gamma_i h, i = 1 … SPLIT4_STAGES
+    (T.SPLIT4_GAMMA, a symmetric composition of order 4; derive/tableaux.py) to bodies with effects.
+    Bodies without take the same flows as one sequence (T.SPLIT4_SEQ, neighbours about one axis merged)
+    on L_b = I ω (body_momentum), turned back into ω once (body_rate), and p drifts by h v — the C
+    backend's splitting4_step, operation for operation."""
+    xn = x.copy()
+    if plan.forced.size:
+        xf = x
+        for g in T.SPLIT4_GAMMA:
+            xf = _splitting(plan, xf, g * h)
+        xn[plan.forced] = xf[plan.forced]
+    free = slice(None) if not plan.forced.size else plan.free
+    I = plan.I[free]
+    if I.shape[0]:
+        xn[free, P] = K.translation_drift(x[free, P], x[free, V], h)
+        q, L = x[free, Q], K.body_momentum(I, x[free, W])
+        for a, f in T.SPLIT4_SEQ:
+            q, L = _AXIS_FLOWS[a](I, q, L, f * h)
+        xn[free, Q], xn[free, W] = q, K.body_rate(I, L)
+    return xn
+
+
+def _rk4_expmap(plan, x, h):
+    """rk4_expmap (RKMK4): the RK4 tableau on (p, v, u, ω) with the attitude q = q₀ ⊗ exp(u/2), u the
+    body rotation vector since the step's start (u₀ = 0). Each stage evaluates the right-hand side at its
+    attitude (quat_exp_step(q₀, u, 1)) and u̇ = rkmk_dexpinv(u, ω); the end attitude is q₀ ⊗ exp(u₁/2),
+    unit to rounding. The same operations in the same order as the C backend's rk4_expmap_step."""
+    q0 = x[:, Q]
+    y = x.copy()
+    y[:, Q] = 0.0                        # the Q slot holds u (3) and a 0
+    c = (T.RK4_C1 * h, T.RK4_C2 * h, T.RK4_C3 * h)
+    ks = []
+    xs = x
+    for s in range(4):
+        if s:
+            ys = y + c[s - 1] * ks[-1]
+            xs = ys.copy()
+            xs[:, Q] = K.quat_exp_step(q0, ys[:, U], 1.0)
+        else:
+            ys = y
+        k = plan.rhs(xs)
+        k[:, U] = K.rkmk_dexpinv(ys[:, U], ys[:, W])
+        k[:, U0] = 0.0
+        ks.append(k)
+    yn = y + (h / T.RK4_B_DEN) * (T.RK4_B0 * ks[0] + T.RK4_B1 * ks[1] + T.RK4_B2 * ks[2] + T.RK4_B3 * ks[3])
+    yn[:, Q] = K.quat_exp_step(q0, yn[:, U], 1.0)
+    return yn
+
+
 def gyro_newton(I, w, tau_b, h, iterations: int = T.GYRO_MAX_ITER):
     """Solve I(w1 − w) + h w1 × (I w1) = h tau_b for w1 (rows of bodies) by Newton's method from w1 = w,
     to rounding (implicit_gyro_newton: the derived residual, its SymPy Jacobian, the adjugate solve).
@@ -296,6 +350,10 @@ def step(plan: _Plan, x: np.ndarray, integrator: str, normalize: bool, dt: float
         xn = _splitting(plan, x, dt)
     elif integrator == "implicit_gyro":
         xn = _implicit_gyro(plan, x, dt)
+    elif integrator == "splitting4":
+        xn = _splitting4(plan, x, dt)
+    elif integrator == "rk4_expmap":
+        xn = _rk4_expmap(plan, x, dt)
     elif integrator == "rk4":
         k1 = f(x)
         k2 = f(x + (T.RK4_C1 * dt) * k1)

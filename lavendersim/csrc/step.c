@@ -725,8 +725,69 @@ static int gyro_step(const body_ctx *c, double *x, double h)
     return ok;
 }
 
-/* Advance plain body b by n_steps of splitting or implicit_gyro; contract as advance_block with n = 1, and
-   *why = LV_DIVERGED (non-finite) or LV_NO_ROOT (implicit_gyro's Newton solve did not converge). */
+/* One splitting4 step: splitting_step with step gamma_i h, i = 1 .. LV_SPLIT4_STAGES (LV_SPLIT4_GAMMA, a
+   symmetric composition of order 4; derive/tableaux.py). A body without effects takes the same flows as one
+   sequence (LV_SPLIT4_AXIS / LV_SPLIT4_FRAC: neighbours about one axis merged, 21 flows instead of 25) on
+   L_b = I omega (body_momentum), carried between the flows and turned back into omega once (body_rate), and
+   p drifts by h v. Torque-free it conserves L_w and |L_b| to rounding. */
+static void splitting4_step(const body_ctx *c, double *x, double h, int damped)
+{
+    const double *I = c->prm + LV_PARAM_I_B;
+    double L[3];
+    int i;
+    if (c->has) {
+        for (i = 0; i < LV_SPLIT4_STAGES; i++) splitting_step(c, x, LV_SPLIT4_GAMMA[i] * h, damped);
+        return;
+    }
+    lv_translation_drift(x + LV_STATE_P_W, x + LV_STATE_V_W, h, x + LV_STATE_P_W);
+    lv_body_momentum(I, x + LV_STATE_OMEGA_B, L);
+    for (i = 0; i < LV_SPLIT4_FLOWS; i++) {
+        const double tau = LV_SPLIT4_FRAC[i] * h;
+        if (LV_SPLIT4_AXIS[i] == 0)
+            lv_axis_flow_x(I, x + LV_STATE_Q, L, tau, x + LV_STATE_Q, L);
+        else if (LV_SPLIT4_AXIS[i] == 1)
+            lv_axis_flow_y(I, x + LV_STATE_Q, L, tau, x + LV_STATE_Q, L);
+        else
+            lv_axis_flow_z(I, x + LV_STATE_Q, L, tau, x + LV_STATE_Q, L);
+    }
+    lv_body_rate(I, L, x + LV_STATE_OMEGA_B);
+}
+
+/* One rk4_expmap step (RKMK4): the RK4 tableau on (p, u, v, omega) with u (the body rotation vector since
+   the step's start, u0 = 0) kept in q's first three slots and the fourth held at 0. Stage s evaluates the
+   right-hand side at the attitude q0 (x) exp(u/2) (quat_exp_step with h = 1) and u' = rkmk_dexpinv(u, omega);
+   the step ends with q = q0 (x) exp(u1/2), unit to rounding. The same operations in the same order as the
+   NumPy backend's _rk4_expmap (bitwise equal results). */
+static void rk4_expmap_step(const body_ctx *c, double *x, double h)
+{
+    double y[LV_STATE_SIZE], ys[LV_STATE_SIZE], xs[LV_STATE_SIZE], k[4][LV_STATE_SIZE], q0[4];
+    const double cs[3] = {LV_RK4_C1 * h, LV_RK4_C2 * h, LV_RK4_C3 * h}, h6 = h / LV_RK4_B_DEN;
+    int s, i;
+    memcpy(q0, x + LV_STATE_Q, sizeof q0);
+    memcpy(y, x, sizeof y);
+    for (i = 0; i < 4; i++) y[LV_STATE_Q + i] = 0.0;
+    for (s = 0; s < 4; s++) {
+        if (s) {
+            for (i = 0; i < LV_STATE_SIZE; i++) ys[i] = y[i] + cs[s - 1] * k[s - 1][i];
+            memcpy(xs, ys, sizeof xs);
+            lv_quat_exp_step(q0, ys + LV_STATE_Q, 1.0, xs + LV_STATE_Q);
+        } else {
+            memcpy(ys, y, sizeof ys);
+            memcpy(xs, x, sizeof xs);
+        }
+        body_rhs(xs, c->prm, c->refs, c->n_refs, k[s]);
+        lv_rkmk_dexpinv(ys + LV_STATE_Q, ys + LV_STATE_OMEGA_B, k[s] + LV_STATE_Q);
+        k[s][LV_STATE_Q + 3] = 0.0;
+    }
+    for (i = 0; i < LV_STATE_SIZE; i++)
+        y[i] = y[i] + h6 * (LV_RK4_B0 * k[0][i] + LV_RK4_B1 * k[1][i] + LV_RK4_B2 * k[2][i] + LV_RK4_B3 * k[3][i]);
+    memcpy(x, y, sizeof y);
+    lv_quat_exp_step(q0, y + LV_STATE_Q, 1.0, x + LV_STATE_Q);
+}
+
+/* Advance plain body b by n_steps of a plain-only integrator (splitting, implicit_gyro, splitting4,
+   rk4_expmap); contract as advance_block with n = 1, and *why = LV_DIVERGED (non-finite) or LV_NO_ROOT
+   (implicit_gyro's Newton solve did not converge). */
 static long advance_structured(double *state, const double *params, long b, const lv_effect_index *ix,
                                int integrator, int normalize, double dt, long n_steps, double *last, int *why)
 {
@@ -739,9 +800,13 @@ static long advance_structured(double *state, const double *params, long b, cons
     memcpy(x, state + b * LV_STATE_SIZE, sizeof x);
     for (s = 0; s < n_steps; s++) {
         memcpy(xn, x, sizeof x);
-        if (integrator == LV_INTEGRATOR_SPLITTING) {
+        if (integrator == LV_INTEGRATOR_SPLITTING)
             splitting_step(&c, xn, dt, damped);
-        } else if (!gyro_step(&c, xn, dt)) {
+        else if (integrator == LV_INTEGRATOR_SPLITTING4)
+            splitting4_step(&c, xn, dt, damped);
+        else if (integrator == LV_INTEGRATOR_RK4_EXPMAP)
+            rk4_expmap_step(&c, xn, dt);
+        else if (!gyro_step(&c, xn, dt)) {
             *why = LV_NO_ROOT;
             memcpy(last, x, sizeof x);
             return s;
@@ -891,7 +956,7 @@ int lv_simulate(double *state, const double *params, long nb,
     if (ne > 0 && row_size < LV_EFFECT_ROW_PARAMS) return LV_BAD_ARGUMENT;
     if (integrator == LV_INTEGRATOR_DOPRI5 && (adaptive == NULL || !(adaptive->rtol > 0.0) || !(adaptive->atol >= 0.0)))
         return LV_BAD_ARGUMENT;
-    if ((integrator == LV_INTEGRATOR_SPLITTING || integrator == LV_INTEGRATOR_IMPLICIT_GYRO) && models != NULL)
+    if (LV_INTEGRATOR_PLAIN_ONLY(integrator) && models != NULL)
         for (b = 0; b < nb; b++)
             if ((int)models->rows[b * LV_MODEL_SIZE + LV_MODEL_KIND] != 0) return LV_BAD_ARGUMENT;
     status = index_build(&ix, effects, ne, row_size, nb, user, fail_step);
@@ -909,7 +974,7 @@ int lv_simulate(double *state, const double *params, long nb,
             best_body = b;
             status = why;
         }
-    } else if (integrator == LV_INTEGRATOR_SPLITTING || integrator == LV_INTEGRATOR_IMPLICIT_GYRO) {
+    } else if (LV_INTEGRATOR_PLAIN_ONLY(integrator)) {
         for (b = 0; b < nb && limit > 0; b++) {
             int why = LV_DIVERGED;
             s = advance_structured(state, params, b, &ix, integrator, normalize, dt, limit, last[0], &why);

@@ -45,9 +45,14 @@ enum {
     LV_INTEGRATOR_RK4 = 2,
     LV_INTEGRATOR_DOPRI5 = 3,        /* adaptive Dormand-Prince 5(4), FSAL; needs an lv_adaptive */
     LV_INTEGRATOR_SPLITTING = 4,     /* Strang splitting, exact axis sub-flows; plain bodies only */
-    LV_INTEGRATOR_IMPLICIT_GYRO = 5  /* implicit gyroscopic term (Newton), exp-map q; plain bodies only */
+    LV_INTEGRATOR_IMPLICIT_GYRO = 5, /* implicit gyroscopic term (Newton), exp-map q; plain bodies only */
+    LV_INTEGRATOR_SPLITTING4 = 6,    /* symmetric composition of the splitting step, order 4; plain bodies only */
+    LV_INTEGRATOR_RK4_EXPMAP = 7     /* RK4 in exponential coordinates of q (RKMK4); plain bodies only */
 };
-#define LV_INTEGRATOR_LAST LV_INTEGRATOR_IMPLICIT_GYRO
+#define LV_INTEGRATOR_LAST LV_INTEGRATOR_RK4_EXPMAP
+/* The integrators that step plain bodies only, one by one (advance_structured). */
+#define LV_INTEGRATOR_PLAIN_ONLY(i) ((i) == LV_INTEGRATOR_SPLITTING || (i) == LV_INTEGRATOR_IMPLICIT_GYRO \
+                                     || (i) == LV_INTEGRATOR_SPLITTING4 || (i) == LV_INTEGRATOR_RK4_EXPMAP)
 
 /* Adaptive stepping (dopri5): every body is stepped with its own step sizes; each of the n_steps
    steps advances it by exactly dt with as many accepted substeps as its error estimate needs.
@@ -87,7 +92,7 @@ enum {
    step fail_step; its applied row untouched) and, for LV_TOLERANCE, h[fail_body] as above; every
    other body's rows (state, Omega, applied, h, nfev) are unspecified (advanced by some number of
    steps): the caller restores them from its snapshot. Model kinds must be valid (the caller validates); an
-   unknown integrator, dopri5 without `adaptive`, splitting / implicit_gyro with a body of nonzero kind, or
+   unknown integrator, dopri5 without `adaptive`, a plain-only integrator (LV_INTEGRATOR_PLAIN_ONLY) with a body of nonzero kind, or
    an effect body outside [-1, nb) returns LV_BAD_ARGUMENT, an effect code no declared effect has (built
    in or in `user`) LV_UNKNOWN_EFFECT with *fail_step = its row (nothing changed, never a silent no-op).
    `adaptive` is read only by dopri5. */
