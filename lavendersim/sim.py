@@ -129,18 +129,18 @@ class Sim:
     rtol, atol : float, optional
         Tolerances of the adaptive integrators only.
     on_bound : {"raise", "warn"}
-        Beyond the integrator's validity bound (|omega|*dt*(I_max/I_min)**p <= WDT_MAX, derive/tableaux.py):
+        (keyword only) Beyond the integrator's validity bound (|omega|*dt*(I_max/I_min)**p <= WDT_MAX, derive/tableaux.py):
         "raise" (default) raises DivergenceError at the first step that would run beyond it (set_state:
         LavenderInputError at the call); "warn" runs on with one ValidityBoundWarning per body.
     max_growth : float or None
-        A torque- and force-free body whose kinetic energy (a free wheeled body: whose total |L|) exceeds
+        (keyword only) A torque- and force-free body whose kinetic energy (a free wheeled body: whose total |L|) exceeds
         max_growth times its value at construction / the last set_state raises DivergenceError
         (default 10; None switches the check off).
     """
 
     @V.keywords  # unknown keyword arguments raise LavenderInputError naming them
     def __init__(self, scene: Scene, dt: float = 1e-3, integrator: str = "rk4", backend: str = "auto", normalize: bool = True,
-                 rtol: float | None = None, atol: float | None = None, on_bound: str = "raise",
+                 rtol: float | None = None, atol: float | None = None, *, on_bound: str = "raise",
                  max_growth: float | None = 10.0):
         if not isinstance(scene, Scene):
             raise V.LavenderInputError("scene", "must be a lavendersim.Scene", f", got {type(scene).__name__}")
