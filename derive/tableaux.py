@@ -110,6 +110,29 @@ def split4_sequence(gamma=None) -> tuple:
 
 GYRO_MAX_ITER = 30                  # Newton iterations at most
 GYRO_TOL_SQ = 1e-32                 # stop when |delta|^2 <= this * |omega_next|^2 (|delta| <= 1e-16 |omega|)
+GYRO_ACCEPT_SQ = 1e-20              # after GYRO_MAX_ITER iterations the last update must be at most 1e-10 |omega_next|
+                                    # (an ill-conditioned solve stalls at rounding); else the step has no root: divergence
+
+# Validity bounds, one per integrator (issue 11): the run is trusted while
+#     |omega| * dt * (I_max / I_min) ** WDT_RATIO_EXPONENT[name]  <=  WDT_MAX[name]
+# (|omega| rad/s, dt s, per body; beyond it Sim raises DivergenceError naming the bound, or warns with
+# on_bound="warn"). An integrator without an entry (the adaptive dopri5: it controls its own error) has none.
+#  * euler, semi_implicit_euler: explicit in omega, a rotation mode grows by sqrt(1 + (|omega| dt)^2) per
+#    step; at 0.1 that is 0.5 % per step (energy x2.7 in 100 steps): beyond it the answer is not a rotation.
+#  * rk4: its linear stability limit on the imaginary axis, |R(iy)| <= 1 for |y| <= 2 sqrt(2).
+#  * splitting: the Strang composition of exact axis flows resonates about the major and intermediate
+#    axes: measured (atlas body, 1000 steps) the energy grows x2 and more from |omega| dt (I_max/I_min)^(1/4)
+#    ~ 1.8-3.2 for ratios 10..1e6; its accuracy degrades sooner with the ratio (I = (1e-9, 1, 1),
+#    omega = (5, 1, 0.5), dt = 1e-3: 0.38 rad off after 10 s, rk4 3e-10): the bound takes the square root,
+#    |omega| dt (I_max/I_min)^(1/2) <= 1, which is below the resonance for every ratio and refuses that case.
+#  * implicit_gyro: unconditionally stable, but beyond half a turn per step the exp-map attitude update
+#    aliases (a turn of |omega| dt is indistinguishable from one of 2 pi - |omega| dt).
+#  * splitting4: its substeps are the splitting step at gamma_i h, |gamma_i| <= 0.66: splitting's bound
+#    (not measured separately yet). rk4_expmap: RK4's tableau, RK4's linear stability limit.
+WDT_MAX = {"euler": R(1, 10), "semi_implicit_euler": R(1, 10), "rk4": 2 * sp.sqrt(2), "splitting": R(1),
+           "implicit_gyro": sp.pi, "splitting4": R(1), "rk4_expmap": 2 * sp.sqrt(2)}
+WDT_RATIO_EXPONENT = {"euler": R(0), "semi_implicit_euler": R(0), "rk4": R(0), "splitting": R(1, 2),
+                      "implicit_gyro": R(0), "splitting4": R(1, 2), "rk4_expmap": R(0)}
 
 
 def dp_b() -> tuple:
@@ -173,12 +196,16 @@ def _scalars() -> list[tuple[str, str, str]]:
               ("DP_HMIN_REL", DP_HMIN_REL), ("DP_ERR_EXPONENT", -1.0 / (DP_ORDER_ERR + 1)),
               ("DP_INIT_SMALL", DP_INIT_SMALL), ("DP_INIT_TINY_H", DP_INIT_TINY_H), ("DP_INIT_FRAC", DP_INIT_FRAC),
               ("DP_INIT_FLAT", DP_INIT_FLAT), ("DP_INIT_SHRINK", DP_INIT_SHRINK), ("DP_INIT_GROW", DP_INIT_GROW),
-              ("DP_INIT_EXPONENT", 1.0 / (DP_ORDER_ERR + 1)), ("GYRO_TOL_SQ", GYRO_TOL_SQ)]
+              ("DP_INIT_EXPONENT", 1.0 / (DP_ORDER_ERR + 1)), ("GYRO_TOL_SQ", GYRO_TOL_SQ),
+              ("GYRO_ACCEPT_SQ", GYRO_ACCEPT_SQ)]
     out = [(n, f"{v}L" if n == "DP_MAX_SUBSTEPS" else str(v), f"{v:_}") for n, v in ints]
     out += [(n, f"({float(v)!r})" if v < 0 else repr(float(v)), repr(float(v))) for n, v in floats]
     out += [("SPLIT_KICK", _f(SPLIT_KICK), _f(SPLIT_KICK)), ("SPLIT_MIDPOINT", _f(SPLIT_MIDPOINT), _f(SPLIT_MIDPOINT))]
     out += [(f"RK4_C{i}", _f(c), _f(c)) for i, c in enumerate(RK4_C)]
     out += [(f"RK4_B{i}", _f(n), _f(n)) for i, n in enumerate(RK4_B_NUM)]
+    for name in sorted(WDT_MAX):
+        v, p = repr(float(WDT_MAX[name])), repr(float(WDT_RATIO_EXPONENT[name]))
+        out += [(f"WDT_MAX_{name.upper()}", v, v), (f"WDT_RATIO_EXPONENT_{name.upper()}", p, p)]
     return out
 
 
@@ -227,5 +254,9 @@ def print_python() -> str:
     out.append("SPLIT4_GAMMA = (" + ", ".join(_fa(g) for g in SPLIT4_GAMMA) + ")")
     out.append("# splitting4 without effects: its substeps' axis flows as one sequence (axis, fraction of h), neighbours merged")
     out.append("SPLIT4_SEQ = (" + ", ".join(f"({a}, {_fa(f)})" for a, f in split4_sequence()) + ")")
+    out.append("# validity bounds: |omega| dt (I_max/I_min)**WDT_RATIO_EXPONENT[name] <= WDT_MAX[name] (derive/tableaux.py)")
+    out.append("WDT_MAX = {" + ", ".join(f"{n!r}: {float(WDT_MAX[n])!r}" for n in sorted(WDT_MAX)) + "}")
+    out.append("WDT_RATIO_EXPONENT = {" + ", ".join(f"{n!r}: {float(WDT_RATIO_EXPONENT[n])!r}"
+                                                    for n in sorted(WDT_RATIO_EXPONENT)) + "}")
     out.append("")
     return "\n".join(out)

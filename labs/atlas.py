@@ -35,6 +35,11 @@ Per cell (results.json "cells", sorted by integrator, axis, ratio, |ω|·dt — 
   attitude_error   max rotation angle (rad) to lavendersim.reference.torque_free (the exact
                    Jacobi-elliptic motion) at the samples; omega_error  max |ω − ω_exact| / |ω0|
   steps, rhs_evals, dt, T, backend, rtol/atol (adaptive), diverged_at_step, message
+  within_bound     |ω0|·dt·ratio^p ≤ the integrator's declared validity bound (derive/tableaux.py: WDT_MAX,
+                   WDT_RATIO_EXPONENT; dopri5 has none). The cells run with Sim(..., on_bound="warn") so
+                   that the atlas maps behaviour beyond the bound too (a default Sim raises there); Sim's
+                   growth check (max_growth = 10: E or |L| ×10 on a torque-free body) stays on, so a cell
+                   that grows ×10 is a caught divergence, not a silent blow-up.
 Exact zeros and values below 1e-16 are drawn at 1e-16 (the colour bars' lower end).
 
 Pictures (one figure per metric; rows = integrators, columns = spin axes, log axes): energy
@@ -47,6 +52,7 @@ the status of every cell, "within the catalogue's bounds" distinguished from "st
 
 Checks (bounds that hold here and would fail if an integrator regressed):
   * no cell anywhere ends in a silent NaN or an error other than DivergenceError;
+  * no cell within its integrator's declared validity bound is a silent blow-up (issue 11);
   * rk4 at |ω|·dt ≤ 1e-3: ok for every ratio and axis, within all three catalogue bounds;
   * rk4 at |ω|·dt = 10 (beyond its limit 2√2) on every non-spherical body diverges or blows up — an
     inaccurate-but-finite answer there would be silent (a sphere's ω_b is constant, so only its
@@ -81,6 +87,7 @@ import math
 import os
 import sys
 import time
+import warnings
 
 import numpy as np
 
@@ -91,7 +98,8 @@ from lavendersim.generated import layout as LY
 from lavendersim.generated import tableaux as TABLEAUX
 from lavendersim import reference as R
 from lavendersim import validate as V
-from lavendersim.errors import DivergenceError
+from lavendersim import sim as S
+from lavendersim.errors import DivergenceError, ValidityBoundWarning
 from lavendersim.kernels import K
 
 from . import common as C
@@ -260,10 +268,16 @@ def run_cell(integrator: str, wdt: float, ratio: float, axis: str, backend: str,
             "diverged_at_step": None, "message": None, "I_b": I_b.tolist(), "omega_b0": w0.tolist()}
     scene = lv.Scene()
     scene.add_body(lv.Body("body", 1.0, I_b, omega_b=w0, q=H.Q0))
+    bound = S.validity_bound(integrator)
+    cell["within_bound"] = bool(bound is None or float(np.linalg.norm(w0)) * dt * ratio ** bound[1] <= bound[0])
     try:
-        sim = lv.Sim(scene, dt=dt, integrator=integrator, backend=cell["backend"],
-                     **({"rtol": rtol, "atol": atol} if adaptive else {}))
-        tr = sim.record(n, n // SAMPLES)
+        # the atlas maps behaviour beyond each integrator's declared validity bound too: it opts in with
+        # on_bound="warn" (a default Sim raises DivergenceError there); the growth check stays at its default
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", ValidityBoundWarning)
+            sim = lv.Sim(scene, dt=dt, integrator=integrator, backend=cell["backend"], on_bound="warn",
+                         **({"rtol": rtol, "atol": atol} if adaptive else {}))
+            tr = sim.record(n, n // SAMPLES)
     except DivergenceError as exc:
         cell.update(status="diverged", diverged_at_step=int(exc.step), message=str(exc))
         return cell
@@ -459,6 +473,13 @@ def atlas_checks(cells: list[dict], integrators, rtol: float) -> tuple[list[C.Ch
     checks.append(C.holds("no_silent_nan_or_error", not bad,
                           "every non-finite run raised DivergenceError and no integrator refused a cell"
                           + (f"; found: {_where(bad)}" if bad else "")))
+    silent = [c for c in cells if c["status"] == "blew_up" and c.get("within_bound", True)]
+    fig["blew_up_within_bound"] = len(silent)
+    checks.append(C.holds("no_silent_blow_up_within_bounds", not silent,
+                          "no cell within its integrator's declared validity bound (derive/tableaux.py WDT_MAX) "
+                          "more than doubled E or |L| without a DivergenceError (beyond the bound a default Sim "
+                          "raises; the atlas opts in with on_bound='warn' to map it)"
+                          + (f"; found: {_where(silent)}" if silent else "")))
     if _available("rk4", integrators, checks):
         _rk4_checks(cells, checks, fig)
     if _available("euler", integrators, checks):

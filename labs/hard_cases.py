@@ -5,7 +5,8 @@
 Every dynamic case ("trial") is run with every integrator in ``lavendersim.backends.INTEGRATORS``
 (discovered at run time) and recorded in a survival table: ``pass`` (the case's bounds hold),
 ``stable`` (finite, but a bound is missed: the worst figure is named), ``blew up`` (finite but
-error > 1 with no DivergenceError: dt_range only), ``diverged`` (a
+error > 1 with no DivergenceError: dt_range only; since issue 11 none is expected — a run beyond its
+integrator's validity bound, or whose energy / |L| grows x10 on a torque-free body, raises), ``diverged`` (a
 DivergenceError naming the step, the body and the cause), ``SILENT NaN`` (a bug: never expected)
 or ``error`` (the integrator refused the case). The bounds are *asserted* (checks, exit 1 when one
 fails) only for the integrator the issue names for that case (``rk4`` unless stated;
@@ -56,14 +57,18 @@ The catalogue (bounds; the measured figures are in results.json and the survival
                            ≤ 1e-9 rad, no NaN.
   body_vs_world_kinematics quat_derivative_body(q, ω_b) = quat_derivative_world(q, R(q) ω_b) to
                            ≤ 1e-15 · max(1, |ω|) on random inputs.
-  divergence_report        explicit Euler, dt = 0.1, a calm body and a spinner (|ω|·dt = 5): run(1000)
-                           raises DivergenceError naming the step, the spinner and |omega|*dt; the
-                           sim's state, step count and time are unchanged; never a silent NaN.
+  divergence_report        explicit Euler, dt = 0.1, a calm body and a spinner (|ω|·dt = 5): with
+                           Sim's default on_bound="raise" the first step is refused naming the
+                           validity bound; opted in (on_bound="warn"), one good step, then run(1000)
+                           raises DivergenceError (growth check, before infinity) naming the step,
+                           the spinner and |omega|*dt; the sim's state, step count and time are
+                           unchanged; never a silent NaN.
 """
 from __future__ import annotations
 
 import math
 import time
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -72,7 +77,7 @@ import lavendersim as lv
 from lavendersim import backends
 from lavendersim import reference as R
 from lavendersim import validate as V
-from lavendersim.errors import DivergenceError
+from lavendersim.errors import DivergenceError, ValidityBoundWarning
 from lavendersim.kernels import K
 
 from . import common as C
@@ -594,19 +599,27 @@ DIVERGENCE_STEPS = 1000   # the calm body survives these under explicit Euler at
 DIV_I, DIV_CALM, DIV_SPIN, DIV_DT = (1.0, 2.0, 3.0), (0.1, 0.2, 0.3), (0.5, 0.5, 50.0), 0.1
 
 
-def divergence_trial(integrator: str, backend: str, steps: int = DIVERGENCE_STEPS) -> dict:
+def divergence_trial(integrator: str, backend: str, steps: int = DIVERGENCE_STEPS, on_bound: str = "warn") -> dict:
     """A calm body and a spinner (|ω|·dt = 5) at dt = 0.1: one good step, then run(steps).
+
+    |ω|·dt = 5 is beyond every fixed-step integrator's validity bound: with on_bound="raise" (Sim's
+    default) the first step is refused; with "warn" (the default here: the trial shows the divergence
+    found during a run) the growth check or the non-finite check stops it before infinity.
     Returns {"error": DivergenceError | other exception | None, "unchanged": bool, "finite": bool, "sim": Sim}."""
     scene = lv.Scene()
     scene.add_body(lv.Body("calm", 1.0, DIV_I, omega_b=DIV_CALM))
     scene.add_body(lv.Body("spinner", 1.0, DIV_I, omega_b=DIV_SPIN, q=Q0))
     out = {"error": None, "unchanged": False, "finite": False, "sim": None}
     try:
-        sim = lv.Sim(scene, dt=DIV_DT, integrator=integrator, backend=backend, **adaptive_options(integrator))
-        out["sim"] = sim
-        sim.run(1)
-        x0, steps0, t0 = sim.x.copy(), sim.steps, sim.t
-        sim.run(steps)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", ValidityBoundWarning)
+            sim = lv.Sim(scene, dt=DIV_DT, integrator=integrator, backend=backend, on_bound=on_bound,
+                         **adaptive_options(integrator))
+            out["sim"] = sim
+            x0, steps0, t0 = sim.x.copy(), sim.steps, sim.t
+            sim.run(1)
+            x0, steps0, t0 = sim.x.copy(), sim.steps, sim.t
+            sim.run(steps)
     except Exception as exc:  # DivergenceError, or an integrator that refuses: recorded, not hidden
         out["error"] = exc
         if out["sim"] is not None and isinstance(exc, DivergenceError):
@@ -664,6 +677,15 @@ def case_divergence_report(ctx) -> CaseOut:
                 C.holds("divergence_same_on_both_backends", same,
                         f"{ctx.backend}: step {err.step}, body {err.body}; {other}: "
                         + (f"step {e2.step}, body {e2.body}" if isinstance(e2, DivergenceError) else repr(e2))))
+    if named in ctx.integrators:   # a default Sim (on_bound="raise") refuses the first step, naming the bound
+        r = divergence_trial(named, ctx.backend, on_bound="raise")
+        err = r["error"]
+        ok = (isinstance(err, DivergenceError) and err.step == 0 and "validity bound" in str(err)
+              and err.body_name == "spinner" and r["unchanged"])
+        out.figures["divergence_bound_message"] = str(err)
+        out.checks.append(C.holds("divergence_bound_refuses_first_step", ok,
+                                  f"{named}, Sim's default on_bound='raise': the first step is refused naming the "
+                                  f"spinner and the validity bound, state unchanged: {str(err)!r}"))
     if named not in ctx.integrators:
         out.checks.append(C.holds("divergence_integrator_available", False, f"{named!r} not in INTEGRATORS"))
     out.survival["divergence_report"] = row

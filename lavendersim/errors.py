@@ -3,7 +3,9 @@ from __future__ import annotations
 
 
 class DivergenceError(FloatingPointError):
-    """A step produced a non-finite state. The simulator's state is left as it was before the call.
+    """A step produced a non-finite state, ran beyond its integrator's validity bound, grew a conserved
+    quantity beyond Sim's max_growth, or (implicit_gyro) had no root its Newton solve could find. The
+    simulator's state is left as it was before the call.
 
     Attributes: step (0-based index within the call), body (index), body_name (or None), cause."""
 
@@ -12,6 +14,10 @@ class DivergenceError(FloatingPointError):
         who = f"body {body}" + (f" ({body_name!r})" if body_name else "")
         when = f"step {step}" + (f" (t = {t:.6g} s)" if t is not None else "")
         super().__init__(f"simulation diverged at {when}, {who}: {cause}")
+
+
+class ValidityBoundWarning(UserWarning):
+    """A body ran beyond its integrator's validity bound with Sim(..., on_bound="warn") (the text names it)."""
 
 
 class StaleBuildError(ImportError):

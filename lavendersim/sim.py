@@ -49,8 +49,28 @@ Integrators (`integrator=`; `sim.rhs_evals` counts right-hand-side evaluations, 
   Plain bodies only.
 Unsupported combinations (splitting / implicit_gyro / splitting4 / rk4_expmap with a joint or wheels;
 rtol/atol with a fixed-step integrator) raise LavenderInputError at construction.
+
+Divergence before infinity (checked per chunk of steps, so the stepping itself is unchanged bit for bit):
+a run is advanced in chunks of about CHUNK_WORK right-hand-side evaluations; after each chunk every body
+is checked against
+* its integrator's validity bound, |omega|*dt*(I_max/I_min)**p <= WDT_MAX (declared once in
+  derive/tableaux.py, printed in generated/tableaux.py; dopri5 has none): beyond it the run raises
+  DivergenceError naming the bound, or with on_bound="warn" warns once per body (ValidityBoundWarning);
+* for a body no effect acts on (torque- and force-free): its kinetic energy and |L| may not grow beyond
+  max_growth times their values at construction / the last set_state (default 10; None: off); a wheeled
+  body without a joint and without other effects: its total |L| (body + wheels) likewise.
+A chunk that fails a check (or goes non-finite) is re-run from its start in smaller pieces to find the
+first step whose state fails (the states are recomputed bit for bit; for dopri5, whose FSAL stage does
+not carry across calls, to the tolerance). DivergenceError then names the step, the body and the
+cause, and the Sim is left exactly as it was before the call — for run, run_for and record alike (and on
+KeyboardInterrupt, which a long run sees between chunks). A Sim steps under its own lock: two threads
+stepping one Sim serialize (never a lost step); two Sims run in parallel (the C loop releases the GIL).
+n_steps per call is at most MAX_STEPS.
 """
 from __future__ import annotations
+
+import threading
+import warnings
 
 import numpy as np
 
@@ -59,10 +79,23 @@ from . import effects as effects_mod
 from . import validate as V
 from .backends import ADAPTIVE, KIND_JOINT, KIND_WHEELS, PLAIN_ONLY, Adaptive, Models
 from .bodies import BodyState
-from .errors import DivergenceError
+from .errors import DivergenceError, ValidityBoundWarning
 from .generated import layout as LY
+from .generated import tableaux as TB
 from .kernels import K
 from .scene import Scene
+
+
+MAX_STEPS = 2**53          # steps per call and in total: the step counter and t = steps*dt stay exact in float64
+CHUNK_WORK = 2**20         # right-hand-side evaluations (summed over bodies) per backend call between checks
+ON_BOUND = ("raise", "warn")
+
+
+def validity_bound(integrator: str) -> tuple[float, float] | None:
+    """(WDT_MAX, WDT_RATIO_EXPONENT) of an integrator (derive/tableaux.py), or None if it declares none."""
+    if integrator not in TB.WDT_MAX:
+        return None
+    return float(TB.WDT_MAX[integrator]), float(TB.WDT_RATIO_EXPONENT.get(integrator, 0.0))
 
 
 class Trajectory:
@@ -80,9 +113,35 @@ class Trajectory:
 
 
 class Sim:
+    """Steps a scene's bodies (see the module docstring).
+
+    Parameters
+    ----------
+    scene : Scene
+        Read once here; later edits to it do not affect this Sim.
+    dt : float
+        Step (s); the output interval of an adaptive integrator.
+    integrator : str
+        One of lavendersim.backends.INTEGRATORS.
+    backend : {"auto", "c", "numpy"}
+    normalize : bool
+        Normalize q after every step.
+    rtol, atol : float, optional
+        Tolerances of the adaptive integrators only.
+    on_bound : {"raise", "warn"}
+        (keyword only) Beyond the integrator's validity bound (|omega|*dt*(I_max/I_min)**p <= WDT_MAX, derive/tableaux.py):
+        "raise" (default) raises DivergenceError at the first step that would run beyond it (set_state:
+        LavenderInputError at the call); "warn" runs on with one ValidityBoundWarning per body.
+    max_growth : float or None
+        (keyword only) A torque- and force-free body whose kinetic energy (a free wheeled body: whose total |L|) exceeds
+        max_growth times its value at construction / the last set_state raises DivergenceError
+        (default 10; None switches the check off).
+    """
+
     @V.keywords  # unknown keyword arguments raise LavenderInputError naming them
     def __init__(self, scene: Scene, dt: float = 1e-3, integrator: str = "rk4", backend: str = "auto", normalize: bool = True,
-                 rtol: float | None = None, atol: float | None = None):
+                 rtol: float | None = None, atol: float | None = None, *, on_bound: str = "raise",
+                 max_growth: float | None = 10.0):
         if not isinstance(scene, Scene):
             raise V.LavenderInputError("scene", "must be a lavendersim.Scene", f", got {type(scene).__name__}")
         self.dt = V.dt("dt", dt)
@@ -119,9 +178,153 @@ class Sim:
                         "integrator", f"{self.integrator!r} steps plain rigid bodies only, but body {name!r} has {what}; "
                         "use rk4 or dopri5 for jointed or wheeled bodies")
         self._per_step = backends.rhs_per_step(self.integrator, self.effects, len(self.names))
+        self.on_bound = V.choice("on_bound", on_bound, ON_BOUND)
+        if max_growth is not None:
+            max_growth = V.scalar("max_growth", max_growth, positive=True)
+            if not max_growth > 1.0:
+                raise V.LavenderInputError("max_growth", "must be > 1 (or None: no growth check)", f", got {max_growth!r}")
+        self.max_growth = max_growth
+        self._lock = threading.RLock()
+        self._has_models = bool(self._models.rows[:, LY.MODEL_KIND].any())
+        self._checked = None       # the last state that passed the checks (skips the re-check before a call)
+        self._setup_checks()
         self.t = 0.0
         self.steps = 0
         self.rhs_evals = 0
+
+    # ---- divergence checks ---------------------------------------------------------------
+    def _setup_checks(self) -> None:
+        nb = len(self.names)
+        I = self.params[:, LY.PARAM_I_B]
+        self._ratio = (I.max(axis=1) / I.min(axis=1)) if nb else np.zeros(0)
+        self._bound = validity_bound(self.integrator)
+        p = 0.0 if self._bound is None else self._bound[1]
+        self._wdt_scale = self.dt * (self._ratio ** p if p else np.ones(nb))
+        acted = np.zeros(nb, bool)
+        if len(self.effects):
+            from .effects import ROW_BODY
+            body = self.effects[:, ROW_BODY].astype(np.int64)
+            acted[:] = bool(np.any(body < 0))
+            acted[body[body >= 0]] = True
+        kind = self._models.rows[:, LY.MODEL_KIND].astype(np.int64) if nb else np.zeros(0, np.int64)
+        self._free = ~acted & (kind == 0)                      # E and |L| conserved
+        self._free_wheels = ~acted & (kind == KIND_WHEELS)     # total |L| conserved (motor torques are internal)
+        self._free_any = bool(self._free.any())
+        self._free_wheels_idx = [int(i) for i in np.flatnonzero(self._free_wheels)]
+        self._warned: set[int] = set()
+        evals = self._per_step if self._per_step is not None else 12
+        self._chunk = max(1, CHUNK_WORK // max(1, nb * evals))
+        self._reference()
+
+    def _invariants(self, x: np.ndarray, Omega: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(kinetic energy, |L|) per body, where the growth check reads them (else 0): E of the torque- and
+        force-free plain bodies (kinetic_energy; E catches their blow-ups — splitting keeps |L| exactly —
+        and is the cheaper kernel), |L| (body + wheels, wheel_momentum) of the wheeled ones."""
+        nb = len(self.names)
+        E, L = np.zeros(nb), np.zeros(nb)
+        with np.errstate(over="ignore", invalid="ignore"):
+            if self._free_any:
+                f = self._free
+                E[f] = K.kinetic_energy(self.params[f, LY.PARAM_M], self.params[f][:, LY.PARAM_I_B],
+                                        x[f][:, LY.STATE_V_W], x[f][:, LY.STATE_OMEGA_B])
+            for i in self._free_wheels_idx:
+                r = self._models.rows[i]
+                Lb, Lw = K.wheel_momentum(x[i, LY.STATE_Q], x[i, LY.STATE_OMEGA_B], Omega[i],
+                                          r[LY.MODEL_I_P].reshape(3, 3), r[LY.MODEL_J])
+                L[i] = np.linalg.norm(np.asarray(Lb) + np.asarray(Lw))
+        return E, L
+
+    def _reference(self) -> None:
+        """The growth check's reference values (at construction and after set_state), and per free body the
+        largest |omega| at which its energy cannot exceed max_growth * E0 (E <= T_translation + I_max |omega|^2 / 2,
+        both terms from the kinetic_energy kernel; v is constant on a force-free body): the check evaluates the
+        kernel only for a body above it, so it costs nothing while a run is far from its limit."""
+        self._E0, self._L0 = self._invariants(self.x, self._models.Omega)
+        nb = len(self.names)
+        self._w_safe = np.zeros(nb)
+        if self._free_any and self.max_growth is not None:
+            f = self._free
+            I = self.params[f][:, LY.PARAM_I_B]
+            with np.errstate(over="ignore", invalid="ignore"):
+                T = K.kinetic_energy(self.params[f, LY.PARAM_M], I, self.x[f][:, LY.STATE_V_W], np.zeros((int(f.sum()), 3)))
+                half_Imax = K.kinetic_energy(np.zeros(int(f.sum())), np.repeat(I.max(axis=1)[:, None], 3, axis=1),
+                                             np.zeros((int(f.sum()), 3)), np.tile([1.0, 0.0, 0.0], (int(f.sum()), 1)))
+                room = np.maximum(self.max_growth * self._E0[f] - T, 0.0)
+                self._w_safe[f] = np.sqrt(room / half_Imax) * (1 - 1e-12)   # rounding margin: never skip a violation
+
+    def _wdt(self, x: np.ndarray, w: np.ndarray | None = None) -> np.ndarray:
+        """Per body |omega|*dt*(I_max/I_min)**p, the quantity the validity bound limits (w: |omega| if known)."""
+        p = 0.0 if self._bound is None else self._bound[1]
+        with np.errstate(over="ignore", invalid="ignore"):   # an overflowing norm is inf: beyond any bound
+            if w is None:
+                w = np.linalg.norm(x[:, LY.STATE_OMEGA_B], axis=-1)
+            return w * self.dt * (self._ratio ** p if p else 1.0)
+
+    def _bound_text(self, value: float) -> str:
+        wmax, p = self._bound
+        what = "|omega|*dt" + (f"*(I_max/I_min)**{p:g}" if p else "")
+        return (f"{what} = {value:.3g} is beyond {self.integrator}'s validity bound {wmax:.4g} (WDT_MAX, "
+                f"derive/tableaux.py); reduce dt" + ("" if self.integrator == "dopri5" else " or use dopri5"))
+
+    def _violation(self, x: np.ndarray, Omega: np.ndarray, warn: bool = True, growth: bool = True) -> tuple[int, str] | None:
+        """The first body (index, cause) of state x that fails a check (growth=False: the bound only), or None;
+        for a wheeled body whose wheel damping is beyond the integrator's limit the cause says so first."""
+        v = self._violation_raw(x, Omega, warn, growth)
+        if v is not None and self._kind(v[0]) & KIND_WHEELS:
+            r = self._models.rows[v[0]]
+            why = backends.divergence_cause(x[v[0]], self.dt, self.integrator, Omega[v[0]],
+                                            (r[LY.MODEL_J], r[LY.MODEL_C_W]))
+            if "wheel damping" in why:
+                return v[0], f"{why}; {v[1]}"
+        return v
+
+    def _violation_raw(self, x, Omega, warn, growth):
+        with np.errstate(over="ignore", invalid="ignore"):   # an overflowing norm is inf: beyond any bound
+            om = x[:, LY.STATE_OMEGA_B]
+            w = np.sqrt(np.add.reduce(om * om, axis=1))
+        if self._bound is not None and not w.size == 0 and not float((w * self._wdt_scale).max()) <= self._bound[0]:
+            v = self._wdt(x)
+            bad = ~(v <= self._bound[0])
+            if bad.any():
+                if self.on_bound == "raise":
+                    b = int(np.flatnonzero(bad)[0])
+                    return b, self._bound_text(float(v[b]))
+                if warn:
+                    for b in np.flatnonzero(bad):
+                        if int(b) not in self._warned:
+                            self._warned.add(int(b))
+                            warnings.warn(f"body {self.names[b]!r}: {self._bound_text(float(v[b]))}; results beyond it "
+                                          "are not trusted (on_bound='warn')", ValidityBoundWarning, stacklevel=4)
+        g = self.max_growth
+        if growth and g is not None and (self._free_wheels_idx or (self._free_any and not bool((w <= self._w_safe).all()))):
+            E, L = self._invariants(x, Omega)
+            with np.errstate(over="ignore", invalid="ignore"):
+                badE = self._free & (self._E0 > 0) & ~(E <= g * self._E0)
+                badL = self._free_wheels & (self._L0 > 0) & ~(L <= g * self._L0)
+            bad = badE | badL
+            if bad.any():
+                b = int(np.flatnonzero(bad)[0])
+                if badE[b]:
+                    return b, (f"kinetic energy grew x{E[b] / self._E0[b]:.3g} (beyond max_growth = {g:g}) on a torque-free "
+                               f"body (|omega|*dt = {backends.norm_safe(x[b, LY.STATE_OMEGA_B]) * self.dt:.3g}): "
+                               f"{self.integrator} is unstable here; reduce dt")
+                return b, (f"|L| grew x{L[b] / self._L0[b]:.3g} (beyond max_growth = {g:g}) on a body no external effect "
+                           f"acts on (|omega|*dt = {backends.norm_safe(x[b, LY.STATE_OMEGA_B]) * self.dt:.3g}): "
+                           f"{self.integrator} is unstable here; reduce dt")
+        return None
+
+    def _snapshot(self) -> tuple:
+        m, ad = self._models, self._adaptive
+        return (self.x.copy(), m.Omega.copy(), m.applied.copy(),
+                None if ad is None else (ad.h.copy(), ad.nfev.copy()), self.steps, self.t, self.rhs_evals)
+
+    def _restore(self, snap: tuple) -> None:
+        x, W, u, ad, self.steps, self.t, self.rhs_evals = snap
+        self.x[...] = x
+        self._models.Omega[...] = W
+        self._models.applied[...] = u
+        if ad is not None:
+            self._adaptive.h[...], self._adaptive.nfev[...] = ad
 
     @property
     def rtol(self) -> float | None:
@@ -200,44 +403,143 @@ class Sim:
         return lines
 
     # ---- stepping -------------------------------------------------------------------------
-    def _advance(self, n: int) -> None:
-        models = self._models if self._models.rows[:, LY.MODEL_KIND].any() else None
+    def _backend_advance(self, n: int) -> None:
+        """n steps on the backend, counters updated; DivergenceError from the backend as it raised it."""
+        models = self._models if self._has_models else None
         ad = self._adaptive
         before = None if ad is None else ad.nfev.copy()
-        try:
-            self.backend.advance(self.x, self.params, self.effects, self.integrator, self.normalize, self.dt, n, models,
-                                 *(() if ad is None else (ad,)))
-        except DivergenceError as e:
-            raise DivergenceError(self.steps + e.step, e.body, e.cause, self.names[e.body],
-                                  t=(self.steps + e.step + 1) * self.dt) from None
+        self.backend.advance(self.x, self.params, self.effects, self.integrator, self.normalize, self.dt, n, models,
+                             *(() if ad is None else (ad,)))
         self.rhs_evals += n * self._per_step if ad is None else int(np.max(ad.nfev - before, initial=0))
         self.steps += n
         self.t = self.steps * self.dt
 
+    def _locate(self, limit: int) -> tuple[int, int, str] | None:
+        """From the current state (which passes the checks), the first k in 1..limit whose state after k
+        steps fails a check: (k, body, cause), found by re-running in pieces (each piece's end checked,
+        the failing piece split again). The state is left somewhere in between: the caller restores it."""
+        lo, hi = 0, limit
+        while True:
+            size = max(1, (hi - lo) // 16)
+            k, found = lo, None
+            while k < hi:
+                m = min(size, hi - k)
+                pre = self._snapshot()
+                try:
+                    self._backend_advance(m)
+                except DivergenceError:
+                    self._restore(pre)
+                    if m == 1:
+                        return None       # non-finite before any check failed
+                    found = (k, m, None)
+                    break
+                v = self._violation(self.x, self._models.Omega, warn=False)
+                if v is not None:
+                    if m == 1:
+                        return k + 1, v[0], v[1]
+                    self._restore(pre)
+                    found = (k, m, v)
+                    break
+                k += m
+            if found is None:
+                return None
+            lo, hi = found[0], found[0] + found[1]
+
+    def _advance(self, n: int) -> None:
+        if self.steps + n > MAX_STEPS:
+            raise V.LavenderInputError("n_steps", f"the Sim would pass MAX_STEPS = 2**53 steps in total "
+                                       f"({self.steps} done + {n})")
+        start = self._snapshot()
+        steps0 = self.steps
+
+        def fail(k: int, body: int, cause: str):   # k: 0-based index of the failing step within this call
+            self._restore(start)
+            return DivergenceError(steps0 + k, body, cause, self.names[body], t=(steps0 + k + 1) * self.dt)
+
+        try:
+            # before stepping: the bound (the state may have been written since the last check); the growth
+            # check ran on the end state of the previous call
+            if self._checked is None or not np.array_equal(self._checked, self.x):
+                v = self._violation(self.x, self._models.Omega, growth=False)
+                if v is not None:
+                    raise fail(0, v[0], "before the step: " + v[1])
+            done = 0
+            while done < n:
+                m = min(self._chunk, n - done)
+                chunk = start if done == 0 else self._snapshot()
+                try:
+                    self._backend_advance(m)
+                except DivergenceError as e:
+                    self._restore(chunk)
+                    hit = self._locate(e.step) if e.step > 0 else None
+                    if hit is not None:
+                        raise fail(done + hit[0] - 1, hit[1], hit[2]) from None
+                    raise fail(done + e.step, e.body, e.cause) from None
+                v = self._violation(self.x, self._models.Omega)
+                if v is not None:
+                    end = self.x.copy()
+                    self._restore(chunk)
+                    hit = self._locate(m)
+                    if hit is None:     # (dopri5: the pieces' trajectory differs from the chunk's by rounding)
+                        hit = (m, v[0], v[1])
+                    del end
+                    raise fail(done + hit[0] - 1, hit[1], hit[2]) from None
+                done += m
+            self._checked = self.x.copy()
+        except DivergenceError:
+            raise
+        except BaseException:           # KeyboardInterrupt between chunks, or any error: nothing half-applied
+            self._restore(start)
+            raise
+
     def step(self) -> None:
-        self._advance(1)
+        """Advance one step (see run)."""
+        with self._lock:
+            self._advance(1)
 
     def run(self, n_steps: int) -> None:
+        """Advance n_steps steps (0 <= n_steps <= MAX_STEPS).
+
+        Raises DivergenceError (step, body, cause; the Sim left as before the call) on a non-finite state,
+        a validity bound exceeded (on_bound="raise") or a growth beyond max_growth; see the module doc."""
         n = V.integer("n_steps", n_steps, minimum=0)
+        if n > MAX_STEPS:
+            raise V.LavenderInputError("n_steps", "must be at most MAX_STEPS = 2**53 (9.0e15)", f", got {n}")
         if n:
-            self._advance(n)
+            with self._lock:
+                self._advance(n)
 
     def run_for(self, duration: float) -> None:
-        """Advance by round(duration / dt) steps."""
-        self.run(int(round(V.scalar("duration", duration, nonnegative=True) / self.dt)))
+        """Advance by round(duration / dt) steps (as run; restored as run on divergence)."""
+        d = V.scalar("duration", duration, nonnegative=True)
+        n = d / self.dt
+        if not n <= MAX_STEPS:
+            raise V.LavenderInputError("duration", f"must be at most MAX_STEPS*dt = {MAX_STEPS * self.dt:.3g} s "
+                                       "(2**53 steps)", f", got {d!r}")
+        self.run(int(round(n)))
 
     def record(self, n_steps: int, every: int = 1) -> Trajectory:
-        """Advance n_steps, sampling the state every `every` steps; includes the initial sample."""
+        """Advance n_steps, sampling the state every `every` steps; includes the initial sample.
+
+        On DivergenceError (or KeyboardInterrupt) the Sim is left exactly as before the call."""
         n = V.integer("n_steps", n_steps, minimum=0)
         every = V.integer("every", every, minimum=1)
+        if n > MAX_STEPS:
+            raise V.LavenderInputError("n_steps", "must be at most MAX_STEPS = 2**53 (9.0e15)", f", got {n}")
         if n % every:
             raise V.LavenderInputError("every", f"must divide n_steps ({n})", f", got {every}")
-        xs, Ws, ts = [self.x.copy()], [self._models.Omega.copy()], [self.t]
-        for _ in range(n // every):
-            self._advance(every)
-            xs.append(self.x.copy())
-            Ws.append(self._models.Omega.copy())
-            ts.append(self.t)
+        with self._lock:
+            start = self._snapshot()
+            xs, Ws, ts = [self.x.copy()], [self._models.Omega.copy()], [self.t]
+            try:
+                for _ in range(n // every):
+                    self._advance(every)
+                    xs.append(self.x.copy())
+                    Ws.append(self._models.Omega.copy())
+                    ts.append(self.t)
+            except BaseException:
+                self._restore(start)
+                raise
         return Trajectory(self.names, np.array(ts), np.stack(xs), np.stack(Ws))
 
     # ---- state access ---------------------------------------------------------------------
@@ -280,9 +582,25 @@ class Sim:
             r = self._models.rows[i]
             x[LY.STATE_P_W], x[LY.STATE_V_W] = K.pivot_kinematics(x[LY.STATE_Q], x[LY.STATE_OMEGA_B],
                                                                  r[LY.MODEL_ANCHOR_W], r[LY.MODEL_R_B])
-        self.x[i] = x
-        if W is not None:
-            self._models.Omega[i] = W
+        field = "omega_w" if omega_w is not None else "omega_b"
+        with np.errstate(over="ignore", invalid="ignore"):
+            E = K.kinetic_energy(self.params[i, LY.PARAM_M], self.params[i, LY.PARAM_I_B], x[LY.STATE_V_W],
+                                 x[LY.STATE_OMEGA_B])
+        if not (np.all(np.isfinite(x)) and np.isfinite(E)):
+            raise V.LavenderInputError(field if (omega_b is not None or omega_w is not None) else "v_w",
+                                       "the body's kinetic energy is not representable (overflows float64)")
+        if self._bound is not None:
+            wdt = float(self._wdt(x[None])[0])
+            if not wdt <= self._bound[0]:
+                if self.on_bound == "raise":
+                    raise V.LavenderInputError(field, self._bound_text(wdt) + " (Sim(..., on_bound='warn') to allow it)")
+                warnings.warn(f"body {name!r}: {self._bound_text(wdt)}", ValidityBoundWarning, stacklevel=2)
+        with self._lock:
+            self.x[i] = x
+            if W is not None:
+                self._models.Omega[i] = W
+            E0, L0 = self._invariants(self.x, self._models.Omega)
+            self._E0[i], self._L0[i] = E0[i], L0[i]
 
     # ---- reaction wheels ------------------------------------------------------------------
     def _wheeled(self, name: str) -> int:

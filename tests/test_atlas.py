@@ -27,7 +27,8 @@ from lavendersim.validate import LavenderInputError
 
 CELL_KEYS = {"integrator", "omega_dt", "ratio", "axis", "status", "energy_drift", "energy_gain", "L_norm_drift",
              "L_norm_gain", "L_world_drift", "attitude_error", "omega_error", "steps", "dt", "T", "rhs_evals",
-             "backend", "rtol", "atol", "diverged_at_step", "message", "I_b", "omega_b0", "reference"}
+             "backend", "rtol", "atol", "diverged_at_step", "message", "I_b", "omega_b0", "reference",
+             "within_bound"}
 METRIC_KEYS = ("energy_drift", "energy_gain", "L_norm_drift", "L_norm_gain", "L_world_drift")
 
 

@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 import lavendersim as lv
+from lavendersim.errors import ValidityBoundWarning
 from lavendersim import reference as R
 
 # Long NumPy runs are in the slow set (NUMPY_SLOW: tests/conftest.py); test_c_and_numpy_agree
@@ -198,9 +199,14 @@ def test_implicit_gyro_fast_major_axis_spin_never_gains_energy(backend):
 
 @pytest.mark.parametrize("backend", BACKENDS)
 def test_implicit_gyro_stays_stable_at_huge_omega_dt(backend):
-    sim = lv.Sim(scene(omega_b=(30.0, 200.0, 5.0)), dt=0.05, integrator="implicit_gyro", backend=backend)  # |w| dt ~ 10
+    # |w| dt ~ 10: stable, but beyond implicit_gyro's validity bound (pi, attitude aliasing): the user opts in
+    with pytest.raises(lv.DivergenceError, match="validity bound"):
+        lv.Sim(scene(omega_b=(30.0, 200.0, 5.0)), dt=0.05, integrator="implicit_gyro", backend=backend).run(1)
+    sim = lv.Sim(scene(omega_b=(30.0, 200.0, 5.0)), dt=0.05, integrator="implicit_gyro", backend=backend,
+                 on_bound="warn")
     E0 = sim.kinetic_energy()
-    sim.run(2000)
+    with pytest.warns(ValidityBoundWarning, match="implicit_gyro's validity bound"):
+        sim.run(2000)
     assert np.all(np.isfinite(sim.x)) and sim.kinetic_energy() <= E0 * (1 + 1e-12)
     assert abs(np.linalg.norm(sim.state("b").q) - 1) <= 1e-12
 

@@ -155,6 +155,15 @@ def tolerance_cause(adaptive: Adaptive, h: float, dt: float, x: np.ndarray) -> s
             "effect strengths (stiff damping), or use implicit_gyro for very fast spin")
 
 
+def no_root_cause(x_before: np.ndarray, I_b: np.ndarray, dt: float) -> str:
+    """Why implicit_gyro stopped: the Newton solve of the step from x_before did not converge."""
+    w = norm_safe(np.asarray(x_before[LAYOUT.STATE_OMEGA_B], dtype=np.float64))
+    I = np.asarray(I_b, dtype=np.float64)
+    return (f"Newton did not converge: implicit_gyro's solve of I(omega+ - omega) + dt omega+ x I omega+ = dt tau_b "
+            f"found no root within {TABLEAUX.GYRO_MAX_ITER} iterations (|omega|*dt = {w * dt:.3g}, "
+            f"I_max/I_min = {float(I.max() / I.min()):.3g}); reduce dt")
+
+
 def divergence_cause(x_before: np.ndarray, dt: float, integrator: str, Omega_before: np.ndarray | None = None,
                      wheels: tuple | None = None) -> str:
     """A plain guess at why one body's step went non-finite, from its state before the step

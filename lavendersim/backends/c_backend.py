@@ -17,7 +17,7 @@ from ..effects import ROW, ROW_BODY
 from ..errors import DivergenceError, StaleBuildError
 from .._install import rebuild_command
 from ..generated import layout as LY
-from . import KIND_WHEELS, PLAIN_ONLY, Adaptive, Models, norm_safe, tolerance_cause
+from . import KIND_WHEELS, PLAIN_ONLY, Adaptive, Models, no_root_cause, norm_safe, tolerance_cause
 
 REBUILD = rebuild_command()
 HASHED = ("kernels.c", "kernels.h", "layout.h", "tableaux.h")  # every generated file the extension compiles
@@ -254,5 +254,7 @@ class CBackend:
                 model = (rows[body], W0, None if W0 is None else pre_W, command[body])
         if tol_cause is not None:
             raise DivergenceError(step, body, tol_cause)
+        if status == 3:  # LV_NO_ROOT: implicit_gyro's Newton solve did not converge
+            raise DivergenceError(step, body, no_root_cause(pre, params[body, LY.PARAM_I_B], float(dt)))
         raise DivergenceError(step, body, _cause(snapshot[body], pre, params, effects, body, step,
                                                  float(dt), integrator, model))

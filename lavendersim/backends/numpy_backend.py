@@ -20,7 +20,7 @@ from ..generated import layout as LY
 from ..generated import tableaux as T
 from ..kernels import K
 from . import (DOPRI5_HMIN_REL, DOPRI5_MAX_SUBSTEPS, KIND_JOINT, KIND_WHEELS, PLAIN_ONLY, Adaptive, Models,
-               divergence_cause, tolerance_cause)
+               divergence_cause, no_root_cause, tolerance_cause)
 
 P, Q, V, W = LY.STATE_P_W, LY.STATE_Q, LY.STATE_V_W, LY.STATE_OMEGA_B  # state-row fields
 X, OM = LY.XS_X, LY.XS_OMEGA                                               # extended state [x, Omega]
@@ -305,19 +305,27 @@ def _rk4_expmap(plan, x, h):
 def gyro_newton(I, w, tau_b, h, iterations: int = T.GYRO_MAX_ITER):
     """Solve I(w1 − w) + h w1 × (I w1) = h tau_b for w1 (rows of bodies) by Newton's method from w1 = w,
     to rounding (implicit_gyro_newton: the derived residual, its SymPy Jacobian, the adjugate solve).
-    Solved exactly the torque-free step never gains energy: E − E1 = ½(w − w1)ᵀI(w − w1)."""
+    Solved exactly the torque-free step never gains energy: E − E1 = ½(w − w1)ᵀI(w − w1).
+
+    Returns (w1, converged): converged (rows) is False where the last update is above
+    sqrt(GYRO_ACCEPT_SQ) |w1| after the iterations (no root near w: the caller reports a divergence)."""
     w1 = w.copy()
+    done = np.zeros(w.shape[0], bool)
     for _ in range(iterations):
-        w1, d = K.implicit_gyro_newton(I, w, tau_b, h, w1)
-        if not np.any(np.sum(d * d, axis=1) > T.GYRO_TOL_SQ * np.sum(w1 * w1, axis=1)):
-            break
-    return w1
+        w1n, d = K.implicit_gyro_newton(I, w, tau_b, h, w1)
+        w1 = np.where(done[:, None], w1, w1n)  # a body that met the rule keeps its iterate (as C stops per body)
+        dd, ww = np.sum(d * d, axis=1), np.sum(w1 * w1, axis=1)
+        done |= ~(dd > T.GYRO_TOL_SQ * ww)
+        if done.all():
+            return w1, done
+    return w1, done | ~(dd > T.GYRO_ACCEPT_SQ * ww)
 
 
 def _implicit_gyro(plan, x, h):
     """Loads at the start; w1 by gyro_newton; q ← q ⊗ exp(h w1/2) (quat_exp_step); v += h F/m; p += h v."""
     F, tb = plan.loads(x)
-    w1 = gyro_newton(plan.I, x[:, W], tb, h)
+    w1, ok = gyro_newton(plan.I, x[:, W], tb, h)
+    plan.no_root = None if ok.all() else ~ok
     xn = x.copy()
     xn[:, Q] = K.quat_exp_step(x[:, Q], w1, h)
     xn[:, W] = w1
@@ -408,6 +416,13 @@ class NumpyBackend:
         for i in range(n_steps):
             u = None if command is None else plan.applied(x, command)
             xn = step(plan, x, integrator, normalize, dt, u)
+            no_root = getattr(plan, "no_root", None)
+            if no_root is not None:
+                bad = no_root | ~np.isfinite(xn).all(axis=1)
+                b = int(np.flatnonzero(bad)[0])
+                if no_root[b]:
+                    plan.no_root = None
+                    raise DivergenceError(i, b, no_root_cause(x[b, X], plan.I[b], dt))
             if not np.isfinite(xn).all():
                 b = int(np.flatnonzero(~np.isfinite(xn).all(axis=1))[0])
                 raise DivergenceError(i, b, divergence_cause(x[b, X], dt, integrator, *plan.wheel_info(x, b)))

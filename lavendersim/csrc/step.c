@@ -691,30 +691,38 @@ static void splitting_step(const body_ctx *c, double *x, double h, int damped)
 /* Solve I (w1 - w) + h w1 x (I w1) = h tau_b for w1 by Newton's method (implicit_gyro_newton: the derived
    residual, its SymPy Jacobian and the adjugate solve) to rounding, at most LV_GYRO_MAX_ITER iterations,
    starting from w1 = w. Solved exactly, the torque-free step never gains energy:
-   E - E1 = (w - w1)^T I (w - w1) / 2 >= 0. */
-static void gyro_newton(const double *I, const double *w, const double *tau_b, double h, double *w1)
+   E - E1 = (w - w1)^T I (w - w1) / 2 >= 0. Returns 1 when it converged: the last update met the stopping
+   rule, or (an ill-conditioned solve stalls at rounding) is at most sqrt(LV_GYRO_ACCEPT_SQ) |w1|; 0 when
+   the iteration wandered (no root near: the step is reported as a divergence, never returned). */
+static int gyro_newton(const double *I, const double *w, const double *tau_b, double h, double *w1)
 {
-    double d[3];
+    double d[3], dd = 0.0, ww = 0.0;
     int it;
     w1[0] = w[0]; w1[1] = w[1]; w1[2] = w[2];
     for (it = 0; it < LV_GYRO_MAX_ITER; it++) {
         lv_implicit_gyro_newton(I, w, tau_b, h, w1, w1, d);
+        dd = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
+        ww = w1[0] * w1[0] + w1[1] * w1[1] + w1[2] * w1[2];
         /* |d| <= 1e-16 |w1| (or non-finite: caught by the caller) */
-        if (!(d[0] * d[0] + d[1] * d[1] + d[2] * d[2] > LV_GYRO_TOL_SQ * (w1[0] * w1[0] + w1[1] * w1[1] + w1[2] * w1[2])))
-            break;
+        if (!(dd > LV_GYRO_TOL_SQ * ww))
+            return 1;
     }
+    return !(dd > LV_GYRO_ACCEPT_SQ * ww);
 }
 
 /* One implicit_gyro step: loads at the start (explicit), w1 from gyro_newton, q <- q (x) exp(h w1 / 2)
-   (quat_exp_step; unit by construction), then v += h F/m, p += h v (semi_implicit_translation). */
-static void gyro_step(const body_ctx *c, double *x, double h)
+   (quat_exp_step; unit by construction), then v += h F/m, p += h v (semi_implicit_translation).
+   Returns 0 when the Newton solve did not converge (x then holds an unspecified state). */
+static int gyro_step(const body_ctx *c, double *x, double h)
 {
     double F[3] = {0.0, 0.0, 0.0}, tb[3] = {0.0, 0.0, 0.0}, w1[3];
+    int ok;
     if (c->has) plain_loads(c, x, F, tb);
-    gyro_newton(c->prm + LV_PARAM_I_B, x + LV_STATE_OMEGA_B, tb, h, w1);
+    ok = gyro_newton(c->prm + LV_PARAM_I_B, x + LV_STATE_OMEGA_B, tb, h, w1);
     lv_quat_exp_step(x + LV_STATE_Q, w1, h, x + LV_STATE_Q);
     memcpy(x + LV_STATE_OMEGA_B, w1, sizeof w1);
     lv_semi_implicit_translation(c->m, x + LV_STATE_P_W, x + LV_STATE_V_W, F, h, x + LV_STATE_P_W, x + LV_STATE_V_W);
+    return ok;
 }
 
 /* One splitting4 step: splitting_step with step gamma_i h, i = 1 .. LV_SPLIT4_STAGES (LV_SPLIT4_GAMMA, a
@@ -778,9 +786,10 @@ static void rk4_expmap_step(const body_ctx *c, double *x, double h)
 }
 
 /* Advance plain body b by n_steps of a plain-only integrator (splitting, implicit_gyro, splitting4,
-   rk4_expmap); contract as advance_block with n = 1. */
+   rk4_expmap); contract as advance_block with n = 1, and *why = LV_DIVERGED (non-finite) or LV_NO_ROOT
+   (implicit_gyro's Newton solve did not converge). */
 static long advance_structured(double *state, const double *params, long b, const lv_effect_index *ix,
-                               int integrator, int normalize, double dt, long n_steps, double *last)
+                               int integrator, int normalize, double dt, long n_steps, double *last, int *why)
 {
     body_ctx c;
     double x[LV_STATE_SIZE], xn[LV_STATE_SIZE];
@@ -797,11 +806,15 @@ static long advance_structured(double *state, const double *params, long b, cons
             splitting4_step(&c, xn, dt, damped);
         else if (integrator == LV_INTEGRATOR_RK4_EXPMAP)
             rk4_expmap_step(&c, xn, dt);
-        else
-            gyro_step(&c, xn, dt);
+        else if (!gyro_step(&c, xn, dt)) {
+            *why = LV_NO_ROOT;
+            memcpy(last, x, sizeof x);
+            return s;
+        }
         if (normalize) lv_quat_normalize(xn + LV_STATE_Q, xn + LV_STATE_Q);
         for (i = 0; i < LV_STATE_SIZE; i++) {
             if (!isfinite(xn[i])) {
+                *why = LV_DIVERGED;
                 memcpy(last, x, sizeof x);
                 return s;
             }
@@ -963,12 +976,13 @@ int lv_simulate(double *state, const double *params, long nb,
         }
     } else if (LV_INTEGRATOR_PLAIN_ONLY(integrator)) {
         for (b = 0; b < nb && limit > 0; b++) {
-            s = advance_structured(state, params, b, &ix, integrator, normalize, dt, limit, last[0]);
+            int why = LV_DIVERGED;
+            s = advance_structured(state, params, b, &ix, integrator, normalize, dt, limit, last[0], &why);
             if (s < 0) continue;
             memcpy(state + b * LV_STATE_SIZE, last[0], sizeof last[0]);
             limit = s;
             best_body = b;
-            status = LV_DIVERGED;
+            status = why;
         }
     } else {
         ids = (long *)malloc(((size_t)nb + 1) * sizeof(long));

@@ -70,6 +70,8 @@ enum {
     LV_TOLERANCE = 2,   /* dopri5: the step size fell below dt*1e-12 (or over 10^6 substeps in one step)
                            without meeting rtol/atol; same state contract as LV_DIVERGED, and h[fail_body]
                            holds the step size that was too small */
+    LV_NO_ROOT = 3,     /* implicit_gyro: the Newton solve of a step did not converge (no root near omega);
+                           same state contract as LV_DIVERGED */
     LV_BAD_ARGUMENT = -1,
     LV_UNKNOWN_EFFECT = -2, /* an effect row's code is no declared effect's (*fail_step = the row); nothing changed */
     LV_NO_MEMORY = -3       /* the per-body effect index could not be allocated; nothing changed */
