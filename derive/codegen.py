@@ -521,9 +521,24 @@ def render() -> dict[str, str]:
     h, c = print_c(printed, forces)
     files = {"kernels.h": h, "kernels.c": c, "kernels_numpy.py": print_numpy(printed, forces, self_check=True),
              "kernels_casadi.py": print_casadi(printed), "effects_meta.py": meta_module(effects, HEADER),
-             "EQUATIONS.md": print_markdown(printed, effects), "__init__.py": f'"""{HEADER}"""\n'}
+             "EQUATIONS.md": print_markdown(printed, effects)}
     files.update(contract_files())
+    files["__init__.py"] = package_init(sorted(n for n in files if n.endswith(".py")))
     return files
+
+
+def package_init(modules: list[str]) -> str:
+    """generated/__init__.py: importing any generated module first checks these Python modules against
+    manifest.json (lavendersim._integrity.check_generated), so a hand edit of layout.py, tableaux.py,
+    effects_meta.py, kernels_casadi.py or kernels_numpy.py raises GeneratedFileError instead of silently
+    changing what the NumPy backend computes — also a file cut mid-statement, which a module's own
+    first-line check cannot catch (Python compiles the whole file first)."""
+    names = ", ".join(repr(m) for m in modules)
+    return (f'"""{HEADER}"""\n'
+            "from pathlib import Path as _Path\n\n"
+            "from lavendersim._integrity import check_generated as _check_generated\n\n"
+            f"for _name in ({names},):\n"
+            "    _check_generated(_Path(__file__).with_name(_name))  # edited or truncated -> GeneratedFileError\n")
 
 
 def contract_files() -> dict[str, str]:

@@ -7,10 +7,12 @@ and the command that regenerates it — a hand edit (a box's inertia doubled) or
 runs silently and never surfaces as an AttributeError. One file is hashed once per process (cached
 by size and modification time); ``import lavendersim`` does not trigger it.
 
-The check runs twice over, so that every way of importing the kernels is covered: lavendersim.kernels
-calls :func:`check_generated` before importing the module (this also covers a file truncated to
-nothing), and derive prints a call to :func:`check_generated` as the first statement of
-kernels_numpy.py (a direct ``from lavendersim.generated import kernels_numpy``).
+Every way of importing a generated module is covered: derive prints generated/__init__.py to check
+every Python module of the package (kernels_numpy, kernels_casadi, layout, tableaux, effects_meta)
+before any of them is imported — this also catches a file cut mid-statement, which a module's own
+check cannot (Python compiles the whole file first); lavendersim.kernels checks kernels_numpy.py
+before importing it, and derive prints a call to :func:`check_generated` as the first statement of
+kernels_numpy.py (a copy of the file imported on its own).
 Standard library only.
 """
 from __future__ import annotations

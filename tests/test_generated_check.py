@@ -69,7 +69,10 @@ def test_a_hand_edit_raises_naming_the_file_and_derive(gen_copy):
 def test_a_truncated_file_raises_not_attribute_error(gen_copy, keep):
     p = gen_copy / "kernels_numpy.py"
     data = p.read_bytes()
-    p.write_bytes(data[: int(len(data) * keep)])
+    cut = int(len(data) * keep)
+    if keep == 0.5:          # cut at a kernel's start, so the rest still compiles and the module's own check runs
+        cut = data.rindex(b"\ndef ", 0, cut) + 1
+    p.write_bytes(data[:cut])
     with pytest.raises(GeneratedFileError, match="lavendersim derive"):
         _integrity.check_generated(p)
     if keep == 0.5:          # cut after the module's own check: importing it raises the same error
@@ -135,3 +138,19 @@ def test_the_package_file_is_checked_and_the_check_is_printed_by_derive():
     _integrity.check_generated(GEN / "kernels_numpy.py")          # the committed tree is consistent
     head = (GEN / "kernels_numpy.py").read_text(encoding="utf-8").split("import numpy", 1)[0]
     assert "_check_generated(__file__)" in head                    # before any kernel is defined
+
+
+@pytest.mark.parametrize("name", ["tableaux.py", "layout.py", "effects_meta.py", "kernels_casadi.py", "kernels_numpy.py"])
+def test_every_generated_python_module_is_checked_when_the_package_is_imported(gen_copy, name):
+    """generated/__init__.py checks every Python module of the package: a hand edit of, e.g., an RK4
+    weight in tableaux.py raises before any module of the package is used (and a kernels_numpy.py cut
+    mid-statement raises GeneratedFileError, not the SyntaxError its own first-line check cannot pre-empt)."""
+    _integrity.check_generated(gen_copy / name)                          # the intact copy passes
+    p = gen_copy / name
+    p.write_text(p.read_text(encoding="utf-8") + "\n# hand edit\n", encoding="utf-8")
+    spec = importlib.util.spec_from_file_location(f"lavendersim_test_generated_pkg_{name[:-3]}", gen_copy / "__init__.py",
+                                                  submodule_search_locations=[str(gen_copy)])
+    module = importlib.util.module_from_spec(spec)
+    with pytest.raises(GeneratedFileError, match=name.replace(".", r"\.")):
+        spec.loader.exec_module(module)
+    assert "`lavendersim derive`" in str(pytest.raises(GeneratedFileError, spec.loader.exec_module, module).value)
