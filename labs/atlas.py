@@ -28,7 +28,9 @@ Per cell (results.json "cells", sorted by integrator, axis, ratio, |ω|·dt — 
   status           ok | diverged (DivergenceError: the step is recorded) | blew_up (finite, no error,
                    but the energy or |L| more than doubled: a silent blow-up; a decay, such as
                    implicit_gyro's dissipation, is not one) | silent_nan
-                   (a non-finite state without DivergenceError: a bug) | error (refused the case)
+                   (a non-finite state without DivergenceError: a bug) | error (refused the case) |
+                   not_run (more than NUMPY_MAX_STEPS steps while the C backend is unavailable: left
+                   unmapped rather than run for minutes on NumPy; the lab's checks use the cells that ran)
   energy_drift     max over the samples |E(t) − E(0)| / E(0);   energy_gain  max (E(t)/E(0) − 1)
   L_norm_drift     max | |L_b(t)| − |L_b(0)| | / |L_b(0)|   (|L|, the Casimir)
   L_world_drift    max |L_w(t) − L_w(0)| / |L_w(0)|           (the conserved world vector; ≥ the above)
@@ -133,7 +135,10 @@ SPLITTING_L_PER_STEP = 4.0       # world-L drift of splitting ≤ 4 ε per step:
 # allowance per flow (measured: 2.5 ε per step at most over the quick grid)
 SPLITTING4_L_PER_STEP = SPLITTING_L_PER_STEP * len(TABLEAUX.SPLIT4_SEQ) / len(TABLEAUX.STRANG)
 RK4_SMALL_WDT = 1e-3
-STATUSES = ("ok", "diverged", "blew_up", "silent_nan", "error")
+STATUSES = ("ok", "diverged", "blew_up", "silent_nan", "error", "not_run")
+# Without the C backend, cells longer than this are "not_run" (the quick atlas's |ω|·dt = 1e-4 column,
+# ~3e5 steps per cell, would take ~10 s each on NumPy: half an hour for lab all on a compiler-less machine).
+NUMPY_MAX_STEPS = 40_000
 
 
 def add_arguments(parser) -> None:
@@ -270,6 +275,10 @@ def run_cell(integrator: str, wdt: float, ratio: float, axis: str, backend: str,
     scene.add_body(lv.Body("body", 1.0, I_b, omega_b=w0, q=H.Q0))
     bound = S.validity_bound(integrator)
     cell["within_bound"] = bool(bound is None or float(np.linalg.norm(w0)) * dt * ratio ** bound[1] <= bound[0])
+    if n > NUMPY_MAX_STEPS and cell["backend"] != "c":     # long, and the C backend is unavailable
+        cell.update(status="not_run", message=f"{n} steps on the NumPy backend: not run (more than NUMPY_MAX_STEPS = "
+                                              f"{NUMPY_MAX_STEPS} without the C backend: {B.c_unavailable()})")
+        return cell
     try:
         # the atlas maps behaviour beyond each integrator's declared validity bound too: it opts in with
         # on_bound="warn" (a default Sim raises DivergenceError there); the growth check stays at its default
@@ -469,6 +478,8 @@ def atlas_checks(cells: list[dict], integrators, rtol: float) -> tuple[list[C.Ch
         The checks and a flat dict of the figures they measured.
     """
     checks, fig = [], {}
+    fig["cells_not_run"] = sum(c["status"] == "not_run" for c in cells)     # no C backend: see NUMPY_MAX_STEPS
+    cells = [c for c in cells if c["status"] != "not_run"]
     bad = [c for c in cells if c["status"] in ("silent_nan", "error")]
     checks.append(C.holds("no_silent_nan_or_error", not bad,
                           "every non-finite run raised DivergenceError and no integrator refused a cell"
@@ -535,10 +546,11 @@ def hard_case_points(wdts) -> list[dict]:
 # ------------------------------------------------------------------------------------------ pictures
 
 STATUS_COLORS = {"diverged": "#9e9e9e", "blew_up": "#e41a1c", "silent_nan": "#ff00ff", "error": "#ffffff",
-                 "no_reference": "#c6dbef"}
+                 "no_reference": "#c6dbef", "not_run": "#fff7bc"}
 STATUS_TEXT = {"diverged": "diverged: DivergenceError raised", "blew_up": "silent blow-up: E or |L| more than doubled, no error",
                "silent_nan": "silent NaN: non-finite without DivergenceError", "error": "refused (error)",
-               "no_reference": "no exact reference for this cell"}
+               "no_reference": "no exact reference for this cell",
+               "not_run": f"not run: > {NUMPY_MAX_STEPS} steps without the C backend"}
 METRICS = {  # metric -> (file, colour-bar label, vmax, bound label)
     "energy_drift": ("atlas_energy.png", "relative energy drift  max_t |E(t) − E(0)| / E(0)", 1.0,
                      "energy drift ≤ {b:.0e}"),
@@ -548,7 +560,7 @@ METRICS = {  # metric -> (file, colour-bar label, vmax, bound label)
                        "attitude error ≤ {b:.0e} rad"),
 }
 OVERVIEW_COLORS = ("#1a9850", "#a6d96a", STATUS_COLORS["diverged"], STATUS_COLORS["blew_up"],
-                   STATUS_COLORS["silent_nan"], STATUS_COLORS["error"])
+                   STATUS_COLORS["silent_nan"], STATUS_COLORS["error"], STATUS_COLORS["not_run"])
 
 
 def _edges(values) -> np.ndarray:
@@ -621,6 +633,15 @@ def _decorate(ax, integ, axis, row, col, nrows, xe, ye, hard_points) -> None:
         if p["integrator"] == integ and p["axis"] == axis:
             ax.plot(p["omega_dt"], p["ratio"], "o" if p["dt_range"] else "*", ms=5 if p["dt_range"] else 9,
                     mfc="white", mec="k", mew=0.8, zorder=5)
+
+
+def _not_run_handle(cells) -> list:
+    """The legend entry for cells that were not run (none when every cell ran)."""
+    from matplotlib.patches import Patch
+
+    if not any(c["status"] == "not_run" for c in cells):
+        return []
+    return [Patch(facecolor=STATUS_COLORS["not_run"], edgecolor="k", lw=0.5, label=STATUS_TEXT["not_run"])]
 
 
 def _legend_handles(extra: list, hatched: bool = False) -> list:
@@ -721,6 +742,7 @@ def metric_figure(metric: str, cells, integrators, wdts, ratios, hard_points):
     if any(c["status"] == "ok" and c[metric] is None for c in cells):
         extra.append(Patch(facecolor=STATUS_COLORS["no_reference"], edgecolor="k", lw=0.5,
                            label=STATUS_TEXT["no_reference"]))
+    extra += _not_run_handle(cells)
     fig.legend(handles=_legend_handles(extra, hatched=True), loc="outside lower center", ncols=3, fontsize=7.5,
                frameon=False)
     return fname, fig
@@ -732,7 +754,7 @@ def _overview_code(c) -> float:
     if c["status"] == "ok":
         within = all(c[k] is not None and c[k] <= b for k, b in BOUNDS.items())
         return 0.0 if within else 1.0
-    return float(2 + ("diverged", "blew_up", "silent_nan", "error").index(c["status"]))
+    return float(2 + ("diverged", "blew_up", "silent_nan", "error", "not_run").index(c["status"]))
 
 
 def status_figure(cells, integrators, wdts, ratios, hard_points):
@@ -754,6 +776,7 @@ def status_figure(cells, integrators, wdts, ratios, hard_points):
     bounds = ", ".join(f"{k.replace('_', ' ')} ≤ {b:.0e}" for k, b in BOUNDS.items())
     extra = [Patch(facecolor=OVERVIEW_COLORS[0], edgecolor="k", lw=0.5, label=f"stable, within lab hard's bounds ({bounds})"),
              Patch(facecolor=OVERVIEW_COLORS[1], edgecolor="k", lw=0.5, label="stable (finite, no blow-up), a bound missed")]
+    extra += _not_run_handle(cells)
     fig.legend(handles=_legend_handles(extra), loc="outside lower center", ncols=3, fontsize=7.5, frameon=False)
     return "atlas_status.png", fig
 
@@ -786,7 +809,8 @@ def _summary(cells, integrators) -> dict:
         for st in STATUSES:
             fig[f"cells_{integ}_{st}"] = sum(c["status"] == st for c in mine)
         wdts = sorted({c["omega_dt"] for c in mine})
-        stable = [w for w in wdts if all(c["status"] == "ok" for c in mine if c["omega_dt"] <= w)]
+        stable = [w for w in wdts if all(c["status"] == "ok" for c in mine
+                                         if c["omega_dt"] <= w and c["status"] != "not_run")]
         fig[f"stable_up_to_omega_dt_{integ}"] = max(stable) if stable else 0.0
     return fig
 

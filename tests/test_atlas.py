@@ -221,3 +221,31 @@ def test_cli_help_and_registration():
     bad = subprocess.run([sys.executable, "-m", "lavendersim", "lab", "atlas", "--quick", "--workers", "0"],
                          capture_output=True, text=True, timeout=120)
     assert bad.returncode == 2 and "workers" in bad.stderr and "Traceback" not in bad.stderr
+
+
+def test_without_the_c_backend_long_cells_are_not_run_and_drawn_so(monkeypatch):
+    """No compiler: a cell of more than NUMPY_MAX_STEPS steps is "not_run" (recorded with why, never run
+    for minutes on NumPy), its colour is explained in the legend, and the checks use the cells that ran."""
+    import lavendersim.backends as backends
+
+    monkeypatch.setattr(backends, "c_unavailable", lambda: "the C extension is not built (test)")
+    wdt_long = 1e-4
+    assert A.horizon_steps(wdt_long) > A.NUMPY_MAX_STEPS
+    cell = A.run_cell("rk4", wdt_long, 1.0, "major", "auto", 1e-6, 1e-12)
+    assert cell["status"] == "not_run" and cell["rhs_evals"] is None and cell["backend"] == "auto"
+    assert "NUMPY_MAX_STEPS" in cell["message"] and "not built (test)" in cell["message"]
+    short = A.run_cell("rk4", 1.0, 1.0, "major", "auto", 1e-6, 1e-12)
+    assert short["status"] == "ok" and short["backend"] == "auto"
+    checks, fig = A.atlas_checks([cell, short], ["rk4"], 1e-6)
+    assert fig["cells_not_run"] == 1
+    f_name, f = A.status_figure([cell, short], ["rk4"], [wdt_long, 1.0], [1.0], [])
+    labels = [t.get_text() for leg in f.legends for t in leg.get_texts()]
+    assert A.STATUS_TEXT["not_run"] in labels
+
+
+def test_with_the_c_backend_long_cells_run():
+    if B.c_unavailable() is not None:
+        pytest.skip(f"the C backend is unavailable here: {B.c_unavailable()}")
+    cell = A.run_cell("splitting", 1e-3 / 2, 1.0, "major", "numpy", 1e-6, 1e-12)
+    assert A.horizon_steps(1e-3 / 2) > A.NUMPY_MAX_STEPS
+    assert cell["status"] == "ok" and cell["backend"] == "c"
