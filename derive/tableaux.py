@@ -135,6 +135,36 @@ WDT_RATIO_EXPONENT = {"euler": R(0), "semi_implicit_euler": R(0), "rk4": R(0), "
                       "implicit_gyro": R(0), "splitting4": R(1, 2), "rk4_expmap": R(0)}
 
 
+def _stability_polynomial(A, b) -> sp.Expr:
+    """R(z) = 1 + z bᵀ (I − z A)⁻¹ 1 of an explicit Runge–Kutta tableau (y' = λy: y₁ = R(λh) y₀)."""
+    z = sp.Symbol("z")
+    n = len(b)
+    Am = sp.Matrix(n, n, lambda i, j: A[i][j] if j < len(A[i]) else 0)
+    return sp.expand(1 + z * (sp.Matrix(b).T * (sp.eye(n) - z * Am).inv() * sp.ones(n, 1))[0])
+
+
+def _real_axis_limit(R_z: sp.Expr) -> float:
+    """The x > 0 where |R(−x)| first reaches 1: a decaying mode λ < 0 is stable for |λ| h below it."""
+    z, x = sp.Symbol("z"), sp.Symbol("x")
+    roots = []
+    for side in (1, -1):
+        poly = sp.Poly(sp.expand(R_z.subs(z, -x) - side), x)
+        roots += [float(sp.re(r)) for r in poly.nroots(n=30) if abs(sp.im(r)) < 1e-25 and sp.re(r) > 1e-12]
+    return min(roots)
+
+
+def real_axis_stability() -> dict:
+    """Per explicit integrator, the stability limit on the negative real axis, from its own tableau:
+    a linear decay λ (a damping c/I or a wheel's c_w/J) is stable while |λ|·h stays below it —
+    the Euler family 2, RK4 (and rk4_expmap) 2.785…, Dormand–Prince 5 3.306…. divergence_cause names it."""
+    # RK4 as tableaux.h applies it: stage s at x + c_s h k_{s-1}, i.e. a subdiagonal A with a_{s,s-1} = c_s
+    rk4_a = [[]] + [[0] * (s - 1) + [RK4_C[s]] for s in range(1, len(RK4_C))]
+    rk4 = _real_axis_limit(_stability_polynomial(rk4_a, [R(n, RK4_B_DEN) for n in RK4_B_NUM]))
+    dp5 = _real_axis_limit(_stability_polynomial(DP_A[:6], DP_A[6]))
+    euler = _real_axis_limit(1 + sp.Symbol("z"))
+    return {"euler": euler, "semi_implicit_euler": euler, "rk4": rk4, "rk4_expmap": rk4, "dopri5": dp5}
+
+
 def dp_b() -> tuple:
     return tuple(DP_A[6]) + (R(0),)
 
@@ -258,5 +288,8 @@ def print_python() -> str:
     out.append("WDT_MAX = {" + ", ".join(f"{n!r}: {float(WDT_MAX[n])!r}" for n in sorted(WDT_MAX)) + "}")
     out.append("WDT_RATIO_EXPONENT = {" + ", ".join(f"{n!r}: {float(WDT_RATIO_EXPONENT[n])!r}"
                                                     for n in sorted(WDT_RATIO_EXPONENT)) + "}")
+    out.append("# linear stability limit on the negative real axis, |lambda| h (from each explicit tableau; derive/tableaux.py)")
+    lim = real_axis_stability()
+    out.append("REAL_AXIS_STABILITY = {" + ", ".join(f"{n!r}: {lim[n]!r}" for n in sorted(lim)) + "}")
     out.append("")
     return "\n".join(out)

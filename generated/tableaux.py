@@ -69,3 +69,5 @@ SPLIT4_SEQ = ((0, 0.20724538589718786), (1, 0.20724538589718786), (2, 0.41449077
 # validity bounds: |omega| dt (I_max/I_min)**WDT_RATIO_EXPONENT[name] <= WDT_MAX[name] (derive/tableaux.py)
 WDT_MAX = {'euler': 0.1, 'implicit_gyro': 3.141592653589793, 'rk4': 2.8284271247461903, 'rk4_expmap': 2.8284271247461903, 'semi_implicit_euler': 0.1, 'splitting': 1.0, 'splitting4': 1.0}
 WDT_RATIO_EXPONENT = {'euler': 0.0, 'implicit_gyro': 0.0, 'rk4': 0.0, 'rk4_expmap': 0.0, 'semi_implicit_euler': 0.0, 'splitting': 0.5, 'splitting4': 0.5}
+# linear stability limit on the negative real axis, |lambda| h (from each explicit tableau; derive/tableaux.py)
+REAL_AXIS_STABILITY = {'dopri5': 3.3065678926349467, 'euler': 2.0, 'rk4': 2.785293563405282, 'rk4_expmap': 2.785293563405282, 'semi_implicit_euler': 2.0}

@@ -177,15 +177,15 @@ def divergence_cause(x_before: np.ndarray, dt: float, integrator: str, Omega_bef
     if wheels is not None:
         J, c_w = np.asarray(wheels[0], dtype=np.float64), float(wheels[1])
         stiff = c_w * dt / float(np.min(J))
-        wlimit = {"euler": 2.0, "semi_implicit_euler": 2.0, "rk4": 2.78, "dopri5": 3.3}.get(integrator, 2.0)
-        if stiff > wlimit:
+        wlimit = TABLEAUX.REAL_AXIS_STABILITY.get(integrator)      # from the integrator's own tableau
+        if wlimit is not None and stiff > wlimit:
             return (f"wheel damping c_w*dt/J = {stiff:.3g} is beyond the stability limit of {integrator} "
-                    f"(~{wlimit}); the wheel rates Omega blew up: reduce dt or c_w")
+                    f"({wlimit:.4g}); the wheel rates Omega blew up: reduce dt or c_w")
     wdt = w * dt
-    limit = {"euler": 0.1, "semi_implicit_euler": 0.1, "rk4": 1.0, "splitting": 3.0, "implicit_gyro": 10.0,
-             "splitting4": 3.0 / max(abs(g) for g in TABLEAUX.SPLIT4_GAMMA), "rk4_expmap": 1.0}.get(integrator, 1.0)
-    if wdt > limit:
-        return f"|omega|*dt = {wdt:.3g} is too large for {integrator} (keep it below ~{limit}); reduce dt"
+    limit = TABLEAUX.WDT_MAX.get(integrator)                    # the validity bound (derive/tableaux.py)
+    if limit is not None and wdt > limit:
+        return (f"|omega|*dt = {wdt:.3g} is beyond {integrator}'s validity bound (|omega|*dt <= {limit:.4g}, "
+                "times (I_max/I_min)**WDT_RATIO_EXPONENT); reduce dt")
     wheels = "" if W is None else f", |Omega| = {W:.3g} rad/s"
     return (f"state grew without bound (|omega| = {w:.3g} rad/s{wheels}, |v| = {v:.3g} m/s, dt = {dt:g} s); "
             "check effect strengths (damping c*dt/I, wheel damping c_w*dt/J, forces) and the integrator")
