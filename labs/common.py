@@ -272,22 +272,9 @@ def steps(field: str, duration: float, dt: float, *, whole: bool = True, limit: 
 def check_out_dir(out_dir, lab: str | None = None) -> Path:
     """Create OUT (and OUT/lab) if needed and make sure a file can be written there; LavenderInputError naming
     ``out`` otherwise (checked before a lab runs, so a long lab never fails at its very end)."""
-    import tempfile
-
-    if isinstance(out_dir, (bool, int, float)) or out_dir is None:
-        raise V.LavenderInputError("out", "expected a directory path", f", got {out_dir!r}")
-    d = Path(out_dir) / lab if lab else Path(out_dir)
-    for parent in (d, *d.parents):
-        if parent.exists() and not parent.is_dir():
-            raise V.LavenderInputError("out", f"cannot write to {d}", f" ({parent} is a file, not a directory)")
-    try:
-        d.mkdir(parents=True, exist_ok=True)
-        fd, probe = tempfile.mkstemp(dir=d, prefix=".write-test-")
-        os.close(fd)
-        os.unlink(probe)
-    except OSError as exc:
-        raise V.LavenderInputError("out", f"cannot write to {d}", f" ({exc.strerror or exc})") from None
-    return d
+    if lab and isinstance(out_dir, (str, os.PathLike)):
+        out_dir = Path(out_dir) / lab
+    return V.writable_dir("out", out_dir)
 
 
 def check_backend(backend) -> str:
