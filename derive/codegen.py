@@ -210,6 +210,20 @@ def _doc_lines(k: Kernel) -> list[str]:
     return lines
 
 
+def _np_doc_lines(k: Kernel) -> list[str]:
+    """The NumPy kernel's docstring in numpydoc form (inputs broadcast over leading batch axes)."""
+    def shp(a, kind):
+        return f"{kind}, shape (..., {', '.join(map(str, a.shape))})" if a.shape else f"{kind}, shape (...)"
+    lines = [f"{k.summary}.", "", f"Generated kernel ``{k.name}``; inputs broadcast over leading batch axes.",
+             "", "Parameters", "----------"]
+    for a in k.inputs:
+        lines += [f"{a.name} : {shp(a, 'array_like')}", f"    {a.doc}"]
+    lines += ["", "Returns", "-------"]
+    for a in k.outputs:
+        lines += [f"{a.name} : {shp(a, 'ndarray')}", f"    {a.doc}"]
+    return lines + [""]
+
+
 def _c_kernel(p: Printed, pr: CPrinter, prefix: str) -> list[str]:
     k = p.k
     c = [_c_sig(k, prefix) + " {"]
@@ -298,7 +312,8 @@ def print_c_user(printed: list[Printed], effects: list, set_name: str) -> tuple[
 
 def _np_kernel(p: Printed, pr: NpPrinter) -> list[str]:
     k = p.k
-    out = [f"def {k.name}({', '.join(a.name for a in k.inputs)}):", '    """' + "\n    ".join(_doc_lines(k)) + '"""']
+    doc = "\n".join(f"    {line}" if line else "" for line in _np_doc_lines(k)).lstrip()
+    out = [f"def {k.name}({', '.join(a.name for a in k.inputs)}):", f'    """{doc}    """']
     for a in k.inputs:
         out.append(f"    {a.name} = numpy.asarray({a.name}, dtype=numpy.float64)")
     lead = []

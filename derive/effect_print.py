@@ -130,6 +130,18 @@ def _np_arg(decl: E.EffectDecl, a) -> str:
     return f"p[..., {o}]" if a.shape == () else f"p[..., {o}:{o + a.size}]"
 
 
+# the rest of an effect apply function's numpydoc docstring (after its p)
+_NP_APPLY_DOC = [
+    "    x : array_like, shape (n, 13)", "        Body states [p_w, q (x, y, z, w), v_w, omega_b] the effect acts on.",
+    "    v_w : array_like, shape (n, 3)", "        COM velocities it sees, world frame, m/s.",
+    "    m : array_like, shape (n,)", "        Masses, kg.",
+    "    I_b : array_like, shape (n, 3)", "        Principal moments, body frame, kg·m².",
+    "", "    Returns", "    -------",
+    "    F_w : ndarray, shape (n, 3) or None", "        Force at the COM, world frame, N (None: the effect has none).",
+    "    tau_w : ndarray, shape (n, 3) or None", "        Torque about the COM, world frame, N·m (None: the effect has none).",
+]
+
+
 def numpy_dispatch(effects: list[tuple[int | None, E.EffectDecl]]) -> list[str]:
     """NumPy: one accumulating function per effect, EFFECT_APPLY by name, and (built-ins) dispatch by code."""
     out = ["# ---- Scene effects: apply(p, x, v_w, m, I_b) -> (F_com_w or None, tau_com_w or None), rows",
@@ -139,7 +151,10 @@ def numpy_dispatch(effects: list[tuple[int | None, E.EffectDecl]]) -> list[str]:
         k = d.kernel()
         outs = dict(d.outputs)
         out.append(f"def effect_apply_{d.name}(p, x, v_w, m, I_b):")
-        out.append(f'    """{d.name}: {d.summary}. p = [{", ".join(f"{p.name}({p.size})" for p in d.params)}]."""')
+        out.append(f'    """{d.name}: {d.summary}.')
+        out += ["", "    Parameters", "    ----------", "    p : array_like, shape (n, n_params)",
+                f'        The effect\'s parameters per row: [{", ".join(f"{p.name}({p.size})" for p in d.params)}].']
+        out += _NP_APPLY_DOC + ['    """']
         call = f"{k.name}({', '.join(_np_arg(d, a) for a in k.inputs)})"
         if len(outs) == 2:
             out.append(f"    return {call}")
@@ -158,7 +173,10 @@ def numpy_dispatch(effects: list[tuple[int | None, E.EffectDecl]]) -> list[str]:
         out += [f"    {c}: effect_apply_{d.name}," for c, d in coded]
         out += ["}", "", "",
                 "def effect_apply(code, p, x, v_w, m, I_b):",
-                '    """Dispatch by built-in effect code; a code that is not one raises ValueError (never a no-op)."""',
+                '    """Dispatch by built-in effect code; a code that is not one raises ValueError (never a no-op).',
+                "", "    Parameters", "    ----------", "    code : int", "        A built-in effect code.",
+                "    p : array_like, shape (n, n_params)", "        The effect's parameters per row.",
+                *_NP_APPLY_DOC, '    """',
                 "    fn = EFFECT_APPLY_BY_CODE.get(code)",
                 "    if fn is None:",
                 "        raise ValueError(f\"effect code {code!r} is not a built-in effect (built-in codes: "

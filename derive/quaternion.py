@@ -28,6 +28,16 @@ def pure(v: sp.Matrix) -> sp.Matrix:
     return sp.Matrix([v[0], v[1], v[2], 0])
 
 
+def quat_rate_body(q: sp.Matrix, omega_b: sp.Matrix) -> sp.Matrix:
+    """Quaternion kinematics with the body-frame angular velocity: q̇ = ½ q ⊗ [ω_b, 0]."""
+    return qmul(q, pure(omega_b)) / 2
+
+
+def quat_rate_world(q: sp.Matrix, omega_w: sp.Matrix) -> sp.Matrix:
+    """Quaternion kinematics with the world-frame angular velocity: q̇ = ½ [ω_w, 0] ⊗ q."""
+    return qmul(pure(omega_w), q) / 2
+
+
 def rotation_matrix(q: sp.Matrix) -> sp.Matrix:
     """R_WB of a unit quaternion (x, y, z, w)."""
     x, y, z, w = q
@@ -95,8 +105,8 @@ def kernels() -> list[Kernel]:
     Rm = sp.Matrix(3, 3, list(R))
     dt, theta = scalar("dt", positive=True), scalar("angle")
     ea, eb, ec = scalar("roll"), scalar("pitch"), scalar("yaw")
-    qd_world = qmul(pure(omega_w), q) / 2
-    qd_body = qmul(q, pure(omega_b)) / 2
+    qd_world = quat_rate_world(q, omega_w)
+    qd_body = quat_rate_body(q, omega_b)
     q_step = q + dt * qd_world
     norm = sp.sqrt(q_step.dot(q_step))
     qnorm = sp.sqrt(q.dot(q))

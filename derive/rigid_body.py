@@ -12,7 +12,7 @@ import sympy as sp
 
 from .kernel import Arg, Kernel, scalar, vec
 from .layout import STATE as X
-from .quaternion import pure, qmul, rotation_matrix
+from .quaternion import quat_rate_body, rotation_matrix
 
 STATE = "state (p_w[3] m, q[4] (x,y,z,w), v_w[3] m/s, omega_b[3] rad/s)"
 
@@ -44,7 +44,7 @@ def kernels() -> list[Kernel]:
     _check_euler(I_b, omega_b, tau_b)
     xq, xv, xw = X.part(x, "q"), X.part(x, "v_w"), X.part(x, "omega_b")
     R = rotation_matrix(xq)
-    qdot = qmul(xq, pure(xw)) / 2
+    qdot = quat_rate_body(xq, xw)
     full = X.assemble(p_w=xv, q=qdot, v_w=F_w / m, omega_b=euler_rhs(I_b, xw, R.T * tau_w))
     free = X.assemble(p_w=xv, q=qdot, v_w=sp.zeros(3, 1), omega_b=euler_rhs(I_b, xw, sp.zeros(3, 1)))
     Rq = rotation_matrix(q)

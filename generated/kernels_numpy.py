@@ -11,12 +11,26 @@ import numpy
 
 
 def particle_moments(m, r_w, v_w):
-    """particle_moments: One particle's mass moment and momentum (summed: m r_COM and p).
-      in  m scalar: particle mass, kg
-      in  r_w [3]: position, world, m
-      in  v_w [3]: velocity, world, m/s
-      out m_r [3]: mass moment, kg·m
-      out p [3]: linear momentum, kg·m/s"""
+    """One particle's mass moment and momentum (summed: m r_COM and p).
+
+    Generated kernel ``particle_moments``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    m : array_like, shape (...)
+        particle mass, kg
+    r_w : array_like, shape (..., 3)
+        position, world, m
+    v_w : array_like, shape (..., 3)
+        velocity, world, m/s
+
+    Returns
+    -------
+    m_r : ndarray, shape (..., 3)
+        mass moment, kg·m
+    p : ndarray, shape (..., 3)
+        linear momentum, kg·m/s
+    """
     m = numpy.asarray(m, dtype=numpy.float64)
     r_w = numpy.asarray(r_w, dtype=numpy.float64)
     v_w = numpy.asarray(v_w, dtype=numpy.float64)
@@ -39,13 +53,28 @@ def particle_moments(m, r_w, v_w):
 
 
 def particle_angular_momentum(m, r_w, v_w, r_com_w, v_com_w):
-    """particle_angular_momentum: One particle's angular momentum about the COM.
-      in  m scalar: particle mass, kg
-      in  r_w [3]: position, world, m
-      in  v_w [3]: velocity, world, m/s
-      in  r_com_w [3]: centre of mass, world, m
-      in  v_com_w [3]: COM velocity, world, m/s
-      out L_w [3]: angular momentum about the COM, world, kg·m²/s"""
+    """One particle's angular momentum about the COM.
+
+    Generated kernel ``particle_angular_momentum``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    m : array_like, shape (...)
+        particle mass, kg
+    r_w : array_like, shape (..., 3)
+        position, world, m
+    v_w : array_like, shape (..., 3)
+        velocity, world, m/s
+    r_com_w : array_like, shape (..., 3)
+        centre of mass, world, m
+    v_com_w : array_like, shape (..., 3)
+        COM velocity, world, m/s
+
+    Returns
+    -------
+    L_w : ndarray, shape (..., 3)
+        angular momentum about the COM, world, kg·m²/s
+    """
     m = numpy.asarray(m, dtype=numpy.float64)
     r_w = numpy.asarray(r_w, dtype=numpy.float64)
     v_w = numpy.asarray(v_w, dtype=numpy.float64)
@@ -78,12 +107,26 @@ def particle_angular_momentum(m, r_w, v_w, r_com_w, v_com_w):
 
 
 def inertia_box(m, w, h, d):
-    """inertia_box: Principal inertia of a solid box, integrated over its volume.
-      in  m scalar: mass, kg
-      in  w scalar: x side, m
-      in  h scalar: y side, m
-      in  d scalar: z side, m
-      out I_b [3]: principal moments, body frame, kg·m²"""
+    """Principal inertia of a solid box, integrated over its volume.
+
+    Generated kernel ``inertia_box``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    m : array_like, shape (...)
+        mass, kg
+    w : array_like, shape (...)
+        x side, m
+    h : array_like, shape (...)
+        y side, m
+    d : array_like, shape (...)
+        z side, m
+
+    Returns
+    -------
+    I_b : ndarray, shape (..., 3)
+        principal moments, body frame, kg·m²
+    """
     m = numpy.asarray(m, dtype=numpy.float64)
     w = numpy.asarray(w, dtype=numpy.float64)
     h = numpy.asarray(h, dtype=numpy.float64)
@@ -101,11 +144,24 @@ def inertia_box(m, w, h, d):
 
 
 def inertia_cylinder(m, r, h):
-    """inertia_cylinder: Principal inertia of a solid cylinder along body z.
-      in  m scalar: mass, kg
-      in  r scalar: radius, m
-      in  h scalar: height along z, m
-      out I_b [3]: principal moments, body frame, kg·m²"""
+    """Principal inertia of a solid cylinder along body z.
+
+    Generated kernel ``inertia_cylinder``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    m : array_like, shape (...)
+        mass, kg
+    r : array_like, shape (...)
+        radius, m
+    h : array_like, shape (...)
+        height along z, m
+
+    Returns
+    -------
+    I_b : ndarray, shape (..., 3)
+        principal moments, body frame, kg·m²
+    """
     m = numpy.asarray(m, dtype=numpy.float64)
     r = numpy.asarray(r, dtype=numpy.float64)
     h = numpy.asarray(h, dtype=numpy.float64)
@@ -120,10 +176,22 @@ def inertia_cylinder(m, r, h):
 
 
 def inertia_sphere(m, r):
-    """inertia_sphere: Principal inertia of a solid sphere.
-      in  m scalar: mass, kg
-      in  r scalar: radius, m
-      out I_b [3]: principal moments, body frame, kg·m²"""
+    """Principal inertia of a solid sphere.
+
+    Generated kernel ``inertia_sphere``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    m : array_like, shape (...)
+        mass, kg
+    r : array_like, shape (...)
+        radius, m
+
+    Returns
+    -------
+    I_b : ndarray, shape (..., 3)
+        principal moments, body frame, kg·m²
+    """
     m = numpy.asarray(m, dtype=numpy.float64)
     r = numpy.asarray(r, dtype=numpy.float64)
     batch = numpy.broadcast_shapes(m.shape, r.shape)
@@ -136,11 +204,24 @@ def inertia_sphere(m, r):
 
 
 def parallel_axis(I_c, m, d):
-    """parallel_axis: Inertia about a point offset by d from the centre of mass.
-      in  I_c [3×3]: inertia about the COM, kg·m², row-major
-      in  m scalar: mass, kg
-      in  d [3]: offset of the point from the COM, m (same frame as I_c)
-      out I_o [3×3]: inertia about the point, kg·m², row-major"""
+    """Inertia about a point offset by d from the centre of mass.
+
+    Generated kernel ``parallel_axis``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    I_c : array_like, shape (..., 3, 3)
+        inertia about the COM, kg·m², row-major
+    m : array_like, shape (...)
+        mass, kg
+    d : array_like, shape (..., 3)
+        offset of the point from the COM, m (same frame as I_c)
+
+    Returns
+    -------
+    I_o : ndarray, shape (..., 3, 3)
+        inertia about the point, kg·m², row-major
+    """
     I_c = numpy.asarray(I_c, dtype=numpy.float64)
     m = numpy.asarray(m, dtype=numpy.float64)
     d = numpy.asarray(d, dtype=numpy.float64)
@@ -178,10 +259,22 @@ def parallel_axis(I_c, m, d):
 
 
 def world_inertia(q, I_b):
-    """world_inertia: Body inertia written in world coordinates.
-      in  q [4]: orientation (x, y, z, w), R_WB, unit
-      in  I_b [3]: principal moments, body frame, kg·m²
-      out I_w [3×3]: inertia, world frame, kg·m², row-major"""
+    """Body inertia written in world coordinates.
+
+    Generated kernel ``world_inertia``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    q : array_like, shape (..., 4)
+        orientation (x, y, z, w), R_WB, unit
+    I_b : array_like, shape (..., 3)
+        principal moments, body frame, kg·m²
+
+    Returns
+    -------
+    I_w : ndarray, shape (..., 3, 3)
+        inertia, world frame, kg·m², row-major
+    """
     q = numpy.asarray(q, dtype=numpy.float64)
     I_b = numpy.asarray(I_b, dtype=numpy.float64)
     batch = numpy.broadcast_shapes(q.shape[:-1], I_b.shape[:-1])
@@ -231,10 +324,22 @@ def world_inertia(q, I_b):
 
 
 def torque_from_force(r_w, F_w):
-    """torque_from_force: Torque of a force about the COM.
-      in  r_w [3]: application point relative to the COM, world frame, m
-      in  F_w [3]: force, world frame, N
-      out tau_w [3]: torque about the COM, world frame, N·m"""
+    """Torque of a force about the COM.
+
+    Generated kernel ``torque_from_force``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    r_w : array_like, shape (..., 3)
+        application point relative to the COM, world frame, m
+    F_w : array_like, shape (..., 3)
+        force, world frame, N
+
+    Returns
+    -------
+    tau_w : ndarray, shape (..., 3)
+        torque about the COM, world frame, N·m
+    """
     r_w = numpy.asarray(r_w, dtype=numpy.float64)
     F_w = numpy.asarray(F_w, dtype=numpy.float64)
     batch = numpy.broadcast_shapes(r_w.shape[:-1], F_w.shape[:-1])
@@ -252,11 +357,24 @@ def torque_from_force(r_w, F_w):
 
 
 def force_at_point(q, r_b, F_w):
-    """force_at_point: Torque about the COM of a world force applied at a body-fixed point.
-      in  q [4]: orientation (x, y, z, w), R_WB, unit
-      in  r_b [3]: application point relative to the COM, body frame, m
-      in  F_w [3]: force, world frame, N
-      out tau_w [3]: torque about the COM, world frame, N·m"""
+    """Torque about the COM of a world force applied at a body-fixed point.
+
+    Generated kernel ``force_at_point``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    q : array_like, shape (..., 4)
+        orientation (x, y, z, w), R_WB, unit
+    r_b : array_like, shape (..., 3)
+        application point relative to the COM, body frame, m
+    F_w : array_like, shape (..., 3)
+        force, world frame, N
+
+    Returns
+    -------
+    tau_w : ndarray, shape (..., 3)
+        torque about the COM, world frame, N·m
+    """
     q = numpy.asarray(q, dtype=numpy.float64)
     r_b = numpy.asarray(r_b, dtype=numpy.float64)
     F_w = numpy.asarray(F_w, dtype=numpy.float64)
@@ -292,9 +410,20 @@ def force_at_point(q, r_b, F_w):
 
 
 def effect_applied_torque(torque_w):
-    """effect_applied_torque: A torque about the COM, world frame.
-      in  torque_w [3]: torque about the COM, world frame, N·m
-      out tau_com_w [3]: torque about the COM, world frame, N·m"""
+    """A torque about the COM, world frame.
+
+    Generated kernel ``effect_applied_torque``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    torque_w : array_like, shape (..., 3)
+        torque about the COM, world frame, N·m
+
+    Returns
+    -------
+    tau_com_w : ndarray, shape (..., 3)
+        torque about the COM, world frame, N·m
+    """
     torque_w = numpy.asarray(torque_w, dtype=numpy.float64)
     batch = numpy.broadcast_shapes(torque_w.shape[:-1])
     torque_w_0 = torque_w[..., 0]
@@ -308,12 +437,26 @@ def effect_applied_torque(torque_w):
 
 
 def effect_force_at_point(q, r_b, F_w):
-    """effect_force_at_point: A world force applied at a body-fixed point: the force acts on the COM plus a torque.
-      in  q [4]: orientation (x, y, z, w), R_WB, unit
-      in  r_b [3]: application point relative to the COM, body frame, m
-      in  F_w [3]: force, world frame, N
-      out F_com_w [3]: force at the COM, world frame, N
-      out tau_com_w [3]: torque about the COM, world frame, N·m"""
+    """A world force applied at a body-fixed point: the force acts on the COM plus a torque.
+
+    Generated kernel ``effect_force_at_point``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    q : array_like, shape (..., 4)
+        orientation (x, y, z, w), R_WB, unit
+    r_b : array_like, shape (..., 3)
+        application point relative to the COM, body frame, m
+    F_w : array_like, shape (..., 3)
+        force, world frame, N
+
+    Returns
+    -------
+    F_com_w : ndarray, shape (..., 3)
+        force at the COM, world frame, N
+    tau_com_w : ndarray, shape (..., 3)
+        torque about the COM, world frame, N·m
+    """
     q = numpy.asarray(q, dtype=numpy.float64)
     r_b = numpy.asarray(r_b, dtype=numpy.float64)
     F_w = numpy.asarray(F_w, dtype=numpy.float64)
@@ -353,10 +496,22 @@ def effect_force_at_point(q, r_b, F_w):
 
 
 def effect_gravity(m, g_w):
-    """effect_gravity: Uniform gravity acting at the COM.
-      in  m scalar: mass, kg
-      in  g_w [3]: gravitational acceleration, world frame, m/s²
-      out F_com_w [3]: force at the COM, world frame, N"""
+    """Uniform gravity acting at the COM.
+
+    Generated kernel ``effect_gravity``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    m : array_like, shape (...)
+        mass, kg
+    g_w : array_like, shape (..., 3)
+        gravitational acceleration, world frame, m/s²
+
+    Returns
+    -------
+    F_com_w : ndarray, shape (..., 3)
+        force at the COM, world frame, N
+    """
     m = numpy.asarray(m, dtype=numpy.float64)
     g_w = numpy.asarray(g_w, dtype=numpy.float64)
     batch = numpy.broadcast_shapes(m.shape, g_w.shape[:-1])
@@ -371,10 +526,22 @@ def effect_gravity(m, g_w):
 
 
 def effect_linear_damping(v_w, c):
-    """effect_linear_damping: Viscous drag on the COM velocity.
-      in  v_w [3]: COM velocity, world frame, m/s
-      in  c scalar: viscous coefficient, N·s/m
-      out F_com_w [3]: force at the COM, world frame, N"""
+    """Viscous drag on the COM velocity.
+
+    Generated kernel ``effect_linear_damping``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    v_w : array_like, shape (..., 3)
+        COM velocity, world frame, m/s
+    c : array_like, shape (...)
+        viscous coefficient, N·s/m
+
+    Returns
+    -------
+    F_com_w : ndarray, shape (..., 3)
+        force at the COM, world frame, N
+    """
     v_w = numpy.asarray(v_w, dtype=numpy.float64)
     c = numpy.asarray(c, dtype=numpy.float64)
     batch = numpy.broadcast_shapes(v_w.shape[:-1], c.shape)
@@ -389,11 +556,24 @@ def effect_linear_damping(v_w, c):
 
 
 def effect_angular_damping(q, omega_b, c):
-    """effect_angular_damping: Viscous drag on the angular velocity.
-      in  q [4]: orientation (x, y, z, w), R_WB, unit
-      in  omega_b [3]: angular velocity, body frame, rad/s
-      in  c scalar: viscous coefficient, N·m·s/rad
-      out tau_com_w [3]: torque about the COM, world frame, N·m"""
+    """Viscous drag on the angular velocity.
+
+    Generated kernel ``effect_angular_damping``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    q : array_like, shape (..., 4)
+        orientation (x, y, z, w), R_WB, unit
+    omega_b : array_like, shape (..., 3)
+        angular velocity, body frame, rad/s
+    c : array_like, shape (...)
+        viscous coefficient, N·m·s/rad
+
+    Returns
+    -------
+    tau_com_w : ndarray, shape (..., 3)
+        torque about the COM, world frame, N·m
+    """
     q = numpy.asarray(q, dtype=numpy.float64)
     omega_b = numpy.asarray(omega_b, dtype=numpy.float64)
     c = numpy.asarray(c, dtype=numpy.float64)
@@ -423,10 +603,22 @@ def effect_angular_damping(q, omega_b, c):
 
 
 def quat_mul(a, b):
-    """quat_mul: Hamilton product.
-      in  a [4]: quaternion (x, y, z, w), scalar last
-      in  b [4]: quaternion (x, y, z, w), scalar last
-      out ab [4]: quaternion (x, y, z, w), scalar last"""
+    """Hamilton product.
+
+    Generated kernel ``quat_mul``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    a : array_like, shape (..., 4)
+        quaternion (x, y, z, w), scalar last
+    b : array_like, shape (..., 4)
+        quaternion (x, y, z, w), scalar last
+
+    Returns
+    -------
+    ab : ndarray, shape (..., 4)
+        quaternion (x, y, z, w), scalar last
+    """
     a = numpy.asarray(a, dtype=numpy.float64)
     b = numpy.asarray(b, dtype=numpy.float64)
     batch = numpy.broadcast_shapes(a.shape[:-1], b.shape[:-1])
@@ -447,9 +639,20 @@ def quat_mul(a, b):
 
 
 def quat_conj(q):
-    """quat_conj: Conjugate (inverse of a unit quaternion).
-      in  q [4]: quaternion (x, y, z, w), scalar last
-      out q_conj [4]: quaternion (x, y, z, w), scalar last"""
+    """Conjugate (inverse of a unit quaternion).
+
+    Generated kernel ``quat_conj``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    q : array_like, shape (..., 4)
+        quaternion (x, y, z, w), scalar last
+
+    Returns
+    -------
+    q_conj : ndarray, shape (..., 4)
+        quaternion (x, y, z, w), scalar last
+    """
     q = numpy.asarray(q, dtype=numpy.float64)
     batch = numpy.broadcast_shapes(q.shape[:-1])
     q_0 = q[..., 0]
@@ -465,9 +668,20 @@ def quat_conj(q):
 
 
 def quat_normalize(q):
-    """quat_normalize: Scale to unit length.
-      in  q [4]: quaternion (x, y, z, w), scalar last
-      out q_unit [4]: quaternion (x, y, z, w), scalar last"""
+    """Scale to unit length.
+
+    Generated kernel ``quat_normalize``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    q : array_like, shape (..., 4)
+        quaternion (x, y, z, w), scalar last
+
+    Returns
+    -------
+    q_unit : ndarray, shape (..., 4)
+        quaternion (x, y, z, w), scalar last
+    """
     q = numpy.asarray(q, dtype=numpy.float64)
     batch = numpy.broadcast_shapes(q.shape[:-1])
     q_0 = q[..., 0]
@@ -484,10 +698,22 @@ def quat_normalize(q):
 
 
 def quat_rotate(q, v_b):
-    """quat_rotate: Rotate a body vector into the world frame.
-      in  q [4]: quaternion (x, y, z, w), scalar last, unit, R_WB
-      in  v_b [3]: vector, body frame
-      out v_w [3]: vector, world frame"""
+    """Rotate a body vector into the world frame.
+
+    Generated kernel ``quat_rotate``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    q : array_like, shape (..., 4)
+        quaternion (x, y, z, w), scalar last, unit, R_WB
+    v_b : array_like, shape (..., 3)
+        vector, body frame
+
+    Returns
+    -------
+    v_w : ndarray, shape (..., 3)
+        vector, world frame
+    """
     q = numpy.asarray(q, dtype=numpy.float64)
     v_b = numpy.asarray(v_b, dtype=numpy.float64)
     batch = numpy.broadcast_shapes(q.shape[:-1], v_b.shape[:-1])
@@ -516,9 +742,20 @@ def quat_rotate(q, v_b):
 
 
 def quat_to_matrix(q):
-    """quat_to_matrix: Rotation matrix R_WB.
-      in  q [4]: quaternion (x, y, z, w), scalar last, unit
-      out R_wb [3×3]: 3×3 rotation, body → world, row-major"""
+    """Rotation matrix R_WB.
+
+    Generated kernel ``quat_to_matrix``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    q : array_like, shape (..., 4)
+        quaternion (x, y, z, w), scalar last, unit
+
+    Returns
+    -------
+    R_wb : ndarray, shape (..., 3, 3)
+        3×3 rotation, body → world, row-major
+    """
     q = numpy.asarray(q, dtype=numpy.float64)
     batch = numpy.broadcast_shapes(q.shape[:-1])
     q_0 = q[..., 0]
@@ -549,9 +786,20 @@ def quat_to_matrix(q):
 
 
 def matrix_to_quat(R_wb):
-    """matrix_to_quat: Quaternion of a rotation matrix (Shepperd's branch on the largest component).
-      in  R_wb [3×3]: 3×3 rotation, body → world, row-major
-      out q [4]: quaternion (x, y, z, w), scalar last"""
+    """Quaternion of a rotation matrix (Shepperd's branch on the largest component).
+
+    Generated kernel ``matrix_to_quat``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    R_wb : array_like, shape (..., 3, 3)
+        3×3 rotation, body → world, row-major
+
+    Returns
+    -------
+    q : ndarray, shape (..., 4)
+        quaternion (x, y, z, w), scalar last
+    """
     R_wb = numpy.asarray(R_wb, dtype=numpy.float64)
     batch = numpy.broadcast_shapes(R_wb.shape[:-2])
     R_0 = R_wb[..., 0, 0]
@@ -596,10 +844,22 @@ def matrix_to_quat(R_wb):
 
 
 def axis_angle_to_quat(axis, angle):
-    """axis_angle_to_quat: Quaternion of a rotation by angle about a unit axis.
-      in  axis [3]: unit axis (any frame)
-      in  angle scalar: angle, rad
-      out q [4]: quaternion (x, y, z, w), scalar last"""
+    """Quaternion of a rotation by angle about a unit axis.
+
+    Generated kernel ``axis_angle_to_quat``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    axis : array_like, shape (..., 3)
+        unit axis (any frame)
+    angle : array_like, shape (...)
+        angle, rad
+
+    Returns
+    -------
+    q : ndarray, shape (..., 4)
+        quaternion (x, y, z, w), scalar last
+    """
     axis = numpy.asarray(axis, dtype=numpy.float64)
     angle = numpy.asarray(angle, dtype=numpy.float64)
     batch = numpy.broadcast_shapes(axis.shape[:-1], angle.shape)
@@ -617,10 +877,22 @@ def axis_angle_to_quat(axis, angle):
 
 
 def quat_from_two_vectors(a, b):
-    """quat_from_two_vectors: Shortest-arc rotation taking one unit vector onto another.
-      in  a [3]: unit vector (any frame)
-      in  b [3]: unit vector, same frame
-      out q [4]: quaternion (x, y, z, w), scalar last, unit: R(q) a = b"""
+    """Shortest-arc rotation taking one unit vector onto another.
+
+    Generated kernel ``quat_from_two_vectors``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    a : array_like, shape (..., 3)
+        unit vector (any frame)
+    b : array_like, shape (..., 3)
+        unit vector, same frame
+
+    Returns
+    -------
+    q : ndarray, shape (..., 4)
+        quaternion (x, y, z, w), scalar last, unit: R(q) a = b
+    """
     a = numpy.asarray(a, dtype=numpy.float64)
     b = numpy.asarray(b, dtype=numpy.float64)
     batch = numpy.broadcast_shapes(a.shape[:-1], b.shape[:-1])
@@ -651,10 +923,22 @@ def quat_from_two_vectors(a, b):
 
 
 def quat_to_axis_angle(q):
-    """quat_to_axis_angle: Unit axis and angle in [0, 2π] of a unit quaternion.
-      in  q [4]: quaternion (x, y, z, w), scalar last, unit
-      out axis [3]: unit axis ([1,0,0] for the identity)
-      out angle scalar: angle, rad"""
+    """Unit axis and angle in [0, 2π] of a unit quaternion.
+
+    Generated kernel ``quat_to_axis_angle``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    q : array_like, shape (..., 4)
+        quaternion (x, y, z, w), scalar last, unit
+
+    Returns
+    -------
+    axis : ndarray, shape (..., 3)
+        unit axis ([1,0,0] for the identity)
+    angle : ndarray, shape (...)
+        angle, rad
+    """
     q = numpy.asarray(q, dtype=numpy.float64)
     batch = numpy.broadcast_shapes(q.shape[:-1])
     q_0 = q[..., 0]
@@ -675,11 +959,24 @@ def quat_to_axis_angle(q):
 
 
 def euler_xyz_to_quat(roll, pitch, yaw):
-    """euler_xyz_to_quat: Quaternion of intrinsic XYZ Euler angles, R = Rx(roll) Ry(pitch) Rz(yaw).
-      in  roll scalar: rad
-      in  pitch scalar: rad
-      in  yaw scalar: rad
-      out q [4]: quaternion (x, y, z, w), scalar last"""
+    """Quaternion of intrinsic XYZ Euler angles, R = Rx(roll) Ry(pitch) Rz(yaw).
+
+    Generated kernel ``euler_xyz_to_quat``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    roll : array_like, shape (...)
+        rad
+    pitch : array_like, shape (...)
+        rad
+    yaw : array_like, shape (...)
+        rad
+
+    Returns
+    -------
+    q : ndarray, shape (..., 4)
+        quaternion (x, y, z, w), scalar last
+    """
     roll = numpy.asarray(roll, dtype=numpy.float64)
     pitch = numpy.asarray(pitch, dtype=numpy.float64)
     yaw = numpy.asarray(yaw, dtype=numpy.float64)
@@ -705,9 +1002,20 @@ def euler_xyz_to_quat(roll, pitch, yaw):
 
 
 def quat_to_euler_xyz(q):
-    """quat_to_euler_xyz: Intrinsic XYZ Euler angles of a unit quaternion, exact through gimbal lock.
-      in  q [4]: quaternion (x, y, z, w), scalar last, unit
-      out rpy [3]: (roll, pitch, yaw), rad"""
+    """Intrinsic XYZ Euler angles of a unit quaternion, exact through gimbal lock.
+
+    Generated kernel ``quat_to_euler_xyz``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    q : array_like, shape (..., 4)
+        quaternion (x, y, z, w), scalar last, unit
+
+    Returns
+    -------
+    rpy : ndarray, shape (..., 3)
+        (roll, pitch, yaw), rad
+    """
     q = numpy.asarray(q, dtype=numpy.float64)
     batch = numpy.broadcast_shapes(q.shape[:-1])
     q_0 = q[..., 0]
@@ -737,10 +1045,22 @@ def quat_to_euler_xyz(q):
 
 
 def quat_derivative_world(q, omega_w):
-    """quat_derivative_world: Quaternion rate from world-frame angular velocity.
-      in  q [4]: quaternion (x, y, z, w), scalar last
-      in  omega_w [3]: angular velocity, world frame, rad/s
-      out q_dot [4]: 1/s"""
+    """Quaternion rate from world-frame angular velocity.
+
+    Generated kernel ``quat_derivative_world``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    q : array_like, shape (..., 4)
+        quaternion (x, y, z, w), scalar last
+    omega_w : array_like, shape (..., 3)
+        angular velocity, world frame, rad/s
+
+    Returns
+    -------
+    q_dot : ndarray, shape (..., 4)
+        1/s
+    """
     q = numpy.asarray(q, dtype=numpy.float64)
     omega_w = numpy.asarray(omega_w, dtype=numpy.float64)
     batch = numpy.broadcast_shapes(q.shape[:-1], omega_w.shape[:-1])
@@ -765,10 +1085,22 @@ def quat_derivative_world(q, omega_w):
 
 
 def quat_derivative_body(q, omega_b):
-    """quat_derivative_body: Quaternion rate from body-frame angular velocity.
-      in  q [4]: quaternion (x, y, z, w), scalar last
-      in  omega_b [3]: angular velocity, body frame, rad/s
-      out q_dot [4]: 1/s"""
+    """Quaternion rate from body-frame angular velocity.
+
+    Generated kernel ``quat_derivative_body``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    q : array_like, shape (..., 4)
+        quaternion (x, y, z, w), scalar last
+    omega_b : array_like, shape (..., 3)
+        angular velocity, body frame, rad/s
+
+    Returns
+    -------
+    q_dot : ndarray, shape (..., 4)
+        1/s
+    """
     q = numpy.asarray(q, dtype=numpy.float64)
     omega_b = numpy.asarray(omega_b, dtype=numpy.float64)
     batch = numpy.broadcast_shapes(q.shape[:-1], omega_b.shape[:-1])
@@ -791,11 +1123,24 @@ def quat_derivative_body(q, omega_b):
 
 
 def integrate_orientation(q, omega_w, dt):
-    """integrate_orientation: One explicit world-form step, then normalization (the chapter's default).
-      in  q [4]: quaternion (x, y, z, w), scalar last
-      in  omega_w [3]: angular velocity, world frame, rad/s
-      in  dt scalar: time step, s
-      out q_next [4]: quaternion (x, y, z, w), scalar last, unit"""
+    """One explicit world-form step, then normalization (the chapter's default).
+
+    Generated kernel ``integrate_orientation``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    q : array_like, shape (..., 4)
+        quaternion (x, y, z, w), scalar last
+    omega_w : array_like, shape (..., 3)
+        angular velocity, world frame, rad/s
+    dt : array_like, shape (...)
+        time step, s
+
+    Returns
+    -------
+    q_next : ndarray, shape (..., 4)
+        quaternion (x, y, z, w), scalar last, unit
+    """
     q = numpy.asarray(q, dtype=numpy.float64)
     omega_w = numpy.asarray(omega_w, dtype=numpy.float64)
     dt = numpy.asarray(dt, dtype=numpy.float64)
@@ -826,11 +1171,24 @@ def integrate_orientation(q, omega_w, dt):
 
 
 def euler_equations(I_b, omega_b, tau_b):
-    """euler_equations: Euler's rotation equations with external torque, body frame.
-      in  I_b [3]: principal moments, body frame, kg·m²
-      in  omega_b [3]: angular velocity, body frame, rad/s
-      in  tau_b [3]: torque, body frame, N·m
-      out omega_dot_b [3]: angular acceleration, body frame, rad/s²"""
+    """Euler's rotation equations with external torque, body frame.
+
+    Generated kernel ``euler_equations``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    I_b : array_like, shape (..., 3)
+        principal moments, body frame, kg·m²
+    omega_b : array_like, shape (..., 3)
+        angular velocity, body frame, rad/s
+    tau_b : array_like, shape (..., 3)
+        torque, body frame, N·m
+
+    Returns
+    -------
+    omega_dot_b : ndarray, shape (..., 3)
+        angular acceleration, body frame, rad/s²
+    """
     I_b = numpy.asarray(I_b, dtype=numpy.float64)
     omega_b = numpy.asarray(omega_b, dtype=numpy.float64)
     tau_b = numpy.asarray(tau_b, dtype=numpy.float64)
@@ -853,13 +1211,28 @@ def euler_equations(I_b, omega_b, tau_b):
 
 
 def rigid_body_rhs(x, m, I_b, F_w, tau_w):
-    """rigid_body_rhs: State derivative under a world force at the COM and a world torque.
-      in  x [13]: state (p_w[3] m, q[4] (x,y,z,w), v_w[3] m/s, omega_b[3] rad/s)
-      in  m scalar: mass, kg
-      in  I_b [3]: principal moments, body frame, kg·m²
-      in  F_w [3]: total force at the COM, world frame, N
-      in  tau_w [3]: total torque about the COM, world frame, N·m
-      out x_dot [13]: d/dt of the state"""
+    """State derivative under a world force at the COM and a world torque.
+
+    Generated kernel ``rigid_body_rhs``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    x : array_like, shape (..., 13)
+        state (p_w[3] m, q[4] (x,y,z,w), v_w[3] m/s, omega_b[3] rad/s)
+    m : array_like, shape (...)
+        mass, kg
+    I_b : array_like, shape (..., 3)
+        principal moments, body frame, kg·m²
+    F_w : array_like, shape (..., 3)
+        total force at the COM, world frame, N
+    tau_w : array_like, shape (..., 3)
+        total torque about the COM, world frame, N·m
+
+    Returns
+    -------
+    x_dot : ndarray, shape (..., 13)
+        d/dt of the state
+    """
     x = numpy.asarray(x, dtype=numpy.float64)
     m = numpy.asarray(m, dtype=numpy.float64)
     I_b = numpy.asarray(I_b, dtype=numpy.float64)
@@ -918,10 +1291,22 @@ def rigid_body_rhs(x, m, I_b, F_w, tau_w):
 
 
 def rigid_body_rhs_free(x, I_b):
-    """rigid_body_rhs_free: State derivative of a torque-free, force-free body.
-      in  x [13]: state (p_w[3] m, q[4] (x,y,z,w), v_w[3] m/s, omega_b[3] rad/s)
-      in  I_b [3]: principal moments, body frame, kg·m²
-      out x_dot [13]: d/dt of the state"""
+    """State derivative of a torque-free, force-free body.
+
+    Generated kernel ``rigid_body_rhs_free``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    x : array_like, shape (..., 13)
+        state (p_w[3] m, q[4] (x,y,z,w), v_w[3] m/s, omega_b[3] rad/s)
+    I_b : array_like, shape (..., 3)
+        principal moments, body frame, kg·m²
+
+    Returns
+    -------
+    x_dot : ndarray, shape (..., 13)
+        d/dt of the state
+    """
     x = numpy.asarray(x, dtype=numpy.float64)
     I_b = numpy.asarray(I_b, dtype=numpy.float64)
     batch = numpy.broadcast_shapes(x.shape[:-1], I_b.shape[:-1])
@@ -960,11 +1345,24 @@ def rigid_body_rhs_free(x, I_b):
 
 
 def apply_inv_inertia(q, I_b, v):
-    """apply_inv_inertia: Multiply a world vector by I_W⁻¹: rotate into the body, apply the diagonal inverse, rotate back.
-      in  q [4]: orientation (x, y, z, w), R_WB, unit
-      in  I_b [3]: principal moments, body frame, kg·m²
-      in  v [3]: vector, world frame (e.g. torque, N·m)
-      out out [3]: I_W⁻¹ v, world frame (e.g. rad/s²)"""
+    """Multiply a world vector by I_W⁻¹: rotate into the body, apply the diagonal inverse, rotate back.
+
+    Generated kernel ``apply_inv_inertia``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    q : array_like, shape (..., 4)
+        orientation (x, y, z, w), R_WB, unit
+    I_b : array_like, shape (..., 3)
+        principal moments, body frame, kg·m²
+    v : array_like, shape (..., 3)
+        vector, world frame (e.g. torque, N·m)
+
+    Returns
+    -------
+    out : ndarray, shape (..., 3)
+        I_W⁻¹ v, world frame (e.g. rad/s²)
+    """
     q = numpy.asarray(q, dtype=numpy.float64)
     I_b = numpy.asarray(I_b, dtype=numpy.float64)
     v = numpy.asarray(v, dtype=numpy.float64)
@@ -1015,10 +1413,22 @@ def apply_inv_inertia(q, I_b, v):
 
 
 def world_to_body(q, v_w):
-    """world_to_body: Express a world vector in the body frame.
-      in  q [4]: orientation (x, y, z, w), R_WB, unit
-      in  v_w [3]: vector, world frame
-      out v_b [3]: vector, body frame"""
+    """Express a world vector in the body frame.
+
+    Generated kernel ``world_to_body``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    q : array_like, shape (..., 4)
+        orientation (x, y, z, w), R_WB, unit
+    v_w : array_like, shape (..., 3)
+        vector, world frame
+
+    Returns
+    -------
+    v_b : ndarray, shape (..., 3)
+        vector, body frame
+    """
     q = numpy.asarray(q, dtype=numpy.float64)
     v_w = numpy.asarray(v_w, dtype=numpy.float64)
     batch = numpy.broadcast_shapes(q.shape[:-1], v_w.shape[:-1])
@@ -1047,12 +1457,26 @@ def world_to_body(q, v_w):
 
 
 def kinetic_energy(m, I_b, v_w, omega_b):
-    """kinetic_energy: Translational plus rotational kinetic energy.
-      in  m scalar: mass, kg
-      in  I_b [3]: principal moments, body frame, kg·m²
-      in  v_w [3]: COM velocity, world frame, m/s
-      in  omega_b [3]: angular velocity, body frame, rad/s
-      out T scalar: energy, J"""
+    """Translational plus rotational kinetic energy.
+
+    Generated kernel ``kinetic_energy``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    m : array_like, shape (...)
+        mass, kg
+    I_b : array_like, shape (..., 3)
+        principal moments, body frame, kg·m²
+    v_w : array_like, shape (..., 3)
+        COM velocity, world frame, m/s
+    omega_b : array_like, shape (..., 3)
+        angular velocity, body frame, rad/s
+
+    Returns
+    -------
+    T : ndarray, shape (...)
+        energy, J
+    """
     m = numpy.asarray(m, dtype=numpy.float64)
     I_b = numpy.asarray(I_b, dtype=numpy.float64)
     v_w = numpy.asarray(v_w, dtype=numpy.float64)
@@ -1073,11 +1497,24 @@ def kinetic_energy(m, I_b, v_w, omega_b):
 
 
 def angular_momentum_world(q, I_b, omega_b):
-    """angular_momentum_world: Angular momentum about the COM in the world frame.
-      in  q [4]: orientation (x, y, z, w), R_WB, unit
-      in  I_b [3]: principal moments, body frame, kg·m²
-      in  omega_b [3]: angular velocity, body frame, rad/s
-      out L_w [3]: angular momentum, world frame, kg·m²/s"""
+    """Angular momentum about the COM in the world frame.
+
+    Generated kernel ``angular_momentum_world``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    q : array_like, shape (..., 4)
+        orientation (x, y, z, w), R_WB, unit
+    I_b : array_like, shape (..., 3)
+        principal moments, body frame, kg·m²
+    omega_b : array_like, shape (..., 3)
+        angular velocity, body frame, rad/s
+
+    Returns
+    -------
+    L_w : ndarray, shape (..., 3)
+        angular momentum, world frame, kg·m²/s
+    """
     q = numpy.asarray(q, dtype=numpy.float64)
     I_b = numpy.asarray(I_b, dtype=numpy.float64)
     omega_b = numpy.asarray(omega_b, dtype=numpy.float64)
@@ -1113,11 +1550,24 @@ def angular_momentum_world(q, I_b, omega_b):
 
 
 def rigid_body_rhs_torque(x, I_b, tau_w):
-    """rigid_body_rhs_torque: State derivative under a world torque only (rigid_body_rhs with F_W = 0, for bodies whose effects add no force).
-      in  x [13]: state (p_w[3] m, q[4] (x,y,z,w), v_w[3] m/s, omega_b[3] rad/s)
-      in  I_b [3]: principal moments, body frame, kg·m²
-      in  tau_w [3]: total torque about the COM, world frame, N·m
-      out x_dot [13]: d/dt of the state"""
+    """State derivative under a world torque only (rigid_body_rhs with F_W = 0, for bodies whose effects add no force).
+
+    Generated kernel ``rigid_body_rhs_torque``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    x : array_like, shape (..., 13)
+        state (p_w[3] m, q[4] (x,y,z,w), v_w[3] m/s, omega_b[3] rad/s)
+    I_b : array_like, shape (..., 3)
+        principal moments, body frame, kg·m²
+    tau_w : array_like, shape (..., 3)
+        total torque about the COM, world frame, N·m
+
+    Returns
+    -------
+    x_dot : ndarray, shape (..., 13)
+        d/dt of the state
+    """
     x = numpy.asarray(x, dtype=numpy.float64)
     I_b = numpy.asarray(I_b, dtype=numpy.float64)
     tau_w = numpy.asarray(tau_w, dtype=numpy.float64)
@@ -1170,15 +1620,32 @@ def rigid_body_rhs_torque(x, I_b, tau_w):
 
 
 def pivot_body_rhs(q, omega_b, I_p, r_b, F_w, tau_w):
-    """pivot_body_rhs: Rotation about a world-anchored spherical joint (no wheels).
-      in  q [4]: orientation (x, y, z, w), R_WB
-      in  omega_b [3]: angular velocity, body frame, rad/s
-      in  I_p [3×3]: inertia about the pivot (wheels locked), body frame, kg·m², symmetric row-major
-      in  r_b [3]: pivot → COM, body frame, m
-      in  F_w [3]: total force at the COM, world frame, N
-      in  tau_w [3]: total torque about the COM, world frame, N·m
-      out q_dot [4]: 1/s
-      out omega_dot_b [3]: rad/s², body frame"""
+    """Rotation about a world-anchored spherical joint (no wheels).
+
+    Generated kernel ``pivot_body_rhs``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    q : array_like, shape (..., 4)
+        orientation (x, y, z, w), R_WB
+    omega_b : array_like, shape (..., 3)
+        angular velocity, body frame, rad/s
+    I_p : array_like, shape (..., 3, 3)
+        inertia about the pivot (wheels locked), body frame, kg·m², symmetric row-major
+    r_b : array_like, shape (..., 3)
+        pivot → COM, body frame, m
+    F_w : array_like, shape (..., 3)
+        total force at the COM, world frame, N
+    tau_w : array_like, shape (..., 3)
+        total torque about the COM, world frame, N·m
+
+    Returns
+    -------
+    q_dot : ndarray, shape (..., 4)
+        1/s
+    omega_dot_b : ndarray, shape (..., 3)
+        rad/s², body frame
+    """
     q = numpy.asarray(q, dtype=numpy.float64)
     omega_b = numpy.asarray(omega_b, dtype=numpy.float64)
     I_p = numpy.asarray(I_p, dtype=numpy.float64)
@@ -1259,20 +1726,42 @@ def pivot_body_rhs(q, omega_b, I_p, r_b, F_w, tau_w):
 
 
 def wheel_body_rhs(q, omega_b, Omega, I_p, J, r_b, F_w, tau_w, u, c_w):
-    """wheel_body_rhs: Body with three body-axis reaction wheels rotating about a pivot.
-      in  q [4]: orientation (x, y, z, w), R_WB
-      in  omega_b [3]: angular velocity, body frame, rad/s
-      in  Omega [3]: wheel rates relative to the body, rad/s
-      in  I_p [3×3]: inertia about the pivot (wheels locked), body frame, kg·m², symmetric row-major
-      in  J [3]: wheel spin inertias, kg·m²
-      in  r_b [3]: pivot → COM, body frame, m
-      in  F_w [3]: total force at the COM, world frame, N
-      in  tau_w [3]: total torque about the COM, world frame, N·m
-      in  u [3]: motor torques on the wheels (body gets −u), N·m
-      in  c_w scalar: wheel damping, N·m·s/rad
-      out q_dot [4]: 1/s
-      out omega_dot_b [3]: rad/s², body frame
-      out Omega_dot [3]: rad/s²"""
+    """Body with three body-axis reaction wheels rotating about a pivot.
+
+    Generated kernel ``wheel_body_rhs``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    q : array_like, shape (..., 4)
+        orientation (x, y, z, w), R_WB
+    omega_b : array_like, shape (..., 3)
+        angular velocity, body frame, rad/s
+    Omega : array_like, shape (..., 3)
+        wheel rates relative to the body, rad/s
+    I_p : array_like, shape (..., 3, 3)
+        inertia about the pivot (wheels locked), body frame, kg·m², symmetric row-major
+    J : array_like, shape (..., 3)
+        wheel spin inertias, kg·m²
+    r_b : array_like, shape (..., 3)
+        pivot → COM, body frame, m
+    F_w : array_like, shape (..., 3)
+        total force at the COM, world frame, N
+    tau_w : array_like, shape (..., 3)
+        total torque about the COM, world frame, N·m
+    u : array_like, shape (..., 3)
+        motor torques on the wheels (body gets −u), N·m
+    c_w : array_like, shape (...)
+        wheel damping, N·m·s/rad
+
+    Returns
+    -------
+    q_dot : ndarray, shape (..., 4)
+        1/s
+    omega_dot_b : ndarray, shape (..., 3)
+        rad/s², body frame
+    Omega_dot : ndarray, shape (..., 3)
+        rad/s²
+    """
     q = numpy.asarray(q, dtype=numpy.float64)
     omega_b = numpy.asarray(omega_b, dtype=numpy.float64)
     Omega = numpy.asarray(Omega, dtype=numpy.float64)
@@ -1381,14 +1870,30 @@ def wheel_body_rhs(q, omega_b, Omega, I_p, J, r_b, F_w, tau_w, u, c_w):
 
 
 def wheel_momentum(q, omega_b, Omega, I_p, J):
-    """wheel_momentum: World angular momentum about the pivot of the body (wheels locked) and of the wheels' spin.
-      in  q [4]: orientation (x, y, z, w), R_WB
-      in  omega_b [3]: angular velocity, body frame, rad/s
-      in  Omega [3]: wheel rates relative to the body, rad/s
-      in  I_p [3×3]: inertia about the pivot (wheels locked), body frame, kg·m², symmetric row-major
-      in  J [3]: wheel spin inertias, kg·m²
-      out L_body_w [3]: kg·m²/s, world
-      out L_wheels_w [3]: kg·m²/s, world"""
+    """World angular momentum about the pivot of the body (wheels locked) and of the wheels' spin.
+
+    Generated kernel ``wheel_momentum``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    q : array_like, shape (..., 4)
+        orientation (x, y, z, w), R_WB
+    omega_b : array_like, shape (..., 3)
+        angular velocity, body frame, rad/s
+    Omega : array_like, shape (..., 3)
+        wheel rates relative to the body, rad/s
+    I_p : array_like, shape (..., 3, 3)
+        inertia about the pivot (wheels locked), body frame, kg·m², symmetric row-major
+    J : array_like, shape (..., 3)
+        wheel spin inertias, kg·m²
+
+    Returns
+    -------
+    L_body_w : ndarray, shape (..., 3)
+        kg·m²/s, world
+    L_wheels_w : ndarray, shape (..., 3)
+        kg·m²/s, world
+    """
     q = numpy.asarray(q, dtype=numpy.float64)
     omega_b = numpy.asarray(omega_b, dtype=numpy.float64)
     Omega = numpy.asarray(Omega, dtype=numpy.float64)
@@ -1451,13 +1956,28 @@ def wheel_momentum(q, omega_b, Omega, I_p, J):
 
 
 def pivot_kinematics(q, omega_b, anchor_w, r_b):
-    """pivot_kinematics: COM position and velocity of a body on a spherical joint.
-      in  q [4]: orientation (x, y, z, w), R_WB
-      in  omega_b [3]: angular velocity, body frame, rad/s
-      in  anchor_w [3]: joint anchor, world frame, m
-      in  r_b [3]: pivot → COM, body frame, m
-      out p_w [3]: COM position, world, m
-      out v_w [3]: COM velocity, world, m/s"""
+    """COM position and velocity of a body on a spherical joint.
+
+    Generated kernel ``pivot_kinematics``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    q : array_like, shape (..., 4)
+        orientation (x, y, z, w), R_WB
+    omega_b : array_like, shape (..., 3)
+        angular velocity, body frame, rad/s
+    anchor_w : array_like, shape (..., 3)
+        joint anchor, world frame, m
+    r_b : array_like, shape (..., 3)
+        pivot → COM, body frame, m
+
+    Returns
+    -------
+    p_w : ndarray, shape (..., 3)
+        COM position, world, m
+    v_w : ndarray, shape (..., 3)
+        COM velocity, world, m/s
+    """
     q = numpy.asarray(q, dtype=numpy.float64)
     omega_b = numpy.asarray(omega_b, dtype=numpy.float64)
     anchor_w = numpy.asarray(anchor_w, dtype=numpy.float64)
@@ -1510,13 +2030,28 @@ def pivot_kinematics(q, omega_b, anchor_w, r_b):
 
 
 def splitting_rotation(I_b, q, omega_b, h):
-    """splitting_rotation: Free rotation over h by Strang splitting into exact principal-axis flows.
-      in  I_b [3]: principal moments, body frame, kg·m²
-      in  q [4]: orientation (x, y, z, w), R_WB, unit
-      in  omega_b [3]: angular velocity, body frame, rad/s
-      in  h scalar: time step, s
-      out q_next [4]: orientation after h (unit when q is)
-      out omega_next [3]: rad/s, body frame"""
+    """Free rotation over h by Strang splitting into exact principal-axis flows.
+
+    Generated kernel ``splitting_rotation``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    I_b : array_like, shape (..., 3)
+        principal moments, body frame, kg·m²
+    q : array_like, shape (..., 4)
+        orientation (x, y, z, w), R_WB, unit
+    omega_b : array_like, shape (..., 3)
+        angular velocity, body frame, rad/s
+    h : array_like, shape (...)
+        time step, s
+
+    Returns
+    -------
+    q_next : ndarray, shape (..., 4)
+        orientation after h (unit when q is)
+    omega_next : ndarray, shape (..., 3)
+        rad/s, body frame
+    """
     I_b = numpy.asarray(I_b, dtype=numpy.float64)
     q = numpy.asarray(q, dtype=numpy.float64)
     omega_b = numpy.asarray(omega_b, dtype=numpy.float64)
@@ -1600,13 +2135,28 @@ def splitting_rotation(I_b, q, omega_b, h):
 
 
 def axis_flow_x(I_b, q, L_b, tau):
-    """axis_flow_x: Exact flow of H_x = L_x²/(2 I_x) on (q, L_B) for time τ.
-      in  I_b [3]: principal moments, body frame, kg·m²
-      in  q [4]: orientation (x, y, z, w), R_WB, unit
-      in  L_b [3]: angular momentum, body frame, kg·m²/s
-      in  tau scalar: duration of the flow, s
-      out q_next [4]: orientation (unit when q is)
-      out L_next [3]: kg·m²/s, body frame"""
+    """Exact flow of H_x = L_x²/(2 I_x) on (q, L_B) for time τ.
+
+    Generated kernel ``axis_flow_x``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    I_b : array_like, shape (..., 3)
+        principal moments, body frame, kg·m²
+    q : array_like, shape (..., 4)
+        orientation (x, y, z, w), R_WB, unit
+    L_b : array_like, shape (..., 3)
+        angular momentum, body frame, kg·m²/s
+    tau : array_like, shape (...)
+        duration of the flow, s
+
+    Returns
+    -------
+    q_next : ndarray, shape (..., 4)
+        orientation (unit when q is)
+    L_next : ndarray, shape (..., 3)
+        kg·m²/s, body frame
+    """
     I_b = numpy.asarray(I_b, dtype=numpy.float64)
     q = numpy.asarray(q, dtype=numpy.float64)
     L_b = numpy.asarray(L_b, dtype=numpy.float64)
@@ -1638,13 +2188,28 @@ def axis_flow_x(I_b, q, L_b, tau):
 
 
 def axis_flow_y(I_b, q, L_b, tau):
-    """axis_flow_y: Exact flow of H_y = L_y²/(2 I_y) on (q, L_B) for time τ.
-      in  I_b [3]: principal moments, body frame, kg·m²
-      in  q [4]: orientation (x, y, z, w), R_WB, unit
-      in  L_b [3]: angular momentum, body frame, kg·m²/s
-      in  tau scalar: duration of the flow, s
-      out q_next [4]: orientation (unit when q is)
-      out L_next [3]: kg·m²/s, body frame"""
+    """Exact flow of H_y = L_y²/(2 I_y) on (q, L_B) for time τ.
+
+    Generated kernel ``axis_flow_y``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    I_b : array_like, shape (..., 3)
+        principal moments, body frame, kg·m²
+    q : array_like, shape (..., 4)
+        orientation (x, y, z, w), R_WB, unit
+    L_b : array_like, shape (..., 3)
+        angular momentum, body frame, kg·m²/s
+    tau : array_like, shape (...)
+        duration of the flow, s
+
+    Returns
+    -------
+    q_next : ndarray, shape (..., 4)
+        orientation (unit when q is)
+    L_next : ndarray, shape (..., 3)
+        kg·m²/s, body frame
+    """
     I_b = numpy.asarray(I_b, dtype=numpy.float64)
     q = numpy.asarray(q, dtype=numpy.float64)
     L_b = numpy.asarray(L_b, dtype=numpy.float64)
@@ -1676,13 +2241,28 @@ def axis_flow_y(I_b, q, L_b, tau):
 
 
 def axis_flow_z(I_b, q, L_b, tau):
-    """axis_flow_z: Exact flow of H_z = L_z²/(2 I_z) on (q, L_B) for time τ.
-      in  I_b [3]: principal moments, body frame, kg·m²
-      in  q [4]: orientation (x, y, z, w), R_WB, unit
-      in  L_b [3]: angular momentum, body frame, kg·m²/s
-      in  tau scalar: duration of the flow, s
-      out q_next [4]: orientation (unit when q is)
-      out L_next [3]: kg·m²/s, body frame"""
+    """Exact flow of H_z = L_z²/(2 I_z) on (q, L_B) for time τ.
+
+    Generated kernel ``axis_flow_z``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    I_b : array_like, shape (..., 3)
+        principal moments, body frame, kg·m²
+    q : array_like, shape (..., 4)
+        orientation (x, y, z, w), R_WB, unit
+    L_b : array_like, shape (..., 3)
+        angular momentum, body frame, kg·m²/s
+    tau : array_like, shape (...)
+        duration of the flow, s
+
+    Returns
+    -------
+    q_next : ndarray, shape (..., 4)
+        orientation (unit when q is)
+    L_next : ndarray, shape (..., 3)
+        kg·m²/s, body frame
+    """
     I_b = numpy.asarray(I_b, dtype=numpy.float64)
     q = numpy.asarray(q, dtype=numpy.float64)
     L_b = numpy.asarray(L_b, dtype=numpy.float64)
@@ -1714,10 +2294,22 @@ def axis_flow_z(I_b, q, L_b, tau):
 
 
 def body_momentum(I_b, omega_b):
-    """body_momentum: Body angular momentum of a body with principal moments I_B.
-      in  I_b [3]: principal moments, body frame, kg·m²
-      in  omega_b [3]: angular velocity, body frame, rad/s
-      out L_b [3]: kg·m²/s, body frame"""
+    """Body angular momentum of a body with principal moments I_B.
+
+    Generated kernel ``body_momentum``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    I_b : array_like, shape (..., 3)
+        principal moments, body frame, kg·m²
+    omega_b : array_like, shape (..., 3)
+        angular velocity, body frame, rad/s
+
+    Returns
+    -------
+    L_b : ndarray, shape (..., 3)
+        kg·m²/s, body frame
+    """
     I_b = numpy.asarray(I_b, dtype=numpy.float64)
     omega_b = numpy.asarray(omega_b, dtype=numpy.float64)
     batch = numpy.broadcast_shapes(I_b.shape[:-1], omega_b.shape[:-1])
@@ -1735,10 +2327,22 @@ def body_momentum(I_b, omega_b):
 
 
 def body_rate(I_b, L_b):
-    """body_rate: Body angular velocity from the body angular momentum.
-      in  I_b [3]: principal moments, body frame, kg·m²
-      in  L_b [3]: angular momentum, body frame, kg·m²/s
-      out omega_b [3]: rad/s, body frame"""
+    """Body angular velocity from the body angular momentum.
+
+    Generated kernel ``body_rate``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    I_b : array_like, shape (..., 3)
+        principal moments, body frame, kg·m²
+    L_b : array_like, shape (..., 3)
+        angular momentum, body frame, kg·m²/s
+
+    Returns
+    -------
+    omega_b : ndarray, shape (..., 3)
+        rad/s, body frame
+    """
     I_b = numpy.asarray(I_b, dtype=numpy.float64)
     L_b = numpy.asarray(L_b, dtype=numpy.float64)
     batch = numpy.broadcast_shapes(I_b.shape[:-1], L_b.shape[:-1])
@@ -1756,16 +2360,34 @@ def body_rate(I_b, L_b):
 
 
 def splitting_kick(m, I_b, v_w, omega_b, F_w, tau_b, h):
-    """splitting_kick: Kick of v and ω under a force and a body torque for time h (q, p fixed).
-      in  m scalar: mass, kg
-      in  I_b [3]: principal moments, body frame, kg·m²
-      in  v_w [3]: COM velocity, world frame, m/s
-      in  omega_b [3]: angular velocity, body frame, rad/s
-      in  F_w [3]: force at the COM, world frame, N
-      in  tau_b [3]: torque, body frame, N·m
-      in  h scalar: time step, s
-      out v_next [3]: m/s, world frame
-      out omega_next [3]: rad/s, body frame"""
+    """Kick of v and ω under a force and a body torque for time h (q, p fixed).
+
+    Generated kernel ``splitting_kick``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    m : array_like, shape (...)
+        mass, kg
+    I_b : array_like, shape (..., 3)
+        principal moments, body frame, kg·m²
+    v_w : array_like, shape (..., 3)
+        COM velocity, world frame, m/s
+    omega_b : array_like, shape (..., 3)
+        angular velocity, body frame, rad/s
+    F_w : array_like, shape (..., 3)
+        force at the COM, world frame, N
+    tau_b : array_like, shape (..., 3)
+        torque, body frame, N·m
+    h : array_like, shape (...)
+        time step, s
+
+    Returns
+    -------
+    v_next : ndarray, shape (..., 3)
+        m/s, world frame
+    omega_next : ndarray, shape (..., 3)
+        rad/s, body frame
+    """
     m = numpy.asarray(m, dtype=numpy.float64)
     I_b = numpy.asarray(I_b, dtype=numpy.float64)
     v_w = numpy.asarray(v_w, dtype=numpy.float64)
@@ -1802,11 +2424,24 @@ def splitting_kick(m, I_b, v_w, omega_b, F_w, tau_b, h):
 
 
 def translation_drift(p_w, v_w, h):
-    """translation_drift: Drift of the COM position for time h.
-      in  p_w [3]: COM position, world frame, m
-      in  v_w [3]: COM velocity, world frame, m/s
-      in  h scalar: time step, s
-      out p_next [3]: m, world frame"""
+    """Drift of the COM position for time h.
+
+    Generated kernel ``translation_drift``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    p_w : array_like, shape (..., 3)
+        COM position, world frame, m
+    v_w : array_like, shape (..., 3)
+        COM velocity, world frame, m/s
+    h : array_like, shape (...)
+        time step, s
+
+    Returns
+    -------
+    p_next : ndarray, shape (..., 3)
+        m, world frame
+    """
     p_w = numpy.asarray(p_w, dtype=numpy.float64)
     v_w = numpy.asarray(v_w, dtype=numpy.float64)
     h = numpy.asarray(h, dtype=numpy.float64)
@@ -1825,14 +2460,30 @@ def translation_drift(p_w, v_w, h):
 
 
 def semi_implicit_translation(m, p_w, v_w, F_w, h):
-    """semi_implicit_translation: Semi-implicit Euler step of the COM under a force.
-      in  m scalar: mass, kg
-      in  p_w [3]: COM position, world frame, m
-      in  v_w [3]: COM velocity, world frame, m/s
-      in  F_w [3]: force at the COM, world frame, N
-      in  h scalar: time step, s
-      out p_next [3]: m, world frame
-      out v_next [3]: m/s, world frame"""
+    """Semi-implicit Euler step of the COM under a force.
+
+    Generated kernel ``semi_implicit_translation``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    m : array_like, shape (...)
+        mass, kg
+    p_w : array_like, shape (..., 3)
+        COM position, world frame, m
+    v_w : array_like, shape (..., 3)
+        COM velocity, world frame, m/s
+    F_w : array_like, shape (..., 3)
+        force at the COM, world frame, N
+    h : array_like, shape (...)
+        time step, s
+
+    Returns
+    -------
+    p_next : ndarray, shape (..., 3)
+        m, world frame
+    v_next : ndarray, shape (..., 3)
+        m/s, world frame
+    """
     m = numpy.asarray(m, dtype=numpy.float64)
     p_w = numpy.asarray(p_w, dtype=numpy.float64)
     v_w = numpy.asarray(v_w, dtype=numpy.float64)
@@ -1864,12 +2515,26 @@ def semi_implicit_translation(m, p_w, v_w, F_w, h):
 
 
 def translation_rhs(m, v_w, F_w):
-    """translation_rhs: COM translation of a free body.
-      in  m scalar: mass, kg
-      in  v_w [3]: COM velocity, world frame, m/s
-      in  F_w [3]: force at the COM, world frame, N
-      out p_dot [3]: m/s, world frame
-      out v_dot [3]: m/s², world frame"""
+    """COM translation of a free body.
+
+    Generated kernel ``translation_rhs``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    m : array_like, shape (...)
+        mass, kg
+    v_w : array_like, shape (..., 3)
+        COM velocity, world frame, m/s
+    F_w : array_like, shape (..., 3)
+        force at the COM, world frame, N
+
+    Returns
+    -------
+    p_dot : ndarray, shape (..., 3)
+        m/s, world frame
+    v_dot : ndarray, shape (..., 3)
+        m/s², world frame
+    """
     m = numpy.asarray(m, dtype=numpy.float64)
     v_w = numpy.asarray(v_w, dtype=numpy.float64)
     F_w = numpy.asarray(F_w, dtype=numpy.float64)
@@ -1893,13 +2558,28 @@ def translation_rhs(m, v_w, F_w):
 
 
 def implicit_gyro_residual(I_b, omega_b, tau_b, h, omega_next):
-    """implicit_gyro_residual: Residual of the implicit gyroscopic step.
-      in  I_b [3]: principal moments, body frame, kg·m²
-      in  omega_b [3]: angular velocity, body frame, rad/s
-      in  tau_b [3]: torque, body frame, N·m
-      in  h scalar: time step, s
-      in  omega_next [3]: current iterate of the new angular velocity ω⁺, body frame, rad/s
-      out g [3]: N·m·s"""
+    """Residual of the implicit gyroscopic step.
+
+    Generated kernel ``implicit_gyro_residual``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    I_b : array_like, shape (..., 3)
+        principal moments, body frame, kg·m²
+    omega_b : array_like, shape (..., 3)
+        angular velocity, body frame, rad/s
+    tau_b : array_like, shape (..., 3)
+        torque, body frame, N·m
+    h : array_like, shape (...)
+        time step, s
+    omega_next : array_like, shape (..., 3)
+        current iterate of the new angular velocity ω⁺, body frame, rad/s
+
+    Returns
+    -------
+    g : ndarray, shape (..., 3)
+        N·m·s
+    """
     I_b = numpy.asarray(I_b, dtype=numpy.float64)
     omega_b = numpy.asarray(omega_b, dtype=numpy.float64)
     tau_b = numpy.asarray(tau_b, dtype=numpy.float64)
@@ -1927,11 +2607,24 @@ def implicit_gyro_residual(I_b, omega_b, tau_b, h, omega_next):
 
 
 def implicit_gyro_jacobian(I_b, h, omega_next):
-    """implicit_gyro_jacobian: Jacobian of the implicit-gyro residual, differentiated by SymPy.
-      in  I_b [3]: principal moments, body frame, kg·m²
-      in  h scalar: time step, s
-      in  omega_next [3]: current iterate of the new angular velocity ω⁺, body frame, rad/s
-      out J [3×3]: kg·m², row-major"""
+    """Jacobian of the implicit-gyro residual, differentiated by SymPy.
+
+    Generated kernel ``implicit_gyro_jacobian``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    I_b : array_like, shape (..., 3)
+        principal moments, body frame, kg·m²
+    h : array_like, shape (...)
+        time step, s
+    omega_next : array_like, shape (..., 3)
+        current iterate of the new angular velocity ω⁺, body frame, rad/s
+
+    Returns
+    -------
+    J : ndarray, shape (..., 3, 3)
+        kg·m², row-major
+    """
     I_b = numpy.asarray(I_b, dtype=numpy.float64)
     h = numpy.asarray(h, dtype=numpy.float64)
     omega_next = numpy.asarray(omega_next, dtype=numpy.float64)
@@ -1959,14 +2652,30 @@ def implicit_gyro_jacobian(I_b, h, omega_next):
 
 
 def implicit_gyro_newton(I_b, omega_b, tau_b, h, omega_next):
-    """implicit_gyro_newton: One Newton update of the implicit gyroscopic step (adjugate solve).
-      in  I_b [3]: principal moments, body frame, kg·m²
-      in  omega_b [3]: angular velocity, body frame, rad/s
-      in  tau_b [3]: torque, body frame, N·m
-      in  h scalar: time step, s
-      in  omega_next [3]: current iterate of the new angular velocity ω⁺, body frame, rad/s
-      out omega_new [3]: next iterate, rad/s, body frame
-      out delta [3]: the Newton step, rad/s"""
+    """One Newton update of the implicit gyroscopic step (adjugate solve).
+
+    Generated kernel ``implicit_gyro_newton``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    I_b : array_like, shape (..., 3)
+        principal moments, body frame, kg·m²
+    omega_b : array_like, shape (..., 3)
+        angular velocity, body frame, rad/s
+    tau_b : array_like, shape (..., 3)
+        torque, body frame, N·m
+    h : array_like, shape (...)
+        time step, s
+    omega_next : array_like, shape (..., 3)
+        current iterate of the new angular velocity ω⁺, body frame, rad/s
+
+    Returns
+    -------
+    omega_new : ndarray, shape (..., 3)
+        next iterate, rad/s, body frame
+    delta : ndarray, shape (..., 3)
+        the Newton step, rad/s
+    """
     I_b = numpy.asarray(I_b, dtype=numpy.float64)
     omega_b = numpy.asarray(omega_b, dtype=numpy.float64)
     tau_b = numpy.asarray(tau_b, dtype=numpy.float64)
@@ -2021,11 +2730,24 @@ def implicit_gyro_newton(I_b, omega_b, tau_b, h, omega_next):
 
 
 def quat_exp_step(q, omega_b, h):
-    """quat_exp_step: Attitude step by the exponential map of a body angular velocity held over h.
-      in  q [4]: orientation (x, y, z, w), R_WB, unit
-      in  omega_b [3]: angular velocity, body frame, rad/s
-      in  h scalar: time step, s
-      out q_next [4]: orientation (unit when q is)"""
+    """Attitude step by the exponential map of a body angular velocity held over h.
+
+    Generated kernel ``quat_exp_step``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    q : array_like, shape (..., 4)
+        orientation (x, y, z, w), R_WB, unit
+    omega_b : array_like, shape (..., 3)
+        angular velocity, body frame, rad/s
+    h : array_like, shape (...)
+        time step, s
+
+    Returns
+    -------
+    q_next : ndarray, shape (..., 4)
+        orientation (unit when q is)
+    """
     q = numpy.asarray(q, dtype=numpy.float64)
     omega_b = numpy.asarray(omega_b, dtype=numpy.float64)
     h = numpy.asarray(h, dtype=numpy.float64)
@@ -2056,10 +2778,22 @@ def quat_exp_step(q, omega_b, h):
 
 
 def rkmk_dexpinv(u_b, omega_b):
-    """rkmk_dexpinv: Rate of the attitude's exponential coordinates (RKMK4, truncated dexp inverse).
-      in  u_b [3]: rotation vector of the attitude relative to the step's start, body frame, rad
-      in  omega_b [3]: angular velocity, body frame, rad/s
-      out u_dot [3]: rad/s, body frame"""
+    """Rate of the attitude's exponential coordinates (RKMK4, truncated dexp inverse).
+
+    Generated kernel ``rkmk_dexpinv``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    u_b : array_like, shape (..., 3)
+        rotation vector of the attitude relative to the step's start, body frame, rad
+    omega_b : array_like, shape (..., 3)
+        angular velocity, body frame, rad/s
+
+    Returns
+    -------
+    u_dot : ndarray, shape (..., 3)
+        rad/s, body frame
+    """
     u_b = numpy.asarray(u_b, dtype=numpy.float64)
     omega_b = numpy.asarray(omega_b, dtype=numpy.float64)
     batch = numpy.broadcast_shapes(u_b.shape[:-1], omega_b.shape[:-1])
@@ -2085,12 +2819,26 @@ def rkmk_dexpinv(u_b, omega_b):
 
 
 def wheel_saturation(command, Omega, torque_limit, speed_limit):
-    """wheel_saturation: Motor torques actually applied: clipped, and cut off beyond the speed limit.
-      in  command [3]: commanded motor torques, N·m
-      in  Omega [3]: wheel rates relative to the body, rad/s
-      in  torque_limit scalar: N·m
-      in  speed_limit scalar: rad/s
-      out u [3]: applied motor torques, N·m"""
+    """Motor torques actually applied: clipped, and cut off beyond the speed limit.
+
+    Generated kernel ``wheel_saturation``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    command : array_like, shape (..., 3)
+        commanded motor torques, N·m
+    Omega : array_like, shape (..., 3)
+        wheel rates relative to the body, rad/s
+    torque_limit : array_like, shape (...)
+        N·m
+    speed_limit : array_like, shape (...)
+        rad/s
+
+    Returns
+    -------
+    u : ndarray, shape (..., 3)
+        applied motor torques, N·m
+    """
     command = numpy.asarray(command, dtype=numpy.float64)
     Omega = numpy.asarray(Omega, dtype=numpy.float64)
     torque_limit = numpy.asarray(torque_limit, dtype=numpy.float64)
@@ -2189,27 +2937,132 @@ KERNELS = {
 # (its row after [code, body]); x: the body states; v_w: the COM velocities it sees; m, I_b.
 
 def effect_apply_applied_torque(p, x, v_w, m, I_b):
-    """applied_torque: A torque about the COM, world frame. p = [torque_w(3)]."""
+    """applied_torque: A torque about the COM, world frame.
+
+    Parameters
+    ----------
+    p : array_like, shape (n, n_params)
+        The effect's parameters per row: [torque_w(3)].
+    x : array_like, shape (n, 13)
+        Body states [p_w, q (x, y, z, w), v_w, omega_b] the effect acts on.
+    v_w : array_like, shape (n, 3)
+        COM velocities it sees, world frame, m/s.
+    m : array_like, shape (n,)
+        Masses, kg.
+    I_b : array_like, shape (n, 3)
+        Principal moments, body frame, kg·m².
+
+    Returns
+    -------
+    F_w : ndarray, shape (n, 3) or None
+        Force at the COM, world frame, N (None: the effect has none).
+    tau_w : ndarray, shape (n, 3) or None
+        Torque about the COM, world frame, N·m (None: the effect has none).
+    """
     return None, effect_applied_torque(p[..., 0:3])
 
 
 def effect_apply_force_at_point(p, x, v_w, m, I_b):
-    """force_at_point: A world force applied at a body-fixed point: the force acts on the COM plus a torque. p = [r_b(3), F_w(3)]."""
+    """force_at_point: A world force applied at a body-fixed point: the force acts on the COM plus a torque.
+
+    Parameters
+    ----------
+    p : array_like, shape (n, n_params)
+        The effect's parameters per row: [r_b(3), F_w(3)].
+    x : array_like, shape (n, 13)
+        Body states [p_w, q (x, y, z, w), v_w, omega_b] the effect acts on.
+    v_w : array_like, shape (n, 3)
+        COM velocities it sees, world frame, m/s.
+    m : array_like, shape (n,)
+        Masses, kg.
+    I_b : array_like, shape (n, 3)
+        Principal moments, body frame, kg·m².
+
+    Returns
+    -------
+    F_w : ndarray, shape (n, 3) or None
+        Force at the COM, world frame, N (None: the effect has none).
+    tau_w : ndarray, shape (n, 3) or None
+        Torque about the COM, world frame, N·m (None: the effect has none).
+    """
     return effect_force_at_point(x[..., 3:7], p[..., 0:3], p[..., 3:6])
 
 
 def effect_apply_gravity(p, x, v_w, m, I_b):
-    """gravity: Uniform gravity acting at the COM. p = [g_w(3)]."""
+    """gravity: Uniform gravity acting at the COM.
+
+    Parameters
+    ----------
+    p : array_like, shape (n, n_params)
+        The effect's parameters per row: [g_w(3)].
+    x : array_like, shape (n, 13)
+        Body states [p_w, q (x, y, z, w), v_w, omega_b] the effect acts on.
+    v_w : array_like, shape (n, 3)
+        COM velocities it sees, world frame, m/s.
+    m : array_like, shape (n,)
+        Masses, kg.
+    I_b : array_like, shape (n, 3)
+        Principal moments, body frame, kg·m².
+
+    Returns
+    -------
+    F_w : ndarray, shape (n, 3) or None
+        Force at the COM, world frame, N (None: the effect has none).
+    tau_w : ndarray, shape (n, 3) or None
+        Torque about the COM, world frame, N·m (None: the effect has none).
+    """
     return effect_gravity(m, p[..., 0:3]), None
 
 
 def effect_apply_linear_damping(p, x, v_w, m, I_b):
-    """linear_damping: Viscous drag on the COM velocity. p = [c(1)]."""
+    """linear_damping: Viscous drag on the COM velocity.
+
+    Parameters
+    ----------
+    p : array_like, shape (n, n_params)
+        The effect's parameters per row: [c(1)].
+    x : array_like, shape (n, 13)
+        Body states [p_w, q (x, y, z, w), v_w, omega_b] the effect acts on.
+    v_w : array_like, shape (n, 3)
+        COM velocities it sees, world frame, m/s.
+    m : array_like, shape (n,)
+        Masses, kg.
+    I_b : array_like, shape (n, 3)
+        Principal moments, body frame, kg·m².
+
+    Returns
+    -------
+    F_w : ndarray, shape (n, 3) or None
+        Force at the COM, world frame, N (None: the effect has none).
+    tau_w : ndarray, shape (n, 3) or None
+        Torque about the COM, world frame, N·m (None: the effect has none).
+    """
     return effect_linear_damping(v_w, p[..., 0]), None
 
 
 def effect_apply_angular_damping(p, x, v_w, m, I_b):
-    """angular_damping: Viscous drag on the angular velocity. p = [c(1)]."""
+    """angular_damping: Viscous drag on the angular velocity.
+
+    Parameters
+    ----------
+    p : array_like, shape (n, n_params)
+        The effect's parameters per row: [c(1)].
+    x : array_like, shape (n, 13)
+        Body states [p_w, q (x, y, z, w), v_w, omega_b] the effect acts on.
+    v_w : array_like, shape (n, 3)
+        COM velocities it sees, world frame, m/s.
+    m : array_like, shape (n,)
+        Masses, kg.
+    I_b : array_like, shape (n, 3)
+        Principal moments, body frame, kg·m².
+
+    Returns
+    -------
+    F_w : ndarray, shape (n, 3) or None
+        Force at the COM, world frame, N (None: the effect has none).
+    tau_w : ndarray, shape (n, 3) or None
+        Torque about the COM, world frame, N·m (None: the effect has none).
+    """
     return None, effect_angular_damping(x[..., 3:7], x[..., 10:13], p[..., 0])
 
 
@@ -2232,7 +3085,30 @@ EFFECT_APPLY_BY_CODE = {
 
 
 def effect_apply(code, p, x, v_w, m, I_b):
-    """Dispatch by built-in effect code; a code that is not one raises ValueError (never a no-op)."""
+    """Dispatch by built-in effect code; a code that is not one raises ValueError (never a no-op).
+
+    Parameters
+    ----------
+    code : int
+        A built-in effect code.
+    p : array_like, shape (n, n_params)
+        The effect's parameters per row.
+    x : array_like, shape (n, 13)
+        Body states [p_w, q (x, y, z, w), v_w, omega_b] the effect acts on.
+    v_w : array_like, shape (n, 3)
+        COM velocities it sees, world frame, m/s.
+    m : array_like, shape (n,)
+        Masses, kg.
+    I_b : array_like, shape (n, 3)
+        Principal moments, body frame, kg·m².
+
+    Returns
+    -------
+    F_w : ndarray, shape (n, 3) or None
+        Force at the COM, world frame, N (None: the effect has none).
+    tau_w : ndarray, shape (n, 3) or None
+        Torque about the COM, world frame, N·m (None: the effect has none).
+    """
     fn = EFFECT_APPLY_BY_CODE.get(code)
     if fn is None:
         raise ValueError(f"effect code {code!r} is not a built-in effect (built-in codes: 1 applied_torque, 2 force_at_point, 3 gravity, 4 linear_damping, 5 angular_damping)")

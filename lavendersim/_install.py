@@ -38,9 +38,18 @@ def extra_command(extra: str) -> str:
 class MissingExtraError(ImportError):
     """A feature needs an optional extra that is not installed.
 
-    Attributes: ``feature`` (what was asked for), ``extra`` (its name), ``module`` (what failed to
-    import). The message is one line: ``"<feature> needs the <extra> extra: pip install
-    'lavendersim[<extra>]'"``."""
+    The message is one line: ``"<feature> needs the <extra> extra: pip install
+    'lavendersim[<extra>]'"``; the three are kept as attributes.
+
+    Parameters
+    ----------
+    feature : str
+        What was asked for (``"lavendersim lqr"``).
+    extra : str
+        The extra that provides it (``"control"``).
+    module : str
+        The module that failed to import.
+    """
 
     def __init__(self, feature: str, extra: str, module: str):
         self.feature, self.extra, self.module = feature, extra, module

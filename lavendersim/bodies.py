@@ -23,7 +23,16 @@ _FIELDS = ("name", "mass", "I_b", "shape", "x0")
 
 
 class ImmutableBodyError(V.LavenderInputError, AttributeError):
-    """Assignment to an attribute of a validated Body (a LavenderInputError and an AttributeError)."""
+    """Assignment to an attribute of a validated Body (a LavenderInputError and an AttributeError).
+
+    Parameters
+    ----------
+    field : str
+        ``body.<attribute>``.
+    rule : str
+        Why it is refused.
+    detail : str, optional
+    """
 
 
 def _shape(value) -> tuple[str, tuple[float, ...]] | None:
@@ -116,7 +125,36 @@ class Body:
     @classmethod
     @V.keywords
     def box(cls, name: str, mass: float, size: ArrayLike, **state: Any) -> Body:
-        """Solid box with full side lengths size = (w, h, d) along body x, y, z (m)."""
+        """Solid box with full side lengths size = (w, h, d) along body x, y, z (m).
+
+        ``I_b = m/12 (h² + d², w² + d², w² + h²)`` (printed from derive/inertia.py).
+
+        Parameters
+        ----------
+        name : str
+            Non-empty name, unique within a Scene.
+        mass : float
+            kg, > 0.
+        size : array_like, shape (3,)
+            Full side lengths (w, h, d) along body x, y, z, m, > 0.
+        **state
+            Initial state keywords of :class:`Body` (``p_w``, ``q``, ``v_w``, ``omega_b`` or ``omega_w``).
+
+        Returns
+        -------
+        Body
+
+        Raises
+        ------
+        LavenderInputError
+            On a non-positive mass or dimension, or a bad state keyword (named in the message).
+
+        Examples
+        --------
+        >>> import lavendersim as lv
+        >>> lv.Body.box("cube", mass=1.0, size=(0.1, 0.1, 0.1)).I_b
+        array([0.00166667, 0.00166667, 0.00166667])
+        """
         cls._no_shape(state)
         w, h, d = (V.positive(f"size[{i}]", s) for i, s in enumerate(V.vector("size", size)))
         return cls(name, mass, K.inertia_box(V.positive("mass", mass), w, h, d), shape=("box", (w, h, d)), **state)
@@ -124,7 +162,28 @@ class Body:
     @classmethod
     @V.keywords
     def cylinder(cls, name: str, mass: float, radius: float, height: float, **state: Any) -> Body:
-        """Solid cylinder along body z."""
+        """Solid cylinder with its axis along body z.
+
+        Parameters
+        ----------
+        name : str
+            Non-empty name, unique within a Scene.
+        mass : float
+            kg, > 0.
+        radius, height : float
+            m, > 0.
+        **state
+            Initial state keywords of :class:`Body` (``p_w``, ``q``, ``v_w``, ``omega_b`` or ``omega_w``).
+
+        Returns
+        -------
+        Body
+
+        Raises
+        ------
+        LavenderInputError
+            On a non-positive mass or dimension, or a bad state keyword (named in the message).
+        """
         cls._no_shape(state)
         r, h = V.positive("radius", radius), V.positive("height", height)
         return cls(name, mass, K.inertia_cylinder(V.positive("mass", mass), r, h), shape=("cylinder", (r, h)), **state)
@@ -132,7 +191,28 @@ class Body:
     @classmethod
     @V.keywords
     def sphere(cls, name: str, mass: float, radius: float, **state: Any) -> Body:
-        """Solid sphere of the given radius (m)."""
+        """Solid sphere of the given radius.
+
+        Parameters
+        ----------
+        name : str
+            Non-empty name, unique within a Scene.
+        mass : float
+            kg, > 0.
+        radius : float
+            m, > 0.
+        **state
+            Initial state keywords of :class:`Body` (``p_w``, ``q``, ``v_w``, ``omega_b`` or ``omega_w``).
+
+        Returns
+        -------
+        Body
+
+        Raises
+        ------
+        LavenderInputError
+            On a non-positive mass or dimension, or a bad state keyword (named in the message).
+        """
         cls._no_shape(state)
         r = V.positive("radius", radius)
         return cls(name, mass, K.inertia_sphere(V.positive("mass", mass), r), shape=("sphere", (r,)), **state)
@@ -159,7 +239,14 @@ def _rebuild(name, mass, I_b, shape, x0) -> Body:
 class BodyState:
     """A view of one body's state (or trajectory: leading time axis) with derived quantities.
 
-    Omega: wheel rates relative to the body (rad/s), zeros for a body without reaction wheels."""
+    Parameters
+    ----------
+    x : ndarray, shape (..., 13)
+        ``[p_w(3), q(4), v_w(3), omega_b(3)]`` (layout printed in lavendersim.generated.layout);
+        a leading axis (samples of a Trajectory) is kept by every property.
+    Omega : ndarray, shape (..., 3), optional
+        Wheel rates relative to the body (rad/s); zeros for a body without reaction wheels.
+    """
 
     def __init__(self, x: np.ndarray, Omega: np.ndarray | None = None) -> None:
         self.x = x
@@ -192,4 +279,5 @@ class BodyState:
 
     @property
     def R_wb(self) -> np.ndarray:
+        """Rotation matrix, shape (..., 3, 3), mapping body to world coordinates."""
         return K.quat_to_matrix(self.q)

@@ -77,7 +77,27 @@ class CubeModel:
     ``damping`` (N·m·s/rad, the "angular_damping" effect), wheel bearing damping ``wheel_damping``
     (N·m·s/rad), gravity ``g`` (m/s², along −z world). Defaults are Cubli-like (15 cm, 1 kg;
     Cubli: 1.42 kg, wheel inertia 0.57e-3 kg·m², Maxon EC45-flat motors): J = 5.7e-4 kg·m² per
-    wheel, 0.2 N·m, 400 rad/s (3800 rpm)."""
+    wheel, 0.2 N·m, 400 rad/s (3800 rpm).
+
+    Parameters
+    ----------
+    scenario : {"center", "corner"}
+        Spherical joint at the cube's centre, or on a corner (Cubli-like balancing).
+    mass : float
+        Total mass, kg (wheels included).
+    size : float
+        Side length, m.
+    J : float or array_like, shape (3,)
+        Wheel spin inertias about body x, y, z, kg·m².
+    torque_limit : float
+        Motor torque limit, N·m.
+    speed_limit : float
+        Wheel speed limit, rad/s.
+    damping, wheel_damping : float
+        N·m·s/rad, >= 0.
+    g : float
+        m/s², >= 0 (along −z world).
+    """
 
     scenario: str = "center"
     mass: float = 1.0
@@ -127,6 +147,7 @@ class CubeModel:
 
     @property
     def g_w(self) -> np.ndarray:
+        """Gravitational acceleration, world frame, m/s² (along −z)."""
         return np.array([0.0, 0.0, -self.g])
 
     @property
@@ -144,7 +165,21 @@ class CubeModel:
     # runtime scene ------------------------------------------------------------------------
     def scene(self, q0: ArrayLike | None = None, omega_b: ArrayLike = (0, 0, 0), Omega: ArrayLike | None = None) -> Scene:
         """The Scene for the runtime simulator: body "cube" (COM placed at anchor + R r_b), a
-        spherical joint at the origin, reaction wheels, and the declared damping/gravity."""
+        spherical joint at the origin, reaction wheels, and the declared damping/gravity.
+
+        Parameters
+        ----------
+        q0 : array_like, shape (4,), optional
+            Attitude (x, y, z, w); default upright.
+        omega_b : array_like, shape (3,), optional
+            Body rates, rad/s.
+        Omega : array_like, shape (3,), optional
+            Unused here (set wheel rates on the Sim).
+
+        Returns
+        -------
+        Scene
+        """
         import lavendersim as lv
 
         q0 = self.upright_q() if q0 is None else V.quaternion("q0", q0)
@@ -163,6 +198,23 @@ class CubeModel:
 
     def make_sim(self, q0: ArrayLike | None = None, omega_b: ArrayLike = (0, 0, 0), Omega: ArrayLike = (0, 0, 0),
                  dt: float = 1e-3, backend: str = "auto", integrator: str = "rk4") -> Sim:
+        """A Sim of :meth:`scene` with wheel rates `Omega`.
+
+        Parameters
+        ----------
+        q0, omega_b : optional
+            As in :meth:`scene`.
+        Omega : array_like, shape (3,), optional
+            Wheel rates relative to the body, rad/s.
+        dt : float, optional
+            Step, s.
+        backend, integrator : str, optional
+            As in :class:`lavendersim.Sim`.
+
+        Returns
+        -------
+        Sim
+        """
         import lavendersim as lv
 
         sim = lv.Sim(self.scene(q0, omega_b), dt=dt, integrator=integrator, backend=backend)
@@ -171,6 +223,7 @@ class CubeModel:
         return sim
 
     def as_dict(self) -> dict[str, Any]:
+        """The fields as plain JSON-able values."""
         return {"scenario": self.scenario, "mass": self.mass, "size": self.size, "J": self.J.tolist(),
                 "torque_limit": self.torque_limit, "speed_limit": self.speed_limit, "damping": self.damping,
                 "wheel_damping": self.wheel_damping, "g": self.g}
@@ -182,21 +235,53 @@ class CubeModel:
 
 
 def attitude_error(q: ArrayLike, q_ref: ArrayLike) -> np.ndarray:
-    """dtheta = 2 vec(q_ref* ⊗ q), sign chosen so the scalar part is >= 0 (rad, body frame)."""
+    """dtheta = 2 vec(q_ref* ⊗ q), sign chosen so the scalar part is >= 0 (rad, body frame).
+
+    Parameters
+    ----------
+    q, q_ref : array_like, shape (..., 4)
+        Quaternions (x, y, z, w).
+
+    Returns
+    -------
+    ndarray, shape (..., 3)
+    """
     qe = np.asarray(KN.quat_mul(KN.quat_conj(np.asarray(q_ref, float)), np.asarray(q, float)), dtype=float)
     sgn = np.where(qe[..., 3:4] < 0, -1.0, 1.0)
     return 2.0 * sgn * qe[..., 0:3]
 
 
 def error_angle_deg(q: ArrayLike, q_ref: ArrayLike) -> np.ndarray:
-    """Rotation angle between q and q_ref, degrees in [0, 180]."""
+    """Rotation angle between q and q_ref, degrees in [0, 180].
+
+    Parameters
+    ----------
+    q, q_ref : array_like, shape (..., 4)
+        Quaternions (x, y, z, w).
+
+    Returns
+    -------
+    ndarray, shape (...)
+    """
     qe = np.asarray(KN.quat_mul(KN.quat_conj(np.asarray(q_ref, float)), np.asarray(q, float)), dtype=float)
     s = np.linalg.norm(qe[..., 0:3], axis=-1)
     return np.degrees(2.0 * np.arctan2(s, np.abs(qe[..., 3])))
 
 
 def perturbed(q_ref: ArrayLike, dtheta: ArrayLike) -> np.ndarray:
-    """q = q_ref ⊗ [dtheta/2, sqrt(1 - |dtheta/2|²)] (the inverse of attitude_error)."""
+    """q = q_ref ⊗ [dtheta/2, sqrt(1 - |dtheta/2|²)] (the inverse of attitude_error).
+
+    Parameters
+    ----------
+    q_ref : array_like, shape (4,)
+        Reference (x, y, z, w).
+    dtheta : array_like, shape (3,)
+        Error coordinates, rad, body frame, |dtheta| < 2.
+
+    Returns
+    -------
+    ndarray, shape (4,)
+    """
     h = np.asarray(dtheta, float) / 2
     n2 = float(h @ h)
     if n2 >= 1:
@@ -205,7 +290,21 @@ def perturbed(q_ref: ArrayLike, dtheta: ArrayLike) -> np.ndarray:
 
 
 def rotated(q_ref: ArrayLike, axis: ArrayLike, angle_deg: float) -> np.ndarray:
-    """q_ref ⊗ rotation by angle_deg about a body-frame axis (normalized)."""
+    """q_ref ⊗ rotation by angle_deg about a body-frame axis (normalized).
+
+    Parameters
+    ----------
+    q_ref : array_like, shape (4,)
+        Reference (x, y, z, w).
+    axis : array_like, shape (3,)
+        Non-zero body-frame axis.
+    angle_deg : float
+        Degrees.
+
+    Returns
+    -------
+    ndarray, shape (4,)
+    """
     axis = V.vector("axis", axis)
     n = np.linalg.norm(axis)
     if n == 0:
@@ -221,6 +320,27 @@ def rotated(q_ref: ArrayLike, axis: ArrayLike, angle_deg: float) -> np.ndarray:
 
 @dataclass
 class Linearization:
+    """The cube linearized in error coordinates x = [dtheta (rad), omega_b (rad/s), Omega − Omega0 (rad/s)].
+
+    Parameters
+    ----------
+    A : ndarray, shape (9, 9)
+    B : ndarray, shape (9, 3)
+        Input: motor torques du (N·m) about u0.
+    q_ref : ndarray, shape (4,)
+        Equilibrium attitude (x, y, z, w).
+    Omega0 : ndarray, shape (3,)
+        Equilibrium wheel rates, rad/s.
+    u0 : ndarray, shape (3,)
+        Equilibrium motor torques, N·m.
+    rank : int
+        Rank of the controllability matrix.
+    basis : ndarray, shape (9, rank)
+        Orthonormal basis of the controllable subspace.
+    equilibrium_residual : float
+        |f(0, 0)| at the equilibrium.
+    state_labels, input_labels : tuple of str
+    """
     A: np.ndarray
     B: np.ndarray
     q_ref: np.ndarray
@@ -234,6 +354,7 @@ class Linearization:
 
     @property
     def controllable(self) -> bool:
+        """Whether the pair (A, B) is fully controllable."""
         return self.rank == self.A.shape[0]
 
     @property
@@ -250,7 +371,18 @@ class Linearization:
     def target(self, x: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         """(x_ss, du_ss): the equilibrium with dtheta = 0, omega = 0 that has the same conserved
         coordinates Uᵀx as x (wheel speeds Omega_ss absorb the momentum), and the torque holding it.
-        Zero when x carries no conserved momentum (e.g. starting at rest without damping)."""
+        Zero when x carries no conserved momentum (e.g. starting at rest without damping).
+
+        Parameters
+        ----------
+        x : array_like, shape (9,)
+            Error-coordinate state.
+
+        Returns
+        -------
+        x_ss : ndarray, shape (9,)
+        du_ss : ndarray, shape (3,)
+        """
         n = self.A.shape[0]
         x_ss, du = np.zeros(n), np.zeros(self.B.shape[1])
         if self.rank == n:
@@ -263,19 +395,60 @@ class Linearization:
         return x_ss, du
 
     def feedback(self, K: ArrayLike, x: ArrayLike) -> np.ndarray:
-        """u = u0 + du_ss − K (x − x_ss) (unsaturated), N·m."""
+        """u = u0 + du_ss − K (x − x_ss) (unsaturated), N·m.
+
+        Parameters
+        ----------
+        K : array_like, shape (3, 9)
+            Gain.
+        x : array_like, shape (9,)
+            Error-coordinate state.
+
+        Returns
+        -------
+        ndarray, shape (3,)
+        """
         x_ss, du = self.target(x)
         return self.u0 + du - np.asarray(K) @ (x - x_ss)
 
     def state(self, q: ArrayLike, omega_b: ArrayLike, Omega: ArrayLike) -> np.ndarray:
-        """Error-coordinate state x from a simulator state."""
+        """Error-coordinate state x from a simulator state.
+
+        Parameters
+        ----------
+        q : array_like, shape (4,)
+            Attitude (x, y, z, w).
+        omega_b : array_like, shape (3,)
+            Body rates, rad/s.
+        Omega : array_like, shape (3,)
+            Wheel rates, rad/s.
+
+        Returns
+        -------
+        ndarray, shape (9,)
+        """
         return np.concatenate([attitude_error(q, self.q_ref), np.asarray(omega_b, float),
                                np.asarray(Omega, float) - self.Omega0])
 
 
 def casadi_rhs(model: CubeModel, q_ref: ArrayLike, Omega0: ArrayLike = (0, 0, 0)) -> tuple[casadi.Function, np.ndarray]:
     """(f, u0): the CasADi Function f(x, du) -> x_dot in error coordinates, built from kernels_casadi,
-    and the equilibrium motor torque u0 = c_w Omega0 (3,), N·m."""
+    and the equilibrium motor torque u0 = c_w Omega0 (3,), N·m.
+
+    Parameters
+    ----------
+    model : CubeModel
+        The cube.
+    q_ref : array_like, shape (4,)
+        Equilibrium attitude.
+    Omega0 : array_like, shape (3,), optional
+        Equilibrium wheel rates, rad/s.
+
+    Returns
+    -------
+    f : casadi.Function
+    u0 : ndarray, shape (3,)
+    """
     ca = require("casadi", "control", "the CasADi linearization")
     from .generated import kernels_casadi as KC
 
@@ -306,7 +479,18 @@ def casadi_rhs(model: CubeModel, q_ref: ArrayLike, Omega0: ArrayLike = (0, 0, 0)
 
 def controllable_basis(A: np.ndarray, B: np.ndarray, tol: float = 1e-9) -> np.ndarray:
     """Orthonormal basis of the controllable subspace span[B, AB, A²B, …] (Krylov with
-    re-orthogonalization; A and B scaled to unit norm, singular values below tol dropped)."""
+    re-orthogonalization; A and B scaled to unit norm, singular values below tol dropped).
+
+    Parameters
+    ----------
+    A : ndarray, shape (n, n)
+    B : ndarray, shape (n, m)
+    tol : float, optional
+
+    Returns
+    -------
+    ndarray, shape (n, rank)
+    """
     n = A.shape[0]
     An = A / max(np.linalg.norm(A, 2), 1e-300)
     Bn = B / max(np.linalg.norm(B, 2), 1e-300)
@@ -332,7 +516,23 @@ def controllable_basis(A: np.ndarray, B: np.ndarray, tol: float = 1e-9) -> np.nd
 
 def linearize(model: CubeModel, q_ref: ArrayLike | None = None, Omega0: ArrayLike = (0, 0, 0),
               tol: float = 1e-9) -> Linearization:
-    """A = ∂f/∂x, B = ∂f/∂u at (q_ref, omega = 0, Omega = Omega0, u = c_w Omega0), by CasADi AD."""
+    """A = ∂f/∂x, B = ∂f/∂u at (q_ref, omega = 0, Omega = Omega0, u = c_w Omega0), by CasADi AD.
+
+    Parameters
+    ----------
+    model : CubeModel
+        The cube.
+    q_ref : array_like, shape (4,), optional
+        Equilibrium attitude (default upright).
+    Omega0 : array_like, shape (3,), optional
+        Equilibrium wheel rates, rad/s.
+    tol : float, optional
+        Rank tolerance (see :func:`controllable_basis`).
+
+    Returns
+    -------
+    Linearization
+    """
     ca = require("casadi", "control", "the CasADi linearization")
     q_ref = model.upright_q() if q_ref is None else V.quaternion("q_ref", q_ref)
     Omega0 = V.vector("Omega0", Omega0)
@@ -387,7 +587,23 @@ def _weight(name: str, value, n: int, definite: bool) -> np.ndarray:
 def lqr(lin: Linearization, Q: ArrayLike, R: ArrayLike) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(K, S, E) of python-control's lqr, on the controllable subspace when rank < n (see the
     module docstring). E are the closed-loop eigenvalues of A − B K (the uncontrollable conserved
-    modes included, at 0)."""
+    modes included, at 0).
+
+    Parameters
+    ----------
+    lin : Linearization
+    Q : array_like
+        State weight: a number, the diagonal (9,) or (9, 9).
+    R : array_like
+        Input weight: a number, the diagonal (3,) or (3, 3), positive definite.
+
+    Returns
+    -------
+    K : ndarray, shape (3, 9)
+        ``u = -K x``.
+    S : ndarray, shape (9, 9)
+    E : ndarray, shape (9,)
+    """
     ct = require("control", "control", "LQR design (python-control)")
     n, m = lin.B.shape
     Q = _weight("Q", Q, n, definite=False)
@@ -406,7 +622,18 @@ def lqr(lin: Linearization, Q: ArrayLike, R: ArrayLike) -> tuple[np.ndarray, np.
 
 def default_weights(model: CubeModel) -> tuple[np.ndarray, np.ndarray]:
     """Bryson-style defaults: attitude 1/(2°)², rates 1/(0.5 rad/s)², wheels 1/(0.5·limit)²,
-    torque 1/(0.5·limit)² (corner: attitude 1/(0.5°)²)."""
+    torque 1/(0.5·limit)² (corner: attitude 1/(0.5°)²).
+
+    Parameters
+    ----------
+    model : CubeModel
+        The cube.
+
+    Returns
+    -------
+    Q_diag : ndarray, shape (9,)
+    R_diag : ndarray, shape (3,)
+    """
     ang = math.radians(2.0 if model.scenario == "center" else 0.5)
     q = np.concatenate([np.full(3, 1 / ang ** 2), np.full(3, 1 / 0.5 ** 2), np.full(3, 1 / (0.5 * model.speed_limit) ** 2)])
     return q, np.full(3, 1 / (0.5 * model.torque_limit) ** 2)
@@ -419,6 +646,23 @@ def default_weights(model: CubeModel) -> tuple[np.ndarray, np.ndarray]:
 
 @dataclass
 class Response:
+    """A closed-loop run sampled every control period.
+
+    Parameters
+    ----------
+    t : ndarray, shape (T,)
+        s.
+    error_deg : ndarray, shape (T,)
+        Attitude error, degrees.
+    omega_b : ndarray, shape (T, 3)
+        rad/s.
+    Omega : ndarray, shape (T, 3)
+        Wheel rates, rad/s.
+    u_cmd, u_applied : ndarray, shape (T, 3)
+        Commanded and saturated motor torques, N·m.
+    q : ndarray, shape (T, 4)
+        Attitude (x, y, z, w).
+    """
     t: np.ndarray
     error_deg: np.ndarray
     omega_b: np.ndarray
@@ -428,7 +672,17 @@ class Response:
     q: np.ndarray
 
     def settling_time(self, threshold_deg: float) -> float:
-        """First time after which the attitude error stays below threshold_deg (inf if never)."""
+        """First time after which the attitude error stays below threshold_deg (inf if never).
+
+        Parameters
+        ----------
+        threshold_deg : float
+
+        Returns
+        -------
+        float
+            s.
+        """
         above = np.flatnonzero(self.error_deg >= threshold_deg)
         if above.size == 0:
             return 0.0
@@ -445,7 +699,29 @@ def closed_loop(model: CubeModel, lin: Linearization, K: ArrayLike, q0: ArrayLik
                 control_dt: float = 2e-3, backend: str = "auto", sim: Sim | None = None) -> Response:
     """Run u = u0 − K x (clipped to ±torque_limit) with a zero-order hold of control_dt in the
     nonlinear simulator (the Sim's reaction_wheels effect saturates again, speed limit included).
-    `sim` may be given (any object with the Sim's wheel API) instead of building one."""
+    `sim` may be given (any object with the Sim's wheel API) instead of building one.
+
+    Parameters
+    ----------
+    model : CubeModel
+        The cube.
+    lin : Linearization
+    K : array_like, shape (3, 9)
+    q0 : array_like, shape (4,)
+        Initial attitude.
+    T : float, optional
+        Duration, s.
+    omega0, Omega0 : array_like, shape (3,), optional
+        Initial body and wheel rates, rad/s.
+    dt, control_dt : float, optional
+        Simulator step and control period, s.
+    backend : str, optional
+    sim : Sim, optional
+
+    Returns
+    -------
+    Response
+    """
     dt = V.dt("dt", dt)
     control_dt = V.dt("control_dt", control_dt)
     sub = int(round(control_dt / dt))
@@ -485,6 +761,24 @@ def closed_loop(model: CubeModel, lin: Linearization, K: ArrayLike, q0: ArrayLik
 
 @dataclass
 class DesignResult:
+    """What :func:`design` returns: the model, linearization, weights, gain and closed-loop run.
+
+    Parameters
+    ----------
+    model : CubeModel
+    lin : Linearization
+    Q, R : ndarray
+        Weights used.
+    K, S : ndarray
+        Gain (3, 9) and Riccati solution (9, 9).
+    poles : ndarray
+        Closed-loop eigenvalues.
+    response : Response
+    theta0_deg : float
+    axis : ndarray, shape (3,)
+    threshold_deg : float
+    backend : str
+    """
     model: CubeModel
     lin: Linearization
     Q: np.ndarray
@@ -500,6 +794,7 @@ class DesignResult:
 
     @property
     def settling_time(self) -> float:
+        """Settling time to threshold_deg, s (inf if never)."""
         return self.response.settling_time(self.threshold_deg)
 
     @property
@@ -509,13 +804,16 @@ class DesignResult:
 
     @property
     def peak_wheel_speed(self) -> float:
+        """max |Omega| over wheels and time, rad/s."""
         return float(np.max(np.abs(self.response.Omega)))
 
     @property
     def final_error_deg(self) -> float:
+        """Attitude error at the end, degrees."""
         return float(self.response.error_deg[-1])
 
     def figures(self) -> dict[str, Any]:
+        """The design's figures as a JSON-able dict."""
         p = self.poles
         return {
             "model": self.model.as_dict(), "backend": self.backend,
@@ -531,11 +829,18 @@ class DesignResult:
         }
 
     def to_json(self) -> str:
+        """:meth:`figures` as JSON text (an infinite settling time as null)."""
         fig = self.figures()
         fig["settling_time"] = fig["settling_time"] if math.isfinite(fig["settling_time"]) else None
         return json.dumps(fig, indent=2)
 
     def plot(self, path: str | os.PathLike[str]) -> None:
+        """Write the response plot (PNG).
+
+        Parameters
+        ----------
+        path : str or os.PathLike
+        """
         from .labs.common import new_figure
 
         r, m = self.response, self.model
@@ -574,7 +879,40 @@ def design(scenario: str = "center", Q: ArrayLike | None = None, R: ArrayLike | 
     """Linearize, design the LQR gain, run the closed loop from an initial error of theta0_deg
     about the body axis `axis` (defaults: 20° about (1, 2, 3) centre; 3° about (1, 1, −2), a pure
     tilt, corner), return a DesignResult.
-    model_params go to CubeModel (mass, size, J, torque_limit, speed_limit, damping, …)."""
+    model_params go to CubeModel (mass, size, J, torque_limit, speed_limit, damping, …).
+
+    Parameters
+    ----------
+    scenario : {"center", "corner"}, optional
+    Q, R : array_like, optional
+        Weights (default :func:`default_weights`).
+    theta0_deg : float, optional
+        Initial error, degrees.
+    axis : array_like, shape (3,), optional
+        Body-frame axis of the initial error.
+    T : float, optional
+        Duration, s.
+    threshold_deg : float, optional
+        Settling threshold, degrees.
+    backend : str, optional
+    dt, control_dt : float, optional
+        s.
+    model : CubeModel, optional
+    sim : Sim, optional
+    **model_params
+        CubeModel fields.
+
+    Returns
+    -------
+    DesignResult
+
+    Examples
+    --------
+    >>> from lavendersim.control import design   # doctest: +SKIP
+    >>> r = design("center")                      # doctest: +SKIP
+    >>> r.settling_time < 1.0                     # doctest: +SKIP
+    True
+    """
     model = model or CubeModel(scenario=scenario, **model_params)
     lin = linearize(model)
     q_def, r_def = default_weights(model)
@@ -605,7 +943,25 @@ def finite_difference_AB(model: CubeModel, lin: Linearization, *, backend: str =
     Φ(x, u) = x + dt f(x, u) + (normalization, even in the perturbation), so at the equilibrium
     (Φ(+h e_j) − Φ(−h e_j)) / (2 h) = e_j + dt A e_j exactly in dt; A = ((Φ₊ − Φ₋)/(2h) − e_j)/dt and
     likewise B. The states are mapped to error coordinates with lin.state. `make_sim(q, omega_b,
-    Omega, dt)` may replace the Sim (the tests' independent reference uses it)."""
+    Omega, dt)` may replace the Sim (the tests' independent reference uses it).
+
+    Parameters
+    ----------
+    model : CubeModel
+        The cube.
+    lin : Linearization
+    backend : str, optional
+    h : float, optional
+        Perturbation.
+    dt : float, optional
+        s.
+    make_sim : callable, optional
+
+    Returns
+    -------
+    A : ndarray, shape (9, 9)
+    B : ndarray, shape (9, 3)
+    """
     if make_sim is None:
         def make_sim(q, w, Om, dt_):
             return model.make_sim(q, w, Om, dt=dt_, backend=backend, integrator="euler")
@@ -632,7 +988,19 @@ def finite_difference_AB(model: CubeModel, lin: Linearization, *, backend: str =
 
 
 def linearization_residual(lin: Linearization, A_fd: ArrayLike, B_fd: ArrayLike) -> dict[str, float]:
-    """max |A − A_fd|, max |B − B_fd| (absolute) and the same relative to max(1, max |entry|)."""
+    """max |A − A_fd|, max |B − B_fd| (absolute) and the same relative to max(1, max |entry|).
+
+    Parameters
+    ----------
+    lin : Linearization
+    A_fd, B_fd : array_like
+        Finite-difference A and B.
+
+    Returns
+    -------
+    dict
+        ``A_abs``, ``B_abs``, ``A_rel``, ``B_rel``.
+    """
     ea, eb = float(np.max(np.abs(lin.A - A_fd))), float(np.max(np.abs(lin.B - B_fd)))
     return {"A_abs": ea, "B_abs": eb, "A_rel": ea / max(1.0, float(np.max(np.abs(lin.A)))),
             "B_rel": eb / max(1.0, float(np.max(np.abs(lin.B))))}
@@ -669,6 +1037,12 @@ def _matrix_arg(field_name: str, text: str | None, n: int):
 
 
 def register_cli(subparsers: argparse._SubParsersAction) -> None:
+    """Add the ``lqr`` subcommand to the CLI.
+
+    Parameters
+    ----------
+    subparsers : argparse._SubParsersAction
+    """
     p = subparsers.add_parser("lqr", help="design an LQR wheel controller for the reaction-wheel cube and run it in the simulator",
                               description=__doc__.split("\n\n")[0] + "\n\nQ and R: one number (times identity), the "
                               "diagonal (9 / 3 numbers, comma-separated) or the full matrix row-major (81 / 9 numbers). "

@@ -39,7 +39,25 @@ FLAG_USES_V, FLAG_USES_OMEGA, FLAG_FORCE = _META.FLAG_USES_V, _META.FLAG_USES_OM
 
 @dataclass(frozen=True)
 class ParamSpec:
-    """One declared parameter: shape () or (n,), unit, meaning, rule, default, offset in the row's parameters."""
+    """One declared parameter of an effect (printed by derive into effects_meta).
+
+    Parameters
+    ----------
+    name : str
+        Parameter name (a keyword of the effect).
+    shape : tuple
+        ``()`` for a scalar, ``(n,)`` for a vector.
+    unit : str
+        SI unit, e.g. ``"N·m"``.
+    doc : str
+        Meaning, with its frame.
+    rule : {"finite", "positive", "nonnegative"}
+        Validation rule applied to every entry.
+    default : object
+        Default value, or None if required.
+    offset : int
+        Offset in the row's parameters.
+    """
 
     name: str
     shape: tuple
@@ -51,13 +69,41 @@ class ParamSpec:
 
     @property
     def size(self) -> int:
+        """Number of floats the parameter takes in a row."""
         return self.shape[0] if self.shape else 1
 
 
 @dataclass(frozen=True)
 class EffectSpec:
-    """What derive printed about one effect (see the module docstring); ``source`` is "built-in" or
-    the directory of the user set it was loaded from."""
+    """What derive printed about one effect (see the module docstring).
+
+    Parameters
+    ----------
+    name : str
+        Effect name.
+    code : int
+        Code in the effect table (user effects from USER_CODE_BASE on).
+    kind : {"force", "model"}
+        A force/torque contribution, or a change of the body's model (joint, wheels).
+    summary : str
+        One line on what it does.
+    params : tuple of ParamSpec
+        Declared parameters in row order.
+    n_params : int
+        Floats they take in a row.
+    outputs : tuple of str
+        What it contributes (``"F_w"``, ``"tau_w"``).
+    state_inputs : tuple of str
+        What it reads (``"p_w"``, ``"q"``, ``"v_w"``, ``"omega_b"``, ``"m"``, ``"I_b"``).
+    flags : int
+        FLAG_* bits.
+    kernel : str or None
+        Name of its generated kernel.
+    source : str, optional
+        ``"built-in"`` or the directory of the user set it was loaded from.
+    user_set : object, optional
+        The loaded user set (lavendersim.extending.UserSet), None for a built-in.
+    """
 
     name: str
     code: int
@@ -84,6 +130,21 @@ class EffectSpec:
 
     @classmethod
     def from_meta(cls, entry: dict, code: int | None = None, source: str = "built-in", user_set=None) -> "EffectSpec":
+        """Build a spec from one entry of a generated ``effects_meta.EFFECTS`` list.
+
+        Parameters
+        ----------
+        entry : dict
+            The printed metadata of one effect.
+        code : int, optional
+            Overrides ``entry["code"]``.
+        source, user_set
+            As in the class.
+
+        Returns
+        -------
+        EffectSpec
+        """
         params = tuple(ParamSpec(p["name"], tuple(p["shape"]), p["unit"], p["doc"], p["rule"], p["default"], p["offset"])
                        for p in entry["params"])
         return cls(entry["name"], entry["code"] if code is None else code, entry["kind"], entry["summary"], params,
@@ -95,7 +156,20 @@ class Effect:
     """An effect declared on a scene: ``body`` (a name, or None for every body) and validated ``values``.
 
     Declared effects are subclasses built from their EffectSpec (``spec``); a hand-written subclass
-    without a declaration can be constructed but a Sim refuses it (see the module docstring)."""
+    without a declaration can be constructed but a Sim refuses it (see the module docstring).
+
+    Parameters
+    ----------
+    body : str or None, optional
+        The body it acts on; None for every body (force effects only).
+    **params
+        The declared parameters by name (see the subclass's docstring for shapes and units).
+
+    Raises
+    ------
+    LavenderInputError
+        On a missing, unknown or invalid parameter (named ``effect.param``).
+    """
 
     spec: EffectSpec | None = None
     name = ""
@@ -145,7 +219,19 @@ class Effect:
             if self.fields else np.zeros(0)
 
     def row(self, body_index: int, width: int = ROW) -> np.ndarray:
-        """This effect's row of the effect table: [code, body index (-1: every body), parameters …]."""
+        """This effect's row of the effect table: [code, body index (-1: every body), parameters …].
+
+        Parameters
+        ----------
+        body_index : int
+            Index of its body in the scene, -1 for every body.
+        width : int, optional
+            Row width (at least ROW).
+
+        Returns
+        -------
+        ndarray, shape (max(width, needed),)
+        """
         flat = self.params_flat()
         r = np.zeros(max(width, ROW_PARAMS + flat.size))
         r[ROW_CODE], r[ROW_BODY] = self.code, body_index
@@ -153,6 +239,7 @@ class Effect:
         return r
 
     def describe(self) -> str:
+        """A one-line description: ``name(param=value, ...)``."""
         vals = ", ".join(f"{f}={np.array2string(np.atleast_1d(self.values[f]), precision=4)}" for f in self.fields)
         return f"{self.name}({vals})"
 
@@ -207,19 +294,48 @@ def _class_name(name: str) -> str:
     return "".join(w.capitalize() for w in name.split("_"))
 
 
+def _effect_doc(spec: EffectSpec) -> str:
+    """A numpydoc docstring for an effect class, from its declaration."""
+    body = ("str\n    The body it acts on (required: at most one per body)." if spec.kind == "model"
+            else "str or None, optional\n    The body it acts on; None for every body.")
+    lines = [f"{spec.summary}.", "", f"Declared in {spec.source} (``{spec.name}``).", "",
+             "Parameters", "----------", f"body : {body}"]
+    for p in spec.params:
+        kind = "float" if not p.shape else f"array_like, shape ({p.shape[0]},)"
+        opt = ", optional" if p.default is not None else ""
+        dflt = f" Default {p.default}." if p.default is not None else ""
+        lines += [f"{p.name} : {kind}{opt}", f"    {p.doc[:1].upper()}{p.doc[1:]}, {p.unit or 'dimensionless'} ({p.rule}).{dflt}"]
+    return "\n".join(lines) + "\n"
+
+
 def _effect_class(spec: EffectSpec) -> type:
-    params = ", ".join(f"{p.name} ({'scalar' if not p.shape else p.shape[0]}, {p.unit or '-'}, {p.rule})" for p in spec.params)
     attrs = {"spec": spec, "name": spec.name, "code": spec.code, "per_body": spec.kind == "model",
              "fields": tuple(p.name for p in spec.params),
              "defaults": {p.name: p.default for p in spec.params if p.default is not None},
-             "__doc__": f"{spec.summary}. Parameters: {params}. Declared in {spec.source}.",
+             "__doc__": _effect_doc(spec),
              "__module__": __name__}
     bases = (_HAND_CHECKS[spec.name], Effect) if spec.name in _HAND_CHECKS else (Effect,)
     return type(_class_name(spec.name), bases, attrs)
 
 
 def register(spec: EffectSpec) -> type:
-    """Add a declared effect to the registry (the built-ins at import; user sets when loaded)."""
+    """Add a declared effect to the registry (the built-ins at import; user sets when loaded).
+
+    Parameters
+    ----------
+    spec : EffectSpec
+        The declaration.
+
+    Returns
+    -------
+    type
+        The Effect subclass built for it.
+
+    Raises
+    ------
+    LavenderInputError
+        If its name or code clashes with a registered effect from another source.
+    """
     old = REGISTRY.get(spec.name)
     if old is not None and old.source != spec.source:
         raise V.LavenderInputError("effect", f"{spec.name!r} from {spec.source} clashes with the effect of the same "
@@ -240,7 +356,21 @@ del _entry, _cls
 
 def make(name: str, body: str | None = None, **params) -> Effect:
     """Build an effect by name (a built-in, a loaded user effect, or one found in the user directory —
-    see lavendersim.extending); unknown names raise naming the known ones."""
+    see lavendersim.extending); unknown names raise naming the known ones.
+
+    Parameters
+    ----------
+    name : str
+        Effect name.
+    body : str or None, optional
+        The body it acts on (None: every body).
+    **params
+        Its parameters by name.
+
+    Returns
+    -------
+    Effect
+    """
     if isinstance(name, str) and name not in EFFECTS and re.match(r"^[a-z][a-z0-9_]*$", name):
         from . import extending
 
@@ -249,7 +379,21 @@ def make(name: str, body: str | None = None, **params) -> Effect:
 
 
 def check_declared(effect: Effect) -> EffectSpec:
-    """The spec of a declared effect; LavenderInputError naming an effect that is not declared."""
+    """The spec of a declared effect.
+
+    Parameters
+    ----------
+    effect : Effect
+
+    Returns
+    -------
+    EffectSpec
+
+    Raises
+    ------
+    LavenderInputError
+        Naming an effect that no derive declaration printed.
+    """
     spec = REGISTRY.get(effect.name)
     if spec is None or spec.code != effect.code or BY_CODE.get(effect.code) is not spec or effect.spec is None:
         raise V.LavenderInputError(
@@ -261,7 +405,21 @@ def check_declared(effect: Effect) -> EffectSpec:
 
 
 def spec_for_code(code: int) -> EffectSpec:
-    """The spec of effect code `code` (LavenderInputError if no declared effect has it)."""
+    """The spec of a declared force effect by its code.
+
+    Parameters
+    ----------
+    code : int
+
+    Returns
+    -------
+    EffectSpec
+
+    Raises
+    ------
+    LavenderInputError
+        If no declared force effect has that code.
+    """
     spec = BY_CODE.get(int(code))
     if spec is None or spec.kind != "force":
         known = ", ".join(f"{c} {s.name}" for c, s in sorted(BY_CODE.items()) if s.kind == "force")
@@ -271,7 +429,19 @@ def spec_for_code(code: int) -> EffectSpec:
 
 def net_load(effects, body) -> tuple[np.ndarray, np.ndarray]:
     """Sum of the force effects `effects` on `body` at its initial state: (F_w, tau_w), world frame,
-    evaluated with the generated NumPy kernels (overflow gives inf/nan, no warning)."""
+    evaluated with the generated NumPy kernels (overflow gives inf/nan, no warning).
+
+    Parameters
+    ----------
+    effects : iterable of Effect
+        Force effects.
+    body : Body
+
+    Returns
+    -------
+    F_w, tau_w : ndarray, shape (3,)
+        N and N·m, world frame, about the COM.
+    """
     from .generated.layout import STATE_V_W
 
     x = body.x0[None]
@@ -294,7 +464,17 @@ MAX_LOAD = 1e300
 
 def load_overflow(effects, body) -> str | None:
     """Why the force effects `effects` on `body` are too large at its initial state (net force or
-    torque, or the accelerations |F|/m, |tau|/min(I_b), not finite or above MAX_LOAD), or None."""
+    torque, or the accelerations |F|/m, |tau|/min(I_b), not finite or above MAX_LOAD), or None.
+
+    Parameters
+    ----------
+    effects : iterable of Effect
+    body : Body
+
+    Returns
+    -------
+    str or None
+    """
     F, tau = net_load(effects, body)
     with np.errstate(all="ignore"):
         checks = (("net force", V.safe_norm(F) if np.all(np.isfinite(F)) else np.inf, "N"),
@@ -310,7 +490,16 @@ def load_overflow(effects, body) -> str | None:
 
 
 def largest_param(effect: Effect) -> str:
-    """The field name (effect.param) of the effect's parameter with the largest magnitude."""
+    """The field name (effect.param) of the effect's parameter with the largest magnitude.
+
+    Parameters
+    ----------
+    effect : Effect
+
+    Returns
+    -------
+    str
+    """
     if not effect.fields:
         return effect.name
     mags = [float(np.max(np.abs(np.atleast_1d(effect.values[f])), initial=0.0)) for f in effect.fields]
@@ -318,12 +507,31 @@ def largest_param(effect: Effect) -> str:
 
 
 def row_width(effects) -> int:
-    """Width of the effect table for these effects: [code, body] plus the most parameters, at least ROW."""
+    """Width of the effect table for these effects: [code, body] plus the most parameters, at least ROW.
+
+    Parameters
+    ----------
+    effects : iterable of Effect
+
+    Returns
+    -------
+    int
+    """
     return max([ROW] + [ROW_PARAMS + e.params_flat().size for e in effects])
 
 
 def numpy_apply(code: int):
-    """The NumPy function of effect `code`: apply(p, x, v_w, m, I_b) -> (F_w or None, tau_w or None)."""
+    """The NumPy function of effect `code`: apply(p, x, v_w, m, I_b) -> (F_w or None, tau_w or None).
+
+    Parameters
+    ----------
+    code : int
+
+    Returns
+    -------
+    callable
+        Batched over a leading axis: p (n, n_params), x (n, 13), v_w (n, 3), m (n,), I_b (n, 3).
+    """
     spec = spec_for_code(code)
     if spec.user_set is None:
         from .generated.kernels_numpy import EFFECT_APPLY
@@ -332,14 +540,33 @@ def numpy_apply(code: int):
 
 
 def velocity_dependent(codes) -> bool:
-    """Whether any of these effect codes reads v_w or omega_b."""
+    """Whether any of these effect codes reads v_w or omega_b.
+
+    Parameters
+    ----------
+    codes : iterable of int
+
+    Returns
+    -------
+    bool
+    """
     return any(spec_for_code(int(c)).velocity_dependent for c in codes)
 
 
 def load_user(path) -> list[str]:
     """Load the user effects derived from a declaration file or found in a derived directory (see
     lavendersim.extending.load); returns their names. Effects in the user directory are also found on
-    first use by name, so calling this is needed only for a set kept elsewhere."""
+    first use by name, so calling this is needed only for a set kept elsewhere.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        A declaration file or a directory ``lavendersim derive --user`` wrote.
+
+    Returns
+    -------
+    list of str
+    """
     from . import extending
 
     return extending.load(path).effect_names
@@ -366,6 +593,10 @@ def casadi_expr(name: str, **inputs):
     **inputs
         The state values it reads (any of p_w, q, v_w, omega_b, m, I_b, as in ``EFFECTS[name].spec.state_inputs``)
         and its parameters by name: numbers, numpy arrays or casadi SX/MX/DM. Missing ones raise.
+
+    Returns
+    -------
+    F_w, tau_w : casadi column, 3×1
     """
     import casadi
 
@@ -387,7 +618,17 @@ def casadi_expr(name: str, **inputs):
 
 def casadi_function(name: str):
     """A casadi.Function of effect `name`: inputs the state values it reads and its parameters (named as
-    in the declaration), outputs F_w and tau_w (world frame, N and N·m)."""
+    in the declaration), outputs F_w and tau_w (world frame, N and N·m).
+
+    Parameters
+    ----------
+    name : str
+        A force effect's name.
+
+    Returns
+    -------
+    casadi.Function
+    """
     import casadi
 
     spec = _force_spec(name)

@@ -7,7 +7,19 @@ class DivergenceError(FloatingPointError):
     quantity beyond Sim's max_growth, or (implicit_gyro) had no root its Newton solve could find. The
     simulator's state is left as it was before the call.
 
-    Attributes: step (0-based index within the call), body (index), body_name (or None), cause."""
+    Parameters
+    ----------
+    step : int
+        0-based index of the failing step within the call.
+    body : int
+        Index of the body in the scene.
+    cause : str
+        The likely cause, in words.
+    body_name : str or None, optional
+        The body's name.
+    t : float or None, optional
+        Simulated time of the failing step, s.
+    """
 
     def __init__(self, step: int, body: int, cause: str, body_name: str | None = None, t: float | None = None):
         self.step, self.body, self.cause, self.body_name, self.t = step, body, cause, body_name, t

@@ -73,7 +73,7 @@ def _start_method() -> str:
 class Executor:
     """Where :meth:`map` runs the tasks.
 
-    Attributes
+    Parameters
     ----------
     kind : str
         ``"serial"`` (this process), ``"processes"`` (a pool of local worker processes) or

@@ -78,7 +78,13 @@ def _import_file(name: str, path: Path):
 
 class UserSet:
     """A derived user set: its metadata, NumPy module, CasADi module (on demand) and compiled library
-    (on demand, built when missing)."""
+    (on demand, built when missing).
+
+    Parameters
+    ----------
+    directory : str or os.PathLike
+        The folder ``lavendersim derive --user`` wrote for the set.
+    """
 
     def __init__(self, directory: Path):
         self.directory = Path(directory).resolve()
@@ -128,7 +134,18 @@ class UserSet:
         return self._lib
 
     def c_function(self, effect: str) -> int:
-        """Address of the compiled accumulating function of one of the set's effects."""
+        """Address of the compiled accumulating function of one of the set's effects.
+
+        Parameters
+        ----------
+        effect : str
+            An effect of this set.
+
+        Returns
+        -------
+        int
+            The C function's address (the C backend calls it per body).
+        """
         fn = getattr(self.library(), f"lvu_effect_{effect}")
         return int(ctypes.cast(fn, ctypes.c_void_p).value)
 
@@ -144,7 +161,23 @@ def _library_name(directory: Path, cmd: list[str]) -> str:
 
 def build(directory) -> Path:
     """Compile a set's kernels.c into build/lib<set>-<hash>.so; reuse it when the printed C and the
-    compiler command are unchanged. A failing compile raises UserBuildError with its full output."""
+    compiler command are unchanged. A failing compile raises UserBuildError with its full output.
+
+    Parameters
+    ----------
+    directory : str or os.PathLike
+        The set's folder.
+
+    Returns
+    -------
+    pathlib.Path
+        The shared library.
+
+    Raises
+    ------
+    UserBuildError
+        With the command and the compiler's full output.
+    """
     return _build(directory)[0]
 
 
@@ -171,7 +204,21 @@ def _build(directory) -> tuple[Path, bool]:
 
 def derive(declaration, out=None, compile: bool = True) -> UserSet:
     """Derive a declaration file: print its set into `out` (default sets_dir()) / <stem>/, compile its
-    C (cached) and load it. Imports SymPy (this is the derive step, not the simulation path)."""
+    C (cached) and load it. Imports SymPy (this is the derive step, not the simulation path).
+
+    Parameters
+    ----------
+    declaration : str or os.PathLike
+        The declaration file (docs/extending.md).
+    out : str or os.PathLike, optional
+        Parent folder of the set (default :func:`sets_dir`).
+    compile : bool, optional
+        Compile its C now (else on first use by the C backend).
+
+    Returns
+    -------
+    UserSet
+    """
     from .derive.user import render_user
 
     from .derive.atomic import replace_folder
@@ -189,7 +236,19 @@ def derive(declaration, out=None, compile: bool = True) -> UserSet:
 
 def load(path, reload: bool = False) -> UserSet:
     """Load and register a derived set: `path` is its directory, or its declaration file (then the set of
-    that name in sets_dir()). Already loaded sets are returned as they are unless reload=True."""
+    that name in sets_dir()). Already loaded sets are returned as they are unless reload=True.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        A set's directory or its declaration file.
+    reload : bool, optional
+        Load again even if loaded.
+
+    Returns
+    -------
+    UserSet
+    """
     from . import effects as E
 
     path = Path(path).expanduser().resolve()
@@ -215,7 +274,17 @@ def load(path, reload: bool = False) -> UserSet:
 
 
 def discover(name: str) -> UserSet | None:
-    """Load the set in sets_dir() that declares effect `name`, if any (None otherwise)."""
+    """Load the set in sets_dir() that declares effect `name`, if any (None otherwise).
+
+    Parameters
+    ----------
+    name : str
+        An effect name.
+
+    Returns
+    -------
+    UserSet or None
+    """
     root = sets_dir()
     if not root.is_dir():
         return None

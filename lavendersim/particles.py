@@ -42,12 +42,44 @@ def _vectors(field: str, value, n: int) -> np.ndarray:
 
 
 def total_mass(m: ArrayLike) -> float:
-    """Sum of the particle masses, kg."""
+    """Sum of the particle masses, kg.
+
+    Parameters
+    ----------
+    m : array_like, shape (n,)
+        Masses, kg, > 0.
+
+    Returns
+    -------
+    float
+
+    Raises
+    ------
+    LavenderInputError
+        On a non-positive mass or mismatched shapes.
+    """
     return float(np.sum(_masses(m)))
 
 
 def center_of_mass(m: ArrayLike, r_w: ArrayLike) -> np.ndarray:
-    """Centre of mass, world, m: (sum_i m_i r_i) / (sum_i m_i)."""
+    """Centre of mass, world, m: (sum_i m_i r_i) / (sum_i m_i).
+
+    Parameters
+    ----------
+    m : array_like, shape (n,)
+        Masses, kg, > 0.
+    r_w : array_like, shape (n, 3)
+        Positions, world frame, m.
+
+    Returns
+    -------
+    ndarray, shape (3,)
+
+    Raises
+    ------
+    LavenderInputError
+        On a non-positive mass or mismatched shapes.
+    """
     m = _masses(m)
     r = _vectors("r_w", r_w, m.size)
     m_r, _ = K.particle_moments(m, r, np.zeros_like(r))
@@ -55,7 +87,24 @@ def center_of_mass(m: ArrayLike, r_w: ArrayLike) -> np.ndarray:
 
 
 def linear_momentum(m: ArrayLike, v_w: ArrayLike) -> np.ndarray:
-    """Total linear momentum, world, kg·m/s: sum_i m_i v_i."""
+    """Total linear momentum, world, kg·m/s: sum_i m_i v_i.
+
+    Parameters
+    ----------
+    m : array_like, shape (n,)
+        Masses, kg, > 0.
+    v_w : array_like, shape (n, 3)
+        Velocities, world frame, m/s.
+
+    Returns
+    -------
+    ndarray, shape (3,)
+
+    Raises
+    ------
+    LavenderInputError
+        On a non-positive mass or mismatched shapes.
+    """
     m = _masses(m)
     v = _vectors("v_w", v_w, m.size)
     _, p = K.particle_moments(m, np.zeros_like(v), v)
@@ -63,13 +112,49 @@ def linear_momentum(m: ArrayLike, v_w: ArrayLike) -> np.ndarray:
 
 
 def com_velocity(m: ArrayLike, v_w: ArrayLike) -> np.ndarray:
-    """Velocity of the centre of mass, world, m/s: p / m."""
+    """Velocity of the centre of mass, world, m/s: p / m.
+
+    Parameters
+    ----------
+    m : array_like, shape (n,)
+        Masses, kg, > 0.
+    v_w : array_like, shape (n, 3)
+        Velocities, world frame, m/s.
+
+    Returns
+    -------
+    ndarray, shape (3,)
+
+    Raises
+    ------
+    LavenderInputError
+        On a non-positive mass or mismatched shapes.
+    """
     m = _masses(m)
     return linear_momentum(m, v_w) / m.sum()
 
 
 def angular_momentum_com(m: ArrayLike, r_w: ArrayLike, v_w: ArrayLike) -> np.ndarray:
-    """Angular momentum about the centre of mass, world, kg·m²/s."""
+    """Angular momentum about the centre of mass, world, kg·m²/s.
+
+    Parameters
+    ----------
+    m : array_like, shape (n,)
+        Masses, kg, > 0.
+    r_w : array_like, shape (n, 3)
+        Positions, world frame, m.
+    v_w : array_like, shape (n, 3)
+        Velocities, world frame, m/s.
+
+    Returns
+    -------
+    ndarray, shape (3,)
+
+    Raises
+    ------
+    LavenderInputError
+        On a non-positive mass or mismatched shapes.
+    """
     m = _masses(m)
     r = _vectors("r_w", r_w, m.size)
     v = _vectors("v_w", v_w, m.size)
@@ -82,7 +167,24 @@ def angular_momentum_com(m: ArrayLike, r_w: ArrayLike, v_w: ArrayLike) -> np.nda
 def inertia_com(m: ArrayLike, r_w: ArrayLike) -> np.ndarray:
     """Inertia tensor about the centre of mass, world axes, kg·m² (3, 3).
 
-    Each point mass is a zero tensor moved to its offset by the parallel-axis kernel."""
+    Each point mass is a zero tensor moved to its offset by the parallel-axis kernel.
+
+    Parameters
+    ----------
+    m : array_like, shape (n,)
+        Masses, kg, > 0.
+    r_w : array_like, shape (n, 3)
+        Positions, world frame, m.
+
+    Returns
+    -------
+    ndarray, shape (3, 3)
+
+    Raises
+    ------
+    LavenderInputError
+        On a non-positive mass or mismatched shapes.
+    """
     m = _masses(m)
     r = _vectors("r_w", r_w, m.size)
     s = r - center_of_mass(m, r)

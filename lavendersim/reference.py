@@ -89,14 +89,41 @@ def attitude_error(q_a: ArrayLike, q_b: ArrayLike) -> np.ndarray:
     """Rotation angle (rad, in [0, π]) between orientations q_a and q_b, vectorized; q ≡ −q.
 
     2·atan2(|vec(q_a* ⊗ q_b)|, |w(q_a* ⊗ q_b)|): exact to rounding for tiny angles (no arccos of a
-    number near 1) and independent of the inputs' norms."""
+    number near 1) and independent of the inputs' norms.
+
+    Parameters
+    ----------
+    q_a, q_b : array_like, shape (..., 4)
+        Quaternions (x, y, z, w), broadcast against each other; need not be unit.
+
+    Returns
+    -------
+    ndarray, shape (...)
+        Angles, rad.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from lavendersim.reference import attitude_error
+    >>> float(attitude_error([0, 0, 0, 1], [0, 0, np.sin(0.05), np.cos(0.05)]))   # 0.1 rad about z
+    0.1
+    """
     d = K.quat_mul(K.quat_conj(np.asarray(q_a, float)), np.asarray(q_b, float))
     return 2.0 * np.arctan2(np.linalg.norm(d[..., :3], axis=-1), np.abs(d[..., 3]))
 
 
 def relative_drift(series: ArrayLike) -> float:
     """max_t |x(t) − x(0)| / |x(0)| of a scalar series (T,) or a vector series (T, k) (Euclidean
-    norm), e.g. energy or world angular momentum. If x(0) = 0 the absolute drift is returned."""
+    norm), e.g. energy or world angular momentum. If x(0) = 0 the absolute drift is returned.
+
+    Parameters
+    ----------
+    series : array_like, shape (T,) or (T, k)
+
+    Returns
+    -------
+    float
+    """
     x = np.asarray(series, dtype=float)
     if x.ndim == 1:
         x = x[:, None]
@@ -109,7 +136,22 @@ def relative_drift(series: ArrayLike) -> float:
 
 def constant_omega(q0: ArrayLike, omega_w: ArrayLike, t: ArrayLike) -> np.ndarray:
     """Exact attitude under a constant world angular velocity: q(t) = exp(t[ω_w]×) q0, i.e.
-    axis_angle_to_quat(ω̂, |ω| t) ⊗ q0. Returns (T, 4) for an array t, (4,) for a scalar."""
+    axis_angle_to_quat(ω̂, |ω| t) ⊗ q0.
+
+    Parameters
+    ----------
+    q0 : array_like, shape (4,)
+        Initial orientation R_WB (x, y, z, w).
+    omega_w : array_like, shape (3,)
+        Angular velocity, world frame, rad/s.
+    t : float or array_like, shape (T,)
+        Times, s.
+
+    Returns
+    -------
+    ndarray, shape (T, 4) or (4,)
+        (T, 4) for an array t, (4,) for a scalar.
+    """
     t, scalar = _as_times(t)
     q0 = _unit_q(q0)
     w = _vec3("omega_w", omega_w)
@@ -181,7 +223,30 @@ class TorqueFreeMotion:
     period: of ω_b(t) (4K(m)/λ asymmetric, 2π/|Ω| symmetric; inf at the separatrix and for
     constant ω); kind: "constant", "symmetric", "asymmetric" or "separatrix"; for the elliptic
     cases m (parameter, k²), lam (λ, 1/s), u0 (phase at t = 0) and Kq = K(m), with ω_b of the
-    intermediate principal axis ∝ sn(λ t + u0)."""
+    intermediate principal axis ∝ sn(λ t + u0).
+
+    Parameters
+    ----------
+    t : ndarray, shape (T,)
+        Sample times, s.
+    omega_b : ndarray, shape (T, 3)
+        Angular velocity, body frame, rad/s.
+    q : ndarray, shape (T, 4)
+        Orientation R_WB (x, y, z, w).
+    period : float
+        Period of omega_b(t), s.
+    E : float
+        Rotational kinetic energy, J.
+    L_w : ndarray, shape (3,)
+        World angular momentum, kg·m²/s.
+    kind : {"constant", "symmetric", "asymmetric", "separatrix"}
+    m, lam, u0, Kq : float, optional
+        Elliptic parameter k², rate λ (1/s), phase at t = 0, K(m).
+    intermediate_axis : int, optional
+        Index of the intermediate principal axis (-1 if none).
+    details : dict, optional
+        Further numbers of the solution.
+    """
     t: np.ndarray
     omega_b: np.ndarray
     q: np.ndarray
@@ -199,7 +264,20 @@ class TorqueFreeMotion:
     def intermediate_zero_crossings(self, t_end: float, t_start: float = 0.0) -> np.ndarray:
         """Times in [t_start, t_end] at which ω_b of the intermediate axis changes sign (the
         Dzhanibekov flips of a polhode circling the major or minor axis): λt + u0 = 2K·j, spaced
-        by half the period. Asymmetric bodies only (one crossing at the separatrix)."""
+        by half the period. Asymmetric bodies only (one crossing at the separatrix).
+
+        Parameters
+        ----------
+        t_end : float
+            End of the window, s.
+        t_start : float, optional
+            Start of the window, s.
+
+        Returns
+        -------
+        ndarray
+            Crossing times, s.
+        """
         if self.kind == "separatrix":
             tc = np.array([-self.u0 / self.lam])
         elif self.kind == "asymmetric":
@@ -396,7 +474,30 @@ def torque_free(I_b: ArrayLike, omega_b0: ArrayLike, q0: ArrayLike, t: ArrayLike
     separatrix L² = 2E I_2 (sech/tanh), symmetric bodies (sin/cos) and constant-ω motions.
     Attitude: R_WB(t) = R_WB(0) M(0)ᵀ R_z(φ(t)) M(t), where M(t) has rows n, l × n, l with l the
     body-frame unit momentum and n the line of nodes of an Euler axis chosen to stay well away
-    from l; φ is the quadrature of Landau's φ̇ over one period of it, extended by periodicity."""
+    from l; φ is the quadrature of Landau's φ̇ over one period of it, extended by periodicity.
+
+    Parameters
+    ----------
+    I_b : array_like, shape (3,)
+        Principal moments, kg·m².
+    omega_b0 : array_like, shape (3,)
+        Initial angular velocity, body frame, rad/s.
+    q0 : array_like, shape (4,)
+        Initial orientation R_WB (x, y, z, w).
+    t : array_like, shape (T,)
+        Sample times, s.
+
+    Returns
+    -------
+    TorqueFreeMotion
+
+    Examples
+    --------
+    >>> from lavendersim.reference import torque_free
+    >>> m = torque_free([1.0, 2.0, 3.0], [0.01, 1.0, 0.01], [0, 0, 0, 1], [0.0, 1.0])
+    >>> m.kind, m.omega_b.shape
+    ('asymmetric', (2, 3))
+    """
     t, _ = _as_times(t)
     I_b = _inertia(I_b)
     w0 = _vec3("omega_b0", omega_b0)
@@ -429,7 +530,20 @@ def torque_free(I_b: ArrayLike, omega_b0: ArrayLike, q0: ArrayLike, t: ArrayLike
 def torque_free_period(I_b: ArrayLike, omega_b0: ArrayLike) -> float:
     """Period (s) of the body angular velocity of the torque-free motion: 4K(m)/λ for an
     asymmetric body, 2π/|Ω| (Ω = (I_s − I_t) ω_s / I_t) for a symmetric one; inf at the
-    separatrix and when ω_b is constant (sphere, permanent rotation)."""
+    separatrix and when ω_b is constant (sphere, permanent rotation).
+
+    Parameters
+    ----------
+    I_b : array_like, shape (3,)
+        Principal moments, kg·m².
+    omega_b0 : array_like, shape (3,)
+        Initial angular velocity, body frame, rad/s.
+
+    Returns
+    -------
+    float
+        Period, s.
+    """
     return _Solution(_inertia(I_b), _vec3("omega_b0", omega_b0)).period
 
 
@@ -437,17 +551,29 @@ def torque_free_period(I_b: ArrayLike, omega_b0: ArrayLike) -> float:
 
 @dataclass
 class Integrated:
-    """A DOP853 reference: t (T,), x (T, 13) states (q normalized), q, omega_b, nfev."""
+    """A DOP853 reference (returned by :func:`dop853`).
+
+    Parameters
+    ----------
+    t : ndarray, shape (T,)
+        Times, s.
+    x : ndarray, shape (T, 13)
+        States ``[p_w, q, v_w, omega_b]`` (q normalized).
+    nfev : int
+        Right-hand-side evaluations.
+    """
     t: np.ndarray
     x: np.ndarray
     nfev: int
 
     @property
     def q(self) -> np.ndarray:
+        """Orientations R_WB (x, y, z, w), shape (T, 4)."""
         return self.x[:, 3:7]
 
     @property
     def omega_b(self) -> np.ndarray:
+        """Angular velocities, body frame, rad/s, shape (T, 3)."""
         return self.x[:, 10:13]
 
 
@@ -457,7 +583,29 @@ def dop853(I_b: ArrayLike, omega_b0: ArrayLike, q0: ArrayLike, t: ArrayLike,
     """solve_ivp(DOP853) reference on the 13-number state from t = 0, with dense output at t (s,
     any reals: negative times are integrated backward). rhs(t, x) → ẋ (13,) defaults to the
     generated torque-free kernel rigid_body_rhs_free(x, I_b); x0 (13,) overrides the initial
-    state built from q0, omega_b0 (p_w = v_w = 0). The quaternion is normalized at output."""
+    state built from q0, omega_b0 (p_w = v_w = 0). The quaternion is normalized at output.
+
+    Parameters
+    ----------
+    I_b : array_like, shape (3,)
+        Principal moments, kg·m².
+    omega_b0 : array_like, shape (3,)
+        Initial angular velocity, body frame, rad/s.
+    q0 : array_like, shape (4,)
+        Initial orientation R_WB (x, y, z, w).
+    t : array_like, shape (T,)
+        Output times, s.
+    rhs : callable, optional
+        ``rhs(t, x) -> xdot`` (13,).
+    rtol, atol : float, optional
+        solve_ivp tolerances.
+    x0 : array_like, shape (13,), optional
+        Full initial state.
+
+    Returns
+    -------
+    Integrated
+    """
     t, _ = _as_times(t)
     I_b = _inertia(I_b)
     if x0 is None:

@@ -21,7 +21,17 @@ class Scene:
 
     Every add is validated before anything is stored: a rejected call leaves the scene as it was.
     Force effects whose parameters would overflow — alone or summed with the other effects on a body,
-    as force, torque or acceleration at the body's initial state — are rejected when added."""
+    as force, torque or acceleration at the body's initial state — are rejected when added.
+
+    Examples
+    --------
+    >>> import lavendersim as lv
+    >>> scene = lv.Scene()
+    >>> rod = scene.add_body(lv.Body.box("rod", mass=1.0, size=(0.8, 0.2, 0.2)))
+    >>> torque = scene.add_effect("applied_torque", body="rod", torque_w=[0, 0, 0.02])
+    >>> list(scene.bodies)
+    ['rod']
+    """
 
     @V.keywords
     def __init__(self):
@@ -30,7 +40,23 @@ class Scene:
 
     @V.keywords
     def add_body(self, body: Body) -> Body:
-        """Add a (validated, immutable) Body; its name must be new in this scene."""
+        """Add a (validated, immutable) Body; its name must be new in this scene.
+
+        Parameters
+        ----------
+        body : Body
+            The body to add.
+
+        Returns
+        -------
+        Body
+            `body` itself.
+
+        Raises
+        ------
+        LavenderInputError
+            If `body` is not a Body, its name is taken, or a scene-wide effect would overflow on it.
+        """
         if not isinstance(body, Body):
             raise V.LavenderInputError("body", "must be a lavendersim.Body", f", got {type(body).__name__}")
         if body.name in self.bodies:
@@ -44,7 +70,29 @@ class Scene:
         return body
 
     def add_effect(self, effect: Effect | str, body: str | None = None, **params) -> Effect:
-        """Declare an effect: an Effect instance, or its name plus parameters."""
+        """Declare an effect: an Effect instance, or its name plus parameters.
+
+        Parameters
+        ----------
+        effect : str or Effect
+            An effect name (``"applied_torque"``, ``"gravity"``, ``"spherical_joint"``, ...) or an instance.
+        body : str or None, optional
+            The body it acts on; None for every body (effects that allow it, e.g. gravity).
+        **params
+            The effect's parameters by name, with the units its declaration states
+            (``lavendersim.effects.describe()`` lists them), e.g. ``torque_w=[0, 0, 0.02]`` (N·m, world).
+
+        Returns
+        -------
+        Effect
+            The effect as stored.
+
+        Raises
+        ------
+        LavenderInputError
+            On an unknown effect, body or parameter, a bad value, a duplicate per-body effect, or loads
+            that would overflow; the scene is left as it was.
+        """
         if isinstance(effect, str):
             effect = make(effect, body=body, **params)
         elif not isinstance(effect, Effect):
@@ -73,12 +121,39 @@ class Scene:
         return effect
 
     def index(self, name: str) -> int:
+        """The position of body `name` in the state arrays.
+
+        Parameters
+        ----------
+        name : str
+            A body name.
+
+        Returns
+        -------
+        int
+
+        Raises
+        ------
+        LavenderInputError
+            If no body has that name.
+        """
         if name not in self.bodies:
             raise V.LavenderInputError("body", f"unknown body {name!r}; bodies: {', '.join(self.bodies) or 'none'}")
         return list(self.bodies).index(name)
 
     def model_effects(self, name: str) -> dict:
-        """The per-body (model) effects declared on body `name`: {"spherical_joint": e, "reaction_wheels": e}."""
+        """The per-body (model) effects declared on body `name`.
+
+        Parameters
+        ----------
+        name : str
+            A body name.
+
+        Returns
+        -------
+        dict
+            ``{"spherical_joint": e, "reaction_wheels": e}``, only the ones declared.
+        """
         return {e.name: e for e in self.effects if e.per_body and e.body == name}
 
     def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

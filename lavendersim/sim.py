@@ -92,20 +92,68 @@ ON_BOUND = ("raise", "warn")
 
 
 def validity_bound(integrator: str) -> tuple[float, float] | None:
-    """(WDT_MAX, WDT_RATIO_EXPONENT) of an integrator (derive/tableaux.py), or None if it declares none."""
+    """The validity bound of an integrator, as declared in derive/tableaux.py.
+
+    Parameters
+    ----------
+    integrator : str
+        An integrator name (``lavendersim.backends.INTEGRATORS``).
+
+    Returns
+    -------
+    tuple of (float, float) or None
+        ``(WDT_MAX, WDT_RATIO_EXPONENT)``: a body stays within the bound while
+        ``|omega| * dt * (I_max / I_min)**p <= WDT_MAX`` (omega in rad/s, dt in s); None if the
+        integrator declares no bound (the adaptive ``dopri5`` controls its own error).
+
+    Examples
+    --------
+    >>> from lavendersim.sim import validity_bound
+    >>> validity_bound("euler")
+    (0.1, 0.0)
+    """
     if integrator not in TB.WDT_MAX:
         return None
     return float(TB.WDT_MAX[integrator]), float(TB.WDT_RATIO_EXPONENT.get(integrator, 0.0))
 
 
 class Trajectory:
-    """Recorded samples: t (T,), x (T, nb, 13), Omega (T, nb, 3) wheel rates (zeros without wheels)."""
+    """Recorded samples of a run (returned by :meth:`Sim.record`).
+
+    Parameters
+    ----------
+    names : list of str
+        Body names, in the order of the second axis of `x`.
+    t : ndarray, shape (T,)
+        Sample times, s.
+    x : ndarray, shape (T, nb, 13)
+        Body states ``[p_w(3), q(4) (x, y, z, w), v_w(3), omega_b(3)]`` per sample and body (SI units).
+    Omega : ndarray, shape (T, nb, 3), optional
+        Wheel rates relative to the body, rad/s (zeros when None: bodies without wheels).
+    """
 
     def __init__(self, names: list[str], t: np.ndarray, x: np.ndarray, Omega: np.ndarray | None = None):
         self.names, self.t, self.x = names, t, x
         self.Omega = np.zeros(x.shape[:-1] + (3,)) if Omega is None else Omega
 
     def body(self, name: str) -> BodyState:
+        """The samples of one body.
+
+        Parameters
+        ----------
+        name : str
+            A body name from `names`.
+
+        Returns
+        -------
+        BodyState
+            Its state with a leading sample axis (``.q`` has shape (T, 4), ``.omega_w`` (T, 3), ...).
+
+        Raises
+        ------
+        LavenderInputError
+            If no body has that name.
+        """
         if name not in self.names:
             raise V.LavenderInputError("body", f"unknown body {name!r}; bodies: {', '.join(self.names)}")
         i = self.names.index(name)
@@ -124,6 +172,7 @@ class Sim:
     integrator : str
         One of lavendersim.backends.INTEGRATORS.
     backend : {"auto", "c", "numpy"}
+        "auto" uses the C extension when it is built and current, else NumPy (with a warning).
     normalize : bool
         Normalize q after every step.
     rtol, atol : float, optional
@@ -136,6 +185,22 @@ class Sim:
         (keyword only) A torque- and force-free body whose kinetic energy (a free wheeled body: whose total |L|) exceeds
         max_growth times its value at construction / the last set_state raises DivergenceError
         (default 10; None switches the check off).
+
+    Raises
+    ------
+    LavenderInputError
+        On any invalid argument (named in the message); nothing is built.
+
+    Examples
+    --------
+    >>> import lavendersim as lv
+    >>> scene = lv.Scene()
+    >>> rod = scene.add_body(lv.Body.box("rod", mass=1.0, size=(0.8, 0.2, 0.2)))
+    >>> torque = scene.add_effect("applied_torque", body="rod", torque_w=[0, 0, 0.02])
+    >>> sim = lv.Sim(scene, dt=1e-3, integrator="rk4")
+    >>> sim.run(100)
+    >>> round(float(sim.state("rod").omega_w[2]), 6)   # rad/s after 0.1 s
+    0.035294
     """
 
     @V.keywords  # unknown keyword arguments raise LavenderInputError naming them
@@ -328,10 +393,12 @@ class Sim:
 
     @property
     def rtol(self) -> float | None:
+        """Relative tolerance of an adaptive integrator (None for a fixed-step one)."""
         return None if self._adaptive is None else self._adaptive.rtol
 
     @property
     def atol(self) -> float | None:
+        """Absolute tolerance of an adaptive integrator (None for a fixed-step one)."""
         return None if self._adaptive is None else self._adaptive.atol
 
     def _build_models(self, scene: Scene) -> Models:
@@ -498,10 +565,22 @@ class Sim:
             self._advance(1)
 
     def run(self, n_steps: int) -> None:
-        """Advance n_steps steps (0 <= n_steps <= MAX_STEPS).
+        """Advance `n_steps` steps of `dt` (inside C on the C backend).
 
-        Raises DivergenceError (step, body, cause; the Sim left as before the call) on a non-finite state,
-        a validity bound exceeded (on_bound="raise") or a growth beyond max_growth; see the module doc."""
+        Parameters
+        ----------
+        n_steps : int
+            Number of steps, 0 <= n_steps <= MAX_STEPS (2**53).
+
+        Raises
+        ------
+        DivergenceError
+            On a non-finite state, a validity bound exceeded (``on_bound="raise"``) or a growth beyond
+            `max_growth`; it names the step, the body and the likely cause, and the Sim is left as
+            before the call (see the module docstring).
+        LavenderInputError
+            If `n_steps` is not an integer in range.
+        """
         n = V.integer("n_steps", n_steps, minimum=0)
         if n > MAX_STEPS:
             raise V.LavenderInputError("n_steps", "must be at most MAX_STEPS = 2**53 (9.0e15)", f", got {n}")
@@ -510,7 +589,20 @@ class Sim:
                 self._advance(n)
 
     def run_for(self, duration: float) -> None:
-        """Advance by round(duration / dt) steps (as run; restored as run on divergence)."""
+        """Advance by ``round(duration / dt)`` steps (as :meth:`run`).
+
+        Parameters
+        ----------
+        duration : float
+            Simulated time to advance, s (>= 0).
+
+        Raises
+        ------
+        DivergenceError
+            As :meth:`run`; the Sim is restored.
+        LavenderInputError
+            If `duration` is negative, non-finite or more than 2**53 steps.
+        """
         d = V.scalar("duration", duration, nonnegative=True)
         n = d / self.dt
         if not n <= MAX_STEPS:
@@ -519,9 +611,27 @@ class Sim:
         self.run(int(round(n)))
 
     def record(self, n_steps: int, every: int = 1) -> Trajectory:
-        """Advance n_steps, sampling the state every `every` steps; includes the initial sample.
+        """Advance `n_steps`, sampling the state every `every` steps (the initial state included).
 
-        On DivergenceError (or KeyboardInterrupt) the Sim is left exactly as before the call."""
+        Parameters
+        ----------
+        n_steps : int
+            Number of steps (>= 0).
+        every : int, optional
+            Sampling interval in steps (>= 1); must divide `n_steps`.
+
+        Returns
+        -------
+        Trajectory
+            ``n_steps // every + 1`` samples: t (T,), x (T, nb, 13), Omega (T, nb, 3).
+
+        Raises
+        ------
+        DivergenceError
+            As :meth:`run`; on it (or KeyboardInterrupt) the Sim is left exactly as before the call.
+        LavenderInputError
+            On a bad `n_steps` or `every`.
+        """
         n = V.integer("n_steps", n_steps, minimum=0)
         every = V.integer("every", every, minimum=1)
         if n > MAX_STEPS:
@@ -544,6 +654,24 @@ class Sim:
 
     # ---- state access ---------------------------------------------------------------------
     def state(self, name: str) -> BodyState:
+        """A copy of one body's current state.
+
+        Parameters
+        ----------
+        name : str
+            The body's name.
+
+        Returns
+        -------
+        BodyState
+            ``p_w`` (3,) m, ``q`` (4,) (x, y, z, w), ``v_w`` (3,) m/s, ``omega_b`` (3,) rad/s, and derived
+            ``omega_w``, ``R_wb``; ``Omega`` (3,) wheel rates, rad/s.
+
+        Raises
+        ------
+        LavenderInputError
+            If no body has that name.
+        """
         i = self._i(name)
         return BodyState(self.x[i].copy(), self._models.Omega[i].copy())
 
@@ -552,7 +680,28 @@ class Sim:
         """Set parts of one body's state; everything is validated before anything changes.
 
         Omega (wheel rates, rad/s) only for a body with reaction_wheels. A jointed body's p_w and v_w
-        follow from q and omega (pivot_kinematics) and cannot be set."""
+        follow from q and omega (pivot_kinematics) and cannot be set.
+
+        Parameters
+        ----------
+        name : str
+            The body's name.
+        p_w : array_like, shape (3,), optional
+            COM position, world frame, m.
+        q : array_like, shape (4,), optional
+            Orientation quaternion (x, y, z, w), normalized here; body to world.
+        v_w : array_like, shape (3,), optional
+            COM velocity, world frame, m/s.
+        omega_b, omega_w : array_like, shape (3,), optional
+            Angular velocity in the body or in the world frame, rad/s (give at most one).
+        Omega : array_like, shape (3,), optional
+            Wheel rates relative to the body, rad/s.
+
+        Raises
+        ------
+        LavenderInputError
+            On an unknown body or keyword, a bad value, or a state beyond the integrator's validity bound.
+        """
         i = self._i(name)
         kind = self._kind(i)
         x = self.x[i].copy()
@@ -610,25 +759,78 @@ class Sim:
         return i
 
     def set_wheel_command(self, name: str, u) -> None:
-        """Motor torques on the wheels (N·m, body x, y, z), held until changed; saturated every step."""
+        """Command motor torques on a body's reaction wheels, held until changed; saturated every step.
+
+        Parameters
+        ----------
+        name : str
+            A body with a ``reaction_wheels`` effect.
+        u : array_like, shape (3,)
+            Torques on the body-x, y, z wheels, N·m.
+
+        Raises
+        ------
+        LavenderInputError
+            If the body has no wheels or `u` is not 3 finite numbers.
+        """
         i = self._wheeled(name)
         self._models.command[i] = V.vector("u", u)
 
     def wheel_command(self, name: str) -> np.ndarray:
-        """The commanded (unsaturated) wheel torques, N·m."""
+        """The commanded (unsaturated) wheel torques, N·m.
+
+        Parameters
+        ----------
+        name : str
+            A body with reaction wheels.
+
+        Returns
+        -------
+        ndarray, shape (3,)
+        """
         return self._models.command[self._wheeled(name)].copy()
 
     def wheel_command_applied(self, name: str) -> np.ndarray:
-        """The saturated wheel torques used in the most recent step (zeros before the first), N·m."""
+        """The saturated wheel torques used in the most recent step (zeros before the first), N·m.
+
+        Parameters
+        ----------
+        name : str
+            A body with reaction wheels.
+
+        Returns
+        -------
+        ndarray, shape (3,)
+        """
         return self._models.applied[self._wheeled(name)].copy()
 
     def wheel_rates(self, name: str) -> np.ndarray:
-        """Wheel rates relative to the body, Omega (3,), rad/s."""
+        """Wheel rates relative to the body, rad/s.
+
+        Parameters
+        ----------
+        name : str
+            A body with reaction wheels.
+
+        Returns
+        -------
+        ndarray, shape (3,)
+        """
         return self._models.Omega[self._wheeled(name)].copy()
 
     def wheel_momentum_w(self, name: str) -> tuple[np.ndarray, np.ndarray]:
         """(L_body_w, L_wheels_w), world frame, kg·m²/s, from the wheel_momentum kernel: about the
-        joint's pivot for a jointed body, about the COM otherwise; L_wheels_w is zero without wheels."""
+        joint's pivot for a jointed body, about the COM otherwise; L_wheels_w is zero without wheels.
+
+        Parameters
+        ----------
+        name : str
+            The body's name.
+
+        Returns
+        -------
+        L_body_w, L_wheels_w : ndarray, shape (3,)
+        """
         i = self._i(name)
         r = self._models.rows[i]
         return K.wheel_momentum(self.x[i, LY.STATE_Q], self.x[i, LY.STATE_OMEGA_B], self._models.Omega[i],
@@ -641,17 +843,50 @@ class Sim:
 
     def kinetic_energy(self, name: str | None = None) -> float:
         """Kinetic energy of one body, or of all bodies (name=None), J: ½ m|v|² + ½ ωᵀ I_b ω with
-        wheels locked (a jointed body's v_w is its kinematic COM velocity; wheel spin not included)."""
+        wheels locked (a jointed body's v_w is its kinematic COM velocity; wheel spin not included).
+
+        Parameters
+        ----------
+        name : str or None, optional
+            A body name, or None for the sum over all bodies.
+
+        Returns
+        -------
+        float
+            Kinetic energy, J.
+        """
         idx = range(len(self.names)) if name is None else [self._i(name)]
         return float(sum(K.kinetic_energy(self.params[i, LY.PARAM_M], self.params[i, LY.PARAM_I_B], self.x[i, LY.STATE_V_W],
                                           self.x[i, LY.STATE_OMEGA_B]) for i in idx))
 
     def angular_momentum_w(self, name: str) -> np.ndarray:
-        """Angular momentum about the body's COM, world frame, kg·m²/s."""
+        """Angular momentum about the body's COM, world frame, kg·m²/s.
+
+        Parameters
+        ----------
+        name : str
+            The body's name.
+
+        Returns
+        -------
+        ndarray, shape (3,)
+            ``L_w = R_wb I_b omega_b``.
+        """
         i = self._i(name)
         return K.angular_momentum_world(self.x[i, LY.STATE_Q], self.params[i, LY.PARAM_I_B],
                                         self.x[i, LY.STATE_OMEGA_B])
 
     def linear_momentum_w(self, name: str) -> np.ndarray:
+        """Linear momentum ``m v_w``, world frame, kg·m/s.
+
+        Parameters
+        ----------
+        name : str
+            The body's name.
+
+        Returns
+        -------
+        ndarray, shape (3,)
+        """
         i = self._i(name)
         return self.params[i, LY.PARAM_M] * self.x[i, LY.STATE_V_W]

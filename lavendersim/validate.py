@@ -56,9 +56,25 @@ _DIAGONAL_RULE = (
 class LavenderInputError(ValueError):
     """Invalid input to a LavenderSim entry point.
 
-    Attributes: ``field`` (the parameter's name) and ``rule`` (the rule that
-    was broken). The message is ``f"{field}: {rule}"`` followed by a summary of
-    the offending value.
+    The message is ``f"{field}: {rule}{detail}"``; the three are kept as attributes.
+
+    Parameters
+    ----------
+    field : str
+        The name of the rejected parameter (e.g. ``"mass"``, ``"overlays.vectors[1].color"``).
+    rule : str
+        The rule that was broken (``"must be finite and > 0"``).
+    detail : str, optional
+        A summary of the offending value (``", got -1"``).
+
+    Examples
+    --------
+    >>> import lavendersim as lv
+    >>> try:
+    ...     lv.Body.box("b", mass=-1.0, size=(1, 1, 1))
+    ... except lv.LavenderInputError as e:
+    ...     print(e.field)
+    mass
     """
 
     def __init__(self, field: str, rule: str, detail: str = "") -> None:
@@ -178,6 +194,25 @@ def array(field: str, value: ArrayLike, shape: Sequence[int | None]) -> np.ndarr
 
     ``shape`` entries may be ``None`` for "any length" in that position, e.g.
     ``(None, 3)`` for a stack of 3-vectors.
+
+    Parameters
+    ----------
+    field : str
+        The name an error message gives the value (e.g. ``"omega_b"``, ``"scene.bodies"``).
+    value : array_like
+        The input.
+    shape : sequence of int or None
+        Expected shape.
+
+    Returns
+    -------
+    ndarray
+        float64 copy.
+
+    Raises
+    ------
+    LavenderInputError
+        Naming `field` and the broken rule.
     """
     shape = tuple(shape)
     arr = _real_array(field, value)
@@ -189,7 +224,26 @@ def array(field: str, value: ArrayLike, shape: Sequence[int | None]) -> np.ndarr
 
 
 def vector(field: str, value: ArrayLike, n: int = 3) -> np.ndarray:
-    """Validate a finite real vector of shape ``(n,)``; return a float64 copy."""
+    """Validate a finite real vector of shape ``(n,)``; return a float64 copy.
+
+    Parameters
+    ----------
+    field : str
+        The name an error message gives the value (e.g. ``"omega_b"``, ``"scene.bodies"``).
+    value : array_like
+        The input.
+    n : int, optional
+        Expected length (3).
+
+    Returns
+    -------
+    ndarray, shape (n,)
+
+    Raises
+    ------
+    LavenderInputError
+        Naming `field` and the broken rule.
+    """
     return array(field, value, (n,))
 
 
@@ -202,6 +256,24 @@ def scalar(field: str, value: SupportsFloat, *, positive: bool = False, nonnegat
     """Validate a finite real number (bools rejected); return it as a float.
 
     ``positive=True`` requires > 0; ``nonnegative=True`` requires >= 0.
+
+    Parameters
+    ----------
+    field : str
+        The name an error message gives the value (e.g. ``"omega_b"``, ``"scene.bodies"``).
+    value : float
+        The input.
+    positive, nonnegative : bool, optional
+        Extra rules.
+
+    Returns
+    -------
+    float
+
+    Raises
+    ------
+    LavenderInputError
+        Naming `field` and the broken rule.
     """
     if positive:
         rule = "must be finite and > 0"
@@ -230,17 +302,70 @@ def scalar(field: str, value: SupportsFloat, *, positive: bool = False, nonnegat
 
 
 def positive(field: str, value: SupportsFloat) -> float:
-    """Shorthand for ``scalar(field, value, positive=True)`` (e.g. mass in kg)."""
+    """Shorthand for ``scalar(field, value, positive=True)`` (e.g. mass in kg).
+
+    Parameters
+    ----------
+    field : str
+        The name an error message gives the value (e.g. ``"omega_b"``, ``"scene.bodies"``).
+    value : float
+        The input.
+
+    Returns
+    -------
+    float
+
+    Raises
+    ------
+    LavenderInputError
+        Naming `field` and the broken rule.
+    """
     return scalar(field, value, positive=True)
 
 
 def dt(field: str, value: SupportsFloat) -> float:
-    """Validate a time step in seconds: finite and > 0."""
+    """Validate a time step in seconds: finite and > 0.
+
+    Parameters
+    ----------
+    field : str
+        The name an error message gives the value (e.g. ``"omega_b"``, ``"scene.bodies"``).
+    value : float
+        The step, s.
+
+    Returns
+    -------
+    float
+
+    Raises
+    ------
+    LavenderInputError
+        Naming `field` and the broken rule.
+    """
     return scalar(field, value, positive=True)
 
 
 def integer(field: str, value: int | np.integer, *, minimum: int | None = None) -> int:
-    """Validate a Python or NumPy integer (not bool, not float), optionally >= minimum."""
+    """Validate a Python or NumPy integer (not bool, not float), optionally >= minimum.
+
+    Parameters
+    ----------
+    field : str
+        The name an error message gives the value (e.g. ``"omega_b"``, ``"scene.bodies"``).
+    value : int
+        The input.
+    minimum : int or None, optional
+        Smallest allowed value.
+
+    Returns
+    -------
+    int
+
+    Raises
+    ------
+    LavenderInputError
+        Naming `field` and the broken rule.
+    """
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
         raise LavenderInputError(field, "expected an integer", f", got {_describe(value)}")
     n = int(value)
@@ -250,7 +375,26 @@ def integer(field: str, value: int | np.integer, *, minimum: int | None = None) 
 
 
 def choice(field: str, value: str, allowed: Iterable[str]) -> str:
-    """Validate that ``value`` is one of the ``allowed`` names; return it."""
+    """Validate that ``value`` is one of the ``allowed`` names; return it.
+
+    Parameters
+    ----------
+    field : str
+        The name an error message gives the value (e.g. ``"omega_b"``, ``"scene.bodies"``).
+    value : str
+        The input.
+    allowed : iterable of str
+        The accepted names (listed in the error).
+
+    Returns
+    -------
+    str
+
+    Raises
+    ------
+    LavenderInputError
+        Naming `field` and the broken rule.
+    """
     known = sorted(allowed)
     known_text = ", ".join(known)
     if not isinstance(value, str):
@@ -275,6 +419,23 @@ def quaternion(field: str, value: ArrayLike) -> np.ndarray:
     Rejects wrong shape, non-finite entries and zero (norm < 1e-300). A nonzero
     quaternion that is not of unit length is normalized; the unit quaternion is
     returned (``q`` and ``-q`` are kept as given).
+
+    Parameters
+    ----------
+    field : str
+        The name an error message gives the value (e.g. ``"omega_b"``, ``"scene.bodies"``).
+    value : array_like, shape (4,)
+        The quaternion (x, y, z, w).
+
+    Returns
+    -------
+    ndarray, shape (4,)
+        Unit quaternion.
+
+    Raises
+    ------
+    LavenderInputError
+        Naming `field` and the broken rule.
     """
     q = array(field, value, (4,))
     scale = float(np.max(np.abs(q)))
@@ -350,6 +511,23 @@ def inertia(field: str, value: ArrayLike) -> np.ndarray:
     symmetric, positive definite and diagonal (off-diagonals <= 1e-12 max|I|).
     Moments must be > 0 and satisfy the triangle inequality (each <= sum of the
     other two, relative tolerance 1e-12); equality (a flat plate) is valid.
+
+    Parameters
+    ----------
+    field : str
+        The name an error message gives the value (e.g. ``"omega_b"``, ``"scene.bodies"``).
+    value : array_like, shape (3,) or (3, 3)
+        Principal moments or a diagonal tensor about the COM, body frame, kg·m².
+
+    Returns
+    -------
+    ndarray, shape (3,)
+        Principal moments, kg·m².
+
+    Raises
+    ------
+    LavenderInputError
+        Naming `field` and the broken rule.
     """
     arr = _real_array(field, value)
     if arr.shape == (3,):
@@ -378,6 +556,23 @@ def principal_axes(I: ArrayLike, *, field: str = "inertia") -> tuple[np.ndarray,
     proper rotation (det +1) whose columns are the principal axes, so that
     ``I == R @ diag(moments) @ R.T``. Validates like :func:`inertia` except
     that ``I`` need not be diagonal.
+
+    Parameters
+    ----------
+    I : array_like, shape (3, 3)
+        Inertia tensor about the COM in some body frame, kg·m².
+    field : str, optional
+        The name an error gives it.
+
+    Returns
+    -------
+    moments : ndarray, shape (3,)
+    R : ndarray, shape (3, 3)
+
+    Raises
+    ------
+    LavenderInputError
+        Naming `field` and the broken rule.
     """
     t = array(field, I, (3, 3))
     sym, _, scale = _checked_tensor(field, t)
@@ -407,7 +602,17 @@ def principal_axes(I: ArrayLike, *, field: str = "inertia") -> tuple[np.ndarray,
 def safe_norm(a: ArrayLike) -> float:
     """Euclidean norm without intermediate overflow or underflow (scaled by max|a|).
 
-    Returns inf only when the norm itself exceeds the largest float64."""
+    Returns inf only when the norm itself exceeds the largest float64.
+
+    Parameters
+    ----------
+    a : array_like
+        Any shape (flattened).
+
+    Returns
+    -------
+    float
+    """
     a = np.asarray(a, dtype=np.float64).ravel()
     scale = float(np.max(np.abs(a), initial=0.0))
     if not scale > 0 or not np.isfinite(scale):
@@ -419,7 +624,17 @@ def safe_norm(a: ArrayLike) -> float:
 def keywords(fn: Callable[..., Any]) -> Callable[..., Any]:
     """Decorator: a call with an unknown keyword, a missing argument or too many positional
     arguments raises :class:`LavenderInputError` naming it (and the accepted names), not a
-    ``TypeError``. Functions that take ``**kwargs`` check those themselves."""
+    ``TypeError``. Functions that take ``**kwargs`` check those themselves.
+
+    Parameters
+    ----------
+    fn : callable
+        The function or method to wrap.
+
+    Returns
+    -------
+    callable
+    """
     sig = inspect.signature(fn)
     params = sig.parameters
     takes_var_kw = any(p.kind is p.VAR_KEYWORD for p in params.values())
@@ -451,7 +666,24 @@ def keywords(fn: Callable[..., Any]) -> Callable[..., Any]:
 
 def writable_dir(field: str, path: str | os.PathLike[str]) -> Path:
     """Create directory `path` (and parents) if needed and check that a file can be written in it;
-    LavenderInputError naming `field` otherwise (a path through a file, no permission, read-only)."""
+    LavenderInputError naming `field` otherwise (a path through a file, no permission, read-only).
+
+    Parameters
+    ----------
+    field : str
+        The name an error message gives the value (e.g. ``"omega_b"``, ``"scene.bodies"``).
+    path : str or os.PathLike
+        The directory.
+
+    Returns
+    -------
+    pathlib.Path
+
+    Raises
+    ------
+    LavenderInputError
+        Naming `field` and the broken rule.
+    """
     import tempfile
 
     if not isinstance(path, (str, os.PathLike)) or not str(path):
@@ -472,7 +704,24 @@ def writable_dir(field: str, path: str | os.PathLike[str]) -> Path:
 
 def writable_file(field: str, path: str | os.PathLike[str]) -> Path:
     """Check that file `path` can be written (its directory is created if needed, as the writer would);
-    LavenderInputError naming `field` otherwise (a directory, a path through a file, no permission)."""
+    LavenderInputError naming `field` otherwise (a directory, a path through a file, no permission).
+
+    Parameters
+    ----------
+    field : str
+        The name an error message gives the value (e.g. ``"omega_b"``, ``"scene.bodies"``).
+    path : str or os.PathLike
+        The file.
+
+    Returns
+    -------
+    pathlib.Path
+
+    Raises
+    ------
+    LavenderInputError
+        Naming `field` and the broken rule.
+    """
     if not isinstance(path, (str, os.PathLike)) or not str(path):
         raise LavenderInputError(field, "expected a file path", f", got {_describe(path)}")
     p = Path(path)

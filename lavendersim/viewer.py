@@ -205,7 +205,25 @@ def validate_overlays(overlays: Mapping[str, Any] | None, body_names: Iterable[s
 
     Result: ``{"axes": [{"body": str, "scale": float}], "vectors": [{"label": str, "origin":
     ndarray(3), "vector": ndarray(3), "scale": float, "color": ndarray(4)}]}``. Raises
-    LavenderInputError naming the first bad field; the input is never mutated."""
+    LavenderInputError naming the first bad field; the input is never mutated.
+
+    Parameters
+    ----------
+    overlays : mapping or None
+        ``{"axes": [{"body", "scale"}], "vectors": [{"label", "origin", "vector", "scale", "color"}]}``;
+        origin and vector world frame (m and any unit; drawn ``scale * vector`` long), color RGBA in [0, 1].
+    body_names : iterable of str
+        The scene's bodies (an axes entry must name one).
+
+    Returns
+    -------
+    dict
+
+    Raises
+    ------
+    LavenderInputError
+        Naming the first bad field (``overlays.vectors[1].color``).
+    """
     names = list(body_names)
     if overlays is None:
         return {"axes": [], "vectors": []}
@@ -258,7 +276,18 @@ def validate_overlays(overlays: Mapping[str, Any] | None, body_names: Iterable[s
 
 
 def xyzw_to_wxyz(q: ArrayLike) -> np.ndarray:
-    """Our (x, y, z, w) quaternion as viser's (w, x, y, z)."""
+    """Our (x, y, z, w) quaternion as viser's (w, x, y, z).
+
+    Parameters
+    ----------
+    q : array_like, shape (..., 4)
+        Quaternions (x, y, z, w).
+
+    Returns
+    -------
+    ndarray, shape (..., 4)
+        (w, x, y, z).
+    """
     q = np.asarray(q, dtype=float)
     return np.array([q[3], q[0], q[1], q[2]])
 
@@ -347,6 +376,28 @@ class Viewer:
     one; if the port is taken viser uses the next free one — ``viewer.port`` is the bound one).
     max_rate_hz: most scene updates per second sent to browsers (frames in between coalesce).
     arrow_radius: shaft radius of vector arrows in m (default: 2.5% of the largest body).
+
+    Parameters
+    ----------
+    host : str, optional
+        Interface to bind.
+    port : int, optional
+        TCP port.
+    max_rate_hz : float, optional
+        Most scene updates per second.
+    label : str, optional
+        Page title.
+    arrow_radius : float or None, optional
+        Shaft radius of vector arrows, m.
+    verbose : bool, optional
+        Let viser print its banner.
+
+    Raises
+    ------
+    MissingExtraError
+        Without the ``viewer`` extra (viser).
+    LavenderInputError
+        On a bad host, port or rate.
     """
 
     @V.keywords
@@ -392,12 +443,33 @@ class Viewer:
     # ---- public ---------------------------------------------------------------------------
     @property
     def url(self) -> str:
+        """The page's address, ``http://HOST:PORT/``."""
         host = "127.0.0.1" if self.host in ("0.0.0.0", "") else self.host
         return f"http://{host}:{self.port}/"
 
     def publish_frame(self, sim: Sim, overlays: Mapping[str, Any] | None = None) -> int:
         """Validate ``overlays`` against ``sim``'s bodies, snapshot the poses, store as the latest
-        frame and return its number. Never waits for a browser or for the scene update."""
+        frame and return its number. Never waits for a browser or for the scene update.
+
+        Parameters
+        ----------
+        sim : Sim
+            Its bodies are drawn at their current poses.
+        overlays : mapping, optional
+            Axes and vectors (see :func:`validate_overlays`).
+
+        Returns
+        -------
+        int
+            The frame's number (for :meth:`wait_applied`).
+
+        Raises
+        ------
+        LavenderInputError
+            On a bad payload (nothing is drawn).
+        ViewerError
+            If the previous frame could not be drawn.
+        """
         names, x, bodies = self._sim_parts(sim)
         ov = validate_overlays(overlays, names)
         f = _Frame()
@@ -431,7 +503,20 @@ class Viewer:
         """Block until frame ``number`` (or a later one) is in the viser scene; False on timeout.
         Raises :class:`ViewerError` when the apply thread failed to draw it (the latest frame it
         processed is ``number`` or later and failed). For tests and scripts; the simulation loop
-        never needs it."""
+        never needs it.
+
+        Parameters
+        ----------
+        number : int
+            A frame number from :meth:`publish_frame`.
+        timeout : float, optional
+            Seconds to wait.
+
+        Returns
+        -------
+        bool
+            True once applied, False on timeout.
+        """
         number = V.integer("number", number, minimum=0)
         timeout = V.scalar("timeout", timeout, nonnegative=True)
         deadline = time.monotonic() + timeout
@@ -466,14 +551,17 @@ class Viewer:
                     "vectors": [dict(v) for v in self._vectors]}
 
     def clients(self) -> int:
+        """Number of connected browser tabs."""
         return len(self.server.get_clients())
 
     def stats(self) -> dict[str, Any]:
+        """Counters: frames published, applied, dropped (coalesced), failed; clients; the last error."""
         with self._lock:
             return {"published": self._published, "applied": self._applied, "dropped": self._dropped, "failed": self._failed,
                     "clients": self.clients(), "last_error": repr(self.last_error) if self.last_error else None}
 
     def close(self) -> None:
+        """Stop the apply thread and the server (idempotent)."""
         if self._stop.is_set():
             return
         self._stop.set()
@@ -730,7 +818,28 @@ LAB_VIEWS = {"03": "lab03", "04": "wheel"}
 def run_scene(name: str, *, duration: float | None = None, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT,
               rate_hz: float = 60.0, viewer: Viewer | None = None, out: TextIO = sys.stdout) -> dict[str, Any]:
     """Run scene ``name`` in real time, publishing ``rate_hz`` frames per second, for ``duration``
-    seconds of simulated time (None: until interrupted). Returns the viewer's stats."""
+    seconds of simulated time (None: until interrupted). Returns the viewer's stats.
+
+    Parameters
+    ----------
+    name : str
+        A scene of SCENES (``"tumble"``, ``"wheel"``, ...).
+    duration : float or None, optional
+        Simulated seconds (None: until Ctrl-C).
+    host, port : optional
+        Where to serve (when `viewer` is None).
+    rate_hz : float, optional
+        Frames per second.
+    viewer : Viewer, optional
+        An existing viewer.
+    out : text stream, optional
+        Where the URL line is printed.
+
+    Returns
+    -------
+    dict
+        :meth:`Viewer.stats`.
+    """
     V.choice("scene", name, SCENES)
     if duration is not None:
         duration = V.scalar("duration", duration, nonnegative=True)

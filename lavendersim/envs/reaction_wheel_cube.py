@@ -70,6 +70,43 @@ MAX_SUBSTEPS = 100_000  # simulator steps per control step (control_dt / dt), at
 
 
 class ReactionWheelCubeEnv(gym.Env):
+    """The reaction-wheel cube as a Gymnasium environment (``lavendersim:ReactionWheelCube-v0``).
+
+    Action: wheel torques in [-1, 1]³ scaled to the motor limit and saturated. Observation (float32):
+    attitude q (x, y, z, w), body rates omega_b (rad/s), wheel rates Omega (rad/s).
+
+    Parameters
+    ----------
+    task : {"center", "corner"}, optional
+        Balance on the centre joint or on a corner (Cubli-like).
+    backend : {"auto", "c", "numpy"}, optional
+        Simulator backend.
+    render_mode : {None, "rgb_array"}, optional
+    control_dt : float, optional
+        Seconds per env step (a multiple of `dt`).
+    dt : float, optional
+        Simulator step, s.
+    damping : float, optional
+        Joint damping, N·m·s/rad.
+    init_angle_deg : float or None, optional
+        Largest random initial tilt from the target, degrees.
+    max_tilt_deg : float, optional
+        Terminate beyond this error, degrees.
+    target_q : array_like, shape (4,), optional
+        Target attitude (x, y, z, w).
+    model : lavendersim.control.CubeModel, optional
+        A ready model (else built from `task` and `model_params`).
+    **model_params
+        CubeModel fields (mass, size, J, torque_limit, ...).
+
+    Examples
+    --------
+    >>> import gymnasium as gym, lavendersim   # doctest: +SKIP
+    >>> env = gym.make("lavendersim:ReactionWheelCube-v0")   # doctest: +SKIP
+    >>> obs, info = env.reset(seed=0)   # doctest: +SKIP
+    >>> obs, reward, terminated, truncated, info = env.step([0.0, 0.0, 0.0])   # doctest: +SKIP
+    """
+
     metadata = {"render_modes": ["rgb_array"], "render_fps": 50}
 
     @V.keywords
@@ -133,7 +170,17 @@ class ReactionWheelCubeEnv(gym.Env):
 
     def angle_error_deg(self, q: Sequence[float] | np.ndarray | None = None) -> float:
         """Rotation angle between the cube and the target attitude, degrees: 4 atan2(|q − s q_t|,
-        |q + s q_t|) with s = sign(q·q_t) (accurate at small angles, cheap per step)."""
+        |q + s q_t|) with s = sign(q·q_t) (accurate at small angles, cheap per step).
+
+        Parameters
+        ----------
+        q : array_like, shape (4,), optional
+            An attitude (default: the current one).
+
+        Returns
+        -------
+        float
+        """
         q = self.sim.state(BODY).q if q is None else q
         t = self._tq
         d = q[0] * t[0] + q[1] * t[1] + q[2] * t[2] + q[3] * t[3]
@@ -143,7 +190,17 @@ class ReactionWheelCubeEnv(gym.Env):
         return math.degrees(4.0 * math.atan2(a, b))
 
     def tilt_deg(self, q: ArrayLike | None = None) -> float:
-        """Corner task: angle of the body diagonal (pivot → COM) from vertical, degrees."""
+        """Corner task: angle of the body diagonal (pivot → COM) from vertical, degrees.
+
+        Parameters
+        ----------
+        q : array_like, shape (4,), optional
+            An attitude (default: the current one).
+
+        Returns
+        -------
+        float
+        """
         q = self.sim.state(BODY).q if q is None else q
         d = K.quat_rotate(q, np.ones(3) / math.sqrt(3.0))
         return float(math.degrees(math.atan2(math.hypot(float(d[0]), float(d[1])), float(d[2]))))
@@ -164,6 +221,26 @@ class ReactionWheelCubeEnv(gym.Env):
     # ---- gymnasium API --------------------------------------------------------------------
     def reset(self, *, seed: int | None = None,
               options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict[str, Any]]:
+        """Start an episode (Gymnasium API).
+
+        Parameters
+        ----------
+        seed : int or None, optional
+            Seeds the initial-tilt generator.
+        options : dict, optional
+            ``q`` (4,), ``omega_b`` (3,) rad/s, ``Omega`` (3,) rad/s: a given initial state.
+
+        Returns
+        -------
+        observation : ndarray, shape (10,), float32
+        info : dict
+            ``t``, ``angle_error_deg``, ``torque_applied`` (and ``tilt_deg`` on the corner).
+
+        Raises
+        ------
+        LavenderInputError
+            On a bad seed or option; nothing changes.
+        """
         if seed is not None:
             seed = V.integer("seed", seed, minimum=0)  # a Python int (gymnasium refuses numpy integers)
         if options is not None and not isinstance(options, Mapping):
@@ -195,6 +272,30 @@ class ReactionWheelCubeEnv(gym.Env):
         return info
 
     def step(self, action: ArrayLike) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+        """Advance `control_dt` with the wheel torques `action` (Gymnasium API).
+
+        Parameters
+        ----------
+        action : array_like, shape (3,)
+            Wheel torques as fractions of the motor limit, clipped to [-1, 1].
+
+        Returns
+        -------
+        observation : ndarray, shape (10,), float32
+        reward : float
+            ``-(theta² + 0.05 |omega_b|² + 0.01 |action|²)``, theta the attitude error in rad.
+        terminated : bool
+            Beyond `max_tilt_deg`, or the simulation diverged (``info["diverged"]``).
+        truncated : bool
+        info : dict
+
+        Raises
+        ------
+        LavenderInputError
+            On an action that is not 3 finite real numbers.
+        RuntimeError
+            Before :meth:`reset`.
+        """
         if self.sim is None:
             raise RuntimeError("ReactionWheelCube-v0: call reset() before step()")
         # real finite numbers of shape (3,): complex, bool, str, None, NaN/inf and other shapes are rejected
@@ -256,6 +357,7 @@ class ReactionWheelCubeEnv(gym.Env):
         return np.asarray(self._fig.canvas.buffer_rgba())[..., :3].copy()
 
     def close(self) -> None:
+        """Release the simulator and the figure."""
         self._fig = None
         self.sim = None
 
@@ -264,5 +366,15 @@ def make_env(**kwargs: Any) -> ReactionWheelCubeEnv:
     """The entry point registered for ReactionWheelCube-v0: builds :class:`ReactionWheelCubeEnv`.
 
     A plain function (no ``metadata``), so ``gymnasium.make`` passes ``render_mode`` through unchanged and
-    an unsupported mode such as ``"human"`` is rejected by the env instead of wrapped."""
+    an unsupported mode such as ``"human"`` is rejected by the env instead of wrapped.
+
+    Parameters
+    ----------
+    **kwargs
+        Passed to :class:`ReactionWheelCubeEnv`.
+
+    Returns
+    -------
+    ReactionWheelCubeEnv
+    """
     return ReactionWheelCubeEnv(**kwargs)
