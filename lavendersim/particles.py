@@ -5,7 +5,7 @@ generated per-particle kernels (``particle_moments``, ``particle_angular_momentu
 ``parallel_axis``) over the particles; nothing here retypes an equation.
 
 Shapes: ``m`` (N,) masses in kg, all > 0; ``r_w`` (N, 3) world positions in m; ``v_w`` (N, 3)
-world velocities in m/s. Results are world-frame float64 arrays.
+world velocities in m/s. Results are world-frame float64 arrays::
 
     m = sum_i m_i                                  total_mass
     r_COM = (1/m) sum_i m_i r_i                    center_of_mass

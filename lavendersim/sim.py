@@ -11,6 +11,7 @@ rotates about its COM (I_p = diag(I_b), r_b = 0) and translates freely. Wheel co
 (zero-order) until changed and saturated at the start of every step.
 
 Integrators (`integrator=`; `sim.rhs_evals` counts right-hand-side evaluations, cumulative):
+
 * "euler", "semi_implicit_euler" (1 evaluation per step), "rk4" (4): fixed step dt, any body.
 * "dopri5": adaptive Dormand–Prince 5(4) with FSAL and error control (`rtol`, default 1e-6; `atol`,
   default 1e-9; the error of each accepted substep is at most 1 in Hairer's RMS norm of
@@ -47,18 +48,21 @@ Integrators (`integrator=`; `sim.rhs_evals` counts right-hand-side evaluations, 
   with q = q0 ⊗ exp(u/2): unit to rounding even with normalize=False; p, v, ω exactly as RK4's
   stages. 4 evaluations per step; its stability limit is RK4's (|ω|·dt ≲ 1 for the gyroscopic term).
   Plain bodies only.
+
 Unsupported combinations (splitting / implicit_gyro / splitting4 / rk4_expmap with a joint or wheels;
 rtol/atol with a fixed-step integrator) raise LavenderInputError at construction.
 
 Divergence before infinity (checked per chunk of steps, so the stepping itself is unchanged bit for bit):
 a run is advanced in chunks of about CHUNK_WORK right-hand-side evaluations; after each chunk every body
 is checked against
+
 * its integrator's validity bound, |omega|*dt*(I_max/I_min)**p <= WDT_MAX (declared once in
   derive/tableaux.py, printed in generated/tableaux.py; dopri5 has none): beyond it the run raises
   DivergenceError naming the bound, or with on_bound="warn" warns once per body (ValidityBoundWarning);
 * for a body no effect acts on (torque- and force-free): its kinetic energy and |L| may not grow beyond
   max_growth times their values at construction / the last set_state (default 10; None: off); a wheeled
   body without a joint and without other effects: its total |L| (body + wheels) likewise.
+
 A chunk that fails a check (or goes non-finite) is re-run from its start in smaller pieces to find the
 first step whose state fails (the states are recomputed bit for bit; for dopri5, whose FSAL stage does
 not carry across calls, to the tolerance). DivergenceError then names the step, the body and the

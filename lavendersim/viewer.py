@@ -1,5 +1,7 @@
 """Live browser viewer: a viser page that shows a Sim's bodies plus Python-chosen axes and vectors.
 
+Example::
+
     viewer = Viewer(port=8080)                 # serves http://127.0.0.1:8080 (host/port configurable)
     viewer.publish_frame(sim, overlays={
         "axes": [{"body": "cube", "scale": 0.34}],
@@ -14,11 +16,13 @@ y green, z blue; length = scale in m) follows its body. A vector is drawn in wor
 an arrow from ``origin`` to ``origin + scale * vector`` in colour ``[r, g, b, a]`` (each in
 [0, 1]; a is the opacity) with its label at the tip.
 
-Overlay payload (keys outside these are errors):
+Overlay payload (keys outside these are errors)::
+
   axes:    list of {"body": name (required), "scale": m > 0 (default 0.3)}; one entry per body.
   vectors: list (at most MAX_VECTORS) of {"label": str (default ""), "origin": 3 reals (required),
            "vector": 3 reals (required), "scale": real > 0 (default 1), "color": 4 reals in [0, 1]
            (default DEFAULT_COLOR)}.
+
 Every coordinate drawn (origin, origin + scale * vector, the arrow's length, body positions) must lie
 within FLOAT32_MAX (3.4e38; the browser draws in float32): a vector of 1e308 — or one whose length
 overflows — is rejected. The whole payload is validated before anything is stored: a bad one raises

@@ -11,6 +11,8 @@ Some tests need a tool that a fresh machine may lack. Each has one name here (TO
     viewer    viser (viewer extra: the live browser viewer)
     gym       gymnasium (gym extra: the ReactionWheelCube-v0 environment)
     distributed  dask and distributed (distributed extra)
+    docs      sphinx and myst-parser (docs extra: the documentation site)
+    notebooks nbclient, nbformat and ipykernel (docs extra: the notebooks executed headless)
 
 A test says what it needs in one of three ways, all handled by :func:`require`:
 
@@ -111,6 +113,8 @@ TOOLS = {
     "viewer": (_modules("viser"), "pip install -e '.[viewer]'"),
     "gym": (_modules("gymnasium"), "pip install -e '.[gym]'"),
     "distributed": (_modules("dask", "distributed"), "pip install -e '.[distributed]'"),
+    "docs": (_modules("sphinx", "myst_parser"), "pip install -e '.[docs]'"),
+    "notebooks": (_modules("nbclient", "nbformat", "ipykernel"), "pip install -e '.[docs]'"),
 }
 
 _missing: dict[str, str | None] = {}
