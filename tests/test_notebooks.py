@@ -10,7 +10,6 @@ import json
 from pathlib import Path
 
 import pytest
-
 from conftest import missing
 
 NOTEBOOKS = Path(__file__).resolve().parents[1] / "notebooks"
