@@ -78,7 +78,10 @@ def extensions() -> list[Extension]:
                              "(or `python -c \"from pathlib import Path; from derive import codegen; "
                              "codegen.write(Path('generated'))\"` from the repo root)")
     csrc = sorted(p.name for p in (HERE / CSRC).glob("*.c"))
-    args = ["-O3", "-std=c99", "-fno-math-errno"]  # never -ffast-math: it breaks isfinite and IEEE rules
+    # never -ffast-math: it breaks isfinite and IEEE rules. -ffp-contract=off: no a*b+c fused into an FMA
+    # (GCC's default under -std=c99 already; clang contracts by default), so the SIMD copies of the batched
+    # loop (csrc/batch_simd.h, AVX2/AVX-512 chosen at run time) give bitwise the scalar path's results
+    args = ["-O3", "-std=c99", "-fno-math-errno", "-ffp-contract=off"]
     # only PyInit_ is exported (PyMODINIT_FUNC); hidden symbols cannot be interposed, so -fPIC code
     # calls and inlines the kernels directly (same effect as -fno-semantic-interposition, older compilers too)
     args.append("-fvisibility=hidden")
@@ -97,7 +100,7 @@ def extensions() -> list[Extension]:
         # generated/kernels.c is #included by step.c (one translation unit, so its kernels inline)
         sources=[f"{CSRC}/{n}" for n in csrc],
         include_dirs=[GENERATED, CSRC],
-        depends=[f"{GENERATED}/{n}" for n in HASHED] + [f"{CSRC}/step.h"],
+        depends=[f"{GENERATED}/{n}" for n in HASHED] + [f"{CSRC}/step.h", f"{CSRC}/batch_simd.h"],
         define_macros=[("LV_GENERATED_HASH", '"%s"' % generated_hash(HERE / GENERATED))],
         extra_compile_args=args,
         extra_link_args=link_args,

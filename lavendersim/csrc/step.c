@@ -12,6 +12,29 @@
 #include "step.h"
 #include "tableaux.h"
 
+/* LV_FLATTEN: inline every call in the function (its kernels included), so each call with constant block
+   size, kind and normalize flag compiles to its own straight-line loop (GCC and clang; elsewhere a
+   plain function). */
+#if defined(__GNUC__) || defined(__clang__)
+#define LV_FLATTEN __attribute__((flatten))
+#else
+#define LV_FLATTEN
+#endif
+#if defined(_MSC_VER)
+#define LV_RESTRICT __restrict
+#else
+#define LV_RESTRICT restrict
+#endif
+/* Per-instruction-set copies of the batched loops, dispatched at run time (x86 with GCC or clang). */
+#if (defined(__GNUC__) || defined(__clang__)) && (defined(__x86_64__) || defined(__i386__))
+#define LV_HAVE_ISA_CLONES 1
+#else
+#define LV_HAVE_ISA_CLONES 0
+#endif
+
+/* Steps between finiteness checks on the torque-free path (see advance_free_rk4). */
+#define LV_FREE_CHUNK 64
+
 /* ---- the effect index -------------------------------------------------------------------------
 
    One effect acting on one body: its parameters and, for a user effect, its compiled function
@@ -272,17 +295,6 @@ enum { LV_RHS_FREE = 0, LV_RHS_TORQUE = 1, LV_RHS_FULL = 2 };
             for (j = 0; j < n; j++) lv_quat_normalize(xn[j] + LV_STATE_Q, xn[j] + LV_STATE_Q);          \
     } while (0)
 
-/* LV_FLATTEN: inline every call in the function (its kernels included), so each call with constant block
-   size, kind and normalize flag compiles to its own straight-line loop (GCC and clang; elsewhere a
-   plain function). */
-#if defined(__GNUC__) || defined(__clang__)
-#define LV_FLATTEN __attribute__((flatten))
-#else
-#define LV_FLATTEN
-#endif
-
-/* Steps between finiteness checks on the torque-free path (see advance_free_rk4). */
-#define LV_FREE_CHUNK 64
 
 /* RK4 fast path on plain bodies, `forced` (LV_RHS_*) of them all: torque-free (no effect acts on them;
    the common free-flight scene), or with effects, each body summed over its own (from the index ix).
@@ -349,6 +361,55 @@ static inline long advance_free_rk4(double *state, const double *params, const l
 }
 #undef LV_FREE_RK4_STEP
 #undef LV_RK4_RHS
+
+#include "batch_simd.h"
+
+/* ---- instruction set selection ---------------------------------------------------------------- */
+
+static int lv_isa_detect(void)
+{
+#if LV_HAVE_ISA_CLONES
+    __builtin_cpu_init();
+    if (__builtin_cpu_supports("avx512f")) return LV_ISA_AVX512;
+    if (__builtin_cpu_supports("avx2")) return LV_ISA_AVX2;
+#endif
+    return LV_ISA_BASE;
+}
+
+static int lv_isa_best_cached = -1; /* benign race: every thread computes the same value */
+static int lv_isa_current = -1;     /* -1: the best */
+
+int lv_isa_best(void)
+{
+    if (lv_isa_best_cached < 0) lv_isa_best_cached = lv_isa_detect();
+    return lv_isa_best_cached;
+}
+
+int lv_isa_get(void)
+{
+    return lv_isa_current < 0 ? lv_isa_best() : lv_isa_current;
+}
+
+int lv_isa_set(int isa)
+{
+    lv_isa_current = isa < 0 ? -1 : (isa < lv_isa_best() ? isa : lv_isa_best());
+    return lv_isa_get();
+}
+
+const char *lv_isa_name(int isa)
+{
+    switch (isa) {
+    case LV_ISA_SCALAR: return "scalar";
+#if defined(__x86_64__) || defined(_M_X64)
+    case LV_ISA_BASE: return "sse2";
+#else
+    case LV_ISA_BASE: return "baseline";
+#endif
+    case LV_ISA_AVX2: return "avx2";
+    case LV_ISA_AVX512: return "avx512f";
+    default: return "unknown";
+    }
+}
 
 /* ---- bodies with a spherical joint and/or reaction wheels ------------------------------------ */
 
@@ -902,7 +963,7 @@ static int rhs_kind(const lv_effect_index *ix, long b)
    lv_simulate. */
 static int advance_fixed(double *state, const double *params, long nb, const lv_effect_index *ix,
                          const lv_models *models, int integrator, int normalize, double dt, long n_steps,
-                         long *ids, long *limit, long *best)
+                         int isa, long *ids, long *limit, long *best)
 {
     double last[LV_BLOCK][LV_STATE_SIZE], lastm[LV_XS_SIZE];
     long b, k, s, lim, count[3] = {0, 0, 0}, first[3];
@@ -929,14 +990,22 @@ static int advance_fixed(double *state, const double *params, long nb, const lv_
         if (models == NULL || (int)models->rows[b * LV_MODEL_SIZE + LV_MODEL_KIND] == 0) ids[first[rhs_kind(ix, b)]++] = b;
     for (kind = 0; kind < 3; kind++) {
         const long *list = ids + first[kind] - count[kind];
+        /* torque-free RK4 groups of LV_SOA_MIN bodies or more: SIMD tiles (csrc/batch_simd.h) */
+        const lv_tile_fn tile = (kind == LV_RHS_FREE && integrator == LV_INTEGRATOR_RK4 && isa != LV_ISA_SCALAR
+                                 && count[kind] >= LV_SOA_MIN) ? tile_rk4_fn(isa, normalize) : NULL;
+        const int group = tile != NULL ? LV_TILE : LV_BLOCK;
         for (k = 0; k < count[kind]; k += n) {
-            n = (int)(count[kind] - k < LV_BLOCK ? count[kind] - k : LV_BLOCK);
+            n = (int)(count[kind] - k < group ? count[kind] - k : group);
             lim = run_limit(list[k], *limit, *best, n_steps);
             if (lim <= 0) continue;
-            s = advance_group(state, params, list + k, n, ix, kind, integrator, normalize, dt, lim, &j, last);
-            /* the block stops at its first failing step, j its lowest failing body there (lockstep) */
+            if (tile != NULL)
+                s = advance_free_soa(state, params, list + k, n, tile, dt, lim, &j, last);
+            else
+                s = advance_group(state, params, list + k, n, ix, kind, integrator, normalize, dt, lim, &j, last);
+            /* the group stops at its first failing step, j its lowest failing body there (lockstep);
+               its last finite state is last[j] (a block) or last[0] (a tile) */
             if (s < 0 || !earlier(s, list[k + j], *limit, *best)) continue;
-            memcpy(state + list[k + j] * LV_STATE_SIZE, last[j], sizeof last[j]);
+            memcpy(state + list[k + j] * LV_STATE_SIZE, last[tile != NULL ? 0 : j], sizeof last[0]);
             *limit = s;
             *best = list[k + j];
             status = LV_DIVERGED;
@@ -989,8 +1058,8 @@ int lv_simulate(double *state, const double *params, long nb,
     } else {
         ids = (long *)malloc(((size_t)nb + 1) * sizeof(long));
         status = ids == NULL ? LV_NO_MEMORY
-                             : advance_fixed(state, params, nb, &ix, models, integrator, normalize, dt, n_steps, ids,
-                                             &limit, &best_body);
+                             : advance_fixed(state, params, nb, &ix, models, integrator, normalize, dt, n_steps,
+                                             lv_isa_get(), ids, &limit, &best_body);
         free(ids);
     }
     index_free(&ix);
