@@ -88,11 +88,14 @@ def extensions() -> list[Extension]:
     if _flag("LAVENDERSIM_NATIVE"):
         args.append("-march=native")
     link_args = []
+    if os.name == "posix":  # csrc/step.c: the SIMD tiles of one call may be split over POSIX threads
+        args.append("-pthread")
+        link_args.append("-pthread")
     if _flag("LAVENDERSIM_SANITIZE"):  # testing build (.ci/sanitize): memory errors and UB abort the process
         sanitize = ["-fsanitize=address,undefined", "-fno-sanitize-recover=undefined"]
         # -fno-wrapv: Python's CFLAGS carry -fwrapv, which defines signed overflow and so hides it from UBSan
         args = [a for a in args if a != "-O3"] + ["-O1", "-g", "-fno-omit-frame-pointer", "-fno-wrapv"] + sanitize
-        link_args = sanitize
+        link_args = link_args + sanitize
         print(f"LAVENDERSIM_SANITIZE=1: building lavendersim._lavender_c with {' '.join(sanitize)} (not for use)",
               file=sys.stderr)
     return [Extension(

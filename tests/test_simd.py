@@ -86,3 +86,46 @@ def test_divergence_in_a_tile_is_reported_as_on_the_scalar_path(levels, bad):
     for r in reports[1:]:
         assert r[:3] == reports[0][:3]
         np.testing.assert_array_equal(r[3], reports[0][3])
+
+
+@pytest.fixture
+def two_threads():
+    """The SIMD tiles of a call shared by two threads; one thread again after."""
+    assert C.threads(2) in (1, 2)   # 1 where the build has no POSIX threads
+    yield
+    C.threads(1)
+
+
+@pytest.mark.parametrize("n", [129, 300])                 # 3 and 5 tiles of 64, the last one partial
+def test_two_threads_are_one_thread_bitwise(levels, n, two_threads):
+    sc = _scene(n, seed=n + 1)
+    C.threads(1)
+    want = _run(sc, levels[-1], 120)
+    C.threads(2)
+    np.testing.assert_array_equal(_run(sc, levels[-1], 120), want)
+    np.testing.assert_array_equal(_run(sc, 0, 120), want)   # the scalar path ignores threads
+
+
+@pytest.mark.parametrize("bad", [[200], [10, 250], [250, 10]])   # in the second share; in both
+def test_divergence_with_two_threads_is_reported_as_with_one(levels, bad, two_threads):
+    from lavendersim.effects import ROW
+    x0, params, _ = _scene(300, seed=8).arrays()
+    x0 = np.array(x0, dtype=np.float64, copy=True)
+    params = np.ascontiguousarray(params, dtype=np.float64)
+    for k, b in enumerate(bad):
+        x0[b, 10:13] = [1e150 * 10.0 ** k, 1e150, 1e150]   # the later ones overflow sooner
+    reports = []
+    for threads in (1, 2):
+        C.threads(threads)
+        x = x0.copy()
+        status, step, body = C.simulate(x, params, np.zeros((0, ROW)), C.RK4, 1, 1e-2, 50)
+        reports.append((status, step, body, x[body].copy()))
+    assert reports[0][0] == 1 and reports[0][2] in bad
+    assert reports[1][:3] == reports[0][:3]
+    np.testing.assert_array_equal(reports[1][3], reports[0][3])
+
+
+def test_threads_rejects_a_bad_count():
+    with pytest.raises(ValueError, match="threads"):
+        C.threads(0)
+    assert C.threads() == 1

@@ -78,6 +78,7 @@ TARGETS = {
     "torque_free_vs_handwritten": 1.1,  # LavenderSim C / hand-written (inlined, same arithmetic), at most
     "simd_batch_vs_hand_soa": 1.3,     # C batch loop / hand-written SoA loop, best ISA of each, N >= 1e3, at most
     "simd_batch_ns_avx512": 8.0,       # C batch loop ns per body-step on AVX-512, N >= 1e3, at most
+    "threads2_speedup": 1.8,           # C batch loop, 1 thread / 2 threads, N >= 1e4, at least
     "per_body_effect_ratio": 1.5,      # one applied_torque per body / plain body, ns per body-step, at most
 }
 PER_BODY_SIZES_FULL = (1, 100, 10_000)
@@ -87,6 +88,7 @@ BATCH_SIZES_FULL = (1, 10, 100, 1_000, 10_000, 100_000)
 BATCH_SIZES_QUICK = (1, 10, 100, 1_000)
 SIMD_SIZES_FULL = (1_000, 10_000)
 SIMD_SIZES_QUICK = (1_000,)
+THREADS_MIN_N = 1_000  # the SIMD batch sizes that also time two threads
 MUJOCO_INTEGRATORS = ("RK4", "Euler", "implicitfast")
 
 EFFECT_SETS = (
@@ -499,12 +501,18 @@ def simd_batch(kernel, sizes, body_steps: int, rounds: int) -> dict:
                 st = state0.copy()
                 cases[f"lavendersim_{nm}"] = (lambda lvl=lvl, st=st: (C.isa(lvl), be.advance(st, params, empty, "rk4",
                                                                                              True, DT, steps)), steps * n)
+            if n >= THREADS_MIN_N:
+                st2 = state0.copy()
+                cases["lavendersim_2_threads"] = (lambda st=st2: _two_threads(C, be, st, params, empty, steps),
+                                                  steps * n)
             for nm in hand:
                 X = X0.copy()
                 cases[f"hand_soa_{nm}"] = (lambda nm=nm, X=X: kernel.advance_soa(nm, X, I, DT, steps), steps * n)
             t = interleaved(cases, rounds, f"SIMD batch N = {n}")
             row = {"n_bodies": n, "steps": steps, "bitwise_identical": bitwise, **t}
             ours = t[f"lavendersim_{info['best']}"]["ns_min"]
+            if "lavendersim_2_threads" in t:
+                row["threads_speedup"] = ours / t["lavendersim_2_threads"]["ns_min"]
             if hand:
                 best_hand = min(hand, key=lambda nm: t[f"hand_soa_{nm}"]["ns_min"])
                 row["best_hand_isa"] = best_hand
@@ -512,7 +520,18 @@ def simd_batch(kernel, sizes, body_steps: int, rounds: int) -> dict:
             out["sizes"].append(row)
     finally:
         C.isa(-1)
+        C.threads(1)
     return out
+
+
+def _two_threads(C, be, st, params, empty, steps) -> None:
+    """One C batch call at the best ISA with its tiles shared by two threads."""
+    C.isa(-1)
+    C.threads(2)
+    try:
+        be.advance(st, params, empty, "rk4", True, DT, steps)
+    finally:
+        C.threads(1)
 
 
 # --------------------------------------------------------------------------- the run
@@ -740,6 +759,12 @@ def standing(res: dict) -> list[dict]:
     for p in res.get("per_body_effects", []):
         out.append(_line(f"one applied_torque per body / plain body, N = {p['n_bodies']:g}", p["ratio"],
                          TARGETS["per_body_effect_ratio"], "max", "x", "ns per body-step, same run"))
+    big = [r for r in sb["sizes"] if r["n_bodies"] >= 10_000 and "threads_speedup" in r]
+    out.append(_line("two threads / one, SIMD batch loop (worst of N >= 1e4)",
+                     min((r["threads_speedup"] for r in big), default=None), TARGETS["threads2_speedup"], "min", "x",
+                     "one C call at the best ISA, tiles split over 2 threads; "
+                     + (f"{os.cpu_count()} cores, load {(res['machine'].get('loadavg') or ['?'])[0]}" if big
+                        else "not measured (N >= 1e4 is not in this run)")))
     return out
 
 
@@ -818,6 +843,10 @@ def report(res: dict) -> str:
                      + "".join(f"{r['hand_soa_' + nm]['ns_min']:14.2f}" for nm in hands)
                      + (f"{r['ratio_to_hand_soa']:12.2f}" if "ratio_to_hand_soa" in r else f"{'—':>12}")
                      + f"  {'yes' if r['bitwise_identical'] else 'NO'}")
+        for r in sb["sizes"]:
+            if "threads_speedup" in r:
+                L.append(f"  N = {r['n_bodies']:g}: two threads {r['lavendersim_2_threads']['ns_min']:.2f} ns/body-step, "
+                         f"speed-up {r['threads_speedup']:.2f}x over one")
     if mj["available"] and "agreement" in mj:
         a = mj["agreement"]
         L.append("")

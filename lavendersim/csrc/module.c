@@ -409,7 +409,27 @@ static PyObject *py_isa(PyObject *self, PyObject *args)
     return Py_BuildValue("(isis)", cur, lv_isa_name(cur), lv_isa_best(), lv_isa_name(lv_isa_best()));
 }
 
+/* threads([n]) -> n: the threads that share the SIMD tiles of one simulate call. */
+static PyObject *py_threads(PyObject *self, PyObject *args)
+{
+    int n = 0;
+    (void)self;
+    if (!PyArg_ParseTuple(args, "|i", &n)) return NULL;
+    if (PyTuple_GET_SIZE(args) > 0) {
+        if (n < 1 || n > LV_MAX_THREADS) {
+            PyErr_Format(PyExc_ValueError, "threads: must be 1..%d, got %d", LV_MAX_THREADS, n);
+            return NULL;
+        }
+        (void)lv_threads_set(n);
+    }
+    return PyLong_FromLong(lv_threads_get());
+}
+
 static PyMethodDef methods[] = {
+    {"threads", py_threads, METH_VARARGS,
+     "threads([n]) -> n: the threads that share the SIMD tiles (torque-free RK4 groups of >= 16 bodies) of one\n"
+     "simulate call (default 1; set first with n; 1 where the build has no POSIX threads). Results are bitwise\n"
+     "those of one thread. simulate runs with the GIL released."},
     {"isa", py_isa, METH_VARARGS,
      "isa([level]) -> (current, name, best, best_name): the instruction set of the batched torque-free RK4 path\n"
      "(ISA_SCALAR 0: off, ISA_BASE 1: the build's baseline (sse2 on x86-64), ISA_AVX2 2, ISA_AVX512 3); with level,\n"

@@ -88,6 +88,12 @@ int lv_isa_best(void);
    in lv_simulate (a test and benchmark switch). */
 int lv_isa_get(void);
 int lv_isa_set(int isa);
+/* Threads that share the SIMD tiles of one lv_simulate call (default 1; 1 .. LV_MAX_THREADS; always 1 where
+   the build has no POSIX threads). Results are bitwise those of one thread. lv_threads_set returns the
+   number now in use; like lv_isa_set, not for use while another thread is in lv_simulate. */
+#define LV_MAX_THREADS 64
+int lv_threads_get(void);
+int lv_threads_set(int threads);
 /* A short name of LV_ISA_* isa ("scalar", "sse2" (x86-64) or "baseline", "avx2", "avx512f"). */
 const char *lv_isa_name(int isa);
 
