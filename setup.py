@@ -78,18 +78,24 @@ def extensions() -> list[Extension]:
                              "(or `python -c \"from pathlib import Path; from derive import codegen; "
                              "codegen.write(Path('generated'))\"` from the repo root)")
     csrc = sorted(p.name for p in (HERE / CSRC).glob("*.c"))
-    args = ["-O3", "-std=c99", "-fno-math-errno"]  # never -ffast-math: it breaks isfinite and IEEE rules
+    # never -ffast-math: it breaks isfinite and IEEE rules. -ffp-contract=off: no a*b+c fused into an FMA
+    # (GCC's default under -std=c99 already; clang contracts by default), so the SIMD copies of the batched
+    # loop (csrc/batch_simd.h, AVX2/AVX-512 chosen at run time) give bitwise the scalar path's results
+    args = ["-O3", "-std=c99", "-fno-math-errno", "-ffp-contract=off"]
     # only PyInit_ is exported (PyMODINIT_FUNC); hidden symbols cannot be interposed, so -fPIC code
     # calls and inlines the kernels directly (same effect as -fno-semantic-interposition, older compilers too)
     args.append("-fvisibility=hidden")
     if _flag("LAVENDERSIM_NATIVE"):
         args.append("-march=native")
     link_args = []
+    if os.name == "posix":  # csrc/step.c: the SIMD tiles of one call may be split over POSIX threads
+        args.append("-pthread")
+        link_args.append("-pthread")
     if _flag("LAVENDERSIM_SANITIZE"):  # testing build (.ci/sanitize): memory errors and UB abort the process
         sanitize = ["-fsanitize=address,undefined", "-fno-sanitize-recover=undefined"]
         # -fno-wrapv: Python's CFLAGS carry -fwrapv, which defines signed overflow and so hides it from UBSan
         args = [a for a in args if a != "-O3"] + ["-O1", "-g", "-fno-omit-frame-pointer", "-fno-wrapv"] + sanitize
-        link_args = sanitize
+        link_args = link_args + sanitize
         print(f"LAVENDERSIM_SANITIZE=1: building lavendersim._lavender_c with {' '.join(sanitize)} (not for use)",
               file=sys.stderr)
     return [Extension(
@@ -97,7 +103,7 @@ def extensions() -> list[Extension]:
         # generated/kernels.c is #included by step.c (one translation unit, so its kernels inline)
         sources=[f"{CSRC}/{n}" for n in csrc],
         include_dirs=[GENERATED, CSRC],
-        depends=[f"{GENERATED}/{n}" for n in HASHED] + [f"{CSRC}/step.h"],
+        depends=[f"{GENERATED}/{n}" for n in HASHED] + [f"{CSRC}/step.h", f"{CSRC}/batch_simd.h"],
         define_macros=[("LV_GENERATED_HASH", '"%s"' % generated_hash(HERE / GENERATED))],
         extra_compile_args=args,
         extra_link_args=link_args,

@@ -35,7 +35,7 @@ def test_quick_runs_and_prints_its_standing(quick):
         assert heading in out
     lines = [ln.split() for ln in out.splitlines()]
     status = [ln[0] for ln in lines if ln and ln[0] in ("PASS", "MISS", "N/A")]
-    assert len(status) == 5 + len(bench.PER_BODY_SIZES_QUICK)  # one line per target, whatever the timings
+    assert len(status) == 8 + len(bench.PER_BODY_SIZES_QUICK)  # one line per target, whatever the timings
     assert "round" in r.stderr  # progress
 
 
@@ -59,13 +59,23 @@ def test_quick_json_is_well_formed(quick):
     for p in d["per_body_effects"]:
         assert p["plain"]["ns_min"] > 0 and p["applied_torque"]["ns_min"] > 0
         assert p["ratio"] == p["applied_torque"]["ns_min"] / p["plain"]["ns_min"]
-    assert [t["status"] in ("PASS", "MISS", "N/A") for t in d["standing"]] == [True] * (5 + len(bench.PER_BODY_SIZES_QUICK))
+    assert [t["status"] in ("PASS", "MISS", "N/A") for t in d["standing"]] == [True] * (8 + len(bench.PER_BODY_SIZES_QUICK))
     assert all(math.isfinite(v) for v in d["ratios"].values())
     hw = d["handwritten"]
     assert hw["available"] == have("cc"), hw
     if hw["available"]:
         assert "handwritten_c" in d["single_body"] and "c_rk4_over_handwritten_c" in d["ratios"]
-        assert hw["agreement"]["max_abs_diff"] <= 1e-12
+        assert hw["agreement"]["max_abs_diff"] == 0.0 and hw["agreement"]["bitwise"]  # same arithmetic
+    if "simd_batch" in d:  # the C extension is built: every ISA level and hand SoA copy agree bitwise
+        sb = d["simd_batch"]
+        assert [r["n_bodies"] for r in sb["sizes"]] == list(bench.SIMD_SIZES_QUICK)
+        assert sb["isa_levels"][0] == "scalar" and sb["best_isa"] == sb["isa_levels"][-1] == d["machine"]["isa"]
+        for r in sb["sizes"]:
+            assert r["bitwise_identical"]
+            for nm in sb["isa_levels"]:
+                assert r[f"lavendersim_{nm}"]["ns_min"] > 0
+            if hw["available"]:
+                assert r["ratio_to_hand_soa"] > 0 and f"hand_soa_{r['best_hand_isa']}" in r
     mj = d["mujoco"]
     assert mj["available"] == have("mujoco"), mj
     if mj["available"]:
@@ -80,6 +90,8 @@ def test_quick_json_is_well_formed(quick):
 def test_handwritten_kernel_computes_the_sims_trajectory(backend):
     kernel = bench.HandwrittenKernel()
     a = bench.handwritten_agreement(kernel, n_steps=20_000, every=2_000, backend=backend)
+    if backend == "c":   # the hand loop writes each expression in the generated kernel's order
+        assert a["max_abs_diff"] == 0.0, a
     assert a["max_abs_diff"] <= 1e-12, a
 
 
@@ -91,6 +103,31 @@ def test_handwritten_kernel_reports_divergence_with_check():
     start = x.copy()
     assert kernel.advance(x, bench.inertia(), bench.DT, 10, check=True) == 0
     np.testing.assert_array_equal(x, start)  # left at the last finite state
+
+
+@pytest.mark.needs("cc")
+def test_handwritten_soa_loop_is_the_scalar_loop_bitwise():
+    """The SoA peer (one body per lane) gives bitwise the scalar peer's states, at every instruction set
+    this CPU and compiler have, for a body count that is no multiple of any lane count."""
+    kernel = bench.HandwrittenKernel()
+    info = bench.extension_isa()   # what this CPU runs (the extension's detection); baseline without it
+    best = info["best_level"] if info else 1
+    kernel.compile_soa([(nm, extra) for lvl, nm, extra in bench.SOA_ISAS if lvl <= best])
+    assert "sse2" in kernel.soa, kernel.soa_errors
+    rng = np.random.default_rng(3)
+    n = 131
+    X = np.tile(bench.initial_state()[:, None], (1, n))
+    X[10:13] = 3.0 * rng.standard_normal((3, n))
+    I = np.ascontiguousarray(np.tile(bench.inertia()[:, None], (1, n)) * (1.0 + rng.random((3, n))))
+    want = X.copy()
+    for b in range(n):
+        x = np.ascontiguousarray(want[:, b])
+        kernel.advance(x, np.ascontiguousarray(I[:, b]), bench.DT, 200)
+        want[:, b] = x
+    for nm in kernel.soa:
+        got = X.copy()
+        kernel.advance_soa(nm, got, I, bench.DT, 200)
+        np.testing.assert_array_equal(got, want, err_msg=nm)
 
 
 @pytest.mark.needs("mujoco")

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .. import validate as V
 from ..effects import ROW, ROW_BODY
 from ..errors import DivergenceError, StaleBuildError
 from .._install import rebuild_command
@@ -190,6 +191,44 @@ def _f64_rows(name: str, a, cols: int, nb: int, writable: bool = False) -> np.nd
     if a.shape != (nb, cols):
         raise ValueError(f"models.{name} must have shape ({nb}, {cols}), got {a.shape}")
     return a
+
+
+MAX_THREADS = 64  # LV_MAX_THREADS (csrc/step.h)
+
+
+def threads(n: int | None = None) -> int:
+    """The threads that share the batched torque-free RK4 path of one C call, process-wide.
+
+    Parameters
+    ----------
+    n : int, optional
+        1 .. MAX_THREADS: set it first (default 1). Bodies are split over the threads in tiles of 64
+        (groups of at least 16 force-free plain bodies stepped with RK4; other bodies and integrators run
+        on the calling thread). Results are bitwise those of one thread.
+
+    Returns
+    -------
+    int
+        The number in use (1 where the build has no POSIX threads).
+
+    Raises
+    ------
+    LavenderInputError
+        n is not an integer in 1 .. MAX_THREADS.
+    """
+    if n is not None:
+        n = V.integer("threads", n, minimum=1)
+        if n > MAX_THREADS:
+            raise V.LavenderInputError("threads", f"must be at most {MAX_THREADS}", f", got {n}")
+        return int(_c.threads(n))
+    return int(_c.threads())
+
+
+def isa() -> dict:
+    """The instruction set of the batched torque-free RK4 path: ``{"current": name, "best": name}``
+    ("scalar", "sse2" or "baseline", "avx2", "avx512f"; the best this CPU supports is chosen at import)."""
+    cur, name, best, best_name = _c.isa()
+    return {"current": name, "best": best_name}
 
 
 class CBackend:

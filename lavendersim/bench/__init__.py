@@ -11,11 +11,16 @@ is kept too); ratios are of minima.
 Sections (one body: a solid box 2 kg, 0.8 x 0.4 x 0.2 m, asymmetric, omega_b0 = (1, 0.5, 0.2) rad/s,
 v0 = (0.1, 0, 0) m/s, dt = 1e-3 s, RK4, q normalized each step):
 * single body — LavenderSim C (`Sim.run(n)`: one C call, n >= 1e6 steps), the hand-written C99
-  reference (handwritten_rk4.c, compiled now with the system `cc -O3`, called through ctypes with
-  n >= 1e6 steps), NumPy (`Sim.run(n)`, fewer steps), one Python `sim.step()` call (c and numpy),
+  reference (handwritten_rk4.c: the same arithmetic as the generated kernels, everything inlined,
+  compiled now with the system `cc -O3` and the extension's math flags, called through ctypes with
+  n >= 1e6 steps; its trajectory must be bitwise the Sim's), NumPy (`Sim.run(n)`, fewer steps), one Python `sim.step()` call (c and numpy),
   and MuJoCo (when installed) on the same free body: `mj_step` in a Python loop and
   `mujoco.rollout` (steps inside C), integrators RK4, Euler and implicitfast;
 * batched — N bodies in one C call (`Sim.run`), N = 1 … 1e5, ns per body-step; NumPy batched too;
+* SIMD batch — the C batch loop itself (one backend call, no Sim checks between chunks) at every
+  instruction set this CPU has (LV_ISA_*: scalar, sse2, avx2, avx512f; the extension picks the best at
+  run time) against the hand-written struct-of-arrays loop (handwritten_rk4.c, compiled once per
+  instruction set with -mavx2 / -mavx512f), N = 1 000 and 10 000 (quick: 1 000), ns per body-step;
 * effects — the step cost of cumulative effect sets on one body in C: torque-free, + applied
   torque, + damping (linear + angular), + gravity, + spherical joint, + reaction wheels;
 * per-body effects — N bodies each with its own applied_torque against N plain bodies, in C, at
@@ -53,7 +58,9 @@ from ..generated import layout as LY
 SCHEMA = "lavendersim-bench/1"
 HERE = Path(__file__).resolve().parent
 KERNEL_SOURCE = HERE / "handwritten_rk4.c"
-CFLAGS = ["-O3", "-std=c99", "-fno-math-errno", "-fPIC", "-shared"]  # the extension's math flags (setup.py)
+CFLAGS = ["-O3", "-std=c99", "-fno-math-errno", "-ffp-contract=off", "-fPIC", "-shared"]  # the extension's (setup.py)
+# the hand-written SoA peer, compiled once per instruction set (LV_ISA_* level -> name, extra flags)
+SOA_ISAS = ((1, "sse2", []), (2, "avx2", ["-mavx2"]), (3, "avx512f", ["-mavx512f"]))
 
 # The body every section uses.
 MASS = 2.0
@@ -66,9 +73,12 @@ MAX_ROUNDS = 1000  # --rounds: interleaved rounds per section, 1..MAX_ROUNDS
 
 TARGETS = {
     "c_single_rk4_ns": 100.0,          # ns per step, at most
-    "mujoco_rk4_speedup": 40.0,        # MuJoCo RK4 ns / LavenderSim C ns, at least
+    "mujoco_rk4_speedup": 90.0,        # MuJoCo RK4 ns / LavenderSim C ns, at least
     "batched_ns_per_body_step": 40.0,  # at most, every N >= 1e3
-    "torque_free_vs_handwritten": 1.15,  # LavenderSim C / hand-written, at most
+    "torque_free_vs_handwritten": 1.1,  # LavenderSim C / hand-written (inlined, same arithmetic), at most
+    "simd_batch_vs_hand_soa": 1.3,     # C batch loop / hand-written SoA loop, best ISA of each, N >= 1e3, at most
+    "simd_batch_ns_avx512": 8.0,       # C batch loop ns per body-step on AVX-512, N >= 1e3, at most
+    "threads2_speedup": 1.8,           # C batch loop, 1 thread / 2 threads, N >= 1e4, at least
     "per_body_effect_ratio": 1.5,      # one applied_torque per body / plain body, ns per body-step, at most
 }
 PER_BODY_SIZES_FULL = (1, 100, 10_000)
@@ -76,6 +86,9 @@ PER_BODY_SIZES_QUICK = (1, 100)
 PER_BODY_TORQUE = (1e-3, 2e-3, -1e-3)
 BATCH_SIZES_FULL = (1, 10, 100, 1_000, 10_000, 100_000)
 BATCH_SIZES_QUICK = (1, 10, 100, 1_000)
+SIMD_SIZES_FULL = (1_000, 10_000)
+SIMD_SIZES_QUICK = (1_000,)
+THREADS_MIN_N = 1_000  # the SIMD batch sizes that also time two threads
 MUJOCO_INTEGRATORS = ("RK4", "Euler", "implicitfast")
 
 EFFECT_SETS = (
@@ -125,6 +138,18 @@ def source_commit() -> tuple[str | None, bool | None]:
     return commit, (bool(st) if st is not None else None)
 
 
+def _cpu_flags() -> list[str]:
+    """The SIMD flags of /proc/cpuinfo the bench cares about (empty where it cannot be read)."""
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.lower().startswith("flags"):
+                have = set(line.split(":", 1)[1].split())
+                return [f for f in ("sse2", "avx", "avx2", "fma", "avx512f") if f in have]
+    except OSError:
+        pass
+    return []
+
+
 def machine_stamp() -> dict:
     """Where and on what a measurement ran: CPU, cores, load, Python/NumPy/MuJoCo/LavenderSim
     versions, the C compiler, the git commit (None outside a checkout) and the UTC date."""
@@ -160,6 +185,7 @@ def machine_stamp() -> dict:
         "python": f"{platform.python_implementation()} {platform.python_version()}",
         "numpy": np.__version__, "mujoco": mj, "lavendersim": lavendersim.__version__,
         "compiler": cc, "compiler_version": cc_version,
+        "isa": (extension_isa() or {}).get("best"), "cpu_flags": _cpu_flags(),
         "git_commit": commit, "git_dirty": dirty,
         "date": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
     }
@@ -254,6 +280,38 @@ class HandwrittenKernel:
                       ctypes.c_double, ctypes.c_long, ctypes.c_int]
         f.restype = ctypes.c_long
         self._f = f
+        self.soa = {}  # ISA name -> lv_ref_rk4_free_soa of a copy compiled for it
+        self.soa_commands = {}
+        self.soa_errors = {}
+
+    def compile_soa(self, isas) -> None:
+        """Compile the SoA peer once per (name, flags) in isas (a failing one is recorded, not raised)."""
+        for name, extra in isas:
+            d = tempfile.mkdtemp(prefix="lavendersim-bench-")
+            lib = Path(d) / f"handwritten_rk4_{name}.so"
+            cmd = self.cc.split() + self.flags + extra + [str(KERNEL_SOURCE), "-o", str(lib), "-lm"]
+            r = subprocess.run(cmd, capture_output=True, text=True)
+            if r.returncode != 0:
+                self.soa_errors[name] = r.stderr.strip()[-400:]
+                shutil.rmtree(d, ignore_errors=True)
+                continue
+            f = ctypes.CDLL(str(lib)).lv_ref_rk4_free_soa
+            shutil.rmtree(d, ignore_errors=True)
+            f.argtypes = [ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_double), ctypes.c_long,
+                          ctypes.c_double, ctypes.c_long]
+            f.restype = None
+            self.soa[name] = f
+            self.soa_commands[name] = " ".join(cmd)
+
+    def advance_soa(self, isa: str, X: np.ndarray, I: np.ndarray, dt: float, n_steps: int) -> None:
+        """Advance the bodies of X (13, n) float64 (struct of arrays) in place with the SoA peer of isa;
+        I (3, n) their principal moments."""
+        n = X.shape[1]
+        if X.dtype != np.float64 or X.shape[0] != 13 or not X.flags.c_contiguous or I.shape != (3, n) \
+                or I.dtype != np.float64 or not I.flags.c_contiguous:
+            raise TypeError("X must be C-contiguous float64 (13, n) and I float64 (3, n)")
+        dp = ctypes.POINTER(ctypes.c_double)
+        self.soa[isa](X.ctypes.data_as(dp), I.ctypes.data_as(dp), n, float(dt), int(n_steps))
 
     def advance(self, x: np.ndarray, I_b: np.ndarray, dt: float, n_steps: int, check: bool = False) -> int:
         """Advance x (13,) float64 in place; returns -1, or the step at which it went non-finite."""
@@ -279,7 +337,7 @@ def handwritten_agreement(kernel: HandwrittenKernel, n_steps: int = 10_000, ever
         worst = max(worst, float(d.max()))
         worst_rel = max(worst_rel, float((d / np.maximum(np.abs(x), 1.0)).max()))
     return {"backend": backend, "steps": n_steps, "sampled_every": every, "max_abs_diff": worst,
-            "max_rel_diff": worst_rel}
+            "max_rel_diff": worst_rel, "bitwise": worst == 0.0}
 
 
 # --------------------------------------------------------------------------- MuJoCo
@@ -384,16 +442,108 @@ def mujoco_agreement(n_steps: int = 1000) -> dict:
     return out
 
 
+# --------------------------------------------------------------------------- SIMD batch
+
+def extension_isa() -> dict | None:
+    """The C extension's instruction sets: {"levels": [(level, name), ...] this CPU can run (scalar
+    first), "best": name} — None without the extension."""
+    try:
+        from .. import _lavender_c as C
+    except Exception:  # noqa: BLE001 - no C backend: the section is not run
+        return None
+    cur, _, best, best_name = C.isa()
+    levels = []
+    try:
+        for lvl in range(best + 1):
+            levels.append((lvl, C.isa(lvl)[1]))
+    finally:
+        C.isa(-1 if cur == best else cur)
+    return {"levels": levels, "best": best_name, "best_level": best}
+
+
+def _batch_arrays(n: int):
+    """n bodies as batch_sim(n) builds them: state (n, 13) AoS, params (n, 4), and the same as SoA."""
+    state = np.ascontiguousarray(np.asarray(batch_sim(n, "c").x, dtype=float).reshape(n, LY.STATE_SIZE))
+    params = np.tile(np.concatenate([[MASS], inertia()]), (n, 1))
+    return state, params, np.ascontiguousarray(state.T), np.ascontiguousarray(params[:, 1:].T)
+
+
+def simd_batch(kernel, sizes, body_steps: int, rounds: int) -> dict:
+    """The C batch loop (one CBackend.advance call, torque-free RK4, q normalized) at every instruction
+    set the CPU has, against the hand-written SoA loop compiled for each, interleaved; ns per body-step.
+    Also checks that every level and every hand copy give bitwise the same states after 50 steps."""
+    from .. import _lavender_c as C
+    from ..backends.c_backend import ROW, CBackend
+    info = extension_isa()
+    be = CBackend()
+    empty = np.zeros((0, ROW))
+    out = {"isa_levels": [nm for _, nm in info["levels"]], "best_isa": info["best"], "sizes": []}
+    hand = {} if kernel is None else kernel.soa
+    try:
+        for n in sizes:
+            _progress(f"SIMD batch: N = {n}")
+            state0, params, X0, I = _batch_arrays(n)
+            outs = {}
+            for lvl, nm in info["levels"]:
+                C.isa(lvl)
+                st = state0.copy()
+                be.advance(st, params, empty, "rk4", True, DT, 50)
+                outs[f"lavendersim_{nm}"] = st
+            for nm in hand:
+                X = X0.copy()
+                kernel.advance_soa(nm, X, I, DT, 50)
+                outs[f"hand_soa_{nm}"] = np.ascontiguousarray(X.T)
+            ref = outs[f"lavendersim_{info['levels'][0][1]}"]
+            bitwise = all(np.array_equal(ref, v) for v in outs.values())
+            steps = max(2, body_steps // n)
+            cases = {}
+            for lvl, nm in info["levels"]:
+                st = state0.copy()
+                cases[f"lavendersim_{nm}"] = (lambda lvl=lvl, st=st: (C.isa(lvl), be.advance(st, params, empty, "rk4",
+                                                                                             True, DT, steps)), steps * n)
+            if n >= THREADS_MIN_N:
+                st2 = state0.copy()
+                cases["lavendersim_2_threads"] = (lambda st=st2: _two_threads(C, be, st, params, empty, steps),
+                                                  steps * n)
+            for nm in hand:
+                X = X0.copy()
+                cases[f"hand_soa_{nm}"] = (lambda nm=nm, X=X: kernel.advance_soa(nm, X, I, DT, steps), steps * n)
+            t = interleaved(cases, rounds, f"SIMD batch N = {n}")
+            row = {"n_bodies": n, "steps": steps, "bitwise_identical": bitwise, **t}
+            ours = t[f"lavendersim_{info['best']}"]["ns_min"]
+            if "lavendersim_2_threads" in t:
+                row["threads_speedup"] = ours / t["lavendersim_2_threads"]["ns_min"]
+            if hand:
+                best_hand = min(hand, key=lambda nm: t[f"hand_soa_{nm}"]["ns_min"])
+                row["best_hand_isa"] = best_hand
+                row["ratio_to_hand_soa"] = ours / t[f"hand_soa_{best_hand}"]["ns_min"]
+            out["sizes"].append(row)
+    finally:
+        C.isa(-1)
+        C.threads(1)
+    return out
+
+
+def _two_threads(C, be, st, params, empty, steps) -> None:
+    """One C batch call at the best ISA with its tiles shared by two threads."""
+    C.isa(-1)
+    C.threads(2)
+    try:
+        be.advance(st, params, empty, "rk4", True, DT, steps)
+    finally:
+        C.threads(1)
+
+
 # --------------------------------------------------------------------------- the run
 
 def settings(quick: bool) -> dict:
     if quick:
-        return {"rounds": 2, "c_steps": 20_000, "numpy_steps": 200, "py_step_calls": 500,
+        return {"rounds": 2, "c_steps": 20_000, "simd_sizes": SIMD_SIZES_QUICK, "numpy_steps": 200, "py_step_calls": 500,
                 "batch_sizes": BATCH_SIZES_QUICK, "per_body_sizes": PER_BODY_SIZES_QUICK,
                 "c_body_steps": 40_000, "numpy_body_steps": 4_000,
                 "effect_steps": 20_000, "mj_step_steps": 300, "mj_rollout_steps": 1_000,
                 "agreement_steps": 2_000, "mujoco_agreement_steps": 200}
-    return {"rounds": 5, "c_steps": 2_000_000, "numpy_steps": 10_000, "py_step_calls": 20_000,
+    return {"rounds": 5, "c_steps": 2_000_000, "simd_sizes": SIMD_SIZES_FULL, "numpy_steps": 10_000, "py_step_calls": 20_000,
             "batch_sizes": BATCH_SIZES_FULL, "per_body_sizes": PER_BODY_SIZES_FULL,
             "c_body_steps": 4_000_000, "numpy_body_steps": 400_000,
             "effect_steps": 1_000_000, "mj_step_steps": 20_000, "mj_rollout_steps": 50_000,
@@ -420,6 +570,10 @@ def run(quick: bool = False, rounds: int | None = None, use_mujoco: bool = True)
     try:
         kernel = HandwrittenKernel()
         hw.update(available=True, compile_command=kernel.command)
+        isa = extension_isa()
+        if isa is not None:
+            kernel.compile_soa([(nm, extra) for lvl, nm, extra in SOA_ISAS if lvl <= isa["best_level"]])
+            hw.update(soa_compile_commands=kernel.soa_commands, soa_compile_errors=kernel.soa_errors)
         _progress("hand-written kernel compiled; checking it against the Sim")
         hw["agreement"] = handwritten_agreement(kernel, cfg["agreement_steps"], max(1, cfg["agreement_steps"] // 10))
     except Exception as exc:  # noqa: BLE001 - reported in the output, the rest still runs
@@ -501,6 +655,9 @@ def run(quick: bool = False, rounds: int | None = None, use_mujoco: bool = True)
 
     res["per_body_effects"] = per_body_effects(cfg["per_body_sizes"], cfg["c_body_steps"], R)
 
+    if extension_isa() is not None:
+        res["simd_batch"] = simd_batch(kernel, cfg["simd_sizes"], cfg["c_body_steps"], R)
+
     # ---- MuJoCo trajectory agreement
     if mj_ok:
         try:
@@ -557,6 +714,9 @@ def ratios(res: dict) -> dict:
         r[f"effects[{e['name']}]_over_torque_free"] = e["ratio_to_torque_free"]
     for p in res.get("per_body_effects", []):
         r[f"per_body_applied_torque_{p['n_bodies']}_over_plain"] = p["ratio"]
+    for row in (res.get("simd_batch") or {}).get("sizes", []):
+        if "ratio_to_hand_soa" in row:
+            r[f"simd_batch_{row['n_bodies']}_over_hand_soa"] = row["ratio_to_hand_soa"]
     return r
 
 
@@ -582,11 +742,29 @@ def standing(res: dict) -> list[dict]:
     out.append(_line("batched ns per body-step (worst of N >= 1e3)", worst, TARGETS["batched_ns_per_body_step"],
                      "max", "ns/body-step", "N = " + ", ".join(f"{b['n_bodies']:g}" for b in big)))
     hw = _ns(res, "handwritten_c")
-    out.append(_line("torque-free scene / hand-written C kernel", None if hw is None else c / hw,
-                     TARGETS["torque_free_vs_handwritten"], "max", "x", "LavenderSim C / handwritten_rk4.c (no checks)"))
+    out.append(_line("RK4 torque-free single body \u2264 1.1\u00d7 hand C", None if hw is None else c / hw,
+                     TARGETS["torque_free_vs_handwritten"], "max", "x",
+                     "LavenderSim C / handwritten_rk4.c (inlined, same arithmetic, -O3; no checks)"))
+    sb = res.get("simd_batch") or {"sizes": []}
+    rows = [r for r in sb["sizes"] if r["n_bodies"] >= 1000]
+    worst = max((r["ratio_to_hand_soa"] for r in rows if "ratio_to_hand_soa" in r), default=None)
+    out.append(_line("SIMD batch loop / hand-written SoA loop (worst of N >= 1e3)", worst,
+                     TARGETS["simd_batch_vs_hand_soa"], "max", "x",
+                     f"one C call, LavenderSim at {sb.get('best_isa')} / the fastest hand copy; "
+                     "N = " + ", ".join(f"{r['n_bodies']:g}" for r in rows)))
+    ns512 = max((r["lavendersim_avx512f"]["ns_min"] for r in rows if "lavendersim_avx512f" in r), default=None)
+    out.append(_line("SIMD batch ns per body-step on AVX-512 (worst of N >= 1e3)", ns512,
+                     TARGETS["simd_batch_ns_avx512"], "max", "ns/body-step",
+                     "one C call at avx512f" if ns512 is not None else "this CPU or build has no AVX-512 path"))
     for p in res.get("per_body_effects", []):
         out.append(_line(f"one applied_torque per body / plain body, N = {p['n_bodies']:g}", p["ratio"],
                          TARGETS["per_body_effect_ratio"], "max", "x", "ns per body-step, same run"))
+    big = [r for r in sb["sizes"] if r["n_bodies"] >= 10_000 and "threads_speedup" in r]
+    out.append(_line("two threads / one, SIMD batch loop (worst of N >= 1e4)",
+                     min((r["threads_speedup"] for r in big), default=None), TARGETS["threads2_speedup"], "min", "x",
+                     "one C call at the best ISA, tiles split over 2 threads; "
+                     + (f"{os.cpu_count()} cores, load {(res['machine'].get('loadavg') or ['?'])[0]}" if big
+                        else "not measured (N >= 1e4 is not in this run)")))
     return out
 
 
@@ -606,6 +784,7 @@ def report(res: dict) -> str:
          f"machine : {m['cpu']}; {m['cores']} cores ({m['cores_usable']} usable); load {m['loadavg']}",
          f"software: {m['python']}, numpy {m['numpy']}, mujoco {m['mujoco'] or 'not installed'}, "
          f"lavendersim {m['lavendersim']}; compiler {m['compiler_version'] or 'none'}",
+         f"isa     : extension's batch path {m.get('isa') or 'n/a'}; cpu flags {' '.join(m.get('cpu_flags') or []) or 'n/a'}",
          f"commit  : {m['git_commit'] or 'unknown'}{' (dirty)' if m['git_dirty'] else ''}; {m['date']}",
          f"body    : box {MASS} kg {SIZE} m, I_b = {np.array2string(inertia(), precision=5)}, "
          f"omega_b0 = {OMEGA_B0}, dt = {DT} s, RK4, q normalized; min of {res['config']['rounds']} interleaved rounds",
@@ -630,7 +809,8 @@ def report(res: dict) -> str:
         L.append(f"  hand-written reference unavailable: {hw.get('error')}")
     elif "agreement" in hw:
         a = hw["agreement"]
-        L.append(f"  hand-written vs Sim ({a['steps']} steps): max |Δx| = {a['max_abs_diff']:.2e}")
+        L.append(f"  hand-written vs Sim ({a['steps']} steps): max |Δx| = {a['max_abs_diff']:.2e}"
+                 f"{' (bitwise identical)' if a.get('bitwise') else ''}")
     mj = res["mujoco"]
     if not mj["available"]:
         L.append(f"  MuJoCo: not measured — {mj.get('reason')}")
@@ -649,6 +829,24 @@ def report(res: dict) -> str:
         for p in res["per_body_effects"]:
             L.append(f"  N = {p['n_bodies']:<8g} ({p['steps']:>8} steps)                    {p['plain']['ns_min']:10.1f}"
                      f"  {p['applied_torque']['ns_min']:19.1f}  {p['ratio']:5.2f}")
+    sb = res.get("simd_batch")
+    if sb and sb["sizes"]:
+        L.append("")
+        names = sb["isa_levels"]
+        hands = [k[len("hand_soa_"):] for k in sb["sizes"][0] if k.startswith("hand_soa_")]
+        L.append(f"SIMD batch, ns/body-step: the C batch loop (one call) per instruction set (best here: "
+                 f"{sb['best_isa']}) and the hand-written SoA loop")
+        L.append("  N          " + "".join(f"{'ours ' + nm:>14}" for nm in names)
+                 + "".join(f"{'hand ' + nm:>14}" for nm in hands) + "   ours/hand  bitwise")
+        for r in sb["sizes"]:
+            L.append(f"  {r['n_bodies']:<9g}" + "".join(f"{r['lavendersim_' + nm]['ns_min']:14.2f}" for nm in names)
+                     + "".join(f"{r['hand_soa_' + nm]['ns_min']:14.2f}" for nm in hands)
+                     + (f"{r['ratio_to_hand_soa']:12.2f}" if "ratio_to_hand_soa" in r else f"{'—':>12}")
+                     + f"  {'yes' if r['bitwise_identical'] else 'NO'}")
+        for r in sb["sizes"]:
+            if "threads_speedup" in r:
+                L.append(f"  N = {r['n_bodies']:g}: two threads {r['lavendersim_2_threads']['ns_min']:.2f} ns/body-step, "
+                         f"speed-up {r['threads_speedup']:.2f}x over one")
     if mj["available"] and "agreement" in mj:
         a = mj["agreement"]
         L.append("")

@@ -392,7 +392,48 @@ fail: /* every exit releases the buffers it holds; result stays NULL on an error
     return result;
 }
 
+/* isa([level]) -> (current, current_name, best, best_name): the instruction set of the batched path. */
+static PyObject *py_isa(PyObject *self, PyObject *args)
+{
+    int level = -2, cur;
+    (void)self;
+    if (!PyArg_ParseTuple(args, "|i", &level)) return NULL;
+    if (level != -2) {
+        if (level < -1 || level > LV_ISA_AVX512) {
+            PyErr_Format(PyExc_ValueError, "isa: level must be -1 (best) or 0..%d, got %d", LV_ISA_AVX512, level);
+            return NULL;
+        }
+        (void)lv_isa_set(level);
+    }
+    cur = lv_isa_get();
+    return Py_BuildValue("(isis)", cur, lv_isa_name(cur), lv_isa_best(), lv_isa_name(lv_isa_best()));
+}
+
+/* threads([n]) -> n: the threads that share the SIMD tiles of one simulate call. */
+static PyObject *py_threads(PyObject *self, PyObject *args)
+{
+    int n = 0;
+    (void)self;
+    if (!PyArg_ParseTuple(args, "|i", &n)) return NULL;
+    if (PyTuple_GET_SIZE(args) > 0) {
+        if (n < 1 || n > LV_MAX_THREADS) {
+            PyErr_Format(PyExc_ValueError, "threads: must be 1..%d, got %d", LV_MAX_THREADS, n);
+            return NULL;
+        }
+        (void)lv_threads_set(n);
+    }
+    return PyLong_FromLong(lv_threads_get());
+}
+
 static PyMethodDef methods[] = {
+    {"threads", py_threads, METH_VARARGS,
+     "threads([n]) -> n: the threads that share the SIMD tiles (torque-free RK4 groups of >= 16 bodies) of one\n"
+     "simulate call (default 1; set first with n; 1 where the build has no POSIX threads). Results are bitwise\n"
+     "those of one thread. simulate runs with the GIL released."},
+    {"isa", py_isa, METH_VARARGS,
+     "isa([level]) -> (current, name, best, best_name): the instruction set of the batched torque-free RK4 path\n"
+     "(ISA_SCALAR 0: off, ISA_BASE 1: the build's baseline (sse2 on x86-64), ISA_AVX2 2, ISA_AVX512 3); with level,\n"
+     "select it first (capped at the best this CPU supports; -1: the best). All levels give bitwise the same results."},
     {"kernels", py_kernels, METH_NOARGS,
      "kernels() -> list of (name, n_in, n_out), in the order of the generated lv_kernel_table."},
     {"eval_kernel", py_eval_kernel, METH_VARARGS,
@@ -436,7 +477,11 @@ PyMODINIT_FUNC PyInit__lavender_c(void)
         PyModule_AddIntConstant(m, "SPLITTING", LV_INTEGRATOR_SPLITTING) != 0 ||
         PyModule_AddIntConstant(m, "IMPLICIT_GYRO", LV_INTEGRATOR_IMPLICIT_GYRO) != 0 ||
         PyModule_AddIntConstant(m, "SPLITTING4", LV_INTEGRATOR_SPLITTING4) != 0 ||
-        PyModule_AddIntConstant(m, "RK4_EXPMAP", LV_INTEGRATOR_RK4_EXPMAP) != 0) {
+        PyModule_AddIntConstant(m, "RK4_EXPMAP", LV_INTEGRATOR_RK4_EXPMAP) != 0 ||
+        PyModule_AddIntConstant(m, "ISA_SCALAR", LV_ISA_SCALAR) != 0 ||
+        PyModule_AddIntConstant(m, "ISA_BASE", LV_ISA_BASE) != 0 ||
+        PyModule_AddIntConstant(m, "ISA_AVX2", LV_ISA_AVX2) != 0 ||
+        PyModule_AddIntConstant(m, "ISA_AVX512", LV_ISA_AVX512) != 0) {
         Py_DECREF(m);
         return NULL;
     }

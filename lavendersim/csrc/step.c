@@ -12,6 +12,37 @@
 #include "step.h"
 #include "tableaux.h"
 
+/* LV_FLATTEN: inline every call in the function (its kernels included), so each call with constant block
+   size, kind and normalize flag compiles to its own straight-line loop (GCC and clang; elsewhere a
+   plain function). */
+#if defined(__GNUC__) || defined(__clang__)
+#define LV_FLATTEN __attribute__((flatten))
+#else
+#define LV_FLATTEN
+#endif
+#if defined(_MSC_VER)
+#define LV_RESTRICT __restrict
+#else
+#define LV_RESTRICT restrict
+#endif
+/* Per-instruction-set copies of the batched loops, dispatched at run time (x86 with GCC or clang). */
+#if (defined(__GNUC__) || defined(__clang__)) && (defined(__x86_64__) || defined(__i386__))
+#define LV_HAVE_ISA_CLONES 1
+#else
+#define LV_HAVE_ISA_CLONES 0
+#endif
+
+/* Threads for the SIMD tiles of one call (POSIX threads; elsewhere one). */
+#if !defined(_WIN32) && (defined(__unix__) || defined(__APPLE__))
+#include <pthread.h>
+#define LV_HAVE_THREADS 1
+#else
+#define LV_HAVE_THREADS 0
+#endif
+
+/* Steps between finiteness checks on the torque-free path (see advance_free_rk4). */
+#define LV_FREE_CHUNK 64
+
 /* ---- the effect index -------------------------------------------------------------------------
 
    One effect acting on one body: its parameters and, for a user effect, its compiled function
@@ -272,17 +303,6 @@ enum { LV_RHS_FREE = 0, LV_RHS_TORQUE = 1, LV_RHS_FULL = 2 };
             for (j = 0; j < n; j++) lv_quat_normalize(xn[j] + LV_STATE_Q, xn[j] + LV_STATE_Q);          \
     } while (0)
 
-/* LV_FLATTEN: inline every call in the function (its kernels included), so each call with constant block
-   size, kind and normalize flag compiles to its own straight-line loop (GCC and clang; elsewhere a
-   plain function). */
-#if defined(__GNUC__) || defined(__clang__)
-#define LV_FLATTEN __attribute__((flatten))
-#else
-#define LV_FLATTEN
-#endif
-
-/* Steps between finiteness checks on the torque-free path (see advance_free_rk4). */
-#define LV_FREE_CHUNK 64
 
 /* RK4 fast path on plain bodies, `forced` (LV_RHS_*) of them all: torque-free (no effect acts on them;
    the common free-flight scene), or with effects, each body summed over its own (from the index ix).
@@ -349,6 +369,55 @@ static inline long advance_free_rk4(double *state, const double *params, const l
 }
 #undef LV_FREE_RK4_STEP
 #undef LV_RK4_RHS
+
+#include "batch_simd.h"
+
+/* ---- instruction set selection ---------------------------------------------------------------- */
+
+static int lv_isa_detect(void)
+{
+#if LV_HAVE_ISA_CLONES
+    __builtin_cpu_init();
+    if (__builtin_cpu_supports("avx512f")) return LV_ISA_AVX512;
+    if (__builtin_cpu_supports("avx2")) return LV_ISA_AVX2;
+#endif
+    return LV_ISA_BASE;
+}
+
+static int lv_isa_best_cached = -1; /* benign race: every thread computes the same value */
+static int lv_isa_current = -1;     /* -1: the best */
+
+int lv_isa_best(void)
+{
+    if (lv_isa_best_cached < 0) lv_isa_best_cached = lv_isa_detect();
+    return lv_isa_best_cached;
+}
+
+int lv_isa_get(void)
+{
+    return lv_isa_current < 0 ? lv_isa_best() : lv_isa_current;
+}
+
+int lv_isa_set(int isa)
+{
+    lv_isa_current = isa < 0 ? -1 : (isa < lv_isa_best() ? isa : lv_isa_best());
+    return lv_isa_get();
+}
+
+const char *lv_isa_name(int isa)
+{
+    switch (isa) {
+    case LV_ISA_SCALAR: return "scalar";
+#if defined(__x86_64__) || defined(_M_X64)
+    case LV_ISA_BASE: return "sse2";
+#else
+    case LV_ISA_BASE: return "baseline";
+#endif
+    case LV_ISA_AVX2: return "avx2";
+    case LV_ISA_AVX512: return "avx512f";
+    default: return "unknown";
+    }
+}
 
 /* ---- bodies with a spherical joint and/or reaction wheels ------------------------------------ */
 
@@ -854,8 +923,10 @@ LV_FLATTEN static long advance_forced_rk4(double *state, const double *params, c
 }
 
 /* RK4 on up to LV_BLOCK plain bodies of ids in lockstep, all of one right-hand side kind (LV_RHS_*). The
-   torque-free calls have constant block sizes and normalize flags, so the compiler specializes them. */
-static long advance_rk4_group(double *state, const double *params, const long *ids, int n, const lv_effect_index *ix,
+   torque-free calls have constant block sizes and normalize flags, so the compiler specializes them, and
+   flatten inlines the generated right-hand side into each loop (GCC 12 at -O3 kept 24 out-of-line calls of
+   lv_rigid_body_rhs_free in these loops without it: ~2x a torque-free step). */
+LV_FLATTEN static long advance_rk4_group(double *state, const double *params, const long *ids, int n, const lv_effect_index *ix,
                               int kind, int normalize, double dt, long n_steps, int *fail_j,
                               double last[][LV_STATE_SIZE])
 {
@@ -872,8 +943,8 @@ static long advance_rk4_group(double *state, const double *params, const long *i
 
 /* Up to LV_BLOCK plain bodies of ids (ascending) in lockstep, all of one right-hand side kind (LV_RHS_*):
    RK4 on the fast path, the other integrators on the generic block (constant block sizes let the
-   compiler specialize it). */
-static long advance_group(double *state, const double *params, const long *ids, int n, const lv_effect_index *ix,
+   compiler specialize it; flatten inlines the kernels and the effect dispatch into each). */
+LV_FLATTEN static long advance_group(double *state, const double *params, const long *ids, int n, const lv_effect_index *ix,
                           int kind, int integrator, int normalize, double dt, long n_steps, int *fail_j,
                           double last[][LV_STATE_SIZE])
 {
@@ -893,6 +964,119 @@ static int rhs_kind(const lv_effect_index *ix, long b)
     return (ix->flags[b] & LV_EFFECT_FORCE) ? LV_RHS_FULL : LV_RHS_TORQUE;
 }
 
+/* ---- the SoA tiles of one call, over threads ---------------------------------------------------
+
+   One share of the torque-free tiles: bodies list[0 .. count-1] (ascending), stepped tile by tile, each
+   only as far as the share's own failure so far (limit, best; started from the call's) can still be
+   beaten. Shares touch disjoint bodies, so they run on threads with no shared writes; merging their
+   failures in order with `earlier` gives the earliest step, then the lowest body, over all of them: the
+   same report and the same failing body's state as one share (the other bodies' rows are unspecified
+   on failure anyway, lv_simulate's contract), and bitwise the same states on success. */
+typedef struct {
+    double *state;
+    const double *params;
+    const long *list;
+    long count, n_steps, limit, best;
+    lv_tile_fn tile;
+    double dt;
+    int status;
+} soa_share;
+
+static void soa_share_run(soa_share *sh)
+{
+    double last[1][LV_STATE_SIZE];
+    long k, s, lim;
+    int n, j;
+    for (k = 0; k < sh->count; k += n) {
+        n = (int)(sh->count - k < LV_TILE ? sh->count - k : LV_TILE);
+        lim = run_limit(sh->list[k], sh->limit, sh->best, sh->n_steps);
+        if (lim <= 0) continue;
+        s = advance_free_soa(sh->state, sh->params, sh->list + k, n, sh->tile, sh->dt, lim, &j, last);
+        /* the tile stops at its first failing step, j its lowest failing body there (lockstep) */
+        if (s < 0 || !earlier(s, sh->list[k + j], sh->limit, sh->best)) continue;
+        memcpy(sh->state + sh->list[k + j] * LV_STATE_SIZE, last[0], sizeof last[0]);
+        sh->limit = s;
+        sh->best = sh->list[k + j];
+        sh->status = LV_DIVERGED;
+    }
+}
+
+#if LV_HAVE_THREADS
+static void *soa_share_thread(void *arg)
+{
+    soa_share_run((soa_share *)arg);
+    return NULL;
+}
+#endif
+
+/* The torque-free bodies list[0 .. count-1] on SIMD tiles, split into `threads` shares of whole tiles
+   (the calling thread runs the first; a thread that cannot be started has its share run here). Returns
+   LV_DIVERGED (with *limit, *best updated as in advance_fixed) or LV_OK. */
+static int advance_soa_threads(double *state, const double *params, const long *list, long count, lv_tile_fn tile,
+                               double dt, long n_steps, int threads, long *limit, long *best)
+{
+    soa_share sh[LV_MAX_THREADS];
+#if LV_HAVE_THREADS
+    pthread_t tid[LV_MAX_THREADS];
+    int started[LV_MAX_THREADS];
+#endif
+    const long tiles = (count + LV_TILE - 1) / LV_TILE;
+    long t0 = 0;
+    int t, n_sh, status = LV_OK;
+    n_sh = threads < 1 ? 1 : (threads > LV_MAX_THREADS ? LV_MAX_THREADS : threads);
+    if (n_sh > tiles) n_sh = (int)tiles;
+    for (t = 0; t < n_sh; t++) { /* share t: tiles [t0, t1) */
+        const long t1 = tiles * (t + 1) / n_sh;
+        const long b0 = t0 * LV_TILE, b1 = t1 * LV_TILE < count ? t1 * LV_TILE : count;
+        sh[t].state = state;
+        sh[t].params = params;
+        sh[t].list = list + b0;
+        sh[t].count = b1 - b0;
+        sh[t].n_steps = n_steps;
+        sh[t].limit = *limit;
+        sh[t].best = *best;
+        sh[t].tile = tile;
+        sh[t].dt = dt;
+        sh[t].status = LV_OK;
+        t0 = t1;
+    }
+#if LV_HAVE_THREADS
+    for (t = 1; t < n_sh; t++) started[t] = pthread_create(&tid[t], NULL, soa_share_thread, &sh[t]) == 0;
+    soa_share_run(&sh[0]);
+    for (t = 1; t < n_sh; t++) {
+        if (started[t]) pthread_join(tid[t], NULL);
+        else soa_share_run(&sh[t]);
+    }
+#else
+    for (t = 0; t < n_sh; t++) soa_share_run(&sh[t]);
+#endif
+    for (t = 0; t < n_sh; t++) {
+        if (sh[t].status != LV_DIVERGED || !earlier(sh[t].limit, sh[t].best, *limit, *best)) continue;
+        *limit = sh[t].limit;
+        *best = sh[t].best;
+        status = LV_DIVERGED;
+    }
+    return status;
+}
+
+static int lv_threads_current = 1;
+
+int lv_threads_get(void)
+{
+    return lv_threads_current;
+}
+
+int lv_threads_set(int threads)
+{
+#if LV_HAVE_THREADS
+    lv_threads_current = threads < 1 ? 1 : (threads > LV_MAX_THREADS ? LV_MAX_THREADS : threads);
+#else
+    (void)threads;
+    lv_threads_current = 1;
+#endif
+    return lv_threads_current;
+}
+
 /* euler, semi-implicit Euler, rk4 over every body. Bodies with a joint or wheels are stepped one by one;
    plain bodies in lockstep blocks gathered by their work (rhs_kind): those no effect acts on together
    (RK4: the torque-free fast path), those with effects by kind, so a plain body never leaves its path
@@ -900,7 +1084,7 @@ static int rhs_kind(const lv_effect_index *ix, long b)
    lv_simulate. */
 static int advance_fixed(double *state, const double *params, long nb, const lv_effect_index *ix,
                          const lv_models *models, int integrator, int normalize, double dt, long n_steps,
-                         long *ids, long *limit, long *best)
+                         int isa, int threads, long *ids, long *limit, long *best)
 {
     double last[LV_BLOCK][LV_STATE_SIZE], lastm[LV_XS_SIZE];
     long b, k, s, lim, count[3] = {0, 0, 0}, first[3];
@@ -927,6 +1111,14 @@ static int advance_fixed(double *state, const double *params, long nb, const lv_
         if (models == NULL || (int)models->rows[b * LV_MODEL_SIZE + LV_MODEL_KIND] == 0) ids[first[rhs_kind(ix, b)]++] = b;
     for (kind = 0; kind < 3; kind++) {
         const long *list = ids + first[kind] - count[kind];
+        /* torque-free RK4 groups of LV_SOA_MIN bodies or more: SIMD tiles (csrc/batch_simd.h), split over
+           threads when asked */
+        if (kind == LV_RHS_FREE && integrator == LV_INTEGRATOR_RK4 && isa != LV_ISA_SCALAR && count[kind] >= LV_SOA_MIN) {
+            if (advance_soa_threads(state, params, list, count[kind], tile_rk4_fn(isa, normalize), dt, n_steps,
+                                    threads, limit, best) == LV_DIVERGED)
+                status = LV_DIVERGED;
+            continue;
+        }
         for (k = 0; k < count[kind]; k += n) {
             n = (int)(count[kind] - k < LV_BLOCK ? count[kind] - k : LV_BLOCK);
             lim = run_limit(list[k], *limit, *best, n_steps);
@@ -987,8 +1179,8 @@ int lv_simulate(double *state, const double *params, long nb,
     } else {
         ids = (long *)malloc(((size_t)nb + 1) * sizeof(long));
         status = ids == NULL ? LV_NO_MEMORY
-                             : advance_fixed(state, params, nb, &ix, models, integrator, normalize, dt, n_steps, ids,
-                                             &limit, &best_body);
+                             : advance_fixed(state, params, nb, &ix, models, integrator, normalize, dt, n_steps,
+                                             lv_isa_get(), lv_threads_get(), ids, &limit, &best_body);
         free(ids);
     }
     index_free(&ix);

@@ -77,6 +77,26 @@ enum {
     LV_NO_MEMORY = -3       /* the per-body effect index could not be allocated; nothing changed */
 };
 
+/* The instruction sets of the batched torque-free RK4 path (csrc/batch_simd.h): LV_ISA_SCALAR turns it off
+   (every body on the scalar block path), LV_ISA_BASE is the build's baseline (SSE2 on x86-64), AVX2 and
+   AVX-512F copies exist on x86 builds with GCC or clang. All give bitwise the same results. */
+enum { LV_ISA_SCALAR = 0, LV_ISA_BASE = 1, LV_ISA_AVX2 = 2, LV_ISA_AVX512 = 3 };
+/* The best instruction set this CPU (and OS) supports, detected once. */
+int lv_isa_best(void);
+/* The one lv_simulate uses (default: lv_isa_best()). lv_isa_set(isa) selects one, capped at lv_isa_best()
+   (a negative isa: the best again), and returns the one now in use. Not for use while another thread is
+   in lv_simulate (a test and benchmark switch). */
+int lv_isa_get(void);
+int lv_isa_set(int isa);
+/* Threads that share the SIMD tiles of one lv_simulate call (default 1; 1 .. LV_MAX_THREADS; always 1 where
+   the build has no POSIX threads). Results are bitwise those of one thread. lv_threads_set returns the
+   number now in use; like lv_isa_set, not for use while another thread is in lv_simulate. */
+#define LV_MAX_THREADS 64
+int lv_threads_get(void);
+int lv_threads_set(int threads);
+/* A short name of LV_ISA_* isa ("scalar", "sse2" (x86-64) or "baseline", "avx2", "avx512f"). */
+const char *lv_isa_name(int isa);
+
 /* Advance nb bodies (state: nb x 13, in place) by n_steps steps of size dt.
    effects: ne rows of row_size doubles, [code, body (-1: every body), parameters...]; built-in codes
    and codes of `user` (may be NULL). The effects are indexed per body once per call (O(nb + ne)), so a

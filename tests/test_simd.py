@@ -1,0 +1,131 @@
+"""The batched torque-free RK4 path in C (lavendersim/csrc/batch_simd.h): struct-of-arrays tiles that the
+compiler vectorizes, one copy per instruction set chosen at run time. Every instruction set the CPU has
+must give bitwise the scalar block path's states (same operations in the same order, no FMA
+contraction), for body counts that are no multiple of any lane count, with q normalized or not, and a
+body that diverges inside a tile must be reported exactly as the scalar path reports it.
+(_lavender_c is built by `pip install`; the suite needs the C backend.)"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import lavendersim as lv
+from lavendersim import _lavender_c as C
+
+
+@pytest.fixture
+def levels():
+    """Every ISA level this CPU runs, scalar (0: the SIMD path off) first; the best is restored after."""
+    best = C.isa(-1)[2]
+    yield list(range(best + 1))
+    C.isa(-1)
+
+
+def _scene(n: int, seed: int, effect_every: int = 0) -> lv.Scene:
+    rng = np.random.default_rng(seed)
+    sc = lv.Scene()
+    for i in range(n):
+        sc.add_body(lv.Body.box(f"b{i}", 0.5 + rng.random(), tuple(0.1 + rng.random(3)),
+                                q=tuple(rng.standard_normal(4)), omega_b=tuple(3.0 * rng.standard_normal(3)),
+                                v_w=tuple(rng.standard_normal(3)), p_w=tuple(rng.standard_normal(3))))
+        if effect_every and i % effect_every == 0:
+            sc.add_effect("applied_torque", body=f"b{i}", torque_w=[1e-2, -2e-2, 3e-2])
+    return sc
+
+
+def _run(sc: lv.Scene, level: int, steps: int, normalize: bool = True) -> np.ndarray:
+    assert C.isa(level)[0] == level
+    sim = lv.Sim(sc, dt=1e-2, integrator="rk4", backend="c", normalize=normalize)
+    sim.run(steps)
+    return np.array(sim.x, copy=True)
+
+
+def test_isa_reports_names_and_caps_at_the_best(levels):
+    cur, name, best, best_name = C.isa()
+    assert (cur, name) == (best, best_name) and best == levels[-1]
+    assert C.isa(0)[1] == "scalar" and C.isa(C.ISA_AVX512)[0] == best  # capped at what the CPU has
+    with pytest.raises(ValueError, match="level"):
+        C.isa(7)
+
+
+@pytest.mark.parametrize("n", [16, 17, 67, 131])        # 64 bodies per tile; lanes of 2, 4, 8
+@pytest.mark.parametrize("normalize", [True, False])
+def test_every_isa_is_the_scalar_path_bitwise(levels, n, normalize):
+    sc = _scene(n, seed=n)
+    want = _run(sc, 0, 150, normalize)
+    for level in levels[1:]:
+        np.testing.assert_array_equal(_run(sc, level, 150, normalize), want, err_msg=C.isa(level)[1])
+
+
+def test_mixed_scene_free_bodies_on_the_simd_path_are_bitwise(levels):
+    """Free bodies beside bodies with effects: the free ones take the tiles, the others the block path."""
+    sc = _scene(70, seed=9, effect_every=3)
+    want = _run(sc, 0, 100)
+    for level in levels[1:]:
+        np.testing.assert_array_equal(_run(sc, level, 100), want)
+
+
+@pytest.mark.parametrize("bad", [[29], [29, 5], [63, 64]])   # in a tile; two tiles; tile edges
+def test_divergence_in_a_tile_is_reported_as_on_the_scalar_path(levels, bad):
+    """Bodies blow up among 70 (lv_simulate's contract): every level returns the same status, step and
+    body (the earliest step, then the lowest body), and that body's last finite state."""
+    from lavendersim.effects import ROW
+    n = 70
+    x0, params, _ = _scene(n, seed=4).arrays()
+    x0 = np.array(x0, dtype=np.float64, copy=True)
+    params = np.ascontiguousarray(params, dtype=np.float64)
+    for k, b in enumerate(bad):
+        x0[b, 10:13] = [1e150 * (k + 1), 1e150, 1e150]   # overflows within a few steps
+    reports = []
+    for level in levels:
+        C.isa(level)
+        x = x0.copy()
+        status, step, body = C.simulate(x, params, np.zeros((0, ROW)), C.RK4, 1, 1e-2, 50)
+        reports.append((status, step, body, x[body].copy()))
+    assert reports[0][0] == 1 and reports[0][2] in bad and np.isfinite(reports[0][3]).all(), reports[0][:3]
+    for r in reports[1:]:
+        assert r[:3] == reports[0][:3]
+        np.testing.assert_array_equal(r[3], reports[0][3])
+
+
+@pytest.fixture
+def two_threads():
+    """The SIMD tiles of a call shared by two threads; one thread again after."""
+    assert C.threads(2) in (1, 2)   # 1 where the build has no POSIX threads
+    yield
+    C.threads(1)
+
+
+@pytest.mark.parametrize("n", [129, 300])                 # 3 and 5 tiles of 64, the last one partial
+def test_two_threads_are_one_thread_bitwise(levels, n, two_threads):
+    sc = _scene(n, seed=n + 1)
+    C.threads(1)
+    want = _run(sc, levels[-1], 120)
+    C.threads(2)
+    np.testing.assert_array_equal(_run(sc, levels[-1], 120), want)
+    np.testing.assert_array_equal(_run(sc, 0, 120), want)   # the scalar path ignores threads
+
+
+@pytest.mark.parametrize("bad", [[200], [10, 250], [250, 10]])   # in the second share; in both
+def test_divergence_with_two_threads_is_reported_as_with_one(levels, bad, two_threads):
+    from lavendersim.effects import ROW
+    x0, params, _ = _scene(300, seed=8).arrays()
+    x0 = np.array(x0, dtype=np.float64, copy=True)
+    params = np.ascontiguousarray(params, dtype=np.float64)
+    for k, b in enumerate(bad):
+        x0[b, 10:13] = [1e150 * 10.0 ** k, 1e150, 1e150]   # the later ones overflow sooner
+    reports = []
+    for threads in (1, 2):
+        C.threads(threads)
+        x = x0.copy()
+        status, step, body = C.simulate(x, params, np.zeros((0, ROW)), C.RK4, 1, 1e-2, 50)
+        reports.append((status, step, body, x[body].copy()))
+    assert reports[0][0] == 1 and reports[0][2] in bad
+    assert reports[1][:3] == reports[0][:3]
+    np.testing.assert_array_equal(reports[1][3], reports[0][3])
+
+
+def test_threads_rejects_a_bad_count():
+    with pytest.raises(ValueError, match="threads"):
+        C.threads(0)
+    assert C.threads() == 1
