@@ -16,7 +16,6 @@ from __future__ import annotations
 import numpy as np
 
 import lavendersim as lv
-from lavendersim import validate as V
 from lavendersim.kernels import K
 
 from . import common as C
@@ -46,7 +45,13 @@ def options_from_args(args) -> dict:
     return {"offset": args.offset}
 
 
-def run(out_dir=C.DEFAULT_OUT, backend: str = "auto", offset: float = R_W[0]) -> C.LabResult:
+def run(out_dir=C.DEFAULT_OUT, backend: str = "auto", **options) -> C.LabResult:
+    """:func:`compute`, then write OUT/force/ (results.json, force.png)."""
+    return compute(backend, **options).save(out_dir)
+
+
+def compute(backend: str = "auto", offset: float = R_W[0]) -> C.LabResult:
+    """Run the lab and return its :class:`~lavendersim.labs.common.LabResult`; writes nothing."""
     backend = C.check_backend(backend)
     x = C.bounded("offset", offset)
     r = np.array([x, 0.0, 0.0])
@@ -130,7 +135,15 @@ def run(out_dir=C.DEFAULT_OUT, backend: str = "auto", offset: float = R_W[0]) ->
                   "the force also accelerates the COM: a = F / m, m/s²"),
     ]
 
-    # --- plot ----------------------------------------------------------------------------
+    data = {"r": r, "F": F, "F_along": F_along, "tau": tau, "tau_along": tau_along, "tau_neg": tau_neg,
+            "tau_mixed": tau_mixed}
+    return C.make_result(NAME, figures, params, checks, {"force.png": _plot}, data,
+                         headline=("torque", "[0, 0, 1.5] N·m within 1e-12"))
+
+
+def _plot(d):
+    r, F, F_along = d["r"], d["F"], d["F_along"]
+    tau, tau_along, tau_neg, tau_mixed = d["tau"], d["tau_along"], d["tau_neg"], d["tau_mixed"]
     fig, ax = C.new_figure(1, 2, size=(10, 4.2), title="Off-center force: torque = r × F")
     a = ax[0, 0]
     a.add_patch(_rect(ROD_SIZE[0], ROD_SIZE[1]))
@@ -159,8 +172,7 @@ def run(out_dir=C.DEFAULT_OUT, backend: str = "auto", offset: float = R_W[0]) ->
     b.set_ylabel("torque τ_z (N·m)")
     b.set_title("τ = r × F (torque_from_force kernel)")
     b.tick_params(axis="x", labelsize=8)
-    result = C.finish(NAME, out_dir, figures, params, checks, {"force.png": fig})
-    return result
+    return fig
 
 
 def _rect(w, h):
