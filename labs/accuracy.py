@@ -1169,8 +1169,8 @@ def make_plots(use, meths, points, drifts, per_case, per_case_rhs, only: str | N
 
     if only is not None and only != "drift_vs_time.png":
         return plots
-    fig, axes = C.new_figure(2, n, size=(4.2 * n + 3, 8),
-                             title=f"relative drift over the run (C backend at dt = 2^-{DRIFT_DT_EXP} s; "
+    fig, axes = C.new_figure(2, n, size=(max(4.2 * n + 3, 9.0), 8),
+                             title=f"relative drift over the run\n(C backend at dt = 2^-{DRIFT_DT_EXP} s; "
                                    f"rtol = {DRIFT_RTOL:.0e} for adaptive/scipy; MuJoCo at dt = 2^-{DRIFT_DT_EXP} s)")
     for k, case in enumerate(use):
         for row, what in enumerate(("energy", "momentum")):
