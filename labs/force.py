@@ -157,7 +157,7 @@ def _plot(d):
     a.text(r[0], -0.12, f"r = [{r[0]:g}, 0, 0] m", ha="center")
     a.text(r[0] + 0.02, 0.1 * F[1], "F = [0, 5, 0] N", color="tab:red")
     a.text(-R_W[0] - 0.02, 0.1 * F[1], "paw-check 2: at −0.3 m", color="tab:purple", ha="right")
-    a.text(r[0] + 0.05, 0.03, "F along r", color="tab:gray")
+    a.text(r[0] + 0.5, 0.05, "F along r", color="tab:gray", ha="right")
     a.set_xlim(-1.25, 1.1)
     a.set_ylim(-0.4, 0.7)
     a.set_aspect("equal")
@@ -169,6 +169,7 @@ def _plot(d):
     vals = [tau[2], tau_along[2], tau_neg[2], tau_mixed[2]]
     b.bar(labels, vals, color=["tab:red", "tab:gray", "tab:purple", "tab:orange"])
     b.axhline(0, color="k", lw=0.8)
+    b.text(1, 0.06, f"{tau_along[2]:g}: no torque", ha="center", color="tab:gray", fontsize=9)
     b.set_ylabel("torque τ_z (N·m)")
     b.set_title("τ = r × F (torque_from_force kernel)")
     b.tick_params(axis="x", labelsize=8)

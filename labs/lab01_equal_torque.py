@@ -225,14 +225,16 @@ def _plot(d):
     for w, pred, col, mk, ls, lab in (
             (w_cube, pred_cube, "tab:blue", "o", "-", "cube"), (w_rod, pred_rod, "tab:orange", "o", "-", "rod"),
             (w_y90, d["pred_y90"], "tab:green", "x", "--", "rod rotated 90° about y (paw-check 3)")):
-        a.plot(t, pred, color=col, lw=1.5, ls=ls, label=f"{lab}: predicted")
+        # the cube's line and the rotated rod's coincide (paw-check 3): the cube's is drawn wide underneath
+        a.plot(t, pred, color=col, lw=4 if lab == "cube" else 1.5, alpha=0.5 if lab == "cube" else 1.0, ls=ls,
+               label=f"{lab}: predicted")
         a.plot(t[::every], w[::every], mk, color=col, ms=5, mfc="none", label=f"{lab}: simulated ({backend})")
     a.set_xlabel("time t (s)")
     a.set_ylabel("ω_z (rad/s)")
     a.set_title(f"α_cube = {a_cube:.3f}, α_rod = {a_rod:.6f} rad/s²")
     a.legend(fontsize=7)
     b = ax[0, 1]
-    b.plot(t[1:], w_cube[1:] / w_rod[1:], color="k", label="simulated ω_cube / ω_rod")
+    b.plot(t[1:], w_cube[1:] / w_rod[1:], color="k", lw=3.5, alpha=0.4, label="simulated ω_cube / ω_rod")
     b.plot(t[1:], pred_cube[1:] / pred_rod[1:], "--", color="tab:red", label="predicted")
     b.axhline(RATIO, color="tab:gray", lw=0.8, ls=":", label="I_rod / I_cube = 8.5")
     b.set_xlabel("time t (s)")

@@ -203,7 +203,8 @@ def _plot(d):
                                  + (" (single axis)" if single_axis else ""))
     a = ax[0, 0]
     a.semilogy(t[1:], np.maximum(err_naive[1:], 1e-12), label="naive Euler-angle addition", color="tab:red")
-    a.semilogy(t[1:], np.maximum(err_quat[1:], 1e-12), label="quaternion, normalized", color="tab:blue")
+    # the normalized and unnormalized errors coincide: the normalized one is drawn wide underneath
+    a.semilogy(t[1:], np.maximum(err_quat[1:], 1e-12), label="quaternion, normalized", color="tab:blue", lw=4, alpha=0.5)
     a.semilogy(t[1:], np.maximum(err_unnorm[1:], 1e-12), "--", label="quaternion, unnormalized (normalized to compare)",
                color="tab:cyan")
     a.set_xlabel("time t (s)")
@@ -218,7 +219,8 @@ def _plot(d):
     b.set_title(f"norm drift: |q(T)| = {norm_unnorm[-1]:.5f}")
     b.legend(fontsize=8)
     c = ax[0, 2]
-    c.semilogy(t[1:], np.maximum(body_err[1:], 1e-12), color="tab:green", label="body ω, ½ q⊗[ω_b,0] (correct)")
+    c.semilogy(t[1:], np.maximum(body_err[1:], 1e-12), color="tab:green", lw=4, alpha=0.5,
+               label="body ω, ½ q⊗[ω_b,0] (correct; = world form)")
     c.semilogy(t[1:], np.maximum(d["world_err"][1:], 1e-12), ":", color="k",
                label="world ω, ½ [ω_w,0]⊗q")
     c.semilogy(t[1:], np.maximum(wrong_err[1:], 1e-12), color="tab:orange", label="body ω, ½ [ω_b,0]⊗q (wrong order)")

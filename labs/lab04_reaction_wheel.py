@@ -198,8 +198,9 @@ def _plot(d):
     a.axhline(0, color="k", lw=0.5); a.set_xlabel("t (s)"); a.set_ylabel("rad/s"); a.legend(fontsize=7)
     a.set_title("reversed command reverses both")
     a = ax[0, 2]
-    for i, c in enumerate("xyz"):
-        a.plot(xy["t"], xy["w"][:, i], label=f"two wheels: ω_{c}")
+    for i, c in enumerate("xyz"):   # equal wheels: ω_x = ω_y, so ω_x is drawn wide underneath
+        a.plot(xy["t"], xy["w"][:, i], lw=4 if i == 0 else 1.5, alpha=0.5 if i == 0 else 1.0,
+               label=f"two wheels: ω_{c}" + (" (= ω_y)" if i == 0 else ""))
     for i, c in enumerate("xyz"):
         a.plot(gyro["t"], gyro["w"][:, i], "--", label=f"x cmd, z wheel at 100 rad/s: ω_{c}")
     a.set_xlabel("t (s)"); a.set_ylabel("cube ω_b (rad/s)"); a.legend(fontsize=7)
