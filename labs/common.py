@@ -326,13 +326,16 @@ def progress(iterable=None, *, total: int | None = None, desc: str = "", unit: s
     Anywhere else (a pipe, a log file, CI, ``--quiet``) it is a silent pass-through with the same
     interface (iterate it, or call ``update(n)``/``close()``), so no progress text ends up in logs.
     """
+    import shutil
     import sys
 
     from tqdm import tqdm
 
     show = bool(enabled) and hasattr(sys.stderr, "isatty") and sys.stderr.isatty()
+    # a terminal that reports a 0 x 0 size (a bare pty) would hide the bar: 100 x 24 then
+    cols, rows = shutil.get_terminal_size((100, 24))
     return tqdm(iterable, total=total, desc=desc, unit=unit, disable=not show, leave=False, file=sys.stderr,
-                dynamic_ncols=True)
+                ncols=cols, nrows=rows)
 
 
 def map_with_progress(executor, fn, tasks, bar, *, feature: str) -> list:
