@@ -221,8 +221,8 @@ def _plot(d):
     a.set_xlabel("t (s)"); a.set_ylabel("kg·m²/s (world)"); a.legend(fontsize=7)
     a.set_title("no damping: ΔL_cube (colour) = −ΔL_wheels (dotted)")
     a = ax[1, 2]
-    a.semilogy(ex["t"][1:], np.maximum(np.linalg.norm(dLb + dLw, axis=1)[1:] / scale, 1e-18))
-    a.axhline(1e-9, color="tab:red", ls=":", label="1e-9")
+    a.semilogy(ex["t"][1:], np.maximum(np.linalg.norm(dLb + dLw, axis=1)[1:] / scale, 1e-18), label="measured")
+    a.axhline(1e-9, color="tab:red", ls=":", label="bound 1e-9")
     a.set_xlabel("t (s)"); a.set_ylabel("|ΔL_cube + ΔL_wheels| / max|ΔL_wheels|"); a.legend(fontsize=7)
     a.set_title(f"exchange error {exchange_err:.1e}")
     return fig
