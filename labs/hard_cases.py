@@ -818,6 +818,9 @@ def _plots(d):
     vals = [min(max(r, 1e-8), 1e3) if math.isfinite(r) else 1e3 for r in ratios.values()]
     y = np.arange(len(names))
     c.barh(y, vals, color=["tab:green" if passed[n] else "tab:red" for n in names])
+    for yi, r in zip(y, ratios.values()):        # no bar to see on a log axis: say the value
+        if r < 1e-8:
+            c.text(1.3e-8, yi, "0 (exact)" if r == 0 else "< 1e-8", va="center", fontsize=6, color="tab:green")
     c.set_xscale("log")
     c.set_xlim(1e-8, 1e3)
     c.axvline(1.0, color="k", lw=0.8)
