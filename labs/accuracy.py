@@ -1175,7 +1175,7 @@ def make_plots(use, meths, points, drifts, per_case, per_case_rhs, only: str | N
     for k, case in enumerate(use):
         for row, what in enumerate(("energy", "momentum")):
             ax = axes[row, k]
-            for m in meths:
+            for i, m in enumerate(meths):
                 if m.backend == "numpy":
                     continue
                 d = drifts.get((case.name, m.label))
@@ -1183,8 +1183,10 @@ def make_plots(use, meths, points, drifts, per_case, per_case_rhs, only: str | N
                     continue
                 key = m.integrator if m.family == "lavendersim" else m.label
                 yv = np.asarray(d[what], float)
-                ax.semilogy(d["t"], np.where(yv > 0, yv, np.nan), _FAMILY_STYLE[m.backend], color=colors[key], lw=1,
-                            label=m.label.replace(" [c]", ""))
+                # methods whose drifts coincide (euler and MuJoCo Euler, rk4 and rk4_expmap) stay visible: the
+                # earlier in the list, the wider the line underneath
+                ax.semilogy(d["t"], np.where(yv > 0, yv, np.nan), _FAMILY_STYLE[m.backend], color=colors[key],
+                            lw=3.2 - 2.4 * i / max(1, len(meths) - 1), label=m.label.replace(" [c]", ""))
             ax.set_xlabel("time t (s)")
             ax.set_ylabel("|E(t) − E(0)| / E(0)" if what == "energy" else "|L_w(t) − L_w(0)| / |L_w(0)|")
             ax.set_title(f"{case.label}: {what}", fontsize=9)
