@@ -1175,9 +1175,8 @@ def make_plots(use, meths, points, drifts, per_case, per_case_rhs, only: str | N
     for k, case in enumerate(use):
         for row, what in enumerate(("energy", "momentum")):
             ax = axes[row, k]
-            for i, m in enumerate(meths):
-                if m.backend == "numpy":
-                    continue
+            shown = [m for m in meths if m.backend != "numpy"]
+            for i, m in enumerate(shown):
                 d = drifts.get((case.name, m.label))
                 if not d:
                     continue
@@ -1186,7 +1185,7 @@ def make_plots(use, meths, points, drifts, per_case, per_case_rhs, only: str | N
                 # methods whose drifts coincide (euler and MuJoCo Euler, rk4 and rk4_expmap) stay visible: the
                 # earlier in the list, the wider the line underneath
                 ax.semilogy(d["t"], np.where(yv > 0, yv, np.nan), _FAMILY_STYLE[m.backend], color=colors[key],
-                            lw=3.2 - 2.4 * i / max(1, len(meths) - 1), label=m.label.replace(" [c]", ""))
+                            lw=4.0 - 3.2 * i / max(1, len(shown) - 1), label=m.label.replace(" [c]", ""))
             ax.set_xlabel("time t (s)")
             ax.set_ylabel("|E(t) − E(0)| / E(0)" if what == "energy" else "|L_w(t) − L_w(0)| / |L_w(0)|")
             ax.set_title(f"{case.label}: {what}", fontsize=9)
