@@ -3,13 +3,15 @@
     lavendersim lab NAME [--out DIR] [--backend auto|c|numpy] [lab options]
     lavendersim lab all  [--out DIR] [--backend auto|c|numpy]
 
-From Python: ``lavendersim.labs.run("01", out_dir, backend="numpy", damping=0.01)`` or the lab
-module's own ``run(out_dir, backend=..., **options)``; both return a
-:class:`~lavendersim.labs.common.LabResult` (a dict of figures and parameters, with ``checks``
-and ``passed``) and never raise because a figure is off.
+From Python: ``lavendersim.labs.compute("01", damping=0.01)`` computes a lab and writes nothing;
+``lavendersim.labs.run("01", out_dir, backend="numpy", damping=0.01)`` (or the lab module's own
+``compute``/``run``) also writes OUT/NAME/. Both return a :class:`~lavendersim.labs.common.LabResult`
+(a dict of figures and parameters, with ``checks``, ``passed``, ``figure(name)`` -> a matplotlib
+Figure, ``summary_line()`` and ``save(out_dir)``) and never raise because a figure is off.
 
 Every lab module defines NAME, TITLE, ``add_arguments(parser)`` (its failure-mode options),
-``options_from_args(args) -> dict`` and ``run``.
+``options_from_args(args) -> dict``, ``compute(backend, **options)`` (compute -> checks -> the
+plots' data; no files) and ``run(out_dir, backend, **options)`` (compute, then save).
 """
 from __future__ import annotations
 
@@ -32,7 +34,7 @@ LABS: dict[str, str] = {
     "atlas": "atlas",
 }
 
-__all__ = ["LABS", "lab_module", "run", "register_cli", "LabResult"]
+__all__ = ["LABS", "lab_module", "compute", "run", "register_cli", "LabResult"]
 
 
 def lab_module(name: str):
@@ -40,6 +42,11 @@ def lab_module(name: str):
 
     V.choice("lab", name, LABS)
     return importlib.import_module(f"{__name__}.{LABS[name]}")
+
+
+def compute(name: str, backend: str = "auto", **options) -> LabResult:
+    """Compute lab ``name`` and return its results, writing nothing (see the module docstring)."""
+    return lab_module(name).compute(backend=backend, **options)
 
 
 def run(name: str, out_dir=DEFAULT_OUT, backend: str = "auto", **options) -> LabResult:
@@ -55,6 +62,11 @@ def _common_parent():
                    help=f"output directory; the lab writes DIR/NAME/results.json and PNGs (default: ./{DEFAULT_OUT})")
     p.add_argument("--backend", default="auto", choices=BACKENDS,
                    help="simulator backend for the labs that step a scene (default auto: C when built, else NumPy with a warning)")
+    out = p.add_mutually_exclusive_group()
+    out.add_argument("--quiet", action="store_true",
+                     help="print only failures; no progress bar (a bar is shown on a terminal only)")
+    out.add_argument("--verbose", action="store_true",
+                     help="print every parameter in full (lab all: each lab's figures and checks too)")
     return p
 
 
@@ -70,6 +82,19 @@ def _view_parent(scene: str):
     v.add_argument("--view-duration", type=float, default=None,
                    help="simulated seconds to stream with --view (default: until Ctrl-C)")
     return p
+
+
+def _verbosity(args) -> int:
+    return 0 if getattr(args, "quiet", False) else (2 if getattr(args, "verbose", False) else 1)
+
+
+def _with_progress(mod, options: dict, args) -> dict:
+    """Add progress=... for the labs whose compute() draws a progress bar (shown on a terminal only)."""
+    import inspect
+
+    if "progress" in inspect.signature(mod.compute).parameters and "progress" not in options:
+        options = {**options, "progress": not getattr(args, "quiet", False)}
+    return options
 
 
 def _run_one(args) -> int:
@@ -88,12 +113,12 @@ def _run_one(args) -> int:
 
         require("viser", "viewer", f"lavendersim lab {args.lab_name} --view")  # before the lab runs, not after
     try:
-        options = mod.options_from_args(args)
-        result = mod.run(args.out, backend=args.backend, **options)
+        options = _with_progress(mod, mod.options_from_args(args), args)
+        result = mod.compute(backend=args.backend, **options).save(args.out)
     except LavenderInputError as exc:
         print(f"lab {args.lab_name}: invalid option: {exc}", file=sys.stderr)
         return 2
-    code = report(result)
+    code = report(result, verbosity=_verbosity(args))
     if getattr(args, "view", False):
         from lavendersim import viewer
 
@@ -106,37 +131,63 @@ def _run_one(args) -> int:
     return code
 
 
+# what `lab all` runs: every lab with its chapter parameters; the two sweeps in their quick mode (said in the output)
+ALL_OPTIONS: dict[str, dict] = {"accuracy": {"quick": True}, "atlas": {"quick": True}}
+
+
 def _run_all(args) -> int:
     from lavendersim.validate import LavenderInputError
 
-    from .common import check_out_dir
+    from .common import check_out_dir, progress
 
     try:
         check_out_dir(args.out)
     except LavenderInputError as exc:
         print(f"lab all: invalid option: {exc}", file=sys.stderr)
         return 2
-    summary = []
+    verbosity = _verbosity(args)
+    bar = progress(total=len(LABS), desc="lab all", unit="lab", enabled=verbosity > 0)
+
+    def say(line: str, stream=None) -> None:
+        if bar.disable:
+            print(line, file=stream or sys.stdout, flush=True)
+        else:
+            bar.write(line, file=stream or sys.stdout)
+
+    if verbosity:
+        quick = ", ".join(f"{n} ({', '.join(f'{k}={v}' for k, v in o.items())})" for n, o in ALL_OPTIONS.items())
+        say(f"lab all: {len(LABS)} labs, backend {args.backend}, results in {args.out}/NAME/; "
+            f"quick mode for {quick} — `lab accuracy` and `lab atlas` run the full sweeps; details with --verbose")
+    failed = []
     for name in LABS:
+        bar.set_description(f"lab all: {name}")
         t0 = time.perf_counter()
+        mod = lab_module(name)
         try:
-            result = lab_module(name).run(args.out, backend=args.backend)
-            code = report(result)
-            status = "pass" if code == 0 else f"FAIL ({len(result.failures)} of {len(result.checks)} checks)"
+            options = _with_progress(mod, dict(ALL_OPTIONS.get(name, {})), args)
+            result = mod.compute(backend=args.backend, **options).save(args.out)
         except Exception as exc:  # one broken lab must not hide the others' results
-            code = 1
-            status = f"ERROR {type(exc).__name__}: {exc}"
-            print(f"lab {name}: {status}", file=sys.stderr)
-        summary.append((name, code, status, time.perf_counter() - t0))
-        print()
-    print("lab summary:")
-    for name, code, status, secs in summary:
-        print(f"  {name:<9} {status}  ({secs:.1f} s)")
-    failed = [n for n, c, _, _ in summary if c != 0]
+            failed.append(name)
+            say(f"{name:<9} ERROR {type(exc).__name__}: {exc}  ({time.perf_counter() - t0:.1f} s)", sys.stderr)
+            bar.update(1)
+            continue
+        secs = time.perf_counter() - t0
+        if verbosity >= 2:
+            report(result, verbosity=verbosity)
+        if not result.passed:
+            failed.append(name)
+        if verbosity or not result.passed:
+            say(result.summary_line(secs), None if result.passed else sys.stderr)
+        if not result.passed and verbosity < 2:
+            for c in result.failures:
+                say(f"          FAIL  {c.describe()}", sys.stderr)
+        bar.update(1)
+    bar.close()
     if failed:
-        print(f"{len(failed)} of {len(summary)} labs failed: {', '.join(failed)}", file=sys.stderr)
+        print(f"{len(failed)} of {len(LABS)} labs failed: {', '.join(failed)}", file=sys.stderr)
         return 1
-    print(f"all {len(summary)} labs pass")
+    if verbosity:
+        print(f"all {len(LABS)} labs pass")
     return 0
 
 
@@ -157,5 +208,6 @@ def register_cli(subparsers) -> None:
                              formatter_class=argparse.RawDescriptionHelpFormatter)
         mod.add_arguments(p)
         p.set_defaults(fn=_run_one)
-    a = names.add_parser("all", parents=[parent], help="run every lab with its chapter parameters; print a summary")
+    a = names.add_parser("all", parents=[parent],
+                         help="run every lab with its chapter parameters (accuracy and atlas quick); one line per lab")
     a.set_defaults(fn=_run_all)

@@ -81,8 +81,9 @@ over the run at dt = 2^-6 s / rtol = 1e-6).
 from __future__ import annotations
 
 import csv
+import functools
 import inspect
-import json
+import io
 import math
 import os
 import sys
@@ -192,7 +193,6 @@ def add_arguments(parser) -> None:
     parser.add_argument("--quick", action="store_true",
                         help="reduced sweep (2 cases, dt 2^-4..2^-9, 1 repeat; < 20 s) for tests")
     parser.add_argument("--no-mujoco", action="store_true", help="skip MuJoCo even when it is installed")
-    parser.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     parser.add_argument("--workers", type=int, default=None, metavar="N",
                         help="local processes computing the errors (default: every core; 1 = serial); "
                              "the timing runs are always serial in this process")
@@ -610,7 +610,7 @@ def _timing_job(mj, case: Case, m: Method, value: float):
 SHORT_RUN_S, SHORT_RUN_ROUNDS = 0.01, 4     # runs under 10 ms get 4x the rounds (they are cheap and noisiest)
 
 
-def _time_jobs(jobs: list, repeats: int, budget: float, say) -> list[tuple[float, int]]:
+def _time_jobs(jobs: list, repeats: int, budget: float, say, bar=None) -> list[tuple[float, int]]:
     """Run every job `repeats` times round-robin (each round visits all jobs once), then the jobs
     whose best run is under SHORT_RUN_S for (SHORT_RUN_ROUNDS - 1) x repeats more rounds, and
     return (min wall time, repeats done) per job. A job whose single run exceeds `budget` s
@@ -618,6 +618,9 @@ def _time_jobs(jobs: list, repeats: int, budget: float, say) -> list[tuple[float
     best = [math.inf] * len(jobs)
     done = [0] * len(jobs)
     rounds = max(1, repeats) * (SHORT_RUN_ROUNDS if repeats > 1 else 1)
+    if bar is not None:
+        bar.reset(total=rounds * len(jobs))
+        bar.set_description("lab accuracy: timing")
     for r in range(rounds):
         t_round = time.perf_counter()
         extra = r >= max(1, repeats)
@@ -626,6 +629,8 @@ def _time_jobs(jobs: list, repeats: int, budget: float, say) -> list[tuple[float
                 continue
             best[i] = min(best[i], job())
             done[i] += 1
+        if bar is not None:
+            bar.update(len(jobs))
         if not extra or r == rounds - 1:
             say(f"timing round {r + 1}/{rounds} done in {time.perf_counter() - t_round:.1f} s"
                 + (f" (rounds after the first {repeats} time only the runs under 10 ms)" if not extra and repeats > 1
@@ -767,9 +772,14 @@ def machine_stamp(mujoco) -> dict:
 
 # ------------------------------------------------------------------------------------------ run
 
-def run(out_dir=C.DEFAULT_OUT, backend: str = "auto", quick: bool = True, mujoco: bool = True,
-        progress: bool = False, workers: int | None = None, dask: str | None = None) -> C.LabResult:
-    """Run the study; ``quick=True`` (the Python default, what ``lab all`` runs) is the reduced
+def run(out_dir=C.DEFAULT_OUT, backend: str = "auto", **options) -> C.LabResult:
+    """:func:`compute`, then write OUT/accuracy/ (results.json, points.csv and the four PNGs)."""
+    return compute(backend, **options).save(out_dir)
+
+
+def compute(backend: str = "auto", quick: bool = True, mujoco: bool = True, progress: bool = False,
+            workers: int | None = None, dask: str | None = None) -> C.LabResult:
+    """Run the study and return its LabResult, writing nothing; ``quick=True`` (the Python default, what ``lab all`` runs) is the reduced
     sweep, ``quick=False`` the full one (the command line's default). ``backend`` is accepted for
     the labs' common interface and ignored: both backends are always measured. ``workers`` /
     ``dask`` choose where the errors are computed (lavendersim.executor.resolve: None = every
@@ -782,9 +792,11 @@ def run(out_dir=C.DEFAULT_OUT, backend: str = "auto", quick: bool = True, mujoco
     cfg = QUICK if quick else FULL
     t_start = time.perf_counter()
 
-    def say(msg):
-        if progress:
-            print(f"[accuracy {time.perf_counter() - t_start:6.1f} s] {msg}", file=sys.stderr, flush=True)
+    bar = C.progress(total=None, desc="lab accuracy", unit="run", enabled=progress)
+
+    def say(msg):           # progress lines: on a terminal only, above the bar
+        if not bar.disable:
+            bar.write(f"[accuracy {time.perf_counter() - t_start:6.1f} s] {msg}", file=sys.stderr)
 
     # Where the errors are computed is resolved first, so a missing distributed extra or an
     # unreachable scheduler is reported before any work is done.
@@ -818,7 +830,9 @@ def run(out_dir=C.DEFAULT_OUT, backend: str = "auto", quick: bool = True, mujoco
 
     tasks = sweep_tasks(use, meths, cfg, exacts)
     say(f"errors of {len(tasks)} sweeps on {ex.describe()} (timing follows, serially in this process)")
-    sweeps = ex.map(measure_sweep, tasks, feature="lavendersim lab accuracy --dask")
+    bar.reset(total=len(tasks))
+    bar.set_description("lab accuracy: errors")
+    sweeps = C.map_with_progress(ex, measure_sweep, tasks, bar, feature="lavendersim lab accuracy --dask")
     points: list[Point] = []
     jobs: list = []
     drifts: dict = {}
@@ -832,7 +846,8 @@ def run(out_dir=C.DEFAULT_OUT, backend: str = "auto", quick: bool = True, mujoco
         say(f"{case.name}: {m.label} ({len(values)} {m.param} values) in {sw['seconds']:.1f} s")
 
     say(f"timing {sum(j is not None for j in jobs)} runs x {cfg['repeats']} interleaved repeats")
-    timed = _time_jobs(jobs, cfg["repeats"], cfg["time_budget"] if cfg["time_budget"] else 0.0, say)
+    timed = _time_jobs(jobs, cfg["repeats"], cfg["time_budget"] if cfg["time_budget"] else 0.0, say, bar)
+    bar.close()
     for pt, (best, done) in zip(points, timed):
         if pt.ok and done:
             pt.wall_s, pt.repeats = best, done
@@ -866,7 +881,9 @@ def run(out_dir=C.DEFAULT_OUT, backend: str = "auto", quick: bool = True, mujoco
             if m.family == "lavendersim" and m.param == "dt" and m.backend == "c" and m.integrator in EXPECTED_ORDER:
                 exp_o = EXPECTED_ORDER[m.integrator]
                 checks.append(C.close(f"order_{m.integrator}_{case.name}", o if o is not None else math.nan, exp_o,
-                                      ORDER_TOL, "slope of log attitude error vs log dt, C backend"))
+                                      ORDER_TOL, "slope of log attitude error vs log dt, C backend" + (
+                                          "" if o is not None else f"; fewer than 2 points with {ORDER_WINDOW[0]:g} < "
+                                          f"error < {ORDER_WINDOW[1]:g} rad to fit it")))
             if m.family == "lavendersim" and m.integrator == "rk4" and m.backend == "c":
                 checks.append(C.at_most(f"rk4_smallest_dt_{case.name}", max(tight.attitude_error, tight.omega_error),
                                         1e-9, f"RK4 [c] at dt = {_param_text('dt', tight.value)}: attitude "
@@ -968,8 +985,13 @@ def run(out_dir=C.DEFAULT_OUT, backend: str = "auto", quick: bool = True, mujoco
                     f"mujoco {stamp['mujoco']}, {stamp['compiler']}",
     }
 
-    plots = make_plots(use, meths, points, drifts, per_case, per_case_rhs)
-    result = C.finish(NAME, out_dir, figures, params, checks, plots)
+    plot_data = {"use": use, "meths": meths, "points": points, "drifts": drifts, "per_case": per_case,
+                 "per_case_rhs": per_case_rhs}
+    plots = {name: functools.partial(_plot_one, name) for name in PLOT_NAMES}
+    rk4 = [f"order_rk4_c_{c.name}" for c in use if f"order_rk4_c_{c.name}" in figures]
+    result = C.make_result(NAME, figures, params, checks, plots, plot_data,
+                           headline=(rk4[0], f"4 ± {ORDER_TOL:g} (RK4's order, C backend)") if rk4 else None)
+    result.mode = f"{'quick' if quick else 'full'} sweep" + ("; `lab accuracy` runs the full one" if quick else "")
     # the nested data: added to the returned dict and written into the same results.json
     result["machine"] = stamp
     result["table"] = table
@@ -985,16 +1007,13 @@ def run(out_dir=C.DEFAULT_OUT, backend: str = "auto", quick: bool = True, mujoco
                           "param": m.param, "stages": m.stages} for m in meths]
     result["points"] = [_point_json(p) for p in points]
     result["drift_series"] = [{"case": c, "method": lab, **d} for (c, lab), d in drifts.items()]
-    path = result.out_dir / "results.json"
-    path.write_text(json.dumps(dict(result), indent=1, allow_nan=False) + "\n")
-    csv_path = result.out_dir / "points.csv"
-    with csv_path.open("w", newline="") as f:
-        cols = [k for k in _point_json(points[0]) if k != "final_x"]
-        w = csv.DictWriter(f, fieldnames=cols, extrasaction="ignore")
-        w.writeheader()
-        for p in points:
-            w.writerow(_point_json(p))
-    result.files.append(csv_path)
+    f = io.StringIO(newline="")
+    cols = [k for k in _point_json(points[0]) if k != "final_x"]
+    w = csv.DictWriter(f, fieldnames=cols, extrasaction="ignore")
+    w.writeheader()
+    for p in points:
+        w.writerow(_point_json(p))
+    result.extra_files["points.csv"] = f.getvalue()
     result.table_text = table_text
     say(f"done in {time.perf_counter() - t_start:.1f} s")
     return result
@@ -1085,7 +1104,15 @@ def _colors(meths):
     return {n: _PALETTE[i % len(_PALETTE)] for i, n in enumerate(names)}
 
 
-def make_plots(use, meths, points, drifts, per_case, per_case_rhs) -> dict:
+PLOT_NAMES = ("work_precision_time.png", "work_precision_rhs.png", "work_precision_omega.png", "drift_vs_time.png")
+
+
+def _plot_one(name: str, d: dict):
+    """One PNG of the study, drawn from the result's data (LabResult.figure)."""
+    return make_plots(d["use"], d["meths"], d["points"], d["drifts"], d["per_case"], d["per_case_rhs"], only=name)[name]
+
+
+def make_plots(use, meths, points, drifts, per_case, per_case_rhs, only: str | None = None) -> dict:
     """The PNGs; big markers are points of methods on the front of that plot's own verdict (attitude
     error vs time, or vs RHS evaluations); the omega plot marks none."""
     colors = _colors(meths)
@@ -1100,6 +1127,8 @@ def make_plots(use, meths, points, drifts, per_case, per_case_rhs) -> dict:
              ("work_precision_omega.png", "wall_per_sim_s", 1e6, "wall time per simulated second (µs)",
               "omega_error", "|ω(T) − ω_exact(T)| (rad/s)", True))
     for fname, xkey, xscale, xlabel, ykey, ylabel, both_backends in specs:
+        if only is not None and fname != only:
+            continue
         fig, axes = C.new_figure(nrows, ncols, size=(15, 5.2 * nrows),
                                  title=f"{ylabel.split(' (')[0]} vs {xlabel.split(' (')[0]}, torque-free, T = {T_END:g} s")
         for k, case in enumerate(use):
@@ -1138,22 +1167,25 @@ def make_plots(use, meths, points, drifts, per_case, per_case_rhs) -> dict:
                       else "numpy = c (same\ncounts and errors)"), title_fontsize=7)
         plots[fname] = fig
 
-    fig, axes = C.new_figure(2, n, size=(4.2 * n + 3, 8),
-                             title=f"relative drift over the run (C backend at dt = 2^-{DRIFT_DT_EXP} s; "
+    if only is not None and only != "drift_vs_time.png":
+        return plots
+    fig, axes = C.new_figure(2, n, size=(max(4.2 * n + 3, 9.0), 8),
+                             title=f"relative drift over the run\n(C backend at dt = 2^-{DRIFT_DT_EXP} s; "
                                    f"rtol = {DRIFT_RTOL:.0e} for adaptive/scipy; MuJoCo at dt = 2^-{DRIFT_DT_EXP} s)")
     for k, case in enumerate(use):
         for row, what in enumerate(("energy", "momentum")):
             ax = axes[row, k]
-            for m in meths:
-                if m.backend == "numpy":
-                    continue
+            shown = [m for m in meths if m.backend != "numpy"]
+            for i, m in enumerate(shown):
                 d = drifts.get((case.name, m.label))
                 if not d:
                     continue
                 key = m.integrator if m.family == "lavendersim" else m.label
                 yv = np.asarray(d[what], float)
-                ax.semilogy(d["t"], np.where(yv > 0, yv, np.nan), _FAMILY_STYLE[m.backend], color=colors[key], lw=1,
-                            label=m.label.replace(" [c]", ""))
+                # methods whose drifts coincide (euler and MuJoCo Euler, rk4 and rk4_expmap) stay visible: the
+                # earlier in the list, the wider the line underneath
+                ax.semilogy(d["t"], np.where(yv > 0, yv, np.nan), _FAMILY_STYLE[m.backend], color=colors[key],
+                            lw=4.0 - 3.2 * i / max(1, len(shown) - 1), label=m.label.replace(" [c]", ""))
             ax.set_xlabel("time t (s)")
             ax.set_ylabel("|E(t) − E(0)| / E(0)" if what == "energy" else "|L_w(t) − L_w(0)| / |L_w(0)|")
             ax.set_title(f"{case.label}: {what}", fontsize=9)

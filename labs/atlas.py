@@ -84,6 +84,7 @@ atlas_attitude.png.
 """
 from __future__ import annotations
 
+import functools
 import json
 import math
 import os
@@ -150,7 +151,6 @@ def add_arguments(parser) -> None:
                         help="run the cells on an existing Dask scheduler, e.g. tcp://host:8786 (the distributed extra)")
     parser.add_argument("--rtol", type=float, default=RTOL,
                         help=f"dopri5's rtol (default {RTOL:g}; atol = rtol × {ATOL / RTOL:g})")
-    parser.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
 
 
 def options_from_args(args) -> dict:
@@ -340,7 +340,7 @@ def cell_key(cell: dict, integrators) -> tuple:
     return (list(integrators).index(cell["integrator"]), AXES.index(cell["axis"]), cell["ratio"], cell["omega_dt"])
 
 
-def compute_cells(wdts, ratios, integrators, backend, rtol, atol, executor: X.Executor) -> list[dict]:
+def compute_cells(wdts, ratios, integrators, backend, rtol, atol, executor: X.Executor, bar=None) -> list[dict]:
     """Every cell of a grid, computed on `executor`.
 
     Parameters
@@ -355,6 +355,8 @@ def compute_cells(wdts, ratios, integrators, backend, rtol, atol, executor: X.Ex
         Adaptive tolerances.
     executor : lavendersim.executor.Executor
         Where the groups run.
+    bar : tqdm or None
+        A progress bar advanced as the groups finish (labs.common.progress).
 
     Returns
     -------
@@ -363,7 +365,10 @@ def compute_cells(wdts, ratios, integrators, backend, rtol, atol, executor: X.Ex
         whatever the executor and the completion order.
     """
     tasks = make_tasks(wdts, ratios, integrators, backend, rtol, atol)
-    groups = executor.map(run_group, tasks, feature="lavendersim lab atlas --dask")
+    if bar is None:
+        groups = executor.map(run_group, tasks, feature="lavendersim lab atlas --dask")
+    else:
+        groups = C.map_with_progress(executor, run_group, tasks, bar, feature="lavendersim lab atlas --dask")
     cells = [c for g in groups for c in g]
     return sorted(cells, key=lambda c: cell_key(c, integrators))
 
@@ -781,12 +786,21 @@ def status_figure(cells, integrators, wdts, ratios, hard_points):
     return "atlas_status.png", fig
 
 
-def make_plots(cells, integrators, wdts, ratios, hard_points) -> dict:
-    plots = dict([status_figure(cells, integrators, wdts, ratios, hard_points)])
+def make_plots(cells, integrators, wdts, ratios, hard_points, only: str | None = None) -> dict:
+    """{file name: Figure} of the atlas (only the one named ``only`` when given)."""
+    plots = {}
+    if only in (None, "atlas_status.png"):
+        plots.update([status_figure(cells, integrators, wdts, ratios, hard_points)])
     for metric in METRICS:
-        fname, fig = metric_figure(metric, cells, integrators, wdts, ratios, hard_points)
-        plots[fname] = fig
+        if only in (None, METRICS[metric][0]):
+            fname, fig = metric_figure(metric, cells, integrators, wdts, ratios, hard_points)
+            plots[fname] = fig
     return plots
+
+
+def _plot_one(name: str, d: dict):
+    """One PNG of the atlas, drawn from the result's data (LabResult.figure)."""
+    return make_plots(d["cells"], d["integrators"], d["wdts"], d["ratios"], d["hard_points"], only=name)[name]
 
 
 # ------------------------------------------------------------------------------------------ run
@@ -815,14 +829,17 @@ def _summary(cells, integrators) -> dict:
     return fig
 
 
-def run(out_dir=C.DEFAULT_OUT, backend: str = "auto", quick: bool = True, workers: int | None = None,
-        dask: str | None = None, rtol: float = RTOL, progress: bool = False) -> C.LabResult:
-    """Compute the atlas and write OUT/atlas/ (see the module docstring).
+def run(out_dir=C.DEFAULT_OUT, backend: str = "auto", **options) -> C.LabResult:
+    """:func:`compute`, then write OUT/atlas/ (results.json, run.json and the four PNGs)."""
+    return compute(backend, **options).save(out_dir)
+
+
+def compute(backend: str = "auto", quick: bool = True, workers: int | None = None, dask: str | None = None,
+            rtol: float = RTOL, progress: bool = False) -> C.LabResult:
+    """Compute the atlas and return its LabResult, writing nothing (see the module docstring).
 
     Parameters
     ----------
-    out_dir : path
-        Output directory; the lab writes ``out_dir/atlas/``.
     backend : {"auto", "c", "numpy"}
         Backend of the cells of at most 5 000 steps (longer ones use C when it is built).
     quick : bool
@@ -834,7 +851,7 @@ def run(out_dir=C.DEFAULT_OUT, backend: str = "auto", quick: bool = True, worker
     rtol : float
         dopri5's rtol (atol = rtol × 1e-3).
     progress : bool
-        Progress lines on stderr.
+        A progress bar on stderr (on a terminal only).
 
     Returns
     -------
@@ -851,13 +868,16 @@ def run(out_dir=C.DEFAULT_OUT, backend: str = "auto", quick: bool = True, worker
     integrators = list(B.INTEGRATORS)
     t0 = time.perf_counter()
 
-    def say(msg):
-        if progress:
-            print(f"[atlas {time.perf_counter() - t0:6.1f} s] {msg}", file=sys.stderr, flush=True)
+    bar = C.progress(total=len(wdts) * len(ratios) * len(AXES), desc="lab atlas", unit="group", enabled=progress)
+
+    def say(msg):           # progress lines: on a terminal only, above the bar
+        if not bar.disable:
+            bar.write(f"[atlas {time.perf_counter() - t0:6.1f} s] {msg}", file=sys.stderr)
 
     say(f"{mode} grid: {len(wdts)} |ω|·dt × {len(ratios)} ratios × {len(AXES)} axes × {len(integrators)} integrators "
         f"on {ex.describe()}")
-    cells = compute_cells(wdts, ratios, integrators, backend, rtol, atol, ex)
+    cells = compute_cells(wdts, ratios, integrators, backend, rtol, atol, ex, bar)
+    bar.close()
     wall = time.perf_counter() - t0
     say(f"{len(cells)} cells in {wall:.1f} s")
     checks, figures = atlas_checks(cells, integrators, rtol)
@@ -873,22 +893,23 @@ def run(out_dir=C.DEFAULT_OUT, backend: str = "auto", quick: bool = True, worker
         "spin": f"omega_b0 = |ω| (e_axis + {PERTURBATION:g} e_j + {PERTURBATION:g} e_k)/|…|, |ω| = {OMEGA:g} rad/s",
         "long_runs_backend": f"c (cells over {H.C_BACKEND_ABOVE} steps)",
     }
-    plots = make_plots(cells, integrators, wdts, ratios, hard_points)
-    result = C.finish(NAME, out_dir, figures, params, checks, plots)
+    plots = {name: functools.partial(_plot_one, name)
+             for name in ("atlas_status.png", *(METRICS[m][0] for m in METRICS))}
+    data = {"cells": cells, "integrators": integrators, "wdts": wdts, "ratios": ratios, "hard_points": hard_points}
+    figures["cells_silent_nan_or_error"] = sum(c["status"] in ("silent_nan", "error") for c in cells)
+    result = C.make_result(NAME, figures, params, checks, plots, data,
+                           headline=("cells_silent_nan_or_error", "0 (every cell ok, or a DivergenceError)"))
+    result.mode = f"{mode} grid, {len(cells)} cells" + ("; `lab atlas` runs the full grid" if quick else "")
     result["grid"] = {"omega_dt": list(wdts), "ratio": list(ratios), "axis": list(AXES), "integrators": integrators}
     result["bounds"] = {**BOUNDS, "implicit_gyro_energy_gain": ENERGY_GAIN_BOUND, "splitting_L_world_drift_per_step_eps": SPLITTING_L_PER_STEP,
                         "splitting4_L_world_drift_per_step_eps": SPLITTING4_L_PER_STEP,
                         "rk4_stability_limit_omega_dt": H.RK4_STABILITY}
     result["hard_case_points"] = hard_points
     result["cells"] = cells
-    path = result.out_dir / "results.json"
-    path.write_text(json.dumps(dict(result), indent=1, allow_nan=False) + "\n")
     result.run_info = {"executor": ex.describe(), "kind": ex.kind, "workers": ex.workers, "dask": ex.address,
                        "wall_time_s": wall, "tasks": len(wdts) * len(ratios) * len(AXES), "cells": len(cells),
                        "local_cores": X.local_cores(),
                        "loadavg": list(os.getloadavg()) if hasattr(os, "getloadavg") else None}
-    info = result.out_dir / "run.json"
-    info.write_text(json.dumps(result.run_info, indent=1) + "\n")
-    result.files.append(info)
+    result.extra_files["run.json"] = json.dumps(result.run_info, indent=1) + "\n"
     say(f"done in {time.perf_counter() - t0:.1f} s")
     return result

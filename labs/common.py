@@ -76,6 +76,11 @@ class Check:
         """``name = value (expected ...)`` in words, for PASS and FAIL lines alike."""
         if self.kind == "true":
             text = f"{self.name}: {'holds' if self.value else 'does NOT hold'}"
+        elif not _finite(self.value):
+            exp = (f"{_fmt(self.expected)} ± {_fmt(self.tol)}" if self.kind == "close"
+                   else f"{_OPS[self.kind]} {_fmt(self.expected)}")
+            got = "not computed" if math.isnan(float(self.value)) else f"infinite ({_fmt(self.value)})"
+            text = f"{self.name}: {got}, expected {exp}"
         else:
             v = _fmt(self.value)
             if self.kind == "close":
@@ -83,9 +88,11 @@ class Check:
                 text = (f"{self.name} = {v}, expected {_fmt(self.expected)} ± {_fmt(self.tol)}"
                         f" (off by {_fmt(off)})")
             else:
-                op = {"max": "<=", "below": "<", "min": ">=", "above": ">"}[self.kind]
-                text = f"{self.name} = {v}, expected {op} {_fmt(self.expected)}"
+                text = f"{self.name} = {v}, expected {_OPS[self.kind]} {_fmt(self.expected)}"
         return text + (f" — {self.note}" if self.note else "")
+
+
+_OPS = {"max": "<=", "below": "<", "min": ">=", "above": ">"}
 
 
 def _finite(x) -> bool:
@@ -140,16 +147,26 @@ def holds(name, condition, note="") -> Check:
 
 
 class LabResult(dict):
-    """Flat results (exactly the content of results.json) plus ``checks``, ``files``, ``passed``."""
+    """A lab's results: the flat items of results.json plus ``checks``, ``files``, ``passed``.
 
-    def __init__(self, lab: str, out_dir: Path, items: dict, checks: list[Check]):
+    Made by a lab's ``compute(...)`` (:func:`make_result`), which writes nothing; :meth:`save` writes
+    ``OUT/lab/results.json``, the PNGs and any extra files. :meth:`figure` draws a plot as a matplotlib
+    Figure from the data the computation kept (``data``), without re-running the physics.
+    """
+
+    def __init__(self, lab: str, out_dir, items: dict, checks: list[Check]):
         super().__init__(items)
         self.lab = lab
-        self.out_dir = Path(out_dir)
+        self.out_dir = None if out_dir is None else Path(out_dir)
         self.checks = list(checks)
         self.files: list[Path] = []
         self.param_names: list[str] = []
         self.figure_names: list[str] = []
+        self.data: dict = {}                 # what the plots are drawn from (arrays, not JSON)
+        self.plotters: dict = {}             # PNG file name -> callable(data) -> Figure
+        self.extra_files: dict = {}          # file name -> text, written by save() beside results.json
+        self.headline: tuple[str, str] | None = None   # (figure name, what is expected) for summary_line
+        self.mode: str = ""                  # e.g. "quick sweep", said in summary_line
 
     @property
     def passed(self) -> bool:
@@ -158,6 +175,80 @@ class LabResult(dict):
     @property
     def failures(self) -> list[Check]:
         return [c for c in self.checks if not c.passed]
+
+    @property
+    def plot_names(self) -> list[str]:
+        """The PNG file names :meth:`save` writes (the keys :meth:`figure` accepts)."""
+        return list(self.plotters)
+
+    def figure(self, name: str | None = None):
+        """A new matplotlib Figure of plot ``name`` (a PNG file name, with or without ``.png``).
+
+        Parameters
+        ----------
+        name : str, optional
+            Which plot; default the lab's first (headline) plot. ``plot_names`` lists them.
+
+        Returns
+        -------
+        matplotlib.figure.Figure
+            Drawn from ``self.data`` (headless Agg canvas; nothing is written, nothing re-run).
+        """
+        if not self.plotters:
+            raise V.LavenderInputError("name", f"lab {self.lab} draws no plot")
+        if name is None:
+            name = next(iter(self.plotters))
+        key = name if name in self.plotters else f"{name}.png"
+        if key not in self.plotters:
+            raise V.LavenderInputError("name", f"must be one of {', '.join(self.plotters)}", f", got {name!r}")
+        return self.plotters[key](self.data)
+
+    def summary_line(self, seconds: float | None = None) -> str:
+        """One line: the lab, its headline figure, what is expected, PASS/FAIL (and the seconds)."""
+        status = (f"PASS ({len(self.checks)} checks)" if self.passed
+                  else f"FAIL ({len(self.failures)} of {len(self.checks)} checks)")
+        head = ""
+        if self.headline is not None and self.headline[0] in self:
+            key, expected = self.headline
+            head = f"{key} = {_show(self[key])}, expected {expected}"
+        elif self.checks:
+            c = (self.failures or self.checks)[0]
+            head = c.describe().split(" — ")[0]
+        if self.mode:
+            head += f" [{self.mode}]"
+        took = "" if seconds is None else f"  {seconds:.1f} s"
+        return f"{self.lab:<9} {status:<22} {head}{took}"
+
+    def save(self, out_dir=None) -> "LabResult":
+        """Write OUT/lab/results.json, every PNG of ``plot_names`` and ``extra_files``; return self."""
+        d = Path(DEFAULT_OUT if out_dir is None else out_dir) / self.lab
+        try:
+            d.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise V.LavenderInputError("out", f"cannot write to {d}", f" ({exc.strerror or exc})") from None
+        self.out_dir = d
+        self.files = []
+        try:
+            path = d / "results.json"
+            path.write_text(json.dumps(dict(self), indent=2 if _flat(self) else 1, allow_nan=False) + "\n")
+            self.files.append(path)
+            for fname in self.plotters:
+                p = d / fname
+                fig = self.figure(fname)
+                fig.savefig(p, dpi=110)
+                self.files.append(p)
+            for fname, text in self.extra_files.items():
+                p = d / fname
+                p.write_text(text)
+                self.files.append(p)
+        except OSError as exc:
+            raise V.LavenderInputError("out", f"cannot write to {d}", f" ({exc.strerror or exc})") from None
+        return self
+
+
+def _flat(d: dict) -> bool:
+    return all(not isinstance(v, (dict, list)) or (isinstance(v, list) and all(not isinstance(x, (dict, list)) for x in v))
+               for v in d.values())
 
 
 def _json_value(name: str, v):
@@ -179,40 +270,36 @@ def _json_value(name: str, v):
     raise TypeError(f"results.json: {name!r} must be a number, bool, string or flat vector, got {type(v).__name__}")
 
 
-def finish(lab: str, out_dir, figures: dict, params: dict, checks: list[Check], plots: dict) -> LabResult:
-    """Write ``OUT/lab/results.json`` and the PNGs; return the :class:`LabResult`.
+def make_result(lab: str, figures: dict, params: dict, checks: list[Check], plots: dict | None = None,
+                data: dict | None = None, headline: tuple[str, str] | None = None) -> LabResult:
+    """The :class:`LabResult` of a computation, writing nothing.
 
-    ``figures`` and ``params`` are flat dicts (a name clash is an error); ``plots`` maps a PNG
-    file name to a ``matplotlib.figure.Figure``.
+    ``figures`` and ``params`` are flat dicts (a name clash is an error); ``plots`` maps a PNG file
+    name to ``callable(data) -> Figure`` (or to a ready Figure, kept as is); ``data`` is what the
+    plots are drawn from; ``headline`` = (figure name, expected) for :meth:`LabResult.summary_line`.
     """
     clash = set(figures) & set(params)
     if clash:
         raise ValueError(f"lab {lab}: names used as both figure and parameter: {sorted(clash)}")
-    d = Path(out_dir) / lab
-    try:
-        d.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise V.LavenderInputError("out", f"cannot write to {d}", f" ({exc.strerror or exc})") from None
     items: dict = {"lab": lab}
     for k, v in {**params, **figures}.items():
         items[k] = _json_value(k, v)
     for c in checks:
         items[f"check_{c.name}"] = c.passed
-    result = LabResult(lab, d, items, checks)
+    result = LabResult(lab, None, items, checks)
     result.param_names = list(params)
     result.figure_names = list(figures)
     result["passed"] = result.passed
-    path = d / "results.json"
-    try:
-        path.write_text(json.dumps(dict(result), indent=2, allow_nan=False) + "\n")
-        result.files.append(path)
-        for fname, fig in plots.items():
-            p = d / fname
-            fig.savefig(p, dpi=110)
-            result.files.append(p)
-    except OSError as exc:
-        raise V.LavenderInputError("out", f"cannot write to {d}", f" ({exc.strerror or exc})") from None
+    result.data = dict(data or {})
+    for fname, p in (plots or {}).items():
+        result.plotters[fname] = p if callable(p) else (lambda _d, fig=p: fig)
+    result.headline = headline
     return result
+
+
+def finish(lab: str, out_dir, figures: dict, params: dict, checks: list[Check], plots: dict) -> LabResult:
+    """:func:`make_result` then :meth:`LabResult.save` to ``out_dir`` (``plots``: file name -> Figure)."""
+    return make_result(lab, figures, params, checks, plots).save(out_dir)
 
 
 # --------------------------------------------------------------------------
@@ -231,6 +318,41 @@ def new_figure(nrows: int = 1, ncols: int = 1, *, size=(8.0, 4.5), title: str | 
     if title:
         fig.suptitle(title)
     return fig, axes
+
+
+def progress(iterable=None, *, total: int | None = None, desc: str = "", unit: str = "it", enabled: bool = True):
+    """A tqdm progress bar on stderr, shown only when ``enabled`` and stderr is a terminal.
+
+    Anywhere else (a pipe, a log file, CI, ``--quiet``) it is a silent pass-through with the same
+    interface (iterate it, or call ``update(n)``/``close()``), so no progress text ends up in logs.
+    """
+    import shutil
+    import sys
+
+    from tqdm import tqdm
+
+    show = bool(enabled) and hasattr(sys.stderr, "isatty") and sys.stderr.isatty()
+    # a terminal that reports a 0 x 0 size (a bare pty) would hide the bar: 100 x 24 then
+    cols, rows = shutil.get_terminal_size((100, 24))
+    return tqdm(iterable, total=total, desc=desc, unit=unit, disable=not show, leave=False, file=sys.stderr,
+                ncols=cols, nrows=rows)
+
+
+def map_with_progress(executor, fn, tasks, bar, *, feature: str) -> list:
+    """``executor.map(fn, tasks)`` advancing ``bar`` as results arrive (in chunks of a few tasks per worker).
+
+    With the bar hidden (not a terminal, or quiet) it is exactly one ``executor.map`` call; with the bar
+    shown, the tasks go in chunks of 4 per worker, so the bar moves while the sweep runs. Results are in
+    task order either way."""
+    tasks = list(tasks)
+    if bar.disable:
+        return executor.map(fn, tasks, feature=feature)
+    chunk = max(1, 4 * int(getattr(executor, "workers", 1) or 1))
+    out: list = []
+    for i in range(0, len(tasks), chunk):
+        out += executor.map(fn, tasks[i:i + chunk], feature=feature)
+        bar.update(len(tasks[i:i + chunk]))
+    return out
 
 
 # --------------------------------------------------------------------------
@@ -298,29 +420,64 @@ def angle_between_deg(K, q_a, q_b):
 # --------------------------------------------------------------------------
 
 
+NOT_COMPUTED = "not computed"
+PARAM_WIDTH = 100          # the report wraps the parameters line at this width
+PARAM_SHOWN = 80           # a parameter whose text is longer is named only (its value is in results.json)
+
+
 def _show(v) -> str:
+    """A figure or parameter as printed: never a bare ``nan`` (a non-finite value says it was not computed)."""
     if isinstance(v, list):
         return "[" + ", ".join(x if isinstance(x, str) else _fmt(x) for x in v) + "]"
+    if isinstance(v, str) and v in ("nan", "inf", "-inf"):   # how results.json keeps a non-finite float
+        v = float(v)
     if isinstance(v, (float, int)) and not isinstance(v, bool):
+        if isinstance(v, float) and math.isnan(v):
+            return f"{NOT_COMPUTED} (NaN)"
         return _fmt(v)
     return str(v)
 
 
-def report(result: LabResult, stream=None) -> int:
-    """Print parameters, figures and every check; return 0 if all checks pass, else 1."""
+def parameters_text(result: LabResult, width: int = PARAM_WIDTH, longest: int = PARAM_SHOWN) -> list[str]:
+    """The parameters as wrapped lines; a long one is named with "(in results.json)" instead of printed."""
+    import textwrap
+
+    short, long_ = [], []
+    for k in result.param_names:
+        text = _show(result[k])
+        (short if len(text) <= longest else long_).append(f"{k}={text}" if len(text) <= longest else k)
+    body = "; ".join(short)
+    if long_:
+        body += f"; in results.json only (long): {', '.join(long_)}"
+    return textwrap.wrap("parameters: " + body, width=width, initial_indent="  ", subsequent_indent="    ",
+                         break_on_hyphens=False)
+
+
+def report(result: LabResult, stream=None, verbosity: int = 1) -> int:
+    """Print the lab's result; return 0 if all checks pass, else 1.
+
+    verbosity 0: only failures (on stderr); 1: parameters (wrapped, long ones named), figures,
+    every check and the files; 2: as 1 with every parameter printed in full.
+    """
     import sys
 
     out = stream or sys.stdout
-    print(f"== lab {result.lab} -> {result.out_dir}", file=out)
-    print("  parameters: " + ", ".join(f"{k}={_show(result[k])}" for k in result.param_names), file=out)
-    for k in result.figure_names:
-        print(f"  {k} = {_show(result[k])}", file=out)
-    for c in result.checks:
-        print(f"  {'PASS' if c.passed else 'FAIL'}  {c.describe()}", file=out)
-    for p in result.files:
-        print(f"  wrote {p}", file=out)
+    if verbosity >= 1:
+        print(f"== lab {result.lab} -> {result.out_dir}", file=out)
+        if verbosity >= 2:
+            print("  parameters: " + ", ".join(f"{k}={_show(result[k])}" for k in result.param_names), file=out)
+        else:
+            for line in parameters_text(result):
+                print(line, file=out)
+        for k in result.figure_names:
+            print(f"  {k} = {_show(result[k])}", file=out)
+        for c in result.checks:
+            print(f"  {'PASS' if c.passed else 'FAIL'}  {c.describe()}", file=out)
+        for p in result.files:
+            print(f"  wrote {p}", file=out)
     if result.passed:
-        print(f"lab {result.lab}: all {len(result.checks)} checks pass", file=out)
+        if verbosity >= 1:
+            print(f"lab {result.lab}: all {len(result.checks)} checks pass", file=out)
         return 0
     for c in result.failures:
         print(f"lab {result.lab}: figure {c.describe()}", file=sys.stderr)

@@ -16,7 +16,6 @@ from __future__ import annotations
 import numpy as np
 
 import lavendersim as lv
-from lavendersim import validate as V
 from lavendersim.kernels import K
 
 from . import common as C
@@ -46,7 +45,13 @@ def options_from_args(args) -> dict:
     return {"offset": args.offset}
 
 
-def run(out_dir=C.DEFAULT_OUT, backend: str = "auto", offset: float = R_W[0]) -> C.LabResult:
+def run(out_dir=C.DEFAULT_OUT, backend: str = "auto", **options) -> C.LabResult:
+    """:func:`compute`, then write OUT/force/ (results.json, force.png)."""
+    return compute(backend, **options).save(out_dir)
+
+
+def compute(backend: str = "auto", offset: float = R_W[0]) -> C.LabResult:
+    """Run the lab and return its :class:`~lavendersim.labs.common.LabResult`; writes nothing."""
     backend = C.check_backend(backend)
     x = C.bounded("offset", offset)
     r = np.array([x, 0.0, 0.0])
@@ -130,7 +135,15 @@ def run(out_dir=C.DEFAULT_OUT, backend: str = "auto", offset: float = R_W[0]) ->
                   "the force also accelerates the COM: a = F / m, m/s²"),
     ]
 
-    # --- plot ----------------------------------------------------------------------------
+    data = {"r": r, "F": F, "F_along": F_along, "tau": tau, "tau_along": tau_along, "tau_neg": tau_neg,
+            "tau_mixed": tau_mixed}
+    return C.make_result(NAME, figures, params, checks, {"force.png": _plot}, data,
+                         headline=("torque", "[0, 0, 1.5] N·m within 1e-12"))
+
+
+def _plot(d):
+    r, F, F_along = d["r"], d["F"], d["F_along"]
+    tau, tau_along, tau_neg, tau_mixed = d["tau"], d["tau_along"], d["tau_neg"], d["tau_mixed"]
     fig, ax = C.new_figure(1, 2, size=(10, 4.2), title="Off-center force: torque = r × F")
     a = ax[0, 0]
     a.add_patch(_rect(ROD_SIZE[0], ROD_SIZE[1]))
@@ -144,7 +157,7 @@ def run(out_dir=C.DEFAULT_OUT, backend: str = "auto", offset: float = R_W[0]) ->
     a.text(r[0], -0.12, f"r = [{r[0]:g}, 0, 0] m", ha="center")
     a.text(r[0] + 0.02, 0.1 * F[1], "F = [0, 5, 0] N", color="tab:red")
     a.text(-R_W[0] - 0.02, 0.1 * F[1], "paw-check 2: at −0.3 m", color="tab:purple", ha="right")
-    a.text(r[0] + 0.05, 0.03, "F along r", color="tab:gray")
+    a.text(r[0] + 0.5, 0.05, "F along r", color="tab:gray", ha="right")
     a.set_xlim(-1.25, 1.1)
     a.set_ylim(-0.4, 0.7)
     a.set_aspect("equal")
@@ -156,11 +169,11 @@ def run(out_dir=C.DEFAULT_OUT, backend: str = "auto", offset: float = R_W[0]) ->
     vals = [tau[2], tau_along[2], tau_neg[2], tau_mixed[2]]
     b.bar(labels, vals, color=["tab:red", "tab:gray", "tab:purple", "tab:orange"])
     b.axhline(0, color="k", lw=0.8)
+    b.text(1, 0.06, f"{tau_along[2]:g}: no torque", ha="center", color="tab:gray", fontsize=9)
     b.set_ylabel("torque τ_z (N·m)")
     b.set_title("τ = r × F (torque_from_force kernel)")
     b.tick_params(axis="x", labelsize=8)
-    result = C.finish(NAME, out_dir, figures, params, checks, {"force.png": fig})
-    return result
+    return fig
 
 
 def _rect(w, h):

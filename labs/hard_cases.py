@@ -451,7 +451,9 @@ def case_dt_range(ctx) -> CaseOut:
                                                          (f"err {err:.0e}" if err <= 1.0 else f"BLEW UP, err {err:.0e}, no DivergenceError")))
                 plot_rows.append((dt, err, bound))
                 if integ == named:
-                    out.figures[f"{label}_error"] = err
+                    out.figures[f"{label}_error"] = err if math.isfinite(err) else (
+                        f"not computed: the run {'raised ' + type(run.error).__name__ if run.error else 'went NaN'}"
+                        + (f" at step {run.error.step}" if isinstance(run.error, DivergenceError) else ""))
                     out.figures[f"{label}_omega_dt"] = wdt
                     expect = ("a DivergenceError naming the step, the body and |omega|*dt" if must_diverge
                               else f"error at T ≤ {bound:.3g}")
@@ -744,60 +746,111 @@ def _status_code(s: str) -> int:
     return 3
 
 
-def _plots(outs: dict, survival: dict, integrators: list[str], checks):
-    from matplotlib.colors import ListedColormap
+def _bound_ratios(checks) -> dict:
+    """{check name: figure / bound} of the asserted upper bounds (a bound of 0: 0 when met, inf when not)."""
+    out = {}
+    for ch in checks:
+        if ch.kind != "max":
+            continue
+        v = float(ch.value)
+        out[ch.name] = v / ch.expected if ch.expected > 0 else (0.0 if v <= 0 else math.inf)
+    return out
 
-    fig, ax = C.new_figure(2, 2, size=(14, 9), title="Hard cases: asserted bounds and the figures measured")
-    a = ax[0, 0]
+
+def _plot_data(outs: dict) -> dict:
+    """What hard_cases.png draws, taken from the cases' runs (arrays only; nothing is re-run to draw)."""
+    d = {"flips": None, "dt_range": None}
     flips = outs.get("intermediate_axis_flips")
     if flips and "intermediate_axis_flips" in flips.plot:
         run, ref = flips.plot["intermediate_axis_flips"]
-        a.plot(run.t, run.x[:, 0, 11], lw=0.8, label="ω_2 (RK4, dt = 1e-3)")
-        tc = ref.intermediate_zero_crossings(run.t[-1])
-        a.plot(tc, np.zeros_like(tc), "kx", label="exact flips (4K(m)/λ)")
-        a.legend(fontsize=8)
-    a.set_xlabel("time t (s)")
-    a.set_ylabel("ω_2 (rad/s)")
-    a.set_title("intermediate-axis flips, diag(1,2,3), ω0 = (1e-3, 5, 1e-3)")
-    b = ax[0, 1]
+        d["flips"] = {"t": run.t, "w2": run.x[:, 0, 11], "exact": ref.intermediate_zero_crossings(run.t[-1])}
     dtr = outs.get("dt_range")
     if dtr and "dt_range" in dtr.plot:
         plot, named = dtr.plot["dt_range"]
-        for (bname, integ), rows in plot.items():
-            if integ != named:
-                continue
-            d = np.array([r[0] for r in rows])
-            e = np.array([r[1] for r in rows])
+        d["dt_range"] = {"named": named, "rows": {b: rows for (b, integ), rows in plot.items() if integ == named}}
+    return d
+
+
+STATUS_KEY = (("tab:green", "pass (the case's bounds hold)"), ("gold", "finite, a bound missed"),
+              ("tab:orange", "diverged: DivergenceError (or blew up)"), ("tab:red", "silent NaN or error"))
+
+
+def _plots(d):
+    """hard_cases.png from the result's data: flips, the dt range, every asserted bound, the survival table."""
+    from matplotlib.colors import ListedColormap
+    from matplotlib.patches import Patch
+
+    ratios, passed = d["bound_ratios"], d["passed"]
+    survival, integrators = d["survival"], d["integrators"]
+    fig, _ = C.new_figure(1, 1, size=(15, 6.5 + 0.16 * max(len(ratios), len(survival) * 2)))
+    fig.clear()
+    fig.suptitle("Hard cases: asserted bounds and the figures measured")
+    gs = fig.add_gridspec(3, 2, height_ratios=[1, 1, 1.3], width_ratios=[1, 1.1])
+    a = fig.add_subplot(gs[0, 0])
+    if d["flips"] is not None:
+        f = d["flips"]
+        a.plot(f["t"], f["w2"], lw=0.8, label="ω_2 (RK4, dt = 1e-3)")
+        a.plot(f["exact"], np.zeros_like(f["exact"]), "kx", label="exact flip times (4K(m)/λ)")
+        a.legend(fontsize=8, loc="lower left")
+    a.set_xlabel("time t (s)")
+    a.set_ylabel("ω_2 (rad/s)")
+    a.set_title("intermediate-axis flips: diag(1,2,3), ω0 = (1e-3, 5, 1e-3)", fontsize=10)
+    b = fig.add_subplot(gs[1, 0])
+    if d["dt_range"] is not None:
+        for k, (bname, rows) in enumerate(d["dt_range"]["rows"].items()):
+            dt = np.array([r[0] for r in rows])
+            e = np.array([r[1] for r in rows], float)
             bd = np.array([r[2] for r in rows])
-            b.loglog(d, np.maximum(e, 1e-17), "o-", label=f"{bname}: error at T")
-            b.loglog(d, bd, ":", label=f"{bname}: bound")
-        b.legend(fontsize=8)
+            col = f"C{k}"
+            ok = np.isfinite(e)
+            b.loglog(dt[ok], np.maximum(e[ok], 1e-17), "o-", color=col, label=f"{bname} spin: error at T")
+            b.loglog(dt, bd, ":", color=col, label=f"{bname} spin: bound")
+            if (~ok).any():
+                b.loglog(dt[~ok], bd[~ok], "v", color=col, ms=8, mfc="none",
+                         label=f"{bname} spin: DivergenceError raised (no error to draw)")
+        b.legend(fontsize=7, loc="upper left")
     b.set_xlabel("dt (s)")
-    b.set_ylabel("max(attitude rad, relative ω) error at T")
-    b.set_title("dt range (RK4); missing points diverged with a DivergenceError")
-    c = ax[1, 0]
-    num = [ch for ch in checks if ch.kind == "max"]
-    ratios = [(float(ch.value) / ch.expected if ch.expected > 0 else (0.0 if ch.value <= 0 else np.inf)) for ch in num]
-    ratios = [r if np.isfinite(r) else 1e3 for r in ratios]
-    y = np.arange(len(num))
-    c.barh(y, np.maximum(ratios, 1e-8), color=["tab:green" if ch.passed else "tab:red" for ch in num])
+    b.set_ylabel("error at T (rad; relative ω)")
+    named = d["dt_range"]["named"] if d["dt_range"] else "rk4"
+    b.set_title(f"dt range ({named}): error at T against its bound", fontsize=10)
+    c = fig.add_subplot(gs[0:2, 1])
+    names = list(ratios)
+    vals = [min(max(r, 1e-8), 1e3) if math.isfinite(r) else 1e3 for r in ratios.values()]
+    y = np.arange(len(names))
+    c.barh(y, vals, color=["tab:green" if passed[n] else "tab:red" for n in names])
+    for yi, r in zip(y, ratios.values()):        # no bar to see on a log axis: say the value
+        if r < 1e-8:
+            c.text(1.3e-8, yi, "0 (exact)" if r == 0 else "< 1e-8", va="center", fontsize=6, color="tab:green")
     c.set_xscale("log")
+    c.set_xlim(1e-8, 1e3)
     c.axvline(1.0, color="k", lw=0.8)
-    c.set_yticks(y, [ch.name for ch in num], fontsize=6)
-    c.set_xlabel("figure / bound (< 1 passes)")
-    c.set_title("asserted bounds")
-    d = ax[1, 1]
+    c.set_yticks(y, names, fontsize=7)
+    c.invert_yaxis()
+    c.set_xlabel("figure / bound (< 1 passes; clamped to 1e-8 … 1e3)")
+    c.set_title(f"asserted bounds ({len(names)} upper bounds)", fontsize=10)
+    c.legend(handles=[Patch(color="tab:green", label="within its bound"), Patch(color="tab:red", label="bound missed")],
+             fontsize=7, loc="lower right")
+    e = fig.add_subplot(gs[2, :])
     rows = list(survival)
-    M = np.array([[_status_code(survival[r].get(i, "error")) for i in integrators] for r in rows])
-    cmap = ListedColormap(["tab:green", "gold", "tab:orange", "tab:red"])
-    d.imshow(M, cmap=cmap, vmin=0, vmax=3, aspect="auto")
-    d.set_xticks(range(len(integrators)), integrators, rotation=30, fontsize=7)
-    d.set_yticks(range(len(rows)), rows, fontsize=7)
-    d.set_title("survival: green pass, yellow finite but off-bound, orange diverged, red NaN/error")
+    M = np.array([[_status_code(survival[r].get(i, "error")) for i in integrators] for r in rows]).T
+    e.imshow(M, cmap=ListedColormap([k for k, _ in STATUS_KEY]), vmin=0, vmax=3, aspect="auto")
+    e.set_yticks(range(len(integrators)), integrators, fontsize=8)
+    e.set_xticks(range(len(rows)), rows, rotation=30, ha="right", fontsize=7)
+    e.set_title("which integrators survive each case (survival.md has the words)", fontsize=10)
+    e.legend(handles=[Patch(color=col, label=text) for col, text in STATUS_KEY], loc="upper left",
+             bbox_to_anchor=(1.01, 1.0), fontsize=8, title="cell colour", title_fontsize=8)
     return fig
 
 
-def run(out_dir=C.DEFAULT_OUT, backend: str = "auto", cases=None, integrator: str | None = None) -> C.LabResult:
+def run(out_dir=C.DEFAULT_OUT, backend: str = "auto", **options) -> C.LabResult:
+    """:func:`compute`, then write OUT/hard/ (results.json, hard_cases.png, survival.md)."""
+    return compute(backend, **options).save(out_dir)
+
+
+def compute(backend: str = "auto", cases=None, integrator: str | None = None, progress: bool = False) -> C.LabResult:
+    """Run the catalogue and return its :class:`~lavendersim.labs.common.LabResult`; writes nothing.
+
+    ``progress``: a progress bar on stderr (a TTY only; see :func:`lavendersim.labs.common.progress`)."""
     backend = C.check_backend(backend)
     integrators = list(backends.INTEGRATORS)
     if integrator is not None:
@@ -810,7 +863,7 @@ def run(out_dir=C.DEFAULT_OUT, backend: str = "auto", cases=None, integrator: st
         cases = [V.choice("cases", c, CASES) for c in cases]
     ctx = Context(backend, integrators, integrator)
     outs, walls = {}, {}
-    for name in cases:
+    for name in C.progress(cases, desc="lab hard", unit="case", enabled=progress):
         t0 = time.perf_counter()
         outs[name] = CASE_FUNCS[name](ctx)
         walls[name] = time.perf_counter() - t0
@@ -824,12 +877,15 @@ def run(out_dir=C.DEFAULT_OUT, backend: str = "auto", cases=None, integrator: st
     params = {"backend": backend, "integrators": ", ".join(integrators), "cases": ", ".join(cases),
               "asserted_with": integrator or "the integrator each case names (rk4; implicit_gyro; euler for divergence)",
               "long_runs_backend": f"{fast_backend(backend)} (runs over {C_BACKEND_ABOVE} steps)", **allc.params}
-    fig = _plots(outs, allc.survival, integrators, allc.checks)
-    result = C.finish(NAME, out_dir, figures, params, allc.checks, {"hard_cases.png": fig})
+    ratios = _bound_ratios(allc.checks)
+    figures["worst_figure_over_bound"] = max(ratios.values(), default=0.0)
+    figures["worst_figure_over_bound_name"] = max(ratios, key=ratios.get) if ratios else "none"
+    data = {"survival": allc.survival, "integrators": integrators, "bound_ratios": ratios,
+            "passed": {ch.name: ch.passed for ch in allc.checks}, **_plot_data(outs)}
+    result = C.make_result(NAME, figures, params, allc.checks, {"hard_cases.png": _plots}, data,
+                           headline=("worst_figure_over_bound", "<= 1 (every asserted figure within its bound)"))
     table = survival_table(allc.survival, integrators)
-    path = result.out_dir / "survival.md"
-    path.write_text("# Which integrators survive each hard case\n\n" + table)
-    result.files.append(path)
+    result.extra_files["survival.md"] = "# Which integrators survive each hard case\n\n" + table
     result.survival = allc.survival
     result.survival_table = table
     return result

@@ -97,7 +97,13 @@ def exact(omega_w, t, q0=(0.0, 0.0, 0.0, 1.0)):
     return K.quat_mul(q_rot, np.broadcast_to(np.asarray(q0, float), (len(t), 4)))
 
 
-def run(out_dir=C.DEFAULT_OUT, backend: str = "auto", dt: float = DT, single_axis: bool = False) -> C.LabResult:
+def run(out_dir=C.DEFAULT_OUT, backend: str = "auto", **options) -> C.LabResult:
+    """:func:`compute`, then write OUT/02/ (results.json, orientation.png)."""
+    return compute(backend, **options).save(out_dir)
+
+
+def compute(backend: str = "auto", dt: float = DT, single_axis: bool = False) -> C.LabResult:
+    """Run the lab and return its :class:`~lavendersim.labs.common.LabResult`; writes nothing."""
     C.check_backend(backend)  # validated only: this lab evaluates the generated NumPy kernels, no simulator
     backend = C.NO_SIMULATOR
     dt = V.dt("dt", dt)
@@ -180,12 +186,25 @@ def run(out_dir=C.DEFAULT_OUT, backend: str = "auto", dt: float = DT, single_axi
                 "body omega with the world-form order: error at T in degrees"),
     ]
 
+    data = {"w": w, "dt": dt, "single_axis": single_axis, "t": t, "err_naive": err_naive, "err_quat": err_quat,
+            "err_unnorm": err_unnorm, "norm_unnorm": norm_unnorm, "norm_quat": np.linalg.norm(H["quaternion"], axis=1),
+            "body_err": body_err, "world_err": C.angle_between_deg(K, H4["quaternion"], Q4), "wrong_err": wrong_err}
+    return C.make_result(NAME, figures, params, checks, {"orientation.png": _plot}, data,
+                         headline=("naive_euler_error_deg", f"{NAIVE_DEG:g} ± {NAIVE_TOL:g}° (quaternion "
+                                   f"{QUAT_DEG:g}°) at the chapter's dt"))
+
+
+def _plot(d):
+    w, dt, single_axis, t = d["w"], d["dt"], d["single_axis"], d["t"]
+    err_naive, err_quat, err_unnorm, norm_unnorm = d["err_naive"], d["err_quat"], d["err_unnorm"], d["norm_unnorm"]
+    body_err, wrong_err = d["body_err"], d["wrong_err"]
     fig, ax = C.new_figure(1, 3, size=(14, 4.4),
                            title=f"Constant world ω = {np.array2string(w, precision=3)} rad/s, dt = {dt:g} s"
                                  + (" (single axis)" if single_axis else ""))
     a = ax[0, 0]
     a.semilogy(t[1:], np.maximum(err_naive[1:], 1e-12), label="naive Euler-angle addition", color="tab:red")
-    a.semilogy(t[1:], np.maximum(err_quat[1:], 1e-12), label="quaternion, normalized", color="tab:blue")
+    # the normalized and unnormalized errors coincide: the normalized one is drawn wide underneath
+    a.semilogy(t[1:], np.maximum(err_quat[1:], 1e-12), label="quaternion, normalized", color="tab:blue", lw=4, alpha=0.5)
     a.semilogy(t[1:], np.maximum(err_unnorm[1:], 1e-12), "--", label="quaternion, unnormalized (normalized to compare)",
                color="tab:cyan")
     a.set_xlabel("time t (s)")
@@ -194,18 +213,19 @@ def run(out_dir=C.DEFAULT_OUT, backend: str = "auto", dt: float = DT, single_axi
     a.legend(fontsize=8)
     b = ax[0, 1]
     b.plot(t, norm_unnorm, color="tab:cyan", label="unnormalized")
-    b.plot(t, np.linalg.norm(H["quaternion"], axis=1), color="tab:blue", label="normalized")
+    b.plot(t, d["norm_quat"], color="tab:blue", label="normalized")
     b.set_xlabel("time t (s)")
     b.set_ylabel("|q| (dimensionless)")
     b.set_title(f"norm drift: |q(T)| = {norm_unnorm[-1]:.5f}")
     b.legend(fontsize=8)
     c = ax[0, 2]
-    c.semilogy(t[1:], np.maximum(body_err[1:], 1e-12), color="tab:green", label="body ω, ½ q⊗[ω_b,0] (correct)")
-    c.semilogy(t[1:], np.maximum(C.angle_between_deg(K, H4["quaternion"], Q4)[1:], 1e-12), ":", color="k",
+    c.semilogy(t[1:], np.maximum(body_err[1:], 1e-12), color="tab:green", lw=4, alpha=0.5,
+               label="body ω, ½ q⊗[ω_b,0] (correct; = world form)")
+    c.semilogy(t[1:], np.maximum(d["world_err"][1:], 1e-12), ":", color="k",
                label="world ω, ½ [ω_w,0]⊗q")
     c.semilogy(t[1:], np.maximum(wrong_err[1:], 1e-12), color="tab:orange", label="body ω, ½ [ω_b,0]⊗q (wrong order)")
     c.set_xlabel("time t (s)")
     c.set_ylabel("orientation error (deg)")
     c.set_title("paw-check 4: start 90° about y")
     c.legend(fontsize=8)
-    return C.finish(NAME, out_dir, figures, params, checks, {"orientation.png": fig})
+    return fig

@@ -160,8 +160,14 @@ def _invariants(traj, name, body):
     return L, E
 
 
-def run(out_dir=C.DEFAULT_OUT, backend: str = "auto", dt: float = DT, integrator: str = INTEGRATOR,
-        normalize: bool = True, search: bool = False) -> C.LabResult:
+def run(out_dir=C.DEFAULT_OUT, backend: str = "auto", **options) -> C.LabResult:
+    """:func:`compute`, then write OUT/03/ (results.json, torque_free.png)."""
+    return compute(backend, **options).save(out_dir)
+
+
+def compute(backend: str = "auto", dt: float = DT, integrator: str = INTEGRATOR, normalize: bool = True,
+            search: bool = False) -> C.LabResult:
+    """Run the lab and return its :class:`~lavendersim.labs.common.LabResult`; writes nothing."""
     backend = C.check_backend(backend)
     dt = V.dt("dt", dt)
     integrator = V.choice("integrator", integrator, ("euler", "semi_implicit_euler", "rk4"))
@@ -289,39 +295,59 @@ def run(out_dir=C.DEFAULT_OUT, backend: str = "auto", dt: float = DT, integrator
                                   and h["definition"] == "|w(T)-w0|" for h in hits),
                               "the lab's setup is among the candidate grid's hits"))
 
-    fig, ax = C.new_figure(2, 2, size=(12, 8), title=f"Torque-free rod 0.8 × 0.2 × 0.2 m, {integrator}, dt = {dt:g} s")
+    data = {"integrator": integrator, "dt": dt, "t": t, "wp": wp, "wm": wm, "phase": phase,
+            "principal_change": principal_change, "mixed_change": mixed_change, "L_err": L_err, "E_err": E_err,
+            "momentum_error": momentum_error, "t5": traj5.t, "dev5": dev5, "dev5_t": dev5_t}
+    return C.make_result(NAME, figures, params, checks, {"torque_free.png": _plot}, data,
+                         headline=("mixed_omega_change", f"{MIXED_CHANGE:.2f} ± {MIXED_TOL:g} rad/s (chapter 3.30)"))
+
+
+def _plot(data):
+    integrator, dt, t, wp, wm, phase = data["integrator"], data["dt"], data["t"], data["wp"], data["wm"], data["phase"]
+    principal_change, mixed_change = data["principal_change"], data["mixed_change"]
+    L_err, E_err, momentum_error = data["L_err"], data["E_err"], data["momentum_error"]
+    dev5, dev5_t = data["dev5"], data["dev5_t"]
+    paw_names = ("x", "y", "z")
+    fig, ax = C.new_figure(2, 2, size=(12, 8.5), title=f"Torque-free rod 0.8 × 0.2 × 0.2 m, {integrator}, dt = {dt:g} s")
     a = ax[0, 0]
-    for k, col in enumerate(("tab:red", "tab:green", "tab:blue")):
-        a.plot(t, wp[:, k], color=col, label=f"ω_{'xyz'[k]}")
+    # ω_y and ω_z of the principal spin coincide (both 0): drawn wide/solid and narrow/dashed so both show
+    for k, col, ls, lw in ((0, "tab:red", "-", 1.5), (1, "tab:green", "-", 4.0), (2, "tab:blue", "--", 1.5)):
+        a.plot(t, wp[:, k], color=col, ls=ls, lw=lw, label=f"ω_{'xyz'[k]}" + (" (= ω_z = 0)" if k == 1 else ""))
+    a.set_ylim(-0.4, 3.6)
     a.set_xlabel("time t (s)")
     a.set_ylabel("body ω (rad/s)")
-    a.set_title(f"principal-axis spin ω0 = {list(OMEGA_PRINCIPAL)}: change {principal_change:.1e} rad/s")
-    a.legend(fontsize=8)
+    a.set_title(f"principal-axis spin ω0 = {list(OMEGA_PRINCIPAL)}: change {principal_change:.1e} rad/s", fontsize=10)
+    a.legend(fontsize=8, loc="center right")
     b = ax[0, 1]
     closed_w = np.column_stack([np.full_like(t, OMEGA_MIXED[0]), phase.real, phase.imag])
     for k, col in enumerate(("tab:red", "tab:green", "tab:blue")):
         b.plot(t, wm[:, k], color=col, label=f"ω_{'xyz'[k]} simulated")
         b.plot(t[::150], closed_w[::150, k], "o", color=col, ms=3, mfc="none")
     b.plot([], [], "ko", ms=3, mfc="none", label="closed form (symmetric rod)")
+    b.set_ylim(-2.6, 4.8)         # room for the legend above the curves
     b.set_xlabel("time t (s)")
     b.set_ylabel("body ω (rad/s)")
-    b.set_title(f"mixed-axis ω0 = {list(OMEGA_MIXED)}: |ω(T) − ω(0)| = {mixed_change:.4f} rad/s")
-    b.legend(fontsize=8)
+    b.set_title(f"mixed-axis ω0 = {list(OMEGA_MIXED)}: |ω(T) − ω(0)| = {mixed_change:.4f} rad/s", fontsize=10)
+    b.legend(fontsize=8, loc="upper center", ncols=2)
     c = ax[1, 0]
-    floor = 1e-18
+    floor = 1e-16                 # float64 rounding: smaller relative errors are drawn at the floor
     c.semilogy(t, np.maximum(L_err, floor), label="world angular momentum (relative)")
     c.semilogy(t, np.maximum(E_err, floor), label="kinetic energy (relative)")
     c.axhline(MOMENTUM_LIMIT, color="tab:gray", ls=":", label="chapter bound 4e-7")
+    c.set_ylim(floor / 2, 1e-5)
     c.set_xlabel("time t (s)")
-    c.set_ylabel("relative error (dimensionless)")
-    c.set_title(f"invariants of the mixed spin: max L error {momentum_error:.2e}")
-    c.legend(fontsize=8)
+    c.set_ylabel(f"relative error (values < {floor:.0e} drawn at it)")
+    c.set_title(f"invariants of the mixed spin: max L error {momentum_error:.2e}", fontsize=10)
+    c.legend(fontsize=8, loc="center right")
     d = ax[1, 1]
-    t5 = traj5.t
+    t5 = data["t5"]
+    dfloor = 1e-6
     for ax_name, col in zip(paw_names, ("tab:red", "tab:green", "tab:blue")):
-        d.semilogy(t5, np.maximum(dev5_t[ax_name], floor), color=col, label=f"near {ax_name} (max {dev5[ax_name]:.3g})")
+        d.semilogy(t5[1:], np.maximum(dev5_t[ax_name][1:], dfloor), color=col,
+                   label=f"near {ax_name} (max {dev5[ax_name]:.3g} rad/s)")
+    d.set_ylim(dfloor, 1e2)
     d.set_xlabel("time t (s)")
     d.set_ylabel("|ω_b(t) − ω_b(0)| (rad/s)")
-    d.set_title(f"paw-check 5: box {PAW5_SIZE} m, 3 rad/s + 1%")
-    d.legend(fontsize=8)
-    return C.finish(NAME, out_dir, figures, params, checks, {"torque_free.png": fig})
+    d.set_title(f"paw-check 5: box {PAW5_SIZE} m, 3 rad/s + 1%: y (intermediate) flips", fontsize=10)
+    d.legend(fontsize=8, loc="upper left", ncols=3)
+    return fig

@@ -78,7 +78,13 @@ def _run(model, u_of_t, T, backend, omega_b=(0, 0, 0), Omega=(0, 0, 0), momentum
     return {"t": t, "w": w, "Om": Om, "u": ua, "Lb": Lb, "Lw": Lw}
 
 
-def run(out_dir=C.DEFAULT_OUT, backend: str = "auto", torque: float = TORQUE, T: float = T_END) -> C.LabResult:
+def run(out_dir=C.DEFAULT_OUT, backend: str = "auto", **options) -> C.LabResult:
+    """:func:`compute`, then write OUT/04/ (results.json, reaction_wheel.png)."""
+    return compute(backend, **options).save(out_dir)
+
+
+def compute(backend: str = "auto", torque: float = TORQUE, T: float = T_END) -> C.LabResult:
+    """Run the lab and return its :class:`~lavendersim.labs.common.LabResult`; writes nothing."""
     backend = C.check_backend(backend)
     U = V.positive("torque", torque)
     T = V.positive("T", T)
@@ -166,6 +172,18 @@ def run(out_dir=C.DEFAULT_OUT, backend: str = "auto", torque: float = TORQUE, T:
                   "damping off, joint at the centre: max |ΔL_cube + ΔL_wheels| / max |ΔL_wheels|, world frame"),
     ]
 
+    data = {"pos": pos, "rev": rev, "xy": xy, "gyro": gyro, "sat": sat, "ex": ex, "dLb": dLb, "dLw": dLw,
+            "scale": scale, "exchange_err": exchange_err, "U": U, "ratio": ratio, "coupling_z": coupling_z,
+            "gyro_ratio": gyro_ratio, "model": model, "backend": backend}
+    return C.make_result(NAME, figures, params, checks, {"reaction_wheel.png": _plot}, data,
+                         headline=("momentum_exchange_error", "<= 1e-9 (ΔL_cube = −ΔL_wheels; wheel and cube "
+                                   "spin opposite ways)"))
+
+
+def _plot(d):
+    pos, rev, xy, gyro, sat, ex = d["pos"], d["rev"], d["xy"], d["gyro"], d["sat"], d["ex"]
+    dLb, dLw, scale, exchange_err, U, ratio = d["dLb"], d["dLw"], d["scale"], d["exchange_err"], d["U"], d["ratio"]
+    coupling_z, gyro_ratio, model, backend = d["coupling_z"], d["gyro_ratio"], d["model"], d["backend"]
     fig, ax = C.new_figure(2, 3, size=(15, 8), title=f"Experiment 04: reaction-wheel cube ({backend} backend)")
     a = ax[0, 0]
     a.plot(pos["t"], pos["w"][:, 0], color="tab:blue", label="cube ω_x (< 0)")
@@ -180,8 +198,9 @@ def run(out_dir=C.DEFAULT_OUT, backend: str = "auto", torque: float = TORQUE, T:
     a.axhline(0, color="k", lw=0.5); a.set_xlabel("t (s)"); a.set_ylabel("rad/s"); a.legend(fontsize=7)
     a.set_title("reversed command reverses both")
     a = ax[0, 2]
-    for i, c in enumerate("xyz"):
-        a.plot(xy["t"], xy["w"][:, i], label=f"two wheels: ω_{c}")
+    for i, c in enumerate("xyz"):   # equal wheels: ω_x = ω_y, so ω_x is drawn wide underneath
+        a.plot(xy["t"], xy["w"][:, i], lw=4 if i == 0 else 1.5, alpha=0.5 if i == 0 else 1.0,
+               label=f"two wheels: ω_{c}" + (" (= ω_y)" if i == 0 else ""))
     for i, c in enumerate("xyz"):
         a.plot(gyro["t"], gyro["w"][:, i], "--", label=f"x cmd, z wheel at 100 rad/s: ω_{c}")
     a.set_xlabel("t (s)"); a.set_ylabel("cube ω_b (rad/s)"); a.legend(fontsize=7)
@@ -202,8 +221,8 @@ def run(out_dir=C.DEFAULT_OUT, backend: str = "auto", torque: float = TORQUE, T:
     a.set_xlabel("t (s)"); a.set_ylabel("kg·m²/s (world)"); a.legend(fontsize=7)
     a.set_title("no damping: ΔL_cube (colour) = −ΔL_wheels (dotted)")
     a = ax[1, 2]
-    a.semilogy(ex["t"][1:], np.maximum(np.linalg.norm(dLb + dLw, axis=1)[1:] / scale, 1e-18))
-    a.axhline(1e-9, color="tab:red", ls=":", label="1e-9")
+    a.semilogy(ex["t"][1:], np.maximum(np.linalg.norm(dLb + dLw, axis=1)[1:] / scale, 1e-18), label="measured")
+    a.axhline(1e-9, color="tab:red", ls=":", label="bound 1e-9")
     a.set_xlabel("t (s)"); a.set_ylabel("|ΔL_cube + ΔL_wheels| / max|ΔL_wheels|"); a.legend(fontsize=7)
     a.set_title(f"exchange error {exchange_err:.1e}")
-    return C.finish(NAME, out_dir, figures, params, checks, {"reaction_wheel.png": fig})
+    return fig

@@ -15,7 +15,6 @@ from __future__ import annotations
 import numpy as np
 
 from lavendersim import particles as P
-from lavendersim import validate as V
 
 from . import common as C
 
@@ -53,7 +52,13 @@ def _rel(a, b) -> float:
     return float(np.max(np.abs(a - b)) / max(float(np.max(np.abs(b))), 1e-300))
 
 
-def run(out_dir=C.DEFAULT_OUT, backend: str = "auto", mass_scale: float = 2.0) -> C.LabResult:
+def run(out_dir=C.DEFAULT_OUT, backend: str = "auto", **options) -> C.LabResult:
+    """:func:`compute`, then write OUT/momentum/ (results.json, momentum.png)."""
+    return compute(backend, **options).save(out_dir)
+
+
+def compute(backend: str = "auto", mass_scale: float = 2.0) -> C.LabResult:
+    """Run the lab and return its :class:`~lavendersim.labs.common.LabResult`; writes nothing."""
     C.check_backend(backend)  # validated only: this lab evaluates the generated NumPy kernels, no simulator
     backend = C.NO_SIMULATOR
     s = C.bounded("mass_scale", mass_scale, positive=True)
@@ -119,17 +124,41 @@ def run(out_dir=C.DEFAULT_OUT, backend: str = "auto", mass_scale: float = 2.0) -
         C.at_most("free_p_equals_m_vcom", _rel(p_free, M * v_com_free), REL_TOL, "non-rigid set (relative)"),
     ]
 
-    fig, ax = C.new_figure(1, 2, size=(11, 4.6), title="Particle system: COM, p and L about the COM")
+    data = {"m": m, "r": r, "v": v, "r_com": r_com, "v_com": v_com, "p": p, "p2": p2, "L": L, "L2": L2,
+            "I_omega": I_omega, "s": s}
+    return C.make_result(NAME, figures, params, checks, {"momentum.png": _plot}, data,
+                         headline=("L_minus_I_omega_rel", "<= 1e-12 (L about the COM = I ω)"))
+
+
+def _plot(d):
+    m, r, v, r_com, v_com = d["m"], d["r"], d["v"], d["r_com"], d["v_com"]
+    p, p2, L, L2, I_omega, s = d["p"], d["p2"], d["L"], d["L2"], d["I_omega"], d["s"]
+    fig, ax = C.new_figure(1, 2, size=(12, 5.6), title="Particle system: COM, p and L about the COM")
+
+    from matplotlib.lines import Line2D
+
     a = ax[0, 0]
-    a.scatter(r[:, 0], r[:, 1], s=80 * m, color="tab:blue", alpha=0.6, label="particles (area ∝ mass)")
-    a.quiver(r[:, 0], r[:, 1], v[:, 0], v[:, 1], angles="xy", scale_units="xy", scale=5, color="tab:blue", width=0.004)
-    a.plot(r_com[0], r_com[1], "k+", ms=14, mew=2, label="COM (unchanged when masses double)")
-    a.quiver([r_com[0]], [r_com[1]], [v_com[0]], [v_com[1]], angles="xy", scale_units="xy", scale=5, color="k", width=0.006)
+    scale = 5.0                   # quiver: 1 m/s drawn as 0.2 m
+    a.scatter(r[:, 0], r[:, 1], s=80 * m, color="tab:blue", alpha=0.6)
+    a.quiver(r[:, 0], r[:, 1], v[:, 0], v[:, 1], angles="xy", scale_units="xy", scale=scale, color="tab:blue", width=0.005)
+    a.plot(r_com[0], r_com[1], "k+", ms=14, mew=2)
+    a.quiver([r_com[0]], [r_com[1]], [v_com[0]], [v_com[1]], angles="xy", scale_units="xy", scale=scale, color="k",
+             width=0.007)
+    # the limits hold every point and every arrow tip, with a margin
+    pts = np.vstack([r[:, :2], r[:, :2] + v[:, :2] / scale, [r_com[:2]], [r_com[:2] + v_com[:2] / scale]])
+    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    pad = 0.08 * max(hi - lo)
+    a.set_xlim(lo[0] - pad, hi[0] + pad)
+    a.set_ylim(lo[1] - pad, hi[1] + pad)
     a.set_xlabel("x (m)")
     a.set_ylabel("y (m)")
     a.set_aspect("equal")
-    a.set_title("positions, velocity arrows (0.2 m per m/s)")
-    a.legend(loc="lower left", fontsize=8)
+    a.set_title("positions and velocities (top view, 0.2 m per m/s)", fontsize=10)
+    handles = [Line2D([], [], ls="", marker="o", color="tab:blue", alpha=0.6, ms=8, label="particle (area ∝ mass)"),
+               Line2D([], [], color="tab:blue", lw=1.5, label="particle velocity v_i"),
+               Line2D([], [], ls="", marker="+", color="k", ms=12, mew=2, label="COM (unchanged when masses double)"),
+               Line2D([], [], color="k", lw=2.5, label="COM velocity v_COM")]
+    a.legend(handles=handles, fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.14), ncols=2)
     b = ax[0, 1]
     xs = np.arange(3)
     wdt = 0.2
@@ -144,4 +173,4 @@ def run(out_dir=C.DEFAULT_OUT, backend: str = "auto", mass_scale: float = 2.0) -
     b.set_ylabel("momentum (kg·m/s, kg·m²/s)")
     b.set_title("paw-check 1: p and L scale with the masses")
     b.legend(fontsize=8)
-    return C.finish(NAME, out_dir, figures, params, checks, {"momentum.png": fig})
+    return fig
