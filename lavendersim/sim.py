@@ -69,6 +69,7 @@ n_steps per call is at most MAX_STEPS.
 """
 from __future__ import annotations
 
+import sys
 import threading
 import warnings
 
@@ -85,10 +86,41 @@ from .generated import tableaux as TB
 from .kernels import K
 from .scene import Scene
 
-
 MAX_STEPS = 2**53          # steps per call and in total: the step counter and t = steps*dt stay exact in float64
 CHUNK_WORK = 2**20         # right-hand-side evaluations (summed over bodies) per backend call between checks
 ON_BOUND = ("raise", "warn")
+FAST_STEP_WORK = 4096      # step() runs inside C (holding the GIL) for scenes of at most this many evaluations per step
+
+
+class _Counters:
+    """steps and rhs_evals of a Sim without the C stepper (which keeps them itself)."""
+
+    __slots__ = ("steps", "rhs_evals")
+
+    def __init__(self):
+        self.steps = 0
+        self.rhs_evals = 0
+
+
+class _Guard:
+    """The Sim's lock (reentrant); while held it marks the C stepper busy, so its fast path steps aside."""
+
+    __slots__ = ("_lock", "_fast")
+
+    def __init__(self, fast):
+        self._lock, self._fast = threading.RLock(), fast
+
+    def __enter__(self):
+        self._lock.acquire()
+        if self._fast is not None:
+            self._fast.busy += 1
+        return self
+
+    def __exit__(self, *exc):
+        if self._fast is not None:
+            self._fast.busy -= 1
+        self._lock.release()
+        return False
 
 
 def validity_bound(integrator: str) -> tuple[float, float] | None:
@@ -184,13 +216,59 @@ class Sim:
             if not max_growth > 1.0:
                 raise V.LavenderInputError("max_growth", "must be > 1 (or None: no growth check)", f", got {max_growth!r}")
         self.max_growth = max_growth
-        self._lock = threading.RLock()
         self._has_models = bool(self._models.rows[:, LY.MODEL_KIND].any())
         self._checked = None       # the last state that passed the checks (skips the re-check before a call)
         self._setup_checks()
-        self.t = 0.0
-        self.steps = 0
-        self.rhs_evals = 0
+        self._fast = self._make_stepper()
+        self._ctr = self._fast if self._fast is not None else _Counters()
+        self._lock = _Guard(self._fast)
+        if self._fast is not None:   # sim.step() straight into C; the Python path only when C steps aside
+            self._fast.set_fallback(self._step_slow)
+            self.step = self._fast.step_or_fallback
+
+    # ---- counters (kept by the C stepper when there is one) --------------------------------
+    @property
+    def steps(self) -> int:
+        """Steps taken so far."""
+        return self._ctr.steps
+
+    @steps.setter
+    def steps(self, n: int) -> None:
+        self._ctr.steps = n
+
+    @property
+    def t(self) -> float:
+        """Simulated time, s: steps * dt."""
+        return self._ctr.steps * self.dt
+
+    @property
+    def rhs_evals(self) -> int:
+        """Right-hand-side evaluations so far (see the module docstring)."""
+        return self._ctr.rhs_evals
+
+    @rhs_evals.setter
+    def rhs_evals(self, n: int) -> None:
+        self._ctr.rhs_evals = n
+
+    def _make_stepper(self):
+        """The C fast path of step() (lavendersim/csrc/fast_step.c), or None where it does not apply: not the C
+        backend, an adaptive integrator (unbounded work per step), a free wheeled body under the growth check
+        (its |L| is computed in Python every step), a scene larger than FAST_STEP_WORK evaluations per step (the
+        fast path holds the GIL), or a Python without the GIL."""
+        gil = getattr(sys, "_is_gil_enabled", lambda: True)()
+        if (self.backend.name != "c" or self._per_step is None or not gil
+                or (self._free_wheels_idx and self.max_growth is not None)
+                or len(self.names) * self._per_step > FAST_STEP_WORK):
+            return None
+        from .backends import c_backend
+
+        m = self._models if self._has_models else None
+        models = (None,) * 4 if m is None else (m.rows, m.Omega, m.command, m.applied)
+        bound = np.inf if self._bound is None else float(self._bound[0])
+        return c_backend._c.Stepper(self.x, self.params, self.effects if self.effects.size else self.effects.reshape(0, 2),
+                                    c_backend.INTEGRATOR_CODES[self.integrator], 1 if self.normalize else 0, float(self.dt),
+                                    int(self._per_step), MAX_STEPS, self._wdt_scale, bound, self._w_fast,
+                                    c_backend.user_effect_table(self.effects), *models)
 
     # ---- divergence checks ---------------------------------------------------------------
     def _setup_checks(self) -> None:
@@ -242,8 +320,14 @@ class Sim:
         self._E0, self._L0 = self._invariants(self.x, self._models.Omega)
         nb = len(self.names)
         self._w_safe = np.zeros(nb)
-        if self._free_any and self.max_growth is not None:
-            f = self._free
+        # the C stepper's copy: +inf where no growth check can fire (bodies not free, or max_growth None)
+        self._w_fast = np.full(nb, np.inf)
+        self._safe_rates(self._free)
+
+    def _safe_rates(self, f: np.ndarray) -> None:
+        """w_safe (see _reference) of the free bodies selected by the boolean mask f, from the current E0."""
+        f = f & self._free
+        if f.any() and self.max_growth is not None:
             I = self.params[f][:, LY.PARAM_I_B]
             with np.errstate(over="ignore", invalid="ignore"):
                 T = K.kinetic_energy(self.params[f, LY.PARAM_M], I, self.x[f][:, LY.STATE_V_W], np.zeros((int(f.sum()), 3)))
@@ -251,6 +335,7 @@ class Sim:
                                              np.zeros((int(f.sum()), 3)), np.tile([1.0, 0.0, 0.0], (int(f.sum()), 1)))
                 room = np.maximum(self.max_growth * self._E0[f] - T, 0.0)
                 self._w_safe[f] = np.sqrt(room / half_Imax) * (1 - 1e-12)   # rounding margin: never skip a violation
+            self._w_fast[f] = self._w_safe[f]
 
     def _wdt(self, x: np.ndarray, w: np.ndarray | None = None) -> np.ndarray:
         """Per body |omega|*dt*(I_max/I_min)**p, the quantity the validity bound limits (w: |omega| if known)."""
@@ -316,10 +401,10 @@ class Sim:
     def _snapshot(self) -> tuple:
         m, ad = self._models, self._adaptive
         return (self.x.copy(), m.Omega.copy(), m.applied.copy(),
-                None if ad is None else (ad.h.copy(), ad.nfev.copy()), self.steps, self.t, self.rhs_evals)
+                None if ad is None else (ad.h.copy(), ad.nfev.copy()), self.steps, self.rhs_evals)
 
     def _restore(self, snap: tuple) -> None:
-        x, W, u, ad, self.steps, self.t, self.rhs_evals = snap
+        x, W, u, ad, self.steps, self.rhs_evals = snap
         self.x[...] = x
         self._models.Omega[...] = W
         self._models.applied[...] = u
@@ -412,7 +497,6 @@ class Sim:
                              *(() if ad is None else (ad,)))
         self.rhs_evals += n * self._per_step if ad is None else int(np.max(ad.nfev - before, initial=0))
         self.steps += n
-        self.t = self.steps * self.dt
 
     def _locate(self, limit: int) -> tuple[int, int, str] | None:
         """From the current state (which passes the checks), the first k in 1..limit whose state after k
@@ -459,7 +543,7 @@ class Sim:
         try:
             # before stepping: the bound (the state may have been written since the last check); the growth
             # check ran on the end state of the previous call
-            if self._checked is None or not np.array_equal(self._checked, self.x):
+            if not self._is_checked():
                 v = self._violation(self.x, self._models.Omega, growth=False)
                 if v is not None:
                     raise fail(0, v[0], "before the step: " + v[1])
@@ -485,15 +569,36 @@ class Sim:
                     del end
                     raise fail(done + hit[0] - 1, hit[1], hit[2]) from None
                 done += m
-            self._checked = self.x.copy()
+            self._mark_checked()
         except DivergenceError:
             raise
         except BaseException:           # KeyboardInterrupt between chunks, or any error: nothing half-applied
             self._restore(start)
             raise
 
+    def _is_checked(self) -> bool:
+        if self._fast is not None:
+            return self._fast.is_checked()
+        return self._checked is not None and np.array_equal(self._checked, self.x)
+
+    def _mark_checked(self) -> None:
+        if self._fast is not None:
+            self._fast.mark_checked()
+        else:
+            self._checked = self.x.copy()
+
     def step(self) -> None:
-        """Advance one step (see run)."""
+        """Advance one step (see run).
+
+        On the C backend a step whose every check passes is taken inside C (fast_step.c); any other step
+        (a check fails, the state was written since the last check, another thread holds the Sim) takes the
+        Python path, which raises or warns as run does."""
+        f = self._fast
+        if f is not None and f.step():
+            return
+        self._step_slow()
+
+    def _step_slow(self) -> None:
         with self._lock:
             self._advance(1)
 
@@ -601,6 +706,7 @@ class Sim:
                 self._models.Omega[i] = W
             E0, L0 = self._invariants(self.x, self._models.Omega)
             self._E0[i], self._L0[i] = E0[i], L0[i]
+            self._safe_rates(np.arange(len(self.names)) == i)   # the no-work region follows the new E0   # the no-work region follows the new E0
 
     # ---- reaction wheels ------------------------------------------------------------------
     def _wheeled(self, name: str) -> int:

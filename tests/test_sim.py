@@ -155,3 +155,120 @@ def test_omega_world_and_body_agree(backend):
     sim = lv.Sim(s, backend=backend)
     np.testing.assert_allclose(sim.state("rod").omega_b, [-1.0, 0, 0], atol=1e-15)
     np.testing.assert_allclose(sim.state("rod").omega_w, [0, 0, 1.0], atol=1e-15)
+
+
+# ------------------------------------------------------------------ sim.step() inside C (issue 12)
+
+def _scenes():
+    from lavendersim import control as lc
+
+    plain = tumbling()
+    forced = tumbling(omega_b=(0.3, 2.0, 0.1))
+    forced.add_effect("gravity", g_w=(0.0, 0.0, -9.81))
+    forced.add_effect("angular_damping", body="b", c=0.05)
+    cube = lc.CubeModel(scenario="corner", damping=1e-3)
+    return {"plain": (plain, "rk4"), "forced": (forced, "rk4"), "plain_euler": (plain, "euler"),
+            "splitting": (plain, "splitting"), "implicit_gyro": (forced, "implicit_gyro"), "cube": (cube, "rk4")}
+
+
+def _sim(scene, integrator):
+    if not isinstance(scene, lv.Scene):   # a CubeModel: a wheeled body on a joint
+        sim = scene.make_sim(scene.upright_q(), (0.2, -0.1, 0.3), (5.0, -3.0, 1.0), dt=1e-3, backend="c")
+        sim.set_wheel_command("cube", (0.01, -0.02, 0.005))
+        return sim
+    return lv.Sim(scene, dt=1e-3, integrator=integrator, backend="c")
+
+
+@pytest.mark.parametrize("case", list(_scenes()))
+def test_step_inside_c_equals_the_python_path_bitwise(case):
+    scene, integrator = _scenes()[case]
+    fast, slow = _sim(scene, integrator), _sim(scene, integrator)
+    assert fast._fast is not None, "the C fast path should serve this scene"
+    for _ in range(300):
+        fast.step()
+    slow.run(300)                       # the Python path (chunked checks)
+    assert np.array_equal(fast.x, slow.x)
+    assert np.array_equal(fast._models.Omega, slow._models.Omega)
+    assert (fast.steps, fast.t, fast.rhs_evals) == (slow.steps, slow.t, slow.rhs_evals) == (300, slow.t, slow.rhs_evals)
+    assert fast.t == 300 * fast.dt
+    # a state written between steps is checked again, then stepped as the Python path does
+    name = fast.names[0]
+    for s in (fast, slow):
+        s.set_state(name, omega_b=(0.4, -0.2, 0.1))
+    for _ in range(5):
+        fast.step()
+        slow.run(1)
+    assert np.array_equal(fast.x, slow.x)
+
+
+def test_step_in_a_loop_raises_at_the_first_bad_step_and_restores_it():
+    sim = lv.Sim(tumbling(omega_b=(0.5, 0.5, 50.0)), dt=0.1, integrator="euler", backend="c", on_bound="raise",
+                 max_growth=None)
+    with pytest.raises(lv.DivergenceError) as e:   # beyond euler's bound already: the pre-step check
+        sim.step()
+    assert sim.steps == 0 and "validity bound" in str(e.value)
+    sim = lv.Sim(tumbling(omega_b=(0.2, 0.3, 8.0)), dt=1e-2, integrator="euler", backend="c", max_growth=2.0)
+    before = None
+    for k in range(100_000):
+        before = (sim.x.copy(), sim.steps, sim.rhs_evals)
+        try:
+            sim.step()
+        except lv.DivergenceError as exc:
+            assert exc.step == k == before[1]
+            assert "grew" in exc.cause or "validity bound" in exc.cause
+            break
+    else:
+        pytest.fail("euler never diverged")
+    assert np.array_equal(sim.x, before[0]) and (sim.steps, sim.rhs_evals) == before[1:]
+    with pytest.raises(lv.DivergenceError):        # and again: nothing was half-applied
+        sim.step()
+    assert np.array_equal(sim.x, before[0])
+
+
+def test_set_state_moves_the_growth_reference_and_its_no_work_region():
+    """After set_state lowers a free body's energy, growth is measured from the new energy: the same
+    step fails as in a Sim built at that state (the no-work region |omega| <= w_safe follows E0)."""
+    def run(sim):
+        with pytest.raises(lv.DivergenceError) as e:
+            sim.run(20_000)
+        return e.value.step, e.value.cause.split(" (")[0]
+
+    for backend in BACKENDS:
+        a = lv.Sim(tumbling(omega_b=(0.2, 0.3, 9.0)), dt=1e-2, integrator="euler", backend=backend, max_growth=1.5)
+        a.set_state("b", omega_b=(0.1, 0.2, 3.0))
+        b = lv.Sim(tumbling(omega_b=(0.1, 0.2, 3.0)), dt=1e-2, integrator="euler", backend=backend, max_growth=1.5)
+        assert run(a) == run(b)
+
+
+def test_two_threads_stepping_one_sim_never_lose_a_step():
+    import threading
+
+    n = 20_000
+    ref = lv.Sim(tumbling(), dt=1e-3, backend="c")
+    ref.run(3 * n)
+    sim = lv.Sim(tumbling(), dt=1e-3, backend="c")
+    why = {}
+
+    def stepper(k):
+        try:
+            for _ in range(n):
+                sim.step()
+            why[k] = "done"
+        except BaseException as exc:  # recorded, asserted below
+            why[k] = repr(exc)
+
+    def runner():
+        try:
+            for _ in range(n // 100):
+                sim.run(100)
+            why["run"] = "done"
+        except BaseException as exc:
+            why["run"] = repr(exc)
+    threads = [threading.Thread(target=stepper, args=(k,)) for k in range(2)] + [threading.Thread(target=runner)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(timeout=300)
+    assert why == {0: "done", 1: "done", "run": "done"}
+    assert sim.steps == 3 * n
+    assert np.array_equal(sim.x, ref.x)

@@ -70,6 +70,7 @@ TARGETS = {
     "batched_ns_per_body_step": 40.0,  # at most, every N >= 1e3
     "torque_free_vs_handwritten": 1.15,  # LavenderSim C / hand-written, at most
     "per_body_effect_ratio": 1.5,      # one applied_torque per body / plain body, ns per body-step, at most
+    "python_step_c_ns": 1000.0,        # one Python sim.step() on the C backend, at most (issue 12)
 }
 PER_BODY_SIZES_FULL = (1, 100, 10_000)
 PER_BODY_SIZES_QUICK = (1, 100)
@@ -442,6 +443,10 @@ def run(quick: bool = False, rounds: int | None = None, use_mujoco: bool = True)
         "python_step_c": (lambda: [sim_pc.step() for _ in range(n_py)], n_py),
         "python_step_numpy": (lambda: [sim_pn.step() for _ in range(max(1, n_py // 10))], max(1, n_py // 10)),
     }
+    if sim_c.backend.name == "c":   # the bare C call of one step (no checks, no snapshot) beside sim.step()
+        from ..backends import c_backend as _cb
+        xr, pr, er = sim_c.x.copy(), sim_c.params, sim_c.effects
+        cases["c_call_1step"] = (lambda: [_cb._c.simulate(xr, pr, er, 2, 1, DT, 1) for _ in range(n_py)], n_py)
     if kernel is not None:
         xh, xhc, I_b = initial_state(), initial_state(), inertia()
         cases["handwritten_c"] = (lambda: kernel.advance(xh, I_b, DT, n_c), n_c)
@@ -587,6 +592,11 @@ def standing(res: dict) -> list[dict]:
     for p in res.get("per_body_effects", []):
         out.append(_line(f"one applied_torque per body / plain body, N = {p['n_bodies']:g}", p["ratio"],
                          TARGETS["per_body_effect_ratio"], "max", "x", "ns per body-step, same run"))
+    py, bare, mj_roll1 = _ns(res, "python_step_c"), _ns(res, "c_call_1step"), _ns(res, "mujoco_RK4_rollout")
+    basis = "min over rounds" + ("" if bare is None else f"; the bare C call of one step {bare / 1e3:.3f} µs")
+    if mj_step is not None and mj_roll1 is not None:
+        basis += f"; mj_step's Python-call overhead {(mj_step - mj_roll1) / 1e3:.3f} µs (mj_step loop − rollout per step)"
+    out.append(_line("one Python sim.step(), c backend", py, TARGETS["python_step_c_ns"], "max", "ns/call", basis))
     return out
 
 
@@ -619,6 +629,7 @@ def report(res: dict) -> str:
             ("handwritten_c_checked", "hand-written + finite check each step"),
             ("numpy_rk4", f"LavenderSim NumPy, Sim.run({s['numpy_rk4']['units_per_call']})"),
             ("python_step_c", "one Python sim.step() call, c backend"),
+            ("c_call_1step", "the bare C call of one step (_c.simulate)"),
             ("python_step_numpy", "one Python sim.step() call, numpy backend")]
     for integ in MUJOCO_INTEGRATORS:
         rows += [(f"mujoco_{integ}_mj_step", f"MuJoCo {integ}: mj_step in a Python loop"),

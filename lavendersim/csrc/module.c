@@ -416,6 +416,8 @@ static PyMethodDef methods[] = {
      "holds its last finite state (and wheel rates), later bodies are untouched."},
     {NULL, NULL, 0, NULL}};
 
+int lv_add_stepper_type(PyObject *m); /* fast_step.c: the Stepper type behind Sim.step() */
+
 static struct PyModuleDef moduledef = {
     PyModuleDef_HEAD_INIT, "_lavender_c",
     "LavenderSim compiled backend: the generated C kernels and the C stepping loop.", -1, methods,
@@ -436,7 +438,8 @@ PyMODINIT_FUNC PyInit__lavender_c(void)
         PyModule_AddIntConstant(m, "SPLITTING", LV_INTEGRATOR_SPLITTING) != 0 ||
         PyModule_AddIntConstant(m, "IMPLICIT_GYRO", LV_INTEGRATOR_IMPLICIT_GYRO) != 0 ||
         PyModule_AddIntConstant(m, "SPLITTING4", LV_INTEGRATOR_SPLITTING4) != 0 ||
-        PyModule_AddIntConstant(m, "RK4_EXPMAP", LV_INTEGRATOR_RK4_EXPMAP) != 0) {
+        PyModule_AddIntConstant(m, "RK4_EXPMAP", LV_INTEGRATOR_RK4_EXPMAP) != 0 ||
+        lv_add_stepper_type(m) != 0) {
         Py_DECREF(m);
         return NULL;
     }
