@@ -92,6 +92,16 @@ ON_BOUND = ("raise", "warn")
 FAST_STEP_WORK = 4096      # step() runs inside C (holding the GIL) for scenes of at most this many evaluations per step
 
 
+def _read_only_views(x: np.ndarray, Omega: np.ndarray) -> tuple[np.ndarray, ...]:
+    """(x, p_w, q, v_w, omega_b, Omega) as read-only views sharing memory with x and Omega."""
+    out = []
+    for v in (x, x[:, LY.STATE_P_W], x[:, LY.STATE_Q], x[:, LY.STATE_V_W], x[:, LY.STATE_OMEGA_B], Omega):
+        v = v.view()
+        v.flags.writeable = False
+        out.append(v)
+    return tuple(out)
+
+
 class _Counters:
     """steps and rhs_evals of a Sim without the C stepper (which keeps them itself)."""
 
@@ -134,14 +144,14 @@ class Trajectory:
     """Recorded samples: t (T,), x (T, nb, 13), Omega (T, nb, 3) wheel rates (zeros without wheels)."""
 
     def __init__(self, names: list[str], t: np.ndarray, x: np.ndarray, Omega: np.ndarray | None = None):
-        self.names, self.t, self.x = names, t, x
+        self.names, self.t, self._x = names, t, x
         self.Omega = np.zeros(x.shape[:-1] + (3,)) if Omega is None else Omega
 
     def body(self, name: str) -> BodyState:
         if name not in self.names:
             raise V.LavenderInputError("body", f"unknown body {name!r}; bodies: {', '.join(self.names)}")
         i = self.names.index(name)
-        return BodyState(self.x[:, i], self.Omega[:, i])
+        return BodyState(self._x[:, i], self.Omega[:, i])
 
 
 class Sim:
@@ -186,7 +196,8 @@ class Sim:
         self.bodies = dict(scene.bodies)
         for e in scene.effects:  # an effect no declaration printed is an error, never a no-op
             effects_mod.check_declared(e)
-        self.x, self.params, self.effects = scene.arrays()
+        self._x, self.params, self.effects = scene.arrays()
+        self._index = {name: i for i, name in enumerate(self.names)}
         self._effect_objs = list(scene.effects)
         self._models = self._build_models(scene)
         self._adaptive = None
@@ -222,9 +233,44 @@ class Sim:
         self._fast = self._make_stepper()
         self._ctr = self._fast if self._fast is not None else _Counters()
         self._lock = _Guard(self._fast)
+        self._views = _read_only_views(self._x, self._models.Omega)
         if self._fast is not None:   # sim.step() straight into C; the Python path only when C steps aside
             self._fast.set_fallback(self._step_slow)
             self.step = self._fast.step_or_fallback
+
+    # ---- zero-copy views of the state (read-only: set_state is the writer) ------------------
+    @property
+    def x(self) -> np.ndarray:
+        """The state of every body, (nb, 13) = [p_w(3), q(4), v_w(3), omega_b(3)] per row (layout
+        generated/layout.py), in the order of `names`. A read-only view of the array the backends advance
+        in place: no copy, always current; write through set_state (which validates), never through it."""
+        return self._views[0]
+
+    @property
+    def p_w(self) -> np.ndarray:
+        """COM positions, world frame, m, (nb, 3): a read-only view of x (see x)."""
+        return self._views[1]
+
+    @property
+    def q(self) -> np.ndarray:
+        """Orientations R_WB as quaternions (x, y, z, w), (nb, 4): a read-only view of x (see x)."""
+        return self._views[2]
+
+    @property
+    def v_w(self) -> np.ndarray:
+        """COM velocities, world frame, m/s, (nb, 3): a read-only view of x (see x)."""
+        return self._views[3]
+
+    @property
+    def omega_b(self) -> np.ndarray:
+        """Angular velocities (body rates), body frame, rad/s, (nb, 3): a read-only view of x (see x)."""
+        return self._views[4]
+
+    @property
+    def Omega(self) -> np.ndarray:
+        """Reaction-wheel rates relative to their body, rad/s, (nb, 3) (zeros for a body without wheels):
+        a read-only view (set_state(name, Omega=...) writes them)."""
+        return self._views[5]
 
     # ---- counters (kept by the C stepper when there is one) --------------------------------
     @property
@@ -265,7 +311,7 @@ class Sim:
         m = self._models if self._has_models else None
         models = (None,) * 4 if m is None else (m.rows, m.Omega, m.command, m.applied)
         bound = np.inf if self._bound is None else float(self._bound[0])
-        return c_backend._c.Stepper(self.x, self.params, self.effects if self.effects.size else self.effects.reshape(0, 2),
+        return c_backend._c.Stepper(self._x, self.params, self.effects if self.effects.size else self.effects.reshape(0, 2),
                                     c_backend.INTEGRATOR_CODES[self.integrator], 1 if self.normalize else 0, float(self.dt),
                                     int(self._per_step), MAX_STEPS, self._wdt_scale, bound, self._w_fast,
                                     c_backend.user_effect_table(self.effects), *models)
@@ -317,7 +363,7 @@ class Sim:
         largest |omega| at which its energy cannot exceed max_growth * E0 (E <= T_translation + I_max |omega|^2 / 2,
         both terms from the kinetic_energy kernel; v is constant on a force-free body): the check evaluates the
         kernel only for a body above it, so it costs nothing while a run is far from its limit."""
-        self._E0, self._L0 = self._invariants(self.x, self._models.Omega)
+        self._E0, self._L0 = self._invariants(self._x, self._models.Omega)
         nb = len(self.names)
         self._w_safe = np.zeros(nb)
         # the C stepper's copy: +inf where no growth check can fire (bodies not free, or max_growth None)
@@ -330,7 +376,7 @@ class Sim:
         if f.any() and self.max_growth is not None:
             I = self.params[f][:, LY.PARAM_I_B]
             with np.errstate(over="ignore", invalid="ignore"):
-                T = K.kinetic_energy(self.params[f, LY.PARAM_M], I, self.x[f][:, LY.STATE_V_W], np.zeros((int(f.sum()), 3)))
+                T = K.kinetic_energy(self.params[f, LY.PARAM_M], I, self._x[f][:, LY.STATE_V_W], np.zeros((int(f.sum()), 3)))
                 half_Imax = K.kinetic_energy(np.zeros(int(f.sum())), np.repeat(I.max(axis=1)[:, None], 3, axis=1),
                                              np.zeros((int(f.sum()), 3)), np.tile([1.0, 0.0, 0.0], (int(f.sum()), 1)))
                 room = np.maximum(self.max_growth * self._E0[f] - T, 0.0)
@@ -400,12 +446,12 @@ class Sim:
 
     def _snapshot(self) -> tuple:
         m, ad = self._models, self._adaptive
-        return (self.x.copy(), m.Omega.copy(), m.applied.copy(),
+        return (self._x.copy(), m.Omega.copy(), m.applied.copy(),
                 None if ad is None else (ad.h.copy(), ad.nfev.copy()), self.steps, self.rhs_evals)
 
     def _restore(self, snap: tuple) -> None:
         x, W, u, ad, self.steps, self.rhs_evals = snap
-        self.x[...] = x
+        self._x[...] = x
         self._models.Omega[...] = W
         self._models.applied[...] = u
         if ad is not None:
@@ -431,10 +477,10 @@ class Sim:
             if "spherical_joint" in me:
                 kind |= KIND_JOINT
                 anchor = me["spherical_joint"].values["anchor_w"]
-                r_b = K.quat_to_matrix(self.x[i, LY.STATE_Q]).T @ (self.x[i, LY.STATE_P_W] - anchor)
+                r_b = K.quat_to_matrix(self._x[i, LY.STATE_Q]).T @ (self._x[i, LY.STATE_P_W] - anchor)
                 I_p = K.parallel_axis(np.diag(I_b), m, -r_b)
-                self.x[i, LY.STATE_P_W], self.x[i, LY.STATE_V_W] = K.pivot_kinematics(
-                    self.x[i, LY.STATE_Q], self.x[i, LY.STATE_OMEGA_B], anchor, r_b)
+                self._x[i, LY.STATE_P_W], self._x[i, LY.STATE_V_W] = K.pivot_kinematics(
+                    self._x[i, LY.STATE_Q], self._x[i, LY.STATE_OMEGA_B], anchor, r_b)
             if "reaction_wheels" in me:
                 kind |= KIND_WHEELS
                 w = me["reaction_wheels"].values
@@ -493,7 +539,7 @@ class Sim:
         models = self._models if self._has_models else None
         ad = self._adaptive
         before = None if ad is None else ad.nfev.copy()
-        self.backend.advance(self.x, self.params, self.effects, self.integrator, self.normalize, self.dt, n, models,
+        self.backend.advance(self._x, self.params, self.effects, self.integrator, self.normalize, self.dt, n, models,
                              *(() if ad is None else (ad,)))
         self.rhs_evals += n * self._per_step if ad is None else int(np.max(ad.nfev - before, initial=0))
         self.steps += n
@@ -517,7 +563,7 @@ class Sim:
                         return None       # non-finite before any check failed
                     found = (k, m, None)
                     break
-                v = self._violation(self.x, self._models.Omega, warn=False)
+                v = self._violation(self._x, self._models.Omega, warn=False)
                 if v is not None:
                     if m == 1:
                         return k + 1, v[0], v[1]
@@ -544,7 +590,7 @@ class Sim:
             # before stepping: the bound (the state may have been written since the last check); the growth
             # check ran on the end state of the previous call
             if not self._is_checked():
-                v = self._violation(self.x, self._models.Omega, growth=False)
+                v = self._violation(self._x, self._models.Omega, growth=False)
                 if v is not None:
                     raise fail(0, v[0], "before the step: " + v[1])
             done = 0
@@ -559,9 +605,9 @@ class Sim:
                     if hit is not None:
                         raise fail(done + hit[0] - 1, hit[1], hit[2]) from None
                     raise fail(done + e.step, e.body, e.cause) from None
-                v = self._violation(self.x, self._models.Omega)
+                v = self._violation(self._x, self._models.Omega)
                 if v is not None:
-                    end = self.x.copy()
+                    end = self._x.copy()
                     self._restore(chunk)
                     hit = self._locate(m)
                     if hit is None:     # (dopri5: the pieces' trajectory differs from the chunk's by rounding)
@@ -579,13 +625,13 @@ class Sim:
     def _is_checked(self) -> bool:
         if self._fast is not None:
             return self._fast.is_checked()
-        return self._checked is not None and np.array_equal(self._checked, self.x)
+        return self._checked is not None and np.array_equal(self._checked, self._x)
 
     def _mark_checked(self) -> None:
         if self._fast is not None:
             self._fast.mark_checked()
         else:
-            self._checked = self.x.copy()
+            self._checked = self._x.copy()
 
     def step(self) -> None:
         """Advance one step (see run).
@@ -635,11 +681,11 @@ class Sim:
             raise V.LavenderInputError("every", f"must divide n_steps ({n})", f", got {every}")
         with self._lock:
             start = self._snapshot()
-            xs, Ws, ts = [self.x.copy()], [self._models.Omega.copy()], [self.t]
+            xs, Ws, ts = [self._x.copy()], [self._models.Omega.copy()], [self.t]
             try:
                 for _ in range(n // every):
                     self._advance(every)
-                    xs.append(self.x.copy())
+                    xs.append(self._x.copy())
                     Ws.append(self._models.Omega.copy())
                     ts.append(self.t)
             except BaseException:
@@ -649,8 +695,11 @@ class Sim:
 
     # ---- state access ---------------------------------------------------------------------
     def state(self, name: str) -> BodyState:
+        """A copy of one body's state (and wheel rates) as a BodyState; O(1) in the number of bodies (the
+        name is looked up in a dict). For every body at once without copying use the views x, p_w, q, v_w,
+        omega_b and Omega."""
         i = self._i(name)
-        return BodyState(self.x[i].copy(), self._models.Omega[i].copy())
+        return BodyState(self._x[i].copy(), self._models.Omega[i].copy())
 
     @V.keywords  # an unknown keyword (a typo such as omega=) is a LavenderInputError naming it
     def set_state(self, name: str, *, p_w=None, q=None, v_w=None, omega_b=None, omega_w=None, Omega=None) -> None:
@@ -660,7 +709,7 @@ class Sim:
         follow from q and omega (pivot_kinematics) and cannot be set."""
         i = self._i(name)
         kind = self._kind(i)
-        x = self.x[i].copy()
+        x = self._x[i].copy()
         if kind & KIND_JOINT:
             for field, value in (("p_w", p_w), ("v_w", v_w)):
                 if value is not None:
@@ -701,10 +750,10 @@ class Sim:
                     raise V.LavenderInputError(field, self._bound_text(wdt) + " (Sim(..., on_bound='warn') to allow it)")
                 warnings.warn(f"body {name!r}: {self._bound_text(wdt)}", ValidityBoundWarning, stacklevel=2)
         with self._lock:
-            self.x[i] = x
+            self._x[i] = x
             if W is not None:
                 self._models.Omega[i] = W
-            E0, L0 = self._invariants(self.x, self._models.Omega)
+            E0, L0 = self._invariants(self._x, self._models.Omega)
             self._E0[i], self._L0[i] = E0[i], L0[i]
             self._safe_rates(np.arange(len(self.names)) == i)   # the no-work region follows the new E0   # the no-work region follows the new E0
 
@@ -737,27 +786,29 @@ class Sim:
         joint's pivot for a jointed body, about the COM otherwise; L_wheels_w is zero without wheels."""
         i = self._i(name)
         r = self._models.rows[i]
-        return K.wheel_momentum(self.x[i, LY.STATE_Q], self.x[i, LY.STATE_OMEGA_B], self._models.Omega[i],
+        return K.wheel_momentum(self._x[i, LY.STATE_Q], self._x[i, LY.STATE_OMEGA_B], self._models.Omega[i],
                                 r[LY.MODEL_I_P].reshape(3, 3), r[LY.MODEL_J])
 
     def _i(self, name: str) -> int:
-        if name not in self.names:
-            raise V.LavenderInputError("body", f"unknown body {name!r}; bodies: {', '.join(self.names)}")
-        return self.names.index(name)
+        try:
+            return self._index[name]
+        except (KeyError, TypeError):   # TypeError: an unhashable name
+            raise V.LavenderInputError("body", f"unknown body {name!r}; bodies: {', '.join(self.names[:20])}"
+                                       + (f", … ({len(self.names)} bodies)" if len(self.names) > 20 else "")) from None
 
     def kinetic_energy(self, name: str | None = None) -> float:
         """Kinetic energy of one body, or of all bodies (name=None), J: ½ m|v|² + ½ ωᵀ I_b ω with
         wheels locked (a jointed body's v_w is its kinematic COM velocity; wheel spin not included)."""
         idx = range(len(self.names)) if name is None else [self._i(name)]
-        return float(sum(K.kinetic_energy(self.params[i, LY.PARAM_M], self.params[i, LY.PARAM_I_B], self.x[i, LY.STATE_V_W],
-                                          self.x[i, LY.STATE_OMEGA_B]) for i in idx))
+        return float(sum(K.kinetic_energy(self.params[i, LY.PARAM_M], self.params[i, LY.PARAM_I_B], self._x[i, LY.STATE_V_W],
+                                          self._x[i, LY.STATE_OMEGA_B]) for i in idx))
 
     def angular_momentum_w(self, name: str) -> np.ndarray:
         """Angular momentum about the body's COM, world frame, kg·m²/s."""
         i = self._i(name)
-        return K.angular_momentum_world(self.x[i, LY.STATE_Q], self.params[i, LY.PARAM_I_B],
-                                        self.x[i, LY.STATE_OMEGA_B])
+        return K.angular_momentum_world(self._x[i, LY.STATE_Q], self.params[i, LY.PARAM_I_B],
+                                        self._x[i, LY.STATE_OMEGA_B])
 
     def linear_momentum_w(self, name: str) -> np.ndarray:
         i = self._i(name)
-        return self.params[i, LY.PARAM_M] * self.x[i, LY.STATE_V_W]
+        return self.params[i, LY.PARAM_M] * self._x[i, LY.STATE_V_W]

@@ -272,3 +272,33 @@ def test_two_threads_stepping_one_sim_never_lose_a_step():
     assert why == {0: "done", 1: "done", "run": "done"}
     assert sim.steps == 3 * n
     assert np.array_equal(sim.x, ref.x)
+
+
+# ------------------------------------------------------------------ zero-copy views, O(1) lookup (issue 12)
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_state_views_are_zero_copy_read_only_and_current(backend):
+    s = lv.Scene()
+    for k in range(3):
+        s.add_body(lv.Body(f"b{k}", 1.0 + k, (1.0, 2.0, 3.0), p_w=(k, 0, 0), omega_b=(0.1 * k, 0.2, 0.3)))
+    sim = lv.Sim(s, dt=1e-3, backend=backend)
+    views = {"x": sim.x, "p_w": sim.p_w, "q": sim.q, "v_w": sim.v_w, "omega_b": sim.omega_b, "Omega": sim.Omega}
+    assert [v.shape for v in views.values()] == [(3, 13), (3, 3), (3, 4), (3, 3), (3, 3), (3, 3)]
+    for name, v in views.items():
+        assert not v.flags.writeable, name
+        with pytest.raises(ValueError):
+            v[0, 0] = 1.0
+    for _ in range(10):
+        sim.step()
+    sim.run(10)
+    for k, name in enumerate(sim.names):                       # the same memory, advanced in place
+        st = sim.state(name)
+        assert np.array_equal(views["x"][k], st.x) and np.array_equal(views["q"][k], st.q)
+        assert np.array_equal(views["omega_b"][k], st.omega_b) and np.array_equal(views["p_w"][k], st.p_w)
+        assert np.array_equal(views["v_w"][k], st.v_w)
+    sim.set_state("b1", omega_b=(0.0, 0.0, 1.0))                # set_state is the writer; the views see it
+    assert np.array_equal(views["omega_b"][1], [0.0, 0.0, 1.0])
+    with pytest.raises(lv.LavenderInputError, match="unknown body 'nope'"):
+        sim.state("nope")
+    with pytest.raises(lv.LavenderInputError, match="unknown body"):
+        sim.state(["unhashable"])
