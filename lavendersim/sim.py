@@ -470,7 +470,12 @@ class Sim:
         nb = len(self.names)
         models = Models.empty(nb)
         rows = models.rows
+        # a body without model effects: kind 0, I_p = diag(I_b), r_b = anchor = 0 (all bodies at once)
+        rows[:, LY.MODEL_I_P] = (self.params[:, LY.PARAM_I_B][:, :, None] * np.eye(3)).reshape(nb, 9)
+        modelled = {e.body for e in scene.effects if e.per_body}
         for i, name in enumerate(self.names):
+            if name not in modelled:
+                continue
             m, I_b = self.params[i, LY.PARAM_M], self.params[i, LY.PARAM_I_B]
             me = scene.model_effects(name)
             kind, I_p, r_b, anchor = 0, np.diag(I_b), np.zeros(3), np.zeros(3)

@@ -302,3 +302,62 @@ def test_state_views_are_zero_copy_read_only_and_current(backend):
         sim.state("nope")
     with pytest.raises(lv.LavenderInputError, match="unknown body"):
         sim.state(["unhashable"])
+
+
+# ------------------------------------------------------------------ batched add_bodies (issue 12)
+
+def _batch(n=6, seed=0):
+    rng = np.random.default_rng(seed)
+    return dict(names=[f"b{i}" for i in range(n)], masses=rng.uniform(0.5, 2.0, n), I_b=rng.uniform(1.0, 1.5, (n, 3)),
+                p_w=rng.normal(size=(n, 3)), q=rng.normal(size=(n, 4)), v_w=rng.normal(size=(n, 3)),
+                omega_w=rng.normal(size=(n, 3)))
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_add_bodies_equals_add_body_one_by_one(backend):
+    kw = _batch()
+    one = lv.Scene()
+    for i, name in enumerate(kw["names"]):
+        one.add_body(lv.Body(name, kw["masses"][i], kw["I_b"][i], p_w=kw["p_w"][i], q=kw["q"][i], v_w=kw["v_w"][i],
+                             omega_w=kw["omega_w"][i]))
+    many = lv.Scene()
+    out = many.add_bodies(**kw)
+    assert [b.name for b in out] == kw["names"] == list(many.bodies)
+    for a, b in zip(one.bodies.values(), many.bodies.values()):
+        assert a.mass == b.mass and np.array_equal(a.I_b, b.I_b)
+        np.testing.assert_allclose(b.x0, a.x0, rtol=0, atol=1e-15)       # q normalized, omega_w rotated alike
+        assert not b.x0.flags.writeable and not b.I_b.flags.writeable
+    sa, sb = lv.Sim(one, backend=backend), lv.Sim(many, backend=backend)
+    sa.run(50)
+    sb.run(50)
+    np.testing.assert_allclose(sb.x, sa.x, rtol=0, atol=1e-12)
+    defaults = lv.Scene()
+    defaults.add_bodies(["u", "v"], [1.0, 2.0], [[1.0, 1.0, 1.0], [1.0, 2.0, 2.5]])
+    assert np.array_equal(defaults.bodies["v"].x0, lv.Body("v", 2.0, (1.0, 2.0, 2.5)).x0)
+
+
+@pytest.mark.parametrize("field, value, match", [
+    ("masses", lambda m: np.r_[m[:3], -1.0, m[4:]], r"masses\[3\]: must be finite and > 0"),
+    ("masses", lambda m: np.r_[m[:2], np.nan, m[3:]], r"masses: must be finite.*index 2"),
+    ("I_b", lambda I: np.r_[I[:4], [[1.0, 1.0, 5.0]], I[5:]], r"I_b\[4\]: principal moments violate the triangle"),
+    ("I_b", lambda I: np.r_[I[:1], [[1.0, 0.0, 1.0]], I[2:]], r"I_b\[1\]: principal moments must be > 0"),
+    ("q", lambda q: np.r_[q[:5], [[0.0, 0.0, 0.0, 0.0]]], r"q\[5\]: zero quaternion"),
+    ("p_w", lambda p: p[:5], r"p_w: expected shape \(6, 3\)"),
+    ("names", lambda n: n[:2] + ["b0"] + n[3:], r"names\[2\]: duplicate name 'b0' \(also names\[0\]\)"),
+    ("names", lambda n: n[:1] + [""] + n[2:], r"names\[1\]: must be a non-empty string"),
+])
+def test_add_bodies_names_the_bad_row_and_adds_nothing(field, value, match):
+    kw = _batch()
+    kw[field] = value(kw[field])
+    s = lv.Scene()
+    s.add_body(lv.Body("first", 1.0, (1.0, 1.0, 1.0)))
+    with pytest.raises(lv.LavenderInputError, match=match):
+        s.add_bodies(**kw)
+    assert list(s.bodies) == ["first"]
+    with pytest.raises(lv.LavenderInputError, match="names\\[0\\]: duplicate name 'first'"):
+        s.add_bodies(["first"], [1.0], [[1.0, 1.0, 1.0]])
+    with pytest.raises(lv.LavenderInputError, match="omega_w: give omega_b or omega_w, not both"):
+        s.add_bodies(["x"], [1.0], [[1.0, 1.0, 1.0]], omega_b=[[0, 0, 1]], omega_w=[[0, 0, 1]])
+    with pytest.raises(lv.LavenderInputError, match="omega_x"):
+        s.add_bodies(["x"], [1.0], [[1.0, 1.0, 1.0]], omega_x=[[0, 0, 1]])
+    assert list(s.bodies) == ["first"]
