@@ -233,6 +233,8 @@ class Sim:
         self._fast = self._make_stepper()
         self._ctr = self._fast if self._fast is not None else _Counters()
         self._lock = _Guard(self._fast)
+        # run(n) inside C for n up to one chunk (checked at its end, as _advance checks a chunk) within the work cap
+        self._fast_n = min(self._chunk, FAST_STEP_WORK // max(1, len(self.names) * (self._per_step or 1)))
         self._views = _read_only_views(self._x, self._models.Omega)
         if self._fast is not None:   # sim.step() straight into C; the Python path only when C steps aside
             self._fast.set_fallback(self._step_slow)
@@ -472,12 +474,15 @@ class Sim:
         rows = models.rows
         # a body without model effects: kind 0, I_p = diag(I_b), r_b = anchor = 0 (all bodies at once)
         rows[:, LY.MODEL_I_P] = (self.params[:, LY.PARAM_I_B][:, :, None] * np.eye(3)).reshape(nb, 9)
-        modelled = {e.body for e in scene.effects if e.per_body}
+        modelled: dict[str, dict] = {}      # scene.model_effects(name) for every body at once
+        for e in scene.effects:
+            if e.per_body:
+                modelled.setdefault(e.body, {})[e.name] = e
         for i, name in enumerate(self.names):
             if name not in modelled:
                 continue
             m, I_b = self.params[i, LY.PARAM_M], self.params[i, LY.PARAM_I_B]
-            me = scene.model_effects(name)
+            me = modelled[name]
             kind, I_p, r_b, anchor = 0, np.diag(I_b), np.zeros(3), np.zeros(3)
             if "spherical_joint" in me:
                 kind |= KIND_JOINT
@@ -662,6 +667,9 @@ class Sim:
         if n > MAX_STEPS:
             raise V.LavenderInputError("n_steps", "must be at most MAX_STEPS = 2**53 (9.0e15)", f", got {n}")
         if n:
+            f = self._fast
+            if f is not None and n <= self._fast_n and f.advance(n):
+                return     # one chunk inside C, its end checked as _advance checks it
             with self._lock:
                 self._advance(n)
 

@@ -179,14 +179,24 @@ def _sim(scene, integrator):
     return lv.Sim(scene, dt=1e-3, integrator=integrator, backend="c")
 
 
+def _python_path_only(sim):
+    """The same Sim with its C fast path switched off (step and run take the Python path)."""
+    sim.__dict__.pop("step", None)
+    sim._fast = None
+    return sim
+
+
 @pytest.mark.parametrize("case", list(_scenes()))
 def test_step_inside_c_equals_the_python_path_bitwise(case):
     scene, integrator = _scenes()[case]
-    fast, slow = _sim(scene, integrator), _sim(scene, integrator)
+    fast, slow, fast_run = _sim(scene, integrator), _python_path_only(_sim(scene, integrator)), _sim(scene, integrator)
     assert fast._fast is not None, "the C fast path should serve this scene"
     for _ in range(300):
         fast.step()
     slow.run(300)                       # the Python path (chunked checks)
+    for _ in range(30):
+        fast_run.run(10)                # run(n) inside C
+    assert np.array_equal(fast_run.x, slow.x) and fast_run.steps == 300
     assert np.array_equal(fast.x, slow.x)
     assert np.array_equal(fast._models.Omega, slow._models.Omega)
     assert (fast.steps, fast.t, fast.rhs_evals) == (slow.steps, slow.t, slow.rhs_evals) == (300, slow.t, slow.rhs_evals)

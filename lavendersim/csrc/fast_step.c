@@ -229,36 +229,45 @@ static int checks_pass(const Stepper *s)
     return 1;
 }
 
-static int fast_step(Stepper *s)
+static int fast_step(Stepper *s, long n)
 {
     long fail_step = -1, fail_body = -1;
     int status;
-    if (s->busy || s->snap == NULL || s->steps + 1 > s->max_steps || !unchanged(s) || !arguments_ok(s))
+    if (s->busy || s->snap == NULL || n < 1 || s->steps + n > s->max_steps || !unchanged(s) || !arguments_ok(s))
         return 0;
     status = lv_simulate((double *)s->buf[FS_STATE].buf, (const double *)s->buf[FS_PARAMS].buf, s->nb,
                          (const double *)s->buf[FS_EFFECTS].buf, s->ne, s->row_size, s->user.n ? &s->user : NULL,
-                         s->has_models ? &s->models : NULL, s->integrator, s->normalize, s->dt, 1, NULL,
+                         s->has_models ? &s->models : NULL, s->integrator, s->normalize, s->dt, n, NULL,
                          &fail_step, &fail_body);
     if (status != LV_OK || !checks_pass(s)) {
         snap_copy(s, 0);
         return 0;
     }
     snap_copy(s, 1);
-    s->steps += 1;
-    s->rhs_evals += s->per_step;
+    s->steps += n;
+    s->rhs_evals += s->per_step * n;
     return 1;
 }
 
 static PyObject *stepper_step(Stepper *s, PyObject *noargs)
 {
     (void)noargs;
-    return PyBool_FromLong(fast_step(s));
+    return PyBool_FromLong(fast_step(s, 1));
+}
+
+/* advance(n) -> bool: n steps in one call, checked at the end only — what Sim._advance(n) does for n up to
+   its chunk (the caller guarantees that, and that n * the scene's work fits the fast path). */
+static PyObject *stepper_advance(Stepper *s, PyObject *arg)
+{
+    long n = PyLong_AsLong(arg);
+    if (n == -1 && PyErr_Occurred()) return NULL;
+    return PyBool_FromLong(fast_step(s, n));
 }
 
 static PyObject *stepper_step_or_fallback(Stepper *s, PyObject *noargs)
 {
     (void)noargs;
-    if (fast_step(s)) Py_RETURN_NONE;
+    if (fast_step(s, 1)) Py_RETURN_NONE;
     if (s->fallback == NULL) {
         PyErr_SetString(PyExc_RuntimeError, "Stepper: no fallback set");
         return NULL;
@@ -296,6 +305,8 @@ static PyObject *stepper_is_checked(Stepper *s, PyObject *noargs)
 static PyMethodDef stepper_methods[] = {
     {"step", (PyCFunction)stepper_step, METH_NOARGS,
      "step() -> bool: one step with the Sim's checks passed (True), or nothing changed (False: take the Python path)."},
+    {"advance", (PyCFunction)stepper_advance, METH_O,
+     "advance(n) -> bool: n steps checked at the end (as one chunk of Sim._advance), or nothing changed (False)."},
     {"step_or_fallback", (PyCFunction)stepper_step_or_fallback, METH_NOARGS,
      "step_or_fallback(): one step, inside C when every check passes, else by the fallback (the Python path)."},
     {"set_fallback", (PyCFunction)stepper_set_fallback, METH_O, "set_fallback(fn): what step_or_fallback calls."},
