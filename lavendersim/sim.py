@@ -92,10 +92,10 @@ ON_BOUND = ("raise", "warn")
 FAST_STEP_WORK = 4096      # step() runs inside C (holding the GIL) for scenes of at most this many evaluations per step
 
 
-def _read_only_views(x: np.ndarray, Omega: np.ndarray) -> tuple[np.ndarray, ...]:
-    """(x, p_w, q, v_w, omega_b, Omega) as read-only views sharing memory with x and Omega."""
+def _read_only_views(x: np.ndarray, Omega: np.ndarray, applied: np.ndarray) -> tuple[np.ndarray, ...]:
+    """(x, p_w, q, v_w, omega_b, Omega, applied) as read-only views sharing memory with the arrays."""
     out = []
-    for v in (x, x[:, LY.STATE_P_W], x[:, LY.STATE_Q], x[:, LY.STATE_V_W], x[:, LY.STATE_OMEGA_B], Omega):
+    for v in (x, x[:, LY.STATE_P_W], x[:, LY.STATE_Q], x[:, LY.STATE_V_W], x[:, LY.STATE_OMEGA_B], Omega, applied):
         v = v.view()
         v.flags.writeable = False
         out.append(v)
@@ -235,7 +235,7 @@ class Sim:
         self._lock = _Guard(self._fast)
         # run(n) inside C for n up to one chunk (checked at its end, as _advance checks a chunk) within the work cap
         self._fast_n = min(self._chunk, FAST_STEP_WORK // max(1, len(self.names) * (self._per_step or 1)))
-        self._views = _read_only_views(self._x, self._models.Omega)
+        self._views = _read_only_views(self._x, self._models.Omega, self._models.applied)
         if self._fast is not None:   # sim.step() straight into C; the Python path only when C steps aside
             self._fast.set_fallback(self._step_slow)
             self.step = self._fast.step_or_fallback
@@ -478,30 +478,50 @@ class Sim:
         for e in scene.effects:
             if e.per_body:
                 modelled.setdefault(e.body, {})[e.name] = e
+        self._modelled = modelled
         for i, name in enumerate(self.names):
-            if name not in modelled:
-                continue
-            m, I_b = self.params[i, LY.PARAM_M], self.params[i, LY.PARAM_I_B]
-            me = modelled[name]
-            kind, I_p, r_b, anchor = 0, np.diag(I_b), np.zeros(3), np.zeros(3)
-            if "spherical_joint" in me:
-                kind |= KIND_JOINT
-                anchor = me["spherical_joint"].values["anchor_w"]
-                r_b = K.quat_to_matrix(self._x[i, LY.STATE_Q]).T @ (self._x[i, LY.STATE_P_W] - anchor)
-                I_p = K.parallel_axis(np.diag(I_b), m, -r_b)
-                self._x[i, LY.STATE_P_W], self._x[i, LY.STATE_V_W] = K.pivot_kinematics(
-                    self._x[i, LY.STATE_Q], self._x[i, LY.STATE_OMEGA_B], anchor, r_b)
-            if "reaction_wheels" in me:
-                kind |= KIND_WHEELS
-                w = me["reaction_wheels"].values
-                rows[i, LY.MODEL_J] = w["J"]
-                rows[i, LY.MODEL_TORQUE_LIMIT], rows[i, LY.MODEL_SPEED_LIMIT] = w["torque_limit"], w["speed_limit"]
-                rows[i, LY.MODEL_C_W] = w["c_w"]
-            rows[i, LY.MODEL_KIND] = kind
-            rows[i, LY.MODEL_I_P] = np.asarray(I_p).reshape(9)
-            rows[i, LY.MODEL_R_B] = r_b
-            rows[i, LY.MODEL_ANCHOR_W] = anchor
+            if name in modelled:
+                self._model_row(i, modelled[name], rows)
         return models
+
+    def _model_row(self, i: int, me: dict, rows: np.ndarray) -> None:
+        """Body i's model row from its model effects me and its current state (a jointed body's r_b, I_p
+        from its q and p_w; its p_w, v_w then set from pivot_kinematics)."""
+        m, I_b = self.params[i, LY.PARAM_M], self.params[i, LY.PARAM_I_B]
+        kind, I_p, r_b, anchor = 0, np.diag(I_b), np.zeros(3), np.zeros(3)
+        if "spherical_joint" in me:
+            kind |= KIND_JOINT
+            anchor = me["spherical_joint"].values["anchor_w"]
+            r_b = K.quat_to_matrix(self._x[i, LY.STATE_Q]).T @ (self._x[i, LY.STATE_P_W] - anchor)
+            I_p = K.parallel_axis(np.diag(I_b), m, -r_b)
+            self._x[i, LY.STATE_P_W], self._x[i, LY.STATE_V_W] = K.pivot_kinematics(
+                self._x[i, LY.STATE_Q], self._x[i, LY.STATE_OMEGA_B], anchor, r_b)
+        if "reaction_wheels" in me:
+            kind |= KIND_WHEELS
+            w = me["reaction_wheels"].values
+            rows[i, LY.MODEL_J] = w["J"]
+            rows[i, LY.MODEL_TORQUE_LIMIT], rows[i, LY.MODEL_SPEED_LIMIT] = w["torque_limit"], w["speed_limit"]
+            rows[i, LY.MODEL_C_W] = w["c_w"]
+        rows[i, LY.MODEL_KIND] = kind
+        rows[i, LY.MODEL_I_P] = np.asarray(I_p).reshape(9)
+        rows[i, LY.MODEL_R_B] = r_b
+        rows[i, LY.MODEL_ANCHOR_W] = anchor
+
+    def _reinit_body(self, i: int, p_w: np.ndarray, q: np.ndarray, omega_b: np.ndarray, Omega: np.ndarray) -> None:
+        """Body i as if this Sim had been built with it at rest-translation state (p_w, q, v_w = 0, omega_b) and
+        then given wheel rates Omega by set_state: model row (joint r_b, I_p), growth reference, wheel command
+        and applied torques zeroed. For batched resets (the vector env); the caller validated the values."""
+        with self._lock:
+            x = self._x[i]
+            x[LY.STATE_P_W], x[LY.STATE_Q], x[LY.STATE_V_W], x[LY.STATE_OMEGA_B] = p_w, q, 0.0, omega_b
+            self._model_row(i, self._modelled.get(self.names[i], {}), self._models.rows)
+            self._models.Omega[i] = Omega
+            self._models.command[i] = 0.0
+            self._models.applied[i] = 0.0
+            E0, L0 = self._invariants(self._x, self._models.Omega)
+            self._E0[i], self._L0[i] = E0[i], L0[i]
+            self._safe_rates(np.arange(len(self.names)) == i)
+            self._warned.discard(i)
 
     def _kind(self, i: int) -> int:
         return int(self._models.rows[i, LY.MODEL_KIND])
@@ -781,6 +801,23 @@ class Sim:
         """Motor torques on the wheels (N·m, body x, y, z), held until changed; saturated every step."""
         i = self._wheeled(name)
         self._models.command[i] = V.vector("u", u)
+
+    def set_wheel_commands(self, u) -> None:
+        """Motor torques of every body's wheels at once, (nb, 3) N·m in body order (rows of bodies without
+        reaction_wheels must be zero); held until changed, saturated every step, as set_wheel_command."""
+        u = V.array("u", u, (len(self.names), 3))
+        wheeled = (self._models.rows[:, LY.MODEL_KIND].astype(np.int64) & KIND_WHEELS) != 0
+        stray = ~wheeled & np.any(u != 0, axis=1)
+        if stray.any():
+            b = int(np.flatnonzero(stray)[0])
+            raise V.LavenderInputError(f"u[{b}]", f"body {self.names[b]!r} has no reaction_wheels: its row must be 0")
+        self._models.command[...] = u
+
+    @property
+    def wheel_torques_applied(self) -> np.ndarray:
+        """The saturated wheel torques of the most recent step for every body, (nb, 3) N·m (zeros before the
+        first step and for bodies without wheels): a read-only view."""
+        return self._views[6]
 
     def wheel_command(self, name: str) -> np.ndarray:
         """The commanded (unsaturated) wheel torques, N·m."""
