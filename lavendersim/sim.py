@@ -93,13 +93,13 @@ FAST_STEP_WORK = 4096      # step() runs inside C (holding the GIL) for scenes o
 
 
 def _read_only_views(x: np.ndarray, Omega: np.ndarray, applied: np.ndarray) -> tuple[np.ndarray, ...]:
-    """(x, p_w, q, v_w, omega_b, Omega, applied) as read-only views sharing memory with the arrays."""
-    out = []
-    for v in (x, x[:, LY.STATE_P_W], x[:, LY.STATE_Q], x[:, LY.STATE_V_W], x[:, LY.STATE_OMEGA_B], Omega, applied):
-        v = v.view()
-        v.flags.writeable = False
-        out.append(v)
-    return tuple(out)
+    """(x, p_w, q, v_w, omega_b, Omega, applied) as read-only views sharing memory with the arrays. Each is a view
+    over a read-only memoryview of the array, so NumPy refuses to turn their WRITEABLE flag back on."""
+    def ro(a: np.ndarray) -> np.ndarray:
+        return np.frombuffer(memoryview(a).toreadonly(), dtype=a.dtype).reshape(a.shape)
+
+    xr = ro(x)
+    return (xr, xr[:, LY.STATE_P_W], xr[:, LY.STATE_Q], xr[:, LY.STATE_V_W], xr[:, LY.STATE_OMEGA_B], ro(Omega), ro(applied))
 
 
 class _Counters:
@@ -228,9 +228,16 @@ class Sim:
                 raise V.LavenderInputError("max_growth", "must be > 1 (or None: no growth check)", f", got {max_growth!r}")
         self.max_growth = max_growth
         self._has_models = bool(self._models.rows[:, LY.MODEL_KIND].any())
-        self._checked = None       # the last state that passed the checks (skips the re-check before a call)
+        self._dirty = True         # the state was written since the last check (see _is_checked)
+        self._snap_buf = None      # _advance's reusable snapshot buffers
         self._setup_checks()
         self._fast = self._make_stepper()
+        self._screen = None
+        if self.backend.name == "c":
+            from .backends import c_backend
+
+            self._screen = c_backend._c.checks_pass
+        self._w_inf = np.full(len(self.names), np.inf)
         self._ctr = self._fast if self._fast is not None else _Counters()
         self._lock = _Guard(self._fast)
         # run(n) inside C for n up to one chunk (checked at its end, as _advance checks a chunk) within the work cap
@@ -412,6 +419,12 @@ class Sim:
         return v
 
     def _violation_raw(self, x, Omega, warn, growth):
+        screen = self._screen
+        if screen is not None and x is self._x and (not growth or self.max_growth is None or not self._free_wheels_idx):
+            # one pass in C: every body inside the bound and (growth) inside its no-work region -> nothing to report
+            bound = np.inf if self._bound is None else self._bound[0]
+            if screen(x, self._wdt_scale, bound, self._w_fast if growth else self._w_inf):
+                return None
         with np.errstate(over="ignore", invalid="ignore"):   # an overflowing norm is inf: beyond any bound
             om = x[:, LY.STATE_OMEGA_B]
             w = np.sqrt(np.add.reduce(om * om, axis=1))
@@ -446,16 +459,31 @@ class Sim:
                            f"{self.integrator} is unstable here; reduce dt")
         return None
 
-    def _snapshot(self) -> tuple:
-        m, ad = self._models, self._adaptive
-        return (self._x.copy(), m.Omega.copy(), m.applied.copy(),
-                None if ad is None else (ad.h.copy(), ad.nfev.copy()), self.steps, self.rhs_evals)
+    def _snapshot(self, reuse: bool = False) -> tuple:
+        """What a restore needs: the state, (with joints/wheels) wheel rates and applied torques, the adaptive
+        arrays, the counters. reuse=True copies into buffers kept by the Sim (no allocation: at 10^6 bodies
+        a fresh 100 MB array per call cost more in page faults than the copy); only _advance's start uses them."""
+        m, ad, models = self._models, self._adaptive, self._has_models
+        if not reuse:
+            x, W, u = self._x.copy(), m.Omega.copy() if models else None, m.applied.copy() if models else None
+        else:
+            if self._snap_buf is None:
+                self._snap_buf = tuple(np.empty_like(a) for a in (self._x, m.Omega, m.applied))
+            x, W, u = self._snap_buf
+            np.copyto(x, self._x)
+            if models:
+                np.copyto(W, m.Omega)
+                np.copyto(u, m.applied)
+            else:
+                W = u = None
+        return (x, W, u, None if ad is None else (ad.h.copy(), ad.nfev.copy()), self.steps, self.rhs_evals)
 
     def _restore(self, snap: tuple) -> None:
         x, W, u, ad, self.steps, self.rhs_evals = snap
         self._x[...] = x
-        self._models.Omega[...] = W
-        self._models.applied[...] = u
+        if W is not None:     # None: no body has a joint or wheels, the backends never touch them
+            self._models.Omega[...] = W
+            self._models.applied[...] = u
         if ad is not None:
             self._adaptive.h[...], self._adaptive.nfev[...] = ad
 
@@ -512,6 +540,7 @@ class Sim:
         then given wheel rates Omega by set_state: model row (joint r_b, I_p), growth reference, wheel command
         and applied torques zeroed. For batched resets (the vector env); the caller validated the values."""
         with self._lock:
+            self._dirty = True
             x = self._x[i]
             x[LY.STATE_P_W], x[LY.STATE_Q], x[LY.STATE_V_W], x[LY.STATE_OMEGA_B] = p_w, q, 0.0, omega_b
             self._model_row(i, self._modelled.get(self.names[i], {}), self._models.rows)
@@ -609,8 +638,16 @@ class Sim:
         if self.steps + n > MAX_STEPS:
             raise V.LavenderInputError("n_steps", f"the Sim would pass MAX_STEPS = 2**53 steps in total "
                                        f"({self.steps} done + {n})")
-        start = self._snapshot()
+        start = self._snapshot(reuse=True)
         steps0 = self.steps
+        sizes: list[int] = []
+
+        def to_chunk_start():
+            """Back to the start of the current chunk by replay: restore the call's start and re-run the
+            chunks that passed (the same backend calls, so bitwise the same, dopri5 too): no copy per chunk."""
+            self._restore(start)
+            for size in sizes:
+                self._backend_advance(size)
 
         def fail(k: int, body: int, cause: str):   # k: 0-based index of the failing step within this call
             self._restore(start)
@@ -626,25 +663,23 @@ class Sim:
             done = 0
             while done < n:
                 m = min(self._chunk, n - done)
-                chunk = start if done == 0 else self._snapshot()
                 try:
                     self._backend_advance(m)
                 except DivergenceError as e:
-                    self._restore(chunk)
+                    to_chunk_start()
                     hit = self._locate(e.step) if e.step > 0 else None
                     if hit is not None:
                         raise fail(done + hit[0] - 1, hit[1], hit[2]) from None
                     raise fail(done + e.step, e.body, e.cause) from None
                 v = self._violation(self._x, self._models.Omega)
                 if v is not None:
-                    end = self._x.copy()
-                    self._restore(chunk)
+                    to_chunk_start()
                     hit = self._locate(m)
                     if hit is None:     # (dopri5: the pieces' trajectory differs from the chunk's by rounding)
                         hit = (m, v[0], v[1])
-                    del end
                     raise fail(done + hit[0] - 1, hit[1], hit[2]) from None
                 done += m
+                sizes.append(m)
             self._mark_checked()
         except DivergenceError:
             raise
@@ -653,15 +688,17 @@ class Sim:
             raise
 
     def _is_checked(self) -> bool:
+        """The state is the last one that passed the checks: compared bytewise by the C stepper; else tracked by a
+        flag that every writer sets (set_state, _reinit_body; the views are read-only and their flag cannot be
+        turned back on, so no public path writes the state without setting it)."""
         if self._fast is not None:
             return self._fast.is_checked()
-        return self._checked is not None and np.array_equal(self._checked, self._x)
+        return not self._dirty
 
     def _mark_checked(self) -> None:
         if self._fast is not None:
             self._fast.mark_checked()
-        else:
-            self._checked = self._x.copy()
+        self._dirty = False
 
     def step(self) -> None:
         """Advance one step (see run).
@@ -783,6 +820,7 @@ class Sim:
                     raise V.LavenderInputError(field, self._bound_text(wdt) + " (Sim(..., on_bound='warn') to allow it)")
                 warnings.warn(f"body {name!r}: {self._bound_text(wdt)}", ValidityBoundWarning, stacklevel=2)
         with self._lock:
+            self._dirty = True
             self._x[i] = x
             if W is not None:
                 self._models.Omega[i] = W

@@ -359,8 +359,53 @@ static PyTypeObject StepperType = {
     .tp_getset = stepper_getset,
 };
 
+/* checks_pass(x, wdt_scale, bound, w_safe) -> bool: every body's |omega| * wdt_scale <= bound and |omega| <=
+   w_safe (NaN fails), the Sim's cheap first screen of its per-chunk checks in one pass without temporaries; False
+   means "look closer" (the Sim's NumPy check decides). */
+static PyObject *py_checks_pass(PyObject *self, PyObject *args)
+{
+    PyObject *xo, *so, *wo;
+    double bound;
+    Py_buffer xb, sb, wb;
+    Py_ssize_t nb, b;
+    int ok = 1;
+    (void)self;
+    if (!PyArg_ParseTuple(args, "OOdO:checks_pass", &xo, &so, &bound, &wo)) return NULL;
+    if (PyObject_GetBuffer(xo, &xb, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT) != 0) return NULL;
+    if (PyObject_GetBuffer(so, &sb, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT) != 0) { PyBuffer_Release(&xb); return NULL; }
+    if (PyObject_GetBuffer(wo, &wb, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT) != 0) {
+        PyBuffer_Release(&xb); PyBuffer_Release(&sb); return NULL;
+    }
+    nb = xb.len / 8 / LV_STATE_SIZE;
+    if (xb.itemsize != 8 || sb.itemsize != 8 || wb.itemsize != 8 || xb.len != nb * LV_STATE_SIZE * 8
+        || sb.len != nb * 8 || wb.len != nb * 8) {
+        PyErr_SetString(PyExc_ValueError, "checks_pass: x (nb, 13), wdt_scale (nb,), w_safe (nb,) float64");
+        ok = -1;
+    } else {
+        const double *x = (const double *)xb.buf, *scale = (const double *)sb.buf, *w_safe = (const double *)wb.buf;
+        Py_BEGIN_ALLOW_THREADS
+        for (b = 0; b < nb; b++) {
+            const double *om = x + b * LV_STATE_SIZE + LV_STATE_OMEGA_B;
+            const double w = sqrt(om[0] * om[0] + om[1] * om[1] + om[2] * om[2]);
+            if (!(w * scale[b] <= bound) || !(w <= w_safe[b])) { ok = 0; break; }
+        }
+        Py_END_ALLOW_THREADS
+    }
+    PyBuffer_Release(&xb);
+    PyBuffer_Release(&sb);
+    PyBuffer_Release(&wb);
+    if (ok < 0) return NULL;
+    return PyBool_FromLong(ok);
+}
+
+static PyMethodDef fast_functions[] = {
+    {"checks_pass", py_checks_pass, METH_VARARGS,
+     "checks_pass(x, wdt_scale, bound, w_safe) -> bool: all |omega|*wdt_scale <= bound and |omega| <= w_safe."},
+    {NULL, NULL, 0, NULL}};
+
 int lv_add_stepper_type(PyObject *m)
 {
+    if (PyModule_AddFunctions(m, fast_functions) != 0) return -1;
     if (PyType_Ready(&StepperType) < 0) return -1;
     Py_INCREF(&StepperType);
     if (PyModule_AddObject(m, "Stepper", (PyObject *)&StepperType) < 0) {
