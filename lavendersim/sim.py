@@ -144,14 +144,14 @@ class Trajectory:
     """Recorded samples: t (T,), x (T, nb, 13), Omega (T, nb, 3) wheel rates (zeros without wheels)."""
 
     def __init__(self, names: list[str], t: np.ndarray, x: np.ndarray, Omega: np.ndarray | None = None):
-        self.names, self.t, self._x = names, t, x
+        self.names, self.t, self.x = names, t, x
         self.Omega = np.zeros(x.shape[:-1] + (3,)) if Omega is None else Omega
 
     def body(self, name: str) -> BodyState:
         if name not in self.names:
             raise V.LavenderInputError("body", f"unknown body {name!r}; bodies: {', '.join(self.names)}")
         i = self.names.index(name)
-        return BodyState(self._x[:, i], self.Omega[:, i])
+        return BodyState(self.x[:, i], self.Omega[:, i])
 
 
 class Sim:
