@@ -463,6 +463,11 @@ def run(quick: bool = False, rounds: int | None = None, use_mujoco: bool = True)
                     n_r = cfg["mj_rollout_steps"]
                     buf = np.empty((1, n_r, mb.nstate))
                     cases[f"mujoco_{integ}_rollout"] = (lambda mb=mb, n_r=n_r, buf=buf: mb.rollout_states(n_r, buf), n_r)
+            # mj_step on a model with no bodies: what one call from Python costs beyond the physics (binding overhead)
+            m0 = mj_bodies["RK4"].mj.MjModel.from_xml_string("<mujoco/>")
+            d0 = mj_bodies["RK4"].mj.MjData(m0)
+            cases["mujoco_empty_mj_step"] = (lambda st=mj_bodies["RK4"].mj.mj_step, m0=m0, d0=d0, n=n_py:
+                                             [st(m0, d0) for _ in range(n)], n_py)
             mj["version"] = mj_bodies["RK4"].mj.__version__
             mj["rollout"] = mj_bodies["RK4"].rollout is not None
         except Exception as exc:  # noqa: BLE001
@@ -592,10 +597,10 @@ def standing(res: dict) -> list[dict]:
     for p in res.get("per_body_effects", []):
         out.append(_line(f"one applied_torque per body / plain body, N = {p['n_bodies']:g}", p["ratio"],
                          TARGETS["per_body_effect_ratio"], "max", "x", "ns per body-step, same run"))
-    py, bare, mj_roll1 = _ns(res, "python_step_c"), _ns(res, "c_call_1step"), _ns(res, "mujoco_RK4_rollout")
+    py, bare, mj0 = _ns(res, "python_step_c"), _ns(res, "c_call_1step"), _ns(res, "mujoco_empty_mj_step")
     basis = "min over rounds" + ("" if bare is None else f"; the bare C call of one step {bare / 1e3:.3f} µs")
-    if mj_step is not None and mj_roll1 is not None:
-        basis += f"; mj_step's Python-call overhead {(mj_step - mj_roll1) / 1e3:.3f} µs (mj_step loop − rollout per step)"
+    if mj0 is not None:
+        basis += f"; mujoco.mj_step on an empty model (its Python-call overhead) {mj0 / 1e3:.3f} µs"
     out.append(_line("one Python sim.step(), c backend", py, TARGETS["python_step_c_ns"], "max", "ns/call", basis))
     return out
 
@@ -630,6 +635,7 @@ def report(res: dict) -> str:
             ("numpy_rk4", f"LavenderSim NumPy, Sim.run({s['numpy_rk4']['units_per_call']})"),
             ("python_step_c", "one Python sim.step() call, c backend"),
             ("c_call_1step", "the bare C call of one step (_c.simulate)"),
+            ("mujoco_empty_mj_step", "MuJoCo mj_step, empty model (call overhead)"),
             ("python_step_numpy", "one Python sim.step() call, numpy backend")]
     for integ in MUJOCO_INTEGRATORS:
         rows += [(f"mujoco_{integ}_mj_step", f"MuJoCo {integ}: mj_step in a Python loop"),
