@@ -66,6 +66,13 @@ cause, and the Sim is left exactly as it was before the call — for run, run_fo
 KeyboardInterrupt, which a long run sees between chunks). A Sim steps under its own lock: two threads
 stepping one Sim serialize (never a lost step); two Sims run in parallel (the C loop releases the GIL).
 n_steps per call is at most MAX_STEPS.
+
+On the C backend a small scene (at most FAST_STEP_WORK right-hand-side evaluations per step, fixed-step
+integrators, no free wheeled body under the growth check) takes step() and run(n) for n up to one chunk
+inside C (lavendersim/csrc/fast_step.c): the same step, finiteness, bound and growth checks and restore, bit for
+bit; anything it cannot prove passes (a check fails, the state was written since the last check, another thread
+holds the Sim) goes to the Python path above, which raises or warns. The state is read through zero-copy
+read-only views (x, p_w, q, v_w, omega_b, Omega, wheel_torques_applied); set_state is the writer.
 """
 from __future__ import annotations
 
