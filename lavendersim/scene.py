@@ -4,8 +4,9 @@ from __future__ import annotations
 import numpy as np
 
 from . import validate as V
-from .bodies import Body
+from .bodies import P, Q, STATE_SIZE, VEL, W, Body
 from .effects import Effect, check_declared, largest_param, load_overflow, make, row_width
+from .kernels import K
 
 
 def _declared(effect: Effect) -> bool:
@@ -171,3 +172,123 @@ class Scene:
         rows = [e.row(-1 if e.body is None else self.index(e.body), width) for e in forces]
         effects = np.ascontiguousarray(np.array(rows, dtype=np.float64).reshape(len(rows), width))
         return state, params, effects
+
+
+# ---- batched add_bodies (issue 12): the checks of Body / Scene.add_body over whole arrays -------------
+
+def _rows(field: str, value, n: int, width: int | None) -> np.ndarray:
+    """A finite real (n,) or (n, width) array (V.array's checks: bools, non-numbers, NaN/inf named by index)."""
+    return V.array(field, value, (n,) if width is None else (n, width))
+
+
+def _first_bad(field: str, bad: np.ndarray, check) -> None:
+    """Re-validate the first flagged row with the scalar validator under the field name `field[i]`; it raises
+    the same error Body would (the vectorized screen only selects rows, the scalar check decides)."""
+    for i in np.flatnonzero(bad)[:1]:
+        check(f"{field}[{int(i)}]", int(i))
+
+
+def _unit_quaternions(q: np.ndarray) -> np.ndarray:
+    """V.quaternion per row: zero rows rejected (naming the row), others scaled to unit length as it does."""
+    scale = np.max(np.abs(q), axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        u = q / scale[:, None]
+        scaled = np.sqrt(((u[:, 0] ** 2 + u[:, 1] ** 2) + u[:, 2] ** 2) + u[:, 3] ** 2)
+    _first_bad("q", ~(scale * scaled >= V.QUATERNION_MIN_NORM), lambda f, i: V.quaternion(f, q[i]))
+    return u / scaled[:, None]
+
+
+def _principal_moments(I_b: np.ndarray) -> None:
+    """V.inertia's rules for (n, 3) principal moments: all > 0, each <= the sum of the other two (rel. 1e-12)."""
+    with np.errstate(invalid="ignore", divide="ignore"):
+        u = I_b / np.max(I_b, axis=1)[:, None]
+        tri = np.stack([u[:, k] - (u[:, i] + u[:, j]) > V.TRIANGLE_RTOL
+                        for k, (i, j) in enumerate(((1, 2), (0, 2), (0, 1)))], axis=1)
+    _first_bad("I_b", ~np.all(I_b > 0, axis=1) | tri.any(axis=1), lambda f, i: V.inertia(f, I_b[i]))
+
+
+@V.keywords
+def add_bodies(scene: Scene, names, masses, I_b, *, p_w=None, q=None, v_w=None, omega_b=None, omega_w=None) -> list[Body]:
+    """Add n bodies at once, validated as Body(...) + Scene.add_body validate each, over whole arrays.
+
+    Parameters
+    ----------
+    scene : Scene
+        The scene the bodies join (``Scene.add_bodies`` passes itself).
+    names : sequence of str, (n,)
+        Non-empty, unique among themselves and new in the scene.
+    masses : array_like, (n,)
+        kg, finite and > 0.
+    I_b : array_like, (n, 3)
+        Principal moments about each COM, body frame, kg·m² (> 0, triangle inequality).
+    p_w, v_w : array_like, (n, 3), optional
+        COM positions (m) and velocities (m/s), world frame; default zeros.
+    q : array_like, (n, 4), optional
+        Orientations R_WB (x, y, z, w), each normalized (a zero row is rejected); default identity.
+    omega_b, omega_w : array_like, (n, 3), optional
+        Angular velocities in the body or the world frame (at most one of them); default zeros.
+
+    Returns
+    -------
+    list of Body
+        The new bodies, in order.
+
+    Raises
+    ------
+    LavenderInputError
+        A bad row, naming the field and the row (e.g. ``I_b[17]``); nothing is added.
+    """
+    if isinstance(names, (str, bytes)) or not hasattr(names, "__len__"):
+        raise V.LavenderInputError("names", "expected a sequence of body names", f", got {V._describe(names)}")
+    names = list(names)
+    n = len(names)
+    for i, name in enumerate(names):
+        if not isinstance(name, str) or not name:
+            raise V.LavenderInputError(f"names[{i}]", "must be a non-empty string", f", got {V._describe(name)}")
+    seen: dict[str, int] = {}
+    for i, name in enumerate(names):
+        if name in scene.bodies or name in seen:
+            raise V.LavenderInputError(f"names[{i}]", f"duplicate name {name!r}"
+                                       + ("" if name in scene.bodies else f" (also names[{seen[name]}])"))
+        seen[name] = i
+    m = _rows("masses", masses, n, None)
+    _first_bad("masses", ~(m > 0), lambda f, i: V.positive(f, m[i]))
+    I = _rows("I_b", I_b, n, 3)
+    _principal_moments(I)
+    x = np.zeros((n, STATE_SIZE))
+    x[:, Q] = (0.0, 0.0, 0.0, 1.0) if q is None else _unit_quaternions(_rows("q", q, n, 4))
+    if p_w is not None:
+        x[:, P] = _rows("p_w", p_w, n, 3)
+    if v_w is not None:
+        x[:, VEL] = _rows("v_w", v_w, n, 3)
+    if omega_b is not None and omega_w is not None:
+        raise V.LavenderInputError("omega_w", "give omega_b or omega_w, not both")
+    if omega_w is not None:
+        x[:, W] = K.world_to_body(x[:, Q], _rows("omega_w", omega_w, n, 3)) if n else 0.0
+    elif omega_b is not None:
+        x[:, W] = _rows("omega_b", omega_b, n, 3)
+    I.flags.writeable = False
+    x.flags.writeable = False
+    # validated above, row by row as Body.__init__ does: fill the slots directly (Body refuses setattr)
+    set_name, set_mass, set_I, set_shape, set_x = (Body.__dict__[f].__set__ for f in ("name", "mass", "I_b", "shape", "x0"))
+    new = object.__new__
+    bodies = []
+    for name, mass, I_row, x_row in zip(names, m.tolist(), list(I), list(x)):
+        b = new(Body)
+        set_name(b, name)
+        set_mass(b, mass)
+        set_I(b, I_row)
+        set_shape(b, None)
+        set_x(b, x_row)
+        bodies.append(b)
+    every = [e for e in scene.effects if not e.per_body and e.body is None and _declared(e)]
+    for i, b in enumerate(bodies if every else ()):
+        why = load_overflow(every, b)
+        if why:
+            raise V.LavenderInputError(f"names[{i}]", f"body {b.name!r}: {why} with the scene's effects on every body "
+                                       f"({', '.join(e.name for e in every)})")
+    scene.bodies.update(zip(names, bodies))
+    return bodies
+
+
+Scene.add_bodies = add_bodies

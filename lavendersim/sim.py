@@ -70,9 +70,17 @@ cause, and the Sim is left exactly as it was before the call — for run, run_fo
 KeyboardInterrupt, which a long run sees between chunks). A Sim steps under its own lock: two threads
 stepping one Sim serialize (never a lost step); two Sims run in parallel (the C loop releases the GIL).
 n_steps per call is at most MAX_STEPS.
+
+On the C backend a small scene (at most FAST_STEP_WORK right-hand-side evaluations per step, fixed-step
+integrators, no free wheeled body under the growth check) takes step() and run(n) for n up to one chunk
+inside C (lavendersim/csrc/fast_step.c): the same step, finiteness, bound and growth checks and restore, bit for
+bit; anything it cannot prove passes (a check fails, the state was written since the last check, another thread
+holds the Sim) goes to the Python path above, which raises or warns. The state is read through zero-copy
+read-only views (x, p_w, q, v_w, omega_b, Omega, wheel_torques_applied); set_state is the writer.
 """
 from __future__ import annotations
 
+import sys
 import threading
 import warnings
 
@@ -89,10 +97,51 @@ from .generated import tableaux as TB
 from .kernels import K
 from .scene import Scene
 
-
 MAX_STEPS = 2**53          # steps per call and in total: the step counter and t = steps*dt stay exact in float64
 CHUNK_WORK = 2**20         # right-hand-side evaluations (summed over bodies) per backend call between checks
 ON_BOUND = ("raise", "warn")
+FAST_STEP_WORK = 4096      # step() runs inside C (holding the GIL) for scenes of at most this many evaluations per step
+
+
+def _read_only_views(x: np.ndarray, Omega: np.ndarray, applied: np.ndarray) -> tuple[np.ndarray, ...]:
+    """(x, p_w, q, v_w, omega_b, Omega, applied) as read-only views sharing memory with the arrays. Each is a view
+    over a read-only memoryview of the array, so NumPy refuses to turn their WRITEABLE flag back on."""
+    def ro(a: np.ndarray) -> np.ndarray:
+        return np.frombuffer(memoryview(a).toreadonly(), dtype=a.dtype).reshape(a.shape)
+
+    xr = ro(x)
+    return (xr, xr[:, LY.STATE_P_W], xr[:, LY.STATE_Q], xr[:, LY.STATE_V_W], xr[:, LY.STATE_OMEGA_B], ro(Omega), ro(applied))
+
+
+class _Counters:
+    """steps and rhs_evals of a Sim without the C stepper (which keeps them itself)."""
+
+    __slots__ = ("steps", "rhs_evals")
+
+    def __init__(self):
+        self.steps = 0
+        self.rhs_evals = 0
+
+
+class _Guard:
+    """The Sim's lock (reentrant); while held it marks the C stepper busy, so its fast path steps aside."""
+
+    __slots__ = ("_lock", "_fast")
+
+    def __init__(self, fast):
+        self._lock, self._fast = threading.RLock(), fast
+
+    def __enter__(self):
+        self._lock.acquire()
+        if self._fast is not None:
+            self._fast.busy += 1
+        return self
+
+    def __exit__(self, *exc):
+        if self._fast is not None:
+            self._fast.busy -= 1
+        self._lock.release()
+        return False
 
 
 def validity_bound(integrator: str) -> tuple[float, float] | None:
@@ -223,7 +272,8 @@ class Sim:
         self.bodies = dict(scene.bodies)
         for e in scene.effects:  # an effect no declaration printed is an error, never a no-op
             effects_mod.check_declared(e)
-        self.x, self.params, self.effects = scene.arrays()
+        self._x, self.params, self.effects = scene.arrays()
+        self._index = {name: i for i, name in enumerate(self.names)}
         self._effect_objs = list(scene.effects)
         self._models = self._build_models(scene)
         self._adaptive = None
@@ -253,13 +303,103 @@ class Sim:
             if not max_growth > 1.0:
                 raise V.LavenderInputError("max_growth", "must be > 1 (or None: no growth check)", f", got {max_growth!r}")
         self.max_growth = max_growth
-        self._lock = threading.RLock()
         self._has_models = bool(self._models.rows[:, LY.MODEL_KIND].any())
-        self._checked = None       # the last state that passed the checks (skips the re-check before a call)
+        self._dirty = True         # the state was written since the last check (see _is_checked)
+        self._snap_buf = None      # _advance's reusable snapshot buffers
         self._setup_checks()
-        self.t = 0.0
-        self.steps = 0
-        self.rhs_evals = 0
+        self._fast = self._make_stepper()
+        self._screen = None
+        if self.backend.name == "c":
+            from .backends import c_backend
+
+            self._screen = c_backend._c.checks_pass
+        self._w_inf = np.full(len(self.names), np.inf)
+        self._ctr = self._fast if self._fast is not None else _Counters()
+        self._lock = _Guard(self._fast)
+        # run(n) inside C for n up to one chunk (checked at its end, as _advance checks a chunk) within the work cap
+        self._fast_n = min(self._chunk, FAST_STEP_WORK // max(1, len(self.names) * (self._per_step or 1)))
+        self._views = _read_only_views(self._x, self._models.Omega, self._models.applied)
+        if self._fast is not None:   # sim.step() straight into C; the Python path only when C steps aside
+            self._fast.set_fallback(self._step_slow)
+            self.step = self._fast.step_or_fallback
+
+    # ---- zero-copy views of the state (read-only: set_state is the writer) ------------------
+    @property
+    def x(self) -> np.ndarray:
+        """The state of every body, (nb, 13) = [p_w(3), q(4), v_w(3), omega_b(3)] per row (layout
+        generated/layout.py), in the order of `names`. A read-only view of the array the backends advance
+        in place: no copy, always current; write through set_state (which validates), never through it."""
+        return self._views[0]
+
+    @property
+    def p_w(self) -> np.ndarray:
+        """COM positions, world frame, m, (nb, 3): a read-only view of x (see x)."""
+        return self._views[1]
+
+    @property
+    def q(self) -> np.ndarray:
+        """Orientations R_WB as quaternions (x, y, z, w), (nb, 4): a read-only view of x (see x)."""
+        return self._views[2]
+
+    @property
+    def v_w(self) -> np.ndarray:
+        """COM velocities, world frame, m/s, (nb, 3): a read-only view of x (see x)."""
+        return self._views[3]
+
+    @property
+    def omega_b(self) -> np.ndarray:
+        """Angular velocities (body rates), body frame, rad/s, (nb, 3): a read-only view of x (see x)."""
+        return self._views[4]
+
+    @property
+    def Omega(self) -> np.ndarray:
+        """Reaction-wheel rates relative to their body, rad/s, (nb, 3) (zeros for a body without wheels):
+        a read-only view (set_state(name, Omega=...) writes them)."""
+        return self._views[5]
+
+    # ---- counters (kept by the C stepper when there is one) --------------------------------
+    @property
+    def steps(self) -> int:
+        """Steps taken so far."""
+        return self._ctr.steps
+
+    @steps.setter
+    def steps(self, n: int) -> None:
+        self._ctr.steps = n
+
+    @property
+    def t(self) -> float:
+        """Simulated time, s: steps * dt."""
+        return self._ctr.steps * self.dt
+
+    @property
+    def rhs_evals(self) -> int:
+        """Right-hand-side evaluations so far (see the module docstring)."""
+        return self._ctr.rhs_evals
+
+    @rhs_evals.setter
+    def rhs_evals(self, n: int) -> None:
+        self._ctr.rhs_evals = n
+
+    def _make_stepper(self):
+        """The C fast path of step() (lavendersim/csrc/fast_step.c), or None where it does not apply: not the C
+        backend, an adaptive integrator (unbounded work per step), a free wheeled body under the growth check
+        (its |L| is computed in Python every step), a scene larger than FAST_STEP_WORK evaluations per step (the
+        fast path holds the GIL), or a Python without the GIL."""
+        gil = getattr(sys, "_is_gil_enabled", lambda: True)()
+        if (self.backend.name != "c" or self._per_step is None or not gil
+                or (self._free_wheels_idx and self.max_growth is not None)
+                or len(self.names) * self._per_step > FAST_STEP_WORK):
+            return None
+        from .backends import c_backend
+
+        m = self._models if self._has_models else None
+        models = (None,) * 4 if m is None else (m.rows, m.Omega, m.command, m.applied)
+        bound = np.inf if self._bound is None else float(self._bound[0])
+        return c_backend._c.Stepper(self._x, self.params, self.effects if self.effects.size else self.effects.reshape(0, 2),
+                                    c_backend.INTEGRATOR_CODES[self.integrator], 1 if self.normalize else 0, float(self.dt),
+                                    int(self._per_step), MAX_STEPS, self._wdt_scale, bound, self._w_fast,
+                                    c_backend.user_effect_table(self.effects), *models)
 
     # ---- divergence checks ---------------------------------------------------------------
     def _setup_checks(self) -> None:
@@ -308,18 +448,25 @@ class Sim:
         largest |omega| at which its energy cannot exceed max_growth * E0 (E <= T_translation + I_max |omega|^2 / 2,
         both terms from the kinetic_energy kernel; v is constant on a force-free body): the check evaluates the
         kernel only for a body above it, so it costs nothing while a run is far from its limit."""
-        self._E0, self._L0 = self._invariants(self.x, self._models.Omega)
+        self._E0, self._L0 = self._invariants(self._x, self._models.Omega)
         nb = len(self.names)
         self._w_safe = np.zeros(nb)
-        if self._free_any and self.max_growth is not None:
-            f = self._free
+        # the C stepper's copy: +inf where no growth check can fire (bodies not free, or max_growth None)
+        self._w_fast = np.full(nb, np.inf)
+        self._safe_rates(self._free)
+
+    def _safe_rates(self, f: np.ndarray) -> None:
+        """w_safe (see _reference) of the free bodies selected by the boolean mask f, from the current E0."""
+        f = f & self._free
+        if f.any() and self.max_growth is not None:
             I = self.params[f][:, LY.PARAM_I_B]
             with np.errstate(over="ignore", invalid="ignore"):
-                T = K.kinetic_energy(self.params[f, LY.PARAM_M], I, self.x[f][:, LY.STATE_V_W], np.zeros((int(f.sum()), 3)))
+                T = K.kinetic_energy(self.params[f, LY.PARAM_M], I, self._x[f][:, LY.STATE_V_W], np.zeros((int(f.sum()), 3)))
                 half_Imax = K.kinetic_energy(np.zeros(int(f.sum())), np.repeat(I.max(axis=1)[:, None], 3, axis=1),
                                              np.zeros((int(f.sum()), 3)), np.tile([1.0, 0.0, 0.0], (int(f.sum()), 1)))
                 room = np.maximum(self.max_growth * self._E0[f] - T, 0.0)
                 self._w_safe[f] = np.sqrt(room / half_Imax) * (1 - 1e-12)   # rounding margin: never skip a violation
+            self._w_fast[f] = self._w_safe[f]
 
     def _wdt(self, x: np.ndarray, w: np.ndarray | None = None) -> np.ndarray:
         """Per body |omega|*dt*(I_max/I_min)**p, the quantity the validity bound limits (w: |omega| if known)."""
@@ -348,6 +495,12 @@ class Sim:
         return v
 
     def _violation_raw(self, x, Omega, warn, growth):
+        screen = self._screen
+        if screen is not None and x is self._x and (not growth or self.max_growth is None or not self._free_wheels_idx):
+            # one pass in C: every body inside the bound and (growth) inside its no-work region -> nothing to report
+            bound = np.inf if self._bound is None else self._bound[0]
+            if screen(x, self._wdt_scale, bound, self._w_fast if growth else self._w_inf):
+                return None
         with np.errstate(over="ignore", invalid="ignore"):   # an overflowing norm is inf: beyond any bound
             om = x[:, LY.STATE_OMEGA_B]
             w = np.sqrt(np.add.reduce(om * om, axis=1))
@@ -382,16 +535,31 @@ class Sim:
                            f"{self.integrator} is unstable here; reduce dt")
         return None
 
-    def _snapshot(self) -> tuple:
-        m, ad = self._models, self._adaptive
-        return (self.x.copy(), m.Omega.copy(), m.applied.copy(),
-                None if ad is None else (ad.h.copy(), ad.nfev.copy()), self.steps, self.t, self.rhs_evals)
+    def _snapshot(self, reuse: bool = False) -> tuple:
+        """What a restore needs: the state, (with joints/wheels) wheel rates and applied torques, the adaptive
+        arrays, the counters. reuse=True copies into buffers kept by the Sim (no allocation: at 10^6 bodies
+        a fresh 100 MB array per call cost more in page faults than the copy); only _advance's start uses them."""
+        m, ad, models = self._models, self._adaptive, self._has_models
+        if not reuse:
+            x, W, u = self._x.copy(), m.Omega.copy() if models else None, m.applied.copy() if models else None
+        else:
+            if self._snap_buf is None:
+                self._snap_buf = tuple(np.empty_like(a) for a in (self._x, m.Omega, m.applied))
+            x, W, u = self._snap_buf
+            np.copyto(x, self._x)
+            if models:
+                np.copyto(W, m.Omega)
+                np.copyto(u, m.applied)
+            else:
+                W = u = None
+        return (x, W, u, None if ad is None else (ad.h.copy(), ad.nfev.copy()), self.steps, self.rhs_evals)
 
     def _restore(self, snap: tuple) -> None:
-        x, W, u, ad, self.steps, self.t, self.rhs_evals = snap
-        self.x[...] = x
-        self._models.Omega[...] = W
-        self._models.applied[...] = u
+        x, W, u, ad, self.steps, self.rhs_evals = snap
+        self._x[...] = x
+        if W is not None:     # None: no body has a joint or wheels, the backends never touch them
+            self._models.Omega[...] = W
+            self._models.applied[...] = u
         if ad is not None:
             self._adaptive.h[...], self._adaptive.nfev[...] = ad
 
@@ -410,28 +578,57 @@ class Sim:
         nb = len(self.names)
         models = Models.empty(nb)
         rows = models.rows
+        # a body without model effects: kind 0, I_p = diag(I_b), r_b = anchor = 0 (all bodies at once)
+        rows[:, LY.MODEL_I_P] = (self.params[:, LY.PARAM_I_B][:, :, None] * np.eye(3)).reshape(nb, 9)
+        modelled: dict[str, dict] = {}      # scene.model_effects(name) for every body at once
+        for e in scene.effects:
+            if e.per_body:
+                modelled.setdefault(e.body, {})[e.name] = e
+        self._modelled = modelled
         for i, name in enumerate(self.names):
-            m, I_b = self.params[i, LY.PARAM_M], self.params[i, LY.PARAM_I_B]
-            me = scene.model_effects(name)
-            kind, I_p, r_b, anchor = 0, np.diag(I_b), np.zeros(3), np.zeros(3)
-            if "spherical_joint" in me:
-                kind |= KIND_JOINT
-                anchor = me["spherical_joint"].values["anchor_w"]
-                r_b = K.quat_to_matrix(self.x[i, LY.STATE_Q]).T @ (self.x[i, LY.STATE_P_W] - anchor)
-                I_p = K.parallel_axis(np.diag(I_b), m, -r_b)
-                self.x[i, LY.STATE_P_W], self.x[i, LY.STATE_V_W] = K.pivot_kinematics(
-                    self.x[i, LY.STATE_Q], self.x[i, LY.STATE_OMEGA_B], anchor, r_b)
-            if "reaction_wheels" in me:
-                kind |= KIND_WHEELS
-                w = me["reaction_wheels"].values
-                rows[i, LY.MODEL_J] = w["J"]
-                rows[i, LY.MODEL_TORQUE_LIMIT], rows[i, LY.MODEL_SPEED_LIMIT] = w["torque_limit"], w["speed_limit"]
-                rows[i, LY.MODEL_C_W] = w["c_w"]
-            rows[i, LY.MODEL_KIND] = kind
-            rows[i, LY.MODEL_I_P] = np.asarray(I_p).reshape(9)
-            rows[i, LY.MODEL_R_B] = r_b
-            rows[i, LY.MODEL_ANCHOR_W] = anchor
+            if name in modelled:
+                self._model_row(i, modelled[name], rows)
         return models
+
+    def _model_row(self, i: int, me: dict, rows: np.ndarray) -> None:
+        """Body i's model row from its model effects me and its current state (a jointed body's r_b, I_p
+        from its q and p_w; its p_w, v_w then set from pivot_kinematics)."""
+        m, I_b = self.params[i, LY.PARAM_M], self.params[i, LY.PARAM_I_B]
+        kind, I_p, r_b, anchor = 0, np.diag(I_b), np.zeros(3), np.zeros(3)
+        if "spherical_joint" in me:
+            kind |= KIND_JOINT
+            anchor = me["spherical_joint"].values["anchor_w"]
+            r_b = K.quat_to_matrix(self._x[i, LY.STATE_Q]).T @ (self._x[i, LY.STATE_P_W] - anchor)
+            I_p = K.parallel_axis(np.diag(I_b), m, -r_b)
+            self._x[i, LY.STATE_P_W], self._x[i, LY.STATE_V_W] = K.pivot_kinematics(
+                self._x[i, LY.STATE_Q], self._x[i, LY.STATE_OMEGA_B], anchor, r_b)
+        if "reaction_wheels" in me:
+            kind |= KIND_WHEELS
+            w = me["reaction_wheels"].values
+            rows[i, LY.MODEL_J] = w["J"]
+            rows[i, LY.MODEL_TORQUE_LIMIT], rows[i, LY.MODEL_SPEED_LIMIT] = w["torque_limit"], w["speed_limit"]
+            rows[i, LY.MODEL_C_W] = w["c_w"]
+        rows[i, LY.MODEL_KIND] = kind
+        rows[i, LY.MODEL_I_P] = np.asarray(I_p).reshape(9)
+        rows[i, LY.MODEL_R_B] = r_b
+        rows[i, LY.MODEL_ANCHOR_W] = anchor
+
+    def _reinit_body(self, i: int, p_w: np.ndarray, q: np.ndarray, omega_b: np.ndarray, Omega: np.ndarray) -> None:
+        """Body i as if this Sim had been built with it at rest-translation state (p_w, q, v_w = 0, omega_b) and
+        then given wheel rates Omega by set_state: model row (joint r_b, I_p), growth reference, wheel command
+        and applied torques zeroed. For batched resets (the vector env); the caller validated the values."""
+        with self._lock:
+            self._dirty = True
+            x = self._x[i]
+            x[LY.STATE_P_W], x[LY.STATE_Q], x[LY.STATE_V_W], x[LY.STATE_OMEGA_B] = p_w, q, 0.0, omega_b
+            self._model_row(i, self._modelled.get(self.names[i], {}), self._models.rows)
+            self._models.Omega[i] = Omega
+            self._models.command[i] = 0.0
+            self._models.applied[i] = 0.0
+            E0, L0 = self._invariants(self._x, self._models.Omega)
+            self._E0[i], self._L0[i] = E0[i], L0[i]
+            self._safe_rates(np.arange(len(self.names)) == i)
+            self._warned.discard(i)
 
     def _kind(self, i: int) -> int:
         return int(self._models.rows[i, LY.MODEL_KIND])
@@ -479,11 +676,10 @@ class Sim:
         models = self._models if self._has_models else None
         ad = self._adaptive
         before = None if ad is None else ad.nfev.copy()
-        self.backend.advance(self.x, self.params, self.effects, self.integrator, self.normalize, self.dt, n, models,
+        self.backend.advance(self._x, self.params, self.effects, self.integrator, self.normalize, self.dt, n, models,
                              *(() if ad is None else (ad,)))
         self.rhs_evals += n * self._per_step if ad is None else int(np.max(ad.nfev - before, initial=0))
         self.steps += n
-        self.t = self.steps * self.dt
 
     def _locate(self, limit: int) -> tuple[int, int, str] | None:
         """From the current state (which passes the checks), the first k in 1..limit whose state after k
@@ -504,7 +700,7 @@ class Sim:
                         return None       # non-finite before any check failed
                     found = (k, m, None)
                     break
-                v = self._violation(self.x, self._models.Omega, warn=False)
+                v = self._violation(self._x, self._models.Omega, warn=False)
                 if v is not None:
                     if m == 1:
                         return k + 1, v[0], v[1]
@@ -520,8 +716,16 @@ class Sim:
         if self.steps + n > MAX_STEPS:
             raise V.LavenderInputError("n_steps", f"the Sim would pass MAX_STEPS = 2**53 steps in total "
                                        f"({self.steps} done + {n})")
-        start = self._snapshot()
+        start = self._snapshot(reuse=True)
         steps0 = self.steps
+        sizes: list[int] = []
+
+        def to_chunk_start():
+            """Back to the start of the current chunk by replay: restore the call's start and re-run the
+            chunks that passed (the same backend calls, so bitwise the same, dopri5 too): no copy per chunk."""
+            self._restore(start)
+            for size in sizes:
+                self._backend_advance(size)
 
         def fail(k: int, body: int, cause: str):   # k: 0-based index of the failing step within this call
             self._restore(start)
@@ -530,41 +734,62 @@ class Sim:
         try:
             # before stepping: the bound (the state may have been written since the last check); the growth
             # check ran on the end state of the previous call
-            if self._checked is None or not np.array_equal(self._checked, self.x):
-                v = self._violation(self.x, self._models.Omega, growth=False)
+            if not self._is_checked():
+                v = self._violation(self._x, self._models.Omega, growth=False)
                 if v is not None:
                     raise fail(0, v[0], "before the step: " + v[1])
             done = 0
             while done < n:
                 m = min(self._chunk, n - done)
-                chunk = start if done == 0 else self._snapshot()
                 try:
                     self._backend_advance(m)
                 except DivergenceError as e:
-                    self._restore(chunk)
+                    to_chunk_start()
                     hit = self._locate(e.step) if e.step > 0 else None
                     if hit is not None:
                         raise fail(done + hit[0] - 1, hit[1], hit[2]) from None
                     raise fail(done + e.step, e.body, e.cause) from None
-                v = self._violation(self.x, self._models.Omega)
+                v = self._violation(self._x, self._models.Omega)
                 if v is not None:
-                    end = self.x.copy()
-                    self._restore(chunk)
+                    to_chunk_start()
                     hit = self._locate(m)
                     if hit is None:     # (dopri5: the pieces' trajectory differs from the chunk's by rounding)
                         hit = (m, v[0], v[1])
-                    del end
                     raise fail(done + hit[0] - 1, hit[1], hit[2]) from None
                 done += m
-            self._checked = self.x.copy()
+                sizes.append(m)
+            self._mark_checked()
         except DivergenceError:
             raise
         except BaseException:           # KeyboardInterrupt between chunks, or any error: nothing half-applied
             self._restore(start)
             raise
 
+    def _is_checked(self) -> bool:
+        """The state is the last one that passed the checks: compared bytewise by the C stepper; else tracked by a
+        flag that every writer sets (set_state, _reinit_body; the views are read-only and their flag cannot be
+        turned back on, so no public path writes the state without setting it)."""
+        if self._fast is not None:
+            return self._fast.is_checked()
+        return not self._dirty
+
+    def _mark_checked(self) -> None:
+        if self._fast is not None:
+            self._fast.mark_checked()
+        self._dirty = False
+
     def step(self) -> None:
-        """Advance one step (see run)."""
+        """Advance one step (see run).
+
+        On the C backend a step whose every check passes is taken inside C (fast_step.c); any other step
+        (a check fails, the state was written since the last check, another thread holds the Sim) takes the
+        Python path, which raises or warns as run does."""
+        f = self._fast
+        if f is not None and f.step():
+            return
+        self._step_slow()
+
+    def _step_slow(self) -> None:
         with self._lock:
             self._advance(1)
 
@@ -589,6 +814,9 @@ class Sim:
         if n > MAX_STEPS:
             raise V.LavenderInputError("n_steps", "must be at most MAX_STEPS = 2**53 (9.0e15)", f", got {n}")
         if n:
+            f = self._fast
+            if f is not None and n <= self._fast_n and f.advance(n):
+                return     # one chunk inside C, its end checked as _advance checks it
             with self._lock:
                 self._advance(n)
 
@@ -644,11 +872,11 @@ class Sim:
             raise V.LavenderInputError("every", f"must divide n_steps ({n})", f", got {every}")
         with self._lock:
             start = self._snapshot()
-            xs, Ws, ts = [self.x.copy()], [self._models.Omega.copy()], [self.t]
+            xs, Ws, ts = [self._x.copy()], [self._models.Omega.copy()], [self.t]
             try:
                 for _ in range(n // every):
                     self._advance(every)
-                    xs.append(self.x.copy())
+                    xs.append(self._x.copy())
                     Ws.append(self._models.Omega.copy())
                     ts.append(self.t)
             except BaseException:
@@ -658,7 +886,10 @@ class Sim:
 
     # ---- state access ---------------------------------------------------------------------
     def state(self, name: str) -> BodyState:
-        """A copy of one body's current state.
+        """A copy of one body's current state; O(1) in the number of bodies (a dict lookup).
+
+        For every body at once without copying use the views ``x``, ``p_w``, ``q``, ``v_w``, ``omega_b``
+        and ``Omega``.
 
         Parameters
         ----------
@@ -677,7 +908,7 @@ class Sim:
             If no body has that name.
         """
         i = self._i(name)
-        return BodyState(self.x[i].copy(), self._models.Omega[i].copy())
+        return BodyState(self._x[i].copy(), self._models.Omega[i].copy())
 
     @V.keywords  # an unknown keyword (a typo such as omega=) is a LavenderInputError naming it
     def set_state(self, name: str, *, p_w=None, q=None, v_w=None, omega_b=None, omega_w=None, Omega=None) -> None:
@@ -708,7 +939,7 @@ class Sim:
         """
         i = self._i(name)
         kind = self._kind(i)
-        x = self.x[i].copy()
+        x = self._x[i].copy()
         if kind & KIND_JOINT:
             for field, value in (("p_w", p_w), ("v_w", v_w)):
                 if value is not None:
@@ -749,11 +980,13 @@ class Sim:
                     raise V.LavenderInputError(field, self._bound_text(wdt) + " (Sim(..., on_bound='warn') to allow it)")
                 warnings.warn(f"body {name!r}: {self._bound_text(wdt)}", ValidityBoundWarning, stacklevel=2)
         with self._lock:
-            self.x[i] = x
+            self._dirty = True
+            self._x[i] = x
             if W is not None:
                 self._models.Omega[i] = W
-            E0, L0 = self._invariants(self.x, self._models.Omega)
+            E0, L0 = self._invariants(self._x, self._models.Omega)
             self._E0[i], self._L0[i] = E0[i], L0[i]
+            self._safe_rates(np.arange(len(self.names)) == i)   # the no-work region follows the new E0   # the no-work region follows the new E0
 
     # ---- reaction wheels ------------------------------------------------------------------
     def _wheeled(self, name: str) -> int:
@@ -779,6 +1012,35 @@ class Sim:
         """
         i = self._wheeled(name)
         self._models.command[i] = V.vector("u", u)
+
+    def set_wheel_commands(self, u) -> None:
+        """Motor torques of every body's wheels at once; held until changed, saturated every step, as
+        set_wheel_command.
+
+        Parameters
+        ----------
+        u : array_like, (nb, 3)
+            Commanded wheel torques, N·m, body frame, in body order; rows of bodies without
+            reaction_wheels must be zero.
+
+        Raises
+        ------
+        LavenderInputError
+            A wrong shape, a non-finite value, or a non-zero row for a body without wheels.
+        """
+        u = V.array("u", u, (len(self.names), 3))
+        wheeled = (self._models.rows[:, LY.MODEL_KIND].astype(np.int64) & KIND_WHEELS) != 0
+        stray = ~wheeled & np.any(u != 0, axis=1)
+        if stray.any():
+            b = int(np.flatnonzero(stray)[0])
+            raise V.LavenderInputError(f"u[{b}]", f"body {self.names[b]!r} has no reaction_wheels: its row must be 0")
+        self._models.command[...] = u
+
+    @property
+    def wheel_torques_applied(self) -> np.ndarray:
+        """The saturated wheel torques of the most recent step for every body, (nb, 3) N·m (zeros before the
+        first step and for bodies without wheels): a read-only view."""
+        return self._views[6]
 
     def wheel_command(self, name: str) -> np.ndarray:
         """The commanded (unsaturated) wheel torques, N·m.
@@ -837,13 +1099,15 @@ class Sim:
         """
         i = self._i(name)
         r = self._models.rows[i]
-        return K.wheel_momentum(self.x[i, LY.STATE_Q], self.x[i, LY.STATE_OMEGA_B], self._models.Omega[i],
+        return K.wheel_momentum(self._x[i, LY.STATE_Q], self._x[i, LY.STATE_OMEGA_B], self._models.Omega[i],
                                 r[LY.MODEL_I_P].reshape(3, 3), r[LY.MODEL_J])
 
     def _i(self, name: str) -> int:
-        if name not in self.names:
-            raise V.LavenderInputError("body", f"unknown body {name!r}; bodies: {', '.join(self.names)}")
-        return self.names.index(name)
+        try:
+            return self._index[name]
+        except (KeyError, TypeError):   # TypeError: an unhashable name
+            raise V.LavenderInputError("body", f"unknown body {name!r}; bodies: {', '.join(self.names[:20])}"
+                                       + (f", … ({len(self.names)} bodies)" if len(self.names) > 20 else "")) from None
 
     def kinetic_energy(self, name: str | None = None) -> float:
         """Kinetic energy of one body, or of all bodies (name=None), J: ½ m|v|² + ½ ωᵀ I_b ω with
@@ -860,8 +1124,8 @@ class Sim:
             Kinetic energy, J.
         """
         idx = range(len(self.names)) if name is None else [self._i(name)]
-        return float(sum(K.kinetic_energy(self.params[i, LY.PARAM_M], self.params[i, LY.PARAM_I_B], self.x[i, LY.STATE_V_W],
-                                          self.x[i, LY.STATE_OMEGA_B]) for i in idx))
+        return float(sum(K.kinetic_energy(self.params[i, LY.PARAM_M], self.params[i, LY.PARAM_I_B], self._x[i, LY.STATE_V_W],
+                                          self._x[i, LY.STATE_OMEGA_B]) for i in idx))
 
     def angular_momentum_w(self, name: str) -> np.ndarray:
         """Angular momentum about the body's COM, world frame, kg·m²/s.
@@ -877,8 +1141,8 @@ class Sim:
             ``L_w = R_wb I_b omega_b``.
         """
         i = self._i(name)
-        return K.angular_momentum_world(self.x[i, LY.STATE_Q], self.params[i, LY.PARAM_I_B],
-                                        self.x[i, LY.STATE_OMEGA_B])
+        return K.angular_momentum_world(self._x[i, LY.STATE_Q], self.params[i, LY.PARAM_I_B],
+                                        self._x[i, LY.STATE_OMEGA_B])
 
     def linear_momentum_w(self, name: str) -> np.ndarray:
         """Linear momentum ``m v_w``, world frame, kg·m/s.
@@ -893,4 +1157,4 @@ class Sim:
         ndarray, shape (3,)
         """
         i = self._i(name)
-        return self.params[i, LY.PARAM_M] * self.x[i, LY.STATE_V_W]
+        return self.params[i, LY.PARAM_M] * self._x[i, LY.STATE_V_W]

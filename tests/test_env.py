@@ -159,3 +159,108 @@ def test_backends_agree(backend):
         env.reset(seed=7)
         outs.append([env.step(np.array([0.2, -0.7, 0.4], np.float32))[0] for _ in range(20)])
     assert np.max(np.abs(np.array(outs[0]) - np.array(outs[1]))) < 1e-5
+
+
+# ------------------------------------------------------------------ the vector env (issue 12)
+
+def _vec(n, mode, **kw):
+    return gym.make_vec("lavendersim:ReactionWheelCube-v0", num_envs=n, vectorization_mode=mode, **kw)
+
+
+@pytest.mark.parametrize("task", ["center", "corner"])
+def test_vector_env_equals_n_single_envs_with_autoreset(task):
+    """gymnasium's SyncVectorEnv over N single envs (next-step autoreset, seeds s + i) is the reference:
+    observations, terminations and truncations equal bitwise, rewards to rounding, through resets."""
+    from lavendersim.envs.vector import ReactionWheelCubeVectorEnv
+
+    n = 5
+    kw = dict(task=task, max_episode_steps=40)
+    ve, se = _vec(n, "vector_entry_point", **kw), _vec(n, "sync", **kw)
+    assert isinstance(ve, ReactionWheelCubeVectorEnv) and ve.metadata["autoreset_mode"] == gym.vector.AutoresetMode.NEXT_STEP
+    assert se.metadata["autoreset_mode"] == gym.vector.AutoresetMode.NEXT_STEP
+    o1, _ = ve.reset(seed=11)
+    o2, _ = se.reset(seed=11)
+    assert np.array_equal(o1, o2) and o1.dtype == np.float32 and o1 in ve.observation_space
+    rng = np.random.default_rng(0)
+    ends = 0
+    for _ in range(120):
+        a = rng.uniform(-1.2, 1.2, (n, 3)).astype(np.float32)     # beyond ±1 too: saturated alike
+        r1, r2 = ve.step(a), se.step(a)
+        assert np.array_equal(r1[0], r2[0]) and r1[0] in ve.observation_space
+        assert np.array_equal(r1[2], r2[2]) and np.array_equal(r1[3], r2[3])
+        np.testing.assert_allclose(r1[1], r2[1], rtol=1e-12, atol=1e-12)
+        ends += int(np.sum(r1[2] | r1[3]))
+    assert ends >= n          # every sub-env truncated at least once (40 steps) and was reset by the next step
+    ve.close()
+    se.close()
+
+
+def test_vector_env_seeding_is_per_env_and_reproducible():
+    ve = _vec(3, "vector_entry_point")
+    a, _ = ve.reset(seed=5)
+    b, _ = ve.reset(seed=5)
+    c, _ = ve.reset(seed=[5, 6, 7])
+    assert np.array_equal(a, b) and np.array_equal(a, c)
+    assert not np.array_equal(a[0], a[1])                     # each sub-env its own generator
+    single = gym.make("lavendersim:ReactionWheelCube-v0")
+    o, _ = single.reset(seed=6)
+    assert np.array_equal(a[1], o)
+    d, _ = ve.reset(seed=[None, 6, None])                      # only sub-env 1 re-seeded
+    assert np.array_equal(d[1], a[1])
+    mask = np.array([False, True, False])
+    e, _ = ve.reset(seed=6, options={"reset_mask": mask})     # reset sub-env 1 only (seed 6 + 1)
+    assert np.array_equal(e[0], d[0]) and np.array_equal(e[2], d[2])
+    for bad, field in (({"seed": -1}, "seed"), ({"seed": [1, 2]}, "seed"), ({"options": {"q": 1}}, "options.q"),
+                       ({"options": {"reset_mask": [1, 0, 1]}}, "options.reset_mask")):
+        with pytest.raises(LavenderInputError, match=field):
+            ve.reset(**bad)
+    with pytest.raises(LavenderInputError, match="actions"):
+        ve.step(np.full((3, 3), np.nan))
+    with pytest.raises(LavenderInputError, match="actions"):
+        ve.step(np.zeros((2, 3)))
+    with pytest.raises(LavenderInputError, match="num_envs"):
+        _vec(0, "vector_entry_point")
+    with pytest.raises(LavenderInputError, match="render_mode"):
+        _vec(2, "vector_entry_point", render_mode="rgb_array")
+
+
+def test_vector_env_divergence_ends_only_that_sub_env():
+    """A DivergenceError of one cube (here injected by a Sim.run that raises once for body 1, as a real one
+    does: the Sim restored) terminates that sub-env with reward -1e3 and its pre-step observation; the
+    others advance exactly as without it; the next step resets it."""
+    from lavendersim.errors import DivergenceError
+
+    n = 3
+    ve, ref = _vec(n, "vector_entry_point"), _vec(n, "vector_entry_point")
+    o0, _ = ve.reset(seed=2)
+    ref.reset(seed=2)
+    sim, real_run = ve.sim, ve.sim.run
+    calls = []
+
+    def run_once_diverging(k):
+        calls.append(k)
+        if len(calls) == 1:
+            raise DivergenceError(3, 1, "injected", "cube1")
+        return real_run(k)
+    sim.run = run_once_diverging
+    a = np.full((n, 3), 0.3, np.float32)
+    obs, rew, term, trunc, info = ve.step(a)
+    r_obs, r_rew, *_ = ref.step(a)
+    assert term.tolist() == [False, True, False] and rew[1] == -1e3 and info["diverged"].tolist() == [False, True, False]
+    assert "injected" in info["diverged_message"][1]
+    assert np.array_equal(obs[1], o0[1])                              # its state before the step
+    assert np.array_equal(obs[[0, 2]], r_obs[[0, 2]]) and np.array_equal(rew[[0, 2]], r_rew[[0, 2]])
+    obs2, rew2, term2, *_ = ve.step(a)                                 # next-step autoreset of sub-env 1
+    assert rew2[1] == 0.0 and not term2[1]
+
+
+def test_vector_env_steps_all_cubes_in_one_sim_call():
+    ve = _vec(4, "vector_entry_point")
+    ve.reset(seed=0)
+    sim = ve.sim
+    assert len(sim.names) == 4
+    calls = []
+    real = sim.run
+    sim.run = lambda k: (calls.append(k), real(k))[1]
+    ve.step(np.zeros((4, 3), np.float32))
+    assert calls == [ve.substeps]

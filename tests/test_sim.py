@@ -155,3 +155,247 @@ def test_omega_world_and_body_agree(backend):
     sim = lv.Sim(s, backend=backend)
     np.testing.assert_allclose(sim.state("rod").omega_b, [-1.0, 0, 0], atol=1e-15)
     np.testing.assert_allclose(sim.state("rod").omega_w, [0, 0, 1.0], atol=1e-15)
+
+
+# ------------------------------------------------------------------ sim.step() inside C (issue 12)
+
+def _scenes():
+    from lavendersim import control as lc
+
+    plain = tumbling()
+    forced = tumbling(omega_b=(0.3, 2.0, 0.1))
+    forced.add_effect("gravity", g_w=(0.0, 0.0, -9.81))
+    forced.add_effect("angular_damping", body="b", c=0.05)
+    cube = lc.CubeModel(scenario="corner", damping=1e-3)
+    return {"plain": (plain, "rk4"), "forced": (forced, "rk4"), "plain_euler": (plain, "euler"),
+            "splitting": (plain, "splitting"), "implicit_gyro": (forced, "implicit_gyro"), "cube": (cube, "rk4")}
+
+
+def _sim(scene, integrator):
+    if not isinstance(scene, lv.Scene):   # a CubeModel: a wheeled body on a joint
+        sim = scene.make_sim(scene.upright_q(), (0.2, -0.1, 0.3), (5.0, -3.0, 1.0), dt=1e-3, backend="c")
+        sim.set_wheel_command("cube", (0.01, -0.02, 0.005))
+        return sim
+    return lv.Sim(scene, dt=1e-3, integrator=integrator, backend="c")
+
+
+def _python_path_only(sim):
+    """The same Sim with its C fast path switched off (step and run take the Python path)."""
+    sim.__dict__.pop("step", None)
+    sim._fast = None
+    return sim
+
+
+@pytest.mark.parametrize("case", list(_scenes()))
+def test_step_inside_c_equals_the_python_path_bitwise(case):
+    scene, integrator = _scenes()[case]
+    fast, slow, fast_run = _sim(scene, integrator), _python_path_only(_sim(scene, integrator)), _sim(scene, integrator)
+    assert fast._fast is not None, "the C fast path should serve this scene"
+    for _ in range(300):
+        fast.step()
+    slow.run(300)                       # the Python path (chunked checks)
+    for _ in range(30):
+        fast_run.run(10)                # run(n) inside C
+    assert np.array_equal(fast_run.x, slow.x) and fast_run.steps == 300
+    assert np.array_equal(fast.x, slow.x)
+    assert np.array_equal(fast._models.Omega, slow._models.Omega)
+    assert (fast.steps, fast.t, fast.rhs_evals) == (slow.steps, slow.t, slow.rhs_evals) == (300, slow.t, slow.rhs_evals)
+    assert fast.t == 300 * fast.dt
+    # a state written between steps is checked again, then stepped as the Python path does
+    name = fast.names[0]
+    for s in (fast, slow):
+        s.set_state(name, omega_b=(0.4, -0.2, 0.1))
+    for _ in range(5):
+        fast.step()
+        slow.run(1)
+    assert np.array_equal(fast.x, slow.x)
+
+
+def test_step_in_a_loop_raises_at_the_first_bad_step_and_restores_it():
+    sim = lv.Sim(tumbling(omega_b=(0.5, 0.5, 50.0)), dt=0.1, integrator="euler", backend="c", on_bound="raise",
+                 max_growth=None)
+    with pytest.raises(lv.DivergenceError) as e:   # beyond euler's bound already: the pre-step check
+        sim.step()
+    assert sim.steps == 0 and "validity bound" in str(e.value)
+    sim = lv.Sim(tumbling(omega_b=(0.2, 0.3, 8.0)), dt=1e-2, integrator="euler", backend="c", max_growth=2.0)
+    before = None
+    for k in range(100_000):
+        before = (sim.x.copy(), sim.steps, sim.rhs_evals)
+        try:
+            sim.step()
+        except lv.DivergenceError as exc:
+            assert exc.step == k == before[1]
+            assert "grew" in exc.cause or "validity bound" in exc.cause
+            break
+    else:
+        pytest.fail("euler never diverged")
+    assert np.array_equal(sim.x, before[0]) and (sim.steps, sim.rhs_evals) == before[1:]
+    with pytest.raises(lv.DivergenceError):        # and again: nothing was half-applied
+        sim.step()
+    assert np.array_equal(sim.x, before[0])
+
+
+def test_set_state_moves_the_growth_reference_and_its_no_work_region():
+    """After set_state lowers a free body's energy, growth is measured from the new energy: the same
+    step fails as in a Sim built at that state (the no-work region |omega| <= w_safe follows E0)."""
+    def run(sim):
+        with pytest.raises(lv.DivergenceError) as e:
+            sim.run(20_000)
+        return e.value.step, e.value.cause.split(" (")[0]
+
+    for backend in BACKENDS:
+        a = lv.Sim(tumbling(omega_b=(0.2, 0.3, 9.0)), dt=1e-2, integrator="euler", backend=backend, max_growth=1.5)
+        a.set_state("b", omega_b=(0.1, 0.2, 3.0))
+        b = lv.Sim(tumbling(omega_b=(0.1, 0.2, 3.0)), dt=1e-2, integrator="euler", backend=backend, max_growth=1.5)
+        assert run(a) == run(b)
+
+
+def test_two_threads_stepping_one_sim_never_lose_a_step():
+    import threading
+
+    n = 20_000
+    ref = lv.Sim(tumbling(), dt=1e-3, backend="c")
+    ref.run(3 * n)
+    sim = lv.Sim(tumbling(), dt=1e-3, backend="c")
+    why = {}
+
+    def stepper(k):
+        try:
+            for _ in range(n):
+                sim.step()
+            why[k] = "done"
+        except BaseException as exc:  # recorded, asserted below
+            why[k] = repr(exc)
+
+    def runner():
+        try:
+            for _ in range(n // 100):
+                sim.run(100)
+            why["run"] = "done"
+        except BaseException as exc:
+            why["run"] = repr(exc)
+    threads = [threading.Thread(target=stepper, args=(k,)) for k in range(2)] + [threading.Thread(target=runner)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(timeout=300)
+    assert why == {0: "done", 1: "done", "run": "done"}
+    assert sim.steps == 3 * n
+    assert np.array_equal(sim.x, ref.x)
+
+
+# ------------------------------------------------------------------ zero-copy views, O(1) lookup (issue 12)
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_state_views_are_zero_copy_read_only_and_current(backend):
+    s = lv.Scene()
+    for k in range(3):
+        s.add_body(lv.Body(f"b{k}", 1.0 + k, (1.0, 2.0, 3.0), p_w=(k, 0, 0), omega_b=(0.1 * k, 0.2, 0.3)))
+    sim = lv.Sim(s, dt=1e-3, backend=backend)
+    views = {"x": sim.x, "p_w": sim.p_w, "q": sim.q, "v_w": sim.v_w, "omega_b": sim.omega_b, "Omega": sim.Omega}
+    assert [v.shape for v in views.values()] == [(3, 13), (3, 3), (3, 4), (3, 3), (3, 3), (3, 3)]
+    for name, v in views.items():
+        assert not v.flags.writeable, name
+        with pytest.raises(ValueError):
+            v[0, 0] = 1.0
+        with pytest.raises(ValueError):          # and the flag cannot be turned back on (set_state is the writer)
+            v.flags.writeable = True
+    for _ in range(10):
+        sim.step()
+    sim.run(10)
+    for k, name in enumerate(sim.names):                       # the same memory, advanced in place
+        st = sim.state(name)
+        assert np.array_equal(views["x"][k], st.x) and np.array_equal(views["q"][k], st.q)
+        assert np.array_equal(views["omega_b"][k], st.omega_b) and np.array_equal(views["p_w"][k], st.p_w)
+        assert np.array_equal(views["v_w"][k], st.v_w)
+    sim.set_state("b1", omega_b=(0.0, 0.0, 1.0))                # set_state is the writer; the views see it
+    assert np.array_equal(views["omega_b"][1], [0.0, 0.0, 1.0])
+    with pytest.raises(lv.LavenderInputError, match="unknown body 'nope'"):
+        sim.state("nope")
+    with pytest.raises(lv.LavenderInputError, match="unknown body"):
+        sim.state(["unhashable"])
+
+
+# ------------------------------------------------------------------ batched add_bodies (issue 12)
+
+def _batch(n=6, seed=0):
+    rng = np.random.default_rng(seed)
+    return dict(names=[f"b{i}" for i in range(n)], masses=rng.uniform(0.5, 2.0, n), I_b=rng.uniform(1.0, 1.5, (n, 3)),
+                p_w=rng.normal(size=(n, 3)), q=rng.normal(size=(n, 4)), v_w=rng.normal(size=(n, 3)),
+                omega_w=rng.normal(size=(n, 3)))
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_add_bodies_equals_add_body_one_by_one(backend):
+    kw = _batch()
+    one = lv.Scene()
+    for i, name in enumerate(kw["names"]):
+        one.add_body(lv.Body(name, kw["masses"][i], kw["I_b"][i], p_w=kw["p_w"][i], q=kw["q"][i], v_w=kw["v_w"][i],
+                             omega_w=kw["omega_w"][i]))
+    many = lv.Scene()
+    out = many.add_bodies(**kw)
+    assert [b.name for b in out] == kw["names"] == list(many.bodies)
+    for a, b in zip(one.bodies.values(), many.bodies.values()):
+        assert a.mass == b.mass and np.array_equal(a.I_b, b.I_b)
+        np.testing.assert_allclose(b.x0, a.x0, rtol=0, atol=1e-15)       # q normalized, omega_w rotated alike
+        assert not b.x0.flags.writeable and not b.I_b.flags.writeable
+    sa, sb = lv.Sim(one, backend=backend), lv.Sim(many, backend=backend)
+    sa.run(50)
+    sb.run(50)
+    np.testing.assert_allclose(sb.x, sa.x, rtol=0, atol=1e-12)
+    defaults = lv.Scene()
+    defaults.add_bodies(["u", "v"], [1.0, 2.0], [[1.0, 1.0, 1.0], [1.0, 2.0, 2.5]])
+    assert np.array_equal(defaults.bodies["v"].x0, lv.Body("v", 2.0, (1.0, 2.0, 2.5)).x0)
+
+
+@pytest.mark.parametrize("field, value, match", [
+    ("masses", lambda m: np.r_[m[:3], -1.0, m[4:]], r"masses\[3\]: must be finite and > 0"),
+    ("masses", lambda m: np.r_[m[:2], np.nan, m[3:]], r"masses: must be finite.*index 2"),
+    ("I_b", lambda I: np.r_[I[:4], [[1.0, 1.0, 5.0]], I[5:]], r"I_b\[4\]: principal moments violate the triangle"),
+    ("I_b", lambda I: np.r_[I[:1], [[1.0, 0.0, 1.0]], I[2:]], r"I_b\[1\]: principal moments must be > 0"),
+    ("q", lambda q: np.r_[q[:5], [[0.0, 0.0, 0.0, 0.0]]], r"q\[5\]: zero quaternion"),
+    ("p_w", lambda p: p[:5], r"p_w: expected shape \(6, 3\)"),
+    ("names", lambda n: n[:2] + ["b0"] + n[3:], r"names\[2\]: duplicate name 'b0' \(also names\[0\]\)"),
+    ("names", lambda n: n[:1] + [""] + n[2:], r"names\[1\]: must be a non-empty string"),
+])
+def test_add_bodies_names_the_bad_row_and_adds_nothing(field, value, match):
+    kw = _batch()
+    kw[field] = value(kw[field])
+    s = lv.Scene()
+    s.add_body(lv.Body("first", 1.0, (1.0, 1.0, 1.0)))
+    with pytest.raises(lv.LavenderInputError, match=match):
+        s.add_bodies(**kw)
+    assert list(s.bodies) == ["first"]
+    with pytest.raises(lv.LavenderInputError, match="names\\[0\\]: duplicate name 'first'"):
+        s.add_bodies(["first"], [1.0], [[1.0, 1.0, 1.0]])
+    with pytest.raises(lv.LavenderInputError, match="omega_w: give omega_b or omega_w, not both"):
+        s.add_bodies(["x"], [1.0], [[1.0, 1.0, 1.0]], omega_b=[[0, 0, 1]], omega_w=[[0, 0, 1]])
+    with pytest.raises(lv.LavenderInputError, match="omega_x"):
+        s.add_bodies(["x"], [1.0], [[1.0, 1.0, 1.0]], omega_x=[[0, 0, 1]])
+    assert list(s.bodies) == ["first"]
+
+
+@pytest.mark.parametrize("integrator", ["rk4", "dopri5"])
+def test_a_failing_later_chunk_is_located_by_replay_bitwise(integrator, monkeypatch):
+    """_advance keeps one snapshot per call and reaches a failing chunk's start by replaying the chunks
+    before it: the error names the same step as one long chunk does, and the Sim is restored exactly."""
+    from lavendersim import sim as S
+
+    def run(chunk_work):
+        monkeypatch.setattr(S, "CHUNK_WORK", chunk_work)
+        sim = lv.Sim(tumbling(omega_b=(0.2, 0.3, 8.0)), dt=1e-2, integrator="euler" if integrator == "rk4" else integrator,
+                     backend="c", max_growth=2.0, **({"rtol": 1e-3} if integrator == "dopri5" else {}))
+        sim.run(3)
+        x0, steps0 = sim.x.copy(), sim.steps
+        try:
+            sim.run(5000)
+        except lv.DivergenceError as e:
+            assert np.array_equal(sim.x, x0) and sim.steps == steps0
+            return e.step, e.cause
+        return None
+
+    one, many = run(2**40), run(16)
+    if integrator == "rk4":
+        assert one is not None and one == many
+    else:   # dopri5 at rtol 1e-3 may well stay bounded; when it fails, both name the same step
+        assert one == many or one is None or many is None

@@ -80,6 +80,7 @@ TARGETS = {
     "simd_batch_ns_avx512": 8.0,       # C batch loop ns per body-step on AVX-512, N >= 1e3, at most
     "threads2_speedup": 1.8,           # C batch loop, 1 thread / 2 threads, N >= 1e4, at least
     "per_body_effect_ratio": 1.5,      # one applied_torque per body / plain body, ns per body-step, at most
+    "python_step_c_ns": 1000.0,        # one Python sim.step() on the C backend, at most (issue 12)
 }
 PER_BODY_SIZES_FULL = (1, 100, 10_000)
 PER_BODY_SIZES_QUICK = (1, 100)
@@ -596,6 +597,10 @@ def run(quick: bool = False, rounds: int | None = None, use_mujoco: bool = True)
         "python_step_c": (lambda: [sim_pc.step() for _ in range(n_py)], n_py),
         "python_step_numpy": (lambda: [sim_pn.step() for _ in range(max(1, n_py // 10))], max(1, n_py // 10)),
     }
+    if sim_c.backend.name == "c":   # the bare C call of one step (no checks, no snapshot) beside sim.step()
+        from ..backends import c_backend as _cb
+        xr, pr, er = sim_c.x.copy(), sim_c.params, sim_c.effects
+        cases["c_call_1step"] = (lambda: [_cb._c.simulate(xr, pr, er, 2, 1, DT, 1) for _ in range(n_py)], n_py)
     if kernel is not None:
         xh, xhc, I_b = initial_state(), initial_state(), inertia()
         cases["handwritten_c"] = (lambda: kernel.advance(xh, I_b, DT, n_c), n_c)
@@ -612,6 +617,11 @@ def run(quick: bool = False, rounds: int | None = None, use_mujoco: bool = True)
                     n_r = cfg["mj_rollout_steps"]
                     buf = np.empty((1, n_r, mb.nstate))
                     cases[f"mujoco_{integ}_rollout"] = (lambda mb=mb, n_r=n_r, buf=buf: mb.rollout_states(n_r, buf), n_r)
+            # mj_step on a model with no bodies: what one call from Python costs beyond the physics (binding overhead)
+            m0 = mj_bodies["RK4"].mj.MjModel.from_xml_string("<mujoco/>")
+            d0 = mj_bodies["RK4"].mj.MjData(m0)
+            cases["mujoco_empty_mj_step"] = (lambda st=mj_bodies["RK4"].mj.mj_step, m0=m0, d0=d0, n=n_py:
+                                             [st(m0, d0) for _ in range(n)], n_py)
             mj["version"] = mj_bodies["RK4"].mj.__version__
             mj["rollout"] = mj_bodies["RK4"].rollout is not None
         except Exception as exc:  # noqa: BLE001
@@ -765,6 +775,11 @@ def standing(res: dict) -> list[dict]:
                      "one C call at the best ISA, tiles split over 2 threads; "
                      + (f"{os.cpu_count()} cores, load {(res['machine'].get('loadavg') or ['?'])[0]}" if big
                         else "not measured (N >= 1e4 is not in this run)")))
+    py, bare, mj0 = _ns(res, "python_step_c"), _ns(res, "c_call_1step"), _ns(res, "mujoco_empty_mj_step")
+    basis = "min over rounds" + ("" if bare is None else f"; the bare C call of one step {bare / 1e3:.3f} µs")
+    if mj0 is not None:
+        basis += f"; mujoco.mj_step on an empty model (its Python-call overhead) {mj0 / 1e3:.3f} µs"
+    out.append(_line("one Python sim.step(), c backend", py, TARGETS["python_step_c_ns"], "max", "ns/call", basis))
     return out
 
 
@@ -798,6 +813,8 @@ def report(res: dict) -> str:
             ("handwritten_c_checked", "hand-written + finite check each step"),
             ("numpy_rk4", f"LavenderSim NumPy, Sim.run({s['numpy_rk4']['units_per_call']})"),
             ("python_step_c", "one Python sim.step() call, c backend"),
+            ("c_call_1step", "the bare C call of one step (_c.simulate)"),
+            ("mujoco_empty_mj_step", "MuJoCo mj_step, empty model (call overhead)"),
             ("python_step_numpy", "one Python sim.step() call, numpy backend")]
     for integ in MUJOCO_INTEGRATORS:
         rows += [(f"mujoco_{integ}_mj_step", f"MuJoCo {integ}: mj_step in a Python loop"),

@@ -457,6 +457,8 @@ static PyMethodDef methods[] = {
      "holds its last finite state (and wheel rates), later bodies are untouched."},
     {NULL, NULL, 0, NULL}};
 
+int lv_add_stepper_type(PyObject *m); /* fast_step.c: the Stepper type behind Sim.step() */
+
 static struct PyModuleDef moduledef = {
     PyModuleDef_HEAD_INIT, "_lavender_c",
     "LavenderSim compiled backend: the generated C kernels and the C stepping loop.", -1, methods,
@@ -481,7 +483,8 @@ PyMODINIT_FUNC PyInit__lavender_c(void)
         PyModule_AddIntConstant(m, "ISA_SCALAR", LV_ISA_SCALAR) != 0 ||
         PyModule_AddIntConstant(m, "ISA_BASE", LV_ISA_BASE) != 0 ||
         PyModule_AddIntConstant(m, "ISA_AVX2", LV_ISA_AVX2) != 0 ||
-        PyModule_AddIntConstant(m, "ISA_AVX512", LV_ISA_AVX512) != 0) {
+        PyModule_AddIntConstant(m, "ISA_AVX512", LV_ISA_AVX512) != 0 ||
+        lv_add_stepper_type(m) != 0) {
         Py_DECREF(m);
         return NULL;
     }

@@ -15,12 +15,14 @@ ENV_ID = "ReactionWheelCube-v0"
 # a function, not the class: gymnasium.make then passes render_mode through unchanged (given a class whose
 # metadata lacks the mode, it would swap "human" for "rgb_array" plus its HumanRendering wrapper)
 ENTRY_POINT = "lavendersim.envs.reaction_wheel_cube:make_env"
+VECTOR_ENTRY_POINT = "lavendersim.envs.vector:make_vec_env"   # N cubes in one Sim (gymnasium.make_vec)
 MAX_EPISODE_STEPS = 1000
 
 
 def _register_now(gymnasium) -> None:
     if ENV_ID not in gymnasium.registry:
-        gymnasium.register(id=ENV_ID, entry_point=ENTRY_POINT, max_episode_steps=MAX_EPISODE_STEPS)
+        gymnasium.register(id=ENV_ID, entry_point=ENTRY_POINT, max_episode_steps=MAX_EPISODE_STEPS,
+                           vector_entry_point=VECTOR_ENTRY_POINT)
 
 
 class _RegisteringLoader(importlib.abc.Loader):
@@ -70,4 +72,8 @@ def __getattr__(name):
         from .reaction_wheel_cube import ReactionWheelCubeEnv
 
         return ReactionWheelCubeEnv
+    if name == "ReactionWheelCubeVectorEnv":
+        from .vector import ReactionWheelCubeVectorEnv
+
+        return ReactionWheelCubeVectorEnv
     raise AttributeError(name)

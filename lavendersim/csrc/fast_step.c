@@ -1,0 +1,416 @@
+/* lavendersim._lavender_c.Stepper: one Sim.step() inside C, with the Sim's per-step checks.
+
+   A Stepper holds the Sim's arrays (buffers taken once), a snapshot of the last state that passed the
+   checks, and the Sim's step counters. step() advances one step only when it can prove that the Python
+   path (Sim._advance(1)) would accept it unchanged:
+     * no other thread is inside the Sim's lock (`busy` is 0; it is set by Sim's lock guard),
+     * the state and wheel rates are those of the last check (bytewise; else the pre-step bound check is due),
+     * the step returns LV_OK (finite),
+     * every body's |omega| * wdt_scale <= bound (the validity bound) and |omega| <= w_safe (the growth
+       check's no-work region; w_safe is +inf where no growth check applies).
+   Otherwise it restores the arrays from the snapshot (bitwise) and returns False: the caller takes the
+   Python path, which re-runs the step and raises or warns exactly as before. The GIL is held throughout
+   (the Sim enables the fast path only for small scenes), so a step never interleaves with another
+   Python thread. Control flow only: every number comes from lv_simulate and the arrays Sim fills. */
+#define PY_SSIZE_T_CLEAN
+#include <Python.h>
+#include <math.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "kernels.h"
+#include "step.h"
+
+enum { FS_STATE, FS_PARAMS, FS_EFFECTS, FS_WDT, FS_WSAFE, FS_ROWS, FS_OMEGA, FS_COMMAND, FS_APPLIED, FS_N };
+
+typedef struct {
+    PyObject_HEAD
+    Py_buffer buf[FS_N];
+    int have[FS_N];
+    lv_user_effect *user_entries;
+    lv_user_effects user;
+    lv_models models;
+    int has_models, integrator, normalize;
+    double dt, bound;
+    long nb, ne, row_size;
+    double *snap;          /* x (nb*13), Omega (nb*3), applied (nb*3) of the last checked state */
+    int valid;             /* snap holds a checked state */
+    long busy;             /* > 0 while the Python path holds the Sim's lock */
+    long long steps, rhs_evals, per_step, max_steps;
+    PyObject *fallback;    /* called by step_or_fallback when the fast path steps aside (the Python path) */
+} Stepper;
+
+static void stepper_release(Stepper *s)
+{
+    int i;
+    for (i = 0; i < FS_N; i++)
+        if (s->have[i]) { PyBuffer_Release(&s->buf[i]); s->have[i] = 0; }
+    free(s->user_entries);
+    s->user_entries = NULL;
+    free(s->snap);
+    s->snap = NULL;
+}
+
+static int stepper_traverse(Stepper *s, visitproc visit, void *arg)
+{
+    Py_VISIT(s->fallback);
+    return 0;
+}
+
+static int stepper_clear(Stepper *s)
+{
+    Py_CLEAR(s->fallback);
+    return 0;
+}
+
+static void stepper_dealloc(Stepper *s)
+{
+    PyObject_GC_UnTrack(s);
+    stepper_clear(s);
+    stepper_release(s);
+    Py_TYPE(s)->tp_free((PyObject *)s);
+}
+
+static int take(Stepper *s, int i, PyObject *obj, int writable, Py_ssize_t n_doubles, const char *what)
+{
+    int flags = PyBUF_C_CONTIGUOUS | PyBUF_FORMAT | (writable ? PyBUF_WRITABLE : 0);
+    if (PyObject_GetBuffer(obj, &s->buf[i], flags) != 0) return -1;
+    s->have[i] = 1;
+    if (s->buf[i].itemsize != 8 || s->buf[i].format == NULL || strchr(s->buf[i].format, 'd') == NULL
+        || (n_doubles >= 0 && s->buf[i].len != n_doubles * 8)) {
+        PyErr_Format(PyExc_ValueError, "Stepper: %s must be a C-contiguous float64 array of %zd numbers", what, n_doubles);
+        return -1;
+    }
+    return 0;
+}
+
+/* Stepper(state, params, effects, integrator, normalize, dt, per_step, max_steps, wdt_scale, bound, w_safe,
+           user_effects, rows, Omega, command, applied) — the model arrays all None or all given. */
+static int stepper_init(Stepper *s, PyObject *args, PyObject *kw)
+{
+    PyObject *st, *pr, *ef, *wdt, *wsafe, *user_obj, *rows, *om, *cm, *ap;
+    long long per_step, max_steps;
+    Py_ssize_t nb;
+    (void)kw;
+    stepper_release(s);
+    if (!PyArg_ParseTuple(args, "OOOipdLLOdOOOOOO:Stepper", &st, &pr, &ef, &s->integrator, &s->normalize, &s->dt,
+                          &per_step, &max_steps, &wdt, &s->bound, &wsafe, &user_obj, &rows, &om, &cm, &ap))
+        return -1;
+    if (s->integrator < 0 || s->integrator > LV_INTEGRATOR_LAST || s->integrator == LV_INTEGRATOR_DOPRI5) {
+        PyErr_SetString(PyExc_ValueError, "Stepper: a fixed-step integrator code (dopri5 is not served)");
+        return -1;
+    }
+    if (take(s, FS_STATE, st, 1, -1, "state") != 0) return -1;
+    nb = s->buf[FS_STATE].len / 8 / LV_STATE_SIZE;
+    if (nb * LV_STATE_SIZE * 8 != s->buf[FS_STATE].len || nb == 0) {
+        PyErr_SetString(PyExc_ValueError, "Stepper: state must be (nb, 13), nb >= 1");
+        return -1;
+    }
+    s->nb = (long)nb;
+    if (take(s, FS_PARAMS, pr, 0, nb * LV_PARAM_SIZE, "params") != 0) return -1;
+    if (take(s, FS_EFFECTS, ef, 0, -1, "effects") != 0) return -1;
+    if (s->buf[FS_EFFECTS].ndim == 2 && s->buf[FS_EFFECTS].shape[1] >= LV_EFFECT_ROW_PARAMS) {
+        s->row_size = (long)s->buf[FS_EFFECTS].shape[1];
+        s->ne = (long)s->buf[FS_EFFECTS].shape[0];
+    } else if (s->buf[FS_EFFECTS].len == 0) {
+        s->row_size = LV_EFFECT_ROW_PARAMS + LV_EFFECT_ROW_MIN_PARAMS;
+        s->ne = 0;
+    } else {
+        PyErr_SetString(PyExc_ValueError, "Stepper: effects must be (ne, row) with row >= 2");
+        return -1;
+    }
+    if (take(s, FS_WDT, wdt, 0, nb, "wdt_scale") != 0 || take(s, FS_WSAFE, wsafe, 0, nb, "w_safe") != 0) return -1;
+    s->has_models = rows != Py_None;
+    if (s->has_models) {
+        if (take(s, FS_ROWS, rows, 0, nb * LV_MODEL_SIZE, "rows") != 0 || take(s, FS_OMEGA, om, 1, nb * 3, "Omega") != 0
+            || take(s, FS_COMMAND, cm, 0, nb * 3, "command") != 0 || take(s, FS_APPLIED, ap, 1, nb * 3, "applied") != 0)
+            return -1;
+        s->models.rows = (const double *)s->buf[FS_ROWS].buf;
+        s->models.Omega = (double *)s->buf[FS_OMEGA].buf;
+        s->models.command = (const double *)s->buf[FS_COMMAND].buf;
+        s->models.applied = (double *)s->buf[FS_APPLIED].buf;
+    }
+    s->user.entries = NULL;
+    s->user.n = 0;
+    if (user_obj != Py_None) {
+        Py_buffer v;
+        Py_ssize_t i;
+        if (PyObject_GetBuffer(user_obj, &v, PyBUF_C_CONTIGUOUS) != 0) return -1;
+        if (v.len % 24 != 0) {
+            PyBuffer_Release(&v);
+            PyErr_SetString(PyExc_ValueError, "Stepper: user_effects must be int64 (n, 3)");
+            return -1;
+        }
+        s->user.n = (long)(v.len / 24);
+        s->user_entries = (lv_user_effect *)calloc((size_t)s->user.n + 1, sizeof(lv_user_effect));
+        if (s->user_entries == NULL) { PyBuffer_Release(&v); PyErr_NoMemory(); return -1; }
+        for (i = 0; i < s->user.n; i++) {
+            const long long *r = (const long long *)v.buf + 3 * i;
+            s->user_entries[i].fn = (lv_effect_fn)(uintptr_t)r[0];
+            s->user_entries[i].n_params = (int)r[1];
+            s->user_entries[i].flags = (int)r[2];
+        }
+        PyBuffer_Release(&v);
+        s->user.entries = s->user_entries;
+    }
+    s->snap = (double *)malloc(sizeof(double) * (size_t)nb * (LV_STATE_SIZE + 6));
+    if (s->snap == NULL) { PyErr_NoMemory(); return -1; }
+    s->valid = 0;
+    s->busy = 0;
+    s->per_step = per_step;
+    s->max_steps = max_steps;
+    return 0;
+}
+
+/* The checks module.c's simulate() makes per call (effect codes and bodies, model kinds), as a yes/no:
+   anything it would reject goes to the Python path, which raises the named error. */
+static int arguments_ok(const Stepper *s)
+{
+    const double *ef = (const double *)s->buf[FS_EFFECTS].buf;
+    long e;
+    for (e = 0; e < s->ne; e++) {
+        const double *row = ef + e * s->row_size;
+        const double code = row[LV_EFFECT_ROW_CODE], body = row[LV_EFFECT_ROW_BODY];
+        int np;
+        if (!(code == floor(code) && fabs(code) < 1e9)) return 0;
+        np = lv_effect_n_params((int)code);
+        if (np < 0 && (int)code >= LV_EFFECT_USER_BASE && (int)code - LV_EFFECT_USER_BASE < s->user.n
+            && s->user.entries[(int)code - LV_EFFECT_USER_BASE].fn != NULL)
+            np = s->user.entries[(int)code - LV_EFFECT_USER_BASE].n_params;
+        if (np < 0 || np > s->row_size - LV_EFFECT_ROW_PARAMS) return 0;
+        if (!(body == -1 || (body >= 0 && body < (double)s->nb && body == floor(body)))) return 0;
+    }
+    if (s->has_models) {
+        long b;
+        for (b = 0; b < s->nb; b++) {
+            const double kind = s->models.rows[b * LV_MODEL_SIZE + LV_MODEL_KIND];
+            if (!(kind >= 0 && kind <= (LV_KIND_JOINT | LV_KIND_WHEELS) && kind == floor(kind))) return 0;
+            if (kind != 0 && LV_INTEGRATOR_PLAIN_ONLY(s->integrator)) return 0;
+        }
+    }
+    return 1;
+}
+
+/* Copy the arrays into the snapshot (to = 1) or back from it (to = 0). */
+static void snap_copy(Stepper *s, int to)
+{
+    const size_t nx = (size_t)s->nb * LV_STATE_SIZE, n3 = (size_t)s->nb * 3;
+    double *x = (double *)s->buf[FS_STATE].buf;
+    if (to) memcpy(s->snap, x, nx * sizeof(double)); else memcpy(x, s->snap, nx * sizeof(double));
+    if (!s->has_models) return;
+    if (to) {
+        memcpy(s->snap + nx, s->models.Omega, n3 * sizeof(double));
+        memcpy(s->snap + nx + n3, s->models.applied, n3 * sizeof(double));
+    } else {
+        memcpy(s->models.Omega, s->snap + nx, n3 * sizeof(double));
+        memcpy(s->models.applied, s->snap + nx + n3, n3 * sizeof(double));
+    }
+}
+
+static int unchanged(const Stepper *s)
+{
+    const size_t nx = (size_t)s->nb * LV_STATE_SIZE, n3 = (size_t)s->nb * 3;
+    if (!s->valid || memcmp(s->snap, s->buf[FS_STATE].buf, nx * sizeof(double)) != 0) return 0;
+    return !s->has_models || memcmp(s->snap + nx, s->models.Omega, n3 * sizeof(double)) == 0;
+}
+
+static int checks_pass(const Stepper *s)
+{
+    const double *x = (const double *)s->buf[FS_STATE].buf;
+    const double *scale = (const double *)s->buf[FS_WDT].buf, *w_safe = (const double *)s->buf[FS_WSAFE].buf;
+    long b;
+    for (b = 0; b < s->nb; b++) {
+        const double *om = x + b * LV_STATE_SIZE + LV_STATE_OMEGA_B;
+        const double w = sqrt(om[0] * om[0] + om[1] * om[1] + om[2] * om[2]);
+        if (!(w * scale[b] <= s->bound) || !(w <= w_safe[b])) return 0;
+    }
+    return 1;
+}
+
+static int fast_step(Stepper *s, long n)
+{
+    long fail_step = -1, fail_body = -1;
+    int status;
+    if (s->busy || s->snap == NULL || n < 1 || s->steps + n > s->max_steps || !unchanged(s) || !arguments_ok(s))
+        return 0;
+    status = lv_simulate((double *)s->buf[FS_STATE].buf, (const double *)s->buf[FS_PARAMS].buf, s->nb,
+                         (const double *)s->buf[FS_EFFECTS].buf, s->ne, s->row_size, s->user.n ? &s->user : NULL,
+                         s->has_models ? &s->models : NULL, s->integrator, s->normalize, s->dt, n, NULL,
+                         &fail_step, &fail_body);
+    if (status != LV_OK || !checks_pass(s)) {
+        snap_copy(s, 0);
+        return 0;
+    }
+    snap_copy(s, 1);
+    s->steps += n;
+    s->rhs_evals += s->per_step * n;
+    return 1;
+}
+
+static PyObject *stepper_step(Stepper *s, PyObject *noargs)
+{
+    (void)noargs;
+    return PyBool_FromLong(fast_step(s, 1));
+}
+
+/* advance(n) -> bool: n steps in one call, checked at the end only — what Sim._advance(n) does for n up to
+   its chunk (the caller guarantees that, and that n * the scene's work fits the fast path). */
+static PyObject *stepper_advance(Stepper *s, PyObject *arg)
+{
+    long n = PyLong_AsLong(arg);
+    if (n == -1 && PyErr_Occurred()) return NULL;
+    return PyBool_FromLong(fast_step(s, n));
+}
+
+static PyObject *stepper_step_or_fallback(Stepper *s, PyObject *noargs)
+{
+    (void)noargs;
+    if (fast_step(s, 1)) Py_RETURN_NONE;
+    if (s->fallback == NULL) {
+        PyErr_SetString(PyExc_RuntimeError, "Stepper: no fallback set");
+        return NULL;
+    }
+    return PyObject_CallNoArgs(s->fallback);
+}
+
+static PyObject *stepper_set_fallback(Stepper *s, PyObject *fn)
+{
+    if (!PyCallable_Check(fn)) {
+        PyErr_SetString(PyExc_TypeError, "Stepper.set_fallback: needs a callable");
+        return NULL;
+    }
+    Py_INCREF(fn);
+    Py_XSETREF(s->fallback, fn);
+    Py_RETURN_NONE;
+}
+
+static PyObject *stepper_mark_checked(Stepper *s, PyObject *noargs)
+{
+    (void)noargs;
+    if (s->snap != NULL) {
+        snap_copy(s, 1);
+        s->valid = 1;
+    }
+    Py_RETURN_NONE;
+}
+
+static PyObject *stepper_is_checked(Stepper *s, PyObject *noargs)
+{
+    (void)noargs;
+    return PyBool_FromLong(s->snap != NULL && unchanged(s));
+}
+
+static PyMethodDef stepper_methods[] = {
+    {"step", (PyCFunction)stepper_step, METH_NOARGS,
+     "step() -> bool: one step with the Sim's checks passed (True), or nothing changed (False: take the Python path)."},
+    {"advance", (PyCFunction)stepper_advance, METH_O,
+     "advance(n) -> bool: n steps checked at the end (as one chunk of Sim._advance), or nothing changed (False)."},
+    {"step_or_fallback", (PyCFunction)stepper_step_or_fallback, METH_NOARGS,
+     "step_or_fallback(): one step, inside C when every check passes, else by the fallback (the Python path)."},
+    {"set_fallback", (PyCFunction)stepper_set_fallback, METH_O, "set_fallback(fn): what step_or_fallback calls."},
+    {"mark_checked", (PyCFunction)stepper_mark_checked, METH_NOARGS,
+     "mark_checked(): the current arrays passed the checks; snapshot them."},
+    {"is_checked", (PyCFunction)stepper_is_checked, METH_NOARGS,
+     "is_checked() -> bool: state and wheel rates are bytewise those of the last mark_checked / step."},
+    {NULL, NULL, 0, NULL}};
+
+static PyObject *get_ll(Stepper *s, void *field) { return PyLong_FromLongLong(*(long long *)((char *)s + (size_t)field)); }
+static int set_ll(Stepper *s, PyObject *v, void *field)
+{
+    long long n;
+    if (v == NULL) { PyErr_SetString(PyExc_AttributeError, "cannot delete"); return -1; }
+    n = PyLong_AsLongLong(v);
+    if (n == -1 && PyErr_Occurred()) return -1;
+    *(long long *)((char *)s + (size_t)field) = n;
+    return 0;
+}
+static PyObject *get_busy(Stepper *s, void *c) { (void)c; return PyLong_FromLong(s->busy); }
+static int set_busy(Stepper *s, PyObject *v, void *c)
+{
+    long n;
+    (void)c;
+    if (v == NULL) { PyErr_SetString(PyExc_AttributeError, "cannot delete"); return -1; }
+    n = PyLong_AsLong(v);
+    if (n == -1 && PyErr_Occurred()) return -1;
+    s->busy = n;
+    return 0;
+}
+
+static PyGetSetDef stepper_getset[] = {
+    {"steps", (getter)get_ll, (setter)set_ll, "steps taken (the Sim's counter)", (void *)offsetof(Stepper, steps)},
+    {"rhs_evals", (getter)get_ll, (setter)set_ll, "RHS evaluations (the Sim's counter)", (void *)offsetof(Stepper, rhs_evals)},
+    {"busy", (getter)get_busy, (setter)set_busy, "> 0 while the Python path holds the Sim's lock", NULL},
+    {NULL, NULL, NULL, NULL, NULL}};
+
+static PyTypeObject StepperType = {
+    PyVarObject_HEAD_INIT(NULL, 0)
+    .tp_name = "lavendersim._lavender_c.Stepper",
+    .tp_basicsize = sizeof(Stepper),
+    .tp_flags = Py_TPFLAGS_DEFAULT | Py_TPFLAGS_HAVE_GC,
+    .tp_traverse = (traverseproc)stepper_traverse,
+    .tp_clear = (inquiry)stepper_clear,
+    .tp_doc = "Stepper(...): one Sim step inside C with the Sim's checks (see fast_step.c).",
+    .tp_new = PyType_GenericNew,
+    .tp_init = (initproc)stepper_init,
+    .tp_dealloc = (destructor)stepper_dealloc,
+    .tp_methods = stepper_methods,
+    .tp_getset = stepper_getset,
+};
+
+/* checks_pass(x, wdt_scale, bound, w_safe) -> bool: every body's |omega| * wdt_scale <= bound and |omega| <=
+   w_safe (NaN fails), the Sim's cheap first screen of its per-chunk checks in one pass without temporaries; False
+   means "look closer" (the Sim's NumPy check decides). */
+static PyObject *py_checks_pass(PyObject *self, PyObject *args)
+{
+    PyObject *xo, *so, *wo;
+    double bound;
+    Py_buffer xb, sb, wb;
+    Py_ssize_t nb, b;
+    int ok = 1;
+    (void)self;
+    if (!PyArg_ParseTuple(args, "OOdO:checks_pass", &xo, &so, &bound, &wo)) return NULL;
+    if (PyObject_GetBuffer(xo, &xb, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT) != 0) return NULL;
+    if (PyObject_GetBuffer(so, &sb, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT) != 0) { PyBuffer_Release(&xb); return NULL; }
+    if (PyObject_GetBuffer(wo, &wb, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT) != 0) {
+        PyBuffer_Release(&xb); PyBuffer_Release(&sb); return NULL;
+    }
+    nb = xb.len / 8 / LV_STATE_SIZE;
+    if (xb.itemsize != 8 || sb.itemsize != 8 || wb.itemsize != 8 || xb.len != nb * LV_STATE_SIZE * 8
+        || sb.len != nb * 8 || wb.len != nb * 8) {
+        PyErr_SetString(PyExc_ValueError, "checks_pass: x (nb, 13), wdt_scale (nb,), w_safe (nb,) float64");
+        ok = -1;
+    } else {
+        const double *x = (const double *)xb.buf, *scale = (const double *)sb.buf, *w_safe = (const double *)wb.buf;
+        Py_BEGIN_ALLOW_THREADS
+        for (b = 0; b < nb; b++) {
+            const double *om = x + b * LV_STATE_SIZE + LV_STATE_OMEGA_B;
+            const double w = sqrt(om[0] * om[0] + om[1] * om[1] + om[2] * om[2]);
+            if (!(w * scale[b] <= bound) || !(w <= w_safe[b])) { ok = 0; break; }
+        }
+        Py_END_ALLOW_THREADS
+    }
+    PyBuffer_Release(&xb);
+    PyBuffer_Release(&sb);
+    PyBuffer_Release(&wb);
+    if (ok < 0) return NULL;
+    return PyBool_FromLong(ok);
+}
+
+static PyMethodDef fast_functions[] = {
+    {"checks_pass", py_checks_pass, METH_VARARGS,
+     "checks_pass(x, wdt_scale, bound, w_safe) -> bool: all |omega|*wdt_scale <= bound and |omega| <= w_safe."},
+    {NULL, NULL, 0, NULL}};
+
+int lv_add_stepper_type(PyObject *m)
+{
+    if (PyModule_AddFunctions(m, fast_functions) != 0) return -1;
+    if (PyType_Ready(&StepperType) < 0) return -1;
+    Py_INCREF(&StepperType);
+    if (PyModule_AddObject(m, "Stepper", (PyObject *)&StepperType) < 0) {
+        Py_DECREF(&StepperType);
+        return -1;
+    }
+    return 0;
+}

@@ -1,0 +1,240 @@
+"""ReactionWheelCube-v0 as a Gymnasium vector environment: N cubes in one Sim, stepped by one batched call.
+
+``gymnasium.make_vec("lavendersim:ReactionWheelCube-v0", num_envs=N, vectorization_mode="vector_entry_point")``
+builds :class:`ReactionWheelCubeVectorEnv`. Each sub-environment is the single environment (same task,
+model, spaces, reward, termination; see lavendersim.envs.reaction_wheel_cube): body ``cube{i}`` of one Sim,
+on its own spherical joint, with its own wheels, under the scene-wide gravity and damping. One ``step``
+sets every wheel command at once and advances all N cubes with one ``Sim.run`` (one C call on the C
+backend), so its observations are those of N single environments stepped alike (bitwise on one backend).
+
+Gymnasium 1.x rules: autoreset in next-step mode (``metadata["autoreset_mode"]``): a sub-environment that
+terminated or truncated is reset by the next ``step``, which ignores its action and returns its first
+observation with reward 0, terminated and truncated False. Truncation after ``max_episode_steps`` steps
+(1000 when made through gymnasium, as the TimeLimit of the single env). Seeding per sub-environment:
+``reset(seed=s)`` seeds sub-environment i with s + i (as SyncVectorEnv does), ``reset(seed=[s0, s1, ...])``
+each with its own, None keeps the generators. ``reset(options={"reset_mask": mask})`` resets the masked ones.
+
+A sub-environment whose simulation diverges (DivergenceError) terminates with reward -1e3 and the
+observation of its state before the step (as the single env), and ``info["diverged"]`` marks it; the others
+advance normally. No rendering (render_mode must be None).
+"""
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+from .. import validate as V
+from .._install import require
+from ..errors import DivergenceError
+from ..kernels import K
+from .reaction_wheel_cube import ReactionWheelCubeEnv, initial_q
+
+gym = require("gymnasium", "gym", "the ReactionWheelCube-v0 vector environment")
+require("gymnasium.vector", "gym", "the ReactionWheelCube-v0 vector environment")
+from gymnasium.utils import seeding  # noqa: E402
+from gymnasium.vector import AutoresetMode, VectorEnv  # noqa: E402
+from gymnasium.vector.utils import batch_space  # noqa: E402
+
+
+class ReactionWheelCubeVectorEnv(VectorEnv):
+    """N ReactionWheelCube-v0 environments stepped together (see the module docstring).
+
+    Parameters
+    ----------
+    num_envs : int
+        Number of sub-environments N >= 1.
+    max_episode_steps : int or None
+        Truncate an episode after this many steps (None: never).
+    **env_kwargs
+        The single environment's arguments (task, backend, control_dt, dt, damping, init_angle_deg,
+        max_tilt_deg, target_q, model or the CubeModel's parameters), validated by it.
+
+    Observations (N, 10) float32, actions (N, 3) float32 in [-1, 1], rewards (N,) float64,
+    terminations and truncations (N,) bool.
+    """
+
+    metadata = {"render_modes": [], "autoreset_mode": AutoresetMode.NEXT_STEP}
+
+    @V.keywords
+    def __init__(self, num_envs: int = 1, max_episode_steps: int | None = None, render_mode: str | None = None,
+                 **env_kwargs: Any) -> None:
+        if render_mode is not None:
+            raise V.LavenderInputError("render_mode", "the vector environment does not render: must be None",
+                                       f", got {render_mode!r}")
+        self.num_envs = V.integer("num_envs", num_envs, minimum=1)
+        self.max_episode_steps = None if max_episode_steps is None else V.integer("max_episode_steps", max_episode_steps,
+                                                                                  minimum=1)
+        self.render_mode = None
+        one = ReactionWheelCubeEnv(**env_kwargs)    # validates every argument; its settings are the template
+        self._one = one
+        self.model, self.task, self.substeps = one.model, one.task, one.substeps
+        self.single_observation_space, self.single_action_space = one.observation_space, one.action_space
+        self.observation_space = batch_space(one.observation_space, self.num_envs)
+        self.action_space = batch_space(one.action_space, self.num_envs)
+        self._low, self._high = one.observation_space.low, one.observation_space.high
+        self._target = np.asarray(one.target_q, dtype=float)
+        self.sim = self._build_sim()
+        n = self.num_envs
+        self._rngs: list[np.random.Generator | None] = [None] * n
+        self._start: list[tuple | None] = [None] * n
+        self._needs_reset = np.zeros(n, bool)
+        self._elapsed = np.zeros(n, np.int64)
+        self._started = False
+
+    # ---- construction --------------------------------------------------------------------
+    def _build_sim(self):
+        import lavendersim as lv
+        from ..effects import make
+
+        m, s, n = self.model, self.model.size, self.num_envs
+        q_up = V.quaternion("q0", m.upright_q())
+        p_w = np.asarray(K.quat_rotate(q_up, m.r_b), dtype=float)
+        scene = lv.Scene()
+        wheels = dict(J=m.J.tolist(), torque_limit=m.torque_limit, speed_limit=m.speed_limit, c_w=m.wheel_damping)
+        for i in range(n):
+            body = lv.Body.box(f"cube{i}", mass=m.mass, size=(s, s, s), p_w=p_w, q=q_up)
+            scene.add_body(body)
+        for i in range(n):   # validated model effects, one pair per body (new names: no duplicate scan needed)
+            scene.effects.append(make("spherical_joint", body=f"cube{i}", anchor_w=[0.0, 0.0, 0.0]))
+            scene.effects.append(make("reaction_wheels", body=f"cube{i}", **wheels))
+        if m.gravity:
+            scene.add_effect("gravity", g_w=m.g_w)
+        if m.damping > 0:
+            scene.add_effect("angular_damping", c=m.damping)
+        return lv.Sim(scene, dt=self._one.dt, integrator="rk4", backend=self._one.backend)
+
+    def _place(self, i: int, q0: np.ndarray, omega_b: np.ndarray, Omega: np.ndarray) -> None:
+        """Cube i at the start of an episode, exactly as the single env's make_sim builds it."""
+        q0 = V.quaternion("q0", q0)
+        p_w = np.asarray(K.quat_rotate(q0, self.model.r_b), dtype=float)
+        self.sim._reinit_body(i, p_w, V.quaternion("q", q0), omega_b, Omega)
+
+    def _reset_one(self, i: int) -> None:
+        if self._rngs[i] is None:
+            self._rngs[i], _ = seeding.np_random(None)
+        one = self._one
+        q0 = initial_q(self._rngs[i], self.task, one.target_q, one.init_angle_deg)
+        self._start[i] = (q0, np.zeros(3), np.zeros(3))
+        self._place(i, *self._start[i])
+        self._elapsed[i] = 0
+        self._needs_reset[i] = False
+
+    # ---- gymnasium API ---------------------------------------------------------------------
+    def reset(self, *, seed: int | list | None = None, options: dict[str, Any] | None = None):
+        n = self.num_envs
+        if options is not None and not isinstance(options, Mapping):
+            raise V.LavenderInputError("options", "expected a dict or None", f", got {V._describe(options)}")
+        unknown = sorted(str(k) for k in (options or {}) if k != "reset_mask")
+        if unknown:
+            raise V.LavenderInputError(f"options.{unknown[0]}", "unknown reset option of the vector env; known: reset_mask")
+        mask = np.ones(n, bool)
+        if options and options.get("reset_mask") is not None:
+            mask = np.asarray(options["reset_mask"])
+            if mask.dtype != bool or mask.shape != (n,):
+                raise V.LavenderInputError("options.reset_mask", f"must be a bool array of shape ({n},)",
+                                           f", got {V._describe(options['reset_mask'])}")
+        if seed is None:
+            seeds = [None] * n
+        elif isinstance(seed, (list, tuple)):
+            if len(seed) != n:
+                raise V.LavenderInputError("seed", f"a list of seeds needs one per sub-environment ({n})", f", got {len(seed)}")
+            seeds = [None if s_ is None else V.integer(f"seed[{i}]", s_, minimum=0) for i, s_ in enumerate(seed)]
+        else:
+            first = V.integer("seed", seed, minimum=0)
+            seeds = [first + i for i in range(n)]
+        for i in np.flatnonzero(mask):
+            if seeds[i] is not None:
+                self._rngs[i], _ = seeding.np_random(int(seeds[i]))
+            self._reset_one(int(i))
+        self._started = True
+        return self._obs(self._raw()), {}
+
+    def step(self, actions):
+        if not self._started:
+            raise RuntimeError("ReactionWheelCube-v0 (vector): call reset() before step()")
+        n, sim = self.num_envs, self.sim
+        a = np.clip(V.array("actions", actions, (n, 3)), -1.0, 1.0)
+        resets = np.flatnonzero(self._needs_reset)
+        for i in resets:                         # next-step autoreset: these start over and do not step
+            self._reset_one(int(i))
+        u = a * self.model.torque_limit
+        u[resets] = 0.0
+        sim.set_wheel_commands(u)
+        diverged = self._run()
+        for i in resets:
+            self._place(int(i), *self._start[i])
+        raw = self._raw()
+        for b, (msg, pre) in diverged.items():
+            raw[b] = pre
+        obs = self._obs(raw)
+        q, w, Om = raw[:, 0:4], raw[:, 4:7], raw[:, 7:10]
+        angle = self._angle_deg(q)
+        theta = np.radians(angle)
+        reward = -(theta * theta + 0.05 * np.einsum("ij,ij->i", w, w) + 0.01 * np.einsum("ij,ij->i", a, a))
+        terminated = (np.max(np.abs(w), axis=1) > self._one.rate_bound) | (np.max(np.abs(Om), axis=1) > self._one.wheel_bound)
+        info: dict[str, Any] = {"angle_error_deg": angle, "torque_applied": sim.wheel_torques_applied.copy()}
+        if self.task == "corner":
+            d = np.asarray(K.quat_rotate(q, np.ones(3) / math.sqrt(3.0)))
+            tilt = np.degrees(np.arctan2(np.hypot(d[:, 0], d[:, 1]), d[:, 2]))
+            terminated |= tilt > self._one.max_tilt_deg
+            info["tilt_deg"] = tilt
+        if diverged:
+            rows = list(diverged)
+            reward[rows] = -1e3
+            terminated[rows] = True
+            angle[rows] = np.nan
+            info["diverged"] = np.zeros(n, bool)
+            info["diverged"][rows] = True
+            info["diverged_message"] = np.array([diverged.get(i, ("", None))[0] for i in range(n)], dtype=object)
+        self._elapsed += 1
+        self._elapsed[resets] = 0
+        truncated = np.zeros(n, bool) if self.max_episode_steps is None else self._elapsed >= self.max_episode_steps
+        reward[resets], terminated[resets], truncated[resets] = 0.0, False, False
+        self._needs_reset = terminated | truncated
+        return obs, reward, terminated, truncated, info
+
+    def close_extras(self, **kwargs: Any) -> None:
+        self.sim = None
+
+    # ---- helpers ---------------------------------------------------------------------------
+    def _run(self) -> dict[int, tuple[str, np.ndarray]]:
+        """One Sim.run of every cube; a cube that diverges is recorded (message, its state before the step), set
+        at rest where it was and the run repeated without it (the Sim restores itself on DivergenceError)."""
+        diverged: dict[int, tuple[str, np.ndarray]] = {}
+        while True:
+            try:
+                self.sim.run(self.substeps)
+                return diverged
+            except DivergenceError as exc:
+                b = int(exc.body)
+                if b in diverged:
+                    raise
+                diverged[b] = (str(exc), self._raw()[b].copy())
+                q = self.sim.q[b].copy()
+                self._place(b, q, np.zeros(3), np.zeros(3))
+
+    def _raw(self) -> np.ndarray:
+        sim = self.sim
+        return np.concatenate([sim.q, sim.omega_b, sim.Omega], axis=1)
+
+    def _obs(self, raw: np.ndarray) -> np.ndarray:
+        obs = np.clip(raw, self._low, self._high).astype(np.float32)
+        return np.nan_to_num(obs, nan=0.0, posinf=0.0, neginf=0.0)
+
+    def _angle_deg(self, q: np.ndarray) -> np.ndarray:
+        """The single env's angle_error_deg per row: 4 atan2(|q − s q_t|, |q + s q_t|), s = sign(q·q_t), degrees."""
+        t = self._target
+        d = ((q[:, 0] * t[0] + q[:, 1] * t[1]) + q[:, 2] * t[2]) + q[:, 3] * t[3]
+        s = np.where(d >= 0, 1.0, -1.0)[:, None]
+        dm, dp = q - s * t, q + s * t
+        a = np.sqrt(((dm[:, 0] ** 2 + dm[:, 1] ** 2) + dm[:, 2] ** 2) + dm[:, 3] ** 2)
+        b = np.sqrt(((dp[:, 0] ** 2 + dp[:, 1] ** 2) + dp[:, 2] ** 2) + dp[:, 3] ** 2)
+        return np.degrees(4.0 * np.arctan2(a, b))
+
+
+def make_vec_env(num_envs: int = 1, **kwargs: Any) -> ReactionWheelCubeVectorEnv:
+    """The vector entry point registered for ReactionWheelCube-v0 (gymnasium.make_vec, vector_entry_point mode)."""
+    return ReactionWheelCubeVectorEnv(num_envs=num_envs, **kwargs)
