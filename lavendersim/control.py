@@ -39,7 +39,7 @@ import json
 import math
 import numbers
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -53,8 +53,7 @@ if TYPE_CHECKING:  # annotations only: casadi is an optional extra, Scene/Sim lo
     import argparse
     import os
 
-    import casadi
-
+    from ._linearize import Linearization
     from .scene import Scene
     from .sim import Sim
 
@@ -219,95 +218,16 @@ def rotated(q_ref: ArrayLike, axis: ArrayLike, angle_deg: float) -> np.ndarray:
 # ----------------------------------------------------------------------------------------------
 
 
-@dataclass
-class Linearization:
-    A: np.ndarray
-    B: np.ndarray
-    q_ref: np.ndarray
-    Omega0: np.ndarray
-    u0: np.ndarray
-    rank: int
-    basis: np.ndarray = field(repr=False)   # orthonormal basis of the controllable subspace (9 × rank)
-    equilibrium_residual: float = 0.0
-    state_labels: tuple = STATE_LABELS
-    input_labels: tuple = INPUT_LABELS
-
-    @property
-    def controllable(self) -> bool:
-        return self.rank == self.A.shape[0]
-
-    @property
-    def uncontrollable_basis(self) -> np.ndarray:
-        """Orthonormal basis U of the complement of the controllable subspace (9 × (9 − rank)):
-        Uᵀx are the conserved (momentum) coordinates no wheel torque can change."""
-        n = self.A.shape[0]
-        if self.rank == n:
-            return np.zeros((n, 0))
-        P = np.eye(n) - self.basis @ self.basis.T
-        Uf, s, _ = np.linalg.svd(P)
-        return Uf[:, : n - self.rank]
-
-    def target(self, x: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
-        """(x_ss, du_ss): the equilibrium with dtheta = 0, omega = 0 that has the same conserved
-        coordinates Uᵀx as x (wheel speeds Omega_ss absorb the momentum), and the torque holding it.
-        Zero when x carries no conserved momentum (e.g. starting at rest without damping)."""
-        n = self.A.shape[0]
-        x_ss, du = np.zeros(n), np.zeros(self.B.shape[1])
-        if self.rank == n:
-            return x_ss, du
-        U = self.uncontrollable_basis
-        x_ss[6:9] = np.linalg.lstsq(U[6:9, :].T, U.T @ x, rcond=None)[0]
-        r = self.A @ x_ss
-        if np.any(r != 0):
-            du = np.linalg.lstsq(self.B, -r, rcond=None)[0]
-        return x_ss, du
-
-    def feedback(self, K: ArrayLike, x: ArrayLike) -> np.ndarray:
-        """u = u0 + du_ss − K (x − x_ss) (unsaturated), N·m."""
-        x_ss, du = self.target(x)
-        return self.u0 + du - np.asarray(K) @ (x - x_ss)
-
-    def state(self, q: ArrayLike, omega_b: ArrayLike, Omega: ArrayLike) -> np.ndarray:
-        """Error-coordinate state x from a simulator state."""
-        return np.concatenate([attitude_error(q, self.q_ref), np.asarray(omega_b, float),
-                               np.asarray(Omega, float) - self.Omega0])
-
-
-def casadi_rhs(model: CubeModel, q_ref: ArrayLike, Omega0: ArrayLike = (0, 0, 0)) -> tuple[casadi.Function, np.ndarray]:
-    """(f, u0): the CasADi Function f(x, du) -> x_dot in error coordinates, built from kernels_casadi,
-    and the equilibrium motor torque u0 = c_w Omega0 (3,), N·m."""
-    ca = require("casadi", "control", "the CasADi linearization")
-    from .generated import kernels_casadi as KC
-
-    q_ref = ca.DM(np.asarray(q_ref, float))
-    Om0 = ca.DM(np.asarray(Omega0, float))
-    u0 = model.wheel_damping * Om0
-    x = ca.SX.sym("x", 9)
-    du = ca.SX.sym("du", 3)
-    half = x[0:3] / 2
-    q = KC.quat_mul(q_ref, ca.vertcat(half, ca.sqrt(1 - ca.dot(half, half))))
-    w, Om, u = x[3:6], Om0 + x[6:9], u0 + du
-    s = model.size
-    Ic = KC.inertia_box(model.mass, s, s, s)
-    Ic_flat = ca.vertcat(Ic[0], 0, 0, 0, Ic[1], 0, 0, 0, Ic[2])
-    r_b = ca.DM(model.r_b)
-    I_p = KC.parallel_axis(Ic_flat, model.mass, -r_b)
-    F_w = KC.effect_gravity(model.mass, ca.DM(model.g_w)) if model.gravity else ca.DM.zeros(3)
-    tau_w = KC.effect_angular_damping(q, w, model.damping)
-    q_dot, w_dot, Om_dot = KC.wheel_body_rhs(q, w, Om, I_p, ca.DM(model.J), r_b, F_w, tau_w, u, model.wheel_damping)
-    # d(dtheta)/dt = (∂e/∂q) q_dot with e(q) = 2 vec(q_ref* ⊗ q) (linear in q: a constant Jacobian)
-    qs = ca.SX.sym("q", 4)
-    e = 2 * KC.quat_mul(KC.quat_conj(q_ref), qs)[0:3]
-    Je = ca.jacobian(e, qs)
-    dth_dot = ca.mtimes(ca.substitute(Je, qs, q), q_dot)
-    f = ca.vertcat(dth_dot, w_dot, Om_dot)
-    return ca.Function("wheel_cube_error_rhs", [x, du], [f], ["x", "du"], ["x_dot"]), np.asarray(u0, float).ravel()
-
-
-def controllable_basis(A: np.ndarray, B: np.ndarray, tol: float = 1e-9) -> np.ndarray:
-    """Orthonormal basis of the controllable subspace span[B, AB, A²B, …] (Krylov with
-    re-orthogonalization; A and B scaled to unit norm, singular values below tol dropped)."""
+def controllable_basis(A: np.ndarray, B: np.ndarray, tol: float = 1e-9, discrete: bool = False) -> np.ndarray:
+    """Orthonormal basis (n, rank) of the controllable subspace span[B, AB, A²B, …] (Krylov with
+    re-orthogonalization; A and B scaled to unit norm, singular values below tol dropped). For a
+    discrete pair the Krylov space of A − I is used (the same space, better conditioned when A ≈ I)."""
+    A, B = np.asarray(A, float), np.asarray(B, float)
     n = A.shape[0]
+    if discrete:
+        A = A - np.eye(n)
+    if B.size == 0:
+        return np.zeros((n, 0))
     An = A / max(np.linalg.norm(A, 2), 1e-300)
     Bn = B / max(np.linalg.norm(B, 2), 1e-300)
     U, s, _ = np.linalg.svd(Bn, full_matrices=False)
@@ -330,24 +250,88 @@ def controllable_basis(A: np.ndarray, B: np.ndarray, tol: float = 1e-9) -> np.nd
     return basis
 
 
-def linearize(model: CubeModel, q_ref: ArrayLike | None = None, Omega0: ArrayLike = (0, 0, 0),
-              tol: float = 1e-9) -> Linearization:
-    """A = ∂f/∂x, B = ∂f/∂u at (q_ref, omega = 0, Omega = Omega0, u = c_w Omega0), by CasADi AD."""
-    ca = require("casadi", "control", "the CasADi linearization")
+def uncontrollable(basis: np.ndarray, n: int) -> np.ndarray:
+    """Orthonormal complement (n, n − rank) of an orthonormal basis (n, rank) of the controllable subspace."""
+    if basis.shape[1] >= n:
+        return np.zeros((n, 0))
+    P = np.eye(n) - basis @ basis.T
+    Uf, _, _ = np.linalg.svd(P)
+    return Uf[:, : n - basis.shape[1]]
+
+
+def __getattr__(name: str) -> Any:
+    """``Linearization`` (a control.StateSpace subclass) is built when python-control is first needed."""
+    if name == "Linearization":
+        require("control", "control", "the StateSpace linearization")
+        require("casadi", "control", "the CasADi linearization")
+        from ._linearize import Linearization
+        return Linearization
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def linearize(sim_or_scene: CubeModel | Sim | Scene, x0: dict | None = None, u0: dict | None = None, *,
+              inputs: list[str] | str | None = None, outputs: list[str] | str | None = None, dt: float | None = None,
+              q_ref: ArrayLike | None = None, Omega0: ArrayLike = (0, 0, 0), name: str = "lavendersim") -> Any:
+    """Linearize a scene (or the wheel cube) at an operating point, by CasADi AD of the derived kernels.
+
+    The right-hand side is composed from generated/kernels_casadi.py — each body's model kernel
+    (rigid_body_rhs, pivot_body_rhs, wheel_body_rhs with wheel_saturation) and the CasADi printing of
+    every force effect the scene declares, user effects included — so it is the model the backends
+    step. See lavendersim._linearize for the error coordinates (per body p, dtheta, v, omega; a
+    jointed body dtheta, omega; wheels add Omega) and the input names.
+
+    Parameters
+    ----------
+    sim_or_scene : Sim, Scene or CubeModel
+        What to linearize. A Sim's current state (and held wheel commands) is the default operating
+        point; a Scene's is its bodies' initial state. A CubeModel gives the 9-state cube model
+        (states ``STATE_LABELS``, inputs ``INPUT_LABELS``) at ``q_ref`` (default: upright) with wheel
+        rates ``Omega0`` (rad/s) and the equilibrium torque u0 = c_w Omega0; it must be an equilibrium.
+    x0 : dict, optional
+        ``{body: {"q": (4,), "omega_b": (3,), "Omega": (3,), "p_w": (3,), "v_w": (3,)}}`` overriding
+        parts of the operating point (p_w, v_w only for free bodies).
+    u0 : dict, optional
+        ``{input name: value}`` overriding the operating input (default: the held wheel commands, the
+        effects' declared parameter values).
+    inputs : list of str, optional
+        ``"BODY.u"`` (3 wheel commands, N·m) or ``"EFFECT.PARAM"`` (a parameter of a force effect
+        declared once on the scene). Default: every wheeled body's commands.
+    outputs : list of str, optional
+        State labels to output (default: every state, C = I).
+    dt : float, optional
+        If given, the zero-order-hold discretization at this period (s) is returned.
+
+    Returns
+    -------
+    Linearization
+        A ``control.StateSpace`` (n states, m inputs du = u − u0) with named states, inputs and
+        outputs, the operating point, ``f0`` (the right-hand side there) and the controllable subspace.
+    """
+    require("control", "control", "the StateSpace linearization")
+    require("casadi", "control", "the CasADi linearization")
+    from . import _linearize as L
+
+    if isinstance(sim_or_scene, CubeModel):
+        return _linearize_cube(sim_or_scene, q_ref, Omega0, dt)
+    return L.linearize_scene(sim_or_scene, x0, u0, inputs=inputs, outputs=outputs, dt=dt, name=name)
+
+
+def _linearize_cube(model: CubeModel, q_ref: ArrayLike | None, Omega0: ArrayLike, dt: float | None) -> Any:
+    from . import _linearize as L
+
     q_ref = model.upright_q() if q_ref is None else V.quaternion("q_ref", q_ref)
     Omega0 = V.vector("Omega0", Omega0)
-    f, u0 = casadi_rhs(model, q_ref, Omega0)
-    x, du = ca.SX.sym("x", 9), ca.SX.sym("du", 3)
-    fx = f(x, du)
-    jac = ca.Function("wheel_cube_linearization", [x, du], [fx, ca.jacobian(fx, x), ca.jacobian(fx, du)])
-    f0, A, B = (np.asarray(m, dtype=float) for m in jac(np.zeros(9), np.zeros(3)))
-    res = float(np.max(np.abs(f0)))
-    scale = max(1.0, float(np.max(np.abs(A))))
-    if res > 1e-9 * scale:
+    sim = model.make_sim(q_ref, Omega=Omega0, backend="numpy")
+    lin = L.linearize_scene(sim, None, {f"{BODY}.u": model.wheel_damping * Omega0}, inputs=[f"{BODY}.u"],
+                            labels=list(STATE_LABELS), name="wheel_cube")
+    lin = L.Linearization(lin.A, lin.B, lin.C, lin.D, 0, bodies=lin.bodies, input_refs=lin.input_refs, u0=lin.u0,
+                          f0=lin.f0, wheel_states=lin.wheel_states, states=list(STATE_LABELS), inputs=list(INPUT_LABELS),
+                          outputs=list(STATE_LABELS), name="wheel_cube")
+    res = float(np.max(np.abs(lin.f0)))
+    if res > 1e-9 * max(1.0, float(np.max(np.abs(lin.A)))):
         raise V.LavenderInputError("q_ref", "is not an equilibrium of the model (the right-hand side is not zero there: "
                                    "for the corner scenario the COM must be straight above the pivot)", f", |f| = {res:.3g}")
-    basis = controllable_basis(A, B, tol)
-    return Linearization(A, B, q_ref, Omega0, u0, basis.shape[1], basis, res)
+    return lin if dt is None else lin.sample(dt)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -384,24 +368,118 @@ def _weight(name: str, value, n: int, definite: bool) -> np.ndarray:
     return (arr + arr.T) / 2
 
 
-def lqr(lin: Linearization, Q: ArrayLike, R: ArrayLike) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(K, S, E) of python-control's lqr, on the controllable subspace when rank < n (see the
-    module docstring). E are the closed-loop eigenvalues of A − B K (the uncontrollable conserved
-    modes included, at 0)."""
+class LQRResult(tuple):
+    """(K, S, E) as python-control's lqr/dlqr return them (unpacks as a 3-tuple), plus how the design
+    was made: ``rank`` of the controllable subspace, ``controllable``, and ``uncontrollable`` — an
+    orthonormal basis (n, n − rank) of the directions no input can change (their closed-loop
+    eigenvalues stay at 0, continuous, or 1, discrete: conserved momenta, not errors to regulate)."""
+
+    K: np.ndarray
+    S: np.ndarray
+    E: np.ndarray
+    rank: int
+    uncontrollable: np.ndarray
+
+    def __new__(cls, K: np.ndarray, S: np.ndarray, E: np.ndarray, rank: int, unc: np.ndarray) -> "LQRResult":
+        obj = super().__new__(cls, (K, S, E))
+        obj.K, obj.S, obj.E, obj.rank, obj.uncontrollable = K, S, E, rank, unc
+        return obj
+
+    @property
+    def controllable(self) -> bool:
+        """Whether the design covered the whole state (rank == n)."""
+        return self.uncontrollable.shape[1] == 0
+
+
+def _pair(sys_or_A: Any, args: tuple, fn: str, discrete: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray, tuple]:
+    """(A, B, basis, rest of args) from a StateSpace, an (A, B) pair, or A, B positional (python-control style)."""
     ct = require("control", "control", "LQR design (python-control)")
-    n, m = lin.B.shape
+    basis = None
+    if isinstance(sys_or_A, ct.StateSpace):
+        if discrete != sys_or_A.isdtime(strict=True):
+            raise V.LavenderInputError("sys", f"{fn} needs a {'discrete' if discrete else 'continuous'} StateSpace"
+                                       + (" (sample it: lin.sample(dt) or ct.c2d(sys, dt))" if discrete else " (use dlqr)"),
+                                       f", got dt = {sys_or_A.dt}")
+        A, B = sys_or_A.A, sys_or_A.B
+        basis = getattr(sys_or_A, "basis", None)
+    elif isinstance(sys_or_A, tuple) and len(sys_or_A) == 2:
+        A, B = sys_or_A
+    elif len(args) >= 3:
+        A, B, args = sys_or_A, args[0], args[1:]
+    else:
+        raise V.LavenderInputError("sys", f"{fn} takes a control.StateSpace, an (A, B) pair, or A, B, Q, R",
+                                   f", got {type(sys_or_A).__name__}")
+    try:
+        A, B = np.asarray(A, dtype=float), np.asarray(B, dtype=float)
+    except (TypeError, ValueError):
+        raise V.LavenderInputError("A", "A and B must be numeric matrices") from None
+    if B.ndim == 1:
+        B = B[:, None]
+    n = A.shape[0] if A.ndim == 2 else -1
+    if A.ndim != 2 or A.shape != (n, n) or B.ndim != 2 or B.shape[0] != n:
+        raise V.LavenderInputError("A", "A must be n×n and B n×m", f", got {A.shape} and {B.shape}")
+    if not (np.all(np.isfinite(A)) and np.all(np.isfinite(B))):
+        raise V.LavenderInputError("A", "A and B must be finite")
+    if len(args) != 2:
+        raise V.LavenderInputError("Q", f"{fn} needs Q and R", f", got {len(args)} weight argument(s)")
+    if basis is None:
+        basis = controllable_basis(A, B, discrete=discrete)
+    return A, B, basis, args
+
+
+def _design(sys_or_A: Any, args: tuple, discrete: bool) -> LQRResult:
+    ct = require("control", "control", "LQR design (python-control)")
+    fn = "dlqr" if discrete else "lqr"
+    A, B, T, (Q, R) = _pair(sys_or_A, args, fn, discrete)
+    n, m = B.shape
     Q = _weight("Q", Q, n, definite=False)
     R = _weight("R", R, m, definite=True)
-    if lin.controllable:
-        K, S, _ = ct.lqr(lin.A, lin.B, Q, R)
+    solve = ct.dlqr if discrete else ct.lqr
+    if T.shape[1] == n:
+        K, S, _ = solve(A, B, Q, R)
     else:
-        T = lin.basis
+        if T.shape[1] == 0:
+            raise V.LavenderInputError("B", "no input reaches any state (the controllable subspace is empty)")
         Qc = T.T @ Q @ T
-        Kc, Sc, _ = ct.lqr(T.T @ lin.A @ T, T.T @ lin.B, (Qc + Qc.T) / 2, R)
-        K, S = Kc @ T.T, T @ Sc @ T.T
+        Kc, Sc, _ = solve(T.T @ A @ T, T.T @ B, (Qc + Qc.T) / 2, R)
+        K, S = np.asarray(Kc) @ T.T, T @ np.asarray(Sc) @ T.T
     K, S = np.asarray(K), np.asarray(S)
-    E = np.linalg.eigvals(lin.A - lin.B @ K)
-    return K, S, E[np.argsort(E.real)]
+    E = np.linalg.eigvals(A - B @ K)
+    E = E[np.argsort(np.abs(E) if discrete else E.real)]
+    return LQRResult(K, S, E, T.shape[1], uncontrollable(T, n))
+
+
+def lqr(sys: Any, *args: Any) -> LQRResult:
+    """Continuous LQR, python-control conventions: ``lqr(sys, Q, R)`` with a ``control.StateSpace``
+    (a :class:`Linearization` or any continuous one), ``lqr((A, B), Q, R)`` or ``lqr(A, B, Q, R)``.
+
+    When (A, B) is not controllable (internal wheel torques conserve momentum) the design is made on
+    the controllable subspace (orthonormal Krylov basis T): ``Kc, Sc = control.lqr(TᵀAT, TᵀB, TᵀQT,
+    R)``, ``K = Kc Tᵀ``, ``S = T Sc Tᵀ``; otherwise it is exactly ``control.lqr(A, B, Q, R)``.
+
+    Parameters
+    ----------
+    sys : control.StateSpace, (A, B) or A
+        The model (n states, m inputs).
+    *args
+        Q (n×n, a diagonal (n,) or a scalar; symmetric PSD) and R (m×m, (m,) or scalar; PD), after
+        B when A and B are given separately.
+
+    Returns
+    -------
+    LQRResult
+        Unpacks as (K (m, n), S (n, n), E (n,) closed-loop eigenvalues of A − B K, sorted by real
+        part); ``.rank`` and ``.uncontrollable`` report the directions the design cannot move.
+    """
+    return _design(sys, args, discrete=False)
+
+
+def dlqr(sys: Any, *args: Any) -> LQRResult:
+    """Discrete LQR (python-control's dlqr), the same forms and subspace design as :func:`lqr`:
+    ``dlqr(lin.sample(Ts), Q, R)``, ``dlqr((Ad, Bd), Q, R)`` or ``dlqr(Ad, Bd, Q, R)``. The gain is
+    for u[k] = u0 − K x[k] held over the period (zero-order hold). E are the eigenvalues of Ad − Bd K,
+    sorted by modulus (conserved directions at 1)."""
+    return _design(sys, args, discrete=True)
 
 
 def default_weights(model: CubeModel) -> tuple[np.ndarray, np.ndarray]:
@@ -419,6 +497,26 @@ def default_weights(model: CubeModel) -> tuple[np.ndarray, np.ndarray]:
 
 @dataclass
 class Response:
+    """A closed-loop run, with python-control's TimeResponseData names and shapes.
+
+    Attributes
+    ----------
+    t : ndarray (T,)
+        Sample times (s), one per control period plus the start.
+    states : ndarray (n, T)
+        Error-coordinate states (the linearization's state labels ``state_labels``).
+    inputs : ndarray (m, T)
+        Applied (saturated) motor torques, N·m (``input_labels``).
+    outputs : ndarray (p, T)
+        C x (``output_labels``; the states when C = I).
+    error_deg : ndarray (T,)
+        Attitude error angle to q_ref, degrees.
+    omega_b, Omega, u_cmd, u_applied : ndarray (T, 3)
+        Cube rates (rad/s, body), wheel rates (rad/s), commanded and applied torques (N·m), per sample.
+    q : ndarray (T, 4)
+        Orientation (x, y, z, w).
+    """
+
     t: np.ndarray
     error_deg: np.ndarray
     omega_b: np.ndarray
@@ -426,6 +524,21 @@ class Response:
     u_cmd: np.ndarray
     u_applied: np.ndarray
     q: np.ndarray
+    states: np.ndarray | None = None
+    outputs: np.ndarray | None = None
+    state_labels: tuple = STATE_LABELS
+    input_labels: tuple = INPUT_LABELS
+    output_labels: tuple = STATE_LABELS
+
+    @property
+    def inputs(self) -> np.ndarray:
+        """Applied inputs (m, T), N·m (python-control's layout: one row per input)."""
+        return self.u_applied.T
+
+    @property
+    def time(self) -> np.ndarray:
+        """Alias of t (python-control's TimeResponseData.time)."""
+        return self.t
 
     def settling_time(self, threshold_deg: float) -> float:
         """First time after which the attitude error stays below threshold_deg (inf if never)."""
@@ -436,16 +549,60 @@ class Response:
             return math.inf
         return float(self.t[above[-1] + 1])
 
+    def to_control(self) -> Any:
+        """The same run as a ``control.TimeResponseData`` (outputs, states, inputs, labelled)."""
+        ct = require("control", "control", "TimeResponseData")
+        return ct.TimeResponseData(self.t, self.outputs, self.states, self.inputs, output_labels=list(self.output_labels),
+                                   state_labels=list(self.state_labels), input_labels=list(self.input_labels))
+
+    def plot(self, threshold_deg: float = 0.1) -> Any:
+        """A matplotlib Figure (not shown, no pyplot state): attitude error (log), cube rates, applied
+        torques, wheel rates against t."""
+        from matplotlib.figure import Figure
+
+        fig = Figure(figsize=(11, 7), layout="constrained")
+        ax = fig.subplots(2, 2)
+        a = ax[0, 0]
+        a.semilogy(self.t, np.maximum(self.error_deg, 1e-6), label="attitude error")
+        a.axhline(threshold_deg, color="tab:red", ls=":", label=f"{threshold_deg:g}°")
+        a.set_xlabel("t (s)"); a.set_ylabel("attitude error (deg)"); a.legend(fontsize=8)
+        for a, data, lab, unit in ((ax[0, 1], self.omega_b, "ω", "cube rate ω_b (rad/s)"),
+                                   (ax[1, 0], self.u_applied, "u", "applied motor torque (N·m)"),
+                                   (ax[1, 1], self.Omega, "Ω", "wheel speed Ω (rad/s)")):
+            for i, c in enumerate("xyz"[: data.shape[1]] if data.shape[1] <= 3 else range(data.shape[1])):
+                a.plot(self.t, data[:, i], label=f"{lab}_{c}")
+            a.set_xlabel("t (s)"); a.set_ylabel(unit); a.legend(fontsize=8)
+        return fig
+
 
 MAX_CONTROL_STEPS = 1_000_000  # closed_loop: control periods per run
 
 
-def closed_loop(model: CubeModel, lin: Linearization, K: ArrayLike, q0: ArrayLike, T: float = 5.0, *,
-                omega0: ArrayLike = (0, 0, 0), Omega0: ArrayLike | None = None, dt: float = 1e-3,
+def closed_loop(model: CubeModel, lin: Any, K: ArrayLike | Callable[[float, np.ndarray], ArrayLike], q0: ArrayLike,
+                T: float = 5.0, *, omega0: ArrayLike = (0, 0, 0), Omega0: ArrayLike | None = None, dt: float = 1e-3,
                 control_dt: float = 2e-3, backend: str = "auto", sim: Sim | None = None) -> Response:
-    """Run u = u0 − K x (clipped to ±torque_limit) with a zero-order hold of control_dt in the
-    nonlinear simulator (the Sim's reaction_wheels effect saturates again, speed limit included).
-    `sim` may be given (any object with the Sim's wheel API) instead of building one."""
+    """Run the cube in the nonlinear simulator under a controller with a zero-order hold of control_dt.
+
+    Parameters
+    ----------
+    model : CubeModel
+    lin : Linearization
+        Gives the error coordinates x (lin.state) and, for a gain, the operating point.
+    K : (3, 9) array or callable
+        A gain: u = u0 + du_ss − K (x − x_ss) (lin.feedback), or any controller ``u = K(t, x)``
+        returning the 3 motor torques (N·m) from the time (s) and the error state x (9,). Either is
+        clipped to ±torque_limit and the Sim's reaction_wheels saturate again (speed limit included).
+    q0 : (4,)
+        Initial orientation (x, y, z, w).
+    T : float
+        Duration, s.
+    sim : Sim, optional
+        Any object with the Sim's wheel API instead of building one.
+
+    Returns
+    -------
+    Response
+    """
     dt = V.dt("dt", dt)
     control_dt = V.dt("control_dt", control_dt)
     sub = int(round(control_dt / dt))
@@ -455,27 +612,43 @@ def closed_loop(model: CubeModel, lin: Linearization, K: ArrayLike, q0: ArrayLik
     if not T / control_dt <= MAX_CONTROL_STEPS:  # stepped in Python and recorded: bounded, never a hang
         raise V.LavenderInputError("T", f"would take {T / control_dt:.3g} control steps of {control_dt:g} s; at most "
                                    f"{MAX_CONTROL_STEPS:,} are allowed", f", got {T!r}")
+    if callable(K):
+        controller = K
+    else:
+        Km = np.asarray(K, float)
+        if Km.shape != (lin.ninputs, lin.nstates):
+            raise V.LavenderInputError("K", f"a gain must be {lin.ninputs}×{lin.nstates} (or pass a callable u = f(t, x))",
+                                       f", got shape {Km.shape}")
+        controller = lambda t, x: lin.feedback(Km, x)  # noqa: E731
     n = int(round(T / control_dt))
     Omega0 = lin.Omega0 if Omega0 is None else V.vector("Omega0", Omega0)
     if sim is None:
         sim = model.make_sim(q0, omega0, Omega0, dt=dt, backend=backend)
-    K = np.asarray(K, float)
     t = np.empty(n + 1)
     qs, ws, Oms = np.empty((n + 1, 4)), np.empty((n + 1, 3)), np.empty((n + 1, 3))
+    xs = np.empty((n + 1, lin.nstates))
     ucmd, uapp = np.zeros((n + 1, 3)), np.zeros((n + 1, 3))
     lim = model.torque_limit
     for k in range(n + 1):
         st = sim.state(BODY)
         q, w, Om = st.q, st.omega_b, sim.wheel_rates(BODY)
         t[k], qs[k], ws[k], Oms[k] = sim.t, q, w, Om
+        xs[k] = lin.state(q, w, Om)
         if k == n:
             break
-        u = np.clip(lin.feedback(K, lin.state(q, w, Om)), -lim, lim)
+        u = np.asarray(controller(float(sim.t), xs[k].copy()), dtype=float)
+        if u.shape != (3,) or not np.all(np.isfinite(u)):
+            raise V.LavenderInputError("K", "the controller must return 3 finite motor torques (N·m)",
+                                       f", got {np.array2string(np.asarray(u), precision=4)} at t = {sim.t:g} s")
+        u = np.clip(u, -lim, lim)
         sim.set_wheel_command(BODY, u)
         sim.run(sub)
         ucmd[k], uapp[k] = u, sim.wheel_command_applied(BODY)
     ucmd[n], uapp[n] = ucmd[n - 1], uapp[n - 1]
-    return Response(t, error_angle_deg(qs, lin.q_ref), ws, Oms, ucmd, uapp, qs)
+    C = np.asarray(lin.C, float)
+    return Response(t, error_angle_deg(qs, lin.q_ref), ws, Oms, ucmd, uapp, qs, states=xs.T, outputs=C @ xs.T,
+                    state_labels=tuple(lin.state_labels), input_labels=tuple(lin.input_labels),
+                    output_labels=tuple(lin.output_labels))
 
 
 # ----------------------------------------------------------------------------------------------

@@ -95,10 +95,12 @@ def test_full_rank_model_goes_straight_to_control_lqr():
 
     rng = np.random.default_rng(1)
     A, B = rng.normal(size=(9, 9)), rng.normal(size=(9, 3))
-    lin = lc.Linearization(A, B, np.array([0, 0, 0, 1.0]), np.zeros(3), np.zeros(3), 9, np.eye(9))
-    K, S, E = lc.lqr(lin, np.eye(9), np.eye(3))
-    K2, _, _ = ct.lqr(A, B, np.eye(9), np.eye(3))
-    assert np.allclose(K, K2)
+    K2, S2, _ = ct.lqr(A, B, np.eye(9), np.eye(3))
+    for args in ((ct.ss(A, B, np.eye(9), 0), np.eye(9), np.eye(3)), ((A, B), np.eye(9), np.eye(3)), (A, B, np.eye(9), np.eye(3))):
+        res = lc.lqr(*args)
+        K, S, E = res
+        assert res.rank == 9 and res.controllable and res.uncontrollable.shape == (9, 0)
+        assert np.allclose(K, K2, rtol=1e-10, atol=1e-12) and np.allclose(S, S2, rtol=1e-10, atol=1e-12)
 
 
 # ------------------------------------------------------------------------ closed loops
