@@ -3,7 +3,7 @@ entry points are lavendersim.control.linearize and lavendersim.control.Lineariza
 
 Nothing here is a second model: each body's right-hand side is the generated CasADi printing of
 the same declarations the backends run (``rigid_body_rhs``, ``translation_rhs``, ``pivot_body_rhs``,
-``wheel_body_rhs``, ``wheel_saturation``, ``pivot_kinematics`` in generated/kernels_casadi.py), with
+``wheel_body_rhs``, ``wheel_motor``, ``pivot_kinematics`` in generated/kernels_casadi.py), with
 the force and torque of every force effect the scene declares on the body from that effect's own
 CasADi printing (built-in or user, :func:`lavendersim.effects.casadi_expr`). The model constants
 (inertia about the pivot, r_b, wheel inertias and limits) are the Sim's model rows.
@@ -256,7 +256,8 @@ def _body_rhs(scene, ref: BodyRef, xb, params_of, wheel_u):
     out = {}
     if ref.wheels:
         Om = ca.DM(ref.Omega) + get["Omega"]
-        u = KC.wheel_saturation(wheel_u, Om, float(r[LY.MODEL_TORQUE_LIMIT]), float(r[LY.MODEL_SPEED_LIMIT]))
+        u = KC.wheel_motor(wheel_u, Om, float(r[LY.MODEL_TORQUE_LIMIT]), float(r[LY.MODEL_SPEED_LIMIT]),
+                           float(r[LY.MODEL_CUTOFF]))
         q_dot, out["omega"], out["Omega"] = KC.wheel_body_rhs(q, w, Om, I_p, ca.DM(r[LY.MODEL_J]), r_b, F, tau, u,
                                                               float(r[LY.MODEL_C_W]))
         if not ref.joint:

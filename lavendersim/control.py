@@ -58,6 +58,7 @@ if TYPE_CHECKING:  # annotations only: casadi is an optional extra, Scene/Sim lo
     from .sim import Sim
 
 SCENARIOS = ("center", "corner")
+MOTORS = ("line", "cutoff")
 STATE_LABELS = ("dtheta_x", "dtheta_y", "dtheta_z", "omega_x", "omega_y", "omega_z", "Omega_x", "Omega_y", "Omega_z")
 INPUT_LABELS = ("u_x", "u_y", "u_z")
 BODY = "cube"
@@ -74,7 +75,10 @@ class CubeModel:
     uniform, with three body-axis reaction wheels of spin inertia ``J`` (kg·m²), motor torque
     limit ``torque_limit`` (N·m), wheel speed limit ``speed_limit`` (rad/s), cube angular damping
     ``damping`` (N·m·s/rad, the "angular_damping" effect), wheel bearing damping ``wheel_damping``
-    (N·m·s/rad), gravity ``g`` (m/s², along −z world). Defaults are Cubli-like (15 cm, 1 kg;
+    (N·m·s/rad, the motor's viscous friction), gravity ``g`` (m/s², along −z world). ``motor``:
+    "line" (default) — the torque a wheel can apply to speed itself up falls linearly from the stall
+    torque ``torque_limit`` at rest to 0 at the no-load speed ``speed_limit`` (wheel_motor kernel);
+    "cutoff" — full torque below ``speed_limit``, none beyond (the old hard cut-off). Defaults are Cubli-like (15 cm, 1 kg;
     Cubli: 1.42 kg, wheel inertia 0.57e-3 kg·m², Maxon EC45-flat motors): J = 5.7e-4 kg·m² per
     wheel, 0.2 N·m, 400 rad/s (3800 rpm)."""
 
@@ -87,8 +91,10 @@ class CubeModel:
     damping: float = 0.0
     wheel_damping: float = 0.0
     g: float = 9.81
+    motor: str = "line"
 
     def __post_init__(self):
+        self.motor = V.choice("motor", self.motor, MOTORS)
         self.scenario = V.choice("scenario", self.scenario, SCENARIOS)
         self.mass = V.positive("mass", self.mass)
         self.size = V.positive("size", self.size)
@@ -153,7 +159,7 @@ class CubeModel:
         scene.add_body(lv.Body.box(BODY, mass=self.mass, size=(s, s, s), p_w=p_w, q=q0, omega_b=omega_b))
         scene.add_effect("spherical_joint", body=BODY, anchor_w=[0.0, 0.0, 0.0])
         scene.add_effect("reaction_wheels", body=BODY, J=self.J.tolist(), torque_limit=self.torque_limit,
-                         speed_limit=self.speed_limit, c_w=self.wheel_damping)
+                         speed_limit=self.speed_limit, c_w=self.wheel_damping, cutoff=float(self.motor == "cutoff"))
         if self.gravity:
             scene.add_effect("gravity", body=BODY, g_w=self.g_w)
         if self.damping > 0:
@@ -172,7 +178,7 @@ class CubeModel:
     def as_dict(self) -> dict[str, Any]:
         return {"scenario": self.scenario, "mass": self.mass, "size": self.size, "J": self.J.tolist(),
                 "torque_limit": self.torque_limit, "speed_limit": self.speed_limit, "damping": self.damping,
-                "wheel_damping": self.wheel_damping, "g": self.g}
+                "wheel_damping": self.wheel_damping, "g": self.g, "motor": self.motor}
 
 
 # ----------------------------------------------------------------------------------------------
@@ -275,7 +281,7 @@ def linearize(sim_or_scene: CubeModel | Sim | Scene, x0: dict | None = None, u0:
     """Linearize a scene (or the wheel cube) at an operating point, by CasADi AD of the derived kernels.
 
     The right-hand side is composed from generated/kernels_casadi.py — each body's model kernel
-    (rigid_body_rhs, pivot_body_rhs, wheel_body_rhs with wheel_saturation) and the CasADi printing of
+    (rigid_body_rhs, pivot_body_rhs, wheel_body_rhs with wheel_motor) and the CasADi printing of
     every force effect the scene declares, user effects included — so it is the model the backends
     step. See lavendersim._linearize for the error coordinates (per body p, dtheta, v, omega; a
     jointed body dtheta, omega; wheels add Omega) and the input names.

@@ -15,11 +15,10 @@ from lavendersim import control as lc
 from lavendersim.validate import LavenderInputError
 
 sys.path.insert(0, __import__("os").path.dirname(__file__))
-from wheel_reference import RefSim  # noqa: E402
-
 # The closed loops' NumPy runs are in the slow set (NUMPY_SLOW: tests/conftest.py); the C runs stay,
 # and test_closed_loop_matches_an_independent_reference_stepper checks the loop itself quickly.
 from conftest import NUMPY_SLOW  # noqa: E402
+from wheel_reference import RefSim  # noqa: E402
 
 BACKENDS = ("c", "numpy")
 
@@ -135,7 +134,9 @@ def test_attitude_regulation_reaction_wheel_cube_v0(backend):
     assert settle <= 1.0
     assert errs[-1] < 1e-3
     assert max(torques) <= m.torque_limit
-    assert max(torques) == pytest.approx(m.torque_limit)  # the start saturates: the limit is exercised
+    # the start saturates: the limit is exercised (the last substep of a 10 ms env step reports the torque–speed
+    # line's 0.2 (1 − |Ω|/400) once the wheel spins, measured 0.198)
+    assert 0.95 * m.torque_limit <= max(torques) <= m.torque_limit
     assert max(speeds) < m.speed_limit
 
 

@@ -12,9 +12,6 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-# the docs/extending.md fixture: derives and compiles the guide's user effects into a temporary folder
-from test_extending import guide, make_scene  # noqa: F401
-
 import lavendersim as lv
 from lavendersim import control as lc
 from lavendersim.validate import LavenderInputError
@@ -91,15 +88,6 @@ def test_the_cube_model_is_the_cube_scene():
     b = lc.linearize(m.scene())
     np.testing.assert_allclose(a.A, b.A, rtol=0, atol=1e-12)
     np.testing.assert_allclose(a.B, b.B, rtol=0, atol=1e-12)
-
-
-@pytest.mark.needs("cc")
-def test_user_declared_effect(guide):  # noqa: F811
-    s = make_scene()
-    lin = lc.linearize(s, inputs=["quadratic_drag.cd_area", "gravity_gradient.mu"])
-    assert lin.ninputs == 2 and lin.nstates == 12
-    for backend in BACKENDS:
-        check(lin, s, backend)
 
 
 def test_bad_inputs_name_the_field():
