@@ -771,6 +771,90 @@ def design(scenario: str = "center", Q: ArrayLike | None = None, R: ArrayLike | 
 
 
 # ----------------------------------------------------------------------------------------------
+# Monte Carlo robustness
+# ----------------------------------------------------------------------------------------------
+
+# Perturbations (independent, uniform, relative to the nominal value): the plant's mass (and with it
+# its inertia), its size (inertia and, in the corner scenario, the COM height), each wheel's spin
+# inertia, the motor stall torque and no-load speed.
+MC_SPREAD = {"mass": 0.10, "size": 0.05, "J": 0.20, "torque_limit": 0.10, "speed_limit": 0.10}
+
+
+def monte_carlo_tasks(model: CubeModel, n: int, seed: int) -> list[dict[str, Any]]:
+    """The perturbed plants' parameters (n dicts for CubeModel), drawn here from one seeded generator
+    (numpy default_rng(seed)) so every executor runs the same samples. See MC_SPREAD."""
+    n = V.integer("monte_carlo", n, minimum=1)
+    rng = np.random.default_rng(V.integer("seed", seed, minimum=0))
+    base = model.as_dict()
+    out = []
+    for _ in range(n):
+        d = dict(base)
+        for key, spread in MC_SPREAD.items():
+            nominal = np.asarray(base[key], dtype=float)
+            d[key] = (nominal * (1 + spread * rng.uniform(-1, 1, nominal.shape))).tolist()
+        out.append(d)
+    return out
+
+
+def monte_carlo_sample(task: dict[str, Any]) -> dict[str, Any]:
+    """One closed loop of a perturbed plant under the nominal design's gain (a module-level function
+    of a picklable task: the executor's contract). Never raises for a plant that diverges: it is a failure."""
+    from .errors import DivergenceError
+
+    model = CubeModel(**task["model"])
+    lin = linearize(CubeModel(**task["nominal"]))
+    K = np.asarray(task["K"], float)
+    q0 = rotated(lin.q_ref, task["axis"], task["theta0_deg"])
+    try:
+        r = closed_loop(model, lin, K, q0, task["T"], dt=task["dt"], control_dt=task["control_dt"], backend=task["backend"])
+    except DivergenceError as exc:
+        return {"settled": False, "settling_time": None, "peak_torque": None, "final_error_deg": None, "why": str(exc)}
+    st = r.settling_time(task["threshold_deg"])
+    ok = math.isfinite(st) and bool(r.error_deg[-1] < task["threshold_deg"])
+    return {"settled": ok, "settling_time": st if math.isfinite(st) else None,
+            "peak_torque": float(np.max(np.abs(r.u_applied))), "final_error_deg": float(r.error_deg[-1]), "why": None}
+
+
+def monte_carlo(res: DesignResult, n: int, seed: int, executor: Any = None) -> dict[str, Any]:
+    """Re-run the closed loop of a design on n perturbed plants (MC_SPREAD), with the design's gain.
+
+    Parameters
+    ----------
+    res : DesignResult
+        The nominal design (its gain K, initial error, T, threshold, backend).
+    n, seed : int
+        Samples and the seed of numpy's default_rng that draws them.
+    executor : lavendersim.executor.Executor, optional
+        Where the samples run (serial, local processes, a Dask cluster); results are in sample order,
+        so the summary is the same for the same seed on any executor.
+
+    Returns
+    -------
+    dict
+        n, seed, spreads, failures, failure_rate, settling-time and peak-torque percentiles (s, N·m; over
+        the settled samples) and the per-sample results.
+    """
+    from . import executor as X
+
+    nominal = res.model.as_dict()
+    base = {"nominal": nominal, "K": res.K.tolist(), "axis": res.axis.tolist(), "theta0_deg": res.theta0_deg,
+            "T": float(res.response.t[-1]), "dt": 1e-3, "control_dt": 2e-3, "backend": res.backend,
+            "threshold_deg": res.threshold_deg}
+    tasks = [{**base, "model": m} for m in monte_carlo_tasks(res.model, n, seed)]
+    samples = X.map_tasks(monte_carlo_sample, tasks, executor, feature="lavendersim lqr --dask")
+    ok = [s for s in samples if s["settled"]]
+    st = np.array([s["settling_time"] for s in ok], dtype=float)
+    pk = np.array([s["peak_torque"] for s in samples if s["peak_torque"] is not None], dtype=float)
+
+    def pct(a):
+        return {p: (float(np.percentile(a, int(p[1:]))) if a.size else None) for p in ("p50", "p90", "p100")}
+
+    return {"n": len(samples), "seed": int(seed), "spread": dict(MC_SPREAD), "distribution": "uniform, relative",
+            "failures": len(samples) - len(ok), "failure_rate": (len(samples) - len(ok)) / len(samples),
+            "settling_time": pct(st), "peak_torque": pct(pk), "samples": samples}
+
+
+# ----------------------------------------------------------------------------------------------
 # checking the linearization against the runtime simulator
 # ----------------------------------------------------------------------------------------------
 
@@ -946,6 +1030,14 @@ def register_cli(subparsers: argparse._SubParsersAction) -> None:
                    help="simulator backend (default auto: C when built, else NumPy with a warning)")
     p.add_argument("--plot", default=None, metavar="PATH", help="write the response plot to PATH (PNG; default: no plot)")
     p.add_argument("--json", action="store_true", help="print the figures as JSON")
+    p.add_argument("--motor", default="line", choices=MOTORS, help="wheel motor: line (torque–speed line, default) or "
+                   "cutoff (full torque up to the speed limit)")
+    p.add_argument("--monte-carlo", type=int, default=None, metavar="N", help="also re-run the closed loop on N plants "
+                   "with mass, size, wheel inertias and motor parameters perturbed (uniform, see MC_SPREAD)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the Monte Carlo draws (default 0)")
+    p.add_argument("--workers", type=int, default=None, help="Monte Carlo on N local processes (default: every core; 1: serial)")
+    p.add_argument("--dask", default=None, metavar="ADDRESS", help="Monte Carlo on the Dask scheduler at ADDRESS "
+                   "(the distributed extra)")
     p.set_defaults(fn=_cli)
 
 
@@ -967,18 +1059,31 @@ def _cli(args) -> int:
                 raise V.LavenderInputError(name.replace("_", "-"), "must be finite", f", got {v!r}")
         model = CubeModel(scenario=args.scenario, mass=args.mass, size=args.size, J=J if J.size == 3 else float(J[0]),
                           torque_limit=args.torque_limit, speed_limit=args.speed_limit, damping=args.damping,
-                          wheel_damping=args.wheel_damping)
+                          wheel_damping=args.wheel_damping, motor=args.motor)
+        ex = None
+        if args.monte_carlo is not None:
+            from . import executor as X
+
+            V.integer("monte-carlo", args.monte_carlo, minimum=1)
+            V.integer("seed", args.seed, minimum=0)
+            ex = X.resolve(workers=args.workers, dask=args.dask, feature="lavendersim lqr --dask")
         if axis is None:
             axis = DEFAULT_AXIS if model.scenario == "center" else CORNER_AXIS
         res = design(model=model, Q=_matrix_arg("Q", args.Q, 9), R=_matrix_arg("R", args.R, 3), theta0_deg=args.theta0,
                      axis=axis, T=args.T, threshold_deg=args.threshold, backend=args.backend)
+        mc = None if args.monte_carlo is None else monte_carlo(res, args.monte_carlo, args.seed, ex)
     except V.LavenderInputError as exc:
         print(f"lavendersim lqr: invalid parameter: {exc}", file=sys.stderr)
         return 2
     if args.plot:
         res.plot(args.plot)
     if args.json:
-        print(res.to_json())
+        if mc is None:
+            print(res.to_json())
+        else:
+            out = json.loads(res.to_json())
+            out["monte_carlo"] = {k: v for k, v in mc.items() if k != "samples"}
+            print(json.dumps(out, indent=2))
         return 0
     f = res.figures()
     np.set_printoptions(precision=5, suppress=True, linewidth=140)
@@ -991,6 +1096,11 @@ def _cli(args) -> int:
     print(f"from {f['theta0_deg']:g}° about {np.round(res.axis, 4).tolist()}: settling time (< {f['threshold_deg']:g}°) {st}, "
           f"final error {f['final_error_deg']:.3g}°, peak torque {f['peak_torque']:.4g} N·m (limit {model.torque_limit:g}), "
           f"peak wheel speed {f['peak_wheel_speed']:.4g} rad/s (limit {model.speed_limit:g})")
+    if mc is not None:
+        fmt = lambda d, u: ", ".join(f"{k} {v:.4g} {u}" if v is not None else f"{k} -" for k, v in d.items())  # noqa: E731
+        print(f"Monte Carlo, {mc['n']} plants (seed {mc['seed']}; uniform ±{', ±'.join(f'{100 * v:g}% {k}' for k, v in MC_SPREAD.items())}): "
+              f"failure rate {mc['failure_rate']:.3g} ({mc['failures']}); settling time {fmt(mc['settling_time'], 's')}; "
+              f"peak torque {fmt(mc['peak_torque'], 'N·m')}")
     if args.plot:
         print(f"wrote {args.plot}")
     return 0
