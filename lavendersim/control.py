@@ -1,15 +1,19 @@
-"""LQR wheel controllers for the reaction-wheel cube: CasADi linearization + python-control.
+"""LQR wheel controllers and linearization of any scene: CasADi from the derived kernels + python-control.
 
-The model is the derived one, nothing typed by hand: :func:`linearize` builds the right-hand side
-in CasADi from ``generated/kernels_casadi.py`` — ``wheel_body_rhs`` with ``F_w = effect_gravity(m,
-g_w)`` and ``tau_w = effect_angular_damping(q, omega_b, c)``, the inertia from ``inertia_box`` and
-``parallel_axis`` — and differentiates it at an equilibrium.
+:func:`linearize` composes a scene's right-hand side in CasADi from ``generated/kernels_casadi.py``
+— the model kernels (rigid_body_rhs, pivot_body_rhs, wheel_body_rhs, wheel_motor) and the CasADi
+printing of every effect the scene declares, user effects included (lavendersim._linearize) — and
+differentiates it at an operating point. It returns a :class:`Linearization`, a ``control.StateSpace``
+with named states, inputs and outputs (``sample(dt)``: the zero-order-hold discretization);
+:func:`finite_difference` checks it against the simulator's own step.
 
-State (error coordinates, 9): ``x = [dtheta (3), omega_b (3), Omega - Omega_0 (3)]`` where the
-attitude error ``dtheta`` (rad, body frame) is defined by ``q = q_ref ⊗ [dtheta/2, sqrt(1 -
-|dtheta/2|²)]``, i.e. ``dtheta = 2 vec(q_ref* ⊗ q)`` on the hemisphere ``w >= 0``; ``omega_b``
-rad/s; ``Omega`` wheel rates relative to the body, rad/s. Input ``u`` (3): motor torques on the
-wheels, N·m (the cube receives −u), relative to the equilibrium torque ``u_0 = c_w Omega_0``.
+The reaction-wheel cube (:class:`CubeModel`) is one such scene. State (error coordinates, 9):
+``x = [dtheta (3), omega_b (3), Omega - Omega_0 (3)]`` where the attitude error ``dtheta`` (rad,
+body frame) is defined by ``q = q_ref ⊗ [dtheta/2, sqrt(1 - |dtheta/2|²)]``; ``omega_b`` rad/s;
+``Omega`` wheel rates relative to the body, rad/s. Input ``u`` (3): motor torques on the wheels, N·m
+(the cube receives −u), relative to the equilibrium torque ``u_0 = c_w Omega_0``. The motor's
+torque–speed line limits the drive torque to ``torque_limit (1 − |Ω|/speed_limit)`` (``motor="line"``,
+default) or cuts it off at ``speed_limit`` (``motor="cutoff"``).
 
 Scenarios (:class:`CubeModel`):
   * ``"center"`` — ReactionWheelCube-v0: spherical joint at the cube's centre (no gravity
@@ -20,18 +24,25 @@ Scenarios (:class:`CubeModel`):
 Internal torques cannot change the total angular momentum, so without damping the linear model is
 not fully controllable: the centre scenario has rank 6 of 9 (all three momentum components are
 conserved) and the corner scenario rank 8 of 9 (gravity's torque is horizontal; the vertical
-momentum is conserved). :func:`lqr` then designs on the controllable subspace (an orthonormal
-Krylov basis ``T``): ``Kc, Sc, Ec = control.lqr(TᵀAT, TᵀB, TᵀQT, R)`` and ``K = Kc Tᵀ``; the
-uncontrollable modes are those conserved momenta (eigenvalue 0: they are constants of the motion,
-not errors to regulate). With a full-rank model it is plainly ``control.lqr(A, B, Q, R)``.
+momentum is conserved). :func:`lqr` and :func:`dlqr` (python-control conventions: a StateSpace,
+(A, B) or A, B, then Q, R) then design on the controllable subspace (an orthonormal Krylov basis
+``T``): ``Kc, Sc, Ec = control.lqr(TᵀAT, TᵀB, TᵀQT, R)`` and ``K = Kc Tᵀ``, and report the
+uncontrollable directions (``LQRResult.uncontrollable``: those conserved momenta, constants of the
+motion, not errors to regulate). With a full-rank model it is plainly ``control.lqr(A, B, Q, R)``.
+:func:`closed_loop` runs a gain or any controller ``u = f(t, x)`` in the nonlinear simulator and
+returns a :class:`Response` (t, states, inputs, outputs as python-control names them; ``plot()``);
+:func:`monte_carlo` re-runs it on perturbed plants on any lavendersim.executor.
 
 From Python::
 
     from lavendersim import control as lc
     res = lc.design(scenario="center", Q=[...9...], R=[...3...], theta0_deg=20, axis=[1, 2, 3])
     res.K, res.poles, res.settling_time, res.peak_torque, res.peak_wheel_speed, res.plot("r.png")
+    lin = lc.linearize(sim, inputs=["applied_torque.torque_w"])      # any scene or Sim
+    K, S, E = lc.dlqr(lin.sample(0.01), Q, R)
 
-From the shell: ``lavendersim lqr --scenario corner --theta0 3 --json``.
+From the shell: ``lavendersim lqr --scenario corner --theta0 3 --json`` (``--monte-carlo N --seed S
+--workers W`` or ``--dask ADDRESS`` for the robustness runs).
 """
 from __future__ import annotations
 

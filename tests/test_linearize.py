@@ -4,8 +4,10 @@ callable controller and the response object.
 
 Tolerances (finite_difference: central differences h = 1e-5 of one Euler step, Richardson in dt from
 1e-4): relative to max(1, max |entry|), A ≤ 1e-5 and B ≤ 1e-7 — measured 5e-7 / 4e-9 (free body,
-float rounding of p_w ~ 3 m over h·dt), 2e-9 / 7e-10 (pivoted body), 1e-9 / 1e-9 (wheel cube). A
-dropped gyroscopic, gravity or wheel term is O(1e-2..1e1) there.
+float rounding of p_w ~ 3 m over h·dt), 2e-9 / 7e-10 (pivoted body), 3e-7 / 6e-9 (wheel cube off
+equilibrium, wheels at 40 rad/s). The user-declared effect (docs/extending.md's set):
+tests/test_extending.py::test_linearize_a_scene_with_user_effects. A dropped gyroscopic, gravity or
+wheel term is O(1e-2..1e1) there.
 """
 from __future__ import annotations
 
