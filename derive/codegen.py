@@ -150,6 +150,12 @@ class CasadiPrinter(PythonCodePrinter):
     def _print_And(self, expr):
         return _fold(self, expr, "casadi.logic_and")
 
+    def _print_Or(self, expr):   # Python's `or` would ask a symbolic SXElem for its truth value
+        return _fold(self, expr, "casadi.logic_or")
+
+    def _print_Not(self, expr):
+        return f"casadi.logic_not({self._print(expr.args[0])})"
+
     def _print_Piecewise(self, expr):
         *head, (last, _) = expr.args
         out = self._print(last)

@@ -41,9 +41,12 @@ def declarations() -> list[EffectDecl]:
                      [param("anchor_w", 3, "m", "joint anchor, world frame")]),
         model_effect("reaction_wheels", "Three reaction wheels on the body x, y, z axes (the body's mass and inertia include them, locked)",
                      [param("J", 3, "kg·m²", "wheel spin inertias about body x, y, z (each below the body's moment)", "positive"),
-                      param("torque_limit", (), "N·m", "motor torque limit (clips each command)", "positive"),
-                      param("speed_limit", (), "rad/s", "a wheel at |Omega_i| >= speed_limit is not driven faster", "positive"),
-                      param("c_w", (), "N·m·s/rad", "wheel bearing damping", "nonnegative", default=0.0)]),
+                      param("torque_limit", (), "N·m", "motor stall torque (clips each command)", "positive"),
+                      param("speed_limit", (), "rad/s", "motor no-load speed: the drive torque falls linearly to 0 there "
+                            "(with cutoff = 1: full torque below it, none beyond)", "positive"),
+                      param("c_w", (), "N·m·s/rad", "wheel bearing (viscous) friction", "nonnegative", default=0.0),
+                      param("cutoff", (), "", "0: torque–speed line (default); 1: the hard cut-off at speed_limit",
+                            "nonnegative", default=0.0)]),
     ]
 
 

@@ -119,6 +119,25 @@ def saturation(command, Omega, torque_limit, speed_limit) -> sp.Matrix:
     return sp.Matrix(out)
 
 
+def motor(command, Omega, torque_limit, speed_limit, cutoff) -> sp.Matrix:
+    """The torque a wheel motor applies. cutoff > 0: :func:`saturation` (the old hard cut-off).
+    Otherwise a DC motor's torque–speed line: the command is clipped to ±torque_limit (the stall
+    torque, a current limit) and, when it drives the wheel faster (same sign as Omega_i), to the
+    available torque torque_limit (1 − |Omega_i| / speed_limit) (zero at the no-load speed
+    speed_limit and beyond); braking keeps the full ±torque_limit. Continuous in Omega."""
+    cut = saturation(command, Omega, torque_limit, speed_limit)
+    out = []
+    for i in range(3):
+        c, W = command[i], Omega[i]
+        u = sp.Piecewise((-torque_limit, c < -torque_limit), (torque_limit, c > torque_limit), (c, True))
+        a = torque_limit * (1 - sp.Abs(W) / speed_limit)   # available drive torque below the no-load speed
+        line = sp.Piecewise((0, sp.And(W >= speed_limit, c > 0)), (0, sp.And(W <= -speed_limit, c < 0)),
+                            (a, sp.And(W > 0, W < speed_limit, c > a)), (-a, sp.And(W < 0, W > -speed_limit, c < -a)),
+                            (u, True))
+        out.append(sp.Piecewise((cut[i], cutoff > 0), (line, True)))
+    return sp.Matrix(out)
+
+
 def _check(I_b, w, tau, h, w1) -> None:
     """Derivation-time proofs: the Jacobian is I + h([ω⁺]ₓ I − [Iω⁺]ₓ); a Strang step of a spin about
     one principal axis is the exact rotation about it."""
@@ -223,4 +242,15 @@ def kernels() -> list[Kernel]:
                [Arg("command", cmd, "commanded motor torques, N·m"), Arg("Omega", Om, "wheel rates relative to the body, rad/s"),
                 Arg("torque_limit", tl, "N·m", "positive"), Arg("speed_limit", sl, "rad/s", "positive")],
                [Arg("u", saturation(cmd, Om, tl, sl), "applied motor torques, N·m")], g),
+        Kernel("wheel_motor", "Motor torques actually applied: a torque–speed line from the stall torque to the no-load "
+               "speed (cutoff = 0), or the hard cut-off of wheel_saturation (cutoff = 1)",
+               r"u_i = \begin{cases} \mathrm{sign}(\Omega_i)\,a_i & \bar u_i \Omega_i > 0,\ |\bar u_i| > a_i \\ \bar u_i & "
+               r"\text{else}\end{cases},\quad a_i = u_{max}\max(0, 1 - |\Omega_i|/\Omega_{0}),\quad "
+               r"\bar u_i = \min(\max(c_i, -u_{max}), u_{max})",
+               [Arg("command", cmd, "commanded motor torques, N·m"), Arg("Omega", Om, "wheel rates relative to the body, rad/s"),
+                Arg("torque_limit", tl, "stall torque (current limit), N·m", "positive"),
+                Arg("speed_limit", sl, "no-load speed, rad/s", "positive"),
+                Arg("cutoff", scalar("cutoff"), "1: hard cut-off at speed_limit instead of the line; 0: the line")],
+               [Arg("u", motor(cmd, Om, tl, sl, scalar("cutoff")), "applied motor torques, N·m")], g,
+               notes=["Viscous wheel friction is the wheel damping c_w of wheel_body_rhs (−c_w Ω on the wheel)."]),
     ]

@@ -90,6 +90,7 @@ MODEL = Layout("MODEL", "per-body model row (spherical joint and/or reaction whe
     Field("torque_limit", 1, "motor torque limit, N·m"),
     Field("speed_limit", 1, "no drive beyond this |Omega_i|, rad/s"),
     Field("c_w", 1, "wheel bearing damping, N·m·s/rad"),
+    Field("cutoff", 1, "wheel motor: 0 torque–speed line (stall torque_limit, no-load speed_limit); 1 hard cut-off"),
 ])
 
 XS = Layout("XS", "extended state of a body with a model: x then the wheel rates", [

@@ -1646,6 +1646,175 @@ void lv_wheel_saturation(const double *command, const double *Omega, double torq
 ));
 }
 
+void lv_wheel_motor(const double *command, const double *Omega, double torque_limit, double speed_limit, double cutoff, double *u) {
+    const double command_0 = command[0];
+    const double command_1 = command[1];
+    const double command_2 = command[2];
+    const double Omega_0 = Omega[0];
+    const double Omega_1 = Omega[1];
+    const double Omega_2 = Omega[2];
+    const double t0 = -torque_limit;
+    const double t1 = command_0 < t0;
+    const double t2 = fabs(Omega_0);
+    const double t3 = speed_limit <= t2;
+    const double t4 = Omega_0*torque_limit;
+    const double t5 = command_0 > torque_limit;
+    const double t6 = ((t1) ? (
+   t0
+)
+: ((t5) ? (
+   torque_limit
+)
+: (
+   command_0
+)));
+    const double t7 = cutoff > 0;
+    const double t8 = Omega_0 >= speed_limit;
+    const double t9 = command_0 < 0;
+    const double t10 = command_0 > 0;
+    const double t11 = -speed_limit;
+    const double t12 = Omega_0 <= t11;
+    const double t13 = (1.0/speed_limit);
+    const double t14 = torque_limit*(-t13*t2 + 1);
+    const double t15 = -t14;
+    const double t16 = command_1 < t0;
+    const double t17 = fabs(Omega_1);
+    const double t18 = speed_limit <= t17;
+    const double t19 = Omega_1*torque_limit;
+    const double t20 = command_1 > torque_limit;
+    const double t21 = ((t16) ? (
+   t0
+)
+: ((t20) ? (
+   torque_limit
+)
+: (
+   command_1
+)));
+    const double t22 = Omega_1 >= speed_limit;
+    const double t23 = command_1 < 0;
+    const double t24 = command_1 > 0;
+    const double t25 = Omega_1 <= t11;
+    const double t26 = torque_limit*(-t13*t17 + 1);
+    const double t27 = -t26;
+    const double t28 = command_2 < t0;
+    const double t29 = fabs(Omega_2);
+    const double t30 = speed_limit <= t29;
+    const double t31 = Omega_2*torque_limit;
+    const double t32 = command_2 > torque_limit;
+    const double t33 = ((t28) ? (
+   t0
+)
+: ((t32) ? (
+   torque_limit
+)
+: (
+   command_2
+)));
+    const double t34 = Omega_2 >= speed_limit;
+    const double t35 = command_2 < 0;
+    const double t36 = command_2 > 0;
+    const double t37 = Omega_2 <= t11;
+    const double t38 = torque_limit*(-t13*t29 + 1);
+    const double t39 = -t38;
+    u[0] = ((t7) ? (
+   ((((t1) ? (
+      t3 && t4 < 0
+   )
+   : (
+      ((t5) ? (
+         t3 && t4 > 0
+      )
+      : (
+         t3 && Omega_0*command_0 > 0
+      ))
+   ))) ? (
+      0
+   )
+   : (
+      t6
+   ))
+)
+: (
+   (((t10 || t12) && (t10 || t9) && (t12 || t8) && (t8 || t9)) ? (
+      0
+   )
+   : ((Omega_0 > 0 && command_0 > t14 && Omega_0 < speed_limit) ? (
+      t14
+   )
+   : ((Omega_0 > t11 && Omega_0 < 0 && command_0 < t15) ? (
+      t15
+   )
+   : (
+      t6
+   ))))
+));
+    u[1] = ((t7) ? (
+   ((((t16) ? (
+      t18 && t19 < 0
+   )
+   : (
+      ((t20) ? (
+         t18 && t19 > 0
+      )
+      : (
+         t18 && Omega_1*command_1 > 0
+      ))
+   ))) ? (
+      0
+   )
+   : (
+      t21
+   ))
+)
+: (
+   (((t22 || t23) && (t22 || t25) && (t23 || t24) && (t24 || t25)) ? (
+      0
+   )
+   : ((Omega_1 > 0 && command_1 > t26 && Omega_1 < speed_limit) ? (
+      t26
+   )
+   : ((Omega_1 > t11 && Omega_1 < 0 && command_1 < t27) ? (
+      t27
+   )
+   : (
+      t21
+   ))))
+));
+    u[2] = ((t7) ? (
+   ((((t28) ? (
+      t30 && t31 < 0
+   )
+   : (
+      ((t32) ? (
+         t30 && t31 > 0
+      )
+      : (
+         t30 && Omega_2*command_2 > 0
+      ))
+   ))) ? (
+      0
+   )
+   : (
+      t33
+   ))
+)
+: (
+   (((t34 || t35) && (t34 || t37) && (t35 || t36) && (t36 || t37)) ? (
+      0
+   )
+   : ((Omega_2 > 0 && command_2 > t38 && Omega_2 < speed_limit) ? (
+      t38
+   )
+   : ((Omega_2 > t11 && Omega_2 < 0 && command_2 < t39) ? (
+      t39
+   )
+   : (
+      t33
+   ))))
+));
+}
+
 /* ---- Scene effects: accumulating functions and dispatch -------------------------------------- */
 /* applied_torque: adds tau_com_w for one body. p = [torque_w(3)] */
 static inline void lv_effect_acc_applied_torque(const double *p, const double *x, const double *v_w, double m, const double *I_b, double *F, double *tau)
@@ -1799,6 +1968,7 @@ static void packed_implicit_gyro_newton(const double *in, double *out) { lv_impl
 static void packed_quat_exp_step(const double *in, double *out) { lv_quat_exp_step(in + 0, in + 4, in[7], out + 0); }
 static void packed_rkmk_dexpinv(const double *in, double *out) { lv_rkmk_dexpinv(in + 0, in + 3, out + 0); }
 static void packed_wheel_saturation(const double *in, double *out) { lv_wheel_saturation(in + 0, in + 3, in[6], in[7], out + 0); }
+static void packed_wheel_motor(const double *in, double *out) { lv_wheel_motor(in + 0, in + 3, in[6], in[7], in[8], out + 0); }
 
 const lv_kernel_info lv_kernel_table[LV_KERNEL_COUNT] = {
     {"particle_moments", 7, 6, packed_particle_moments},
@@ -1857,4 +2027,5 @@ const lv_kernel_info lv_kernel_table[LV_KERNEL_COUNT] = {
     {"quat_exp_step", 8, 4, packed_quat_exp_step},
     {"rkmk_dexpinv", 6, 3, packed_rkmk_dexpinv},
     {"wheel_saturation", 8, 3, packed_wheel_saturation},
+    {"wheel_motor", 9, 3, packed_wheel_motor},
 };

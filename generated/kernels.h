@@ -11,7 +11,7 @@ typedef struct {
     void (*packed)(const double *in, double *out);
 } lv_kernel_info;
 
-#define LV_KERNEL_COUNT 56
+#define LV_KERNEL_COUNT 57
 extern const lv_kernel_info lv_kernel_table[LV_KERNEL_COUNT];
 
 /* particle_moments: One particle's mass moment and momentum (summed: m r_COM and p).
@@ -425,6 +425,15 @@ void lv_rkmk_dexpinv(const double *u_b, const double *omega_b, double *u_dot);
      in  speed_limit scalar: rad/s
      out u [3]: applied motor torques, N·m */
 void lv_wheel_saturation(const double *command, const double *Omega, double torque_limit, double speed_limit, double *u);
+
+/* wheel_motor: Motor torques actually applied: a torque–speed line from the stall torque to the no-load speed (cutoff = 0), or the hard cut-off of wheel_saturation (cutoff = 1).
+     in  command [3]: commanded motor torques, N·m
+     in  Omega [3]: wheel rates relative to the body, rad/s
+     in  torque_limit scalar: stall torque (current limit), N·m
+     in  speed_limit scalar: no-load speed, rad/s
+     in  cutoff scalar: 1: hard cut-off at speed_limit instead of the line; 0: the line
+     out u [3]: applied motor torques, N·m */
+void lv_wheel_motor(const double *command, const double *Omega, double torque_limit, double speed_limit, double cutoff, double *u);
 
 /* ---- Scene effects (derive/effects.py): effect table layout, codes and dispatch ---------------- */
 #define LV_EFFECT_ROW_CODE 0     /* an effect table row: [code, body, parameters...] */

@@ -1528,3 +1528,60 @@ def wheel_saturation(command, Omega, torque_limit, speed_limit):
     t11 = Omega_2*torque_limit
     t12 = (command_2 > torque_limit)
     return casadi.vertcat(casadi.if_else(casadi.if_else(t1, casadi.logic_and(t2, (t3 < 0)), casadi.if_else(t4, casadi.logic_and(t2, (t3 > 0)), casadi.logic_and(t2, (Omega_0*command_0 > 0)))), 0, casadi.if_else(t1, t0, casadi.if_else(t4, torque_limit, command_0))), casadi.if_else(casadi.if_else(t5, casadi.logic_and(t6, (t7 < 0)), casadi.if_else(t8, casadi.logic_and(t6, (t7 > 0)), casadi.logic_and(t6, (Omega_1*command_1 > 0)))), 0, casadi.if_else(t5, t0, casadi.if_else(t8, torque_limit, command_1))), casadi.if_else(casadi.if_else(t9, casadi.logic_and(t10, (t11 < 0)), casadi.if_else(t12, casadi.logic_and(t10, (t11 > 0)), casadi.logic_and(t10, (Omega_2*command_2 > 0)))), 0, casadi.if_else(t9, t0, casadi.if_else(t12, torque_limit, command_2))))
+
+
+def wheel_motor(command, Omega, torque_limit, speed_limit, cutoff):
+    """wheel_motor: Motor torques actually applied: a torque–speed line from the stall torque to the no-load speed (cutoff = 0), or the hard cut-off of wheel_saturation (cutoff = 1).
+      in  command [3]: commanded motor torques, N·m
+      in  Omega [3]: wheel rates relative to the body, rad/s
+      in  torque_limit scalar: stall torque (current limit), N·m
+      in  speed_limit scalar: no-load speed, rad/s
+      in  cutoff scalar: 1: hard cut-off at speed_limit instead of the line; 0: the line
+      out u [3]: applied motor torques, N·m"""
+    command_0 = command[0]
+    command_1 = command[1]
+    command_2 = command[2]
+    Omega_0 = Omega[0]
+    Omega_1 = Omega[1]
+    Omega_2 = Omega[2]
+    t0 = -torque_limit
+    t1 = (command_0 < t0)
+    t2 = casadi.fabs(Omega_0)
+    t3 = (speed_limit <= t2)
+    t4 = Omega_0*torque_limit
+    t5 = (command_0 > torque_limit)
+    t6 = casadi.if_else(t1, t0, casadi.if_else(t5, torque_limit, command_0))
+    t7 = (cutoff > 0)
+    t8 = (Omega_0 >= speed_limit)
+    t9 = (command_0 < 0)
+    t10 = (command_0 > 0)
+    t11 = -speed_limit
+    t12 = (Omega_0 <= t11)
+    t13 = (1.0/speed_limit)
+    t14 = torque_limit*(-t13*t2 + 1)
+    t15 = -t14
+    t16 = (command_1 < t0)
+    t17 = casadi.fabs(Omega_1)
+    t18 = (speed_limit <= t17)
+    t19 = Omega_1*torque_limit
+    t20 = (command_1 > torque_limit)
+    t21 = casadi.if_else(t16, t0, casadi.if_else(t20, torque_limit, command_1))
+    t22 = (Omega_1 >= speed_limit)
+    t23 = (command_1 < 0)
+    t24 = (command_1 > 0)
+    t25 = (Omega_1 <= t11)
+    t26 = torque_limit*(-t13*t17 + 1)
+    t27 = -t26
+    t28 = (command_2 < t0)
+    t29 = casadi.fabs(Omega_2)
+    t30 = (speed_limit <= t29)
+    t31 = Omega_2*torque_limit
+    t32 = (command_2 > torque_limit)
+    t33 = casadi.if_else(t28, t0, casadi.if_else(t32, torque_limit, command_2))
+    t34 = (Omega_2 >= speed_limit)
+    t35 = (command_2 < 0)
+    t36 = (command_2 > 0)
+    t37 = (Omega_2 <= t11)
+    t38 = torque_limit*(-t13*t29 + 1)
+    t39 = -t38
+    return casadi.vertcat(casadi.if_else(t7, casadi.if_else(casadi.if_else(t1, casadi.logic_and(t3, (t4 < 0)), casadi.if_else(t5, casadi.logic_and(t3, (t4 > 0)), casadi.logic_and(t3, (Omega_0*command_0 > 0)))), 0, t6), casadi.if_else(casadi.logic_and(casadi.logic_and(casadi.logic_and(casadi.logic_or(t10, t12), casadi.logic_or(t10, t9)), casadi.logic_or(t12, t8)), casadi.logic_or(t8, t9)), 0, casadi.if_else(casadi.logic_and(casadi.logic_and((Omega_0 > 0), (command_0 > t14)), (Omega_0 < speed_limit)), t14, casadi.if_else(casadi.logic_and(casadi.logic_and((Omega_0 > t11), (Omega_0 < 0)), (command_0 < t15)), t15, t6)))), casadi.if_else(t7, casadi.if_else(casadi.if_else(t16, casadi.logic_and(t18, (t19 < 0)), casadi.if_else(t20, casadi.logic_and(t18, (t19 > 0)), casadi.logic_and(t18, (Omega_1*command_1 > 0)))), 0, t21), casadi.if_else(casadi.logic_and(casadi.logic_and(casadi.logic_and(casadi.logic_or(t22, t23), casadi.logic_or(t22, t25)), casadi.logic_or(t23, t24)), casadi.logic_or(t24, t25)), 0, casadi.if_else(casadi.logic_and(casadi.logic_and((Omega_1 > 0), (command_1 > t26)), (Omega_1 < speed_limit)), t26, casadi.if_else(casadi.logic_and(casadi.logic_and((Omega_1 > t11), (Omega_1 < 0)), (command_1 < t27)), t27, t21)))), casadi.if_else(t7, casadi.if_else(casadi.if_else(t28, casadi.logic_and(t30, (t31 < 0)), casadi.if_else(t32, casadi.logic_and(t30, (t31 > 0)), casadi.logic_and(t30, (Omega_2*command_2 > 0)))), 0, t33), casadi.if_else(casadi.logic_and(casadi.logic_and(casadi.logic_and(casadi.logic_or(t34, t35), casadi.logic_or(t34, t37)), casadi.logic_or(t35, t36)), casadi.logic_or(t36, t37)), 0, casadi.if_else(casadi.logic_and(casadi.logic_and((Omega_2 > 0), (command_2 > t38)), (Omega_2 < speed_limit)), t38, casadi.if_else(casadi.logic_and(casadi.logic_and((Omega_2 > t11), (Omega_2 < 0)), (command_2 < t39)), t39, t33)))))

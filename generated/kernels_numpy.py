@@ -2871,6 +2871,89 @@ def wheel_saturation(command, Omega, torque_limit, speed_limit):
     return u_out
 
 
+def wheel_motor(command, Omega, torque_limit, speed_limit, cutoff):
+    """Motor torques actually applied: a torque–speed line from the stall torque to the no-load speed (cutoff = 0), or the hard cut-off of wheel_saturation (cutoff = 1).
+
+    Generated kernel ``wheel_motor``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    command : array_like, shape (..., 3)
+        commanded motor torques, N·m
+    Omega : array_like, shape (..., 3)
+        wheel rates relative to the body, rad/s
+    torque_limit : array_like, shape (...)
+        stall torque (current limit), N·m
+    speed_limit : array_like, shape (...)
+        no-load speed, rad/s
+    cutoff : array_like, shape (...)
+        1: hard cut-off at speed_limit instead of the line; 0: the line
+
+    Returns
+    -------
+    u : ndarray, shape (..., 3)
+        applied motor torques, N·m
+    """
+    command = numpy.asarray(command, dtype=numpy.float64)
+    Omega = numpy.asarray(Omega, dtype=numpy.float64)
+    torque_limit = numpy.asarray(torque_limit, dtype=numpy.float64)
+    speed_limit = numpy.asarray(speed_limit, dtype=numpy.float64)
+    cutoff = numpy.asarray(cutoff, dtype=numpy.float64)
+    batch = numpy.broadcast_shapes(command.shape[:-1], Omega.shape[:-1], torque_limit.shape, speed_limit.shape, cutoff.shape)
+    command_0 = command[..., 0]
+    command_1 = command[..., 1]
+    command_2 = command[..., 2]
+    Omega_0 = Omega[..., 0]
+    Omega_1 = Omega[..., 1]
+    Omega_2 = Omega[..., 2]
+    with numpy.errstate(invalid='ignore', divide='ignore'):  # numpy.select evaluates every branch
+        t0 = -torque_limit
+        t1 = numpy.less(command_0, t0)
+        t2 = abs(Omega_0)
+        t3 = numpy.less_equal(speed_limit, t2)
+        t4 = Omega_0*torque_limit
+        t5 = numpy.greater(command_0, torque_limit)
+        t6 = numpy.select([t1,t5,True], [t0,torque_limit,command_0], default=numpy.nan)
+        t7 = numpy.greater(cutoff, 0)
+        t8 = numpy.greater_equal(Omega_0, speed_limit)
+        t9 = numpy.less(command_0, 0)
+        t10 = numpy.greater(command_0, 0)
+        t11 = -speed_limit
+        t12 = numpy.less_equal(Omega_0, t11)
+        t13 = (1.0/speed_limit)
+        t14 = torque_limit*(-t13*t2 + 1)
+        t15 = -t14
+        t16 = numpy.less(command_1, t0)
+        t17 = abs(Omega_1)
+        t18 = numpy.less_equal(speed_limit, t17)
+        t19 = Omega_1*torque_limit
+        t20 = numpy.greater(command_1, torque_limit)
+        t21 = numpy.select([t16,t20,True], [t0,torque_limit,command_1], default=numpy.nan)
+        t22 = numpy.greater_equal(Omega_1, speed_limit)
+        t23 = numpy.less(command_1, 0)
+        t24 = numpy.greater(command_1, 0)
+        t25 = numpy.less_equal(Omega_1, t11)
+        t26 = torque_limit*(-t13*t17 + 1)
+        t27 = -t26
+        t28 = numpy.less(command_2, t0)
+        t29 = abs(Omega_2)
+        t30 = numpy.less_equal(speed_limit, t29)
+        t31 = Omega_2*torque_limit
+        t32 = numpy.greater(command_2, torque_limit)
+        t33 = numpy.select([t28,t32,True], [t0,torque_limit,command_2], default=numpy.nan)
+        t34 = numpy.greater_equal(Omega_2, speed_limit)
+        t35 = numpy.less(command_2, 0)
+        t36 = numpy.greater(command_2, 0)
+        t37 = numpy.less_equal(Omega_2, t11)
+        t38 = torque_limit*(-t13*t29 + 1)
+        t39 = -t38
+        u_out = numpy.empty(batch + (3,))
+        u_out[..., 0] = numpy.select([t7,True], [numpy.select([numpy.logical_and.reduce((t3,numpy.logical_or.reduce((numpy.logical_not(t1),numpy.less(t4, 0))),numpy.logical_or.reduce((t1,numpy.logical_not(t5),numpy.greater(t4, 0))),numpy.logical_or.reduce((t1,t5,numpy.greater(Omega_0*command_0, 0))))),True], [0,t6], default=numpy.nan),numpy.select([numpy.logical_and.reduce((numpy.logical_or.reduce((t10,t12)),numpy.logical_or.reduce((t10,t9)),numpy.logical_or.reduce((t12,t8)),numpy.logical_or.reduce((t8,t9)))),numpy.logical_and.reduce((numpy.greater(Omega_0, 0),numpy.greater(command_0, t14),numpy.less(Omega_0, speed_limit))),numpy.logical_and.reduce((numpy.greater(Omega_0, t11),numpy.less(Omega_0, 0),numpy.less(command_0, t15))),True], [0,t14,t15,t6], default=numpy.nan)], default=numpy.nan)
+        u_out[..., 1] = numpy.select([t7,True], [numpy.select([numpy.logical_and.reduce((t18,numpy.logical_or.reduce((numpy.logical_not(t16),numpy.less(t19, 0))),numpy.logical_or.reduce((t16,numpy.logical_not(t20),numpy.greater(t19, 0))),numpy.logical_or.reduce((t16,t20,numpy.greater(Omega_1*command_1, 0))))),True], [0,t21], default=numpy.nan),numpy.select([numpy.logical_and.reduce((numpy.logical_or.reduce((t22,t23)),numpy.logical_or.reduce((t22,t25)),numpy.logical_or.reduce((t23,t24)),numpy.logical_or.reduce((t24,t25)))),numpy.logical_and.reduce((numpy.greater(Omega_1, 0),numpy.greater(command_1, t26),numpy.less(Omega_1, speed_limit))),numpy.logical_and.reduce((numpy.greater(Omega_1, t11),numpy.less(Omega_1, 0),numpy.less(command_1, t27))),True], [0,t26,t27,t21], default=numpy.nan)], default=numpy.nan)
+        u_out[..., 2] = numpy.select([t7,True], [numpy.select([numpy.logical_and.reduce((t30,numpy.logical_or.reduce((numpy.logical_not(t28),numpy.less(t31, 0))),numpy.logical_or.reduce((t28,numpy.logical_not(t32),numpy.greater(t31, 0))),numpy.logical_or.reduce((t28,t32,numpy.greater(Omega_2*command_2, 0))))),True], [0,t33], default=numpy.nan),numpy.select([numpy.logical_and.reduce((numpy.logical_or.reduce((t34,t35)),numpy.logical_or.reduce((t34,t37)),numpy.logical_or.reduce((t35,t36)),numpy.logical_or.reduce((t36,t37)))),numpy.logical_and.reduce((numpy.greater(Omega_2, 0),numpy.greater(command_2, t38),numpy.less(Omega_2, speed_limit))),numpy.logical_and.reduce((numpy.greater(Omega_2, t11),numpy.less(Omega_2, 0),numpy.less(command_2, t39))),True], [0,t38,t39,t33], default=numpy.nan)], default=numpy.nan)
+    return u_out
+
+
 # name -> (function, [(input, shape)], [(output, shape)]), in the order of the C kernel table
 KERNELS = {
     'particle_moments': (particle_moments, [('m', ()), ('r_w', (3,)), ('v_w', (3,))], [('m_r', (3,)), ('p', (3,))]),
@@ -2929,6 +3012,7 @@ KERNELS = {
     'quat_exp_step': (quat_exp_step, [('q', (4,)), ('omega_b', (3,)), ('h', ())], [('q_next', (4,))]),
     'rkmk_dexpinv': (rkmk_dexpinv, [('u_b', (3,)), ('omega_b', (3,))], [('u_dot', (3,))]),
     'wheel_saturation': (wheel_saturation, [('command', (3,)), ('Omega', (3,)), ('torque_limit', ()), ('speed_limit', ())], [('u', (3,))]),
+    'wheel_motor': (wheel_motor, [('command', (3,)), ('Omega', (3,)), ('torque_limit', ()), ('speed_limit', ()), ('cutoff', ())], [('u', (3,))]),
 }
 
 

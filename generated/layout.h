@@ -16,7 +16,7 @@
 #define LV_PARAM_I_B 1  /* [3] principal moments of inertia (I_x, I_y, I_z), body frame, kg·m² */
 #define LV_PARAM_SIZE 4
 
-/* per-body model row (spherical joint and/or reaction wheels) (22) */
+/* per-body model row (spherical joint and/or reaction wheels) (23) */
 #define LV_MODEL_KIND 0  /* [1] bit set of the KIND_* flags; 0: a plain rigid body (the row is ignored) */
 #define LV_MODEL_I_P 1  /* [9] inertia about the pivot (wheels locked), body frame, kg·m², row-major */
 #define LV_MODEL_R_B 10  /* [3] pivot → COM, body frame, m */
@@ -25,7 +25,8 @@
 #define LV_MODEL_TORQUE_LIMIT 19  /* [1] motor torque limit, N·m */
 #define LV_MODEL_SPEED_LIMIT 20  /* [1] no drive beyond this |Omega_i|, rad/s */
 #define LV_MODEL_C_W 21  /* [1] wheel bearing damping, N·m·s/rad */
-#define LV_MODEL_SIZE 22
+#define LV_MODEL_CUTOFF 22  /* [1] wheel motor: 0 torque–speed line (stall torque_limit, no-load speed_limit); 1 hard cut-off */
+#define LV_MODEL_SIZE 23
 
 /* extended state of a body with a model: x then the wheel rates (16) */
 #define LV_XS_X 0  /* [13] the body state (STATE layout) */

@@ -27,8 +27,9 @@ MODEL_J = slice(16, 19)  # [3] wheel spin inertias about body x, y, z, kg·m²
 MODEL_TORQUE_LIMIT = 19  # [1] motor torque limit, N·m
 MODEL_SPEED_LIMIT = 20  # [1] no drive beyond this |Omega_i|, rad/s
 MODEL_C_W = 21  # [1] wheel bearing damping, N·m·s/rad
-MODEL_SIZE = 22
-MODEL_LAYOUT = {'kind': slice(0, 1), 'I_p': slice(1, 10), 'r_b': slice(10, 13), 'anchor_w': slice(13, 16), 'J': slice(16, 19), 'torque_limit': slice(19, 20), 'speed_limit': slice(20, 21), 'c_w': slice(21, 22)}
+MODEL_CUTOFF = 22  # [1] wheel motor: 0 torque–speed line (stall torque_limit, no-load speed_limit); 1 hard cut-off
+MODEL_SIZE = 23
+MODEL_LAYOUT = {'kind': slice(0, 1), 'I_p': slice(1, 10), 'r_b': slice(10, 13), 'anchor_w': slice(13, 16), 'J': slice(16, 19), 'torque_limit': slice(19, 20), 'speed_limit': slice(20, 21), 'c_w': slice(21, 22), 'cutoff': slice(22, 23)}
 
 # extended state of a body with a model: x then the wheel rates
 XS_X = slice(0, 13)  # [13] the body state (STATE layout)

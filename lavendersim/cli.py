@@ -26,9 +26,12 @@ COMMANDS = {
 
 
 def generated_dir() -> Path:
-    import lavendersim.generated as g
+    """The generated/ folder, found without importing it: importing runs the integrity check, which must
+    not stop `lavendersim derive` from repairing a half-written or hand-edited folder."""
+    import importlib.util
 
-    return Path(g.__file__).resolve().parent
+    spec = importlib.util.find_spec("lavendersim.generated")
+    return Path(next(iter(spec.submodule_search_locations))).resolve()
 
 
 def _derive_user(args) -> int:

@@ -1,15 +1,19 @@
-"""LQR wheel controllers for the reaction-wheel cube: CasADi linearization + python-control.
+"""LQR wheel controllers and linearization of any scene: CasADi from the derived kernels + python-control.
 
-The model is the derived one, nothing typed by hand: :func:`linearize` builds the right-hand side
-in CasADi from ``generated/kernels_casadi.py`` — ``wheel_body_rhs`` with ``F_w = effect_gravity(m,
-g_w)`` and ``tau_w = effect_angular_damping(q, omega_b, c)``, the inertia from ``inertia_box`` and
-``parallel_axis`` — and differentiates it at an equilibrium.
+:func:`linearize` composes a scene's right-hand side in CasADi from ``generated/kernels_casadi.py``
+— the model kernels (rigid_body_rhs, pivot_body_rhs, wheel_body_rhs, wheel_motor) and the CasADi
+printing of every effect the scene declares, user effects included (lavendersim._linearize) — and
+differentiates it at an operating point. It returns a :class:`Linearization`, a ``control.StateSpace``
+with named states, inputs and outputs (``sample(dt)``: the zero-order-hold discretization);
+:func:`finite_difference` checks it against the simulator's own step.
 
-State (error coordinates, 9): ``x = [dtheta (3), omega_b (3), Omega - Omega_0 (3)]`` where the
-attitude error ``dtheta`` (rad, body frame) is defined by ``q = q_ref ⊗ [dtheta/2, sqrt(1 -
-|dtheta/2|²)]``, i.e. ``dtheta = 2 vec(q_ref* ⊗ q)`` on the hemisphere ``w >= 0``; ``omega_b``
-rad/s; ``Omega`` wheel rates relative to the body, rad/s. Input ``u`` (3): motor torques on the
-wheels, N·m (the cube receives −u), relative to the equilibrium torque ``u_0 = c_w Omega_0``.
+The reaction-wheel cube (:class:`CubeModel`) is one such scene. State (error coordinates, 9):
+``x = [dtheta (3), omega_b (3), Omega - Omega_0 (3)]`` where the attitude error ``dtheta`` (rad,
+body frame) is defined by ``q = q_ref ⊗ [dtheta/2, sqrt(1 - |dtheta/2|²)]``; ``omega_b`` rad/s;
+``Omega`` wheel rates relative to the body, rad/s. Input ``u`` (3): motor torques on the wheels, N·m
+(the cube receives −u), relative to the equilibrium torque ``u_0 = c_w Omega_0``. The motor's
+torque–speed line limits the drive torque to ``torque_limit (1 − |Ω|/speed_limit)`` (``motor="line"``,
+default) or cuts it off at ``speed_limit`` (``motor="cutoff"``).
 
 Scenarios (:class:`CubeModel`):
   * ``"center"`` — ReactionWheelCube-v0: spherical joint at the cube's centre (no gravity
@@ -20,18 +24,25 @@ Scenarios (:class:`CubeModel`):
 Internal torques cannot change the total angular momentum, so without damping the linear model is
 not fully controllable: the centre scenario has rank 6 of 9 (all three momentum components are
 conserved) and the corner scenario rank 8 of 9 (gravity's torque is horizontal; the vertical
-momentum is conserved). :func:`lqr` then designs on the controllable subspace (an orthonormal
-Krylov basis ``T``): ``Kc, Sc, Ec = control.lqr(TᵀAT, TᵀB, TᵀQT, R)`` and ``K = Kc Tᵀ``; the
-uncontrollable modes are those conserved momenta (eigenvalue 0: they are constants of the motion,
-not errors to regulate). With a full-rank model it is plainly ``control.lqr(A, B, Q, R)``.
+momentum is conserved). :func:`lqr` and :func:`dlqr` (python-control conventions: a StateSpace,
+(A, B) or A, B, then Q, R) then design on the controllable subspace (an orthonormal Krylov basis
+``T``): ``Kc, Sc, Ec = control.lqr(TᵀAT, TᵀB, TᵀQT, R)`` and ``K = Kc Tᵀ``, and report the
+uncontrollable directions (``LQRResult.uncontrollable``: those conserved momenta, constants of the
+motion, not errors to regulate). With a full-rank model it is plainly ``control.lqr(A, B, Q, R)``.
+:func:`closed_loop` runs a gain or any controller ``u = f(t, x)`` in the nonlinear simulator and
+returns a :class:`Response` (t, states, inputs, outputs as python-control names them; ``plot()``);
+:func:`monte_carlo` re-runs it on perturbed plants on any lavendersim.executor.
 
 From Python::
 
     from lavendersim import control as lc
     res = lc.design(scenario="center", Q=[...9...], R=[...3...], theta0_deg=20, axis=[1, 2, 3])
     res.K, res.poles, res.settling_time, res.peak_torque, res.peak_wheel_speed, res.plot("r.png")
+    lin = lc.linearize(sim, inputs=["applied_torque.torque_w"])      # any scene or Sim
+    K, S, E = lc.dlqr(lin.sample(0.01), Q, R)
 
-From the shell: ``lavendersim lqr --scenario corner --theta0 3 --json``.
+From the shell: ``lavendersim lqr --scenario corner --theta0 3 --json`` (``--monte-carlo N --seed S
+--workers W`` or ``--dask ADDRESS`` for the robustness runs).
 """
 from __future__ import annotations
 
@@ -39,7 +50,7 @@ import json
 import math
 import numbers
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -53,12 +64,12 @@ if TYPE_CHECKING:  # annotations only: casadi is an optional extra, Scene/Sim lo
     import argparse
     import os
 
-    import casadi
-
+    from ._linearize import Linearization
     from .scene import Scene
     from .sim import Sim
 
 SCENARIOS = ("center", "corner")
+MOTORS = ("line", "cutoff")
 STATE_LABELS = ("dtheta_x", "dtheta_y", "dtheta_z", "omega_x", "omega_y", "omega_z", "Omega_x", "Omega_y", "Omega_z")
 INPUT_LABELS = ("u_x", "u_y", "u_z")
 BODY = "cube"
@@ -75,29 +86,12 @@ class CubeModel:
     uniform, with three body-axis reaction wheels of spin inertia ``J`` (kg·m²), motor torque
     limit ``torque_limit`` (N·m), wheel speed limit ``speed_limit`` (rad/s), cube angular damping
     ``damping`` (N·m·s/rad, the "angular_damping" effect), wheel bearing damping ``wheel_damping``
-    (N·m·s/rad), gravity ``g`` (m/s², along −z world). Defaults are Cubli-like (15 cm, 1 kg;
+    (N·m·s/rad, the motor's viscous friction), gravity ``g`` (m/s², along −z world). ``motor``:
+    "line" (default) — the torque a wheel can apply to speed itself up falls linearly from the stall
+    torque ``torque_limit`` at rest to 0 at the no-load speed ``speed_limit`` (wheel_motor kernel);
+    "cutoff" — full torque below ``speed_limit``, none beyond (the old hard cut-off). Defaults are Cubli-like (15 cm, 1 kg;
     Cubli: 1.42 kg, wheel inertia 0.57e-3 kg·m², Maxon EC45-flat motors): J = 5.7e-4 kg·m² per
-    wheel, 0.2 N·m, 400 rad/s (3800 rpm).
-
-    Parameters
-    ----------
-    scenario : {"center", "corner"}
-        Spherical joint at the cube's centre, or on a corner (Cubli-like balancing).
-    mass : float
-        Total mass, kg (wheels included).
-    size : float
-        Side length, m.
-    J : float or array_like, shape (3,)
-        Wheel spin inertias about body x, y, z, kg·m².
-    torque_limit : float
-        Motor torque limit, N·m.
-    speed_limit : float
-        Wheel speed limit, rad/s.
-    damping, wheel_damping : float
-        N·m·s/rad, >= 0.
-    g : float
-        m/s², >= 0 (along −z world).
-    """
+    wheel, 0.2 N·m, 400 rad/s (3800 rpm)."""
 
     scenario: str = "center"
     mass: float = 1.0
@@ -108,8 +102,10 @@ class CubeModel:
     damping: float = 0.0
     wheel_damping: float = 0.0
     g: float = 9.81
+    motor: str = "line"
 
     def __post_init__(self):
+        self.motor = V.choice("motor", self.motor, MOTORS)
         self.scenario = V.choice("scenario", self.scenario, SCENARIOS)
         self.mass = V.positive("mass", self.mass)
         self.size = V.positive("size", self.size)
@@ -147,7 +143,6 @@ class CubeModel:
 
     @property
     def g_w(self) -> np.ndarray:
-        """Gravitational acceleration, world frame, m/s² (along −z)."""
         return np.array([0.0, 0.0, -self.g])
 
     @property
@@ -165,21 +160,7 @@ class CubeModel:
     # runtime scene ------------------------------------------------------------------------
     def scene(self, q0: ArrayLike | None = None, omega_b: ArrayLike = (0, 0, 0), Omega: ArrayLike | None = None) -> Scene:
         """The Scene for the runtime simulator: body "cube" (COM placed at anchor + R r_b), a
-        spherical joint at the origin, reaction wheels, and the declared damping/gravity.
-
-        Parameters
-        ----------
-        q0 : array_like, shape (4,), optional
-            Attitude (x, y, z, w); default upright.
-        omega_b : array_like, shape (3,), optional
-            Body rates, rad/s.
-        Omega : array_like, shape (3,), optional
-            Unused here (set wheel rates on the Sim).
-
-        Returns
-        -------
-        Scene
-        """
+        spherical joint at the origin, reaction wheels, and the declared damping/gravity."""
         import lavendersim as lv
 
         q0 = self.upright_q() if q0 is None else V.quaternion("q0", q0)
@@ -189,7 +170,7 @@ class CubeModel:
         scene.add_body(lv.Body.box(BODY, mass=self.mass, size=(s, s, s), p_w=p_w, q=q0, omega_b=omega_b))
         scene.add_effect("spherical_joint", body=BODY, anchor_w=[0.0, 0.0, 0.0])
         scene.add_effect("reaction_wheels", body=BODY, J=self.J.tolist(), torque_limit=self.torque_limit,
-                         speed_limit=self.speed_limit, c_w=self.wheel_damping)
+                         speed_limit=self.speed_limit, c_w=self.wheel_damping, cutoff=float(self.motor == "cutoff"))
         if self.gravity:
             scene.add_effect("gravity", body=BODY, g_w=self.g_w)
         if self.damping > 0:
@@ -198,23 +179,6 @@ class CubeModel:
 
     def make_sim(self, q0: ArrayLike | None = None, omega_b: ArrayLike = (0, 0, 0), Omega: ArrayLike = (0, 0, 0),
                  dt: float = 1e-3, backend: str = "auto", integrator: str = "rk4") -> Sim:
-        """A Sim of :meth:`scene` with wheel rates `Omega`.
-
-        Parameters
-        ----------
-        q0, omega_b : optional
-            As in :meth:`scene`.
-        Omega : array_like, shape (3,), optional
-            Wheel rates relative to the body, rad/s.
-        dt : float, optional
-            Step, s.
-        backend, integrator : str, optional
-            As in :class:`lavendersim.Sim`.
-
-        Returns
-        -------
-        Sim
-        """
         import lavendersim as lv
 
         sim = lv.Sim(self.scene(q0, omega_b), dt=dt, integrator=integrator, backend=backend)
@@ -223,10 +187,9 @@ class CubeModel:
         return sim
 
     def as_dict(self) -> dict[str, Any]:
-        """The fields as plain JSON-able values."""
         return {"scenario": self.scenario, "mass": self.mass, "size": self.size, "J": self.J.tolist(),
                 "torque_limit": self.torque_limit, "speed_limit": self.speed_limit, "damping": self.damping,
-                "wheel_damping": self.wheel_damping, "g": self.g}
+                "wheel_damping": self.wheel_damping, "g": self.g, "motor": self.motor}
 
 
 # ----------------------------------------------------------------------------------------------
@@ -235,53 +198,21 @@ class CubeModel:
 
 
 def attitude_error(q: ArrayLike, q_ref: ArrayLike) -> np.ndarray:
-    """dtheta = 2 vec(q_ref* ⊗ q), sign chosen so the scalar part is >= 0 (rad, body frame).
-
-    Parameters
-    ----------
-    q, q_ref : array_like, shape (..., 4)
-        Quaternions (x, y, z, w).
-
-    Returns
-    -------
-    ndarray, shape (..., 3)
-    """
+    """dtheta = 2 vec(q_ref* ⊗ q), sign chosen so the scalar part is >= 0 (rad, body frame)."""
     qe = np.asarray(KN.quat_mul(KN.quat_conj(np.asarray(q_ref, float)), np.asarray(q, float)), dtype=float)
     sgn = np.where(qe[..., 3:4] < 0, -1.0, 1.0)
     return 2.0 * sgn * qe[..., 0:3]
 
 
 def error_angle_deg(q: ArrayLike, q_ref: ArrayLike) -> np.ndarray:
-    """Rotation angle between q and q_ref, degrees in [0, 180].
-
-    Parameters
-    ----------
-    q, q_ref : array_like, shape (..., 4)
-        Quaternions (x, y, z, w).
-
-    Returns
-    -------
-    ndarray, shape (...)
-    """
+    """Rotation angle between q and q_ref, degrees in [0, 180]."""
     qe = np.asarray(KN.quat_mul(KN.quat_conj(np.asarray(q_ref, float)), np.asarray(q, float)), dtype=float)
     s = np.linalg.norm(qe[..., 0:3], axis=-1)
     return np.degrees(2.0 * np.arctan2(s, np.abs(qe[..., 3])))
 
 
 def perturbed(q_ref: ArrayLike, dtheta: ArrayLike) -> np.ndarray:
-    """q = q_ref ⊗ [dtheta/2, sqrt(1 - |dtheta/2|²)] (the inverse of attitude_error).
-
-    Parameters
-    ----------
-    q_ref : array_like, shape (4,)
-        Reference (x, y, z, w).
-    dtheta : array_like, shape (3,)
-        Error coordinates, rad, body frame, |dtheta| < 2.
-
-    Returns
-    -------
-    ndarray, shape (4,)
-    """
+    """q = q_ref ⊗ [dtheta/2, sqrt(1 - |dtheta/2|²)] (the inverse of attitude_error)."""
     h = np.asarray(dtheta, float) / 2
     n2 = float(h @ h)
     if n2 >= 1:
@@ -290,21 +221,7 @@ def perturbed(q_ref: ArrayLike, dtheta: ArrayLike) -> np.ndarray:
 
 
 def rotated(q_ref: ArrayLike, axis: ArrayLike, angle_deg: float) -> np.ndarray:
-    """q_ref ⊗ rotation by angle_deg about a body-frame axis (normalized).
-
-    Parameters
-    ----------
-    q_ref : array_like, shape (4,)
-        Reference (x, y, z, w).
-    axis : array_like, shape (3,)
-        Non-zero body-frame axis.
-    angle_deg : float
-        Degrees.
-
-    Returns
-    -------
-    ndarray, shape (4,)
-    """
+    """q_ref ⊗ rotation by angle_deg about a body-frame axis (normalized)."""
     axis = V.vector("axis", axis)
     n = np.linalg.norm(axis)
     if n == 0:
@@ -318,180 +235,16 @@ def rotated(q_ref: ArrayLike, axis: ArrayLike, angle_deg: float) -> np.ndarray:
 # ----------------------------------------------------------------------------------------------
 
 
-@dataclass
-class Linearization:
-    """The cube linearized in error coordinates x = [dtheta (rad), omega_b (rad/s), Omega − Omega0 (rad/s)].
-
-    Parameters
-    ----------
-    A : ndarray, shape (9, 9)
-    B : ndarray, shape (9, 3)
-        Input: motor torques du (N·m) about u0.
-    q_ref : ndarray, shape (4,)
-        Equilibrium attitude (x, y, z, w).
-    Omega0 : ndarray, shape (3,)
-        Equilibrium wheel rates, rad/s.
-    u0 : ndarray, shape (3,)
-        Equilibrium motor torques, N·m.
-    rank : int
-        Rank of the controllability matrix.
-    basis : ndarray, shape (9, rank)
-        Orthonormal basis of the controllable subspace.
-    equilibrium_residual : float
-        |f(0, 0)| at the equilibrium.
-    state_labels, input_labels : tuple of str
-    """
-    A: np.ndarray
-    B: np.ndarray
-    q_ref: np.ndarray
-    Omega0: np.ndarray
-    u0: np.ndarray
-    rank: int
-    basis: np.ndarray = field(repr=False)   # orthonormal basis of the controllable subspace (9 × rank)
-    equilibrium_residual: float = 0.0
-    state_labels: tuple = STATE_LABELS
-    input_labels: tuple = INPUT_LABELS
-
-    @property
-    def controllable(self) -> bool:
-        """Whether the pair (A, B) is fully controllable."""
-        return self.rank == self.A.shape[0]
-
-    @property
-    def uncontrollable_basis(self) -> np.ndarray:
-        """Orthonormal basis U of the complement of the controllable subspace (9 × (9 − rank)):
-        Uᵀx are the conserved (momentum) coordinates no wheel torque can change."""
-        n = self.A.shape[0]
-        if self.rank == n:
-            return np.zeros((n, 0))
-        P = np.eye(n) - self.basis @ self.basis.T
-        Uf, s, _ = np.linalg.svd(P)
-        return Uf[:, : n - self.rank]
-
-    def target(self, x: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
-        """(x_ss, du_ss): the equilibrium with dtheta = 0, omega = 0 that has the same conserved
-        coordinates Uᵀx as x (wheel speeds Omega_ss absorb the momentum), and the torque holding it.
-        Zero when x carries no conserved momentum (e.g. starting at rest without damping).
-
-        Parameters
-        ----------
-        x : array_like, shape (9,)
-            Error-coordinate state.
-
-        Returns
-        -------
-        x_ss : ndarray, shape (9,)
-        du_ss : ndarray, shape (3,)
-        """
-        n = self.A.shape[0]
-        x_ss, du = np.zeros(n), np.zeros(self.B.shape[1])
-        if self.rank == n:
-            return x_ss, du
-        U = self.uncontrollable_basis
-        x_ss[6:9] = np.linalg.lstsq(U[6:9, :].T, U.T @ x, rcond=None)[0]
-        r = self.A @ x_ss
-        if np.any(r != 0):
-            du = np.linalg.lstsq(self.B, -r, rcond=None)[0]
-        return x_ss, du
-
-    def feedback(self, K: ArrayLike, x: ArrayLike) -> np.ndarray:
-        """u = u0 + du_ss − K (x − x_ss) (unsaturated), N·m.
-
-        Parameters
-        ----------
-        K : array_like, shape (3, 9)
-            Gain.
-        x : array_like, shape (9,)
-            Error-coordinate state.
-
-        Returns
-        -------
-        ndarray, shape (3,)
-        """
-        x_ss, du = self.target(x)
-        return self.u0 + du - np.asarray(K) @ (x - x_ss)
-
-    def state(self, q: ArrayLike, omega_b: ArrayLike, Omega: ArrayLike) -> np.ndarray:
-        """Error-coordinate state x from a simulator state.
-
-        Parameters
-        ----------
-        q : array_like, shape (4,)
-            Attitude (x, y, z, w).
-        omega_b : array_like, shape (3,)
-            Body rates, rad/s.
-        Omega : array_like, shape (3,)
-            Wheel rates, rad/s.
-
-        Returns
-        -------
-        ndarray, shape (9,)
-        """
-        return np.concatenate([attitude_error(q, self.q_ref), np.asarray(omega_b, float),
-                               np.asarray(Omega, float) - self.Omega0])
-
-
-def casadi_rhs(model: CubeModel, q_ref: ArrayLike, Omega0: ArrayLike = (0, 0, 0)) -> tuple[casadi.Function, np.ndarray]:
-    """(f, u0): the CasADi Function f(x, du) -> x_dot in error coordinates, built from kernels_casadi,
-    and the equilibrium motor torque u0 = c_w Omega0 (3,), N·m.
-
-    Parameters
-    ----------
-    model : CubeModel
-        The cube.
-    q_ref : array_like, shape (4,)
-        Equilibrium attitude.
-    Omega0 : array_like, shape (3,), optional
-        Equilibrium wheel rates, rad/s.
-
-    Returns
-    -------
-    f : casadi.Function
-    u0 : ndarray, shape (3,)
-    """
-    ca = require("casadi", "control", "the CasADi linearization")
-    from .generated import kernels_casadi as KC
-
-    q_ref = ca.DM(np.asarray(q_ref, float))
-    Om0 = ca.DM(np.asarray(Omega0, float))
-    u0 = model.wheel_damping * Om0
-    x = ca.SX.sym("x", 9)
-    du = ca.SX.sym("du", 3)
-    half = x[0:3] / 2
-    q = KC.quat_mul(q_ref, ca.vertcat(half, ca.sqrt(1 - ca.dot(half, half))))
-    w, Om, u = x[3:6], Om0 + x[6:9], u0 + du
-    s = model.size
-    Ic = KC.inertia_box(model.mass, s, s, s)
-    Ic_flat = ca.vertcat(Ic[0], 0, 0, 0, Ic[1], 0, 0, 0, Ic[2])
-    r_b = ca.DM(model.r_b)
-    I_p = KC.parallel_axis(Ic_flat, model.mass, -r_b)
-    F_w = KC.effect_gravity(model.mass, ca.DM(model.g_w)) if model.gravity else ca.DM.zeros(3)
-    tau_w = KC.effect_angular_damping(q, w, model.damping)
-    q_dot, w_dot, Om_dot = KC.wheel_body_rhs(q, w, Om, I_p, ca.DM(model.J), r_b, F_w, tau_w, u, model.wheel_damping)
-    # d(dtheta)/dt = (∂e/∂q) q_dot with e(q) = 2 vec(q_ref* ⊗ q) (linear in q: a constant Jacobian)
-    qs = ca.SX.sym("q", 4)
-    e = 2 * KC.quat_mul(KC.quat_conj(q_ref), qs)[0:3]
-    Je = ca.jacobian(e, qs)
-    dth_dot = ca.mtimes(ca.substitute(Je, qs, q), q_dot)
-    f = ca.vertcat(dth_dot, w_dot, Om_dot)
-    return ca.Function("wheel_cube_error_rhs", [x, du], [f], ["x", "du"], ["x_dot"]), np.asarray(u0, float).ravel()
-
-
-def controllable_basis(A: np.ndarray, B: np.ndarray, tol: float = 1e-9) -> np.ndarray:
-    """Orthonormal basis of the controllable subspace span[B, AB, A²B, …] (Krylov with
-    re-orthogonalization; A and B scaled to unit norm, singular values below tol dropped).
-
-    Parameters
-    ----------
-    A : ndarray, shape (n, n)
-    B : ndarray, shape (n, m)
-    tol : float, optional
-
-    Returns
-    -------
-    ndarray, shape (n, rank)
-    """
+def controllable_basis(A: np.ndarray, B: np.ndarray, tol: float = 1e-9, discrete: bool = False) -> np.ndarray:
+    """Orthonormal basis (n, rank) of the controllable subspace span[B, AB, A²B, …] (Krylov with
+    re-orthogonalization; A and B scaled to unit norm, singular values below tol dropped). For a
+    discrete pair the Krylov space of A − I is used (the same space, better conditioned when A ≈ I)."""
+    A, B = np.asarray(A, float), np.asarray(B, float)
     n = A.shape[0]
+    if discrete:
+        A = A - np.eye(n)
+    if B.size == 0:
+        return np.zeros((n, 0))
     An = A / max(np.linalg.norm(A, 2), 1e-300)
     Bn = B / max(np.linalg.norm(B, 2), 1e-300)
     U, s, _ = np.linalg.svd(Bn, full_matrices=False)
@@ -514,40 +267,88 @@ def controllable_basis(A: np.ndarray, B: np.ndarray, tol: float = 1e-9) -> np.nd
     return basis
 
 
-def linearize(model: CubeModel, q_ref: ArrayLike | None = None, Omega0: ArrayLike = (0, 0, 0),
-              tol: float = 1e-9) -> Linearization:
-    """A = ∂f/∂x, B = ∂f/∂u at (q_ref, omega = 0, Omega = Omega0, u = c_w Omega0), by CasADi AD.
+def uncontrollable(basis: np.ndarray, n: int) -> np.ndarray:
+    """Orthonormal complement (n, n − rank) of an orthonormal basis (n, rank) of the controllable subspace."""
+    if basis.shape[1] >= n:
+        return np.zeros((n, 0))
+    P = np.eye(n) - basis @ basis.T
+    Uf, _, _ = np.linalg.svd(P)
+    return Uf[:, : n - basis.shape[1]]
+
+
+def __getattr__(name: str) -> Any:
+    """``Linearization`` (a control.StateSpace subclass) is built when python-control is first needed."""
+    if name == "Linearization":
+        require("control", "control", "the StateSpace linearization")
+        require("casadi", "control", "the CasADi linearization")
+        from ._linearize import Linearization
+        return Linearization
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def linearize(sim_or_scene: CubeModel | Sim | Scene, x0: dict | None = None, u0: dict | None = None, *,
+              inputs: list[str] | str | None = None, outputs: list[str] | str | None = None, dt: float | None = None,
+              q_ref: ArrayLike | None = None, Omega0: ArrayLike = (0, 0, 0), name: str = "lavendersim") -> Any:
+    """Linearize a scene (or the wheel cube) at an operating point, by CasADi AD of the derived kernels.
+
+    The right-hand side is composed from generated/kernels_casadi.py — each body's model kernel
+    (rigid_body_rhs, pivot_body_rhs, wheel_body_rhs with wheel_motor) and the CasADi printing of
+    every force effect the scene declares, user effects included — so it is the model the backends
+    step. See lavendersim._linearize for the error coordinates (per body p, dtheta, v, omega; a
+    jointed body dtheta, omega; wheels add Omega) and the input names.
 
     Parameters
     ----------
-    model : CubeModel
-        The cube.
-    q_ref : array_like, shape (4,), optional
-        Equilibrium attitude (default upright).
-    Omega0 : array_like, shape (3,), optional
-        Equilibrium wheel rates, rad/s.
-    tol : float, optional
-        Rank tolerance (see :func:`controllable_basis`).
+    sim_or_scene : Sim, Scene or CubeModel
+        What to linearize. A Sim's current state (and held wheel commands) is the default operating
+        point; a Scene's is its bodies' initial state. A CubeModel gives the 9-state cube model
+        (states ``STATE_LABELS``, inputs ``INPUT_LABELS``) at ``q_ref`` (default: upright) with wheel
+        rates ``Omega0`` (rad/s) and the equilibrium torque u0 = c_w Omega0; it must be an equilibrium.
+    x0 : dict, optional
+        ``{body: {"q": (4,), "omega_b": (3,), "Omega": (3,), "p_w": (3,), "v_w": (3,)}}`` overriding
+        parts of the operating point (p_w, v_w only for free bodies).
+    u0 : dict, optional
+        ``{input name: value}`` overriding the operating input (default: the held wheel commands, the
+        effects' declared parameter values).
+    inputs : list of str, optional
+        ``"BODY.u"`` (3 wheel commands, N·m) or ``"EFFECT.PARAM"`` (a parameter of a force effect
+        declared once on the scene). Default: every wheeled body's commands.
+    outputs : list of str, optional
+        State labels to output (default: every state, C = I).
+    dt : float, optional
+        If given, the zero-order-hold discretization at this period (s) is returned.
 
     Returns
     -------
     Linearization
+        A ``control.StateSpace`` (n states, m inputs du = u − u0) with named states, inputs and
+        outputs, the operating point, ``f0`` (the right-hand side there) and the controllable subspace.
     """
-    ca = require("casadi", "control", "the CasADi linearization")
+    require("control", "control", "the StateSpace linearization")
+    require("casadi", "control", "the CasADi linearization")
+    from . import _linearize as L
+
+    if isinstance(sim_or_scene, CubeModel):
+        return _linearize_cube(sim_or_scene, q_ref, Omega0, dt)
+    return L.linearize_scene(sim_or_scene, x0, u0, inputs=inputs, outputs=outputs, dt=dt, name=name)
+
+
+def _linearize_cube(model: CubeModel, q_ref: ArrayLike | None, Omega0: ArrayLike, dt: float | None) -> Any:
+    from . import _linearize as L
+
     q_ref = model.upright_q() if q_ref is None else V.quaternion("q_ref", q_ref)
     Omega0 = V.vector("Omega0", Omega0)
-    f, u0 = casadi_rhs(model, q_ref, Omega0)
-    x, du = ca.SX.sym("x", 9), ca.SX.sym("du", 3)
-    fx = f(x, du)
-    jac = ca.Function("wheel_cube_linearization", [x, du], [fx, ca.jacobian(fx, x), ca.jacobian(fx, du)])
-    f0, A, B = (np.asarray(m, dtype=float) for m in jac(np.zeros(9), np.zeros(3)))
-    res = float(np.max(np.abs(f0)))
-    scale = max(1.0, float(np.max(np.abs(A))))
-    if res > 1e-9 * scale:
+    sim = model.make_sim(q_ref, Omega=Omega0, backend="numpy")
+    lin = L.linearize_scene(sim, None, {f"{BODY}.u": model.wheel_damping * Omega0}, inputs=[f"{BODY}.u"],
+                            labels=list(STATE_LABELS), name="wheel_cube")
+    lin = L.Linearization(lin.A, lin.B, lin.C, lin.D, 0, bodies=lin.bodies, input_refs=lin.input_refs, u0=lin.u0,
+                          f0=lin.f0, wheel_states=lin.wheel_states, states=list(STATE_LABELS), inputs=list(INPUT_LABELS),
+                          outputs=list(STATE_LABELS), name="wheel_cube")
+    res = float(np.max(np.abs(lin.f0)))
+    if res > 1e-9 * max(1.0, float(np.max(np.abs(lin.A)))):
         raise V.LavenderInputError("q_ref", "is not an equilibrium of the model (the right-hand side is not zero there: "
                                    "for the corner scenario the COM must be straight above the pivot)", f", |f| = {res:.3g}")
-    basis = controllable_basis(A, B, tol)
-    return Linearization(A, B, q_ref, Omega0, u0, basis.shape[1], basis, res)
+    return lin if dt is None else lin.sample(dt)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -584,56 +385,123 @@ def _weight(name: str, value, n: int, definite: bool) -> np.ndarray:
     return (arr + arr.T) / 2
 
 
-def lqr(lin: Linearization, Q: ArrayLike, R: ArrayLike) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(K, S, E) of python-control's lqr, on the controllable subspace when rank < n (see the
-    module docstring). E are the closed-loop eigenvalues of A − B K (the uncontrollable conserved
-    modes included, at 0).
+class LQRResult(tuple):
+    """(K, S, E) as python-control's lqr/dlqr return them (unpacks as a 3-tuple), plus how the design
+    was made: ``rank`` of the controllable subspace, ``controllable``, and ``uncontrollable`` — an
+    orthonormal basis (n, n − rank) of the directions no input can change (their closed-loop
+    eigenvalues stay at 0, continuous, or 1, discrete: conserved momenta, not errors to regulate)."""
+
+    K: np.ndarray
+    S: np.ndarray
+    E: np.ndarray
+    rank: int
+    uncontrollable: np.ndarray
+
+    def __new__(cls, K: np.ndarray, S: np.ndarray, E: np.ndarray, rank: int, unc: np.ndarray) -> "LQRResult":
+        obj = super().__new__(cls, (K, S, E))
+        obj.K, obj.S, obj.E, obj.rank, obj.uncontrollable = K, S, E, rank, unc
+        return obj
+
+    @property
+    def controllable(self) -> bool:
+        """Whether the design covered the whole state (rank == n)."""
+        return self.uncontrollable.shape[1] == 0
+
+
+def _pair(sys_or_A: Any, args: tuple, fn: str, discrete: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray, tuple]:
+    """(A, B, basis, rest of args) from a StateSpace, an (A, B) pair, or A, B positional (python-control style)."""
+    ct = require("control", "control", "LQR design (python-control)")
+    basis = None
+    if isinstance(sys_or_A, ct.StateSpace):
+        if discrete != sys_or_A.isdtime(strict=True):
+            raise V.LavenderInputError("sys", f"{fn} needs a {'discrete' if discrete else 'continuous'} StateSpace"
+                                       + (" (sample it: lin.sample(dt) or ct.c2d(sys, dt))" if discrete else " (use dlqr)"),
+                                       f", got dt = {sys_or_A.dt}")
+        A, B = sys_or_A.A, sys_or_A.B
+        basis = getattr(sys_or_A, "basis", None)
+    elif isinstance(sys_or_A, tuple) and len(sys_or_A) == 2:
+        A, B = sys_or_A
+    elif len(args) >= 3:
+        A, B, args = sys_or_A, args[0], args[1:]
+    else:
+        raise V.LavenderInputError("sys", f"{fn} takes a control.StateSpace, an (A, B) pair, or A, B, Q, R",
+                                   f", got {type(sys_or_A).__name__}")
+    try:
+        A, B = np.asarray(A, dtype=float), np.asarray(B, dtype=float)
+    except (TypeError, ValueError):
+        raise V.LavenderInputError("A", "A and B must be numeric matrices") from None
+    if B.ndim == 1:
+        B = B[:, None]
+    n = A.shape[0] if A.ndim == 2 else -1
+    if A.ndim != 2 or A.shape != (n, n) or B.ndim != 2 or B.shape[0] != n:
+        raise V.LavenderInputError("A", "A must be n×n and B n×m", f", got {A.shape} and {B.shape}")
+    if not (np.all(np.isfinite(A)) and np.all(np.isfinite(B))):
+        raise V.LavenderInputError("A", "A and B must be finite")
+    if len(args) != 2:
+        raise V.LavenderInputError("Q", f"{fn} needs Q and R", f", got {len(args)} weight argument(s)")
+    if basis is None:
+        basis = controllable_basis(A, B, discrete=discrete)
+    return A, B, basis, args
+
+
+def _design(sys_or_A: Any, args: tuple, discrete: bool) -> LQRResult:
+    ct = require("control", "control", "LQR design (python-control)")
+    fn = "dlqr" if discrete else "lqr"
+    A, B, T, (Q, R) = _pair(sys_or_A, args, fn, discrete)
+    n, m = B.shape
+    Q = _weight("Q", Q, n, definite=False)
+    R = _weight("R", R, m, definite=True)
+    solve = ct.dlqr if discrete else ct.lqr
+    if T.shape[1] == n:
+        K, S, _ = solve(A, B, Q, R)
+    else:
+        if T.shape[1] == 0:
+            raise V.LavenderInputError("B", "no input reaches any state (the controllable subspace is empty)")
+        Qc = T.T @ Q @ T
+        Kc, Sc, _ = solve(T.T @ A @ T, T.T @ B, (Qc + Qc.T) / 2, R)
+        K, S = np.asarray(Kc) @ T.T, T @ np.asarray(Sc) @ T.T
+    K, S = np.asarray(K), np.asarray(S)
+    E = np.linalg.eigvals(A - B @ K)
+    E = E[np.argsort(np.abs(E) if discrete else E.real)]
+    return LQRResult(K, S, E, T.shape[1], uncontrollable(T, n))
+
+
+def lqr(sys: Any, *args: Any) -> LQRResult:
+    """Continuous LQR, python-control conventions: ``lqr(sys, Q, R)`` with a ``control.StateSpace``
+    (a :class:`Linearization` or any continuous one), ``lqr((A, B), Q, R)`` or ``lqr(A, B, Q, R)``.
+
+    When (A, B) is not controllable (internal wheel torques conserve momentum) the design is made on
+    the controllable subspace (orthonormal Krylov basis T): ``Kc, Sc = control.lqr(TᵀAT, TᵀB, TᵀQT,
+    R)``, ``K = Kc Tᵀ``, ``S = T Sc Tᵀ``; otherwise it is exactly ``control.lqr(A, B, Q, R)``.
 
     Parameters
     ----------
-    lin : Linearization
-    Q : array_like
-        State weight: a number, the diagonal (9,) or (9, 9).
-    R : array_like
-        Input weight: a number, the diagonal (3,) or (3, 3), positive definite.
+    sys : control.StateSpace, (A, B) or A
+        The model (n states, m inputs).
+    *args
+        Q (n×n, a diagonal (n,) or a scalar; symmetric PSD) and R (m×m, (m,) or scalar; PD), after
+        B when A and B are given separately.
 
     Returns
     -------
-    K : ndarray, shape (3, 9)
-        ``u = -K x``.
-    S : ndarray, shape (9, 9)
-    E : ndarray, shape (9,)
+    LQRResult
+        Unpacks as (K (m, n), S (n, n), E (n,) closed-loop eigenvalues of A − B K, sorted by real
+        part); ``.rank`` and ``.uncontrollable`` report the directions the design cannot move.
     """
-    ct = require("control", "control", "LQR design (python-control)")
-    n, m = lin.B.shape
-    Q = _weight("Q", Q, n, definite=False)
-    R = _weight("R", R, m, definite=True)
-    if lin.controllable:
-        K, S, _ = ct.lqr(lin.A, lin.B, Q, R)
-    else:
-        T = lin.basis
-        Qc = T.T @ Q @ T
-        Kc, Sc, _ = ct.lqr(T.T @ lin.A @ T, T.T @ lin.B, (Qc + Qc.T) / 2, R)
-        K, S = Kc @ T.T, T @ Sc @ T.T
-    K, S = np.asarray(K), np.asarray(S)
-    E = np.linalg.eigvals(lin.A - lin.B @ K)
-    return K, S, E[np.argsort(E.real)]
+    return _design(sys, args, discrete=False)
+
+
+def dlqr(sys: Any, *args: Any) -> LQRResult:
+    """Discrete LQR (python-control's dlqr), the same forms and subspace design as :func:`lqr`:
+    ``dlqr(lin.sample(Ts), Q, R)``, ``dlqr((Ad, Bd), Q, R)`` or ``dlqr(Ad, Bd, Q, R)``. The gain is
+    for u[k] = u0 − K x[k] held over the period (zero-order hold). E are the eigenvalues of Ad − Bd K,
+    sorted by modulus (conserved directions at 1)."""
+    return _design(sys, args, discrete=True)
 
 
 def default_weights(model: CubeModel) -> tuple[np.ndarray, np.ndarray]:
     """Bryson-style defaults: attitude 1/(2°)², rates 1/(0.5 rad/s)², wheels 1/(0.5·limit)²,
-    torque 1/(0.5·limit)² (corner: attitude 1/(0.5°)²).
-
-    Parameters
-    ----------
-    model : CubeModel
-        The cube.
-
-    Returns
-    -------
-    Q_diag : ndarray, shape (9,)
-    R_diag : ndarray, shape (3,)
-    """
+    torque 1/(0.5·limit)² (corner: attitude 1/(0.5°)²)."""
     ang = math.radians(2.0 if model.scenario == "center" else 0.5)
     q = np.concatenate([np.full(3, 1 / ang ** 2), np.full(3, 1 / 0.5 ** 2), np.full(3, 1 / (0.5 * model.speed_limit) ** 2)])
     return q, np.full(3, 1 / (0.5 * model.torque_limit) ** 2)
@@ -646,23 +514,26 @@ def default_weights(model: CubeModel) -> tuple[np.ndarray, np.ndarray]:
 
 @dataclass
 class Response:
-    """A closed-loop run sampled every control period.
+    """A closed-loop run, with python-control's TimeResponseData names and shapes.
 
-    Parameters
+    Attributes
     ----------
-    t : ndarray, shape (T,)
-        s.
-    error_deg : ndarray, shape (T,)
-        Attitude error, degrees.
-    omega_b : ndarray, shape (T, 3)
-        rad/s.
-    Omega : ndarray, shape (T, 3)
-        Wheel rates, rad/s.
-    u_cmd, u_applied : ndarray, shape (T, 3)
-        Commanded and saturated motor torques, N·m.
-    q : ndarray, shape (T, 4)
-        Attitude (x, y, z, w).
+    t : ndarray (T,)
+        Sample times (s), one per control period plus the start.
+    states : ndarray (n, T)
+        Error-coordinate states (the linearization's state labels ``state_labels``).
+    inputs : ndarray (m, T)
+        Applied (saturated) motor torques, N·m (``input_labels``).
+    outputs : ndarray (p, T)
+        C x (``output_labels``; the states when C = I).
+    error_deg : ndarray (T,)
+        Attitude error angle to q_ref, degrees.
+    omega_b, Omega, u_cmd, u_applied : ndarray (T, 3)
+        Cube rates (rad/s, body), wheel rates (rad/s), commanded and applied torques (N·m), per sample.
+    q : ndarray (T, 4)
+        Orientation (x, y, z, w).
     """
+
     t: np.ndarray
     error_deg: np.ndarray
     omega_b: np.ndarray
@@ -670,19 +541,24 @@ class Response:
     u_cmd: np.ndarray
     u_applied: np.ndarray
     q: np.ndarray
+    states: np.ndarray | None = None
+    outputs: np.ndarray | None = None
+    state_labels: tuple = STATE_LABELS
+    input_labels: tuple = INPUT_LABELS
+    output_labels: tuple = STATE_LABELS
+
+    @property
+    def inputs(self) -> np.ndarray:
+        """Applied inputs (m, T), N·m (python-control's layout: one row per input)."""
+        return self.u_applied.T
+
+    @property
+    def time(self) -> np.ndarray:
+        """Alias of t (python-control's TimeResponseData.time)."""
+        return self.t
 
     def settling_time(self, threshold_deg: float) -> float:
-        """First time after which the attitude error stays below threshold_deg (inf if never).
-
-        Parameters
-        ----------
-        threshold_deg : float
-
-        Returns
-        -------
-        float
-            s.
-        """
+        """First time after which the attitude error stays below threshold_deg (inf if never)."""
         above = np.flatnonzero(self.error_deg >= threshold_deg)
         if above.size == 0:
             return 0.0
@@ -690,33 +566,55 @@ class Response:
             return math.inf
         return float(self.t[above[-1] + 1])
 
+    def to_control(self) -> Any:
+        """The same run as a ``control.TimeResponseData`` (outputs, states, inputs, labelled)."""
+        ct = require("control", "control", "TimeResponseData")
+        return ct.TimeResponseData(self.t, self.outputs, self.states, self.inputs, output_labels=list(self.output_labels),
+                                   state_labels=list(self.state_labels), input_labels=list(self.input_labels))
+
+    def plot(self, threshold_deg: float = 0.1) -> Any:
+        """A matplotlib Figure (not shown, no pyplot state): attitude error (log), cube rates, applied
+        torques, wheel rates against t."""
+        from matplotlib.figure import Figure
+
+        fig = Figure(figsize=(11, 7), layout="constrained")
+        ax = fig.subplots(2, 2)
+        a = ax[0, 0]
+        a.semilogy(self.t, np.maximum(self.error_deg, 1e-6), label="attitude error")
+        a.axhline(threshold_deg, color="tab:red", ls=":", label=f"{threshold_deg:g}°")
+        a.set_xlabel("t (s)"); a.set_ylabel("attitude error (deg)"); a.legend(fontsize=8)
+        for a, data, lab, unit in ((ax[0, 1], self.omega_b, "ω", "cube rate ω_b (rad/s)"),
+                                   (ax[1, 0], self.u_applied, "u", "applied motor torque (N·m)"),
+                                   (ax[1, 1], self.Omega, "Ω", "wheel speed Ω (rad/s)")):
+            for i, c in enumerate("xyz"[: data.shape[1]] if data.shape[1] <= 3 else range(data.shape[1])):
+                a.plot(self.t, data[:, i], label=f"{lab}_{c}")
+            a.set_xlabel("t (s)"); a.set_ylabel(unit); a.legend(fontsize=8)
+        return fig
+
 
 MAX_CONTROL_STEPS = 1_000_000  # closed_loop: control periods per run
 
 
-def closed_loop(model: CubeModel, lin: Linearization, K: ArrayLike, q0: ArrayLike, T: float = 5.0, *,
-                omega0: ArrayLike = (0, 0, 0), Omega0: ArrayLike | None = None, dt: float = 1e-3,
+def closed_loop(model: CubeModel, lin: Any, K: ArrayLike | Callable[[float, np.ndarray], ArrayLike], q0: ArrayLike,
+                T: float = 5.0, *, omega0: ArrayLike = (0, 0, 0), Omega0: ArrayLike | None = None, dt: float = 1e-3,
                 control_dt: float = 2e-3, backend: str = "auto", sim: Sim | None = None) -> Response:
-    """Run u = u0 − K x (clipped to ±torque_limit) with a zero-order hold of control_dt in the
-    nonlinear simulator (the Sim's reaction_wheels effect saturates again, speed limit included).
-    `sim` may be given (any object with the Sim's wheel API) instead of building one.
+    """Run the cube in the nonlinear simulator under a controller with a zero-order hold of control_dt.
 
     Parameters
     ----------
     model : CubeModel
-        The cube.
     lin : Linearization
-    K : array_like, shape (3, 9)
-    q0 : array_like, shape (4,)
-        Initial attitude.
-    T : float, optional
+        Gives the error coordinates x (lin.state) and, for a gain, the operating point.
+    K : (3, 9) array or callable
+        A gain: u = u0 + du_ss − K (x − x_ss) (lin.feedback), or any controller ``u = K(t, x)``
+        returning the 3 motor torques (N·m) from the time (s) and the error state x (9,). Either is
+        clipped to ±torque_limit and the Sim's reaction_wheels saturate again (speed limit included).
+    q0 : (4,)
+        Initial orientation (x, y, z, w).
+    T : float
         Duration, s.
-    omega0, Omega0 : array_like, shape (3,), optional
-        Initial body and wheel rates, rad/s.
-    dt, control_dt : float, optional
-        Simulator step and control period, s.
-    backend : str, optional
     sim : Sim, optional
+        Any object with the Sim's wheel API instead of building one.
 
     Returns
     -------
@@ -731,27 +629,43 @@ def closed_loop(model: CubeModel, lin: Linearization, K: ArrayLike, q0: ArrayLik
     if not T / control_dt <= MAX_CONTROL_STEPS:  # stepped in Python and recorded: bounded, never a hang
         raise V.LavenderInputError("T", f"would take {T / control_dt:.3g} control steps of {control_dt:g} s; at most "
                                    f"{MAX_CONTROL_STEPS:,} are allowed", f", got {T!r}")
+    if callable(K):
+        controller = K
+    else:
+        Km = np.asarray(K, float)
+        if Km.shape != (lin.ninputs, lin.nstates):
+            raise V.LavenderInputError("K", f"a gain must be {lin.ninputs}×{lin.nstates} (or pass a callable u = f(t, x))",
+                                       f", got shape {Km.shape}")
+        controller = lambda t, x: lin.feedback(Km, x)  # noqa: E731
     n = int(round(T / control_dt))
     Omega0 = lin.Omega0 if Omega0 is None else V.vector("Omega0", Omega0)
     if sim is None:
         sim = model.make_sim(q0, omega0, Omega0, dt=dt, backend=backend)
-    K = np.asarray(K, float)
     t = np.empty(n + 1)
     qs, ws, Oms = np.empty((n + 1, 4)), np.empty((n + 1, 3)), np.empty((n + 1, 3))
+    xs = np.empty((n + 1, lin.nstates))
     ucmd, uapp = np.zeros((n + 1, 3)), np.zeros((n + 1, 3))
     lim = model.torque_limit
     for k in range(n + 1):
         st = sim.state(BODY)
         q, w, Om = st.q, st.omega_b, sim.wheel_rates(BODY)
         t[k], qs[k], ws[k], Oms[k] = sim.t, q, w, Om
+        xs[k] = lin.state(q, w, Om)
         if k == n:
             break
-        u = np.clip(lin.feedback(K, lin.state(q, w, Om)), -lim, lim)
+        u = np.asarray(controller(float(sim.t), xs[k].copy()), dtype=float)
+        if u.shape != (3,) or not np.all(np.isfinite(u)):
+            raise V.LavenderInputError("K", "the controller must return 3 finite motor torques (N·m)",
+                                       f", got {np.array2string(np.asarray(u), precision=4)} at t = {sim.t:g} s")
+        u = np.clip(u, -lim, lim)
         sim.set_wheel_command(BODY, u)
         sim.run(sub)
         ucmd[k], uapp[k] = u, sim.wheel_command_applied(BODY)
     ucmd[n], uapp[n] = ucmd[n - 1], uapp[n - 1]
-    return Response(t, error_angle_deg(qs, lin.q_ref), ws, Oms, ucmd, uapp, qs)
+    C = np.asarray(lin.C, float)
+    return Response(t, error_angle_deg(qs, lin.q_ref), ws, Oms, ucmd, uapp, qs, states=xs.T, outputs=C @ xs.T,
+                    state_labels=tuple(lin.state_labels), input_labels=tuple(lin.input_labels),
+                    output_labels=tuple(lin.output_labels))
 
 
 # ----------------------------------------------------------------------------------------------
@@ -761,24 +675,6 @@ def closed_loop(model: CubeModel, lin: Linearization, K: ArrayLike, q0: ArrayLik
 
 @dataclass
 class DesignResult:
-    """What :func:`design` returns: the model, linearization, weights, gain and closed-loop run.
-
-    Parameters
-    ----------
-    model : CubeModel
-    lin : Linearization
-    Q, R : ndarray
-        Weights used.
-    K, S : ndarray
-        Gain (3, 9) and Riccati solution (9, 9).
-    poles : ndarray
-        Closed-loop eigenvalues.
-    response : Response
-    theta0_deg : float
-    axis : ndarray, shape (3,)
-    threshold_deg : float
-    backend : str
-    """
     model: CubeModel
     lin: Linearization
     Q: np.ndarray
@@ -794,7 +690,6 @@ class DesignResult:
 
     @property
     def settling_time(self) -> float:
-        """Settling time to threshold_deg, s (inf if never)."""
         return self.response.settling_time(self.threshold_deg)
 
     @property
@@ -804,16 +699,13 @@ class DesignResult:
 
     @property
     def peak_wheel_speed(self) -> float:
-        """max |Omega| over wheels and time, rad/s."""
         return float(np.max(np.abs(self.response.Omega)))
 
     @property
     def final_error_deg(self) -> float:
-        """Attitude error at the end, degrees."""
         return float(self.response.error_deg[-1])
 
     def figures(self) -> dict[str, Any]:
-        """The design's figures as a JSON-able dict."""
         p = self.poles
         return {
             "model": self.model.as_dict(), "backend": self.backend,
@@ -829,18 +721,11 @@ class DesignResult:
         }
 
     def to_json(self) -> str:
-        """:meth:`figures` as JSON text (an infinite settling time as null)."""
         fig = self.figures()
         fig["settling_time"] = fig["settling_time"] if math.isfinite(fig["settling_time"]) else None
         return json.dumps(fig, indent=2)
 
     def plot(self, path: str | os.PathLike[str]) -> None:
-        """Write the response plot (PNG).
-
-        Parameters
-        ----------
-        path : str or os.PathLike
-        """
         from .labs.common import new_figure
 
         r, m = self.response, self.model
@@ -879,40 +764,7 @@ def design(scenario: str = "center", Q: ArrayLike | None = None, R: ArrayLike | 
     """Linearize, design the LQR gain, run the closed loop from an initial error of theta0_deg
     about the body axis `axis` (defaults: 20° about (1, 2, 3) centre; 3° about (1, 1, −2), a pure
     tilt, corner), return a DesignResult.
-    model_params go to CubeModel (mass, size, J, torque_limit, speed_limit, damping, …).
-
-    Parameters
-    ----------
-    scenario : {"center", "corner"}, optional
-    Q, R : array_like, optional
-        Weights (default :func:`default_weights`).
-    theta0_deg : float, optional
-        Initial error, degrees.
-    axis : array_like, shape (3,), optional
-        Body-frame axis of the initial error.
-    T : float, optional
-        Duration, s.
-    threshold_deg : float, optional
-        Settling threshold, degrees.
-    backend : str, optional
-    dt, control_dt : float, optional
-        s.
-    model : CubeModel, optional
-    sim : Sim, optional
-    **model_params
-        CubeModel fields.
-
-    Returns
-    -------
-    DesignResult
-
-    Examples
-    --------
-    >>> from lavendersim.control import design   # doctest: +SKIP
-    >>> r = design("center")                      # doctest: +SKIP
-    >>> r.settling_time < 1.0                     # doctest: +SKIP
-    True
-    """
+    model_params go to CubeModel (mass, size, J, torque_limit, speed_limit, damping, …)."""
     model = model or CubeModel(scenario=scenario, **model_params)
     lin = linearize(model)
     q_def, r_def = default_weights(model)
@@ -930,6 +782,90 @@ def design(scenario: str = "center", Q: ArrayLike | None = None, R: ArrayLike | 
 
 
 # ----------------------------------------------------------------------------------------------
+# Monte Carlo robustness
+# ----------------------------------------------------------------------------------------------
+
+# Perturbations (independent, uniform, relative to the nominal value): the plant's mass (and with it
+# its inertia), its size (inertia and, in the corner scenario, the COM height), each wheel's spin
+# inertia, the motor stall torque and no-load speed.
+MC_SPREAD = {"mass": 0.10, "size": 0.05, "J": 0.20, "torque_limit": 0.10, "speed_limit": 0.10}
+
+
+def monte_carlo_tasks(model: CubeModel, n: int, seed: int) -> list[dict[str, Any]]:
+    """The perturbed plants' parameters (n dicts for CubeModel), drawn here from one seeded generator
+    (numpy default_rng(seed)) so every executor runs the same samples. See MC_SPREAD."""
+    n = V.integer("monte_carlo", n, minimum=1)
+    rng = np.random.default_rng(V.integer("seed", seed, minimum=0))
+    base = model.as_dict()
+    out = []
+    for _ in range(n):
+        d = dict(base)
+        for key, spread in MC_SPREAD.items():
+            nominal = np.asarray(base[key], dtype=float)
+            d[key] = (nominal * (1 + spread * rng.uniform(-1, 1, nominal.shape))).tolist()
+        out.append(d)
+    return out
+
+
+def monte_carlo_sample(task: dict[str, Any]) -> dict[str, Any]:
+    """One closed loop of a perturbed plant under the nominal design's gain (a module-level function
+    of a picklable task: the executor's contract). Never raises for a plant that diverges: it is a failure."""
+    from .errors import DivergenceError
+
+    model = CubeModel(**task["model"])
+    lin = linearize(CubeModel(**task["nominal"]))
+    K = np.asarray(task["K"], float)
+    q0 = rotated(lin.q_ref, task["axis"], task["theta0_deg"])
+    try:
+        r = closed_loop(model, lin, K, q0, task["T"], dt=task["dt"], control_dt=task["control_dt"], backend=task["backend"])
+    except DivergenceError as exc:
+        return {"settled": False, "settling_time": None, "peak_torque": None, "final_error_deg": None, "why": str(exc)}
+    st = r.settling_time(task["threshold_deg"])
+    ok = math.isfinite(st) and bool(r.error_deg[-1] < task["threshold_deg"])
+    return {"settled": ok, "settling_time": st if math.isfinite(st) else None,
+            "peak_torque": float(np.max(np.abs(r.u_applied))), "final_error_deg": float(r.error_deg[-1]), "why": None}
+
+
+def monte_carlo(res: DesignResult, n: int, seed: int, executor: Any = None) -> dict[str, Any]:
+    """Re-run the closed loop of a design on n perturbed plants (MC_SPREAD), with the design's gain.
+
+    Parameters
+    ----------
+    res : DesignResult
+        The nominal design (its gain K, initial error, T, threshold, backend).
+    n, seed : int
+        Samples and the seed of numpy's default_rng that draws them.
+    executor : lavendersim.executor.Executor, optional
+        Where the samples run (serial, local processes, a Dask cluster); results are in sample order,
+        so the summary is the same for the same seed on any executor.
+
+    Returns
+    -------
+    dict
+        n, seed, spreads, failures, failure_rate, settling-time and peak-torque percentiles (s, N·m; over
+        the settled samples) and the per-sample results.
+    """
+    from . import executor as X
+
+    nominal = res.model.as_dict()
+    base = {"nominal": nominal, "K": res.K.tolist(), "axis": res.axis.tolist(), "theta0_deg": res.theta0_deg,
+            "T": float(res.response.t[-1]), "dt": 1e-3, "control_dt": 2e-3, "backend": res.backend,
+            "threshold_deg": res.threshold_deg}
+    tasks = [{**base, "model": m} for m in monte_carlo_tasks(res.model, n, seed)]
+    samples = X.map_tasks(monte_carlo_sample, tasks, executor, feature="lavendersim lqr --dask")
+    ok = [s for s in samples if s["settled"]]
+    st = np.array([s["settling_time"] for s in ok], dtype=float)
+    pk = np.array([s["peak_torque"] for s in samples if s["peak_torque"] is not None], dtype=float)
+
+    def pct(a):
+        return {p: (float(np.percentile(a, int(p[1:]))) if a.size else None) for p in ("p50", "p90", "p100")}
+
+    return {"n": len(samples), "seed": int(seed), "spread": dict(MC_SPREAD), "distribution": "uniform, relative",
+            "failures": len(samples) - len(ok), "failure_rate": (len(samples) - len(ok)) / len(samples),
+            "settling_time": pct(st), "peak_torque": pct(pk), "samples": samples}
+
+
+# ----------------------------------------------------------------------------------------------
 # checking the linearization against the runtime simulator
 # ----------------------------------------------------------------------------------------------
 
@@ -943,25 +879,7 @@ def finite_difference_AB(model: CubeModel, lin: Linearization, *, backend: str =
     Φ(x, u) = x + dt f(x, u) + (normalization, even in the perturbation), so at the equilibrium
     (Φ(+h e_j) − Φ(−h e_j)) / (2 h) = e_j + dt A e_j exactly in dt; A = ((Φ₊ − Φ₋)/(2h) − e_j)/dt and
     likewise B. The states are mapped to error coordinates with lin.state. `make_sim(q, omega_b,
-    Omega, dt)` may replace the Sim (the tests' independent reference uses it).
-
-    Parameters
-    ----------
-    model : CubeModel
-        The cube.
-    lin : Linearization
-    backend : str, optional
-    h : float, optional
-        Perturbation.
-    dt : float, optional
-        s.
-    make_sim : callable, optional
-
-    Returns
-    -------
-    A : ndarray, shape (9, 9)
-    B : ndarray, shape (9, 3)
-    """
+    Omega, dt)` may replace the Sim (the tests' independent reference uses it)."""
     if make_sim is None:
         def make_sim(q, w, Om, dt_):
             return model.make_sim(q, w, Om, dt=dt_, backend=backend, integrator="euler")
@@ -987,20 +905,82 @@ def finite_difference_AB(model: CubeModel, lin: Linearization, *, backend: str =
     return A, B
 
 
-def linearization_residual(lin: Linearization, A_fd: ArrayLike, B_fd: ArrayLike) -> dict[str, float]:
-    """max |A − A_fd|, max |B − B_fd| (absolute) and the same relative to max(1, max |entry|).
+def finite_difference(lin: Any, scene: Scene, *, backend: str = "auto", h: float = 1e-5, dt: float = 1e-4,
+                      extrapolate: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    """A and B of any scene by central finite differences of the simulator's own step.
+
+    For each perturbation ±h of one error coordinate (or input) a Sim is built from `scene` (an
+    effect-parameter input perturbs that effect's declared value), put at the operating point plus
+    the perturbation (``lin.set_state``), stepped once with integrator="euler" and read back in error
+    coordinates (``lin.state_of``): Φ(x, u) = x + dt f(x, u) + O(dt²), so
+    A e_j ≈ ((Φ(+h e_j) − Φ(−h e_j)) / (2h) − e_j) / dt and B e_j ≈ (Φ(+h e_j) − Φ(−h e_j)) / (2h dt).
+    Errors: O(h²) from the differences, O(dt) away from an equilibrium (the chart's curvature; with
+    ``extrapolate`` (default) Richardson's 2 D(dt/2) − D(dt) removes it, leaving O(dt²)), and float
+    rounding ~ eps / (h dt).
 
     Parameters
     ----------
     lin : Linearization
-    A_fd, B_fd : array_like
-        Finite-difference A and B.
+        From :func:`linearize` of the same scene (continuous).
+    scene : Scene
+        The scene that was linearized.
 
     Returns
     -------
-    dict
-        ``A_abs``, ``B_abs``, ``A_rel``, ``B_rel``.
+    (A_fd (n, n), B_fd (n, m))
     """
+    import lavendersim as lv
+
+    from . import effects as E
+
+    h, dt = V.positive("h", h), V.dt("dt", dt)
+    if extrapolate:
+        A1, B1 = finite_difference(lin, scene, backend=backend, h=h, dt=dt, extrapolate=False)
+        A2, B2 = finite_difference(lin, scene, backend=backend, h=h, dt=dt / 2, extrapolate=False)
+        return 2 * A2 - A1, 2 * B2 - B1
+    n, m = lin.nstates, lin.ninputs
+
+    def scene_with(du):
+        if not any(r.kind == "effect" for r in lin.input_refs):
+            return scene
+        new = lv.Scene()
+        for b in scene.bodies.values():
+            new.add_body(b)
+        for k, e in enumerate(scene.effects):
+            vals = dict(e.values)
+            for r in lin.input_refs:
+                if r.kind == "effect" and r.effect_index == k:
+                    v = lin.u0[r.offset:r.offset + r.size] + du[r.offset:r.offset + r.size]
+                    vals[r.param] = float(v[0]) if np.ndim(e.values[r.param]) == 0 else v
+            new.add_effect(E.make(e.name, body=e.body, **vals))
+        return new
+
+    def phi(x, du):
+        sim = lv.Sim(scene_with(du), dt=dt, integrator="euler", backend=backend, max_growth=None)
+        for r in lin.input_refs:
+            if r.kind == "wheels":
+                sim.set_wheel_command(r.body, lin.u0[r.offset:r.offset + 3] + du[r.offset:r.offset + 3])
+        for ref in lin.bodies:
+            if ref.wheels and not any(r.kind == "wheels" and r.body == ref.name for r in lin.input_refs):
+                sim.set_wheel_command(ref.name, ref.command)
+        lin.set_state(sim, x)
+        sim.step()
+        return lin.state_of(sim)
+
+    A, B = np.empty((n, n)), np.empty((n, m))
+    for j in range(n):
+        e = np.zeros(n)
+        e[j] = h
+        A[:, j] = ((phi(e, np.zeros(m)) - phi(-e, np.zeros(m))) / (2 * h) - e / h) / dt
+    for j in range(m):
+        e = np.zeros(m)
+        e[j] = h
+        B[:, j] = (phi(np.zeros(n), e) - phi(np.zeros(n), -e)) / (2 * h) / dt
+    return A, B
+
+
+def linearization_residual(lin: Linearization, A_fd: ArrayLike, B_fd: ArrayLike) -> dict[str, float]:
+    """max |A − A_fd|, max |B − B_fd| (absolute) and the same relative to max(1, max |entry|)."""
     ea, eb = float(np.max(np.abs(lin.A - A_fd))), float(np.max(np.abs(lin.B - B_fd)))
     return {"A_abs": ea, "B_abs": eb, "A_rel": ea / max(1.0, float(np.max(np.abs(lin.A)))),
             "B_rel": eb / max(1.0, float(np.max(np.abs(lin.B))))}
@@ -1037,12 +1017,6 @@ def _matrix_arg(field_name: str, text: str | None, n: int):
 
 
 def register_cli(subparsers: argparse._SubParsersAction) -> None:
-    """Add the ``lqr`` subcommand to the CLI.
-
-    Parameters
-    ----------
-    subparsers : argparse._SubParsersAction
-    """
     p = subparsers.add_parser("lqr", help="design an LQR wheel controller for the reaction-wheel cube and run it in the simulator",
                               description=__doc__.split("\n\n")[0] + "\n\nQ and R: one number (times identity), the "
                               "diagonal (9 / 3 numbers, comma-separated) or the full matrix row-major (81 / 9 numbers). "
@@ -1067,6 +1041,14 @@ def register_cli(subparsers: argparse._SubParsersAction) -> None:
                    help="simulator backend (default auto: C when built, else NumPy with a warning)")
     p.add_argument("--plot", default=None, metavar="PATH", help="write the response plot to PATH (PNG; default: no plot)")
     p.add_argument("--json", action="store_true", help="print the figures as JSON")
+    p.add_argument("--motor", default="line", choices=MOTORS, help="wheel motor: line (torque–speed line, default) or "
+                   "cutoff (full torque up to the speed limit)")
+    p.add_argument("--monte-carlo", type=int, default=None, metavar="N", help="also re-run the closed loop on N plants "
+                   "with mass, size, wheel inertias and motor parameters perturbed (uniform, see MC_SPREAD)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the Monte Carlo draws (default 0)")
+    p.add_argument("--workers", type=int, default=None, help="Monte Carlo on N local processes (default: every core; 1: serial)")
+    p.add_argument("--dask", default=None, metavar="ADDRESS", help="Monte Carlo on the Dask scheduler at ADDRESS "
+                   "(the distributed extra)")
     p.set_defaults(fn=_cli)
 
 
@@ -1088,18 +1070,31 @@ def _cli(args) -> int:
                 raise V.LavenderInputError(name.replace("_", "-"), "must be finite", f", got {v!r}")
         model = CubeModel(scenario=args.scenario, mass=args.mass, size=args.size, J=J if J.size == 3 else float(J[0]),
                           torque_limit=args.torque_limit, speed_limit=args.speed_limit, damping=args.damping,
-                          wheel_damping=args.wheel_damping)
+                          wheel_damping=args.wheel_damping, motor=args.motor)
+        ex = None
+        if args.monte_carlo is not None:
+            from . import executor as X
+
+            V.integer("monte-carlo", args.monte_carlo, minimum=1)
+            V.integer("seed", args.seed, minimum=0)
+            ex = X.resolve(workers=args.workers, dask=args.dask, feature="lavendersim lqr --dask")
         if axis is None:
             axis = DEFAULT_AXIS if model.scenario == "center" else CORNER_AXIS
         res = design(model=model, Q=_matrix_arg("Q", args.Q, 9), R=_matrix_arg("R", args.R, 3), theta0_deg=args.theta0,
                      axis=axis, T=args.T, threshold_deg=args.threshold, backend=args.backend)
+        mc = None if args.monte_carlo is None else monte_carlo(res, args.monte_carlo, args.seed, ex)
     except V.LavenderInputError as exc:
         print(f"lavendersim lqr: invalid parameter: {exc}", file=sys.stderr)
         return 2
     if args.plot:
         res.plot(args.plot)
     if args.json:
-        print(res.to_json())
+        if mc is None:
+            print(res.to_json())
+        else:
+            out = json.loads(res.to_json())
+            out["monte_carlo"] = {k: v for k, v in mc.items() if k != "samples"}
+            print(json.dumps(out, indent=2))
         return 0
     f = res.figures()
     np.set_printoptions(precision=5, suppress=True, linewidth=140)
@@ -1112,6 +1107,11 @@ def _cli(args) -> int:
     print(f"from {f['theta0_deg']:g}° about {np.round(res.axis, 4).tolist()}: settling time (< {f['threshold_deg']:g}°) {st}, "
           f"final error {f['final_error_deg']:.3g}°, peak torque {f['peak_torque']:.4g} N·m (limit {model.torque_limit:g}), "
           f"peak wheel speed {f['peak_wheel_speed']:.4g} rad/s (limit {model.speed_limit:g})")
+    if mc is not None:
+        fmt = lambda d, u: ", ".join(f"{k} {v:.4g} {u}" if v is not None else f"{k} -" for k, v in d.items())  # noqa: E731
+        print(f"Monte Carlo, {mc['n']} plants (seed {mc['seed']}; uniform ±{', ±'.join(f'{100 * v:g}% {k}' for k, v in MC_SPREAD.items())}): "
+              f"failure rate {mc['failure_rate']:.3g} ({mc['failures']}); settling time {fmt(mc['settling_time'], 's')}; "
+              f"peak torque {fmt(mc['peak_torque'], 'N·m')}")
     if args.plot:
         print(f"wrote {args.plot}")
     return 0

@@ -251,7 +251,11 @@ class _WheelsCheck:
     """Hand-written check of reaction_wheels against its body (a relation the declaration cannot state)."""
 
     def check_body(self, body) -> None:
-        """J_i < I_b[i]: the body with its wheels free must keep a positive inertia about each axis."""
+        """J_i < I_b[i]: the body with its wheels free must keep a positive inertia about each axis;
+        cutoff is 0 or 1."""
+        if self.values["cutoff"] not in (0.0, 1.0):
+            raise V.LavenderInputError(f"{self.name}.cutoff", "must be 0 (torque–speed line) or 1 (hard cut-off at speed_limit)",
+                                       f", got {self.values['cutoff']!r}")
         I_b = body.I_b
         J = self.values["J"]
         bad = np.flatnonzero(J >= I_b)

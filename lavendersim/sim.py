@@ -608,6 +608,7 @@ class Sim:
             rows[i, LY.MODEL_J] = w["J"]
             rows[i, LY.MODEL_TORQUE_LIMIT], rows[i, LY.MODEL_SPEED_LIMIT] = w["torque_limit"], w["speed_limit"]
             rows[i, LY.MODEL_C_W] = w["c_w"]
+            rows[i, LY.MODEL_CUTOFF] = w["cutoff"]
         rows[i, LY.MODEL_KIND] = kind
         rows[i, LY.MODEL_I_P] = np.asarray(I_p).reshape(9)
         rows[i, LY.MODEL_R_B] = r_b

@@ -555,7 +555,7 @@ def test_bad_model_buffers():
     W3 = np.zeros((2, 3))
     with pytest.raises(ValueError, match="all four"):
         _c.simulate(state.copy(), params, E, 2, 1, 0.01, 1, md.rows)
-    with pytest.raises(ValueError, match=r"model_rows must have shape \(n, 22\)"):
+    with pytest.raises(ValueError, match=rf"model_rows must have shape \(n, {MODEL_SIZE}\)"):
         _c.simulate(state.copy(), params, E, 2, 1, 0.01, 1, md.rows[:, :21].copy(), W3.copy(), W3, W3.copy())
     with pytest.raises(ValueError, match="model_rows has 1 rows"):
         _c.simulate(state.copy(), params, E, 2, 1, 0.01, 1, md.rows[:1].copy(), W3.copy(), W3, W3.copy())
@@ -574,9 +574,9 @@ def test_bad_model_buffers():
     with pytest.raises(TypeError, match="models.Omega"):
         CBackend().advance(state.copy(), params, E, "rk4", True, 0.01, 1,
                            Models(md.rows, W3.astype(np.float32), W3, W3.copy()))
-    with pytest.raises(ValueError, match=r"models.rows must have shape \(2, 22\)"):
+    with pytest.raises(ValueError, match=rf"models.rows must have shape \(2, {MODEL_SIZE}\)"):
         CBackend().advance(state.copy(), params, E, "rk4", True, 0.01, 1, Models(md.rows[:, :20], W3.copy(), W3, W3.copy()))
-    assert MODEL_SIZE == 22
+    assert MODEL_SIZE == 23   # + MODEL_CUTOFF (issue 13: the wheel motor)
 
 
 @pytest.mark.parametrize("calm", [0, 9])   # the diverging body alone, or in the second block of 8

@@ -15,11 +15,10 @@ from lavendersim import control as lc
 from lavendersim.validate import LavenderInputError
 
 sys.path.insert(0, __import__("os").path.dirname(__file__))
-from wheel_reference import RefSim  # noqa: E402
-
 # The closed loops' NumPy runs are in the slow set (NUMPY_SLOW: tests/conftest.py); the C runs stay,
 # and test_closed_loop_matches_an_independent_reference_stepper checks the loop itself quickly.
 from conftest import NUMPY_SLOW  # noqa: E402
+from wheel_reference import RefSim  # noqa: E402
 
 BACKENDS = ("c", "numpy")
 
@@ -95,10 +94,12 @@ def test_full_rank_model_goes_straight_to_control_lqr():
 
     rng = np.random.default_rng(1)
     A, B = rng.normal(size=(9, 9)), rng.normal(size=(9, 3))
-    lin = lc.Linearization(A, B, np.array([0, 0, 0, 1.0]), np.zeros(3), np.zeros(3), 9, np.eye(9))
-    K, S, E = lc.lqr(lin, np.eye(9), np.eye(3))
-    K2, _, _ = ct.lqr(A, B, np.eye(9), np.eye(3))
-    assert np.allclose(K, K2)
+    K2, S2, _ = ct.lqr(A, B, np.eye(9), np.eye(3))
+    for args in ((ct.ss(A, B, np.eye(9), 0), np.eye(9), np.eye(3)), ((A, B), np.eye(9), np.eye(3)), (A, B, np.eye(9), np.eye(3))):
+        res = lc.lqr(*args)
+        K, S, E = res
+        assert res.rank == 9 and res.controllable and res.uncontrollable.shape == (9, 0)
+        assert np.allclose(K, K2, rtol=1e-10, atol=1e-12) and np.allclose(S, S2, rtol=1e-10, atol=1e-12)
 
 
 # ------------------------------------------------------------------------ closed loops
@@ -133,7 +134,9 @@ def test_attitude_regulation_reaction_wheel_cube_v0(backend):
     assert settle <= 1.0
     assert errs[-1] < 1e-3
     assert max(torques) <= m.torque_limit
-    assert max(torques) == pytest.approx(m.torque_limit)  # the start saturates: the limit is exercised
+    # the start saturates: the limit is exercised (the last substep of a 10 ms env step reports the torque–speed
+    # line's 0.2 (1 − |Ω|/400) once the wheel spins, measured 0.198)
+    assert 0.95 * m.torque_limit <= max(torques) <= m.torque_limit
     assert max(speeds) < m.speed_limit
 
 

@@ -92,7 +92,8 @@ def test_saturated_wheels_blow_up_is_caught(integrator):
     # c_w = 0: euler let |Omega| reach 7.2e17 rad/s silently
     s = lv.Scene()
     s.add_body(lv.Body("sat", 1.0, (0.1, 0.12, 0.15), omega_b=(0.5, -0.3, 0.8)))
-    s.add_effect("reaction_wheels", body="sat", J=(1e-3, 1e-3, 1e-3), torque_limit=0.05, speed_limit=50.0, c_w=0.0)
+    s.add_effect("reaction_wheels", body="sat", J=(1e-3, 1e-3, 1e-3), torque_limit=0.05, speed_limit=50.0, c_w=0.0,
+                 cutoff=1.0)  # the hard cut-off (issue 13: the default is the torque–speed line)
     sim = lv.Sim(s, dt=0.05, integrator=integrator, backend="c", on_bound="warn")
     sim.set_wheel_command("sat", (0.05, -0.05, 0.05))
     before = sim.x.copy(), sim.wheel_rates("sat")

@@ -6,9 +6,9 @@ import warnings
 
 import numpy as np
 import pytest
+from conftest import missing
 
 import lavendersim
-from conftest import missing
 from lavendersim.validate import LavenderInputError
 
 # The gym extra: every test is skipped without gymnasium, failed under CI=true (tests/conftest.py).
@@ -78,9 +78,18 @@ def test_action_is_scaled_and_saturated():
     env = gym.make("lavendersim:ReactionWheelCube-v0").unwrapped
     env.reset(seed=0)
     _, _, _, _, info = env.step(np.array([0.5, -1.0, 0.0], np.float32))
-    assert np.allclose(info["torque_applied"], [0.1, -0.2, 0.0])
+    # 0.1 is below the line's available torque; −0.2 is the stall torque, 0.2 (1 − |Ω|/400) after the first substeps
+    assert info["torque_applied"][0] == pytest.approx(0.1) and -0.2 < info["torque_applied"][1] < -0.19
+    Om = env.sim.wheel_rates("cube")
     _, _, _, _, info = env.step(np.array([7.0, -3.0, 0.25]))  # outside the box: saturated
-    assert np.allclose(info["torque_applied"], [0.2, -0.2, 0.05])
+    # clipped to the 0.2 N·m stall torque, then the motor's torque–speed line (issue 13): < 0.2 once spinning
+    from lavendersim.kernels import K
+
+    cmd = np.array([1.4, -0.6, 0.05])
+    hi = np.abs(K.wheel_motor(cmd, Om, 0.2, 400.0, 0.0))                               # at the step's start
+    lo = np.abs(K.wheel_motor(cmd, env.sim.wheel_rates("cube"), 0.2, 400.0, 0.0))      # at its end
+    got = np.abs(info["torque_applied"])   # the last 1 ms substep's torque
+    assert np.all(lo - 1e-12 <= got) and np.all(got <= hi + 1e-12) and 0.19 < got[0] < 0.2 and got[2] == 0.05
 
 
 def test_wheel_speed_limit_reaches_the_env():

@@ -383,3 +383,18 @@ def test_a_user_effect_cannot_shadow_a_built_in(guide, tmp_path):
                     "EFFECTS = [effect('gravity', 'not the real one', params=[c], force_w=-c.symbol * STATE.v_w)]\n")
     with pytest.raises(LavenderInputError, match="built-in"):
         extending.derive(decl, out=tmp_path / "sets", compile=False)
+
+
+@pytest.mark.needs("control")
+def test_linearize_a_scene_with_user_effects(guide):
+    """Issue 13: lavendersim.control.linearize composes the user effects' CasADi printing; checked
+    against finite differences of one Euler step of the Sim (tolerances: tests/test_linearize.py)."""
+    from lavendersim import control as lc
+
+    s = make_scene()
+    lin = lc.linearize(s, inputs=["quadratic_drag.cd_area", "gravity_gradient.mu"])
+    assert lin.ninputs == 2 and lin.nstates == 12
+    for backend in ("c", "numpy"):
+        A, B = lc.finite_difference(lin, s, backend=backend)
+        res = lc.linearization_residual(lin, A, B)
+        assert res["A_rel"] <= 1e-5 and res["B_rel"] <= 1e-7, res

@@ -17,12 +17,15 @@ I_CUBE = MASS * SIDE**2 / 6  # 0.00375 kg·m²
 J3 = [2e-4, 3e-4, 2.5e-4]
 
 
-def wheel_cube(joint=True, anchor=(0, 0, 0), J=J3, torque_limit=0.2, speed_limit=400.0, c_w=0.0, **state):
+def wheel_cube(joint=True, anchor=(0, 0, 0), J=J3, torque_limit=0.2, speed_limit=400.0, c_w=0.0, cutoff=1.0, **state):
+    """The wheel cube; cutoff=1 (explicit): the hard speed cut-off these saturation tests pin down
+    (the default torque–speed line motor: tests/test_motor.py)."""
     s = lv.Scene()
     s.add_body(lv.Body.box("cube", MASS, (SIDE, SIDE, SIDE), **state))
     if joint:
         s.add_effect("spherical_joint", body="cube", anchor_w=list(anchor))
-    s.add_effect("reaction_wheels", body="cube", J=list(J), torque_limit=torque_limit, speed_limit=speed_limit, c_w=c_w)
+    s.add_effect("reaction_wheels", body="cube", J=list(J), torque_limit=torque_limit, speed_limit=speed_limit, c_w=c_w,
+                 cutoff=cutoff)
     return s
 
 

@@ -34,8 +34,12 @@ class RefSim:
 
     def _saturate(self):
         u = np.clip(self.cmd, -self.m.torque_limit, self.m.torque_limit)
-        u = np.where((np.abs(self.Om) >= self.m.speed_limit) & (u * self.Om > 0), 0.0, u)
-        return u
+        if getattr(self.m, "motor", "cutoff") == "cutoff":
+            return np.where((np.abs(self.Om) >= self.m.speed_limit) & (u * self.Om > 0), 0.0, u)
+        # torque–speed line: driving the wheel faster, at most stall · (1 − |Ω| / no-load speed), never below 0
+        avail = self.m.torque_limit * np.maximum(0.0, 1.0 - np.abs(self.Om) / self.m.speed_limit)
+        drive = u * self.Om > 0
+        return np.where(drive, np.sign(u) * np.minimum(np.abs(u), avail), u)
 
     def step(self):
         u = self._saturate()

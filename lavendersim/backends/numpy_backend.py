@@ -107,6 +107,7 @@ class _Group:
         self.r_b, self.anchor, self.J = r[:, LY.MODEL_R_B].copy(), r[:, LY.MODEL_ANCHOR_W].copy(), r[:, LY.MODEL_J].copy()
         self.tl, self.sl = r[:, LY.MODEL_TORQUE_LIMIT].copy(), r[:, LY.MODEL_SPEED_LIMIT].copy()
         self.c_w = r[:, LY.MODEL_C_W].copy()
+        self.cutoff = r[:, LY.MODEL_CUTOFF].copy()
 
     def velocity(self, x):
         """COM velocity for the effects: kinematic for jointed bodies, the state's otherwise."""
@@ -200,7 +201,7 @@ class _Plan:
         g = self.wheels
         if g is None:
             return None
-        return K.wheel_saturation(command[g.idx], x[g.idx, OM], g.tl, g.sl)
+        return K.wheel_motor(command[g.idx], x[g.idx, OM], g.tl, g.sl, g.cutoff)
 
     def wheel_info(self, x: np.ndarray, b: int) -> tuple:
         """(Omega, (J, c_w)) of body b if it has wheels, else (None, None): for divergence_cause."""

@@ -476,7 +476,7 @@ static long advance_model(double *state, const double *params, long b, const lv_
 #define MRHS(in, out) model_rhs(in, u, m, I_b, r, kind, needs_v, refs, n_refs, out)
     for (s = 0; s < n_steps; s++) {
         if (kind & LV_KIND_WHEELS)
-            lv_wheel_saturation(cmd, y + LV_XS_OMEGA, r[LV_MODEL_TORQUE_LIMIT], r[LV_MODEL_SPEED_LIMIT], u);
+            lv_wheel_motor(cmd, y + LV_XS_OMEGA, r[LV_MODEL_TORQUE_LIMIT], r[LV_MODEL_SPEED_LIMIT], r[LV_MODEL_CUTOFF], u);
         switch (integrator) {
         case LV_INTEGRATOR_EULER:
             MRHS(y, k1);
@@ -641,7 +641,7 @@ static long advance_dopri5(double *state, const double *params, long b, const lv
         long sub = 0;
         int rejected = 0;
         if (c.kind & LV_KIND_WHEELS) {
-            lv_wheel_saturation(cmd, y + LV_XS_OMEGA, c.r[LV_MODEL_TORQUE_LIMIT], c.r[LV_MODEL_SPEED_LIMIT], c.u);
+            lv_wheel_motor(cmd, y + LV_XS_OMEGA, c.r[LV_MODEL_TORQUE_LIMIT], c.r[LV_MODEL_SPEED_LIMIT], c.r[LV_MODEL_CUTOFF], c.u);
             have_k1 = 0; /* the held torque may change at each output step */
         }
         if (!have_k1) {
