@@ -1,6 +1,8 @@
 """A scene: bodies plus the effects it declares, and nothing else."""
 from __future__ import annotations
 
+from types import MappingProxyType
+
 import numpy as np
 
 from . import validate as V
@@ -25,8 +27,13 @@ class Scene:
 
     @V.keywords
     def __init__(self):
-        self.bodies: dict[str, Body] = {}
+        self._bodies: dict[str, Body] = {}
         self.effects: list[Effect] = []
+
+    @property
+    def bodies(self) -> MappingProxyType:
+        """The bodies by name, in the order added: a read-only view (add with add_body, which validates)."""
+        return MappingProxyType(self._bodies)
 
     @V.keywords
     def add_body(self, body: Body) -> Body:
@@ -40,7 +47,7 @@ class Scene:
         if why:
             raise V.LavenderInputError("body", f"{why} with the scene's effects on every body "
                                        f"({', '.join(e.name for e in every)})")
-        self.bodies[body.name] = body
+        self._bodies[body.name] = body
         return body
 
     def add_effect(self, effect: Effect | str, body: str | None = None, **params) -> Effect:
