@@ -29,7 +29,8 @@ from conftest import have, require
 pytestmark = pytest.mark.needs("cc")  # the guide's command compiles the C of the set
 
 GUIDE = Path(__file__).resolve().parent.parent / "docs" / "extending.md"
-INTEGRATORS = ("euler", "semi_implicit_euler", "rk4", "dopri5", "splitting", "implicit_gyro", "splitting4", "rk4_expmap")
+INTEGRATORS = ("euler", "semi_implicit_euler", "rk4", "dopri5", "splitting", "implicit_gyro", "splitting4", "rk4_expmap",
+               "symtop4")
 RTOL = 1e-12
 
 
