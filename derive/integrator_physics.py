@@ -39,7 +39,12 @@ EXP_SERIES_BELOW = sp.Rational(1, 10**8)
 def axis_flow(I_b, q, L, a: int, tau):
     """Exact flow for time tau of H_a = L_a²/(2 I_a): returns (q ⊗ [sin(θ/2) e_a, cos(θ/2)], L turned
     about body axis a by −θ), θ = tau L_a / I_a."""
-    th = tau * L[a] / I_b[a]
+    return axis_rotation(q, L, a, tau * L[a] / I_b[a])
+
+
+def axis_rotation(q, L, a: int, th):
+    """(q ⊗ [sin(θ/2) e_a, cos(θ/2)], L turned about body axis a by −θ): the exact flow of any H = f(L_a)
+    with θ = τ f'(L_a) (L_a is constant along it)."""
     j, k = (a + 1) % 3, (a + 2) % 3
     sh, ch = sp.sin(th / 2), sp.cos(th / 2)
     c, s = 1 - 2 * sh * sh, 2 * sh * ch   # cos θ, sin θ from the half angle (one sin, one cos)
@@ -72,6 +77,109 @@ def axis_flow_kernel(a: int, I_b, q, L_b, tau) -> "Kernel":
                   "Integrator physics",
                   notes=["splitting4 applies the sequence printed in generated/tableaux (SPLIT4_SEQ) of these flows to "
                          "bodies without effects; each keeps |L_B|, L_W and |q| to rounding."])
+
+
+# symtop4: the free rigid body split around a symmetric top (reference axis r):
+#     H = |L|²/(2 I_r) + ½ c_a L_a² + ½ c_b L_b²,   c_i = 1/I_i − 1/I_r   (c_r = 0).
+# |L|² is a Casimir of the Lie–Poisson bracket, so its flow (the "sphere" flow: a rotation of the attitude
+# about the body momentum at rate |L|/I_r, L_B fixed) commutes with every flow of a function of L_B; the
+# A part |L|²/(2 I_r) + ½ c_a L_a² is then solved exactly by the sphere flow times the axis flow of ½ c_a L_a²
+# (a symmetric top), and B = ½ c_b L_b² is an axis flow. The splitting error is a sum of nested brackets each
+# containing {L_a², L_b²}, i.e. proportional to c_a c_b: the score of the reference axis r is |c_a c_b|, and
+# the intermediate principal axis minimises it (proved in _check); a body that is a symmetric top about one
+# of its axes has c_b = 0 and is integrated exactly.
+
+
+def symtop_leftover(I_b, I_r) -> sp.Matrix:
+    """c_i = 1/I_i − 1/I_r, the coefficients left over when |L|²/(2 I_r) is split off H."""
+    return sp.Matrix([1 / I_b[i] - 1 / I_r for i in range(3)])
+
+
+def symtop_score(I_b) -> sp.Matrix:
+    """score_r = |c_j c_k| (j, k the other two axes) for r = 0, 1, 2: the size of the splitting error."""
+    out = []
+    for r in range(3):
+        c = symtop_leftover(I_b, I_b[r])
+        j, k = (r + 1) % 3, (r + 2) % 3
+        out.append(sp.Abs(c[j] * c[k]))
+    return sp.Matrix(out)
+
+
+def symtop_axis_flow(q, L, a: int, c, tau):
+    """Exact flow for time tau of ½ c L_a²: θ = tau c L_a (axis_rotation)."""
+    return axis_rotation(q, L, a, tau * c * L[a])
+
+
+def sphere_flow(q, L_b, I_r, tau) -> sp.Matrix:
+    """Exact flow for time tau (either sign) of |L|²/(2 I_r): the attitude turns by the body rate L_B/I_r
+    held over tau, q ⊗ [sin(a) L_B/|L|, cos a], a = tau |L|/(2 I_r), L_B unchanged; sin(a)/|L| by its series
+    where |a| is small (as quat_exp_step)."""
+    n = sp.sqrt(L_b.dot(L_b))
+    a = tau * n / (2 * I_r)
+    sa = sp.Piecewise((sp.sin(a) / n, sp.Abs(a) > EXP_SERIES_BELOW), (tau / (2 * I_r) * (1 - a * a / 6), True))
+    return qmul(q, sp.Matrix([sa * L_b[0], sa * L_b[1], sa * L_b[2], sp.cos(a)]))
+
+
+def _check_symtop(I_b) -> None:
+    """The split sums to the free rigid-body energy; |L|² Poisson-commutes with each L_a²; the intermediate
+    axis minimises the score |c_a c_b|."""
+    L = vec("L", 3)
+    H = sum((L[i] ** 2 / (2 * I_b[i]) for i in range(3)), sp.Integer(0))
+    for r in range(3):
+        c = symtop_leftover(I_b, I_b[r])
+        if c[r] != 0 or sp.simplify(L.dot(L) / (2 * I_b[r]) + sum(c[i] * L[i] ** 2 / 2 for i in range(3)) - H) != 0:
+            raise RuntimeError(f"derive: the symmetric-top split about axis {r} does not sum to the energy")
+
+    def bracket(F, G):  # Lie–Poisson bracket on so(3)*: {F, G} = −L · (∇F × ∇G)
+        gF = sp.Matrix([sp.diff(F, x) for x in L])
+        gG = sp.Matrix([sp.diff(G, x) for x in L])
+        return -L.dot(gF.cross(gG))
+    for a in range(3):
+        if sp.expand(bracket(L.dot(L), L[a] ** 2)) != 0:
+            raise RuntimeError(f"derive: |L|^2 does not commute with L_{a}^2")
+    # order the moments I_hi >= I_mid >= I_lo by their inverses 1/I = s, s + x, s + x + y (x, y >= 0)
+    s, x, y = sp.symbols("s x y", nonnegative=True)
+    inv = {"hi": s, "mid": s + x, "lo": s + x + y}
+    sc = {r: sp.expand(sp.Abs(sp.expand((inv[j] - inv[r]) * (inv[k] - inv[r]))))
+          for r, (j, k) in {"hi": ("mid", "lo"), "mid": ("hi", "lo"), "lo": ("hi", "mid")}.items()}
+    if sp.expand(sc["mid"] - sc["hi"]) != -x ** 2 or sp.expand(sc["mid"] - sc["lo"]) != -y ** 2:
+        raise RuntimeError("derive: the intermediate axis does not minimise the symmetric-top score")
+
+
+def symtop_kernels(I_b, q, L_b, tau) -> list[Kernel]:
+    """symtop_score, symtop_leftover, symtop_axis_flow_{x,y,z} and sphere_flow."""
+    g = "Integrator physics"
+    I_r, c = scalar("I_r", positive=True), scalar("c")
+    _check_symtop(I_b)
+    IB = Arg("I_b", I_b, "principal moments, body frame, kg·m²", "positive")
+    Q = Arg("q", q, "orientation (x, y, z, w), R_WB, unit", "unit_quaternion")
+    LB = Arg("L_b", L_b, "angular momentum, body frame, kg·m²/s")
+    TAU = Arg("tau", tau, "duration of the flow, s")
+    IR = Arg("I_r", I_r, "the reference moment I_b[r], kg·m²", "positive")
+    out = [
+        Kernel("symtop_score", "Size of the symmetric-top splitting error for each reference axis r",
+               r"s_r = \lvert (1/I_j - 1/I_r)(1/I_k - 1/I_r)\rvert",
+               [IB], [Arg("score", symtop_score(I_b), "1/(kg·m²)², one per reference axis r = 0, 1, 2")], g,
+               notes=["symtop4 takes r = argmin s_r (the first on ties): the intermediate principal axis "
+                      "(proved at derivation); the splitting error is proportional to s_r."]),
+        Kernel("symtop_leftover", "Coefficients left over when |L|²/(2 I_r) is split off the energy",
+               r"c_i = 1/I_i - 1/I_r,\quad H = \lvert L\rvert^2/(2 I_r) + \tfrac12 \textstyle\sum_i c_i L_i^2",
+               [IB, IR], [Arg("c", symtop_leftover(I_b, I_r), "1/(kg·m²), body axes (0 on the reference axis)")], g),
+    ]
+    for a in range(3):
+        n = "xyz"[a]
+        qn, Ln = symtop_axis_flow(q, list(L_b), a, c, tau)
+        out.append(Kernel(f"symtop_axis_flow_{n}", f"Exact flow of ½ c L_{n}² on (q, L_B) for time τ",
+                          rf"\theta = \tau c L_{n},\ q \leftarrow q \otimes [\sin\tfrac\theta2 e_{n}, \cos\tfrac\theta2],"
+                          rf"\ L_B \leftarrow R_{n}(-\theta) L_B",
+                          [Q, LB, Arg("c", c, "coefficient of ½ L²_axis in the energy, 1/(kg·m²)"), TAU],
+                          [Arg("q_next", qn, "orientation (unit when q is)"), Arg("L_next", sp.Matrix(Ln), "kg·m²/s, body frame")], g))
+    out.append(Kernel("sphere_flow", "Exact flow of |L|²/(2 I_r) on q for time τ (L_B is unchanged)",
+                      r"q \leftarrow q \otimes [\tfrac{\sin a}{\lVert L\rVert} L_B, \cos a],\ a = \tau\lVert L_B\rVert/(2 I_r)",
+                      [Q, LB, IR, TAU], [Arg("q_next", sphere_flow(q, L_b, I_r, tau), "orientation (unit when q is)")], g,
+                      notes=["|L|² is a Casimir: this flow commutes with every axis flow, so it may be applied "
+                             "before or after them within one part of the splitting."]))
+    return out
 
 
 def gyro_residual(I_b, omega_b, tau_b, h, w1) -> sp.Matrix:
@@ -193,6 +301,7 @@ def kernels() -> list[Kernel]:
                [Arg("q_next", q_s, "orientation after h (unit when q is)"), Arg("omega_next", w_s, "rad/s, body frame")], g,
                notes=["Torque-free, it conserves the world angular momentum and |L_B| to rounding; second order."]),
         *[axis_flow_kernel(a, I_b, q, L_b, tau) for a in range(3)],
+        *symtop_kernels(I_b, q, L_b, tau),
         Kernel("body_momentum", "Body angular momentum of a body with principal moments I_B", r"L_B = I_B \omega_B",
                [Arg(*IB), Arg(*W)], [Arg("L_b", sp.Matrix([I_b[i] * omega_b[i] for i in range(3)]), "kg·m²/s, body frame")], g),
         Kernel("body_rate", "Body angular velocity from the body angular momentum", r"\omega_B = I_B^{-1} L_B",

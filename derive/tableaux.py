@@ -108,6 +108,23 @@ def split4_sequence(gamma=None) -> tuple:
                 seq.append([a, g * f])
     return tuple((a, f) for a, f in seq)
 
+# symtop4: the symmetric-top splitting (derive/integrator_physics.py) H = A + B, A = |L|²/(2 I_r) + ½ c_a L_a²
+# (exact: sphere flow and axis flow), B = ½ c_b L_b² (axis flow), composed as the Strang step
+# A(h/2) B(h) A(h/2) and that step as splitting4 composes splitting's: Suzuki's 5-stage composition, order 4.
+# Torque-free the neighbouring A halves merge (A is one flow): A B A B … B A with SYMTOP4_STAGES B flows and
+# SYMTOP4_STAGES + 1 A flows, fractions of h printed below.
+SYMTOP4_GAMMA = SUZUKI5
+SYMTOP_STRANG_A = R(1, 2)           # with effects each stage is the Strang step A(h/2) B(h) A(h/2) (this fraction)
+
+
+def symtop4_sequence(gamma=None) -> tuple[tuple, tuple]:
+    """(A fractions, B fractions) of h of symtop4's torque-free step A(a_0 h) B(b_0 h) A(a_1 h) … B(b_{s-1} h)
+    A(a_s h): b_i = γ_i, a_0 = γ_1/2, a_i = (γ_i + γ_{i+1})/2, a_s = γ_s/2. Exact (algebraic)."""
+    g = list(SYMTOP4_GAMMA if gamma is None else gamma)
+    a = [g[0] / 2] + [(g[i] + g[i + 1]) / 2 for i in range(len(g) - 1)] + [g[-1] / 2]
+    return tuple(a), tuple(g)
+
+
 GYRO_MAX_ITER = 30                  # Newton iterations at most
 GYRO_TOL_SQ = 1e-32                 # stop when |delta|^2 <= this * |omega_next|^2 (|delta| <= 1e-16 |omega|)
 GYRO_ACCEPT_SQ = 1e-20              # after GYRO_MAX_ITER iterations the last update must be at most 1e-10 |omega_next|
@@ -129,10 +146,15 @@ GYRO_ACCEPT_SQ = 1e-20              # after GYRO_MAX_ITER iterations the last up
 #    aliases (a turn of |omega| dt is indistinguishable from one of 2 pi - |omega| dt).
 #  * splitting4: its substeps are the splitting step at gamma_i h, |gamma_i| <= 0.66: splitting's bound
 #    (not measured separately yet). rk4_expmap: RK4's tableau, RK4's linear stability limit.
+#  * symtop4: like splitting4 a composition of exact rotations (never overflows); its substeps are
+#    A(γ_i h/2) B(γ_i h) A(γ_i h/2), |γ_i| <= 0.66, with the splitting error proportional to |c_a c_b| <=
+#    splitting's: splitting4's bound (not measured separately yet).
 WDT_MAX = {"euler": R(1, 10), "semi_implicit_euler": R(1, 10), "rk4": 2 * sp.sqrt(2), "splitting": R(1),
-           "implicit_gyro": sp.pi, "splitting4": R(1), "rk4_expmap": 2 * sp.sqrt(2)}
+           "implicit_gyro": sp.pi, "splitting4": R(1), "rk4_expmap": 2 * sp.sqrt(2),
+           "symtop4": R(1)}
 WDT_RATIO_EXPONENT = {"euler": R(0), "semi_implicit_euler": R(0), "rk4": R(0), "splitting": R(1, 2),
-                      "implicit_gyro": R(0), "splitting4": R(1, 2), "rk4_expmap": R(0)}
+                      "implicit_gyro": R(0), "splitting4": R(1, 2), "rk4_expmap": R(0),
+                      "symtop4": R(1, 2)}
 
 
 def _stability_polynomial(A, b) -> sp.Expr:
@@ -199,6 +221,16 @@ def _check() -> None:
         for k, want in ((1, 1), (3, 0)):
             if sp.nsimplify(sp.radsimp(sp.expand(sum(x ** k for x in g)))) != want:
                 raise RuntimeError(f"derive: the {name} composition fails Σγ^{k} = {want}")
+    if list(SYMTOP4_GAMMA) != list(SPLIT4_GAMMA):
+        raise RuntimeError("derive: symtop4 is documented as Suzuki's composition, as splitting4")
+    fa, fb = symtop4_sequence()
+    if fa[0] != SYMTOP_STRANG_A * SYMTOP4_GAMMA[0]:
+        raise RuntimeError("derive: the merged symtop4 sequence does not start with the Strang step's A half")
+    if list(fa) != list(reversed(fa)) or list(fb) != list(reversed(fb)) or len(fa) != len(fb) + 1:
+        raise RuntimeError("derive: the symtop4 sequence is not symmetric")
+    for name, f in (("A", fa), ("B", fb)):
+        if sp.nsimplify(sp.radsimp(sp.expand(sum(f, R(0))))) != 1:
+            raise RuntimeError(f"derive: the symtop4 sequence does not flow {name} for total time h")
     seq = split4_sequence()
     if [a for a, _ in seq] != [a for a, _ in reversed(seq)] or any(seq[i][0] == seq[i + 1][0] for i in range(len(seq) - 1)):
         raise RuntimeError("derive: the merged splitting4 sequence is not symmetric or has unmerged neighbours")
@@ -221,7 +253,8 @@ def _fa(x) -> str:
 def _scalars() -> list[tuple[str, str, str]]:
     """(name, C literal, Python literal) of every scalar constant."""
     ints = [("DP_MAX_SUBSTEPS", DP_MAX_SUBSTEPS), ("GYRO_MAX_ITER", GYRO_MAX_ITER), ("RK4_B_DEN", RK4_B_DEN),
-            ("SPLIT4_STAGES", len(SPLIT4_GAMMA)), ("SPLIT4_FLOWS", len(split4_sequence()))]
+            ("SPLIT4_STAGES", len(SPLIT4_GAMMA)), ("SPLIT4_FLOWS", len(split4_sequence())),
+            ("SYMTOP4_STAGES", len(SYMTOP4_GAMMA))]
     floats = [("DP_SAFETY", DP_SAFETY), ("DP_FACMIN", DP_FACMIN), ("DP_FACMAX", DP_FACMAX),
               ("DP_HMIN_REL", DP_HMIN_REL), ("DP_ERR_EXPONENT", -1.0 / (DP_ORDER_ERR + 1)),
               ("DP_INIT_SMALL", DP_INIT_SMALL), ("DP_INIT_TINY_H", DP_INIT_TINY_H), ("DP_INIT_FRAC", DP_INIT_FRAC),
@@ -230,6 +263,7 @@ def _scalars() -> list[tuple[str, str, str]]:
               ("GYRO_ACCEPT_SQ", GYRO_ACCEPT_SQ)]
     out = [(n, f"{v}L" if n == "DP_MAX_SUBSTEPS" else str(v), f"{v:_}") for n, v in ints]
     out += [(n, f"({float(v)!r})" if v < 0 else repr(float(v)), repr(float(v))) for n, v in floats]
+    out += [("SYMTOP_STRANG_A", _f(SYMTOP_STRANG_A), _f(SYMTOP_STRANG_A))]
     out += [("SPLIT_KICK", _f(SPLIT_KICK), _f(SPLIT_KICK)), ("SPLIT_MIDPOINT", _f(SPLIT_MIDPOINT), _f(SPLIT_MIDPOINT))]
     out += [(f"RK4_C{i}", _f(c), _f(c)) for i, c in enumerate(RK4_C)]
     out += [(f"RK4_B{i}", _f(n), _f(n)) for i, n in enumerate(RK4_B_NUM)]
@@ -259,6 +293,13 @@ def print_c() -> str:
             "   merged: flow k turns about body axis LV_SPLIT4_AXIS[k] for LV_SPLIT4_FRAC[k] * h */",
             "static const int LV_SPLIT4_AXIS[LV_SPLIT4_FLOWS] = {" + ", ".join(str(a) for a, _ in split4_sequence()) + "};",
             "static const double LV_SPLIT4_FRAC[LV_SPLIT4_FLOWS] = {" + ", ".join(_fa(f) for _, f in split4_sequence()) + "};"]
+    fa, fb = symtop4_sequence()
+    out += ["/* symtop4 without effects: A(LV_SYMTOP4_A_FRAC[0] h) B(LV_SYMTOP4_B_FRAC[0] h) A(...[1] h) ... A(...[s] h),",
+            "   A = sphere flow + axis flow of the larger leftover coefficient, B = axis flow of the smaller; with",
+            "   effects the Strang step A(gamma_i h/2) B(gamma_i h) A(gamma_i h/2) inside the splitting's kicks */",
+            "static const double LV_SYMTOP4_GAMMA[LV_SYMTOP4_STAGES] = {" + ", ".join(_fa(g) for g in SYMTOP4_GAMMA) + "};",
+            "static const double LV_SYMTOP4_A_FRAC[LV_SYMTOP4_STAGES + 1] = {" + ", ".join(_fa(f) for f in fa) + "};",
+            "static const double LV_SYMTOP4_B_FRAC[LV_SYMTOP4_STAGES] = {" + ", ".join(_fa(f) for f in fb) + "};"]
     seq = " ".join(f"{'xyz'[a]}({'h' if f == 1 else f'{f}*h'})" for a, f in STRANG)
     out += ["", f"/* Strang splitting of the free rotation, {seq}: composed in derive/ into the kernel",
             "   lv_splitting_rotation (no table is needed at run time). */", "", "#endif", ""]
@@ -284,6 +325,12 @@ def print_python() -> str:
     out.append("SPLIT4_GAMMA = (" + ", ".join(_fa(g) for g in SPLIT4_GAMMA) + ")")
     out.append("# splitting4 without effects: its substeps' axis flows as one sequence (axis, fraction of h), neighbours merged")
     out.append("SPLIT4_SEQ = (" + ", ".join(f"({a}, {_fa(f)})" for a, f in split4_sequence()) + ")")
+    fa, fb = symtop4_sequence()
+    out.append("# symtop4: the Strang step's stage fractions gamma_i (order 4), and without effects the merged sequence")
+    out.append("# A(SYMTOP4_A_FRAC[0] h) B(SYMTOP4_B_FRAC[0] h) A(SYMTOP4_A_FRAC[1] h) ... A(SYMTOP4_A_FRAC[s] h)")
+    out.append("SYMTOP4_GAMMA = (" + ", ".join(_fa(g) for g in SYMTOP4_GAMMA) + ")")
+    out.append("SYMTOP4_A_FRAC = (" + ", ".join(_fa(f) for f in fa) + ")")
+    out.append("SYMTOP4_B_FRAC = (" + ", ".join(_fa(f) for f in fb) + ")")
     out.append("# validity bounds: |omega| dt (I_max/I_min)**WDT_RATIO_EXPONENT[name] <= WDT_MAX[name] (derive/tableaux.py)")
     out.append("WDT_MAX = {" + ", ".join(f"{n!r}: {float(WDT_MAX[n])!r}" for n in sorted(WDT_MAX)) + "}")
     out.append("WDT_RATIO_EXPONENT = {" + ", ".join(f"{n!r}: {float(WDT_RATIO_EXPONENT[n])!r}"

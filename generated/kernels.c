@@ -1320,6 +1320,127 @@ void lv_axis_flow_z(const double *I_b, const double *q, const double *L_b, doubl
     L_next[2] = L_b_2;
 }
 
+void lv_symtop_score(const double *I_b, double *score) {
+    const double I_b_0 = I_b[0];
+    const double I_b_1 = I_b[1];
+    const double I_b_2 = I_b[2];
+    const double t0 = (1.0/I_b_1);
+    const double t1 = -1/I_b_0;
+    const double t2 = t0 + t1;
+    const double t3 = (1.0/I_b_2);
+    const double t4 = t1 + t3;
+    const double t5 = -t0 + t3;
+    score[0] = fabs(t2*t4);
+    score[1] = fabs(t2*t5);
+    score[2] = fabs(t4*t5);
+}
+
+void lv_symtop_leftover(const double *I_b, double I_r, double *c) {
+    const double I_b_0 = I_b[0];
+    const double I_b_1 = I_b[1];
+    const double I_b_2 = I_b[2];
+    const double t0 = (1.0/I_r);
+    c[0] = -t0 + (1.0/I_b_0);
+    c[1] = -t0 + (1.0/I_b_1);
+    c[2] = -t0 + (1.0/I_b_2);
+}
+
+void lv_symtop_axis_flow_x(const double *q, const double *L_b, double c, double tau, double *q_next, double *L_next) {
+    const double q_0 = q[0];
+    const double q_1 = q[1];
+    const double q_2 = q[2];
+    const double q_3 = q[3];
+    const double L_b_0 = L_b[0];
+    const double L_b_1 = L_b[1];
+    const double L_b_2 = L_b[2];
+    const double t0 = ((1.0/2.0))*L_b_0*c*tau;
+    const double t1 = cos(t0);
+    const double t2 = sin(t0);
+    const double t3 = 1 - 2*(t2*t2);
+    const double t4 = 2*t1*t2;
+    q_next[0] = q_0*t1 + q_3*t2;
+    q_next[1] = q_1*t1 + q_2*t2;
+    q_next[2] = -q_1*t2 + q_2*t1;
+    q_next[3] = -q_0*t2 + q_3*t1;
+    L_next[0] = L_b_0;
+    L_next[1] = L_b_1*t3 + L_b_2*t4;
+    L_next[2] = -L_b_1*t4 + L_b_2*t3;
+}
+
+void lv_symtop_axis_flow_y(const double *q, const double *L_b, double c, double tau, double *q_next, double *L_next) {
+    const double q_0 = q[0];
+    const double q_1 = q[1];
+    const double q_2 = q[2];
+    const double q_3 = q[3];
+    const double L_b_0 = L_b[0];
+    const double L_b_1 = L_b[1];
+    const double L_b_2 = L_b[2];
+    const double t0 = ((1.0/2.0))*L_b_1*c*tau;
+    const double t1 = cos(t0);
+    const double t2 = sin(t0);
+    const double t3 = 1 - 2*(t2*t2);
+    const double t4 = 2*t1*t2;
+    q_next[0] = q_0*t1 - q_2*t2;
+    q_next[1] = q_1*t1 + q_3*t2;
+    q_next[2] = q_0*t2 + q_2*t1;
+    q_next[3] = -q_1*t2 + q_3*t1;
+    L_next[0] = L_b_0*t3 - L_b_2*t4;
+    L_next[1] = L_b_1;
+    L_next[2] = L_b_0*t4 + L_b_2*t3;
+}
+
+void lv_symtop_axis_flow_z(const double *q, const double *L_b, double c, double tau, double *q_next, double *L_next) {
+    const double q_0 = q[0];
+    const double q_1 = q[1];
+    const double q_2 = q[2];
+    const double q_3 = q[3];
+    const double L_b_0 = L_b[0];
+    const double L_b_1 = L_b[1];
+    const double L_b_2 = L_b[2];
+    const double t0 = ((1.0/2.0))*L_b_2*c*tau;
+    const double t1 = cos(t0);
+    const double t2 = sin(t0);
+    const double t3 = 1 - 2*(t2*t2);
+    const double t4 = 2*t1*t2;
+    q_next[0] = q_0*t1 + q_1*t2;
+    q_next[1] = -q_0*t2 + q_1*t1;
+    q_next[2] = q_2*t1 + q_3*t2;
+    q_next[3] = -q_2*t2 + q_3*t1;
+    L_next[0] = L_b_0*t3 + L_b_1*t4;
+    L_next[1] = -L_b_0*t4 + L_b_1*t3;
+    L_next[2] = L_b_2;
+}
+
+void lv_sphere_flow(const double *q, const double *L_b, double I_r, double tau, double *q_next) {
+    const double q_0 = q[0];
+    const double q_1 = q[1];
+    const double q_2 = q[2];
+    const double q_3 = q[3];
+    const double L_b_0 = L_b[0];
+    const double L_b_1 = L_b[1];
+    const double L_b_2 = L_b[2];
+    const double t0 = (1.0/I_r);
+    const double t1 = (L_b_0*L_b_0) + (L_b_1*L_b_1) + (L_b_2*L_b_2);
+    const double t2 = sqrt(t1);
+    const double t3 = t0*t2;
+    const double t4 = ((1.0/2.0))*tau;
+    const double t5 = t3*t4;
+    const double t6 = cos(t5);
+    const double t7 = ((t3*fabs(tau) > (1.0/50000000.0)) ? (
+   sin(t5)/t2
+)
+: (
+   t0*t4*(1 - (1.0/24.0)*t1*(tau*tau)/(I_r*I_r))
+));
+    const double t8 = L_b_0*t7;
+    const double t9 = L_b_2*t7;
+    const double t10 = L_b_1*t7;
+    q_next[0] = q_0*t6 + q_1*t9 - q_2*t10 + q_3*t8;
+    q_next[1] = -q_0*t9 + q_1*t6 + q_2*t8 + q_3*t10;
+    q_next[2] = q_0*t10 - q_1*t8 + q_2*t6 + q_3*t9;
+    q_next[3] = -q_0*t8 - q_1*t10 - q_2*t9 + q_3*t6;
+}
+
 void lv_body_momentum(const double *I_b, const double *omega_b, double *L_b) {
     const double I_b_0 = I_b[0];
     const double I_b_1 = I_b[1];
@@ -1956,6 +2077,12 @@ static void packed_splitting_rotation(const double *in, double *out) { lv_splitt
 static void packed_axis_flow_x(const double *in, double *out) { lv_axis_flow_x(in + 0, in + 3, in + 7, in[10], out + 0, out + 4); }
 static void packed_axis_flow_y(const double *in, double *out) { lv_axis_flow_y(in + 0, in + 3, in + 7, in[10], out + 0, out + 4); }
 static void packed_axis_flow_z(const double *in, double *out) { lv_axis_flow_z(in + 0, in + 3, in + 7, in[10], out + 0, out + 4); }
+static void packed_symtop_score(const double *in, double *out) { lv_symtop_score(in + 0, out + 0); }
+static void packed_symtop_leftover(const double *in, double *out) { lv_symtop_leftover(in + 0, in[3], out + 0); }
+static void packed_symtop_axis_flow_x(const double *in, double *out) { lv_symtop_axis_flow_x(in + 0, in + 4, in[7], in[8], out + 0, out + 4); }
+static void packed_symtop_axis_flow_y(const double *in, double *out) { lv_symtop_axis_flow_y(in + 0, in + 4, in[7], in[8], out + 0, out + 4); }
+static void packed_symtop_axis_flow_z(const double *in, double *out) { lv_symtop_axis_flow_z(in + 0, in + 4, in[7], in[8], out + 0, out + 4); }
+static void packed_sphere_flow(const double *in, double *out) { lv_sphere_flow(in + 0, in + 4, in[7], in[8], out + 0); }
 static void packed_body_momentum(const double *in, double *out) { lv_body_momentum(in + 0, in + 3, out + 0); }
 static void packed_body_rate(const double *in, double *out) { lv_body_rate(in + 0, in + 3, out + 0); }
 static void packed_splitting_kick(const double *in, double *out) { lv_splitting_kick(in[0], in + 1, in + 4, in + 7, in + 10, in + 13, in[16], out + 0, out + 3); }
@@ -2015,6 +2142,12 @@ const lv_kernel_info lv_kernel_table[LV_KERNEL_COUNT] = {
     {"axis_flow_x", 11, 7, packed_axis_flow_x},
     {"axis_flow_y", 11, 7, packed_axis_flow_y},
     {"axis_flow_z", 11, 7, packed_axis_flow_z},
+    {"symtop_score", 3, 3, packed_symtop_score},
+    {"symtop_leftover", 4, 3, packed_symtop_leftover},
+    {"symtop_axis_flow_x", 9, 7, packed_symtop_axis_flow_x},
+    {"symtop_axis_flow_y", 9, 7, packed_symtop_axis_flow_y},
+    {"symtop_axis_flow_z", 9, 7, packed_symtop_axis_flow_z},
+    {"sphere_flow", 9, 4, packed_sphere_flow},
     {"body_momentum", 6, 3, packed_body_momentum},
     {"body_rate", 6, 3, packed_body_rate},
     {"splitting_kick", 17, 6, packed_splitting_kick},

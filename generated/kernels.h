@@ -11,7 +11,7 @@ typedef struct {
     void (*packed)(const double *in, double *out);
 } lv_kernel_info;
 
-#define LV_KERNEL_COUNT 57
+#define LV_KERNEL_COUNT 63
 extern const lv_kernel_info lv_kernel_table[LV_KERNEL_COUNT];
 
 /* particle_moments: One particle's mass moment and momentum (summed: m r_COM and p).
@@ -329,6 +329,52 @@ void lv_axis_flow_y(const double *I_b, const double *q, const double *L_b, doubl
      out q_next [4]: orientation (unit when q is)
      out L_next [3]: kg·m²/s, body frame */
 void lv_axis_flow_z(const double *I_b, const double *q, const double *L_b, double tau, double *q_next, double *L_next);
+
+/* symtop_score: Size of the symmetric-top splitting error for each reference axis r.
+     in  I_b [3]: principal moments, body frame, kg·m²
+     out score [3]: 1/(kg·m²)², one per reference axis r = 0, 1, 2 */
+void lv_symtop_score(const double *I_b, double *score);
+
+/* symtop_leftover: Coefficients left over when |L|²/(2 I_r) is split off the energy.
+     in  I_b [3]: principal moments, body frame, kg·m²
+     in  I_r scalar: the reference moment I_b[r], kg·m²
+     out c [3]: 1/(kg·m²), body axes (0 on the reference axis) */
+void lv_symtop_leftover(const double *I_b, double I_r, double *c);
+
+/* symtop_axis_flow_x: Exact flow of ½ c L_x² on (q, L_B) for time τ.
+     in  q [4]: orientation (x, y, z, w), R_WB, unit
+     in  L_b [3]: angular momentum, body frame, kg·m²/s
+     in  c scalar: coefficient of ½ L²_axis in the energy, 1/(kg·m²)
+     in  tau scalar: duration of the flow, s
+     out q_next [4]: orientation (unit when q is)
+     out L_next [3]: kg·m²/s, body frame */
+void lv_symtop_axis_flow_x(const double *q, const double *L_b, double c, double tau, double *q_next, double *L_next);
+
+/* symtop_axis_flow_y: Exact flow of ½ c L_y² on (q, L_B) for time τ.
+     in  q [4]: orientation (x, y, z, w), R_WB, unit
+     in  L_b [3]: angular momentum, body frame, kg·m²/s
+     in  c scalar: coefficient of ½ L²_axis in the energy, 1/(kg·m²)
+     in  tau scalar: duration of the flow, s
+     out q_next [4]: orientation (unit when q is)
+     out L_next [3]: kg·m²/s, body frame */
+void lv_symtop_axis_flow_y(const double *q, const double *L_b, double c, double tau, double *q_next, double *L_next);
+
+/* symtop_axis_flow_z: Exact flow of ½ c L_z² on (q, L_B) for time τ.
+     in  q [4]: orientation (x, y, z, w), R_WB, unit
+     in  L_b [3]: angular momentum, body frame, kg·m²/s
+     in  c scalar: coefficient of ½ L²_axis in the energy, 1/(kg·m²)
+     in  tau scalar: duration of the flow, s
+     out q_next [4]: orientation (unit when q is)
+     out L_next [3]: kg·m²/s, body frame */
+void lv_symtop_axis_flow_z(const double *q, const double *L_b, double c, double tau, double *q_next, double *L_next);
+
+/* sphere_flow: Exact flow of |L|²/(2 I_r) on q for time τ (L_B is unchanged).
+     in  q [4]: orientation (x, y, z, w), R_WB, unit
+     in  L_b [3]: angular momentum, body frame, kg·m²/s
+     in  I_r scalar: the reference moment I_b[r], kg·m²
+     in  tau scalar: duration of the flow, s
+     out q_next [4]: orientation (unit when q is) */
+void lv_sphere_flow(const double *q, const double *L_b, double I_r, double tau, double *q_next);
 
 /* body_momentum: Body angular momentum of a body with principal moments I_B.
      in  I_b [3]: principal moments, body frame, kg·m²

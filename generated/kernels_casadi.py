@@ -1249,6 +1249,131 @@ def axis_flow_z(I_b, q, L_b, tau):
     return casadi.vertcat(q_0*t1 + q_1*t2, -q_0*t2 + q_1*t1, q_2*t1 + q_3*t2, -q_2*t2 + q_3*t1), casadi.vertcat(L_b_0*t3 + L_b_1*t4, -L_b_0*t4 + L_b_1*t3, L_b_2)
 
 
+def symtop_score(I_b):
+    """symtop_score: Size of the symmetric-top splitting error for each reference axis r.
+      in  I_b [3]: principal moments, body frame, kg·m²
+      out score [3]: 1/(kg·m²)², one per reference axis r = 0, 1, 2"""
+    I_b_0 = I_b[0]
+    I_b_1 = I_b[1]
+    I_b_2 = I_b[2]
+    t0 = (1.0/I_b_1)
+    t1 = -1/I_b_0
+    t2 = t0 + t1
+    t3 = (1.0/I_b_2)
+    t4 = t1 + t3
+    t5 = -t0 + t3
+    return casadi.vertcat(casadi.fabs(t2*t4), casadi.fabs(t2*t5), casadi.fabs(t4*t5))
+
+
+def symtop_leftover(I_b, I_r):
+    """symtop_leftover: Coefficients left over when |L|²/(2 I_r) is split off the energy.
+      in  I_b [3]: principal moments, body frame, kg·m²
+      in  I_r scalar: the reference moment I_b[r], kg·m²
+      out c [3]: 1/(kg·m²), body axes (0 on the reference axis)"""
+    I_b_0 = I_b[0]
+    I_b_1 = I_b[1]
+    I_b_2 = I_b[2]
+    t0 = (1.0/I_r)
+    return casadi.vertcat(-t0 + (1.0/I_b_0), -t0 + (1.0/I_b_1), -t0 + (1.0/I_b_2))
+
+
+def symtop_axis_flow_x(q, L_b, c, tau):
+    """symtop_axis_flow_x: Exact flow of ½ c L_x² on (q, L_B) for time τ.
+      in  q [4]: orientation (x, y, z, w), R_WB, unit
+      in  L_b [3]: angular momentum, body frame, kg·m²/s
+      in  c scalar: coefficient of ½ L²_axis in the energy, 1/(kg·m²)
+      in  tau scalar: duration of the flow, s
+      out q_next [4]: orientation (unit when q is)
+      out L_next [3]: kg·m²/s, body frame"""
+    q_0 = q[0]
+    q_1 = q[1]
+    q_2 = q[2]
+    q_3 = q[3]
+    L_b_0 = L_b[0]
+    L_b_1 = L_b[1]
+    L_b_2 = L_b[2]
+    t0 = ((1.0/2.0))*L_b_0*c*tau
+    t1 = casadi.cos(t0)
+    t2 = casadi.sin(t0)
+    t3 = 1 - 2*(t2*t2)
+    t4 = 2*t1*t2
+    return casadi.vertcat(q_0*t1 + q_3*t2, q_1*t1 + q_2*t2, -q_1*t2 + q_2*t1, -q_0*t2 + q_3*t1), casadi.vertcat(L_b_0, L_b_1*t3 + L_b_2*t4, -L_b_1*t4 + L_b_2*t3)
+
+
+def symtop_axis_flow_y(q, L_b, c, tau):
+    """symtop_axis_flow_y: Exact flow of ½ c L_y² on (q, L_B) for time τ.
+      in  q [4]: orientation (x, y, z, w), R_WB, unit
+      in  L_b [3]: angular momentum, body frame, kg·m²/s
+      in  c scalar: coefficient of ½ L²_axis in the energy, 1/(kg·m²)
+      in  tau scalar: duration of the flow, s
+      out q_next [4]: orientation (unit when q is)
+      out L_next [3]: kg·m²/s, body frame"""
+    q_0 = q[0]
+    q_1 = q[1]
+    q_2 = q[2]
+    q_3 = q[3]
+    L_b_0 = L_b[0]
+    L_b_1 = L_b[1]
+    L_b_2 = L_b[2]
+    t0 = ((1.0/2.0))*L_b_1*c*tau
+    t1 = casadi.cos(t0)
+    t2 = casadi.sin(t0)
+    t3 = 1 - 2*(t2*t2)
+    t4 = 2*t1*t2
+    return casadi.vertcat(q_0*t1 - q_2*t2, q_1*t1 + q_3*t2, q_0*t2 + q_2*t1, -q_1*t2 + q_3*t1), casadi.vertcat(L_b_0*t3 - L_b_2*t4, L_b_1, L_b_0*t4 + L_b_2*t3)
+
+
+def symtop_axis_flow_z(q, L_b, c, tau):
+    """symtop_axis_flow_z: Exact flow of ½ c L_z² on (q, L_B) for time τ.
+      in  q [4]: orientation (x, y, z, w), R_WB, unit
+      in  L_b [3]: angular momentum, body frame, kg·m²/s
+      in  c scalar: coefficient of ½ L²_axis in the energy, 1/(kg·m²)
+      in  tau scalar: duration of the flow, s
+      out q_next [4]: orientation (unit when q is)
+      out L_next [3]: kg·m²/s, body frame"""
+    q_0 = q[0]
+    q_1 = q[1]
+    q_2 = q[2]
+    q_3 = q[3]
+    L_b_0 = L_b[0]
+    L_b_1 = L_b[1]
+    L_b_2 = L_b[2]
+    t0 = ((1.0/2.0))*L_b_2*c*tau
+    t1 = casadi.cos(t0)
+    t2 = casadi.sin(t0)
+    t3 = 1 - 2*(t2*t2)
+    t4 = 2*t1*t2
+    return casadi.vertcat(q_0*t1 + q_1*t2, -q_0*t2 + q_1*t1, q_2*t1 + q_3*t2, -q_2*t2 + q_3*t1), casadi.vertcat(L_b_0*t3 + L_b_1*t4, -L_b_0*t4 + L_b_1*t3, L_b_2)
+
+
+def sphere_flow(q, L_b, I_r, tau):
+    """sphere_flow: Exact flow of |L|²/(2 I_r) on q for time τ (L_B is unchanged).
+      in  q [4]: orientation (x, y, z, w), R_WB, unit
+      in  L_b [3]: angular momentum, body frame, kg·m²/s
+      in  I_r scalar: the reference moment I_b[r], kg·m²
+      in  tau scalar: duration of the flow, s
+      out q_next [4]: orientation (unit when q is)"""
+    q_0 = q[0]
+    q_1 = q[1]
+    q_2 = q[2]
+    q_3 = q[3]
+    L_b_0 = L_b[0]
+    L_b_1 = L_b[1]
+    L_b_2 = L_b[2]
+    t0 = (1.0/I_r)
+    t1 = (L_b_0*L_b_0) + (L_b_1*L_b_1) + (L_b_2*L_b_2)
+    t2 = casadi.sqrt(t1)
+    t3 = t0*t2
+    t4 = ((1.0/2.0))*tau
+    t5 = t3*t4
+    t6 = casadi.cos(t5)
+    t7 = casadi.if_else((t3*casadi.fabs(tau) > (1.0/50000000.0)), casadi.sin(t5)/t2, t0*t4*(1 - (1.0/24.0)*t1*(tau*tau)/(I_r*I_r)))
+    t8 = L_b_0*t7
+    t9 = L_b_2*t7
+    t10 = L_b_1*t7
+    return casadi.vertcat(q_0*t6 + q_1*t9 - q_2*t10 + q_3*t8, -q_0*t9 + q_1*t6 + q_2*t8 + q_3*t10, q_0*t10 - q_1*t8 + q_2*t6 + q_3*t9, -q_0*t8 - q_1*t10 - q_2*t9 + q_3*t6)
+
+
 def body_momentum(I_b, omega_b):
     """body_momentum: Body angular momentum of a body with principal moments I_B.
       in  I_b [3]: principal moments, body frame, kg·m²

@@ -2293,6 +2293,279 @@ def axis_flow_z(I_b, q, L_b, tau):
     return q_next_out, L_next_out
 
 
+def symtop_score(I_b):
+    """Size of the symmetric-top splitting error for each reference axis r.
+
+    Generated kernel ``symtop_score``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    I_b : array_like, shape (..., 3)
+        principal moments, body frame, kg·m²
+
+    Returns
+    -------
+    score : ndarray, shape (..., 3)
+        1/(kg·m²)², one per reference axis r = 0, 1, 2
+    """
+    I_b = numpy.asarray(I_b, dtype=numpy.float64)
+    batch = numpy.broadcast_shapes(I_b.shape[:-1])
+    I_b_0 = I_b[..., 0]
+    I_b_1 = I_b[..., 1]
+    I_b_2 = I_b[..., 2]
+    t0 = (1.0/I_b_1)
+    t1 = -1/I_b_0
+    t2 = t0 + t1
+    t3 = (1.0/I_b_2)
+    t4 = t1 + t3
+    t5 = -t0 + t3
+    score_out = numpy.empty(batch + (3,))
+    score_out[..., 0] = abs(t2*t4)
+    score_out[..., 1] = abs(t2*t5)
+    score_out[..., 2] = abs(t4*t5)
+    return score_out
+
+
+def symtop_leftover(I_b, I_r):
+    """Coefficients left over when |L|²/(2 I_r) is split off the energy.
+
+    Generated kernel ``symtop_leftover``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    I_b : array_like, shape (..., 3)
+        principal moments, body frame, kg·m²
+    I_r : array_like, shape (...)
+        the reference moment I_b[r], kg·m²
+
+    Returns
+    -------
+    c : ndarray, shape (..., 3)
+        1/(kg·m²), body axes (0 on the reference axis)
+    """
+    I_b = numpy.asarray(I_b, dtype=numpy.float64)
+    I_r = numpy.asarray(I_r, dtype=numpy.float64)
+    batch = numpy.broadcast_shapes(I_b.shape[:-1], I_r.shape)
+    I_b_0 = I_b[..., 0]
+    I_b_1 = I_b[..., 1]
+    I_b_2 = I_b[..., 2]
+    t0 = (1.0/I_r)
+    c_out = numpy.empty(batch + (3,))
+    c_out[..., 0] = -t0 + (1.0/I_b_0)
+    c_out[..., 1] = -t0 + (1.0/I_b_1)
+    c_out[..., 2] = -t0 + (1.0/I_b_2)
+    return c_out
+
+
+def symtop_axis_flow_x(q, L_b, c, tau):
+    """Exact flow of ½ c L_x² on (q, L_B) for time τ.
+
+    Generated kernel ``symtop_axis_flow_x``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    q : array_like, shape (..., 4)
+        orientation (x, y, z, w), R_WB, unit
+    L_b : array_like, shape (..., 3)
+        angular momentum, body frame, kg·m²/s
+    c : array_like, shape (...)
+        coefficient of ½ L²_axis in the energy, 1/(kg·m²)
+    tau : array_like, shape (...)
+        duration of the flow, s
+
+    Returns
+    -------
+    q_next : ndarray, shape (..., 4)
+        orientation (unit when q is)
+    L_next : ndarray, shape (..., 3)
+        kg·m²/s, body frame
+    """
+    q = numpy.asarray(q, dtype=numpy.float64)
+    L_b = numpy.asarray(L_b, dtype=numpy.float64)
+    c = numpy.asarray(c, dtype=numpy.float64)
+    tau = numpy.asarray(tau, dtype=numpy.float64)
+    batch = numpy.broadcast_shapes(q.shape[:-1], L_b.shape[:-1], c.shape, tau.shape)
+    q_0 = q[..., 0]
+    q_1 = q[..., 1]
+    q_2 = q[..., 2]
+    q_3 = q[..., 3]
+    L_b_0 = L_b[..., 0]
+    L_b_1 = L_b[..., 1]
+    L_b_2 = L_b[..., 2]
+    t0 = ((1.0/2.0))*L_b_0*c*tau
+    t1 = numpy.cos(t0)
+    t2 = numpy.sin(t0)
+    t3 = 1 - 2*(t2*t2)
+    t4 = 2*t1*t2
+    q_next_out = numpy.empty(batch + (4,))
+    q_next_out[..., 0] = q_0*t1 + q_3*t2
+    q_next_out[..., 1] = q_1*t1 + q_2*t2
+    q_next_out[..., 2] = -q_1*t2 + q_2*t1
+    q_next_out[..., 3] = -q_0*t2 + q_3*t1
+    L_next_out = numpy.empty(batch + (3,))
+    L_next_out[..., 0] = L_b_0
+    L_next_out[..., 1] = L_b_1*t3 + L_b_2*t4
+    L_next_out[..., 2] = -L_b_1*t4 + L_b_2*t3
+    return q_next_out, L_next_out
+
+
+def symtop_axis_flow_y(q, L_b, c, tau):
+    """Exact flow of ½ c L_y² on (q, L_B) for time τ.
+
+    Generated kernel ``symtop_axis_flow_y``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    q : array_like, shape (..., 4)
+        orientation (x, y, z, w), R_WB, unit
+    L_b : array_like, shape (..., 3)
+        angular momentum, body frame, kg·m²/s
+    c : array_like, shape (...)
+        coefficient of ½ L²_axis in the energy, 1/(kg·m²)
+    tau : array_like, shape (...)
+        duration of the flow, s
+
+    Returns
+    -------
+    q_next : ndarray, shape (..., 4)
+        orientation (unit when q is)
+    L_next : ndarray, shape (..., 3)
+        kg·m²/s, body frame
+    """
+    q = numpy.asarray(q, dtype=numpy.float64)
+    L_b = numpy.asarray(L_b, dtype=numpy.float64)
+    c = numpy.asarray(c, dtype=numpy.float64)
+    tau = numpy.asarray(tau, dtype=numpy.float64)
+    batch = numpy.broadcast_shapes(q.shape[:-1], L_b.shape[:-1], c.shape, tau.shape)
+    q_0 = q[..., 0]
+    q_1 = q[..., 1]
+    q_2 = q[..., 2]
+    q_3 = q[..., 3]
+    L_b_0 = L_b[..., 0]
+    L_b_1 = L_b[..., 1]
+    L_b_2 = L_b[..., 2]
+    t0 = ((1.0/2.0))*L_b_1*c*tau
+    t1 = numpy.cos(t0)
+    t2 = numpy.sin(t0)
+    t3 = 1 - 2*(t2*t2)
+    t4 = 2*t1*t2
+    q_next_out = numpy.empty(batch + (4,))
+    q_next_out[..., 0] = q_0*t1 - q_2*t2
+    q_next_out[..., 1] = q_1*t1 + q_3*t2
+    q_next_out[..., 2] = q_0*t2 + q_2*t1
+    q_next_out[..., 3] = -q_1*t2 + q_3*t1
+    L_next_out = numpy.empty(batch + (3,))
+    L_next_out[..., 0] = L_b_0*t3 - L_b_2*t4
+    L_next_out[..., 1] = L_b_1
+    L_next_out[..., 2] = L_b_0*t4 + L_b_2*t3
+    return q_next_out, L_next_out
+
+
+def symtop_axis_flow_z(q, L_b, c, tau):
+    """Exact flow of ½ c L_z² on (q, L_B) for time τ.
+
+    Generated kernel ``symtop_axis_flow_z``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    q : array_like, shape (..., 4)
+        orientation (x, y, z, w), R_WB, unit
+    L_b : array_like, shape (..., 3)
+        angular momentum, body frame, kg·m²/s
+    c : array_like, shape (...)
+        coefficient of ½ L²_axis in the energy, 1/(kg·m²)
+    tau : array_like, shape (...)
+        duration of the flow, s
+
+    Returns
+    -------
+    q_next : ndarray, shape (..., 4)
+        orientation (unit when q is)
+    L_next : ndarray, shape (..., 3)
+        kg·m²/s, body frame
+    """
+    q = numpy.asarray(q, dtype=numpy.float64)
+    L_b = numpy.asarray(L_b, dtype=numpy.float64)
+    c = numpy.asarray(c, dtype=numpy.float64)
+    tau = numpy.asarray(tau, dtype=numpy.float64)
+    batch = numpy.broadcast_shapes(q.shape[:-1], L_b.shape[:-1], c.shape, tau.shape)
+    q_0 = q[..., 0]
+    q_1 = q[..., 1]
+    q_2 = q[..., 2]
+    q_3 = q[..., 3]
+    L_b_0 = L_b[..., 0]
+    L_b_1 = L_b[..., 1]
+    L_b_2 = L_b[..., 2]
+    t0 = ((1.0/2.0))*L_b_2*c*tau
+    t1 = numpy.cos(t0)
+    t2 = numpy.sin(t0)
+    t3 = 1 - 2*(t2*t2)
+    t4 = 2*t1*t2
+    q_next_out = numpy.empty(batch + (4,))
+    q_next_out[..., 0] = q_0*t1 + q_1*t2
+    q_next_out[..., 1] = -q_0*t2 + q_1*t1
+    q_next_out[..., 2] = q_2*t1 + q_3*t2
+    q_next_out[..., 3] = -q_2*t2 + q_3*t1
+    L_next_out = numpy.empty(batch + (3,))
+    L_next_out[..., 0] = L_b_0*t3 + L_b_1*t4
+    L_next_out[..., 1] = -L_b_0*t4 + L_b_1*t3
+    L_next_out[..., 2] = L_b_2
+    return q_next_out, L_next_out
+
+
+def sphere_flow(q, L_b, I_r, tau):
+    """Exact flow of |L|²/(2 I_r) on q for time τ (L_B is unchanged).
+
+    Generated kernel ``sphere_flow``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    q : array_like, shape (..., 4)
+        orientation (x, y, z, w), R_WB, unit
+    L_b : array_like, shape (..., 3)
+        angular momentum, body frame, kg·m²/s
+    I_r : array_like, shape (...)
+        the reference moment I_b[r], kg·m²
+    tau : array_like, shape (...)
+        duration of the flow, s
+
+    Returns
+    -------
+    q_next : ndarray, shape (..., 4)
+        orientation (unit when q is)
+    """
+    q = numpy.asarray(q, dtype=numpy.float64)
+    L_b = numpy.asarray(L_b, dtype=numpy.float64)
+    I_r = numpy.asarray(I_r, dtype=numpy.float64)
+    tau = numpy.asarray(tau, dtype=numpy.float64)
+    batch = numpy.broadcast_shapes(q.shape[:-1], L_b.shape[:-1], I_r.shape, tau.shape)
+    q_0 = q[..., 0]
+    q_1 = q[..., 1]
+    q_2 = q[..., 2]
+    q_3 = q[..., 3]
+    L_b_0 = L_b[..., 0]
+    L_b_1 = L_b[..., 1]
+    L_b_2 = L_b[..., 2]
+    with numpy.errstate(invalid='ignore', divide='ignore'):  # numpy.select evaluates every branch
+        t0 = (1.0/I_r)
+        t1 = (L_b_0*L_b_0) + (L_b_1*L_b_1) + (L_b_2*L_b_2)
+        t2 = numpy.sqrt(t1)
+        t3 = t0*t2
+        t4 = ((1.0/2.0))*tau
+        t5 = t3*t4
+        t6 = numpy.cos(t5)
+        t7 = numpy.select([numpy.greater(t3*abs(tau), (1.0/50000000.0)),True], [numpy.sin(t5)/t2,t0*t4*(1 - (1.0/24.0)*t1*(tau*tau)/(I_r*I_r))], default=numpy.nan)
+        t8 = L_b_0*t7
+        t9 = L_b_2*t7
+        t10 = L_b_1*t7
+        q_next_out = numpy.empty(batch + (4,))
+        q_next_out[..., 0] = q_0*t6 + q_1*t9 - q_2*t10 + q_3*t8
+        q_next_out[..., 1] = -q_0*t9 + q_1*t6 + q_2*t8 + q_3*t10
+        q_next_out[..., 2] = q_0*t10 - q_1*t8 + q_2*t6 + q_3*t9
+        q_next_out[..., 3] = -q_0*t8 - q_1*t10 - q_2*t9 + q_3*t6
+    return q_next_out
+
+
 def body_momentum(I_b, omega_b):
     """Body angular momentum of a body with principal moments I_B.
 
@@ -3000,6 +3273,12 @@ KERNELS = {
     'axis_flow_x': (axis_flow_x, [('I_b', (3,)), ('q', (4,)), ('L_b', (3,)), ('tau', ())], [('q_next', (4,)), ('L_next', (3,))]),
     'axis_flow_y': (axis_flow_y, [('I_b', (3,)), ('q', (4,)), ('L_b', (3,)), ('tau', ())], [('q_next', (4,)), ('L_next', (3,))]),
     'axis_flow_z': (axis_flow_z, [('I_b', (3,)), ('q', (4,)), ('L_b', (3,)), ('tau', ())], [('q_next', (4,)), ('L_next', (3,))]),
+    'symtop_score': (symtop_score, [('I_b', (3,))], [('score', (3,))]),
+    'symtop_leftover': (symtop_leftover, [('I_b', (3,)), ('I_r', ())], [('c', (3,))]),
+    'symtop_axis_flow_x': (symtop_axis_flow_x, [('q', (4,)), ('L_b', (3,)), ('c', ()), ('tau', ())], [('q_next', (4,)), ('L_next', (3,))]),
+    'symtop_axis_flow_y': (symtop_axis_flow_y, [('q', (4,)), ('L_b', (3,)), ('c', ()), ('tau', ())], [('q_next', (4,)), ('L_next', (3,))]),
+    'symtop_axis_flow_z': (symtop_axis_flow_z, [('q', (4,)), ('L_b', (3,)), ('c', ()), ('tau', ())], [('q_next', (4,)), ('L_next', (3,))]),
+    'sphere_flow': (sphere_flow, [('q', (4,)), ('L_b', (3,)), ('I_r', ()), ('tau', ())], [('q_next', (4,))]),
     'body_momentum': (body_momentum, [('I_b', (3,)), ('omega_b', (3,))], [('L_b', (3,))]),
     'body_rate': (body_rate, [('I_b', (3,)), ('L_b', (3,))], [('omega_b', (3,))]),
     'splitting_kick': (splitting_kick, [('m', ()), ('I_b', (3,)), ('v_w', (3,)), ('omega_b', (3,)), ('F_w', (3,)), ('tau_b', (3,)), ('h', ())], [('v_next', (3,)), ('omega_next', (3,))]),

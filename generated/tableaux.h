@@ -8,6 +8,7 @@
 #define LV_RK4_B_DEN 6
 #define LV_SPLIT4_STAGES 5
 #define LV_SPLIT4_FLOWS 21
+#define LV_SYMTOP4_STAGES 5
 #define LV_DP_SAFETY 0.9
 #define LV_DP_FACMIN 0.2
 #define LV_DP_FACMAX 5.0
@@ -22,6 +23,7 @@
 #define LV_DP_INIT_EXPONENT 0.2
 #define LV_GYRO_TOL_SQ 1e-32
 #define LV_GYRO_ACCEPT_SQ 1e-20
+#define LV_SYMTOP_STRANG_A 0.5
 #define LV_SPLIT_KICK 0.5
 #define LV_SPLIT_MIDPOINT 0.5
 #define LV_RK4_C0 0.0
@@ -46,6 +48,8 @@
 #define LV_WDT_RATIO_EXPONENT_SPLITTING 0.5
 #define LV_WDT_MAX_SPLITTING4 1.0
 #define LV_WDT_RATIO_EXPONENT_SPLITTING4 0.5
+#define LV_WDT_MAX_SYMTOP4 1.0
+#define LV_WDT_RATIO_EXPONENT_SYMTOP4 0.5
 
 /* Dormand-Prince 5(4): A (row 6 = the 5th-order weights, FSAL) and E = b - b_hat */
 static const double LV_DP_A[7][6] = {
@@ -66,6 +70,12 @@ static const double LV_SPLIT4_GAMMA[LV_SPLIT4_STAGES] = {0.4144907717943757, 0.4
    merged: flow k turns about body axis LV_SPLIT4_AXIS[k] for LV_SPLIT4_FRAC[k] * h */
 static const int LV_SPLIT4_AXIS[LV_SPLIT4_FLOWS] = {0, 1, 2, 1, 0, 1, 2, 1, 0, 1, 2, 1, 0, 1, 2, 1, 0, 1, 2, 1, 0};
 static const double LV_SPLIT4_FRAC[LV_SPLIT4_FLOWS] = {0.20724538589718786, 0.20724538589718786, 0.4144907717943757, 0.20724538589718786, 0.4144907717943757, 0.20724538589718786, 0.4144907717943757, 0.20724538589718786, -0.12173615769156361, -0.3289815435887515, -0.657963087177503, -0.3289815435887515, -0.12173615769156361, 0.20724538589718786, 0.4144907717943757, 0.20724538589718786, 0.4144907717943757, 0.20724538589718786, 0.4144907717943757, 0.20724538589718786, 0.20724538589718786};
+/* symtop4 without effects: A(LV_SYMTOP4_A_FRAC[0] h) B(LV_SYMTOP4_B_FRAC[0] h) A(...[1] h) ... A(...[s] h),
+   A = sphere flow + axis flow of the larger leftover coefficient, B = axis flow of the smaller; with
+   effects the Strang step A(gamma_i h/2) B(gamma_i h) A(gamma_i h/2) inside the splitting's kicks */
+static const double LV_SYMTOP4_GAMMA[LV_SYMTOP4_STAGES] = {0.4144907717943757, 0.4144907717943757, -0.657963087177503, 0.4144907717943757, 0.4144907717943757};
+static const double LV_SYMTOP4_A_FRAC[LV_SYMTOP4_STAGES + 1] = {0.20724538589718786, 0.4144907717943757, -0.12173615769156361, -0.12173615769156361, 0.4144907717943757, 0.20724538589718786};
+static const double LV_SYMTOP4_B_FRAC[LV_SYMTOP4_STAGES] = {0.4144907717943757, 0.4144907717943757, -0.657963087177503, 0.4144907717943757, 0.4144907717943757};
 
 /* Strang splitting of the free rotation, x(1/2*h) y(1/2*h) z(h) y(1/2*h) x(1/2*h): composed in derive/ into the kernel
    lv_splitting_rotation (no table is needed at run time). */

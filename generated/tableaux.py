@@ -8,6 +8,7 @@ GYRO_MAX_ITER = 30
 RK4_B_DEN = 6
 SPLIT4_STAGES = 5
 SPLIT4_FLOWS = 21
+SYMTOP4_STAGES = 5
 DP_SAFETY = 0.9
 DP_FACMIN = 0.2
 DP_FACMAX = 5.0
@@ -22,6 +23,7 @@ DP_INIT_GROW = 100.0
 DP_INIT_EXPONENT = 0.2
 GYRO_TOL_SQ = 1e-32
 GYRO_ACCEPT_SQ = 1e-20
+SYMTOP_STRANG_A = 0.5
 SPLIT_KICK = 0.5
 SPLIT_MIDPOINT = 0.5
 RK4_C0 = 0.0
@@ -46,6 +48,8 @@ WDT_MAX_SPLITTING = 1.0
 WDT_RATIO_EXPONENT_SPLITTING = 0.5
 WDT_MAX_SPLITTING4 = 1.0
 WDT_RATIO_EXPONENT_SPLITTING4 = 0.5
+WDT_MAX_SYMTOP4 = 1.0
+WDT_RATIO_EXPONENT_SYMTOP4 = 0.5
 
 # Dormand-Prince 5(4): DP_A[s] (stage s's coefficients; DP_A[6] = the 5th-order weights, FSAL), DP_E = b - b_hat
 DP_A = (
@@ -66,8 +70,13 @@ STRANG = ((0, 0.5), (1, 0.5), (2, 1.0), (1, 0.5), (0, 0.5))
 SPLIT4_GAMMA = (0.4144907717943757, 0.4144907717943757, -0.657963087177503, 0.4144907717943757, 0.4144907717943757)
 # splitting4 without effects: its substeps' axis flows as one sequence (axis, fraction of h), neighbours merged
 SPLIT4_SEQ = ((0, 0.20724538589718786), (1, 0.20724538589718786), (2, 0.4144907717943757), (1, 0.20724538589718786), (0, 0.4144907717943757), (1, 0.20724538589718786), (2, 0.4144907717943757), (1, 0.20724538589718786), (0, -0.12173615769156361), (1, -0.3289815435887515), (2, -0.657963087177503), (1, -0.3289815435887515), (0, -0.12173615769156361), (1, 0.20724538589718786), (2, 0.4144907717943757), (1, 0.20724538589718786), (0, 0.4144907717943757), (1, 0.20724538589718786), (2, 0.4144907717943757), (1, 0.20724538589718786), (0, 0.20724538589718786))
+# symtop4: the Strang step's stage fractions gamma_i (order 4), and without effects the merged sequence
+# A(SYMTOP4_A_FRAC[0] h) B(SYMTOP4_B_FRAC[0] h) A(SYMTOP4_A_FRAC[1] h) ... A(SYMTOP4_A_FRAC[s] h)
+SYMTOP4_GAMMA = (0.4144907717943757, 0.4144907717943757, -0.657963087177503, 0.4144907717943757, 0.4144907717943757)
+SYMTOP4_A_FRAC = (0.20724538589718786, 0.4144907717943757, -0.12173615769156361, -0.12173615769156361, 0.4144907717943757, 0.20724538589718786)
+SYMTOP4_B_FRAC = (0.4144907717943757, 0.4144907717943757, -0.657963087177503, 0.4144907717943757, 0.4144907717943757)
 # validity bounds: |omega| dt (I_max/I_min)**WDT_RATIO_EXPONENT[name] <= WDT_MAX[name] (derive/tableaux.py)
-WDT_MAX = {'euler': 0.1, 'implicit_gyro': 3.141592653589793, 'rk4': 2.8284271247461903, 'rk4_expmap': 2.8284271247461903, 'semi_implicit_euler': 0.1, 'splitting': 1.0, 'splitting4': 1.0}
-WDT_RATIO_EXPONENT = {'euler': 0.0, 'implicit_gyro': 0.0, 'rk4': 0.0, 'rk4_expmap': 0.0, 'semi_implicit_euler': 0.0, 'splitting': 0.5, 'splitting4': 0.5}
+WDT_MAX = {'euler': 0.1, 'implicit_gyro': 3.141592653589793, 'rk4': 2.8284271247461903, 'rk4_expmap': 2.8284271247461903, 'semi_implicit_euler': 0.1, 'splitting': 1.0, 'splitting4': 1.0, 'symtop4': 1.0}
+WDT_RATIO_EXPONENT = {'euler': 0.0, 'implicit_gyro': 0.0, 'rk4': 0.0, 'rk4_expmap': 0.0, 'semi_implicit_euler': 0.0, 'splitting': 0.5, 'splitting4': 0.5, 'symtop4': 0.5}
 # linear stability limit on the negative real axis, |lambda| h (from each explicit tableau; derive/tableaux.py)
 REAL_AXIS_STABILITY = {'dopri5': 3.3065678926349467, 'euler': 2.0, 'rk4': 2.785293563405282, 'rk4_expmap': 2.785293563405282, 'semi_implicit_euler': 2.0}

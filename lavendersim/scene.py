@@ -1,6 +1,8 @@
 """A scene: bodies plus the effects it declares, and nothing else."""
 from __future__ import annotations
 
+from types import MappingProxyType
+
 import numpy as np
 
 from . import validate as V
@@ -36,8 +38,13 @@ class Scene:
 
     @V.keywords
     def __init__(self):
-        self.bodies: dict[str, Body] = {}
+        self._bodies: dict[str, Body] = {}
         self.effects: list[Effect] = []
+
+    @property
+    def bodies(self) -> MappingProxyType:
+        """The bodies by name, in the order added: a read-only view (add with add_body, which validates)."""
+        return MappingProxyType(self._bodies)
 
     @V.keywords
     def add_body(self, body: Body) -> Body:
@@ -67,7 +74,7 @@ class Scene:
         if why:
             raise V.LavenderInputError("body", f"{why} with the scene's effects on every body "
                                        f"({', '.join(e.name for e in every)})")
-        self.bodies[body.name] = body
+        self._bodies[body.name] = body
         return body
 
     def add_effect(self, effect: Effect | str, body: str | None = None, **params) -> Effect:
@@ -287,7 +294,7 @@ def add_bodies(scene: Scene, names, masses, I_b, *, p_w=None, q=None, v_w=None, 
         if why:
             raise V.LavenderInputError(f"names[{i}]", f"body {b.name!r}: {why} with the scene's effects on every body "
                                        f"({', '.join(e.name for e in every)})")
-    scene.bodies.update(zip(names, bodies))
+    scene._bodies.update(zip(names, bodies))
     return bodies
 
 

@@ -49,7 +49,13 @@ Integrators (`integrator=`; `sim.rhs_evals` counts right-hand-side evaluations, 
   stages. 4 evaluations per step; its stability limit is RK4's (|ω|·dt ≲ 1 for the gyroscopic term).
   Plain bodies only.
 
-Unsupported combinations (splitting / implicit_gyro / splitting4 / rk4_expmap with a joint or wheels;
+* "symtop4": fourth order, the free rigid body split around a symmetric top about the intermediate
+  axis r, H = |L|²/(2 I_r) + ½ c_a L_a² + ½ c_b L_b² (c_i = 1/I_i − 1/I_r): exact sphere and axis
+  flows (17 rotations per step torque-free), composed with splitting4's Suzuki coefficients. Exact for
+  a symmetric top (c_b = 0); torque-free, world L, |L_b| and |q| conserved to rounding. Effects as
+  splitting4's, per stage: order 4 with loads of position and attitude only, order 3 with damping.
+  rhs_evals counted as splitting4's. Plain bodies only; validity bound splitting4's.
+Unsupported combinations (splitting / implicit_gyro / splitting4 / rk4_expmap / symtop4 with a joint or wheels;
 rtol/atol with a fixed-step integrator) raise LavenderInputError at construction.
 
 Divergence before infinity (checked per chunk of steps, so the stepping itself is unchanged bit for bit):

@@ -276,6 +276,73 @@ def _splitting4(plan, x, h):
     return xn
 
 
+_SYMTOP_FLOWS = (K.symtop_axis_flow_x, K.symtop_axis_flow_y, K.symtop_axis_flow_z)
+
+
+def symtop_axes(I):
+    """symtop4's split of each body (rows of I, principal moments): (a, b, I_r, c_a, c_b) — the reference
+    axis r with the smallest symtop_score (the first on ties: the intermediate principal axis), the A axis a
+    (of the other two, the larger leftover |c| from symtop_leftover, the first on ties), the B axis b, the
+    reference moment I_r and the coefficients c_a, c_b (1/(kg·m²)). As the C backend's symtop_axes."""
+    rows = np.arange(I.shape[0])
+    r = np.argmin(K.symtop_score(I), axis=1)
+    I_r = I[rows, r]
+    c = K.symtop_leftover(I, I_r)
+    j, k = (r + 1) % 3, (r + 2) % 3
+    swap = np.abs(c[rows, k]) > np.abs(c[rows, j])
+    a, b = np.where(swap, k, j), np.where(swap, j, k)
+    return a, b, I_r, c[rows, a], c[rows, b]
+
+
+def _symtop_rotation(I, q, L, h, stage=None):
+    """symtop4's rotation on rows (q, L_b): stage None, the merged sequence A(a_0 h) B(b_0 h) … A(a_s h)
+    (T.SYMTOP4_A_FRAC, T.SYMTOP4_B_FRAC); else stage's Strang step A(γ h/2) B(γ h) A(γ h/2). A(τ): the axis
+    flow of ½ c_a L_a² then the sphere flow of |L|²/(2 I_r); B(τ): the axis flow of ½ c_b L_b². Bodies are
+    grouped by their (a, b) axes; the C backend's symtop_rotation, operation for operation."""
+    a, b, I_r, c_a, c_b = symtop_axes(I)
+    if stage is None:
+        fa, fb = T.SYMTOP4_A_FRAC, T.SYMTOP4_B_FRAC
+    else:
+        g = T.SYMTOP4_GAMMA[stage]
+        fa, fb = (T.SYMTOP_STRANG_A * g, T.SYMTOP_STRANG_A * g), (g,)
+    q, L = q.copy(), L.copy()
+    for pa, pb in sorted(set(zip(a.tolist(), b.tolist()))):
+        m = (a == pa) & (b == pb)
+        qm, Lm = q[m], L[m]
+        for i, f in enumerate(fa):
+            qm, Lm = _SYMTOP_FLOWS[pa](qm, Lm, c_a[m], f * h)
+            qm = K.sphere_flow(qm, Lm, I_r[m], f * h)
+            if i < len(fb):
+                qm, Lm = _SYMTOP_FLOWS[pb](qm, Lm, c_b[m], fb[i] * h)
+        q[m], L[m] = qm, Lm
+    return q, L
+
+
+def _symtop4(plan, x, h):
+    """symtop4: bodies without effects drift p by h v and take the merged rotation (_symtop_rotation) on
+    L_b = I ω (body_momentum), turned back into ω once (body_rate). Bodies with effects: for each stage γ_i,
+    kick(γ_i h/2), drift p by γ_i h, the Strang rotation over γ_i h, kick(γ_i h/2). The C backend's
+    symtop4_step, operation for operation."""
+    xn = x.copy()
+    if plan.forced.size:
+        xf = x.copy()
+        for s, g in enumerate(T.SYMTOP4_GAMMA):
+            gh = g * h
+            _kick(plan, xf, T.SPLIT_KICK * gh)
+            xf[:, P] = K.translation_drift(xf[:, P], xf[:, V], gh)
+            q, L = _symtop_rotation(plan.I, xf[:, Q], K.body_momentum(plan.I, xf[:, W]), h, s)
+            xf[:, Q], xf[:, W] = q, K.body_rate(plan.I, L)
+            _kick(plan, xf, T.SPLIT_KICK * gh)
+        xn[plan.forced] = xf[plan.forced]
+    free = slice(None) if not plan.forced.size else plan.free
+    I = plan.I[free]
+    if I.shape[0]:
+        xn[free, P] = K.translation_drift(x[free, P], x[free, V], h)
+        q, L = _symtop_rotation(I, x[free, Q], K.body_momentum(I, x[free, W]), h)
+        xn[free, Q], xn[free, W] = q, K.body_rate(I, L)
+    return xn
+
+
 def _rk4_expmap(plan, x, h):
     """rk4_expmap (RKMK4): the RK4 tableau on (p, v, u, ω) with the attitude q = q₀ ⊗ exp(u/2), u the
     body rotation vector since the step's start (u₀ = 0). Each stage evaluates the right-hand side at its
@@ -355,6 +422,8 @@ def step(plan: _Plan, x: np.ndarray, integrator: str, normalize: bool, dt: float
         xn = _splitting4(plan, x, dt)
     elif integrator == "rk4_expmap":
         xn = _rk4_expmap(plan, x, dt)
+    elif integrator == "symtop4":
+        xn = _symtop4(plan, x, dt)
     elif integrator == "rk4":
         k1 = f(x)
         k2 = f(x + (T.RK4_C1 * dt) * k1)

@@ -261,7 +261,7 @@ static PyObject *py_simulate(PyObject *self, PyObject *args)
     if (integrator < 0 || integrator > LV_INTEGRATOR_LAST) {
         PyErr_Format(PyExc_ValueError,
                      "simulate: integrator code must be 0 (euler), 1 (semi_implicit_euler), 2 (rk4), 3 (dopri5), "
-                     "4 (splitting), 5 (implicit_gyro), 6 (splitting4) or 7 (rk4_expmap), got %d", integrator);
+                     "4 (splitting), 5 (implicit_gyro), 6 (splitting4), 7 (rk4_expmap) or 8 (symtop4), got %d", integrator);
         return NULL;
     }
     if (integrator == LV_INTEGRATOR_DOPRI5 && (h_obj == Py_None || nfev_obj == Py_None)) {
@@ -373,7 +373,7 @@ static PyObject *py_simulate(PyObject *self, PyObject *args)
         PyErr_Format(PyExc_ValueError, "simulate: effects[%ld] has a code no declared effect has", fail_step);
     else if (status < 0)
         PyErr_SetString(PyExc_ValueError, "simulate: lv_simulate rejected its arguments "
-                        "(splitting, implicit_gyro, splitting4 and rk4_expmap step plain bodies only: no joint or wheels)");
+                        "(splitting, implicit_gyro, splitting4, rk4_expmap and symtop4 step plain bodies only: no joint or wheels)");
     else if (status == LV_OK)
         result = Py_BuildValue("(iii)", 0, -1, -1);
     else
@@ -452,7 +452,7 @@ static PyMethodDef methods[] = {
      "The model arrays may be None (all four). dopri5 needs h (nb,) (per-body step proposals, in/out; <= 0:\n"
      "choose) and nfev (nb,) (RHS evaluations added per body), rtol > 0, atol >= 0.\n"
      "integrator 0 euler, 1 semi-implicit euler, 2 rk4, 3 dopri5, 4 splitting, 5 implicit_gyro, 6 splitting4,\n"
-     "7 rk4_expmap (4-7: plain bodies only). status 2: dopri5 could not meet the tolerance (h[body] = the step that was too small). status 0 ok (step = body = -1); status 1: the\n"
+     "7 rk4_expmap, 8 symtop4 (4-8: plain bodies only). status 2: dopri5 could not meet the tolerance (h[body] = the step that was too small). status 0 ok (step = body = -1); status 1: the\n"
      "state of `body` became non-finite at 0-based `step`: earlier bodies are fully advanced, that body\n"
      "holds its last finite state (and wheel rates), later bodies are untouched."},
     {NULL, NULL, 0, NULL}};
@@ -484,6 +484,7 @@ PyMODINIT_FUNC PyInit__lavender_c(void)
         PyModule_AddIntConstant(m, "ISA_BASE", LV_ISA_BASE) != 0 ||
         PyModule_AddIntConstant(m, "ISA_AVX2", LV_ISA_AVX2) != 0 ||
         PyModule_AddIntConstant(m, "ISA_AVX512", LV_ISA_AVX512) != 0 ||
+        PyModule_AddIntConstant(m, "SYMTOP4", LV_INTEGRATOR_SYMTOP4) != 0 ||
         lv_add_stepper_type(m) != 0) {
         Py_DECREF(m);
         return NULL;

@@ -822,6 +822,82 @@ static void splitting4_step(const body_ctx *c, double *x, double h, int damped)
     lv_body_rate(I, L, x + LV_STATE_OMEGA_B);
 }
 
+/* symtop4's split of body c (symtop_score, symtop_leftover): the reference axis r (the smallest score, the
+   first on ties: the intermediate principal axis), the A axis (the larger leftover coefficient |c_a| of the
+   other two, the first on ties) and the B axis; *I_r, *c_a, *c_b. */
+static void symtop_axes(const double *I, int *a, int *b, double *I_r, double *c_a, double *c_b)
+{
+    double score[3], c[3];
+    int r = 0, i, j, k;
+    lv_symtop_score(I, score);
+    for (i = 1; i < 3; i++)
+        if (score[i] < score[r]) r = i;
+    *I_r = I[r];
+    lv_symtop_leftover(I, I[r], c);
+    j = (r + 1) % 3;
+    k = (r + 2) % 3;
+    if (fabs(c[k]) > fabs(c[j])) { i = j; j = k; k = i; }
+    *a = j; *b = k; *c_a = c[j]; *c_b = c[k];
+}
+
+/* The exact flow for time tau of 1/2 cf L_ax^2 on (q, L) (symtop_axis_flow_{x,y,z}), in place. */
+static void symtop_axis(int ax, double cf, double *q, double *L, double tau)
+{
+    if (ax == 0)
+        lv_symtop_axis_flow_x(q, L, cf, tau, q, L);
+    else if (ax == 1)
+        lv_symtop_axis_flow_y(q, L, cf, tau, q, L);
+    else
+        lv_symtop_axis_flow_z(q, L, cf, tau, q, L);
+}
+
+/* symtop4's rotation part on (q, L) (body c's split from symtop_axes): without effects the merged sequence
+   A(a_0 h) B(b_0 h) A(a_1 h) ... A(a_s h) (LV_SYMTOP4_A_FRAC / LV_SYMTOP4_B_FRAC); `stage` >= 0 gives
+   stage's Strang step A(gamma h/2) B(gamma h) A(gamma h/2) (gamma = LV_SYMTOP4_GAMMA[stage]). A(tau) is the
+   axis flow of 1/2 c_a L_a^2 then the sphere flow of |L|^2/(2 I_r) (they commute); B(tau) the axis flow of
+   1/2 c_b L_b^2. */
+static void symtop_rotation(const double *I, double *q, double *L, double h, int stage)
+{
+    double I_r, c_a, c_b;
+    int a, b, i, n = stage < 0 ? LV_SYMTOP4_STAGES : 1;
+    symtop_axes(I, &a, &b, &I_r, &c_a, &c_b);
+    for (i = 0; i <= n; i++) {
+        const double ta = stage < 0 ? LV_SYMTOP4_A_FRAC[i] * h : LV_SYMTOP_STRANG_A * LV_SYMTOP4_GAMMA[stage] * h;
+        symtop_axis(a, c_a, q, L, ta);
+        lv_sphere_flow(q, L, I_r, ta, q);
+        if (i < n) symtop_axis(b, c_b, q, L, stage < 0 ? LV_SYMTOP4_B_FRAC[i] * h : LV_SYMTOP4_GAMMA[stage] * h);
+    }
+}
+
+/* One symtop4 step. Without effects: p drifts by h v; the merged rotation sequence (symtop_rotation) on
+   L_b = I omega (body_momentum), turned back into omega once (body_rate); torque-free it conserves L_w and
+   |L_b| to rounding, order 4, and is exact for a symmetric top (c_b = 0). With effects: for each stage
+   gamma_i, kick(gamma_i h/2), drift p by gamma_i h, the Strang rotation over gamma_i h, kick(gamma_i h/2)
+   (splitting4's composition with the symmetric-top rotation: order 4 with loads of p and q only, 3 with a
+   velocity-dependent effect). The same operations in the same order as the NumPy backend's _symtop4. */
+static void symtop4_step(const body_ctx *c, double *x, double h, int damped)
+{
+    const double *I = c->prm + LV_PARAM_I_B;
+    double L[3];
+    int i;
+    if (!c->has) {
+        lv_translation_drift(x + LV_STATE_P_W, x + LV_STATE_V_W, h, x + LV_STATE_P_W);
+        lv_body_momentum(I, x + LV_STATE_OMEGA_B, L);
+        symtop_rotation(I, x + LV_STATE_Q, L, h, -1);
+        lv_body_rate(I, L, x + LV_STATE_OMEGA_B);
+        return;
+    }
+    for (i = 0; i < LV_SYMTOP4_STAGES; i++) {
+        const double g = LV_SYMTOP4_GAMMA[i] * h;
+        kick(c, x, LV_SPLIT_KICK * g, damped);
+        lv_translation_drift(x + LV_STATE_P_W, x + LV_STATE_V_W, g, x + LV_STATE_P_W);
+        lv_body_momentum(I, x + LV_STATE_OMEGA_B, L);
+        symtop_rotation(I, x + LV_STATE_Q, L, h, i);
+        lv_body_rate(I, L, x + LV_STATE_OMEGA_B);
+        kick(c, x, LV_SPLIT_KICK * g, damped);
+    }
+}
+
 /* One rk4_expmap step (RKMK4): the RK4 tableau on (p, u, v, omega) with u (the body rotation vector since
    the step's start, u0 = 0) kept in q's first three slots and the fourth held at 0. Stage s evaluates the
    right-hand side at the attitude q0 (x) exp(u/2) (quat_exp_step with h = 1) and u' = rkmk_dexpinv(u, omega);
@@ -855,7 +931,7 @@ static void rk4_expmap_step(const body_ctx *c, double *x, double h)
 }
 
 /* Advance plain body b by n_steps of a plain-only integrator (splitting, implicit_gyro, splitting4,
-   rk4_expmap); contract as advance_block with n = 1, and *why = LV_DIVERGED (non-finite) or LV_NO_ROOT
+   rk4_expmap, symtop4); contract as advance_block with n = 1, and *why = LV_DIVERGED (non-finite) or LV_NO_ROOT
    (implicit_gyro's Newton solve did not converge). */
 static long advance_structured(double *state, const double *params, long b, const lv_effect_index *ix,
                                int integrator, int normalize, double dt, long n_steps, double *last, int *why)
@@ -875,6 +951,8 @@ static long advance_structured(double *state, const double *params, long b, cons
             splitting4_step(&c, xn, dt, damped);
         else if (integrator == LV_INTEGRATOR_RK4_EXPMAP)
             rk4_expmap_step(&c, xn, dt);
+        else if (integrator == LV_INTEGRATOR_SYMTOP4)
+            symtop4_step(&c, xn, dt, damped);
         else if (!gyro_step(&c, xn, dt)) {
             *why = LV_NO_ROOT;
             memcpy(last, x, sizeof x);
