@@ -55,6 +55,7 @@ Integrators (`integrator=`; `sim.rhs_evals` counts right-hand-side evaluations, 
   a symmetric top (c_b = 0); torque-free, world L, |L_b| and |q| conserved to rounding. Effects as
   splitting4's, per stage: order 4 with loads of position and attitude only, order 3 with damping.
   rhs_evals counted as splitting4's. Plain bodies only; validity bound splitting4's.
+
 Unsupported combinations (splitting / implicit_gyro / splitting4 / rk4_expmap / symtop4 with a joint or wheels;
 rtol/atol with a fixed-step integrator) raise LavenderInputError at construction.
 

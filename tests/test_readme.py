@@ -25,7 +25,7 @@ def test_readme_opens_with_the_two_commands_ci_runs():
 def test_integrator_count_matches():
     from lavendersim.backends import INTEGRATORS
 
-    words = {6: "Six", 7: "Seven", 8: "Eight"}
+    words = {6: "Six", 7: "Seven", 8: "Eight", 9: "Nine", 10: "Ten"}
     assert f"({len(INTEGRATORS)} integrators)" in README
     assert f"{words[len(INTEGRATORS)]} integrators" in README
 
