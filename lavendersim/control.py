@@ -82,7 +82,9 @@ BODY = "cube"
 
 @dataclass
 class CubeModel:
-    """A cube of side ``size`` (m) and total mass ``mass`` (kg, wheels included and locked),
+    """The reaction-wheel cube: a uniform cube on a spherical joint with three body-axis wheels.
+
+    A cube of side ``size`` (m) and total mass ``mass`` (kg, wheels included and locked),
     uniform, with three body-axis reaction wheels of spin inertia ``J`` (kg·m²), motor torque
     limit ``torque_limit`` (N·m), wheel speed limit ``speed_limit`` (rad/s), cube angular damping
     ``damping`` (N·m·s/rad, the "angular_damping" effect), wheel bearing damping ``wheel_damping``
@@ -91,7 +93,40 @@ class CubeModel:
     torque ``torque_limit`` at rest to 0 at the no-load speed ``speed_limit`` (wheel_motor kernel);
     "cutoff" — full torque below ``speed_limit``, none beyond (the old hard cut-off). Defaults are Cubli-like (15 cm, 1 kg;
     Cubli: 1.42 kg, wheel inertia 0.57e-3 kg·m², Maxon EC45-flat motors): J = 5.7e-4 kg·m² per
-    wheel, 0.2 N·m, 400 rad/s (3800 rpm)."""
+    wheel, 0.2 N·m, 400 rad/s (3800 rpm).
+
+    Parameters
+    ----------
+    scenario : {"center", "corner"}, default "center"
+        ``"center"``: the joint at the cube's centre (no gravity torque); ``"corner"``: the joint at
+        the body corner ``-size/2 (1, 1, 1)``, balancing under gravity (see the module docstring).
+    mass : float, default 1.0
+        Total mass, kg, wheels included; > 0.
+    size : float, default 0.15
+        Side of the cube, m; > 0.
+    J : float or array_like (3,), default (5.7e-4, 5.7e-4, 5.7e-4)
+        Spin inertia of each wheel about its body axis (x, y, z), kg·m²; a scalar gives all three.
+        Each > 0, and ``I_p − diag(J)`` must be positive definite. Stored as an ndarray (3,).
+    torque_limit : float, default 0.2
+        Motor torque limit (stall torque), N·m; > 0.
+    speed_limit : float, default 400.0
+        Wheel speed limit (no-load speed), rad/s, relative to the body; > 0.
+    damping : float, default 0.0
+        Cube angular damping coefficient, N·m·s/rad; >= 0 (0: no "angular_damping" effect).
+    wheel_damping : float, default 0.0
+        Wheel bearing (viscous) damping ``c_w``, N·m·s/rad; >= 0.
+    g : float, default 9.81
+        Gravitational acceleration, m/s², along −z world; >= 0 (used by the corner scenario only).
+    motor : {"line", "cutoff"}, default "line"
+        The motor's torque–speed model (see above).
+
+    Raises
+    ------
+    lavendersim.validate.LavenderInputError
+        If a parameter is out of range (unknown scenario or motor, a non-positive mass, size, J,
+        torque_limit or speed_limit, a negative damping, wheel_damping or g, a non-finite value) or
+        if ``I_p − diag(J)`` is not positive definite.
+    """
 
     scenario: str = "center"
     mass: float = 1.0
@@ -143,6 +178,7 @@ class CubeModel:
 
     @property
     def g_w(self) -> np.ndarray:
+        """Gravity vector, world frame, m/s²: ``(0, 0, −g)``, ndarray (3,)."""
         return np.array([0.0, 0.0, -self.g])
 
     @property
@@ -159,8 +195,32 @@ class CubeModel:
 
     # runtime scene ------------------------------------------------------------------------
     def scene(self, q0: ArrayLike | None = None, omega_b: ArrayLike = (0, 0, 0), Omega: ArrayLike | None = None) -> Scene:
-        """The Scene for the runtime simulator: body "cube" (COM placed at anchor + R r_b), a
-        spherical joint at the origin, reaction wheels, and the declared damping/gravity."""
+        """Build the Scene for the runtime simulator.
+
+        The scene has body "cube" (COM placed at anchor + R r_b), a spherical joint at the origin,
+        reaction wheels, and the declared damping/gravity.
+
+        Parameters
+        ----------
+        q0 : array_like (4,), optional
+            Initial orientation of the cube, body to world, quaternion (x, y, z, w); normalized.
+            Default: :meth:`upright_q`.
+        omega_b : array_like (3,), default (0, 0, 0)
+            Initial angular velocity of the cube, body frame, rad/s.
+        Omega : array_like (3,), optional
+            Not used: the Scene carries no wheel rates (they start at 0). Set them on the Sim, as
+            :meth:`make_sim` does.
+
+        Returns
+        -------
+        Scene
+            A new :class:`lavendersim.scene.Scene`.
+
+        Raises
+        ------
+        lavendersim.validate.LavenderInputError
+            If ``q0`` is not a valid quaternion, or ``omega_b`` is invalid.
+        """
         import lavendersim as lv
 
         q0 = self.upright_q() if q0 is None else V.quaternion("q0", q0)
@@ -179,6 +239,34 @@ class CubeModel:
 
     def make_sim(self, q0: ArrayLike | None = None, omega_b: ArrayLike = (0, 0, 0), Omega: ArrayLike = (0, 0, 0),
                  dt: float = 1e-3, backend: str = "auto", integrator: str = "rk4") -> Sim:
+        """Build a Sim of the cube (:meth:`scene`) with the given initial state.
+
+        Parameters
+        ----------
+        q0 : array_like (4,), optional
+            Initial orientation of the cube, body to world, quaternion (x, y, z, w); normalized.
+            Default: :meth:`upright_q`.
+        omega_b : array_like (3,), default (0, 0, 0)
+            Initial angular velocity of the cube, body frame, rad/s.
+        Omega : array_like (3,), default (0, 0, 0)
+            Initial wheel rates relative to the body, rad/s.
+        dt : float, default 1e-3
+            Integrator time step, s.
+        backend : str, default "auto"
+            Simulator backend: ``"auto"``, ``"c"`` or ``"numpy"``.
+        integrator : str, default "rk4"
+            The Sim's integrator (e.g. ``"rk4"``, ``"euler"``).
+
+        Returns
+        -------
+        Sim
+            A new :class:`lavendersim.sim.Sim`, at t = 0, wheel commands 0.
+
+        Raises
+        ------
+        lavendersim.validate.LavenderInputError
+            If ``q0``, ``omega_b``, ``Omega`` or a Sim option is invalid.
+        """
         import lavendersim as lv
 
         sim = lv.Sim(self.scene(q0, omega_b), dt=dt, integrator=integrator, backend=backend)
@@ -187,6 +275,14 @@ class CubeModel:
         return sim
 
     def as_dict(self) -> dict[str, Any]:
+        """The model's parameters as a JSON-serializable dict.
+
+        Returns
+        -------
+        dict
+            ``scenario, mass, size, J (list of 3), torque_limit, speed_limit, damping,
+            wheel_damping, g, motor`` (the constructor's keywords: ``CubeModel(**d)`` rebuilds it).
+        """
         return {"scenario": self.scenario, "mass": self.mass, "size": self.size, "J": self.J.tolist(),
                 "torque_limit": self.torque_limit, "speed_limit": self.speed_limit, "damping": self.damping,
                 "wheel_damping": self.wheel_damping, "g": self.g, "motor": self.motor}
@@ -198,21 +294,68 @@ class CubeModel:
 
 
 def attitude_error(q: ArrayLike, q_ref: ArrayLike) -> np.ndarray:
-    """dtheta = 2 vec(q_ref* ⊗ q), sign chosen so the scalar part is >= 0 (rad, body frame)."""
+    """Attitude error dtheta = 2 vec(q_ref* ⊗ q), sign chosen so the scalar part is >= 0 (rad, body frame).
+
+    Parameters
+    ----------
+    q : array_like (4,) or (..., 4)
+        Orientation(s), body to world, quaternion (x, y, z, w), unit length.
+    q_ref : array_like (4,) or (..., 4)
+        Reference orientation(s), quaternion (x, y, z, w), unit length; broadcasts against ``q``.
+
+    Returns
+    -------
+    ndarray (3,) or (..., 3)
+        dtheta, rad, in the reference's body frame (the inverse of :func:`perturbed` for
+        |dtheta| < 2).
+    """
     qe = np.asarray(KN.quat_mul(KN.quat_conj(np.asarray(q_ref, float)), np.asarray(q, float)), dtype=float)
     sgn = np.where(qe[..., 3:4] < 0, -1.0, 1.0)
     return 2.0 * sgn * qe[..., 0:3]
 
 
 def error_angle_deg(q: ArrayLike, q_ref: ArrayLike) -> np.ndarray:
-    """Rotation angle between q and q_ref, degrees in [0, 180]."""
+    """Rotation angle between q and q_ref, degrees in [0, 180].
+
+    Parameters
+    ----------
+    q : array_like (4,) or (..., 4)
+        Orientation(s), body to world, quaternion (x, y, z, w), unit length.
+    q_ref : array_like (4,) or (..., 4)
+        Reference orientation(s), quaternion (x, y, z, w), unit length; broadcasts against ``q``.
+
+    Returns
+    -------
+    float or ndarray (...,)
+        The angle of the rotation q_ref* ⊗ q, deg (q and −q give the same angle).
+    """
     qe = np.asarray(KN.quat_mul(KN.quat_conj(np.asarray(q_ref, float)), np.asarray(q, float)), dtype=float)
     s = np.linalg.norm(qe[..., 0:3], axis=-1)
     return np.degrees(2.0 * np.arctan2(s, np.abs(qe[..., 3])))
 
 
 def perturbed(q_ref: ArrayLike, dtheta: ArrayLike) -> np.ndarray:
-    """q = q_ref ⊗ [dtheta/2, sqrt(1 - |dtheta/2|²)] (the inverse of attitude_error)."""
+    """Orientation at attitude error dtheta: q = q_ref ⊗ [dtheta/2, sqrt(1 - |dtheta/2|²)].
+
+    The inverse of :func:`attitude_error`.
+
+    Parameters
+    ----------
+    q_ref : array_like (4,)
+        Reference orientation, body to world, quaternion (x, y, z, w), unit length.
+    dtheta : array_like (3,)
+        Attitude error, rad, body frame; |dtheta| < 2.
+
+    Returns
+    -------
+    ndarray (4,)
+        q, quaternion (x, y, z, w).
+
+    Raises
+    ------
+    lavendersim.validate.LavenderInputError
+        If |dtheta| >= 2.
+    """
     h = np.asarray(dtheta, float) / 2
     n2 = float(h @ h)
     if n2 >= 1:
@@ -221,7 +364,28 @@ def perturbed(q_ref: ArrayLike, dtheta: ArrayLike) -> np.ndarray:
 
 
 def rotated(q_ref: ArrayLike, axis: ArrayLike, angle_deg: float) -> np.ndarray:
-    """q_ref ⊗ rotation by angle_deg about a body-frame axis (normalized)."""
+    """q_ref ⊗ rotation by angle_deg about a body-frame axis (normalized).
+
+    Parameters
+    ----------
+    q_ref : array_like (4,)
+        Reference orientation, body to world, quaternion (x, y, z, w), unit length.
+    axis : array_like (3,)
+        Rotation axis, body frame of ``q_ref``; any non-zero length (normalized here).
+    angle_deg : float
+        Rotation angle, deg (right-handed about ``axis``).
+
+    Returns
+    -------
+    ndarray (4,)
+        The rotated orientation, quaternion (x, y, z, w).
+
+    Raises
+    ------
+    lavendersim.validate.LavenderInputError
+        If ``axis`` is not a finite 3-vector or is zero, or ``angle_deg`` is not a finite number
+        (reported as ``theta0_deg``).
+    """
     axis = V.vector("axis", axis)
     n = np.linalg.norm(axis)
     if n == 0:
@@ -236,9 +400,29 @@ def rotated(q_ref: ArrayLike, axis: ArrayLike, angle_deg: float) -> np.ndarray:
 
 
 def controllable_basis(A: np.ndarray, B: np.ndarray, tol: float = 1e-9, discrete: bool = False) -> np.ndarray:
-    """Orthonormal basis (n, rank) of the controllable subspace span[B, AB, A²B, …] (Krylov with
-    re-orthogonalization; A and B scaled to unit norm, singular values below tol dropped). For a
-    discrete pair the Krylov space of A − I is used (the same space, better conditioned when A ≈ I)."""
+    """Orthonormal basis (n, rank) of the controllable subspace span[B, AB, A²B, …].
+
+    Krylov with re-orthogonalization; A and B scaled to unit norm, singular values below tol dropped.
+    For a discrete pair the Krylov space of A − I is used (the same space, better conditioned when
+    A ≈ I).
+
+    Parameters
+    ----------
+    A : array_like (n, n)
+        State matrix (continuous, or discrete with ``discrete=True``).
+    B : array_like (n, m)
+        Input matrix.
+    tol : float, default 1e-9
+        Rank tolerance on the singular values of the (unit-norm scaled) Krylov blocks; for B,
+        relative to its largest singular value.
+    discrete : bool, default False
+        Whether (A, B) is a discrete-time pair (use A − I).
+
+    Returns
+    -------
+    ndarray (n, rank)
+        Orthonormal columns spanning the controllable subspace; (n, 0) if B is empty.
+    """
     A, B = np.asarray(A, float), np.asarray(B, float)
     n = A.shape[0]
     if discrete:
@@ -268,7 +452,20 @@ def controllable_basis(A: np.ndarray, B: np.ndarray, tol: float = 1e-9, discrete
 
 
 def uncontrollable(basis: np.ndarray, n: int) -> np.ndarray:
-    """Orthonormal complement (n, n − rank) of an orthonormal basis (n, rank) of the controllable subspace."""
+    """Orthonormal complement (n, n − rank) of an orthonormal basis (n, rank) of the controllable subspace.
+
+    Parameters
+    ----------
+    basis : ndarray (n, rank)
+        Orthonormal basis of the controllable subspace (from :func:`controllable_basis`).
+    n : int
+        State dimension.
+
+    Returns
+    -------
+    ndarray (n, n − rank)
+        Orthonormal basis of the uncontrollable directions; (n, 0) when rank >= n.
+    """
     if basis.shape[1] >= n:
         return np.zeros((n, 0))
     P = np.eye(n) - basis @ basis.T
@@ -295,7 +492,9 @@ def linearize(sim_or_scene: CubeModel | Sim | Scene, x0: dict | None = None, u0:
     (rigid_body_rhs, pivot_body_rhs, wheel_body_rhs with wheel_motor) and the CasADi printing of
     every force effect the scene declares, user effects included — so it is the model the backends
     step. See lavendersim._linearize for the error coordinates (per body p, dtheta, v, omega; a
-    jointed body dtheta, omega; wheels add Omega) and the input names.
+    jointed body dtheta, omega; wheels add Omega) and the input names. For a CubeModel, ``x0``,
+    ``u0``, ``inputs``, ``outputs`` and ``name`` are not used; for a Sim or Scene, ``q_ref`` and
+    ``Omega0`` are not used.
 
     Parameters
     ----------
@@ -317,12 +516,27 @@ def linearize(sim_or_scene: CubeModel | Sim | Scene, x0: dict | None = None, u0:
         State labels to output (default: every state, C = I).
     dt : float, optional
         If given, the zero-order-hold discretization at this period (s) is returned.
+    q_ref : array_like (4,), optional
+        CubeModel only: the operating orientation, body to world, quaternion (x, y, z, w)
+        (normalized). Default: ``model.upright_q()``.
+    Omega0 : array_like (3,), default (0, 0, 0)
+        CubeModel only: the operating wheel rates relative to the body, rad/s.
+    name : str, default "lavendersim"
+        Name of the returned system (Sim or Scene only; a CubeModel's is ``"wheel_cube"``).
 
     Returns
     -------
     Linearization
         A ``control.StateSpace`` (n states, m inputs du = u − u0) with named states, inputs and
         outputs, the operating point, ``f0`` (the right-hand side there) and the controllable subspace.
+
+    Raises
+    ------
+    lavendersim._install.MissingExtraError
+        If python-control or CasADi (the ``control`` extra) is not installed.
+    lavendersim.validate.LavenderInputError
+        If an argument is invalid, or (CubeModel) if the operating point (``q_ref``, ``Omega0``) is not
+        an equilibrium of the model (the right-hand side is not zero there).
     """
     require("control", "control", "the StateSpace linearization")
     require("casadi", "control", "the CasADi linearization")
@@ -492,16 +706,58 @@ def lqr(sys: Any, *args: Any) -> LQRResult:
 
 
 def dlqr(sys: Any, *args: Any) -> LQRResult:
-    """Discrete LQR (python-control's dlqr), the same forms and subspace design as :func:`lqr`:
+    """Discrete LQR (python-control's dlqr), with the same forms and subspace design as :func:`lqr`.
+
     ``dlqr(lin.sample(Ts), Q, R)``, ``dlqr((Ad, Bd), Q, R)`` or ``dlqr(Ad, Bd, Q, R)``. The gain is
     for u[k] = u0 − K x[k] held over the period (zero-order hold). E are the eigenvalues of Ad − Bd K,
-    sorted by modulus (conserved directions at 1)."""
+    sorted by modulus (conserved directions at 1).
+
+    Parameters
+    ----------
+    sys : control.StateSpace, (Ad, Bd) or Ad
+        The discrete-time model (n states, m inputs), e.g. ``lin.sample(Ts)``; a StateSpace must be
+        discrete (dt > 0).
+    *args
+        Q (n×n, a diagonal (n,) or a scalar; symmetric PSD) and R (m×m, (m,) or scalar; PD), after
+        Bd when Ad and Bd are given separately.
+
+    Returns
+    -------
+    LQRResult
+        Unpacks as (K (m, n), S (n, n), E (n,) closed-loop eigenvalues of Ad − Bd K, sorted by
+        modulus); ``.rank`` and ``.uncontrollable`` report the directions the design cannot move.
+
+    Raises
+    ------
+    lavendersim._install.MissingExtraError
+        If python-control (the ``control`` extra) is not installed.
+    lavendersim.validate.LavenderInputError
+        If the system is continuous or not a recognized form, A, B are not finite n×n, n×m matrices,
+        Q and R are missing or not valid weights (Q symmetric PSD, R symmetric PD), or no input reaches
+        any state.
+    """
     return _design(sys, args, discrete=True)
 
 
 def default_weights(model: CubeModel) -> tuple[np.ndarray, np.ndarray]:
-    """Bryson-style defaults: attitude 1/(2°)², rates 1/(0.5 rad/s)², wheels 1/(0.5·limit)²,
-    torque 1/(0.5·limit)² (corner: attitude 1/(0.5°)²)."""
+    """Bryson-style default LQR weights for the cube's 9 states and 3 inputs.
+
+    Attitude 1/(2°)², rates 1/(0.5 rad/s)², wheels 1/(0.5·limit)², torque 1/(0.5·limit)² (corner:
+    attitude 1/(0.5°)²); the angles in rad, the limits ``speed_limit`` (rad/s) and ``torque_limit``
+    (N·m).
+
+    Parameters
+    ----------
+    model : CubeModel
+        Gives the scenario and the limits.
+
+    Returns
+    -------
+    Q : ndarray (9,)
+        The diagonal of the state weight (order ``STATE_LABELS``), 1/rad², s²/rad², s²/rad².
+    R : ndarray (3,)
+        The diagonal of the input weight, 1/(N·m)².
+    """
     ang = math.radians(2.0 if model.scenario == "center" else 0.5)
     q = np.concatenate([np.full(3, 1 / ang ** 2), np.full(3, 1 / 0.5 ** 2), np.full(3, 1 / (0.5 * model.speed_limit) ** 2)])
     return q, np.full(3, 1 / (0.5 * model.torque_limit) ** 2)
@@ -516,22 +772,36 @@ def default_weights(model: CubeModel) -> tuple[np.ndarray, np.ndarray]:
 class Response:
     """A closed-loop run, with python-control's TimeResponseData names and shapes.
 
-    Attributes
+    The fields below are its attributes; ``inputs`` (m, T) are the applied (saturated) motor torques,
+    N·m (``input_labels``), and ``time`` is ``t``.
+
+    Parameters
     ----------
     t : ndarray (T,)
         Sample times (s), one per control period plus the start.
-    states : ndarray (n, T)
-        Error-coordinate states (the linearization's state labels ``state_labels``).
-    inputs : ndarray (m, T)
-        Applied (saturated) motor torques, N·m (``input_labels``).
-    outputs : ndarray (p, T)
-        C x (``output_labels``; the states when C = I).
     error_deg : ndarray (T,)
         Attitude error angle to q_ref, degrees.
-    omega_b, Omega, u_cmd, u_applied : ndarray (T, 3)
-        Cube rates (rad/s, body), wheel rates (rad/s), commanded and applied torques (N·m), per sample.
+    omega_b : ndarray (T, 3)
+        Cube angular velocity, body frame, rad/s, per sample.
+    Omega : ndarray (T, 3)
+        Wheel rates relative to the body, rad/s, per sample.
+    u_cmd : ndarray (T, 3)
+        Commanded motor torques (clipped to ±torque_limit), N·m, held from each sample to the next
+        (the last sample repeats the one before).
+    u_applied : ndarray (T, 3)
+        Applied motor torques after the wheels' saturation (speed limit included), N·m, per sample.
     q : ndarray (T, 4)
-        Orientation (x, y, z, w).
+        Orientation, body to world, quaternion (x, y, z, w).
+    states : ndarray (n, T), optional
+        Error-coordinate states (the linearization's state labels ``state_labels``).
+    outputs : ndarray (p, T), optional
+        C x (``output_labels``; the states when C = I).
+    state_labels : tuple of str, default STATE_LABELS
+        Names of the states.
+    input_labels : tuple of str, default INPUT_LABELS
+        Names of the inputs.
+    output_labels : tuple of str, default STATE_LABELS
+        Names of the outputs.
     """
 
     t: np.ndarray
@@ -558,7 +828,19 @@ class Response:
         return self.t
 
     def settling_time(self, threshold_deg: float) -> float:
-        """First time after which the attitude error stays below threshold_deg (inf if never)."""
+        """First time after which the attitude error stays below threshold_deg (inf if never).
+
+        Parameters
+        ----------
+        threshold_deg : float
+            Attitude error threshold, deg.
+
+        Returns
+        -------
+        float
+            The sample time (s) following the last sample with ``error_deg >= threshold_deg``; 0.0 if
+            there is none, ``math.inf`` if the last sample is still at or above the threshold.
+        """
         above = np.flatnonzero(self.error_deg >= threshold_deg)
         if above.size == 0:
             return 0.0
@@ -573,8 +855,19 @@ class Response:
                                    state_labels=list(self.state_labels), input_labels=list(self.input_labels))
 
     def plot(self, threshold_deg: float = 0.1) -> Any:
-        """A matplotlib Figure (not shown, no pyplot state): attitude error (log), cube rates, applied
-        torques, wheel rates against t."""
+        """Plot the run on a new matplotlib Figure (not shown, no pyplot state).
+
+        Four panels against t: attitude error (log), cube rates, applied torques, wheel rates.
+
+        Parameters
+        ----------
+        threshold_deg : float, default 0.1
+            Settling threshold, deg, drawn as a horizontal line on the attitude error panel.
+
+        Returns
+        -------
+        matplotlib.figure.Figure
+        """
         from matplotlib.figure import Figure
 
         fig = Figure(figsize=(11, 7), layout="constrained")
@@ -603,6 +896,8 @@ def closed_loop(model: CubeModel, lin: Any, K: ArrayLike | Callable[[float, np.n
     Parameters
     ----------
     model : CubeModel
+        The plant simulated (it may differ from the one ``lin`` linearizes); its ``torque_limit``
+        clips the commands.
     lin : Linearization
         Gives the error coordinates x (lin.state) and, for a gain, the operating point.
     K : (3, 9) array or callable
@@ -611,14 +906,37 @@ def closed_loop(model: CubeModel, lin: Any, K: ArrayLike | Callable[[float, np.n
         clipped to ±torque_limit and the Sim's reaction_wheels saturate again (speed limit included).
     q0 : (4,)
         Initial orientation (x, y, z, w).
-    T : float
-        Duration, s.
+    T : float, default 5.0
+        Duration, s; > 0, at most ``MAX_CONTROL_STEPS`` control periods.
+    omega0 : array_like (3,), default (0, 0, 0)
+        Initial angular velocity of the cube, body frame, rad/s.
+    Omega0 : array_like (3,), optional
+        Initial wheel rates relative to the body, rad/s. Default: the operating point's
+        ``lin.Omega0``.
+    dt : float, default 1e-3
+        Simulator time step, s.
+    control_dt : float, default 2e-3
+        Control period (zero-order hold), s; a whole multiple of ``dt``.
+    backend : str, default "auto"
+        Simulator backend: ``"auto"``, ``"c"`` or ``"numpy"``.
     sim : Sim, optional
-        Any object with the Sim's wheel API instead of building one.
+        Any object with the Sim's wheel API instead of building one; then ``q0``, ``omega0``,
+        ``Omega0`` and ``backend`` are not used, and its time step should be ``dt`` (each control
+        period runs ``control_dt / dt`` steps).
 
     Returns
     -------
     Response
+        Sampled once per control period, from t = 0 to T.
+
+    Raises
+    ------
+    lavendersim.validate.LavenderInputError
+        If ``dt`` or ``control_dt`` is not positive, ``control_dt`` is not a whole multiple of ``dt``,
+        ``T`` is not positive or needs more than ``MAX_CONTROL_STEPS`` control periods, a gain ``K`` is
+        not (m, n), or the controller returns anything but 3 finite torques.
+    lavendersim.errors.DivergenceError
+        If the simulation diverges.
     """
     dt = V.dt("dt", dt)
     control_dt = V.dt("control_dt", control_dt)
@@ -675,6 +993,37 @@ def closed_loop(model: CubeModel, lin: Any, K: ArrayLike | Callable[[float, np.n
 
 @dataclass
 class DesignResult:
+    """The result of :func:`design`: the model, its linearization, the LQR design and its closed-loop run.
+
+    Parameters
+    ----------
+    model : CubeModel
+        The plant designed for and simulated.
+    lin : Linearization
+        The continuous 9-state linearization of ``model`` at its upright equilibrium (states
+        ``STATE_LABELS``, inputs ``INPUT_LABELS``).
+    Q : ndarray (9, 9)
+        State weight used (symmetric PSD).
+    R : ndarray (3, 3)
+        Input weight used (symmetric PD), 1/(N·m)².
+    K : ndarray (3, 9)
+        The LQR gain, N·m per state unit (u = u0 − K x).
+    S : ndarray (9, 9)
+        The Riccati solution of the design.
+    poles : ndarray (9,)
+        Closed-loop eigenvalues of A − B K (complex, sorted by real part), 1/s.
+    response : Response
+        The closed-loop run in the nonlinear simulator.
+    theta0_deg : float
+        Initial attitude error, deg.
+    axis : ndarray (3,)
+        Unit axis of the initial error, body frame.
+    threshold_deg : float
+        Settling threshold, deg.
+    backend : str
+        The simulator backend asked for (``"auto"``, ``"c"`` or ``"numpy"``).
+    """
+
     model: CubeModel
     lin: Linearization
     Q: np.ndarray
@@ -690,6 +1039,7 @@ class DesignResult:
 
     @property
     def settling_time(self) -> float:
+        """Settling time to within ``threshold_deg``, s (``math.inf`` if never; see :meth:`Response.settling_time`)."""
         return self.response.settling_time(self.threshold_deg)
 
     @property
@@ -699,13 +1049,27 @@ class DesignResult:
 
     @property
     def peak_wheel_speed(self) -> float:
+        """max |wheel rate| over wheels and time, rad/s (relative to the body)."""
         return float(np.max(np.abs(self.response.Omega)))
 
     @property
     def final_error_deg(self) -> float:
+        """Attitude error at the end of the run, deg."""
         return float(self.response.error_deg[-1])
 
     def figures(self) -> dict[str, Any]:
+        """The design's figures of merit and settings as plain Python values (JSON-ready but for inf).
+
+        Returns
+        -------
+        dict
+            ``model`` (:meth:`CubeModel.as_dict`), ``backend``, ``q_ref`` (x, y, z, w),
+            ``controllability_rank``, ``n_states``, ``Q``, ``R``, ``K`` (nested lists),
+            ``poles_real``, ``poles_imag`` (1/s), ``theta0_deg`` (deg), ``axis``, ``T`` (s),
+            ``threshold_deg`` (deg), ``settling_time`` (s, ``math.inf`` if never), ``peak_torque``
+            (N·m), ``peak_wheel_speed`` (rad/s), ``final_error_deg`` (deg),
+            ``torque_limit_respected`` and ``speed_limit_respected`` (bool).
+        """
         p = self.poles
         return {
             "model": self.model.as_dict(), "backend": self.backend,
@@ -721,11 +1085,31 @@ class DesignResult:
         }
 
     def to_json(self) -> str:
+        """:meth:`figures` as an indented JSON string (an infinite settling time becomes null).
+
+        Returns
+        -------
+        str
+        """
         fig = self.figures()
         fig["settling_time"] = fig["settling_time"] if math.isfinite(fig["settling_time"]) else None
         return json.dumps(fig, indent=2)
 
     def plot(self, path: str | os.PathLike[str]) -> None:
+        """Write the response plot to a file (PNG, 100 dpi).
+
+        Four panels against t: attitude error (log, with the threshold and the settling time), cube
+        rates, applied motor torques (with ±torque_limit), wheel rates.
+
+        Parameters
+        ----------
+        path : str or os.PathLike
+            Output file; its suffix selects the format (matplotlib's ``savefig``).
+
+        Returns
+        -------
+        None
+        """
         from .labs.common import new_figure
 
         r, m = self.response, self.model
@@ -761,10 +1145,61 @@ def design(scenario: str = "center", Q: ArrayLike | None = None, R: ArrayLike | 
            theta0_deg: float | None = None, axis: ArrayLike | None = None, T: float | None = None,
            threshold_deg: float = 0.1, backend: str = "auto", dt: float = 1e-3, control_dt: float = 2e-3,
            model: CubeModel | None = None, sim: Sim | None = None, **model_params: Any) -> DesignResult:
-    """Linearize, design the LQR gain, run the closed loop from an initial error of theta0_deg
+    """Linearize the cube, design the LQR gain and run the closed loop in the simulator.
+
+    Linearize, design the LQR gain, run the closed loop from an initial error of theta0_deg
     about the body axis `axis` (defaults: 20° about (1, 2, 3) centre; 3° about (1, 1, −2), a pure
     tilt, corner), return a DesignResult.
-    model_params go to CubeModel (mass, size, J, torque_limit, speed_limit, damping, …)."""
+    model_params go to CubeModel (mass, size, J, torque_limit, speed_limit, damping, …).
+
+    Parameters
+    ----------
+    scenario : {"center", "corner"}, default "center"
+        The CubeModel scenario (not used when ``model`` is given).
+    Q : array_like, optional
+        State weight: a scalar, a diagonal (9,) or a matrix (9, 9); symmetric PSD. Default:
+        :func:`default_weights`.
+    R : array_like, optional
+        Input weight: a scalar, a diagonal (3,) or a matrix (3, 3), 1/(N·m)²; symmetric PD. Default:
+        :func:`default_weights`.
+    theta0_deg : float, optional
+        Initial attitude error, deg (default 20 centre, 3 corner).
+    axis : array_like (3,), optional
+        Axis of the initial error, body frame, non-zero (default (1, 2, 3) centre, (1, 1, −2) corner).
+    T : float, optional
+        Simulated time, s (default 5 centre, 6 corner).
+    threshold_deg : float, default 0.1
+        Settling threshold, deg; > 0.
+    backend : str, default "auto"
+        Simulator backend: ``"auto"``, ``"c"`` or ``"numpy"``.
+    dt : float, default 1e-3
+        Simulator time step, s.
+    control_dt : float, default 2e-3
+        Control period (zero-order hold), s; a whole multiple of ``dt``.
+    model : CubeModel, optional
+        The plant; when given, ``scenario`` and ``model_params`` are not used.
+    sim : Sim, optional
+        A simulator to run the closed loop in instead of building one (see :func:`closed_loop`).
+    **model_params
+        Further CubeModel parameters (mass, size, J, torque_limit, speed_limit, damping,
+        wheel_damping, g, motor).
+
+    Returns
+    -------
+    DesignResult
+
+    Raises
+    ------
+    lavendersim._install.MissingExtraError
+        If python-control or CasADi (the ``control`` extra) is not installed.
+    lavendersim.validate.LavenderInputError
+        If a model parameter, a weight, ``theta0_deg``, ``axis``, ``T``, ``dt``, ``control_dt`` or
+        ``threshold_deg`` is invalid.
+    TypeError
+        If ``model_params`` has a name CubeModel does not take.
+    lavendersim.errors.DivergenceError
+        If the closed-loop simulation diverges.
+    """
     model = model or CubeModel(scenario=scenario, **model_params)
     lin = linearize(model)
     q_def, r_def = default_weights(model)
@@ -792,8 +1227,31 @@ MC_SPREAD = {"mass": 0.10, "size": 0.05, "J": 0.20, "torque_limit": 0.10, "speed
 
 
 def monte_carlo_tasks(model: CubeModel, n: int, seed: int) -> list[dict[str, Any]]:
-    """The perturbed plants' parameters (n dicts for CubeModel), drawn here from one seeded generator
-    (numpy default_rng(seed)) so every executor runs the same samples. See MC_SPREAD."""
+    """Draw the perturbed plants' parameters (n dicts for CubeModel) for a Monte Carlo run.
+
+    The parameters are drawn here from one seeded generator (numpy default_rng(seed)) so every
+    executor runs the same samples. See MC_SPREAD: each of mass, size, J (per wheel), torque_limit
+    and speed_limit is multiplied by 1 + spread·U(−1, 1), independently.
+
+    Parameters
+    ----------
+    model : CubeModel
+        The nominal plant.
+    n : int
+        Number of samples; >= 1.
+    seed : int
+        Seed of numpy's default_rng; >= 0.
+
+    Returns
+    -------
+    list of dict
+        n keyword dicts for CubeModel (as :meth:`CubeModel.as_dict`, perturbed).
+
+    Raises
+    ------
+    lavendersim.validate.LavenderInputError
+        If ``n`` or ``seed`` is not an integer in range.
+    """
     n = V.integer("monte_carlo", n, minimum=1)
     rng = np.random.default_rng(V.integer("seed", seed, minimum=0))
     base = model.as_dict()
@@ -808,8 +1266,31 @@ def monte_carlo_tasks(model: CubeModel, n: int, seed: int) -> list[dict[str, Any
 
 
 def monte_carlo_sample(task: dict[str, Any]) -> dict[str, Any]:
-    """One closed loop of a perturbed plant under the nominal design's gain (a module-level function
-    of a picklable task: the executor's contract). Never raises for a plant that diverges: it is a failure."""
+    """Run one closed loop of a perturbed plant under the nominal design's gain.
+
+    A module-level function of a picklable task: the executor's contract. Never raises for a plant
+    that diverges: it is a failure.
+
+    Parameters
+    ----------
+    task : dict
+        ``model`` (the perturbed plant's CubeModel keywords), ``nominal`` (the nominal plant's, whose
+        linearization gives the error coordinates and operating point), ``K`` (3×9 gain, N·m per
+        state unit, nested lists), ``axis`` (3, body frame), ``theta0_deg`` (deg), ``T``, ``dt``,
+        ``control_dt`` (s), ``backend`` and ``threshold_deg`` (deg).
+
+    Returns
+    -------
+    dict
+        ``settled`` (bool: settled and below the threshold at the end), ``settling_time`` (s, None if
+        never or diverged), ``peak_torque`` (N·m, None if diverged), ``final_error_deg`` (deg, None
+        if diverged) and ``why`` (the divergence message, else None).
+
+    Raises
+    ------
+    lavendersim.validate.LavenderInputError
+        If the task's parameters are invalid (a divergence is not raised).
+    """
     from .errors import DivergenceError
 
     model = CubeModel(**task["model"])
@@ -879,7 +1360,32 @@ def finite_difference_AB(model: CubeModel, lin: Linearization, *, backend: str =
     Φ(x, u) = x + dt f(x, u) + (normalization, even in the perturbation), so at the equilibrium
     (Φ(+h e_j) − Φ(−h e_j)) / (2 h) = e_j + dt A e_j exactly in dt; A = ((Φ₊ − Φ₋)/(2h) − e_j)/dt and
     likewise B. The states are mapped to error coordinates with lin.state. `make_sim(q, omega_b,
-    Omega, dt)` may replace the Sim (the tests' independent reference uses it)."""
+    Omega, dt)` may replace the Sim (the tests' independent reference uses it).
+
+    Parameters
+    ----------
+    model : CubeModel
+        The cube whose Sim is stepped.
+    lin : Linearization
+        The cube's continuous linearization (:func:`linearize` of ``model``) at an equilibrium: gives
+        q_ref, Omega0, u0 and the error coordinates.
+    backend : str, default "auto"
+        Simulator backend of the default Sim: ``"auto"``, ``"c"`` or ``"numpy"``.
+    h : float, default 1e-5
+        Perturbation of each error coordinate (rad, rad/s, rad/s) and input (N·m).
+    dt : float, default 1e-3
+        The Euler step, s.
+    make_sim : callable, optional
+        ``make_sim(q (4,), omega_b (3,), Omega (3,), dt) -> Sim``, stepping with explicit Euler.
+        Default: ``model.make_sim(..., backend=backend, integrator="euler")``.
+
+    Returns
+    -------
+    A_fd : ndarray (n, n)
+        State matrix, 1/s.
+    B_fd : ndarray (n, m)
+        Input matrix.
+    """
     if make_sim is None:
         def make_sim(q, w, Om, dt_):
             return model.make_sim(q, w, Om, dt=dt_, backend=backend, integrator="euler")
@@ -924,10 +1430,23 @@ def finite_difference(lin: Any, scene: Scene, *, backend: str = "auto", h: float
         From :func:`linearize` of the same scene (continuous).
     scene : Scene
         The scene that was linearized.
+    backend : str, default "auto"
+        Simulator backend: ``"auto"``, ``"c"`` or ``"numpy"``.
+    h : float, default 1e-5
+        Perturbation of each error coordinate and input, in their units; > 0.
+    dt : float, default 1e-4
+        The Euler step, s; > 0.
+    extrapolate : bool, default True
+        Richardson-extrapolate from steps dt and dt/2 (removes the O(dt) error).
 
     Returns
     -------
     (A_fd (n, n), B_fd (n, m))
+
+    Raises
+    ------
+    lavendersim.validate.LavenderInputError
+        If ``h`` or ``dt`` is not a positive finite number.
     """
     import lavendersim as lv
 
@@ -980,7 +1499,25 @@ def finite_difference(lin: Any, scene: Scene, *, backend: str = "auto", h: float
 
 
 def linearization_residual(lin: Linearization, A_fd: ArrayLike, B_fd: ArrayLike) -> dict[str, float]:
-    """max |A − A_fd|, max |B − B_fd| (absolute) and the same relative to max(1, max |entry|)."""
+    """Compare a linearization with finite-difference matrices.
+
+    max |A − A_fd|, max |B − B_fd| (absolute) and the same relative to max(1, max |entry|) (of
+    lin's A and B).
+
+    Parameters
+    ----------
+    lin : Linearization
+        The linearization (its A (n, n) and B (n, m)).
+    A_fd : array_like (n, n)
+        State matrix to compare, e.g. from :func:`finite_difference`.
+    B_fd : array_like (n, m)
+        Input matrix to compare.
+
+    Returns
+    -------
+    dict
+        ``A_abs``, ``B_abs``, ``A_rel``, ``B_rel`` (float).
+    """
     ea, eb = float(np.max(np.abs(lin.A - A_fd))), float(np.max(np.abs(lin.B - B_fd)))
     return {"A_abs": ea, "B_abs": eb, "A_rel": ea / max(1.0, float(np.max(np.abs(lin.A)))),
             "B_rel": eb / max(1.0, float(np.max(np.abs(lin.B))))}
@@ -1017,6 +1554,18 @@ def _matrix_arg(field_name: str, text: str | None, n: int):
 
 
 def register_cli(subparsers: argparse._SubParsersAction) -> None:
+    """Add the ``lavendersim lqr`` subcommand to the command-line parser.
+
+    Parameters
+    ----------
+    subparsers : argparse._SubParsersAction
+        The ``add_subparsers()`` action of the ``lavendersim`` parser; the ``lqr`` parser's handler
+        is set as its ``fn`` default.
+
+    Returns
+    -------
+    None
+    """
     p = subparsers.add_parser("lqr", help="design an LQR wheel controller for the reaction-wheel cube and run it in the simulator",
                               description=__doc__.split("\n\n")[0] + "\n\nQ and R: one number (times identity), the "
                               "diagonal (9 / 3 numbers, comma-separated) or the full matrix row-major (81 / 9 numbers). "
