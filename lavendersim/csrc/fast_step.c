@@ -216,17 +216,23 @@ static int unchanged(const Stepper *s)
     return !s->has_models || memcmp(s->snap + nx, s->models.Omega, n3 * sizeof(double)) == 0;
 }
 
-static int checks_pass(const Stepper *s)
+/* 1 when every body's |omega| * scale <= bound and |omega| <= w_safe (NaN fails): the per-chunk screen, shared by
+   the Stepper and the module-level checks_pass. */
+static int screen_pass(const double *x, long nb, const double *scale, double bound, const double *w_safe)
 {
-    const double *x = (const double *)s->buf[FS_STATE].buf;
-    const double *scale = (const double *)s->buf[FS_WDT].buf, *w_safe = (const double *)s->buf[FS_WSAFE].buf;
     long b;
-    for (b = 0; b < s->nb; b++) {
+    for (b = 0; b < nb; b++) {
         const double *om = x + b * LV_STATE_SIZE + LV_STATE_OMEGA_B;
         const double w = sqrt(om[0] * om[0] + om[1] * om[1] + om[2] * om[2]);
-        if (!(w * scale[b] <= s->bound) || !(w <= w_safe[b])) return 0;
+        if (!(w * scale[b] <= bound) || !(w <= w_safe[b])) return 0;
     }
     return 1;
+}
+
+static int checks_pass(const Stepper *s)
+{
+    return screen_pass((const double *)s->buf[FS_STATE].buf, s->nb, (const double *)s->buf[FS_WDT].buf, s->bound,
+                       (const double *)s->buf[FS_WSAFE].buf);
 }
 
 static int fast_step(Stepper *s, long n)
@@ -367,7 +373,7 @@ static PyObject *py_checks_pass(PyObject *self, PyObject *args)
     PyObject *xo, *so, *wo;
     double bound;
     Py_buffer xb, sb, wb;
-    Py_ssize_t nb, b;
+    Py_ssize_t nb;
     int ok = 1;
     (void)self;
     if (!PyArg_ParseTuple(args, "OOdO:checks_pass", &xo, &so, &bound, &wo)) return NULL;
@@ -382,13 +388,8 @@ static PyObject *py_checks_pass(PyObject *self, PyObject *args)
         PyErr_SetString(PyExc_ValueError, "checks_pass: x (nb, 13), wdt_scale (nb,), w_safe (nb,) float64");
         ok = -1;
     } else {
-        const double *x = (const double *)xb.buf, *scale = (const double *)sb.buf, *w_safe = (const double *)wb.buf;
         Py_BEGIN_ALLOW_THREADS
-        for (b = 0; b < nb; b++) {
-            const double *om = x + b * LV_STATE_SIZE + LV_STATE_OMEGA_B;
-            const double w = sqrt(om[0] * om[0] + om[1] * om[1] + om[2] * om[2]);
-            if (!(w * scale[b] <= bound) || !(w <= w_safe[b])) { ok = 0; break; }
-        }
+        ok = screen_pass((const double *)xb.buf, (long)nb, (const double *)sb.buf, bound, (const double *)wb.buf);
         Py_END_ALLOW_THREADS
     }
     PyBuffer_Release(&xb);
