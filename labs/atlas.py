@@ -40,8 +40,8 @@ Per cell (results.json "cells", sorted by integrator, axis, ratio, |ω|·dt — 
   within_bound     |ω0|·dt·ratio^p ≤ the integrator's declared validity bound (derive/tableaux.py: WDT_MAX,
                    WDT_RATIO_EXPONENT; dopri5 has none). The cells run with Sim(..., on_bound="warn") so
                    that the atlas maps behaviour beyond the bound too (a default Sim raises there); Sim's
-                   growth check (max_growth = 10: E or |L| ×10 on a torque-free body) stays on, so a cell
-                   that grows ×10 is a caught divergence, not a silent blow-up.
+                   growth check (max_growth = 2: E or |L| ×2 on a torque-free body, the same line as
+                   BLOWUP here) stays on, so a cell that doubles is a caught divergence, not a silent blow-up.
 Exact zeros and values below 1e-16 are drawn at 1e-16 (the colour bars' lower end).
 
 Pictures (one figure per metric; rows = integrators, columns = spin axes, log axes): energy

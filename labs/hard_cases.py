@@ -6,7 +6,7 @@ Every dynamic case ("trial") is run with every integrator in ``lavendersim.backe
 (discovered at run time) and recorded in a survival table: ``pass`` (the case's bounds hold),
 ``stable`` (finite, but a bound is missed: the worst figure is named), ``blew up`` (finite but
 error > 1 with no DivergenceError: dt_range only; since issue 11 none is expected — a run beyond its
-integrator's validity bound, or whose energy / |L| grows x10 on a torque-free body, raises), ``diverged`` (a
+integrator's validity bound, or whose energy / |L| doubles on a torque-free body, raises), ``diverged`` (a
 DivergenceError naming the step, the body and the cause), ``SILENT NaN`` (a bug: never expected)
 or ``error`` (the integrator refused the case). The bounds are *asserted* (checks, exit 1 when one
 fails) only for the integrator the issue names for that case (``rk4`` unless stated;

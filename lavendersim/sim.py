@@ -67,7 +67,7 @@ is checked against
   derive/tableaux.py, printed in generated/tableaux.py; dopri5 has none): beyond it the run raises
   DivergenceError naming the bound, or with on_bound="warn" warns once per body (ValidityBoundWarning);
 * for a body no effect acts on (torque- and force-free): its kinetic energy and |L| may not grow beyond
-  max_growth times their values at construction / the last set_state (default 10; None: off); a wheeled
+  max_growth times their values at construction / the last set_state (default 2; None: off); a wheeled
   body without a joint and without other effects: its total |L| (body + wheels) likewise.
 
 A chunk that fails a check (or goes non-finite) is re-run from its start in smaller pieces to find the
@@ -242,9 +242,9 @@ class Sim:
         "raise" (default) raises DivergenceError at the first step that would run beyond it (set_state:
         LavenderInputError at the call); "warn" runs on with one ValidityBoundWarning per body.
     max_growth : float or None
-        (keyword only) A torque- and force-free body whose kinetic energy (a free wheeled body: whose total |L|) exceeds
-        max_growth times its value at construction / the last set_state raises DivergenceError
-        (default 10; None switches the check off).
+        (keyword only) A torque- and force-free body whose kinetic energy or |L| (a free wheeled body: whose total |L|)
+        exceeds max_growth times its value at construction / the last set_state raises DivergenceError
+        (default 2: a conserved quantity that doubles is never rounding; None switches the check off).
 
     Raises
     ------
@@ -266,7 +266,7 @@ class Sim:
     @V.keywords  # unknown keyword arguments raise LavenderInputError naming them
     def __init__(self, scene: Scene, dt: float = 1e-3, integrator: str = "rk4", backend: str = "auto", normalize: bool = True,
                  rtol: float | None = None, atol: float | None = None, *, on_bound: str = "raise",
-                 max_growth: float | None = 10.0):
+                 max_growth: float | None = 2.0):
         if not isinstance(scene, Scene):
             raise V.LavenderInputError("scene", "must be a lavendersim.Scene", f", got {type(scene).__name__}")
         self.dt = V.dt("dt", dt)
@@ -433,16 +433,18 @@ class Sim:
         self._reference()
 
     def _invariants(self, x: np.ndarray, Omega: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(kinetic energy, |L|) per body, where the growth check reads them (else 0): E of the torque- and
-        force-free plain bodies (kinetic_energy; E catches their blow-ups — splitting keeps |L| exactly —
-        and is the cheaper kernel), |L| (body + wheels, wheel_momentum) of the wheeled ones."""
+        """(kinetic energy, |L|) per body, where the growth check reads them (else 0): E (kinetic_energy) and
+        |L| (body_momentum) of the torque- and force-free plain bodies — both are needed: a first-order method
+        can move a minor-axis spin towards the major axis, |L| x2 while E stays within x2 (the atlas's euler
+        cells) —, |L| (body + wheels, wheel_momentum) of the wheeled ones."""
         nb = len(self.names)
         E, L = np.zeros(nb), np.zeros(nb)
         with np.errstate(over="ignore", invalid="ignore"):
             if self._free_any:
                 f = self._free
-                E[f] = K.kinetic_energy(self.params[f, LY.PARAM_M], self.params[f][:, LY.PARAM_I_B],
-                                        x[f][:, LY.STATE_V_W], x[f][:, LY.STATE_OMEGA_B])
+                I_b, w_b = self.params[f][:, LY.PARAM_I_B], x[f][:, LY.STATE_OMEGA_B]
+                E[f] = K.kinetic_energy(self.params[f, LY.PARAM_M], I_b, x[f][:, LY.STATE_V_W], w_b)
+                L[f] = np.linalg.norm(K.body_momentum(I_b, w_b), axis=-1)
             for i in self._free_wheels_idx:
                 r = self._models.rows[i]
                 Lb, Lw = K.wheel_momentum(x[i, LY.STATE_Q], x[i, LY.STATE_OMEGA_B], Omega[i],
@@ -452,9 +454,10 @@ class Sim:
 
     def _reference(self) -> None:
         """The growth check's reference values (at construction and after set_state), and per free body the
-        largest |omega| at which its energy cannot exceed max_growth * E0 (E <= T_translation + I_max |omega|^2 / 2,
-        both terms from the kinetic_energy kernel; v is constant on a force-free body): the check evaluates the
-        kernel only for a body above it, so it costs nothing while a run is far from its limit."""
+        largest |omega| at which neither its energy can exceed max_growth * E0 (E <= T_translation + I_max |omega|^2 / 2,
+        both terms from the kinetic_energy kernel; v is constant on a force-free body) nor its |L| max_growth * L0
+        (|L| = |I_b omega_b| <= I_max |omega|): the check evaluates the kernels only for a body above it, so it
+        costs nothing while a run is far from its limit."""
         self._E0, self._L0 = self._invariants(self._x, self._models.Omega)
         nb = len(self.names)
         self._w_safe = np.zeros(nb)
@@ -472,7 +475,9 @@ class Sim:
                 half_Imax = K.kinetic_energy(np.zeros(int(f.sum())), np.repeat(I.max(axis=1)[:, None], 3, axis=1),
                                              np.zeros((int(f.sum()), 3)), np.tile([1.0, 0.0, 0.0], (int(f.sum()), 1)))
                 room = np.maximum(self.max_growth * self._E0[f] - T, 0.0)
-                self._w_safe[f] = np.sqrt(room / half_Imax) * (1 - 1e-12)   # rounding margin: never skip a violation
+                w_E = np.sqrt(room / half_Imax)
+                w_L = self.max_growth * self._L0[f] / I.max(axis=1)
+                self._w_safe[f] = np.minimum(w_E, w_L) * (1 - 1e-12)   # rounding margin: never skip a violation
             self._w_fast[f] = self._w_safe[f]
 
     def _wdt(self, x: np.ndarray, w: np.ndarray | None = None) -> np.ndarray:
@@ -529,7 +534,7 @@ class Sim:
             E, L = self._invariants(x, Omega)
             with np.errstate(over="ignore", invalid="ignore"):
                 badE = self._free & (self._E0 > 0) & ~(E <= g * self._E0)
-                badL = self._free_wheels & (self._L0 > 0) & ~(L <= g * self._L0)
+                badL = (self._free | self._free_wheels) & (self._L0 > 0) & ~(L <= g * self._L0)
             bad = badE | badL
             if bad.any():
                 b = int(np.flatnonzero(bad)[0])
