@@ -8,6 +8,7 @@ import numpy as np
 from . import validate as V
 from .bodies import P, Q, STATE_SIZE, VEL, W, Body
 from .effects import Effect, check_declared, largest_param, load_overflow, make, row_width
+from .generated import layout as LY
 from .kernels import K
 
 
@@ -174,11 +175,32 @@ class Scene:
         bodies = list(self.bodies.values())
         state = np.ascontiguousarray(np.stack([b.x0 for b in bodies]))
         params = np.ascontiguousarray(np.stack([b.params for b in bodies]))
+        _revalidate(bodies, state, params)
         forces = [e for e in self.effects if not e.per_body]
         width = row_width(forces)
         rows = [e.row(-1 if e.body is None else self.index(e.body), width) for e in forces]
         effects = np.ascontiguousarray(np.array(rows, dtype=np.float64).reshape(len(rows), width))
         return state, params, effects
+
+
+def _revalidate(bodies: list, state: np.ndarray, params: np.ndarray) -> None:
+    """Body's rules once more over the stacked arrays a Sim is built from (vectorized; a Body is immutable, but
+    object.__setattr__ gets past that): a body changed after validation is refused by name, not simulated."""
+    m, I_b = params[:, LY.PARAM_M], params[:, LY.PARAM_I_B]
+    tri = _triangle_broken(I_b)
+    with np.errstate(invalid="ignore", over="ignore"):
+        q_norm = np.sqrt(np.sum(state[:, Q] ** 2, axis=1))
+    checks = (("mass", ~(np.isfinite(m) & (m > 0)), "must be finite and > 0"),
+              ("I_b", ~(np.isfinite(I_b).all(axis=1) & (I_b > 0).all(axis=1)) | tri,
+               "principal moments must be finite, > 0 and each at most the sum of the other two"),
+              ("x0", ~np.isfinite(state).all(axis=1) | ~(np.abs(q_norm - 1.0) <= 1e-12),
+               "the initial state must be finite with a unit quaternion"))
+    for field, bad, rule in checks:
+        if bad.any():
+            b = bodies[int(np.flatnonzero(bad)[0])]
+            raise V.LavenderInputError(f"scene.bodies[{b.name!r}].{field}",
+                                       f"{rule}; the Body was changed after validation (object.__setattr__ gets "
+                                       "past its immutability)")
 
 
 # ---- batched add_bodies (issue 12): the checks of Body / Scene.add_body over whole arrays -------------
@@ -205,13 +227,17 @@ def _unit_quaternions(q: np.ndarray) -> np.ndarray:
     return u / scaled[:, None]
 
 
+def _triangle_broken(I_b: np.ndarray) -> np.ndarray:
+    """Per row of (n, 3) principal moments: some moment exceeds the sum of the other two (rel. V.TRIANGLE_RTOL)."""
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+        u = I_b / np.max(I_b, axis=1)[:, None]
+        return np.stack([u[:, k] - (u[:, i] + u[:, j]) > V.TRIANGLE_RTOL
+                         for k, (i, j) in enumerate(((1, 2), (0, 2), (0, 1)))], axis=1).any(axis=1)
+
+
 def _principal_moments(I_b: np.ndarray) -> None:
     """V.inertia's rules for (n, 3) principal moments: all > 0, each <= the sum of the other two (rel. 1e-12)."""
-    with np.errstate(invalid="ignore", divide="ignore"):
-        u = I_b / np.max(I_b, axis=1)[:, None]
-        tri = np.stack([u[:, k] - (u[:, i] + u[:, j]) > V.TRIANGLE_RTOL
-                        for k, (i, j) in enumerate(((1, 2), (0, 2), (0, 1)))], axis=1)
-    _first_bad("I_b", ~np.all(I_b > 0, axis=1) | tri.any(axis=1), lambda f, i: V.inertia(f, I_b[i]))
+    _first_bad("I_b", ~np.all(I_b > 0, axis=1) | _triangle_broken(I_b), lambda f, i: V.inertia(f, I_b[i]))
 
 
 @V.keywords
