@@ -103,6 +103,11 @@ class CPrinter(C99CodePrinter):
         return f"({float(expr.p)!r}/{float(expr.q)!r})"
 
 
+def _beyond_float32(r) -> bool:
+    """A rational whose numerator or denominator overflows float (|.| > 3.4e38)."""
+    return max(abs(float(r.p)), abs(float(r.q))) > 3.0e38
+
+
 class CPrinterF32(C99CodePrinter):
     """The C printer in single precision: `float` math (sqrtf, sinf, fabsf, fmaxf ...), literals with the F
     suffix (1.0F), rationals as float divisions (1.0F/3.0F, correctly rounded to float at compile time), so
@@ -117,6 +122,8 @@ class CPrinterF32(C99CodePrinter):
         return _small_pow(self, expr, "*", "1.0F", "sqrtf") or super()._print_Pow(expr)
 
     def _print_Rational(self, expr):
+        if _beyond_float32(expr):   # a threshold such as 1e-300: its double quotient rounded to float once
+            return f"((float)({float(expr.p)!r}/{float(expr.q)!r}))"
         return f"({float(expr.p)!r}F/{float(expr.q)!r}F)"
 
 
@@ -143,6 +150,8 @@ class NpPrinterF32(NpPrinter):
     combined with a float32 array stays float32 under NumPy >= 2)."""
 
     def _print_Rational(self, expr):
+        if _beyond_float32(expr):   # as CPrinterF32: the double quotient rounded to float32 once
+            return f"numpy.float32({float(expr.p)!r}/{float(expr.q)!r})"
         return f"(numpy.float32({float(expr.p)!r})/numpy.float32({float(expr.q)!r}))"
 
 

@@ -527,7 +527,7 @@ void lvf_quat_to_axis_angle(const float *q, float *axis, float *angle) {
     const float q_2 = q[2];
     const float q_3 = q[3];
     const float t0 = sqrtf((q_0*q_0) + (q_1*q_1) + (q_2*q_2));
-    const float t1 = t0 <= (1.0F/1e+300F);
+    const float t1 = t0 <= ((float)(1.0/1e+300));
     const float t2 = (1.0F/t0);
     axis[0] = ((t1) ? (
    1

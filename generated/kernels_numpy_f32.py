@@ -949,7 +949,7 @@ def quat_to_axis_angle(q):
     q_3 = q[..., 3]
     with numpy.errstate(invalid='ignore', divide='ignore'):  # numpy.select evaluates every branch
         t0 = numpy.sqrt((q_0*q_0) + (q_1*q_1) + (q_2*q_2))
-        t1 = numpy.less_equal(t0, (numpy.float32(1.0)/numpy.float32(1e+300)))
+        t1 = numpy.less_equal(t0, numpy.float32(1.0/1e+300))
         t2 = (1.0/t0)
         axis_out = numpy.empty(batch + (3,), dtype=numpy.float32)
         axis_out[..., 0] = numpy.select([t1,True], [1,q_0*t2], default=numpy.nan)

@@ -345,11 +345,9 @@ class Sim:
     def _check_dtype(self, dtype) -> str:
         """dtype as "float64" or "float32" (also accepted: numpy.float32 / numpy.float64 and their dtypes); float32
         only where it is printed (backends.FLOAT32_INTEGRATORS, plain bodies, built-in effects)."""
-        try:
-            name = dtype if isinstance(dtype, str) else np.dtype(dtype).name
-        except TypeError:
-            name = repr(dtype)
-        name = V.choice("dtype", name, backends.DTYPES)
+        if isinstance(dtype, np.dtype) or (isinstance(dtype, type) and issubclass(dtype, np.generic)):
+            dtype = np.dtype(dtype).name
+        name = V.choice("dtype", dtype if isinstance(dtype, str) else repr(dtype), backends.DTYPES)
         if name == "float64":
             return name
         if self.integrator not in backends.FLOAT32_INTEGRATORS:
