@@ -142,3 +142,27 @@ def test_float32_overflow_is_a_divergence(backend):
     assert sim.steps == 0
     sim64 = lv.Sim(s, dt=1.0, integrator="euler", backend=backend)
     sim64.run(10)   # float64 holds it
+
+
+def test_float32_numpy_kernels_stay_float32():
+    """Every kernel of generated/kernels_numpy_f32.py returns float32 for float32 inputs (no temporary promoted to
+    float64 by a literal), and the kernels the float32 step uses agree with the float64 printing to float32
+    rounding (relative 1e-5) on random inputs."""
+    from lavendersim.generated import kernels_numpy as K64
+    from lavendersim.generated import kernels_numpy_f32 as K32
+
+    rng = np.random.default_rng(3)
+    assert set(K32.KERNELS) == set(K64.KERNELS)
+    for name, (fn, ins, _outs) in K32.KERNELS.items():
+        args = [rng.uniform(0.5, 1.5, size=(7,) + tuple(shape)).astype(np.float32) for _, shape in ins]
+        with np.errstate(all="ignore"):
+            out32 = fn(*args)
+            out64 = K64.KERNELS[name][0](*[a.astype(np.float64) for a in args])
+        out32 = out32 if isinstance(out32, tuple) else (out32,)
+        out64 = out64 if isinstance(out64, tuple) else (out64,)
+        for a, b in zip(out32, out64):
+            assert a.dtype == np.float32, name
+            if name in ("rigid_body_rhs_free", "rigid_body_rhs", "quat_normalize", "translation_drift",
+                        "quat_derivative_body", "effect_applied_torque", "effect_force_at_point", "effect_gravity",
+                        "effect_linear_damping", "effect_angular_damping"):
+                np.testing.assert_allclose(a, b, rtol=1e-5, atol=1e-6, err_msg=name)
