@@ -56,6 +56,12 @@ Integrators (`integrator=`; `sim.rhs_evals` counts right-hand-side evaluations, 
   splitting4's, per stage: order 4 with loads of position and attitude only, order 3 with damping.
   rhs_evals counted as splitting4's. Plain bodies only; validity bound splitting4's.
 
+Precision (`dtype=`, keyword only): "float64" (default) or "float32". float32 steps the single-precision
+printing of the same SymPy kernels (C: csrc/step_f32.c on generated/kernels_f32.c, vectorized over bodies;
+NumPy: generated/kernels_numpy_f32.py; the two agree bitwise) for euler, semi_implicit_euler and rk4 on plain
+bodies with built-in effects; the state, its views, state() and record() are float32 (the divergence checks
+evaluate in float64; step() takes the Python path). Anything else with float32 raises LavenderInputError.
+
 Unsupported combinations (splitting / implicit_gyro / splitting4 / rk4_expmap / symtop4 with a joint or wheels;
 rtol/atol with a fixed-step integrator) raise LavenderInputError at construction.
 
