@@ -61,7 +61,7 @@ def test_quick_json_is_well_formed(quick):
     for p in d["per_body_effects"]:
         assert p["plain"]["ns_min"] > 0 and p["applied_torque"]["ns_min"] > 0
         assert p["ratio"] == p["applied_torque"]["ns_min"] / p["plain"]["ns_min"]
-    assert [t["status"] in ("PASS", "MISS", "N/A") for t in d["standing"]] == [True] * (9 + len(bench.PER_BODY_SIZES_QUICK))
+    assert [t["status"] in ("PASS", "MISS", "N/A") for t in d["standing"]] == [True] * (10 + len(bench.PER_BODY_SIZES_QUICK))
     assert any(t["name"] == "one Python sim.step(), c backend" for t in d["standing"])
     assert all(math.isfinite(v) for v in d["ratios"].values())
     hw = d["handwritten"]
