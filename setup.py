@@ -25,7 +25,7 @@ from setuptools.command.build_ext import build_ext
 HERE = Path(__file__).resolve().parent
 GENERATED = "generated"
 CSRC = "lavendersim/csrc"
-HASHED = ("kernels.c", "kernels.h", "layout.h", "tableaux.h")
+HASHED = ("kernels.c", "kernels.h", "layout.h", "tableaux.h", "kernels_f32.c", "kernels_f32.h")
 
 
 def generated_hash(gen_dir: Path) -> str:
@@ -103,7 +103,8 @@ def extensions() -> list[Extension]:
         # generated/kernels.c is #included by step.c (one translation unit, so its kernels inline)
         sources=[f"{CSRC}/{n}" for n in csrc],
         include_dirs=[GENERATED, CSRC],
-        depends=[f"{GENERATED}/{n}" for n in HASHED] + [f"{CSRC}/step.h", f"{CSRC}/batch_simd.h"],
+        depends=[f"{GENERATED}/{n}" for n in HASHED] + [f"{CSRC}/step.h", f"{CSRC}/batch_simd.h",
+                                                                    f"{CSRC}/step_f32.h", f"{CSRC}/fixed_loop.h"],
         define_macros=[("LV_GENERATED_HASH", '"%s"' % generated_hash(HERE / GENERATED))],
         extra_compile_args=args,
         extra_link_args=link_args,

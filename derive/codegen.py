@@ -103,6 +103,30 @@ class CPrinter(C99CodePrinter):
         return f"({float(expr.p)!r}/{float(expr.q)!r})"
 
 
+def _beyond_float32(r) -> bool:
+    """A rational whose numerator or denominator overflows float (|.| > 3.4e38)."""
+    return max(abs(float(r.p)), abs(float(r.q))) > 3.0e38
+
+
+class CPrinterF32(C99CodePrinter):
+    """The C printer in single precision: `float` math (sqrtf, sinf, fabsf, fmaxf ...), literals with the F
+    suffix (1.0F), rationals as float divisions (1.0F/3.0F, correctly rounded to float at compile time), so
+    no subexpression is promoted to double."""
+
+    def __init__(self):
+        from sympy.codegen.ast import float32, real
+
+        super().__init__({"type_aliases": {real: float32}})
+
+    def _print_Pow(self, expr):
+        return _small_pow(self, expr, "*", "1.0F", "sqrtf") or super()._print_Pow(expr)
+
+    def _print_Rational(self, expr):
+        if _beyond_float32(expr):   # a threshold such as 1e-300: its double quotient rounded to float once
+            return f"((float)({float(expr.p)!r}/{float(expr.q)!r}))"
+        return f"({float(expr.p)!r}F/{float(expr.q)!r}F)"
+
+
 class NpPrinter(NumPyPrinter):
     def __init__(self):
         super().__init__({"fully_qualified_modules": True})
@@ -118,6 +142,17 @@ class NpPrinter(NumPyPrinter):
 
     def _print_Max(self, expr):
         return _fold(self, expr, "numpy.maximum")
+
+
+class NpPrinterF32(NpPrinter):
+    """The NumPy printer in single precision: rationals as float32 divisions (numpy.float32(1.0) /
+    numpy.float32(3.0), the C printer's 1.0F/3.0F), so every temporary stays float32 (a Python float
+    combined with a float32 array stays float32 under NumPy >= 2)."""
+
+    def _print_Rational(self, expr):
+        if _beyond_float32(expr):   # as CPrinterF32: the double quotient rounded to float32 once
+            return f"numpy.float32({float(expr.p)!r}/{float(expr.q)!r})"
+        return f"(numpy.float32({float(expr.p)!r})/numpy.float32({float(expr.q)!r}))"
 
 
 class CasadiPrinter(PythonCodePrinter):
@@ -194,12 +229,12 @@ class Printed:
             raise RuntimeError(f"derive: kernel {k.name} uses undeclared symbols {sorted(map(str, unknown))}")
 
 
-def _c_sig(k: Kernel, prefix: str = PREFIX) -> str:
+def _c_sig(k: Kernel, prefix: str = PREFIX, real: str = "double") -> str:
     args = []
     for a in k.inputs:
-        args.append(f"double {a.name}" if a.shape == () else f"const double *{a.name}")
+        args.append(f"{real} {a.name}" if a.shape == () else f"const {real} *{a.name}")
     for a in k.outputs:
-        args.append(f"double *{a.name}")
+        args.append(f"{real} *{a.name}")
     return f"void {prefix}{k.name}({', '.join(args)})"
 
 
@@ -230,12 +265,12 @@ def _np_doc_lines(k: Kernel) -> list[str]:
     return lines + [""]
 
 
-def _c_kernel(p: Printed, pr: CPrinter, prefix: str) -> list[str]:
+def _c_kernel(p: Printed, pr: CPrinter, prefix: str, real: str = "double") -> list[str]:
     k = p.k
-    c = [_c_sig(k, prefix) + " {"]
-    _unpack(k, p.used, lambda a, i, s: c.append(f"    const double {s} = {a.name}[{i}];"))
+    c = [_c_sig(k, prefix, real) + " {"]
+    _unpack(k, p.used, lambda a, i, s: c.append(f"    const {real} {s} = {a.name}[{i}];"))
     for t, e in p.temps:
-        c.append(f"    const double {t} = {pr.doprint(e)};")
+        c.append(f"    const {real} {t} = {pr.doprint(e)};")
     idx = 0
     for a in k.outputs:
         for i in range(a.size):
@@ -295,6 +330,31 @@ def print_c(printed: list[Printed], effects: list | None = None) -> tuple[str, s
     return "\n".join(h) + "\n", "\n".join(c) + "\n"
 
 
+F32_PREFIX = "lvf_"
+
+
+def print_c_f32(printed: list[Printed], effects: list | None = None) -> tuple[str, str]:
+    """kernels_f32.h and kernels_f32.c: every kernel printed again in single precision (prefix lvf_, float
+    arguments, float math and literals; CPrinterF32) and the built-in effects' float accumulating functions
+    with their dispatch lvf_effect_apply (effect codes from kernels.h). Compiled by the float32 step loop
+    (lavendersim/csrc/step_f32.c), which includes kernels_f32.c into its translation unit."""
+    from . import effect_print
+
+    pr = CPrinterF32()
+    h = [f"/* {HEADER} */", "/* LavenderSim kernels in single precision, C99: the kernels of kernels.h printed from the same",
+         "   SymPy expressions with float arithmetic (sqrtf, 1.0F, ...). No allocation, no globals; arrays are",
+         "   row-major floats. Quaternions are (x, y, z, w), scalar last. Outputs may alias inputs. */",
+         "#ifndef LAVENDERSIM_KERNELS_F32_H", "#define LAVENDERSIM_KERNELS_F32_H", ""]
+    c = [f"/* {HEADER} */", "#include <math.h>", '#include "kernels.h"', '#include "kernels_f32.h"', ""]
+    for p in printed:
+        h += [f"/* {p.k.name}: {p.k.summary} (float; see kernels.h) */", _c_sig(p.k, F32_PREFIX, "float") + ";"]
+        c += _c_kernel(p, pr, F32_PREFIX, "float")
+    if effects:
+        c += effect_print.c_source_real(effects, F32_PREFIX, "float")
+    h += ["", "#endif"]
+    return "\n".join(h) + "\n", "\n".join(c) + "\n"
+
+
 def print_c_user(printed: list[Printed], effects: list, set_name: str) -> tuple[str, str]:
     """A user set's kernels.h / kernels.c: its kernels (prefix lvu_<set>_) and its effects' exported
     accumulating functions lvu_effect_<name>, compiled into one shared library."""
@@ -316,12 +376,12 @@ def print_c_user(printed: list[Printed], effects: list, set_name: str) -> tuple[
     return "\n".join(h) + "\n", "\n".join(c) + "\n"
 
 
-def _np_kernel(p: Printed, pr: NpPrinter) -> list[str]:
+def _np_kernel(p: Printed, pr: NpPrinter, dtype: str = "float64") -> list[str]:
     k = p.k
     doc = "\n".join(f"    {line}" if line else "" for line in _np_doc_lines(k)).lstrip()
     out = [f"def {k.name}({', '.join(a.name for a in k.inputs)}):", f'    """{doc}    """']
     for a in k.inputs:
-        out.append(f"    {a.name} = numpy.asarray({a.name}, dtype=numpy.float64)")
+        out.append(f"    {a.name} = numpy.asarray({a.name}, dtype=numpy.{dtype})")
     lead = []
     for a in k.inputs:
         nd = len(a.shape)
@@ -342,7 +402,7 @@ def _np_kernel(p: Printed, pr: NpPrinter) -> list[str]:
     rets = []
     for a in k.outputs:
         shp = "" if a.shape == () else " + " + repr(tuple(a.shape))
-        out.append(f"{ind}{a.name}_out = numpy.empty(batch{shp})")
+        out.append(f"{ind}{a.name}_out = numpy.empty(batch{shp}" + (")" if dtype == "float64" else f", dtype=numpy.{dtype})"))
         for i in range(a.size):
             e = p.reduced[idx]
             idx += 1
@@ -359,17 +419,20 @@ def _np_kernel(p: Printed, pr: NpPrinter) -> list[str]:
 
 
 def print_numpy(printed: list[Printed], effects: list | None = None, header: str = HEADER,
-                self_check: bool = False) -> str:
+                self_check: bool = False, dtype: str = "float64") -> str:
     """kernels_numpy.py: every kernel vectorized, the KERNELS table and the effects' dispatch.
 
     self_check: the module's first statement checks its own sha256 against the manifest.json beside it
     (lavendersim._integrity.check_generated), so a hand edit or a truncation raises at import."""
     from . import effect_print
 
-    pr = NpPrinter()
+    pr = NpPrinter() if dtype == "float64" else NpPrinterF32()
+    prec = [] if dtype == "float64" else [f"Single precision: inputs are taken as {dtype} and every temporary and output is",
+                                          f"{dtype} (the same expressions as the C kernels of kernels_f32.c)."]
     out = [f'"""{header}', "", "LavenderSim kernels for NumPy, vectorized over leading batch axes: an input of shape",
            "(..., n) broadcasts against the others; scalars may be floats or arrays of the batch shape.",
-           'Quaternions are (x, y, z, w), scalar last; matrices are (..., 3, 3)."""']
+           "Quaternions are (x, y, z, w), scalar last; matrices are (..., 3, 3)." + ("" if prec else '"""'),
+           *prec[:-1], *(prec[-1:] and [prec[-1] + '"""'])]
     if self_check:
         out += ["from lavendersim._integrity import check_generated as _check_generated",
                 "",
@@ -379,7 +442,7 @@ def print_numpy(printed: list[Printed], effects: list | None = None, header: str
     meta = []
     for p in printed:
         k = p.k
-        out += _np_kernel(p, pr)
+        out += _np_kernel(p, pr, dtype)
         meta.append(f"    {k.name!r}: ({k.name}, {[(a.name, tuple(a.shape)) for a in k.inputs]!r}, "
                     f"{[(a.name, tuple(a.shape)) for a in k.outputs]!r}),")
     out.append("# name -> (function, [(input, shape)], [(output, shape)]), in the order of the C kernel table")
@@ -540,7 +603,10 @@ def render() -> dict[str, str]:
     effects = list(enumerate(all_effects(), start=1))
     forces = [(c, d) for c, d in effects if d.kind == "force"]
     h, c = print_c(printed, forces)
+    h32, c32 = print_c_f32(printed, forces)
     files = {"kernels.h": h, "kernels.c": c, "kernels_numpy.py": print_numpy(printed, forces, self_check=True),
+             "kernels_f32.h": h32, "kernels_f32.c": c32,
+             "kernels_numpy_f32.py": print_numpy(printed, forces, self_check=True, dtype="float32"),
              "kernels_casadi.py": print_casadi(printed), "effects_meta.py": meta_module(effects, HEADER),
              "EQUATIONS.md": print_markdown(printed, effects)}
     files.update(contract_files())

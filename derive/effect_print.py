@@ -21,6 +21,11 @@ C_ARGS = ("const double *p, const double *x, const double *v_w, double m, const 
           "double *F, double *tau")
 
 
+def c_args(real: str = "double") -> str:
+    """The effect calling convention's C parameters in precision `real` (C_ARGS for double)."""
+    return C_ARGS.replace("double", real)
+
+
 def _in_state(name: str) -> bool:
     return any(f.name == name for f in STATE.fields)
 
@@ -35,14 +40,14 @@ def _c_arg(decl: E.EffectDecl, a) -> str:
     return f"p[{o}]" if a.shape == () else f"p + {o}"
 
 
-def c_effect_functions(decl: E.EffectDecl, prefix: str, fn_name: str, storage: str) -> list[str]:
-    """The accumulating C function of one effect (calls its kernel, adds its outputs)."""
+def c_effect_functions(decl: E.EffectDecl, prefix: str, fn_name: str, storage: str, real: str = "double") -> list[str]:
+    """The accumulating C function of one effect (calls its kernel, adds its outputs), in precision `real`."""
     k = decl.kernel()
     used = {a.name for a in k.inputs}
     lines = [f"/* {decl.name}: adds {' and '.join(n for n, _ in decl.outputs)} for one body. "
              f"p = [{', '.join(f'{p.name}({p.size})' for p in decl.params)}] */",
-             f"{storage}void {fn_name}({C_ARGS})", "{"]
-    lines += [f"    double {n}[3];" for n, _ in decl.outputs]
+             f"{storage}void {fn_name}({c_args(real)})", "{"]
+    lines += [f"    {real} {n}[3];" for n, _ in decl.outputs]
     unused = [n for n in ("p", "x", "v_w", "m", "I_b") if n not in used and not (n == "x" and used & {"p_w", "q", "omega_b"})
               and not (n == "p" and decl.params)]
     unused += [n for n, out in (("F", E.OUT_FORCE), ("tau", E.OUT_TORQUE)) if out not in dict(decl.outputs)]
@@ -106,6 +111,21 @@ def c_source(effects: list[tuple[int, E.EffectDecl]], prefix: str) -> list[str]:
     c += _switch("int lv_effect_n_params(int code)", effects, lambda d: str(d.n_params), "-1")
     c += _switch("int lv_effect_flags(int code)", effects, lambda d: str(d.flags), "-1")
     c += _switch("const char *lv_effect_name(int code)", effects, lambda d: f'"{d.name}"', "0")
+    return c
+
+
+def c_source_real(effects: list[tuple[int, E.EffectDecl]], prefix: str, real: str) -> list[str]:
+    """The built-in effects' accumulating functions and their dispatch (static inline int
+    <prefix>effect_apply(int code, ...)) in precision `real` (float for kernels_f32.c); the codes, parameter
+    counts and flags are kernels.h's."""
+    c = [f"/* ---- Scene effects in {real}: accumulating functions and dispatch ---------------------------- */"]
+    for _, d in effects:
+        c += c_effect_functions(d, prefix, f"{prefix}effect_acc_{d.name}", "static inline ", real) + [""]
+    c += [f"/* Add built-in effect `code`'s force and torque; 0, or -1 for a code that is not a built-in effect. */",
+          f"static inline int {prefix}effect_apply(int code, {c_args(real)})", "{", "    switch (code) {"]
+    for _, d in effects:
+        c.append(f"    case LV_EFFECT_{d.name.upper()}: {prefix}effect_acc_{d.name}(p, x, v_w, m, I_b, F, tau); return 0;")
+    c += ["    default: return -1; /* not a built-in effect: the caller reports it */", "    }", "}", ""]
     return c
 
 

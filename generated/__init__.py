@@ -3,5 +3,5 @@ from pathlib import Path as _Path
 
 from lavendersim._integrity import check_generated as _check_generated
 
-for _name in ('effects_meta.py', 'kernels_casadi.py', 'kernels_numpy.py', 'layout.py', 'tableaux.py',):
+for _name in ('effects_meta.py', 'kernels_casadi.py', 'kernels_numpy.py', 'kernels_numpy_f32.py', 'layout.py', 'tableaux.py',):
     _check_generated(_Path(__file__).with_name(_name))  # edited or truncated -> GeneratedFileError

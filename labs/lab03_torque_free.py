@@ -25,7 +25,10 @@ constant and (omega_y, omega_z) turns at lambda = (I_y - I_x)/I_y * omega_x = 45
 |w(T) - w0| = 2 |w_perp| |sin(lambda T / 2)| = 2 sqrt(5) |sin(135/34)| = 3.29710 rad/s.
 
 World angular-momentum error: max_t |L_w(t) - L_w(0)| / |L_w(0)| (relative). The chapter's
-single-precision build reports < 4e-7; float64 is far smaller (reported). Energy: max_t |E - E0| / E0.
+single-precision build reports < 4e-7; float64 is far smaller (reported), and the same spin stepped with
+Sim(..., dtype="float32") gives 2.6e-6 (momentum_error_float32, reported beside the chapter's 4e-7 and
+checked against the float32 rounding bound FLOAT32_MOMENTUM_LIMIT). Energy:
+max_t |E - E0| / E0.
 
 Paw-check 5: a box with three distinct moments (0.3 x 0.2 x 0.1 m, 1 kg: I_x < I_y < I_z) spins
 at 3 rad/s about each principal axis with 1% (0.03 rad/s) on the other two, for 10 s. The largest
@@ -61,6 +64,10 @@ INTEGRATOR = "rk4"
 MIXED_CHANGE, MIXED_TOL = 3.30, 0.005  # the chapter's two decimals
 PRINCIPAL_TOL = 1e-12
 MOMENTUM_LIMIT = 4e-7
+# float32 (Sim(dtype="float32")): the relative rounding of ~6e-8 per step accumulates as a random walk,
+# ~3 sqrt(n) eps over the run's n = 3000 steps; measured 2.6e-6 at dt = 1e-3 s (above the chapter's < 4e-7,
+# whose build's step count and arithmetic are not known), 7e-7 at dt = 1e-2 s (fewer steps).
+FLOAT32_MOMENTUM_LIMIT = 1e-5
 PAW5_SIZE = (0.3, 0.2, 0.1)
 PAW5_SPIN, PAW5_PERTURB, PAW5_T = 3.0, 0.01, 10.0
 
@@ -142,11 +149,11 @@ def _rel_series(a, a0):
     return np.linalg.norm(a - a0, axis=-1) / np.linalg.norm(a0)
 
 
-def _simulate(bodies, T, dt, integrator, normalize, backend):
+def _simulate(bodies, T, dt, integrator, normalize, backend, dtype="float64"):
     scene = lv.Scene()
     for b in bodies:
         scene.add_body(b)
-    sim = lv.Sim(scene, dt=dt, integrator=integrator, backend=backend, normalize=normalize)
+    sim = lv.Sim(scene, dt=dt, integrator=integrator, backend=backend, normalize=normalize, dtype=dtype)
     n = int(round(T / dt))
     if n < 1 or abs(n * dt - T) > 1e-9 * T:
         raise V.LavenderInputError("dt", f"T = {T:g} s must be a whole number of steps", f", got dt = {dt!r}")
@@ -199,6 +206,10 @@ def compute(backend: str = "auto", dt: float = DT, integrator: str = INTEGRATOR,
     momentum_error = float(np.max(L_err))
     energy_error = float(np.max(E_err))
     momentum_error_principal = float(np.max(_rel_series(L_p, L_p[0])))
+    # the same mixed spin with Sim(dtype="float32"): the precision the chapter's build had
+    _, traj32 = _simulate([mixed], T_END, dt, integrator, normalize, backend, dtype="float32")
+    L_32 = _invariants(traj32, "mixed", mixed)[0]
+    momentum_error_float32 = float(np.max(_rel_series(L_32, L_32[0])))
     qnorm_dev = float(np.max(np.abs(np.linalg.norm(traj.body("mixed").q, axis=1) - 1)))
 
     # paw-check 5
@@ -225,7 +236,8 @@ def compute(backend: str = "auto", dt: float = DT, integrator: str = INTEGRATOR,
         "principal_omega_change": principal_change, "principal_omega_change_max": principal_change_max,
         "mixed_omega_change": mixed_change, "mixed_omega_change_closed_form": float(closed),
         "mixed_omega_change_max": mixed_change_max, "mixed_omega_b_T": wm[-1],
-        "momentum_error": momentum_error, "momentum_error_principal": momentum_error_principal,
+        "momentum_error": momentum_error, "momentum_error_float32": momentum_error_float32,
+        "momentum_error_principal": momentum_error_principal,
         "energy_error": energy_error, "L_w0_mixed": L_m[0], "energy_mixed": float(E_m[0]),
         "quaternion_norm_max_deviation": qnorm_dev,
         "paw5_I_b": I5, "paw5_max_deviation_x": dev5["x"], "paw5_max_deviation_y": dev5["y"],
@@ -260,6 +272,9 @@ def compute(backend: str = "auto", dt: float = DT, integrator: str = INTEGRATOR,
                     "2 |w_perp| |sin(lambda T / 2)| for the symmetric rod, rad/s"),
             C.below("momentum_error", momentum_error, MOMENTUM_LIMIT, "chapter < 4e-7 (single precision)"),
             C.below("momentum_error_float64", momentum_error, 1e-10, "float64 RK4 is far below the chapter's bound"),
+            C.below("momentum_error_float32", momentum_error_float32, FLOAT32_MOMENTUM_LIMIT,
+                    f"Sim(dtype='float32'), the same mixed spin, beside the chapter's < {MOMENTUM_LIMIT:g}: rounding "
+                    f"accumulates as a random walk over the {int(round(T_END / DT))} steps (~3 sqrt(n) eps_float32)"),
             C.below("energy_error", energy_error, 1e-10, "relative, RK4"),
         ]
     else:

@@ -56,6 +56,12 @@ Integrators (`integrator=`; `sim.rhs_evals` counts right-hand-side evaluations, 
   splitting4's, per stage: order 4 with loads of position and attitude only, order 3 with damping.
   rhs_evals counted as splitting4's. Plain bodies only; validity bound splitting4's.
 
+Precision (`dtype=`, keyword only): "float64" (default) or "float32". float32 steps the single-precision
+printing of the same SymPy kernels (C: csrc/step_f32.c on generated/kernels_f32.c, vectorized over bodies;
+NumPy: generated/kernels_numpy_f32.py; the two agree bitwise) for euler, semi_implicit_euler and rk4 on plain
+bodies with built-in effects; the state, its views, state() and record() are float32 (the divergence checks
+evaluate in float64; step() takes the Python path). Anything else with float32 raises LavenderInputError.
+
 Unsupported combinations (splitting / implicit_gyro / splitting4 / rk4_expmap / symtop4 with a joint or wheels;
 rtol/atol with a fixed-step integrator) raise LavenderInputError at construction.
 
@@ -245,6 +251,12 @@ class Sim:
         (keyword only) A torque- and force-free body whose kinetic energy or |L| (a free wheeled body: whose total |L|)
         exceeds max_growth times its value at construction / the last set_state raises DivergenceError
         (default 2: a conserved quantity that doubles is never rounding; None switches the check off).
+    dtype : {"float64", "float32"}
+        (keyword only) Precision of the state and of every step's arithmetic (default "float64"). "float32"
+        steps the single-precision printing of the same kernels (C: generated/kernels_f32.c; NumPy:
+        generated/kernels_numpy_f32.py) for euler, semi_implicit_euler and rk4 on plain bodies with built-in
+        effects (anything else raises LavenderInputError naming dtype); the state, its views, state() and
+        record() are then float32, while the divergence checks evaluate in float64.
 
     Raises
     ------
@@ -266,7 +278,7 @@ class Sim:
     @V.keywords  # unknown keyword arguments raise LavenderInputError naming them
     def __init__(self, scene: Scene, dt: float = 1e-3, integrator: str = "rk4", backend: str = "auto", normalize: bool = True,
                  rtol: float | None = None, atol: float | None = None, *, on_bound: str = "raise",
-                 max_growth: float | None = 2.0):
+                 max_growth: float | None = 2.0, dtype: str = "float64"):
         if not isinstance(scene, Scene):
             raise V.LavenderInputError("scene", "must be a lavendersim.Scene", f", got {type(scene).__name__}")
         self.dt = V.dt("dt", dt)
@@ -303,6 +315,7 @@ class Sim:
                     raise V.LavenderInputError(
                         "integrator", f"{self.integrator!r} steps plain rigid bodies only, but body {name!r} has {what}; "
                         "use rk4 or dopri5 for jointed or wheeled bodies")
+        self.dtype = self._check_dtype(dtype)
         self._per_step = backends.rhs_per_step(self.integrator, self.effects, len(self.names))
         self.on_bound = V.choice("on_bound", on_bound, ON_BOUND)
         if max_growth is not None:
@@ -311,12 +324,17 @@ class Sim:
                 raise V.LavenderInputError("max_growth", "must be > 1 (or None: no growth check)", f", got {max_growth!r}")
         self.max_growth = max_growth
         self._has_models = bool(self._models.rows[:, LY.MODEL_KIND].any())
+        # the arrays the backend steps: float64, or float32 copies of the state, params and effect table
+        self._step_params, self._step_effects = self.params, self.effects
+        if self.dtype == "float32":
+            self._x = self._x.astype(np.float32)
+            self._step_params, self._step_effects = self.params.astype(np.float32), self.effects.astype(np.float32)
         self._dirty = True         # the state was written since the last check (see _is_checked)
         self._snap_buf = None      # _advance's reusable snapshot buffers
         self._setup_checks()
         self._fast = self._make_stepper()
         self._screen = None
-        if self.backend.name == "c":
+        if self.backend.name == "c" and self.dtype == "float64":   # the C screen reads float64 states
             from .backends import c_backend
 
             self._screen = c_backend._c.checks_pass
@@ -329,6 +347,31 @@ class Sim:
         if self._fast is not None:   # sim.step() straight into C; the Python path only when C steps aside
             self._fast.set_fallback(self._step_slow)
             self.step = self._fast.step_or_fallback
+
+    def _check_dtype(self, dtype) -> str:
+        """dtype as "float64" or "float32" (also accepted: numpy.float32 / numpy.float64 and their dtypes); float32
+        only where it is printed (backends.FLOAT32_INTEGRATORS, plain bodies, built-in effects)."""
+        if isinstance(dtype, np.dtype) or (isinstance(dtype, type) and issubclass(dtype, np.generic)):
+            dtype = np.dtype(dtype).name
+        name = V.choice("dtype", dtype if isinstance(dtype, str) else repr(dtype), backends.DTYPES)
+        if name == "float64":
+            return name
+        if self.integrator not in backends.FLOAT32_INTEGRATORS:
+            raise V.LavenderInputError("dtype", f"float32 steps {', '.join(backends.FLOAT32_INTEGRATORS)} only, not "
+                                       f"{self.integrator!r} (use dtype='float64' for it)")
+        for i, name_ in enumerate(self.names):
+            if self._kind(i):
+                raise V.LavenderInputError("dtype", f"float32 steps plain rigid bodies only, but body {name_!r} has a "
+                                           "spherical_joint or reaction_wheels (use dtype='float64')")
+        if len(self.effects):
+            codes = self.effects[:, effects_mod.ROW_CODE]
+            if np.any(codes >= effects_mod.USER_CODE_BASE):
+                raise V.LavenderInputError("dtype", "float32 steps built-in effects only; the scene has a user effect "
+                                           "(use dtype='float64')")
+            if len(self.names) >= 2**24:
+                raise V.LavenderInputError("dtype", "float32 with effects takes fewer than 2**24 bodies (body indices "
+                                           "in the float32 effect table must be exact)")
+        return name
 
     # ---- zero-copy views of the state (read-only: set_state is the writer) ------------------
     @property
@@ -394,7 +437,7 @@ class Sim:
         (its |L| is computed in Python every step), a scene larger than FAST_STEP_WORK evaluations per step (the
         fast path holds the GIL), or a Python without the GIL."""
         gil = getattr(sys, "_is_gil_enabled", lambda: True)()
-        if (self.backend.name != "c" or self._per_step is None or not gil
+        if (self.backend.name != "c" or self._per_step is None or not gil or self.dtype != "float64"
                 or (self._free_wheels_idx and self.max_growth is not None)
                 or len(self.names) * self._per_step > FAST_STEP_WORK):
             return None
@@ -689,7 +732,7 @@ class Sim:
         models = self._models if self._has_models else None
         ad = self._adaptive
         before = None if ad is None else ad.nfev.copy()
-        self.backend.advance(self._x, self.params, self.effects, self.integrator, self.normalize, self.dt, n, models,
+        self.backend.advance(self._x, self._step_params, self._step_effects, self.integrator, self.normalize, self.dt, n, models,
                              *(() if ad is None else (ad,)))
         self.rhs_evals += n * self._per_step if ad is None else int(np.max(ad.nfev - before, initial=0))
         self.steps += n

@@ -52,7 +52,8 @@ def test_json_is_well_formed(quick):
     m = data["machine"]
     for key in ("cpu", "logical_cores", "python", "numpy", "scipy", "compiler", "git_commit"):
         assert m[key], key
-    assert "float32" in data and "not measured" in data["float32"]
+    assert "float32" in data and "rk4 [c float32]" in data["float32"]   # the precision axis
+    assert "rk4 [c float32]" in {m["label"] for m in data["methods"]}
     keys = {"case", "method", "param", "value", "steps", "rhs_evals", "attitude_error", "omega_error",
             "energy_drift", "momentum_drift", "wall_s", "wall_per_sim_s", "repeats", "diverged"}
     labels = {m["label"] for m in data["methods"]}

@@ -2,7 +2,8 @@
 
     advance(state, params, effects, integrator, normalize, dt, n_steps, models=None, adaptive=None)
 
-mutates state (nb, 13) (and, with `models`, models.Omega and models.applied; with `adaptive`,
+mutates state (nb, 13) (float64; or float32: FLOAT32_INTEGRATORS on plain bodies, built-in effects, in single
+precision throughout) (and, with `models`, models.Omega and models.applied; with `adaptive`,
 adaptive.h and adaptive.nfev) in place, or raises DivergenceError and leaves every array unchanged.
 "numpy" needs no compiler; "c" steps inside C. dopri5 needs `adaptive` (an Adaptive); the PLAIN_ONLY
 integrators (splitting, implicit_gyro, splitting4, rk4_expmap, symtop4) accept plain bodies only (ValueError
@@ -32,6 +33,11 @@ ADAPTIVE = ("dopri5",)
 # sub-flows / implicit solve use the diagonal principal inertia of a free body.
 PLAIN_ONLY = ("splitting", "implicit_gyro", "splitting4", "rk4_expmap", "symtop4")
 BACKENDS = ("c", "numpy")
+# Precisions of the state (Sim(..., dtype=)): float32 runs the single-precision printing of the same kernels
+# (generated/kernels_f32.c, generated/kernels_numpy_f32.py) for these integrators on plain bodies with
+# built-in effects; anything else is float64 only.
+DTYPES = ("float64", "float32")
+FLOAT32_INTEGRATORS = ("euler", "semi_implicit_euler", "rk4")
 
 DOPRI5_HMIN_REL = TABLEAUX.DP_HMIN_REL          # a substep below dt * this means the tolerance cannot be met
 DOPRI5_MAX_SUBSTEPS = TABLEAUX.DP_MAX_SUBSTEPS  # ... as do more substeps than this within one output step

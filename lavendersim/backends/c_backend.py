@@ -18,10 +18,10 @@ from ..effects import ROW, ROW_BODY
 from ..errors import DivergenceError, StaleBuildError
 from .._install import rebuild_command
 from ..generated import layout as LY
-from . import KIND_WHEELS, PLAIN_ONLY, Adaptive, Models, no_root_cause, norm_safe, tolerance_cause
+from . import FLOAT32_INTEGRATORS, KIND_WHEELS, PLAIN_ONLY, Adaptive, Models, no_root_cause, norm_safe, tolerance_cause
 
 REBUILD = rebuild_command()
-HASHED = ("kernels.c", "kernels.h", "layout.h", "tableaux.h")  # every generated file the extension compiles
+HASHED = ("kernels.c", "kernels.h", "layout.h", "tableaux.h", "kernels_f32.c", "kernels_f32.h")  # every generated file the extension compiles
 INTEGRATOR_CODES = {"euler": 0, "semi_implicit_euler": 1, "rk4": 2, "dopri5": 3, "splitting": 4, "implicit_gyro": 5,
                     "splitting4": 6, "rk4_expmap": 7, "symtop4": 8}
 
@@ -241,6 +241,8 @@ class CBackend:
                 models: Models | None = None, adaptive: Adaptive | None = None) -> None:
         if integrator not in INTEGRATOR_CODES:
             raise ValueError(f"integrator: must be one of {', '.join(INTEGRATOR_CODES)}, got {integrator!r}")
+        if isinstance(state, np.ndarray) and state.dtype == np.float32:
+            return self._advance_f32(state, params, effects, integrator, normalize, dt, n_steps, models)
         if integrator == "dopri5" and adaptive is None:
             raise ValueError("integrator: dopri5 needs adaptive (a lavendersim.backends.Adaptive)")
         if integrator in PLAIN_ONLY and models is not None and np.any(np.asarray(models.rows)[:, LY.MODEL_KIND] != 0):
@@ -297,3 +299,28 @@ class CBackend:
             raise DivergenceError(step, body, no_root_cause(pre, params[body, LY.PARAM_I_B], float(dt)))
         raise DivergenceError(step, body, _cause(snapshot[body], pre, params, effects, body, step,
                                                  float(dt), integrator, model))
+
+    def _advance_f32(self, state, params, effects, integrator, normalize, dt, n_steps, models) -> None:
+        """advance on a float32 state (csrc/step_f32.c): plain bodies, FLOAT32_INTEGRATORS, built-in effects;
+        params and effects are used as float32 (pass them as float32 to avoid a copy per call)."""
+        if integrator not in FLOAT32_INTEGRATORS:
+            raise ValueError(f"integrator: float32 steps {', '.join(FLOAT32_INTEGRATORS)} only, got {integrator!r}")
+        if models is not None and np.any(np.asarray(models.rows)[:, LY.MODEL_KIND] != 0):
+            raise ValueError("float32 steps plain rigid bodies only (no spherical_joint or reaction_wheels)")
+        if not state.flags.c_contiguous or not state.flags.writeable:
+            raise TypeError(f"state must be a writable C-contiguous numpy array of shape (nb, {LY.STATE_SIZE})")
+        params32 = np.ascontiguousarray(params, dtype=np.float32)
+        effects32 = np.ascontiguousarray(effects, dtype=np.float32)
+        if effects32.size == 0:
+            effects32 = effects32.reshape(0, ROW)
+        snapshot = state.copy()
+        status, step, body = _c.simulate_f32(state, params32, effects32, INTEGRATOR_CODES[integrator],
+                                             1 if normalize else 0, float(dt), int(n_steps))
+        if status == 0:
+            return
+        pre = state[body].astype(np.float64)  # the failing body is left at its last finite state
+        state[...] = snapshot
+        e64 = np.asarray(effects, np.float64)
+        e64 = e64.reshape(0, ROW) if e64.size == 0 else e64
+        raise DivergenceError(step, body, _cause(snapshot[body].astype(np.float64), pre, np.asarray(params, np.float64),
+                                                 e64, body, step, float(dt), integrator))

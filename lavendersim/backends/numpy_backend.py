@@ -19,7 +19,7 @@ from ..errors import DivergenceError
 from ..generated import layout as LY
 from ..generated import tableaux as T
 from ..kernels import K
-from . import (DOPRI5_HMIN_REL, DOPRI5_MAX_SUBSTEPS, KIND_JOINT, KIND_WHEELS, PLAIN_ONLY, Adaptive, Models,
+from . import (DOPRI5_HMIN_REL, DOPRI5_MAX_SUBSTEPS, FLOAT32_INTEGRATORS, KIND_JOINT, KIND_WHEELS, PLAIN_ONLY, Adaptive, Models,
                divergence_cause, no_root_cause, tolerance_cause)
 
 P, Q, V, W = LY.STATE_P_W, LY.STATE_Q, LY.STATE_V_W, LY.STATE_OMEGA_B  # state-row fields
@@ -33,8 +33,10 @@ class _EffectIndex:
     (body, effect) pairs; the sums are then taken in each body's table order, so they are bitwise
     those of the C backend. A body pays for its own effects only; an unknown code raises."""
 
-    def __init__(self, effects: np.ndarray, idx: np.ndarray, m: np.ndarray, I: np.ndarray):
+    def __init__(self, effects: np.ndarray, idx: np.ndarray, m: np.ndarray, I: np.ndarray, kmod=None):
         from .. import effects as E
+
+        self.dtype = m.dtype   # float32 plans sum in float32 with the float32 printing of the effects (kmod)
 
         n = idx.size
         nb = m.shape[0]
@@ -60,7 +62,8 @@ class _EffectIndex:
         for code in np.unique(codes):
             spec = E.spec_for_code(int(code))  # LavenderInputError for a code no effect declares
             sel = np.flatnonzero(codes == code)
-            self.groups.append((E.numpy_apply(int(code)), sel, pair_loc[sel], effects[pair_row[sel], E.ROW_PARAMS:].copy()))
+            apply = E.numpy_apply(int(code)) if kmod is None else kmod.EFFECT_APPLY[spec.name]
+            self.groups.append((apply, sel, pair_loc[sel], effects[pair_row[sel], E.ROW_PARAMS:].copy()))
             has_F[sel], has_T[sel] = "F_w" in spec.outputs, "tau_w" in spec.outputs
             if spec.velocity_dependent:
                 self.velocity[pair_loc[sel]] = True
@@ -75,10 +78,10 @@ class _EffectIndex:
         """Total force at the COM and torque about it (world), per body of idx: x their states (n, >= 13),
         v the COM velocities the effects see."""
         n = x.shape[0]
-        F, tau = np.zeros((n, 3)), np.zeros((n, 3))
+        F, tau = np.zeros((n, 3), self.dtype), np.zeros((n, 3), self.dtype)
         if not self.npairs:
             return F, tau
-        cF, cT = np.empty((self.npairs, 3)), np.empty((self.npairs, 3))
+        cF, cT = np.empty((self.npairs, 3), self.dtype), np.empty((self.npairs, 3), self.dtype)
         for apply, sel, loc, p in self.groups:
             f, t = apply(p, x[loc], v[loc], self.m[loc], self.I[loc])
             if f is not None:
@@ -129,6 +132,8 @@ class _Plan:
 
     def __init__(self, params: np.ndarray, effects: np.ndarray, rows: np.ndarray | None = None):
         nb = params.shape[0]
+        # float32 params: the float32 plan (plain bodies, built-in effects), on the float32 kernels
+        self.K = K if params.dtype != np.float32 else _kernels_f32()
         self.m, self.I = params[:, LY.PARAM_M], params[:, LY.PARAM_I_B]
         kind = np.zeros(nb, np.int64) if rows is None else rows[:, LY.MODEL_KIND].astype(np.int64)
         touched = np.zeros(nb, bool)
@@ -140,7 +145,7 @@ class _Plan:
         self.all_free = not touched.any() and not self.has_models
         self.free = np.flatnonzero(plain & ~touched)
         self.forced = np.flatnonzero(plain & touched)
-        self.index = _EffectIndex(effects, self.forced, self.m, self.I)
+        self.index = _EffectIndex(effects, self.forced, self.m, self.I, None if self.K is K else self.K)
         self.m_f, self.I_f = self.m[self.forced], self.I[self.forced]
         self.damped_f = self.index.velocity  # bodies with an effect that reads v_w or omega_b
         self.wheeled = (kind & KIND_WHEELS) != 0
@@ -157,16 +162,16 @@ class _Plan:
     def rhs(self, x: np.ndarray, u: np.ndarray | None = None) -> np.ndarray:
         """d/dt of x (nb, 13), or of [x, Omega] (nb, 16) with u (n_wheeled, 3) when bodies have models."""
         if self.all_free:
-            return K.rigid_body_rhs_free(x, self.I)
+            return self.K.rigid_body_rhs_free(x, self.I)
         out = np.empty_like(x)
         if x.shape[1] > LY.STATE_SIZE:
             out[:, OM] = 0.0
         if self.free.size:
-            out[self.free, X] = K.rigid_body_rhs_free(x[self.free, X], self.I_free)
+            out[self.free, X] = self.K.rigid_body_rhs_free(x[self.free, X], self.I_free)
         if self.forced.size:
             xf = x[self.forced, X]
             F, tau = self.index.sums(xf, xf[:, V])
-            out[self.forced, X] = K.rigid_body_rhs(xf, self.m_f, self.I_f, F, tau)
+            out[self.forced, X] = self.K.rigid_body_rhs(xf, self.m_f, self.I_f, F, tau)
         g = self.wheels
         if g is not None:
             xg = x[g.idx]
@@ -218,8 +223,15 @@ class _Plan:
             x[j, P], x[j, V] = K.pivot_kinematics(x[j, Q], x[j, W], self.j_anchor, self.j_r_b)
 
 
-def _normalize(x: np.ndarray) -> None:
-    x[:, Q] = K.quat_normalize(x[:, Q])
+def _kernels_f32():
+    """The float32 printing of the kernels (generated/kernels_numpy_f32.py), imported on first use."""
+    from ..generated import kernels_numpy_f32
+
+    return kernels_numpy_f32
+
+
+def _normalize(x: np.ndarray, kmod=K) -> None:
+    x[:, Q] = kmod.quat_normalize(x[:, Q])
 
 
 def _kick(plan, x, h):
@@ -412,8 +424,8 @@ def step(plan: _Plan, x: np.ndarray, integrator: str, normalize: bool, dt: float
         xn = x.copy()
         for part in (V, W) + ((OM,) if x.shape[1] > LY.STATE_SIZE else ()):  # v, omega (and Omega) first
             xn[:, part] += dt * k[:, part]
-        xn[:, P] = K.translation_drift(x[:, P], xn[:, V], dt)
-        xn[:, Q] += dt * K.quat_derivative_body(x[:, Q], xn[:, W])
+        xn[:, P] = plan.K.translation_drift(x[:, P], xn[:, V], dt)
+        xn[:, Q] += dt * plan.K.quat_derivative_body(x[:, Q], xn[:, W])
     elif integrator == "splitting":
         xn = _splitting(plan, x, dt)
     elif integrator == "implicit_gyro":
@@ -433,7 +445,7 @@ def step(plan: _Plan, x: np.ndarray, integrator: str, normalize: bool, dt: float
     else:  # validated by Sim; kept for direct callers
         raise ValueError(f"integrator: unknown {integrator!r}")
     if normalize:
-        _normalize(xn)
+        _normalize(xn, plan.K)
     if plan.has_models:
         plan.constrain(xn)
     return xn
@@ -447,13 +459,20 @@ class NumpyBackend:
         self._plan = None
 
     def plan(self, params: np.ndarray, effects: np.ndarray, rows: np.ndarray | None = None) -> _Plan:
-        key = (params.tobytes(), effects.tobytes(), None if rows is None else rows.tobytes())
+        key = (params.dtype.str, params.tobytes(), effects.tobytes(), None if rows is None else rows.tobytes())
         if key != self._plan_key:
             self._plan, self._plan_key = _Plan(params, effects, rows), key
         return self._plan
 
     def advance(self, state, params, effects, integrator: str, normalize: bool, dt: float, n_steps: int,
                 models: Models | None = None, adaptive: Adaptive | None = None) -> None:
+        if isinstance(state, np.ndarray) and state.dtype == np.float32:   # single precision throughout
+            if integrator not in FLOAT32_INTEGRATORS:
+                raise ValueError(f"integrator: float32 steps {', '.join(FLOAT32_INTEGRATORS)} only, got {integrator!r}")
+            if models is not None and np.any(np.asarray(models.rows)[:, LY.MODEL_KIND] != 0):
+                raise ValueError("float32 steps plain rigid bodies only (no spherical_joint or reaction_wheels)")
+            params, effects, models, dt = (np.asarray(params, np.float32), np.asarray(effects, np.float32), None,
+                                           np.float32(dt))
         plan = self.plan(params, effects, None if models is None else models.rows)
         if integrator in PLAIN_ONLY and plan.has_models:
             raise ValueError(f"integrator: {integrator} steps plain rigid bodies only (no spherical_joint or reaction_wheels)")

@@ -81,6 +81,7 @@ TARGETS = {
     "threads2_speedup": 1.8,           # C batch loop, 1 thread / 2 threads, N >= 1e4, at least
     "per_body_effect_ratio": 1.5,      # one applied_torque per body / plain body, ns per body-step, at most
     "python_step_c_ns": 1000.0,        # one Python sim.step() on the C backend, at most (issue 12)
+    "float32_batch_speedup": 1.8,      # float64 / float32 ns per body-step, Sim.run in C, N >= 1e3, at least ("about 2x")
 }
 PER_BODY_SIZES_FULL = (1, 100, 10_000)
 PER_BODY_SIZES_QUICK = (1, 100)
@@ -243,9 +244,9 @@ def single_sim(backend: str = "c", integrator: str = "rk4", effects=()):
     return sim
 
 
-def batch_sim(n: int, backend: str, torque: bool = False):
+def batch_sim(n: int, backend: str, torque: bool = False, dtype: str = "float64"):
     """n copies of the body with slightly different spins (independent trajectories); with torque,
-    each body has its own applied_torque (n effects, one per body)."""
+    each body has its own applied_torque (n effects, one per body); dtype: the Sim's precision."""
     import lavendersim as lv
     scene = lv.Scene()
     rng = np.random.default_rng(n)
@@ -254,7 +255,7 @@ def batch_sim(n: int, backend: str, torque: bool = False):
         scene.add_body(lv.Body.box(f"b{i}", MASS, SIZE, q=Q0, omega_b=w, v_w=V_W0))
         if torque:
             scene.add_effect("applied_torque", body=f"b{i}", torque_w=PER_BODY_TORQUE)
-    return lv.Sim(scene, dt=DT, integrator="rk4", backend=backend)
+    return lv.Sim(scene, dt=DT, integrator="rk4", backend=backend, dtype=dtype)
 
 
 # --------------------------------------------------------------------------- hand-written reference
@@ -664,6 +665,7 @@ def run(quick: bool = False, rounds: int | None = None, use_mujoco: bool = True)
                                "ratio_to_torque_free": et[name]["ns_min"] / base})
 
     res["per_body_effects"] = per_body_effects(cfg["per_body_sizes"], cfg["c_body_steps"], R)
+    res["float32_batch"] = float32_batch(cfg["simd_sizes"], cfg["c_body_steps"], R)
 
     if extension_isa() is not None:
         res["simd_batch"] = simd_batch(kernel, cfg["simd_sizes"], cfg["c_body_steps"], R)
@@ -680,6 +682,26 @@ def run(quick: bool = False, rounds: int | None = None, use_mujoco: bool = True)
     res["ratios"] = ratios(res)
     res["standing"] = standing(res)
     return res
+
+
+def float32_batch(sizes, body_steps: int, rounds: int) -> list[dict]:
+    """For each N: the batch of batch_sim(N) stepped by Sim.run on the C backend in float64 and in float32
+    (Sim(dtype="float32"): csrc/step_f32.c), interleaved in the same rounds; ns per body-step, the speed-up
+    (float64 / float32) and the largest |x32 - x64| after the timed runs' first call (the same steps)."""
+    out = []
+    for n in sizes:
+        _progress(f"float32 batch: N = {n}: building scenes")
+        s64, s32 = batch_sim(n, "c"), batch_sim(n, "c", dtype="float32")
+        steps = max(2, body_steps // n)
+        s64.run(steps)
+        s32.run(steps)
+        diff = float(np.max(np.abs(s32.x.astype(np.float64) - s64.x)))
+        t = interleaved({"float64": (lambda s=s64, k=steps: s.run(k), steps * n),
+                         "float32": (lambda s=s32, k=steps: s.run(k), steps * n)}, rounds, f"float32 batch N = {n}")
+        out.append({"n_bodies": n, "steps": steps, "float64": t["float64"], "float32": t["float32"],
+                    "speedup": t["float64"]["ns_min"] / t["float32"]["ns_min"], "max_abs_diff_after_steps": diff})
+        del s64, s32
+    return out
 
 
 def per_body_effects(sizes, body_steps: int, rounds: int) -> list[dict]:
@@ -775,6 +797,11 @@ def standing(res: dict) -> list[dict]:
                      "one C call at the best ISA, tiles split over 2 threads; "
                      + (f"{os.cpu_count()} cores, load {(res['machine'].get('loadavg') or ['?'])[0]}" if big
                         else "not measured (N >= 1e4 is not in this run)")))
+    f32 = [r for r in res.get("float32_batch", []) if r["n_bodies"] >= 1000]
+    out.append(_line("float32 / float64 batch throughput (worst of N >= 1e3)", min((r["speedup"] for r in f32), default=None),
+                     TARGETS["float32_batch_speedup"], "min", "x",
+                     "Sim.run on the C backend, float64 ns / float32 ns per body-step, same rounds; N = "
+                     + ", ".join(f"{r['n_bodies']:g}" for r in f32)))
     py, bare, mj0 = _ns(res, "python_step_c"), _ns(res, "c_call_1step"), _ns(res, "mujoco_empty_mj_step")
     basis = "min over rounds" + ("" if bare is None else f"; the bare C call of one step {bare / 1e3:.3f} µs")
     if mj0 is not None:
@@ -846,6 +873,12 @@ def report(res: dict) -> str:
         for p in res["per_body_effects"]:
             L.append(f"  N = {p['n_bodies']:<8g} ({p['steps']:>8} steps)                    {p['plain']['ns_min']:10.1f}"
                      f"  {p['applied_torque']['ns_min']:19.1f}  {p['ratio']:5.2f}")
+    if res.get("float32_batch"):
+        L.append("")
+        L.append("float32 batch, C (Sim(dtype='float32')), torque-free RK4   float64 ns/body-step  float32  speed-up  max|x32-x64|")
+        for r in res["float32_batch"]:
+            L.append(f"  N = {r['n_bodies']:<8g} ({r['steps']:>8} steps)                     {r['float64']['ns_min']:10.2f}"
+                     f"  {r['float32']['ns_min']:9.2f}  {r['speedup']:7.2f}x  {r['max_abs_diff_after_steps']:.2e}")
     sb = res.get("simd_batch")
     if sb and sb["sizes"]:
         L.append("")

@@ -425,6 +425,8 @@ static PyObject *py_threads(PyObject *self, PyObject *args)
     return PyLong_FromLong(lv_threads_get());
 }
 
+PyObject *lv_py_simulate_f32(PyObject *self, PyObject *args); /* module_f32.c */
+
 static PyMethodDef methods[] = {
     {"threads", py_threads, METH_VARARGS,
      "threads([n]) -> n: the threads that share the SIMD tiles (torque-free RK4 groups of >= 16 bodies) of one\n"
@@ -455,6 +457,9 @@ static PyMethodDef methods[] = {
      "7 rk4_expmap, 8 symtop4 (4-8: plain bodies only). status 2: dopri5 could not meet the tolerance (h[body] = the step that was too small). status 0 ok (step = body = -1); status 1: the\n"
      "state of `body` became non-finite at 0-based `step`: earlier bodies are fully advanced, that body\n"
      "holds its last finite state (and wheel rates), later bodies are untouched."},
+    {"simulate_f32", lv_py_simulate_f32, METH_VARARGS,
+     "simulate_f32(state, params, effects, integrator, normalize, dt, n_steps) -> (status, step, body): simulate\n"
+     "in float32 (csrc/step_f32.c) for plain bodies, integrators 0-2 and built-in effects; arrays float32."},
     {NULL, NULL, 0, NULL}};
 
 int lv_add_stepper_type(PyObject *m); /* fast_step.c: the Stepper type behind Sim.step() */
