@@ -149,7 +149,7 @@ def _effect_scene(n: int, seed: int) -> lv.Scene:
     return sc
 
 
-@pytest.mark.parametrize("n", [16, 17, 67, 131])
+@pytest.mark.parametrize("n", [1, 3, 16, 17, 67, 131])     # any count with constant effects takes the tiles
 @pytest.mark.parametrize("normalize", [True, False])
 def test_constant_effects_on_the_tiles_are_the_scalar_path_bitwise(levels, n, normalize):
     """Bodies whose effects read no state (applied_torque, gravity) take the SIMD tiles with their sums

@@ -1197,10 +1197,11 @@ static int advance_fixed(double *state, const double *params, long nb, const lv_
     for (cls = 0; cls < LV_RHS_CLASSES; cls++) {
         const long *list = ids + first[cls] - count[cls];
         kind = cls > LV_RHS_FULL ? cls - LV_RHS_CONSTANT : cls;
-        /* RK4 groups of LV_SOA_MIN bodies or more, torque-free or with constant effects: SIMD tiles
-           (csrc/batch_simd.h), split over threads when asked */
-        if ((cls == LV_RHS_FREE || cls > LV_RHS_FULL) && integrator == LV_INTEGRATOR_RK4 && isa != LV_ISA_SCALAR
-            && count[cls] >= LV_SOA_MIN) {
+        /* RK4 groups on SIMD tiles (csrc/batch_simd.h), split over threads when asked: torque-free ones of
+           LV_SOA_MIN bodies or more, and any with constant effects (their sums are then evaluated once per
+           call, not at every stage) */
+        if ((cls == LV_RHS_FREE ? count[cls] >= LV_SOA_MIN : cls > LV_RHS_FULL && count[cls] > 0)
+            && integrator == LV_INTEGRATOR_RK4 && isa != LV_ISA_SCALAR) {
             if (advance_soa_threads(state, params, list, count[cls], tile_rk4_fn(isa, normalize, kind),
                                     cls == LV_RHS_FREE ? NULL : ix, dt, n_steps, threads, limit, best) == LV_DIVERGED)
                 status = LV_DIVERGED;
