@@ -1,8 +1,17 @@
-/* LavenderSim batched torque-free RK4 on struct-of-arrays tiles, vectorized by the compiler, with one
-   copy per instruction set chosen at run time. Included once by step.c, after the generated kernels
+/* LavenderSim batched RK4 on struct-of-arrays tiles, vectorized by the compiler, with one copy per
+   instruction set chosen at run time: torque-free bodies, and bodies whose effects all read no state
+   (LV_EFFECT_USES_STATE clear: applied_torque, gravity), whose force and torque sums are evaluated once
+   per call with the generated effect dispatch (effect_sums) and passed to the generated
+   lv_rigid_body_rhs_torque / lv_rigid_body_rhs in every stage, as the scalar path does.
+
+   Speed (lavendersim bench, "SIMD batch"): a bitwise step needs 12 correctly rounded divisions by I_k
+   (three per right-hand side) and a sqrt and a division for the normalization; x86's divider is not
+   pipelined like the adders (AVX-512 vdivpd: one per ~16 cycles for 8 lanes), so those alone cost
+   about as much as the rest of the step (the bench's "divider floor" loop), and no bitwise loop goes
+   below them. Included once by step.c, after the generated kernels
    (static functions; not a separate translation unit, so the kernels inline into every copy).
 
-   Every equation is the generated one: a tile step calls lv_rigid_body_rhs_free and lv_quat_normalize
+   Every equation is the generated one: a tile step calls the generated right-hand side and lv_quat_normalize
    on one body's numbers (local arrays the compiler turns into registers) and the RK4 constants come
    from tableaux.h, exactly as advance_free_rk4 does; the loop over the bodies of a tile is what the
    compiler vectorizes, one body per lane. A lane computes the same IEEE operations (+, -, *, /, sqrt
