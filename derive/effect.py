@@ -48,7 +48,10 @@ USER_CODE_BASE = 1000
 FLAG_USES_V = 1       # reads v_w (a jointed body then needs its kinematic COM velocity)
 FLAG_USES_OMEGA = 2   # reads omega_b
 FLAG_FORCE = 4        # adds a force (a body whose effects add none may use the torque-only right-hand side)
-FLAGS = {"uses_v_w": FLAG_USES_V, "uses_omega_b": FLAG_USES_OMEGA, "adds_force": FLAG_FORCE}
+FLAG_USES_STATE = 8   # reads any state value (without it the force and torque are constant over a step:
+                      # the SIMD batch evaluates them once per call, csrc/batch_simd.h)
+FLAGS = {"uses_v_w": FLAG_USES_V, "uses_omega_b": FLAG_USES_OMEGA, "adds_force": FLAG_FORCE,
+         "uses_state": FLAG_USES_STATE}
 # Version of the calling convention of printed effect functions (checked when a user library loads).
 ABI_VERSION = 1
 _NAME = re.compile(r"^[a-z][a-z0-9_]*$")
@@ -211,7 +214,7 @@ class EffectDecl:
     def flags(self) -> int:
         used = self.state_inputs
         return ((FLAG_USES_V if "v_w" in used else 0) | (FLAG_USES_OMEGA if "omega_b" in used else 0)
-                | (FLAG_FORCE if self.force_w is not None else 0))
+                | (FLAG_FORCE if self.force_w is not None else 0) | (FLAG_USES_STATE if used else 0))
 
     @property
     def n_params(self) -> int:

@@ -73,7 +73,8 @@ def c_header(effects: list[tuple[int, E.EffectDecl]]) -> list[str]:
          f"#define LV_EFFECT_ABI {E.ABI_VERSION}          /* version of the calling convention below */",
          f"#define LV_EFFECT_USES_V {E.FLAG_USES_V}       /* flag: the effect reads v_w */",
          f"#define LV_EFFECT_USES_OMEGA {E.FLAG_USES_OMEGA}   /* flag: the effect reads omega_b */",
-         f"#define LV_EFFECT_FORCE {E.FLAG_FORCE}        /* flag: the effect adds a force */"]
+         f"#define LV_EFFECT_FORCE {E.FLAG_FORCE}        /* flag: the effect adds a force */",
+         f"#define LV_EFFECT_USES_STATE {E.FLAG_USES_STATE}   /* flag: the effect reads a state value (else constant) */"]
     for code, d in effects:
         h.append(f"#define LV_EFFECT_{d.name.upper()} {code} /* p = [{', '.join(f'{p.name}({p.size})' for p in d.params)}] */")
     h += ["/* An effect adds its force at the COM (F, world, N) and torque about it (tau, world, N·m) for one",
@@ -227,7 +228,8 @@ def meta_module(effects: list[tuple[int | None, E.EffectDecl]], header: str, ext
              f"ROW_CODE, ROW_BODY, ROW_PARAMS = {E.ROW_CODE}, {E.ROW_BODY}, {E.ROW_PARAMS}",
              f"ROW_MIN_PARAMS = {E.ROW_MIN_PARAMS}", f"USER_CODE_BASE = {E.USER_CODE_BASE}",
              f"ABI_VERSION = {E.ABI_VERSION}",
-             f"FLAG_USES_V, FLAG_USES_OMEGA, FLAG_FORCE = {E.FLAG_USES_V}, {E.FLAG_USES_OMEGA}, {E.FLAG_FORCE}"]
+             f"FLAG_USES_V, FLAG_USES_OMEGA, FLAG_FORCE = {E.FLAG_USES_V}, {E.FLAG_USES_OMEGA}, {E.FLAG_FORCE}",
+             f"FLAG_USES_STATE = {E.FLAG_USES_STATE}"]
     for k, v in (extra or {}).items():
         lines.append(f"{k.upper()} = {v!r}")
     lines += ["", "EFFECTS = ("]

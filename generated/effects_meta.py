@@ -9,6 +9,7 @@ ROW_MIN_PARAMS = 6
 USER_CODE_BASE = 1000
 ABI_VERSION = 1
 FLAG_USES_V, FLAG_USES_OMEGA, FLAG_FORCE = 1, 2, 4
+FLAG_USES_STATE = 8
 
 EFFECTS = (
     {'name': 'applied_torque',
@@ -48,7 +49,7 @@ EFFECTS = (
      'n_params': 6,
      'outputs': ('F_w', 'tau_w'),
      'state_inputs': ('q',),
-     'flags': 4,
+     'flags': 12,
      'kernel': 'effect_force_at_point'},
     {'name': 'gravity',
      'code': 3,
@@ -64,7 +65,7 @@ EFFECTS = (
      'n_params': 3,
      'outputs': ('F_w',),
      'state_inputs': ('m',),
-     'flags': 4,
+     'flags': 12,
      'kernel': 'effect_gravity'},
     {'name': 'linear_damping',
      'code': 4,
@@ -80,7 +81,7 @@ EFFECTS = (
      'n_params': 1,
      'outputs': ('F_w',),
      'state_inputs': ('v_w',),
-     'flags': 5,
+     'flags': 13,
      'kernel': 'effect_linear_damping'},
     {'name': 'angular_damping',
      'code': 5,
@@ -96,7 +97,7 @@ EFFECTS = (
      'n_params': 1,
      'outputs': ('tau_w',),
      'state_inputs': ('q', 'omega_b'),
-     'flags': 2,
+     'flags': 10,
      'kernel': 'effect_angular_damping'},
     {'name': 'spherical_joint',
      'code': 6,

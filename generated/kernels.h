@@ -491,6 +491,7 @@ void lv_wheel_motor(const double *command, const double *Omega, double torque_li
 #define LV_EFFECT_USES_V 1       /* flag: the effect reads v_w */
 #define LV_EFFECT_USES_OMEGA 2   /* flag: the effect reads omega_b */
 #define LV_EFFECT_FORCE 4        /* flag: the effect adds a force */
+#define LV_EFFECT_USES_STATE 8   /* flag: the effect reads a state value (else constant) */
 #define LV_EFFECT_APPLIED_TORQUE 1 /* p = [torque_w(3)] */
 #define LV_EFFECT_FORCE_AT_POINT 2 /* p = [r_b(3), F_w(3)] */
 #define LV_EFFECT_GRAVITY 3 /* p = [g_w(3)] */

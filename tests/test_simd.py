@@ -129,3 +129,77 @@ def test_threads_rejects_a_bad_count():
     with pytest.raises(ValueError, match="threads"):
         C.threads(0)
     assert C.threads() == 1
+
+
+def _effect_scene(n: int, seed: int) -> lv.Scene:
+    """n random bodies, each with its own effects: one applied_torque (most), two (their sum in table
+    order), gravity with a torque (the full right-hand side), every-body gravity, or angular damping
+    (reads the state: stays off the constant-effect tiles)."""
+    sc = _scene(n, seed)
+    rng = np.random.default_rng(seed + 100)
+    for i in range(n):
+        k = i % 7
+        sc.add_effect("applied_torque", body=f"b{i}", torque_w=list(1e-3 * rng.standard_normal(3)))
+        if k == 1:
+            sc.add_effect("applied_torque", body=f"b{i}", torque_w=list(1e-5 * rng.standard_normal(3)))
+        elif k == 2:
+            sc.add_effect("gravity", body=f"b{i}", g_w=list(rng.standard_normal(3)))
+        elif k == 3:
+            sc.add_effect("angular_damping", body=f"b{i}", c=0.1 + rng.random())
+    return sc
+
+
+@pytest.mark.parametrize("n", [1, 3, 16, 17, 67, 131])     # any count with constant effects takes the tiles
+@pytest.mark.parametrize("normalize", [True, False])
+def test_constant_effects_on_the_tiles_are_the_scalar_path_bitwise(levels, n, normalize):
+    """Bodies whose effects read no state (applied_torque, gravity) take the SIMD tiles with their sums
+    evaluated once per call; every level gives the scalar path's bits."""
+    sc = _effect_scene(n, seed=3 * n)
+    want = _run(sc, 0, 120, normalize)
+    assert np.isfinite(want).all()
+    for level in levels[1:]:
+        np.testing.assert_array_equal(_run(sc, level, 120, normalize), want, err_msg=C.isa(level)[1])
+
+
+def test_constant_effects_tiles_with_an_every_body_effect_and_two_threads(levels, two_threads):
+    sc = _effect_scene(150, seed=5)
+    sc.add_effect("gravity", g_w=[0.0, 0.0, -9.81])      # body -1: every body, after their own effects
+    want = _run(sc, 0, 80)
+    for threads in (1, 2):
+        C.threads(threads)
+        for level in levels[1:]:
+            np.testing.assert_array_equal(_run(sc, level, 80), want, err_msg=f"{C.isa(level)[1]}, {threads}")
+
+
+def test_constant_effects_change_the_motion():
+    """The tiles do apply the torque: the same bodies without effects end elsewhere."""
+    n = 40
+    plain = _run(_scene(n, seed=11), C.isa(-1)[2], 50)
+    C.isa(-1)
+    forced = _run(_effect_scene(n, seed=11), C.isa(-1)[2], 50)
+    assert np.abs(forced[:, 10:13] - plain[:, 10:13]).min(axis=1).max() > 1e-6
+
+
+@pytest.mark.parametrize("bad", [[29], [40, 5], [63, 64]])
+def test_divergence_in_a_constant_effect_tile_is_reported_as_on_the_scalar_path(levels, bad):
+    """A huge applied torque overflows omega within a few steps: every level reports the same step, body
+    and last finite state."""
+    n = 70
+    sc = _scene(n, seed=6)
+    for i in range(n):
+        big = 1e296 * (1.0 + bad.index(i)) if i in bad else 1e-3
+        sc.add_effect("applied_torque", body=f"b{i}", torque_w=[big, -big, big])
+    x0, params, effects = sc.arrays()
+    x0 = np.array(x0, dtype=np.float64, copy=True)
+    params = np.ascontiguousarray(params, dtype=np.float64)
+    effects = np.ascontiguousarray(effects, dtype=np.float64)
+    reports = []
+    for level in levels:
+        C.isa(level)
+        x = x0.copy()
+        status, step, body = C.simulate(x, params, effects, C.RK4, 1, 1e-2, 50)
+        reports.append((status, step, body, x[body].copy()))
+    assert reports[0][0] == 1 and reports[0][2] in bad and np.isfinite(reports[0][3]).all(), reports[0][:3]
+    for r in reports[1:]:
+        assert r[:3] == reports[0][:3]
+        np.testing.assert_array_equal(r[3], reports[0][3])

@@ -283,6 +283,7 @@ class HandwrittenKernel:
         f.restype = ctypes.c_long
         self._f = f
         self.soa = {}  # ISA name -> lv_ref_rk4_free_soa of a copy compiled for it
+        self.floor = {}  # ISA name -> lv_ref_divider_floor_soa of that copy (the divider's limit)
         self.soa_commands = {}
         self.soa_errors = {}
 
@@ -297,23 +298,25 @@ class HandwrittenKernel:
                 self.soa_errors[name] = r.stderr.strip()[-400:]
                 shutil.rmtree(d, ignore_errors=True)
                 continue
-            f = ctypes.CDLL(str(lib)).lv_ref_rk4_free_soa
+            so = ctypes.CDLL(str(lib))
             shutil.rmtree(d, ignore_errors=True)
-            f.argtypes = [ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_double), ctypes.c_long,
-                          ctypes.c_double, ctypes.c_long]
-            f.restype = None
-            self.soa[name] = f
+            for table, f in ((self.soa, so.lv_ref_rk4_free_soa), (self.floor, so.lv_ref_divider_floor_soa)):
+                f.argtypes = [ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_double), ctypes.c_long,
+                              ctypes.c_double, ctypes.c_long]
+                f.restype = None
+                table[name] = f
             self.soa_commands[name] = " ".join(cmd)
 
-    def advance_soa(self, isa: str, X: np.ndarray, I: np.ndarray, dt: float, n_steps: int) -> None:
+    def advance_soa(self, isa: str, X: np.ndarray, I: np.ndarray, dt: float, n_steps: int, floor: bool = False) -> None:
         """Advance the bodies of X (13, n) float64 (struct of arrays) in place with the SoA peer of isa;
-        I (3, n) their principal moments."""
+        I (3, n) their principal moments. floor: run the divider's floor loop instead (X then holds
+        meaningless numbers)."""
         n = X.shape[1]
         if X.dtype != np.float64 or X.shape[0] != 13 or not X.flags.c_contiguous or I.shape != (3, n) \
                 or I.dtype != np.float64 or not I.flags.c_contiguous:
             raise TypeError("X must be C-contiguous float64 (13, n) and I float64 (3, n)")
         dp = ctypes.POINTER(ctypes.c_double)
-        self.soa[isa](X.ctypes.data_as(dp), I.ctypes.data_as(dp), n, float(dt), int(n_steps))
+        (self.floor if floor else self.soa)[isa](X.ctypes.data_as(dp), I.ctypes.data_as(dp), n, float(dt), int(n_steps))
 
     def advance(self, x: np.ndarray, I_b: np.ndarray, dt: float, n_steps: int, check: bool = False) -> int:
         """Advance x (13,) float64 in place; returns -1, or the step at which it went non-finite."""
@@ -510,8 +513,13 @@ def simd_batch(kernel, sizes, body_steps: int, rounds: int) -> dict:
             for nm in hand:
                 X = X0.copy()
                 cases[f"hand_soa_{nm}"] = (lambda nm=nm, X=X: kernel.advance_soa(nm, X, I, DT, steps), steps * n)
+            floor_isa = list(hand)[-1] if hand else None   # the widest hand copy
+            if floor_isa is not None:
+                X = X0.copy()
+                cases["divider_floor"] = (lambda X=X: kernel.advance_soa(floor_isa, X, I, DT, steps, floor=True),
+                                          steps * n)
             t = interleaved(cases, rounds, f"SIMD batch N = {n}")
-            row = {"n_bodies": n, "steps": steps, "bitwise_identical": bitwise, **t}
+            row = {"n_bodies": n, "steps": steps, "bitwise_identical": bitwise, "divider_floor_isa": floor_isa, **t}
             ours = t[f"lavendersim_{info['best']}"]["ns_min"]
             if "lavendersim_2_threads" in t:
                 row["threads_speedup"] = ours / t["lavendersim_2_threads"]["ns_min"]
@@ -785,9 +793,13 @@ def standing(res: dict) -> list[dict]:
                      f"one C call, LavenderSim at {sb.get('best_isa')} / the fastest hand copy; "
                      "N = " + ", ".join(f"{r['n_bodies']:g}" for r in rows)))
     ns512 = max((r["lavendersim_avx512f"]["ns_min"] for r in rows if "lavendersim_avx512f" in r), default=None)
+    floor = max((r["divider_floor"]["ns_min"] for r in rows
+                 if r.get("divider_floor_isa") == "avx512f" and "divider_floor" in r), default=None)
     out.append(_line("SIMD batch ns per body-step on AVX-512 (worst of N >= 1e3)", ns512,
                      TARGETS["simd_batch_ns_avx512"], "max", "ns/body-step",
-                     "one C call at avx512f" if ns512 is not None else "this CPU or build has no AVX-512 path"))
+                     ("one C call at avx512f" if ns512 is not None else "this CPU or build has no AVX-512 path")
+                     + ("" if floor is None else f"; the divider alone (12 div + 1 sqrt per body-step, required for "
+                        f"bitwise results) takes {floor:.2f}")))
     for p in res.get("per_body_effects", []):
         out.append(_line(f"one applied_torque per body / plain body, N = {p['n_bodies']:g}", p["ratio"],
                          TARGETS["per_body_effect_ratio"], "max", "x", "ns per body-step, same run"))
@@ -893,6 +905,10 @@ def report(res: dict) -> str:
                      + "".join(f"{r['hand_soa_' + nm]['ns_min']:14.2f}" for nm in hands)
                      + (f"{r['ratio_to_hand_soa']:12.2f}" if "ratio_to_hand_soa" in r else f"{'—':>12}")
                      + f"  {'yes' if r['bitwise_identical'] else 'NO'}")
+        for r in sb["sizes"]:
+            if "divider_floor" in r:
+                L.append(f"  N = {r['n_bodies']:g}: divider floor at {r['divider_floor_isa']} {r['divider_floor']['ns_min']:.2f} "
+                         "ns/body-step (only the 12 divisions + 1 sqrt a bitwise step needs; no loop below it)")
         for r in sb["sizes"]:
             if "threads_speedup" in r:
                 L.append(f"  N = {r['n_bodies']:g}: two threads {r['lavendersim_2_threads']['ns_min']:.2f} ns/body-step, "

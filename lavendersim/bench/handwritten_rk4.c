@@ -149,3 +149,43 @@ void lv_ref_rk4_free_soa(double *X, const double *I, long n, double dt, long n_s
             for (b = 0; b < m; b++) X[k * n + b0 + b] = T[k][b];
     }
 }
+
+/* The divider's floor for the batch (not a peer, a limit): per body-step only the correctly rounded
+   operations the torque-free RK4 step cannot do without while giving the same bits -- 12 divisions by
+   I_k (three per right-hand side) and the 1 / sqrt of the normalization -- on the same SoA tiles,
+   vectorized like lv_ref_rk4_free_soa. Each division's dividend depends on the previous one's
+   quotient (scaled back near 1, as a step feeds a stage), so nothing is hoisted out of the loop. On x86
+   the divider (divpd/sqrtpd) is one unit, not pipelined like the adders and multipliers, so this loop
+   bounds the throughput of any bitwise-identical batch loop from below. X is updated (its values are
+   meaningless). */
+void lv_ref_divider_floor_soa(double *X, const double *I, long n, double dt, long n_steps)
+{
+    double T[NX][TILE], J[3][TILE];
+    long s, b, b0, m;
+    int k;
+    for (b0 = 0; b0 < n; b0 += m) {
+        m = n - b0 < TILE ? n - b0 : TILE;
+        for (k = 0; k < NX; k++)
+            for (b = 0; b < m; b++) T[k][b] = X[k * n + b0 + b];
+        for (k = 0; k < 3; k++)
+            for (b = 0; b < m; b++) J[k][b] = I[k * n + b0 + b];
+        for (s = 0; s < n_steps; s++) {
+            for (b = 0; b < m; b++) {
+                const double I0 = J[0][b], I1 = J[1][b], I2 = J[2][b];
+                double w0 = T[10][b], w1 = T[11][b], w2 = T[12][b], q;
+                int r;
+                for (r = 0; r < 4; r++) {
+                    w0 = w0 + dt * (w0 / I0);
+                    w1 = w1 + dt * (w1 / I1);
+                    w2 = w2 + dt * (w2 / I2);
+                }
+                q = 1.0 / sqrt(w0 * w0 + w1 * w1 + w2 * w2);
+                T[10][b] = w0 * q;
+                T[11][b] = w1 * q;
+                T[12][b] = w2 * q;
+            }
+        }
+        for (k = 0; k < NX; k++)
+            for (b = 0; b < m; b++) X[k * n + b0 + b] = T[k][b];
+    }
+}

@@ -1,8 +1,17 @@
-/* LavenderSim batched torque-free RK4 on struct-of-arrays tiles, vectorized by the compiler, with one
-   copy per instruction set chosen at run time. Included once by step.c, after the generated kernels
+/* LavenderSim batched RK4 on struct-of-arrays tiles, vectorized by the compiler, with one copy per
+   instruction set chosen at run time: torque-free bodies, and bodies whose effects all read no state
+   (LV_EFFECT_USES_STATE clear: applied_torque, gravity), whose force and torque sums are evaluated once
+   per call with the generated effect dispatch (effect_sums) and passed to the generated
+   lv_rigid_body_rhs_torque / lv_rigid_body_rhs in every stage, as the scalar path does.
+
+   Speed (lavendersim bench, "SIMD batch"): a bitwise step needs 12 correctly rounded divisions by I_k
+   (three per right-hand side) and a sqrt and a division for the normalization; x86's divider is not
+   pipelined like the adders (AVX-512 vdivpd: one per ~16 cycles for 8 lanes), so those alone cost
+   about as much as the rest of the step (the bench's "divider floor" loop), and no bitwise loop goes
+   below them. Included once by step.c, after the generated kernels
    (static functions; not a separate translation unit, so the kernels inline into every copy).
 
-   Every equation is the generated one: a tile step calls lv_rigid_body_rhs_free and lv_quat_normalize
+   Every equation is the generated one: a tile step calls the generated right-hand side and lv_quat_normalize
    on one body's numbers (local arrays the compiler turns into registers) and the RK4 constants come
    from tableaux.h, exactly as advance_free_rk4 does; the loop over the bodies of a tile is what the
    compiler vectorizes, one body per lane. A lane computes the same IEEE operations (+, -, *, /, sqrt
@@ -22,12 +31,31 @@
 /* Groups of torque-free RK4 bodies smaller than this take the scalar block path (advance_free_rk4). */
 #define LV_SOA_MIN 16
 
-typedef void (*lv_tile_fn)(double (*LV_RESTRICT T)[LV_TILE], const double (*LV_RESTRICT J)[LV_TILE], long m,
-                           double dt, long n_steps);
+/* Rows of a tile's constant effect sums P[k][b] (bodies whose effects all read no state, see
+   LV_EFFECT_USES_STATE): the mass, then the force and the torque (world) summed over the body's effects
+   in table order, as effect_sums adds them at every stage (the same inputs give the same bits, so
+   summing them once per call changes nothing). */
+enum { LV_TP_M = 0, LV_TP_F = 1, LV_TP_TAU = 4, LV_TP_ROWS = 7 };
+
+typedef void (*lv_tile_fn)(double (*LV_RESTRICT T)[LV_TILE], const double (*LV_RESTRICT J)[LV_TILE],
+                           const double (*LV_RESTRICT P)[LV_TILE], long m, double dt, long n_steps);
+
+/* One lane's right-hand side, per kind (LV_RHS_*): in, out, I (3) of body b; P as above. */
+#define LV_TILE_RHS_FREE(in, out) lv_rigid_body_rhs_free(in, I, out)
+#define LV_TILE_RHS_TORQUE(in, out) lv_rigid_body_rhs_torque(in, I, tau, out)
+#define LV_TILE_RHS_FULL(in, out) lv_rigid_body_rhs(in, mass, I, F, tau, out)
+#define LV_TILE_LOAD_FREE (void)P
+#define LV_TILE_LOAD_TORQUE                                                                             \
+    const double tau[3] = {P[LV_TP_TAU][b], P[LV_TP_TAU + 1][b], P[LV_TP_TAU + 2][b]}
+#define LV_TILE_LOAD_FULL                                                                               \
+    const double tau[3] = {P[LV_TP_TAU][b], P[LV_TP_TAU + 1][b], P[LV_TP_TAU + 2][b]};                 \
+    const double F[3] = {P[LV_TP_F][b], P[LV_TP_F + 1][b], P[LV_TP_F + 2][b]};                         \
+    const double mass = P[LV_TP_M][b]
 
 /* n_steps RK4 steps of the m bodies of a tile: T[k][b] = state number k of body b, J[k][b] = its I_k.
-   NORMALIZE: q normalized after each step (the generated kernel), as on the scalar path. */
-#define LV_TILE_RK4(NORMALIZE)                                                                          \
+   NORMALIZE: q normalized after each step (the generated kernel), as on the scalar path. LOAD, RHS:
+   the lane's constant effect sums and its right-hand side (LV_TILE_LOAD_*, LV_TILE_RHS_*). */
+#define LV_TILE_RK4(NORMALIZE, LOAD, RHS)                                                               \
     {                                                                                                   \
         const double h2 = LV_RK4_C1 * dt, h3 = LV_RK4_C2 * dt, h4 = LV_RK4_C3 * dt, h6 = dt / LV_RK4_B_DEN; \
         long s, b;                                                                                      \
@@ -36,15 +64,16 @@ typedef void (*lv_tile_fn)(double (*LV_RESTRICT T)[LV_TILE], const double (*LV_R
             for (b = 0; b < m; b++) {                                                                   \
                 double x[LV_STATE_SIZE], k1[LV_STATE_SIZE], k2[LV_STATE_SIZE], k3[LV_STATE_SIZE],       \
                     k4[LV_STATE_SIZE], tmp[LV_STATE_SIZE], xn[LV_STATE_SIZE], I[3];                     \
+                LOAD;                                                                                   \
                 for (i = 0; i < LV_STATE_SIZE; i++) x[i] = T[i][b];                                     \
                 for (i = 0; i < 3; i++) I[i] = J[i][b];                                                 \
-                lv_rigid_body_rhs_free(x, I, k1);                                                       \
+                RHS(x, k1);                                                                             \
                 for (i = 0; i < LV_STATE_SIZE; i++) tmp[i] = x[i] + h2 * k1[i];                         \
-                lv_rigid_body_rhs_free(tmp, I, k2);                                                     \
+                RHS(tmp, k2);                                                                           \
                 for (i = 0; i < LV_STATE_SIZE; i++) tmp[i] = x[i] + h3 * k2[i];                         \
-                lv_rigid_body_rhs_free(tmp, I, k3);                                                     \
+                RHS(tmp, k3);                                                                           \
                 for (i = 0; i < LV_STATE_SIZE; i++) tmp[i] = x[i] + h4 * k3[i];                         \
-                lv_rigid_body_rhs_free(tmp, I, k4);                                                     \
+                RHS(tmp, k4);                                                                           \
                 for (i = 0; i < LV_STATE_SIZE; i++)                                                     \
                     xn[i] = x[i] + h6 * (LV_RK4_B0 * k1[i] + LV_RK4_B1 * k2[i] + LV_RK4_B2 * k3[i]      \
                                          + LV_RK4_B3 * k4[i]);                                          \
@@ -54,16 +83,20 @@ typedef void (*lv_tile_fn)(double (*LV_RESTRICT T)[LV_TILE], const double (*LV_R
         }                                                                                               \
     }
 
-/* One instruction set's pair of tile steppers (q normalized / not). */
+#define LV_DEFINE_TILE(NAME, ATTR, NORMALIZE, KIND)                                                     \
+    ATTR LV_FLATTEN static void NAME(double (*LV_RESTRICT T)[LV_TILE], const double (*LV_RESTRICT J)[LV_TILE], \
+                                     const double (*LV_RESTRICT P)[LV_TILE], long m, double dt, long n_steps) \
+    LV_TILE_RK4(NORMALIZE, LV_TILE_LOAD_##KIND, LV_TILE_RHS_##KIND)
+
+/* One instruction set's tile steppers: q normalized / not, times torque-free / constant torque /
+   constant force and torque. */
 #define LV_DEFINE_TILES(SUFFIX, ATTR)                                                                   \
-    ATTR LV_FLATTEN static void tile_rk4_norm_##SUFFIX(double (*LV_RESTRICT T)[LV_TILE],                \
-                                                       const double (*LV_RESTRICT J)[LV_TILE], long m,  \
-                                                       double dt, long n_steps)                         \
-    LV_TILE_RK4(1)                                                                                      \
-    ATTR LV_FLATTEN static void tile_rk4_raw_##SUFFIX(double (*LV_RESTRICT T)[LV_TILE],                 \
-                                                      const double (*LV_RESTRICT J)[LV_TILE], long m,   \
-                                                      double dt, long n_steps)                          \
-    LV_TILE_RK4(0)
+    LV_DEFINE_TILE(tile_rk4_norm_free_##SUFFIX, ATTR, 1, FREE)                                          \
+    LV_DEFINE_TILE(tile_rk4_raw_free_##SUFFIX, ATTR, 0, FREE)                                           \
+    LV_DEFINE_TILE(tile_rk4_norm_torque_##SUFFIX, ATTR, 1, TORQUE)                                      \
+    LV_DEFINE_TILE(tile_rk4_raw_torque_##SUFFIX, ATTR, 0, TORQUE)                                       \
+    LV_DEFINE_TILE(tile_rk4_norm_full_##SUFFIX, ATTR, 1, FULL)                                          \
+    LV_DEFINE_TILE(tile_rk4_raw_full_##SUFFIX, ATTR, 0, FULL)
 
 LV_DEFINE_TILES(base, )
 #if LV_HAVE_ISA_CLONES
@@ -71,15 +104,33 @@ LV_DEFINE_TILES(avx2, __attribute__((target("avx2"))))
 LV_DEFINE_TILES(avx512, __attribute__((target("avx512f"))))
 #endif
 
-/* The tile stepper of instruction set isa (LV_ISA_*; one this CPU supports, see lv_isa_best). */
-static lv_tile_fn tile_rk4_fn(int isa, int normalize)
+#define LV_TILE_PICK(SUFFIX)                                                                            \
+    (kind == LV_RHS_FREE     ? (normalize ? tile_rk4_norm_free_##SUFFIX : tile_rk4_raw_free_##SUFFIX)     \
+     : kind == LV_RHS_TORQUE ? (normalize ? tile_rk4_norm_torque_##SUFFIX : tile_rk4_raw_torque_##SUFFIX) \
+                             : (normalize ? tile_rk4_norm_full_##SUFFIX : tile_rk4_raw_full_##SUFFIX))
+
+/* The tile stepper of instruction set isa (LV_ISA_*; one this CPU supports, see lv_isa_best) for
+   right-hand side kind (LV_RHS_*; with effects: constant ones, see LV_TP_*). */
+static lv_tile_fn tile_rk4_fn(int isa, int normalize, int kind)
 {
 #if LV_HAVE_ISA_CLONES
-    if (isa == LV_ISA_AVX512) return normalize ? tile_rk4_norm_avx512 : tile_rk4_raw_avx512;
-    if (isa == LV_ISA_AVX2) return normalize ? tile_rk4_norm_avx2 : tile_rk4_raw_avx2;
+    if (isa == LV_ISA_AVX512) return LV_TILE_PICK(avx512);
+    if (isa == LV_ISA_AVX2) return LV_TILE_PICK(avx2);
 #endif
     (void)isa;
-    return normalize ? tile_rk4_norm_base : tile_rk4_raw_base;
+    return LV_TILE_PICK(base);
+}
+#undef LV_TILE_PICK
+
+/* Whether every effect on plain body b reads no state (a built-in effect without LV_EFFECT_USES_STATE):
+   its force and torque sums are then constant and the body may take the SIMD tiles with effects. */
+static int effects_constant(const lv_effect_index *ix, long b)
+{
+    long k;
+    if (ix->flags[b] & LV_EFFECT_USES_STATE) return 0;
+    for (k = ix->start[b]; k < ix->start[b + 1]; k++)
+        if (ix->refs[k].user != NULL) return 0;
+    return 1;
 }
 
 static int tile_finite(const double (*T)[LV_TILE], long j)
@@ -90,32 +141,45 @@ static int tile_finite(const double (*T)[LV_TILE], long j)
     return 1;
 }
 
-/* RK4 on the m <= LV_TILE torque-free plain bodies ids (ascending) through tile stepper fn. Same
+/* RK4 on the m <= LV_TILE plain bodies ids (ascending) through tile stepper fn: torque-free (ix NULL),
+   or each with its constant effect sums (from ix, see effects_constant), evaluated here once. Same
    contract as advance_free_rk4, except that on failure the lowest failing body's last finite state is
    written to last[0] (and *fail_j is its index in ids). Finiteness is checked per chunk of
    LV_FREE_CHUNK steps, with the step-by-step re-run of a failing chunk (see advance_free_rk4): a lane
    computes the same bits whether its tile is stepped one step or a chunk at a time. */
 static long advance_free_soa(double *state, const double *params, const long *ids, long m, lv_tile_fn fn,
-                             double dt, long n_steps, int *fail_j, double last[][LV_STATE_SIZE])
+                             const lv_effect_index *ix, double dt, long n_steps, int *fail_j,
+                             double last[][LV_STATE_SIZE])
 {
-    double T[LV_STATE_SIZE][LV_TILE], S[LV_STATE_SIZE][LV_TILE], J[3][LV_TILE];
+    double T[LV_STATE_SIZE][LV_TILE], S[LV_STATE_SIZE][LV_TILE], J[3][LV_TILE], P[LV_TP_ROWS][LV_TILE];
+    const double (*Pc)[LV_TILE] = (const double (*)[LV_TILE])P;
     long c, cm, s, j;
     int k, ok;
     for (j = 0; j < m; j++) {
-        for (k = 0; k < LV_STATE_SIZE; k++) T[k][j] = state[ids[j] * LV_STATE_SIZE + k];
-        for (k = 0; k < 3; k++) J[k][j] = params[ids[j] * LV_PARAM_SIZE + LV_PARAM_I_B + k];
+        const double *x = state + ids[j] * LV_STATE_SIZE, *prm = params + ids[j] * LV_PARAM_SIZE;
+        double F[3] = {0.0, 0.0, 0.0}, tau[3] = {0.0, 0.0, 0.0};
+        for (k = 0; k < LV_STATE_SIZE; k++) T[k][j] = x[k];
+        for (k = 0; k < 3; k++) J[k][j] = prm[LV_PARAM_I_B + k];
+        if (ix == NULL) continue;
+        effect_sums(x, x + LV_STATE_V_W, prm[LV_PARAM_M], prm + LV_PARAM_I_B, ix->refs + ix->start[ids[j]],
+                    ix->start[ids[j] + 1] - ix->start[ids[j]], F, tau);
+        P[LV_TP_M][j] = prm[LV_PARAM_M];
+        for (k = 0; k < 3; k++) {
+            P[LV_TP_F + k][j] = F[k];
+            P[LV_TP_TAU + k][j] = tau[k];
+        }
     }
     for (c = 0; c < n_steps; c += cm) {
         cm = n_steps - c < LV_FREE_CHUNK ? n_steps - c : LV_FREE_CHUNK;
         memcpy(S, T, sizeof T);
-        fn(T, (const double (*)[LV_TILE])J, m, dt, cm);
+        fn(T, (const double (*)[LV_TILE])J, Pc, m, dt, cm);
         ok = 1;
         for (j = 0; j < m; j++) ok &= tile_finite((const double (*)[LV_TILE])T, j);
         if (ok) continue;
         memcpy(T, S, sizeof T); /* some body went non-finite in this chunk: redo it step by step */
         for (s = 0; s < cm; s++) {
             memcpy(S, T, sizeof T);
-            fn(T, (const double (*)[LV_TILE])J, m, dt, 1);
+            fn(T, (const double (*)[LV_TILE])J, Pc, m, dt, 1);
             for (j = 0; j < m; j++) {
                 if (!tile_finite((const double (*)[LV_TILE])T, j)) {
                     *fail_j = (int)j;

@@ -1035,11 +1035,15 @@ LV_FLATTEN static long advance_group(double *state, const double *params, const 
     return advance_block(state, params, ids, n, ix, integrator, normalize, dt, n_steps, fail_j, last);
 }
 
-/* The right-hand side kind of plain body b (LV_RHS_*). */
+/* The right-hand side kind of plain body b (LV_RHS_*), plus LV_RHS_CONSTANT when it has effects and
+   they are all constant (effects_constant: such a group may take the SIMD tiles with effects). */
+#define LV_RHS_CONSTANT 2
+#define LV_RHS_CLASSES 5
 static int rhs_kind(const lv_effect_index *ix, long b)
 {
+    const int c = ix->start[b + 1] > ix->start[b] && effects_constant(ix, b) ? LV_RHS_CONSTANT : 0;
     if (ix->start[b + 1] == ix->start[b]) return LV_RHS_FREE;
-    return (ix->flags[b] & LV_EFFECT_FORCE) ? LV_RHS_FULL : LV_RHS_TORQUE;
+    return c + ((ix->flags[b] & LV_EFFECT_FORCE) ? LV_RHS_FULL : LV_RHS_TORQUE);
 }
 
 /* ---- the SoA tiles of one call, over threads ---------------------------------------------------
@@ -1056,6 +1060,7 @@ typedef struct {
     const long *list;
     long count, n_steps, limit, best;
     lv_tile_fn tile;
+    const lv_effect_index *ix; /* NULL: torque-free tiles; else the constant effects' index */
     double dt;
     int status;
 } soa_share;
@@ -1069,7 +1074,7 @@ static void soa_share_run(soa_share *sh)
         n = (int)(sh->count - k < LV_TILE ? sh->count - k : LV_TILE);
         lim = run_limit(sh->list[k], sh->limit, sh->best, sh->n_steps);
         if (lim <= 0) continue;
-        s = advance_free_soa(sh->state, sh->params, sh->list + k, n, sh->tile, sh->dt, lim, &j, last);
+        s = advance_free_soa(sh->state, sh->params, sh->list + k, n, sh->tile, sh->ix, sh->dt, lim, &j, last);
         /* the tile stops at its first failing step, j its lowest failing body there (lockstep) */
         if (s < 0 || !earlier(s, sh->list[k + j], sh->limit, sh->best)) continue;
         memcpy(sh->state + sh->list[k + j] * LV_STATE_SIZE, last[0], sizeof last[0]);
@@ -1087,11 +1092,13 @@ static void *soa_share_thread(void *arg)
 }
 #endif
 
-/* The torque-free bodies list[0 .. count-1] on SIMD tiles, split into `threads` shares of whole tiles
-   (the calling thread runs the first; a thread that cannot be started has its share run here). Returns
-   LV_DIVERGED (with *limit, *best updated as in advance_fixed) or LV_OK. */
+/* The plain bodies list[0 .. count-1] on SIMD tiles (torque-free: ix NULL; else all with constant
+   effects, see advance_free_soa), split into `threads` shares of whole tiles (the calling thread runs the
+   first; a thread that cannot be started has its share run here). Returns LV_DIVERGED (with *limit,
+   *best updated as in advance_fixed) or LV_OK. */
 static int advance_soa_threads(double *state, const double *params, const long *list, long count, lv_tile_fn tile,
-                               double dt, long n_steps, int threads, long *limit, long *best)
+                               const lv_effect_index *ix, double dt, long n_steps, int threads, long *limit,
+                               long *best)
 {
     soa_share sh[LV_MAX_THREADS];
 #if LV_HAVE_THREADS
@@ -1114,6 +1121,7 @@ static int advance_soa_threads(double *state, const double *params, const long *
         sh[t].limit = *limit;
         sh[t].best = *best;
         sh[t].tile = tile;
+        sh[t].ix = ix;
         sh[t].dt = dt;
         sh[t].status = LV_OK;
         t0 = t1;
@@ -1165,8 +1173,8 @@ static int advance_fixed(double *state, const double *params, long nb, const lv_
                          int isa, int threads, long *ids, long *limit, long *best)
 {
     double last[LV_BLOCK][LV_STATE_SIZE], lastm[LV_XS_SIZE];
-    long b, k, s, lim, count[3] = {0, 0, 0}, first[3];
-    int j, n, kind, status = LV_OK;
+    long b, k, s, lim, count[LV_RHS_CLASSES] = {0, 0, 0, 0, 0}, first[LV_RHS_CLASSES];
+    int j, n, cls, kind, status = LV_OK;
     for (b = 0; b < nb; b++) {
         if (models != NULL && (int)models->rows[b * LV_MODEL_SIZE + LV_MODEL_KIND] != 0) {
             lim = run_limit(b, *limit, *best, n_steps);
@@ -1182,23 +1190,25 @@ static int advance_fixed(double *state, const double *params, long nb, const lv_
             count[rhs_kind(ix, b)]++;
         }
     }
-    first[0] = 0; /* ids: the plain bodies grouped by kind, ascending within each */
-    first[1] = count[0];
-    first[2] = count[0] + count[1];
+    first[0] = 0; /* ids: the plain bodies grouped by class (rhs_kind), ascending within each */
+    for (cls = 1; cls < LV_RHS_CLASSES; cls++) first[cls] = first[cls - 1] + count[cls - 1];
     for (b = 0; b < nb; b++)
         if (models == NULL || (int)models->rows[b * LV_MODEL_SIZE + LV_MODEL_KIND] == 0) ids[first[rhs_kind(ix, b)]++] = b;
-    for (kind = 0; kind < 3; kind++) {
-        const long *list = ids + first[kind] - count[kind];
-        /* torque-free RK4 groups of LV_SOA_MIN bodies or more: SIMD tiles (csrc/batch_simd.h), split over
-           threads when asked */
-        if (kind == LV_RHS_FREE && integrator == LV_INTEGRATOR_RK4 && isa != LV_ISA_SCALAR && count[kind] >= LV_SOA_MIN) {
-            if (advance_soa_threads(state, params, list, count[kind], tile_rk4_fn(isa, normalize), dt, n_steps,
-                                    threads, limit, best) == LV_DIVERGED)
+    for (cls = 0; cls < LV_RHS_CLASSES; cls++) {
+        const long *list = ids + first[cls] - count[cls];
+        kind = cls > LV_RHS_FULL ? cls - LV_RHS_CONSTANT : cls;
+        /* RK4 groups on SIMD tiles (csrc/batch_simd.h), split over threads when asked: torque-free ones of
+           LV_SOA_MIN bodies or more, and any with constant effects (their sums are then evaluated once per
+           call, not at every stage) */
+        if ((cls == LV_RHS_FREE ? count[cls] >= LV_SOA_MIN : cls > LV_RHS_FULL && count[cls] > 0)
+            && integrator == LV_INTEGRATOR_RK4 && isa != LV_ISA_SCALAR) {
+            if (advance_soa_threads(state, params, list, count[cls], tile_rk4_fn(isa, normalize, kind),
+                                    cls == LV_RHS_FREE ? NULL : ix, dt, n_steps, threads, limit, best) == LV_DIVERGED)
                 status = LV_DIVERGED;
             continue;
         }
-        for (k = 0; k < count[kind]; k += n) {
-            n = (int)(count[kind] - k < LV_BLOCK ? count[kind] - k : LV_BLOCK);
+        for (k = 0; k < count[cls]; k += n) {
+            n = (int)(count[cls] - k < LV_BLOCK ? count[cls] - k : LV_BLOCK);
             lim = run_limit(list[k], *limit, *best, n_steps);
             if (lim <= 0) continue;
             s = advance_group(state, params, list + k, n, ix, kind, integrator, normalize, dt, lim, &j, last);
