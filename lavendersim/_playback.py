@@ -471,7 +471,7 @@ def _default_overlays(trajectory: Trajectory, bodies: Mapping[str, Any]) -> Call
             s = snap.state(name)
             vecs.append({"label": f"{name}: ω" if len(snap.names) > 1 else "angular velocity ω", "origin": s.p_w.tolist(),
                          "vector": s.omega_w.tolist(), "scale": scale, "color": _DEFAULT_COLORS[k % len(_DEFAULT_COLORS)]})
-        return {"axes": [{"body": n, "scale": 0.6 * ext} for n in snap.names], "vectors": vecs[:64]}
+        return {"axes": [{"body": n, "scale": 0.9 * ext} for n in snap.names], "vectors": vecs[:64]}
 
     return overlays
 
