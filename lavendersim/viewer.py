@@ -65,6 +65,7 @@ World frame z up. Units m.
 """
 from __future__ import annotations
 
+import atexit
 import copy
 import difflib
 import html
@@ -76,6 +77,7 @@ import sys
 import threading
 import time
 import urllib.parse
+import weakref
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from typing import TYPE_CHECKING, Any, Self, TextIO
 
@@ -475,6 +477,11 @@ class Viewer:
         self.controls = Controls(self.server.gui, self._republish)
         self._thread = threading.Thread(target=self._run, name="lavendersim-viewer", daemon=True)
         self._thread.start()
+        # a viewer left open (a notebook, a script) is closed at interpreter exit before viser stops
+        # its server (atexit runs last-registered first), so a player never writes to a stopped one
+        ref = weakref.ref(self)
+        self._at_exit = lambda: (v := ref()) is not None and v.close()
+        atexit.register(self._at_exit)
 
     # ---- public ---------------------------------------------------------------------------
     @property
@@ -629,6 +636,7 @@ class Viewer:
         with a deadline of JOIN_TIMEOUT_S (lavendersim._playback); one still running then says so in :meth:`threads`."""
         if self._stop.is_set():
             return
+        atexit.unregister(self._at_exit)
         if self.player is not None:
             self.player.stop(PB.JOIN_TIMEOUT_S)
         self._stop.set()
