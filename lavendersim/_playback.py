@@ -41,6 +41,7 @@ SPEED_MARKS = ((0.05, "0.05×"), (1.0, "1×"), (2.0, "2×"), (4.0, "4×"))
 WAIT_SLICE_S = 0.5       # a paused player wakes at least this often (to see Ctrl-C / a stop), no more
 JOIN_TIMEOUT_S = 10.0    # stopping a player thread waits this long for it
 MAX_RATE_HZ = 1000.0     # frames per wall-clock second, at most
+MAX_TOGGLES = 64         # vector checkboxes, at most (labels that change every frame would add one each)
 
 
 def vector_key(k: int, label: str) -> str:
@@ -64,6 +65,8 @@ class Controls:
     handles : dict
         The viser GUI handles: ``"axes"`` (checkbox), ``"vectors"`` ({key: checkbox}), and while a
         player runs ``"pause"`` (button), ``"speed"`` (slider), and while replaying ``"time"`` (slider).
+    untoggled : set of str
+        Vector labels seen after MAX_TOGGLES checkboxes existed (always drawn).
     paused_wakeups : int
         How often a paused player woke up (bounded by elapsed / WAIT_SLICE_S plus the pause,
         resume and stop calls: it never spins).
@@ -81,6 +84,7 @@ class Controls:
         self._on_seek: Callable[[float], Any] | None = None
         self._playback_folder = None
         self.paused_wakeups = 0
+        self.untoggled: set[str] = set()     # vector labels beyond MAX_TOGGLES (drawn, no checkbox)
         self._show_folder = gui.add_folder("Show", order=20.0)
         with self._show_folder:
             axes = gui.add_checkbox("body axes", True, hint="the x (red), y (green), z (blue) axes of each body")
@@ -233,6 +237,9 @@ class Controls:
         for key in keys:
             if key in self.handles["vectors"]:
                 continue
+            if len(self.handles["vectors"]) >= MAX_TOGGLES:    # no checkbox: always drawn
+                self.untoggled.add(key)
+                continue
             with self._cv:
                 shown = self._vectors.setdefault(key, True)
             with self._show_folder:
@@ -283,7 +290,8 @@ class Controls:
                 step = float(np.min(np.diff(times))) if len(times) > 1 else 1.0
                 handles["time"] = gui.add_slider("time (s)", t0, t1, step, t0, hint="drag to any recorded instant")
         button.on_click(lambda _event: self.toggle_pause())
-        speed.on_update(lambda event: self.set_speed(float(event.target.value)))
+        # a number typed into the slider's box may lie outside it: clamped, never an error in viser's thread
+        speed.on_update(lambda event: self.set_speed(min(max(float(event.target.value), SPEED_MIN), SPEED_MAX)))
         if "time" in handles:
             self._on_seek = on_seek
             handles["time"].on_update(self._time_moved)
@@ -376,15 +384,19 @@ class _LiveSource:
 
     @property
     def finished(self) -> bool:
-        return self.duration is not None and self.sim.t >= self.duration - 1e-12
+        """At the duration: less than half a step left (a duration between steps rounds to one)."""
+        return self.duration is not None and self.duration - self.sim.t <= 0.5 * self.sim.dt * (1 + 1e-9)
 
     def advance(self, seconds: float) -> int:
         """Advance by `seconds` of simulated time, in whole steps; returns the steps taken."""
         sim = self.sim
         self._owed += seconds
-        if self.duration is not None:
-            self._owed = min(self._owed, self.duration - sim.t)
-        n = math.floor(self._owed / sim.dt + 1e-9)
+        left = None if self.duration is None else self.duration - sim.t
+        if left is not None and self._owed >= left:       # the last frame: to the step nearest the duration
+            self._owed = left
+            n = round(left / sim.dt)
+        else:
+            n = math.floor(self._owed / sim.dt + 1e-9)
         if n < 1:
             return 0
         t0 = sim.t

@@ -151,6 +151,16 @@ def test_vector_and_axes_toggles_hide_their_nodes(viewer):
     assert st["hidden"] == [] and arrows[1]["node"].visible and axes.visible and st["axes"] == {"box": 0.3}
 
 
+def test_labels_that_change_every_frame_add_at_most_max_toggles(viewer):
+    sim = _sim()
+    for i in range(PB.MAX_TOGGLES + 6):
+        viewer.publish_frame(sim, {"vectors": [{"label": f"|L| = {i}", "origin": [0, 0, 0], "vector": [1, 0, 0]}]})
+        _drawn(viewer)
+    assert len(viewer.controls.handles["vectors"]) == PB.MAX_TOGGLES
+    assert viewer.controls.untoggled == {f"|L| = {i}" for i in range(PB.MAX_TOGGLES, PB.MAX_TOGGLES + 6)}
+    assert viewer.handles()["vectors"][0]["node"].visible          # drawn all the same
+
+
 def test_unlabelled_vectors_get_numbered_toggles(viewer):
     sim = _sim()
     viewer.publish_frame(sim, {"vectors": [{"origin": [0, 0, 0], "vector": [1, 0, 0]},
@@ -297,6 +307,22 @@ def test_player_thread_stops_paused_at_once_and_finishes_at_its_duration():
         assert not player.thread.is_alive() and player.stop_reason == "finished", player.stop_reason
         assert sim.t == pytest.approx(0.25)
         assert _drawn(v)["t"] == pytest.approx(0.25)            # the last frame is the final state
+
+
+@pytest.mark.parametrize("duration", [0.0105, 0.0004, 0.0])
+def test_a_duration_between_steps_finishes_at_the_nearest_step(viewer, duration):
+    sim = _sim()
+    player = viewer.play(sim, rate_hz=60.0, duration=duration, start=False)
+    assert player.run() == "finished"
+    assert abs(sim.t - duration) <= 0.5 * sim.dt + 1e-15, sim.t
+
+
+def test_a_typed_speed_outside_the_slider_is_clamped(viewer):
+    viewer.play(_sim(), start=False)
+    viewer.controls.handles["speed"].value = 50.0        # typed into the box beside the slider
+    assert viewer.controls.speed == PB.SPEED_MAX
+    viewer.controls.handles["speed"].value = 0.0
+    assert viewer.controls.speed == PB.SPEED_MIN
 
 
 def test_player_thread_records_an_error():
