@@ -222,7 +222,7 @@ def test_several_tabs_watch_and_frames_keep_arriving(live):
         p.close()
 
 
-def test_controls_render_and_reach_python():
+def test_controls_render_and_reach_python(live):
     """The side panel shows the controls (Pause/Resume, the speed and time sliders, the body-axes
     checkbox, one checkbox per vector), and what the page does reaches Python: Resume starts the
     replay, typing a speed sets it, unticking a vector hides its arrow; a pause from Python shows
@@ -234,7 +234,8 @@ def test_controls_render_and_reach_python():
     sc.add_body(lv.Body.box("box", 1.0, (0.4, 0.25, 0.1), omega_b=(0.05, 4.0, 0.05)))
     sim = lv.Sim(sc, dt=1e-3)
     traj = sim.record(1000, every=20)
-    with Viewer(port=0) as v, browser() as ctx:
+    ctx = live[2]        # the module's browser (one playwright per thread); a viewer of its own
+    with Viewer(port=0) as v:
         player = v.replay(traj, sim, paused=True, loop=True)
         page = open_tab(ctx, v)
         for text in ("Playback", "speed ×", "time (s)", "Show", "body axes"):
