@@ -406,14 +406,17 @@ def measure() -> None:
 
 
 def screenshot(path: str) -> None:
-    """The README picture: the tumble scene (axes, ω and L arrows) as the test browser shows it."""
+    """The README picture: the tumble scene (axes, ω and L arrows) as the test browser shows it,
+    paused at t = 1.3 s with the side panel's controls."""
     from lavendersim import viewer as VW
 
     sim, overlays, advance = VW.SCENES["tumble"]()
     advance(sim, 1.3)
     with VW.Viewer(port=0) as v, browser() as ctx:
-        v.wait_applied(v.publish_frame(sim, overlays(sim)), DEADLINE)
+        v.play(sim, overlays, advance, paused=True)       # publishes the frame, then waits (paused)
+        assert _until(lambda: v.scene_state()["frame"] >= 1), v.stats()
         page = open_tab(ctx, v)
+        page.set_viewport_size({"width": 1440, "height": 640})   # the side panel clear of the labels
         time.sleep(3.0)
         for close in page.get_by_role("button", name="Close").all():   # software-WebGL notice, if shown
             if close.is_visible():
