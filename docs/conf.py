@@ -17,15 +17,19 @@ copyright = "The LavenderSim authors (MIT)"
 release = version = lavendersim.__version__
 
 extensions = [
-    "myst_parser",
+    "myst_nb",   # MyST Markdown (it loads myst_parser itself) and the notebooks in nb/ (a link to ../notebooks)
     "sphinx.ext.autodoc",
     "sphinx.ext.napoleon",
     "sphinx.ext.mathjax",
     "sphinx.ext.viewcode",
 ]
-source_suffix = {".rst": "restructuredtext", ".md": "markdown"}
+source_suffix = {".rst": "restructuredtext", ".md": "myst-nb", ".ipynb": "myst-nb"}
 root_doc = "index"
-exclude_patterns = ["_build", "Thumbs.db", ".DS_Store"]
+exclude_patterns = ["_build", "Thumbs.db", ".DS_Store", "**/.ipynb_checkpoints"]
+
+# The notebooks (docs/nb -> ../notebooks) are stored with outputs stripped and rendered as they are:
+# their source cells, never executed here (CI executes every one in tests/test_notebooks.py).
+nb_execution_mode = "off"
 
 # numpydoc-style docstrings, read by napoleon
 napoleon_google_docstring = False

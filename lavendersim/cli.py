@@ -114,7 +114,8 @@ def _view(args) -> int:
     from lavendersim import viewer
 
     try:
-        viewer.run_scene(args.scene, duration=args.duration, host=args.host, port=args.port, rate_hz=args.rate)
+        viewer.run_scene(args.scene, duration=args.duration, host=args.host, port=args.port, rate_hz=args.rate,
+                         replay=args.replay)
     except viewer.ViewerError as exc:  # a frame could not be drawn: one line, exit 1 (not a usage error)
         print(f"lavendersim view: {exc}", file=sys.stderr)
         return 1
@@ -132,6 +133,10 @@ def _add_view(sub) -> None:
     v.add_argument("--host", default=DEFAULT_HOST, help=f"interface to bind (default {DEFAULT_HOST}: this machine only)")
     v.add_argument("--port", type=int, default=DEFAULT_PORT, help=f"TCP port (default {DEFAULT_PORT}; 0 = any free port)")
     v.add_argument("--rate", type=float, default=60.0, help="frames published per second of simulated time (default 60)")
+    v.add_argument("--replay", action="store_true",
+                   help="record --duration simulated seconds (default 10) first, then replay them with a time slider "
+                        "to scrub (until Ctrl-C). Live or replayed, the page's side panel has Pause/Resume, a speed "
+                        "slider and checkboxes for the body axes and each vector")
     v.set_defaults(fn=_view)
 
 

@@ -45,12 +45,30 @@ Binding: ``host`` must be an IP address or a host name (checked, and resolved wi
 RESOLVE_TIMEOUT_S) that is an address of this machine (a test bind, so 192.0.2.1 fails at once);
 the server must be up within BIND_TIMEOUT_S. Otherwise LavenderInputError names ``host``.
 
+Controls (the page's side panel; :class:`Controls`, ``viewer.controls``): a "body axes" checkbox and
+one checkbox per vector label hide or show them (applied to the latest frame at once, and to every
+frame after); while a :class:`Player` runs (:meth:`Viewer.play` for a live Sim, :meth:`Viewer.replay`
+for a recorded :class:`~lavendersim.sim.Trajectory`, ``lavendersim view``), a Pause/Resume button, a
+speed slider (simulated seconds per wall-clock second: a live Sim advances ``speed / rate_hz`` s per
+frame) and, for a replay, a time slider to scrub. Each works the same from Python, from its GUI
+handle and from the browser. Example::
+
+    traj = sim.record(3000, every=20)          # 3 s at 1 ms steps, every 20th state
+    viewer = Viewer(port=0)
+    viewer.replay(traj, sim)                   # plays in a background thread; returns at once
+    viewer                                     # in a notebook: the page inline, and a link
+    viewer.controls.pause(); viewer.player.seek(1.5)
+    viewer.close()                             # stops the player and the server (threads joined)
+
 Conventions: our quaternions are (x, y, z, w); viser's are (w, x, y, z) — converted here, once.
 World frame z up. Units m.
 """
 from __future__ import annotations
 
+import atexit
+import copy
 import difflib
+import html
 import ipaddress
 import math
 import re
@@ -59,22 +77,25 @@ import sys
 import threading
 import time
 import urllib.parse
-from collections.abc import Iterable, Mapping, Sequence
+import weakref
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from typing import TYPE_CHECKING, Any, Self, TextIO
 
 import numpy as np
 from numpy.typing import ArrayLike
 
+from . import _playback as PB
 from . import validate as V
 from ._install import require
+from ._playback import Controls, Player, Snapshot
 from .generated import layout as LY
 from .kernels import K as KN
 
 if TYPE_CHECKING:  # annotations only: the Sim loads lazily
-    from .sim import Sim
+    from .sim import Sim, Trajectory
 
-__all__ = ["Viewer", "ViewerError", "validate_overlays", "xyzw_to_wxyz", "DEFAULT_COLOR", "MAX_VECTORS", "SCENES", "LAB_VIEWS",
-           "run_scene"]
+__all__ = ["Viewer", "ViewerError", "Controls", "Player", "Snapshot", "validate_overlays", "xyzw_to_wxyz", "DEFAULT_COLOR",
+           "MAX_VECTORS", "SCENES", "LAB_VIEWS", "run_scene"]
 
 DEFAULT_HOST = "127.0.0.1"
 DEFAULT_PORT = 8080
@@ -83,7 +104,10 @@ DEFAULT_AXES_SCALE = 0.3
 DEFAULT_COLOR = (0.95, 0.75, 0.2, 1.0)
 MAX_VECTORS = 64
 MAX_LABEL = 200
-MIN_RATE_HZ = 0.1           # run_scene: frames per simulated second, at least
+MIN_RATE_HZ = 0.1           # run_scene, play, replay: frames per second, at least
+DEFAULT_REPLAY_S = 10.0     # run_scene(replay=True) without a duration records this many simulated seconds
+MAX_REPLAY_SAMPLES = 100_000  # run_scene(replay=True): duration * rate_hz, at most (memory, recording time)
+INLINE_HEIGHT = 480         # px: the notebook's inline frame
 FLOAT32_MAX = 3.4e38        # the browser draws in float32: coordinates beyond this would become Infinity
 RESOLVE_TIMEOUT_S = 10.0    # host name resolution
 BIND_TIMEOUT_S = 30.0       # the viser server up and listening
@@ -351,6 +375,12 @@ POSE_Q = slice(POSE_P.stop, POSE_P.stop + LY.STATE_Q.stop - LY.STATE_Q.start)
 class _Frame:
     __slots__ = ("number", "t", "names", "shapes", "pose", "overlays", "published_at")
 
+    def copy(self) -> _Frame:
+        g = _Frame()
+        for k in self.__slots__:
+            setattr(g, k, getattr(self, k))
+        return g
+
 
 def _start_server(viser, host: str, port: int, label: str, verbose: bool):
     """ViserServer(...) bounded by BIND_TIMEOUT_S: viser retries 1000 ports and then waits forever."""
@@ -421,6 +451,9 @@ class Viewer:
         self.server.gui.configure_theme(show_share_button=False, show_logo=False)
         self._status = self.server.gui.add_markdown("waiting for the first frame")
         self._lock = threading.Lock()
+        self._last: _Frame | None = None   # the latest frame published (redrawn when a control changes)
+        self.player: Player | None = None
+        self.stop_reason: str | None = None   # why the apply thread stopped
         self._wake = threading.Event()
         self._stop = threading.Event()
         self._applied_cv = threading.Condition()
@@ -440,9 +473,15 @@ class Viewer:
         self._bodies: dict = {}     # name -> {"node", "shape", "axes"}
         self._vectors: list = []    # [{"node", "shaft", "head", "label"}]
         self._cache: dict = {}      # (handle id, prop) -> last value assigned
-        self._state: dict = {"frame": 0, "t": None, "bodies": {}, "axes": {}, "vectors": []}
+        self._state: dict = {"frame": 0, "t": None, "bodies": {}, "axes": {}, "vectors": [], "hidden": []}
+        self.controls = Controls(self.server.gui, self._republish)
         self._thread = threading.Thread(target=self._run, name="lavendersim-viewer", daemon=True)
         self._thread.start()
+        # a viewer left open (a notebook, a script) is closed at interpreter exit before viser stops
+        # its server (atexit runs last-registered first), so a player never writes to a stopped one
+        ref = weakref.ref(self)
+        self._at_exit = lambda: (v := ref()) is not None and v.close()
+        atexit.register(self._at_exit)
 
     # ---- public ---------------------------------------------------------------------------
     @property
@@ -499,9 +538,24 @@ class Viewer:
             f.number = self._published
             if self._pending is not None:
                 self._dropped += 1
-            self._pending = f
+            self._pending = self._last = f
         self._wake.set()
         return f.number
+
+    def _republish(self) -> int:
+        """Draw the latest frame again (a control changed what is shown); returns the number to
+        wait for (a new one, or the frame still pending)."""
+        with self._lock:
+            if self._stop.is_set() or self._last is None:
+                return self._published
+            if self._pending is None:
+                f = self._last.copy()
+                self._published += 1
+                f.number = self._published
+                self._pending = self._last = f
+            number = self._pending.number
+        self._wake.set()
+        return number
 
     def wait_applied(self, number: int, timeout: float = 5.0) -> bool:
         """Block until frame ``number`` (or a later one) is in the viser scene; False on timeout.
@@ -540,9 +594,8 @@ class Viewer:
 
     def scene_state(self) -> dict[str, Any]:
         """What the viser scene shows now (deep copy): frame number, t, per-body position and
-        wxyz, axes per body, and the drawn vectors (label, start, end, rgb, opacity)."""
-        import copy
-
+        wxyz, axes per body, the drawn vectors (label, start, end, rgb, opacity), and the vector
+        toggles switched off in this frame (``"hidden"``)."""
         with self._state_lock:
             return copy.deepcopy(self._state)
 
@@ -564,16 +617,186 @@ class Viewer:
             return {"published": self._published, "applied": self._applied, "dropped": self._dropped, "failed": self._failed,
                     "clients": self.clients(), "last_error": repr(self.last_error) if self.last_error else None}
 
+    def threads(self) -> dict[str, dict[str, Any]]:
+        """The viewer's threads and why each stopped: ``{"apply": {...}, "player": {...}}`` (the
+        player only when one was started), each ``{"alive": bool, "stop_reason": str or None}``.
+
+        Returns
+        -------
+        dict
+        """
+        out = {"apply": {"alive": self._thread.is_alive(), "stop_reason": self.stop_reason}}
+        p = self.player
+        if p is not None and p.thread is not None:
+            out["player"] = {"alive": p.thread.is_alive(), "stop_reason": p.stop_reason, "state": p.state}
+        return out
+
     def close(self) -> None:
-        """Stop the apply thread and the server (idempotent)."""
+        """Stop the player, the apply thread and the server (idempotent). Each thread is joined
+        with a deadline of JOIN_TIMEOUT_S (lavendersim._playback); one still running then says so in :meth:`threads`."""
         if self._stop.is_set():
             return
+        atexit.unregister(self._at_exit)
+        if self.player is not None:
+            self.player.stop(PB.JOIN_TIMEOUT_S)
         self._stop.set()
         self._wake.set()
         with self._applied_cv:
             self._applied_cv.notify_all()
-        self._thread.join(timeout=5)
+        self._thread.join(PB.JOIN_TIMEOUT_S)
+        if self._thread.is_alive():
+            self.stop_reason = f"still running {PB.JOIN_TIMEOUT_S:g} s after close() (a stuck scene update?)"
         self.server.stop()
+
+    # ---- playback ---------------------------------------------------------------------------
+    @V.keywords
+    def play(self, sim: Sim, overlays: Callable[[Sim], Mapping[str, Any] | None] | None = None,
+             advance: Callable[[Sim, float], None] | None = None, *, rate_hz: float = 60.0,
+             duration: float | None = None, speed: float | None = None, paused: bool = False,
+             start: bool = True) -> Player:
+        """Drive a live Sim in a background thread: ``rate_hz`` frames per wall-clock second, each
+        advancing ``speed / rate_hz`` simulated seconds, with the Pause/Resume button and the speed
+        slider in the page. Replaces a running player. Returns at once (the player runs until
+        `duration`, :meth:`Player.stop` or :meth:`close`).
+
+        Parameters
+        ----------
+        sim : Sim
+            Advanced by the player's thread (leave it alone meanwhile).
+        overlays : callable, optional
+            ``overlays(sim)`` -> payload (see :func:`validate_overlays`) for each frame.
+        advance : callable, optional
+            ``advance(sim, seconds)`` (default ``sim.run_for``), e.g. a controller's loop.
+        rate_hz : float, optional
+            Frames per wall-clock second.
+        duration : float or None, optional
+            Stop at this simulated time, s (None: run until stopped).
+        speed : float or None, optional
+            Initial speed (None: keep the slider's).
+        paused : bool, optional
+            Start paused.
+        start : bool, optional
+            False: do not start the thread (drive it with :meth:`Player.tick` / :meth:`Player.run`).
+
+        Returns
+        -------
+        Player
+
+        Raises
+        ------
+        LavenderInputError
+            On a bad argument (nothing started).
+        """
+        self._sim_parts(sim)
+        for field, fn in (("overlays", overlays), ("advance", advance)):
+            if fn is not None and not callable(fn):
+                raise V.LavenderInputError(field, "expected a callable or None", f", got {V._describe(fn)}")
+        if duration is not None:
+            duration = V.scalar("duration", duration, nonnegative=True)
+        return self._start(PB._LiveSource(sim, overlays, advance, duration), rate_hz, speed, paused, start, None)
+
+    @V.keywords
+    def replay(self, trajectory: Trajectory, bodies: Any, overlays: Any = None, *, rate_hz: float = 30.0,
+               speed: float | None = None, loop: bool = False, paused: bool = False, start: bool = True) -> Player:
+        """Play a recorded Trajectory back in a background thread, with a time slider (drag it to any
+        sample, paused or not), the Pause/Resume button and the speed slider. Played through, it
+        pauses at the end (resume: from the start) unless `loop`. Returns at once.
+
+        Parameters
+        ----------
+        trajectory : Trajectory
+            From :meth:`Sim.record`: names, t (T,), x (T, nb, 13).
+        bodies : Sim, Scene or mapping
+            The bodies (name -> Body) whose shapes are drawn; every trajectory body must be there.
+        overlays : None, callable or sequence, optional
+            None: each body's axes and its angular velocity ω (world) as an arrow; a callable
+            ``overlays(snapshot)`` -> payload, given a :class:`Snapshot` of the sample; or one payload
+            per sample (length T).
+        rate_hz : float, optional
+            Frames per wall-clock second.
+        speed : float or None, optional
+            Initial speed, simulated s per wall-clock s (None: keep the slider's).
+        loop : bool, optional
+            Start over at the end instead of pausing there.
+        paused : bool, optional
+            Start paused (at the first sample).
+        start : bool, optional
+            False: do not start the thread (drive it with :meth:`Player.tick` / :meth:`Player.run`).
+
+        Returns
+        -------
+        Player
+
+        Raises
+        ------
+        LavenderInputError
+            Naming ``trajectory``, ``bodies``, ``overlays`` or an option when it is bad (nothing started).
+        """
+        found, overlays = PB.check_trajectory(trajectory, bodies, overlays)
+        if not isinstance(loop, bool):
+            raise V.LavenderInputError("loop", "expected a bool", f", got {V._describe(loop)}")
+        source = PB._ReplaySource(trajectory, found, overlays, loop)
+        snap, payload = source.frame()          # the first sample draws: a bad payload stops here
+        validate_overlays(payload, snap.names)
+        return self._start(source, rate_hz, speed, paused, start, source.t)
+
+    def _start(self, source, rate_hz, speed, paused, start, times) -> Player:
+        rate_hz = V.positive("rate_hz", rate_hz)
+        if not MIN_RATE_HZ <= rate_hz <= PB.MAX_RATE_HZ:
+            raise V.LavenderInputError("rate_hz", f"must be within [{MIN_RATE_HZ:g}, {PB.MAX_RATE_HZ:g}] frames per second",
+                                       f", got {rate_hz!r}")
+        for field, flag in (("paused", paused), ("start", start)):
+            if not isinstance(flag, bool):
+                raise V.LavenderInputError(field, "expected a bool", f", got {V._describe(flag)}")
+        if speed is not None:
+            speed = V.positive("speed", speed)
+            if not PB.SPEED_MIN <= speed <= PB.SPEED_MAX:
+                raise V.LavenderInputError("speed", f"must be within [{PB.SPEED_MIN:g}, {PB.SPEED_MAX:g}]", f", got {speed!r}")
+        if self._stop.is_set():
+            raise RuntimeError("viewer is closed")
+        if self.player is not None:
+            self.player.stop(PB.JOIN_TIMEOUT_S)
+        player = Player(self, source, rate_hz)
+        if speed is not None:
+            self.controls.set_speed(speed)
+        self.controls.set_paused(paused)
+        self.controls.add_playback(times, player.seek if times is not None else None)
+        self.player = player
+        if start:
+            player.start()
+        return player
+
+    # ---- in a notebook ------------------------------------------------------------------------
+    def _inline_html(self, height: int) -> str:
+        url = html.escape(self.url, quote=True)
+        return (f'<iframe src="{url}" width="100%" height="{height}" style="border: 1px solid #ddd" '
+                f'title="LavenderSim viewer"></iframe>'
+                f'<p>LavenderSim viewer: <a href="{url}" target="_blank">{url}</a> (opens it in a tab)</p>')
+
+    def _repr_html_(self) -> str:
+        """A notebook shows the page inline (an iframe) and a link to it."""
+        return self._inline_html(INLINE_HEIGHT)
+
+    def show(self, height: int = INLINE_HEIGHT) -> None:
+        """Show the page inline in a notebook (an iframe of :attr:`url` and a link); outside a
+        notebook, print the link. The iframe works from a Jupyter whose browser runs on this
+        machine (the viewer binds 127.0.0.1 by default); from a remote Jupyter, forward the port.
+
+        Parameters
+        ----------
+        height : int, optional
+            Height of the inline frame, px (>= 100).
+        """
+        height = V.integer("height", height, minimum=100)
+        try:
+            from IPython import get_ipython
+            from IPython.display import HTML, display
+        except ImportError:
+            get_ipython = None
+        if get_ipython is not None and get_ipython() is not None:
+            display(HTML(self._inline_html(height)))
+        else:
+            print(f"LavenderSim viewer: {self.url}")
 
     def __enter__(self) -> Self:
         return self
@@ -595,6 +818,14 @@ class Viewer:
         return list(names), x, bodies
 
     def _run(self) -> None:
+        try:
+            self._serve()
+            self.stop_reason = "closed"
+        except BaseException as exc:   # recorded for threads(); the thread ends
+            self.stop_reason = f"error: {exc!r}"
+            raise
+
+    def _serve(self) -> None:
         period = 1.0 / self.max_rate_hz
         next_at = 0.0
         while not self._stop.is_set():
@@ -681,7 +912,10 @@ class Viewer:
         return self._vectors[k]
 
     def _apply(self, f: _Frame) -> None:
-        state = {"frame": f.number, "t": f.t, "bodies": {}, "axes": {}, "vectors": []}
+        state = {"frame": f.number, "t": f.t, "bodies": {}, "axes": {}, "vectors": [], "hidden": []}
+        ctl = self.controls
+        keys = [PB.vector_key(k, v["label"]) for k, v in enumerate(f.overlays["vectors"])]
+        ctl.ensure_vector_toggles(keys)
         with self.server.atomic():
             if (f.names, f.shapes) != self._signature:
                 self._build(f)
@@ -691,7 +925,7 @@ class Viewer:
                 b["node"].position = pos
                 b["node"].wxyz = wxyz
                 state["bodies"][name] = {"position": pos.tolist(), "wxyz": wxyz.tolist(), "shape": b["shape"]}
-            axes = {a["body"]: a["scale"] for a in f.overlays["axes"]}
+            axes = {a["body"]: a["scale"] for a in f.overlays["axes"]} if ctl.show_axes else {}
             for name, b in self._bodies.items():
                 on = name in axes
                 if on:
@@ -702,6 +936,10 @@ class Viewer:
                 self._set(b["axes"], "visible", on)
             for k, v in enumerate(f.overlays["vectors"]):
                 h = self._vector_handles(k)
+                if not ctl.vector_shown(keys[k]):
+                    self._set(h["node"], "visible", False)
+                    state["hidden"].append(keys[k])
+                    continue
                 d = v["scale"] * v["vector"]
                 length = V.safe_norm(d)
                 rgb = tuple(int(round(255 * c)) for c in v["color"][:3])
@@ -725,7 +963,7 @@ class Viewer:
                 self._set(h["node"], "visible", True)
             for h in self._vectors[len(f.overlays["vectors"]):]:
                 self._set(h["node"], "visible", False)
-            self._status.content = f"**frame {f.number}** · t = {f.t:.3f} s"
+            self._status.content = f"**frame {f.number}** · t = {f.t:.3f} s" + (" · paused" if ctl.paused else "")
         with self._state_lock:
             self._state = state
 
@@ -820,24 +1058,29 @@ LAB_VIEWS = {"03": "lab03", "04": "wheel"}
 
 @V.keywords
 def run_scene(name: str, *, duration: float | None = None, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT,
-              rate_hz: float = 60.0, viewer: Viewer | None = None, out: TextIO = sys.stdout) -> dict[str, Any]:
+              rate_hz: float = 60.0, viewer: Viewer | None = None, out: TextIO = sys.stdout,
+              replay: bool = False) -> dict[str, Any]:
     """Run scene ``name`` in real time, publishing ``rate_hz`` frames per second, for ``duration``
-    seconds of simulated time (None: until interrupted). Returns the viewer's stats.
+    seconds of simulated time (None: until interrupted), with the page's Pause/Resume button and
+    speed slider. With ``replay``: record ``duration`` simulated seconds (default DEFAULT_REPLAY_S)
+    first, then replay them with a time slider until interrupted. Returns the viewer's stats.
 
     Parameters
     ----------
     name : str
         A scene of SCENES (``"tumble"``, ``"wheel"``, ...).
     duration : float or None, optional
-        Simulated seconds (None: until Ctrl-C).
+        Simulated seconds (None: until Ctrl-C; with `replay`: DEFAULT_REPLAY_S recorded).
     host, port : optional
         Where to serve (when `viewer` is None).
     rate_hz : float, optional
-        Frames per second.
+        Frames per second (live: per simulated second at speed 1; a replay samples at this rate).
     viewer : Viewer, optional
-        An existing viewer.
+        An existing viewer (its player is stopped on return, the viewer is left open).
     out : text stream, optional
         Where the URL line is printed.
+    replay : bool, optional
+        Record first, then replay with a time slider.
 
     Returns
     -------
@@ -848,29 +1091,52 @@ def run_scene(name: str, *, duration: float | None = None, host: str = DEFAULT_H
     if duration is not None:
         duration = V.scalar("duration", duration, nonnegative=True)
     rate_hz = V.positive("rate_hz", rate_hz)
+    if not isinstance(replay, bool):
+        raise V.LavenderInputError("replay", "expected a bool", f", got {V._describe(replay)}")
     sim, overlays, advance = SCENES[name]()
     if not MIN_RATE_HZ <= rate_hz <= 1.0 / sim.dt:  # a frame must advance at least one step, at most 1/MIN_RATE_HZ s
         raise V.LavenderInputError("rate_hz", f"must be within [{MIN_RATE_HZ:g}, {1.0 / sim.dt:g}] frames per simulated "
                                    f"second (scene {name!r} steps dt = {sim.dt:g} s)", f", got {rate_hz!r}")
+    record_s = (DEFAULT_REPLAY_S if duration is None else duration) if replay else None
+    if replay and record_s * rate_hz > MAX_REPLAY_SAMPLES:
+        raise V.LavenderInputError("duration", f"with replay, duration * rate_hz must be at most {MAX_REPLAY_SAMPLES} "
+                                   "samples", f", got {record_s:g} s at {rate_hz:g} Hz")
     own = viewer is None
     viewer = viewer or Viewer(host, port)
     print(f"lavendersim view {name}: open {viewer.url}  (Ctrl-C to stop)", file=out, flush=True)
-    step = 1.0 / rate_hz
-    t0 = time.monotonic()
+    player = None
     try:
-        while duration is None or sim.t < duration - 1e-12:
-            viewer.publish_frame(sim, overlays(sim))
-            advance(sim, step if duration is None else min(step, duration - sim.t))
-            lag = (t0 + sim.t) - time.monotonic()
-            if lag > 0:
-                time.sleep(lag)
-        viewer.publish_frame(sim, overlays(sim))
-    except KeyboardInterrupt:
+        if replay:
+            print(f"lavendersim view {name}: recording {record_s:g} s ...", file=out, flush=True)
+            traj, payloads = _record_scene(sim, overlays, advance, record_s, rate_hz)
+            player = viewer.replay(traj, sim, payloads, rate_hz=rate_hz, start=False)
+            print(f"lavendersim view {name}: replaying {len(traj.t)} samples (t = 0 to {traj.t[-1]:.3f} s); "
+                  "Pause, speed and time are in the page's side panel", file=out, flush=True)
+        else:
+            player = viewer.play(sim, overlays, advance, rate_hz=rate_hz, duration=duration, start=False)
+        player.run()
+    except KeyboardInterrupt:    # while recording
         pass
     finally:
         stats = viewer.stats()
         if own:
             viewer.close()
-    print(f"lavendersim view {name}: t = {sim.t:.3f} s, {stats['published']} frames published, "
+        elif player is not None:
+            player.stop()
+    print(f"lavendersim view {name}: t = {(player.t if player else sim.t):.3f} s, {stats['published']} frames published, "
           f"{stats['applied']} sent, {stats['dropped']} coalesced", file=out)
     return stats
+
+
+def _record_scene(sim, overlays, advance, seconds: float, rate_hz: float):
+    """A scene's states and payloads every 1/rate_hz simulated seconds up to `seconds`, as a
+    Trajectory (wheel rates not recorded: zeros) and the list of payloads."""
+    from .sim import Trajectory
+
+    ts, xs, payloads = [sim.t], [np.array(sim.x, copy=True)], [overlays(sim)]
+    while sim.t < seconds - 0.5 * sim.dt:
+        advance(sim, max(sim.dt, min(1.0 / rate_hz, seconds - sim.t)))
+        ts.append(sim.t)
+        xs.append(np.array(sim.x, copy=True))
+        payloads.append(overlays(sim))
+    return Trajectory(list(sim.names), np.array(ts), np.stack(xs)), payloads

@@ -11,7 +11,7 @@ Some tests need a tool that a fresh machine may lack. Each has one name here (TO
     viewer    viser (viewer extra: the live browser viewer)
     gym       gymnasium (gym extra: the ReactionWheelCube-v0 environment)
     distributed  dask and distributed (distributed extra)
-    docs      sphinx and myst-parser (docs extra: the documentation site)
+    docs      sphinx, myst-parser and myst-nb (docs extra: the documentation site, the notebooks rendered)
     notebooks nbclient, nbformat and ipykernel (docs extra: the notebooks executed headless)
 
 A test says what it needs in one of three ways, all handled by :func:`require`:
@@ -113,7 +113,7 @@ TOOLS = {
     "viewer": (_modules("viser"), "pip install -e '.[viewer]'"),
     "gym": (_modules("gymnasium"), "pip install -e '.[gym]'"),
     "distributed": (_modules("dask", "distributed"), "pip install -e '.[distributed]'"),
-    "docs": (_modules("sphinx", "myst_parser"), "pip install -e '.[docs]'"),
+    "docs": (_modules("sphinx", "myst_parser", "myst_nb"), "pip install -e '.[docs]'"),
     "notebooks": (_modules("nbclient", "nbformat", "ipykernel"), "pip install -e '.[docs]'"),
 }
 

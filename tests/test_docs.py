@@ -35,6 +35,21 @@ def test_pages_exist(site):
         assert (site / f"{page}.html").is_file(), page
 
 
+def test_notebooks_are_rendered(site):
+    """Every notebook in notebooks/ is a page (docs/nb links there), its cells rendered as stored, and
+    the notebooks page lists each."""
+    index = (site / "notebooks.html").read_text(encoding="utf-8")
+    notebooks = sorted((ROOT / "notebooks").glob("*.ipynb"))
+    assert notebooks
+    for nb in notebooks:
+        page = site / "nb" / f"{nb.stem}.html"
+        assert page.is_file(), nb.name
+        html = page.read_text(encoding="utf-8")
+        assert "## Predict" not in html and "<h2>Predict<" in html, nb.name       # markdown cells rendered
+        assert 'class="cell docutils container"' in html, nb.name                 # code cells rendered
+        assert f'href="nb/{nb.stem}.html"' in index, nb.name
+
+
 def test_api_reference_comes_from_the_docstrings(site):
     sim = (site / "api" / "lavendersim.sim.html").read_text(encoding="utf-8")
     for name in ("Sim.run", "Sim.record", "Sim.set_state", "Trajectory.body"):

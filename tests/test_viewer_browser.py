@@ -9,7 +9,8 @@ SwiftShader by itself still gets WebGL.
 Checks: the page connects; a published pure-red vector shows up as red pixels (pixels classified
 by dominant colour) and disappears when unpublished; a changed vector moves the red pixels;
 several tabs watch at once and every one keeps receiving the updates (waited for, never counted
-per time window).
+per time window); the side panel's controls render and a click or a typed value there reaches
+Python.
 
 Needs Debian's chromium and the playwright package (`@pytest.mark.needs("chromium")`, see
 tests/conftest.py): skipped without them, failed without them under CI=true.
@@ -221,6 +222,60 @@ def test_several_tabs_watch_and_frames_keep_arriving(live):
         p.close()
 
 
+def test_controls_render_and_reach_python(live):
+    """The side panel shows the controls (Pause/Resume, the speed and time sliders, the body-axes
+    checkbox, one checkbox per vector), and what the page does reaches Python: Resume starts the
+    replay, typing a speed sets it, unticking a vector hides its arrow; a pause from Python shows
+    in the page, and a time typed there seeks."""
+    import lavendersim as lv
+    from lavendersim.viewer import Viewer
+
+    sc = lv.Scene()
+    sc.add_body(lv.Body.box("box", 1.0, (0.4, 0.25, 0.1), omega_b=(0.05, 4.0, 0.05)))
+    sim = lv.Sim(sc, dt=1e-3)
+    traj = sim.record(1000, every=20)
+    ctx = live[2]        # the module's browser (one playwright per thread); a viewer of its own
+    with Viewer(port=0) as v:
+        player = v.replay(traj, sim, paused=True, loop=True)
+        page = open_tab(ctx, v)
+        for text in ("Playback", "speed ×", "time (s)", "Show", "body axes"):
+            page.get_by_text(text, exact=True).first.wait_for()
+        ctl = v.controls
+        assert page.get_by_role("checkbox", name="body axes").is_checked()
+        omega = page.get_by_role("checkbox", name="angular velocity ω")
+        assert omega.is_checked()
+
+        page.get_by_role("button", name="Resume").click()
+        assert _until(lambda: not ctl.paused and player.frames > 0), (ctl.paused, player.frames)
+        page.get_by_role("button", name="Pause").wait_for()
+
+        speed, when = page.get_by_role("textbox").all()   # the number boxes beside the speed and time sliders
+        speed.fill("2")
+        speed.press("Enter")
+        assert _until(lambda: ctl.speed == 2.0), ctl.speed
+
+        omega.click()
+        assert _until(lambda: not ctl.vector_shown("angular velocity ω")
+                      and v.scene_state()["hidden"] == ["angular velocity ω"]), v.scene_state()["hidden"]
+        assert not v.handles()["vectors"][0]["node"].visible and not omega.is_checked()
+
+        ctl.pause()                              # from Python: the page's button says Resume again
+        page.get_by_role("button", name="Resume").wait_for()
+        when.fill("0.5")                         # paused, a time typed in the page: that sample is drawn
+        when.press("Enter")
+        assert _until(lambda: player.t == 0.5 and v.scene_state()["t"] == 0.5), (player.t, v.scene_state()["t"])
+        page.close()
+
+
+def _until(predicate, timeout=DEADLINE) -> bool:
+    end = time.monotonic() + timeout
+    while not predicate():
+        if time.monotonic() > end:
+            return predicate()
+        time.sleep(0.05)
+    return True
+
+
 # ---- shared by the tests and the measurement script -------------------------------------------
 
 def _publisher(v, sim, stop, hz=120.0, errors=None):
@@ -306,8 +361,9 @@ def _cost(v, sim, seconds=2.0, hz=1000.0):
 
 
 def measure() -> None:
-    from lavendersim.viewer import Viewer
     import test_viewer as TV
+
+    from lavendersim.viewer import Viewer
 
     sim = _scene()
     rows = []
@@ -350,14 +406,17 @@ def measure() -> None:
 
 
 def screenshot(path: str) -> None:
-    """The README picture: the tumble scene (axes, ω and L arrows) as the test browser shows it."""
+    """The README picture: the tumble scene (axes, ω and L arrows) as the test browser shows it,
+    paused at t = 1.3 s with the side panel's controls."""
     from lavendersim import viewer as VW
 
     sim, overlays, advance = VW.SCENES["tumble"]()
     advance(sim, 1.3)
     with VW.Viewer(port=0) as v, browser() as ctx:
-        v.wait_applied(v.publish_frame(sim, overlays(sim)), DEADLINE)
+        v.play(sim, overlays, advance, paused=True)       # publishes the frame, then waits (paused)
+        assert _until(lambda: v.scene_state()["frame"] >= 1), v.stats()
         page = open_tab(ctx, v)
+        page.set_viewport_size({"width": 1440, "height": 640})   # the side panel clear of the labels
         time.sleep(3.0)
         for close in page.get_by_role("button", name="Close").all():   # software-WebGL notice, if shown
             if close.is_visible():
