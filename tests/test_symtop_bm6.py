@@ -114,7 +114,8 @@ def test_fourth_order_with_attitude_dependent_loads():
 
 @pytest.mark.parametrize("effects", ["none", "loads", "damped"])
 def test_c_and_numpy_bitwise_equal_on_random_bodies(effects):
-    """Random bodies whose moments come in every order, so that the (P, Q) axes differ between bodies."""
+    """Random bodies whose moments come in every order, so that the (P, Q) axes differ between bodies, and
+    a symmetric top."""
     if B.c_unavailable() is not None:
         pytest.skip(f"C backend unavailable: {B.c_unavailable()}")
     rng = np.random.default_rng(12)
@@ -124,8 +125,9 @@ def test_c_and_numpy_bitwise_equal_on_random_bodies(effects):
         q = rng.normal(size=4)
         bodies.append((f"b{i}", tuple(I_b), {"q": q / np.linalg.norm(q), "omega_b": rng.normal(size=3) * 3,
                                            "v_w": rng.normal(size=3), "p_w": rng.normal(size=3)}))
+    bodies.append(("top", (1.5, 1.2, 1.2), {"omega_b": W2}))    # c_b = 0: the P flows are skipped (turns by 0)
     axes = NB.symtop_axes(np.array([b[1] for b in bodies]))
-    assert len(set(zip(axes[0].tolist(), axes[1].tolist()))) >= 3
+    assert len(set(zip(axes[0].tolist(), axes[1].tolist()))) >= 3 and axes[4][-1] == 0.0
     eff = []
     if effects != "none":
         eff = [("gravity", {"g_w": [0, 0, -9.81]}), ("applied_torque", {"torque_w": [0.3, -0.1, 0.2]}),

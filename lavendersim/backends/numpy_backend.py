@@ -347,15 +347,18 @@ def _symtop_bm6_rotation(I, q, L, h):
     """symtop_bm6's rotation on rows (q, L_b) for time h: the Blanes–Moan S10 sequence P(p_0 h) Q(q_0 h) …
     P(p_s h) (T.BM6_P_FRAC, T.BM6_Q_FRAC), P the axis flow of ½ c_b L_b² (the smaller leftover |c|, symtop_axes'
     b), Q that of ½ c_a L_a²; then one sphere flow of |L|²/(2 I_r) for h (it commutes with both). Bodies are
-    grouped by their (a, b) axes; the C backend's symtop_bm6_rotation, operation for operation."""
+    grouped by their (a, b) axes and whether c_b = 0 (a symmetric top: its P flows are turns by 0, skipped);
+    the C backend's symtop_bm6_rotation, operation for operation."""
     a, b, I_r, c_a, c_b = symtop_axes(I)
     q, L = q.copy(), L.copy()
     fp, fq = T.BM6_P_FRAC, T.BM6_Q_FRAC
-    for pa, pb in sorted(set(zip(a.tolist(), b.tolist()))):
-        m = (a == pa) & (b == pb)
+    top = c_b == 0.0
+    for pa, pb, pt in sorted(set(zip(a.tolist(), b.tolist(), top.tolist()))):
+        m = (a == pa) & (b == pb) & (top == pt)
         qm, Lm = q[m], L[m]
         for i, f in enumerate(fp):
-            qm, Lm = _SYMTOP_FLOWS[pb](qm, Lm, c_b[m], f * h)
+            if not pt:
+                qm, Lm = _SYMTOP_FLOWS[pb](qm, Lm, c_b[m], f * h)
             if i < len(fq):
                 qm, Lm = _SYMTOP_FLOWS[pa](qm, Lm, c_a[m], fq[i] * h)
         q[m], L[m] = K.sphere_flow(qm, Lm, I_r[m], h), Lm

@@ -901,14 +901,15 @@ static void symtop4_step(const body_ctx *c, double *x, double h, int damped)
 /* symtop_bm6's rotation on (q, L) for time h (body c's split from symtop_axes): the Blanes-Moan S10 sequence
    P(p_0 h) Q(q_0 h) P(p_1 h) ... P(p_s h) (LV_BM6_P_FRAC / LV_BM6_Q_FRAC), P the axis flow with the smaller
    leftover coefficient (symtop4's B axis), Q the larger's (symtop4's A axis); then one sphere flow of
-   |L|^2/(2 I_r) for h (it commutes with both axis flows). */
+   |L|^2/(2 I_r) for h (it commutes with both axis flows). A symmetric top (c_b = 0) skips the P flows: each
+   is then a turn by 0 (cos 0 = 1, sin 0 = 0), leaving q and L bit for bit as they are. */
 static void symtop_bm6_rotation(const double *I, double *q, double *L, double h)
 {
     double I_r, c_a, c_b;
     int a, b, i;
     symtop_axes(I, &a, &b, &I_r, &c_a, &c_b);
     for (i = 0; i <= LV_BM6_FLOWS; i++) {
-        symtop_axis(b, c_b, q, L, LV_BM6_P_FRAC[i] * h);
+        if (c_b != 0.0) symtop_axis(b, c_b, q, L, LV_BM6_P_FRAC[i] * h);
         if (i < LV_BM6_FLOWS) symtop_axis(a, c_a, q, L, LV_BM6_Q_FRAC[i] * h);
     }
     lv_sphere_flow(q, L, I_r, h, q);
