@@ -9,6 +9,7 @@ RK4_B_DEN = 6
 SPLIT4_STAGES = 5
 SPLIT4_FLOWS = 21
 SYMTOP4_STAGES = 5
+BM6_FLOWS = 10
 DP_SAFETY = 0.9
 DP_FACMIN = 0.2
 DP_FACMAX = 5.0
@@ -50,6 +51,8 @@ WDT_MAX_SPLITTING4 = 1.0
 WDT_RATIO_EXPONENT_SPLITTING4 = 0.5
 WDT_MAX_SYMTOP4 = 1.0
 WDT_RATIO_EXPONENT_SYMTOP4 = 0.5
+WDT_MAX_SYMTOP_BM6 = 1.0
+WDT_RATIO_EXPONENT_SYMTOP_BM6 = 0.5
 
 # Dormand-Prince 5(4): DP_A[s] (stage s's coefficients; DP_A[6] = the 5th-order weights, FSAL), DP_E = b - b_hat
 DP_A = (
@@ -75,8 +78,12 @@ SPLIT4_SEQ = ((0, 0.20724538589718786), (1, 0.20724538589718786), (2, 0.41449077
 SYMTOP4_GAMMA = (0.4144907717943757, 0.4144907717943757, -0.657963087177503, 0.4144907717943757, 0.4144907717943757)
 SYMTOP4_A_FRAC = (0.20724538589718786, 0.4144907717943757, -0.12173615769156361, -0.12173615769156361, 0.4144907717943757, 0.20724538589718786)
 SYMTOP4_B_FRAC = (0.4144907717943757, 0.4144907717943757, -0.657963087177503, 0.4144907717943757, 0.4144907717943757)
+# symtop_bm6 (Blanes & Moan S10, order 6): P(BM6_P_FRAC[0] h) Q(BM6_Q_FRAC[0] h) ... P(BM6_P_FRAC[-1] h),
+# P = the axis flow with the smaller leftover |c|, Q = the larger's; then one sphere flow for h
+BM6_P_FRAC = (0.0502627644003922, 0.413514300428344, 0.0450798897943977, -0.188054853819569, 0.54196067845078, -0.7255255585086898, 0.54196067845078, -0.188054853819569, 0.0450798897943977, 0.413514300428344, 0.0502627644003922)
+BM6_Q_FRAC = (0.148816447901042, -0.132385865767784, 0.067307604692185, 0.432666402578175, -0.016404589403618, -0.016404589403618, 0.432666402578175, 0.067307604692185, -0.132385865767784, 0.148816447901042)
 # validity bounds: |omega| dt (I_max/I_min)**WDT_RATIO_EXPONENT[name] <= WDT_MAX[name] (derive/tableaux.py)
-WDT_MAX = {'euler': 0.1, 'implicit_gyro': 3.141592653589793, 'rk4': 2.8284271247461903, 'rk4_expmap': 2.8284271247461903, 'semi_implicit_euler': 0.1, 'splitting': 1.0, 'splitting4': 1.0, 'symtop4': 1.0}
-WDT_RATIO_EXPONENT = {'euler': 0.0, 'implicit_gyro': 0.0, 'rk4': 0.0, 'rk4_expmap': 0.0, 'semi_implicit_euler': 0.0, 'splitting': 0.5, 'splitting4': 0.5, 'symtop4': 0.5}
+WDT_MAX = {'euler': 0.1, 'implicit_gyro': 3.141592653589793, 'rk4': 2.8284271247461903, 'rk4_expmap': 2.8284271247461903, 'semi_implicit_euler': 0.1, 'splitting': 1.0, 'splitting4': 1.0, 'symtop4': 1.0, 'symtop_bm6': 1.0}
+WDT_RATIO_EXPONENT = {'euler': 0.0, 'implicit_gyro': 0.0, 'rk4': 0.0, 'rk4_expmap': 0.0, 'semi_implicit_euler': 0.0, 'splitting': 0.5, 'splitting4': 0.5, 'symtop4': 0.5, 'symtop_bm6': 0.5}
 # linear stability limit on the negative real axis, |lambda| h (from each explicit tableau; derive/tableaux.py)
 REAL_AXIS_STABILITY = {'dopri5': 3.3065678926349467, 'euler': 2.0, 'rk4': 2.785293563405282, 'rk4_expmap': 2.785293563405282, 'semi_implicit_euler': 2.0}

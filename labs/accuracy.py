@@ -121,7 +121,7 @@ ORDER_WINDOW = (1e-10, 0.2)
 ORDER_TOL = 0.35
 # expected convergence order of attitude error in dt for integrators we know by name
 EXPECTED_ORDER = {"euler": 1, "semi_implicit_euler": 1, "rk4": 4, "midpoint": 2, "implicit_midpoint": 2,
-                  "splitting": 2, "implicit_gyro": 1, "splitting4": 4, "rk4_expmap": 4, "symtop4": 4, "strang": 2, "lie_poisson": 2, "rkmk4": 4, "heun": 2, "rk2": 2}
+                  "splitting": 2, "implicit_gyro": 1, "splitting4": 4, "rk4_expmap": 4, "symtop4": 4, "symtop_bm6": 6, "strang": 2, "lie_poisson": 2, "rkmk4": 4, "heun": 2, "rk2": 2}
 ADAPTIVE_ERROR_FACTOR = 100.0
 ADAPTIVE_NAMES = {"dopri5", "dopri45", "rk45", "rkf45", "adaptive", "bs23", "dop853", "cash_karp"}
 DRIFT_DT_EXP, DRIFT_RTOL = 6, 1e-6        # the runs drawn in drift_vs_time.png

@@ -138,6 +138,8 @@ SPLITTING4_L_PER_STEP = SPLITTING_L_PER_STEP * len(TABLEAUX.SPLIT4_SEQ) / len(TA
 # symtop4 (torque-free) applies 2 SYMTOP4_STAGES + 1 axis flows and SYMTOP4_STAGES + 1 sphere flows (exact
 # rotations too) per step: the same allowance per flow
 SYMTOP4_L_PER_STEP = SPLITTING_L_PER_STEP * (3 * TABLEAUX.SYMTOP4_STAGES + 2) / len(TABLEAUX.STRANG)
+# symtop_bm6 (torque-free) applies 2 BM6_FLOWS + 1 axis flows and one sphere flow per step: the same allowance per flow
+SYMTOP_BM6_L_PER_STEP = SPLITTING_L_PER_STEP * (2 * TABLEAUX.BM6_FLOWS + 2) / len(TABLEAUX.STRANG)
 RK4_SMALL_WDT = 1e-3
 STATUSES = ("ok", "diverged", "blew_up", "silent_nan", "error", "not_run")
 # Without the C backend, cells longer than this are "not_run" (the quick atlas's |ω|·dt = 1e-4 column,
@@ -511,6 +513,8 @@ def atlas_checks(cells: list[dict], integrators, rtol: float) -> tuple[list[C.Ch
         _splitting_checks(cells, checks, fig, "splitting4", SPLITTING4_L_PER_STEP)
     if _available("symtop4", integrators, checks):
         _splitting_checks(cells, checks, fig, "symtop4", SYMTOP4_L_PER_STEP)
+    if _available("symtop_bm6", integrators, checks):
+        _splitting_checks(cells, checks, fig, "symtop_bm6", SYMTOP_BM6_L_PER_STEP)
     for name in B.ADAPTIVE:
         if _available(name, integrators, checks):
             _adaptive_checks(cells, name, rtol, checks, fig)

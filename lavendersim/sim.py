@@ -55,6 +55,11 @@ Integrators (`integrator=`; `sim.rhs_evals` counts right-hand-side evaluations, 
   a symmetric top (c_b = 0); torque-free, world L, |L_b| and |q| conserved to rounding. Effects as
   splitting4's, per stage: order 4 with loads of position and attitude only, order 3 with damping.
   rhs_evals counted as splitting4's. Plain bodies only; validity bound splitting4's.
+* "symtop_bm6": sixth order, symtop4's split composed by Blanes & Moan's optimized 10-stage order-6
+  splitting (S10, J. Comput. Appl. Math. 142 (2002) 313): 21 exact axis flows and one sphere flow per
+  step torque-free; world L, |L_b| and |q| conserved to rounding, exact for a symmetric top. Effects:
+  symtop4's kicked stages around this rotation (order 4 with loads of position and attitude, 3 with
+  damping). rhs_evals counted as symtop4's. Plain bodies only; validity bound symtop4's.
 
 Precision (`dtype=`, keyword only): "float64" (default) or "float32". float32 steps the single-precision
 printing of the same SymPy kernels (C: csrc/step_f32.c on generated/kernels_f32.c, vectorized over bodies;
@@ -62,7 +67,7 @@ NumPy: generated/kernels_numpy_f32.py; the two agree bitwise) for euler, semi_im
 bodies with built-in effects; the state, its views, state() and record() are float32 (the divergence checks
 evaluate in float64; step() takes the Python path). Anything else with float32 raises LavenderInputError.
 
-Unsupported combinations (splitting / implicit_gyro / splitting4 / rk4_expmap / symtop4 with a joint or wheels;
+Unsupported combinations (splitting / implicit_gyro / splitting4 / rk4_expmap / symtop4 / symtop_bm6 with a joint or wheels;
 rtol/atol with a fixed-step integrator) raise LavenderInputError at construction.
 
 Divergence before infinity (checked per chunk of steps, so the stepping itself is unchanged bit for bit):

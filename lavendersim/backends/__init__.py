@@ -6,7 +6,7 @@ mutates state (nb, 13) (float64; or float32: FLOAT32_INTEGRATORS on plain bodies
 precision throughout) (and, with `models`, models.Omega and models.applied; with `adaptive`,
 adaptive.h and adaptive.nfev) in place, or raises DivergenceError and leaves every array unchanged.
 "numpy" needs no compiler; "c" steps inside C. dopri5 needs `adaptive` (an Adaptive); the PLAIN_ONLY
-integrators (splitting, implicit_gyro, splitting4, rk4_expmap, symtop4) accept plain bodies only (ValueError
+integrators (splitting, implicit_gyro, splitting4, rk4_expmap, symtop4, symtop_bm6) accept plain bodies only (ValueError
 otherwise; Sim raises LavenderInputError first).
 
 `models` (a `Models`, or None when no body has a joint or wheels) carries the per-body model:
@@ -27,11 +27,12 @@ from ..generated.layout import KIND_JOINT, KIND_WHEELS, MODEL_LAYOUT, MODEL_SIZE
 # name -> RHS evaluations per step (None: adaptive, counted as it runs). See rhs_per_step for how the
 # structure-preserving methods are counted.
 INTEGRATORS = {"euler": 1, "semi_implicit_euler": 1, "rk4": 4, "dopri5": None, "splitting": 1, "implicit_gyro": 1,
-               "splitting4": TABLEAUX.SPLIT4_STAGES, "rk4_expmap": 4, "symtop4": TABLEAUX.SYMTOP4_STAGES}
+               "splitting4": TABLEAUX.SPLIT4_STAGES, "rk4_expmap": 4, "symtop4": TABLEAUX.SYMTOP4_STAGES,
+               "symtop_bm6": TABLEAUX.SYMTOP4_STAGES}
 ADAPTIVE = ("dopri5",)
 # Integrators that step plain rigid bodies only (no spherical_joint, no reaction_wheels): their exact
 # sub-flows / implicit solve use the diagonal principal inertia of a free body.
-PLAIN_ONLY = ("splitting", "implicit_gyro", "splitting4", "rk4_expmap", "symtop4")
+PLAIN_ONLY = ("splitting", "implicit_gyro", "splitting4", "rk4_expmap", "symtop4", "symtop_bm6")
 BACKENDS = ("c", "numpy")
 # Precisions of the state (Sim(..., dtype=)): float32 runs the single-precision printing of the same kernels
 # (generated/kernels_f32.c, generated/kernels_numpy_f32.py) for these integrators on plain bodies with
@@ -62,14 +63,16 @@ def rhs_per_step(integrator: str, effects: np.ndarray, nb: int) -> int | None:
     rounding, typically 3–6 iterations, not counted). splitting4: SPLIT4_STAGES splitting steps, each
     counted as splitting's. rk4_expmap: 4 (as rk4; the exp maps and dexp inverses are not counted).
     symtop4: counted as splitting4 (SYMTOP4_STAGES Strang steps of exact flows, kicks as splitting's).
+    symtop_bm6: counted as symtop4 (torque-free, 21 axis flows and a sphere flow per step, counted as
+    SYMTOP4_STAGES; with effects the same SYMTOP4_STAGES kicked stages as symtop4).
     The scene's count is the largest body's."""
     n = INTEGRATORS[integrator]
-    if integrator not in ("splitting", "splitting4", "symtop4") or n is None or len(effects) == 0:
+    if integrator not in ("splitting", "splitting4", "symtop4", "symtop_bm6") or n is None or len(effects) == 0:
         return n
     from ..effects import ROW_CODE, velocity_dependent
 
     per = 4 if velocity_dependent(np.unique(effects[:, ROW_CODE].astype(np.int64))) else 2
-    return per * (n if integrator in ("splitting4", "symtop4") else 1)
+    return per * (n if integrator in ("splitting4", "symtop4", "symtop_bm6") else 1)
 
 # Per-body model row (float64), MODEL_LAYOUT / MODEL_SIZE printed from derive/layout.py: kind is a bit set,
 # KIND_JOINT | KIND_WHEELS.

@@ -23,7 +23,8 @@ from . import FLOAT32_INTEGRATORS, KIND_WHEELS, PLAIN_ONLY, Adaptive, Models, no
 REBUILD = rebuild_command()
 HASHED = ("kernels.c", "kernels.h", "layout.h", "tableaux.h", "kernels_f32.c", "kernels_f32.h")  # every generated file the extension compiles
 INTEGRATOR_CODES = {"euler": 0, "semi_implicit_euler": 1, "rk4": 2, "dopri5": 3, "splitting": 4, "implicit_gyro": 5,
-                    "splitting4": 6, "rk4_expmap": 7, "symtop4": 8}
+                    "splitting4": 6, "rk4_expmap": 7, "symtop4": 8,
+                    "symtop_bm6": 9}
 
 try:
     from .. import _lavender_c as _c

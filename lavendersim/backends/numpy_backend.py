@@ -355,6 +355,53 @@ def _symtop4(plan, x, h):
     return xn
 
 
+def _symtop_bm6_rotation(I, q, L, h):
+    """symtop_bm6's rotation on rows (q, L_b) for time h: the Blanes–Moan S10 sequence P(p_0 h) Q(q_0 h) …
+    P(p_s h) (T.BM6_P_FRAC, T.BM6_Q_FRAC), P the axis flow of ½ c_b L_b² (the smaller leftover |c|, symtop_axes'
+    b), Q that of ½ c_a L_a²; then one sphere flow of |L|²/(2 I_r) for h (it commutes with both). Bodies are
+    grouped by their (a, b) axes and whether c_b = 0 (a symmetric top: its P flows are turns by 0, skipped);
+    the C backend's symtop_bm6_rotation, operation for operation."""
+    a, b, I_r, c_a, c_b = symtop_axes(I)
+    q, L = q.copy(), L.copy()
+    fp, fq = T.BM6_P_FRAC, T.BM6_Q_FRAC
+    top = c_b == 0.0
+    for pa, pb, pt in sorted(set(zip(a.tolist(), b.tolist(), top.tolist()))):
+        m = (a == pa) & (b == pb) & (top == pt)
+        qm, Lm = q[m], L[m]
+        for i, f in enumerate(fp):
+            if not pt:
+                qm, Lm = _SYMTOP_FLOWS[pb](qm, Lm, c_b[m], f * h)
+            if i < len(fq):
+                qm, Lm = _SYMTOP_FLOWS[pa](qm, Lm, c_a[m], fq[i] * h)
+        q[m], L[m] = K.sphere_flow(qm, Lm, I_r[m], h), Lm
+    return q, L
+
+
+def _symtop_bm6(plan, x, h):
+    """symtop_bm6: bodies without effects drift p by h v and take _symtop_bm6_rotation on L_b = I ω, turned
+    back into ω once. Bodies with effects: symtop4's composition, for each γ_i of T.SYMTOP4_GAMMA:
+    kick(γ_i h/2), drift p by γ_i h, the rotation over γ_i h, kick(γ_i h/2). The C backend's symtop_bm6_step,
+    operation for operation."""
+    xn = x.copy()
+    if plan.forced.size:
+        xf = x.copy()
+        for g in T.SYMTOP4_GAMMA:
+            gh = g * h
+            _kick(plan, xf, T.SPLIT_KICK * gh)
+            xf[:, P] = K.translation_drift(xf[:, P], xf[:, V], gh)
+            q, L = _symtop_bm6_rotation(plan.I, xf[:, Q], K.body_momentum(plan.I, xf[:, W]), gh)
+            xf[:, Q], xf[:, W] = q, K.body_rate(plan.I, L)
+            _kick(plan, xf, T.SPLIT_KICK * gh)
+        xn[plan.forced] = xf[plan.forced]
+    free = slice(None) if not plan.forced.size else plan.free
+    I = plan.I[free]
+    if I.shape[0]:
+        xn[free, P] = K.translation_drift(x[free, P], x[free, V], h)
+        q, L = _symtop_bm6_rotation(I, x[free, Q], K.body_momentum(I, x[free, W]), h)
+        xn[free, Q], xn[free, W] = q, K.body_rate(I, L)
+    return xn
+
+
 def _rk4_expmap(plan, x, h):
     """rk4_expmap (RKMK4): the RK4 tableau on (p, v, u, ω) with the attitude q = q₀ ⊗ exp(u/2), u the
     body rotation vector since the step's start (u₀ = 0). Each stage evaluates the right-hand side at its
@@ -436,6 +483,8 @@ def step(plan: _Plan, x: np.ndarray, integrator: str, normalize: bool, dt: float
         xn = _rk4_expmap(plan, x, dt)
     elif integrator == "symtop4":
         xn = _symtop4(plan, x, dt)
+    elif integrator == "symtop_bm6":
+        xn = _symtop_bm6(plan, x, dt)
     elif integrator == "rk4":
         k1 = f(x)
         k2 = f(x + (T.RK4_C1 * dt) * k1)

@@ -490,6 +490,7 @@ PyMODINIT_FUNC PyInit__lavender_c(void)
         PyModule_AddIntConstant(m, "ISA_AVX2", LV_ISA_AVX2) != 0 ||
         PyModule_AddIntConstant(m, "ISA_AVX512", LV_ISA_AVX512) != 0 ||
         PyModule_AddIntConstant(m, "SYMTOP4", LV_INTEGRATOR_SYMTOP4) != 0 ||
+        PyModule_AddIntConstant(m, "SYMTOP_BM6", LV_INTEGRATOR_SYMTOP_BM6) != 0 ||
         lv_add_stepper_type(m) != 0) {
         Py_DECREF(m);
         return NULL;

@@ -48,13 +48,14 @@ enum {
     LV_INTEGRATOR_IMPLICIT_GYRO = 5, /* implicit gyroscopic term (Newton), exp-map q; plain bodies only */
     LV_INTEGRATOR_SPLITTING4 = 6,    /* symmetric composition of the splitting step, order 4; plain bodies only */
     LV_INTEGRATOR_RK4_EXPMAP = 7,    /* RK4 in exponential coordinates of q (RKMK4); plain bodies only */
-    LV_INTEGRATOR_SYMTOP4 = 8        /* symmetric-top splitting, Suzuki composition, order 4; plain bodies only */
+    LV_INTEGRATOR_SYMTOP4 = 8,       /* symmetric-top splitting, Suzuki composition, order 4; plain bodies only */
+    LV_INTEGRATOR_SYMTOP_BM6 = 9     /* symmetric-top splitting, Blanes-Moan S10, order 6; plain bodies only */
 };
-#define LV_INTEGRATOR_LAST LV_INTEGRATOR_SYMTOP4
+#define LV_INTEGRATOR_LAST LV_INTEGRATOR_SYMTOP_BM6
 /* The integrators that step plain bodies only, one by one (advance_structured). */
 #define LV_INTEGRATOR_PLAIN_ONLY(i) ((i) == LV_INTEGRATOR_SPLITTING || (i) == LV_INTEGRATOR_IMPLICIT_GYRO \
                                      || (i) == LV_INTEGRATOR_SPLITTING4 || (i) == LV_INTEGRATOR_RK4_EXPMAP \
-                                     || (i) == LV_INTEGRATOR_SYMTOP4)
+                                     || (i) == LV_INTEGRATOR_SYMTOP4 || (i) == LV_INTEGRATOR_SYMTOP_BM6)
 
 /* Adaptive stepping (dopri5): every body is stepped with its own step sizes; each of the n_steps
    steps advances it by exactly dt with as many accepted substeps as its error estimate needs.
