@@ -1936,6 +1936,572 @@ void lv_wheel_motor(const double *command, const double *Omega, double torque_li
 ));
 }
 
+void lv_wheels4_body_rhs(const double *q, const double *omega_b, const double *Omega, const double *I_p, const double *A_b, const double *J, const double *r_b, const double *F_w, const double *tau_w, const double *u, double c_w, double *q_dot, double *omega_dot_b, double *Omega_dot) {
+    const double q_0 = q[0];
+    const double q_1 = q[1];
+    const double q_2 = q[2];
+    const double q_3 = q[3];
+    const double omega_b_0 = omega_b[0];
+    const double omega_b_1 = omega_b[1];
+    const double omega_b_2 = omega_b[2];
+    const double Omega_0 = Omega[0];
+    const double Omega_1 = Omega[1];
+    const double Omega_2 = Omega[2];
+    const double Omega_3 = Omega[3];
+    const double I_p_00 = I_p[0];
+    const double I_p_01 = I_p[1];
+    const double I_p_02 = I_p[2];
+    const double I_p_11 = I_p[4];
+    const double I_p_12 = I_p[5];
+    const double I_p_22 = I_p[8];
+    const double A_b_00 = A_b[0];
+    const double A_b_01 = A_b[1];
+    const double A_b_02 = A_b[2];
+    const double A_b_03 = A_b[3];
+    const double A_b_10 = A_b[4];
+    const double A_b_11 = A_b[5];
+    const double A_b_12 = A_b[6];
+    const double A_b_13 = A_b[7];
+    const double A_b_20 = A_b[8];
+    const double A_b_21 = A_b[9];
+    const double A_b_22 = A_b[10];
+    const double A_b_23 = A_b[11];
+    const double J_0 = J[0];
+    const double J_1 = J[1];
+    const double J_2 = J[2];
+    const double J_3 = J[3];
+    const double r_b_0 = r_b[0];
+    const double r_b_1 = r_b[1];
+    const double r_b_2 = r_b[2];
+    const double F_w_0 = F_w[0];
+    const double F_w_1 = F_w[1];
+    const double F_w_2 = F_w[2];
+    const double tau_w_0 = tau_w[0];
+    const double tau_w_1 = tau_w[1];
+    const double tau_w_2 = tau_w[2];
+    const double u_0 = u[0];
+    const double u_1 = u[1];
+    const double u_2 = u[2];
+    const double u_3 = u[3];
+    const double t0 = ((1.0/2.0))*omega_b_0;
+    const double t1 = ((1.0/2.0))*omega_b_1;
+    const double t2 = ((1.0/2.0))*omega_b_2;
+    const double t3 = -Omega_0*c_w + u_0;
+    const double t4 = -Omega_1*c_w + u_1;
+    const double t5 = -Omega_2*c_w + u_2;
+    const double t6 = -Omega_3*c_w + u_3;
+    const double t7 = 2*q_1;
+    const double t8 = q_0*t7;
+    const double t9 = 2*q_2;
+    const double t10 = q_3*t9;
+    const double t11 = t10 + t8;
+    const double t12 = q_0*t9;
+    const double t13 = q_3*t7;
+    const double t14 = t12 - t13;
+    const double t15 = 2*(q_1*q_1);
+    const double t16 = 2*(q_2*q_2) - 1;
+    const double t17 = -t15 - t16;
+    const double t18 = J_0*Omega_0;
+    const double t19 = J_1*Omega_1;
+    const double t20 = J_2*Omega_2;
+    const double t21 = J_3*Omega_3;
+    const double t22 = A_b_20*t18 + A_b_21*t19 + A_b_22*t20 + A_b_23*t21 + I_p_02*omega_b_0 + I_p_12*omega_b_1 + I_p_22*omega_b_2;
+    const double t23 = A_b_10*t18 + A_b_11*t19 + A_b_12*t20 + A_b_13*t21 + I_p_01*omega_b_0 + I_p_11*omega_b_1 + I_p_12*omega_b_2;
+    const double t24 = -t10 + t8;
+    const double t25 = 2*q_0*q_3;
+    const double t26 = q_2*t7 + t25;
+    const double t27 = 2*(q_0*q_0);
+    const double t28 = -t16 - t27;
+    const double t29 = F_w_0*t24 + F_w_1*t28 + F_w_2*t26;
+    const double t30 = t12 + t13;
+    const double t31 = 2*q_1*q_2 - t25;
+    const double t32 = -t15 - t27 + 1;
+    const double t33 = F_w_0*t30 + F_w_1*t31 + F_w_2*t32;
+    const double t34 = -A_b_00*t3 - A_b_01*t4 - A_b_02*t5 - A_b_03*t6 - omega_b_1*t22 + omega_b_2*t23 + r_b_1*t33 - r_b_2*t29 + t11*tau_w_1 + t14*tau_w_2 + t17*tau_w_0;
+    const double t35 = I_p_11*I_p_22;
+    const double t36 = (I_p_12*I_p_12);
+    const double t37 = A_b_10*A_b_20*J_0;
+    const double t38 = 2*I_p_12;
+    const double t39 = A_b_11*A_b_21*J_1;
+    const double t40 = A_b_12*A_b_22*J_2;
+    const double t41 = A_b_13*A_b_23*J_3;
+    const double t42 = (A_b_10*A_b_10)*J_0;
+    const double t43 = I_p_22*t42;
+    const double t44 = (A_b_11*A_b_11)*J_1;
+    const double t45 = I_p_22*t44;
+    const double t46 = (A_b_12*A_b_12)*J_2;
+    const double t47 = I_p_22*t46;
+    const double t48 = (A_b_13*A_b_13)*J_3;
+    const double t49 = I_p_22*t48;
+    const double t50 = (A_b_20*A_b_20);
+    const double t51 = J_0*t50;
+    const double t52 = I_p_11*t51;
+    const double t53 = (A_b_21*A_b_21);
+    const double t54 = J_1*t53;
+    const double t55 = I_p_11*t54;
+    const double t56 = (A_b_22*A_b_22);
+    const double t57 = J_2*t56;
+    const double t58 = I_p_11*t57;
+    const double t59 = (A_b_23*A_b_23);
+    const double t60 = J_3*t59;
+    const double t61 = I_p_11*t60;
+    const double t62 = 2*t37;
+    const double t63 = 2*t39;
+    const double t64 = 2*t40;
+    const double t65 = t42*t54;
+    const double t66 = t42*t57;
+    const double t67 = t42*t60;
+    const double t68 = t44*t51;
+    const double t69 = t44*t57;
+    const double t70 = t44*t60;
+    const double t71 = t46*t51;
+    const double t72 = t46*t54;
+    const double t73 = t46*t60;
+    const double t74 = t48*t51;
+    const double t75 = t48*t54;
+    const double t76 = t48*t57;
+    const double t77 = A_b_00*t18 + A_b_01*t19 + A_b_02*t20 + A_b_03*t21 + I_p_00*omega_b_0 + I_p_01*omega_b_1 + I_p_02*omega_b_2;
+    const double t78 = F_w_0*t17 + F_w_1*t11 + F_w_2*t14;
+    const double t79 = -A_b_10*t3 - A_b_11*t4 - A_b_12*t5 - A_b_13*t6 + omega_b_0*t22 - omega_b_2*t77 - r_b_0*t33 + r_b_2*t78 + t24*tau_w_0 + t26*tau_w_2 + t28*tau_w_1;
+    const double t80 = I_p_01*I_p_22;
+    const double t81 = A_b_00*J_0;
+    const double t82 = A_b_20*t81;
+    const double t83 = I_p_12*t82;
+    const double t84 = A_b_01*J_1;
+    const double t85 = A_b_21*t84;
+    const double t86 = I_p_12*t85;
+    const double t87 = A_b_02*J_2;
+    const double t88 = A_b_22*t87;
+    const double t89 = I_p_12*t88;
+    const double t90 = A_b_03*J_3;
+    const double t91 = A_b_23*t90;
+    const double t92 = I_p_12*t91;
+    const double t93 = I_p_02*t37;
+    const double t94 = I_p_02*t39;
+    const double t95 = I_p_02*t40;
+    const double t96 = I_p_02*t41;
+    const double t97 = A_b_10*t81;
+    const double t98 = t54*t97;
+    const double t99 = t57*t97;
+    const double t100 = t60*t97;
+    const double t101 = A_b_11*t84;
+    const double t102 = t101*t51;
+    const double t103 = t101*t57;
+    const double t104 = t101*t60;
+    const double t105 = A_b_12*t87;
+    const double t106 = t105*t51;
+    const double t107 = t105*t54;
+    const double t108 = A_b_13*t90;
+    const double t109 = A_b_00*A_b_10*I_p_22*J_0 + A_b_00*A_b_11*A_b_20*A_b_21*J_0*J_1 + A_b_00*A_b_12*A_b_20*A_b_22*J_0*J_2 + A_b_00*A_b_13*A_b_20*A_b_23*J_0*J_3 + A_b_01*A_b_10*A_b_20*A_b_21*J_0*J_1 + A_b_01*A_b_11*I_p_22*J_1 + A_b_01*A_b_12*A_b_21*A_b_22*J_1*J_2 + A_b_01*A_b_13*A_b_21*A_b_23*J_1*J_3 + A_b_02*A_b_10*A_b_20*A_b_22*J_0*J_2 + A_b_02*A_b_11*A_b_21*A_b_22*J_1*J_2 + A_b_02*A_b_12*I_p_22*J_2 + A_b_02*A_b_13*A_b_22*A_b_23*J_2*J_3 + A_b_03*A_b_10*A_b_20*A_b_23*J_0*J_3 + A_b_03*A_b_11*A_b_21*A_b_23*J_1*J_3 + A_b_03*A_b_12*A_b_22*A_b_23*J_2*J_3 + A_b_03*A_b_13*I_p_22*J_3 + I_p_01*J_0*t50 + I_p_01*J_1*t53 + I_p_01*J_2*t56 + I_p_01*J_3*t59 + I_p_02*I_p_12 - t100 - t102 - t103 - t104 - t105*t60 - t106 - t107 - t108*t51 - t108*t54 - t108*t57 - t80 - t83 - t86 - t89 - t92 - t93 - t94 - t95 - t96 - t98 - t99;
+    const double t110 = -A_b_20*t3 - A_b_21*t4 - A_b_22*t5 - A_b_23*t6 - omega_b_0*t23 + omega_b_1*t77 + r_b_0*t29 - r_b_1*t78 + t30*tau_w_0 + t31*tau_w_1 + t32*tau_w_2;
+    const double t111 = I_p_01*I_p_12;
+    const double t112 = I_p_02*I_p_11;
+    const double t113 = I_p_11*t82;
+    const double t114 = I_p_11*t85;
+    const double t115 = I_p_11*t88;
+    const double t116 = I_p_02*t42;
+    const double t117 = I_p_02*t44;
+    const double t118 = I_p_02*t46;
+    const double t119 = I_p_02*t48;
+    const double t120 = t44*t82;
+    const double t121 = t46*t82;
+    const double t122 = t48*t82;
+    const double t123 = t42*t85;
+    const double t124 = t46*t85;
+    const double t125 = t48*t85;
+    const double t126 = t42*t88;
+    const double t127 = t44*t88;
+    const double t128 = -I_p_01*t37 - I_p_01*t39 - I_p_01*t40 - I_p_01*t41 + I_p_11*t91 - I_p_12*t101 - I_p_12*t105 - I_p_12*t108 - I_p_12*t97 + t101*t37 + t101*t40 + t101*t41 + t105*t37 + t105*t39 + t105*t41 + t108*t37 + t108*t39 + t108*t40 + t111 - t112 + t113 + t114 + t115 + t116 + t117 + t118 + t119 - t120 - t121 - t122 - t123 - t124 - t125 - t126 - t127 + t39*t97 + t40*t97 + t41*t97 - t42*t91 - t44*t91 - t46*t91 - t48*t88;
+    const double t129 = I_p_02*I_p_12;
+    const double t130 = 2*I_p_01;
+    const double t131 = (I_p_01*I_p_01);
+    const double t132 = (I_p_02*I_p_02);
+    const double t133 = 2*t80;
+    const double t134 = 2*t129;
+    const double t135 = 2*t111;
+    const double t136 = 2*t112;
+    const double t137 = I_p_00*I_p_12;
+    const double t138 = 2*t137;
+    const double t139 = 2*I_p_01*I_p_02;
+    const double t140 = (A_b_00*A_b_00);
+    const double t141 = J_0*t140;
+    const double t142 = (A_b_01*A_b_01);
+    const double t143 = J_1*t142;
+    const double t144 = (A_b_02*A_b_02);
+    const double t145 = J_2*t144;
+    const double t146 = (A_b_03*A_b_03);
+    const double t147 = J_3*t146;
+    const double t148 = I_p_00*I_p_22;
+    const double t149 = I_p_00*I_p_11;
+    const double t150 = I_p_22*t97;
+    const double t151 = 2*t101;
+    const double t152 = 2*t97;
+    const double t153 = 2*t85;
+    const double t154 = 2*t105;
+    const double t155 = 2*t88;
+    const double t156 = 2*t108;
+    const double t157 = 2*t91;
+    const double t158 = t39*t82;
+    const double t159 = t40*t82;
+    const double t160 = t41*t82;
+    const double t161 = I_p_22*t101;
+    const double t162 = t37*t85;
+    const double t163 = t40*t85;
+    const double t164 = t41*t85;
+    const double t165 = t37*t88;
+    const double t166 = t39*t88;
+    const double t167 = t41*t88;
+    const double t168 = t37*t91;
+    const double t169 = t39*t91;
+    const double t170 = t40*t91;
+    const double t171 = I_p_00*t37;
+    const double t172 = 2*t41;
+    const double t173 = I_p_00*t39;
+    const double t174 = I_p_00*t54;
+    const double t175 = I_p_00*t57;
+    const double t176 = I_p_00*t60;
+    const double t177 = I_p_00*t51;
+    const double t178 = I_p_01*t54;
+    const double t179 = I_p_01*t57;
+    const double t180 = I_p_01*t60;
+    const double t181 = 2*t82;
+    const double t182 = I_p_12*t141;
+    const double t183 = I_p_01*t51;
+    const double t184 = I_p_12*t143;
+    const double t185 = I_p_12*t145;
+    const double t186 = I_p_12*t147;
+    const double t187 = t141*t39;
+    const double t188 = t141*t40;
+    const double t189 = t143*t37;
+    const double t190 = t143*t40;
+    const double t191 = t145*t37;
+    const double t192 = t145*t39;
+    const double t193 = t147*t37;
+    const double t194 = t147*t39;
+    const double t195 = (1.0/(-I_p_00*t172*t40 + I_p_00*t35 - I_p_00*t36 - I_p_11*t132 - I_p_22*t105*t156 - I_p_22*t131 + t100*t151 + t100*t154 + t101*t133 - t101*t134 + t102*t154 + t102*t156 + t103*t156 + t104*t154 + t105*t133 - t105*t134 + t106*t156 + t107*t156 + t108*t133 - t108*t134 - t113*t153 - t113*t155 - t113*t157 - t114*t155 - t114*t157 - t115*t157 - t116*t153 - t116*t155 - t116*t157 - t117*t155 - t117*t157 - t117*t181 - t118*t153 - t118*t157 - t118*t181 - t119*t153 - t119*t155 - t119*t181 + t120*t155 + t120*t157 + t121*t153 + t121*t157 + t122*t153 + t122*t155 + t123*t155 + t123*t157 + t124*t157 + t125*t155 + t126*t157 + t127*t157 + t129*t130 + t130*t158 + t130*t159 + t130*t160 + t130*t162 + t130*t163 + t130*t164 + t130*t165 + t130*t166 + t130*t167 + t130*t168 + t130*t169 + t130*t170 + t131*t51 + t131*t54 + t131*t57 + t131*t60 + t132*t42 + t132*t44 + t132*t46 + t132*t48 + t133*t97 - t134*t97 - t135*t82 - t135*t85 - t135*t88 - t135*t91 + t136*t82 + t136*t85 + t136*t88 + t136*t91 + t138*t37 + t138*t39 + t138*t40 + t138*t41 - t139*t37 - t139*t39 - t139*t40 - t139*t41 - t141*t35 + t141*t36 + t141*t45 + t141*t47 + t141*t49 + t141*t55 + t141*t58 + t141*t61 - t141*t69 - t141*t70 - t141*t72 - t141*t73 - t141*t75 - t141*t76 - t143*t35 + t143*t36 + t143*t43 + t143*t47 + t143*t49 + t143*t52 + t143*t58 + t143*t61 - t143*t66 - t143*t67 - t143*t71 - t143*t73 - t143*t74 - t143*t76 - t145*t35 + t145*t36 + t145*t43 + t145*t45 + t145*t49 + t145*t52 + t145*t55 + t145*t61 - t145*t65 - t145*t67 - t145*t68 - t145*t70 - t145*t74 - t145*t75 - t147*t35 + t147*t36 + t147*t43 + t147*t45 + t147*t47 + t147*t52 + t147*t55 + t147*t58 - t147*t65 - t147*t66 - t147*t68 - t147*t69 - t147*t71 - t147*t72 - t148*t42 - t148*t44 - t148*t46 - t148*t48 - t149*t51 - t149*t54 - t149*t57 - t149*t60 - t150*t151 - t150*t154 - t150*t156 - t151*t159 - t151*t160 - t151*t165 - t151*t167 - t151*t168 - t151*t170 - t151*t179 - t151*t180 - t151*t183 + t151*t83 + t151*t89 + t151*t92 + t151*t93 + t151*t95 + t151*t96 + t151*t99 - t152*t163 - t152*t164 - t152*t166 - t152*t167 - t152*t169 - t152*t170 - t152*t178 - t152*t179 - t152*t180 + t152*t86 + t152*t89 + t152*t92 + t152*t94 + t152*t95 + t152*t96 - t154*t158 - t154*t160 - t154*t161 - t154*t162 - t154*t164 - t154*t168 - t154*t169 - t154*t178 - t154*t180 - t154*t183 + t154*t83 + t154*t86 + t154*t92 + t154*t93 + t154*t94 + t154*t96 + t154*t98 - t156*t158 - t156*t159 - t156*t161 - t156*t162 - t156*t163 - t156*t165 - t156*t166 - t156*t178 - t156*t179 - t156*t183 + t156*t83 + t156*t86 + t156*t89 + t156*t93 + t156*t94 + t156*t95 + t156*t98 + t156*t99 - t171*t172 - t171*t63 - t171*t64 - t172*t173 - t172*t182 - t172*t184 - t172*t185 + t172*t187 + t172*t188 + t172*t189 + t172*t190 + t172*t191 + t172*t192 - t173*t64 + t174*t42 + t174*t46 + t174*t48 + t175*t42 + t175*t44 + t175*t48 + t176*t42 + t176*t44 + t176*t46 + t177*t44 + t177*t46 + t177*t48 - t182*t63 - t182*t64 - t184*t62 - t184*t64 - t185*t62 - t185*t63 - t186*t62 - t186*t63 - t186*t64 + t187*t64 + t189*t64 + t191*t63 + t193*t63 + t193*t64 + t194*t64));
+    const double t196 = t195*(t109*t79 + t110*t128 + t34*(t35 - t36 + t37*t38 + t38*t39 + t38*t40 + t38*t41 - t39*t62 - t40*t62 - t40*t63 - t41*t62 - t41*t63 - t41*t64 - t43 - t45 - t47 - t49 - t52 - t55 - t58 - t61 + t65 + t66 + t67 + t68 + t69 + t70 + t71 + t72 + t73 + t74 + t75 + t76));
+    const double t197 = 2*I_p_02;
+    const double t198 = A_b_00*A_b_01*A_b_10*A_b_21*J_0*J_1 + A_b_00*A_b_01*A_b_11*A_b_20*J_0*J_1 + A_b_00*A_b_02*A_b_10*A_b_22*J_0*J_2 + A_b_00*A_b_02*A_b_12*A_b_20*J_0*J_2 + A_b_00*A_b_03*A_b_10*A_b_23*J_0*J_3 + A_b_00*A_b_03*A_b_13*A_b_20*J_0*J_3 + A_b_01*A_b_02*A_b_11*A_b_22*J_1*J_2 + A_b_01*A_b_02*A_b_12*A_b_21*J_1*J_2 + A_b_01*A_b_03*A_b_11*A_b_23*J_1*J_3 + A_b_01*A_b_03*A_b_13*A_b_21*J_1*J_3 + A_b_02*A_b_03*A_b_12*A_b_23*J_2*J_3 + A_b_02*A_b_03*A_b_13*A_b_22*J_2*J_3 + A_b_10*A_b_20*I_p_00*J_0 + A_b_11*A_b_21*I_p_00*J_1 + A_b_12*A_b_22*I_p_00*J_2 + A_b_13*A_b_23*I_p_00*J_3 + I_p_01*I_p_02 - I_p_01*t82 - I_p_01*t85 - I_p_01*t88 - I_p_01*t91 - I_p_02*t101 - I_p_02*t105 - I_p_02*t108 - I_p_02*t97 + I_p_12*J_0*t140 + I_p_12*J_1*t142 + I_p_12*J_2*t144 + I_p_12*J_3*t146 - t137 - t141*t41 - t143*t41 - t145*t41 - t147*t40 - t187 - t188 - t189 - t190 - t191 - t192 - t193 - t194;
+    const double t199 = t195*(t109*t34 + t110*t198 + t79*(-I_p_22*t141 - I_p_22*t143 - I_p_22*t145 - I_p_22*t147 - t132 + t141*t54 + t141*t57 + t141*t60 + t143*t51 + t143*t57 + t143*t60 + t145*t51 + t145*t54 + t145*t60 + t147*t51 + t147*t54 + t147*t57 + t148 - t153*t88 - t153*t91 - t155*t91 - t174 - t175 - t176 - t177 - t181*t85 - t181*t88 - t181*t91 + t197*t82 + t197*t85 + t197*t88 + t197*t91));
+    const double t200 = t195*(t110*(-I_p_00*t42 - I_p_00*t44 - I_p_00*t46 - I_p_00*t48 - I_p_11*t141 - I_p_11*t143 - I_p_11*t145 - I_p_11*t147 + t101*t130 - t101*t152 + t105*t130 - t105*t151 - t105*t152 + t108*t130 - t108*t151 - t108*t152 - t108*t154 + t130*t97 - t131 + t141*t44 + t141*t46 + t141*t48 + t143*t42 + t143*t46 + t143*t48 + t145*t42 + t145*t44 + t145*t48 + t147*t42 + t147*t44 + t147*t46 + t149) + t128*t34 + t198*t79);
+    q_dot[0] = q_1*t2 - q_2*t1 + q_3*t0;
+    q_dot[1] = -q_0*t2 + q_2*t0 + q_3*t1;
+    q_dot[2] = q_0*t1 - q_1*t0 + q_3*t2;
+    q_dot[3] = -q_0*t0 - q_1*t1 - q_2*t2;
+    omega_dot_b[0] = t196;
+    omega_dot_b[1] = t199;
+    omega_dot_b[2] = t200;
+    Omega_dot[0] = -A_b_00*t196 - A_b_10*t199 - A_b_20*t200 + t3/J_0;
+    Omega_dot[1] = -A_b_01*t196 - A_b_11*t199 - A_b_21*t200 + t4/J_1;
+    Omega_dot[2] = -A_b_02*t196 - A_b_12*t199 - A_b_22*t200 + t5/J_2;
+    Omega_dot[3] = -A_b_03*t196 - A_b_13*t199 - A_b_23*t200 + t6/J_3;
+}
+
+void lv_wheels4_momentum(const double *q, const double *omega_b, const double *Omega, const double *I_p, const double *A_b, const double *J, double *L_body_w, double *L_wheels_w, double *h_w) {
+    const double q_0 = q[0];
+    const double q_1 = q[1];
+    const double q_2 = q[2];
+    const double q_3 = q[3];
+    const double omega_b_0 = omega_b[0];
+    const double omega_b_1 = omega_b[1];
+    const double omega_b_2 = omega_b[2];
+    const double Omega_0 = Omega[0];
+    const double Omega_1 = Omega[1];
+    const double Omega_2 = Omega[2];
+    const double Omega_3 = Omega[3];
+    const double I_p_00 = I_p[0];
+    const double I_p_01 = I_p[1];
+    const double I_p_02 = I_p[2];
+    const double I_p_11 = I_p[4];
+    const double I_p_12 = I_p[5];
+    const double I_p_22 = I_p[8];
+    const double A_b_00 = A_b[0];
+    const double A_b_01 = A_b[1];
+    const double A_b_02 = A_b[2];
+    const double A_b_03 = A_b[3];
+    const double A_b_10 = A_b[4];
+    const double A_b_11 = A_b[5];
+    const double A_b_12 = A_b[6];
+    const double A_b_13 = A_b[7];
+    const double A_b_20 = A_b[8];
+    const double A_b_21 = A_b[9];
+    const double A_b_22 = A_b[10];
+    const double A_b_23 = A_b[11];
+    const double J_0 = J[0];
+    const double J_1 = J[1];
+    const double J_2 = J[2];
+    const double J_3 = J[3];
+    const double t0 = 2*q_1;
+    const double t1 = q_0*t0;
+    const double t2 = 2*q_2;
+    const double t3 = q_3*t2;
+    const double t4 = t1 - t3;
+    const double t5 = A_b_10*J_0;
+    const double t6 = A_b_11*J_1;
+    const double t7 = A_b_12*J_2;
+    const double t8 = A_b_13*J_3;
+    const double t9 = -A_b_00*t5 - A_b_01*t6 - A_b_02*t7 - A_b_03*t8 + I_p_01;
+    const double t10 = -A_b_20*t5 - A_b_21*t6 - A_b_22*t7 - A_b_23*t8 + I_p_12;
+    const double t11 = omega_b_0*t9 + omega_b_1*(-(A_b_10*A_b_10)*J_0 - (A_b_11*A_b_11)*J_1 - (A_b_12*A_b_12)*J_2 - (A_b_13*A_b_13)*J_3 + I_p_11) + omega_b_2*t10;
+    const double t12 = q_0*t2;
+    const double t13 = q_3*t0;
+    const double t14 = t12 + t13;
+    const double t15 = -A_b_00*A_b_20*J_0 - A_b_01*A_b_21*J_1 - A_b_02*A_b_22*J_2 - A_b_03*A_b_23*J_3 + I_p_02;
+    const double t16 = omega_b_0*t15 + omega_b_1*t10 + omega_b_2*(-(A_b_20*A_b_20)*J_0 - (A_b_21*A_b_21)*J_1 - (A_b_22*A_b_22)*J_2 - (A_b_23*A_b_23)*J_3 + I_p_22);
+    const double t17 = 2*(q_1*q_1);
+    const double t18 = 2*(q_2*q_2) - 1;
+    const double t19 = -t17 - t18;
+    const double t20 = omega_b_0*(-(A_b_00*A_b_00)*J_0 - (A_b_01*A_b_01)*J_1 - (A_b_02*A_b_02)*J_2 - (A_b_03*A_b_03)*J_3 + I_p_00) + omega_b_1*t9 + omega_b_2*t15;
+    const double t21 = t1 + t3;
+    const double t22 = 2*q_0*q_3;
+    const double t23 = 2*q_1*q_2 - t22;
+    const double t24 = 2*(q_0*q_0);
+    const double t25 = -t18 - t24;
+    const double t26 = t12 - t13;
+    const double t27 = q_1*t2 + t22;
+    const double t28 = -t17 - t24 + 1;
+    const double t29 = J_0*(A_b_00*omega_b_0 + A_b_10*omega_b_1 + A_b_20*omega_b_2 + Omega_0);
+    const double t30 = J_1*(A_b_01*omega_b_0 + A_b_11*omega_b_1 + A_b_21*omega_b_2 + Omega_1);
+    const double t31 = J_2*(A_b_02*omega_b_0 + A_b_12*omega_b_1 + A_b_22*omega_b_2 + Omega_2);
+    const double t32 = J_3*(A_b_03*omega_b_0 + A_b_13*omega_b_1 + A_b_23*omega_b_2 + Omega_3);
+    const double t33 = A_b_10*t29 + A_b_11*t30 + A_b_12*t31 + A_b_13*t32;
+    const double t34 = A_b_20*t29 + A_b_21*t30 + A_b_22*t31 + A_b_23*t32;
+    const double t35 = A_b_00*t29 + A_b_01*t30 + A_b_02*t31 + A_b_03*t32;
+    L_body_w[0] = t11*t4 + t14*t16 + t19*t20;
+    L_body_w[1] = t11*t25 + t16*t23 + t20*t21;
+    L_body_w[2] = t11*t27 + t16*t28 + t20*t26;
+    L_wheels_w[0] = t14*t34 + t19*t35 + t33*t4;
+    L_wheels_w[1] = t21*t35 + t23*t34 + t25*t33;
+    L_wheels_w[2] = t26*t35 + t27*t33 + t28*t34;
+    h_w[0] = t29;
+    h_w[1] = t30;
+    h_w[2] = t31;
+    h_w[3] = t32;
+}
+
+void lv_wheels4_motor(const double *command, const double *Omega, double torque_limit, double speed_limit, double cutoff, double *u) {
+    const double command_0 = command[0];
+    const double command_1 = command[1];
+    const double command_2 = command[2];
+    const double command_3 = command[3];
+    const double Omega_0 = Omega[0];
+    const double Omega_1 = Omega[1];
+    const double Omega_2 = Omega[2];
+    const double Omega_3 = Omega[3];
+    const double t0 = -torque_limit;
+    const double t1 = command_0 < t0;
+    const double t2 = fabs(Omega_0);
+    const double t3 = speed_limit <= t2;
+    const double t4 = Omega_0*torque_limit;
+    const double t5 = command_0 > torque_limit;
+    const double t6 = ((t1) ? (
+   t0
+)
+: ((t5) ? (
+   torque_limit
+)
+: (
+   command_0
+)));
+    const double t7 = cutoff > 0;
+    const double t8 = Omega_0 >= speed_limit;
+    const double t9 = command_0 < 0;
+    const double t10 = command_0 > 0;
+    const double t11 = -speed_limit;
+    const double t12 = Omega_0 <= t11;
+    const double t13 = (1.0/speed_limit);
+    const double t14 = torque_limit*(-t13*t2 + 1);
+    const double t15 = -t14;
+    const double t16 = command_1 < t0;
+    const double t17 = fabs(Omega_1);
+    const double t18 = speed_limit <= t17;
+    const double t19 = Omega_1*torque_limit;
+    const double t20 = command_1 > torque_limit;
+    const double t21 = ((t16) ? (
+   t0
+)
+: ((t20) ? (
+   torque_limit
+)
+: (
+   command_1
+)));
+    const double t22 = Omega_1 >= speed_limit;
+    const double t23 = command_1 < 0;
+    const double t24 = command_1 > 0;
+    const double t25 = Omega_1 <= t11;
+    const double t26 = torque_limit*(-t13*t17 + 1);
+    const double t27 = -t26;
+    const double t28 = command_2 < t0;
+    const double t29 = fabs(Omega_2);
+    const double t30 = speed_limit <= t29;
+    const double t31 = Omega_2*torque_limit;
+    const double t32 = command_2 > torque_limit;
+    const double t33 = ((t28) ? (
+   t0
+)
+: ((t32) ? (
+   torque_limit
+)
+: (
+   command_2
+)));
+    const double t34 = Omega_2 >= speed_limit;
+    const double t35 = command_2 < 0;
+    const double t36 = command_2 > 0;
+    const double t37 = Omega_2 <= t11;
+    const double t38 = torque_limit*(-t13*t29 + 1);
+    const double t39 = -t38;
+    const double t40 = command_3 < t0;
+    const double t41 = fabs(Omega_3);
+    const double t42 = speed_limit <= t41;
+    const double t43 = Omega_3*torque_limit;
+    const double t44 = command_3 > torque_limit;
+    const double t45 = ((t40) ? (
+   t0
+)
+: ((t44) ? (
+   torque_limit
+)
+: (
+   command_3
+)));
+    const double t46 = Omega_3 >= speed_limit;
+    const double t47 = command_3 < 0;
+    const double t48 = command_3 > 0;
+    const double t49 = Omega_3 <= t11;
+    const double t50 = torque_limit*(-t13*t41 + 1);
+    const double t51 = -t50;
+    u[0] = ((t7) ? (
+   ((((t1) ? (
+      t3 && t4 < 0
+   )
+   : (
+      ((t5) ? (
+         t3 && t4 > 0
+      )
+      : (
+         t3 && Omega_0*command_0 > 0
+      ))
+   ))) ? (
+      0
+   )
+   : (
+      t6
+   ))
+)
+: (
+   (((t10 || t12) && (t10 || t9) && (t12 || t8) && (t8 || t9)) ? (
+      0
+   )
+   : ((Omega_0 > 0 && command_0 > t14 && Omega_0 < speed_limit) ? (
+      t14
+   )
+   : ((Omega_0 > t11 && Omega_0 < 0 && command_0 < t15) ? (
+      t15
+   )
+   : (
+      t6
+   ))))
+));
+    u[1] = ((t7) ? (
+   ((((t16) ? (
+      t18 && t19 < 0
+   )
+   : (
+      ((t20) ? (
+         t18 && t19 > 0
+      )
+      : (
+         t18 && Omega_1*command_1 > 0
+      ))
+   ))) ? (
+      0
+   )
+   : (
+      t21
+   ))
+)
+: (
+   (((t22 || t23) && (t22 || t25) && (t23 || t24) && (t24 || t25)) ? (
+      0
+   )
+   : ((Omega_1 > 0 && command_1 > t26 && Omega_1 < speed_limit) ? (
+      t26
+   )
+   : ((Omega_1 > t11 && Omega_1 < 0 && command_1 < t27) ? (
+      t27
+   )
+   : (
+      t21
+   ))))
+));
+    u[2] = ((t7) ? (
+   ((((t28) ? (
+      t30 && t31 < 0
+   )
+   : (
+      ((t32) ? (
+         t30 && t31 > 0
+      )
+      : (
+         t30 && Omega_2*command_2 > 0
+      ))
+   ))) ? (
+      0
+   )
+   : (
+      t33
+   ))
+)
+: (
+   (((t34 || t35) && (t34 || t37) && (t35 || t36) && (t36 || t37)) ? (
+      0
+   )
+   : ((Omega_2 > 0 && command_2 > t38 && Omega_2 < speed_limit) ? (
+      t38
+   )
+   : ((Omega_2 > t11 && Omega_2 < 0 && command_2 < t39) ? (
+      t39
+   )
+   : (
+      t33
+   ))))
+));
+    u[3] = ((t7) ? (
+   ((((t40) ? (
+      t42 && t43 < 0
+   )
+   : (
+      ((t44) ? (
+         t42 && t43 > 0
+      )
+      : (
+         t42 && Omega_3*command_3 > 0
+      ))
+   ))) ? (
+      0
+   )
+   : (
+      t45
+   ))
+)
+: (
+   (((t46 || t47) && (t46 || t49) && (t47 || t48) && (t48 || t49)) ? (
+      0
+   )
+   : ((Omega_3 > 0 && command_3 > t50 && Omega_3 < speed_limit) ? (
+      t50
+   )
+   : ((Omega_3 > t11 && Omega_3 < 0 && command_3 < t51) ? (
+      t51
+   )
+   : (
+      t45
+   ))))
+));
+}
+
 /* ---- Scene effects: accumulating functions and dispatch -------------------------------------- */
 /* applied_torque: adds tau_com_w for one body. p = [torque_w(3)] */
 static inline void lv_effect_acc_applied_torque(const double *p, const double *x, const double *v_w, double m, const double *I_b, double *F, double *tau)
@@ -2096,6 +2662,9 @@ static void packed_quat_exp_step(const double *in, double *out) { lv_quat_exp_st
 static void packed_rkmk_dexpinv(const double *in, double *out) { lv_rkmk_dexpinv(in + 0, in + 3, out + 0); }
 static void packed_wheel_saturation(const double *in, double *out) { lv_wheel_saturation(in + 0, in + 3, in[6], in[7], out + 0); }
 static void packed_wheel_motor(const double *in, double *out) { lv_wheel_motor(in + 0, in + 3, in[6], in[7], in[8], out + 0); }
+static void packed_wheels4_body_rhs(const double *in, double *out) { lv_wheels4_body_rhs(in + 0, in + 4, in + 7, in + 11, in + 20, in + 32, in + 36, in + 39, in + 42, in + 45, in[49], out + 0, out + 4, out + 7); }
+static void packed_wheels4_momentum(const double *in, double *out) { lv_wheels4_momentum(in + 0, in + 4, in + 7, in + 11, in + 20, in + 32, out + 0, out + 3, out + 6); }
+static void packed_wheels4_motor(const double *in, double *out) { lv_wheels4_motor(in + 0, in + 4, in[8], in[9], in[10], out + 0); }
 
 const lv_kernel_info lv_kernel_table[LV_KERNEL_COUNT] = {
     {"particle_moments", 7, 6, packed_particle_moments},
@@ -2161,4 +2730,7 @@ const lv_kernel_info lv_kernel_table[LV_KERNEL_COUNT] = {
     {"rkmk_dexpinv", 6, 3, packed_rkmk_dexpinv},
     {"wheel_saturation", 8, 3, packed_wheel_saturation},
     {"wheel_motor", 9, 3, packed_wheel_motor},
+    {"wheels4_body_rhs", 50, 11, packed_wheels4_body_rhs},
+    {"wheels4_momentum", 36, 10, packed_wheels4_momentum},
+    {"wheels4_motor", 11, 4, packed_wheels4_motor},
 };

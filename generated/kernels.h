@@ -11,7 +11,7 @@ typedef struct {
     void (*packed)(const double *in, double *out);
 } lv_kernel_info;
 
-#define LV_KERNEL_COUNT 63
+#define LV_KERNEL_COUNT 66
 extern const lv_kernel_info lv_kernel_table[LV_KERNEL_COUNT];
 
 /* particle_moments: One particle's mass moment and momentum (summed: m r_COM and p).
@@ -480,6 +480,44 @@ void lv_wheel_saturation(const double *command, const double *Omega, double torq
      in  cutoff scalar: 1: hard cut-off at speed_limit instead of the line; 0: the line
      out u [3]: applied motor torques, N·m */
 void lv_wheel_motor(const double *command, const double *Omega, double torque_limit, double speed_limit, double cutoff, double *u);
+
+/* wheels4_body_rhs: Body with 4 reaction wheels on arbitrary axes rotating about a pivot.
+     in  q [4]: orientation (x, y, z, w), R_WB
+     in  omega_b [3]: angular velocity, body frame, rad/s
+     in  Omega [4]: wheel rates relative to the body about their axes (4), rad/s
+     in  I_p [3×3]: inertia about the pivot (wheels locked), body frame, kg·m², symmetric row-major
+     in  A_b [3×4]: wheel spin axes as columns (3×4, unit columns), body frame, row-major
+     in  J [4]: wheel axial inertias (4), kg·m²
+     in  r_b [3]: pivot → COM, body frame, m
+     in  F_w [3]: total force at the COM, world frame, N
+     in  tau_w [3]: total torque about the COM, world frame, N·m
+     in  u [4]: motor torques on the wheels (body gets −A_b u), N·m
+     in  c_w scalar: wheel damping, N·m·s/rad
+     out q_dot [4]: 1/s
+     out omega_dot_b [3]: rad/s², body frame
+     out Omega_dot [4]: rad/s² */
+void lv_wheels4_body_rhs(const double *q, const double *omega_b, const double *Omega, const double *I_p, const double *A_b, const double *J, const double *r_b, const double *F_w, const double *tau_w, const double *u, double c_w, double *q_dot, double *omega_dot_b, double *Omega_dot);
+
+/* wheels4_momentum: World angular momentum about the pivot of a body with 4 wheels, and the wheels' axial momenta.
+     in  q [4]: orientation (x, y, z, w), R_WB
+     in  omega_b [3]: angular velocity, body frame, rad/s
+     in  Omega [4]: wheel rates relative to the body about their axes (4), rad/s
+     in  I_p [3×3]: inertia about the pivot (wheels locked), body frame, kg·m², symmetric row-major
+     in  A_b [3×4]: wheel spin axes as columns (3×4, unit columns), body frame, row-major
+     in  J [4]: wheel axial inertias (4), kg·m²
+     out L_body_w [3]: kg·m²/s, world
+     out L_wheels_w [3]: kg·m²/s, world
+     out h_w [4]: axial momentum of each wheel, kg·m²/s */
+void lv_wheels4_momentum(const double *q, const double *omega_b, const double *Omega, const double *I_p, const double *A_b, const double *J, double *L_body_w, double *L_wheels_w, double *h_w);
+
+/* wheels4_motor: Motor torques actually applied on 4 wheels (the wheel_motor line, per wheel).
+     in  command [4]: commanded motor torques, N·m
+     in  Omega [4]: wheel rates relative to the body, rad/s
+     in  torque_limit scalar: stall torque (current limit), N·m
+     in  speed_limit scalar: no-load speed, rad/s
+     in  cutoff scalar: 1: hard cut-off at speed_limit instead of the line; 0: the line
+     out u [4]: applied motor torques, N·m */
+void lv_wheels4_motor(const double *command, const double *Omega, double torque_limit, double speed_limit, double cutoff, double *u);
 
 /* ---- Scene effects (derive/effects.py): effect table layout, codes and dispatch ---------------- */
 #define LV_EFFECT_ROW_CODE 0     /* an effect table row: [code, body, parameters...] */

@@ -1710,3 +1710,423 @@ def wheel_motor(command, Omega, torque_limit, speed_limit, cutoff):
     t38 = torque_limit*(-t13*t29 + 1)
     t39 = -t38
     return casadi.vertcat(casadi.if_else(t7, casadi.if_else(casadi.if_else(t1, casadi.logic_and(t3, (t4 < 0)), casadi.if_else(t5, casadi.logic_and(t3, (t4 > 0)), casadi.logic_and(t3, (Omega_0*command_0 > 0)))), 0, t6), casadi.if_else(casadi.logic_and(casadi.logic_and(casadi.logic_and(casadi.logic_or(t10, t12), casadi.logic_or(t10, t9)), casadi.logic_or(t12, t8)), casadi.logic_or(t8, t9)), 0, casadi.if_else(casadi.logic_and(casadi.logic_and((Omega_0 > 0), (command_0 > t14)), (Omega_0 < speed_limit)), t14, casadi.if_else(casadi.logic_and(casadi.logic_and((Omega_0 > t11), (Omega_0 < 0)), (command_0 < t15)), t15, t6)))), casadi.if_else(t7, casadi.if_else(casadi.if_else(t16, casadi.logic_and(t18, (t19 < 0)), casadi.if_else(t20, casadi.logic_and(t18, (t19 > 0)), casadi.logic_and(t18, (Omega_1*command_1 > 0)))), 0, t21), casadi.if_else(casadi.logic_and(casadi.logic_and(casadi.logic_and(casadi.logic_or(t22, t23), casadi.logic_or(t22, t25)), casadi.logic_or(t23, t24)), casadi.logic_or(t24, t25)), 0, casadi.if_else(casadi.logic_and(casadi.logic_and((Omega_1 > 0), (command_1 > t26)), (Omega_1 < speed_limit)), t26, casadi.if_else(casadi.logic_and(casadi.logic_and((Omega_1 > t11), (Omega_1 < 0)), (command_1 < t27)), t27, t21)))), casadi.if_else(t7, casadi.if_else(casadi.if_else(t28, casadi.logic_and(t30, (t31 < 0)), casadi.if_else(t32, casadi.logic_and(t30, (t31 > 0)), casadi.logic_and(t30, (Omega_2*command_2 > 0)))), 0, t33), casadi.if_else(casadi.logic_and(casadi.logic_and(casadi.logic_and(casadi.logic_or(t34, t35), casadi.logic_or(t34, t37)), casadi.logic_or(t35, t36)), casadi.logic_or(t36, t37)), 0, casadi.if_else(casadi.logic_and(casadi.logic_and((Omega_2 > 0), (command_2 > t38)), (Omega_2 < speed_limit)), t38, casadi.if_else(casadi.logic_and(casadi.logic_and((Omega_2 > t11), (Omega_2 < 0)), (command_2 < t39)), t39, t33)))))
+
+
+def wheels4_body_rhs(q, omega_b, Omega, I_p, A_b, J, r_b, F_w, tau_w, u, c_w):
+    """wheels4_body_rhs: Body with 4 reaction wheels on arbitrary axes rotating about a pivot.
+      in  q [4]: orientation (x, y, z, w), R_WB
+      in  omega_b [3]: angular velocity, body frame, rad/s
+      in  Omega [4]: wheel rates relative to the body about their axes (4), rad/s
+      in  I_p [3×3]: inertia about the pivot (wheels locked), body frame, kg·m², symmetric row-major
+      in  A_b [3×4]: wheel spin axes as columns (3×4, unit columns), body frame, row-major
+      in  J [4]: wheel axial inertias (4), kg·m²
+      in  r_b [3]: pivot → COM, body frame, m
+      in  F_w [3]: total force at the COM, world frame, N
+      in  tau_w [3]: total torque about the COM, world frame, N·m
+      in  u [4]: motor torques on the wheels (body gets −A_b u), N·m
+      in  c_w scalar: wheel damping, N·m·s/rad
+      out q_dot [4]: 1/s
+      out omega_dot_b [3]: rad/s², body frame
+      out Omega_dot [4]: rad/s²"""
+    q_0 = q[0]
+    q_1 = q[1]
+    q_2 = q[2]
+    q_3 = q[3]
+    omega_b_0 = omega_b[0]
+    omega_b_1 = omega_b[1]
+    omega_b_2 = omega_b[2]
+    Omega_0 = Omega[0]
+    Omega_1 = Omega[1]
+    Omega_2 = Omega[2]
+    Omega_3 = Omega[3]
+    I_p_00 = I_p[0]
+    I_p_01 = I_p[1]
+    I_p_02 = I_p[2]
+    I_p_11 = I_p[4]
+    I_p_12 = I_p[5]
+    I_p_22 = I_p[8]
+    A_b_00 = A_b[0]
+    A_b_01 = A_b[1]
+    A_b_02 = A_b[2]
+    A_b_03 = A_b[3]
+    A_b_10 = A_b[4]
+    A_b_11 = A_b[5]
+    A_b_12 = A_b[6]
+    A_b_13 = A_b[7]
+    A_b_20 = A_b[8]
+    A_b_21 = A_b[9]
+    A_b_22 = A_b[10]
+    A_b_23 = A_b[11]
+    J_0 = J[0]
+    J_1 = J[1]
+    J_2 = J[2]
+    J_3 = J[3]
+    r_b_0 = r_b[0]
+    r_b_1 = r_b[1]
+    r_b_2 = r_b[2]
+    F_w_0 = F_w[0]
+    F_w_1 = F_w[1]
+    F_w_2 = F_w[2]
+    tau_w_0 = tau_w[0]
+    tau_w_1 = tau_w[1]
+    tau_w_2 = tau_w[2]
+    u_0 = u[0]
+    u_1 = u[1]
+    u_2 = u[2]
+    u_3 = u[3]
+    t0 = ((1.0/2.0))*omega_b_0
+    t1 = ((1.0/2.0))*omega_b_1
+    t2 = ((1.0/2.0))*omega_b_2
+    t3 = -Omega_0*c_w + u_0
+    t4 = -Omega_1*c_w + u_1
+    t5 = -Omega_2*c_w + u_2
+    t6 = -Omega_3*c_w + u_3
+    t7 = 2*q_1
+    t8 = q_0*t7
+    t9 = 2*q_2
+    t10 = q_3*t9
+    t11 = t10 + t8
+    t12 = q_0*t9
+    t13 = q_3*t7
+    t14 = t12 - t13
+    t15 = 2*(q_1*q_1)
+    t16 = 2*(q_2*q_2) - 1
+    t17 = -t15 - t16
+    t18 = J_0*Omega_0
+    t19 = J_1*Omega_1
+    t20 = J_2*Omega_2
+    t21 = J_3*Omega_3
+    t22 = A_b_20*t18 + A_b_21*t19 + A_b_22*t20 + A_b_23*t21 + I_p_02*omega_b_0 + I_p_12*omega_b_1 + I_p_22*omega_b_2
+    t23 = A_b_10*t18 + A_b_11*t19 + A_b_12*t20 + A_b_13*t21 + I_p_01*omega_b_0 + I_p_11*omega_b_1 + I_p_12*omega_b_2
+    t24 = -t10 + t8
+    t25 = 2*q_0*q_3
+    t26 = q_2*t7 + t25
+    t27 = 2*(q_0*q_0)
+    t28 = -t16 - t27
+    t29 = F_w_0*t24 + F_w_1*t28 + F_w_2*t26
+    t30 = t12 + t13
+    t31 = 2*q_1*q_2 - t25
+    t32 = -t15 - t27 + 1
+    t33 = F_w_0*t30 + F_w_1*t31 + F_w_2*t32
+    t34 = -A_b_00*t3 - A_b_01*t4 - A_b_02*t5 - A_b_03*t6 - omega_b_1*t22 + omega_b_2*t23 + r_b_1*t33 - r_b_2*t29 + t11*tau_w_1 + t14*tau_w_2 + t17*tau_w_0
+    t35 = I_p_11*I_p_22
+    t36 = (I_p_12*I_p_12)
+    t37 = A_b_10*A_b_20*J_0
+    t38 = 2*I_p_12
+    t39 = A_b_11*A_b_21*J_1
+    t40 = A_b_12*A_b_22*J_2
+    t41 = A_b_13*A_b_23*J_3
+    t42 = (A_b_10*A_b_10)*J_0
+    t43 = I_p_22*t42
+    t44 = (A_b_11*A_b_11)*J_1
+    t45 = I_p_22*t44
+    t46 = (A_b_12*A_b_12)*J_2
+    t47 = I_p_22*t46
+    t48 = (A_b_13*A_b_13)*J_3
+    t49 = I_p_22*t48
+    t50 = (A_b_20*A_b_20)
+    t51 = J_0*t50
+    t52 = I_p_11*t51
+    t53 = (A_b_21*A_b_21)
+    t54 = J_1*t53
+    t55 = I_p_11*t54
+    t56 = (A_b_22*A_b_22)
+    t57 = J_2*t56
+    t58 = I_p_11*t57
+    t59 = (A_b_23*A_b_23)
+    t60 = J_3*t59
+    t61 = I_p_11*t60
+    t62 = 2*t37
+    t63 = 2*t39
+    t64 = 2*t40
+    t65 = t42*t54
+    t66 = t42*t57
+    t67 = t42*t60
+    t68 = t44*t51
+    t69 = t44*t57
+    t70 = t44*t60
+    t71 = t46*t51
+    t72 = t46*t54
+    t73 = t46*t60
+    t74 = t48*t51
+    t75 = t48*t54
+    t76 = t48*t57
+    t77 = A_b_00*t18 + A_b_01*t19 + A_b_02*t20 + A_b_03*t21 + I_p_00*omega_b_0 + I_p_01*omega_b_1 + I_p_02*omega_b_2
+    t78 = F_w_0*t17 + F_w_1*t11 + F_w_2*t14
+    t79 = -A_b_10*t3 - A_b_11*t4 - A_b_12*t5 - A_b_13*t6 + omega_b_0*t22 - omega_b_2*t77 - r_b_0*t33 + r_b_2*t78 + t24*tau_w_0 + t26*tau_w_2 + t28*tau_w_1
+    t80 = I_p_01*I_p_22
+    t81 = A_b_00*J_0
+    t82 = A_b_20*t81
+    t83 = I_p_12*t82
+    t84 = A_b_01*J_1
+    t85 = A_b_21*t84
+    t86 = I_p_12*t85
+    t87 = A_b_02*J_2
+    t88 = A_b_22*t87
+    t89 = I_p_12*t88
+    t90 = A_b_03*J_3
+    t91 = A_b_23*t90
+    t92 = I_p_12*t91
+    t93 = I_p_02*t37
+    t94 = I_p_02*t39
+    t95 = I_p_02*t40
+    t96 = I_p_02*t41
+    t97 = A_b_10*t81
+    t98 = t54*t97
+    t99 = t57*t97
+    t100 = t60*t97
+    t101 = A_b_11*t84
+    t102 = t101*t51
+    t103 = t101*t57
+    t104 = t101*t60
+    t105 = A_b_12*t87
+    t106 = t105*t51
+    t107 = t105*t54
+    t108 = A_b_13*t90
+    t109 = A_b_00*A_b_10*I_p_22*J_0 + A_b_00*A_b_11*A_b_20*A_b_21*J_0*J_1 + A_b_00*A_b_12*A_b_20*A_b_22*J_0*J_2 + A_b_00*A_b_13*A_b_20*A_b_23*J_0*J_3 + A_b_01*A_b_10*A_b_20*A_b_21*J_0*J_1 + A_b_01*A_b_11*I_p_22*J_1 + A_b_01*A_b_12*A_b_21*A_b_22*J_1*J_2 + A_b_01*A_b_13*A_b_21*A_b_23*J_1*J_3 + A_b_02*A_b_10*A_b_20*A_b_22*J_0*J_2 + A_b_02*A_b_11*A_b_21*A_b_22*J_1*J_2 + A_b_02*A_b_12*I_p_22*J_2 + A_b_02*A_b_13*A_b_22*A_b_23*J_2*J_3 + A_b_03*A_b_10*A_b_20*A_b_23*J_0*J_3 + A_b_03*A_b_11*A_b_21*A_b_23*J_1*J_3 + A_b_03*A_b_12*A_b_22*A_b_23*J_2*J_3 + A_b_03*A_b_13*I_p_22*J_3 + I_p_01*J_0*t50 + I_p_01*J_1*t53 + I_p_01*J_2*t56 + I_p_01*J_3*t59 + I_p_02*I_p_12 - t100 - t102 - t103 - t104 - t105*t60 - t106 - t107 - t108*t51 - t108*t54 - t108*t57 - t80 - t83 - t86 - t89 - t92 - t93 - t94 - t95 - t96 - t98 - t99
+    t110 = -A_b_20*t3 - A_b_21*t4 - A_b_22*t5 - A_b_23*t6 - omega_b_0*t23 + omega_b_1*t77 + r_b_0*t29 - r_b_1*t78 + t30*tau_w_0 + t31*tau_w_1 + t32*tau_w_2
+    t111 = I_p_01*I_p_12
+    t112 = I_p_02*I_p_11
+    t113 = I_p_11*t82
+    t114 = I_p_11*t85
+    t115 = I_p_11*t88
+    t116 = I_p_02*t42
+    t117 = I_p_02*t44
+    t118 = I_p_02*t46
+    t119 = I_p_02*t48
+    t120 = t44*t82
+    t121 = t46*t82
+    t122 = t48*t82
+    t123 = t42*t85
+    t124 = t46*t85
+    t125 = t48*t85
+    t126 = t42*t88
+    t127 = t44*t88
+    t128 = -I_p_01*t37 - I_p_01*t39 - I_p_01*t40 - I_p_01*t41 + I_p_11*t91 - I_p_12*t101 - I_p_12*t105 - I_p_12*t108 - I_p_12*t97 + t101*t37 + t101*t40 + t101*t41 + t105*t37 + t105*t39 + t105*t41 + t108*t37 + t108*t39 + t108*t40 + t111 - t112 + t113 + t114 + t115 + t116 + t117 + t118 + t119 - t120 - t121 - t122 - t123 - t124 - t125 - t126 - t127 + t39*t97 + t40*t97 + t41*t97 - t42*t91 - t44*t91 - t46*t91 - t48*t88
+    t129 = I_p_02*I_p_12
+    t130 = 2*I_p_01
+    t131 = (I_p_01*I_p_01)
+    t132 = (I_p_02*I_p_02)
+    t133 = 2*t80
+    t134 = 2*t129
+    t135 = 2*t111
+    t136 = 2*t112
+    t137 = I_p_00*I_p_12
+    t138 = 2*t137
+    t139 = 2*I_p_01*I_p_02
+    t140 = (A_b_00*A_b_00)
+    t141 = J_0*t140
+    t142 = (A_b_01*A_b_01)
+    t143 = J_1*t142
+    t144 = (A_b_02*A_b_02)
+    t145 = J_2*t144
+    t146 = (A_b_03*A_b_03)
+    t147 = J_3*t146
+    t148 = I_p_00*I_p_22
+    t149 = I_p_00*I_p_11
+    t150 = I_p_22*t97
+    t151 = 2*t101
+    t152 = 2*t97
+    t153 = 2*t85
+    t154 = 2*t105
+    t155 = 2*t88
+    t156 = 2*t108
+    t157 = 2*t91
+    t158 = t39*t82
+    t159 = t40*t82
+    t160 = t41*t82
+    t161 = I_p_22*t101
+    t162 = t37*t85
+    t163 = t40*t85
+    t164 = t41*t85
+    t165 = t37*t88
+    t166 = t39*t88
+    t167 = t41*t88
+    t168 = t37*t91
+    t169 = t39*t91
+    t170 = t40*t91
+    t171 = I_p_00*t37
+    t172 = 2*t41
+    t173 = I_p_00*t39
+    t174 = I_p_00*t54
+    t175 = I_p_00*t57
+    t176 = I_p_00*t60
+    t177 = I_p_00*t51
+    t178 = I_p_01*t54
+    t179 = I_p_01*t57
+    t180 = I_p_01*t60
+    t181 = 2*t82
+    t182 = I_p_12*t141
+    t183 = I_p_01*t51
+    t184 = I_p_12*t143
+    t185 = I_p_12*t145
+    t186 = I_p_12*t147
+    t187 = t141*t39
+    t188 = t141*t40
+    t189 = t143*t37
+    t190 = t143*t40
+    t191 = t145*t37
+    t192 = t145*t39
+    t193 = t147*t37
+    t194 = t147*t39
+    t195 = (1.0/(-I_p_00*t172*t40 + I_p_00*t35 - I_p_00*t36 - I_p_11*t132 - I_p_22*t105*t156 - I_p_22*t131 + t100*t151 + t100*t154 + t101*t133 - t101*t134 + t102*t154 + t102*t156 + t103*t156 + t104*t154 + t105*t133 - t105*t134 + t106*t156 + t107*t156 + t108*t133 - t108*t134 - t113*t153 - t113*t155 - t113*t157 - t114*t155 - t114*t157 - t115*t157 - t116*t153 - t116*t155 - t116*t157 - t117*t155 - t117*t157 - t117*t181 - t118*t153 - t118*t157 - t118*t181 - t119*t153 - t119*t155 - t119*t181 + t120*t155 + t120*t157 + t121*t153 + t121*t157 + t122*t153 + t122*t155 + t123*t155 + t123*t157 + t124*t157 + t125*t155 + t126*t157 + t127*t157 + t129*t130 + t130*t158 + t130*t159 + t130*t160 + t130*t162 + t130*t163 + t130*t164 + t130*t165 + t130*t166 + t130*t167 + t130*t168 + t130*t169 + t130*t170 + t131*t51 + t131*t54 + t131*t57 + t131*t60 + t132*t42 + t132*t44 + t132*t46 + t132*t48 + t133*t97 - t134*t97 - t135*t82 - t135*t85 - t135*t88 - t135*t91 + t136*t82 + t136*t85 + t136*t88 + t136*t91 + t138*t37 + t138*t39 + t138*t40 + t138*t41 - t139*t37 - t139*t39 - t139*t40 - t139*t41 - t141*t35 + t141*t36 + t141*t45 + t141*t47 + t141*t49 + t141*t55 + t141*t58 + t141*t61 - t141*t69 - t141*t70 - t141*t72 - t141*t73 - t141*t75 - t141*t76 - t143*t35 + t143*t36 + t143*t43 + t143*t47 + t143*t49 + t143*t52 + t143*t58 + t143*t61 - t143*t66 - t143*t67 - t143*t71 - t143*t73 - t143*t74 - t143*t76 - t145*t35 + t145*t36 + t145*t43 + t145*t45 + t145*t49 + t145*t52 + t145*t55 + t145*t61 - t145*t65 - t145*t67 - t145*t68 - t145*t70 - t145*t74 - t145*t75 - t147*t35 + t147*t36 + t147*t43 + t147*t45 + t147*t47 + t147*t52 + t147*t55 + t147*t58 - t147*t65 - t147*t66 - t147*t68 - t147*t69 - t147*t71 - t147*t72 - t148*t42 - t148*t44 - t148*t46 - t148*t48 - t149*t51 - t149*t54 - t149*t57 - t149*t60 - t150*t151 - t150*t154 - t150*t156 - t151*t159 - t151*t160 - t151*t165 - t151*t167 - t151*t168 - t151*t170 - t151*t179 - t151*t180 - t151*t183 + t151*t83 + t151*t89 + t151*t92 + t151*t93 + t151*t95 + t151*t96 + t151*t99 - t152*t163 - t152*t164 - t152*t166 - t152*t167 - t152*t169 - t152*t170 - t152*t178 - t152*t179 - t152*t180 + t152*t86 + t152*t89 + t152*t92 + t152*t94 + t152*t95 + t152*t96 - t154*t158 - t154*t160 - t154*t161 - t154*t162 - t154*t164 - t154*t168 - t154*t169 - t154*t178 - t154*t180 - t154*t183 + t154*t83 + t154*t86 + t154*t92 + t154*t93 + t154*t94 + t154*t96 + t154*t98 - t156*t158 - t156*t159 - t156*t161 - t156*t162 - t156*t163 - t156*t165 - t156*t166 - t156*t178 - t156*t179 - t156*t183 + t156*t83 + t156*t86 + t156*t89 + t156*t93 + t156*t94 + t156*t95 + t156*t98 + t156*t99 - t171*t172 - t171*t63 - t171*t64 - t172*t173 - t172*t182 - t172*t184 - t172*t185 + t172*t187 + t172*t188 + t172*t189 + t172*t190 + t172*t191 + t172*t192 - t173*t64 + t174*t42 + t174*t46 + t174*t48 + t175*t42 + t175*t44 + t175*t48 + t176*t42 + t176*t44 + t176*t46 + t177*t44 + t177*t46 + t177*t48 - t182*t63 - t182*t64 - t184*t62 - t184*t64 - t185*t62 - t185*t63 - t186*t62 - t186*t63 - t186*t64 + t187*t64 + t189*t64 + t191*t63 + t193*t63 + t193*t64 + t194*t64))
+    t196 = t195*(t109*t79 + t110*t128 + t34*(t35 - t36 + t37*t38 + t38*t39 + t38*t40 + t38*t41 - t39*t62 - t40*t62 - t40*t63 - t41*t62 - t41*t63 - t41*t64 - t43 - t45 - t47 - t49 - t52 - t55 - t58 - t61 + t65 + t66 + t67 + t68 + t69 + t70 + t71 + t72 + t73 + t74 + t75 + t76))
+    t197 = 2*I_p_02
+    t198 = A_b_00*A_b_01*A_b_10*A_b_21*J_0*J_1 + A_b_00*A_b_01*A_b_11*A_b_20*J_0*J_1 + A_b_00*A_b_02*A_b_10*A_b_22*J_0*J_2 + A_b_00*A_b_02*A_b_12*A_b_20*J_0*J_2 + A_b_00*A_b_03*A_b_10*A_b_23*J_0*J_3 + A_b_00*A_b_03*A_b_13*A_b_20*J_0*J_3 + A_b_01*A_b_02*A_b_11*A_b_22*J_1*J_2 + A_b_01*A_b_02*A_b_12*A_b_21*J_1*J_2 + A_b_01*A_b_03*A_b_11*A_b_23*J_1*J_3 + A_b_01*A_b_03*A_b_13*A_b_21*J_1*J_3 + A_b_02*A_b_03*A_b_12*A_b_23*J_2*J_3 + A_b_02*A_b_03*A_b_13*A_b_22*J_2*J_3 + A_b_10*A_b_20*I_p_00*J_0 + A_b_11*A_b_21*I_p_00*J_1 + A_b_12*A_b_22*I_p_00*J_2 + A_b_13*A_b_23*I_p_00*J_3 + I_p_01*I_p_02 - I_p_01*t82 - I_p_01*t85 - I_p_01*t88 - I_p_01*t91 - I_p_02*t101 - I_p_02*t105 - I_p_02*t108 - I_p_02*t97 + I_p_12*J_0*t140 + I_p_12*J_1*t142 + I_p_12*J_2*t144 + I_p_12*J_3*t146 - t137 - t141*t41 - t143*t41 - t145*t41 - t147*t40 - t187 - t188 - t189 - t190 - t191 - t192 - t193 - t194
+    t199 = t195*(t109*t34 + t110*t198 + t79*(-I_p_22*t141 - I_p_22*t143 - I_p_22*t145 - I_p_22*t147 - t132 + t141*t54 + t141*t57 + t141*t60 + t143*t51 + t143*t57 + t143*t60 + t145*t51 + t145*t54 + t145*t60 + t147*t51 + t147*t54 + t147*t57 + t148 - t153*t88 - t153*t91 - t155*t91 - t174 - t175 - t176 - t177 - t181*t85 - t181*t88 - t181*t91 + t197*t82 + t197*t85 + t197*t88 + t197*t91))
+    t200 = t195*(t110*(-I_p_00*t42 - I_p_00*t44 - I_p_00*t46 - I_p_00*t48 - I_p_11*t141 - I_p_11*t143 - I_p_11*t145 - I_p_11*t147 + t101*t130 - t101*t152 + t105*t130 - t105*t151 - t105*t152 + t108*t130 - t108*t151 - t108*t152 - t108*t154 + t130*t97 - t131 + t141*t44 + t141*t46 + t141*t48 + t143*t42 + t143*t46 + t143*t48 + t145*t42 + t145*t44 + t145*t48 + t147*t42 + t147*t44 + t147*t46 + t149) + t128*t34 + t198*t79)
+    return casadi.vertcat(q_1*t2 - q_2*t1 + q_3*t0, -q_0*t2 + q_2*t0 + q_3*t1, q_0*t1 - q_1*t0 + q_3*t2, -q_0*t0 - q_1*t1 - q_2*t2), casadi.vertcat(t196, t199, t200), casadi.vertcat(-A_b_00*t196 - A_b_10*t199 - A_b_20*t200 + t3/J_0, -A_b_01*t196 - A_b_11*t199 - A_b_21*t200 + t4/J_1, -A_b_02*t196 - A_b_12*t199 - A_b_22*t200 + t5/J_2, -A_b_03*t196 - A_b_13*t199 - A_b_23*t200 + t6/J_3)
+
+
+def wheels4_momentum(q, omega_b, Omega, I_p, A_b, J):
+    """wheels4_momentum: World angular momentum about the pivot of a body with 4 wheels, and the wheels' axial momenta.
+      in  q [4]: orientation (x, y, z, w), R_WB
+      in  omega_b [3]: angular velocity, body frame, rad/s
+      in  Omega [4]: wheel rates relative to the body about their axes (4), rad/s
+      in  I_p [3×3]: inertia about the pivot (wheels locked), body frame, kg·m², symmetric row-major
+      in  A_b [3×4]: wheel spin axes as columns (3×4, unit columns), body frame, row-major
+      in  J [4]: wheel axial inertias (4), kg·m²
+      out L_body_w [3]: kg·m²/s, world
+      out L_wheels_w [3]: kg·m²/s, world
+      out h_w [4]: axial momentum of each wheel, kg·m²/s"""
+    q_0 = q[0]
+    q_1 = q[1]
+    q_2 = q[2]
+    q_3 = q[3]
+    omega_b_0 = omega_b[0]
+    omega_b_1 = omega_b[1]
+    omega_b_2 = omega_b[2]
+    Omega_0 = Omega[0]
+    Omega_1 = Omega[1]
+    Omega_2 = Omega[2]
+    Omega_3 = Omega[3]
+    I_p_00 = I_p[0]
+    I_p_01 = I_p[1]
+    I_p_02 = I_p[2]
+    I_p_11 = I_p[4]
+    I_p_12 = I_p[5]
+    I_p_22 = I_p[8]
+    A_b_00 = A_b[0]
+    A_b_01 = A_b[1]
+    A_b_02 = A_b[2]
+    A_b_03 = A_b[3]
+    A_b_10 = A_b[4]
+    A_b_11 = A_b[5]
+    A_b_12 = A_b[6]
+    A_b_13 = A_b[7]
+    A_b_20 = A_b[8]
+    A_b_21 = A_b[9]
+    A_b_22 = A_b[10]
+    A_b_23 = A_b[11]
+    J_0 = J[0]
+    J_1 = J[1]
+    J_2 = J[2]
+    J_3 = J[3]
+    t0 = 2*q_1
+    t1 = q_0*t0
+    t2 = 2*q_2
+    t3 = q_3*t2
+    t4 = t1 - t3
+    t5 = A_b_10*J_0
+    t6 = A_b_11*J_1
+    t7 = A_b_12*J_2
+    t8 = A_b_13*J_3
+    t9 = -A_b_00*t5 - A_b_01*t6 - A_b_02*t7 - A_b_03*t8 + I_p_01
+    t10 = -A_b_20*t5 - A_b_21*t6 - A_b_22*t7 - A_b_23*t8 + I_p_12
+    t11 = omega_b_0*t9 + omega_b_1*(-(A_b_10*A_b_10)*J_0 - (A_b_11*A_b_11)*J_1 - (A_b_12*A_b_12)*J_2 - (A_b_13*A_b_13)*J_3 + I_p_11) + omega_b_2*t10
+    t12 = q_0*t2
+    t13 = q_3*t0
+    t14 = t12 + t13
+    t15 = -A_b_00*A_b_20*J_0 - A_b_01*A_b_21*J_1 - A_b_02*A_b_22*J_2 - A_b_03*A_b_23*J_3 + I_p_02
+    t16 = omega_b_0*t15 + omega_b_1*t10 + omega_b_2*(-(A_b_20*A_b_20)*J_0 - (A_b_21*A_b_21)*J_1 - (A_b_22*A_b_22)*J_2 - (A_b_23*A_b_23)*J_3 + I_p_22)
+    t17 = 2*(q_1*q_1)
+    t18 = 2*(q_2*q_2) - 1
+    t19 = -t17 - t18
+    t20 = omega_b_0*(-(A_b_00*A_b_00)*J_0 - (A_b_01*A_b_01)*J_1 - (A_b_02*A_b_02)*J_2 - (A_b_03*A_b_03)*J_3 + I_p_00) + omega_b_1*t9 + omega_b_2*t15
+    t21 = t1 + t3
+    t22 = 2*q_0*q_3
+    t23 = 2*q_1*q_2 - t22
+    t24 = 2*(q_0*q_0)
+    t25 = -t18 - t24
+    t26 = t12 - t13
+    t27 = q_1*t2 + t22
+    t28 = -t17 - t24 + 1
+    t29 = J_0*(A_b_00*omega_b_0 + A_b_10*omega_b_1 + A_b_20*omega_b_2 + Omega_0)
+    t30 = J_1*(A_b_01*omega_b_0 + A_b_11*omega_b_1 + A_b_21*omega_b_2 + Omega_1)
+    t31 = J_2*(A_b_02*omega_b_0 + A_b_12*omega_b_1 + A_b_22*omega_b_2 + Omega_2)
+    t32 = J_3*(A_b_03*omega_b_0 + A_b_13*omega_b_1 + A_b_23*omega_b_2 + Omega_3)
+    t33 = A_b_10*t29 + A_b_11*t30 + A_b_12*t31 + A_b_13*t32
+    t34 = A_b_20*t29 + A_b_21*t30 + A_b_22*t31 + A_b_23*t32
+    t35 = A_b_00*t29 + A_b_01*t30 + A_b_02*t31 + A_b_03*t32
+    return casadi.vertcat(t11*t4 + t14*t16 + t19*t20, t11*t25 + t16*t23 + t20*t21, t11*t27 + t16*t28 + t20*t26), casadi.vertcat(t14*t34 + t19*t35 + t33*t4, t21*t35 + t23*t34 + t25*t33, t26*t35 + t27*t33 + t28*t34), casadi.vertcat(t29, t30, t31, t32)
+
+
+def wheels4_motor(command, Omega, torque_limit, speed_limit, cutoff):
+    """wheels4_motor: Motor torques actually applied on 4 wheels (the wheel_motor line, per wheel).
+      in  command [4]: commanded motor torques, N·m
+      in  Omega [4]: wheel rates relative to the body, rad/s
+      in  torque_limit scalar: stall torque (current limit), N·m
+      in  speed_limit scalar: no-load speed, rad/s
+      in  cutoff scalar: 1: hard cut-off at speed_limit instead of the line; 0: the line
+      out u [4]: applied motor torques, N·m"""
+    command_0 = command[0]
+    command_1 = command[1]
+    command_2 = command[2]
+    command_3 = command[3]
+    Omega_0 = Omega[0]
+    Omega_1 = Omega[1]
+    Omega_2 = Omega[2]
+    Omega_3 = Omega[3]
+    t0 = -torque_limit
+    t1 = (command_0 < t0)
+    t2 = casadi.fabs(Omega_0)
+    t3 = (speed_limit <= t2)
+    t4 = Omega_0*torque_limit
+    t5 = (command_0 > torque_limit)
+    t6 = casadi.if_else(t1, t0, casadi.if_else(t5, torque_limit, command_0))
+    t7 = (cutoff > 0)
+    t8 = (Omega_0 >= speed_limit)
+    t9 = (command_0 < 0)
+    t10 = (command_0 > 0)
+    t11 = -speed_limit
+    t12 = (Omega_0 <= t11)
+    t13 = (1.0/speed_limit)
+    t14 = torque_limit*(-t13*t2 + 1)
+    t15 = -t14
+    t16 = (command_1 < t0)
+    t17 = casadi.fabs(Omega_1)
+    t18 = (speed_limit <= t17)
+    t19 = Omega_1*torque_limit
+    t20 = (command_1 > torque_limit)
+    t21 = casadi.if_else(t16, t0, casadi.if_else(t20, torque_limit, command_1))
+    t22 = (Omega_1 >= speed_limit)
+    t23 = (command_1 < 0)
+    t24 = (command_1 > 0)
+    t25 = (Omega_1 <= t11)
+    t26 = torque_limit*(-t13*t17 + 1)
+    t27 = -t26
+    t28 = (command_2 < t0)
+    t29 = casadi.fabs(Omega_2)
+    t30 = (speed_limit <= t29)
+    t31 = Omega_2*torque_limit
+    t32 = (command_2 > torque_limit)
+    t33 = casadi.if_else(t28, t0, casadi.if_else(t32, torque_limit, command_2))
+    t34 = (Omega_2 >= speed_limit)
+    t35 = (command_2 < 0)
+    t36 = (command_2 > 0)
+    t37 = (Omega_2 <= t11)
+    t38 = torque_limit*(-t13*t29 + 1)
+    t39 = -t38
+    t40 = (command_3 < t0)
+    t41 = casadi.fabs(Omega_3)
+    t42 = (speed_limit <= t41)
+    t43 = Omega_3*torque_limit
+    t44 = (command_3 > torque_limit)
+    t45 = casadi.if_else(t40, t0, casadi.if_else(t44, torque_limit, command_3))
+    t46 = (Omega_3 >= speed_limit)
+    t47 = (command_3 < 0)
+    t48 = (command_3 > 0)
+    t49 = (Omega_3 <= t11)
+    t50 = torque_limit*(-t13*t41 + 1)
+    t51 = -t50
+    return casadi.vertcat(casadi.if_else(t7, casadi.if_else(casadi.if_else(t1, casadi.logic_and(t3, (t4 < 0)), casadi.if_else(t5, casadi.logic_and(t3, (t4 > 0)), casadi.logic_and(t3, (Omega_0*command_0 > 0)))), 0, t6), casadi.if_else(casadi.logic_and(casadi.logic_and(casadi.logic_and(casadi.logic_or(t10, t12), casadi.logic_or(t10, t9)), casadi.logic_or(t12, t8)), casadi.logic_or(t8, t9)), 0, casadi.if_else(casadi.logic_and(casadi.logic_and((Omega_0 > 0), (command_0 > t14)), (Omega_0 < speed_limit)), t14, casadi.if_else(casadi.logic_and(casadi.logic_and((Omega_0 > t11), (Omega_0 < 0)), (command_0 < t15)), t15, t6)))), casadi.if_else(t7, casadi.if_else(casadi.if_else(t16, casadi.logic_and(t18, (t19 < 0)), casadi.if_else(t20, casadi.logic_and(t18, (t19 > 0)), casadi.logic_and(t18, (Omega_1*command_1 > 0)))), 0, t21), casadi.if_else(casadi.logic_and(casadi.logic_and(casadi.logic_and(casadi.logic_or(t22, t23), casadi.logic_or(t22, t25)), casadi.logic_or(t23, t24)), casadi.logic_or(t24, t25)), 0, casadi.if_else(casadi.logic_and(casadi.logic_and((Omega_1 > 0), (command_1 > t26)), (Omega_1 < speed_limit)), t26, casadi.if_else(casadi.logic_and(casadi.logic_and((Omega_1 > t11), (Omega_1 < 0)), (command_1 < t27)), t27, t21)))), casadi.if_else(t7, casadi.if_else(casadi.if_else(t28, casadi.logic_and(t30, (t31 < 0)), casadi.if_else(t32, casadi.logic_and(t30, (t31 > 0)), casadi.logic_and(t30, (Omega_2*command_2 > 0)))), 0, t33), casadi.if_else(casadi.logic_and(casadi.logic_and(casadi.logic_and(casadi.logic_or(t34, t35), casadi.logic_or(t34, t37)), casadi.logic_or(t35, t36)), casadi.logic_or(t36, t37)), 0, casadi.if_else(casadi.logic_and(casadi.logic_and((Omega_2 > 0), (command_2 > t38)), (Omega_2 < speed_limit)), t38, casadi.if_else(casadi.logic_and(casadi.logic_and((Omega_2 > t11), (Omega_2 < 0)), (command_2 < t39)), t39, t33)))), casadi.if_else(t7, casadi.if_else(casadi.if_else(t40, casadi.logic_and(t42, (t43 < 0)), casadi.if_else(t44, casadi.logic_and(t42, (t43 > 0)), casadi.logic_and(t42, (Omega_3*command_3 > 0)))), 0, t45), casadi.if_else(casadi.logic_and(casadi.logic_and(casadi.logic_and(casadi.logic_or(t46, t47), casadi.logic_or(t46, t49)), casadi.logic_or(t47, t48)), casadi.logic_or(t48, t49)), 0, casadi.if_else(casadi.logic_and(casadi.logic_and((Omega_3 > 0), (command_3 > t50)), (Omega_3 < speed_limit)), t50, casadi.if_else(casadi.logic_and(casadi.logic_and((Omega_3 > t11), (Omega_3 < 0)), (command_3 < t51)), t51, t45)))))
