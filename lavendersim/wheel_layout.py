@@ -418,10 +418,11 @@ def slew(model: LayoutCube, theta_deg: float = 30.0, axis: ArrayLike = (1.0, 2.0
 
 
 def momentum_exchange(model: LayoutCube, *, omega0: ArrayLike = (0.3, -0.2, 0.5), torque: float = 0.05, T: float = 2.0,
-                      dt: float = 1e-3) -> dict:
+                      dt: float = 2.5e-4) -> dict:
     """Lab 04's momentum check for any layout: damping off, no external torque, the body spinning at
     ``omega0`` (rad/s) and time-varying commands on every wheel (below the torque limit). The exchange
-    is exact: ΔL_body = −ΔL_wheels in the world frame (wheels<N>_momentum kernel).
+    is exact: ΔL_body = −ΔL_wheels in the world frame (wheels<N>_momentum kernel), to RK4's
+    truncation error (∝ dt⁴: pyramid4, 2 s at dt = 2.5e-4 s, exchange 1.1e-11, |L| drift 4e-10).
 
     Returns
     -------
