@@ -65,7 +65,8 @@ def test_momentum_kernel_matches_definition(pyramid):
     (np.hstack([np.eye(3), [[1.0], [1.0], [0.0]]]), r"A_b.*unit vector.*column 3"),
     (np.array([[1.0, 0, 0, np.nan], [0, 1, 0, 0], [0, 0, 1, 1]]), r"A_b.*finite"),
     (np.array([[1.0, 0, -1, 0], [0, 1, 0, -1], [0, 0, 0, 0]]), r"A_b.*span 3-D space.*rank 2"),
-    (np.eye(3), r"A_b.*kernels are printed for \[4\] wheels.*got 3"),
+    (np.ones((3, 7)) / np.sqrt(3.0), r"A_b.*span 3-D space"),
+    (np.hstack([np.eye(3), np.eye(3), [[0.0], [0.0], [1.0]]]), r"A_b.*kernels are printed for \[1, 2, 3, 4, 5, 6\] wheels.*got 7"),
     (np.zeros((2, 4)), r"A_b"),
 ])
 def test_bad_axes_are_refused(A_b, match):
@@ -121,3 +122,33 @@ def test_cli_lqr_layout_pyramid4(capsys):
         assert cli.main(["lqr", "--layout", "pyramid4", *args]) == 2
         err = capsys.readouterr().err
         assert err.count("\n") == 1 and f"invalid parameter: {field}" in err
+
+
+def test_printed_counts_and_three_body_axes_equal_the_cube_kernel():
+    """Derived once for any N, printed for N = 1 … 6; with A_b = 1 the N = 3 kernel is the body-axis
+    cube's wheel_body_rhs (to rounding), pivot offset, external load and damping included."""
+    assert WL.printed_counts() == (1, 2, 3, 4, 5, 6)
+    rng = np.random.default_rng(7)
+    S = rng.normal(size=(3, 3))
+    I_p = S @ S.T + 5 * np.eye(3)
+    q = rng.normal(size=4)
+    q /= np.linalg.norm(q)
+    w, W, J, r, F, tau, u = (rng.normal(size=3) for _ in range(7))
+    J = np.abs(J) * 0.1 + 0.05
+    a = K.wheels3_body_rhs(q, w, W, I_p, np.eye(3), J, r, F, tau, u, 0.3)
+    b = K.wheel_body_rhs(q, w, W, I_p, J, r, F, tau, u, 0.3)
+    for x, y in zip(a, b):
+        np.testing.assert_allclose(x, y, rtol=1e-13, atol=1e-13)
+
+
+@pytest.mark.parametrize("n", [3, 6])
+def test_other_counts_momentum_exchange(n):
+    """A tilted 3-wheel set (no null space) and a 6-wheel set (3-D null space) conserve L exactly too."""
+    rng = np.random.default_rng(n)
+    A = rng.normal(size=(3, n))
+    A /= np.linalg.norm(A, axis=0)
+    m = WL.LayoutCube(A_b=A, J=2e-4)
+    assert WL.null_space(A).shape == (n, n - 3)
+    out = WL.momentum_exchange(m, T=0.5)
+    assert out["max_dL_wheels"] > 0.01
+    assert out["exchange_residual"] <= 1e-9 and out["L_drift"] <= 1e-9
