@@ -42,7 +42,9 @@ From Python::
     K, S, E = lc.dlqr(lin.sample(0.01), Q, R)
 
 From the shell: ``lavendersim lqr --scenario corner --theta0 3 --json`` (``--monte-carlo N --seed S
---workers W`` or ``--dask ADDRESS`` for the robustness runs).
+--workers W`` or ``--dask ADDRESS`` for the robustness runs). ``--layout pyramid4``: four wheels on a
+pyramid (lavendersim.wheel_layout) — a 30° slew with null-space wheel-speed management and the
+momentum check.
 """
 from __future__ import annotations
 
