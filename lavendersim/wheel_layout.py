@@ -132,7 +132,7 @@ class LayoutCube:
     speed_limit: float = 400.0
     wheel_damping: float = 0.0
     motor: str = "line"
-    _k: dict = field(default_factory=dict, repr=False)
+    _k: dict = field(default_factory=dict, init=False, repr=False)
 
     def __post_init__(self):
         self.A_b = axes("A_b", self.A_b, span=True)
