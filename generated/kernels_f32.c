@@ -1937,6 +1937,2914 @@ void lvf_wheel_motor(const float *command, const float *Omega, float torque_limi
 ));
 }
 
+void lvf_wheels1_body_rhs(const float *q, const float *omega_b, const float *Omega, const float *I_p, const float *A_b, const float *J, const float *r_b, const float *F_w, const float *tau_w, const float *u, float c_w, float *q_dot, float *omega_dot_b, float *Omega_dot) {
+    const float q_0 = q[0];
+    const float q_1 = q[1];
+    const float q_2 = q[2];
+    const float q_3 = q[3];
+    const float omega_b_0 = omega_b[0];
+    const float omega_b_1 = omega_b[1];
+    const float omega_b_2 = omega_b[2];
+    const float Omega_0 = Omega[0];
+    const float I_p_00 = I_p[0];
+    const float I_p_01 = I_p[1];
+    const float I_p_02 = I_p[2];
+    const float I_p_11 = I_p[4];
+    const float I_p_12 = I_p[5];
+    const float I_p_22 = I_p[8];
+    const float A_b_00 = A_b[0];
+    const float A_b_10 = A_b[1];
+    const float A_b_20 = A_b[2];
+    const float J_0 = J[0];
+    const float r_b_0 = r_b[0];
+    const float r_b_1 = r_b[1];
+    const float r_b_2 = r_b[2];
+    const float F_w_0 = F_w[0];
+    const float F_w_1 = F_w[1];
+    const float F_w_2 = F_w[2];
+    const float tau_w_0 = tau_w[0];
+    const float tau_w_1 = tau_w[1];
+    const float tau_w_2 = tau_w[2];
+    const float u_0 = u[0];
+    const float t0 = ((1.0F/2.0F))*omega_b_0;
+    const float t1 = ((1.0F/2.0F))*omega_b_1;
+    const float t2 = ((1.0F/2.0F))*omega_b_2;
+    const float t3 = (I_p_12*I_p_12);
+    const float t4 = (I_p_01*I_p_01);
+    const float t5 = (I_p_02*I_p_02);
+    const float t6 = (A_b_00*A_b_00);
+    const float t7 = J_0*t6;
+    const float t8 = (A_b_10*A_b_10);
+    const float t9 = J_0*t8;
+    const float t10 = (A_b_20*A_b_20);
+    const float t11 = J_0*t10;
+    const float t12 = I_p_02*I_p_12;
+    const float t13 = A_b_00*J_0;
+    const float t14 = A_b_10*t13;
+    const float t15 = A_b_20*t13;
+    const float t16 = I_p_01*I_p_02;
+    const float t17 = A_b_10*A_b_20*J_0;
+    const float t18 = (1.0F/(2*A_b_00*A_b_10*I_p_01*I_p_22*J_0 + 2*A_b_00*A_b_20*I_p_02*I_p_11*J_0 + 2*A_b_10*A_b_20*I_p_00*I_p_12*J_0 + I_p_00*I_p_11*I_p_22 - I_p_00*I_p_11*t11 - I_p_00*I_p_22*t9 - I_p_00*t3 + 2*I_p_01*I_p_02*I_p_12 - 2*I_p_01*I_p_12*t15 - I_p_11*I_p_22*t7 - I_p_11*t5 - I_p_22*t4 + J_0*t10*t4 + J_0*t3*t6 + J_0*t5*t8 - 2*t12*t14 - 2*t16*t17));
+    const float t19 = -Omega_0*c_w + u_0;
+    const float t20 = 2*q_0;
+    const float t21 = q_1*t20;
+    const float t22 = 2*q_2*q_3;
+    const float t23 = t21 + t22;
+    const float t24 = q_2*t20;
+    const float t25 = 2*q_1;
+    const float t26 = q_3*t25;
+    const float t27 = t24 - t26;
+    const float t28 = 2*(q_2*q_2);
+    const float t29 = 2*(q_1*q_1) - 1;
+    const float t30 = -t28 - t29;
+    const float t31 = J_0*Omega_0;
+    const float t32 = A_b_10*t31 + I_p_01*omega_b_0 + I_p_11*omega_b_1 + I_p_12*omega_b_2;
+    const float t33 = A_b_20*t31 + I_p_02*omega_b_0 + I_p_12*omega_b_1 + I_p_22*omega_b_2;
+    const float t34 = t24 + t26;
+    const float t35 = q_3*t20;
+    const float t36 = 2*q_1*q_2 - t35;
+    const float t37 = 2*(q_0*q_0);
+    const float t38 = -t29 - t37;
+    const float t39 = F_w_0*t34 + F_w_1*t36 + F_w_2*t38;
+    const float t40 = t21 - t22;
+    const float t41 = q_2*t25 + t35;
+    const float t42 = -t28 - t37 + 1;
+    const float t43 = F_w_0*t40 + F_w_1*t42 + F_w_2*t41;
+    const float t44 = -A_b_00*t19 - omega_b_1*t33 + omega_b_2*t32 + r_b_1*t39 - r_b_2*t43 + t23*tau_w_1 + t27*tau_w_2 + t30*tau_w_0;
+    const float t45 = A_b_00*A_b_20*I_p_11*J_0 + I_p_01*I_p_12 - I_p_01*t17 - I_p_02*I_p_11 + I_p_02*J_0*t8 - I_p_12*t14;
+    const float t46 = A_b_00*t31 + I_p_00*omega_b_0 + I_p_01*omega_b_1 + I_p_02*omega_b_2;
+    const float t47 = F_w_0*t30 + F_w_1*t23 + F_w_2*t27;
+    const float t48 = -A_b_20*t19 - omega_b_0*t32 + omega_b_1*t46 + r_b_0*t43 - r_b_1*t47 + t34*tau_w_0 + t36*tau_w_1 + t38*tau_w_2;
+    const float t49 = -I_p_01*I_p_22 + I_p_01*t11 - I_p_02*t17 - I_p_12*t15 + I_p_22*t14 + t12;
+    const float t50 = -A_b_10*t19 + omega_b_0*t33 - omega_b_2*t46 - r_b_0*t39 + r_b_2*t47 + t40*tau_w_0 + t41*tau_w_2 + t42*tau_w_1;
+    const float t51 = t18*(t44*(2*A_b_10*A_b_20*I_p_12*J_0 + I_p_11*I_p_22 - I_p_11*t11 - I_p_22*t9 - t3) + t45*t48 + t49*t50);
+    const float t52 = -I_p_00*I_p_12 + I_p_00*t17 - I_p_01*t15 - I_p_02*t14 + I_p_12*t7 + t16;
+    const float t53 = t18*(t44*t49 + t48*t52 + t50*(2*A_b_00*A_b_20*I_p_02*J_0 + I_p_00*I_p_22 - I_p_00*t11 - I_p_22*t7 - t5));
+    const float t54 = t18*(t44*t45 + t48*(2*A_b_00*A_b_10*I_p_01*J_0 + I_p_00*I_p_11 - I_p_00*t9 - I_p_11*t7 - t4) + t50*t52);
+    q_dot[0] = q_1*t2 - q_2*t1 + q_3*t0;
+    q_dot[1] = -q_0*t2 + q_2*t0 + q_3*t1;
+    q_dot[2] = q_0*t1 - q_1*t0 + q_3*t2;
+    q_dot[3] = -q_0*t0 - q_1*t1 - q_2*t2;
+    omega_dot_b[0] = t51;
+    omega_dot_b[1] = t53;
+    omega_dot_b[2] = t54;
+    Omega_dot[0] = -A_b_00*t51 - A_b_10*t53 - A_b_20*t54 + t19/J_0;
+}
+
+void lvf_wheels1_momentum(const float *q, const float *omega_b, const float *Omega, const float *I_p, const float *A_b, const float *J, float *L_body_w, float *L_wheels_w, float *h_w) {
+    const float q_0 = q[0];
+    const float q_1 = q[1];
+    const float q_2 = q[2];
+    const float q_3 = q[3];
+    const float omega_b_0 = omega_b[0];
+    const float omega_b_1 = omega_b[1];
+    const float omega_b_2 = omega_b[2];
+    const float Omega_0 = Omega[0];
+    const float I_p_00 = I_p[0];
+    const float I_p_01 = I_p[1];
+    const float I_p_02 = I_p[2];
+    const float I_p_11 = I_p[4];
+    const float I_p_12 = I_p[5];
+    const float I_p_22 = I_p[8];
+    const float A_b_00 = A_b[0];
+    const float A_b_10 = A_b[1];
+    const float A_b_20 = A_b[2];
+    const float J_0 = J[0];
+    const float t0 = 2*q_1;
+    const float t1 = q_0*t0;
+    const float t2 = 2*q_2;
+    const float t3 = q_3*t2;
+    const float t4 = t1 - t3;
+    const float t5 = A_b_10*J_0;
+    const float t6 = -A_b_00*t5 + I_p_01;
+    const float t7 = -A_b_20*t5 + I_p_12;
+    const float t8 = omega_b_0*t6 + omega_b_1*(-(A_b_10*A_b_10)*J_0 + I_p_11) + omega_b_2*t7;
+    const float t9 = q_0*t2;
+    const float t10 = q_3*t0;
+    const float t11 = t10 + t9;
+    const float t12 = -A_b_00*A_b_20*J_0 + I_p_02;
+    const float t13 = omega_b_0*t12 + omega_b_1*t7 + omega_b_2*(-(A_b_20*A_b_20)*J_0 + I_p_22);
+    const float t14 = 2*(q_1*q_1);
+    const float t15 = 2*(q_2*q_2) - 1;
+    const float t16 = -t14 - t15;
+    const float t17 = omega_b_0*(-(A_b_00*A_b_00)*J_0 + I_p_00) + omega_b_1*t6 + omega_b_2*t12;
+    const float t18 = t1 + t3;
+    const float t19 = 2*q_0*q_3;
+    const float t20 = 2*q_1*q_2 - t19;
+    const float t21 = 2*(q_0*q_0);
+    const float t22 = -t15 - t21;
+    const float t23 = -t10 + t9;
+    const float t24 = q_1*t2 + t19;
+    const float t25 = -t14 - t21 + 1;
+    const float t26 = J_0*(A_b_00*omega_b_0 + A_b_10*omega_b_1 + A_b_20*omega_b_2 + Omega_0);
+    const float t27 = A_b_10*t26;
+    const float t28 = A_b_20*t26;
+    const float t29 = A_b_00*t26;
+    L_body_w[0] = t11*t13 + t16*t17 + t4*t8;
+    L_body_w[1] = t13*t20 + t17*t18 + t22*t8;
+    L_body_w[2] = t13*t25 + t17*t23 + t24*t8;
+    L_wheels_w[0] = t11*t28 + t16*t29 + t27*t4;
+    L_wheels_w[1] = t18*t29 + t20*t28 + t22*t27;
+    L_wheels_w[2] = t23*t29 + t24*t27 + t25*t28;
+    h_w[0] = t26;
+}
+
+void lvf_wheels1_motor(const float *command, const float *Omega, float torque_limit, float speed_limit, float cutoff, float *u) {
+    const float command_0 = command[0];
+    const float Omega_0 = Omega[0];
+    const float t0 = -torque_limit;
+    const float t1 = command_0 < t0;
+    const float t2 = fabsf(Omega_0);
+    const float t3 = speed_limit <= t2;
+    const float t4 = Omega_0*torque_limit;
+    const float t5 = command_0 > torque_limit;
+    const float t6 = ((t1) ? (
+   t0
+)
+: ((t5) ? (
+   torque_limit
+)
+: (
+   command_0
+)));
+    const float t7 = Omega_0 >= speed_limit;
+    const float t8 = command_0 < 0;
+    const float t9 = command_0 > 0;
+    const float t10 = -speed_limit;
+    const float t11 = Omega_0 <= t10;
+    const float t12 = torque_limit*(1 - t2/speed_limit);
+    const float t13 = -t12;
+    u[0] = ((cutoff > 0) ? (
+   ((((t1) ? (
+      t3 && t4 < 0
+   )
+   : (
+      ((t5) ? (
+         t3 && t4 > 0
+      )
+      : (
+         t3 && Omega_0*command_0 > 0
+      ))
+   ))) ? (
+      0
+   )
+   : (
+      t6
+   ))
+)
+: (
+   (((t11 || t7) && (t11 || t9) && (t7 || t8) && (t8 || t9)) ? (
+      0
+   )
+   : ((Omega_0 > 0 && command_0 > t12 && Omega_0 < speed_limit) ? (
+      t12
+   )
+   : ((Omega_0 > t10 && Omega_0 < 0 && command_0 < t13) ? (
+      t13
+   )
+   : (
+      t6
+   ))))
+));
+}
+
+void lvf_wheels2_body_rhs(const float *q, const float *omega_b, const float *Omega, const float *I_p, const float *A_b, const float *J, const float *r_b, const float *F_w, const float *tau_w, const float *u, float c_w, float *q_dot, float *omega_dot_b, float *Omega_dot) {
+    const float q_0 = q[0];
+    const float q_1 = q[1];
+    const float q_2 = q[2];
+    const float q_3 = q[3];
+    const float omega_b_0 = omega_b[0];
+    const float omega_b_1 = omega_b[1];
+    const float omega_b_2 = omega_b[2];
+    const float Omega_0 = Omega[0];
+    const float Omega_1 = Omega[1];
+    const float I_p_00 = I_p[0];
+    const float I_p_01 = I_p[1];
+    const float I_p_02 = I_p[2];
+    const float I_p_11 = I_p[4];
+    const float I_p_12 = I_p[5];
+    const float I_p_22 = I_p[8];
+    const float A_b_00 = A_b[0];
+    const float A_b_01 = A_b[1];
+    const float A_b_10 = A_b[2];
+    const float A_b_11 = A_b[3];
+    const float A_b_20 = A_b[4];
+    const float A_b_21 = A_b[5];
+    const float J_0 = J[0];
+    const float J_1 = J[1];
+    const float r_b_0 = r_b[0];
+    const float r_b_1 = r_b[1];
+    const float r_b_2 = r_b[2];
+    const float F_w_0 = F_w[0];
+    const float F_w_1 = F_w[1];
+    const float F_w_2 = F_w[2];
+    const float tau_w_0 = tau_w[0];
+    const float tau_w_1 = tau_w[1];
+    const float tau_w_2 = tau_w[2];
+    const float u_0 = u[0];
+    const float u_1 = u[1];
+    const float t0 = ((1.0F/2.0F))*omega_b_0;
+    const float t1 = ((1.0F/2.0F))*omega_b_1;
+    const float t2 = ((1.0F/2.0F))*omega_b_2;
+    const float t3 = I_p_11*I_p_22;
+    const float t4 = I_p_02*I_p_12;
+    const float t5 = 2*I_p_01;
+    const float t6 = (I_p_12*I_p_12);
+    const float t7 = (I_p_01*I_p_01);
+    const float t8 = (I_p_02*I_p_02);
+    const float t9 = A_b_00*J_0;
+    const float t10 = A_b_10*t9;
+    const float t11 = I_p_01*I_p_22;
+    const float t12 = 2*t11;
+    const float t13 = 2*t4;
+    const float t14 = A_b_20*t9;
+    const float t15 = I_p_01*I_p_12;
+    const float t16 = 2*t15;
+    const float t17 = I_p_02*I_p_11;
+    const float t18 = 2*t17;
+    const float t19 = A_b_01*J_1;
+    const float t20 = A_b_11*t19;
+    const float t21 = A_b_21*t19;
+    const float t22 = A_b_10*A_b_20*J_0;
+    const float t23 = I_p_00*I_p_12;
+    const float t24 = 2*t23;
+    const float t25 = 2*I_p_01*I_p_02;
+    const float t26 = A_b_11*A_b_21*J_1;
+    const float t27 = (A_b_00*A_b_00);
+    const float t28 = J_0*t27;
+    const float t29 = (A_b_01*A_b_01);
+    const float t30 = J_1*t29;
+    const float t31 = (A_b_10*A_b_10);
+    const float t32 = J_0*t31;
+    const float t33 = (A_b_11*A_b_11);
+    const float t34 = J_1*t33;
+    const float t35 = (A_b_20*A_b_20);
+    const float t36 = J_0*t35;
+    const float t37 = (A_b_21*A_b_21);
+    const float t38 = J_1*t37;
+    const float t39 = I_p_00*I_p_22;
+    const float t40 = I_p_00*I_p_11;
+    const float t41 = 2*t20;
+    const float t42 = I_p_12*t21;
+    const float t43 = 2*t10;
+    const float t44 = I_p_12*t14;
+    const float t45 = I_p_11*t14;
+    const float t46 = 2*t21;
+    const float t47 = I_p_02*t26;
+    const float t48 = I_p_02*t22;
+    const float t49 = 2*t26;
+    const float t50 = I_p_22*t34;
+    const float t51 = I_p_11*t38;
+    const float t52 = I_p_22*t32;
+    const float t53 = I_p_11*t36;
+    const float t54 = I_p_00*t38;
+    const float t55 = I_p_00*t36;
+    const float t56 = I_p_02*t34;
+    const float t57 = 2*t14;
+    const float t58 = I_p_02*t32;
+    const float t59 = 2*t22;
+    const float t60 = (1.0F/(-I_p_00*t22*t49 + I_p_00*t3 - I_p_00*t6 - I_p_01*t36*t41 - I_p_01*t38*t43 - I_p_11*t8 - I_p_12*t28*t49 - I_p_12*t30*t59 - I_p_22*t10*t41 - I_p_22*t7 + t10*t12 - t10*t13 + t12*t20 - t13*t20 - t14*t16 + t14*t18 + t14*t26*t5 - t16*t21 + t18*t21 + t21*t22*t5 + t22*t24 - t22*t25 + t24*t26 - t25*t26 - t28*t3 + t28*t50 + t28*t51 + t28*t6 - t3*t30 + t30*t52 + t30*t53 + t30*t6 - t32*t39 + t32*t54 + t32*t8 - t34*t39 + t34*t55 + t34*t8 - t36*t40 + t36*t7 - t38*t40 + t38*t7 + t4*t5 + t41*t44 + t41*t48 + t42*t43 + t43*t47 - t45*t46 - t46*t58 - t56*t57));
+    const float t61 = -Omega_0*c_w + u_0;
+    const float t62 = -Omega_1*c_w + u_1;
+    const float t63 = 2*q_1;
+    const float t64 = q_0*t63;
+    const float t65 = 2*q_2;
+    const float t66 = q_3*t65;
+    const float t67 = t64 + t66;
+    const float t68 = q_0*t65;
+    const float t69 = q_3*t63;
+    const float t70 = t68 - t69;
+    const float t71 = 2*(q_1*q_1);
+    const float t72 = 2*(q_2*q_2) - 1;
+    const float t73 = -t71 - t72;
+    const float t74 = J_0*Omega_0;
+    const float t75 = J_1*Omega_1;
+    const float t76 = A_b_10*t74 + A_b_11*t75 + I_p_01*omega_b_0 + I_p_11*omega_b_1 + I_p_12*omega_b_2;
+    const float t77 = A_b_20*t74 + A_b_21*t75 + I_p_02*omega_b_0 + I_p_12*omega_b_1 + I_p_22*omega_b_2;
+    const float t78 = t68 + t69;
+    const float t79 = 2*q_0*q_3;
+    const float t80 = 2*q_1*q_2 - t79;
+    const float t81 = 2*(q_0*q_0);
+    const float t82 = -t71 - t81 + 1;
+    const float t83 = F_w_0*t78 + F_w_1*t80 + F_w_2*t82;
+    const float t84 = t64 - t66;
+    const float t85 = q_2*t63 + t79;
+    const float t86 = -t72 - t81;
+    const float t87 = F_w_0*t84 + F_w_1*t86 + F_w_2*t85;
+    const float t88 = -A_b_00*t61 - A_b_01*t62 - omega_b_1*t77 + omega_b_2*t76 + r_b_1*t83 - r_b_2*t87 + t67*tau_w_1 + t70*tau_w_2 + t73*tau_w_0;
+    const float t89 = A_b_00*A_b_10*I_p_22*J_0 + A_b_00*A_b_11*A_b_20*A_b_21*J_0*J_1 + A_b_01*A_b_10*A_b_20*A_b_21*J_0*J_1 + A_b_01*A_b_11*I_p_22*J_1 + I_p_01*J_0*t35 + I_p_01*J_1*t37 + I_p_02*I_p_12 - t10*t38 - t11 - t20*t36 - t42 - t44 - t47 - t48;
+    const float t90 = A_b_00*t74 + A_b_01*t75 + I_p_00*omega_b_0 + I_p_01*omega_b_1 + I_p_02*omega_b_2;
+    const float t91 = F_w_0*t73 + F_w_1*t67 + F_w_2*t70;
+    const float t92 = -A_b_10*t61 - A_b_11*t62 + omega_b_0*t77 - omega_b_2*t90 - r_b_0*t83 + r_b_2*t91 + t84*tau_w_0 + t85*tau_w_2 + t86*tau_w_1;
+    const float t93 = -I_p_01*t22 - I_p_01*t26 + I_p_11*t21 - I_p_12*t10 - I_p_12*t20 + t10*t26 - t14*t34 + t15 - t17 + t20*t22 - t21*t32 + t45 + t56 + t58;
+    const float t94 = -A_b_20*t61 - A_b_21*t62 - omega_b_0*t76 + omega_b_1*t90 + r_b_0*t87 - r_b_1*t91 + t78*tau_w_0 + t80*tau_w_1 + t82*tau_w_2;
+    const float t95 = t60*(t88*(2*A_b_10*A_b_20*I_p_12*J_0 + 2*A_b_11*A_b_21*I_p_12*J_1 + I_p_11*I_p_22 + J_0*J_1*t31*t37 + J_0*J_1*t33*t35 - t26*t59 - t50 - t51 - t52 - t53 - t6) + t89*t92 + t93*t94);
+    const float t96 = A_b_00*A_b_01*A_b_10*A_b_21*J_0*J_1 + A_b_00*A_b_01*A_b_11*A_b_20*J_0*J_1 + A_b_10*A_b_20*I_p_00*J_0 + A_b_11*A_b_21*I_p_00*J_1 + I_p_01*I_p_02 - I_p_01*t14 - I_p_01*t21 - I_p_02*t10 - I_p_02*t20 + I_p_12*J_0*t27 + I_p_12*J_1*t29 - t22*t30 - t23 - t26*t28;
+    const float t97 = t60*(t88*t89 + t92*(2*A_b_00*A_b_20*I_p_02*J_0 + 2*A_b_01*A_b_21*I_p_02*J_1 + I_p_00*I_p_22 - I_p_22*t28 - I_p_22*t30 + J_0*J_1*t27*t37 + J_0*J_1*t29*t35 - t21*t57 - t54 - t55 - t8) + t94*t96);
+    const float t98 = t60*(t88*t93 + t92*t96 + t94*(2*A_b_00*A_b_10*I_p_01*J_0 + 2*A_b_01*A_b_11*I_p_01*J_1 + I_p_00*I_p_11 - I_p_00*t32 - I_p_00*t34 - I_p_11*t28 - I_p_11*t30 + J_0*J_1*t27*t33 + J_0*J_1*t29*t31 - t20*t43 - t7));
+    q_dot[0] = q_1*t2 - q_2*t1 + q_3*t0;
+    q_dot[1] = -q_0*t2 + q_2*t0 + q_3*t1;
+    q_dot[2] = q_0*t1 - q_1*t0 + q_3*t2;
+    q_dot[3] = -q_0*t0 - q_1*t1 - q_2*t2;
+    omega_dot_b[0] = t95;
+    omega_dot_b[1] = t97;
+    omega_dot_b[2] = t98;
+    Omega_dot[0] = -A_b_00*t95 - A_b_10*t97 - A_b_20*t98 + t61/J_0;
+    Omega_dot[1] = -A_b_01*t95 - A_b_11*t97 - A_b_21*t98 + t62/J_1;
+}
+
+void lvf_wheels2_momentum(const float *q, const float *omega_b, const float *Omega, const float *I_p, const float *A_b, const float *J, float *L_body_w, float *L_wheels_w, float *h_w) {
+    const float q_0 = q[0];
+    const float q_1 = q[1];
+    const float q_2 = q[2];
+    const float q_3 = q[3];
+    const float omega_b_0 = omega_b[0];
+    const float omega_b_1 = omega_b[1];
+    const float omega_b_2 = omega_b[2];
+    const float Omega_0 = Omega[0];
+    const float Omega_1 = Omega[1];
+    const float I_p_00 = I_p[0];
+    const float I_p_01 = I_p[1];
+    const float I_p_02 = I_p[2];
+    const float I_p_11 = I_p[4];
+    const float I_p_12 = I_p[5];
+    const float I_p_22 = I_p[8];
+    const float A_b_00 = A_b[0];
+    const float A_b_01 = A_b[1];
+    const float A_b_10 = A_b[2];
+    const float A_b_11 = A_b[3];
+    const float A_b_20 = A_b[4];
+    const float A_b_21 = A_b[5];
+    const float J_0 = J[0];
+    const float J_1 = J[1];
+    const float t0 = 2*q_1;
+    const float t1 = q_0*t0;
+    const float t2 = 2*q_2;
+    const float t3 = q_3*t2;
+    const float t4 = t1 - t3;
+    const float t5 = A_b_10*J_0;
+    const float t6 = A_b_11*J_1;
+    const float t7 = -A_b_00*t5 - A_b_01*t6 + I_p_01;
+    const float t8 = -A_b_20*t5 - A_b_21*t6 + I_p_12;
+    const float t9 = omega_b_0*t7 + omega_b_1*(-(A_b_10*A_b_10)*J_0 - (A_b_11*A_b_11)*J_1 + I_p_11) + omega_b_2*t8;
+    const float t10 = q_0*t2;
+    const float t11 = q_3*t0;
+    const float t12 = t10 + t11;
+    const float t13 = -A_b_00*A_b_20*J_0 - A_b_01*A_b_21*J_1 + I_p_02;
+    const float t14 = omega_b_0*t13 + omega_b_1*t8 + omega_b_2*(-(A_b_20*A_b_20)*J_0 - (A_b_21*A_b_21)*J_1 + I_p_22);
+    const float t15 = 2*(q_1*q_1);
+    const float t16 = 2*(q_2*q_2) - 1;
+    const float t17 = -t15 - t16;
+    const float t18 = omega_b_0*(-(A_b_00*A_b_00)*J_0 - (A_b_01*A_b_01)*J_1 + I_p_00) + omega_b_1*t7 + omega_b_2*t13;
+    const float t19 = t1 + t3;
+    const float t20 = 2*q_0*q_3;
+    const float t21 = 2*q_1*q_2 - t20;
+    const float t22 = 2*(q_0*q_0);
+    const float t23 = -t16 - t22;
+    const float t24 = t10 - t11;
+    const float t25 = q_1*t2 + t20;
+    const float t26 = -t15 - t22 + 1;
+    const float t27 = J_0*(A_b_00*omega_b_0 + A_b_10*omega_b_1 + A_b_20*omega_b_2 + Omega_0);
+    const float t28 = J_1*(A_b_01*omega_b_0 + A_b_11*omega_b_1 + A_b_21*omega_b_2 + Omega_1);
+    const float t29 = A_b_10*t27 + A_b_11*t28;
+    const float t30 = A_b_20*t27 + A_b_21*t28;
+    const float t31 = A_b_00*t27 + A_b_01*t28;
+    L_body_w[0] = t12*t14 + t17*t18 + t4*t9;
+    L_body_w[1] = t14*t21 + t18*t19 + t23*t9;
+    L_body_w[2] = t14*t26 + t18*t24 + t25*t9;
+    L_wheels_w[0] = t12*t30 + t17*t31 + t29*t4;
+    L_wheels_w[1] = t19*t31 + t21*t30 + t23*t29;
+    L_wheels_w[2] = t24*t31 + t25*t29 + t26*t30;
+    h_w[0] = t27;
+    h_w[1] = t28;
+}
+
+void lvf_wheels2_motor(const float *command, const float *Omega, float torque_limit, float speed_limit, float cutoff, float *u) {
+    const float command_0 = command[0];
+    const float command_1 = command[1];
+    const float Omega_0 = Omega[0];
+    const float Omega_1 = Omega[1];
+    const float t0 = -torque_limit;
+    const float t1 = command_0 < t0;
+    const float t2 = fabsf(Omega_0);
+    const float t3 = speed_limit <= t2;
+    const float t4 = Omega_0*torque_limit;
+    const float t5 = command_0 > torque_limit;
+    const float t6 = ((t1) ? (
+   t0
+)
+: ((t5) ? (
+   torque_limit
+)
+: (
+   command_0
+)));
+    const float t7 = cutoff > 0;
+    const float t8 = Omega_0 >= speed_limit;
+    const float t9 = command_0 < 0;
+    const float t10 = command_0 > 0;
+    const float t11 = -speed_limit;
+    const float t12 = Omega_0 <= t11;
+    const float t13 = (1.0F/speed_limit);
+    const float t14 = torque_limit*(-t13*t2 + 1);
+    const float t15 = -t14;
+    const float t16 = command_1 < t0;
+    const float t17 = fabsf(Omega_1);
+    const float t18 = speed_limit <= t17;
+    const float t19 = Omega_1*torque_limit;
+    const float t20 = command_1 > torque_limit;
+    const float t21 = ((t16) ? (
+   t0
+)
+: ((t20) ? (
+   torque_limit
+)
+: (
+   command_1
+)));
+    const float t22 = Omega_1 >= speed_limit;
+    const float t23 = command_1 < 0;
+    const float t24 = command_1 > 0;
+    const float t25 = Omega_1 <= t11;
+    const float t26 = torque_limit*(-t13*t17 + 1);
+    const float t27 = -t26;
+    u[0] = ((t7) ? (
+   ((((t1) ? (
+      t3 && t4 < 0
+   )
+   : (
+      ((t5) ? (
+         t3 && t4 > 0
+      )
+      : (
+         t3 && Omega_0*command_0 > 0
+      ))
+   ))) ? (
+      0
+   )
+   : (
+      t6
+   ))
+)
+: (
+   (((t10 || t12) && (t10 || t9) && (t12 || t8) && (t8 || t9)) ? (
+      0
+   )
+   : ((Omega_0 > 0 && command_0 > t14 && Omega_0 < speed_limit) ? (
+      t14
+   )
+   : ((Omega_0 > t11 && Omega_0 < 0 && command_0 < t15) ? (
+      t15
+   )
+   : (
+      t6
+   ))))
+));
+    u[1] = ((t7) ? (
+   ((((t16) ? (
+      t18 && t19 < 0
+   )
+   : (
+      ((t20) ? (
+         t18 && t19 > 0
+      )
+      : (
+         t18 && Omega_1*command_1 > 0
+      ))
+   ))) ? (
+      0
+   )
+   : (
+      t21
+   ))
+)
+: (
+   (((t22 || t23) && (t22 || t25) && (t23 || t24) && (t24 || t25)) ? (
+      0
+   )
+   : ((Omega_1 > 0 && command_1 > t26 && Omega_1 < speed_limit) ? (
+      t26
+   )
+   : ((Omega_1 > t11 && Omega_1 < 0 && command_1 < t27) ? (
+      t27
+   )
+   : (
+      t21
+   ))))
+));
+}
+
+void lvf_wheels3_body_rhs(const float *q, const float *omega_b, const float *Omega, const float *I_p, const float *A_b, const float *J, const float *r_b, const float *F_w, const float *tau_w, const float *u, float c_w, float *q_dot, float *omega_dot_b, float *Omega_dot) {
+    const float q_0 = q[0];
+    const float q_1 = q[1];
+    const float q_2 = q[2];
+    const float q_3 = q[3];
+    const float omega_b_0 = omega_b[0];
+    const float omega_b_1 = omega_b[1];
+    const float omega_b_2 = omega_b[2];
+    const float Omega_0 = Omega[0];
+    const float Omega_1 = Omega[1];
+    const float Omega_2 = Omega[2];
+    const float I_p_00 = I_p[0];
+    const float I_p_01 = I_p[1];
+    const float I_p_02 = I_p[2];
+    const float I_p_11 = I_p[4];
+    const float I_p_12 = I_p[5];
+    const float I_p_22 = I_p[8];
+    const float A_b_00 = A_b[0];
+    const float A_b_01 = A_b[1];
+    const float A_b_02 = A_b[2];
+    const float A_b_10 = A_b[3];
+    const float A_b_11 = A_b[4];
+    const float A_b_12 = A_b[5];
+    const float A_b_20 = A_b[6];
+    const float A_b_21 = A_b[7];
+    const float A_b_22 = A_b[8];
+    const float J_0 = J[0];
+    const float J_1 = J[1];
+    const float J_2 = J[2];
+    const float r_b_0 = r_b[0];
+    const float r_b_1 = r_b[1];
+    const float r_b_2 = r_b[2];
+    const float F_w_0 = F_w[0];
+    const float F_w_1 = F_w[1];
+    const float F_w_2 = F_w[2];
+    const float tau_w_0 = tau_w[0];
+    const float tau_w_1 = tau_w[1];
+    const float tau_w_2 = tau_w[2];
+    const float u_0 = u[0];
+    const float u_1 = u[1];
+    const float u_2 = u[2];
+    const float t0 = ((1.0F/2.0F))*omega_b_0;
+    const float t1 = ((1.0F/2.0F))*omega_b_1;
+    const float t2 = ((1.0F/2.0F))*omega_b_2;
+    const float t3 = I_p_11*I_p_22;
+    const float t4 = (I_p_12*I_p_12);
+    const float t5 = A_b_10*A_b_20*J_0;
+    const float t6 = 2*I_p_12;
+    const float t7 = A_b_11*A_b_21*J_1;
+    const float t8 = A_b_12*A_b_22*J_2;
+    const float t9 = (A_b_10*A_b_10)*J_0;
+    const float t10 = I_p_22*t9;
+    const float t11 = (A_b_11*A_b_11)*J_1;
+    const float t12 = I_p_22*t11;
+    const float t13 = (A_b_12*A_b_12)*J_2;
+    const float t14 = I_p_22*t13;
+    const float t15 = (A_b_20*A_b_20);
+    const float t16 = J_0*t15;
+    const float t17 = I_p_11*t16;
+    const float t18 = (A_b_21*A_b_21);
+    const float t19 = J_1*t18;
+    const float t20 = I_p_11*t19;
+    const float t21 = (A_b_22*A_b_22);
+    const float t22 = J_2*t21;
+    const float t23 = I_p_11*t22;
+    const float t24 = 2*t5;
+    const float t25 = 2*t7;
+    const float t26 = t19*t9;
+    const float t27 = t22*t9;
+    const float t28 = t11*t16;
+    const float t29 = t11*t22;
+    const float t30 = t13*t16;
+    const float t31 = t13*t19;
+    const float t32 = -Omega_0*c_w + u_0;
+    const float t33 = -Omega_1*c_w + u_1;
+    const float t34 = -Omega_2*c_w + u_2;
+    const float t35 = 2*q_1;
+    const float t36 = q_0*t35;
+    const float t37 = 2*q_2;
+    const float t38 = q_3*t37;
+    const float t39 = t36 + t38;
+    const float t40 = q_0*t37;
+    const float t41 = q_3*t35;
+    const float t42 = t40 - t41;
+    const float t43 = 2*(q_1*q_1);
+    const float t44 = 2*(q_2*q_2) - 1;
+    const float t45 = -t43 - t44;
+    const float t46 = J_0*Omega_0;
+    const float t47 = J_1*Omega_1;
+    const float t48 = J_2*Omega_2;
+    const float t49 = A_b_20*t46 + A_b_21*t47 + A_b_22*t48 + I_p_02*omega_b_0 + I_p_12*omega_b_1 + I_p_22*omega_b_2;
+    const float t50 = A_b_10*t46 + A_b_11*t47 + A_b_12*t48 + I_p_01*omega_b_0 + I_p_11*omega_b_1 + I_p_12*omega_b_2;
+    const float t51 = t36 - t38;
+    const float t52 = 2*q_0*q_3;
+    const float t53 = q_2*t35 + t52;
+    const float t54 = 2*(q_0*q_0);
+    const float t55 = -t44 - t54;
+    const float t56 = F_w_0*t51 + F_w_1*t55 + F_w_2*t53;
+    const float t57 = t40 + t41;
+    const float t58 = 2*q_1*q_2 - t52;
+    const float t59 = -t43 - t54 + 1;
+    const float t60 = F_w_0*t57 + F_w_1*t58 + F_w_2*t59;
+    const float t61 = -A_b_00*t32 - A_b_01*t33 - A_b_02*t34 - omega_b_1*t49 + omega_b_2*t50 + r_b_1*t60 - r_b_2*t56 + t39*tau_w_1 + t42*tau_w_2 + t45*tau_w_0;
+    const float t62 = I_p_01*I_p_22;
+    const float t63 = A_b_00*J_0;
+    const float t64 = A_b_20*t63;
+    const float t65 = I_p_12*t64;
+    const float t66 = A_b_01*J_1;
+    const float t67 = A_b_21*t66;
+    const float t68 = I_p_12*t67;
+    const float t69 = A_b_02*J_2;
+    const float t70 = A_b_22*t69;
+    const float t71 = I_p_12*t70;
+    const float t72 = I_p_02*t5;
+    const float t73 = I_p_02*t7;
+    const float t74 = I_p_02*t8;
+    const float t75 = A_b_10*t63;
+    const float t76 = t19*t75;
+    const float t77 = t22*t75;
+    const float t78 = A_b_11*t66;
+    const float t79 = t16*t78;
+    const float t80 = A_b_12*t69;
+    const float t81 = A_b_00*A_b_10*I_p_22*J_0 + A_b_00*A_b_11*A_b_20*A_b_21*J_0*J_1 + A_b_00*A_b_12*A_b_20*A_b_22*J_0*J_2 + A_b_01*A_b_10*A_b_20*A_b_21*J_0*J_1 + A_b_01*A_b_11*I_p_22*J_1 + A_b_01*A_b_12*A_b_21*A_b_22*J_1*J_2 + A_b_02*A_b_10*A_b_20*A_b_22*J_0*J_2 + A_b_02*A_b_11*A_b_21*A_b_22*J_1*J_2 + A_b_02*A_b_12*I_p_22*J_2 + I_p_01*J_0*t15 + I_p_01*J_1*t18 + I_p_01*J_2*t21 + I_p_02*I_p_12 - t16*t80 - t19*t80 - t22*t78 - t62 - t65 - t68 - t71 - t72 - t73 - t74 - t76 - t77 - t79;
+    const float t82 = A_b_00*t46 + A_b_01*t47 + A_b_02*t48 + I_p_00*omega_b_0 + I_p_01*omega_b_1 + I_p_02*omega_b_2;
+    const float t83 = F_w_0*t45 + F_w_1*t39 + F_w_2*t42;
+    const float t84 = -A_b_10*t32 - A_b_11*t33 - A_b_12*t34 + omega_b_0*t49 - omega_b_2*t82 - r_b_0*t60 + r_b_2*t83 + t51*tau_w_0 + t53*tau_w_2 + t55*tau_w_1;
+    const float t85 = I_p_01*I_p_12;
+    const float t86 = I_p_02*I_p_11;
+    const float t87 = I_p_11*t64;
+    const float t88 = I_p_11*t67;
+    const float t89 = I_p_02*t9;
+    const float t90 = I_p_02*t11;
+    const float t91 = I_p_02*t13;
+    const float t92 = t11*t64;
+    const float t93 = t13*t64;
+    const float t94 = t67*t9;
+    const float t95 = -I_p_01*t5 - I_p_01*t7 - I_p_01*t8 + I_p_11*t70 - I_p_12*t75 - I_p_12*t78 - I_p_12*t80 - t11*t70 - t13*t67 + t5*t78 + t5*t80 + t7*t75 + t7*t80 - t70*t9 + t75*t8 + t78*t8 + t85 - t86 + t87 + t88 + t89 + t90 + t91 - t92 - t93 - t94;
+    const float t96 = -A_b_20*t32 - A_b_21*t33 - A_b_22*t34 - omega_b_0*t50 + omega_b_1*t82 + r_b_0*t56 - r_b_1*t83 + t57*tau_w_0 + t58*tau_w_1 + t59*tau_w_2;
+    const float t97 = I_p_02*I_p_12;
+    const float t98 = 2*I_p_01;
+    const float t99 = (I_p_01*I_p_01);
+    const float t100 = (I_p_02*I_p_02);
+    const float t101 = 2*t62;
+    const float t102 = 2*t97;
+    const float t103 = 2*t85;
+    const float t104 = 2*t86;
+    const float t105 = I_p_00*I_p_12;
+    const float t106 = 2*t105;
+    const float t107 = 2*I_p_01*I_p_02;
+    const float t108 = (A_b_00*A_b_00);
+    const float t109 = J_0*t108;
+    const float t110 = (A_b_01*A_b_01);
+    const float t111 = J_1*t110;
+    const float t112 = (A_b_02*A_b_02);
+    const float t113 = J_2*t112;
+    const float t114 = I_p_00*I_p_22;
+    const float t115 = I_p_00*I_p_11;
+    const float t116 = I_p_22*t75;
+    const float t117 = 2*t78;
+    const float t118 = 2*t75;
+    const float t119 = 2*t67;
+    const float t120 = 2*t80;
+    const float t121 = 2*t70;
+    const float t122 = t64*t7;
+    const float t123 = t64*t8;
+    const float t124 = t5*t67;
+    const float t125 = t67*t8;
+    const float t126 = t5*t70;
+    const float t127 = t7*t70;
+    const float t128 = I_p_00*t5;
+    const float t129 = 2*t8;
+    const float t130 = I_p_00*t19;
+    const float t131 = I_p_00*t22;
+    const float t132 = I_p_00*t16;
+    const float t133 = I_p_01*t19;
+    const float t134 = I_p_01*t22;
+    const float t135 = 2*t64;
+    const float t136 = I_p_12*t109;
+    const float t137 = I_p_01*t16;
+    const float t138 = I_p_12*t111;
+    const float t139 = I_p_12*t113;
+    const float t140 = t109*t7;
+    const float t141 = t111*t5;
+    const float t142 = t113*t5;
+    const float t143 = (1.0F/(-I_p_00*t129*t7 + I_p_00*t3 - I_p_00*t4 - I_p_11*t100 - I_p_22*t120*t78 - I_p_22*t99 + t10*t111 + t10*t113 + t100*t11 + t100*t13 + t100*t9 + t101*t75 + t101*t78 + t101*t80 - t102*t75 - t102*t78 - t102*t80 - t103*t64 - t103*t67 - t103*t70 + t104*t64 + t104*t67 + t104*t70 + t106*t5 + t106*t7 + t106*t8 - t107*t5 - t107*t7 - t107*t8 + t109*t12 + t109*t14 + t109*t20 + t109*t23 - t109*t29 - t109*t3 - t109*t31 + t109*t4 - t11*t114 + t11*t131 + t11*t132 + t111*t14 + t111*t17 + t111*t23 - t111*t27 - t111*t3 - t111*t30 + t111*t4 + t113*t12 + t113*t17 + t113*t20 - t113*t26 - t113*t28 - t113*t3 + t113*t4 - t114*t13 - t114*t9 - t115*t16 - t115*t19 - t115*t22 - t116*t117 - t116*t120 - t117*t123 - t117*t126 - t117*t134 - t117*t137 + t117*t65 + t117*t71 + t117*t72 + t117*t74 + t117*t77 - t118*t125 - t118*t127 - t118*t133 - t118*t134 + t118*t68 + t118*t71 + t118*t73 + t118*t74 - t119*t87 - t119*t89 - t119*t91 + t119*t93 - t120*t122 - t120*t124 - t120*t133 - t120*t137 + t120*t65 + t120*t68 + t120*t72 + t120*t73 + t120*t76 + t120*t79 - t121*t87 - t121*t88 - t121*t89 - t121*t90 + t121*t92 + t121*t94 + t122*t98 + t123*t98 + t124*t98 + t125*t98 + t126*t98 + t127*t98 - t128*t129 - t128*t25 - t129*t136 - t129*t138 + t129*t140 + t129*t141 + t13*t130 + t13*t132 + t130*t9 + t131*t9 - t135*t90 - t135*t91 - t136*t25 - t138*t24 - t139*t24 - t139*t25 + t142*t25 + t16*t99 + t19*t99 + t22*t99 + t97*t98));
+    const float t144 = t143*(t61*(-t10 - t12 - t14 - t17 - t20 - t23 - t24*t7 - t24*t8 - t25*t8 + t26 + t27 + t28 + t29 + t3 + t30 + t31 - t4 + t5*t6 + t6*t7 + t6*t8) + t81*t84 + t95*t96);
+    const float t145 = 2*I_p_02;
+    const float t146 = A_b_00*A_b_01*A_b_10*A_b_21*J_0*J_1 + A_b_00*A_b_01*A_b_11*A_b_20*J_0*J_1 + A_b_00*A_b_02*A_b_10*A_b_22*J_0*J_2 + A_b_00*A_b_02*A_b_12*A_b_20*J_0*J_2 + A_b_01*A_b_02*A_b_11*A_b_22*J_1*J_2 + A_b_01*A_b_02*A_b_12*A_b_21*J_1*J_2 + A_b_10*A_b_20*I_p_00*J_0 + A_b_11*A_b_21*I_p_00*J_1 + A_b_12*A_b_22*I_p_00*J_2 + I_p_01*I_p_02 - I_p_01*t64 - I_p_01*t67 - I_p_01*t70 - I_p_02*t75 - I_p_02*t78 - I_p_02*t80 + I_p_12*J_0*t108 + I_p_12*J_1*t110 + I_p_12*J_2*t112 - t105 - t109*t8 - t111*t8 - t113*t7 - t140 - t141 - t142;
+    const float t147 = t143*(t146*t96 + t61*t81 + t84*(-I_p_22*t109 - I_p_22*t111 - I_p_22*t113 - t100 + t109*t19 + t109*t22 + t111*t16 + t111*t22 + t113*t16 + t113*t19 + t114 - t119*t70 - t130 - t131 - t132 - t135*t67 - t135*t70 + t145*t64 + t145*t67 + t145*t70));
+    const float t148 = t143*(t146*t84 + t61*t95 + t96*(-I_p_00*t11 - I_p_00*t13 - I_p_00*t9 - I_p_11*t109 - I_p_11*t111 - I_p_11*t113 + t109*t11 + t109*t13 + t11*t113 + t111*t13 + t111*t9 + t113*t9 + t115 - t117*t80 - t118*t78 - t118*t80 + t75*t98 + t78*t98 + t80*t98 - t99));
+    q_dot[0] = q_1*t2 - q_2*t1 + q_3*t0;
+    q_dot[1] = -q_0*t2 + q_2*t0 + q_3*t1;
+    q_dot[2] = q_0*t1 - q_1*t0 + q_3*t2;
+    q_dot[3] = -q_0*t0 - q_1*t1 - q_2*t2;
+    omega_dot_b[0] = t144;
+    omega_dot_b[1] = t147;
+    omega_dot_b[2] = t148;
+    Omega_dot[0] = -A_b_00*t144 - A_b_10*t147 - A_b_20*t148 + t32/J_0;
+    Omega_dot[1] = -A_b_01*t144 - A_b_11*t147 - A_b_21*t148 + t33/J_1;
+    Omega_dot[2] = -A_b_02*t144 - A_b_12*t147 - A_b_22*t148 + t34/J_2;
+}
+
+void lvf_wheels3_momentum(const float *q, const float *omega_b, const float *Omega, const float *I_p, const float *A_b, const float *J, float *L_body_w, float *L_wheels_w, float *h_w) {
+    const float q_0 = q[0];
+    const float q_1 = q[1];
+    const float q_2 = q[2];
+    const float q_3 = q[3];
+    const float omega_b_0 = omega_b[0];
+    const float omega_b_1 = omega_b[1];
+    const float omega_b_2 = omega_b[2];
+    const float Omega_0 = Omega[0];
+    const float Omega_1 = Omega[1];
+    const float Omega_2 = Omega[2];
+    const float I_p_00 = I_p[0];
+    const float I_p_01 = I_p[1];
+    const float I_p_02 = I_p[2];
+    const float I_p_11 = I_p[4];
+    const float I_p_12 = I_p[5];
+    const float I_p_22 = I_p[8];
+    const float A_b_00 = A_b[0];
+    const float A_b_01 = A_b[1];
+    const float A_b_02 = A_b[2];
+    const float A_b_10 = A_b[3];
+    const float A_b_11 = A_b[4];
+    const float A_b_12 = A_b[5];
+    const float A_b_20 = A_b[6];
+    const float A_b_21 = A_b[7];
+    const float A_b_22 = A_b[8];
+    const float J_0 = J[0];
+    const float J_1 = J[1];
+    const float J_2 = J[2];
+    const float t0 = 2*q_1;
+    const float t1 = q_0*t0;
+    const float t2 = 2*q_2;
+    const float t3 = q_3*t2;
+    const float t4 = t1 - t3;
+    const float t5 = A_b_10*J_0;
+    const float t6 = A_b_11*J_1;
+    const float t7 = A_b_12*J_2;
+    const float t8 = -A_b_00*t5 - A_b_01*t6 - A_b_02*t7 + I_p_01;
+    const float t9 = -A_b_20*t5 - A_b_21*t6 - A_b_22*t7 + I_p_12;
+    const float t10 = omega_b_0*t8 + omega_b_1*(-(A_b_10*A_b_10)*J_0 - (A_b_11*A_b_11)*J_1 - (A_b_12*A_b_12)*J_2 + I_p_11) + omega_b_2*t9;
+    const float t11 = q_0*t2;
+    const float t12 = q_3*t0;
+    const float t13 = t11 + t12;
+    const float t14 = -A_b_00*A_b_20*J_0 - A_b_01*A_b_21*J_1 - A_b_02*A_b_22*J_2 + I_p_02;
+    const float t15 = omega_b_0*t14 + omega_b_1*t9 + omega_b_2*(-(A_b_20*A_b_20)*J_0 - (A_b_21*A_b_21)*J_1 - (A_b_22*A_b_22)*J_2 + I_p_22);
+    const float t16 = 2*(q_1*q_1);
+    const float t17 = 2*(q_2*q_2) - 1;
+    const float t18 = -t16 - t17;
+    const float t19 = omega_b_0*(-(A_b_00*A_b_00)*J_0 - (A_b_01*A_b_01)*J_1 - (A_b_02*A_b_02)*J_2 + I_p_00) + omega_b_1*t8 + omega_b_2*t14;
+    const float t20 = t1 + t3;
+    const float t21 = 2*q_0*q_3;
+    const float t22 = 2*q_1*q_2 - t21;
+    const float t23 = 2*(q_0*q_0);
+    const float t24 = -t17 - t23;
+    const float t25 = t11 - t12;
+    const float t26 = q_1*t2 + t21;
+    const float t27 = -t16 - t23 + 1;
+    const float t28 = J_0*(A_b_00*omega_b_0 + A_b_10*omega_b_1 + A_b_20*omega_b_2 + Omega_0);
+    const float t29 = J_1*(A_b_01*omega_b_0 + A_b_11*omega_b_1 + A_b_21*omega_b_2 + Omega_1);
+    const float t30 = J_2*(A_b_02*omega_b_0 + A_b_12*omega_b_1 + A_b_22*omega_b_2 + Omega_2);
+    const float t31 = A_b_10*t28 + A_b_11*t29 + A_b_12*t30;
+    const float t32 = A_b_20*t28 + A_b_21*t29 + A_b_22*t30;
+    const float t33 = A_b_00*t28 + A_b_01*t29 + A_b_02*t30;
+    L_body_w[0] = t10*t4 + t13*t15 + t18*t19;
+    L_body_w[1] = t10*t24 + t15*t22 + t19*t20;
+    L_body_w[2] = t10*t26 + t15*t27 + t19*t25;
+    L_wheels_w[0] = t13*t32 + t18*t33 + t31*t4;
+    L_wheels_w[1] = t20*t33 + t22*t32 + t24*t31;
+    L_wheels_w[2] = t25*t33 + t26*t31 + t27*t32;
+    h_w[0] = t28;
+    h_w[1] = t29;
+    h_w[2] = t30;
+}
+
+void lvf_wheels3_motor(const float *command, const float *Omega, float torque_limit, float speed_limit, float cutoff, float *u) {
+    const float command_0 = command[0];
+    const float command_1 = command[1];
+    const float command_2 = command[2];
+    const float Omega_0 = Omega[0];
+    const float Omega_1 = Omega[1];
+    const float Omega_2 = Omega[2];
+    const float t0 = -torque_limit;
+    const float t1 = command_0 < t0;
+    const float t2 = fabsf(Omega_0);
+    const float t3 = speed_limit <= t2;
+    const float t4 = Omega_0*torque_limit;
+    const float t5 = command_0 > torque_limit;
+    const float t6 = ((t1) ? (
+   t0
+)
+: ((t5) ? (
+   torque_limit
+)
+: (
+   command_0
+)));
+    const float t7 = cutoff > 0;
+    const float t8 = Omega_0 >= speed_limit;
+    const float t9 = command_0 < 0;
+    const float t10 = command_0 > 0;
+    const float t11 = -speed_limit;
+    const float t12 = Omega_0 <= t11;
+    const float t13 = (1.0F/speed_limit);
+    const float t14 = torque_limit*(-t13*t2 + 1);
+    const float t15 = -t14;
+    const float t16 = command_1 < t0;
+    const float t17 = fabsf(Omega_1);
+    const float t18 = speed_limit <= t17;
+    const float t19 = Omega_1*torque_limit;
+    const float t20 = command_1 > torque_limit;
+    const float t21 = ((t16) ? (
+   t0
+)
+: ((t20) ? (
+   torque_limit
+)
+: (
+   command_1
+)));
+    const float t22 = Omega_1 >= speed_limit;
+    const float t23 = command_1 < 0;
+    const float t24 = command_1 > 0;
+    const float t25 = Omega_1 <= t11;
+    const float t26 = torque_limit*(-t13*t17 + 1);
+    const float t27 = -t26;
+    const float t28 = command_2 < t0;
+    const float t29 = fabsf(Omega_2);
+    const float t30 = speed_limit <= t29;
+    const float t31 = Omega_2*torque_limit;
+    const float t32 = command_2 > torque_limit;
+    const float t33 = ((t28) ? (
+   t0
+)
+: ((t32) ? (
+   torque_limit
+)
+: (
+   command_2
+)));
+    const float t34 = Omega_2 >= speed_limit;
+    const float t35 = command_2 < 0;
+    const float t36 = command_2 > 0;
+    const float t37 = Omega_2 <= t11;
+    const float t38 = torque_limit*(-t13*t29 + 1);
+    const float t39 = -t38;
+    u[0] = ((t7) ? (
+   ((((t1) ? (
+      t3 && t4 < 0
+   )
+   : (
+      ((t5) ? (
+         t3 && t4 > 0
+      )
+      : (
+         t3 && Omega_0*command_0 > 0
+      ))
+   ))) ? (
+      0
+   )
+   : (
+      t6
+   ))
+)
+: (
+   (((t10 || t12) && (t10 || t9) && (t12 || t8) && (t8 || t9)) ? (
+      0
+   )
+   : ((Omega_0 > 0 && command_0 > t14 && Omega_0 < speed_limit) ? (
+      t14
+   )
+   : ((Omega_0 > t11 && Omega_0 < 0 && command_0 < t15) ? (
+      t15
+   )
+   : (
+      t6
+   ))))
+));
+    u[1] = ((t7) ? (
+   ((((t16) ? (
+      t18 && t19 < 0
+   )
+   : (
+      ((t20) ? (
+         t18 && t19 > 0
+      )
+      : (
+         t18 && Omega_1*command_1 > 0
+      ))
+   ))) ? (
+      0
+   )
+   : (
+      t21
+   ))
+)
+: (
+   (((t22 || t23) && (t22 || t25) && (t23 || t24) && (t24 || t25)) ? (
+      0
+   )
+   : ((Omega_1 > 0 && command_1 > t26 && Omega_1 < speed_limit) ? (
+      t26
+   )
+   : ((Omega_1 > t11 && Omega_1 < 0 && command_1 < t27) ? (
+      t27
+   )
+   : (
+      t21
+   ))))
+));
+    u[2] = ((t7) ? (
+   ((((t28) ? (
+      t30 && t31 < 0
+   )
+   : (
+      ((t32) ? (
+         t30 && t31 > 0
+      )
+      : (
+         t30 && Omega_2*command_2 > 0
+      ))
+   ))) ? (
+      0
+   )
+   : (
+      t33
+   ))
+)
+: (
+   (((t34 || t35) && (t34 || t37) && (t35 || t36) && (t36 || t37)) ? (
+      0
+   )
+   : ((Omega_2 > 0 && command_2 > t38 && Omega_2 < speed_limit) ? (
+      t38
+   )
+   : ((Omega_2 > t11 && Omega_2 < 0 && command_2 < t39) ? (
+      t39
+   )
+   : (
+      t33
+   ))))
+));
+}
+
+void lvf_wheels4_body_rhs(const float *q, const float *omega_b, const float *Omega, const float *I_p, const float *A_b, const float *J, const float *r_b, const float *F_w, const float *tau_w, const float *u, float c_w, float *q_dot, float *omega_dot_b, float *Omega_dot) {
+    const float q_0 = q[0];
+    const float q_1 = q[1];
+    const float q_2 = q[2];
+    const float q_3 = q[3];
+    const float omega_b_0 = omega_b[0];
+    const float omega_b_1 = omega_b[1];
+    const float omega_b_2 = omega_b[2];
+    const float Omega_0 = Omega[0];
+    const float Omega_1 = Omega[1];
+    const float Omega_2 = Omega[2];
+    const float Omega_3 = Omega[3];
+    const float I_p_00 = I_p[0];
+    const float I_p_01 = I_p[1];
+    const float I_p_02 = I_p[2];
+    const float I_p_11 = I_p[4];
+    const float I_p_12 = I_p[5];
+    const float I_p_22 = I_p[8];
+    const float A_b_00 = A_b[0];
+    const float A_b_01 = A_b[1];
+    const float A_b_02 = A_b[2];
+    const float A_b_03 = A_b[3];
+    const float A_b_10 = A_b[4];
+    const float A_b_11 = A_b[5];
+    const float A_b_12 = A_b[6];
+    const float A_b_13 = A_b[7];
+    const float A_b_20 = A_b[8];
+    const float A_b_21 = A_b[9];
+    const float A_b_22 = A_b[10];
+    const float A_b_23 = A_b[11];
+    const float J_0 = J[0];
+    const float J_1 = J[1];
+    const float J_2 = J[2];
+    const float J_3 = J[3];
+    const float r_b_0 = r_b[0];
+    const float r_b_1 = r_b[1];
+    const float r_b_2 = r_b[2];
+    const float F_w_0 = F_w[0];
+    const float F_w_1 = F_w[1];
+    const float F_w_2 = F_w[2];
+    const float tau_w_0 = tau_w[0];
+    const float tau_w_1 = tau_w[1];
+    const float tau_w_2 = tau_w[2];
+    const float u_0 = u[0];
+    const float u_1 = u[1];
+    const float u_2 = u[2];
+    const float u_3 = u[3];
+    const float t0 = ((1.0F/2.0F))*omega_b_0;
+    const float t1 = ((1.0F/2.0F))*omega_b_1;
+    const float t2 = ((1.0F/2.0F))*omega_b_2;
+    const float t3 = -Omega_0*c_w + u_0;
+    const float t4 = -Omega_1*c_w + u_1;
+    const float t5 = -Omega_2*c_w + u_2;
+    const float t6 = -Omega_3*c_w + u_3;
+    const float t7 = 2*q_1;
+    const float t8 = q_0*t7;
+    const float t9 = 2*q_2;
+    const float t10 = q_3*t9;
+    const float t11 = t10 + t8;
+    const float t12 = q_0*t9;
+    const float t13 = q_3*t7;
+    const float t14 = t12 - t13;
+    const float t15 = 2*(q_1*q_1);
+    const float t16 = 2*(q_2*q_2) - 1;
+    const float t17 = -t15 - t16;
+    const float t18 = J_0*Omega_0;
+    const float t19 = J_1*Omega_1;
+    const float t20 = J_2*Omega_2;
+    const float t21 = J_3*Omega_3;
+    const float t22 = A_b_20*t18 + A_b_21*t19 + A_b_22*t20 + A_b_23*t21 + I_p_02*omega_b_0 + I_p_12*omega_b_1 + I_p_22*omega_b_2;
+    const float t23 = A_b_10*t18 + A_b_11*t19 + A_b_12*t20 + A_b_13*t21 + I_p_01*omega_b_0 + I_p_11*omega_b_1 + I_p_12*omega_b_2;
+    const float t24 = -t10 + t8;
+    const float t25 = 2*q_0*q_3;
+    const float t26 = q_2*t7 + t25;
+    const float t27 = 2*(q_0*q_0);
+    const float t28 = -t16 - t27;
+    const float t29 = F_w_0*t24 + F_w_1*t28 + F_w_2*t26;
+    const float t30 = t12 + t13;
+    const float t31 = 2*q_1*q_2 - t25;
+    const float t32 = -t15 - t27 + 1;
+    const float t33 = F_w_0*t30 + F_w_1*t31 + F_w_2*t32;
+    const float t34 = -A_b_00*t3 - A_b_01*t4 - A_b_02*t5 - A_b_03*t6 - omega_b_1*t22 + omega_b_2*t23 + r_b_1*t33 - r_b_2*t29 + t11*tau_w_1 + t14*tau_w_2 + t17*tau_w_0;
+    const float t35 = I_p_11*I_p_22;
+    const float t36 = (I_p_12*I_p_12);
+    const float t37 = A_b_10*A_b_20*J_0;
+    const float t38 = 2*I_p_12;
+    const float t39 = A_b_11*A_b_21*J_1;
+    const float t40 = A_b_12*A_b_22*J_2;
+    const float t41 = A_b_13*A_b_23*J_3;
+    const float t42 = (A_b_10*A_b_10)*J_0;
+    const float t43 = I_p_22*t42;
+    const float t44 = (A_b_11*A_b_11)*J_1;
+    const float t45 = I_p_22*t44;
+    const float t46 = (A_b_12*A_b_12)*J_2;
+    const float t47 = I_p_22*t46;
+    const float t48 = (A_b_13*A_b_13)*J_3;
+    const float t49 = I_p_22*t48;
+    const float t50 = (A_b_20*A_b_20);
+    const float t51 = J_0*t50;
+    const float t52 = I_p_11*t51;
+    const float t53 = (A_b_21*A_b_21);
+    const float t54 = J_1*t53;
+    const float t55 = I_p_11*t54;
+    const float t56 = (A_b_22*A_b_22);
+    const float t57 = J_2*t56;
+    const float t58 = I_p_11*t57;
+    const float t59 = (A_b_23*A_b_23);
+    const float t60 = J_3*t59;
+    const float t61 = I_p_11*t60;
+    const float t62 = 2*t37;
+    const float t63 = 2*t39;
+    const float t64 = 2*t40;
+    const float t65 = t42*t54;
+    const float t66 = t42*t57;
+    const float t67 = t42*t60;
+    const float t68 = t44*t51;
+    const float t69 = t44*t57;
+    const float t70 = t44*t60;
+    const float t71 = t46*t51;
+    const float t72 = t46*t54;
+    const float t73 = t46*t60;
+    const float t74 = t48*t51;
+    const float t75 = t48*t54;
+    const float t76 = t48*t57;
+    const float t77 = A_b_00*t18 + A_b_01*t19 + A_b_02*t20 + A_b_03*t21 + I_p_00*omega_b_0 + I_p_01*omega_b_1 + I_p_02*omega_b_2;
+    const float t78 = F_w_0*t17 + F_w_1*t11 + F_w_2*t14;
+    const float t79 = -A_b_10*t3 - A_b_11*t4 - A_b_12*t5 - A_b_13*t6 + omega_b_0*t22 - omega_b_2*t77 - r_b_0*t33 + r_b_2*t78 + t24*tau_w_0 + t26*tau_w_2 + t28*tau_w_1;
+    const float t80 = I_p_01*I_p_22;
+    const float t81 = A_b_00*J_0;
+    const float t82 = A_b_20*t81;
+    const float t83 = I_p_12*t82;
+    const float t84 = A_b_01*J_1;
+    const float t85 = A_b_21*t84;
+    const float t86 = I_p_12*t85;
+    const float t87 = A_b_02*J_2;
+    const float t88 = A_b_22*t87;
+    const float t89 = I_p_12*t88;
+    const float t90 = A_b_03*J_3;
+    const float t91 = A_b_23*t90;
+    const float t92 = I_p_12*t91;
+    const float t93 = I_p_02*t37;
+    const float t94 = I_p_02*t39;
+    const float t95 = I_p_02*t40;
+    const float t96 = I_p_02*t41;
+    const float t97 = A_b_10*t81;
+    const float t98 = t54*t97;
+    const float t99 = t57*t97;
+    const float t100 = t60*t97;
+    const float t101 = A_b_11*t84;
+    const float t102 = t101*t51;
+    const float t103 = t101*t57;
+    const float t104 = t101*t60;
+    const float t105 = A_b_12*t87;
+    const float t106 = t105*t51;
+    const float t107 = t105*t54;
+    const float t108 = A_b_13*t90;
+    const float t109 = A_b_00*A_b_10*I_p_22*J_0 + A_b_00*A_b_11*A_b_20*A_b_21*J_0*J_1 + A_b_00*A_b_12*A_b_20*A_b_22*J_0*J_2 + A_b_00*A_b_13*A_b_20*A_b_23*J_0*J_3 + A_b_01*A_b_10*A_b_20*A_b_21*J_0*J_1 + A_b_01*A_b_11*I_p_22*J_1 + A_b_01*A_b_12*A_b_21*A_b_22*J_1*J_2 + A_b_01*A_b_13*A_b_21*A_b_23*J_1*J_3 + A_b_02*A_b_10*A_b_20*A_b_22*J_0*J_2 + A_b_02*A_b_11*A_b_21*A_b_22*J_1*J_2 + A_b_02*A_b_12*I_p_22*J_2 + A_b_02*A_b_13*A_b_22*A_b_23*J_2*J_3 + A_b_03*A_b_10*A_b_20*A_b_23*J_0*J_3 + A_b_03*A_b_11*A_b_21*A_b_23*J_1*J_3 + A_b_03*A_b_12*A_b_22*A_b_23*J_2*J_3 + A_b_03*A_b_13*I_p_22*J_3 + I_p_01*J_0*t50 + I_p_01*J_1*t53 + I_p_01*J_2*t56 + I_p_01*J_3*t59 + I_p_02*I_p_12 - t100 - t102 - t103 - t104 - t105*t60 - t106 - t107 - t108*t51 - t108*t54 - t108*t57 - t80 - t83 - t86 - t89 - t92 - t93 - t94 - t95 - t96 - t98 - t99;
+    const float t110 = -A_b_20*t3 - A_b_21*t4 - A_b_22*t5 - A_b_23*t6 - omega_b_0*t23 + omega_b_1*t77 + r_b_0*t29 - r_b_1*t78 + t30*tau_w_0 + t31*tau_w_1 + t32*tau_w_2;
+    const float t111 = I_p_01*I_p_12;
+    const float t112 = I_p_02*I_p_11;
+    const float t113 = I_p_11*t82;
+    const float t114 = I_p_11*t85;
+    const float t115 = I_p_11*t88;
+    const float t116 = I_p_02*t42;
+    const float t117 = I_p_02*t44;
+    const float t118 = I_p_02*t46;
+    const float t119 = I_p_02*t48;
+    const float t120 = t44*t82;
+    const float t121 = t46*t82;
+    const float t122 = t48*t82;
+    const float t123 = t42*t85;
+    const float t124 = t46*t85;
+    const float t125 = t48*t85;
+    const float t126 = t42*t88;
+    const float t127 = t44*t88;
+    const float t128 = -I_p_01*t37 - I_p_01*t39 - I_p_01*t40 - I_p_01*t41 + I_p_11*t91 - I_p_12*t101 - I_p_12*t105 - I_p_12*t108 - I_p_12*t97 + t101*t37 + t101*t40 + t101*t41 + t105*t37 + t105*t39 + t105*t41 + t108*t37 + t108*t39 + t108*t40 + t111 - t112 + t113 + t114 + t115 + t116 + t117 + t118 + t119 - t120 - t121 - t122 - t123 - t124 - t125 - t126 - t127 + t39*t97 + t40*t97 + t41*t97 - t42*t91 - t44*t91 - t46*t91 - t48*t88;
+    const float t129 = I_p_02*I_p_12;
+    const float t130 = 2*I_p_01;
+    const float t131 = (I_p_01*I_p_01);
+    const float t132 = (I_p_02*I_p_02);
+    const float t133 = 2*t80;
+    const float t134 = 2*t129;
+    const float t135 = 2*t111;
+    const float t136 = 2*t112;
+    const float t137 = I_p_00*I_p_12;
+    const float t138 = 2*t137;
+    const float t139 = 2*I_p_01*I_p_02;
+    const float t140 = (A_b_00*A_b_00);
+    const float t141 = J_0*t140;
+    const float t142 = (A_b_01*A_b_01);
+    const float t143 = J_1*t142;
+    const float t144 = (A_b_02*A_b_02);
+    const float t145 = J_2*t144;
+    const float t146 = (A_b_03*A_b_03);
+    const float t147 = J_3*t146;
+    const float t148 = I_p_00*I_p_22;
+    const float t149 = I_p_00*I_p_11;
+    const float t150 = I_p_22*t97;
+    const float t151 = 2*t101;
+    const float t152 = 2*t97;
+    const float t153 = 2*t85;
+    const float t154 = 2*t105;
+    const float t155 = 2*t88;
+    const float t156 = 2*t108;
+    const float t157 = 2*t91;
+    const float t158 = t39*t82;
+    const float t159 = t40*t82;
+    const float t160 = t41*t82;
+    const float t161 = I_p_22*t101;
+    const float t162 = t37*t85;
+    const float t163 = t40*t85;
+    const float t164 = t41*t85;
+    const float t165 = t37*t88;
+    const float t166 = t39*t88;
+    const float t167 = t41*t88;
+    const float t168 = t37*t91;
+    const float t169 = t39*t91;
+    const float t170 = t40*t91;
+    const float t171 = I_p_00*t37;
+    const float t172 = 2*t41;
+    const float t173 = I_p_00*t39;
+    const float t174 = I_p_00*t54;
+    const float t175 = I_p_00*t57;
+    const float t176 = I_p_00*t60;
+    const float t177 = I_p_00*t51;
+    const float t178 = I_p_01*t54;
+    const float t179 = I_p_01*t57;
+    const float t180 = I_p_01*t60;
+    const float t181 = 2*t82;
+    const float t182 = I_p_12*t141;
+    const float t183 = I_p_01*t51;
+    const float t184 = I_p_12*t143;
+    const float t185 = I_p_12*t145;
+    const float t186 = I_p_12*t147;
+    const float t187 = t141*t39;
+    const float t188 = t141*t40;
+    const float t189 = t143*t37;
+    const float t190 = t143*t40;
+    const float t191 = t145*t37;
+    const float t192 = t145*t39;
+    const float t193 = t147*t37;
+    const float t194 = t147*t39;
+    const float t195 = (1.0F/(-I_p_00*t172*t40 + I_p_00*t35 - I_p_00*t36 - I_p_11*t132 - I_p_22*t105*t156 - I_p_22*t131 + t100*t151 + t100*t154 + t101*t133 - t101*t134 + t102*t154 + t102*t156 + t103*t156 + t104*t154 + t105*t133 - t105*t134 + t106*t156 + t107*t156 + t108*t133 - t108*t134 - t113*t153 - t113*t155 - t113*t157 - t114*t155 - t114*t157 - t115*t157 - t116*t153 - t116*t155 - t116*t157 - t117*t155 - t117*t157 - t117*t181 - t118*t153 - t118*t157 - t118*t181 - t119*t153 - t119*t155 - t119*t181 + t120*t155 + t120*t157 + t121*t153 + t121*t157 + t122*t153 + t122*t155 + t123*t155 + t123*t157 + t124*t157 + t125*t155 + t126*t157 + t127*t157 + t129*t130 + t130*t158 + t130*t159 + t130*t160 + t130*t162 + t130*t163 + t130*t164 + t130*t165 + t130*t166 + t130*t167 + t130*t168 + t130*t169 + t130*t170 + t131*t51 + t131*t54 + t131*t57 + t131*t60 + t132*t42 + t132*t44 + t132*t46 + t132*t48 + t133*t97 - t134*t97 - t135*t82 - t135*t85 - t135*t88 - t135*t91 + t136*t82 + t136*t85 + t136*t88 + t136*t91 + t138*t37 + t138*t39 + t138*t40 + t138*t41 - t139*t37 - t139*t39 - t139*t40 - t139*t41 - t141*t35 + t141*t36 + t141*t45 + t141*t47 + t141*t49 + t141*t55 + t141*t58 + t141*t61 - t141*t69 - t141*t70 - t141*t72 - t141*t73 - t141*t75 - t141*t76 - t143*t35 + t143*t36 + t143*t43 + t143*t47 + t143*t49 + t143*t52 + t143*t58 + t143*t61 - t143*t66 - t143*t67 - t143*t71 - t143*t73 - t143*t74 - t143*t76 - t145*t35 + t145*t36 + t145*t43 + t145*t45 + t145*t49 + t145*t52 + t145*t55 + t145*t61 - t145*t65 - t145*t67 - t145*t68 - t145*t70 - t145*t74 - t145*t75 - t147*t35 + t147*t36 + t147*t43 + t147*t45 + t147*t47 + t147*t52 + t147*t55 + t147*t58 - t147*t65 - t147*t66 - t147*t68 - t147*t69 - t147*t71 - t147*t72 - t148*t42 - t148*t44 - t148*t46 - t148*t48 - t149*t51 - t149*t54 - t149*t57 - t149*t60 - t150*t151 - t150*t154 - t150*t156 - t151*t159 - t151*t160 - t151*t165 - t151*t167 - t151*t168 - t151*t170 - t151*t179 - t151*t180 - t151*t183 + t151*t83 + t151*t89 + t151*t92 + t151*t93 + t151*t95 + t151*t96 + t151*t99 - t152*t163 - t152*t164 - t152*t166 - t152*t167 - t152*t169 - t152*t170 - t152*t178 - t152*t179 - t152*t180 + t152*t86 + t152*t89 + t152*t92 + t152*t94 + t152*t95 + t152*t96 - t154*t158 - t154*t160 - t154*t161 - t154*t162 - t154*t164 - t154*t168 - t154*t169 - t154*t178 - t154*t180 - t154*t183 + t154*t83 + t154*t86 + t154*t92 + t154*t93 + t154*t94 + t154*t96 + t154*t98 - t156*t158 - t156*t159 - t156*t161 - t156*t162 - t156*t163 - t156*t165 - t156*t166 - t156*t178 - t156*t179 - t156*t183 + t156*t83 + t156*t86 + t156*t89 + t156*t93 + t156*t94 + t156*t95 + t156*t98 + t156*t99 - t171*t172 - t171*t63 - t171*t64 - t172*t173 - t172*t182 - t172*t184 - t172*t185 + t172*t187 + t172*t188 + t172*t189 + t172*t190 + t172*t191 + t172*t192 - t173*t64 + t174*t42 + t174*t46 + t174*t48 + t175*t42 + t175*t44 + t175*t48 + t176*t42 + t176*t44 + t176*t46 + t177*t44 + t177*t46 + t177*t48 - t182*t63 - t182*t64 - t184*t62 - t184*t64 - t185*t62 - t185*t63 - t186*t62 - t186*t63 - t186*t64 + t187*t64 + t189*t64 + t191*t63 + t193*t63 + t193*t64 + t194*t64));
+    const float t196 = t195*(t109*t79 + t110*t128 + t34*(t35 - t36 + t37*t38 + t38*t39 + t38*t40 + t38*t41 - t39*t62 - t40*t62 - t40*t63 - t41*t62 - t41*t63 - t41*t64 - t43 - t45 - t47 - t49 - t52 - t55 - t58 - t61 + t65 + t66 + t67 + t68 + t69 + t70 + t71 + t72 + t73 + t74 + t75 + t76));
+    const float t197 = 2*I_p_02;
+    const float t198 = A_b_00*A_b_01*A_b_10*A_b_21*J_0*J_1 + A_b_00*A_b_01*A_b_11*A_b_20*J_0*J_1 + A_b_00*A_b_02*A_b_10*A_b_22*J_0*J_2 + A_b_00*A_b_02*A_b_12*A_b_20*J_0*J_2 + A_b_00*A_b_03*A_b_10*A_b_23*J_0*J_3 + A_b_00*A_b_03*A_b_13*A_b_20*J_0*J_3 + A_b_01*A_b_02*A_b_11*A_b_22*J_1*J_2 + A_b_01*A_b_02*A_b_12*A_b_21*J_1*J_2 + A_b_01*A_b_03*A_b_11*A_b_23*J_1*J_3 + A_b_01*A_b_03*A_b_13*A_b_21*J_1*J_3 + A_b_02*A_b_03*A_b_12*A_b_23*J_2*J_3 + A_b_02*A_b_03*A_b_13*A_b_22*J_2*J_3 + A_b_10*A_b_20*I_p_00*J_0 + A_b_11*A_b_21*I_p_00*J_1 + A_b_12*A_b_22*I_p_00*J_2 + A_b_13*A_b_23*I_p_00*J_3 + I_p_01*I_p_02 - I_p_01*t82 - I_p_01*t85 - I_p_01*t88 - I_p_01*t91 - I_p_02*t101 - I_p_02*t105 - I_p_02*t108 - I_p_02*t97 + I_p_12*J_0*t140 + I_p_12*J_1*t142 + I_p_12*J_2*t144 + I_p_12*J_3*t146 - t137 - t141*t41 - t143*t41 - t145*t41 - t147*t40 - t187 - t188 - t189 - t190 - t191 - t192 - t193 - t194;
+    const float t199 = t195*(t109*t34 + t110*t198 + t79*(-I_p_22*t141 - I_p_22*t143 - I_p_22*t145 - I_p_22*t147 - t132 + t141*t54 + t141*t57 + t141*t60 + t143*t51 + t143*t57 + t143*t60 + t145*t51 + t145*t54 + t145*t60 + t147*t51 + t147*t54 + t147*t57 + t148 - t153*t88 - t153*t91 - t155*t91 - t174 - t175 - t176 - t177 - t181*t85 - t181*t88 - t181*t91 + t197*t82 + t197*t85 + t197*t88 + t197*t91));
+    const float t200 = t195*(t110*(-I_p_00*t42 - I_p_00*t44 - I_p_00*t46 - I_p_00*t48 - I_p_11*t141 - I_p_11*t143 - I_p_11*t145 - I_p_11*t147 + t101*t130 - t101*t152 + t105*t130 - t105*t151 - t105*t152 + t108*t130 - t108*t151 - t108*t152 - t108*t154 + t130*t97 - t131 + t141*t44 + t141*t46 + t141*t48 + t143*t42 + t143*t46 + t143*t48 + t145*t42 + t145*t44 + t145*t48 + t147*t42 + t147*t44 + t147*t46 + t149) + t128*t34 + t198*t79);
+    q_dot[0] = q_1*t2 - q_2*t1 + q_3*t0;
+    q_dot[1] = -q_0*t2 + q_2*t0 + q_3*t1;
+    q_dot[2] = q_0*t1 - q_1*t0 + q_3*t2;
+    q_dot[3] = -q_0*t0 - q_1*t1 - q_2*t2;
+    omega_dot_b[0] = t196;
+    omega_dot_b[1] = t199;
+    omega_dot_b[2] = t200;
+    Omega_dot[0] = -A_b_00*t196 - A_b_10*t199 - A_b_20*t200 + t3/J_0;
+    Omega_dot[1] = -A_b_01*t196 - A_b_11*t199 - A_b_21*t200 + t4/J_1;
+    Omega_dot[2] = -A_b_02*t196 - A_b_12*t199 - A_b_22*t200 + t5/J_2;
+    Omega_dot[3] = -A_b_03*t196 - A_b_13*t199 - A_b_23*t200 + t6/J_3;
+}
+
+void lvf_wheels4_momentum(const float *q, const float *omega_b, const float *Omega, const float *I_p, const float *A_b, const float *J, float *L_body_w, float *L_wheels_w, float *h_w) {
+    const float q_0 = q[0];
+    const float q_1 = q[1];
+    const float q_2 = q[2];
+    const float q_3 = q[3];
+    const float omega_b_0 = omega_b[0];
+    const float omega_b_1 = omega_b[1];
+    const float omega_b_2 = omega_b[2];
+    const float Omega_0 = Omega[0];
+    const float Omega_1 = Omega[1];
+    const float Omega_2 = Omega[2];
+    const float Omega_3 = Omega[3];
+    const float I_p_00 = I_p[0];
+    const float I_p_01 = I_p[1];
+    const float I_p_02 = I_p[2];
+    const float I_p_11 = I_p[4];
+    const float I_p_12 = I_p[5];
+    const float I_p_22 = I_p[8];
+    const float A_b_00 = A_b[0];
+    const float A_b_01 = A_b[1];
+    const float A_b_02 = A_b[2];
+    const float A_b_03 = A_b[3];
+    const float A_b_10 = A_b[4];
+    const float A_b_11 = A_b[5];
+    const float A_b_12 = A_b[6];
+    const float A_b_13 = A_b[7];
+    const float A_b_20 = A_b[8];
+    const float A_b_21 = A_b[9];
+    const float A_b_22 = A_b[10];
+    const float A_b_23 = A_b[11];
+    const float J_0 = J[0];
+    const float J_1 = J[1];
+    const float J_2 = J[2];
+    const float J_3 = J[3];
+    const float t0 = 2*q_1;
+    const float t1 = q_0*t0;
+    const float t2 = 2*q_2;
+    const float t3 = q_3*t2;
+    const float t4 = t1 - t3;
+    const float t5 = A_b_10*J_0;
+    const float t6 = A_b_11*J_1;
+    const float t7 = A_b_12*J_2;
+    const float t8 = A_b_13*J_3;
+    const float t9 = -A_b_00*t5 - A_b_01*t6 - A_b_02*t7 - A_b_03*t8 + I_p_01;
+    const float t10 = -A_b_20*t5 - A_b_21*t6 - A_b_22*t7 - A_b_23*t8 + I_p_12;
+    const float t11 = omega_b_0*t9 + omega_b_1*(-(A_b_10*A_b_10)*J_0 - (A_b_11*A_b_11)*J_1 - (A_b_12*A_b_12)*J_2 - (A_b_13*A_b_13)*J_3 + I_p_11) + omega_b_2*t10;
+    const float t12 = q_0*t2;
+    const float t13 = q_3*t0;
+    const float t14 = t12 + t13;
+    const float t15 = -A_b_00*A_b_20*J_0 - A_b_01*A_b_21*J_1 - A_b_02*A_b_22*J_2 - A_b_03*A_b_23*J_3 + I_p_02;
+    const float t16 = omega_b_0*t15 + omega_b_1*t10 + omega_b_2*(-(A_b_20*A_b_20)*J_0 - (A_b_21*A_b_21)*J_1 - (A_b_22*A_b_22)*J_2 - (A_b_23*A_b_23)*J_3 + I_p_22);
+    const float t17 = 2*(q_1*q_1);
+    const float t18 = 2*(q_2*q_2) - 1;
+    const float t19 = -t17 - t18;
+    const float t20 = omega_b_0*(-(A_b_00*A_b_00)*J_0 - (A_b_01*A_b_01)*J_1 - (A_b_02*A_b_02)*J_2 - (A_b_03*A_b_03)*J_3 + I_p_00) + omega_b_1*t9 + omega_b_2*t15;
+    const float t21 = t1 + t3;
+    const float t22 = 2*q_0*q_3;
+    const float t23 = 2*q_1*q_2 - t22;
+    const float t24 = 2*(q_0*q_0);
+    const float t25 = -t18 - t24;
+    const float t26 = t12 - t13;
+    const float t27 = q_1*t2 + t22;
+    const float t28 = -t17 - t24 + 1;
+    const float t29 = J_0*(A_b_00*omega_b_0 + A_b_10*omega_b_1 + A_b_20*omega_b_2 + Omega_0);
+    const float t30 = J_1*(A_b_01*omega_b_0 + A_b_11*omega_b_1 + A_b_21*omega_b_2 + Omega_1);
+    const float t31 = J_2*(A_b_02*omega_b_0 + A_b_12*omega_b_1 + A_b_22*omega_b_2 + Omega_2);
+    const float t32 = J_3*(A_b_03*omega_b_0 + A_b_13*omega_b_1 + A_b_23*omega_b_2 + Omega_3);
+    const float t33 = A_b_10*t29 + A_b_11*t30 + A_b_12*t31 + A_b_13*t32;
+    const float t34 = A_b_20*t29 + A_b_21*t30 + A_b_22*t31 + A_b_23*t32;
+    const float t35 = A_b_00*t29 + A_b_01*t30 + A_b_02*t31 + A_b_03*t32;
+    L_body_w[0] = t11*t4 + t14*t16 + t19*t20;
+    L_body_w[1] = t11*t25 + t16*t23 + t20*t21;
+    L_body_w[2] = t11*t27 + t16*t28 + t20*t26;
+    L_wheels_w[0] = t14*t34 + t19*t35 + t33*t4;
+    L_wheels_w[1] = t21*t35 + t23*t34 + t25*t33;
+    L_wheels_w[2] = t26*t35 + t27*t33 + t28*t34;
+    h_w[0] = t29;
+    h_w[1] = t30;
+    h_w[2] = t31;
+    h_w[3] = t32;
+}
+
+void lvf_wheels4_motor(const float *command, const float *Omega, float torque_limit, float speed_limit, float cutoff, float *u) {
+    const float command_0 = command[0];
+    const float command_1 = command[1];
+    const float command_2 = command[2];
+    const float command_3 = command[3];
+    const float Omega_0 = Omega[0];
+    const float Omega_1 = Omega[1];
+    const float Omega_2 = Omega[2];
+    const float Omega_3 = Omega[3];
+    const float t0 = -torque_limit;
+    const float t1 = command_0 < t0;
+    const float t2 = fabsf(Omega_0);
+    const float t3 = speed_limit <= t2;
+    const float t4 = Omega_0*torque_limit;
+    const float t5 = command_0 > torque_limit;
+    const float t6 = ((t1) ? (
+   t0
+)
+: ((t5) ? (
+   torque_limit
+)
+: (
+   command_0
+)));
+    const float t7 = cutoff > 0;
+    const float t8 = Omega_0 >= speed_limit;
+    const float t9 = command_0 < 0;
+    const float t10 = command_0 > 0;
+    const float t11 = -speed_limit;
+    const float t12 = Omega_0 <= t11;
+    const float t13 = (1.0F/speed_limit);
+    const float t14 = torque_limit*(-t13*t2 + 1);
+    const float t15 = -t14;
+    const float t16 = command_1 < t0;
+    const float t17 = fabsf(Omega_1);
+    const float t18 = speed_limit <= t17;
+    const float t19 = Omega_1*torque_limit;
+    const float t20 = command_1 > torque_limit;
+    const float t21 = ((t16) ? (
+   t0
+)
+: ((t20) ? (
+   torque_limit
+)
+: (
+   command_1
+)));
+    const float t22 = Omega_1 >= speed_limit;
+    const float t23 = command_1 < 0;
+    const float t24 = command_1 > 0;
+    const float t25 = Omega_1 <= t11;
+    const float t26 = torque_limit*(-t13*t17 + 1);
+    const float t27 = -t26;
+    const float t28 = command_2 < t0;
+    const float t29 = fabsf(Omega_2);
+    const float t30 = speed_limit <= t29;
+    const float t31 = Omega_2*torque_limit;
+    const float t32 = command_2 > torque_limit;
+    const float t33 = ((t28) ? (
+   t0
+)
+: ((t32) ? (
+   torque_limit
+)
+: (
+   command_2
+)));
+    const float t34 = Omega_2 >= speed_limit;
+    const float t35 = command_2 < 0;
+    const float t36 = command_2 > 0;
+    const float t37 = Omega_2 <= t11;
+    const float t38 = torque_limit*(-t13*t29 + 1);
+    const float t39 = -t38;
+    const float t40 = command_3 < t0;
+    const float t41 = fabsf(Omega_3);
+    const float t42 = speed_limit <= t41;
+    const float t43 = Omega_3*torque_limit;
+    const float t44 = command_3 > torque_limit;
+    const float t45 = ((t40) ? (
+   t0
+)
+: ((t44) ? (
+   torque_limit
+)
+: (
+   command_3
+)));
+    const float t46 = Omega_3 >= speed_limit;
+    const float t47 = command_3 < 0;
+    const float t48 = command_3 > 0;
+    const float t49 = Omega_3 <= t11;
+    const float t50 = torque_limit*(-t13*t41 + 1);
+    const float t51 = -t50;
+    u[0] = ((t7) ? (
+   ((((t1) ? (
+      t3 && t4 < 0
+   )
+   : (
+      ((t5) ? (
+         t3 && t4 > 0
+      )
+      : (
+         t3 && Omega_0*command_0 > 0
+      ))
+   ))) ? (
+      0
+   )
+   : (
+      t6
+   ))
+)
+: (
+   (((t10 || t12) && (t10 || t9) && (t12 || t8) && (t8 || t9)) ? (
+      0
+   )
+   : ((Omega_0 > 0 && command_0 > t14 && Omega_0 < speed_limit) ? (
+      t14
+   )
+   : ((Omega_0 > t11 && Omega_0 < 0 && command_0 < t15) ? (
+      t15
+   )
+   : (
+      t6
+   ))))
+));
+    u[1] = ((t7) ? (
+   ((((t16) ? (
+      t18 && t19 < 0
+   )
+   : (
+      ((t20) ? (
+         t18 && t19 > 0
+      )
+      : (
+         t18 && Omega_1*command_1 > 0
+      ))
+   ))) ? (
+      0
+   )
+   : (
+      t21
+   ))
+)
+: (
+   (((t22 || t23) && (t22 || t25) && (t23 || t24) && (t24 || t25)) ? (
+      0
+   )
+   : ((Omega_1 > 0 && command_1 > t26 && Omega_1 < speed_limit) ? (
+      t26
+   )
+   : ((Omega_1 > t11 && Omega_1 < 0 && command_1 < t27) ? (
+      t27
+   )
+   : (
+      t21
+   ))))
+));
+    u[2] = ((t7) ? (
+   ((((t28) ? (
+      t30 && t31 < 0
+   )
+   : (
+      ((t32) ? (
+         t30 && t31 > 0
+      )
+      : (
+         t30 && Omega_2*command_2 > 0
+      ))
+   ))) ? (
+      0
+   )
+   : (
+      t33
+   ))
+)
+: (
+   (((t34 || t35) && (t34 || t37) && (t35 || t36) && (t36 || t37)) ? (
+      0
+   )
+   : ((Omega_2 > 0 && command_2 > t38 && Omega_2 < speed_limit) ? (
+      t38
+   )
+   : ((Omega_2 > t11 && Omega_2 < 0 && command_2 < t39) ? (
+      t39
+   )
+   : (
+      t33
+   ))))
+));
+    u[3] = ((t7) ? (
+   ((((t40) ? (
+      t42 && t43 < 0
+   )
+   : (
+      ((t44) ? (
+         t42 && t43 > 0
+      )
+      : (
+         t42 && Omega_3*command_3 > 0
+      ))
+   ))) ? (
+      0
+   )
+   : (
+      t45
+   ))
+)
+: (
+   (((t46 || t47) && (t46 || t49) && (t47 || t48) && (t48 || t49)) ? (
+      0
+   )
+   : ((Omega_3 > 0 && command_3 > t50 && Omega_3 < speed_limit) ? (
+      t50
+   )
+   : ((Omega_3 > t11 && Omega_3 < 0 && command_3 < t51) ? (
+      t51
+   )
+   : (
+      t45
+   ))))
+));
+}
+
+void lvf_wheels5_body_rhs(const float *q, const float *omega_b, const float *Omega, const float *I_p, const float *A_b, const float *J, const float *r_b, const float *F_w, const float *tau_w, const float *u, float c_w, float *q_dot, float *omega_dot_b, float *Omega_dot) {
+    const float q_0 = q[0];
+    const float q_1 = q[1];
+    const float q_2 = q[2];
+    const float q_3 = q[3];
+    const float omega_b_0 = omega_b[0];
+    const float omega_b_1 = omega_b[1];
+    const float omega_b_2 = omega_b[2];
+    const float Omega_0 = Omega[0];
+    const float Omega_1 = Omega[1];
+    const float Omega_2 = Omega[2];
+    const float Omega_3 = Omega[3];
+    const float Omega_4 = Omega[4];
+    const float I_p_00 = I_p[0];
+    const float I_p_01 = I_p[1];
+    const float I_p_02 = I_p[2];
+    const float I_p_11 = I_p[4];
+    const float I_p_12 = I_p[5];
+    const float I_p_22 = I_p[8];
+    const float A_b_00 = A_b[0];
+    const float A_b_01 = A_b[1];
+    const float A_b_02 = A_b[2];
+    const float A_b_03 = A_b[3];
+    const float A_b_04 = A_b[4];
+    const float A_b_10 = A_b[5];
+    const float A_b_11 = A_b[6];
+    const float A_b_12 = A_b[7];
+    const float A_b_13 = A_b[8];
+    const float A_b_14 = A_b[9];
+    const float A_b_20 = A_b[10];
+    const float A_b_21 = A_b[11];
+    const float A_b_22 = A_b[12];
+    const float A_b_23 = A_b[13];
+    const float A_b_24 = A_b[14];
+    const float J_0 = J[0];
+    const float J_1 = J[1];
+    const float J_2 = J[2];
+    const float J_3 = J[3];
+    const float J_4 = J[4];
+    const float r_b_0 = r_b[0];
+    const float r_b_1 = r_b[1];
+    const float r_b_2 = r_b[2];
+    const float F_w_0 = F_w[0];
+    const float F_w_1 = F_w[1];
+    const float F_w_2 = F_w[2];
+    const float tau_w_0 = tau_w[0];
+    const float tau_w_1 = tau_w[1];
+    const float tau_w_2 = tau_w[2];
+    const float u_0 = u[0];
+    const float u_1 = u[1];
+    const float u_2 = u[2];
+    const float u_3 = u[3];
+    const float u_4 = u[4];
+    const float t0 = ((1.0F/2.0F))*omega_b_0;
+    const float t1 = ((1.0F/2.0F))*omega_b_1;
+    const float t2 = ((1.0F/2.0F))*omega_b_2;
+    const float t3 = -Omega_0*c_w + u_0;
+    const float t4 = -Omega_1*c_w + u_1;
+    const float t5 = -Omega_2*c_w + u_2;
+    const float t6 = -Omega_3*c_w + u_3;
+    const float t7 = -Omega_4*c_w + u_4;
+    const float t8 = 2*q_1;
+    const float t9 = q_0*t8;
+    const float t10 = 2*q_2;
+    const float t11 = q_3*t10;
+    const float t12 = t11 + t9;
+    const float t13 = q_0*t10;
+    const float t14 = q_3*t8;
+    const float t15 = t13 - t14;
+    const float t16 = 2*(q_1*q_1);
+    const float t17 = 2*(q_2*q_2) - 1;
+    const float t18 = -t16 - t17;
+    const float t19 = J_0*Omega_0;
+    const float t20 = J_1*Omega_1;
+    const float t21 = J_2*Omega_2;
+    const float t22 = J_3*Omega_3;
+    const float t23 = J_4*Omega_4;
+    const float t24 = A_b_20*t19 + A_b_21*t20 + A_b_22*t21 + A_b_23*t22 + A_b_24*t23 + I_p_02*omega_b_0 + I_p_12*omega_b_1 + I_p_22*omega_b_2;
+    const float t25 = A_b_10*t19 + A_b_11*t20 + A_b_12*t21 + A_b_13*t22 + A_b_14*t23 + I_p_01*omega_b_0 + I_p_11*omega_b_1 + I_p_12*omega_b_2;
+    const float t26 = -t11 + t9;
+    const float t27 = 2*q_0*q_3;
+    const float t28 = q_2*t8 + t27;
+    const float t29 = 2*(q_0*q_0);
+    const float t30 = -t17 - t29;
+    const float t31 = F_w_0*t26 + F_w_1*t30 + F_w_2*t28;
+    const float t32 = t13 + t14;
+    const float t33 = 2*q_1*q_2 - t27;
+    const float t34 = -t16 - t29 + 1;
+    const float t35 = F_w_0*t32 + F_w_1*t33 + F_w_2*t34;
+    const float t36 = -A_b_00*t3 - A_b_01*t4 - A_b_02*t5 - A_b_03*t6 - A_b_04*t7 - omega_b_1*t24 + omega_b_2*t25 + r_b_1*t35 - r_b_2*t31 + t12*tau_w_1 + t15*tau_w_2 + t18*tau_w_0;
+    const float t37 = I_p_11*I_p_22;
+    const float t38 = (I_p_12*I_p_12);
+    const float t39 = A_b_10*A_b_20*J_0;
+    const float t40 = 2*I_p_12;
+    const float t41 = A_b_11*A_b_21*J_1;
+    const float t42 = A_b_12*A_b_22*J_2;
+    const float t43 = A_b_13*A_b_23*J_3;
+    const float t44 = A_b_14*A_b_24*J_4;
+    const float t45 = (A_b_10*A_b_10);
+    const float t46 = J_0*t45;
+    const float t47 = (A_b_11*A_b_11);
+    const float t48 = J_1*t47;
+    const float t49 = (A_b_12*A_b_12);
+    const float t50 = J_2*t49;
+    const float t51 = (A_b_13*A_b_13);
+    const float t52 = J_3*t51;
+    const float t53 = (A_b_14*A_b_14);
+    const float t54 = J_4*t53;
+    const float t55 = (A_b_20*A_b_20);
+    const float t56 = J_0*t55;
+    const float t57 = (A_b_21*A_b_21);
+    const float t58 = J_1*t57;
+    const float t59 = (A_b_22*A_b_22);
+    const float t60 = J_2*t59;
+    const float t61 = (A_b_23*A_b_23);
+    const float t62 = J_3*t61;
+    const float t63 = (A_b_24*A_b_24);
+    const float t64 = J_4*t63;
+    const float t65 = 2*t39;
+    const float t66 = 2*t41;
+    const float t67 = 2*t42;
+    const float t68 = 2*t43;
+    const float t69 = t46*t58;
+    const float t70 = t46*t60;
+    const float t71 = t46*t62;
+    const float t72 = t46*t64;
+    const float t73 = t48*t56;
+    const float t74 = t48*t60;
+    const float t75 = t48*t62;
+    const float t76 = t48*t64;
+    const float t77 = t50*t56;
+    const float t78 = t50*t58;
+    const float t79 = t50*t62;
+    const float t80 = t50*t64;
+    const float t81 = t52*t56;
+    const float t82 = t52*t58;
+    const float t83 = t52*t60;
+    const float t84 = t52*t64;
+    const float t85 = t54*t56;
+    const float t86 = t54*t58;
+    const float t87 = t54*t60;
+    const float t88 = t54*t62;
+    const float t89 = A_b_00*t19 + A_b_01*t20 + A_b_02*t21 + A_b_03*t22 + A_b_04*t23 + I_p_00*omega_b_0 + I_p_01*omega_b_1 + I_p_02*omega_b_2;
+    const float t90 = F_w_0*t18 + F_w_1*t12 + F_w_2*t15;
+    const float t91 = -A_b_10*t3 - A_b_11*t4 - A_b_12*t5 - A_b_13*t6 - A_b_14*t7 + omega_b_0*t24 - omega_b_2*t89 - r_b_0*t35 + r_b_2*t90 + t26*tau_w_0 + t28*tau_w_2 + t30*tau_w_1;
+    const float t92 = A_b_00*J_0;
+    const float t93 = A_b_20*t92;
+    const float t94 = A_b_01*J_1;
+    const float t95 = A_b_21*t94;
+    const float t96 = A_b_02*J_2;
+    const float t97 = A_b_22*t96;
+    const float t98 = A_b_03*J_3;
+    const float t99 = A_b_23*t98;
+    const float t100 = A_b_04*J_4;
+    const float t101 = A_b_24*t100;
+    const float t102 = A_b_10*t92;
+    const float t103 = A_b_11*t94;
+    const float t104 = A_b_12*t96;
+    const float t105 = A_b_13*t98;
+    const float t106 = A_b_14*t100;
+    const float t107 = A_b_00*A_b_10*I_p_22*J_0 + A_b_00*A_b_11*A_b_20*A_b_21*J_0*J_1 + A_b_00*A_b_12*A_b_20*A_b_22*J_0*J_2 + A_b_00*A_b_13*A_b_20*A_b_23*J_0*J_3 + A_b_00*A_b_14*A_b_20*A_b_24*J_0*J_4 + A_b_01*A_b_10*A_b_20*A_b_21*J_0*J_1 + A_b_01*A_b_11*I_p_22*J_1 + A_b_01*A_b_12*A_b_21*A_b_22*J_1*J_2 + A_b_01*A_b_13*A_b_21*A_b_23*J_1*J_3 + A_b_01*A_b_14*A_b_21*A_b_24*J_1*J_4 + A_b_02*A_b_10*A_b_20*A_b_22*J_0*J_2 + A_b_02*A_b_11*A_b_21*A_b_22*J_1*J_2 + A_b_02*A_b_12*I_p_22*J_2 + A_b_02*A_b_13*A_b_22*A_b_23*J_2*J_3 + A_b_02*A_b_14*A_b_22*A_b_24*J_2*J_4 + A_b_03*A_b_10*A_b_20*A_b_23*J_0*J_3 + A_b_03*A_b_11*A_b_21*A_b_23*J_1*J_3 + A_b_03*A_b_12*A_b_22*A_b_23*J_2*J_3 + A_b_03*A_b_13*I_p_22*J_3 + A_b_03*A_b_14*A_b_23*A_b_24*J_3*J_4 + A_b_04*A_b_10*A_b_20*A_b_24*J_0*J_4 + A_b_04*A_b_11*A_b_21*A_b_24*J_1*J_4 + A_b_04*A_b_12*A_b_22*A_b_24*J_2*J_4 + A_b_04*A_b_13*A_b_23*A_b_24*J_3*J_4 + A_b_04*A_b_14*I_p_22*J_4 - I_p_01*I_p_22 + I_p_01*J_0*t55 + I_p_01*J_1*t57 + I_p_01*J_2*t59 + I_p_01*J_3*t61 + I_p_01*J_4*t63 + I_p_02*I_p_12 - I_p_02*t39 - I_p_02*t41 - I_p_02*t42 - I_p_02*t43 - I_p_02*t44 - I_p_12*t101 - I_p_12*t93 - I_p_12*t95 - I_p_12*t97 - I_p_12*t99 - t102*t58 - t102*t60 - t102*t62 - t102*t64 - t103*t56 - t103*t60 - t103*t62 - t103*t64 - t104*t56 - t104*t58 - t104*t62 - t104*t64 - t105*t56 - t105*t58 - t105*t60 - t105*t64 - t106*t56 - t106*t58 - t106*t60 - t106*t62;
+    const float t108 = -A_b_20*t3 - A_b_21*t4 - A_b_22*t5 - A_b_23*t6 - A_b_24*t7 - omega_b_0*t25 + omega_b_1*t89 + r_b_0*t31 - r_b_1*t90 + t32*tau_w_0 + t33*tau_w_1 + t34*tau_w_2;
+    const float t109 = I_p_01*I_p_12;
+    const float t110 = I_p_11*t93;
+    const float t111 = I_p_11*t95;
+    const float t112 = I_p_11*t97;
+    const float t113 = I_p_11*t99;
+    const float t114 = I_p_02*t46;
+    const float t115 = I_p_02*t48;
+    const float t116 = I_p_02*t50;
+    const float t117 = I_p_02*t52;
+    const float t118 = I_p_02*t54;
+    const float t119 = -I_p_01*t39 - I_p_01*t41 - I_p_01*t42 - I_p_01*t43 - I_p_01*t44 - I_p_02*I_p_11 + I_p_11*t101 - I_p_12*t102 - I_p_12*t103 - I_p_12*t104 - I_p_12*t105 - I_p_12*t106 - t101*t46 - t101*t48 - t101*t50 - t101*t52 + t102*t41 + t102*t42 + t102*t43 + t102*t44 + t103*t39 + t103*t42 + t103*t43 + t103*t44 + t104*t39 + t104*t41 + t104*t43 + t104*t44 + t105*t39 + t105*t41 + t105*t42 + t105*t44 + t106*t39 + t106*t41 + t106*t42 + t106*t43 + t109 + t110 + t111 + t112 + t113 + t114 + t115 + t116 + t117 + t118 - t46*t95 - t46*t97 - t46*t99 - t48*t93 - t48*t97 - t48*t99 - t50*t93 - t50*t95 - t50*t99 - t52*t93 - t52*t95 - t52*t97 - t54*t93 - t54*t95 - t54*t97 - t54*t99;
+    const float t120 = (I_p_01*I_p_01);
+    const float t121 = (I_p_02*I_p_02);
+    const float t122 = (A_b_00*A_b_00);
+    const float t123 = J_0*t122;
+    const float t124 = (A_b_01*A_b_01);
+    const float t125 = J_1*t124;
+    const float t126 = (A_b_02*A_b_02);
+    const float t127 = J_2*t126;
+    const float t128 = (A_b_03*A_b_03);
+    const float t129 = J_3*t128;
+    const float t130 = (A_b_04*A_b_04);
+    const float t131 = J_4*t130;
+    const float t132 = I_p_00*I_p_22;
+    const float t133 = I_p_00*I_p_11;
+    const float t134 = 2*I_p_02*I_p_12;
+    const float t135 = 2*t109;
+    const float t136 = 2*I_p_01*I_p_02;
+    const float t137 = I_p_22*t102;
+    const float t138 = 2*t103;
+    const float t139 = 2*t95;
+    const float t140 = 2*t104;
+    const float t141 = 2*t97;
+    const float t142 = 2*t105;
+    const float t143 = 2*t99;
+    const float t144 = 2*t106;
+    const float t145 = 2*t101;
+    const float t146 = I_p_22*t103;
+    const float t147 = I_p_22*t104;
+    const float t148 = I_p_00*t39;
+    const float t149 = 2*t44;
+    const float t150 = I_p_00*t41;
+    const float t151 = I_p_00*t42;
+    const float t152 = I_p_01*t58;
+    const float t153 = 2*t102;
+    const float t154 = I_p_01*t60;
+    const float t155 = I_p_01*t62;
+    const float t156 = I_p_01*t64;
+    const float t157 = 2*t93;
+    const float t158 = I_p_12*t123;
+    const float t159 = I_p_01*t56;
+    const float t160 = I_p_12*t125;
+    const float t161 = I_p_12*t127;
+    const float t162 = I_p_12*t129;
+    const float t163 = I_p_12*t131;
+    const float t164 = t42*t95;
+    const float t165 = t43*t95;
+    const float t166 = t44*t95;
+    const float t167 = t42*t93;
+    const float t168 = t43*t93;
+    const float t169 = t44*t93;
+    const float t170 = t41*t97;
+    const float t171 = t43*t97;
+    const float t172 = t44*t97;
+    const float t173 = t41*t93;
+    const float t174 = t41*t99;
+    const float t175 = t42*t99;
+    const float t176 = t44*t99;
+    const float t177 = t101*t41;
+    const float t178 = t101*t42;
+    const float t179 = t101*t43;
+    const float t180 = t39*t97;
+    const float t181 = t39*t95;
+    const float t182 = t39*t99;
+    const float t183 = t101*t39;
+    const float t184 = (1.0F/(2*A_b_00*A_b_01*A_b_10*A_b_11*J_0*J_1*J_2*t59 + 2*A_b_00*A_b_01*A_b_10*A_b_11*J_0*J_1*J_3*t61 + 2*A_b_00*A_b_01*A_b_10*A_b_11*J_0*J_1*J_4*t63 + 2*A_b_00*A_b_01*A_b_10*A_b_21*I_p_12*J_0*J_1 + 2*A_b_00*A_b_01*A_b_11*A_b_20*I_p_12*J_0*J_1 + 2*A_b_00*A_b_01*A_b_20*A_b_21*J_0*J_1*J_2*t49 + 2*A_b_00*A_b_01*A_b_20*A_b_21*J_0*J_1*J_3*t51 + 2*A_b_00*A_b_01*A_b_20*A_b_21*J_0*J_1*J_4*t53 + 2*A_b_00*A_b_02*A_b_10*A_b_12*J_0*J_1*J_2*t57 + 2*A_b_00*A_b_02*A_b_10*A_b_12*J_0*J_2*J_3*t61 + 2*A_b_00*A_b_02*A_b_10*A_b_12*J_0*J_2*J_4*t63 + 2*A_b_00*A_b_02*A_b_10*A_b_22*I_p_12*J_0*J_2 + 2*A_b_00*A_b_02*A_b_12*A_b_20*I_p_12*J_0*J_2 + 2*A_b_00*A_b_02*A_b_20*A_b_22*J_0*J_1*J_2*t47 + 2*A_b_00*A_b_02*A_b_20*A_b_22*J_0*J_2*J_3*t51 + 2*A_b_00*A_b_02*A_b_20*A_b_22*J_0*J_2*J_4*t53 + 2*A_b_00*A_b_03*A_b_10*A_b_13*J_0*J_1*J_3*t57 + 2*A_b_00*A_b_03*A_b_10*A_b_13*J_0*J_2*J_3*t59 + 2*A_b_00*A_b_03*A_b_10*A_b_13*J_0*J_3*J_4*t63 + 2*A_b_00*A_b_03*A_b_10*A_b_23*I_p_12*J_0*J_3 + 2*A_b_00*A_b_03*A_b_13*A_b_20*I_p_12*J_0*J_3 + 2*A_b_00*A_b_03*A_b_20*A_b_23*J_0*J_1*J_3*t47 + 2*A_b_00*A_b_03*A_b_20*A_b_23*J_0*J_2*J_3*t49 + 2*A_b_00*A_b_03*A_b_20*A_b_23*J_0*J_3*J_4*t53 + 2*A_b_00*A_b_04*A_b_10*A_b_14*J_0*J_1*J_4*t57 + 2*A_b_00*A_b_04*A_b_10*A_b_14*J_0*J_2*J_4*t59 + 2*A_b_00*A_b_04*A_b_10*A_b_14*J_0*J_3*J_4*t61 + 2*A_b_00*A_b_04*A_b_10*A_b_24*I_p_12*J_0*J_4 + 2*A_b_00*A_b_04*A_b_14*A_b_20*I_p_12*J_0*J_4 + 2*A_b_00*A_b_04*A_b_20*A_b_24*J_0*J_1*J_4*t47 + 2*A_b_00*A_b_04*A_b_20*A_b_24*J_0*J_2*J_4*t49 + 2*A_b_00*A_b_04*A_b_20*A_b_24*J_0*J_3*J_4*t51 + 2*A_b_00*A_b_10*A_b_11*A_b_21*I_p_02*J_0*J_1 + 2*A_b_00*A_b_10*A_b_12*A_b_22*I_p_02*J_0*J_2 + 2*A_b_00*A_b_10*A_b_13*A_b_23*I_p_02*J_0*J_3 + 2*A_b_00*A_b_10*A_b_14*A_b_24*I_p_02*J_0*J_4 + 2*A_b_00*A_b_10*I_p_01*I_p_22*J_0 + 2*A_b_00*A_b_11*A_b_20*A_b_21*I_p_01*J_0*J_1 + 2*A_b_00*A_b_12*A_b_20*A_b_22*I_p_01*J_0*J_2 + 2*A_b_00*A_b_13*A_b_20*A_b_23*I_p_01*J_0*J_3 + 2*A_b_00*A_b_14*A_b_20*A_b_24*I_p_01*J_0*J_4 + 2*A_b_00*A_b_20*I_p_02*I_p_11*J_0 + 2*A_b_01*A_b_02*A_b_11*A_b_12*J_0*J_1*J_2*t55 + 2*A_b_01*A_b_02*A_b_11*A_b_12*J_1*J_2*J_3*t61 + 2*A_b_01*A_b_02*A_b_11*A_b_12*J_1*J_2*J_4*t63 + 2*A_b_01*A_b_02*A_b_11*A_b_22*I_p_12*J_1*J_2 + 2*A_b_01*A_b_02*A_b_12*A_b_21*I_p_12*J_1*J_2 + 2*A_b_01*A_b_02*A_b_21*A_b_22*J_0*J_1*J_2*t45 + 2*A_b_01*A_b_02*A_b_21*A_b_22*J_1*J_2*J_3*t51 + 2*A_b_01*A_b_02*A_b_21*A_b_22*J_1*J_2*J_4*t53 + 2*A_b_01*A_b_03*A_b_11*A_b_13*J_0*J_1*J_3*t55 + 2*A_b_01*A_b_03*A_b_11*A_b_13*J_1*J_2*J_3*t59 + 2*A_b_01*A_b_03*A_b_11*A_b_13*J_1*J_3*J_4*t63 + 2*A_b_01*A_b_03*A_b_11*A_b_23*I_p_12*J_1*J_3 + 2*A_b_01*A_b_03*A_b_13*A_b_21*I_p_12*J_1*J_3 + 2*A_b_01*A_b_03*A_b_21*A_b_23*J_0*J_1*J_3*t45 + 2*A_b_01*A_b_03*A_b_21*A_b_23*J_1*J_2*J_3*t49 + 2*A_b_01*A_b_03*A_b_21*A_b_23*J_1*J_3*J_4*t53 + 2*A_b_01*A_b_04*A_b_11*A_b_14*J_0*J_1*J_4*t55 + 2*A_b_01*A_b_04*A_b_11*A_b_14*J_1*J_2*J_4*t59 + 2*A_b_01*A_b_04*A_b_11*A_b_14*J_1*J_3*J_4*t61 + 2*A_b_01*A_b_04*A_b_11*A_b_24*I_p_12*J_1*J_4 + 2*A_b_01*A_b_04*A_b_14*A_b_21*I_p_12*J_1*J_4 + 2*A_b_01*A_b_04*A_b_21*A_b_24*J_0*J_1*J_4*t45 + 2*A_b_01*A_b_04*A_b_21*A_b_24*J_1*J_2*J_4*t49 + 2*A_b_01*A_b_04*A_b_21*A_b_24*J_1*J_3*J_4*t51 + 2*A_b_01*A_b_10*A_b_11*A_b_20*I_p_02*J_0*J_1 + 2*A_b_01*A_b_10*A_b_20*A_b_21*I_p_01*J_0*J_1 + 2*A_b_01*A_b_11*A_b_12*A_b_22*I_p_02*J_1*J_2 + 2*A_b_01*A_b_11*A_b_13*A_b_23*I_p_02*J_1*J_3 + 2*A_b_01*A_b_11*A_b_14*A_b_24*I_p_02*J_1*J_4 + 2*A_b_01*A_b_11*I_p_01*I_p_22*J_1 + 2*A_b_01*A_b_12*A_b_21*A_b_22*I_p_01*J_1*J_2 + 2*A_b_01*A_b_13*A_b_21*A_b_23*I_p_01*J_1*J_3 + 2*A_b_01*A_b_14*A_b_21*A_b_24*I_p_01*J_1*J_4 + 2*A_b_01*A_b_21*I_p_02*I_p_11*J_1 + 2*A_b_02*A_b_03*A_b_12*A_b_13*J_0*J_2*J_3*t55 + 2*A_b_02*A_b_03*A_b_12*A_b_13*J_1*J_2*J_3*t57 + 2*A_b_02*A_b_03*A_b_12*A_b_13*J_2*J_3*J_4*t63 + 2*A_b_02*A_b_03*A_b_12*A_b_23*I_p_12*J_2*J_3 + 2*A_b_02*A_b_03*A_b_13*A_b_22*I_p_12*J_2*J_3 + 2*A_b_02*A_b_03*A_b_22*A_b_23*J_0*J_2*J_3*t45 + 2*A_b_02*A_b_03*A_b_22*A_b_23*J_1*J_2*J_3*t47 + 2*A_b_02*A_b_03*A_b_22*A_b_23*J_2*J_3*J_4*t53 + 2*A_b_02*A_b_04*A_b_12*A_b_14*J_0*J_2*J_4*t55 + 2*A_b_02*A_b_04*A_b_12*A_b_14*J_1*J_2*J_4*t57 + 2*A_b_02*A_b_04*A_b_12*A_b_14*J_2*J_3*J_4*t61 + 2*A_b_02*A_b_04*A_b_12*A_b_24*I_p_12*J_2*J_4 + 2*A_b_02*A_b_04*A_b_14*A_b_22*I_p_12*J_2*J_4 + 2*A_b_02*A_b_04*A_b_22*A_b_24*J_0*J_2*J_4*t45 + 2*A_b_02*A_b_04*A_b_22*A_b_24*J_1*J_2*J_4*t47 + 2*A_b_02*A_b_04*A_b_22*A_b_24*J_2*J_3*J_4*t51 + 2*A_b_02*A_b_10*A_b_12*A_b_20*I_p_02*J_0*J_2 + 2*A_b_02*A_b_10*A_b_20*A_b_22*I_p_01*J_0*J_2 + 2*A_b_02*A_b_11*A_b_12*A_b_21*I_p_02*J_1*J_2 + 2*A_b_02*A_b_11*A_b_21*A_b_22*I_p_01*J_1*J_2 + 2*A_b_02*A_b_12*A_b_13*A_b_23*I_p_02*J_2*J_3 + 2*A_b_02*A_b_12*A_b_14*A_b_24*I_p_02*J_2*J_4 + 2*A_b_02*A_b_12*I_p_01*I_p_22*J_2 + 2*A_b_02*A_b_13*A_b_22*A_b_23*I_p_01*J_2*J_3 + 2*A_b_02*A_b_14*A_b_22*A_b_24*I_p_01*J_2*J_4 + 2*A_b_02*A_b_22*I_p_02*I_p_11*J_2 + 2*A_b_03*A_b_04*A_b_13*A_b_14*J_0*J_3*J_4*t55 + 2*A_b_03*A_b_04*A_b_13*A_b_14*J_1*J_3*J_4*t57 + 2*A_b_03*A_b_04*A_b_13*A_b_14*J_2*J_3*J_4*t59 + 2*A_b_03*A_b_04*A_b_13*A_b_24*I_p_12*J_3*J_4 + 2*A_b_03*A_b_04*A_b_14*A_b_23*I_p_12*J_3*J_4 + 2*A_b_03*A_b_04*A_b_23*A_b_24*J_0*J_3*J_4*t45 + 2*A_b_03*A_b_04*A_b_23*A_b_24*J_1*J_3*J_4*t47 + 2*A_b_03*A_b_04*A_b_23*A_b_24*J_2*J_3*J_4*t49 + 2*A_b_03*A_b_10*A_b_13*A_b_20*I_p_02*J_0*J_3 + 2*A_b_03*A_b_10*A_b_20*A_b_23*I_p_01*J_0*J_3 + 2*A_b_03*A_b_11*A_b_13*A_b_21*I_p_02*J_1*J_3 + 2*A_b_03*A_b_11*A_b_21*A_b_23*I_p_01*J_1*J_3 + 2*A_b_03*A_b_12*A_b_13*A_b_22*I_p_02*J_2*J_3 + 2*A_b_03*A_b_12*A_b_22*A_b_23*I_p_01*J_2*J_3 + 2*A_b_03*A_b_13*A_b_14*A_b_24*I_p_02*J_3*J_4 + 2*A_b_03*A_b_13*I_p_01*I_p_22*J_3 + 2*A_b_03*A_b_14*A_b_23*A_b_24*I_p_01*J_3*J_4 + 2*A_b_03*A_b_23*I_p_02*I_p_11*J_3 + 2*A_b_04*A_b_10*A_b_14*A_b_20*I_p_02*J_0*J_4 + 2*A_b_04*A_b_10*A_b_20*A_b_24*I_p_01*J_0*J_4 + 2*A_b_04*A_b_11*A_b_14*A_b_21*I_p_02*J_1*J_4 + 2*A_b_04*A_b_11*A_b_21*A_b_24*I_p_01*J_1*J_4 + 2*A_b_04*A_b_12*A_b_14*A_b_22*I_p_02*J_2*J_4 + 2*A_b_04*A_b_12*A_b_22*A_b_24*I_p_01*J_2*J_4 + 2*A_b_04*A_b_13*A_b_14*A_b_23*I_p_02*J_3*J_4 + 2*A_b_04*A_b_13*A_b_23*A_b_24*I_p_01*J_3*J_4 + 2*A_b_04*A_b_14*I_p_01*I_p_22*J_4 + 2*A_b_04*A_b_24*I_p_02*I_p_11*J_4 + 2*A_b_10*A_b_11*A_b_20*A_b_21*J_0*J_1*J_2*t126 + 2*A_b_10*A_b_11*A_b_20*A_b_21*J_0*J_1*J_3*t128 + 2*A_b_10*A_b_11*A_b_20*A_b_21*J_0*J_1*J_4*t130 + 2*A_b_10*A_b_12*A_b_20*A_b_22*J_0*J_1*J_2*t124 + 2*A_b_10*A_b_12*A_b_20*A_b_22*J_0*J_2*J_3*t128 + 2*A_b_10*A_b_12*A_b_20*A_b_22*J_0*J_2*J_4*t130 + 2*A_b_10*A_b_13*A_b_20*A_b_23*J_0*J_1*J_3*t124 + 2*A_b_10*A_b_13*A_b_20*A_b_23*J_0*J_2*J_3*t126 + 2*A_b_10*A_b_13*A_b_20*A_b_23*J_0*J_3*J_4*t130 + 2*A_b_10*A_b_14*A_b_20*A_b_24*J_0*J_1*J_4*t124 + 2*A_b_10*A_b_14*A_b_20*A_b_24*J_0*J_2*J_4*t126 + 2*A_b_10*A_b_14*A_b_20*A_b_24*J_0*J_3*J_4*t128 + 2*A_b_10*A_b_20*I_p_00*I_p_12*J_0 + 2*A_b_11*A_b_12*A_b_21*A_b_22*J_0*J_1*J_2*t122 + 2*A_b_11*A_b_12*A_b_21*A_b_22*J_1*J_2*J_3*t128 + 2*A_b_11*A_b_12*A_b_21*A_b_22*J_1*J_2*J_4*t130 + 2*A_b_11*A_b_13*A_b_21*A_b_23*J_0*J_1*J_3*t122 + 2*A_b_11*A_b_13*A_b_21*A_b_23*J_1*J_2*J_3*t126 + 2*A_b_11*A_b_13*A_b_21*A_b_23*J_1*J_3*J_4*t130 + 2*A_b_11*A_b_14*A_b_21*A_b_24*J_0*J_1*J_4*t122 + 2*A_b_11*A_b_14*A_b_21*A_b_24*J_1*J_2*J_4*t126 + 2*A_b_11*A_b_14*A_b_21*A_b_24*J_1*J_3*J_4*t128 + 2*A_b_11*A_b_21*I_p_00*I_p_12*J_1 + 2*A_b_12*A_b_13*A_b_22*A_b_23*J_0*J_2*J_3*t122 + 2*A_b_12*A_b_13*A_b_22*A_b_23*J_1*J_2*J_3*t124 + 2*A_b_12*A_b_13*A_b_22*A_b_23*J_2*J_3*J_4*t130 + 2*A_b_12*A_b_14*A_b_22*A_b_24*J_0*J_2*J_4*t122 + 2*A_b_12*A_b_14*A_b_22*A_b_24*J_1*J_2*J_4*t124 + 2*A_b_12*A_b_14*A_b_22*A_b_24*J_2*J_3*J_4*t128 + 2*A_b_12*A_b_22*I_p_00*I_p_12*J_2 + 2*A_b_13*A_b_14*A_b_23*A_b_24*J_0*J_3*J_4*t122 + 2*A_b_13*A_b_14*A_b_23*A_b_24*J_1*J_3*J_4*t124 + 2*A_b_13*A_b_14*A_b_23*A_b_24*J_2*J_3*J_4*t126 + 2*A_b_13*A_b_23*I_p_00*I_p_12*J_3 + 2*A_b_14*A_b_24*I_p_00*I_p_12*J_4 + I_p_00*I_p_11*I_p_22 + I_p_00*J_0*J_1*t45*t57 + I_p_00*J_0*J_1*t47*t55 + I_p_00*J_0*J_2*t45*t59 + I_p_00*J_0*J_2*t49*t55 + I_p_00*J_0*J_3*t45*t61 + I_p_00*J_0*J_3*t51*t55 + I_p_00*J_0*J_4*t45*t63 + I_p_00*J_0*J_4*t53*t55 + I_p_00*J_1*J_2*t47*t59 + I_p_00*J_1*J_2*t49*t57 + I_p_00*J_1*J_3*t47*t61 + I_p_00*J_1*J_3*t51*t57 + I_p_00*J_1*J_4*t47*t63 + I_p_00*J_1*J_4*t53*t57 + I_p_00*J_2*J_3*t49*t61 + I_p_00*J_2*J_3*t51*t59 + I_p_00*J_2*J_4*t49*t63 + I_p_00*J_2*J_4*t53*t59 + I_p_00*J_3*J_4*t51*t63 + I_p_00*J_3*J_4*t53*t61 - I_p_00*t149*t43 - I_p_00*t38 + 2*I_p_01*I_p_02*I_p_12 + I_p_11*J_0*J_1*t122*t57 + I_p_11*J_0*J_1*t124*t55 + I_p_11*J_0*J_2*t122*t59 + I_p_11*J_0*J_2*t126*t55 + I_p_11*J_0*J_3*t122*t61 + I_p_11*J_0*J_3*t128*t55 + I_p_11*J_0*J_4*t122*t63 + I_p_11*J_0*J_4*t130*t55 + I_p_11*J_1*J_2*t124*t59 + I_p_11*J_1*J_2*t126*t57 + I_p_11*J_1*J_3*t124*t61 + I_p_11*J_1*J_3*t128*t57 + I_p_11*J_1*J_4*t124*t63 + I_p_11*J_1*J_4*t130*t57 + I_p_11*J_2*J_3*t126*t61 + I_p_11*J_2*J_3*t128*t59 + I_p_11*J_2*J_4*t126*t63 + I_p_11*J_2*J_4*t130*t59 + I_p_11*J_3*J_4*t128*t63 + I_p_11*J_3*J_4*t130*t61 - I_p_11*t121 + I_p_22*J_0*J_1*t122*t47 + I_p_22*J_0*J_1*t124*t45 + I_p_22*J_0*J_2*t122*t49 + I_p_22*J_0*J_2*t126*t45 + I_p_22*J_0*J_3*t122*t51 + I_p_22*J_0*J_3*t128*t45 + I_p_22*J_0*J_4*t122*t53 + I_p_22*J_0*J_4*t130*t45 + I_p_22*J_1*J_2*t124*t49 + I_p_22*J_1*J_2*t126*t47 + I_p_22*J_1*J_3*t124*t51 + I_p_22*J_1*J_3*t128*t47 + I_p_22*J_1*J_4*t124*t53 + I_p_22*J_1*J_4*t130*t47 + I_p_22*J_2*J_3*t126*t51 + I_p_22*J_2*J_3*t128*t49 + I_p_22*J_2*J_4*t126*t53 + I_p_22*J_2*J_4*t130*t49 + I_p_22*J_3*J_4*t128*t53 + I_p_22*J_3*J_4*t130*t51 - I_p_22*t105*t144 - I_p_22*t120 + J_0*t120*t55 + J_0*t121*t45 + J_0*t122*t38 + J_1*t120*t57 + J_1*t121*t47 + J_1*t124*t38 + J_2*t120*t59 + J_2*t121*t49 + J_2*t126*t38 + J_3*t120*t61 + J_3*t121*t51 + J_3*t128*t38 + J_4*t120*t63 + J_4*t121*t53 + J_4*t130*t38 - t101*t135 - t102*t134 - t103*t134 - t104*t134 - t105*t134 - t106*t134 - t110*t139 - t110*t141 - t110*t143 - t110*t145 - t111*t141 - t111*t143 - t111*t145 - t112*t143 - t112*t145 - t113*t145 - t114*t139 - t114*t141 - t114*t143 - t114*t145 - t115*t141 - t115*t143 - t115*t145 - t115*t157 - t116*t139 - t116*t143 - t116*t145 - t116*t157 - t117*t139 - t117*t141 - t117*t145 - t117*t157 - t118*t139 - t118*t141 - t118*t143 - t118*t157 - t123*t37 - t123*t74 - t123*t75 - t123*t76 - t123*t78 - t123*t79 - t123*t80 - t123*t82 - t123*t83 - t123*t84 - t123*t86 - t123*t87 - t123*t88 - t125*t37 - t125*t70 - t125*t71 - t125*t72 - t125*t77 - t125*t79 - t125*t80 - t125*t81 - t125*t83 - t125*t84 - t125*t85 - t125*t87 - t125*t88 - t127*t37 - t127*t69 - t127*t71 - t127*t72 - t127*t73 - t127*t75 - t127*t76 - t127*t81 - t127*t82 - t127*t84 - t127*t85 - t127*t86 - t127*t88 - t129*t37 - t129*t69 - t129*t70 - t129*t72 - t129*t73 - t129*t74 - t129*t76 - t129*t77 - t129*t78 - t129*t80 - t129*t85 - t129*t86 - t129*t87 - t131*t37 - t131*t69 - t131*t70 - t131*t71 - t131*t73 - t131*t74 - t131*t75 - t131*t77 - t131*t78 - t131*t79 - t131*t81 - t131*t82 - t131*t83 - t132*t46 - t132*t48 - t132*t50 - t132*t52 - t132*t54 - t133*t56 - t133*t58 - t133*t60 - t133*t62 - t133*t64 - t135*t93 - t135*t95 - t135*t97 - t135*t99 - t136*t39 - t136*t41 - t136*t42 - t136*t43 - t136*t44 - t137*t138 - t137*t140 - t137*t142 - t137*t144 - t138*t154 - t138*t155 - t138*t156 - t138*t159 - t138*t167 - t138*t168 - t138*t169 - t138*t171 - t138*t172 - t138*t175 - t138*t176 - t138*t178 - t138*t179 - t138*t180 - t138*t182 - t138*t183 - t140*t146 - t140*t152 - t140*t155 - t140*t156 - t140*t159 - t140*t165 - t140*t166 - t140*t168 - t140*t169 - t140*t173 - t140*t174 - t140*t176 - t140*t177 - t140*t179 - t140*t181 - t140*t182 - t140*t183 - t142*t146 - t142*t147 - t142*t152 - t142*t154 - t142*t156 - t142*t159 - t142*t164 - t142*t166 - t142*t167 - t142*t169 - t142*t170 - t142*t172 - t142*t173 - t142*t177 - t142*t178 - t142*t180 - t142*t181 - t142*t183 - t144*t146 - t144*t147 - t144*t152 - t144*t154 - t144*t155 - t144*t159 - t144*t164 - t144*t165 - t144*t167 - t144*t168 - t144*t170 - t144*t171 - t144*t173 - t144*t174 - t144*t175 - t144*t180 - t144*t181 - t144*t182 - t148*t149 - t148*t66 - t148*t67 - t148*t68 - t149*t150 - t149*t151 - t149*t158 - t149*t160 - t149*t161 - t149*t162 - t150*t67 - t150*t68 - t151*t68 - t152*t153 - t153*t154 - t153*t155 - t153*t156 - t153*t164 - t153*t165 - t153*t166 - t153*t170 - t153*t171 - t153*t172 - t153*t174 - t153*t175 - t153*t176 - t153*t177 - t153*t178 - t153*t179 - t158*t66 - t158*t67 - t158*t68 - t160*t65 - t160*t67 - t160*t68 - t161*t65 - t161*t66 - t161*t68 - t162*t65 - t162*t66 - t162*t67 - t163*t65 - t163*t66 - t163*t67 - t163*t68));
+    const float t185 = t184*(t107*t91 + t108*t119 + t36*(-I_p_11*t56 - I_p_11*t58 - I_p_11*t60 - I_p_11*t62 - I_p_11*t64 - I_p_22*t46 - I_p_22*t48 - I_p_22*t50 - I_p_22*t52 - I_p_22*t54 + t37 - t38 + t39*t40 + t40*t41 + t40*t42 + t40*t43 + t40*t44 - t41*t65 - t42*t65 - t42*t66 - t43*t65 - t43*t66 - t43*t67 - t44*t65 - t44*t66 - t44*t67 - t44*t68 + t69 + t70 + t71 + t72 + t73 + t74 + t75 + t76 + t77 + t78 + t79 + t80 + t81 + t82 + t83 + t84 + t85 + t86 + t87 + t88));
+    const float t186 = 2*I_p_02;
+    const float t187 = A_b_00*A_b_01*A_b_10*A_b_21*J_0*J_1 + A_b_00*A_b_01*A_b_11*A_b_20*J_0*J_1 + A_b_00*A_b_02*A_b_10*A_b_22*J_0*J_2 + A_b_00*A_b_02*A_b_12*A_b_20*J_0*J_2 + A_b_00*A_b_03*A_b_10*A_b_23*J_0*J_3 + A_b_00*A_b_03*A_b_13*A_b_20*J_0*J_3 + A_b_00*A_b_04*A_b_10*A_b_24*J_0*J_4 + A_b_00*A_b_04*A_b_14*A_b_20*J_0*J_4 + A_b_01*A_b_02*A_b_11*A_b_22*J_1*J_2 + A_b_01*A_b_02*A_b_12*A_b_21*J_1*J_2 + A_b_01*A_b_03*A_b_11*A_b_23*J_1*J_3 + A_b_01*A_b_03*A_b_13*A_b_21*J_1*J_3 + A_b_01*A_b_04*A_b_11*A_b_24*J_1*J_4 + A_b_01*A_b_04*A_b_14*A_b_21*J_1*J_4 + A_b_02*A_b_03*A_b_12*A_b_23*J_2*J_3 + A_b_02*A_b_03*A_b_13*A_b_22*J_2*J_3 + A_b_02*A_b_04*A_b_12*A_b_24*J_2*J_4 + A_b_02*A_b_04*A_b_14*A_b_22*J_2*J_4 + A_b_03*A_b_04*A_b_13*A_b_24*J_3*J_4 + A_b_03*A_b_04*A_b_14*A_b_23*J_3*J_4 + A_b_10*A_b_20*I_p_00*J_0 + A_b_11*A_b_21*I_p_00*J_1 + A_b_12*A_b_22*I_p_00*J_2 + A_b_13*A_b_23*I_p_00*J_3 + A_b_14*A_b_24*I_p_00*J_4 - I_p_00*I_p_12 + I_p_01*I_p_02 - I_p_01*t101 - I_p_01*t93 - I_p_01*t95 - I_p_01*t97 - I_p_01*t99 - I_p_02*t102 - I_p_02*t103 - I_p_02*t104 - I_p_02*t105 - I_p_02*t106 + I_p_12*J_0*t122 + I_p_12*J_1*t124 + I_p_12*J_2*t126 + I_p_12*J_3*t128 + I_p_12*J_4*t130 - t123*t41 - t123*t42 - t123*t43 - t123*t44 - t125*t39 - t125*t42 - t125*t43 - t125*t44 - t127*t39 - t127*t41 - t127*t43 - t127*t44 - t129*t39 - t129*t41 - t129*t42 - t129*t44 - t131*t39 - t131*t41 - t131*t42 - t131*t43;
+    const float t188 = t184*(t107*t36 + t108*t187 + t91*(-I_p_00*t56 - I_p_00*t58 - I_p_00*t60 - I_p_00*t62 - I_p_00*t64 - I_p_22*t123 - I_p_22*t125 - I_p_22*t127 - I_p_22*t129 - I_p_22*t131 - t101*t139 - t101*t141 - t101*t143 - t101*t157 + t101*t186 - t121 + t123*t58 + t123*t60 + t123*t62 + t123*t64 + t125*t56 + t125*t60 + t125*t62 + t125*t64 + t127*t56 + t127*t58 + t127*t62 + t127*t64 + t129*t56 + t129*t58 + t129*t60 + t129*t64 + t131*t56 + t131*t58 + t131*t60 + t131*t62 + t132 - t139*t97 - t139*t99 - t141*t99 - t157*t95 - t157*t97 - t157*t99 + t186*t93 + t186*t95 + t186*t97 + t186*t99));
+    const float t189 = 2*I_p_01;
+    const float t190 = t184*(t108*(-I_p_00*t46 - I_p_00*t48 - I_p_00*t50 - I_p_00*t52 - I_p_00*t54 - I_p_11*t123 - I_p_11*t125 - I_p_11*t127 - I_p_11*t129 - I_p_11*t131 + t102*t189 - t103*t153 + t103*t189 - t104*t138 - t104*t153 + t104*t189 - t105*t138 - t105*t140 - t105*t153 + t105*t189 - t106*t138 - t106*t140 - t106*t142 - t106*t153 + t106*t189 - t120 + t123*t48 + t123*t50 + t123*t52 + t123*t54 + t125*t46 + t125*t50 + t125*t52 + t125*t54 + t127*t46 + t127*t48 + t127*t52 + t127*t54 + t129*t46 + t129*t48 + t129*t50 + t129*t54 + t131*t46 + t131*t48 + t131*t50 + t131*t52 + t133) + t119*t36 + t187*t91);
+    q_dot[0] = q_1*t2 - q_2*t1 + q_3*t0;
+    q_dot[1] = -q_0*t2 + q_2*t0 + q_3*t1;
+    q_dot[2] = q_0*t1 - q_1*t0 + q_3*t2;
+    q_dot[3] = -q_0*t0 - q_1*t1 - q_2*t2;
+    omega_dot_b[0] = t185;
+    omega_dot_b[1] = t188;
+    omega_dot_b[2] = t190;
+    Omega_dot[0] = -A_b_00*t185 - A_b_10*t188 - A_b_20*t190 + t3/J_0;
+    Omega_dot[1] = -A_b_01*t185 - A_b_11*t188 - A_b_21*t190 + t4/J_1;
+    Omega_dot[2] = -A_b_02*t185 - A_b_12*t188 - A_b_22*t190 + t5/J_2;
+    Omega_dot[3] = -A_b_03*t185 - A_b_13*t188 - A_b_23*t190 + t6/J_3;
+    Omega_dot[4] = -A_b_04*t185 - A_b_14*t188 - A_b_24*t190 + t7/J_4;
+}
+
+void lvf_wheels5_momentum(const float *q, const float *omega_b, const float *Omega, const float *I_p, const float *A_b, const float *J, float *L_body_w, float *L_wheels_w, float *h_w) {
+    const float q_0 = q[0];
+    const float q_1 = q[1];
+    const float q_2 = q[2];
+    const float q_3 = q[3];
+    const float omega_b_0 = omega_b[0];
+    const float omega_b_1 = omega_b[1];
+    const float omega_b_2 = omega_b[2];
+    const float Omega_0 = Omega[0];
+    const float Omega_1 = Omega[1];
+    const float Omega_2 = Omega[2];
+    const float Omega_3 = Omega[3];
+    const float Omega_4 = Omega[4];
+    const float I_p_00 = I_p[0];
+    const float I_p_01 = I_p[1];
+    const float I_p_02 = I_p[2];
+    const float I_p_11 = I_p[4];
+    const float I_p_12 = I_p[5];
+    const float I_p_22 = I_p[8];
+    const float A_b_00 = A_b[0];
+    const float A_b_01 = A_b[1];
+    const float A_b_02 = A_b[2];
+    const float A_b_03 = A_b[3];
+    const float A_b_04 = A_b[4];
+    const float A_b_10 = A_b[5];
+    const float A_b_11 = A_b[6];
+    const float A_b_12 = A_b[7];
+    const float A_b_13 = A_b[8];
+    const float A_b_14 = A_b[9];
+    const float A_b_20 = A_b[10];
+    const float A_b_21 = A_b[11];
+    const float A_b_22 = A_b[12];
+    const float A_b_23 = A_b[13];
+    const float A_b_24 = A_b[14];
+    const float J_0 = J[0];
+    const float J_1 = J[1];
+    const float J_2 = J[2];
+    const float J_3 = J[3];
+    const float J_4 = J[4];
+    const float t0 = 2*q_1;
+    const float t1 = q_0*t0;
+    const float t2 = 2*q_2;
+    const float t3 = q_3*t2;
+    const float t4 = t1 - t3;
+    const float t5 = A_b_10*J_0;
+    const float t6 = A_b_11*J_1;
+    const float t7 = A_b_12*J_2;
+    const float t8 = A_b_13*J_3;
+    const float t9 = A_b_14*J_4;
+    const float t10 = -A_b_00*t5 - A_b_01*t6 - A_b_02*t7 - A_b_03*t8 - A_b_04*t9 + I_p_01;
+    const float t11 = -A_b_20*t5 - A_b_21*t6 - A_b_22*t7 - A_b_23*t8 - A_b_24*t9 + I_p_12;
+    const float t12 = omega_b_0*t10 + omega_b_1*(-(A_b_10*A_b_10)*J_0 - (A_b_11*A_b_11)*J_1 - (A_b_12*A_b_12)*J_2 - (A_b_13*A_b_13)*J_3 - (A_b_14*A_b_14)*J_4 + I_p_11) + omega_b_2*t11;
+    const float t13 = q_0*t2;
+    const float t14 = q_3*t0;
+    const float t15 = t13 + t14;
+    const float t16 = -A_b_00*A_b_20*J_0 - A_b_01*A_b_21*J_1 - A_b_02*A_b_22*J_2 - A_b_03*A_b_23*J_3 - A_b_04*A_b_24*J_4 + I_p_02;
+    const float t17 = omega_b_0*t16 + omega_b_1*t11 + omega_b_2*(-(A_b_20*A_b_20)*J_0 - (A_b_21*A_b_21)*J_1 - (A_b_22*A_b_22)*J_2 - (A_b_23*A_b_23)*J_3 - (A_b_24*A_b_24)*J_4 + I_p_22);
+    const float t18 = 2*(q_1*q_1);
+    const float t19 = 2*(q_2*q_2) - 1;
+    const float t20 = -t18 - t19;
+    const float t21 = omega_b_0*(-(A_b_00*A_b_00)*J_0 - (A_b_01*A_b_01)*J_1 - (A_b_02*A_b_02)*J_2 - (A_b_03*A_b_03)*J_3 - (A_b_04*A_b_04)*J_4 + I_p_00) + omega_b_1*t10 + omega_b_2*t16;
+    const float t22 = t1 + t3;
+    const float t23 = 2*q_0*q_3;
+    const float t24 = 2*q_1*q_2 - t23;
+    const float t25 = 2*(q_0*q_0);
+    const float t26 = -t19 - t25;
+    const float t27 = t13 - t14;
+    const float t28 = q_1*t2 + t23;
+    const float t29 = -t18 - t25 + 1;
+    const float t30 = J_0*(A_b_00*omega_b_0 + A_b_10*omega_b_1 + A_b_20*omega_b_2 + Omega_0);
+    const float t31 = J_1*(A_b_01*omega_b_0 + A_b_11*omega_b_1 + A_b_21*omega_b_2 + Omega_1);
+    const float t32 = J_2*(A_b_02*omega_b_0 + A_b_12*omega_b_1 + A_b_22*omega_b_2 + Omega_2);
+    const float t33 = J_3*(A_b_03*omega_b_0 + A_b_13*omega_b_1 + A_b_23*omega_b_2 + Omega_3);
+    const float t34 = J_4*(A_b_04*omega_b_0 + A_b_14*omega_b_1 + A_b_24*omega_b_2 + Omega_4);
+    const float t35 = A_b_10*t30 + A_b_11*t31 + A_b_12*t32 + A_b_13*t33 + A_b_14*t34;
+    const float t36 = A_b_20*t30 + A_b_21*t31 + A_b_22*t32 + A_b_23*t33 + A_b_24*t34;
+    const float t37 = A_b_00*t30 + A_b_01*t31 + A_b_02*t32 + A_b_03*t33 + A_b_04*t34;
+    L_body_w[0] = t12*t4 + t15*t17 + t20*t21;
+    L_body_w[1] = t12*t26 + t17*t24 + t21*t22;
+    L_body_w[2] = t12*t28 + t17*t29 + t21*t27;
+    L_wheels_w[0] = t15*t36 + t20*t37 + t35*t4;
+    L_wheels_w[1] = t22*t37 + t24*t36 + t26*t35;
+    L_wheels_w[2] = t27*t37 + t28*t35 + t29*t36;
+    h_w[0] = t30;
+    h_w[1] = t31;
+    h_w[2] = t32;
+    h_w[3] = t33;
+    h_w[4] = t34;
+}
+
+void lvf_wheels5_motor(const float *command, const float *Omega, float torque_limit, float speed_limit, float cutoff, float *u) {
+    const float command_0 = command[0];
+    const float command_1 = command[1];
+    const float command_2 = command[2];
+    const float command_3 = command[3];
+    const float command_4 = command[4];
+    const float Omega_0 = Omega[0];
+    const float Omega_1 = Omega[1];
+    const float Omega_2 = Omega[2];
+    const float Omega_3 = Omega[3];
+    const float Omega_4 = Omega[4];
+    const float t0 = -torque_limit;
+    const float t1 = command_0 < t0;
+    const float t2 = fabsf(Omega_0);
+    const float t3 = speed_limit <= t2;
+    const float t4 = Omega_0*torque_limit;
+    const float t5 = command_0 > torque_limit;
+    const float t6 = ((t1) ? (
+   t0
+)
+: ((t5) ? (
+   torque_limit
+)
+: (
+   command_0
+)));
+    const float t7 = cutoff > 0;
+    const float t8 = Omega_0 >= speed_limit;
+    const float t9 = command_0 < 0;
+    const float t10 = command_0 > 0;
+    const float t11 = -speed_limit;
+    const float t12 = Omega_0 <= t11;
+    const float t13 = (1.0F/speed_limit);
+    const float t14 = torque_limit*(-t13*t2 + 1);
+    const float t15 = -t14;
+    const float t16 = command_1 < t0;
+    const float t17 = fabsf(Omega_1);
+    const float t18 = speed_limit <= t17;
+    const float t19 = Omega_1*torque_limit;
+    const float t20 = command_1 > torque_limit;
+    const float t21 = ((t16) ? (
+   t0
+)
+: ((t20) ? (
+   torque_limit
+)
+: (
+   command_1
+)));
+    const float t22 = Omega_1 >= speed_limit;
+    const float t23 = command_1 < 0;
+    const float t24 = command_1 > 0;
+    const float t25 = Omega_1 <= t11;
+    const float t26 = torque_limit*(-t13*t17 + 1);
+    const float t27 = -t26;
+    const float t28 = command_2 < t0;
+    const float t29 = fabsf(Omega_2);
+    const float t30 = speed_limit <= t29;
+    const float t31 = Omega_2*torque_limit;
+    const float t32 = command_2 > torque_limit;
+    const float t33 = ((t28) ? (
+   t0
+)
+: ((t32) ? (
+   torque_limit
+)
+: (
+   command_2
+)));
+    const float t34 = Omega_2 >= speed_limit;
+    const float t35 = command_2 < 0;
+    const float t36 = command_2 > 0;
+    const float t37 = Omega_2 <= t11;
+    const float t38 = torque_limit*(-t13*t29 + 1);
+    const float t39 = -t38;
+    const float t40 = command_3 < t0;
+    const float t41 = fabsf(Omega_3);
+    const float t42 = speed_limit <= t41;
+    const float t43 = Omega_3*torque_limit;
+    const float t44 = command_3 > torque_limit;
+    const float t45 = ((t40) ? (
+   t0
+)
+: ((t44) ? (
+   torque_limit
+)
+: (
+   command_3
+)));
+    const float t46 = Omega_3 >= speed_limit;
+    const float t47 = command_3 < 0;
+    const float t48 = command_3 > 0;
+    const float t49 = Omega_3 <= t11;
+    const float t50 = torque_limit*(-t13*t41 + 1);
+    const float t51 = -t50;
+    const float t52 = command_4 < t0;
+    const float t53 = fabsf(Omega_4);
+    const float t54 = speed_limit <= t53;
+    const float t55 = Omega_4*torque_limit;
+    const float t56 = command_4 > torque_limit;
+    const float t57 = ((t52) ? (
+   t0
+)
+: ((t56) ? (
+   torque_limit
+)
+: (
+   command_4
+)));
+    const float t58 = Omega_4 >= speed_limit;
+    const float t59 = command_4 < 0;
+    const float t60 = command_4 > 0;
+    const float t61 = Omega_4 <= t11;
+    const float t62 = torque_limit*(-t13*t53 + 1);
+    const float t63 = -t62;
+    u[0] = ((t7) ? (
+   ((((t1) ? (
+      t3 && t4 < 0
+   )
+   : (
+      ((t5) ? (
+         t3 && t4 > 0
+      )
+      : (
+         t3 && Omega_0*command_0 > 0
+      ))
+   ))) ? (
+      0
+   )
+   : (
+      t6
+   ))
+)
+: (
+   (((t10 || t12) && (t10 || t9) && (t12 || t8) && (t8 || t9)) ? (
+      0
+   )
+   : ((Omega_0 > 0 && command_0 > t14 && Omega_0 < speed_limit) ? (
+      t14
+   )
+   : ((Omega_0 > t11 && Omega_0 < 0 && command_0 < t15) ? (
+      t15
+   )
+   : (
+      t6
+   ))))
+));
+    u[1] = ((t7) ? (
+   ((((t16) ? (
+      t18 && t19 < 0
+   )
+   : (
+      ((t20) ? (
+         t18 && t19 > 0
+      )
+      : (
+         t18 && Omega_1*command_1 > 0
+      ))
+   ))) ? (
+      0
+   )
+   : (
+      t21
+   ))
+)
+: (
+   (((t22 || t23) && (t22 || t25) && (t23 || t24) && (t24 || t25)) ? (
+      0
+   )
+   : ((Omega_1 > 0 && command_1 > t26 && Omega_1 < speed_limit) ? (
+      t26
+   )
+   : ((Omega_1 > t11 && Omega_1 < 0 && command_1 < t27) ? (
+      t27
+   )
+   : (
+      t21
+   ))))
+));
+    u[2] = ((t7) ? (
+   ((((t28) ? (
+      t30 && t31 < 0
+   )
+   : (
+      ((t32) ? (
+         t30 && t31 > 0
+      )
+      : (
+         t30 && Omega_2*command_2 > 0
+      ))
+   ))) ? (
+      0
+   )
+   : (
+      t33
+   ))
+)
+: (
+   (((t34 || t35) && (t34 || t37) && (t35 || t36) && (t36 || t37)) ? (
+      0
+   )
+   : ((Omega_2 > 0 && command_2 > t38 && Omega_2 < speed_limit) ? (
+      t38
+   )
+   : ((Omega_2 > t11 && Omega_2 < 0 && command_2 < t39) ? (
+      t39
+   )
+   : (
+      t33
+   ))))
+));
+    u[3] = ((t7) ? (
+   ((((t40) ? (
+      t42 && t43 < 0
+   )
+   : (
+      ((t44) ? (
+         t42 && t43 > 0
+      )
+      : (
+         t42 && Omega_3*command_3 > 0
+      ))
+   ))) ? (
+      0
+   )
+   : (
+      t45
+   ))
+)
+: (
+   (((t46 || t47) && (t46 || t49) && (t47 || t48) && (t48 || t49)) ? (
+      0
+   )
+   : ((Omega_3 > 0 && command_3 > t50 && Omega_3 < speed_limit) ? (
+      t50
+   )
+   : ((Omega_3 > t11 && Omega_3 < 0 && command_3 < t51) ? (
+      t51
+   )
+   : (
+      t45
+   ))))
+));
+    u[4] = ((t7) ? (
+   ((((t52) ? (
+      t54 && t55 < 0
+   )
+   : (
+      ((t56) ? (
+         t54 && t55 > 0
+      )
+      : (
+         t54 && Omega_4*command_4 > 0
+      ))
+   ))) ? (
+      0
+   )
+   : (
+      t57
+   ))
+)
+: (
+   (((t58 || t59) && (t58 || t61) && (t59 || t60) && (t60 || t61)) ? (
+      0
+   )
+   : ((Omega_4 > 0 && command_4 > t62 && Omega_4 < speed_limit) ? (
+      t62
+   )
+   : ((Omega_4 > t11 && Omega_4 < 0 && command_4 < t63) ? (
+      t63
+   )
+   : (
+      t57
+   ))))
+));
+}
+
+void lvf_wheels6_body_rhs(const float *q, const float *omega_b, const float *Omega, const float *I_p, const float *A_b, const float *J, const float *r_b, const float *F_w, const float *tau_w, const float *u, float c_w, float *q_dot, float *omega_dot_b, float *Omega_dot) {
+    const float q_0 = q[0];
+    const float q_1 = q[1];
+    const float q_2 = q[2];
+    const float q_3 = q[3];
+    const float omega_b_0 = omega_b[0];
+    const float omega_b_1 = omega_b[1];
+    const float omega_b_2 = omega_b[2];
+    const float Omega_0 = Omega[0];
+    const float Omega_1 = Omega[1];
+    const float Omega_2 = Omega[2];
+    const float Omega_3 = Omega[3];
+    const float Omega_4 = Omega[4];
+    const float Omega_5 = Omega[5];
+    const float I_p_00 = I_p[0];
+    const float I_p_01 = I_p[1];
+    const float I_p_02 = I_p[2];
+    const float I_p_11 = I_p[4];
+    const float I_p_12 = I_p[5];
+    const float I_p_22 = I_p[8];
+    const float A_b_00 = A_b[0];
+    const float A_b_01 = A_b[1];
+    const float A_b_02 = A_b[2];
+    const float A_b_03 = A_b[3];
+    const float A_b_04 = A_b[4];
+    const float A_b_05 = A_b[5];
+    const float A_b_10 = A_b[6];
+    const float A_b_11 = A_b[7];
+    const float A_b_12 = A_b[8];
+    const float A_b_13 = A_b[9];
+    const float A_b_14 = A_b[10];
+    const float A_b_15 = A_b[11];
+    const float A_b_20 = A_b[12];
+    const float A_b_21 = A_b[13];
+    const float A_b_22 = A_b[14];
+    const float A_b_23 = A_b[15];
+    const float A_b_24 = A_b[16];
+    const float A_b_25 = A_b[17];
+    const float J_0 = J[0];
+    const float J_1 = J[1];
+    const float J_2 = J[2];
+    const float J_3 = J[3];
+    const float J_4 = J[4];
+    const float J_5 = J[5];
+    const float r_b_0 = r_b[0];
+    const float r_b_1 = r_b[1];
+    const float r_b_2 = r_b[2];
+    const float F_w_0 = F_w[0];
+    const float F_w_1 = F_w[1];
+    const float F_w_2 = F_w[2];
+    const float tau_w_0 = tau_w[0];
+    const float tau_w_1 = tau_w[1];
+    const float tau_w_2 = tau_w[2];
+    const float u_0 = u[0];
+    const float u_1 = u[1];
+    const float u_2 = u[2];
+    const float u_3 = u[3];
+    const float u_4 = u[4];
+    const float u_5 = u[5];
+    const float t0 = ((1.0F/2.0F))*omega_b_0;
+    const float t1 = ((1.0F/2.0F))*omega_b_1;
+    const float t2 = ((1.0F/2.0F))*omega_b_2;
+    const float t3 = -Omega_0*c_w + u_0;
+    const float t4 = -Omega_1*c_w + u_1;
+    const float t5 = -Omega_2*c_w + u_2;
+    const float t6 = -Omega_3*c_w + u_3;
+    const float t7 = -Omega_4*c_w + u_4;
+    const float t8 = -Omega_5*c_w + u_5;
+    const float t9 = 2*q_1;
+    const float t10 = q_0*t9;
+    const float t11 = 2*q_2;
+    const float t12 = q_3*t11;
+    const float t13 = t10 + t12;
+    const float t14 = q_0*t11;
+    const float t15 = q_3*t9;
+    const float t16 = t14 - t15;
+    const float t17 = 2*(q_1*q_1);
+    const float t18 = 2*(q_2*q_2) - 1;
+    const float t19 = -t17 - t18;
+    const float t20 = J_0*Omega_0;
+    const float t21 = J_1*Omega_1;
+    const float t22 = J_2*Omega_2;
+    const float t23 = J_3*Omega_3;
+    const float t24 = J_4*Omega_4;
+    const float t25 = J_5*Omega_5;
+    const float t26 = A_b_20*t20 + A_b_21*t21 + A_b_22*t22 + A_b_23*t23 + A_b_24*t24 + A_b_25*t25 + I_p_02*omega_b_0 + I_p_12*omega_b_1 + I_p_22*omega_b_2;
+    const float t27 = A_b_10*t20 + A_b_11*t21 + A_b_12*t22 + A_b_13*t23 + A_b_14*t24 + A_b_15*t25 + I_p_01*omega_b_0 + I_p_11*omega_b_1 + I_p_12*omega_b_2;
+    const float t28 = t10 - t12;
+    const float t29 = 2*q_0*q_3;
+    const float t30 = q_2*t9 + t29;
+    const float t31 = 2*(q_0*q_0);
+    const float t32 = -t18 - t31;
+    const float t33 = F_w_0*t28 + F_w_1*t32 + F_w_2*t30;
+    const float t34 = t14 + t15;
+    const float t35 = 2*q_1*q_2 - t29;
+    const float t36 = -t17 - t31 + 1;
+    const float t37 = F_w_0*t34 + F_w_1*t35 + F_w_2*t36;
+    const float t38 = -A_b_00*t3 - A_b_01*t4 - A_b_02*t5 - A_b_03*t6 - A_b_04*t7 - A_b_05*t8 - omega_b_1*t26 + omega_b_2*t27 + r_b_1*t37 - r_b_2*t33 + t13*tau_w_1 + t16*tau_w_2 + t19*tau_w_0;
+    const float t39 = I_p_11*I_p_22;
+    const float t40 = (I_p_12*I_p_12);
+    const float t41 = A_b_10*A_b_20*J_0;
+    const float t42 = 2*I_p_12;
+    const float t43 = A_b_11*A_b_21*J_1;
+    const float t44 = A_b_12*A_b_22*J_2;
+    const float t45 = A_b_13*A_b_23*J_3;
+    const float t46 = A_b_14*A_b_24*J_4;
+    const float t47 = A_b_15*A_b_25*J_5;
+    const float t48 = (A_b_10*A_b_10);
+    const float t49 = J_0*t48;
+    const float t50 = (A_b_11*A_b_11);
+    const float t51 = J_1*t50;
+    const float t52 = (A_b_12*A_b_12);
+    const float t53 = J_2*t52;
+    const float t54 = (A_b_13*A_b_13);
+    const float t55 = J_3*t54;
+    const float t56 = (A_b_14*A_b_14);
+    const float t57 = J_4*t56;
+    const float t58 = (A_b_15*A_b_15);
+    const float t59 = J_5*t58;
+    const float t60 = (A_b_20*A_b_20);
+    const float t61 = J_0*t60;
+    const float t62 = (A_b_21*A_b_21);
+    const float t63 = J_1*t62;
+    const float t64 = (A_b_22*A_b_22);
+    const float t65 = J_2*t64;
+    const float t66 = (A_b_23*A_b_23);
+    const float t67 = J_3*t66;
+    const float t68 = (A_b_24*A_b_24);
+    const float t69 = J_4*t68;
+    const float t70 = (A_b_25*A_b_25);
+    const float t71 = J_5*t70;
+    const float t72 = 2*t41;
+    const float t73 = 2*t43;
+    const float t74 = 2*t44;
+    const float t75 = 2*t45;
+    const float t76 = 2*t46;
+    const float t77 = t49*t63;
+    const float t78 = t49*t65;
+    const float t79 = t49*t67;
+    const float t80 = t49*t69;
+    const float t81 = t49*t71;
+    const float t82 = t51*t61;
+    const float t83 = t51*t65;
+    const float t84 = t51*t67;
+    const float t85 = t51*t69;
+    const float t86 = t51*t71;
+    const float t87 = t53*t61;
+    const float t88 = t53*t63;
+    const float t89 = t53*t67;
+    const float t90 = t53*t69;
+    const float t91 = t53*t71;
+    const float t92 = t55*t61;
+    const float t93 = t55*t63;
+    const float t94 = t55*t65;
+    const float t95 = t55*t69;
+    const float t96 = t55*t71;
+    const float t97 = t57*t61;
+    const float t98 = t57*t63;
+    const float t99 = t57*t65;
+    const float t100 = t57*t67;
+    const float t101 = t57*t71;
+    const float t102 = t59*t61;
+    const float t103 = t59*t63;
+    const float t104 = t59*t65;
+    const float t105 = t59*t67;
+    const float t106 = t59*t69;
+    const float t107 = A_b_00*t20 + A_b_01*t21 + A_b_02*t22 + A_b_03*t23 + A_b_04*t24 + A_b_05*t25 + I_p_00*omega_b_0 + I_p_01*omega_b_1 + I_p_02*omega_b_2;
+    const float t108 = F_w_0*t19 + F_w_1*t13 + F_w_2*t16;
+    const float t109 = -A_b_10*t3 - A_b_11*t4 - A_b_12*t5 - A_b_13*t6 - A_b_14*t7 - A_b_15*t8 + omega_b_0*t26 - omega_b_2*t107 - r_b_0*t37 + r_b_2*t108 + t28*tau_w_0 + t30*tau_w_2 + t32*tau_w_1;
+    const float t110 = A_b_00*J_0;
+    const float t111 = A_b_20*t110;
+    const float t112 = A_b_01*J_1;
+    const float t113 = A_b_21*t112;
+    const float t114 = A_b_02*J_2;
+    const float t115 = A_b_22*t114;
+    const float t116 = A_b_03*J_3;
+    const float t117 = A_b_23*t116;
+    const float t118 = A_b_04*J_4;
+    const float t119 = A_b_24*t118;
+    const float t120 = A_b_05*J_5;
+    const float t121 = A_b_25*t120;
+    const float t122 = A_b_10*t110;
+    const float t123 = A_b_11*t112;
+    const float t124 = A_b_12*t114;
+    const float t125 = A_b_13*t116;
+    const float t126 = A_b_14*t118;
+    const float t127 = A_b_15*t120;
+    const float t128 = A_b_00*A_b_10*I_p_22*J_0 + A_b_00*A_b_11*A_b_20*A_b_21*J_0*J_1 + A_b_00*A_b_12*A_b_20*A_b_22*J_0*J_2 + A_b_00*A_b_13*A_b_20*A_b_23*J_0*J_3 + A_b_00*A_b_14*A_b_20*A_b_24*J_0*J_4 + A_b_00*A_b_15*A_b_20*A_b_25*J_0*J_5 + A_b_01*A_b_10*A_b_20*A_b_21*J_0*J_1 + A_b_01*A_b_11*I_p_22*J_1 + A_b_01*A_b_12*A_b_21*A_b_22*J_1*J_2 + A_b_01*A_b_13*A_b_21*A_b_23*J_1*J_3 + A_b_01*A_b_14*A_b_21*A_b_24*J_1*J_4 + A_b_01*A_b_15*A_b_21*A_b_25*J_1*J_5 + A_b_02*A_b_10*A_b_20*A_b_22*J_0*J_2 + A_b_02*A_b_11*A_b_21*A_b_22*J_1*J_2 + A_b_02*A_b_12*I_p_22*J_2 + A_b_02*A_b_13*A_b_22*A_b_23*J_2*J_3 + A_b_02*A_b_14*A_b_22*A_b_24*J_2*J_4 + A_b_02*A_b_15*A_b_22*A_b_25*J_2*J_5 + A_b_03*A_b_10*A_b_20*A_b_23*J_0*J_3 + A_b_03*A_b_11*A_b_21*A_b_23*J_1*J_3 + A_b_03*A_b_12*A_b_22*A_b_23*J_2*J_3 + A_b_03*A_b_13*I_p_22*J_3 + A_b_03*A_b_14*A_b_23*A_b_24*J_3*J_4 + A_b_03*A_b_15*A_b_23*A_b_25*J_3*J_5 + A_b_04*A_b_10*A_b_20*A_b_24*J_0*J_4 + A_b_04*A_b_11*A_b_21*A_b_24*J_1*J_4 + A_b_04*A_b_12*A_b_22*A_b_24*J_2*J_4 + A_b_04*A_b_13*A_b_23*A_b_24*J_3*J_4 + A_b_04*A_b_14*I_p_22*J_4 + A_b_04*A_b_15*A_b_24*A_b_25*J_4*J_5 + A_b_05*A_b_10*A_b_20*A_b_25*J_0*J_5 + A_b_05*A_b_11*A_b_21*A_b_25*J_1*J_5 + A_b_05*A_b_12*A_b_22*A_b_25*J_2*J_5 + A_b_05*A_b_13*A_b_23*A_b_25*J_3*J_5 + A_b_05*A_b_14*A_b_24*A_b_25*J_4*J_5 + A_b_05*A_b_15*I_p_22*J_5 - I_p_01*I_p_22 + I_p_01*J_0*t60 + I_p_01*J_1*t62 + I_p_01*J_2*t64 + I_p_01*J_3*t66 + I_p_01*J_4*t68 + I_p_01*J_5*t70 + I_p_02*I_p_12 - I_p_02*t41 - I_p_02*t43 - I_p_02*t44 - I_p_02*t45 - I_p_02*t46 - I_p_02*t47 - I_p_12*t111 - I_p_12*t113 - I_p_12*t115 - I_p_12*t117 - I_p_12*t119 - I_p_12*t121 - t122*t63 - t122*t65 - t122*t67 - t122*t69 - t122*t71 - t123*t61 - t123*t65 - t123*t67 - t123*t69 - t123*t71 - t124*t61 - t124*t63 - t124*t67 - t124*t69 - t124*t71 - t125*t61 - t125*t63 - t125*t65 - t125*t69 - t125*t71 - t126*t61 - t126*t63 - t126*t65 - t126*t67 - t126*t71 - t127*t61 - t127*t63 - t127*t65 - t127*t67 - t127*t69;
+    const float t129 = -A_b_20*t3 - A_b_21*t4 - A_b_22*t5 - A_b_23*t6 - A_b_24*t7 - A_b_25*t8 - omega_b_0*t27 + omega_b_1*t107 + r_b_0*t33 - r_b_1*t108 + t34*tau_w_0 + t35*tau_w_1 + t36*tau_w_2;
+    const float t130 = I_p_01*I_p_12;
+    const float t131 = I_p_11*t111;
+    const float t132 = I_p_11*t113;
+    const float t133 = I_p_11*t115;
+    const float t134 = I_p_11*t117;
+    const float t135 = I_p_11*t119;
+    const float t136 = I_p_02*t49;
+    const float t137 = I_p_02*t51;
+    const float t138 = I_p_02*t53;
+    const float t139 = I_p_02*t55;
+    const float t140 = I_p_02*t57;
+    const float t141 = I_p_02*t59;
+    const float t142 = -I_p_01*t41 - I_p_01*t43 - I_p_01*t44 - I_p_01*t45 - I_p_01*t46 - I_p_01*t47 - I_p_02*I_p_11 + I_p_11*t121 - I_p_12*t122 - I_p_12*t123 - I_p_12*t124 - I_p_12*t125 - I_p_12*t126 - I_p_12*t127 - t111*t51 - t111*t53 - t111*t55 - t111*t57 - t111*t59 - t113*t49 - t113*t53 - t113*t55 - t113*t57 - t113*t59 - t115*t49 - t115*t51 - t115*t55 - t115*t57 - t115*t59 - t117*t49 - t117*t51 - t117*t53 - t117*t57 - t117*t59 - t119*t49 - t119*t51 - t119*t53 - t119*t55 - t119*t59 - t121*t49 - t121*t51 - t121*t53 - t121*t55 - t121*t57 + t122*t43 + t122*t44 + t122*t45 + t122*t46 + t122*t47 + t123*t41 + t123*t44 + t123*t45 + t123*t46 + t123*t47 + t124*t41 + t124*t43 + t124*t45 + t124*t46 + t124*t47 + t125*t41 + t125*t43 + t125*t44 + t125*t46 + t125*t47 + t126*t41 + t126*t43 + t126*t44 + t126*t45 + t126*t47 + t127*t41 + t127*t43 + t127*t44 + t127*t45 + t127*t46 + t130 + t131 + t132 + t133 + t134 + t135 + t136 + t137 + t138 + t139 + t140 + t141;
+    const float t143 = (I_p_01*I_p_01);
+    const float t144 = (I_p_02*I_p_02);
+    const float t145 = (A_b_00*A_b_00);
+    const float t146 = J_0*t145;
+    const float t147 = (A_b_01*A_b_01);
+    const float t148 = J_1*t147;
+    const float t149 = (A_b_02*A_b_02);
+    const float t150 = J_2*t149;
+    const float t151 = (A_b_03*A_b_03);
+    const float t152 = J_3*t151;
+    const float t153 = (A_b_04*A_b_04);
+    const float t154 = J_4*t153;
+    const float t155 = (A_b_05*A_b_05);
+    const float t156 = J_5*t155;
+    const float t157 = I_p_00*I_p_22;
+    const float t158 = I_p_00*I_p_11;
+    const float t159 = 2*I_p_02*I_p_12;
+    const float t160 = 2*t130;
+    const float t161 = 2*I_p_01*I_p_02;
+    const float t162 = I_p_22*t122;
+    const float t163 = 2*t123;
+    const float t164 = 2*t113;
+    const float t165 = 2*t124;
+    const float t166 = 2*t115;
+    const float t167 = 2*t125;
+    const float t168 = 2*t117;
+    const float t169 = 2*t126;
+    const float t170 = 2*t119;
+    const float t171 = 2*t127;
+    const float t172 = 2*t121;
+    const float t173 = I_p_22*t123;
+    const float t174 = I_p_22*t124;
+    const float t175 = I_p_22*t125;
+    const float t176 = I_p_00*t41;
+    const float t177 = 2*t47;
+    const float t178 = I_p_00*t43;
+    const float t179 = I_p_00*t44;
+    const float t180 = I_p_00*t45;
+    const float t181 = I_p_01*t63;
+    const float t182 = 2*t122;
+    const float t183 = I_p_01*t65;
+    const float t184 = I_p_01*t67;
+    const float t185 = I_p_01*t69;
+    const float t186 = I_p_01*t71;
+    const float t187 = 2*t111;
+    const float t188 = I_p_12*t146;
+    const float t189 = I_p_01*t61;
+    const float t190 = I_p_12*t148;
+    const float t191 = I_p_12*t150;
+    const float t192 = I_p_12*t152;
+    const float t193 = I_p_12*t154;
+    const float t194 = I_p_12*t156;
+    const float t195 = t113*t44;
+    const float t196 = t113*t45;
+    const float t197 = t113*t46;
+    const float t198 = t113*t47;
+    const float t199 = t111*t44;
+    const float t200 = t111*t45;
+    const float t201 = t111*t46;
+    const float t202 = t111*t47;
+    const float t203 = t115*t43;
+    const float t204 = t115*t45;
+    const float t205 = t115*t46;
+    const float t206 = t115*t47;
+    const float t207 = t111*t43;
+    const float t208 = t117*t43;
+    const float t209 = t117*t44;
+    const float t210 = t117*t46;
+    const float t211 = t117*t47;
+    const float t212 = t119*t43;
+    const float t213 = t119*t44;
+    const float t214 = t119*t45;
+    const float t215 = t119*t47;
+    const float t216 = t121*t43;
+    const float t217 = t121*t44;
+    const float t218 = t121*t45;
+    const float t219 = t121*t46;
+    const float t220 = t115*t41;
+    const float t221 = t113*t41;
+    const float t222 = t117*t41;
+    const float t223 = t119*t41;
+    const float t224 = t121*t41;
+    const float t225 = (1.0F/(2*A_b_00*A_b_01*A_b_10*A_b_11*J_0*J_1*J_2*t64 + 2*A_b_00*A_b_01*A_b_10*A_b_11*J_0*J_1*J_3*t66 + 2*A_b_00*A_b_01*A_b_10*A_b_11*J_0*J_1*J_4*t68 + 2*A_b_00*A_b_01*A_b_10*A_b_11*J_0*J_1*J_5*t70 + 2*A_b_00*A_b_01*A_b_10*A_b_21*I_p_12*J_0*J_1 + 2*A_b_00*A_b_01*A_b_11*A_b_20*I_p_12*J_0*J_1 + 2*A_b_00*A_b_01*A_b_20*A_b_21*J_0*J_1*J_2*t52 + 2*A_b_00*A_b_01*A_b_20*A_b_21*J_0*J_1*J_3*t54 + 2*A_b_00*A_b_01*A_b_20*A_b_21*J_0*J_1*J_4*t56 + 2*A_b_00*A_b_01*A_b_20*A_b_21*J_0*J_1*J_5*t58 + 2*A_b_00*A_b_02*A_b_10*A_b_12*J_0*J_1*J_2*t62 + 2*A_b_00*A_b_02*A_b_10*A_b_12*J_0*J_2*J_3*t66 + 2*A_b_00*A_b_02*A_b_10*A_b_12*J_0*J_2*J_4*t68 + 2*A_b_00*A_b_02*A_b_10*A_b_12*J_0*J_2*J_5*t70 + 2*A_b_00*A_b_02*A_b_10*A_b_22*I_p_12*J_0*J_2 + 2*A_b_00*A_b_02*A_b_12*A_b_20*I_p_12*J_0*J_2 + 2*A_b_00*A_b_02*A_b_20*A_b_22*J_0*J_1*J_2*t50 + 2*A_b_00*A_b_02*A_b_20*A_b_22*J_0*J_2*J_3*t54 + 2*A_b_00*A_b_02*A_b_20*A_b_22*J_0*J_2*J_4*t56 + 2*A_b_00*A_b_02*A_b_20*A_b_22*J_0*J_2*J_5*t58 + 2*A_b_00*A_b_03*A_b_10*A_b_13*J_0*J_1*J_3*t62 + 2*A_b_00*A_b_03*A_b_10*A_b_13*J_0*J_2*J_3*t64 + 2*A_b_00*A_b_03*A_b_10*A_b_13*J_0*J_3*J_4*t68 + 2*A_b_00*A_b_03*A_b_10*A_b_13*J_0*J_3*J_5*t70 + 2*A_b_00*A_b_03*A_b_10*A_b_23*I_p_12*J_0*J_3 + 2*A_b_00*A_b_03*A_b_13*A_b_20*I_p_12*J_0*J_3 + 2*A_b_00*A_b_03*A_b_20*A_b_23*J_0*J_1*J_3*t50 + 2*A_b_00*A_b_03*A_b_20*A_b_23*J_0*J_2*J_3*t52 + 2*A_b_00*A_b_03*A_b_20*A_b_23*J_0*J_3*J_4*t56 + 2*A_b_00*A_b_03*A_b_20*A_b_23*J_0*J_3*J_5*t58 + 2*A_b_00*A_b_04*A_b_10*A_b_14*J_0*J_1*J_4*t62 + 2*A_b_00*A_b_04*A_b_10*A_b_14*J_0*J_2*J_4*t64 + 2*A_b_00*A_b_04*A_b_10*A_b_14*J_0*J_3*J_4*t66 + 2*A_b_00*A_b_04*A_b_10*A_b_14*J_0*J_4*J_5*t70 + 2*A_b_00*A_b_04*A_b_10*A_b_24*I_p_12*J_0*J_4 + 2*A_b_00*A_b_04*A_b_14*A_b_20*I_p_12*J_0*J_4 + 2*A_b_00*A_b_04*A_b_20*A_b_24*J_0*J_1*J_4*t50 + 2*A_b_00*A_b_04*A_b_20*A_b_24*J_0*J_2*J_4*t52 + 2*A_b_00*A_b_04*A_b_20*A_b_24*J_0*J_3*J_4*t54 + 2*A_b_00*A_b_04*A_b_20*A_b_24*J_0*J_4*J_5*t58 + 2*A_b_00*A_b_05*A_b_10*A_b_15*J_0*J_1*J_5*t62 + 2*A_b_00*A_b_05*A_b_10*A_b_15*J_0*J_2*J_5*t64 + 2*A_b_00*A_b_05*A_b_10*A_b_15*J_0*J_3*J_5*t66 + 2*A_b_00*A_b_05*A_b_10*A_b_15*J_0*J_4*J_5*t68 + 2*A_b_00*A_b_05*A_b_10*A_b_25*I_p_12*J_0*J_5 + 2*A_b_00*A_b_05*A_b_15*A_b_20*I_p_12*J_0*J_5 + 2*A_b_00*A_b_05*A_b_20*A_b_25*J_0*J_1*J_5*t50 + 2*A_b_00*A_b_05*A_b_20*A_b_25*J_0*J_2*J_5*t52 + 2*A_b_00*A_b_05*A_b_20*A_b_25*J_0*J_3*J_5*t54 + 2*A_b_00*A_b_05*A_b_20*A_b_25*J_0*J_4*J_5*t56 + 2*A_b_00*A_b_10*A_b_11*A_b_21*I_p_02*J_0*J_1 + 2*A_b_00*A_b_10*A_b_12*A_b_22*I_p_02*J_0*J_2 + 2*A_b_00*A_b_10*A_b_13*A_b_23*I_p_02*J_0*J_3 + 2*A_b_00*A_b_10*A_b_14*A_b_24*I_p_02*J_0*J_4 + 2*A_b_00*A_b_10*A_b_15*A_b_25*I_p_02*J_0*J_5 + 2*A_b_00*A_b_10*I_p_01*I_p_22*J_0 + 2*A_b_00*A_b_11*A_b_20*A_b_21*I_p_01*J_0*J_1 + 2*A_b_00*A_b_12*A_b_20*A_b_22*I_p_01*J_0*J_2 + 2*A_b_00*A_b_13*A_b_20*A_b_23*I_p_01*J_0*J_3 + 2*A_b_00*A_b_14*A_b_20*A_b_24*I_p_01*J_0*J_4 + 2*A_b_00*A_b_15*A_b_20*A_b_25*I_p_01*J_0*J_5 + 2*A_b_00*A_b_20*I_p_02*I_p_11*J_0 + 2*A_b_01*A_b_02*A_b_11*A_b_12*J_0*J_1*J_2*t60 + 2*A_b_01*A_b_02*A_b_11*A_b_12*J_1*J_2*J_3*t66 + 2*A_b_01*A_b_02*A_b_11*A_b_12*J_1*J_2*J_4*t68 + 2*A_b_01*A_b_02*A_b_11*A_b_12*J_1*J_2*J_5*t70 + 2*A_b_01*A_b_02*A_b_11*A_b_22*I_p_12*J_1*J_2 + 2*A_b_01*A_b_02*A_b_12*A_b_21*I_p_12*J_1*J_2 + 2*A_b_01*A_b_02*A_b_21*A_b_22*J_0*J_1*J_2*t48 + 2*A_b_01*A_b_02*A_b_21*A_b_22*J_1*J_2*J_3*t54 + 2*A_b_01*A_b_02*A_b_21*A_b_22*J_1*J_2*J_4*t56 + 2*A_b_01*A_b_02*A_b_21*A_b_22*J_1*J_2*J_5*t58 + 2*A_b_01*A_b_03*A_b_11*A_b_13*J_0*J_1*J_3*t60 + 2*A_b_01*A_b_03*A_b_11*A_b_13*J_1*J_2*J_3*t64 + 2*A_b_01*A_b_03*A_b_11*A_b_13*J_1*J_3*J_4*t68 + 2*A_b_01*A_b_03*A_b_11*A_b_13*J_1*J_3*J_5*t70 + 2*A_b_01*A_b_03*A_b_11*A_b_23*I_p_12*J_1*J_3 + 2*A_b_01*A_b_03*A_b_13*A_b_21*I_p_12*J_1*J_3 + 2*A_b_01*A_b_03*A_b_21*A_b_23*J_0*J_1*J_3*t48 + 2*A_b_01*A_b_03*A_b_21*A_b_23*J_1*J_2*J_3*t52 + 2*A_b_01*A_b_03*A_b_21*A_b_23*J_1*J_3*J_4*t56 + 2*A_b_01*A_b_03*A_b_21*A_b_23*J_1*J_3*J_5*t58 + 2*A_b_01*A_b_04*A_b_11*A_b_14*J_0*J_1*J_4*t60 + 2*A_b_01*A_b_04*A_b_11*A_b_14*J_1*J_2*J_4*t64 + 2*A_b_01*A_b_04*A_b_11*A_b_14*J_1*J_3*J_4*t66 + 2*A_b_01*A_b_04*A_b_11*A_b_14*J_1*J_4*J_5*t70 + 2*A_b_01*A_b_04*A_b_11*A_b_24*I_p_12*J_1*J_4 + 2*A_b_01*A_b_04*A_b_14*A_b_21*I_p_12*J_1*J_4 + 2*A_b_01*A_b_04*A_b_21*A_b_24*J_0*J_1*J_4*t48 + 2*A_b_01*A_b_04*A_b_21*A_b_24*J_1*J_2*J_4*t52 + 2*A_b_01*A_b_04*A_b_21*A_b_24*J_1*J_3*J_4*t54 + 2*A_b_01*A_b_04*A_b_21*A_b_24*J_1*J_4*J_5*t58 + 2*A_b_01*A_b_05*A_b_11*A_b_15*J_0*J_1*J_5*t60 + 2*A_b_01*A_b_05*A_b_11*A_b_15*J_1*J_2*J_5*t64 + 2*A_b_01*A_b_05*A_b_11*A_b_15*J_1*J_3*J_5*t66 + 2*A_b_01*A_b_05*A_b_11*A_b_15*J_1*J_4*J_5*t68 + 2*A_b_01*A_b_05*A_b_11*A_b_25*I_p_12*J_1*J_5 + 2*A_b_01*A_b_05*A_b_15*A_b_21*I_p_12*J_1*J_5 + 2*A_b_01*A_b_05*A_b_21*A_b_25*J_0*J_1*J_5*t48 + 2*A_b_01*A_b_05*A_b_21*A_b_25*J_1*J_2*J_5*t52 + 2*A_b_01*A_b_05*A_b_21*A_b_25*J_1*J_3*J_5*t54 + 2*A_b_01*A_b_05*A_b_21*A_b_25*J_1*J_4*J_5*t56 + 2*A_b_01*A_b_10*A_b_11*A_b_20*I_p_02*J_0*J_1 + 2*A_b_01*A_b_10*A_b_20*A_b_21*I_p_01*J_0*J_1 + 2*A_b_01*A_b_11*A_b_12*A_b_22*I_p_02*J_1*J_2 + 2*A_b_01*A_b_11*A_b_13*A_b_23*I_p_02*J_1*J_3 + 2*A_b_01*A_b_11*A_b_14*A_b_24*I_p_02*J_1*J_4 + 2*A_b_01*A_b_11*A_b_15*A_b_25*I_p_02*J_1*J_5 + 2*A_b_01*A_b_11*I_p_01*I_p_22*J_1 + 2*A_b_01*A_b_12*A_b_21*A_b_22*I_p_01*J_1*J_2 + 2*A_b_01*A_b_13*A_b_21*A_b_23*I_p_01*J_1*J_3 + 2*A_b_01*A_b_14*A_b_21*A_b_24*I_p_01*J_1*J_4 + 2*A_b_01*A_b_15*A_b_21*A_b_25*I_p_01*J_1*J_5 + 2*A_b_01*A_b_21*I_p_02*I_p_11*J_1 + 2*A_b_02*A_b_03*A_b_12*A_b_13*J_0*J_2*J_3*t60 + 2*A_b_02*A_b_03*A_b_12*A_b_13*J_1*J_2*J_3*t62 + 2*A_b_02*A_b_03*A_b_12*A_b_13*J_2*J_3*J_4*t68 + 2*A_b_02*A_b_03*A_b_12*A_b_13*J_2*J_3*J_5*t70 + 2*A_b_02*A_b_03*A_b_12*A_b_23*I_p_12*J_2*J_3 + 2*A_b_02*A_b_03*A_b_13*A_b_22*I_p_12*J_2*J_3 + 2*A_b_02*A_b_03*A_b_22*A_b_23*J_0*J_2*J_3*t48 + 2*A_b_02*A_b_03*A_b_22*A_b_23*J_1*J_2*J_3*t50 + 2*A_b_02*A_b_03*A_b_22*A_b_23*J_2*J_3*J_4*t56 + 2*A_b_02*A_b_03*A_b_22*A_b_23*J_2*J_3*J_5*t58 + 2*A_b_02*A_b_04*A_b_12*A_b_14*J_0*J_2*J_4*t60 + 2*A_b_02*A_b_04*A_b_12*A_b_14*J_1*J_2*J_4*t62 + 2*A_b_02*A_b_04*A_b_12*A_b_14*J_2*J_3*J_4*t66 + 2*A_b_02*A_b_04*A_b_12*A_b_14*J_2*J_4*J_5*t70 + 2*A_b_02*A_b_04*A_b_12*A_b_24*I_p_12*J_2*J_4 + 2*A_b_02*A_b_04*A_b_14*A_b_22*I_p_12*J_2*J_4 + 2*A_b_02*A_b_04*A_b_22*A_b_24*J_0*J_2*J_4*t48 + 2*A_b_02*A_b_04*A_b_22*A_b_24*J_1*J_2*J_4*t50 + 2*A_b_02*A_b_04*A_b_22*A_b_24*J_2*J_3*J_4*t54 + 2*A_b_02*A_b_04*A_b_22*A_b_24*J_2*J_4*J_5*t58 + 2*A_b_02*A_b_05*A_b_12*A_b_15*J_0*J_2*J_5*t60 + 2*A_b_02*A_b_05*A_b_12*A_b_15*J_1*J_2*J_5*t62 + 2*A_b_02*A_b_05*A_b_12*A_b_15*J_2*J_3*J_5*t66 + 2*A_b_02*A_b_05*A_b_12*A_b_15*J_2*J_4*J_5*t68 + 2*A_b_02*A_b_05*A_b_12*A_b_25*I_p_12*J_2*J_5 + 2*A_b_02*A_b_05*A_b_15*A_b_22*I_p_12*J_2*J_5 + 2*A_b_02*A_b_05*A_b_22*A_b_25*J_0*J_2*J_5*t48 + 2*A_b_02*A_b_05*A_b_22*A_b_25*J_1*J_2*J_5*t50 + 2*A_b_02*A_b_05*A_b_22*A_b_25*J_2*J_3*J_5*t54 + 2*A_b_02*A_b_05*A_b_22*A_b_25*J_2*J_4*J_5*t56 + 2*A_b_02*A_b_10*A_b_12*A_b_20*I_p_02*J_0*J_2 + 2*A_b_02*A_b_10*A_b_20*A_b_22*I_p_01*J_0*J_2 + 2*A_b_02*A_b_11*A_b_12*A_b_21*I_p_02*J_1*J_2 + 2*A_b_02*A_b_11*A_b_21*A_b_22*I_p_01*J_1*J_2 + 2*A_b_02*A_b_12*A_b_13*A_b_23*I_p_02*J_2*J_3 + 2*A_b_02*A_b_12*A_b_14*A_b_24*I_p_02*J_2*J_4 + 2*A_b_02*A_b_12*A_b_15*A_b_25*I_p_02*J_2*J_5 + 2*A_b_02*A_b_12*I_p_01*I_p_22*J_2 + 2*A_b_02*A_b_13*A_b_22*A_b_23*I_p_01*J_2*J_3 + 2*A_b_02*A_b_14*A_b_22*A_b_24*I_p_01*J_2*J_4 + 2*A_b_02*A_b_15*A_b_22*A_b_25*I_p_01*J_2*J_5 + 2*A_b_02*A_b_22*I_p_02*I_p_11*J_2 + 2*A_b_03*A_b_04*A_b_13*A_b_14*J_0*J_3*J_4*t60 + 2*A_b_03*A_b_04*A_b_13*A_b_14*J_1*J_3*J_4*t62 + 2*A_b_03*A_b_04*A_b_13*A_b_14*J_2*J_3*J_4*t64 + 2*A_b_03*A_b_04*A_b_13*A_b_14*J_3*J_4*J_5*t70 + 2*A_b_03*A_b_04*A_b_13*A_b_24*I_p_12*J_3*J_4 + 2*A_b_03*A_b_04*A_b_14*A_b_23*I_p_12*J_3*J_4 + 2*A_b_03*A_b_04*A_b_23*A_b_24*J_0*J_3*J_4*t48 + 2*A_b_03*A_b_04*A_b_23*A_b_24*J_1*J_3*J_4*t50 + 2*A_b_03*A_b_04*A_b_23*A_b_24*J_2*J_3*J_4*t52 + 2*A_b_03*A_b_04*A_b_23*A_b_24*J_3*J_4*J_5*t58 + 2*A_b_03*A_b_05*A_b_13*A_b_15*J_0*J_3*J_5*t60 + 2*A_b_03*A_b_05*A_b_13*A_b_15*J_1*J_3*J_5*t62 + 2*A_b_03*A_b_05*A_b_13*A_b_15*J_2*J_3*J_5*t64 + 2*A_b_03*A_b_05*A_b_13*A_b_15*J_3*J_4*J_5*t68 + 2*A_b_03*A_b_05*A_b_13*A_b_25*I_p_12*J_3*J_5 + 2*A_b_03*A_b_05*A_b_15*A_b_23*I_p_12*J_3*J_5 + 2*A_b_03*A_b_05*A_b_23*A_b_25*J_0*J_3*J_5*t48 + 2*A_b_03*A_b_05*A_b_23*A_b_25*J_1*J_3*J_5*t50 + 2*A_b_03*A_b_05*A_b_23*A_b_25*J_2*J_3*J_5*t52 + 2*A_b_03*A_b_05*A_b_23*A_b_25*J_3*J_4*J_5*t56 + 2*A_b_03*A_b_10*A_b_13*A_b_20*I_p_02*J_0*J_3 + 2*A_b_03*A_b_10*A_b_20*A_b_23*I_p_01*J_0*J_3 + 2*A_b_03*A_b_11*A_b_13*A_b_21*I_p_02*J_1*J_3 + 2*A_b_03*A_b_11*A_b_21*A_b_23*I_p_01*J_1*J_3 + 2*A_b_03*A_b_12*A_b_13*A_b_22*I_p_02*J_2*J_3 + 2*A_b_03*A_b_12*A_b_22*A_b_23*I_p_01*J_2*J_3 + 2*A_b_03*A_b_13*A_b_14*A_b_24*I_p_02*J_3*J_4 + 2*A_b_03*A_b_13*A_b_15*A_b_25*I_p_02*J_3*J_5 + 2*A_b_03*A_b_13*I_p_01*I_p_22*J_3 + 2*A_b_03*A_b_14*A_b_23*A_b_24*I_p_01*J_3*J_4 + 2*A_b_03*A_b_15*A_b_23*A_b_25*I_p_01*J_3*J_5 + 2*A_b_03*A_b_23*I_p_02*I_p_11*J_3 + 2*A_b_04*A_b_05*A_b_14*A_b_15*J_0*J_4*J_5*t60 + 2*A_b_04*A_b_05*A_b_14*A_b_15*J_1*J_4*J_5*t62 + 2*A_b_04*A_b_05*A_b_14*A_b_15*J_2*J_4*J_5*t64 + 2*A_b_04*A_b_05*A_b_14*A_b_15*J_3*J_4*J_5*t66 + 2*A_b_04*A_b_05*A_b_14*A_b_25*I_p_12*J_4*J_5 + 2*A_b_04*A_b_05*A_b_15*A_b_24*I_p_12*J_4*J_5 + 2*A_b_04*A_b_05*A_b_24*A_b_25*J_0*J_4*J_5*t48 + 2*A_b_04*A_b_05*A_b_24*A_b_25*J_1*J_4*J_5*t50 + 2*A_b_04*A_b_05*A_b_24*A_b_25*J_2*J_4*J_5*t52 + 2*A_b_04*A_b_05*A_b_24*A_b_25*J_3*J_4*J_5*t54 + 2*A_b_04*A_b_10*A_b_14*A_b_20*I_p_02*J_0*J_4 + 2*A_b_04*A_b_10*A_b_20*A_b_24*I_p_01*J_0*J_4 + 2*A_b_04*A_b_11*A_b_14*A_b_21*I_p_02*J_1*J_4 + 2*A_b_04*A_b_11*A_b_21*A_b_24*I_p_01*J_1*J_4 + 2*A_b_04*A_b_12*A_b_14*A_b_22*I_p_02*J_2*J_4 + 2*A_b_04*A_b_12*A_b_22*A_b_24*I_p_01*J_2*J_4 + 2*A_b_04*A_b_13*A_b_14*A_b_23*I_p_02*J_3*J_4 + 2*A_b_04*A_b_13*A_b_23*A_b_24*I_p_01*J_3*J_4 + 2*A_b_04*A_b_14*A_b_15*A_b_25*I_p_02*J_4*J_5 + 2*A_b_04*A_b_14*I_p_01*I_p_22*J_4 + 2*A_b_04*A_b_15*A_b_24*A_b_25*I_p_01*J_4*J_5 + 2*A_b_04*A_b_24*I_p_02*I_p_11*J_4 + 2*A_b_05*A_b_10*A_b_15*A_b_20*I_p_02*J_0*J_5 + 2*A_b_05*A_b_10*A_b_20*A_b_25*I_p_01*J_0*J_5 + 2*A_b_05*A_b_11*A_b_15*A_b_21*I_p_02*J_1*J_5 + 2*A_b_05*A_b_11*A_b_21*A_b_25*I_p_01*J_1*J_5 + 2*A_b_05*A_b_12*A_b_15*A_b_22*I_p_02*J_2*J_5 + 2*A_b_05*A_b_12*A_b_22*A_b_25*I_p_01*J_2*J_5 + 2*A_b_05*A_b_13*A_b_15*A_b_23*I_p_02*J_3*J_5 + 2*A_b_05*A_b_13*A_b_23*A_b_25*I_p_01*J_3*J_5 + 2*A_b_05*A_b_14*A_b_15*A_b_24*I_p_02*J_4*J_5 + 2*A_b_05*A_b_14*A_b_24*A_b_25*I_p_01*J_4*J_5 + 2*A_b_05*A_b_15*I_p_01*I_p_22*J_5 + 2*A_b_05*A_b_25*I_p_02*I_p_11*J_5 + 2*A_b_10*A_b_11*A_b_20*A_b_21*J_0*J_1*J_2*t149 + 2*A_b_10*A_b_11*A_b_20*A_b_21*J_0*J_1*J_3*t151 + 2*A_b_10*A_b_11*A_b_20*A_b_21*J_0*J_1*J_4*t153 + 2*A_b_10*A_b_11*A_b_20*A_b_21*J_0*J_1*J_5*t155 + 2*A_b_10*A_b_12*A_b_20*A_b_22*J_0*J_1*J_2*t147 + 2*A_b_10*A_b_12*A_b_20*A_b_22*J_0*J_2*J_3*t151 + 2*A_b_10*A_b_12*A_b_20*A_b_22*J_0*J_2*J_4*t153 + 2*A_b_10*A_b_12*A_b_20*A_b_22*J_0*J_2*J_5*t155 + 2*A_b_10*A_b_13*A_b_20*A_b_23*J_0*J_1*J_3*t147 + 2*A_b_10*A_b_13*A_b_20*A_b_23*J_0*J_2*J_3*t149 + 2*A_b_10*A_b_13*A_b_20*A_b_23*J_0*J_3*J_4*t153 + 2*A_b_10*A_b_13*A_b_20*A_b_23*J_0*J_3*J_5*t155 + 2*A_b_10*A_b_14*A_b_20*A_b_24*J_0*J_1*J_4*t147 + 2*A_b_10*A_b_14*A_b_20*A_b_24*J_0*J_2*J_4*t149 + 2*A_b_10*A_b_14*A_b_20*A_b_24*J_0*J_3*J_4*t151 + 2*A_b_10*A_b_14*A_b_20*A_b_24*J_0*J_4*J_5*t155 + 2*A_b_10*A_b_15*A_b_20*A_b_25*J_0*J_1*J_5*t147 + 2*A_b_10*A_b_15*A_b_20*A_b_25*J_0*J_2*J_5*t149 + 2*A_b_10*A_b_15*A_b_20*A_b_25*J_0*J_3*J_5*t151 + 2*A_b_10*A_b_15*A_b_20*A_b_25*J_0*J_4*J_5*t153 + 2*A_b_10*A_b_20*I_p_00*I_p_12*J_0 + 2*A_b_11*A_b_12*A_b_21*A_b_22*J_0*J_1*J_2*t145 + 2*A_b_11*A_b_12*A_b_21*A_b_22*J_1*J_2*J_3*t151 + 2*A_b_11*A_b_12*A_b_21*A_b_22*J_1*J_2*J_4*t153 + 2*A_b_11*A_b_12*A_b_21*A_b_22*J_1*J_2*J_5*t155 + 2*A_b_11*A_b_13*A_b_21*A_b_23*J_0*J_1*J_3*t145 + 2*A_b_11*A_b_13*A_b_21*A_b_23*J_1*J_2*J_3*t149 + 2*A_b_11*A_b_13*A_b_21*A_b_23*J_1*J_3*J_4*t153 + 2*A_b_11*A_b_13*A_b_21*A_b_23*J_1*J_3*J_5*t155 + 2*A_b_11*A_b_14*A_b_21*A_b_24*J_0*J_1*J_4*t145 + 2*A_b_11*A_b_14*A_b_21*A_b_24*J_1*J_2*J_4*t149 + 2*A_b_11*A_b_14*A_b_21*A_b_24*J_1*J_3*J_4*t151 + 2*A_b_11*A_b_14*A_b_21*A_b_24*J_1*J_4*J_5*t155 + 2*A_b_11*A_b_15*A_b_21*A_b_25*J_0*J_1*J_5*t145 + 2*A_b_11*A_b_15*A_b_21*A_b_25*J_1*J_2*J_5*t149 + 2*A_b_11*A_b_15*A_b_21*A_b_25*J_1*J_3*J_5*t151 + 2*A_b_11*A_b_15*A_b_21*A_b_25*J_1*J_4*J_5*t153 + 2*A_b_11*A_b_21*I_p_00*I_p_12*J_1 + 2*A_b_12*A_b_13*A_b_22*A_b_23*J_0*J_2*J_3*t145 + 2*A_b_12*A_b_13*A_b_22*A_b_23*J_1*J_2*J_3*t147 + 2*A_b_12*A_b_13*A_b_22*A_b_23*J_2*J_3*J_4*t153 + 2*A_b_12*A_b_13*A_b_22*A_b_23*J_2*J_3*J_5*t155 + 2*A_b_12*A_b_14*A_b_22*A_b_24*J_0*J_2*J_4*t145 + 2*A_b_12*A_b_14*A_b_22*A_b_24*J_1*J_2*J_4*t147 + 2*A_b_12*A_b_14*A_b_22*A_b_24*J_2*J_3*J_4*t151 + 2*A_b_12*A_b_14*A_b_22*A_b_24*J_2*J_4*J_5*t155 + 2*A_b_12*A_b_15*A_b_22*A_b_25*J_0*J_2*J_5*t145 + 2*A_b_12*A_b_15*A_b_22*A_b_25*J_1*J_2*J_5*t147 + 2*A_b_12*A_b_15*A_b_22*A_b_25*J_2*J_3*J_5*t151 + 2*A_b_12*A_b_15*A_b_22*A_b_25*J_2*J_4*J_5*t153 + 2*A_b_12*A_b_22*I_p_00*I_p_12*J_2 + 2*A_b_13*A_b_14*A_b_23*A_b_24*J_0*J_3*J_4*t145 + 2*A_b_13*A_b_14*A_b_23*A_b_24*J_1*J_3*J_4*t147 + 2*A_b_13*A_b_14*A_b_23*A_b_24*J_2*J_3*J_4*t149 + 2*A_b_13*A_b_14*A_b_23*A_b_24*J_3*J_4*J_5*t155 + 2*A_b_13*A_b_15*A_b_23*A_b_25*J_0*J_3*J_5*t145 + 2*A_b_13*A_b_15*A_b_23*A_b_25*J_1*J_3*J_5*t147 + 2*A_b_13*A_b_15*A_b_23*A_b_25*J_2*J_3*J_5*t149 + 2*A_b_13*A_b_15*A_b_23*A_b_25*J_3*J_4*J_5*t153 + 2*A_b_13*A_b_23*I_p_00*I_p_12*J_3 + 2*A_b_14*A_b_15*A_b_24*A_b_25*J_0*J_4*J_5*t145 + 2*A_b_14*A_b_15*A_b_24*A_b_25*J_1*J_4*J_5*t147 + 2*A_b_14*A_b_15*A_b_24*A_b_25*J_2*J_4*J_5*t149 + 2*A_b_14*A_b_15*A_b_24*A_b_25*J_3*J_4*J_5*t151 + 2*A_b_14*A_b_24*I_p_00*I_p_12*J_4 + 2*A_b_15*A_b_25*I_p_00*I_p_12*J_5 + I_p_00*I_p_11*I_p_22 + I_p_00*J_0*J_1*t48*t62 + I_p_00*J_0*J_1*t50*t60 + I_p_00*J_0*J_2*t48*t64 + I_p_00*J_0*J_2*t52*t60 + I_p_00*J_0*J_3*t48*t66 + I_p_00*J_0*J_3*t54*t60 + I_p_00*J_0*J_4*t48*t68 + I_p_00*J_0*J_4*t56*t60 + I_p_00*J_0*J_5*t48*t70 + I_p_00*J_0*J_5*t58*t60 + I_p_00*J_1*J_2*t50*t64 + I_p_00*J_1*J_2*t52*t62 + I_p_00*J_1*J_3*t50*t66 + I_p_00*J_1*J_3*t54*t62 + I_p_00*J_1*J_4*t50*t68 + I_p_00*J_1*J_4*t56*t62 + I_p_00*J_1*J_5*t50*t70 + I_p_00*J_1*J_5*t58*t62 + I_p_00*J_2*J_3*t52*t66 + I_p_00*J_2*J_3*t54*t64 + I_p_00*J_2*J_4*t52*t68 + I_p_00*J_2*J_4*t56*t64 + I_p_00*J_2*J_5*t52*t70 + I_p_00*J_2*J_5*t58*t64 + I_p_00*J_3*J_4*t54*t68 + I_p_00*J_3*J_4*t56*t66 + I_p_00*J_3*J_5*t54*t70 + I_p_00*J_3*J_5*t58*t66 + I_p_00*J_4*J_5*t56*t70 + I_p_00*J_4*J_5*t58*t68 - I_p_00*t177*t46 - I_p_00*t40 + 2*I_p_01*I_p_02*I_p_12 + I_p_11*J_0*J_1*t145*t62 + I_p_11*J_0*J_1*t147*t60 + I_p_11*J_0*J_2*t145*t64 + I_p_11*J_0*J_2*t149*t60 + I_p_11*J_0*J_3*t145*t66 + I_p_11*J_0*J_3*t151*t60 + I_p_11*J_0*J_4*t145*t68 + I_p_11*J_0*J_4*t153*t60 + I_p_11*J_0*J_5*t145*t70 + I_p_11*J_0*J_5*t155*t60 + I_p_11*J_1*J_2*t147*t64 + I_p_11*J_1*J_2*t149*t62 + I_p_11*J_1*J_3*t147*t66 + I_p_11*J_1*J_3*t151*t62 + I_p_11*J_1*J_4*t147*t68 + I_p_11*J_1*J_4*t153*t62 + I_p_11*J_1*J_5*t147*t70 + I_p_11*J_1*J_5*t155*t62 + I_p_11*J_2*J_3*t149*t66 + I_p_11*J_2*J_3*t151*t64 + I_p_11*J_2*J_4*t149*t68 + I_p_11*J_2*J_4*t153*t64 + I_p_11*J_2*J_5*t149*t70 + I_p_11*J_2*J_5*t155*t64 + I_p_11*J_3*J_4*t151*t68 + I_p_11*J_3*J_4*t153*t66 + I_p_11*J_3*J_5*t151*t70 + I_p_11*J_3*J_5*t155*t66 + I_p_11*J_4*J_5*t153*t70 + I_p_11*J_4*J_5*t155*t68 - I_p_11*t144 + I_p_22*J_0*J_1*t145*t50 + I_p_22*J_0*J_1*t147*t48 + I_p_22*J_0*J_2*t145*t52 + I_p_22*J_0*J_2*t149*t48 + I_p_22*J_0*J_3*t145*t54 + I_p_22*J_0*J_3*t151*t48 + I_p_22*J_0*J_4*t145*t56 + I_p_22*J_0*J_4*t153*t48 + I_p_22*J_0*J_5*t145*t58 + I_p_22*J_0*J_5*t155*t48 + I_p_22*J_1*J_2*t147*t52 + I_p_22*J_1*J_2*t149*t50 + I_p_22*J_1*J_3*t147*t54 + I_p_22*J_1*J_3*t151*t50 + I_p_22*J_1*J_4*t147*t56 + I_p_22*J_1*J_4*t153*t50 + I_p_22*J_1*J_5*t147*t58 + I_p_22*J_1*J_5*t155*t50 + I_p_22*J_2*J_3*t149*t54 + I_p_22*J_2*J_3*t151*t52 + I_p_22*J_2*J_4*t149*t56 + I_p_22*J_2*J_4*t153*t52 + I_p_22*J_2*J_5*t149*t58 + I_p_22*J_2*J_5*t155*t52 + I_p_22*J_3*J_4*t151*t56 + I_p_22*J_3*J_4*t153*t54 + I_p_22*J_3*J_5*t151*t58 + I_p_22*J_3*J_5*t155*t54 + I_p_22*J_4*J_5*t153*t58 + I_p_22*J_4*J_5*t155*t56 - I_p_22*t126*t171 - I_p_22*t143 + J_0*t143*t60 + J_0*t144*t48 + J_0*t145*t40 + J_1*t143*t62 + J_1*t144*t50 + J_1*t147*t40 + J_2*t143*t64 + J_2*t144*t52 + J_2*t149*t40 + J_3*t143*t66 + J_3*t144*t54 + J_3*t151*t40 + J_4*t143*t68 + J_4*t144*t56 + J_4*t153*t40 + J_5*t143*t70 + J_5*t144*t58 + J_5*t155*t40 - t100*t146 - t100*t148 - t100*t150 - t100*t156 - t101*t146 - t101*t148 - t101*t150 - t101*t152 - t102*t148 - t102*t150 - t102*t152 - t102*t154 - t103*t146 - t103*t150 - t103*t152 - t103*t154 - t104*t146 - t104*t148 - t104*t152 - t104*t154 - t105*t146 - t105*t148 - t105*t150 - t105*t154 - t106*t146 - t106*t148 - t106*t150 - t106*t152 - t111*t160 - t113*t160 - t115*t160 - t117*t160 - t119*t160 - t121*t160 - t122*t159 - t123*t159 - t124*t159 - t125*t159 - t126*t159 - t127*t159 - t131*t164 - t131*t166 - t131*t168 - t131*t170 - t131*t172 - t132*t166 - t132*t168 - t132*t170 - t132*t172 - t133*t168 - t133*t170 - t133*t172 - t134*t170 - t134*t172 - t135*t172 - t136*t164 - t136*t166 - t136*t168 - t136*t170 - t136*t172 - t137*t166 - t137*t168 - t137*t170 - t137*t172 - t137*t187 - t138*t164 - t138*t168 - t138*t170 - t138*t172 - t138*t187 - t139*t164 - t139*t166 - t139*t170 - t139*t172 - t139*t187 - t140*t164 - t140*t166 - t140*t168 - t140*t172 - t140*t187 - t141*t164 - t141*t166 - t141*t168 - t141*t170 - t141*t187 - t146*t39 - t146*t83 - t146*t84 - t146*t85 - t146*t86 - t146*t88 - t146*t89 - t146*t90 - t146*t91 - t146*t93 - t146*t94 - t146*t95 - t146*t96 - t146*t98 - t146*t99 - t148*t39 - t148*t78 - t148*t79 - t148*t80 - t148*t81 - t148*t87 - t148*t89 - t148*t90 - t148*t91 - t148*t92 - t148*t94 - t148*t95 - t148*t96 - t148*t97 - t148*t99 - t150*t39 - t150*t77 - t150*t79 - t150*t80 - t150*t81 - t150*t82 - t150*t84 - t150*t85 - t150*t86 - t150*t92 - t150*t93 - t150*t95 - t150*t96 - t150*t97 - t150*t98 - t152*t39 - t152*t77 - t152*t78 - t152*t80 - t152*t81 - t152*t82 - t152*t83 - t152*t85 - t152*t86 - t152*t87 - t152*t88 - t152*t90 - t152*t91 - t152*t97 - t152*t98 - t152*t99 - t154*t39 - t154*t77 - t154*t78 - t154*t79 - t154*t81 - t154*t82 - t154*t83 - t154*t84 - t154*t86 - t154*t87 - t154*t88 - t154*t89 - t154*t91 - t154*t92 - t154*t93 - t154*t94 - t154*t96 - t156*t39 - t156*t77 - t156*t78 - t156*t79 - t156*t80 - t156*t82 - t156*t83 - t156*t84 - t156*t85 - t156*t87 - t156*t88 - t156*t89 - t156*t90 - t156*t92 - t156*t93 - t156*t94 - t156*t95 - t156*t97 - t156*t98 - t156*t99 - t157*t49 - t157*t51 - t157*t53 - t157*t55 - t157*t57 - t157*t59 - t158*t61 - t158*t63 - t158*t65 - t158*t67 - t158*t69 - t158*t71 - t161*t41 - t161*t43 - t161*t44 - t161*t45 - t161*t46 - t161*t47 - t162*t163 - t162*t165 - t162*t167 - t162*t169 - t162*t171 - t163*t183 - t163*t184 - t163*t185 - t163*t186 - t163*t189 - t163*t199 - t163*t200 - t163*t201 - t163*t202 - t163*t204 - t163*t205 - t163*t206 - t163*t209 - t163*t210 - t163*t211 - t163*t213 - t163*t214 - t163*t215 - t163*t217 - t163*t218 - t163*t219 - t163*t220 - t163*t222 - t163*t223 - t163*t224 - t165*t173 - t165*t181 - t165*t184 - t165*t185 - t165*t186 - t165*t189 - t165*t196 - t165*t197 - t165*t198 - t165*t200 - t165*t201 - t165*t202 - t165*t207 - t165*t208 - t165*t210 - t165*t211 - t165*t212 - t165*t214 - t165*t215 - t165*t216 - t165*t218 - t165*t219 - t165*t221 - t165*t222 - t165*t223 - t165*t224 - t167*t173 - t167*t174 - t167*t181 - t167*t183 - t167*t185 - t167*t186 - t167*t189 - t167*t195 - t167*t197 - t167*t198 - t167*t199 - t167*t201 - t167*t202 - t167*t203 - t167*t205 - t167*t206 - t167*t207 - t167*t212 - t167*t213 - t167*t215 - t167*t216 - t167*t217 - t167*t219 - t167*t220 - t167*t221 - t167*t223 - t167*t224 - t169*t173 - t169*t174 - t169*t175 - t169*t181 - t169*t183 - t169*t184 - t169*t186 - t169*t189 - t169*t195 - t169*t196 - t169*t198 - t169*t199 - t169*t200 - t169*t202 - t169*t203 - t169*t204 - t169*t206 - t169*t207 - t169*t208 - t169*t209 - t169*t211 - t169*t216 - t169*t217 - t169*t218 - t169*t220 - t169*t221 - t169*t222 - t169*t224 - t171*t173 - t171*t174 - t171*t175 - t171*t181 - t171*t183 - t171*t184 - t171*t185 - t171*t189 - t171*t195 - t171*t196 - t171*t197 - t171*t199 - t171*t200 - t171*t201 - t171*t203 - t171*t204 - t171*t205 - t171*t207 - t171*t208 - t171*t209 - t171*t210 - t171*t212 - t171*t213 - t171*t214 - t171*t220 - t171*t221 - t171*t222 - t171*t223 - t176*t177 - t176*t73 - t176*t74 - t176*t75 - t176*t76 - t177*t178 - t177*t179 - t177*t180 - t177*t188 - t177*t190 - t177*t191 - t177*t192 - t177*t193 - t178*t74 - t178*t75 - t178*t76 - t179*t75 - t179*t76 - t180*t76 - t181*t182 - t182*t183 - t182*t184 - t182*t185 - t182*t186 - t182*t195 - t182*t196 - t182*t197 - t182*t198 - t182*t203 - t182*t204 - t182*t205 - t182*t206 - t182*t208 - t182*t209 - t182*t210 - t182*t211 - t182*t212 - t182*t213 - t182*t214 - t182*t215 - t182*t216 - t182*t217 - t182*t218 - t182*t219 - t188*t73 - t188*t74 - t188*t75 - t188*t76 - t190*t72 - t190*t74 - t190*t75 - t190*t76 - t191*t72 - t191*t73 - t191*t75 - t191*t76 - t192*t72 - t192*t73 - t192*t74 - t192*t76 - t193*t72 - t193*t73 - t193*t74 - t193*t75 - t194*t72 - t194*t73 - t194*t74 - t194*t75 - t194*t76));
+    const float t226 = t225*(t109*t128 + t129*t142 + t38*(-I_p_11*t61 - I_p_11*t63 - I_p_11*t65 - I_p_11*t67 - I_p_11*t69 - I_p_11*t71 - I_p_22*t49 - I_p_22*t51 - I_p_22*t53 - I_p_22*t55 - I_p_22*t57 - I_p_22*t59 + t100 + t101 + t102 + t103 + t104 + t105 + t106 + t39 - t40 + t41*t42 + t42*t43 + t42*t44 + t42*t45 + t42*t46 + t42*t47 - t43*t72 - t44*t72 - t44*t73 - t45*t72 - t45*t73 - t45*t74 - t46*t72 - t46*t73 - t46*t74 - t46*t75 - t47*t72 - t47*t73 - t47*t74 - t47*t75 - t47*t76 + t77 + t78 + t79 + t80 + t81 + t82 + t83 + t84 + t85 + t86 + t87 + t88 + t89 + t90 + t91 + t92 + t93 + t94 + t95 + t96 + t97 + t98 + t99));
+    const float t227 = 2*I_p_02;
+    const float t228 = A_b_00*A_b_01*A_b_10*A_b_21*J_0*J_1 + A_b_00*A_b_01*A_b_11*A_b_20*J_0*J_1 + A_b_00*A_b_02*A_b_10*A_b_22*J_0*J_2 + A_b_00*A_b_02*A_b_12*A_b_20*J_0*J_2 + A_b_00*A_b_03*A_b_10*A_b_23*J_0*J_3 + A_b_00*A_b_03*A_b_13*A_b_20*J_0*J_3 + A_b_00*A_b_04*A_b_10*A_b_24*J_0*J_4 + A_b_00*A_b_04*A_b_14*A_b_20*J_0*J_4 + A_b_00*A_b_05*A_b_10*A_b_25*J_0*J_5 + A_b_00*A_b_05*A_b_15*A_b_20*J_0*J_5 + A_b_01*A_b_02*A_b_11*A_b_22*J_1*J_2 + A_b_01*A_b_02*A_b_12*A_b_21*J_1*J_2 + A_b_01*A_b_03*A_b_11*A_b_23*J_1*J_3 + A_b_01*A_b_03*A_b_13*A_b_21*J_1*J_3 + A_b_01*A_b_04*A_b_11*A_b_24*J_1*J_4 + A_b_01*A_b_04*A_b_14*A_b_21*J_1*J_4 + A_b_01*A_b_05*A_b_11*A_b_25*J_1*J_5 + A_b_01*A_b_05*A_b_15*A_b_21*J_1*J_5 + A_b_02*A_b_03*A_b_12*A_b_23*J_2*J_3 + A_b_02*A_b_03*A_b_13*A_b_22*J_2*J_3 + A_b_02*A_b_04*A_b_12*A_b_24*J_2*J_4 + A_b_02*A_b_04*A_b_14*A_b_22*J_2*J_4 + A_b_02*A_b_05*A_b_12*A_b_25*J_2*J_5 + A_b_02*A_b_05*A_b_15*A_b_22*J_2*J_5 + A_b_03*A_b_04*A_b_13*A_b_24*J_3*J_4 + A_b_03*A_b_04*A_b_14*A_b_23*J_3*J_4 + A_b_03*A_b_05*A_b_13*A_b_25*J_3*J_5 + A_b_03*A_b_05*A_b_15*A_b_23*J_3*J_5 + A_b_04*A_b_05*A_b_14*A_b_25*J_4*J_5 + A_b_04*A_b_05*A_b_15*A_b_24*J_4*J_5 + A_b_10*A_b_20*I_p_00*J_0 + A_b_11*A_b_21*I_p_00*J_1 + A_b_12*A_b_22*I_p_00*J_2 + A_b_13*A_b_23*I_p_00*J_3 + A_b_14*A_b_24*I_p_00*J_4 + A_b_15*A_b_25*I_p_00*J_5 - I_p_00*I_p_12 + I_p_01*I_p_02 - I_p_01*t111 - I_p_01*t113 - I_p_01*t115 - I_p_01*t117 - I_p_01*t119 - I_p_01*t121 - I_p_02*t122 - I_p_02*t123 - I_p_02*t124 - I_p_02*t125 - I_p_02*t126 - I_p_02*t127 + I_p_12*J_0*t145 + I_p_12*J_1*t147 + I_p_12*J_2*t149 + I_p_12*J_3*t151 + I_p_12*J_4*t153 + I_p_12*J_5*t155 - t146*t43 - t146*t44 - t146*t45 - t146*t46 - t146*t47 - t148*t41 - t148*t44 - t148*t45 - t148*t46 - t148*t47 - t150*t41 - t150*t43 - t150*t45 - t150*t46 - t150*t47 - t152*t41 - t152*t43 - t152*t44 - t152*t46 - t152*t47 - t154*t41 - t154*t43 - t154*t44 - t154*t45 - t154*t47 - t156*t41 - t156*t43 - t156*t44 - t156*t45 - t156*t46;
+    const float t229 = t225*(t109*(-I_p_00*t61 - I_p_00*t63 - I_p_00*t65 - I_p_00*t67 - I_p_00*t69 - I_p_00*t71 - I_p_22*t146 - I_p_22*t148 - I_p_22*t150 - I_p_22*t152 - I_p_22*t154 - I_p_22*t156 + t111*t227 - t113*t187 + t113*t227 - t115*t164 - t115*t187 + t115*t227 - t117*t164 - t117*t166 - t117*t187 + t117*t227 - t119*t164 - t119*t166 - t119*t168 - t119*t187 + t119*t227 - t121*t164 - t121*t166 - t121*t168 - t121*t170 - t121*t187 + t121*t227 - t144 + t146*t63 + t146*t65 + t146*t67 + t146*t69 + t146*t71 + t148*t61 + t148*t65 + t148*t67 + t148*t69 + t148*t71 + t150*t61 + t150*t63 + t150*t67 + t150*t69 + t150*t71 + t152*t61 + t152*t63 + t152*t65 + t152*t69 + t152*t71 + t154*t61 + t154*t63 + t154*t65 + t154*t67 + t154*t71 + t156*t61 + t156*t63 + t156*t65 + t156*t67 + t156*t69 + t157) + t128*t38 + t129*t228);
+    const float t230 = 2*I_p_01;
+    const float t231 = t225*(t109*t228 + t129*(-I_p_00*t49 - I_p_00*t51 - I_p_00*t53 - I_p_00*t55 - I_p_00*t57 - I_p_00*t59 - I_p_11*t146 - I_p_11*t148 - I_p_11*t150 - I_p_11*t152 - I_p_11*t154 - I_p_11*t156 + t122*t230 - t123*t182 + t123*t230 - t124*t163 - t124*t182 + t124*t230 - t125*t163 - t125*t165 - t125*t182 + t125*t230 - t126*t163 - t126*t165 - t126*t167 - t126*t182 + t126*t230 - t127*t163 - t127*t165 - t127*t167 - t127*t169 - t127*t182 + t127*t230 - t143 + t146*t51 + t146*t53 + t146*t55 + t146*t57 + t146*t59 + t148*t49 + t148*t53 + t148*t55 + t148*t57 + t148*t59 + t150*t49 + t150*t51 + t150*t55 + t150*t57 + t150*t59 + t152*t49 + t152*t51 + t152*t53 + t152*t57 + t152*t59 + t154*t49 + t154*t51 + t154*t53 + t154*t55 + t154*t59 + t156*t49 + t156*t51 + t156*t53 + t156*t55 + t156*t57 + t158) + t142*t38);
+    q_dot[0] = q_1*t2 - q_2*t1 + q_3*t0;
+    q_dot[1] = -q_0*t2 + q_2*t0 + q_3*t1;
+    q_dot[2] = q_0*t1 - q_1*t0 + q_3*t2;
+    q_dot[3] = -q_0*t0 - q_1*t1 - q_2*t2;
+    omega_dot_b[0] = t226;
+    omega_dot_b[1] = t229;
+    omega_dot_b[2] = t231;
+    Omega_dot[0] = -A_b_00*t226 - A_b_10*t229 - A_b_20*t231 + t3/J_0;
+    Omega_dot[1] = -A_b_01*t226 - A_b_11*t229 - A_b_21*t231 + t4/J_1;
+    Omega_dot[2] = -A_b_02*t226 - A_b_12*t229 - A_b_22*t231 + t5/J_2;
+    Omega_dot[3] = -A_b_03*t226 - A_b_13*t229 - A_b_23*t231 + t6/J_3;
+    Omega_dot[4] = -A_b_04*t226 - A_b_14*t229 - A_b_24*t231 + t7/J_4;
+    Omega_dot[5] = -A_b_05*t226 - A_b_15*t229 - A_b_25*t231 + t8/J_5;
+}
+
+void lvf_wheels6_momentum(const float *q, const float *omega_b, const float *Omega, const float *I_p, const float *A_b, const float *J, float *L_body_w, float *L_wheels_w, float *h_w) {
+    const float q_0 = q[0];
+    const float q_1 = q[1];
+    const float q_2 = q[2];
+    const float q_3 = q[3];
+    const float omega_b_0 = omega_b[0];
+    const float omega_b_1 = omega_b[1];
+    const float omega_b_2 = omega_b[2];
+    const float Omega_0 = Omega[0];
+    const float Omega_1 = Omega[1];
+    const float Omega_2 = Omega[2];
+    const float Omega_3 = Omega[3];
+    const float Omega_4 = Omega[4];
+    const float Omega_5 = Omega[5];
+    const float I_p_00 = I_p[0];
+    const float I_p_01 = I_p[1];
+    const float I_p_02 = I_p[2];
+    const float I_p_11 = I_p[4];
+    const float I_p_12 = I_p[5];
+    const float I_p_22 = I_p[8];
+    const float A_b_00 = A_b[0];
+    const float A_b_01 = A_b[1];
+    const float A_b_02 = A_b[2];
+    const float A_b_03 = A_b[3];
+    const float A_b_04 = A_b[4];
+    const float A_b_05 = A_b[5];
+    const float A_b_10 = A_b[6];
+    const float A_b_11 = A_b[7];
+    const float A_b_12 = A_b[8];
+    const float A_b_13 = A_b[9];
+    const float A_b_14 = A_b[10];
+    const float A_b_15 = A_b[11];
+    const float A_b_20 = A_b[12];
+    const float A_b_21 = A_b[13];
+    const float A_b_22 = A_b[14];
+    const float A_b_23 = A_b[15];
+    const float A_b_24 = A_b[16];
+    const float A_b_25 = A_b[17];
+    const float J_0 = J[0];
+    const float J_1 = J[1];
+    const float J_2 = J[2];
+    const float J_3 = J[3];
+    const float J_4 = J[4];
+    const float J_5 = J[5];
+    const float t0 = 2*q_1;
+    const float t1 = q_0*t0;
+    const float t2 = 2*q_2;
+    const float t3 = q_3*t2;
+    const float t4 = t1 - t3;
+    const float t5 = A_b_10*J_0;
+    const float t6 = A_b_11*J_1;
+    const float t7 = A_b_12*J_2;
+    const float t8 = A_b_13*J_3;
+    const float t9 = A_b_14*J_4;
+    const float t10 = A_b_15*J_5;
+    const float t11 = -A_b_00*t5 - A_b_01*t6 - A_b_02*t7 - A_b_03*t8 - A_b_04*t9 - A_b_05*t10 + I_p_01;
+    const float t12 = -A_b_20*t5 - A_b_21*t6 - A_b_22*t7 - A_b_23*t8 - A_b_24*t9 - A_b_25*t10 + I_p_12;
+    const float t13 = omega_b_0*t11 + omega_b_1*(-(A_b_10*A_b_10)*J_0 - (A_b_11*A_b_11)*J_1 - (A_b_12*A_b_12)*J_2 - (A_b_13*A_b_13)*J_3 - (A_b_14*A_b_14)*J_4 - (A_b_15*A_b_15)*J_5 + I_p_11) + omega_b_2*t12;
+    const float t14 = q_0*t2;
+    const float t15 = q_3*t0;
+    const float t16 = t14 + t15;
+    const float t17 = -A_b_00*A_b_20*J_0 - A_b_01*A_b_21*J_1 - A_b_02*A_b_22*J_2 - A_b_03*A_b_23*J_3 - A_b_04*A_b_24*J_4 - A_b_05*A_b_25*J_5 + I_p_02;
+    const float t18 = omega_b_0*t17 + omega_b_1*t12 + omega_b_2*(-(A_b_20*A_b_20)*J_0 - (A_b_21*A_b_21)*J_1 - (A_b_22*A_b_22)*J_2 - (A_b_23*A_b_23)*J_3 - (A_b_24*A_b_24)*J_4 - (A_b_25*A_b_25)*J_5 + I_p_22);
+    const float t19 = 2*(q_1*q_1);
+    const float t20 = 2*(q_2*q_2) - 1;
+    const float t21 = -t19 - t20;
+    const float t22 = omega_b_0*(-(A_b_00*A_b_00)*J_0 - (A_b_01*A_b_01)*J_1 - (A_b_02*A_b_02)*J_2 - (A_b_03*A_b_03)*J_3 - (A_b_04*A_b_04)*J_4 - (A_b_05*A_b_05)*J_5 + I_p_00) + omega_b_1*t11 + omega_b_2*t17;
+    const float t23 = t1 + t3;
+    const float t24 = 2*q_0*q_3;
+    const float t25 = 2*q_1*q_2 - t24;
+    const float t26 = 2*(q_0*q_0);
+    const float t27 = -t20 - t26;
+    const float t28 = t14 - t15;
+    const float t29 = q_1*t2 + t24;
+    const float t30 = -t19 - t26 + 1;
+    const float t31 = J_0*(A_b_00*omega_b_0 + A_b_10*omega_b_1 + A_b_20*omega_b_2 + Omega_0);
+    const float t32 = J_1*(A_b_01*omega_b_0 + A_b_11*omega_b_1 + A_b_21*omega_b_2 + Omega_1);
+    const float t33 = J_2*(A_b_02*omega_b_0 + A_b_12*omega_b_1 + A_b_22*omega_b_2 + Omega_2);
+    const float t34 = J_3*(A_b_03*omega_b_0 + A_b_13*omega_b_1 + A_b_23*omega_b_2 + Omega_3);
+    const float t35 = J_4*(A_b_04*omega_b_0 + A_b_14*omega_b_1 + A_b_24*omega_b_2 + Omega_4);
+    const float t36 = J_5*(A_b_05*omega_b_0 + A_b_15*omega_b_1 + A_b_25*omega_b_2 + Omega_5);
+    const float t37 = A_b_10*t31 + A_b_11*t32 + A_b_12*t33 + A_b_13*t34 + A_b_14*t35 + A_b_15*t36;
+    const float t38 = A_b_20*t31 + A_b_21*t32 + A_b_22*t33 + A_b_23*t34 + A_b_24*t35 + A_b_25*t36;
+    const float t39 = A_b_00*t31 + A_b_01*t32 + A_b_02*t33 + A_b_03*t34 + A_b_04*t35 + A_b_05*t36;
+    L_body_w[0] = t13*t4 + t16*t18 + t21*t22;
+    L_body_w[1] = t13*t27 + t18*t25 + t22*t23;
+    L_body_w[2] = t13*t29 + t18*t30 + t22*t28;
+    L_wheels_w[0] = t16*t38 + t21*t39 + t37*t4;
+    L_wheels_w[1] = t23*t39 + t25*t38 + t27*t37;
+    L_wheels_w[2] = t28*t39 + t29*t37 + t30*t38;
+    h_w[0] = t31;
+    h_w[1] = t32;
+    h_w[2] = t33;
+    h_w[3] = t34;
+    h_w[4] = t35;
+    h_w[5] = t36;
+}
+
+void lvf_wheels6_motor(const float *command, const float *Omega, float torque_limit, float speed_limit, float cutoff, float *u) {
+    const float command_0 = command[0];
+    const float command_1 = command[1];
+    const float command_2 = command[2];
+    const float command_3 = command[3];
+    const float command_4 = command[4];
+    const float command_5 = command[5];
+    const float Omega_0 = Omega[0];
+    const float Omega_1 = Omega[1];
+    const float Omega_2 = Omega[2];
+    const float Omega_3 = Omega[3];
+    const float Omega_4 = Omega[4];
+    const float Omega_5 = Omega[5];
+    const float t0 = -torque_limit;
+    const float t1 = command_0 < t0;
+    const float t2 = fabsf(Omega_0);
+    const float t3 = speed_limit <= t2;
+    const float t4 = Omega_0*torque_limit;
+    const float t5 = command_0 > torque_limit;
+    const float t6 = ((t1) ? (
+   t0
+)
+: ((t5) ? (
+   torque_limit
+)
+: (
+   command_0
+)));
+    const float t7 = cutoff > 0;
+    const float t8 = Omega_0 >= speed_limit;
+    const float t9 = command_0 < 0;
+    const float t10 = command_0 > 0;
+    const float t11 = -speed_limit;
+    const float t12 = Omega_0 <= t11;
+    const float t13 = (1.0F/speed_limit);
+    const float t14 = torque_limit*(-t13*t2 + 1);
+    const float t15 = -t14;
+    const float t16 = command_1 < t0;
+    const float t17 = fabsf(Omega_1);
+    const float t18 = speed_limit <= t17;
+    const float t19 = Omega_1*torque_limit;
+    const float t20 = command_1 > torque_limit;
+    const float t21 = ((t16) ? (
+   t0
+)
+: ((t20) ? (
+   torque_limit
+)
+: (
+   command_1
+)));
+    const float t22 = Omega_1 >= speed_limit;
+    const float t23 = command_1 < 0;
+    const float t24 = command_1 > 0;
+    const float t25 = Omega_1 <= t11;
+    const float t26 = torque_limit*(-t13*t17 + 1);
+    const float t27 = -t26;
+    const float t28 = command_2 < t0;
+    const float t29 = fabsf(Omega_2);
+    const float t30 = speed_limit <= t29;
+    const float t31 = Omega_2*torque_limit;
+    const float t32 = command_2 > torque_limit;
+    const float t33 = ((t28) ? (
+   t0
+)
+: ((t32) ? (
+   torque_limit
+)
+: (
+   command_2
+)));
+    const float t34 = Omega_2 >= speed_limit;
+    const float t35 = command_2 < 0;
+    const float t36 = command_2 > 0;
+    const float t37 = Omega_2 <= t11;
+    const float t38 = torque_limit*(-t13*t29 + 1);
+    const float t39 = -t38;
+    const float t40 = command_3 < t0;
+    const float t41 = fabsf(Omega_3);
+    const float t42 = speed_limit <= t41;
+    const float t43 = Omega_3*torque_limit;
+    const float t44 = command_3 > torque_limit;
+    const float t45 = ((t40) ? (
+   t0
+)
+: ((t44) ? (
+   torque_limit
+)
+: (
+   command_3
+)));
+    const float t46 = Omega_3 >= speed_limit;
+    const float t47 = command_3 < 0;
+    const float t48 = command_3 > 0;
+    const float t49 = Omega_3 <= t11;
+    const float t50 = torque_limit*(-t13*t41 + 1);
+    const float t51 = -t50;
+    const float t52 = command_4 < t0;
+    const float t53 = fabsf(Omega_4);
+    const float t54 = speed_limit <= t53;
+    const float t55 = Omega_4*torque_limit;
+    const float t56 = command_4 > torque_limit;
+    const float t57 = ((t52) ? (
+   t0
+)
+: ((t56) ? (
+   torque_limit
+)
+: (
+   command_4
+)));
+    const float t58 = Omega_4 >= speed_limit;
+    const float t59 = command_4 < 0;
+    const float t60 = command_4 > 0;
+    const float t61 = Omega_4 <= t11;
+    const float t62 = torque_limit*(-t13*t53 + 1);
+    const float t63 = -t62;
+    const float t64 = command_5 < t0;
+    const float t65 = fabsf(Omega_5);
+    const float t66 = speed_limit <= t65;
+    const float t67 = Omega_5*torque_limit;
+    const float t68 = command_5 > torque_limit;
+    const float t69 = ((t64) ? (
+   t0
+)
+: ((t68) ? (
+   torque_limit
+)
+: (
+   command_5
+)));
+    const float t70 = Omega_5 >= speed_limit;
+    const float t71 = command_5 < 0;
+    const float t72 = command_5 > 0;
+    const float t73 = Omega_5 <= t11;
+    const float t74 = torque_limit*(-t13*t65 + 1);
+    const float t75 = -t74;
+    u[0] = ((t7) ? (
+   ((((t1) ? (
+      t3 && t4 < 0
+   )
+   : (
+      ((t5) ? (
+         t3 && t4 > 0
+      )
+      : (
+         t3 && Omega_0*command_0 > 0
+      ))
+   ))) ? (
+      0
+   )
+   : (
+      t6
+   ))
+)
+: (
+   (((t10 || t12) && (t10 || t9) && (t12 || t8) && (t8 || t9)) ? (
+      0
+   )
+   : ((Omega_0 > 0 && command_0 > t14 && Omega_0 < speed_limit) ? (
+      t14
+   )
+   : ((Omega_0 > t11 && Omega_0 < 0 && command_0 < t15) ? (
+      t15
+   )
+   : (
+      t6
+   ))))
+));
+    u[1] = ((t7) ? (
+   ((((t16) ? (
+      t18 && t19 < 0
+   )
+   : (
+      ((t20) ? (
+         t18 && t19 > 0
+      )
+      : (
+         t18 && Omega_1*command_1 > 0
+      ))
+   ))) ? (
+      0
+   )
+   : (
+      t21
+   ))
+)
+: (
+   (((t22 || t23) && (t22 || t25) && (t23 || t24) && (t24 || t25)) ? (
+      0
+   )
+   : ((Omega_1 > 0 && command_1 > t26 && Omega_1 < speed_limit) ? (
+      t26
+   )
+   : ((Omega_1 > t11 && Omega_1 < 0 && command_1 < t27) ? (
+      t27
+   )
+   : (
+      t21
+   ))))
+));
+    u[2] = ((t7) ? (
+   ((((t28) ? (
+      t30 && t31 < 0
+   )
+   : (
+      ((t32) ? (
+         t30 && t31 > 0
+      )
+      : (
+         t30 && Omega_2*command_2 > 0
+      ))
+   ))) ? (
+      0
+   )
+   : (
+      t33
+   ))
+)
+: (
+   (((t34 || t35) && (t34 || t37) && (t35 || t36) && (t36 || t37)) ? (
+      0
+   )
+   : ((Omega_2 > 0 && command_2 > t38 && Omega_2 < speed_limit) ? (
+      t38
+   )
+   : ((Omega_2 > t11 && Omega_2 < 0 && command_2 < t39) ? (
+      t39
+   )
+   : (
+      t33
+   ))))
+));
+    u[3] = ((t7) ? (
+   ((((t40) ? (
+      t42 && t43 < 0
+   )
+   : (
+      ((t44) ? (
+         t42 && t43 > 0
+      )
+      : (
+         t42 && Omega_3*command_3 > 0
+      ))
+   ))) ? (
+      0
+   )
+   : (
+      t45
+   ))
+)
+: (
+   (((t46 || t47) && (t46 || t49) && (t47 || t48) && (t48 || t49)) ? (
+      0
+   )
+   : ((Omega_3 > 0 && command_3 > t50 && Omega_3 < speed_limit) ? (
+      t50
+   )
+   : ((Omega_3 > t11 && Omega_3 < 0 && command_3 < t51) ? (
+      t51
+   )
+   : (
+      t45
+   ))))
+));
+    u[4] = ((t7) ? (
+   ((((t52) ? (
+      t54 && t55 < 0
+   )
+   : (
+      ((t56) ? (
+         t54 && t55 > 0
+      )
+      : (
+         t54 && Omega_4*command_4 > 0
+      ))
+   ))) ? (
+      0
+   )
+   : (
+      t57
+   ))
+)
+: (
+   (((t58 || t59) && (t58 || t61) && (t59 || t60) && (t60 || t61)) ? (
+      0
+   )
+   : ((Omega_4 > 0 && command_4 > t62 && Omega_4 < speed_limit) ? (
+      t62
+   )
+   : ((Omega_4 > t11 && Omega_4 < 0 && command_4 < t63) ? (
+      t63
+   )
+   : (
+      t57
+   ))))
+));
+    u[5] = ((t7) ? (
+   ((((t64) ? (
+      t66 && t67 < 0
+   )
+   : (
+      ((t68) ? (
+         t66 && t67 > 0
+      )
+      : (
+         t66 && Omega_5*command_5 > 0
+      ))
+   ))) ? (
+      0
+   )
+   : (
+      t69
+   ))
+)
+: (
+   (((t70 || t71) && (t70 || t73) && (t71 || t72) && (t72 || t73)) ? (
+      0
+   )
+   : ((Omega_5 > 0 && command_5 > t74 && Omega_5 < speed_limit) ? (
+      t74
+   )
+   : ((Omega_5 > t11 && Omega_5 < 0 && command_5 < t75) ? (
+      t75
+   )
+   : (
+      t69
+   ))))
+));
+}
+
 /* ---- Scene effects in float: accumulating functions and dispatch ---------------------------- */
 /* applied_torque: adds tau_com_w for one body. p = [torque_w(3)] */
 static inline void lvf_effect_acc_applied_torque(const float *p, const float *x, const float *v_w, float m, const float *I_b, float *F, float *tau)

@@ -42,7 +42,9 @@ From Python::
     K, S, E = lc.dlqr(lin.sample(0.01), Q, R)
 
 From the shell: ``lavendersim lqr --scenario corner --theta0 3 --json`` (``--monte-carlo N --seed S
---workers W`` or ``--dask ADDRESS`` for the robustness runs).
+--workers W`` or ``--dask ADDRESS`` for the robustness runs). ``--layout pyramid4``: four wheels on a
+pyramid (lavendersim.wheel_layout) — a 30° slew with null-space wheel-speed management and the
+momentum check.
 """
 from __future__ import annotations
 
@@ -69,6 +71,7 @@ if TYPE_CHECKING:  # annotations only: casadi is an optional extra, Scene/Sim lo
     from .sim import Sim
 
 SCENARIOS = ("center", "corner")
+LAYOUT_CHOICES = ("cube3", "pyramid4")
 MOTORS = ("line", "cutoff")
 STATE_LABELS = ("dtheta_x", "dtheta_y", "dtheta_z", "omega_x", "omega_y", "omega_z", "Omega_x", "Omega_y", "Omega_z")
 INPUT_LABELS = ("u_x", "u_y", "u_z")
@@ -1570,6 +1573,9 @@ def register_cli(subparsers: argparse._SubParsersAction) -> None:
                               description=__doc__.split("\n\n")[0] + "\n\nQ and R: one number (times identity), the "
                               "diagonal (9 / 3 numbers, comma-separated) or the full matrix row-major (81 / 9 numbers). "
                               "State order: " + ", ".join(STATE_LABELS) + ".")
+    p.add_argument("--layout", default="cube3", choices=LAYOUT_CHOICES, help="wheel layout: cube3 (three wheels on the body "
+                   "axes, default) or pyramid4 (four wheels on a pyramid, a free cube spacecraft: 30° slew with null-space "
+                   "wheel-speed management and the momentum check; lavendersim.wheel_layout)")
     p.add_argument("--scenario", default="center", choices=SCENARIOS, help="center: joint at the centre (ReactionWheelCube-v0); "
                    "corner: balancing on a corner under gravity (default center)")
     p.add_argument("--Q", help="state weight (default: Bryson, see lavendersim.control.default_weights)")
@@ -1604,6 +1610,8 @@ def register_cli(subparsers: argparse._SubParsersAction) -> None:
 def _cli(args) -> int:
     import sys
 
+    if args.layout != "cube3":
+        return _cli_layout(args)
     try:
         J = _numbers("J", args.J)
         if J.size not in (1, 3):
@@ -1663,4 +1671,59 @@ def _cli(args) -> int:
               f"peak torque {fmt(mc['peak_torque'], 'N·m')}")
     if args.plot:
         print(f"wrote {args.plot}")
+    return 0
+
+
+def _cli_layout(args) -> int:
+    """``lavendersim lqr --layout pyramid4``: the slew and the momentum check of lavendersim.wheel_layout."""
+    import sys
+
+    from . import wheel_layout as WL
+
+    try:
+        unsupported = [(f"--{k.replace('_', '-')}", v) for k, v in (("scenario", args.scenario != "center"), ("monte_carlo", args.monte_carlo),
+                                                                   ("dask", args.dask), ("damping", args.damping), ("plot", args.plot))
+                       if v not in (None, False, 0.0)]
+        if unsupported:
+            raise V.LavenderInputError("layout", f"--layout {args.layout} runs the free cube's slew only",
+                                       f"; {unsupported[0][0]} is not supported with it")
+        for name in ("mass", "size", "torque_limit", "speed_limit", "wheel_damping", "theta0", "T", "threshold"):
+            v = getattr(args, name)
+            if v is not None and not math.isfinite(v):
+                raise V.LavenderInputError(name.replace("_", "-"), "must be finite", f", got {v!r}")
+        J = _numbers("J", args.J)
+        if J.size not in (1, 4):
+            raise V.LavenderInputError("J", f"give 1 or 4 wheel inertias for --layout {args.layout}", f", got {J.size}")
+        axis = DEFAULT_AXIS if args.axis is None else _numbers("axis", args.axis)
+        if np.size(axis) != 3:
+            raise V.LavenderInputError("axis", "must be 3 numbers", f", got {np.size(axis)}")
+        model = WL.LAYOUTS[args.layout](J=J if J.size > 1 else float(J[0]), mass=args.mass, size=args.size,
+                                        torque_limit=args.torque_limit, speed_limit=args.speed_limit,
+                                        wheel_damping=args.wheel_damping, motor=args.motor)
+        n = model.n
+        res = WL.slew(model, 30.0 if args.theta0 is None else args.theta0, axis, T=3.0 if args.T is None else args.T,
+                      Q=_matrix_arg("Q", args.Q, 6 + n), R=_matrix_arg("R", args.R, n), threshold_deg=args.threshold)
+        mom = WL.momentum_exchange(WL.LAYOUTS[args.layout](J=model.J, mass=model.mass, size=model.size,
+                                                           torque_limit=model.torque_limit, speed_limit=model.speed_limit))
+    except V.LavenderInputError as exc:
+        print(f"lavendersim lqr: invalid parameter: {exc}", file=sys.stderr)
+        return 2
+    f = res.figures()
+    if args.json:
+        print(json.dumps({**f, "K": res.K.tolist(), "A_b": model.A_b.tolist(), "momentum_check": mom}, indent=2))
+        return 0
+    np.set_printoptions(precision=5, suppress=True, linewidth=140)
+    print(f"LQR, layout {args.layout}: {n} wheels, free cube {model.mass:g} kg, {model.size:g} m; axes (columns, body frame):\n{model.A_b}")
+    print(f"controllability rank {res.rank} of {6 + n} (the rest: conserved angular momentum); dlqr at {0.01:g} s, "
+          f"null-space wheel-speed target {np.round(res.Omega_ref, 3).tolist()} rad/s")
+    print(f"K (states {', '.join(WL.state_labels(n))}):\n{res.K}")
+    st = f"{f['settling_time']:.3f} s" if math.isfinite(f["settling_time"]) else "never"
+    print(f"slew {30.0 if args.theta0 is None else args.theta0:g}° about {np.round(np.asarray(axis, float), 4).tolist()}: settling time "
+          f"(< {f['threshold_deg']:g}°) {st}, final error {f['final_error_deg']:.3g}°; peak |Omega_i| "
+          f"{np.round(f['peak_wheel_speed'], 2).tolist()} rad/s (limit {model.speed_limit:g}), peak |u_i| "
+          f"{np.round(f['peak_torque'], 4).tolist()} N·m (limit {model.torque_limit:g}); within limits: {f['within_limits']}")
+    print(f"null-space wheel speed: {f['null_Omega_start'][0]:.4g} → {f['null_Omega_end'][0]:.4g} rad/s "
+          f"(target {f['null_Omega_target'][0]:.4g}; no torque on the body: A_b n = 0)")
+    print(f"momentum check (damping off, 2 s of varying commands): |ΔL_body + ΔL_wheels| / max|ΔL_wheels| = "
+          f"{mom['exchange_residual']:.2e}, |L| drift {mom['L_drift']:.2e}")
     return 0

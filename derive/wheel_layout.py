@@ -1,0 +1,129 @@
+"""Reaction wheels on arbitrary spin axes: N ≥ 1 wheels, axis matrix A_b (3×N, unit columns, body
+frame) — the generalization of derive/wheel_cube.py (whose three wheels sit on body x, y, z, A_b = 1).
+
+Rotational state: q (4) orientation R_WB (x, y, z, w); omega_b (3) body angular velocity, body
+frame, rad/s; Omega (N) wheel spin rates relative to the body about their axes, rad/s.
+
+Parameters (SI): I_p — inertia of the body (wheels counted as locked) about the pivot P, body frame,
+kg·m², symmetric; A_b — wheel spin axes as columns, body frame; J — wheel axial inertias, kg·m²; r_b
+— P→COM offset, body frame, m; F_w, tau_w — total force at the COM and torque about it from the
+scene's effects, world frame (N, N·m); u — motor torques on the wheels, N·m (the body receives
+−A_b u); c_w — wheel bearing damping, N·m·s/rad.
+
+Equations (derived once, for any N; printed for the counts in WHEEL_COUNTS):
+  H = I_p ω + A_b J Ω,   Ḣ + ω × H = τ_P,   J_i (a_iᵀ ω̇ + Ω̇_i) = u_i − c_w Ω_i, so
+  (I_p − A_b J A_bᵀ) ω̇ = τ_P − ω × H − A_b (u − c_w Ω),   Ω̇ = J⁻¹(u − c_w Ω) − A_bᵀ ω̇.
+The wheel momentum h_w = J (A_bᵀ ω + Ω) (N components, each about its wheel's axis).
+"""
+from __future__ import annotations
+
+import sympy as sp
+
+from .integrator_physics import motor
+from .kernel import Arg, Kernel, mat, scalar, vec
+from .quaternion import pure, qmul, rotation_matrix
+from .wheel_cube import solve3, sym3, torque_about_pivot, wheel_rhs
+
+WHEEL_COUNTS = (1, 2, 3, 4, 5, 6)   # printed kernels: wheels<N>_body_rhs, wheels<N>_momentum, wheels<N>_motor
+
+
+def layout_rhs(q, w, Om, I_p, A, J, r_b, F_w, tau_w, u, c_w):
+    """(q̇, ω̇, Ω̇) of a body carrying N wheels on the columns of A (3×N); J, Om, u are N-vectors."""
+    n = A.shape[1]
+    Jd = sp.diag(*J)
+    H = I_p * w + A * Jd * Om
+    rhs = torque_about_pivot(q, r_b, F_w, tau_w) - w.cross(H) - A * (u - c_w * Om)
+    w_dot = solve3(I_p - A * Jd * A.T, rhs)
+    Om_dot = sp.Matrix([(u[i] - c_w * Om[i]) / J[i] for i in range(n)]) - A.T * w_dot
+    return qmul(q, pure(w)) / 2, w_dot, Om_dot
+
+
+def layout_momentum(q, w, Om, I_p, A, J):
+    """(L_body_w, L_wheels_w, h_w): world momenta of the body (wheels locked, minus their spin) and of
+    the wheels' spin about P; h_w = J (Aᵀω + Ω) the wheels' axial momenta (N)."""
+    R, Jd = rotation_matrix(q), sp.diag(*J)
+    h = Jd * (A.T * w + Om)
+    return R * ((I_p - A * Jd * A.T) * w), R * (A * h), h
+
+
+def motor_n(command, Omega, torque_limit, speed_limit, cutoff) -> sp.Matrix:
+    """integrator_physics.motor applied wheel by wheel (each wheel's line depends on its own Ω_i only)."""
+    z = sp.Integer(0)
+    return sp.Matrix([motor(sp.Matrix([command[i], z, z]), sp.Matrix([Omega[i], z, z]), torque_limit, speed_limit, cutoff)[0]
+                      for i in range(len(command))])
+
+
+def _random_rationals(rng, rows: int, cols: int = 1) -> sp.Matrix:
+    return sp.Matrix(rows, cols, lambda i, j: sp.Rational(rng.randint(-40, 40), rng.randint(1, 9)))
+
+
+def _check() -> None:
+    """A_b = 1 reproduces the body-axis cube; without external torque H is conserved for any axes.
+    The equations are evaluated in exact rational arithmetic at random rational inputs (three wheels
+    on general axes, a general symmetric I_p): the identities hold exactly there, and a wrong term
+    would show (a nonzero rational function vanishes at a random point with negligible probability);
+    far cheaper than sympy.simplify on the symbolic 3×3 solve."""
+    import random
+
+    rng = random.Random(13)
+    for _ in range(3):
+        q, w, r_b, F, T = (_random_rationals(rng, k) for k in (4, 3, 3, 3, 3))
+        Om, u, J = _random_rationals(rng, 3), _random_rationals(rng, 3), _random_rationals(rng, 3).applyfunc(abs) / 100 + sp.ones(3, 1) / 50
+        S = _random_rationals(rng, 3, 3)
+        I_p, c = S * S.T + 10 * sp.eye(3), sp.Rational(rng.randint(0, 9), 7)
+        a = layout_rhs(q, w, Om, I_p, sp.eye(3), J, r_b, F, T, u, c)
+        b = wheel_rhs(q, w, Om, I_p, J, r_b, F, T, u, c)
+        if any(x != y for x, y in zip(a, b)):
+            raise RuntimeError("derive: the N-wheel equations with A_b = 1 differ from the body-axis cube")
+        A = _random_rationals(rng, 3, 3)
+        _, w_dot, Om_dot = layout_rhs(q, w, Om, I_p, A, J, r_b, sp.zeros(3, 1), sp.zeros(3, 1), u, c)
+        H = I_p * w + A * sp.diag(*J) * Om
+        if I_p * w_dot + A * sp.diag(*J) * Om_dot + w.cross(H) != sp.zeros(3, 1):
+            raise RuntimeError("derive: the N-wheel equations do not conserve angular momentum")
+
+
+def kernels_for(n: int) -> list[Kernel]:
+    """The three kernels of an n-wheel layout."""
+    g = "Pivoted bodies and reaction wheels"
+    q, w, Om = vec("q", 4), vec("omega_b", 3), vec("Omega", n)
+    A, J, u = mat("A_b", 3, n), vec("J", n), vec("u", n)
+    r_b, F_w, tau_w, I_p, c_w = vec("r_b", 3), vec("F_w", 3), vec("tau_w", 3), sym3("I_p"), scalar("c_w")
+    q_dot, w_dot, Om_dot = layout_rhs(q, w, Om, I_p, A, J, r_b, F_w, tau_w, u, c_w)
+    Lb, Lw, h = layout_momentum(q, w, Om, I_p, A, J)
+    Q = Arg("q", q, "orientation (x, y, z, w), R_WB", "unit_quaternion")
+    W = Arg("omega_b", w, "angular velocity, body frame, rad/s")
+    OM = Arg("Omega", Om, f"wheel rates relative to the body about their axes ({n}), rad/s")
+    IP = Arg("I_p", I_p, "inertia about the pivot (wheels locked), body frame, kg·m², symmetric row-major", "inertia_sym")
+    AB = Arg("A_b", A, f"wheel spin axes as columns (3×{n}, unit columns), body frame, row-major", "unit_vector")
+    JJ = Arg("J", J, f"wheel axial inertias ({n}), kg·m²", "positive")
+    cmd, tl, sl, cut = vec("command", n), scalar("torque_limit"), scalar("speed_limit"), scalar("cutoff")
+    note = [f"{n} wheels; I_p and I_p − A_b J A_bᵀ must be positive definite (the runtime validates them)."]
+    return [
+        Kernel(f"wheels{n}_body_rhs", f"Body with {n} reaction wheels on arbitrary axes rotating about a pivot",
+               r"(I_P - A J A^T)\dot\omega = \tau_P - \omega\times(I_P\omega + A J\Omega) - A(u - c_w\Omega),\quad "
+               r"\dot\Omega = J^{-1}(u - c_w\Omega) - A^T\dot\omega,\quad \dot q = \tfrac12 q\otimes[\omega,0]",
+               [Q, W, OM, IP, AB, JJ, Arg("r_b", r_b, "pivot → COM, body frame, m", "small"),
+                Arg("F_w", F_w, "total force at the COM, world frame, N"),
+                Arg("tau_w", tau_w, "total torque about the COM, world frame, N·m"),
+                Arg("u", u, "motor torques on the wheels (body gets −A_b u), N·m"),
+                Arg("c_w", c_w, "wheel damping, N·m·s/rad", "positive")],
+               [Arg("q_dot", q_dot, "1/s"), Arg("omega_dot_b", w_dot, "rad/s², body frame"), Arg("Omega_dot", Om_dot, "rad/s²")],
+               g, note),
+        Kernel(f"wheels{n}_momentum", f"World angular momentum about the pivot of a body with {n} wheels, and the wheels' axial momenta",
+               r"L_{body} = R (I_P - A J A^T)\omega,\quad L_{wheels} = R A h_w,\quad h_w = J(A^T\omega + \Omega)",
+               [Q, W, OM, IP, AB, JJ],
+               [Arg("L_body_w", Lb, "kg·m²/s, world"), Arg("L_wheels_w", Lw, "kg·m²/s, world"),
+                Arg("h_w", h, "axial momentum of each wheel, kg·m²/s")], g),
+        Kernel(f"wheels{n}_motor", f"Motor torques actually applied on {n} wheels (the wheel_motor line, per wheel)",
+               r"u_i = \mathrm{wheel\_motor}(c_i, \Omega_i)",
+               [Arg("command", cmd, "commanded motor torques, N·m"), Arg("Omega", Om, "wheel rates relative to the body, rad/s"),
+                Arg("torque_limit", tl, "stall torque (current limit), N·m", "positive"),
+                Arg("speed_limit", sl, "no-load speed, rad/s", "positive"),
+                Arg("cutoff", cut, "1: hard cut-off at speed_limit instead of the line; 0: the line")],
+               [Arg("u", motor_n(cmd, Om, tl, sl, cut), "applied motor torques, N·m")], g),
+    ]
+
+
+def kernels() -> list[Kernel]:
+    _check()
+    return [k for n in WHEEL_COUNTS for k in kernels_for(n)]

@@ -1,0 +1,154 @@
+"""Issue 13, wheel layouts: N reaction wheels on arbitrary axes (derive/wheel_layout.py, printed as
+wheels<N>_body_rhs / _momentum / _motor; lavendersim.wheel_layout) and the 4-wheel pyramid example:
+a 30° LQR slew that settles below 0.1° with every wheel within its limits, null-space wheel-speed
+management, and the momentum exchange exact with damping off; `lavendersim lqr --layout pyramid4`."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from lavendersim import cli
+from lavendersim import wheel_layout as WL
+from lavendersim.kernels import K
+from lavendersim.validate import LavenderInputError
+
+pytestmark = pytest.mark.needs("control")   # casadi + python-control (tests/conftest.py)
+
+
+@pytest.fixture(scope="module")
+def pyramid():
+    return WL.pyramid4()
+
+
+def test_pyramid_axes_and_null_space(pyramid):
+    A = pyramid.A_b
+    np.testing.assert_allclose(np.linalg.norm(A, axis=0), 1.0, atol=1e-15)
+    np.testing.assert_allclose(A @ A.T, np.eye(3) * 4 / 3, atol=1e-14)       # equal authority on every axis
+    n = WL.null_space(A)
+    assert n.shape == (4, 1)
+    np.testing.assert_allclose(A @ n, 0.0, atol=1e-14)
+    np.testing.assert_allclose(np.abs(n[:, 0]), 0.5, atol=1e-14)             # (1, −1, 1, −1)/2 up to sign
+
+
+def test_kernel_null_torque_moves_no_body_and_conserves_H(pyramid):
+    """A torque along the null vector changes only the wheel rates: omega_dot_b is unchanged; with no
+    external torque dH/dt + ω × H = 0 (H = I_p ω + A_b J Ω) at a random state."""
+    rng = np.random.default_rng(3)
+    A, J, I_p, z = pyramid.A_b, pyramid.J, pyramid.I_p, np.zeros(3)
+    n = WL.null_space(A)[:, 0]
+    for _ in range(5):
+        q = rng.normal(size=4)
+        q /= np.linalg.norm(q)
+        w, W, u, c = rng.normal(size=3), rng.normal(size=4) * 50, rng.normal(size=4) * 0.1, 1e-4
+        _, wd, Wd = K.wheels4_body_rhs(q, w, W, I_p, A, J, z, z, z, u, c)
+        _, wd2, Wd2 = K.wheels4_body_rhs(q, w, W, I_p, A, J, z, z, z, u + 0.3 * n, c)
+        np.testing.assert_allclose(wd2, wd, rtol=0, atol=1e-12 * np.abs(wd).max())
+        assert np.abs(Wd2 - Wd).max() > 100.0                                # the wheels do feel it
+        H = I_p @ w + A @ (J * W)
+        Hdot = I_p @ wd + A @ (J * Wd)
+        np.testing.assert_allclose(Hdot + np.cross(w, H), 0.0, atol=1e-12 * np.abs(Hdot).max())
+
+
+def test_momentum_kernel_matches_definition(pyramid):
+    y = np.array([0.1, -0.2, 0.3, 0.9, 0.3, -0.2, 0.5, 10.0, -20.0, 30.0, 5.0])
+    y[:4] /= np.linalg.norm(y[:4])
+    Lb, Lw, h = pyramid.momentum_w(y)
+    R = np.asarray(K.quat_to_matrix(y[:4])).reshape(3, 3)
+    A, J, w, W = pyramid.A_b, pyramid.J, y[4:7], y[7:]
+    np.testing.assert_allclose(h, J * (A.T @ w + W), rtol=1e-14)
+    np.testing.assert_allclose(Lb + Lw, R @ (pyramid.I_p @ w + A @ (J * W)), rtol=1e-13)
+
+
+@pytest.mark.parametrize("A_b, match", [
+    (np.hstack([np.eye(3), [[1.0], [1.0], [0.0]]]), r"A_b.*unit vector.*column 3"),
+    (np.array([[1.0, 0, 0, np.nan], [0, 1, 0, 0], [0, 0, 1, 1]]), r"A_b.*finite"),
+    (np.array([[1.0, 0, -1, 0], [0, 1, 0, -1], [0, 0, 0, 0]]), r"A_b.*span 3-D space.*rank 2"),
+    (np.ones((3, 7)) / np.sqrt(3.0), r"A_b.*span 3-D space"),
+    (np.hstack([np.eye(3), np.eye(3), [[0.0], [0.0], [1.0]]]), r"A_b.*kernels are printed for \[1, 2, 3, 4, 5, 6\] wheels.*got 7"),
+    (np.zeros((2, 4)), r"A_b"),
+])
+def test_bad_axes_are_refused(A_b, match):
+    with pytest.raises(LavenderInputError, match=match):
+        WL.LayoutCube(A_b=A_b)
+
+
+def test_bad_wheel_parameters_are_refused():
+    with pytest.raises(LavenderInputError, match=r"^J: .*positive"):
+        WL.pyramid4(J=[1e-4, 1e-4, -1e-4, 1e-4])
+    with pytest.raises(LavenderInputError, match=r"^J: .*positive definite"):
+        WL.pyramid4(J=0.01)                        # wheels heavier than the 0.00375 kg·m² cube
+    with pytest.raises(LavenderInputError, match=r"^J"):
+        WL.pyramid4(J=[1e-4, 1e-4])
+    with pytest.raises(LavenderInputError, match=r"^null_bias: .*speed_limit"):
+        WL.slew(WL.pyramid4(), null_bias=1000.0)
+
+
+def test_pyramid_slew_settles_within_limits_and_manages_null_speed(pyramid):
+    res = WL.slew(pyramid, 30.0, (1.0, 2.0, 3.0), null_bias=50.0, T=4.0)
+    f = res.figures()
+    assert res.rank == 7                           # 10 states, 3 conserved momentum components
+    assert res.error_deg[0] == pytest.approx(30.0, abs=1e-9)
+    assert f["settling_time"] < 2.0                # stays below 0.1° from then on
+    assert np.all(res.error_deg[res.run["t"] >= f["settling_time"]] < 0.1)
+    assert f["final_error_deg"] < 1e-3
+    assert f["within_limits"]
+    assert max(f["peak_wheel_speed"]) < 0.5 * pyramid.speed_limit
+    assert np.all(np.abs(res.run["u"]) <= pyramid.torque_limit + 1e-15)
+    # null-space management: the wheels' null component went from 0 to its target (50 rad/s) …
+    assert f["null_Omega_start"][0] == 0.0
+    assert abs(f["null_Omega_end"][0] - 50.0) < 2.5
+    # … and the rest of the wheel momentum is what the slew needs: back to 0 at rest (H = 0)
+    Om_end = res.run["y"][-1, 7:]
+    n = WL.null_space(pyramid.A_b)[:, 0]
+    np.testing.assert_allclose(Om_end - n * (n @ Om_end), 0.0, atol=0.05)
+
+
+def test_pyramid_momentum_exchange_exact_with_damping_off(pyramid):
+    m = WL.pyramid4(wheel_damping=0.0)
+    out = WL.momentum_exchange(m)
+    assert out["max_dL_wheels"] > 0.05             # real exchange happened
+    assert out["exchange_residual"] <= 1e-9
+    assert out["L_drift"] <= 1e-9
+
+
+def test_cli_lqr_layout_pyramid4(capsys):
+    assert cli.main(["lqr", "--layout", "pyramid4", "--T", "1.5", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["layout_wheels"] == 4 and out["settling_time"] < 1.5 and out["within_limits"]
+    assert out["momentum_check"]["exchange_residual"] <= 1e-9
+    for args, field in ((["--J", "1e-4,1e-4"], "J"), (["--scenario", "corner"], "layout"), (["--Q", "1,2"], "Q")):
+        assert cli.main(["lqr", "--layout", "pyramid4", *args]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and f"invalid parameter: {field}" in err
+
+
+def test_printed_counts_and_three_body_axes_equal_the_cube_kernel():
+    """Derived once for any N, printed for N = 1 … 6; with A_b = 1 the N = 3 kernel is the body-axis
+    cube's wheel_body_rhs (to rounding), pivot offset, external load and damping included."""
+    assert WL.printed_counts() == (1, 2, 3, 4, 5, 6)
+    rng = np.random.default_rng(7)
+    S = rng.normal(size=(3, 3))
+    I_p = S @ S.T + 5 * np.eye(3)
+    q = rng.normal(size=4)
+    q /= np.linalg.norm(q)
+    w, W, J, r, F, tau, u = (rng.normal(size=3) for _ in range(7))
+    J = np.abs(J) * 0.1 + 0.05
+    a = K.wheels3_body_rhs(q, w, W, I_p, np.eye(3), J, r, F, tau, u, 0.3)
+    b = K.wheel_body_rhs(q, w, W, I_p, J, r, F, tau, u, 0.3)
+    for x, y in zip(a, b):
+        np.testing.assert_allclose(x, y, rtol=1e-13, atol=1e-13)
+
+
+@pytest.mark.parametrize("n", [3, 6])
+def test_other_counts_momentum_exchange(n):
+    """A tilted 3-wheel set (no null space) and a 6-wheel set (3-D null space) conserve L exactly too."""
+    rng = np.random.default_rng(n)
+    A = rng.normal(size=(3, n))
+    A /= np.linalg.norm(A, axis=0)
+    m = WL.LayoutCube(A_b=A, J=2e-4)
+    assert WL.null_space(A).shape == (n, n - 3)
+    out = WL.momentum_exchange(m, T=0.5)
+    assert out["max_dL_wheels"] > 0.01
+    assert out["exchange_residual"] <= 1e-9 and out["L_drift"] <= 1e-9
