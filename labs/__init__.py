@@ -38,6 +38,22 @@ __all__ = ["LABS", "lab_module", "compute", "run", "register_cli", "LabResult"]
 
 
 def lab_module(name: str):
+    """The module of lab ``name`` (imported on first use).
+
+    Parameters
+    ----------
+    name : str
+        A key of LABS ("force", "momentum", "01" … "04", "hard", "accuracy", "atlas").
+
+    Returns
+    -------
+    module
+
+    Raises
+    ------
+    lavendersim.validate.LavenderInputError
+        ``name`` is not a lab.
+    """
     from lavendersim import validate as V
 
     V.choice("lab", name, LABS)
@@ -45,12 +61,52 @@ def lab_module(name: str):
 
 
 def compute(name: str, backend: str = "auto", **options) -> LabResult:
-    """Compute lab ``name`` and return its results, writing nothing (see the module docstring)."""
+    """Compute lab ``name`` and return its results, writing nothing (see the module docstring).
+
+    Parameters
+    ----------
+    name : str
+        A key of LABS.
+    backend : {"auto", "c", "numpy"}, default "auto"
+        Simulator backend for the labs that step a scene.
+    **options
+        The lab's own options (its ``compute`` keywords, e.g. ``damping`` for lab 01).
+
+    Returns
+    -------
+    LabResult
+
+    Raises
+    ------
+    lavendersim.validate.LavenderInputError
+        Unknown lab or an invalid option.
+    """
     return lab_module(name).compute(backend=backend, **options)
 
 
 def run(name: str, out_dir=DEFAULT_OUT, backend: str = "auto", **options) -> LabResult:
-    """Run lab ``name`` and return its results (see the module docstring)."""
+    """Run lab ``name`` and return its results (see the module docstring).
+
+    Parameters
+    ----------
+    name : str
+        A key of LABS.
+    out_dir : str or Path, default DEFAULT_OUT
+        Output directory; the lab writes ``out_dir/NAME/``.
+    backend : {"auto", "c", "numpy"}, default "auto"
+        Simulator backend for the labs that step a scene.
+    **options
+        The lab's own options (its ``compute`` keywords).
+
+    Returns
+    -------
+    LabResult
+
+    Raises
+    ------
+    lavendersim.validate.LavenderInputError
+        Unknown lab, an invalid option or an unwritable ``out_dir``.
+    """
     return lab_module(name).run(out_dir, backend=backend, **options)
 
 
@@ -192,7 +248,13 @@ def _run_all(args) -> int:
 
 
 def register_cli(subparsers) -> None:
-    """Add ``lab NAME|all`` to the ``lavendersim`` command line (each leaf sets ``fn``)."""
+    """Add ``lab NAME|all`` to the ``lavendersim`` command line (each leaf sets ``fn``).
+
+    Parameters
+    ----------
+    subparsers : argparse._SubParsersAction
+        The ``lavendersim`` parser's subcommands (from ``add_subparsers``).
+    """
     import argparse
 
     from lavendersim.viewer import LAB_VIEWS

@@ -43,6 +43,20 @@ class Check:
     kind: ``"close"`` (|value - expected| <= tol), ``"max"`` (value <= limit), ``"below"``
     (value < limit), ``"min"`` (value >= limit), ``"above"`` (value > limit) or ``"true"``
     (a paw-check assertion; value is a bool).
+
+    Parameters
+    ----------
+    name : str
+        The figure's name (results.json gets ``check_<name>``).
+    value : float or bool
+        The figure (a bool for kind ``"true"``).
+    kind : {"close", "max", "below", "min", "above", "true"}
+    expected : float, optional
+        The expected value or the limit.
+    tol : float, optional
+        Absolute tolerance of a ``"close"`` check.
+    note : str, default ""
+        Said after the check in reports.
     """
 
     name: str
@@ -54,6 +68,13 @@ class Check:
 
     @property
     def passed(self) -> bool:
+        """Whether the check holds (a non-finite value fails every numeric kind).
+
+        Raises
+        ------
+        ValueError
+            Unknown ``kind``.
+        """
         v = self.value
         if self.kind == "true":
             return bool(v)
@@ -116,28 +137,124 @@ def _fmt(x) -> str:
 
 
 def close(name, value, expected, tol, note="") -> Check:
-    """|value - expected| <= tol."""
+    """|value - expected| <= tol.
+
+    Parameters
+    ----------
+    name : str
+        The figure's name.
+    value, expected, tol : float
+        The figure, its expected value and the absolute tolerance.
+    note : str, optional
+        Said after the check in reports.
+
+    Returns
+    -------
+    Check
+    """
     return Check(name, float(value), "close", float(expected), float(tol), note)
 
 
 def at_most(name, value, limit, note="") -> Check:
+    """value <= limit.
+
+    Parameters
+    ----------
+    name : str
+        The figure's name.
+    value : float
+        The figure.
+    limit : float
+        The bound.
+    note : str, optional
+        Said after the check in reports.
+
+    Returns
+    -------
+    Check
+    """
     return Check(name, float(value), "max", float(limit), None, note)
 
 
 def below(name, value, limit, note="") -> Check:
+    """value < limit.
+
+    Parameters
+    ----------
+    name : str
+        The figure's name.
+    value : float
+        The figure.
+    limit : float
+        The bound.
+    note : str, optional
+        Said after the check in reports.
+
+    Returns
+    -------
+    Check
+    """
     return Check(name, float(value), "below", float(limit), None, note)
 
 
 def at_least(name, value, limit, note="") -> Check:
+    """value >= limit.
+
+    Parameters
+    ----------
+    name : str
+        The figure's name.
+    value : float
+        The figure.
+    limit : float
+        The bound.
+    note : str, optional
+        Said after the check in reports.
+
+    Returns
+    -------
+    Check
+    """
     return Check(name, float(value), "min", float(limit), None, note)
 
 
 def above(name, value, limit, note="") -> Check:
+    """value > limit.
+
+    Parameters
+    ----------
+    name : str
+        The figure's name.
+    value : float
+        The figure.
+    limit : float
+        The bound.
+    note : str, optional
+        Said after the check in reports.
+
+    Returns
+    -------
+    Check
+    """
     return Check(name, float(value), "above", float(limit), None, note)
 
 
 def holds(name, condition, note="") -> Check:
-    """A paw-check or failure-mode assertion."""
+    """A paw-check or failure-mode assertion.
+
+    Parameters
+    ----------
+    name : str
+        What is asserted.
+    condition : bool
+        Whether it holds.
+    note : str, optional
+        Said after the check in reports.
+
+    Returns
+    -------
+    Check
+    """
     return Check(name, bool(condition), "true", None, None, note)
 
 
@@ -152,6 +269,16 @@ class LabResult(dict):
     Made by a lab's ``compute(...)`` (:func:`make_result`), which writes nothing; :meth:`save` writes
     ``OUT/lab/results.json``, the PNGs and any extra files. :meth:`figure` draws a plot as a matplotlib
     Figure from the data the computation kept (``data``), without re-running the physics.
+
+    Parameters
+    ----------
+    lab : str
+        The lab's name.
+    out_dir : str or Path or None
+        Where it was saved (None: not yet).
+    items : dict
+        The flat results.json items.
+    checks : list of Check
     """
 
     def __init__(self, lab: str, out_dir, items: dict, checks: list[Check]):
@@ -170,10 +297,12 @@ class LabResult(dict):
 
     @property
     def passed(self) -> bool:
+        """True when every check passes."""
         return all(c.passed for c in self.checks)
 
     @property
     def failures(self) -> list[Check]:
+        """The checks that do not pass."""
         return [c for c in self.checks if not c.passed]
 
     @property
@@ -204,7 +333,17 @@ class LabResult(dict):
         return self.plotters[key](self.data)
 
     def summary_line(self, seconds: float | None = None) -> str:
-        """One line: the lab, its headline figure, what is expected, PASS/FAIL (and the seconds)."""
+        """One line: the lab, its headline figure, what is expected, PASS/FAIL (and the seconds).
+
+        Parameters
+        ----------
+        seconds : float, optional
+            Run time to append, s.
+
+        Returns
+        -------
+        str
+        """
         status = (f"PASS ({len(self.checks)} checks)" if self.passed
                   else f"FAIL ({len(self.failures)} of {len(self.checks)} checks)")
         head = ""
@@ -220,7 +359,23 @@ class LabResult(dict):
         return f"{self.lab:<9} {status:<22} {head}{took}"
 
     def save(self, out_dir=None) -> "LabResult":
-        """Write OUT/lab/results.json, every PNG of ``plot_names`` and ``extra_files``; return self."""
+        """Write OUT/lab/results.json, every PNG of ``plot_names`` and ``extra_files``; return self.
+
+        Parameters
+        ----------
+        out_dir : str or Path, optional
+            OUT (default DEFAULT_OUT); the files go to ``OUT/lab/``.
+
+        Returns
+        -------
+        LabResult
+            self, with ``out_dir`` and ``files`` set.
+
+        Raises
+        ------
+        lavendersim.validate.LavenderInputError
+            The directory or a file cannot be written (naming ``out``).
+        """
         d = Path(DEFAULT_OUT if out_dir is None else out_dir) / self.lab
         try:
             d.mkdir(parents=True, exist_ok=True)
@@ -277,6 +432,31 @@ def make_result(lab: str, figures: dict, params: dict, checks: list[Check], plot
     ``figures`` and ``params`` are flat dicts (a name clash is an error); ``plots`` maps a PNG file
     name to ``callable(data) -> Figure`` (or to a ready Figure, kept as is); ``data`` is what the
     plots are drawn from; ``headline`` = (figure name, expected) for :meth:`LabResult.summary_line`.
+
+    Parameters
+    ----------
+    lab : str
+        The lab's name.
+    figures, params : dict
+        Flat dicts of the figures and the parameters used (numbers, bools, strings, flat vectors).
+    checks : list of Check
+    plots : dict, optional
+        PNG file name -> ``callable(data) -> Figure`` or a Figure.
+    data : dict, optional
+        What the plots are drawn from.
+    headline : tuple (str, str), optional
+        (figure name, what is expected).
+
+    Returns
+    -------
+    LabResult
+
+    Raises
+    ------
+    ValueError
+        A name used as both figure and parameter.
+    TypeError
+        A value that is not a number, bool, string or flat vector.
     """
     clash = set(figures) & set(params)
     if clash:
@@ -298,7 +478,24 @@ def make_result(lab: str, figures: dict, params: dict, checks: list[Check], plot
 
 
 def finish(lab: str, out_dir, figures: dict, params: dict, checks: list[Check], plots: dict) -> LabResult:
-    """:func:`make_result` then :meth:`LabResult.save` to ``out_dir`` (``plots``: file name -> Figure)."""
+    """:func:`make_result` then :meth:`LabResult.save` to ``out_dir`` (``plots``: file name -> Figure).
+
+    Parameters
+    ----------
+    lab : str
+        The lab's name.
+    out_dir : str or Path or None
+        OUT (None: DEFAULT_OUT).
+    figures, params : dict
+        As :func:`make_result`.
+    checks : list of Check
+    plots : dict
+        PNG file name -> Figure (or ``callable(data) -> Figure``).
+
+    Returns
+    -------
+    LabResult
+    """
     return make_result(lab, figures, params, checks, plots).save(out_dir)
 
 
@@ -308,7 +505,22 @@ def finish(lab: str, out_dir, figures: dict, params: dict, checks: list[Check], 
 
 
 def new_figure(nrows: int = 1, ncols: int = 1, *, size=(8.0, 4.5), title: str | None = None):
-    """A headless matplotlib Figure (Agg canvas) and its axes array."""
+    """A headless matplotlib Figure (Agg canvas) and its axes array.
+
+    Parameters
+    ----------
+    nrows, ncols : int, default 1
+        Grid of axes.
+    size : tuple (float, float), default (8.0, 4.5)
+        Figure size, inches.
+    title : str, optional
+        Figure title (suptitle).
+
+    Returns
+    -------
+    fig : matplotlib.figure.Figure
+    axes : ndarray (nrows, ncols) of Axes
+    """
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
@@ -325,6 +537,23 @@ def progress(iterable=None, *, total: int | None = None, desc: str = "", unit: s
 
     Anywhere else (a pipe, a log file, CI, ``--quiet``) it is a silent pass-through with the same
     interface (iterate it, or call ``update(n)``/``close()``), so no progress text ends up in logs.
+
+    Parameters
+    ----------
+    iterable : iterable, optional
+        What to iterate over.
+    total : int, optional
+        Expected number of items.
+    desc : str, default ""
+        Label before the bar.
+    unit : str, default "it"
+        Unit shown with the count.
+    enabled : bool, default True
+        False hides the bar everywhere.
+
+    Returns
+    -------
+    tqdm.tqdm
     """
     import shutil
     import sys
@@ -343,7 +572,26 @@ def map_with_progress(executor, fn, tasks, bar, *, feature: str) -> list:
 
     With the bar hidden (not a terminal, or quiet) it is exactly one ``executor.map`` call; with the bar
     shown, the tasks go in chunks of 4 per worker, so the bar moves while the sweep runs. Results are in
-    task order either way."""
+    task order either way.
+
+    Parameters
+    ----------
+    executor : lavendersim.executor executor
+        Anything with ``map(fn, tasks, feature=...)`` (and optionally ``workers``).
+    fn : callable
+        Applied to each task.
+    tasks : iterable
+        The tasks.
+    bar : tqdm.tqdm
+        A :func:`progress` bar.
+    feature : str
+        Passed on to ``executor.map``.
+
+    Returns
+    -------
+    list
+        The results, in task order.
+    """
     tasks = list(tasks)
     if bar.disable:
         return executor.map(fn, tasks, feature=feature)
@@ -366,7 +614,25 @@ MAX_OPTION = 1e100
 
 
 def bounded(field: str, value: float, *, positive: bool = False) -> float:
-    """A finite option value with 1/MAX_OPTION <= |value| <= MAX_OPTION (0 allowed unless positive)."""
+    """A finite option value with 1/MAX_OPTION <= |value| <= MAX_OPTION (0 allowed unless positive).
+
+    Parameters
+    ----------
+    field : str
+        The option's name, used in the error.
+    value : float
+    positive : bool, default False
+        Require value > 0.
+
+    Returns
+    -------
+    float
+
+    Raises
+    ------
+    lavendersim.validate.LavenderInputError
+        Naming ``field`` and the bound.
+    """
     x = V.scalar(field, value, positive=positive)
     if abs(x) > MAX_OPTION or (x != 0 and abs(x) < 1 / MAX_OPTION):
         raise V.LavenderInputError(field, f"magnitude must be within [{1 / MAX_OPTION:g}, {MAX_OPTION:g}]"
@@ -378,7 +644,30 @@ def steps(field: str, duration: float, dt: float, *, whole: bool = True, limit: 
           value: float | None = None) -> int:
     """round(duration / dt), rejected (LavenderInputError naming `field`, the bound stated) when it is more
     than `limit` steps, fewer than 1, or — with whole=True — not a whole number of steps.
-    `value` is what the user gave for `field` (default: dt)."""
+    `value` is what the user gave for `field` (default: dt).
+
+    Parameters
+    ----------
+    field : str
+        The option named in the error.
+    duration, dt : float
+        Run duration and step, s.
+    whole : bool, default True
+        Require duration to be a whole number of steps.
+    limit : int, default MAX_STEPS
+        Most steps allowed.
+    value : float, optional
+        The value quoted in the error (default ``dt``).
+
+    Returns
+    -------
+    int
+
+    Raises
+    ------
+    lavendersim.validate.LavenderInputError
+        Naming ``field`` and the bound.
+    """
     got = f", got {field} = {dt if value is None else value!r}"
     with np.errstate(over="ignore"):
         ratio = float(duration) / float(dt)
@@ -393,20 +682,56 @@ def steps(field: str, duration: float, dt: float, *, whole: bool = True, limit: 
 
 def check_out_dir(out_dir, lab: str | None = None) -> Path:
     """Create OUT (and OUT/lab) if needed and make sure a file can be written there; LavenderInputError naming
-    ``out`` otherwise (checked before a lab runs, so a long lab never fails at its very end)."""
+    ``out`` otherwise (checked before a lab runs, so a long lab never fails at its very end).
+
+    Parameters
+    ----------
+    out_dir : str or Path
+        OUT.
+    lab : str, optional
+        Also create ``OUT/lab``.
+
+    Returns
+    -------
+    Path
+    """
     if lab and isinstance(out_dir, (str, os.PathLike)):
         out_dir = Path(out_dir) / lab
     return V.writable_dir("out", out_dir)
 
 
 def check_backend(backend) -> str:
+    """The backend name ``backend`` stands for (:func:`lavendersim.backends.resolve`).
+
+    Parameters
+    ----------
+    backend : {"auto", "c", "numpy"}
+
+    Returns
+    -------
+    str
+        "c" or "numpy".
+    """
     return backends.resolve(backend)
 
 
 def angle_between_deg(K, q_a, q_b):
     """Rotation angle (degrees, in [0, 180]) between two orientations; q and -q are the same.
 
-    Both are normalized first (an unnormalized state still names an orientation)."""
+    Both are normalized first (an unnormalized state still names an orientation).
+
+    Parameters
+    ----------
+    K : module
+        The kernels to use (e.g. ``lavendersim.kernels.K``).
+    q_a, q_b : array_like (..., 4)
+        Quaternions (x, y, z, w); leading axes broadcast.
+
+    Returns
+    -------
+    ndarray (...)
+        Degrees.
+    """
     qa = K.quat_normalize(q_a)
     qb = K.quat_normalize(q_b)
     _, ang = K.quat_to_axis_angle(K.quat_mul(K.quat_conj(qb), qa))
@@ -439,7 +764,20 @@ def _show(v) -> str:
 
 
 def parameters_text(result: LabResult, width: int = PARAM_WIDTH, longest: int = PARAM_SHOWN) -> list[str]:
-    """The parameters as wrapped lines; a long one is named with "(in results.json)" instead of printed."""
+    """The parameters as wrapped lines; a long one is only named, after "in results.json only (long):".
+
+    Parameters
+    ----------
+    result : LabResult
+    width : int, default PARAM_WIDTH
+        Line width.
+    longest : int, default PARAM_SHOWN
+        A parameter whose text is longer is named only.
+
+    Returns
+    -------
+    list of str
+    """
     import textwrap
 
     short, long_ = [], []
@@ -458,6 +796,19 @@ def report(result: LabResult, stream=None, verbosity: int = 1) -> int:
 
     verbosity 0: only failures (on stderr); 1: parameters (wrapped, long ones named), figures,
     every check and the files; 2: as 1 with every parameter printed in full.
+
+    Parameters
+    ----------
+    result : LabResult
+    stream : file, optional
+        Where the report goes (default stdout); failures always go to stderr.
+    verbosity : int, default 1
+        0, 1 or 2 as above.
+
+    Returns
+    -------
+    int
+        0 or 1.
     """
     import sys
 

@@ -78,7 +78,23 @@ def axes(field_name: str, A_b: ArrayLike, *, span: bool = False) -> np.ndarray:
 
 
 def null_space(A_b: ArrayLike) -> np.ndarray:
-    """Orthonormal basis (N, N − rank) of the wheel torques that put no torque on the body: ``A_b n = 0``."""
+    """Orthonormal basis (N, N − rank) of the wheel torques that put no torque on the body: ``A_b n = 0``.
+
+    Parameters
+    ----------
+    A_b : array_like (3, N)
+        Wheel spin axes as unit columns, body frame (checked as :func:`axes`).
+
+    Returns
+    -------
+    ndarray (N, N − rank)
+        Orthonormal columns; (N, 0) when the axes are independent.
+
+    Raises
+    ------
+    lavendersim.validate.LavenderInputError
+        ``A_b`` is not a (3, N) matrix of unit columns.
+    """
     A = axes("A_b", A_b)
     _, s, vt = np.linalg.svd(A)
     r = int(np.sum(s > 1e-9 * max(1.0, s.max())))
@@ -88,7 +104,18 @@ def null_space(A_b: ArrayLike) -> np.ndarray:
 def pyramid_axes(elevation_deg: float | None = None) -> np.ndarray:
     """Four wheel axes on a pyramid about body z: azimuths 0°, 90°, 180°, 270°, each raised by
     ``elevation_deg`` from the x–y plane (default atan(1/√2) ≈ 35.26°: equal authority on all
-    three axes, ``A_b A_bᵀ = 4/3·1``). Returns ndarray (3, 4), unit columns, body frame."""
+    three axes, ``A_b A_bᵀ = 4/3·1``).
+
+    Parameters
+    ----------
+    elevation_deg : float, optional
+        Elevation of each axis above the body x–y plane, degrees (default atan(1/√2)).
+
+    Returns
+    -------
+    ndarray (3, 4)
+        Unit columns, body frame.
+    """
     e = math.atan(1.0 / math.sqrt(2.0)) if elevation_deg is None else math.radians(V.scalar("elevation_deg", elevation_deg))
     cols = []
     for k in range(4):
@@ -173,25 +200,76 @@ class LayoutCube:
         return null_space(self.A_b)
 
     def rhs(self, y: np.ndarray, u: np.ndarray, c_w: float | None = None) -> np.ndarray:
-        """d/dt of y = [q (4), omega_b (3), Omega (N)] with applied wheel torques u (N), free body."""
+        """d/dt of y = [q (4), omega_b (3), Omega (N)] with applied wheel torques u (N), free body.
+
+        Parameters
+        ----------
+        y : ndarray (7 + N,)
+            State: quaternion (x, y, z, w) body to world, omega_b (rad/s, body frame), wheel rates
+            Omega relative to the body (rad/s).
+        u : ndarray (N,)
+            Applied wheel motor torques, N·m.
+        c_w : float, optional
+            Wheel damping, N·m·s/rad (default the model's ``wheel_damping``).
+
+        Returns
+        -------
+        ndarray (7 + N,)
+        """
         z = np.zeros(3)
         qd, wd, Wd = self._k["body_rhs"](y[:4], y[4:7], y[7:], self.I_p, self.A_b, self.J, z, z, z, u,
                                           self.wheel_damping if c_w is None else c_w)
         return np.concatenate([qd, wd, Wd])
 
     def applied(self, command: np.ndarray, Omega: np.ndarray) -> np.ndarray:
-        """Motor torques actually applied (wheels<N>_motor kernel), N·m, (N,)."""
+        """Motor torques actually applied (wheels<N>_motor kernel), N·m, (N,).
+
+        Parameters
+        ----------
+        command : ndarray (N,)
+            Commanded wheel torques, N·m.
+        Omega : ndarray (N,)
+            Wheel rates relative to the body, rad/s.
+
+        Returns
+        -------
+        ndarray (N,)
+            The command saturated by the motor model (``motor``, ``torque_limit``, ``speed_limit``).
+        """
         return np.asarray(self._k["motor"](command, Omega, self.torque_limit, self.speed_limit,
                                            1.0 if self.motor == "cutoff" else 0.0), dtype=float)
 
     def momentum_w(self, y: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(L_body_w, L_wheels_w, h_w) of state y (wheels<N>_momentum kernel)."""
+        """(L_body_w, L_wheels_w, h_w) of state y (wheels<N>_momentum kernel).
+
+        Parameters
+        ----------
+        y : ndarray (7 + N,)
+            State [q (4), omega_b (3), Omega (N)] as in :meth:`rhs`.
+
+        Returns
+        -------
+        tuple of ndarray
+            ``L_body_w`` and ``L_wheels_w``: body and wheel angular momentum, world frame, kg·m²/s,
+            (3,) each; ``h_w``: each wheel's axial momentum ``J (A_bᵀ omega_b + Omega)``, (N,).
+        """
         Lb, Lw, h = self._k["momentum"](y[:4], y[4:7], y[7:], self.I_p, self.A_b, self.J)
         return np.asarray(Lb, float), np.asarray(Lw, float), np.asarray(h, float)
 
 
 def pyramid4(**kwargs) -> LayoutCube:
-    """The 4-wheel pyramid cube: :class:`LayoutCube` with ``A_b = pyramid_axes()`` (kwargs passed on)."""
+    """The 4-wheel pyramid cube: :class:`LayoutCube` with ``A_b = pyramid_axes()`` (kwargs passed on).
+
+    Parameters
+    ----------
+    **kwargs
+        Any other :class:`LayoutCube` parameter (``J``, ``mass``, ``size``, ``torque_limit``,
+        ``speed_limit``, ``wheel_damping``, ``motor``).
+
+    Returns
+    -------
+    LayoutCube
+    """
     return LayoutCube(A_b=pyramid_axes(), **kwargs)
 
 
@@ -204,7 +282,18 @@ LAYOUTS = {"pyramid4": pyramid4}
 
 
 def state_labels(n: int) -> list[str]:
-    """Names of the error-coordinate states: dtheta (3), omega (3), Omega_0 … Omega_{N−1}."""
+    """Names of the error-coordinate states: dtheta (3), omega (3), Omega_0 … Omega_{N−1}.
+
+    Parameters
+    ----------
+    n : int
+        Number of wheels N.
+
+    Returns
+    -------
+    list of str
+        6 + N names.
+    """
     return ["dtheta_x", "dtheta_y", "dtheta_z", "omega_x", "omega_y", "omega_z", *(f"Omega_{i}" for i in range(n))]
 
 
@@ -215,10 +304,25 @@ def linearize(model: LayoutCube, q_ref: ArrayLike = (0, 0, 0, 1), Omega_ref: Arr
     inputs ``u − c_w Omega_ref`` (N, N·m). The right-hand side is the CasADi printing of
     ``wheels<N>_body_rhs``, differentiated by CasADi.
 
+    Parameters
+    ----------
+    model : LayoutCube
+    q_ref : array_like (4,), default (0, 0, 0, 1)
+        Reference attitude, quaternion (x, y, z, w), body to world.
+    Omega_ref : array_like (N,), optional
+        Wheel rates relative to the body at the operating point, rad/s (default zeros).
+
     Returns
     -------
     control.StateSpace
         Named states (:func:`state_labels`) and inputs ``u_0 … u_{N−1}``; C = identity.
+
+    Raises
+    ------
+    ImportError
+        casadi or python-control is not installed (the control extra).
+    lavendersim.validate.LavenderInputError
+        ``q_ref`` or ``Omega_ref`` malformed.
     """
     from ._install import require
 
@@ -246,7 +350,19 @@ def linearize(model: LayoutCube, q_ref: ArrayLike = (0, 0, 0, 1), Omega_ref: Arr
 
 def default_weights(model: LayoutCube) -> tuple[np.ndarray, np.ndarray]:
     """Bryson's rule as lavendersim.control.default_weights: 2° attitude, 0.5 rad/s, half the wheel
-    speed limit, half the torque limit. Returns (Q diagonal (6+N,), R diagonal (N,))."""
+    speed limit, half the torque limit.
+
+    Parameters
+    ----------
+    model : LayoutCube
+
+    Returns
+    -------
+    Q : ndarray (6 + N,)
+        Diagonal of the state weight (rad⁻², (rad/s)⁻², (rad/s)⁻²).
+    R : ndarray (N,)
+        Diagonal of the input weight, (N·m)⁻².
+    """
     ang = math.radians(2.0)
     Q = np.concatenate([np.full(3, 1 / ang ** 2), np.full(3, 1 / 0.5 ** 2), np.full(model.n, 1 / (0.5 * model.speed_limit) ** 2)])
     return Q, np.full(model.n, 1 / (0.5 * model.torque_limit) ** 2)
@@ -340,7 +456,26 @@ def simulate(model: LayoutCube, controller, y0: ArrayLike, T: float, *, dt: floa
 
 @dataclass
 class SlewResult:
-    """A closed-loop slew: gains, the run, and its figures (angles in degrees)."""
+    """A closed-loop slew: gains, the run, and its figures (angles in degrees).
+
+    Parameters
+    ----------
+    model : LayoutCube
+    K : ndarray (N, 6 + N)
+        LQR gain, N·m per state unit.
+    poles : ndarray
+        Closed-loop eigenvalues of the sampled linear model (discrete).
+    rank : int
+        Controllable-subspace dimension (of 6 + N).
+    Omega_ref : ndarray (N,)
+        The null-space wheel-speed target, rad/s.
+    run : dict
+        :func:`simulate`'s output.
+    error_deg : ndarray (k,)
+        Attitude error at each control period, degrees.
+    threshold_deg : float
+        Settling threshold, degrees.
+    """
 
     model: LayoutCube
     K: np.ndarray            # (N, 6+N), N·m per state unit
@@ -386,9 +521,33 @@ def slew(model: LayoutCube, theta_deg: float = 30.0, axis: ArrayLike = (1.0, 2.0
     conserved); the command ``u = c_w Omega_ref −
     K x`` is held over each control period ``Ts`` in :func:`simulate`.
 
+    Parameters
+    ----------
+    model : LayoutCube
+    theta_deg : float, default 30
+        Initial rotation angle, degrees.
+    axis : array_like (3,), default (1, 2, 3)
+        Initial rotation axis, body frame (normalized).
+    null_bias : float, default 50
+        Magnitude of the null-space wheel-speed target, rad/s; ``max |Omega_ref|`` must stay below
+        ``speed_limit``.
+    Q, R : array_like, optional
+        LQR weights (default :func:`default_weights`).
+    T, dt, Ts : float
+        Duration, integrator step, control period, s (defaults 8, 1e-3, 0.01).
+    threshold_deg : float, default 0.1
+        Settling threshold on the attitude error, degrees, > 0.
+
     Returns
     -------
     SlewResult
+
+    Raises
+    ------
+    lavendersim.validate.LavenderInputError
+        A parameter out of range (``null_bias`` whose target reaches ``speed_limit``).
+    ImportError
+        casadi or python-control is not installed (the control extra).
     """
     from . import control as lc
 
@@ -423,6 +582,16 @@ def momentum_exchange(model: LayoutCube, *, omega0: ArrayLike = (0.3, -0.2, 0.5)
     ``omega0`` (rad/s) and time-varying commands on every wheel (below the torque limit). The exchange
     is exact: ΔL_body = −ΔL_wheels in the world frame (wheels<N>_momentum kernel), to RK4's
     truncation error (∝ dt⁴: pyramid4, 2 s at dt = 2.5e-4 s, exchange 1.1e-11, |L| drift 4e-10).
+
+    Parameters
+    ----------
+    model : LayoutCube
+    omega0 : array_like (3,), default (0.3, -0.2, 0.5)
+        Initial body rate omega_b, rad/s, body frame.
+    torque : float, default 0.05
+        Amplitude of the sinusoidal wheel commands, N·m, > 0.
+    T, dt : float
+        Duration and RK4 step, s (defaults 2, 2.5e-4).
 
     Returns
     -------

@@ -8,7 +8,10 @@ self/cls) must have a numpydoc ``Parameters`` section, and every parameter must 
 ``name : type`` or ``a, b : type``, ``*args``/``**kwargs`` as ``**kwargs``). A class documents its
 constructor's parameters in the class docstring.
 
-Internal modules (backends, bench, cli, executor internals, _-prefixed) are not covered.
+Also covered: ``lavendersim.wheel_layout`` (control extra), ``lavendersim.backends`` and, when the C extension
+is built and current, ``lavendersim.backends.c_backend``; the labs' package and plumbing (``lavendersim.labs``, ``lavendersim.labs.common``: labs/). Not covered:
+the other backend modules (``backends.numpy_backend``), the individual lab modules, ``bench``, ``cli``,
+executor internals and ``_``-prefixed modules.
 """
 from __future__ import annotations
 
@@ -17,16 +20,21 @@ import inspect
 import re
 
 import pytest
-from conftest import missing
+from conftest import IN_CI, missing
 
 PUBLIC_MODULES = [
     "lavendersim", "lavendersim.bodies", "lavendersim.scene", "lavendersim.sim", "lavendersim.effects",
     "lavendersim.errors", "lavendersim.validate", "lavendersim.reference", "lavendersim.particles",
-    "lavendersim.extending", "lavendersim.executor", "lavendersim.derive.symbolic",
+    "lavendersim.extending", "lavendersim.executor", "lavendersim.derive.symbolic", "lavendersim.backends",
+    "lavendersim.labs", "lavendersim.labs.common",    # labs/, installed as lavendersim.labs
 ]
 # modules whose import needs an optional extra: checked when it is installed (CI installs all)
 OPTIONAL_MODULES = {"lavendersim.control": "control", "lavendersim.viewer": "viewer",
-                    "lavendersim.envs.reaction_wheel_cube": "gym"}
+                    "lavendersim.envs.reaction_wheel_cube": "gym", "lavendersim.wheel_layout": "control"}
+# modules that import only when the C extension is built and current (no conftest tool checks that; `cc` is only
+# a compiler): checked when lavendersim.backends.c_unavailable() is None, and always under CI=true (CI builds it,
+# so a missing build there is an import error, never a silent skip)
+C_EXTENSION_MODULES = ["lavendersim.backends.c_backend"]
 
 _SECTION = re.compile(r"^\s*Parameters\s*\n\s*-{3,}\s*\n(?P<body>.*?)(?=^\s*\S[^\n]*\n\s*-{3,}\s*$|\Z)", re.M | re.S)
 
@@ -34,6 +42,10 @@ _SECTION = re.compile(r"^\s*Parameters\s*\n\s*-{3,}\s*\n(?P<body>.*?)(?=^\s*\S[^
 def _modules() -> list[str]:
     mods = list(PUBLIC_MODULES)
     mods += [m for m, tool in OPTIONAL_MODULES.items() if missing(tool) is None]
+    from lavendersim.backends import c_unavailable
+
+    if IN_CI or c_unavailable() is None:
+        mods += C_EXTENSION_MODULES
     return mods
 
 

@@ -46,7 +46,15 @@ DOPRI5_MAX_SUBSTEPS = TABLEAUX.DP_MAX_SUBSTEPS  # ... as do more substeps than t
 
 class Adaptive:
     """Adaptive-stepping arrays shared by both backends: rtol, atol; h (nb,) each body's step-size
-    proposal carried between calls (0: choose one); nfev (nb,) RHS evaluations spent per body."""
+    proposal carried between calls (0: choose one); nfev (nb,) RHS evaluations spent per body.
+
+    Parameters
+    ----------
+    rtol, atol : float
+        Relative and absolute error tolerances of dopri5.
+    nb : int
+        Number of bodies (``h`` and ``nfev`` start as zeros of shape (nb,)).
+    """
 
     def __init__(self, rtol: float, atol: float, nb: int):
         self.rtol, self.atol = float(rtol), float(atol)
@@ -65,7 +73,27 @@ def rhs_per_step(integrator: str, effects: np.ndarray, nb: int) -> int | None:
     symtop4: counted as splitting4 (SYMTOP4_STAGES Strang steps of exact flows, kicks as splitting's).
     symtop_bm6: counted as symtop4 (torque-free, 21 axis flows and a sphere flow per step, counted as
     SYMTOP4_STAGES; with effects the same SYMTOP4_STAGES kicked stages as symtop4).
-    The scene's count is the largest body's."""
+    The scene's count is the largest body's.
+
+    Parameters
+    ----------
+    integrator : str
+        A key of INTEGRATORS.
+    effects : ndarray (n, ROW)
+        The scene's effect table (its code column decides the splitting counts).
+    nb : int
+        Number of bodies (not used by the count).
+
+    Returns
+    -------
+    int or None
+        None for adaptive integrators.
+
+    Raises
+    ------
+    KeyError
+        ``integrator`` is not in INTEGRATORS.
+    """
     n = INTEGRATORS[integrator]
     if integrator not in ("splitting", "splitting4", "symtop4", "symtop_bm6") or n is None or len(effects) == 0:
         return n
@@ -79,17 +107,41 @@ def rhs_per_step(integrator: str, effects: np.ndarray, nb: int) -> int | None:
 
 
 class Models:
-    """Per-body model arrays shared by both backends (see the module docstring)."""
+    """Per-body model arrays shared by both backends (see the module docstring).
+
+    Parameters
+    ----------
+    rows : ndarray (nb, MODEL_SIZE)
+        Per-body model rows laid out as MODEL_LAYOUT.
+    Omega : ndarray (nb, 3)
+        Wheel rates relative to the body, rad/s (integrated in place).
+    command : ndarray (nb, 3)
+        Motor torque commands, N·m, held over a call.
+    applied : ndarray (nb, 3)
+        Written with the saturated motor torques of the last step, N·m.
+    """
 
     def __init__(self, rows: np.ndarray, Omega: np.ndarray, command: np.ndarray, applied: np.ndarray):
         self.rows, self.Omega, self.command, self.applied = rows, Omega, command, applied
 
     @classmethod
     def empty(cls, nb: int) -> "Models":
+        """All-zero arrays for nb bodies (every body of kind 0, plain).
+
+        Parameters
+        ----------
+        nb : int
+            Number of bodies.
+
+        Returns
+        -------
+        Models
+        """
         return cls(np.zeros((nb, MODEL_SIZE)), np.zeros((nb, 3)), np.zeros((nb, 3)), np.zeros((nb, 3)))
 
     @property
     def kind(self) -> np.ndarray:
+        """Each body's model kind (bit set KIND_JOINT | KIND_WHEELS; 0 plain), int64 (nb,)."""
         return self.rows[:, LAYOUT.MODEL_KIND].astype(np.int64)
 
 
@@ -121,7 +173,28 @@ def resolve(name: str = "auto") -> str:
     """The backend a name stands for: "c", "numpy", or for "auto" C when its extension is built and
     current, else NumPy with one warning per process (a BackendFallbackWarning that says why).
 
-    An explicit "c" that cannot load raises ImportError / StaleBuildError with the fix."""
+    An explicit "c" is returned as is: loading it (:func:`get`) raises ImportError / StaleBuildError
+    with the fix.
+
+    Parameters
+    ----------
+    name : {"auto", "c", "numpy"}, default "auto"
+
+    Returns
+    -------
+    str
+        "c" or "numpy".
+
+    Raises
+    ------
+    lavendersim.validate.LavenderInputError
+        ``name`` is not one of BACKEND_CHOICES.
+
+    Warns
+    -----
+    BackendFallbackWarning
+        "auto" fell back to NumPy (once per process).
+    """
     global _fallback_warned
     name = V.choice("backend", name, BACKEND_CHOICES)
     if name != "auto":
@@ -139,7 +212,23 @@ def resolve(name: str = "auto") -> str:
 
 
 def get(name: str = "auto"):
-    """A backend object for `name` ("auto", "c" or "numpy"; see resolve)."""
+    """A backend object for `name` ("auto", "c" or "numpy"; see resolve).
+
+    Parameters
+    ----------
+    name : {"auto", "c", "numpy"}, default "auto"
+
+    Returns
+    -------
+    NumpyBackend or CBackend
+        An object with ``advance(state, params, effects, integrator, normalize, dt, n_steps, models=None,
+        adaptive=None)``.
+
+    Raises
+    ------
+    ImportError
+        An explicit "c" whose extension is not built, or is stale (StaleBuildError).
+    """
     name = resolve(name)
     if name == "numpy":
         from .numpy_backend import NumpyBackend
@@ -151,13 +240,40 @@ def get(name: str = "auto"):
 
 
 def norm_safe(v: np.ndarray) -> float:
-    """Euclidean norm without overflow for huge finite components (0 for non-finite input)."""
+    """Euclidean norm without overflow for huge finite components (0 for non-finite input).
+
+    Parameters
+    ----------
+    v : ndarray
+        Any shape; the norm is over all entries.
+
+    Returns
+    -------
+    float
+    """
     s = float(np.max(np.abs(v))) if v.size else 0.0
     return 0.0 if s == 0.0 or not np.isfinite(s) else s * float(np.sqrt(np.sum((v / s) ** 2)))
 
 
 def tolerance_cause(adaptive: Adaptive, h: float, dt: float, x: np.ndarray) -> str:
-    """Why dopri5 stopped: the requested tolerance could not be met."""
+    """Why dopri5 stopped: the requested tolerance could not be met.
+
+    Parameters
+    ----------
+    adaptive : Adaptive
+        Its rtol and atol are named.
+    h : float
+        The last step size proposed, s.
+    dt : float
+        Output step, s.
+    x : ndarray (STATE_SIZE,)
+        The body's state (its omega_b, rad/s, is quoted).
+
+    Returns
+    -------
+    str
+        A one-line message with the fix.
+    """
     w = norm_safe(np.asarray(x[LAYOUT.STATE_OMEGA_B], dtype=np.float64))
     return (f"dopri5 could not meet rtol={adaptive.rtol:g}, atol={adaptive.atol:g}: the step size fell to "
             f"{h:.3g} s (below dt*{DOPRI5_HMIN_REL:g} = {dt * DOPRI5_HMIN_REL:.3g} s) or one step of dt = {dt:g} s "
@@ -166,7 +282,22 @@ def tolerance_cause(adaptive: Adaptive, h: float, dt: float, x: np.ndarray) -> s
 
 
 def no_root_cause(x_before: np.ndarray, I_b: np.ndarray, dt: float) -> str:
-    """Why implicit_gyro stopped: the Newton solve of the step from x_before did not converge."""
+    """Why implicit_gyro stopped: the Newton solve of the step from x_before did not converge.
+
+    Parameters
+    ----------
+    x_before : ndarray (STATE_SIZE,)
+        The body's state before the failing step (its omega_b, rad/s, is quoted).
+    I_b : array_like (3,)
+        Principal inertia, body frame, kg·m².
+    dt : float
+        Step, s.
+
+    Returns
+    -------
+    str
+        A one-line message with the fix.
+    """
     w = norm_safe(np.asarray(x_before[LAYOUT.STATE_OMEGA_B], dtype=np.float64))
     I = np.asarray(I_b, dtype=np.float64)
     return (f"Newton did not converge: implicit_gyro's solve of I(omega+ - omega) + dt omega+ x I omega+ = dt tau_b "
@@ -177,7 +308,26 @@ def no_root_cause(x_before: np.ndarray, I_b: np.ndarray, dt: float) -> str:
 def divergence_cause(x_before: np.ndarray, dt: float, integrator: str, Omega_before: np.ndarray | None = None,
                      wheels: tuple | None = None) -> str:
     """A plain guess at why one body's step went non-finite, from its state before the step
-    (and, for a body with reaction wheels, its wheel rates and wheels = (J, c_w))."""
+    (and, for a body with reaction wheels, its wheel rates and wheels = (J, c_w)).
+
+    Parameters
+    ----------
+    x_before : ndarray (STATE_SIZE,)
+        The body's state before the failing step.
+    dt : float
+        Step, s.
+    integrator : str
+        Its validity and stability bounds are looked up in the generated tableaux.
+    Omega_before : ndarray (3,), optional
+        Wheel rates relative to the body before the step, rad/s.
+    wheels : tuple (J, c_w), optional
+        Wheel axial inertias, kg·m², and wheel damping, N·m·s/rad.
+
+    Returns
+    -------
+    str
+        A one-line guess with the fix.
+    """
     with np.errstate(over="ignore", invalid="ignore"):
         w = float(np.linalg.norm(x_before[LAYOUT.STATE_OMEGA_B]))
         v = float(np.linalg.norm(x_before[LAYOUT.STATE_V_W]))

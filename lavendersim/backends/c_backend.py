@@ -37,13 +37,35 @@ except ImportError as exc:  # not built (or built for another interpreter)
 
 
 def generated_dir() -> Path:
+    """The folder of the ``lavendersim.generated`` package (resolved), whose C sources the build must match.
+
+    Returns
+    -------
+    Path
+    """
     import lavendersim.generated as g
 
     return Path(g.__file__).resolve().parent
 
 
 def generated_hash(gen_dir: Path) -> str:
-    """sha256 over the per-file sha256 of the generated C sources HASHED (same recipe as setup.py)."""
+    """sha256 over the per-file sha256 of the generated C sources HASHED (same recipe as setup.py).
+
+    Parameters
+    ----------
+    gen_dir : Path
+        Folder holding the HASHED files.
+
+    Returns
+    -------
+    str
+        Hex digest.
+
+    Raises
+    ------
+    OSError
+        A HASHED file cannot be read.
+    """
     h = hashlib.sha256()
     for name in HASHED:
         h.update(f"{name} {hashlib.sha256((gen_dir / name).read_bytes()).hexdigest()}\n".encode())
@@ -66,7 +88,21 @@ def _generated_inconsistent(gen_dir: Path) -> list[str]:
 
 
 def check_build(gen_dir: Path | None = None, built_hash: str | None = None) -> None:
-    """Raise StaleBuildError if the extension was built from other generated sources than gen_dir's."""
+    """Raise StaleBuildError if the extension was built from other generated sources than gen_dir's.
+
+    Parameters
+    ----------
+    gen_dir : Path, optional
+        Folder of the generated C sources (default :func:`generated_dir`).
+    built_hash : str, optional
+        The hash the extension was built from (default the extension's ``GENERATED_HASH``).
+
+    Raises
+    ------
+    lavendersim.errors.StaleBuildError
+        The hashes differ or the sources cannot be read; the message names the rebuild command
+        (and ``lavendersim derive`` when generated/ does not match its manifest).
+    """
     gen_dir = generated_dir() if gen_dir is None else Path(gen_dir)
     built = _c.GENERATED_HASH if built_hash is None else built_hash
     try:
@@ -99,7 +135,29 @@ _INDEX = _kernel_index()
 def eval_kernel(name: str, *inputs):
     """Evaluate generated kernel `name` through C, broadcasting leading batch axes like
     generated/kernels_numpy.py. Returns the outputs (a tuple when there are several), shaped like
-    the NumPy kernel's: batch + output shape."""
+    the NumPy kernel's: batch + output shape.
+
+    Parameters
+    ----------
+    name : str
+        A kernel of generated/kernels_numpy.py's ``KERNELS``.
+    *inputs : array_like
+        One per kernel input, each ending in that input's shape; leading axes broadcast.
+
+    Returns
+    -------
+    ndarray or tuple of ndarray
+        float64, batch shape + each output's shape.
+
+    Raises
+    ------
+    KeyError
+        Unknown kernel.
+    TypeError
+        Wrong number of inputs.
+    ValueError
+        An input whose trailing shape does not match.
+    """
     from lavendersim.generated.kernels_numpy import KERNELS
 
     if name not in KERNELS or name not in _INDEX:
@@ -169,7 +227,22 @@ def _cause(start: np.ndarray, pre: np.ndarray, params: np.ndarray, effects: np.n
 def user_effect_table(effects: np.ndarray) -> np.ndarray | None:
     """The C user-effect table for the codes in this effect table: int64 (n, 3) rows [function address,
     n_params, flags], row i for code USER_CODE_BASE + i; None when no user code appears. Compiles (cached)
-    and loads each user set's library on first use."""
+    and loads each user set's library on first use.
+
+    Parameters
+    ----------
+    effects : ndarray (n, ROW)
+        The scene's effect table.
+
+    Returns
+    -------
+    ndarray (m, 3) of int64 or None
+
+    Raises
+    ------
+    lavendersim.validate.LavenderInputError
+        A user code that no declaration has.
+    """
     from .. import effects as E
 
     codes = np.unique(effects[:, E.ROW_CODE]).astype(np.int64) if len(effects) else np.zeros(0, np.int64)
@@ -240,6 +313,38 @@ class CBackend:
 
     def advance(self, state, params, effects, integrator: str, normalize: bool, dt: float, n_steps: int,
                 models: Models | None = None, adaptive: Adaptive | None = None) -> None:
+        """Advance every body by n_steps steps inside C, in place (see lavendersim.backends).
+
+        Parameters
+        ----------
+        state : ndarray (nb, STATE_SIZE)
+            Writable C-contiguous float64 (or float32: :meth:`_advance_f32`); mutated in place.
+        params : ndarray (nb, PARAM_SIZE)
+            Per-body parameters (inertia I_b in kg·m², mass in kg, ...).
+        effects : ndarray (n, ROW)
+            Effect table.
+        integrator : str
+            A key of INTEGRATOR_CODES.
+        normalize : bool
+            Renormalize the quaternion (x, y, z, w) after each step.
+        dt : float
+            Step, s.
+        n_steps : int
+            Steps to take.
+        models : Models, optional
+            Per-body joint / wheel model (Omega and applied are mutated).
+        adaptive : Adaptive, optional
+            Needed by dopri5 (h and nfev are mutated).
+
+        Raises
+        ------
+        ValueError
+            Unknown integrator, dopri5 without ``adaptive``, or a PLAIN_ONLY integrator with a model body.
+        TypeError
+            ``state`` is not a writable C-contiguous float64 array.
+        lavendersim.errors.DivergenceError
+            A body's state became non-finite or the solve failed; every array is left unchanged.
+        """
         if integrator not in INTEGRATOR_CODES:
             raise ValueError(f"integrator: must be one of {', '.join(INTEGRATOR_CODES)}, got {integrator!r}")
         if isinstance(state, np.ndarray) and state.dtype == np.float32:
