@@ -122,7 +122,7 @@ def c_source_real(effects: list[tuple[int, E.EffectDecl]], prefix: str, real: st
     c = [f"/* ---- Scene effects in {real}: accumulating functions and dispatch ---------------------------- */"]
     for _, d in effects:
         c += c_effect_functions(d, prefix, f"{prefix}effect_acc_{d.name}", "static inline ", real) + [""]
-    c += [f"/* Add built-in effect `code`'s force and torque; 0, or -1 for a code that is not a built-in effect. */",
+    c += ["/* Add built-in effect `code`'s force and torque; 0, or -1 for a code that is not a built-in effect. */",
           f"static inline int {prefix}effect_apply(int code, {c_args(real)})", "{", "    switch (code) {"]
     for _, d in effects:
         c.append(f"    case LV_EFFECT_{d.name.upper()}: {prefix}effect_acc_{d.name}(p, x, v_w, m, I_b, F, tau); return 0;")

@@ -11,7 +11,7 @@ typedef struct {
     void (*packed)(const double *in, double *out);
 } lv_kernel_info;
 
-#define LV_KERNEL_COUNT 81
+#define LV_KERNEL_COUNT 69
 extern const lv_kernel_info lv_kernel_table[LV_KERNEL_COUNT];
 
 /* particle_moments: One particle's mass moment and momentum (summed: m r_COM and p).
@@ -481,82 +481,6 @@ void lv_wheel_saturation(const double *command, const double *Omega, double torq
      out u [3]: applied motor torques, N·m */
 void lv_wheel_motor(const double *command, const double *Omega, double torque_limit, double speed_limit, double cutoff, double *u);
 
-/* wheels1_body_rhs: Body with 1 reaction wheels on arbitrary axes rotating about a pivot.
-     in  q [4]: orientation (x, y, z, w), R_WB
-     in  omega_b [3]: angular velocity, body frame, rad/s
-     in  Omega [1]: wheel rates relative to the body about their axes (1), rad/s
-     in  I_p [3×3]: inertia about the pivot (wheels locked), body frame, kg·m², symmetric row-major
-     in  A_b [3]: wheel spin axes as columns (3×1, unit columns), body frame, row-major
-     in  J [1]: wheel axial inertias (1), kg·m²
-     in  r_b [3]: pivot → COM, body frame, m
-     in  F_w [3]: total force at the COM, world frame, N
-     in  tau_w [3]: total torque about the COM, world frame, N·m
-     in  u [1]: motor torques on the wheels (body gets −A_b u), N·m
-     in  c_w scalar: wheel damping, N·m·s/rad
-     out q_dot [4]: 1/s
-     out omega_dot_b [3]: rad/s², body frame
-     out Omega_dot [1]: rad/s² */
-void lv_wheels1_body_rhs(const double *q, const double *omega_b, const double *Omega, const double *I_p, const double *A_b, const double *J, const double *r_b, const double *F_w, const double *tau_w, const double *u, double c_w, double *q_dot, double *omega_dot_b, double *Omega_dot);
-
-/* wheels1_momentum: World angular momentum about the pivot of a body with 1 wheels, and the wheels' axial momenta.
-     in  q [4]: orientation (x, y, z, w), R_WB
-     in  omega_b [3]: angular velocity, body frame, rad/s
-     in  Omega [1]: wheel rates relative to the body about their axes (1), rad/s
-     in  I_p [3×3]: inertia about the pivot (wheels locked), body frame, kg·m², symmetric row-major
-     in  A_b [3]: wheel spin axes as columns (3×1, unit columns), body frame, row-major
-     in  J [1]: wheel axial inertias (1), kg·m²
-     out L_body_w [3]: kg·m²/s, world
-     out L_wheels_w [3]: kg·m²/s, world
-     out h_w [1]: axial momentum of each wheel, kg·m²/s */
-void lv_wheels1_momentum(const double *q, const double *omega_b, const double *Omega, const double *I_p, const double *A_b, const double *J, double *L_body_w, double *L_wheels_w, double *h_w);
-
-/* wheels1_motor: Motor torques actually applied on 1 wheels (the wheel_motor line, per wheel).
-     in  command [1]: commanded motor torques, N·m
-     in  Omega [1]: wheel rates relative to the body, rad/s
-     in  torque_limit scalar: stall torque (current limit), N·m
-     in  speed_limit scalar: no-load speed, rad/s
-     in  cutoff scalar: 1: hard cut-off at speed_limit instead of the line; 0: the line
-     out u [1]: applied motor torques, N·m */
-void lv_wheels1_motor(const double *command, const double *Omega, double torque_limit, double speed_limit, double cutoff, double *u);
-
-/* wheels2_body_rhs: Body with 2 reaction wheels on arbitrary axes rotating about a pivot.
-     in  q [4]: orientation (x, y, z, w), R_WB
-     in  omega_b [3]: angular velocity, body frame, rad/s
-     in  Omega [2]: wheel rates relative to the body about their axes (2), rad/s
-     in  I_p [3×3]: inertia about the pivot (wheels locked), body frame, kg·m², symmetric row-major
-     in  A_b [3×2]: wheel spin axes as columns (3×2, unit columns), body frame, row-major
-     in  J [2]: wheel axial inertias (2), kg·m²
-     in  r_b [3]: pivot → COM, body frame, m
-     in  F_w [3]: total force at the COM, world frame, N
-     in  tau_w [3]: total torque about the COM, world frame, N·m
-     in  u [2]: motor torques on the wheels (body gets −A_b u), N·m
-     in  c_w scalar: wheel damping, N·m·s/rad
-     out q_dot [4]: 1/s
-     out omega_dot_b [3]: rad/s², body frame
-     out Omega_dot [2]: rad/s² */
-void lv_wheels2_body_rhs(const double *q, const double *omega_b, const double *Omega, const double *I_p, const double *A_b, const double *J, const double *r_b, const double *F_w, const double *tau_w, const double *u, double c_w, double *q_dot, double *omega_dot_b, double *Omega_dot);
-
-/* wheels2_momentum: World angular momentum about the pivot of a body with 2 wheels, and the wheels' axial momenta.
-     in  q [4]: orientation (x, y, z, w), R_WB
-     in  omega_b [3]: angular velocity, body frame, rad/s
-     in  Omega [2]: wheel rates relative to the body about their axes (2), rad/s
-     in  I_p [3×3]: inertia about the pivot (wheels locked), body frame, kg·m², symmetric row-major
-     in  A_b [3×2]: wheel spin axes as columns (3×2, unit columns), body frame, row-major
-     in  J [2]: wheel axial inertias (2), kg·m²
-     out L_body_w [3]: kg·m²/s, world
-     out L_wheels_w [3]: kg·m²/s, world
-     out h_w [2]: axial momentum of each wheel, kg·m²/s */
-void lv_wheels2_momentum(const double *q, const double *omega_b, const double *Omega, const double *I_p, const double *A_b, const double *J, double *L_body_w, double *L_wheels_w, double *h_w);
-
-/* wheels2_motor: Motor torques actually applied on 2 wheels (the wheel_motor line, per wheel).
-     in  command [2]: commanded motor torques, N·m
-     in  Omega [2]: wheel rates relative to the body, rad/s
-     in  torque_limit scalar: stall torque (current limit), N·m
-     in  speed_limit scalar: no-load speed, rad/s
-     in  cutoff scalar: 1: hard cut-off at speed_limit instead of the line; 0: the line
-     out u [2]: applied motor torques, N·m */
-void lv_wheels2_motor(const double *command, const double *Omega, double torque_limit, double speed_limit, double cutoff, double *u);
-
 /* wheels3_body_rhs: Body with 3 reaction wheels on arbitrary axes rotating about a pivot.
      in  q [4]: orientation (x, y, z, w), R_WB
      in  omega_b [3]: angular velocity, body frame, rad/s
@@ -632,82 +556,6 @@ void lv_wheels4_momentum(const double *q, const double *omega_b, const double *O
      in  cutoff scalar: 1: hard cut-off at speed_limit instead of the line; 0: the line
      out u [4]: applied motor torques, N·m */
 void lv_wheels4_motor(const double *command, const double *Omega, double torque_limit, double speed_limit, double cutoff, double *u);
-
-/* wheels5_body_rhs: Body with 5 reaction wheels on arbitrary axes rotating about a pivot.
-     in  q [4]: orientation (x, y, z, w), R_WB
-     in  omega_b [3]: angular velocity, body frame, rad/s
-     in  Omega [5]: wheel rates relative to the body about their axes (5), rad/s
-     in  I_p [3×3]: inertia about the pivot (wheels locked), body frame, kg·m², symmetric row-major
-     in  A_b [3×5]: wheel spin axes as columns (3×5, unit columns), body frame, row-major
-     in  J [5]: wheel axial inertias (5), kg·m²
-     in  r_b [3]: pivot → COM, body frame, m
-     in  F_w [3]: total force at the COM, world frame, N
-     in  tau_w [3]: total torque about the COM, world frame, N·m
-     in  u [5]: motor torques on the wheels (body gets −A_b u), N·m
-     in  c_w scalar: wheel damping, N·m·s/rad
-     out q_dot [4]: 1/s
-     out omega_dot_b [3]: rad/s², body frame
-     out Omega_dot [5]: rad/s² */
-void lv_wheels5_body_rhs(const double *q, const double *omega_b, const double *Omega, const double *I_p, const double *A_b, const double *J, const double *r_b, const double *F_w, const double *tau_w, const double *u, double c_w, double *q_dot, double *omega_dot_b, double *Omega_dot);
-
-/* wheels5_momentum: World angular momentum about the pivot of a body with 5 wheels, and the wheels' axial momenta.
-     in  q [4]: orientation (x, y, z, w), R_WB
-     in  omega_b [3]: angular velocity, body frame, rad/s
-     in  Omega [5]: wheel rates relative to the body about their axes (5), rad/s
-     in  I_p [3×3]: inertia about the pivot (wheels locked), body frame, kg·m², symmetric row-major
-     in  A_b [3×5]: wheel spin axes as columns (3×5, unit columns), body frame, row-major
-     in  J [5]: wheel axial inertias (5), kg·m²
-     out L_body_w [3]: kg·m²/s, world
-     out L_wheels_w [3]: kg·m²/s, world
-     out h_w [5]: axial momentum of each wheel, kg·m²/s */
-void lv_wheels5_momentum(const double *q, const double *omega_b, const double *Omega, const double *I_p, const double *A_b, const double *J, double *L_body_w, double *L_wheels_w, double *h_w);
-
-/* wheels5_motor: Motor torques actually applied on 5 wheels (the wheel_motor line, per wheel).
-     in  command [5]: commanded motor torques, N·m
-     in  Omega [5]: wheel rates relative to the body, rad/s
-     in  torque_limit scalar: stall torque (current limit), N·m
-     in  speed_limit scalar: no-load speed, rad/s
-     in  cutoff scalar: 1: hard cut-off at speed_limit instead of the line; 0: the line
-     out u [5]: applied motor torques, N·m */
-void lv_wheels5_motor(const double *command, const double *Omega, double torque_limit, double speed_limit, double cutoff, double *u);
-
-/* wheels6_body_rhs: Body with 6 reaction wheels on arbitrary axes rotating about a pivot.
-     in  q [4]: orientation (x, y, z, w), R_WB
-     in  omega_b [3]: angular velocity, body frame, rad/s
-     in  Omega [6]: wheel rates relative to the body about their axes (6), rad/s
-     in  I_p [3×3]: inertia about the pivot (wheels locked), body frame, kg·m², symmetric row-major
-     in  A_b [3×6]: wheel spin axes as columns (3×6, unit columns), body frame, row-major
-     in  J [6]: wheel axial inertias (6), kg·m²
-     in  r_b [3]: pivot → COM, body frame, m
-     in  F_w [3]: total force at the COM, world frame, N
-     in  tau_w [3]: total torque about the COM, world frame, N·m
-     in  u [6]: motor torques on the wheels (body gets −A_b u), N·m
-     in  c_w scalar: wheel damping, N·m·s/rad
-     out q_dot [4]: 1/s
-     out omega_dot_b [3]: rad/s², body frame
-     out Omega_dot [6]: rad/s² */
-void lv_wheels6_body_rhs(const double *q, const double *omega_b, const double *Omega, const double *I_p, const double *A_b, const double *J, const double *r_b, const double *F_w, const double *tau_w, const double *u, double c_w, double *q_dot, double *omega_dot_b, double *Omega_dot);
-
-/* wheels6_momentum: World angular momentum about the pivot of a body with 6 wheels, and the wheels' axial momenta.
-     in  q [4]: orientation (x, y, z, w), R_WB
-     in  omega_b [3]: angular velocity, body frame, rad/s
-     in  Omega [6]: wheel rates relative to the body about their axes (6), rad/s
-     in  I_p [3×3]: inertia about the pivot (wheels locked), body frame, kg·m², symmetric row-major
-     in  A_b [3×6]: wheel spin axes as columns (3×6, unit columns), body frame, row-major
-     in  J [6]: wheel axial inertias (6), kg·m²
-     out L_body_w [3]: kg·m²/s, world
-     out L_wheels_w [3]: kg·m²/s, world
-     out h_w [6]: axial momentum of each wheel, kg·m²/s */
-void lv_wheels6_momentum(const double *q, const double *omega_b, const double *Omega, const double *I_p, const double *A_b, const double *J, double *L_body_w, double *L_wheels_w, double *h_w);
-
-/* wheels6_motor: Motor torques actually applied on 6 wheels (the wheel_motor line, per wheel).
-     in  command [6]: commanded motor torques, N·m
-     in  Omega [6]: wheel rates relative to the body, rad/s
-     in  torque_limit scalar: stall torque (current limit), N·m
-     in  speed_limit scalar: no-load speed, rad/s
-     in  cutoff scalar: 1: hard cut-off at speed_limit instead of the line; 0: the line
-     out u [6]: applied motor torques, N·m */
-void lv_wheels6_motor(const double *command, const double *Omega, double torque_limit, double speed_limit, double cutoff, double *u);
 
 /* ---- Scene effects (derive/effects.py): effect table layout, codes and dispatch ---------------- */
 #define LV_EFFECT_ROW_CODE 0     /* an effect table row: [code, body, parameters...] */

@@ -131,18 +131,6 @@ void lvf_rkmk_dexpinv(const float *u_b, const float *omega_b, float *u_dot);
 void lvf_wheel_saturation(const float *command, const float *Omega, float torque_limit, float speed_limit, float *u);
 /* wheel_motor: Motor torques actually applied: a torque–speed line from the stall torque to the no-load speed (cutoff = 0), or the hard cut-off of wheel_saturation (cutoff = 1) (float; see kernels.h) */
 void lvf_wheel_motor(const float *command, const float *Omega, float torque_limit, float speed_limit, float cutoff, float *u);
-/* wheels1_body_rhs: Body with 1 reaction wheels on arbitrary axes rotating about a pivot (float; see kernels.h) */
-void lvf_wheels1_body_rhs(const float *q, const float *omega_b, const float *Omega, const float *I_p, const float *A_b, const float *J, const float *r_b, const float *F_w, const float *tau_w, const float *u, float c_w, float *q_dot, float *omega_dot_b, float *Omega_dot);
-/* wheels1_momentum: World angular momentum about the pivot of a body with 1 wheels, and the wheels' axial momenta (float; see kernels.h) */
-void lvf_wheels1_momentum(const float *q, const float *omega_b, const float *Omega, const float *I_p, const float *A_b, const float *J, float *L_body_w, float *L_wheels_w, float *h_w);
-/* wheels1_motor: Motor torques actually applied on 1 wheels (the wheel_motor line, per wheel) (float; see kernels.h) */
-void lvf_wheels1_motor(const float *command, const float *Omega, float torque_limit, float speed_limit, float cutoff, float *u);
-/* wheels2_body_rhs: Body with 2 reaction wheels on arbitrary axes rotating about a pivot (float; see kernels.h) */
-void lvf_wheels2_body_rhs(const float *q, const float *omega_b, const float *Omega, const float *I_p, const float *A_b, const float *J, const float *r_b, const float *F_w, const float *tau_w, const float *u, float c_w, float *q_dot, float *omega_dot_b, float *Omega_dot);
-/* wheels2_momentum: World angular momentum about the pivot of a body with 2 wheels, and the wheels' axial momenta (float; see kernels.h) */
-void lvf_wheels2_momentum(const float *q, const float *omega_b, const float *Omega, const float *I_p, const float *A_b, const float *J, float *L_body_w, float *L_wheels_w, float *h_w);
-/* wheels2_motor: Motor torques actually applied on 2 wheels (the wheel_motor line, per wheel) (float; see kernels.h) */
-void lvf_wheels2_motor(const float *command, const float *Omega, float torque_limit, float speed_limit, float cutoff, float *u);
 /* wheels3_body_rhs: Body with 3 reaction wheels on arbitrary axes rotating about a pivot (float; see kernels.h) */
 void lvf_wheels3_body_rhs(const float *q, const float *omega_b, const float *Omega, const float *I_p, const float *A_b, const float *J, const float *r_b, const float *F_w, const float *tau_w, const float *u, float c_w, float *q_dot, float *omega_dot_b, float *Omega_dot);
 /* wheels3_momentum: World angular momentum about the pivot of a body with 3 wheels, and the wheels' axial momenta (float; see kernels.h) */
@@ -155,17 +143,5 @@ void lvf_wheels4_body_rhs(const float *q, const float *omega_b, const float *Ome
 void lvf_wheels4_momentum(const float *q, const float *omega_b, const float *Omega, const float *I_p, const float *A_b, const float *J, float *L_body_w, float *L_wheels_w, float *h_w);
 /* wheels4_motor: Motor torques actually applied on 4 wheels (the wheel_motor line, per wheel) (float; see kernels.h) */
 void lvf_wheels4_motor(const float *command, const float *Omega, float torque_limit, float speed_limit, float cutoff, float *u);
-/* wheels5_body_rhs: Body with 5 reaction wheels on arbitrary axes rotating about a pivot (float; see kernels.h) */
-void lvf_wheels5_body_rhs(const float *q, const float *omega_b, const float *Omega, const float *I_p, const float *A_b, const float *J, const float *r_b, const float *F_w, const float *tau_w, const float *u, float c_w, float *q_dot, float *omega_dot_b, float *Omega_dot);
-/* wheels5_momentum: World angular momentum about the pivot of a body with 5 wheels, and the wheels' axial momenta (float; see kernels.h) */
-void lvf_wheels5_momentum(const float *q, const float *omega_b, const float *Omega, const float *I_p, const float *A_b, const float *J, float *L_body_w, float *L_wheels_w, float *h_w);
-/* wheels5_motor: Motor torques actually applied on 5 wheels (the wheel_motor line, per wheel) (float; see kernels.h) */
-void lvf_wheels5_motor(const float *command, const float *Omega, float torque_limit, float speed_limit, float cutoff, float *u);
-/* wheels6_body_rhs: Body with 6 reaction wheels on arbitrary axes rotating about a pivot (float; see kernels.h) */
-void lvf_wheels6_body_rhs(const float *q, const float *omega_b, const float *Omega, const float *I_p, const float *A_b, const float *J, const float *r_b, const float *F_w, const float *tau_w, const float *u, float c_w, float *q_dot, float *omega_dot_b, float *Omega_dot);
-/* wheels6_momentum: World angular momentum about the pivot of a body with 6 wheels, and the wheels' axial momenta (float; see kernels.h) */
-void lvf_wheels6_momentum(const float *q, const float *omega_b, const float *Omega, const float *I_p, const float *A_b, const float *J, float *L_body_w, float *L_wheels_w, float *h_w);
-/* wheels6_motor: Motor torques actually applied on 6 wheels (the wheel_motor line, per wheel) (float; see kernels.h) */
-void lvf_wheels6_motor(const float *command, const float *Omega, float torque_limit, float speed_limit, float cutoff, float *u);
 
 #endif

@@ -66,7 +66,7 @@ def test_momentum_kernel_matches_definition(pyramid):
     (np.array([[1.0, 0, 0, np.nan], [0, 1, 0, 0], [0, 0, 1, 1]]), r"A_b.*finite"),
     (np.array([[1.0, 0, -1, 0], [0, 1, 0, -1], [0, 0, 0, 0]]), r"A_b.*span 3-D space.*rank 2"),
     (np.ones((3, 7)) / np.sqrt(3.0), r"A_b.*span 3-D space"),
-    (np.hstack([np.eye(3), np.eye(3), [[0.0], [0.0], [1.0]]]), r"A_b.*kernels are printed for \[1, 2, 3, 4, 5, 6\] wheels.*got 7"),
+    (np.hstack([np.eye(3), np.eye(3), [[0.0], [0.0], [1.0]]]), r"A_b.*kernels are printed for \[3, 4\] wheels.*got 7"),
     (np.zeros((2, 4)), r"A_b"),
 ])
 def test_bad_axes_are_refused(A_b, match):
@@ -125,9 +125,9 @@ def test_cli_lqr_layout_pyramid4(capsys):
 
 
 def test_printed_counts_and_three_body_axes_equal_the_cube_kernel():
-    """Derived once for any N, printed for N = 1 … 6; with A_b = 1 the N = 3 kernel is the body-axis
+    """Derived once for any N, printed for N = 3 and 4 (WHEEL_COUNTS); with A_b = 1 the N = 3 kernel is the body-axis
     cube's wheel_body_rhs (to rounding), pivot offset, external load and damping included."""
-    assert WL.printed_counts() == (1, 2, 3, 4, 5, 6)
+    assert WL.printed_counts() == (3, 4)
     rng = np.random.default_rng(7)
     S = rng.normal(size=(3, 3))
     I_p = S @ S.T + 5 * np.eye(3)
@@ -141,9 +141,9 @@ def test_printed_counts_and_three_body_axes_equal_the_cube_kernel():
         np.testing.assert_allclose(x, y, rtol=1e-13, atol=1e-13)
 
 
-@pytest.mark.parametrize("n", [3, 6])
+@pytest.mark.parametrize("n", [3, 4])
 def test_other_counts_momentum_exchange(n):
-    """A tilted 3-wheel set (no null space) and a 6-wheel set (3-D null space) conserve L exactly too."""
+    """A tilted 3-wheel set (no null space) and a random 4-wheel set (1-D null space) conserve L exactly too."""
     rng = np.random.default_rng(n)
     A = rng.normal(size=(3, n))
     A /= np.linalg.norm(A, axis=0)
