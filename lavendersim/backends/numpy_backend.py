@@ -330,11 +330,12 @@ def _symtop_rotation(I, q, L, h, stage=None):
     return q, L
 
 
-def _symtop4(plan, x, h):
-    """symtop4: bodies without effects drift p by h v and take the merged rotation (_symtop_rotation) on
-    L_b = I ω (body_momentum), turned back into ω once (body_rate). Bodies with effects: for each stage γ_i,
-    kick(γ_i h/2), drift p by γ_i h, the Strang rotation over γ_i h, kick(γ_i h/2). The C backend's
-    symtop4_step, operation for operation."""
+def _symtop_composition(plan, x, h, rotate):
+    """One step of symtop4 or symtop_bm6 (rotate(I, q, L, h, stage): the method's rotation, stage None for
+    the whole step). Bodies without effects drift p by h v and take the rotation on L_b = I ω
+    (body_momentum), turned back into ω once (body_rate). Bodies with effects: for each stage γ_i of
+    T.SYMTOP4_GAMMA, kick(γ_i h/2), drift p by γ_i h, the stage's rotation, kick(γ_i h/2). The C backend's
+    symtop_step, operation for operation."""
     xn = x.copy()
     if plan.forced.size:
         xf = x.copy()
@@ -342,7 +343,7 @@ def _symtop4(plan, x, h):
             gh = g * h
             _kick(plan, xf, T.SPLIT_KICK * gh)
             xf[:, P] = K.translation_drift(xf[:, P], xf[:, V], gh)
-            q, L = _symtop_rotation(plan.I, xf[:, Q], K.body_momentum(plan.I, xf[:, W]), h, s)
+            q, L = rotate(plan.I, xf[:, Q], K.body_momentum(plan.I, xf[:, W]), h, s)
             xf[:, Q], xf[:, W] = q, K.body_rate(plan.I, L)
             _kick(plan, xf, T.SPLIT_KICK * gh)
         xn[plan.forced] = xf[plan.forced]
@@ -350,9 +351,14 @@ def _symtop4(plan, x, h):
     I = plan.I[free]
     if I.shape[0]:
         xn[free, P] = K.translation_drift(x[free, P], x[free, V], h)
-        q, L = _symtop_rotation(I, x[free, Q], K.body_momentum(I, x[free, W]), h)
+        q, L = rotate(I, x[free, Q], K.body_momentum(I, x[free, W]), h, None)
         xn[free, Q], xn[free, W] = q, K.body_rate(I, L)
     return xn
+
+
+def _symtop4(plan, x, h):
+    """symtop4: _symtop_composition with the merged / Strang rotations of _symtop_rotation."""
+    return _symtop_composition(plan, x, h, _symtop_rotation)
 
 
 def _symtop_bm6_rotation(I, q, L, h):
@@ -377,29 +383,15 @@ def _symtop_bm6_rotation(I, q, L, h):
     return q, L
 
 
+def _symtop_bm6_stage(I, q, L, h, stage):
+    """_symtop_bm6_rotation for the whole step (stage None) or over stage's γ_i h."""
+    return _symtop_bm6_rotation(I, q, L, h if stage is None else T.SYMTOP4_GAMMA[stage] * h)
+
+
 def _symtop_bm6(plan, x, h):
-    """symtop_bm6: bodies without effects drift p by h v and take _symtop_bm6_rotation on L_b = I ω, turned
-    back into ω once. Bodies with effects: symtop4's composition, for each γ_i of T.SYMTOP4_GAMMA:
-    kick(γ_i h/2), drift p by γ_i h, the rotation over γ_i h, kick(γ_i h/2). The C backend's symtop_bm6_step,
-    operation for operation."""
-    xn = x.copy()
-    if plan.forced.size:
-        xf = x.copy()
-        for g in T.SYMTOP4_GAMMA:
-            gh = g * h
-            _kick(plan, xf, T.SPLIT_KICK * gh)
-            xf[:, P] = K.translation_drift(xf[:, P], xf[:, V], gh)
-            q, L = _symtop_bm6_rotation(plan.I, xf[:, Q], K.body_momentum(plan.I, xf[:, W]), gh)
-            xf[:, Q], xf[:, W] = q, K.body_rate(plan.I, L)
-            _kick(plan, xf, T.SPLIT_KICK * gh)
-        xn[plan.forced] = xf[plan.forced]
-    free = slice(None) if not plan.forced.size else plan.free
-    I = plan.I[free]
-    if I.shape[0]:
-        xn[free, P] = K.translation_drift(x[free, P], x[free, V], h)
-        q, L = _symtop_bm6_rotation(I, x[free, Q], K.body_momentum(I, x[free, W]), h)
-        xn[free, Q], xn[free, W] = q, K.body_rate(I, L)
-    return xn
+    """symtop_bm6: _symtop_composition with the Blanes–Moan rotation (_symtop_bm6_rotation); with effects
+    symtop4's kicked stages around it."""
+    return _symtop_composition(plan, x, h, _symtop_bm6_stage)
 
 
 def _rk4_expmap(plan, x, h):

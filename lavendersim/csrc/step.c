@@ -869,13 +869,18 @@ static void symtop_rotation(const double *I, double *q, double *L, double h, int
     }
 }
 
-/* One symtop4 step. Without effects: p drifts by h v; the merged rotation sequence (symtop_rotation) on
-   L_b = I omega (body_momentum), turned back into omega once (body_rate); torque-free it conserves L_w and
-   |L_b| to rounding, order 4, and is exact for a symmetric top (c_b = 0). With effects: for each stage
-   gamma_i, kick(gamma_i h/2), drift p by gamma_i h, the Strang rotation over gamma_i h, kick(gamma_i h/2)
-   (splitting4's composition with the symmetric-top rotation: order 4 with loads of p and q only, 3 with a
-   velocity-dependent effect). The same operations in the same order as the NumPy backend's _symtop4. */
-static void symtop4_step(const body_ctx *c, double *x, double h, int damped)
+/* A rotation of the symmetric-top split on (q, L) of body I: stage < 0, the whole step h torque-free;
+   else the rotation of stage `stage` of symtop4's kicked composition (over LV_SYMTOP4_GAMMA[stage] h). */
+typedef void (*symtop_rotation_fn)(const double *I, double *q, double *L, double h, int stage);
+
+/* One step of symtop4 or symtop_bm6 (rotate: the method's rotation). Without effects: p drifts by h v; the
+   rotation on L_b = I omega (body_momentum), turned back into omega once (body_rate); torque-free it
+   conserves L_w and |L_b| to rounding and is exact for a symmetric top (c_b = 0). With effects: for each
+   stage gamma_i of LV_SYMTOP4_GAMMA, kick(gamma_i h/2), drift p by gamma_i h, the stage's rotation,
+   kick(gamma_i h/2) (splitting4's composition: order 4 with loads of p and q only, 3 with a
+   velocity-dependent effect). The same operations in the same order as the NumPy backend's
+   _symtop_composition. */
+static inline void symtop_step(const body_ctx *c, double *x, double h, int damped, symtop_rotation_fn rotate)
 {
     const double *I = c->prm + LV_PARAM_I_B;
     double L[3];
@@ -883,7 +888,7 @@ static void symtop4_step(const body_ctx *c, double *x, double h, int damped)
     if (!c->has) {
         lv_translation_drift(x + LV_STATE_P_W, x + LV_STATE_V_W, h, x + LV_STATE_P_W);
         lv_body_momentum(I, x + LV_STATE_OMEGA_B, L);
-        symtop_rotation(I, x + LV_STATE_Q, L, h, -1);
+        rotate(I, x + LV_STATE_Q, L, h, -1);
         lv_body_rate(I, L, x + LV_STATE_OMEGA_B);
         return;
     }
@@ -892,7 +897,7 @@ static void symtop4_step(const body_ctx *c, double *x, double h, int damped)
         kick(c, x, LV_SPLIT_KICK * g, damped);
         lv_translation_drift(x + LV_STATE_P_W, x + LV_STATE_V_W, g, x + LV_STATE_P_W);
         lv_body_momentum(I, x + LV_STATE_OMEGA_B, L);
-        symtop_rotation(I, x + LV_STATE_Q, L, h, i);
+        rotate(I, x + LV_STATE_Q, L, h, i);
         lv_body_rate(I, L, x + LV_STATE_OMEGA_B);
         kick(c, x, LV_SPLIT_KICK * g, damped);
     }
@@ -915,32 +920,10 @@ static void symtop_bm6_rotation(const double *I, double *q, double *L, double h)
     lv_sphere_flow(q, L, I_r, h, q);
 }
 
-/* One symtop_bm6 step. Without effects: p drifts by h v; symtop_bm6_rotation on L_b = I omega, turned back
-   into omega once; torque-free it conserves L_w and |L_b| to rounding, order 6, exact for a symmetric top.
-   With effects: symtop4's composition (for each gamma_i of LV_SYMTOP4_GAMMA: kick(gamma_i h/2), drift,
-   the rotation over gamma_i h, kick(gamma_i h/2)): order 4 with loads of p and q, 3 with a velocity-dependent
-   effect. The same operations in the same order as the NumPy backend's _symtop_bm6. */
-static void symtop_bm6_step(const body_ctx *c, double *x, double h, int damped)
+/* symtop_bm6's rotation as a symtop_rotation_fn: the whole step, or a stage's gamma_i h. */
+static void symtop_bm6_stage(const double *I, double *q, double *L, double h, int stage)
 {
-    const double *I = c->prm + LV_PARAM_I_B;
-    double L[3];
-    int i;
-    if (!c->has) {
-        lv_translation_drift(x + LV_STATE_P_W, x + LV_STATE_V_W, h, x + LV_STATE_P_W);
-        lv_body_momentum(I, x + LV_STATE_OMEGA_B, L);
-        symtop_bm6_rotation(I, x + LV_STATE_Q, L, h);
-        lv_body_rate(I, L, x + LV_STATE_OMEGA_B);
-        return;
-    }
-    for (i = 0; i < LV_SYMTOP4_STAGES; i++) {
-        const double g = LV_SYMTOP4_GAMMA[i] * h;
-        kick(c, x, LV_SPLIT_KICK * g, damped);
-        lv_translation_drift(x + LV_STATE_P_W, x + LV_STATE_V_W, g, x + LV_STATE_P_W);
-        lv_body_momentum(I, x + LV_STATE_OMEGA_B, L);
-        symtop_bm6_rotation(I, x + LV_STATE_Q, L, g);
-        lv_body_rate(I, L, x + LV_STATE_OMEGA_B);
-        kick(c, x, LV_SPLIT_KICK * g, damped);
-    }
+    symtop_bm6_rotation(I, q, L, stage < 0 ? h : LV_SYMTOP4_GAMMA[stage] * h);
 }
 
 /* One rk4_expmap step (RKMK4): the RK4 tableau on (p, u, v, omega) with u (the body rotation vector since
@@ -997,9 +980,9 @@ static long advance_structured(double *state, const double *params, long b, cons
         else if (integrator == LV_INTEGRATOR_RK4_EXPMAP)
             rk4_expmap_step(&c, xn, dt);
         else if (integrator == LV_INTEGRATOR_SYMTOP4)
-            symtop4_step(&c, xn, dt, damped);
+            symtop_step(&c, xn, dt, damped, symtop_rotation);
         else if (integrator == LV_INTEGRATOR_SYMTOP_BM6)
-            symtop_bm6_step(&c, xn, dt, damped);
+            symtop_step(&c, xn, dt, damped, symtop_bm6_stage);
         else if (!gyro_step(&c, xn, dt)) {
             *why = LV_NO_ROOT;
             memcpy(last, x, sizeof x);
