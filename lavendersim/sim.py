@@ -343,7 +343,7 @@ class Sim:
             from .backends import c_backend
 
             self._screen = c_backend._c.checks_pass
-        self._w_inf = np.full(len(self.names), np.inf)
+        self._g_inf = np.full((len(self.names), 3), np.inf)   # growth limits that never fire (growth=False)
         self._ctr = self._fast if self._fast is not None else _Counters()
         self._lock = _Guard(self._fast)
         # run(n) inside C for n up to one chunk (checked at its end, as _advance checks a chunk) within the work cap
@@ -453,7 +453,7 @@ class Sim:
         bound = np.inf if self._bound is None else float(self._bound[0])
         return c_backend._c.Stepper(self._x, self.params, self.effects if self.effects.size else self.effects.reshape(0, 2),
                                     c_backend.INTEGRATOR_CODES[self.integrator], 1 if self.normalize else 0, float(self.dt),
-                                    int(self._per_step), MAX_STEPS, self._wdt_scale, bound, self._w_fast,
+                                    int(self._per_step), MAX_STEPS, self._wdt_scale, bound, self._g_fast,
                                     c_backend.user_effect_table(self.effects), *models)
 
     # ---- divergence checks ---------------------------------------------------------------
@@ -509,8 +509,9 @@ class Sim:
         self._E0, self._L0 = self._invariants(self._x, self._models.Omega)
         nb = len(self.names)
         self._w_safe = np.zeros(nb)
-        # the C stepper's copy: +inf where no growth check can fire (bodies not free, or max_growth None)
-        self._w_fast = np.full(nb, np.inf)
+        # the C screen's growth limits per body (csrc/fast_step.c LV_G_*): no-work rate, max_growth * E0 and
+        # (max_growth * L0)^2 with a rounding margin; +inf where no growth check can fire (not free, max_growth None)
+        self._g_fast = np.full((nb, 3), np.inf)
         self._safe_rates(self._free)
 
     def _safe_rates(self, f: np.ndarray) -> None:
@@ -526,7 +527,12 @@ class Sim:
                 w_E = np.sqrt(room / half_Imax)
                 w_L = self.max_growth * self._L0[f] / I.max(axis=1)
                 self._w_safe[f] = np.minimum(w_E, w_L) * (1 - 1e-12)   # rounding margin: never skip a violation
-            self._w_fast[f] = self._w_safe[f]
+            self._g_fast[f, 0] = self._w_safe[f]
+            with np.errstate(over="ignore"):
+                E0, L0 = self._E0[f], self._L0[f]
+                margin = 1 - 1e-12      # rounding: the C screen never passes what the NumPy check would refuse
+                self._g_fast[f, 1] = np.where(E0 > 0, self.max_growth * E0 * margin, np.inf)
+                self._g_fast[f, 2] = np.where(L0 > 0, (self.max_growth * L0) ** 2 * margin, np.inf)
 
     def _wdt(self, x: np.ndarray, w: np.ndarray | None = None) -> np.ndarray:
         """Per body |omega|*dt*(I_max/I_min)**p, the quantity the validity bound limits (w: |omega| if known)."""
@@ -557,9 +563,9 @@ class Sim:
     def _violation_raw(self, x, Omega, warn, growth):
         screen = self._screen
         if screen is not None and x is self._x and (not growth or self.max_growth is None or not self._free_wheels_idx):
-            # one pass in C: every body inside the bound and (growth) inside its no-work region -> nothing to report
+            # one pass in C: every body inside the bound and (growth) inside its E and |L| limits -> nothing to report
             bound = np.inf if self._bound is None else self._bound[0]
-            if screen(x, self._wdt_scale, bound, self._w_fast if growth else self._w_inf):
+            if screen(x, self.params, self._wdt_scale, bound, self._g_fast if growth else self._g_inf):
                 return None
         with np.errstate(over="ignore", invalid="ignore"):   # an overflowing norm is inf: beyond any bound
             om = x[:, LY.STATE_OMEGA_B]

@@ -4,6 +4,7 @@ import pytest
 
 import lavendersim as lv
 from lavendersim.generated import kernels_numpy as K
+from lavendersim.generated import layout as LY
 
 BACKENDS = ["numpy", "c"]
 
@@ -399,3 +400,27 @@ def test_a_failing_later_chunk_is_located_by_replay_bitwise(integrator, monkeypa
         assert one is not None and one == many
     else:   # dopri5 at rtol 1e-3 may well stay bounded; when it fails, both name the same step
         assert one == many or one is None or many is None
+
+
+def test_c_screen_serves_an_elongated_spinning_body_and_agrees_with_the_numpy_check():
+    """A body with I_max/I_min > max_growth spinning off its minor axis is beyond the no-work rate w_safe from the start;
+    the C screen then evaluates E and |L| (generated kernels) instead of sending every step to the Python path, and it
+    passes exactly when the NumPy growth check finds nothing (states inside and beyond the limits)."""
+    scene = lv.Scene()
+    scene.add_body(lv.Body.box("b", 2.0, (0.8, 0.4, 0.2), omega_b=(1.0, 0.5, 0.2)))
+    sim = lv.Sim(scene, dt=1e-3, integrator="rk4", backend="c")
+    w = float(np.linalg.norm(sim.x[0, LY.STATE_OMEGA_B]))
+    assert w > sim._g_fast[0, 0], "the body starts beyond its no-work rate (the case the screen must compute)"
+    sim.run(1)                          # the Python path: checks the state and hands it to the fast path
+    assert sim._fast.advance(1), "the C fast path served the step (screen passed on the exact invariants)"
+    x = sim.x.copy()
+    for scale, expect in ((1.0, True), (1.2, True), (1.6, False), (3.0, False)):   # E, |L| grow as scale^2, scale
+        y = x.copy()
+        y[0, LY.STATE_OMEGA_B] *= scale
+        c = bool(sim._screen(y, sim.params, sim._wdt_scale, np.inf, sim._g_fast))
+        E, L = sim._invariants(y, sim._models.Omega)
+        numpy_ok = bool(E[0] <= sim.max_growth * sim._E0[0] and L[0] <= sim.max_growth * sim._L0[0])
+        assert c == numpy_ok == expect, (scale, c, numpy_ok)
+    y = x.copy()
+    y[0, LY.STATE_OMEGA_B.start + 1] = np.nan
+    assert not sim._screen(y, sim.params, sim._wdt_scale, np.inf, sim._g_fast)

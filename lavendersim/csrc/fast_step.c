@@ -6,8 +6,8 @@
      * no other thread is inside the Sim's lock (`busy` is 0; it is set by Sim's lock guard),
      * the state and wheel rates are those of the last check (bytewise; else the pre-step bound check is due),
      * the step returns LV_OK (finite),
-     * every body's |omega| * wdt_scale <= bound (the validity bound) and |omega| <= w_safe (the growth
-       check's no-work region; w_safe is +inf where no growth check applies).
+     * every body's |omega| * wdt_scale <= bound (the validity bound) and it is inside the growth check's
+       limits (screen_pass: its no-work rate, else its E and |L| from the generated kernels).
    Otherwise it restores the arrays from the snapshot (bitwise) and returns False: the caller takes the
    Python path, which re-runs the step and raises or warns exactly as before. The GIL is held throughout
    (the Sim enables the fast path only for small scenes), so a step never interleaves with another
@@ -23,7 +23,13 @@
 #include "kernels.h"
 #include "step.h"
 
-enum { FS_STATE, FS_PARAMS, FS_EFFECTS, FS_WDT, FS_WSAFE, FS_ROWS, FS_OMEGA, FS_COMMAND, FS_APPLIED, FS_N };
+/* The growth check's per-body limits, a row of G (nb, LV_G_COLS) that Sim fills (Sim._safe_rates): the no-work
+   rate w_safe (|omega| <= w_safe proves E and |L| inside their limits; +inf where no growth check applies), and the
+   limits themselves, max_growth * E0 and (max_growth * L0)^2, each shrunk by a rounding margin (+inf where the check
+   does not apply). */
+enum { LV_G_W = 0, LV_G_E = 1, LV_G_L2 = 2, LV_G_COLS = 3 };
+
+enum { FS_STATE, FS_PARAMS, FS_EFFECTS, FS_WDT, FS_GROWTH, FS_ROWS, FS_OMEGA, FS_COMMAND, FS_APPLIED, FS_N };
 
 typedef struct {
     PyObject_HEAD
@@ -86,17 +92,17 @@ static int take(Stepper *s, int i, PyObject *obj, int writable, Py_ssize_t n_dou
     return 0;
 }
 
-/* Stepper(state, params, effects, integrator, normalize, dt, per_step, max_steps, wdt_scale, bound, w_safe,
+/* Stepper(state, params, effects, integrator, normalize, dt, per_step, max_steps, wdt_scale, bound, growth,
            user_effects, rows, Omega, command, applied) — the model arrays all None or all given. */
 static int stepper_init(Stepper *s, PyObject *args, PyObject *kw)
 {
-    PyObject *st, *pr, *ef, *wdt, *wsafe, *user_obj, *rows, *om, *cm, *ap;
+    PyObject *st, *pr, *ef, *wdt, *growth, *user_obj, *rows, *om, *cm, *ap;
     long long per_step, max_steps;
     Py_ssize_t nb;
     (void)kw;
     stepper_release(s);
     if (!PyArg_ParseTuple(args, "OOOipdLLOdOOOOOO:Stepper", &st, &pr, &ef, &s->integrator, &s->normalize, &s->dt,
-                          &per_step, &max_steps, &wdt, &s->bound, &wsafe, &user_obj, &rows, &om, &cm, &ap))
+                          &per_step, &max_steps, &wdt, &s->bound, &growth, &user_obj, &rows, &om, &cm, &ap))
         return -1;
     if (s->integrator < 0 || s->integrator > LV_INTEGRATOR_LAST || s->integrator == LV_INTEGRATOR_DOPRI5) {
         PyErr_SetString(PyExc_ValueError, "Stepper: a fixed-step integrator code (dopri5 is not served)");
@@ -121,7 +127,7 @@ static int stepper_init(Stepper *s, PyObject *args, PyObject *kw)
         PyErr_SetString(PyExc_ValueError, "Stepper: effects must be (ne, row) with row >= 2");
         return -1;
     }
-    if (take(s, FS_WDT, wdt, 0, nb, "wdt_scale") != 0 || take(s, FS_WSAFE, wsafe, 0, nb, "w_safe") != 0) return -1;
+    if (take(s, FS_WDT, wdt, 0, nb, "wdt_scale") != 0 || take(s, FS_GROWTH, growth, 0, nb * LV_G_COLS, "growth") != 0) return -1;
     s->has_models = rows != Py_None;
     if (s->has_models) {
         if (take(s, FS_ROWS, rows, 0, nb * LV_MODEL_SIZE, "rows") != 0 || take(s, FS_OMEGA, om, 1, nb * 3, "Omega") != 0
@@ -216,23 +222,37 @@ static int unchanged(const Stepper *s)
     return !s->has_models || memcmp(s->snap + nx, s->models.Omega, n3 * sizeof(double)) == 0;
 }
 
-/* 1 when every body's |omega| * scale <= bound and |omega| <= w_safe (NaN fails): the per-chunk screen, shared by
-   the Stepper and the module-level checks_pass. */
-static int screen_pass(const double *x, long nb, const double *scale, double bound, const double *w_safe)
+/* 1 when body x (params prm) is inside its growth limits g: |omega| = w <= w_safe, else its kinetic energy and |L|^2
+   from the generated kinetic_energy and body_momentum kernels are at most g's limits (NaN fails). */
+static int growth_pass(const double *x, const double *prm, const double *g, double w)
+{
+    double T, L[3];
+    if (w <= g[LV_G_W]) return 1;
+    lv_kinetic_energy(prm[LV_PARAM_M], prm + LV_PARAM_I_B, x + LV_STATE_V_W, x + LV_STATE_OMEGA_B, &T);
+    lv_body_momentum(prm + LV_PARAM_I_B, x + LV_STATE_OMEGA_B, L);
+    return T <= g[LV_G_E] && L[0] * L[0] + L[1] * L[1] + L[2] * L[2] <= g[LV_G_L2];
+}
+
+/* 1 when every body's |omega| * scale <= bound and it passes growth_pass with its row of G (NaN fails): the
+   per-chunk screen, shared by the Stepper and the module-level checks_pass. Exact where it passes: a body beyond
+   its no-work rate has its invariants evaluated here, so a spinning body whose rate exceeds w_safe (any body with
+   I_max/I_min > max_growth) does not send every step to the Python path. */
+static int screen_pass(const double *x, const double *params, long nb, const double *scale, double bound,
+                       const double *G)
 {
     long b;
     for (b = 0; b < nb; b++) {
-        const double *om = x + b * LV_STATE_SIZE + LV_STATE_OMEGA_B;
+        const double *xb = x + b * LV_STATE_SIZE, *om = xb + LV_STATE_OMEGA_B;
         const double w = sqrt(om[0] * om[0] + om[1] * om[1] + om[2] * om[2]);
-        if (!(w * scale[b] <= bound) || !(w <= w_safe[b])) return 0;
+        if (!(w * scale[b] <= bound) || !growth_pass(xb, params + b * LV_PARAM_SIZE, G + b * LV_G_COLS, w)) return 0;
     }
     return 1;
 }
 
 static int checks_pass(const Stepper *s)
 {
-    return screen_pass((const double *)s->buf[FS_STATE].buf, s->nb, (const double *)s->buf[FS_WDT].buf, s->bound,
-                       (const double *)s->buf[FS_WSAFE].buf);
+    return screen_pass((const double *)s->buf[FS_STATE].buf, (const double *)s->buf[FS_PARAMS].buf, s->nb,
+                       (const double *)s->buf[FS_WDT].buf, s->bound, (const double *)s->buf[FS_GROWTH].buf);
 }
 
 static int fast_step(Stepper *s, long n)
@@ -365,43 +385,43 @@ static PyTypeObject StepperType = {
     .tp_getset = stepper_getset,
 };
 
-/* checks_pass(x, wdt_scale, bound, w_safe) -> bool: every body's |omega| * wdt_scale <= bound and |omega| <=
-   w_safe (NaN fails), the Sim's cheap first screen of its per-chunk checks in one pass without temporaries; False
-   means "look closer" (the Sim's NumPy check decides). */
+/* checks_pass(x, params, wdt_scale, bound, growth) -> bool: every body's |omega| * wdt_scale <= bound and inside its
+   growth limits (screen_pass; growth (nb, 3) as LV_G_*), the Sim's screen of its per-chunk checks in one pass
+   without temporaries; False means "look closer" (the Sim's NumPy check decides and names the cause). */
 static PyObject *py_checks_pass(PyObject *self, PyObject *args)
 {
-    PyObject *xo, *so, *wo;
+    PyObject *obj[4];
+    Py_buffer buf[4];
+    const Py_ssize_t width[4] = {LV_STATE_SIZE, LV_PARAM_SIZE, 1, LV_G_COLS};
     double bound;
-    Py_buffer xb, sb, wb;
     Py_ssize_t nb;
-    int ok = 1;
+    int ok = 1, i, got = 0;
     (void)self;
-    if (!PyArg_ParseTuple(args, "OOdO:checks_pass", &xo, &so, &bound, &wo)) return NULL;
-    if (PyObject_GetBuffer(xo, &xb, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT) != 0) return NULL;
-    if (PyObject_GetBuffer(so, &sb, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT) != 0) { PyBuffer_Release(&xb); return NULL; }
-    if (PyObject_GetBuffer(wo, &wb, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT) != 0) {
-        PyBuffer_Release(&xb); PyBuffer_Release(&sb); return NULL;
+    if (!PyArg_ParseTuple(args, "OOOdO:checks_pass", &obj[0], &obj[1], &obj[2], &bound, &obj[3])) return NULL;
+    for (got = 0; got < 4; got++)
+        if (PyObject_GetBuffer(obj[got], &buf[got], PyBUF_C_CONTIGUOUS | PyBUF_FORMAT) != 0) { ok = -2; break; }
+    if (ok == 1) {
+        nb = buf[0].len / 8 / LV_STATE_SIZE;
+        for (i = 0; i < 4; i++)
+            if (buf[i].itemsize != 8 || buf[i].len != nb * width[i] * 8) ok = -1;
+        if (ok < 0) {
+            PyErr_SetString(PyExc_ValueError,
+                            "checks_pass: x (nb, 13), params (nb, PARAM_SIZE), wdt_scale (nb,), growth (nb, 3) float64");
+        } else {
+            Py_BEGIN_ALLOW_THREADS
+            ok = screen_pass((const double *)buf[0].buf, (const double *)buf[1].buf, (long)nb,
+                             (const double *)buf[2].buf, bound, (const double *)buf[3].buf);
+            Py_END_ALLOW_THREADS
+        }
     }
-    nb = xb.len / 8 / LV_STATE_SIZE;
-    if (xb.itemsize != 8 || sb.itemsize != 8 || wb.itemsize != 8 || xb.len != nb * LV_STATE_SIZE * 8
-        || sb.len != nb * 8 || wb.len != nb * 8) {
-        PyErr_SetString(PyExc_ValueError, "checks_pass: x (nb, 13), wdt_scale (nb,), w_safe (nb,) float64");
-        ok = -1;
-    } else {
-        Py_BEGIN_ALLOW_THREADS
-        ok = screen_pass((const double *)xb.buf, (long)nb, (const double *)sb.buf, bound, (const double *)wb.buf);
-        Py_END_ALLOW_THREADS
-    }
-    PyBuffer_Release(&xb);
-    PyBuffer_Release(&sb);
-    PyBuffer_Release(&wb);
+    for (i = 0; i < got; i++) PyBuffer_Release(&buf[i]);
     if (ok < 0) return NULL;
     return PyBool_FromLong(ok);
 }
 
 static PyMethodDef fast_functions[] = {
     {"checks_pass", py_checks_pass, METH_VARARGS,
-     "checks_pass(x, wdt_scale, bound, w_safe) -> bool: all |omega|*wdt_scale <= bound and |omega| <= w_safe."},
+     "checks_pass(x, params, wdt_scale, bound, growth) -> bool: all |omega|*wdt_scale <= bound and inside the growth limits."},
     {NULL, NULL, 0, NULL}};
 
 int lv_add_stepper_type(PyObject *m)
