@@ -44,8 +44,8 @@ a ``model`` that is not a CubeModel, a bad ``seed`` or ``options`` raise Lavende
 """
 from __future__ import annotations
 
-import math
 import dataclasses
+import math
 from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING, Any
 
