@@ -149,7 +149,7 @@ class ReactionWheelCubeEnv(gym.Env):
         if target_q is not None and self.task == "corner":
             raise V.LavenderInputError("target_q", "the corner task's target is fixed (body diagonal vertical)")
         self.target_q = self.model.upright_q() if target_q is None else V.quaternion("target_q", target_q)
-        self._tq = [float(v) for v in self.target_q]
+        self._tq = tuple(float(v) for v in self.target_q)
         self.action_space = spaces.Box(-1.0, 1.0, shape=(3,), dtype=np.float32)
         # finite bounds (gymnasium's checker rejects infinite ones): leaving them ends the episode
         self.rate_bound = 200.0                               # rad/s, cube
@@ -187,14 +187,7 @@ class ReactionWheelCubeEnv(gym.Env):
         float
         """
         q = self.sim.state(BODY).q if q is None else q
-        t = self._tq
-        d = q[0] * t[0] + q[1] * t[1] + q[2] * t[2] + q[3] * t[3]
-        s = 1.0 if d >= 0 else -1.0
-        m0, m1, m2, m3 = q[0] - s * t[0], q[1] - s * t[1], q[2] - s * t[2], q[3] - s * t[3]
-        p0, p1, p2, p3 = q[0] + s * t[0], q[1] + s * t[1], q[2] + s * t[2], q[3] + s * t[3]
-        a = math.sqrt(m0 ** 2 + m1 ** 2 + m2 ** 2 + m3 ** 2)
-        b = math.sqrt(p0 ** 2 + p1 ** 2 + p2 ** 2 + p3 ** 2)
-        return math.degrees(4.0 * math.atan2(a, b))
+        return _angle_deg(q[0], q[1], q[2], q[3], *self._tq)
 
     def tilt_deg(self, q: ArrayLike | None = None) -> float:
         """Corner task: angle of the body diagonal (pivot → COM) from vertical, degrees.
@@ -318,26 +311,27 @@ class ReactionWheelCubeEnv(gym.Env):
         q, w = r[LY.STATE_Q], r[LY.STATE_OMEGA_B]
         w0, w1, w2 = w
         W0, W1, W2 = io.Omega.tolist()
-        angle = self.angle_error_deg(q)
+        q0, q1, q2, q3 = q
+        angle = _angle_deg(q0, q1, q2, q3, *self._tq)
         theta = math.radians(angle)
         reward = -(theta * theta + 0.05 * (w0 * w0 + w1 * w1 + w2 * w2) + 0.01 * (a0 * a0 + a1 * a1 + a2 * a2))
         ob = io.obs_mv          # the float32 observation, written through a memoryview (C's double -> float cast)
-        ob[0], ob[1], ob[2], ob[3], ob[4], ob[5], ob[6], ob[7], ob[8], ob[9] = q[0], q[1], q[2], q[3], w0, w1, w2, W0, W1, W2
+        ob[0], ob[1], ob[2], ob[3], ob[4], ob[5], ob[6], ob[7], ob[8], ob[9] = q0, q1, q2, q3, w0, w1, w2, W0, W1, W2
         obs = io.obs.copy()
-        info = {"t": float(io.counters.steps * io.dt), "angle_error_deg": angle, "torque_applied": u}
+        info = {"t": io.counters.steps * io.dt, "angle_error_deg": angle, "torque_applied": u}
         terminated = False
         if self.task == "corner":
             info["tilt_deg"] = tilt = self.tilt_deg(q)
             terminated = tilt > self.max_tilt_deg
         wb, Ob = io.w_in, io.Om_in       # within both the termination and the observation bounds: nothing to do
         if not (-wb <= w0 <= wb and -wb <= w1 <= wb and -wb <= w2 <= wb and -Ob <= W0 <= Ob and -Ob <= W1 <= Ob
-                and -Ob <= W2 <= Ob and -1.0 <= q[0] <= 1.0 and -1.0 <= q[1] <= 1.0 and -1.0 <= q[2] <= 1.0
-                and -1.0 <= q[3] <= 1.0):
+                and -Ob <= W2 <= Ob and -1.0 <= q0 <= 1.0 and -1.0 <= q1 <= 1.0 and -1.0 <= q2 <= 1.0
+                and -1.0 <= q3 <= 1.0):
             if max(abs(w0), abs(w1), abs(w2)) > self.rate_bound or max(abs(W0), abs(W1), abs(W2)) > self.wheel_bound:
                 terminated, info["out_of_bounds"] = True, True
             # the observation bounds (float32 numbers: clipping after the cast equals np.clip before it)
             obs = np.minimum(np.maximum(obs, self.observation_space.low), self.observation_space.high)
-        return obs, float(reward), terminated, False, info
+        return obs, reward, terminated, False, info
 
     def _diverged(self, extra: dict) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         """The step's result when the simulation diverged: the observation of the (restored or non-finite) state with
@@ -417,6 +411,16 @@ class _StepIO:
         high = env.observation_space.high
         self.w_in = min(float(env.rate_bound), float(high[4]))
         self.Om_in = min(float(env.wheel_bound), float(high[7]))
+
+
+def _angle_deg(q0: float, q1: float, q2: float, q3: float, t0: float, t1: float, t2: float, t3: float) -> float:
+    """ReactionWheelCubeEnv.angle_error_deg on numbers: the angle between attitudes q and t (x, y, z, w), degrees."""
+    s = 1.0 if q0 * t0 + q1 * t1 + q2 * t2 + q3 * t3 >= 0 else -1.0
+    m0, m1, m2, m3 = q0 - s * t0, q1 - s * t1, q2 - s * t2, q3 - s * t3
+    p0, p1, p2, p3 = q0 + s * t0, q1 + s * t1, q2 + s * t2, q3 + s * t3
+    a = math.sqrt(m0 ** 2 + m1 ** 2 + m2 ** 2 + m3 ** 2)
+    b = math.sqrt(p0 ** 2 + p1 ** 2 + p2 ** 2 + p3 ** 2)
+    return math.degrees(4.0 * math.atan2(a, b))
 
 
 def _action3(action: ArrayLike) -> tuple[float, float, float]:
