@@ -14,6 +14,9 @@ observation with reward 0, terminated and truncated False. Truncation after ``ma
 ``reset(seed=s)`` seeds sub-environment i with s + i (as SyncVectorEnv does), ``reset(seed=[s0, s1, ...])``
 each with its own, None keeps the generators. ``reset(options={"reset_mask": mask})`` resets the masked ones.
 
+Speed: the cubes are advanced by one C call per step; ``lavendersim.backends.c_backend.threads(2)`` (process-wide)
+shares them over two threads, with bitwise the same results (tests/test_vector_env.py).
+
 A sub-environment whose simulation diverges (DivergenceError) terminates with reward -1e3 and the
 observation of its state before the step (as the single env), and ``info["diverged"]`` marks it; the others
 advance normally. No rendering (render_mode must be None).
