@@ -35,7 +35,7 @@ def test_quick_runs_and_prints_its_standing(quick):
         assert heading in out
     lines = [ln.split() for ln in out.splitlines()]
     status = [ln[0] for ln in lines if ln and ln[0] in ("PASS", "MISS", "N/A")]
-    assert len(status) == 10 + len(bench.PER_BODY_SIZES_QUICK)  # one line per target, whatever the timings
+    assert len(status) == 12 + len(bench.PER_BODY_SIZES_QUICK)  # one line per target, whatever the timings
     assert "round" in r.stderr  # progress
 
 
@@ -61,7 +61,7 @@ def test_quick_json_is_well_formed(quick):
     for p in d["per_body_effects"]:
         assert p["plain"]["ns_min"] > 0 and p["applied_torque"]["ns_min"] > 0
         assert p["ratio"] == p["applied_torque"]["ns_min"] / p["plain"]["ns_min"]
-    assert [t["status"] in ("PASS", "MISS", "N/A") for t in d["standing"]] == [True] * (10 + len(bench.PER_BODY_SIZES_QUICK))
+    assert [t["status"] in ("PASS", "MISS", "N/A") for t in d["standing"]] == [True] * (12 + len(bench.PER_BODY_SIZES_QUICK))
     assert any(t["name"] == "one Python sim.step(), c backend" for t in d["standing"])
     assert all(math.isfinite(v) for v in d["ratios"].values())
     hw = d["handwritten"]

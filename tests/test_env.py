@@ -273,3 +273,25 @@ def test_vector_env_steps_all_cubes_in_one_sim_call():
     sim.run = lambda k: (calls.append(k), real(k))[1]
     ve.step(np.zeros((4, 3), np.float32))
     assert calls == [ve.substeps]
+
+
+@pytest.mark.parametrize("task", ["center", "corner"])
+def test_step_fast_path_equals_sim_run_path(task):
+    """env.step calls Sim.run's C fast path directly (a Stepper's advance): its results equal those of the Sim.run
+    path bitwise, including a step whose rates leave the observation bounds (clipped observation, out_of_bounds)."""
+    envs = [gym.make("lavendersim:ReactionWheelCube-v0", task=task).unwrapped for _ in range(2)]
+    for e in envs:
+        e.reset(seed=3, options={"omega_b": [0.0, 0.0, 199.0], "Omega": [0.0, 0.0, 799.8]})
+    envs[1]._bind(envs[1].sim).advance = None          # the second env takes Sim.run every step
+    assert envs[0]._bind(envs[0].sim).advance is not None
+    seen_out = False
+    for k in range(6):
+        a = np.array([0.3 * (-1) ** k, -0.2, 1.0], np.float32)
+        (o0, r0, t0, u0, i0), (o1, r1, t1, u1, i1) = envs[0].step(a), envs[1].step(a)
+        assert o0.dtype == np.float32 and o0 in envs[0].observation_space
+        assert np.array_equal(o0, o1) and r0 == r1 and (t0, u0) == (t1, u1)
+        assert i0.keys() == i1.keys() and np.array_equal(i0["torque_applied"], i1["torque_applied"])
+        assert all(i0[key] == i1[key] for key in i0 if key != "torque_applied")
+        seen_out |= bool(i0.get("out_of_bounds"))
+    assert seen_out     # the z wheel passed 800 rad/s (the cube's damping spins it up): observation clipped there
+    assert o0[9] == envs[0].observation_space.high[9]

@@ -271,14 +271,16 @@ MAX_THREADS = 64  # LV_MAX_THREADS (csrc/step.h)
 
 
 def threads(n: int | None = None) -> int:
-    """The threads that share the batched torque-free RK4 path of one C call, process-wide.
+    """The threads that share the batched RK4 path and the jointed / wheeled bodies of one C call, process-wide.
 
     Parameters
     ----------
     n : int, optional
-        1 .. MAX_THREADS: set it first (default 1). Bodies are split over the threads in tiles of 64
-        (groups of at least 16 force-free plain bodies stepped with RK4; other bodies and integrators run
-        on the calling thread). Results are bitwise those of one thread.
+        1 .. MAX_THREADS: set it first (default 1). Plain bodies are split over the threads in tiles of 64
+        (groups of at least 16 force-free plain bodies stepped with RK4); bodies with a spherical joint or
+        reaction wheels (euler, semi_implicit_euler, rk4; e.g. the ReactionWheelCube-v0 vector env's cubes) in
+        shares of consecutive bodies once a call has enough of them (512 body-steps per thread); other bodies
+        and integrators run on the calling thread. Results are bitwise those of one thread.
 
     Returns
     -------

@@ -26,6 +26,10 @@ v0 = (0.1, 0, 0) m/s, dt = 1e-3 s, RK4, q normalized each step):
 * per-body effects — N bodies each with its own applied_torque against N plain bodies, in C, at
   N = 1, 100, 10 000 (quick: 1, 100): ns per body-step and their ratio. The effects are indexed per
   body, so the ratio must stay flat in N (target <= 1.5);
+* ReactionWheelCube-v0 (lavendersim/bench/envs.py; needs gymnasium, else skipped) — env.step() as
+  gymnasium.make returns it and unwrapped, its physics alone (sim.run(substeps)), and the vector env at
+  N = 1024 per env-step (one and two threads) with its physics alone, interleaved; env / physics is the
+  Python overhead;
 * agreement — the hand-written kernel against the Sim (same trajectory to ~1e-12), and MuJoCo's
   trajectory against ours and against the exact torque-free motion over 1 s.
 
@@ -54,6 +58,7 @@ import numpy as np
 from .. import validate as V
 from .._install import extra_command
 from ..generated import layout as LY
+from . import envs as _envs
 
 SCHEMA = "lavendersim-bench/1"
 HERE = Path(__file__).resolve().parent
@@ -82,6 +87,8 @@ TARGETS = {
     "per_body_effect_ratio": 1.5,      # one applied_torque per body / plain body, ns per body-step, at most
     "python_step_c_ns": 1000.0,        # one Python sim.step() on the C backend, at most (issue 12)
     "float32_batch_speedup": 1.8,      # float64 / float32 ns per body-step, Sim.run in C, N >= 1e3, at least ("about 2x")
+    "env_step_us": 10.0,               # ReactionWheelCube-v0 env.step() as gymnasium.make returns it, µs, at most
+    "vector_env_us": 2.0,              # its vector env, µs per env-step at N = 1024, at most
 }
 PER_BODY_SIZES_FULL = (1, 100, 10_000)
 PER_BODY_SIZES_QUICK = (1, 100)
@@ -678,6 +685,12 @@ def run(quick: bool = False, rounds: int | None = None, use_mujoco: bool = True)
     if extension_isa() is not None:
         res["simd_batch"] = simd_batch(kernel, cfg["simd_sizes"], cfg["c_body_steps"], R)
 
+    # ---- ReactionWheelCube-v0 and its vector env (lavendersim/bench/envs.py)
+    try:
+        res["env"] = _envs.env_section(quick, R, interleaved)
+    except Exception as exc:  # noqa: BLE001 - reported in the output, the rest still runs
+        res["env"] = {"available": False, "reason": f"failed: {type(exc).__name__}: {exc}"}
+
     # ---- MuJoCo trajectory agreement
     if mj_ok:
         try:
@@ -819,6 +832,7 @@ def standing(res: dict) -> list[dict]:
     if mj0 is not None:
         basis += f"; mujoco.mj_step on an empty model (its Python-call overhead) {mj0 / 1e3:.3f} µs"
     out.append(_line("one Python sim.step(), c backend", py, TARGETS["python_step_c_ns"], "max", "ns/call", basis))
+    out += _envs.standing_lines(res, _line, TARGETS)
     return out
 
 
@@ -928,6 +942,7 @@ def report(res: dict) -> str:
             L.append(row(f"MuJoCo {integ} vs exact", a[f"mujoco_{integ}_vs_exact"]))
     elif "agreement_error" in mj:
         L.append(f"MuJoCo agreement failed: {mj['agreement_error']}")
+    L += _envs.report_lines(res, _f)
     L.append("")
     L.append("targets")
     for t in res["standing"]:

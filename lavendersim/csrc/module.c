@@ -429,9 +429,9 @@ PyObject *lv_py_simulate_f32(PyObject *self, PyObject *args); /* module_f32.c */
 
 static PyMethodDef methods[] = {
     {"threads", py_threads, METH_VARARGS,
-     "threads([n]) -> n: the threads that share the SIMD tiles (torque-free RK4 groups of >= 16 bodies) of one\n"
-     "simulate call (default 1; set first with n; 1 where the build has no POSIX threads). Results are bitwise\n"
-     "those of one thread. simulate runs with the GIL released."},
+     "threads([n]) -> n: the threads that share the SIMD tiles (torque-free RK4 groups of >= 16 bodies) and the\n"
+     "jointed / wheeled bodies (euler, semi_implicit_euler, rk4) of one simulate call (default 1; set first\n"
+     "with n; 1 where the build has no POSIX threads). Results are bitwise those of one thread. simulate runs with the GIL released."},
     {"isa", py_isa, METH_VARARGS,
      "isa([level]) -> (current, name, best, best_name): the instruction set of the batched torque-free RK4 path\n"
      "(ISA_SCALAR 0: off, ISA_BASE 1: the build's baseline (sse2 on x86-64), ISA_AVX2 2, ISA_AVX512 3); with level,\n"

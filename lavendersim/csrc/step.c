@@ -156,6 +156,15 @@ static inline void effect_sums(const double *x, const double *v_w, double m, con
     }
 }
 
+/* effect_sums for refs that are all built-in effects (no user function): the generated dispatch only, so a
+   flattened caller inlines every effect. */
+static inline void builtin_effect_sums(const double *x, const double *v_w, double m, const double *I_b,
+                                       const lv_effect_ref *refs, long n, double *F, double *tau)
+{
+    long k;
+    for (k = 0; k < n; k++) (void)lv_effect_apply(refs[k].code, refs[k].p, x, v_w, m, I_b, F, tau);
+}
+
 /* d/dt of one plain body's state: the free kernel when no effect applies, else the effects' force and
    torque summed in table order and passed to the full right-hand side. */
 static void body_rhs(const double *x, const double *prm, const lv_effect_ref *refs, long n_refs, double *xdot)
@@ -425,8 +434,8 @@ const char *lv_isa_name(int isa)
 /* d/dt of [x, Omega] for a body of nonzero kind; u = this step's applied wheel torques.
    r = its model row. A jointed body's p, v derivatives are zero (set from the joint after the step);
    its effects that read v_w see the kinematic COM velocity (computed only when needs_v). */
-static void model_rhs(const double *y, const double *u, double m, const double *I_b, const double *r, int kind,
-                      int needs_v, const lv_effect_ref *refs, long n_refs, double *yd)
+static inline void model_rhs_of(const double *y, const double *u, double m, const double *I_b, const double *r,
+                                int kind, int needs_v, int builtin, const lv_effect_ref *refs, long n_refs, double *yd)
 {
     double F[3] = {0.0, 0.0, 0.0}, tau[3] = {0.0, 0.0, 0.0}, pk[3], vk[3];
     const double *v = y + LV_STATE_V_W;
@@ -435,7 +444,8 @@ static void model_rhs(const double *y, const double *u, double m, const double *
         lv_pivot_kinematics(y + LV_STATE_Q, y + LV_STATE_OMEGA_B, r + LV_MODEL_ANCHOR_W, r + LV_MODEL_R_B, pk, vk);
         v = vk;
     }
-    effect_sums(y, v, m, I_b, refs, n_refs, F, tau);
+    if (builtin) builtin_effect_sums(y, v, m, I_b, refs, n_refs, F, tau);
+    else effect_sums(y, v, m, I_b, refs, n_refs, F, tau);
     if (kind & LV_KIND_WHEELS) {
         lv_wheel_body_rhs(y + LV_STATE_Q, y + LV_STATE_OMEGA_B, y + LV_XS_OMEGA, r + LV_MODEL_I_P, r + LV_MODEL_J,
                           r + LV_MODEL_R_B, F, tau, u, r[LV_MODEL_C_W], yd + LV_STATE_Q, yd + LV_STATE_OMEGA_B, yd + LV_XS_OMEGA);
@@ -451,14 +461,21 @@ static void model_rhs(const double *y, const double *u, double m, const double *
     }
 }
 
+static void model_rhs(const double *y, const double *u, double m, const double *I_b, const double *r, int kind,
+                      int needs_v, const lv_effect_ref *refs, long n_refs, double *yd)
+{
+    model_rhs_of(y, u, m, I_b, r, kind, needs_v, 0, refs, n_refs, yd);
+}
+
 /* Advance body b (nonzero kind) by n_steps. Its rows are written only on success; returns -1, or the
-   0-based failing step with last[] = its last finite [x, Omega]. */
-static long advance_model(double *state, const double *params, long b, const lv_models *md,
-                          const lv_effect_index *ix, int integrator, int normalize,
-                          double dt, long n_steps, double *last)
+   0-based failing step with last[] = its last finite [x, Omega]. kind is the body's (its model row's);
+   builtin: none of its effects is a user effect (then the effect sums inline). advance_model_body calls it
+   with constant kind, builtin, integrator and normalize, so each combination compiles to its own loop. */
+static inline long advance_model(double *state, const double *params, long b, const lv_models *md,
+                                 const lv_effect_index *ix, int kind, int builtin, int integrator, int normalize,
+                                 double dt, long n_steps, double *last)
 {
     const double *r = md->rows + b * LV_MODEL_SIZE;
-    const int kind = (int)r[LV_MODEL_KIND];
     const double m = params[b * LV_PARAM_SIZE + LV_PARAM_M];
     const double *cmd = md->command + 3 * b;
     double y[LV_XS_SIZE], yn[LV_XS_SIZE], k1[LV_XS_SIZE], k2[LV_XS_SIZE], k3[LV_XS_SIZE], k4[LV_XS_SIZE], tmp[LV_XS_SIZE];
@@ -473,7 +490,7 @@ static long advance_model(double *state, const double *params, long b, const lv_
     memcpy(y, state + b * LV_STATE_SIZE, LV_STATE_SIZE * sizeof(double));
     memcpy(y + LV_XS_OMEGA, md->Omega + 3 * b, 3 * sizeof(double));
     memcpy(applied, md->applied + 3 * b, sizeof applied);
-#define MRHS(in, out) model_rhs(in, u, m, I_b, r, kind, needs_v, refs, n_refs, out)
+#define MRHS(in, out) model_rhs_of(in, u, m, I_b, r, kind, needs_v, builtin, refs, n_refs, out)
     for (s = 0; s < n_steps; s++) {
         if (kind & LV_KIND_WHEELS)
             lv_wheel_motor(cmd, y + LV_XS_OMEGA, r[LV_MODEL_TORQUE_LIMIT], r[LV_MODEL_SPEED_LIMIT], r[LV_MODEL_CUTOFF], u);
@@ -523,6 +540,38 @@ static long advance_model(double *state, const double *params, long b, const lv_
     memcpy(md->Omega + 3 * b, y + LV_XS_OMEGA, 3 * sizeof(double));
     memcpy(md->applied + 3 * b, applied, sizeof applied);
     return -1;
+}
+
+/* advance_model for body b with its kind, builtin flag, integrator and normalize as constants: RK4 with
+   built-in effects only (the env's cube, the common case) gets a loop per kind with the kernels and the
+   effect dispatch inlined (flatten); anything else the generic loop. Same arithmetic in the same order
+   either way (inlining changes no operation), so the results are bitwise the same. */
+#define LV_MODEL_RK4(k) (normalize ? advance_model(state, params, b, md, ix, (k), 1, LV_INTEGRATOR_RK4, 1, dt, n_steps, last) \
+                                   : advance_model(state, params, b, md, ix, (k), 1, LV_INTEGRATOR_RK4, 0, dt, n_steps, last))
+LV_FLATTEN static long advance_model_rk4(double *state, const double *params, long b, const lv_models *md,
+                                         const lv_effect_index *ix, int kind, int normalize, double dt, long n_steps,
+                                         double *last)
+{
+    switch (kind) {
+    case LV_KIND_JOINT | LV_KIND_WHEELS: return LV_MODEL_RK4(LV_KIND_JOINT | LV_KIND_WHEELS);
+    case LV_KIND_WHEELS: return LV_MODEL_RK4(LV_KIND_WHEELS);
+    default: return LV_MODEL_RK4(LV_KIND_JOINT);
+    }
+}
+#undef LV_MODEL_RK4
+
+static long advance_model_body(double *state, const double *params, long b, const lv_models *md,
+                               const lv_effect_index *ix, int integrator, int normalize, double dt, long n_steps,
+                               double *last)
+{
+    const int kind = (int)md->rows[b * LV_MODEL_SIZE + LV_MODEL_KIND];
+    long k;
+    int builtin = 1;
+    for (k = ix->start[b]; k < ix->start[b + 1]; k++)
+        if (ix->refs[k].user != NULL) builtin = 0;
+    if (integrator == LV_INTEGRATOR_RK4 && builtin)
+        return advance_model_rk4(state, params, b, md, ix, kind, normalize, dt, n_steps, last);
+    return advance_model(state, params, b, md, ix, kind, 0, integrator, normalize, dt, n_steps, last);
 }
 
 /* ---- per-body integrators: dopri5 (any kind), splitting and implicit_gyro (plain bodies) ------- */
@@ -1175,6 +1224,111 @@ static int advance_soa_threads(double *state, const double *params, const long *
     return status;
 }
 
+/* ---- bodies with a joint or wheels, over threads ----------------------------------------------
+
+   One share of the model bodies: list[0 .. count-1] (ascending), each advanced by advance_model_body only as
+   far as the share's own failure so far (limit, best; started from the call's) can still be beaten, as
+   soa_share_run does for tiles. Shares touch disjoint bodies (their state, Omega and applied rows), so they
+   run on threads with no shared writes, and merging their failures with `earlier` gives the report of one
+   thread; each body's arithmetic does not depend on the split, so the states are bitwise those of one
+   thread. */
+typedef struct {
+    double *state;
+    const double *params;
+    const lv_models *md;
+    const lv_effect_index *ix;
+    const long *list;
+    long count, n_steps, limit, best;
+    int integrator, normalize;
+    double dt;
+    int status;
+} model_share;
+
+static void model_share_run(model_share *sh)
+{
+    double lastm[LV_XS_SIZE];
+    long k, s, lim, b;
+    for (k = 0; k < sh->count; k++) {
+        b = sh->list[k];
+        lim = run_limit(b, sh->limit, sh->best, sh->n_steps);
+        if (lim <= 0) continue;
+        s = advance_model_body(sh->state, sh->params, b, sh->md, sh->ix, sh->integrator, sh->normalize, sh->dt, lim,
+                               lastm);
+        if (s < 0 || !earlier(s, b, sh->limit, sh->best)) continue;
+        memcpy(sh->state + b * LV_STATE_SIZE, lastm, LV_STATE_SIZE * sizeof(double));
+        memcpy(sh->md->Omega + 3 * b, lastm + LV_XS_OMEGA, 3 * sizeof(double));
+        sh->limit = s;
+        sh->best = b;
+        sh->status = LV_DIVERGED;
+    }
+}
+
+#if LV_HAVE_THREADS
+static void *model_share_thread(void *arg)
+{
+    model_share_run((model_share *)arg);
+    return NULL;
+}
+#endif
+
+/* Below this many body-steps per thread a call's model bodies stay on the calling thread (starting a thread
+   costs about as much as ~100 body-steps). */
+#define LV_MODEL_THREAD_WORK 512
+
+/* The model bodies list[0 .. count-1] (ascending), split into up to `threads` shares of consecutive bodies (the
+   calling thread runs the first; a thread that cannot be started has its share run here). Returns LV_DIVERGED
+   (with *limit, *best updated as in advance_fixed) or LV_OK. */
+static int advance_models_threads(double *state, const double *params, const lv_models *md, const lv_effect_index *ix,
+                                  const long *list, long count, int integrator, int normalize, double dt,
+                                  long n_steps, int threads, long *limit, long *best)
+{
+    model_share sh[LV_MAX_THREADS];
+#if LV_HAVE_THREADS
+    pthread_t tid[LV_MAX_THREADS];
+    int started[LV_MAX_THREADS];
+#endif
+    long k0 = 0, most;
+    int t, n_sh, status = LV_OK;
+    n_sh = threads < 1 ? 1 : (threads > LV_MAX_THREADS ? LV_MAX_THREADS : threads);
+    most = count * n_steps / LV_MODEL_THREAD_WORK; /* shares the work pays for */
+    if (most < n_sh) n_sh = most < 1 ? 1 : (int)most;
+    if (n_sh > count) n_sh = count < 1 ? 1 : (int)count;
+    for (t = 0; t < n_sh; t++) { /* share t: list[k0 .. k1) */
+        const long k1 = count * (t + 1) / n_sh;
+        sh[t].state = state;
+        sh[t].params = params;
+        sh[t].md = md;
+        sh[t].ix = ix;
+        sh[t].list = list + k0;
+        sh[t].count = k1 - k0;
+        sh[t].n_steps = n_steps;
+        sh[t].limit = *limit;
+        sh[t].best = *best;
+        sh[t].integrator = integrator;
+        sh[t].normalize = normalize;
+        sh[t].dt = dt;
+        sh[t].status = LV_OK;
+        k0 = k1;
+    }
+#if LV_HAVE_THREADS
+    for (t = 1; t < n_sh; t++) started[t] = pthread_create(&tid[t], NULL, model_share_thread, &sh[t]) == 0;
+    model_share_run(&sh[0]);
+    for (t = 1; t < n_sh; t++) {
+        if (started[t]) pthread_join(tid[t], NULL);
+        else model_share_run(&sh[t]);
+    }
+#else
+    for (t = 0; t < n_sh; t++) model_share_run(&sh[t]);
+#endif
+    for (t = 0; t < n_sh; t++) {
+        if (sh[t].status != LV_DIVERGED || !earlier(sh[t].limit, sh[t].best, *limit, *best)) continue;
+        *limit = sh[t].limit;
+        *best = sh[t].best;
+        status = LV_DIVERGED;
+    }
+    return status;
+}
+
 static int lv_threads_current = 1;
 
 int lv_threads_get(void)
@@ -1193,8 +1347,8 @@ int lv_threads_set(int threads)
     return lv_threads_current;
 }
 
-/* euler, semi-implicit Euler, rk4 over every body. Bodies with a joint or wheels are stepped one by one;
-   plain bodies in lockstep blocks gathered by their work (rhs_kind): those no effect acts on together
+/* euler, semi-implicit Euler, rk4 over every body. Bodies with a joint or wheels are stepped one by one
+   (shared over `threads`, see advance_models_threads); plain bodies in lockstep blocks gathered by their work (rhs_kind): those no effect acts on together
    (RK4: the torque-free fast path), those with effects by kind, so a plain body never leaves its path
    because of a neighbour. ids: scratch for nb indices. Returns the status; *limit, *best as in
    lv_simulate. */
@@ -1202,28 +1356,24 @@ static int advance_fixed(double *state, const double *params, long nb, const lv_
                          const lv_models *models, int integrator, int normalize, double dt, long n_steps,
                          int isa, int threads, long *ids, long *limit, long *best)
 {
-    double last[LV_BLOCK][LV_STATE_SIZE], lastm[LV_XS_SIZE];
-    long b, k, s, lim, count[LV_RHS_CLASSES] = {0, 0, 0, 0, 0}, first[LV_RHS_CLASSES];
+    double last[LV_BLOCK][LV_STATE_SIZE];
+    long b, k, s, lim, n_models = 0, count[LV_RHS_CLASSES] = {0, 0, 0, 0, 0}, first[LV_RHS_CLASSES];
     int j, n, cls, kind, status = LV_OK;
     for (b = 0; b < nb; b++) {
-        if (models != NULL && (int)models->rows[b * LV_MODEL_SIZE + LV_MODEL_KIND] != 0) {
-            lim = run_limit(b, *limit, *best, n_steps);
-            if (lim <= 0) continue;
-            s = advance_model(state, params, b, models, ix, integrator, normalize, dt, lim, lastm);
-            if (s < 0 || !earlier(s, b, *limit, *best)) continue;
-            memcpy(state + b * LV_STATE_SIZE, lastm, LV_STATE_SIZE * sizeof(double));
-            memcpy(models->Omega + 3 * b, lastm + LV_XS_OMEGA, 3 * sizeof(double));
-            *limit = s;
-            *best = b;
-            status = LV_DIVERGED;
-        } else {
-            count[rhs_kind(ix, b)]++;
-        }
+        if (models != NULL && (int)models->rows[b * LV_MODEL_SIZE + LV_MODEL_KIND] != 0) n_models++;
+        else count[rhs_kind(ix, b)]++;
     }
-    first[0] = 0; /* ids: the plain bodies grouped by class (rhs_kind), ascending within each */
+    /* ids: the model bodies (ascending) first, then the plain ones grouped by class (rhs_kind), ascending within
+       each */
+    first[0] = n_models;
     for (cls = 1; cls < LV_RHS_CLASSES; cls++) first[cls] = first[cls - 1] + count[cls - 1];
-    for (b = 0; b < nb; b++)
-        if (models == NULL || (int)models->rows[b * LV_MODEL_SIZE + LV_MODEL_KIND] == 0) ids[first[rhs_kind(ix, b)]++] = b;
+    for (b = 0, k = 0; b < nb; b++) {
+        if (models != NULL && (int)models->rows[b * LV_MODEL_SIZE + LV_MODEL_KIND] != 0) ids[k++] = b;
+        else ids[first[rhs_kind(ix, b)]++] = b;
+    }
+    if (n_models > 0 && advance_models_threads(state, params, models, ix, ids, n_models, integrator, normalize, dt,
+                                               n_steps, threads, limit, best) == LV_DIVERGED)
+        status = LV_DIVERGED;
     for (cls = 0; cls < LV_RHS_CLASSES; cls++) {
         const long *list = ids + first[cls] - count[cls];
         kind = cls > LV_RHS_FULL ? cls - LV_RHS_CONSTANT : cls;

@@ -91,8 +91,9 @@ int lv_isa_best(void);
    in lv_simulate (a test and benchmark switch). */
 int lv_isa_get(void);
 int lv_isa_set(int isa);
-/* Threads that share the SIMD tiles of one lv_simulate call (default 1; 1 .. LV_MAX_THREADS; always 1 where
-   the build has no POSIX threads). Results are bitwise those of one thread. lv_threads_set returns the
+/* Threads that share the SIMD tiles and the bodies with a joint or wheels (euler, semi-implicit Euler, rk4) of
+   one lv_simulate call (default 1; 1 .. LV_MAX_THREADS; always 1 where the build has no POSIX threads). Results
+   are bitwise those of one thread. lv_threads_set returns the
    number now in use; like lv_isa_set, not for use while another thread is in lv_simulate. */
 #define LV_MAX_THREADS 64
 int lv_threads_get(void);

@@ -44,8 +44,8 @@ a ``model`` that is not a CubeModel, a bad ``seed`` or ``options`` raise Lavende
 """
 from __future__ import annotations
 
-import math
 import dataclasses
+import math
 from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING, Any
 
@@ -57,6 +57,7 @@ from .. import control as lc
 from .. import validate as V
 from .._install import require
 from ..errors import DivergenceError
+from ..generated import layout as LY
 from ..kernels import K
 
 if TYPE_CHECKING:
@@ -148,7 +149,7 @@ class ReactionWheelCubeEnv(gym.Env):
         if target_q is not None and self.task == "corner":
             raise V.LavenderInputError("target_q", "the corner task's target is fixed (body diagonal vertical)")
         self.target_q = self.model.upright_q() if target_q is None else V.quaternion("target_q", target_q)
-        self._tq = [float(v) for v in self.target_q]
+        self._tq = tuple(float(v) for v in self.target_q)
         self.action_space = spaces.Box(-1.0, 1.0, shape=(3,), dtype=np.float32)
         # finite bounds (gymnasium's checker rejects infinite ones): leaving them ends the episode
         self.rate_bound = 200.0                               # rad/s, cube
@@ -158,6 +159,7 @@ class ReactionWheelCubeEnv(gym.Env):
         self.sim: Sim | None = None
         self._fig = None
         self._last_u = np.zeros(3)
+        self._io: _StepIO | None = None
 
     # ---- helpers --------------------------------------------------------------------------
     def _raw(self) -> np.ndarray:
@@ -185,14 +187,7 @@ class ReactionWheelCubeEnv(gym.Env):
         float
         """
         q = self.sim.state(BODY).q if q is None else q
-        t = self._tq
-        d = q[0] * t[0] + q[1] * t[1] + q[2] * t[2] + q[3] * t[3]
-        s = 1.0 if d >= 0 else -1.0
-        m0, m1, m2, m3 = q[0] - s * t[0], q[1] - s * t[1], q[2] - s * t[2], q[3] - s * t[3]
-        p0, p1, p2, p3 = q[0] + s * t[0], q[1] + s * t[1], q[2] + s * t[2], q[3] + s * t[3]
-        a = math.sqrt(m0 ** 2 + m1 ** 2 + m2 ** 2 + m3 ** 2)
-        b = math.sqrt(p0 ** 2 + p1 ** 2 + p2 ** 2 + p3 ** 2)
-        return math.degrees(4.0 * math.atan2(a, b))
+        return _angle_deg(q[0], q[1], q[2], q[3], *self._tq)
 
     def tilt_deg(self, q: ArrayLike | None = None) -> float:
         """Corner task: angle of the body diagonal (pivot → COM) from vertical, degrees.
@@ -291,36 +286,64 @@ class ReactionWheelCubeEnv(gym.Env):
         RuntimeError
             Before :meth:`reset`.
         """
-        if self.sim is None:
+        sim = self.sim
+        if sim is None:
             raise RuntimeError("ReactionWheelCube-v0: call reset() before step()")
+        # the step path: a few reads and writes through memoryviews, one C call (Sim.run's fast path), float
+        # arithmetic and one float32 array; the numbers are those of Sim.run and the NumPy formulation before
+        io = self._io if self._io is not None and self._io.sim is sim else self._bind(sim)
         # real finite numbers of shape (3,): complex, bool, str, None, NaN/inf and other shapes are rejected
-        a = _action(action)
+        a0, a1, a2 = _action3(action)
         # validated (finite, saturated) above: written straight into the held command (set_wheel_command's array)
-        self.sim._models.command[0] = a * self.model.torque_limit
-        terminated, extra = False, {}
-        try:
-            self.sim.run(self.substeps)
-        except DivergenceError as exc:
-            terminated, extra = True, {"diverged": str(exc)}
-        self._last_u = self.sim.wheel_torques_applied[0].copy()
-        raw = self._raw()
-        if terminated or not np.isfinite(raw).all():
-            obs = np.nan_to_num(self._obs(raw), nan=0.0, posinf=0.0, neginf=0.0)
-            extra.setdefault("diverged", "non-finite state")
-            return obs, -1e3, True, False, self._info(angle=float("nan"), tilt=float("nan"), **extra)
-        r = raw.tolist()
-        q, w, Om = r[0:4], r[4:7], r[7:10]
-        angle = self.angle_error_deg(q)
+        tl, cmd = io.torque_limit, io.command
+        cmd[0], cmd[1], cmd[2] = a0 * tl, a1 * tl, a2 * tl
+        if io.advance is None or not io.advance(self.substeps):   # the C fast path of Sim.run, else Sim.run
+            try:
+                sim.run(self.substeps)
+            except DivergenceError as exc:
+                self._last_u = io.applied_row.copy()
+                return self._diverged({"diverged": str(exc)})
+            if not all(map(math.isfinite, io.x.tolist() + io.Omega.tolist())):
+                self._last_u = io.applied_row.copy()
+                return self._diverged({})
+        self._last_u = u = io.applied_row.copy()
+        r = io.x.tolist()
+        q, w = r[LY.STATE_Q], r[LY.STATE_OMEGA_B]
+        w0, w1, w2 = w
+        W0, W1, W2 = io.Omega.tolist()
+        q0, q1, q2, q3 = q
+        angle = _angle_deg(q0, q1, q2, q3, *self._tq)
         theta = math.radians(angle)
-        a0, a1, a2 = a.tolist()
-        reward = -(theta * theta + 0.05 * (w[0] * w[0] + w[1] * w[1] + w[2] * w[2]) + 0.01 * (a0 * a0 + a1 * a1 + a2 * a2))
-        if max(map(abs, w)) > self.rate_bound or max(map(abs, Om)) > self.wheel_bound:
-            terminated, extra = True, {"out_of_bounds": True}
-        tilt = None
+        reward = -(theta * theta + 0.05 * (w0 * w0 + w1 * w1 + w2 * w2) + 0.01 * (a0 * a0 + a1 * a1 + a2 * a2))
+        ob = io.obs_mv          # the float32 observation, written through a memoryview (C's double -> float cast)
+        ob[0], ob[1], ob[2], ob[3], ob[4], ob[5], ob[6], ob[7], ob[8], ob[9] = q0, q1, q2, q3, w0, w1, w2, W0, W1, W2
+        obs = io.obs.copy()
+        info = {"t": io.counters.steps * io.dt, "angle_error_deg": angle, "torque_applied": u}
+        terminated = False
         if self.task == "corner":
-            tilt = self.tilt_deg(q)
-            terminated = terminated or tilt > self.max_tilt_deg
-        return self._obs(raw), float(reward), terminated, False, self._info(angle, tilt, **extra)
+            info["tilt_deg"] = tilt = self.tilt_deg(q)
+            terminated = tilt > self.max_tilt_deg
+        wb, Ob = io.w_in, io.Om_in       # within both the termination and the observation bounds: nothing to do
+        if not (-wb <= w0 <= wb and -wb <= w1 <= wb and -wb <= w2 <= wb and -Ob <= W0 <= Ob and -Ob <= W1 <= Ob
+                and -Ob <= W2 <= Ob and -1.0 <= q0 <= 1.0 and -1.0 <= q1 <= 1.0 and -1.0 <= q2 <= 1.0
+                and -1.0 <= q3 <= 1.0):
+            if max(abs(w0), abs(w1), abs(w2)) > self.rate_bound or max(abs(W0), abs(W1), abs(W2)) > self.wheel_bound:
+                terminated, info["out_of_bounds"] = True, True
+            # the observation bounds (float32 numbers: clipping after the cast equals np.clip before it)
+            obs = np.minimum(np.maximum(obs, self.observation_space.low), self.observation_space.high)
+        return obs, reward, terminated, False, info
+
+    def _diverged(self, extra: dict) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+        """The step's result when the simulation diverged: the observation of the (restored or non-finite) state with
+        non-finite numbers as 0, reward -1e3, terminated, ``info["diverged"]`` (the message)."""
+        obs = np.nan_to_num(self._obs(self._raw()), nan=0.0, posinf=0.0, neginf=0.0)
+        extra.setdefault("diverged", "non-finite state")
+        return obs, -1e3, True, False, self._info(angle=float("nan"), tilt=float("nan"), **extra)
+
+    def _bind(self, sim: Sim) -> _StepIO:
+        """The step path's handles on `sim` (taken once per Sim: reset builds a new one)."""
+        self._io = _StepIO(self, sim)
+        return self._io
 
     def render(self) -> np.ndarray | None:
         """The current frame as an (H, W, 3) uint8 image (render_mode "rgb_array"), or None."""
@@ -358,6 +381,58 @@ class ReactionWheelCubeEnv(gym.Env):
         """Release the simulator and the figure."""
         self._fig = None
         self.sim = None
+
+
+class _StepIO:
+    """What ReactionWheelCubeEnv.step reads and writes on its Sim, taken once per Sim: flat float64 memoryviews of
+    body 0's state row, wheel rates and held command (element access without NumPy's per-call cost), its applied
+    torques' row, the Stepper's ``advance`` (Sim.run's C fast path for this many substeps; None where Sim.run
+    would not take it), a float32 observation buffer with a memoryview, and the bounds within which neither a
+    termination bound nor an observation bound is reached (Python floats)."""
+
+    __slots__ = ("sim", "x", "Omega", "command", "applied", "applied_row", "advance", "counters", "dt", "torque_limit",
+                 "obs", "obs_mv", "w_in", "Om_in")
+
+    def __init__(self, env: ReactionWheelCubeEnv, sim: Sim) -> None:
+        def flat(a: np.ndarray) -> memoryview:
+            return memoryview(a).cast("B").cast("d")
+
+        self.sim = sim
+        m = sim._models
+        self.x = flat(sim._x[0])
+        self.Omega, self.command, self.applied = flat(m.Omega[0]), flat(m.command[0]), flat(m.applied[0])
+        self.applied_row = m.applied[0]
+        fast = sim._fast
+        self.advance = fast.advance if fast is not None and 1 <= env.substeps <= sim._fast_n else None
+        self.counters, self.dt = sim._ctr, sim.dt     # sim.t = steps * dt
+        self.torque_limit = float(env.model.torque_limit)
+        self.obs = np.zeros(10, np.float32)
+        self.obs_mv = memoryview(self.obs)
+        high = env.observation_space.high
+        self.w_in = min(float(env.rate_bound), float(high[4]))
+        self.Om_in = min(float(env.wheel_bound), float(high[7]))
+
+
+def _angle_deg(q0: float, q1: float, q2: float, q3: float, t0: float, t1: float, t2: float, t3: float) -> float:
+    """ReactionWheelCubeEnv.angle_error_deg on numbers: the angle between attitudes q and t (x, y, z, w), degrees."""
+    s = 1.0 if q0 * t0 + q1 * t1 + q2 * t2 + q3 * t3 >= 0 else -1.0
+    m0, m1, m2, m3 = q0 - s * t0, q1 - s * t1, q2 - s * t2, q3 - s * t3
+    p0, p1, p2, p3 = q0 + s * t0, q1 + s * t1, q2 + s * t2, q3 + s * t3
+    a = math.sqrt(m0 ** 2 + m1 ** 2 + m2 ** 2 + m3 ** 2)
+    b = math.sqrt(p0 ** 2 + p1 ** 2 + p2 ** 2 + p3 ** 2)
+    return math.degrees(4.0 * math.atan2(a, b))
+
+
+def _action3(action: ArrayLike) -> tuple[float, float, float]:
+    """The action as three floats saturated to [-1, 1] (:func:`_action`'s numbers): a float ndarray of shape (3,)
+    with finite entries takes a shortcut; anything else V.array's checks (LavenderInputError naming ``action``)."""
+    if type(action) is np.ndarray and action.shape == (3,) and action.dtype.kind == "f":
+        a0, a1, a2 = action.tolist()
+        if a0 - a0 == 0.0 and a1 - a1 == 0.0 and a2 - a2 == 0.0:     # finite (inf - inf and NaN are NaN)
+            return (-1.0 if a0 < -1.0 else 1.0 if a0 > 1.0 else a0, -1.0 if a1 < -1.0 else 1.0 if a1 > 1.0 else a1,
+                    -1.0 if a2 < -1.0 else 1.0 if a2 > 1.0 else a2)
+    a0, a1, a2 = _action(action).tolist()
+    return a0, a1, a2
 
 
 def _action(action: ArrayLike) -> np.ndarray:

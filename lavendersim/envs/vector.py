@@ -14,6 +14,9 @@ observation with reward 0, terminated and truncated False. Truncation after ``ma
 ``reset(seed=s)`` seeds sub-environment i with s + i (as SyncVectorEnv does), ``reset(seed=[s0, s1, ...])``
 each with its own, None keeps the generators. ``reset(options={"reset_mask": mask})`` resets the masked ones.
 
+Speed: the cubes are advanced by one C call per step; ``lavendersim.backends.c_backend.threads(2)`` (process-wide)
+shares them over two threads, with bitwise the same results (tests/test_vector_env.py).
+
 A sub-environment whose simulation diverges (DivergenceError) terminates with reward -1e3 and the
 observation of its state before the step (as the single env), and ``info["diverged"]`` marks it; the others
 advance normally. No rendering (render_mode must be None).
@@ -78,6 +81,7 @@ class ReactionWheelCubeVectorEnv(VectorEnv):
         self._target = np.asarray(one.target_q, dtype=float)
         self.sim = self._build_sim()
         n = self.num_envs
+        self._raw_buf, self._clip_buf = np.empty((n, 10)), np.empty((n, 10))   # _raw's and _obs's scratch
         self._rngs: list[np.random.Generator | None] = [None] * n
         self._start: list[tuple | None] = [None] * n
         self._needs_reset = np.zeros(n, bool)
@@ -87,6 +91,7 @@ class ReactionWheelCubeVectorEnv(VectorEnv):
     # ---- construction --------------------------------------------------------------------
     def _build_sim(self):
         import lavendersim as lv
+
         from ..effects import make
 
         m, s, n = self.model, self.model.size, self.num_envs
@@ -156,13 +161,16 @@ class ReactionWheelCubeVectorEnv(VectorEnv):
         if not self._started:
             raise RuntimeError("ReactionWheelCube-v0 (vector): call reset() before step()")
         n, sim = self.num_envs, self.sim
-        a = np.clip(V.array("actions", actions, (n, 3)), -1.0, 1.0)
+        a = V.array("actions", actions, (n, 3))          # a validated float64 copy: saturated in place
+        np.minimum(np.maximum(a, -1.0, out=a), 1.0, out=a)
         resets = np.flatnonzero(self._needs_reset)
         for i in resets:                         # next-step autoreset: these start over and do not step
             self._reset_one(int(i))
-        u = a * self.model.torque_limit
-        u[resets] = 0.0
-        sim.set_wheel_commands(u)
+        # finite and saturated: written straight into the held commands (set_wheel_commands' array; every cube has
+        # wheels), as a * torque_limit
+        cmd = sim._models.command
+        np.multiply(a, self.model.torque_limit, out=cmd)
+        cmd[resets] = 0.0
         diverged = self._run()
         for i in resets:
             self._place(int(i), *self._start[i])
@@ -212,17 +220,24 @@ class ReactionWheelCubeVectorEnv(VectorEnv):
                 b = int(exc.body)
                 if b in diverged:
                     raise
-                diverged[b] = (str(exc), self._raw()[b].copy())
+                diverged[b] = (str(exc), self._raw()[b].copy())     # (_raw's buffer is reused)
                 q = self.sim.q[b].copy()
                 self._place(b, q, np.zeros(3), np.zeros(3))
 
     def _raw(self) -> np.ndarray:
-        sim = self.sim
-        return np.concatenate([sim.q, sim.omega_b, sim.Omega], axis=1)
+        """[q, omega_b, Omega] of every cube, (N, 10), in a scratch buffer reused by the next call."""
+        sim, raw = self.sim, self._raw_buf
+        raw[:, 0:4], raw[:, 4:7], raw[:, 7:10] = sim.q, sim.omega_b, sim.Omega
+        return raw
 
     def _obs(self, raw: np.ndarray) -> np.ndarray:
-        obs = np.clip(raw, self._low, self._high).astype(np.float32)
-        return np.nan_to_num(obs, nan=0.0, posinf=0.0, neginf=0.0)
+        """The observations: raw clipped to the bounds (as np.clip), float32 (a new array), non-finite numbers as 0."""
+        c = self._clip_buf
+        np.minimum(np.maximum(raw, self._low, out=c), self._high, out=c)
+        obs = c.astype(np.float32)
+        if not np.isfinite(obs).all():
+            np.nan_to_num(obs, copy=False, nan=0.0, posinf=0.0, neginf=0.0)
+        return obs
 
     def _angle_deg(self, q: np.ndarray) -> np.ndarray:
         """The single env's angle_error_deg per row: 4 atan2(|q − s q_t|, |q + s q_t|), s = sign(q·q_t), degrees."""

@@ -1,0 +1,148 @@
+"""ReactionWheelCube-v0's vector env checked the way gymnasium's check_env checks a single env (gymnasium has
+no checker for vector envs): batched spaces, reset/step return types, seed and step determinism, returned
+arrays not reused between calls; and the C backend's threads (the suite needs the C extension): the cubes of one call shared over two threads
+give bitwise the results of one thread (the vector env's physics), divergence reported alike."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from conftest import missing
+
+pytestmark = pytest.mark.needs("gym")
+if missing("gym") is None:
+    import gymnasium as gym
+    from gymnasium.utils.env_checker import data_equivalence
+
+    from lavendersim.envs.vector import ReactionWheelCubeVectorEnv
+
+N = 6
+
+
+def _vec(n=N, **kw):
+    return gym.make_vec("lavendersim:ReactionWheelCube-v0", num_envs=n, vectorization_mode="vector_entry_point", **kw)
+
+
+def test_spaces_and_return_types():
+    ve = _vec()
+    one = gym.make("lavendersim:ReactionWheelCube-v0").unwrapped
+    assert isinstance(ve, ReactionWheelCubeVectorEnv) and ve.num_envs == N
+    assert ve.single_observation_space == one.observation_space and ve.single_action_space == one.action_space
+    assert ve.observation_space.shape == (N, 10) and ve.observation_space.dtype == np.float32
+    assert ve.action_space.shape == (N, 3) and ve.action_space.dtype == np.float32
+    obs, info = ve.reset(seed=3)
+    assert isinstance(obs, np.ndarray) and obs.dtype == np.float32 and obs.shape == (N, 10) and isinstance(info, dict)
+    assert obs in ve.observation_space
+    ve.action_space.seed(1)
+    for _ in range(30):
+        obs, rew, term, trunc, info = ve.step(ve.action_space.sample())
+        assert obs.dtype == np.float32 and obs.shape == (N, 10) and obs in ve.observation_space
+        assert rew.dtype == np.float64 and rew.shape == (N,) and np.all(np.isfinite(rew)) and np.all(rew <= 0)
+        assert term.dtype == bool and trunc.dtype == bool and term.shape == trunc.shape == (N,)
+        assert isinstance(info, dict) and info["angle_error_deg"].shape == (N,)
+        assert info["torque_applied"].shape == (N, 3)
+    ve.close()
+
+
+def test_seed_and_step_determinism():
+    """check_reset_seed_determinism and check_step_determinism, batched: two envs seeded alike and given the same
+    actions return equal data, exactly."""
+    a, b = _vec(), _vec()
+    ra, rb = a.reset(seed=123), b.reset(seed=123)
+    assert data_equivalence(ra, rb, exact=True)
+    assert data_equivalence(a.reset(seed=123), ra, exact=True)
+    rng = np.random.default_rng(5)
+    for _ in range(25):
+        act = rng.uniform(-1, 1, (N, 3)).astype(np.float32)
+        assert data_equivalence(a.step(act), b.step(act), exact=True)
+
+
+def test_returned_data_not_reused():
+    """check_returned_data_not_reused, batched: arrays returned by one call are not overwritten by the next."""
+    ve = _vec()
+    o0, _ = ve.reset(seed=0)
+    keep0 = o0.copy()
+    out1 = ve.step(np.full((N, 3), 0.5, np.float32))
+    keep1 = [x.copy() for x in out1[:4]]
+    out2 = ve.step(np.full((N, 3), -0.5, np.float32))
+    assert np.array_equal(o0, keep0) and not np.shares_memory(o0, out1[0])
+    for x, k, y in zip(out1[:4], keep1, out2[:4]):
+        assert np.array_equal(x, k) and not np.shares_memory(x, y)
+    assert not np.array_equal(out1[0], out2[0])
+
+
+def _c_cubes(n):
+    """The arrays a vector env of n cubes hands to the C backend, with spread initial rates and commands."""
+    ve = _vec(n)
+    ve.reset(seed=4)
+    sim = ve.unwrapped.sim
+    rng = np.random.default_rng(9)
+    m = sim._models
+    x = sim._x.copy()
+    x[:, 10:13] = rng.uniform(-3, 3, (n, 3))
+    cmd = rng.uniform(-0.25, 0.25, (n, 3))                  # beyond the torque limit too: saturated
+    Om = rng.uniform(-50, 50, (n, 3))
+    return x, sim.params, sim._step_effects, m.rows, Om, cmd
+
+
+@pytest.mark.parametrize("integrator", [0, 1, 2])         # euler, semi_implicit_euler, rk4
+def test_two_threads_are_one_thread_bitwise(integrator):
+    from lavendersim.backends import c_backend as C
+
+    n, steps = 300, 40          # 12 000 body-steps: the cubes are split over the threads
+    x0, params, effects, rows, Om0, cmd = _c_cubes(n)
+    out = {}
+    try:
+        for threads in (1, 2):
+            assert C.threads(threads) in (1, threads)
+            x, Om, applied = x0.copy(), Om0.copy(), np.zeros((n, 3))
+            status = C._c.simulate(x, params, effects, integrator, 1, 1e-3, steps, rows, Om, cmd, applied,
+                                   None, None, 0.0, 0.0, None)
+            out[threads] = (status, x, Om, applied)
+    finally:
+        C.threads(1)
+    assert out[1][0][0] == 0 and out[1][0] == out[2][0]
+    for a, b in zip(out[1][1:], out[2][1:]):
+        np.testing.assert_array_equal(a, b)
+    assert not np.array_equal(out[1][1], x0)       # it moved
+
+
+def test_divergence_with_two_threads_is_reported_as_with_one():
+    """Two cubes blow up (one in each thread's share; the later body first): the same step and body, and the
+    failing body left at its last finite state, with one thread or two."""
+    from lavendersim.backends import c_backend as C
+
+    n, steps = 300, 40
+    x0, params, effects, rows, Om0, cmd = _c_cubes(n)
+    x0[40, 10:13] = [1e153, 0.0, 0.0]        # |omega|^2 overflows after a few steps
+    x0[250, 10:13] = [1e154, 0.0, 0.0]       # sooner: the reported one
+    res = {}
+    try:
+        for threads in (1, 2):
+            C.threads(threads)
+            x, Om, applied = x0.copy(), Om0.copy(), np.zeros((n, 3))
+            status, step, body = C._c.simulate(x, params, effects, 2, 1, 1e-3, steps, rows, Om, cmd, applied,
+                                               None, None, 0.0, 0.0, None)
+            res[threads] = (status, step, body, x[body].copy(), Om[body].copy())
+    finally:
+        C.threads(1)
+    assert res[1][0] == 1 and res[1][2] in (40, 250)
+    assert res[1][:3] == res[2][:3]
+    np.testing.assert_array_equal(res[1][3], res[2][3])
+    np.testing.assert_array_equal(res[1][4], res[2][4])
+
+
+def test_vector_env_with_two_threads_equals_one_thread():
+    from lavendersim.backends import c_backend as C
+
+    n = 128                     # 1 280 body-steps per env step: shared over two threads
+    outs = {}
+    try:
+        for threads in (1, 2):
+            C.threads(threads)
+            ve = _vec(n)
+            ve.reset(seed=8)
+            rng = np.random.default_rng(2)
+            outs[threads] = [ve.step(rng.uniform(-1, 1, (n, 3)).astype(np.float32))[:4] for _ in range(15)]
+    finally:
+        C.threads(1)
+    assert data_equivalence(outs[1], outs[2], exact=True)
