@@ -738,13 +738,14 @@ class Sim:
         return lines
 
     # ---- stepping -------------------------------------------------------------------------
-    def _backend_advance(self, n: int) -> None:
-        """n steps on the backend, counters updated; DivergenceError from the backend as it raised it."""
+    def _backend_advance(self, n: int, restore: bool = True) -> None:
+        """n steps on the backend, counters updated; DivergenceError from the backend as it raised it (restore=False:
+        the backend keeps no snapshot and leaves the arrays as they are on failure; the caller restores)."""
         models = self._models if self._has_models else None
         ad = self._adaptive
         before = None if ad is None else ad.nfev.copy()
         self.backend.advance(self._x, self._step_params, self._step_effects, self.integrator, self.normalize, self.dt, n, models,
-                             *(() if ad is None else (ad,)))
+                             *(() if ad is None else (ad,)), restore=restore)
         self.rhs_evals += n * self._per_step if ad is None else int(np.max(ad.nfev - before, initial=0))
         self.steps += n
 
@@ -809,13 +810,17 @@ class Sim:
             while done < n:
                 m = min(self._chunk, n - done)
                 try:
-                    self._backend_advance(m)
-                except DivergenceError as e:
+                    self._backend_advance(m, restore=False)   # no copy per chunk: a failure is restored by replay
+                except DivergenceError:
                     to_chunk_start()
-                    hit = self._locate(e.step) if e.step > 0 else None
-                    if hit is not None:
-                        raise fail(done + hit[0] - 1, hit[1], hit[2]) from None
-                    raise fail(done + e.step, e.body, e.cause) from None
+                    try:     # the same steps again (bitwise), the backend keeping its snapshot: the failure, its cause named
+                        self._backend_advance(m)
+                    except DivergenceError as e:
+                        to_chunk_start()
+                        hit = self._locate(e.step) if e.step > 0 else None
+                        if hit is not None:
+                            raise fail(done + hit[0] - 1, hit[1], hit[2]) from None
+                        raise fail(done + e.step, e.body, e.cause) from None
                 v = self._violation(self._x, self._models.Omega)
                 if v is not None:
                     to_chunk_start()

@@ -242,6 +242,23 @@ def test_divergence_raises_and_restores():
     assert "omega" in str(again.value) and "euler" in str(again.value)
 
 
+def test_divergence_without_restore_names_the_step_and_leaves_the_arrays():
+    """restore=False (Sim's chunks: Sim restores by replay) takes no copy: the same step and body as with
+    restore, the arrays as the C call left them, and the error says they were not restored."""
+    state, params = diverging_setup()
+    kept, left = state.copy(), state.copy()
+    with pytest.raises(DivergenceError) as with_copy:
+        CBackend().advance(kept, params, effects_array("angular_damping"), "euler", False, 0.05, 200)
+    with pytest.raises(DivergenceError, match="not restored") as without:
+        CBackend().advance(left, params, effects_array("angular_damping"), "euler", False, 0.05, 200, restore=False)
+    assert (without.value.step, without.value.body) == (with_copy.value.step, with_copy.value.body)
+    np.testing.assert_array_equal(kept, state)
+    raw = state.copy()       # the C call alone, nobody restoring
+    status, step, body = _c.simulate(raw, params, effects_array("angular_damping"), 0, 0, 0.05, 200)
+    assert (status, step, body) == (1, without.value.step, without.value.body)
+    np.testing.assert_array_equal(left, raw)
+
+
 @pytest.mark.parametrize("nb,bad", [(3, 1), (9, 6), (8, 0), (5, 4)])
 def test_divergence_low_level_contract(nb, bad):
     """The failing body ends at its last finite state (the other rows are unspecified: CBackend

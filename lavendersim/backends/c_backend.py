@@ -314,7 +314,7 @@ class CBackend:
     name = "c"
 
     def advance(self, state, params, effects, integrator: str, normalize: bool, dt: float, n_steps: int,
-                models: Models | None = None, adaptive: Adaptive | None = None) -> None:
+                models: Models | None = None, adaptive: Adaptive | None = None, *, restore: bool = True) -> None:
         """Advance every body by n_steps steps inside C, in place (see lavendersim.backends).
 
         Parameters
@@ -337,6 +337,11 @@ class CBackend:
             Per-body joint / wheel model (Omega and applied are mutated).
         adaptive : Adaptive, optional
             Needed by dopri5 (h and nfev are mutated).
+        restore : bool, optional
+            True (default): on divergence every array is restored to its value at the call (a copy of the state is
+            taken per call: ~10-40 ns per body at 10^6 bodies). False, for a caller that keeps its own snapshot (Sim
+            restores by replay): no copy; on divergence the arrays are left as the C call left them and the error
+            names the step and body only.
 
         Raises
         ------
@@ -363,7 +368,7 @@ class CBackend:
         if effects.size == 0:
             effects = effects.reshape(0, ROW)
         user = user_effect_table(effects)
-        snapshot = state.copy()
+        snapshot = state.copy() if restore else None
         extra = ()
         if models is not None:
             nb = state.shape[0]
@@ -372,11 +377,13 @@ class CBackend:
             command = _f64_rows("command", models.command, 3, nb)
             applied = _f64_rows("applied", models.applied, 3, nb, writable=True)
             extra = (rows, Omega, command, applied)
-            snap_W, snap_u = Omega.copy(), applied.copy()
+            if restore:
+                snap_W, snap_u = Omega.copy(), applied.copy()
         if not extra:
             extra = (None, None, None, None)
         if adaptive is not None and integrator == "dopri5":
-            snap_h, snap_n = adaptive.h.copy(), adaptive.nfev.copy()
+            if restore:
+                snap_h, snap_n = adaptive.h.copy(), adaptive.nfev.copy()
             extra = extra + (adaptive.h, adaptive.nfev, adaptive.rtol, adaptive.atol)
         else:
             extra = extra + (None, None, 0.0, 0.0)
@@ -385,6 +392,9 @@ class CBackend:
                                          1 if normalize else 0, float(dt), int(n_steps), *extra)
         if status == 0:
             return
+        if not restore:
+            raise DivergenceError(step, body, "non-finite state or failed solve (arrays not restored: restore=False; "
+                                              "re-run with restore=True for the cause)")
         tol_cause = None
         if adaptive is not None and integrator == "dopri5":
             if status == 2:

@@ -506,7 +506,8 @@ class NumpyBackend:
         return self._plan
 
     def advance(self, state, params, effects, integrator: str, normalize: bool, dt: float, n_steps: int,
-                models: Models | None = None, adaptive: Adaptive | None = None) -> None:
+                models: Models | None = None, adaptive: Adaptive | None = None, *, restore: bool = True) -> None:
+        # restore: accepted for the C backend's interface; this backend always restores (it steps a copy)
         if isinstance(state, np.ndarray) and state.dtype == np.float32:   # single precision throughout
             if integrator not in FLOAT32_INTEGRATORS:
                 raise ValueError(f"integrator: float32 steps {', '.join(FLOAT32_INTEGRATORS)} only, got {integrator!r}")
