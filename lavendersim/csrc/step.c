@@ -263,21 +263,23 @@ static inline long advance_block(double *state, const double *params, const long
 
 /* Right-hand sides on the lockstep RK4 path (`forced`): LV_RHS_FREE the free kernel; else each body's
    effects summed in table order, then LV_RHS_FULL the full kernel (as body_rhs), or LV_RHS_TORQUE the
-   torque-only one for bodies whose effects add no force (bitwise the full kernel with F = 0). */
+   torque-only one for bodies whose effects add no force (bitwise the full kernel with F = 0). Each on
+   the body's Euler coefficients c[j] (lv_euler_coefficients, once per call): the *_c kernels divide by
+   nothing and give bitwise the I_b kernels' results (the same printed arithmetic). */
 enum { LV_RHS_FREE = 0, LV_RHS_TORQUE = 1, LV_RHS_FULL = 2 };
 #define LV_RK4_RHS(in, out)                                                                             \
     do {                                                                                                \
         if (forced == LV_RHS_FREE) {                                                                    \
-            for (j = 0; j < n; j++) lv_rigid_body_rhs_free(in[j], I[j], out[j]);                        \
+            for (j = 0; j < n; j++) lv_rigid_body_rhs_free_c(in[j], cf[j], out[j]);                     \
         } else {                                                                                        \
             for (j = 0; j < n; j++) {                                                                   \
                 F[j][0] = F[j][1] = F[j][2] = tau[j][0] = tau[j][1] = tau[j][2] = 0.0;                  \
-                effect_sums(in[j], in[j] + LV_STATE_V_W, m[j], I[j], refs[j], n_refs[j], F[j], tau[j]);            \
+                effect_sums(in[j], in[j] + LV_STATE_V_W, m[j], I[j], refs[j], n_refs[j], F[j], tau[j]);  \
             }                                                                                           \
             if (forced == LV_RHS_TORQUE)                                                                \
-                for (j = 0; j < n; j++) lv_rigid_body_rhs_torque(in[j], I[j], tau[j], out[j]);          \
+                for (j = 0; j < n; j++) lv_rigid_body_rhs_torque_c(in[j], cf[j], tau[j], out[j]);       \
             else                                                                                        \
-                for (j = 0; j < n; j++) lv_rigid_body_rhs(in[j], m[j], I[j], F[j], tau[j], out[j]);     \
+                for (j = 0; j < n; j++) lv_rigid_body_rhs_c(in[j], m[j], cf[j], F[j], tau[j], out[j]);  \
         }                                                                                               \
     } while (0)
 
@@ -325,7 +327,7 @@ static inline long advance_free_rk4(double *state, const double *params, const l
 {
     double x[LV_BLOCK][LV_STATE_SIZE], xn[LV_BLOCK][LV_STATE_SIZE], k1[LV_BLOCK][LV_STATE_SIZE],
         k2[LV_BLOCK][LV_STATE_SIZE], k3[LV_BLOCK][LV_STATE_SIZE], k4[LV_BLOCK][LV_STATE_SIZE],
-        tmp[LV_BLOCK][LV_STATE_SIZE], I[LV_BLOCK][3], snap[LV_BLOCK][LV_STATE_SIZE];
+        tmp[LV_BLOCK][LV_STATE_SIZE], I[LV_BLOCK][3], cf[LV_BLOCK][LV_EULER_SIZE], snap[LV_BLOCK][LV_STATE_SIZE];
     double F[LV_BLOCK][3], tau[LV_BLOCK][3], m[LV_BLOCK];
     const lv_effect_ref *refs[LV_BLOCK];
     long n_refs[LV_BLOCK];
@@ -335,6 +337,7 @@ static inline long advance_free_rk4(double *state, const double *params, const l
     for (j = 0; j < n; j++) {
         memcpy(x[j], state + ids[j] * LV_STATE_SIZE, sizeof x[j]);
         memcpy(I[j], params + ids[j] * LV_PARAM_SIZE + LV_PARAM_I_B, sizeof I[j]);
+        lv_euler_coefficients(I[j], cf[j]);
         m[j] = params[ids[j] * LV_PARAM_SIZE + LV_PARAM_M];
         refs[j] = ix->refs + ix->start[ids[j]];
         n_refs[j] = ix->start[ids[j] + 1] - ix->start[ids[j]];
