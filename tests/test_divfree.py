@@ -18,6 +18,7 @@ import lavendersim as lv
 from lavendersim import _lavender_c as C
 from lavendersim.backends.c_backend import eval_kernel
 
+
 def _gen_dir() -> Path:
     from lavendersim.backends.c_backend import generated_dir
 
