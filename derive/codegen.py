@@ -550,7 +550,7 @@ def latex_of(p: Printed) -> str:
     if len(direct) <= LATEX_DIRECT_MAX and not k.where:   # named subexpressions: show them (CSE form)
         return direct
     names = _tex_symbols(k, p.temps)
-    rows = [f"t_{{{str(t)[1:]}}} &= {sp.latex(e, symbol_names=names)}" for t, e in p.temps]
+    rows = [f"{names[t]} &= {sp.latex(e, symbol_names=names)}" for t, e in p.temps]
     idx = 0
     for a in k.outputs:
         rows.append(f"{_tex_name(a.name)} &= {_tex_value(a, p.reduced[idx:idx + a.size], names)}")
