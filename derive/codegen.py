@@ -211,20 +211,33 @@ def _unpack(k: Kernel, used: set, emit) -> None:
                 emit(a, i, s)
 
 
+def _used_where(where: list, exprs: list) -> list:
+    """The named subexpressions the outputs need (directly or through later ones), in order."""
+    need = set().union(*(sp.sympify(e).free_symbols for e in exprs)) if exprs else set()
+    keep = []
+    for s, e in reversed(where):
+        if s in need:
+            keep.append((s, e))
+            need |= e.free_symbols
+    return keep[::-1]
+
+
 class Printed:
     """One kernel after CSE: temporaries, reduced outputs and op counts."""
 
     def __init__(self, k: Kernel):
         self.k = k
-        exprs = k.output_exprs
-        self.ops_before = int(sum(sp.count_ops(e) for e in exprs))
+        self.ops_before = int(sum(sp.count_ops(e) for e in k.output_exprs))
+        # Named subexpressions (k.where) are atoms to CSE and printed first, as written, as temporaries.
+        exprs = k.printed_exprs
         temps, reduced = sp.cse(exprs, symbols=sp.numbered_symbols("t"), order="canonical")
-        self.temps, self.reduced = _hoist_pow_bases(temps, reduced)
+        self.temps, self.reduced = _hoist_pow_bases(_used_where(k.where, exprs) + temps, reduced)
         self.ops_after = int(sum(sp.count_ops(e) for _, e in self.temps) + sum(sp.count_ops(e) for e in self.reduced))
-        self.has_piecewise = any(e.has(sp.Piecewise) for e in exprs)
-        free = set().union(*(sp.sympify(e).free_symbols for e in exprs)) if exprs else set()
-        self.used = free
-        unknown = free - set(k.input_symbols)
+        self.has_piecewise = any(e.has(sp.Piecewise) for e in k.output_exprs)
+        named = {s for s, _ in k.where}
+        free = set().union(*(sp.sympify(e).free_symbols for e in exprs + [e for _, e in k.where])) if exprs else set()
+        self.used = free - named
+        unknown = self.used - set(k.input_symbols)
         if unknown:
             raise RuntimeError(f"derive: kernel {k.name} uses undeclared symbols {sorted(map(str, unknown))}")
 
@@ -507,8 +520,13 @@ def _tex_symbols(k: Kernel, temps) -> dict:
             else:
                 ix = str(i) if len(a.shape) == 1 else f"{i // a.shape[1]}{i % a.shape[1]}"
                 names[s] = _tex_name(a.name, ix)
+    named = {s for s, _ in k.where}
     for t, _ in temps:
-        names[t] = f"t_{{{str(t)[1:]}}}"
+        if t in named:   # a where-symbol: c_b_0 -> c_{b,0}
+            head, _, ix = str(t).rpartition("_")
+            names[t] = _tex_name(head, ix)
+        else:
+            names[t] = f"t_{{{str(t)[1:]}}}"
     return names
 
 
@@ -529,10 +547,10 @@ def latex_of(p: Printed) -> str:
         lines.append(f"{_tex_name(a.name)} = {_tex_value(a, flat[idx:idx + a.size], names)}")
         idx += a.size
     direct = r",\quad ".join(lines)
-    if len(direct) <= LATEX_DIRECT_MAX:
+    if len(direct) <= LATEX_DIRECT_MAX and not k.where:   # named subexpressions: show them (CSE form)
         return direct
     names = _tex_symbols(k, p.temps)
-    rows = [f"t_{{{str(t)[1:]}}} &= {sp.latex(e, symbol_names=names)}" for t, e in p.temps]
+    rows = [f"{names[t]} &= {sp.latex(e, symbol_names=names)}" for t, e in p.temps]
     idx = 0
     for a in k.outputs:
         rows.append(f"{_tex_name(a.name)} &= {_tex_value(a, p.reduced[idx:idx + a.size], names)}")

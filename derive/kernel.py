@@ -74,7 +74,14 @@ class Arg:
 @dataclass
 class Kernel:
     """A kernel: summary, an optional human caption (`latex`, shown beside the equation; EQUATIONS.md
-    prints the equation itself from the outputs with sympy.latex), inputs, outputs, group, notes."""
+    prints the equation itself from the outputs with sympy.latex), inputs, outputs, group, notes.
+
+    where: named subexpressions [(symbol, expression)], evaluated in order before the outputs, which
+    may use their symbols (an expression may use earlier ones). The printers compute each once, as
+    written, and keep it as one rounded number: SymPy would otherwise flatten a product such as
+    c·ω_y·ω_z with c = (I_y − I_z)/I_x into ω_y ω_z (I_y − I_z)/I_x, a division per call, where the
+    grouped form lets a caller hoist c out of its loop (see derive/rigid_body.py). `output_exprs` has
+    them substituted (the mathematics); `printed_exprs` keeps them (what the code computes)."""
 
     name: str
     summary: str
@@ -83,11 +90,28 @@ class Kernel:
     outputs: list[Arg]
     group: str = ""
     notes: list[str] = field(default_factory=list)
+    where: list[tuple[sp.Symbol, sp.Expr]] = field(default_factory=list)
+
+    def __post_init__(self):
+        names = {s for s in self.input_symbols}
+        for s, _ in self.where:
+            if not isinstance(s, sp.Symbol) or s in names:
+                raise ValueError(f"kernel {self.name}: where-symbol {s!r} is not a fresh symbol")
+            names.add(s)
 
     @property
     def input_symbols(self) -> list[sp.Symbol]:
         return [s for a in self.inputs for s in a.flat]
 
     @property
-    def output_exprs(self) -> list[sp.Expr]:
+    def printed_exprs(self) -> list[sp.Expr]:
+        """The outputs as the code computes them: where-symbols kept as names."""
         return [sp.sympify(e) for a in self.outputs for e in a.flat]
+
+    @property
+    def output_exprs(self) -> list[sp.Expr]:
+        """The outputs over the inputs only (where-symbols substituted, last first)."""
+        exprs = self.printed_exprs
+        for s, e in reversed(self.where):
+            exprs = [x.xreplace({s: e}) for x in exprs]
+        return exprs

@@ -98,7 +98,12 @@ XS = Layout("XS", "extended state of a body with a model: x then the wheel rates
     Field("Omega", 3, "wheel rates relative to the body, rad/s"),
 ])
 
-LAYOUTS = (STATE, PARAM, MODEL, XS)
+EULER = Layout("EULER", "Euler coefficients c_b of a body (derive/rigid_body.py euler_coefficients)", [
+    Field("k", 3, "k_x = (I_y - I_z)/I_x (cyclic), body frame, dimensionless"),
+    Field("r", 3, "r_x = 1/I_x (cyclic), body frame, 1/(kg·m²)"),
+])
+
+LAYOUTS = (STATE, PARAM, MODEL, XS, EULER)
 
 # Model kinds: bits of MODEL.kind.
 KINDS = (("JOINT", 1, "world-anchored spherical joint: p_w, v_w follow from q, omega"),

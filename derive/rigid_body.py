@@ -5,30 +5,47 @@ printed as generated/layout.h and layout.py): p_w (3) position of the centre of 
 m; q (4) orientation R_WB as (x, y, z, w), unit; v_w (3) velocity of the centre of mass, world
 frame, m/s; omega_b (3) angular velocity, body frame, rad/s.
 Inertia is diagonal in the body frame (principal axes): I_b = (I_x, I_y, I_z), kg·m².
+
+Euler's equations are printed division-free: ω̇_x = k_x ω_y ω_z + r_x τ_x (cyclic) with the
+inertia-only coefficients c_b = (k_x, k_y, k_z, r_x, r_y, r_z), k_x = (I_y − I_z)/I_x, r_x = 1/I_x
+(euler_coefficients). The kernels that take I_b compute c_b first as named subexpressions
+(Kernel.where), so they print exactly the arithmetic of the *_c kernels that take c_b: a step loop
+computes c_b once per call (kernel euler_coefficients) and its stages divide by nothing, with bits
+equal to the I_b kernels'.
 """
 from __future__ import annotations
 
 import sympy as sp
 
 from .kernel import Arg, Kernel, scalar, vec
+from .layout import EULER
 from .layout import STATE as X
 from .quaternion import quat_rate_body, rotation_matrix
 
 STATE = "state (p_w[3] m, q[4] (x,y,z,w), v_w[3] m/s, omega_b[3] rad/s)"
 
 
+def euler_coefficients(I_b: sp.Matrix) -> sp.Matrix:
+    """c_b = (k_x, k_y, k_z, r_x, r_y, r_z): k_x = (I_y − I_z)/I_x (cyclic, dimensionless), r_x = 1/I_x
+    (1/(kg·m²)). Exactly 0 = k_x when I_y = I_z, so the gyroscopic term of a symmetric axis is exactly zero."""
+    k = [(I_b[(i + 1) % 3] - I_b[(i + 2) % 3]) / I_b[i] for i in range(3)]
+    return EULER.assemble(k=k, r=[1 / I_b[i] for i in range(3)])
+
+
+def euler_rhs_c(c_b, w: sp.Matrix, tau_b) -> sp.Matrix:
+    """ω̇_b from the coefficients c_b (euler_coefficients): ω̇_x = k_x ω_y ω_z + r_x τ_x (cyclic)."""
+    k, r = EULER.part(c_b, "k"), EULER.part(c_b, "r")
+    return sp.Matrix([k[i] * w[(i + 1) % 3] * w[(i + 2) % 3] + r[i] * tau_b[i] for i in range(3)])
+
+
 def euler_rhs(I_b: sp.Matrix, w: sp.Matrix, tau_b) -> sp.Matrix:
-    """ω̇_b from I ω̇ + ω × (I ω) = τ, written per axis as I_x ω̇_x = (I_y − I_z) ω_y ω_z + τ_x
-    (and cyclic) so that the gyroscopic term is exactly zero for isotropic inertia."""
-    out = []
-    for i in range(3):
-        j, k = (i + 1) % 3, (i + 2) % 3
-        out.append(((I_b[j] - I_b[k]) * w[j] * w[k] + tau_b[i]) / I_b[i])
-    return sp.Matrix(out)
+    """ω̇_b from I ω̇ + ω × (I ω) = τ, per axis (the coefficients of euler_coefficients substituted):
+    ω̇_x = ((I_y − I_z)/I_x) ω_y ω_z + τ_x/I_x (and cyclic)."""
+    return euler_rhs_c(euler_coefficients(I_b), w, tau_b)
 
 
 def _check_euler(I_b, w, tau):
-    """Proof that the per-axis form is I⁻¹(τ − ω × Iω)."""
+    """Proof that the per-axis coefficient form is I⁻¹(τ − ω × Iω)."""
     I = sp.diag(*I_b)
     ref = I.inv() * (tau - w.cross(I * w))
     if (ref - euler_rhs(I_b, w, tau)).applyfunc(sp.simplify) != sp.zeros(3, 1):
@@ -41,31 +58,40 @@ def kernels() -> list[Kernel]:
     m = scalar("m", positive=True)
     I_b, F_w, tau_w, tau_b = vec("I_b", 3), vec("F_w", 3), vec("tau_w", 3), vec("tau_b", 3)
     omega_b, v_w, q, vec_w = vec("omega_b", 3), vec("v_w", 3), vec("q", 4), vec("v", 3)
+    c_b = vec("c_b", EULER.size)
     _check_euler(I_b, omega_b, tau_b)
+    # c_b as named subexpressions of the kernels that take I_b: the same printed arithmetic as the *_c kernels
+    where = list(zip(c_b, euler_coefficients(I_b)))
     xq, xv, xw = X.part(x, "q"), X.part(x, "v_w"), X.part(x, "omega_b")
     R = rotation_matrix(xq)
     qdot = quat_rate_body(xq, xw)
-    full = X.assemble(p_w=xv, q=qdot, v_w=F_w / m, omega_b=euler_rhs(I_b, xw, R.T * tau_w))
-    free = X.assemble(p_w=xv, q=qdot, v_w=sp.zeros(3, 1), omega_b=euler_rhs(I_b, xw, sp.zeros(3, 1)))
+    full = X.assemble(p_w=xv, q=qdot, v_w=F_w / m, omega_b=euler_rhs_c(c_b, xw, R.T * tau_w))
+    free = X.assemble(p_w=xv, q=qdot, v_w=sp.zeros(3, 1), omega_b=euler_rhs_c(c_b, xw, sp.zeros(3, 1)))
+    torque = full.subs({F_w[i]: 0 for i in range(3)})
     Rq = rotation_matrix(q)
     inv_apply = Rq * sp.diag(*[1 / I_b[i] for i in range(3)]) * Rq.T * vec_w
     ke = (m * v_w.dot(v_w) + sum(I_b[i] * omega_b[i] ** 2 for i in range(3))) / 2
     IB = ("I_b", I_b, "principal moments, body frame, kg·m²", "positive")
+    CB = ("c_b", c_b, "Euler coefficients (k_x, k_y, k_z, r_x, r_y, r_z), body frame: k_x = (I_y − I_z)/I_x "
+          "(cyclic, dimensionless), r_x = 1/I_x (1/(kg·m²)); from euler_coefficients")
     QU = ("q", q, "orientation (x, y, z, w), R_WB, unit", "unit_quaternion")
+    XS = ("x", x, STATE, "real")
+    same = "Bitwise the I_b kernel of the same name without _c, given c_b = euler_coefficients(I_b) (the same printed arithmetic)."
     return [
         Kernel("euler_equations", "Euler's rotation equations with external torque, body frame",
                r"I_B \dot\omega_B + \omega_B \times (I_B \omega_B) = \tau_B",
                [Arg(*IB), Arg("omega_b", omega_b, "angular velocity, body frame, rad/s"), Arg("tau_b", tau_b, "torque, body frame, N·m")],
-               [Arg("omega_dot_b", euler_rhs(I_b, omega_b, tau_b), "angular acceleration, body frame, rad/s²")], g),
+               [Arg("omega_dot_b", euler_rhs_c(c_b, omega_b, tau_b), "angular acceleration, body frame, rad/s²")], g,
+               where=where),
         Kernel("rigid_body_rhs", "State derivative under a world force at the COM and a world torque",
                r"\dot p_W = v_W,\ \dot q = \tfrac12 q \otimes [\omega_B,0],\ \dot v_W = F_W/m,\ \dot\omega_B = I_B^{-1}(R^T\tau_W - \omega_B \times I_B\omega_B)",
-               [Arg("x", x, STATE, "real"), Arg("m", m, "mass, kg", "positive"), Arg(*IB),
+               [Arg(*XS), Arg("m", m, "mass, kg", "positive"), Arg(*IB),
                 Arg("F_w", F_w, "total force at the COM, world frame, N"), Arg("tau_w", tau_w, "total torque about the COM, world frame, N·m")],
                [Arg("x_dot", full, "d/dt of the state")], g,
-               notes=["q need not be exactly unit: the body-form rate is used as is; R(q) assumes unit q."]),
+               notes=["q need not be exactly unit: the body-form rate is used as is; R(q) assumes unit q."], where=where),
         Kernel("rigid_body_rhs_free", "State derivative of a torque-free, force-free body",
                r"\dot p_W = v_W,\ \dot q = \tfrac12 q \otimes [\omega_B,0],\ \dot v_W = 0,\ I_x\dot\omega_x = (I_y - I_z)\omega_y\omega_z\ \text{(cyclic)}",
-               [Arg("x", x, STATE, "real"), Arg(*IB)], [Arg("x_dot", free, "d/dt of the state")], g),
+               [Arg(*XS), Arg(*IB)], [Arg("x_dot", free, "d/dt of the state")], g, where=where),
         Kernel("apply_inv_inertia", "Multiply a world vector by I_W⁻¹: rotate into the body, apply the diagonal inverse, rotate back",
                r"I_W^{-1} v = R_{WB}\, \operatorname{diag}(1/I_x, 1/I_y, 1/I_z)\, R_{WB}^T v",
                [Arg(*QU), Arg(*IB), Arg("v", vec_w, "vector, world frame (e.g. torque, N·m)")],
@@ -81,7 +107,25 @@ def kernels() -> list[Kernel]:
                [Arg("L_w", Rq * sp.diag(*I_b) * omega_b, "angular momentum, world frame, kg·m²/s")], g),
         Kernel("rigid_body_rhs_torque", "State derivative under a world torque only (rigid_body_rhs with F_W = 0, for bodies whose effects add no force)",
                r"\dot v_W = 0,\ \text{else as rigid\_body\_rhs}",
-               [Arg("x", x, STATE, "real"), Arg(*IB), Arg("tau_w", tau_w, "total torque about the COM, world frame, N·m")],
-               [Arg("x_dot", full.subs({F_w[i]: 0 for i in range(3)}), "d/dt of the state")], g,
-               notes=["Bitwise rigid_body_rhs with F_W = 0 (its v rate F_W/m is then exactly +0)."]),
+               [Arg(*XS), Arg(*IB), Arg("tau_w", tau_w, "total torque about the COM, world frame, N·m")],
+               [Arg("x_dot", torque, "d/dt of the state")], g,
+               notes=["Bitwise rigid_body_rhs with F_W = 0 (its v rate F_W/m is then exactly +0)."], where=where),
+        Kernel("euler_coefficients", "The inertia-only coefficients of Euler's equations, computed once per body and call",
+               r"k_x = (I_y - I_z)/I_x,\ r_x = 1/I_x\ \text{(cyclic)}",
+               [Arg(*IB)], [Arg("c_b", c_b, "(k_x, k_y, k_z, r_x, r_y, r_z), body frame; k dimensionless, r 1/(kg·m²)")], g,
+               notes=["The step loops call it once per body and call; the *_c right-hand sides then divide by nothing.",
+                      "Printed from the same named subexpressions as the I_b kernels, so their c_b is bitwise this one."],
+               where=where),
+        Kernel("rigid_body_rhs_free_c", "rigid_body_rhs_free on the Euler coefficients c_b (no division)",
+               r"\dot\omega_x = k_x\omega_y\omega_z\ \text{(cyclic), else as rigid\_body\_rhs\_free}",
+               [Arg(*XS), Arg(*CB)], [Arg("x_dot", free, "d/dt of the state")], g, notes=[same]),
+        Kernel("rigid_body_rhs_torque_c", "rigid_body_rhs_torque on the Euler coefficients c_b (no division)",
+               r"\dot\omega_x = k_x\omega_y\omega_z + r_x (R^T\tau_W)_x\ \text{(cyclic), else as rigid\_body\_rhs\_torque}",
+               [Arg(*XS), Arg(*CB), Arg("tau_w", tau_w, "total torque about the COM, world frame, N·m")],
+               [Arg("x_dot", torque, "d/dt of the state")], g, notes=[same]),
+        Kernel("rigid_body_rhs_c", "rigid_body_rhs on the Euler coefficients c_b (one division: F_W/m)",
+               r"\dot\omega_x = k_x\omega_y\omega_z + r_x (R^T\tau_W)_x\ \text{(cyclic), else as rigid\_body\_rhs}",
+               [Arg(*XS), Arg("m", m, "mass, kg", "positive"), Arg(*CB),
+                Arg("F_w", F_w, "total force at the COM, world frame, N"), Arg("tau_w", tau_w, "total torque about the COM, world frame, N·m")],
+               [Arg("x_dot", full, "d/dt of the state")], g, notes=[same]),
     ]

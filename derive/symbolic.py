@@ -22,7 +22,7 @@ Matrix([
 [                 0,                  0, m*(h**2 + w**2)/12]])
 >>> I_x, I_y, I_z = sp.symbols("I_x I_y I_z", positive=True)
 >>> S.euler_equations()[0]
-(omega_y*omega_z*(I_y - I_z) + tau_x)/I_x
+omega_y*omega_z*(I_y - I_z)/I_x + tau_x/I_x
 >>> f = sp.lambdify([S.symbols("I_b"), S.symbols("omega_b"), S.symbols("tau_b")], S.euler_equations(), "numpy")
 >>> [round(float(v), 4) for v in f([1.0, 2.0, 3.0], [0.1, 1.0, 0.1], [0.0, 0.0, 0.0]).ravel()]
 [-0.1, 0.01, -0.0333]
@@ -185,8 +185,9 @@ def euler_equations(I_b=None, omega_b=None, tau_b=None) -> sp.Matrix:
     """Euler's rotation equations solved for the angular acceleration, body frame.
 
     ``I ω̇ + ω × (I ω) = τ`` with principal moments, per axis
-    ``ω̇_x = ((I_y − I_z) ω_y ω_z + τ_x) / I_x`` (and cyclic): the expression the ``euler_equations``
-    kernel is printed from (derive/rigid_body.py).
+    ``ω̇_x = ((I_y − I_z)/I_x) ω_y ω_z + τ_x/I_x`` (and cyclic): the expression the ``euler_equations``
+    kernel is printed from (derive/rigid_body.py), there with the inertia-only coefficients
+    ``(I_y − I_z)/I_x`` and ``1/I_x`` computed first as named subexpressions.
 
     Parameters
     ----------

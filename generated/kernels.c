@@ -672,10 +672,15 @@ void lv_euler_equations(const double *I_b, const double *omega_b, const double *
     const double tau_b_0 = tau_b[0];
     const double tau_b_1 = tau_b[1];
     const double tau_b_2 = tau_b[2];
-    const double t0 = -I_b_2;
-    omega_dot_b[0] = (omega_b_1*omega_b_2*(I_b_1 + t0) + tau_b_0)/I_b_0;
-    omega_dot_b[1] = (omega_b_0*omega_b_2*(-I_b_0 - t0) + tau_b_1)/I_b_1;
-    omega_dot_b[2] = (omega_b_0*omega_b_1*(I_b_0 - I_b_1) + tau_b_2)/I_b_2;
+    const double c_b_0 = (I_b_1 - I_b_2)/I_b_0;
+    const double c_b_1 = (-I_b_0 + I_b_2)/I_b_1;
+    const double c_b_2 = (I_b_0 - I_b_1)/I_b_2;
+    const double c_b_3 = (1.0/I_b_0);
+    const double c_b_4 = (1.0/I_b_1);
+    const double c_b_5 = (1.0/I_b_2);
+    omega_dot_b[0] = c_b_0*omega_b_1*omega_b_2 + c_b_3*tau_b_0;
+    omega_dot_b[1] = c_b_1*omega_b_0*omega_b_2 + c_b_4*tau_b_1;
+    omega_dot_b[2] = c_b_2*omega_b_0*omega_b_1 + c_b_5*tau_b_2;
 }
 
 void lv_rigid_body_rhs(const double *x, double m, const double *I_b, const double *F_w, const double *tau_w, double *x_dot) {
@@ -698,21 +703,26 @@ void lv_rigid_body_rhs(const double *x, double m, const double *I_b, const doubl
     const double tau_w_0 = tau_w[0];
     const double tau_w_1 = tau_w[1];
     const double tau_w_2 = tau_w[2];
+    const double c_b_0 = (I_b_1 - I_b_2)/I_b_0;
+    const double c_b_1 = (-I_b_0 + I_b_2)/I_b_1;
+    const double c_b_2 = (I_b_0 - I_b_1)/I_b_2;
+    const double c_b_3 = (1.0/I_b_0);
+    const double c_b_4 = (1.0/I_b_1);
+    const double c_b_5 = (1.0/I_b_2);
     const double t0 = ((1.0/2.0))*x_10;
     const double t1 = ((1.0/2.0))*x_11;
     const double t2 = ((1.0/2.0))*x_12;
     const double t3 = (1.0/m);
-    const double t4 = -I_b_2;
-    const double t5 = 2*x_4;
-    const double t6 = t5*x_3;
-    const double t7 = 2*x_5;
-    const double t8 = t7*x_6;
-    const double t9 = t7*x_3;
-    const double t10 = t5*x_6;
-    const double t11 = 2*(x_4*x_4);
-    const double t12 = 2*(x_5*x_5) - 1;
-    const double t13 = 2*x_3*x_6;
-    const double t14 = 2*(x_3*x_3);
+    const double t4 = 2*x_4;
+    const double t5 = t4*x_3;
+    const double t6 = 2*x_5;
+    const double t7 = t6*x_6;
+    const double t8 = t6*x_3;
+    const double t9 = t4*x_6;
+    const double t10 = 2*(x_4*x_4);
+    const double t11 = 2*(x_5*x_5) - 1;
+    const double t12 = 2*x_3*x_6;
+    const double t13 = 2*(x_3*x_3);
     x_dot[0] = x_7;
     x_dot[1] = x_8;
     x_dot[2] = x_9;
@@ -723,9 +733,9 @@ void lv_rigid_body_rhs(const double *x, double m, const double *I_b, const doubl
     x_dot[7] = F_w_0*t3;
     x_dot[8] = F_w_1*t3;
     x_dot[9] = F_w_2*t3;
-    x_dot[10] = (tau_w_0*(-t11 - t12) + tau_w_1*(t6 + t8) + tau_w_2*(-t10 + t9) + x_11*x_12*(I_b_1 + t4))/I_b_0;
-    x_dot[11] = (tau_w_0*(t6 - t8) + tau_w_1*(-t12 - t14) + tau_w_2*(t13 + t5*x_5) + x_10*x_12*(-I_b_0 - t4))/I_b_1;
-    x_dot[12] = (tau_w_0*(t10 + t9) + tau_w_1*(-t13 + 2*x_4*x_5) + tau_w_2*(-t11 - t14 + 1) + x_10*x_11*(I_b_0 - I_b_1))/I_b_2;
+    x_dot[10] = c_b_0*x_11*x_12 + c_b_3*(tau_w_0*(-t10 - t11) + tau_w_1*(t5 + t7) + tau_w_2*(t8 - t9));
+    x_dot[11] = c_b_1*x_10*x_12 + c_b_4*(tau_w_0*(t5 - t7) + tau_w_1*(-t11 - t13) + tau_w_2*(t12 + t4*x_5));
+    x_dot[12] = c_b_2*x_10*x_11 + c_b_5*(tau_w_0*(t8 + t9) + tau_w_1*(-t12 + 2*x_4*x_5) + tau_w_2*(-t10 - t13 + 1));
 }
 
 void lv_rigid_body_rhs_free(const double *x, const double *I_b, double *x_dot) {
@@ -742,10 +752,12 @@ void lv_rigid_body_rhs_free(const double *x, const double *I_b, double *x_dot) {
     const double I_b_0 = I_b[0];
     const double I_b_1 = I_b[1];
     const double I_b_2 = I_b[2];
+    const double c_b_0 = (I_b_1 - I_b_2)/I_b_0;
+    const double c_b_1 = (-I_b_0 + I_b_2)/I_b_1;
+    const double c_b_2 = (I_b_0 - I_b_1)/I_b_2;
     const double t0 = ((1.0/2.0))*x_10;
     const double t1 = ((1.0/2.0))*x_11;
     const double t2 = ((1.0/2.0))*x_12;
-    const double t3 = -I_b_2;
     x_dot[0] = x_7;
     x_dot[1] = x_8;
     x_dot[2] = x_9;
@@ -756,9 +768,9 @@ void lv_rigid_body_rhs_free(const double *x, const double *I_b, double *x_dot) {
     x_dot[7] = 0;
     x_dot[8] = 0;
     x_dot[9] = 0;
-    x_dot[10] = x_11*x_12*(I_b_1 + t3)/I_b_0;
-    x_dot[11] = x_10*x_12*(-I_b_0 - t3)/I_b_1;
-    x_dot[12] = x_10*x_11*(I_b_0 - I_b_1)/I_b_2;
+    x_dot[10] = c_b_0*x_11*x_12;
+    x_dot[11] = c_b_1*x_10*x_12;
+    x_dot[12] = c_b_2*x_10*x_11;
 }
 
 void lv_apply_inv_inertia(const double *q, const double *I_b, const double *v, double *out) {
@@ -887,10 +899,165 @@ void lv_rigid_body_rhs_torque(const double *x, const double *I_b, const double *
     const double tau_w_0 = tau_w[0];
     const double tau_w_1 = tau_w[1];
     const double tau_w_2 = tau_w[2];
+    const double c_b_0 = (I_b_1 - I_b_2)/I_b_0;
+    const double c_b_1 = (-I_b_0 + I_b_2)/I_b_1;
+    const double c_b_2 = (I_b_0 - I_b_1)/I_b_2;
+    const double c_b_3 = (1.0/I_b_0);
+    const double c_b_4 = (1.0/I_b_1);
+    const double c_b_5 = (1.0/I_b_2);
     const double t0 = ((1.0/2.0))*x_10;
     const double t1 = ((1.0/2.0))*x_11;
     const double t2 = ((1.0/2.0))*x_12;
-    const double t3 = -I_b_2;
+    const double t3 = 2*x_4;
+    const double t4 = t3*x_3;
+    const double t5 = 2*x_5;
+    const double t6 = t5*x_6;
+    const double t7 = t5*x_3;
+    const double t8 = t3*x_6;
+    const double t9 = 2*(x_4*x_4);
+    const double t10 = 2*(x_5*x_5) - 1;
+    const double t11 = 2*x_3*x_6;
+    const double t12 = 2*(x_3*x_3);
+    x_dot[0] = x_7;
+    x_dot[1] = x_8;
+    x_dot[2] = x_9;
+    x_dot[3] = t0*x_6 - t1*x_5 + t2*x_4;
+    x_dot[4] = t0*x_5 + t1*x_6 - t2*x_3;
+    x_dot[5] = -t0*x_4 + t1*x_3 + t2*x_6;
+    x_dot[6] = -t0*x_3 - t1*x_4 - t2*x_5;
+    x_dot[7] = 0;
+    x_dot[8] = 0;
+    x_dot[9] = 0;
+    x_dot[10] = c_b_0*x_11*x_12 + c_b_3*(tau_w_0*(-t10 - t9) + tau_w_1*(t4 + t6) + tau_w_2*(t7 - t8));
+    x_dot[11] = c_b_1*x_10*x_12 + c_b_4*(tau_w_0*(t4 - t6) + tau_w_1*(-t10 - t12) + tau_w_2*(t11 + t3*x_5));
+    x_dot[12] = c_b_2*x_10*x_11 + c_b_5*(tau_w_0*(t7 + t8) + tau_w_1*(-t11 + 2*x_4*x_5) + tau_w_2*(-t12 - t9 + 1));
+}
+
+void lv_euler_coefficients(const double *I_b, double *c_b) {
+    const double I_b_0 = I_b[0];
+    const double I_b_1 = I_b[1];
+    const double I_b_2 = I_b[2];
+    const double c_b_0 = (I_b_1 - I_b_2)/I_b_0;
+    const double c_b_1 = (-I_b_0 + I_b_2)/I_b_1;
+    const double c_b_2 = (I_b_0 - I_b_1)/I_b_2;
+    const double c_b_3 = (1.0/I_b_0);
+    const double c_b_4 = (1.0/I_b_1);
+    const double c_b_5 = (1.0/I_b_2);
+    c_b[0] = c_b_0;
+    c_b[1] = c_b_1;
+    c_b[2] = c_b_2;
+    c_b[3] = c_b_3;
+    c_b[4] = c_b_4;
+    c_b[5] = c_b_5;
+}
+
+void lv_rigid_body_rhs_free_c(const double *x, const double *c_b, double *x_dot) {
+    const double x_3 = x[3];
+    const double x_4 = x[4];
+    const double x_5 = x[5];
+    const double x_6 = x[6];
+    const double x_7 = x[7];
+    const double x_8 = x[8];
+    const double x_9 = x[9];
+    const double x_10 = x[10];
+    const double x_11 = x[11];
+    const double x_12 = x[12];
+    const double c_b_0 = c_b[0];
+    const double c_b_1 = c_b[1];
+    const double c_b_2 = c_b[2];
+    const double t0 = ((1.0/2.0))*x_10;
+    const double t1 = ((1.0/2.0))*x_11;
+    const double t2 = ((1.0/2.0))*x_12;
+    x_dot[0] = x_7;
+    x_dot[1] = x_8;
+    x_dot[2] = x_9;
+    x_dot[3] = t0*x_6 - t1*x_5 + t2*x_4;
+    x_dot[4] = t0*x_5 + t1*x_6 - t2*x_3;
+    x_dot[5] = -t0*x_4 + t1*x_3 + t2*x_6;
+    x_dot[6] = -t0*x_3 - t1*x_4 - t2*x_5;
+    x_dot[7] = 0;
+    x_dot[8] = 0;
+    x_dot[9] = 0;
+    x_dot[10] = c_b_0*x_11*x_12;
+    x_dot[11] = c_b_1*x_10*x_12;
+    x_dot[12] = c_b_2*x_10*x_11;
+}
+
+void lv_rigid_body_rhs_torque_c(const double *x, const double *c_b, const double *tau_w, double *x_dot) {
+    const double x_3 = x[3];
+    const double x_4 = x[4];
+    const double x_5 = x[5];
+    const double x_6 = x[6];
+    const double x_7 = x[7];
+    const double x_8 = x[8];
+    const double x_9 = x[9];
+    const double x_10 = x[10];
+    const double x_11 = x[11];
+    const double x_12 = x[12];
+    const double c_b_0 = c_b[0];
+    const double c_b_1 = c_b[1];
+    const double c_b_2 = c_b[2];
+    const double c_b_3 = c_b[3];
+    const double c_b_4 = c_b[4];
+    const double c_b_5 = c_b[5];
+    const double tau_w_0 = tau_w[0];
+    const double tau_w_1 = tau_w[1];
+    const double tau_w_2 = tau_w[2];
+    const double t0 = ((1.0/2.0))*x_10;
+    const double t1 = ((1.0/2.0))*x_11;
+    const double t2 = ((1.0/2.0))*x_12;
+    const double t3 = 2*x_4;
+    const double t4 = t3*x_3;
+    const double t5 = 2*x_5;
+    const double t6 = t5*x_6;
+    const double t7 = t5*x_3;
+    const double t8 = t3*x_6;
+    const double t9 = 2*(x_4*x_4);
+    const double t10 = 2*(x_5*x_5) - 1;
+    const double t11 = 2*x_3*x_6;
+    const double t12 = 2*(x_3*x_3);
+    x_dot[0] = x_7;
+    x_dot[1] = x_8;
+    x_dot[2] = x_9;
+    x_dot[3] = t0*x_6 - t1*x_5 + t2*x_4;
+    x_dot[4] = t0*x_5 + t1*x_6 - t2*x_3;
+    x_dot[5] = -t0*x_4 + t1*x_3 + t2*x_6;
+    x_dot[6] = -t0*x_3 - t1*x_4 - t2*x_5;
+    x_dot[7] = 0;
+    x_dot[8] = 0;
+    x_dot[9] = 0;
+    x_dot[10] = c_b_0*x_11*x_12 + c_b_3*(tau_w_0*(-t10 - t9) + tau_w_1*(t4 + t6) + tau_w_2*(t7 - t8));
+    x_dot[11] = c_b_1*x_10*x_12 + c_b_4*(tau_w_0*(t4 - t6) + tau_w_1*(-t10 - t12) + tau_w_2*(t11 + t3*x_5));
+    x_dot[12] = c_b_2*x_10*x_11 + c_b_5*(tau_w_0*(t7 + t8) + tau_w_1*(-t11 + 2*x_4*x_5) + tau_w_2*(-t12 - t9 + 1));
+}
+
+void lv_rigid_body_rhs_c(const double *x, double m, const double *c_b, const double *F_w, const double *tau_w, double *x_dot) {
+    const double x_3 = x[3];
+    const double x_4 = x[4];
+    const double x_5 = x[5];
+    const double x_6 = x[6];
+    const double x_7 = x[7];
+    const double x_8 = x[8];
+    const double x_9 = x[9];
+    const double x_10 = x[10];
+    const double x_11 = x[11];
+    const double x_12 = x[12];
+    const double c_b_0 = c_b[0];
+    const double c_b_1 = c_b[1];
+    const double c_b_2 = c_b[2];
+    const double c_b_3 = c_b[3];
+    const double c_b_4 = c_b[4];
+    const double c_b_5 = c_b[5];
+    const double F_w_0 = F_w[0];
+    const double F_w_1 = F_w[1];
+    const double F_w_2 = F_w[2];
+    const double tau_w_0 = tau_w[0];
+    const double tau_w_1 = tau_w[1];
+    const double tau_w_2 = tau_w[2];
+    const double t0 = ((1.0/2.0))*x_10;
+    const double t1 = ((1.0/2.0))*x_11;
+    const double t2 = ((1.0/2.0))*x_12;
+    const double t3 = (1.0/m);
     const double t4 = 2*x_4;
     const double t5 = t4*x_3;
     const double t6 = 2*x_5;
@@ -908,12 +1075,12 @@ void lv_rigid_body_rhs_torque(const double *x, const double *I_b, const double *
     x_dot[4] = t0*x_5 + t1*x_6 - t2*x_3;
     x_dot[5] = -t0*x_4 + t1*x_3 + t2*x_6;
     x_dot[6] = -t0*x_3 - t1*x_4 - t2*x_5;
-    x_dot[7] = 0;
-    x_dot[8] = 0;
-    x_dot[9] = 0;
-    x_dot[10] = (tau_w_0*(-t10 - t11) + tau_w_1*(t5 + t7) + tau_w_2*(t8 - t9) + x_11*x_12*(I_b_1 + t3))/I_b_0;
-    x_dot[11] = (tau_w_0*(t5 - t7) + tau_w_1*(-t11 - t13) + tau_w_2*(t12 + t4*x_5) + x_10*x_12*(-I_b_0 - t3))/I_b_1;
-    x_dot[12] = (tau_w_0*(t8 + t9) + tau_w_1*(-t12 + 2*x_4*x_5) + tau_w_2*(-t10 - t13 + 1) + x_10*x_11*(I_b_0 - I_b_1))/I_b_2;
+    x_dot[7] = F_w_0*t3;
+    x_dot[8] = F_w_1*t3;
+    x_dot[9] = F_w_2*t3;
+    x_dot[10] = c_b_0*x_11*x_12 + c_b_3*(tau_w_0*(-t10 - t11) + tau_w_1*(t5 + t7) + tau_w_2*(t8 - t9));
+    x_dot[11] = c_b_1*x_10*x_12 + c_b_4*(tau_w_0*(t5 - t7) + tau_w_1*(-t11 - t13) + tau_w_2*(t12 + t4*x_5));
+    x_dot[12] = c_b_2*x_10*x_11 + c_b_5*(tau_w_0*(t8 + t9) + tau_w_1*(-t12 + 2*x_4*x_5) + tau_w_2*(-t10 - t13 + 1));
 }
 
 void lv_pivot_body_rhs(const double *q, const double *omega_b, const double *I_p, const double *r_b, const double *F_w, const double *tau_w, double *q_dot, double *omega_dot_b) {
@@ -3080,6 +3247,10 @@ static void packed_world_to_body(const double *in, double *out) { lv_world_to_bo
 static void packed_kinetic_energy(const double *in, double *out) { lv_kinetic_energy(in[0], in + 1, in + 4, in + 7, out + 0); }
 static void packed_angular_momentum_world(const double *in, double *out) { lv_angular_momentum_world(in + 0, in + 4, in + 7, out + 0); }
 static void packed_rigid_body_rhs_torque(const double *in, double *out) { lv_rigid_body_rhs_torque(in + 0, in + 13, in + 16, out + 0); }
+static void packed_euler_coefficients(const double *in, double *out) { lv_euler_coefficients(in + 0, out + 0); }
+static void packed_rigid_body_rhs_free_c(const double *in, double *out) { lv_rigid_body_rhs_free_c(in + 0, in + 13, out + 0); }
+static void packed_rigid_body_rhs_torque_c(const double *in, double *out) { lv_rigid_body_rhs_torque_c(in + 0, in + 13, in + 19, out + 0); }
+static void packed_rigid_body_rhs_c(const double *in, double *out) { lv_rigid_body_rhs_c(in + 0, in[13], in + 14, in + 20, in + 23, out + 0); }
 static void packed_pivot_body_rhs(const double *in, double *out) { lv_pivot_body_rhs(in + 0, in + 4, in + 7, in + 16, in + 19, in + 22, out + 0, out + 4); }
 static void packed_wheel_body_rhs(const double *in, double *out) { lv_wheel_body_rhs(in + 0, in + 4, in + 7, in + 10, in + 19, in + 22, in + 25, in + 28, in + 31, in[34], out + 0, out + 4, out + 7); }
 static void packed_wheel_momentum(const double *in, double *out) { lv_wheel_momentum(in + 0, in + 4, in + 7, in + 10, in + 19, out + 0, out + 3); }
@@ -3151,6 +3322,10 @@ const lv_kernel_info lv_kernel_table[LV_KERNEL_COUNT] = {
     {"kinetic_energy", 10, 1, packed_kinetic_energy},
     {"angular_momentum_world", 10, 3, packed_angular_momentum_world},
     {"rigid_body_rhs_torque", 19, 13, packed_rigid_body_rhs_torque},
+    {"euler_coefficients", 3, 6, packed_euler_coefficients},
+    {"rigid_body_rhs_free_c", 19, 13, packed_rigid_body_rhs_free_c},
+    {"rigid_body_rhs_torque_c", 22, 13, packed_rigid_body_rhs_torque_c},
+    {"rigid_body_rhs_c", 26, 13, packed_rigid_body_rhs_c},
     {"pivot_body_rhs", 25, 7, packed_pivot_body_rhs},
     {"wheel_body_rhs", 35, 10, packed_wheel_body_rhs},
     {"wheel_momentum", 22, 6, packed_wheel_momentum},

@@ -11,7 +11,7 @@ typedef struct {
     void (*packed)(const double *in, double *out);
 } lv_kernel_info;
 
-#define LV_KERNEL_COUNT 69
+#define LV_KERNEL_COUNT 73
 extern const lv_kernel_info lv_kernel_table[LV_KERNEL_COUNT];
 
 /* particle_moments: One particle's mass moment and momentum (summed: m r_COM and p).
@@ -247,6 +247,33 @@ void lv_angular_momentum_world(const double *q, const double *I_b, const double 
      in  tau_w [3]: total torque about the COM, world frame, N·m
      out x_dot [13]: d/dt of the state */
 void lv_rigid_body_rhs_torque(const double *x, const double *I_b, const double *tau_w, double *x_dot);
+
+/* euler_coefficients: The inertia-only coefficients of Euler's equations, computed once per body and call.
+     in  I_b [3]: principal moments, body frame, kg·m²
+     out c_b [6]: (k_x, k_y, k_z, r_x, r_y, r_z), body frame; k dimensionless, r 1/(kg·m²) */
+void lv_euler_coefficients(const double *I_b, double *c_b);
+
+/* rigid_body_rhs_free_c: rigid_body_rhs_free on the Euler coefficients c_b (no division).
+     in  x [13]: state (p_w[3] m, q[4] (x,y,z,w), v_w[3] m/s, omega_b[3] rad/s)
+     in  c_b [6]: Euler coefficients (k_x, k_y, k_z, r_x, r_y, r_z), body frame: k_x = (I_y − I_z)/I_x (cyclic, dimensionless), r_x = 1/I_x (1/(kg·m²)); from euler_coefficients
+     out x_dot [13]: d/dt of the state */
+void lv_rigid_body_rhs_free_c(const double *x, const double *c_b, double *x_dot);
+
+/* rigid_body_rhs_torque_c: rigid_body_rhs_torque on the Euler coefficients c_b (no division).
+     in  x [13]: state (p_w[3] m, q[4] (x,y,z,w), v_w[3] m/s, omega_b[3] rad/s)
+     in  c_b [6]: Euler coefficients (k_x, k_y, k_z, r_x, r_y, r_z), body frame: k_x = (I_y − I_z)/I_x (cyclic, dimensionless), r_x = 1/I_x (1/(kg·m²)); from euler_coefficients
+     in  tau_w [3]: total torque about the COM, world frame, N·m
+     out x_dot [13]: d/dt of the state */
+void lv_rigid_body_rhs_torque_c(const double *x, const double *c_b, const double *tau_w, double *x_dot);
+
+/* rigid_body_rhs_c: rigid_body_rhs on the Euler coefficients c_b (one division: F_W/m).
+     in  x [13]: state (p_w[3] m, q[4] (x,y,z,w), v_w[3] m/s, omega_b[3] rad/s)
+     in  m scalar: mass, kg
+     in  c_b [6]: Euler coefficients (k_x, k_y, k_z, r_x, r_y, r_z), body frame: k_x = (I_y − I_z)/I_x (cyclic, dimensionless), r_x = 1/I_x (1/(kg·m²)); from euler_coefficients
+     in  F_w [3]: total force at the COM, world frame, N
+     in  tau_w [3]: total torque about the COM, world frame, N·m
+     out x_dot [13]: d/dt of the state */
+void lv_rigid_body_rhs_c(const double *x, double m, const double *c_b, const double *F_w, const double *tau_w, double *x_dot);
 
 /* pivot_body_rhs: Rotation about a world-anchored spherical joint (no wheels).
      in  q [4]: orientation (x, y, z, w), R_WB

@@ -592,8 +592,13 @@ def euler_equations(I_b, omega_b, tau_b):
     tau_b_0 = tau_b[0]
     tau_b_1 = tau_b[1]
     tau_b_2 = tau_b[2]
-    t0 = -I_b_2
-    return casadi.vertcat((omega_b_1*omega_b_2*(I_b_1 + t0) + tau_b_0)/I_b_0, (omega_b_0*omega_b_2*(-I_b_0 - t0) + tau_b_1)/I_b_1, (omega_b_0*omega_b_1*(I_b_0 - I_b_1) + tau_b_2)/I_b_2)
+    c_b_0 = (I_b_1 - I_b_2)/I_b_0
+    c_b_1 = (-I_b_0 + I_b_2)/I_b_1
+    c_b_2 = (I_b_0 - I_b_1)/I_b_2
+    c_b_3 = (1.0/I_b_0)
+    c_b_4 = (1.0/I_b_1)
+    c_b_5 = (1.0/I_b_2)
+    return casadi.vertcat(c_b_0*omega_b_1*omega_b_2 + c_b_3*tau_b_0, c_b_1*omega_b_0*omega_b_2 + c_b_4*tau_b_1, c_b_2*omega_b_0*omega_b_1 + c_b_5*tau_b_2)
 
 
 def rigid_body_rhs(x, m, I_b, F_w, tau_w):
@@ -623,22 +628,27 @@ def rigid_body_rhs(x, m, I_b, F_w, tau_w):
     tau_w_0 = tau_w[0]
     tau_w_1 = tau_w[1]
     tau_w_2 = tau_w[2]
+    c_b_0 = (I_b_1 - I_b_2)/I_b_0
+    c_b_1 = (-I_b_0 + I_b_2)/I_b_1
+    c_b_2 = (I_b_0 - I_b_1)/I_b_2
+    c_b_3 = (1.0/I_b_0)
+    c_b_4 = (1.0/I_b_1)
+    c_b_5 = (1.0/I_b_2)
     t0 = ((1.0/2.0))*x_10
     t1 = ((1.0/2.0))*x_11
     t2 = ((1.0/2.0))*x_12
     t3 = (1.0/m)
-    t4 = -I_b_2
-    t5 = 2*x_4
-    t6 = t5*x_3
-    t7 = 2*x_5
-    t8 = t7*x_6
-    t9 = t7*x_3
-    t10 = t5*x_6
-    t11 = 2*(x_4*x_4)
-    t12 = 2*(x_5*x_5) - 1
-    t13 = 2*x_3*x_6
-    t14 = 2*(x_3*x_3)
-    return casadi.vertcat(x_7, x_8, x_9, t0*x_6 - t1*x_5 + t2*x_4, t0*x_5 + t1*x_6 - t2*x_3, -t0*x_4 + t1*x_3 + t2*x_6, -t0*x_3 - t1*x_4 - t2*x_5, F_w_0*t3, F_w_1*t3, F_w_2*t3, (tau_w_0*(-t11 - t12) + tau_w_1*(t6 + t8) + tau_w_2*(-t10 + t9) + x_11*x_12*(I_b_1 + t4))/I_b_0, (tau_w_0*(t6 - t8) + tau_w_1*(-t12 - t14) + tau_w_2*(t13 + t5*x_5) + x_10*x_12*(-I_b_0 - t4))/I_b_1, (tau_w_0*(t10 + t9) + tau_w_1*(-t13 + 2*x_4*x_5) + tau_w_2*(-t11 - t14 + 1) + x_10*x_11*(I_b_0 - I_b_1))/I_b_2)
+    t4 = 2*x_4
+    t5 = t4*x_3
+    t6 = 2*x_5
+    t7 = t6*x_6
+    t8 = t6*x_3
+    t9 = t4*x_6
+    t10 = 2*(x_4*x_4)
+    t11 = 2*(x_5*x_5) - 1
+    t12 = 2*x_3*x_6
+    t13 = 2*(x_3*x_3)
+    return casadi.vertcat(x_7, x_8, x_9, t0*x_6 - t1*x_5 + t2*x_4, t0*x_5 + t1*x_6 - t2*x_3, -t0*x_4 + t1*x_3 + t2*x_6, -t0*x_3 - t1*x_4 - t2*x_5, F_w_0*t3, F_w_1*t3, F_w_2*t3, c_b_0*x_11*x_12 + c_b_3*(tau_w_0*(-t10 - t11) + tau_w_1*(t5 + t7) + tau_w_2*(t8 - t9)), c_b_1*x_10*x_12 + c_b_4*(tau_w_0*(t5 - t7) + tau_w_1*(-t11 - t13) + tau_w_2*(t12 + t4*x_5)), c_b_2*x_10*x_11 + c_b_5*(tau_w_0*(t8 + t9) + tau_w_1*(-t12 + 2*x_4*x_5) + tau_w_2*(-t10 - t13 + 1)))
 
 
 def rigid_body_rhs_free(x, I_b):
@@ -659,11 +669,13 @@ def rigid_body_rhs_free(x, I_b):
     I_b_0 = I_b[0]
     I_b_1 = I_b[1]
     I_b_2 = I_b[2]
+    c_b_0 = (I_b_1 - I_b_2)/I_b_0
+    c_b_1 = (-I_b_0 + I_b_2)/I_b_1
+    c_b_2 = (I_b_0 - I_b_1)/I_b_2
     t0 = ((1.0/2.0))*x_10
     t1 = ((1.0/2.0))*x_11
     t2 = ((1.0/2.0))*x_12
-    t3 = -I_b_2
-    return casadi.vertcat(x_7, x_8, x_9, t0*x_6 - t1*x_5 + t2*x_4, t0*x_5 + t1*x_6 - t2*x_3, -t0*x_4 + t1*x_3 + t2*x_6, -t0*x_3 - t1*x_4 - t2*x_5, 0, 0, 0, x_11*x_12*(I_b_1 + t3)/I_b_0, x_10*x_12*(-I_b_0 - t3)/I_b_1, x_10*x_11*(I_b_0 - I_b_1)/I_b_2)
+    return casadi.vertcat(x_7, x_8, x_9, t0*x_6 - t1*x_5 + t2*x_4, t0*x_5 + t1*x_6 - t2*x_3, -t0*x_4 + t1*x_3 + t2*x_6, -t0*x_3 - t1*x_4 - t2*x_5, 0, 0, 0, c_b_0*x_11*x_12, c_b_1*x_10*x_12, c_b_2*x_10*x_11)
 
 
 def apply_inv_inertia(q, I_b, v):
@@ -811,10 +823,143 @@ def rigid_body_rhs_torque(x, I_b, tau_w):
     tau_w_0 = tau_w[0]
     tau_w_1 = tau_w[1]
     tau_w_2 = tau_w[2]
+    c_b_0 = (I_b_1 - I_b_2)/I_b_0
+    c_b_1 = (-I_b_0 + I_b_2)/I_b_1
+    c_b_2 = (I_b_0 - I_b_1)/I_b_2
+    c_b_3 = (1.0/I_b_0)
+    c_b_4 = (1.0/I_b_1)
+    c_b_5 = (1.0/I_b_2)
     t0 = ((1.0/2.0))*x_10
     t1 = ((1.0/2.0))*x_11
     t2 = ((1.0/2.0))*x_12
-    t3 = -I_b_2
+    t3 = 2*x_4
+    t4 = t3*x_3
+    t5 = 2*x_5
+    t6 = t5*x_6
+    t7 = t5*x_3
+    t8 = t3*x_6
+    t9 = 2*(x_4*x_4)
+    t10 = 2*(x_5*x_5) - 1
+    t11 = 2*x_3*x_6
+    t12 = 2*(x_3*x_3)
+    return casadi.vertcat(x_7, x_8, x_9, t0*x_6 - t1*x_5 + t2*x_4, t0*x_5 + t1*x_6 - t2*x_3, -t0*x_4 + t1*x_3 + t2*x_6, -t0*x_3 - t1*x_4 - t2*x_5, 0, 0, 0, c_b_0*x_11*x_12 + c_b_3*(tau_w_0*(-t10 - t9) + tau_w_1*(t4 + t6) + tau_w_2*(t7 - t8)), c_b_1*x_10*x_12 + c_b_4*(tau_w_0*(t4 - t6) + tau_w_1*(-t10 - t12) + tau_w_2*(t11 + t3*x_5)), c_b_2*x_10*x_11 + c_b_5*(tau_w_0*(t7 + t8) + tau_w_1*(-t11 + 2*x_4*x_5) + tau_w_2*(-t12 - t9 + 1)))
+
+
+def euler_coefficients(I_b):
+    """euler_coefficients: The inertia-only coefficients of Euler's equations, computed once per body and call.
+      in  I_b [3]: principal moments, body frame, kg·m²
+      out c_b [6]: (k_x, k_y, k_z, r_x, r_y, r_z), body frame; k dimensionless, r 1/(kg·m²)"""
+    I_b_0 = I_b[0]
+    I_b_1 = I_b[1]
+    I_b_2 = I_b[2]
+    c_b_0 = (I_b_1 - I_b_2)/I_b_0
+    c_b_1 = (-I_b_0 + I_b_2)/I_b_1
+    c_b_2 = (I_b_0 - I_b_1)/I_b_2
+    c_b_3 = (1.0/I_b_0)
+    c_b_4 = (1.0/I_b_1)
+    c_b_5 = (1.0/I_b_2)
+    return casadi.vertcat(c_b_0, c_b_1, c_b_2, c_b_3, c_b_4, c_b_5)
+
+
+def rigid_body_rhs_free_c(x, c_b):
+    """rigid_body_rhs_free_c: rigid_body_rhs_free on the Euler coefficients c_b (no division).
+      in  x [13]: state (p_w[3] m, q[4] (x,y,z,w), v_w[3] m/s, omega_b[3] rad/s)
+      in  c_b [6]: Euler coefficients (k_x, k_y, k_z, r_x, r_y, r_z), body frame: k_x = (I_y − I_z)/I_x (cyclic, dimensionless), r_x = 1/I_x (1/(kg·m²)); from euler_coefficients
+      out x_dot [13]: d/dt of the state"""
+    x_3 = x[3]
+    x_4 = x[4]
+    x_5 = x[5]
+    x_6 = x[6]
+    x_7 = x[7]
+    x_8 = x[8]
+    x_9 = x[9]
+    x_10 = x[10]
+    x_11 = x[11]
+    x_12 = x[12]
+    c_b_0 = c_b[0]
+    c_b_1 = c_b[1]
+    c_b_2 = c_b[2]
+    t0 = ((1.0/2.0))*x_10
+    t1 = ((1.0/2.0))*x_11
+    t2 = ((1.0/2.0))*x_12
+    return casadi.vertcat(x_7, x_8, x_9, t0*x_6 - t1*x_5 + t2*x_4, t0*x_5 + t1*x_6 - t2*x_3, -t0*x_4 + t1*x_3 + t2*x_6, -t0*x_3 - t1*x_4 - t2*x_5, 0, 0, 0, c_b_0*x_11*x_12, c_b_1*x_10*x_12, c_b_2*x_10*x_11)
+
+
+def rigid_body_rhs_torque_c(x, c_b, tau_w):
+    """rigid_body_rhs_torque_c: rigid_body_rhs_torque on the Euler coefficients c_b (no division).
+      in  x [13]: state (p_w[3] m, q[4] (x,y,z,w), v_w[3] m/s, omega_b[3] rad/s)
+      in  c_b [6]: Euler coefficients (k_x, k_y, k_z, r_x, r_y, r_z), body frame: k_x = (I_y − I_z)/I_x (cyclic, dimensionless), r_x = 1/I_x (1/(kg·m²)); from euler_coefficients
+      in  tau_w [3]: total torque about the COM, world frame, N·m
+      out x_dot [13]: d/dt of the state"""
+    x_3 = x[3]
+    x_4 = x[4]
+    x_5 = x[5]
+    x_6 = x[6]
+    x_7 = x[7]
+    x_8 = x[8]
+    x_9 = x[9]
+    x_10 = x[10]
+    x_11 = x[11]
+    x_12 = x[12]
+    c_b_0 = c_b[0]
+    c_b_1 = c_b[1]
+    c_b_2 = c_b[2]
+    c_b_3 = c_b[3]
+    c_b_4 = c_b[4]
+    c_b_5 = c_b[5]
+    tau_w_0 = tau_w[0]
+    tau_w_1 = tau_w[1]
+    tau_w_2 = tau_w[2]
+    t0 = ((1.0/2.0))*x_10
+    t1 = ((1.0/2.0))*x_11
+    t2 = ((1.0/2.0))*x_12
+    t3 = 2*x_4
+    t4 = t3*x_3
+    t5 = 2*x_5
+    t6 = t5*x_6
+    t7 = t5*x_3
+    t8 = t3*x_6
+    t9 = 2*(x_4*x_4)
+    t10 = 2*(x_5*x_5) - 1
+    t11 = 2*x_3*x_6
+    t12 = 2*(x_3*x_3)
+    return casadi.vertcat(x_7, x_8, x_9, t0*x_6 - t1*x_5 + t2*x_4, t0*x_5 + t1*x_6 - t2*x_3, -t0*x_4 + t1*x_3 + t2*x_6, -t0*x_3 - t1*x_4 - t2*x_5, 0, 0, 0, c_b_0*x_11*x_12 + c_b_3*(tau_w_0*(-t10 - t9) + tau_w_1*(t4 + t6) + tau_w_2*(t7 - t8)), c_b_1*x_10*x_12 + c_b_4*(tau_w_0*(t4 - t6) + tau_w_1*(-t10 - t12) + tau_w_2*(t11 + t3*x_5)), c_b_2*x_10*x_11 + c_b_5*(tau_w_0*(t7 + t8) + tau_w_1*(-t11 + 2*x_4*x_5) + tau_w_2*(-t12 - t9 + 1)))
+
+
+def rigid_body_rhs_c(x, m, c_b, F_w, tau_w):
+    """rigid_body_rhs_c: rigid_body_rhs on the Euler coefficients c_b (one division: F_W/m).
+      in  x [13]: state (p_w[3] m, q[4] (x,y,z,w), v_w[3] m/s, omega_b[3] rad/s)
+      in  m scalar: mass, kg
+      in  c_b [6]: Euler coefficients (k_x, k_y, k_z, r_x, r_y, r_z), body frame: k_x = (I_y − I_z)/I_x (cyclic, dimensionless), r_x = 1/I_x (1/(kg·m²)); from euler_coefficients
+      in  F_w [3]: total force at the COM, world frame, N
+      in  tau_w [3]: total torque about the COM, world frame, N·m
+      out x_dot [13]: d/dt of the state"""
+    x_3 = x[3]
+    x_4 = x[4]
+    x_5 = x[5]
+    x_6 = x[6]
+    x_7 = x[7]
+    x_8 = x[8]
+    x_9 = x[9]
+    x_10 = x[10]
+    x_11 = x[11]
+    x_12 = x[12]
+    c_b_0 = c_b[0]
+    c_b_1 = c_b[1]
+    c_b_2 = c_b[2]
+    c_b_3 = c_b[3]
+    c_b_4 = c_b[4]
+    c_b_5 = c_b[5]
+    F_w_0 = F_w[0]
+    F_w_1 = F_w[1]
+    F_w_2 = F_w[2]
+    tau_w_0 = tau_w[0]
+    tau_w_1 = tau_w[1]
+    tau_w_2 = tau_w[2]
+    t0 = ((1.0/2.0))*x_10
+    t1 = ((1.0/2.0))*x_11
+    t2 = ((1.0/2.0))*x_12
+    t3 = (1.0/m)
     t4 = 2*x_4
     t5 = t4*x_3
     t6 = 2*x_5
@@ -825,7 +970,7 @@ def rigid_body_rhs_torque(x, I_b, tau_w):
     t11 = 2*(x_5*x_5) - 1
     t12 = 2*x_3*x_6
     t13 = 2*(x_3*x_3)
-    return casadi.vertcat(x_7, x_8, x_9, t0*x_6 - t1*x_5 + t2*x_4, t0*x_5 + t1*x_6 - t2*x_3, -t0*x_4 + t1*x_3 + t2*x_6, -t0*x_3 - t1*x_4 - t2*x_5, 0, 0, 0, (tau_w_0*(-t10 - t11) + tau_w_1*(t5 + t7) + tau_w_2*(t8 - t9) + x_11*x_12*(I_b_1 + t3))/I_b_0, (tau_w_0*(t5 - t7) + tau_w_1*(-t11 - t13) + tau_w_2*(t12 + t4*x_5) + x_10*x_12*(-I_b_0 - t3))/I_b_1, (tau_w_0*(t8 + t9) + tau_w_1*(-t12 + 2*x_4*x_5) + tau_w_2*(-t10 - t13 + 1) + x_10*x_11*(I_b_0 - I_b_1))/I_b_2)
+    return casadi.vertcat(x_7, x_8, x_9, t0*x_6 - t1*x_5 + t2*x_4, t0*x_5 + t1*x_6 - t2*x_3, -t0*x_4 + t1*x_3 + t2*x_6, -t0*x_3 - t1*x_4 - t2*x_5, F_w_0*t3, F_w_1*t3, F_w_2*t3, c_b_0*x_11*x_12 + c_b_3*(tau_w_0*(-t10 - t11) + tau_w_1*(t5 + t7) + tau_w_2*(t8 - t9)), c_b_1*x_10*x_12 + c_b_4*(tau_w_0*(t5 - t7) + tau_w_1*(-t11 - t13) + tau_w_2*(t12 + t4*x_5)), c_b_2*x_10*x_11 + c_b_5*(tau_w_0*(t8 + t9) + tau_w_1*(-t12 + 2*x_4*x_5) + tau_w_2*(-t10 - t13 + 1)))
 
 
 def pivot_body_rhs(q, omega_b, I_p, r_b, F_w, tau_w):

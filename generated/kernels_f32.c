@@ -673,10 +673,15 @@ void lvf_euler_equations(const float *I_b, const float *omega_b, const float *ta
     const float tau_b_0 = tau_b[0];
     const float tau_b_1 = tau_b[1];
     const float tau_b_2 = tau_b[2];
-    const float t0 = -I_b_2;
-    omega_dot_b[0] = (omega_b_1*omega_b_2*(I_b_1 + t0) + tau_b_0)/I_b_0;
-    omega_dot_b[1] = (omega_b_0*omega_b_2*(-I_b_0 - t0) + tau_b_1)/I_b_1;
-    omega_dot_b[2] = (omega_b_0*omega_b_1*(I_b_0 - I_b_1) + tau_b_2)/I_b_2;
+    const float c_b_0 = (I_b_1 - I_b_2)/I_b_0;
+    const float c_b_1 = (-I_b_0 + I_b_2)/I_b_1;
+    const float c_b_2 = (I_b_0 - I_b_1)/I_b_2;
+    const float c_b_3 = (1.0F/I_b_0);
+    const float c_b_4 = (1.0F/I_b_1);
+    const float c_b_5 = (1.0F/I_b_2);
+    omega_dot_b[0] = c_b_0*omega_b_1*omega_b_2 + c_b_3*tau_b_0;
+    omega_dot_b[1] = c_b_1*omega_b_0*omega_b_2 + c_b_4*tau_b_1;
+    omega_dot_b[2] = c_b_2*omega_b_0*omega_b_1 + c_b_5*tau_b_2;
 }
 
 void lvf_rigid_body_rhs(const float *x, float m, const float *I_b, const float *F_w, const float *tau_w, float *x_dot) {
@@ -699,21 +704,26 @@ void lvf_rigid_body_rhs(const float *x, float m, const float *I_b, const float *
     const float tau_w_0 = tau_w[0];
     const float tau_w_1 = tau_w[1];
     const float tau_w_2 = tau_w[2];
+    const float c_b_0 = (I_b_1 - I_b_2)/I_b_0;
+    const float c_b_1 = (-I_b_0 + I_b_2)/I_b_1;
+    const float c_b_2 = (I_b_0 - I_b_1)/I_b_2;
+    const float c_b_3 = (1.0F/I_b_0);
+    const float c_b_4 = (1.0F/I_b_1);
+    const float c_b_5 = (1.0F/I_b_2);
     const float t0 = ((1.0F/2.0F))*x_10;
     const float t1 = ((1.0F/2.0F))*x_11;
     const float t2 = ((1.0F/2.0F))*x_12;
     const float t3 = (1.0F/m);
-    const float t4 = -I_b_2;
-    const float t5 = 2*x_4;
-    const float t6 = t5*x_3;
-    const float t7 = 2*x_5;
-    const float t8 = t7*x_6;
-    const float t9 = t7*x_3;
-    const float t10 = t5*x_6;
-    const float t11 = 2*(x_4*x_4);
-    const float t12 = 2*(x_5*x_5) - 1;
-    const float t13 = 2*x_3*x_6;
-    const float t14 = 2*(x_3*x_3);
+    const float t4 = 2*x_4;
+    const float t5 = t4*x_3;
+    const float t6 = 2*x_5;
+    const float t7 = t6*x_6;
+    const float t8 = t6*x_3;
+    const float t9 = t4*x_6;
+    const float t10 = 2*(x_4*x_4);
+    const float t11 = 2*(x_5*x_5) - 1;
+    const float t12 = 2*x_3*x_6;
+    const float t13 = 2*(x_3*x_3);
     x_dot[0] = x_7;
     x_dot[1] = x_8;
     x_dot[2] = x_9;
@@ -724,9 +734,9 @@ void lvf_rigid_body_rhs(const float *x, float m, const float *I_b, const float *
     x_dot[7] = F_w_0*t3;
     x_dot[8] = F_w_1*t3;
     x_dot[9] = F_w_2*t3;
-    x_dot[10] = (tau_w_0*(-t11 - t12) + tau_w_1*(t6 + t8) + tau_w_2*(-t10 + t9) + x_11*x_12*(I_b_1 + t4))/I_b_0;
-    x_dot[11] = (tau_w_0*(t6 - t8) + tau_w_1*(-t12 - t14) + tau_w_2*(t13 + t5*x_5) + x_10*x_12*(-I_b_0 - t4))/I_b_1;
-    x_dot[12] = (tau_w_0*(t10 + t9) + tau_w_1*(-t13 + 2*x_4*x_5) + tau_w_2*(-t11 - t14 + 1) + x_10*x_11*(I_b_0 - I_b_1))/I_b_2;
+    x_dot[10] = c_b_0*x_11*x_12 + c_b_3*(tau_w_0*(-t10 - t11) + tau_w_1*(t5 + t7) + tau_w_2*(t8 - t9));
+    x_dot[11] = c_b_1*x_10*x_12 + c_b_4*(tau_w_0*(t5 - t7) + tau_w_1*(-t11 - t13) + tau_w_2*(t12 + t4*x_5));
+    x_dot[12] = c_b_2*x_10*x_11 + c_b_5*(tau_w_0*(t8 + t9) + tau_w_1*(-t12 + 2*x_4*x_5) + tau_w_2*(-t10 - t13 + 1));
 }
 
 void lvf_rigid_body_rhs_free(const float *x, const float *I_b, float *x_dot) {
@@ -743,10 +753,12 @@ void lvf_rigid_body_rhs_free(const float *x, const float *I_b, float *x_dot) {
     const float I_b_0 = I_b[0];
     const float I_b_1 = I_b[1];
     const float I_b_2 = I_b[2];
+    const float c_b_0 = (I_b_1 - I_b_2)/I_b_0;
+    const float c_b_1 = (-I_b_0 + I_b_2)/I_b_1;
+    const float c_b_2 = (I_b_0 - I_b_1)/I_b_2;
     const float t0 = ((1.0F/2.0F))*x_10;
     const float t1 = ((1.0F/2.0F))*x_11;
     const float t2 = ((1.0F/2.0F))*x_12;
-    const float t3 = -I_b_2;
     x_dot[0] = x_7;
     x_dot[1] = x_8;
     x_dot[2] = x_9;
@@ -757,9 +769,9 @@ void lvf_rigid_body_rhs_free(const float *x, const float *I_b, float *x_dot) {
     x_dot[7] = 0;
     x_dot[8] = 0;
     x_dot[9] = 0;
-    x_dot[10] = x_11*x_12*(I_b_1 + t3)/I_b_0;
-    x_dot[11] = x_10*x_12*(-I_b_0 - t3)/I_b_1;
-    x_dot[12] = x_10*x_11*(I_b_0 - I_b_1)/I_b_2;
+    x_dot[10] = c_b_0*x_11*x_12;
+    x_dot[11] = c_b_1*x_10*x_12;
+    x_dot[12] = c_b_2*x_10*x_11;
 }
 
 void lvf_apply_inv_inertia(const float *q, const float *I_b, const float *v, float *out) {
@@ -888,10 +900,165 @@ void lvf_rigid_body_rhs_torque(const float *x, const float *I_b, const float *ta
     const float tau_w_0 = tau_w[0];
     const float tau_w_1 = tau_w[1];
     const float tau_w_2 = tau_w[2];
+    const float c_b_0 = (I_b_1 - I_b_2)/I_b_0;
+    const float c_b_1 = (-I_b_0 + I_b_2)/I_b_1;
+    const float c_b_2 = (I_b_0 - I_b_1)/I_b_2;
+    const float c_b_3 = (1.0F/I_b_0);
+    const float c_b_4 = (1.0F/I_b_1);
+    const float c_b_5 = (1.0F/I_b_2);
     const float t0 = ((1.0F/2.0F))*x_10;
     const float t1 = ((1.0F/2.0F))*x_11;
     const float t2 = ((1.0F/2.0F))*x_12;
-    const float t3 = -I_b_2;
+    const float t3 = 2*x_4;
+    const float t4 = t3*x_3;
+    const float t5 = 2*x_5;
+    const float t6 = t5*x_6;
+    const float t7 = t5*x_3;
+    const float t8 = t3*x_6;
+    const float t9 = 2*(x_4*x_4);
+    const float t10 = 2*(x_5*x_5) - 1;
+    const float t11 = 2*x_3*x_6;
+    const float t12 = 2*(x_3*x_3);
+    x_dot[0] = x_7;
+    x_dot[1] = x_8;
+    x_dot[2] = x_9;
+    x_dot[3] = t0*x_6 - t1*x_5 + t2*x_4;
+    x_dot[4] = t0*x_5 + t1*x_6 - t2*x_3;
+    x_dot[5] = -t0*x_4 + t1*x_3 + t2*x_6;
+    x_dot[6] = -t0*x_3 - t1*x_4 - t2*x_5;
+    x_dot[7] = 0;
+    x_dot[8] = 0;
+    x_dot[9] = 0;
+    x_dot[10] = c_b_0*x_11*x_12 + c_b_3*(tau_w_0*(-t10 - t9) + tau_w_1*(t4 + t6) + tau_w_2*(t7 - t8));
+    x_dot[11] = c_b_1*x_10*x_12 + c_b_4*(tau_w_0*(t4 - t6) + tau_w_1*(-t10 - t12) + tau_w_2*(t11 + t3*x_5));
+    x_dot[12] = c_b_2*x_10*x_11 + c_b_5*(tau_w_0*(t7 + t8) + tau_w_1*(-t11 + 2*x_4*x_5) + tau_w_2*(-t12 - t9 + 1));
+}
+
+void lvf_euler_coefficients(const float *I_b, float *c_b) {
+    const float I_b_0 = I_b[0];
+    const float I_b_1 = I_b[1];
+    const float I_b_2 = I_b[2];
+    const float c_b_0 = (I_b_1 - I_b_2)/I_b_0;
+    const float c_b_1 = (-I_b_0 + I_b_2)/I_b_1;
+    const float c_b_2 = (I_b_0 - I_b_1)/I_b_2;
+    const float c_b_3 = (1.0F/I_b_0);
+    const float c_b_4 = (1.0F/I_b_1);
+    const float c_b_5 = (1.0F/I_b_2);
+    c_b[0] = c_b_0;
+    c_b[1] = c_b_1;
+    c_b[2] = c_b_2;
+    c_b[3] = c_b_3;
+    c_b[4] = c_b_4;
+    c_b[5] = c_b_5;
+}
+
+void lvf_rigid_body_rhs_free_c(const float *x, const float *c_b, float *x_dot) {
+    const float x_3 = x[3];
+    const float x_4 = x[4];
+    const float x_5 = x[5];
+    const float x_6 = x[6];
+    const float x_7 = x[7];
+    const float x_8 = x[8];
+    const float x_9 = x[9];
+    const float x_10 = x[10];
+    const float x_11 = x[11];
+    const float x_12 = x[12];
+    const float c_b_0 = c_b[0];
+    const float c_b_1 = c_b[1];
+    const float c_b_2 = c_b[2];
+    const float t0 = ((1.0F/2.0F))*x_10;
+    const float t1 = ((1.0F/2.0F))*x_11;
+    const float t2 = ((1.0F/2.0F))*x_12;
+    x_dot[0] = x_7;
+    x_dot[1] = x_8;
+    x_dot[2] = x_9;
+    x_dot[3] = t0*x_6 - t1*x_5 + t2*x_4;
+    x_dot[4] = t0*x_5 + t1*x_6 - t2*x_3;
+    x_dot[5] = -t0*x_4 + t1*x_3 + t2*x_6;
+    x_dot[6] = -t0*x_3 - t1*x_4 - t2*x_5;
+    x_dot[7] = 0;
+    x_dot[8] = 0;
+    x_dot[9] = 0;
+    x_dot[10] = c_b_0*x_11*x_12;
+    x_dot[11] = c_b_1*x_10*x_12;
+    x_dot[12] = c_b_2*x_10*x_11;
+}
+
+void lvf_rigid_body_rhs_torque_c(const float *x, const float *c_b, const float *tau_w, float *x_dot) {
+    const float x_3 = x[3];
+    const float x_4 = x[4];
+    const float x_5 = x[5];
+    const float x_6 = x[6];
+    const float x_7 = x[7];
+    const float x_8 = x[8];
+    const float x_9 = x[9];
+    const float x_10 = x[10];
+    const float x_11 = x[11];
+    const float x_12 = x[12];
+    const float c_b_0 = c_b[0];
+    const float c_b_1 = c_b[1];
+    const float c_b_2 = c_b[2];
+    const float c_b_3 = c_b[3];
+    const float c_b_4 = c_b[4];
+    const float c_b_5 = c_b[5];
+    const float tau_w_0 = tau_w[0];
+    const float tau_w_1 = tau_w[1];
+    const float tau_w_2 = tau_w[2];
+    const float t0 = ((1.0F/2.0F))*x_10;
+    const float t1 = ((1.0F/2.0F))*x_11;
+    const float t2 = ((1.0F/2.0F))*x_12;
+    const float t3 = 2*x_4;
+    const float t4 = t3*x_3;
+    const float t5 = 2*x_5;
+    const float t6 = t5*x_6;
+    const float t7 = t5*x_3;
+    const float t8 = t3*x_6;
+    const float t9 = 2*(x_4*x_4);
+    const float t10 = 2*(x_5*x_5) - 1;
+    const float t11 = 2*x_3*x_6;
+    const float t12 = 2*(x_3*x_3);
+    x_dot[0] = x_7;
+    x_dot[1] = x_8;
+    x_dot[2] = x_9;
+    x_dot[3] = t0*x_6 - t1*x_5 + t2*x_4;
+    x_dot[4] = t0*x_5 + t1*x_6 - t2*x_3;
+    x_dot[5] = -t0*x_4 + t1*x_3 + t2*x_6;
+    x_dot[6] = -t0*x_3 - t1*x_4 - t2*x_5;
+    x_dot[7] = 0;
+    x_dot[8] = 0;
+    x_dot[9] = 0;
+    x_dot[10] = c_b_0*x_11*x_12 + c_b_3*(tau_w_0*(-t10 - t9) + tau_w_1*(t4 + t6) + tau_w_2*(t7 - t8));
+    x_dot[11] = c_b_1*x_10*x_12 + c_b_4*(tau_w_0*(t4 - t6) + tau_w_1*(-t10 - t12) + tau_w_2*(t11 + t3*x_5));
+    x_dot[12] = c_b_2*x_10*x_11 + c_b_5*(tau_w_0*(t7 + t8) + tau_w_1*(-t11 + 2*x_4*x_5) + tau_w_2*(-t12 - t9 + 1));
+}
+
+void lvf_rigid_body_rhs_c(const float *x, float m, const float *c_b, const float *F_w, const float *tau_w, float *x_dot) {
+    const float x_3 = x[3];
+    const float x_4 = x[4];
+    const float x_5 = x[5];
+    const float x_6 = x[6];
+    const float x_7 = x[7];
+    const float x_8 = x[8];
+    const float x_9 = x[9];
+    const float x_10 = x[10];
+    const float x_11 = x[11];
+    const float x_12 = x[12];
+    const float c_b_0 = c_b[0];
+    const float c_b_1 = c_b[1];
+    const float c_b_2 = c_b[2];
+    const float c_b_3 = c_b[3];
+    const float c_b_4 = c_b[4];
+    const float c_b_5 = c_b[5];
+    const float F_w_0 = F_w[0];
+    const float F_w_1 = F_w[1];
+    const float F_w_2 = F_w[2];
+    const float tau_w_0 = tau_w[0];
+    const float tau_w_1 = tau_w[1];
+    const float tau_w_2 = tau_w[2];
+    const float t0 = ((1.0F/2.0F))*x_10;
+    const float t1 = ((1.0F/2.0F))*x_11;
+    const float t2 = ((1.0F/2.0F))*x_12;
+    const float t3 = (1.0F/m);
     const float t4 = 2*x_4;
     const float t5 = t4*x_3;
     const float t6 = 2*x_5;
@@ -909,12 +1076,12 @@ void lvf_rigid_body_rhs_torque(const float *x, const float *I_b, const float *ta
     x_dot[4] = t0*x_5 + t1*x_6 - t2*x_3;
     x_dot[5] = -t0*x_4 + t1*x_3 + t2*x_6;
     x_dot[6] = -t0*x_3 - t1*x_4 - t2*x_5;
-    x_dot[7] = 0;
-    x_dot[8] = 0;
-    x_dot[9] = 0;
-    x_dot[10] = (tau_w_0*(-t10 - t11) + tau_w_1*(t5 + t7) + tau_w_2*(t8 - t9) + x_11*x_12*(I_b_1 + t3))/I_b_0;
-    x_dot[11] = (tau_w_0*(t5 - t7) + tau_w_1*(-t11 - t13) + tau_w_2*(t12 + t4*x_5) + x_10*x_12*(-I_b_0 - t3))/I_b_1;
-    x_dot[12] = (tau_w_0*(t8 + t9) + tau_w_1*(-t12 + 2*x_4*x_5) + tau_w_2*(-t10 - t13 + 1) + x_10*x_11*(I_b_0 - I_b_1))/I_b_2;
+    x_dot[7] = F_w_0*t3;
+    x_dot[8] = F_w_1*t3;
+    x_dot[9] = F_w_2*t3;
+    x_dot[10] = c_b_0*x_11*x_12 + c_b_3*(tau_w_0*(-t10 - t11) + tau_w_1*(t5 + t7) + tau_w_2*(t8 - t9));
+    x_dot[11] = c_b_1*x_10*x_12 + c_b_4*(tau_w_0*(t5 - t7) + tau_w_1*(-t11 - t13) + tau_w_2*(t12 + t4*x_5));
+    x_dot[12] = c_b_2*x_10*x_11 + c_b_5*(tau_w_0*(t8 + t9) + tau_w_1*(-t12 + 2*x_4*x_5) + tau_w_2*(-t10 - t13 + 1));
 }
 
 void lvf_pivot_body_rhs(const float *q, const float *omega_b, const float *I_p, const float *r_b, const float *F_w, const float *tau_w, float *q_dot, float *omega_dot_b) {

@@ -77,6 +77,14 @@ void lvf_kinetic_energy(float m, const float *I_b, const float *v_w, const float
 void lvf_angular_momentum_world(const float *q, const float *I_b, const float *omega_b, float *L_w);
 /* rigid_body_rhs_torque: State derivative under a world torque only (rigid_body_rhs with F_W = 0, for bodies whose effects add no force) (float; see kernels.h) */
 void lvf_rigid_body_rhs_torque(const float *x, const float *I_b, const float *tau_w, float *x_dot);
+/* euler_coefficients: The inertia-only coefficients of Euler's equations, computed once per body and call (float; see kernels.h) */
+void lvf_euler_coefficients(const float *I_b, float *c_b);
+/* rigid_body_rhs_free_c: rigid_body_rhs_free on the Euler coefficients c_b (no division) (float; see kernels.h) */
+void lvf_rigid_body_rhs_free_c(const float *x, const float *c_b, float *x_dot);
+/* rigid_body_rhs_torque_c: rigid_body_rhs_torque on the Euler coefficients c_b (no division) (float; see kernels.h) */
+void lvf_rigid_body_rhs_torque_c(const float *x, const float *c_b, const float *tau_w, float *x_dot);
+/* rigid_body_rhs_c: rigid_body_rhs on the Euler coefficients c_b (one division: F_W/m) (float; see kernels.h) */
+void lvf_rigid_body_rhs_c(const float *x, float m, const float *c_b, const float *F_w, const float *tau_w, float *x_dot);
 /* pivot_body_rhs: Rotation about a world-anchored spherical joint (no wheels) (float; see kernels.h) */
 void lvf_pivot_body_rhs(const float *q, const float *omega_b, const float *I_p, const float *r_b, const float *F_w, const float *tau_w, float *q_dot, float *omega_dot_b);
 /* wheel_body_rhs: Body with three body-axis reaction wheels rotating about a pivot (float; see kernels.h) */

@@ -1204,11 +1204,16 @@ def euler_equations(I_b, omega_b, tau_b):
     tau_b_0 = tau_b[..., 0]
     tau_b_1 = tau_b[..., 1]
     tau_b_2 = tau_b[..., 2]
-    t0 = -I_b_2
+    c_b_0 = (I_b_1 - I_b_2)/I_b_0
+    c_b_1 = (-I_b_0 + I_b_2)/I_b_1
+    c_b_2 = (I_b_0 - I_b_1)/I_b_2
+    c_b_3 = (1.0/I_b_0)
+    c_b_4 = (1.0/I_b_1)
+    c_b_5 = (1.0/I_b_2)
     omega_dot_b_out = numpy.empty(batch + (3,), dtype=numpy.float32)
-    omega_dot_b_out[..., 0] = (omega_b_1*omega_b_2*(I_b_1 + t0) + tau_b_0)/I_b_0
-    omega_dot_b_out[..., 1] = (omega_b_0*omega_b_2*(-I_b_0 - t0) + tau_b_1)/I_b_1
-    omega_dot_b_out[..., 2] = (omega_b_0*omega_b_1*(I_b_0 - I_b_1) + tau_b_2)/I_b_2
+    omega_dot_b_out[..., 0] = c_b_0*omega_b_1*omega_b_2 + c_b_3*tau_b_0
+    omega_dot_b_out[..., 1] = c_b_1*omega_b_0*omega_b_2 + c_b_4*tau_b_1
+    omega_dot_b_out[..., 2] = c_b_2*omega_b_0*omega_b_1 + c_b_5*tau_b_2
     return omega_dot_b_out
 
 
@@ -1260,21 +1265,26 @@ def rigid_body_rhs(x, m, I_b, F_w, tau_w):
     tau_w_0 = tau_w[..., 0]
     tau_w_1 = tau_w[..., 1]
     tau_w_2 = tau_w[..., 2]
+    c_b_0 = (I_b_1 - I_b_2)/I_b_0
+    c_b_1 = (-I_b_0 + I_b_2)/I_b_1
+    c_b_2 = (I_b_0 - I_b_1)/I_b_2
+    c_b_3 = (1.0/I_b_0)
+    c_b_4 = (1.0/I_b_1)
+    c_b_5 = (1.0/I_b_2)
     t0 = ((numpy.float32(1.0)/numpy.float32(2.0)))*x_10
     t1 = ((numpy.float32(1.0)/numpy.float32(2.0)))*x_11
     t2 = ((numpy.float32(1.0)/numpy.float32(2.0)))*x_12
     t3 = (1.0/m)
-    t4 = -I_b_2
-    t5 = 2*x_4
-    t6 = t5*x_3
-    t7 = 2*x_5
-    t8 = t7*x_6
-    t9 = t7*x_3
-    t10 = t5*x_6
-    t11 = 2*(x_4*x_4)
-    t12 = 2*(x_5*x_5) - 1
-    t13 = 2*x_3*x_6
-    t14 = 2*(x_3*x_3)
+    t4 = 2*x_4
+    t5 = t4*x_3
+    t6 = 2*x_5
+    t7 = t6*x_6
+    t8 = t6*x_3
+    t9 = t4*x_6
+    t10 = 2*(x_4*x_4)
+    t11 = 2*(x_5*x_5) - 1
+    t12 = 2*x_3*x_6
+    t13 = 2*(x_3*x_3)
     x_dot_out = numpy.empty(batch + (13,), dtype=numpy.float32)
     x_dot_out[..., 0] = x_7
     x_dot_out[..., 1] = x_8
@@ -1286,9 +1296,9 @@ def rigid_body_rhs(x, m, I_b, F_w, tau_w):
     x_dot_out[..., 7] = F_w_0*t3
     x_dot_out[..., 8] = F_w_1*t3
     x_dot_out[..., 9] = F_w_2*t3
-    x_dot_out[..., 10] = (tau_w_0*(-t11 - t12) + tau_w_1*(t6 + t8) + tau_w_2*(-t10 + t9) + x_11*x_12*(I_b_1 + t4))/I_b_0
-    x_dot_out[..., 11] = (tau_w_0*(t6 - t8) + tau_w_1*(-t12 - t14) + tau_w_2*(t13 + t5*x_5) + x_10*x_12*(-I_b_0 - t4))/I_b_1
-    x_dot_out[..., 12] = (tau_w_0*(t10 + t9) + tau_w_1*(-t13 + 2*x_4*x_5) + tau_w_2*(-t11 - t14 + 1) + x_10*x_11*(I_b_0 - I_b_1))/I_b_2
+    x_dot_out[..., 10] = c_b_0*x_11*x_12 + c_b_3*(tau_w_0*(-t10 - t11) + tau_w_1*(t5 + t7) + tau_w_2*(t8 - t9))
+    x_dot_out[..., 11] = c_b_1*x_10*x_12 + c_b_4*(tau_w_0*(t5 - t7) + tau_w_1*(-t11 - t13) + tau_w_2*(t12 + t4*x_5))
+    x_dot_out[..., 12] = c_b_2*x_10*x_11 + c_b_5*(tau_w_0*(t8 + t9) + tau_w_1*(-t12 + 2*x_4*x_5) + tau_w_2*(-t10 - t13 + 1))
     return x_dot_out
 
 
@@ -1325,10 +1335,12 @@ def rigid_body_rhs_free(x, I_b):
     I_b_0 = I_b[..., 0]
     I_b_1 = I_b[..., 1]
     I_b_2 = I_b[..., 2]
+    c_b_0 = (I_b_1 - I_b_2)/I_b_0
+    c_b_1 = (-I_b_0 + I_b_2)/I_b_1
+    c_b_2 = (I_b_0 - I_b_1)/I_b_2
     t0 = ((numpy.float32(1.0)/numpy.float32(2.0)))*x_10
     t1 = ((numpy.float32(1.0)/numpy.float32(2.0)))*x_11
     t2 = ((numpy.float32(1.0)/numpy.float32(2.0)))*x_12
-    t3 = -I_b_2
     x_dot_out = numpy.empty(batch + (13,), dtype=numpy.float32)
     x_dot_out[..., 0] = x_7
     x_dot_out[..., 1] = x_8
@@ -1340,9 +1352,9 @@ def rigid_body_rhs_free(x, I_b):
     x_dot_out[..., 7] = 0
     x_dot_out[..., 8] = 0
     x_dot_out[..., 9] = 0
-    x_dot_out[..., 10] = x_11*x_12*(I_b_1 + t3)/I_b_0
-    x_dot_out[..., 11] = x_10*x_12*(-I_b_0 - t3)/I_b_1
-    x_dot_out[..., 12] = x_10*x_11*(I_b_0 - I_b_1)/I_b_2
+    x_dot_out[..., 10] = c_b_0*x_11*x_12
+    x_dot_out[..., 11] = c_b_1*x_10*x_12
+    x_dot_out[..., 12] = c_b_2*x_10*x_11
     return x_dot_out
 
 
@@ -1590,10 +1602,258 @@ def rigid_body_rhs_torque(x, I_b, tau_w):
     tau_w_0 = tau_w[..., 0]
     tau_w_1 = tau_w[..., 1]
     tau_w_2 = tau_w[..., 2]
+    c_b_0 = (I_b_1 - I_b_2)/I_b_0
+    c_b_1 = (-I_b_0 + I_b_2)/I_b_1
+    c_b_2 = (I_b_0 - I_b_1)/I_b_2
+    c_b_3 = (1.0/I_b_0)
+    c_b_4 = (1.0/I_b_1)
+    c_b_5 = (1.0/I_b_2)
     t0 = ((numpy.float32(1.0)/numpy.float32(2.0)))*x_10
     t1 = ((numpy.float32(1.0)/numpy.float32(2.0)))*x_11
     t2 = ((numpy.float32(1.0)/numpy.float32(2.0)))*x_12
-    t3 = -I_b_2
+    t3 = 2*x_4
+    t4 = t3*x_3
+    t5 = 2*x_5
+    t6 = t5*x_6
+    t7 = t5*x_3
+    t8 = t3*x_6
+    t9 = 2*(x_4*x_4)
+    t10 = 2*(x_5*x_5) - 1
+    t11 = 2*x_3*x_6
+    t12 = 2*(x_3*x_3)
+    x_dot_out = numpy.empty(batch + (13,), dtype=numpy.float32)
+    x_dot_out[..., 0] = x_7
+    x_dot_out[..., 1] = x_8
+    x_dot_out[..., 2] = x_9
+    x_dot_out[..., 3] = t0*x_6 - t1*x_5 + t2*x_4
+    x_dot_out[..., 4] = t0*x_5 + t1*x_6 - t2*x_3
+    x_dot_out[..., 5] = -t0*x_4 + t1*x_3 + t2*x_6
+    x_dot_out[..., 6] = -t0*x_3 - t1*x_4 - t2*x_5
+    x_dot_out[..., 7] = 0
+    x_dot_out[..., 8] = 0
+    x_dot_out[..., 9] = 0
+    x_dot_out[..., 10] = c_b_0*x_11*x_12 + c_b_3*(tau_w_0*(-t10 - t9) + tau_w_1*(t4 + t6) + tau_w_2*(t7 - t8))
+    x_dot_out[..., 11] = c_b_1*x_10*x_12 + c_b_4*(tau_w_0*(t4 - t6) + tau_w_1*(-t10 - t12) + tau_w_2*(t11 + t3*x_5))
+    x_dot_out[..., 12] = c_b_2*x_10*x_11 + c_b_5*(tau_w_0*(t7 + t8) + tau_w_1*(-t11 + 2*x_4*x_5) + tau_w_2*(-t12 - t9 + 1))
+    return x_dot_out
+
+
+def euler_coefficients(I_b):
+    """The inertia-only coefficients of Euler's equations, computed once per body and call.
+
+    Generated kernel ``euler_coefficients``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    I_b : array_like, shape (..., 3)
+        principal moments, body frame, kg·m²
+
+    Returns
+    -------
+    c_b : ndarray, shape (..., 6)
+        (k_x, k_y, k_z, r_x, r_y, r_z), body frame; k dimensionless, r 1/(kg·m²)
+    """
+    I_b = numpy.asarray(I_b, dtype=numpy.float32)
+    batch = numpy.broadcast_shapes(I_b.shape[:-1])
+    I_b_0 = I_b[..., 0]
+    I_b_1 = I_b[..., 1]
+    I_b_2 = I_b[..., 2]
+    c_b_0 = (I_b_1 - I_b_2)/I_b_0
+    c_b_1 = (-I_b_0 + I_b_2)/I_b_1
+    c_b_2 = (I_b_0 - I_b_1)/I_b_2
+    c_b_3 = (1.0/I_b_0)
+    c_b_4 = (1.0/I_b_1)
+    c_b_5 = (1.0/I_b_2)
+    c_b_out = numpy.empty(batch + (6,), dtype=numpy.float32)
+    c_b_out[..., 0] = c_b_0
+    c_b_out[..., 1] = c_b_1
+    c_b_out[..., 2] = c_b_2
+    c_b_out[..., 3] = c_b_3
+    c_b_out[..., 4] = c_b_4
+    c_b_out[..., 5] = c_b_5
+    return c_b_out
+
+
+def rigid_body_rhs_free_c(x, c_b):
+    """rigid_body_rhs_free on the Euler coefficients c_b (no division).
+
+    Generated kernel ``rigid_body_rhs_free_c``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    x : array_like, shape (..., 13)
+        state (p_w[3] m, q[4] (x,y,z,w), v_w[3] m/s, omega_b[3] rad/s)
+    c_b : array_like, shape (..., 6)
+        Euler coefficients (k_x, k_y, k_z, r_x, r_y, r_z), body frame: k_x = (I_y − I_z)/I_x (cyclic, dimensionless), r_x = 1/I_x (1/(kg·m²)); from euler_coefficients
+
+    Returns
+    -------
+    x_dot : ndarray, shape (..., 13)
+        d/dt of the state
+    """
+    x = numpy.asarray(x, dtype=numpy.float32)
+    c_b = numpy.asarray(c_b, dtype=numpy.float32)
+    batch = numpy.broadcast_shapes(x.shape[:-1], c_b.shape[:-1])
+    x_3 = x[..., 3]
+    x_4 = x[..., 4]
+    x_5 = x[..., 5]
+    x_6 = x[..., 6]
+    x_7 = x[..., 7]
+    x_8 = x[..., 8]
+    x_9 = x[..., 9]
+    x_10 = x[..., 10]
+    x_11 = x[..., 11]
+    x_12 = x[..., 12]
+    c_b_0 = c_b[..., 0]
+    c_b_1 = c_b[..., 1]
+    c_b_2 = c_b[..., 2]
+    t0 = ((numpy.float32(1.0)/numpy.float32(2.0)))*x_10
+    t1 = ((numpy.float32(1.0)/numpy.float32(2.0)))*x_11
+    t2 = ((numpy.float32(1.0)/numpy.float32(2.0)))*x_12
+    x_dot_out = numpy.empty(batch + (13,), dtype=numpy.float32)
+    x_dot_out[..., 0] = x_7
+    x_dot_out[..., 1] = x_8
+    x_dot_out[..., 2] = x_9
+    x_dot_out[..., 3] = t0*x_6 - t1*x_5 + t2*x_4
+    x_dot_out[..., 4] = t0*x_5 + t1*x_6 - t2*x_3
+    x_dot_out[..., 5] = -t0*x_4 + t1*x_3 + t2*x_6
+    x_dot_out[..., 6] = -t0*x_3 - t1*x_4 - t2*x_5
+    x_dot_out[..., 7] = 0
+    x_dot_out[..., 8] = 0
+    x_dot_out[..., 9] = 0
+    x_dot_out[..., 10] = c_b_0*x_11*x_12
+    x_dot_out[..., 11] = c_b_1*x_10*x_12
+    x_dot_out[..., 12] = c_b_2*x_10*x_11
+    return x_dot_out
+
+
+def rigid_body_rhs_torque_c(x, c_b, tau_w):
+    """rigid_body_rhs_torque on the Euler coefficients c_b (no division).
+
+    Generated kernel ``rigid_body_rhs_torque_c``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    x : array_like, shape (..., 13)
+        state (p_w[3] m, q[4] (x,y,z,w), v_w[3] m/s, omega_b[3] rad/s)
+    c_b : array_like, shape (..., 6)
+        Euler coefficients (k_x, k_y, k_z, r_x, r_y, r_z), body frame: k_x = (I_y − I_z)/I_x (cyclic, dimensionless), r_x = 1/I_x (1/(kg·m²)); from euler_coefficients
+    tau_w : array_like, shape (..., 3)
+        total torque about the COM, world frame, N·m
+
+    Returns
+    -------
+    x_dot : ndarray, shape (..., 13)
+        d/dt of the state
+    """
+    x = numpy.asarray(x, dtype=numpy.float32)
+    c_b = numpy.asarray(c_b, dtype=numpy.float32)
+    tau_w = numpy.asarray(tau_w, dtype=numpy.float32)
+    batch = numpy.broadcast_shapes(x.shape[:-1], c_b.shape[:-1], tau_w.shape[:-1])
+    x_3 = x[..., 3]
+    x_4 = x[..., 4]
+    x_5 = x[..., 5]
+    x_6 = x[..., 6]
+    x_7 = x[..., 7]
+    x_8 = x[..., 8]
+    x_9 = x[..., 9]
+    x_10 = x[..., 10]
+    x_11 = x[..., 11]
+    x_12 = x[..., 12]
+    c_b_0 = c_b[..., 0]
+    c_b_1 = c_b[..., 1]
+    c_b_2 = c_b[..., 2]
+    c_b_3 = c_b[..., 3]
+    c_b_4 = c_b[..., 4]
+    c_b_5 = c_b[..., 5]
+    tau_w_0 = tau_w[..., 0]
+    tau_w_1 = tau_w[..., 1]
+    tau_w_2 = tau_w[..., 2]
+    t0 = ((numpy.float32(1.0)/numpy.float32(2.0)))*x_10
+    t1 = ((numpy.float32(1.0)/numpy.float32(2.0)))*x_11
+    t2 = ((numpy.float32(1.0)/numpy.float32(2.0)))*x_12
+    t3 = 2*x_4
+    t4 = t3*x_3
+    t5 = 2*x_5
+    t6 = t5*x_6
+    t7 = t5*x_3
+    t8 = t3*x_6
+    t9 = 2*(x_4*x_4)
+    t10 = 2*(x_5*x_5) - 1
+    t11 = 2*x_3*x_6
+    t12 = 2*(x_3*x_3)
+    x_dot_out = numpy.empty(batch + (13,), dtype=numpy.float32)
+    x_dot_out[..., 0] = x_7
+    x_dot_out[..., 1] = x_8
+    x_dot_out[..., 2] = x_9
+    x_dot_out[..., 3] = t0*x_6 - t1*x_5 + t2*x_4
+    x_dot_out[..., 4] = t0*x_5 + t1*x_6 - t2*x_3
+    x_dot_out[..., 5] = -t0*x_4 + t1*x_3 + t2*x_6
+    x_dot_out[..., 6] = -t0*x_3 - t1*x_4 - t2*x_5
+    x_dot_out[..., 7] = 0
+    x_dot_out[..., 8] = 0
+    x_dot_out[..., 9] = 0
+    x_dot_out[..., 10] = c_b_0*x_11*x_12 + c_b_3*(tau_w_0*(-t10 - t9) + tau_w_1*(t4 + t6) + tau_w_2*(t7 - t8))
+    x_dot_out[..., 11] = c_b_1*x_10*x_12 + c_b_4*(tau_w_0*(t4 - t6) + tau_w_1*(-t10 - t12) + tau_w_2*(t11 + t3*x_5))
+    x_dot_out[..., 12] = c_b_2*x_10*x_11 + c_b_5*(tau_w_0*(t7 + t8) + tau_w_1*(-t11 + 2*x_4*x_5) + tau_w_2*(-t12 - t9 + 1))
+    return x_dot_out
+
+
+def rigid_body_rhs_c(x, m, c_b, F_w, tau_w):
+    """rigid_body_rhs on the Euler coefficients c_b (one division: F_W/m).
+
+    Generated kernel ``rigid_body_rhs_c``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    x : array_like, shape (..., 13)
+        state (p_w[3] m, q[4] (x,y,z,w), v_w[3] m/s, omega_b[3] rad/s)
+    m : array_like, shape (...)
+        mass, kg
+    c_b : array_like, shape (..., 6)
+        Euler coefficients (k_x, k_y, k_z, r_x, r_y, r_z), body frame: k_x = (I_y − I_z)/I_x (cyclic, dimensionless), r_x = 1/I_x (1/(kg·m²)); from euler_coefficients
+    F_w : array_like, shape (..., 3)
+        total force at the COM, world frame, N
+    tau_w : array_like, shape (..., 3)
+        total torque about the COM, world frame, N·m
+
+    Returns
+    -------
+    x_dot : ndarray, shape (..., 13)
+        d/dt of the state
+    """
+    x = numpy.asarray(x, dtype=numpy.float32)
+    m = numpy.asarray(m, dtype=numpy.float32)
+    c_b = numpy.asarray(c_b, dtype=numpy.float32)
+    F_w = numpy.asarray(F_w, dtype=numpy.float32)
+    tau_w = numpy.asarray(tau_w, dtype=numpy.float32)
+    batch = numpy.broadcast_shapes(x.shape[:-1], m.shape, c_b.shape[:-1], F_w.shape[:-1], tau_w.shape[:-1])
+    x_3 = x[..., 3]
+    x_4 = x[..., 4]
+    x_5 = x[..., 5]
+    x_6 = x[..., 6]
+    x_7 = x[..., 7]
+    x_8 = x[..., 8]
+    x_9 = x[..., 9]
+    x_10 = x[..., 10]
+    x_11 = x[..., 11]
+    x_12 = x[..., 12]
+    c_b_0 = c_b[..., 0]
+    c_b_1 = c_b[..., 1]
+    c_b_2 = c_b[..., 2]
+    c_b_3 = c_b[..., 3]
+    c_b_4 = c_b[..., 4]
+    c_b_5 = c_b[..., 5]
+    F_w_0 = F_w[..., 0]
+    F_w_1 = F_w[..., 1]
+    F_w_2 = F_w[..., 2]
+    tau_w_0 = tau_w[..., 0]
+    tau_w_1 = tau_w[..., 1]
+    tau_w_2 = tau_w[..., 2]
+    t0 = ((numpy.float32(1.0)/numpy.float32(2.0)))*x_10
+    t1 = ((numpy.float32(1.0)/numpy.float32(2.0)))*x_11
+    t2 = ((numpy.float32(1.0)/numpy.float32(2.0)))*x_12
+    t3 = (1.0/m)
     t4 = 2*x_4
     t5 = t4*x_3
     t6 = 2*x_5
@@ -1612,12 +1872,12 @@ def rigid_body_rhs_torque(x, I_b, tau_w):
     x_dot_out[..., 4] = t0*x_5 + t1*x_6 - t2*x_3
     x_dot_out[..., 5] = -t0*x_4 + t1*x_3 + t2*x_6
     x_dot_out[..., 6] = -t0*x_3 - t1*x_4 - t2*x_5
-    x_dot_out[..., 7] = 0
-    x_dot_out[..., 8] = 0
-    x_dot_out[..., 9] = 0
-    x_dot_out[..., 10] = (tau_w_0*(-t10 - t11) + tau_w_1*(t5 + t7) + tau_w_2*(t8 - t9) + x_11*x_12*(I_b_1 + t3))/I_b_0
-    x_dot_out[..., 11] = (tau_w_0*(t5 - t7) + tau_w_1*(-t11 - t13) + tau_w_2*(t12 + t4*x_5) + x_10*x_12*(-I_b_0 - t3))/I_b_1
-    x_dot_out[..., 12] = (tau_w_0*(t8 + t9) + tau_w_1*(-t12 + 2*x_4*x_5) + tau_w_2*(-t10 - t13 + 1) + x_10*x_11*(I_b_0 - I_b_1))/I_b_2
+    x_dot_out[..., 7] = F_w_0*t3
+    x_dot_out[..., 8] = F_w_1*t3
+    x_dot_out[..., 9] = F_w_2*t3
+    x_dot_out[..., 10] = c_b_0*x_11*x_12 + c_b_3*(tau_w_0*(-t10 - t11) + tau_w_1*(t5 + t7) + tau_w_2*(t8 - t9))
+    x_dot_out[..., 11] = c_b_1*x_10*x_12 + c_b_4*(tau_w_0*(t5 - t7) + tau_w_1*(-t11 - t13) + tau_w_2*(t12 + t4*x_5))
+    x_dot_out[..., 12] = c_b_2*x_10*x_11 + c_b_5*(tau_w_0*(t8 + t9) + tau_w_1*(-t12 + 2*x_4*x_5) + tau_w_2*(-t10 - t13 + 1))
     return x_dot_out
 
 
@@ -4253,6 +4513,10 @@ KERNELS = {
     'kinetic_energy': (kinetic_energy, [('m', ()), ('I_b', (3,)), ('v_w', (3,)), ('omega_b', (3,))], [('T', ())]),
     'angular_momentum_world': (angular_momentum_world, [('q', (4,)), ('I_b', (3,)), ('omega_b', (3,))], [('L_w', (3,))]),
     'rigid_body_rhs_torque': (rigid_body_rhs_torque, [('x', (13,)), ('I_b', (3,)), ('tau_w', (3,))], [('x_dot', (13,))]),
+    'euler_coefficients': (euler_coefficients, [('I_b', (3,))], [('c_b', (6,))]),
+    'rigid_body_rhs_free_c': (rigid_body_rhs_free_c, [('x', (13,)), ('c_b', (6,))], [('x_dot', (13,))]),
+    'rigid_body_rhs_torque_c': (rigid_body_rhs_torque_c, [('x', (13,)), ('c_b', (6,)), ('tau_w', (3,))], [('x_dot', (13,))]),
+    'rigid_body_rhs_c': (rigid_body_rhs_c, [('x', (13,)), ('m', ()), ('c_b', (6,)), ('F_w', (3,)), ('tau_w', (3,))], [('x_dot', (13,))]),
     'pivot_body_rhs': (pivot_body_rhs, [('q', (4,)), ('omega_b', (3,)), ('I_p', (3, 3)), ('r_b', (3,)), ('F_w', (3,)), ('tau_w', (3,))], [('q_dot', (4,)), ('omega_dot_b', (3,))]),
     'wheel_body_rhs': (wheel_body_rhs, [('q', (4,)), ('omega_b', (3,)), ('Omega', (3,)), ('I_p', (3, 3)), ('J', (3,)), ('r_b', (3,)), ('F_w', (3,)), ('tau_w', (3,)), ('u', (3,)), ('c_w', ())], [('q_dot', (4,)), ('omega_dot_b', (3,)), ('Omega_dot', (3,))]),
     'wheel_momentum': (wheel_momentum, [('q', (4,)), ('omega_b', (3,)), ('Omega', (3,)), ('I_p', (3, 3)), ('J', (3,))], [('L_body_w', (3,)), ('L_wheels_w', (3,))]),

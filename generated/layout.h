@@ -33,6 +33,11 @@
 #define LV_XS_OMEGA 13  /* [3] wheel rates relative to the body, rad/s */
 #define LV_XS_SIZE 16
 
+/* Euler coefficients c_b of a body (derive/rigid_body.py euler_coefficients) (6) */
+#define LV_EULER_K 0  /* [3] k_x = (I_y - I_z)/I_x (cyclic), body frame, dimensionless */
+#define LV_EULER_R 3  /* [3] r_x = 1/I_x (cyclic), body frame, 1/(kg·m²) */
+#define LV_EULER_SIZE 6
+
 /* bits of the model row's kind */
 enum {
     LV_KIND_JOINT = 1,  /* world-anchored spherical joint: p_w, v_w follow from q, omega */

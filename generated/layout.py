@@ -37,6 +37,12 @@ XS_OMEGA = slice(13, 16)  # [3] wheel rates relative to the body, rad/s
 XS_SIZE = 16
 XS_LAYOUT = {'x': slice(0, 13), 'Omega': slice(13, 16)}
 
+# Euler coefficients c_b of a body (derive/rigid_body.py euler_coefficients)
+EULER_K = slice(0, 3)  # [3] k_x = (I_y - I_z)/I_x (cyclic), body frame, dimensionless
+EULER_R = slice(3, 6)  # [3] r_x = 1/I_x (cyclic), body frame, 1/(kg·m²)
+EULER_SIZE = 6
+EULER_LAYOUT = {'k': slice(0, 3), 'r': slice(3, 6)}
+
 # bits of the model row's kind
 KIND_JOINT = 1  # world-anchored spherical joint: p_w, v_w follow from q, omega
 KIND_WHEELS = 2  # three body-axis reaction wheels: Omega integrated, motor torques saturated

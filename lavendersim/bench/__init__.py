@@ -811,7 +811,7 @@ def standing(res: dict) -> list[dict]:
     out.append(_line("SIMD batch ns per body-step on AVX-512 (worst of N >= 1e3)", ns512,
                      TARGETS["simd_batch_ns_avx512"], "max", "ns/body-step",
                      ("one C call at avx512f" if ns512 is not None else "this CPU or build has no AVX-512 path")
-                     + ("" if floor is None else f"; the divider alone (12 div + 1 sqrt per body-step, required for "
+                     + ("" if floor is None else f"; the divider alone (the normalization's 1 div + 1 sqrt per body-step, required for "
                         f"bitwise results) takes {floor:.2f}")))
     for p in res.get("per_body_effects", []):
         out.append(_line(f"one applied_torque per body / plain body, N = {p['n_bodies']:g}", p["ratio"],
@@ -922,7 +922,7 @@ def report(res: dict) -> str:
         for r in sb["sizes"]:
             if "divider_floor" in r:
                 L.append(f"  N = {r['n_bodies']:g}: divider floor at {r['divider_floor_isa']} {r['divider_floor']['ns_min']:.2f} "
-                         "ns/body-step (only the 12 divisions + 1 sqrt a bitwise step needs; no loop below it)")
+                         "ns/body-step (only the normalization's division + sqrt a bitwise step needs; no loop below it)")
         for r in sb["sizes"]:
             if "threads_speedup" in r:
                 L.append(f"  N = {r['n_bodies']:g}: two threads {r['lavendersim_2_threads']['ns_min']:.2f} ns/body-step, "

@@ -8,10 +8,12 @@
      state x (13) = p_w[3], q[4] (x, y, z, w; scalar last; R_WB), v_w[3], omega_b[3]
      p' = v,  v' = 0
      q' = 1/2 q (x) (omega_b, 0)          (body-form kinematics)
-     I w' = (I w) x w                      (Euler's equations, principal axes)
+     I w' = (I w) x w                      (Euler's equations, principal axes), written division-free
+     w_x' = k_x w_y w_z, k_x = (I_y - I_z)/I_x (cyclic), the coefficients computed once per call
    four right-hand-side evaluations (stage quaternions unnormalized), the RK4 combination of all 13
    numbers, then q normalized. Each expression is written in the same order of operations as the
-   generated kernel (generated/kernels.c: rigid_body_rhs_free, quat_normalize), so a peer that is
+   generated kernels (generated/kernels.c: euler_coefficients, rigid_body_rhs_free_c, quat_normalize;
+   rigid_body_rhs_free prints the same arithmetic), so a peer that is
    right gives bitwise LavenderSim's trajectory; the bench checks that (max |dx| = 0).
 
    lv_ref_rk4_free: one body, everything inlined into one loop (the scalar peer). With check != 0
@@ -20,7 +22,8 @@
    state went non-finite (x then holds the last finite state).
 
    lv_ref_rk4_free_soa: n bodies stored as structure of arrays, X[k*n + b] = number k of body b (13
-   arrays of n), I[k*n + b] = I_k of body b; every step is one loop over bodies that the compiler
+   arrays of n), I[k*n + b] = I_k of body b (turned into the coefficient rows k_x, k_y, k_z once per
+   tile); every step is one loop over bodies that the compiler
    vectorizes (the batch peer). Compiled once per instruction set the bench measures (see
    lavendersim.bench: -mavx512f, -mavx2, SSE2 baseline). No finiteness checks. */
 #include <math.h>
@@ -28,9 +31,9 @@
 #define NX 13
 #define TILE 128 /* bodies per tile of the SoA peer */
 
-static inline void rhs_free(const double *x, const double *I, double *d)
+static inline void rhs_free(const double *x, const double *c, double *d)
 {
-    const double t0 = 0.5 * x[10], t1 = 0.5 * x[11], t2 = 0.5 * x[12], t3 = -I[2];
+    const double t0 = 0.5 * x[10], t1 = 0.5 * x[11], t2 = 0.5 * x[12];
     d[0] = x[7];
     d[1] = x[8];
     d[2] = x[9];
@@ -41,27 +44,27 @@ static inline void rhs_free(const double *x, const double *I, double *d)
     d[7] = 0.0;
     d[8] = 0.0;
     d[9] = 0.0;
-    d[10] = x[11] * x[12] * (I[1] + t3) / I[0];
-    d[11] = x[10] * x[12] * (-I[0] - t3) / I[1];
-    d[12] = x[10] * x[11] * (I[0] - I[1]) / I[2];
+    d[10] = c[0] * x[11] * x[12];
+    d[11] = c[1] * x[10] * x[12];
+    d[12] = c[2] * x[10] * x[11];
 }
 
 long lv_ref_rk4_free(double *x, const double *I_b, double dt, long n_steps, int check)
 {
     double y[NX], k1[NX], k2[NX], k3[NX], k4[NX], t[NX], yn[NX];
-    const double I[3] = {I_b[0], I_b[1], I_b[2]};
+    const double c[3] = {(I_b[1] - I_b[2]) / I_b[0], (-I_b[0] + I_b[2]) / I_b[1], (I_b[0] - I_b[1]) / I_b[2]};
     const double h2 = 0.5 * dt, h6 = dt / 6.0;
     long s;
     int i;
     for (i = 0; i < NX; i++) y[i] = x[i];
     for (s = 0; s < n_steps; s++) {
-        rhs_free(y, I, k1);
+        rhs_free(y, c, k1);
         for (i = 0; i < NX; i++) t[i] = y[i] + h2 * k1[i];
-        rhs_free(t, I, k2);
+        rhs_free(t, c, k2);
         for (i = 0; i < NX; i++) t[i] = y[i] + h2 * k2[i];
-        rhs_free(t, I, k3);
+        rhs_free(t, c, k3);
         for (i = 0; i < NX; i++) t[i] = y[i] + dt * k3[i];
-        rhs_free(t, I, k4);
+        rhs_free(t, c, k4);
         for (i = 0; i < NX; i++) yn[i] = y[i] + h6 * (1.0 * k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + 1.0 * k4[i]);
         {
             const double r = 1.0 / sqrt(yn[3] * yn[3] + yn[4] * yn[4] + yn[5] * yn[5] + yn[6] * yn[6]);
@@ -88,9 +91,9 @@ long lv_ref_rk4_free(double *x, const double *I_b, double dt, long n_steps, int 
     const double d##4 = d##u0 * a##5 + d##u1 * a##6 - d##u2 * a##3;                                  \
     const double d##5 = -d##u0 * a##4 + d##u1 * a##3 + d##u2 * a##6;                                 \
     const double d##6 = -d##u0 * a##3 - d##u1 * a##4 - d##u2 * a##5;                                 \
-    const double d##10 = a##11 * a##12 * c0 / I0;                                                    \
-    const double d##11 = a##10 * a##12 * c1 / I1;                                                    \
-    const double d##12 = a##10 * a##11 * c2 / I2
+    const double d##10 = c0 * a##11 * a##12;                                                         \
+    const double d##11 = c1 * a##10 * a##12;                                                         \
+    const double d##12 = c2 * a##10 * a##11
 /* stage state: a##k = y##k + h * d##k (d##0..2 = y##7..9 of the previous stage, d##7..9 = 0). */
 #define STAGE(a, h, d, v0, v1, v2)                                                                   \
     const double a##0 = y0 + h * v0, a##1 = y1 + h * v1, a##2 = y2 + h * v2;                         \
@@ -111,12 +114,15 @@ void lv_ref_rk4_free_soa(double *X, const double *I, long n, double dt, long n_s
         m = n - b0 < TILE ? n - b0 : TILE;
         for (k = 0; k < NX; k++)
             for (b = 0; b < m; b++) T[k][b] = X[k * n + b0 + b];
-        for (k = 0; k < 3; k++)
-            for (b = 0; b < m; b++) J[k][b] = I[k * n + b0 + b];
+        for (b = 0; b < m; b++) { /* the Euler coefficients, once per tile */
+            const double I0 = I[b0 + b], I1 = I[n + b0 + b], I2 = I[2 * n + b0 + b];
+            J[0][b] = (I1 - I2) / I0;
+            J[1][b] = (-I0 + I2) / I1;
+            J[2][b] = (I0 - I1) / I2;
+        }
         for (s = 0; s < n_steps; s++) {
             for (b = 0; b < m; b++) {
-                const double I0 = J[0][b], I1 = J[1][b], I2 = J[2][b], t3 = -I2;
-                const double c0 = I1 + t3, c1 = -I0 - t3, c2 = I0 - I1;
+                const double c0 = J[0][b], c1 = J[1][b], c2 = J[2][b];
                 const double y0 = T[0][b], y1 = T[1][b], y2 = T[2][b], y3 = T[3][b], y4 = T[4][b], y5 = T[5][b],
                     y6 = T[6][b], y7 = T[7][b], y8 = T[8][b], y9 = T[9][b], y10 = T[10][b], y11 = T[11][b],
                     y12 = T[12][b];
@@ -151,38 +157,31 @@ void lv_ref_rk4_free_soa(double *X, const double *I, long n, double dt, long n_s
 }
 
 /* The divider's floor for the batch (not a peer, a limit): per body-step only the correctly rounded
-   operations the torque-free RK4 step cannot do without while giving the same bits -- 12 divisions by
-   I_k (three per right-hand side) and the 1 / sqrt of the normalization -- on the same SoA tiles,
-   vectorized like lv_ref_rk4_free_soa. Each division's dividend depends on the previous one's
-   quotient (scaled back near 1, as a step feeds a stage), so nothing is hoisted out of the loop. On x86
-   the divider (divpd/sqrtpd) is one unit, not pipelined like the adders and multipliers, so this loop
-   bounds the throughput of any bitwise-identical batch loop from below. X is updated (its values are
-   meaningless). */
+   operations the torque-free RK4 step cannot do without while giving the same bits -- the sqrt and the
+   division of the normalization (the Euler coefficients' divisions are once per call, not per step) --
+   on the same SoA tiles, vectorized like lv_ref_rk4_free_soa. Each step's sqrt depends on the previous
+   step's quotient, so nothing is hoisted out of the loop. On x86 the divider (divpd/sqrtpd) is one
+   unit, not pipelined like the adders and multipliers, so this loop bounds the throughput of any
+   bitwise-identical batch loop from below. I is unused (same signature as the peer). X is updated
+   (its values are meaningless). */
 void lv_ref_divider_floor_soa(double *X, const double *I, long n, double dt, long n_steps)
 {
-    double T[NX][TILE], J[3][TILE];
+    double T[NX][TILE];
     long s, b, b0, m;
     int k;
+    (void)I;
     for (b0 = 0; b0 < n; b0 += m) {
         m = n - b0 < TILE ? n - b0 : TILE;
         for (k = 0; k < NX; k++)
             for (b = 0; b < m; b++) T[k][b] = X[k * n + b0 + b];
-        for (k = 0; k < 3; k++)
-            for (b = 0; b < m; b++) J[k][b] = I[k * n + b0 + b];
         for (s = 0; s < n_steps; s++) {
             for (b = 0; b < m; b++) {
-                const double I0 = J[0][b], I1 = J[1][b], I2 = J[2][b];
-                double w0 = T[10][b], w1 = T[11][b], w2 = T[12][b], q;
-                int r;
-                for (r = 0; r < 4; r++) {
-                    w0 = w0 + dt * (w0 / I0);
-                    w1 = w1 + dt * (w1 / I1);
-                    w2 = w2 + dt * (w2 / I2);
-                }
-                q = 1.0 / sqrt(w0 * w0 + w1 * w1 + w2 * w2);
-                T[10][b] = w0 * q;
-                T[11][b] = w1 * q;
-                T[12][b] = w2 * q;
+                const double w0 = T[3][b] + dt * T[10][b], w1 = T[4][b], w2 = T[5][b], w3 = T[6][b];
+                const double q = 1.0 / sqrt(w0 * w0 + w1 * w1 + w2 * w2 + w3 * w3);
+                T[3][b] = w0 * q;
+                T[4][b] = w1 * q;
+                T[5][b] = w2 * q;
+                T[6][b] = w3 * q;
             }
         }
         for (k = 0; k < NX; k++)

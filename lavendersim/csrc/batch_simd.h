@@ -4,12 +4,16 @@
    per call with the generated effect dispatch (effect_sums) and passed to the generated
    lv_rigid_body_rhs_torque / lv_rigid_body_rhs in every stage, as the scalar path does.
 
-   Speed (lavendersim bench, "SIMD batch"): a bitwise step needs 12 correctly rounded divisions by I_k
-   (three per right-hand side) and a sqrt and a division for the normalization; x86's divider is not
-   pipelined like the adders (AVX-512 vdivpd: one per ~16 cycles for 8 lanes), so those alone cost
-   about as much as the rest of the step (the bench's "divider floor" loop), and no bitwise loop goes
-   below them. Included once by step.c, after the generated kernels
-   (static functions; not a separate translation unit, so the kernels inline into every copy).
+   Speed (lavendersim bench, "SIMD batch"): x86's divider is not pipelined like the adders (AVX-512
+   vdivpd: one per ~16 cycles for 8 lanes). The printed right-hand sides divide by nothing: the tile
+   holds each body's Euler coefficients c_b (k_x = (I_y - I_z)/I_x, r_x = 1/I_x; the generated
+   lv_euler_coefficients, 6 divisions per body once per call) instead of I_b, and the stages call the
+   generated *_c kernels (bitwise the I_b kernels, the same printed arithmetic). What is left per step
+   is the normalization's sqrt and division (the bench's "divider floor" loop, ~2 ns/body-step at
+   AVX-512 against ~9-10 ns for the hand SoA peer: the adds and multiplies, not the divider, now bound
+   a step). Included once by
+   step.c, after the generated kernels (static functions; not a separate translation unit, so the
+   kernels inline into every copy).
 
    Every equation is the generated one: a tile step calls the generated right-hand side and lv_quat_normalize
    on one body's numbers (local arrays the compiler turns into registers) and the RK4 constants come
@@ -26,7 +30,7 @@
 #ifndef LAVENDERSIM_BATCH_SIMD_H
 #define LAVENDERSIM_BATCH_SIMD_H
 
-/* Bodies per tile: 13 + 13 (snapshot) + 3 rows of LV_TILE doubles stay in L1 over a chunk of steps. */
+/* Bodies per tile: 13 + 13 (snapshot) + 6 (c_b) + 7 (P) rows of LV_TILE doubles stay in L1 over a chunk of steps. */
 #define LV_TILE 64
 /* Groups of torque-free RK4 bodies smaller than this take the scalar block path (advance_free_rk4). */
 #define LV_SOA_MIN 16
@@ -40,10 +44,10 @@ enum { LV_TP_M = 0, LV_TP_F = 1, LV_TP_TAU = 4, LV_TP_ROWS = 7 };
 typedef void (*lv_tile_fn)(double (*LV_RESTRICT T)[LV_TILE], const double (*LV_RESTRICT J)[LV_TILE],
                            const double (*LV_RESTRICT P)[LV_TILE], long m, double dt, long n_steps);
 
-/* One lane's right-hand side, per kind (LV_RHS_*): in, out, I (3) of body b; P as above. */
-#define LV_TILE_RHS_FREE(in, out) lv_rigid_body_rhs_free(in, I, out)
-#define LV_TILE_RHS_TORQUE(in, out) lv_rigid_body_rhs_torque(in, I, tau, out)
-#define LV_TILE_RHS_FULL(in, out) lv_rigid_body_rhs(in, mass, I, F, tau, out)
+/* One lane's right-hand side, per kind (LV_RHS_*): in, out, cf (the Euler coefficients c_b of body b); P as above. */
+#define LV_TILE_RHS_FREE(in, out) lv_rigid_body_rhs_free_c(in, cf, out)
+#define LV_TILE_RHS_TORQUE(in, out) lv_rigid_body_rhs_torque_c(in, cf, tau, out)
+#define LV_TILE_RHS_FULL(in, out) lv_rigid_body_rhs_c(in, mass, cf, F, tau, out)
 #define LV_TILE_LOAD_FREE (void)P
 #define LV_TILE_LOAD_TORQUE                                                                             \
     const double tau[3] = {P[LV_TP_TAU][b], P[LV_TP_TAU + 1][b], P[LV_TP_TAU + 2][b]}
@@ -52,7 +56,8 @@ typedef void (*lv_tile_fn)(double (*LV_RESTRICT T)[LV_TILE], const double (*LV_R
     const double F[3] = {P[LV_TP_F][b], P[LV_TP_F + 1][b], P[LV_TP_F + 2][b]};                         \
     const double mass = P[LV_TP_M][b]
 
-/* n_steps RK4 steps of the m bodies of a tile: T[k][b] = state number k of body b, J[k][b] = its I_k.
+/* n_steps RK4 steps of the m bodies of a tile: T[k][b] = state number k of body b, J[k][b] = its Euler
+   coefficient c_b[k] (LV_EULER_*).
    NORMALIZE: q normalized after each step (the generated kernel), as on the scalar path. LOAD, RHS:
    the lane's constant effect sums and its right-hand side (LV_TILE_LOAD_*, LV_TILE_RHS_*). */
 #define LV_TILE_RK4(NORMALIZE, LOAD, RHS)                                                               \
@@ -63,10 +68,10 @@ typedef void (*lv_tile_fn)(double (*LV_RESTRICT T)[LV_TILE], const double (*LV_R
         for (s = 0; s < n_steps; s++) {                                                                 \
             for (b = 0; b < m; b++) {                                                                   \
                 double x[LV_STATE_SIZE], k1[LV_STATE_SIZE], k2[LV_STATE_SIZE], k3[LV_STATE_SIZE],       \
-                    k4[LV_STATE_SIZE], tmp[LV_STATE_SIZE], xn[LV_STATE_SIZE], I[3];                     \
+                    k4[LV_STATE_SIZE], tmp[LV_STATE_SIZE], xn[LV_STATE_SIZE], cf[LV_EULER_SIZE];        \
                 LOAD;                                                                                   \
                 for (i = 0; i < LV_STATE_SIZE; i++) x[i] = T[i][b];                                     \
-                for (i = 0; i < 3; i++) I[i] = J[i][b];                                                 \
+                for (i = 0; i < LV_EULER_SIZE; i++) cf[i] = J[i][b];                                    \
                 RHS(x, k1);                                                                             \
                 for (i = 0; i < LV_STATE_SIZE; i++) tmp[i] = x[i] + h2 * k1[i];                         \
                 RHS(tmp, k2);                                                                           \
@@ -151,15 +156,16 @@ static long advance_free_soa(double *state, const double *params, const long *id
                              const lv_effect_index *ix, double dt, long n_steps, int *fail_j,
                              double last[][LV_STATE_SIZE])
 {
-    double T[LV_STATE_SIZE][LV_TILE], S[LV_STATE_SIZE][LV_TILE], J[3][LV_TILE], P[LV_TP_ROWS][LV_TILE];
+    double T[LV_STATE_SIZE][LV_TILE], S[LV_STATE_SIZE][LV_TILE], J[LV_EULER_SIZE][LV_TILE], P[LV_TP_ROWS][LV_TILE];
     const double (*Pc)[LV_TILE] = (const double (*)[LV_TILE])P;
     long c, cm, s, j;
     int k, ok;
     for (j = 0; j < m; j++) {
         const double *x = state + ids[j] * LV_STATE_SIZE, *prm = params + ids[j] * LV_PARAM_SIZE;
-        double F[3] = {0.0, 0.0, 0.0}, tau[3] = {0.0, 0.0, 0.0};
+        double F[3] = {0.0, 0.0, 0.0}, tau[3] = {0.0, 0.0, 0.0}, cf[LV_EULER_SIZE];
         for (k = 0; k < LV_STATE_SIZE; k++) T[k][j] = x[k];
-        for (k = 0; k < 3; k++) J[k][j] = prm[LV_PARAM_I_B + k];
+        lv_euler_coefficients(prm + LV_PARAM_I_B, cf);
+        for (k = 0; k < LV_EULER_SIZE; k++) J[k][j] = cf[k];
         if (ix == NULL) continue;
         effect_sums(x, x + LV_STATE_V_W, prm[LV_PARAM_M], prm + LV_PARAM_I_B, ix->refs + ix->start[ids[j]],
                     ix->start[ids[j] + 1] - ix->start[ids[j]], F, tau);

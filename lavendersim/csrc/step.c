@@ -272,21 +272,26 @@ static inline long advance_block(double *state, const double *params, const long
 
 /* Right-hand sides on the lockstep RK4 path (`forced`): LV_RHS_FREE the free kernel; else each body's
    effects summed in table order, then LV_RHS_FULL the full kernel (as body_rhs), or LV_RHS_TORQUE the
-   torque-only one for bodies whose effects add no force (bitwise the full kernel with F = 0). */
+   torque-only one for bodies whose effects add no force (bitwise the full kernel with F = 0); with
+   `constant` (every effect of every body reads no state, see effects_constant) the sums were taken once
+   per call before the loop (the same inputs give the same bits, as on the SIMD tiles). Each on
+   the body's Euler coefficients c[j] (lv_euler_coefficients, once per call): the *_c kernels divide by
+   nothing and give bitwise the I_b kernels' results (the same printed arithmetic). */
 enum { LV_RHS_FREE = 0, LV_RHS_TORQUE = 1, LV_RHS_FULL = 2 };
+#define LV_RHS_CONSTANT 2 /* added to LV_RHS_TORQUE / LV_RHS_FULL: the body's effects read no state */
 #define LV_RK4_RHS(in, out)                                                                             \
     do {                                                                                                \
         if (forced == LV_RHS_FREE) {                                                                    \
-            for (j = 0; j < n; j++) lv_rigid_body_rhs_free(in[j], I[j], out[j]);                        \
+            for (j = 0; j < n; j++) lv_rigid_body_rhs_free_c(in[j], cf[j], out[j]);                     \
         } else {                                                                                        \
-            for (j = 0; j < n; j++) {                                                                   \
+            for (j = 0; j < n && !constant; j++) {                                                      \
                 F[j][0] = F[j][1] = F[j][2] = tau[j][0] = tau[j][1] = tau[j][2] = 0.0;                  \
-                effect_sums(in[j], in[j] + LV_STATE_V_W, m[j], I[j], refs[j], n_refs[j], F[j], tau[j]);            \
+                effect_sums(in[j], in[j] + LV_STATE_V_W, m[j], I[j], refs[j], n_refs[j], F[j], tau[j]);  \
             }                                                                                           \
             if (forced == LV_RHS_TORQUE)                                                                \
-                for (j = 0; j < n; j++) lv_rigid_body_rhs_torque(in[j], I[j], tau[j], out[j]);          \
+                for (j = 0; j < n; j++) lv_rigid_body_rhs_torque_c(in[j], cf[j], tau[j], out[j]);       \
             else                                                                                        \
-                for (j = 0; j < n; j++) lv_rigid_body_rhs(in[j], m[j], I[j], F[j], tau[j], out[j]);     \
+                for (j = 0; j < n; j++) lv_rigid_body_rhs_c(in[j], m[j], cf[j], F[j], tau[j], out[j]);  \
         }                                                                                               \
     } while (0)
 
@@ -329,12 +334,12 @@ enum { LV_RHS_FREE = 0, LV_RHS_TORQUE = 1, LV_RHS_FULL = 2 };
    non-finite too; then the chunk is re-run from its start with a check after every step, which
    recomputes the same bits (deterministic arithmetic) and finds the first failing step and body. */
 static inline long advance_free_rk4(double *state, const double *params, const long *ids, int n,
-                                    const lv_effect_index *ix, int forced, int normalize,
+                                    const lv_effect_index *ix, int forced, int constant, int normalize,
                                     double dt, long n_steps, int *fail_j, double last[][LV_STATE_SIZE])
 {
     double x[LV_BLOCK][LV_STATE_SIZE], xn[LV_BLOCK][LV_STATE_SIZE], k1[LV_BLOCK][LV_STATE_SIZE],
         k2[LV_BLOCK][LV_STATE_SIZE], k3[LV_BLOCK][LV_STATE_SIZE], k4[LV_BLOCK][LV_STATE_SIZE],
-        tmp[LV_BLOCK][LV_STATE_SIZE], I[LV_BLOCK][3], snap[LV_BLOCK][LV_STATE_SIZE];
+        tmp[LV_BLOCK][LV_STATE_SIZE], I[LV_BLOCK][3], cf[LV_BLOCK][LV_EULER_SIZE], snap[LV_BLOCK][LV_STATE_SIZE];
     double F[LV_BLOCK][3], tau[LV_BLOCK][3], m[LV_BLOCK];
     const lv_effect_ref *refs[LV_BLOCK];
     long n_refs[LV_BLOCK];
@@ -344,9 +349,13 @@ static inline long advance_free_rk4(double *state, const double *params, const l
     for (j = 0; j < n; j++) {
         memcpy(x[j], state + ids[j] * LV_STATE_SIZE, sizeof x[j]);
         memcpy(I[j], params + ids[j] * LV_PARAM_SIZE + LV_PARAM_I_B, sizeof I[j]);
+        lv_euler_coefficients(I[j], cf[j]);
         m[j] = params[ids[j] * LV_PARAM_SIZE + LV_PARAM_M];
         refs[j] = ix->refs + ix->start[ids[j]];
         n_refs[j] = ix->start[ids[j] + 1] - ix->start[ids[j]];
+        F[j][0] = F[j][1] = F[j][2] = tau[j][0] = tau[j][1] = tau[j][2] = 0.0;
+        if (constant && forced != LV_RHS_FREE)
+            effect_sums(x[j], x[j] + LV_STATE_V_W, m[j], I[j], refs[j], n_refs[j], F[j], tau[j]);
     }
     for (c = 0; c < n_steps; c += cm) {
         cm = n_steps - c < LV_FREE_CHUNK ? n_steps - c : LV_FREE_CHUNK;
@@ -1072,11 +1081,17 @@ LV_FLATTEN static long advance_forced_rk4(double *state, const double *params, c
                                           const lv_effect_index *ix, int kind, int normalize, double dt, long n_steps,
                                           int *fail_j, double last[][LV_STATE_SIZE])
 {
-    if (kind == LV_RHS_TORQUE)
-        return n == LV_BLOCK ? advance_free_rk4(state, params, ids, LV_BLOCK, ix, LV_RHS_TORQUE, normalize, dt, n_steps, fail_j, last)
-                             : advance_free_rk4(state, params, ids, n, ix, LV_RHS_TORQUE, normalize, dt, n_steps, fail_j, last);
-    return n == LV_BLOCK ? advance_free_rk4(state, params, ids, LV_BLOCK, ix, LV_RHS_FULL, normalize, dt, n_steps, fail_j, last)
-                         : advance_free_rk4(state, params, ids, n, ix, LV_RHS_FULL, normalize, dt, n_steps, fail_j, last);
+#define LV_FORCED(KIND, CONST)                                                                          \
+    (n == LV_BLOCK ? advance_free_rk4(state, params, ids, LV_BLOCK, ix, KIND, CONST, normalize, dt, n_steps, fail_j, last) \
+     : n == 1      ? advance_free_rk4(state, params, ids, 1, ix, KIND, CONST, normalize, dt, n_steps, fail_j, last)        \
+                   : advance_free_rk4(state, params, ids, n, ix, KIND, CONST, normalize, dt, n_steps, fail_j, last))
+    switch (kind) {
+    case LV_RHS_TORQUE: return LV_FORCED(LV_RHS_TORQUE, 0);
+    case LV_RHS_TORQUE + LV_RHS_CONSTANT: return LV_FORCED(LV_RHS_TORQUE, 1);
+    case LV_RHS_FULL + LV_RHS_CONSTANT: return LV_FORCED(LV_RHS_FULL, 1);
+    default: return LV_FORCED(LV_RHS_FULL, 0);
+    }
+#undef LV_FORCED
 }
 
 /* RK4 on up to LV_BLOCK plain bodies of ids in lockstep, all of one right-hand side kind (LV_RHS_*). The
@@ -1090,12 +1105,12 @@ LV_FLATTEN static long advance_rk4_group(double *state, const double *params, co
     if (kind != LV_RHS_FREE)
         return advance_forced_rk4(state, params, ids, n, ix, kind, normalize, dt, n_steps, fail_j, last);
     if (n == LV_BLOCK)
-        return normalize ? advance_free_rk4(state, params, ids, LV_BLOCK, ix, LV_RHS_FREE, 1, dt, n_steps, fail_j, last)
-                         : advance_free_rk4(state, params, ids, LV_BLOCK, ix, LV_RHS_FREE, 0, dt, n_steps, fail_j, last);
+        return normalize ? advance_free_rk4(state, params, ids, LV_BLOCK, ix, LV_RHS_FREE, 0, 1, dt, n_steps, fail_j, last)
+                         : advance_free_rk4(state, params, ids, LV_BLOCK, ix, LV_RHS_FREE, 0, 0, dt, n_steps, fail_j, last);
     if (n == 1)
-        return normalize ? advance_free_rk4(state, params, ids, 1, ix, LV_RHS_FREE, 1, dt, n_steps, fail_j, last)
-                         : advance_free_rk4(state, params, ids, 1, ix, LV_RHS_FREE, 0, dt, n_steps, fail_j, last);
-    return advance_free_rk4(state, params, ids, n, ix, LV_RHS_FREE, normalize, dt, n_steps, fail_j, last);
+        return normalize ? advance_free_rk4(state, params, ids, 1, ix, LV_RHS_FREE, 0, 1, dt, n_steps, fail_j, last)
+                         : advance_free_rk4(state, params, ids, 1, ix, LV_RHS_FREE, 0, 0, dt, n_steps, fail_j, last);
+    return advance_free_rk4(state, params, ids, n, ix, LV_RHS_FREE, 0, normalize, dt, n_steps, fail_j, last);
 }
 
 /* Up to LV_BLOCK plain bodies of ids (ascending) in lockstep, all of one right-hand side kind (LV_RHS_*):
@@ -1115,8 +1130,8 @@ LV_FLATTEN static long advance_group(double *state, const double *params, const 
 }
 
 /* The right-hand side kind of plain body b (LV_RHS_*), plus LV_RHS_CONSTANT when it has effects and
-   they are all constant (effects_constant: such a group may take the SIMD tiles with effects). */
-#define LV_RHS_CONSTANT 2
+   they are all constant (effects_constant: such a group takes the SIMD tiles with effects, or the
+   scalar blocks with its sums taken once per call). */
 #define LV_RHS_CLASSES 5
 static int rhs_kind(const lv_effect_index *ix, long b)
 {
@@ -1377,10 +1392,12 @@ static int advance_fixed(double *state, const double *params, long nb, const lv_
     for (cls = 0; cls < LV_RHS_CLASSES; cls++) {
         const long *list = ids + first[cls] - count[cls];
         kind = cls > LV_RHS_FULL ? cls - LV_RHS_CONSTANT : cls;
-        /* RK4 groups on SIMD tiles (csrc/batch_simd.h), split over threads when asked: torque-free ones of
-           LV_SOA_MIN bodies or more, and any with constant effects (their sums are then evaluated once per
-           call, not at every stage) */
-        if ((cls == LV_RHS_FREE ? count[cls] >= LV_SOA_MIN : cls > LV_RHS_FULL && count[cls] > 0)
+        /* RK4 groups of LV_SOA_MIN bodies or more on SIMD tiles (csrc/batch_simd.h), split over threads
+           when asked: torque-free ones, and those with constant effects (their sums are then evaluated
+           once per call, not at every stage); smaller such groups get the same on the scalar blocks (one
+           body with one applied torque: 1.57-1.69x a plain body there, 1.74x on a 1-body tile; bench
+           per-body effects, loaded machine) */
+        if ((cls == LV_RHS_FREE || cls > LV_RHS_FULL) && count[cls] >= LV_SOA_MIN
             && integrator == LV_INTEGRATOR_RK4 && isa != LV_ISA_SCALAR) {
             if (advance_soa_threads(state, params, list, count[cls], tile_rk4_fn(isa, normalize, kind),
                                     cls == LV_RHS_FREE ? NULL : ix, dt, n_steps, threads, limit, best) == LV_DIVERGED)
@@ -1391,7 +1408,7 @@ static int advance_fixed(double *state, const double *params, long nb, const lv_
             n = (int)(count[cls] - k < LV_BLOCK ? count[cls] - k : LV_BLOCK);
             lim = run_limit(list[k], *limit, *best, n_steps);
             if (lim <= 0) continue;
-            s = advance_group(state, params, list + k, n, ix, kind, integrator, normalize, dt, lim, &j, last);
+            s = advance_group(state, params, list + k, n, ix, cls, integrator, normalize, dt, lim, &j, last);
             /* the block stops at its first failing step, j its lowest failing body there (lockstep) */
             if (s < 0 || !earlier(s, list[k + j], *limit, *best)) continue;
             memcpy(state + list[k + j] * LV_STATE_SIZE, last[j], sizeof last[j]);
