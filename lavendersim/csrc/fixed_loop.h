@@ -15,10 +15,16 @@
    (lavendersim/backends/numpy_backend.py: the same kernels, RK4 combination and normalization in the same
    order), which tests/test_float32.py checks bitwise.
 
-   Layout: bodies are stepped in struct-of-arrays tiles (T[k][b] = state number k of body b) so that the
-   loop over the bodies of a tile, with the kernels inlined (flatten), is what the compiler vectorizes for
-   torque-free bodies (one body per lane; 16 float lanes in AVX-512); bodies with effects take the same loop
-   with the effect dispatch (scalar). */
+   Layout: bodies are stepped in struct-of-arrays tiles (T[k][b] = state number k of body b), grouped by what
+   their right-hand side needs (LV_FIXED_*): torque-free, constant torque, constant force and torque (every
+   effect reads no state: its sums are evaluated once per call), any effects (summed at every stage by the
+   generated dispatch). The tile holds each body's Euler coefficients c_b (generated euler_coefficients, once
+   per call; k_x = (I_y - I_z)/I_x, r_x = 1/I_x) and the stages call the generated coefficient kernels
+   (rigid_body_rhs_free_c / _torque_c / _c: bitwise the I_b kernels, the same printed arithmetic), so a
+   torque-free step divides by nothing but the normalization's 1/sqrt (as csrc/batch_simd.h in float64).
+   The loop over the bodies of a tile, with the kernels inlined (flatten), is what the compiler vectorizes for
+   the first three kinds (one body per lane; 16 float lanes in AVX-512, one copy per instruction set through
+   target_clones); the "any effects" tiles take the same loop with the effect dispatch (scalar). */
 
 #if defined(__GNUC__) || defined(__clang__)
 #define LV_FIXED_FLATTEN __attribute__((flatten))
@@ -41,30 +47,62 @@ typedef struct {
     int code;
 } LV_FN(ref);
 
-/* d/dt of one plain body: the free kernel, or its effects summed in table order and the full kernel. */
-static inline void LV_FN(rhs)(const LV_REAL *x, const LV_REAL *I, LV_REAL m, const LV_FN(ref) *refs, long n,
-                              int forced, LV_REAL *xd)
+/* What the right-hand side of a tile's bodies needs: LV_FIXED_FREE no effect acts on them (the free kernel);
+   LV_FIXED_TORQUE / LV_FIXED_FORCE every effect on them reads no state (LV_EFFECT_USES_STATE clear: applied
+   torque, gravity), without / with a force: their sums are evaluated once per call into the tile (the same
+   inputs give the same bits at every stage) and the torque / full kernel takes them; LV_FIXED_ANY the
+   effects summed in table order at every stage (the generated dispatch, scalar), then the full kernel. */
+enum { LV_FIXED_FREE = 0, LV_FIXED_TORQUE = 1, LV_FIXED_FORCE = 2, LV_FIXED_ANY = 3, LV_FIXED_KINDS = 4 };
+
+/* A tile of nt bodies: T[k][b] state, C[k][b] Euler coefficients c_b (generated euler_coefficients, once per
+   call), M[b] mass, I[k][b] principal moments (LV_FIXED_ANY: the effects' input), P[k][b] constant force
+   (0..2) and torque (3..5) sums (LV_FIXED_TORQUE / LV_FIXED_FORCE); refs[b] / nref[b] body b's effects. */
+typedef struct {
+    LV_REAL T[LV_STATE_SIZE][LV_FIXED_TILE];
+    LV_REAL C[LV_EULER_SIZE][LV_FIXED_TILE];
+    LV_REAL M[LV_FIXED_TILE];
+    LV_REAL I[3][LV_FIXED_TILE];
+    LV_REAL P[6][LV_FIXED_TILE];
+    const LV_FN(ref) *refs[LV_FIXED_TILE];
+    long nref[LV_FIXED_TILE];
+    long nt;
+} LV_FN(tile);
+
+/* d/dt of body b of tile t at state x (kind: LV_FIXED_*). The printed right-hand sides are the coefficient
+   forms (*_c, bitwise the I_b kernels): no division but the full kernel's 1/m. */
+static inline void LV_FN(rhs)(const LV_FN(tile) *LV_RESTRICT t, long b, int kind, const LV_REAL *x, LV_REAL *xd)
 {
-    LV_REAL F[3] = {0, 0, 0}, tau[3] = {0, 0, 0};
+    LV_REAL cf[LV_EULER_SIZE], F[3] = {0, 0, 0}, tau[3] = {0, 0, 0};
     long k;
-    if (!forced) {
-        LV_K(rigid_body_rhs_free)(x, I, xd);
+    for (k = 0; k < LV_EULER_SIZE; k++) cf[k] = t->C[k][b];
+    if (kind == LV_FIXED_FREE) {
+        LV_K(rigid_body_rhs_free_c)(x, cf, xd);
         return;
     }
-    for (k = 0; k < n; k++) (void)LV_EFFECT_APPLY(refs[k].code, refs[k].p, x, x + LV_STATE_V_W, m, I, F, tau);
-    LV_K(rigid_body_rhs)(x, m, I, F, tau, xd);
+    if (kind == LV_FIXED_ANY) {
+        const LV_REAL I[3] = {t->I[0][b], t->I[1][b], t->I[2][b]};
+        for (k = 0; k < t->nref[b]; k++)
+            (void)LV_EFFECT_APPLY(t->refs[b][k].code, t->refs[b][k].p, x, x + LV_STATE_V_W, t->M[b], I, F, tau);
+    } else {
+        for (k = 0; k < 3; k++) {
+            F[k] = t->P[k][b];
+            tau[k] = t->P[3 + k][b];
+        }
+    }
+    if (kind == LV_FIXED_TORQUE) LV_K(rigid_body_rhs_torque_c)(x, cf, tau, xd);
+    else LV_K(rigid_body_rhs_c)(x, t->M[b], cf, F, tau, xd);
 }
 
-/* One step of one body, x -> x (q normalized when asked). */
-static inline void LV_FN(body_step)(LV_REAL *x, const LV_REAL *I, LV_REAL m, const LV_FN(ref) *refs, long n,
-                                    int forced, int integrator, int normalize, LV_REAL dt)
+/* One step of body b of tile t, x -> x (q normalized when asked). */
+static inline void LV_FN(body_step)(const LV_FN(tile) *LV_RESTRICT t, long b, LV_REAL *x, int kind, int integrator,
+                                    int normalize, LV_REAL dt)
 {
     const LV_REAL h2 = (LV_REAL)LV_RK4_C1 * dt, h3 = (LV_REAL)LV_RK4_C2 * dt, h4 = (LV_REAL)LV_RK4_C3 * dt;
     const LV_REAL h6 = dt / (LV_REAL)LV_RK4_B_DEN;
     const LV_REAL b0 = (LV_REAL)LV_RK4_B0, b1 = (LV_REAL)LV_RK4_B1, b2 = (LV_REAL)LV_RK4_B2, b3 = (LV_REAL)LV_RK4_B3;
     LV_REAL k1[LV_STATE_SIZE], k2[LV_STATE_SIZE], k3[LV_STATE_SIZE], k4[LV_STATE_SIZE], tmp[LV_STATE_SIZE];
     int i;
-    LV_FN(rhs)(x, I, m, refs, n, forced, k1);
+    LV_FN(rhs)(t, b, kind, x, k1);
     if (integrator == LV_INTEGRATOR_EULER) {
         for (i = 0; i < LV_STATE_SIZE; i++) x[i] = x[i] + dt * k1[i];
     } else if (integrator == LV_INTEGRATOR_SEMI_IMPLICIT_EULER) {
@@ -77,38 +115,26 @@ static inline void LV_FN(body_step)(LV_REAL *x, const LV_REAL *I, LV_REAL m, con
         for (i = 0; i < 4; i++) x[LV_STATE_Q + i] = x[LV_STATE_Q + i] + dt * tmp[i];
     } else { /* LV_INTEGRATOR_RK4 */
         for (i = 0; i < LV_STATE_SIZE; i++) tmp[i] = x[i] + h2 * k1[i];
-        LV_FN(rhs)(tmp, I, m, refs, n, forced, k2);
+        LV_FN(rhs)(t, b, kind, tmp, k2);
         for (i = 0; i < LV_STATE_SIZE; i++) tmp[i] = x[i] + h3 * k2[i];
-        LV_FN(rhs)(tmp, I, m, refs, n, forced, k3);
+        LV_FN(rhs)(t, b, kind, tmp, k3);
         for (i = 0; i < LV_STATE_SIZE; i++) tmp[i] = x[i] + h4 * k3[i];
-        LV_FN(rhs)(tmp, I, m, refs, n, forced, k4);
+        LV_FN(rhs)(t, b, kind, tmp, k4);
         for (i = 0; i < LV_STATE_SIZE; i++) x[i] = x[i] + h6 * (b0 * k1[i] + b1 * k2[i] + b2 * k3[i] + b3 * k4[i]);
     }
     if (normalize) LV_K(quat_normalize)(x + LV_STATE_Q, x + LV_STATE_Q);
 }
 
-/* A tile of nt bodies: T[k][b] state, J[0..2][b] principal moments, J[3][b] mass; refs[b] / nref[b] body b's
-   effects (forced tiles only). */
-typedef struct {
-    LV_REAL T[LV_STATE_SIZE][LV_FIXED_TILE];
-    LV_REAL J[4][LV_FIXED_TILE];
-    const LV_FN(ref) *refs[LV_FIXED_TILE];
-    long nref[LV_FIXED_TILE];
-    long nt;
-} LV_FN(tile);
-
-static inline void LV_FN(tile_steps)(LV_FN(tile) *LV_RESTRICT t, int forced, int integrator, int normalize,
-                                     LV_REAL dt, long n_steps)
+static inline void LV_FN(tile_steps)(LV_FN(tile) *LV_RESTRICT t, int kind, int integrator, int normalize, LV_REAL dt,
+                                     long n_steps)
 {
     long s, b;
     int i;
     for (s = 0; s < n_steps; s++) {
         for (b = 0; b < t->nt; b++) {
-            LV_REAL x[LV_STATE_SIZE], I[3];
+            LV_REAL x[LV_STATE_SIZE];
             for (i = 0; i < LV_STATE_SIZE; i++) x[i] = t->T[i][b];
-            for (i = 0; i < 3; i++) I[i] = t->J[i][b];
-            LV_FN(body_step)(x, I, t->J[3][b], forced ? t->refs[b] : NULL, forced ? t->nref[b] : 0, forced,
-                             integrator, normalize, dt);
+            LV_FN(body_step)(t, b, x, kind, integrator, normalize, dt);
             for (i = 0; i < LV_STATE_SIZE; i++) t->T[i][b] = x[i];
         }
     }
@@ -116,26 +142,42 @@ static inline void LV_FN(tile_steps)(LV_FN(tile) *LV_RESTRICT t, int forced, int
 
 typedef void (*LV_FN(tile_fn))(LV_FN(tile) *LV_RESTRICT t, LV_REAL dt, long n_steps);
 
-/* The torque-free tiles, one specialized (constant integrator and normalize flag) copy each, and the tile of
-   bodies with effects (generic). */
-#define LV_FIXED_FREE_TILE(NAME, INTEGRATOR, NORMALIZE)                                                   \
+/* One specialized (constant kind, integrator and normalize flag) copy of the tile loop each: the loop over
+   the bodies of a tile vectorizes for LV_FIXED_FREE / _TORQUE / _FORCE (one body per lane); LV_FIXED_ANY
+   (the effect dispatch) stays scalar. */
+#define LV_FIXED_TILE_FN(NAME, KIND, INTEGRATOR, NORMALIZE)                                                   \
     LV_FIXED_CLONES LV_FIXED_FLATTEN static void LV_FN(NAME)(LV_FN(tile) *LV_RESTRICT t, LV_REAL dt, long n_steps) \
-    {                                                                                                   \
-        LV_FN(tile_steps)(t, 0, INTEGRATOR, NORMALIZE, dt, n_steps);                                    \
+    {                                                                                                         \
+        LV_FN(tile_steps)(t, KIND, INTEGRATOR, NORMALIZE, dt, n_steps);                                       \
     }
-LV_FIXED_FREE_TILE(free_euler_n, LV_INTEGRATOR_EULER, 1)
-LV_FIXED_FREE_TILE(free_euler_r, LV_INTEGRATOR_EULER, 0)
-LV_FIXED_FREE_TILE(free_semi_n, LV_INTEGRATOR_SEMI_IMPLICIT_EULER, 1)
-LV_FIXED_FREE_TILE(free_semi_r, LV_INTEGRATOR_SEMI_IMPLICIT_EULER, 0)
-LV_FIXED_FREE_TILE(free_rk4_n, LV_INTEGRATOR_RK4, 1)
-LV_FIXED_FREE_TILE(free_rk4_r, LV_INTEGRATOR_RK4, 0)
-#undef LV_FIXED_FREE_TILE
+#define LV_FIXED_TILE_KIND(K, KIND)                                                  \
+    LV_FIXED_TILE_FN(K##_euler_n, KIND, LV_INTEGRATOR_EULER, 1)                      \
+    LV_FIXED_TILE_FN(K##_euler_r, KIND, LV_INTEGRATOR_EULER, 0)                      \
+    LV_FIXED_TILE_FN(K##_semi_n, KIND, LV_INTEGRATOR_SEMI_IMPLICIT_EULER, 1)         \
+    LV_FIXED_TILE_FN(K##_semi_r, KIND, LV_INTEGRATOR_SEMI_IMPLICIT_EULER, 0)         \
+    LV_FIXED_TILE_FN(K##_rk4_n, KIND, LV_INTEGRATOR_RK4, 1)                          \
+    LV_FIXED_TILE_FN(K##_rk4_r, KIND, LV_INTEGRATOR_RK4, 0)
+LV_FIXED_TILE_KIND(free, LV_FIXED_FREE)
+LV_FIXED_TILE_KIND(torque, LV_FIXED_TORQUE)
+LV_FIXED_TILE_KIND(force, LV_FIXED_FORCE)
+#undef LV_FIXED_CLONES
+#define LV_FIXED_CLONES
+LV_FIXED_TILE_KIND(any, LV_FIXED_ANY)
+#undef LV_FIXED_TILE_KIND
+#undef LV_FIXED_TILE_FN
 
-LV_FIXED_FLATTEN static void LV_FN(forced_tile)(LV_FN(tile) *LV_RESTRICT t, int integrator, int normalize, LV_REAL dt,
-                                                long n_steps)
+#define LV_FIXED_PICK(K)                                                                                       \
+    (integrator == LV_INTEGRATOR_EULER ? (normalize ? LV_FN(K##_euler_n) : LV_FN(K##_euler_r))                 \
+     : integrator == LV_INTEGRATOR_SEMI_IMPLICIT_EULER ? (normalize ? LV_FN(K##_semi_n) : LV_FN(K##_semi_r))   \
+                                                       : (normalize ? LV_FN(K##_rk4_n) : LV_FN(K##_rk4_r)))
+/* The tile loop of kind (LV_FIXED_*), integrator and normalize flag. */
+static LV_FN(tile_fn) LV_FN(tile_pick)(int kind, int integrator, int normalize)
 {
-    LV_FN(tile_steps)(t, 1, integrator, normalize, dt, n_steps);
+    return kind == LV_FIXED_FREE ? LV_FIXED_PICK(free)
+         : kind == LV_FIXED_TORQUE ? LV_FIXED_PICK(torque)
+         : kind == LV_FIXED_FORCE ? LV_FIXED_PICK(force) : LV_FIXED_PICK(any);
 }
+#undef LV_FIXED_PICK
 
 static int LV_FN(tile_finite)(const LV_FN(tile) *t, long b)
 {
@@ -149,23 +191,22 @@ static int LV_FN(tile_finite)(const LV_FN(tile) *t, long b)
    re-run step by step from its start (the same bits: a non-finite number never becomes finite again on these
    paths, new = old + something and normalization keeps a NaN) to find its first failing step. Returns -1, or
    that step with *fail_b the lowest failing body of the tile and last[] its last finite state. */
-static long LV_FN(tile_run)(LV_FN(tile) *t, LV_FN(tile) *snap, LV_FN(tile_fn) fn, int integrator, int normalize,
-                            LV_REAL dt, long n_steps, long *fail_b, LV_REAL *last)
+static long LV_FN(tile_run)(LV_FN(tile) *t, LV_FN(tile) *snap, LV_FN(tile_fn) fn, LV_REAL dt, long n_steps,
+                            long *fail_b, LV_REAL *last)
 {
     long c, cm, r, b;
     int ok, k;
-#define LV_FIXED_RUN(N) (fn != NULL ? fn(t, dt, (N)) : LV_FN(forced_tile)(t, integrator, normalize, dt, (N)))
     for (c = 0; c < n_steps; c += cm) {
         cm = n_steps - c < LV_FIXED_CHUNK ? n_steps - c : LV_FIXED_CHUNK;
-        memcpy(snap, t, sizeof *t);
-        LV_FIXED_RUN(cm);
+        memcpy(snap->T, t->T, sizeof t->T);
+        fn(t, dt, cm);
         ok = 1;
         for (b = 0; b < t->nt; b++) ok &= LV_FN(tile_finite)(t, b);
         if (ok) continue;
-        memcpy(t, snap, sizeof *t); /* some body went non-finite in this chunk: redo it step by step */
+        memcpy(t->T, snap->T, sizeof t->T); /* some body went non-finite in this chunk: redo it step by step */
         for (r = 0; r < cm; r++) {
-            memcpy(snap, t, sizeof *t);
-            LV_FIXED_RUN(1);
+            memcpy(snap->T, t->T, sizeof t->T);
+            fn(t, dt, 1);
             for (b = 0; b < t->nt; b++) {
                 if (LV_FN(tile_finite)(t, b)) continue;
                 *fail_b = b;
@@ -175,7 +216,6 @@ static long LV_FN(tile_run)(LV_FN(tile) *t, LV_FN(tile) *snap, LV_FN(tile_fn) fn
         }
         /* not reached: the non-finite end state of the chunk fails on the re-run */
     }
-#undef LV_FIXED_RUN
     return -1;
 }
 
@@ -186,10 +226,11 @@ static int LV_FN(simulate)(LV_REAL *state, const LV_REAL *params, long nb, const
                            long *fail_step, long *fail_body)
 {
     long *start = NULL, *order = NULL, *fill = NULL, e, b, j, k, n_every = 0, limit = n_steps, best = -1, s, fb;
+    int *flags = NULL, every_flags = 0;
     LV_FN(ref) *refs = NULL;
     LV_FN(tile) *t = NULL, *snap = NULL;
     LV_REAL last[LV_STATE_SIZE];
-    int status = LV_OK, pass;
+    int status = LV_OK, kind;
     if (integrator != LV_INTEGRATOR_EULER && integrator != LV_INTEGRATOR_SEMI_IMPLICIT_EULER
         && integrator != LV_INTEGRATOR_RK4)
         return LV_BAD_ARGUMENT;
@@ -197,9 +238,10 @@ static int LV_FN(simulate)(LV_REAL *state, const LV_REAL *params, long nb, const
     start = (long *)calloc((size_t)nb + 1, sizeof(long));
     order = (long *)malloc(((size_t)nb + 1) * sizeof(long));
     fill = (long *)malloc(((size_t)nb + 1) * sizeof(long));
+    flags = (int *)calloc((size_t)nb + 1, sizeof(int));
     t = (LV_FN(tile) *)malloc(sizeof *t);
     snap = (LV_FN(tile) *)malloc(sizeof *snap);
-    if (start == NULL || order == NULL || fill == NULL || t == NULL || snap == NULL) { status = LV_NO_MEMORY; goto done; }
+    if (start == NULL || order == NULL || fill == NULL || flags == NULL || t == NULL || snap == NULL) { status = LV_NO_MEMORY; goto done; }
     /* the effect index (CSR, table order per body), as step.c's */
     for (e = 0; e < ne; e++) {
         const LV_REAL *row = effects + e * row_size;
@@ -208,7 +250,8 @@ static int LV_FN(simulate)(LV_REAL *state, const LV_REAL *params, long nb, const
         const int np = (LV_REAL)code == row[LV_EFFECT_ROW_CODE] ? lv_effect_n_params(code) : -1;
         if (np < 0 || np > row_size - LV_EFFECT_ROW_PARAMS) { *fail_step = e; status = LV_UNKNOWN_EFFECT; goto done; }
         if (body < -1 || body >= nb || (LV_REAL)body != row[LV_EFFECT_ROW_BODY]) { status = LV_BAD_ARGUMENT; goto done; }
-        if (body == -1) n_every++; else start[body + 1]++;
+        if (body == -1) { n_every++; every_flags |= lv_effect_flags(code); }
+        else { start[body + 1]++; flags[body] |= lv_effect_flags(code); }
     }
     for (b = 0; b < nb; b++) start[b + 1] += start[b] + n_every;
     refs = (LV_FN(ref) *)malloc(((size_t)start[nb] + 1) * sizeof(LV_FN(ref)));
@@ -223,30 +266,44 @@ static int LV_FN(simulate)(LV_REAL *state, const LV_REAL *params, long nb, const
         if (body == -1) for (b = 0; b < nb; b++) refs[fill[b]++] = r;
         else refs[fill[body]++] = r;
     }
-    /* torque-free bodies first (pass 0), then those with effects (pass 1); tiles of ascending bodies, each
+    /* bodies grouped by kind (LV_FIXED_*; in that order), tiles of ascending bodies within a kind, each
        advanced only as far as the earliest failure so far can still be beaten */
-    for (pass = 0; pass < 2; pass++) {
-        LV_FN(tile_fn) fn = NULL;
-        if (pass == 0)
-            fn = integrator == LV_INTEGRATOR_EULER ? (normalize ? LV_FN(free_euler_n) : LV_FN(free_euler_r))
-               : integrator == LV_INTEGRATOR_SEMI_IMPLICIT_EULER ? (normalize ? LV_FN(free_semi_n) : LV_FN(free_semi_r))
-               : (normalize ? LV_FN(free_rk4_n) : LV_FN(free_rk4_r));
+    for (b = 0; b < nb; b++) {
+        const int f = flags[b] | (start[b + 1] > start[b] ? every_flags : 0);
+        flags[b] = start[b + 1] == start[b] ? LV_FIXED_FREE
+                 : (f & LV_EFFECT_USES_STATE) ? LV_FIXED_ANY
+                 : (f & LV_EFFECT_FORCE) ? LV_FIXED_FORCE : LV_FIXED_TORQUE;
+    }
+    for (kind = 0; kind < LV_FIXED_KINDS; kind++) {
+        const LV_FN(tile_fn) fn = LV_FN(tile_pick)(kind, integrator, normalize);
         for (j = 0, b = 0; b < nb; b++)
-            if ((start[b + 1] > start[b]) == pass) order[j++] = b;
+            if (flags[b] == kind) order[j++] = b;
         for (k = 0; k < j; k += t->nt) {
             long lim;
             t->nt = j - k < LV_FIXED_TILE ? j - k : LV_FIXED_TILE;
             for (b = 0; b < t->nt; b++) {
                 const long id = order[k + b];
+                const LV_REAL *prm = params + id * LV_PARAM_SIZE;
+                LV_REAL x[LV_STATE_SIZE], cf[LV_EULER_SIZE], F[3] = {0, 0, 0}, tau[3] = {0, 0, 0};
                 int i;
-                for (i = 0; i < LV_STATE_SIZE; i++) t->T[i][b] = state[id * LV_STATE_SIZE + i];
-                for (i = 0; i < 3; i++) t->J[i][b] = params[id * LV_PARAM_SIZE + LV_PARAM_I_B + i];
-                t->J[3][b] = params[id * LV_PARAM_SIZE + LV_PARAM_M];
+                for (i = 0; i < LV_STATE_SIZE; i++) t->T[i][b] = x[i] = state[id * LV_STATE_SIZE + i];
+                LV_K(euler_coefficients)(prm + LV_PARAM_I_B, cf);
+                for (i = 0; i < LV_EULER_SIZE; i++) t->C[i][b] = cf[i];
+                for (i = 0; i < 3; i++) t->I[i][b] = prm[LV_PARAM_I_B + i];
+                t->M[b] = prm[LV_PARAM_M];
                 t->refs[b] = refs + start[id];
                 t->nref[b] = start[id + 1] - start[id];
+                if (kind == LV_FIXED_TORQUE || kind == LV_FIXED_FORCE) /* the constant sums, in table order */
+                    for (e = start[id]; e < start[id + 1]; e++)
+                        (void)LV_EFFECT_APPLY(refs[e].code, refs[e].p, x, x + LV_STATE_V_W, prm[LV_PARAM_M],
+                                              prm + LV_PARAM_I_B, F, tau);
+                for (i = 0; i < 3; i++) {
+                    t->P[i][b] = F[i];
+                    t->P[3 + i][b] = tau[i];
+                }
             }
             lim = (best >= 0 && order[k] < best && limit < n_steps) ? limit + 1 : limit;
-            s = lim > 0 ? LV_FN(tile_run)(t, snap, fn, integrator, normalize, dt, lim, &fb, last) : -2;
+            s = lim > 0 ? LV_FN(tile_run)(t, snap, fn, dt, lim, &fb, last) : -2;
             if (s == -2) continue;
             if (s < 0) {
                 for (b = 0; b < t->nt; b++)
@@ -265,6 +322,7 @@ done:
     free(start);
     free(order);
     free(fill);
+    free(flags);
     free(refs);
     free(t);
     free(snap);
