@@ -339,7 +339,7 @@ class Sim:
         self._setup_checks()
         self._fast = self._make_stepper()
         self._screen = None
-        if self.backend.name == "c" and self.dtype == "float64":   # the C screen reads float64 states
+        if self.backend.name == "c":   # the C screen reads float64 and float32 states (csrc/fast_step.c)
             from .backends import c_backend
 
             self._screen = c_backend._c.checks_pass

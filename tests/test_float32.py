@@ -194,3 +194,39 @@ def test_float32_tiles_bitwise_numpy(integrator, normalize):
         sim.run(150)
         out.append(sim.x.copy())
     np.testing.assert_array_equal(out[0], out[1])
+
+
+def test_float32_screen_passes_only_inside_margin():
+    """checks_pass (csrc/fast_step.c; no-work rate 0 here) on a float32 state, the C screen of a float32 Sim's per-chunk checks:
+    passes a state well inside its limits, refuses one at its limits (it passes only what is 1e-5 inside: the
+    NumPy check of a float32 state rounds some intermediates to float32), and fails where the float64 screen
+    of the same numbers fails."""
+    from lavendersim.generated import layout as LY
+    from lavendersim.backends import c_backend
+    from lavendersim.generated import kernels_numpy as K
+
+    sim = lv.Sim(_scene(effects=False), dt=1e-3, backend="c", dtype="float32")
+    x32, params = sim.x.copy(), sim.params
+    x64 = x32.astype(np.float64)
+    nb = len(x32)
+    E = K.kinetic_energy(params[:, LY.PARAM_M], params[:, LY.PARAM_I_B], x64[:, LY.STATE_V_W], x64[:, LY.STATE_OMEGA_B])
+    L2 = np.sum(K.body_momentum(params[:, LY.PARAM_I_B], x64[:, LY.STATE_OMEGA_B]) ** 2, axis=1)
+    w = np.linalg.norm(x64[:, LY.STATE_OMEGA_B], axis=1)
+    scale = np.ones(nb)
+    check = c_backend._c.checks_pass
+
+    def growth(fE, fL):
+        return np.ascontiguousarray(np.stack([np.zeros(nb), E * fE, L2 * fL], axis=1))
+
+    assert check(x32, params, scale, float(w.max()) * 2, growth(2.0, 2.0))
+    assert check(x64, params, scale, float(w.max()) * 2, growth(2.0, 2.0))
+    assert not check(x32, params, scale, float(w.max()) * 2, growth(1.0 + 1e-7, 2.0))   # inside, but not by 1e-5
+    assert not check(x32, params, scale, float(w.max()) * 2, growth(2.0, 1.0 + 1e-7))
+    assert not check(x32, params, scale, float(w.max()) * (1 + 1e-7), growth(2.0, 2.0))
+    assert not check(x32, params, scale, float(w.max()) * 2, growth(0.5, 2.0))
+    assert not check(x64, params, scale, float(w.max()) * 2, growth(0.5, 2.0))
+    bad = x32.copy()
+    bad[0, LY.STATE_OMEGA_B] = np.nan
+    assert not check(bad, params, scale, np.inf, growth(np.inf, np.inf))
+    with pytest.raises(ValueError):
+        check(x32.astype(np.float16), params, scale, 1.0, growth(2.0, 2.0))

@@ -249,6 +249,35 @@ static int screen_pass(const double *x, const double *params, long nb, const dou
     return 1;
 }
 
+/* Relative margin of the float32 screen: the Sim's NumPy check of a float32 state rounds some of its
+   intermediates to float32 (|omega|, and squares in kinetic_energy: a few float32 roundings, ~1e-6 relative at
+   most, every term of E, |L|^2 and |omega|^2 positive), so the screen passes only what is this far inside. */
+#define LV_SCREEN_F32_MARGIN 1e-5
+
+/* screen_pass of a float32 state (Sim(dtype="float32"): params and limits float64): each body's numbers
+   converted to double (exact), the bound and the E and |L|^2 limits shrunk by LV_SCREEN_F32_MARGIN, and no
+   no-work-rate shortcut (its margin is relative to the room left, not to E): E and |L| are always evaluated.
+   Passes only what the NumPy check passes. */
+static int screen_pass_f32(const float *x, const double *params, long nb, const double *scale, double bound,
+                           const double *G)
+{
+    const double keep = 1.0 - LV_SCREEN_F32_MARGIN;
+    long b;
+    int k;
+    for (b = 0; b < nb; b++) {
+        const double *g = G + b * LV_G_COLS;
+        double xb[LV_STATE_SIZE], gb[LV_G_COLS], w;
+        for (k = 0; k < LV_STATE_SIZE; k++) xb[k] = (double)x[b * LV_STATE_SIZE + k];
+        w = sqrt(xb[LV_STATE_OMEGA_B] * xb[LV_STATE_OMEGA_B] + xb[LV_STATE_OMEGA_B + 1] * xb[LV_STATE_OMEGA_B + 1]
+                 + xb[LV_STATE_OMEGA_B + 2] * xb[LV_STATE_OMEGA_B + 2]);
+        gb[LV_G_W] = -1.0; /* never skips the evaluation (a NaN w fails below) */
+        gb[LV_G_E] = g[LV_G_E] * keep;
+        gb[LV_G_L2] = g[LV_G_L2] * keep;
+        if (!(w * scale[b] <= bound * keep) || !growth_pass(xb, params + b * LV_PARAM_SIZE, gb, w)) return 0;
+    }
+    return 1;
+}
+
 static int checks_pass(const Stepper *s)
 {
     return screen_pass((const double *)s->buf[FS_STATE].buf, (const double *)s->buf[FS_PARAMS].buf, s->nb,
@@ -385,7 +414,8 @@ static PyTypeObject StepperType = {
     .tp_getset = stepper_getset,
 };
 
-/* checks_pass(x, params, wdt_scale, bound, growth) -> bool: every body's |omega| * wdt_scale <= bound and inside its
+/* checks_pass(x, params, wdt_scale, bound, growth) -> bool (x float64, or float32: screen_pass_f32): every body's
+   |omega| * wdt_scale <= bound and inside its
    growth limits (screen_pass; growth (nb, 3) as LV_G_*), the Sim's screen of its per-chunk checks in one pass
    without temporaries; False means "look closer" (the Sim's NumPy check decides and names the cause). */
 static PyObject *py_checks_pass(PyObject *self, PyObject *args)
@@ -401,16 +431,23 @@ static PyObject *py_checks_pass(PyObject *self, PyObject *args)
     for (got = 0; got < 4; got++)
         if (PyObject_GetBuffer(obj[got], &buf[got], PyBUF_C_CONTIGUOUS | PyBUF_FORMAT) != 0) { ok = -2; break; }
     if (ok == 1) {
-        nb = buf[0].len / 8 / LV_STATE_SIZE;
-        for (i = 0; i < 4; i++)
+        const char *f = buf[0].format ? buf[0].format : "B";
+        const int f32 = buf[0].itemsize == 4 && (strcmp(f, "f") == 0 || strcmp(f, "<f") == 0 || strcmp(f, "=f") == 0);
+        nb = buf[0].len / buf[0].itemsize / LV_STATE_SIZE;
+        if (!f32 && (buf[0].itemsize != 8 || strcmp(f, "d") != 0 && strcmp(f, "<d") != 0 && strcmp(f, "=d") != 0))
+            ok = -1;
+        if (buf[0].len != nb * LV_STATE_SIZE * buf[0].itemsize) ok = -1;
+        for (i = 1; i < 4; i++)
             if (buf[i].itemsize != 8 || buf[i].len != nb * width[i] * 8) ok = -1;
         if (ok < 0) {
-            PyErr_SetString(PyExc_ValueError,
-                            "checks_pass: x (nb, 13), params (nb, PARAM_SIZE), wdt_scale (nb,), growth (nb, 3) float64");
+            PyErr_SetString(PyExc_ValueError, "checks_pass: x (nb, 13) float64 or float32, params (nb, PARAM_SIZE), "
+                                              "wdt_scale (nb,), growth (nb, 3) float64");
         } else {
             Py_BEGIN_ALLOW_THREADS
-            ok = screen_pass((const double *)buf[0].buf, (const double *)buf[1].buf, (long)nb,
-                             (const double *)buf[2].buf, bound, (const double *)buf[3].buf);
+            ok = f32 ? screen_pass_f32((const float *)buf[0].buf, (const double *)buf[1].buf, (long)nb,
+                                       (const double *)buf[2].buf, bound, (const double *)buf[3].buf)
+                     : screen_pass((const double *)buf[0].buf, (const double *)buf[1].buf, (long)nb,
+                                   (const double *)buf[2].buf, bound, (const double *)buf[3].buf);
             Py_END_ALLOW_THREADS
         }
     }
