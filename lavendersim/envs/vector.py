@@ -85,6 +85,8 @@ class ReactionWheelCubeVectorEnv(VectorEnv):
         self._act_buf = np.empty((n, 3))                 # step's saturated actions (float64)
         self._qt_buf, self._mp_buf = np.empty((4, n)), np.empty((2, 4, n))   # _angle_deg's scratch
         self._tcol = self._target[:, None]
+        # the observation bounds as full (N, 10) float32 arrays: the clipping is then two flat ufunc loops
+        self._low_n, self._high_n = (np.ascontiguousarray(np.broadcast_to(b, (n, 10))) for b in (self._low, self._high))
         self._rngs: list[np.random.Generator | None] = [None] * n
         self._start: list[tuple | None] = [None] * n
         self._needs_reset = np.zeros(n, bool)
@@ -248,24 +250,23 @@ class ReactionWheelCubeVectorEnv(VectorEnv):
         the right shape with finite entries is copied and saturated in place; anything else (and any non-finite
         number) takes V.array's checks (LavenderInputError naming ``actions``)."""
         n, a = self.num_envs, self._act_buf
-        if type(actions) is np.ndarray and actions.shape == (n, 3) and actions.dtype.kind == "f":
+        ok = type(actions) is np.ndarray and actions.shape == (n, 3) and actions.dtype.kind == "f"
+        if ok:
             np.copyto(a, actions)
-            with np.errstate(over="ignore", invalid="ignore"):
-                total = float(np.add.reduce(a, axis=None))
-            if total - total == 0.0:     # a finite sum: every entry finite (inf or NaN anywhere makes it inf or NaN)
-                return np.minimum(np.maximum(a, -1.0, out=a), 1.0, out=a)
-        np.copyto(a, V.array("actions", actions, (n, 3)))     # raises on anything but n x 3 finite real numbers
+            ok = bool(np.isfinite(a).all())
+        if not ok:
+            np.copyto(a, V.array("actions", actions, (n, 3)))     # raises on anything but n x 3 finite real numbers
         return np.minimum(np.maximum(a, -1.0, out=a), 1.0, out=a)
 
     def _obs(self, raw: np.ndarray) -> np.ndarray:
         """The observations: raw clipped to the bounds (as np.clip), float32 (a new array), non-finite numbers as 0.
 
-        The float64 numbers are clipped below, cast and clipped above in float32: the bounds are float32 numbers
-        and the cast is monotonic, so this is np.clip's result cast, bitwise. Only NaN survives the clipping."""
-        obs = np.empty(raw.shape, np.float32)
-        np.maximum(raw, self._low, out=obs)
-        np.minimum(obs, self._high, out=obs)
-        total = float(np.add.reduce(obs, axis=None, dtype=np.float64))
+        Cast first, then clipped in float32: the bounds are float32 numbers and the cast is monotonic, so this is
+        np.clip's result cast, bitwise. Only NaN survives the clipping (inf is clipped to a bound)."""
+        obs = raw.astype(np.float32)
+        np.maximum(obs, self._low_n, out=obs)
+        np.minimum(obs, self._high_n, out=obs)
+        total = float(np.add.reduce(obs, axis=None))
         if total != total:             # a NaN somewhere (the clipped numbers are bounded: the sum is finite else)
             np.nan_to_num(obs, copy=False, nan=0.0, posinf=0.0, neginf=0.0)
         return obs
@@ -274,9 +275,10 @@ class ReactionWheelCubeVectorEnv(VectorEnv):
         """Per row: a body rate beyond rate_bound or a wheel rate beyond wheel_bound (NaN is not beyond)."""
         n, one = self.num_envs, self._one
         w, Om = raw[:, 4:7], raw[:, 7:10]
-        if float(np.max(np.abs(w))) <= one.rate_bound and float(np.max(np.abs(Om))) <= one.wheel_bound:
+        rb, wb = one.rate_bound, one.wheel_bound
+        if -rb <= float(w.min()) and float(w.max()) <= rb and -wb <= float(Om.min()) and float(Om.max()) <= wb:
             return np.zeros(n, bool)   # every row within both (a NaN anywhere fails the screen: the rows decide)
-        return (np.max(np.abs(w), axis=1) > one.rate_bound) | (np.max(np.abs(Om), axis=1) > one.wheel_bound)
+        return (np.max(np.abs(w), axis=1) > rb) | (np.max(np.abs(Om), axis=1) > wb)
 
     def _angle_deg(self, q: np.ndarray) -> np.ndarray:
         """The single env's angle_error_deg per row: 4 atan2(|q − s q_t|, |q + s q_t|), s = sign(q·q_t), degrees.
@@ -286,14 +288,12 @@ class ReactionWheelCubeVectorEnv(VectorEnv):
         qt, mp = self._qt_buf, self._mp_buf
         np.copyto(qt, q.T)
         t = self._tcol
-        np.multiply(qt, t, out=mp[0])
-        m = mp[0]
-        d = ((m[0] + m[1]) + m[2]) + m[3]
+        # sums over the 4 components as reductions over axis 0 of C-ordered arrays: row by row, ((x0 + x1) + x2) + x3
+        d = np.add.reduce(np.multiply(qt, t, out=mp[0]), axis=0)
         np.subtract(qt, t, out=mp[0])
         np.add(qt, t, out=mp[1])
         np.multiply(mp, mp, out=mp)
-        s2 = ((mp[:, 0] + mp[:, 1]) + mp[:, 2]) + mp[:, 3]
-        np.sqrt(s2, out=s2)
+        s2 = np.sqrt(np.add.reduce(mp, axis=1))
         pos = d >= 0
         a, b = np.where(pos, s2[0], s2[1]), np.where(pos, s2[1], s2[0])
         return np.degrees(4.0 * np.arctan2(a, b))
