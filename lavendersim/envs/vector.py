@@ -15,7 +15,11 @@ observation with reward 0, terminated and truncated False. Truncation after ``ma
 each with its own, None keeps the generators. ``reset(options={"reset_mask": mask})`` resets the masked ones.
 
 Speed: the cubes are advanced by one C call per step; ``lavendersim.backends.c_backend.threads(2)`` (process-wide)
-shares them over two threads, with bitwise the same results (tests/test_vector_env.py).
+shares them over two threads, with bitwise the same results (tests/test_vector_env.py). The step's ``Sim.run`` takes
+the Sim's C fast path (``Stepper.advance``, enabled for any N by ``Sim._fast_chunks``): the same checks at the end of
+the step and the same numbers as the Python path, which it falls back to for anything those checks refuse; it holds
+the GIL while the cubes are stepped. The rest of a step is a fixed number of NumPy calls on preallocated buffers
+(no Python loop over the sub-environments except over those being reset).
 
 A sub-environment whose simulation diverges (DivergenceError) terminates with reward -1e3 and the
 observation of its state before the step (as the single env), and ``info["diverged"]`` marks it; the others
@@ -170,8 +174,8 @@ class ReactionWheelCubeVectorEnv(VectorEnv):
             raise RuntimeError("ReactionWheelCube-v0 (vector): call reset() before step()")
         n, sim = self.num_envs, self.sim
         a = self._actions(actions)                        # validated float64, saturated (a reused buffer)
-        resets = np.flatnonzero(self._needs_reset)
-        any_reset = resets.size > 0
+        any_reset = bool(self._needs_reset.any())
+        resets = np.flatnonzero(self._needs_reset) if any_reset else ()
         for i in resets:                         # next-step autoreset: these start over and do not step
             self._reset_one(int(i))
         if any_reset:
@@ -276,7 +280,8 @@ class ReactionWheelCubeVectorEnv(VectorEnv):
         n, one = self.num_envs, self._one
         w, Om = raw[:, 4:7], raw[:, 7:10]
         rb, wb = one.rate_bound, one.wheel_bound
-        if -rb <= float(w.min()) and float(w.max()) <= rb and -wb <= float(Om.min()) and float(Om.max()) <= wb:
+        m0, m1, m2, m3, m4, m5 = np.max(np.abs(raw[:, 4:10]), axis=0).tolist()    # per column, over the rows
+        if m0 <= rb and m1 <= rb and m2 <= rb and m3 <= wb and m4 <= wb and m5 <= wb:
             return np.zeros(n, bool)   # every row within both (a NaN anywhere fails the screen: the rows decide)
         return (np.max(np.abs(w), axis=1) > rb) | (np.max(np.abs(Om), axis=1) > wb)
 
@@ -293,10 +298,11 @@ class ReactionWheelCubeVectorEnv(VectorEnv):
         np.subtract(qt, t, out=mp[0])
         np.add(qt, t, out=mp[1])
         np.multiply(mp, mp, out=mp)
-        s2 = np.sqrt(np.add.reduce(mp, axis=1))
-        pos = d >= 0
-        a, b = np.where(pos, s2[0], s2[1]), np.where(pos, s2[1], s2[0])
-        return np.degrees(4.0 * np.arctan2(a, b))
+        s2 = np.add.reduce(mp, axis=1)                       # |q - q_t|^2, |q + q_t|^2
+        ab = np.sqrt(np.where(d >= 0, s2, s2[::-1]))        # rows |q - s q_t|, |q + s q_t| (sqrt after the choice)
+        y = np.arctan2(ab[0], ab[1])
+        np.multiply(y, 4.0, out=y)
+        return np.degrees(y, out=y)
 
 
 def make_vec_env(num_envs: int = 1, **kwargs: Any) -> ReactionWheelCubeVectorEnv:
