@@ -436,15 +436,15 @@ class Sim:
     def rhs_evals(self, n: int) -> None:
         self._ctr.rhs_evals = n
 
-    def _make_stepper(self):
+    def _make_stepper(self, cap: bool = True):
         """The C fast path of step() (lavendersim/csrc/fast_step.c), or None where it does not apply: not the C
         backend, an adaptive integrator (unbounded work per step), a free wheeled body under the growth check
         (its |L| is computed in Python every step), a scene larger than FAST_STEP_WORK evaluations per step (the
-        fast path holds the GIL), or a Python without the GIL."""
+        fast path holds the GIL; cap=False: built whatever the size, see _fast_chunks), or a Python without the GIL."""
         gil = getattr(sys, "_is_gil_enabled", lambda: True)()
         if (self.backend.name != "c" or self._per_step is None or not gil or self.dtype != "float64"
                 or (self._free_wheels_idx and self.max_growth is not None)
-                or len(self.names) * self._per_step > FAST_STEP_WORK):
+                or (cap and len(self.names) * self._per_step > FAST_STEP_WORK)):
             return None
         from .backends import c_backend
 
@@ -836,6 +836,39 @@ class Sim:
         except BaseException:           # KeyboardInterrupt between chunks, or any error: nothing half-applied
             self._restore(start)
             raise
+
+    def _fast_chunks(self) -> None:
+        """Let run(n) take the C fast path (Stepper.advance) for any n up to one chunk, whatever the scene's size: for
+        a caller that advances a large scene by a few steps per call (the vector env: N cubes, one run per env step).
+        Stepper.advance checks the chunk's end as _advance does (the validity bound, the growth limits, finite) and
+        otherwise restores the arrays bitwise and steps aside to the Python path, so the results, the checks and the
+        errors are those of run; but it holds the GIL for the whole call (other Python threads wait for it). The
+        Stepper is built here also beyond FAST_STEP_WORK (then sim.step() too runs inside C). On a new Sim only (no
+        step taken: the Stepper's counters start at 0); where there is no C fast path at all, nothing changes."""
+        if self.steps or self.rhs_evals:
+            raise RuntimeError("Sim._fast_chunks: only on a new Sim (no step taken)")
+        if self._fast is None:
+            fast = self._make_stepper(cap=False)
+            if fast is None:
+                return
+            self._fast, self._ctr, self._lock = fast, fast, _Guard(fast)
+            fast.set_fallback(self._step_slow)
+            self.step = fast.step_or_fallback
+        self._fast_n = self._chunk
+
+    def _check_written(self) -> None:
+        """_advance's check before stepping (the validity bound of a state written since the last check, e.g. by
+        _reinit_body), done now where the C screen passes it: the state is then marked checked, so the next run(n)
+        can take the C fast path. Exactly what _advance would find (its check of a written state is this screen
+        with growth off: passing it reports nothing). Where the screen does not pass, or there is no C fast path,
+        nothing changes: run checks the state itself and raises or warns as before."""
+        f, screen = self._fast, self._screen
+        if f is None or screen is None:
+            return
+        with self._lock:
+            if not f.is_checked() and screen(self._x, self.params, self._wdt_scale,
+                                             np.inf if self._bound is None else float(self._bound[0]), self._g_inf):
+                self._mark_checked()
 
     def _is_checked(self) -> bool:
         """The state is the last one that passed the checks: compared bytewise by the C stepper; else tracked by a

@@ -146,3 +146,91 @@ def test_vector_env_with_two_threads_equals_one_thread():
     finally:
         C.threads(1)
     assert data_equivalence(outs[1], outs[2], exact=True)
+
+
+# ------------------------------------------------------------------ the step's C fast path (issue 12)
+
+def _sim_run_path(ve):
+    """ve's Sim with the C fast path off: every run takes Sim._advance (the Python path), every written state is
+    checked there."""
+    ve.sim._fast_n = 0
+    ve.sim._check_written = lambda: None
+    return ve
+
+
+def _count_python_path(sim):
+    calls, real = [], sim._advance
+    sim._advance = lambda n: (calls.append(n), real(n))[1]
+    return calls
+
+
+@pytest.mark.parametrize("task,n", [("center", 5), ("corner", 5), ("center", 1030)])
+def test_fast_path_equals_sim_run_path(task, n):
+    """Each step's run inside C (Sim._fast_chunks: Stepper.advance, also beyond FAST_STEP_WORK at n = 1030) gives
+    bitwise the results of the Python path, through autoresets (the reset cubes' states checked at once, so the
+    Python path is never taken) and actions beyond ±1, float32, float64 and lists."""
+    kw = dict(task=task, max_episode_steps=9)
+    fast, ref = _vec(n, **kw), _sim_run_path(_vec(n, **kw))
+    assert fast.sim._fast is not None and fast.sim._fast_n >= fast.substeps
+    calls = _count_python_path(fast.sim)
+    assert data_equivalence(fast.reset(seed=3), ref.reset(seed=3), exact=True)
+    rng = np.random.default_rng(1)
+    ends = 0
+    for k in range(30):
+        a = rng.uniform(-1.5, 1.5, (n, 3))
+        a = a.astype(np.float32) if k % 3 == 0 else a.tolist() if k % 3 == 1 else a
+        out_f, out_r = fast.step(a), ref.step(a)
+        assert data_equivalence(out_f, out_r, exact=True)
+        ends += int(np.sum(out_f[3]))
+    assert ends >= n and calls == []     # resets every 9 steps, none of them sent a run to the Python path
+
+
+def test_fast_path_divergence_is_caught_and_reported_as_before():
+    """A cube pushed beyond rk4's validity bound inside a step's C run: the Stepper refuses the chunk (nothing
+    changed), Sim.run's Python path raises, the sub-env terminates with -1e3 and info["diverged"] exactly as on the
+    Python path; the others advance alike."""
+    envs = [_vec(3, damping=0.0), _sim_run_path(_vec(3, damping=0.0))]
+    outs = []
+    for ve in envs:
+        ve.reset(seed=1)
+        sim = ve.unwrapped.sim
+        w_lim = float(sim._bound[0] / sim._wdt_scale[1])
+        ve.unwrapped._place(1, sim.q[1].copy(), np.array([w_lim * 0.99995, 0.0, 0.0]), np.zeros(3))
+        sim._check_written()                       # (the reference's is off: its Python path checks it)
+        a = np.zeros((3, 3), np.float32)
+        a[1] = -1.0                                # spins the cube up beyond the bound within the step
+        outs.append((ve.step(a), ve.step(a)))
+    assert envs[0].sim._fast.is_checked()
+    (o, r, t, u, info), second = outs[0]
+    assert t.tolist() == [False, True, False] and r[1] == -1e3 and info["diverged"].tolist() == [False, True, False]
+    assert "validity bound" in info["diverged_message"][1]
+    np.testing.assert_equal(outs[0], outs[1])       # bitwise, the NaN angle of the diverged one at the same place
+    assert second[1][1] == 0.0 and not second[2][1]          # autoreset by the next step
+
+
+def test_actions_saturated_and_checked():
+    """Actions beyond ±1 are saturated (a float32, float64 or list input alike, the caller's array untouched); a
+    non-finite action or a wrong shape raises LavenderInputError naming actions and changes nothing."""
+    from lavendersim.validate import LavenderInputError
+
+    n = 4
+    envs = [_vec(n) for _ in range(4)]
+    for ve in envs:
+        ve.reset(seed=7)
+    a = np.array([[3.0, -7.0, 0.5], [-1.0, 1.0, 1.0000001], [np.finfo(np.float64).max] * 3, [-2.0, 0.0, 0.25]])
+    keep = a.copy()
+    outs = [envs[0].step(a), envs[1].step(np.clip(a, -1, 1)), envs[2].step(a.tolist()),
+            envs[3].step(np.clip(a, -1, 1).astype(np.float32))]
+    assert np.array_equal(a, keep)
+    for out in outs[1:3]:
+        assert data_equivalence(outs[0], out, exact=True)
+    assert np.array_equal(outs[0][0], outs[3][0]) or not np.array_equal(np.clip(a, -1, 1),
+                                                                         np.clip(a, -1, 1).astype(np.float32))
+    tl = envs[0].model.torque_limit
+    np.testing.assert_array_equal(envs[0].sim._models.command, np.clip(a, -1, 1) * tl)
+    x = envs[0].sim.x.copy()
+    for bad in (np.where(np.eye(n, 3) > 0, np.nan, 0.0), np.full((n, 3), np.inf, np.float32), np.zeros((n, 2)),
+                [[0.0, 0.0, float("-inf")]] * n):
+        with pytest.raises(LavenderInputError, match="actions"):
+            envs[0].step(bad)
+    assert np.array_equal(envs[0].sim.x, x)

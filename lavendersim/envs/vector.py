@@ -15,7 +15,11 @@ observation with reward 0, terminated and truncated False. Truncation after ``ma
 each with its own, None keeps the generators. ``reset(options={"reset_mask": mask})`` resets the masked ones.
 
 Speed: the cubes are advanced by one C call per step; ``lavendersim.backends.c_backend.threads(2)`` (process-wide)
-shares them over two threads, with bitwise the same results (tests/test_vector_env.py).
+shares them over two threads, with bitwise the same results (tests/test_vector_env.py). The step's ``Sim.run`` takes
+the Sim's C fast path (``Stepper.advance``, enabled for any N by ``Sim._fast_chunks``): the same checks at the end of
+the step and the same numbers as the Python path, which it falls back to for anything those checks refuse; it holds
+the GIL while the cubes are stepped. The rest of a step is a fixed number of NumPy calls on preallocated buffers
+(no Python loop over the sub-environments except over those being reset).
 
 A sub-environment whose simulation diverges (DivergenceError) terminates with reward -1e3 and the
 observation of its state before the step (as the single env), and ``info["diverged"]`` marks it; the others
@@ -82,6 +86,11 @@ class ReactionWheelCubeVectorEnv(VectorEnv):
         self.sim = self._build_sim()
         n = self.num_envs
         self._raw_buf, self._clip_buf = np.empty((n, 10)), np.empty((n, 10))   # _raw's and _obs's scratch
+        self._act_buf = np.empty((n, 3))                 # step's saturated actions (float64)
+        self._qt_buf, self._mp_buf = np.empty((4, n)), np.empty((2, 4, n))   # _angle_deg's scratch
+        self._tcol = self._target[:, None]
+        # the observation bounds as full (N, 10) float32 arrays: the clipping is then two flat ufunc loops
+        self._low_n, self._high_n = (np.ascontiguousarray(np.broadcast_to(b, (n, 10))) for b in (self._low, self._high))
         self._rngs: list[np.random.Generator | None] = [None] * n
         self._start: list[tuple | None] = [None] * n
         self._needs_reset = np.zeros(n, bool)
@@ -109,7 +118,9 @@ class ReactionWheelCubeVectorEnv(VectorEnv):
             scene.add_effect("gravity", g_w=m.g_w)
         if m.damping > 0:
             scene.add_effect("angular_damping", c=m.damping)
-        return lv.Sim(scene, dt=self._one.dt, integrator="rk4", backend=self._one.backend)
+        sim = lv.Sim(scene, dt=self._one.dt, integrator="rk4", backend=self._one.backend)
+        sim._fast_chunks()     # one step's run inside C (Stepper.advance: run's checks and results), any N
+        return sim
 
     def _place(self, i: int, q0: np.ndarray, omega_b: np.ndarray, Omega: np.ndarray) -> None:
         """Cube i at the start of an episode, exactly as the single env's make_sim builds it."""
@@ -154,6 +165,7 @@ class ReactionWheelCubeVectorEnv(VectorEnv):
             if seeds[i] is not None:
                 self._rngs[i], _ = seeding.np_random(int(seeds[i]))
             self._reset_one(int(i))
+        self.sim._check_written()     # the start states' pre-step check now: the first run can take the C fast path
         self._started = True
         return self._obs(self._raw()), {}
 
@@ -161,28 +173,33 @@ class ReactionWheelCubeVectorEnv(VectorEnv):
         if not self._started:
             raise RuntimeError("ReactionWheelCube-v0 (vector): call reset() before step()")
         n, sim = self.num_envs, self.sim
-        a = V.array("actions", actions, (n, 3))          # a validated float64 copy: saturated in place
-        np.minimum(np.maximum(a, -1.0, out=a), 1.0, out=a)
-        resets = np.flatnonzero(self._needs_reset)
+        a = self._actions(actions)                        # validated float64, saturated (a reused buffer)
+        any_reset = bool(self._needs_reset.any())
+        resets = np.flatnonzero(self._needs_reset) if any_reset else ()
         for i in resets:                         # next-step autoreset: these start over and do not step
             self._reset_one(int(i))
+        if any_reset:
+            sim._check_written()     # the written states' pre-step check now: the run stays on the C fast path
         # finite and saturated: written straight into the held commands (set_wheel_commands' array; every cube has
         # wheels), as a * torque_limit
         cmd = sim._models.command
         np.multiply(a, self.model.torque_limit, out=cmd)
-        cmd[resets] = 0.0
+        if any_reset:
+            cmd[resets] = 0.0
         diverged = self._run()
-        for i in resets:
-            self._place(int(i), *self._start[i])
+        if any_reset:
+            for i in resets:
+                self._place(int(i), *self._start[i])
+            sim._check_written()     # (again: the next step's run too)
         raw = self._raw()
         for b, (msg, pre) in diverged.items():
             raw[b] = pre
         obs = self._obs(raw)
-        q, w, Om = raw[:, 0:4], raw[:, 4:7], raw[:, 7:10]
+        q, w = raw[:, 0:4], raw[:, 4:7]
         angle = self._angle_deg(q)
         theta = np.radians(angle)
         reward = -(theta * theta + 0.05 * np.einsum("ij,ij->i", w, w) + 0.01 * np.einsum("ij,ij->i", a, a))
-        terminated = (np.max(np.abs(w), axis=1) > self._one.rate_bound) | (np.max(np.abs(Om), axis=1) > self._one.wheel_bound)
+        terminated = self._out_of_bounds(raw)
         info: dict[str, Any] = {"angle_error_deg": angle, "torque_applied": sim.wheel_torques_applied.copy()}
         if self.task == "corner":
             d = np.asarray(K.quat_rotate(q, np.ones(3) / math.sqrt(3.0)))
@@ -198,9 +215,11 @@ class ReactionWheelCubeVectorEnv(VectorEnv):
             info["diverged"][rows] = True
             info["diverged_message"] = np.array([diverged.get(i, ("", None))[0] for i in range(n)], dtype=object)
         self._elapsed += 1
-        self._elapsed[resets] = 0
+        if any_reset:
+            self._elapsed[resets] = 0
         truncated = np.zeros(n, bool) if self.max_episode_steps is None else self._elapsed >= self.max_episode_steps
-        reward[resets], terminated[resets], truncated[resets] = 0.0, False, False
+        if any_reset:
+            reward[resets], terminated[resets], truncated[resets] = 0.0, False, False
         self._needs_reset = terminated | truncated
         return obs, reward, terminated, truncated, info
 
@@ -230,24 +249,60 @@ class ReactionWheelCubeVectorEnv(VectorEnv):
         raw[:, 0:4], raw[:, 4:7], raw[:, 7:10] = sim.q, sim.omega_b, sim.Omega
         return raw
 
+    def _actions(self, actions) -> np.ndarray:
+        """The actions as float64 (N, 3) saturated to [-1, 1], in a buffer reused by the next call: a float ndarray of
+        the right shape with finite entries is copied and saturated in place; anything else (and any non-finite
+        number) takes V.array's checks (LavenderInputError naming ``actions``)."""
+        n, a = self.num_envs, self._act_buf
+        ok = type(actions) is np.ndarray and actions.shape == (n, 3) and actions.dtype.kind == "f"
+        if ok:
+            np.copyto(a, actions)
+            ok = bool(np.isfinite(a).all())
+        if not ok:
+            np.copyto(a, V.array("actions", actions, (n, 3)))     # raises on anything but n x 3 finite real numbers
+        return np.minimum(np.maximum(a, -1.0, out=a), 1.0, out=a)
+
     def _obs(self, raw: np.ndarray) -> np.ndarray:
-        """The observations: raw clipped to the bounds (as np.clip), float32 (a new array), non-finite numbers as 0."""
-        c = self._clip_buf
-        np.minimum(np.maximum(raw, self._low, out=c), self._high, out=c)
-        obs = c.astype(np.float32)
-        if not np.isfinite(obs).all():
+        """The observations: raw clipped to the bounds (as np.clip), float32 (a new array), non-finite numbers as 0.
+
+        Cast first, then clipped in float32: the bounds are float32 numbers and the cast is monotonic, so this is
+        np.clip's result cast, bitwise. Only NaN survives the clipping (inf is clipped to a bound)."""
+        obs = raw.astype(np.float32)
+        np.maximum(obs, self._low_n, out=obs)
+        np.minimum(obs, self._high_n, out=obs)
+        total = float(np.add.reduce(obs, axis=None))
+        if total != total:             # a NaN somewhere (the clipped numbers are bounded: the sum is finite else)
             np.nan_to_num(obs, copy=False, nan=0.0, posinf=0.0, neginf=0.0)
         return obs
 
+    def _out_of_bounds(self, raw: np.ndarray) -> np.ndarray:
+        """Per row: a body rate beyond rate_bound or a wheel rate beyond wheel_bound (NaN is not beyond)."""
+        n, one = self.num_envs, self._one
+        w, Om = raw[:, 4:7], raw[:, 7:10]
+        rb, wb = one.rate_bound, one.wheel_bound
+        m0, m1, m2, m3, m4, m5 = np.max(np.abs(raw[:, 4:10]), axis=0).tolist()    # per column, over the rows
+        if m0 <= rb and m1 <= rb and m2 <= rb and m3 <= wb and m4 <= wb and m5 <= wb:
+            return np.zeros(n, bool)   # every row within both (a NaN anywhere fails the screen: the rows decide)
+        return (np.max(np.abs(w), axis=1) > rb) | (np.max(np.abs(Om), axis=1) > wb)
+
     def _angle_deg(self, q: np.ndarray) -> np.ndarray:
-        """The single env's angle_error_deg per row: 4 atan2(|q − s q_t|, |q + s q_t|), s = sign(q·q_t), degrees."""
-        t = self._target
-        d = ((q[:, 0] * t[0] + q[:, 1] * t[1]) + q[:, 2] * t[2]) + q[:, 3] * t[3]
-        s = np.where(d >= 0, 1.0, -1.0)[:, None]
-        dm, dp = q - s * t, q + s * t
-        a = np.sqrt(((dm[:, 0] ** 2 + dm[:, 1] ** 2) + dm[:, 2] ** 2) + dm[:, 3] ** 2)
-        b = np.sqrt(((dp[:, 0] ** 2 + dp[:, 1] ** 2) + dp[:, 2] ** 2) + dp[:, 3] ** 2)
-        return np.degrees(4.0 * np.arctan2(a, b))
+        """The single env's angle_error_deg per row: 4 atan2(|q − s q_t|, |q + s q_t|), s = sign(q·q_t), degrees.
+
+        The same operations in the same order on each number: with s = -1, q - s q_t is q + q_t (exactly), so
+        |q - q_t| and |q + q_t| are computed once and swapped where q·q_t < 0. Columns in scratch (4, N) buffers."""
+        qt, mp = self._qt_buf, self._mp_buf
+        np.copyto(qt, q.T)
+        t = self._tcol
+        # sums over the 4 components as reductions over axis 0 of C-ordered arrays: row by row, ((x0 + x1) + x2) + x3
+        d = np.add.reduce(np.multiply(qt, t, out=mp[0]), axis=0)
+        np.subtract(qt, t, out=mp[0])
+        np.add(qt, t, out=mp[1])
+        np.multiply(mp, mp, out=mp)
+        s2 = np.add.reduce(mp, axis=1)                       # |q - q_t|^2, |q + q_t|^2
+        ab = np.sqrt(np.where(d >= 0, s2, s2[::-1]))        # rows |q - s q_t|, |q + s q_t| (sqrt after the choice)
+        y = np.arctan2(ab[0], ab[1])
+        np.multiply(y, 4.0, out=y)
+        return np.degrees(y, out=y)
 
 
 def make_vec_env(num_envs: int = 1, **kwargs: Any) -> ReactionWheelCubeVectorEnv:
