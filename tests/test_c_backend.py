@@ -242,19 +242,23 @@ def test_divergence_raises_and_restores():
     assert "omega" in str(again.value) and "euler" in str(again.value)
 
 
-def test_divergence_without_restore_names_the_step_and_leaves_the_arrays():
+@pytest.mark.parametrize("dtype", ["float64", "float32"])
+def test_divergence_without_restore_names_the_step_and_leaves_the_arrays(dtype):
     """restore=False (Sim's chunks: Sim restores by replay) takes no copy: the same step and body as with
-    restore, the arrays as the C call left them, and the error says they were not restored."""
+    restore, the arrays as the C call left them, and the error says they were not restored (float32:
+    the float32 loop, csrc/step_f32.c, likewise)."""
     state, params = diverging_setup()
+    state, params, effects = state.astype(dtype), params.astype(dtype), effects_array("angular_damping").astype(dtype)
     kept, left = state.copy(), state.copy()
     with pytest.raises(DivergenceError) as with_copy:
-        CBackend().advance(kept, params, effects_array("angular_damping"), "euler", False, 0.05, 200)
+        CBackend().advance(kept, params, effects, "euler", False, 0.05, 200)
     with pytest.raises(DivergenceError, match="not restored") as without:
-        CBackend().advance(left, params, effects_array("angular_damping"), "euler", False, 0.05, 200, restore=False)
+        CBackend().advance(left, params, effects, "euler", False, 0.05, 200, restore=False)
     assert (without.value.step, without.value.body) == (with_copy.value.step, with_copy.value.body)
     np.testing.assert_array_equal(kept, state)
     raw = state.copy()       # the C call alone, nobody restoring
-    status, step, body = _c.simulate(raw, params, effects_array("angular_damping"), 0, 0, 0.05, 200)
+    call = _c.simulate if dtype == "float64" else _c.simulate_f32
+    status, step, body = call(raw, params, effects, 0, 0, 0.05, 200)
     assert (status, step, body) == (1, without.value.step, without.value.body)
     np.testing.assert_array_equal(left, raw)
 

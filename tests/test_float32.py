@@ -197,7 +197,7 @@ def test_float32_tiles_bitwise_numpy(integrator, normalize):
 
 
 def test_float32_screen_passes_only_inside_margin():
-    """checks_pass (csrc/fast_step.c; no-work rate 0 here) on a float32 state, the C screen of a float32 Sim's per-chunk checks:
+    """checks_pass (csrc/fast_step.c) on a float32 state, the C screen of a float32 Sim's per-chunk checks:
     passes a state well inside its limits, refuses one at its limits (it passes only what is 1e-5 inside: the
     NumPy check of a float32 state rounds some intermediates to float32), and fails where the float64 screen
     of the same numbers fails."""
@@ -225,6 +225,14 @@ def test_float32_screen_passes_only_inside_margin():
     assert not check(x32, params, scale, float(w.max()) * (1 + 1e-7), growth(2.0, 2.0))
     assert not check(x32, params, scale, float(w.max()) * 2, growth(0.5, 2.0))
     assert not check(x64, params, scale, float(w.max()) * 2, growth(0.5, 2.0))
+    # the no-work rate (column 0): at or under it (shrunk by 1e-5 for float32) E and |L| are not evaluated
+    def with_rate(rate, fE):
+        g = growth(fE, 2.0)
+        g[:, 0] = rate
+        return g
+    assert check(x32, params, scale, float(w.max()) * 2, with_rate(w * (1 + 2e-5), 0.5))    # skipped: passes
+    assert not check(x32, params, scale, float(w.max()) * 2, with_rate(w * (1 + 2e-6), 0.5))  # evaluated: fails
+    assert check(x64, params, scale, float(w.max()) * 2, with_rate(w * (1 + 2e-6), 0.5))
     bad = x32.copy()
     bad[0, LY.STATE_OMEGA_B] = np.nan
     assert not check(bad, params, scale, np.inf, growth(np.inf, np.inf))

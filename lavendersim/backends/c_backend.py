@@ -268,6 +268,8 @@ def _f64_rows(name: str, a, cols: int, nb: int, writable: bool = False) -> np.nd
 
 
 MAX_THREADS = 64  # LV_MAX_THREADS (csrc/step.h)
+# the cause a DivergenceError names when advance(restore=False) failed (the caller restores and re-runs for the cause)
+NOT_RESTORED = "non-finite state or failed solve (arrays not restored: restore=False; re-run with restore=True for the cause)"
 
 
 def threads(n: int | None = None) -> int:
@@ -355,7 +357,7 @@ class CBackend:
         if integrator not in INTEGRATOR_CODES:
             raise ValueError(f"integrator: must be one of {', '.join(INTEGRATOR_CODES)}, got {integrator!r}")
         if isinstance(state, np.ndarray) and state.dtype == np.float32:
-            return self._advance_f32(state, params, effects, integrator, normalize, dt, n_steps, models)
+            return self._advance_f32(state, params, effects, integrator, normalize, dt, n_steps, models, restore)
         if integrator == "dopri5" and adaptive is None:
             raise ValueError("integrator: dopri5 needs adaptive (a lavendersim.backends.Adaptive)")
         if integrator in PLAIN_ONLY and models is not None and np.any(np.asarray(models.rows)[:, LY.MODEL_KIND] != 0):
@@ -393,8 +395,7 @@ class CBackend:
         if status == 0:
             return
         if not restore:
-            raise DivergenceError(step, body, "non-finite state or failed solve (arrays not restored: restore=False; "
-                                              "re-run with restore=True for the cause)")
+            raise DivergenceError(step, body, NOT_RESTORED)
         tol_cause = None
         if adaptive is not None and integrator == "dopri5":
             if status == 2:
@@ -418,9 +419,10 @@ class CBackend:
         raise DivergenceError(step, body, _cause(snapshot[body], pre, params, effects, body, step,
                                                  float(dt), integrator, model))
 
-    def _advance_f32(self, state, params, effects, integrator, normalize, dt, n_steps, models) -> None:
+    def _advance_f32(self, state, params, effects, integrator, normalize, dt, n_steps, models, restore=True) -> None:
         """advance on a float32 state (csrc/step_f32.c): plain bodies, FLOAT32_INTEGRATORS, built-in effects;
-        params and effects are used as float32 (pass them as float32 to avoid a copy per call)."""
+        params and effects are used as float32 (pass them as float32 to avoid a copy per call); restore as
+        :meth:`advance`'s (False: no copy of the state per call)."""
         if integrator not in FLOAT32_INTEGRATORS:
             raise ValueError(f"integrator: float32 steps {', '.join(FLOAT32_INTEGRATORS)} only, got {integrator!r}")
         if models is not None and np.any(np.asarray(models.rows)[:, LY.MODEL_KIND] != 0):
@@ -431,11 +433,13 @@ class CBackend:
         effects32 = np.ascontiguousarray(effects, dtype=np.float32)
         if effects32.size == 0:
             effects32 = effects32.reshape(0, ROW)
-        snapshot = state.copy()
+        snapshot = state.copy() if restore else None
         status, step, body = _c.simulate_f32(state, params32, effects32, INTEGRATOR_CODES[integrator],
                                              1 if normalize else 0, float(dt), int(n_steps))
         if status == 0:
             return
+        if not restore:
+            raise DivergenceError(step, body, NOT_RESTORED)
         pre = state[body].astype(np.float64)  # the failing body is left at its last finite state
         state[...] = snapshot
         e64 = np.asarray(effects, np.float64)

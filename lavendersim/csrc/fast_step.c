@@ -255,9 +255,10 @@ static int screen_pass(const double *x, const double *params, long nb, const dou
 #define LV_SCREEN_F32_MARGIN 1e-5
 
 /* screen_pass of a float32 state (Sim(dtype="float32"): params and limits float64): each body's numbers
-   converted to double (exact), the bound and the E and |L|^2 limits shrunk by LV_SCREEN_F32_MARGIN, and no
-   no-work-rate shortcut (its margin is relative to the room left, not to E): E and |L| are always evaluated.
-   Passes only what the NumPy check passes. */
+   converted to double (exact), the bound, the no-work rate and the E and |L|^2 limits shrunk by
+   LV_SCREEN_F32_MARGIN. A body at or below the shrunk no-work rate is inside its limits by more than the margin
+   (E <= T_v + I_max |omega|^2 / 2 and |L| <= I_max |omega|, the rate's definition in Sim._safe_rates), whatever
+   the NumPy check's float32 roundings. Passes only what the NumPy check passes. */
 static int screen_pass_f32(const float *x, const double *params, long nb, const double *scale, double bound,
                            const double *G)
 {
@@ -270,7 +271,7 @@ static int screen_pass_f32(const float *x, const double *params, long nb, const 
         for (k = 0; k < LV_STATE_SIZE; k++) xb[k] = (double)x[b * LV_STATE_SIZE + k];
         w = sqrt(xb[LV_STATE_OMEGA_B] * xb[LV_STATE_OMEGA_B] + xb[LV_STATE_OMEGA_B + 1] * xb[LV_STATE_OMEGA_B + 1]
                  + xb[LV_STATE_OMEGA_B + 2] * xb[LV_STATE_OMEGA_B + 2]);
-        gb[LV_G_W] = -1.0; /* never skips the evaluation (a NaN w fails below) */
+        gb[LV_G_W] = g[LV_G_W] * keep; /* a NaN w fails the bound test below */
         gb[LV_G_E] = g[LV_G_E] * keep;
         gb[LV_G_L2] = g[LV_G_L2] * keep;
         if (!(w * scale[b] <= bound * keep) || !growth_pass(xb, params + b * LV_PARAM_SIZE, gb, w)) return 0;

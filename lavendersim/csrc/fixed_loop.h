@@ -226,6 +226,7 @@ static int LV_FN(simulate)(LV_REAL *state, const LV_REAL *params, long nb, const
                            long *fail_step, long *fail_body)
 {
     long *start = NULL, *order = NULL, *fill = NULL, e, b, j, k, n_every = 0, limit = n_steps, best = -1, s, fb;
+    long first[LV_FIXED_KINDS + 1] = {0}, next[LV_FIXED_KINDS + 1];
     int *flags = NULL, every_flags = 0;
     LV_FN(ref) *refs = NULL;
     LV_FN(tile) *t = NULL, *snap = NULL;
@@ -274,15 +275,21 @@ static int LV_FN(simulate)(LV_REAL *state, const LV_REAL *params, long nb, const
                  : (f & LV_EFFECT_USES_STATE) ? LV_FIXED_ANY
                  : (f & LV_EFFECT_FORCE) ? LV_FIXED_FORCE : LV_FIXED_TORQUE;
     }
+    /* one counting pass: order = the bodies of kind 0, then kind 1, ..., each ascending (first[kind] where
+       its run starts) */
+    for (b = 0; b < nb; b++) first[flags[b] + 1]++;
+    for (kind = 0; kind < LV_FIXED_KINDS; kind++) first[kind + 1] += first[kind];
+    memcpy(next, first, sizeof first);
+    for (b = 0; b < nb; b++) order[next[flags[b]]++] = b;
     for (kind = 0; kind < LV_FIXED_KINDS; kind++) {
         const LV_FN(tile_fn) fn = LV_FN(tile_pick)(kind, integrator, normalize);
-        for (j = 0, b = 0; b < nb; b++)
-            if (flags[b] == kind) order[j++] = b;
+        const long *ids = order + first[kind];
+        j = first[kind + 1] - first[kind];
         for (k = 0; k < j; k += t->nt) {
             long lim;
             t->nt = j - k < LV_FIXED_TILE ? j - k : LV_FIXED_TILE;
             for (b = 0; b < t->nt; b++) {
-                const long id = order[k + b];
+                const long id = ids[k + b];
                 const LV_REAL *prm = params + id * LV_PARAM_SIZE;
                 LV_REAL x[LV_STATE_SIZE], cf[LV_EULER_SIZE], F[3] = {0, 0, 0}, tau[3] = {0, 0, 0};
                 int i;
@@ -302,17 +309,17 @@ static int LV_FN(simulate)(LV_REAL *state, const LV_REAL *params, long nb, const
                     t->P[3 + i][b] = tau[i];
                 }
             }
-            lim = (best >= 0 && order[k] < best && limit < n_steps) ? limit + 1 : limit;
+            lim = (best >= 0 && ids[k] < best && limit < n_steps) ? limit + 1 : limit;
             s = lim > 0 ? LV_FN(tile_run)(t, snap, fn, dt, lim, &fb, last) : -2;
             if (s == -2) continue;
             if (s < 0) {
                 for (b = 0; b < t->nt; b++)
-                    for (e = 0; e < LV_STATE_SIZE; e++) state[order[k + b] * LV_STATE_SIZE + e] = t->T[e][b];
+                    for (e = 0; e < LV_STATE_SIZE; e++) state[ids[k + b] * LV_STATE_SIZE + e] = t->T[e][b];
                 continue;
             }
-            if (s < limit || (s == limit && order[k + fb] < best)) {
+            if (s < limit || (s == limit && ids[k + fb] < best)) {
                 limit = s;
-                best = order[k + fb];
+                best = ids[k + fb];
                 memcpy(state + best * LV_STATE_SIZE, last, sizeof last);
                 status = LV_DIVERGED;
             }
