@@ -103,7 +103,7 @@ def extensions() -> list[Extension]:
         # generated/kernels.c is #included by step.c (one translation unit, so its kernels inline)
         sources=[f"{CSRC}/{n}" for n in csrc],
         include_dirs=[GENERATED, CSRC],
-        depends=[f"{GENERATED}/{n}" for n in HASHED] + [f"{CSRC}/step.h", f"{CSRC}/batch_simd.h",
+        depends=[f"{GENERATED}/{n}" for n in HASHED] + [f"{CSRC}/step.h", f"{CSRC}/batch_simd.h", f"{CSRC}/model_simd.h",
                                                                     f"{CSRC}/step_f32.h", f"{CSRC}/fixed_loop.h"],
         define_macros=[("LV_GENERATED_HASH", '"%s"' % generated_hash(HERE / GENERATED))],
         extra_compile_args=args,

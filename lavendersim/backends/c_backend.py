@@ -303,7 +303,7 @@ def threads(n: int | None = None) -> int:
 
 
 def isa() -> dict:
-    """The instruction set of the batched torque-free RK4 path: ``{"current": name, "best": name}``
+    """The instruction set of the batched RK4 paths (plain and jointed wheel bodies): ``{"current": name, "best": name}``
     ("scalar", "sse2" or "baseline", "avx2", "avx512f"; the best this CPU supports is chosen at import)."""
     cur, name, best, best_name = _c.isa()
     return {"current": name, "best": best_name}

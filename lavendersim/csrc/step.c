@@ -1362,8 +1362,11 @@ int lv_threads_set(int threads)
     return lv_threads_current;
 }
 
+#include "model_simd.h"
+
 /* euler, semi-implicit Euler, rk4 over every body. Bodies with a joint or wheels are stepped one by one
-   (shared over `threads`, see advance_models_threads); plain bodies in lockstep blocks gathered by their work (rhs_kind): those no effect acts on together
+   (shared over `threads`, see advance_models_threads), except, under RK4 with SIMD on, one group of jointed
+   wheel bodies with the same built-in effects, on model tiles (advance_models_grouped, csrc/model_simd.h); plain bodies in lockstep blocks gathered by their work (rhs_kind): those no effect acts on together
    (RK4: the torque-free fast path), those with effects by kind, so a plain body never leaves its path
    because of a neighbour. ids: scratch for nb indices. Returns the status; *limit, *best as in
    lv_simulate. */
@@ -1386,8 +1389,8 @@ static int advance_fixed(double *state, const double *params, long nb, const lv_
         if (models != NULL && (int)models->rows[b * LV_MODEL_SIZE + LV_MODEL_KIND] != 0) ids[k++] = b;
         else ids[first[rhs_kind(ix, b)]++] = b;
     }
-    if (n_models > 0 && advance_models_threads(state, params, models, ix, ids, n_models, integrator, normalize, dt,
-                                               n_steps, threads, limit, best) == LV_DIVERGED)
+    if (n_models > 0 && advance_models_grouped(state, params, models, ix, ids, n_models, integrator, isa, normalize,
+                                               dt, n_steps, threads, limit, best) == LV_DIVERGED)
         status = LV_DIVERGED;
     for (cls = 0; cls < LV_RHS_CLASSES; cls++) {
         const long *list = ids + first[cls] - count[cls];

@@ -80,8 +80,8 @@ enum {
     LV_NO_MEMORY = -3       /* the per-body effect index could not be allocated; nothing changed */
 };
 
-/* The instruction sets of the batched torque-free RK4 path (csrc/batch_simd.h): LV_ISA_SCALAR turns it off
-   (every body on the scalar block path), LV_ISA_BASE is the build's baseline (SSE2 on x86-64), AVX2 and
+/* The instruction sets of the batched RK4 paths (plain bodies: csrc/batch_simd.h; jointed wheel bodies:
+   csrc/model_simd.h): LV_ISA_SCALAR turns them off (every body on the scalar block or per-body path), LV_ISA_BASE is the build's baseline (SSE2 on x86-64), AVX2 and
    AVX-512F copies exist on x86 builds with GCC or clang. All give bitwise the same results. */
 enum { LV_ISA_SCALAR = 0, LV_ISA_BASE = 1, LV_ISA_AVX2 = 2, LV_ISA_AVX512 = 3 };
 /* The best instruction set this CPU (and OS) supports, detected once. */
