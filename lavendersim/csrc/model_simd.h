@@ -274,45 +274,39 @@ static long advance_model_soa(double *state, const double *params, const lv_mode
 
 /* One share of a group's tiles over threads (as soa_share for plain bodies). */
 typedef struct {
+    lv_share_head head; /* first: run_shares reads it */
     double *state;
     const double *params;
     const lv_models *md;
     const lv_effect_index *ix;
     const long *list;
-    long count, n_steps, limit, best;
+    long count, n_steps;
     lv_mtile_fn fn;
     int normalize;
     double dt;
-    int status;
 } mtile_share;
 
-static void mtile_share_run(mtile_share *sh)
+static void mtile_share_run(void *arg)
 {
+    mtile_share *const sh = (mtile_share *)arg;
     double last[LV_XS_SIZE];
     long k, s, lim, n;
     int j;
     for (k = 0; k < sh->count; k += n) {
         n = sh->count - k < LV_MTILE ? sh->count - k : LV_MTILE;
-        lim = run_limit(sh->list[k], sh->limit, sh->best, sh->n_steps);
+        lim = run_limit(sh->list[k], sh->head.limit, sh->head.best, sh->n_steps);
         if (lim <= 0) continue;
         s = advance_model_soa(sh->state, sh->params, sh->md, sh->ix, sh->list + k, n, sh->fn, sh->normalize, sh->dt,
                               lim, &j, last);
-        if (s < 0 || !earlier(s, sh->list[k + j], sh->limit, sh->best)) continue;
+        if (s < 0 || !earlier(s, sh->list[k + j], sh->head.limit, sh->head.best)) continue;
         memcpy(sh->state + sh->list[k + j] * LV_STATE_SIZE, last, LV_STATE_SIZE * sizeof(double));
         memcpy(sh->md->Omega + 3 * sh->list[k + j], last + LV_XS_OMEGA, 3 * sizeof(double));
-        sh->limit = s;
-        sh->best = sh->list[k + j];
-        sh->status = LV_DIVERGED;
+        sh->head.limit = s;
+        sh->head.best = sh->list[k + j];
+        sh->head.status = LV_DIVERGED;
     }
 }
 
-#if LV_HAVE_THREADS
-static void *mtile_share_thread(void *arg)
-{
-    mtile_share_run((mtile_share *)arg);
-    return NULL;
-}
-#endif
 
 /* The group list[0 .. count-1] (ascending) on model tiles, split into up to `threads` shares of whole
    tiles (as advance_soa_threads). Returns LV_DIVERGED (with *limit, *best updated) or LV_OK. */
@@ -321,13 +315,9 @@ static int advance_mtile_threads(double *state, const double *params, const lv_m
                                  int threads, long *limit, long *best)
 {
     mtile_share sh[LV_MAX_THREADS];
-#if LV_HAVE_THREADS
-    pthread_t tid[LV_MAX_THREADS];
-    int started[LV_MAX_THREADS];
-#endif
     const long tiles = (count + LV_MTILE - 1) / LV_MTILE;
     long t0 = 0, most;
-    int t, n_sh, status = LV_OK;
+    int t, n_sh;
     n_sh = threads < 1 ? 1 : (threads > LV_MAX_THREADS ? LV_MAX_THREADS : threads);
     most = count * n_steps / LV_MODEL_THREAD_WORK; /* shares the work pays for */
     if (most < n_sh) n_sh = most < 1 ? 1 : (int)most;
@@ -342,31 +332,15 @@ static int advance_mtile_threads(double *state, const double *params, const lv_m
         sh[t].list = list + b0;
         sh[t].count = b1 - b0;
         sh[t].n_steps = n_steps;
-        sh[t].limit = *limit;
-        sh[t].best = *best;
+        sh[t].head.limit = *limit;
+        sh[t].head.best = *best;
         sh[t].fn = mtile_rk4_fn(isa);
         sh[t].normalize = normalize;
         sh[t].dt = dt;
-        sh[t].status = LV_OK;
+        sh[t].head.status = LV_OK;
         t0 = t1;
     }
-#if LV_HAVE_THREADS
-    for (t = 1; t < n_sh; t++) started[t] = pthread_create(&tid[t], NULL, mtile_share_thread, &sh[t]) == 0;
-    mtile_share_run(&sh[0]);
-    for (t = 1; t < n_sh; t++) {
-        if (started[t]) pthread_join(tid[t], NULL);
-        else mtile_share_run(&sh[t]);
-    }
-#else
-    for (t = 0; t < n_sh; t++) mtile_share_run(&sh[t]);
-#endif
-    for (t = 0; t < n_sh; t++) {
-        if (sh[t].status != LV_DIVERGED || !earlier(sh[t].limit, sh[t].best, *limit, *best)) continue;
-        *limit = sh[t].limit;
-        *best = sh[t].best;
-        status = LV_DIVERGED;
-    }
-    return status;
+    return run_shares(sh, sizeof sh[0], n_sh, mtile_share_run, limit, best);
 }
 
 /* The model bodies list[0 .. count-1] (ascending): RK4 (isa not LV_ISA_SCALAR) takes the group of the first

@@ -1074,6 +1074,65 @@ static long run_limit(long lowest, long limit, long best, long n_steps)
     return (best >= 0 && lowest < best && limit < n_steps) ? limit + 1 : limit;
 }
 
+/* What every share of a call's bodies over threads reports, the first member of each *_share struct: its
+   earliest failure so far (limit, best: started from the call's) and LV_DIVERGED once it has one. */
+typedef struct {
+    long limit, best;
+    int status;
+} lv_share_head;
+
+typedef void (*lv_share_fn)(void *share);
+
+#if LV_HAVE_THREADS
+typedef struct {
+    lv_share_fn run;
+    void *share;
+} lv_share_job;
+
+static void *share_job_thread(void *arg)
+{
+    const lv_share_job *job = (const lv_share_job *)arg;
+    job->run(job->share);
+    return NULL;
+}
+#endif
+
+/* Runs the n_sh shares (an array of structs of `size` bytes, each starting with an lv_share_head) with run:
+   the calling thread runs the first, a thread each of the others (one that cannot be started has its share
+   run here). Shares touch disjoint bodies, so merging their failures in order with `earlier` gives the
+   earliest step, then the lowest body, over all of them. Returns LV_DIVERGED (with *limit, *best updated) or
+   LV_OK. */
+static int run_shares(void *shares, size_t size, int n_sh, lv_share_fn run, long *limit, long *best)
+{
+    char *base = (char *)shares;
+    int t, status = LV_OK;
+#if LV_HAVE_THREADS
+    pthread_t tid[LV_MAX_THREADS];
+    int started[LV_MAX_THREADS];
+    lv_share_job job[LV_MAX_THREADS];
+    for (t = 1; t < n_sh; t++) {
+        job[t].run = run;
+        job[t].share = base + (size_t)t * size;
+        started[t] = pthread_create(&tid[t], NULL, share_job_thread, &job[t]) == 0;
+    }
+    run(base);
+    for (t = 1; t < n_sh; t++) {
+        if (started[t]) pthread_join(tid[t], NULL);
+        else run(base + (size_t)t * size);
+    }
+#else
+    for (t = 0; t < n_sh; t++) run(base + (size_t)t * size);
+#endif
+    for (t = 0; t < n_sh; t++) {
+        const lv_share_head *h = (const lv_share_head *)(base + (size_t)t * size);
+        if (h->status != LV_DIVERGED || !earlier(h->limit, h->best, *limit, *best)) continue;
+        *limit = h->limit;
+        *best = h->best;
+        status = LV_DIVERGED;
+    }
+    return status;
+}
+
 /* RK4 on up to LV_BLOCK plain bodies of ids with effects, in lockstep, all of one right-hand side kind
    (LV_RHS_TORQUE or LV_RHS_FULL). Every call below has constant arguments and is inlined with its
    kernels and the effect dispatch (flatten), so each block size and kind compiles to its own loop. */
@@ -1149,42 +1208,36 @@ static int rhs_kind(const lv_effect_index *ix, long b)
    same report and the same failing body's state as one share (the other bodies' rows are unspecified
    on failure anyway, lv_simulate's contract), and bitwise the same states on success. */
 typedef struct {
+    lv_share_head head; /* first: run_shares reads it */
     double *state;
     const double *params;
     const long *list;
-    long count, n_steps, limit, best;
+    long count, n_steps;
     lv_tile_fn tile;
     const lv_effect_index *ix; /* NULL: torque-free tiles; else the constant effects' index */
     double dt;
-    int status;
 } soa_share;
 
-static void soa_share_run(soa_share *sh)
+static void soa_share_run(void *arg)
 {
+    soa_share *const sh = (soa_share *)arg;
     double last[1][LV_STATE_SIZE];
     long k, s, lim;
     int n, j;
     for (k = 0; k < sh->count; k += n) {
         n = (int)(sh->count - k < LV_TILE ? sh->count - k : LV_TILE);
-        lim = run_limit(sh->list[k], sh->limit, sh->best, sh->n_steps);
+        lim = run_limit(sh->list[k], sh->head.limit, sh->head.best, sh->n_steps);
         if (lim <= 0) continue;
         s = advance_free_soa(sh->state, sh->params, sh->list + k, n, sh->tile, sh->ix, sh->dt, lim, &j, last);
         /* the tile stops at its first failing step, j its lowest failing body there (lockstep) */
-        if (s < 0 || !earlier(s, sh->list[k + j], sh->limit, sh->best)) continue;
+        if (s < 0 || !earlier(s, sh->list[k + j], sh->head.limit, sh->head.best)) continue;
         memcpy(sh->state + sh->list[k + j] * LV_STATE_SIZE, last[0], sizeof last[0]);
-        sh->limit = s;
-        sh->best = sh->list[k + j];
-        sh->status = LV_DIVERGED;
+        sh->head.limit = s;
+        sh->head.best = sh->list[k + j];
+        sh->head.status = LV_DIVERGED;
     }
 }
 
-#if LV_HAVE_THREADS
-static void *soa_share_thread(void *arg)
-{
-    soa_share_run((soa_share *)arg);
-    return NULL;
-}
-#endif
 
 /* The plain bodies list[0 .. count-1] on SIMD tiles (torque-free: ix NULL; else all with constant
    effects, see advance_free_soa), split into `threads` shares of whole tiles (the calling thread runs the
@@ -1195,13 +1248,9 @@ static int advance_soa_threads(double *state, const double *params, const long *
                                long *best)
 {
     soa_share sh[LV_MAX_THREADS];
-#if LV_HAVE_THREADS
-    pthread_t tid[LV_MAX_THREADS];
-    int started[LV_MAX_THREADS];
-#endif
     const long tiles = (count + LV_TILE - 1) / LV_TILE;
     long t0 = 0;
-    int t, n_sh, status = LV_OK;
+    int t, n_sh;
     n_sh = threads < 1 ? 1 : (threads > LV_MAX_THREADS ? LV_MAX_THREADS : threads);
     if (n_sh > tiles) n_sh = (int)tiles;
     for (t = 0; t < n_sh; t++) { /* share t: tiles [t0, t1) */
@@ -1212,31 +1261,15 @@ static int advance_soa_threads(double *state, const double *params, const long *
         sh[t].list = list + b0;
         sh[t].count = b1 - b0;
         sh[t].n_steps = n_steps;
-        sh[t].limit = *limit;
-        sh[t].best = *best;
+        sh[t].head.limit = *limit;
+        sh[t].head.best = *best;
         sh[t].tile = tile;
         sh[t].ix = ix;
         sh[t].dt = dt;
-        sh[t].status = LV_OK;
+        sh[t].head.status = LV_OK;
         t0 = t1;
     }
-#if LV_HAVE_THREADS
-    for (t = 1; t < n_sh; t++) started[t] = pthread_create(&tid[t], NULL, soa_share_thread, &sh[t]) == 0;
-    soa_share_run(&sh[0]);
-    for (t = 1; t < n_sh; t++) {
-        if (started[t]) pthread_join(tid[t], NULL);
-        else soa_share_run(&sh[t]);
-    }
-#else
-    for (t = 0; t < n_sh; t++) soa_share_run(&sh[t]);
-#endif
-    for (t = 0; t < n_sh; t++) {
-        if (sh[t].status != LV_DIVERGED || !earlier(sh[t].limit, sh[t].best, *limit, *best)) continue;
-        *limit = sh[t].limit;
-        *best = sh[t].best;
-        status = LV_DIVERGED;
-    }
-    return status;
+    return run_shares(sh, sizeof sh[0], n_sh, soa_share_run, limit, best);
 }
 
 /* ---- bodies with a joint or wheels, over threads ----------------------------------------------
@@ -1248,43 +1281,37 @@ static int advance_soa_threads(double *state, const double *params, const long *
    thread; each body's arithmetic does not depend on the split, so the states are bitwise those of one
    thread. */
 typedef struct {
+    lv_share_head head; /* first: run_shares reads it */
     double *state;
     const double *params;
     const lv_models *md;
     const lv_effect_index *ix;
     const long *list;
-    long count, n_steps, limit, best;
+    long count, n_steps;
     int integrator, normalize;
     double dt;
-    int status;
 } model_share;
 
-static void model_share_run(model_share *sh)
+static void model_share_run(void *arg)
 {
+    model_share *const sh = (model_share *)arg;
     double lastm[LV_XS_SIZE];
     long k, s, lim, b;
     for (k = 0; k < sh->count; k++) {
         b = sh->list[k];
-        lim = run_limit(b, sh->limit, sh->best, sh->n_steps);
+        lim = run_limit(b, sh->head.limit, sh->head.best, sh->n_steps);
         if (lim <= 0) continue;
         s = advance_model_body(sh->state, sh->params, b, sh->md, sh->ix, sh->integrator, sh->normalize, sh->dt, lim,
                                lastm);
-        if (s < 0 || !earlier(s, b, sh->limit, sh->best)) continue;
+        if (s < 0 || !earlier(s, b, sh->head.limit, sh->head.best)) continue;
         memcpy(sh->state + b * LV_STATE_SIZE, lastm, LV_STATE_SIZE * sizeof(double));
         memcpy(sh->md->Omega + 3 * b, lastm + LV_XS_OMEGA, 3 * sizeof(double));
-        sh->limit = s;
-        sh->best = b;
-        sh->status = LV_DIVERGED;
+        sh->head.limit = s;
+        sh->head.best = b;
+        sh->head.status = LV_DIVERGED;
     }
 }
 
-#if LV_HAVE_THREADS
-static void *model_share_thread(void *arg)
-{
-    model_share_run((model_share *)arg);
-    return NULL;
-}
-#endif
 
 /* Below this many body-steps per thread a call's model bodies stay on the calling thread (starting a thread
    costs about as much as ~100 body-steps). */
@@ -1298,12 +1325,8 @@ static int advance_models_threads(double *state, const double *params, const lv_
                                   long n_steps, int threads, long *limit, long *best)
 {
     model_share sh[LV_MAX_THREADS];
-#if LV_HAVE_THREADS
-    pthread_t tid[LV_MAX_THREADS];
-    int started[LV_MAX_THREADS];
-#endif
     long k0 = 0, most;
-    int t, n_sh, status = LV_OK;
+    int t, n_sh;
     n_sh = threads < 1 ? 1 : (threads > LV_MAX_THREADS ? LV_MAX_THREADS : threads);
     most = count * n_steps / LV_MODEL_THREAD_WORK; /* shares the work pays for */
     if (most < n_sh) n_sh = most < 1 ? 1 : (int)most;
@@ -1317,31 +1340,15 @@ static int advance_models_threads(double *state, const double *params, const lv_
         sh[t].list = list + k0;
         sh[t].count = k1 - k0;
         sh[t].n_steps = n_steps;
-        sh[t].limit = *limit;
-        sh[t].best = *best;
+        sh[t].head.limit = *limit;
+        sh[t].head.best = *best;
         sh[t].integrator = integrator;
         sh[t].normalize = normalize;
         sh[t].dt = dt;
-        sh[t].status = LV_OK;
+        sh[t].head.status = LV_OK;
         k0 = k1;
     }
-#if LV_HAVE_THREADS
-    for (t = 1; t < n_sh; t++) started[t] = pthread_create(&tid[t], NULL, model_share_thread, &sh[t]) == 0;
-    model_share_run(&sh[0]);
-    for (t = 1; t < n_sh; t++) {
-        if (started[t]) pthread_join(tid[t], NULL);
-        else model_share_run(&sh[t]);
-    }
-#else
-    for (t = 0; t < n_sh; t++) model_share_run(&sh[t]);
-#endif
-    for (t = 0; t < n_sh; t++) {
-        if (sh[t].status != LV_DIVERGED || !earlier(sh[t].limit, sh[t].best, *limit, *best)) continue;
-        *limit = sh[t].limit;
-        *best = sh[t].best;
-        status = LV_DIVERGED;
-    }
-    return status;
+    return run_shares(sh, sizeof sh[0], n_sh, model_share_run, limit, best);
 }
 
 static int lv_threads_current = 1;
