@@ -77,6 +77,8 @@ def c_header(effects: list[tuple[int, E.EffectDecl]]) -> list[str]:
          f"#define LV_EFFECT_USES_STATE {E.FLAG_USES_STATE}   /* flag: the effect reads a state value (else constant) */"]
     for code, d in effects:
         h.append(f"#define LV_EFFECT_{d.name.upper()} {code} /* p = [{', '.join(f'{p.name}({p.size})' for p in d.params)}] */")
+    h += ["/* Every built-in effect code above, for a dispatch a stepping loop writes once: X(code) each. */",
+          "#define LV_EFFECT_BUILTINS(X) " + " ".join(f"X(LV_EFFECT_{d.name.upper()})" for _, d in effects)]
     h += ["/* An effect adds its force at the COM (F, world, N) and torque about it (tau, world, N·m) for one",
           "   body: p its parameters, x the body state, v_w the COM velocity it sees (the state's, or a joint's",
           "   kinematic one), m and I_b the body's mass and principal moments. */",

@@ -600,6 +600,8 @@ void lv_wheels4_motor(const double *command, const double *Omega, double torque_
 #define LV_EFFECT_GRAVITY 3 /* p = [g_w(3)] */
 #define LV_EFFECT_LINEAR_DAMPING 4 /* p = [c(1)] */
 #define LV_EFFECT_ANGULAR_DAMPING 5 /* p = [c(1)] */
+/* Every built-in effect code above, for a dispatch a stepping loop writes once: X(code) each. */
+#define LV_EFFECT_BUILTINS(X) X(LV_EFFECT_APPLIED_TORQUE) X(LV_EFFECT_FORCE_AT_POINT) X(LV_EFFECT_GRAVITY) X(LV_EFFECT_LINEAR_DAMPING) X(LV_EFFECT_ANGULAR_DAMPING)
 /* An effect adds its force at the COM (F, world, N) and torque about it (tau, world, N·m) for one
    body: p its parameters, x the body state, v_w the COM velocity it sees (the state's, or a joint's
    kinematic one), m and I_b the body's mass and principal moments. */

@@ -125,21 +125,14 @@ typedef void (*lv_mtile_fn)(lv_mtile *LV_RESTRICT t, const lv_effect_ref *refs, 
         for (b = 0; b < m; b++) t->F[i][b] = t->TAU[i][b] = 0.0;                                        \
     for (e = 0; e < n_refs; e++) {                                                                      \
         const double *p = refs[e].p;                                                                    \
-        switch (refs[e].code) {                                                                         \
-        case LV_EFFECT_APPLIED_TORQUE: LV_MT_EFFECT(LV_EFFECT_APPLIED_TORQUE) break;                    \
-        case LV_EFFECT_FORCE_AT_POINT: LV_MT_EFFECT(LV_EFFECT_FORCE_AT_POINT) break;                    \
-        case LV_EFFECT_GRAVITY: LV_MT_EFFECT(LV_EFFECT_GRAVITY) break;                                  \
-        case LV_EFFECT_LINEAR_DAMPING: LV_MT_EFFECT(LV_EFFECT_LINEAR_DAMPING) break;                    \
-        default: LV_MT_EFFECT(LV_EFFECT_ANGULAR_DAMPING) break;                                         \
-        }                                                                                               \
+        switch (refs[e].code) { LV_EFFECT_BUILTINS(LV_MT_CASE) default: break; }                        \
     }
+/* One case per built-in effect (derive prints the list, LV_EFFECT_BUILTINS), so each lane loop inlines one. */
+#define LV_MT_CASE(CODE)                                                                                \
+    case CODE: LV_MT_EFFECT(CODE) break;
 
-/* The codes the lane loops above dispatch (a group's effects must all be among them). */
-static int mtile_code_known(int code)
-{
-    return code == LV_EFFECT_APPLIED_TORQUE || code == LV_EFFECT_FORCE_AT_POINT || code == LV_EFFECT_GRAVITY
-           || code == LV_EFFECT_LINEAR_DAMPING || code == LV_EFFECT_ANGULAR_DAMPING;
-}
+/* Whether the lane loops above dispatch `code`: every built-in effect does (a user effect stays scalar). */
+static int mtile_code_known(int code) { return lv_effect_n_params(code) >= 0; }
 
 /* n_steps RK4 steps of the m bodies of tile t (kind LV_MKIND, effects refs[0 .. n_refs-1], the same for
    every lane): advance_model's step for each lane. */
