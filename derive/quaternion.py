@@ -152,6 +152,12 @@ def kernels() -> list[Kernel]:
     small = vnorm <= sp.Rational(1, 10**300)
     to_axis = sp.Matrix([sp.Piecewise((1 if i == 0 else 0, small), (q[i] / vnorm, True)) for i in range(3)])
 
+    # The angle between attitudes q and q_ref: that of e = q_ref* ⊗ q, with |e_w| so that q and −q (one attitude)
+    # give the same angle; atan2 keeps it accurate near 0 and near π alike.
+    q_ref = vec("q_ref", 4)
+    e = qmul(qconj(q_ref), q)
+    err_angle = 2 * sp.atan2(sp.sqrt(e[0] ** 2 + e[1] ** 2 + e[2] ** 2), sp.Abs(e[3]))
+
     # Shortest arc taking the unit vector a onto the unit vector b: q ∝ [a × b, 1 + a·b]. When b is
     # (nearly) −a that direction is lost to rounding, so the half turn about an axis ⟂ a is taken
     # instead: a × e_x, or a × e_y when a lies within 45° of e_x.
@@ -191,6 +197,10 @@ def kernels() -> list[Kernel]:
         Kernel("quat_to_axis_angle", "Unit axis and angle in [0, 2π] of a unit quaternion", r"\theta = 2\,\operatorname{atan2}(\lVert q_v\rVert, q_w),\ \hat u = q_v/\lVert q_v\rVert",
                [Arg("q", q, Q + ", unit", "unit_quaternion")],
                [Arg("axis", to_axis, "unit axis ([1,0,0] for the identity)"), Arg("angle", 2 * half, "angle, rad")], g),
+        Kernel("quat_error_angle", "Angle of the rotation between two attitudes (q and −q alike), in [0, π]",
+               r"\theta = 2\,\operatorname{atan2}(\lVert e_v\rVert, |e_w|),\ e = q_{ref}^* \otimes q",
+               [Arg("q", q, Q + ", unit", "unit_quaternion"), Arg("q_ref", q_ref, Q + ", unit", "unit_quaternion")],
+               [Arg("angle", err_angle, "angle, rad")], g),
         Kernel("euler_xyz_to_quat", "Quaternion of intrinsic XYZ Euler angles, R = Rx(roll) Ry(pitch) Rz(yaw)",
                r"q = q_x(a) \otimes q_y(b) \otimes q_z(c)",
                [Arg("roll", ea, "rad"), Arg("pitch", eb, "rad"), Arg("yaw", ec, "rad")], [Arg("q", euler_xyz_quat(ea, eb, ec), Q)], g),

@@ -11,7 +11,7 @@ typedef struct {
     void (*packed)(const double *in, double *out);
 } lv_kernel_info;
 
-#define LV_KERNEL_COUNT 73
+#define LV_KERNEL_COUNT 74
 extern const lv_kernel_info lv_kernel_table[LV_KERNEL_COUNT];
 
 /* particle_moments: One particle's mass moment and momentum (summed: m r_COM and p).
@@ -159,6 +159,12 @@ void lv_quat_from_two_vectors(const double *a, const double *b, double *q);
      out axis [3]: unit axis ([1,0,0] for the identity)
      out angle scalar: angle, rad */
 void lv_quat_to_axis_angle(const double *q, double *axis, double *angle);
+
+/* quat_error_angle: Angle of the rotation between two attitudes (q and −q alike), in [0, π].
+     in  q [4]: quaternion (x, y, z, w), scalar last, unit
+     in  q_ref [4]: quaternion (x, y, z, w), scalar last, unit
+     out angle scalar: angle, rad */
+void lv_quat_error_angle(const double *q, const double *q_ref, double *angle);
 
 /* euler_xyz_to_quat: Quaternion of intrinsic XYZ Euler angles, R = Rx(roll) Ry(pitch) Rz(yaw).
      in  roll scalar: rad

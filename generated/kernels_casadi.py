@@ -467,6 +467,25 @@ def quat_to_axis_angle(q):
     return casadi.vertcat(casadi.if_else(t1, 1, q_0*t2), casadi.if_else(t1, 0, q_1*t2), casadi.if_else(t1, 0, q_2*t2)), casadi.vertcat(2*casadi.atan2(t0, q_3))
 
 
+def quat_error_angle(q, q_ref):
+    """quat_error_angle: Angle of the rotation between two attitudes (q and −q alike), in [0, π].
+      in  q [4]: quaternion (x, y, z, w), scalar last, unit
+      in  q_ref [4]: quaternion (x, y, z, w), scalar last, unit
+      out angle scalar: angle, rad"""
+    q_0 = q[0]
+    q_1 = q[1]
+    q_2 = q[2]
+    q_3 = q[3]
+    q_ref_0 = q_ref[0]
+    q_ref_1 = q_ref[1]
+    q_ref_2 = q_ref[2]
+    q_ref_3 = q_ref[3]
+    t0 = q_0*q_ref_1 - q_1*q_ref_0 + q_2*q_ref_3 - q_3*q_ref_2
+    t1 = q_0*q_ref_3 + q_1*q_ref_2 - q_2*q_ref_1 - q_3*q_ref_0
+    t2 = -q_0*q_ref_2 + q_1*q_ref_3 + q_2*q_ref_0 - q_3*q_ref_1
+    return casadi.vertcat(2*casadi.atan2(casadi.sqrt((t0*t0) + (t1*t1) + (t2*t2)), casadi.fabs(q_0*q_ref_0 + q_1*q_ref_1 + q_2*q_ref_2 + q_3*q_ref_3)))
+
+
 def euler_xyz_to_quat(roll, pitch, yaw):
     """euler_xyz_to_quat: Quaternion of intrinsic XYZ Euler angles, R = Rx(roll) Ry(pitch) Rz(yaw).
       in  roll scalar: rad

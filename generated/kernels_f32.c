@@ -550,6 +550,21 @@ void lvf_quat_to_axis_angle(const float *q, float *axis, float *angle) {
     angle[0] = 2*atan2f(t0, q_3);
 }
 
+void lvf_quat_error_angle(const float *q, const float *q_ref, float *angle) {
+    const float q_0 = q[0];
+    const float q_1 = q[1];
+    const float q_2 = q[2];
+    const float q_3 = q[3];
+    const float q_ref_0 = q_ref[0];
+    const float q_ref_1 = q_ref[1];
+    const float q_ref_2 = q_ref[2];
+    const float q_ref_3 = q_ref[3];
+    const float t0 = q_0*q_ref_1 - q_1*q_ref_0 + q_2*q_ref_3 - q_3*q_ref_2;
+    const float t1 = q_0*q_ref_3 + q_1*q_ref_2 - q_2*q_ref_1 - q_3*q_ref_0;
+    const float t2 = -q_0*q_ref_2 + q_1*q_ref_3 + q_2*q_ref_0 - q_3*q_ref_1;
+    angle[0] = 2*atan2f(sqrtf((t0*t0) + (t1*t1) + (t2*t2)), fabsf(q_0*q_ref_0 + q_1*q_ref_1 + q_2*q_ref_2 + q_3*q_ref_3));
+}
+
 void lvf_euler_xyz_to_quat(float roll, float pitch, float yaw, float *q) {
     const float t0 = ((1.0F/2.0F))*yaw;
     const float t1 = sinf(t0);

@@ -958,6 +958,42 @@ def quat_to_axis_angle(q):
     return axis_out, angle_out
 
 
+def quat_error_angle(q, q_ref):
+    """Angle of the rotation between two attitudes (q and −q alike), in [0, π].
+
+    Generated kernel ``quat_error_angle``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    q : array_like, shape (..., 4)
+        quaternion (x, y, z, w), scalar last, unit
+    q_ref : array_like, shape (..., 4)
+        quaternion (x, y, z, w), scalar last, unit
+
+    Returns
+    -------
+    angle : ndarray, shape (...)
+        angle, rad
+    """
+    q = numpy.asarray(q, dtype=numpy.float64)
+    q_ref = numpy.asarray(q_ref, dtype=numpy.float64)
+    batch = numpy.broadcast_shapes(q.shape[:-1], q_ref.shape[:-1])
+    q_0 = q[..., 0]
+    q_1 = q[..., 1]
+    q_2 = q[..., 2]
+    q_3 = q[..., 3]
+    q_ref_0 = q_ref[..., 0]
+    q_ref_1 = q_ref[..., 1]
+    q_ref_2 = q_ref[..., 2]
+    q_ref_3 = q_ref[..., 3]
+    t0 = q_0*q_ref_1 - q_1*q_ref_0 + q_2*q_ref_3 - q_3*q_ref_2
+    t1 = q_0*q_ref_3 + q_1*q_ref_2 - q_2*q_ref_1 - q_3*q_ref_0
+    t2 = -q_0*q_ref_2 + q_1*q_ref_3 + q_2*q_ref_0 - q_3*q_ref_1
+    angle_out = numpy.empty(batch)
+    angle_out[...] = 2*numpy.arctan2(numpy.sqrt((t0*t0) + (t1*t1) + (t2*t2)), abs(q_0*q_ref_0 + q_1*q_ref_1 + q_2*q_ref_2 + q_3*q_ref_3))
+    return angle_out
+
+
 def euler_xyz_to_quat(roll, pitch, yaw):
     """Quaternion of intrinsic XYZ Euler angles, R = Rx(roll) Ry(pitch) Rz(yaw).
 
@@ -4498,6 +4534,7 @@ KERNELS = {
     'axis_angle_to_quat': (axis_angle_to_quat, [('axis', (3,)), ('angle', ())], [('q', (4,))]),
     'quat_from_two_vectors': (quat_from_two_vectors, [('a', (3,)), ('b', (3,))], [('q', (4,))]),
     'quat_to_axis_angle': (quat_to_axis_angle, [('q', (4,))], [('axis', (3,)), ('angle', ())]),
+    'quat_error_angle': (quat_error_angle, [('q', (4,)), ('q_ref', (4,))], [('angle', ())]),
     'euler_xyz_to_quat': (euler_xyz_to_quat, [('roll', ()), ('pitch', ()), ('yaw', ())], [('q', (4,))]),
     'quat_to_euler_xyz': (quat_to_euler_xyz, [('q', (4,))], [('rpy', (3,))]),
     'quat_derivative_world': (quat_derivative_world, [('q', (4,)), ('omega_w', (3,))], [('q_dot', (4,))]),

@@ -332,9 +332,7 @@ def error_angle_deg(q: ArrayLike, q_ref: ArrayLike) -> np.ndarray:
     float or ndarray (...,)
         The angle of the rotation q_ref* ⊗ q, deg (q and −q give the same angle).
     """
-    qe = np.asarray(KN.quat_mul(KN.quat_conj(np.asarray(q_ref, float)), np.asarray(q, float)), dtype=float)
-    s = np.linalg.norm(qe[..., 0:3], axis=-1)
-    return np.degrees(2.0 * np.arctan2(s, np.abs(qe[..., 3])))
+    return np.degrees(KN.quat_error_angle(np.asarray(q, float), np.asarray(q_ref, float)))
 
 
 def perturbed(q_ref: ArrayLike, dtheta: ArrayLike) -> np.ndarray:

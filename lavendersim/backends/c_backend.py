@@ -7,6 +7,7 @@ the rebuild command) when they differ. If the extension was never built, the Imp
 """
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 from pathlib import Path
@@ -194,6 +195,31 @@ def eval_kernel(name: str, *inputs):
         results.append(out[:, col:col + size].reshape(batch + tuple(shape)).copy())
         col += size
     return results[0] if len(results) == 1 else tuple(results)
+
+
+def scalar_kernel(name: str):
+    """Generated kernel `name` through C as a function of Python numbers, for a hot loop on one row (no arrays).
+
+    Parameters
+    ----------
+    name : str
+        A kernel of the C table (``lavendersim._lavender_c.kernels()``).
+
+    Returns
+    -------
+    callable
+        ``f(x0, ..., x{n_in-1})``: the inputs flattened in the kernel's argument order (a quaternion's
+        four numbers (x, y, z, w), then the next argument's); returns a float when the kernel has one output
+        number, else a tuple of its n_out numbers in order.
+
+    Raises
+    ------
+    KeyError
+        Unknown kernel.
+    """
+    if name not in _INDEX:
+        raise KeyError(f"scalar_kernel: unknown kernel {name!r}")
+    return functools.partial(_c.call_kernel, _INDEX[name][0])
 
 
 def _cause(start: np.ndarray, pre: np.ndarray, params: np.ndarray, effects: np.ndarray, body: int,

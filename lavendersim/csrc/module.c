@@ -224,6 +224,53 @@ fail:
     return NULL;
 }
 
+/* A kernel on one row of Python numbers, without buffers: call_kernel(index, x0, ..., x{n_in-1}). The outputs are
+   few (a kernel's scalars and small vectors), so a fixed row on the stack holds them. */
+enum { LV_CALL_MAX = 64 };
+static PyObject *py_call_kernel(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    double in[LV_CALL_MAX], out[LV_CALL_MAX];
+    const lv_kernel_info *k;
+    PyObject *res;
+    long index;
+    Py_ssize_t i;
+    (void)self;
+    if (nargs < 1) {
+        PyErr_SetString(PyExc_TypeError, "call_kernel: expected (index, inputs...)");
+        return NULL;
+    }
+    index = PyLong_AsLong(args[0]);
+    if (index == -1 && PyErr_Occurred()) return NULL;
+    if (index < 0 || index >= LV_KERNEL_COUNT) {
+        PyErr_Format(PyExc_ValueError, "call_kernel: kernel index %ld out of range [0, %d)", index, LV_KERNEL_COUNT);
+        return NULL;
+    }
+    k = &lv_kernel_table[index];
+    if (k->n_in > LV_CALL_MAX || k->n_out > LV_CALL_MAX) {
+        PyErr_Format(PyExc_ValueError, "call_kernel(%s): %d inputs, %d outputs: more than %d (use eval_kernel)",
+                     k->name, k->n_in, k->n_out, (int)LV_CALL_MAX);
+        return NULL;
+    }
+    if (nargs - 1 != k->n_in) {
+        PyErr_Format(PyExc_TypeError, "call_kernel(%s): expected %d numbers, got %zd", k->name, k->n_in, nargs - 1);
+        return NULL;
+    }
+    for (i = 0; i < k->n_in; i++) {
+        in[i] = PyFloat_AsDouble(args[i + 1]);
+        if (in[i] == -1.0 && PyErr_Occurred()) return NULL;
+    }
+    k->packed(in, out);
+    if (k->n_out == 1) return PyFloat_FromDouble(out[0]);
+    res = PyTuple_New(k->n_out);
+    if (res == NULL) return NULL;
+    for (i = 0; i < k->n_out; i++) {
+        PyObject *v = PyFloat_FromDouble(out[i]);
+        if (v == NULL) { Py_DECREF(res); return NULL; }
+        PyTuple_SET_ITEM(res, i, v);
+    }
+    return res;
+}
+
 static PyObject *py_simulate(PyObject *self, PyObject *args)
 {
     PyObject *state_obj, *params_obj, *effects_obj;
@@ -441,6 +488,9 @@ static PyMethodDef methods[] = {
     {"eval_kernel", py_eval_kernel, METH_VARARGS,
      "eval_kernel(index, inp, out): run packed kernel `index` over N rows; inp holds N*n_in float64 "
      "(C-contiguous), out N*n_out (writable)."},
+    {"call_kernel", (PyCFunction)(void (*)(void))py_call_kernel, METH_FASTCALL,
+     "call_kernel(index, x0, ..., x{n_in-1}) -> float (one output) or tuple of n_out floats: packed kernel `index`\n"
+     "on one row of numbers (the inputs in the packed order of eval_kernel)."},
     {"simulate", py_simulate, METH_VARARGS,
      "simulate(state, params, effects, integrator, normalize, dt, n_steps[, model_rows, Omega, command, applied,\n"
      "         h, nfev, rtol, atol, user_effects])\n"

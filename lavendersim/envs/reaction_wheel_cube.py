@@ -174,8 +174,8 @@ class ReactionWheelCubeEnv(gym.Env):
         return np.minimum(np.maximum(raw, self.observation_space.low), self.observation_space.high).astype(np.float32)
 
     def angle_error_deg(self, q: Sequence[float] | np.ndarray | None = None) -> float:
-        """Rotation angle between the cube and the target attitude, degrees: 4 atan2(|q − s q_t|,
-        |q + s q_t|) with s = sign(q·q_t) (accurate at small angles, cheap per step).
+        """Rotation angle between the cube and the target attitude, degrees: the generated kernel
+        quat_error_angle, 2 atan2(|e_v|, |e_w|) with e = q_t* ⊗ q (accurate near 0 and 180°).
 
         Parameters
         ----------
@@ -187,7 +187,7 @@ class ReactionWheelCubeEnv(gym.Env):
         float
         """
         q = self.sim.state(BODY).q if q is None else q
-        return _angle_deg(q[0], q[1], q[2], q[3], *self._tq)
+        return math.degrees(error_angle_fn()(float(q[0]), float(q[1]), float(q[2]), float(q[3]), *self._tq))
 
     def tilt_deg(self, q: ArrayLike | None = None) -> float:
         """Corner task: angle of the body diagonal (pivot → COM) from vertical, degrees.
@@ -312,8 +312,9 @@ class ReactionWheelCubeEnv(gym.Env):
         w0, w1, w2 = w
         W0, W1, W2 = io.Omega.tolist()
         q0, q1, q2, q3 = q
-        angle = _angle_deg(q0, q1, q2, q3, *self._tq)
-        theta = math.radians(angle)
+        t0, t1, t2, t3 = self._tq
+        theta = io.error_angle(q0, q1, q2, q3, t0, t1, t2, t3)
+        angle = math.degrees(theta)
         reward = -(theta * theta + 0.05 * (w0 * w0 + w1 * w1 + w2 * w2) + 0.01 * (a0 * a0 + a1 * a1 + a2 * a2))
         ob = io.obs_mv          # the float32 observation, written through a memoryview (C's double -> float cast)
         ob[0], ob[1], ob[2], ob[3], ob[4], ob[5], ob[6], ob[7], ob[8], ob[9] = q0, q1, q2, q3, w0, w1, w2, W0, W1, W2
@@ -391,7 +392,7 @@ class _StepIO:
     termination bound nor an observation bound is reached (Python floats)."""
 
     __slots__ = ("sim", "x", "Omega", "command", "applied", "applied_row", "advance", "counters", "dt", "torque_limit",
-                 "obs", "obs_mv", "w_in", "Om_in")
+                 "obs", "obs_mv", "w_in", "Om_in", "error_angle")
 
     def __init__(self, env: ReactionWheelCubeEnv, sim: Sim) -> None:
         def flat(a: np.ndarray) -> memoryview:
@@ -411,16 +412,27 @@ class _StepIO:
         high = env.observation_space.high
         self.w_in = min(float(env.rate_bound), float(high[4]))
         self.Om_in = min(float(env.wheel_bound), float(high[7]))
+        self.error_angle = error_angle_fn()
 
 
-def _angle_deg(q0: float, q1: float, q2: float, q3: float, t0: float, t1: float, t2: float, t3: float) -> float:
-    """ReactionWheelCubeEnv.angle_error_deg on numbers: the angle between attitudes q and t (x, y, z, w), degrees."""
-    s = 1.0 if q0 * t0 + q1 * t1 + q2 * t2 + q3 * t3 >= 0 else -1.0
-    m0, m1, m2, m3 = q0 - s * t0, q1 - s * t1, q2 - s * t2, q3 - s * t3
-    p0, p1, p2, p3 = q0 + s * t0, q1 + s * t1, q2 + s * t2, q3 + s * t3
-    a = math.sqrt(m0 ** 2 + m1 ** 2 + m2 ** 2 + m3 ** 2)
-    b = math.sqrt(p0 ** 2 + p1 ** 2 + p2 ** 2 + p3 ** 2)
-    return math.degrees(4.0 * math.atan2(a, b))
+_ERROR_ANGLE: list = []
+
+
+def error_angle_fn():
+    """The generated kernel quat_error_angle on eight numbers (q, then the target, each (x, y, z, w)) -> rad:
+    the C printing through ``scalar_kernel`` (one call, no arrays) when the compiled backend loads, else the
+    NumPy printing. Chosen once per process."""
+    if not _ERROR_ANGLE:
+        try:
+            from ..backends import c_backend
+            fn = c_backend.scalar_kernel("quat_error_angle")
+        except ImportError:          # not built, or stale (StaleBuildError): the NumPy printing, same formula
+            from ..kernels import K
+
+            def fn(q0, q1, q2, q3, t0, t1, t2, t3):
+                return float(K.quat_error_angle((q0, q1, q2, q3), (t0, t1, t2, t3)))
+        _ERROR_ANGLE.append(fn)
+    return _ERROR_ANGLE[0]
 
 
 def _action3(action: ArrayLike) -> tuple[float, float, float]:

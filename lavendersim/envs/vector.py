@@ -87,8 +87,6 @@ class ReactionWheelCubeVectorEnv(VectorEnv):
         n = self.num_envs
         self._raw_buf, self._clip_buf = np.empty((n, 10)), np.empty((n, 10))   # _raw's and _obs's scratch
         self._act_buf = np.empty((n, 3))                 # step's saturated actions (float64)
-        self._qt_buf, self._mp_buf = np.empty((4, n)), np.empty((2, 4, n))   # _angle_deg's scratch
-        self._tcol = self._target[:, None]
         # the observation bounds as full (N, 10) float32 arrays: the clipping is then two flat ufunc loops
         self._low_n, self._high_n = (np.ascontiguousarray(np.broadcast_to(b, (n, 10))) for b in (self._low, self._high))
         self._rngs: list[np.random.Generator | None] = [None] * n
@@ -196,8 +194,8 @@ class ReactionWheelCubeVectorEnv(VectorEnv):
             raw[b] = pre
         obs = self._obs(raw)
         q, w = raw[:, 0:4], raw[:, 4:7]
-        angle = self._angle_deg(q)
-        theta = np.radians(angle)
+        theta = K.quat_error_angle(q, self._target)      # rad; the single env's kernel, its NumPy printing
+        angle = np.degrees(theta)
         reward = -(theta * theta + 0.05 * np.einsum("ij,ij->i", w, w) + 0.01 * np.einsum("ij,ij->i", a, a))
         terminated = self._out_of_bounds(raw)
         info: dict[str, Any] = {"angle_error_deg": angle, "torque_applied": sim.wheel_torques_applied.copy()}
@@ -284,25 +282,6 @@ class ReactionWheelCubeVectorEnv(VectorEnv):
         if m0 <= rb and m1 <= rb and m2 <= rb and m3 <= wb and m4 <= wb and m5 <= wb:
             return np.zeros(n, bool)   # every row within both (a NaN anywhere fails the screen: the rows decide)
         return (np.max(np.abs(w), axis=1) > rb) | (np.max(np.abs(Om), axis=1) > wb)
-
-    def _angle_deg(self, q: np.ndarray) -> np.ndarray:
-        """The single env's angle_error_deg per row: 4 atan2(|q − s q_t|, |q + s q_t|), s = sign(q·q_t), degrees.
-
-        The same operations in the same order on each number: with s = -1, q - s q_t is q + q_t (exactly), so
-        |q - q_t| and |q + q_t| are computed once and swapped where q·q_t < 0. Columns in scratch (4, N) buffers."""
-        qt, mp = self._qt_buf, self._mp_buf
-        np.copyto(qt, q.T)
-        t = self._tcol
-        # sums over the 4 components as reductions over axis 0 of C-ordered arrays: row by row, ((x0 + x1) + x2) + x3
-        d = np.add.reduce(np.multiply(qt, t, out=mp[0]), axis=0)
-        np.subtract(qt, t, out=mp[0])
-        np.add(qt, t, out=mp[1])
-        np.multiply(mp, mp, out=mp)
-        s2 = np.add.reduce(mp, axis=1)                       # |q - q_t|^2, |q + q_t|^2
-        ab = np.sqrt(np.where(d >= 0, s2, s2[::-1]))        # rows |q - s q_t|, |q + s q_t| (sqrt after the choice)
-        y = np.arctan2(ab[0], ab[1])
-        np.multiply(y, 4.0, out=y)
-        return np.degrees(y, out=y)
 
 
 def make_vec_env(num_envs: int = 1, **kwargs: Any) -> ReactionWheelCubeVectorEnv:
