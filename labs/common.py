@@ -19,6 +19,7 @@ import numpy as np
 
 from lavendersim import backends
 from lavendersim import validate as V
+from lavendersim.figures import new_figure  # noqa: F401  (the labs' figures; re-exported)
 
 DEFAULT_OUT = "lab-output"
 # The most steps a lab's run may take (its duration / dt): labs are demonstrations, and a dt of 1e-300 must
@@ -500,36 +501,8 @@ def finish(lab: str, out_dir, figures: dict, params: dict, checks: list[Check], 
 
 
 # --------------------------------------------------------------------------
-# plotting (no pyplot: no global state, no display needed)
+# plotting (no pyplot: no global state, no display needed): new_figure is lavendersim.figures'
 # --------------------------------------------------------------------------
-
-
-def new_figure(nrows: int = 1, ncols: int = 1, *, size=(8.0, 4.5), title: str | None = None):
-    """A headless matplotlib Figure (Agg canvas) and its axes array.
-
-    Parameters
-    ----------
-    nrows, ncols : int, default 1
-        Grid of axes.
-    size : tuple (float, float), default (8.0, 4.5)
-        Figure size, inches.
-    title : str, optional
-        Figure title (suptitle).
-
-    Returns
-    -------
-    fig : matplotlib.figure.Figure
-    axes : ndarray (nrows, ncols) of Axes
-    """
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-
-    fig = Figure(figsize=size, layout="constrained")
-    FigureCanvasAgg(fig)
-    axes = fig.subplots(nrows, ncols, squeeze=False)
-    if title:
-        fig.suptitle(title)
-    return fig, axes
 
 
 def progress(iterable=None, *, total: int | None = None, desc: str = "", unit: str = "it", enabled: bool = True):

@@ -1111,7 +1111,7 @@ class DesignResult:
         -------
         None
         """
-        from .labs.common import new_figure
+        from .figures import new_figure
 
         r, m = self.response, self.model
         fig, ax = new_figure(2, 2, size=(11, 7), title=f"LQR {m.scenario}: {self.theta0_deg:g}° about "

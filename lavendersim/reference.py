@@ -108,8 +108,7 @@ def attitude_error(q_a: ArrayLike, q_b: ArrayLike) -> np.ndarray:
     >>> float(attitude_error([0, 0, 0, 1], [0, 0, np.sin(0.05), np.cos(0.05)]))   # 0.1 rad about z
     0.1
     """
-    d = K.quat_mul(K.quat_conj(np.asarray(q_a, float)), np.asarray(q_b, float))
-    return 2.0 * np.arctan2(np.linalg.norm(d[..., :3], axis=-1), np.abs(d[..., 3]))
+    return K.quat_error_angle(np.asarray(q_b, float), np.asarray(q_a, float))    # the generated kernel (derive)
 
 
 def relative_drift(series: ArrayLike) -> float:
