@@ -33,6 +33,7 @@ from scipy.integrate import solve_ivp
 from scipy.special import elliprf, ellipk, ellipkm1
 
 from .generated import kernels_numpy as K
+from .generated import layout as LY
 
 __all__ = ["constant_omega", "torque_free", "torque_free_period", "dop853", "attitude_error",
            "relative_drift", "TorqueFreeMotion", "Integrated"]
@@ -568,12 +569,12 @@ class Integrated:
     @property
     def q(self) -> np.ndarray:
         """Orientations R_WB (x, y, z, w), shape (T, 4)."""
-        return self.x[:, 3:7]
+        return self.x[:, LY.STATE_Q]
 
     @property
     def omega_b(self) -> np.ndarray:
         """Angular velocities, body frame, rad/s, shape (T, 3)."""
-        return self.x[:, 10:13]
+        return self.x[:, LY.STATE_OMEGA_B]
 
 
 def dop853(I_b: ArrayLike, omega_b0: ArrayLike, q0: ArrayLike, t: ArrayLike,
@@ -608,17 +609,17 @@ def dop853(I_b: ArrayLike, omega_b0: ArrayLike, q0: ArrayLike, t: ArrayLike,
     t, _ = _as_times(t)
     I_b = _inertia(I_b)
     if x0 is None:
-        x0 = np.zeros(13)
-        x0[3:7] = _unit_q(q0)
-        x0[10:13] = _vec3("omega_b0", omega_b0)
+        x0 = np.zeros(LY.STATE_SIZE)
+        x0[LY.STATE_Q] = _unit_q(q0)
+        x0[LY.STATE_OMEGA_B] = _vec3("omega_b0", omega_b0)
     else:
         x0 = np.asarray(x0, dtype=float).copy()
-        if x0.shape != (13,) or not np.all(np.isfinite(x0)):
-            raise ValueError("x0 must be 13 finite numbers")
+        if x0.shape != (LY.STATE_SIZE,) or not np.all(np.isfinite(x0)):
+            raise ValueError(f"x0 must be {LY.STATE_SIZE} finite numbers")
     if rhs is None:
         def rhs(_t, x):
             return K.rigid_body_rhs_free(x, I_b)
-    out = np.empty((len(t), 13))
+    out = np.empty((len(t), LY.STATE_SIZE))
     nfev = 0
     for sel, pick in ((t >= 0, np.max), (t < 0, np.min)):        # forward, then backward from 0
         if not np.any(sel):
@@ -632,5 +633,5 @@ def dop853(I_b: ArrayLike, omega_b0: ArrayLike, q0: ArrayLike, t: ArrayLike,
             raise RuntimeError(f"DOP853 reference failed: {r.message}")
         nfev += r.nfev
         out[sel] = r.sol(t[sel]).T
-    out[:, 3:7] /= np.linalg.norm(out[:, 3:7], axis=1, keepdims=True)
+    out[:, LY.STATE_Q] /= np.linalg.norm(out[:, LY.STATE_Q], axis=1, keepdims=True)
     return Integrated(t, out, nfev)
