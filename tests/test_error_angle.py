@@ -2,6 +2,7 @@
 Python numbers (c_backend.scalar_kernel), which the env's step uses for it."""
 from __future__ import annotations
 
+import functools
 import math
 
 import gymnasium
@@ -92,3 +93,23 @@ def test_env_reports_the_kernel_angle():
     w = env.sim.state("cube").omega_b
     a = np.array([0.3, -0.2, 0.1], np.float32).astype(float)
     assert reward == pytest.approx(-(theta ** 2 + 0.05 * w @ w + 0.01 * a @ a), rel=1e-12)
+
+
+def test_error_angle_without_the_c_backend(monkeypatch):
+    """Where the compiled backend does not load, the env's angle is the NumPy printing of the same kernel."""
+    import sys
+
+    import lavendersim.envs.reaction_wheel_cube as rwc
+
+    monkeypatch.setattr(rwc, "_ERROR_ANGLE", [])
+    import lavendersim.backends as backends_pkg
+
+    monkeypatch.setitem(sys.modules, "lavendersim.backends.c_backend", None)     # `import` raises ImportError
+    monkeypatch.delattr(backends_pkg, "c_backend")
+    f = rwc.error_angle_fn()
+    assert not isinstance(f, functools.partial)      # not scalar_kernel's C call
+    rng = np.random.default_rng(5)
+    q, ref = unit_quats(rng, 50), unit_quats(rng, 1)[0]
+    got = np.array([f(*row.tolist(), *ref.tolist()) for row in q])
+    assert all(type(f(*row.tolist(), *ref.tolist())) is float for row in q[:3])
+    np.testing.assert_array_equal(got, K.quat_error_angle(q, ref))
