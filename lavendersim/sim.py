@@ -71,7 +71,8 @@ Unsupported combinations (splitting / implicit_gyro / splitting4 / rk4_expmap / 
 rtol/atol with a fixed-step integrator) raise LavenderInputError at construction.
 
 Divergence before infinity (checked per chunk of steps, so the stepping itself is unchanged bit for bit):
-a run is advanced in chunks of about CHUNK_WORK right-hand-side evaluations; after each chunk every body
+a run is advanced in chunks of about CHUNK_WORK right-hand-side evaluations (on the C backend with a fixed-step
+integrator at least CHUNK_MIN_STEPS steps within CHUNK_WORK_MAX evaluations); after each chunk every body
 is checked against
 
 * its integrator's validity bound, |omega|*dt*(I_max/I_min)**p <= WDT_MAX (declared once in
@@ -117,8 +118,21 @@ from .scene import Scene
 
 MAX_STEPS = 2**53          # steps per call and in total: the step counter and t = steps*dt stay exact in float64
 CHUNK_WORK = 2**20         # right-hand-side evaluations (summed over bodies) per backend call between checks
+CHUNK_MIN_STEPS = 64       # C backend, fixed step: a chunk is at least this many steps (a call's setup and checks,
+CHUNK_WORK_MAX = 2**25     # ~60-100 ns per body, then cost ~1-2 ns per body-step) within this many evaluations (the
+                           # latency of KeyboardInterrupt: ~0.1 s for plain RK4 bodies, ~4 s for wheeled ones)
 ON_BOUND = ("raise", "warn")
 FAST_STEP_WORK = 4096      # step() runs inside C (holding the GIL) for scenes of at most this many evaluations per step
+
+
+def chunk_steps(work: int, long_ok: bool) -> int:
+    """Steps per backend call between checks for `work` right-hand-side evaluations per step: CHUNK_WORK's worth,
+    and with long_ok (the C backend, a fixed-step integrator: the results do not depend on the chunk edges) at least
+    CHUNK_MIN_STEPS as long as that stays within CHUNK_WORK_MAX evaluations (large scenes, whose checks and C
+    setup per call would otherwise be paid every step or two)."""
+    work = max(1, work)
+    n = max(1, CHUNK_WORK // work)
+    return max(n, min(CHUNK_MIN_STEPS, CHUNK_WORK_MAX // work)) if long_ok else n
 
 
 def _read_only_views(x: np.ndarray, Omega: np.ndarray, applied: np.ndarray) -> tuple[np.ndarray, ...]:
@@ -477,7 +491,7 @@ class Sim:
         self._free_wheels_idx = [int(i) for i in np.flatnonzero(self._free_wheels)]
         self._warned: set[int] = set()
         evals = self._per_step if self._per_step is not None else 12
-        self._chunk = max(1, CHUNK_WORK // max(1, nb * evals))
+        self._chunk = chunk_steps(nb * evals, self.backend.name == "c" and self._per_step is not None)
         self._reference()
 
     def _invariants(self, x: np.ndarray, Omega: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

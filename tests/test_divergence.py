@@ -65,6 +65,7 @@ def test_growth_step_is_the_first_failing_one_across_chunks(backend, monkeypatch
     """The located step does not depend on how the run is chunked: the same as stepping one by one."""
     def failing_step(chunk):
         monkeypatch.setattr(S, "CHUNK_WORK", chunk)
+        monkeypatch.setattr(S, "CHUNK_MIN_STEPS", 1)     # C too: chunks of CHUNK_WORK alone
         sim = lv.Sim(spinner(omega_b=(0.3, 0.3, 2.0)), dt=0.04, integrator="euler", backend=backend,
                      on_bound="warn", max_growth=1.5)
         with warnings.catch_warnings():

@@ -384,6 +384,7 @@ def test_a_failing_later_chunk_is_located_by_replay_bitwise(integrator, monkeypa
 
     def run(chunk_work):
         monkeypatch.setattr(S, "CHUNK_WORK", chunk_work)
+        monkeypatch.setattr(S, "CHUNK_MIN_STEPS", 1)     # chunks of CHUNK_WORK alone (16: one step each)
         sim = lv.Sim(tumbling(omega_b=(0.2, 0.3, 8.0)), dt=1e-2, integrator="euler" if integrator == "rk4" else integrator,
                      backend="c", max_growth=2.0, **({"rtol": 1e-3} if integrator == "dopri5" else {}))
         sim.run(3)
@@ -424,3 +425,36 @@ def test_c_screen_serves_an_elongated_spinning_body_and_agrees_with_the_numpy_ch
     y = x.copy()
     y[0, LY.STATE_OMEGA_B.start + 1] = np.nan
     assert not sim._screen(y, sim.params, sim._wdt_scale, np.inf, sim._g_fast)
+
+
+def test_chunks_of_large_scenes_on_c_are_long_and_change_nothing(monkeypatch):
+    """On the C backend a fixed-step run of a large scene is chunked in at least CHUNK_MIN_STEPS steps (within
+    CHUNK_WORK_MAX evaluations); NumPy and dopri5 keep CHUNK_WORK's chunks. The result is bitwise that of short
+    chunks."""
+    from lavendersim import sim as S
+
+    assert S.chunk_steps(4, False) == S.chunk_steps(4, True) == S.CHUNK_WORK // 4
+    assert S.chunk_steps(4 * 10**5, False) == S.CHUNK_WORK // (4 * 10**5) == 2
+    assert S.chunk_steps(4 * 10**5, True) == S.CHUNK_MIN_STEPS == 64
+    assert S.chunk_steps(4 * 10**6, True) == S.CHUNK_WORK_MAX // (4 * 10**6) == 8
+    assert S.chunk_steps(10**9, True) == 1
+    n = 20_000
+    rng = np.random.default_rng(2)
+
+    def sim(**kw):
+        sc = lv.Scene()
+        sc.add_bodies([f"b{i}" for i in range(n)], np.ones(n), 1 + rng.random((n, 3)),
+                      omega_b=2.0 * rng.standard_normal((n, 3)))
+        return lv.Sim(sc, dt=1e-3, **kw)
+
+    long_c = sim(integrator="rk4", backend="c")
+    assert long_c._chunk == 64
+    assert sim(integrator="rk4", backend="numpy")._chunk == S.CHUNK_WORK // (4 * n)
+    assert sim(integrator="dopri5", backend="c", rtol=1e-6)._chunk == S.CHUNK_WORK // (12 * n)
+    rng = np.random.default_rng(2)          # the same scene again, with CHUNK_WORK's chunks
+    monkeypatch.setattr(S, "CHUNK_MIN_STEPS", 1)
+    short_c = sim(integrator="rk4", backend="c")
+    assert short_c._chunk == S.CHUNK_WORK // (4 * n) == 13
+    long_c.run(150)
+    short_c.run(150)
+    assert np.array_equal(long_c.x, short_c.x) and long_c.steps == short_c.steps == 150
