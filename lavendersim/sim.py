@@ -126,10 +126,22 @@ FAST_STEP_WORK = 4096      # step() runs inside C (holding the GIL) for scenes o
 
 
 def chunk_steps(work: int, long_ok: bool) -> int:
-    """Steps per backend call between checks for `work` right-hand-side evaluations per step: CHUNK_WORK's worth,
-    and with long_ok (the C backend, a fixed-step integrator: the results do not depend on the chunk edges) at least
-    CHUNK_MIN_STEPS as long as that stays within CHUNK_WORK_MAX evaluations (large scenes, whose checks and C
-    setup per call would otherwise be paid every step or two)."""
+    """Steps per backend call between checks: CHUNK_WORK's worth, and with long_ok at least CHUNK_MIN_STEPS as
+    long as that stays within CHUNK_WORK_MAX evaluations (large scenes, whose checks and C setup per call would
+    otherwise be paid every step or two).
+
+    Parameters
+    ----------
+    work : int
+        Right-hand-side evaluations per step, summed over the bodies.
+    long_ok : bool
+        The C backend with a fixed-step integrator (its results do not depend on the chunk edges).
+
+    Returns
+    -------
+    int
+        Steps per chunk, >= 1.
+    """
     work = max(1, work)
     n = max(1, CHUNK_WORK // work)
     return max(n, min(CHUNK_MIN_STEPS, CHUNK_WORK_MAX // work)) if long_ok else n

@@ -46,7 +46,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -418,10 +418,16 @@ class _StepIO:
 _ERROR_ANGLE: list = []
 
 
-def error_angle_fn():
-    """The generated kernel quat_error_angle on eight numbers (q, then the target, each (x, y, z, w)) -> rad:
-    the C printing through ``scalar_kernel`` (one call, no arrays) when the compiled backend loads, else the
-    NumPy printing. Chosen once per process."""
+def error_angle_fn() -> Callable[..., float]:
+    """The generated kernel quat_error_angle as a function of eight numbers, chosen once per process.
+
+    Returns
+    -------
+    callable
+        ``f(q0, q1, q2, q3, t0, t1, t2, t3) -> float``: the angle between attitudes q and t (each (x, y, z, w)),
+        rad in [0, π]; the C printing through ``scalar_kernel`` (one call, no arrays) when the compiled backend
+        loads, else the NumPy printing.
+    """
     if not _ERROR_ANGLE:
         try:
             from ..backends import c_backend
