@@ -20,7 +20,7 @@ import sympy as sp
 from .kernel import Arg, Kernel, scalar, vec
 from .layout import EULER
 from .layout import STATE as X
-from .quaternion import quat_rate_body, rotation_matrix
+from .quaternion import quat_rate_body, rotate_to_body, rotation_matrix
 
 STATE = "state (p_w[3] m, q[4] (x,y,z,w), v_w[3] m/s, omega_b[3] rad/s)"
 
@@ -63,9 +63,8 @@ def kernels() -> list[Kernel]:
     # c_b as named subexpressions of the kernels that take I_b: the same printed arithmetic as the *_c kernels
     where = list(zip(c_b, euler_coefficients(I_b)))
     xq, xv, xw = X.part(x, "q"), X.part(x, "v_w"), X.part(x, "omega_b")
-    R = rotation_matrix(xq)
     qdot = quat_rate_body(xq, xw)
-    full = X.assemble(p_w=xv, q=qdot, v_w=F_w / m, omega_b=euler_rhs_c(c_b, xw, R.T * tau_w))
+    full = X.assemble(p_w=xv, q=qdot, v_w=F_w / m, omega_b=euler_rhs_c(c_b, xw, rotate_to_body(xq, tau_w)))
     free = X.assemble(p_w=xv, q=qdot, v_w=sp.zeros(3, 1), omega_b=euler_rhs_c(c_b, xw, sp.zeros(3, 1)))
     torque = full.subs({F_w[i]: 0 for i in range(3)})
     Rq = rotation_matrix(q)

@@ -728,16 +728,10 @@ void lv_rigid_body_rhs(const double *x, double m, const double *I_b, const doubl
     const double t1 = ((1.0/2.0))*x_11;
     const double t2 = ((1.0/2.0))*x_12;
     const double t3 = (1.0/m);
-    const double t4 = 2*x_4;
-    const double t5 = t4*x_3;
-    const double t6 = 2*x_5;
-    const double t7 = t6*x_6;
-    const double t8 = t6*x_3;
-    const double t9 = t4*x_6;
-    const double t10 = 2*(x_4*x_4);
-    const double t11 = 2*(x_5*x_5) - 1;
-    const double t12 = 2*x_3*x_6;
-    const double t13 = 2*(x_3*x_3);
+    const double t4 = 2*tau_w_0;
+    const double t5 = -t4*x_4 + 2*tau_w_1*x_3;
+    const double t6 = t4*x_5 - 2*tau_w_2*x_3;
+    const double t7 = -2*tau_w_1*x_5 + 2*tau_w_2*x_4;
     x_dot[0] = x_7;
     x_dot[1] = x_8;
     x_dot[2] = x_9;
@@ -748,9 +742,9 @@ void lv_rigid_body_rhs(const double *x, double m, const double *I_b, const doubl
     x_dot[7] = F_w_0*t3;
     x_dot[8] = F_w_1*t3;
     x_dot[9] = F_w_2*t3;
-    x_dot[10] = c_b_0*x_11*x_12 + c_b_3*(tau_w_0*(-t10 - t11) + tau_w_1*(t5 + t7) + tau_w_2*(t8 - t9));
-    x_dot[11] = c_b_1*x_10*x_12 + c_b_4*(tau_w_0*(t5 - t7) + tau_w_1*(-t11 - t13) + tau_w_2*(t12 + t4*x_5));
-    x_dot[12] = c_b_2*x_10*x_11 + c_b_5*(tau_w_0*(t8 + t9) + tau_w_1*(-t12 + 2*x_4*x_5) + tau_w_2*(-t10 - t13 + 1));
+    x_dot[10] = c_b_0*x_11*x_12 + c_b_3*(t5*x_4 - t6*x_5 - t7*x_6 + tau_w_0);
+    x_dot[11] = c_b_1*x_10*x_12 + c_b_4*(-t5*x_3 - t6*x_6 + t7*x_5 + tau_w_1);
+    x_dot[12] = c_b_2*x_10*x_11 + c_b_5*(-t5*x_6 + t6*x_3 - t7*x_4 + tau_w_2);
 }
 
 void lv_rigid_body_rhs_free(const double *x, const double *I_b, double *x_dot) {
@@ -923,16 +917,10 @@ void lv_rigid_body_rhs_torque(const double *x, const double *I_b, const double *
     const double t0 = ((1.0/2.0))*x_10;
     const double t1 = ((1.0/2.0))*x_11;
     const double t2 = ((1.0/2.0))*x_12;
-    const double t3 = 2*x_4;
-    const double t4 = t3*x_3;
-    const double t5 = 2*x_5;
-    const double t6 = t5*x_6;
-    const double t7 = t5*x_3;
-    const double t8 = t3*x_6;
-    const double t9 = 2*(x_4*x_4);
-    const double t10 = 2*(x_5*x_5) - 1;
-    const double t11 = 2*x_3*x_6;
-    const double t12 = 2*(x_3*x_3);
+    const double t3 = 2*tau_w_0;
+    const double t4 = -t3*x_4 + 2*tau_w_1*x_3;
+    const double t5 = t3*x_5 - 2*tau_w_2*x_3;
+    const double t6 = -2*tau_w_1*x_5 + 2*tau_w_2*x_4;
     x_dot[0] = x_7;
     x_dot[1] = x_8;
     x_dot[2] = x_9;
@@ -943,9 +931,9 @@ void lv_rigid_body_rhs_torque(const double *x, const double *I_b, const double *
     x_dot[7] = 0;
     x_dot[8] = 0;
     x_dot[9] = 0;
-    x_dot[10] = c_b_0*x_11*x_12 + c_b_3*(tau_w_0*(-t10 - t9) + tau_w_1*(t4 + t6) + tau_w_2*(t7 - t8));
-    x_dot[11] = c_b_1*x_10*x_12 + c_b_4*(tau_w_0*(t4 - t6) + tau_w_1*(-t10 - t12) + tau_w_2*(t11 + t3*x_5));
-    x_dot[12] = c_b_2*x_10*x_11 + c_b_5*(tau_w_0*(t7 + t8) + tau_w_1*(-t11 + 2*x_4*x_5) + tau_w_2*(-t12 - t9 + 1));
+    x_dot[10] = c_b_0*x_11*x_12 + c_b_3*(t4*x_4 - t5*x_5 - t6*x_6 + tau_w_0);
+    x_dot[11] = c_b_1*x_10*x_12 + c_b_4*(-t4*x_3 - t5*x_6 + t6*x_5 + tau_w_1);
+    x_dot[12] = c_b_2*x_10*x_11 + c_b_5*(-t4*x_6 + t5*x_3 - t6*x_4 + tau_w_2);
 }
 
 void lv_euler_coefficients(const double *I_b, double *c_b) {
@@ -1021,16 +1009,10 @@ void lv_rigid_body_rhs_torque_c(const double *x, const double *c_b, const double
     const double t0 = ((1.0/2.0))*x_10;
     const double t1 = ((1.0/2.0))*x_11;
     const double t2 = ((1.0/2.0))*x_12;
-    const double t3 = 2*x_4;
-    const double t4 = t3*x_3;
-    const double t5 = 2*x_5;
-    const double t6 = t5*x_6;
-    const double t7 = t5*x_3;
-    const double t8 = t3*x_6;
-    const double t9 = 2*(x_4*x_4);
-    const double t10 = 2*(x_5*x_5) - 1;
-    const double t11 = 2*x_3*x_6;
-    const double t12 = 2*(x_3*x_3);
+    const double t3 = 2*tau_w_0;
+    const double t4 = -t3*x_4 + 2*tau_w_1*x_3;
+    const double t5 = t3*x_5 - 2*tau_w_2*x_3;
+    const double t6 = -2*tau_w_1*x_5 + 2*tau_w_2*x_4;
     x_dot[0] = x_7;
     x_dot[1] = x_8;
     x_dot[2] = x_9;
@@ -1041,9 +1023,9 @@ void lv_rigid_body_rhs_torque_c(const double *x, const double *c_b, const double
     x_dot[7] = 0;
     x_dot[8] = 0;
     x_dot[9] = 0;
-    x_dot[10] = c_b_0*x_11*x_12 + c_b_3*(tau_w_0*(-t10 - t9) + tau_w_1*(t4 + t6) + tau_w_2*(t7 - t8));
-    x_dot[11] = c_b_1*x_10*x_12 + c_b_4*(tau_w_0*(t4 - t6) + tau_w_1*(-t10 - t12) + tau_w_2*(t11 + t3*x_5));
-    x_dot[12] = c_b_2*x_10*x_11 + c_b_5*(tau_w_0*(t7 + t8) + tau_w_1*(-t11 + 2*x_4*x_5) + tau_w_2*(-t12 - t9 + 1));
+    x_dot[10] = c_b_0*x_11*x_12 + c_b_3*(t4*x_4 - t5*x_5 - t6*x_6 + tau_w_0);
+    x_dot[11] = c_b_1*x_10*x_12 + c_b_4*(-t4*x_3 - t5*x_6 + t6*x_5 + tau_w_1);
+    x_dot[12] = c_b_2*x_10*x_11 + c_b_5*(-t4*x_6 + t5*x_3 - t6*x_4 + tau_w_2);
 }
 
 void lv_rigid_body_rhs_c(const double *x, double m, const double *c_b, const double *F_w, const double *tau_w, double *x_dot) {
@@ -1073,16 +1055,10 @@ void lv_rigid_body_rhs_c(const double *x, double m, const double *c_b, const dou
     const double t1 = ((1.0/2.0))*x_11;
     const double t2 = ((1.0/2.0))*x_12;
     const double t3 = (1.0/m);
-    const double t4 = 2*x_4;
-    const double t5 = t4*x_3;
-    const double t6 = 2*x_5;
-    const double t7 = t6*x_6;
-    const double t8 = t6*x_3;
-    const double t9 = t4*x_6;
-    const double t10 = 2*(x_4*x_4);
-    const double t11 = 2*(x_5*x_5) - 1;
-    const double t12 = 2*x_3*x_6;
-    const double t13 = 2*(x_3*x_3);
+    const double t4 = 2*tau_w_0;
+    const double t5 = -t4*x_4 + 2*tau_w_1*x_3;
+    const double t6 = t4*x_5 - 2*tau_w_2*x_3;
+    const double t7 = -2*tau_w_1*x_5 + 2*tau_w_2*x_4;
     x_dot[0] = x_7;
     x_dot[1] = x_8;
     x_dot[2] = x_9;
@@ -1093,9 +1069,9 @@ void lv_rigid_body_rhs_c(const double *x, double m, const double *c_b, const dou
     x_dot[7] = F_w_0*t3;
     x_dot[8] = F_w_1*t3;
     x_dot[9] = F_w_2*t3;
-    x_dot[10] = c_b_0*x_11*x_12 + c_b_3*(tau_w_0*(-t10 - t11) + tau_w_1*(t5 + t7) + tau_w_2*(t8 - t9));
-    x_dot[11] = c_b_1*x_10*x_12 + c_b_4*(tau_w_0*(t5 - t7) + tau_w_1*(-t11 - t13) + tau_w_2*(t12 + t4*x_5));
-    x_dot[12] = c_b_2*x_10*x_11 + c_b_5*(tau_w_0*(t8 + t9) + tau_w_1*(-t12 + 2*x_4*x_5) + tau_w_2*(-t10 - t13 + 1));
+    x_dot[10] = c_b_0*x_11*x_12 + c_b_3*(t5*x_4 - t6*x_5 - t7*x_6 + tau_w_0);
+    x_dot[11] = c_b_1*x_10*x_12 + c_b_4*(-t5*x_3 - t6*x_6 + t7*x_5 + tau_w_1);
+    x_dot[12] = c_b_2*x_10*x_11 + c_b_5*(-t5*x_6 + t6*x_3 - t7*x_4 + tau_w_2);
 }
 
 void lv_pivot_body_rhs(const double *q, const double *omega_b, const double *I_p, const double *r_b, const double *F_w, const double *tau_w, double *q_dot, double *omega_dot_b) {

@@ -657,17 +657,11 @@ def rigid_body_rhs(x, m, I_b, F_w, tau_w):
     t1 = ((1.0/2.0))*x_11
     t2 = ((1.0/2.0))*x_12
     t3 = (1.0/m)
-    t4 = 2*x_4
-    t5 = t4*x_3
-    t6 = 2*x_5
-    t7 = t6*x_6
-    t8 = t6*x_3
-    t9 = t4*x_6
-    t10 = 2*(x_4*x_4)
-    t11 = 2*(x_5*x_5) - 1
-    t12 = 2*x_3*x_6
-    t13 = 2*(x_3*x_3)
-    return casadi.vertcat(x_7, x_8, x_9, t0*x_6 - t1*x_5 + t2*x_4, t0*x_5 + t1*x_6 - t2*x_3, -t0*x_4 + t1*x_3 + t2*x_6, -t0*x_3 - t1*x_4 - t2*x_5, F_w_0*t3, F_w_1*t3, F_w_2*t3, c_b_0*x_11*x_12 + c_b_3*(tau_w_0*(-t10 - t11) + tau_w_1*(t5 + t7) + tau_w_2*(t8 - t9)), c_b_1*x_10*x_12 + c_b_4*(tau_w_0*(t5 - t7) + tau_w_1*(-t11 - t13) + tau_w_2*(t12 + t4*x_5)), c_b_2*x_10*x_11 + c_b_5*(tau_w_0*(t8 + t9) + tau_w_1*(-t12 + 2*x_4*x_5) + tau_w_2*(-t10 - t13 + 1)))
+    t4 = 2*tau_w_0
+    t5 = -t4*x_4 + 2*tau_w_1*x_3
+    t6 = t4*x_5 - 2*tau_w_2*x_3
+    t7 = -2*tau_w_1*x_5 + 2*tau_w_2*x_4
+    return casadi.vertcat(x_7, x_8, x_9, t0*x_6 - t1*x_5 + t2*x_4, t0*x_5 + t1*x_6 - t2*x_3, -t0*x_4 + t1*x_3 + t2*x_6, -t0*x_3 - t1*x_4 - t2*x_5, F_w_0*t3, F_w_1*t3, F_w_2*t3, c_b_0*x_11*x_12 + c_b_3*(t5*x_4 - t6*x_5 - t7*x_6 + tau_w_0), c_b_1*x_10*x_12 + c_b_4*(-t5*x_3 - t6*x_6 + t7*x_5 + tau_w_1), c_b_2*x_10*x_11 + c_b_5*(-t5*x_6 + t6*x_3 - t7*x_4 + tau_w_2))
 
 
 def rigid_body_rhs_free(x, I_b):
@@ -851,17 +845,11 @@ def rigid_body_rhs_torque(x, I_b, tau_w):
     t0 = ((1.0/2.0))*x_10
     t1 = ((1.0/2.0))*x_11
     t2 = ((1.0/2.0))*x_12
-    t3 = 2*x_4
-    t4 = t3*x_3
-    t5 = 2*x_5
-    t6 = t5*x_6
-    t7 = t5*x_3
-    t8 = t3*x_6
-    t9 = 2*(x_4*x_4)
-    t10 = 2*(x_5*x_5) - 1
-    t11 = 2*x_3*x_6
-    t12 = 2*(x_3*x_3)
-    return casadi.vertcat(x_7, x_8, x_9, t0*x_6 - t1*x_5 + t2*x_4, t0*x_5 + t1*x_6 - t2*x_3, -t0*x_4 + t1*x_3 + t2*x_6, -t0*x_3 - t1*x_4 - t2*x_5, 0, 0, 0, c_b_0*x_11*x_12 + c_b_3*(tau_w_0*(-t10 - t9) + tau_w_1*(t4 + t6) + tau_w_2*(t7 - t8)), c_b_1*x_10*x_12 + c_b_4*(tau_w_0*(t4 - t6) + tau_w_1*(-t10 - t12) + tau_w_2*(t11 + t3*x_5)), c_b_2*x_10*x_11 + c_b_5*(tau_w_0*(t7 + t8) + tau_w_1*(-t11 + 2*x_4*x_5) + tau_w_2*(-t12 - t9 + 1)))
+    t3 = 2*tau_w_0
+    t4 = -t3*x_4 + 2*tau_w_1*x_3
+    t5 = t3*x_5 - 2*tau_w_2*x_3
+    t6 = -2*tau_w_1*x_5 + 2*tau_w_2*x_4
+    return casadi.vertcat(x_7, x_8, x_9, t0*x_6 - t1*x_5 + t2*x_4, t0*x_5 + t1*x_6 - t2*x_3, -t0*x_4 + t1*x_3 + t2*x_6, -t0*x_3 - t1*x_4 - t2*x_5, 0, 0, 0, c_b_0*x_11*x_12 + c_b_3*(t4*x_4 - t5*x_5 - t6*x_6 + tau_w_0), c_b_1*x_10*x_12 + c_b_4*(-t4*x_3 - t5*x_6 + t6*x_5 + tau_w_1), c_b_2*x_10*x_11 + c_b_5*(-t4*x_6 + t5*x_3 - t6*x_4 + tau_w_2))
 
 
 def euler_coefficients(I_b):
@@ -932,17 +920,11 @@ def rigid_body_rhs_torque_c(x, c_b, tau_w):
     t0 = ((1.0/2.0))*x_10
     t1 = ((1.0/2.0))*x_11
     t2 = ((1.0/2.0))*x_12
-    t3 = 2*x_4
-    t4 = t3*x_3
-    t5 = 2*x_5
-    t6 = t5*x_6
-    t7 = t5*x_3
-    t8 = t3*x_6
-    t9 = 2*(x_4*x_4)
-    t10 = 2*(x_5*x_5) - 1
-    t11 = 2*x_3*x_6
-    t12 = 2*(x_3*x_3)
-    return casadi.vertcat(x_7, x_8, x_9, t0*x_6 - t1*x_5 + t2*x_4, t0*x_5 + t1*x_6 - t2*x_3, -t0*x_4 + t1*x_3 + t2*x_6, -t0*x_3 - t1*x_4 - t2*x_5, 0, 0, 0, c_b_0*x_11*x_12 + c_b_3*(tau_w_0*(-t10 - t9) + tau_w_1*(t4 + t6) + tau_w_2*(t7 - t8)), c_b_1*x_10*x_12 + c_b_4*(tau_w_0*(t4 - t6) + tau_w_1*(-t10 - t12) + tau_w_2*(t11 + t3*x_5)), c_b_2*x_10*x_11 + c_b_5*(tau_w_0*(t7 + t8) + tau_w_1*(-t11 + 2*x_4*x_5) + tau_w_2*(-t12 - t9 + 1)))
+    t3 = 2*tau_w_0
+    t4 = -t3*x_4 + 2*tau_w_1*x_3
+    t5 = t3*x_5 - 2*tau_w_2*x_3
+    t6 = -2*tau_w_1*x_5 + 2*tau_w_2*x_4
+    return casadi.vertcat(x_7, x_8, x_9, t0*x_6 - t1*x_5 + t2*x_4, t0*x_5 + t1*x_6 - t2*x_3, -t0*x_4 + t1*x_3 + t2*x_6, -t0*x_3 - t1*x_4 - t2*x_5, 0, 0, 0, c_b_0*x_11*x_12 + c_b_3*(t4*x_4 - t5*x_5 - t6*x_6 + tau_w_0), c_b_1*x_10*x_12 + c_b_4*(-t4*x_3 - t5*x_6 + t6*x_5 + tau_w_1), c_b_2*x_10*x_11 + c_b_5*(-t4*x_6 + t5*x_3 - t6*x_4 + tau_w_2))
 
 
 def rigid_body_rhs_c(x, m, c_b, F_w, tau_w):
@@ -979,17 +961,11 @@ def rigid_body_rhs_c(x, m, c_b, F_w, tau_w):
     t1 = ((1.0/2.0))*x_11
     t2 = ((1.0/2.0))*x_12
     t3 = (1.0/m)
-    t4 = 2*x_4
-    t5 = t4*x_3
-    t6 = 2*x_5
-    t7 = t6*x_6
-    t8 = t6*x_3
-    t9 = t4*x_6
-    t10 = 2*(x_4*x_4)
-    t11 = 2*(x_5*x_5) - 1
-    t12 = 2*x_3*x_6
-    t13 = 2*(x_3*x_3)
-    return casadi.vertcat(x_7, x_8, x_9, t0*x_6 - t1*x_5 + t2*x_4, t0*x_5 + t1*x_6 - t2*x_3, -t0*x_4 + t1*x_3 + t2*x_6, -t0*x_3 - t1*x_4 - t2*x_5, F_w_0*t3, F_w_1*t3, F_w_2*t3, c_b_0*x_11*x_12 + c_b_3*(tau_w_0*(-t10 - t11) + tau_w_1*(t5 + t7) + tau_w_2*(t8 - t9)), c_b_1*x_10*x_12 + c_b_4*(tau_w_0*(t5 - t7) + tau_w_1*(-t11 - t13) + tau_w_2*(t12 + t4*x_5)), c_b_2*x_10*x_11 + c_b_5*(tau_w_0*(t8 + t9) + tau_w_1*(-t12 + 2*x_4*x_5) + tau_w_2*(-t10 - t13 + 1)))
+    t4 = 2*tau_w_0
+    t5 = -t4*x_4 + 2*tau_w_1*x_3
+    t6 = t4*x_5 - 2*tau_w_2*x_3
+    t7 = -2*tau_w_1*x_5 + 2*tau_w_2*x_4
+    return casadi.vertcat(x_7, x_8, x_9, t0*x_6 - t1*x_5 + t2*x_4, t0*x_5 + t1*x_6 - t2*x_3, -t0*x_4 + t1*x_3 + t2*x_6, -t0*x_3 - t1*x_4 - t2*x_5, F_w_0*t3, F_w_1*t3, F_w_2*t3, c_b_0*x_11*x_12 + c_b_3*(t5*x_4 - t6*x_5 - t7*x_6 + tau_w_0), c_b_1*x_10*x_12 + c_b_4*(-t5*x_3 - t6*x_6 + t7*x_5 + tau_w_1), c_b_2*x_10*x_11 + c_b_5*(-t5*x_6 + t6*x_3 - t7*x_4 + tau_w_2))
 
 
 def pivot_body_rhs(q, omega_b, I_p, r_b, F_w, tau_w):

@@ -729,16 +729,10 @@ void lvf_rigid_body_rhs(const float *x, float m, const float *I_b, const float *
     const float t1 = ((1.0F/2.0F))*x_11;
     const float t2 = ((1.0F/2.0F))*x_12;
     const float t3 = (1.0F/m);
-    const float t4 = 2*x_4;
-    const float t5 = t4*x_3;
-    const float t6 = 2*x_5;
-    const float t7 = t6*x_6;
-    const float t8 = t6*x_3;
-    const float t9 = t4*x_6;
-    const float t10 = 2*(x_4*x_4);
-    const float t11 = 2*(x_5*x_5) - 1;
-    const float t12 = 2*x_3*x_6;
-    const float t13 = 2*(x_3*x_3);
+    const float t4 = 2*tau_w_0;
+    const float t5 = -t4*x_4 + 2*tau_w_1*x_3;
+    const float t6 = t4*x_5 - 2*tau_w_2*x_3;
+    const float t7 = -2*tau_w_1*x_5 + 2*tau_w_2*x_4;
     x_dot[0] = x_7;
     x_dot[1] = x_8;
     x_dot[2] = x_9;
@@ -749,9 +743,9 @@ void lvf_rigid_body_rhs(const float *x, float m, const float *I_b, const float *
     x_dot[7] = F_w_0*t3;
     x_dot[8] = F_w_1*t3;
     x_dot[9] = F_w_2*t3;
-    x_dot[10] = c_b_0*x_11*x_12 + c_b_3*(tau_w_0*(-t10 - t11) + tau_w_1*(t5 + t7) + tau_w_2*(t8 - t9));
-    x_dot[11] = c_b_1*x_10*x_12 + c_b_4*(tau_w_0*(t5 - t7) + tau_w_1*(-t11 - t13) + tau_w_2*(t12 + t4*x_5));
-    x_dot[12] = c_b_2*x_10*x_11 + c_b_5*(tau_w_0*(t8 + t9) + tau_w_1*(-t12 + 2*x_4*x_5) + tau_w_2*(-t10 - t13 + 1));
+    x_dot[10] = c_b_0*x_11*x_12 + c_b_3*(t5*x_4 - t6*x_5 - t7*x_6 + tau_w_0);
+    x_dot[11] = c_b_1*x_10*x_12 + c_b_4*(-t5*x_3 - t6*x_6 + t7*x_5 + tau_w_1);
+    x_dot[12] = c_b_2*x_10*x_11 + c_b_5*(-t5*x_6 + t6*x_3 - t7*x_4 + tau_w_2);
 }
 
 void lvf_rigid_body_rhs_free(const float *x, const float *I_b, float *x_dot) {
@@ -924,16 +918,10 @@ void lvf_rigid_body_rhs_torque(const float *x, const float *I_b, const float *ta
     const float t0 = ((1.0F/2.0F))*x_10;
     const float t1 = ((1.0F/2.0F))*x_11;
     const float t2 = ((1.0F/2.0F))*x_12;
-    const float t3 = 2*x_4;
-    const float t4 = t3*x_3;
-    const float t5 = 2*x_5;
-    const float t6 = t5*x_6;
-    const float t7 = t5*x_3;
-    const float t8 = t3*x_6;
-    const float t9 = 2*(x_4*x_4);
-    const float t10 = 2*(x_5*x_5) - 1;
-    const float t11 = 2*x_3*x_6;
-    const float t12 = 2*(x_3*x_3);
+    const float t3 = 2*tau_w_0;
+    const float t4 = -t3*x_4 + 2*tau_w_1*x_3;
+    const float t5 = t3*x_5 - 2*tau_w_2*x_3;
+    const float t6 = -2*tau_w_1*x_5 + 2*tau_w_2*x_4;
     x_dot[0] = x_7;
     x_dot[1] = x_8;
     x_dot[2] = x_9;
@@ -944,9 +932,9 @@ void lvf_rigid_body_rhs_torque(const float *x, const float *I_b, const float *ta
     x_dot[7] = 0;
     x_dot[8] = 0;
     x_dot[9] = 0;
-    x_dot[10] = c_b_0*x_11*x_12 + c_b_3*(tau_w_0*(-t10 - t9) + tau_w_1*(t4 + t6) + tau_w_2*(t7 - t8));
-    x_dot[11] = c_b_1*x_10*x_12 + c_b_4*(tau_w_0*(t4 - t6) + tau_w_1*(-t10 - t12) + tau_w_2*(t11 + t3*x_5));
-    x_dot[12] = c_b_2*x_10*x_11 + c_b_5*(tau_w_0*(t7 + t8) + tau_w_1*(-t11 + 2*x_4*x_5) + tau_w_2*(-t12 - t9 + 1));
+    x_dot[10] = c_b_0*x_11*x_12 + c_b_3*(t4*x_4 - t5*x_5 - t6*x_6 + tau_w_0);
+    x_dot[11] = c_b_1*x_10*x_12 + c_b_4*(-t4*x_3 - t5*x_6 + t6*x_5 + tau_w_1);
+    x_dot[12] = c_b_2*x_10*x_11 + c_b_5*(-t4*x_6 + t5*x_3 - t6*x_4 + tau_w_2);
 }
 
 void lvf_euler_coefficients(const float *I_b, float *c_b) {
@@ -1022,16 +1010,10 @@ void lvf_rigid_body_rhs_torque_c(const float *x, const float *c_b, const float *
     const float t0 = ((1.0F/2.0F))*x_10;
     const float t1 = ((1.0F/2.0F))*x_11;
     const float t2 = ((1.0F/2.0F))*x_12;
-    const float t3 = 2*x_4;
-    const float t4 = t3*x_3;
-    const float t5 = 2*x_5;
-    const float t6 = t5*x_6;
-    const float t7 = t5*x_3;
-    const float t8 = t3*x_6;
-    const float t9 = 2*(x_4*x_4);
-    const float t10 = 2*(x_5*x_5) - 1;
-    const float t11 = 2*x_3*x_6;
-    const float t12 = 2*(x_3*x_3);
+    const float t3 = 2*tau_w_0;
+    const float t4 = -t3*x_4 + 2*tau_w_1*x_3;
+    const float t5 = t3*x_5 - 2*tau_w_2*x_3;
+    const float t6 = -2*tau_w_1*x_5 + 2*tau_w_2*x_4;
     x_dot[0] = x_7;
     x_dot[1] = x_8;
     x_dot[2] = x_9;
@@ -1042,9 +1024,9 @@ void lvf_rigid_body_rhs_torque_c(const float *x, const float *c_b, const float *
     x_dot[7] = 0;
     x_dot[8] = 0;
     x_dot[9] = 0;
-    x_dot[10] = c_b_0*x_11*x_12 + c_b_3*(tau_w_0*(-t10 - t9) + tau_w_1*(t4 + t6) + tau_w_2*(t7 - t8));
-    x_dot[11] = c_b_1*x_10*x_12 + c_b_4*(tau_w_0*(t4 - t6) + tau_w_1*(-t10 - t12) + tau_w_2*(t11 + t3*x_5));
-    x_dot[12] = c_b_2*x_10*x_11 + c_b_5*(tau_w_0*(t7 + t8) + tau_w_1*(-t11 + 2*x_4*x_5) + tau_w_2*(-t12 - t9 + 1));
+    x_dot[10] = c_b_0*x_11*x_12 + c_b_3*(t4*x_4 - t5*x_5 - t6*x_6 + tau_w_0);
+    x_dot[11] = c_b_1*x_10*x_12 + c_b_4*(-t4*x_3 - t5*x_6 + t6*x_5 + tau_w_1);
+    x_dot[12] = c_b_2*x_10*x_11 + c_b_5*(-t4*x_6 + t5*x_3 - t6*x_4 + tau_w_2);
 }
 
 void lvf_rigid_body_rhs_c(const float *x, float m, const float *c_b, const float *F_w, const float *tau_w, float *x_dot) {
@@ -1074,16 +1056,10 @@ void lvf_rigid_body_rhs_c(const float *x, float m, const float *c_b, const float
     const float t1 = ((1.0F/2.0F))*x_11;
     const float t2 = ((1.0F/2.0F))*x_12;
     const float t3 = (1.0F/m);
-    const float t4 = 2*x_4;
-    const float t5 = t4*x_3;
-    const float t6 = 2*x_5;
-    const float t7 = t6*x_6;
-    const float t8 = t6*x_3;
-    const float t9 = t4*x_6;
-    const float t10 = 2*(x_4*x_4);
-    const float t11 = 2*(x_5*x_5) - 1;
-    const float t12 = 2*x_3*x_6;
-    const float t13 = 2*(x_3*x_3);
+    const float t4 = 2*tau_w_0;
+    const float t5 = -t4*x_4 + 2*tau_w_1*x_3;
+    const float t6 = t4*x_5 - 2*tau_w_2*x_3;
+    const float t7 = -2*tau_w_1*x_5 + 2*tau_w_2*x_4;
     x_dot[0] = x_7;
     x_dot[1] = x_8;
     x_dot[2] = x_9;
@@ -1094,9 +1070,9 @@ void lvf_rigid_body_rhs_c(const float *x, float m, const float *c_b, const float
     x_dot[7] = F_w_0*t3;
     x_dot[8] = F_w_1*t3;
     x_dot[9] = F_w_2*t3;
-    x_dot[10] = c_b_0*x_11*x_12 + c_b_3*(tau_w_0*(-t10 - t11) + tau_w_1*(t5 + t7) + tau_w_2*(t8 - t9));
-    x_dot[11] = c_b_1*x_10*x_12 + c_b_4*(tau_w_0*(t5 - t7) + tau_w_1*(-t11 - t13) + tau_w_2*(t12 + t4*x_5));
-    x_dot[12] = c_b_2*x_10*x_11 + c_b_5*(tau_w_0*(t8 + t9) + tau_w_1*(-t12 + 2*x_4*x_5) + tau_w_2*(-t10 - t13 + 1));
+    x_dot[10] = c_b_0*x_11*x_12 + c_b_3*(t5*x_4 - t6*x_5 - t7*x_6 + tau_w_0);
+    x_dot[11] = c_b_1*x_10*x_12 + c_b_4*(-t5*x_3 - t6*x_6 + t7*x_5 + tau_w_1);
+    x_dot[12] = c_b_2*x_10*x_11 + c_b_5*(-t5*x_6 + t6*x_3 - t7*x_4 + tau_w_2);
 }
 
 void lvf_pivot_body_rhs(const float *q, const float *omega_b, const float *I_p, const float *r_b, const float *F_w, const float *tau_w, float *q_dot, float *omega_dot_b) {

@@ -1311,16 +1311,10 @@ def rigid_body_rhs(x, m, I_b, F_w, tau_w):
     t1 = ((numpy.float32(1.0)/numpy.float32(2.0)))*x_11
     t2 = ((numpy.float32(1.0)/numpy.float32(2.0)))*x_12
     t3 = (1.0/m)
-    t4 = 2*x_4
-    t5 = t4*x_3
-    t6 = 2*x_5
-    t7 = t6*x_6
-    t8 = t6*x_3
-    t9 = t4*x_6
-    t10 = 2*(x_4*x_4)
-    t11 = 2*(x_5*x_5) - 1
-    t12 = 2*x_3*x_6
-    t13 = 2*(x_3*x_3)
+    t4 = 2*tau_w_0
+    t5 = -t4*x_4 + 2*tau_w_1*x_3
+    t6 = t4*x_5 - 2*tau_w_2*x_3
+    t7 = -2*tau_w_1*x_5 + 2*tau_w_2*x_4
     x_dot_out = numpy.empty(batch + (13,), dtype=numpy.float32)
     x_dot_out[..., 0] = x_7
     x_dot_out[..., 1] = x_8
@@ -1332,9 +1326,9 @@ def rigid_body_rhs(x, m, I_b, F_w, tau_w):
     x_dot_out[..., 7] = F_w_0*t3
     x_dot_out[..., 8] = F_w_1*t3
     x_dot_out[..., 9] = F_w_2*t3
-    x_dot_out[..., 10] = c_b_0*x_11*x_12 + c_b_3*(tau_w_0*(-t10 - t11) + tau_w_1*(t5 + t7) + tau_w_2*(t8 - t9))
-    x_dot_out[..., 11] = c_b_1*x_10*x_12 + c_b_4*(tau_w_0*(t5 - t7) + tau_w_1*(-t11 - t13) + tau_w_2*(t12 + t4*x_5))
-    x_dot_out[..., 12] = c_b_2*x_10*x_11 + c_b_5*(tau_w_0*(t8 + t9) + tau_w_1*(-t12 + 2*x_4*x_5) + tau_w_2*(-t10 - t13 + 1))
+    x_dot_out[..., 10] = c_b_0*x_11*x_12 + c_b_3*(t5*x_4 - t6*x_5 - t7*x_6 + tau_w_0)
+    x_dot_out[..., 11] = c_b_1*x_10*x_12 + c_b_4*(-t5*x_3 - t6*x_6 + t7*x_5 + tau_w_1)
+    x_dot_out[..., 12] = c_b_2*x_10*x_11 + c_b_5*(-t5*x_6 + t6*x_3 - t7*x_4 + tau_w_2)
     return x_dot_out
 
 
@@ -1647,16 +1641,10 @@ def rigid_body_rhs_torque(x, I_b, tau_w):
     t0 = ((numpy.float32(1.0)/numpy.float32(2.0)))*x_10
     t1 = ((numpy.float32(1.0)/numpy.float32(2.0)))*x_11
     t2 = ((numpy.float32(1.0)/numpy.float32(2.0)))*x_12
-    t3 = 2*x_4
-    t4 = t3*x_3
-    t5 = 2*x_5
-    t6 = t5*x_6
-    t7 = t5*x_3
-    t8 = t3*x_6
-    t9 = 2*(x_4*x_4)
-    t10 = 2*(x_5*x_5) - 1
-    t11 = 2*x_3*x_6
-    t12 = 2*(x_3*x_3)
+    t3 = 2*tau_w_0
+    t4 = -t3*x_4 + 2*tau_w_1*x_3
+    t5 = t3*x_5 - 2*tau_w_2*x_3
+    t6 = -2*tau_w_1*x_5 + 2*tau_w_2*x_4
     x_dot_out = numpy.empty(batch + (13,), dtype=numpy.float32)
     x_dot_out[..., 0] = x_7
     x_dot_out[..., 1] = x_8
@@ -1668,9 +1656,9 @@ def rigid_body_rhs_torque(x, I_b, tau_w):
     x_dot_out[..., 7] = 0
     x_dot_out[..., 8] = 0
     x_dot_out[..., 9] = 0
-    x_dot_out[..., 10] = c_b_0*x_11*x_12 + c_b_3*(tau_w_0*(-t10 - t9) + tau_w_1*(t4 + t6) + tau_w_2*(t7 - t8))
-    x_dot_out[..., 11] = c_b_1*x_10*x_12 + c_b_4*(tau_w_0*(t4 - t6) + tau_w_1*(-t10 - t12) + tau_w_2*(t11 + t3*x_5))
-    x_dot_out[..., 12] = c_b_2*x_10*x_11 + c_b_5*(tau_w_0*(t7 + t8) + tau_w_1*(-t11 + 2*x_4*x_5) + tau_w_2*(-t12 - t9 + 1))
+    x_dot_out[..., 10] = c_b_0*x_11*x_12 + c_b_3*(t4*x_4 - t5*x_5 - t6*x_6 + tau_w_0)
+    x_dot_out[..., 11] = c_b_1*x_10*x_12 + c_b_4*(-t4*x_3 - t5*x_6 + t6*x_5 + tau_w_1)
+    x_dot_out[..., 12] = c_b_2*x_10*x_11 + c_b_5*(-t4*x_6 + t5*x_3 - t6*x_4 + tau_w_2)
     return x_dot_out
 
 
@@ -1808,16 +1796,10 @@ def rigid_body_rhs_torque_c(x, c_b, tau_w):
     t0 = ((numpy.float32(1.0)/numpy.float32(2.0)))*x_10
     t1 = ((numpy.float32(1.0)/numpy.float32(2.0)))*x_11
     t2 = ((numpy.float32(1.0)/numpy.float32(2.0)))*x_12
-    t3 = 2*x_4
-    t4 = t3*x_3
-    t5 = 2*x_5
-    t6 = t5*x_6
-    t7 = t5*x_3
-    t8 = t3*x_6
-    t9 = 2*(x_4*x_4)
-    t10 = 2*(x_5*x_5) - 1
-    t11 = 2*x_3*x_6
-    t12 = 2*(x_3*x_3)
+    t3 = 2*tau_w_0
+    t4 = -t3*x_4 + 2*tau_w_1*x_3
+    t5 = t3*x_5 - 2*tau_w_2*x_3
+    t6 = -2*tau_w_1*x_5 + 2*tau_w_2*x_4
     x_dot_out = numpy.empty(batch + (13,), dtype=numpy.float32)
     x_dot_out[..., 0] = x_7
     x_dot_out[..., 1] = x_8
@@ -1829,9 +1811,9 @@ def rigid_body_rhs_torque_c(x, c_b, tau_w):
     x_dot_out[..., 7] = 0
     x_dot_out[..., 8] = 0
     x_dot_out[..., 9] = 0
-    x_dot_out[..., 10] = c_b_0*x_11*x_12 + c_b_3*(tau_w_0*(-t10 - t9) + tau_w_1*(t4 + t6) + tau_w_2*(t7 - t8))
-    x_dot_out[..., 11] = c_b_1*x_10*x_12 + c_b_4*(tau_w_0*(t4 - t6) + tau_w_1*(-t10 - t12) + tau_w_2*(t11 + t3*x_5))
-    x_dot_out[..., 12] = c_b_2*x_10*x_11 + c_b_5*(tau_w_0*(t7 + t8) + tau_w_1*(-t11 + 2*x_4*x_5) + tau_w_2*(-t12 - t9 + 1))
+    x_dot_out[..., 10] = c_b_0*x_11*x_12 + c_b_3*(t4*x_4 - t5*x_5 - t6*x_6 + tau_w_0)
+    x_dot_out[..., 11] = c_b_1*x_10*x_12 + c_b_4*(-t4*x_3 - t5*x_6 + t6*x_5 + tau_w_1)
+    x_dot_out[..., 12] = c_b_2*x_10*x_11 + c_b_5*(-t4*x_6 + t5*x_3 - t6*x_4 + tau_w_2)
     return x_dot_out
 
 
@@ -1890,16 +1872,10 @@ def rigid_body_rhs_c(x, m, c_b, F_w, tau_w):
     t1 = ((numpy.float32(1.0)/numpy.float32(2.0)))*x_11
     t2 = ((numpy.float32(1.0)/numpy.float32(2.0)))*x_12
     t3 = (1.0/m)
-    t4 = 2*x_4
-    t5 = t4*x_3
-    t6 = 2*x_5
-    t7 = t6*x_6
-    t8 = t6*x_3
-    t9 = t4*x_6
-    t10 = 2*(x_4*x_4)
-    t11 = 2*(x_5*x_5) - 1
-    t12 = 2*x_3*x_6
-    t13 = 2*(x_3*x_3)
+    t4 = 2*tau_w_0
+    t5 = -t4*x_4 + 2*tau_w_1*x_3
+    t6 = t4*x_5 - 2*tau_w_2*x_3
+    t7 = -2*tau_w_1*x_5 + 2*tau_w_2*x_4
     x_dot_out = numpy.empty(batch + (13,), dtype=numpy.float32)
     x_dot_out[..., 0] = x_7
     x_dot_out[..., 1] = x_8
@@ -1911,9 +1887,9 @@ def rigid_body_rhs_c(x, m, c_b, F_w, tau_w):
     x_dot_out[..., 7] = F_w_0*t3
     x_dot_out[..., 8] = F_w_1*t3
     x_dot_out[..., 9] = F_w_2*t3
-    x_dot_out[..., 10] = c_b_0*x_11*x_12 + c_b_3*(tau_w_0*(-t10 - t11) + tau_w_1*(t5 + t7) + tau_w_2*(t8 - t9))
-    x_dot_out[..., 11] = c_b_1*x_10*x_12 + c_b_4*(tau_w_0*(t5 - t7) + tau_w_1*(-t11 - t13) + tau_w_2*(t12 + t4*x_5))
-    x_dot_out[..., 12] = c_b_2*x_10*x_11 + c_b_5*(tau_w_0*(t8 + t9) + tau_w_1*(-t12 + 2*x_4*x_5) + tau_w_2*(-t10 - t13 + 1))
+    x_dot_out[..., 10] = c_b_0*x_11*x_12 + c_b_3*(t5*x_4 - t6*x_5 - t7*x_6 + tau_w_0)
+    x_dot_out[..., 11] = c_b_1*x_10*x_12 + c_b_4*(-t5*x_3 - t6*x_6 + t7*x_5 + tau_w_1)
+    x_dot_out[..., 12] = c_b_2*x_10*x_11 + c_b_5*(-t5*x_6 + t6*x_3 - t7*x_4 + tau_w_2)
     return x_dot_out
 
 
