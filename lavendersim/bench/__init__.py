@@ -30,6 +30,8 @@ v0 = (0.1, 0, 0) m/s, dt = 1e-3 s, RK4, q normalized each step):
   gymnasium.make returns it and unwrapped, its physics alone (sim.run(substeps)), and the vector env at
   N = 1024 per env-step (one and two threads) with its physics alone, interleaved; env / physics is the
   Python overhead;
+* scene build (lavendersim/bench/scenes.py) — a 1e4-body scene built with one add_bodies and its Sim,
+  against the same built with add_body one by one; sim.state(name) at N = 1e4 against N = 10 (O(1));
 * agreement — the hand-written kernel against the Sim (same trajectory to ~1e-12), and MuJoCo's
   trajectory against ours and against the exact torque-free motion over 1 s.
 
@@ -59,6 +61,7 @@ from .. import validate as V
 from .._install import extra_command
 from ..generated import layout as LY
 from . import envs as _envs
+from . import scenes as _scenes
 
 SCHEMA = "lavendersim-bench/1"
 HERE = Path(__file__).resolve().parent
@@ -89,6 +92,8 @@ TARGETS = {
     "float32_batch_speedup": 1.8,      # float64 / float32 ns per body-step, Sim.run in C, N >= 1e3, at least ("about 2x")
     "env_step_us": 10.0,               # ReactionWheelCube-v0 env.step() as gymnasium.make returns it, µs, at most
     "vector_env_us": 2.0,              # its vector env, µs per env-step at N = 1024, at most
+    "scene_build_s": 0.2,              # Scene + add_bodies(1e4) + Sim(...), seconds, at most (issue 12)
+    "state_lookup_ratio": 2.0,         # sim.state(name) at N = 1e4 / at N = 10, at most (O(1): ~1; a scan: ~1000)
 }
 PER_BODY_SIZES_FULL = (1, 100, 10_000)
 PER_BODY_SIZES_QUICK = (1, 100)
@@ -691,6 +696,9 @@ def run(quick: bool = False, rounds: int | None = None, use_mujoco: bool = True)
     except Exception as exc:  # noqa: BLE001 - reported in the output, the rest still runs
         res["env"] = {"available": False, "reason": f"failed: {type(exc).__name__}: {exc}"}
 
+    # ---- building a large scene (lavendersim/bench/scenes.py)
+    res["scenes"] = _scenes.scene_section(quick, R, interleaved)
+
     # ---- MuJoCo trajectory agreement
     if mj_ok:
         try:
@@ -833,6 +841,7 @@ def standing(res: dict) -> list[dict]:
         basis += f"; mujoco.mj_step on an empty model (its Python-call overhead) {mj0 / 1e3:.3f} µs"
     out.append(_line("one Python sim.step(), c backend", py, TARGETS["python_step_c_ns"], "max", "ns/call", basis))
     out += _envs.standing_lines(res, _line, TARGETS)
+    out += _scenes.standing_lines(res, _line, TARGETS)
     return out
 
 
@@ -943,6 +952,7 @@ def report(res: dict) -> str:
     elif "agreement_error" in mj:
         L.append(f"MuJoCo agreement failed: {mj['agreement_error']}")
     L += _envs.report_lines(res, _f)
+    L += _scenes.report_lines(res, _f)
     L.append("")
     L.append("targets")
     for t in res["standing"]:
