@@ -34,7 +34,24 @@ LABS: dict[str, str] = {
     "atlas": "atlas",
 }
 
-__all__ = ["LABS", "lab_module", "compute", "run", "register_cli", "LabResult"]
+# lab name -> the lavendersim.viewer scene `lavendersim lab NAME --view` streams after the lab has run
+LAB_VIEWS: dict[str, str] = {"03": "lab03", "04": "wheel"}
+
+__all__ = ["LABS", "LAB_VIEWS", "lab_module", "compute", "run", "register_cli", "register_views", "LabResult"]
+
+
+def _lab03_view():
+    """Lab 03's viewer scene, its module imported only when the scene is built."""
+    return lab_module("03").view_scene()
+
+
+def register_views() -> None:
+    """Register the labs' own viewer scenes with lavendersim.viewer (``lab03``: lab 03's rods), so
+    ``lavendersim view`` and ``lab NAME --view`` find them; the viewer itself does not import labs.
+    Idempotent; imports no lab module (each is imported when its scene is built)."""
+    from lavendersim import viewer
+
+    viewer.register_scene("lab03", _lab03_view)
 
 
 def lab_module(name: str):
@@ -178,8 +195,9 @@ def _run_one(args) -> int:
     if getattr(args, "view", False):
         from lavendersim import viewer
 
+        register_views()
         try:
-            viewer.run_scene(viewer.LAB_VIEWS[args.lab_name], duration=args.view_duration, host=args.view_host,
+            viewer.run_scene(LAB_VIEWS[args.lab_name], duration=args.view_duration, host=args.view_host,
                              port=args.view_port)
         except LavenderInputError as exc:
             print(f"lab {args.lab_name}: invalid option: {exc}", file=sys.stderr)
@@ -256,8 +274,6 @@ def register_cli(subparsers) -> None:
         The ``lavendersim`` parser's subcommands (from ``add_subparsers``).
     """
     import argparse
-
-    from lavendersim.viewer import LAB_VIEWS
 
     parent = _common_parent()
     lab = subparsers.add_parser("lab", help="run a chapter lab (or `all`); exits non-zero if a figure is off",

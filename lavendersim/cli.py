@@ -112,6 +112,9 @@ def _add_derive(sub) -> None:
 
 def _view(args) -> int:
     from lavendersim import viewer
+    from lavendersim.labs import register_views
+
+    register_views()   # the labs' scenes (lab03) beside the viewer's own
 
     try:
         viewer.run_scene(args.scene, duration=args.duration, host=args.host, port=args.port, rate_hz=args.rate,
@@ -123,7 +126,10 @@ def _view(args) -> int:
 
 
 def _add_view(sub) -> None:
+    from lavendersim.labs import register_views
     from lavendersim.viewer import DEFAULT_HOST, DEFAULT_PORT, SCENES
+
+    register_views()
 
     v = sub.add_parser("view", help=COMMANDS["view"],
                        description="Run a scene in real time and stream it to a browser page "

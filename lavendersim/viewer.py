@@ -95,7 +95,7 @@ if TYPE_CHECKING:  # annotations only: the Sim loads lazily
     from .sim import Sim, Trajectory
 
 __all__ = ["Viewer", "ViewerError", "Controls", "Player", "Snapshot", "validate_overlays", "xyzw_to_wxyz", "DEFAULT_COLOR",
-           "MAX_VECTORS", "SCENES", "LAB_VIEWS", "run_scene"]
+           "MAX_VECTORS", "SCENES", "register_scene", "run_scene"]
 
 DEFAULT_HOST = "127.0.0.1"
 DEFAULT_PORT = 8080
@@ -995,30 +995,6 @@ def _tumble_scene():
     return sim, overlays, lambda sim, dt: sim.run_for(dt)
 
 
-def _lab03_scene():
-    """Lab 03's two rods side by side: steady spin about the long axis ([3, 0, 0] rad/s) and the
-    mixed spin ([3, 2, 1] rad/s) that tumbles while its world angular momentum stays fixed."""
-    import lavendersim as lv
-    from lavendersim.labs import lab03_torque_free as L3
-
-    scene = lv.Scene()
-    scene.add_body(lv.Body.box("principal", L3.MASS, L3.ROD_SIZE, p_w=(0.0, -0.6, 0.0), omega_b=L3.OMEGA_PRINCIPAL))
-    scene.add_body(lv.Body.box("mixed", L3.MASS, L3.ROD_SIZE, p_w=(0.0, 0.6, 0.0), omega_b=L3.OMEGA_MIXED))
-    sim = lv.Sim(scene, dt=L3.DT, integrator=L3.INTEGRATOR)
-
-    def overlays(sim):
-        vecs = []
-        for name in ("principal", "mixed"):
-            s = sim.state(name)
-            vecs += [{"label": f"{name}: ω", "origin": s.p_w.tolist(), "vector": s.omega_w.tolist(), "scale": 0.12,
-                      "color": [0.51, 0.87, 0.76, 0.95]},
-                     {"label": f"{name}: L", "origin": s.p_w.tolist(), "vector": sim.angular_momentum_w(name).tolist(),
-                      "scale": 2.0, "color": [0.95, 0.66, 0.77, 0.95]}]
-        return {"axes": [{"body": "principal", "scale": 0.35}, {"body": "mixed", "scale": 0.35}], "vectors": vecs}
-
-    return sim, overlays, lambda sim, dt: sim.run_for(dt)
-
-
 def _wheel_scene():
     """The reaction-wheel cube balancing on its corner (lavendersim.control's Cubli-like model,
     15 cm, 1 kg) from a 3° tilt under LQR wheel control: cube axes, angular velocity and the
@@ -1051,9 +1027,35 @@ def _wheel_scene():
     return sim, overlays, advance
 
 
-SCENES = {"tumble": _tumble_scene, "lab03": _lab03_scene, "wheel": _wheel_scene}
-# lab name -> scene that `lavendersim lab NAME --view` streams after the lab has run
-LAB_VIEWS = {"03": "lab03", "04": "wheel"}
+# name -> builder () -> (sim, overlays, advance): the built-in scenes; register_scene adds more (the labs add
+# theirs from the CLI layer: library code does not import labs)
+SCENES = {"tumble": _tumble_scene, "wheel": _wheel_scene}
+
+
+def register_scene(name: str, builder: Callable[[], tuple]) -> None:
+    """Make a scene available to :func:`run_scene` (and ``lavendersim view NAME``) under `name`.
+
+    Parameters
+    ----------
+    name : str
+        A new, non-empty scene name (registering the same builder again under its name is a no-op).
+    builder : callable
+        ``builder() -> (sim, overlays, advance)`` as the built-in scenes: a Sim, ``overlays(sim) -> dict``
+        (see :func:`validate_overlays`) and ``advance(sim, dt)``.
+
+    Raises
+    ------
+    LavenderInputError
+        `name` empty, not a string, or taken by another builder; `builder` not callable.
+    """
+    if not isinstance(name, str) or not name:
+        raise V.LavenderInputError("name", "must be a non-empty string", f", got {name!r}")
+    if not callable(builder):
+        raise V.LavenderInputError("builder", "must be callable: builder() -> (sim, overlays, advance)",
+                                   f", got {type(builder).__name__}")
+    if SCENES.get(name, builder) is not builder:
+        raise V.LavenderInputError("name", f"scene {name!r} is taken (scenes: {', '.join(SCENES)})")
+    SCENES[name] = builder
 
 
 @V.keywords

@@ -624,8 +624,32 @@ def test_lab_view_option_refused_for_a_lab_without_view():
     assert r.returncode == 2 and "unrecognized arguments: --view" in r.stderr, (r.returncode, r.stderr)
 
 
+def test_the_viewer_imports_no_lab_and_the_labs_register_their_scenes():
+    # library code does not import labs: the viewer alone leaves lavendersim.labs unimported, and lab 03's
+    # scene reaches run_scene's registry through labs.register_views (what the CLI calls)
+    code = ("import sys, lavendersim.viewer as VW; bare = sorted(VW.SCENES); "
+            "print(any(m.startswith('lavendersim.labs') for m in sys.modules), bare); "
+            "from lavendersim.labs import register_views, LAB_VIEWS; register_views(); register_views(); "
+            "print(sorted(VW.SCENES), all(v in VW.SCENES for v in LAB_VIEWS.values()))")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.split("\n")[:2] == ["False ['tumble', 'wheel']", "['lab03', 'tumble', 'wheel'] True"], r.stdout
+
+
+def test_register_scene_refuses_bad_names_and_builders():
+    with pytest.raises(LavenderInputError, match="name"):
+        VW.register_scene("", lambda: None)
+    with pytest.raises(LavenderInputError, match="builder"):
+        VW.register_scene("mine", 3)
+    with pytest.raises(LavenderInputError, match="scene 'tumble' is taken"):
+        VW.register_scene("tumble", lambda: None)
+    assert "mine" not in VW.SCENES
+
+
 def test_lab03_scene_payload_is_valid():
-    sim, overlays, advance = VW.SCENES["lab03"]()
+    from lavendersim.labs import lab_module
+
+    sim, overlays, advance = lab_module("03").view_scene()
     advance(sim, 0.5)
     ov = VW.validate_overlays(overlays(sim), sim.names)
     assert [a["body"] for a in ov["axes"]] == ["principal", "mixed"] and len(ov["vectors"]) == 4
@@ -647,4 +671,6 @@ def test_wheel_scene_balances_the_cube_and_draws_the_chapter_payload():
     # the torque arrow is the motor torque on the cube: minus the applied wheel torque, in world
     u = sim.wheel_command_applied("cube")
     np.testing.assert_allclose(ov["vectors"][1]["vector"], -(sim.state("cube").R_wb @ u), atol=1e-15)
-    assert VW.LAB_VIEWS["04"] == "wheel"
+    from lavendersim.labs import LAB_VIEWS
+
+    assert LAB_VIEWS["04"] == "wheel"
