@@ -58,7 +58,8 @@ def _random_rationals(rng, rows: int, cols: int = 1) -> sp.Matrix:
 
 
 def _check() -> None:
-    """A_b = 1 reproduces the body-axis cube; without external torque H is conserved for any axes.
+    """A_b = 1 reproduces the body-axis cube; without external torque H is conserved for any axes; a
+    padded wheel (zero axis, J = 1, Ω = u = 0) leaves the other equations as they are and keeps Ω̇ = 0.
     The equations are evaluated in exact rational arithmetic at random rational inputs (three wheels
     on general axes, a general symmetric I_p): the identities hold exactly there, and a wrong term
     would show (a nonzero rational function vanishes at a random point with negligible probability);
@@ -80,6 +81,13 @@ def _check() -> None:
         H = I_p * w + A * sp.diag(*J) * Om
         if I_p * w_dot + A * sp.diag(*J) * Om_dot + w.cross(H) != sp.zeros(3, 1):
             raise RuntimeError("derive: the N-wheel equations do not conserve angular momentum")
+        # a padded wheel (zero axis, J = 1, Omega = u = 0) changes nothing and stays at rest: one printed
+        # N-wheel kernel can step any layout of fewer wheels (the plan for N-axis wheels inside Sim, issue 13)
+        pad = layout_rhs(q, w, Om.col_join(sp.zeros(1, 1)), I_p, A.row_join(sp.zeros(3, 1)), J.col_join(sp.ones(1, 1)),
+                         r_b, F, T, u.col_join(sp.zeros(1, 1)), c)
+        ref = layout_rhs(q, w, Om, I_p, A, J, r_b, F, T, u, c)
+        if pad[0] != ref[0] or pad[1] != ref[1] or list(pad[2]) != list(ref[2]) + [0]:
+            raise RuntimeError("derive: a padded wheel (zero axis, J = 1, at rest, no torque) changes the N-wheel equations")
 
 
 def kernels_for(n: int) -> list[Kernel]:

@@ -618,7 +618,7 @@ def run(quick: bool = False, rounds: int | None = None, use_mujoco: bool = True)
         "python_step_c": (lambda: [sim_pc.step() for _ in range(n_py)], n_py),
         "python_step_numpy": (lambda: [sim_pn.step() for _ in range(max(1, n_py // 10))], max(1, n_py // 10)),
     }
-    if sim_c.backend.name == "c":   # the bare C call of one step (no checks, no snapshot) beside sim.step()
+    if sim_c.backend.name == "c":   # the general C entry for one step (no checks, no snapshot) beside sim.step()
         from ..backends import c_backend as _cb
         xr, pr, er = sim_c.x.copy(), sim_c.params, sim_c.effects
         cases["c_call_1step"] = (lambda: [_cb._c.simulate(xr, pr, er, 2, 1, DT, 1) for _ in range(n_py)], n_py)
@@ -836,7 +836,9 @@ def standing(res: dict) -> list[dict]:
                      "Sim.run on the C backend, float64 ns / float32 ns per body-step, same rounds; N = "
                      + ", ".join(f"{r['n_bodies']:g}" for r in f32)))
     py, bare, mj0 = _ns(res, "python_step_c"), _ns(res, "c_call_1step"), _ns(res, "mujoco_empty_mj_step")
-    basis = "min over rounds" + ("" if bare is None else f"; the bare C call of one step {bare / 1e3:.3f} µs")
+    basis = "min over rounds" + ("" if bare is None else f"; _c.simulate for one step {bare / 1e3:.3f} µs: the general entry, "
+                                                  "which parses and checks its arguments and indexes the effects per call; sim.step() "
+                                                  "calls a C stepper prepared once")
     if mj0 is not None:
         basis += f"; mujoco.mj_step on an empty model (its Python-call overhead) {mj0 / 1e3:.3f} µs"
     out.append(_line("one Python sim.step(), c backend", py, TARGETS["python_step_c_ns"], "max", "ns/call", basis))
@@ -875,7 +877,7 @@ def report(res: dict) -> str:
             ("handwritten_c_checked", "hand-written + finite check each step"),
             ("numpy_rk4", f"LavenderSim NumPy, Sim.run({s['numpy_rk4']['units_per_call']})"),
             ("python_step_c", "one Python sim.step() call, c backend"),
-            ("c_call_1step", "the bare C call of one step (_c.simulate)"),
+            ("c_call_1step", "_c.simulate for one step (general entry)"),
             ("mujoco_empty_mj_step", "MuJoCo mj_step, empty model (call overhead)"),
             ("python_step_numpy", "one Python sim.step() call, numpy backend")]
     for integ in MUJOCO_INTEGRATORS:
