@@ -113,12 +113,15 @@ KINDS = (("JOINT", 1, "world-anchored spherical joint: p_w, v_w follow from q, o
 def print_c() -> str:
     """generated/layout.h."""
     out = [f"/* {HEADER} */", "/* Row layouts of the arrays the step loop exchanges with Python (float64 rows):",
-           "   LV_<ROW>_<FIELD> is the offset of a field in its row, LV_<ROW>_SIZE the row length. */",
+           "   LV_<ROW>_<FIELD> is the offset of a field in its row, LV_<ROW>_<FIELD>_LEN its length (vector",
+           "   fields), LV_<ROW>_SIZE the row length. */",
            "#ifndef LAVENDERSIM_LAYOUT_H", "#define LAVENDERSIM_LAYOUT_H", ""]
     for lay in LAYOUTS:
         out.append(f"/* {lay.title} ({lay.size}) */")
         for f in lay.fields:
             out.append(f"#define LV_{lay.prefix}_{f.name.upper()} {lay.offset(f.name)}  /* [{f.size}] {f.doc} */")
+            if f.size > 1:
+                out.append(f"#define LV_{lay.prefix}_{f.name.upper()}_LEN {f.size}")
         out.append(f"#define LV_{lay.prefix}_SIZE {lay.size}")
         out.append("")
     out.append("/* bits of the model row's kind */")
@@ -132,13 +135,16 @@ def print_c() -> str:
 def print_python() -> str:
     """generated/layout.py."""
     out = [f'"""{HEADER}', "", "Row layouts of the arrays the backends exchange (float64 rows): for each row a slice per",
-           "vector field, an index per scalar field, <ROW>_SIZE, and <ROW>_LAYOUT (field -> slice).", '"""', ""]
+           "vector field (and <ROW>_<FIELD>_LEN, its length), an index per scalar field, <ROW>_SIZE, and",
+           "<ROW>_LAYOUT (field -> slice).", '"""', ""]
     for lay in LAYOUTS:
         out.append(f"# {lay.title}")
         for f in lay.fields:
             o = lay.offset(f.name)
             val = str(o) if f.size == 1 else f"slice({o}, {o + f.size})"
             out.append(f"{lay.prefix}_{f.name.upper()} = {val}  # [{f.size}] {f.doc}")
+            if f.size > 1:
+                out.append(f"{lay.prefix}_{f.name.upper()}_LEN = {f.size}")
         out.append(f"{lay.prefix}_SIZE = {lay.size}")
         items = ", ".join(f"{f.name!r}: slice({lay.offset(f.name)}, {lay.offset(f.name) + f.size})" for f in lay.fields)
         out.append(f"{lay.prefix}_LAYOUT = {{{items}}}")

@@ -137,7 +137,8 @@ class Models:
         -------
         Models
         """
-        return cls(np.zeros((nb, MODEL_SIZE)), np.zeros((nb, 3)), np.zeros((nb, 3)), np.zeros((nb, 3)))
+        nw = LAYOUT.XS_OMEGA_LEN   # wheel rates (commands, applied torques) per body
+        return cls(np.zeros((nb, MODEL_SIZE)), np.zeros((nb, nw)), np.zeros((nb, nw)), np.zeros((nb, nw)))
 
     @property
     def kind(self) -> np.ndarray:

@@ -130,8 +130,8 @@ static int stepper_init(Stepper *s, PyObject *args, PyObject *kw)
     if (take(s, FS_WDT, wdt, 0, nb, "wdt_scale") != 0 || take(s, FS_GROWTH, growth, 0, nb * LV_G_COLS, "growth") != 0) return -1;
     s->has_models = rows != Py_None;
     if (s->has_models) {
-        if (take(s, FS_ROWS, rows, 0, nb * LV_MODEL_SIZE, "rows") != 0 || take(s, FS_OMEGA, om, 1, nb * 3, "Omega") != 0
-            || take(s, FS_COMMAND, cm, 0, nb * 3, "command") != 0 || take(s, FS_APPLIED, ap, 1, nb * 3, "applied") != 0)
+        if (take(s, FS_ROWS, rows, 0, nb * LV_MODEL_SIZE, "rows") != 0 || take(s, FS_OMEGA, om, 1, nb * LV_NW, "Omega") != 0
+            || take(s, FS_COMMAND, cm, 0, nb * LV_NW, "command") != 0 || take(s, FS_APPLIED, ap, 1, nb * LV_NW, "applied") != 0)
             return -1;
         s->models.rows = (const double *)s->buf[FS_ROWS].buf;
         s->models.Omega = (double *)s->buf[FS_OMEGA].buf;
@@ -161,7 +161,7 @@ static int stepper_init(Stepper *s, PyObject *args, PyObject *kw)
         PyBuffer_Release(&v);
         s->user.entries = s->user_entries;
     }
-    s->snap = (double *)malloc(sizeof(double) * (size_t)nb * (LV_STATE_SIZE + 6));
+    s->snap = (double *)malloc(sizeof(double) * (size_t)nb * (LV_STATE_SIZE + 2 * LV_NW)); /* x, Omega, applied */
     if (s->snap == NULL) { PyErr_NoMemory(); return -1; }
     s->valid = 0;
     s->busy = 0;
@@ -202,24 +202,24 @@ static int arguments_ok(const Stepper *s)
 /* Copy the arrays into the snapshot (to = 1) or back from it (to = 0). */
 static void snap_copy(Stepper *s, int to)
 {
-    const size_t nx = (size_t)s->nb * LV_STATE_SIZE, n3 = (size_t)s->nb * 3;
+    const size_t nx = (size_t)s->nb * LV_STATE_SIZE, nw = (size_t)s->nb * LV_NW;
     double *x = (double *)s->buf[FS_STATE].buf;
     if (to) memcpy(s->snap, x, nx * sizeof(double)); else memcpy(x, s->snap, nx * sizeof(double));
     if (!s->has_models) return;
     if (to) {
-        memcpy(s->snap + nx, s->models.Omega, n3 * sizeof(double));
-        memcpy(s->snap + nx + n3, s->models.applied, n3 * sizeof(double));
+        memcpy(s->snap + nx, s->models.Omega, nw * sizeof(double));
+        memcpy(s->snap + nx + nw, s->models.applied, nw * sizeof(double));
     } else {
-        memcpy(s->models.Omega, s->snap + nx, n3 * sizeof(double));
-        memcpy(s->models.applied, s->snap + nx + n3, n3 * sizeof(double));
+        memcpy(s->models.Omega, s->snap + nx, nw * sizeof(double));
+        memcpy(s->models.applied, s->snap + nx + nw, nw * sizeof(double));
     }
 }
 
 static int unchanged(const Stepper *s)
 {
-    const size_t nx = (size_t)s->nb * LV_STATE_SIZE, n3 = (size_t)s->nb * 3;
+    const size_t nx = (size_t)s->nb * LV_STATE_SIZE, nw = (size_t)s->nb * LV_NW;
     if (!s->valid || memcmp(s->snap, s->buf[FS_STATE].buf, nx * sizeof(double)) != 0) return 0;
-    return !s->has_models || memcmp(s->snap + nx, s->models.Omega, n3 * sizeof(double)) == 0;
+    return !s->has_models || memcmp(s->snap + nx, s->models.Omega, nw * sizeof(double)) == 0;
 }
 
 /* 1 when body x (params prm) is inside its growth limits g: |omega| = w <= w_safe, else its kinetic energy and |L|^2

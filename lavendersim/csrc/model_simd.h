@@ -31,10 +31,10 @@ typedef struct {
     double A[LV_XS_SIZE][LV_MTILE];  /* the RK4 weighted sum of the stage derivatives so far */
     double V[3][LV_MTILE];           /* the joint's kinematic COM velocity at the stage input */
     double F[3][LV_MTILE], TAU[3][LV_MTILE]; /* the effect sums at the stage input */
-    double U[3][LV_MTILE];           /* this step's applied wheel torques */
+    double U[LV_NW][LV_MTILE];           /* this step's applied wheel torques */
     double R[LV_MODEL_SIZE][LV_MTILE]; /* the model rows */
     double P[LV_PARAM_SIZE][LV_MTILE]; /* the params rows (m, I_b) */
-    double C[3][LV_MTILE];           /* the commands */
+    double C[LV_NW][LV_MTILE];           /* the commands */
 } lv_mtile;
 
 typedef void (*lv_mtile_fn)(lv_mtile *LV_RESTRICT t, const lv_effect_ref *refs, long n_refs, int needs_v,
@@ -76,12 +76,12 @@ typedef void (*lv_mtile_fn)(lv_mtile *LV_RESTRICT t, const lv_effect_ref *refs, 
    stage's input (h: LV_RK4_C1..3 dt), or, after the last stage, the step's end in t->Y. */
 #define LV_MT_STAGE_RHS(COMBINE)                                                                        \
     for (b = 0; b < m; b++) {                                                                           \
-        double y[LV_XS_SIZE], k[LV_XS_SIZE], r[LV_MODEL_SIZE], F[3], tau[3], u[3];                      \
+        double y[LV_XS_SIZE], k[LV_XS_SIZE], r[LV_MODEL_SIZE], F[3], tau[3], u[LV_NW];                  \
         LV_MT_LOAD(y, T, LV_XS_SIZE);                                                                   \
         LV_MT_LOAD(r, R, LV_MODEL_SIZE);                                                                \
         LV_MT_LOAD(F, F, 3);                                                                            \
         LV_MT_LOAD(tau, TAU, 3);                                                                        \
-        LV_MT_LOAD(u, U, 3);                                                                            \
+        LV_MT_LOAD(u, U, LV_NW);                                                                        \
         lv_wheel_body_rhs(y + LV_STATE_Q, y + LV_STATE_OMEGA_B, y + LV_XS_OMEGA, r + LV_MODEL_I_P,       \
                           r + LV_MODEL_J, r + LV_MODEL_R_B, F, tau, u, r[LV_MODEL_C_W], k + LV_STATE_Q,  \
                           k + LV_STATE_OMEGA_B, k + LV_XS_OMEGA);                                        \
@@ -146,13 +146,13 @@ static int mtile_code_known(int code) { return lv_effect_n_params(code) >= 0; }
         int i;                                                                                          \
         for (s = 0; s < n_steps; s++) {                                                                 \
             for (b = 0; b < m; b++) {                                                                   \
-                double cmd[3], Om[3], r[LV_MODEL_SIZE], u[3];                                           \
-                LV_MT_LOAD(cmd, C, 3);                                                                  \
-                for (i = 0; i < 3; i++) Om[i] = t->Y[LV_XS_OMEGA + i][b];                               \
+                double cmd[LV_NW], Om[LV_NW], r[LV_MODEL_SIZE], u[LV_NW];                               \
+                LV_MT_LOAD(cmd, C, LV_NW);                                                              \
+                for (i = 0; i < LV_NW; i++) Om[i] = t->Y[LV_XS_OMEGA + i][b];                           \
                 LV_MT_LOAD(r, R, LV_MODEL_SIZE);                                                        \
                 lv_wheel_motor(cmd, Om, r[LV_MODEL_TORQUE_LIMIT], r[LV_MODEL_SPEED_LIMIT],              \
                                r[LV_MODEL_CUTOFF], u);                                                  \
-                LV_MT_STORE(U, u, 3);                                                                   \
+                LV_MT_STORE(U, u, LV_NW);                                                               \
                 for (i = 0; i < LV_XS_SIZE; i++) t->T[i][b] = t->Y[i][b];                               \
             }                                                                                           \
             LV_MT_EFFECTS                                                                               \
@@ -227,9 +227,9 @@ static long advance_model_soa(double *state, const double *params, const lv_mode
     for (j = 0; j < m; j++) {
         const long b = ids[j];
         for (k = 0; k < LV_STATE_SIZE; k++) t.Y[k][j] = state[b * LV_STATE_SIZE + k];
-        for (k = 0; k < 3; k++) {
-            t.Y[LV_XS_OMEGA + k][j] = md->Omega[3 * b + k];
-            t.C[k][j] = md->command[3 * b + k];
+        for (k = 0; k < LV_NW; k++) {
+            t.Y[LV_XS_OMEGA + k][j] = md->Omega[LV_NW * b + k];
+            t.C[k][j] = md->command[LV_NW * b + k];
         }
         for (k = 0; k < LV_MODEL_SIZE; k++) t.R[k][j] = md->rows[b * LV_MODEL_SIZE + k];
         for (k = 0; k < LV_PARAM_SIZE; k++) t.P[k][j] = params[b * LV_PARAM_SIZE + k];
@@ -257,9 +257,9 @@ static long advance_model_soa(double *state, const double *params, const lv_mode
     for (j = 0; j < m; j++) {
         const long b = ids[j];
         for (k = 0; k < LV_STATE_SIZE; k++) state[b * LV_STATE_SIZE + k] = t.Y[k][j];
-        for (k = 0; k < 3; k++) {
-            md->Omega[3 * b + k] = t.Y[LV_XS_OMEGA + k][j];
-            md->applied[3 * b + k] = t.U[k][j];
+        for (k = 0; k < LV_NW; k++) {
+            md->Omega[LV_NW * b + k] = t.Y[LV_XS_OMEGA + k][j];
+            md->applied[LV_NW * b + k] = t.U[k][j];
         }
     }
     return -1;

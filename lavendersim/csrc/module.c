@@ -377,17 +377,17 @@ static PyObject *py_simulate(PyObject *self, PyObject *args)
             PyErr_Format(PyExc_ValueError, "simulate: model_rows has %zd rows but state has %zd bodies", rows_n, nb);
             goto fail;
         }
-        if (rows_of(&om, 3, "simulate: Omega", "[Omega_x, Omega_y, Omega_z]", &rows_n) != 0) goto fail;
+        if (rows_of(&om, LV_NW, "simulate: Omega", "[Omega_x, Omega_y, Omega_z]", &rows_n) != 0) goto fail;
         if (rows_n != nb) {
             PyErr_Format(PyExc_ValueError, "simulate: Omega has %zd rows but state has %zd bodies", rows_n, nb);
             goto fail;
         }
-        if (rows_of(&cm, 3, "simulate: command", "[u_x, u_y, u_z]", &rows_n) != 0) goto fail;
+        if (rows_of(&cm, LV_NW, "simulate: command", "[u_x, u_y, u_z]", &rows_n) != 0) goto fail;
         if (rows_n != nb) {
             PyErr_Format(PyExc_ValueError, "simulate: command has %zd rows but state has %zd bodies", rows_n, nb);
             goto fail;
         }
-        if (rows_of(&ap, 3, "simulate: applied", "[u_x, u_y, u_z]", &rows_n) != 0) goto fail;
+        if (rows_of(&ap, LV_NW, "simulate: applied", "[u_x, u_y, u_z]", &rows_n) != 0) goto fail;
         if (rows_n != nb) {
             PyErr_Format(PyExc_ValueError, "simulate: applied has %zd rows but state has %zd bodies", rows_n, nb);
             goto fail;

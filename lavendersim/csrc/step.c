@@ -461,7 +461,7 @@ static inline void model_rhs_of(const double *y, const double *u, double m, cons
     } else {
         lv_pivot_body_rhs(y + LV_STATE_Q, y + LV_STATE_OMEGA_B, r + LV_MODEL_I_P, r + LV_MODEL_R_B, F, tau,
                           yd + LV_STATE_Q, yd + LV_STATE_OMEGA_B);
-        for (i = 0; i < 3; i++) yd[LV_XS_OMEGA + i] = 0.0;
+        for (i = 0; i < LV_NW; i++) yd[LV_XS_OMEGA + i] = 0.0;
     }
     if (kind & LV_KIND_JOINT) {
         for (i = 0; i < 3; i++) yd[LV_STATE_P_W + i] = yd[LV_STATE_V_W + i] = 0.0;
@@ -486,9 +486,9 @@ static inline long advance_model(double *state, const double *params, long b, co
 {
     const double *r = md->rows + b * LV_MODEL_SIZE;
     const double m = params[b * LV_PARAM_SIZE + LV_PARAM_M];
-    const double *cmd = md->command + 3 * b;
+    const double *cmd = md->command + LV_NW * b;
     double y[LV_XS_SIZE], yn[LV_XS_SIZE], k1[LV_XS_SIZE], k2[LV_XS_SIZE], k3[LV_XS_SIZE], k4[LV_XS_SIZE], tmp[LV_XS_SIZE];
-    double u[3] = {0.0, 0.0, 0.0}, applied[3];
+    double u[LV_NW] = {0.0}, applied[LV_NW];
     const double h2 = LV_RK4_C1 * dt, h3 = LV_RK4_C2 * dt, h4 = LV_RK4_C3 * dt, h6 = dt / LV_RK4_B_DEN;
     const double *I_b = params + b * LV_PARAM_SIZE + LV_PARAM_I_B;
     const lv_effect_ref *refs = ix->refs + ix->start[b];
@@ -497,8 +497,8 @@ static inline long advance_model(double *state, const double *params, long b, co
     long s;
     int i;
     memcpy(y, state + b * LV_STATE_SIZE, LV_STATE_SIZE * sizeof(double));
-    memcpy(y + LV_XS_OMEGA, md->Omega + 3 * b, 3 * sizeof(double));
-    memcpy(applied, md->applied + 3 * b, sizeof applied);
+    memcpy(y + LV_XS_OMEGA, md->Omega + LV_NW * b, LV_NW * sizeof(double));
+    memcpy(applied, md->applied + LV_NW * b, sizeof applied);
 #define MRHS(in, out) model_rhs_of(in, u, m, I_b, r, kind, needs_v, builtin, refs, n_refs, out)
     for (s = 0; s < n_steps; s++) {
         if (kind & LV_KIND_WHEELS)
@@ -510,11 +510,11 @@ static inline long advance_model(double *state, const double *params, long b, co
             break;
         case LV_INTEGRATOR_SEMI_IMPLICIT_EULER:
             MRHS(y, k1);
-            for (i = 0; i < 3; i++) {                                    /* v', omega', Omega' */
+            for (i = 0; i < 3; i++) {                                    /* v', omega' */
                 yn[LV_STATE_V_W + i] = y[LV_STATE_V_W + i] + dt * k1[LV_STATE_V_W + i];
                 yn[LV_STATE_OMEGA_B + i] = y[LV_STATE_OMEGA_B + i] + dt * k1[LV_STATE_OMEGA_B + i];
-                yn[LV_XS_OMEGA + i] = y[LV_XS_OMEGA + i] + dt * k1[LV_XS_OMEGA + i];
             }
+            for (i = 0; i < LV_NW; i++) yn[LV_XS_OMEGA + i] = y[LV_XS_OMEGA + i] + dt * k1[LV_XS_OMEGA + i]; /* Omega' */
             lv_translation_drift(y + LV_STATE_P_W, yn + LV_STATE_V_W, dt, yn + LV_STATE_P_W); /* p + dt v' */
             lv_quat_derivative_body(y + LV_STATE_Q, yn + LV_STATE_OMEGA_B, tmp);                /* q rate at omega' */
             for (i = 0; i < 4; i++) yn[LV_STATE_Q + i] = y[LV_STATE_Q + i] + dt * tmp[i];
@@ -546,8 +546,8 @@ static inline long advance_model(double *state, const double *params, long b, co
     }
 #undef MRHS
     memcpy(state + b * LV_STATE_SIZE, y, LV_STATE_SIZE * sizeof(double));
-    memcpy(md->Omega + 3 * b, y + LV_XS_OMEGA, 3 * sizeof(double));
-    memcpy(md->applied + 3 * b, applied, sizeof applied);
+    memcpy(md->Omega + LV_NW * b, y + LV_XS_OMEGA, LV_NW * sizeof(double));
+    memcpy(md->applied + LV_NW * b, applied, sizeof applied);
     return -1;
 }
 
@@ -593,14 +593,15 @@ typedef struct {
     const double *prm, *r;
     const lv_effect_ref *refs;
     long n_refs;
-    double u[3];
+    double u[LV_NW];
 } body_ctx;
 
 static void ctx_rhs(const body_ctx *c, const double *y, double *yd)
 {
     if (c->kind == 0) {
+        int i;
         body_rhs(y, c->prm, c->refs, c->n_refs, yd);
-        yd[LV_XS_OMEGA] = yd[LV_XS_OMEGA + 1] = yd[LV_XS_OMEGA + 2] = 0.0;
+        for (i = 0; i < LV_NW; i++) yd[LV_XS_OMEGA + i] = 0.0;
     } else {
         model_rhs(y, c->u, c->m, c->prm + LV_PARAM_I_B, c->r, c->kind, c->needs_v, c->refs, c->n_refs, yd);
     }
@@ -608,6 +609,7 @@ static void ctx_rhs(const body_ctx *c, const double *y, double *yd)
 
 static void ctx_init(body_ctx *c, const double *params, long b, const lv_models *md, const lv_effect_index *ix)
 {
+    int i;
     c->b = b;
     c->prm = params + b * LV_PARAM_SIZE;
     c->m = c->prm[LV_PARAM_M];
@@ -618,7 +620,7 @@ static void ctx_init(body_ctx *c, const double *params, long b, const lv_models 
     c->r = md != NULL ? md->rows + b * LV_MODEL_SIZE : NULL;
     c->has = c->n_refs > 0;
     c->needs_v = (c->kind & LV_KIND_JOINT) && (c->flags & LV_EFFECT_USES_V);
-    c->u[0] = c->u[1] = c->u[2] = 0.0;
+    for (i = 0; i < LV_NW; i++) c->u[i] = 0.0;
 }
 
 /* Dormand-Prince 5(4): LV_DP_A, LV_DP_E and the controller constants come from generated/tableaux.h
@@ -678,7 +680,7 @@ static long advance_dopri5(double *state, const double *params, long b, const lv
                            int normalize, double dt, long n_steps, const lv_adaptive *ad, int *why, double *last)
 {
     body_ctx c;
-    double y[LV_XS_SIZE], yn[LV_XS_SIZE], k[7][LV_XS_SIZE], tmp[LV_XS_SIZE], err[LV_XS_SIZE], applied[3];
+    double y[LV_XS_SIZE], yn[LV_XS_SIZE], k[7][LV_XS_SIZE], tmp[LV_XS_SIZE], err[LV_XS_SIZE], applied[LV_NW];
     double h, nfev = 0.0;
     const double rtol = ad->rtol, atol = ad->atol, hmin = LV_DP_HMIN_REL * dt;
     const double *cmd = NULL;
@@ -687,11 +689,11 @@ static long advance_dopri5(double *state, const double *params, long b, const lv
     ctx_init(&c, params, b, md, ix);
     n = c.kind & LV_KIND_WHEELS ? LV_XS_SIZE : LV_STATE_SIZE;
     memcpy(y, state + b * LV_STATE_SIZE, LV_STATE_SIZE * sizeof(double));
-    y[LV_XS_OMEGA] = y[LV_XS_OMEGA + 1] = y[LV_XS_OMEGA + 2] = 0.0;
+    for (i = 0; i < LV_NW; i++) y[LV_XS_OMEGA + i] = 0.0;
     if (c.kind) {
-        memcpy(y + LV_XS_OMEGA, md->Omega + 3 * b, 3 * sizeof(double));
-        memcpy(applied, md->applied + 3 * b, sizeof applied);
-        cmd = md->command + 3 * b;
+        memcpy(y + LV_XS_OMEGA, md->Omega + LV_NW * b, LV_NW * sizeof(double));
+        memcpy(applied, md->applied + LV_NW * b, sizeof applied);
+        cmd = md->command + LV_NW * b;
     }
     h = ad->h[b];
     for (s = 0; s < n_steps; s++) {
@@ -768,8 +770,8 @@ static long advance_dopri5(double *state, const double *params, long b, const lv
     }
     memcpy(state + b * LV_STATE_SIZE, y, LV_STATE_SIZE * sizeof(double));
     if (c.kind) {
-        memcpy(md->Omega + 3 * b, y + LV_XS_OMEGA, 3 * sizeof(double));
-        memcpy(md->applied + 3 * b, applied, sizeof applied);
+        memcpy(md->Omega + LV_NW * b, y + LV_XS_OMEGA, LV_NW * sizeof(double));
+        memcpy(md->applied + LV_NW * b, applied, sizeof applied);
     }
     ad->h[b] = h;
     ad->nfev[b] += nfev;
@@ -1305,7 +1307,7 @@ static void model_share_run(void *arg)
                                lastm);
         if (s < 0 || !earlier(s, b, sh->head.limit, sh->head.best)) continue;
         memcpy(sh->state + b * LV_STATE_SIZE, lastm, LV_STATE_SIZE * sizeof(double));
-        memcpy(sh->md->Omega + 3 * b, lastm + LV_XS_OMEGA, 3 * sizeof(double));
+        memcpy(sh->md->Omega + LV_NW * b, lastm + LV_XS_OMEGA, LV_NW * sizeof(double));
         sh->head.limit = s;
         sh->head.best = b;
         sh->head.status = LV_DIVERGED;
@@ -1456,7 +1458,7 @@ int lv_simulate(double *state, const double *params, long nb,
             if (s < 0) continue;
             memcpy(state + b * LV_STATE_SIZE, lastx, LV_STATE_SIZE * sizeof(double));
             if (models != NULL && (int)models->rows[b * LV_MODEL_SIZE + LV_MODEL_KIND] != 0)
-                memcpy(models->Omega + 3 * b, lastx + LV_XS_OMEGA, 3 * sizeof(double));
+                memcpy(models->Omega + LV_NW * b, lastx + LV_XS_OMEGA, LV_NW * sizeof(double));
             limit = s;
             best_body = b;
             status = why;

@@ -9,6 +9,11 @@
 #include "layout.h"
 #include "kernels.h"
 
+/* Wheel rates (and motor commands, applied torques) per model body: the XS layout's Omega length, printed
+   by derive/layout.py. The body-axis wheel kernels (wheel_body_rhs, wheel_motor) take exactly 3. */
+#define LV_NW LV_XS_OMEGA_LEN
+typedef char lv_nw_is_the_wheel_kernels_count[LV_NW == 3 ? 1 : -1];
+
 /* The effect table, its row layout (LV_EFFECT_ROW_*), the built-in codes and their dispatch
    (lv_effect_apply) are generated from the effect declarations (generated/kernels.h). User effects are
    compiled apart and reach the stepping loop through this table: entry i serves code
