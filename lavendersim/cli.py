@@ -112,11 +112,8 @@ def _add_derive(sub) -> None:
 
 def _view(args) -> int:
     from lavendersim import viewer
-    from lavendersim.labs import register_views
 
-    register_views()   # the labs' scenes (lab03) beside the viewer's own
-
-    try:
+    try:   # the labs' scenes (lab03) were registered when the parser was built (_add_view)
         viewer.run_scene(args.scene, duration=args.duration, host=args.host, port=args.port, rate_hz=args.rate,
                          replay=args.replay)
     except viewer.ViewerError as exc:  # a frame could not be drawn: one line, exit 1 (not a usage error)
@@ -129,7 +126,7 @@ def _add_view(sub) -> None:
     from lavendersim.labs import register_views
     from lavendersim.viewer import DEFAULT_HOST, DEFAULT_PORT, SCENES
 
-    register_views()
+    register_views()   # the labs' scenes (lab03) beside the viewer's own, in the help and for _view
 
     v = sub.add_parser("view", help=COMMANDS["view"],
                        description="Run a scene in real time and stream it to a browser page "
