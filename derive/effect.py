@@ -31,7 +31,7 @@ from dataclasses import dataclass, field
 
 import sympy as sp
 
-from .kernel import Arg, Kernel, scalar, vec
+from .kernel import Arg, Kernel, mat, scalar, vec
 from .layout import PARAM as LAYOUT_PARAM
 from .layout import STATE as LAYOUT_STATE
 from .quaternion import rotation_matrix
@@ -91,7 +91,9 @@ STATE = _State()
 
 @dataclass
 class Param:
-    """A named effect parameter: shape () or (n,), unit, description, rule, optional default."""
+    """A named effect parameter: shape () or (n,) (or (n, k), model effects), unit, description, rule,
+    optional default; upto: the leading length n is a maximum (a value has 1 … n entries or rows: model
+    effects only, e.g. one per reaction wheel)."""
 
     name: str
     shape: tuple[int, ...] = ()
@@ -99,6 +101,7 @@ class Param:
     doc: str = ""
     rule: str = "finite"
     default: object = None
+    upto: bool = False
 
     def __post_init__(self):
         if isinstance(self.shape, int):
@@ -108,20 +111,33 @@ class Param:
             raise ValueError(f"param {self.name!r}: a name is letters, digits and _, starting with a letter")
         if keyword.iskeyword(self.name) or self.name in _State.FIELDS or self.name in _RESERVED:
             raise ValueError(f"param {self.name!r}: the name is reserved (state symbols: {', '.join(_State.FIELDS)})")
-        if len(self.shape) > 1 or (self.shape and self.shape[0] < 1):
-            raise ValueError(f"param {self.name!r}: shape must be () or (n,), got {self.shape}")
+        if len(self.shape) > 2 or any(n < 1 for n in self.shape):
+            raise ValueError(f"param {self.name!r}: shape must be (), (n,) or (n, k), got {self.shape}")
+        if self.upto and not self.shape:
+            raise ValueError(f"param {self.name!r}: upto needs a vector or matrix shape")
         if self.rule not in RULES:
             raise ValueError(f"param {self.name!r}: rule must be one of {', '.join(RULES)}, got {self.rule!r}")
         if self.default is not None:
-            d = tuple(float(v) for v in self.default) if self.shape else float(self.default)
-            if self.shape and len(d) != self.shape[0]:
-                raise ValueError(f"param {self.name!r}: default must have {self.shape[0]} entries")
-            self.default = d
-        self.symbol = vec(self.name, self.shape[0]) if self.shape else scalar(self.name)
+            self.default = self._default(self.default)
+        n = self.shape
+        self.symbol = scalar(self.name) if not n else vec(self.name, n[0]) if len(n) == 1 else mat(self.name, *n)
+
+    def _default(self, value):
+        """The default as floats (nested tuples for a matrix), checked against the shape."""
+        if not self.shape:
+            return float(value)
+        rows = tuple(tuple(float(v) for v in r) for r in value) if len(self.shape) == 2 else tuple(float(v) for v in value)
+        ok = (1 <= len(rows) <= self.shape[0]) if self.upto else len(rows) == self.shape[0]
+        if not ok or (len(self.shape) == 2 and any(len(r) != self.shape[1] for r in rows)):
+            raise ValueError(f"param {self.name!r}: default must have shape {self.shape}" + (" (up to)" if self.upto else ""))
+        return rows
 
     @property
     def size(self) -> int:
-        return self.shape[0] if self.shape else 1
+        out = 1
+        for n in self.shape:
+            out *= n
+        return out
 
     @property
     def domain(self) -> str:
@@ -133,7 +149,7 @@ OUT_FORCE, OUT_TORQUE = "F_com_w", "tau_com_w"
 _RESERVED = {"x", "p", "F", "tau", OUT_FORCE, OUT_TORQUE, "code", "body", "numpy", "casadi", "batch"}
 
 
-def param(name: str, shape=(), unit: str = "", doc: str = "", rule: str = "finite", default=None) -> Param:
+def param(name: str, shape=(), unit: str = "", doc: str = "", rule: str = "finite", default=None, upto: bool = False) -> Param:
     """Declare an effect parameter; its SymPy value is ``.symbol`` (a symbol or a column of them).
 
     Parameters
@@ -148,8 +164,11 @@ def param(name: str, shape=(), unit: str = "", doc: str = "", rule: str = "finit
         Validation of every entry when an effect is added to a scene.
     default : float or sequence, optional
         Value used when the parameter is not given.
+    upto : bool, optional
+        Model effects only: the leading length of ``shape`` is a maximum (a value has 1 … n entries or
+        rows, e.g. one per reaction wheel).
     """
-    return Param(name, shape, unit, doc, rule, default)
+    return Param(name, shape, unit, doc, rule, default, upto)
 
 
 @dataclass
@@ -189,6 +208,10 @@ class EffectDecl:
             if unknown:
                 raise ValueError(f"effect {self.name}: uses undeclared symbols {sorted(map(str, unknown))}; "
                                  f"declare them with param() or use STATE's ({', '.join(_State.FIELDS)})")
+            odd = [p.name for p in self.params if p.upto or len(p.shape) > 1]
+            if odd:
+                raise ValueError(f"effect {self.name}: a force effect's parameters have a fixed shape () or (n,) "
+                                 f"(its row layout is printed), not {odd[0]!r}")
         elif self.force_w is not None or self.torque_w is not None:
             raise ValueError(f"effect {self.name}: a model effect declares parameters only")
 

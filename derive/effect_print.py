@@ -213,7 +213,7 @@ def meta_entry(code: int | None, d: E.EffectDecl) -> dict:
     params, off = [], d.offsets()
     for p in d.params:
         params.append({"name": p.name, "shape": tuple(p.shape), "unit": p.unit, "doc": p.doc, "rule": p.rule,
-                       "default": p.default, "offset": off[p.name]})
+                       "default": p.default, "offset": off[p.name], "upto": p.upto})
     return {"name": d.name, "code": code, "kind": d.kind, "summary": d.summary, "params": tuple(params),
             "n_params": d.n_params,
             "outputs": tuple("F_w" if n == E.OUT_FORCE else "tau_w" for n, _ in d.outputs),
@@ -253,7 +253,7 @@ def markdown_params(d: E.EffectDecl, code: int | None) -> list[str]:
            "| parameter | shape | unit | rule | default | offset | meaning |", "|---|---|---|---|---|---|---|"]
     off = d.offsets()
     for p in d.params:
-        shape = "scalar" if not p.shape else f"[{p.shape[0]}]"
+        shape = "scalar" if not p.shape else "[" + ("≤" if p.upto else "") + "×".join(map(str, p.shape)) + "]"
         default = "—" if p.default is None else f"`{p.default}`"
         out.append(f"| `{p.name}` | {shape} | {p.unit or '—'} | {p.rule} | {default} | {off[p.name]} | {p.doc} |")
     out.append("")

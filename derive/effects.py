@@ -3,7 +3,8 @@
 Force effects contribute a force at the COM and/or a torque about it, both in the world frame (N,
 N·m); their codes are their position in EFFECTS (1, 2, …), the contract between the Python effect
 table and both backends. Model effects (a spherical joint, reaction wheels) change a body's model
-instead; they declare their parameters here and their equations in derive/wheel_cube.py.
+instead; they declare their parameters here and their equations in derive/wheel_cube.py (body-axis
+wheels) and derive/wheel_layout.py (wheels on the axes_b rows).
 Units: damping coefficients c in N·s/m (linear) and N·m·s/rad (angular).
 """
 from __future__ import annotations
@@ -11,6 +12,7 @@ from __future__ import annotations
 from .effect import STATE as S
 from .effect import EffectDecl, effect, model_effect, param
 from .kernel import Arg, Kernel, vec
+from .layout import WHEELS_MAX
 from .quaternion import rotation_matrix
 
 
@@ -39,8 +41,12 @@ def declarations() -> list[EffectDecl]:
                caption=r"\tau_W = -c\,R_{WB}\,\omega_B = -c\,\omega_W"),
         model_effect("spherical_joint", "World-anchored ball joint: the body point at anchor_w when the Sim starts stays there",
                      [param("anchor_w", 3, "m", "joint anchor, world frame")]),
-        model_effect("reaction_wheels", "Three reaction wheels on the body x, y, z axes (the body's mass and inertia include them, locked)",
-                     [param("J", 3, "kg·m²", "wheel spin inertias about body x, y, z (each below the body's moment)", "positive"),
+        model_effect("reaction_wheels", "Reaction wheels on body-fixed spin axes (default three, on body x, y, z); the body's "
+                     "mass and inertia include them, locked",
+                     [param("J", WHEELS_MAX, "kg·m²", "wheel spin inertias, one per wheel (the body with its wheels free "
+                            "must keep a positive definite inertia)", "positive", upto=True),
+                      param("axes_b", (WHEELS_MAX, 3), "", "wheel spin axes, one unit row per wheel, body frame",
+                            default=((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0)), upto=True),
                       param("torque_limit", (), "N·m", "motor stall torque (clips each command)", "positive"),
                       param("speed_limit", (), "rad/s", "motor no-load speed: the drive torque falls linearly to 0 there "
                             "(with cutoff = 1: full torque below it, none beyond)", "positive"),

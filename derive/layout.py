@@ -16,6 +16,13 @@ import sympy as sp
 
 from .codegen import HEADER
 
+# Reaction wheels per body inside a Sim: every wheeled body carries this many wheel slots (rates, motor
+# commands, applied torques, inertias, axes). A layout of fewer wheels pads the rest with a zero axis,
+# J = 1, at rest (derive/wheel_layout.py proves a padded wheel changes nothing); the body-axis wheels
+# of KIND_WHEELS use the first WHEELS_BODY_AXES slots.
+WHEELS_MAX = 4
+WHEELS_BODY_AXES = 3
+
 
 @dataclass(frozen=True)
 class Field:
@@ -86,7 +93,9 @@ MODEL = Layout("MODEL", "per-body model row (spherical joint and/or reaction whe
     Field("I_p", 9, "inertia about the pivot (wheels locked), body frame, kg·m², row-major"),
     Field("r_b", 3, "pivot → COM, body frame, m"),
     Field("anchor_w", 3, "joint anchor, world frame, m"),
-    Field("J", 3, "wheel spin inertias about body x, y, z, kg·m²"),
+    Field("J", WHEELS_MAX, "wheel spin inertias, kg·m² (unused slots 1)"),
+    Field("A_b", 3 * WHEELS_MAX, "wheel spin axes as the columns of a 3×WHEELS_MAX matrix, body frame, row-major "
+          "(unused slots 0; KIND_AXES only)"),
     Field("torque_limit", 1, "motor torque limit, N·m"),
     Field("speed_limit", 1, "no drive beyond this |Omega_i|, rad/s"),
     Field("c_w", 1, "wheel bearing damping, N·m·s/rad"),
@@ -95,7 +104,7 @@ MODEL = Layout("MODEL", "per-body model row (spherical joint and/or reaction whe
 
 XS = Layout("XS", "extended state of a body with a model: x then the wheel rates", [
     Field("x", STATE.size, "the body state (STATE layout)"),
-    Field("Omega", 3, "wheel rates relative to the body, rad/s"),
+    Field("Omega", WHEELS_MAX, "wheel rates relative to the body, rad/s (unused slots 0)"),
 ])
 
 EULER = Layout("EULER", "Euler coefficients c_b of a body (derive/rigid_body.py euler_coefficients)", [
@@ -107,7 +116,11 @@ LAYOUTS = (STATE, PARAM, MODEL, XS, EULER)
 
 # Model kinds: bits of MODEL.kind.
 KINDS = (("JOINT", 1, "world-anchored spherical joint: p_w, v_w follow from q, omega"),
-         ("WHEELS", 2, "three body-axis reaction wheels: Omega integrated, motor torques saturated"))
+         ("WHEELS", 2, "reaction wheels: Omega integrated, motor torques saturated; three on the body x, y, z axes "
+          "(wheel_body_rhs) unless KIND_AXES"),
+         ("AXES", 4, "with KIND_WHEELS: up to WHEELS_MAX wheels on the columns of A_b (wheels<WHEELS_MAX>_body_rhs)"))
+CONSTANTS = (("WHEELS_MAX", WHEELS_MAX, "wheel slots per body (XS.Omega, MODEL.J, the columns of MODEL.A_b)"),
+             ("WHEELS_BODY_AXES", WHEELS_BODY_AXES, "wheels of a body-axis layout (KIND_WHEELS without KIND_AXES)"))
 
 
 def print_c() -> str:
@@ -128,6 +141,7 @@ def print_c() -> str:
     out.append("enum {")
     out.extend(f"    LV_KIND_{n} = {v},  /* {doc} */" for n, v, doc in KINDS)
     out.append("};")
+    out.extend(f"#define LV_{n} {v}  /* {doc} */" for n, v, doc in CONSTANTS)
     out += ["", "#endif", ""]
     return "\n".join(out)
 
@@ -151,5 +165,6 @@ def print_python() -> str:
         out.append("")
     out.append("# bits of the model row's kind")
     out.extend(f"KIND_{n} = {v}  # {doc}" for n, v, doc in KINDS)
+    out.extend(f"{n} = {v}  # {doc}" for n, v, doc in CONSTANTS)
     out.append("")
     return "\n".join(out)

@@ -21,6 +21,7 @@ import sympy as sp
 
 from .integrator_physics import motor
 from .kernel import Arg, Kernel, mat, scalar, vec
+from .layout import WHEELS_MAX
 from .quaternion import pure, qmul, rotation_matrix
 from .wheel_cube import solve3, sym3, torque_about_pivot, wheel_rhs
 
@@ -133,5 +134,8 @@ def kernels_for(n: int) -> list[Kernel]:
 
 
 def kernels() -> list[Kernel]:
+    if WHEELS_MAX not in WHEEL_COUNTS:
+        raise RuntimeError(f"derive: Sim steps wheel layouts with the wheels{WHEELS_MAX} kernels (derive/layout.py "
+                           f"WHEELS_MAX); WHEEL_COUNTS {WHEEL_COUNTS} must include it")
     _check()
     return [k for n in WHEEL_COUNTS for k in kernels_for(n)]

@@ -22,7 +22,7 @@
 #define LV_PARAM_I_B_LEN 3
 #define LV_PARAM_SIZE 4
 
-/* per-body model row (spherical joint and/or reaction wheels) (23) */
+/* per-body model row (spherical joint and/or reaction wheels) (36) */
 #define LV_MODEL_KIND 0  /* [1] bit set of the KIND_* flags; 0: a plain rigid body (the row is ignored) */
 #define LV_MODEL_I_P 1  /* [9] inertia about the pivot (wheels locked), body frame, kg·m², row-major */
 #define LV_MODEL_I_P_LEN 9
@@ -30,20 +30,22 @@
 #define LV_MODEL_R_B_LEN 3
 #define LV_MODEL_ANCHOR_W 13  /* [3] joint anchor, world frame, m */
 #define LV_MODEL_ANCHOR_W_LEN 3
-#define LV_MODEL_J 16  /* [3] wheel spin inertias about body x, y, z, kg·m² */
-#define LV_MODEL_J_LEN 3
-#define LV_MODEL_TORQUE_LIMIT 19  /* [1] motor torque limit, N·m */
-#define LV_MODEL_SPEED_LIMIT 20  /* [1] no drive beyond this |Omega_i|, rad/s */
-#define LV_MODEL_C_W 21  /* [1] wheel bearing damping, N·m·s/rad */
-#define LV_MODEL_CUTOFF 22  /* [1] wheel motor: 0 torque–speed line (stall torque_limit, no-load speed_limit); 1 hard cut-off */
-#define LV_MODEL_SIZE 23
+#define LV_MODEL_J 16  /* [4] wheel spin inertias, kg·m² (unused slots 1) */
+#define LV_MODEL_J_LEN 4
+#define LV_MODEL_A_B 20  /* [12] wheel spin axes as the columns of a 3×WHEELS_MAX matrix, body frame, row-major (unused slots 0; KIND_AXES only) */
+#define LV_MODEL_A_B_LEN 12
+#define LV_MODEL_TORQUE_LIMIT 32  /* [1] motor torque limit, N·m */
+#define LV_MODEL_SPEED_LIMIT 33  /* [1] no drive beyond this |Omega_i|, rad/s */
+#define LV_MODEL_C_W 34  /* [1] wheel bearing damping, N·m·s/rad */
+#define LV_MODEL_CUTOFF 35  /* [1] wheel motor: 0 torque–speed line (stall torque_limit, no-load speed_limit); 1 hard cut-off */
+#define LV_MODEL_SIZE 36
 
-/* extended state of a body with a model: x then the wheel rates (16) */
+/* extended state of a body with a model: x then the wheel rates (17) */
 #define LV_XS_X 0  /* [13] the body state (STATE layout) */
 #define LV_XS_X_LEN 13
-#define LV_XS_OMEGA 13  /* [3] wheel rates relative to the body, rad/s */
-#define LV_XS_OMEGA_LEN 3
-#define LV_XS_SIZE 16
+#define LV_XS_OMEGA 13  /* [4] wheel rates relative to the body, rad/s (unused slots 0) */
+#define LV_XS_OMEGA_LEN 4
+#define LV_XS_SIZE 17
 
 /* Euler coefficients c_b of a body (derive/rigid_body.py euler_coefficients) (6) */
 #define LV_EULER_K 0  /* [3] k_x = (I_y - I_z)/I_x (cyclic), body frame, dimensionless */
@@ -55,7 +57,10 @@
 /* bits of the model row's kind */
 enum {
     LV_KIND_JOINT = 1,  /* world-anchored spherical joint: p_w, v_w follow from q, omega */
-    LV_KIND_WHEELS = 2,  /* three body-axis reaction wheels: Omega integrated, motor torques saturated */
+    LV_KIND_WHEELS = 2,  /* reaction wheels: Omega integrated, motor torques saturated; three on the body x, y, z axes (wheel_body_rhs) unless KIND_AXES */
+    LV_KIND_AXES = 4,  /* with KIND_WHEELS: up to WHEELS_MAX wheels on the columns of A_b (wheels<WHEELS_MAX>_body_rhs) */
 };
+#define LV_WHEELS_MAX 4  /* wheel slots per body (XS.Omega, MODEL.J, the columns of MODEL.A_b) */
+#define LV_WHEELS_BODY_AXES 3  /* wheels of a body-axis layout (KIND_WHEELS without KIND_AXES) */
 
 #endif

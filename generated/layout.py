@@ -32,22 +32,24 @@ MODEL_R_B = slice(10, 13)  # [3] pivot → COM, body frame, m
 MODEL_R_B_LEN = 3
 MODEL_ANCHOR_W = slice(13, 16)  # [3] joint anchor, world frame, m
 MODEL_ANCHOR_W_LEN = 3
-MODEL_J = slice(16, 19)  # [3] wheel spin inertias about body x, y, z, kg·m²
-MODEL_J_LEN = 3
-MODEL_TORQUE_LIMIT = 19  # [1] motor torque limit, N·m
-MODEL_SPEED_LIMIT = 20  # [1] no drive beyond this |Omega_i|, rad/s
-MODEL_C_W = 21  # [1] wheel bearing damping, N·m·s/rad
-MODEL_CUTOFF = 22  # [1] wheel motor: 0 torque–speed line (stall torque_limit, no-load speed_limit); 1 hard cut-off
-MODEL_SIZE = 23
-MODEL_LAYOUT = {'kind': slice(0, 1), 'I_p': slice(1, 10), 'r_b': slice(10, 13), 'anchor_w': slice(13, 16), 'J': slice(16, 19), 'torque_limit': slice(19, 20), 'speed_limit': slice(20, 21), 'c_w': slice(21, 22), 'cutoff': slice(22, 23)}
+MODEL_J = slice(16, 20)  # [4] wheel spin inertias, kg·m² (unused slots 1)
+MODEL_J_LEN = 4
+MODEL_A_B = slice(20, 32)  # [12] wheel spin axes as the columns of a 3×WHEELS_MAX matrix, body frame, row-major (unused slots 0; KIND_AXES only)
+MODEL_A_B_LEN = 12
+MODEL_TORQUE_LIMIT = 32  # [1] motor torque limit, N·m
+MODEL_SPEED_LIMIT = 33  # [1] no drive beyond this |Omega_i|, rad/s
+MODEL_C_W = 34  # [1] wheel bearing damping, N·m·s/rad
+MODEL_CUTOFF = 35  # [1] wheel motor: 0 torque–speed line (stall torque_limit, no-load speed_limit); 1 hard cut-off
+MODEL_SIZE = 36
+MODEL_LAYOUT = {'kind': slice(0, 1), 'I_p': slice(1, 10), 'r_b': slice(10, 13), 'anchor_w': slice(13, 16), 'J': slice(16, 20), 'A_b': slice(20, 32), 'torque_limit': slice(32, 33), 'speed_limit': slice(33, 34), 'c_w': slice(34, 35), 'cutoff': slice(35, 36)}
 
 # extended state of a body with a model: x then the wheel rates
 XS_X = slice(0, 13)  # [13] the body state (STATE layout)
 XS_X_LEN = 13
-XS_OMEGA = slice(13, 16)  # [3] wheel rates relative to the body, rad/s
-XS_OMEGA_LEN = 3
-XS_SIZE = 16
-XS_LAYOUT = {'x': slice(0, 13), 'Omega': slice(13, 16)}
+XS_OMEGA = slice(13, 17)  # [4] wheel rates relative to the body, rad/s (unused slots 0)
+XS_OMEGA_LEN = 4
+XS_SIZE = 17
+XS_LAYOUT = {'x': slice(0, 13), 'Omega': slice(13, 17)}
 
 # Euler coefficients c_b of a body (derive/rigid_body.py euler_coefficients)
 EULER_K = slice(0, 3)  # [3] k_x = (I_y - I_z)/I_x (cyclic), body frame, dimensionless
@@ -59,4 +61,7 @@ EULER_LAYOUT = {'k': slice(0, 3), 'r': slice(3, 6)}
 
 # bits of the model row's kind
 KIND_JOINT = 1  # world-anchored spherical joint: p_w, v_w follow from q, omega
-KIND_WHEELS = 2  # three body-axis reaction wheels: Omega integrated, motor torques saturated
+KIND_WHEELS = 2  # reaction wheels: Omega integrated, motor torques saturated; three on the body x, y, z axes (wheel_body_rhs) unless KIND_AXES
+KIND_AXES = 4  # with KIND_WHEELS: up to WHEELS_MAX wheels on the columns of A_b (wheels<WHEELS_MAX>_body_rhs)
+WHEELS_MAX = 4  # wheel slots per body (XS.Omega, MODEL.J, the columns of MODEL.A_b)
+WHEELS_BODY_AXES = 3  # wheels of a body-axis layout (KIND_WHEELS without KIND_AXES)

@@ -53,29 +53,43 @@ class BodyRef:
     joint: bool
     wheels: bool
     x: np.ndarray                 # (13,) reference state, STATE layout
-    Omega: np.ndarray             # (3,) reference wheel rates, rad/s
+    Omega: np.ndarray             # (N,) reference wheel rates, rad/s (N = n_wheels; (3,) zeros without wheels)
     m: float
     I_b: np.ndarray               # (3,)
     row: np.ndarray = field(repr=False)   # the Sim's model row (MODEL layout)
     offset: int = 0               # first index of this body's block in the error state
     command: np.ndarray | None = None     # the held wheel command when the wheels are not an input
+    n_wheels: int = 0             # its wheels (0 without; three on the body axes unless on_axes)
+    on_axes: bool = False         # the wheels sit on the row's A_b columns (KIND_AXES)
 
     @property
     def blocks(self) -> tuple[str, ...]:
         b = ("dtheta", "omega") if self.joint else ("p", "dtheta", "v", "omega")
         return b + (("Omega",) if self.wheels else ())
 
+    def block_size(self, block: str) -> int:
+        return self.n_wheels if block == "Omega" else 3
+
     @property
     def size(self) -> int:
-        return 3 * len(self.blocks)
+        return sum(self.block_size(b) for b in self.blocks)
 
     def index(self, block: str) -> slice:
-        k = self.blocks.index(block)
-        return slice(self.offset + 3 * k, self.offset + 3 * k + 3)
+        k = self.offset + sum(self.block_size(b) for b in self.blocks[:self.blocks.index(block)])
+        return slice(k, k + self.block_size(block))
+
+    def split(self, xb) -> dict:
+        """This body's error block xb (its size) cut into its blocks by name."""
+        return {b: xb[self.index(b).start - self.offset:self.index(b).stop - self.offset] for b in self.blocks}
 
     def labels(self, prefix: bool = True) -> list[str]:
         pre = f"{self.name}_" if prefix else ""
-        return [f"{pre}{b}_{a}" for b in self.blocks for a in AXES]
+        return [f"{pre}{b}_{a}" for b in self.blocks for a in wheel_labels(self.block_size(b), self.on_axes, b == "Omega")]
+
+
+def wheel_labels(n: int, on_axes: bool, wheel: bool = True) -> tuple[str, ...]:
+    """Component names: x, y, z for a 3-vector and body-axis wheels; 1 … N for wheels on axes_b."""
+    return tuple(str(k + 1) for k in range(n)) if wheel and on_axes else AXES
 
 
 @dataclass
@@ -90,9 +104,11 @@ class InputRef:
     size: int
     offset: int = 0
 
+    on_axes: bool = False         # wheel commands of a layout on axes_b (named u_1 … u_N)
+
     def labels(self) -> list[str]:
         if self.kind == "wheels":
-            return [f"{self.body}_u_{a}" for a in AXES]
+            return [f"{self.body}_u_{a}" for a in wheel_labels(self.size, self.on_axes)]
         base = self.name.replace(".", "_")
         return [base] if self.size == 1 else [f"{base}_{k}" for k in range(self.size)]
 
@@ -123,8 +139,9 @@ def body_refs(sim, x0: dict | None) -> list[BodyRef]:
     for i, name in enumerate(sim.names):
         kind = int(rows[i, LY.MODEL_KIND])
         joint, wheels = bool(kind & LY.KIND_JOINT), bool(kind & LY.KIND_WHEELS)
+        n_w = int(sim._wheel_n[i])
         x = sim.x[i].copy()
-        Om = sim._models.Omega[i].copy()
+        Om = sim._models.Omega[i, :n_w].copy()
         over = x0.get(name, {})
         allowed = {"q", "omega_b", "Omega"} | (set() if joint else {"p_w", "v_w"})
         bad = sorted(set(over) - allowed)
@@ -139,13 +156,13 @@ def body_refs(sim, x0: dict | None) -> list[BodyRef]:
         if "Omega" in over:
             if not wheels:
                 raise V.LavenderInputError(f"x0[{name!r}].Omega", f"body {name!r} has no reaction_wheels")
-            Om = V.vector(f"x0[{name!r}].Omega", over["Omega"])
+            Om = V.vector(f"x0[{name!r}].Omega", over["Omega"], n_w)
         if joint:
             r = rows[i]
             x[LY.STATE_P_W], x[LY.STATE_V_W] = KN.pivot_kinematics(x[LY.STATE_Q], x[LY.STATE_OMEGA_B],
                                                                   r[LY.MODEL_ANCHOR_W], r[LY.MODEL_R_B])
         ref = BodyRef(name, joint, wheels, x, Om, float(sim.params[i, LY.PARAM_M]), sim.params[i, LY.PARAM_I_B].copy(),
-                      rows[i].copy(), off)
+                      rows[i].copy(), off, n_wheels=n_w, on_axes=bool(kind & LY.KIND_AXES))
         off += ref.size
         refs.append(ref)
     return refs
@@ -167,7 +184,9 @@ def input_refs(sim, scene, inputs) -> list[InputRef]:
         if tail == "u" and head in sim.names:
             if head not in wheeled:
                 raise V.LavenderInputError("inputs", f"body {head!r} has no reaction_wheels", f", got {name!r}")
-            ref = InputRef(name, "wheels", head, None, None, 3, off)
+            i = sim.names.index(head)
+            ref = InputRef(name, "wheels", head, None, None, int(sim._wheel_n[i]), off,
+                           on_axes=bool(int(sim._models.rows[i, LY.MODEL_KIND]) & LY.KIND_AXES))
         else:
             idx = [k for k, e in enumerate(scene.effects) if e.name == head and not e.per_body]
             if len(idx) != 1:
@@ -244,7 +263,7 @@ def _loads(scene, ref: BodyRef, p_w, q, v_w, w, params_of):
 def _body_rhs(scene, ref: BodyRef, xb, params_of, wheel_u):
     """The time derivative of this body's error block (CasADi column)."""
     r = ref.row
-    get = {b: xb[3 * k:3 * k + 3] for k, b in enumerate(ref.blocks)}
+    get = ref.split(xb)
     q = _attitude(ref.x[LY.STATE_Q], get["dtheta"])
     w = ca.DM(ref.x[LY.STATE_OMEGA_B]) + get["omega"]
     I_p, r_b = ca.DM(r[LY.MODEL_I_P]), ca.DM(r[LY.MODEL_R_B])
@@ -255,11 +274,7 @@ def _body_rhs(scene, ref: BodyRef, xb, params_of, wheel_u):
     F, tau = _loads(scene, ref, p_w, q, v_w, w, params_of)
     out = {}
     if ref.wheels:
-        Om = ca.DM(ref.Omega) + get["Omega"]
-        u = KC.wheel_motor(wheel_u, Om, float(r[LY.MODEL_TORQUE_LIMIT]), float(r[LY.MODEL_SPEED_LIMIT]),
-                           float(r[LY.MODEL_CUTOFF]))
-        q_dot, out["omega"], out["Omega"] = KC.wheel_body_rhs(q, w, Om, I_p, ca.DM(r[LY.MODEL_J]), r_b, F, tau, u,
-                                                              float(r[LY.MODEL_C_W]))
+        q_dot, out["omega"], out["Omega"] = _wheel_rhs(ref, q, w, ca.DM(ref.Omega) + get["Omega"], wheel_u, F, tau)
         if not ref.joint:
             out["p"], out["v"] = KC.translation_rhs(ref.m, v_w, F)
     elif ref.joint:
@@ -270,6 +285,25 @@ def _body_rhs(scene, ref: BodyRef, xb, params_of, wheel_u):
         out["p"], out["v"], out["omega"] = xd[0:3], xd[7:10], xd[10:13]
     out["dtheta"] = _dtheta_dot(ref.x[LY.STATE_Q], q, q_dot)
     return ca.vertcat(*[out[b] for b in ref.blocks])
+
+
+def _wheel_rhs(ref: BodyRef, q, w, Om, wheel_u, F, tau):
+    """(q_dot, omega_dot_b, Omega_dot) of a wheeled body through its layout's printed CasADi kernels — the Sim's
+    (body-axis wheels, or the WHEELS_MAX-wheel kernel with the unused slots padded at rest); Omega_dot of its
+    N wheels only."""
+    r = ref.row
+    I_p, r_b = ca.DM(r[LY.MODEL_I_P]), ca.DM(r[LY.MODEL_R_B])
+    lim = (float(r[LY.MODEL_TORQUE_LIMIT]), float(r[LY.MODEL_SPEED_LIMIT]), float(r[LY.MODEL_CUTOFF]))
+    if not ref.on_axes:
+        u = KC.wheel_motor(wheel_u, Om, *lim)
+        J = ca.DM(r[LY.MODEL_J][:LY.WHEELS_BODY_AXES])
+        return KC.wheel_body_rhs(q, w, Om, I_p, J, r_b, F, tau, u, float(r[LY.MODEL_C_W]))
+    pad = ca.DM.zeros(LY.WHEELS_MAX - ref.n_wheels, 1)
+    Om_all, cmd = ca.vertcat(Om, pad), ca.vertcat(wheel_u, pad)
+    u = getattr(KC, f"wheels{LY.WHEELS_MAX}_motor")(cmd, Om_all, *lim)
+    q_dot, w_dot, Om_dot = getattr(KC, f"wheels{LY.WHEELS_MAX}_body_rhs")(
+        q, w, Om_all, I_p, ca.DM(r[LY.MODEL_A_B]), ca.DM(r[LY.MODEL_J]), r_b, F, tau, u, float(r[LY.MODEL_C_W]))
+    return q_dot, w_dot, Om_dot[:ref.n_wheels]
 
 
 def casadi_error_rhs(scene, refs: list[BodyRef], ins: list[InputRef], u0: np.ndarray) -> ca.Function:
@@ -290,7 +324,7 @@ def casadi_error_rhs(scene, refs: list[BodyRef], ins: list[InputRef], u0: np.nda
 
     parts = []
     for ref in refs:
-        wu = next((u[r.offset:r.offset + 3] for r in ins if r.kind == "wheels" and r.body == ref.name), None)
+        wu = next((u[r.offset:r.offset + r.size] for r in ins if r.kind == "wheels" and r.body == ref.name), None)
         if ref.wheels and wu is None:   # not an input: held at the Sim's command (set by the caller via u0 of the ref)
             wu = ca.DM(ref_command(ref))
         parts.append(_body_rhs(scene, ref, x[ref.offset:ref.offset + ref.size], params_of, wu))
@@ -298,7 +332,7 @@ def casadi_error_rhs(scene, refs: list[BodyRef], ins: list[InputRef], u0: np.nda
 
 
 def ref_command(ref: BodyRef) -> np.ndarray:
-    return np.zeros(3) if ref.command is None else ref.command
+    return np.zeros(ref.n_wheels) if ref.command is None else ref.command
 
 
 def jacobians(f: ca.Function, n: int, m: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -335,8 +369,7 @@ def state_of(refs: list[BodyRef], sim) -> np.ndarray:
 def set_state(refs: list[BodyRef], sim, x: np.ndarray) -> None:
     """Put a Sim (built from the same scene) at the error-coordinate state x."""
     for ref in refs:
-        xb = x[ref.offset:ref.offset + ref.size]
-        get = {b: xb[3 * k:3 * k + 3] for k, b in enumerate(ref.blocks)}
+        get = ref.split(x[ref.offset:ref.offset + ref.size])
         kw = {"q": perturbed(ref.x[LY.STATE_Q], get["dtheta"]), "omega_b": ref.x[LY.STATE_OMEGA_B] + get["omega"]}
         if not ref.joint:
             kw["p_w"], kw["v_w"] = ref.x[LY.STATE_P_W] + get["p"], ref.x[LY.STATE_V_W] + get["v"]

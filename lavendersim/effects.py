@@ -57,6 +57,8 @@ class ParamSpec:
         Default value, or None if required.
     offset : int
         Offset in the row's parameters.
+    upto : bool, optional
+        The leading length of ``shape`` is a maximum (model effects: e.g. one entry per reaction wheel).
     """
 
     name: str
@@ -66,11 +68,17 @@ class ParamSpec:
     rule: str
     default: object
     offset: int
+    upto: bool = False
 
     @property
     def size(self) -> int:
-        """Number of floats the parameter takes in a row."""
-        return self.shape[0] if self.shape else 1
+        """Number of floats the parameter takes in a row (its full declared shape)."""
+        return int(np.prod(self.shape)) if self.shape else 1
+
+    def text(self) -> str:
+        """The shape as a docstring shows it, e.g. ``(3,)``, ``(1 … 4,)``, ``(1 … 4, 3)``."""
+        lead = f"1 … {self.shape[0]}" if self.upto else str(self.shape[0])
+        return "(" + ", ".join([lead] + [str(n) for n in self.shape[1:]]) + ("," if len(self.shape) == 1 else "") + ")"
 
 
 @dataclass(frozen=True)
@@ -145,7 +153,8 @@ class EffectSpec:
         -------
         EffectSpec
         """
-        params = tuple(ParamSpec(p["name"], tuple(p["shape"]), p["unit"], p["doc"], p["rule"], p["default"], p["offset"])
+        params = tuple(ParamSpec(p["name"], tuple(p["shape"]), p["unit"], p["doc"], p["rule"], p["default"], p["offset"],
+                                 bool(p.get("upto", False)))
                        for p in entry["params"])
         return cls(entry["name"], entry["code"] if code is None else code, entry["kind"], entry["summary"], params,
                    entry["n_params"], tuple(entry["outputs"]), tuple(entry["state_inputs"]), entry["flags"],
@@ -205,9 +214,12 @@ class Effect:
             return V.vector(field_name, v)
         if not p.shape:
             return V.scalar(field_name, v, positive=p.rule == "positive", nonnegative=p.rule == "nonnegative")
-        out = V.vector(field_name, v, p.size)
+        out = V.array(field_name, v, ((None,) if p.upto else p.shape[:1]) + tuple(p.shape[1:]))
+        if p.upto and not 1 <= out.shape[0] <= p.shape[0]:
+            raise V.LavenderInputError(field_name, f"takes 1 to {p.shape[0]} entries (shape {p.text()})",
+                                       f", got {out.shape[0]}")
         bad = np.flatnonzero(~(out > 0) if p.rule == "positive" else ~(out >= 0) if p.rule == "nonnegative"
-                             else np.zeros(p.size, bool))
+                             else np.zeros(out.size, bool))
         if bad.size:
             op = ">" if p.rule == "positive" else ">="
             raise V.LavenderInputError(field_name, f"each entry must be {op} 0", f", got {out.tolist()}")
@@ -251,19 +263,42 @@ class _WheelsCheck:
     """Hand-written check of reaction_wheels against its body (a relation the declaration cannot state)."""
 
     def check_body(self, body) -> None:
-        """J_i < I_b[i]: the body with its wheels free must keep a positive inertia about each axis;
-        cutoff is 0 or 1."""
+        """One J per axis, unit axes; the body with its wheels free keeps a positive definite inertia
+        (I_b − A_b J A_bᵀ; on the body axes: J_i < I_b[i]); cutoff is 0 or 1."""
+        from .wheel_layout import axes
+
         if self.values["cutoff"] not in (0.0, 1.0):
             raise V.LavenderInputError(f"{self.name}.cutoff", "must be 0 (torque–speed line) or 1 (hard cut-off at speed_limit)",
                                        f", got {self.values['cutoff']!r}")
-        I_b = body.I_b
-        J = self.values["J"]
-        bad = np.flatnonzero(J >= I_b)
-        if bad.size:
-            i = int(bad[0])
-            raise V.LavenderInputError(f"{self.name}.J", f"J[{i}] must be below the body's principal moment "
-                                       f"I_b[{i}] = {I_b[i]:g} kg·m² (the body's inertia includes its wheels)",
-                                       f", got {J[i]:g}")
+        I_b, J = body.I_b, self.values["J"]
+        A_b = axes(f"{self.name}.axes_b", self.values["axes_b"].T)
+        if J.size != A_b.shape[1]:
+            raise V.LavenderInputError(f"{self.name}.J", f"needs one inertia per wheel axis (axes_b has {A_b.shape[1]} rows)",
+                                       f", got {J.size}")
+        if self.on_body_axes:
+            bad = np.flatnonzero(J >= I_b)
+            if bad.size:
+                i = int(bad[0])
+                raise V.LavenderInputError(f"{self.name}.J", f"J[{i}] must be below the body's principal moment "
+                                           f"I_b[{i}] = {I_b[i]:g} kg·m² (the body's inertia includes its wheels)",
+                                           f", got {J[i]:g}")
+            return
+        free = np.diag(I_b) - (A_b * J) @ A_b.T
+        low = float(np.linalg.eigvalsh(free).min())
+        if not low > 1e-12 * float(I_b.max()):
+            raise V.LavenderInputError(f"{self.name}.J", "the body with its wheels free, I_b − A_b J A_bᵀ, must stay "
+                                       "positive definite (the body's inertia includes its wheels)",
+                                       f", got smallest eigenvalue {low:.6g} kg·m² with J = {J.tolist()}")
+
+    @property
+    def on_body_axes(self) -> bool:
+        """Three wheels on body x, y, z in that order (the body-axis kernels step them)."""
+        return bool(np.array_equal(self.values["axes_b"], np.eye(3)))
+
+    @property
+    def A_b(self) -> np.ndarray:
+        """The wheel axes as the columns of a (3, N) matrix, body frame."""
+        return self.values["axes_b"].T.copy()
 
 
 class _JointCheck:
@@ -305,7 +340,7 @@ def _effect_doc(spec: EffectSpec) -> str:
     lines = [f"{spec.summary}.", "", f"Declared in {spec.source} (``{spec.name}``).", "",
              "Parameters", "----------", f"body : {body}"]
     for p in spec.params:
-        kind = "float" if not p.shape else f"array_like, shape ({p.shape[0]},)"
+        kind = "float" if not p.shape else f"array_like, shape {p.text()}"
         opt = ", optional" if p.default is not None else ""
         dflt = f" Default {p.default}." if p.default is not None else ""
         lines += [f"{p.name} : {kind}{opt}", f"    {p.doc[:1].upper()}{p.doc[1:]}, {p.unit or 'dimensionless'} ({p.rule}).{dflt}"]

@@ -108,7 +108,7 @@ import numpy as np
 from . import backends
 from . import effects as effects_mod
 from . import validate as V
-from .backends import ADAPTIVE, KIND_JOINT, KIND_WHEELS, PLAIN_ONLY, Adaptive, Models
+from .backends import ADAPTIVE, KIND_AXES, KIND_JOINT, KIND_WHEELS, PLAIN_ONLY, Adaptive, Models
 from .bodies import BodyState
 from .errors import DivergenceError, ValidityBoundWarning
 from .generated import layout as LY
@@ -155,6 +155,11 @@ def _read_only_views(x: np.ndarray, Omega: np.ndarray, applied: np.ndarray) -> t
 
     xr = ro(x)
     return (xr, xr[:, LY.STATE_P_W], xr[:, LY.STATE_Q], xr[:, LY.STATE_V_W], xr[:, LY.STATE_OMEGA_B], ro(Omega), ro(applied))
+
+
+def _rates_shown(n_wheels: int) -> int:
+    """How many wheel rates a body's state shows: its wheels, or WHEELS_BODY_AXES zeros without any."""
+    return n_wheels if n_wheels else LY.WHEELS_BODY_AXES
 
 
 class _Counters:
@@ -225,13 +230,20 @@ class Trajectory:
         Sample times, s.
     x : ndarray, shape (T, nb, 13)
         Body states ``[p_w(3), q(4) (x, y, z, w), v_w(3), omega_b(3)]`` per sample and body (SI units).
-    Omega : ndarray, shape (T, nb, 3), optional
-        Wheel rates relative to the body, rad/s (zeros when None: bodies without wheels).
+    Omega : ndarray, shape (T, nb, WHEELS_MAX), optional
+        Wheel rates relative to the body, rad/s, in each body's wheel slots (zeros when None: bodies
+        without wheels).
+    wheel_counts : array_like of int, shape (nb,), optional
+        Wheels per body (0 without); :meth:`body` returns that many rates (WHEELS_BODY_AXES zeros for a
+        body without wheels). Default: every body WHEELS_BODY_AXES.
     """
 
-    def __init__(self, names: list[str], t: np.ndarray, x: np.ndarray, Omega: np.ndarray | None = None):
+    def __init__(self, names: list[str], t: np.ndarray, x: np.ndarray, Omega: np.ndarray | None = None,
+                 wheel_counts=None):
         self.names, self.t, self.x = names, t, x
-        self.Omega = np.zeros(x.shape[:-1] + (3,)) if Omega is None else Omega
+        self.Omega = np.zeros(x.shape[:-1] + (LY.WHEELS_MAX,)) if Omega is None else Omega
+        self.wheel_counts = (np.full(len(names), LY.WHEELS_BODY_AXES) if wheel_counts is None
+                             else np.asarray(wheel_counts, dtype=np.int64))
 
     def body(self, name: str) -> BodyState:
         """The samples of one body.
@@ -254,7 +266,7 @@ class Trajectory:
         if name not in self.names:
             raise V.LavenderInputError("body", f"unknown body {name!r}; bodies: {', '.join(self.names)}")
         i = self.names.index(name)
-        return BodyState(self.x[:, i], self.Omega[:, i])
+        return BodyState(self.x[:, i], self.Omega[:, i, :_rates_shown(int(self.wheel_counts[i]))])
 
 
 class Sim:
@@ -434,8 +446,9 @@ class Sim:
 
     @property
     def Omega(self) -> np.ndarray:
-        """Reaction-wheel rates relative to their body, rad/s, (nb, 3) (zeros for a body without wheels):
-        a read-only view (set_state(name, Omega=...) writes them)."""
+        """Reaction-wheel rates relative to their body, rad/s, (nb, WHEELS_MAX): a body's N wheels in its first
+        N columns, in the order of its axes_b (zeros beyond them and for a body without wheels); a read-only
+        view (set_state(name, Omega=...) writes them)."""
         return self._views[5]
 
     # ---- counters (kept by the C stepper when there is one) --------------------------------
@@ -498,7 +511,7 @@ class Sim:
             acted[body[body >= 0]] = True
         kind = self._models.rows[:, LY.MODEL_KIND].astype(np.int64) if nb else np.zeros(0, np.int64)
         self._free = ~acted & (kind == 0)                      # E and |L| conserved
-        self._free_wheels = ~acted & (kind == KIND_WHEELS)     # total |L| conserved (motor torques are internal)
+        self._free_wheels = ~acted & ((kind & ~KIND_AXES) == KIND_WHEELS)  # total |L| conserved (motor torques are internal)
         self._free_any = bool(self._free.any())
         self._free_wheels_idx = [int(i) for i in np.flatnonzero(self._free_wheels)]
         self._warned: set[int] = set()
@@ -520,10 +533,8 @@ class Sim:
                 E[f] = K.kinetic_energy(self.params[f, LY.PARAM_M], I_b, x[f][:, LY.STATE_V_W], w_b)
                 L[f] = np.linalg.norm(K.body_momentum(I_b, w_b), axis=-1)
             for i in self._free_wheels_idx:
-                r = self._models.rows[i]
-                Lb, Lw = K.wheel_momentum(x[i, LY.STATE_Q], x[i, LY.STATE_OMEGA_B], Omega[i],
-                                          r[LY.MODEL_I_P].reshape(3, 3), r[LY.MODEL_J])
-                L[i] = np.linalg.norm(np.asarray(Lb) + np.asarray(Lw))
+                Lb, Lw = backends.wheel_momentum(self._models.rows[i], x[i, LY.STATE_Q], x[i, LY.STATE_OMEGA_B], Omega[i])
+                L[i] = np.linalg.norm(Lb + Lw)
         return E, L
 
     def _reference(self) -> None:
@@ -579,9 +590,9 @@ class Sim:
         for a wheeled body whose wheel damping is beyond the integrator's limit the cause says so first."""
         v = self._violation_raw(x, Omega, warn, growth)
         if v is not None and self._kind(v[0]) & KIND_WHEELS:
-            r = self._models.rows[v[0]]
-            why = backends.divergence_cause(x[v[0]], self.dt, self.integrator, Omega[v[0]],
-                                            (r[LY.MODEL_J], r[LY.MODEL_C_W]))
+            r, n = self._models.rows[v[0]], int(self._wheel_n[v[0]])
+            why = backends.divergence_cause(x[v[0]], self.dt, self.integrator, Omega[v[0], :n],
+                                            (r[LY.MODEL_J][:n], r[LY.MODEL_C_W]))
             if "wheel damping" in why:
                 return v[0], f"{why}; {v[1]}"
         return v
@@ -680,6 +691,7 @@ class Sim:
         for i, name in enumerate(self.names):
             if name in modelled:
                 self._model_row(i, modelled[name], rows)
+        self._wheel_n = models.wheel_counts     # wheels per body (the model rows' layouts never change)
         return models
 
     def _model_row(self, i: int, me: dict, rows: np.ndarray) -> None:
@@ -695,9 +707,9 @@ class Sim:
             self._x[i, LY.STATE_P_W], self._x[i, LY.STATE_V_W] = K.pivot_kinematics(
                 self._x[i, LY.STATE_Q], self._x[i, LY.STATE_OMEGA_B], anchor, r_b)
         if "reaction_wheels" in me:
-            kind |= KIND_WHEELS
-            w = me["reaction_wheels"].values
-            rows[i, LY.MODEL_J] = w["J"]
+            e = me["reaction_wheels"]
+            w = e.values
+            kind |= backends.wheel_row(rows[i], w["J"], e.A_b, on_axes=not e.on_body_axes)
             rows[i, LY.MODEL_TORQUE_LIMIT], rows[i, LY.MODEL_SPEED_LIMIT] = w["torque_limit"], w["speed_limit"]
             rows[i, LY.MODEL_C_W] = w["c_w"]
             rows[i, LY.MODEL_CUTOFF] = w["cutoff"]
@@ -715,7 +727,8 @@ class Sim:
             x = self._x[i]
             x[LY.STATE_P_W], x[LY.STATE_Q], x[LY.STATE_V_W], x[LY.STATE_OMEGA_B] = p_w, q, 0.0, omega_b
             self._model_row(i, self._modelled.get(self.names[i], {}), self._models.rows)
-            self._models.Omega[i] = Omega
+            self._models.Omega[i] = 0.0
+            self._models.Omega[i, :np.size(Omega)] = Omega
             self._models.command[i] = 0.0
             self._models.applied[i] = 0.0
             E0, L0 = self._invariants(self._x, self._models.Omega)
@@ -744,7 +757,8 @@ class Sim:
             if kind:
                 model = [e for e in mine if e.per_body]
                 forces = [e for e in mine if not e.per_body]
-                kernel = "wheel_body_rhs" if kind & KIND_WHEELS else "pivot_body_rhs"
+                kernel = ((f"wheels{LY.WHEELS_MAX}_body_rhs ({self._wheel_n[i]} wheels on axes_b)" if kind & KIND_AXES
+                           else "wheel_body_rhs") if kind & KIND_WHEELS else "pivot_body_rhs")
                 terms = " + ".join(e.describe() for e in model + forces)
                 extra = []
                 if kind & KIND_WHEELS:
@@ -986,7 +1000,7 @@ class Sim:
         Returns
         -------
         Trajectory
-            ``n_steps // every + 1`` samples: t (T,), x (T, nb, 13), Omega (T, nb, 3).
+            ``n_steps // every + 1`` samples: t (T,), x (T, nb, 13), Omega (T, nb, WHEELS_MAX).
 
         Raises
         ------
@@ -1013,7 +1027,7 @@ class Sim:
             except BaseException:
                 self._restore(start)
                 raise
-        return Trajectory(self.names, np.array(ts), np.stack(xs), np.stack(Ws))
+        return Trajectory(self.names, np.array(ts), np.stack(xs), np.stack(Ws), self._wheel_n)
 
     # ---- state access ---------------------------------------------------------------------
     def state(self, name: str) -> BodyState:
@@ -1031,7 +1045,8 @@ class Sim:
         -------
         BodyState
             ``p_w`` (3,) m, ``q`` (4,) (x, y, z, w), ``v_w`` (3,) m/s, ``omega_b`` (3,) rad/s, and derived
-            ``omega_w``, ``R_wb``; ``Omega`` (3,) wheel rates, rad/s.
+            ``omega_w``, ``R_wb``; ``Omega`` (N,) the rates of its N wheels, rad/s (three zeros without
+            wheels).
 
         Raises
         ------
@@ -1039,7 +1054,7 @@ class Sim:
             If no body has that name.
         """
         i = self._i(name)
-        return BodyState(self._x[i].copy(), self._models.Omega[i].copy())
+        return BodyState(self._x[i].copy(), self._models.Omega[i, :_rates_shown(int(self._wheel_n[i]))].copy())
 
     @V.keywords  # an unknown keyword (a typo such as omega=) is a LavenderInputError naming it
     def set_state(self, name: str, *, p_w=None, q=None, v_w=None, omega_b=None, omega_w=None, Omega=None) -> None:
@@ -1092,7 +1107,8 @@ class Sim:
         if Omega is not None:
             if not kind & KIND_WHEELS:
                 raise V.LavenderInputError("Omega", f"body {name!r} has no reaction_wheels")
-            W = V.vector("Omega", Omega)
+            W = np.zeros(LY.WHEELS_MAX)
+            W[:self._wheel_n[i]] = V.vector("Omega", Omega, int(self._wheel_n[i]))
         if kind & KIND_JOINT:
             r = self._models.rows[i]
             x[LY.STATE_P_W], x[LY.STATE_V_W] = K.pivot_kinematics(x[LY.STATE_Q], x[LY.STATE_OMEGA_B],
@@ -1133,16 +1149,18 @@ class Sim:
         ----------
         name : str
             A body with a ``reaction_wheels`` effect.
-        u : array_like, shape (3,)
-            Torques on the body-x, y, z wheels, N·m.
+        u : array_like, shape (N,)
+            Torques on its N wheels in the order of ``axes_b`` (body x, y, z by default), N·m.
 
         Raises
         ------
         LavenderInputError
-            If the body has no wheels or `u` is not 3 finite numbers.
+            If the body has no wheels or `u` is not N finite numbers.
         """
         i = self._wheeled(name)
-        self._models.command[i] = V.vector("u", u)
+        u_full = np.zeros(LY.WHEELS_MAX)
+        u_full[:self._wheel_n[i]] = V.vector("u", u, int(self._wheel_n[i]))
+        self._models.command[i] = u_full
 
     def set_wheel_commands(self, u) -> None:
         """Motor torques of every body's wheels at once; held until changed, saturated every step, as
@@ -1150,27 +1168,33 @@ class Sim:
 
         Parameters
         ----------
-        u : array_like, (nb, 3)
-            Commanded wheel torques, N·m, body frame, in body order; rows of bodies without
-            reaction_wheels must be zero.
+        u : array_like, (nb, 3) or (nb, WHEELS_MAX)
+            Commanded wheel torques, N·m, in body order, a body's wheels in its first N columns (three
+            columns suffice when no body has more than three wheels); the other entries must be zero.
 
         Raises
         ------
         LavenderInputError
-            A wrong shape, a non-finite value, or a non-zero row for a body without wheels.
+            A wrong shape, a non-finite value, or a non-zero entry beyond a body's wheels.
         """
-        u = V.array("u", u, (len(self.names), 3))
-        wheeled = (self._models.rows[:, LY.MODEL_KIND].astype(np.int64) & KIND_WHEELS) != 0
-        stray = ~wheeled & np.any(u != 0, axis=1)
-        if stray.any():
-            b = int(np.flatnonzero(stray)[0])
-            raise V.LavenderInputError(f"u[{b}]", f"body {self.names[b]!r} has no reaction_wheels: its row must be 0")
-        self._models.command[...] = u
+        nb = len(self.names)
+        u = V.array("u", u, (nb, None))
+        if u.shape[1] not in (LY.WHEELS_BODY_AXES, LY.WHEELS_MAX):
+            raise V.LavenderInputError("u", f"expected shape ({nb}, {LY.WHEELS_BODY_AXES}) or ({nb}, {LY.WHEELS_MAX})",
+                                       f", got {u.shape}")
+        stray = np.arange(u.shape[1])[None, :] >= self._wheel_n[:, None]
+        bad = np.flatnonzero(np.any(stray & (u != 0), axis=1))
+        if bad.size:
+            b = int(bad[0])
+            raise V.LavenderInputError(f"u[{b}]", f"body {self.names[b]!r} has {self._wheel_n[b]} reaction wheel(s): "
+                                       "the entries beyond them must be 0")
+        self._models.command[...] = 0.0
+        self._models.command[:, :u.shape[1]] = u
 
     @property
     def wheel_torques_applied(self) -> np.ndarray:
-        """The saturated wheel torques of the most recent step for every body, (nb, 3) N·m (zeros before the
-        first step and for bodies without wheels): a read-only view."""
+        """The saturated wheel torques of the most recent step for every body, (nb, WHEELS_MAX) N·m, a body's
+        wheels in its first N columns (zeros before the first step and beyond its wheels): a read-only view."""
         return self._views[6]
 
     def wheel_command(self, name: str) -> np.ndarray:
@@ -1183,9 +1207,11 @@ class Sim:
 
         Returns
         -------
-        ndarray, shape (3,)
+        ndarray, shape (N,)
+            One entry per wheel, in the order of ``axes_b``.
         """
-        return self._models.command[self._wheeled(name)].copy()
+        i = self._wheeled(name)
+        return self._models.command[i, :self._wheel_n[i]].copy()
 
     def wheel_command_applied(self, name: str) -> np.ndarray:
         """The saturated wheel torques used in the most recent step (zeros before the first), N·m.
@@ -1197,9 +1223,11 @@ class Sim:
 
         Returns
         -------
-        ndarray, shape (3,)
+        ndarray, shape (N,)
+            One entry per wheel, in the order of ``axes_b``.
         """
-        return self._models.applied[self._wheeled(name)].copy()
+        i = self._wheeled(name)
+        return self._models.applied[i, :self._wheel_n[i]].copy()
 
     def wheel_rates(self, name: str) -> np.ndarray:
         """Wheel rates relative to the body, rad/s.
@@ -1211,9 +1239,11 @@ class Sim:
 
         Returns
         -------
-        ndarray, shape (3,)
+        ndarray, shape (N,)
+            One entry per wheel, in the order of ``axes_b``.
         """
-        return self._models.Omega[self._wheeled(name)].copy()
+        i = self._wheeled(name)
+        return self._models.Omega[i, :self._wheel_n[i]].copy()
 
     def wheel_momentum_w(self, name: str) -> tuple[np.ndarray, np.ndarray]:
         """(L_body_w, L_wheels_w), world frame, kg·m²/s, from the wheel_momentum kernel: about the
@@ -1229,9 +1259,8 @@ class Sim:
         L_body_w, L_wheels_w : ndarray, shape (3,)
         """
         i = self._i(name)
-        r = self._models.rows[i]
-        return K.wheel_momentum(self._x[i, LY.STATE_Q], self._x[i, LY.STATE_OMEGA_B], self._models.Omega[i],
-                                r[LY.MODEL_I_P].reshape(3, 3), r[LY.MODEL_J])
+        return backends.wheel_momentum(self._models.rows[i], self._x[i, LY.STATE_Q], self._x[i, LY.STATE_OMEGA_B],
+                                       self._models.Omega[i])
 
     def _i(self, name: str) -> int:
         try:

@@ -327,7 +327,7 @@ def test_divergence_earliest_step_models_and_structured():
     kinds = [2, 0, 0, 0, 0, 3]
     state, params = random_bodies(rng, len(kinds))
     md = random_models(rng, state, params, kinds)
-    md.rows[0, 21] = 10.0                                # body 0's wheels blow up, after a while (step 17)
+    md.rows[0, LY.MODEL_C_W] = 10.0                      # body 0's wheels blow up, after a while (step 17)
     state[4, 10:13] = [3000.0, 2000.0, 1000.0]           # body 4 blows up sooner (step 8) under explicit Euler
     got = {}
     for backend in (CBackend(), NumpyBackend()):
@@ -492,26 +492,33 @@ def _stale_message_for_current_generated():
 
 # ---------------------------------------------------------------- joint / wheel models through the C loop
 
-from lavendersim.backends import KIND_JOINT, KIND_WHEELS, MODEL_SIZE, Models  # noqa: E402
+from lavendersim.backends import KIND_AXES, KIND_JOINT, KIND_WHEELS, MODEL_SIZE, Models, wheel_row  # noqa: E402
 from lavendersim.backends.numpy_backend import NumpyBackend  # noqa: E402
+from lavendersim.generated import layout as LY  # noqa: E402
 
 
 def random_models(rng, state, params, kinds):
-    """Model rows for the given kinds (joint anchored 0.1-0.3 m from the COM; wheels ~5% of I)."""
+    """Model rows for the given kinds (joint anchored 0.1-0.3 m from the COM; wheels ~5% of I: three on the
+    body axes, or with KIND_AXES 2-4 wheels on random unit axes, the unused slots padded)."""
     nb = state.shape[0]
     md = Models.empty(nb)
     for b, kind in enumerate(kinds):
-        I_b = params[b, 1:4]
+        I_b = params[b, LY.PARAM_I_B]
         r_b = rng.uniform(-0.3, 0.3, 3) if kind & KIND_JOINT else np.zeros(3)
-        anchor = state[b, 0:3] - K.quat_rotate(state[b, 3:7], r_b)
-        md.rows[b, 0] = kind
-        md.rows[b, 1:10] = K.parallel_axis(np.diag(I_b), params[b, 0], -r_b).reshape(9)
-        md.rows[b, 10:13], md.rows[b, 13:16] = r_b, anchor
+        anchor = state[b, LY.STATE_P_W] - K.quat_rotate(state[b, LY.STATE_Q], r_b)
+        row = md.rows[b]
+        row[LY.MODEL_KIND] = kind
+        row[LY.MODEL_I_P] = K.parallel_axis(np.diag(I_b), params[b, LY.PARAM_M], -r_b).reshape(9)
+        row[LY.MODEL_R_B], row[LY.MODEL_ANCHOR_W] = r_b, anchor
         if kind & KIND_WHEELS:
-            md.rows[b, 16:19] = 0.05 * I_b
-            md.rows[b, 19:22] = 0.3, 40.0, 1e-3
-            md.Omega[b] = rng.uniform(-5, 5, 3)
-            md.command[b] = rng.uniform(-0.5, 0.5, 3)
+            n = int(rng.integers(2, LY.WHEELS_MAX + 1)) if kind & KIND_AXES else LY.WHEELS_BODY_AXES
+            A = rng.normal(size=(3, n)) if kind & KIND_AXES else np.eye(3)
+            A /= np.linalg.norm(A, axis=0)
+            J = 0.05 * (I_b.min() * np.ones(n) if kind & KIND_AXES else I_b)
+            assert wheel_row(row, J, A, on_axes=bool(kind & KIND_AXES)) == kind & (KIND_WHEELS | KIND_AXES)
+            row[LY.MODEL_TORQUE_LIMIT], row[LY.MODEL_SPEED_LIMIT], row[LY.MODEL_C_W] = 0.3, 40.0, 1e-3
+            md.Omega[b, :n] = rng.uniform(-5, 5, n)
+            md.command[b, :n] = rng.uniform(-0.5, 0.5, n)
     return md
 
 
@@ -522,9 +529,10 @@ def copy_models(md):
 @pytest.mark.parametrize("integrator", INTEGRATORS)
 @pytest.mark.parametrize("effects_name", ["none", "all"])
 def test_models_match_the_numpy_backend(integrator, effects_name):
-    """Plain, jointed, wheeled and jointed+wheeled bodies interleaved (plain runs are blocked in C)."""
+    """Plain, jointed, wheeled and jointed+wheeled bodies, wheels on the body axes and on random axes
+    (KIND_AXES), interleaved (plain runs are blocked in C)."""
     rng = np.random.default_rng(21)
-    kinds = [0, 3, 0, 0, 2, 1, 0, 0, 0, 0, 3]
+    kinds = [0, 3, 0, 0, 2, 1, 0, 0, 0, 0, 3, 6, 0, 7]
     state, params = random_bodies(rng, len(kinds))
     md = random_models(rng, state, params, kinds)
     effects = effects_array(effects_name)
@@ -535,7 +543,10 @@ def test_models_match_the_numpy_backend(integrator, effects_name):
     assert np.max(np.abs(a - b)) <= TOL * max(1.0, np.max(np.abs(a)))
     assert np.max(np.abs(ma.Omega - mb.Omega)) <= TOL * max(1.0, np.max(np.abs(ma.Omega)))
     np.testing.assert_array_equal(ma.applied, mb.applied)
-    assert np.all(mb.applied[[1, 4, 10]] != 0) and np.all(mb.applied[[0, 2, 5]] == 0)
+    n = md.wheel_counts
+    assert list(n) == [0, 3, 0, 0, 3, 0, 0, 0, 0, 0, 3, n[11], 0, n[13]] and min(n[11], n[13]) >= 2
+    used = np.arange(LY.WHEELS_MAX)[None, :] < n[:, None]
+    assert np.all(mb.applied[used] != 0) and np.all(mb.applied[~used] == 0) and np.all(mb.Omega[~used] == 0)
     # plain bodies are bit-identical to a call without models
     plain = state.copy()
     CBackend().advance(plain, params, effects, integrator, True, 0.005, 60)
@@ -548,7 +559,7 @@ def test_model_divergence_low_level_contract():
     kinds = [0, 2, 3, 0, 0]
     state, params = random_bodies(rng, len(kinds))
     md = random_models(rng, state, params, kinds)
-    md.rows[2, 21] = 1e3  # wheel damping far beyond explicit Euler's limit: body 2's wheels blow up
+    md.rows[2, LY.MODEL_C_W] = 1e3  # wheel damping far beyond explicit Euler's limit: body 2's wheels blow up
     s, m2 = state.copy(), copy_models(md)
     status, step, body = _c.simulate(s, params, np.zeros((0, 8)), 0, 0, 0.01, 300, m2.rows, m2.Omega, m2.command, m2.applied)
     assert (status, body) == (1, 2) and step > 0
@@ -573,19 +584,20 @@ def test_bad_model_buffers():
     state, params = random_bodies(rng, 2)
     md = random_models(rng, state, params, [3, 0])
     E = np.zeros((0, 8))
-    W3 = np.zeros((2, 3))
+    W3 = np.zeros((2, LY.WHEELS_MAX))
     with pytest.raises(ValueError, match="all four"):
         _c.simulate(state.copy(), params, E, 2, 1, 0.01, 1, md.rows)
     with pytest.raises(ValueError, match=rf"model_rows must have shape \(n, {MODEL_SIZE}\)"):
-        _c.simulate(state.copy(), params, E, 2, 1, 0.01, 1, md.rows[:, :21].copy(), W3.copy(), W3, W3.copy())
+        _c.simulate(state.copy(), params, E, 2, 1, 0.01, 1, md.rows[:, :-1].copy(), W3.copy(), W3, W3.copy())
     with pytest.raises(ValueError, match="model_rows has 1 rows"):
         _c.simulate(state.copy(), params, E, 2, 1, 0.01, 1, md.rows[:1].copy(), W3.copy(), W3, W3.copy())
     with pytest.raises(ValueError, match="Omega has 1 rows"):
-        _c.simulate(state.copy(), params, E, 2, 1, 0.01, 1, md.rows, np.zeros((1, 3)), W3, W3.copy())
-    bad = md.rows.copy()
-    bad[1, 0] = 4
-    with pytest.raises(ValueError, match="kind"):
-        _c.simulate(state.copy(), params, E, 2, 1, 0.01, 1, bad, W3.copy(), W3, W3.copy())
+        _c.simulate(state.copy(), params, E, 2, 1, 0.01, 1, md.rows, np.zeros((1, LY.WHEELS_MAX)), W3, W3.copy())
+    for k in (4, 5, 8, 2.5, -1):   # KIND_AXES needs KIND_WHEELS; beyond the bits; not an integer
+        bad = md.rows.copy()
+        bad[1, LY.MODEL_KIND] = k
+        with pytest.raises(ValueError, match="kind"):
+            _c.simulate(state.copy(), params, E, 2, 1, 0.01, 1, bad, W3.copy(), W3, W3.copy())
     ro = W3.copy()
     ro.flags.writeable = False
     with pytest.raises(TypeError, match="writable"):
@@ -597,7 +609,7 @@ def test_bad_model_buffers():
                            Models(md.rows, W3.astype(np.float32), W3, W3.copy()))
     with pytest.raises(ValueError, match=rf"models.rows must have shape \(2, {MODEL_SIZE}\)"):
         CBackend().advance(state.copy(), params, E, "rk4", True, 0.01, 1, Models(md.rows[:, :20], W3.copy(), W3, W3.copy()))
-    assert MODEL_SIZE == 23   # + MODEL_CUTOFF (issue 13: the wheel motor)
+    assert MODEL_SIZE == 36   # + MODEL_CUTOFF (issue 13: the wheel motor); J and A_b for 4 wheel slots (N-axis wheels)
 
 
 @pytest.mark.parametrize("calm", [0, 9])   # the diverging body alone, or in the second block of 8

@@ -7,6 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from conftest import missing
+from lavendersim.generated import layout as LY
 
 pytestmark = pytest.mark.needs("gym")
 if missing("gym") is None:
@@ -79,8 +80,9 @@ def _c_cubes(n):
     m = sim._models
     x = sim._x.copy()
     x[:, 10:13] = rng.uniform(-3, 3, (n, 3))
-    cmd = rng.uniform(-0.25, 0.25, (n, 3))                  # beyond the torque limit too: saturated
-    Om = rng.uniform(-50, 50, (n, 3))
+    cmd, Om = np.zeros((n, LY.WHEELS_MAX)), np.zeros((n, LY.WHEELS_MAX))   # the cubes' three wheels: the first slots
+    cmd[:, :3] = rng.uniform(-0.25, 0.25, (n, 3))          # beyond the torque limit too: saturated
+    Om[:, :3] = rng.uniform(-50, 50, (n, 3))
     return x, sim.params, sim._step_effects, m.rows, Om, cmd
 
 
@@ -94,7 +96,7 @@ def test_two_threads_are_one_thread_bitwise(integrator):
     try:
         for threads in (1, 2):
             assert C.threads(threads) in (1, threads)
-            x, Om, applied = x0.copy(), Om0.copy(), np.zeros((n, 3))
+            x, Om, applied = x0.copy(), Om0.copy(), np.zeros((n, LY.WHEELS_MAX))
             status = C._c.simulate(x, params, effects, integrator, 1, 1e-3, steps, rows, Om, cmd, applied,
                                    None, None, 0.0, 0.0, None)
             out[threads] = (status, x, Om, applied)
@@ -119,7 +121,7 @@ def test_divergence_with_two_threads_is_reported_as_with_one():
     try:
         for threads in (1, 2):
             C.threads(threads)
-            x, Om, applied = x0.copy(), Om0.copy(), np.zeros((n, 3))
+            x, Om, applied = x0.copy(), Om0.copy(), np.zeros((n, LY.WHEELS_MAX))
             status, step, body = C._c.simulate(x, params, effects, 2, 1, 1e-3, steps, rows, Om, cmd, applied,
                                                None, None, 0.0, 0.0, None)
             res[threads] = (status, step, body, x[body].copy(), Om[body].copy())
@@ -227,7 +229,8 @@ def test_actions_saturated_and_checked():
     assert np.array_equal(outs[0][0], outs[3][0]) or not np.array_equal(np.clip(a, -1, 1),
                                                                          np.clip(a, -1, 1).astype(np.float32))
     tl = envs[0].model.torque_limit
-    np.testing.assert_array_equal(envs[0].sim._models.command, np.clip(a, -1, 1) * tl)
+    np.testing.assert_array_equal(envs[0].sim._models.command[:, :3], np.clip(a, -1, 1) * tl)
+    assert not envs[0].sim._models.command[:, 3:].any()     # the unused wheel slots stay 0
     x = envs[0].sim.x.copy()
     for bad in (np.where(np.eye(n, 3) > 0, np.nan, 0.0), np.full((n, 3), np.inf, np.float32), np.zeros((n, 2)),
                 [[0.0, 0.0, float("-inf")]] * n):

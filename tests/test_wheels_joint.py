@@ -5,6 +5,7 @@ import pytest
 import lavendersim as lv
 from lavendersim import LavenderInputError as E
 from lavendersim.generated import kernels_numpy as K
+from lavendersim.generated import layout as LY
 
 # Long NumPy runs are in the slow set (NUMPY_SLOW: tests/conftest.py); test_c_and_numpy_agree_on_a_mixed_scene
 # checks quickly that NumPy computes what C computes.
@@ -411,7 +412,7 @@ def test_state_access_and_trajectory_carry_omega(backend):
     np.testing.assert_array_equal(sim.wheel_rates("cube"), [1.0, -2.0, 3.0])
     np.testing.assert_array_equal(sim.state("free").Omega, [0, 0, 0])
     tr = sim.record(10, every=5)
-    assert tr.Omega.shape == (3, 5, 3) and tr.body("cube").Omega.shape == (3, 3)
+    assert tr.Omega.shape == (3, 5, LY.WHEELS_MAX) and tr.body("cube").Omega.shape == (3, 3)   # all slots; the body its 3
     np.testing.assert_array_equal(tr.body("cube").Omega[0], [1.0, -2.0, 3.0])
     np.testing.assert_array_equal(tr.body("free").Omega, np.zeros((3, 3)))
     # setting q on a jointed body moves its COM with it

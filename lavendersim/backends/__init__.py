@@ -10,9 +10,10 @@ integrators (splitting, implicit_gyro, splitting4, rk4_expmap, symtop4, symtop_b
 otherwise; Sim raises LavenderInputError first).
 
 `models` (a `Models`, or None when no body has a joint or wheels) carries the per-body model:
-rows (nb, MODEL_SIZE) laid out as MODEL_LAYOUT; Omega (nb, 3) wheel rates relative to the body,
-rad/s (integrated); command (nb, 3) motor torque commands, N·m, held over the whole call;
-applied (nb, 3) written with the saturated torques of the last step. A body of kind 0 uses the
+rows (nb, MODEL_SIZE) laid out as MODEL_LAYOUT; Omega (nb, WHEELS_MAX) wheel rates relative to the
+body, rad/s (integrated); command (nb, WHEELS_MAX) motor torque commands, N·m, held over the whole
+call; applied (nb, WHEELS_MAX) written with the saturated torques of the last step. A body uses the
+first Models.wheel_counts[b] slots (three on the body axes; the rest padded, at rest). A body of kind 0 uses the
 plain rigid-body paths and ignores its row; bodies of different kinds mix freely.
 """
 from __future__ import annotations
@@ -22,7 +23,7 @@ import numpy as np
 from .. import validate as V
 from ..generated import layout as LAYOUT
 from ..generated import tableaux as TABLEAUX
-from ..generated.layout import KIND_JOINT, KIND_WHEELS, MODEL_LAYOUT, MODEL_SIZE  # noqa: F401  (re-exported)
+from ..generated.layout import KIND_AXES, KIND_JOINT, KIND_WHEELS, MODEL_LAYOUT, MODEL_SIZE  # noqa: F401  (re-exported)
 
 # name -> RHS evaluations per step (None: adaptive, counted as it runs). See rhs_per_step for how the
 # structure-preserving methods are counted.
@@ -103,7 +104,7 @@ def rhs_per_step(integrator: str, effects: np.ndarray, nb: int) -> int | None:
     return per * (n if integrator in ("splitting4", "symtop4", "symtop_bm6") else 1)
 
 # Per-body model row (float64), MODEL_LAYOUT / MODEL_SIZE printed from derive/layout.py: kind is a bit set,
-# KIND_JOINT | KIND_WHEELS.
+# KIND_JOINT | KIND_WHEELS (| KIND_AXES: the wheels on the row's A_b columns).
 
 
 class Models:
@@ -113,11 +114,11 @@ class Models:
     ----------
     rows : ndarray (nb, MODEL_SIZE)
         Per-body model rows laid out as MODEL_LAYOUT.
-    Omega : ndarray (nb, 3)
+    Omega : ndarray (nb, WHEELS_MAX)
         Wheel rates relative to the body, rad/s (integrated in place).
-    command : ndarray (nb, 3)
+    command : ndarray (nb, WHEELS_MAX)
         Motor torque commands, N·m, held over a call.
-    applied : ndarray (nb, 3)
+    applied : ndarray (nb, WHEELS_MAX)
         Written with the saturated motor torques of the last step, N·m.
     """
 
@@ -142,8 +143,99 @@ class Models:
 
     @property
     def kind(self) -> np.ndarray:
-        """Each body's model kind (bit set KIND_JOINT | KIND_WHEELS; 0 plain), int64 (nb,)."""
+        """Each body's model kind (bit set KIND_JOINT | KIND_WHEELS | KIND_AXES; 0 plain), int64 (nb,)."""
         return self.rows[:, LAYOUT.MODEL_KIND].astype(np.int64)
+
+    @property
+    def wheel_counts(self) -> np.ndarray:
+        """Wheels per body, int64 (nb,) (see :func:`wheel_counts`)."""
+        return wheel_counts(self.rows)
+
+    @property
+    def A_b(self) -> np.ndarray:
+        """Each body's wheel axes as columns, body frame, (nb, 3, WHEELS_MAX) (a view of the rows)."""
+        return self.rows[:, LAYOUT.MODEL_A_B].reshape(-1, 3, LAYOUT.WHEELS_MAX)
+
+
+def wheel_counts(rows: np.ndarray) -> np.ndarray:
+    """Wheels per body of model rows: 0 without wheels, WHEELS_BODY_AXES on the body axes, else the A_b
+    columns in use (a padded slot has a zero axis).
+
+    Parameters
+    ----------
+    rows : ndarray (nb, MODEL_SIZE) or (MODEL_SIZE,)
+        Model rows.
+
+    Returns
+    -------
+    ndarray of int64, shape (nb,) (or a scalar for one row)
+    """
+    r = np.asarray(rows)
+    kind = r[..., LAYOUT.MODEL_KIND].astype(np.int64)
+    A = r[..., LAYOUT.MODEL_A_B].reshape(r.shape[:-1] + (3, LAYOUT.WHEELS_MAX))
+    used = np.count_nonzero(np.any(A != 0.0, axis=-2), axis=-1)
+    return np.where((kind & KIND_WHEELS) == 0, 0, np.where((kind & KIND_AXES) != 0, used, LAYOUT.WHEELS_BODY_AXES))
+
+
+def wheel_row(row: np.ndarray, J: np.ndarray, A_b: np.ndarray, on_axes: bool) -> int:
+    """Write a wheel layout into one model row: J and A_b's columns in the first N slots, the rest padded
+    (J = 1, zero axis: derive/wheel_layout.py proves such a wheel changes nothing).
+
+    Parameters
+    ----------
+    row : ndarray (MODEL_SIZE,)
+        The body's model row, written in place (J and A_b only).
+    J : ndarray (N,)
+        Wheel axial inertias, kg·m².
+    A_b : ndarray (3, N)
+        Wheel spin axes as unit columns, body frame.
+    on_axes : bool
+        The layout is stepped on its axes (KIND_AXES); else it is the body-axis triple.
+
+    Returns
+    -------
+    int
+        The kind bits the layout adds: KIND_WHEELS, with KIND_AXES when on_axes.
+    """
+    n = J.size
+    pad_J = np.ones(LAYOUT.WHEELS_MAX)
+    pad_J[:n] = J
+    pad_A = np.zeros((3, LAYOUT.WHEELS_MAX))
+    pad_A[:, :n] = A_b
+    row[LAYOUT.MODEL_J], row[LAYOUT.MODEL_A_B] = pad_J, pad_A.reshape(-1)
+    return KIND_WHEELS | (KIND_AXES if on_axes else 0)
+
+
+def wheel_momentum(row: np.ndarray, q: np.ndarray, omega_b: np.ndarray, Omega: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """World angular momentum about the pivot of a wheeled body (wheels locked) and of its wheels' spin,
+    from its model row, through its layout's printed kernel.
+
+    Parameters
+    ----------
+    row : ndarray (MODEL_SIZE,)
+        The body's model row (kind with KIND_WHEELS).
+    q : ndarray (4,)
+        Orientation (x, y, z, w), R_WB.
+    omega_b : ndarray (3,)
+        Angular velocity, body frame, rad/s.
+    Omega : ndarray (WHEELS_MAX,)
+        Wheel rates relative to the body, rad/s.
+
+    Returns
+    -------
+    L_body_w, L_wheels_w : ndarray (3,)
+        kg·m²/s, world frame.
+    """
+    from ..kernels import K
+
+    I_p = row[LAYOUT.MODEL_I_P].reshape(3, 3)
+    if int(row[LAYOUT.MODEL_KIND]) & KIND_AXES:
+        Lb, Lw, _ = getattr(K, f"wheels{LAYOUT.WHEELS_MAX}_momentum")(q, omega_b, Omega, I_p, row[LAYOUT.MODEL_A_B].reshape(3, LAYOUT.WHEELS_MAX),
+                                       row[LAYOUT.MODEL_J])
+    else:
+        n = LAYOUT.WHEELS_BODY_AXES
+        Lb, Lw = K.wheel_momentum(q, omega_b, Omega[:n], I_p, row[LAYOUT.MODEL_J][:n])
+    return np.asarray(Lb), np.asarray(Lw)
 
 
 BACKEND_CHOICES = ("auto",) + BACKENDS

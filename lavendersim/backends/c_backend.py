@@ -239,10 +239,11 @@ def _cause(start: np.ndarray, pre: np.ndarray, params: np.ndarray, effects: np.n
     W0 = None if model is None else model[1]
     if not np.all(np.isfinite(start)) or (W0 is not None and not np.all(np.isfinite(W0))):
         return "non-finite input: the state was already non-finite before the step"
-    from . import divergence_cause
+    from . import divergence_cause, wheel_counts
 
-    wheels = None if W0 is None else (model[0][LY.MODEL_J], model[0][LY.MODEL_C_W])
-    cause = divergence_cause(start, dt, integrator, W0, wheels)
+    n = int(wheel_counts(model[0])) if W0 is not None else 0
+    wheels = None if W0 is None else (model[0][LY.MODEL_J][:n], model[0][LY.MODEL_C_W])
+    cause = divergence_cause(start, dt, integrator, None if W0 is None else W0[:n], wheels)
     if step > 0:
         wtxt = "" if W0 is None else f", |Omega| = {norm_safe(model[2]):.3g} rad/s"
         cause += (f" (just before step {step}: |omega|*dt = {norm_safe(pre[LY.STATE_OMEGA_B]) * dt:.3g}, "
@@ -401,9 +402,9 @@ class CBackend:
         if models is not None:
             nb = state.shape[0]
             rows = _f64_rows("rows", models.rows, LY.MODEL_SIZE, nb)
-            Omega = _f64_rows("Omega", models.Omega, 3, nb, writable=True)
-            command = _f64_rows("command", models.command, 3, nb)
-            applied = _f64_rows("applied", models.applied, 3, nb, writable=True)
+            Omega = _f64_rows("Omega", models.Omega, LY.XS_OMEGA_LEN, nb, writable=True)
+            command = _f64_rows("command", models.command, LY.XS_OMEGA_LEN, nb)
+            applied = _f64_rows("applied", models.applied, LY.XS_OMEGA_LEN, nb, writable=True)
             extra = (rows, Omega, command, applied)
             if restore:
                 snap_W, snap_u = Omega.copy(), applied.copy()

@@ -6,8 +6,9 @@ dispatch (generated/kernels_numpy.py, or a user set's), indexed per body once pe
 (_EffectIndex), and use rigid_body_rhs. An effect code no declaration has raises.
 Bodies with a spherical joint and/or reaction wheels (kind != 0 in the model rows) accumulate the
 same way (a jointed body's effects that read v_w see its kinematic COM velocity) and
-use wheel_body_rhs (wheels) or pivot_body_rhs (joint only). With such bodies the stepped state is
-(nb, 16) = [x (13), Omega (3)]; a jointed body's p_w, v_w are not integrated but set from
+use wheel_body_rhs (body-axis wheels), wheels<WHEELS_MAX>_body_rhs (wheels on the model row's axes,
+KIND_AXES) or pivot_body_rhs (joint only). With such bodies the stepped state is (nb, XS_SIZE) =
+[x (13), Omega (WHEELS_MAX)]; a jointed body's p_w, v_w are not integrated but set from
 pivot_kinematics after every step.
 """
 from __future__ import annotations
@@ -19,11 +20,14 @@ from ..errors import DivergenceError
 from ..generated import layout as LY
 from ..generated import tableaux as T
 from ..kernels import K
-from . import (DOPRI5_HMIN_REL, DOPRI5_MAX_SUBSTEPS, FLOAT32_INTEGRATORS, KIND_JOINT, KIND_WHEELS, PLAIN_ONLY, Adaptive, Models,
-               divergence_cause, no_root_cause, tolerance_cause)
+from . import (DOPRI5_HMIN_REL, DOPRI5_MAX_SUBSTEPS, FLOAT32_INTEGRATORS, KIND_AXES, KIND_JOINT, KIND_WHEELS, PLAIN_ONLY,
+               Adaptive, Models, divergence_cause, no_root_cause, tolerance_cause)
 
 P, Q, V, W = LY.STATE_P_W, LY.STATE_Q, LY.STATE_V_W, LY.STATE_OMEGA_B  # state-row fields
 X, OM = LY.XS_X, LY.XS_OMEGA                                               # extended state [x, Omega]
+OM3 = slice(OM.start, OM.start + LY.WHEELS_BODY_AXES)                       # the rates of body-axis wheels
+_WHEELS_RHS = getattr(K, f"wheels{LY.WHEELS_MAX}_body_rhs")                  # wheels on the model row's axes
+_WHEELS_MOTOR = getattr(K, f"wheels{LY.WHEELS_MAX}_motor")
 U, U0 = slice(Q.start, Q.start + 3), Q.start + 3  # rk4_expmap: u in q's first three slots, the fourth held at 0
 
 
@@ -111,6 +115,26 @@ class _Group:
         self.tl, self.sl = r[:, LY.MODEL_TORQUE_LIMIT].copy(), r[:, LY.MODEL_SPEED_LIMIT].copy()
         self.c_w = r[:, LY.MODEL_C_W].copy()
         self.cutoff = r[:, LY.MODEL_CUTOFF].copy()
+        self.on_axes = bool(kind.size) and bool(kind[0] & KIND_AXES)   # a group is all one wheel kernel
+        self.A_b = r[:, LY.MODEL_A_B].reshape(-1, 3, LY.WHEELS_MAX).copy()
+
+    def wheel_rhs(self, xg, F, tau, u, o):
+        """q, omega_b, Omega derivatives of the group's wheeled bodies into o (the other wheel slots at rest)."""
+        if self.on_axes:
+            o[:, Q], o[:, W], o[:, OM] = _WHEELS_RHS(xg[:, Q], xg[:, W], xg[:, OM], self.I_p, self.A_b, self.J,
+                                                            self.r_b, F, tau, u, self.c_w)
+        else:
+            o[:, Q], o[:, W], o[:, OM3] = K.wheel_body_rhs(xg[:, Q], xg[:, W], xg[:, OM3], self.I_p, self.J[:, :3],
+                                                           self.r_b, F, tau, u[:, :3], self.c_w)
+            o[:, OM3.stop:OM.stop] = 0.0
+
+    def motor(self, command, Omega):
+        """The torques the group's motors apply (command, Omega: its rows, (n, WHEELS_MAX))."""
+        if self.on_axes:
+            return _WHEELS_MOTOR(command, Omega, self.tl, self.sl, self.cutoff)
+        u = np.zeros_like(command)
+        u[:, :3] = K.wheel_motor(command[:, :3], Omega[:, :3], self.tl, self.sl, self.cutoff)
+        return u
 
     def velocity(self, x):
         """COM velocity for the effects: kinematic for jointed bodies, the state's otherwise."""
@@ -150,17 +174,22 @@ class _Plan:
         self.damped_f = self.index.velocity  # bodies with an effect that reads v_w or omega_b
         self.wheeled = (kind & KIND_WHEELS) != 0
         self.I_free = self.I[self.free]
-        wheels = np.flatnonzero((kind & KIND_WHEELS) != 0)
         pivot = np.flatnonzero(kind == KIND_JOINT)
-        self.wheels = _Group(wheels, effects, self.m, self.I, rows) if wheels.size else None
+        # wheeled bodies by kernel: body-axis wheels, wheels on the row's axes
+        self.wheels = [_Group(ids, effects, self.m, self.I, rows)
+                       for ids in (np.flatnonzero(self.wheeled & ((kind & KIND_AXES) == 0)),
+                                   np.flatnonzero((kind & KIND_AXES) != 0)) if ids.size]
         self.pivot = _Group(pivot, effects, self.m, self.I, rows) if pivot.size else None
         self.jointed = np.flatnonzero((kind & KIND_JOINT) != 0)
+        # dopri5's error norm counts the state and the layout's wheel rates (every slot with axes), as C does
+        self.norm_cols = np.where((kind & KIND_AXES) != 0, float(LY.XS_SIZE),
+                                  np.where(self.wheeled, float(LY.XS_OMEGA.start + LY.WHEELS_BODY_AXES), float(LY.STATE_SIZE)))
         if self.jointed.size:
             r = rows[self.jointed]
             self.j_anchor, self.j_r_b = r[:, LY.MODEL_ANCHOR_W].copy(), r[:, LY.MODEL_R_B].copy()
 
     def rhs(self, x: np.ndarray, u: np.ndarray | None = None) -> np.ndarray:
-        """d/dt of x (nb, 13), or of [x, Omega] (nb, 16) with u (n_wheeled, 3) when bodies have models."""
+        """d/dt of x (nb, 13), or of [x, Omega] (nb, XS_SIZE) with u (nb, WHEELS_MAX) when bodies have models."""
         if self.all_free:
             return self.K.rigid_body_rhs_free(x, self.I)
         out = np.empty_like(x)
@@ -172,13 +201,11 @@ class _Plan:
             xf = x[self.forced, X]
             F, tau = self.index.sums(xf, xf[:, V])
             out[self.forced, X] = self.K.rigid_body_rhs(xf, self.m_f, self.I_f, F, tau)
-        g = self.wheels
-        if g is not None:
+        for g in self.wheels:
             xg = x[g.idx]
             F, tau = g.index.sums(xg, g.velocity(xg))
             o = np.empty((g.idx.size, LY.XS_SIZE))
-            o[:, Q], o[:, W], o[:, OM] = K.wheel_body_rhs(
-                xg[:, Q], xg[:, W], xg[:, OM], g.I_p, g.J, g.r_b, F, tau, u, g.c_w)
+            g.wheel_rhs(xg, F, tau, u[g.idx], o)
             g.translation(xg, F, o)
             out[g.idx] = o
         g = self.pivot
@@ -202,19 +229,23 @@ class _Plan:
         return F, tau_b
 
     def applied(self, x: np.ndarray, command: np.ndarray) -> np.ndarray | None:
-        """Saturated wheel torques for this step (zero-order hold), for the wheeled bodies."""
-        g = self.wheels
-        if g is None:
+        """Saturated wheel torques for this step (zero-order hold), (nb, WHEELS_MAX) (zero rows for bodies without
+        wheels), or None without wheeled bodies."""
+        if not self.wheels:
             return None
-        return K.wheel_motor(command[g.idx], x[g.idx, OM], g.tl, g.sl, g.cutoff)
+        u = np.zeros((x.shape[0], LY.WHEELS_MAX))
+        for g in self.wheels:
+            u[g.idx] = g.motor(command[g.idx], x[g.idx, OM])
+        return u
 
     def wheel_info(self, x: np.ndarray, b: int) -> tuple:
         """(Omega, (J, c_w)) of body b if it has wheels, else (None, None): for divergence_cause."""
-        g = self.wheels
-        if g is None or b not in g.idx:
-            return None, None
-        k = int(np.flatnonzero(g.idx == b)[0])
-        return x[b, OM], (g.J[k], g.c_w[k])
+        for g in self.wheels:
+            if b in g.idx:
+                k = int(np.flatnonzero(g.idx == b)[0])
+                n = LY.WHEELS_BODY_AXES if not g.on_axes else int(np.count_nonzero(np.any(g.A_b[k] != 0.0, axis=0)))
+                return x[b, OM][:n], (g.J[k][:n], g.c_w[k])
+        return None, None
 
     def constrain(self, x: np.ndarray) -> None:
         """Jointed bodies: p_w, v_w from the joint kinematics of the new q, omega."""
@@ -559,7 +590,7 @@ class NumpyBackend:
                 raise DivergenceError(i, b, divergence_cause(x[b, X], dt, integrator, *plan.wheel_info(x, b)))
             x[...] = xn
             if u is not None:
-                applied[plan.wheels.idx] = u
+                applied[plan.wheeled] = u[plan.wheeled]
 
 
 # Dormand–Prince 5(4) (Hairer, Nørsett & Wanner, Solving ODEs I, table 5.2): T.DP_A, T.DP_E and the controller
@@ -579,8 +610,7 @@ def _dopri5(plan, x, normalize, dt, n_steps, rtol, atol, hs, nfev, command=None,
     updated in place. k1 is reused (FSAL) within the call, recomputed each output step with wheels
     (their held torque may change)."""
     nb = x.shape[0]
-    ncols = (np.where(plan.wheeled, float(LY.XS_SIZE), float(LY.STATE_SIZE)) if x.shape[1] > LY.STATE_SIZE
-             else np.full(nb, float(LY.STATE_SIZE)))
+    ncols = (plan.norm_cols if x.shape[1] > LY.STATE_SIZE else np.full(nb, float(LY.STATE_SIZE)))
     hmin = DOPRI5_HMIN_REL * dt
     h = float(hs[0]) if nb else dt
     k1 = None
@@ -589,7 +619,7 @@ def _dopri5(plan, x, normalize, dt, n_steps, rtol, atol, hs, nfev, command=None,
     for i in range(n_steps):
         if command is not None:
             u = plan.applied(x, command)
-            if plan.wheels is not None:
+            if plan.wheels:
                 k1 = None
         f = (lambda y: plan.rhs(y, u)) if plan.has_models else plan.rhs  # noqa: E731
         if k1 is None:
@@ -639,7 +669,7 @@ def _dopri5(plan, x, normalize, dt, n_steps, rtol, atol, hs, nfev, command=None,
                 b = int(np.flatnonzero(bad)[0]) if bad.any() else int(np.argmax(norms))
                 raise DivergenceError(i, b, tolerance_cause(Adaptive(rtol, atol, 0), h, dt, x[b]))
         if u is not None:
-            applied[plan.wheels.idx] = u
+            applied[plan.wheeled] = u[plan.wheeled]
     hs[...] = h
     nfev += count
 

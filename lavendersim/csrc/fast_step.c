@@ -192,7 +192,7 @@ static int arguments_ok(const Stepper *s)
         long b;
         for (b = 0; b < s->nb; b++) {
             const double kind = s->models.rows[b * LV_MODEL_SIZE + LV_MODEL_KIND];
-            if (!(kind >= 0 && kind <= (LV_KIND_JOINT | LV_KIND_WHEELS) && kind == floor(kind))) return 0;
+            if (!lv_kind_valid(kind)) return 0;
             if (kind != 0 && LV_INTEGRATOR_PLAIN_ONLY(s->integrator)) return 0;
         }
     }

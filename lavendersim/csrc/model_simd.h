@@ -16,12 +16,12 @@
    Speed (wheel cubes under scene-wide gravity and angular damping, RK4, one thread, CPU time, min of 7
    interleaved rounds against isa(0), load ~0.5-1, Sim.run): N = 1024: scalar 289 ns/body-step, AVX-512 98
    (2.95x), AVX2 139 (2.1x), SSE2 239 (1.2x); N = 10^4: 299, 108 (2.8x), 153 (1.95x), 252 (1.2x). The lane
-   copies must be unrolled for that (LV_MT_UNROLL): without it the loops over the 23-number model row stay
+   copies must be unrolled for that (LV_MT_UNROLL): without it the loops over the model row stay
    loops, the lane loops around them are not vectorized, and the tiles were 0.65x the scalar path. */
 #ifndef LAVENDERSIM_MODEL_SIMD_H
 #define LAVENDERSIM_MODEL_SIMD_H
 
-/* Bodies per model tile: 90 rows of LV_MTILE doubles (23 KB) stay in L1 over a chunk of steps. */
+/* Bodies per model tile: ~110 rows of LV_MTILE doubles (~28 KB) stay in L1 over a chunk of steps. */
 #define LV_MTILE 32
 #define LV_MKIND (LV_KIND_JOINT | LV_KIND_WHEELS)
 
@@ -41,9 +41,9 @@ typedef void (*lv_mtile_fn)(lv_mtile *LV_RESTRICT t, const lv_effect_ref *refs, 
                             int normalize, long m, double dt, long n_steps);
 
 /* A lane's rows in and out. The copies are unrolled (GCC's complete peeling stops at 16 iterations; a loop left
-   inside a lane loop keeps the compiler from vectorizing it over the lanes: the model row has 23 numbers). */
+   inside a lane loop keeps the compiler from vectorizing it over the lanes: the model row has LV_MODEL_SIZE numbers). */
 #if defined(__GNUC__) && !defined(__clang__)
-#define LV_MT_UNROLL _Pragma("GCC unroll 32")
+#define LV_MT_UNROLL _Pragma("GCC unroll 64")
 #else
 #define LV_MT_UNROLL
 #endif
@@ -82,9 +82,7 @@ typedef void (*lv_mtile_fn)(lv_mtile *LV_RESTRICT t, const lv_effect_ref *refs, 
         LV_MT_LOAD(F, F, 3);                                                                            \
         LV_MT_LOAD(tau, TAU, 3);                                                                        \
         LV_MT_LOAD(u, U, LV_NW);                                                                        \
-        lv_wheel_body_rhs(y + LV_STATE_Q, y + LV_STATE_OMEGA_B, y + LV_XS_OMEGA, r + LV_MODEL_I_P,       \
-                          r + LV_MODEL_J, r + LV_MODEL_R_B, F, tau, u, r[LV_MODEL_C_W], k + LV_STATE_Q,  \
-                          k + LV_STATE_OMEGA_B, k + LV_XS_OMEGA);                                        \
+        lv_wheels_rhs(LV_MKIND, y, r, F, tau, u, k);                                                    \
         for (i = 0; i < 3; i++) k[LV_STATE_P_W + i] = k[LV_STATE_V_W + i] = 0.0;                        \
         COMBINE                                                                                         \
     }
@@ -150,8 +148,7 @@ static int mtile_code_known(int code) { return lv_effect_n_params(code) >= 0; }
                 LV_MT_LOAD(cmd, C, LV_NW);                                                              \
                 for (i = 0; i < LV_NW; i++) Om[i] = t->Y[LV_XS_OMEGA + i][b];                           \
                 LV_MT_LOAD(r, R, LV_MODEL_SIZE);                                                        \
-                lv_wheel_motor(cmd, Om, r[LV_MODEL_TORQUE_LIMIT], r[LV_MODEL_SPEED_LIMIT],              \
-                               r[LV_MODEL_CUTOFF], u);                                                  \
+                lv_wheels_motor(LV_MKIND, r, cmd, Om, u);                                               \
                 LV_MT_STORE(U, u, LV_NW);                                                               \
                 for (i = 0; i < LV_XS_SIZE; i++) t->T[i][b] = t->Y[i][b];                               \
             }                                                                                           \
@@ -293,7 +290,7 @@ static void mtile_share_run(void *arg)
                               lim, &j, last);
         if (s < 0 || !earlier(s, sh->list[k + j], sh->head.limit, sh->head.best)) continue;
         memcpy(sh->state + sh->list[k + j] * LV_STATE_SIZE, last, LV_STATE_SIZE * sizeof(double));
-        memcpy(sh->md->Omega + 3 * sh->list[k + j], last + LV_XS_OMEGA, 3 * sizeof(double));
+        memcpy(sh->md->Omega + LV_NW * sh->list[k + j], last + LV_XS_OMEGA, LV_NW * sizeof(double));
         sh->head.limit = s;
         sh->head.best = sh->list[k + j];
         sh->head.status = LV_DIVERGED;

@@ -372,32 +372,33 @@ static PyObject *py_simulate(PyObject *self, PyObject *args)
     }
     if (n_models) {
         if (rows_of(&mr, LV_MODEL_SIZE, "simulate: model_rows",
-                    "[kind, I_p(9), r_b(3), anchor_w(3), J(3), torque_limit, speed_limit, c_w, cutoff]", &rows_n) != 0) goto fail;
+                    "[kind, I_p(9), r_b(3), anchor_w(3), J(4), A_b(12), torque_limit, speed_limit, c_w, cutoff]", &rows_n) != 0) goto fail;
         if (rows_n != nb) {
             PyErr_Format(PyExc_ValueError, "simulate: model_rows has %zd rows but state has %zd bodies", rows_n, nb);
             goto fail;
         }
-        if (rows_of(&om, LV_NW, "simulate: Omega", "[Omega_x, Omega_y, Omega_z]", &rows_n) != 0) goto fail;
+        if (rows_of(&om, LV_NW, "simulate: Omega", "[Omega_1 .. Omega_4]", &rows_n) != 0) goto fail;
         if (rows_n != nb) {
             PyErr_Format(PyExc_ValueError, "simulate: Omega has %zd rows but state has %zd bodies", rows_n, nb);
             goto fail;
         }
-        if (rows_of(&cm, LV_NW, "simulate: command", "[u_x, u_y, u_z]", &rows_n) != 0) goto fail;
+        if (rows_of(&cm, LV_NW, "simulate: command", "[u_1 .. u_4]", &rows_n) != 0) goto fail;
         if (rows_n != nb) {
             PyErr_Format(PyExc_ValueError, "simulate: command has %zd rows but state has %zd bodies", rows_n, nb);
             goto fail;
         }
-        if (rows_of(&ap, LV_NW, "simulate: applied", "[u_x, u_y, u_z]", &rows_n) != 0) goto fail;
+        if (rows_of(&ap, LV_NW, "simulate: applied", "[u_1 .. u_4]", &rows_n) != 0) goto fail;
         if (rows_n != nb) {
             PyErr_Format(PyExc_ValueError, "simulate: applied has %zd rows but state has %zd bodies", rows_n, nb);
             goto fail;
         }
         for (e = 0; e < nb; e++) {
             const double kind = ((const double *)mr.buf)[e * LV_MODEL_SIZE + LV_MODEL_KIND];
-            if (!(kind >= 0 && kind <= (LV_KIND_JOINT | LV_KIND_WHEELS) && kind == floor(kind))) {
+            if (!lv_kind_valid(kind)) {
                 PyObject *ko = PyFloat_FromDouble(kind);
                 PyErr_Format(PyExc_ValueError,
-                             "simulate: model_rows[%zd] kind must be 0 (plain), 1 (joint), 2 (wheels) or 3 (joint + wheels), got %R",
+                             "simulate: model_rows[%zd] kind must be 0 (plain), 1 (joint), 2 (wheels), 3 (joint + wheels), "
+                             "6 (wheels on axes) or 7 (joint + wheels on axes), got %R",
                              e, ko);
                 Py_XDECREF(ko);
                 goto fail;
@@ -498,9 +499,9 @@ static PyMethodDef methods[] = {
      "state (nb,13) advanced in place; params (nb,4) [m, I_x, I_y, I_z]; effects (ne, >=2) [code, body, parameters...]\n"
      "(built-in codes, see generated/kernels.h, or user codes from LV_EFFECT_USER_BASE with user_effects: int64 (n,3)\n"
      "[function address, n_params, flags] for codes base .. base+n-1; an undeclared code raises ValueError).\n"
-     "Optional, all four or none: model_rows (nb,22) [kind (0 plain, 1 joint, 2 wheels, 3 both), I_p(9), r_b(3),\n"
-     "anchor_w(3), J(3), torque_limit, speed_limit, c_w, cutoff]; Omega (nb,3) advanced in place; command (nb,3) held;\n"
-     "applied (nb,3) receives the saturated wheel torques of the last step.\n"
+     "Optional, all four or none: model_rows (nb,36) [kind (0 plain, 1 joint, 2 wheels, 3 both; +4 wheels on the A_b\n"
+     "axes), I_p(9), r_b(3), anchor_w(3), J(4), A_b(3x4), torque_limit, speed_limit, c_w, cutoff]; Omega (nb,4) advanced\n"
+     "in place; command (nb,4) held; applied (nb,4) receives the saturated wheel torques of the last step.\n"
      "The model arrays may be None (all four). dopri5 needs h (nb,) (per-body step proposals, in/out; <= 0:\n"
      "choose) and nfev (nb,) (RHS evaluations added per body), rtol > 0, atol >= 0.\n"
      "integrator 0 euler, 1 semi-implicit euler, 2 rk4, 3 dopri5, 4 splitting, 5 implicit_gyro, 6 splitting4,\n"

@@ -440,6 +440,36 @@ const char *lv_isa_name(int isa)
 /* ---- bodies with a spherical joint and/or reaction wheels ------------------------------------ */
 
 
+/* The rotational part of d/dt [x, Omega] (q, omega_b, Omega) of a body with wheels, F and tau its effect
+   sums (world), u its applied motor torques: the printed kernel of its layout. Body-axis wheels fill the
+   first LV_WHEELS_BODY_AXES rates; the other slots stay at rest. */
+static inline void lv_wheels_rhs(int kind, const double *y, const double *r, const double *F, const double *tau,
+                                 const double *u, double *yd)
+{
+    int i;
+    if (kind & LV_KIND_AXES) {
+        lv_wheels4_body_rhs(y + LV_STATE_Q, y + LV_STATE_OMEGA_B, y + LV_XS_OMEGA, r + LV_MODEL_I_P, r + LV_MODEL_A_B,
+                            r + LV_MODEL_J, r + LV_MODEL_R_B, F, tau, u, r[LV_MODEL_C_W], yd + LV_STATE_Q,
+                            yd + LV_STATE_OMEGA_B, yd + LV_XS_OMEGA);
+    } else {
+        lv_wheel_body_rhs(y + LV_STATE_Q, y + LV_STATE_OMEGA_B, y + LV_XS_OMEGA, r + LV_MODEL_I_P, r + LV_MODEL_J,
+                          r + LV_MODEL_R_B, F, tau, u, r[LV_MODEL_C_W], yd + LV_STATE_Q, yd + LV_STATE_OMEGA_B, yd + LV_XS_OMEGA);
+        for (i = LV_WHEELS_BODY_AXES; i < LV_NW; i++) yd[LV_XS_OMEGA + i] = 0.0;
+    }
+}
+
+/* The torques the motors of a body with wheels apply this step (its layout's printed motor line). */
+static inline void lv_wheels_motor(int kind, const double *r, const double *cmd, const double *Omega, double *u)
+{
+    int i;
+    if (kind & LV_KIND_AXES) {
+        lv_wheels4_motor(cmd, Omega, r[LV_MODEL_TORQUE_LIMIT], r[LV_MODEL_SPEED_LIMIT], r[LV_MODEL_CUTOFF], u);
+    } else {
+        lv_wheel_motor(cmd, Omega, r[LV_MODEL_TORQUE_LIMIT], r[LV_MODEL_SPEED_LIMIT], r[LV_MODEL_CUTOFF], u);
+        for (i = LV_WHEELS_BODY_AXES; i < LV_NW; i++) u[i] = 0.0;
+    }
+}
+
 /* d/dt of [x, Omega] for a body of nonzero kind; u = this step's applied wheel torques.
    r = its model row. A jointed body's p, v derivatives are zero (set from the joint after the step);
    its effects that read v_w see the kinematic COM velocity (computed only when needs_v). */
@@ -456,8 +486,7 @@ static inline void model_rhs_of(const double *y, const double *u, double m, cons
     if (builtin) builtin_effect_sums(y, v, m, I_b, refs, n_refs, F, tau);
     else effect_sums(y, v, m, I_b, refs, n_refs, F, tau);
     if (kind & LV_KIND_WHEELS) {
-        lv_wheel_body_rhs(y + LV_STATE_Q, y + LV_STATE_OMEGA_B, y + LV_XS_OMEGA, r + LV_MODEL_I_P, r + LV_MODEL_J,
-                          r + LV_MODEL_R_B, F, tau, u, r[LV_MODEL_C_W], yd + LV_STATE_Q, yd + LV_STATE_OMEGA_B, yd + LV_XS_OMEGA);
+        lv_wheels_rhs(kind, y, r, F, tau, u, yd);
     } else {
         lv_pivot_body_rhs(y + LV_STATE_Q, y + LV_STATE_OMEGA_B, r + LV_MODEL_I_P, r + LV_MODEL_R_B, F, tau,
                           yd + LV_STATE_Q, yd + LV_STATE_OMEGA_B);
@@ -501,8 +530,7 @@ static inline long advance_model(double *state, const double *params, long b, co
     memcpy(applied, md->applied + LV_NW * b, sizeof applied);
 #define MRHS(in, out) model_rhs_of(in, u, m, I_b, r, kind, needs_v, builtin, refs, n_refs, out)
     for (s = 0; s < n_steps; s++) {
-        if (kind & LV_KIND_WHEELS)
-            lv_wheel_motor(cmd, y + LV_XS_OMEGA, r[LV_MODEL_TORQUE_LIMIT], r[LV_MODEL_SPEED_LIMIT], r[LV_MODEL_CUTOFF], u);
+        if (kind & LV_KIND_WHEELS) lv_wheels_motor(kind, r, cmd, y + LV_XS_OMEGA, u);
         switch (integrator) {
         case LV_INTEGRATOR_EULER:
             MRHS(y, k1);
@@ -564,6 +592,8 @@ LV_FLATTEN static long advance_model_rk4(double *state, const double *params, lo
     switch (kind) {
     case LV_KIND_JOINT | LV_KIND_WHEELS: return LV_MODEL_RK4(LV_KIND_JOINT | LV_KIND_WHEELS);
     case LV_KIND_WHEELS: return LV_MODEL_RK4(LV_KIND_WHEELS);
+    case LV_KIND_JOINT | LV_KIND_WHEELS | LV_KIND_AXES: return LV_MODEL_RK4(LV_KIND_JOINT | LV_KIND_WHEELS | LV_KIND_AXES);
+    case LV_KIND_WHEELS | LV_KIND_AXES: return LV_MODEL_RK4(LV_KIND_WHEELS | LV_KIND_AXES);
     default: return LV_MODEL_RK4(LV_KIND_JOINT);
     }
 }
@@ -585,7 +615,7 @@ static long advance_model_body(double *state, const double *params, long b, cons
 
 /* ---- per-body integrators: dopri5 (any kind), splitting and implicit_gyro (plain bodies) ------- */
 
-/* One body's right-hand side on the extended state [x, Omega] (16): plain bodies get Omega' = 0. */
+/* One body's right-hand side on the extended state [x, Omega] (LV_XS_SIZE): plain bodies get Omega' = 0. */
 typedef struct {
     long b;
     int kind, has, needs_v, flags;
@@ -687,7 +717,8 @@ static long advance_dopri5(double *state, const double *params, long b, const lv
     int have_k1 = 0, n, i, s2, j;
     long s;
     ctx_init(&c, params, b, md, ix);
-    n = c.kind & LV_KIND_WHEELS ? LV_XS_SIZE : LV_STATE_SIZE;
+    /* the error norm's numbers: the state and the wheel rates of the layout (all slots with axes) */
+    n = c.kind & LV_KIND_AXES ? LV_XS_SIZE : c.kind & LV_KIND_WHEELS ? LV_XS_OMEGA + LV_WHEELS_BODY_AXES : LV_STATE_SIZE;
     memcpy(y, state + b * LV_STATE_SIZE, LV_STATE_SIZE * sizeof(double));
     for (i = 0; i < LV_NW; i++) y[LV_XS_OMEGA + i] = 0.0;
     if (c.kind) {
@@ -701,7 +732,7 @@ static long advance_dopri5(double *state, const double *params, long b, const lv
         long sub = 0;
         int rejected = 0;
         if (c.kind & LV_KIND_WHEELS) {
-            lv_wheel_motor(cmd, y + LV_XS_OMEGA, c.r[LV_MODEL_TORQUE_LIMIT], c.r[LV_MODEL_SPEED_LIMIT], c.r[LV_MODEL_CUTOFF], c.u);
+            lv_wheels_motor(c.kind, c.r, cmd, y + LV_XS_OMEGA, c.u);
             have_k1 = 0; /* the held torque may change at each output step */
         }
         if (!have_k1) {

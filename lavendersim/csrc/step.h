@@ -9,10 +9,20 @@
 #include "layout.h"
 #include "kernels.h"
 
-/* Wheel rates (and motor commands, applied torques) per model body: the XS layout's Omega length, printed
-   by derive/layout.py. The body-axis wheel kernels (wheel_body_rhs, wheel_motor) take exactly 3. */
+/* Wheel slots (rates, motor commands, applied torques) per model body: the XS layout's Omega length,
+   WHEELS_MAX of derive/layout.py. A body-axis layout (LV_KIND_WHEELS without LV_KIND_AXES) uses the first
+   LV_WHEELS_BODY_AXES (wheel_body_rhs, wheel_motor); a layout on the row's axes (LV_KIND_AXES) all of them,
+   unused ones padded (zero axis, J = 1, at rest: derive/wheel_layout.py proves they change nothing). */
 #define LV_NW LV_XS_OMEGA_LEN
-typedef char lv_nw_is_the_wheel_kernels_count[LV_NW == 3 ? 1 : -1];
+typedef char lv_nw_is_wheels_max[LV_NW == LV_WHEELS_MAX && LV_WHEELS_BODY_AXES <= LV_NW ? 1 : -1];
+
+/* Whether a model row's kind is one the step loop knows: a bit set of JOINT and WHEELS, AXES only with WHEELS. */
+static inline int lv_kind_valid(double kind)
+{
+    const int k = (int)kind;
+    if (!(kind >= 0.0 && kind <= (double)(LV_KIND_JOINT | LV_KIND_WHEELS | LV_KIND_AXES) && kind == (double)k)) return 0;
+    return !(k & LV_KIND_AXES) || (k & LV_KIND_WHEELS);
+}
 
 /* The effect table, its row layout (LV_EFFECT_ROW_*), the built-in codes and their dispatch
    (lv_effect_apply) are generated from the effect declarations (generated/kernels.h). User effects are
@@ -30,18 +40,18 @@ typedef struct {
 } lv_user_effects;
 
 /* The model row (LV_MODEL_SIZE), per body: kind, I_p[9] (about the pivot, body frame, row-major), r_b[3]
-   (pivot -> COM, body frame), anchor_w[3], J[3], torque_limit, speed_limit, c_w (offsets LV_MODEL_*).
-   kind is a bit set of LV_KIND_JOINT and LV_KIND_WHEELS; a body of kind 0 is a plain rigid body (its row
-   is ignored). */
+   (pivot -> COM, body frame), anchor_w[3], J[LV_NW], A_b[3 x LV_NW], torque_limit, speed_limit, c_w, cutoff
+   (offsets LV_MODEL_*). kind is a bit set of LV_KIND_JOINT, LV_KIND_WHEELS and LV_KIND_AXES (lv_kind_valid);
+   a body of kind 0 is a plain rigid body (its row is ignored). */
 
 /* Per-body model data for bodies with a joint and/or wheels (all arrays nb rows).
-   Omega (nb x 3) is advanced in place; command (nb x 3) is held over the call (zero-order hold);
-   applied (nb x 3) receives the saturated torques of the last step. */
+   Omega (nb x LV_NW) is advanced in place; command (nb x LV_NW) is held over the call (zero-order hold);
+   applied (nb x LV_NW) receives the saturated torques of the last step. */
 typedef struct {
     const double *rows;     /* nb x LV_MODEL_SIZE */
-    double *Omega;          /* nb x 3, wheel rates relative to the body, rad/s */
-    const double *command;  /* nb x 3, motor torque commands, N m */
-    double *applied;        /* nb x 3, saturated torques used in the last step, N m */
+    double *Omega;          /* nb x LV_NW, wheel rates relative to the body, rad/s */
+    const double *command;  /* nb x LV_NW, motor torque commands, N m */
+    double *applied;        /* nb x LV_NW, saturated torques used in the last step, N m */
 } lv_models;
 
 enum {

@@ -69,6 +69,8 @@ spaces = require("gymnasium.spaces", "gym", "the ReactionWheelCube-v0 environmen
 BODY = lc.BODY
 MAX_SUBSTEPS = 100_000  # simulator steps per control step (control_dt / dt), at most
 
+_NW = LY.WHEELS_BODY_AXES   # the cube's three wheels: the first slots of the Sim's wheel arrays
+
 
 class ReactionWheelCubeEnv(gym.Env):
     """The reaction-wheel cube as a Gymnasium environment (``lavendersim:ReactionWheelCube-v0``).
@@ -165,7 +167,7 @@ class ReactionWheelCubeEnv(gym.Env):
     def _raw(self) -> np.ndarray:
         """[q (4), omega_b (3), Omega (3)] of the cube (a copy, from the Sim's views)."""
         sim, raw = self.sim, np.empty(10)
-        raw[0:4], raw[4:7], raw[7:10] = sim.q[0], sim.omega_b[0], sim.Omega[0]
+        raw[0:4], raw[4:7], raw[7:10] = sim.q[0], sim.omega_b[0], sim.Omega[0, :_NW]
         return raw
 
     def _obs(self, raw=None) -> np.ndarray:
@@ -401,8 +403,8 @@ class _StepIO:
         self.sim = sim
         m = sim._models
         self.x = flat(sim._x[0])
-        self.Omega, self.command, self.applied = flat(m.Omega[0]), flat(m.command[0]), flat(m.applied[0])
-        self.applied_row = m.applied[0]
+        self.Omega, self.command, self.applied = flat(m.Omega[0, :_NW]), flat(m.command[0, :_NW]), flat(m.applied[0, :_NW])
+        self.applied_row = m.applied[0, :_NW]
         fast = sim._fast
         self.advance = fast.advance if fast is not None and 1 <= env.substeps <= sim._fast_n else None
         self.counters, self.dt = sim._ctr, sim.dt     # sim.t = steps * dt

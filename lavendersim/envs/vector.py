@@ -36,6 +36,7 @@ import numpy as np
 from .. import validate as V
 from .._install import require
 from ..errors import DivergenceError
+from ..generated import layout as LY
 from ..kernels import K
 from .reaction_wheel_cube import ReactionWheelCubeEnv, initial_q
 
@@ -180,7 +181,7 @@ class ReactionWheelCubeVectorEnv(VectorEnv):
             sim._check_written()     # the written states' pre-step check now: the run stays on the C fast path
         # finite and saturated: written straight into the held commands (set_wheel_commands' array; every cube has
         # wheels), as a * torque_limit
-        cmd = sim._models.command
+        cmd = sim._models.command[:, :LY.WHEELS_BODY_AXES]    # the cubes' three wheels: the first slots
         np.multiply(a, self.model.torque_limit, out=cmd)
         if any_reset:
             cmd[resets] = 0.0
@@ -198,7 +199,7 @@ class ReactionWheelCubeVectorEnv(VectorEnv):
         angle = np.degrees(theta)
         reward = -(theta * theta + 0.05 * np.einsum("ij,ij->i", w, w) + 0.01 * np.einsum("ij,ij->i", a, a))
         terminated = self._out_of_bounds(raw)
-        info: dict[str, Any] = {"angle_error_deg": angle, "torque_applied": sim.wheel_torques_applied.copy()}
+        info: dict[str, Any] = {"angle_error_deg": angle, "torque_applied": sim.wheel_torques_applied[:, :LY.WHEELS_BODY_AXES].copy()}
         if self.task == "corner":
             d = np.asarray(K.quat_rotate(q, np.ones(3) / math.sqrt(3.0)))
             tilt = np.degrees(np.arctan2(np.hypot(d[:, 0], d[:, 1]), d[:, 2]))
@@ -244,7 +245,7 @@ class ReactionWheelCubeVectorEnv(VectorEnv):
     def _raw(self) -> np.ndarray:
         """[q, omega_b, Omega] of every cube, (N, 10), in a scratch buffer reused by the next call."""
         sim, raw = self.sim, self._raw_buf
-        raw[:, 0:4], raw[:, 4:7], raw[:, 7:10] = sim.q, sim.omega_b, sim.Omega
+        raw[:, 0:4], raw[:, 4:7], raw[:, 7:10] = sim.q, sim.omega_b, sim.Omega[:, :LY.WHEELS_BODY_AXES]
         return raw
 
     def _actions(self, actions) -> np.ndarray:
