@@ -1479,7 +1479,7 @@ def finite_difference(lin: Any, scene: Scene, *, backend: str = "auto", h: float
         sim = lv.Sim(scene_with(du), dt=dt, integrator="euler", backend=backend, max_growth=None)
         for r in lin.input_refs:
             if r.kind == "wheels":
-                sim.set_wheel_command(r.body, lin.u0[r.offset:r.offset + 3] + du[r.offset:r.offset + 3])
+                sim.set_wheel_command(r.body, lin.u0[r.offset:r.offset + r.size] + du[r.offset:r.offset + r.size])
         for ref in lin.bodies:
             if ref.wheels and not any(r.kind == "wheels" and r.body == ref.name for r in lin.input_refs):
                 sim.set_wheel_command(ref.name, ref.command)

@@ -12,11 +12,10 @@ axes the null space of ``A_b`` (``A_b n = 0``) lets the controller move the whee
 torque on the body — wheel-speed management (:func:`null_space`). :func:`slew` designs an LQR on the
 linearization (CasADi, from the printed kernel) in error coordinates ``x = [dtheta (3), omega_b (3),
 Omega − Omega_ref (N)]`` with ``Omega_ref`` a bias in the null space, and runs it in a fixed-step RK4
-of the printed NumPy kernel (the motor line applied at each step's start, commands held over each
-control period). :func:`momentum_exchange` is lab 04's momentum check for any layout.
-
-Not yet: the layout in ``Scene``/``Sim`` (the C and NumPy backends' model row holds three body-axis
-wheels); this module steps the printed NumPy kernel itself.
+inside a :class:`lavendersim.Sim` of :meth:`LayoutCube.scene` (the scene's ``reaction_wheels`` on the
+layout's axes, stepped by the printed N-wheel kernel in C or NumPy; the motor line applied at each
+step's start, commands held over each control period). :func:`momentum_exchange` is lab 04's
+momentum check for any layout.
 """
 from __future__ import annotations
 
@@ -27,10 +26,10 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from . import validate as V
-from .generated import tableaux as TB
 from .kernels import K as KN
 
 MOTORS = ("line", "cutoff")
+BODY = "cube"     # the body of LayoutCube.scene()
 UNIT_TOL = 1e-9   # |‖a_i‖ − 1| allowed for an axis
 
 
@@ -239,6 +238,31 @@ class LayoutCube:
         return np.asarray(self._k["motor"](command, Omega, self.torque_limit, self.speed_limit,
                                            1.0 if self.motor == "cutoff" else 0.0), dtype=float)
 
+    def scene(self, c_w: float | None = None, name: str = "cube"):
+        """The cube as a :class:`lavendersim.Scene`: a uniform box body carrying ``reaction_wheels`` on the
+        layout's axes (the Sim steps it with the printed N-wheel kernels), free, no other effect.
+
+        Parameters
+        ----------
+        c_w : float, optional
+            Wheel damping, N·m·s/rad (default the model's ``wheel_damping``).
+        name : str, default "cube"
+            The body's name.
+
+        Returns
+        -------
+        lavendersim.Scene
+        """
+        from .bodies import Body
+        from .scene import Scene
+
+        scene = Scene()
+        scene.add_body(Body.box(name, self.mass, (self.size,) * 3))
+        scene.add_effect("reaction_wheels", body=name, J=self.J, axes_b=self.A_b.T, torque_limit=self.torque_limit,
+                         speed_limit=self.speed_limit, c_w=self.wheel_damping if c_w is None else c_w,
+                         cutoff=1.0 if self.motor == "cutoff" else 0.0)
+        return scene
+
     def momentum_w(self, y: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(L_body_w, L_wheels_w, h_w) of state y (wheels<N>_momentum kernel).
 
@@ -368,38 +392,12 @@ def default_weights(model: LayoutCube) -> tuple[np.ndarray, np.ndarray]:
     return Q, np.full(model.n, 1 / (0.5 * model.torque_limit) ** 2)
 
 
-def _stepper(model: LayoutCube, dt: float, c_w: float):
-    """CasADi Function (y, command) -> (y_next, u): one RK4 step (generated tableau) of the printed
-    wheels<N>_body_rhs with the motor kernel's torques u held over the step, q renormalized."""
-    from ._install import require
-
-    ca = require("casadi", "control", "the wheel-layout simulator (CasADi)")
-    from .generated import kernels_casadi as KC
-
-    n = model.n
-    y, cmd = ca.SX.sym("y", 7 + n), ca.SX.sym("c", n)
-    u = getattr(KC, f"wheels{n}_motor")(cmd, y[7:], model.torque_limit, model.speed_limit, 1.0 if model.motor == "cutoff" else 0.0)
-    z, I_p, A, J = ca.DM.zeros(3), ca.DM(model.I_p.ravel()), ca.DM(model.A_b.ravel()), ca.DM(model.J)
-    rhs = getattr(KC, f"wheels{n}_body_rhs")
-
-    def f(s):
-        return ca.vertcat(*rhs(s[0:4], s[4:7], s[7:], I_p, A, J, z, z, z, u, c_w))
-
-    k1 = f(y)
-    k2 = f(y + (TB.RK4_C1 * dt) * k1)
-    k3 = f(y + (TB.RK4_C2 * dt) * k2)
-    k4 = f(y + (TB.RK4_C3 * dt) * k3)
-    yn = y + (dt / TB.RK4_B_DEN) * (TB.RK4_B0 * k1 + TB.RK4_B1 * k2 + TB.RK4_B2 * k3 + TB.RK4_B3 * k4)
-    yn = ca.vertcat(KC.quat_normalize(yn[0:4]), yn[4:])
-    return ca.Function("wheels_step", [y, cmd], [yn, u])
-
-
 def simulate(model: LayoutCube, controller, y0: ArrayLike, T: float, *, dt: float = 1e-3, Ts: float = 0.01,
-             c_w: float | None = None) -> dict[str, np.ndarray]:
+             c_w: float | None = None, backend: str = "auto") -> dict[str, np.ndarray]:
     """Run ``controller(t, y) -> command (N,)`` (held over each control period ``Ts``) on the
-    nonlinear model: fixed-step RK4 (generated tableau) of the printed ``wheels<N>_body_rhs`` (its
-    CasADi printing), the motor kernel applied at each step's start, the quaternion normalized
-    after each step.
+    nonlinear model inside a :class:`lavendersim.Sim` of :meth:`LayoutCube.scene`: fixed-step RK4,
+    the printed ``wheels<WHEELS_MAX>_body_rhs`` on the layout's axes (unused slots padded), the
+    motor kernel applied at each step's start, the quaternion normalized after each step.
 
     Parameters
     ----------
@@ -412,6 +410,8 @@ def simulate(model: LayoutCube, controller, y0: ArrayLike, T: float, *, dt: floa
         Duration, integrator step, control period, s (Ts rounded to a whole number of steps).
     c_w : float, optional
         Wheel damping override (default the model's).
+    backend : {"auto", "c", "numpy"}, default "auto"
+        The Sim's backend.
 
     Returns
     -------
@@ -422,35 +422,36 @@ def simulate(model: LayoutCube, controller, y0: ArrayLike, T: float, *, dt: floa
     Raises
     ------
     lavendersim.validate.LavenderInputError
-        The controller returned a wrong-sized or non-finite command.
+        The controller returned a wrong-sized or non-finite command, or y0 is malformed.
     lavendersim.errors.DivergenceError
         The state became non-finite (step and time named).
     """
-    from .errors import DivergenceError
+    from .sim import Sim
 
     n = model.n
     y = V.vector("y0", y0, 7 + n)
     T, dt, Ts = V.positive("T", T), V.dt("dt", dt), V.positive("Ts", Ts)
-    step = _stepper(model, dt, model.wheel_damping if c_w is None else V.scalar("c_w", c_w, nonnegative=True))
+    c_w = None if c_w is None else V.scalar("c_w", c_w, nonnegative=True)
+    sim = Sim(model.scene(c_w=c_w), dt=dt, integrator="rk4", backend=backend)
+    sim.set_state(BODY, q=y[:4], omega_b=y[4:7], Omega=y[7:])
     sub = max(1, int(round(Ts / dt)))
     periods = int(math.ceil(T / (sub * dt) - 1e-9))
     ts, ys, us, cs = [], [], [], []
     for k in range(periods + 1):
         t = k * sub * dt
+        st = sim.state(BODY)
+        y = np.concatenate([st.q, st.omega_b, st.Omega])
         cmd = np.asarray(controller(t, y.copy()), dtype=float)
         if cmd.shape != (n,) or not np.all(np.isfinite(cmd)):
             raise V.LavenderInputError("controller", f"must return {n} finite wheel torques", f", got {cmd!r} at t = {t:g} s")
-        ts.append(t), ys.append(y.copy()), cs.append(cmd)
+        ts.append(t), ys.append(y), cs.append(cmd)
         if k == periods:
             us.append(model.applied(cmd, y[7:]))
             break
-        for i in range(sub):
-            yn, u = step(y, cmd)
-            y = np.asarray(yn, dtype=float).ravel()
-            if i == 0:
-                us.append(np.asarray(u, dtype=float).ravel())
-        if not np.all(np.isfinite(y)):
-            raise DivergenceError((k + 1) * sub - 1, 0, "the state became non-finite (reduce dt)", "cube", t)
+        sim.set_wheel_command(BODY, cmd)
+        sim.run(1)                                    # the torque applied over the period's first step
+        us.append(sim.wheel_command_applied(BODY))
+        sim.run(sub - 1)
     return {"t": np.array(ts), "y": np.array(ys), "u": np.array(us), "command": np.array(cs)}
 
 

@@ -84,6 +84,32 @@ def test_wheel_cube_off_equilibrium(backend):
     check(lin, s, backend)
 
 
+@pytest.mark.parametrize("backend", BACKENDS)
+@pytest.mark.parametrize("joint", [False, True])
+def test_pyramid_layout_off_equilibrium(backend, joint):
+    """Four wheels on a pyramid (reaction_wheels axes_b: the Sim's N-axis kernel), spinning, commanded, with
+    gravity on a pivot or free: the linearization (wheels4 CasADi kernels, padding stripped) against finite
+    differences of the Sim's own step."""
+    from lavendersim import wheel_layout as WL
+
+    s = lv.Scene()
+    s.add_body(lv.Body.box("sc", 1.0, (0.15, 0.15, 0.15), p_w=(0, 0.1, 0.2), q=(0.1, -0.2, 0.05, 0.97),
+                           omega_b=(0.3, -0.2, 0.5)))
+    s.add_effect("reaction_wheels", body="sc", axes_b=WL.pyramid_axes().T, J=(5e-4, 5.5e-4, 6e-4, 6.5e-4),
+                 torque_limit=0.2, speed_limit=400.0, c_w=1e-4)
+    s.add_effect("gravity", body="sc")
+    if joint:
+        s.add_effect("spherical_joint", body="sc", anchor_w=(0, 0, 0))
+    sim = lv.Sim(s, backend=backend)
+    sim.set_state("sc", Omega=(40.0, -25.0, 10.0, 60.0))
+    sim.set_wheel_command("sc", (0.01, -0.02, 0.005, 0.03))
+    lin = lc.linearize(sim)
+    assert lin.input_labels == ["sc_u_1", "sc_u_2", "sc_u_3", "sc_u_4"]
+    assert lin.nstates == (6 if joint else 12) + 4 and lin.state_labels[-4:] == [f"sc_Omega_{k}" for k in (1, 2, 3, 4)]
+    np.testing.assert_allclose(lin.u0, [0.01, -0.02, 0.005, 0.03])
+    check(lin, s, backend)
+
+
 def test_the_cube_model_is_the_cube_scene():
     m = lc.CubeModel(scenario="corner")
     a = lc.linearize(m)
