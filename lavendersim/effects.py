@@ -13,8 +13,9 @@ or generated/EQUATIONS.md.
 
 Two effects change a body's model instead of adding a force (``per_body = True``; body= required,
 at most one of each per body): ``spherical_joint`` pins the body point that coincides with anchor_w
-at the start to that world point; ``reaction_wheels`` adds three wheels on the body axes (J each
-below the body's moment about that axis, checked by ``check_body``). The Sim turns them into
+at the start to that world point; ``reaction_wheels`` adds 1 to WHEELS_MAX wheels on the unit axes
+``axes_b`` (rows, body frame; default three on the body x, y, z axes), one J per axis, the body with
+its wheels free keeping a positive definite inertia (checked by ``check_body``). The Sim turns them into
 per-body model rows (lavendersim.backends.MODEL_LAYOUT); they never appear in the effect table.
 
 An effect whose name and code are not declared (an ``Effect`` subclass with a new code) is refused
