@@ -94,12 +94,13 @@ MODEL = Layout("MODEL", "per-body model row (spherical joint and/or reaction whe
     Field("r_b", 3, "pivot → COM, body frame, m"),
     Field("anchor_w", 3, "joint anchor, world frame, m"),
     Field("J", WHEELS_MAX, "wheel spin inertias, kg·m² (unused slots 1)"),
-    Field("A_b", 3 * WHEELS_MAX, "wheel spin axes as the columns of a 3×WHEELS_MAX matrix, body frame, row-major "
-          "(unused slots 0; KIND_AXES only)"),
     Field("torque_limit", 1, "motor torque limit, N·m"),
     Field("speed_limit", 1, "no drive beyond this |Omega_i|, rad/s"),
     Field("c_w", 1, "wheel bearing damping, N·m·s/rad"),
     Field("cutoff", 1, "wheel motor: 0 torque–speed line (stall torque_limit, no-load speed_limit); 1 hard cut-off"),
+    # last: the body-axis model tiles (csrc/model_simd.h) carry the row only up to here
+    Field("A_b", 3 * WHEELS_MAX, "wheel spin axes as the columns of a 3×WHEELS_MAX matrix, body frame, row-major "
+          "(unused slots 0; KIND_AXES only)"),
 ])
 
 XS = Layout("XS", "extended state of a body with a model: x then the wheel rates", [

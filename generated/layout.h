@@ -32,12 +32,12 @@
 #define LV_MODEL_ANCHOR_W_LEN 3
 #define LV_MODEL_J 16  /* [4] wheel spin inertias, kg·m² (unused slots 1) */
 #define LV_MODEL_J_LEN 4
-#define LV_MODEL_A_B 20  /* [12] wheel spin axes as the columns of a 3×WHEELS_MAX matrix, body frame, row-major (unused slots 0; KIND_AXES only) */
+#define LV_MODEL_TORQUE_LIMIT 20  /* [1] motor torque limit, N·m */
+#define LV_MODEL_SPEED_LIMIT 21  /* [1] no drive beyond this |Omega_i|, rad/s */
+#define LV_MODEL_C_W 22  /* [1] wheel bearing damping, N·m·s/rad */
+#define LV_MODEL_CUTOFF 23  /* [1] wheel motor: 0 torque–speed line (stall torque_limit, no-load speed_limit); 1 hard cut-off */
+#define LV_MODEL_A_B 24  /* [12] wheel spin axes as the columns of a 3×WHEELS_MAX matrix, body frame, row-major (unused slots 0; KIND_AXES only) */
 #define LV_MODEL_A_B_LEN 12
-#define LV_MODEL_TORQUE_LIMIT 32  /* [1] motor torque limit, N·m */
-#define LV_MODEL_SPEED_LIMIT 33  /* [1] no drive beyond this |Omega_i|, rad/s */
-#define LV_MODEL_C_W 34  /* [1] wheel bearing damping, N·m·s/rad */
-#define LV_MODEL_CUTOFF 35  /* [1] wheel motor: 0 torque–speed line (stall torque_limit, no-load speed_limit); 1 hard cut-off */
 #define LV_MODEL_SIZE 36
 
 /* extended state of a body with a model: x then the wheel rates (17) */

@@ -34,14 +34,14 @@ MODEL_ANCHOR_W = slice(13, 16)  # [3] joint anchor, world frame, m
 MODEL_ANCHOR_W_LEN = 3
 MODEL_J = slice(16, 20)  # [4] wheel spin inertias, kg·m² (unused slots 1)
 MODEL_J_LEN = 4
-MODEL_A_B = slice(20, 32)  # [12] wheel spin axes as the columns of a 3×WHEELS_MAX matrix, body frame, row-major (unused slots 0; KIND_AXES only)
+MODEL_TORQUE_LIMIT = 20  # [1] motor torque limit, N·m
+MODEL_SPEED_LIMIT = 21  # [1] no drive beyond this |Omega_i|, rad/s
+MODEL_C_W = 22  # [1] wheel bearing damping, N·m·s/rad
+MODEL_CUTOFF = 23  # [1] wheel motor: 0 torque–speed line (stall torque_limit, no-load speed_limit); 1 hard cut-off
+MODEL_A_B = slice(24, 36)  # [12] wheel spin axes as the columns of a 3×WHEELS_MAX matrix, body frame, row-major (unused slots 0; KIND_AXES only)
 MODEL_A_B_LEN = 12
-MODEL_TORQUE_LIMIT = 32  # [1] motor torque limit, N·m
-MODEL_SPEED_LIMIT = 33  # [1] no drive beyond this |Omega_i|, rad/s
-MODEL_C_W = 34  # [1] wheel bearing damping, N·m·s/rad
-MODEL_CUTOFF = 35  # [1] wheel motor: 0 torque–speed line (stall torque_limit, no-load speed_limit); 1 hard cut-off
 MODEL_SIZE = 36
-MODEL_LAYOUT = {'kind': slice(0, 1), 'I_p': slice(1, 10), 'r_b': slice(10, 13), 'anchor_w': slice(13, 16), 'J': slice(16, 20), 'A_b': slice(20, 32), 'torque_limit': slice(32, 33), 'speed_limit': slice(33, 34), 'c_w': slice(34, 35), 'cutoff': slice(35, 36)}
+MODEL_LAYOUT = {'kind': slice(0, 1), 'I_p': slice(1, 10), 'r_b': slice(10, 13), 'anchor_w': slice(13, 16), 'J': slice(16, 20), 'torque_limit': slice(20, 21), 'speed_limit': slice(21, 22), 'c_w': slice(22, 23), 'cutoff': slice(23, 24), 'A_b': slice(24, 36)}
 
 # extended state of a body with a model: x then the wheel rates
 XS_X = slice(0, 13)  # [13] the body state (STATE layout)

@@ -258,7 +258,7 @@ def test_layout_header_and_module_agree():
             off = sl.stop
         assert int(defines[f"{row}_SIZE"]) == off == getattr(LY, f"{row}_SIZE")
     assert (LY.STATE_SIZE, LY.PARAM_SIZE, LY.MODEL_SIZE, LY.XS_SIZE) == (13, 4, 36, 17)   # MODEL_CUTOFF: issue 13; 4 wheel slots (J, A_b, Omega)
-    assert LY.STATE_Q == slice(3, 7) and LY.MODEL_TORQUE_LIMIT == 32 and LY.MODEL_A_B == slice(20, 32)
+    assert LY.STATE_Q == slice(3, 7) and LY.MODEL_TORQUE_LIMIT == 20 and LY.MODEL_A_B == slice(24, 36)
 
 
 def test_tableaux_header_and_module_agree_with_the_published_coefficients():

@@ -24,6 +24,7 @@
 /* Bodies per model tile: ~110 rows of LV_MTILE doubles (~28 KB) stay in L1 over a chunk of steps. */
 #define LV_MTILE 32
 #define LV_MKIND (LV_KIND_JOINT | LV_KIND_WHEELS)
+typedef char lv_mtile_a_b_is_last[LV_MODEL_A_B + LV_MODEL_A_B_LEN == LV_MODEL_SIZE ? 1 : -1];
 
 typedef struct {
     double Y[LV_XS_SIZE][LV_MTILE];  /* [x, Omega] at the start of the step */
@@ -32,7 +33,7 @@ typedef struct {
     double V[3][LV_MTILE];           /* the joint's kinematic COM velocity at the stage input */
     double F[3][LV_MTILE], TAU[3][LV_MTILE]; /* the effect sums at the stage input */
     double U[LV_NW][LV_MTILE];           /* this step's applied wheel torques */
-    double R[LV_MODEL_SIZE][LV_MTILE]; /* the model rows */
+    double R[LV_MODEL_A_B][LV_MTILE];  /* the model rows up to A_b (the last field: body-axis wheels never read it) */
     double P[LV_PARAM_SIZE][LV_MTILE]; /* the params rows (m, I_b) */
     double C[LV_NW][LV_MTILE];           /* the commands */
 } lv_mtile;
@@ -40,8 +41,9 @@ typedef struct {
 typedef void (*lv_mtile_fn)(lv_mtile *LV_RESTRICT t, const lv_effect_ref *refs, long n_refs, int needs_v,
                             int normalize, long m, double dt, long n_steps);
 
-/* A lane's rows in and out. The copies are unrolled (GCC's complete peeling stops at 16 iterations; a loop left
-   inside a lane loop keeps the compiler from vectorizing it over the lanes: the model row has LV_MODEL_SIZE numbers). */
+/* A lane's rows in and out, and every loop over a lane's [x, Omega] (LV_XS_SIZE numbers, 17), are unrolled (GCC's
+   complete peeling stops at 16 iterations; a loop left inside a lane loop keeps the compiler from vectorizing it
+   over the lanes: the model row has LV_MODEL_SIZE numbers; with XS at 17 the RK4 sums alone cost 3x). */
 #if defined(__GNUC__) && !defined(__clang__)
 #define LV_MT_UNROLL _Pragma("GCC unroll 64")
 #else
@@ -78,7 +80,7 @@ typedef void (*lv_mtile_fn)(lv_mtile *LV_RESTRICT t, const lv_effect_ref *refs, 
     for (b = 0; b < m; b++) {                                                                           \
         double y[LV_XS_SIZE], k[LV_XS_SIZE], r[LV_MODEL_SIZE], F[3], tau[3], u[LV_NW];                  \
         LV_MT_LOAD(y, T, LV_XS_SIZE);                                                                   \
-        LV_MT_LOAD(r, R, LV_MODEL_SIZE);                                                                \
+        LV_MT_LOAD(r, R, LV_MODEL_A_B);                                                                   \
         LV_MT_LOAD(F, F, 3);                                                                            \
         LV_MT_LOAD(tau, TAU, 3);                                                                        \
         LV_MT_LOAD(u, U, LV_NW);                                                                        \
@@ -88,19 +90,19 @@ typedef void (*lv_mtile_fn)(lv_mtile *LV_RESTRICT t, const lv_effect_ref *refs, 
     }
 
 #define LV_MT_FIRST(W, H)                                                                               \
-    for (i = 0; i < LV_XS_SIZE; i++) {                                                                  \
+    LV_MT_UNROLL for (i = 0; i < LV_XS_SIZE; i++) {                                                     \
         t->A[i][b] = W * k[i];                                                                          \
         t->T[i][b] = t->Y[i][b] + H * k[i];                                                             \
     }
 #define LV_MT_MID(W, H)                                                                                 \
-    for (i = 0; i < LV_XS_SIZE; i++) {                                                                  \
+    LV_MT_UNROLL for (i = 0; i < LV_XS_SIZE; i++) {                                                     \
         t->A[i][b] = t->A[i][b] + W * k[i];                                                             \
         t->T[i][b] = t->Y[i][b] + H * k[i];                                                             \
     }
 #define LV_MT_LAST(NORMALIZE)                                                                           \
     {                                                                                                   \
         double yn[LV_XS_SIZE];                                                                          \
-        for (i = 0; i < LV_XS_SIZE; i++) yn[i] = t->Y[i][b] + h6 * (t->A[i][b] + LV_RK4_B3 * k[i]);     \
+        LV_MT_UNROLL for (i = 0; i < LV_XS_SIZE; i++) yn[i] = t->Y[i][b] + h6 * (t->A[i][b] + LV_RK4_B3 * k[i]); \
         if (NORMALIZE) lv_quat_normalize(yn + LV_STATE_Q, yn + LV_STATE_Q);                             \
         lv_pivot_kinematics(yn + LV_STATE_Q, yn + LV_STATE_OMEGA_B, r + LV_MODEL_ANCHOR_W,             \
                             r + LV_MODEL_R_B, yn + LV_STATE_P_W, yn + LV_STATE_V_W);                    \
@@ -113,7 +115,7 @@ typedef void (*lv_mtile_fn)(lv_mtile *LV_RESTRICT t, const lv_effect_ref *refs, 
         for (b = 0; b < m; b++) {                                                                       \
             double y[LV_STATE_SIZE], r[LV_MODEL_SIZE], pk[3], vk[3];                                    \
             LV_MT_LOAD(y, T, LV_STATE_SIZE);                                                            \
-            LV_MT_LOAD(r, R, LV_MODEL_SIZE);                                                            \
+            LV_MT_LOAD(r, R, LV_MODEL_A_B);                                                               \
             lv_pivot_kinematics(y + LV_STATE_Q, y + LV_STATE_OMEGA_B, r + LV_MODEL_ANCHOR_W,           \
                                 r + LV_MODEL_R_B, pk, vk);                                              \
             LV_MT_STORE(V, vk, 3);                                                                      \
@@ -146,11 +148,11 @@ static int mtile_code_known(int code) { return lv_effect_n_params(code) >= 0; }
             for (b = 0; b < m; b++) {                                                                   \
                 double cmd[LV_NW], Om[LV_NW], r[LV_MODEL_SIZE], u[LV_NW];                               \
                 LV_MT_LOAD(cmd, C, LV_NW);                                                              \
-                for (i = 0; i < LV_NW; i++) Om[i] = t->Y[LV_XS_OMEGA + i][b];                           \
-                LV_MT_LOAD(r, R, LV_MODEL_SIZE);                                                        \
+                LV_MT_UNROLL for (i = 0; i < LV_NW; i++) Om[i] = t->Y[LV_XS_OMEGA + i][b];              \
+                LV_MT_LOAD(r, R, LV_MODEL_A_B);                                                           \
                 lv_wheels_motor(LV_MKIND, r, cmd, Om, u);                                               \
                 LV_MT_STORE(U, u, LV_NW);                                                               \
-                for (i = 0; i < LV_XS_SIZE; i++) t->T[i][b] = t->Y[i][b];                               \
+                LV_MT_UNROLL for (i = 0; i < LV_XS_SIZE; i++) t->T[i][b] = t->Y[i][b];                  \
             }                                                                                           \
             LV_MT_EFFECTS                                                                               \
             LV_MT_STAGE_RHS(LV_MT_FIRST(LV_RK4_B0, h2))                                                 \
@@ -228,7 +230,7 @@ static long advance_model_soa(double *state, const double *params, const lv_mode
             t.Y[LV_XS_OMEGA + k][j] = md->Omega[LV_NW * b + k];
             t.C[k][j] = md->command[LV_NW * b + k];
         }
-        for (k = 0; k < LV_MODEL_SIZE; k++) t.R[k][j] = md->rows[b * LV_MODEL_SIZE + k];
+        for (k = 0; k < LV_MODEL_A_B; k++) t.R[k][j] = md->rows[b * LV_MODEL_SIZE + k];
         for (k = 0; k < LV_PARAM_SIZE; k++) t.P[k][j] = params[b * LV_PARAM_SIZE + k];
     }
     for (c = 0; c < n_steps; c += cm) {

@@ -372,7 +372,7 @@ static PyObject *py_simulate(PyObject *self, PyObject *args)
     }
     if (n_models) {
         if (rows_of(&mr, LV_MODEL_SIZE, "simulate: model_rows",
-                    "[kind, I_p(9), r_b(3), anchor_w(3), J(4), A_b(12), torque_limit, speed_limit, c_w, cutoff]", &rows_n) != 0) goto fail;
+                    "[kind, I_p(9), r_b(3), anchor_w(3), J(4), torque_limit, speed_limit, c_w, cutoff, A_b(12)]", &rows_n) != 0) goto fail;
         if (rows_n != nb) {
             PyErr_Format(PyExc_ValueError, "simulate: model_rows has %zd rows but state has %zd bodies", rows_n, nb);
             goto fail;
@@ -500,7 +500,7 @@ static PyMethodDef methods[] = {
      "(built-in codes, see generated/kernels.h, or user codes from LV_EFFECT_USER_BASE with user_effects: int64 (n,3)\n"
      "[function address, n_params, flags] for codes base .. base+n-1; an undeclared code raises ValueError).\n"
      "Optional, all four or none: model_rows (nb,36) [kind (0 plain, 1 joint, 2 wheels, 3 both; +4 wheels on the A_b\n"
-     "axes), I_p(9), r_b(3), anchor_w(3), J(4), A_b(3x4), torque_limit, speed_limit, c_w, cutoff]; Omega (nb,4) advanced\n"
+     "axes), I_p(9), r_b(3), anchor_w(3), J(4), torque_limit, speed_limit, c_w, cutoff, A_b(3x4)]; Omega (nb,4) advanced\n"
      "in place; command (nb,4) held; applied (nb,4) receives the saturated wheel torques of the last step.\n"
      "The model arrays may be None (all four). dopri5 needs h (nb,) (per-body step proposals, in/out; <= 0:\n"
      "choose) and nfev (nb,) (RHS evaluations added per body), rtol > 0, atol >= 0.\n"

@@ -439,6 +439,13 @@ const char *lv_isa_name(int isa)
 
 /* ---- bodies with a spherical joint and/or reaction wheels ------------------------------------ */
 
+/* Loops over a body's [x, Omega] (LV_XS_SIZE numbers, past GCC's 16-iteration complete peeling) unrolled. */
+#if defined(__GNUC__) && !defined(__clang__)
+#define LV_XS_UNROLL _Pragma("GCC unroll 32")
+#else
+#define LV_XS_UNROLL
+#endif
+
 
 /* The rotational part of d/dt [x, Omega] (q, omega_b, Omega) of a body with wheels, F and tau its effect
    sums (world), u its applied motor torques: the printed kernel of its layout. Body-axis wheels fill the
@@ -534,7 +541,7 @@ static inline long advance_model(double *state, const double *params, long b, co
         switch (integrator) {
         case LV_INTEGRATOR_EULER:
             MRHS(y, k1);
-            for (i = 0; i < LV_XS_SIZE; i++) yn[i] = y[i] + dt * k1[i];
+            LV_XS_UNROLL for (i = 0; i < LV_XS_SIZE; i++) yn[i] = y[i] + dt * k1[i];
             break;
         case LV_INTEGRATOR_SEMI_IMPLICIT_EULER:
             MRHS(y, k1);
@@ -549,13 +556,13 @@ static inline long advance_model(double *state, const double *params, long b, co
             break;
         default: /* LV_INTEGRATOR_RK4 */
             MRHS(y, k1);
-            for (i = 0; i < LV_XS_SIZE; i++) tmp[i] = y[i] + h2 * k1[i];
+            LV_XS_UNROLL for (i = 0; i < LV_XS_SIZE; i++) tmp[i] = y[i] + h2 * k1[i];
             MRHS(tmp, k2);
-            for (i = 0; i < LV_XS_SIZE; i++) tmp[i] = y[i] + h3 * k2[i];
+            LV_XS_UNROLL for (i = 0; i < LV_XS_SIZE; i++) tmp[i] = y[i] + h3 * k2[i];
             MRHS(tmp, k3);
-            for (i = 0; i < LV_XS_SIZE; i++) tmp[i] = y[i] + h4 * k3[i];
+            LV_XS_UNROLL for (i = 0; i < LV_XS_SIZE; i++) tmp[i] = y[i] + h4 * k3[i];
             MRHS(tmp, k4);
-            for (i = 0; i < LV_XS_SIZE; i++)
+            LV_XS_UNROLL for (i = 0; i < LV_XS_SIZE; i++)
                 yn[i] = y[i] + h6 * (LV_RK4_B0 * k1[i] + LV_RK4_B1 * k2[i] + LV_RK4_B2 * k3[i] + LV_RK4_B3 * k4[i]);
             break;
         }
@@ -563,7 +570,7 @@ static inline long advance_model(double *state, const double *params, long b, co
         if (kind & LV_KIND_JOINT)
             lv_pivot_kinematics(yn + LV_STATE_Q, yn + LV_STATE_OMEGA_B, r + LV_MODEL_ANCHOR_W, r + LV_MODEL_R_B,
                                 yn + LV_STATE_P_W, yn + LV_STATE_V_W);
-        for (i = 0; i < LV_XS_SIZE; i++) {
+        LV_XS_UNROLL for (i = 0; i < LV_XS_SIZE; i++) {
             if (!isfinite(yn[i])) {
                 memcpy(last, y, sizeof y);
                 return s;

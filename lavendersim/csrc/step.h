@@ -40,7 +40,7 @@ typedef struct {
 } lv_user_effects;
 
 /* The model row (LV_MODEL_SIZE), per body: kind, I_p[9] (about the pivot, body frame, row-major), r_b[3]
-   (pivot -> COM, body frame), anchor_w[3], J[LV_NW], A_b[3 x LV_NW], torque_limit, speed_limit, c_w, cutoff
+   (pivot -> COM, body frame), anchor_w[3], J[LV_NW], torque_limit, speed_limit, c_w, cutoff, A_b[3 x LV_NW]
    (offsets LV_MODEL_*). kind is a bit set of LV_KIND_JOINT, LV_KIND_WHEELS and LV_KIND_AXES (lv_kind_valid);
    a body of kind 0 is a plain rigid body (its row is ignored). */
 
