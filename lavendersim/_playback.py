@@ -347,14 +347,18 @@ class Snapshot:
         Sample time, s.
     x : ndarray, shape (nb, 13)
         Body states ``[p_w, q (x, y, z, w), v_w, omega_b]`` (SI units).
-    Omega : ndarray, shape (nb, 3)
-        Wheel rates relative to each body, rad/s.
+    Omega : ndarray, shape (nb, k)
+        Wheel rates relative to each body, rad/s (a Sim's WHEELS_MAX slots, or three per body).
     bodies : mapping
         Body name -> :class:`~lavendersim.Body` (their shapes are drawn).
+    wheel_counts : ndarray of int, shape (nb,), optional
+        Wheels per body: ``state(name).Omega`` then has that many rates (three zeros without wheels).
     """
 
-    def __init__(self, names: list[str], t: float, x: np.ndarray, Omega: np.ndarray, bodies: Mapping[str, Any]) -> None:
+    def __init__(self, names: list[str], t: float, x: np.ndarray, Omega: np.ndarray, bodies: Mapping[str, Any],
+                 wheel_counts: np.ndarray | None = None) -> None:
         self.names, self.t, self.x, self.Omega, self.bodies = names, t, x, Omega, bodies
+        self.wheel_counts = wheel_counts
 
     def state(self, name: str) -> BodyState:
         """The state of body `name` at this sample.
@@ -371,7 +375,9 @@ class Snapshot:
         if name not in self.names:
             raise V.LavenderInputError("body", f"unknown body {name!r}; bodies: {', '.join(self.names)}")
         i = self.names.index(name)
-        return BodyState(self.x[i], self.Omega[i])
+        if self.wheel_counts is None:
+            return BodyState(self.x[i], self.Omega[i])
+        return BodyState.of_slots(self.x[i], self.Omega[i], int(self.wheel_counts[i]))
 
 
 class _LiveSource:
@@ -460,7 +466,8 @@ class _ReplaySource:
 
     def snapshot(self, i: int) -> Snapshot:
         tr = self.traj
-        return Snapshot(list(tr.names), float(self.t[i]), np.asarray(tr.x[i]), np.asarray(tr.Omega[i]), self.bodies)
+        return Snapshot(list(tr.names), float(self.t[i]), np.asarray(tr.x[i]), np.asarray(tr.Omega[i]), self.bodies,
+                        getattr(tr, "wheel_counts", None))
 
 
 _DEFAULT_COLORS = ([0.51, 0.87, 0.76, 0.95], [0.95, 0.66, 0.77, 0.95], [0.55, 0.65, 0.95, 0.95],

@@ -244,13 +244,34 @@ class BodyState:
     x : ndarray, shape (..., 13)
         ``[p_w(3), q(4), v_w(3), omega_b(3)]`` (layout printed in lavendersim.generated.layout);
         a leading axis (samples of a Trajectory) is kept by every property.
-    Omega : ndarray, shape (..., 3), optional
-        Wheel rates relative to the body (rad/s); zeros for a body without reaction wheels.
+    Omega : ndarray, shape (..., N), optional
+        Rates of the body's N reaction wheels relative to it (rad/s); three zeros for a body without
+        reaction wheels.
     """
 
     def __init__(self, x: np.ndarray, Omega: np.ndarray | None = None) -> None:
         self.x = x
         self.Omega = np.zeros(x.shape[:-1] + (3,)) if Omega is None else Omega
+
+    @classmethod
+    def of_slots(cls, x: np.ndarray, Omega_slots: np.ndarray, n_wheels: int) -> "BodyState":
+        """A state from a Sim's wheel slots (WHEELS_MAX, last axis): the body's N wheel rates, or three zeros
+        without wheels (as a body without wheels always showed).
+
+        Parameters
+        ----------
+        x : ndarray, shape (..., 13)
+            The body state(s).
+        Omega_slots : ndarray, shape (..., WHEELS_MAX)
+            The body's wheel slots, rad/s.
+        n_wheels : int
+            Its wheels (0 without).
+
+        Returns
+        -------
+        BodyState
+        """
+        return cls(x, Omega_slots[..., :n_wheels] if n_wheels else np.zeros(x.shape[:-1] + (3,)))
 
     @property
     def p_w(self) -> np.ndarray:

@@ -157,11 +157,6 @@ def _read_only_views(x: np.ndarray, Omega: np.ndarray, applied: np.ndarray) -> t
     return (xr, xr[:, LY.STATE_P_W], xr[:, LY.STATE_Q], xr[:, LY.STATE_V_W], xr[:, LY.STATE_OMEGA_B], ro(Omega), ro(applied))
 
 
-def _rates_shown(n_wheels: int) -> int:
-    """How many wheel rates a body's state shows: its wheels, or WHEELS_BODY_AXES zeros without any."""
-    return n_wheels if n_wheels else LY.WHEELS_BODY_AXES
-
-
 class _Counters:
     """steps and rhs_evals of a Sim without the C stepper (which keeps them itself)."""
 
@@ -234,8 +229,8 @@ class Trajectory:
         Wheel rates relative to the body, rad/s, in each body's wheel slots (zeros when None: bodies
         without wheels).
     wheel_counts : array_like of int, shape (nb,), optional
-        Wheels per body (0 without); :meth:`body` returns that many rates (WHEELS_BODY_AXES zeros for a
-        body without wheels). Default: every body WHEELS_BODY_AXES.
+        Wheels per body (0 without); :meth:`body` returns that many rates (three zeros for a body without
+        wheels). Default: every body WHEELS_BODY_AXES.
     """
 
     def __init__(self, names: list[str], t: np.ndarray, x: np.ndarray, Omega: np.ndarray | None = None,
@@ -266,7 +261,7 @@ class Trajectory:
         if name not in self.names:
             raise V.LavenderInputError("body", f"unknown body {name!r}; bodies: {', '.join(self.names)}")
         i = self.names.index(name)
-        return BodyState(self.x[:, i], self.Omega[:, i, :_rates_shown(int(self.wheel_counts[i]))])
+        return BodyState.of_slots(self.x[:, i], self.Omega[:, i], int(self.wheel_counts[i]))
 
 
 class Sim:
@@ -1054,7 +1049,7 @@ class Sim:
             If no body has that name.
         """
         i = self._i(name)
-        return BodyState(self._x[i].copy(), self._models.Omega[i, :_rates_shown(int(self._wheel_n[i]))].copy())
+        return BodyState.of_slots(self._x[i].copy(), self._models.Omega[i].copy(), int(self._wheel_n[i]))
 
     @V.keywords  # an unknown keyword (a typo such as omega=) is a LavenderInputError naming it
     def set_state(self, name: str, *, p_w=None, q=None, v_w=None, omega_b=None, omega_w=None, Omega=None) -> None:

@@ -45,6 +45,9 @@ def test_a_layout_gets_the_axes_kernel_and_n_wheel_arrays():
         sim.set_wheel_command("sc", [0.1, -0.1, 0.05])          # four wheels take four commands
     sim.run(5)
     assert np.all(sim.wheel_command_applied("sc")[:3] != 0)
+    tr = sim.record(4, every=2)
+    assert tr.Omega.shape == (3, 1, LY.WHEELS_MAX) and tr.body("sc").Omega.shape == (3, 4)
+    np.testing.assert_array_equal(tr.body("sc").Omega[-1], sim.wheel_rates("sc"))
     # the default layout stays on the body-axis kernels, its arrays three wide
     cube = lv.Scene()
     cube.add_body(lv.Body.box("c", 1.0, (0.15, 0.15, 0.15)))
