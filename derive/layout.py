@@ -143,6 +143,8 @@ def print_c() -> str:
     out.extend(f"    LV_KIND_{n} = {v},  /* {doc} */" for n, v, doc in KINDS)
     out.append("};")
     out.extend(f"#define LV_{n} {v}  /* {doc} */" for n, v, doc in CONSTANTS)
+    out.append("/* the printed kernels of a KIND_AXES layout (derive/wheel_layout.py, N = WHEELS_MAX) */")
+    out.extend(f"#define LV_WHEELS_AXES_{part.upper()} lv_wheels{WHEELS_MAX}_{part}" for part in ("body_rhs", "motor"))
     out += ["", "#endif", ""]
     return "\n".join(out)
 

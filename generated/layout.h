@@ -62,5 +62,8 @@ enum {
 };
 #define LV_WHEELS_MAX 4  /* wheel slots per body (XS.Omega, MODEL.J, the columns of MODEL.A_b) */
 #define LV_WHEELS_BODY_AXES 3  /* wheels of a body-axis layout (KIND_WHEELS without KIND_AXES) */
+/* the printed kernels of a KIND_AXES layout (derive/wheel_layout.py, N = WHEELS_MAX) */
+#define LV_WHEELS_AXES_BODY_RHS lv_wheels4_body_rhs
+#define LV_WHEELS_AXES_MOTOR lv_wheels4_motor
 
 #endif

@@ -455,9 +455,9 @@ static inline void lv_wheels_rhs(int kind, const double *y, const double *r, con
 {
     int i;
     if (kind & LV_KIND_AXES) {
-        lv_wheels4_body_rhs(y + LV_STATE_Q, y + LV_STATE_OMEGA_B, y + LV_XS_OMEGA, r + LV_MODEL_I_P, r + LV_MODEL_A_B,
-                            r + LV_MODEL_J, r + LV_MODEL_R_B, F, tau, u, r[LV_MODEL_C_W], yd + LV_STATE_Q,
-                            yd + LV_STATE_OMEGA_B, yd + LV_XS_OMEGA);
+        LV_WHEELS_AXES_BODY_RHS(y + LV_STATE_Q, y + LV_STATE_OMEGA_B, y + LV_XS_OMEGA, r + LV_MODEL_I_P, r + LV_MODEL_A_B,
+                                r + LV_MODEL_J, r + LV_MODEL_R_B, F, tau, u, r[LV_MODEL_C_W], yd + LV_STATE_Q,
+                                yd + LV_STATE_OMEGA_B, yd + LV_XS_OMEGA);
     } else {
         lv_wheel_body_rhs(y + LV_STATE_Q, y + LV_STATE_OMEGA_B, y + LV_XS_OMEGA, r + LV_MODEL_I_P, r + LV_MODEL_J,
                           r + LV_MODEL_R_B, F, tau, u, r[LV_MODEL_C_W], yd + LV_STATE_Q, yd + LV_STATE_OMEGA_B, yd + LV_XS_OMEGA);
@@ -470,7 +470,7 @@ static inline void lv_wheels_motor(int kind, const double *r, const double *cmd,
 {
     int i;
     if (kind & LV_KIND_AXES) {
-        lv_wheels4_motor(cmd, Omega, r[LV_MODEL_TORQUE_LIMIT], r[LV_MODEL_SPEED_LIMIT], r[LV_MODEL_CUTOFF], u);
+        LV_WHEELS_AXES_MOTOR(cmd, Omega, r[LV_MODEL_TORQUE_LIMIT], r[LV_MODEL_SPEED_LIMIT], r[LV_MODEL_CUTOFF], u);
     } else {
         lv_wheel_motor(cmd, Omega, r[LV_MODEL_TORQUE_LIMIT], r[LV_MODEL_SPEED_LIMIT], r[LV_MODEL_CUTOFF], u);
         for (i = LV_WHEELS_BODY_AXES; i < LV_NW; i++) u[i] = 0.0;
