@@ -253,7 +253,8 @@ class Effect:
 
     def describe(self) -> str:
         """A one-line description: ``name(param=value, ...)``."""
-        vals = ", ".join(f"{f}={np.array2string(np.atleast_1d(self.values[f]), precision=4)}" for f in self.fields)
+        vals = ", ".join(f"{f}={' '.join(np.array2string(np.atleast_1d(self.values[f]), precision=4).split())}"
+                         for f in self.fields)
         return f"{self.name}({vals})"
 
     def __repr__(self):
