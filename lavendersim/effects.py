@@ -227,8 +227,8 @@ class Effect:
         return out
 
     def params_flat(self) -> np.ndarray:
-        """The parameters in row order (the declared offsets)."""
-        return np.concatenate([np.atleast_1d(np.asarray(self.values[f], dtype=np.float64)) for f in self.fields]) \
+        """The parameters in row order (the declared offsets; a matrix parameter row-major)."""
+        return np.concatenate([np.ravel(np.asarray(self.values[f], dtype=np.float64)) for f in self.fields]) \
             if self.fields else np.zeros(0)
 
     def row(self, body_index: int, width: int = ROW) -> np.ndarray:

@@ -45,6 +45,8 @@ def test_a_layout_gets_the_axes_kernel_and_n_wheel_arrays():
         sim.set_wheel_command("sc", [0.1, -0.1, 0.05])          # four wheels take four commands
     sim.run(5)
     assert np.all(sim.wheel_command_applied("sc")[:3] != 0)
+    e = pyramid_scene().effects[0]
+    assert e.params_flat().size == 4 + 12 + 4 and "axes_b=[[" in e.describe()   # a matrix parameter flattens
     tr = sim.record(4, every=2)
     assert tr.Omega.shape == (3, 1, LY.WHEELS_MAX) and tr.body("sc").Omega.shape == (3, 4)
     np.testing.assert_array_equal(tr.body("sc").Omega[-1], sim.wheel_rates("sc"))
