@@ -21,11 +21,12 @@ from ..generated import layout as LY
 from ..generated import tableaux as T
 from ..kernels import K
 from . import (DOPRI5_HMIN_REL, DOPRI5_MAX_SUBSTEPS, FLOAT32_INTEGRATORS, KIND_AXES, KIND_JOINT, KIND_WHEELS, PLAIN_ONLY,
-               Adaptive, Models, divergence_cause, no_root_cause, tolerance_cause)
+               Adaptive, Models, divergence_cause, no_root_cause, tolerance_cause, wheel_counts)
 
 P, Q, V, W = LY.STATE_P_W, LY.STATE_Q, LY.STATE_V_W, LY.STATE_OMEGA_B  # state-row fields
 X, OM = LY.XS_X, LY.XS_OMEGA                                               # extended state [x, Omega]
 OM3 = slice(OM.start, OM.start + LY.WHEELS_BODY_AXES)                       # the rates of body-axis wheels
+W3 = slice(0, LY.WHEELS_BODY_AXES)                                          # their slots in a wheel array
 _WHEELS_RHS = getattr(K, f"wheels{LY.WHEELS_MAX}_body_rhs")                  # wheels on the model row's axes
 _WHEELS_MOTOR = getattr(K, f"wheels{LY.WHEELS_MAX}_motor")
 U, U0 = slice(Q.start, Q.start + 3), Q.start + 3  # rk4_expmap: u in q's first three slots, the fourth held at 0
@@ -117,6 +118,7 @@ class _Group:
         self.cutoff = r[:, LY.MODEL_CUTOFF].copy()
         self.on_axes = bool(kind.size) and bool(kind[0] & KIND_AXES)   # a group is all one wheel kernel
         self.A_b = r[:, LY.MODEL_A_B].reshape(-1, 3, LY.WHEELS_MAX).copy()
+        self.n_wheels = wheel_counts(r)
 
     def wheel_rhs(self, xg, F, tau, u, o):
         """q, omega_b, Omega derivatives of the group's wheeled bodies into o (the other wheel slots at rest)."""
@@ -124,8 +126,8 @@ class _Group:
             o[:, Q], o[:, W], o[:, OM] = _WHEELS_RHS(xg[:, Q], xg[:, W], xg[:, OM], self.I_p, self.A_b, self.J,
                                                             self.r_b, F, tau, u, self.c_w)
         else:
-            o[:, Q], o[:, W], o[:, OM3] = K.wheel_body_rhs(xg[:, Q], xg[:, W], xg[:, OM3], self.I_p, self.J[:, :3],
-                                                           self.r_b, F, tau, u[:, :3], self.c_w)
+            o[:, Q], o[:, W], o[:, OM3] = K.wheel_body_rhs(xg[:, Q], xg[:, W], xg[:, OM3], self.I_p, self.J[:, W3],
+                                                           self.r_b, F, tau, u[:, W3], self.c_w)
             o[:, OM3.stop:OM.stop] = 0.0
 
     def motor(self, command, Omega):
@@ -133,7 +135,7 @@ class _Group:
         if self.on_axes:
             return _WHEELS_MOTOR(command, Omega, self.tl, self.sl, self.cutoff)
         u = np.zeros_like(command)
-        u[:, :3] = K.wheel_motor(command[:, :3], Omega[:, :3], self.tl, self.sl, self.cutoff)
+        u[:, W3] = K.wheel_motor(command[:, W3], Omega[:, W3], self.tl, self.sl, self.cutoff)
         return u
 
     def velocity(self, x):
@@ -243,7 +245,7 @@ class _Plan:
         for g in self.wheels:
             if b in g.idx:
                 k = int(np.flatnonzero(g.idx == b)[0])
-                n = LY.WHEELS_BODY_AXES if not g.on_axes else int(np.count_nonzero(np.any(g.A_b[k] != 0.0, axis=0)))
+                n = int(g.n_wheels[k])
                 return x[b, OM][:n], (g.J[k][:n], g.c_w[k])
         return None, None
 
