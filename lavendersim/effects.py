@@ -70,6 +70,7 @@ class ParamSpec:
     default: object
     offset: int
     upto: bool = False
+    frame: str | None = None   # "body": a body-frame vector (or rows of them), rotated for a non-principal body
 
     @property
     def size(self) -> int:
@@ -155,11 +156,18 @@ class EffectSpec:
         EffectSpec
         """
         params = tuple(ParamSpec(p["name"], tuple(p["shape"]), p["unit"], p["doc"], p["rule"], p["default"], p["offset"],
-                                 bool(p.get("upto", False)))
+                                 bool(p.get("upto", False)), p.get("frame", _frame_of(p)))
                        for p in entry["params"])
         return cls(entry["name"], entry["code"] if code is None else code, entry["kind"], entry["summary"], params,
                    entry["n_params"], tuple(entry["outputs"]), tuple(entry["state_inputs"]), entry["flags"],
                    entry["kernel"], source, user_set)
+
+
+def _frame_of(p: dict) -> str | None:
+    """The frame of a parameter printed before derive printed frames (a user set derived by an older
+    version): the name's suffix, as derive.effect.Param.frame reads it."""
+    shape = tuple(p["shape"])
+    return {"_b": "body", "_w": "world"}.get(p["name"][-2:]) if shape and shape[-1] == 3 else None
 
 
 class Effect:
