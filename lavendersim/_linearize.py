@@ -483,8 +483,29 @@ class Linearization(ct.StateSpace):
             du = np.linalg.lstsq(self.B, -r, rcond=None)[0]
         return x_ss, du
 
-    def feedback(self, K: np.ndarray, x: np.ndarray) -> np.ndarray:
-        """u = u0 + du_ss − K (x − x_ss) (unsaturated), in the inputs' units."""
+    def target_map(self) -> tuple[np.ndarray, np.ndarray]:
+        """(P (n, n), G (m, n)): :meth:`target` is linear in x, ``x_ss = P x`` and ``du_ss = G x``."""
+        cols = [self.target(e) for e in np.eye(self.nstates)]
+        return (np.array([c[0] for c in cols]).T.reshape(self.nstates, self.nstates),
+                np.array([c[1] for c in cols]).T.reshape(self.ninputs, self.nstates))
+
+    def control_law(self, K: np.ndarray, x: np.ndarray) -> np.ndarray:
+        """u = u0 + du_ss − K (x − x_ss) (unsaturated), in the inputs' units: the state feedback u = −K x
+        about the operating point, regulating to the equilibrium :meth:`target` that keeps x's conserved
+        coordinates. (Not ``StateSpace.feedback``, which closes a loop between two systems and is kept
+        as python-control defines it.)
+
+        Parameters
+        ----------
+        K : array_like (m, n)
+            A gain, e.g. from :func:`lavendersim.control.lqr`.
+        x : array_like (n,)
+            Error-coordinate state.
+
+        Returns
+        -------
+        ndarray (m,)
+        """
         x = np.asarray(x, float)
         x_ss, du = self.target(x)
         return self.u0 + du - np.asarray(K) @ (x - x_ss)

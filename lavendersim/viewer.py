@@ -1011,7 +1011,7 @@ def _wheel_scene():
         for _ in range(max(1, int(round(dt / control_dt)))):
             st = sim.state(C.BODY)
             x = lin.state(st.q, st.omega_b, sim.wheel_rates(C.BODY))
-            sim.set_wheel_command(C.BODY, np.clip(lin.feedback(K, x), -lim, lim))
+            sim.set_wheel_command(C.BODY, np.clip(lin.control_law(K, x), -lim, lim))
             sim.run(int(round(control_dt / sim.dt)))
 
     def overlays(sim):
