@@ -47,9 +47,10 @@ the file writes the inertia in, ``_w`` world)::
     settle_threshold_deg = 0.1            # (default 0.1)
     settle_within = 60.0                  # s: the stated settle time (optional; reported as met or not)
 
+    # Omega0 = [0, 0, 0, 0]              # rad/s, wheel speeds at the start (default: the null-space bias)
+
     [simulator]                           # optional
-    dt = 0.001                            # s, the Sim's step (a whole fraction of the period)
-    integrator = "rk4"
+    dt = 0.001                            # s, the Sim's RK4 step (a whole fraction of the period and the delay)
 
     [monte_carlo]                         # optional: `lavendersim lqr --spacecraft F --monte-carlo N`
     n = 50
@@ -82,10 +83,9 @@ CONTROLLER_KEYS = ("body", "period", "delay", "Q", "R", "weights", "q_ref", "nul
 WEIGHT_KEYS = ("attitude_deg", "rate", "wheel_speed_fraction", "torque_fraction")
 SENSOR_KEYS = ("attitude_noise", "gyro_noise", "gyro_bias", "wheel_speed_noise", "seed")
 ACTUATOR_KEYS = ("lag",)
-MANEUVER_KEYS = ("angle_deg", "axis", "duration", "settle_threshold_deg", "settle_within")
-SIMULATOR_KEYS = ("dt", "integrator")
+MANEUVER_KEYS = ("angle_deg", "axis", "duration", "settle_threshold_deg", "settle_within", "Omega0")
+SIMULATOR_KEYS = ("dt",)
 MONTE_CARLO_KEYS = ("n", "inertia_uncertainty", "seed")
-INTEGRATORS = ("rk4", "dopri5", "euler", "semi_implicit")
 
 
 @dataclass(frozen=True)
@@ -133,6 +133,8 @@ class Maneuver:
         Settled: the attitude error stays below this, deg.
     settle_within : float or None
         The stated settle time, s (None: not stated).
+    Omega0 : ndarray (N,) or None
+        Wheel speeds at the start, rad/s (None: the controller's null-space bias Omega_ref).
     """
 
     angle_deg: float
@@ -140,6 +142,7 @@ class Maneuver:
     duration: float
     settle_threshold_deg: float
     settle_within: float | None
+    Omega0: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -180,9 +183,7 @@ class Spacecraft:
         First-order actuator time constant, s.
     maneuver : Maneuver
     dt : float
-        The Sim's step, s.
-    integrator : str
-        The Sim's integrator.
+        The Sim's RK4 step, s.
     monte_carlo : MonteCarloSpec or None
     source : str
         The file it was read from ("" for a dict).
@@ -196,7 +197,6 @@ class Spacecraft:
     actuator_lag: float
     maneuver: Maneuver
     dt: float
-    integrator: str
     monte_carlo: MonteCarloSpec | None
     source: str = ""
     raw: dict = field(default_factory=dict, repr=False, compare=False)
@@ -308,8 +308,9 @@ def _maneuver(d: dict) -> Maneuver:
     if not norm > 0:
         raise V.LavenderInputError("maneuver.axis", "must be a non-zero vector", f", got {V._nums(axis)}")
     within = None if "settle_within" not in m else V.positive("maneuver.settle_within", m["settle_within"])
+    Om0 = None if "Omega0" not in m else V.array("maneuver.Omega0", m["Omega0"], (None,))
     return Maneuver(angle, axis / norm, V.positive("maneuver.duration", m["duration"]),
-                    V.positive("maneuver.settle_threshold_deg", m.get("settle_threshold_deg", 0.1)), within)
+                    V.positive("maneuver.settle_threshold_deg", m.get("settle_threshold_deg", 0.1)), within, Om0)
 
 
 def _monte_carlo(d: dict) -> MonteCarloSpec | None:
@@ -357,9 +358,14 @@ def from_dict(d: dict, *, source: str = "") -> Spacecraft:
     if abs(sub - round(sub)) > 1e-9 * sub:
         raise V.LavenderInputError("simulator.dt", f"must divide the controller period {ctrl.period:g} s into whole steps",
                                    f", got {dt!r}")
-    integrator = V.choice("simulator.integrator", sim.get("integrator", "rk4"), INTEGRATORS)
+    nd = ctrl.delay / dt
+    if abs(nd - round(nd)) > 1e-9 * max(1.0, nd):
+        raise V.LavenderInputError("simulator.dt", f"must divide the controller delay {ctrl.delay:g} s into whole steps",
+                                   f", got {dt!r}")
+    if man.Omega0 is not None and man.Omega0.size != n:
+        raise V.LavenderInputError("maneuver.Omega0", f"needs one speed per wheel ({n})", f", got {man.Omega0.size}")
     name = SF.text("name", d["name"]) if "name" in d else body
-    return Spacecraft(name, scene, body, ctrl, sensors, lag, man, dt, integrator, _monte_carlo(d), source, d)
+    return Spacecraft(name, scene, body, ctrl, sensors, lag, man, dt, _monte_carlo(d), source, d)
 
 
 def load(path: str | os.PathLike[str]) -> Spacecraft:
@@ -395,3 +401,221 @@ def shipped() -> dict[str, Path]:
         (``lavendersim lqr --scenario``), ``cube_pyramid4`` (``--layout pyramid4``).
     """
     return {p.stem: p for p in sorted(DATA.glob("*.toml"))}
+
+
+# ---------------------------------------------------------------------------------------------
+# designing and flying (lavendersim.control's one stack)
+# ---------------------------------------------------------------------------------------------
+
+
+def _stack():
+    from . import wheel_control
+
+    return wheel_control
+
+
+def design(sc: Spacecraft) -> Any:
+    """Design the file's controller: :func:`lavendersim.control.design` with its ``[controller]`` and ``[actuator]``.
+
+    Parameters
+    ----------
+    sc : Spacecraft
+
+    Returns
+    -------
+    lavendersim.control.Controller
+    """
+    c = sc.controller
+    return _stack().design(sc.scene, sc.body, period=c.period, delay=c.delay, Q=c.Q, R=c.R, q_ref=c.q_ref,
+                           null_bias=c.null_bias, actuator_lag=sc.actuator_lag, weights=c.weights or None)
+
+
+def sensors(sc: Spacecraft, *, noise: bool = True, seed: int | None = None) -> Any:
+    """The file's ``[sensors]`` as :class:`lavendersim.control.Sensors` (``noise=False``: perfect measurements).
+
+    Parameters
+    ----------
+    sc : Spacecraft
+    noise : bool, default True
+    seed : int, optional
+        Overrides the file's seed.
+
+    Returns
+    -------
+    lavendersim.control.Sensors
+    """
+    kw = dict(sc.sensors) if noise else {}
+    if seed is not None:
+        kw["seed"] = seed
+    return _stack().Sensors(**kw)
+
+
+def fly(sc: Spacecraft, controller: Any, *, noise: bool = True, scene: Scene | None = None, seed: int | None = None,
+        backend: str = "auto") -> Any:
+    """Fly the file's maneuver: :func:`lavendersim.control.closed_loop` from :attr:`Spacecraft.q0` back to q_ref.
+
+    Parameters
+    ----------
+    sc : Spacecraft
+    controller : lavendersim.control.Controller
+        From :func:`design`.
+    noise : bool, default True
+        The file's sensor models (False: perfect measurements).
+    scene : Scene, optional
+        Another plant (Monte Carlo: a perturbed inertia); default the file's.
+    seed : int, optional
+        Overrides the sensors' seed.
+    backend : {"auto", "c", "numpy"}, default "auto"
+
+    Returns
+    -------
+    lavendersim.control.Response
+    """
+    m = sc.maneuver
+    return _stack().closed_loop(sc.scene if scene is None else scene, controller, T=m.duration, q0=sc.q0,
+                                Omega0=m.Omega0, sensors=sensors(sc, noise=noise, seed=seed), dt=sc.dt,
+                                threshold_deg=m.settle_threshold_deg, backend=backend)
+
+
+def external_effects(sc: Spacecraft) -> list[str]:
+    """The effects that can change the controlled body's total angular momentum (a joint, force effects on it).
+
+    Parameters
+    ----------
+    sc : Spacecraft
+
+    Returns
+    -------
+    list of str
+        Effect names; empty for a free spacecraft (its |L| must then be conserved).
+    """
+    return [e.name for e in sc.scene.effects if e.name != "reaction_wheels" and e.body in (None, sc.body)]
+
+
+def figures(sc: Spacecraft, controller: Any, response: Any) -> dict:
+    """The design and the maneuver's figures as plain values (JSON-ready but for an infinite settling time).
+
+    Parameters
+    ----------
+    sc : Spacecraft
+    controller : lavendersim.control.Controller
+    response : lavendersim.control.Response
+
+    Returns
+    -------
+    dict
+        ``spacecraft``, ``file``, ``body``, ``wheels``; ``design`` (period, delay, actuator_lag,
+        controllability_rank, n_states, poles (discrete: real, imag, max modulus), Omega_ref, q_ref); ``maneuver``
+        (angle_deg, axis, duration, settle_threshold_deg, settle_within); ``figures``: settling_time (s),
+        settled_within (bool or None), peak_torque and peak_wheel_speed (per wheel and max, N·m and rad/s),
+        torque_limit, speed_limit, within_limits, final_error_deg, L_drift (relative drift of the total angular
+        momentum, meaningful without external torque: ``external_effects`` empty), external_effects.
+    """
+    d = controller.figures()
+    design_ = {k: d[k] for k in ("period", "delay", "actuator_lag", "controllability_rank", "n_states", "poles_real",
+                                 "poles_imag", "max_pole_modulus", "Omega_ref", "q_ref")}
+    f = response.figures()
+    st = f["settling_time"]
+    m = sc.maneuver
+    ext = external_effects(sc)
+    fig = {"settling_time": st, "settled_within": None if m.settle_within is None else bool(st <= m.settle_within),
+           "peak_torque": f["peak_torque"], "peak_torque_max": float(np.max(f["peak_torque"])),
+           "peak_wheel_speed": f["peak_wheel_speed"], "peak_wheel_speed_max": float(np.max(f["peak_wheel_speed"])),
+           "torque_limit": f["torque_limit"], "speed_limit": f["speed_limit"], "within_limits": f["within_limits"],
+           "final_error_deg": f["final_error_deg"], "L_drift": f["L_drift"], "external_effects": ext}
+    return {"spacecraft": sc.name, "file": sc.source, "body": sc.body, "wheels": sc.n_wheels, "design": design_,
+            "maneuver": {"angle_deg": m.angle_deg, "axis": m.axis.tolist(), "duration": m.duration,
+                         "settle_threshold_deg": m.settle_threshold_deg, "settle_within": m.settle_within},
+            "sensors": dict(sc.sensors), "figures": fig}
+
+
+# ---------------------------------------------------------------------------------------------
+# Monte Carlo: sensor seeds and the inertia tensor
+# ---------------------------------------------------------------------------------------------
+
+
+def perturbed_scene(sc: Spacecraft, rng: np.random.Generator, spread: float) -> Scene:
+    """The file's scene with the controlled body's inertia tensor perturbed: each entry I_ij scaled by
+    (1 + spread·s_ij), s symmetric, uniform in [-1, 1] (redrawn until the tensor is a valid inertia).
+
+    Parameters
+    ----------
+    sc : Spacecraft
+    rng : numpy.random.Generator
+    spread : float
+        Relative spread, in [0, 0.5).
+
+    Returns
+    -------
+    Scene
+    """
+    d = SF.scene_to_dict(sc.scene)
+    entry = next(b for b in d["body"] if b["name"] == sc.body)
+    I = np.asarray(entry["inertia"], dtype=float)
+    I = np.diag(I) if I.ndim == 1 else I
+    for _ in range(1000):
+        s = rng.uniform(-1.0, 1.0, (3, 3))
+        s = np.triu(s) + np.triu(s, 1).T
+        trial = I * (1.0 + spread * s)
+        try:
+            V.inertia_frame("inertia", trial)
+        except V.LavenderInputError:
+            continue
+        entry["inertia"] = trial.tolist()
+        return SF.scene_from_dict(d)
+    raise V.LavenderInputError("monte_carlo.inertia_uncertainty", "too large: no valid inertia tensor drawn in 1000 tries",
+                               f", got {spread!r}")
+
+
+def _mc_task(task: dict) -> dict:
+    """One Monte Carlo run (module level: the executors pickle it by reference)."""
+    sc = from_dict(task["file"], source=task["source"])
+    rng = np.random.default_rng([task["seed"], task["i"]])
+    scene = perturbed_scene(sc, rng, task["spread"])
+    r = fly(sc, task["controller"], scene=scene, seed=int(rng.integers(0, 2 ** 31)), backend=task["backend"])
+    f = r.figures()
+    return {"settling_time": f["settling_time"], "peak_torque": float(np.max(f["peak_torque"])),
+            "peak_wheel_speed": float(np.max(f["peak_wheel_speed"])), "final_error_deg": f["final_error_deg"],
+            "within_limits": f["within_limits"]}
+
+
+def monte_carlo(sc: Spacecraft, controller: Any, n: int | None = None, *, executor: Any = None,
+                backend: str = "auto") -> dict:
+    """Fly the nominal controller on ``n`` plants: the inertia tensor perturbed (``[monte_carlo]``) and new sensor seeds.
+
+    Parameters
+    ----------
+    sc : Spacecraft
+    controller : lavendersim.control.Controller
+        The nominal design.
+    n : int, optional
+        Runs (default the file's ``monte_carlo.n``, else 20).
+    executor : lavendersim.executor.Executor, optional
+        Where the runs go (default: this process).
+    backend : {"auto", "c", "numpy"}, default "auto"
+
+    Returns
+    -------
+    dict
+        ``n``, ``seed``, ``inertia_uncertainty``; ``settled`` (runs settled within the stated time, or at all), ``failures``
+        (run indices that did not); per figure (settling_time s, peak_torque N·m, peak_wheel_speed rad/s,
+        final_error_deg) the ``min``, ``median``, ``p95``, ``max`` over the settled runs; ``runs``: each run's figures.
+    """
+    from . import executor as X
+
+    spec = sc.monte_carlo or MonteCarloSpec(20, 0.0, 0)
+    n = spec.n if n is None else V.integer("monte-carlo", n, minimum=1)
+    tasks = [{"file": sc.raw, "source": sc.source, "seed": spec.seed, "i": i, "spread": spec.inertia_uncertainty,
+              "controller": controller, "backend": backend} for i in range(n)]
+    runs = X.map_tasks(_mc_task, tasks, executor)
+    limit = sc.maneuver.settle_within
+    ok = [r for r in runs if math.isfinite(r["settling_time"]) and (limit is None or r["settling_time"] <= limit)]
+    out: dict[str, Any] = {"n": n, "seed": spec.seed, "inertia_uncertainty": spec.inertia_uncertainty,
+                           "settle_within": limit, "settled": len(ok),
+                           "failures": [i for i, r in enumerate(runs) if r not in ok]}
+    for k in ("settling_time", "peak_torque", "peak_wheel_speed", "final_error_deg"):
+        v = np.array([r[k] for r in ok])
+        out[k] = {"min": float(v.min()), "median": float(np.median(v)), "p95": float(np.percentile(v, 95)),
+                  "max": float(v.max())} if v.size else None
+    out["runs"] = runs
+    return out
