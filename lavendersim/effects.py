@@ -60,6 +60,9 @@ class ParamSpec:
         Offset in the row's parameters.
     upto : bool, optional
         The leading length of ``shape`` is a maximum (model effects: e.g. one entry per reaction wheel).
+    frame : {"body", "world", None}, optional
+        The frame of a 3-vector (or of each row of a matrix): "body" values of a body given a full
+        inertia tensor are rotated into its principal frame before the kernels see them.
     """
 
     name: str
@@ -285,7 +288,8 @@ class _WheelsCheck:
         if J.size != A_b.shape[1]:
             raise V.LavenderInputError(f"{self.name}.J", f"needs one inertia per wheel axis (axes_b has {A_b.shape[1]} rows)",
                                        f", got {J.size}")
-        if self.on_body_axes:
+        principal = getattr(body, "principal", True)
+        if self.on_body_axes and principal:
             bad = np.flatnonzero(J >= I_b)
             if bad.size:
                 i = int(bad[0])
@@ -293,7 +297,7 @@ class _WheelsCheck:
                                            f"I_b[{i}] = {I_b[i]:g} kg·m² (the body's inertia includes its wheels)",
                                            f", got {J[i]:g}")
             return
-        free = np.diag(I_b) - (A_b * J) @ A_b.T
+        free = (np.diag(I_b) if principal else body.inertia_b) - (A_b * J) @ A_b.T   # body frame
         low = float(np.linalg.eigvalsh(free).min())
         if not low > 1e-12 * float(I_b.max()):
             raise V.LavenderInputError(f"{self.name}.J", "the body with its wheels free, I_b − A_b J A_bᵀ, must stay "
@@ -324,7 +328,7 @@ class _JointCheck:
         x = body.x0
         with np.errstate(all="ignore"):
             r_b = K.quat_to_matrix(x[STATE_Q]).T @ (x[STATE_P_W] - anchor)
-            I_p = K.parallel_axis(np.diag(body.I_b), body.mass, -r_b)
+            I_p = K.parallel_axis(body.inertia_b, body.mass, -r_b)
             p_w, v_w = K.pivot_kinematics(x[STATE_Q], x[STATE_OMEGA_B], anchor, r_b)
         if not all(np.all(np.isfinite(a)) for a in (r_b, I_p, p_w, v_w)):
             raise V.LavenderInputError(f"{self.name}.anchor_w", f"too far from the COM of body {body.name!r}: the "

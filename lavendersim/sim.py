@@ -111,6 +111,7 @@ from . import validate as V
 from .backends import ADAPTIVE, KIND_AXES, KIND_JOINT, KIND_WHEELS, PLAIN_ONLY, Adaptive, Models
 from .bodies import BodyState
 from .errors import DivergenceError, ValidityBoundWarning
+from .frames import public_rows
 from .generated import layout as LY
 from .generated import tableaux as TB
 from .kernels import K
@@ -329,7 +330,9 @@ class Sim:
         self.bodies = dict(scene.bodies)
         for e in scene.effects:  # an effect no declaration printed is an error, never a no-op
             effects_mod.check_declared(e)
-        self._x, self.params, self.effects = scene.arrays()
+        tables = scene.tables()   # a body given a full inertia tensor is stepped in its principal frame
+        self._x, self.params, self.effects = tables.state, tables.params, tables.effects
+        self._frames = tables.frames
         self._index = {name: i for i, name in enumerate(self.names)}
         self._effect_objs = list(scene.effects)
         self._models = self._build_models(scene)
@@ -417,7 +420,13 @@ class Sim:
         """The state of every body, (nb, 13) = [p_w(3), q(4), v_w(3), omega_b(3)] per row (layout
         generated/layout.py), in the order of `names`. A read-only view of the array the backends advance
         in place: no copy, always current; write through set_state (which validates), never through it."""
-        return self._views[0]
+        return self._views[0] if self._frames is None else self._public(self._views[0])
+
+    def _public(self, a: np.ndarray) -> np.ndarray:
+        """Internal state rows in the body frames: a read-only converted copy (bodies with full tensors)."""
+        out = self._frames.public(a)
+        out.flags.writeable = False
+        return out
 
     @property
     def p_w(self) -> np.ndarray:
@@ -427,7 +436,7 @@ class Sim:
     @property
     def q(self) -> np.ndarray:
         """Orientations R_WB as quaternions (x, y, z, w), (nb, 4): a read-only view of x (see x)."""
-        return self._views[2]
+        return self._views[2] if self._frames is None else self.x[:, LY.STATE_Q]
 
     @property
     def v_w(self) -> np.ndarray:
@@ -437,7 +446,7 @@ class Sim:
     @property
     def omega_b(self) -> np.ndarray:
         """Angular velocities (body rates), body frame, rad/s, (nb, 3): a read-only view of x (see x)."""
-        return self._views[4]
+        return self._views[4] if self._frames is None else self.x[:, LY.STATE_OMEGA_B]
 
     @property
     def Omega(self) -> np.ndarray:
@@ -704,7 +713,9 @@ class Sim:
         if "reaction_wheels" in me:
             e = me["reaction_wheels"]
             w = e.values
-            kind |= backends.wheel_row(rows[i], w["J"], e.A_b, on_axes=not e.on_body_axes)
+            R_bp = None if self._frames is None else self._frames.rotation(i)
+            A_p = e.A_b if R_bp is None else R_bp.T @ e.A_b   # the wheel axes in the principal frame
+            kind |= backends.wheel_row(rows[i], w["J"], A_p, on_axes=not e.on_body_axes or R_bp is not None)
             rows[i, LY.MODEL_TORQUE_LIMIT], rows[i, LY.MODEL_SPEED_LIMIT] = w["torque_limit"], w["speed_limit"]
             rows[i, LY.MODEL_C_W] = w["c_w"]
             rows[i, LY.MODEL_CUTOFF] = w["cutoff"]
@@ -1022,7 +1033,7 @@ class Sim:
             except BaseException:
                 self._restore(start)
                 raise
-        return Trajectory(self.names, np.array(ts), np.stack(xs), np.stack(Ws), self._wheel_n)
+        return Trajectory(self.names, np.array(ts), public_rows(self._frames, np.stack(xs)), np.stack(Ws), self._wheel_n)
 
     # ---- state access ---------------------------------------------------------------------
     def state(self, name: str) -> BodyState:
@@ -1049,7 +1060,8 @@ class Sim:
             If no body has that name.
         """
         i = self._i(name)
-        return BodyState.of_slots(self._x[i].copy(), self._models.Omega[i].copy(), int(self._wheel_n[i]))
+        x = self._x[i].copy() if self._frames is None else self._frames.public_row(i, self._x[i])
+        return BodyState.of_slots(x, self._models.Omega[i].copy(), int(self._wheel_n[i]))
 
     @V.keywords  # an unknown keyword (a typo such as omega=) is a LavenderInputError naming it
     def set_state(self, name: str, *, p_w=None, q=None, v_w=None, omega_b=None, omega_w=None, Omega=None) -> None:
@@ -1080,7 +1092,8 @@ class Sim:
         """
         i = self._i(name)
         kind = self._kind(i)
-        x = self._x[i].copy()
+        R_bp = None if self._frames is None else self._frames.rotation(i)
+        x = self._x[i].copy() if R_bp is None else self._frames.public_row(i, self._x[i])
         if kind & KIND_JOINT:
             for field, value in (("p_w", p_w), ("v_w", v_w)):
                 if value is not None:
@@ -1104,6 +1117,14 @@ class Sim:
                 raise V.LavenderInputError("Omega", f"body {name!r} has no reaction_wheels")
             W = np.zeros(LY.WHEELS_MAX)
             W[:self._wheel_n[i]] = V.vector("Omega", Omega, int(self._wheel_n[i]))
+        if R_bp is not None:   # back to the principal frame: only what was given (the rest keeps its bits)
+            given, x_int = self._frames.internal_row(i, x), self._x[i].copy()
+            x_int[LY.STATE_P_W], x_int[LY.STATE_V_W] = x[LY.STATE_P_W], x[LY.STATE_V_W]
+            if q is not None:
+                x_int[LY.STATE_Q] = given[LY.STATE_Q]
+            if omega_b is not None or omega_w is not None:
+                x_int[LY.STATE_OMEGA_B] = given[LY.STATE_OMEGA_B]
+            x = x_int
         if kind & KIND_JOINT:
             r = self._models.rows[i]
             x[LY.STATE_P_W], x[LY.STATE_V_W] = K.pivot_kinematics(x[LY.STATE_Q], x[LY.STATE_OMEGA_B],
