@@ -411,7 +411,8 @@ def scene_to_dict(scene: Scene) -> dict:
                 entry["body"] = e.body
             entry.update({k: (_list(v) if np.ndim(v) else float(v)) for k, v in e.values.items()})
             effects.append(entry)
-    out: dict[str, Any] = {"scene_format": SCENE_FORMAT, "body": list(bodies.values())}
+    ordered = [{k: b[k] for k in BODY_KEYS if k in b} for b in bodies.values()]   # one key order, whatever the effects'
+    out: dict[str, Any] = {"scene_format": SCENE_FORMAT, "body": ordered}
     if effects:
         out["effects"] = effects
     return out
