@@ -362,6 +362,10 @@ def from_dict(d: dict, *, source: str = "") -> Spacecraft:
     if abs(nd - round(nd)) > 1e-9 * max(1.0, nd):
         raise V.LavenderInputError("simulator.dt", f"must divide the controller delay {ctrl.delay:g} s into whole steps",
                                    f", got {dt!r}")
+    most = _stack().MAX_SAMPLES
+    if not man.duration / ctrl.period <= most:
+        raise V.LavenderInputError("maneuver.duration", f"would take {man.duration / ctrl.period:.3g} controller periods; "
+                                   f"at most {most:,} are allowed", f", got {man.duration!r}")
     if man.Omega0 is not None and man.Omega0.size != n:
         raise V.LavenderInputError("maneuver.Omega0", f"needs one speed per wheel ({n})", f", got {man.Omega0.size}")
     name = SF.text("name", d["name"]) if "name" in d else body
