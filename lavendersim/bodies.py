@@ -21,7 +21,7 @@ from .kernels import K
 # shape kind -> (number of dimensions, their names) of Body(shape=(kind, dims)); all in m, > 0
 SHAPES = {"box": (3, "side lengths (w, h, d) along body x, y, z"), "cylinder": (2, "(radius, height), along body z"),
           "sphere": (1, "(radius,)")}
-_FIELDS = ("name", "mass", "I_b", "shape", "x0", "R_bp")
+_FIELDS = ("name", "mass", "I_b", "shape", "x0", "R_bp", "_tensor")
 
 
 class ImmutableBodyError(V.LavenderInputError, AttributeError):
@@ -101,8 +101,12 @@ class Body:
             raise V.LavenderInputError("name", "must be a non-empty string", f", got {V._describe(name)}")
         mass = V.positive("mass", mass)
         I_b, R_bp = V.inertia_frame("inertia", inertia)
+        tensor = None
         if not np.array_equal(R_bp, np.eye(3)):   # one rotation everywhere: the matrix of its unit quaternion
             R_bp = K.quat_to_matrix(K.quat_normalize(K.matrix_to_quat(R_bp)))
+            t = np.asarray(inertia, dtype=np.float64)
+            tensor = 0.5 * t + 0.5 * t.T           # as given (symmetrized): saved and shown as the user wrote it
+            tensor.flags.writeable = False
         x = np.empty(STATE_SIZE)
         x[P] = V.vector("p_w", p_w)
         x[Q] = V.quaternion("q", q)
@@ -118,7 +122,7 @@ class Body:
         x.flags.writeable = False
         R_bp = np.ascontiguousarray(R_bp, dtype=np.float64)
         R_bp.flags.writeable = False
-        for f, v in zip(_FIELDS, (name, mass, I_b, shape, x, R_bp)):
+        for f, v in zip(_FIELDS, (name, mass, I_b, shape, x, R_bp, tensor)):
             object.__setattr__(self, f, v)
 
     def __setattr__(self, field: str, value: Any) -> None:
@@ -244,8 +248,9 @@ class Body:
 
     @property
     def inertia_b(self) -> np.ndarray:
-        """The inertia tensor about the COM, body frame, kg·m², (3, 3): ``R_bp diag(I_b) R_bpᵀ``."""
-        return (self.R_bp * self.I_b) @ self.R_bp.T
+        """The inertia tensor about the COM, body frame, kg·m², (3, 3): as given (symmetrized), equal to
+        ``R_bp diag(I_b) R_bpᵀ`` to rounding; ``diag(I_b)`` for a principal body."""
+        return np.diag(self.I_b) if self._tensor is None else self._tensor.copy()
 
     @property
     def params(self) -> np.ndarray:
@@ -303,11 +308,12 @@ def inertia_about_com(I_o: ArrayLike, mass: float, com: ArrayLike) -> np.ndarray
     return I_c
 
 
-def _rebuild(name, mass, I_b, shape, x0, R_bp=None) -> Body:
+def _rebuild(name, mass, I_b, shape, x0, R_bp=None, tensor=None) -> Body:
     """Unpickle a Body without re-running validation twice (its fields were validated)."""
     b = object.__new__(Body)
     R_bp = np.eye(3) if R_bp is None else R_bp
-    for f, v in zip(_FIELDS, (name, mass, np.array(I_b), shape, np.array(x0), np.array(R_bp))):
+    tensor = None if tensor is None else np.array(tensor)
+    for f, v in zip(_FIELDS, (name, mass, np.array(I_b), shape, np.array(x0), np.array(R_bp), tensor)):
         if isinstance(v, np.ndarray):
             v.flags.writeable = False
         object.__setattr__(b, f, v)

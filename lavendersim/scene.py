@@ -152,6 +152,44 @@ class Scene:
             raise V.LavenderInputError("body", f"unknown body {name!r}; bodies: {', '.join(self.bodies) or 'none'}")
         return list(self.bodies).index(name)
 
+    def save(self, path) -> "Path":
+        """Write this scene as a TOML scene file (lavendersim.scene_file: bodies with their inertia tensors,
+        initial states and model effects, then the force effects by declared name).
+
+        Parameters
+        ----------
+        path : str or os.PathLike
+            The file; its folder must exist.
+
+        Returns
+        -------
+        pathlib.Path
+        """
+        from . import scene_file   # scene_file builds Scenes: imported here, not at module level
+
+        return scene_file.save(self, path)
+
+    @staticmethod
+    def load(path) -> "Scene":
+        """Read a TOML scene file written by :meth:`save` (or the scene part of a spacecraft file).
+
+        Parameters
+        ----------
+        path : str or os.PathLike
+
+        Returns
+        -------
+        Scene
+
+        Raises
+        ------
+        LavenderInputError
+            Naming the key path and the rule of the first bad key or value; nothing is built.
+        """
+        from . import scene_file
+
+        return scene_file.load(path)
+
     def model_effects(self, name: str) -> dict:
         """The per-body (model) effects declared on body `name`.
 
@@ -353,8 +391,8 @@ def add_bodies(scene: Scene, names, masses, I_b, *, p_w=None, q=None, v_w=None, 
     I.flags.writeable = False
     x.flags.writeable = False
     # validated above, row by row as Body.__init__ does: fill the slots directly (Body refuses setattr)
-    set_name, set_mass, set_I, set_shape, set_x, set_R = (Body.__dict__[f].__set__
-                                                          for f in ("name", "mass", "I_b", "shape", "x0", "R_bp"))
+    set_name, set_mass, set_I, set_shape, set_x, set_R, set_T = (
+        Body.__dict__[f].__set__ for f in ("name", "mass", "I_b", "shape", "x0", "R_bp", "_tensor"))
     eye = np.eye(3)   # principal moments: the body frame is principal (one read-only identity for all)
     eye.flags.writeable = False
     new = object.__new__
@@ -367,6 +405,7 @@ def add_bodies(scene: Scene, names, masses, I_b, *, p_w=None, q=None, v_w=None, 
         set_shape(b, None)
         set_x(b, x_row)
         set_R(b, eye)
+        set_T(b, None)
         bodies.append(b)
     every = [e for e in scene.effects if not e.per_body and e.body is None and _declared(e)]
     for i, b in enumerate(bodies if every else ()):

@@ -215,6 +215,10 @@ def validity_bound(integrator: str) -> tuple[float, float] | None:
     return float(TB.WDT_MAX[integrator]), float(TB.WDT_RATIO_EXPONENT.get(integrator, 0.0))
 
 
+# the growth check's floor on a wheeled body's reference |L|, relative to the momentum its parts carry
+L_FLOOR = 1e-6
+
+
 class Trajectory:
     """Recorded samples of a run (returned by :meth:`Sim.record`).
 
@@ -523,11 +527,15 @@ class Sim:
         self._chunk = chunk_steps(nb * evals, self.backend.name == "c" and self._per_step is not None)
         self._reference()
 
-    def _invariants(self, x: np.ndarray, Omega: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def _invariants(self, x: np.ndarray, Omega: np.ndarray, reference: bool = False) -> tuple[np.ndarray, np.ndarray]:
         """(kinetic energy, |L|) per body, where the growth check reads them (else 0): E (kinetic_energy) and
         |L| (body_momentum) of the torque- and force-free plain bodies — both are needed: a first-order method
         can move a minor-axis spin towards the major axis, |L| x2 while E stays within x2 (the atlas's euler
-        cells) —, |L| (body + wheels, wheel_momentum) of the wheeled ones."""
+        cells) —, |L| (body + wheels, wheel_momentum) of the wheeled ones.
+
+        reference: the growth check's reference |L| of a wheeled body is at least L_FLOOR times the momentum
+        its parts carry (|L_body| + Σ J_i |Omega_i|): a total that cancels to rounding (wheels spinning in the
+        layout's null space, the body at rest) cannot double by rounding alone and be called a divergence."""
         nb = len(self.names)
         E, L = np.zeros(nb), np.zeros(nb)
         with np.errstate(over="ignore", invalid="ignore"):
@@ -539,6 +547,9 @@ class Sim:
             for i in self._free_wheels_idx:
                 Lb, Lw = backends.wheel_momentum(self._models.rows[i], x[i, LY.STATE_Q], x[i, LY.STATE_OMEGA_B], Omega[i])
                 L[i] = np.linalg.norm(Lb + Lw)
+                if reference:
+                    parts = np.linalg.norm(Lb) + float(np.abs(self._models.rows[i, LY.MODEL_J] * Omega[i]).sum())
+                    L[i] = max(L[i], L_FLOOR * parts)
         return E, L
 
     def _reference(self) -> None:
@@ -547,7 +558,7 @@ class Sim:
         both terms from the kinetic_energy kernel; v is constant on a force-free body) nor its |L| max_growth * L0
         (|L| = |I_b omega_b| <= I_max |omega|): the check evaluates the kernels only for a body above it, so it
         costs nothing while a run is far from its limit."""
-        self._E0, self._L0 = self._invariants(self._x, self._models.Omega)
+        self._E0, self._L0 = self._invariants(self._x, self._models.Omega, reference=True)
         nb = len(self.names)
         self._w_safe = np.zeros(nb)
         # the C screen's growth limits per body (csrc/fast_step.c LV_G_*): no-work rate, max_growth * E0 and
@@ -737,7 +748,7 @@ class Sim:
             self._models.Omega[i, :np.size(Omega)] = Omega
             self._models.command[i] = 0.0
             self._models.applied[i] = 0.0
-            E0, L0 = self._invariants(self._x, self._models.Omega)
+            E0, L0 = self._invariants(self._x, self._models.Omega, reference=True)
             self._E0[i], self._L0[i] = E0[i], L0[i]
             self._safe_rates(np.arange(len(self.names)) == i)
             self._warned.discard(i)
@@ -1147,7 +1158,7 @@ class Sim:
             self._x[i] = x
             if W is not None:
                 self._models.Omega[i] = W
-            E0, L0 = self._invariants(self._x, self._models.Omega)
+            E0, L0 = self._invariants(self._x, self._models.Omega, reference=True)
             self._E0[i], self._L0[i] = E0[i], L0[i]
             self._safe_rates(np.arange(len(self.names)) == i)   # the no-work region follows the new E0   # the no-work region follows the new E0
 
