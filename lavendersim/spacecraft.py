@@ -65,6 +65,7 @@ package (:func:`shipped`) are the 6U CubeSat and the chapter's cubes (`lavenders
 """
 from __future__ import annotations
 
+import copy
 import math
 import os
 from dataclasses import dataclass, field
@@ -609,8 +610,10 @@ def monte_carlo(sc: Spacecraft, controller: Any, n: int | None = None, *, execut
 
     spec = sc.monte_carlo or MonteCarloSpec(20, 0.0, 0)
     n = spec.n if n is None else V.integer("monte-carlo", n, minimum=1)
+    portable = copy.copy(controller)   # flying needs no linearization, and a StateSpace does not pickle (processes)
+    portable.lin = None
     tasks = [{"file": sc.raw, "source": sc.source, "seed": spec.seed, "i": i, "spread": spec.inertia_uncertainty,
-              "controller": controller, "backend": backend} for i in range(n)]
+              "controller": portable, "backend": backend} for i in range(n)]
     runs = X.map_tasks(_mc_task, tasks, executor)
     limit = sc.maneuver.settle_within
     ok = [r for r in runs if math.isfinite(r["settling_time"]) and (limit is None or r["settling_time"] <= limit)]

@@ -427,3 +427,34 @@ def test_monte_carlo(skew3_dict, capsys, skew3_file):
     mc = out["monte_carlo"]
     assert (mc["n"], mc["seed"], mc["inertia_uncertainty"]) == (2, 3, 0.1) and "runs" not in mc
     assert mc["settling_time"]["max"] <= 40.0
+
+
+@pytest.fixture(scope="module")
+def short_mc(skew3_dict):
+    d = copy.deepcopy(skew3_dict)
+    d["maneuver"]["duration"] = 15.0
+    d["maneuver"].pop("settle_within")
+    sc = S.from_dict(d)
+    ctrl = S.design(sc)
+    return sc, ctrl, S.monte_carlo(sc, ctrl, 2)
+
+
+@pytest.mark.needs("control")
+def test_monte_carlo_on_two_local_processes_is_identical(short_mc):
+    from lavendersim import executor as X
+
+    sc, ctrl, serial = short_mc
+    assert serial["settled"] == 2
+    assert json.dumps(S.monte_carlo(sc, ctrl, 2, executor=X.Executor(X.PROCESSES, 2))) == json.dumps(serial)
+
+
+@pytest.mark.needs("control", "distributed")
+def test_monte_carlo_on_a_local_dask_cluster_is_identical(short_mc):
+    from dask.distributed import LocalCluster
+
+    from lavendersim import executor as X
+
+    sc, ctrl, serial = short_mc
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
+        got = S.monte_carlo(sc, ctrl, 2, executor=X.resolve(dask=cluster.scheduler_address))
+    assert json.dumps(got) == json.dumps(serial)
