@@ -58,6 +58,8 @@ from .bodies import Body
 from .generated import layout as LY
 from .scene import Scene
 
+__all__ = ["scene_to_dict", "scene_from_dict", "save", "load", "dumps", "read_toml", "body_from_dict", "wheels_params"]
+
 SCENE_FORMAT = 1
 MOTORS = {"line": 0.0, "cutoff": 1.0}          # motor name -> the reaction_wheels cutoff parameter
 AXIS_UNIT_TOL = 1e-12                           # an axis row this close to unit length is kept as written

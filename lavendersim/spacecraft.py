@@ -78,6 +78,9 @@ from . import scene_file as SF
 from . import validate as V
 from .scene import Scene
 
+__all__ = ["Spacecraft", "ControllerSpec", "Maneuver", "MonteCarloSpec", "load", "from_dict", "shipped", "design",
+           "sensors", "fly", "figures", "external_effects", "monte_carlo", "perturbed_scene"]
+
 DATA = Path(__file__).resolve().parent / "data" / "spacecraft"
 SECTIONS = ("name", "controller", "sensors", "actuator", "maneuver", "simulator", "monte_carlo")
 CONTROLLER_KEYS = ("body", "period", "delay", "Q", "R", "weights", "q_ref", "null_bias")
@@ -188,6 +191,8 @@ class Spacecraft:
     monte_carlo : MonteCarloSpec or None
     source : str
         The file it was read from ("" for a dict).
+    raw : dict
+        The dict it was built from (Monte Carlo workers rebuild the spacecraft from it).
     """
 
     name: str
