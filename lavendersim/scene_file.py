@@ -28,7 +28,7 @@ quaternions (x, y, z, w), frames by suffix (``_w`` world, ``_b`` the user's body
     anchor_w = [0.0, 0.0, 0.0]            # the body point at anchor_w at the start stays there
 
     [[effects]]                           # force effects, each by its declared name and parameters
-    name = "gravity"                      # (lavendersim.effects.describe() lists them)
+    name = "gravity"                      # (lavendersim.effects.EFFECTS: each class's docstring lists them)
     body = "sat"                          # optional: every body when absent
     g_w = [0.0, 0.0, -9.81]
 
@@ -177,27 +177,16 @@ def _inertia(path: str, b: dict, mass: float) -> np.ndarray:
         I = rows(f"{path}.inertia", value, 3, min_rows=3, max_rows=3)
     else:
         I = V.vector(f"{path}.inertia", value)
-    if "com_offset" in b:
+    if "com_offset" in b:   # CAD mass properties: moved to the COM (bodies.inertia_about_com, the derived kernel)
+        from .bodies import inertia_about_com
+
         c = V.vector(f"{path}.com_offset", b["com_offset"])
-        I_o = np.diag(I) if I.ndim == 1 else I
-        with at(f"{path}.inertia"):
-            V.inertia_frame("", I_o)   # the CAD tensor itself must be a valid inertia
-        I = _about_com(I_o, mass, c)
-        with at(f"{path}.com_offset"):
-            V.inertia_frame("", I)     # and so must the tensor moved to the COM
+        try:
+            return inertia_about_com(np.diag(I) if I.ndim == 1 else I, mass, c)
+        except V.LavenderInputError as exc:
+            key = {"I_o": "inertia", "com": "com_offset", "mass": "mass"}.get(exc.field.split("[")[0], exc.field)
+            raise V.LavenderInputError(f"{path}.{key}", exc.rule, exc.detail) from None
     return I
-
-
-def _about_com(I_o: np.ndarray, mass: float, c: np.ndarray) -> np.ndarray:
-    """The inertia about the COM from one about a reference point with the COM at c from it."""
-    from . import bodies
-
-    helper = getattr(bodies, "inertia_about_com", None)
-    if helper is not None:
-        return np.asarray(helper(I_o, mass, c), dtype=float).reshape(3, 3)
-    from .kernels import K
-
-    return np.asarray(K.inertia_about_com(I_o, mass, c), dtype=float).reshape(3, 3)
 
 
 def _shape(path: str, value: Any):

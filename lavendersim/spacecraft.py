@@ -46,8 +46,7 @@ the file writes the inertia in, ``_w`` world)::
     duration = 120.0                      # s simulated
     settle_threshold_deg = 0.1            # (default 0.1)
     settle_within = 60.0                  # s: the stated settle time (optional; reported as met or not)
-
-    # Omega0 = [0, 0, 0, 0]              # rad/s, wheel speeds at the start (default: the null-space bias)
+    # Omega0 = [0, 0, 0, 0]               # rad/s, wheel speeds at the start (default: the null-space bias)
 
     [simulator]                           # optional
     dt = 0.001                            # s, the Sim's RK4 step (a whole fraction of the period and the delay)
