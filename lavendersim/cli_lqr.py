@@ -94,11 +94,13 @@ def _text(fig: dict, mc: dict | None) -> str:
     if mc is not None:
         def row(k, unit):
             v = mc[k]
-            return f"{k} {v['median']:.4g} median, {v['p95']:.4g} p95, {v['max']:.4g} max {unit}" if v else f"{k} -"
+            return f"{k} {v['p50']:.4g} median, {v['p90']:.4g} p90, {v['p100']:.4g} max {unit}" if v["p50"] is not None \
+                else f"{k} -"
 
-        lines.append(f"Monte Carlo, {mc['n']} runs (inertia ±{100 * mc['inertia_uncertainty']:g}%, sensor seeds from "
-                     f"{mc['seed']}): {mc['settled']} settled" + (f" within {mc['settle_within']:g} s" if mc["settle_within"] else "")
-                     + f"; {row('settling_time', 's')}; {row('peak_torque', 'N·m')}; {row('peak_wheel_speed', 'rad/s')}")
+        within = f" ({mc['settled_within']} within {mc['settle_within']:g} s)" if mc["settle_within"] else ""
+        lines.append(f"Monte Carlo, {mc['n']} runs (inertia ±{100 * mc['inertia_spread']:g}% per axis, sensor seeds "
+                     f"{mc['sensors']['seed']}+): {mc['n'] - mc['failures']} settled{within}; {row('settling_time', 's')}; "
+                     f"{row('peak_torque', 'N·m')}; {row('peak_wheel_speed', 'rad/s')}")
     return "\n".join(lines)
 
 
@@ -135,7 +137,7 @@ def _cli(args) -> int:
     if args.json:
         out = dict(fig)
         if mc is not None:
-            out["monte_carlo"] = {k: v for k, v in mc.items() if k != "runs"}
+            out["monte_carlo"] = {k: v for k, v in mc.items() if k != "samples"}
         print(json.dumps(_finite(out), indent=2))
     else:
         print(_text(fig, mc))

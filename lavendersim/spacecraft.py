@@ -53,7 +53,7 @@ the file writes the inertia in, ``_w`` world)::
 
     [monte_carlo]                         # optional: `lavendersim lqr --spacecraft F --monte-carlo N`
     n = 50
-    inertia_uncertainty = 0.05            # relative, uniform ± on the inertia tensor (its design stays nominal)
+    inertia_uncertainty = 0.05            # relative: the inertia becomes D I D, D = diag(sqrt(1 ± u)) uniform per body axis
     seed = 0
 
 :func:`load` checks every key: an unknown one, a wrong type or shape, a non-positive value raises
@@ -78,7 +78,7 @@ from . import validate as V
 from .scene import Scene
 
 __all__ = ["Spacecraft", "ControllerSpec", "Maneuver", "MonteCarloSpec", "load", "from_dict", "shipped", "design",
-           "sensors", "fly", "figures", "external_effects", "monte_carlo", "perturbed_scene"]
+           "sensors", "fly", "figures", "external_effects", "monte_carlo"]
 
 DATA = Path(__file__).resolve().parent / "data" / "spacecraft"
 SECTIONS = ("name", "controller", "sensors", "actuator", "maneuver", "simulator", "monte_carlo")
@@ -157,7 +157,8 @@ class MonteCarloSpec:
     n : int
         Runs (``--monte-carlo N`` overrides it).
     inertia_uncertainty : float
-        Relative spread of the flown body's inertia tensor (uniform ±, in [0, 0.5)); the controller is the nominal design.
+        Relative spread of the flown body's inertia (D I D with D = diag(sqrt(1 + u U(−1, 1))) per body axis, u in
+        [0, 0.5)); the controller is the nominal design.
     seed : int
         Seed of the draws (each run's sensors get their own seed from it).
     """
@@ -543,54 +544,10 @@ def figures(sc: Spacecraft, controller: Any, response: Any) -> dict:
 # ---------------------------------------------------------------------------------------------
 
 
-def perturbed_scene(sc: Spacecraft, rng: np.random.Generator, spread: float) -> Scene:
-    """The file's scene with the controlled body's inertia tensor perturbed: each entry I_ij scaled by
-    (1 + spread·s_ij), s symmetric, uniform in [-1, 1] (redrawn until the tensor is a valid inertia).
-
-    Parameters
-    ----------
-    sc : Spacecraft
-    rng : numpy.random.Generator
-    spread : float
-        Relative spread, in [0, 0.5).
-
-    Returns
-    -------
-    Scene
-    """
-    d = SF.scene_to_dict(sc.scene)
-    entry = next(b for b in d["body"] if b["name"] == sc.body)
-    I = np.asarray(entry["inertia"], dtype=float)
-    I = np.diag(I) if I.ndim == 1 else I
-    for _ in range(1000):
-        s = rng.uniform(-1.0, 1.0, (3, 3))
-        s = np.triu(s) + np.triu(s, 1).T
-        trial = I * (1.0 + spread * s)
-        try:
-            V.inertia_frame("inertia", trial)
-        except V.LavenderInputError:
-            continue
-        entry["inertia"] = trial.tolist()
-        return SF.scene_from_dict(d)
-    raise V.LavenderInputError("monte_carlo.inertia_uncertainty", "too large: no valid inertia tensor drawn in 1000 tries",
-                               f", got {spread!r}")
-
-
-def _mc_task(task: dict) -> dict:
-    """One Monte Carlo run (module level: the executors pickle it by reference)."""
-    sc = from_dict(task["file"], source=task["source"])
-    rng = np.random.default_rng([task["seed"], task["i"]])
-    scene = perturbed_scene(sc, rng, task["spread"])
-    r = fly(sc, task["controller"], scene=scene, seed=int(rng.integers(0, 2 ** 31)), backend=task["backend"])
-    f = r.figures()
-    return {"settling_time": f["settling_time"], "peak_torque": float(np.max(f["peak_torque"])),
-            "peak_wheel_speed": float(np.max(f["peak_wheel_speed"])), "final_error_deg": f["final_error_deg"],
-            "within_limits": f["within_limits"]}
-
-
 def monte_carlo(sc: Spacecraft, controller: Any, n: int | None = None, *, executor: Any = None,
                 backend: str = "auto") -> dict:
-    """Fly the nominal controller on ``n`` plants: the inertia tensor perturbed (``[monte_carlo]``) and new sensor seeds.
+    """Fly the nominal controller on ``n`` plants (:func:`lavendersim.control.monte_carlo`): the body's inertia
+    perturbed by ``[monte_carlo] inertia_uncertainty`` and the file's sensors with a new seed per run.
 
     Parameters
     ----------
@@ -606,27 +563,19 @@ def monte_carlo(sc: Spacecraft, controller: Any, n: int | None = None, *, execut
     Returns
     -------
     dict
-        ``n``, ``seed``, ``inertia_uncertainty``; ``settled`` (runs settled within the stated time, or at all), ``failures``
-        (run indices that did not); per figure (settling_time s, peak_torque N·m, peak_wheel_speed rad/s,
-        final_error_deg) the ``min``, ``median``, ``p95``, ``max`` over the settled runs; ``runs``: each run's figures.
+        control.monte_carlo's summary (``n``, ``seed``, ``inertia_spread``, ``failures``, percentiles p50, p90,
+        p100 of ``settling_time``, ``peak_torque``, ``peak_wheel_speed``, ``L_drift``, the ``samples``) plus
+        ``settle_within`` (the file's stated time, s, or None) and ``settled_within`` (runs settled within it).
     """
-    from . import executor as X
-
     spec = sc.monte_carlo or MonteCarloSpec(20, 0.0, 0)
     n = spec.n if n is None else V.integer("monte-carlo", n, minimum=1)
+    m = sc.maneuver
     portable = copy.copy(controller)   # flying needs no linearization, and a StateSpace does not pickle (processes)
     portable.lin = None
-    tasks = [{"file": sc.raw, "source": sc.source, "seed": spec.seed, "i": i, "spread": spec.inertia_uncertainty,
-              "controller": portable, "backend": backend} for i in range(n)]
-    runs = X.map_tasks(_mc_task, tasks, executor)
-    limit = sc.maneuver.settle_within
-    ok = [r for r in runs if math.isfinite(r["settling_time"]) and (limit is None or r["settling_time"] <= limit)]
-    out: dict[str, Any] = {"n": n, "seed": spec.seed, "inertia_uncertainty": spec.inertia_uncertainty,
-                           "settle_within": limit, "settled": len(ok),
-                           "failures": [i for i, r in enumerate(runs) if r not in ok]}
-    for k in ("settling_time", "peak_torque", "peak_wheel_speed", "final_error_deg"):
-        v = np.array([r[k] for r in ok])
-        out[k] = {"min": float(v.min()), "median": float(np.median(v)), "p95": float(np.percentile(v, 95)),
-                  "max": float(v.max())} if v.size else None
-    out["runs"] = runs
+    out = _stack().monte_carlo(sc.scene, portable, n=n, seed=spec.seed, T=m.duration, q0=sc.q0, Omega0=m.Omega0,
+                               sensors=sensors(sc), inertia_spread=spec.inertia_uncertainty, dt=sc.dt,
+                               threshold_deg=m.settle_threshold_deg, backend=backend, executor=executor)
+    limit = m.settle_within
+    out["settle_within"] = limit
+    out["settled_within"] = sum(1 for r in out["samples"] if r["settled"] and (limit is None or r["settling_time"] <= limit))
     return out
