@@ -104,6 +104,21 @@ def _text(fig: dict, mc: dict | None) -> str:
     return "\n".join(lines)
 
 
+def _design(S, sc):
+    """S.design, with the Riccati solver's failures (scipy's LinAlgError / ValueError on an ill-posed Q, R) named."""
+    import numpy as np
+
+    from . import validate as V
+
+    try:
+        return S.design(sc)
+    except (np.linalg.LinAlgError, ValueError) as exc:
+        if isinstance(exc, V.LavenderInputError):
+            raise
+        raise V.LavenderInputError("controller", "the LQR design failed (check Q, R or weights against the plant, "
+                                   "the delay and the actuator lag)", f": {' '.join(str(exc).split())}") from None
+
+
 def _cli(args) -> int:
     from . import spacecraft as S
     from . import validate as V
@@ -123,7 +138,7 @@ def _cli(args) -> int:
                 raise V.LavenderInputError("--dask" if args.dask else "--workers", "needs --monte-carlo N")
             V.integer("--monte-carlo", args.monte_carlo, minimum=1)
             ex = X.resolve(workers=args.workers, dask=args.dask, feature="lavendersim lqr --dask")
-        ctrl = S.design(sc)
+        ctrl = _design(S, sc)
         resp = S.fly(sc, ctrl, noise=not args.no_noise, backend=args.backend)
         mc = None if args.monte_carlo is None else S.monte_carlo(sc, ctrl, args.monte_carlo, executor=ex, backend=args.backend)
     except V.LavenderInputError as exc:

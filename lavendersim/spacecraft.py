@@ -49,7 +49,8 @@ the file writes the inertia in, ``_w`` world)::
     # Omega0 = [0, 0, 0, 0]               # rad/s, wheel speeds at the start (default: the null-space bias)
 
     [simulator]                           # optional
-    dt = 0.001                            # s, the Sim's RK4 step (a whole fraction of the period and the delay)
+    dt = 0.001                            # s, the Sim's RK4 step: a whole fraction of the period and the delay
+                                          # (default min(1 ms, period), at most 10,000 steps per period)
 
     [monte_carlo]                         # optional: `lavendersim lqr --spacecraft F --monte-carlo N`
     n = 50
@@ -359,8 +360,13 @@ def from_dict(d: dict, *, source: str = "") -> Spacecraft:
                    nonnegative=True)
     man = _maneuver(d)
     sim = SF.table("simulator", d.get("simulator", {}), SIMULATOR_KEYS)
-    dt = V.dt("simulator.dt", sim.get("dt", min(1e-3, ctrl.period)))
+    most_sub = _stack().MAX_SUBSTEPS
+    default_dt = min(1e-3, ctrl.period) if ctrl.period / 1e-3 <= most_sub else ctrl.period / most_sub
+    dt = V.dt("simulator.dt", sim.get("dt", default_dt))
     sub = ctrl.period / dt
+    if not sub <= most_sub * (1 + 1e-9):
+        raise V.LavenderInputError("simulator.dt", f"must divide the controller period {ctrl.period:g} s into at most "
+                                   f"{most_sub:,} steps", f", got {dt!r}")
     if abs(sub - round(sub)) > 1e-9 * sub:
         raise V.LavenderInputError("simulator.dt", f"must divide the controller period {ctrl.period:g} s into whole steps",
                                    f", got {dt!r}")

@@ -211,6 +211,8 @@ BAD = [  # (mutation, the key path the error names, a piece of the rule)
     (_set("maneuver.Omega0", [0.0, 0.0]), "maneuver.Omega0", "one speed per wheel"),
     (_set("simulator.dt", 0.03), "simulator.dt", "controller period"),
     (_set("simulator.dt", 0.025), "simulator.dt", "controller delay"),
+    (_set("simulator.dt", 5e-324), "simulator.dt", "at most 10,000 steps"),
+    (_set("controller.period", 1e308), "simulator.dt", "at most 10,000 steps"),
     (_set("simulator.integrator", "rk4"), "simulator.integrator", "unknown key"),
     (_set("monte_carlo.n", 0), "monte_carlo.n", ">= 1"),
     (_set("monte_carlo.inertia_uncertainty", 0.6), "monte_carlo.inertia_uncertainty", "below 0.5"),
@@ -458,3 +460,14 @@ def test_monte_carlo_on_a_local_dask_cluster_is_identical(short_mc):
     with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
         got = S.monte_carlo(sc, ctrl, 2, executor=X.resolve(dask=cluster.scheduler_address))
     assert json.dumps(got) == json.dumps(serial)
+
+
+@pytest.mark.needs("control")
+def test_cli_a_design_the_solver_refuses_is_one_line_exit_2(skew3_dict, tmp_path, capsys):
+    d = copy.deepcopy(skew3_dict)
+    d["controller"]["Q"] = 0.0          # nothing to regulate: the Riccati equation has no stabilizing solution
+    path = tmp_path / "q0.toml"
+    path.write_text(SF.dumps(d), encoding="utf-8")
+    assert cli.main(["lqr", "--spacecraft", str(path)]) == 2
+    _, err = capsys.readouterr()
+    assert len(err.strip().splitlines()) == 1 and f"{path}: controller: the LQR design failed" in err
