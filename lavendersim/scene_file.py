@@ -69,6 +69,8 @@ WHEEL_KEYS = ("axes_b", "J", "torque_limit", "speed_limit", "c_w", "motor")
 JOINT_KEYS = ("anchor_w",)
 SHAPE_KEYS = ("kind", "dims")
 NESTED = {"reaction_wheels": "wheels", "spherical_joint": "joint"}   # model effects live in their body's table
+# a spacecraft file's other top-level keys (lavendersim.spacecraft reads them; load() skips them)
+SPACECRAFT_TABLES = ("name", "controller", "sensors", "actuator", "maneuver", "simulator", "monte_carlo")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -535,8 +537,8 @@ def save(scene: Scene, path: str | os.PathLike[str]) -> Path:
 
 
 def load(path: str | os.PathLike[str]) -> Scene:
-    """Read a TOML scene file (a spacecraft file's scene part included: its other tables are ignored here
-    only if you call :func:`lavendersim.spacecraft.load` instead; here they are unknown keys).
+    """Read a TOML scene file, or the scene part of a spacecraft file (its SPACECRAFT_TABLES are skipped here;
+    lavendersim.spacecraft.load reads them).
 
     Parameters
     ----------
@@ -551,4 +553,4 @@ def load(path: str | os.PathLike[str]) -> Scene:
     LavenderInputError
         A missing file, bad TOML, or a bad key (its path named).
     """
-    return scene_from_dict(read_toml(path))
+    return scene_from_dict(read_toml(path, field=str(path)), extra=SPACECRAFT_TABLES)

@@ -82,7 +82,7 @@ __all__ = ["Spacecraft", "ControllerSpec", "Maneuver", "MonteCarloSpec", "load",
            "sensors", "fly", "figures", "external_effects", "monte_carlo"]
 
 DATA = Path(__file__).resolve().parent / "data" / "spacecraft"
-SECTIONS = ("name", "controller", "sensors", "actuator", "maneuver", "simulator", "monte_carlo")
+SECTIONS = SF.SPACECRAFT_TABLES   # beside the scene part
 CONTROLLER_KEYS = ("body", "period", "delay", "Q", "R", "weights", "q_ref", "null_bias")
 WEIGHT_KEYS = ("attitude_deg", "rate", "wheel_speed_fraction", "torque_fraction")
 SENSOR_KEYS = ("attitude_noise", "gyro_noise", "gyro_bias", "wheel_speed_noise", "seed")
@@ -442,8 +442,22 @@ def design(sc: Spacecraft) -> Any:
     lavendersim.control.Controller
     """
     c = sc.controller
-    return _stack().design(sc.scene, sc.body, period=c.period, delay=c.delay, Q=c.Q, R=c.R, q_ref=c.q_ref,
-                           null_bias=c.null_bias, actuator_lag=sc.actuator_lag, weights=c.weights or None)
+    try:
+        return _stack().design(sc.scene, sc.body, period=c.period, delay=c.delay, Q=c.Q, R=c.R, q_ref=c.q_ref,
+                               null_bias=c.null_bias, actuator_lag=sc.actuator_lag, weights=c.weights or None)
+    except V.LavenderInputError as exc:   # named as the file names it
+        head, sep, rest = exc.field.partition("[")
+        key = _DESIGN_KEYS.get(head, None)
+        if key is None:
+            raise
+        raise V.LavenderInputError(key + sep + rest, exc.rule, exc.detail) from None
+
+
+# design()'s argument -> the file's key
+_DESIGN_KEYS = {"period": "controller.period", "delay": "controller.delay", "Q": "controller.Q", "R": "controller.R",
+                "q_ref": "controller.q_ref", "null_bias": "controller.null_bias", "actuator_lag": "actuator.lag",
+                "weights": "controller.weights", "body": "controller.body",
+                **{k: f"controller.weights.{k}" for k in WEIGHT_KEYS}}
 
 
 def sensors(sc: Spacecraft, *, noise: bool = True, seed: int | None = None) -> Any:
@@ -488,9 +502,21 @@ def fly(sc: Spacecraft, controller: Any, *, noise: bool = True, scene: Scene | N
     lavendersim.control.Response
     """
     m = sc.maneuver
-    return _stack().closed_loop(sc.scene if scene is None else scene, controller, T=m.duration, q0=sc.q0,
-                                Omega0=m.Omega0, sensors=sensors(sc, noise=noise, seed=seed), dt=sc.dt,
-                                threshold_deg=m.settle_threshold_deg, backend=backend)
+    try:
+        return _stack().closed_loop(sc.scene if scene is None else scene, controller, T=m.duration, q0=sc.q0,
+                                    Omega0=m.Omega0, sensors=sensors(sc, noise=noise, seed=seed), dt=sc.dt,
+                                    threshold_deg=m.settle_threshold_deg, backend=backend)
+    except V.LavenderInputError as exc:   # named as the file names it
+        head, sep, rest = exc.field.partition("[")
+        key = _FLY_KEYS.get(head)
+        if key is None:
+            raise
+        raise V.LavenderInputError(key + sep + rest, exc.rule, exc.detail) from None
+
+
+# closed_loop()'s argument -> the file's key
+_FLY_KEYS = {"T": "maneuver.duration", "Omega0": "maneuver.Omega0", "dt": "simulator.dt", "delay": "controller.delay",
+             "threshold_deg": "maneuver.settle_threshold_deg", **{k: f"sensors.{k}" for k in SENSOR_KEYS}}
 
 
 def external_effects(sc: Spacecraft) -> list[str]:

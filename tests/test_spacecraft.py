@@ -320,9 +320,15 @@ def test_scene_round_trip_through_toml_text(tmp_path):
         sim.run(200)
     for name in scene.bodies:
         np.testing.assert_array_equal(sims[1].state(name).x, sims[0].state(name).x)
-    # save / load
+    # save / load, and the lead's wrappers Scene.save / Scene.load
     path = SF.save(scene, tmp_path / "scene.toml")
     _close(SF.scene_to_dict(SF.load(path)), d)
+    scene.save(tmp_path / "again.toml")
+    _close(SF.scene_to_dict(lv.Scene.load(tmp_path / "again.toml")), d)
+    assert (tmp_path / "again.toml").read_text(encoding="utf-8") == text
+    # the scene part of a spacecraft file
+    sat = lv.Scene.load(S.shipped()["cubesat6u"])
+    _close(SF.scene_to_dict(sat), SF.scene_to_dict(S.load("cubesat6u").scene))
 
 
 def test_dumps_strings_and_keys():
@@ -471,3 +477,12 @@ def test_cli_a_design_the_solver_refuses_is_one_line_exit_2(skew3_dict, tmp_path
     assert cli.main(["lqr", "--spacecraft", str(path)]) == 2
     _, err = capsys.readouterr()
     assert len(err.strip().splitlines()) == 1 and f"{path}: controller: the LQR design failed" in err
+
+
+@pytest.mark.needs("control")
+def test_design_errors_name_the_file_keys():
+    d = tomllib.loads(S.shipped()["cubesat6u"].read_text(encoding="utf-8"))
+    d["controller"]["null_bias"] = 1e6           # beyond the 600 rad/s speed limit: found by control.design
+    with pytest.raises(LavenderInputError) as exc:
+        S.design(S.from_dict(d))
+    assert exc.value.field == "controller.null_bias" and "below speed_limit" in str(exc.value)
