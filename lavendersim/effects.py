@@ -26,6 +26,8 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass, field
 
+from types import MappingProxyType
+
 import numpy as np
 
 from . import validate as V
@@ -173,6 +175,31 @@ def _frame_of(p: dict) -> str | None:
     return {"_b": "body", "_w": "world"}.get(p["name"][-2:]) if shape and shape[-1] == 3 else None
 
 
+class ImmutableEffectError(V.LavenderInputError, AttributeError):
+    """Assignment to an attribute of a validated Effect (a LavenderInputError and an AttributeError).
+
+    Parameters
+    ----------
+    field : str
+        ``effect.<attribute>``.
+    rule : str
+        Why it is refused.
+    detail : str, optional
+    """
+
+
+def _rebuild_effect(class_name: str, name: str, body, values: dict):
+    """Unpickle an Effect: a declared one by its registered name (validated again), else its class by name."""
+    if name in EFFECTS:
+        return EFFECTS[name](body=body, **values)
+    raise V.LavenderInputError("effect", f"{name!r} is not a registered effect in this process (load its user set "
+                               "first)")
+
+
+def _rebuild_plain(cls, body, values: dict):
+    return cls(body=body, **values)
+
+
 class Effect:
     """An effect declared on a scene: ``body`` (a name, or None for every body) and validated ``values``.
 
@@ -212,11 +239,41 @@ class Effect:
         missing = [f for f in self.fields if f not in params]
         if missing:
             raise V.LavenderInputError(f"{self.name}.{missing[0]}", "is required")
-        self.body = body
-        self.values = {f: self._check(f, params[f]) for f in self.fields}
-        for v in self.values.values():  # validated once: read-only, so a later edit cannot bypass the checks
+        values = {f: self._check(f, params[f]) for f in self.fields}
+        for v in values.values():  # validated once: read-only, so a later edit cannot bypass the checks
             if isinstance(v, np.ndarray):
                 v.flags.writeable = False
+        object.__setattr__(self, "body", body)
+        object.__setattr__(self, "values", MappingProxyType(values))
+
+    def __setattr__(self, field: str, value) -> None:
+        """An Effect is immutable once validated: a parameter changed by assignment would be silently ignored
+        by a Sim already built (and half-applied in a scene), so every assignment raises, naming the field."""
+        raise ImmutableEffectError(f"{self.name or type(self).__name__}.{field}",
+                                   "an effect is immutable once validated: change a force effect's parameters "
+                                   "between steps with Sim.set_effect_params(effect, ...), or add a new effect "
+                                   "to the scene")
+
+    def __delattr__(self, field: str) -> None:
+        raise ImmutableEffectError(f"{self.name or type(self).__name__}.{field}", "an effect is immutable once validated")
+
+    def __getattr__(self, field: str):
+        """A parameter by name, read-only (``e.torque_w``; the same array as ``e.values["torque_w"]``)."""
+        values = self.__dict__.get("values")
+        if values is not None and field in values:
+            return values[field]
+        raise AttributeError(f"{type(self).__name__!r} object has no attribute {field!r}")
+
+    def __reduce__(self):
+        if self.spec is None:   # a hand-written subclass: rebuilt from its class (importable by reference)
+            return (_rebuild_plain, (type(self), self.body, dict(self.values)))
+        return (_rebuild_effect, (type(self).__name__, self.name, self.body, dict(self.values)))
+
+    def __copy__(self):
+        return self
+
+    def __deepcopy__(self, memo):
+        return self
 
     def _check(self, f, v):
         """Validate parameter f by its declared shape and rule (a plain finite 3-vector without a spec)."""

@@ -115,7 +115,7 @@ from .frames import public_rows
 from .generated import layout as LY
 from .generated import tableaux as TB
 from .kernels import K
-from .scene import Scene
+from .scene import Scene, _effect_rows
 
 MAX_STEPS = 2**53          # steps per call and in total: the step counter and t = steps*dt stay exact in float64
 CHUNK_WORK = 2**20         # right-hand-side evaluations (summed over bodies) per backend call between checks
@@ -337,6 +337,8 @@ class Sim:
         tables = scene.tables()   # a body given a full inertia tensor is stepped in its principal frame
         self._x, self.params, self.effects = tables.state, tables.params, tables.effects
         self._frames = tables.frames
+        self._forces, self._rows_of = list(tables.forces), tables.rows_of   # force effects (current) and their rows
+        self._forces_given = list(tables.forces)                            # ... as the scene gave them
         self._index = {name: i for i, name in enumerate(self.names)}
         self._effect_objs = list(scene.effects)
         self._models = self._build_models(scene)
@@ -792,6 +794,9 @@ class Sim:
             else:
                 terms = " + ".join(e.describe() for e in mine)
                 lines.append(f"{name}: {terms} -> rigid_body_rhs")
+        if self._frames is not None:
+            for i in self._frames.idx:
+                lines[1 + int(i)] += "; full inertia tensor: stepped in its principal frame (constant R_bp)"
         return lines
 
     # ---- stepping -------------------------------------------------------------------------
@@ -1161,6 +1166,70 @@ class Sim:
             E0, L0 = self._invariants(self._x, self._models.Omega, reference=True)
             self._E0[i], self._L0[i] = E0[i], L0[i]
             self._safe_rates(np.arange(len(self.names)) == i)   # the no-work region follows the new E0   # the no-work region follows the new E0
+
+    # ---- effect parameters between steps ---------------------------------------------------
+    def set_effect_params(self, effect, **values):
+        """Change parameters of one force effect for the steps that follow (a disturbance that varies between
+        controller samples, a thruster switched on): validated like the effect itself, applied at once or
+        not at all, seen by both backends from the next step. Model effects (spherical_joint, reaction_wheels)
+        are constants of the body's model and cannot change here.
+
+        Parameters
+        ----------
+        effect : Effect
+            The effect as ``Scene.add_effect`` returned it (or as a previous call returned it).
+        **values
+            New values of some of its declared parameters, in their units and frames (a body-frame
+            parameter such as ``r_b`` in the user's body frame); the others keep theirs.
+
+        Returns
+        -------
+        Effect
+            The effect with its new values (effects are immutable: the scene's object is unchanged).
+
+        Raises
+        ------
+        LavenderInputError
+            If ``effect`` is not a force effect of this Sim, a parameter is unknown or invalid (named
+            ``effect.param``), or the new load would overflow; the Sim is left as it was.
+
+        Examples
+        --------
+        >>> import lavendersim as lv
+        >>> scene = lv.Scene()
+        >>> b = scene.add_body(lv.Body.box("b", 1.0, (0.1, 0.1, 0.1)))
+        >>> push = scene.add_effect("applied_torque", body="b", torque_w=[0, 0, 0])
+        >>> sim = lv.Sim(scene, dt=1e-3)
+        >>> push = sim.set_effect_params(push, torque_w=[0, 0, 1e-3])
+        >>> sim.run(100)
+        >>> round(float(sim.state("b").omega_w[2]), 6)
+        0.06
+        """
+        k = next((j for j, (cur, given) in enumerate(zip(self._forces, self._forces_given))
+                  if effect is cur or effect is given), None)
+        if k is None:
+            what = getattr(effect, "name", type(effect).__name__)
+            rule = ("is a model effect (a constant of the body's model); build a new Sim to change it"
+                    if getattr(effect, "per_body", False) else "is not a force effect of this Sim (pass the object "
+                    "Scene.add_effect returned)")
+            raise V.LavenderInputError("effect", rule, f", got {what!r}")
+        cur = self._forces[k]
+        new = effects_mod.make(cur.name, body=cur.body, **{**dict(cur.values), **values})
+        targets = [self.bodies[cur.body]] if cur.body is not None else list(self.bodies.values())
+        for b in targets:
+            why = effects_mod.load_overflow([new], b)
+            if why:
+                raise V.LavenderInputError(effects_mod.largest_param(new), f"too large: {why}")
+        body_index = -1 if cur.body is None else self._index[cur.body]
+        rows = _effect_rows(new, body_index, self.effects.shape[1], self._frames, len(self.names))
+        with self._lock:
+            for r, row in zip(self._rows_of[k], rows):
+                self.effects[r] = row
+                if self._step_effects is not self.effects:
+                    self._step_effects[r] = row
+            self._forces[k] = new
+            self._effect_objs[self._effect_objs.index(cur)] = new
+        return new
 
     # ---- reaction wheels ------------------------------------------------------------------
     def _wheeled(self, name: str) -> int:
