@@ -6,8 +6,9 @@ axes in B), as a quaternion ``q_bp``. The conversions at the public boundary are
 
     q_wp = q_wb ⊗ q_bp,     omega_p = R_bpᵀ omega_b,     v_p = R_bpᵀ v_b   (any body-frame vector),
 
-and back. Only bodies whose R_bp is not the identity are touched (a scene of principal bodies has no
-PrincipalFrames at all and pays nothing). The quaternion products are the printed kernels.
+and back (right multiplication by the constant q_pb / q_bp: a 4x4 matrix built once from the
+printed quaternion product). Only bodies whose R_bp is not the identity are touched (a scene of principal bodies has no
+PrincipalFrames at all and pays nothing).
 """
 from __future__ import annotations
 
@@ -42,6 +43,11 @@ class PrincipalFrames:
         self.q_bp = K.quat_normalize(K.matrix_to_quat(self.R))
         self.q_pb = K.quat_conj(self.q_bp)
         self._pos = {int(i): k for k, i in enumerate(self.idx)}
+        # right multiplication by a constant quaternion is linear: q ⊗ c = M(c) q, M's columns the printed product
+        # of the basis quaternions with c (evaluated once here; each conversion is then a 4x4 product)
+        basis = np.eye(4)[:, None, :]                                   # (4 basis, 1, 4)
+        self._to_b = np.moveaxis(K.quat_mul(basis, self.q_pb[None]), 0, -1)   # (k, 4, 4): q_wp -> q_wb
+        self._to_p = np.moveaxis(K.quat_mul(basis, self.q_bp[None]), 0, -1)   # (k, 4, 4): q_wb -> q_wp
 
     @classmethod
     def of(cls, bodies) -> "PrincipalFrames | None":
@@ -60,7 +66,7 @@ class PrincipalFrames:
         """A copy of the internal state rows x (..., nb, 13) in the body frames (q_wb, omega_b)."""
         out = np.array(x, dtype=np.float64, copy=True)
         rows = out[..., self.idx, :]
-        rows[..., STATE_Q] = K.quat_mul(rows[..., STATE_Q], self.q_pb)
+        rows[..., STATE_Q] = np.einsum("kij,...kj->...ki", self._to_b, rows[..., STATE_Q])
         rows[..., STATE_OMEGA_B] = np.einsum("kij,...kj->...ki", self.R, rows[..., STATE_OMEGA_B])
         out[..., self.idx, :] = rows
         return out
@@ -70,7 +76,7 @@ class PrincipalFrames:
         k = self._pos.get(int(i))
         out = np.array(x, dtype=np.float64, copy=True)
         if k is not None:
-            out[STATE_Q] = K.quat_mul(out[STATE_Q], self.q_pb[k])
+            out[STATE_Q] = self._to_b[k] @ out[STATE_Q]
             out[STATE_OMEGA_B] = self.R[k] @ out[STATE_OMEGA_B]
         return out
 
@@ -79,7 +85,8 @@ class PrincipalFrames:
         k = self._pos.get(int(i))
         out = np.array(x, dtype=np.float64, copy=True)
         if k is not None:
-            out[STATE_Q] = K.quat_normalize(K.quat_mul(out[STATE_Q], self.q_bp[k]))
+            q = self._to_p[k] @ out[STATE_Q]
+            out[STATE_Q] = q / np.sqrt(q @ q)   # q_wb and q_bp are unit: this only removes the product's rounding
             out[STATE_OMEGA_B] = self.R[k].T @ out[STATE_OMEGA_B]
         return out
 
