@@ -425,7 +425,9 @@ class Sim:
     def x(self) -> np.ndarray:
         """The state of every body, (nb, 13) = [p_w(3), q(4), v_w(3), omega_b(3)] per row (layout
         generated/layout.py), in the order of `names`. A read-only view of the array the backends advance
-        in place: no copy, always current; write through set_state (which validates), never through it."""
+        in place: no copy, always current; write through set_state (which validates), never through it.
+        q and omega_b are in each body's own frame; when a body was given a full inertia tensor (stepped in
+        its principal frame), x, q and omega_b are read-only converted copies instead of views."""
         return self._views[0] if self._frames is None else self._public(self._views[0])
 
     def _public(self, a: np.ndarray) -> np.ndarray:
