@@ -229,14 +229,25 @@ def body_from_dict(path: str, b: Any) -> Body:
                 return Body.cylinder(name, mass, dims[0], dims[1], **state)
             return Body.sphere(name, mass, dims[0], **state)
         except V.LavenderInputError as exc:
-            f = exc.field
-            f = "shape.dims" + f[4:] if f.startswith("size") else "shape.dims" if f in ("radius", "height") else f
-            raise V.LavenderInputError(f"{path}.{f}", exc.rule, exc.detail) from None
+            raise V.LavenderInputError(f"{path}.{_shape_field(exc.field)}", exc.rule, exc.detail) from None
     I = _inertia(path, b, mass)
     if shape is not None:
         state["shape"] = shape
-    with at(path):
+    try:
         return Body(name, mass, I, **state)
+    except V.LavenderInputError as exc:
+        raise V.LavenderInputError(f"{path}.{_shape_field(exc.field)}", exc.rule, exc.detail) from None
+
+
+def _shape_field(f: str) -> str:
+    """Body's names for the shape's parts (shape[0], shape[1][i], size[i], radius, height) as the file's keys."""
+    if f.startswith("shape[0]"):
+        return "shape.kind"
+    if f.startswith("shape[1]"):
+        return "shape.dims" + f[len("shape[1]"):]
+    if f.startswith("size"):
+        return "shape.dims" + f[len("size"):]
+    return "shape.dims" if f in ("radius", "height") else f
 
 
 def wheels_params(path: str, w: Any) -> dict:

@@ -157,7 +157,10 @@ BAD = [  # (mutation, the key path the error names, a piece of the rule)
     (_set("body.com_offset", [0.0, 0.0, 0.2]), "body.inertia", ""),     # 4 kg 0.2 m off: I_o too small for it
     (_set("body.q", [0.0, 0.0, 0.0, 0.0]), "body.q", "zero quaternion"),
     (_set("body.omega_b", [0.0, float("nan"), 0.0]), "body.omega_b", "finite"),
-    (_set("body.shape", {"kind": "cone", "dims": [1.0]}), "body.shape[0]", "unknown name 'cone'"),
+    (_set("body.shape", {"kind": "cone", "dims": [1.0]}), "body.shape.kind", "unknown name 'cone'"),
+    (_set("body.shape", {"kind": "box", "dims": [0.1, -0.2, 0.3]}), "body.shape.dims[1]", "> 0"),
+    (_set("body.shape", {"kind": "box", "dims": [0.1, 0.2]}), "body.shape.dims", "shape (3,)"),
+    (_set("body.shape", {"kind": "box"}), "body.shape.dims", "is required"),
     (_set("body.wheels", DEL), "controller.body", "no body has wheels"),
     (_set("body.wheels.axes_b.2", [0.0, 0.0]), "body.wheels.axes_b[2]", "shape (3,)"),
     (_set("body.wheels.axes_b.1", [0.0, 0.0, 0.0]), "body.wheels.axes_b[1]", "non-zero"),
