@@ -68,7 +68,7 @@ from __future__ import annotations
 import copy
 import math
 import os
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -161,7 +161,7 @@ class MonteCarloSpec:
         Relative spread of the flown body's inertia (D I D with D = diag(sqrt(1 + u U(−1, 1))) per body axis, u in
         [0, 0.5)); the controller is the nominal design.
     seed : int
-        Seed of the draws (each run's sensors get their own seed from it).
+        Seed of the inertia draws; run i flies the sensors with seed ``sensors.seed + seed + i``.
     """
 
     n: int
@@ -192,8 +192,6 @@ class Spacecraft:
     monte_carlo : MonteCarloSpec or None
     source : str
         The file it was read from ("" for a dict).
-    raw : dict
-        The dict it was built from (Monte Carlo workers rebuild the spacecraft from it).
     """
 
     name: str
@@ -206,7 +204,6 @@ class Spacecraft:
     dt: float
     monte_carlo: MonteCarloSpec | None
     source: str = ""
-    raw: dict = field(default_factory=dict, repr=False, compare=False)
 
     @property
     def n_wheels(self) -> int:
@@ -381,7 +378,7 @@ def from_dict(d: dict, *, source: str = "") -> Spacecraft:
     if man.Omega0 is not None and man.Omega0.size != n:
         raise V.LavenderInputError("maneuver.Omega0", f"needs one speed per wheel ({n})", f", got {man.Omega0.size}")
     name = SF.text("name", d["name"]) if "name" in d else body
-    return Spacecraft(name, scene, body, ctrl, sensors, lag, man, dt, _monte_carlo(d), source, d)
+    return Spacecraft(name, scene, body, ctrl, sensors, lag, man, dt, _monte_carlo(d), source)
 
 
 def load(path: str | os.PathLike[str]) -> Spacecraft:
