@@ -611,3 +611,183 @@ class CompiledController(Controller):
 
     def __getstate__(self):
         raise TypeError("a CompiledController holds a loaded library and does not pickle; pickle its Controller")
+
+
+# ----------------------------------------------------------------------------------------------
+# software in the loop
+# ----------------------------------------------------------------------------------------------
+
+COMMAND_REL_TOL = 1e-12      # float64: max relative command difference at any sample (issue 27)
+TRAJECTORY_TOL = 1e-9        # float64: max |difference| of q, omega_b (rad/s), Omega (rad/s) at any sample
+SETTLE_REL_TOL = 0.05        # float32: settling time within 5 % of float64's
+
+
+@dataclass
+class SilReport:
+    """The printed controller flown in the loop against the Python one (same plant, same sensor noise).
+
+    Attributes
+    ----------
+    command_rel_f64 : float
+        max over samples of ``max_i |u_C − u_py| / max_i |u_py|`` (the C float64 step), 0 when identical.
+    commands_identical_f64 : bool
+        Every float64 command bit for bit equal to the Python one.
+    trajectory_diff_f64 : float
+        max over samples of |Δq|, |Δomega_b| (rad/s), |ΔOmega| (rad/s), float64 run against Python's.
+    command_diff_f32 : float
+        Worst |u_C32 − u_py| at any sample, N·m (the float32 run flies its own trajectory).
+    command_diff_f32_rel_limit : float
+        ``command_diff_f32 / torque_limit``.
+    command_diff_f32_replay : float
+        Worst |u_C32 − u_py| when the float32 step is fed the Python run's own measurements (the
+        step's rounding alone, without the trajectory's divergence), N·m.
+    trajectory_diff_f32 : float
+        As ``trajectory_diff_f64`` for the float32 run.
+    settling_time_python, settling_time_f64, settling_time_f32 : float
+        Settling times, s.
+    settle_rel_f32 : float
+        ``|t_f32 − t_f64| / t_f64``.
+    samples : int
+        Controller samples compared.
+    compile_command : str
+    n_ops, n_instructions : int
+        Arithmetic operations in the printed step; instructions of the CasADi Function.
+    lines : dict
+        Lines per printed file.
+    """
+
+    command_rel_f64: float
+    commands_identical_f64: bool
+    trajectory_diff_f64: float
+    command_diff_f32: float
+    command_diff_f32_rel_limit: float
+    command_diff_f32_replay: float
+    trajectory_diff_f32: float
+    settling_time_python: float
+    settling_time_f64: float
+    settling_time_f32: float
+    settle_rel_f32: float
+    samples: int
+    compile_command: str
+    n_ops: int
+    n_instructions: int
+    lines: dict = field(default_factory=dict)
+
+    @property
+    def ok(self) -> bool:
+        """float64 commands within COMMAND_REL_TOL, trajectories within TRAJECTORY_TOL, float32 settling within 5 %."""
+        return bool(self.command_rel_f64 <= COMMAND_REL_TOL and self.trajectory_diff_f64 <= TRAJECTORY_TOL
+                    and self.settle_rel_f32 <= SETTLE_REL_TOL)
+
+    def figures(self) -> dict:
+        """Plain values (JSON-ready but for an infinite settling time), with ``ok`` and the tolerances."""
+        d = {k: getattr(self, k) for k in self.__dataclass_fields__}
+        d.update(ok=self.ok, tolerances={"command_rel_f64": COMMAND_REL_TOL, "trajectory_f64": TRAJECTORY_TOL,
+                                         "settle_rel_f32": SETTLE_REL_TOL})
+        return d
+
+
+def _trajectory_diff(a: Any, b: Any) -> float:
+    return float(max(np.abs(a.q - b.q).max(), np.abs(a.omega_b - b.omega_b).max(), np.abs(a.Omega - b.Omega).max()))
+
+
+def _command_rel(ref: np.ndarray, other: np.ndarray) -> float:
+    num = np.abs(other - ref).max(axis=1)
+    den = np.maximum(np.abs(ref).max(axis=1), 1e-300)
+    return float((num / den).max())
+
+
+def replay(controller: Controller, response: Any) -> np.ndarray:
+    """The commands ``controller`` computes from a run's recorded measurements, in order (memory reset first).
+
+    Parameters
+    ----------
+    controller : Controller
+        Any controller (a CompiledController: the printed step on the Python run's inputs).
+    response : Response
+        A closed-loop run (its ``q_meas``, ``omega_meas``, ``Omega_meas``, ``q_ref``).
+
+    Returns
+    -------
+    ndarray (K, N)
+        One command per sample but the last (which computes none), N·m.
+    """
+    controller.reset()
+    K = response.t.size - 1
+    return np.array([controller.command(response.q_meas[k], response.omega_meas[k], response.Omega_meas[k], response.q_ref)
+                     for k in range(K)]).reshape(K, controller.n)
+
+
+def compare(reference: Any, f64: Any, f32: Any, torque_limit: float, printed: Printed, command: list,
+            replay_f32: np.ndarray | None = None) -> SilReport:
+    """A :class:`SilReport` from three Responses of one maneuver: Python, C float64, C float32 (and the float32
+    step's replay of the Python run's measurements, :func:`replay`)."""
+    st = [r.settling_time() for r in (reference, f64, f32)]
+    srel = abs(st[2] - st[1]) / st[1] if math.isfinite(st[1]) and st[1] > 0 else (0.0 if st[2] == st[1] else math.inf)
+    d32 = float(np.abs(f32.commands - reference.commands).max())
+    rep = math.nan if replay_f32 is None else float(np.abs(replay_f32 - reference.commands[:-1]).max())
+    return SilReport(_command_rel(reference.commands, f64.commands), bool(np.array_equal(reference.commands, f64.commands)),
+                     _trajectory_diff(reference, f64), d32, d32 / torque_limit, rep, _trajectory_diff(reference, f32),
+                     st[0], st[1], st[2], srel, int(reference.t.size - 1), " ".join(command), printed.n_ops,
+                     printed.n_instructions, dict(printed.lines))
+
+
+def verify(controller: Controller, fly: Callable[[Controller], Any], *, reference: Any = None, printed: Printed | None = None,
+           directory: str | os.PathLike | None = None) -> SilReport:
+    """Software in the loop: compile the printed controller and fly it (float64, float32) as ``fly`` flies the Python one.
+
+    Parameters
+    ----------
+    controller : Controller
+    fly : callable
+        ``fly(controller) -> Response``: one maneuver (e.g. ``lambda c: closed_loop(scene, c, T=...,
+        sensors=...)``); called with the C controllers, and with ``controller`` unless ``reference`` is given.
+        It must reproduce its sensor noise (a seeded Sensors) so the runs see the same noise.
+    reference : Response, optional
+        The Python controller's run of the same maneuver (saves flying it again).
+    printed : Printed, optional
+        Default :func:`render` ``(controller)``.
+    directory : str or os.PathLike, optional
+        Where to compile (default a temporary directory).
+
+    Returns
+    -------
+    SilReport
+
+    Raises
+    ------
+    CompileError
+        The printed files do not compile with the strict flags (or no compiler).
+    """
+    printed = render(controller) if printed is None else printed
+    lib, cmd = compile_library(printed, directory)
+    ref = fly(controller) if reference is None else reference
+    compiled = [CompiledController.of(controller, precision=p, printed=printed, library=lib, command=cmd)
+                for p in ("float64", "float32")]
+    runs = [fly(c) for c in compiled]
+    return compare(ref, runs[0], runs[1], controller.wheels.torque_limit, printed, cmd, replay(compiled[1], ref))
+
+
+def sil(scene: Any, controller: Controller, *, T: float, directory: str | os.PathLike | None = None,
+        **closed_loop_kw: Any) -> SilReport:
+    """:func:`verify` on ``lavendersim.control.closed_loop(scene, controller, T=T, **closed_loop_kw)``.
+
+    Parameters
+    ----------
+    scene : Scene
+        The plant.
+    controller : Controller
+    T : float
+        Duration, s.
+    directory : str or os.PathLike, optional
+        Where to compile.
+    **closed_loop_kw
+        q0, omega0, Omega0, sensors (seeded: every run sees the same noise), dt, backend, ...
+
+    Returns
+    -------
+    SilReport
+    """
+    from .wheel_control import closed_loop
+
+    return verify(controller, lambda c: closed_loop(scene, c, T=T, **closed_loop_kw), directory=directory)
