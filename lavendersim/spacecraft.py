@@ -399,8 +399,9 @@ def load(path: str | os.PathLike[str]) -> Spacecraft:
         A missing file, bad TOML, or a bad key (its path named).
     """
     p = Path(path)
-    if not p.exists() and str(path) in shipped():
-        p = shipped()[str(path)]
+    name = p.stem if p.suffix == ".toml" and p.parent == Path(".") else str(path)
+    if not p.exists() and name in shipped():   # a shipped name ("cubesat6u" or "cubesat6u.toml")
+        p = shipped()[name]
     return from_dict(SF.read_toml(p, field=str(path)), source=str(p))
 
 

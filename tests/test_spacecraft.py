@@ -94,6 +94,7 @@ def skew3_file(tmp_path_factory):
 def test_shipped_files():
     assert set(S.shipped()) == {"cubesat6u", "cube_center", "cube_corner", "cube_pyramid4"}
     sc = S.load("cubesat6u")
+    assert S.load("cubesat6u.toml").source == sc.source == str(S.shipped()["cubesat6u"])
     b = sc.scene.bodies["sat"]
     assert (sc.name, sc.body, sc.n_wheels, b.mass) == ("6U CubeSat", "sat", 4, 12.0)
     np.testing.assert_allclose(b.inertia_b, [[0.2, 0.004, -0.002], [0.004, 0.25, 0.003], [-0.002, 0.003, 0.08]],
