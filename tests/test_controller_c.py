@@ -198,7 +198,7 @@ def test_bad_arguments_are_named(designs, tmp_path):
     with pytest.raises(LavenderInputError, match="directory"):
         CC.export_c(ctrl, tmp_path / "file" / "sub")
     with pytest.raises(LavenderInputError, match="precision"):
-        CC.CompiledController.of(ctrl, precision="float16")
+        CC.CompiledController(ctrl, precision="float16")
 
 
 def test_a_compiler_failure_shows_the_command_and_output(designs, monkeypatch):
@@ -249,7 +249,7 @@ def test_bounded_inputs(designs, name):
     printed = CC.render(ctrl)
     lib, cmd = CC.compile_library(printed)
     for prec in ("float64", "float32"):
-        cc = CC.CompiledController.of(ctrl, precision=prec, printed=printed, library=lib, command=cmd)
+        cc = CC.CompiledController(ctrl, precision=prec, printed=printed, library=lib, command=cmd)
         worst, hits = 0.0, 0
         for _ in range(400):
             q, qr = (v / np.linalg.norm(v) for v in rng.normal(size=(2, 4)))
