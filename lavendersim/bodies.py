@@ -114,7 +114,11 @@ class Body:
         if omega_b is not None and omega_w is not None:
             raise V.LavenderInputError("omega_w", "give omega_b or omega_w, not both")
         if omega_w is not None:
-            x[W] = K.world_to_body(x[Q], V.vector("omega_w", omega_w))
+            with np.errstate(over="ignore", invalid="ignore"):
+                x[W] = K.world_to_body(x[Q], V.vector("omega_w", omega_w))
+            if not np.all(np.isfinite(x[W])):
+                raise V.LavenderInputError("omega_w", "its body-frame value overflows a float64",
+                                           f", got {V._nums(np.asarray(omega_w, dtype=float))}")
         else:
             x[W] = V.vector("omega_b", (0, 0, 0) if omega_b is None else omega_b)
         shape = _shape(shape)

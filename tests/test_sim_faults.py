@@ -189,3 +189,9 @@ def test_a_fork_while_another_thread_holds_the_lock_does_not_hang():
         time.sleep(0.05)
     assert os.WIFEXITED(status) and os.WEXITSTATUS(status) == 0, status
     assert not errors, errors
+
+
+def test_an_omega_w_whose_body_frame_value_overflows_is_refused_by_body():
+    with pytest.raises(lv.LavenderInputError) as ei:
+        lv.Body("b", 1.0, (1.0, 2.0, 3.0), q=[0.7, 0.2, 0.1, 0.9], omega_w=[1.7e308, -1.7e308, 1.7e308])
+    assert ei.value.field == "omega_w"
