@@ -203,6 +203,39 @@ def _step_body(fn: Any, names: list[str], prec: _Precision) -> tuple[list[str], 
     return lines, out, n_ops
 
 
+def function_c(fn: Any, name: str, precision: str = "float64") -> str:
+    """Any CasADi SX Function with dense inputs and outputs printed as one C99 function (the printer alone).
+
+    ``void name(const T in0[n0], ..., T out0[m0], ...)`` with the Function's own argument names; the
+    body is what :func:`render` prints for the controller's step. Used to test the printer on every
+    operation it knows.
+
+    Parameters
+    ----------
+    fn : casadi.Function
+        An SX Function (``fn.is_a("SXFunction")``).
+    name : str
+        The C function's name.
+    precision : {"float64", "float32"}, default "float64"
+
+    Returns
+    -------
+    str
+        The function's C source (needs ``<math.h>``).
+    """
+    p = F32 if precision == "float32" else F64
+    ins = [fn.name_in(i) for i in range(fn.n_in())]
+    lines, outs, _ = _step_body(fn, ins, p)
+    args = [f"const {p.ctype} {a}[{max(fn.nnz_in(i), 1)}]" for i, a in enumerate(ins)]
+    args += [f"{p.ctype} {fn.name_out(i)}[{max(fn.numel_out(i), 1)}]" for i in range(fn.n_out())]
+    body = [f"void {name}({', '.join(args)})", "{"]
+    body += [f"    (void){a};" for a in ins]
+    body += ["    " + ln for ln in lines]
+    for i in range(fn.n_out()):
+        body += [f"    {fn.name_out(i)}[{r}] = {outs.get((i, r), p.literal(0.0))};" for r in range(fn.numel_out(i))]
+    return "\n".join(body + ["}", ""])
+
+
 # ----------------------------------------------------------------------------------------------
 # the files
 # ----------------------------------------------------------------------------------------------
