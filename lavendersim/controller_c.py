@@ -654,8 +654,17 @@ class CompiledController(Controller):
         self.z = self._zbuf[:self.nz].astype(float)
         return u.astype(float)
 
+    def __copy__(self) -> "CompiledController":
+        """A copy sharing the loaded library, with its own memory z."""
+        new = type(self).__new__(type(self))
+        new.__dict__.update(self.__dict__)
+        new._zbuf = self._zbuf.copy()
+        new.z = self.z.copy()
+        return new
+
     def __getstate__(self):
-        raise TypeError("a CompiledController holds a loaded library and does not pickle; pickle its Controller")
+        raise TypeError("a CompiledController holds a loaded library and does not pickle (another process cannot "
+                        "use it); send its Controller and compile there")
 
 
 # ----------------------------------------------------------------------------------------------

@@ -357,3 +357,22 @@ def test_every_operation_prints_as_casadi_evaluates_it(tmp_path):
             f(xin.ctypes.data_as(ctypes.POINTER(ct)), y.ctypes.data_as(ctypes.POINTER(ct)))
             ref = np.asarray(fn(xin.astype(float))).ravel()
             np.testing.assert_allclose(y.astype(float), ref, rtol=rtol, atol=rtol * np.abs(ref).max() * (dt is np.float32))
+
+
+def test_compiled_controller_copies_but_does_not_pickle(designs):
+    """A copy shares the library and has its own memory (spacecraft.monte_carlo copies the controller it flies);
+    pickling (another process) is refused with a reason."""
+    require("cc")
+    import copy
+    import pickle
+
+    from lavendersim import controller_c as CC
+
+    ctrl = designs["cubesat6u"][1]
+    k = CC.CompiledController(ctrl)
+    k2 = copy.copy(k)
+    q = np.array([0.1, 0.0, 0.0, 1.0]) / np.hypot(0.1, 1.0)
+    u = k2.command(q, np.zeros(3), ctrl.Omega_ref)
+    assert np.any(k2.z != k.z) and np.array_equal(u, CC.CompiledController(ctrl).command(q, np.zeros(3), ctrl.Omega_ref))
+    with pytest.raises(TypeError, match="does not pickle"):
+        pickle.dumps(k)
