@@ -446,11 +446,13 @@ def _main_c(ctrl: Controller, prefix: str, example_q: Any) -> str:
     if example_q is None:
         example_q = np.asarray(KN.quat_mul(ctrl.q_ref, KN.axis_angle_to_quat(np.array([1.0, 0, 0]), math.radians(10))),
                                dtype=float)
+        where = "the attitude 10 degrees about body x off q_ref"
     else:
         example_q = V.quaternion("example_q", example_q)
+        where = "the given attitude"
     arr = lambda a: "{" + ", ".join(repr(float(v)) for v in np.ravel(a)) + "}"   # noqa: E731
     return "\n".join([
-        f"/* One step of {prefix} (see controller.h): the attitude 10 degrees off q_ref, at rest, wheels at",
+        f"/* One step of {prefix} (see controller.h): {where}, at rest, wheels at",
         " * their operating rates. Build: cc -std=c99 -Wall -Wextra -pedantic -Werror main.c controller.c -lm */",
         "#include <stdio.h>", "", '#include "controller.h"', "",
         "int main(void)", "{",
