@@ -595,8 +595,12 @@ def design(scene: Scene, body: str | None = None, *, period: float, delay: float
     lag = V.scalar("actuator_lag", actuator_lag, nonnegative=True)
     q_ref = V.quaternion("q_ref", q_ref)
     null_bias = V.scalar("null_bias", null_bias)
+    known = ("attitude_deg", "rate", "wheel_speed_fraction", "torque_fraction")
     if weights is not None and not isinstance(weights, dict):
         raise V.LavenderInputError("weights", "must be a dict of default_weights keywords", f", got {V._describe(weights)}")
+    bad = sorted(set(weights or {}) - set(known), key=str)
+    if bad:
+        raise V.LavenderInputError("weights", f"unknown key {bad[0]!r}; known: {', '.join(known)}")
     wh = Wheels.of(scene, body)
     lin, Om_ref, M, r = _operating_point(scene, body, wh, q_ref, null_bias)
     ref = next(b for b in lin.bodies if b.name == body)
