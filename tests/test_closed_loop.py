@@ -43,7 +43,7 @@ def cubesat_scene() -> lv.Scene:
 
 # (scene factory, design keywords, T s, settling bound s (measured), Omega0)
 CASES = {
-    "chapter_cube": (lambda: lc.chapter_cube("center"), {"period": 0.01}, 3.0, 0.6, None),            # measured 0.47 s
+    "chapter_cube": (lambda: lc.chapter_cube("center"), {"period": 0.01}, 3.0, 0.6, None),            # measured 0.43 s
     "pyramid_cube": (WL.pyramid_cube, {"period": 0.01, "null_bias": 50.0}, 3.0, 0.5, np.zeros(4)),    # measured 0.43 s
     "sat_5Hz": (sat_scene, {"period": 0.2}, 40.0, 8.0, None),                                          # measured 6.4 s
     # from the null-space bias (Omega0 = Omega_ref, 100 rad/s): |L(0)| is roundoff, the loop must not call it divergence
