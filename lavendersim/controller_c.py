@@ -409,7 +409,7 @@ def _header(ctrl: Controller, prefix: str, source: str, n_ops: int, n_instr: int
 def _source_c(ctrl: Controller, prefix: str, bodies: dict) -> str:
     P = _macro(prefix)
     n, nz = _dims(ctrl)
-    z0 = ctrl._z0() if ctrl.nz else np.zeros(1)
+    z0 = ctrl.z0 if ctrl.nz else np.zeros(1)
     out = [f"/* {prefix}: printed by lavendersim.controller_c from the controller's CasADi expressions; see controller.h. */",
            '#include "controller.h"', "", "#include <math.h>", ""]
     for p in (F64, F32):
