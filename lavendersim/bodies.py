@@ -81,14 +81,11 @@ class Body:
         ``(kind, dims)`` drawn by the viewer: ``("box", (w, h, d))``, ``("cylinder", (r, h))`` or
         ``("sphere", (r,))``, lengths in m, > 0. None: drawn as the inertia-equivalent box.
 
-    Attributes
-    ----------
-    I_b : ndarray, shape (3,)
-        The principal moments, kg·m² (for a diagonal tensor: its diagonal, in order).
-    R_bp : ndarray, shape (3, 3)
-        The principal axes as columns, body frame (identity for a diagonal tensor); proper rotation.
-    inertia_b : ndarray, shape (3, 3)
-        The tensor in the body frame, ``R_bp diag(I_b) R_bpᵀ``.
+    Notes
+    -----
+    ``I_b`` (3,) holds the principal moments, kg·m² (for a diagonal tensor: its diagonal, in order);
+    ``R_bp`` (3, 3) the principal axes as columns in the body frame (identity for a diagonal tensor; a
+    proper rotation); ``inertia_b`` (3, 3) the tensor in the body frame as given.
     """
 
     __slots__ = _FIELDS
