@@ -224,3 +224,15 @@ def test_bad_objects_name_the_field():
         with pytest.raises(LavenderInputError) as e:
             lc.monte_carlo(sat_scene(), _sat_ctrl(), **{"n": 2, "T": 1.0, **kw})
         assert e.value.field == field
+
+
+def test_both_backends_fly_the_same_loop():
+    """The sampled loop on the NumPy backend = on the C backend (same controller, sensors, lag and delay)."""
+    scene = sat_scene()
+    ctrl = lc.design(scene, period=0.2, delay=0.1, actuator_lag=0.05)
+    kw = dict(T=4.0, q0=lc.rotated(ctrl.q_ref, (1.0, 2.0, 0.0), 20.0), sensors=lc.Sensors(attitude_noise=1e-4, seed=2))
+    a = lc.closed_loop(scene, ctrl, backend="c", **kw)
+    b = lc.closed_loop(scene, ctrl, backend="numpy", **kw)
+    np.testing.assert_allclose(b.error_deg, a.error_deg, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(b.Omega, a.Omega, rtol=0, atol=1e-8)
+    np.testing.assert_allclose(b.commands, a.commands, rtol=0, atol=1e-12)
