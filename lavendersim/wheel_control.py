@@ -28,8 +28,8 @@ period ``Ts``:
   (:func:`lavendersim.control.dlqr`) and the command regulates to the equilibrium that keeps the
   measured state's conserved coordinates (``Linearization.target_map``), folded into the gains.
 
-The controller's step is a set of CasADi SX expressions — the attitude error chart from the printed
-``quat_mul`` / ``quat_conj``, ``−K x``, the allocation ``M`` and a torque saturation with
+The controller's step is a set of CasADi SX expressions — the attitude error chart (the printed
+``quat_error_chart`` kernel), ``−K x``, the allocation ``M`` and a torque saturation with
 ``fmin``/``fmax`` — wrapped in one ``casadi.Function`` (:attr:`Controller.function`), which Python
 evaluates; the same expressions print as C.
 
@@ -434,8 +434,7 @@ class Controller:
         n = self.n
         q, w, Om, qr = ca.SX.sym("q", 4), ca.SX.sym("omega_b", 3), ca.SX.sym("Omega", n), ca.SX.sym("q_ref", 4)
         z = ca.SX.sym("z", self.nz)
-        qe = KC.quat_mul(KC.quat_conj(qr), q)
-        dtheta = 2 * ca.if_else(qe[3] < 0, -1, 1) * qe[0:3]
+        dtheta = KC.quat_error_chart(q, qr)      # the printed chart: 2 sgn(e_w) e_v, e = q_ref* ⊗ q
         x = ca.vertcat(dtheta, w, Om - ca.DM(self.Omega_ref))
         Minv = np.linalg.inv(self.M)
         z0 = ca.DM(self._z0())
