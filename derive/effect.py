@@ -143,6 +143,15 @@ class Param:
     def domain(self) -> str:
         return "real" if self.rule == "finite" else "positive"
 
+    @property
+    def frame(self) -> str | None:
+        """The frame a vector (or each row of a matrix) is written in, from the name's suffix (the house's
+        naming rule): "body" for ``*_b``, "world" for ``*_w``, None for scalars and frame-free values. The
+        runtime rotates "body" values of a body given a full inertia tensor into its principal frame."""
+        if not self.shape or self.shape[-1] != 3:
+            return None
+        return {"_b": "body", "_w": "world"}.get(self.name[-2:])
+
 
 # Output names of effect kernels, and names the printed dispatch code uses.
 OUT_FORCE, OUT_TORQUE = "F_com_w", "tau_com_w"

@@ -213,7 +213,8 @@ def meta_entry(code: int | None, d: E.EffectDecl) -> dict:
     params, off = [], d.offsets()
     for p in d.params:
         params.append({"name": p.name, "shape": tuple(p.shape), "unit": p.unit, "doc": p.doc, "rule": p.rule,
-                       "default": p.default, "offset": off[p.name], "upto": p.upto})
+                       "default": p.default, "offset": off[p.name], "upto": p.upto,
+                       "frame": p.frame})
     return {"name": d.name, "code": code, "kind": d.kind, "summary": d.summary, "params": tuple(params),
             "n_params": d.n_params,
             "outputs": tuple("F_w" if n == E.OUT_FORCE else "tau_w" for n, _ in d.outputs),

@@ -63,6 +63,10 @@ def kernels() -> list[Kernel]:
     R = rotation_matrix(q)
     I_w = R * sp.diag(*I_b) * R.T
     KG = "kg"
+    I_o, cvec = mat("I_o", 3, 3), vec("c", 3)
+    about_com = I_o - (parallel_axis(sp.zeros(3, 3), m, cvec))
+    if (parallel_axis(about_com, m, cvec) - I_o).applyfunc(sp.expand) != sp.zeros(3, 3):
+        raise RuntimeError("derive: inertia_about_com is not the inverse of parallel_axis")
     return [
         Kernel("inertia_box", "Principal inertia of a solid box, integrated over its volume",
                r"I_B = \int_V (\lVert r\rVert^2 \mathbf 1 - r r^T)\,dm = \tfrac{m}{12}\operatorname{diag}(h^2+d^2,\ w^2+d^2,\ w^2+h^2)",
@@ -81,6 +85,14 @@ def kernels() -> list[Kernel]:
                [Arg("I_c", I_c, "inertia about the COM, kg·m², row-major"), Arg("m", m, "mass, " + KG, "positive"),
                 Arg("d", dvec, "offset of the point from the COM, m (same frame as I_c)")],
                [Arg("I_o", parallel_axis(I_c, m, dvec), "inertia about the point, kg·m², row-major")], g),
+        Kernel("inertia_about_com", "Inertia about the centre of mass from the inertia about a reference point O "
+               "(CAD mass properties), the COM at c from O",
+               r"I_C = I_O - m(\lVert c\rVert^2 \mathbf 1 - c c^T)",
+               [Arg("I_o", I_o, "inertia about the reference point, kg·m², row-major"), Arg("m", m, "mass, " + KG, "positive"),
+                Arg("c", cvec, "COM position relative to the reference point, m (same frame as I_o)")],
+               [Arg("I_c", about_com, "inertia about the COM, kg·m², row-major")], g,
+               notes=["The parallel-axis theorem read backwards; derive proves that moving the result back by c "
+                      "gives I_O again."]),
         Kernel("world_inertia", "Body inertia written in world coordinates", r"I_W = R_{WB} I_B R_{WB}^T",
                [Arg("q", q, "orientation (x, y, z, w), R_WB, unit", "unit_quaternion"), Arg("I_b", I_b, "principal moments, body frame, kg·m²", "positive")],
                [Arg("I_w", I_w, "inertia, world frame, kg·m², row-major")], g),

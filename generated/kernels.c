@@ -97,6 +97,37 @@ void lv_parallel_axis(const double *I_c, double m, const double *d, double *I_o)
     I_o[8] = I_c_22 + m*(t0 + t5);
 }
 
+void lv_inertia_about_com(const double *I_o, double m, const double *c, double *I_c) {
+    const double I_o_00 = I_o[0];
+    const double I_o_01 = I_o[1];
+    const double I_o_02 = I_o[2];
+    const double I_o_10 = I_o[3];
+    const double I_o_11 = I_o[4];
+    const double I_o_12 = I_o[5];
+    const double I_o_20 = I_o[6];
+    const double I_o_21 = I_o[7];
+    const double I_o_22 = I_o[8];
+    const double c_0 = c[0];
+    const double c_1 = c[1];
+    const double c_2 = c[2];
+    const double t0 = (c_1*c_1);
+    const double t1 = (c_2*c_2);
+    const double t2 = c_0*m;
+    const double t3 = c_1*t2;
+    const double t4 = c_2*t2;
+    const double t5 = (c_0*c_0);
+    const double t6 = c_1*c_2*m;
+    I_c[0] = I_o_00 - m*(t0 + t1);
+    I_c[1] = I_o_01 + t3;
+    I_c[2] = I_o_02 + t4;
+    I_c[3] = I_o_10 + t3;
+    I_c[4] = I_o_11 - m*(t1 + t5);
+    I_c[5] = I_o_12 + t6;
+    I_c[6] = I_o_20 + t4;
+    I_c[7] = I_o_21 + t6;
+    I_c[8] = I_o_22 - m*(t0 + t5);
+}
+
 void lv_world_inertia(const double *q, const double *I_b, double *I_w) {
     const double q_0 = q[0];
     const double q_1 = q[1];
@@ -3050,6 +3081,7 @@ static void packed_inertia_box(const double *in, double *out) { lv_inertia_box(i
 static void packed_inertia_cylinder(const double *in, double *out) { lv_inertia_cylinder(in[0], in[1], in[2], out + 0); }
 static void packed_inertia_sphere(const double *in, double *out) { lv_inertia_sphere(in[0], in[1], out + 0); }
 static void packed_parallel_axis(const double *in, double *out) { lv_parallel_axis(in + 0, in[9], in + 10, out + 0); }
+static void packed_inertia_about_com(const double *in, double *out) { lv_inertia_about_com(in + 0, in[9], in + 10, out + 0); }
 static void packed_world_inertia(const double *in, double *out) { lv_world_inertia(in + 0, in + 4, out + 0); }
 static void packed_torque_from_force(const double *in, double *out) { lv_torque_from_force(in + 0, in + 3, out + 0); }
 static void packed_force_at_point(const double *in, double *out) { lv_force_at_point(in + 0, in + 4, in + 7, out + 0); }
@@ -3126,6 +3158,7 @@ const lv_kernel_info lv_kernel_table[LV_KERNEL_COUNT] = {
     {"inertia_cylinder", 3, 3, packed_inertia_cylinder},
     {"inertia_sphere", 2, 3, packed_inertia_sphere},
     {"parallel_axis", 13, 9, packed_parallel_axis},
+    {"inertia_about_com", 13, 9, packed_inertia_about_com},
     {"world_inertia", 7, 9, packed_world_inertia},
     {"torque_from_force", 6, 3, packed_torque_from_force},
     {"force_at_point", 10, 3, packed_force_at_point},

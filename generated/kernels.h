@@ -11,7 +11,7 @@ typedef struct {
     void (*packed)(const double *in, double *out);
 } lv_kernel_info;
 
-#define LV_KERNEL_COUNT 74
+#define LV_KERNEL_COUNT 75
 extern const lv_kernel_info lv_kernel_table[LV_KERNEL_COUNT];
 
 /* particle_moments: One particle's mass moment and momentum (summed: m r_COM and p).
@@ -58,6 +58,13 @@ void lv_inertia_sphere(double m, double r, double *I_b);
      in  d [3]: offset of the point from the COM, m (same frame as I_c)
      out I_o [3×3]: inertia about the point, kg·m², row-major */
 void lv_parallel_axis(const double *I_c, double m, const double *d, double *I_o);
+
+/* inertia_about_com: Inertia about the centre of mass from the inertia about a reference point O (CAD mass properties), the COM at c from O.
+     in  I_o [3×3]: inertia about the reference point, kg·m², row-major
+     in  m scalar: mass, kg
+     in  c [3]: COM position relative to the reference point, m (same frame as I_o)
+     out I_c [3×3]: inertia about the COM, kg·m², row-major */
+void lv_inertia_about_com(const double *I_o, double m, const double *c, double *I_c);
 
 /* world_inertia: Body inertia written in world coordinates.
      in  q [4]: orientation (x, y, z, w), R_WB, unit

@@ -113,6 +113,34 @@ def parallel_axis(I_c, m, d):
     return casadi.vertcat(I_c_00 + m*(t0 + t1), I_c_01 + t3, I_c_02 + t4, I_c_10 + t3, I_c_11 + m*(t1 + t5), I_c_12 + t6, I_c_20 + t4, I_c_21 + t6, I_c_22 + m*(t0 + t5))
 
 
+def inertia_about_com(I_o, m, c):
+    """inertia_about_com: Inertia about the centre of mass from the inertia about a reference point O (CAD mass properties), the COM at c from O.
+      in  I_o [3×3]: inertia about the reference point, kg·m², row-major
+      in  m scalar: mass, kg
+      in  c [3]: COM position relative to the reference point, m (same frame as I_o)
+      out I_c [3×3]: inertia about the COM, kg·m², row-major"""
+    I_o_00 = I_o[0]
+    I_o_01 = I_o[1]
+    I_o_02 = I_o[2]
+    I_o_10 = I_o[3]
+    I_o_11 = I_o[4]
+    I_o_12 = I_o[5]
+    I_o_20 = I_o[6]
+    I_o_21 = I_o[7]
+    I_o_22 = I_o[8]
+    c_0 = c[0]
+    c_1 = c[1]
+    c_2 = c[2]
+    t0 = (c_1*c_1)
+    t1 = (c_2*c_2)
+    t2 = c_0*m
+    t3 = c_1*t2
+    t4 = c_2*t2
+    t5 = (c_0*c_0)
+    t6 = c_1*c_2*m
+    return casadi.vertcat(I_o_00 - m*(t0 + t1), I_o_01 + t3, I_o_02 + t4, I_o_10 + t3, I_o_11 - m*(t1 + t5), I_o_12 + t6, I_o_20 + t4, I_o_21 + t6, I_o_22 - m*(t0 + t5))
+
+
 def world_inertia(q, I_b):
     """world_inertia: Body inertia written in world coordinates.
       in  q [4]: orientation (x, y, z, w), R_WB, unit

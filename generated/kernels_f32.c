@@ -98,6 +98,37 @@ void lvf_parallel_axis(const float *I_c, float m, const float *d, float *I_o) {
     I_o[8] = I_c_22 + m*(t0 + t5);
 }
 
+void lvf_inertia_about_com(const float *I_o, float m, const float *c, float *I_c) {
+    const float I_o_00 = I_o[0];
+    const float I_o_01 = I_o[1];
+    const float I_o_02 = I_o[2];
+    const float I_o_10 = I_o[3];
+    const float I_o_11 = I_o[4];
+    const float I_o_12 = I_o[5];
+    const float I_o_20 = I_o[6];
+    const float I_o_21 = I_o[7];
+    const float I_o_22 = I_o[8];
+    const float c_0 = c[0];
+    const float c_1 = c[1];
+    const float c_2 = c[2];
+    const float t0 = (c_1*c_1);
+    const float t1 = (c_2*c_2);
+    const float t2 = c_0*m;
+    const float t3 = c_1*t2;
+    const float t4 = c_2*t2;
+    const float t5 = (c_0*c_0);
+    const float t6 = c_1*c_2*m;
+    I_c[0] = I_o_00 - m*(t0 + t1);
+    I_c[1] = I_o_01 + t3;
+    I_c[2] = I_o_02 + t4;
+    I_c[3] = I_o_10 + t3;
+    I_c[4] = I_o_11 - m*(t1 + t5);
+    I_c[5] = I_o_12 + t6;
+    I_c[6] = I_o_20 + t4;
+    I_c[7] = I_o_21 + t6;
+    I_c[8] = I_o_22 - m*(t0 + t5);
+}
+
 void lvf_world_inertia(const float *q, const float *I_b, float *I_w) {
     const float q_0 = q[0];
     const float q_1 = q[1];

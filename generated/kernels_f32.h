@@ -17,6 +17,8 @@ void lvf_inertia_cylinder(float m, float r, float h, float *I_b);
 void lvf_inertia_sphere(float m, float r, float *I_b);
 /* parallel_axis: Inertia about a point offset by d from the centre of mass (float; see kernels.h) */
 void lvf_parallel_axis(const float *I_c, float m, const float *d, float *I_o);
+/* inertia_about_com: Inertia about the centre of mass from the inertia about a reference point O (CAD mass properties), the COM at c from O (float; see kernels.h) */
+void lvf_inertia_about_com(const float *I_o, float m, const float *c, float *I_c);
 /* world_inertia: Body inertia written in world coordinates (float; see kernels.h) */
 void lvf_world_inertia(const float *q, const float *I_b, float *I_w);
 /* torque_from_force: Torque of a force about the COM (float; see kernels.h) */

@@ -258,6 +258,61 @@ def parallel_axis(I_c, m, d):
     return I_o_out
 
 
+def inertia_about_com(I_o, m, c):
+    """Inertia about the centre of mass from the inertia about a reference point O (CAD mass properties), the COM at c from O.
+
+    Generated kernel ``inertia_about_com``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    I_o : array_like, shape (..., 3, 3)
+        inertia about the reference point, kg·m², row-major
+    m : array_like, shape (...)
+        mass, kg
+    c : array_like, shape (..., 3)
+        COM position relative to the reference point, m (same frame as I_o)
+
+    Returns
+    -------
+    I_c : ndarray, shape (..., 3, 3)
+        inertia about the COM, kg·m², row-major
+    """
+    I_o = numpy.asarray(I_o, dtype=numpy.float64)
+    m = numpy.asarray(m, dtype=numpy.float64)
+    c = numpy.asarray(c, dtype=numpy.float64)
+    batch = numpy.broadcast_shapes(I_o.shape[:-2], m.shape, c.shape[:-1])
+    I_o_00 = I_o[..., 0, 0]
+    I_o_01 = I_o[..., 0, 1]
+    I_o_02 = I_o[..., 0, 2]
+    I_o_10 = I_o[..., 1, 0]
+    I_o_11 = I_o[..., 1, 1]
+    I_o_12 = I_o[..., 1, 2]
+    I_o_20 = I_o[..., 2, 0]
+    I_o_21 = I_o[..., 2, 1]
+    I_o_22 = I_o[..., 2, 2]
+    c_0 = c[..., 0]
+    c_1 = c[..., 1]
+    c_2 = c[..., 2]
+    t0 = (c_1*c_1)
+    t1 = (c_2*c_2)
+    t2 = c_0*m
+    t3 = c_1*t2
+    t4 = c_2*t2
+    t5 = (c_0*c_0)
+    t6 = c_1*c_2*m
+    I_c_out = numpy.empty(batch + (3, 3))
+    I_c_out[..., 0, 0] = I_o_00 - m*(t0 + t1)
+    I_c_out[..., 0, 1] = I_o_01 + t3
+    I_c_out[..., 0, 2] = I_o_02 + t4
+    I_c_out[..., 1, 0] = I_o_10 + t3
+    I_c_out[..., 1, 1] = I_o_11 - m*(t1 + t5)
+    I_c_out[..., 1, 2] = I_o_12 + t6
+    I_c_out[..., 2, 0] = I_o_20 + t4
+    I_c_out[..., 2, 1] = I_o_21 + t6
+    I_c_out[..., 2, 2] = I_o_22 - m*(t0 + t5)
+    return I_c_out
+
+
 def world_inertia(q, I_b):
     """Body inertia written in world coordinates.
 
@@ -4332,6 +4387,7 @@ KERNELS = {
     'inertia_cylinder': (inertia_cylinder, [('m', ()), ('r', ()), ('h', ())], [('I_b', (3,))]),
     'inertia_sphere': (inertia_sphere, [('m', ()), ('r', ())], [('I_b', (3,))]),
     'parallel_axis': (parallel_axis, [('I_c', (3, 3)), ('m', ()), ('d', (3,))], [('I_o', (3, 3))]),
+    'inertia_about_com': (inertia_about_com, [('I_o', (3, 3)), ('m', ()), ('c', (3,))], [('I_c', (3, 3))]),
     'world_inertia': (world_inertia, [('q', (4,)), ('I_b', (3,))], [('I_w', (3, 3))]),
     'torque_from_force': (torque_from_force, [('r_w', (3,)), ('F_w', (3,))], [('tau_w', (3,))]),
     'force_at_point': (force_at_point, [('q', (4,)), ('r_b', (3,)), ('F_w', (3,))], [('tau_w', (3,))]),

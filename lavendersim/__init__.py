@@ -16,7 +16,7 @@ from ._version import __version__
 
 # public name -> the module that defines it
 _EXPORTS = {
-    "Body": "bodies", "BodyState": "bodies",
+    "Body": "bodies", "BodyState": "bodies", "inertia_about_com": "bodies",
     "AppliedTorque": "effects", "ForceAtPoint": "effects", "Gravity": "effects", "LinearDamping": "effects",
     "AngularDamping": "effects",
     "DivergenceError": "errors", "StaleBuildError": "errors",
@@ -26,13 +26,13 @@ _EXPORTS = {
     "MissingExtraError": "_install",
 }
 
-__all__ = ["Body", "BodyState", "AppliedTorque", "ForceAtPoint", "Gravity", "LinearDamping", "AngularDamping",
+__all__ = ["Body", "BodyState", "inertia_about_com", "AppliedTorque", "ForceAtPoint", "Gravity", "LinearDamping", "AngularDamping",
            "DivergenceError", "StaleBuildError", "Scene", "Sim", "Trajectory", "LavenderInputError",
            "MissingExtraError", "__version__"]
 
 if TYPE_CHECKING:  # for type checkers and IDEs; at run time the names load lazily
     from ._install import MissingExtraError
-    from .bodies import Body, BodyState
+    from .bodies import Body, BodyState, inertia_about_com
     from .effects import AngularDamping, AppliedTorque, ForceAtPoint, Gravity, LinearDamping
     from .errors import DivergenceError, StaleBuildError
     from .scene import Scene

@@ -62,6 +62,12 @@ class BodyRef:
     command: np.ndarray | None = None     # the held wheel command when the wheels are not an input
     n_wheels: int = 0             # its wheels (0 without)
     on_axes: bool = False         # named 1 … N (a layout on axes_b); False: x, y, z (the body axes, A_b = [I | 0])
+    R_bp: np.ndarray | None = None        # its principal axes in the body frame (None: the body frame is principal)
+    x_pub: np.ndarray | None = None       # (13,) the reference state in the body frame (x is the principal frame's)
+
+    def __post_init__(self):
+        if self.x_pub is None:
+            self.x_pub = self.x
 
     @property
     def blocks(self) -> tuple[str, ...]:
@@ -137,6 +143,7 @@ def body_refs(sim, x0: dict | None) -> list[BodyRef]:
         raise V.LavenderInputError("x0", f"unknown body {unknown[0]!r}; bodies: {', '.join(sim.names)}")
     rows = sim._models.rows
     refs, off = [], 0
+    frames = sim._frames
     for i, name in enumerate(sim.names):
         kind = int(rows[i, LY.MODEL_KIND])
         joint, wheels = bool(kind & LY.KIND_JOINT), bool(kind & LY.KIND_WHEELS)
@@ -158,12 +165,16 @@ def body_refs(sim, x0: dict | None) -> list[BodyRef]:
             if not wheels:
                 raise V.LavenderInputError(f"x0[{name!r}].Omega", f"body {name!r} has no reaction_wheels")
             Om = V.vector(f"x0[{name!r}].Omega", over["Omega"], n_w)
+        R_bp = None if frames is None else frames.rotation(i)
+        x_int = x if R_bp is None else frames.internal_row(i, x)   # the model runs in the principal frame
         if joint:
             r = rows[i]
-            x[LY.STATE_P_W], x[LY.STATE_V_W] = KN.pivot_kinematics(x[LY.STATE_Q], x[LY.STATE_OMEGA_B],
-                                                                  r[LY.MODEL_ANCHOR_W], r[LY.MODEL_R_B])
-        ref = BodyRef(name, joint, wheels, x, Om, float(sim.params[i, LY.PARAM_M]), sim.params[i, LY.PARAM_I_B].copy(),
-                      rows[i].copy(), off, n_wheels=n_w, on_axes=wheels and not backends.on_body_axes(rows[i]))
+            x_int[LY.STATE_P_W], x_int[LY.STATE_V_W] = KN.pivot_kinematics(
+                x_int[LY.STATE_Q], x_int[LY.STATE_OMEGA_B], r[LY.MODEL_ANCHOR_W], r[LY.MODEL_R_B])
+            x[LY.STATE_P_W], x[LY.STATE_V_W] = x_int[LY.STATE_P_W], x_int[LY.STATE_V_W]
+        ref = BodyRef(name, joint, wheels, x_int, Om, float(sim.params[i, LY.PARAM_M]), sim.params[i, LY.PARAM_I_B].copy(),
+                      rows[i].copy(), off, n_wheels=n_w, on_axes=wheels and not backends.on_body_axes(rows[i]),
+                      R_bp=R_bp, x_pub=x)
         off += ref.size
         refs.append(ref)
     return refs
@@ -256,6 +267,10 @@ def _loads(scene, ref: BodyRef, p_w, q, v_w, w, params_of):
         spec = E.check_declared(e)
         kw = {s: state[s] for s in spec.state_inputs}
         kw.update(params_of(k, e))
+        if ref.R_bp is not None:   # body-frame parameters (r_b) into the body's principal frame
+            for p in spec.params:
+                if p.frame == "body":
+                    kw[p.name] = ca.mtimes(ca.DM(ref.R_bp.T), kw[p.name])
         f, t = E.casadi_expr(e.name, **kw)
         F, tau = F + f, tau + t
     return F, tau
@@ -327,6 +342,21 @@ def casadi_error_rhs(scene, refs: list[BodyRef], ins: list[InputRef], u0: np.nda
     return ca.Function("scene_error_rhs", [x, du], [ca.vertcat(*parts)], ["x", "du"], ["x_dot"])
 
 
+def frame_transform(refs: list[BodyRef], n: int) -> np.ndarray | None:
+    """T (n, n) with x_body = T x_principal: R_bp on the dtheta and omega blocks of each body given a full
+    inertia tensor, the identity elsewhere (world-frame blocks, wheel rates); None when there is none.
+    dtheta rotates like a vector: q_ref,p* ⊗ q_p = q_bp* ⊗ (q_ref,b* ⊗ q_b) ⊗ q_bp."""
+    if all(r.R_bp is None for r in refs):
+        return None
+    T = np.eye(n)
+    for r in refs:
+        if r.R_bp is not None:
+            for b in ("dtheta", "omega"):
+                sl = r.index(b)
+                T[sl, sl] = r.R_bp
+    return T
+
+
 def ref_command(ref: BodyRef) -> np.ndarray:
     return np.zeros(ref.n_wheels) if ref.command is None else ref.command
 
@@ -351,11 +381,11 @@ def state_of(refs: list[BodyRef], sim) -> np.ndarray:
     parts = []
     for ref in refs:
         i = sim.names.index(ref.name)
-        x = sim.x[i]
-        blk = {"dtheta": attitude_error(x[LY.STATE_Q], ref.x[LY.STATE_Q]),
-               "omega": x[LY.STATE_OMEGA_B] - ref.x[LY.STATE_OMEGA_B]}
+        x, xr = sim.state(ref.name).x, ref.x_pub   # both in the body frame
+        blk = {"dtheta": attitude_error(x[LY.STATE_Q], xr[LY.STATE_Q]),
+               "omega": x[LY.STATE_OMEGA_B] - xr[LY.STATE_OMEGA_B]}
         if not ref.joint:
-            blk["p"], blk["v"] = x[LY.STATE_P_W] - ref.x[LY.STATE_P_W], x[LY.STATE_V_W] - ref.x[LY.STATE_V_W]
+            blk["p"], blk["v"] = x[LY.STATE_P_W] - xr[LY.STATE_P_W], x[LY.STATE_V_W] - xr[LY.STATE_V_W]
         if ref.wheels:
             blk["Omega"] = sim.wheel_rates(ref.name) - ref.Omega
         parts.extend(blk[b] for b in ref.blocks)
@@ -365,10 +395,10 @@ def state_of(refs: list[BodyRef], sim) -> np.ndarray:
 def set_state(refs: list[BodyRef], sim, x: np.ndarray) -> None:
     """Put a Sim (built from the same scene) at the error-coordinate state x."""
     for ref in refs:
-        get = ref.split(x[ref.offset:ref.offset + ref.size])
-        kw = {"q": perturbed(ref.x[LY.STATE_Q], get["dtheta"]), "omega_b": ref.x[LY.STATE_OMEGA_B] + get["omega"]}
+        get, xr = ref.split(x[ref.offset:ref.offset + ref.size]), ref.x_pub
+        kw = {"q": perturbed(xr[LY.STATE_Q], get["dtheta"]), "omega_b": xr[LY.STATE_OMEGA_B] + get["omega"]}
         if not ref.joint:
-            kw["p_w"], kw["v_w"] = ref.x[LY.STATE_P_W] + get["p"], ref.x[LY.STATE_V_W] + get["v"]
+            kw["p_w"], kw["v_w"] = xr[LY.STATE_P_W] + get["p"], xr[LY.STATE_V_W] + get["v"]
         if ref.wheels:
             kw["Omega"] = ref.Omega + get["Omega"]
         sim.set_state(ref.name, **kw)
@@ -437,7 +467,7 @@ class Linearization(ct.StateSpace):
     @property
     def q_ref(self) -> np.ndarray:
         """The first body's reference orientation (x, y, z, w)."""
-        return self.bodies[0].x[LY.STATE_Q].copy()
+        return self.bodies[0].x_pub[LY.STATE_Q].copy()
 
     @property
     def Omega0(self) -> np.ndarray:
@@ -449,7 +479,7 @@ class Linearization(ct.StateSpace):
         ref = self.bodies[0]
         if len(self.bodies) != 1 or not ref.joint:
             raise V.LavenderInputError("state", "takes (q, omega_b, Omega) only for one jointed body; use state_of(sim)")
-        parts = [attitude_error(q, ref.x[LY.STATE_Q]), np.asarray(omega_b, float) - ref.x[LY.STATE_OMEGA_B]]
+        parts = [attitude_error(q, ref.x_pub[LY.STATE_Q]), np.asarray(omega_b, float) - ref.x_pub[LY.STATE_OMEGA_B]]
         if ref.wheels:
             parts.append(np.asarray(Omega, float) - ref.Omega)
         return np.concatenate(parts)
@@ -472,15 +502,36 @@ class Linearization(ct.StateSpace):
             return x_ss, du
         U = self.uncontrollable_basis
         w = self.wheel_states
-        x_ss[w] = np.linalg.lstsq(U[w, :].T, U.T @ np.asarray(x, float), rcond=None)[0]
+        x_ss[w] = np.linalg.lstsq(U[w, :].T, U.T @ np.asarray(x, float), rcond=1e-9)[0]   # rcond: null-space wheel directions carry no momentum
         Ac = self.A - np.eye(n) if self.isdtime(strict=True) else self.A
         r = Ac @ x_ss
         if np.any(r != 0):
-            du = np.linalg.lstsq(self.B, -r, rcond=None)[0]
+            du = np.linalg.lstsq(self.B, -r, rcond=1e-9)[0]
         return x_ss, du
 
-    def feedback(self, K: np.ndarray, x: np.ndarray) -> np.ndarray:
-        """u = u0 + du_ss − K (x − x_ss) (unsaturated), in the inputs' units."""
+    def target_map(self) -> tuple[np.ndarray, np.ndarray]:
+        """(P (n, n), G (m, n)): :meth:`target` is linear in x, ``x_ss = P x`` and ``du_ss = G x``."""
+        cols = [self.target(e) for e in np.eye(self.nstates)]
+        return (np.array([c[0] for c in cols]).T.reshape(self.nstates, self.nstates),
+                np.array([c[1] for c in cols]).T.reshape(self.ninputs, self.nstates))
+
+    def control_law(self, K: np.ndarray, x: np.ndarray) -> np.ndarray:
+        """u = u0 + du_ss − K (x − x_ss) (unsaturated), in the inputs' units: the state feedback u = −K x
+        about the operating point, regulating to the equilibrium :meth:`target` that keeps x's conserved
+        coordinates. (Not ``StateSpace.feedback``, which closes a loop between two systems and is kept
+        as python-control defines it.)
+
+        Parameters
+        ----------
+        K : array_like (m, n)
+            A gain, e.g. from :func:`lavendersim.control.lqr`.
+        x : array_like (n,)
+            Error-coordinate state.
+
+        Returns
+        -------
+        ndarray (m,)
+        """
         x = np.asarray(x, float)
         x_ss, du = self.target(x)
         return self.u0 + du - np.asarray(K) @ (x - x_ss)
@@ -516,6 +567,9 @@ def linearize_scene(sim_or_scene, x0=None, u0=None, *, inputs=None, outputs=None
     n, m = sum(r.size for r in refs), sum(r.size for r in ins)
     f = casadi_error_rhs(scene, refs, ins, u0v)
     f0, A, B = jacobians(f, n, m)
+    T = frame_transform(refs, n)
+    if T is not None:   # the principal-frame model in the body frames' error coordinates
+        A, B, f0 = T @ A @ T.T, T @ B, T @ f0
     if not (np.all(np.isfinite(A)) and np.all(np.isfinite(B)) and np.all(np.isfinite(f0))):
         raise V.LavenderInputError("x0", "the model is not differentiable there (non-finite Jacobian)")
     states = labels or [lab for r in refs for lab in r.labels()]

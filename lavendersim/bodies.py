@@ -1,6 +1,8 @@
-"""Rigid bodies: mass, principal inertia, shape, and an initial state.
+"""Rigid bodies: mass, inertia, shape, and an initial state.
 
-Body frame at the centre of mass along the principal axes. Units: kg, m, kg·m², m/s, rad/s.
+Body frame at the centre of mass, in the user's axes: the inertia may be any symmetric positive definite
+tensor there. Its principal axes are a constant rotation R_bp of the body (identity when the tensor is
+diagonal); the Sim steps the principal frame and converts at every public boundary. Units: kg, m, kg·m², m/s, rad/s.
 Orientation q = R_WB as (x, y, z, w). The state vector layout is declared in derive/layout.py and
 printed as lavendersim.generated.layout: x = [p_w(3), q(4), v_w(3), omega_b(3)].
 """
@@ -19,7 +21,7 @@ from .kernels import K
 # shape kind -> (number of dimensions, their names) of Body(shape=(kind, dims)); all in m, > 0
 SHAPES = {"box": (3, "side lengths (w, h, d) along body x, y, z"), "cylinder": (2, "(radius, height), along body z"),
           "sphere": (1, "(radius,)")}
-_FIELDS = ("name", "mass", "I_b", "shape", "x0")
+_FIELDS = ("name", "mass", "I_b", "shape", "x0", "R_bp", "_tensor")
 
 
 class ImmutableBodyError(V.LavenderInputError, AttributeError):
@@ -53,7 +55,8 @@ def _shape(value) -> tuple[str, tuple[float, ...]] | None:
 
 
 class Body:
-    """A rigid body with diagonal (principal) inertia I_b and its initial state.
+    """A rigid body with its inertia about the COM (any symmetric positive definite tensor in the body
+    frame) and its initial state.
 
     Give at most one of omega_b (body frame) and omega_w (world frame); the other follows from q.
     A Body is immutable once validated: assigning an attribute raises :class:`ImmutableBodyError`
@@ -66,13 +69,26 @@ class Body:
     mass : float
         kg, finite and > 0.
     inertia : array_like
-        Principal moments (3,) or a diagonal (3, 3) tensor about the COM, body frame, kg·m².
+        Principal moments (3,) or a symmetric positive definite (3, 3) tensor about the COM, body
+        frame, kg·m² (principal moments > 0 with the triangle inequality). A full tensor (from CAD, say;
+        see :func:`inertia_about_com` for one given about another point) keeps every public quantity in
+        this body frame: q, omega_b, effect parameters such as r_b and axes_b, states and records.
+
     p_w, q, v_w, omega_b, omega_w : array_like
         Initial COM position (m, world), orientation R_WB (x, y, z, w; normalized), COM velocity
         (m/s, world), angular velocity (rad/s, body or world frame).
     shape : tuple, optional
         ``(kind, dims)`` drawn by the viewer: ``("box", (w, h, d))``, ``("cylinder", (r, h))`` or
         ``("sphere", (r,))``, lengths in m, > 0. None: drawn as the inertia-equivalent box.
+
+    Attributes
+    ----------
+    I_b : ndarray, shape (3,)
+        The principal moments, kg·m² (for a diagonal tensor: its diagonal, in order).
+    R_bp : ndarray, shape (3, 3)
+        The principal axes as columns, body frame (identity for a diagonal tensor); proper rotation.
+    inertia_b : ndarray, shape (3, 3)
+        The tensor in the body frame, ``R_bp diag(I_b) R_bpᵀ``.
     """
 
     __slots__ = _FIELDS
@@ -84,7 +100,13 @@ class Body:
         if not isinstance(name, str) or not name:
             raise V.LavenderInputError("name", "must be a non-empty string", f", got {V._describe(name)}")
         mass = V.positive("mass", mass)
-        I_b = V.inertia("inertia", inertia)
+        I_b, R_bp = V.inertia_frame("inertia", inertia)
+        tensor = None
+        if not np.array_equal(R_bp, np.eye(3)):   # one rotation everywhere: the matrix of its unit quaternion
+            R_bp = K.quat_to_matrix(K.quat_normalize(K.matrix_to_quat(R_bp)))
+            t = np.asarray(inertia, dtype=np.float64)
+            tensor = 0.5 * t + 0.5 * t.T           # as given (symmetrized): saved and shown as the user wrote it
+            tensor.flags.writeable = False
         x = np.empty(STATE_SIZE)
         x[P] = V.vector("p_w", p_w)
         x[Q] = V.quaternion("q", q)
@@ -98,7 +120,9 @@ class Body:
         shape = _shape(shape)
         I_b.flags.writeable = False
         x.flags.writeable = False
-        for f, v in zip(_FIELDS, (name, mass, I_b, shape, x)):
+        R_bp = np.ascontiguousarray(R_bp, dtype=np.float64)
+        R_bp.flags.writeable = False
+        for f, v in zip(_FIELDS, (name, mass, I_b, shape, x, R_bp, tensor)):
             object.__setattr__(self, f, v)
 
     def __setattr__(self, field: str, value: Any) -> None:
@@ -218,18 +242,78 @@ class Body:
         return cls(name, mass, K.inertia_sphere(V.positive("mass", mass), r), shape=("sphere", (r,)), **state)
 
     @property
+    def principal(self) -> bool:
+        """Whether the body frame is principal (R_bp is the identity)."""
+        return bool(np.array_equal(self.R_bp, np.eye(3)))
+
+    @property
+    def inertia_b(self) -> np.ndarray:
+        """The inertia tensor about the COM, body frame, kg·m², (3, 3): as given (symmetrized), equal to
+        ``R_bp diag(I_b) R_bpᵀ`` to rounding; ``diag(I_b)`` for a principal body."""
+        return np.diag(self.I_b) if self._tensor is None else self._tensor.copy()
+
+    @property
     def params(self) -> np.ndarray:
         """[m, I_x, I_y, I_z], the per-body parameter row the backends take."""
         return np.concatenate(([self.mass], self.I_b))
 
     def __repr__(self) -> str:
-        return f"Body({self.name!r}, mass={self.mass:g}, I_b={np.array2string(self.I_b, precision=6)})"
+        if self.principal:
+            return f"Body({self.name!r}, mass={self.mass:g}, I_b={np.array2string(self.I_b, precision=6)})"
+        I = " ".join(np.array2string(self.inertia_b, precision=6, separator=", ").split())
+        return f"Body({self.name!r}, mass={self.mass:g}, inertia_b={I})"
 
 
-def _rebuild(name, mass, I_b, shape, x0) -> Body:
+def inertia_about_com(I_o: ArrayLike, mass: float, com: ArrayLike) -> np.ndarray:
+    """Move CAD mass properties to the centre of mass: the inertia about the COM from the inertia about a
+    reference point O (the parallel-axis theorem read backwards, printed from derive/inertia.py).
+
+    ``I_C = I_O − m (|c|² 1 − c cᵀ)``, c the COM relative to O.
+
+    Parameters
+    ----------
+    I_o : array_like, shape (3, 3)
+        Inertia about the reference point O, body frame, kg·m² (symmetric; as CAD reports it, with
+        the products of inertia carrying their sign convention ``I_xy = −∫ x y dm``).
+    mass : float
+        kg, finite and > 0.
+    com : array_like, shape (3,)
+        The COM relative to O, body frame, m.
+
+    Returns
+    -------
+    ndarray, shape (3, 3)
+        Inertia about the COM, body frame, kg·m²: what :class:`Body` takes. It is validated as Body
+        validates it (symmetric, positive definite, triangle inequality of its principal moments).
+
+    Raises
+    ------
+    LavenderInputError
+        Naming ``I_o``, ``mass`` or ``com``; ``I_o`` when the result is not a physical inertia (the COM
+        offset is inconsistent with I_o).
+
+    Examples
+    --------
+    >>> import numpy as np, lavendersim as lv
+    >>> I_o = np.diag([0.02, 0.02, 0.01]) + 2.0 * (0.01 * np.eye(3) - np.outer([0, 0, 0.1], [0, 0, 0.1]))
+    >>> np.round(lv.inertia_about_com(I_o, 2.0, [0, 0, 0.1]), 12).diagonal()
+    array([0.02, 0.02, 0.01])
+    """
+    I_o = V.array("I_o", I_o, (3, 3))
+    m = V.positive("mass", mass)
+    c = V.vector("com", com)
+    with np.errstate(over="ignore", invalid="ignore"):
+        I_c = K.inertia_about_com(I_o, m, c)
+    V.inertia_frame("I_o", I_c)   # the COM inertia must be a physical one
+    return I_c
+
+
+def _rebuild(name, mass, I_b, shape, x0, R_bp=None, tensor=None) -> Body:
     """Unpickle a Body without re-running validation twice (its fields were validated)."""
     b = object.__new__(Body)
-    for f, v in zip(_FIELDS, (name, mass, np.array(I_b), shape, np.array(x0))):
+    R_bp = np.eye(3) if R_bp is None else R_bp
+    tensor = None if tensor is None else np.array(tensor)
+    for f, v in zip(_FIELDS, (name, mass, np.array(I_b), shape, np.array(x0), np.array(R_bp), tensor)):
         if isinstance(v, np.ndarray):
             v.flags.writeable = False
         object.__setattr__(b, f, v)

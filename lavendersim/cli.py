@@ -19,7 +19,7 @@ from ._version import __version__
 COMMANDS = {
     "derive": "derive the equations with SymPy and print them into generated/",
     "lab": "run a chapter lab (or `all`); exits 1 if a figure is off",
-    "lqr": "design an LQR wheel controller for the reaction-wheel cube and run it (control extra)",
+    "lqr": "design an LQR wheel controller for a spacecraft file and fly its maneuver (control extra)",
     "view": "run a scene live in the browser viewer (viewer extra)",
     "bench": "speed as ratios against peers measured in the same run",
 }
@@ -161,7 +161,7 @@ def _add_lab(sub) -> None:
 
 
 def _add_lqr(sub) -> None:
-    from lavendersim.control import register_cli
+    from lavendersim.cli_lqr import register_cli
 
     register_cli(sub)
 

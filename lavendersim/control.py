@@ -955,7 +955,7 @@ def closed_loop(model: CubeModel, lin: Any, K: ArrayLike | Callable[[float, np.n
         if Km.shape != (lin.ninputs, lin.nstates):
             raise V.LavenderInputError("K", f"a gain must be {lin.ninputs}×{lin.nstates} (or pass a callable u = f(t, x))",
                                        f", got shape {Km.shape}")
-        controller = lambda t, x: lin.feedback(Km, x)  # noqa: E731
+        controller = lambda t, x: lin.control_law(Km, x)  # noqa: E731
     n = int(round(T / control_dt))
     Omega0 = lin.Omega0 if Omega0 is None else V.vector("Omega0", Omega0)
     if sim is None:

@@ -26,6 +26,8 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass, field
 
+from types import MappingProxyType
+
 import numpy as np
 
 from . import validate as V
@@ -60,6 +62,9 @@ class ParamSpec:
         Offset in the row's parameters.
     upto : bool, optional
         The leading length of ``shape`` is a maximum (model effects: e.g. one entry per reaction wheel).
+    frame : {"body", "world", None}, optional
+        The frame of a 3-vector (or of each row of a matrix): "body" values of a body given a full
+        inertia tensor are rotated into its principal frame before the kernels see them.
     """
 
     name: str
@@ -70,6 +75,7 @@ class ParamSpec:
     default: object
     offset: int
     upto: bool = False
+    frame: str | None = None   # "body": a body-frame vector (or rows of them), rotated for a non-principal body
 
     @property
     def size(self) -> int:
@@ -155,11 +161,43 @@ class EffectSpec:
         EffectSpec
         """
         params = tuple(ParamSpec(p["name"], tuple(p["shape"]), p["unit"], p["doc"], p["rule"], p["default"], p["offset"],
-                                 bool(p.get("upto", False)))
+                                 bool(p.get("upto", False)), p.get("frame", _frame_of(p)))
                        for p in entry["params"])
         return cls(entry["name"], entry["code"] if code is None else code, entry["kind"], entry["summary"], params,
                    entry["n_params"], tuple(entry["outputs"]), tuple(entry["state_inputs"]), entry["flags"],
                    entry["kernel"], source, user_set)
+
+
+def _frame_of(p: dict) -> str | None:
+    """The frame of a parameter printed before derive printed frames (a user set derived by an older
+    version): the name's suffix, as derive.effect.Param.frame reads it."""
+    shape = tuple(p["shape"])
+    return {"_b": "body", "_w": "world"}.get(p["name"][-2:]) if shape and shape[-1] == 3 else None
+
+
+class ImmutableEffectError(V.LavenderInputError, AttributeError):
+    """Assignment to an attribute of a validated Effect (a LavenderInputError and an AttributeError).
+
+    Parameters
+    ----------
+    field : str
+        ``effect.<attribute>``.
+    rule : str
+        Why it is refused.
+    detail : str, optional
+    """
+
+
+def _rebuild_effect(class_name: str, name: str, body, values: dict):
+    """Unpickle an Effect: a declared one by its registered name (validated again), else its class by name."""
+    if name in EFFECTS:
+        return EFFECTS[name](body=body, **values)
+    raise V.LavenderInputError("effect", f"{name!r} is not a registered effect in this process (load its user set "
+                               "first)")
+
+
+def _rebuild_plain(cls, body, values: dict):
+    return cls(body=body, **values)
 
 
 class Effect:
@@ -201,11 +239,41 @@ class Effect:
         missing = [f for f in self.fields if f not in params]
         if missing:
             raise V.LavenderInputError(f"{self.name}.{missing[0]}", "is required")
-        self.body = body
-        self.values = {f: self._check(f, params[f]) for f in self.fields}
-        for v in self.values.values():  # validated once: read-only, so a later edit cannot bypass the checks
+        values = {f: self._check(f, params[f]) for f in self.fields}
+        for v in values.values():  # validated once: read-only, so a later edit cannot bypass the checks
             if isinstance(v, np.ndarray):
                 v.flags.writeable = False
+        object.__setattr__(self, "body", body)
+        object.__setattr__(self, "values", MappingProxyType(values))
+
+    def __setattr__(self, field: str, value) -> None:
+        """An Effect is immutable once validated: a parameter changed by assignment would be silently ignored
+        by a Sim already built (and half-applied in a scene), so every assignment raises, naming the field."""
+        raise ImmutableEffectError(f"{self.name or type(self).__name__}.{field}",
+                                   "an effect is immutable once validated: change a force effect's parameters "
+                                   "between steps with Sim.set_effect_params(effect, ...), or add a new effect "
+                                   "to the scene")
+
+    def __delattr__(self, field: str) -> None:
+        raise ImmutableEffectError(f"{self.name or type(self).__name__}.{field}", "an effect is immutable once validated")
+
+    def __getattr__(self, field: str):
+        """A parameter by name, read-only (``e.torque_w``; the same array as ``e.values["torque_w"]``)."""
+        values = self.__dict__.get("values")
+        if values is not None and field in values:
+            return values[field]
+        raise AttributeError(f"{type(self).__name__!r} object has no attribute {field!r}")
+
+    def __reduce__(self):
+        if self.spec is None:   # a hand-written subclass: rebuilt from its class (importable by reference)
+            return (_rebuild_plain, (type(self), self.body, dict(self.values)))
+        return (_rebuild_effect, (type(self).__name__, self.name, self.body, dict(self.values)))
+
+    def __copy__(self):
+        return self
+
+    def __deepcopy__(self, memo):
+        return self
 
     def _check(self, f, v):
         """Validate parameter f by its declared shape and rule (a plain finite 3-vector without a spec)."""
@@ -277,7 +345,8 @@ class _WheelsCheck:
         if J.size != A_b.shape[1]:
             raise V.LavenderInputError(f"{self.name}.J", f"needs one inertia per wheel axis (axes_b has {A_b.shape[1]} rows)",
                                        f", got {J.size}")
-        if self.on_body_axes:
+        principal = getattr(body, "principal", True)
+        if self.on_body_axes and principal:
             bad = np.flatnonzero(J >= I_b)
             if bad.size:
                 i = int(bad[0])
@@ -285,7 +354,7 @@ class _WheelsCheck:
                                            f"I_b[{i}] = {I_b[i]:g} kg·m² (the body's inertia includes its wheels)",
                                            f", got {J[i]:g}")
             return
-        free = np.diag(I_b) - (A_b * J) @ A_b.T
+        free = (np.diag(I_b) if principal else body.inertia_b) - (A_b * J) @ A_b.T   # body frame
         low = float(np.linalg.eigvalsh(free).min())
         if not low > 1e-12 * float(I_b.max()):
             raise V.LavenderInputError(f"{self.name}.J", "the body with its wheels free, I_b − A_b J A_bᵀ, must stay "
@@ -316,7 +385,7 @@ class _JointCheck:
         x = body.x0
         with np.errstate(all="ignore"):
             r_b = K.quat_to_matrix(x[STATE_Q]).T @ (x[STATE_P_W] - anchor)
-            I_p = K.parallel_axis(np.diag(body.I_b), body.mass, -r_b)
+            I_p = K.parallel_axis(body.inertia_b, body.mass, -r_b)
             p_w, v_w = K.pivot_kinematics(x[STATE_Q], x[STATE_OMEGA_B], anchor, r_b)
         if not all(np.all(np.isfinite(a)) for a in (r_b, I_p, p_w, v_w)):
             raise V.LavenderInputError(f"{self.name}.anchor_w", f"too far from the COM of body {body.name!r}: the "

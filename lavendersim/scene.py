@@ -2,12 +2,14 @@
 from __future__ import annotations
 
 from types import MappingProxyType
+from typing import NamedTuple
 
 import numpy as np
 
 from . import validate as V
 from .bodies import P, Q, STATE_SIZE, VEL, W, Body
-from .effects import Effect, check_declared, largest_param, load_overflow, make, row_width
+from .effects import ROW_PARAMS, Effect, check_declared, largest_param, load_overflow, make, row_width
+from .frames import PrincipalFrames
 from .generated import layout as LY
 from .kernels import K
 
@@ -150,6 +152,44 @@ class Scene:
             raise V.LavenderInputError("body", f"unknown body {name!r}; bodies: {', '.join(self.bodies) or 'none'}")
         return list(self.bodies).index(name)
 
+    def save(self, path) -> "Path":
+        """Write this scene as a TOML scene file (lavendersim.scene_file: bodies with their inertia tensors,
+        initial states and model effects, then the force effects by declared name).
+
+        Parameters
+        ----------
+        path : str or os.PathLike
+            The file; its folder must exist.
+
+        Returns
+        -------
+        pathlib.Path
+        """
+        from . import scene_file   # scene_file builds Scenes: imported here, not at module level
+
+        return scene_file.save(self, path)
+
+    @staticmethod
+    def load(path) -> "Scene":
+        """Read a TOML scene file written by :meth:`save` (or the scene part of a spacecraft file).
+
+        Parameters
+        ----------
+        path : str or os.PathLike
+
+        Returns
+        -------
+        Scene
+
+        Raises
+        ------
+        LavenderInputError
+            Naming the key path and the rule of the first bad key or value; nothing is built.
+        """
+        from . import scene_file
+
+        return scene_file.load(path)
+
     def model_effects(self, name: str) -> dict:
         """The per-body (model) effects declared on body `name`.
 
@@ -169,18 +209,66 @@ class Scene:
         """(state (nb, 13), params (nb, 4) = [m, I_x, I_y, I_z], effects (ne, width)) for the backends.
         The effect table holds only force effects, one row each ([code, body, parameters …], see
         lavendersim.effects; width = the widest, at least effects.ROW); joints and wheels are
-        per-body model rows that the Sim builds (they need the initial state)."""
+        per-body model rows that the Sim builds (they need the initial state).
+
+        A body given a full inertia tensor is stepped in its principal frame (lavendersim.frames): its
+        state row and its effects' body-frame parameters (``r_b``) are rotated there; an every-body effect
+        with a body-frame parameter then becomes one row per body."""
+        t = self.tables()
+        return t.state, t.params, t.effects
+
+    def tables(self) -> "Tables":
+        """What :meth:`arrays` returns plus the force effects' rows (``rows_of[k]``: the table rows of the
+        k-th force effect) and the principal frames (None when every body frame is principal)."""
         if not self.bodies:
             raise V.LavenderInputError("scene.bodies", "a scene needs at least one body")
         bodies = list(self.bodies.values())
+        frames = PrincipalFrames.of(bodies)
         state = np.ascontiguousarray(np.stack([b.x0 for b in bodies]))
         params = np.ascontiguousarray(np.stack([b.params for b in bodies]))
         _revalidate(bodies, state, params)
+        if frames is not None:
+            for i in frames.idx:
+                state[i] = frames.internal_row(int(i), state[i])
         forces = [e for e in self.effects if not e.per_body]
         width = row_width(forces)
-        rows = [e.row(-1 if e.body is None else self.index(e.body), width) for e in forces]
+        rows, rows_of = [], []
+        for e in forces:
+            mine = _effect_rows(e, -1 if e.body is None else self.index(e.body), width, frames, len(bodies))
+            rows_of.append(list(range(len(rows), len(rows) + len(mine))))
+            rows.extend(mine)
         effects = np.ascontiguousarray(np.array(rows, dtype=np.float64).reshape(len(rows), width))
-        return state, params, effects
+        return Tables(state, params, effects, forces, rows_of, frames)
+
+
+class Tables(NamedTuple):
+    """The arrays a Sim is built from (see :meth:`Scene.tables`)."""
+
+    state: np.ndarray
+    params: np.ndarray
+    effects: np.ndarray
+    forces: list
+    rows_of: list
+    frames: PrincipalFrames | None
+
+
+def _effect_rows(e: Effect, body_index: int, width: int, frames: PrincipalFrames | None, nb: int) -> list[np.ndarray]:
+    """The effect-table rows of force effect e on body_index (-1: every body), its body-frame parameters
+    in each body's principal frame: one row, or one per body for an every-body effect with a body-frame
+    parameter in a scene with a non-principal body."""
+    body_frame = [p for p in (e.spec.params if e.spec is not None else ()) if p.frame == "body"]
+    if frames is None or not body_frame or (body_index >= 0 and frames.rotation(body_index) is None):
+        return [e.row(body_index, width)]
+    out = []
+    for i in (range(nb) if body_index < 0 else (body_index,)):
+        r = e.row(i, width)
+        R = frames.rotation(i)
+        if R is not None:
+            for p in body_frame:   # each 3-vector (or row of a matrix) v -> R_bpᵀ v
+                sl = slice(ROW_PARAMS + p.offset, ROW_PARAMS + p.offset + p.size)
+                r[sl] = (r[sl].reshape(-1, 3) @ R).ravel()
+        out.append(r)
+    return out
 
 
 def _revalidate(bodies: list, state: np.ndarray, params: np.ndarray) -> None:
@@ -303,7 +391,10 @@ def add_bodies(scene: Scene, names, masses, I_b, *, p_w=None, q=None, v_w=None, 
     I.flags.writeable = False
     x.flags.writeable = False
     # validated above, row by row as Body.__init__ does: fill the slots directly (Body refuses setattr)
-    set_name, set_mass, set_I, set_shape, set_x = (Body.__dict__[f].__set__ for f in ("name", "mass", "I_b", "shape", "x0"))
+    set_name, set_mass, set_I, set_shape, set_x, set_R, set_T = (
+        Body.__dict__[f].__set__ for f in ("name", "mass", "I_b", "shape", "x0", "R_bp", "_tensor"))
+    eye = np.eye(3)   # principal moments: the body frame is principal (one read-only identity for all)
+    eye.flags.writeable = False
     new = object.__new__
     bodies = []
     for name, mass, I_row, x_row in zip(names, m.tolist(), list(I), list(x)):
@@ -313,6 +404,8 @@ def add_bodies(scene: Scene, names, masses, I_b, *, p_w=None, q=None, v_w=None, 
         set_I(b, I_row)
         set_shape(b, None)
         set_x(b, x_row)
+        set_R(b, eye)
+        set_T(b, None)
         bodies.append(b)
     every = [e for e in scene.effects if not e.per_body and e.body is None and _declared(e)]
     for i, b in enumerate(bodies if every else ()):

@@ -111,10 +111,11 @@ from . import validate as V
 from .backends import ADAPTIVE, KIND_JOINT, KIND_WHEELS, PLAIN_ONLY, Adaptive, Models
 from .bodies import BodyState
 from .errors import DivergenceError, ValidityBoundWarning
+from .frames import public_rows
 from .generated import layout as LY
 from .generated import tableaux as TB
 from .kernels import K
-from .scene import Scene
+from .scene import Scene, _effect_rows
 
 MAX_STEPS = 2**53          # steps per call and in total: the step counter and t = steps*dt stay exact in float64
 CHUNK_WORK = 2**20         # right-hand-side evaluations (summed over bodies) per backend call between checks
@@ -212,6 +213,10 @@ def validity_bound(integrator: str) -> tuple[float, float] | None:
     if integrator not in TB.WDT_MAX:
         return None
     return float(TB.WDT_MAX[integrator]), float(TB.WDT_RATIO_EXPONENT.get(integrator, 0.0))
+
+
+# the growth check's floor on a wheeled body's reference |L|, relative to the momentum its parts carry
+L_FLOOR = 1e-6
 
 
 class Trajectory:
@@ -329,7 +334,11 @@ class Sim:
         self.bodies = dict(scene.bodies)
         for e in scene.effects:  # an effect no declaration printed is an error, never a no-op
             effects_mod.check_declared(e)
-        self._x, self.params, self.effects = scene.arrays()
+        tables = scene.tables()   # a body given a full inertia tensor is stepped in its principal frame
+        self._x, self.params, self.effects = tables.state, tables.params, tables.effects
+        self._frames = tables.frames
+        self._forces, self._rows_of = list(tables.forces), tables.rows_of   # force effects (current) and their rows
+        self._forces_given = list(tables.forces)                            # ... as the scene gave them
         self._index = {name: i for i, name in enumerate(self.names)}
         self._effect_objs = list(scene.effects)
         self._models = self._build_models(scene)
@@ -416,8 +425,16 @@ class Sim:
     def x(self) -> np.ndarray:
         """The state of every body, (nb, 13) = [p_w(3), q(4), v_w(3), omega_b(3)] per row (layout
         generated/layout.py), in the order of `names`. A read-only view of the array the backends advance
-        in place: no copy, always current; write through set_state (which validates), never through it."""
-        return self._views[0]
+        in place: no copy, always current; write through set_state (which validates), never through it.
+        q and omega_b are in each body's own frame; when a body was given a full inertia tensor (stepped in
+        its principal frame), x, q and omega_b are read-only converted copies instead of views."""
+        return self._views[0] if self._frames is None else self._public(self._views[0])
+
+    def _public(self, a: np.ndarray) -> np.ndarray:
+        """Internal state rows in the body frames: a read-only converted copy (bodies with full tensors)."""
+        out = self._frames.public(a)
+        out.flags.writeable = False
+        return out
 
     @property
     def p_w(self) -> np.ndarray:
@@ -427,7 +444,7 @@ class Sim:
     @property
     def q(self) -> np.ndarray:
         """Orientations R_WB as quaternions (x, y, z, w), (nb, 4): a read-only view of x (see x)."""
-        return self._views[2]
+        return self._views[2] if self._frames is None else self.x[:, LY.STATE_Q]
 
     @property
     def v_w(self) -> np.ndarray:
@@ -437,7 +454,7 @@ class Sim:
     @property
     def omega_b(self) -> np.ndarray:
         """Angular velocities (body rates), body frame, rad/s, (nb, 3): a read-only view of x (see x)."""
-        return self._views[4]
+        return self._views[4] if self._frames is None else self.x[:, LY.STATE_OMEGA_B]
 
     @property
     def Omega(self) -> np.ndarray:
@@ -514,11 +531,15 @@ class Sim:
         self._chunk = chunk_steps(nb * evals, self.backend.name == "c" and self._per_step is not None)
         self._reference()
 
-    def _invariants(self, x: np.ndarray, Omega: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def _invariants(self, x: np.ndarray, Omega: np.ndarray, reference: bool = False) -> tuple[np.ndarray, np.ndarray]:
         """(kinetic energy, |L|) per body, where the growth check reads them (else 0): E (kinetic_energy) and
         |L| (body_momentum) of the torque- and force-free plain bodies — both are needed: a first-order method
         can move a minor-axis spin towards the major axis, |L| x2 while E stays within x2 (the atlas's euler
-        cells) —, |L| (body + wheels, wheel_momentum) of the wheeled ones."""
+        cells) —, |L| (body + wheels, wheel_momentum) of the wheeled ones.
+
+        reference: the growth check's reference |L| of a wheeled body is at least L_FLOOR times the momentum
+        its parts carry (|L_body| + Σ J_i |Omega_i|): a total that cancels to rounding (wheels spinning in the
+        layout's null space, the body at rest) cannot double by rounding alone and be called a divergence."""
         nb = len(self.names)
         E, L = np.zeros(nb), np.zeros(nb)
         with np.errstate(over="ignore", invalid="ignore"):
@@ -530,6 +551,9 @@ class Sim:
             for i in self._free_wheels_idx:
                 Lb, Lw = backends.wheel_momentum(self._models.rows[i], x[i, LY.STATE_Q], x[i, LY.STATE_OMEGA_B], Omega[i])
                 L[i] = np.linalg.norm(Lb + Lw)
+                if reference:
+                    parts = np.linalg.norm(Lb) + float(np.abs(self._models.rows[i, LY.MODEL_J] * Omega[i]).sum())
+                    L[i] = max(L[i], L_FLOOR * parts)
         return E, L
 
     def _reference(self) -> None:
@@ -538,7 +562,7 @@ class Sim:
         both terms from the kinetic_energy kernel; v is constant on a force-free body) nor its |L| max_growth * L0
         (|L| = |I_b omega_b| <= I_max |omega|): the check evaluates the kernels only for a body above it, so it
         costs nothing while a run is far from its limit."""
-        self._E0, self._L0 = self._invariants(self._x, self._models.Omega)
+        self._E0, self._L0 = self._invariants(self._x, self._models.Omega, reference=True)
         nb = len(self.names)
         self._w_safe = np.zeros(nb)
         # the C screen's growth limits per body (csrc/fast_step.c LV_G_*): no-work rate, max_growth * E0 and
@@ -704,7 +728,9 @@ class Sim:
         if "reaction_wheels" in me:
             e = me["reaction_wheels"]
             w = e.values
-            kind |= backends.wheel_row(rows[i], w["J"], e.A_b)
+            R_bp = None if self._frames is None else self._frames.rotation(i)
+            A_p = e.A_b if R_bp is None else R_bp.T @ e.A_b   # the wheel axes in the principal frame
+            kind |= backends.wheel_row(rows[i], w["J"], A_p)
             rows[i, LY.MODEL_TORQUE_LIMIT], rows[i, LY.MODEL_SPEED_LIMIT] = w["torque_limit"], w["speed_limit"]
             rows[i, LY.MODEL_C_W] = w["c_w"]
             rows[i, LY.MODEL_CUTOFF] = w["cutoff"]
@@ -726,7 +752,7 @@ class Sim:
             self._models.Omega[i, :np.size(Omega)] = Omega
             self._models.command[i] = 0.0
             self._models.applied[i] = 0.0
-            E0, L0 = self._invariants(self._x, self._models.Omega)
+            E0, L0 = self._invariants(self._x, self._models.Omega, reference=True)
             self._E0[i], self._L0[i] = E0[i], L0[i]
             self._safe_rates(np.arange(len(self.names)) == i)
             self._warned.discard(i)
@@ -771,6 +797,9 @@ class Sim:
             else:
                 terms = " + ".join(e.describe() for e in mine)
                 lines.append(f"{name}: {terms} -> rigid_body_rhs")
+        if self._frames is not None:
+            for i in self._frames.idx:
+                lines[1 + int(i)] += "; full inertia tensor: stepped in its principal frame (constant R_bp)"
         return lines
 
     # ---- stepping -------------------------------------------------------------------------
@@ -1023,7 +1052,7 @@ class Sim:
             except BaseException:
                 self._restore(start)
                 raise
-        return Trajectory(self.names, np.array(ts), np.stack(xs), np.stack(Ws), self._wheel_n)
+        return Trajectory(self.names, np.array(ts), public_rows(self._frames, np.stack(xs)), np.stack(Ws), self._wheel_n)
 
     # ---- state access ---------------------------------------------------------------------
     def state(self, name: str) -> BodyState:
@@ -1050,7 +1079,8 @@ class Sim:
             If no body has that name.
         """
         i = self._i(name)
-        return BodyState.of_slots(self._x[i].copy(), self._models.Omega[i].copy(), int(self._wheel_n[i]))
+        x = self._x[i].copy() if self._frames is None else self._frames.public_row(i, self._x[i])
+        return BodyState.of_slots(x, self._models.Omega[i].copy(), int(self._wheel_n[i]))
 
     @V.keywords  # an unknown keyword (a typo such as omega=) is a LavenderInputError naming it
     def set_state(self, name: str, *, p_w=None, q=None, v_w=None, omega_b=None, omega_w=None, Omega=None) -> None:
@@ -1081,7 +1111,8 @@ class Sim:
         """
         i = self._i(name)
         kind = self._kind(i)
-        x = self._x[i].copy()
+        R_bp = None if self._frames is None else self._frames.rotation(i)
+        x = self._x[i].copy() if R_bp is None else self._frames.public_row(i, self._x[i])
         if kind & KIND_JOINT:
             for field, value in (("p_w", p_w), ("v_w", v_w)):
                 if value is not None:
@@ -1105,6 +1136,14 @@ class Sim:
                 raise V.LavenderInputError("Omega", f"body {name!r} has no reaction_wheels")
             W = np.zeros(LY.WHEELS_MAX)
             W[:self._wheel_n[i]] = V.vector("Omega", Omega, int(self._wheel_n[i]))
+        if R_bp is not None:   # back to the principal frame: only what was given (the rest keeps its bits)
+            given, x_int = self._frames.internal_row(i, x), self._x[i].copy()
+            x_int[LY.STATE_P_W], x_int[LY.STATE_V_W] = x[LY.STATE_P_W], x[LY.STATE_V_W]
+            if q is not None:
+                x_int[LY.STATE_Q] = given[LY.STATE_Q]
+            if omega_b is not None or omega_w is not None:
+                x_int[LY.STATE_OMEGA_B] = given[LY.STATE_OMEGA_B]
+            x = x_int
         if kind & KIND_JOINT:
             r = self._models.rows[i]
             x[LY.STATE_P_W], x[LY.STATE_V_W] = K.pivot_kinematics(x[LY.STATE_Q], x[LY.STATE_OMEGA_B],
@@ -1127,9 +1166,73 @@ class Sim:
             self._x[i] = x
             if W is not None:
                 self._models.Omega[i] = W
-            E0, L0 = self._invariants(self._x, self._models.Omega)
+            E0, L0 = self._invariants(self._x, self._models.Omega, reference=True)
             self._E0[i], self._L0[i] = E0[i], L0[i]
             self._safe_rates(np.arange(len(self.names)) == i)   # the no-work region follows the new E0   # the no-work region follows the new E0
+
+    # ---- effect parameters between steps ---------------------------------------------------
+    def set_effect_params(self, effect, **values):
+        """Change parameters of one force effect for the steps that follow (a disturbance that varies between
+        controller samples, a thruster switched on): validated like the effect itself, applied at once or
+        not at all, seen by both backends from the next step. Model effects (spherical_joint, reaction_wheels)
+        are constants of the body's model and cannot change here.
+
+        Parameters
+        ----------
+        effect : Effect
+            The effect as ``Scene.add_effect`` returned it (or as a previous call returned it).
+        **values
+            New values of some of its declared parameters, in their units and frames (a body-frame
+            parameter such as ``r_b`` in the user's body frame); the others keep theirs.
+
+        Returns
+        -------
+        Effect
+            The effect with its new values (effects are immutable: the scene's object is unchanged).
+
+        Raises
+        ------
+        LavenderInputError
+            If ``effect`` is not a force effect of this Sim, a parameter is unknown or invalid (named
+            ``effect.param``), or the new load would overflow; the Sim is left as it was.
+
+        Examples
+        --------
+        >>> import lavendersim as lv
+        >>> scene = lv.Scene()
+        >>> b = scene.add_body(lv.Body.box("b", 1.0, (0.1, 0.1, 0.1)))
+        >>> push = scene.add_effect("applied_torque", body="b", torque_w=[0, 0, 0])
+        >>> sim = lv.Sim(scene, dt=1e-3)
+        >>> push = sim.set_effect_params(push, torque_w=[0, 0, 1e-3])
+        >>> sim.run(100)
+        >>> round(float(sim.state("b").omega_w[2]), 6)
+        0.06
+        """
+        k = next((j for j, (cur, given) in enumerate(zip(self._forces, self._forces_given))
+                  if effect is cur or effect is given), None)
+        if k is None:
+            what = getattr(effect, "name", type(effect).__name__)
+            rule = ("is a model effect (a constant of the body's model); build a new Sim to change it"
+                    if getattr(effect, "per_body", False) else "is not a force effect of this Sim (pass the object "
+                    "Scene.add_effect returned)")
+            raise V.LavenderInputError("effect", rule, f", got {what!r}")
+        cur = self._forces[k]
+        new = effects_mod.make(cur.name, body=cur.body, **{**dict(cur.values), **values})
+        targets = [self.bodies[cur.body]] if cur.body is not None else list(self.bodies.values())
+        for b in targets:
+            why = effects_mod.load_overflow([new], b)
+            if why:
+                raise V.LavenderInputError(effects_mod.largest_param(new), f"too large: {why}")
+        body_index = -1 if cur.body is None else self._index[cur.body]
+        rows = _effect_rows(new, body_index, self.effects.shape[1], self._frames, len(self.names))
+        with self._lock:
+            for r, row in zip(self._rows_of[k], rows):
+                self.effects[r] = row
+                if self._step_effects is not self.effects:
+                    self._step_effects[r] = row
+            self._forces[k] = new
+            self._effect_objs[self._effect_objs.index(cur)] = new
+        return new
 
     # ---- reaction wheels ------------------------------------------------------------------
     def _wheeled(self, name: str) -> int:

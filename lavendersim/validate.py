@@ -48,8 +48,8 @@ TRIANGLE_RTOL = 1e-12
 QUATERNION_MIN_NORM = 1e-300
 
 _DIAGONAL_RULE = (
-    "must be diagonal in the body frame: rotate the body to principal axes "
-    "(lavendersim.validate.principal_axes gives them)"
+    "must be principal moments (a diagonal tensor) here: lavendersim.Body takes a full tensor "
+    "(lavendersim.validate.principal_axes gives the moments and axes)"
 )
 
 
@@ -592,6 +592,65 @@ def principal_axes(I: ArrayLike, *, field: str = "inertia") -> tuple[np.ndarray,
         R[:, 2] = -R[:, 2]
     R = np.ascontiguousarray(R, dtype=np.float64)
     return np.array(moments, dtype=np.float64, copy=True), R
+
+
+def _nearest_proper_frame(vecs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The column order and signs of orthonormal eigenvectors closest to the identity: the permutation
+    maximizing |trace|, each column signed to a positive diagonal, then det +1 by flipping the column
+    with the smallest diagonal. Returns (order (3,), R (3, 3))."""
+    import itertools
+
+    best = max(itertools.permutations(range(3)), key=lambda p: sum(abs(vecs[i, p[i]]) for i in range(3)))
+    R = vecs[:, list(best)].copy()
+    for c in range(3):
+        if R[c, c] < 0:
+            R[:, c] = -R[:, c]
+    if np.linalg.det(R) < 0:
+        k = int(np.argmin(np.abs(np.diag(R))))
+        R[:, k] = -R[:, k]
+    return np.array(best), R
+
+
+def inertia_frame(field: str, value: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+    """Validate a body-frame inertia about the COM; return its principal moments and axes.
+
+    Accepts 3 principal moments, a diagonal (3, 3) tensor, or any symmetric positive definite (3, 3)
+    tensor whose principal moments satisfy the triangle inequality. For moments or a diagonal tensor
+    (off-diagonals <= 1e-12 max|I|) the body frame is principal: ``R_bp`` is the identity and the
+    moments keep their order. Otherwise the principal axes are ordered and signed to lie closest to
+    the body axes (``R_bp`` near the identity, det +1).
+
+    Parameters
+    ----------
+    field : str
+        The name an error message gives the value.
+    value : array_like, shape (3,) or (3, 3)
+        Principal moments or a tensor about the COM, body frame, kg·m².
+
+    Returns
+    -------
+    I_p : ndarray, shape (3,)
+        Principal moments, kg·m².
+    R_bp : ndarray, shape (3, 3)
+        Proper rotation whose columns are the principal axes in the body frame:
+        ``I_b = R_bp @ diag(I_p) @ R_bp.T``.
+
+    Raises
+    ------
+    LavenderInputError
+        Naming `field` and the broken rule (shape, finite, symmetric, positive definite, triangle).
+    """
+    arr = _real_array(field, value)
+    if arr.shape == (3, 3):
+        _check_finite(field, arr)
+        sym, eig, scale = _checked_tensor(field, arr)
+        off = float(np.max(np.abs(sym - np.diag(np.diag(sym)))))
+        if off > DIAGONAL_RTOL * scale:
+            _check_moments(field, eig)
+            moments, vecs = _eigh(field, sym, scale, vectors=True)
+            order, R = _nearest_proper_frame(vecs)
+            return np.array(moments[order], dtype=np.float64), np.ascontiguousarray(R, dtype=np.float64)
+    return inertia(field, value), np.eye(3)
 
 
 # --------------------------------------------------------------------------

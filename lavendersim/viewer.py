@@ -349,11 +349,14 @@ def _cone_mesh(radius: float, n: int = 24):
 
 
 def _shape_of(body) -> tuple:
-    """(kind, dims) to draw: the body's shape, or the box with its mass and principal moments."""
+    """(kind, dims) to draw: the body's shape, or the box with its mass and moments, along the body axes
+    (for a full inertia tensor: the box of its diagonal in the body frame, an approximation drawn in the
+    user's axes)."""
     shape = getattr(body, "shape", None)
     if shape and shape[0] in ("box", "cylinder", "sphere"):
         return shape[0], tuple(float(x) for x in shape[1])
-    m, I = float(body.mass), np.asarray(body.I_b, dtype=float)
+    m = float(body.mass)
+    I = np.asarray(body.I_b if getattr(body, "principal", True) else np.diag(body.inertia_b), dtype=float)
     sq = [max(6.0 * (I[(k + 1) % 3] + I[(k + 2) % 3] - I[k]) / m, 1e-6) for k in range(3)]
     return "box", tuple(math.sqrt(s) for s in sq)
 
@@ -999,20 +1002,18 @@ def _wheel_scene():
     """The reaction-wheel cube balancing on its corner (lavendersim.control's Cubli-like model,
     15 cm, 1 kg) from a 3° tilt under LQR wheel control: cube axes, angular velocity and the
     motor torque acting on the cube (−u), as in the chapter's example payload."""
+    import lavendersim as lv
     from lavendersim import control as C
 
-    model = C.CubeModel("corner")
-    lin = C.linearize(model)
-    K, _, _ = C.lqr(lin, *C.default_weights(model))
-    sim = model.make_sim(C.rotated(lin.q_ref, (1.0, -1.0, 0.0), 3.0), dt=1e-3)
-    control_dt, lim = 2e-3, model.torque_limit
+    scene = C.chapter_cube("corner")
+    ctrl = C.design(scene, period=2e-3, q_ref=C.cube_upright_q("corner"), weights={"attitude_deg": 0.5})
+    sim = lv.Sim(C.chapter_cube("corner", q=C.rotated(ctrl.q_ref, (1.0, -1.0, 0.0), 3.0)), dt=1e-3)
 
     def advance(sim, dt):
-        for _ in range(max(1, int(round(dt / control_dt)))):
+        for _ in range(max(1, int(round(dt / ctrl.Ts)))):
             st = sim.state(C.BODY)
-            x = lin.state(st.q, st.omega_b, sim.wheel_rates(C.BODY))
-            sim.set_wheel_command(C.BODY, np.clip(lin.feedback(K, x), -lim, lim))
-            sim.run(int(round(control_dt / sim.dt)))
+            sim.set_wheel_command(C.BODY, ctrl.command(st.q, st.omega_b, sim.wheel_rates(C.BODY)))
+            sim.run(int(round(ctrl.Ts / sim.dt)))
 
     def overlays(sim):
         s = sim.state(C.BODY)

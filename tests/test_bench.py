@@ -32,11 +32,11 @@ def test_quick_runs_and_prints_its_standing(quick):
     out = r.stdout
     for heading in ("machine :", "single body", "batched: N bodies in one C call", "effect sets on one body",
                     "per-body effects, C: one applied_torque per body", "float32 batch, C", "scene build (C backend",
-                    "targets"):
+                    "full inertia tensor vs principal moments", "targets"):
         assert heading in out
     lines = [ln.split() for ln in out.splitlines()]
     status = [ln[0] for ln in lines if ln and ln[0] in ("PASS", "MISS", "N/A")]
-    assert len(status) == 14 + len(bench.PER_BODY_SIZES_QUICK)  # one line per target, whatever the timings
+    assert len(status) == 15 + len(bench.PER_BODY_SIZES_QUICK)  # one line per target, whatever the timings
     assert "round" in r.stderr  # progress
 
 
@@ -60,12 +60,15 @@ def test_quick_json_is_well_formed(quick):
     sc = d["scenes"]   # the scene-build section: --quick builds a tenth of the target's 1e4 bodies
     assert sc["n_bodies"] == bench.scenes.SCENE_N // 10
     assert 0 < sc["cases"]["build"]["ns_min"] and sc["state_ratio"] > 0 and sc["one_by_one_over_batched"] > 0
+    fi = d["inertia"]   # full tensors against principal moments, in the same rounds
+    assert list(fi["sizes"]) == [str(n) for n in bench.full_inertia.SIZES_QUICK]
+    assert all(v["run_ratio"] > 0 and v["read_ratio"] > 0 for v in fi["sizes"].values())
     for r in d["float32_batch"]:   # float32 beside float64 in the same rounds, and close to it
         assert r["float32"]["ns_min"] > 0 and r["speedup"] > 0 and r["max_abs_diff_after_steps"] < 1e-3
     for p in d["per_body_effects"]:
         assert p["plain"]["ns_min"] > 0 and p["applied_torque"]["ns_min"] > 0
         assert p["ratio"] == p["applied_torque"]["ns_min"] / p["plain"]["ns_min"]
-    assert [t["status"] in ("PASS", "MISS", "N/A") for t in d["standing"]] == [True] * (14 + len(bench.PER_BODY_SIZES_QUICK))
+    assert [t["status"] in ("PASS", "MISS", "N/A") for t in d["standing"]] == [True] * (15 + len(bench.PER_BODY_SIZES_QUICK))
     assert any(t["name"] == "one Python sim.step(), c backend" for t in d["standing"])
     assert all(math.isfinite(v) for v in d["ratios"].values())
     hw = d["handwritten"]

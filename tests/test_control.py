@@ -122,7 +122,7 @@ def test_attitude_regulation_reaction_wheel_cube_v0(backend):
     for _ in range(200):  # 2 s at 100 Hz
         st = env.sim.state("cube")
         x = lin.state(st.q, st.omega_b, env.sim.wheel_rates("cube"))
-        a = np.clip(lin.feedback(K, x) / m.torque_limit, -1, 1).astype(np.float32)
+        a = np.clip(lin.control_law(K, x) / m.torque_limit, -1, 1).astype(np.float32)
         _, _, term, trunc, info = env.step(a)
         assert not term and not trunc
         errs.append(info["angle_error_deg"])

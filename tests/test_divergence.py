@@ -308,3 +308,32 @@ def test_splitting_extreme_inertia_ratio_is_refused(backend):
     with pytest.raises(lv.DivergenceError, match=r"I_max/I_min\)\*\*0\.5 = 162 is beyond splitting's validity bound"):
         lv.Sim(spinner(I_b=(1e-9, 1.0, 1.0), omega_b=(5.0, 1.0, 0.5)), integrator="splitting", backend=backend).run(10)
     lv.Sim(spinner(I_b=(1e-9, 1.0, 1.0), omega_b=(5.0, 1.0, 0.5)), integrator="rk4", backend=backend).run(10)
+
+
+def test_wheels_spinning_in_the_null_space_are_not_a_divergence():
+    """Four pyramid wheels at 50 rad/s in the layout's null space on a body at rest: the total |L| is rounding
+    (~1e-17), so a commanded slew must not be called a divergence by the growth check (its reference |L| is
+    floored at L_FLOOR times the parts' momentum); with the floor at 0 the same run is refused at step 9."""
+    import lavendersim.sim as S
+    from lavendersim import wheel_layout as WL
+
+    def run():
+        A = WL.pyramid_axes()
+        sc = lv.Scene()
+        sc.add_body(lv.Body.box("c", 1.0, (0.15, 0.15, 0.15)))
+        sc.add_effect("reaction_wheels", body="c", axes_b=A.T, J=[5.7e-4] * 4, torque_limit=0.2, speed_limit=400.0)
+        sim = lv.Sim(sc, dt=1e-3)
+        n = np.ravel(WL.null_space(A))
+        sim.set_state("c", Omega=50 * n / np.max(np.abs(n)))
+        sim.set_wheel_command("c", [0.01, -0.02, 0.005, 0.0])
+        sim.run(3000)
+        return sim
+
+    sim = run()
+    Lb, Lw = sim.wheel_momentum_w("c")
+    assert np.linalg.norm(sim.state("c").omega_b) > 1.0             # it did slew
+    assert np.linalg.norm(Lb + Lw) <= 1e-12 * np.linalg.norm(Lb)     # and kept the total
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(S, "L_FLOOR", 0.0)
+        with pytest.raises(lv.DivergenceError, match=r"\|L\| grew"):
+            run()

@@ -202,7 +202,7 @@ def test_closed_loop_takes_a_callable_and_returns_python_control_shapes():
 
     def ctrl(t, x):
         calls.append(t)
-        return lin.feedback(K, x)
+        return lin.control_law(K, x)
 
     b = lc.closed_loop(m, lin, ctrl, q0, 1.0, backend="c")
     assert len(calls) == 500 and calls[1] == pytest.approx(0.002)

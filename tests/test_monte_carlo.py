@@ -51,9 +51,10 @@ def test_a_local_dask_cluster_gives_the_identical_summary(design, serial):
 def test_cli_monte_carlo_json(capsys):
     from lavendersim import cli
 
-    args = ["lqr", "--scenario", "corner", "--T", "0.5", "--monte-carlo", "3", "--seed", "2", "--workers", "1", "--json"]
+    args = ["lqr", "--scenario", "corner", "--monte-carlo", "3", "--workers", "1", "--json"]
     assert cli.main(args) == 0
     f = json.loads(capsys.readouterr().out)
-    assert f["monte_carlo"]["n"] == 3 and f["monte_carlo"]["seed"] == 2 and "samples" not in f["monte_carlo"]
-    assert cli.main(["lqr", "--T", "0.1", "--monte-carlo", "0"]) == 2
+    assert f["monte_carlo"]["n"] == 3 and f["monte_carlo"]["seed"] == 0 and "runs" not in f["monte_carlo"]
+    assert f["monte_carlo"]["settled"] == 3
+    assert cli.main(["lqr", "--monte-carlo", "0"]) == 2
     assert "monte-carlo" in capsys.readouterr().err

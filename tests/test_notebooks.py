@@ -14,7 +14,7 @@ from conftest import missing
 
 NOTEBOOKS = Path(__file__).resolve().parents[1] / "notebooks"
 EXPECTED = {"force", "momentum", "lab01_equal_torque", "lab02_orientation", "lab03_torque_free",
-            "lab04_reaction_wheel", "accuracy", "hard_cases"}
+            "lab04_reaction_wheel", "accuracy", "hard_cases", "spacecraft_cubesat"}
 ALL = sorted(NOTEBOOKS.glob("*.ipynb"))
 
 

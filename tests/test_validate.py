@@ -464,11 +464,11 @@ def test_inertia_rejects_symmetric_indefinite_with_positive_diagonal():
 def test_inertia_rejects_non_diagonal_valid_tensor():
     R = _rot([1, 2, 3], 0.7)
     t = R @ np.diag([1.0, 2.0, 2.5]) @ R.T
-    with pytest.raises(E, match=r"must be diagonal in the body frame: rotate the body to principal axes "
-                                r"\(lavendersim\.validate\.principal_axes gives them\)") as ei:
+    with pytest.raises(E, match=r"must be principal moments \(a diagonal tensor\) here: lavendersim\.Body takes a "
+                                r"full tensor \(lavendersim\.validate\.principal_axes gives the moments and axes\)") as ei:
         V.inertia("I_b", t)
     assert ei.value.field == "I_b"
-    assert ei.value.rule.startswith("must be diagonal in the body frame")
+    assert ei.value.rule.startswith("must be principal moments")
 
 
 @pytest.mark.parametrize(

@@ -32,6 +32,9 @@ v0 = (0.1, 0, 0) m/s, dt = 1e-3 s, RK4, q normalized each step):
   Python overhead;
 * scene build (lavendersim/bench/scenes.py) — a 1e4-body scene built with one add_bodies and its Sim,
   against the same built with add_body one by one; sim.state(name) at N = 1e4 against N = 10 (O(1));
+* full inertia (lavendersim/bench/full_inertia.py) — bodies given the 6U CubeSat's full tensor against the same
+  bodies given its principal moments, with gravity, damping and a force at r_b, at N = 1 and 1e3: Sim.run
+  ns per body-step and the state readout (target <= 1.5x);
 * agreement — the hand-written kernel against the Sim (same trajectory to ~1e-12), and MuJoCo's
   trajectory against ours and against the exact torque-free motion over 1 s.
 
@@ -61,6 +64,7 @@ from .. import validate as V
 from .._install import extra_command
 from ..generated import layout as LY
 from . import envs as _envs
+from . import full_inertia as _inertia
 from . import scenes as _scenes
 
 SCHEMA = "lavendersim-bench/1"
@@ -94,6 +98,7 @@ TARGETS = {
     "vector_env_us": 2.0,              # its vector env, µs per env-step at N = 1024, at most
     "scene_build_s": 0.2,              # Scene + add_bodies(1e4) + Sim(...), seconds, at most (issue 12)
     "state_lookup_ratio": 2.0,         # sim.state(name) at N = 1e4 / at N = 10, at most (O(1): ~1; a scan: ~1000)
+    "full_inertia_ratio": 1.5,         # a full-tensor body / the same body by principal moments, ns per body-step (issue 26)
 }
 PER_BODY_SIZES_FULL = (1, 100, 10_000)
 PER_BODY_SIZES_QUICK = (1, 100)
@@ -699,6 +704,9 @@ def run(quick: bool = False, rounds: int | None = None, use_mujoco: bool = True)
     # ---- building a large scene (lavendersim/bench/scenes.py)
     res["scenes"] = _scenes.scene_section(quick, R, interleaved)
 
+    # ---- full inertia tensors against principal moments (lavendersim/bench/full_inertia.py)
+    res["inertia"] = _inertia.inertia_section(quick, R, interleaved)
+
     # ---- MuJoCo trajectory agreement
     if mj_ok:
         try:
@@ -844,6 +852,7 @@ def standing(res: dict) -> list[dict]:
     out.append(_line("one Python sim.step(), c backend", py, TARGETS["python_step_c_ns"], "max", "ns/call", basis))
     out += _envs.standing_lines(res, _line, TARGETS)
     out += _scenes.standing_lines(res, _line, TARGETS)
+    out += _inertia.standing_lines(res, _line, TARGETS)
     return out
 
 
@@ -955,6 +964,7 @@ def report(res: dict) -> str:
         L.append(f"MuJoCo agreement failed: {mj['agreement_error']}")
     L += _envs.report_lines(res, _f)
     L += _scenes.report_lines(res, _f)
+    L += _inertia.report_lines(res, _f)
     L.append("")
     L.append("targets")
     for t in res["standing"]:

@@ -1,0 +1,177 @@
+"""``lavendersim lqr``: design a sampled LQR wheel controller for a spacecraft file and fly its maneuver.
+
+The command line layer only: the file is read by :mod:`lavendersim.spacecraft`, designed and flown by
+:mod:`lavendersim.control`'s one stack. ``--scenario center|corner`` and ``--layout cube3|pyramid4`` load
+the spacecraft files shipped with the package (``lavendersim.spacecraft.shipped()``). Every bad option,
+key or value is one line naming it on stderr and exit code 2; a maneuver that misses the file's stated
+settle time (``maneuver.settle_within``) or a wheel limit exits 1.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+
+HELP = "design a sampled LQR wheel controller for a spacecraft file and fly its maneuver (control extra)"
+SCENARIOS = {"center": "cube_center", "corner": "cube_corner"}
+LAYOUTS = {"cube3": None, "pyramid4": "cube_pyramid4"}
+
+
+def register_cli(subparsers: argparse._SubParsersAction) -> None:
+    """Add the ``lavendersim lqr`` subcommand to the command-line parser.
+
+    Parameters
+    ----------
+    subparsers : argparse._SubParsersAction
+        The ``add_subparsers()`` action of the ``lavendersim`` parser; the handler is set as ``fn``.
+
+    Returns
+    -------
+    None
+    """
+    p = subparsers.add_parser("lqr", help=HELP, description=HELP[0].upper() + HELP[1:] + ". The spacecraft file (TOML) "
+                              "gives the body (mass, inertia tensor), its wheels (axes, J, limits, motor), the controller "
+                              "(period, delay, Q/R or Bryson weights, null-space bias), sensors, actuator lag, the maneuver "
+                              "and the Monte Carlo spread: see docs/spacecraft.md or lavendersim.spacecraft. Exit 0: flown; "
+                              "1: the stated settle time was missed or a wheel limit exceeded; 2: bad input.")
+    src = p.add_mutually_exclusive_group()
+    src.add_argument("--spacecraft", metavar="FILE", help="the spacecraft file (TOML), or the name of a shipped one: "
+                     "cubesat6u, cube_center, cube_corner, cube_pyramid4")
+    src.add_argument("--scenario", choices=tuple(SCENARIOS), default=None, help="the chapter's cube: center (joint at the "
+                     "centre, ReactionWheelCube-v0; the default) or corner (balancing on a corner under gravity); "
+                     "the shipped files cube_center / cube_corner")
+    p.add_argument("--layout", choices=tuple(LAYOUTS), default=None, help="cube3 (three body-axis wheels: --scenario) or "
+                   "pyramid4 (a free cube with four pyramid wheels: the shipped file cube_pyramid4)")
+    p.add_argument("--json", action="store_true", help="print the design (rank, poles) and the maneuver's figures as JSON")
+    p.add_argument("--plot", metavar="PATH", default=None, help="write the response plot (PNG) to PATH")
+    p.add_argument("--no-noise", action="store_true", help="fly with perfect measurements (ignore [sensors])")
+    p.add_argument("--monte-carlo", type=int, default=None, metavar="N", help="also fly N plants: the inertia tensor "
+                   "perturbed by [monte_carlo] inertia_uncertainty and new sensor seeds")
+    p.add_argument("--workers", type=int, default=None, help="Monte Carlo on N local processes (default: every core; 1: serial)")
+    p.add_argument("--dask", default=None, metavar="ADDRESS", help="Monte Carlo on the Dask scheduler at ADDRESS "
+                   "(the distributed extra)")
+    p.add_argument("--backend", default="auto", choices=("auto", "c", "numpy"),
+                   help="simulator backend (default auto: C when built, else NumPy with a warning)")
+    p.set_defaults(fn=_cli)
+
+
+def _fail(message: str) -> int:
+    print(f"lavendersim lqr: {message}", file=sys.stderr)
+    return 2
+
+
+def _source(args) -> str:
+    """The spacecraft file to load (a path or a shipped name)."""
+    from . import validate as V
+
+    if args.spacecraft is not None:
+        if args.layout is not None:
+            raise V.LavenderInputError("--layout", "takes no --spacecraft: the file gives the wheel layout")
+        return args.spacecraft
+    if args.layout == "pyramid4":
+        if args.scenario is not None:
+            raise V.LavenderInputError("--scenario", "--layout pyramid4 is a free cube: it has no scenario")
+        return LAYOUTS["pyramid4"]
+    return SCENARIOS[args.scenario or "center"]
+
+
+def _text(fig: dict, mc: dict | None) -> str:
+    d, f, m = fig["design"], fig["figures"], fig["maneuver"]
+    st = f"{f['settling_time']:.4g} s" if math.isfinite(f["settling_time"]) else "never"
+    stated = "" if m["settle_within"] is None else f" (stated: within {m['settle_within']:g} s: " \
+        f"{'met' if f['settled_within'] else 'MISSED'})"
+    lines = [f"{fig['spacecraft']} ({fig['file']}): body {fig['body']!r}, {fig['wheels']} wheels",
+             f"design: discrete LQR at {d['period']:g} s (delay {d['delay']:g} s, actuator lag {d['actuator_lag']:g} s); "
+             f"controllability rank {d['controllability_rank']} of {d['n_states']}; largest closed-loop |z| "
+             f"{d['max_pole_modulus']:.6f}",
+             f"maneuver: {m['angle_deg']:g}° about {[round(a, 4) for a in m['axis']]} (body frame), {m['duration']:g} s",
+             f"settling time (< {m['settle_threshold_deg']:g}°) {st}{stated}; final error {f['final_error_deg']:.3g}°",
+             f"peak wheel torque {f['peak_torque_max']:.4g} N·m (limit {f['torque_limit']:g}), peak wheel speed "
+             f"{f['peak_wheel_speed_max']:.4g} rad/s (limit {f['speed_limit']:g}); within limits: {f['within_limits']}",
+             f"total angular momentum drift {f['L_drift']:.3g} (relative)"
+             + (f"; external: {', '.join(f['external_effects'])}" if f["external_effects"] else "; no external torque")]
+    if mc is not None:
+        def row(k, unit):
+            v = mc[k]
+            return f"{k} {v['p50']:.4g} median, {v['p90']:.4g} p90, {v['p100']:.4g} max {unit}" if v["p50"] is not None \
+                else f"{k} -"
+
+        within = f" ({mc['settled_within']} within {mc['settle_within']:g} s)" if mc["settle_within"] else ""
+        lines.append(f"Monte Carlo, {mc['n']} runs (inertia ±{100 * mc['inertia_spread']:g}% per axis, sensor seeds "
+                     f"{mc['sensors']['seed']}+): {mc['n'] - mc['failures']} settled{within}; {row('settling_time', 's')}; "
+                     f"{row('peak_torque', 'N·m')}; {row('peak_wheel_speed', 'rad/s')}")
+    return "\n".join(lines)
+
+
+def _design(S, sc):
+    """S.design, with the Riccati solver's failures (scipy's LinAlgError / ValueError on an ill-posed Q, R) named."""
+    import numpy as np
+
+    from . import validate as V
+
+    try:
+        return S.design(sc)
+    except (np.linalg.LinAlgError, ValueError) as exc:
+        if isinstance(exc, V.LavenderInputError):
+            raise
+        raise V.LavenderInputError("controller", "the LQR design failed (check Q, R or weights against the plant, "
+                                   "the delay and the actuator lag)", f": {' '.join(str(exc).split())}") from None
+
+
+def _cli(args) -> int:
+    from . import spacecraft as S
+    from . import validate as V
+    from .errors import DivergenceError
+
+    where = ""
+    try:
+        path = where = _source(args)
+        if args.plot:
+            V.writable_file("--plot", args.plot)   # before the design and the run, not after
+        sc = S.load(path)
+        ex = None
+        if args.monte_carlo is not None or args.dask is not None or args.workers is not None:
+            from . import executor as X
+
+            if args.monte_carlo is None:
+                raise V.LavenderInputError("--dask" if args.dask else "--workers", "needs --monte-carlo N")
+            V.integer("--monte-carlo", args.monte_carlo, minimum=1)
+            ex = X.resolve(workers=args.workers, dask=args.dask, feature="lavendersim lqr --dask")
+        ctrl = _design(S, sc)
+        resp = S.fly(sc, ctrl, noise=not args.no_noise, backend=args.backend)
+        mc = None if args.monte_carlo is None else S.monte_carlo(sc, ctrl, args.monte_carlo, executor=ex, backend=args.backend)
+    except V.LavenderInputError as exc:
+        return _fail(str(exc) if not where or str(exc).startswith(str(where)) else f"{where}: {exc}")
+    except DivergenceError as exc:
+        print(f"lavendersim lqr: {where}: simulation diverged: {' '.join(str(exc).split())}", file=sys.stderr)
+        return 1
+    fig = S.figures(sc, ctrl, resp)
+    if args.plot:
+        resp.plot(args.plot, title=f"{sc.name}: {sc.maneuver.angle_deg:g}° slew, controller {sc.controller.period:g} s")
+    if args.json:
+        out = dict(fig)
+        if mc is not None:
+            out["monte_carlo"] = {k: v for k, v in mc.items() if k != "samples"}
+        print(json.dumps(_finite(out), indent=2))
+    else:
+        print(_text(fig, mc))
+        if args.plot:
+            print(f"wrote {args.plot}")
+    f = fig["figures"]
+    if f["settled_within"] is False or not f["within_limits"]:
+        why = "missed the stated settle time" if f["settled_within"] is False else "exceeded a wheel limit"
+        print(f"lavendersim lqr: {sc.name}: {why}", file=sys.stderr)
+        return 1
+    return 0
+
+
+def _finite(x):
+    """A copy with every non-finite float as None (JSON has no inf: a maneuver that never settles)."""
+    if isinstance(x, dict):
+        return {k: _finite(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_finite(v) for v in x]
+    if isinstance(x, float) and not math.isfinite(x):
+        return None
+    return x
