@@ -1,6 +1,6 @@
 """Experiment 04: can an internal actuator rotate a body without pushing on the outside world?
 
-The ReactionWheelCube-v0 model (lavendersim.control.CubeModel, task "center"): a 15 cm, 1 kg cube
+The ReactionWheelCube-v0 model (lavendersim.control.chapter_cube, scenario "center"): a 15 cm, 1 kg cube
 (I = m s²/6 = 3.75e-3 kg·m², wheels locked) on a spherical joint at its centre, three body-axis
 wheels of spin inertia J = 5.7e-4 kg·m², motor limit 0.2 N·m, wheel speed limit 400 rad/s, cube
 angular damping c = 1e-3 N·m·s/rad (the chapter's environment has damping and the joint). Each run
@@ -35,6 +35,7 @@ import math
 
 import numpy as np
 
+import lavendersim as lv
 from lavendersim import control as lc
 from lavendersim import validate as V
 
@@ -61,9 +62,12 @@ def options_from_args(args) -> dict:
     return {"torque": args.torque, "T": args.T}
 
 
-def _run(model, u_of_t, T, backend, omega_b=(0, 0, 0), Omega=(0, 0, 0), momentum=False):
-    """Hold u_of_t(t) per step; record t, omega_b, Omega, applied torque (and momenta)."""
-    sim = model.make_sim(None, omega_b, Omega, dt=DT, backend=backend)
+def _run(damping, u_of_t, T, backend, omega_b=(0, 0, 0), Omega=(0, 0, 0), momentum=False):
+    """The chapter cube (centre joint, angular damping `damping`) starting at omega_b, Omega: hold u_of_t(t) per
+    step; record t, omega_b, Omega, applied torque (and momenta)."""
+    sim = lv.Sim(lc.chapter_cube("center", damping=damping, omega_b=omega_b), dt=DT, integrator="rk4", backend=backend)
+    if np.any(np.asarray(Omega, dtype=float) != 0):
+        sim.set_state(BODY, Omega=V.vector("Omega", Omega))
     n = int(round(T / DT))
     t = np.empty(n + 1)
     w, Om, ua = np.empty((n + 1, 3)), np.empty((n + 1, 3)), np.zeros((n + 1, 3))
@@ -90,23 +94,24 @@ def compute(backend: str = "auto", torque: float = TORQUE, T: float = T_END) -> 
     backend = C.check_backend(backend)
     U = V.positive("torque", torque)
     T = V.positive("T", T)
-    model = lc.CubeModel(scenario="center", damping=DAMPING)
-    if U >= model.torque_limit:
-        raise V.LavenderInputError("torque", f"must be below the motor limit {model.torque_limit:g} N·m for the sign runs "
+    model = lc.chapter_cube("center", damping=DAMPING)
+    cube, wheels = model.bodies[BODY], model.model_effects(BODY)["reaction_wheels"].values
+    torque_limit, speed_limit = wheels["torque_limit"], wheels["speed_limit"]
+    if U >= torque_limit:
+        raise V.LavenderInputError("torque", f"must be below the motor limit {torque_limit:g} N·m for the sign runs "
                                    "(saturation has its own run)", f", got {U!r}")
     if int(round(T / DT)) < 2:
         raise V.LavenderInputError("T", f"must be at least 2 steps of {DT:g} s", f", got {T!r}")
     C.steps("T", T, DT, whole=False, limit=C.MAX_PY_STEPS, value=T)  # stepped in Python, every step recorded
     const = lambda u: (lambda t: np.asarray(u, float))  # noqa: E731
 
-    pos = _run(model, const([U, 0, 0]), T, backend)
-    rev = _run(model, const([-U, 0, 0]), T, backend)
-    xs, ys = pos, _run(model, const([0, U, 0]), T, backend)
-    xy = _run(model, const([U, U, 0]), T, backend)
-    gyro = _run(model, const([U, 0, 0]), T, backend, Omega=(0, 0, 100.0))
-    sat = _run(model, const([0.5, 0, 0]), T_SAT, backend)
-    free = lc.CubeModel(scenario="center", damping=0.0)
-    ex = _run(free, lambda t: np.array([0.08 * math.sin(7 * t), -0.05, 0.12 * math.cos(3 * t)]), T, backend,
+    pos = _run(DAMPING, const([U, 0, 0]), T, backend)
+    rev = _run(DAMPING, const([-U, 0, 0]), T, backend)
+    xs, ys = pos, _run(DAMPING, const([0, U, 0]), T, backend)
+    xy = _run(DAMPING, const([U, U, 0]), T, backend)
+    gyro = _run(DAMPING, const([U, 0, 0]), T, backend, Omega=(0, 0, 100.0))
+    sat = _run(DAMPING, const([0.5, 0, 0]), T_SAT, backend)
+    ex = _run(0.0, lambda t: np.array([0.08 * math.sin(7 * t), -0.05, 0.12 * math.cos(3 * t)]), T, backend,
               omega_b=(0.3, -0.2, 0.5), momentum=True)
 
     s = slice(1, None)  # samples after the command starts (t = 0 is the rest state, exactly 0)
@@ -129,7 +134,7 @@ def compute(backend: str = "auto", torque: float = TORQUE, T: float = T_END) -> 
     # the largest one-step increase of Omega_x under full torque bounds the overshoot past the limit
     step_incr = float(np.max(np.diff(sat["Om"][:, 0])))
     # the torque–speed line: u[k+1] was applied over step k, from the wheel speed Om[k]
-    line = model.torque_limit * np.clip(1 - sat["Om"][:-1, 0] / model.speed_limit, 0, 1)
+    line = torque_limit * np.clip(1 - sat["Om"][:-1, 0] / speed_limit, 0, 1)
     sat_line_err = float(np.max(np.abs(sat["u"][1:, 0] - np.minimum(0.5, line))))
     sat_jump = float(np.max(np.abs(np.diff(sat["u"][1:, 0]))))
     sat_speed_T = float(sat["Om"][-1, 0])
@@ -156,8 +161,8 @@ def compute(backend: str = "auto", torque: float = TORQUE, T: float = T_END) -> 
         "momentum_exchange_error": exchange_err, "momentum_exchange_scale": scale, "total_momentum_drift": total_drift,
     }
     params = {"backend": backend, "torque": U, "T": T, "dt": DT, "integrator": "rk4", "damping": DAMPING,
-              "mass": model.mass, "size": model.size, "J": model.J, "I_cube": model.I_c,
-              "torque_limit": model.torque_limit, "speed_limit": model.speed_limit,
+              "mass": cube.mass, "size": cube.shape[1][0], "J": wheels["J"], "I_cube": cube.I_b,
+              "torque_limit": torque_limit, "speed_limit": speed_limit,
               "gyro_Omega_z0": 100.0, "exchange_omega_b0": np.array([0.3, -0.2, 0.5]), "exchange_damping": 0.0}
     checks = [
         C.holds("wheel_all_positive", wheel_all_positive, f"every x-wheel sample in (0, {T:g}] s > 0"),
@@ -170,20 +175,20 @@ def compute(backend: str = "auto", torque: float = TORQUE, T: float = T_END) -> 
                   "isotropic cube, equal wheels: no z response (rad/s)"),
         C.above("gyroscopic_coupling_shown", gyro_ratio, 0.01,
                 "z wheel pre-spun at 100 rad/s: an x command turns the cube about y"),
-        C.close("saturation_clips_to_limit", sat_applied_max, model.torque_limit, 1e-15, "0.5 N·m command -> applied (N·m)"),
-        C.at_most("saturation_speed_limit", sat_peak_speed, model.speed_limit + step_incr,
+        C.close("saturation_clips_to_limit", sat_applied_max, torque_limit, 1e-15, "0.5 N·m command -> applied (N·m)"),
+        C.at_most("saturation_speed_limit", sat_peak_speed, speed_limit + step_incr,
                   "x wheel stays within one step's increment of the 400 rad/s limit"),
         C.at_most("saturation_follows_torque_speed_line", sat_line_err, 1e-12,
                   "|applied u_x − 0.2 (1 − Ω_x/400)| over the run (N·m)"),
         C.at_most("saturation_is_smooth", sat_jump, 0.01, "largest step-to-step change of the applied torque (N·m)"),
-        C.below("saturation_below_no_load_speed", sat_speed_T, model.speed_limit, "wheel speed at the end (rad/s)"),
+        C.below("saturation_below_no_load_speed", sat_speed_T, speed_limit, "wheel speed at the end (rad/s)"),
         C.at_most("momentum_exchange_error", exchange_err, 1e-9,
                   "damping off, joint at the centre: max |ΔL_cube + ΔL_wheels| / max |ΔL_wheels|, world frame"),
     ]
 
     data = {"pos": pos, "rev": rev, "xy": xy, "gyro": gyro, "sat": sat, "ex": ex, "dLb": dLb, "dLw": dLw,
             "scale": scale, "exchange_err": exchange_err, "U": U, "ratio": ratio, "coupling_z": coupling_z,
-            "gyro_ratio": gyro_ratio, "model": model, "backend": backend}
+            "gyro_ratio": gyro_ratio, "torque_limit": torque_limit, "speed_limit": speed_limit, "backend": backend}
     return C.make_result(NAME, figures, params, checks, {"reaction_wheel.png": _plot}, data,
                          headline=("momentum_exchange_error", "<= 1e-9 (ΔL_cube = −ΔL_wheels; wheel and cube "
                                    "spin opposite ways)"))
@@ -192,7 +197,8 @@ def compute(backend: str = "auto", torque: float = TORQUE, T: float = T_END) -> 
 def _plot(d):
     pos, rev, xy, gyro, sat, ex = d["pos"], d["rev"], d["xy"], d["gyro"], d["sat"], d["ex"]
     dLb, dLw, scale, exchange_err, U, ratio = d["dLb"], d["dLw"], d["scale"], d["exchange_err"], d["U"], d["ratio"]
-    coupling_z, gyro_ratio, model, backend = d["coupling_z"], d["gyro_ratio"], d["model"], d["backend"]
+    coupling_z, gyro_ratio, backend = d["coupling_z"], d["gyro_ratio"], d["backend"]
+    torque_limit, speed_limit = d["torque_limit"], d["speed_limit"]
     fig, ax = C.new_figure(2, 3, size=(15, 8), title=f"Experiment 04: reaction-wheel cube ({backend} backend)")
     a = ax[0, 0]
     a.plot(pos["t"], pos["w"][:, 0], color="tab:blue", label="cube ω_x (< 0)")
@@ -216,14 +222,14 @@ def _plot(d):
     a.set_title(f"coupling: two wheels |ω_z| {coupling_z:.0e}; gyro |ω_y|/|ω_x| {gyro_ratio:.2f}", fontsize=10)
     a = ax[1, 0]
     a.plot(sat["t"][1:], sat["u"][1:, 0], color="tab:red", label="applied u_x, N·m (command 0.5)")
-    a.axhline(model.torque_limit, color="tab:red", ls=":", lw=0.8, label=f"stall torque {model.torque_limit:g} N·m")
+    a.axhline(torque_limit, color="tab:red", ls=":", lw=0.8, label=f"stall torque {torque_limit:g} N·m")
     a.set_xlabel("t (s)"); a.set_ylabel("applied torque u_x (N·m)", color="tab:red")
-    a.set_ylim(0, 1.1 * model.torque_limit)
+    a.set_ylim(0, 1.1 * torque_limit)
     b = a.twinx()
     b.plot(sat["t"], sat["Om"][:, 0], color="tab:orange", label="wheel Ω_x, rad/s (right axis)")
-    b.axhline(model.speed_limit, color="tab:orange", ls=":", lw=0.8, label=f"no-load speed {model.speed_limit:g} rad/s")
+    b.axhline(speed_limit, color="tab:orange", ls=":", lw=0.8, label=f"no-load speed {speed_limit:g} rad/s")
     b.set_ylabel("wheel Ω_x (rad/s)", color="tab:orange")
-    b.set_ylim(0, 1.1 * model.speed_limit)
+    b.set_ylim(0, 1.1 * speed_limit)
     h1, l1 = a.get_legend_handles_labels()
     h2, l2 = b.get_legend_handles_labels()
     a.legend(h1 + h2, l1 + l2, fontsize=7, loc="center right")

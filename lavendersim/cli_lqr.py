@@ -12,6 +12,7 @@ import argparse
 import json
 import math
 import sys
+from pathlib import Path
 
 HELP = "design a sampled LQR wheel controller for a spacecraft file and fly its maneuver (control extra)"
 SCENARIOS = {"center": "cube_center", "corner": "cube_corner"}
@@ -51,6 +52,9 @@ def register_cli(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--workers", type=int, default=None, help="Monte Carlo on N local processes (default: every core; 1: serial)")
     p.add_argument("--dask", default=None, metavar="ADDRESS", help="Monte Carlo on the Dask scheduler at ADDRESS "
                    "(the distributed extra)")
+    p.add_argument("--export-c", metavar="DIR", default=None, help="write the designed controller as C99 (controller.h, "
+                   "controller.c, an example main.c) to DIR, compile it with -std=c99 -Wall -Wextra -pedantic -Werror and "
+                   "fly it in the loop (float64 and float32) against the Python controller: lavendersim.controller_c")
     p.add_argument("--backend", default="auto", choices=("auto", "c", "numpy"),
                    help="simulator backend (default auto: C when built, else NumPy with a warning)")
     p.set_defaults(fn=_cli)
@@ -129,6 +133,8 @@ def _cli(args) -> int:
         path = where = _source(args)
         if args.plot:
             V.writable_file("--plot", args.plot)   # before the design and the run, not after
+        if args.export_c:
+            V.writable_dir("--export-c", args.export_c)
         sc = S.load(path)
         ex = None
         if args.monte_carlo is not None or args.dask is not None or args.workers is not None:
@@ -141,6 +147,7 @@ def _cli(args) -> int:
         ctrl = _design(S, sc)
         resp = S.fly(sc, ctrl, noise=not args.no_noise, backend=args.backend)
         mc = None if args.monte_carlo is None else S.monte_carlo(sc, ctrl, args.monte_carlo, executor=ex, backend=args.backend)
+        exported = None if not args.export_c else _export_c(S, sc, ctrl, resp, args)
     except V.LavenderInputError as exc:
         return _fail(str(exc) if not where or str(exc).startswith(str(where)) else f"{where}: {exc}")
     except DivergenceError as exc:
@@ -153,17 +160,37 @@ def _cli(args) -> int:
         out = dict(fig)
         if mc is not None:
             out["monte_carlo"] = {k: v for k, v in mc.items() if k != "samples"}
+        if exported is not None:
+            out["export_c"] = exported
         print(json.dumps(_finite(out), indent=2))
     else:
         print(_text(fig, mc))
         if args.plot:
             print(f"wrote {args.plot}")
+        if exported is not None:
+            from .controller_c import summary
+
+            print(summary(exported))
+    if exported is not None and exported["compile_error"]:
+        print(f"lavendersim lqr: {exported['compile_error']}", file=sys.stderr)
+        return 1
+    if exported is not None and exported["sil"] is not None and not exported["sil"]["ok"]:
+        print(f"lavendersim lqr: {sc.name}: the printed controller failed its software-in-the-loop check", file=sys.stderr)
+        return 1
     f = fig["figures"]
     if f["settled_within"] is False or not f["within_limits"]:
         why = "missed the stated settle time" if f["settled_within"] is False else "exceeded a wheel limit"
         print(f"lavendersim lqr: {sc.name}: {why}", file=sys.stderr)
         return 1
     return 0
+
+
+def _export_c(S, sc, ctrl, resp, args) -> dict:
+    """--export-c: the printed controller written to DIR and flown in the loop on the file's maneuver (same noise)."""
+    from .controller_c import export_and_verify
+
+    return export_and_verify(ctrl, args.export_c, lambda c: S.fly(sc, c, noise=not args.no_noise, backend=args.backend),
+                             reference=resp, source=Path(args.spacecraft or _source(args)).name)
 
 
 def _finite(x):

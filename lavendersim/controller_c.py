@@ -455,11 +455,7 @@ def export_c(controller: Controller, directory: str | os.PathLike, *, prefix: st
         A bad controller or prefix, or ``directory`` cannot be created or is a file.
     """
     printed = render(controller, prefix=prefix, source=source, example_q=example_q)
-    d = Path(directory)
-    try:
-        d.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise V.LavenderInputError("directory", "cannot be created", f": {exc}") from None
+    d = V.writable_dir("directory", directory)
     for name, text in printed.files.items():
         (d / name).write_text(text, encoding="ascii")
     return printed
@@ -748,7 +744,7 @@ def verify(controller: Controller, fly: Callable[[Controller], Any], *, referenc
     printed : Printed, optional
         Default :func:`render` ``(controller)``.
     directory : str or os.PathLike, optional
-        Where to compile (default a temporary directory).
+        Where to compile and keep the library (default a temporary directory, removed once the library is loaded).
 
     Returns
     -------
@@ -760,10 +756,11 @@ def verify(controller: Controller, fly: Callable[[Controller], Any], *, referenc
         The printed files do not compile with the strict flags (or no compiler).
     """
     printed = render(controller) if printed is None else printed
-    lib, cmd = compile_library(printed, directory)
+    with tempfile.TemporaryDirectory(prefix="lv_controller_c_") as tmp:   # the library is loaded before it goes
+        lib, cmd = compile_library(printed, tmp if directory is None else directory)
+        compiled = [CompiledController.of(controller, precision=p, printed=printed, library=lib, command=cmd)
+                    for p in ("float64", "float32")]
     ref = fly(controller) if reference is None else reference
-    compiled = [CompiledController.of(controller, precision=p, printed=printed, library=lib, command=cmd)
-                for p in ("float64", "float32")]
     runs = [fly(c) for c in compiled]
     return compare(ref, runs[0], runs[1], controller.wheels.torque_limit, printed, cmd, replay(compiled[1], ref))
 
@@ -791,3 +788,66 @@ def sil(scene: Any, controller: Controller, *, T: float, directory: str | os.Pat
     from .wheel_control import closed_loop
 
     return verify(controller, lambda c: closed_loop(scene, c, T=T, **closed_loop_kw), directory=directory)
+
+
+def export_and_verify(controller: Controller, directory: str | os.PathLike, fly: Callable[[Controller], Any], *,
+                      reference: Any = None, source: str = "") -> dict:
+    """:func:`export_c`, then :func:`verify` (compiled in a temporary directory): what ``lavendersim lqr --export-c`` reports.
+
+    Parameters
+    ----------
+    controller : Controller
+    directory : str or os.PathLike
+        Receives controller.h, controller.c, main.c.
+    fly : callable
+        ``fly(controller) -> Response`` (seeded sensors).
+    reference : Response, optional
+        The Python controller's run of that maneuver.
+    source : str, optional
+        Stated in the header.
+
+    Returns
+    -------
+    dict
+        ``directory``, ``files``, ``lines``, ``n_ops``, ``n_instructions``, ``compile_command`` (or None),
+        ``sil`` (:meth:`SilReport.figures`, or None when no C compiler is found or the files do not compile: then
+        ``sil_skipped`` says why, and ``compile_error`` holds the command and the compiler's output).
+    """
+    from .extending import UserBuildError, compiler
+
+    d = Path(directory)
+    printed = export_c(controller, d, source=source)
+    out = {"directory": str(d), "files": list(FILES), "lines": dict(printed.lines), "n_ops": printed.n_ops,
+           "n_instructions": printed.n_instructions, "compile_command": None, "sil": None, "sil_skipped": None,
+           "compile_error": None}
+    try:
+        compiler()
+    except UserBuildError as exc:
+        out["sil_skipped"] = str(exc)
+        return out
+    try:
+        rep = verify(controller, fly, reference=reference, printed=printed)
+    except CompileError as exc:
+        out["sil_skipped"], out["compile_error"] = "the printed files did not compile", str(exc)
+        return out
+    out["compile_command"] = rep.compile_command
+    out["sil"] = rep.figures()
+    return out
+
+
+def summary(report: dict) -> str:
+    """Text lines of :func:`export_and_verify`'s report (the CLI's)."""
+    lines = [f"exported C99: {', '.join(report['files'])} in {report['directory']} ({report['lines']['controller.c']} "
+             f"lines of controller.c, {report['n_ops']} operations per step)"]
+    s = report["sil"]
+    if s is None:
+        return "\n".join(lines + [f"software in the loop skipped: {report['sil_skipped']}"])
+    st = lambda v: f"{v:.4g} s" if math.isfinite(v) else "never"   # noqa: E731
+    lines += [f"compiled: {s['compile_command']}",
+              f"software in the loop, float64: max relative command difference {s['command_rel_f64']:.3g} "
+              f"({'bit-identical' if s['commands_identical_f64'] else 'not bit-identical'}), max trajectory difference "
+              f"{s['trajectory_diff_f64']:.3g}",
+              f"float32: settles {st(s['settling_time_f32'])} (float64 {st(s['settling_time_f64'])}, "
+              f"{100 * s['settle_rel_f32']:.3g} %), worst command difference {s['command_diff_f32']:.3g} N·m "
+              f"({s['command_diff_f32_rel_limit']:.3g} of the limit); SIL {'passed' if s['ok'] else 'FAILED'}"]
+    return "\n".join(lines)

@@ -131,7 +131,18 @@ class Wheels:
 
     @classmethod
     def of(cls, scene: Scene, body: str) -> "Wheels":
-        """The layout of ``body``'s ``reaction_wheels`` in ``scene``."""
+        """The layout of ``body``'s ``reaction_wheels`` in ``scene``.
+
+        Parameters
+        ----------
+        scene : Scene
+        body : str
+            A body of ``scene`` with ``reaction_wheels``.
+
+        Returns
+        -------
+        Wheels
+        """
         v = scene.model_effects(body)["reaction_wheels"].values
         return cls(np.array(v["axes_b"], float).reshape(-1, 3), np.array(v["J"], float).ravel(), float(v["torque_limit"]),
                    float(v["speed_limit"]), float(v["c_w"]))
@@ -225,7 +236,25 @@ class Sensors:
 
     def measure(self, rng: np.random.Generator, q: np.ndarray, omega_b: np.ndarray, Omega: np.ndarray
                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """One sample's measurements (q_m (4,), omega_m (3,) rad/s, Omega_m (N,) rad/s) of the true values."""
+        """One sample's measurements of the true values, drawing 6 + N normals from ``rng``.
+
+        Parameters
+        ----------
+        rng : numpy.random.Generator
+            The loop's generator (:meth:`generator`).
+        q : ndarray (4,)
+            True attitude (x, y, z, w).
+        omega_b : ndarray (3,)
+            True body rate, rad/s, body frame.
+        Omega : ndarray (N,)
+            True wheel rates, rad/s.
+
+        Returns
+        -------
+        q_m : ndarray (4,)
+        omega_m : ndarray (3,)
+        Omega_m : ndarray (N,)
+        """
         z = rng.standard_normal(6 + Omega.size)
         d = self.attitude_noise * z[0:3]
         ang = float(np.linalg.norm(d))
@@ -303,7 +332,7 @@ class Controller:
     keeps the memory ``z`` (the actuator-lag estimate ``a`` (N) when ``actuator_lag > 0``, then the
     previous command (N) when ``delay > 0``).
 
-    Attributes
+    Parameters
     ----------
     body : str
         The controlled body.
@@ -322,6 +351,8 @@ class Controller:
         conserved-momentum target folded in): u = u0 − L x_c − L_z z.
     L_z : ndarray (N, nz)
         The gain on the memory z.
+    Z : ndarray (nz, nz + N)
+        The memory update ``z_next = Z [z; u]`` (the lag estimate propagated exactly; the previous command).
     M : ndarray (N, N)
         Allocation (:func:`allocation`): u − u0 = M v.
     rank_axes : int
@@ -377,8 +408,13 @@ class Controller:
         """Size of the controller's memory z."""
         return self.Z.shape[0]
 
-    def _z0(self) -> np.ndarray:
+    @property
+    def z0(self) -> np.ndarray:
+        """The memory at rest (nz,): the lag estimate and the previous command at u0."""
         return np.tile(self.u0, self.nz // max(self.n, 1)) if self.nz else np.zeros(0)
+
+    def _z0(self) -> np.ndarray:
+        return self.z0
 
     def reset(self) -> None:
         """Clear the memory z (lag estimate and previous command at the operating torque u0)."""
@@ -437,7 +473,12 @@ class Controller:
         return np.asarray(u, float).ravel()
 
     def figures(self) -> dict:
-        """The design as plain values: period, delay, lag, rank, poles (real, imag, |z|), K, allocation."""
+        """The design as plain values: period, delay, lag, rank, poles (real, imag, max |z|), K, L, allocation.
+
+        Returns
+        -------
+        dict
+        """
         p = self.poles
         return {"body": self.body, "period": self.Ts, "delay": self.delay, "actuator_lag": self.actuator_lag,
                 "wheels": self.n, "axes_rank": self.rank_axes, "controllability_rank": self.rank,
@@ -447,8 +488,10 @@ class Controller:
                 "q_ref": self.q_ref.tolist()}
 
     def __getstate__(self):
+        # to a worker process: the gains and limits; the casadi Function is rebuilt from them there, and the
+        # Linearization (a python-control StateSpace holds a lambda: not picklable) stays behind (lin = None)
         d = dict(self.__dict__)
-        d["_fn"] = None   # rebuilt from the gains where it is needed (a worker process)
+        d["_fn"], d["lin"] = None, None
         return d
 
 
@@ -623,7 +666,7 @@ def _fold(lin: Any, K: np.ndarray, idx: np.ndarray, n: int, m: int, nx: int, lag
 class Response:
     """A sampled closed-loop run (one row per controller sample, t_0 = 0 … t_K = T) and its figures.
 
-    Attributes
+    Parameters
     ----------
     t : ndarray (K+1,)
         Sample times, s.
@@ -647,8 +690,11 @@ class Response:
         True attitude error angle to q_ref, deg.
     L_w : ndarray (K+1, 3)
         Total angular momentum of the body and its wheels, world frame, kg·m²/s.
+    L_wheels_w : ndarray (K+1, 3)
+        The wheels' share of it, world frame, kg·m²/s.
     peak_torque : ndarray (N,)
-        max |applied torque| per wheel over every Sim step, N·m.
+        max |applied torque| per wheel over the first and the last Sim step of every hold (every step with
+        an actuator lag), N·m.
     peak_wheel_speed : ndarray (N,)
         max |Omega| per wheel over the samples, rad/s.
     torque_limit, speed_limit : float
@@ -714,7 +760,14 @@ class Response:
                     and np.all(self.peak_wheel_speed <= self.speed_limit))
 
     def figures(self) -> dict:
-        """The run's figures as plain values (JSON-ready but for an infinite settling time)."""
+        """The run's figures as plain values (JSON-ready but for an infinite settling time).
+
+        Returns
+        -------
+        dict
+            ``T``, ``threshold_deg``, ``settling_time`` (s), ``final_error_deg``, ``initial_error_deg``,
+            ``peak_torque`` and ``peak_wheel_speed`` (lists per wheel), the limits, ``within_limits``, ``L_drift``.
+        """
         return {"T": float(self.t[-1]), "threshold_deg": self.threshold_deg, "settling_time": self.settling_time(),
                 "final_error_deg": self.final_error_deg, "initial_error_deg": float(self.error_deg[0]),
                 "peak_torque": self.peak_torque.tolist(), "peak_wheel_speed": self.peak_wheel_speed.tolist(),

@@ -73,8 +73,8 @@ def test_pivoted_body_under_gravity(backend):
 
 @pytest.mark.parametrize("backend", BACKENDS)
 def test_wheel_cube_off_equilibrium(backend):
-    m = lc.CubeModel(scenario="corner", damping=2e-3, wheel_damping=1e-4)
-    s = m.scene(q0=lc.rotated(m.upright_q(), [1, 0, 0], 5.0), omega_b=(0.1, -0.2, 0.05))
+    s = lc.chapter_cube("corner", damping=2e-3, wheel_damping=1e-4, q=lc.rotated(lc.cube_upright_q("corner"), [1, 0, 0], 5.0),
+                        omega_b=(0.1, -0.2, 0.05))
     sim = lv.Sim(s, backend=backend)
     sim.set_state(lc.BODY, Omega=(40.0, -25.0, 10.0))
     sim.set_wheel_command(lc.BODY, (0.01, -0.02, 0.005))
@@ -108,14 +108,6 @@ def test_pyramid_layout_off_equilibrium(backend, joint):
     assert lin.nstates == (6 if joint else 12) + 4 and lin.state_labels[-4:] == [f"sc_Omega_{k}" for k in (1, 2, 3, 4)]
     np.testing.assert_allclose(lin.u0, [0.01, -0.02, 0.005, 0.03])
     check(lin, s, backend)
-
-
-def test_the_cube_model_is_the_cube_scene():
-    m = lc.CubeModel(scenario="corner")
-    a = lc.linearize(m)
-    b = lc.linearize(m.scene())
-    np.testing.assert_allclose(a.A, b.A, rtol=0, atol=1e-12)
-    np.testing.assert_allclose(a.B, b.B, rtol=0, atol=1e-12)
 
 
 def test_bad_inputs_name_the_field():
@@ -162,61 +154,53 @@ def test_ct_lqr_and_ours_agree_on_a_controllable_system():
 
 
 def test_uncontrollable_directions_are_reported():
-    m = lc.CubeModel(scenario="center")
-    res = lc.lqr(lc.linearize(m), *lc.default_weights(m))
+    m = lc.chapter_cube("center")
+    W = lc.default_weights(m)
+    res = lc.lqr(lc.linearize(m), *W)
     assert res.rank == 6 and not res.controllable and res.uncontrollable.shape == (9, 3)
-    # they are the body momentum I_p ω + J Ω
-    H = np.hstack([np.zeros((3, 3)), m.I_p, np.diag(m.J)])
+    # they are the body momentum I ω + J Ω (I = m s²/6 of the 15 cm, 1 kg cube; J = 5.7e-4 kg·m²)
+    H = np.hstack([np.zeros((3, 3)), 0.15 ** 2 / 6 * np.eye(3), 5.7e-4 * np.eye(3)])
     assert np.linalg.matrix_rank(np.hstack([res.uncontrollable, H.T / np.linalg.norm(H)]), tol=1e-9) == 3
-    dres = lc.dlqr(lc.linearize(m, dt=0.01), *lc.default_weights(m))
+    dres = lc.dlqr(lc.linearize(m, dt=0.01), *W)
     assert dres.rank == 6 and np.sum(np.abs(np.abs(dres.E) - 1) < 1e-9) == 3
     with pytest.raises(LavenderInputError, match="dlqr"):
-        lc.lqr(lc.linearize(m, dt=0.01), *lc.default_weights(m))
+        lc.lqr(lc.linearize(m, dt=0.01), *W)
     with pytest.raises(LavenderInputError):
-        lc.dlqr(lc.linearize(m), *lc.default_weights(m))
+        lc.dlqr(lc.linearize(m), *W)
 
 
 def test_dlqr_closed_loop_is_stable_in_the_nonlinear_sim():
     """Corner balancing (open-loop unstable, poles at ±~19 1/s) at a 20 ms zero-order hold: the dlqr
-    gain of the ZOH model settles the 3° tilt below 0.1° and stays within the motor limits."""
-    m = lc.CubeModel(scenario="corner")
-    Ts = 0.02
-    lin = lc.linearize(m, dt=Ts)
-    K, _, E = lc.dlqr(lin, *lc.default_weights(m))
-    assert np.all(np.abs(E) <= 1 + 1e-9)
-    q0 = lc.rotated(m.upright_q(), lc.CORNER_AXIS, 3.0)
-    r = lc.closed_loop(m, lin, K, q0, 4.0, control_dt=Ts, backend="c")
-    assert r.settling_time(0.1) < 1.0 and r.error_deg[-1] < 0.05   # measured 0.16 s, 0.016°
-    assert np.max(np.abs(r.u_applied)) <= m.torque_limit and np.max(np.abs(r.Omega)) < m.speed_limit
+    gain of the ZOH model (control.design) settles the 3° tilt below 0.1° and stays within the motor limits."""
+    scene = lc.chapter_cube("corner")
+    ctrl = lc.design(scene, period=0.02, q_ref=lc.cube_upright_q("corner"), weights={"attitude_deg": 0.5})
+    assert np.all(np.abs(ctrl.poles) < 1)
+    q0 = lc.rotated(ctrl.q_ref, lc.CORNER_AXIS, 3.0)
+    r = lc.closed_loop(scene, ctrl, T=4.0, q0=q0, backend="c")
+    assert r.settling_time(0.1) < 1.0 and r.final_error_deg < 0.05
+    assert r.within_limits
 
 
-def test_closed_loop_takes_a_callable_and_returns_python_control_shapes():
-    from matplotlib.figure import Figure
+def test_python_control_operations_work_on_a_linearization():
+    """What linearize returns is a StateSpace python-control accepts as is: feedback (python-control's, not
+    overridden), lqr on a controllable subsystem, series/parallel, sample."""
+    import control as ct
 
-    m = lc.CubeModel(scenario="center")
-    lin = lc.linearize(m)
-    K, _, _ = lc.lqr(lin, *lc.default_weights(m))
-    q0 = lc.rotated(m.upright_q(), [1, 2, 3], 10.0)
-    a = lc.closed_loop(m, lin, K, q0, 1.0, backend="c")
-    calls = []
-
-    def ctrl(t, x):
-        calls.append(t)
-        return lin.control_law(K, x)
-
-    b = lc.closed_loop(m, lin, ctrl, q0, 1.0, backend="c")
-    assert len(calls) == 500 and calls[1] == pytest.approx(0.002)
-    np.testing.assert_array_equal(a.states, b.states)
-    T = a.t.size
-    assert a.states.shape == (9, T) and a.inputs.shape == (3, T) and a.outputs.shape == (9, T)
-    np.testing.assert_allclose(a.states[:, 0], lin.state(q0, np.zeros(3), np.zeros(3)))
-    fig = a.plot()
-    assert isinstance(fig, Figure) and len(fig.axes) == 4
-    tr = a.to_control()
-    assert tr.states.shape == (9, T) and list(tr.input_labels) == ["u_x", "u_y", "u_z"]
-    with pytest.raises(LavenderInputError) as e:
-        lc.closed_loop(m, lin, lambda t, x: [np.nan, 0, 0], q0, 0.1, backend="c")
-    assert e.value.field == "K"
-    with pytest.raises(LavenderInputError) as e:
-        lc.closed_loop(m, lin, np.zeros((3, 8)), q0, 0.1, backend="c")
-    assert e.value.field == "K"
+    scene = lc.chapter_cube("center")
+    lin = lc.linearize(scene)
+    K = np.asarray(lc.lqr(lin, *lc.default_weights(scene)).K)
+    cl = ct.feedback(lin, ct.ss([], [], [], K), sign=-1)            # u = −K y, y = x (C = I)
+    assert isinstance(cl, ct.StateSpace) and cl.nstates == 9
+    np.testing.assert_allclose(cl.A, lin.A - lin.B @ K, rtol=0, atol=1e-12 * np.abs(lin.A - lin.B @ K).max())
+    assert ct.feedback(lin, K).nstates == 9                           # a plain gain matrix too
+    # lqr on the controllable subsystem (an orthonormal basis T of it: ct.lqr needs a stabilizable pair)
+    T = lin.basis
+    sub = ct.ss(T.T @ lin.A @ T, T.T @ lin.B, np.eye(T.shape[1]), 0)
+    Kc, _, E = ct.lqr(sub, np.eye(T.shape[1]), np.eye(3))
+    assert np.all(np.real(E) < 0)
+    ser = ct.series(lin, ct.ss([], [], [], np.ones((1, 9))))          # y = sum of the states
+    par = ct.parallel(lin, lin)
+    assert ser.noutputs == 1 and par.nstates == 18
+    d = lin.sample(0.01)
+    assert d.dt == 0.01 and isinstance(d, type(lin)) and d.state_labels == lin.state_labels
+    np.testing.assert_allclose(d.A, ct.c2d(ct.ss(lin.A, lin.B, lin.C, lin.D), 0.01).A, rtol=1e-12, atol=1e-15)

@@ -167,14 +167,15 @@ def _scenes():
     forced = tumbling(omega_b=(0.3, 2.0, 0.1))
     forced.add_effect("gravity", g_w=(0.0, 0.0, -9.81))
     forced.add_effect("angular_damping", body="b", c=0.05)
-    cube = lc.CubeModel(scenario="corner", damping=1e-3)
+    cube = lc.chapter_cube("corner", damping=1e-3, omega_b=(0.2, -0.1, 0.3))
     return {"plain": (plain, "rk4"), "forced": (forced, "rk4"), "plain_euler": (plain, "euler"),
             "splitting": (plain, "splitting"), "implicit_gyro": (forced, "implicit_gyro"), "cube": (cube, "rk4")}
 
 
 def _sim(scene, integrator):
-    if not isinstance(scene, lv.Scene):   # a CubeModel: a wheeled body on a joint
-        sim = scene.make_sim(scene.upright_q(), (0.2, -0.1, 0.3), (5.0, -3.0, 1.0), dt=1e-3, backend="c")
+    if "cube" in scene.bodies:   # the chapter cube: a wheeled body on a joint
+        sim = lv.Sim(scene, dt=1e-3, integrator=integrator, backend="c")
+        sim.set_state("cube", Omega=(5.0, -3.0, 1.0))
         sim.set_wheel_command("cube", (0.01, -0.02, 0.005))
         return sim
     return lv.Sim(scene, dt=1e-3, integrator=integrator, backend="c")

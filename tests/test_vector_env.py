@@ -228,7 +228,7 @@ def test_actions_saturated_and_checked():
         assert data_equivalence(outs[0], out, exact=True)
     assert np.array_equal(outs[0][0], outs[3][0]) or not np.array_equal(np.clip(a, -1, 1),
                                                                          np.clip(a, -1, 1).astype(np.float32))
-    tl = envs[0].model.torque_limit
+    tl = envs[0].torque_limit
     np.testing.assert_array_equal(envs[0].sim._models.command[:, :3], np.clip(a, -1, 1) * tl)
     assert not envs[0].sim._models.command[:, 3:].any()     # the unused wheel slots stay 0
     x = envs[0].sim.x.copy()

@@ -1,15 +1,15 @@
 """Issue 13, wheel layouts: N reaction wheels on arbitrary axes (derive/wheel_layout.py, printed as
-wheels<N>_body_rhs / _momentum / _motor; lavendersim.wheel_layout) and the 4-wheel pyramid example:
-a 30° LQR slew that settles below 0.1° with every wheel within its limits, null-space wheel-speed
-management, and the momentum exchange exact with damping off; `lavendersim lqr --layout pyramid4`."""
+wheels<N>_body_rhs / _momentum / _motor; lavendersim.wheel_layout) and the 4-wheel pyramid cube
+(wheel_layout.pyramid_cube, a Scene) under the one control stack (lavendersim.control): a 30° LQR slew
+that settles below 0.1° with every wheel within its limits, null-space wheel-speed management, and the
+momentum exchange exact with damping off."""
 from __future__ import annotations
-
-import json
 
 import numpy as np
 import pytest
 
-from lavendersim import cli
+import lavendersim as lv
+from lavendersim import control as lc
 from lavendersim import wheel_layout as WL
 from lavendersim.kernels import K
 from lavendersim.validate import LavenderInputError
@@ -20,7 +20,11 @@ pytestmark = pytest.mark.needs("control")   # casadi + python-control (tests/con
 
 @pytest.fixture(scope="module")
 def pyramid():
-    return WL.pyramid4()
+    """The pyramid cube's constants: axes (3, 4), J (4,), the cube's inertia I_p (3, 3)."""
+    from types import SimpleNamespace
+
+    return SimpleNamespace(A_b=WL.pyramid_axes(), J=np.full(4, 5.7e-4), I_p=np.eye(3) * 0.15 ** 2 / 6, speed_limit=400.0,
+                           torque_limit=0.2)
 
 
 def test_pyramid_axes_and_null_space(pyramid):
@@ -55,7 +59,7 @@ def test_kernel_null_torque_moves_no_body_and_conserves_H(pyramid):
 def test_momentum_kernel_matches_definition(pyramid):
     y = np.array([0.1, -0.2, 0.3, 0.9, 0.3, -0.2, 0.5, 10.0, -20.0, 30.0, 5.0])
     y[:4] /= np.linalg.norm(y[:4])
-    Lb, Lw, h = pyramid.momentum_w(y)
+    Lb, Lw, h = (np.asarray(v, float) for v in K.wheels4_momentum(y[:4], y[4:7], y[7:], pyramid.I_p, pyramid.A_b, pyramid.J))
     R = np.asarray(K.quat_to_matrix(y[:4])).reshape(3, 3)
     A, J, w, W = pyramid.A_b, pyramid.J, y[4:7], y[7:]
     np.testing.assert_allclose(h, J * (A.T @ w + W), rtol=1e-14)
@@ -67,62 +71,52 @@ def test_momentum_kernel_matches_definition(pyramid):
     (np.array([[1.0, 0, 0, np.nan], [0, 1, 0, 0], [0, 0, 1, 1]]), r"A_b.*finite"),
     (np.array([[1.0, 0, -1, 0], [0, 1, 0, -1], [0, 0, 0, 0]]), r"A_b.*span 3-D space.*rank 2"),
     (np.ones((3, 7)) / np.sqrt(3.0), r"A_b.*span 3-D space"),
-    (np.hstack([np.eye(3), np.eye(3), [[0.0], [0.0], [1.0]]]), r"A_b.*kernels are printed for \[3, 4\] wheels.*got 7"),
     (np.zeros((2, 4)), r"A_b"),
 ])
 def test_bad_axes_are_refused(A_b, match):
     with pytest.raises(LavenderInputError, match=match):
-        WL.LayoutCube(A_b=A_b)
+        WL.axes("A_b", A_b, span=True)
 
 
 def test_bad_wheel_parameters_are_refused():
-    with pytest.raises(LavenderInputError, match=r"^J: .*positive"):
-        WL.pyramid4(J=[1e-4, 1e-4, -1e-4, 1e-4])
-    with pytest.raises(LavenderInputError, match=r"^J: .*positive definite"):
-        WL.pyramid4(J=0.01)                        # wheels heavier than the 0.00375 kg·m² cube
-    with pytest.raises(LavenderInputError, match=r"^J"):
-        WL.pyramid4(J=[1e-4, 1e-4])
-    with pytest.raises(LavenderInputError, match=r"^null_bias: .*speed_limit"):
-        WL.slew(WL.pyramid4(), null_bias=1000.0)
+    for J in ([1e-4, 1e-4, -1e-4, 1e-4], 0.01, [1e-4, 1e-4]):    # negative; heavier than the 0.00375 kg·m² cube; 2 of 4
+        with pytest.raises(LavenderInputError) as e:
+            WL.pyramid_cube(J=J)
+        assert "J" in e.value.field
+    with pytest.raises(LavenderInputError) as e:
+        lc.design(WL.pyramid_cube(), period=0.01, null_bias=1000.0)
+    assert e.value.field == "null_bias" and "speed_limit" in str(e.value)
 
 
 def test_pyramid_slew_settles_within_limits_and_manages_null_speed(pyramid):
-    res = WL.slew(pyramid, 30.0, (1.0, 2.0, 3.0), null_bias=50.0, T=4.0)
-    f = res.figures()
-    assert res.rank == 7                           # 10 states, 3 conserved momentum components
-    assert res.error_deg[0] == pytest.approx(30.0, abs=1e-9)
-    assert f["settling_time"] < 2.0                # stays below 0.1° from then on
-    assert np.all(res.error_deg[res.run["t"] >= f["settling_time"]] < 0.1)
+    scene = WL.pyramid_cube()
+    ctrl = lc.design(scene, period=0.01, null_bias=50.0)
+    assert ctrl.rank == 7                           # 16 states: p, v (6) and 3 conserved momentum components left
+    r = lc.closed_loop(scene, ctrl, T=3.0, q0=lc.rotated(ctrl.q_ref, (1.0, 2.0, 3.0), 30.0), Omega0=np.zeros(4), dt=1e-3,
+                       backend="c")
+    f = r.figures()
+    assert r.error_deg[0] == pytest.approx(30.0, abs=1e-9)
+    assert f["settling_time"] == pytest.approx(0.43, abs=1e-9)   # the README's figure (and the old wheel_layout.slew's)
+    assert np.all(r.error_deg[r.t >= f["settling_time"]] < 0.1)
     assert f["final_error_deg"] < 1e-3
     assert f["within_limits"]
-    assert max(f["peak_wheel_speed"]) < 0.5 * pyramid.speed_limit
-    assert np.all(np.abs(res.run["u"]) <= pyramid.torque_limit + 1e-15)
+    np.testing.assert_allclose(f["peak_wheel_speed"], 23.0227110931837, rtol=1e-9)   # README: every wheel ≤ 23 rad/s
+    assert np.all(np.abs(r.applied) <= pyramid.torque_limit + 1e-15)
     # null-space management: the wheels' null component went from 0 to its target (50 rad/s) …
-    assert f["null_Omega_start"][0] == 0.0
-    assert abs(f["null_Omega_end"][0] - 50.0) < 2.5
-    # … and the rest of the wheel momentum is what the slew needs: back to 0 at rest (H = 0)
-    Om_end = res.run["y"][-1, 7:]
     n = WL.null_space(pyramid.A_b)[:, 0]
-    np.testing.assert_allclose(Om_end - n * (n @ Om_end), 0.0, atol=0.05)
+    assert n @ r.Omega[0] == 0.0
+    assert n @ r.Omega[-1] == pytest.approx(46.05, abs=0.01)      # README: 0 → 46 rad/s in the 3 s
+    # … and the rest of the wheel momentum is what the slew needs: back to 0 at rest (H = 0)
+    np.testing.assert_allclose(r.Omega[-1] - n * (n @ r.Omega[-1]), 0.0, atol=0.05)
+    assert r.L_drift <= 1e-9
 
 
-def test_pyramid_momentum_exchange_exact_with_damping_off(pyramid):
-    m = WL.pyramid4(wheel_damping=0.0)
-    out = WL.momentum_exchange(m)
+def test_pyramid_momentum_exchange_exact_with_damping_off():
+    out = lc.momentum_exchange(WL.pyramid_cube(wheel_damping=0.0))
     assert out["max_dL_wheels"] > 0.05             # real exchange happened
     assert out["exchange_residual"] <= 1e-9
     assert out["L_drift"] <= 1e-9
-
-
-def test_cli_lqr_layout_pyramid4(capsys):
-    assert cli.main(["lqr", "--layout", "pyramid4", "--T", "1.5", "--json"]) == 0
-    out = json.loads(capsys.readouterr().out)
-    assert out["layout_wheels"] == 4 and out["settling_time"] < 1.5 and out["within_limits"]
-    assert out["momentum_check"]["exchange_residual"] <= 1e-9
-    for args, field in ((["--J", "1e-4,1e-4"], "J"), (["--scenario", "corner"], "layout"), (["--Q", "1,2"], "Q")):
-        assert cli.main(["lqr", "--layout", "pyramid4", *args]) == 2
-        err = capsys.readouterr().err
-        assert err.count("\n") == 1 and f"invalid parameter: {field}" in err
+    assert out["exchange_residual"] == pytest.approx(1.0836557412199025e-11, rel=1e-3)   # the README's 1.1e-11
 
 
 def test_printed_counts_and_three_body_axes_equal_the_cube_equations():
@@ -153,8 +147,10 @@ def test_other_counts_momentum_exchange(n):
     rng = np.random.default_rng(n)
     A = rng.normal(size=(3, n))
     A /= np.linalg.norm(A, axis=0)
-    m = WL.LayoutCube(A_b=A, J=2e-4)
+    scene = lv.Scene()
+    scene.add_body(lv.Body.box("sc", 1.0, (0.15, 0.15, 0.15)))
+    scene.add_effect("reaction_wheels", body="sc", axes_b=A.T, J=[2e-4] * n, torque_limit=0.2, speed_limit=400.0)
     assert WL.null_space(A).shape == (n, n - 3)
-    out = WL.momentum_exchange(m, T=0.5)
+    out = lc.momentum_exchange(scene, T=0.5)
     assert out["max_dL_wheels"] > 0.01
     assert out["exchange_residual"] <= 1e-9 and out["L_drift"] <= 1e-9

@@ -62,7 +62,7 @@ def env_section(quick: bool, rounds: int, interleaved) -> dict:
         e.reset(seed=0)
     acts = [np.array(ACTION, np.float32), -np.array(ACTION, np.float32)]
     sim = phys.sim
-    sim.set_wheel_command("cube", np.array(ACTION) * phys.model.torque_limit)
+    sim.set_wheel_command("cube", np.array(ACTION) * phys.torque_limit)
     k = phys.substeps
 
     def loop(step, n):
@@ -75,7 +75,7 @@ def env_section(quick: bool, rounds: int, interleaved) -> dict:
     vec.reset(seed=0)
     A = [np.tile(a, (VECTOR_N, 1)) for a in acts]
     vsim = vec.unwrapped.sim
-    vsim.set_wheel_commands(np.tile(np.array(ACTION) * phys.model.torque_limit, (VECTOR_N, 1)))
+    vsim.set_wheel_commands(np.tile(np.array(ACTION) * phys.torque_limit, (VECTOR_N, 1)))
     have_c = vsim.backend.name == "c"
 
     def vec_loop(n):

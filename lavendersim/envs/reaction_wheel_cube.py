@@ -9,7 +9,7 @@ Tasks
     −s/2 (1,1,1), target: body diagonal vertical). Episodes start at rest, tilted by a uniform
     random angle in [0, ``init_angle_deg``] (default 3°) about a random horizontal axis.
 
-Model (lavendersim.control.CubeModel): 15 cm, 1 kg cube, wheel spin inertia 5.7e-4 kg·m², motor
+Model (lavendersim.control.chapter_cube, a Scene): 15 cm, 1 kg cube, wheel spin inertia 5.7e-4 kg·m², motor
 torque limit 0.2 N·m, wheel speed limit 400 rad/s, cube angular damping ``damping`` = 1e-3 N·m·s/rad.
 
 Action: ``Box(-1, 1, (3,), float32)`` — wheel motor torques as fractions of the torque limit
@@ -39,12 +39,12 @@ Agg canvas (cube edges and body axes; no display needed); ``None`` renders nothi
 ``gymnasium.make`` (the registered entry point is :func:`make_env`, so gymnasium does not swap an
 unsupported mode for a wrapper of its own).
 
-Every argument is validated: unknown keyword arguments (of the env or of the CubeModel it builds),
-a ``model`` that is not a CubeModel, a bad ``seed`` or ``options`` raise LavenderInputError naming it.
+Every argument is validated: unknown keyword arguments (of the env or of the chapter_cube it builds),
+a bad ``seed`` or ``options`` raise LavenderInputError naming it.
 """
 from __future__ import annotations
 
-import dataclasses
+import inspect
 import math
 from collections.abc import Callable, Mapping, Sequence
 from typing import TYPE_CHECKING, Any
@@ -97,10 +97,9 @@ class ReactionWheelCubeEnv(gym.Env):
         Terminate beyond this error, degrees.
     target_q : array_like, shape (4,), optional
         Target attitude (x, y, z, w).
-    model : lavendersim.control.CubeModel, optional
-        A ready model (else built from `task` and `model_params`).
     **model_params
-        CubeModel fields (mass, size, J, torque_limit, ...).
+        lavendersim.control.chapter_cube's keywords (mass, size, J, torque_limit, speed_limit,
+        wheel_damping, g, motor).
 
     Examples
     --------
@@ -115,27 +114,27 @@ class ReactionWheelCubeEnv(gym.Env):
     @V.keywords
     def __init__(self, task: str = "center", backend: str = "auto", render_mode: str | None = None, *,
                  control_dt: float = 0.01, dt: float = 1e-3, damping: float = 1e-3, init_angle_deg: float | None = None,
-                 max_tilt_deg: float = 20.0, target_q: ArrayLike | None = None, model: lc.CubeModel | None = None,
+                 max_tilt_deg: float = 20.0, target_q: ArrayLike | None = None,
                  **model_params: Any) -> None:
         super().__init__()
         task = V.choice("task", task, lc.SCENARIOS)
         if render_mode is not None and (not isinstance(render_mode, str) or render_mode not in self.metadata["render_modes"]):
             raise V.LavenderInputError("render_mode", "must be None or 'rgb_array'", f", got {render_mode!r}")
         self.render_mode = render_mode
-        known = sorted({f.name for f in dataclasses.fields(lc.CubeModel)} - {"scenario", "damping"})
+        known = sorted(set(inspect.signature(lc.chapter_cube).parameters) - {"scenario", "damping", "q", "omega_b", "name"})
         unknown = sorted(set(model_params) - set(known))
         if unknown:
             raise V.LavenderInputError(unknown[0], "unknown keyword argument of ReactionWheelCube-v0",
                                        f"; known: task, backend, render_mode, control_dt, dt, damping, init_angle_deg, "
-                                       f"max_tilt_deg, target_q, model and the CubeModel's {', '.join(known)}")
-        if model is not None and not isinstance(model, lc.CubeModel):
-            raise V.LavenderInputError("model", "must be a lavendersim.control.CubeModel or None",
-                                       f", got {V._describe(model)}")
-        if model is not None and model_params:
-            raise V.LavenderInputError(sorted(model_params)[0], "give either model= or the CubeModel's parameters")
+                                       f"max_tilt_deg, target_q and the chapter cube's {', '.join(known)}")
         self.backend = backends.resolve(backend)
-        self.model = model or lc.CubeModel(scenario=task, damping=damping, **model_params)
-        self.task = self.model.scenario
+        self.task = task
+        self._cube = {"damping": damping, **model_params}
+        self.scene = lc.chapter_cube(task, **self._cube)   # the template: validates the parameters
+        wheels = self.scene.model_effects(BODY)["reaction_wheels"].values
+        self.torque_limit, self.speed_limit = float(wheels["torque_limit"]), float(wheels["speed_limit"])
+        self.size = float(self.scene.bodies[BODY].shape[1][0])
+        self.r_b = lc.cube_r_b(task, self.size)
         self.dt = V.dt("dt", dt)
         self.control_dt = V.dt("control_dt", control_dt)
         ratio = self.control_dt / self.dt
@@ -150,12 +149,12 @@ class ReactionWheelCubeEnv(gym.Env):
         self.max_tilt_deg = V.positive("max_tilt_deg", max_tilt_deg)
         if target_q is not None and self.task == "corner":
             raise V.LavenderInputError("target_q", "the corner task's target is fixed (body diagonal vertical)")
-        self.target_q = self.model.upright_q() if target_q is None else V.quaternion("target_q", target_q)
+        self.target_q = lc.cube_upright_q(task) if target_q is None else V.quaternion("target_q", target_q)
         self._tq = tuple(float(v) for v in self.target_q)
         self.action_space = spaces.Box(-1.0, 1.0, shape=(3,), dtype=np.float32)
         # finite bounds (gymnasium's checker rejects infinite ones): leaving them ends the episode
         self.rate_bound = 200.0                               # rad/s, cube
-        self.wheel_bound = 2.0 * self.model.speed_limit       # rad/s
+        self.wheel_bound = 2.0 * self.speed_limit       # rad/s
         hi = np.array([1.0] * 4 + [self.rate_bound] * 3 + [self.wheel_bound] * 3, dtype=np.float32)
         self.observation_space = spaces.Box(-hi, hi, dtype=np.float32)
         self.sim: Sim | None = None
@@ -164,6 +163,16 @@ class ReactionWheelCubeEnv(gym.Env):
         self._io: _StepIO | None = None
 
     # ---- helpers --------------------------------------------------------------------------
+    def _make_sim(self, q0: np.ndarray, omega_b: np.ndarray, Omega: np.ndarray) -> Sim:
+        """A Sim of the chapter cube at q0, omega_b (rad/s) with wheel rates Omega (rad/s), RK4 at dt."""
+        from ..sim import Sim
+
+        sim = Sim(lc.chapter_cube(self.task, q=q0, omega_b=omega_b, **self._cube), dt=self.dt, integrator="rk4",
+                  backend=self.backend)
+        if np.any(Omega != 0):
+            sim.set_state(BODY, Omega=Omega)
+        return sim
+
     def _raw(self) -> np.ndarray:
         """[q (4), omega_b (3), Omega (3)] of the cube (a copy, from the Sim's views)."""
         sim, raw = self.sim, np.empty(10)
@@ -251,7 +260,7 @@ class ReactionWheelCubeEnv(gym.Env):
             raise V.LavenderInputError("options.Omega", f"must be within ±{self.wheel_bound:g} rad/s (the observation bounds)")
         super().reset(seed=seed)
         q0 = self._initial_q() if q_given is None else q_given
-        self.sim = self.model.make_sim(q0, w0, Om0, dt=self.dt, backend=self.backend)
+        self.sim = self._make_sim(q0, w0, Om0)
         self._last_u = np.zeros(3)
         return self._obs(), self._info()
 
@@ -361,11 +370,11 @@ class ReactionWheelCubeEnv(gym.Env):
             self._ax = self._fig.add_subplot(projection="3d")
         ax = self._ax
         ax.cla()
-        s = self.model.size
+        s = self.size
         st = self.sim.state(BODY) if self.sim is not None else None
         q = st.q if st is not None else self.target_q
         R = K.quat_to_matrix(q)
-        com = R @ self.model.r_b
+        com = R @ self.r_b
         corners = np.array([[i, j, k] for i in (-1, 1) for j in (-1, 1) for k in (-1, 1)], float) * s / 2
         pts = com + corners @ R.T
         for a_ in range(8):
@@ -408,7 +417,7 @@ class _StepIO:
         fast = sim._fast
         self.advance = fast.advance if fast is not None and 1 <= env.substeps <= sim._fast_n else None
         self.counters, self.dt = sim._ctr, sim.dt     # sim.t = steps * dt
-        self.torque_limit = float(env.model.torque_limit)
+        self.torque_limit = float(env.torque_limit)
         self.obs = np.zeros(10, np.float32)
         self.obs_mv = memoryview(self.obs)
         high = env.observation_space.high

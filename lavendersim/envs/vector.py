@@ -38,7 +38,8 @@ from .._install import require
 from ..errors import DivergenceError
 from ..generated import layout as LY
 from ..kernels import K
-from .reaction_wheel_cube import ReactionWheelCubeEnv, initial_q
+from .. import control as lc
+from .reaction_wheel_cube import BODY, ReactionWheelCubeEnv, initial_q
 
 gym = require("gymnasium", "gym", "the ReactionWheelCube-v0 vector environment")
 require("gymnasium.vector", "gym", "the ReactionWheelCube-v0 vector environment")
@@ -58,7 +59,7 @@ class ReactionWheelCubeVectorEnv(VectorEnv):
         Truncate an episode after this many steps (None: never).
     **env_kwargs
         The single environment's arguments (task, backend, control_dt, dt, damping, init_angle_deg,
-        max_tilt_deg, target_q, model or the CubeModel's parameters), validated by it.
+        max_tilt_deg, target_q or the chapter cube's parameters), validated by it.
 
     Observations (N, 10) float32, actions (N, 3) float32 in [-1, 1], rewards (N,) float64,
     terminations and truncations (N,) bool.
@@ -78,7 +79,7 @@ class ReactionWheelCubeVectorEnv(VectorEnv):
         self.render_mode = None
         one = ReactionWheelCubeEnv(**env_kwargs)    # validates every argument; its settings are the template
         self._one = one
-        self.model, self.task, self.substeps = one.model, one.task, one.substeps
+        self.task, self.substeps, self.torque_limit = one.task, one.substeps, one.torque_limit
         self.single_observation_space, self.single_action_space = one.observation_space, one.action_space
         self.observation_space = batch_space(one.observation_space, self.num_envs)
         self.action_space = batch_space(one.action_space, self.num_envs)
@@ -102,29 +103,30 @@ class ReactionWheelCubeVectorEnv(VectorEnv):
 
         from ..effects import make
 
-        m, s, n = self.model, self.model.size, self.num_envs
-        q_up = V.quaternion("q0", m.upright_q())
-        p_w = np.asarray(K.quat_rotate(q_up, m.r_b), dtype=float)
+        one, n = self._one, self.num_envs
+        tmpl = one.scene                                  # the single env's chapter cube: its body and effects
+        cube, s = tmpl.bodies[BODY], one.size
+        q_up = V.quaternion("q0", lc.cube_upright_q(one.task))
+        p_w = np.asarray(K.quat_rotate(q_up, one.r_b), dtype=float)
         scene = lv.Scene()
-        wheels = dict(J=m.J.tolist(), torque_limit=m.torque_limit, speed_limit=m.speed_limit, c_w=m.wheel_damping)
+        wheels = dict(tmpl.model_effects(BODY)["reaction_wheels"].values)
         for i in range(n):
-            body = lv.Body.box(f"cube{i}", mass=m.mass, size=(s, s, s), p_w=p_w, q=q_up)
+            body = lv.Body.box(f"cube{i}", mass=cube.mass, size=(s, s, s), p_w=p_w, q=q_up)
             scene.add_body(body)
         for i in range(n):   # validated model effects, one pair per body (new names: no duplicate scan needed)
             scene.effects.append(make("spherical_joint", body=f"cube{i}", anchor_w=[0.0, 0.0, 0.0]))
             scene.effects.append(make("reaction_wheels", body=f"cube{i}", **wheels))
-        if m.gravity:
-            scene.add_effect("gravity", g_w=m.g_w)
-        if m.damping > 0:
-            scene.add_effect("angular_damping", c=m.damping)
+        for e in tmpl.effects:   # the force effects, declared once for every cube
+            if not e.per_body:
+                scene.add_effect(e.name, **dict(e.values))
         sim = lv.Sim(scene, dt=self._one.dt, integrator="rk4", backend=self._one.backend)
         sim._fast_chunks()     # one step's run inside C (Stepper.advance: run's checks and results), any N
         return sim
 
     def _place(self, i: int, q0: np.ndarray, omega_b: np.ndarray, Omega: np.ndarray) -> None:
-        """Cube i at the start of an episode, exactly as the single env's make_sim builds it."""
+        """Cube i at the start of an episode, exactly as the single env's _make_sim builds it."""
         q0 = V.quaternion("q0", q0)
-        p_w = np.asarray(K.quat_rotate(q0, self.model.r_b), dtype=float)
+        p_w = np.asarray(K.quat_rotate(q0, self._one.r_b), dtype=float)
         self.sim._reinit_body(i, p_w, V.quaternion("q", q0), omega_b, Omega)
 
     def _reset_one(self, i: int) -> None:
@@ -182,7 +184,7 @@ class ReactionWheelCubeVectorEnv(VectorEnv):
         # finite and saturated: written straight into the held commands (set_wheel_commands' array; every cube has
         # wheels), as a * torque_limit
         cmd = sim._models.command[:, :LY.WHEELS_BODY_AXES]    # the cubes' three wheels: the first slots
-        np.multiply(a, self.model.torque_limit, out=cmd)
+        np.multiply(a, self.torque_limit, out=cmd)
         if any_reset:
             cmd[resets] = 0.0
         diverged = self._run()
