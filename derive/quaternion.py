@@ -170,6 +170,11 @@ def kernels() -> list[Kernel]:
     e = qmul(qconj(q_ref), q)
     err_angle = 2 * sp.atan2(sp.sqrt(e[0] ** 2 + e[1] ** 2 + e[2] ** 2), sp.Abs(e[3]))
 
+    # The attitude-error chart of the wheel controllers (lavendersim.control.design): dtheta = 2 sgn(e_w) e_v with
+    # e = q_ref* ⊗ q, the rotation vector of e to first order (|dtheta| = 2 sin(θ/2)), the same for q and −q;
+    # e_w = 0 (a half turn) takes the + branch.
+    chart = sp.Matrix([sp.Piecewise((-2 * e[i], e[3] < 0), (2 * e[i], True)) for i in range(3)])
+
     # Shortest arc taking the unit vector a onto the unit vector b: q ∝ [a × b, 1 + a·b]. When b is
     # (nearly) −a that direction is lost to rounding, so the half turn about an axis ⟂ a is taken
     # instead: a × e_x, or a × e_y when a lies within 45° of e_x.
@@ -213,6 +218,12 @@ def kernels() -> list[Kernel]:
                r"\theta = 2\,\operatorname{atan2}(\lVert e_v\rVert, |e_w|),\ e = q_{ref}^* \otimes q",
                [Arg("q", q, Q + ", unit", "unit_quaternion"), Arg("q_ref", q_ref, Q + ", unit", "unit_quaternion")],
                [Arg("angle", err_angle, "angle, rad")], g),
+        Kernel("quat_error_chart", "Attitude-error chart of the wheel controllers: 2 sgn(e_w) e_v (q and −q alike)",
+               r"\delta\theta = 2\,\operatorname{sgn}(e_w)\,e_v,\ e = q_{ref}^* \otimes q"
+               r"\ (\lVert\delta\theta\rVert = 2\sin(\theta/2),\ \operatorname{sgn}(0) = 1)",
+               [Arg("q", q, Q + ", unit, body to world", "unit_quaternion"),
+                Arg("q_ref", q_ref, Q + ", unit, body to world", "unit_quaternion")],
+               [Arg("dtheta", chart, "attitude error, body frame, rad (the rotation vector of e to first order)")], g),
         Kernel("euler_xyz_to_quat", "Quaternion of intrinsic XYZ Euler angles, R = Rx(roll) Ry(pitch) Rz(yaw)",
                r"q = q_x(a) \otimes q_y(b) \otimes q_z(c)",
                [Arg("roll", ea, "rad"), Arg("pitch", eb, "rad"), Arg("yaw", ec, "rad")], [Arg("q", euler_xyz_quat(ea, eb, ec), Q)], g),

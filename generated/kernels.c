@@ -595,6 +595,41 @@ void lv_quat_error_angle(const double *q, const double *q_ref, double *angle) {
     angle[0] = 2*atan2(sqrt((t0*t0) + (t1*t1) + (t2*t2)), fabs(q_0*q_ref_0 + q_1*q_ref_1 + q_2*q_ref_2 + q_3*q_ref_3));
 }
 
+void lv_quat_error_chart(const double *q, const double *q_ref, double *dtheta) {
+    const double q_0 = q[0];
+    const double q_1 = q[1];
+    const double q_2 = q[2];
+    const double q_3 = q[3];
+    const double q_ref_0 = q_ref[0];
+    const double q_ref_1 = q_ref[1];
+    const double q_ref_2 = q_ref[2];
+    const double q_ref_3 = q_ref[3];
+    const double t0 = 2*q_ref_3;
+    const double t1 = 2*q_ref_2;
+    const double t2 = q_0*t0 + q_1*t1 - 2*q_2*q_ref_1 - 2*q_3*q_ref_0;
+    const double t3 = q_0*q_ref_0 + q_1*q_ref_1 + q_2*q_ref_2 + q_3*q_ref_3 < 0;
+    const double t4 = q_0*t1 - q_1*t0 - 2*q_2*q_ref_0 + 2*q_3*q_ref_1;
+    const double t5 = 2*q_0*q_ref_1 - 2*q_1*q_ref_0 + q_2*t0 - 2*q_3*q_ref_2;
+    dtheta[0] = ((t3) ? (
+   -t2
+)
+: (
+   t2
+));
+    dtheta[1] = ((t3) ? (
+   t4
+)
+: (
+   -t4
+));
+    dtheta[2] = ((t3) ? (
+   -t5
+)
+: (
+   t5
+));
+}
+
 void lv_euler_xyz_to_quat(double roll, double pitch, double yaw, double *q) {
     const double t0 = ((1.0/2.0))*yaw;
     const double t1 = sin(t0);
@@ -3100,6 +3135,7 @@ static void packed_axis_angle_to_quat(const double *in, double *out) { lv_axis_a
 static void packed_quat_from_two_vectors(const double *in, double *out) { lv_quat_from_two_vectors(in + 0, in + 3, out + 0); }
 static void packed_quat_to_axis_angle(const double *in, double *out) { lv_quat_to_axis_angle(in + 0, out + 0, out + 3); }
 static void packed_quat_error_angle(const double *in, double *out) { lv_quat_error_angle(in + 0, in + 4, out + 0); }
+static void packed_quat_error_chart(const double *in, double *out) { lv_quat_error_chart(in + 0, in + 4, out + 0); }
 static void packed_euler_xyz_to_quat(const double *in, double *out) { lv_euler_xyz_to_quat(in[0], in[1], in[2], out + 0); }
 static void packed_quat_to_euler_xyz(const double *in, double *out) { lv_quat_to_euler_xyz(in + 0, out + 0); }
 static void packed_quat_derivative_world(const double *in, double *out) { lv_quat_derivative_world(in + 0, in + 4, out + 0); }
@@ -3177,6 +3213,7 @@ const lv_kernel_info lv_kernel_table[LV_KERNEL_COUNT] = {
     {"quat_from_two_vectors", 6, 4, packed_quat_from_two_vectors},
     {"quat_to_axis_angle", 4, 4, packed_quat_to_axis_angle},
     {"quat_error_angle", 8, 1, packed_quat_error_angle},
+    {"quat_error_chart", 8, 3, packed_quat_error_chart},
     {"euler_xyz_to_quat", 3, 4, packed_euler_xyz_to_quat},
     {"quat_to_euler_xyz", 4, 3, packed_quat_to_euler_xyz},
     {"quat_derivative_world", 7, 4, packed_quat_derivative_world},

@@ -11,7 +11,7 @@ typedef struct {
     void (*packed)(const double *in, double *out);
 } lv_kernel_info;
 
-#define LV_KERNEL_COUNT 75
+#define LV_KERNEL_COUNT 76
 extern const lv_kernel_info lv_kernel_table[LV_KERNEL_COUNT];
 
 /* particle_moments: One particle's mass moment and momentum (summed: m r_COM and p).
@@ -172,6 +172,12 @@ void lv_quat_to_axis_angle(const double *q, double *axis, double *angle);
      in  q_ref [4]: quaternion (x, y, z, w), scalar last, unit
      out angle scalar: angle, rad */
 void lv_quat_error_angle(const double *q, const double *q_ref, double *angle);
+
+/* quat_error_chart: Attitude-error chart of the wheel controllers: 2 sgn(e_w) e_v (q and −q alike).
+     in  q [4]: quaternion (x, y, z, w), scalar last, unit, body to world
+     in  q_ref [4]: quaternion (x, y, z, w), scalar last, unit, body to world
+     out dtheta [3]: attitude error, body frame, rad (the rotation vector of e to first order) */
+void lv_quat_error_chart(const double *q, const double *q_ref, double *dtheta);
 
 /* euler_xyz_to_quat: Quaternion of intrinsic XYZ Euler angles, R = Rx(roll) Ry(pitch) Rz(yaw).
      in  roll scalar: rad

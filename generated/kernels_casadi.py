@@ -514,6 +514,28 @@ def quat_error_angle(q, q_ref):
     return casadi.vertcat(2*casadi.atan2(casadi.sqrt((t0*t0) + (t1*t1) + (t2*t2)), casadi.fabs(q_0*q_ref_0 + q_1*q_ref_1 + q_2*q_ref_2 + q_3*q_ref_3)))
 
 
+def quat_error_chart(q, q_ref):
+    """quat_error_chart: Attitude-error chart of the wheel controllers: 2 sgn(e_w) e_v (q and −q alike).
+      in  q [4]: quaternion (x, y, z, w), scalar last, unit, body to world
+      in  q_ref [4]: quaternion (x, y, z, w), scalar last, unit, body to world
+      out dtheta [3]: attitude error, body frame, rad (the rotation vector of e to first order)"""
+    q_0 = q[0]
+    q_1 = q[1]
+    q_2 = q[2]
+    q_3 = q[3]
+    q_ref_0 = q_ref[0]
+    q_ref_1 = q_ref[1]
+    q_ref_2 = q_ref[2]
+    q_ref_3 = q_ref[3]
+    t0 = 2*q_ref_3
+    t1 = 2*q_ref_2
+    t2 = q_0*t0 + q_1*t1 - 2*q_2*q_ref_1 - 2*q_3*q_ref_0
+    t3 = (q_0*q_ref_0 + q_1*q_ref_1 + q_2*q_ref_2 + q_3*q_ref_3 < 0)
+    t4 = q_0*t1 - q_1*t0 - 2*q_2*q_ref_0 + 2*q_3*q_ref_1
+    t5 = 2*q_0*q_ref_1 - 2*q_1*q_ref_0 + q_2*t0 - 2*q_3*q_ref_2
+    return casadi.vertcat(casadi.if_else(t3, -t2, t2), casadi.if_else(t3, t4, -t4), casadi.if_else(t3, -t5, t5))
+
+
 def euler_xyz_to_quat(roll, pitch, yaw):
     """euler_xyz_to_quat: Quaternion of intrinsic XYZ Euler angles, R = Rx(roll) Ry(pitch) Rz(yaw).
       in  roll scalar: rad

@@ -596,6 +596,41 @@ void lvf_quat_error_angle(const float *q, const float *q_ref, float *angle) {
     angle[0] = 2*atan2f(sqrtf((t0*t0) + (t1*t1) + (t2*t2)), fabsf(q_0*q_ref_0 + q_1*q_ref_1 + q_2*q_ref_2 + q_3*q_ref_3));
 }
 
+void lvf_quat_error_chart(const float *q, const float *q_ref, float *dtheta) {
+    const float q_0 = q[0];
+    const float q_1 = q[1];
+    const float q_2 = q[2];
+    const float q_3 = q[3];
+    const float q_ref_0 = q_ref[0];
+    const float q_ref_1 = q_ref[1];
+    const float q_ref_2 = q_ref[2];
+    const float q_ref_3 = q_ref[3];
+    const float t0 = 2*q_ref_3;
+    const float t1 = 2*q_ref_2;
+    const float t2 = q_0*t0 + q_1*t1 - 2*q_2*q_ref_1 - 2*q_3*q_ref_0;
+    const float t3 = q_0*q_ref_0 + q_1*q_ref_1 + q_2*q_ref_2 + q_3*q_ref_3 < 0;
+    const float t4 = q_0*t1 - q_1*t0 - 2*q_2*q_ref_0 + 2*q_3*q_ref_1;
+    const float t5 = 2*q_0*q_ref_1 - 2*q_1*q_ref_0 + q_2*t0 - 2*q_3*q_ref_2;
+    dtheta[0] = ((t3) ? (
+   -t2
+)
+: (
+   t2
+));
+    dtheta[1] = ((t3) ? (
+   t4
+)
+: (
+   -t4
+));
+    dtheta[2] = ((t3) ? (
+   -t5
+)
+: (
+   t5
+));
+}
+
 void lvf_euler_xyz_to_quat(float roll, float pitch, float yaw, float *q) {
     const float t0 = ((1.0F/2.0F))*yaw;
     const float t1 = sinf(t0);

@@ -55,6 +55,8 @@ void lvf_quat_from_two_vectors(const float *a, const float *b, float *q);
 void lvf_quat_to_axis_angle(const float *q, float *axis, float *angle);
 /* quat_error_angle: Angle of the rotation between two attitudes (q and −q alike), in [0, π] (float; see kernels.h) */
 void lvf_quat_error_angle(const float *q, const float *q_ref, float *angle);
+/* quat_error_chart: Attitude-error chart of the wheel controllers: 2 sgn(e_w) e_v (q and −q alike) (float; see kernels.h) */
+void lvf_quat_error_chart(const float *q, const float *q_ref, float *dtheta);
 /* euler_xyz_to_quat: Quaternion of intrinsic XYZ Euler angles, R = Rx(roll) Ry(pitch) Rz(yaw) (float; see kernels.h) */
 void lvf_euler_xyz_to_quat(float roll, float pitch, float yaw, float *q);
 /* quat_to_euler_xyz: Intrinsic XYZ Euler angles of a unit quaternion, exact through gimbal lock (float; see kernels.h) */

@@ -1051,6 +1051,48 @@ def quat_error_angle(q, q_ref):
     return angle_out
 
 
+def quat_error_chart(q, q_ref):
+    """Attitude-error chart of the wheel controllers: 2 sgn(e_w) e_v (q and −q alike).
+
+    Generated kernel ``quat_error_chart``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    q : array_like, shape (..., 4)
+        quaternion (x, y, z, w), scalar last, unit, body to world
+    q_ref : array_like, shape (..., 4)
+        quaternion (x, y, z, w), scalar last, unit, body to world
+
+    Returns
+    -------
+    dtheta : ndarray, shape (..., 3)
+        attitude error, body frame, rad (the rotation vector of e to first order)
+    """
+    q = numpy.asarray(q, dtype=numpy.float32)
+    q_ref = numpy.asarray(q_ref, dtype=numpy.float32)
+    batch = numpy.broadcast_shapes(q.shape[:-1], q_ref.shape[:-1])
+    q_0 = q[..., 0]
+    q_1 = q[..., 1]
+    q_2 = q[..., 2]
+    q_3 = q[..., 3]
+    q_ref_0 = q_ref[..., 0]
+    q_ref_1 = q_ref[..., 1]
+    q_ref_2 = q_ref[..., 2]
+    q_ref_3 = q_ref[..., 3]
+    with numpy.errstate(invalid='ignore', divide='ignore'):  # numpy.select evaluates every branch
+        t0 = 2*q_ref_3
+        t1 = 2*q_ref_2
+        t2 = q_0*t0 + q_1*t1 - 2*q_2*q_ref_1 - 2*q_3*q_ref_0
+        t3 = numpy.less(q_0*q_ref_0 + q_1*q_ref_1 + q_2*q_ref_2 + q_3*q_ref_3, 0)
+        t4 = q_0*t1 - q_1*t0 - 2*q_2*q_ref_0 + 2*q_3*q_ref_1
+        t5 = 2*q_0*q_ref_1 - 2*q_1*q_ref_0 + q_2*t0 - 2*q_3*q_ref_2
+        dtheta_out = numpy.empty(batch + (3,), dtype=numpy.float32)
+        dtheta_out[..., 0] = numpy.select([t3,True], [-t2,t2], default=numpy.nan)
+        dtheta_out[..., 1] = numpy.select([t3,True], [t4,-t4], default=numpy.nan)
+        dtheta_out[..., 2] = numpy.select([t3,True], [-t5,t5], default=numpy.nan)
+    return dtheta_out
+
+
 def euler_xyz_to_quat(roll, pitch, yaw):
     """Quaternion of intrinsic XYZ Euler angles, R = Rx(roll) Ry(pitch) Rz(yaw).
 
@@ -4408,6 +4450,7 @@ KERNELS = {
     'quat_from_two_vectors': (quat_from_two_vectors, [('a', (3,)), ('b', (3,))], [('q', (4,))]),
     'quat_to_axis_angle': (quat_to_axis_angle, [('q', (4,))], [('axis', (3,)), ('angle', ())]),
     'quat_error_angle': (quat_error_angle, [('q', (4,)), ('q_ref', (4,))], [('angle', ())]),
+    'quat_error_chart': (quat_error_chart, [('q', (4,)), ('q_ref', (4,))], [('dtheta', (3,))]),
     'euler_xyz_to_quat': (euler_xyz_to_quat, [('roll', ()), ('pitch', ()), ('yaw', ())], [('q', (4,))]),
     'quat_to_euler_xyz': (quat_to_euler_xyz, [('q', (4,))], [('rpy', (3,))]),
     'quat_derivative_world': (quat_derivative_world, [('q', (4,)), ('omega_w', (3,))], [('q_dot', (4,))]),

@@ -81,14 +81,11 @@ class Body:
         ``(kind, dims)`` drawn by the viewer: ``("box", (w, h, d))``, ``("cylinder", (r, h))`` or
         ``("sphere", (r,))``, lengths in m, > 0. None: drawn as the inertia-equivalent box.
 
-    Attributes
-    ----------
-    I_b : ndarray, shape (3,)
-        The principal moments, kg·m² (for a diagonal tensor: its diagonal, in order).
-    R_bp : ndarray, shape (3, 3)
-        The principal axes as columns, body frame (identity for a diagonal tensor); proper rotation.
-    inertia_b : ndarray, shape (3, 3)
-        The tensor in the body frame, ``R_bp diag(I_b) R_bpᵀ``.
+    Notes
+    -----
+    ``I_b`` (3,) holds the principal moments, kg·m² (for a diagonal tensor: its diagonal, in order);
+    ``R_bp`` (3, 3) the principal axes as columns in the body frame (identity for a diagonal tensor; a
+    proper rotation); ``inertia_b`` (3, 3) the tensor in the body frame as given.
     """
 
     __slots__ = _FIELDS
@@ -114,7 +111,11 @@ class Body:
         if omega_b is not None and omega_w is not None:
             raise V.LavenderInputError("omega_w", "give omega_b or omega_w, not both")
         if omega_w is not None:
-            x[W] = K.world_to_body(x[Q], V.vector("omega_w", omega_w))
+            with np.errstate(over="ignore", invalid="ignore"):
+                x[W] = K.world_to_body(x[Q], V.vector("omega_w", omega_w))
+            if not np.all(np.isfinite(x[W])):
+                raise V.LavenderInputError("omega_w", "its body-frame value overflows a float64",
+                                           f", got {V._nums(np.asarray(omega_w, dtype=float))}")
         else:
             x[W] = V.vector("omega_b", (0, 0, 0) if omega_b is None else omega_b)
         shape = _shape(shape)

@@ -44,6 +44,7 @@ From the shell: ``lavendersim lqr --spacecraft FILE`` (lavendersim.cli_lqr; ``--
 from __future__ import annotations
 
 import math
+import numbers
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -152,7 +153,7 @@ def chapter_cube(scenario: str = "center", *, mass: float = 1.0, size: float = 0
     scenario = V.choice("scenario", scenario, SCENARIOS)
     motor = V.choice("motor", motor, MOTORS)
     mass, size = V.positive("mass", mass), V.positive("size", size)
-    Jv = np.full(3, V.scalar("J", J)) if np.ndim(J) == 0 else V.vector("J", J)
+    Jv = np.full(3, V.scalar("J", J)) if isinstance(J, numbers.Real) else V.vector("J", J)
     if np.any(Jv <= 0):
         raise V.LavenderInputError("J", "wheel spin inertias must be positive", f", got {Jv.tolist()}")
     torque_limit, speed_limit = V.positive("torque_limit", torque_limit), V.positive("speed_limit", speed_limit)

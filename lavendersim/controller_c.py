@@ -203,6 +203,39 @@ def _step_body(fn: Any, names: list[str], prec: _Precision) -> tuple[list[str], 
     return lines, out, n_ops
 
 
+def function_c(fn: Any, name: str, precision: str = "float64") -> str:
+    """Any CasADi SX Function with dense inputs and outputs printed as one C99 function (the printer alone).
+
+    ``void name(const T in0[n0], ..., T out0[m0], ...)`` with the Function's own argument names; the
+    body is what :func:`render` prints for the controller's step. Used to test the printer on every
+    operation it knows.
+
+    Parameters
+    ----------
+    fn : casadi.Function
+        An SX Function (``fn.is_a("SXFunction")``).
+    name : str
+        The C function's name.
+    precision : {"float64", "float32"}, default "float64"
+
+    Returns
+    -------
+    str
+        The function's C source (needs ``<math.h>``).
+    """
+    p = F32 if precision == "float32" else F64
+    ins = [fn.name_in(i) for i in range(fn.n_in())]
+    lines, outs, _ = _step_body(fn, ins, p)
+    args = [f"const {p.ctype} {a}[{max(fn.nnz_in(i), 1)}]" for i, a in enumerate(ins)]
+    args += [f"{p.ctype} {fn.name_out(i)}[{max(fn.numel_out(i), 1)}]" for i in range(fn.n_out())]
+    body = [f"void {name}({', '.join(args)})", "{"]
+    body += [f"    (void){a};" for a in ins]
+    body += ["    " + ln for ln in lines]
+    for i in range(fn.n_out()):
+        body += [f"    {fn.name_out(i)}[{r}] = {outs.get((i, r), p.literal(0.0))};" for r in range(fn.numel_out(i))]
+    return "\n".join(body + ["}", ""])
+
+
 # ----------------------------------------------------------------------------------------------
 # the files
 # ----------------------------------------------------------------------------------------------
@@ -225,7 +258,7 @@ def _macro(prefix: str) -> str:
 class Printed:
     """The printed controller: the files' text and the code's size.
 
-    Attributes
+    Parameters
     ----------
     files : dict
         ``{"controller.h": text, "controller.c": text, "main.c": text}``.
@@ -376,7 +409,7 @@ def _header(ctrl: Controller, prefix: str, source: str, n_ops: int, n_instr: int
 def _source_c(ctrl: Controller, prefix: str, bodies: dict) -> str:
     P = _macro(prefix)
     n, nz = _dims(ctrl)
-    z0 = ctrl._z0() if ctrl.nz else np.zeros(1)
+    z0 = ctrl.z0 if ctrl.nz else np.zeros(1)
     out = [f"/* {prefix}: printed by lavendersim.controller_c from the controller's CasADi expressions; see controller.h. */",
            '#include "controller.h"', "", "#include <math.h>", ""]
     for p in (F64, F32):
@@ -413,11 +446,13 @@ def _main_c(ctrl: Controller, prefix: str, example_q: Any) -> str:
     if example_q is None:
         example_q = np.asarray(KN.quat_mul(ctrl.q_ref, KN.axis_angle_to_quat(np.array([1.0, 0, 0]), math.radians(10))),
                                dtype=float)
+        where = "the attitude 10 degrees about body x off q_ref"
     else:
         example_q = V.quaternion("example_q", example_q)
+        where = "the given attitude"
     arr = lambda a: "{" + ", ".join(repr(float(v)) for v in np.ravel(a)) + "}"   # noqa: E731
     return "\n".join([
-        f"/* One step of {prefix} (see controller.h): the attitude 10 degrees off q_ref, at rest, wheels at",
+        f"/* One step of {prefix} (see controller.h): {where}, at rest, wheels at",
         " * their operating rates. Build: cc -std=c99 -Wall -Wextra -pedantic -Werror main.c controller.c -lm */",
         "#include <stdio.h>", "", '#include "controller.h"', "",
         "int main(void)", "{",
@@ -467,7 +502,21 @@ def export_c(controller: Controller, directory: str | os.PathLike, *, prefix: st
 
 
 def compile_command(sources: list[str], output: str, *, shared: bool = True) -> list[str]:
-    """The compiler command used for the printed files: $CC (else cc, gcc) with :data:`CFLAGS`."""
+    """The compiler command used for the printed files: $CC (else cc, gcc) with :data:`CFLAGS`.
+
+    Parameters
+    ----------
+    sources : list of str
+        C files.
+    output : str
+        The file to write.
+    shared : bool, default True
+        A shared library (``-fPIC -shared``); False: an executable.
+
+    Returns
+    -------
+    list of str
+    """
     from .extending import compiler
 
     return [*compiler(), *CFLAGS, *(("-fPIC", "-shared") if shared else ()), *sources, "-o", output, "-lm"]
@@ -513,59 +562,49 @@ def compile_library(printed: Printed, directory: str | os.PathLike | None = None
 
 
 class CompiledController(Controller):
-    """A :class:`Controller` whose step is the printed C, compiled: ``command`` calls ``{prefix}_step[_f32]``.
+    """A :class:`Controller` whose step is the printed C, compiled: ``command`` calls ``{prefix}_step[_f32]`` (ctypes).
 
     Everything else (gains, limits, ``Ts``, ``Omega_ref`` ...) is the design's, so
-    :func:`lavendersim.control.closed_loop` flies it as it flies the Python controller. Build with
-    :meth:`of` (or :func:`load`).
+    :func:`lavendersim.control.closed_loop` flies it as it flies the Python controller.
+
+    Parameters
+    ----------
+    controller : Controller
+        The design (copied; not changed).
+    precision : {"float64", "float32"}, default "float64"
+        Which printed step to call.
+    printed : Printed, optional
+        Default :func:`render` ``(controller)``.
+    library : path-like, optional
+        A library already compiled from ``printed`` (:func:`compile_library`); default: compiled now.
+    command : list of str, optional
+        The command ``library`` was compiled with (reported).
 
     Attributes
     ----------
-    precision : {"float64", "float32"}
+    precision : str
     library : Path
         The shared library.
     compile_command : list of str
     printed : Printed
     """
 
-    precision: str
-    library: Path
-    compile_command: list
-    printed: Printed
-
-    @classmethod
-    def of(cls, controller: Controller, *, precision: str = "float64", printed: Printed | None = None,
-           library: Path | None = None, command: list | None = None) -> "CompiledController":
-        """Compile (unless ``library`` is given) and load the printed ``controller``.
-
-        Parameters
-        ----------
-        controller : Controller
-        precision : {"float64", "float32"}
-        printed : Printed, optional
-            Default :func:`render` ``(controller)``.
-        library : Path, optional
-            A library already compiled from ``printed`` (:func:`compile_library`).
-        command : list of str, optional
-            The command it was compiled with (reported).
-
-        Returns
-        -------
-        CompiledController
-        """
+    def __init__(self, controller: Controller, *, precision: str = "float64", printed: Printed | None = None,
+                 library: str | os.PathLike | None = None, command: list | None = None):
+        if not isinstance(controller, Controller):
+            raise V.LavenderInputError("controller", "must be a Controller from lavendersim.control.design",
+                                       f", got {V._describe(controller)}")
         if precision not in ("float64", "float32"):
             raise V.LavenderInputError("precision", "must be 'float64' or 'float32'", f", got {precision!r}")
         printed = render(controller) if printed is None else printed
         if library is None:
             library, command = compile_library(printed)
-        self = cls.__new__(cls)
         self.__dict__.update(controller.__getstate__())
         self._fn = controller._fn
         self.precision, self.library, self.compile_command, self.printed = precision, Path(library), list(command or []), printed
         lib = ctypes.CDLL(str(library))
         s = "_f32" if precision == "float32" else ""
-        ct = ctypes.c_float if precision == "float32" else ctypes.c_double
-        ptr = ctypes.POINTER(ct)
+        ptr = ctypes.POINTER(ctypes.c_float if precision == "float32" else ctypes.c_double)
         self._dtype = np.float32 if precision == "float32" else np.float64
         self._step = getattr(lib, f"{printed.prefix}_step{s}")
         self._step.argtypes = [ptr] * 6
@@ -576,18 +615,30 @@ class CompiledController(Controller):
         self._ptr = ptr
         self._lib = lib
         self.reset()
-        return self
 
     def reset(self) -> None:
         """The memory z at the operating torque, set by the printed ``{prefix}_reset``."""
-        if not hasattr(self, "_reset"):    # during Controller.__init__ (not used: built by `of`)
-            return super().reset()
         self._zbuf = np.zeros(max(self.nz, 1), dtype=self._dtype)
         self._reset(self._zbuf.ctypes.data_as(self._ptr))
         self.z = self._zbuf[:self.nz].astype(float)
 
     def command(self, meas_q, meas_omega_b, meas_Omega, q_ref=None) -> np.ndarray:
-        """The printed step's wheel torques (N,), N·m (float64 values of the chosen precision's results).
+        """The printed step's wheel torques (N,), N·m (float64 values of the chosen precision's results), advancing z.
+
+        Parameters
+        ----------
+        meas_q : array_like (4,)
+            Measured attitude, body to world, (x, y, z, w), unit.
+        meas_omega_b : array_like (3,)
+            Measured body rate, body frame, rad/s.
+        meas_Omega : array_like (N,)
+            Measured wheel rates relative to the body, rad/s.
+        q_ref : array_like (4,), optional
+            Reference attitude (default: the design's ``q_ref``).
+
+        Returns
+        -------
+        ndarray (N,)
 
         Raises
         ------
@@ -605,8 +656,17 @@ class CompiledController(Controller):
         self.z = self._zbuf[:self.nz].astype(float)
         return u.astype(float)
 
+    def __copy__(self) -> "CompiledController":
+        """A copy sharing the loaded library, with its own memory z."""
+        new = type(self).__new__(type(self))
+        new.__dict__.update(self.__dict__)
+        new._zbuf = self._zbuf.copy()
+        new.z = self.z.copy()
+        return new
+
     def __getstate__(self):
-        raise TypeError("a CompiledController holds a loaded library and does not pickle; pickle its Controller")
+        raise TypeError("a CompiledController holds a loaded library and does not pickle (another process cannot "
+                        "use it); send its Controller and compile there")
 
 
 # ----------------------------------------------------------------------------------------------
@@ -622,7 +682,7 @@ SETTLE_REL_TOL = 0.05        # float32: settling time within 5 % of float64's
 class SilReport:
     """The printed controller flown in the loop against the Python one (same plant, same sensor noise).
 
-    Attributes
+    Parameters
     ----------
     command_rel_f64 : float
         max over samples of ``max_i |u_C − u_py| / max_i |u_py|`` (the C float64 step), 0 when identical.
@@ -716,8 +776,24 @@ def replay(controller: Controller, response: Any) -> np.ndarray:
 
 def compare(reference: Any, f64: Any, f32: Any, torque_limit: float, printed: Printed, command: list,
             replay_f32: np.ndarray | None = None) -> SilReport:
-    """A :class:`SilReport` from three Responses of one maneuver: Python, C float64, C float32 (and the float32
-    step's replay of the Python run's measurements, :func:`replay`)."""
+    """A :class:`SilReport` from three Responses of one maneuver: Python, C float64, C float32.
+
+    Parameters
+    ----------
+    reference, f64, f32 : Response
+        The Python controller's run and the printed steps' runs (same plant, same sensor noise).
+    torque_limit : float
+        N·m.
+    printed : Printed
+    command : list of str
+        The compile command.
+    replay_f32 : ndarray (K, N), optional
+        The float32 step's commands on the Python run's measurements (:func:`replay`).
+
+    Returns
+    -------
+    SilReport
+    """
     st = [r.settling_time() for r in (reference, f64, f32)]
     srel = abs(st[2] - st[1]) / st[1] if math.isfinite(st[1]) and st[1] > 0 else (0.0 if st[2] == st[1] else math.inf)
     d32 = float(np.abs(f32.commands - reference.commands).max())
@@ -758,7 +834,7 @@ def verify(controller: Controller, fly: Callable[[Controller], Any], *, referenc
     printed = render(controller) if printed is None else printed
     with tempfile.TemporaryDirectory(prefix="lv_controller_c_") as tmp:   # the library is loaded before it goes
         lib, cmd = compile_library(printed, tmp if directory is None else directory)
-        compiled = [CompiledController.of(controller, precision=p, printed=printed, library=lib, command=cmd)
+        compiled = [CompiledController(controller, precision=p, printed=printed, library=lib, command=cmd)
                     for p in ("float64", "float32")]
     ref = fly(controller) if reference is None else reference
     runs = [fly(c) for c in compiled]
@@ -836,7 +912,17 @@ def export_and_verify(controller: Controller, directory: str | os.PathLike, fly:
 
 
 def summary(report: dict) -> str:
-    """Text lines of :func:`export_and_verify`'s report (the CLI's)."""
+    """Text lines of :func:`export_and_verify`'s report (the CLI's).
+
+    Parameters
+    ----------
+    report : dict
+        From :func:`export_and_verify`.
+
+    Returns
+    -------
+    str
+    """
     lines = [f"exported C99: {', '.join(report['files'])} in {report['directory']} ({report['lines']['controller.c']} "
              f"lines of controller.c, {report['n_ops']} operations per step)"]
     s = report["sil"]

@@ -27,6 +27,9 @@ class DivergenceError(FloatingPointError):
         when = f"step {step}" + (f" (t = {t:.6g} s)" if t is not None else "")
         super().__init__(f"simulation diverged at {when}, {who}: {cause}")
 
+    def __reduce__(self):   # crosses process boundaries (multiprocessing, Dask) with its fields
+        return (type(self), (self.step, self.body, self.cause, self.body_name, self.t))
+
 
 class ValidityBoundWarning(UserWarning):
     """A body ran beyond its integrator's validity bound with Sim(..., on_bound="warn") (the text names it)."""

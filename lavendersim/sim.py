@@ -99,9 +99,11 @@ read-only views (x, p_w, q, v_w, omega_b, Omega, wheel_torques_applied); set_sta
 """
 from __future__ import annotations
 
+import os
 import sys
 import threading
 import warnings
+import weakref
 
 import numpy as np
 
@@ -215,6 +217,52 @@ def validity_bound(integrator: str) -> tuple[float, float] | None:
     return float(TB.WDT_MAX[integrator]), float(TB.WDT_RATIO_EXPONENT.get(integrator, 0.0))
 
 
+def _rebuild_sim(bodies: list, effects: list, kwargs: dict, state: dict) -> "Sim":
+    """Unpickle a Sim: build it from its scene and settings, then load its snapshot."""
+    scene = Scene()
+    for b in bodies:
+        scene.add_body(b)
+    for e in effects:
+        scene.add_effect(e)
+    sim = Sim(scene, **kwargs)
+    sim._load_snapshot(state)
+    return sim
+
+
+class ImmutableSimError(V.LavenderInputError, AttributeError):
+    """Assignment to a fixed setting of a built Sim (dt, integrator, backend, …): a LavenderInputError and an
+    AttributeError naming the field.
+
+    Parameters
+    ----------
+    field : str
+        ``sim.<attribute>``.
+    rule : str
+        Why it is refused.
+    detail : str, optional
+    """
+
+
+# what a built Sim keeps fixed (assignment raises ImmutableSimError)
+_FIXED = frozenset({"dt", "integrator", "normalize", "backend", "names", "bodies", "on_bound", "max_growth", "dtype",
+                    "params", "effects", "x", "p_w", "q", "v_w", "omega_b", "Omega", "t", "pipeline"})
+_LIVE: "weakref.WeakSet[Sim]" = weakref.WeakSet()   # every Sim of this process (the fork handler resets their locks)
+
+
+def _after_fork_in_child() -> None:
+    """A process forked while another thread held a Sim's lock would wait forever for a thread that does not
+    exist in it: give every Sim a fresh lock (and clear the C stepper's busy count that lock kept)."""
+    for sim in list(_LIVE):
+        fast = sim.__dict__.get("_fast")
+        if fast is not None:
+            fast.busy = 0
+        object.__setattr__(sim, "_lock", _Guard(fast))
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_after_fork_in_child)
+
+
 # the growth check's floor on a wheeled body's reference |L|, relative to the momentum its parts carry
 L_FLOOR = 1e-6
 
@@ -324,7 +372,7 @@ class Sim:
                  max_growth: float | None = 2.0, dtype: str = "float64"):
         if not isinstance(scene, Scene):
             raise V.LavenderInputError("scene", "must be a lavendersim.Scene", f", got {type(scene).__name__}")
-        self.dt = V.dt("dt", dt)
+        self.dt = V.dt("dt", dt)   # dt and the other settings are fixed once built (Sim.__setattr__)
         self.integrator = V.choice("integrator", integrator, backends.INTEGRATORS)
         if not isinstance(normalize, (bool, np.bool_)):
             raise V.LavenderInputError("normalize", "must be True or False", f", got {normalize!r}")
@@ -335,7 +383,7 @@ class Sim:
         for e in scene.effects:  # an effect no declaration printed is an error, never a no-op
             effects_mod.check_declared(e)
         tables = scene.tables()   # a body given a full inertia tensor is stepped in its principal frame
-        self._x, self.params, self.effects = tables.state, tables.params, tables.effects
+        self._x, self._params, self._effects = tables.state, tables.params, tables.effects
         self._frames = tables.frames
         self._forces, self._rows_of = list(tables.forces), tables.rows_of   # force effects (current) and their rows
         self._forces_given = list(tables.forces)                            # ... as the scene gave them
@@ -363,7 +411,7 @@ class Sim:
                         "integrator", f"{self.integrator!r} steps plain rigid bodies only, but body {name!r} has {what}; "
                         "use rk4 or dopri5 for jointed or wheeled bodies")
         self.dtype = self._check_dtype(dtype)
-        self._per_step = backends.rhs_per_step(self.integrator, self.effects, len(self.names))
+        self._per_step = backends.rhs_per_step(self.integrator, self._effects, len(self.names))
         self.on_bound = V.choice("on_bound", on_bound, ON_BOUND)
         if max_growth is not None:
             max_growth = V.scalar("max_growth", max_growth, positive=True)
@@ -372,10 +420,10 @@ class Sim:
         self.max_growth = max_growth
         self._has_models = bool(self._models.rows[:, LY.MODEL_KIND].any())
         # the arrays the backend steps: float64, or float32 copies of the state, params and effect table
-        self._step_params, self._step_effects = self.params, self.effects
+        self._step_params, self._step_effects = self._params, self._effects
         if self.dtype == "float32":
             self._x = self._x.astype(np.float32)
-            self._step_params, self._step_effects = self.params.astype(np.float32), self.effects.astype(np.float32)
+            self._step_params, self._step_effects = self._params.astype(np.float32), self._effects.astype(np.float32)
         self._dirty = True         # the state was written since the last check (see _is_checked)
         self._snap_buf = None      # _advance's reusable snapshot buffers
         self._setup_checks()
@@ -394,6 +442,66 @@ class Sim:
         if self._fast is not None:   # sim.step() straight into C; the Python path only when C steps aside
             self._fast.set_fallback(self._step_slow)
             self.step = self._fast.step_or_fallback
+        self._built = True
+        _LIVE.add(self)
+
+    # ---- pickle and deepcopy: the whole state, restorable bit for bit --------------------------
+    def __reduce__(self):
+        """A Sim pickles (and deep-copies) as its scene (the immutable bodies and effects), its settings and a
+        snapshot of everything that evolves: the state, wheel rates, held commands and applied torques, model
+        rows, adaptive step sizes, counters and the growth check's references. The copy steps on bit for bit."""
+        with self._lock:
+            m = self._models
+            state = {"x": self._x.copy(), "rows": m.rows.copy(), "Omega": m.Omega.copy(), "command": m.command.copy(),
+                     "applied": m.applied.copy(), "steps": self.steps, "rhs_evals": self.rhs_evals,
+                     "E0": self._E0.copy(), "L0": self._L0.copy(), "w_safe": self._w_safe.copy(),
+                     "g_fast": self._g_fast.copy(), "warned": sorted(self._warned),
+                     "adaptive": None if self._adaptive is None else (self._adaptive.h.copy(), self._adaptive.nfev.copy())}
+        kwargs = {"dt": self.dt, "integrator": self.integrator, "backend": self.backend.name, "normalize": self.normalize,
+                  "on_bound": self.on_bound, "max_growth": self.max_growth, "dtype": self.dtype}
+        if self._adaptive is not None:
+            kwargs.update(rtol=self._adaptive.rtol, atol=self._adaptive.atol)
+        return (_rebuild_sim, ([self.bodies[n] for n in self.names], list(self._effect_objs), kwargs, state))
+
+    def _load_snapshot(self, st: dict) -> None:
+        """Put a freshly built Sim (same scene and settings) at a pickled state (see __reduce__)."""
+        with self._lock:
+            m = self._models
+            self._x[...] = st["x"]
+            for name in ("rows", "Omega", "command", "applied"):
+                getattr(m, name)[...] = st[name]
+            if st["adaptive"] is not None:
+                self._adaptive.h[...], self._adaptive.nfev[...] = st["adaptive"]
+            self.steps, self.rhs_evals = st["steps"], st["rhs_evals"]
+            self._E0[...], self._L0[...], self._w_safe[...], self._g_fast[...] = st["E0"], st["L0"], st["w_safe"], st["g_fast"]
+            self._warned = set(st["warned"])
+            self._dirty = True   # checked again before the next step (a check of a state that passed passes)
+
+    # ---- settings are fixed; the state changes only through validated calls -------------------
+    def __setattr__(self, name: str, value) -> None:
+        if name in _FIXED and self.__dict__.get("_built"):
+            raise ImmutableSimError(f"sim.{name}", "is fixed when the Sim is built (a changed setting would not mean "
+                                    "the same on both backends): build a new Sim; the state changes through set_state, "
+                                    "set_wheel_command(s) and set_effect_params")
+        object.__setattr__(self, name, value)
+
+    def __delattr__(self, name: str) -> None:
+        raise ImmutableSimError(f"sim.{name}", "cannot be deleted")
+
+    @property
+    def params(self) -> np.ndarray:
+        """Per-body parameters (nb, 4) = [m, I_1, I_2, I_3] (principal moments) the backends step: read-only."""
+        v = self._params.view()
+        v.flags.writeable = False
+        return v
+
+    @property
+    def effects(self) -> np.ndarray:
+        """The force-effect table (ne, width) = [code, body, parameters …] the backends step: read-only (change
+        a force effect's parameters with set_effect_params)."""
+        v = self._effects.view()
+        v.flags.writeable = False
+        return v
 
     def _check_dtype(self, dtype) -> str:
         """dtype as "float64" or "float32" (also accepted: numpy.float32 / numpy.float64 and their dtypes); float32
@@ -410,8 +518,8 @@ class Sim:
             if self._kind(i):
                 raise V.LavenderInputError("dtype", f"float32 steps plain rigid bodies only, but body {name_!r} has a "
                                            "spherical_joint or reaction_wheels (use dtype='float64')")
-        if len(self.effects):
-            codes = self.effects[:, effects_mod.ROW_CODE]
+        if len(self._effects):
+            codes = self._effects[:, effects_mod.ROW_CODE]
             if np.any(codes >= effects_mod.USER_CODE_BASE):
                 raise V.LavenderInputError("dtype", "float32 steps built-in effects only; the scene has a user effect "
                                            "(use dtype='float64')")
@@ -471,7 +579,11 @@ class Sim:
 
     @steps.setter
     def steps(self, n: int) -> None:
-        self._ctr.steps = n
+        n = V.integer("steps", n, minimum=0)
+        if n > MAX_STEPS:   # t = steps * dt stays exact, and the C counters never overflow
+            raise V.LavenderInputError("steps", "must be at most MAX_STEPS = 2**53", f", got {n}")
+        with self._lock:
+            self._ctr.steps = n
 
     @property
     def t(self) -> float:
@@ -485,7 +597,11 @@ class Sim:
 
     @rhs_evals.setter
     def rhs_evals(self, n: int) -> None:
-        self._ctr.rhs_evals = n
+        n = V.integer("rhs_evals", n, minimum=0)
+        if n > 2**62:
+            raise V.LavenderInputError("rhs_evals", "must be at most 2**62", f", got {n}")
+        with self._lock:
+            self._ctr.rhs_evals = n
 
     def _make_stepper(self, cap: bool = True):
         """The C fast path of step() (lavendersim/csrc/fast_step.c), or None where it does not apply: not the C
@@ -502,23 +618,23 @@ class Sim:
         m = self._models if self._has_models else None
         models = (None,) * 4 if m is None else (m.rows, m.Omega, m.command, m.applied)
         bound = np.inf if self._bound is None else float(self._bound[0])
-        return c_backend._c.Stepper(self._x, self.params, self.effects if self.effects.size else self.effects.reshape(0, 2),
+        return c_backend._c.Stepper(self._x, self._params, self._effects if self._effects.size else self._effects.reshape(0, 2),
                                     c_backend.INTEGRATOR_CODES[self.integrator], 1 if self.normalize else 0, float(self.dt),
                                     int(self._per_step), MAX_STEPS, self._wdt_scale, bound, self._g_fast,
-                                    c_backend.user_effect_table(self.effects), *models)
+                                    c_backend.user_effect_table(self._effects), *models)
 
     # ---- divergence checks ---------------------------------------------------------------
     def _setup_checks(self) -> None:
         nb = len(self.names)
-        I = self.params[:, LY.PARAM_I_B]
+        I = self._params[:, LY.PARAM_I_B]
         self._ratio = (I.max(axis=1) / I.min(axis=1)) if nb else np.zeros(0)
         self._bound = validity_bound(self.integrator)
         p = 0.0 if self._bound is None else self._bound[1]
         self._wdt_scale = self.dt * (self._ratio ** p if p else np.ones(nb))
         acted = np.zeros(nb, bool)
-        if len(self.effects):
+        if len(self._effects):
             from .effects import ROW_BODY
-            body = self.effects[:, ROW_BODY].astype(np.int64)
+            body = self._effects[:, ROW_BODY].astype(np.int64)
             acted[:] = bool(np.any(body < 0))
             acted[body[body >= 0]] = True
         kind = self._models.rows[:, LY.MODEL_KIND].astype(np.int64) if nb else np.zeros(0, np.int64)
@@ -545,8 +661,8 @@ class Sim:
         with np.errstate(over="ignore", invalid="ignore"):
             if self._free_any:
                 f = self._free
-                I_b, w_b = self.params[f][:, LY.PARAM_I_B], x[f][:, LY.STATE_OMEGA_B]
-                E[f] = K.kinetic_energy(self.params[f, LY.PARAM_M], I_b, x[f][:, LY.STATE_V_W], w_b)
+                I_b, w_b = self._params[f][:, LY.PARAM_I_B], x[f][:, LY.STATE_OMEGA_B]
+                E[f] = K.kinetic_energy(self._params[f, LY.PARAM_M], I_b, x[f][:, LY.STATE_V_W], w_b)
                 L[f] = np.linalg.norm(K.body_momentum(I_b, w_b), axis=-1)
             for i in self._free_wheels_idx:
                 Lb, Lw = backends.wheel_momentum(self._models.rows[i], x[i, LY.STATE_Q], x[i, LY.STATE_OMEGA_B], Omega[i])
@@ -574,9 +690,9 @@ class Sim:
         """w_safe (see _reference) of the free bodies selected by the boolean mask f, from the current E0."""
         f = f & self._free
         if f.any() and self.max_growth is not None:
-            I = self.params[f][:, LY.PARAM_I_B]
+            I = self._params[f][:, LY.PARAM_I_B]
             with np.errstate(over="ignore", invalid="ignore"):
-                T = K.kinetic_energy(self.params[f, LY.PARAM_M], I, self._x[f][:, LY.STATE_V_W], np.zeros((int(f.sum()), 3)))
+                T = K.kinetic_energy(self._params[f, LY.PARAM_M], I, self._x[f][:, LY.STATE_V_W], np.zeros((int(f.sum()), 3)))
                 half_Imax = K.kinetic_energy(np.zeros(int(f.sum())), np.repeat(I.max(axis=1)[:, None], 3, axis=1),
                                              np.zeros((int(f.sum()), 3)), np.tile([1.0, 0.0, 0.0], (int(f.sum()), 1)))
                 room = np.maximum(self.max_growth * self._E0[f] - T, 0.0)
@@ -621,7 +737,7 @@ class Sim:
         if screen is not None and x is self._x and (not growth or self.max_growth is None or not self._free_wheels_idx):
             # one pass in C: every body inside the bound and (growth) inside its E and |L| limits -> nothing to report
             bound = np.inf if self._bound is None else self._bound[0]
-            if screen(x, self.params, self._wdt_scale, bound, self._g_fast if growth else self._g_inf):
+            if screen(x, self._params, self._wdt_scale, bound, self._g_fast if growth else self._g_inf):
                 return None
         with np.errstate(over="ignore", invalid="ignore"):   # an overflowing norm is inf: beyond any bound
             om = x[:, LY.STATE_OMEGA_B]
@@ -701,7 +817,7 @@ class Sim:
         models = Models.empty(nb)
         rows = models.rows
         # a body without model effects: kind 0, I_p = diag(I_b), r_b = anchor = 0 (all bodies at once)
-        rows[:, LY.MODEL_I_P] = (self.params[:, LY.PARAM_I_B][:, :, None] * np.eye(3)).reshape(nb, 9)
+        rows[:, LY.MODEL_I_P] = (self._params[:, LY.PARAM_I_B][:, :, None] * np.eye(3)).reshape(nb, 9)
         modelled: dict[str, dict] = {}      # scene.model_effects(name) for every body at once
         for e in scene.effects:
             if e.per_body:
@@ -716,7 +832,7 @@ class Sim:
     def _model_row(self, i: int, me: dict, rows: np.ndarray) -> None:
         """Body i's model row from its model effects me and its current state (a jointed body's r_b, I_p
         from its q and p_w; its p_w, v_w then set from pivot_kinematics)."""
-        m, I_b = self.params[i, LY.PARAM_M], self.params[i, LY.PARAM_I_B]
+        m, I_b = self._params[i, LY.PARAM_M], self._params[i, LY.PARAM_I_B]
         kind, I_p, r_b, anchor = 0, np.diag(I_b), np.zeros(3), np.zeros(3)
         if "spherical_joint" in me:
             kind |= KIND_JOINT
@@ -931,7 +1047,7 @@ class Sim:
         if f is None or screen is None:
             return
         with self._lock:
-            if not f.is_checked() and screen(self._x, self.params, self._wdt_scale,
+            if not f.is_checked() and screen(self._x, self._params, self._wdt_scale,
                                              np.inf if self._bound is None else float(self._bound[0]), self._g_inf):
                 self._mark_checked()
 
@@ -1109,6 +1225,10 @@ class Sim:
         LavenderInputError
             On an unknown body or keyword, a bad value, or a state beyond the integrator's validity bound.
         """
+        with self._lock:   # read, modify and write the body's row as one update: no lost update against run()
+            self._set_state(name, p_w=p_w, q=q, v_w=v_w, omega_b=omega_b, omega_w=omega_w, Omega=Omega)
+
+    def _set_state(self, name: str, *, p_w, q, v_w, omega_b, omega_w, Omega) -> None:
         i = self._i(name)
         kind = self._kind(i)
         R_bp = None if self._frames is None else self._frames.rotation(i)
@@ -1150,7 +1270,7 @@ class Sim:
                                                                  r[LY.MODEL_ANCHOR_W], r[LY.MODEL_R_B])
         field = "omega_w" if omega_w is not None else "omega_b"
         with np.errstate(over="ignore", invalid="ignore"):
-            E = K.kinetic_energy(self.params[i, LY.PARAM_M], self.params[i, LY.PARAM_I_B], x[LY.STATE_V_W],
+            E = K.kinetic_energy(self._params[i, LY.PARAM_M], self._params[i, LY.PARAM_I_B], x[LY.STATE_V_W],
                                  x[LY.STATE_OMEGA_B])
         if not (np.all(np.isfinite(x)) and np.isfinite(E)):
             raise V.LavenderInputError(field if (omega_b is not None or omega_w is not None) else "v_w",
@@ -1208,6 +1328,10 @@ class Sim:
         >>> round(float(sim.state("b").omega_w[2]), 6)
         0.06
         """
+        with self._lock:   # the current values are read and replaced as one update
+            return self._set_effect_params(effect, values)
+
+    def _set_effect_params(self, effect, values: dict):
         k = next((j for j, (cur, given) in enumerate(zip(self._forces, self._forces_given))
                   if effect is cur or effect is given), None)
         if k is None:
@@ -1224,14 +1348,13 @@ class Sim:
             if why:
                 raise V.LavenderInputError(effects_mod.largest_param(new), f"too large: {why}")
         body_index = -1 if cur.body is None else self._index[cur.body]
-        rows = _effect_rows(new, body_index, self.effects.shape[1], self._frames, len(self.names))
-        with self._lock:
-            for r, row in zip(self._rows_of[k], rows):
-                self.effects[r] = row
-                if self._step_effects is not self.effects:
-                    self._step_effects[r] = row
-            self._forces[k] = new
-            self._effect_objs[self._effect_objs.index(cur)] = new
+        rows = _effect_rows(new, body_index, self._effects.shape[1], self._frames, len(self.names))
+        for r, row in zip(self._rows_of[k], rows):
+            self._effects[r] = row
+            if self._step_effects is not self._effects:
+                self._step_effects[r] = row
+        self._forces[k] = new
+        self._effect_objs[self._effect_objs.index(cur)] = new
         return new
 
     # ---- reaction wheels ------------------------------------------------------------------
@@ -1259,7 +1382,8 @@ class Sim:
         i = self._wheeled(name)
         u_full = np.zeros(LY.WHEELS_MAX)
         u_full[:self._wheel_n[i]] = V.vector("u", u, int(self._wheel_n[i]))
-        self._models.command[i] = u_full
+        with self._lock:
+            self._models.command[i] = u_full
 
     def set_wheel_commands(self, u) -> None:
         """Motor torques of every body's wheels at once; held until changed, saturated every step, as
@@ -1287,8 +1411,9 @@ class Sim:
             b = int(bad[0])
             raise V.LavenderInputError(f"u[{b}]", f"body {self.names[b]!r} has {self._wheel_n[b]} reaction wheel(s): "
                                        "the entries beyond them must be 0")
-        self._models.command[...] = 0.0
-        self._models.command[:, :u.shape[1]] = u
+        with self._lock:   # one update: a run in another thread never sees the zeroed commands
+            self._models.command[...] = 0.0
+            self._models.command[:, :u.shape[1]] = u
 
     @property
     def wheel_torques_applied(self) -> np.ndarray:
@@ -1383,7 +1508,7 @@ class Sim:
             Kinetic energy, J.
         """
         idx = range(len(self.names)) if name is None else [self._i(name)]
-        return float(sum(K.kinetic_energy(self.params[i, LY.PARAM_M], self.params[i, LY.PARAM_I_B], self._x[i, LY.STATE_V_W],
+        return float(sum(K.kinetic_energy(self._params[i, LY.PARAM_M], self._params[i, LY.PARAM_I_B], self._x[i, LY.STATE_V_W],
                                           self._x[i, LY.STATE_OMEGA_B]) for i in idx))
 
     def angular_momentum_w(self, name: str) -> np.ndarray:
@@ -1400,7 +1525,7 @@ class Sim:
             ``L_w = R_wb I_b omega_b``.
         """
         i = self._i(name)
-        return K.angular_momentum_world(self._x[i, LY.STATE_Q], self.params[i, LY.PARAM_I_B],
+        return K.angular_momentum_world(self._x[i, LY.STATE_Q], self._params[i, LY.PARAM_I_B],
                                         self._x[i, LY.STATE_OMEGA_B])
 
     def linear_momentum_w(self, name: str) -> np.ndarray:
@@ -1416,4 +1541,4 @@ class Sim:
         ndarray, shape (3,)
         """
         i = self._i(name)
-        return self.params[i, LY.PARAM_M] * self._x[i, LY.STATE_V_W]
+        return self._params[i, LY.PARAM_M] * self._x[i, LY.STATE_V_W]

@@ -357,7 +357,7 @@ def from_dict(d: dict, *, source: str = "") -> Spacecraft:
                    nonnegative=True)
     man = _maneuver(d)
     sim = SF.table("simulator", d.get("simulator", {}), SIMULATOR_KEYS)
-    most_sub = _stack().MAX_SUBSTEPS
+    most, most_sub = _limits()
     default_dt = min(1e-3, ctrl.period) if ctrl.period / 1e-3 <= most_sub else ctrl.period / most_sub
     dt = V.dt("simulator.dt", sim.get("dt", default_dt))
     sub = ctrl.period / dt
@@ -371,7 +371,6 @@ def from_dict(d: dict, *, source: str = "") -> Spacecraft:
     if abs(nd - round(nd)) > 1e-9 * max(1.0, nd):
         raise V.LavenderInputError("simulator.dt", f"must divide the controller delay {ctrl.delay:g} s into whole steps",
                                    f", got {dt!r}")
-    most = _stack().MAX_SAMPLES
     if not man.duration / ctrl.period <= most:
         raise V.LavenderInputError("maneuver.duration", f"would take {man.duration / ctrl.period:.3g} controller periods; "
                                    f"at most {most:,} are allowed", f", got {man.duration!r}")
@@ -423,9 +422,17 @@ def shipped() -> dict[str, Path]:
 
 
 def _stack():
-    from . import wheel_control
+    """lavendersim.control: the one control stack (design, Sensors, closed_loop, monte_carlo)."""
+    from . import control
 
-    return wheel_control
+    return control
+
+
+def _limits() -> tuple[int, int]:
+    """closed_loop's bounds: (controller periods per run, Sim steps per period)."""
+    from .wheel_control import MAX_SAMPLES, MAX_SUBSTEPS
+
+    return MAX_SAMPLES, MAX_SUBSTEPS
 
 
 def design(sc: Spacecraft) -> Any:

@@ -28,8 +28,8 @@ period ``Ts``:
   (:func:`lavendersim.control.dlqr`) and the command regulates to the equilibrium that keeps the
   measured state's conserved coordinates (``Linearization.target_map``), folded into the gains.
 
-The controller's step is a set of CasADi SX expressions — the attitude error chart from the printed
-``quat_mul`` / ``quat_conj``, ``−K x``, the allocation ``M`` and a torque saturation with
+The controller's step is a set of CasADi SX expressions — the attitude error chart (the printed
+``quat_error_chart`` kernel), ``−K x``, the allocation ``M`` and a torque saturation with
 ``fmin``/``fmax`` — wrapped in one ``casadi.Function`` (:attr:`Controller.function`), which Python
 evaluates; the same expressions print as C.
 
@@ -434,8 +434,7 @@ class Controller:
         n = self.n
         q, w, Om, qr = ca.SX.sym("q", 4), ca.SX.sym("omega_b", 3), ca.SX.sym("Omega", n), ca.SX.sym("q_ref", 4)
         z = ca.SX.sym("z", self.nz)
-        qe = KC.quat_mul(KC.quat_conj(qr), q)
-        dtheta = 2 * ca.if_else(qe[3] < 0, -1, 1) * qe[0:3]
+        dtheta = KC.quat_error_chart(q, qr)      # the printed chart: 2 sgn(e_w) e_v, e = q_ref* ⊗ q
         x = ca.vertcat(dtheta, w, Om - ca.DM(self.Omega_ref))
         Minv = np.linalg.inv(self.M)
         z0 = ca.DM(self._z0())
@@ -595,8 +594,12 @@ def design(scene: Scene, body: str | None = None, *, period: float, delay: float
     lag = V.scalar("actuator_lag", actuator_lag, nonnegative=True)
     q_ref = V.quaternion("q_ref", q_ref)
     null_bias = V.scalar("null_bias", null_bias)
+    known = ("attitude_deg", "rate", "wheel_speed_fraction", "torque_fraction")
     if weights is not None and not isinstance(weights, dict):
         raise V.LavenderInputError("weights", "must be a dict of default_weights keywords", f", got {V._describe(weights)}")
+    bad = sorted(set(weights or {}) - set(known), key=str)
+    if bad:
+        raise V.LavenderInputError("weights", f"unknown key {bad[0]!r}; known: {', '.join(known)}")
     wh = Wheels.of(scene, body)
     lin, Om_ref, M, r = _operating_point(scene, body, wh, q_ref, null_bias)
     ref = next(b for b in lin.bodies if b.name == body)
@@ -923,9 +926,12 @@ def closed_loop(scene: Scene, controller: Controller, *, T: float, q0: ArrayLike
     dt : float, optional
         Sim step, s: the period divided by a whole number (default ``Ts / 10``, or the smallest
         finer division on which the delay falls).
-    disturbances : callable, optional
-        ``disturbances(t, sim)`` at every sample before the measurement: change effect parameters
-        there (e.g. an applied torque schedule).
+    disturbances : callable or sequence, optional
+        Force effects that change between samples, through ``Sim.set_effect_params``: a callable
+        ``disturbances(t, sim)`` run at every sample before the measurement (it calls
+        ``sim.set_effect_params(effect, ...)`` itself), or a schedule — a sequence of
+        ``(t, effect, {param: value})`` (t in s; effect as ``scene.add_effect`` returned it), each applied
+        at the first sample at or after its t (a piecewise-constant disturbance torque, a thruster firing).
     threshold_deg : float, default 0.1
         Settling threshold of the response's figures, deg.
     backend : {"auto", "c", "numpy"}, default "auto"
@@ -959,13 +965,37 @@ def closed_loop(scene: Scene, controller: Controller, *, T: float, q0: ArrayLike
     sensors = Sensors() if sensors is None else sensors
     if not isinstance(sensors, Sensors):
         raise V.LavenderInputError("sensors", "must be a lavendersim.control.Sensors or None", f", got {V._describe(sensors)}")
-    if disturbances is not None and not callable(disturbances):
-        raise V.LavenderInputError("disturbances", "must be a callable (t, sim) or None", f", got {V._describe(disturbances)}")
+    disturbances = _disturbances(disturbances)
     qr = controller.q_ref if q_ref is None else V.quaternion("q_ref", q_ref)
     th = V.positive("threshold_deg", threshold_deg)
     nsub, nd = _substeps(Ts, dly, dt)
     sim = _initial_sim(scene, body, controller, Ts / nsub, backend, q0, omega0, Omega0)
     return _fly(sim, body, controller, sensors, K, nsub, nd, lag, qr, disturbances, th)
+
+
+def _disturbances(d: Any) -> Callable[[float, Sim], None] | None:
+    """A callable (t, sim) from a callable or a schedule of (t, effect, {param: value}) entries (checked here)."""
+    if d is None or callable(d):
+        return d
+    from .effects import Effect
+
+    rule = "must be a callable (t, sim), a sequence of (t, effect, {param: value}) or None"
+    if isinstance(d, (str, bytes, dict)) or not hasattr(d, "__iter__"):
+        raise V.LavenderInputError("disturbances", rule, f", got {V._describe(d)}")
+    entries = []
+    for k, e in enumerate(d):
+        if not (isinstance(e, (tuple, list)) and len(e) == 3 and isinstance(e[1], Effect) and isinstance(e[2], dict)):
+            raise V.LavenderInputError(f"disturbances[{k}]", rule, f", got {V._describe(e)}")
+        entries.append((V.scalar(f"disturbances[{k}].t", e[0], nonnegative=True), e[1], dict(e[2])))
+    entries.sort(key=lambda e: e[0])
+    latest: dict[int, Any] = {}
+
+    def apply(t: float, sim: Sim) -> None:
+        while entries and entries[0][0] <= t + 1e-9 * max(1.0, t):
+            _, effect, values = entries.pop(0)
+            latest[id(effect)] = sim.set_effect_params(latest.get(id(effect), effect), **values)
+
+    return apply
 
 
 def _fly(sim: Sim, body: str, ctrl: Controller, sensors: Sensors, K: int, nsub: int, nd: int, lag: float,
@@ -1050,7 +1080,7 @@ def monte_carlo_sample(task: dict) -> dict:
     Parameters
     ----------
     task : dict
-        ``scene``, ``controller``, ``scale`` (3 inertia factors), ``sensors`` (a Sensors), and
+        ``scene`` (the perturbed plant), ``controller``, ``sensors`` (a Sensors), and
         closed_loop's ``T``, ``q0``, ``omega0``, ``Omega0``, ``dt``, ``threshold_deg``, ``backend``.
 
     Returns
@@ -1061,9 +1091,8 @@ def monte_carlo_sample(task: dict) -> dict:
     """
     from .errors import DivergenceError
 
-    scene = perturbed_inertia(task["scene"], task["controller"].body, task["scale"])
     try:
-        r = closed_loop(scene, task["controller"], T=task["T"], q0=task["q0"], omega0=task["omega0"], Omega0=task["Omega0"],
+        r = closed_loop(task["scene"], task["controller"], T=task["T"], q0=task["q0"], omega0=task["omega0"], Omega0=task["Omega0"],
                         sensors=task["sensors"], dt=task["dt"], threshold_deg=task["threshold_deg"], backend=task["backend"])
     except DivergenceError as exc:
         return {"settled": False, "settling_time": None, "peak_torque": None, "peak_wheel_speed": None,
@@ -1124,9 +1153,16 @@ def monte_carlo(scene: Scene, controller: Controller, *, n: int, seed: int = 0, 
     wheeled_body(scene, controller.body)
     rng = np.random.default_rng(seed)
     scales = 1 + spread * rng.uniform(-1, 1, (n, 3))
-    base = {"scene": scene, "controller": controller, "T": T, "q0": q0, "omega0": omega0, "Omega0": Omega0, "dt": dt,
+    base = {"controller": controller, "T": T, "q0": q0, "omega0": omega0, "Omega0": Omega0, "dt": dt,
             "threshold_deg": threshold_deg, "backend": backend}
-    tasks = [{**base, "scale": scales[i], "sensors": replace(sensors, seed=sensors.seed + seed + i)} for i in range(n)]
+    tasks = []
+    for i in range(n):
+        try:
+            plant = perturbed_inertia(scene, controller.body, scales[i])
+        except V.LavenderInputError as exc:
+            raise V.LavenderInputError("inertia_spread", f"sample {i}'s inertia is not a rigid body's (factors "
+                                       f"{np.round(scales[i], 4).tolist()}): {exc}; use a smaller spread") from None
+        tasks.append({**base, "scene": plant, "sensors": replace(sensors, seed=sensors.seed + seed + i)})
     samples = X.map_tasks(monte_carlo_sample, tasks, executor, feature="lavendersim lqr --dask")
     for i, s in enumerate(samples):
         s["inertia_scale"], s["seed"] = scales[i].tolist(), sensors.seed + seed + i

@@ -12,6 +12,7 @@ redundant set of four wheels on a pyramid, on a free cube.
 from __future__ import annotations
 
 import math
+import numbers
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -151,7 +152,7 @@ def pyramid_cube(*, J: ArrayLike = 5.7e-4, mass: float = 1.0, size: float = 0.15
     from .scene import Scene
 
     motor = V.choice("motor", motor, MOTORS)
-    J = np.full(4, V.scalar("J", J)) if np.ndim(J) == 0 else V.vector("J", J, 4)
+    J = np.full(4, V.scalar("J", J)) if isinstance(J, numbers.Real) else V.vector("J", J, 4)
     damping = V.scalar("damping", damping, nonnegative=True)
     scene = Scene()
     scene.add_body(Body.box(name, V.positive("mass", mass), (V.positive("size", size),) * 3))

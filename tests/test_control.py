@@ -241,6 +241,8 @@ def test_controller_is_a_casadi_function_of_the_printed_chart():
     ({"null_bias": 10.0}, "null_bias"),                              # three independent wheels: no null space
     ({"body": "sat"}, "body"),
     ({"weights": {"attitude_deg": 0.0}}, "attitude_deg"),
+    ({"weights": {"attitude": 1.0}}, "weights"),
+    ({"weights": [2.0]}, "weights"),
 ])
 def test_bad_design_parameters_name_the_field(kwargs, field):
     kw = {"period": 2e-3, **kwargs}

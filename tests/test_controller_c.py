@@ -198,7 +198,7 @@ def test_bad_arguments_are_named(designs, tmp_path):
     with pytest.raises(LavenderInputError, match="directory"):
         CC.export_c(ctrl, tmp_path / "file" / "sub")
     with pytest.raises(LavenderInputError, match="precision"):
-        CC.CompiledController.of(ctrl, precision="float16")
+        CC.CompiledController(ctrl, precision="float16")
 
 
 def test_a_compiler_failure_shows_the_command_and_output(designs, monkeypatch):
@@ -249,7 +249,7 @@ def test_bounded_inputs(designs, name):
     printed = CC.render(ctrl)
     lib, cmd = CC.compile_library(printed)
     for prec in ("float64", "float32"):
-        cc = CC.CompiledController.of(ctrl, precision=prec, printed=printed, library=lib, command=cmd)
+        cc = CC.CompiledController(ctrl, precision=prec, printed=printed, library=lib, command=cmd)
         worst, hits = 0.0, 0
         for _ in range(400):
             q, qr = (v / np.linalg.norm(v) for v in rng.normal(size=(2, 4)))
@@ -289,8 +289,8 @@ def test_cli_export_c_json(capsys, tmp_path):
     assert s["command_diff_f32"] > 0 and s["ok"] is True
     assert x["compile_command"].startswith(("cc ", "gcc ")) or "-std=c99" in x["compile_command"]
     assert x["lines"]["controller.c"] > 100 and x["n_ops"] > 100
-    # and the text form
-    code = cli.main(["lqr", "--spacecraft", "cubesat6u", "--no-noise", "--export-c", str(tmp_path / "t")])
+    # and the text form (the pyramid cube: 0.3 s of flight)
+    code = cli.main(["lqr", "--spacecraft", "cube_pyramid4", "--no-noise", "--export-c", str(tmp_path / "t")])
     o, e = capsys.readouterr()
     assert code == 0, e
     assert "exported C99" in o and "SIL passed" in o and "bit-identical" in o
@@ -303,3 +303,76 @@ def test_cli_export_c_bad_directory_is_one_line(capsys, tmp_path):
     code = cli.main(["lqr", "--spacecraft", "cubesat6u", "--export-c", str(tmp_path / "f" / "d")])
     o, e = capsys.readouterr()
     assert code == 2 and len(e.strip().splitlines()) == 1 and "--export-c" in e
+
+
+# ---------------------------------------------------------------------------------------------
+# the printer on every operation it knows
+# ---------------------------------------------------------------------------------------------
+
+
+def test_every_operation_prints_as_casadi_evaluates_it(tmp_path):
+    """One SX Function using every operation the printer maps (arithmetic, comparisons, logic, if_else,
+    libm functions), compiled and evaluated on random inputs: float64 equals CasADi's evaluation to 2 ulps
+    (libm functions may round differently from the C++ standard library's; the arithmetic is exact)."""
+    require("cc")
+    import ctypes
+
+    import casadi as ca
+
+    from lavendersim import controller_c as CC
+    from lavendersim.extending import compiler
+
+    x = ca.SX.sym("x", 3)
+    a, b, c = x[0], x[1], x[2]
+    pos = ca.fabs(a) + 0.5
+    unit = ca.tanh(b) * 0.9
+    exprs = [a + b, a - b, a * b, a / pos, -a, a ** 2, 2 * a, 1 / pos, pos ** 2.5, pos ** b, ca.sqrt(pos), ca.exp(unit),
+             ca.log(pos), ca.sin(a), ca.cos(a), ca.tan(unit), ca.asin(unit), ca.acos(unit), ca.atan(a), ca.atan2(a, b),
+             ca.floor(a), ca.ceil(a), ca.fmod(a, pos), ca.fabs(a), ca.sign(a), ca.copysign(a, b), ca.fmin(a, b),
+             ca.fmax(a, b), ca.erf(a), ca.sinh(unit), ca.cosh(unit), ca.tanh(a), ca.asinh(a), ca.acosh(pos + 1),
+             ca.atanh(unit), ca.log1p(pos), ca.expm1(unit), ca.hypot(a, b), a < b, a <= b, a == b, a != b,
+             ca.logic_not(a < b), ca.logic_and(a < b, b < c), ca.logic_or(a < b, b < c), ca.if_else(a < b, c, -c),
+             ca.sign(a * 0)]
+    fn = ca.Function("ops", [x], [ca.vertcat(*exprs)], ["x"], ["y"])
+    ops = {fn.instruction_id(k) for k in range(fn.n_instructions())}
+    assert len(ops) >= 40
+    src = "#include <math.h>\n" + CC.function_c(fn, "ops") + CC.function_c(fn, "ops_f32", "float32")
+    (tmp_path / "ops.c").write_text(src)
+    cmd = [*compiler(), *CC.CFLAGS, "-fPIC", "-shared", "ops.c", "-o", "libops.so", "-lm"]
+    r = subprocess.run(cmd, cwd=tmp_path, capture_output=True, text=True)
+    assert r.returncode == 0, f"$ {' '.join(cmd)}\n{r.stdout}{r.stderr}"
+    lib = ctypes.CDLL(str(tmp_path / "libops.so"))
+    rng = np.random.default_rng(5)
+    n = len(exprs)
+    for prec, ct, dt, rtol in (("", ctypes.c_double, np.float64, 4.5e-16), ("_f32", ctypes.c_float, np.float32, 3e-6)):
+        f = getattr(lib, "ops" + prec)
+        f.argtypes = [ctypes.POINTER(ct)] * 2
+        f.restype = None
+        for _ in range(200):
+            xv = rng.normal(size=3) * 2
+            if rng.random() < 0.2:
+                xv[1] = xv[0]                       # the equality branches
+            y = np.zeros(n, dtype=dt)
+            xin = np.ascontiguousarray(xv.astype(dt))
+            f(xin.ctypes.data_as(ctypes.POINTER(ct)), y.ctypes.data_as(ctypes.POINTER(ct)))
+            ref = np.asarray(fn(xin.astype(float))).ravel()
+            np.testing.assert_allclose(y.astype(float), ref, rtol=rtol, atol=rtol * np.abs(ref).max() * (dt is np.float32))
+
+
+def test_compiled_controller_copies_but_does_not_pickle(designs):
+    """A copy shares the library and has its own memory (spacecraft.monte_carlo copies the controller it flies);
+    pickling (another process) is refused with a reason."""
+    require("cc")
+    import copy
+    import pickle
+
+    from lavendersim import controller_c as CC
+
+    ctrl = designs["cubesat6u"][1]
+    k = CC.CompiledController(ctrl)
+    k2 = copy.copy(k)
+    q = np.array([0.1, 0.0, 0.0, 1.0]) / np.hypot(0.1, 1.0)
+    u = k2.command(q, np.zeros(3), ctrl.Omega_ref)
+    assert np.any(k2.z != k.z) and np.array_equal(u, CC.CompiledController(ctrl).command(q, np.zeros(3), ctrl.Omega_ref))
+    with pytest.raises(TypeError, match="does not pickle"):
+        pickle.dumps(k)

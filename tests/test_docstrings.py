@@ -32,7 +32,7 @@ PUBLIC_MODULES = [
 # modules whose import needs an optional extra: checked when it is installed (CI installs all)
 OPTIONAL_MODULES = {"lavendersim.control": "control", "lavendersim.viewer": "viewer",
                     "lavendersim.envs.reaction_wheel_cube": "gym", "lavendersim.wheel_layout": "control",
-                    "lavendersim.wheel_control": "control"}
+                    "lavendersim.wheel_control": "control", "lavendersim.controller_c": "control"}
 # modules that import only when the C extension is built and current (no conftest tool checks that; `cc` is only
 # a compiler): checked when lavendersim.backends.c_unavailable() is None, and always under CI=true (CI builds it,
 # so a missing build there is an import error, never a silent skip)
