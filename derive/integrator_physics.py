@@ -361,5 +361,5 @@ def kernels() -> list[Kernel]:
                 Arg("speed_limit", sl, "no-load speed, rad/s", "positive"),
                 Arg("cutoff", scalar("cutoff"), "1: hard cut-off at speed_limit instead of the line; 0: the line")],
                [Arg("u", motor(cmd, Om, tl, sl, scalar("cutoff")), "applied motor torques, N·m")], g,
-               notes=["Viscous wheel friction is the wheel damping c_w of wheel_body_rhs (−c_w Ω on the wheel)."]),
+               notes=["Viscous wheel friction is the wheel damping c_w of wheels<N>_body_rhs (−c_w Ω on the wheel)."]),
     ]

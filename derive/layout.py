@@ -17,9 +17,10 @@ import sympy as sp
 from .codegen import HEADER
 
 # Reaction wheels per body inside a Sim: every wheeled body carries this many wheel slots (rates, motor
-# commands, applied torques, inertias, axes). A layout of fewer wheels pads the rest with a zero axis,
-# J = 1, at rest (derive/wheel_layout.py proves a padded wheel changes nothing); the body-axis wheels
-# of KIND_WHEELS use the first WHEELS_BODY_AXES slots.
+# commands, applied torques, inertias, axes) and is stepped by the one N-wheel model, the printed
+# wheels<WHEELS_MAX> kernels. A layout of fewer wheels pads the rest with a zero axis, J = 1, at rest
+# (derive/wheel_layout.py proves a padded wheel changes nothing); the default layout, three wheels on
+# the body axes, is A_b = [I | 0] in the first WHEELS_BODY_AXES slots.
 WHEELS_MAX = 4
 WHEELS_BODY_AXES = 3
 
@@ -98,9 +99,8 @@ MODEL = Layout("MODEL", "per-body model row (spherical joint and/or reaction whe
     Field("speed_limit", 1, "no drive beyond this |Omega_i|, rad/s"),
     Field("c_w", 1, "wheel bearing damping, N·m·s/rad"),
     Field("cutoff", 1, "wheel motor: 0 torque–speed line (stall torque_limit, no-load speed_limit); 1 hard cut-off"),
-    # last: the body-axis model tiles (csrc/model_simd.h) carry the row only up to here
     Field("A_b", 3 * WHEELS_MAX, "wheel spin axes as the columns of a 3×WHEELS_MAX matrix, body frame, row-major "
-          "(unused slots 0; KIND_AXES only)"),
+          "(unused slots 0)"),
 ])
 
 XS = Layout("XS", "extended state of a body with a model: x then the wheel rates", [
@@ -113,15 +113,19 @@ EULER = Layout("EULER", "Euler coefficients c_b of a body (derive/rigid_body.py 
     Field("r", 3, "r_x = 1/I_x (cyclic), body frame, 1/(kg·m²)"),
 ])
 
-LAYOUTS = (STATE, PARAM, MODEL, XS, EULER)
+WCOEF = Layout("WCOEF", "wheel-model coefficients k_w of a wheeled body (derive/wheel_layout.py wheels<WHEELS_MAX>_coefficients)", [
+    Field("Minv", 9, "(I_p − A_b J A_bᵀ)⁻¹, body frame, row-major, 1/(kg·m²)"),
+    Field("J_inv", WHEELS_MAX, "1/J per wheel slot, 1/(kg·m²)"),
+])
+
+LAYOUTS = (STATE, PARAM, MODEL, XS, EULER, WCOEF)
 
 # Model kinds: bits of MODEL.kind.
 KINDS = (("JOINT", 1, "world-anchored spherical joint: p_w, v_w follow from q, omega"),
-         ("WHEELS", 2, "reaction wheels: Omega integrated, motor torques saturated; three on the body x, y, z axes "
-          "(wheel_body_rhs) unless KIND_AXES"),
-         ("AXES", 4, "with KIND_WHEELS: up to WHEELS_MAX wheels on the columns of A_b (wheels<WHEELS_MAX>_body_rhs)"))
+         ("WHEELS", 2, "reaction wheels: up to WHEELS_MAX on the columns of A_b (wheels<WHEELS_MAX>_body_rhs), Omega "
+          "integrated, motor torques saturated"))
 CONSTANTS = (("WHEELS_MAX", WHEELS_MAX, "wheel slots per body (XS.Omega, MODEL.J, the columns of MODEL.A_b)"),
-             ("WHEELS_BODY_AXES", WHEELS_BODY_AXES, "wheels of a body-axis layout (KIND_WHEELS without KIND_AXES)"))
+             ("WHEELS_BODY_AXES", WHEELS_BODY_AXES, "wheels of the default layout: the body x, y, z axes, A_b = [I | 0]"))
 
 
 def print_c() -> str:
@@ -143,8 +147,9 @@ def print_c() -> str:
     out.extend(f"    LV_KIND_{n} = {v},  /* {doc} */" for n, v, doc in KINDS)
     out.append("};")
     out.extend(f"#define LV_{n} {v}  /* {doc} */" for n, v, doc in CONSTANTS)
-    out.append("/* the printed kernels of a KIND_AXES layout (derive/wheel_layout.py, N = WHEELS_MAX) */")
-    out.extend(f"#define LV_WHEELS_AXES_{part.upper()} lv_wheels{WHEELS_MAX}_{part}" for part in ("body_rhs", "motor"))
+    out.append("/* the printed kernels of every wheeled body (derive/wheel_layout.py, N = WHEELS_MAX) */")
+    out.extend(f"#define LV_WHEELS_{part.upper()} lv_wheels{WHEELS_MAX}_{part}"
+               for part in ("coefficients", "body_rhs_c", "motor"))
     out += ["", "#endif", ""]
     return "\n".join(out)
 

@@ -1,5 +1,10 @@
 """A rigid body rotating about a pivot P (a world-anchored spherical joint, or its own COM when
-free), optionally carrying three reaction wheels on its body axes — the reaction-wheel cube.
+free), optionally carrying three reaction wheels on its body axes — the chapter's reaction-wheel cube.
+
+Printed: pivot_body_rhs (a joint, no wheels) and pivot_kinematics. The body-axis wheel equations
+(wheel_rhs) are the chapter's; they are not printed: every wheeled body is stepped by the N-wheel
+model of derive/wheel_layout.py, which proves at derive time that with A_b = 1 it is exactly these
+equations (and that they conserve H, _check here).
 
 Rotational state: q (4) orientation R_WB (x, y, z, w); omega_b (3) body angular velocity, body
 frame, rad/s; Omega (3) wheel spin rates relative to the body about body x, y, z, rad/s.
@@ -59,36 +64,22 @@ def _check() -> None:
 def kernels() -> list[Kernel]:
     _check()
     g = "Pivoted bodies and reaction wheels"
-    q, w, Om = vec("q", 4), vec("omega_b", 3), vec("Omega", 3)
-    J, r_b, F_w, tau_w, u = vec("J", 3), vec("r_b", 3), vec("F_w", 3), vec("tau_w", 3), vec("u", 3)
-    I_p, c_w = sym3("I_p"), scalar("c_w")
+    q, w = vec("q", 4), vec("omega_b", 3)
+    r_b, F_w, tau_w = vec("r_b", 3), vec("F_w", 3), vec("tau_w", 3)
+    I_p = sym3("I_p")
     R = rotation_matrix(q)
-    q_dot, w_dot, Om_dot = wheel_rhs(q, w, Om, I_p, J, r_b, F_w, tau_w, u, c_w)
     Q = ("q", q, "orientation (x, y, z, w), R_WB", "unit_quaternion")
     W = ("omega_b", w, "angular velocity, body frame, rad/s")
-    OM = ("Omega", Om, "wheel rates relative to the body, rad/s")
     IP = ("I_p", I_p, "inertia about the pivot (wheels locked), body frame, kg·m², symmetric row-major", "inertia_sym")
-    JJ = ("J", J, "wheel spin inertias, kg·m²", "positive")
     RB = ("r_b", r_b, "pivot → COM, body frame, m", "small")
     FT = [Arg("F_w", F_w, "total force at the COM, world frame, N"), Arg("tau_w", tau_w, "total torque about the COM, world frame, N·m")]
-    note = ["I_p and I_p − J must be positive definite (the runtime validates them)."]
+    note = ["I_p must be positive definite (the runtime validates it)."]
     return [
         Kernel("pivot_body_rhs", "Rotation about a world-anchored spherical joint (no wheels)",
                r"I_P\dot\omega = \tau_P - \omega\times I_P\omega,\quad \tau_P = R^T\tau_W + r_B\times R^T F_W,\quad \dot q = \tfrac12 q\otimes[\omega,0]",
                [Arg(*Q), Arg(*W), Arg(*IP), Arg(*RB), *FT],
                [Arg("q_dot", qmul(q, pure(w)) / 2, "1/s"),
                 Arg("omega_dot_b", solve3(I_p, torque_about_pivot(q, r_b, F_w, tau_w) - w.cross(I_p * w)), "rad/s², body frame")], g, note),
-        Kernel("wheel_body_rhs", "Body with three body-axis reaction wheels rotating about a pivot",
-               r"(I_P - J)\dot\omega = \tau_P - \omega\times(I_P\omega + J\Omega) - u + c_w\Omega,\quad "
-               r"\dot\Omega = J^{-1}(u - c_w\Omega) - \dot\omega,\quad \dot q = \tfrac12 q\otimes[\omega,0]",
-               [Arg(*Q), Arg(*W), Arg(*OM), Arg(*IP), Arg(*JJ), Arg(*RB), *FT,
-                Arg("u", u, "motor torques on the wheels (body gets −u), N·m"), Arg("c_w", c_w, "wheel damping, N·m·s/rad", "positive")],
-               [Arg("q_dot", q_dot, "1/s"), Arg("omega_dot_b", w_dot, "rad/s², body frame"), Arg("Omega_dot", Om_dot, "rad/s²")], g, note),
-        Kernel("wheel_momentum", "World angular momentum about the pivot of the body (wheels locked) and of the wheels' spin",
-               r"L_{body} = R (I_P - J)\omega,\quad L_{wheels} = R J(\omega + \Omega),\quad L_{body} + L_{wheels} = R H",
-               [Arg(*Q), Arg(*W), Arg(*OM), Arg(*IP), Arg(*JJ)],
-               [Arg("L_body_w", R * ((I_p - sp.diag(*J)) * w), "kg·m²/s, world"),
-                Arg("L_wheels_w", R * (sp.diag(*J) * (w + Om)), "kg·m²/s, world")], g),
         Kernel("pivot_kinematics", "COM position and velocity of a body on a spherical joint",
                r"p_W = a_W + R r_B,\quad v_W = R(\omega_B \times r_B)",
                [Arg(*Q), Arg(*W), Arg("anchor_w", vec("anchor_w", 3), "joint anchor, world frame, m"), Arg(*RB)],

@@ -1,5 +1,6 @@
 """Reaction wheels on arbitrary spin axes: N ≥ 1 wheels, axis matrix A_b (3×N, unit columns, body
-frame) — the generalization of derive/wheel_cube.py (whose three wheels sit on body x, y, z, A_b = 1).
+frame) — the one wheel model; the chapter's body-axis cube (derive/wheel_cube.py, three wheels on body
+x, y, z) is A_b = 1, proved here at derive time.
 
 Rotational state: q (4) orientation R_WB (x, y, z, w); omega_b (3) body angular velocity, body
 frame, rad/s; Omega (N) wheel spin rates relative to the body about their axes, rad/s.
@@ -21,7 +22,7 @@ import sympy as sp
 
 from .integrator_physics import motor
 from .kernel import Arg, Kernel, mat, scalar, vec
-from .layout import WHEELS_MAX
+from .layout import WCOEF, WHEELS_MAX
 from .quaternion import pure, qmul, rotation_matrix
 from .wheel_cube import solve3, sym3, torque_about_pivot, wheel_rhs
 
@@ -37,6 +38,49 @@ def layout_rhs(q, w, Om, I_p, A, J, r_b, F_w, tau_w, u, c_w):
     w_dot = solve3(I_p - A * Jd * A.T, rhs)
     Om_dot = sp.Matrix([(u[i] - c_w * Om[i]) / J[i] for i in range(n)]) - A.T * w_dot
     return qmul(q, pure(w)) / 2, w_dot, Om_dot
+
+
+def coefficient_where(I_p, A, J) -> tuple[sp.Matrix, list]:
+    """The inertia-only coefficients of the N-wheel equations, k_w = [M⁻¹ (9, row-major), 1/J (N)] with
+    M = I_p − A_b J A_bᵀ, as (k_w symbols, where): M (6 named entries), its cofactors (6) and 1/det M
+    are named subexpressions, so the code forms M and solves by the adjugate (a fully expanded adjugate,
+    a polynomial in A_b, J and I_p, prints ~1400 operations for N = 4). They depend on the model row
+    only: the step loops compute them once per body and call (wheels<N>_coefficients) and the
+    right-hand side (wheels<N>_body_rhs_c) then divides by nothing, like the Euler coefficients c_b."""
+    n = A.shape[1]
+    Mx = I_p - A * sp.diag(*J) * A.T
+    M, C = sym3("M"), sym3("C")
+    pairs = [(i, j) for i in range(3) for j in range(i, 3)]
+    cof = {(0, 0): M[1, 1] * M[2, 2] - M[1, 2] ** 2, (0, 1): M[0, 2] * M[1, 2] - M[0, 1] * M[2, 2],
+           (0, 2): M[0, 1] * M[1, 2] - M[0, 2] * M[1, 1], (1, 1): M[0, 0] * M[2, 2] - M[0, 2] ** 2,
+           (1, 2): M[0, 1] * M[0, 2] - M[0, 0] * M[1, 2], (2, 2): M[0, 0] * M[1, 1] - M[0, 1] ** 2}
+    inv = sp.Symbol("inv_det_M", real=True)
+    k_w = vec("k_w", 9 + n)
+    where = ([(M[i, j], Mx[i, j]) for i, j in pairs] + [(C[i, j], cof[(i, j)]) for i, j in pairs]
+             + [(inv, 1 / (M[0, 0] * C[0, 0] + M[0, 1] * C[0, 1] + M[0, 2] * C[0, 2]))]
+             + [(k_w[3 * i + j], C[i, j] * inv) for i in range(3) for j in range(3)]
+             + [(k_w[9 + i], 1 / J[i]) for i in range(n)])
+    return k_w, where
+
+
+def layout_rhs_c(q, w, Om, I_p, A, J, k_w, r_b, F_w, tau_w, u, c_w) -> tuple[tuple, list]:
+    """layout_rhs on the coefficients k_w = [M⁻¹ (9), 1/J (N)] (coefficient_where): ((q̇, ω̇, Ω̇), where). The
+    wheel sums are named subexpressions (J Ω, u − c_w Ω, their images A_b J Ω and A_b (u − c_w Ω), I_p ω,
+    H, ω × H), so the printed sums are short and independent: the step loops' critical path (one RK4 stage
+    after another) stays short for any N."""
+    n = A.shape[1]
+    jo, g = vec("JOmega", n), vec("g_w", n)
+    hw, gw, Iw, H, cr = vec("h_A", 3), vec("g_A", 3), vec("I_omega", 3), vec("H_b", 3), vec("wxH", 3)
+    where = ([(jo[i], J[i] * Om[i]) for i in range(n)] + [(g[i], u[i] - c_w * Om[i]) for i in range(n)]
+             + [(hw[k], sum((A[k, i] * jo[i] for i in range(n)), sp.Integer(0))) for k in range(3)]
+             + [(Iw[k], (I_p * w)[k]) for k in range(3)] + [(H[k], Iw[k] + hw[k]) for k in range(3)]
+             + [(cr[k], w.cross(H)[k]) for k in range(3)]
+             + [(gw[k], sum((A[k, i] * g[i] for i in range(n)), sp.Integer(0))) for k in range(3)])
+    Minv = sp.Matrix(3, 3, list(k_w[:9]))
+    rhs = torque_about_pivot(q, r_b, F_w, tau_w) - cr - gw
+    w_dot = Minv * rhs
+    Om_dot = sp.Matrix([g[i] * k_w[9 + i] for i in range(n)]) - A.T * w_dot
+    return (qmul(q, pure(w)) / 2, w_dot, Om_dot), where
 
 
 def layout_momentum(q, w, Om, I_p, A, J):
@@ -89,6 +133,19 @@ def _check() -> None:
         ref = layout_rhs(q, w, Om, I_p, A, J, r_b, F, T, u, c)
         if pad[0] != ref[0] or pad[1] != ref[1] or list(pad[2]) != list(ref[2]) + [0]:
             raise RuntimeError("derive: a padded wheel (zero axis, J = 1, at rest, no torque) changes the N-wheel equations")
+        # the form the kernels print (named M, cofactors, 1/det M, coefficients k_w) is the same function
+        for A_n in (A, A.row_join(sp.zeros(3, 1))):
+            n = A_n.shape[1]
+            J_n, Om_n, u_n = (v.col_join(sp.Matrix(n - 3, 1, [z] * (n - 3))) for v, z in ((J, 1), (Om, 0), (u, 0)))
+            k_w, where = coefficient_where(I_p, A_n, J_n)
+            out, rhs_where = layout_rhs_c(q, w, Om_n, I_p, A_n, J_n, k_w, r_b, F, T, u_n, c)
+            val: dict = {}
+            for sym, e in where + rhs_where:
+                val[sym] = e.xreplace(val)
+            got = [m.xreplace(val) for m in out]
+            if got != list(layout_rhs(q, w, Om_n, I_p, A_n, J_n, r_b, F, T, u_n, c)):
+                raise RuntimeError("derive: the printed N-wheel kernel (named M, cofactors, coefficients) differs from "
+                                   "the N-wheel equations")
 
 
 def kernels_for(n: int) -> list[Kernel]:
@@ -97,7 +154,9 @@ def kernels_for(n: int) -> list[Kernel]:
     q, w, Om = vec("q", 4), vec("omega_b", 3), vec("Omega", n)
     A, J, u = mat("A_b", 3, n), vec("J", n), vec("u", n)
     r_b, F_w, tau_w, I_p, c_w = vec("r_b", 3), vec("F_w", 3), vec("tau_w", 3), sym3("I_p"), scalar("c_w")
-    q_dot, w_dot, Om_dot = layout_rhs(q, w, Om, I_p, A, J, r_b, F_w, tau_w, u, c_w)
+    k_w, coef_where = coefficient_where(I_p, A, J)
+    (q_dot, w_dot, Om_dot), rhs_where = layout_rhs_c(q, w, Om, I_p, A, J, k_w, r_b, F_w, tau_w, u, c_w)
+    where = coef_where + rhs_where
     Lb, Lw, h = layout_momentum(q, w, Om, I_p, A, J)
     Q = Arg("q", q, "orientation (x, y, z, w), R_WB", "unit_quaternion")
     W = Arg("omega_b", w, "angular velocity, body frame, rad/s")
@@ -106,18 +165,37 @@ def kernels_for(n: int) -> list[Kernel]:
     AB = Arg("A_b", A, f"wheel spin axes as columns (3×{n}, unit columns), body frame, row-major", "unit_vector")
     JJ = Arg("J", J, f"wheel axial inertias ({n}), kg·m²", "positive")
     cmd, tl, sl, cut = vec("command", n), scalar("torque_limit"), scalar("speed_limit"), scalar("cutoff")
-    note = [f"{n} wheels; I_p and I_p − A_b J A_bᵀ must be positive definite (the runtime validates them)."]
+    note = [f"{n} wheels; I_p and I_p − A_b J A_bᵀ must be positive definite (the runtime validates them).",
+            "With A_b = 1 (three wheels on the body x, y, z axes; any further slot padded: zero axis, J = 1, at rest) "
+            "these are the chapter's reaction-wheel cube, (I_P − J)ω̇ = τ_P − ω × (I_Pω + JΩ) − u + c_wΩ, "
+            "Ω̇ = J⁻¹(u − c_wΩ) − ω̇ (derive/wheel_cube.py): proved equal at derive time. Every wheeled body "
+            "in a Sim is stepped by this model (the N = WHEELS_MAX print)."]
+    loads = [Arg("r_b", r_b, "pivot → COM, body frame, m", "small"), Arg("F_w", F_w, "total force at the COM, world frame, N"),
+             Arg("tau_w", tau_w, "total torque about the COM, world frame, N·m"),
+             Arg("u", u, "motor torques on the wheels (body gets −A_b u), N·m"),
+             Arg("c_w", c_w, "wheel damping, N·m·s/rad", "positive")]
+    rates = [Arg("q_dot", q_dot, "1/s"), Arg("omega_dot_b", w_dot, "rad/s², body frame"), Arg("Omega_dot", Om_dot, "rad/s²")]
+    KW = Arg("k_w", k_w, f"wheel-model coefficients [M⁻¹ (3×3 row-major, M = I_p − A_b J A_bᵀ, body frame, 1/(kg·m²)), "
+             f"1/J ({n}, 1/(kg·m²))], from wheels{n}_coefficients")
+    coefficient_kernels = [] if n != WHEELS_MAX else [
+        Kernel(f"wheels{n}_coefficients", f"The inertia-only coefficients of the {n}-wheel equations, computed once per body and call",
+               r"k_w = [(I_P - A J A^T)^{-1},\ J^{-1}]",
+               [IP, AB, JJ], [Arg("k_w", sp.Matrix([e for _, e in coef_where[-len(k_w):]]), KW.doc)], g,
+               notes=[f"The step loops call it once per body and call; wheels{n}_body_rhs_c then divides by nothing.",
+                      f"Printed from the same named subexpressions as wheels{n}_body_rhs, so its k_w is bitwise that kernel's."],
+               where=coef_where[:-len(k_w)]),
+        Kernel(f"wheels{n}_body_rhs_c", f"wheels{n}_body_rhs on the coefficients k_w (no division)",
+               r"\dot\omega = M^{-1}(\tau_P - \omega\times(I_P\omega + A J\Omega) - A(u - c_w\Omega)),\ "
+               r"\dot\Omega = J^{-1}(u - c_w\Omega) - A^T\dot\omega",
+               [Q, W, OM, IP, AB, JJ, KW, *loads], rates, g, where=rhs_where,
+               notes=[f"Bitwise wheels{n}_body_rhs, given k_w = wheels{n}_coefficients(I_p, A_b, J) (the same printed arithmetic)."]),
+    ]
     return [
         Kernel(f"wheels{n}_body_rhs", f"Body with {n} reaction wheels on arbitrary axes rotating about a pivot",
                r"(I_P - A J A^T)\dot\omega = \tau_P - \omega\times(I_P\omega + A J\Omega) - A(u - c_w\Omega),\quad "
                r"\dot\Omega = J^{-1}(u - c_w\Omega) - A^T\dot\omega,\quad \dot q = \tfrac12 q\otimes[\omega,0]",
-               [Q, W, OM, IP, AB, JJ, Arg("r_b", r_b, "pivot → COM, body frame, m", "small"),
-                Arg("F_w", F_w, "total force at the COM, world frame, N"),
-                Arg("tau_w", tau_w, "total torque about the COM, world frame, N·m"),
-                Arg("u", u, "motor torques on the wheels (body gets −A_b u), N·m"),
-                Arg("c_w", c_w, "wheel damping, N·m·s/rad", "positive")],
-               [Arg("q_dot", q_dot, "1/s"), Arg("omega_dot_b", w_dot, "rad/s², body frame"), Arg("Omega_dot", Om_dot, "rad/s²")],
-               g, note),
+               [Q, W, OM, IP, AB, JJ, *loads], rates, g, note, where=where),
+        *coefficient_kernels,
         Kernel(f"wheels{n}_momentum", f"World angular momentum about the pivot of a body with {n} wheels, and the wheels' axial momenta",
                r"L_{body} = R (I_P - A J A^T)\omega,\quad L_{wheels} = R A h_w,\quad h_w = J(A^T\omega + \Omega)",
                [Q, W, OM, IP, AB, JJ],
@@ -134,6 +212,9 @@ def kernels_for(n: int) -> list[Kernel]:
 
 
 def kernels() -> list[Kernel]:
+    if WCOEF.size != 9 + WHEELS_MAX or WCOEF.slice("J_inv") != slice(9, 9 + WHEELS_MAX):
+        raise RuntimeError("derive: the WCOEF layout (derive/layout.py) must be [M⁻¹ (9), 1/J (WHEELS_MAX)], "
+                           "the k_w of wheels<WHEELS_MAX>_coefficients")
     if WHEELS_MAX not in WHEEL_COUNTS:
         raise RuntimeError(f"derive: Sim steps wheel layouts with the wheels{WHEELS_MAX} kernels (derive/layout.py "
                            f"WHEELS_MAX); WHEEL_COUNTS {WHEEL_COUNTS} must include it")

@@ -305,32 +305,6 @@ void lv_rigid_body_rhs_c(const double *x, double m, const double *c_b, const dou
      out omega_dot_b [3]: rad/s², body frame */
 void lv_pivot_body_rhs(const double *q, const double *omega_b, const double *I_p, const double *r_b, const double *F_w, const double *tau_w, double *q_dot, double *omega_dot_b);
 
-/* wheel_body_rhs: Body with three body-axis reaction wheels rotating about a pivot.
-     in  q [4]: orientation (x, y, z, w), R_WB
-     in  omega_b [3]: angular velocity, body frame, rad/s
-     in  Omega [3]: wheel rates relative to the body, rad/s
-     in  I_p [3×3]: inertia about the pivot (wheels locked), body frame, kg·m², symmetric row-major
-     in  J [3]: wheel spin inertias, kg·m²
-     in  r_b [3]: pivot → COM, body frame, m
-     in  F_w [3]: total force at the COM, world frame, N
-     in  tau_w [3]: total torque about the COM, world frame, N·m
-     in  u [3]: motor torques on the wheels (body gets −u), N·m
-     in  c_w scalar: wheel damping, N·m·s/rad
-     out q_dot [4]: 1/s
-     out omega_dot_b [3]: rad/s², body frame
-     out Omega_dot [3]: rad/s² */
-void lv_wheel_body_rhs(const double *q, const double *omega_b, const double *Omega, const double *I_p, const double *J, const double *r_b, const double *F_w, const double *tau_w, const double *u, double c_w, double *q_dot, double *omega_dot_b, double *Omega_dot);
-
-/* wheel_momentum: World angular momentum about the pivot of the body (wheels locked) and of the wheels' spin.
-     in  q [4]: orientation (x, y, z, w), R_WB
-     in  omega_b [3]: angular velocity, body frame, rad/s
-     in  Omega [3]: wheel rates relative to the body, rad/s
-     in  I_p [3×3]: inertia about the pivot (wheels locked), body frame, kg·m², symmetric row-major
-     in  J [3]: wheel spin inertias, kg·m²
-     out L_body_w [3]: kg·m²/s, world
-     out L_wheels_w [3]: kg·m²/s, world */
-void lv_wheel_momentum(const double *q, const double *omega_b, const double *Omega, const double *I_p, const double *J, double *L_body_w, double *L_wheels_w);
-
 /* pivot_kinematics: COM position and velocity of a body on a spherical joint.
      in  q [4]: orientation (x, y, z, w), R_WB
      in  omega_b [3]: angular velocity, body frame, rad/s
@@ -581,6 +555,31 @@ void lv_wheels3_motor(const double *command, const double *Omega, double torque_
      out omega_dot_b [3]: rad/s², body frame
      out Omega_dot [4]: rad/s² */
 void lv_wheels4_body_rhs(const double *q, const double *omega_b, const double *Omega, const double *I_p, const double *A_b, const double *J, const double *r_b, const double *F_w, const double *tau_w, const double *u, double c_w, double *q_dot, double *omega_dot_b, double *Omega_dot);
+
+/* wheels4_coefficients: The inertia-only coefficients of the 4-wheel equations, computed once per body and call.
+     in  I_p [3×3]: inertia about the pivot (wheels locked), body frame, kg·m², symmetric row-major
+     in  A_b [3×4]: wheel spin axes as columns (3×4, unit columns), body frame, row-major
+     in  J [4]: wheel axial inertias (4), kg·m²
+     out k_w [13]: wheel-model coefficients [M⁻¹ (3×3 row-major, M = I_p − A_b J A_bᵀ, body frame, 1/(kg·m²)), 1/J (4, 1/(kg·m²))], from wheels4_coefficients */
+void lv_wheels4_coefficients(const double *I_p, const double *A_b, const double *J, double *k_w);
+
+/* wheels4_body_rhs_c: wheels4_body_rhs on the coefficients k_w (no division).
+     in  q [4]: orientation (x, y, z, w), R_WB
+     in  omega_b [3]: angular velocity, body frame, rad/s
+     in  Omega [4]: wheel rates relative to the body about their axes (4), rad/s
+     in  I_p [3×3]: inertia about the pivot (wheels locked), body frame, kg·m², symmetric row-major
+     in  A_b [3×4]: wheel spin axes as columns (3×4, unit columns), body frame, row-major
+     in  J [4]: wheel axial inertias (4), kg·m²
+     in  k_w [13]: wheel-model coefficients [M⁻¹ (3×3 row-major, M = I_p − A_b J A_bᵀ, body frame, 1/(kg·m²)), 1/J (4, 1/(kg·m²))], from wheels4_coefficients
+     in  r_b [3]: pivot → COM, body frame, m
+     in  F_w [3]: total force at the COM, world frame, N
+     in  tau_w [3]: total torque about the COM, world frame, N·m
+     in  u [4]: motor torques on the wheels (body gets −A_b u), N·m
+     in  c_w scalar: wheel damping, N·m·s/rad
+     out q_dot [4]: 1/s
+     out omega_dot_b [3]: rad/s², body frame
+     out Omega_dot [4]: rad/s² */
+void lv_wheels4_body_rhs_c(const double *q, const double *omega_b, const double *Omega, const double *I_p, const double *A_b, const double *J, const double *k_w, const double *r_b, const double *F_w, const double *tau_w, const double *u, double c_w, double *q_dot, double *omega_dot_b, double *Omega_dot);
 
 /* wheels4_momentum: World angular momentum about the pivot of a body with 4 wheels, and the wheels' axial momenta.
      in  q [4]: orientation (x, y, z, w), R_WB

@@ -93,10 +93,6 @@ void lvf_rigid_body_rhs_torque_c(const float *x, const float *c_b, const float *
 void lvf_rigid_body_rhs_c(const float *x, float m, const float *c_b, const float *F_w, const float *tau_w, float *x_dot);
 /* pivot_body_rhs: Rotation about a world-anchored spherical joint (no wheels) (float; see kernels.h) */
 void lvf_pivot_body_rhs(const float *q, const float *omega_b, const float *I_p, const float *r_b, const float *F_w, const float *tau_w, float *q_dot, float *omega_dot_b);
-/* wheel_body_rhs: Body with three body-axis reaction wheels rotating about a pivot (float; see kernels.h) */
-void lvf_wheel_body_rhs(const float *q, const float *omega_b, const float *Omega, const float *I_p, const float *J, const float *r_b, const float *F_w, const float *tau_w, const float *u, float c_w, float *q_dot, float *omega_dot_b, float *Omega_dot);
-/* wheel_momentum: World angular momentum about the pivot of the body (wheels locked) and of the wheels' spin (float; see kernels.h) */
-void lvf_wheel_momentum(const float *q, const float *omega_b, const float *Omega, const float *I_p, const float *J, float *L_body_w, float *L_wheels_w);
 /* pivot_kinematics: COM position and velocity of a body on a spherical joint (float; see kernels.h) */
 void lvf_pivot_kinematics(const float *q, const float *omega_b, const float *anchor_w, const float *r_b, float *p_w, float *v_w);
 /* splitting_rotation: Free rotation over h by Strang splitting into exact principal-axis flows (float; see kernels.h) */
@@ -153,6 +149,10 @@ void lvf_wheels3_momentum(const float *q, const float *omega_b, const float *Ome
 void lvf_wheels3_motor(const float *command, const float *Omega, float torque_limit, float speed_limit, float cutoff, float *u);
 /* wheels4_body_rhs: Body with 4 reaction wheels on arbitrary axes rotating about a pivot (float; see kernels.h) */
 void lvf_wheels4_body_rhs(const float *q, const float *omega_b, const float *Omega, const float *I_p, const float *A_b, const float *J, const float *r_b, const float *F_w, const float *tau_w, const float *u, float c_w, float *q_dot, float *omega_dot_b, float *Omega_dot);
+/* wheels4_coefficients: The inertia-only coefficients of the 4-wheel equations, computed once per body and call (float; see kernels.h) */
+void lvf_wheels4_coefficients(const float *I_p, const float *A_b, const float *J, float *k_w);
+/* wheels4_body_rhs_c: wheels4_body_rhs on the coefficients k_w (no division) (float; see kernels.h) */
+void lvf_wheels4_body_rhs_c(const float *q, const float *omega_b, const float *Omega, const float *I_p, const float *A_b, const float *J, const float *k_w, const float *r_b, const float *F_w, const float *tau_w, const float *u, float c_w, float *q_dot, float *omega_dot_b, float *Omega_dot);
 /* wheels4_momentum: World angular momentum about the pivot of a body with 4 wheels, and the wheels' axial momenta (float; see kernels.h) */
 void lvf_wheels4_momentum(const float *q, const float *omega_b, const float *Omega, const float *I_p, const float *A_b, const float *J, float *L_body_w, float *L_wheels_w, float *h_w);
 /* wheels4_motor: Motor torques actually applied on 4 wheels (the wheel_motor line, per wheel) (float; see kernels.h) */

@@ -2096,236 +2096,6 @@ def pivot_body_rhs(q, omega_b, I_p, r_b, F_w, tau_w):
     return q_dot_out, omega_dot_b_out
 
 
-def wheel_body_rhs(q, omega_b, Omega, I_p, J, r_b, F_w, tau_w, u, c_w):
-    """Body with three body-axis reaction wheels rotating about a pivot.
-
-    Generated kernel ``wheel_body_rhs``; inputs broadcast over leading batch axes.
-
-    Parameters
-    ----------
-    q : array_like, shape (..., 4)
-        orientation (x, y, z, w), R_WB
-    omega_b : array_like, shape (..., 3)
-        angular velocity, body frame, rad/s
-    Omega : array_like, shape (..., 3)
-        wheel rates relative to the body, rad/s
-    I_p : array_like, shape (..., 3, 3)
-        inertia about the pivot (wheels locked), body frame, kg·m², symmetric row-major
-    J : array_like, shape (..., 3)
-        wheel spin inertias, kg·m²
-    r_b : array_like, shape (..., 3)
-        pivot → COM, body frame, m
-    F_w : array_like, shape (..., 3)
-        total force at the COM, world frame, N
-    tau_w : array_like, shape (..., 3)
-        total torque about the COM, world frame, N·m
-    u : array_like, shape (..., 3)
-        motor torques on the wheels (body gets −u), N·m
-    c_w : array_like, shape (...)
-        wheel damping, N·m·s/rad
-
-    Returns
-    -------
-    q_dot : ndarray, shape (..., 4)
-        1/s
-    omega_dot_b : ndarray, shape (..., 3)
-        rad/s², body frame
-    Omega_dot : ndarray, shape (..., 3)
-        rad/s²
-    """
-    q = numpy.asarray(q, dtype=numpy.float32)
-    omega_b = numpy.asarray(omega_b, dtype=numpy.float32)
-    Omega = numpy.asarray(Omega, dtype=numpy.float32)
-    I_p = numpy.asarray(I_p, dtype=numpy.float32)
-    J = numpy.asarray(J, dtype=numpy.float32)
-    r_b = numpy.asarray(r_b, dtype=numpy.float32)
-    F_w = numpy.asarray(F_w, dtype=numpy.float32)
-    tau_w = numpy.asarray(tau_w, dtype=numpy.float32)
-    u = numpy.asarray(u, dtype=numpy.float32)
-    c_w = numpy.asarray(c_w, dtype=numpy.float32)
-    batch = numpy.broadcast_shapes(q.shape[:-1], omega_b.shape[:-1], Omega.shape[:-1], I_p.shape[:-2], J.shape[:-1], r_b.shape[:-1], F_w.shape[:-1], tau_w.shape[:-1], u.shape[:-1], c_w.shape)
-    q_0 = q[..., 0]
-    q_1 = q[..., 1]
-    q_2 = q[..., 2]
-    q_3 = q[..., 3]
-    omega_b_0 = omega_b[..., 0]
-    omega_b_1 = omega_b[..., 1]
-    omega_b_2 = omega_b[..., 2]
-    Omega_0 = Omega[..., 0]
-    Omega_1 = Omega[..., 1]
-    Omega_2 = Omega[..., 2]
-    I_p_00 = I_p[..., 0, 0]
-    I_p_01 = I_p[..., 0, 1]
-    I_p_02 = I_p[..., 0, 2]
-    I_p_11 = I_p[..., 1, 1]
-    I_p_12 = I_p[..., 1, 2]
-    I_p_22 = I_p[..., 2, 2]
-    J_0 = J[..., 0]
-    J_1 = J[..., 1]
-    J_2 = J[..., 2]
-    r_b_0 = r_b[..., 0]
-    r_b_1 = r_b[..., 1]
-    r_b_2 = r_b[..., 2]
-    F_w_0 = F_w[..., 0]
-    F_w_1 = F_w[..., 1]
-    F_w_2 = F_w[..., 2]
-    tau_w_0 = tau_w[..., 0]
-    tau_w_1 = tau_w[..., 1]
-    tau_w_2 = tau_w[..., 2]
-    u_0 = u[..., 0]
-    u_1 = u[..., 1]
-    u_2 = u[..., 2]
-    t0 = ((numpy.float32(1.0)/numpy.float32(2.0)))*omega_b_0
-    t1 = ((numpy.float32(1.0)/numpy.float32(2.0)))*omega_b_1
-    t2 = ((numpy.float32(1.0)/numpy.float32(2.0)))*omega_b_2
-    t3 = I_p_11*I_p_22
-    t4 = J_1*J_2
-    t5 = I_p_11*J_2
-    t6 = I_p_22*J_1
-    t7 = (I_p_01*I_p_01)
-    t8 = (I_p_02*I_p_02)
-    t9 = (I_p_12*I_p_12)
-    t10 = I_p_01*I_p_12
-    t11 = (1.0/(I_p_00*t3 + I_p_00*t4 - I_p_00*t5 - I_p_00*t6 - I_p_00*t9 + 2*I_p_02*t10 - I_p_11*t8 - I_p_22*t7 - J_0*t3 - J_0*t4 + J_0*t5 + J_0*t6 + J_0*t9 + J_1*t8 + J_2*t7))
-    t12 = -I_p_02*I_p_11 + I_p_02*J_1 + t10
-    t13 = I_p_00*omega_b_0 + I_p_01*omega_b_1 + I_p_02*omega_b_2 + J_0*Omega_0
-    t14 = 2*q_1
-    t15 = q_0*t14
-    t16 = 2*q_3
-    t17 = q_2*t16
-    t18 = t15 - t17
-    t19 = q_0*t16
-    t20 = q_2*t14 + t19
-    t21 = 2*(q_2*q_2)
-    t22 = 2*(q_0*q_0) - 1
-    t23 = -t21 - t22
-    t24 = F_w_0*t18 + F_w_1*t23 + F_w_2*t20
-    t25 = 2*q_0*q_2
-    t26 = q_1*t16
-    t27 = t25 + t26
-    t28 = 2*q_1*q_2 - t19
-    t29 = 2*(q_1*q_1)
-    t30 = -t22 - t29
-    t31 = I_p_01*omega_b_0 + I_p_11*omega_b_1 + I_p_12*omega_b_2 + J_1*Omega_1
-    t32 = t15 + t17
-    t33 = t25 - t26
-    t34 = -t21 - t29 + 1
-    t35 = F_w_0*t34 + F_w_1*t32 + F_w_2*t33
-    t36 = Omega_2*c_w - u_2
-    t37 = -omega_b_0*t31 + omega_b_1*t13 + r_b_0*t24 - r_b_1*t35 + t27*tau_w_0 + t28*tau_w_1 + t30*tau_w_2 + t36
-    t38 = -I_p_01*I_p_22 + I_p_01*J_2 + I_p_02*I_p_12
-    t39 = I_p_02*omega_b_0 + I_p_12*omega_b_1 + I_p_22*omega_b_2 + J_2*Omega_2
-    t40 = F_w_0*t27 + F_w_1*t28 + F_w_2*t30
-    t41 = Omega_1*c_w - u_1
-    t42 = omega_b_0*t39 - omega_b_2*t13 - r_b_0*t40 + r_b_2*t35 + t18*tau_w_0 + t20*tau_w_2 + t23*tau_w_1 + t41
-    t43 = Omega_0*c_w - u_0
-    t44 = -omega_b_1*t39 + omega_b_2*t31 + r_b_1*t40 - r_b_2*t24 + t32*tau_w_1 + t33*tau_w_2 + t34*tau_w_0 + t43
-    t45 = t11*(t12*t37 + t38*t42 + t44*(I_p_11*I_p_22 + J_1*J_2 - t5 - t6 - t9))
-    t46 = -I_p_00*I_p_12 + I_p_01*I_p_02 + I_p_12*J_0
-    t47 = t11*(t37*t46 + t38*t44 + t42*(I_p_00*I_p_22 - I_p_00*J_2 - I_p_22*J_0 + J_0*J_2 - t8))
-    t48 = t11*(t12*t44 + t37*(I_p_00*I_p_11 - I_p_00*J_1 - I_p_11*J_0 + J_0*J_1 - t7) + t42*t46)
-    q_dot_out = numpy.empty(batch + (4,), dtype=numpy.float32)
-    q_dot_out[..., 0] = q_1*t2 - q_2*t1 + q_3*t0
-    q_dot_out[..., 1] = -q_0*t2 + q_2*t0 + q_3*t1
-    q_dot_out[..., 2] = q_0*t1 - q_1*t0 + q_3*t2
-    q_dot_out[..., 3] = -q_0*t0 - q_1*t1 - q_2*t2
-    omega_dot_b_out = numpy.empty(batch + (3,), dtype=numpy.float32)
-    omega_dot_b_out[..., 0] = t45
-    omega_dot_b_out[..., 1] = t47
-    omega_dot_b_out[..., 2] = t48
-    Omega_dot_out = numpy.empty(batch + (3,), dtype=numpy.float32)
-    Omega_dot_out[..., 0] = -t45 - t43/J_0
-    Omega_dot_out[..., 1] = -t47 - t41/J_1
-    Omega_dot_out[..., 2] = -t48 - t36/J_2
-    return q_dot_out, omega_dot_b_out, Omega_dot_out
-
-
-def wheel_momentum(q, omega_b, Omega, I_p, J):
-    """World angular momentum about the pivot of the body (wheels locked) and of the wheels' spin.
-
-    Generated kernel ``wheel_momentum``; inputs broadcast over leading batch axes.
-
-    Parameters
-    ----------
-    q : array_like, shape (..., 4)
-        orientation (x, y, z, w), R_WB
-    omega_b : array_like, shape (..., 3)
-        angular velocity, body frame, rad/s
-    Omega : array_like, shape (..., 3)
-        wheel rates relative to the body, rad/s
-    I_p : array_like, shape (..., 3, 3)
-        inertia about the pivot (wheels locked), body frame, kg·m², symmetric row-major
-    J : array_like, shape (..., 3)
-        wheel spin inertias, kg·m²
-
-    Returns
-    -------
-    L_body_w : ndarray, shape (..., 3)
-        kg·m²/s, world
-    L_wheels_w : ndarray, shape (..., 3)
-        kg·m²/s, world
-    """
-    q = numpy.asarray(q, dtype=numpy.float32)
-    omega_b = numpy.asarray(omega_b, dtype=numpy.float32)
-    Omega = numpy.asarray(Omega, dtype=numpy.float32)
-    I_p = numpy.asarray(I_p, dtype=numpy.float32)
-    J = numpy.asarray(J, dtype=numpy.float32)
-    batch = numpy.broadcast_shapes(q.shape[:-1], omega_b.shape[:-1], Omega.shape[:-1], I_p.shape[:-2], J.shape[:-1])
-    q_0 = q[..., 0]
-    q_1 = q[..., 1]
-    q_2 = q[..., 2]
-    q_3 = q[..., 3]
-    omega_b_0 = omega_b[..., 0]
-    omega_b_1 = omega_b[..., 1]
-    omega_b_2 = omega_b[..., 2]
-    Omega_0 = Omega[..., 0]
-    Omega_1 = Omega[..., 1]
-    Omega_2 = Omega[..., 2]
-    I_p_00 = I_p[..., 0, 0]
-    I_p_01 = I_p[..., 0, 1]
-    I_p_02 = I_p[..., 0, 2]
-    I_p_11 = I_p[..., 1, 1]
-    I_p_12 = I_p[..., 1, 2]
-    I_p_22 = I_p[..., 2, 2]
-    J_0 = J[..., 0]
-    J_1 = J[..., 1]
-    J_2 = J[..., 2]
-    t0 = 2*q_1
-    t1 = q_0*t0
-    t2 = 2*q_2
-    t3 = q_3*t2
-    t4 = t1 - t3
-    t5 = I_p_01*omega_b_0 + I_p_12*omega_b_2 + omega_b_1*(I_p_11 - J_1)
-    t6 = q_0*t2
-    t7 = q_3*t0
-    t8 = t6 + t7
-    t9 = I_p_02*omega_b_0 + I_p_12*omega_b_1 + omega_b_2*(I_p_22 - J_2)
-    t10 = 2*(q_1*q_1)
-    t11 = 2*(q_2*q_2) - 1
-    t12 = -t10 - t11
-    t13 = I_p_01*omega_b_1 + I_p_02*omega_b_2 + omega_b_0*(I_p_00 - J_0)
-    t14 = t1 + t3
-    t15 = 2*q_0*q_3
-    t16 = 2*q_1*q_2 - t15
-    t17 = 2*(q_0*q_0)
-    t18 = -t11 - t17
-    t19 = t6 - t7
-    t20 = q_1*t2 + t15
-    t21 = -t10 - t17 + 1
-    t22 = J_1*(Omega_1 + omega_b_1)
-    t23 = J_2*(Omega_2 + omega_b_2)
-    t24 = J_0*(Omega_0 + omega_b_0)
-    L_body_w_out = numpy.empty(batch + (3,), dtype=numpy.float32)
-    L_body_w_out[..., 0] = t12*t13 + t4*t5 + t8*t9
-    L_body_w_out[..., 1] = t13*t14 + t16*t9 + t18*t5
-    L_body_w_out[..., 2] = t13*t19 + t20*t5 + t21*t9
-    L_wheels_w_out = numpy.empty(batch + (3,), dtype=numpy.float32)
-    L_wheels_w_out[..., 0] = t12*t24 + t22*t4 + t23*t8
-    L_wheels_w_out[..., 1] = t14*t24 + t16*t23 + t18*t22
-    L_wheels_w_out[..., 2] = t19*t24 + t20*t22 + t21*t23
-    return L_body_w_out, L_wheels_w_out
-
-
 def pivot_kinematics(q, omega_b, anchor_w, r_b):
     """COM position and velocity of a body on a spherical joint.
 
@@ -3689,168 +3459,96 @@ def wheels3_body_rhs(q, omega_b, Omega, I_p, A_b, J, r_b, F_w, tau_w, u, c_w):
     u_0 = u[..., 0]
     u_1 = u[..., 1]
     u_2 = u[..., 2]
+    M_00 = -(A_b_00*A_b_00)*J_0 - (A_b_01*A_b_01)*J_1 - (A_b_02*A_b_02)*J_2 + I_p_00
+    M_01 = -A_b_00*A_b_10*J_0 - A_b_01*A_b_11*J_1 - A_b_02*A_b_12*J_2 + I_p_01
+    M_02 = -A_b_00*A_b_20*J_0 - A_b_01*A_b_21*J_1 - A_b_02*A_b_22*J_2 + I_p_02
+    M_11 = -(A_b_10*A_b_10)*J_0 - (A_b_11*A_b_11)*J_1 - (A_b_12*A_b_12)*J_2 + I_p_11
+    M_12 = -A_b_10*A_b_20*J_0 - A_b_11*A_b_21*J_1 - A_b_12*A_b_22*J_2 + I_p_12
+    M_22 = -(A_b_20*A_b_20)*J_0 - (A_b_21*A_b_21)*J_1 - (A_b_22*A_b_22)*J_2 + I_p_22
+    C_00 = M_11*M_22 - (M_12*M_12)
+    C_01 = -M_01*M_22 + M_02*M_12
+    C_02 = M_01*M_12 - M_02*M_11
+    C_11 = M_00*M_22 - (M_02*M_02)
+    C_12 = -M_00*M_12 + M_01*M_02
+    C_22 = M_00*M_11 - (M_01*M_01)
+    inv_det_M = (1.0/(C_00*M_00 + C_01*M_01 + C_02*M_02))
+    k_w_0 = C_00*inv_det_M
+    k_w_1 = C_01*inv_det_M
+    k_w_2 = C_02*inv_det_M
+    k_w_3 = C_01*inv_det_M
+    k_w_4 = C_11*inv_det_M
+    k_w_5 = C_12*inv_det_M
+    k_w_6 = C_02*inv_det_M
+    k_w_7 = C_12*inv_det_M
+    k_w_8 = C_22*inv_det_M
+    k_w_9 = (1.0/J_0)
+    k_w_10 = (1.0/J_1)
+    k_w_11 = (1.0/J_2)
+    JOmega_0 = J_0*Omega_0
+    JOmega_1 = J_1*Omega_1
+    JOmega_2 = J_2*Omega_2
+    g_w_0 = -Omega_0*c_w + u_0
+    g_w_1 = -Omega_1*c_w + u_1
+    g_w_2 = -Omega_2*c_w + u_2
+    h_A_0 = A_b_00*JOmega_0 + A_b_01*JOmega_1 + A_b_02*JOmega_2
+    h_A_1 = A_b_10*JOmega_0 + A_b_11*JOmega_1 + A_b_12*JOmega_2
+    h_A_2 = A_b_20*JOmega_0 + A_b_21*JOmega_1 + A_b_22*JOmega_2
+    I_omega_0 = I_p_00*omega_b_0 + I_p_01*omega_b_1 + I_p_02*omega_b_2
+    I_omega_1 = I_p_01*omega_b_0 + I_p_11*omega_b_1 + I_p_12*omega_b_2
+    I_omega_2 = I_p_02*omega_b_0 + I_p_12*omega_b_1 + I_p_22*omega_b_2
+    H_b_0 = I_omega_0 + h_A_0
+    H_b_1 = I_omega_1 + h_A_1
+    H_b_2 = I_omega_2 + h_A_2
+    wxH_0 = -H_b_1*omega_b_2 + H_b_2*omega_b_1
+    wxH_1 = H_b_0*omega_b_2 - H_b_2*omega_b_0
+    wxH_2 = -H_b_0*omega_b_1 + H_b_1*omega_b_0
+    g_A_0 = A_b_00*g_w_0 + A_b_01*g_w_1 + A_b_02*g_w_2
+    g_A_1 = A_b_10*g_w_0 + A_b_11*g_w_1 + A_b_12*g_w_2
+    g_A_2 = A_b_20*g_w_0 + A_b_21*g_w_1 + A_b_22*g_w_2
     t0 = ((numpy.float32(1.0)/numpy.float32(2.0)))*omega_b_0
     t1 = ((numpy.float32(1.0)/numpy.float32(2.0)))*omega_b_1
     t2 = ((numpy.float32(1.0)/numpy.float32(2.0)))*omega_b_2
-    t3 = I_p_11*I_p_22
-    t4 = (I_p_12*I_p_12)
-    t5 = A_b_10*A_b_20*J_0
-    t6 = 2*I_p_12
-    t7 = A_b_11*A_b_21*J_1
-    t8 = A_b_12*A_b_22*J_2
-    t9 = (A_b_10*A_b_10)*J_0
-    t10 = I_p_22*t9
-    t11 = (A_b_11*A_b_11)*J_1
-    t12 = I_p_22*t11
-    t13 = (A_b_12*A_b_12)*J_2
-    t14 = I_p_22*t13
-    t15 = (A_b_20*A_b_20)
-    t16 = J_0*t15
-    t17 = I_p_11*t16
-    t18 = (A_b_21*A_b_21)
-    t19 = J_1*t18
-    t20 = I_p_11*t19
-    t21 = (A_b_22*A_b_22)
-    t22 = J_2*t21
-    t23 = I_p_11*t22
-    t24 = 2*t5
-    t25 = 2*t7
-    t26 = t19*t9
-    t27 = t22*t9
-    t28 = t11*t16
-    t29 = t11*t22
-    t30 = t13*t16
-    t31 = t13*t19
-    t32 = -Omega_0*c_w + u_0
-    t33 = -Omega_1*c_w + u_1
-    t34 = -Omega_2*c_w + u_2
-    t35 = 2*q_1
-    t36 = q_0*t35
-    t37 = 2*q_2
-    t38 = q_3*t37
-    t39 = t36 + t38
-    t40 = q_0*t37
-    t41 = q_3*t35
-    t42 = t40 - t41
-    t43 = 2*(q_1*q_1)
-    t44 = 2*(q_2*q_2) - 1
-    t45 = -t43 - t44
-    t46 = J_0*Omega_0
-    t47 = J_1*Omega_1
-    t48 = J_2*Omega_2
-    t49 = A_b_20*t46 + A_b_21*t47 + A_b_22*t48 + I_p_02*omega_b_0 + I_p_12*omega_b_1 + I_p_22*omega_b_2
-    t50 = A_b_10*t46 + A_b_11*t47 + A_b_12*t48 + I_p_01*omega_b_0 + I_p_11*omega_b_1 + I_p_12*omega_b_2
-    t51 = t36 - t38
-    t52 = 2*q_0*q_3
-    t53 = q_2*t35 + t52
-    t54 = 2*(q_0*q_0)
-    t55 = -t44 - t54
-    t56 = F_w_0*t51 + F_w_1*t55 + F_w_2*t53
-    t57 = t40 + t41
-    t58 = 2*q_1*q_2 - t52
-    t59 = -t43 - t54 + 1
-    t60 = F_w_0*t57 + F_w_1*t58 + F_w_2*t59
-    t61 = -A_b_00*t32 - A_b_01*t33 - A_b_02*t34 - omega_b_1*t49 + omega_b_2*t50 + r_b_1*t60 - r_b_2*t56 + t39*tau_w_1 + t42*tau_w_2 + t45*tau_w_0
-    t62 = I_p_01*I_p_22
-    t63 = A_b_00*J_0
-    t64 = A_b_20*t63
-    t65 = I_p_12*t64
-    t66 = A_b_01*J_1
-    t67 = A_b_21*t66
-    t68 = I_p_12*t67
-    t69 = A_b_02*J_2
-    t70 = A_b_22*t69
-    t71 = I_p_12*t70
-    t72 = I_p_02*t5
-    t73 = I_p_02*t7
-    t74 = I_p_02*t8
-    t75 = A_b_10*t63
-    t76 = t19*t75
-    t77 = t22*t75
-    t78 = A_b_11*t66
-    t79 = t16*t78
-    t80 = A_b_12*t69
-    t81 = A_b_00*A_b_10*I_p_22*J_0 + A_b_00*A_b_11*A_b_20*A_b_21*J_0*J_1 + A_b_00*A_b_12*A_b_20*A_b_22*J_0*J_2 + A_b_01*A_b_10*A_b_20*A_b_21*J_0*J_1 + A_b_01*A_b_11*I_p_22*J_1 + A_b_01*A_b_12*A_b_21*A_b_22*J_1*J_2 + A_b_02*A_b_10*A_b_20*A_b_22*J_0*J_2 + A_b_02*A_b_11*A_b_21*A_b_22*J_1*J_2 + A_b_02*A_b_12*I_p_22*J_2 + I_p_01*J_0*t15 + I_p_01*J_1*t18 + I_p_01*J_2*t21 + I_p_02*I_p_12 - t16*t80 - t19*t80 - t22*t78 - t62 - t65 - t68 - t71 - t72 - t73 - t74 - t76 - t77 - t79
-    t82 = A_b_00*t46 + A_b_01*t47 + A_b_02*t48 + I_p_00*omega_b_0 + I_p_01*omega_b_1 + I_p_02*omega_b_2
-    t83 = F_w_0*t45 + F_w_1*t39 + F_w_2*t42
-    t84 = -A_b_10*t32 - A_b_11*t33 - A_b_12*t34 + omega_b_0*t49 - omega_b_2*t82 - r_b_0*t60 + r_b_2*t83 + t51*tau_w_0 + t53*tau_w_2 + t55*tau_w_1
-    t85 = I_p_01*I_p_12
-    t86 = I_p_02*I_p_11
-    t87 = I_p_11*t64
-    t88 = I_p_11*t67
-    t89 = I_p_02*t9
-    t90 = I_p_02*t11
-    t91 = I_p_02*t13
-    t92 = t11*t64
-    t93 = t13*t64
-    t94 = t67*t9
-    t95 = -I_p_01*t5 - I_p_01*t7 - I_p_01*t8 + I_p_11*t70 - I_p_12*t75 - I_p_12*t78 - I_p_12*t80 - t11*t70 - t13*t67 + t5*t78 + t5*t80 + t7*t75 + t7*t80 - t70*t9 + t75*t8 + t78*t8 + t85 - t86 + t87 + t88 + t89 + t90 + t91 - t92 - t93 - t94
-    t96 = -A_b_20*t32 - A_b_21*t33 - A_b_22*t34 - omega_b_0*t50 + omega_b_1*t82 + r_b_0*t56 - r_b_1*t83 + t57*tau_w_0 + t58*tau_w_1 + t59*tau_w_2
-    t97 = I_p_02*I_p_12
-    t98 = 2*I_p_01
-    t99 = (I_p_01*I_p_01)
-    t100 = (I_p_02*I_p_02)
-    t101 = 2*t62
-    t102 = 2*t97
-    t103 = 2*t85
-    t104 = 2*t86
-    t105 = I_p_00*I_p_12
-    t106 = 2*t105
-    t107 = 2*I_p_01*I_p_02
-    t108 = (A_b_00*A_b_00)
-    t109 = J_0*t108
-    t110 = (A_b_01*A_b_01)
-    t111 = J_1*t110
-    t112 = (A_b_02*A_b_02)
-    t113 = J_2*t112
-    t114 = I_p_00*I_p_22
-    t115 = I_p_00*I_p_11
-    t116 = I_p_22*t75
-    t117 = 2*t78
-    t118 = 2*t75
-    t119 = 2*t67
-    t120 = 2*t80
-    t121 = 2*t70
-    t122 = t64*t7
-    t123 = t64*t8
-    t124 = t5*t67
-    t125 = t67*t8
-    t126 = t5*t70
-    t127 = t7*t70
-    t128 = I_p_00*t5
-    t129 = 2*t8
-    t130 = I_p_00*t19
-    t131 = I_p_00*t22
-    t132 = I_p_00*t16
-    t133 = I_p_01*t19
-    t134 = I_p_01*t22
-    t135 = 2*t64
-    t136 = I_p_12*t109
-    t137 = I_p_01*t16
-    t138 = I_p_12*t111
-    t139 = I_p_12*t113
-    t140 = t109*t7
-    t141 = t111*t5
-    t142 = t113*t5
-    t143 = (1.0/(-I_p_00*t129*t7 + I_p_00*t3 - I_p_00*t4 - I_p_11*t100 - I_p_22*t120*t78 - I_p_22*t99 + t10*t111 + t10*t113 + t100*t11 + t100*t13 + t100*t9 + t101*t75 + t101*t78 + t101*t80 - t102*t75 - t102*t78 - t102*t80 - t103*t64 - t103*t67 - t103*t70 + t104*t64 + t104*t67 + t104*t70 + t106*t5 + t106*t7 + t106*t8 - t107*t5 - t107*t7 - t107*t8 + t109*t12 + t109*t14 + t109*t20 + t109*t23 - t109*t29 - t109*t3 - t109*t31 + t109*t4 - t11*t114 + t11*t131 + t11*t132 + t111*t14 + t111*t17 + t111*t23 - t111*t27 - t111*t3 - t111*t30 + t111*t4 + t113*t12 + t113*t17 + t113*t20 - t113*t26 - t113*t28 - t113*t3 + t113*t4 - t114*t13 - t114*t9 - t115*t16 - t115*t19 - t115*t22 - t116*t117 - t116*t120 - t117*t123 - t117*t126 - t117*t134 - t117*t137 + t117*t65 + t117*t71 + t117*t72 + t117*t74 + t117*t77 - t118*t125 - t118*t127 - t118*t133 - t118*t134 + t118*t68 + t118*t71 + t118*t73 + t118*t74 - t119*t87 - t119*t89 - t119*t91 + t119*t93 - t120*t122 - t120*t124 - t120*t133 - t120*t137 + t120*t65 + t120*t68 + t120*t72 + t120*t73 + t120*t76 + t120*t79 - t121*t87 - t121*t88 - t121*t89 - t121*t90 + t121*t92 + t121*t94 + t122*t98 + t123*t98 + t124*t98 + t125*t98 + t126*t98 + t127*t98 - t128*t129 - t128*t25 - t129*t136 - t129*t138 + t129*t140 + t129*t141 + t13*t130 + t13*t132 + t130*t9 + t131*t9 - t135*t90 - t135*t91 - t136*t25 - t138*t24 - t139*t24 - t139*t25 + t142*t25 + t16*t99 + t19*t99 + t22*t99 + t97*t98))
-    t144 = t143*(t61*(-t10 - t12 - t14 - t17 - t20 - t23 - t24*t7 - t24*t8 - t25*t8 + t26 + t27 + t28 + t29 + t3 + t30 + t31 - t4 + t5*t6 + t6*t7 + t6*t8) + t81*t84 + t95*t96)
-    t145 = 2*I_p_02
-    t146 = A_b_00*A_b_01*A_b_10*A_b_21*J_0*J_1 + A_b_00*A_b_01*A_b_11*A_b_20*J_0*J_1 + A_b_00*A_b_02*A_b_10*A_b_22*J_0*J_2 + A_b_00*A_b_02*A_b_12*A_b_20*J_0*J_2 + A_b_01*A_b_02*A_b_11*A_b_22*J_1*J_2 + A_b_01*A_b_02*A_b_12*A_b_21*J_1*J_2 + A_b_10*A_b_20*I_p_00*J_0 + A_b_11*A_b_21*I_p_00*J_1 + A_b_12*A_b_22*I_p_00*J_2 + I_p_01*I_p_02 - I_p_01*t64 - I_p_01*t67 - I_p_01*t70 - I_p_02*t75 - I_p_02*t78 - I_p_02*t80 + I_p_12*J_0*t108 + I_p_12*J_1*t110 + I_p_12*J_2*t112 - t105 - t109*t8 - t111*t8 - t113*t7 - t140 - t141 - t142
-    t147 = t143*(t146*t96 + t61*t81 + t84*(-I_p_22*t109 - I_p_22*t111 - I_p_22*t113 - t100 + t109*t19 + t109*t22 + t111*t16 + t111*t22 + t113*t16 + t113*t19 + t114 - t119*t70 - t130 - t131 - t132 - t135*t67 - t135*t70 + t145*t64 + t145*t67 + t145*t70))
-    t148 = t143*(t146*t84 + t61*t95 + t96*(-I_p_00*t11 - I_p_00*t13 - I_p_00*t9 - I_p_11*t109 - I_p_11*t111 - I_p_11*t113 + t109*t11 + t109*t13 + t11*t113 + t111*t13 + t111*t9 + t113*t9 + t115 - t117*t80 - t118*t78 - t118*t80 + t75*t98 + t78*t98 + t80*t98 - t99))
+    t3 = 2*q_0
+    t4 = q_1*t3
+    t5 = 2*q_2*q_3
+    t6 = t4 + t5
+    t7 = q_2*t3
+    t8 = 2*q_1
+    t9 = q_3*t8
+    t10 = t7 - t9
+    t11 = 2*(q_2*q_2)
+    t12 = 2*(q_1*q_1) - 1
+    t13 = -t11 - t12
+    t14 = t7 + t9
+    t15 = q_3*t3
+    t16 = 2*q_1*q_2 - t15
+    t17 = 2*(q_0*q_0)
+    t18 = -t12 - t17
+    t19 = F_w_0*t14 + F_w_1*t16 + F_w_2*t18
+    t20 = t4 - t5
+    t21 = q_2*t8 + t15
+    t22 = -t11 - t17 + 1
+    t23 = F_w_0*t20 + F_w_1*t22 + F_w_2*t21
+    t24 = -g_A_0 + r_b_1*t19 - r_b_2*t23 + t10*tau_w_2 + t13*tau_w_0 + t6*tau_w_1 - wxH_0
+    t25 = F_w_0*t13 + F_w_1*t6 + F_w_2*t10
+    t26 = -g_A_1 - r_b_0*t19 + r_b_2*t25 + t20*tau_w_0 + t21*tau_w_2 + t22*tau_w_1 - wxH_1
+    t27 = -g_A_2 + r_b_0*t23 - r_b_1*t25 + t14*tau_w_0 + t16*tau_w_1 + t18*tau_w_2 - wxH_2
+    t28 = k_w_0*t24 + k_w_1*t26 + k_w_2*t27
+    t29 = k_w_3*t24 + k_w_4*t26 + k_w_5*t27
+    t30 = k_w_6*t24 + k_w_7*t26 + k_w_8*t27
     q_dot_out = numpy.empty(batch + (4,), dtype=numpy.float32)
     q_dot_out[..., 0] = q_1*t2 - q_2*t1 + q_3*t0
     q_dot_out[..., 1] = -q_0*t2 + q_2*t0 + q_3*t1
     q_dot_out[..., 2] = q_0*t1 - q_1*t0 + q_3*t2
     q_dot_out[..., 3] = -q_0*t0 - q_1*t1 - q_2*t2
     omega_dot_b_out = numpy.empty(batch + (3,), dtype=numpy.float32)
-    omega_dot_b_out[..., 0] = t144
-    omega_dot_b_out[..., 1] = t147
-    omega_dot_b_out[..., 2] = t148
+    omega_dot_b_out[..., 0] = t28
+    omega_dot_b_out[..., 1] = t29
+    omega_dot_b_out[..., 2] = t30
     Omega_dot_out = numpy.empty(batch + (3,), dtype=numpy.float32)
-    Omega_dot_out[..., 0] = -A_b_00*t144 - A_b_10*t147 - A_b_20*t148 + t32/J_0
-    Omega_dot_out[..., 1] = -A_b_01*t144 - A_b_11*t147 - A_b_21*t148 + t33/J_1
-    Omega_dot_out[..., 2] = -A_b_02*t144 - A_b_12*t147 - A_b_22*t148 + t34/J_2
+    Omega_dot_out[..., 0] = -A_b_00*t28 - A_b_10*t29 - A_b_20*t30 + g_w_0*k_w_9
+    Omega_dot_out[..., 1] = -A_b_01*t28 - A_b_11*t29 - A_b_21*t30 + g_w_1*k_w_10
+    Omega_dot_out[..., 2] = -A_b_02*t28 - A_b_12*t29 - A_b_22*t30 + g_w_2*k_w_11
     return q_dot_out, omega_dot_b_out, Omega_dot_out
 
 
@@ -4147,221 +3845,362 @@ def wheels4_body_rhs(q, omega_b, Omega, I_p, A_b, J, r_b, F_w, tau_w, u, c_w):
     u_1 = u[..., 1]
     u_2 = u[..., 2]
     u_3 = u[..., 3]
+    M_00 = -(A_b_00*A_b_00)*J_0 - (A_b_01*A_b_01)*J_1 - (A_b_02*A_b_02)*J_2 - (A_b_03*A_b_03)*J_3 + I_p_00
+    M_01 = -A_b_00*A_b_10*J_0 - A_b_01*A_b_11*J_1 - A_b_02*A_b_12*J_2 - A_b_03*A_b_13*J_3 + I_p_01
+    M_02 = -A_b_00*A_b_20*J_0 - A_b_01*A_b_21*J_1 - A_b_02*A_b_22*J_2 - A_b_03*A_b_23*J_3 + I_p_02
+    M_11 = -(A_b_10*A_b_10)*J_0 - (A_b_11*A_b_11)*J_1 - (A_b_12*A_b_12)*J_2 - (A_b_13*A_b_13)*J_3 + I_p_11
+    M_12 = -A_b_10*A_b_20*J_0 - A_b_11*A_b_21*J_1 - A_b_12*A_b_22*J_2 - A_b_13*A_b_23*J_3 + I_p_12
+    M_22 = -(A_b_20*A_b_20)*J_0 - (A_b_21*A_b_21)*J_1 - (A_b_22*A_b_22)*J_2 - (A_b_23*A_b_23)*J_3 + I_p_22
+    C_00 = M_11*M_22 - (M_12*M_12)
+    C_01 = -M_01*M_22 + M_02*M_12
+    C_02 = M_01*M_12 - M_02*M_11
+    C_11 = M_00*M_22 - (M_02*M_02)
+    C_12 = -M_00*M_12 + M_01*M_02
+    C_22 = M_00*M_11 - (M_01*M_01)
+    inv_det_M = (1.0/(C_00*M_00 + C_01*M_01 + C_02*M_02))
+    k_w_0 = C_00*inv_det_M
+    k_w_1 = C_01*inv_det_M
+    k_w_2 = C_02*inv_det_M
+    k_w_3 = C_01*inv_det_M
+    k_w_4 = C_11*inv_det_M
+    k_w_5 = C_12*inv_det_M
+    k_w_6 = C_02*inv_det_M
+    k_w_7 = C_12*inv_det_M
+    k_w_8 = C_22*inv_det_M
+    k_w_9 = (1.0/J_0)
+    k_w_10 = (1.0/J_1)
+    k_w_11 = (1.0/J_2)
+    k_w_12 = (1.0/J_3)
+    JOmega_0 = J_0*Omega_0
+    JOmega_1 = J_1*Omega_1
+    JOmega_2 = J_2*Omega_2
+    JOmega_3 = J_3*Omega_3
+    g_w_0 = -Omega_0*c_w + u_0
+    g_w_1 = -Omega_1*c_w + u_1
+    g_w_2 = -Omega_2*c_w + u_2
+    g_w_3 = -Omega_3*c_w + u_3
+    h_A_0 = A_b_00*JOmega_0 + A_b_01*JOmega_1 + A_b_02*JOmega_2 + A_b_03*JOmega_3
+    h_A_1 = A_b_10*JOmega_0 + A_b_11*JOmega_1 + A_b_12*JOmega_2 + A_b_13*JOmega_3
+    h_A_2 = A_b_20*JOmega_0 + A_b_21*JOmega_1 + A_b_22*JOmega_2 + A_b_23*JOmega_3
+    I_omega_0 = I_p_00*omega_b_0 + I_p_01*omega_b_1 + I_p_02*omega_b_2
+    I_omega_1 = I_p_01*omega_b_0 + I_p_11*omega_b_1 + I_p_12*omega_b_2
+    I_omega_2 = I_p_02*omega_b_0 + I_p_12*omega_b_1 + I_p_22*omega_b_2
+    H_b_0 = I_omega_0 + h_A_0
+    H_b_1 = I_omega_1 + h_A_1
+    H_b_2 = I_omega_2 + h_A_2
+    wxH_0 = -H_b_1*omega_b_2 + H_b_2*omega_b_1
+    wxH_1 = H_b_0*omega_b_2 - H_b_2*omega_b_0
+    wxH_2 = -H_b_0*omega_b_1 + H_b_1*omega_b_0
+    g_A_0 = A_b_00*g_w_0 + A_b_01*g_w_1 + A_b_02*g_w_2 + A_b_03*g_w_3
+    g_A_1 = A_b_10*g_w_0 + A_b_11*g_w_1 + A_b_12*g_w_2 + A_b_13*g_w_3
+    g_A_2 = A_b_20*g_w_0 + A_b_21*g_w_1 + A_b_22*g_w_2 + A_b_23*g_w_3
     t0 = ((numpy.float32(1.0)/numpy.float32(2.0)))*omega_b_0
     t1 = ((numpy.float32(1.0)/numpy.float32(2.0)))*omega_b_1
     t2 = ((numpy.float32(1.0)/numpy.float32(2.0)))*omega_b_2
-    t3 = -Omega_0*c_w + u_0
-    t4 = -Omega_1*c_w + u_1
-    t5 = -Omega_2*c_w + u_2
-    t6 = -Omega_3*c_w + u_3
-    t7 = 2*q_1
-    t8 = q_0*t7
-    t9 = 2*q_2
-    t10 = q_3*t9
-    t11 = t10 + t8
-    t12 = q_0*t9
-    t13 = q_3*t7
-    t14 = t12 - t13
-    t15 = 2*(q_1*q_1)
-    t16 = 2*(q_2*q_2) - 1
-    t17 = -t15 - t16
-    t18 = J_0*Omega_0
-    t19 = J_1*Omega_1
-    t20 = J_2*Omega_2
-    t21 = J_3*Omega_3
-    t22 = A_b_20*t18 + A_b_21*t19 + A_b_22*t20 + A_b_23*t21 + I_p_02*omega_b_0 + I_p_12*omega_b_1 + I_p_22*omega_b_2
-    t23 = A_b_10*t18 + A_b_11*t19 + A_b_12*t20 + A_b_13*t21 + I_p_01*omega_b_0 + I_p_11*omega_b_1 + I_p_12*omega_b_2
-    t24 = -t10 + t8
-    t25 = 2*q_0*q_3
-    t26 = q_2*t7 + t25
-    t27 = 2*(q_0*q_0)
-    t28 = -t16 - t27
-    t29 = F_w_0*t24 + F_w_1*t28 + F_w_2*t26
-    t30 = t12 + t13
-    t31 = 2*q_1*q_2 - t25
-    t32 = -t15 - t27 + 1
-    t33 = F_w_0*t30 + F_w_1*t31 + F_w_2*t32
-    t34 = -A_b_00*t3 - A_b_01*t4 - A_b_02*t5 - A_b_03*t6 - omega_b_1*t22 + omega_b_2*t23 + r_b_1*t33 - r_b_2*t29 + t11*tau_w_1 + t14*tau_w_2 + t17*tau_w_0
-    t35 = I_p_11*I_p_22
-    t36 = (I_p_12*I_p_12)
-    t37 = A_b_10*A_b_20*J_0
-    t38 = 2*I_p_12
-    t39 = A_b_11*A_b_21*J_1
-    t40 = A_b_12*A_b_22*J_2
-    t41 = A_b_13*A_b_23*J_3
-    t42 = (A_b_10*A_b_10)*J_0
-    t43 = I_p_22*t42
-    t44 = (A_b_11*A_b_11)*J_1
-    t45 = I_p_22*t44
-    t46 = (A_b_12*A_b_12)*J_2
-    t47 = I_p_22*t46
-    t48 = (A_b_13*A_b_13)*J_3
-    t49 = I_p_22*t48
-    t50 = (A_b_20*A_b_20)
-    t51 = J_0*t50
-    t52 = I_p_11*t51
-    t53 = (A_b_21*A_b_21)
-    t54 = J_1*t53
-    t55 = I_p_11*t54
-    t56 = (A_b_22*A_b_22)
-    t57 = J_2*t56
-    t58 = I_p_11*t57
-    t59 = (A_b_23*A_b_23)
-    t60 = J_3*t59
-    t61 = I_p_11*t60
-    t62 = 2*t37
-    t63 = 2*t39
-    t64 = 2*t40
-    t65 = t42*t54
-    t66 = t42*t57
-    t67 = t42*t60
-    t68 = t44*t51
-    t69 = t44*t57
-    t70 = t44*t60
-    t71 = t46*t51
-    t72 = t46*t54
-    t73 = t46*t60
-    t74 = t48*t51
-    t75 = t48*t54
-    t76 = t48*t57
-    t77 = A_b_00*t18 + A_b_01*t19 + A_b_02*t20 + A_b_03*t21 + I_p_00*omega_b_0 + I_p_01*omega_b_1 + I_p_02*omega_b_2
-    t78 = F_w_0*t17 + F_w_1*t11 + F_w_2*t14
-    t79 = -A_b_10*t3 - A_b_11*t4 - A_b_12*t5 - A_b_13*t6 + omega_b_0*t22 - omega_b_2*t77 - r_b_0*t33 + r_b_2*t78 + t24*tau_w_0 + t26*tau_w_2 + t28*tau_w_1
-    t80 = I_p_01*I_p_22
-    t81 = A_b_00*J_0
-    t82 = A_b_20*t81
-    t83 = I_p_12*t82
-    t84 = A_b_01*J_1
-    t85 = A_b_21*t84
-    t86 = I_p_12*t85
-    t87 = A_b_02*J_2
-    t88 = A_b_22*t87
-    t89 = I_p_12*t88
-    t90 = A_b_03*J_3
-    t91 = A_b_23*t90
-    t92 = I_p_12*t91
-    t93 = I_p_02*t37
-    t94 = I_p_02*t39
-    t95 = I_p_02*t40
-    t96 = I_p_02*t41
-    t97 = A_b_10*t81
-    t98 = t54*t97
-    t99 = t57*t97
-    t100 = t60*t97
-    t101 = A_b_11*t84
-    t102 = t101*t51
-    t103 = t101*t57
-    t104 = t101*t60
-    t105 = A_b_12*t87
-    t106 = t105*t51
-    t107 = t105*t54
-    t108 = A_b_13*t90
-    t109 = A_b_00*A_b_10*I_p_22*J_0 + A_b_00*A_b_11*A_b_20*A_b_21*J_0*J_1 + A_b_00*A_b_12*A_b_20*A_b_22*J_0*J_2 + A_b_00*A_b_13*A_b_20*A_b_23*J_0*J_3 + A_b_01*A_b_10*A_b_20*A_b_21*J_0*J_1 + A_b_01*A_b_11*I_p_22*J_1 + A_b_01*A_b_12*A_b_21*A_b_22*J_1*J_2 + A_b_01*A_b_13*A_b_21*A_b_23*J_1*J_3 + A_b_02*A_b_10*A_b_20*A_b_22*J_0*J_2 + A_b_02*A_b_11*A_b_21*A_b_22*J_1*J_2 + A_b_02*A_b_12*I_p_22*J_2 + A_b_02*A_b_13*A_b_22*A_b_23*J_2*J_3 + A_b_03*A_b_10*A_b_20*A_b_23*J_0*J_3 + A_b_03*A_b_11*A_b_21*A_b_23*J_1*J_3 + A_b_03*A_b_12*A_b_22*A_b_23*J_2*J_3 + A_b_03*A_b_13*I_p_22*J_3 + I_p_01*J_0*t50 + I_p_01*J_1*t53 + I_p_01*J_2*t56 + I_p_01*J_3*t59 + I_p_02*I_p_12 - t100 - t102 - t103 - t104 - t105*t60 - t106 - t107 - t108*t51 - t108*t54 - t108*t57 - t80 - t83 - t86 - t89 - t92 - t93 - t94 - t95 - t96 - t98 - t99
-    t110 = -A_b_20*t3 - A_b_21*t4 - A_b_22*t5 - A_b_23*t6 - omega_b_0*t23 + omega_b_1*t77 + r_b_0*t29 - r_b_1*t78 + t30*tau_w_0 + t31*tau_w_1 + t32*tau_w_2
-    t111 = I_p_01*I_p_12
-    t112 = I_p_02*I_p_11
-    t113 = I_p_11*t82
-    t114 = I_p_11*t85
-    t115 = I_p_11*t88
-    t116 = I_p_02*t42
-    t117 = I_p_02*t44
-    t118 = I_p_02*t46
-    t119 = I_p_02*t48
-    t120 = t44*t82
-    t121 = t46*t82
-    t122 = t48*t82
-    t123 = t42*t85
-    t124 = t46*t85
-    t125 = t48*t85
-    t126 = t42*t88
-    t127 = t44*t88
-    t128 = -I_p_01*t37 - I_p_01*t39 - I_p_01*t40 - I_p_01*t41 + I_p_11*t91 - I_p_12*t101 - I_p_12*t105 - I_p_12*t108 - I_p_12*t97 + t101*t37 + t101*t40 + t101*t41 + t105*t37 + t105*t39 + t105*t41 + t108*t37 + t108*t39 + t108*t40 + t111 - t112 + t113 + t114 + t115 + t116 + t117 + t118 + t119 - t120 - t121 - t122 - t123 - t124 - t125 - t126 - t127 + t39*t97 + t40*t97 + t41*t97 - t42*t91 - t44*t91 - t46*t91 - t48*t88
-    t129 = I_p_02*I_p_12
-    t130 = 2*I_p_01
-    t131 = (I_p_01*I_p_01)
-    t132 = (I_p_02*I_p_02)
-    t133 = 2*t80
-    t134 = 2*t129
-    t135 = 2*t111
-    t136 = 2*t112
-    t137 = I_p_00*I_p_12
-    t138 = 2*t137
-    t139 = 2*I_p_01*I_p_02
-    t140 = (A_b_00*A_b_00)
-    t141 = J_0*t140
-    t142 = (A_b_01*A_b_01)
-    t143 = J_1*t142
-    t144 = (A_b_02*A_b_02)
-    t145 = J_2*t144
-    t146 = (A_b_03*A_b_03)
-    t147 = J_3*t146
-    t148 = I_p_00*I_p_22
-    t149 = I_p_00*I_p_11
-    t150 = I_p_22*t97
-    t151 = 2*t101
-    t152 = 2*t97
-    t153 = 2*t85
-    t154 = 2*t105
-    t155 = 2*t88
-    t156 = 2*t108
-    t157 = 2*t91
-    t158 = t39*t82
-    t159 = t40*t82
-    t160 = t41*t82
-    t161 = I_p_22*t101
-    t162 = t37*t85
-    t163 = t40*t85
-    t164 = t41*t85
-    t165 = t37*t88
-    t166 = t39*t88
-    t167 = t41*t88
-    t168 = t37*t91
-    t169 = t39*t91
-    t170 = t40*t91
-    t171 = I_p_00*t37
-    t172 = 2*t41
-    t173 = I_p_00*t39
-    t174 = I_p_00*t54
-    t175 = I_p_00*t57
-    t176 = I_p_00*t60
-    t177 = I_p_00*t51
-    t178 = I_p_01*t54
-    t179 = I_p_01*t57
-    t180 = I_p_01*t60
-    t181 = 2*t82
-    t182 = I_p_12*t141
-    t183 = I_p_01*t51
-    t184 = I_p_12*t143
-    t185 = I_p_12*t145
-    t186 = I_p_12*t147
-    t187 = t141*t39
-    t188 = t141*t40
-    t189 = t143*t37
-    t190 = t143*t40
-    t191 = t145*t37
-    t192 = t145*t39
-    t193 = t147*t37
-    t194 = t147*t39
-    t195 = (1.0/(-I_p_00*t172*t40 + I_p_00*t35 - I_p_00*t36 - I_p_11*t132 - I_p_22*t105*t156 - I_p_22*t131 + t100*t151 + t100*t154 + t101*t133 - t101*t134 + t102*t154 + t102*t156 + t103*t156 + t104*t154 + t105*t133 - t105*t134 + t106*t156 + t107*t156 + t108*t133 - t108*t134 - t113*t153 - t113*t155 - t113*t157 - t114*t155 - t114*t157 - t115*t157 - t116*t153 - t116*t155 - t116*t157 - t117*t155 - t117*t157 - t117*t181 - t118*t153 - t118*t157 - t118*t181 - t119*t153 - t119*t155 - t119*t181 + t120*t155 + t120*t157 + t121*t153 + t121*t157 + t122*t153 + t122*t155 + t123*t155 + t123*t157 + t124*t157 + t125*t155 + t126*t157 + t127*t157 + t129*t130 + t130*t158 + t130*t159 + t130*t160 + t130*t162 + t130*t163 + t130*t164 + t130*t165 + t130*t166 + t130*t167 + t130*t168 + t130*t169 + t130*t170 + t131*t51 + t131*t54 + t131*t57 + t131*t60 + t132*t42 + t132*t44 + t132*t46 + t132*t48 + t133*t97 - t134*t97 - t135*t82 - t135*t85 - t135*t88 - t135*t91 + t136*t82 + t136*t85 + t136*t88 + t136*t91 + t138*t37 + t138*t39 + t138*t40 + t138*t41 - t139*t37 - t139*t39 - t139*t40 - t139*t41 - t141*t35 + t141*t36 + t141*t45 + t141*t47 + t141*t49 + t141*t55 + t141*t58 + t141*t61 - t141*t69 - t141*t70 - t141*t72 - t141*t73 - t141*t75 - t141*t76 - t143*t35 + t143*t36 + t143*t43 + t143*t47 + t143*t49 + t143*t52 + t143*t58 + t143*t61 - t143*t66 - t143*t67 - t143*t71 - t143*t73 - t143*t74 - t143*t76 - t145*t35 + t145*t36 + t145*t43 + t145*t45 + t145*t49 + t145*t52 + t145*t55 + t145*t61 - t145*t65 - t145*t67 - t145*t68 - t145*t70 - t145*t74 - t145*t75 - t147*t35 + t147*t36 + t147*t43 + t147*t45 + t147*t47 + t147*t52 + t147*t55 + t147*t58 - t147*t65 - t147*t66 - t147*t68 - t147*t69 - t147*t71 - t147*t72 - t148*t42 - t148*t44 - t148*t46 - t148*t48 - t149*t51 - t149*t54 - t149*t57 - t149*t60 - t150*t151 - t150*t154 - t150*t156 - t151*t159 - t151*t160 - t151*t165 - t151*t167 - t151*t168 - t151*t170 - t151*t179 - t151*t180 - t151*t183 + t151*t83 + t151*t89 + t151*t92 + t151*t93 + t151*t95 + t151*t96 + t151*t99 - t152*t163 - t152*t164 - t152*t166 - t152*t167 - t152*t169 - t152*t170 - t152*t178 - t152*t179 - t152*t180 + t152*t86 + t152*t89 + t152*t92 + t152*t94 + t152*t95 + t152*t96 - t154*t158 - t154*t160 - t154*t161 - t154*t162 - t154*t164 - t154*t168 - t154*t169 - t154*t178 - t154*t180 - t154*t183 + t154*t83 + t154*t86 + t154*t92 + t154*t93 + t154*t94 + t154*t96 + t154*t98 - t156*t158 - t156*t159 - t156*t161 - t156*t162 - t156*t163 - t156*t165 - t156*t166 - t156*t178 - t156*t179 - t156*t183 + t156*t83 + t156*t86 + t156*t89 + t156*t93 + t156*t94 + t156*t95 + t156*t98 + t156*t99 - t171*t172 - t171*t63 - t171*t64 - t172*t173 - t172*t182 - t172*t184 - t172*t185 + t172*t187 + t172*t188 + t172*t189 + t172*t190 + t172*t191 + t172*t192 - t173*t64 + t174*t42 + t174*t46 + t174*t48 + t175*t42 + t175*t44 + t175*t48 + t176*t42 + t176*t44 + t176*t46 + t177*t44 + t177*t46 + t177*t48 - t182*t63 - t182*t64 - t184*t62 - t184*t64 - t185*t62 - t185*t63 - t186*t62 - t186*t63 - t186*t64 + t187*t64 + t189*t64 + t191*t63 + t193*t63 + t193*t64 + t194*t64))
-    t196 = t195*(t109*t79 + t110*t128 + t34*(t35 - t36 + t37*t38 + t38*t39 + t38*t40 + t38*t41 - t39*t62 - t40*t62 - t40*t63 - t41*t62 - t41*t63 - t41*t64 - t43 - t45 - t47 - t49 - t52 - t55 - t58 - t61 + t65 + t66 + t67 + t68 + t69 + t70 + t71 + t72 + t73 + t74 + t75 + t76))
-    t197 = 2*I_p_02
-    t198 = A_b_00*A_b_01*A_b_10*A_b_21*J_0*J_1 + A_b_00*A_b_01*A_b_11*A_b_20*J_0*J_1 + A_b_00*A_b_02*A_b_10*A_b_22*J_0*J_2 + A_b_00*A_b_02*A_b_12*A_b_20*J_0*J_2 + A_b_00*A_b_03*A_b_10*A_b_23*J_0*J_3 + A_b_00*A_b_03*A_b_13*A_b_20*J_0*J_3 + A_b_01*A_b_02*A_b_11*A_b_22*J_1*J_2 + A_b_01*A_b_02*A_b_12*A_b_21*J_1*J_2 + A_b_01*A_b_03*A_b_11*A_b_23*J_1*J_3 + A_b_01*A_b_03*A_b_13*A_b_21*J_1*J_3 + A_b_02*A_b_03*A_b_12*A_b_23*J_2*J_3 + A_b_02*A_b_03*A_b_13*A_b_22*J_2*J_3 + A_b_10*A_b_20*I_p_00*J_0 + A_b_11*A_b_21*I_p_00*J_1 + A_b_12*A_b_22*I_p_00*J_2 + A_b_13*A_b_23*I_p_00*J_3 + I_p_01*I_p_02 - I_p_01*t82 - I_p_01*t85 - I_p_01*t88 - I_p_01*t91 - I_p_02*t101 - I_p_02*t105 - I_p_02*t108 - I_p_02*t97 + I_p_12*J_0*t140 + I_p_12*J_1*t142 + I_p_12*J_2*t144 + I_p_12*J_3*t146 - t137 - t141*t41 - t143*t41 - t145*t41 - t147*t40 - t187 - t188 - t189 - t190 - t191 - t192 - t193 - t194
-    t199 = t195*(t109*t34 + t110*t198 + t79*(-I_p_22*t141 - I_p_22*t143 - I_p_22*t145 - I_p_22*t147 - t132 + t141*t54 + t141*t57 + t141*t60 + t143*t51 + t143*t57 + t143*t60 + t145*t51 + t145*t54 + t145*t60 + t147*t51 + t147*t54 + t147*t57 + t148 - t153*t88 - t153*t91 - t155*t91 - t174 - t175 - t176 - t177 - t181*t85 - t181*t88 - t181*t91 + t197*t82 + t197*t85 + t197*t88 + t197*t91))
-    t200 = t195*(t110*(-I_p_00*t42 - I_p_00*t44 - I_p_00*t46 - I_p_00*t48 - I_p_11*t141 - I_p_11*t143 - I_p_11*t145 - I_p_11*t147 + t101*t130 - t101*t152 + t105*t130 - t105*t151 - t105*t152 + t108*t130 - t108*t151 - t108*t152 - t108*t154 + t130*t97 - t131 + t141*t44 + t141*t46 + t141*t48 + t143*t42 + t143*t46 + t143*t48 + t145*t42 + t145*t44 + t145*t48 + t147*t42 + t147*t44 + t147*t46 + t149) + t128*t34 + t198*t79)
+    t3 = 2*q_0
+    t4 = q_1*t3
+    t5 = 2*q_2*q_3
+    t6 = t4 + t5
+    t7 = q_2*t3
+    t8 = 2*q_1
+    t9 = q_3*t8
+    t10 = t7 - t9
+    t11 = 2*(q_2*q_2)
+    t12 = 2*(q_1*q_1) - 1
+    t13 = -t11 - t12
+    t14 = t7 + t9
+    t15 = q_3*t3
+    t16 = 2*q_1*q_2 - t15
+    t17 = 2*(q_0*q_0)
+    t18 = -t12 - t17
+    t19 = F_w_0*t14 + F_w_1*t16 + F_w_2*t18
+    t20 = t4 - t5
+    t21 = q_2*t8 + t15
+    t22 = -t11 - t17 + 1
+    t23 = F_w_0*t20 + F_w_1*t22 + F_w_2*t21
+    t24 = -g_A_0 + r_b_1*t19 - r_b_2*t23 + t10*tau_w_2 + t13*tau_w_0 + t6*tau_w_1 - wxH_0
+    t25 = F_w_0*t13 + F_w_1*t6 + F_w_2*t10
+    t26 = -g_A_1 - r_b_0*t19 + r_b_2*t25 + t20*tau_w_0 + t21*tau_w_2 + t22*tau_w_1 - wxH_1
+    t27 = -g_A_2 + r_b_0*t23 - r_b_1*t25 + t14*tau_w_0 + t16*tau_w_1 + t18*tau_w_2 - wxH_2
+    t28 = k_w_0*t24 + k_w_1*t26 + k_w_2*t27
+    t29 = k_w_3*t24 + k_w_4*t26 + k_w_5*t27
+    t30 = k_w_6*t24 + k_w_7*t26 + k_w_8*t27
     q_dot_out = numpy.empty(batch + (4,), dtype=numpy.float32)
     q_dot_out[..., 0] = q_1*t2 - q_2*t1 + q_3*t0
     q_dot_out[..., 1] = -q_0*t2 + q_2*t0 + q_3*t1
     q_dot_out[..., 2] = q_0*t1 - q_1*t0 + q_3*t2
     q_dot_out[..., 3] = -q_0*t0 - q_1*t1 - q_2*t2
     omega_dot_b_out = numpy.empty(batch + (3,), dtype=numpy.float32)
-    omega_dot_b_out[..., 0] = t196
-    omega_dot_b_out[..., 1] = t199
-    omega_dot_b_out[..., 2] = t200
+    omega_dot_b_out[..., 0] = t28
+    omega_dot_b_out[..., 1] = t29
+    omega_dot_b_out[..., 2] = t30
     Omega_dot_out = numpy.empty(batch + (4,), dtype=numpy.float32)
-    Omega_dot_out[..., 0] = -A_b_00*t196 - A_b_10*t199 - A_b_20*t200 + t3/J_0
-    Omega_dot_out[..., 1] = -A_b_01*t196 - A_b_11*t199 - A_b_21*t200 + t4/J_1
-    Omega_dot_out[..., 2] = -A_b_02*t196 - A_b_12*t199 - A_b_22*t200 + t5/J_2
-    Omega_dot_out[..., 3] = -A_b_03*t196 - A_b_13*t199 - A_b_23*t200 + t6/J_3
+    Omega_dot_out[..., 0] = -A_b_00*t28 - A_b_10*t29 - A_b_20*t30 + g_w_0*k_w_9
+    Omega_dot_out[..., 1] = -A_b_01*t28 - A_b_11*t29 - A_b_21*t30 + g_w_1*k_w_10
+    Omega_dot_out[..., 2] = -A_b_02*t28 - A_b_12*t29 - A_b_22*t30 + g_w_2*k_w_11
+    Omega_dot_out[..., 3] = -A_b_03*t28 - A_b_13*t29 - A_b_23*t30 + g_w_3*k_w_12
+    return q_dot_out, omega_dot_b_out, Omega_dot_out
+
+
+def wheels4_coefficients(I_p, A_b, J):
+    """The inertia-only coefficients of the 4-wheel equations, computed once per body and call.
+
+    Generated kernel ``wheels4_coefficients``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    I_p : array_like, shape (..., 3, 3)
+        inertia about the pivot (wheels locked), body frame, kg·m², symmetric row-major
+    A_b : array_like, shape (..., 3, 4)
+        wheel spin axes as columns (3×4, unit columns), body frame, row-major
+    J : array_like, shape (..., 4)
+        wheel axial inertias (4), kg·m²
+
+    Returns
+    -------
+    k_w : ndarray, shape (..., 13)
+        wheel-model coefficients [M⁻¹ (3×3 row-major, M = I_p − A_b J A_bᵀ, body frame, 1/(kg·m²)), 1/J (4, 1/(kg·m²))], from wheels4_coefficients
+    """
+    I_p = numpy.asarray(I_p, dtype=numpy.float32)
+    A_b = numpy.asarray(A_b, dtype=numpy.float32)
+    J = numpy.asarray(J, dtype=numpy.float32)
+    batch = numpy.broadcast_shapes(I_p.shape[:-2], A_b.shape[:-2], J.shape[:-1])
+    I_p_00 = I_p[..., 0, 0]
+    I_p_01 = I_p[..., 0, 1]
+    I_p_02 = I_p[..., 0, 2]
+    I_p_11 = I_p[..., 1, 1]
+    I_p_12 = I_p[..., 1, 2]
+    I_p_22 = I_p[..., 2, 2]
+    A_b_00 = A_b[..., 0, 0]
+    A_b_01 = A_b[..., 0, 1]
+    A_b_02 = A_b[..., 0, 2]
+    A_b_03 = A_b[..., 0, 3]
+    A_b_10 = A_b[..., 1, 0]
+    A_b_11 = A_b[..., 1, 1]
+    A_b_12 = A_b[..., 1, 2]
+    A_b_13 = A_b[..., 1, 3]
+    A_b_20 = A_b[..., 2, 0]
+    A_b_21 = A_b[..., 2, 1]
+    A_b_22 = A_b[..., 2, 2]
+    A_b_23 = A_b[..., 2, 3]
+    J_0 = J[..., 0]
+    J_1 = J[..., 1]
+    J_2 = J[..., 2]
+    J_3 = J[..., 3]
+    M_00 = -(A_b_00*A_b_00)*J_0 - (A_b_01*A_b_01)*J_1 - (A_b_02*A_b_02)*J_2 - (A_b_03*A_b_03)*J_3 + I_p_00
+    M_01 = -A_b_00*A_b_10*J_0 - A_b_01*A_b_11*J_1 - A_b_02*A_b_12*J_2 - A_b_03*A_b_13*J_3 + I_p_01
+    M_02 = -A_b_00*A_b_20*J_0 - A_b_01*A_b_21*J_1 - A_b_02*A_b_22*J_2 - A_b_03*A_b_23*J_3 + I_p_02
+    M_11 = -(A_b_10*A_b_10)*J_0 - (A_b_11*A_b_11)*J_1 - (A_b_12*A_b_12)*J_2 - (A_b_13*A_b_13)*J_3 + I_p_11
+    M_12 = -A_b_10*A_b_20*J_0 - A_b_11*A_b_21*J_1 - A_b_12*A_b_22*J_2 - A_b_13*A_b_23*J_3 + I_p_12
+    M_22 = -(A_b_20*A_b_20)*J_0 - (A_b_21*A_b_21)*J_1 - (A_b_22*A_b_22)*J_2 - (A_b_23*A_b_23)*J_3 + I_p_22
+    C_00 = M_11*M_22 - (M_12*M_12)
+    C_01 = -M_01*M_22 + M_02*M_12
+    C_02 = M_01*M_12 - M_02*M_11
+    C_11 = M_00*M_22 - (M_02*M_02)
+    C_12 = -M_00*M_12 + M_01*M_02
+    C_22 = M_00*M_11 - (M_01*M_01)
+    inv_det_M = (1.0/(C_00*M_00 + C_01*M_01 + C_02*M_02))
+    t0 = C_01*inv_det_M
+    t1 = C_02*inv_det_M
+    t2 = C_12*inv_det_M
+    k_w_out = numpy.empty(batch + (13,), dtype=numpy.float32)
+    k_w_out[..., 0] = C_00*inv_det_M
+    k_w_out[..., 1] = t0
+    k_w_out[..., 2] = t1
+    k_w_out[..., 3] = t0
+    k_w_out[..., 4] = C_11*inv_det_M
+    k_w_out[..., 5] = t2
+    k_w_out[..., 6] = t1
+    k_w_out[..., 7] = t2
+    k_w_out[..., 8] = C_22*inv_det_M
+    k_w_out[..., 9] = (1.0/J_0)
+    k_w_out[..., 10] = (1.0/J_1)
+    k_w_out[..., 11] = (1.0/J_2)
+    k_w_out[..., 12] = (1.0/J_3)
+    return k_w_out
+
+
+def wheels4_body_rhs_c(q, omega_b, Omega, I_p, A_b, J, k_w, r_b, F_w, tau_w, u, c_w):
+    """wheels4_body_rhs on the coefficients k_w (no division).
+
+    Generated kernel ``wheels4_body_rhs_c``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    q : array_like, shape (..., 4)
+        orientation (x, y, z, w), R_WB
+    omega_b : array_like, shape (..., 3)
+        angular velocity, body frame, rad/s
+    Omega : array_like, shape (..., 4)
+        wheel rates relative to the body about their axes (4), rad/s
+    I_p : array_like, shape (..., 3, 3)
+        inertia about the pivot (wheels locked), body frame, kg·m², symmetric row-major
+    A_b : array_like, shape (..., 3, 4)
+        wheel spin axes as columns (3×4, unit columns), body frame, row-major
+    J : array_like, shape (..., 4)
+        wheel axial inertias (4), kg·m²
+    k_w : array_like, shape (..., 13)
+        wheel-model coefficients [M⁻¹ (3×3 row-major, M = I_p − A_b J A_bᵀ, body frame, 1/(kg·m²)), 1/J (4, 1/(kg·m²))], from wheels4_coefficients
+    r_b : array_like, shape (..., 3)
+        pivot → COM, body frame, m
+    F_w : array_like, shape (..., 3)
+        total force at the COM, world frame, N
+    tau_w : array_like, shape (..., 3)
+        total torque about the COM, world frame, N·m
+    u : array_like, shape (..., 4)
+        motor torques on the wheels (body gets −A_b u), N·m
+    c_w : array_like, shape (...)
+        wheel damping, N·m·s/rad
+
+    Returns
+    -------
+    q_dot : ndarray, shape (..., 4)
+        1/s
+    omega_dot_b : ndarray, shape (..., 3)
+        rad/s², body frame
+    Omega_dot : ndarray, shape (..., 4)
+        rad/s²
+    """
+    q = numpy.asarray(q, dtype=numpy.float32)
+    omega_b = numpy.asarray(omega_b, dtype=numpy.float32)
+    Omega = numpy.asarray(Omega, dtype=numpy.float32)
+    I_p = numpy.asarray(I_p, dtype=numpy.float32)
+    A_b = numpy.asarray(A_b, dtype=numpy.float32)
+    J = numpy.asarray(J, dtype=numpy.float32)
+    k_w = numpy.asarray(k_w, dtype=numpy.float32)
+    r_b = numpy.asarray(r_b, dtype=numpy.float32)
+    F_w = numpy.asarray(F_w, dtype=numpy.float32)
+    tau_w = numpy.asarray(tau_w, dtype=numpy.float32)
+    u = numpy.asarray(u, dtype=numpy.float32)
+    c_w = numpy.asarray(c_w, dtype=numpy.float32)
+    batch = numpy.broadcast_shapes(q.shape[:-1], omega_b.shape[:-1], Omega.shape[:-1], I_p.shape[:-2], A_b.shape[:-2], J.shape[:-1], k_w.shape[:-1], r_b.shape[:-1], F_w.shape[:-1], tau_w.shape[:-1], u.shape[:-1], c_w.shape)
+    q_0 = q[..., 0]
+    q_1 = q[..., 1]
+    q_2 = q[..., 2]
+    q_3 = q[..., 3]
+    omega_b_0 = omega_b[..., 0]
+    omega_b_1 = omega_b[..., 1]
+    omega_b_2 = omega_b[..., 2]
+    Omega_0 = Omega[..., 0]
+    Omega_1 = Omega[..., 1]
+    Omega_2 = Omega[..., 2]
+    Omega_3 = Omega[..., 3]
+    I_p_00 = I_p[..., 0, 0]
+    I_p_01 = I_p[..., 0, 1]
+    I_p_02 = I_p[..., 0, 2]
+    I_p_11 = I_p[..., 1, 1]
+    I_p_12 = I_p[..., 1, 2]
+    I_p_22 = I_p[..., 2, 2]
+    A_b_00 = A_b[..., 0, 0]
+    A_b_01 = A_b[..., 0, 1]
+    A_b_02 = A_b[..., 0, 2]
+    A_b_03 = A_b[..., 0, 3]
+    A_b_10 = A_b[..., 1, 0]
+    A_b_11 = A_b[..., 1, 1]
+    A_b_12 = A_b[..., 1, 2]
+    A_b_13 = A_b[..., 1, 3]
+    A_b_20 = A_b[..., 2, 0]
+    A_b_21 = A_b[..., 2, 1]
+    A_b_22 = A_b[..., 2, 2]
+    A_b_23 = A_b[..., 2, 3]
+    J_0 = J[..., 0]
+    J_1 = J[..., 1]
+    J_2 = J[..., 2]
+    J_3 = J[..., 3]
+    k_w_0 = k_w[..., 0]
+    k_w_1 = k_w[..., 1]
+    k_w_2 = k_w[..., 2]
+    k_w_3 = k_w[..., 3]
+    k_w_4 = k_w[..., 4]
+    k_w_5 = k_w[..., 5]
+    k_w_6 = k_w[..., 6]
+    k_w_7 = k_w[..., 7]
+    k_w_8 = k_w[..., 8]
+    k_w_9 = k_w[..., 9]
+    k_w_10 = k_w[..., 10]
+    k_w_11 = k_w[..., 11]
+    k_w_12 = k_w[..., 12]
+    r_b_0 = r_b[..., 0]
+    r_b_1 = r_b[..., 1]
+    r_b_2 = r_b[..., 2]
+    F_w_0 = F_w[..., 0]
+    F_w_1 = F_w[..., 1]
+    F_w_2 = F_w[..., 2]
+    tau_w_0 = tau_w[..., 0]
+    tau_w_1 = tau_w[..., 1]
+    tau_w_2 = tau_w[..., 2]
+    u_0 = u[..., 0]
+    u_1 = u[..., 1]
+    u_2 = u[..., 2]
+    u_3 = u[..., 3]
+    JOmega_0 = J_0*Omega_0
+    JOmega_1 = J_1*Omega_1
+    JOmega_2 = J_2*Omega_2
+    JOmega_3 = J_3*Omega_3
+    g_w_0 = -Omega_0*c_w + u_0
+    g_w_1 = -Omega_1*c_w + u_1
+    g_w_2 = -Omega_2*c_w + u_2
+    g_w_3 = -Omega_3*c_w + u_3
+    h_A_0 = A_b_00*JOmega_0 + A_b_01*JOmega_1 + A_b_02*JOmega_2 + A_b_03*JOmega_3
+    h_A_1 = A_b_10*JOmega_0 + A_b_11*JOmega_1 + A_b_12*JOmega_2 + A_b_13*JOmega_3
+    h_A_2 = A_b_20*JOmega_0 + A_b_21*JOmega_1 + A_b_22*JOmega_2 + A_b_23*JOmega_3
+    I_omega_0 = I_p_00*omega_b_0 + I_p_01*omega_b_1 + I_p_02*omega_b_2
+    I_omega_1 = I_p_01*omega_b_0 + I_p_11*omega_b_1 + I_p_12*omega_b_2
+    I_omega_2 = I_p_02*omega_b_0 + I_p_12*omega_b_1 + I_p_22*omega_b_2
+    H_b_0 = I_omega_0 + h_A_0
+    H_b_1 = I_omega_1 + h_A_1
+    H_b_2 = I_omega_2 + h_A_2
+    wxH_0 = -H_b_1*omega_b_2 + H_b_2*omega_b_1
+    wxH_1 = H_b_0*omega_b_2 - H_b_2*omega_b_0
+    wxH_2 = -H_b_0*omega_b_1 + H_b_1*omega_b_0
+    g_A_0 = A_b_00*g_w_0 + A_b_01*g_w_1 + A_b_02*g_w_2 + A_b_03*g_w_3
+    g_A_1 = A_b_10*g_w_0 + A_b_11*g_w_1 + A_b_12*g_w_2 + A_b_13*g_w_3
+    g_A_2 = A_b_20*g_w_0 + A_b_21*g_w_1 + A_b_22*g_w_2 + A_b_23*g_w_3
+    t0 = ((numpy.float32(1.0)/numpy.float32(2.0)))*omega_b_0
+    t1 = ((numpy.float32(1.0)/numpy.float32(2.0)))*omega_b_1
+    t2 = ((numpy.float32(1.0)/numpy.float32(2.0)))*omega_b_2
+    t3 = 2*q_0
+    t4 = q_1*t3
+    t5 = 2*q_2*q_3
+    t6 = t4 + t5
+    t7 = q_2*t3
+    t8 = 2*q_1
+    t9 = q_3*t8
+    t10 = t7 - t9
+    t11 = 2*(q_2*q_2)
+    t12 = 2*(q_1*q_1) - 1
+    t13 = -t11 - t12
+    t14 = t7 + t9
+    t15 = q_3*t3
+    t16 = 2*q_1*q_2 - t15
+    t17 = 2*(q_0*q_0)
+    t18 = -t12 - t17
+    t19 = F_w_0*t14 + F_w_1*t16 + F_w_2*t18
+    t20 = t4 - t5
+    t21 = q_2*t8 + t15
+    t22 = -t11 - t17 + 1
+    t23 = F_w_0*t20 + F_w_1*t22 + F_w_2*t21
+    t24 = -g_A_0 + r_b_1*t19 - r_b_2*t23 + t10*tau_w_2 + t13*tau_w_0 + t6*tau_w_1 - wxH_0
+    t25 = F_w_0*t13 + F_w_1*t6 + F_w_2*t10
+    t26 = -g_A_1 - r_b_0*t19 + r_b_2*t25 + t20*tau_w_0 + t21*tau_w_2 + t22*tau_w_1 - wxH_1
+    t27 = -g_A_2 + r_b_0*t23 - r_b_1*t25 + t14*tau_w_0 + t16*tau_w_1 + t18*tau_w_2 - wxH_2
+    t28 = k_w_0*t24 + k_w_1*t26 + k_w_2*t27
+    t29 = k_w_3*t24 + k_w_4*t26 + k_w_5*t27
+    t30 = k_w_6*t24 + k_w_7*t26 + k_w_8*t27
+    q_dot_out = numpy.empty(batch + (4,), dtype=numpy.float32)
+    q_dot_out[..., 0] = q_1*t2 - q_2*t1 + q_3*t0
+    q_dot_out[..., 1] = -q_0*t2 + q_2*t0 + q_3*t1
+    q_dot_out[..., 2] = q_0*t1 - q_1*t0 + q_3*t2
+    q_dot_out[..., 3] = -q_0*t0 - q_1*t1 - q_2*t2
+    omega_dot_b_out = numpy.empty(batch + (3,), dtype=numpy.float32)
+    omega_dot_b_out[..., 0] = t28
+    omega_dot_b_out[..., 1] = t29
+    omega_dot_b_out[..., 2] = t30
+    Omega_dot_out = numpy.empty(batch + (4,), dtype=numpy.float32)
+    Omega_dot_out[..., 0] = -A_b_00*t28 - A_b_10*t29 - A_b_20*t30 + g_w_0*k_w_9
+    Omega_dot_out[..., 1] = -A_b_01*t28 - A_b_11*t29 - A_b_21*t30 + g_w_1*k_w_10
+    Omega_dot_out[..., 2] = -A_b_02*t28 - A_b_12*t29 - A_b_22*t30 + g_w_2*k_w_11
+    Omega_dot_out[..., 3] = -A_b_03*t28 - A_b_13*t29 - A_b_23*t30 + g_w_3*k_w_12
     return q_dot_out, omega_dot_b_out, Omega_dot_out
 
 
@@ -4630,8 +4469,6 @@ KERNELS = {
     'rigid_body_rhs_torque_c': (rigid_body_rhs_torque_c, [('x', (13,)), ('c_b', (6,)), ('tau_w', (3,))], [('x_dot', (13,))]),
     'rigid_body_rhs_c': (rigid_body_rhs_c, [('x', (13,)), ('m', ()), ('c_b', (6,)), ('F_w', (3,)), ('tau_w', (3,))], [('x_dot', (13,))]),
     'pivot_body_rhs': (pivot_body_rhs, [('q', (4,)), ('omega_b', (3,)), ('I_p', (3, 3)), ('r_b', (3,)), ('F_w', (3,)), ('tau_w', (3,))], [('q_dot', (4,)), ('omega_dot_b', (3,))]),
-    'wheel_body_rhs': (wheel_body_rhs, [('q', (4,)), ('omega_b', (3,)), ('Omega', (3,)), ('I_p', (3, 3)), ('J', (3,)), ('r_b', (3,)), ('F_w', (3,)), ('tau_w', (3,)), ('u', (3,)), ('c_w', ())], [('q_dot', (4,)), ('omega_dot_b', (3,)), ('Omega_dot', (3,))]),
-    'wheel_momentum': (wheel_momentum, [('q', (4,)), ('omega_b', (3,)), ('Omega', (3,)), ('I_p', (3, 3)), ('J', (3,))], [('L_body_w', (3,)), ('L_wheels_w', (3,))]),
     'pivot_kinematics': (pivot_kinematics, [('q', (4,)), ('omega_b', (3,)), ('anchor_w', (3,)), ('r_b', (3,))], [('p_w', (3,)), ('v_w', (3,))]),
     'splitting_rotation': (splitting_rotation, [('I_b', (3,)), ('q', (4,)), ('omega_b', (3,)), ('h', ())], [('q_next', (4,)), ('omega_next', (3,))]),
     'axis_flow_x': (axis_flow_x, [('I_b', (3,)), ('q', (4,)), ('L_b', (3,)), ('tau', ())], [('q_next', (4,)), ('L_next', (3,))]),
@@ -4660,6 +4497,8 @@ KERNELS = {
     'wheels3_momentum': (wheels3_momentum, [('q', (4,)), ('omega_b', (3,)), ('Omega', (3,)), ('I_p', (3, 3)), ('A_b', (3, 3)), ('J', (3,))], [('L_body_w', (3,)), ('L_wheels_w', (3,)), ('h_w', (3,))]),
     'wheels3_motor': (wheels3_motor, [('command', (3,)), ('Omega', (3,)), ('torque_limit', ()), ('speed_limit', ()), ('cutoff', ())], [('u', (3,))]),
     'wheels4_body_rhs': (wheels4_body_rhs, [('q', (4,)), ('omega_b', (3,)), ('Omega', (4,)), ('I_p', (3, 3)), ('A_b', (3, 4)), ('J', (4,)), ('r_b', (3,)), ('F_w', (3,)), ('tau_w', (3,)), ('u', (4,)), ('c_w', ())], [('q_dot', (4,)), ('omega_dot_b', (3,)), ('Omega_dot', (4,))]),
+    'wheels4_coefficients': (wheels4_coefficients, [('I_p', (3, 3)), ('A_b', (3, 4)), ('J', (4,))], [('k_w', (13,))]),
+    'wheels4_body_rhs_c': (wheels4_body_rhs_c, [('q', (4,)), ('omega_b', (3,)), ('Omega', (4,)), ('I_p', (3, 3)), ('A_b', (3, 4)), ('J', (4,)), ('k_w', (13,)), ('r_b', (3,)), ('F_w', (3,)), ('tau_w', (3,)), ('u', (4,)), ('c_w', ())], [('q_dot', (4,)), ('omega_dot_b', (3,)), ('Omega_dot', (4,))]),
     'wheels4_momentum': (wheels4_momentum, [('q', (4,)), ('omega_b', (3,)), ('Omega', (4,)), ('I_p', (3, 3)), ('A_b', (3, 4)), ('J', (4,))], [('L_body_w', (3,)), ('L_wheels_w', (3,)), ('h_w', (4,))]),
     'wheels4_motor': (wheels4_motor, [('command', (4,)), ('Omega', (4,)), ('torque_limit', ()), ('speed_limit', ()), ('cutoff', ())], [('u', (4,))]),
 }

@@ -36,7 +36,7 @@
 #define LV_MODEL_SPEED_LIMIT 21  /* [1] no drive beyond this |Omega_i|, rad/s */
 #define LV_MODEL_C_W 22  /* [1] wheel bearing damping, N·m·s/rad */
 #define LV_MODEL_CUTOFF 23  /* [1] wheel motor: 0 torque–speed line (stall torque_limit, no-load speed_limit); 1 hard cut-off */
-#define LV_MODEL_A_B 24  /* [12] wheel spin axes as the columns of a 3×WHEELS_MAX matrix, body frame, row-major (unused slots 0; KIND_AXES only) */
+#define LV_MODEL_A_B 24  /* [12] wheel spin axes as the columns of a 3×WHEELS_MAX matrix, body frame, row-major (unused slots 0) */
 #define LV_MODEL_A_B_LEN 12
 #define LV_MODEL_SIZE 36
 
@@ -54,16 +54,23 @@
 #define LV_EULER_R_LEN 3
 #define LV_EULER_SIZE 6
 
+/* wheel-model coefficients k_w of a wheeled body (derive/wheel_layout.py wheels<WHEELS_MAX>_coefficients) (13) */
+#define LV_WCOEF_MINV 0  /* [9] (I_p − A_b J A_bᵀ)⁻¹, body frame, row-major, 1/(kg·m²) */
+#define LV_WCOEF_MINV_LEN 9
+#define LV_WCOEF_J_INV 9  /* [4] 1/J per wheel slot, 1/(kg·m²) */
+#define LV_WCOEF_J_INV_LEN 4
+#define LV_WCOEF_SIZE 13
+
 /* bits of the model row's kind */
 enum {
     LV_KIND_JOINT = 1,  /* world-anchored spherical joint: p_w, v_w follow from q, omega */
-    LV_KIND_WHEELS = 2,  /* reaction wheels: Omega integrated, motor torques saturated; three on the body x, y, z axes (wheel_body_rhs) unless KIND_AXES */
-    LV_KIND_AXES = 4,  /* with KIND_WHEELS: up to WHEELS_MAX wheels on the columns of A_b (wheels<WHEELS_MAX>_body_rhs) */
+    LV_KIND_WHEELS = 2,  /* reaction wheels: up to WHEELS_MAX on the columns of A_b (wheels<WHEELS_MAX>_body_rhs), Omega integrated, motor torques saturated */
 };
 #define LV_WHEELS_MAX 4  /* wheel slots per body (XS.Omega, MODEL.J, the columns of MODEL.A_b) */
-#define LV_WHEELS_BODY_AXES 3  /* wheels of a body-axis layout (KIND_WHEELS without KIND_AXES) */
-/* the printed kernels of a KIND_AXES layout (derive/wheel_layout.py, N = WHEELS_MAX) */
-#define LV_WHEELS_AXES_BODY_RHS lv_wheels4_body_rhs
-#define LV_WHEELS_AXES_MOTOR lv_wheels4_motor
+#define LV_WHEELS_BODY_AXES 3  /* wheels of the default layout: the body x, y, z axes, A_b = [I | 0] */
+/* the printed kernels of every wheeled body (derive/wheel_layout.py, N = WHEELS_MAX) */
+#define LV_WHEELS_COEFFICIENTS lv_wheels4_coefficients
+#define LV_WHEELS_BODY_RHS_C lv_wheels4_body_rhs_c
+#define LV_WHEELS_MOTOR lv_wheels4_motor
 
 #endif

@@ -38,7 +38,7 @@ MODEL_TORQUE_LIMIT = 20  # [1] motor torque limit, N·m
 MODEL_SPEED_LIMIT = 21  # [1] no drive beyond this |Omega_i|, rad/s
 MODEL_C_W = 22  # [1] wheel bearing damping, N·m·s/rad
 MODEL_CUTOFF = 23  # [1] wheel motor: 0 torque–speed line (stall torque_limit, no-load speed_limit); 1 hard cut-off
-MODEL_A_B = slice(24, 36)  # [12] wheel spin axes as the columns of a 3×WHEELS_MAX matrix, body frame, row-major (unused slots 0; KIND_AXES only)
+MODEL_A_B = slice(24, 36)  # [12] wheel spin axes as the columns of a 3×WHEELS_MAX matrix, body frame, row-major (unused slots 0)
 MODEL_A_B_LEN = 12
 MODEL_SIZE = 36
 MODEL_LAYOUT = {'kind': slice(0, 1), 'I_p': slice(1, 10), 'r_b': slice(10, 13), 'anchor_w': slice(13, 16), 'J': slice(16, 20), 'torque_limit': slice(20, 21), 'speed_limit': slice(21, 22), 'c_w': slice(22, 23), 'cutoff': slice(23, 24), 'A_b': slice(24, 36)}
@@ -59,9 +59,16 @@ EULER_R_LEN = 3
 EULER_SIZE = 6
 EULER_LAYOUT = {'k': slice(0, 3), 'r': slice(3, 6)}
 
+# wheel-model coefficients k_w of a wheeled body (derive/wheel_layout.py wheels<WHEELS_MAX>_coefficients)
+WCOEF_MINV = slice(0, 9)  # [9] (I_p − A_b J A_bᵀ)⁻¹, body frame, row-major, 1/(kg·m²)
+WCOEF_MINV_LEN = 9
+WCOEF_J_INV = slice(9, 13)  # [4] 1/J per wheel slot, 1/(kg·m²)
+WCOEF_J_INV_LEN = 4
+WCOEF_SIZE = 13
+WCOEF_LAYOUT = {'Minv': slice(0, 9), 'J_inv': slice(9, 13)}
+
 # bits of the model row's kind
 KIND_JOINT = 1  # world-anchored spherical joint: p_w, v_w follow from q, omega
-KIND_WHEELS = 2  # reaction wheels: Omega integrated, motor torques saturated; three on the body x, y, z axes (wheel_body_rhs) unless KIND_AXES
-KIND_AXES = 4  # with KIND_WHEELS: up to WHEELS_MAX wheels on the columns of A_b (wheels<WHEELS_MAX>_body_rhs)
+KIND_WHEELS = 2  # reaction wheels: up to WHEELS_MAX on the columns of A_b (wheels<WHEELS_MAX>_body_rhs), Omega integrated, motor torques saturated
 WHEELS_MAX = 4  # wheel slots per body (XS.Omega, MODEL.J, the columns of MODEL.A_b)
-WHEELS_BODY_AXES = 3  # wheels of a body-axis layout (KIND_WHEELS without KIND_AXES)
+WHEELS_BODY_AXES = 3  # wheels of the default layout: the body x, y, z axes, A_b = [I | 0]

@@ -3,7 +3,7 @@ entry points are lavendersim.control.linearize and lavendersim.control.Lineariza
 
 Nothing here is a second model: each body's right-hand side is the generated CasADi printing of
 the same declarations the backends run (``rigid_body_rhs``, ``translation_rhs``, ``pivot_body_rhs``,
-``wheel_body_rhs``, ``wheel_motor``, ``pivot_kinematics`` in generated/kernels_casadi.py), with
+``wheels<N>_body_rhs``, ``wheels<N>_motor``, ``pivot_kinematics`` in generated/kernels_casadi.py), with
 the force and torque of every force effect the scene declares on the body from that effect's own
 CasADi printing (built-in or user, :func:`lavendersim.effects.casadi_expr`). The model constants
 (inertia about the pivot, r_b, wheel inertias and limits) are the Sim's model rows.
@@ -30,6 +30,7 @@ import casadi as ca
 import control as ct
 import numpy as np
 
+from . import backends
 from . import effects as E
 from . import validate as V
 from .control import attitude_error, controllable_basis, perturbed, uncontrollable
@@ -59,8 +60,8 @@ class BodyRef:
     row: np.ndarray = field(repr=False)   # the Sim's model row (MODEL layout)
     offset: int = 0               # first index of this body's block in the error state
     command: np.ndarray | None = None     # the held wheel command when the wheels are not an input
-    n_wheels: int = 0             # its wheels (0 without; three on the body axes unless on_axes)
-    on_axes: bool = False         # the wheels sit on the row's A_b columns (KIND_AXES)
+    n_wheels: int = 0             # its wheels (0 without)
+    on_axes: bool = False         # named 1 … N (a layout on axes_b); False: x, y, z (the body axes, A_b = [I | 0])
     R_bp: np.ndarray | None = None        # its principal axes in the body frame (None: the body frame is principal)
     x_pub: np.ndarray | None = None       # (13,) the reference state in the body frame (x is the principal frame's)
 
@@ -172,7 +173,8 @@ def body_refs(sim, x0: dict | None) -> list[BodyRef]:
                 x_int[LY.STATE_Q], x_int[LY.STATE_OMEGA_B], r[LY.MODEL_ANCHOR_W], r[LY.MODEL_R_B])
             x[LY.STATE_P_W], x[LY.STATE_V_W] = x_int[LY.STATE_P_W], x_int[LY.STATE_V_W]
         ref = BodyRef(name, joint, wheels, x_int, Om, float(sim.params[i, LY.PARAM_M]), sim.params[i, LY.PARAM_I_B].copy(),
-                      rows[i].copy(), off, n_wheels=n_w, on_axes=bool(kind & LY.KIND_AXES), R_bp=R_bp, x_pub=x)
+                      rows[i].copy(), off, n_wheels=n_w, on_axes=wheels and not backends.on_body_axes(rows[i]),
+                      R_bp=R_bp, x_pub=x)
         off += ref.size
         refs.append(ref)
     return refs
@@ -196,7 +198,7 @@ def input_refs(sim, scene, inputs) -> list[InputRef]:
                 raise V.LavenderInputError("inputs", f"body {head!r} has no reaction_wheels", f", got {name!r}")
             i = sim.names.index(head)
             ref = InputRef(name, "wheels", head, None, None, int(sim._wheel_n[i]), off,
-                           on_axes=bool(int(sim._models.rows[i, LY.MODEL_KIND]) & LY.KIND_AXES))
+                           on_axes=not backends.on_body_axes(sim._models.rows[i]))
         else:
             idx = [k for k, e in enumerate(scene.effects) if e.name == head and not e.per_body]
             if len(idx) != 1:
@@ -302,16 +304,11 @@ def _body_rhs(scene, ref: BodyRef, xb, params_of, wheel_u):
 
 
 def _wheel_rhs(ref: BodyRef, q, w, Om, wheel_u, F, tau):
-    """(q_dot, omega_dot_b, Omega_dot) of a wheeled body through its layout's printed CasADi kernels — the Sim's
-    (body-axis wheels, or the WHEELS_MAX-wheel kernel with the unused slots padded at rest); Omega_dot of its
-    N wheels only."""
+    """(q_dot, omega_dot_b, Omega_dot) of a wheeled body through the printed CasADi kernels the Sim steps (the
+    WHEELS_MAX-wheel model on the row's axes, the unused slots padded at rest); Omega_dot of its N wheels only."""
     r = ref.row
     I_p, r_b = ca.DM(r[LY.MODEL_I_P]), ca.DM(r[LY.MODEL_R_B])
     lim = (float(r[LY.MODEL_TORQUE_LIMIT]), float(r[LY.MODEL_SPEED_LIMIT]), float(r[LY.MODEL_CUTOFF]))
-    if not ref.on_axes:
-        u = KC.wheel_motor(wheel_u, Om, *lim)
-        J = ca.DM(r[LY.MODEL_J][:LY.WHEELS_BODY_AXES])
-        return KC.wheel_body_rhs(q, w, Om, I_p, J, r_b, F, tau, u, float(r[LY.MODEL_C_W]))
     pad = ca.DM.zeros(LY.WHEELS_MAX - ref.n_wheels, 1)
     Om_all, cmd = ca.vertcat(Om, pad), ca.vertcat(wheel_u, pad)
     u = getattr(KC, f"wheels{LY.WHEELS_MAX}_motor")(cmd, Om_all, *lim)

@@ -1,7 +1,7 @@
 """LQR wheel controllers and linearization of any scene: CasADi from the derived kernels + python-control.
 
 :func:`linearize` composes a scene's right-hand side in CasADi from ``generated/kernels_casadi.py``
-— the model kernels (rigid_body_rhs, pivot_body_rhs, wheel_body_rhs, wheel_motor) and the CasADi
+— the model kernels (rigid_body_rhs, pivot_body_rhs, wheels4_body_rhs, wheels4_motor) and the CasADi
 printing of every effect the scene declares, user effects included (lavendersim._linearize) — and
 differentiates it at an operating point. It returns a :class:`Linearization`, a ``control.StateSpace``
 with named states, inputs and outputs (``sample(dt)``: the zero-order-hold discretization);

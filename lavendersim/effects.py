@@ -363,7 +363,7 @@ class _WheelsCheck:
 
     @property
     def on_body_axes(self) -> bool:
-        """Three wheels on body x, y, z in that order (the body-axis kernels step them)."""
+        """Three wheels on body x, y, z in that order (the default layout, A_b = I; the one wheel model steps every layout)."""
         return bool(np.array_equal(self.values["axes_b"], np.eye(3)))
 
     @property

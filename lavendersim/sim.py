@@ -110,7 +110,7 @@ import numpy as np
 from . import backends
 from . import effects as effects_mod
 from . import validate as V
-from .backends import ADAPTIVE, KIND_AXES, KIND_JOINT, KIND_WHEELS, PLAIN_ONLY, Adaptive, Models
+from .backends import ADAPTIVE, KIND_JOINT, KIND_WHEELS, PLAIN_ONLY, Adaptive, Models
 from .bodies import BodyState
 from .errors import DivergenceError, ValidityBoundWarning
 from .frames import public_rows
@@ -639,7 +639,7 @@ class Sim:
             acted[body[body >= 0]] = True
         kind = self._models.rows[:, LY.MODEL_KIND].astype(np.int64) if nb else np.zeros(0, np.int64)
         self._free = ~acted & (kind == 0)                      # E and |L| conserved
-        self._free_wheels = ~acted & ((kind & ~KIND_AXES) == KIND_WHEELS)  # total |L| conserved (motor torques are internal)
+        self._free_wheels = ~acted & (kind == KIND_WHEELS)  # total |L| conserved (motor torques are internal)
         self._free_any = bool(self._free.any())
         self._free_wheels_idx = [int(i) for i in np.flatnonzero(self._free_wheels)]
         self._warned: set[int] = set()
@@ -846,7 +846,7 @@ class Sim:
             w = e.values
             R_bp = None if self._frames is None else self._frames.rotation(i)
             A_p = e.A_b if R_bp is None else R_bp.T @ e.A_b   # the wheel axes in the principal frame
-            kind |= backends.wheel_row(rows[i], w["J"], A_p, on_axes=not e.on_body_axes or R_bp is not None)
+            kind |= backends.wheel_row(rows[i], w["J"], A_p)
             rows[i, LY.MODEL_TORQUE_LIMIT], rows[i, LY.MODEL_SPEED_LIMIT] = w["torque_limit"], w["speed_limit"]
             rows[i, LY.MODEL_C_W] = w["c_w"]
             rows[i, LY.MODEL_CUTOFF] = w["cutoff"]
@@ -894,8 +894,9 @@ class Sim:
             if kind:
                 model = [e for e in mine if e.per_body]
                 forces = [e for e in mine if not e.per_body]
-                kernel = ((f"wheels{LY.WHEELS_MAX}_body_rhs ({self._wheel_n[i]} wheels on axes_b)" if kind & KIND_AXES
-                           else "wheel_body_rhs") if kind & KIND_WHEELS else "pivot_body_rhs")
+                kernel = (f"wheels{LY.WHEELS_MAX}_body_rhs ({self._wheel_n[i]} wheels on "
+                          f"{'the body axes' if backends.on_body_axes(self._models.rows[i]) else 'axes_b'})"
+                          if kind & KIND_WHEELS else "pivot_body_rhs")
                 terms = " + ".join(e.describe() for e in model + forces)
                 extra = []
                 if kind & KIND_WHEELS:
@@ -1469,7 +1470,7 @@ class Sim:
         return self._models.Omega[i, :self._wheel_n[i]].copy()
 
     def wheel_momentum_w(self, name: str) -> tuple[np.ndarray, np.ndarray]:
-        """(L_body_w, L_wheels_w), world frame, kg·m²/s, from the wheel_momentum kernel: about the
+        """(L_body_w, L_wheels_w), world frame, kg·m²/s, from the wheels<N>_momentum kernel: about the
         joint's pivot for a jointed body, about the COM otherwise; L_wheels_w is zero without wheels.
 
         Parameters

@@ -119,7 +119,7 @@ def test_the_equations_are_printed_from_the_expressions(derivation):
     md = (GEN / "EQUATIONS.md").read_text()
     assert derivation.files["EQUATIONS.md"] == md
     kernels = {k.name: k for k in derivation.kernels}
-    for name in ("effect_gravity", "effect_force_at_point", "rigid_body_rhs", "wheel_body_rhs", "quat_to_euler_xyz"):
+    for name in ("effect_gravity", "effect_force_at_point", "rigid_body_rhs", "wheels4_body_rhs", "quat_to_euler_xyz"):
         assert f"$${latex_of(Printed(kernels[name]))}$$" in md, name
     grav = md.split("### `effect_gravity`")[1].split("###")[0]
     assert r"F_{com,w} = \left[\begin{matrix}g_{w,0} m\\g_{w,1} m\\g_{w,2} m\end{matrix}\right]" in grav

@@ -1,8 +1,8 @@
 """Issue 13: reaction wheels on N spin axes inside Sim (``reaction_wheels(axes_b=..., J=...)``).
 
-The layout is stepped by the printed wheels<WHEELS_MAX>_body_rhs / _motor (kind KIND_WHEELS | KIND_AXES),
-unused slots padded. Checked here: the padded layout against the body-axis kernels (same physics,
-different printed expressions: within rounding), C against NumPy, momentum conservation and exchange
+Every layout is stepped by the one wheel model, the printed wheels<WHEELS_MAX> kernels (kind KIND_WHEELS),
+unused slots padded; the default layout is A_b = [I | 0]. Checked here: a permuted body-axis layout against
+the default one (same physics, permuted arithmetic: within rounding), C against NumPy, momentum conservation and exchange
 with damping off, validation of the declaration, and the wheel
 arrays' shapes as a user reads them. The scene linearization of a pyramid is in test_linearize.py; the
 30° pyramid slew (lavendersim.wheel_layout, now stepped by Sim) in test_wheel_layout.py.
@@ -14,7 +14,7 @@ import pytest
 
 import lavendersim as lv
 from lavendersim import wheel_layout as WL
-from lavendersim.backends import KIND_AXES, KIND_WHEELS
+from lavendersim.backends import KIND_WHEELS, on_body_axes
 from lavendersim.generated import layout as LY
 from lavendersim.validate import LavenderInputError
 
@@ -37,7 +37,7 @@ def pyramid_scene(c_w=0.0, joint=False, gravity=False):
 
 def test_a_layout_gets_the_axes_kernel_and_n_wheel_arrays():
     sim = lv.Sim(pyramid_scene(), dt=1e-3, backend="numpy")
-    assert int(sim._models.rows[0, LY.MODEL_KIND]) == KIND_WHEELS | KIND_AXES
+    assert int(sim._models.rows[0, LY.MODEL_KIND]) == KIND_WHEELS and not on_body_axes(sim._models.rows[0])
     assert sim.wheel_rates("sc").shape == (4,) and sim.state("sc").Omega.shape == (4,)
     assert any("wheels4_body_rhs (4 wheels on axes_b)" in line for line in sim.pipeline)
     sim.set_wheel_command("sc", [0.1, -0.1, 0.05, 0.0])
@@ -50,12 +50,15 @@ def test_a_layout_gets_the_axes_kernel_and_n_wheel_arrays():
     tr = sim.record(4, every=2)
     assert tr.Omega.shape == (3, 1, LY.WHEELS_MAX) and tr.body("sc").Omega.shape == (3, 4)
     np.testing.assert_array_equal(tr.body("sc").Omega[-1], sim.wheel_rates("sc"))
-    # the default layout stays on the body-axis kernels, its arrays three wide
+    # the default layout: the same wheel model on A_b = [I | 0], its arrays three wide
     cube = lv.Scene()
     cube.add_body(lv.Body.box("c", 1.0, (0.15, 0.15, 0.15)))
     cube.add_effect("reaction_wheels", body="c", J=(5e-4, 5e-4, 5e-4), **WHEELS)
     sc = lv.Sim(cube, dt=1e-3, backend="numpy")
     assert int(sc._models.rows[0, LY.MODEL_KIND]) == KIND_WHEELS and sc.wheel_rates("c").shape == (3,)
+    assert on_body_axes(sc._models.rows[0]) and any("wheels4_body_rhs (3 wheels on the body axes)" in line
+                                                    for line in sc.pipeline)
+    np.testing.assert_array_equal(sc._models.A_b[0], np.eye(3, LY.WHEELS_MAX))
 
 
 @pytest.mark.parametrize("n", [1, 2, 3, 4])
@@ -83,10 +86,10 @@ def test_any_count_up_to_wheels_max_conserves_momentum_with_damping_off(n):
     assert np.all(sim._models.Omega[0, n:] == 0.0)        # the padded slots never moved
 
 
-def test_padded_layout_on_the_body_axes_matches_the_body_axis_kernels():
-    """Three wheels on body y, x, z (a permutation, so the Sim takes the axes kernel) against the default
-    body-axis layout with J and commands permuted alike: the same physics through different printed
-    expressions, equal to rounding after 2 s with a joint and gravity (kind 7 against kind 3)."""
+def test_permuted_body_axes_match_the_default_layout():
+    """Three wheels on body y, x, z (a permutation) against the default body-axis layout with J and commands
+    permuted alike: the same physics with the wheel sums in another order, equal to rounding after 2 s with a
+    joint and gravity."""
     perm = [1, 0, 2]
     J, u = np.array([4e-4, 5e-4, 6e-4]), np.array([0.02, -0.03, 0.01])
     runs = {}
@@ -99,7 +102,7 @@ def test_padded_layout_on_the_body_axes_matches_the_body_axis_kernels():
         kw = {} if axes is None else {"axes_b": axes}
         s.add_effect("reaction_wheels", body="b", J=J if axes is None else J[perm], c_w=1e-5, **kw, **WHEELS)
         sim = lv.Sim(s, dt=1e-3, integrator="rk4", backend="c")
-        assert int(sim._models.rows[0, LY.MODEL_KIND]) & KIND_AXES == (0 if axes is None else KIND_AXES)
+        assert on_body_axes(sim._models.rows[0]) == (axes is None)
         sim.set_state("b", Omega=np.array([30.0, -20.0, 10.0]) if axes is None else np.array([30.0, -20.0, 10.0])[perm])
         sim.set_wheel_command("b", u if axes is None else u[perm])
         sim.run(2000)

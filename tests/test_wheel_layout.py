@@ -13,6 +13,7 @@ from lavendersim import control as lc
 from lavendersim import wheel_layout as WL
 from lavendersim.kernels import K
 from lavendersim.validate import LavenderInputError
+from wheel_reference import body_axis_wheels_rhs
 
 pytestmark = pytest.mark.needs("control")   # casadi + python-control (tests/conftest.py)
 
@@ -118,9 +119,10 @@ def test_pyramid_momentum_exchange_exact_with_damping_off():
     assert out["exchange_residual"] == pytest.approx(1.0836557412199025e-11, rel=1e-3)   # the README's 1.1e-11
 
 
-def test_printed_counts_and_three_body_axes_equal_the_cube_kernel():
-    """Derived once for any N, printed for N = 3 and 4 (WHEEL_COUNTS); with A_b = 1 the N = 3 kernel is the body-axis
-    cube's wheel_body_rhs (to rounding), pivot offset, external load and damping included."""
+def test_printed_counts_and_three_body_axes_equal_the_cube_equations():
+    """Derived once for any N, printed for N = 3 and 4 (WHEEL_COUNTS); with A_b = 1 (and for N = 4 a padded fourth
+    slot) the kernels are the chapter's body-axis cube equations (written out in tests/wheel_reference.py; to
+    rounding), pivot offset, external load and damping included; the padded slot stays at rest."""
     assert WL.printed_counts() == (3, 4)
     rng = np.random.default_rng(7)
     S = rng.normal(size=(3, 3))
@@ -130,9 +132,13 @@ def test_printed_counts_and_three_body_axes_equal_the_cube_kernel():
     w, W, J, r, F, tau, u = (rng.normal(size=3) for _ in range(7))
     J = np.abs(J) * 0.1 + 0.05
     a = K.wheels3_body_rhs(q, w, W, I_p, np.eye(3), J, r, F, tau, u, 0.3)
-    b = K.wheel_body_rhs(q, w, W, I_p, J, r, F, tau, u, 0.3)
-    for x, y in zip(a, b):
+    b = body_axis_wheels_rhs(q, w, W, I_p, J, r, F, tau, u, 0.3)
+    pad = lambda v, z: np.append(v, z)  # noqa: E731
+    c = K.wheels4_body_rhs(q, w, pad(W, 0.0), I_p, np.eye(3, 4), pad(J, 1.0), r, F, tau, pad(u, 0.0), 0.3)
+    assert c[2][3] == 0.0
+    for x, y, z in zip(a, b, c):
         np.testing.assert_allclose(x, y, rtol=1e-13, atol=1e-13)
+        np.testing.assert_array_equal(z[:x.size], x)      # the padded slot changes no operation's result
 
 
 @pytest.mark.parametrize("n", [3, 4])

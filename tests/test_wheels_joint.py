@@ -10,6 +10,7 @@ from lavendersim.generated import layout as LY
 # Long NumPy runs are in the slow set (NUMPY_SLOW: tests/conftest.py); test_c_and_numpy_agree_on_a_mixed_scene
 # checks quickly that NumPy computes what C computes.
 from conftest import NUMPY_SLOW
+from wheel_reference import body_axis_wheels_rhs
 
 BACKENDS = ["numpy", "c"]
 INTEGRATORS = ["euler", "semi_implicit_euler", "rk4"]
@@ -217,8 +218,9 @@ def test_linear_damping_on_a_jointed_body_uses_its_kinematic_velocity(backend):
 
 
 def reference_run(m, I_b, y0, anchor, r_b, J, c_w, limits, u_cmd, g, c_lin, c_ang, dt, n):
-    """A plain per-step RK4 of one jointed wheeled body written straight from the kernels and the
-    documented semantics (kinematic COM velocity in every stage, zero-order-hold saturation)."""
+    """A plain per-step RK4 of one jointed wheeled body written straight from the chapter's body-axis equations
+    (tests/wheel_reference.py) and the documented semantics (kinematic COM velocity in every stage,
+    zero-order-hold saturation)."""
     I_p = K.parallel_axis(np.diag(I_b), m, -r_b)
 
     def f(y, u):
@@ -226,7 +228,7 @@ def reference_run(m, I_b, y0, anchor, r_b, J, c_w, limits, u_cmd, g, c_lin, c_an
         v = K.pivot_kinematics(q, w, anchor, r_b)[1]
         F = m * np.asarray(g) - c_lin * v
         tau = -c_ang * K.quat_rotate(q, w)
-        qd, wd, Wd = K.wheel_body_rhs(q, w, W, I_p, J, r_b, F, tau, u, c_w)
+        qd, wd, Wd = body_axis_wheels_rhs(q, w, W, I_p, J, r_b, F, tau, u, c_w)
         return np.concatenate([np.zeros(3), qd, np.zeros(3), wd, Wd])
 
     y = y0.copy()
@@ -383,10 +385,10 @@ def test_c_and_numpy_agree_on_a_mixed_scene(integrator):
 def test_pipeline_names_the_joint_wheels_and_kernels(backend):
     sim = lv.Sim(mixed_scene(), backend=backend)
     p = dict(line.split(": ", 1) for line in sim.pipeline[1:])
-    assert "spherical_joint" in p["cube"] and "reaction_wheels" in p["cube"] and "wheel_body_rhs" in p["cube"]
+    assert "spherical_joint" in p["cube"] and "reaction_wheels" in p["cube"] and "wheels4_body_rhs (3 wheels on the body axes)" in p["cube"]
     assert "pivot_kinematics" in p["cube"]
     assert "spherical_joint" in p["pend"] and "pivot_body_rhs" in p["pend"] and "reaction_wheels" not in p["pend"]
-    assert "reaction_wheels" in p["drone"] and "wheel_body_rhs" in p["drone"] and "spherical_joint" not in p["drone"]
+    assert "reaction_wheels" in p["drone"] and "wheels4_body_rhs" in p["drone"] and "spherical_joint" not in p["drone"]
     assert "rigid_body_rhs" in p["free"] and "wheel" not in p["free"] and "joint" not in p["free"]
 
 

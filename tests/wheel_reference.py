@@ -1,7 +1,7 @@
-"""Tests-only reference for the reaction-wheel cube: RK4 on the generated NumPy kernel
-wheel_body_rhs (+ effect_gravity / effect_angular_damping), with the Sim's wheel API (set_wheel_command,
-wheel_command_applied, wheel_rates, state, run, t). An independent stepper the runtime Sim is
-compared against; not used by the package."""
+"""Tests-only reference for the reaction-wheel cube: RK4 on the chapter's body-axis wheel equations written
+out here with NumPy (body_axis_wheels_rhs; + effect_gravity / effect_angular_damping), with the Sim's wheel API
+(set_wheel_command, wheel_command_applied, wheel_rates, state, run, t). An independent stepper the runtime
+Sim (the printed N-wheel model on A_b = [I | 0]) is compared against; not used by the package."""
 from __future__ import annotations
 
 from types import SimpleNamespace
@@ -9,6 +9,16 @@ from types import SimpleNamespace
 import numpy as np
 
 from lavendersim.kernels import K
+
+
+def body_axis_wheels_rhs(q, w, Om, I_p, J, r_b, F_w, tau_w, u, c_w):
+    """(q̇, ω̇, Ω̇) of a body with three wheels on its x, y, z axes about a pivot, written out independently of the
+    printed kernels: τ_P = Rᵀτ_W + r_B × RᵀF_W, (I_P − J) ω̇ = τ_P − ω × (I_P ω + J Ω) − u + c_w Ω,
+    Ω̇ = J⁻¹(u − c_w Ω) − ω̇ (np.linalg.solve, np.cross); q̇ from the quat_derivative_body kernel."""
+    R = K.quat_to_matrix(q)
+    tau_p = R.T @ tau_w + np.cross(r_b, R.T @ F_w)
+    w_dot = np.linalg.solve(I_p - np.diag(J), tau_p - np.cross(w, I_p @ w + J * Om) - u + c_w * Om)
+    return K.quat_derivative_body(q, w), w_dot, (u - c_w * Om) / J - w_dot
 
 
 class RefSim:
@@ -30,7 +40,7 @@ class RefSim:
         m = self.m
         F = K.effect_gravity(m.mass, m.g_w) if m.gravity else np.zeros(3)
         tau = K.effect_angular_damping(q, w, m.damping)
-        return K.wheel_body_rhs(q, w, Om, m.I_p, m.J, m.r_b, F, tau, u, m.wheel_damping)
+        return body_axis_wheels_rhs(q, w, Om, m.I_p, m.J, m.r_b, F, tau, u, m.wheel_damping)
 
     def _saturate(self):
         u = np.clip(self.cmd, -self.m.torque_limit, self.m.torque_limit)

@@ -23,7 +23,7 @@ import numpy as np
 from .. import validate as V
 from ..generated import layout as LAYOUT
 from ..generated import tableaux as TABLEAUX
-from ..generated.layout import KIND_AXES, KIND_JOINT, KIND_WHEELS, MODEL_LAYOUT, MODEL_SIZE  # noqa: F401  (re-exported)
+from ..generated.layout import KIND_JOINT, KIND_WHEELS, MODEL_LAYOUT, MODEL_SIZE  # noqa: F401  (re-exported)
 
 # name -> RHS evaluations per step (None: adaptive, counted as it runs). See rhs_per_step for how the
 # structure-preserving methods are counted.
@@ -104,7 +104,7 @@ def rhs_per_step(integrator: str, effects: np.ndarray, nb: int) -> int | None:
     return per * (n if integrator in ("splitting4", "symtop4", "symtop_bm6") else 1)
 
 # Per-body model row (float64), MODEL_LAYOUT / MODEL_SIZE printed from derive/layout.py: kind is a bit set,
-# KIND_JOINT | KIND_WHEELS (| KIND_AXES: the wheels on the row's A_b columns).
+# KIND_JOINT | KIND_WHEELS (the wheels on the row's A_b columns: one wheel model, body-axis wheels are A_b = [I | 0]).
 
 
 class Models:
@@ -143,7 +143,7 @@ class Models:
 
     @property
     def kind(self) -> np.ndarray:
-        """Each body's model kind (bit set KIND_JOINT | KIND_WHEELS | KIND_AXES; 0 plain), int64 (nb,)."""
+        """Each body's model kind (bit set KIND_JOINT | KIND_WHEELS; 0 plain), int64 (nb,)."""
         return self.rows[:, LAYOUT.MODEL_KIND].astype(np.int64)
 
     @property
@@ -158,8 +158,8 @@ class Models:
 
 
 def wheel_counts(rows: np.ndarray) -> np.ndarray:
-    """Wheels per body of model rows: 0 without wheels, WHEELS_BODY_AXES on the body axes, else the A_b
-    columns in use (a padded slot has a zero axis).
+    """Wheels per body of model rows: 0 without wheels, else the A_b columns in use (a padded slot has a
+    zero axis).
 
     Parameters
     ----------
@@ -174,10 +174,29 @@ def wheel_counts(rows: np.ndarray) -> np.ndarray:
     kind = r[..., LAYOUT.MODEL_KIND].astype(np.int64)
     A = r[..., LAYOUT.MODEL_A_B].reshape(r.shape[:-1] + (3, LAYOUT.WHEELS_MAX))
     used = np.count_nonzero(np.any(A != 0.0, axis=-2), axis=-1)
-    return np.where((kind & KIND_WHEELS) == 0, 0, np.where((kind & KIND_AXES) != 0, used, LAYOUT.WHEELS_BODY_AXES))
+    return np.where((kind & KIND_WHEELS) == 0, 0, used)
 
 
-def wheel_row(row: np.ndarray, J: np.ndarray, A_b: np.ndarray, on_axes: bool) -> int:
+def on_body_axes(row: np.ndarray) -> bool:
+    """Whether a model row's wheels are the default layout: three on the body x, y, z axes in that order
+    (A_b = [I | 0]). Only names depend on it (x, y, z instead of 1 … N); every layout steps alike.
+
+    Parameters
+    ----------
+    row : ndarray (MODEL_SIZE,)
+        A model row.
+
+    Returns
+    -------
+    bool
+    """
+    A = np.asarray(row)[LAYOUT.MODEL_A_B].reshape(3, LAYOUT.WHEELS_MAX)
+    n = LAYOUT.WHEELS_BODY_AXES
+    return bool(int(row[LAYOUT.MODEL_KIND]) & KIND_WHEELS) and bool(np.array_equal(A[:, :n], np.eye(3))
+                                                                    and not A[:, n:].any())
+
+
+def wheel_row(row: np.ndarray, J: np.ndarray, A_b: np.ndarray) -> int:
     """Write a wheel layout into one model row: J and A_b's columns in the first N slots, the rest padded
     (J = 1, zero axis: derive/wheel_layout.py proves such a wheel changes nothing).
 
@@ -189,13 +208,11 @@ def wheel_row(row: np.ndarray, J: np.ndarray, A_b: np.ndarray, on_axes: bool) ->
         Wheel axial inertias, kg·m².
     A_b : ndarray (3, N)
         Wheel spin axes as unit columns, body frame.
-    on_axes : bool
-        The layout is stepped on its axes (KIND_AXES); else it is the body-axis triple.
 
     Returns
     -------
     int
-        The kind bits the layout adds: KIND_WHEELS, with KIND_AXES when on_axes.
+        The kind bit the layout adds: KIND_WHEELS.
     """
     n = J.size
     pad_J = np.ones(LAYOUT.WHEELS_MAX)
@@ -203,12 +220,12 @@ def wheel_row(row: np.ndarray, J: np.ndarray, A_b: np.ndarray, on_axes: bool) ->
     pad_A = np.zeros((3, LAYOUT.WHEELS_MAX))
     pad_A[:, :n] = A_b
     row[LAYOUT.MODEL_J], row[LAYOUT.MODEL_A_B] = pad_J, pad_A.reshape(-1)
-    return KIND_WHEELS | (KIND_AXES if on_axes else 0)
+    return KIND_WHEELS
 
 
 def wheel_momentum(row: np.ndarray, q: np.ndarray, omega_b: np.ndarray, Omega: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """World angular momentum about the pivot of a wheeled body (wheels locked) and of its wheels' spin,
-    from its model row, through its layout's printed kernel.
+    from its model row, through the printed N-wheel kernel (wheels<WHEELS_MAX>_momentum, padded slots at rest).
 
     Parameters
     ----------
@@ -229,12 +246,9 @@ def wheel_momentum(row: np.ndarray, q: np.ndarray, omega_b: np.ndarray, Omega: n
     from ..kernels import K
 
     I_p = row[LAYOUT.MODEL_I_P].reshape(3, 3)
-    if int(row[LAYOUT.MODEL_KIND]) & KIND_AXES:
-        Lb, Lw, _ = getattr(K, f"wheels{LAYOUT.WHEELS_MAX}_momentum")(q, omega_b, Omega, I_p, row[LAYOUT.MODEL_A_B].reshape(3, LAYOUT.WHEELS_MAX),
-                                       row[LAYOUT.MODEL_J])
-    else:
-        n = LAYOUT.WHEELS_BODY_AXES
-        Lb, Lw = K.wheel_momentum(q, omega_b, Omega[:n], I_p, row[LAYOUT.MODEL_J][:n])
+    Lb, Lw, _ = getattr(K, f"wheels{LAYOUT.WHEELS_MAX}_momentum")(q, omega_b, Omega, I_p,
+                                                                  row[LAYOUT.MODEL_A_B].reshape(3, LAYOUT.WHEELS_MAX),
+                                                                  row[LAYOUT.MODEL_J])
     return np.asarray(Lb), np.asarray(Lw)
 
 

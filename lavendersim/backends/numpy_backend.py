@@ -6,8 +6,8 @@ dispatch (generated/kernels_numpy.py, or a user set's), indexed per body once pe
 (_EffectIndex), and use rigid_body_rhs. An effect code no declaration has raises.
 Bodies with a spherical joint and/or reaction wheels (kind != 0 in the model rows) accumulate the
 same way (a jointed body's effects that read v_w see its kinematic COM velocity) and
-use wheel_body_rhs (body-axis wheels), wheels<WHEELS_MAX>_body_rhs (wheels on the model row's axes,
-KIND_AXES) or pivot_body_rhs (joint only). With such bodies the stepped state is (nb, XS_SIZE) =
+use wheels<WHEELS_MAX>_body_rhs (the one wheel model, on the model row's axes; body-axis wheels are
+A_b = [I | 0]) or pivot_body_rhs (joint only). With such bodies the stepped state is (nb, XS_SIZE) =
 [x (13), Omega (WHEELS_MAX)]; a jointed body's p_w, v_w are not integrated but set from
 pivot_kinematics after every step.
 """
@@ -20,14 +20,12 @@ from ..errors import DivergenceError
 from ..generated import layout as LY
 from ..generated import tableaux as T
 from ..kernels import K
-from . import (DOPRI5_HMIN_REL, DOPRI5_MAX_SUBSTEPS, FLOAT32_INTEGRATORS, KIND_AXES, KIND_JOINT, KIND_WHEELS, PLAIN_ONLY,
+from . import (DOPRI5_HMIN_REL, DOPRI5_MAX_SUBSTEPS, FLOAT32_INTEGRATORS, KIND_JOINT, KIND_WHEELS, PLAIN_ONLY,
                Adaptive, Models, divergence_cause, no_root_cause, tolerance_cause, wheel_counts)
 
 P, Q, V, W = LY.STATE_P_W, LY.STATE_Q, LY.STATE_V_W, LY.STATE_OMEGA_B  # state-row fields
 X, OM = LY.XS_X, LY.XS_OMEGA                                               # extended state [x, Omega]
-OM3 = slice(OM.start, OM.start + LY.WHEELS_BODY_AXES)                       # the rates of body-axis wheels
-W3 = slice(0, LY.WHEELS_BODY_AXES)                                          # their slots in a wheel array
-_WHEELS_RHS = getattr(K, f"wheels{LY.WHEELS_MAX}_body_rhs")                  # wheels on the model row's axes
+_WHEELS_RHS = getattr(K, f"wheels{LY.WHEELS_MAX}_body_rhs")                  # every wheeled body, on its row's axes
 _WHEELS_MOTOR = getattr(K, f"wheels{LY.WHEELS_MAX}_motor")
 U, U0 = slice(Q.start, Q.start + 3), Q.start + 3  # rk4_expmap: u in q's first three slots, the fourth held at 0
 
@@ -100,7 +98,7 @@ class _EffectIndex:
 
 
 class _Group:
-    """Bodies with a joint and/or wheels that share one rotational kernel."""
+    """Bodies with a joint and/or wheels that share one rotational kernel (pivot_body_rhs or the wheel model)."""
 
     def __init__(self, idx, effects, m, I, rows):
         self.idx = idx
@@ -116,27 +114,17 @@ class _Group:
         self.tl, self.sl = r[:, LY.MODEL_TORQUE_LIMIT].copy(), r[:, LY.MODEL_SPEED_LIMIT].copy()
         self.c_w = r[:, LY.MODEL_C_W].copy()
         self.cutoff = r[:, LY.MODEL_CUTOFF].copy()
-        self.on_axes = bool(kind.size) and bool(kind[0] & KIND_AXES)   # a group is all one wheel kernel
         self.A_b = r[:, LY.MODEL_A_B].reshape(-1, 3, LY.WHEELS_MAX).copy()
         self.n_wheels = wheel_counts(r)
 
     def wheel_rhs(self, xg, F, tau, u, o):
-        """q, omega_b, Omega derivatives of the group's wheeled bodies into o (the other wheel slots at rest)."""
-        if self.on_axes:
-            o[:, Q], o[:, W], o[:, OM] = _WHEELS_RHS(xg[:, Q], xg[:, W], xg[:, OM], self.I_p, self.A_b, self.J,
-                                                            self.r_b, F, tau, u, self.c_w)
-        else:
-            o[:, Q], o[:, W], o[:, OM3] = K.wheel_body_rhs(xg[:, Q], xg[:, W], xg[:, OM3], self.I_p, self.J[:, W3],
-                                                           self.r_b, F, tau, u[:, W3], self.c_w)
-            o[:, OM3.stop:OM.stop] = 0.0
+        """q, omega_b, Omega derivatives of the group's wheeled bodies into o (padded wheel slots stay at rest)."""
+        o[:, Q], o[:, W], o[:, OM] = _WHEELS_RHS(xg[:, Q], xg[:, W], xg[:, OM], self.I_p, self.A_b, self.J,
+                                                 self.r_b, F, tau, u, self.c_w)
 
     def motor(self, command, Omega):
         """The torques the group's motors apply (command, Omega: its rows, (n, WHEELS_MAX))."""
-        if self.on_axes:
-            return _WHEELS_MOTOR(command, Omega, self.tl, self.sl, self.cutoff)
-        u = np.zeros_like(command)
-        u[:, W3] = K.wheel_motor(command[:, W3], Omega[:, W3], self.tl, self.sl, self.cutoff)
-        return u
+        return _WHEELS_MOTOR(command, Omega, self.tl, self.sl, self.cutoff)
 
     def velocity(self, x):
         """COM velocity for the effects: kinematic for jointed bodies, the state's otherwise."""
@@ -177,15 +165,13 @@ class _Plan:
         self.wheeled = (kind & KIND_WHEELS) != 0
         self.I_free = self.I[self.free]
         pivot = np.flatnonzero(kind == KIND_JOINT)
-        # wheeled bodies by kernel: body-axis wheels, wheels on the row's axes
-        self.wheels = [_Group(ids, effects, self.m, self.I, rows)
-                       for ids in (np.flatnonzero(self.wheeled & ((kind & KIND_AXES) == 0)),
-                                   np.flatnonzero((kind & KIND_AXES) != 0)) if ids.size]
+        wheeled = np.flatnonzero(self.wheeled)   # one wheel model: one group
+        self.wheels = [_Group(wheeled, effects, self.m, self.I, rows)] if wheeled.size else []
         self.pivot = _Group(pivot, effects, self.m, self.I, rows) if pivot.size else None
         self.jointed = np.flatnonzero((kind & KIND_JOINT) != 0)
-        # dopri5's error norm counts the state and the layout's wheel rates (every slot with axes), as C does
-        self.norm_cols = np.where((kind & KIND_AXES) != 0, float(LY.XS_SIZE),
-                                  np.where(self.wheeled, float(LY.XS_OMEGA.start + LY.WHEELS_BODY_AXES), float(LY.STATE_SIZE)))
+        # dopri5's error norm counts the state and the rates of the wheels in use (padded slots stay 0), as C does
+        self.norm_cols = np.where(self.wheeled, LY.XS_OMEGA.start + (wheel_counts(rows) if rows is not None else 0),
+                                  LY.STATE_SIZE).astype(float)
         if self.jointed.size:
             r = rows[self.jointed]
             self.j_anchor, self.j_r_b = r[:, LY.MODEL_ANCHOR_W].copy(), r[:, LY.MODEL_R_B].copy()

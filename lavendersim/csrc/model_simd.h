@@ -1,4 +1,4 @@
-/* LavenderSim batched RK4 for model bodies (a spherical joint and three reaction wheels, kind
+/* LavenderSim batched RK4 for model bodies (a spherical joint and reaction wheels on any axes, kind
    LV_KIND_JOINT | LV_KIND_WHEELS) on struct-of-arrays tiles, one body per lane, vectorized by the
    compiler with one copy per instruction set chosen at run time (as csrc/batch_simd.h does for plain
    bodies). Included once by step.c, after batch_simd.h.
@@ -8,7 +8,7 @@
    cut into lane loops over the tile's arrays, one per piece of model_rhs_of: the wheel motor, per stage
    the joint's kinematic velocity (when an effect reads v), one loop per effect (its code known outside
    the loop, so the generated dispatch inlines to that effect alone), the generated wheel-body
-   right-hand side with the RK4 sums, then the combination, lv_quat_normalize and lv_pivot_kinematics.
+   right-hand side (the one N-wheel model, LV_WHEELS_BODY_RHS, on each lane's axes) with the RK4 sums, then the combination, lv_quat_normalize and lv_pivot_kinematics.
    Every lane does the scalar path's IEEE operations in its order (the effect sums start at 0 and add
    in table order; the RK4 weighted sum B0 k1 + B1 k2 + B2 k3 + B3 k4 is accumulated left to right as C
    evaluates it; -ffp-contract=off), so results are bitwise advance_model's (tests/test_model_simd.py).
@@ -21,10 +21,9 @@
 #ifndef LAVENDERSIM_MODEL_SIMD_H
 #define LAVENDERSIM_MODEL_SIMD_H
 
-/* Bodies per model tile: ~110 rows of LV_MTILE doubles (~28 KB) stay in L1 over a chunk of steps. */
+/* Bodies per model tile: ~125 rows of LV_MTILE doubles (~32 KB) stay in L1 over a chunk of steps. */
 #define LV_MTILE 32
 #define LV_MKIND (LV_KIND_JOINT | LV_KIND_WHEELS)
-typedef char lv_mtile_a_b_is_last[LV_MODEL_A_B + LV_MODEL_A_B_LEN == LV_MODEL_SIZE ? 1 : -1];
 
 typedef struct {
     double Y[LV_XS_SIZE][LV_MTILE];  /* [x, Omega] at the start of the step */
@@ -33,7 +32,8 @@ typedef struct {
     double V[3][LV_MTILE];           /* the joint's kinematic COM velocity at the stage input */
     double F[3][LV_MTILE], TAU[3][LV_MTILE]; /* the effect sums at the stage input */
     double U[LV_NW][LV_MTILE];           /* this step's applied wheel torques */
-    double R[LV_MODEL_A_B][LV_MTILE];  /* the model rows up to A_b (the last field: body-axis wheels never read it) */
+    double R[LV_MODEL_SIZE][LV_MTILE]; /* the model rows */
+    double KW[LV_WCOEF_SIZE][LV_MTILE]; /* the wheel coefficients (lv_wheels_coefficients), once per call */
     double P[LV_PARAM_SIZE][LV_MTILE]; /* the params rows (m, I_b) */
     double C[LV_NW][LV_MTILE];           /* the commands */
 } lv_mtile;
@@ -78,13 +78,14 @@ typedef void (*lv_mtile_fn)(lv_mtile *LV_RESTRICT t, const lv_effect_ref *refs, 
    stage's input (h: LV_RK4_C1..3 dt), or, after the last stage, the step's end in t->Y. */
 #define LV_MT_STAGE_RHS(COMBINE)                                                                        \
     for (b = 0; b < m; b++) {                                                                           \
-        double y[LV_XS_SIZE], k[LV_XS_SIZE], r[LV_MODEL_SIZE], F[3], tau[3], u[LV_NW];                  \
+        double y[LV_XS_SIZE], k[LV_XS_SIZE], r[LV_MODEL_SIZE], kw[LV_WCOEF_SIZE], F[3], tau[3], u[LV_NW]; \
         LV_MT_LOAD(y, T, LV_XS_SIZE);                                                                   \
-        LV_MT_LOAD(r, R, LV_MODEL_A_B);                                                                   \
+        LV_MT_LOAD(r, R, LV_MODEL_SIZE);                                                                \
+        LV_MT_LOAD(kw, KW, LV_WCOEF_SIZE);                                                              \
         LV_MT_LOAD(F, F, 3);                                                                            \
         LV_MT_LOAD(tau, TAU, 3);                                                                        \
         LV_MT_LOAD(u, U, LV_NW);                                                                        \
-        lv_wheels_rhs(LV_MKIND, y, r, F, tau, u, k);                                                    \
+        lv_wheels_rhs(y, r, kw, F, tau, u, k);                                                          \
         for (i = 0; i < 3; i++) k[LV_STATE_P_W + i] = k[LV_STATE_V_W + i] = 0.0;                        \
         COMBINE                                                                                         \
     }
@@ -115,7 +116,7 @@ typedef void (*lv_mtile_fn)(lv_mtile *LV_RESTRICT t, const lv_effect_ref *refs, 
         for (b = 0; b < m; b++) {                                                                       \
             double y[LV_STATE_SIZE], r[LV_MODEL_SIZE], pk[3], vk[3];                                    \
             LV_MT_LOAD(y, T, LV_STATE_SIZE);                                                            \
-            LV_MT_LOAD(r, R, LV_MODEL_A_B);                                                               \
+            LV_MT_LOAD(r, R, LV_MODEL_SIZE);                                                            \
             lv_pivot_kinematics(y + LV_STATE_Q, y + LV_STATE_OMEGA_B, r + LV_MODEL_ANCHOR_W,           \
                                 r + LV_MODEL_R_B, pk, vk);                                              \
             LV_MT_STORE(V, vk, 3);                                                                      \
@@ -149,8 +150,8 @@ static int mtile_code_known(int code) { return lv_effect_n_params(code) >= 0; }
                 double cmd[LV_NW], Om[LV_NW], r[LV_MODEL_SIZE], u[LV_NW];                               \
                 LV_MT_LOAD(cmd, C, LV_NW);                                                              \
                 LV_MT_UNROLL for (i = 0; i < LV_NW; i++) Om[i] = t->Y[LV_XS_OMEGA + i][b];              \
-                LV_MT_LOAD(r, R, LV_MODEL_A_B);                                                           \
-                lv_wheels_motor(LV_MKIND, r, cmd, Om, u);                                               \
+                LV_MT_LOAD(r, R, LV_MODEL_SIZE);                                                        \
+                lv_wheels_motor(r, cmd, Om, u);                                                         \
                 LV_MT_STORE(U, u, LV_NW);                                                               \
                 LV_MT_UNROLL for (i = 0; i < LV_XS_SIZE; i++) t->T[i][b] = t->Y[i][b];                  \
             }                                                                                           \
@@ -225,12 +226,15 @@ static long advance_model_soa(double *state, const double *params, const lv_mode
     int k, ok;
     for (j = 0; j < m; j++) {
         const long b = ids[j];
+        double kw[LV_WCOEF_SIZE];
         for (k = 0; k < LV_STATE_SIZE; k++) t.Y[k][j] = state[b * LV_STATE_SIZE + k];
         for (k = 0; k < LV_NW; k++) {
             t.Y[LV_XS_OMEGA + k][j] = md->Omega[LV_NW * b + k];
             t.C[k][j] = md->command[LV_NW * b + k];
         }
-        for (k = 0; k < LV_MODEL_A_B; k++) t.R[k][j] = md->rows[b * LV_MODEL_SIZE + k];
+        for (k = 0; k < LV_MODEL_SIZE; k++) t.R[k][j] = md->rows[b * LV_MODEL_SIZE + k];
+        lv_wheels_coefficients(md->rows + b * LV_MODEL_SIZE, kw);
+        for (k = 0; k < LV_WCOEF_SIZE; k++) t.KW[k][j] = kw[k];
         for (k = 0; k < LV_PARAM_SIZE; k++) t.P[k][j] = params[b * LV_PARAM_SIZE + k];
     }
     for (c = 0; c < n_steps; c += cm) {

@@ -397,8 +397,8 @@ static PyObject *py_simulate(PyObject *self, PyObject *args)
             if (!lv_kind_valid(kind)) {
                 PyObject *ko = PyFloat_FromDouble(kind);
                 PyErr_Format(PyExc_ValueError,
-                             "simulate: model_rows[%zd] kind must be 0 (plain), 1 (joint), 2 (wheels), 3 (joint + wheels), "
-                             "6 (wheels on axes) or 7 (joint + wheels on axes), got %R",
+                             "simulate: model_rows[%zd] kind must be 0 (plain), 1 (joint), 2 (wheels) or 3 (joint + wheels), "
+                             "got %R",
                              e, ko);
                 Py_XDECREF(ko);
                 goto fail;
@@ -499,8 +499,8 @@ static PyMethodDef methods[] = {
      "state (nb,13) advanced in place; params (nb,4) [m, I_x, I_y, I_z]; effects (ne, >=2) [code, body, parameters...]\n"
      "(built-in codes, see generated/kernels.h, or user codes from LV_EFFECT_USER_BASE with user_effects: int64 (n,3)\n"
      "[function address, n_params, flags] for codes base .. base+n-1; an undeclared code raises ValueError).\n"
-     "Optional, all four or none: model_rows (nb,36) [kind (0 plain, 1 joint, 2 wheels, 3 both; +4 wheels on the A_b\n"
-     "axes), I_p(9), r_b(3), anchor_w(3), J(4), torque_limit, speed_limit, c_w, cutoff, A_b(3x4)]; Omega (nb,4) advanced\n"
+     "Optional, all four or none: model_rows (nb,36) [kind (0 plain, 1 joint, 2 wheels on the A_b axes, 3 both),\n"
+     "I_p(9), r_b(3), anchor_w(3), J(4), torque_limit, speed_limit, c_w, cutoff, A_b(3x4)]; Omega (nb,4) advanced\n"
      "in place; command (nb,4) held; applied (nb,4) receives the saturated wheel torques of the last step.\n"
      "The model arrays may be None (all four). dopri5 needs h (nb,) (per-body step proposals, in/out; <= 0:\n"
      "choose) and nfev (nb,) (RHS evaluations added per body), rtol > 0, atol >= 0.\n"

@@ -10,18 +10,18 @@
 #include "kernels.h"
 
 /* Wheel slots (rates, motor commands, applied torques) per model body: the XS layout's Omega length,
-   WHEELS_MAX of derive/layout.py. A body-axis layout (LV_KIND_WHEELS without LV_KIND_AXES) uses the first
-   LV_WHEELS_BODY_AXES (wheel_body_rhs, wheel_motor); a layout on the row's axes (LV_KIND_AXES) all of them,
-   unused ones padded (zero axis, J = 1, at rest: derive/wheel_layout.py proves they change nothing). */
+   WHEELS_MAX of derive/layout.py. Every wheeled body (LV_KIND_WHEELS) is stepped by the one N-wheel model
+   (LV_WHEELS_BODY_RHS, LV_WHEELS_MOTOR: the printed wheels<WHEELS_MAX> kernels) on its row's axes A_b, the
+   unused slots padded (zero axis, J = 1, at rest: derive/wheel_layout.py proves they change nothing); the
+   default layout, three wheels on the body axes, is A_b = [I | 0]. */
 #define LV_NW LV_XS_OMEGA_LEN
-typedef char lv_nw_is_wheels_max[LV_NW == LV_WHEELS_MAX && LV_WHEELS_BODY_AXES <= LV_NW ? 1 : -1];
+typedef char lv_nw_is_wheels_max[LV_NW == LV_WHEELS_MAX && LV_MODEL_A_B_LEN % LV_NW == 0 ? 1 : -1];
 
-/* Whether a model row's kind is one the step loop knows: a bit set of JOINT and WHEELS, AXES only with WHEELS. */
+/* Whether a model row's kind is one the step loop knows: a bit set of JOINT and WHEELS. */
 static inline int lv_kind_valid(double kind)
 {
     const int k = (int)kind;
-    if (!(kind >= 0.0 && kind <= (double)(LV_KIND_JOINT | LV_KIND_WHEELS | LV_KIND_AXES) && kind == (double)k)) return 0;
-    return !(k & LV_KIND_AXES) || (k & LV_KIND_WHEELS);
+    return kind >= 0.0 && kind <= (double)(LV_KIND_JOINT | LV_KIND_WHEELS) && kind == (double)k;
 }
 
 /* The effect table, its row layout (LV_EFFECT_ROW_*), the built-in codes and their dispatch
@@ -41,7 +41,7 @@ typedef struct {
 
 /* The model row (LV_MODEL_SIZE), per body: kind, I_p[9] (about the pivot, body frame, row-major), r_b[3]
    (pivot -> COM, body frame), anchor_w[3], J[LV_NW], torque_limit, speed_limit, c_w, cutoff, A_b[3 x LV_NW]
-   (offsets LV_MODEL_*). kind is a bit set of LV_KIND_JOINT, LV_KIND_WHEELS and LV_KIND_AXES (lv_kind_valid);
+   (offsets LV_MODEL_*). kind is a bit set of LV_KIND_JOINT and LV_KIND_WHEELS (lv_kind_valid);
    a body of kind 0 is a plain rigid body (its row is ignored). */
 
 /* Per-body model data for bodies with a joint and/or wheels (all arrays nb rows).
@@ -121,10 +121,10 @@ const char *lv_isa_name(int isa);
    and codes of `user` (may be NULL). The effects are indexed per body once per call (O(nb + ne)), so a
    body's step costs its own effects only.
    Bodies are independent: the outer loop runs over bodies (blocks of them), the inner over steps.
-   models may be NULL (every body plain). A body of nonzero kind steps [x, Omega] (16 numbers) with
-   wheel_body_rhs (wheels) or pivot_body_rhs (joint only); its wheel torques are saturated at the
+   models may be NULL (every body plain). A body of nonzero kind steps [x, Omega] (LV_XS_SIZE numbers) with
+   LV_WHEELS_BODY_RHS (wheels) or pivot_body_rhs (joint only); its wheel torques are saturated at the
    start of each step; a jointed body's p_w, v_w are set from pivot_kinematics after each step.
-   After every step all numbers of the body (13, or 16 with its wheel rates) are checked; on a
+   After every step all numbers of the body (13, or LV_XS_SIZE with its wheel rates) are checked; on a
    non-finite value the function returns LV_DIVERGED with *fail_step (0-based) and *fail_body set:
    the earliest failing step over all bodies, then the lowest body index failing at that step (the
    NumPy backend's order). Then body fail_body holds its last finite state and wheel rates (before
