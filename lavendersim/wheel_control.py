@@ -29,8 +29,9 @@ period ``Ts``:
   measured state's conserved coordinates (``Linearization.target_map``), folded into the gains.
 
 The controller's step is a set of CasADi SX expressions — the attitude error chart (the printed
-``quat_error_chart`` kernel), ``−K x``, the allocation ``M`` and a torque saturation with
-``fmin``/``fmax`` — wrapped in one ``casadi.Function`` (:attr:`Controller.function`), which Python
+``quat_error_chart`` kernel), ``−K x``, the allocation ``M``, a torque saturation with ``fmin``/``fmax``
+and the motor's torque–speed line at the measured wheel rates (the printed ``wheels4_motor``) — wrapped in
+one ``casadi.Function`` (:attr:`Controller.function`), which Python
 evaluates; the same expressions print as C.
 
 The loop (:func:`closed_loop`) samples the Sim every ``Ts`` (measurement models from
@@ -52,6 +53,7 @@ from numpy.typing import ArrayLike
 
 from . import validate as V
 from ._install import require
+from .generated import layout as LY
 from .kernels import K as KN
 
 if TYPE_CHECKING:
@@ -121,6 +123,8 @@ class Wheels:
         Motor stall torque, N·m, and no-load speed, rad/s.
     c_w : float
         Bearing damping, N·m·s/rad.
+    cutoff : float, optional
+        0: the motor's torque–speed line; 1: the hard cut-off at speed_limit (the effect's ``cutoff``).
     """
 
     axes_b: np.ndarray
@@ -128,6 +132,7 @@ class Wheels:
     torque_limit: float
     speed_limit: float
     c_w: float
+    cutoff: float = 0.0
 
     @classmethod
     def of(cls, scene: Scene, body: str) -> "Wheels":
@@ -145,7 +150,7 @@ class Wheels:
         """
         v = scene.model_effects(body)["reaction_wheels"].values
         return cls(np.array(v["axes_b"], float).reshape(-1, 3), np.array(v["J"], float).ravel(), float(v["torque_limit"]),
-                   float(v["speed_limit"]), float(v["c_w"]))
+                   float(v["speed_limit"]), float(v["c_w"]), float(v["cutoff"]))
 
     @property
     def n(self) -> int:
@@ -442,13 +447,18 @@ class Controller:
         u = ca.DM(self.u0) + ca.mtimes(ca.DM(self.M), v)
         lim = self.wheels.torque_limit
         u = ca.fmin(ca.fmax(u, -lim), lim)
+        # the motor line at the measured wheel rates: the printed WHEELS_MAX-wheel motor kernel, the unused slots
+        # padded at rest (proved at derive time to change nothing); z then tracks the torque the motors can give
+        pad = ca.DM.zeros(LY.WHEELS_MAX - n, 1)
+        motor = getattr(KC, f"wheels{LY.WHEELS_MAX}_motor")
+        u = motor(ca.vertcat(u, pad), ca.vertcat(Om, pad), lim, self.wheels.speed_limit, self.wheels.cutoff)[0:n]
         zn = ca.mtimes(ca.DM(self.Z), ca.vertcat(z, u)) if self.nz else ca.SX(0, 1)
         return ca.Function("lv_wheel_controller", [q, w, Om, qr, z], [u, zn],
                            ["q", "omega_b", "Omega", "q_ref", "z"], ["u", "z_next"])
 
     def command(self, meas_q: ArrayLike, meas_omega_b: ArrayLike, meas_Omega: ArrayLike, q_ref: ArrayLike | None = None
                 ) -> np.ndarray:
-        """The wheel torques (N,) for one sample (torque-saturated), advancing the memory z.
+        """The wheel torques (N,) for one sample (torque-saturated and on the motor line), advancing the memory z.
 
         Parameters
         ----------
