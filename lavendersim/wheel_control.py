@@ -475,8 +475,17 @@ class Controller:
         -------
         ndarray (N,)
             Wheel motor torques, N·m, within ±torque_limit.
+
+        Raises
+        ------
+        LavenderInputError
+            A measurement or the reference of the wrong size or not finite (fmin/fmax would turn a NaN into
+            a full-scale torque); z is left as it was.
         """
         qr = self.q_ref if q_ref is None else q_ref
+        for field, value, n in (("meas_q", meas_q, 4), ("meas_omega_b", meas_omega_b, 3), ("meas_Omega", meas_Omega, self.n),
+                                ("q_ref", qr, 4)):
+            V.vector(field, value, n)   # shape and finiteness, named
         u, zn = self.function(meas_q, meas_omega_b, meas_Omega, qr, self.z)
         self.z = np.asarray(zn, float).ravel()
         return np.asarray(u, float).ravel()

@@ -236,3 +236,17 @@ def test_both_backends_fly_the_same_loop():
     np.testing.assert_allclose(b.error_deg, a.error_deg, rtol=0, atol=1e-9)
     np.testing.assert_allclose(b.Omega, a.Omega, rtol=0, atol=1e-8)
     np.testing.assert_allclose(b.commands, a.commands, rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize("field, bad", [("meas_q", [np.nan, 0, 0, 1]), ("meas_omega_b", [0, np.inf, 0]),
+                                        ("meas_Omega", [0.0, 1.0]), ("q_ref", [0, 0, np.nan, 1])])
+def test_a_non_finite_or_misshapen_measurement_is_refused_not_a_full_scale_torque(field, bad):
+    """fmin/fmax would turn a NaN into -torque_limit: the Python controller refuses it (as the printed C does)."""
+    ctrl = _sat_ctrl()
+    args = {"meas_q": [0, 0, 0, 1], "meas_omega_b": [0, 0, 0], "meas_Omega": list(ctrl.Omega_ref), "q_ref": None}
+    args[field] = bad
+    z = ctrl.z.copy()
+    with pytest.raises(LavenderInputError) as ei:
+        ctrl.command(args["meas_q"], args["meas_omega_b"], args["meas_Omega"], args["q_ref"])
+    assert ei.value.field == field
+    assert np.array_equal(ctrl.z, z)
