@@ -152,44 +152,6 @@ class Scene:
             raise V.LavenderInputError("body", f"unknown body {name!r}; bodies: {', '.join(self.bodies) or 'none'}")
         return list(self.bodies).index(name)
 
-    def save(self, path) -> "Path":
-        """Write this scene as a TOML scene file (lavendersim.scene_file: bodies with their inertia tensors,
-        initial states and model effects, then the force effects by declared name).
-
-        Parameters
-        ----------
-        path : str or os.PathLike
-            The file; its folder must exist.
-
-        Returns
-        -------
-        pathlib.Path
-        """
-        from . import scene_file   # scene_file builds Scenes: imported here, not at module level
-
-        return scene_file.save(self, path)
-
-    @staticmethod
-    def load(path) -> "Scene":
-        """Read a TOML scene file written by :meth:`save` (or the scene part of a spacecraft file).
-
-        Parameters
-        ----------
-        path : str or os.PathLike
-
-        Returns
-        -------
-        Scene
-
-        Raises
-        ------
-        LavenderInputError
-            Naming the key path and the rule of the first bad key or value; nothing is built.
-        """
-        from . import scene_file
-
-        return scene_file.load(path)
-
     def model_effects(self, name: str) -> dict:
         """The per-body (model) effects declared on body `name`.
 

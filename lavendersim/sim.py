@@ -472,7 +472,7 @@ class Sim:
                 getattr(m, name)[...] = st[name]
             if st["adaptive"] is not None:
                 self._adaptive.h[...], self._adaptive.nfev[...] = st["adaptive"]
-            self.steps, self.rhs_evals = st["steps"], st["rhs_evals"]
+            self._ctr.steps, self._ctr.rhs_evals = st["steps"], st["rhs_evals"]
             self._E0[...], self._L0[...], self._w_safe[...], self._g_fast[...] = st["E0"], st["L0"], st["w_safe"], st["g_fast"]
             self._warned = set(st["warned"])
             self._dirty = True   # checked again before the next step (a check of a state that passed passes)
@@ -793,7 +793,7 @@ class Sim:
         return (x, W, u, None if ad is None else (ad.h.copy(), ad.nfev.copy()), self.steps, self.rhs_evals)
 
     def _restore(self, snap: tuple) -> None:
-        x, W, u, ad, self.steps, self.rhs_evals = snap
+        x, W, u, ad, self._ctr.steps, self._ctr.rhs_evals = snap   # values it read: no re-validation
         self._x[...] = x
         if W is not None:     # None: no body has a joint or wheels, the backends never touch them
             self._models.Omega[...] = W
@@ -927,8 +927,8 @@ class Sim:
         before = None if ad is None else ad.nfev.copy()
         self.backend.advance(self._x, self._step_params, self._step_effects, self.integrator, self.normalize, self.dt, n, models,
                              *(() if ad is None else (ad,)), restore=restore)
-        self.rhs_evals += n * self._per_step if ad is None else int(np.max(ad.nfev - before, initial=0))
-        self.steps += n
+        self._ctr.rhs_evals += n * self._per_step if ad is None else int(np.max(ad.nfev - before, initial=0))
+        self._ctr.steps += n   # the stepping path bumps the counters directly (the public setters validate)
 
     def _locate(self, limit: int) -> tuple[int, int, str] | None:
         """From the current state (which passes the checks), the first k in 1..limit whose state after k

@@ -505,26 +505,6 @@ class Controller:
                 "L": self.L.tolist(), "allocation": self.M.tolist(), "Omega_ref": self.Omega_ref.tolist(),
                 "q_ref": self.q_ref.tolist()}
 
-    def export_c(self, directory: Any, **kw: Any) -> Any:
-        """Write this controller as C99: ``controller.h``, ``controller.c`` and an example ``main.c``.
-
-        See :func:`lavendersim.controller_c.export_c` (printed from :attr:`function`; float64 and float32 steps).
-
-        Parameters
-        ----------
-        directory : str or os.PathLike
-            Created if missing.
-        **kw
-            ``prefix``, ``source``, ``example_q`` of :func:`lavendersim.controller_c.render`.
-
-        Returns
-        -------
-        lavendersim.controller_c.Printed
-        """
-        from .controller_c import export_c
-
-        return export_c(self, directory, **kw)
-
     def __getstate__(self):
         # to a worker process: the gains and limits; the casadi Function is rebuilt from them there, and the
         # Linearization (a python-control StateSpace holds a lambda: not picklable) stays behind (lin = None)

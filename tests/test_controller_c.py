@@ -182,7 +182,7 @@ def test_two_exports_are_byte_identical(designs, tmp_path):
     from lavendersim import spacecraft as S
 
     sc, ctrl, _ = designs["cubesat6u"]
-    ctrl.export_c(tmp_path / "a", source="cubesat6u")                                # Controller.export_c
+    CC.export_c(ctrl, tmp_path / "a", source="cubesat6u")                            # the designed controller
     CC.export_c(S.design(S.load("cubesat6u")), tmp_path / "b", source="cubesat6u")   # designed again
     for f in CC.FILES:
         assert (tmp_path / "a" / f).read_bytes() == (tmp_path / "b" / f).read_bytes(), f

@@ -324,14 +324,14 @@ def test_scene_round_trip_through_toml_text(tmp_path):
         sim.run(200)
     for name in scene.bodies:
         np.testing.assert_array_equal(sims[1].state(name).x, sims[0].state(name).x)
-    # save / load, and the lead's wrappers Scene.save / Scene.load
+    # save / load
     path = SF.save(scene, tmp_path / "scene.toml")
     _close(SF.scene_to_dict(SF.load(path)), d)
-    scene.save(tmp_path / "again.toml")
-    _close(SF.scene_to_dict(lv.Scene.load(tmp_path / "again.toml")), d)
+    SF.save(scene, tmp_path / "again.toml")
+    _close(SF.scene_to_dict(SF.load(tmp_path / "again.toml")), d)
     assert (tmp_path / "again.toml").read_text(encoding="utf-8") == text
     # the scene part of a spacecraft file
-    sat = lv.Scene.load(S.shipped()["cubesat6u"])
+    sat = SF.load(S.shipped()["cubesat6u"])
     _close(SF.scene_to_dict(sat), SF.scene_to_dict(S.load("cubesat6u").scene))
 
 
