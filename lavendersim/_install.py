@@ -13,6 +13,8 @@ from pathlib import Path
 from types import ModuleType
 from urllib.parse import unquote, urlparse
 
+from .errors import PicklableError
+
 # extra -> the packages it installs (as imported)
 EXTRAS = {
     "control": ("casadi", "control"),
@@ -35,7 +37,7 @@ def extra_command(extra: str) -> str:
     return f"pip install -e '{src}[{extra}]'" if src else f"pip install 'lavendersim[{extra}]'"
 
 
-class MissingExtraError(ImportError):
+class MissingExtraError(PicklableError, ImportError):
     """A feature needs an optional extra that is not installed.
 
     The message is one line: ``"<feature> needs the <extra> extra: pip install
@@ -50,6 +52,8 @@ class MissingExtraError(ImportError):
     module : str
         The module that failed to import.
     """
+
+    _init_fields = ("feature", "extra", "module")   # pickles with them (lavendersim.errors.PicklableError)
 
     def __init__(self, feature: str, extra: str, module: str):
         self.feature, self.extra, self.module = feature, extra, module

@@ -22,6 +22,8 @@ from typing import Any, SupportsFloat
 import numpy as np
 from numpy.typing import ArrayLike
 
+from .errors import PicklableError
+
 __all__ = [
     "LavenderInputError",
     "vector",
@@ -53,7 +55,7 @@ _DIAGONAL_RULE = (
 )
 
 
-class LavenderInputError(ValueError):
+class LavenderInputError(PicklableError, ValueError):
     """Invalid input to a LavenderSim entry point.
 
     The message is ``f"{field}: {rule}{detail}"``; the three are kept as attributes.
@@ -77,14 +79,13 @@ class LavenderInputError(ValueError):
     mass
     """
 
+    _init_fields = ("field", "rule", "detail")   # pickles with them (lavendersim.errors.PicklableError)
+
     def __init__(self, field: str, rule: str, detail: str = "") -> None:
         self.field = field
         self.rule = rule
         self.detail = detail
         super().__init__(f"{field}: {rule}{detail}")
-
-    def __reduce__(self):  # keep picklable (multiprocessing, etc.)
-        return (type(self), (self.field, self.rule, self.detail))
 
 
 # --------------------------------------------------------------------------

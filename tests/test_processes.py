@@ -1,0 +1,120 @@
+"""A Sim, its envs and its errors survive processes (issue 28): every exception class of the package pickles with
+its fields (found by walking the package, so a new one cannot be missed), the envs pickle and deep-copy bit for bit
+(state, counters, held commands, episode step counts, random generators), and the executor reports a task that
+cannot be sent and a task that diverges as what they are, on local processes and on a local Dask cluster."""
+from __future__ import annotations
+
+import copy
+import importlib
+import inspect
+import pickle
+import pkgutil
+import threading
+
+import numpy as np
+import pytest
+
+import lavendersim as lv
+from lavendersim import executor as X
+from lavendersim.errors import DivergenceError
+from lavendersim.validate import LavenderInputError
+
+from conftest import IN_CI, have, require
+
+# ---- every exception class of the package ------------------------------------------------------------------
+
+# the packages walked (lavendersim.derive, .labs and .generated live in folders of their own); never their __main__
+PACKAGES = ("lavendersim", "lavendersim.derive", "lavendersim.labs", "lavendersim.generated")
+
+
+def _package_modules() -> list[str]:
+    names = []
+    for pkg in PACKAGES:
+        mod = importlib.import_module(pkg)
+        names.append(pkg)
+        names += [m.name for m in pkgutil.walk_packages(mod.__path__, pkg + ".") if not m.name.endswith("__main__")]
+    return sorted(set(names))
+
+
+def _exception_classes() -> list[type]:
+    found = {}
+    for name in _package_modules():
+        try:
+            mod = importlib.import_module(name)
+        except ImportError:     # an optional extra missing: that module's classes cannot be raised here (CI has all)
+            if IN_CI:
+                raise
+            continue
+        for obj in vars(mod).values():
+            if (isinstance(obj, type) and issubclass(obj, BaseException)
+                    and obj.__module__.split(".")[0] == "lavendersim"):
+                found[f"{obj.__module__}.{obj.__qualname__}"] = obj
+    return [found[k] for k in sorted(found)]
+
+
+EXCEPTIONS = _exception_classes()
+
+# representative values for an __init__ argument, by the words of its annotation (first match)
+_SAMPLES = (("int", 7), ("float", 0.25), ("str", "body.omega_w"), ("path", "/tmp/some/file.py"))
+
+
+def _sample(param: inspect.Parameter, i: int):
+    ann = param.annotation if isinstance(param.annotation, str) else getattr(param.annotation, "__name__", "")
+    for word, value in _SAMPLES:
+        if word in str(ann).lower():
+            return f"{value}-{i}" if isinstance(value, str) else value + i
+    return f"value {i} of {param.name}"
+
+
+def _construct(cls: type) -> BaseException:
+    """An instance of cls built with representative arguments: its own __init__'s parameters (by annotation),
+    or a message."""
+    init = cls.__init__
+    if any(init is getattr(b, "__init__", None) for b in (BaseException, Exception, ImportError, OSError)):
+        return cls("a message naming field x and the rule it broke")
+    args = []
+    for i, p in enumerate(list(inspect.signature(init).parameters.values())[1:]):
+        if p.kind in (p.VAR_POSITIONAL, p.VAR_KEYWORD):
+            continue
+        args.append(_sample(p, i))
+    return cls(*args)
+
+
+def _fields(e: BaseException) -> dict:
+    """Everything an exception carries that a receiver could read: type, message, args, attributes (incl. notes)."""
+    out = {"type": type(e), "str": str(e), "args": e.args, "vars": dict(vars(e))}
+    for attr in ("name", "path", "errno", "strerror", "filename"):    # ImportError's and OSError's own fields
+        if hasattr(e, attr):
+            out[attr] = getattr(e, attr)
+    return out
+
+
+def test_the_walk_finds_the_package_exceptions():
+    names = {c.__qualname__ for c in EXCEPTIONS}
+    # a sample of what must be there (the walk works): one per module family
+    for n in ("LavenderInputError", "DivergenceError", "ImmutableSimError", "ImmutableEffectError", "ImmutableBodyError",
+              "MissingExtraError", "WorkerMismatchError", "UserBuildError", "CompileError", "OutputFolderError"):
+        assert n in names
+    assert len(EXCEPTIONS) >= 14
+
+
+@pytest.mark.parametrize("cls", EXCEPTIONS, ids=lambda c: c.__qualname__)
+def test_every_exception_pickles_with_its_fields(cls):
+    e = _construct(cls)
+    e.add_note("a note added on the way")
+    e.extra_attribute = ("set", 2)        # an attribute set after construction travels too
+    for copy_ in (lambda v: pickle.loads(pickle.dumps(v)), copy.deepcopy, copy.copy):
+        back = copy_(e)
+        assert _fields(back) == _fields(e)
+        assert back is not e
+
+
+def test_a_divergence_error_from_a_sim_pickles_with_its_fields():
+    sc = lv.Scene()
+    sc.add_body(lv.Body("b", 1.0, [1.0, 2.0, 3.0], omega_b=[0.0, 40.0, 0.1]))
+    sim = lv.Sim(sc, dt=0.05, integrator="euler")
+    with pytest.raises(DivergenceError) as ei:
+        sim.run(100)
+    back = pickle.loads(pickle.dumps(ei.value))
+    assert _fields(back) == _fields(ei.value)
+    assert (back.step, back.body, back.body_name) == (ei.value.step, 0, "b")
