@@ -225,6 +225,8 @@ def _rebuild_sim(bodies: list, effects: list, kwargs: dict, state: dict) -> "Sim
     for e in effects:
         scene.add_effect(e)
     sim = Sim(scene, **kwargs)
+    if state.get("fast_chunks"):     # run(n)'s C fast path for any n, as the original had (Sim._fast_chunks)
+        sim._fast_chunks()
     sim._load_snapshot(state)
     return sim
 
@@ -456,7 +458,8 @@ class Sim:
                      "applied": m.applied.copy(), "steps": self.steps, "rhs_evals": self.rhs_evals,
                      "E0": self._E0.copy(), "L0": self._L0.copy(), "w_safe": self._w_safe.copy(),
                      "g_fast": self._g_fast.copy(), "warned": sorted(self._warned),
-                     "adaptive": None if self._adaptive is None else (self._adaptive.h.copy(), self._adaptive.nfev.copy())}
+                     "adaptive": None if self._adaptive is None else (self._adaptive.h.copy(), self._adaptive.nfev.copy()),
+                     "fast_chunks": self._fast is not None and self._fast_n == self._chunk}
         kwargs = {"dt": self.dt, "integrator": self.integrator, "backend": self.backend.name, "normalize": self.normalize,
                   "on_bound": self.on_bound, "max_growth": self.max_growth, "dtype": self.dtype}
         if self._adaptive is not None:

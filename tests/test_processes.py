@@ -118,3 +118,102 @@ def test_a_divergence_error_from_a_sim_pickles_with_its_fields():
     back = pickle.loads(pickle.dumps(ei.value))
     assert _fields(back) == _fields(ei.value)
     assert (back.step, back.body, back.body_name) == (ei.value.step, 0, "b")
+
+
+# ---- the envs: pickle and deepcopy, bit for bit -------------------------------------------------------------
+
+def _bits(v):
+    """A value as something == compares bit for bit (floats and arrays by their bytes, NaN and -0.0 included)."""
+    if isinstance(v, dict):
+        return {k: _bits(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple)):
+        return tuple(_bits(x) for x in v)
+    if isinstance(v, (np.ndarray, np.generic, float)):
+        a = np.asarray(v)
+        return (a.dtype.str, a.shape, a.tobytes() if a.dtype != object else tuple(a.ravel().tolist()))
+    return v
+
+
+def _episodes(env, actions, vector=False) -> list:
+    """Step `env` with `actions`, resetting (no seed: its generator draws the next start) where an episode ends;
+    every return value, as bits."""
+    out = []
+    for a in actions:
+        r = env.step(a)
+        out.append(_bits(r))
+        if not vector and (r[2] or r[3]):
+            out.append(_bits(env.reset()))
+        elif vector and (r[2].any() or r[3].any()):
+            out.append("ended")
+    return out
+
+
+def _copies():
+    return {"pickle": lambda e: pickle.loads(pickle.dumps(e)), "deepcopy": copy.deepcopy}
+
+
+@pytest.mark.parametrize("backend", ["c", "numpy"])
+@pytest.mark.parametrize("task", ["center", "corner"])
+def test_an_env_pickles_and_deep_copies_bit_for_bit(backend, task):
+    """A snapshot mid-episode (gymnasium.make's wrappers: the TimeLimit's step count; the env's generator, Sim, held
+    command, applied torques and counters) steps on bit for bit through truncations, terminations and unseeded resets;
+    the original, stepped after the copy, gives the same numbers (nothing shared)."""
+    require("gym")
+    import gymnasium as gym
+
+    env = gym.make("lavendersim:ReactionWheelCube-v0", task=task, backend=backend, max_episode_steps=12,
+                   dt=5e-3)     # 2 simulator steps per env step (the NumPy backend's Python loop)
+    env.reset(seed=11)
+    rng = np.random.default_rng(3)
+    actions = rng.uniform(-1.5, 1.5, (45, 3)).astype(np.float32)    # some saturated; the corner task tips over
+    _episodes(env, actions[:7])
+    for name, make_copy in _copies().items():
+        twin = make_copy(env)
+        assert twin.unwrapped.sim is not env.unwrapped.sim
+        ours = _episodes(twin, actions[7:])
+        theirs = _episodes(copy.deepcopy(env) if name == "pickle" else pickle.loads(pickle.dumps(env)), actions[7:])
+        assert ours == theirs
+        assert len(ours) > len(actions[7:])     # at least one episode ended and started again from the generator
+    assert _episodes(env, actions[7:]) == ours   # the original: the same numbers after its copies were taken
+    twin.close()
+
+
+def test_an_env_copied_before_its_first_reset_and_after_close():
+    require("gym")
+    from lavendersim.envs.reaction_wheel_cube import ReactionWheelCubeEnv
+
+    env = ReactionWheelCubeEnv(render_mode="rgb_array")
+    fresh = pickle.loads(pickle.dumps(env))
+    assert _bits(fresh.reset(seed=4)) == _bits(env.reset(seed=4))
+    assert env.render().shape == fresh.render().shape       # a drawn figure is not carried (drawn again)
+    twin = copy.deepcopy(env)
+    assert twin.render().shape[2] == 3 and _bits(twin.step(np.ones(3))) == _bits(env.step(np.ones(3)))
+    env.close()
+    assert pickle.loads(pickle.dumps(env)).sim is None
+
+
+@pytest.mark.parametrize("backend", ["c", "numpy"])
+def test_a_vector_env_pickles_and_deep_copies_bit_for_bit(backend):
+    """The vector env's snapshot: its Sim (N cubes), per-cube generators, episode step counts, pending autoresets;
+    the copy keeps the Sim's C fast path for one env step (Sim._fast_chunks)."""
+    require("gym")
+    import gymnasium as gym
+
+    def make():
+        return gym.make_vec("lavendersim:ReactionWheelCube-v0", num_envs=4, vectorization_mode="vector_entry_point",
+                            task="corner", backend=backend, max_episode_steps=9, dt=5e-3)
+
+    env = make()
+    env.reset(seed=[5, None, 7, 8])
+    rng = np.random.default_rng(8)
+    actions = rng.uniform(-1.5, 1.5, (40, 4, 3)).astype(np.float32)
+    _episodes(env, actions[:6], vector=True)
+    for make_copy in _copies().values():
+        twin = make_copy(env)
+        assert twin.sim is not env.sim and twin._elapsed.tolist() == env._elapsed.tolist()
+        if backend == "c":
+            assert twin.sim._fast_n == env.sim._fast_n      # (white box: the copy keeps the one-call step)
+        ours = _episodes(twin, actions[6:], vector=True)
+        assert ours == _episodes(make_copy(env), actions[6:], vector=True)
+    assert ours.count("ended") >= 2        # autoresets happened after the snapshot (truncation at 9 steps, tipped-over corners)
+    assert _episodes(env, actions[6:], vector=True) == ours

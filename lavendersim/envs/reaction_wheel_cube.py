@@ -162,6 +162,17 @@ class ReactionWheelCubeEnv(gym.Env):
         self._last_u = np.zeros(3)
         self._io: _StepIO | None = None
 
+    # ---- pickle and deepcopy -----------------------------------------------------------------
+    def __getstate__(self) -> dict:
+        """The env pickles (and deep-copies) as its settings, spaces, random generator and Sim (which pickles its whole
+        state, held commands and counters included; see Sim.__reduce__): reset/step on the copy give the original's
+        numbers bit for bit. The step path's handles on the Sim (memoryviews) are taken again on the next step; a
+        figure is drawn again on the next render."""
+        state = self.__dict__.copy()
+        state["_io"], state["_fig"] = None, None
+        state.pop("_ax", None)
+        return state
+
     # ---- helpers --------------------------------------------------------------------------
     def _make_sim(self, q0: np.ndarray, omega_b: np.ndarray, Omega: np.ndarray) -> Sim:
         """A Sim of the chapter cube at q0, omega_b (rad/s) with wheel rates Omega (rad/s), RK4 at dt."""
