@@ -5,7 +5,10 @@ Needs the `docs` extra: pip install -e '.[docs]'.
 """
 from __future__ import annotations
 
+import hashlib
 import os
+import shutil
+from pathlib import Path
 
 os.environ.setdefault("MPLBACKEND", "Agg")
 
@@ -63,5 +66,72 @@ def _escape_bars(app, what, name, obj, options, lines):
         lines[i] = "``".join(p.replace("|", r"\|") if k % 2 == 0 else p for k, p in enumerate(parts))
 
 
+# ---------------------------------------------------------------------------------------------------
+# The gallery (gallery.md): every plot of every lab, as `lavendersim lab all` draws it. Drawn at build
+# time into docs/_gallery/ (ignored by git) and cached there, keyed by the sources that draw it (labs/,
+# the figure style, the printed kernels), so a rebuild costs nothing until one of them changes. With
+# LAVENDERSIM_LAB_OUT=DIR (the --out of a `lavendersim lab all` run) the PNGs are copied from there
+# instead of re-running the labs. LAVENDERSIM_GALLERY=skip builds the page without images (quick edits).
+DOCS = Path(__file__).resolve().parent
+ROOT = DOCS.parent
+GALLERY = DOCS / "_gallery"
+GALLERY_LABS = ("force", "momentum", "01", "02", "03", "04", "hard", "accuracy", "atlas")
+GALLERY_DPI = 110                                    # what LabResult.save writes
+
+
+def _gallery_key() -> str:
+    h = hashlib.sha256(lavendersim.__version__.encode())
+    for f in sorted([*ROOT.glob("labs/*.py"), ROOT / "lavendersim" / "figures.py", ROOT / "generated" / "manifest.json"]):
+        h.update(f.name.encode() + f.read_bytes())
+    return h.hexdigest()[:16]
+
+
+def _gallery_images(name: str, source: Path | None) -> list[str]:
+    """Draw (or copy) lab `name`'s PNGs into _gallery/NAME/; their file names."""
+    dest = GALLERY / name
+    dest.mkdir(parents=True, exist_ok=True)
+    if source is not None and sorted((source / name).glob("*.png")):
+        pngs = sorted((source / name).glob("*.png"))
+        for png in pngs:
+            shutil.copyfile(png, dest / png.name)
+        return [png.name for png in pngs]
+    from lavendersim import labs
+
+    result = labs.compute(name, **labs.ALL_OPTIONS.get(name, {}))
+    for fname in result.plot_names:
+        result.figure(fname).savefig(dest / fname, dpi=GALLERY_DPI)
+    return result.plot_names
+
+
+def _make_gallery(app) -> None:
+    key = _gallery_key()
+    index = GALLERY / "index.md"
+    stamp = GALLERY / "key.txt"
+    if os.environ.get("LAVENDERSIM_GALLERY") == "skip":
+        GALLERY.mkdir(exist_ok=True)
+        index.write_text("*(gallery skipped: LAVENDERSIM_GALLERY=skip)*\n", encoding="utf-8")
+        stamp.unlink(missing_ok=True)
+        return
+    if stamp.is_file() and stamp.read_text() == key and index.is_file():
+        return
+    source = os.environ.get("LAVENDERSIM_LAB_OUT")
+    from lavendersim import labs
+
+    GALLERY.mkdir(exist_ok=True)
+    (GALLERY / ".gitignore").write_text("*\n")
+    lines = []
+    for name in GALLERY_LABS:
+        title = labs.lab_module(name).TITLE
+        lines += [f"## `lavendersim lab {name}`", "", title[0].upper() + title[1:] + ".", ""]
+        for png in _gallery_images(name, Path(source) if source else None):
+            lines += [f"```{{image}} _gallery/{name}/{png}", f":alt: lab {name}: {png}", ":width: 100%", "```", ""]
+    index.write_text("\n".join(lines), encoding="utf-8")
+    stamp.write_text(key)
+
+
+exclude_patterns.append("_gallery")
+
+
 def setup(app):
     app.connect("autodoc-process-docstring", _escape_bars, priority=100)
+    app.connect("builder-inited", _make_gallery)
