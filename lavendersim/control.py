@@ -425,14 +425,20 @@ def linearize(sim_or_scene: Sim | Scene, x0: dict | None = None, u0: dict | None
 # ----------------------------------------------------------------------------------------------
 
 
+WEIGHT_MAX = 1e150   # |entries| of Q and R: the Riccati solution and the gain scale with them (sqrt(Q/R), sqrt(Q R))
+
+
 def _weight(name: str, value, n: int, definite: bool) -> np.ndarray:
-    """A weight matrix from a scalar, a diagonal (n,) or a matrix (n, n); checked symmetric and
-    positive semidefinite (Q) or positive definite (R)."""
+    """A weight matrix (n, n) from a scalar, a diagonal (n,) or a matrix (n, n) of real numbers, checked
+    finite, at most WEIGHT_MAX in magnitude, symmetric and positive semidefinite (Q) or positive definite (R).
+
+    Complex, bool, string and object entries are refused (numpy would cast "1" or True to 1.0 and drop an
+    imaginary part), naming ``name`` and the rule; nothing is rounded into a weight."""
+    what = f"must be a real number, a diagonal of {n} real numbers or a {n}×{n} real matrix"
     try:
-        arr = np.asarray(value, dtype=float)
-    except (TypeError, ValueError):
-        raise V.LavenderInputError(name, f"must be a number, a diagonal of {n} numbers or a {n}×{n} matrix",
-                                   f", got {value!r}") from None
+        arr = V._real_array(name, value)
+    except V.LavenderInputError as exc:
+        raise V.LavenderInputError(name, what, f" ({exc.rule}{exc.detail})") from None
     if arr.ndim == 0:
         arr = np.full(n, float(arr))
     if arr.ndim == 1:
@@ -443,15 +449,158 @@ def _weight(name: str, value, n: int, definite: bool) -> np.ndarray:
         raise V.LavenderInputError(name, f"must be {n}×{n} (or a diagonal of {n})", f", got shape {arr.shape}")
     if not np.all(np.isfinite(arr)):
         raise V.LavenderInputError(name, "must be finite (no NaN or inf)")
-    if not np.allclose(arr, arr.T, rtol=1e-12, atol=1e-12 * max(1.0, np.abs(arr).max())):
+    big = float(np.abs(arr).max(initial=0.0))
+    if big > WEIGHT_MAX:
+        raise V.LavenderInputError(name, f"entries must be at most {WEIGHT_MAX:g} in magnitude (rescale Q and R together)",
+                                   f", got {big:.3g}")
+    if not np.allclose(arr, arr.T, rtol=1e-12, atol=1e-12 * max(1.0, big)):
         raise V.LavenderInputError(name, "must be symmetric")
-    ev = np.linalg.eigvalsh((arr + arr.T) / 2)
+    sym = arr / 2 + arr.T / 2
+    ev = np.linalg.eigvalsh(sym)
     tol = 1e-12 * max(1.0, np.abs(ev).max())
     if definite and ev.min() <= tol:
         raise V.LavenderInputError(name, "must be positive definite", f", smallest eigenvalue {ev.min():.3g}")
     if not definite and ev.min() < -tol:
         raise V.LavenderInputError(name, "must be positive semidefinite", f", smallest eigenvalue {ev.min():.3g}")
-    return (arr + arr.T) / 2
+    return sym
+
+
+class DesignError(V.LavenderInputError):
+    """The LQR design cannot stabilize the model: a mode no input reaches grows on its own (python-control
+    refuses such a pair), or the solved gain leaves the closed loop unstable.
+
+    A :class:`lavendersim.validate.LavenderInputError` (``field``, ``rule``, ``detail``) with the mode.
+
+    Parameters
+    ----------
+    field, rule, detail : str
+        As LavenderInputError (``field``: ``"sys"`` for lqr/dlqr, ``"scene"`` for design).
+    eigenvalue : complex
+        The mode's eigenvalue (continuous: 1/s; discrete: per sample).
+    states : tuple of str
+        The states the mode lives in (largest components of its PBH left eigenvector first).
+    discrete : bool
+        Whether the eigenvalue is discrete-time.
+    """
+
+    def __init__(self, field: str, rule: str, detail: str = "", eigenvalue: complex = 0j, states: tuple = (),
+                 discrete: bool = False) -> None:
+        super().__init__(field, rule, detail)
+        self.eigenvalue, self.states, self.discrete = complex(eigenvalue), tuple(states), bool(discrete)
+
+    def __reduce__(self):   # crosses process boundaries with its fields
+        return (type(self), (self.field, self.rule, self.detail, self.eigenvalue, self.states, self.discrete))
+
+
+STABILITY_RTOL = 1e-6   # a mode is unstable when it grows faster than this fraction of the model's fastest rate
+
+
+def _growth(lam: np.ndarray, discrete: bool) -> np.ndarray:
+    """Growth of eigenvalues past the stability boundary: |z| − 1 (discrete) or Re s (continuous)."""
+    return np.abs(lam) - 1.0 if discrete else np.real(lam)
+
+
+def _stability_tol(A: np.ndarray, block: np.ndarray, discrete: bool) -> float:
+    """Growth below which a mode counts as marginal: STABILITY_RTOL times the fastest rate of the model
+    (spectral radius of A, or of A − I discrete: unit-free), plus the rounding split of a double
+    integrator's eigenvalues (10 sqrt(eps ‖A‖ ‖block‖): free positions and unactuated axes sit there)."""
+    n = A.shape[0]
+    fast = float(np.max(np.abs(np.linalg.eigvals(A - np.eye(n) if discrete else A)), initial=0.0))
+    eps = np.finfo(float).eps
+    return STABILITY_RTOL * fast + 10.0 * math.sqrt(eps * np.linalg.norm(A, 2) * max(np.linalg.norm(block, 2), eps))
+
+
+def _mode_states(w: np.ndarray, labels: list[str]) -> tuple[str, ...]:
+    """The states a mode lives in: components of its left eigenvector at least a tenth of the largest, largest first."""
+    a = np.abs(w)
+    order = np.argsort(-a, kind="stable")
+    return tuple(labels[i] for i in order if a[i] >= 0.1 * a.max())
+
+
+def unstable_uncontrollable_modes(A: ArrayLike, B: ArrayLike, *, discrete: bool = False, basis: np.ndarray | None = None,
+                                  labels: list[str] | None = None) -> list[tuple[complex, tuple[str, ...]]]:
+    """The PBH stabilizability test: the modes no input reaches that grow on their own.
+
+    With T an orthonormal basis of the controllable subspace (:func:`controllable_basis`) and U its
+    complement, the uncontrollable dynamics are ``Uᵀ A U`` (the subspace is A-invariant); a left eigenvector
+    y of it gives ``w = U y`` with ``wᵀ A = λ wᵀ`` and ``wᵀ B = 0`` (rank [A − λI, B] < n): the coordinate
+    ``w·x`` evolves as ``e^{λt}`` (or ``λ^k``) whatever the input. A mode is unstable when its growth
+    (``Re λ``, or ``|λ| − 1`` discrete) exceeds ``STABILITY_RTOL`` (1e-6) times the model's fastest rate plus
+    the rounding split of a double integrator: the marginal modes of internal torques (conserved momenta,
+    a free body's position, an unactuated axis's attitude) pass.
+
+    Parameters
+    ----------
+    A : array_like (n, n)
+        State matrix (continuous, or discrete with ``discrete=True``).
+    B : array_like (n, m)
+        Input matrix.
+    discrete : bool, default False
+    basis : ndarray (n, rank), optional
+        The controllable subspace (default :func:`controllable_basis`).
+    labels : list of str, optional
+        State names (default ``x[0]``, ``x[1]``, ...).
+
+    Returns
+    -------
+    list of (complex, tuple of str)
+        Each unstable uncontrollable mode (one of a complex pair): its eigenvalue and the states it
+        lives in (largest components of w first); empty when (A, B) is stabilizable.
+    """
+    from scipy.linalg import eig
+
+    A, B = np.asarray(A, float), np.asarray(B, float)
+    n = A.shape[0]
+    T = controllable_basis(A, B, discrete=discrete) if basis is None else basis
+    U = uncontrollable(T, n)
+    if U.shape[1] == 0:
+        return []
+    labels = [f"x[{i}]" for i in range(n)] if labels is None else list(labels)
+    Auu = U.T @ A @ U
+    lam, W = eig(Auu, left=True, right=False)
+    tol = _stability_tol(A, Auu, discrete)
+    g = _growth(lam, discrete)
+    out = []
+    for i in np.argsort(-g, kind="stable"):
+        if g[i] > tol and lam[i].imag >= 0:
+            out.append((complex(lam[i]), _mode_states(U @ W[:, i], labels)))
+    return out
+
+
+def _refuse_unstable(A: np.ndarray, B: np.ndarray, T: np.ndarray, discrete: bool, labels: list[str] | None,
+                     field: str, period: float | None) -> None:
+    """Raise DesignError naming the fastest unstable uncontrollable mode of (A, B), if any."""
+    modes = unstable_uncontrollable_modes(A, B, discrete=discrete, basis=T, labels=labels)
+    if not modes:
+        return
+    lam, states = modes[0]
+    rate = ""
+    if discrete and period is not None:
+        rate = f" (a continuous rate of {math.log(abs(lam)) / period:+.4g}/s at the period {period:g} s)"
+    more = f"; {len(modes) - 1} more unstable uncontrollable mode(s)" if len(modes) > 1 else ""
+    raise DesignError(field, "has an unstable mode no input reaches (not stabilizable: no gain can hold it)",
+                      f": eigenvalue {_eig_text(lam)}{rate} in {', '.join(states)}{more}", lam, states, discrete)
+
+
+def _eig_text(lam: complex) -> str:
+    return f"{lam.real:+.6g}" if lam.imag == 0 else f"{lam.real:+.6g}{lam.imag:+.6g}j"
+
+
+def _check_closed_loop(A: np.ndarray, B: np.ndarray, K: np.ndarray, T: np.ndarray, discrete: bool,
+                       labels: list[str] | None, field: str) -> None:
+    """Raise DesignError if the solved gain leaves a controllable closed-loop mode unstable (a solver failure)."""
+    if T.shape[1] == 0:
+        return
+    Acl = T.T @ (A - B @ K) @ T
+    lam, W = np.linalg.eig(Acl)
+    g = _growth(lam, discrete)
+    i = int(np.argmax(g))
+    if g[i] > _stability_tol(A, Acl, discrete):
+        w = T @ W[:, i]
+        states = _mode_states(w, [f"x[{j}]" for j in range(A.shape[0])] if labels is None else list(labels))
+        raise DesignError(field, "the solved LQR gain leaves the closed loop unstable (check Q against the plant)",
+                          f": closed-loop eigenvalue {_eig_text(complex(lam[i]))} in {', '.join(states)}",
+                          complex(lam[i]), states, discrete)
 
 
 class LQRResult(tuple):
@@ -513,13 +662,18 @@ def _pair(sys_or_A: Any, args: tuple, fn: str, discrete: bool) -> tuple[np.ndarr
     return A, B, basis, args
 
 
-def _design(sys_or_A: Any, args: tuple, discrete: bool) -> LQRResult:
+def _design(sys_or_A: Any, args: tuple, discrete: bool, *, labels: list[str] | None = None, field: str = "sys",
+            period: float | None = None) -> LQRResult:
     ct = require("control", "control", "LQR design (python-control)")
     fn = "dlqr" if discrete else "lqr"
     A, B, T, (Q, R) = _pair(sys_or_A, args, fn, discrete)
     n, m = B.shape
     Q = _weight("Q", Q, n, definite=False)
     R = _weight("R", R, m, definite=True)
+    if labels is None and isinstance(sys_or_A, ct.StateSpace):
+        labels = list(sys_or_A.state_labels)
+    _refuse_unstable(A, B, T, discrete, labels, field, period if period is not None else (
+        float(sys_or_A.dt) if discrete and isinstance(sys_or_A, ct.StateSpace) and sys_or_A.dt is not True else None))
     solve = ct.dlqr if discrete else ct.lqr
     if T.shape[1] == n:
         K, S, _ = solve(A, B, Q, R)
@@ -530,6 +684,7 @@ def _design(sys_or_A: Any, args: tuple, discrete: bool) -> LQRResult:
         Kc, Sc, _ = solve(T.T @ A @ T, T.T @ B, (Qc + Qc.T) / 2, R)
         K, S = np.asarray(Kc) @ T.T, T @ np.asarray(Sc) @ T.T
     K, S = np.asarray(K), np.asarray(S)
+    _check_closed_loop(A, B, K, T, discrete, labels, field)
     E = np.linalg.eigvals(A - B @ K)
     E = E[np.argsort(np.abs(E) if discrete else E.real)]
     return LQRResult(K, S, E, T.shape[1], uncontrollable(T, n))
@@ -556,6 +711,15 @@ def lqr(sys: Any, *args: Any) -> LQRResult:
     LQRResult
         Unpacks as (K (m, n), S (n, n), E (n,) closed-loop eigenvalues of A − B K, sorted by real
         part); ``.rank`` and ``.uncontrollable`` report the directions the design cannot move.
+
+    Raises
+    ------
+    DesignError
+        A mode no input reaches grows on its own (:func:`unstable_uncontrollable_modes`: python-control
+        refuses such a pair), naming its eigenvalue and states; or the solved gain leaves the closed loop
+        unstable. Marginal uncontrollable modes (conserved momenta at 0) are designed around.
+    lavendersim.validate.LavenderInputError
+        As :func:`dlqr`.
     """
     return _design(sys, args, discrete=False)
 
@@ -588,8 +752,11 @@ def dlqr(sys: Any, *args: Any) -> LQRResult:
         If python-control (the ``control`` extra) is not installed.
     lavendersim.validate.LavenderInputError
         If the system is continuous or not a recognized form, A, B are not finite n×n, n×m matrices,
-        Q and R are missing or not valid weights (Q symmetric PSD, R symmetric PD), or no input reaches
-        any state.
+        Q and R are missing or not valid weights (real finite numbers; Q symmetric PSD, R symmetric PD), or
+        no input reaches any state.
+    DesignError
+        A mode no input reaches grows on its own (|z| > 1), naming its eigenvalue and states, or the solved
+        gain leaves the closed loop unstable. Marginal uncontrollable modes (conserved momenta at 1) pass.
     """
     return _design(sys, args, discrete=True)
 

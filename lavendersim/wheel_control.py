@@ -602,6 +602,11 @@ def design(scene: Scene, body: str | None = None, *, period: float, delay: float
     lavendersim.validate.LavenderInputError
         A bad argument, naming it (period, delay, Q, R, q_ref, null_bias, actuator_lag, body, scene),
         or ``q_ref`` is not an equilibrium.
+    lavendersim.control.DesignError
+        (a LavenderInputError, field ``scene``) The design model has a mode no wheel reaches that grows on
+        its own (e.g. a tilt under gravity about an axis no wheel torque has a component on), naming its
+        eigenvalue (per sample, and the continuous rate) and its states; marginal ones (conserved momenta,
+        a free body's position, an unactuated axis of a free body) are designed around as before.
     """
     from . import control as lc
 
@@ -634,7 +639,9 @@ def design(scene: Scene, body: str | None = None, *, period: float, delay: float
     nd = Ad.shape[0]
     Qa = np.zeros((nd, nd))
     Qa[:n, :n] = Qx
-    res = lc.dlqr((Ad, Bd @ M), Qa, M.T @ Ru @ M)
+    labels = list(lin.state_labels) + [f"{body}_lag_a_{i + 1}" for i in range(m) if lag > 0] \
+        + [f"{body}_u_prev_{i + 1}" for i in range(m) if delay > 0]
+    res = lc._design((Ad, Bd @ M), (Qa, M.T @ Ru @ M), True, labels=labels, field="scene", period=Ts)
     Kv = np.asarray(res.K)
     K = M @ Kv
     T = lc.controllable_basis(Ad, Bd, discrete=True)

@@ -1,0 +1,145 @@
+"""Control corner cases (issue 28): a design that cannot stabilize is refused naming the mode; weights are real
+finite matrices; a Monte Carlo draw that fails is a failed sample, not the end of the sweep."""
+from __future__ import annotations
+
+import math
+import pickle
+
+import numpy as np
+import pytest
+
+import lavendersim as lv
+from lavendersim import control as lc
+from lavendersim.validate import LavenderInputError
+
+pytestmark = pytest.mark.needs("control")
+
+E1 = np.array([[1.0], [0.0]])
+
+
+# ------------------------------------------------------------------------ unstable modes no input reaches
+
+
+def test_the_audits_lqr_is_refused_naming_the_mode():
+    """lqr(A = I, B = e1): the audit's 'design' had E = [-1.41, +1.0]; x[1] grows as e^t whatever the gain."""
+    import control as ct
+
+    with pytest.raises(np.linalg.LinAlgError):          # python-control refuses the pair too
+        ct.lqr(np.eye(2), E1, np.eye(2), 1.0)
+    with pytest.raises(lc.DesignError) as e:
+        lc.lqr(np.eye(2), E1, np.eye(2), 1.0)
+    assert isinstance(e.value, LavenderInputError) and e.value.field == "sys"
+    assert e.value.eigenvalue == pytest.approx(1.0, abs=1e-12) and e.value.states == ("x[1]",)
+    assert not e.value.discrete and "+1" in str(e.value) and "x[1]" in str(e.value)
+    # discrete: |z| = 1.2 > 1 on the second state
+    with pytest.raises(lc.DesignError) as e:
+        lc.dlqr(np.diag([0.5, 1.2]), E1, np.eye(2), 1.0)
+    assert e.value.eigenvalue == pytest.approx(1.2, abs=1e-12) and e.value.states == ("x[1]",) and e.value.discrete
+
+
+def test_a_design_error_pickles_with_its_fields():
+    with pytest.raises(lc.DesignError) as e:
+        lc.lqr(np.eye(2), E1, np.eye(2), 1.0)
+    back = pickle.loads(pickle.dumps(e.value))
+    assert type(back) is lc.DesignError and str(back) == str(e.value)
+    assert (back.field, back.eigenvalue, back.states, back.discrete) == ("sys", e.value.eigenvalue, ("x[1]",), False)
+
+
+def test_stable_and_marginal_uncontrollable_modes_still_design():
+    """A stable uncontrollable mode (-1) and a marginal one (0: a conserved quantity) design as before."""
+    for a in (-1.0, 0.0):
+        K, S, E = lc.lqr(np.diag([1.0, a]), E1, np.eye(2), 1.0)
+        np.testing.assert_allclose(np.sort(E.real), np.sort([-math.sqrt(2.0), a]), atol=1e-12)
+        np.testing.assert_allclose(K, [[1 + math.sqrt(2.0), 0.0]], atol=1e-12)
+    # a double integrator no input reaches (a free body's position: p' = v, v' = 0) is marginal, not unstable
+    A = np.zeros((3, 3))
+    A[1, 2] = 1.0
+    A[0, 0] = 1.0
+    assert lc.lqr(A, np.array([[1.0], [0.0], [0.0]]), np.eye(3), 1.0).rank == 1
+
+
+@pytest.mark.parametrize("growth, refused", [(1e-3, True), (1e-9, False)])
+def test_the_growth_threshold_is_scaled_to_the_model(growth, refused):
+    """An uncontrollable mode growing at 1e-3 of the model's fastest rate (1/s) is refused; 1e-9 is marginal."""
+    A = np.diag([1.0, growth])
+    if refused:
+        with pytest.raises(lc.DesignError) as e:
+            lc.lqr(A, E1, np.eye(2), 1.0)
+        assert e.value.eigenvalue == pytest.approx(growth, rel=1e-9)
+    else:
+        assert lc.lqr(A, E1, np.eye(2), 1.0).rank == 1
+
+
+def _corner_one_wheel() -> lv.Scene:
+    """The chapter's corner cube balancing under gravity with ONE wheel, on the body diagonal: upright, that axis
+    is vertical, so no wheel torque can tilt the cube and both tilts fall (an inverted pendulum) on their own."""
+    q0 = lc.cube_upright_q("corner")
+    s = lv.Scene()
+    s.add_body(lv.Body.box("cube", mass=1.0, size=(0.15,) * 3, p_w=lc.KN.quat_rotate(q0, lc.cube_r_b("corner", 0.15)), q=q0))
+    s.add_effect("spherical_joint", body="cube", anchor_w=[0.0, 0.0, 0.0])
+    s.add_effect("reaction_wheels", body="cube", J=[5.7e-4], axes_b=[[3 ** -0.5] * 3], torque_limit=0.2, speed_limit=400.0)
+    s.add_effect("gravity", body="cube", g_w=[0.0, 0.0, -9.81])
+    return s
+
+
+def test_design_refuses_a_falling_axis_no_wheel_reaches():
+    scene = _corner_one_wheel()
+    q0 = lc.cube_upright_q("corner")
+    with pytest.raises(lc.DesignError) as e:
+        lc.design(scene, period=2e-3, q_ref=q0)
+    # the mode is the gravity tilt: z = e^{sigma Ts} with sigma the continuous model's unstable eigenvalue
+    sigma = float(np.max(np.linalg.eigvals(lc.linearize(scene, {"cube": {"q": q0}}).A).real))
+    assert sigma > 5.0
+    assert e.value.discrete and e.value.field == "scene"
+    assert abs(e.value.eigenvalue - math.exp(sigma * 2e-3)) < 1e-9
+    assert set(e.value.states) >= {"cube_dtheta_x", "cube_dtheta_y", "cube_dtheta_z"}
+    assert not any("Omega" in s for s in e.value.states)      # the wheel's own speed is not in the falling mode
+    assert f"{sigma:+.4g}/s" in str(e.value)                   # the continuous rate, in words
+
+
+def _corner_one_wheel_file(tmp_path):
+    import tomllib
+
+    from lavendersim import spacecraft as S
+
+    d = tomllib.loads(S.shipped()["cube_corner"].read_text(encoding="utf-8"))
+    d["body"]["wheels"] = {"J": [5.7e-4], "axes_b": [[1.0, 1.0, 1.0]], "torque_limit": 0.2, "speed_limit": 400.0}
+    return d
+
+
+def test_the_spacecraft_file_and_the_cli_refuse_it_in_one_line(tmp_path, capsys):
+    """The same plant as a spacecraft file: S.design raises the DesignError; `lqr` prints one line, exit 2."""
+    from lavendersim import cli
+    from lavendersim import scene_file as SF
+    from lavendersim import spacecraft as S
+
+    d = _corner_one_wheel_file(tmp_path)
+    with pytest.raises(lc.DesignError) as e:
+        S.design(S.from_dict(d))
+    assert abs(e.value.eigenvalue) > 1.01 and "cube_dtheta_x" in e.value.states
+    path = tmp_path / "one_wheel.toml"
+    path.write_text(SF.dumps(d), encoding="utf-8")
+    assert cli.main(["lqr", "--spacecraft", str(path)]) == 2
+    out, err = capsys.readouterr()
+    assert out == "" and len(err.strip().splitlines()) == 1 and "no input reaches" in err and "cube_dtheta" in err
+
+
+def test_design_on_a_single_wheel_free_body_still_flies():
+    """One wheel on z of a free body: the x, y attitudes are unactuated double integrators (marginal), p and v too."""
+    s = lv.Scene()
+    s.add_body(lv.Body.box("sat", 4.0, (0.1, 0.2, 0.3)))
+    s.add_effect("reaction_wheels", body="sat", axes_b=[[0.0, 0.0, 1.0]], J=[2e-5], torque_limit=5e-3, speed_limit=600.0)
+    c = lc.design(s, period=0.2)
+    assert c.rank == 2 and np.all(np.abs(c.poles) < 1)
+    r = lc.closed_loop(s, c, T=20.0, q0=lc.rotated(c.q_ref, (0, 0, 1), 10.0), backend="c")
+    assert r.settling_time() == pytest.approx(3.4, abs=1e-9) and r.final_error_deg < 1e-9
+
+
+def test_a_solver_gain_that_does_not_stabilize_is_refused(monkeypatch):
+    """After solving, the closed loop on the controllable subspace is checked (a solver returning a bad gain)."""
+    import control as ct
+
+    monkeypatch.setattr(ct, "lqr", lambda A, B, Q, R: (np.zeros((B.shape[1], A.shape[0])), np.eye(A.shape[0]), None))
+    with pytest.raises(lc.DesignError) as e:
+        lc.lqr(np.array([[2.0]]), np.array([[1.0]]), 1.0, 1.0)
+    assert e.value.eigenvalue == pytest.approx(2.0) and "closed loop unstable" in e.value.rule
