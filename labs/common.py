@@ -362,6 +362,9 @@ class LabResult(dict):
     def save(self, out_dir=None) -> "LabResult":
         """Write OUT/lab/results.json, every PNG of ``plot_names`` and ``extra_files``; return self.
 
+        The folder is written whole, never through a link, one run at a time (:mod:`lavendersim.labs.output`):
+        a save that fails or is killed leaves ``OUT/lab`` as it was.
+
         Parameters
         ----------
         out_dir : str or Path, optional
@@ -375,30 +378,17 @@ class LabResult(dict):
         Raises
         ------
         lavendersim.validate.LavenderInputError
-            The directory or a file cannot be written (naming ``out``).
+            The folder cannot be written, is a link or not a lab's folder, or another run writes it (naming ``out``).
         """
-        d = Path(DEFAULT_OUT if out_dir is None else out_dir) / self.lab
-        try:
-            d.mkdir(parents=True, exist_ok=True)
-        except OSError as exc:
-            raise V.LavenderInputError("out", f"cannot write to {d}", f" ({exc.strerror or exc})") from None
-        self.out_dir = d
-        self.files = []
-        try:
-            path = d / "results.json"
-            path.write_text(json.dumps(dict(self), indent=2 if _flat(self) else 1, allow_nan=False) + "\n")
-            self.files.append(path)
-            for fname in self.plotters:
-                p = d / fname
-                fig = self.figure(fname)
-                fig.savefig(p, dpi=110)
-                self.files.append(p)
-            for fname, text in self.extra_files.items():
-                p = d / fname
-                p.write_text(text)
-                self.files.append(p)
-        except OSError as exc:
-            raise V.LavenderInputError("out", f"cannot write to {d}", f" ({exc.strerror or exc})") from None
+        from .output import write_folder
+
+        out = Path(DEFAULT_OUT if out_dir is None else out_dir)
+        files: dict = {"results.json": json.dumps(dict(self), indent=2 if _flat(self) else 1, allow_nan=False) + "\n"}
+        for fname in self.plotters:
+            files[fname] = lambda f, fname=fname: self.figure(fname).savefig(f, dpi=110, format="png")
+        files.update(self.extra_files)
+        self.files = write_folder(out, self.lab, files)
+        self.out_dir = out / self.lab
         return self
 
 
