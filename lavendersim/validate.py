@@ -26,6 +26,7 @@ from .errors import PicklableError
 
 __all__ = [
     "LavenderInputError",
+    "ValidityBoundError",
     "vector",
     "array",
     "scalar",
@@ -86,6 +87,22 @@ class LavenderInputError(PicklableError, ValueError):
         self.rule = rule
         self.detail = detail
         super().__init__(f"{field}: {rule}{detail}")
+
+
+class ValidityBoundError(LavenderInputError):
+    """A value valid on its own that puts a simulation beyond its integrator's validity or stability bound
+    (``Sim(..., on_bound="raise")``): the message names the bound and how to stay inside it. The labs
+    record it, like a DivergenceError, as a failed figure of their failure modes.
+
+    Parameters
+    ----------
+    field : str
+        The setting that crosses the bound (an effect's name, ``omega_b``, ...).
+    rule : str
+        The bound and its value.
+    detail : str, optional
+        What to do about it.
+    """
 
 
 # --------------------------------------------------------------------------
