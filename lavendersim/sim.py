@@ -1282,7 +1282,7 @@ class Sim:
             wdt = float(self._wdt(x[None])[0])
             if not wdt <= self._bound[0]:
                 if self.on_bound == "raise":
-                    raise V.LavenderInputError(field, self._bound_text(wdt) + " (Sim(..., on_bound='warn') to allow it)")
+                    raise V.ValidityBoundError(field, self._bound_text(wdt) + " (Sim(..., on_bound='warn') to allow it)")
                 warnings.warn(f"body {name!r}: {self._bound_text(wdt)}", ValidityBoundWarning, stacklevel=2)
         with self._lock:
             self._dirty = True
