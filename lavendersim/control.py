@@ -430,7 +430,7 @@ WEIGHT_MAX = 1e150   # |entries| of Q and R: the Riccati solution and the gain s
 
 def _weight(name: str, value, n: int, definite: bool) -> np.ndarray:
     """A weight matrix (n, n) from a scalar, a diagonal (n,) or a matrix (n, n) of real numbers, checked
-    finite, at most WEIGHT_MAX in magnitude, symmetric and positive semidefinite (Q) or positive definite (R).
+    finite, its nonzero entries within [1/WEIGHT_MAX, WEIGHT_MAX] in magnitude, symmetric and positive semidefinite (Q) or positive definite (R).
 
     Complex, bool, string and object entries are refused (numpy would cast "1" or True to 1.0 and drop an
     imaginary part), naming ``name`` and the rule; nothing is rounded into a weight."""
@@ -449,10 +449,12 @@ def _weight(name: str, value, n: int, definite: bool) -> np.ndarray:
         raise V.LavenderInputError(name, f"must be {n}×{n} (or a diagonal of {n})", f", got shape {arr.shape}")
     if not np.all(np.isfinite(arr)):
         raise V.LavenderInputError(name, "must be finite (no NaN or inf)")
-    big = float(np.abs(arr).max(initial=0.0))
-    if big > WEIGHT_MAX:
-        raise V.LavenderInputError(name, f"entries must be at most {WEIGHT_MAX:g} in magnitude (rescale Q and R together)",
-                                   f", got {big:.3g}")
+    mag = np.abs(arr)
+    big = float(mag.max(initial=0.0))
+    small = float(mag[mag > 0].min(initial=np.inf))
+    if big > WEIGHT_MAX or small < 1 / WEIGHT_MAX:
+        raise V.LavenderInputError(name, f"nonzero entries must be between {1 / WEIGHT_MAX:g} and {WEIGHT_MAX:g} in "
+                                   "magnitude (rescale Q and R together)", f", got {big if big > WEIGHT_MAX else small:.3g}")
     if not np.allclose(arr, arr.T, rtol=1e-12, atol=1e-12 * max(1.0, big)):
         raise V.LavenderInputError(name, "must be symmetric")
     sym = arr / 2 + arr.T / 2

@@ -231,11 +231,15 @@ class Spacecraft:
 
 
 def _weight(path: str, value: Any, n: int, name: str) -> Any:
-    """Q or R as written: a number, the n diagonal entries, or the (n, n) matrix (checked by design for definiteness)."""
+    """Q or R as written: a number, the n diagonal entries, or the (n, n) matrix; checked on load as design checks
+    it (real finite entries within lavendersim.control.WEIGHT_MAX, symmetric, Q PSD, R PD), named by its key."""
+    from .control import _weight as weight_matrix
+
     if isinstance(value, list) and value and isinstance(value[0], list):
         M = SF.rows(path, value, n, min_rows=n, max_rows=n)
         if not np.allclose(M, M.T, rtol=1e-12, atol=0.0):
             raise V.LavenderInputError(path, f"the {name} matrix must be symmetric")
+        weight_matrix(path, M, n, definite=name == "R")
         return M
     if isinstance(value, list):
         d = V.vector(path, value, n)
@@ -246,6 +250,7 @@ def _weight(path: str, value: Any, n: int, name: str) -> Any:
         if not rule(x):
             where = path if d.size == 1 and not isinstance(value, list) else f"{path}[{i}]"
             raise V.LavenderInputError(where, f"{name} entries must be {'> 0' if name == 'R' else '>= 0'}", f", got {x!r}")
+    weight_matrix(path, d if isinstance(value, list) else float(d[0]), n, definite=name == "R")
     return float(d[0]) if not isinstance(value, list) else d
 
 
@@ -278,6 +283,13 @@ def _controller(d: dict, scene: Scene, body: str, n: int) -> ControllerSpec:
         weights = {k: V.positive(f"controller.weights.{k}", v) for k, v in w.items()}
         if Q is not None and R is not None:
             raise V.LavenderInputError("controller.weights", "Q and R are both given: weights would be unused")
+        from .wheel_control import default_weights
+
+        try:   # Bryson's weights checked on load (an overflow to inf or underflow to 0), named by the file's key
+            default_weights(scene, body, **weights)
+        except V.LavenderInputError as exc:
+            raise V.LavenderInputError(f"controller.weights.{exc.field}" if exc.field in WEIGHT_KEYS else exc.field,
+                                       exc.rule, exc.detail) from None
     x0 = scene.bodies[body].x0
     from .generated import layout as LY
 

@@ -301,15 +301,28 @@ def default_weights(scene: Scene, body: str | None = None, *, attitude_deg: floa
     Raises
     ------
     lavendersim.validate.LavenderInputError
-        A bad scene, body or value (naming it).
+        A bad scene, body or value (naming it): a value must be a finite real number > 0 whose weight
+        ``1/(value·scale)²`` stays within ``[1/WEIGHT_MAX, WEIGHT_MAX]`` (no overflow to inf, no underflow to 0).
     """
     body = wheeled_body(scene, body)
     wh = Wheels.of(scene, body)
-    ang = math.radians(V.positive("attitude_deg", attitude_deg))
+    attitude_deg = V.positive("attitude_deg", attitude_deg)
     rate = V.positive("rate", rate)
     fs, ft = V.positive("wheel_speed_fraction", wheel_speed_fraction), V.positive("torque_fraction", torque_fraction)
-    Q = np.concatenate([np.full(3, 1 / ang ** 2), np.full(3, 1 / rate ** 2), np.full(wh.n, 1 / (fs * wh.speed_limit) ** 2)])
-    return Q, np.full(wh.n, 1 / (ft * wh.torque_limit) ** 2)
+    from .control import WEIGHT_MAX
+
+    def bryson(name: str, value: float, scale: float) -> float:
+        x = value * scale
+        x2 = x * x                  # (no OverflowError: inf; correctly rounded like x ** 2)
+        w = math.inf if x2 == 0.0 else 1.0 / x2
+        if not (1.0 / WEIGHT_MAX <= w <= WEIGHT_MAX):   # 1/x² overflowed, underflowed or left the weights' range
+            raise V.LavenderInputError(name, f"its Bryson weight 1/(value·scale)² must be within [{1 / WEIGHT_MAX:g}, "
+                                       f"{WEIGHT_MAX:g}]", f", got {value!r} (scale {scale:g}): weight {w:.3g}")
+        return w
+
+    Q = np.concatenate([np.full(3, bryson("attitude_deg", attitude_deg, math.pi / 180)), np.full(3, bryson("rate", rate, 1.0)),
+                        np.full(wh.n, bryson("wheel_speed_fraction", fs, wh.speed_limit))])
+    return Q, np.full(wh.n, bryson("torque_fraction", ft, wh.torque_limit))
 
 
 def _delayed_zoh(A: np.ndarray, B: np.ndarray, Ts: float, d: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

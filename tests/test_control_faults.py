@@ -143,3 +143,75 @@ def test_a_solver_gain_that_does_not_stabilize_is_refused(monkeypatch):
     with pytest.raises(lc.DesignError) as e:
         lc.lqr(np.array([[2.0]]), np.array([[1.0]]), 1.0, 1.0)
     assert e.value.eigenvalue == pytest.approx(2.0) and "closed loop unstable" in e.value.rule
+
+
+# ------------------------------------------------------------------------ weights are real finite matrices
+
+
+BAD_WEIGHTS = [
+    (1 + 1j, "real"), (np.array([1 + 1j, 2.0]), "real"), (True, "real"), (np.bool_(True), "real"), ([True, True], "real"),
+    ("1", "real"), (["1", "2"], "real"), ([["1", "0"], ["0", "1"]], "real"), (object(), "real"), (None, "real"),
+    (np.nan, "finite"), ([np.inf, 1.0], "finite"), (np.ones(3), "2 entries"), (np.ones((2, 3)), "2×2"),
+    ([[1.0, 0.5], [0.0, 1.0]], "symmetric"), (1e200, "between"), (1e-200, "between"),
+]
+
+
+@pytest.mark.parametrize("which", ["Q", "R"])
+@pytest.mark.parametrize("value, rule", BAD_WEIGHTS, ids=lambda v: type(v).__name__ if not isinstance(v, str) else v)
+def test_lqr_refuses_a_weight_that_is_not_a_real_finite_matrix(which, value, rule):
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")        # no ComplexWarning: the imaginary part is never silently dropped
+        with pytest.raises(LavenderInputError) as e:
+            lc.lqr(np.zeros((2, 2)), np.eye(2), value if which == "Q" else np.eye(2), value if which == "R" else np.eye(2))
+    assert e.value.field == which and rule in str(e.value), e.value
+
+
+def test_definiteness_is_the_rule_q_psd_r_pd():
+    A, B = np.zeros((2, 2)), np.eye(2)
+    for Q, R, field, rule in ((np.diag([1.0, -1.0]), 1.0, "Q", "positive semidefinite"),
+                              (1.0, [[1.0, 2.0], [2.0, 1.0]], "R", "positive definite"), (1.0, np.diag([1.0, 0.0]), "R", "positive definite")):
+        with pytest.raises(LavenderInputError) as e:
+            lc.lqr(A, B, Q, R)
+        assert e.value.field == field and rule in e.value.rule
+    # a PSD Q with a zero eigenvalue and a real-valued Fraction are fine, and the gain is the one the floats give
+    from fractions import Fraction
+
+    K1 = lc.lqr(-np.eye(2), B, np.diag([1.0, 0.0]), [Fraction(1, 2), Fraction(1, 2)]).K
+    np.testing.assert_allclose(K1, lc.lqr(-np.eye(2), B, np.diag([1.0, 0.0]), 0.5).K, rtol=0, atol=0)
+    assert K1[0, 0] == pytest.approx(math.sqrt(3.0) - 1, rel=1e-12) and K1[1, 1] == 0.0
+
+
+@pytest.mark.parametrize("kw, field", [
+    ({"Q": 1 + 0j}, "Q"), ({"Q": True}, "Q"), ({"R": "100"}, "R"), ({"R": [100.0, 100.0, np.nan]}, "R"),
+    ({"Q": np.ones(8)}, "Q"), ({"R": -np.eye(3)}, "R"), ({"Q": -1.0}, "Q"),
+    ({"weights": {"attitude_deg": True}}, "attitude_deg"), ({"weights": {"rate": "0.5"}}, "rate"),
+    ({"weights": {"attitude_deg": 1e-200}}, "attitude_deg"),        # 1/x² overflows: named, not "Q: must be finite"
+    ({"weights": {"torque_fraction": 1e300}}, "torque_fraction"),   # 1/x² underflows to a zero R
+])
+def test_design_names_the_weight(kw, field):
+    with pytest.raises(LavenderInputError) as e:
+        lc.design(lc.chapter_cube("center"), period=2e-3, **kw)
+    assert e.value.field == field, e.value
+
+
+@pytest.mark.parametrize("key, value, field, rule", [
+    ("Q", True, "controller.Q", "bool"), ("Q", "1", "controller.Q", "real"), ("Q", ["1"] * 9, "controller.Q", "real"),
+    ("Q", (np.eye(9) * np.r_[-1.0, np.ones(8)]).tolist(), "controller.Q", "positive semidefinite"),
+    ("R", [[1.0, 2.0, 0.0], [2.0, 1.0, 0.0], [0.0, 0.0, 1.0]], "controller.R", "positive definite"),
+    ("R", 1e200, "controller.R", "between"), ("Q", float("nan"), "controller.Q", "finite"),
+    ("weights", {"attitude_deg": 1e-200}, "controller.weights.attitude_deg", "Bryson"),
+])
+def test_a_spacecraft_files_weights_are_checked_on_load(key, value, field, rule):
+    import tomllib
+
+    from lavendersim import spacecraft as S
+
+    d = tomllib.loads(S.shipped()["cube_corner"].read_text(encoding="utf-8"))
+    d["controller"][key] = value
+    if key != "weights":
+        d["controller"].pop("weights")
+    with pytest.raises(LavenderInputError) as e:
+        S.from_dict(d)                                   # on load, before any design
+    assert e.value.field == field and rule in str(e.value), e.value
