@@ -7,7 +7,11 @@ From Python: ``lavendersim.labs.compute("01", damping=0.01)`` computes a lab and
 ``lavendersim.labs.run("01", out_dir, backend="numpy", damping=0.01)`` (or the lab module's own
 ``compute``/``run``) also writes OUT/NAME/. Both return a :class:`~lavendersim.labs.common.LabResult`
 (a dict of figures and parameters, with ``checks``, ``passed``, ``figure(name)`` -> a matplotlib
-Figure, ``summary_line()`` and ``save(out_dir)``) and never raise because a figure is off.
+Figure, ``summary_line()`` and ``save(out_dir)``) and never raise because a figure is off — nor because
+a failure mode's simulation diverged: ``labs.compute``/``labs.run`` and the command line return that as a
+failed check ``no_divergence`` with the divergence recorded (:mod:`lavendersim.labs.diverged`; a lab
+module's own ``compute`` raises it). OUT/NAME/ is written whole, never through a link, one run at a time
+(:mod:`lavendersim.labs.output`).
 
 Every lab module defines NAME, TITLE, ``add_arguments(parser)`` (its failure-mode options),
 ``options_from_args(args) -> dict``, ``compute(backend, **options)`` (compute -> checks -> the
@@ -98,7 +102,9 @@ def compute(name: str, backend: str = "auto", **options) -> LabResult:
     lavendersim.validate.LavenderInputError
         Unknown lab or an invalid option.
     """
-    return lab_module(name).compute(backend=backend, **options)
+    from .diverged import compute_or_failed
+
+    return compute_or_failed(lab_module(name), backend, options)
 
 
 def run(name: str, out_dir=DEFAULT_OUT, backend: str = "auto", **options) -> LabResult:
@@ -124,7 +130,7 @@ def run(name: str, out_dir=DEFAULT_OUT, backend: str = "auto", **options) -> Lab
     lavendersim.validate.LavenderInputError
         Unknown lab, an invalid option or an unwritable ``out_dir``.
     """
-    return lab_module(name).run(out_dir, backend=backend, **options)
+    return compute(name, backend, **options).save(out_dir)
 
 
 def _common_parent():
@@ -174,6 +180,8 @@ def _run_one(args) -> int:
     from lavendersim.validate import LavenderInputError
 
     from .common import check_out_dir
+    from .diverged import compute_or_failed
+    from .output import check_folder, lab_lock
 
     mod = lab_module(args.lab_name)
     try:
@@ -186,8 +194,11 @@ def _run_one(args) -> int:
 
         require("viser", "viewer", f"lavendersim lab {args.lab_name} --view")  # before the lab runs, not after
     try:
-        options = _with_progress(mod, mod.options_from_args(args), args)
-        result = mod.compute(backend=args.backend, **options).save(args.out)
+        # OUT/NAME is this run's from before the lab computes until its folder is in place (labs/output.py)
+        with lab_lock(args.out, args.lab_name):
+            check_folder(args.out, args.lab_name)
+            options = _with_progress(mod, mod.options_from_args(args), args)
+            result = compute_or_failed(mod, args.backend, options).save(args.out)
     except LavenderInputError as exc:
         print(f"lab {args.lab_name}: invalid option: {exc}", file=sys.stderr)
         return 2
@@ -210,15 +221,31 @@ ALL_OPTIONS: dict[str, dict] = {"accuracy": {"quick": True}, "atlas": {"quick": 
 
 
 def _run_all(args) -> int:
+    import contextlib
+
     from lavendersim.validate import LavenderInputError
 
-    from .common import check_out_dir, progress
+    from .common import check_out_dir
+    from .output import check_folder, lab_lock
 
+    locks = contextlib.ExitStack()
     try:
         check_out_dir(args.out)
+        for name in LABS:   # every lab's folder is this run's before the first lab computes
+            locks.enter_context(lab_lock(args.out, name))
+            check_folder(args.out, name)
     except LavenderInputError as exc:
+        locks.close()
         print(f"lab all: invalid option: {exc}", file=sys.stderr)
         return 2
+    with locks:
+        return _run_all_locked(args)
+
+
+def _run_all_locked(args) -> int:
+    from .common import progress
+    from .diverged import compute_or_failed
+
     verbosity = _verbosity(args)
     bar = progress(total=len(LABS), desc="lab all", unit="lab", enabled=verbosity > 0)
 
@@ -239,10 +266,11 @@ def _run_all(args) -> int:
         mod = lab_module(name)
         try:
             options = _with_progress(mod, dict(ALL_OPTIONS.get(name, {})), args)
-            result = mod.compute(backend=args.backend, **options).save(args.out)
+            result = compute_or_failed(mod, args.backend, options).save(args.out)
         except Exception as exc:  # one broken lab must not hide the others' results
             failed.append(name)
-            say(f"{name:<9} ERROR {type(exc).__name__}: {exc}  ({time.perf_counter() - t0:.1f} s)", sys.stderr)
+            say(f"{name:<9} ERROR {type(exc).__name__}: {' '.join(str(exc).split())}  "
+                f"({time.perf_counter() - t0:.1f} s)", sys.stderr)
             bar.update(1)
             continue
         secs = time.perf_counter() - t0

@@ -258,6 +258,36 @@ def _check_replaceable(folder: Path) -> None:
                             "as a whole (move them away or write to another --out)")
 
 
+def check_folder(out_dir, name: str) -> Path:
+    """Refuse at once what :func:`write_folder` would refuse at the end (``OUT/NAME`` a link, not a folder,
+    or not a lab's folder), so a long lab never fails after its computation; the command line calls it
+    while holding :func:`lab_lock`.
+
+    Parameters
+    ----------
+    out_dir : str or Path
+        OUT.
+    name : str
+        The lab's folder name.
+
+    Returns
+    -------
+    Path
+        ``OUT/NAME``.
+
+    Raises
+    ------
+    lavendersim.validate.LavenderInputError
+        Naming ``out``.
+    """
+    folder = Path(out_dir) / _check_name(name)
+    try:
+        _check_replaceable(folder)
+    except OSError as exc:
+        raise _fail(folder, "cannot be read", exc) from None
+    return folder
+
+
 def _write(path: Path, payload) -> None:
     """Create path (never an existing entry, never through a link) and write payload into it."""
     fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_NOFOLLOW", 0)
