@@ -52,17 +52,21 @@ def _exception_classes() -> list[type]:
     return [found[k] for k in sorted(found)]
 
 
-EXCEPTIONS = _exception_classes()
+def pytest_generate_tests(metafunc):
+    # the walk runs at collection, not on import: worker processes import this module for its task functions
+    if "exc_cls" in metafunc.fixturenames:
+        metafunc.parametrize("exc_cls", _exception_classes(), ids=lambda c: c.__qualname__)
 
 # representative values for an __init__ argument, by the words of its annotation (first match)
-_SAMPLES = (("int", 7), ("float", 0.25), ("str", "body.omega_w"), ("path", "/tmp/some/file.py"))
+_SAMPLES = (("complex", 1.5 - 2j), ("bool", True), ("tuple", ("omega_b[0]", "Omega[1]")), ("int", 7), ("float", 0.25),
+            ("str", "body.omega_w"), ("path", "/tmp/some/file.py"))
 
 
 def _sample(param: inspect.Parameter, i: int):
     ann = param.annotation if isinstance(param.annotation, str) else getattr(param.annotation, "__name__", "")
     for word, value in _SAMPLES:
         if word in str(ann).lower():
-            return f"{value}-{i}" if isinstance(value, str) else value + i
+            return f"{value}-{i}" if isinstance(value, str) else value if isinstance(value, (bool, tuple)) else value + i
     return f"value {i} of {param.name}"
 
 
@@ -90,23 +94,26 @@ def _fields(e: BaseException) -> dict:
 
 
 def test_the_walk_finds_the_package_exceptions():
-    names = {c.__qualname__ for c in EXCEPTIONS}
+    found = _exception_classes()
+    names = {c.__qualname__ for c in found}
     # a sample of what must be there (the walk works): one per module family
     for n in ("LavenderInputError", "DivergenceError", "ImmutableSimError", "ImmutableEffectError", "ImmutableBodyError",
               "MissingExtraError", "WorkerMismatchError", "UserBuildError", "CompileError", "OutputFolderError"):
         assert n in names
-    assert len(EXCEPTIONS) >= 14
+    assert len(found) >= 14
 
 
-@pytest.mark.parametrize("cls", EXCEPTIONS, ids=lambda c: c.__qualname__)
-def test_every_exception_pickles_with_its_fields(cls):
-    e = _construct(cls)
+def test_every_exception_pickles_with_its_fields(exc_cls):
+    e = _construct(exc_cls)
     e.add_note("a note added on the way")
     e.extra_attribute = ("set", 2)        # an attribute set after construction travels too
     for copy_ in (lambda v: pickle.loads(pickle.dumps(v)), copy.deepcopy, copy.copy):
         back = copy_(e)
-        assert _fields(back) == _fields(e)
         assert back is not e
+        got, want = _fields(back), _fields(e)
+        got_later, want_later = ({k: f["vars"].pop(k, None) for k in ("__notes__", "extra_attribute")} for f in (got, want))
+        assert got == want                   # type, message, args, the fields __init__ set
+        assert got_later == want_later       # and what was added later (a hand-written (cls, args) __reduce__ drops it)
 
 
 def test_a_divergence_error_from_a_sim_pickles_with_its_fields():
@@ -217,3 +224,93 @@ def test_a_vector_env_pickles_and_deep_copies_bit_for_bit(backend):
         assert ours == _episodes(make_copy(env), actions[6:], vector=True)
     assert ours.count("ended") >= 2        # autoresets happened after the snapshot (truncation at 9 steps, tipped-over corners)
     assert _episodes(env, actions[6:], vector=True) == ours
+
+
+# ---- the executor: what cannot be sent is named before anything runs; what fails in a worker arrives as itself ---
+
+def _diverging(task):
+    """A task function: a Sim stepped past its validity bound (DivergenceError) unless omega_y is small."""
+    omega_y, dt, marker = task
+    if marker:
+        open(marker, "w").close()
+    sc = lv.Scene()
+    sc.add_body(lv.Body("b", 1.0, [1.0, 2.0, 3.0], omega_b=[0.0, omega_y, 0.1]))
+    sim = lv.Sim(sc, dt=dt, integrator="euler")
+    sim.run(50)
+    return sim.x.copy()
+
+
+class _Unsendable(Exception):
+    """An exception that pickles but does not unpickle (its __init__ takes two arguments, args holds one)."""
+
+    def __init__(self, a, b):
+        super().__init__(f"{a} and {b}")
+
+
+def _raise_unsendable(task):
+    raise _Unsendable(task, 2)
+
+
+def _return_a_lock(task):
+    return threading.Lock()
+
+
+class _HoldsALock:
+    def __init__(self):
+        self.lock = threading.Lock()
+
+
+def _executors():
+    """Local processes, and (distributed installed) a dask executor on a 1-worker LocalCluster."""
+    yield X.Executor(X.PROCESSES, 2)
+    if have("distributed"):
+        from dask.distributed import LocalCluster
+
+        with LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
+            yield X.resolve(dask=cluster.scheduler_address)
+
+
+def test_a_task_that_diverges_reports_that_divergence(tmp_path):
+    """The first diverging task in task order arrives as a DivergenceError with the fields a serial run gives (never
+    BrokenProcessPool), the worker's traceback as its cause."""
+    tasks = [(0.5, 0.05, None), (40.0, 0.05, None), (60.0, 0.05, None), (0.3, 0.05, None)]
+    with pytest.raises(DivergenceError) as serial:
+        X.map_tasks(_diverging, tasks)
+    want = _fields(serial.value)
+    kinds = []
+    for ex in _executors():
+        kinds.append(ex.kind)
+        with pytest.raises(DivergenceError) as ei:
+            ex.map(_diverging, tasks)
+        assert _fields(ei.value) == want
+        assert "Traceback" in str(ei.value.__cause__) and "_diverging" in str(ei.value.__cause__)
+        good = ex.map(_diverging, [tasks[0], tasks[3]])       # the executor still works after a failure
+        assert all(np.array_equal(a, b) for a, b in zip(good, X.map_tasks(_diverging, [tasks[0], tasks[3]])))
+    assert kinds == ([X.PROCESSES, X.DASK] if have("distributed") else [X.PROCESSES])
+
+
+def test_a_task_that_does_not_pickle_is_named_before_anything_runs(tmp_path):
+    marker = str(tmp_path / "ran")
+    cases = [("fn", lambda t: t, [(0.5, 0.05, marker)] * 2),
+             ("tasks[1]", _diverging, [(0.5, 0.05, marker), (threading.Lock(), 0.05, marker)]),
+             ("tasks[2]", _diverging, [(0.5, 0.05, marker)] * 2 + [_HoldsALock()])]
+    for ex in _executors():
+        for field, fn, tasks in cases:
+            if field == "fn" and ex.kind == X.DASK:
+                assert len(ex.map(fn, [1, 2])) == 2       # Dask sends functions with cloudpickle: a lambda is fine
+                continue
+            with pytest.raises(X.UnpicklableTaskError) as ei:
+                ex.map(fn, tasks)
+            e = ei.value
+            assert isinstance(e, LavenderInputError) and isinstance(e, TypeError) and e.field == field
+            assert ("lock" in e.detail) if field != "fn" else ("lambda" in e.detail)
+            assert not (tmp_path / "ran").exists()       # refused before any task ran
+
+
+def test_what_cannot_come_back_is_a_worker_error_naming_the_task():
+    for ex in _executors():
+        with pytest.raises(X.WorkerError, match=r"tasks\[0\]: _raise_unsendable raised .*_Unsendable: 1 and 2") as ei:
+            ex.map(_raise_unsendable, [1, 3])
+        assert "_raise_unsendable" in str(ei.value.__cause__)     # the worker's traceback
+        with pytest.raises(X.WorkerError, match=r"tasks\[0\]: _return_a_lock returned a lock"):
+            ex.map(_return_a_lock, [1, 3])
