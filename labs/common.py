@@ -311,18 +311,21 @@ class LabResult(dict):
         """The PNG file names :meth:`save` writes (the keys :meth:`figure` accepts)."""
         return list(self.plotters)
 
-    def figure(self, name: str | None = None):
+    def figure(self, name: str | None = None, *, ax=None):
         """A new matplotlib Figure of plot ``name`` (a PNG file name, with or without ``.png``).
 
         Parameters
         ----------
         name : str, optional
             Which plot; default the lab's first (headline) plot. ``plot_names`` lists them.
+        ax : matplotlib Axes or sequence of Axes, optional
+            Draw into these (as many as the plot has panels, in row order) instead of a new figure.
 
         Returns
         -------
         matplotlib.figure.Figure
-            Drawn from ``self.data`` (headless Agg canvas; nothing is written, nothing re-run).
+            Drawn from ``self.data`` (nothing is written, nothing re-run): a new headless figure whose
+            ``show()`` opens it through pyplot, or the figure of ``ax``.
         """
         if not self.plotters:
             raise V.LavenderInputError("name", f"lab {self.lab} draws no plot")
@@ -331,7 +334,9 @@ class LabResult(dict):
         key = name if name in self.plotters else f"{name}.png"
         if key not in self.plotters:
             raise V.LavenderInputError("name", f"must be one of {', '.join(self.plotters)}", f", got {name!r}")
-        return self.plotters[key](self.data)
+        if ax is None:
+            return self.plotters[key](self.data)
+        return self.plotters[key](self.data, ax=ax)
 
     def summary_line(self, seconds: float | None = None) -> str:
         """One line: the lab, its headline figure, what is expected, PASS/FAIL (and the seconds).

@@ -17,6 +17,7 @@ import numpy as np
 
 import lavendersim as lv
 from lavendersim.kernels import K
+from lavendersim import figures as S   # (F is the force here)
 
 from . import common as C
 
@@ -141,23 +142,23 @@ def compute(backend: str = "auto", offset: float = R_W[0]) -> C.LabResult:
                          headline=("torque", "[0, 0, 1.5] N·m within 1e-12"))
 
 
-def _plot(d):
+def _plot(d, ax=None):
     r, F, F_along = d["r"], d["F"], d["F_along"]
     tau, tau_along, tau_neg, tau_mixed = d["tau"], d["tau_along"], d["tau_neg"], d["tau_mixed"]
-    fig, ax = C.new_figure(1, 2, size=(10, 4.2), title="Off-center force: torque = r × F")
+    fig, ax = C.new_figure(1, 2, size=(10, 4.2), title="Off-center force: torque = r × F", ax=ax)
     a = ax[0, 0]
     a.add_patch(_rect(ROD_SIZE[0], ROD_SIZE[1]))
     a.annotate("", xy=(r[0], 0), xytext=(0, 0), arrowprops=dict(arrowstyle="->", color="k"))
-    a.annotate("", xy=(r[0], 0.1 * F[1]), xytext=(r[0], 0), arrowprops=dict(arrowstyle="->", color="tab:red", lw=2))
+    a.annotate("", xy=(r[0], 0.1 * F[1]), xytext=(r[0], 0), arrowprops=dict(arrowstyle="->", color=S.VERMILLION, lw=2))
     a.annotate("", xy=(-R_W[0], 0.1 * F[1]), xytext=(-R_W[0], 0),
-               arrowprops=dict(arrowstyle="->", color="tab:purple", lw=2))
+               arrowprops=dict(arrowstyle="->", color=S.PURPLE, lw=2, ls="--"))
     a.annotate("", xy=(r[0] + 0.1 * F_along[0], 0), xytext=(r[0], 0),
-               arrowprops=dict(arrowstyle="->", color="tab:gray", lw=2))
+               arrowprops=dict(arrowstyle="->", color=S.GREY, lw=2))
     a.plot([0], [0], "ko")
     a.text(r[0], -0.12, f"r = [{r[0]:g}, 0, 0] m", ha="center")
-    a.text(r[0] + 0.02, 0.1 * F[1], "F = [0, 5, 0] N", color="tab:red")
-    a.text(-R_W[0] - 0.02, 0.1 * F[1], "paw-check 2: at −0.3 m", color="tab:purple", ha="right")
-    a.text(r[0] + 0.5, 0.05, "F along r", color="tab:gray", ha="right")
+    a.text(r[0] + 0.02, 0.1 * F[1], "F = [0, 5, 0] N", color=S.VERMILLION)
+    a.text(-R_W[0] - 0.02, 0.1 * F[1], "paw-check 2: at −0.3 m", color=S.PURPLE, ha="right")
+    a.text(r[0] + 0.5, 0.05, "F along r", color=S.GREY, ha="right")
     a.set_xlim(-1.25, 1.1)
     a.set_ylim(-0.4, 0.7)
     a.set_aspect("equal")
@@ -167,9 +168,9 @@ def _plot(d):
     b = ax[0, 1]
     labels = ["F⊥ at +0.3 m", "F along r", "F⊥ at −0.3 m", "[3,4,0] N at +0.3"]
     vals = [tau[2], tau_along[2], tau_neg[2], tau_mixed[2]]
-    b.bar(labels, vals, color=["tab:red", "tab:gray", "tab:purple", "tab:orange"])
+    b.bar(labels, vals, color=[S.VERMILLION, S.GREY, S.PURPLE, S.ORANGE], hatch=["", "", "//", ".."], edgecolor=S.BLACK, lw=0.5)
     b.axhline(0, color="k", lw=0.8)
-    b.text(1, 0.06, f"{tau_along[2]:g}: no torque", ha="center", color="tab:gray", fontsize=9)
+    b.text(1, 0.06, f"{tau_along[2]:g}: no torque", ha="center", color=S.BLACK, fontsize=9)
     b.set_ylabel("torque τ_z (N·m)")
     b.set_title("τ = r × F (torque_from_force kernel)")
     b.tick_params(axis="x", labelsize=8)
@@ -179,4 +180,4 @@ def _plot(d):
 def _rect(w, h):
     from matplotlib.patches import Rectangle
 
-    return Rectangle((-w / 2, -h / 2), w, h, fill=True, alpha=0.25, color="tab:blue")
+    return Rectangle((-w / 2, -h / 2), w, h, fill=True, alpha=0.25, color=S.BLUE)

@@ -79,6 +79,7 @@ from lavendersim import reference as R
 from lavendersim import validate as V
 from lavendersim.errors import DivergenceError, ValidityBoundWarning
 from lavendersim.kernels import K
+from lavendersim import figures as F
 
 from . import common as C
 
@@ -771,40 +772,52 @@ def _plot_data(outs: dict) -> dict:
     return d
 
 
-STATUS_KEY = (("tab:green", "pass (the case's bounds hold)"), ("gold", "finite, a bound missed"),
-              ("tab:orange", "diverged: DivergenceError (or blew up)"), ("tab:red", "silent NaN or error"))
+# survival map: colour (Okabe–Ito, light to dark) AND a word in every cell that is not a pass, so the
+# four outcomes read under any colour vision and in greyscale: (colour, legend text, cell text, text colour)
+STATUS_KEY = ((F.SKY_BLUE, "pass (the case's bounds hold)", "", F.BLACK),
+              (F.YELLOW, "finite, a bound missed  [miss]", "miss", F.BLACK),
+              (F.ORANGE, "diverged: DivergenceError (or blew up)  [div]", "div", F.BLACK),
+              (F.BLACK, "silent NaN or error  [NaN!]", "NaN!", "white"))
 
 
-def _plots(d):
-    """hard_cases.png from the result's data: flips, the dt range, every asserted bound, the survival table."""
+def _plots(d, ax=None):
+    """hard_cases.png from the result's data: flips, the dt range, every asserted bound, the survival table.
+
+    ``ax``: four Axes to draw into instead (flips, dt range, bounds, survival), in that order."""
     from matplotlib.colors import ListedColormap
     from matplotlib.patches import Patch
 
     ratios, passed = d["bound_ratios"], d["passed"]
     survival, integrators = d["survival"], d["integrators"]
-    fig, _ = C.new_figure(1, 1, size=(15, 6.5 + 0.16 * max(len(ratios), len(survival) * 2)))
-    fig.clear()
-    fig.suptitle("Hard cases: asserted bounds and the figures measured")
-    gs = fig.add_gridspec(3, 2, height_ratios=[1, 1, 1.3], width_ratios=[1, 1.1])
-    a = fig.add_subplot(gs[0, 0])
+    if ax is not None:
+        fig, axes = C.new_figure(1, 4, ax=ax)
+        a, b, c, sv = axes.ravel()
+    else:
+        fig, _ = C.new_figure(1, 1, size=(15, 6.5 + 0.16 * max(len(ratios), len(survival) * 2)))
+        fig.clear()
+        fig.suptitle("Hard cases: asserted bounds and the figures measured")
+        gs = fig.add_gridspec(3, 2, height_ratios=[1, 1, 1.3], width_ratios=[1, 1.1])
+        a, b = fig.add_subplot(gs[0, 0]), fig.add_subplot(gs[1, 0])
+        c, sv = fig.add_subplot(gs[0:2, 1]), fig.add_subplot(gs[2, :])
+        for x in (a, b, c, sv):
+            F.style_axes(x)
     if d["flips"] is not None:
         f = d["flips"]
-        a.plot(f["t"], f["w2"], lw=0.8, label="ω_2 (RK4, dt = 1e-3)")
-        a.plot(f["exact"], np.zeros_like(f["exact"]), "kx", label="exact flip times (4K(m)/λ)")
+        a.plot(f["t"], f["w2"], lw=0.8, color=F.BLUE, label="ω_2 (RK4, dt = 1e-3)")
+        a.plot(f["exact"], np.zeros_like(f["exact"]), "x", color=F.VERMILLION, mew=2, label="exact flip times (4K(m)/λ)")
         a.legend(fontsize=8, loc="lower left")
     a.set_xlabel("time t (s)")
     a.set_ylabel("ω_2 (rad/s)")
     a.set_title("intermediate-axis flips: diag(1,2,3), ω0 = (1e-3, 5, 1e-3)", fontsize=10)
-    b = fig.add_subplot(gs[1, 0])
     if d["dt_range"] is not None:
         for k, (bname, rows) in enumerate(d["dt_range"]["rows"].items()):
             dt = np.array([r[0] for r in rows])
             e = np.array([r[1] for r in rows], float)
             bd = np.array([r[2] for r in rows])
-            col = f"C{k}"
+            col = F.CYCLE[k % len(F.CYCLE)]
             ok = np.isfinite(e)
             b.loglog(dt[ok], np.maximum(e[ok], 1e-17), "o-", color=col, label=f"{bname} spin: error at T")
-            b.loglog(dt, bd, ":", color=col, label=f"{bname} spin: bound")
+            b.loglog(dt, bd, ":", color=col, lw=2, label=f"{bname} spin: bound")
             if (~ok).any():
                 b.loglog(dt[~ok], bd[~ok], "v", color=col, ms=8, mfc="none",
                          label=f"{bname} spin: DivergenceError raised (no error to draw)")
@@ -813,31 +826,36 @@ def _plots(d):
     b.set_ylabel("error at T (rad; relative ω)")
     named = d["dt_range"]["named"] if d["dt_range"] else "rk4"
     b.set_title(f"dt range ({named}): error at T against its bound", fontsize=10)
-    c = fig.add_subplot(gs[0:2, 1])
     names = list(ratios)
     vals = [min(max(r, 1e-8), 1e3) if math.isfinite(r) else 1e3 for r in ratios.values()]
     y = np.arange(len(names))
-    c.barh(y, vals, color=["tab:green" if passed[n] else "tab:red" for n in names])
+    ok_style, bad_style = F.STATUS_STYLE["pass"], F.STATUS_STYLE["fail"]      # colour and hatch differ
+    c.barh(y, vals, color=[(ok_style if passed[n] else bad_style)["color"] for n in names],
+           hatch=[(ok_style if passed[n] else bad_style)["hatch"] for n in names], edgecolor="white", lw=0)
     for yi, r in zip(y, ratios.values()):        # no bar to see on a log axis: say the value
         if r < 1e-8:
-            c.text(1.3e-8, yi, "0 (exact)" if r == 0 else "< 1e-8", va="center", fontsize=6, color="tab:green")
+            c.text(1.3e-8, yi, "0 (exact)" if r == 0 else "< 1e-8", va="center", fontsize=6, color=ok_style["color"])
     c.set_xscale("log")
     c.set_xlim(1e-8, 1e3)
-    c.axvline(1.0, color="k", lw=0.8)
+    c.axvline(1.0, color=F.BLACK, lw=0.8)
     c.set_yticks(y, names, fontsize=7)
     c.invert_yaxis()
     c.set_xlabel("figure / bound (< 1 passes; clamped to 1e-8 … 1e3)")
     c.set_title(f"asserted bounds ({len(names)} upper bounds)", fontsize=10)
-    c.legend(handles=[Patch(color="tab:green", label="within its bound"), Patch(color="tab:red", label="bound missed")],
+    c.legend(handles=[Patch(facecolor=ok_style["color"], hatch=ok_style["hatch"], label="within its bound"),
+                      Patch(facecolor=bad_style["color"], hatch=bad_style["hatch"], edgecolor="white",
+                            label="bound missed (hatched)")],
              fontsize=7, loc="lower right")
-    e = fig.add_subplot(gs[2, :])
     rows = list(survival)
     M = np.array([[_status_code(survival[r].get(i, "error")) for i in integrators] for r in rows]).T
-    e.imshow(M, cmap=ListedColormap([k for k, _ in STATUS_KEY]), vmin=0, vmax=3, aspect="auto")
-    e.set_yticks(range(len(integrators)), integrators, fontsize=8)
-    e.set_xticks(range(len(rows)), rows, rotation=30, ha="right", fontsize=7)
-    e.set_title("which integrators survive each case (survival.md has the words)", fontsize=10)
-    e.legend(handles=[Patch(color=col, label=text) for col, text in STATUS_KEY], loc="upper left",
+    sv.imshow(M, cmap=ListedColormap([k[0] for k in STATUS_KEY]), vmin=0, vmax=3, aspect="auto")
+    for (i, j), code in np.ndenumerate(M):
+        if STATUS_KEY[code][2]:
+            sv.text(j, i, STATUS_KEY[code][2], ha="center", va="center", fontsize=6, color=STATUS_KEY[code][3])
+    sv.set_yticks(range(len(integrators)), integrators, fontsize=8)
+    sv.set_xticks(range(len(rows)), rows, rotation=30, ha="right", fontsize=7)
+    sv.set_title("which integrators survive each case (survival.md has the words)", fontsize=10)
+    sv.legend(handles=[Patch(facecolor=k[0], edgecolor=F.GREY, label=k[1]) for k in STATUS_KEY], loc="upper left",
              bbox_to_anchor=(1.01, 1.0), fontsize=8, title="cell colour", title_fontsize=8)
     return fig
 

@@ -32,6 +32,7 @@ import numpy as np
 import lavendersim as lv
 from lavendersim import validate as V
 from lavendersim.kernels import K
+from lavendersim import figures as F
 
 from . import common as C
 
@@ -237,16 +238,17 @@ def compute(backend: str = "auto", dt: float = DT, integrator: str = INTEGRATOR,
                                    f"{ratio_pred:.9g} ± 1e-9 (damped closed form; 8.5 without damping)"))
 
 
-def _plot(d):
+def _plot(d, ax=None):
     t, n, c, backend, ratio = d["t"], d["n"], d["c"], d["backend"], d["ratio"]
     w_cube, w_rod, w_y90, pred_cube, pred_rod = d["w_cube"], d["w_rod"], d["w_y90"], d["pred_cube"], d["pred_rod"]
     a_cube, a_rod = d["a_cube"], d["a_rod"]
-    fig, ax = C.new_figure(1, 2, size=(11, 4.4), title=f"Equal torque 0.02 N·m about world z{'' if c == 0 else f', angular damping c = {c:g} N·m·s/rad'}")
+    fig, ax = C.new_figure(1, 2, size=(11, 4.4), title=f"Equal torque 0.02 N·m about world z{'' if c == 0 else f', angular damping c = {c:g} N·m·s/rad'}",
+                           ax=ax)
     a = ax[0, 0]
     every = max(1, n // 20)
     for w, pred, col, mk, ls, lab in (
-            (w_cube, pred_cube, "tab:blue", "o", "-", "cube"), (w_rod, pred_rod, "tab:orange", "o", "-", "rod"),
-            (w_y90, d["pred_y90"], "tab:green", "x", "--", "rod rotated 90° about y (paw-check 3)")):
+            (w_cube, pred_cube, F.BLUE, "o", "-", "cube"), (w_rod, pred_rod, F.ORANGE, "s", "-.", "rod"),
+            (w_y90, d["pred_y90"], F.VERMILLION, "x", "--", "rod rotated 90° about y (paw-check 3)")):
         # the cube's line and the rotated rod's coincide (paw-check 3): the cube's is drawn wide underneath
         a.plot(t, pred, color=col, lw=4 if lab == "cube" else 1.5, alpha=0.5 if lab == "cube" else 1.0, ls=ls,
                label=f"{lab}: predicted")
@@ -256,9 +258,9 @@ def _plot(d):
     a.set_title(f"α_cube = {a_cube:.3f}, α_rod = {a_rod:.6f} rad/s²")
     a.legend(fontsize=7)
     b = ax[0, 1]
-    b.plot(t[1:], w_cube[1:] / w_rod[1:], color="k", lw=3.5, alpha=0.4, label="simulated ω_cube / ω_rod")
-    b.plot(t[1:], pred_cube[1:] / pred_rod[1:], "--", color="tab:red", label="predicted")
-    b.axhline(RATIO, color="tab:gray", lw=0.8, ls=":", label="I_rod / I_cube = 8.5")
+    b.plot(t[1:], w_cube[1:] / w_rod[1:], color=F.BLACK, lw=3.5, alpha=0.4, label="simulated ω_cube / ω_rod")
+    b.plot(t[1:], pred_cube[1:] / pred_rod[1:], "--", color=F.VERMILLION, label="predicted")
+    b.axhline(RATIO, color=F.GREY, lw=0.8, ls=":", label="I_rod / I_cube = 8.5")
     b.set_xlabel("time t (s)")
     b.set_ylabel("ratio (dimensionless)")
     b.set_title(f"ratio at {T_END:g} s = {ratio:.9f}")

@@ -33,6 +33,7 @@ import numpy as np
 
 from lavendersim import validate as V
 from lavendersim.kernels import K
+from lavendersim import figures as F
 
 from . import common as C
 
@@ -194,36 +195,36 @@ def compute(backend: str = "auto", dt: float = DT, single_axis: bool = False) ->
                                    f"{QUAT_DEG:g}°) at the chapter's dt"))
 
 
-def _plot(d):
+def _plot(d, ax=None):
     w, dt, single_axis, t = d["w"], d["dt"], d["single_axis"], d["t"]
     err_naive, err_quat, err_unnorm, norm_unnorm = d["err_naive"], d["err_quat"], d["err_unnorm"], d["norm_unnorm"]
     body_err, wrong_err = d["body_err"], d["wrong_err"]
     fig, ax = C.new_figure(1, 3, size=(14, 4.4),
                            title=f"Constant world ω = {np.array2string(w, precision=3)} rad/s, dt = {dt:g} s"
-                                 + (" (single axis)" if single_axis else ""))
+                                 + (" (single axis)" if single_axis else ""), ax=ax)
     a = ax[0, 0]
-    a.semilogy(t[1:], np.maximum(err_naive[1:], 1e-12), label="naive Euler-angle addition", color="tab:red")
+    a.semilogy(t[1:], np.maximum(err_naive[1:], 1e-12), label="naive Euler-angle addition", color=F.VERMILLION)
     # the normalized and unnormalized errors coincide: the normalized one is drawn wide underneath
-    a.semilogy(t[1:], np.maximum(err_quat[1:], 1e-12), label="quaternion, normalized", color="tab:blue", lw=4, alpha=0.5)
+    a.semilogy(t[1:], np.maximum(err_quat[1:], 1e-12), label="quaternion, normalized", color=F.BLUE, lw=4, alpha=0.5)
     a.semilogy(t[1:], np.maximum(err_unnorm[1:], 1e-12), "--", label="quaternion, unnormalized (normalized to compare)",
-               color="tab:cyan")
+               color=F.SKY_BLUE)
     a.set_xlabel("time t (s)")
     a.set_ylabel("orientation error (deg)")
     a.set_title(f"error vs exp(t[ω]×): {err_naive[-1]:.2f}° vs {err_quat[-1]:.5f}° at {T_END:g} s")
     a.legend(fontsize=8)
     b = ax[0, 1]
-    b.plot(t, norm_unnorm, color="tab:cyan", label="unnormalized")
-    b.plot(t, d["norm_quat"], color="tab:blue", label="normalized")
+    b.plot(t, norm_unnorm, "--", color=F.SKY_BLUE, label="unnormalized")
+    b.plot(t, d["norm_quat"], color=F.BLUE, label="normalized")
     b.set_xlabel("time t (s)")
     b.set_ylabel("|q| (dimensionless)")
     b.set_title(f"norm drift: |q(T)| = {norm_unnorm[-1]:.5f}")
     b.legend(fontsize=8)
     c = ax[0, 2]
-    c.semilogy(t[1:], np.maximum(body_err[1:], 1e-12), color="tab:green", lw=4, alpha=0.5,
+    c.semilogy(t[1:], np.maximum(body_err[1:], 1e-12), color=F.GREEN, lw=4, alpha=0.5,
                label="body ω, ½ q⊗[ω_b,0] (correct; = world form)")
-    c.semilogy(t[1:], np.maximum(d["world_err"][1:], 1e-12), ":", color="k",
+    c.semilogy(t[1:], np.maximum(d["world_err"][1:], 1e-12), ":", color=F.BLACK,
                label="world ω, ½ [ω_w,0]⊗q")
-    c.semilogy(t[1:], np.maximum(wrong_err[1:], 1e-12), color="tab:orange", label="body ω, ½ [ω_b,0]⊗q (wrong order)")
+    c.semilogy(t[1:], np.maximum(wrong_err[1:], 1e-12), "-.", color=F.ORANGE, label="body ω, ½ [ω_b,0]⊗q (wrong order)")
     c.set_xlabel("time t (s)")
     c.set_ylabel("orientation error (deg)")
     c.set_title("paw-check 4: start 90° about y")

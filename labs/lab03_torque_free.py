@@ -46,6 +46,7 @@ from __future__ import annotations
 import numpy as np
 
 import lavendersim as lv
+from lavendersim import figures as F
 from lavendersim import validate as V
 from lavendersim.kernels import K
 
@@ -317,17 +318,20 @@ def compute(backend: str = "auto", dt: float = DT, integrator: str = INTEGRATOR,
                          headline=("mixed_omega_change", f"{MIXED_CHANGE:.2f} ± {MIXED_TOL:g} rad/s (chapter 3.30)"))
 
 
-def _plot(data):
+def _plot(data, ax=None):
     integrator, dt, t, wp, wm, phase = data["integrator"], data["dt"], data["t"], data["wp"], data["wm"], data["phase"]
     principal_change, mixed_change = data["principal_change"], data["mixed_change"]
     L_err, E_err, momentum_error = data["L_err"], data["E_err"], data["momentum_error"]
     dev5, dev5_t = data["dev5"], data["dev5_t"]
     paw_names = ("x", "y", "z")
-    fig, ax = C.new_figure(2, 2, size=(12, 8.5), title=f"Torque-free rod 0.8 × 0.2 × 0.2 m, {integrator}, dt = {dt:g} s")
+    fig, ax = C.new_figure(2, 2, size=(12, 8.5), title=f"Torque-free rod 0.8 × 0.2 × 0.2 m, {integrator}, dt = {dt:g} s",
+                           ax=ax)
     a = ax[0, 0]
-    # ω_y and ω_z of the principal spin coincide (both 0): drawn wide/solid and narrow/dashed so both show
-    for k, col, ls, lw in ((0, "tab:red", "-", 1.5), (1, "tab:green", "-", 4.0), (2, "tab:blue", "--", 1.5)):
-        a.plot(t, wp[:, k], color=col, ls=ls, lw=lw, label=f"ω_{'xyz'[k]}" + (" (= ω_z = 0)" if k == 1 else ""))
+    # ω_x, ω_y, ω_z differ in colour AND line style (F.AXIS_STYLE); ω_y and ω_z of the principal spin coincide
+    # (both 0): ω_y is drawn wide and pale underneath so both show
+    for k, lw, alpha in ((0, 1.5, 1.0), (1, 4.0, 0.5), (2, 1.5, 1.0)):
+        a.plot(t, wp[:, k], **F.axis_style(k, marker=None), lw=lw, alpha=alpha,
+               label=f"ω_{'xyz'[k]}" + (" (= ω_z = 0)" if k == 1 else ""))
     a.set_ylim(-0.4, 3.6)
     a.set_xlabel("time t (s)")
     a.set_ylabel("body ω (rad/s)")
@@ -335,10 +339,11 @@ def _plot(data):
     a.legend(fontsize=8, loc="center right")
     b = ax[0, 1]
     closed_w = np.column_stack([np.full_like(t, OMEGA_MIXED[0]), phase.real, phase.imag])
-    for k, col in enumerate(("tab:red", "tab:green", "tab:blue")):
-        b.plot(t, wm[:, k], color=col, label=f"ω_{'xyz'[k]} simulated")
-        b.plot(t[::150], closed_w[::150, k], "o", color=col, ms=3, mfc="none")
-    b.plot([], [], "ko", ms=3, mfc="none", label="closed form (symmetric rod)")
+    for k in range(3):
+        st = F.axis_style(k)
+        b.plot(t, wm[:, k], color=st["color"], ls=st["ls"], label=f"ω_{'xyz'[k]} simulated")
+        b.plot(t[::150], closed_w[::150, k], st["marker"], color=st["color"], ms=4, mfc="none")
+    b.plot([], [], "o", color=F.BLACK, ms=4, mfc="none", label="closed form (symmetric rod; ○ □ △ = x y z)")
     b.set_ylim(-2.6, 4.8)         # room for the legend above the curves
     b.set_xlabel("time t (s)")
     b.set_ylabel("body ω (rad/s)")
@@ -346,9 +351,9 @@ def _plot(data):
     b.legend(fontsize=8, loc="upper center", ncols=2)
     c = ax[1, 0]
     floor = 1e-16                 # float64 rounding: smaller relative errors are drawn at the floor
-    c.semilogy(t, np.maximum(L_err, floor), label="world angular momentum (relative)")
-    c.semilogy(t, np.maximum(E_err, floor), label="kinetic energy (relative)")
-    c.axhline(MOMENTUM_LIMIT, color="tab:gray", ls=":", label="chapter bound 4e-7")
+    c.semilogy(t, np.maximum(L_err, floor), color=F.BLUE, label="world angular momentum (relative)")
+    c.semilogy(t, np.maximum(E_err, floor), color=F.ORANGE, ls="--", label="kinetic energy (relative)")
+    c.axhline(MOMENTUM_LIMIT, color=F.GREY, ls=":", label="chapter bound 4e-7")
     c.set_ylim(floor / 2, 1e-5)
     c.set_xlabel("time t (s)")
     c.set_ylabel(f"relative error (values < {floor:.0e} drawn at it)")
@@ -357,8 +362,8 @@ def _plot(data):
     d = ax[1, 1]
     t5 = data["t5"]
     dfloor = 1e-6
-    for ax_name, col in zip(paw_names, ("tab:red", "tab:green", "tab:blue")):
-        d.semilogy(t5[1:], np.maximum(dev5_t[ax_name][1:], dfloor), color=col,
+    for ax_name in paw_names:
+        d.semilogy(t5[1:], np.maximum(dev5_t[ax_name][1:], dfloor), **F.axis_style(ax_name, marker=None),
                    label=f"near {ax_name} (max {dev5[ax_name]:.3g} rad/s)")
     d.set_ylim(dfloor, 1e2)
     d.set_xlabel("time t (s)")

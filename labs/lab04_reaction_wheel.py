@@ -38,6 +38,7 @@ import numpy as np
 import lavendersim as lv
 from lavendersim import control as lc
 from lavendersim import validate as V
+from lavendersim import figures as F
 
 from . import common as C
 
@@ -194,55 +195,61 @@ def compute(backend: str = "auto", torque: float = TORQUE, T: float = T_END) -> 
                                    "spin opposite ways)"))
 
 
-def _plot(d):
+def _plot(d, ax=None):
     pos, rev, xy, gyro, sat, ex = d["pos"], d["rev"], d["xy"], d["gyro"], d["sat"], d["ex"]
     dLb, dLw, scale, exchange_err, U, ratio = d["dLb"], d["dLw"], d["scale"], d["exchange_err"], d["U"], d["ratio"]
     coupling_z, gyro_ratio, backend = d["coupling_z"], d["gyro_ratio"], d["backend"]
     torque_limit, speed_limit = d["torque_limit"], d["speed_limit"]
-    fig, ax = C.new_figure(2, 3, size=(15, 8), title=f"Experiment 04: reaction-wheel cube ({backend} backend)")
+    fig, ax = C.new_figure(2, 3, size=(15, 10), title=f"Experiment 04: reaction-wheel cube ({backend} backend)", ax=ax)
+    cube, wheel = {"color": F.BLUE}, {"color": F.ORANGE}      # the cube and its wheel, in every panel
+    # every legend sits under its panel (F.legend_below), off the curves
     a = ax[0, 0]
-    a.plot(pos["t"], pos["w"][:, 0], color="tab:blue", label="cube ω_x (< 0)")
-    a.plot(pos["t"], pos["Om"][:, 0], color="tab:orange", label="wheel Ω_x (> 0)")
-    a.set_xlabel("t (s)"); a.set_ylabel("rad/s"); a.legend(fontsize=8)
+    a.plot(pos["t"], pos["w"][:, 0], **cube, label="cube ω_x (< 0)")
+    a.plot(pos["t"], pos["Om"][:, 0], **wheel, ls="--", label="wheel Ω_x (> 0)")
+    a.set_xlabel("t (s)"); a.set_ylabel("rad/s"); F.legend_below(a)
     a.set_title(f"+{U:g} N·m x-wheel: opposite signs, ratio {ratio:.2f}")
-    a.axhline(0, color="k", lw=0.5)
+    a.axhline(0, color=F.BLACK, lw=0.5)
     a = ax[0, 1]
     for run_, ls, lab in ((pos, "-", "+u"), (rev, "--", "−u (paw-check 6)")):
-        a.plot(run_["t"], run_["w"][:, 0] * 10, ls, color="tab:blue", label=f"cube ω_x ×10, {lab}")
-        a.plot(run_["t"], run_["Om"][:, 0], ls, color="tab:orange", label=f"wheel Ω_x, {lab}")
-    a.axhline(0, color="k", lw=0.5); a.set_xlabel("t (s)"); a.set_ylabel("rad/s"); a.legend(fontsize=7)
+        a.plot(run_["t"], run_["w"][:, 0] * 10, ls, **cube, label=f"cube ω_x ×10, {lab}")
+        a.plot(run_["t"], run_["Om"][:, 0], ls, **wheel, lw=2.5, alpha=0.8, label=f"wheel Ω_x, {lab}")
+    a.axhline(0, color=F.BLACK, lw=0.5); a.set_xlabel("t (s)"); a.set_ylabel("rad/s"); F.legend_below(a)
     a.set_title("reversed command reverses both")
     a = ax[0, 2]
+    every = max(1, len(xy["t"]) // 12)
     for i, c in enumerate("xyz"):   # equal wheels: ω_x = ω_y, so ω_x is drawn wide underneath
-        a.plot(xy["t"], xy["w"][:, i], lw=4 if i == 0 else 1.5, alpha=0.5 if i == 0 else 1.0,
+        a.plot(xy["t"], xy["w"][:, i], color=F.AXIS_STYLE[c]["color"], marker=F.AXIS_STYLE[c]["marker"],
+               markevery=every, ms=4, mfc="none", lw=4 if i == 0 else 1.5, alpha=0.5 if i == 0 else 1.0,
                label=f"two wheels: ω_{c}" + (" (= ω_y)" if i == 0 else ""))
     for i, c in enumerate("xyz"):
-        a.plot(gyro["t"], gyro["w"][:, i], "--", label=f"x cmd, z wheel at 100 rad/s: ω_{c}")
-    a.set_xlabel("t (s)"); a.set_ylabel("cube ω_b (rad/s)"); a.legend(fontsize=7)
+        a.plot(gyro["t"], gyro["w"][:, i], ":", color=F.AXIS_STYLE[c]["color"], lw=2,
+               label=f"x cmd, z wheel at 100 rad/s: ω_{c}")
+    a.set_xlabel("t (s)"); a.set_ylabel("cube ω_b (rad/s)"); F.legend_below(a, fontsize=7)
     a.set_title(f"coupling: two wheels |ω_z| {coupling_z:.0e}; gyro |ω_y|/|ω_x| {gyro_ratio:.2f}", fontsize=10)
     a = ax[1, 0]
-    a.plot(sat["t"][1:], sat["u"][1:, 0], color="tab:red", label="applied u_x, N·m (command 0.5)")
-    a.axhline(torque_limit, color="tab:red", ls=":", lw=0.8, label=f"stall torque {torque_limit:g} N·m")
-    a.set_xlabel("t (s)"); a.set_ylabel("applied torque u_x (N·m)", color="tab:red")
+    a.plot(sat["t"][1:], sat["u"][1:, 0], color=F.VERMILLION, label="applied u_x, N·m (command 0.5)")
+    a.axhline(torque_limit, color=F.VERMILLION, ls=":", lw=0.8, label=f"stall torque {torque_limit:g} N·m")
+    a.set_xlabel("t (s)"); a.set_ylabel("applied torque u_x (N·m)", color=F.VERMILLION)
     a.set_ylim(0, 1.1 * torque_limit)
     b = a.twinx()
-    b.plot(sat["t"], sat["Om"][:, 0], color="tab:orange", label="wheel Ω_x, rad/s (right axis)")
-    b.axhline(speed_limit, color="tab:orange", ls=":", lw=0.8, label=f"no-load speed {speed_limit:g} rad/s")
-    b.set_ylabel("wheel Ω_x (rad/s)", color="tab:orange")
+    b.plot(sat["t"], sat["Om"][:, 0], **wheel, ls="--", label="wheel Ω_x, rad/s (right axis)")
+    b.axhline(speed_limit, **wheel, ls=":", lw=0.8, label=f"no-load speed {speed_limit:g} rad/s")
+    b.set_ylabel("wheel Ω_x (rad/s)", color=F.ORANGE)
     b.set_ylim(0, 1.1 * speed_limit)
     h1, l1 = a.get_legend_handles_labels()
     h2, l2 = b.get_legend_handles_labels()
-    a.legend(h1 + h2, l1 + l2, fontsize=7, loc="center right")
+    F.legend_below(a, handles=h1 + h2, labels=l1 + l2, fontsize=7)
     a.set_title("saturation: u = 0.2 (1 − Ω/400), a motor's torque–speed line", fontsize=10)
     a = ax[1, 1]
     for i, c in enumerate("xyz"):
-        a.plot(ex["t"], dLb[:, i], color=f"C{i}", label=f"ΔL_cube,{c}")
-        a.plot(ex["t"], -dLw[:, i], ":", color="k", lw=1)
-    a.set_xlabel("t (s)"); a.set_ylabel("kg·m²/s (world)"); a.legend(fontsize=7)
+        a.plot(ex["t"], dLb[:, i], **F.axis_style(c, marker=None), label=f"ΔL_cube,{c}")
+        a.plot(ex["t"], -dLw[:, i], ":", color=F.BLACK, lw=1, label="−ΔL_wheels" if i == 0 else None)
+    a.set_xlabel("t (s)"); a.set_ylabel("kg·m²/s (world)"); F.legend_below(a, ncols=4, fontsize=7)
     a.set_title("no damping: ΔL_cube (colour) = −ΔL_wheels (dotted)")
     a = ax[1, 2]
-    a.semilogy(ex["t"][1:], np.maximum(np.linalg.norm(dLb + dLw, axis=1)[1:] / scale, 1e-18), label="measured")
-    a.axhline(1e-9, color="tab:red", ls=":", label="bound 1e-9")
-    a.set_xlabel("t (s)"); a.set_ylabel("|ΔL_cube + ΔL_wheels| / max|ΔL_wheels|"); a.legend(fontsize=7)
+    a.semilogy(ex["t"][1:], np.maximum(np.linalg.norm(dLb + dLw, axis=1)[1:] / scale, 1e-18), color=F.BLUE,
+               label="measured")
+    a.axhline(1e-9, color=F.VERMILLION, ls=":", label="bound 1e-9")
+    a.set_xlabel("t (s)"); a.set_ylabel("|ΔL_cube + ΔL_wheels| / max|ΔL_wheels|"); F.legend_below(a)
     a.set_title(f"exchange error {exchange_err:.1e}")
     return fig

@@ -15,6 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 from lavendersim import particles as P
+from lavendersim import figures as F
 
 from . import common as C
 
@@ -130,17 +131,17 @@ def compute(backend: str = "auto", mass_scale: float = 2.0) -> C.LabResult:
                          headline=("L_minus_I_omega_rel", "<= 1e-12 (L about the COM = I ω)"))
 
 
-def _plot(d):
+def _plot(d, ax=None):
     m, r, v, r_com, v_com = d["m"], d["r"], d["v"], d["r_com"], d["v_com"]
     p, p2, L, L2, I_omega, s = d["p"], d["p2"], d["L"], d["L2"], d["I_omega"], d["s"]
-    fig, ax = C.new_figure(1, 2, size=(12, 5.6), title="Particle system: COM, p and L about the COM")
+    fig, ax = C.new_figure(1, 2, size=(12, 5.6), title="Particle system: COM, p and L about the COM", ax=ax)
 
     from matplotlib.lines import Line2D
 
     a = ax[0, 0]
     scale = 5.0                   # quiver: 1 m/s drawn as 0.2 m
-    a.scatter(r[:, 0], r[:, 1], s=80 * m, color="tab:blue", alpha=0.6)
-    a.quiver(r[:, 0], r[:, 1], v[:, 0], v[:, 1], angles="xy", scale_units="xy", scale=scale, color="tab:blue", width=0.005)
+    a.scatter(r[:, 0], r[:, 1], s=80 * m, color=F.BLUE, alpha=0.6)
+    a.quiver(r[:, 0], r[:, 1], v[:, 0], v[:, 1], angles="xy", scale_units="xy", scale=scale, color=F.BLUE, width=0.005)
     a.plot(r_com[0], r_com[1], "k+", ms=14, mew=2)
     a.quiver([r_com[0]], [r_com[1]], [v_com[0]], [v_com[1]], angles="xy", scale_units="xy", scale=scale, color="k",
              width=0.007)
@@ -154,18 +155,18 @@ def _plot(d):
     a.set_ylabel("y (m)")
     a.set_aspect("equal")
     a.set_title("positions and velocities (top view, 0.2 m per m/s)", fontsize=10)
-    handles = [Line2D([], [], ls="", marker="o", color="tab:blue", alpha=0.6, ms=8, label="particle (area ∝ mass)"),
-               Line2D([], [], color="tab:blue", lw=1.5, label="particle velocity v_i"),
+    handles = [Line2D([], [], ls="", marker="o", color=F.BLUE, alpha=0.6, ms=8, label="particle (area ∝ mass)"),
+               Line2D([], [], color=F.BLUE, lw=1.5, label="particle velocity v_i"),
                Line2D([], [], ls="", marker="+", color="k", ms=12, mew=2, label="COM (unchanged when masses double)"),
                Line2D([], [], color="k", lw=2.5, label="COM velocity v_COM")]
     a.legend(handles=handles, fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.14), ncols=2)
     b = ax[0, 1]
     xs = np.arange(3)
     wdt = 0.2
-    b.bar(xs - 1.5 * wdt, p, wdt, label="p (kg·m/s)", color="tab:green")
-    b.bar(xs - 0.5 * wdt, p2, wdt, label=f"p, masses ×{s:g}", color="tab:green", alpha=0.45)
-    b.bar(xs + 0.5 * wdt, L, wdt, label="L about COM (kg·m²/s)", color="tab:purple")
-    b.bar(xs + 1.5 * wdt, L2, wdt, label=f"L, masses ×{s:g}", color="tab:purple", alpha=0.45)
+    b.bar(xs - 1.5 * wdt, p, wdt, label="p (kg·m/s)", color=F.GREEN)
+    b.bar(xs - 0.5 * wdt, p2, wdt, label=f"p, masses ×{s:g}", color=F.GREEN, alpha=0.45, hatch="//")
+    b.bar(xs + 0.5 * wdt, L, wdt, label="L about COM (kg·m²/s)", color=F.PURPLE)
+    b.bar(xs + 1.5 * wdt, L2, wdt, label=f"L, masses ×{s:g}", color=F.PURPLE, alpha=0.45, hatch="//")
     b.plot(xs + 0.5 * wdt, I_omega, "k_", ms=16, mew=2, label="I ω")
     b.axhline(0, color="k", lw=0.8)
     b.set_xticks(xs, ["x", "y", "z"])
