@@ -17,6 +17,8 @@ from pathlib import Path
 HELP = "design a sampled LQR wheel controller for a spacecraft file and fly its maneuver (control extra)"
 SCENARIOS = {"center": "cube_center", "corner": "cube_corner"}
 LAYOUTS = {"cube3": None, "pyramid4": "cube_pyramid4"}
+# what --plot may end with (matplotlib's writers that need nothing beyond matplotlib and Pillow); no suffix: PNG
+PLOT_SUFFIXES = (".png", ".pdf", ".svg", ".svgz", ".eps", ".ps", ".jpg", ".jpeg", ".tif", ".tiff")
 
 
 def register_cli(subparsers: argparse._SubParsersAction) -> None:
@@ -45,7 +47,8 @@ def register_cli(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--layout", choices=tuple(LAYOUTS), default=None, help="cube3 (three body-axis wheels: --scenario) or "
                    "pyramid4 (a free cube with four pyramid wheels: the shipped file cube_pyramid4)")
     p.add_argument("--json", action="store_true", help="print the design (rank, poles) and the maneuver's figures as JSON")
-    p.add_argument("--plot", metavar="PATH", default=None, help="write the response plot (PNG) to PATH")
+    p.add_argument("--plot", metavar="PATH", default=None, help="write the response plot to PATH (its suffix picks "
+                   f"the format: {', '.join(PLOT_SUFFIXES)}; none: PNG)")
     p.add_argument("--no-noise", action="store_true", help="fly with perfect measurements (ignore [sensors])")
     p.add_argument("--monte-carlo", type=int, default=None, metavar="N", help="also fly N plants: the inertia tensor "
                    "perturbed by [monte_carlo] inertia_uncertainty and new sensor seeds")
@@ -63,6 +66,17 @@ def register_cli(subparsers: argparse._SubParsersAction) -> None:
 def _fail(message: str) -> int:
     print(f"lavendersim lqr: {message}", file=sys.stderr)
     return 2
+
+
+def _check_plot(path: str) -> None:
+    """--plot: a writable file whose suffix (if any) is one of PLOT_SUFFIXES; LavenderInputError naming --plot."""
+    from . import validate as V
+
+    suffix = Path(path).suffix.lower()
+    if suffix and suffix not in PLOT_SUFFIXES:
+        raise V.LavenderInputError("--plot", f"must end with one of {', '.join(PLOT_SUFFIXES)} (or no suffix: PNG)",
+                                   f", got {path!r}")
+    V.writable_file("--plot", path)
 
 
 def _source(args) -> str:
@@ -131,9 +145,9 @@ def _cli(args) -> int:
     where = ""
     try:
         path = where = _source(args)
-        if args.plot:
-            V.writable_file("--plot", args.plot)   # before the design and the run, not after
-        if args.export_c:
+        if args.plot is not None:   # before the design and the run, not after
+            _check_plot(args.plot)
+        if args.export_c is not None:
             V.writable_dir("--export-c", args.export_c)
         sc = S.load(path)
         ex = None
@@ -147,15 +161,18 @@ def _cli(args) -> int:
         ctrl = _design(S, sc)
         resp = S.fly(sc, ctrl, noise=not args.no_noise, backend=args.backend)
         mc = None if args.monte_carlo is None else S.monte_carlo(sc, ctrl, args.monte_carlo, executor=ex, backend=args.backend)
-        exported = None if not args.export_c else _export_c(S, sc, ctrl, resp, args)
+        exported = None if args.export_c is None else _export_c(S, sc, ctrl, resp, args)
     except V.LavenderInputError as exc:
         return _fail(str(exc) if not where or str(exc).startswith(str(where)) else f"{where}: {exc}")
     except DivergenceError as exc:
         print(f"lavendersim lqr: {where}: simulation diverged: {' '.join(str(exc).split())}", file=sys.stderr)
         return 1
     fig = S.figures(sc, ctrl, resp)
-    if args.plot:
-        resp.plot(args.plot, title=f"{sc.name}: {sc.maneuver.angle_deg:g}° slew, controller {sc.controller.period:g} s")
+    if args.plot is not None:
+        try:
+            resp.plot(args.plot, title=f"{sc.name}: {sc.maneuver.angle_deg:g}° slew, controller {sc.controller.period:g} s")
+        except OSError as exc:   # checked writable before the run; a disk that filled up since: one line
+            return _fail(f"--plot: cannot write {args.plot} ({exc.strerror or exc})")
     if args.json:
         out = dict(fig)
         if mc is not None:
@@ -165,7 +182,7 @@ def _cli(args) -> int:
         print(json.dumps(_finite(out), indent=2))
     else:
         print(_text(fig, mc))
-        if args.plot:
+        if args.plot is not None:
             print(f"wrote {args.plot}")
         if exported is not None:
             from .controller_c import summary
