@@ -140,6 +140,9 @@ class NpPrinter(NumPyPrinter):
     def _print_Min(self, expr):
         return _fold(self, expr, "numpy.minimum")
 
+    def _print_erf(self, expr):   # NumPy has no erf: the C library's, element by element (as the C kernels)
+        return f"numpy.vectorize(math.erf, otypes=[numpy.float64])({self._print(expr.args[0])})"
+
     def _print_Max(self, expr):
         return _fold(self, expr, "numpy.maximum")
 
@@ -159,7 +162,9 @@ class CasadiPrinter(PythonCodePrinter):
     """Python source over casadi symbols (SX/MX/DM): branches become casadi.if_else."""
 
     _fn = {"sqrt": "sqrt", "sin": "sin", "cos": "cos", "tan": "tan", "atan2": "atan2", "asin": "asin",
-           "acos": "acos", "atan": "atan", "exp": "exp", "log": "log"}
+           "acos": "acos", "atan": "atan", "exp": "exp", "log": "log", "sinh": "sinh", "cosh": "cosh",
+           "tanh": "tanh", "asinh": "asinh", "acosh": "acosh", "atanh": "atanh", "floor": "floor",
+           "ceil": "ceil", "erf": "erf", "log10": "log10", "log1p": "log1p", "expm1": "expm1", "hypot": "hypot"}
 
     def _print_Pow(self, expr, rational=False):
         return _small_pow(self, expr, "*", "1.0", "casadi.sqrt") or f"casadi.power({self._print(expr.base)}, {self._print(expr.exp)})"
@@ -175,6 +180,9 @@ class CasadiPrinter(PythonCodePrinter):
 
     def _print_Abs(self, expr):
         return f"casadi.fabs({self._print(expr.args[0])})"
+
+    def _print_sign(self, expr):   # Python's printer writes `0.0 if x == 0 else ...`: no truth value for SX
+        return f"casadi.sign({self._print(expr.args[0])})"
 
     def _print_Min(self, expr):
         return _fold(self, expr, "casadi.fmin")
@@ -378,10 +386,12 @@ def print_c_user(printed: list[Printed], effects: list, set_name: str) -> tuple[
     guard = f"LAVENDERSIM_USER_{set_name.upper()}_H"
     h = [f"/* {USER_HEADER} */", f"/* User kernels of {set_name!r}, C99 (see lavendersim docs/extending.md). Arrays are",
          "   row-major doubles; quaternions (x, y, z, w), scalar last. */", f"#ifndef {guard}", f"#define {guard}", ""]
-    c = [f"/* {USER_HEADER} */", "#include <math.h>", '#include "kernels.h"', ""]
-    for p in printed:
+    c = [f"/* {USER_HEADER} */", "#include <math.h>", '#include "kernels.h"', "",
+         "#if defined(__GNUC__) || defined(__clang__)  /* the library is built with -fvisibility=hidden */",
+         '#define LV_EXPORT __attribute__((visibility("default")))', "#else", "#define LV_EXPORT", "#endif", ""]
+    for p in printed:   # every kernel exported: a plain kernel is callable from Python (ctypes) too
         h += ["/* " + "\n   ".join(_doc_lines(p.k)) + " */", _c_sig(p.k, prefix) + ";", ""]
-        c += _c_kernel(p, pr, prefix)
+        c += ["LV_EXPORT " + line if i == 0 else line for i, line in enumerate(_c_kernel(p, pr, prefix))]
     for d in effects:
         h.append(f"void lvu_effect_{d.name}({effect_print.C_ARGS});")
     c += effect_print.c_user_source(effects, prefix)
@@ -451,13 +461,16 @@ def print_numpy(printed: list[Printed], effects: list | None = None, header: str
                 "",
                 "_check_generated(__file__)  # this file against manifest.json: edited or truncated -> GeneratedFileError",
                 ""]
-    out += ["import numpy", "", ""]
+    body = []
     meta = []
     for p in printed:
         k = p.k
-        out += _np_kernel(p, pr, dtype)
+        body += _np_kernel(p, pr, dtype)
         meta.append(f"    {k.name!r}: ({k.name}, {[(a.name, tuple(a.shape)) for a in k.inputs]!r}, "
                     f"{[(a.name, tuple(a.shape)) for a in k.outputs]!r}),")
+    # `import math` only where a kernel calls it (erf, element by element): the built-in files are unchanged
+    out += (["import math", "", "import numpy", "", ""] if any("math." in line for line in body)
+            else ["import numpy", "", ""]) + body
     out.append("# name -> (function, [(input, shape)], [(output, shape)]), in the order of the C kernel table")
     out.append("KERNELS = {")
     out.extend(meta)

@@ -35,7 +35,9 @@ def generated_dir() -> Path:
 
 
 def _derive_user(args) -> int:
-    """derive --user FILE: print the user set of FILE (C, NumPy, CasADi, EQUATIONS.md) and compile it."""
+    """derive --user FILE: print the user set of FILE (C, NumPy, CasADi, EQUATIONS.md), compile it, swap it in.
+    Every failure (the declaration raises or cannot be printed, a clash with another set, the C does not
+    compile, CC names no compiler) is one line and exit 2, and leaves the last good set in place."""
     from lavendersim import extending
 
     if args.check:
@@ -43,20 +45,22 @@ def _derive_user(args) -> int:
     t0 = time.perf_counter()
     try:
         s = extending.derive(args.user, out=args.out)
-    except extending.UserBuildError as exc:
-        print(f"lavendersim derive --user: {exc}", file=sys.stderr)
-        return 1
-    except (OSError, SyntaxError) as exc:  # missing, a directory, unreadable, or not Python
-        return _fail(f"derive --user: {exc}")
-    except ValueError as exc:  # a declaration the printers refuse (LavenderInputError is one too)
-        return _fail(f"derive --user: {exc}")
-    cached = "cached, nothing recompiled" if s.library_built_now is False else "compiled"
+    except extending.UserBuildError as exc:   # the full compiler output is in the log file it names
+        return _fail(f"derive --user: {' '.join(exc.summary.split())}")
+    except (OSError, ValueError) as exc:   # missing file, DeclarationError, UserSetError, OutputFolderError
+        return _fail(f"derive --user: {' '.join(str(exc).split())}")
+    except Exception as exc:  # noqa: BLE001 - the declaration is the user's code: one line, never a traceback
+        return _fail(f"derive --user {args.user}: {type(exc).__name__}: {' '.join(str(exc).split())}")
+    cc = " ".join(s.manifest["library"]["compiler"])
+    how = f"cached, nothing recompiled; built with {cc}" if s.library_built_now is False else f"compiled with {cc}"
     print(f"derived {args.user} into {s.directory} in {time.perf_counter() - t0:.2f} s")
+    if s.replaced_declaration is not None:
+        print(f"replaced the set derived from {s.replaced_declaration} (that file no longer exists)")
     if s.effect_names:
         print(f"effects: {', '.join(s.effect_names)} — scene.add_effect(NAME, body=..., ...) on the c and numpy backends")
     if s.kernel_names:
         print(f"kernels: {', '.join(s.kernel_names)} (C: kernels.h; NumPy/CasADi: lavendersim.extending.load(FILE).numpy/.casadi)")
-    print(f"C library: {s.library_path} ({cached})")
+    print(f"C library: {s.library_path} ({how}; its sha256 in {s.directory / extending.MANIFEST})")
     if args.out:
         print(f"outside the user directory: load it with lavendersim.effects.load_user({str(s.directory)!r})")
     return 0

@@ -345,6 +345,9 @@ def resolve(workers: int | None = None, dask: str | None = None, *, feature: str
                                        "(the cluster decides how many workers run)")
         if not isinstance(dask, str) or not re.fullmatch(r"([a-z][a-z0-9+.-]*://)?[A-Za-z0-9._\-\[\]:]+/?", dask.strip()):
             raise V.LavenderInputError("dask", "must be a scheduler address such as tcp://host:8786", f", got {dask!r}")
+        if re.fullmatch(r"((tcp|tls)://)?[^/]+/?", dask.strip()) and not re.search(r":\d+/?$", dask.strip()):
+            # distributed refuses it only inside Client(): a traceback, then a 60 s hang in Client.__del__
+            raise V.LavenderInputError("dask", "must name the scheduler's port, such as tcp://host:8786", f", got {dask!r}")
         _require_distributed(feature)
         return Executor(DASK, 0, dask.strip())
     n = local_cores() if workers is None else V.integer("workers", workers, minimum=1)

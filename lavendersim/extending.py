@@ -16,18 +16,30 @@ The user directory is ``$LAVENDERSIM_USER_DIR`` when set, else the platform's us
 ``~/Library/Application Support/lavendersim`` on macOS, ``%LOCALAPPDATA%\\lavendersim`` on Windows.
 A set kept elsewhere (``--out DIR``) is loaded with ``lavendersim.effects.load_user(DIR/NAME)``.
 
-A set records the sha256 of the declaration it was derived from: loading it while that file exists
-with other contents raises (run the derive command again) rather than simulating stale equations.
+A set is identified by its declaration file: a declaration of the same name from another folder is
+refused naming both files (while the first exists), and so is an effect name another set declares.
+Each set has a manifest.json with the sha256 of the declaration, of every printed file and of the
+compiled library; loading a set checks the printed files before importing them and the library
+before the dynamic loader opens it, so an edited kernels.c, a swapped or truncated library, or a
+declaration edited since (run the derive command again) raises :class:`UserSetError` rather than
+simulating other equations or crashing. derive writes atomically: it prints and compiles first (the
+library into build/ under a new content-hashed name), checks the library's symbols, then swaps the
+set's folder in whole (lavendersim.derive.atomic); a declaration that fails anywhere leaves the last
+good set in place.
 """
 from __future__ import annotations
 
 import ctypes
 import hashlib
-import importlib.util
+import json
 import os
+import re
+import shlex
 import shutil
 import subprocess
 import sys
+import tempfile
+import types
 from pathlib import Path
 
 from . import validate as V
@@ -35,12 +47,42 @@ from . import validate as V
 ENV = "LAVENDERSIM_USER_DIR"
 CFLAGS = ["-O3", "-std=c99", "-fno-math-errno", "-fPIC", "-shared", "-fvisibility=hidden"]  # never -ffast-math
 SOURCES = ("kernels.c", "kernels.h")
+PRINTED = ("kernels.h", "kernels.c", "kernels_numpy.py", "kernels_casadi.py", "effects_meta.py", "EQUATIONS.md")
+MANIFEST = "manifest.json"
+MANIFEST_FORMAT = 1
 
 _SETS: dict[Path, "UserSet"] = {}  # loaded sets by directory
 
 
 class UserBuildError(RuntimeError):
-    """Compiling a user set's C failed; the message holds the command and the compiler's full output."""
+    """Compiling a user set's C failed, no compiler was found, or ``$CC`` names none.
+
+    Parameters
+    ----------
+    summary : str
+        One line: what failed, the compiler's first error line and where its full output is.
+    output : str, optional
+        The command line and the compiler's full output (also in ``str(exc)``).
+    log : str or None, optional
+        The file holding the full output.
+    """
+
+    def __init__(self, summary: str, output: str = "", log: str | None = None):
+        self.summary, self.output, self.log = summary, output, log
+        super().__init__(summary + (f"\n{output}" if output else ""))
+
+    def __reduce__(self):   # crosses process boundaries with its fields
+        return (type(self), (self.summary, self.output, self.log))
+
+
+class UserSetError(V.LavenderInputError):
+    """A user set that cannot be used as it is: two declaration files of one name, an effect name two
+    sets declare, or files that do not match the set's manifest.json (edited, swapped, truncated).
+    ``field`` is ``"user set"``; the message names the files and the command that repairs it."""
+
+
+def _set_error(rule: str, detail: str = "") -> UserSetError:
+    return UserSetError("user set", rule, detail)
 
 
 def user_dir() -> Path:
@@ -61,51 +103,143 @@ def sets_dir() -> Path:
 
 
 def compiler() -> list[str]:
-    """The C compiler: $CC, else cc, else gcc (UserBuildError if none is found)."""
-    for c in (os.environ.get("CC"), "cc", "gcc"):
-        if c and shutil.which(c.split()[0]):
-            return c.split()
+    """The C compiler command: ``$CC`` (split like a shell word list) when set, else cc, else gcc.
+
+    Raises
+    ------
+    UserBuildError
+        ``$CC`` is set but names no executable (it is never silently replaced by another compiler),
+        or it is unset and neither cc nor gcc is found.
+    """
+    cc = os.environ.get("CC", "")
+    if cc.strip():
+        try:
+            cmd = shlex.split(cc)
+        except ValueError as exc:
+            raise UserBuildError(f"CC={cc!r} cannot be split into a command ({exc}); set CC to a C compiler, "
+                                 "e.g. CC=gcc, or unset it to use cc/gcc") from None
+        if not shutil.which(cmd[0]):
+            raise UserBuildError(f"CC={cc!r}: {cmd[0]!r} is not an executable compiler (not found on PATH); set CC to a C "
+                                 "compiler, e.g. CC=gcc, or unset it to use cc/gcc")
+        return cmd
+    for c in ("cc", "gcc"):
+        if shutil.which(c):
+            return [c]
     raise UserBuildError("no C compiler found to build user effects for the C backend: set CC or install cc/gcc "
                          "(the NumPy backend needs none)")
 
 
-def _import_file(name: str, path: Path):
-    spec = importlib.util.spec_from_file_location(name, path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
+def _sha(data: bytes) -> str:
+    return hashlib.sha256(data).hexdigest()
+
+
+def _module(name: str, path: Path, source: bytes) -> types.ModuleType:
+    """A module run from `source` (the bytes just checked against the manifest, not a second read)."""
+    module = types.ModuleType(name)
+    module.__file__ = str(path)
+    exec(compile(source, str(path), "exec"), module.__dict__)
     return module
+
+
+def read_manifest(directory) -> dict:
+    """A set's manifest.json (format, set name, declaration and its sha256, effects, kernels, the sha256 of
+    every printed file, the library's file, sha256 and compiler command).
+
+    Raises
+    ------
+    UserSetError
+        No manifest (not a set, or one derived by an older lavendersim), or not a manifest.
+    """
+    directory = Path(directory)
+    path = directory / MANIFEST
+    try:
+        m = json.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        what = "an older lavendersim's set" if (directory / "effects_meta.py").is_file() else "not a derived set"
+        raise _set_error(f"{directory} has no {MANIFEST} ({what}); run `lavendersim derive --user FILE`") from None
+    except (OSError, ValueError) as exc:
+        raise _set_error(f"{path} cannot be read as a set manifest ({exc}); run `lavendersim derive --user FILE` "
+                         "again") from None
+    ok = (isinstance(m, dict) and m.get("format") == MANIFEST_FORMAT and isinstance(m.get("files"), dict)
+          and set(PRINTED) <= set(m["files"]) and isinstance(m.get("declaration"), str)
+          and isinstance(m.get("effects"), list) and (m.get("library") is None or _library_entry_ok(m["library"])))
+    if not ok:
+        raise _set_error(f"{path} is not a set manifest of this lavendersim; run `lavendersim derive --user "
+                         f"{m.get('declaration', 'FILE') if isinstance(m, dict) else 'FILE'}` again")
+    return m
+
+
+def _library_entry_ok(e) -> bool:
+    return (isinstance(e, dict) and isinstance(e.get("file"), str) and isinstance(e.get("sha256"), str)
+            and re.fullmatch(r"build/[A-Za-z0-9_.-]+", e["file"]) is not None)
+
+
+def _manifest_or_none(directory: Path) -> dict | None:
+    try:
+        return read_manifest(directory)
+    except UserSetError:
+        return None
+
+
+def _verified(directory: Path, name: str, want: str, declaration: str) -> bytes:
+    """The bytes of a set's file, if they have the sha256 the manifest records (else UserSetError)."""
+    path = directory / name
+    try:
+        data = path.read_bytes()
+    except OSError as exc:
+        raise _set_error(f"{path} cannot be read ({exc.strerror or exc})",
+                         f"; run `lavendersim derive --user {declaration}` again") from None
+    got = _sha(data)
+    if got != want:
+        raise _set_error(f"{path} does not match the set's {MANIFEST} (sha256 {got[:12]}…, manifest {want[:12]}…; "
+                         f"{len(data)} bytes): it was edited, replaced or cut after derive wrote it",
+                         f"; run `lavendersim derive --user {declaration}` again")
+    return data
 
 
 class UserSet:
     """A derived user set: its metadata, NumPy module, CasADi module (on demand) and compiled library
-    (on demand, built when missing).
+    (on demand, built when the set was derived without it). Every file is checked against the set's
+    manifest.json before it is imported or loaded.
 
     Parameters
     ----------
     directory : str or os.PathLike
         The folder ``lavendersim derive --user`` wrote for the set.
+
+    Raises
+    ------
+    UserSetError
+        No manifest, or a printed file that does not match it.
     """
 
     def __init__(self, directory: Path):
         self.directory = Path(directory).resolve()
-        meta_path = self.directory / "effects_meta.py"
-        if not meta_path.is_file():
-            raise V.LavenderInputError("user effects", f"{self.directory} is not a derived set (no effects_meta.py); "
-                                       "run `lavendersim derive --user FILE`")
-        self.meta = _import_file(f"lavendersim_user_meta_{abs(hash(self.directory))}", meta_path)
+        if not self.directory.is_dir():
+            raise _set_error(f"{self.directory} is not a derived set (no such folder); run `lavendersim derive --user FILE`")
+        self.manifest = read_manifest(self.directory)
+        self.declaration = Path(self.manifest["declaration"])
+        src = {n: self._file(n) for n in PRINTED}   # every printed file checked before any is run
+        tag = _sha(str(self.directory).encode())[:12]
+        self.meta = _module(f"lavendersim_user_meta_{tag}", self.directory / "effects_meta.py", src["effects_meta.py"])
         self.name = self.meta.SET_NAME
         self.effect_names = [e["name"] for e in self.meta.EFFECTS]
         self.kernel_names = list(self.meta.KERNELS)
-        self.numpy = _import_file(f"lavendersim_user_{self.name}_numpy", self.directory / "kernels_numpy.py")
+        self.numpy = _module(f"lavendersim_user_{self.name}_numpy_{tag}", self.directory / "kernels_numpy.py",
+                             src["kernels_numpy.py"])
         self._casadi = None
         self._lib = None
-        self.library_path: Path | None = None
+        lib = self.manifest.get("library")
+        self.library_path: Path | None = self.directory / lib["file"] if lib else None
         self.library_built_now: bool | None = None  # True: compiled by this process; False: reused from the cache
+
+    def _file(self, name: str) -> bytes:
+        return _verified(self.directory, name, self.manifest["files"][name], str(self.declaration))
 
     def check_current(self) -> None:
         """Raise if the declaration this set was derived from exists and has changed since."""
-        decl = Path(self.meta.DECLARATION)
-        if decl.is_file() and hashlib.sha256(decl.read_bytes()).hexdigest() != self.meta.DECLARATION_SHA256:
+        decl = self.declaration
+        if decl.is_file() and _sha(decl.read_bytes()) != self.manifest.get("declaration_sha256"):
             raise V.LavenderInputError("user effects", f"{decl} changed since the set {self.name!r} was derived "
                                        f"into {self.directory}: run `lavendersim derive --user {decl}`")
 
@@ -116,21 +250,20 @@ class UserSet:
             from ._install import require
 
             require("casadi", "control", "the CasADi expressions of user effects")
-            self._casadi = _import_file(f"lavendersim_user_{self.name}_casadi", self.directory / "kernels_casadi.py")
+            path = self.directory / "kernels_casadi.py"
+            self._casadi = _module(f"lavendersim_user_{self.name}_casadi", path, self._file("kernels_casadi.py"))
         return self._casadi
 
     def library(self) -> ctypes.CDLL:
-        """The compiled library (built now if missing or out of date with the printed C)."""
+        """The compiled library, its sha256 checked against the manifest before the dynamic loader maps it
+        (compiled now, atomically, when the set was derived without it)."""
         if self._lib is None:
-            self.library_path, self.library_built_now = _build(self.directory)
-            lib = ctypes.CDLL(str(self.library_path))
-            abi = ctypes.c_int.in_dll(lib, "lvu_abi_version").value
-            from .generated import effects_meta
-
-            if abi != effects_meta.ABI_VERSION:
-                raise UserBuildError(f"{self.library_path}: built for effect ABI {abi}, this lavendersim uses "
-                                     f"{effects_meta.ABI_VERSION}; run `lavendersim derive --user {self.meta.DECLARATION}`")
-            self._lib = lib
+            if self.manifest.get("library") is None:
+                self.manifest, self.library_built_now = _add_library(self)
+            entry = self.manifest["library"]
+            self.library_path = path = self.directory / entry["file"]
+            _verified(self.directory, entry["file"], entry["sha256"], str(self.declaration))
+            self._lib = _open_library(path, self.effect_names, self.name, self.kernel_names, str(self.declaration))
         return self._lib
 
     def c_function(self, effect: str) -> int:
@@ -150,61 +283,155 @@ class UserSet:
         return int(ctypes.cast(fn, ctypes.c_void_p).value)
 
 
-def _library_name(directory: Path, cmd: list[str]) -> str:
+def _open_library(path: Path, effects, set_name: str, kernels, declaration: str) -> ctypes.CDLL:
+    """Load a library and check its ABI version and that it exports every effect and kernel of the set."""
+    from .generated import effects_meta
+
+    try:
+        lib = ctypes.CDLL(str(path))
+        abi = ctypes.c_int.in_dll(lib, "lvu_abi_version").value
+    except (OSError, ValueError) as exc:
+        raise _set_error(f"{path} is not a loadable library of the set ({exc})",
+                         f"; run `lavendersim derive --user {declaration}` again") from None
+    if abi != effects_meta.ABI_VERSION:
+        raise _set_error(f"{path}: built for effect ABI {abi}, this lavendersim uses {effects_meta.ABI_VERSION}",
+                         f"; run `lavendersim derive --user {declaration}`")
+    want = [f"lvu_effect_{e}" for e in effects] + [f"lvu_{set_name}_{k}" for k in kernels]
+    missing = [s for s in want if not hasattr(lib, s)]
+    if missing:
+        raise _set_error(f"{path} does not export {', '.join(missing)}",
+                         f"; run `lavendersim derive --user {declaration}` again")
+    return lib
+
+
+def _library_name(set_name: str, sources: dict, cmd: list[str]) -> str:
     h = hashlib.sha256()
     for name in SOURCES:
-        h.update(f"{name} {hashlib.sha256((directory / name).read_bytes()).hexdigest()}\n".encode())
+        data = sources[name]
+        h.update(f"{name} {_sha(data.encode() if isinstance(data, str) else data)}\n".encode())
     h.update(" ".join(cmd).encode())
     suffix = ".dll" if os.name == "nt" else ".so"
-    return f"lib{directory.name}-{h.hexdigest()[:16]}{suffix}"
+    return f"lib{set_name}-{h.hexdigest()[:16]}{suffix}"
 
 
-def build(directory) -> Path:
-    """Compile a set's kernels.c into build/lib<set>-<hash>.so; reuse it when the printed C and the
-    compiler command are unchanged. A failing compile raises UserBuildError with its full output.
-
-    Parameters
-    ----------
-    directory : str or os.PathLike
-        The set's folder.
-
-    Returns
-    -------
-    pathlib.Path
-        The shared library.
-
-    Raises
-    ------
-    UserBuildError
-        With the command and the compiler's full output.
-    """
-    return _build(directory)[0]
+def _first_error(output: str) -> str:
+    lines = [ln.strip() for ln in output.splitlines() if ln.strip()]
+    for ln in lines:
+        if re.search(r"\berror\b", ln, re.I):
+            return ln
+    return lines[-1] if lines else "no output"
 
 
-def _build(directory) -> tuple[Path, bool]:
-    directory = Path(directory).resolve()
-    cmd = compiler() + CFLAGS
-    out = directory / "build" / _library_name(directory, cmd)
-    if out.is_file():
-        return out, False
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.with_name(out.name + f".tmp{os.getpid()}")
-    full = cmd + [str(directory / "kernels.c"), "-o", str(tmp), "-lm"]
-    try:
-        r = subprocess.run(full, capture_output=True, text=True, cwd=directory)
-    except OSError as exc:
-        raise UserBuildError(f"compiling user effects failed to start: {' '.join(full)}: {exc}") from exc
-    if r.returncode != 0:
-        tmp.unlink(missing_ok=True)
-        raise UserBuildError(f"compiling the user set {directory.name!r} failed (exit {r.returncode}):\n"
-                             f"$ {' '.join(full)}\n{r.stdout}{r.stderr}".rstrip())
-    os.replace(tmp, out)
-    return out, True
+def _compile(directory: Path, set_name: str, sources: dict, cmd: list[str], symbols: tuple) -> tuple[dict, bool]:
+    """The library entry of the manifest for these printed sources: reused when the set's current manifest
+    names a library of this name whose bytes still match it, else compiled in a temporary folder, loaded
+    and checked (ABI and every symbol), then moved into directory/build/ under its content-hashed name
+    (never over a library the current manifest uses unless it no longer matches it).
+    Returns (entry, compiled now)."""
+    name = _library_name(set_name, sources, cmd)
+    rel = f"build/{name}"
+    entry = {"file": rel, "compiler": cmd}
+    old = _manifest_or_none(directory)
+    path = directory / rel
+    if old and old.get("library") and old["library"]["file"] == rel and path.is_file():
+        digest = _sha(path.read_bytes())
+        if digest == old["library"]["sha256"]:
+            return {**entry, "sha256": digest}, False
+    root = directory.parent
+    log = root / f"{set_name}.compile.log"
+    root.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory(prefix=f".{set_name}.compile-", dir=root) as tmp:
+        tmp = Path(tmp)
+        for n in SOURCES:
+            (tmp / n).write_text(sources[n], encoding="utf-8")
+        full = cmd + CFLAGS + [str(tmp / "kernels.c"), "-o", str(tmp / name), "-lm"]
+        try:
+            r = subprocess.run(full, capture_output=True, text=True, cwd=tmp)
+        except OSError as exc:
+            raise UserBuildError(f"compiling the user set {set_name!r} failed to start ({' '.join(cmd)}: "
+                                 f"{exc.strerror or exc}); the last good set is unchanged") from None
+        if r.returncode != 0:
+            output = f"$ {' '.join(full)}\n{r.stdout}{r.stderr}".rstrip()
+            log.write_text(output + "\n", encoding="utf-8")
+            raise UserBuildError(f"compiling the user set {set_name!r} failed (exit {r.returncode}): "
+                                 f"{_first_error(r.stdout + r.stderr)} — full output in {log}; the last good set "
+                                 "is unchanged", output, str(log))
+        _open_library(tmp / name, *symbols)
+        data = (tmp / name).read_bytes()
+        path.parent.mkdir(parents=True, exist_ok=True)
+        os.replace(tmp / name, path)
+    log.unlink(missing_ok=True)
+    return {**entry, "sha256": _sha(data)}, True
+
+
+def _manifest_text(set_name: str, declaration: Path, files: dict, effects: list, kernels: list,
+                   library: dict | None) -> str:
+    m = {"format": MANIFEST_FORMAT, "set_name": set_name, "declaration": str(declaration),
+         "declaration_sha256": _sha(declaration.read_bytes()), "effects": list(effects), "kernels": list(kernels),
+         "files": {n: _sha(files[n].encode() if isinstance(files[n], str) else files[n]) for n in PRINTED},
+         "library": library}
+    return json.dumps(m, indent=1, sort_keys=True) + "\n"
+
+
+def _meta_names(meta_text: str) -> tuple[list[str], list[str]]:
+    ns: dict = {}
+    exec(compile(meta_text, "effects_meta.py", "exec"), ns)
+    return [e["name"] for e in ns["EFFECTS"]], list(ns["KERNELS"])
+
+
+def _check_folder(directory: Path) -> None:
+    """The set's folder holds only what derive writes (it is replaced whole): else OutputFolderError,
+    before anything (the library's build/ included) is written into it."""
+    from .derive.atomic import IGNORED, OutputFolderError
+
+    if directory.exists() and not directory.is_dir():
+        raise OutputFolderError(f"{directory} exists and is not a folder")
+    if directory.is_dir():
+        allowed = set(PRINTED) | {MANIFEST, "build"} | set(IGNORED)
+        foreign = sorted(p.name for p in directory.iterdir() if p.name not in allowed)
+        if foreign:
+            raise OutputFolderError(f"{directory} holds {', '.join(foreign[:5])}{' …' if len(foreign) > 5 else ''}, "
+                                    "which derive did not write; derive replaces the set's folder as a whole, so move "
+                                    "them away or derive into another folder (--out)")
+
+
+def _check_identity(directory: Path, declaration: Path, set_name: str) -> Path | None:
+    """Refuse a set folder derived from another declaration file that still exists (naming both); return
+    that other file when it no longer exists (the set is replaced, and the caller says so)."""
+    m = _manifest_or_none(directory)
+    if m is None:
+        return None
+    prev = Path(m["declaration"])
+    if prev == declaration:
+        return None
+    if prev.is_file():
+        raise _set_error(f"{declaration} and {prev} both name the set {set_name!r} (a set is named by its file): "
+                         f"{directory} holds the set derived from {prev}",
+                         "; rename one of the files, or derive this one elsewhere with --out DIR")
+    return prev
+
+
+def _check_effect_names(root: Path, directory: Path, declaration: Path, effects: list[str]) -> None:
+    """Refuse an effect name that another set under `root` declares, naming both declaration files."""
+    if not root.is_dir() or not effects:
+        return
+    for d in sorted(root.iterdir()):
+        if not d.is_dir() or d.resolve() == directory:
+            continue
+        m = _manifest_or_none(d)
+        if m is None:
+            continue
+        clash = sorted(set(effects) & set(m["effects"]))
+        if clash:
+            raise _set_error(f"effect {clash[0]!r} of {declaration} is also declared by {m['declaration']} (set {d})",
+                             "; an effect name belongs to one set: rename it in one of the files, or remove the "
+                             f"folder {d}")
 
 
 def derive(declaration, out=None, compile: bool = True) -> UserSet:
-    """Derive a declaration file: print its set into `out` (default sets_dir()) / <stem>/, compile its
-    C (cached) and load it. Imports SymPy (this is the derive step, not the simulation path).
+    """Derive a declaration file: print its set, compile its C (cached), check the library, then swap the
+    set's folder `out` (default sets_dir()) / <stem>/ in whole and load it. Imports SymPy (this is the
+    derive step, not the simulation path). Anything that fails leaves the set that was there as it was.
 
     Parameters
     ----------
@@ -218,25 +445,92 @@ def derive(declaration, out=None, compile: bool = True) -> UserSet:
     Returns
     -------
     UserSet
+        With ``replaced_declaration``: the other declaration file (no longer there) whose set of the same
+        name this one replaced, else None.
+
+    Raises
+    ------
+    lavendersim.derive.user.DeclarationError
+        The declaration cannot be run or printed (one line naming the effect or kernel).
+    UserSetError
+        Another existing file of the same name owns the set's folder, or another set declares one of
+        its effect names.
+    UserBuildError
+        No compiler, a refused ``$CC``, or the C does not compile.
     """
+    from .derive.atomic import recover, replace_folder
     from .derive.user import render_user
 
-    from .derive.atomic import replace_folder
-
-    set_name, files = render_user(declaration)
-    directory = (Path(out) if out is not None else sets_dir()) / set_name
-    # the set's folder is swapped in whole (a killed run leaves the old set or the new one), its
-    # compiled-library cache build/ carried over; anything else in it raises before anything is written
+    decl = Path(declaration).expanduser().resolve()
+    set_name, files = render_user(decl)
+    root = (Path(out).expanduser() if out is not None else sets_dir()).resolve()
+    directory = root / set_name
+    if directory.parent.is_dir():
+        recover(directory)   # an interrupted swap is repaired before the folder is judged
+    _check_folder(directory)
+    replaced = _check_identity(directory, decl, set_name)
+    effects, kernels = _meta_names(files["effects_meta.py"])
+    _check_effect_names(root, directory, decl, effects)
+    library, built = None, None
+    if compile:
+        library, built = _compile(directory, set_name, files, compiler(), (effects, set_name, kernels, str(decl)))
+    files[MANIFEST] = _manifest_text(set_name, decl, files, effects, kernels, library)
     replace_folder(directory, files, keep=("build",))
     s = load(directory, reload=True)
+    s.replaced_declaration = replaced
     if compile:
         s.library()
+        s.library_built_now = built
     return s
+
+
+def _add_library(s: UserSet) -> tuple[dict, bool]:
+    """Compile the library of a set derived without it and record it in its manifest (folder swapped whole)."""
+    from .derive.atomic import replace_folder
+
+    files = {n: s._file(n) for n in PRINTED}
+    sources = {n: files[n].decode("utf-8") for n in SOURCES}
+    library, built = _compile(s.directory, s.name, sources, compiler(),
+                              (s.effect_names, s.name, s.kernel_names, str(s.declaration)))
+    text = _manifest_text(s.name, s.declaration, files, s.manifest["effects"], s.manifest.get("kernels", []), library)
+    m = json.loads(text)
+    m["declaration_sha256"] = s.manifest.get("declaration_sha256")   # the set's declaration, not today's file
+    replace_folder(s.directory, {**files, MANIFEST: json.dumps(m, indent=1, sort_keys=True) + "\n"}, keep=("build",))
+    return m, built
+
+
+def build(directory) -> Path:
+    """Compile a derived set's C (its printed files checked against its manifest) into build/ and record
+    the library in the manifest; reuse it when the printed C and the compiler command are unchanged.
+
+    Parameters
+    ----------
+    directory : str or os.PathLike
+        The set's folder.
+
+    Returns
+    -------
+    pathlib.Path
+        The shared library.
+
+    Raises
+    ------
+    UserSetError
+        The set's files do not match its manifest.
+    UserBuildError
+        With the command and the compiler's full output.
+    """
+    s = UserSet(directory)
+    if s.manifest.get("library") is None or compiler() != s.manifest["library"].get("compiler"):
+        s.manifest, s.library_built_now = _add_library(s)
+    s.library()
+    return s.library_path
 
 
 def load(path, reload: bool = False) -> UserSet:
     """Load and register a derived set: `path` is its directory, or its declaration file (then the set of
-    that name in sets_dir()). Already loaded sets are returned as they are unless reload=True.
+    that name in sets_dir(), which must have been derived from that very file). Already loaded sets are
+    returned as they are unless reload=True.
 
     Parameters
     ----------
@@ -248,22 +542,43 @@ def load(path, reload: bool = False) -> UserSet:
     Returns
     -------
     UserSet
+
+    Raises
+    ------
+    UserSetError
+        The set's files do not match its manifest; the set of that name was derived from another file;
+        one of its effect names belongs to another loaded set.
     """
     from . import effects as E
 
     path = Path(path).expanduser().resolve()
-    directory = sets_dir() / path.stem if path.suffix == ".py" else path
-    directory = directory.resolve()
+    if path.suffix == ".py":
+        directory = (sets_dir() / path.stem).resolve()
+        m = read_manifest(directory) if directory.is_dir() else None
+        if m is None:
+            raise _set_error(f"no set derived from {path} in {sets_dir()}", f"; run `lavendersim derive --user {path}`")
+        if Path(m["declaration"]) != path:
+            raise _set_error(f"{directory} holds the set derived from {m['declaration']}, not from {path} (a set is "
+                             "named by its file)", "; rename one of the files and derive it")
+    else:
+        directory = path
     if directory in _SETS and not reload:
         return _SETS[directory]
     s = UserSet(directory)
     s.check_current()
     old = _SETS.get(directory)
-    for entry in s.meta.EFFECTS:
+    for entry in s.meta.EFFECTS:   # every clash is found before anything is registered
         prev = E.REGISTRY.get(entry["name"])
         if prev is not None and prev.source == "built-in":
-            raise V.LavenderInputError("user effects", f"{entry['name']!r} in {s.meta.DECLARATION} is the name of a "
+            raise V.LavenderInputError("user effects", f"{entry['name']!r} in {s.declaration} is the name of a "
                                        "built-in effect; rename it")
+        if prev is not None and prev.user_set is not None and prev.user_set.directory != s.directory:
+            o = prev.user_set
+            raise _set_error(f"effect {entry['name']!r} is declared by {s.declaration} (set {s.directory}) and by "
+                             f"{o.declaration} (set {o.directory}, loaded first)",
+                             "; an effect name belongs to one set: rename it in one of the files")
+    for entry in s.meta.EFFECTS:
+        prev = E.REGISTRY.get(entry["name"])
         code = prev.code if (prev is not None and old is not None and prev.user_set is old) else None
         if code is None:
             user_codes = [c for c in E.BY_CODE if c >= E.USER_CODE_BASE]
@@ -284,17 +599,30 @@ def discover(name: str) -> UserSet | None:
     Returns
     -------
     UserSet or None
+
+    Raises
+    ------
+    UserSetError
+        Two sets declare it (naming both declaration files), or the set's files do not match its manifest.
     """
     root = sets_dir()
     if not root.is_dir():
         return None
-    for d in sorted(p for p in root.iterdir() if (p / "effects_meta.py").is_file()):
-        text = (d / "effects_meta.py").read_text(encoding="utf-8")
-        if f"'name': {name!r}" in text or f'"name": {name!r}' in text:
-            s = UserSet(d)
-            if name in s.effect_names:
-                return load(d)
-    return None
+    found = []
+    for d in sorted(p for p in root.iterdir() if p.is_dir()):
+        m = _manifest_or_none(d)
+        if m is not None:
+            if name in m["effects"]:
+                found.append((d, m["declaration"]))
+        elif (d / "effects_meta.py").is_file():   # no (valid) manifest: loading it says what to do
+            text = (d / "effects_meta.py").read_text(encoding="utf-8", errors="replace")
+            if f"'name': {name!r}" in text or f'"name": {name!r}' in text:
+                found.append((d, "an unknown file"))
+    if len(found) > 1:
+        (d1, f1), (d2, f2) = found[:2]
+        raise _set_error(f"effect {name!r} is declared by {f1} (set {d1}) and by {f2} (set {d2})",
+                         "; an effect name belongs to one set: rename it in one of the files and derive it again")
+    return load(found[0][0]) if found else None
 
 
 def loaded() -> list[UserSet]:

@@ -337,6 +337,10 @@ def test_plain_kernel_of_the_guide(guide):
     lv.Body("cone", m, I)
     if have("control"):
         assert close(np.asarray(my.casadi.inertia_cone(m, R, h)).ravel(), want)
+    out = np.zeros(3)   # the compiled library exports the plain kernel too (issue 31)
+    my.library().lvu_my_effects_inertia_cone(ctypes.c_double(m), ctypes.c_double(R), ctypes.c_double(h),
+                                              out.ctypes.data_as(ctypes.POINTER(ctypes.c_double)))
+    assert close(out, want)
 
 
 # ---------------------------------------------------------------- what can go wrong
@@ -352,30 +356,23 @@ def test_an_edited_declaration_is_not_simulated_stale(guide, tmp_path):
         extending.load(out / "drift", reload=True)
 
 
-def test_a_compiler_error_is_shown_in_full(guide, tmp_path):
-    import shutil
-
-    broken = tmp_path / "broken"
-    shutil.copytree(guide["set"], broken, ignore=shutil.ignore_patterns("build"))
-    (broken / "kernels.c").write_text((broken / "kernels.c").read_text() + "\nthis is not C;\n")
-    with pytest.raises(extending.UserBuildError) as e:
-        extending.build(broken)
-    msg = str(e.value)
-    assert "kernels.c" in msg and "error" in msg and "this is not C" in msg and "-std=c99" in msg
-    assert not list((broken / "build").glob("*.so"))
-
-
-def test_cli_reports_a_compiler_error_and_exits_1(guide, tmp_path):
+def test_a_compiler_error_is_raised_with_its_full_output(guide, tmp_path, monkeypatch):
+    """The API raises UserBuildError holding the command and the compiler's whole output (the CLI's one line,
+    the log file and the last good set kept: tests/test_user_sets.py)."""
     cc = tmp_path / "failcc"
-    cc.write_text("#!/bin/sh\necho 'failcc: something the user must see' >&2\nexit 3\n")
+    cc.write_text("#!/bin/sh\necho 'kernels.c:3:1: error: this is not C' >&2\necho 'second line of output' >&2\nexit 1\n")
     cc.chmod(0o755)
-    decl = tmp_path / "cli_fail.py"
-    decl.write_text(guide_block("python my_effects.py").replace("gravity_gradient", "gg_fail")
-                    .replace("quadratic_drag", "qd_fail"))
-    env = {**guide["env"], "CC": str(cc), extending.ENV: str(tmp_path / "u")}
-    r = run_lavendersim(["derive", "--user", str(decl)], tmp_path, env)
-    assert r.returncode == 1
-    assert "failcc: something the user must see" in r.stderr and "exit 3" in r.stderr
+    decl = tmp_path / "broken_c.py"
+    decl.write_text(guide_block("python my_effects.py").replace("gravity_gradient", "gg_broken")
+                    .replace("quadratic_drag", "qd_broken"))
+    monkeypatch.setenv("CC", str(cc))
+    with pytest.raises(extending.UserBuildError) as e:
+        extending.derive(decl, out=tmp_path / "sets")
+    msg = str(e.value)
+    assert "error: this is not C" in msg and "second line of output" in msg and "-std=c99" in msg
+    assert "\n" not in e.value.summary and "error: this is not C" in e.value.summary
+    assert Path(e.value.log).read_text().count("second line of output") == 1
+    assert not (tmp_path / "sets" / "broken_c").exists()     # nothing swapped in
 
 
 def test_a_user_effect_cannot_shadow_a_built_in(guide, tmp_path):
