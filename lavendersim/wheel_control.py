@@ -986,6 +986,20 @@ def closed_loop(scene: Scene, controller: Controller, *, T: float, q0: ArrayLike
     lavendersim.errors.DivergenceError
         The simulation diverged.
     """
+    a = _loop_args(scene, controller, T=T, q0=q0, omega0=omega0, Omega0=Omega0, q_ref=q_ref, sensors=sensors,
+                   actuator_lag=actuator_lag, delay=delay, dt=dt, disturbances=disturbances, threshold_deg=threshold_deg,
+                   backend=backend)
+    sim = _initial_sim(scene, a["body"], controller, controller.Ts / a["nsub"], a["backend"], a["q0"], a["omega0"], a["Omega0"])
+    return _fly(sim, a["body"], controller, a["sensors"], a["K"], a["nsub"], a["nd"], a["lag"], a["q_ref"], a["disturbances"],
+                a["threshold_deg"])
+
+
+def _loop_args(scene: Scene, controller: Controller, *, T, q0, omega0, Omega0, q_ref, sensors, actuator_lag, delay, dt,
+               disturbances, threshold_deg, backend) -> dict:
+    """closed_loop's arguments checked (naming each) and resolved, before any Sim is built: the same for every
+    plant of a Monte Carlo sweep, so a sweep checks them once."""
+    from .backends import BACKEND_CHOICES
+
     if not isinstance(controller, Controller):
         raise V.LavenderInputError("controller", "must be a Controller from lavendersim.control.design",
                                    f", got {V._describe(controller)}")
@@ -1008,8 +1022,12 @@ def closed_loop(scene: Scene, controller: Controller, *, T: float, q0: ArrayLike
     qr = controller.q_ref if q_ref is None else V.quaternion("q_ref", q_ref)
     th = V.positive("threshold_deg", threshold_deg)
     nsub, nd = _substeps(Ts, dly, dt)
-    sim = _initial_sim(scene, body, controller, Ts / nsub, backend, q0, omega0, Omega0)
-    return _fly(sim, body, controller, sensors, K, nsub, nd, lag, qr, disturbances, th)
+    backend = V.choice("backend", backend, BACKEND_CHOICES)
+    return {"body": body, "K": K, "lag": lag, "sensors": sensors, "disturbances": disturbances, "q_ref": qr,
+            "threshold_deg": th, "nsub": nsub, "nd": nd, "backend": backend,
+            "q0": None if q0 is None else V.quaternion("q0", q0),
+            "omega0": None if omega0 is None else V.vector("omega0", omega0),
+            "Omega0": None if Omega0 is None else V.vector("Omega0", Omega0, controller.n)}
 
 
 def _disturbances(d: Any) -> Callable[[float, Sim], None] | None:
@@ -1103,14 +1121,30 @@ def perturbed_inertia(scene: Scene, body: str, scale: ArrayLike) -> Scene:
     new = lv.Scene()
     for name, b in scene.bodies.items():
         if name == body:
-            I = np.asarray(getattr(b, "inertia_b", None) if hasattr(b, "inertia_b") else np.diag(b.I_b), float)
-            d = np.sqrt(s)
             x0 = np.asarray(b.x0, float)
-            b = lv.Body(name, b.mass, d[:, None] * I * d[None, :], p_w=x0[0:3], q=x0[3:7], v_w=x0[7:10], omega_b=x0[10:13])
+            b = lv.Body(name, b.mass, _perturbed_tensor(b, s), p_w=x0[0:3], q=x0[3:7], v_w=x0[7:10], omega_b=x0[10:13])
         new.add_body(b)
     for e in scene.effects:
         new.add_effect(E.make(e.name, body=e.body, **dict(e.values)))
     return new
+
+
+def _perturbed_tensor(b: Any, scale: np.ndarray) -> np.ndarray:
+    """D I D (3, 3), body frame, kg·m², D = diag(sqrt(scale)): a body's perturbed inertia tensor (not yet checked)."""
+    I = np.asarray(getattr(b, "inertia_b", None) if hasattr(b, "inertia_b") else np.diag(b.I_b), float)
+    d = np.sqrt(scale)
+    return d[:, None] * I * d[None, :]
+
+
+# the errors a draw may meet that make it a failed sample (its plant or its run), not the end of the sweep
+DRAW_ERRORS = (V.LavenderInputError, ArithmeticError, np.linalg.LinAlgError)
+
+
+def _failed(exc: BaseException, stage: str) -> dict:
+    """A failed draw's figures: None, and why (the error's class, field and message)."""
+    return {"settled": False, "settling_time": None, "peak_torque": None, "peak_wheel_speed": None,
+            "final_error_deg": None, "L_drift": None, "failed": stage, "error": type(exc).__name__,
+            "field": getattr(exc, "field", None), "why": " ".join(str(exc).split())}
 
 
 def monte_carlo_sample(task: dict) -> dict:
@@ -1126,21 +1160,39 @@ def monte_carlo_sample(task: dict) -> dict:
     -------
     dict
         ``settled`` (bool), ``settling_time`` (s or None), ``peak_torque``, ``peak_wheel_speed`` (max over
-        wheels), ``final_error_deg``, ``L_drift``, ``why`` (a divergence's message, else None).
+        wheels), ``final_error_deg``, ``L_drift``; ``failed`` (None, or ``"run"`` when the run raised one of
+        DRAW_ERRORS: a divergence, a validity bound, a state the perturbed plant refuses), then ``error`` (the
+        exception's class), ``field`` (a LavenderInputError's) and ``why`` (its message), else None.
     """
-    from .errors import DivergenceError
-
     try:
         r = closed_loop(task["scene"], task["controller"], T=task["T"], q0=task["q0"], omega0=task["omega0"], Omega0=task["Omega0"],
                         sensors=task["sensors"], dt=task["dt"], threshold_deg=task["threshold_deg"], backend=task["backend"])
-    except DivergenceError as exc:
-        return {"settled": False, "settling_time": None, "peak_torque": None, "peak_wheel_speed": None,
-                "final_error_deg": None, "L_drift": None, "why": str(exc)}
+    except DRAW_ERRORS as exc:
+        return _failed(exc, "run")
     st = r.settling_time()
     return {"settled": bool(math.isfinite(st) and r.final_error_deg < r.threshold_deg),
             "settling_time": st if math.isfinite(st) else None, "peak_torque": float(r.peak_torque.max()),
             "peak_wheel_speed": float(r.peak_wheel_speed.max()), "final_error_deg": r.final_error_deg,
-            "L_drift": r.L_drift, "why": None}
+            "L_drift": r.L_drift, "failed": None, "error": None, "field": None, "why": None}
+
+
+class SweepError(V.LavenderInputError):
+    """Every draw of a Monte Carlo sweep failed (field ``monte_carlo``); ``samples`` holds them, each with its reason.
+
+    Parameters
+    ----------
+    field, rule, detail : str
+        As LavenderInputError.
+    samples : list of dict
+        The failed samples (monte_carlo's ``samples``).
+    """
+
+    def __init__(self, field: str, rule: str, detail: str = "", samples: list | None = None) -> None:
+        super().__init__(field, rule, detail)
+        self.samples = list(samples or [])
+
+    def __reduce__(self):
+        return (type(self), (self.field, self.rule, self.detail, self.samples))
 
 
 def monte_carlo(scene: Scene, controller: Controller, *, n: int, seed: int = 0, T: float, q0: ArrayLike | None = None,
@@ -1152,6 +1204,12 @@ def monte_carlo(scene: Scene, controller: Controller, *, n: int, seed: int = 0, 
     Sample i uses ``sensors`` with seed ``sensors.seed + seed + i`` (default Sensors: noise-free, so only
     the inertia varies) and the inertia factors ``1 + inertia_spread · U(−1, 1)`` per body axis, drawn
     here from ``default_rng(seed)`` (the same samples on every executor).
+
+    A draw that fails is a failed sample, not the end of the sweep: its perturbed inertia is not a rigid
+    body's (``failed = "plant"``), or its run raised one of DRAW_ERRORS (``"run"``: a divergence, a
+    validity bound, ...); it keeps its index, seed, factors and tensor, and the error's class, field and
+    message. The arguments are checked once, before any draw (an error there is the same for every draw);
+    the sweep raises only if every draw fails (:class:`SweepError`).
 
     Parameters
     ----------
@@ -1172,9 +1230,19 @@ def monte_carlo(scene: Scene, controller: Controller, *, n: int, seed: int = 0, 
     Returns
     -------
     dict
-        ``n``, ``seed``, ``inertia_spread``, ``failures``, ``failure_rate``, percentiles (p50, p90, p100)
-        of ``settling_time`` (s, settled samples), ``peak_torque`` (N·m), ``peak_wheel_speed`` (rad/s),
-        ``L_drift``, and ``samples`` (each with its ``inertia_scale`` and ``seed``).
+        ``n``, ``seed``, ``inertia_spread``, ``sensors``, ``failures`` (draws that did not settle, failed ones
+        included), ``failure_rate``, ``failed`` (draws that failed) and ``failed_samples`` (those samples),
+        percentiles (p50, p90, p100) of ``settling_time`` (s, settled samples), ``peak_torque`` (N·m),
+        ``peak_wheel_speed`` (rad/s), ``L_drift`` (over the runs that completed), and ``samples`` (each with its
+        ``index``, ``seed``, ``inertia_scale`` and ``inertia_b`` (3×3, body frame, kg·m²), see
+        :func:`monte_carlo_sample`).
+
+    Raises
+    ------
+    lavendersim.validate.LavenderInputError
+        A bad argument (naming it), checked once for all draws.
+    SweepError
+        Every draw failed (the first one's reason in the message).
     """
     from . import executor as X
 
@@ -1187,34 +1255,43 @@ def monte_carlo(scene: Scene, controller: Controller, *, n: int, seed: int = 0, 
     if spread >= 1:
         raise V.LavenderInputError("inertia_spread", "must be below 1 (inertia factors stay positive)", f", got {spread!r}")
     sensors = Sensors() if sensors is None else sensors
-    if not isinstance(sensors, Sensors):
-        raise V.LavenderInputError("sensors", "must be a lavendersim.control.Sensors or None", f", got {V._describe(sensors)}")
-    wheeled_body(scene, controller.body)
+    a = _loop_args(scene, controller, T=T, q0=q0, omega0=omega0, Omega0=Omega0, q_ref=None, sensors=sensors,
+                   actuator_lag=None, delay=None, dt=dt, disturbances=None, threshold_deg=threshold_deg, backend=backend)
+    body = a["body"]
     rng = np.random.default_rng(seed)
     scales = 1 + spread * rng.uniform(-1, 1, (n, 3))
-    base = {"controller": controller, "T": T, "q0": q0, "omega0": omega0, "Omega0": Omega0, "dt": dt,
+    base = {"controller": controller, "T": T, "q0": a["q0"], "omega0": a["omega0"], "Omega0": a["Omega0"], "dt": dt,
             "threshold_deg": threshold_deg, "backend": backend}
-    tasks = []
+    samples: list[dict | None] = [None] * n
+    tasks, where = [], []
     for i in range(n):
         try:
-            plant = perturbed_inertia(scene, controller.body, scales[i])
-        except V.LavenderInputError as exc:
-            raise V.LavenderInputError("inertia_spread", f"sample {i}'s inertia is not a rigid body's (factors "
-                                       f"{np.round(scales[i], 4).tolist()}): {exc}; use a smaller spread") from None
+            plant = perturbed_inertia(scene, body, scales[i])
+        except V.LavenderInputError as exc:     # this draw's inertia is not a rigid body's
+            samples[i] = _failed(exc, "plant")
+            continue
         tasks.append({**base, "scene": plant, "sensors": replace(sensors, seed=sensors.seed + seed + i)})
-    samples = X.map_tasks(monte_carlo_sample, tasks, executor, feature="lavendersim lqr --dask")
+        where.append(i)
+    for i, s in zip(where, X.map_tasks(monte_carlo_sample, tasks, executor, feature="lavendersim lqr --dask")):
+        samples[i] = s
     for i, s in enumerate(samples):
-        s["inertia_scale"], s["seed"] = scales[i].tolist(), sensors.seed + seed + i
+        s["index"], s["seed"], s["inertia_scale"] = i, sensors.seed + seed + i, scales[i].tolist()
+        s["inertia_b"] = _perturbed_tensor(scene.bodies[body], scales[i]).tolist()
+    failed = [s for s in samples if s["failed"]]
+    if len(failed) == n:
+        f = failed[0]
+        raise SweepError("monte_carlo", f"every one of the {n} draws failed", f"; draw 0 (seed {f['seed']}, inertia factors "
+                         f"{np.round(f['inertia_scale'], 6).tolist()}): {f['why']}", samples)
     ok = [s for s in samples if s["settled"]]
 
     def pct(key, rows):
-        a = np.array([s[key] for s in rows if s[key] is not None], dtype=float)
-        return {p: (float(np.percentile(a, int(p[1:]))) if a.size else None) for p in ("p50", "p90", "p100")}
+        v = np.array([s[key] for s in rows if s[key] is not None], dtype=float)
+        return {p: (float(np.percentile(v, int(p[1:]))) if v.size else None) for p in ("p50", "p90", "p100")}
 
     return {"n": n, "seed": seed, "inertia_spread": spread, "sensors": {k: getattr(sensors, k) for k in ("attitude_noise", "gyro_noise", "gyro_bias", "wheel_speed_noise", "seed")},
-            "failures": n - len(ok), "failure_rate": (n - len(ok)) / n, "settling_time": pct("settling_time", ok),
-            "peak_torque": pct("peak_torque", samples), "peak_wheel_speed": pct("peak_wheel_speed", samples),
-            "L_drift": pct("L_drift", samples), "samples": samples}
+            "failures": n - len(ok), "failure_rate": (n - len(ok)) / n, "failed": len(failed), "failed_samples": failed,
+            "settling_time": pct("settling_time", ok), "peak_torque": pct("peak_torque", samples),
+            "peak_wheel_speed": pct("peak_wheel_speed", samples), "L_drift": pct("L_drift", samples), "samples": samples}
 
 
 # ----------------------------------------------------------------------------------------------

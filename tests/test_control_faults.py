@@ -215,3 +215,177 @@ def test_a_spacecraft_files_weights_are_checked_on_load(key, value, field, rule)
     with pytest.raises(LavenderInputError) as e:
         S.from_dict(d)                                   # on load, before any design
     assert e.value.field == field and rule in str(e.value), e.value
+
+
+# ------------------------------------------------------------------------ Monte Carlo: a failed draw is a failed sample
+
+
+def _sat() -> lv.Scene:
+    """tests/test_closed_loop.py's user spacecraft: a 10×20×30 cm box, I_x ≈ I_y + I_z − 13 %, three skewed wheels."""
+    axes = np.array([[1.0, 0.2, 0.1], [0.1, 1.0, -0.3], [0.3, -0.2, 1.0]])
+    s = lv.Scene()
+    s.add_body(lv.Body.box("sat", 4.0, (0.1, 0.2, 0.3)))
+    s.add_effect("reaction_wheels", body="sat", axes_b=axes / np.linalg.norm(axes, axis=1, keepdims=True),
+                 J=[2e-5, 2.5e-5, 3e-5], torque_limit=5e-3, speed_limit=600.0)
+    return s
+
+
+@pytest.fixture(scope="module")
+def sat():
+    scene = _sat()
+    return scene, lc.design(scene, period=0.2)
+
+
+MC = dict(n=8, seed=1, T=12.0, inertia_spread=0.5, sensors=lc.Sensors(attitude_noise=1e-4, seed=3), backend="c")
+
+
+def _q0(ctrl):
+    return lc.rotated(ctrl.q_ref, (0, 0, 1), 20.0)
+
+
+def test_an_infeasible_draw_is_a_failed_sample_and_the_others_fly_as_alone(sat):
+    """Spread 0.5 on a box near its triangle inequality: draws 1, 2, 3 and 5 of seed 1 are no rigid body. They are
+    failed samples naming their index, seed, factors and tensor; the other draws' figures are those of flying each
+    alone; the summary's percentiles are over the others."""
+    from dataclasses import replace
+
+    from lavendersim import wheel_control as W
+
+    scene, ctrl = sat
+    mc = lc.monte_carlo(scene, ctrl, q0=_q0(ctrl), **MC)
+    scales = 1 + 0.5 * np.random.default_rng(1).uniform(-1, 1, (8, 3))
+    assert [s["index"] for s in mc["failed_samples"]] == [1, 2, 3, 5] and mc["failed"] == 4
+    I0 = np.diag(scene.bodies["sat"].I_b)
+    for s in mc["failed_samples"]:
+        i = s["index"]
+        assert s["failed"] == "plant" and s["error"] == "LavenderInputError" and s["field"] == "inertia"
+        assert s["seed"] == 3 + 1 + i and s["inertia_scale"] == scales[i].tolist()
+        np.testing.assert_allclose(s["inertia_b"], np.sqrt(scales[i])[:, None] * I0 * np.sqrt(scales[i])[None, :], rtol=1e-15)
+        Id = np.diag(s["inertia_b"])
+        assert np.max(Id) > np.sum(Id) - np.max(Id)        # the triangle inequality it names is indeed broken
+        assert "triangle inequality" in s["why"] and s["settled"] is False and s["settling_time"] is None
+    ok = [s for s in mc["samples"] if not s["failed"]]
+    assert [s["index"] for s in ok] == [0, 4, 6, 7] and all(s["settled"] for s in ok)
+    for s in ok:
+        alone = W.monte_carlo_sample({"scene": W.perturbed_inertia(scene, "sat", scales[s["index"]]), "controller": ctrl,
+                                      "sensors": replace(MC["sensors"], seed=s["seed"]), "T": 12.0, "q0": _q0(ctrl),
+                                      "omega0": None, "Omega0": None, "dt": None, "threshold_deg": 0.1, "backend": "c"})
+        assert {k: s[k] for k in alone} == alone
+    st = np.array([s["settling_time"] for s in ok])
+    assert mc["settling_time"]["p100"] == st.max() and mc["settling_time"]["p50"] == np.percentile(st, 50)
+    assert mc["failures"] == 4 and mc["failure_rate"] == 0.5
+
+
+def test_a_draw_whose_run_fails_is_a_failed_sample_the_rest_unchanged(sat, monkeypatch):
+    """Draw 2's run diverges (any DRAW_ERRORS): failed "run" with the error; every other sample is bit for bit the
+    sweep's without the failure."""
+    from lavendersim import wheel_control as W
+    from lavendersim.errors import DivergenceError
+
+    scene, ctrl = sat
+    kw = {**MC, "inertia_spread": 0.05, "n": 4}
+    before = lc.monte_carlo(scene, ctrl, q0=_q0(ctrl), **kw)
+    real = W.closed_loop
+
+    def diverge_on_seed_6(*a, **k):
+        if k["sensors"].seed == 3 + 1 + 2:
+            raise DivergenceError(17, 0, "state grew without bound", "sat", t=0.34)
+        return real(*a, **k)
+
+    monkeypatch.setattr(W, "closed_loop", diverge_on_seed_6)
+    mc = lc.monte_carlo(scene, ctrl, q0=_q0(ctrl), **kw)
+    assert mc["failed"] == 1 and [s["index"] for s in mc["failed_samples"]] == [2]
+    f = mc["samples"][2]
+    assert f["failed"] == "run" and f["error"] == "DivergenceError" and "step 17" in f["why"] and f["seed"] == 6
+    assert f["inertia_scale"] == before["samples"][2]["inertia_scale"]
+    for i in (0, 1, 3):
+        assert mc["samples"][i] == before["samples"][i]
+    assert before["failed"] == 0 and before["failed_samples"] == []
+
+
+def test_the_sweep_errors_only_when_every_draw_fails(sat, monkeypatch):
+    from lavendersim import wheel_control as W
+    from lavendersim.errors import DivergenceError
+
+    scene, ctrl = sat
+    calls = []
+
+    def always(*a, **k):
+        calls.append(k["sensors"].seed)
+        raise DivergenceError(0, 0, "boom", "sat")
+
+    monkeypatch.setattr(W, "closed_loop", always)
+    with pytest.raises(W.SweepError) as e:
+        lc.monte_carlo(scene, ctrl, q0=_q0(ctrl), **{**MC, "inertia_spread": 0.05, "n": 3})
+    assert e.value.field == "monte_carlo" and len(e.value.samples) == 3 and calls == [4, 5, 6]
+    assert all(s["failed"] == "run" for s in e.value.samples) and "every one of the 3 draws failed" in str(e.value)
+    back = pickle.loads(pickle.dumps(e.value))
+    assert back.samples == e.value.samples and str(back) == str(e.value)
+    # a user input error, the same for every draw, is raised once before any draw flies
+    calls.clear()
+    for bad, field in (({"T": 0.0}, "T"), ({"dt": 0.03}, "dt"), ({"q0": (0, 0, 0, 0)}, "q0"), ({"backend": "gpu"}, "backend"),
+                       ({"threshold_deg": -1.0}, "threshold_deg"), ({"Omega0": np.zeros(4)}, "Omega0")):
+        with pytest.raises(LavenderInputError) as e:
+            lc.monte_carlo(scene, ctrl, **{**MC, **bad})
+        assert e.value.field == field and not isinstance(e.value, W.SweepError)
+    assert calls == []
+
+
+def test_failed_samples_cross_processes_unchanged(sat):
+    from lavendersim import executor as X
+
+    scene, ctrl = sat
+    kw = {**MC, "n": 6, "T": 2.0}
+    serial = lc.monte_carlo(scene, ctrl, q0=_q0(ctrl), **kw)
+    two = lc.monte_carlo(scene, ctrl, q0=_q0(ctrl), executor=X.Executor(X.PROCESSES, 2), **kw)
+    assert serial["failed"] == 4 and two == serial
+
+
+PLATE = """
+name = "a flat plate: I_z within 2.5 % of I_x + I_y"
+
+[body]
+name = "plate"
+mass = 2.0
+inertia = [[0.02, 0.0, 0.0], [0.0, 0.02, 0.0], [0.0, 0.0, 0.039]]
+
+[body.wheels]
+J = 2e-5
+torque_limit = 0.005
+speed_limit = 600.0
+
+[controller]
+period = 0.2
+
+[maneuver]
+angle_deg = 10.0
+axis = [1.0, 0.0, 0.0]
+duration = 4.0
+
+[simulator]
+dt = 0.02
+
+[monte_carlo]
+n = 6
+inertia_uncertainty = 0.3
+seed = 0
+"""
+
+
+def test_cli_monte_carlo_json_lists_the_failed_samples(tmp_path, capsys):
+    import json
+
+    from lavendersim import cli
+
+    path = tmp_path / "plate.toml"
+    path.write_text(PLATE, encoding="utf-8")
+    code = cli.main(["lqr", "--spacecraft", str(path), "--monte-carlo", "6", "--workers", "1", "--json"])
+    out, err = capsys.readouterr()
+    mc = json.loads(out)["monte_carlo"]
+    assert code in (0, 1) and "Traceback" not in err
+    scales = 1 + 0.3 * np.random.default_rng(0).uniform(-1, 1, (6, 3))
+    infeasible = [i for i in range(6) if 0.039 * scales[i, 2] > 0.02 * (scales[i, 0] + scales[i, 1])]
+    assert infeasible and len(infeasible) < 6
+    assert mc["failed"] == len(infeasible) and [s["index"] for s in mc["failed_samples"]] == infeasible
+    assert all(s["field"] == "inertia" and s["failed"] == "plant" for s in mc["failed_samples"])
+    assert mc["failures"] >= mc["failed"] and "samples" not in mc
