@@ -98,8 +98,8 @@ def load_declarations(path) -> tuple[list[EffectDecl], list[Kernel]]:
         raise DeclarationError(f"{path}{_line_in(path, exc)}: {_explain(exc)}") from exc
     finally:
         sys.modules.pop(name, None)
-    effects = _listed(path, module, "EFFECTS", EffectDecl, "effect(...) of lavendersim.derive.effect")
-    kernels = _listed(path, module, "KERNELS", Kernel, "Kernel(...) of lavendersim.derive.kernel")
+    effects = _listed(path, module, "EFFECTS", EffectDecl, "an effect(...) of lavendersim.derive.effect")
+    kernels = _listed(path, module, "KERNELS", Kernel, "a Kernel(...) of lavendersim.derive.kernel")
     if not effects and not kernels:
         raise DeclarationError(f"{path}: declares nothing; define EFFECTS = [effect(...), ...] and/or "
                                "KERNELS = [Kernel(...), ...]")
@@ -117,10 +117,11 @@ def load_declarations(path) -> tuple[list[EffectDecl], list[Kernel]]:
 def _listed(path: Path, module, attr: str, cls, what: str) -> list:
     value = getattr(module, attr, [])
     if not isinstance(value, (list, tuple)):
-        raise DeclarationError(f"{path}: {attr} must be a list of {what}, got {type(value).__name__} {_one_line(repr(value))[:60]}")
+        raise DeclarationError(f"{path}: {attr} must be a list, each item {what}; got {type(value).__name__} "
+                               f"{_one_line(repr(value))[:60]}")
     for i, v in enumerate(value):
         if not isinstance(v, cls):
-            raise DeclarationError(f"{path}: {attr}[{i}] must be an {what}, got {type(v).__name__} "
+            raise DeclarationError(f"{path}: {attr}[{i}] must be {what}, got {type(v).__name__} "
                                    f"{_one_line(repr(v))[:60]}")
     return list(value)
 
