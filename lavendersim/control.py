@@ -485,13 +485,12 @@ class DesignError(V.LavenderInputError):
         Whether the eigenvalue is discrete-time.
     """
 
+    _init_fields = ("field", "rule", "detail", "eigenvalue", "states", "discrete")   # pickles with them
+
     def __init__(self, field: str, rule: str, detail: str = "", eigenvalue: complex = 0j, states: tuple = (),
                  discrete: bool = False) -> None:
         super().__init__(field, rule, detail)
         self.eigenvalue, self.states, self.discrete = complex(eigenvalue), tuple(states), bool(discrete)
-
-    def __reduce__(self):   # crosses process boundaries with its fields
-        return (type(self), (self.field, self.rule, self.detail, self.eigenvalue, self.states, self.discrete))
 
 
 STABILITY_RTOL = 1e-6   # a mode is unstable when it grows faster than this fraction of the model's fastest rate
@@ -883,5 +882,5 @@ def linearization_residual(lin: Linearization, A_fd: ArrayLike, B_fd: ArrayLike)
 DEFAULT_AXIS = (1.0, 2.0, 3.0)
 CORNER_AXIS = (1.0, 1.0, -2.0)  # perpendicular to the chapter cube's body diagonal: a pure tilt
 
-from .wheel_control import (Controller, Response, Sensors, Wheels, allocation, closed_loop, default_weights,  # noqa: E402
-                            design, momentum_exchange, monte_carlo, perturbed_inertia, wheeled_body)
+from .wheel_control import (Controller, Response, Sensors, SweepError, Wheels, allocation, closed_loop,  # noqa: E402
+                            default_weights, design, momentum_exchange, monte_carlo, perturbed_inertia, wheeled_body)

@@ -1187,12 +1187,11 @@ class SweepError(V.LavenderInputError):
         The failed samples (monte_carlo's ``samples``).
     """
 
+    _init_fields = ("field", "rule", "detail", "samples")   # pickles with them (lavendersim.errors.PicklableError)
+
     def __init__(self, field: str, rule: str, detail: str = "", samples: list | None = None) -> None:
         super().__init__(field, rule, detail)
         self.samples = list(samples or [])
-
-    def __reduce__(self):
-        return (type(self), (self.field, self.rule, self.detail, self.samples))
 
 
 def monte_carlo(scene: Scene, controller: Controller, *, n: int, seed: int = 0, T: float, q0: ArrayLike | None = None,
