@@ -194,6 +194,13 @@ def _run_one(args) -> int:
 
         require("viser", "viewer", f"lavendersim lab {args.lab_name} --view")  # before the lab runs, not after
     try:
+        if getattr(args, "view", False):   # a host or port the viewer would refuse: exit 2 before the lab runs
+            from lavendersim import viewer
+            from lavendersim import validate as V
+
+            viewer.check_host(args.view_host)
+            if not 0 <= V.integer("port", args.view_port) <= 65535:
+                raise LavenderInputError("port", "must be in 0..65535", f", got {args.view_port}")
         # OUT/NAME is this run's from before the lab computes until its folder is in place (labs/output.py)
         with lab_lock(args.out, args.lab_name):
             check_folder(args.out, args.lab_name)

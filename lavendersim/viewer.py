@@ -184,17 +184,69 @@ class ViewerError(RuntimeError):
 _HOSTNAME = re.compile(r"^(?=.{1,253}$)([A-Za-z0-9]([A-Za-z0-9-]{0,61}[A-Za-z0-9])?)(\.[A-Za-z0-9]([A-Za-z0-9-]{0,61}[A-Za-z0-9])?)*\.?$")
 
 
+# the only spellings of "every interface" accepted (with a warning on stderr): any other host that binds the
+# wildcard address ("0", "", "0.0", "0x0", "000.0.0.0", "::0", "::ffff:0.0.0.0", a name resolving to 0.0.0.0)
+# is refused, so nobody exposes the page to the network by a typo or without saying so
+EVERY_INTERFACE = ("0.0.0.0", "::")
+
+
+def _is_wildcard(addr: str) -> bool:
+    """Whether a numeric address (as getaddrinfo gives it) is INADDR_ANY / in6addr_any (or mapped to it)."""
+    try:
+        ip = ipaddress.ip_address(addr.split("%", 1)[0])
+    except ValueError:
+        return False
+    mapped = getattr(ip, "ipv4_mapped", None)
+    return ip.is_unspecified or (mapped is not None and mapped.is_unspecified)
+
+
+def binds_every_interface(host: str) -> bool:
+    """Whether ``host`` (as accepted by :func:`check_host`) is one of EVERY_INTERFACE.
+
+    Parameters
+    ----------
+    host : str
+
+    Returns
+    -------
+    bool
+    """
+    return host in EVERY_INTERFACE
+
+
 def check_host(host: object) -> str:
     """Validate an interface to bind: an IP address or a host name that resolves (within
-    RESOLVE_TIMEOUT_S) to an address of this machine; LavenderInputError naming ``host`` otherwise."""
+    RESOLVE_TIMEOUT_S) to an address of this machine; LavenderInputError naming ``host`` otherwise.
+    A host that would bind every interface is refused unless spelled exactly ``0.0.0.0`` or ``::``
+    (EVERY_INTERFACE; :class:`Viewer` then prints a warning on stderr).
+
+    Parameters
+    ----------
+    host : str
+
+    Returns
+    -------
+    str
+        ``host``.
+
+    Raises
+    ------
+    lavendersim.validate.LavenderInputError
+        Naming ``host``.
+    """
     if not isinstance(host, str) or not host:
-        raise V.LavenderInputError("host", "expected an interface address (str)", f", got {V._describe(host)}")
+        raise V.LavenderInputError("host", "expected an interface address (str; 0.0.0.0 for every interface)",
+                                   f", got {V._describe(host)}")
     try:
         addrs = [str(ipaddress.ip_address(host))]
     except ValueError:
         if not _HOSTNAME.match(host):
             raise V.LavenderInputError("host", "is neither an IP address nor a valid host name", f", got {host!r}") from None
         addrs = _resolve(host)
+    if host not in EVERY_INTERFACE and any(_is_wildcard(a) for a in addrs):
+        raise V.LavenderInputError("host", "would listen on every interface of this machine (it means "
+                                   f"{', '.join(dict.fromkeys(addrs))}); spell it 0.0.0.0 (or :: for IPv6) if that is "
+                                   "what you want, or give one interface such as 127.0.0.1", f", got {host!r}")
     errors = []
     for a in addrs:
         fam = socket.AF_INET6 if ":" in a else socket.AF_INET
@@ -451,6 +503,10 @@ class Viewer:
         check_host(host)
         self.server = _start_server(viser, host, port, label, verbose)
         self.host, self.port = host, int(self.server.get_port())
+        if binds_every_interface(host):
+            print(f"lavendersim viewer: warning: listening on every interface ({host}, port {self.port}): anyone who "
+                  "can reach this machine can open the page; --host 127.0.0.1 keeps it on this machine",
+                  file=sys.stderr, flush=True)
         self.server.gui.configure_theme(show_share_button=False, show_logo=False)
         self._status = self.server.gui.add_markdown("waiting for the first frame")
         self._lock = threading.Lock()
@@ -490,7 +546,9 @@ class Viewer:
     @property
     def url(self) -> str:
         """The page's address, ``http://HOST:PORT/``."""
-        host = "127.0.0.1" if self.host in ("0.0.0.0", "") else self.host
+        host = {"0.0.0.0": "127.0.0.1", "::": "::1"}.get(self.host, self.host)
+        if ":" in host:   # an IPv6 literal
+            host = f"[{host}]"
         return f"http://{host}:{self.port}/"
 
     def publish_frame(self, sim: Sim, overlays: Mapping[str, Any] | None = None) -> int:

@@ -674,3 +674,62 @@ def test_wheel_scene_balances_the_cube_and_draws_the_chapter_payload():
     from lavendersim.labs import LAB_VIEWS
 
     assert LAB_VIEWS["04"] == "wheel"
+
+
+# ---- which interface the page listens on (issue 28) -------------------------------------------------------
+
+# every spelling that binds INADDR_ANY / in6addr_any other than the two accepted ones
+WILDCARDS = ["0", "0.0", "0.0.0", "0x0", "000.000.000.000", "::0", "0:0:0:0:0:0:0:0", "0::0", "::ffff:0.0.0.0"]
+
+
+@pytest.mark.parametrize("host", WILDCARDS)
+def test_a_host_that_binds_every_interface_is_refused_unless_spelled_0_0_0_0(host):
+    with pytest.raises(LavenderInputError) as exc:
+        VW.check_host(host)
+    assert exc.value.field == "host" and "every interface" in str(exc.value) and "0.0.0.0" in str(exc.value)
+
+
+def test_an_empty_host_is_refused():
+    with pytest.raises(LavenderInputError, match="host"):
+        VW.check_host("")
+
+
+def test_the_two_spellings_of_every_interface_are_accepted():
+    assert VW.check_host("0.0.0.0") == "0.0.0.0"
+    assert VW.check_host("127.0.0.1") == "127.0.0.1" and not VW.binds_every_interface("127.0.0.1")
+    assert VW.binds_every_interface("0.0.0.0") and VW.binds_every_interface("::")
+    try:   # a machine without IPv6 cannot bind :: at all
+        with socket.socket(socket.AF_INET6, socket.SOCK_STREAM) as s:
+            s.bind(("::", 0))
+    except OSError:
+        return
+    assert VW.check_host("::") == "::"
+
+
+@pytest.mark.needs("viewer")
+def test_a_viewer_on_every_interface_says_so_on_stderr_and_listens_there(capsys):
+    with VW.Viewer(host="0.0.0.0", port=0) as v:
+        err = capsys.readouterr().err
+        assert v.url == f"http://127.0.0.1:{v.port}/"
+        if sys.platform.startswith("linux"):   # all of 127/8 is this machine: only a wildcard bind answers 127.0.0.2
+            socket.create_connection(("127.0.0.2", v.port), timeout=DEADLINE).close()
+    lines = [ln for ln in err.splitlines() if "every interface" in ln]
+    assert len(lines) == 1 and "0.0.0.0" in lines[0] and "warning" in lines[0]
+
+
+@pytest.mark.needs("viewer")
+def test_a_viewer_on_one_interface_prints_no_warning(capsys):
+    with VW.Viewer(host="127.0.0.1", port=0) as v:
+        assert v.url == f"http://127.0.0.1:{v.port}/"
+        if sys.platform.startswith("linux"):   # the control: bound to one address, 127.0.0.2 is refused
+            with pytest.raises(OSError):
+                socket.create_connection(("127.0.0.2", v.port), timeout=DEADLINE).close()
+    assert "every interface" not in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("host", ["0", "::0"])
+def test_view_command_refuses_a_wildcard_host_in_one_line(host):
+    r = subprocess.run([sys.executable, "-m", "lavendersim.cli", "view", "tumble", "--host", host, "--duration", "0.1",
+                        "--port", "0"], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 2 and "Traceback" not in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1 and "--host" not in r.stdout and "every interface" in r.stderr
