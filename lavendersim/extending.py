@@ -562,8 +562,8 @@ def load(path, reload: bool = False) -> UserSet:
                              "named by its file)", "; rename one of the files and derive it")
     else:
         directory = path
-    if directory in _SETS and not reload:
-        return _SETS[directory]
+    if directory in _SETS and not reload and _manifest_or_none(directory) == _SETS[directory].manifest:
+        return _SETS[directory]   # (a folder derived again since, from this file or another, is loaded again)
     s = UserSet(directory)
     s.check_current()
     old = _SETS.get(directory)

@@ -100,8 +100,10 @@ def test_the_same_name_from_another_folder_is_refused_naming_both(user):
     assert torque_after("us_twin_a", 0.5) == pytest.approx(0.5, rel=1e-12)
     assert torque_after("us_twin_a", 0.5, backend="c") == pytest.approx(0.5, rel=1e-12)
     (a / "twin.py").unlink()                                         # the first file is gone: the name is free
-    s = extending.derive(b / "twin.py", compile=False)
-    assert s.replaced_declaration == (a / "twin.py").resolve() and s.effect_names == ["us_twin_b"]
+    r = cli(["derive", "--user", b / "twin.py"], user["env"], user["tmp"])
+    assert r.returncode == 0 and f"replaced the set derived from {a / 'twin.py'}" in r.stdout, r.stderr
+    s = extending.load(b / "twin.py")           # this process had the first file's set cached: not returned
+    assert s.declaration == (b / "twin.py").resolve() and s.effect_names == ["us_twin_b"]
     assert torque_after("us_twin_b", 0.5) == pytest.approx(5.0, rel=1e-12)
 
 
