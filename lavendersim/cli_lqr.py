@@ -115,7 +115,8 @@ def _text(fig: dict, mc: dict | None) -> str:
             return f"{k} {v['p50']:.4g} median, {v['p90']:.4g} p90, {v['p100']:.4g} max {unit}" if v["p50"] is not None \
                 else f"{k} -"
 
-        within = f" ({mc['settled_within']} within {mc['settle_within']:g} s)" if mc["settle_within"] else ""
+        within = (f" ({mc['settled_within']} within {mc['settle_within']:g} s)" if mc["settle_within"] else "") \
+            + (f", {mc['failed']} failed draws (--json lists why)" if mc.get("failed") else "")
         lines.append(f"Monte Carlo, {mc['n']} runs (inertia ±{100 * mc['inertia_spread']:g}% per axis, sensor seeds "
                      f"{mc['sensors']['seed']}+): {mc['n'] - mc['failures']} settled{within}; {row('settling_time', 's')}; "
                      f"{row('peak_torque', 'N·m')}; {row('peak_wheel_speed', 'rad/s')}")

@@ -430,7 +430,8 @@ WEIGHT_MAX = 1e150   # |entries| of Q and R: the Riccati solution and the gain s
 
 def _weight(name: str, value, n: int, definite: bool) -> np.ndarray:
     """A weight matrix (n, n) from a scalar, a diagonal (n,) or a matrix (n, n) of real numbers, checked
-    finite, its nonzero entries within [1/WEIGHT_MAX, WEIGHT_MAX] in magnitude, symmetric and positive semidefinite (Q) or positive definite (R).
+    finite, its nonzero entries within [1/WEIGHT_MAX, WEIGHT_MAX] in magnitude, symmetric and positive
+    semidefinite (Q) or positive definite (R).
 
     Complex, bool, string and object entries are refused (numpy would cast "1" or True to 1.0 and drop an
     imaginary part), naming ``name`` and the rule; nothing is rounded into a weight."""
@@ -563,8 +564,9 @@ def unstable_uncontrollable_modes(A: ArrayLike, B: ArrayLike, *, discrete: bool 
     g = _growth(lam, discrete)
     out = []
     for i in np.argsort(-g, kind="stable"):
-        if g[i] > tol and lam[i].imag >= 0:
-            out.append((complex(lam[i]), _mode_states(U @ W[:, i], labels)))
+        z = complex(lam[i])
+        if g[i] > tol and (z.imag >= 0 or _is_real(z)):     # one of a complex pair; every real root
+            out.append((complex(z.real) if _is_real(z) else z, _mode_states(U @ W[:, i], labels)))
     return out
 
 
@@ -583,8 +585,13 @@ def _refuse_unstable(A: np.ndarray, B: np.ndarray, T: np.ndarray, discrete: bool
                       f": eigenvalue {_eig_text(lam)}{rate} in {', '.join(states)}{more}", lam, states, discrete)
 
 
+def _is_real(lam: complex) -> bool:
+    """An eigenvalue whose imaginary part is rounding (a real double root splits into a ±1e-16j pair)."""
+    return abs(lam.imag) <= 1e-12 * max(1.0, abs(lam))
+
+
 def _eig_text(lam: complex) -> str:
-    return f"{lam.real:+.6g}" if lam.imag == 0 else f"{lam.real:+.6g}{lam.imag:+.6g}j"
+    return f"{lam.real:+.6g}" if _is_real(lam) else f"{lam.real:+.6g}{lam.imag:+.6g}j"
 
 
 def _check_closed_loop(A: np.ndarray, B: np.ndarray, K: np.ndarray, T: np.ndarray, discrete: bool,

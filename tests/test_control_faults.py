@@ -171,7 +171,8 @@ def test_lqr_refuses_a_weight_that_is_not_a_real_finite_matrix(which, value, rul
 def test_definiteness_is_the_rule_q_psd_r_pd():
     A, B = np.zeros((2, 2)), np.eye(2)
     for Q, R, field, rule in ((np.diag([1.0, -1.0]), 1.0, "Q", "positive semidefinite"),
-                              (1.0, [[1.0, 2.0], [2.0, 1.0]], "R", "positive definite"), (1.0, np.diag([1.0, 0.0]), "R", "positive definite")):
+                              (1.0, [[1.0, 2.0], [2.0, 1.0]], "R", "positive definite"),
+                              (1.0, np.diag([1.0, 0.0]), "R", "positive definite")):
         with pytest.raises(LavenderInputError) as e:
             lc.lqr(A, B, Q, R)
         assert e.value.field == field and rule in e.value.rule
