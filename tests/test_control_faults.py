@@ -95,6 +95,15 @@ def test_design_refuses_a_falling_axis_no_wheel_reaches():
     assert set(e.value.states) >= {"cube_dtheta_x", "cube_dtheta_y", "cube_dtheta_z"}
     assert not any("Omega" in s for s in e.value.states)      # the wheel's own speed is not in the falling mode
     assert f"{sigma:+.4g}/s" in str(e.value)                   # the continuous rate, in words
+    assert e.value.eigenvalue.imag == 0.0                       # a real double root (both tilts), not ±1e-16j
+    # the same plant's Linearization (a control.StateSpace) given to lqr / dlqr: refused, its state labels named
+    lin = lc.linearize(scene, {"cube": {"q": q0}})
+    with pytest.raises(lc.DesignError) as c:
+        lc.lqr(lin, np.eye(lin.nstates), 1.0)
+    assert c.value.eigenvalue == pytest.approx(sigma, rel=1e-9) and "cube_dtheta_x" in c.value.states
+    with pytest.raises(lc.DesignError) as d:
+        lc.dlqr(lin.sample(2e-3), np.eye(lin.nstates), 1.0)
+    assert abs(d.value.eigenvalue - e.value.eigenvalue) < 1e-9 and f"{sigma:+.4g}/s" in str(d.value)
 
 
 def _corner_one_wheel_file(tmp_path):
