@@ -137,7 +137,8 @@ def _add_view(sub) -> None:
                                    f"(scenes: {', '.join(SCENES)}). Needs the viewer extra: pip install 'lavendersim[viewer]'.")
     v.add_argument("scene", metavar="NAME", help=f"scene to run: {', '.join(SCENES)}")
     v.add_argument("--duration", type=float, default=None, help="simulated seconds to run (default: until Ctrl-C)")
-    v.add_argument("--host", default=DEFAULT_HOST, help=f"interface to bind (default {DEFAULT_HOST}: this machine only)")
+    v.add_argument("--host", default=DEFAULT_HOST, help=f"interface to bind (default {DEFAULT_HOST}: this machine only; "
+                                                        "0.0.0.0 or :: listens on every interface, with a warning)")
     v.add_argument("--port", type=int, default=DEFAULT_PORT, help=f"TCP port (default {DEFAULT_PORT}; 0 = any free port)")
     v.add_argument("--rate", type=float, default=60.0, help="frames published per second of simulated time (default 60)")
     v.add_argument("--replay", action="store_true",
@@ -187,14 +188,27 @@ def _top_parser(full: str | None) -> argparse.ArgumentParser:
     return p
 
 
-def _fail(message: str) -> int:
-    print(f"lavendersim: {message}", file=sys.stderr)
-    return 2
+# set to 1 to see the traceback of an unexpected error (the command line otherwise says it in one line)
+TRACEBACK_ENV = "LAVENDERSIM_TRACEBACK"
+
+
+def _fail(message: str, code: int = 2) -> int:
+    print(f"lavendersim: {' '.join(str(message).split())}", file=sys.stderr)   # one line, whatever the message
+    return code
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Run the command line; returns the exit code (0 ok, 1 a figure or check failed, 2 bad usage)."""
+    """Run the command line; returns the exit code.
+
+    0: done; 1: a figure or check failed, or a simulation diverged; 2: any other error — bad input, an
+    unusable path, a missing extra or backend, or an unexpected error (one line on stderr, never a
+    traceback; ``LAVENDERSIM_TRACEBACK=1`` shows it); 130: interrupted.
+    """
+    import os
+
     from ._install import MissingExtraError
+    from .errors import DivergenceError
+    from .validate import LavenderInputError
 
     argv = list(sys.argv[1:] if argv is None else argv)
     command = next((a for a in argv if not a.startswith("-")), None)
@@ -204,17 +218,29 @@ def main(argv: list[str] | None = None) -> int:
         return int(args.fn(args) or 0)
     except MissingExtraError as exc:
         return _fail(str(exc))
-    except ValueError as exc:  # LavenderInputError is a ValueError naming the field and the rule
-        from .validate import LavenderInputError
-
-        if not isinstance(exc, LavenderInputError):
-            raise
+    except LavenderInputError as exc:  # a ValueError naming the field and the rule
         return _fail(f"{command}: invalid input: {exc}")
     except ImportError as exc:  # the C backend asked for by name and not usable: says how to build it
         return _fail(f"{command}: {exc}")
+    except DivergenceError as exc:   # a command's own simulation (view, lqr, bench): a failed run, not bad usage
+        return _fail(f"{command}: {exc}", 1)
+    except BrokenPipeError:   # stdout closed early (`lavendersim ... | head`): stop quietly
+        try:
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        except (OSError, ValueError):
+            pass
+        return 141
+    except OSError as exc:   # a path the command was given (or one it derived from it) cannot be used
+        where = f" {exc.filename!r}" if getattr(exc, "filename", None) else ""
+        return _fail(f"{command}: cannot use{where}: {exc.strerror or exc}")
     except KeyboardInterrupt:
         print("lavendersim: interrupted", file=sys.stderr)
         return 130
+    except Exception as exc:  # noqa: BLE001 - the promise is one line, never a traceback
+        if os.environ.get(TRACEBACK_ENV, "") not in ("", "0"):
+            raise
+        return _fail(f"{command}: unexpected error (a bug: please report it with the command; {TRACEBACK_ENV}=1 "
+                     f"shows the traceback): {type(exc).__name__}: {exc}")
 
 
 if __name__ == "__main__":
