@@ -998,11 +998,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def command(args) -> int:
     if args.rounds is not None:  # checked before any measurement (run() checks again for Python callers)
         V.integer("rounds", args.rounds, minimum=1)
-    if args.json:
+    if args.json is not None:
         V.writable_file("json", args.json)  # before a run of minutes, not after
     res = run(quick=args.quick, rounds=args.rounds, use_mujoco=not args.no_mujoco)
     print(report(res), flush=True)
-    if args.json:
+    if args.json is not None:
         path = Path(args.json)
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_text(json.dumps(_jsonable(res), indent=1) + "\n", encoding="utf-8")
