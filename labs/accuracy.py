@@ -104,6 +104,7 @@ from lavendersim import validate as V
 from lavendersim._install import extra_command
 from lavendersim.errors import DivergenceError, ValidityBoundWarning
 from lavendersim.kernels import K
+from lavendersim import figures as F
 
 from . import common as C
 
@@ -1114,37 +1115,76 @@ def format_table(table: list[dict]) -> str:
 # ------------------------------------------------------------------------------------------ plots
 
 _FAMILY_STYLE = {"c": "-", "numpy": "--", "scipy": ":", "mujoco": "-."}
+_F32_STYLE = ":"          # float32 differs from float64 in line style and hollow markers, not only in label
+_REFERENCE = ("rk4", "dopri5")   # drawn in grey on the peers' panels, for scale
 
 
-_PALETTE = ("#1f77b4", "#17becf", "#ff7f0e", "#d62728", "#2ca02c", "#9467bd", "#e377c2", "#8c564b",
-            "#7f7f7f", "#bcbd22", "#000000", "#aec7e8", "#ffbb78", "#98df8a")
-
-
-def _colors(meths):
+def _styles(meths) -> dict:
+    """Colour and marker per integrator (or peer), from the Okabe–Ito palette: every pair differs."""
     names = []
     for m in meths:
         key = m.integrator if m.family == "lavendersim" else m.label
         if key not in names:
             names.append(key)
-    return {n: _PALETTE[i % len(_PALETTE)] for i, n in enumerate(names)}
+    colors = [c for c in F.CYCLE if c != F.YELLOW]        # yellow is too faint for a line on white
+    return {n: {"color": colors[i % len(colors)], "marker": F.MARKERS[i % len(F.MARKERS)]} for i, n in enumerate(names)}
+
+
+def _colors(meths):
+    return {k: s["color"] for k, s in _styles(meths).items()}
 
 
 PLOT_NAMES = ("work_precision_time.png", "work_precision_rhs.png", "work_precision_omega.png", "drift_vs_time.png")
 
+# the work-precision plots' columns: which methods each panel draws (split by backend and precision)
+_GROUPS = (("C backend: float64 solid, float32 dotted (hollow)", lambda m: m.backend == "c"),
+           ("NumPy backend (dashed)", lambda m: m.backend == "numpy"),
+           ("peers: scipy dotted, MuJoCo dash-dot; grey: C rk4, dopri5", lambda m: m.backend in ("scipy", "mujoco")))
 
-def _plot_one(name: str, d: dict):
-    """One PNG of the study, drawn from the result's data (LabResult.figure)."""
-    return make_plots(d["use"], d["meths"], d["points"], d["drifts"], d["per_case"], d["per_case_rhs"], only=name)[name]
+
+def _legend(styles) -> tuple[list, list]:
+    """One entry per integrator or peer (colour + marker), then what the line styles mean."""
+    from matplotlib.lines import Line2D
+
+    handles = [Line2D([], [], color=s["color"], marker=s["marker"], ms=4, ls="-") for s in styles.values()]
+    labels = list(styles)
+    for ls, mfc, text in (("-", F.BLACK, "C, float64"), (_F32_STYLE, "none", "C, float32"), ("--", F.BLACK, "NumPy"),
+                          (":", F.BLACK, "scipy"), ("-.", F.BLACK, "MuJoCo")):
+        handles.append(Line2D([], [], color=F.BLACK, marker="o", ms=4, mfc=mfc, ls=ls))
+        labels.append(text)
+    return handles, labels
 
 
-def make_plots(use, meths, points, drifts, per_case, per_case_rhs, only: str | None = None) -> dict:
-    """The PNGs; big markers are points of methods on the front of that plot's own verdict (attitude
-    error vs time, or vs RHS evaluations); the omega plot marks none."""
-    colors = _colors(meths)
+def _plot_one(name: str, d: dict, ax=None):
+    """One PNG of the study, drawn from the result's data (LabResult.figure; ``ax``: that plot's axes)."""
+    return make_plots(d["use"], d["meths"], d["points"], d["drifts"], d["per_case"], d["per_case_rhs"], only=name,
+                      ax=ax)[name]
+
+
+def _draw_method(ax, m, pts, xkey, xscale, ykey, style, front, grey=False):
+    pts = sorted(pts, key=lambda p: -p.value)          # along the sweep: coarse to fine
+    x = np.array([getattr(p, xkey) for p in pts]) * xscale
+    y = np.maximum([getattr(p, ykey) for p in pts], 1e-17)
+    f32 = m.dtype == "float32"
+    kw = dict(color=F.GREY if grey else style["color"], marker=style["marker"], ms=4,
+              mfc="none" if f32 or grey else style["color"], lw=1.0 if grey else 1.3,
+              ls=_F32_STYLE if f32 else _FAMILY_STYLE[m.backend], zorder=1 if grey else 2)
+    ax.loglog(x, y, label=None if grey else m.label, **kw)
+    on = np.array([p.value in front for p in pts], bool)
+    if on.any() and not grey:
+        ax.loglog(x[on], y[on], "o", color=style["color"], ms=9, mfc="none", mew=1.5)
+
+
+def make_plots(use, meths, points, drifts, per_case, per_case_rhs, only: str | None = None, ax=None) -> dict:
+    """The PNGs. Work-precision: one row per case, one column per backend (C float64 and float32,
+    NumPy, the peers); big circles are points of methods on the front of that plot's own verdict
+    (attitude error vs time, or vs RHS evaluations); the omega plot marks none. ``ax``: with ``only``,
+    the axes to draw that plot into (rows × columns of it, in row order)."""
+    from matplotlib.ticker import NullFormatter
+
+    styles = _styles(meths)
     plots = {}
     n = len(use)
-    ncols = 2
-    nrows = (n + 1) // 2
     specs = (("work_precision_time.png", "wall_per_sim_s", 1e6, "wall time per simulated second (µs)",
               "attitude_error", "attitude error at T (rad)", True),
              ("work_precision_rhs.png", "rhs_evals", 1.0, "RHS evaluations over T = 10 s",
@@ -1154,52 +1194,54 @@ def make_plots(use, meths, points, drifts, per_case, per_case_rhs, only: str | N
     for fname, xkey, xscale, xlabel, ykey, ylabel, both_backends in specs:
         if only is not None and fname != only:
             continue
-        fig, axes = C.new_figure(nrows, ncols, size=(15, 5.2 * nrows),
-                                 title=f"{ylabel.split(' (')[0]} vs {xlabel.split(' (')[0]}, torque-free, T = {T_END:g} s")
+        groups = [g for g in _GROUPS if both_backends or "NumPy" not in g[0]]    # numpy: the C counts and errors
+        ncols = len(groups)
+        fig, axes = C.new_figure(n, ncols, size=(5.0 * ncols + 2.6, 3.7 * n + 0.6), ax=ax,
+                                 title=f"{ylabel.split(' (')[0]} vs {xlabel.split(' (')[0]}, torque-free, T = {T_END:g} s"
+                                       + ("" if both_backends else " (NumPy: the same counts and errors as C)"))
         for k, case in enumerate(use):
-            ax = axes[k // ncols, k % ncols]
-            for m in meths:
-                if not both_backends and m.backend == "numpy":
-                    continue          # same RHS counts and errors as the C backend
-                pts = [p for p in points if p.case == case.name and p.method == m.label and p.ok
-                       and getattr(p, xkey) is not None and getattr(p, ykey) is not None]
-                if not pts:
-                    continue
-                pts.sort(key=lambda p: -p.value)          # along the sweep: coarse to fine
-                x = np.array([getattr(p, xkey) for p in pts]) * xscale
-                y = np.maximum([getattr(p, ykey) for p in pts], 1e-17)
-                key = m.integrator if m.family == "lavendersim" else m.label
-                lab = m.label if both_backends else (m.integrator if m.family == "lavendersim" else m.label)
-                marks = {"wall_per_sim_s": per_case, "rhs_evals": per_case_rhs}[xkey] if ykey == "attitude_error" else {}
-                front = set(marks.get(case.name, {}).get(m.label, {}).get("overall_front_points", []))
-                ax.loglog(x, y, _FAMILY_STYLE[m.backend], marker=".", color=colors[key], ms=3, lw=1.2, label=lab)
-                on = np.array([p.value in front for p in pts], bool)
-                if on.any():
-                    ax.loglog(x[on], y[on], "o", color=colors[key], ms=7, mfc="none", mew=1.5)
-            if ykey == "attitude_error":
-                ax.axhline(ERROR_CEILING, color="gray", lw=0.6, ls=":")
-                ax.axhline(ERROR_FLOOR, color="gray", lw=0.6, ls=":")
-            ax.set_xlabel(xlabel)
-            ax.set_ylabel(ylabel)
-            ax.set_title(case.label, fontsize=10)
-            ax.grid(True, which="major", alpha=0.3)
-        for k in range(n, nrows * ncols):
-            axes[k // ncols, k % ncols].set_visible(False)
-        handles, labs_ = axes[0, 0].get_legend_handles_labels()
-        fig.legend(handles, labs_, loc="outside right center", fontsize=7,
-                   title=("circled: the case's Pareto front\n" if ykey == "attitude_error" else "")
-                   + ("c solid, numpy dashed,\nscipy dotted, MuJoCo dash-dot" if both_backends
-                      else "numpy = c (same\ncounts and errors)"), title_fontsize=7)
+            marks = {"wall_per_sim_s": per_case, "rhs_evals": per_case_rhs}[xkey] if ykey == "attitude_error" else {}
+            for j, (gtitle, member) in enumerate(groups):
+                a = axes[k, j]
+                peers = "peers" in gtitle
+                for m in meths:
+                    grey = peers and m.backend == "c" and m.integrator in _REFERENCE and m.dtype == "float64"
+                    if not (member(m) or grey):
+                        continue
+                    pts = [p for p in points if p.case == case.name and p.method == m.label and p.ok
+                           and getattr(p, xkey) is not None and getattr(p, ykey) is not None]
+                    if not pts:
+                        continue
+                    key = m.integrator if m.family == "lavendersim" else m.label
+                    front = set(marks.get(case.name, {}).get(m.label, {}).get("overall_front_points", []))
+                    _draw_method(a, m, pts, xkey, xscale, ykey, styles[key], front, grey=grey)
+                if ykey == "attitude_error":
+                    a.axhline(ERROR_CEILING, color=F.GREY, lw=0.6, ls=":")
+                    a.axhline(ERROR_FLOOR, color=F.GREY, lw=0.6, ls=":")
+                a.set_xlabel(xlabel)
+                if j == 0:
+                    a.set_ylabel(f"{case.label}\n{ylabel}", fontsize=9)
+                if k == 0:
+                    a.set_title(gtitle, fontsize=9)
+                a.grid(True, which="major", alpha=0.3)
+            for j in range(1, ncols):                          # one y range per case row
+                axes[k, j].sharey(axes[k, 0])
+        for a in axes.ravel():
+            a.xaxis.set_minor_formatter(NullFormatter())      # a decade or less: no crowded minor labels
+        if ax is None:
+            fig.legend(*_legend(styles), loc="outside right center", fontsize=7,
+                       title=("circled: the case's Pareto front\n" if ykey == "attitude_error" else "")
+                       + "colour + marker: the integrator", title_fontsize=7)
         plots[fname] = fig
 
     if only is not None and only != "drift_vs_time.png":
         return plots
-    fig, axes = C.new_figure(2, n, size=(max(4.2 * n + 3, 9.0), 8),
+    fig, axes = C.new_figure(2, n, size=(max(4.2 * n + 3, 9.0), 8), ax=ax,
                              title=f"relative drift over the run\n(C backend at dt = 2^-{DRIFT_DT_EXP} s; "
                                    f"rtol = {DRIFT_RTOL:.0e} for adaptive/scipy; MuJoCo at dt = 2^-{DRIFT_DT_EXP} s)")
     for k, case in enumerate(use):
         for row, what in enumerate(("energy", "momentum")):
-            ax = axes[row, k]
+            a = axes[row, k]
             shown = [m for m in meths if m.backend != "numpy"]
             for i, m in enumerate(shown):
                 d = drifts.get((case.name, m.label))
@@ -1209,13 +1251,16 @@ def make_plots(use, meths, points, drifts, per_case, per_case_rhs, only: str | N
                 yv = np.asarray(d[what], float)
                 # methods whose drifts coincide (euler and MuJoCo Euler, rk4 and rk4_expmap) stay visible: the
                 # earlier in the list, the wider the line underneath
-                ax.semilogy(d["t"], np.where(yv > 0, yv, np.nan), _FAMILY_STYLE[m.backend], color=colors[key],
-                            lw=4.0 - 3.2 * i / max(1, len(shown) - 1), label=m.label.replace(" [c]", ""))
-            ax.set_xlabel("time t (s)")
-            ax.set_ylabel("|E(t) − E(0)| / E(0)" if what == "energy" else "|L_w(t) − L_w(0)| / |L_w(0)|")
-            ax.set_title(f"{case.label}: {what}", fontsize=9)
-            ax.grid(True, alpha=0.3)
-    handles, labs_ = axes[0, 0].get_legend_handles_labels()
-    fig.legend(handles, labs_, loc="outside right center", fontsize=7)
+                st = styles[key]
+                a.semilogy(d["t"], np.where(yv > 0, yv, np.nan), _F32_STYLE if m.dtype == "float32" else _FAMILY_STYLE[m.backend],
+                           color=st["color"], marker=st["marker"], markevery=max(1, len(yv) // 8), ms=4, mfc="none",
+                           lw=4.0 - 3.2 * i / max(1, len(shown) - 1), label=m.label.replace(" [c]", ""))
+            a.set_xlabel("time t (s)")
+            a.set_ylabel("|E(t) − E(0)| / E(0)" if what == "energy" else "|L_w(t) − L_w(0)| / |L_w(0)|")
+            a.set_title(f"{case.label}: {what}", fontsize=9)
+            a.grid(True, alpha=0.3)
+    if ax is None:
+        handles, labs_ = axes[0, 0].get_legend_handles_labels()
+        fig.legend(handles, labs_, loc="outside right center", fontsize=7)
     plots["drift_vs_time.png"] = fig
     return plots

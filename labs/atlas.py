@@ -104,6 +104,7 @@ from lavendersim import validate as V
 from lavendersim import sim as S
 from lavendersim.errors import DivergenceError, ValidityBoundWarning
 from lavendersim.kernels import K
+from lavendersim import figures as F
 
 from . import common as C
 from . import hard_cases as H
@@ -559,8 +560,10 @@ def hard_case_points(wdts) -> list[dict]:
 
 # ------------------------------------------------------------------------------------------ pictures
 
-STATUS_COLORS = {"diverged": "#9e9e9e", "blew_up": "#e41a1c", "silent_nan": "#ff00ff", "error": "#ffffff",
-                 "no_reference": "#c6dbef", "not_run": "#fff7bc"}
+# Okabe–Ito (lavendersim.figures): blown-up cells are also hatched, and each status is told apart by
+# lightness as well as hue, so the maps read under colour-vision deficiencies
+STATUS_COLORS = {"diverged": F.GREY, "blew_up": F.VERMILLION, "silent_nan": F.PURPLE, "error": "#ffffff",
+                 "no_reference": "#e0e0e0", "not_run": F.YELLOW}
 STATUS_TEXT = {"diverged": "diverged: DivergenceError raised", "blew_up": "silent blow-up: E or |L| more than doubled, no error",
                "silent_nan": "silent NaN: non-finite without DivergenceError", "error": "refused (error)",
                "no_reference": "no exact reference for this cell",
@@ -573,7 +576,7 @@ METRICS = {  # metric -> (file, colour-bar label, vmax, bound label)
     "attitude_error": ("atlas_attitude.png", "attitude error vs the exact motion  max_t angle (rad)", math.pi,
                        "attitude error ≤ {b:.0e} rad"),
 }
-OVERVIEW_COLORS = ("#1a9850", "#a6d96a", STATUS_COLORS["diverged"], STATUS_COLORS["blew_up"],
+OVERVIEW_COLORS = (F.BLUE, F.SKY_BLUE, STATUS_COLORS["diverged"], STATUS_COLORS["blew_up"],
                    STATUS_COLORS["silent_nan"], STATUS_COLORS["error"], STATUS_COLORS["not_run"])
 
 
@@ -619,7 +622,7 @@ def _decade(x: float) -> str:
 def _decorate(ax, integ, axis, row, col, nrows, xe, ye, hard_points) -> None:
     from matplotlib.ticker import FixedFormatter, FixedLocator, NullLocator
 
-    if row == 0 and col == 0:      # the axes are shared: scale, limits and ticks once
+    if True:                       # on every panel: shared in the lab's figure, not in the caller's (ax=)
         ax.set_xscale("log")
         ax.set_yscale("log")
         ax.set_xlim(xe[0], xe[-1])
@@ -631,7 +634,7 @@ def _decorate(ax, integ, axis, row, col, nrows, xe, ye, hard_points) -> None:
             axis_.set_major_locator(FixedLocator([10.0 ** k for k in ks]))  # decades, no minor ticks, plain text
             axis_.set_major_formatter(FixedFormatter([_decade(10.0 ** k) for k in ks]))
             axis_.set_minor_locator(NullLocator())
-    ax.set_title(f"{integ} · {axis} axis", fontsize=9)
+    ax.set_title(f"{integ} · {axis}", fontsize=8.5)
     if row == nrows - 1:
         ax.set_xlabel("|ω|·dt (rad per step)", fontsize=8)
     else:
@@ -675,19 +678,43 @@ def _legend_handles(extra: list, hatched: bool = False) -> list:
     return hs
 
 
-def _figure(integrators, title):
-    """A headless figure with a panel per integrator (rows) and spin axis (columns), axes shared."""
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
+def _layout(n: int) -> tuple[int, int]:
+    """(rows, blocks) of the panel grid: more than four integrators sit in two blocks side by side, so the
+    figure fits a screen (10 integrators: 5 rows × 6 panels, ~1650 × 1400 px at 110 dpi)."""
+    blocks = 2 if n > 4 else 1
+    return math.ceil(n / blocks), blocks
 
-    nrows = len(integrators)
-    import matplotlib
 
-    with matplotlib.rc_context({"xtick.labelsize": 7, "ytick.labelsize": 7}):
-        fig = Figure(figsize=(13.5, 2.15 * nrows + 2.2), layout="constrained")
-        FigureCanvasAgg(fig)
-        axes = fig.subplots(nrows, len(AXES), squeeze=False, sharex=True, sharey=True)
-    fig.suptitle(title)
+def _place(r: int, c: int, n: int) -> tuple[int, int, int]:
+    """Panel (row, column) of integrator r, spin axis c, and the `nrows` _decorate should see (the panel
+    is the bottom of its block when row == nrows - 1)."""
+    nr, _ = _layout(n)
+    row = r % nr
+    bottom = row == nr - 1 or r == n - 1
+    return row, (r // nr) * len(AXES) + c, row + 1 if bottom else nr + 1
+
+
+def _figure(integrators, title, ax=None):
+    """A headless figure with a panel per integrator and spin axis, axes shared; the axes array it
+    returns is indexed [integrator, axis] whatever the layout (``ax``: the caller's, n × 3 in row order)."""
+    n = len(integrators)
+    if ax is not None:
+        fig, axes = C.new_figure(n, len(AXES), ax=ax)
+        return fig, axes
+    nr, blocks = _layout(n)
+    fig, grid = C.new_figure(nr, blocks * len(AXES), size=(15.0, 2.0 * nr + 2.6), title=title)
+    for a in grid.flat[1:]:
+        a.sharex(grid[0, 0])
+        a.sharey(grid[0, 0])
+    axes = np.empty((n, len(AXES)), dtype=object)
+    for r in range(n):
+        for c in range(len(AXES)):
+            row, col, _ = _place(r, c, n)
+            axes[r, c] = grid[row, col]
+    used = {id(a) for a in axes.flat}
+    for a in grid.flat:
+        if id(a) not in used:
+            a.set_visible(False)
     return fig, axes
 
 
@@ -719,7 +746,7 @@ def _hatch_blowups(ax, cells, integ, axis, wdts, ratios, xe, ye) -> None:
                                edgecolor=STATUS_COLORS["blew_up"], lw=1.2, zorder=3))
 
 
-def metric_figure(metric: str, cells, integrators, wdts, ratios, hard_points):
+def metric_figure(metric: str, cells, integrators, wdts, ratios, hard_points, ax=None):
     """Heat maps of one metric: rows = integrators, columns = spin axes, one colour bar.
 
     Returns (file name, matplotlib Figure)."""
@@ -731,7 +758,7 @@ def metric_figure(metric: str, cells, integrators, wdts, ratios, hard_points):
     bound = BOUNDS[metric]
     xe, ye = _edges(wdts), _edges(ratios)
     fig, axes = _figure(integrators, f"Stability atlas: {label.split('  ')[0]} over {ROTATIONS} rotations "
-                                     f"(≥ {MIN_STEPS} steps), torque-free near-axis spin, |ω| = {OMEGA:g} rad/s")
+                                     f"(≥ {MIN_STEPS} steps), torque-free near-axis spin, |ω| = {OMEGA:g} rad/s", ax)
     norm = LogNorm(vmin=FLOOR, vmax=vmax)
     codes = {k: i for i, k in enumerate(STATUS_COLORS)}
     cat = ListedColormap(list(STATUS_COLORS.values()))
@@ -748,7 +775,7 @@ def metric_figure(metric: str, cells, integrators, wdts, ratios, hard_points):
             inside = np.nan_to_num(val, nan=np.inf) <= bound
             _outline(ax, inside, xe, ye, colors="k", linewidths=1.6, zorder=4)
             _outline(ax, inside, xe, ye, colors="w", linewidths=0.6, zorder=4)
-            _decorate(ax, integ, axis, r, c, len(integrators), xe, ye, hard_points)
+            _decorate(ax, integ, axis, *_place(r, c, len(integrators)), xe, ye, hard_points)
     cb = fig.colorbar(mesh, ax=axes, location="right", shrink=0.5, pad=0.01, extend="both")
     cb.set_label(label + f"  (values < {FLOOR:.0e}, incl. 0, at the bottom)", fontsize=8)
     extra = [Line2D([], [], color="k", lw=1.6, label="lab hard's bound " + bound_text.format(b=bound)
@@ -771,7 +798,7 @@ def _overview_code(c) -> float:
     return float(2 + ("diverged", "blew_up", "silent_nan", "error", "not_run").index(c["status"]))
 
 
-def status_figure(cells, integrators, wdts, ratios, hard_points):
+def status_figure(cells, integrators, wdts, ratios, hard_points, ax=None):
     """Where each integrator stays stable: the status of every cell, within-the-bounds distinguished."""
     from matplotlib.colors import ListedColormap
     from matplotlib.patches import Patch
@@ -779,14 +806,14 @@ def status_figure(cells, integrators, wdts, ratios, hard_points):
     xe, ye = _edges(wdts), _edges(ratios)
     fig, axes = _figure(integrators, f"Stability atlas: where each integrator stays stable "
                                      f"({ROTATIONS} rotations, ≥ {MIN_STEPS} steps; near-axis spin, perturbation "
-                                     f"{PERTURBATION:g}·|ω| on the other two axes)")
+                                     f"{PERTURBATION:g}·|ω| on the other two axes)", ax)
     cmap = ListedColormap(list(OVERVIEW_COLORS))
     for r, integ in enumerate(integrators):
         for c, axis in enumerate(AXES):
             ax = axes[r, c]
             ax.pcolormesh(xe, ye, _grid(cells, integ, axis, wdts, ratios, _overview_code), cmap=cmap, vmin=-0.5,
                           vmax=len(OVERVIEW_COLORS) - 0.5, edgecolors="w", linewidth=0.3)
-            _decorate(ax, integ, axis, r, c, len(integrators), xe, ye, hard_points)
+            _decorate(ax, integ, axis, *_place(r, c, len(integrators)), xe, ye, hard_points)
     bounds = ", ".join(f"{k.replace('_', ' ')} ≤ {b:.0e}" for k, b in BOUNDS.items())
     extra = [Patch(facecolor=OVERVIEW_COLORS[0], edgecolor="k", lw=0.5, label=f"stable, within lab hard's bounds ({bounds})"),
              Patch(facecolor=OVERVIEW_COLORS[1], edgecolor="k", lw=0.5, label="stable (finite, no blow-up), a bound missed")]
@@ -795,21 +822,22 @@ def status_figure(cells, integrators, wdts, ratios, hard_points):
     return "atlas_status.png", fig
 
 
-def make_plots(cells, integrators, wdts, ratios, hard_points, only: str | None = None) -> dict:
-    """{file name: Figure} of the atlas (only the one named ``only`` when given)."""
+def make_plots(cells, integrators, wdts, ratios, hard_points, only: str | None = None, ax=None) -> dict:
+    """{file name: Figure} of the atlas (only the one named ``only`` when given; ``ax``: its axes,
+    integrators × 3 spin axes in row order)."""
     plots = {}
     if only in (None, "atlas_status.png"):
-        plots.update([status_figure(cells, integrators, wdts, ratios, hard_points)])
+        plots.update([status_figure(cells, integrators, wdts, ratios, hard_points, ax=ax)])
     for metric in METRICS:
         if only in (None, METRICS[metric][0]):
-            fname, fig = metric_figure(metric, cells, integrators, wdts, ratios, hard_points)
+            fname, fig = metric_figure(metric, cells, integrators, wdts, ratios, hard_points, ax=ax)
             plots[fname] = fig
     return plots
 
 
-def _plot_one(name: str, d: dict):
-    """One PNG of the atlas, drawn from the result's data (LabResult.figure)."""
-    return make_plots(d["cells"], d["integrators"], d["wdts"], d["ratios"], d["hard_points"], only=name)[name]
+def _plot_one(name: str, d: dict, ax=None):
+    """One PNG of the atlas, drawn from the result's data (LabResult.figure; ``ax``: its axes)."""
+    return make_plots(d["cells"], d["integrators"], d["wdts"], d["ratios"], d["hard_points"], only=name, ax=ax)[name]
 
 
 # ------------------------------------------------------------------------------------------ run

@@ -49,3 +49,16 @@ def test_lab_figure_into_the_callers_axes():
     assert r.figure("equal_torque", ax=axes.ravel()) is mine
     assert len(axes[0, 0].lines) == len(fig.axes[0].lines) > 0
     np.testing.assert_array_equal(axes[0, 0].lines[0].get_ydata(), fig.axes[0].lines[0].get_ydata())
+
+
+@pytest.mark.parametrize("module, fn", [("force", "_plot"), ("momentum", "_plot"), ("lab01_equal_torque", "_plot"),
+                                        ("lab02_orientation", "_plot"), ("lab03_torque_free", "_plot"),
+                                        ("lab04_reaction_wheel", "_plot"), ("hard_cases", "_plots"),
+                                        ("accuracy", "_plot_one"), ("atlas", "_plot_one")])
+def test_every_lab_plot_takes_ax(module, fn):
+    import importlib
+    import inspect
+
+    f = getattr(importlib.import_module(f"lavendersim.labs.{module}"), fn)
+    p = inspect.signature(f).parameters.get("ax")
+    assert p is not None and p.default is None, f"{module}.{fn}"
