@@ -178,6 +178,37 @@ def _printed(path: Path, k: Kernel, printers: dict):
         raise DeclarationError(f"{path}: {_label(k)}: {_explain(exc)}") from exc
 
 
+def _print_files(printed: list, effects: list, set_name: str, extra: dict) -> dict[str, str]:
+    from . import codegen
+    from .effect_print import meta_module
+
+    header = codegen.USER_HEADER
+    coded = [(None, e) for e in effects]
+    h, c = codegen.print_c_user(printed, effects, set_name)
+    return {"kernels.h": h, "kernels.c": c,
+            "kernels_numpy.py": codegen.print_numpy(printed, coded, header=header),
+            "kernels_casadi.py": codegen.print_casadi(printed, header=header),
+            "effects_meta.py": meta_module(coded, header, extra),
+            "EQUATIONS.md": codegen.print_markdown(printed, coded, title=f"User equations: {set_name}", header=header)}
+
+
+def _culprit(printed: list, decls: list, set_name: str, extra: dict) -> str:
+    """'effect NAME: ' / 'kernel NAME: ' of the first declaration that fails to print on its own, or ''."""
+    for p, d in zip(printed, decls):
+        try:
+            _print_files([p], [] if isinstance(d, Kernel) else [d], set_name, extra)
+        except Exception:  # noqa: BLE001 - found it
+            return f"{_label(p.k)}: "
+    return ""
+
+
+def _effect_kernel(path: Path, e: EffectDecl) -> Kernel:
+    try:
+        return e.kernel(group="User effects")
+    except Exception as exc:  # noqa: BLE001 - one line naming the effect
+        raise DeclarationError(f"{path}: effect {e.name!r}: {_explain(exc)}") from exc
+
+
 def render_user(path) -> tuple[str, dict[str, str]]:
     """(set name, {file name: text}) for a declaration file, printed deterministically.
 
@@ -186,36 +217,24 @@ def render_user(path) -> tuple[str, dict[str, str]]:
     DeclarationError
         One line naming the file and the effect or kernel that cannot be derived or printed.
     """
-    from . import codegen
-    from .effect_print import meta_module
-
     path = Path(path).resolve()
     set_name = set_name_of(path)
     effects, kernels = load_declarations(path)
-    header = codegen.USER_HEADER
     printers = _printers()
-    try:
-        user_kernels = [(k, k) for k in kernels] + [(e.kernel(group="User effects"), e) for e in effects]
-    except Exception as exc:  # noqa: BLE001
-        raise DeclarationError(f"{path}: {_explain(exc)}") from exc
+    user_kernels = [(k, k) for k in kernels] + [(_effect_kernel(path, e), e) for e in effects]
     printed = [_printed(path, k, printers) for k, _ in user_kernels]
-    coded = [(None, e) for e in effects]
     extra = {"set_name": set_name, "declaration": str(path),
              "declaration_sha256": hashlib.sha256(path.read_bytes()).hexdigest(),
              "kernels": tuple(k.name for k in kernels)}
     try:
-        h, c = codegen.print_c_user(printed, effects, set_name)
-        files = {"kernels.h": h, "kernels.c": c,
-                 "kernels_numpy.py": codegen.print_numpy(printed, coded, header=header),
-                 "kernels_casadi.py": codegen.print_casadi(printed, header=header),
-                 "effects_meta.py": meta_module(coded, header, extra),
-                 "EQUATIONS.md": codegen.print_markdown(printed, coded, title=f"User equations: {set_name}",
-                                                        header=header)}
+        files = _print_files(printed, effects, set_name, extra)
     except RecursionError:
-        raise DeclarationError(f"{path}: an expression is nested too deeply to print (RecursionError); build a long "
-                               "sum or product in one call, sp.Add(*terms) or sp.Mul(*factors)") from None
-    except Exception as exc:  # noqa: BLE001 - one line naming the file, never a printer's traceback
-        raise DeclarationError(f"{path}: printing the set failed: {_explain(exc)}") from exc
+        raise DeclarationError(f"{path}: {_culprit(printed, [d for _, d in user_kernels], set_name, extra)}an "
+                               "expression is nested too deeply to print (RecursionError); build a long sum or "
+                               "product in one call, sp.Add(*terms) or sp.Mul(*factors)") from None
+    except Exception as exc:  # noqa: BLE001 - one line naming the effect or kernel, never a printer's traceback
+        who = _culprit(printed, [d for _, d in user_kernels], set_name, extra)
+        raise DeclarationError(f"{path}: {who}printing failed: {_explain(exc)}") from exc
     for name, text in files.items():
         if name.endswith(".py"):
             try:
