@@ -78,7 +78,17 @@ class UserBuildError(RuntimeError):
 class UserSetError(V.LavenderInputError):
     """A user set that cannot be used as it is: two declaration files of one name, an effect name two
     sets declare, or files that do not match the set's manifest.json (edited, swapped, truncated).
-    ``field`` is ``"user set"``; the message names the files and the command that repairs it."""
+    The message names the files and the command that repairs it.
+
+    Parameters
+    ----------
+    field : str
+        Always ``"user set"``.
+    rule : str
+        What is wrong, naming the files.
+    detail : str, optional
+        The command that repairs it.
+    """
 
 
 def _set_error(rule: str, detail: str = "") -> UserSetError:
@@ -144,6 +154,16 @@ def _module(name: str, path: Path, source: bytes) -> types.ModuleType:
 def read_manifest(directory) -> dict:
     """A set's manifest.json (format, set name, declaration and its sha256, effects, kernels, the sha256 of
     every printed file, the library's file, sha256 and compiler command).
+
+    Parameters
+    ----------
+    directory : str or os.PathLike
+        The set's folder.
+
+    Returns
+    -------
+    dict
+        The manifest, as derive wrote it.
 
     Raises
     ------
