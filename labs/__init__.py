@@ -163,6 +163,11 @@ def _view_parent(scene: str):
     return p
 
 
+def _line(exc: BaseException) -> str:
+    """An error's message on one line (the command line's promise: one line, never a traceback)."""
+    return " ".join(str(exc).split())
+
+
 def _verbosity(args) -> int:
     return 0 if getattr(args, "quiet", False) else (2 if getattr(args, "verbose", False) else 1)
 
@@ -187,7 +192,7 @@ def _run_one(args) -> int:
     try:
         check_out_dir(args.out)  # before the lab runs: an unwritable --out is exit 2 at once
     except LavenderInputError as exc:
-        print(f"lab {args.lab_name}: invalid option: {exc}", file=sys.stderr)
+        print(f"lab {args.lab_name}: invalid option: {_line(exc)}", file=sys.stderr)
         return 2
     if getattr(args, "view", False):
         from lavendersim._install import require
@@ -207,7 +212,7 @@ def _run_one(args) -> int:
             options = _with_progress(mod, mod.options_from_args(args), args)
             result = compute_or_failed(mod, args.backend, options).save(args.out)
     except LavenderInputError as exc:
-        print(f"lab {args.lab_name}: invalid option: {exc}", file=sys.stderr)
+        print(f"lab {args.lab_name}: invalid option: {_line(exc)}", file=sys.stderr)
         return 2
     code = report(result, verbosity=_verbosity(args))
     if getattr(args, "view", False):
@@ -218,7 +223,7 @@ def _run_one(args) -> int:
             viewer.run_scene(LAB_VIEWS[args.lab_name], duration=args.view_duration, host=args.view_host,
                              port=args.view_port)
         except LavenderInputError as exc:
-            print(f"lab {args.lab_name}: invalid option: {exc}", file=sys.stderr)
+            print(f"lab {args.lab_name}: invalid option: {_line(exc)}", file=sys.stderr)
             return 2
     return code
 
@@ -243,7 +248,7 @@ def _run_all(args) -> int:
             check_folder(args.out, name)
     except LavenderInputError as exc:
         locks.close()
-        print(f"lab all: invalid option: {exc}", file=sys.stderr)
+        print(f"lab all: invalid option: {_line(exc)}", file=sys.stderr)
         return 2
     with locks:
         return _run_all_locked(args)
@@ -276,7 +281,7 @@ def _run_all_locked(args) -> int:
             result = compute_or_failed(mod, args.backend, options).save(args.out)
         except Exception as exc:  # one broken lab must not hide the others' results
             failed.append(name)
-            say(f"{name:<9} ERROR {type(exc).__name__}: {' '.join(str(exc).split())}  "
+            say(f"{name:<9} ERROR {type(exc).__name__}: {_line(exc)}  "
                 f"({time.perf_counter() - t0:.1f} s)", sys.stderr)
             bar.update(1)
             continue
