@@ -225,6 +225,9 @@ def _run_one(args) -> int:
         except LavenderInputError as exc:
             print(f"lab {args.lab_name}: invalid option: {_line(exc)}", file=sys.stderr)
             return 2
+        except viewer.ViewerError as exc:   # a frame could not be drawn: one line, exit 1 (as `lavendersim view`)
+            print(f"lab {args.lab_name} --view: {_line(exc)}", file=sys.stderr)
+            return 1
     return code
 
 
