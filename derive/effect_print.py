@@ -15,6 +15,7 @@ from __future__ import annotations
 import pprint
 
 from . import effect as E
+from .effect_decay import decay_rate
 from .layout import STATE
 
 C_ARGS = ("const double *p, const double *x, const double *v_w, double m, const double *I_b, "
@@ -220,7 +221,8 @@ def meta_entry(code: int | None, d: E.EffectDecl) -> dict:
             "outputs": tuple("F_w" if n == E.OUT_FORCE else "tau_w" for n, _ in d.outputs),
             "state_inputs": tuple(d.state_inputs) if d.kind == "force" else (),
             "flags": d.flags if d.kind == "force" else 0,
-            "kernel": d.kernel_name if d.kind == "force" else None}
+            "kernel": d.kernel_name if d.kind == "force" else None,
+            "decay_rate": f"decay_rate_{d.name}" if decay_rate(d) is not None else None}
 
 
 def meta_module(effects: list[tuple[int | None, E.EffectDecl]], header: str, extra: dict | None = None) -> str:
@@ -240,7 +242,30 @@ def meta_module(effects: list[tuple[int | None, E.EffectDecl]], header: str, ext
         text = pprint.pformat(meta_entry(code, d), width=110, sort_dicts=False)
         lines.append("    " + text.replace("\n", "\n    ") + ",")
     lines.append(")")
+    decays = [(d, decay_rate(d)) for _, d in effects]
+    decays = [(d, r) for d, r in decays if r is not None]
+    if decays:
+        lines += ["", "", "# ---- decay rates (derive/effect_decay.py): max(D) of an effect whose accelerations are -D (v_w, omega_b)"]
+        for d, r in decays:
+            lines += ["", ""] + _decay_function(d, r)
     return "\n".join(lines) + "\n"
+
+
+def _decay_function(d: E.EffectDecl, rate) -> list[str]:
+    """The printed decay rate of one effect: (p (n, n_params), m (n,), I_b (n, 3)) -> (n,), 1/s."""
+    from .codegen import NpPrinter
+
+    off = d.offsets()
+    body = [f"    {p.name} = p[..., {off[p.name]}]" for p in d.params if p.symbol in rate.free_symbols]
+    body += [f"    {s} = I_b[..., {i}]" for i, s in enumerate(E.STATE.I_b) if s in rate.free_symbols]
+    return [f"def decay_rate_{d.name}(p, m, I_b):",
+            f'    """{d.name}: the rate max(D) of its linear decay, 1/s (p: (n, n_params) parameter rows; m: (n,) kg;',
+            '    I_b: (n, 3) principal moments, kg·m²). An explicit step is stable while rate * dt stays below the',
+            '    integrator\'s REAL_AXIS_STABILITY (generated/tableaux.py)."""',
+            "    import numpy",
+            "",
+            *body,
+            f"    return numpy.asarray({NpPrinter().doprint(rate)}, dtype=float) + numpy.zeros(numpy.shape(m))"]
 
 
 def markdown_params(d: E.EffectDecl, code: int | None) -> list[str]:

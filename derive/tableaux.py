@@ -234,16 +234,35 @@ def _real_axis_limit(R_z: sp.Expr) -> float:
     return min(roots)
 
 
+def _kicked_stages(gammas) -> sp.Expr:
+    """R(z) of the splitting family on a linear decay y' = λy (z = λh): the flows leave v and ω alone, each
+    stage γ h kicks twice for SPLIT_KICK γ h, and a kick of a velocity-reading load is an explicit midpoint
+    step, y (1 + w + SPLIT_MIDPOINT w²) with w = λ · (its time): R(z) = Π_i (1 + a γ_i z + M (a γ_i z)²)²."""
+    z = sp.Symbol("z")
+    out = sp.Integer(1)
+    for g in gammas:
+        w = SPLIT_KICK * sp.Float(sp.N(g, 40), 40) * z
+        out *= (1 + w + SPLIT_MIDPOINT * w ** 2) ** 2
+    return sp.expand(out)
+
+
 def real_axis_stability() -> dict:
-    """Per explicit integrator, the stability limit on the negative real axis, from its own tableau:
-    a linear decay λ (a damping c/I or a wheel's c_w/J) is stable while |λ|·h stays below it —
-    the Euler family 2, RK4 (and rk4_expmap) 2.785…, Dormand–Prince 5 3.306…. divergence_cause names it."""
+    """Per integrator, the stability limit on the negative real axis of the way it steps a load: a linear decay
+    λ (an effect's damping c/m or c/I, a wheel's c_w/J) is stable while |λ|·h stays below it. The explicit
+    Runge–Kutta ones from their tableaux (the Euler family 2, RK4 and rk4_expmap 2.785…, Dormand–Prince 5
+    3.306…); implicit_gyro takes the loads at the step's start (explicit Euler in them: 2); the splitting family
+    kicks (_kicked_stages: splitting 4, its compositions with their γ_i). divergence_cause and the Sim's check of
+    every declared decay (an effect's printed decay rate) name it."""
     # RK4 as tableaux.h applies it: stage s at x + c_s h k_{s-1}, i.e. a subdiagonal A with a_{s,s-1} = c_s
     rk4_a = [[]] + [[0] * (s - 1) + [RK4_C[s]] for s in range(1, len(RK4_C))]
     rk4 = _real_axis_limit(_stability_polynomial(rk4_a, [R(n, RK4_B_DEN) for n in RK4_B_NUM]))
     dp5 = _real_axis_limit(_stability_polynomial(DP_A[:6], DP_A[6]))
     euler = _real_axis_limit(1 + sp.Symbol("z"))
-    return {"euler": euler, "semi_implicit_euler": euler, "rk4": rk4, "rk4_expmap": rk4, "dopri5": dp5}
+    split = _real_axis_limit(_kicked_stages((1,)))
+    split4, symtop4 = _real_axis_limit(_kicked_stages(SPLIT4_GAMMA)), _real_axis_limit(_kicked_stages(SYMTOP4_GAMMA))
+    return {"euler": euler, "semi_implicit_euler": euler, "rk4": rk4, "rk4_expmap": rk4, "dopri5": dp5,
+            "implicit_gyro": euler, "splitting": split, "splitting4": split4, "symtop4": symtop4,
+            "symtop_bm6": symtop4}
 
 
 def dp_b() -> tuple:

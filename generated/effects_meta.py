@@ -29,7 +29,8 @@ EFFECTS = (
      'outputs': ('tau_w',),
      'state_inputs': (),
      'flags': 0,
-     'kernel': 'effect_applied_torque'},
+     'kernel': 'effect_applied_torque',
+     'decay_rate': None},
     {'name': 'force_at_point',
      'code': 2,
      'kind': 'force',
@@ -56,7 +57,8 @@ EFFECTS = (
      'outputs': ('F_w', 'tau_w'),
      'state_inputs': ('q',),
      'flags': 12,
-     'kernel': 'effect_force_at_point'},
+     'kernel': 'effect_force_at_point',
+     'decay_rate': None},
     {'name': 'gravity',
      'code': 3,
      'kind': 'force',
@@ -74,7 +76,8 @@ EFFECTS = (
      'outputs': ('F_w',),
      'state_inputs': ('m',),
      'flags': 12,
-     'kernel': 'effect_gravity'},
+     'kernel': 'effect_gravity',
+     'decay_rate': None},
     {'name': 'linear_damping',
      'code': 4,
      'kind': 'force',
@@ -92,7 +95,8 @@ EFFECTS = (
      'outputs': ('F_w',),
      'state_inputs': ('v_w',),
      'flags': 13,
-     'kernel': 'effect_linear_damping'},
+     'kernel': 'effect_linear_damping',
+     'decay_rate': 'decay_rate_linear_damping'},
     {'name': 'angular_damping',
      'code': 5,
      'kind': 'force',
@@ -110,7 +114,8 @@ EFFECTS = (
      'outputs': ('tau_w',),
      'state_inputs': ('q', 'omega_b'),
      'flags': 10,
-     'kernel': 'effect_angular_damping'},
+     'kernel': 'effect_angular_damping',
+     'decay_rate': 'decay_rate_angular_damping'},
     {'name': 'spherical_joint',
      'code': 6,
      'kind': 'model',
@@ -128,7 +133,8 @@ EFFECTS = (
      'outputs': (),
      'state_inputs': (),
      'flags': 0,
-     'kernel': None},
+     'kernel': None,
+     'decay_rate': None},
     {'name': 'reaction_wheels',
      'code': 7,
      'kind': 'model',
@@ -194,5 +200,32 @@ EFFECTS = (
      'outputs': (),
      'state_inputs': (),
      'flags': 0,
-     'kernel': None},
+     'kernel': None,
+     'decay_rate': None},
 )
+
+
+# ---- decay rates (derive/effect_decay.py): max(D) of an effect whose accelerations are -D (v_w, omega_b)
+
+
+def decay_rate_linear_damping(p, m, I_b):
+    """linear_damping: the rate max(D) of its linear decay, 1/s (p: (n, n_params) parameter rows; m: (n,) kg;
+    I_b: (n, 3) principal moments, kg·m²). An explicit step is stable while rate * dt stays below the
+    integrator's REAL_AXIS_STABILITY (generated/tableaux.py)."""
+    import numpy
+
+    c = p[..., 0]
+    return numpy.asarray(c/m, dtype=float) + numpy.zeros(numpy.shape(m))
+
+
+def decay_rate_angular_damping(p, m, I_b):
+    """angular_damping: the rate max(D) of its linear decay, 1/s (p: (n, n_params) parameter rows; m: (n,) kg;
+    I_b: (n, 3) principal moments, kg·m²). An explicit step is stable while rate * dt stays below the
+    integrator's REAL_AXIS_STABILITY (generated/tableaux.py)."""
+    import numpy
+
+    c = p[..., 0]
+    I_b_0 = I_b[..., 0]
+    I_b_1 = I_b[..., 1]
+    I_b_2 = I_b[..., 2]
+    return numpy.asarray(numpy.maximum(numpy.maximum(c/I_b_0, c/I_b_1), c/I_b_2), dtype=float) + numpy.zeros(numpy.shape(m))

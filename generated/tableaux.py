@@ -86,4 +86,4 @@ BM6_Q_FRAC = (0.148816447901042, -0.132385865767784, 0.067307604692185, 0.432666
 WDT_MAX = {'euler': 0.1, 'implicit_gyro': 3.141592653589793, 'rk4': 2.8284271247461903, 'rk4_expmap': 2.8284271247461903, 'semi_implicit_euler': 0.1, 'splitting': 1.0, 'splitting4': 1.0, 'symtop4': 1.0, 'symtop_bm6': 1.0}
 WDT_RATIO_EXPONENT = {'euler': 0.0, 'implicit_gyro': 0.0, 'rk4': 0.0, 'rk4_expmap': 0.0, 'semi_implicit_euler': 0.0, 'splitting': 0.5, 'splitting4': 0.5, 'symtop4': 0.5, 'symtop_bm6': 0.5}
 # linear stability limit on the negative real axis, |lambda| h (from each explicit tableau; derive/tableaux.py)
-REAL_AXIS_STABILITY = {'dopri5': 3.3065678926349467, 'euler': 2.0, 'rk4': 2.785293563405282, 'rk4_expmap': 2.785293563405282, 'semi_implicit_euler': 2.0}
+REAL_AXIS_STABILITY = {'dopri5': 3.3065678926349467, 'euler': 2.0, 'implicit_gyro': 2.0, 'rk4': 2.785293563405282, 'rk4_expmap': 2.785293563405282, 'semi_implicit_euler': 2.0, 'splitting': 4.0, 'splitting4': 7.300270150173448, 'symtop4': 7.300270150173448, 'symtop_bm6': 7.300270150173448}

@@ -132,6 +132,13 @@ class EffectSpec:
     kernel: str | None
     source: str = "built-in"
     user_set: object = field(default=None, repr=False, compare=False)
+    decay_rate: object = field(default=None, repr=False, compare=False)
+
+    @property
+    def is_decay(self) -> bool:
+        """A pure linear decay (derive/effect_decay.py): its load only takes momentum out, and an explicit step of
+        it is stable while ``decay_rate(p, m, I_b) * dt`` stays below the integrator's REAL_AXIS_STABILITY."""
+        return self.decay_rate is not None
 
     @property
     def velocity_dependent(self) -> bool:
@@ -154,7 +161,8 @@ class EffectSpec:
         code : int, optional
             Overrides ``entry["code"]``.
         source, user_set
-            As in the class.
+            As in the class. ``decay_rate``: the printed function named by ``entry["decay_rate"]``, from the user
+            set's metadata module, or the built-in one's.
 
         Returns
         -------
@@ -165,7 +173,16 @@ class EffectSpec:
                        for p in entry["params"])
         return cls(entry["name"], entry["code"] if code is None else code, entry["kind"], entry["summary"], params,
                    entry["n_params"], tuple(entry["outputs"]), tuple(entry["state_inputs"]), entry["flags"],
-                   entry["kernel"], source, user_set)
+                   entry["kernel"], source, user_set, _decay_function(entry, user_set))
+
+
+def _decay_function(entry: dict, user_set):
+    """The printed decay-rate function of a meta entry, or None (not a decay, or a set derived before it existed)."""
+    name = entry.get("decay_rate")
+    if not name:
+        return None
+    module = _META if user_set is None else user_set.meta
+    return getattr(module, name)
 
 
 def _frame_of(p: dict) -> str | None:

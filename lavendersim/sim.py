@@ -112,6 +112,7 @@ from . import effects as effects_mod
 from . import validate as V
 from .backends import ADAPTIVE, KIND_JOINT, KIND_WHEELS, PLAIN_ONLY, Adaptive, Models
 from .bodies import BodyState
+from . import load_checks
 from .errors import DivergenceError, ValidityBoundWarning
 from .frames import public_rows
 from .generated import layout as LY
@@ -428,6 +429,7 @@ class Sim:
             self._step_params, self._step_effects = self._params.astype(np.float32), self._effects.astype(np.float32)
         self._dirty = True         # the state was written since the last check (see _is_checked)
         self._snap_buf = None      # _advance's reusable snapshot buffers
+        self._check_decays(self._effects, "Sim")
         self._setup_checks()
         self._fast = self._make_stepper()
         self._screen = None
@@ -458,6 +460,7 @@ class Sim:
                      "applied": m.applied.copy(), "steps": self.steps, "rhs_evals": self.rhs_evals,
                      "E0": self._E0.copy(), "L0": self._L0.copy(), "w_safe": self._w_safe.copy(),
                      "g_fast": self._g_fast.copy(), "warned": sorted(self._warned),
+                     "budget": None if self._budget is None else self._budget.snapshot(),
                      "adaptive": None if self._adaptive is None else (self._adaptive.h.copy(), self._adaptive.nfev.copy()),
                      "fast_chunks": self._fast is not None and self._fast_n == self._chunk}
         kwargs = {"dt": self.dt, "integrator": self.integrator, "backend": self.backend.name, "normalize": self.normalize,
@@ -478,6 +481,8 @@ class Sim:
             self._ctr.steps, self._ctr.rhs_evals = st["steps"], st["rhs_evals"]
             self._E0[...], self._L0[...], self._w_safe[...], self._g_fast[...] = st["E0"], st["L0"], st["w_safe"], st["g_fast"]
             self._warned = set(st["warned"])
+            if st.get("budget") is not None:
+                self._budget.restore(st["budget"])
             self._dirty = True   # checked again before the next step (a check of a state that passed passes)
 
     # ---- settings are fixed; the state changes only through validated calls -------------------
@@ -613,7 +618,7 @@ class Sim:
         fast path holds the GIL; cap=False: built whatever the size, see _fast_chunks), or a Python without the GIL."""
         gil = getattr(sys, "_is_gil_enabled", lambda: True)()
         if (self.backend.name != "c" or self._per_step is None or not gil or self.dtype != "float64"
-                or (self._free_wheels_idx and self.max_growth is not None)
+                or (self._py_growth and self.max_growth is not None)
                 or (cap and len(self.names) * self._per_step > FAST_STEP_WORK)):
             return None
         from .backends import c_backend
@@ -645,6 +650,12 @@ class Sim:
         self._free_wheels = ~acted & (kind == KIND_WHEELS)  # total |L| conserved (motor torques are internal)
         self._free_any = bool(self._free.any())
         self._free_wheels_idx = [int(i) for i in np.flatnonzero(self._free_wheels)]
+        # bodies effects act on (not jointed: the joint's reaction is no declared load): a growth budget
+        loaded = acted & ((kind & KIND_JOINT) == 0)
+        self._budget = (load_checks.LoadBudget(self._params, self._effects, self._models.rows, loaded, self.dt, self.max_growth)
+                        if self.max_growth is not None and loaded.any() else None)
+        # bodies whose growth check needs Python every chunk (total |L| of body and wheels)
+        self._py_growth = bool(self._free_wheels_idx or (self._budget is not None and self._budget.wheeled))
         self._warned: set[int] = set()
         evals = self._per_step if self._per_step is not None else 12
         self._chunk = chunk_steps(nb * evals, self.backend.name == "c" and self._per_step is not None)
@@ -688,6 +699,10 @@ class Sim:
         # (max_growth * L0)^2 with a rounding margin; +inf where no growth check can fire (not free, max_growth None)
         self._g_fast = np.full((nb, 3), np.inf)
         self._safe_rates(self._free)
+        if self._budget is not None:
+            steps = self._ctr.steps if "_ctr" in self.__dict__ else 0
+            self._budget.reference(self._x, self._models.Omega, steps)
+            self._budget.screen_rows(self._g_fast, steps)
 
     def _safe_rates(self, f: np.ndarray) -> None:
         """w_safe (see _reference) of the free bodies selected by the boolean mask f, from the current E0."""
@@ -737,7 +752,7 @@ class Sim:
 
     def _violation_raw(self, x, Omega, warn, growth):
         screen = self._screen
-        if screen is not None and x is self._x and (not growth or self.max_growth is None or not self._free_wheels_idx):
+        if screen is not None and x is self._x and (not growth or self.max_growth is None or not self._py_growth):
             # one pass in C: every body inside the bound and (growth) inside its E and |L| limits -> nothing to report
             bound = np.inf if self._bound is None else self._bound[0]
             if screen(x, self._params, self._wdt_scale, bound, self._g_fast if growth else self._g_inf):
@@ -774,6 +789,8 @@ class Sim:
                 return b, (f"|L| grew x{L[b] / self._L0[b]:.3g} (beyond max_growth = {g:g}) on a body no external effect "
                            f"acts on (|omega|*dt = {backends.norm_safe(x[b, LY.STATE_OMEGA_B]) * self.dt:.3g}): "
                            f"{self.integrator} is unstable here; reduce dt")
+        if growth and self._budget is not None:
+            return self._budget.violation(x, Omega, self._ctr.steps)
         return None
 
     def _snapshot(self, reuse: bool = False) -> tuple:
@@ -874,7 +891,28 @@ class Sim:
             E0, L0 = self._invariants(self._x, self._models.Omega, reference=True)
             self._E0[i], self._L0[i] = E0[i], L0[i]
             self._safe_rates(np.arange(len(self.names)) == i)
+            self._rebudget(np.arange(len(self.names)) == i)
             self._warned.discard(i)
+
+    def _rebudget(self, mask=None) -> None:
+        """The growth budget of the selected loaded bodies starts again at the current state and step."""
+        if self._budget is not None:
+            self._budget.reference(self._x, self._models.Omega, self._ctr.steps, mask)
+            self._budget.screen_rows(self._g_fast, self._ctr.steps)
+
+    def _check_decays(self, table: np.ndarray, where: str) -> None:
+        """The decay bound (lavendersim/load_checks.py) of an effect table: LavenderInputError naming the decays and
+        the rule (on_bound="raise"), or a ValidityBoundWarning (on_bound="warn")."""
+        hit = load_checks.decay_excess(table, self._params, self.dt, self.integrator)
+        if hit is None:
+            return
+        b, rdt, limit = hit
+        mask = load_checks.decay_rows(table) & np.isin(table[:, effects_mod.ROW_BODY].astype(np.int64), (-1, b))
+        names = sorted({effects_mod.spec_for_code(int(c)).name for c in table[mask, effects_mod.ROW_CODE]})
+        text = f"body {self.names[b]!r}: " + load_checks.decay_text(self.integrator, rdt, limit)
+        if self.on_bound == "raise":
+            raise V.ValidityBoundError(", ".join(names), text + " (Sim(..., on_bound='warn') to allow it)")
+        warnings.warn(f"{where}: {text}; results are not trusted (on_bound='warn')", ValidityBoundWarning, stacklevel=4)
 
     def _kind(self, i: int) -> int:
         return int(self._models.rows[i, LY.MODEL_KIND])
@@ -1015,6 +1053,8 @@ class Sim:
                 done += m
                 sizes.append(m)
             self._mark_checked()
+            if self._budget is not None:   # the C screen's budget limits follow the passed check's time
+                self._budget.screen_rows(self._g_fast, self._ctr.steps)
         except DivergenceError:
             raise
         except BaseException:           # KeyboardInterrupt between chunks, or any error: nothing half-applied
@@ -1291,7 +1331,8 @@ class Sim:
                 self._models.Omega[i] = W
             E0, L0 = self._invariants(self._x, self._models.Omega, reference=True)
             self._E0[i], self._L0[i] = E0[i], L0[i]
-            self._safe_rates(np.arange(len(self.names)) == i)   # the no-work region follows the new E0   # the no-work region follows the new E0
+            self._safe_rates(np.arange(len(self.names)) == i)   # the no-work region follows the new E0
+            self._rebudget(np.arange(len(self.names)) == i)
 
     # ---- effect parameters between steps ---------------------------------------------------
     def set_effect_params(self, effect, **values):
@@ -1352,12 +1393,20 @@ class Sim:
                 raise V.LavenderInputError(effects_mod.largest_param(new), f"too large: {why}")
         body_index = -1 if cur.body is None else self._index[cur.body]
         rows = _effect_rows(new, body_index, self._effects.shape[1], self._frames, len(self.names))
+        table = self._effects.copy()
+        for r, row in zip(self._rows_of[k], rows):
+            table[r] = row
+        self._check_decays(table, "set_effect_params")      # raises before anything changes (on_bound="raise")
         for r, row in zip(self._rows_of[k], rows):
             self._effects[r] = row
             if self._step_effects is not self._effects:
                 self._step_effects[r] = row
         self._forces[k] = new
         self._effect_objs[self._effect_objs.index(cur)] = new
+        if self._budget is not None:   # new loads: the budget restarts from this (checked) state
+            self._budget = load_checks.LoadBudget(self._params, self._effects, self._models.rows, self._budget.loaded,
+                                                  self.dt, self.max_growth)
+            self._rebudget()
         return new
 
     # ---- reaction wheels ------------------------------------------------------------------

@@ -1,0 +1,223 @@
+"""Stiff effects have a declared bound and bodies with effects a growth check (issue 28).
+
+derive recognises pure linear decays (derive/effect_decay.py) and prints their rate; derive/tableaux.py
+prints each integrator's stability limit for a decay (REAL_AXIS_STABILITY). These tests check that the
+printed limit is the real threshold on both backends, that a Sim refuses (or warns about) a decay beyond it
+when built and on every change, and that a body with effects that blows up anyway is a DivergenceError.
+"""
+import pickle
+import warnings
+
+import numpy as np
+import pytest
+import sympy as sp
+
+import lavendersim as lv
+from lavendersim import backends
+from lavendersim.errors import DivergenceError, ValidityBoundWarning
+from lavendersim.generated import tableaux as TABLEAUX
+
+from derive import effect_decay, effects as derive_effects
+from derive.effect import STATE, effect, param
+
+FIXED = [n for n in backends.INTEGRATORS if n not in backends.ADAPTIVE]
+BACKENDS = ["c", "numpy"]
+
+
+def _damped(c: float, kind: str = "linear_damping", v_w=(1.0, 0.0, 0.0), omega_b=(0.0, 0.0, 0.0)) -> lv.Scene:
+    s = lv.Scene()
+    s.add_body(lv.Body("b", 2.0, (0.5, 1.0, 1.5), v_w=v_w, omega_b=omega_b))
+    if c is not None:
+        s.add_effect(kind, body="b", c=c)
+    return s
+
+
+# ---- derive: which effects are decays --------------------------------------------------------------------
+def test_derive_finds_the_built_in_decays_and_their_rates():
+    rates = {d.name: effect_decay.decay_rate(d) for d in derive_effects.declarations()}
+    assert str(rates["linear_damping"]) == "c/m"
+    assert str(rates["angular_damping"]) == "Max(c/I_b_0, c/I_b_1, c/I_b_2)"
+    for name in ("applied_torque", "force_at_point", "gravity", "spherical_joint", "reaction_wheels"):
+        assert rates[name] is None, name
+
+
+def test_derive_decides_user_effects_by_their_structure():
+    c = param("c", unit="N·m·s/rad", doc="drag", rule="nonnegative")
+    k = param("k", unit="N·s/m", doc="drag", rule="nonnegative")
+    spin = effect("spin_drag", "x", params=[c], torque_w=-c.symbol * STATE.omega_w)
+    assert effect_decay.decay_rate(spin) == sp.Max(*(c.symbol / I for I in STATE.I_b))
+    # a body-frame anisotropic drag -D omega_b is a decay (rate max(d_i / I_i)) ...
+    d = param("d", 3, "N·m·s/rad", "drag per body axis", "nonnegative")
+    body_drag = effect("body_drag", "x", params=[d], torque_w=STATE.R_WB * sp.Matrix([-d.symbol[i] * STATE.omega_b[i] for i in range(3)]))
+    assert effect_decay.decay_rate(body_drag) == sp.Max(*(d.symbol[i] / STATE.I_b[i] for i in range(3)))
+    # ... a world-frame anisotropic one is not (its body-frame Jacobian turns with q), nor quadratic drag,
+    # nor a drag with a constant part (it supplies momentum at rest), nor anti-damping
+    world_drag = effect("world_drag", "x", params=[c], torque_w=-c.symbol * sp.diag(1, 2, 3) * STATE.omega_w)
+    v = STATE.v_w
+    quad = effect("quad", "x", params=[k], force_w=-k.symbol * sp.sqrt(v.dot(v)) * v)
+    offset = effect("offset", "x", params=[k], force_w=-k.symbol * (v - sp.Matrix([1, 0, 0])))
+    anti = effect("anti", "x", params=[k], force_w=k.symbol * v)
+    for e in (world_drag, quad, offset, anti):
+        assert effect_decay.decay_rate(e) is None, e.name
+
+
+def test_every_integrator_has_a_decay_limit():
+    assert set(TABLEAUX.REAL_AXIS_STABILITY) == set(backends.INTEGRATORS)
+    assert TABLEAUX.REAL_AXIS_STABILITY["euler"] == 2.0
+    assert TABLEAUX.REAL_AXIS_STABILITY["splitting"] == pytest.approx(4.0, abs=1e-12)
+
+
+# ---- the printed limit is the real threshold, on both backends -------------------------------------------
+@pytest.mark.parametrize("backend", BACKENDS)
+@pytest.mark.parametrize("integrator", FIXED)
+def test_the_printed_limit_is_where_a_linear_decay_turns_unstable(integrator, backend):
+    limit = TABLEAUX.REAL_AXIS_STABILITY[integrator]
+    dt = 0.01
+    speeds = {}
+    for f in (0.97, 1.03):
+        c = f * limit * 2.0 / dt               # rate c/m, m = 2
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", ValidityBoundWarning)
+            sim = lv.Sim(_damped(c), dt=dt, integrator=integrator, backend=backend, on_bound="warn", max_growth=None)
+        sim.run(300)
+        speeds[f] = float(np.linalg.norm(sim.state("b").v_w))
+    assert speeds[0.97] < 1.0, (integrator, speeds)
+    assert speeds[1.03] > 1.0, (integrator, speeds)
+
+
+# ---- the bound is checked when built and on every change ---------------------------------------------------
+@pytest.mark.parametrize("kind,c", [("linear_damping", 3.0 * 2.0 / 0.1), ("angular_damping", 3.0 * 0.5 / 0.1)])
+def test_a_decay_beyond_the_limit_is_refused_naming_the_effect(kind, c):
+    with pytest.raises(lv.LavenderInputError) as e:
+        lv.Sim(_damped(c, kind), dt=0.1, integrator="euler")
+    assert e.value.field == kind and "stability limit 2" in str(e.value) and "rate*dt = 3" in str(e.value)
+    with pytest.warns(ValidityBoundWarning, match="stability limit"):
+        lv.Sim(_damped(c, kind), dt=0.1, integrator="euler", on_bound="warn")
+    lv.Sim(_damped(c, kind), dt=0.1, integrator="dopri5")      # adaptive: it controls its own error
+
+
+def test_decays_on_one_body_add_up():
+    s = _damped(1.2 * 2.0 / 0.1)                                # 1.2 alone: inside euler's 2
+    lv.Sim(s, dt=0.1, integrator="euler")
+    s.add_effect("linear_damping", c=1.2 * 2.0 / 0.1)           # scene-wide: 2.4 on b
+    with pytest.raises(lv.LavenderInputError, match="rate\\*dt = 2.4"):
+        lv.Sim(s, dt=0.1, integrator="euler")
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_set_effect_params_beyond_the_limit_changes_nothing(backend):
+    s = _damped(1.0)
+    sim = lv.Sim(s, dt=0.1, integrator="euler", backend=backend)
+    twin = lv.Sim(_damped(1.0), dt=0.1, integrator="euler", backend=backend)
+    drag = s.effects[0]
+    with pytest.raises(lv.LavenderInputError, match="stability limit"):
+        sim.set_effect_params(drag, c=100.0)
+    assert np.array_equal(sim.effects, twin.effects)
+    sim.run(50)
+    twin.run(50)
+    assert np.array_equal(sim.x, twin.x)
+    s2 = _damped(1.0)
+    warned = lv.Sim(s2, dt=0.1, integrator="euler", backend=backend, on_bound="warn")
+    with pytest.warns(ValidityBoundWarning, match="set_effect_params"):
+        warned.set_effect_params(s2.effects[0], c=100.0)
+
+
+# ---- bodies with effects have a growth check: no finite blow-up is silent ----------------------------------
+@pytest.mark.parametrize("backend", BACKENDS)
+@pytest.mark.parametrize("integrator,f", [("euler", 3.0 / 2.0), ("rk4", 3.5 / 2.785293563405282)])
+def test_a_stiff_linear_damping_let_through_is_a_divergence(integrator, f, backend):
+    # the audit's cases: c*dt/m = 3 under euler, 3.5 under rk4; |v| reached 1e18 before any error
+    dt = 0.01
+    with pytest.warns(ValidityBoundWarning):
+        sim = lv.Sim(_damped(f * TABLEAUX.REAL_AXIS_STABILITY[integrator] * 2.0 / dt), dt=dt, integrator=integrator,
+                     backend=backend, on_bound="warn")
+    before = sim.x.copy()
+    with pytest.raises(DivergenceError) as e:
+        sim.run(2000)
+    assert e.value.step < 10 and "max_growth" in str(e.value)
+    assert np.array_equal(sim.x, before) and sim.steps == 0
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_a_stiff_angular_damping_let_through_is_a_divergence(backend):
+    # the audit: c*dt/I = 3 grew omega 0.01 -> 41 rad/s before any bound fired
+    dt = 0.01
+    with pytest.warns(ValidityBoundWarning):
+        sim = lv.Sim(_damped(3.0 * 0.5 / dt, "angular_damping", v_w=(0, 0, 0), omega_b=(0.01, 0.0, 0.0)), dt=dt,
+                     integrator="euler", backend=backend, on_bound="warn")
+    with pytest.raises(DivergenceError) as e:
+        sim.run(2000)
+    assert e.value.step < 10
+
+
+def _loaded_scene() -> lv.Scene:
+    s = lv.Scene()
+    s.add_body(lv.Body("fall", 2.0, (0.5, 1.0, 1.5), omega_b=(0.3, 0.1, 0.0)))
+    s.add_body(lv.Body("spin_up", 1.0, (0.2, 0.3, 0.4)))                      # from rest: |L(0)| = 0
+    s.add_body(lv.Body("lever", 1.0, (0.2, 0.3, 0.4)))                        # force along r at the start: tau(0) = 0
+    s.add_body(lv.Body("quiet", 1.0, (0.2, 0.3, 0.4), omega_b=(0.0, 0.5, 0.0)))
+    s.add_effect("gravity", body="fall")
+    s.add_effect("linear_damping", body="fall", c=0.5)
+    s.add_effect("angular_damping", body="fall", c=0.05)
+    s.add_effect("applied_torque", body="spin_up", torque_w=(0.0, 0.0, 0.2))
+    s.add_effect("force_at_point", body="lever", r_b=(1.0, 0.0, 0.0), F_w=(1.0, 0.0, 0.0))
+    s.add_effect("applied_torque", body="quiet", torque_w=(0.0, 0.0, 0.0))   # zero strength: |L| conserved
+    s.add_effect("force_at_point", body="lever", r_b=(0.0, 0.1, 0.0), F_w=(0.0, 0.0, 1e-3))
+    return s
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_real_loads_never_trip_the_growth_check(backend):
+    sim = lv.Sim(_loaded_scene(), dt=1e-3, integrator="rk4", backend=backend)
+    for _ in range(20):                       # many calls, the C fast path and the Python path both
+        sim.run(500)
+    for _ in range(300):
+        sim.step()
+    st = sim.state("spin_up")
+    assert st.omega_w[2] * 0.4 == pytest.approx(0.2 * sim.t, rel=1e-9)   # L = tau t: the budget is exact here
+    assert np.all(np.isfinite(sim.x))
+
+
+def test_the_budget_survives_pickling_bit_for_bit():
+    sim = lv.Sim(_loaded_scene(), dt=1e-3, integrator="rk4")
+    sim.run(700)
+    twin = pickle.loads(pickle.dumps(sim))
+    sim.run(900)
+    twin.run(900)
+    assert np.array_equal(sim.x, twin.x)
+
+
+def test_a_user_declared_decay_gets_the_bound(tmp_path):
+    """A user's spin drag (docs/extending.md's way) is recognised by derive and bounded like the built-ins."""
+    import os
+    import subprocess
+    import sys
+
+    from lavendersim import extending
+
+    decl = tmp_path / "bounded_drag.py"
+    decl.write_text(
+        "from lavendersim.derive.effect import STATE, effect, param\n"
+        "c = param('c', unit='N·m·s/rad', doc='drag', rule='nonnegative')\n"
+        "EFFECTS = [effect('bounded_spin_drag', 'Viscous spin drag', params=[c], torque_w=-c.symbol * STATE.omega_w)]\n",
+        encoding="utf-8")
+    env = {**os.environ, extending.ENV: str(tmp_path / "user")}
+    r = subprocess.run([sys.executable, "-m", "lavendersim", "derive", "--user", str(decl)], cwd=tmp_path, env=env,
+                       capture_output=True, text=True)
+    assert r.returncode == 0, r.stdout + r.stderr
+    script = (
+        "import lavendersim as lv\n"
+        "from lavendersim import extending\n"
+        f"extending.load({str(decl)!r})\n"
+        "s = lv.Scene()\n"
+        "s.add_body(lv.Body('b', 2.0, (0.5, 1.0, 1.5), omega_b=(0.1, 0, 0)))\n"
+        "s.add_effect('bounded_spin_drag', body='b', c=0.5 * 1.9 / 0.1)\n"
+        "lv.Sim(s, dt=0.1, integrator='euler')\n"
+        "s.add_effect('bounded_spin_drag', body='b', c=0.5 * 0.2 / 0.1)\n"
+        "try:\n"
+        "    lv.Sim(s, dt=0.1, integrator='euler')\n"
+        "except lv.LavenderInputError as e:\n"
+        "    print('refused', e.field)\n")
+    r = subprocess.run([sys.executable, "-c", script], cwd=tmp_path, env=env, capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.strip() == "refused bounded_spin_drag"
