@@ -45,6 +45,7 @@ from typing import Any
 import numpy as np
 
 from . import validate as V
+from ._files import replace_file
 from .wheel_control import Controller
 
 PREFIX = "lv_controller"
@@ -491,8 +492,8 @@ def export_c(controller: Controller, directory: str | os.PathLike, *, prefix: st
     """
     printed = render(controller, prefix=prefix, source=source, example_q=example_q)
     d = V.writable_dir("directory", directory)
-    for name, text in printed.files.items():
-        (d / name).write_text(text, encoding="ascii")
+    for name, text in printed.files.items():   # never through a link planted in the folder
+        replace_file(d / name, text, encoding="ascii")
     return printed
 
 
@@ -548,7 +549,7 @@ def compile_library(printed: Printed, directory: str | os.PathLike | None = None
     d = Path(tempfile.mkdtemp(prefix="lv_controller_c_") if directory is None else directory)
     d.mkdir(parents=True, exist_ok=True)
     for name in ("controller.h", "controller.c"):
-        (d / name).write_text(printed.files[name], encoding="ascii")
+        replace_file(d / name, printed.files[name], encoding="ascii")
     digest = hashlib.sha256(printed.files["controller.c"].encode()).hexdigest()[:12]
     lib = d / f"lib{printed.prefix}_{digest}.so"
     try:

@@ -209,6 +209,10 @@ def _verified(directory: Path, name: str, want: str, declaration: str) -> bytes:
     except OSError as exc:
         raise _set_error(f"{path} cannot be read ({exc.strerror or exc})",
                          f"; run `lavendersim derive --user {declaration}` again") from None
+    return _check_bytes(path, data, want, declaration)
+
+
+def _check_bytes(path: Path, data: bytes, want: str, declaration: str) -> bytes:
     got = _sha(data)
     if got != want:
         raise _set_error(f"{path} does not match the set's {MANIFEST} (sha256 {got[:12]}…, manifest {want[:12]}…; "
@@ -282,8 +286,23 @@ class UserSet:
                 self.manifest, self.library_built_now = _add_library(self)
             entry = self.manifest["library"]
             self.library_path = path = self.directory / entry["file"]
-            _verified(self.directory, entry["file"], entry["sha256"], str(self.declaration))
-            self._lib = _open_library(path, self.effect_names, self.name, self.kernel_names, str(self.declaration))
+            try:
+                fd = os.open(path, os.O_RDONLY | getattr(os, "O_BINARY", 0))
+            except OSError as exc:
+                raise _set_error(f"{path} cannot be read ({exc.strerror or exc})",
+                                 f"; run `lavendersim derive --user {self.declaration}` again") from None
+            try:   # the file checked is the file loaded: the same inode before and after the loader opens the path
+                with os.fdopen(os.dup(fd), "rb") as f:
+                    _check_bytes(path, f.read(), entry["sha256"], str(self.declaration))
+                ident = _file_id(os.fstat(fd))
+                same = _file_id(os.stat(path)) == ident
+                lib = _open_library(path, self.effect_names, self.name, self.kernel_names, str(self.declaration))
+                if not (same and _file_id(os.stat(path)) == ident):
+                    raise _set_error(f"{path} was replaced while it was being checked and loaded",
+                                     "; load the set again")
+                self._lib = lib
+            finally:
+                os.close(fd)
         return self._lib
 
     def c_function(self, effect: str) -> int:
@@ -303,23 +322,28 @@ class UserSet:
         return int(ctypes.cast(fn, ctypes.c_void_p).value)
 
 
+def _file_id(st: os.stat_result) -> tuple[int, int, int, int]:
+    return (st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns)
+
+
 def _open_library(path: Path, effects, set_name: str, kernels, declaration: str) -> ctypes.CDLL:
     """Load a library and check its ABI version and that it exports every effect and kernel of the set."""
     from .generated import effects_meta
 
+    shown = path
     try:
         lib = ctypes.CDLL(str(path))
         abi = ctypes.c_int.in_dll(lib, "lvu_abi_version").value
     except (OSError, ValueError) as exc:
-        raise _set_error(f"{path} is not a loadable library of the set ({exc})",
+        raise _set_error(f"{shown} is not a loadable library of the set ({exc})",
                          f"; run `lavendersim derive --user {declaration}` again") from None
     if abi != effects_meta.ABI_VERSION:
-        raise _set_error(f"{path}: built for effect ABI {abi}, this lavendersim uses {effects_meta.ABI_VERSION}",
+        raise _set_error(f"{shown}: built for effect ABI {abi}, this lavendersim uses {effects_meta.ABI_VERSION}",
                          f"; run `lavendersim derive --user {declaration}`")
     want = [f"lvu_effect_{e}" for e in effects] + [f"lvu_{set_name}_{k}" for k in kernels]
     missing = [s for s in want if not hasattr(lib, s)]
     if missing:
-        raise _set_error(f"{path} does not export {', '.join(missing)}",
+        raise _set_error(f"{shown} does not export {', '.join(missing)}",
                          f"; run `lavendersim derive --user {declaration}` again")
     return lib
 
@@ -342,6 +366,16 @@ def _first_error(output: str) -> str:
     return lines[-1] if lines else "no output"
 
 
+def _remove_dead_compiles(root: Path, set_name: str) -> None:
+    """Temporary compile folders of this set left by processes that no longer run (killed mid-compile)."""
+    from .derive.atomic import _alive
+
+    for p in root.glob(f".{set_name}.compile-*"):
+        m = re.fullmatch(re.escape(f".{set_name}.compile-") + r"(\d+)-\w+", p.name)
+        if m and p.is_dir() and not p.is_symlink() and not _alive(int(m[1])):
+            shutil.rmtree(p, ignore_errors=True)
+
+
 def _compile(directory: Path, set_name: str, sources: dict, cmd: list[str], symbols: tuple) -> tuple[dict, bool]:
     """The library entry of the manifest for these printed sources: reused when the set's current manifest
     names a library of this name whose bytes still match it, else compiled in a temporary folder, loaded
@@ -360,7 +394,8 @@ def _compile(directory: Path, set_name: str, sources: dict, cmd: list[str], symb
     root = directory.parent
     log = root / f"{set_name}.compile.log"
     root.mkdir(parents=True, exist_ok=True)
-    with tempfile.TemporaryDirectory(prefix=f".{set_name}.compile-", dir=root) as tmp:
+    _remove_dead_compiles(root, set_name)
+    with tempfile.TemporaryDirectory(prefix=f".{set_name}.compile-{os.getpid()}-", dir=root) as tmp:
         tmp = Path(tmp)
         for n in SOURCES:
             (tmp / n).write_text(sources[n], encoding="utf-8")

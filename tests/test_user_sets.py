@@ -217,6 +217,7 @@ def test_a_failed_derive_exits_2_and_keeps_the_last_good_set(user):
     failcc.write_text("#!/bin/sh\necho 'kernels.c:9:5: error: boom' >&2\necho 'more output' >&2\nexit 1\n")
     failcc.chmod(0o755)
     decl.write_text(torque_decl("us_keep_push", 2.0))                # new C, which fails to compile
+    (user["sets"] / ".us_keep.compile-999999999-x1").mkdir()         # left by a compile killed earlier: removed
     line = one_line_exit_2(cli(["derive", "--user", decl], {**user["env"], "CC": str(failcc)}, user["tmp"]))
     assert "error: boom" in line and "exit 1" in line and "us_keep.compile.log" in line
     assert "more output" in (user["sets"] / "us_keep.compile.log").read_text()
