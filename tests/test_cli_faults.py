@@ -403,3 +403,18 @@ def test_the_lock_is_reentrant_in_one_thread_and_released_after(tmp_path):
     with O.lab_lock(tmp_path, "t"):
         pass
     assert O.lock_path(tmp_path, "t").read_text().strip() == str(os.getpid())
+
+
+@pytest.mark.needs("control")
+def test_export_c_replaces_a_link_planted_in_its_folder_and_keeps_the_target(tmp_path):
+    from lavendersim import controller_c as CC
+    from lavendersim import spacecraft as S
+
+    target = _secret(tmp_path)
+    d = tmp_path / "exported"
+    d.mkdir()
+    (d / "controller.c").symlink_to(target)
+    CC.export_c(S.design(S.load("cube_center")), d)
+    assert target.read_text() == "keep me"
+    assert not (d / "controller.c").is_symlink() and "controller" in (d / "controller.c").read_text()
+    assert sorted(p.name for p in d.iterdir()) == ["controller.c", "controller.h", "main.c"]   # no temporaries left
