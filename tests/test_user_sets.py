@@ -121,6 +121,10 @@ def test_an_effect_name_two_sets_declare_is_refused_naming_both(user):
     assert str(one) in str(e.value) and str(two) in str(e.value)
     assert lv.effects.REGISTRY["us_shared"].user_set.declaration == one.resolve()   # nothing half-registered
     assert torque_after("us_shared", 0.5) == pytest.approx(0.5, rel=1e-12)
+    assert extending.read_manifest(user["sets"] / "one")["library"] is None       # derived without compiling:
+    assert torque_after("us_shared", 0.5, backend="c") == pytest.approx(0.5, rel=1e-12)   # compiled on first use,
+    m = extending.read_manifest(user["sets"] / "one")                            # recorded in the manifest
+    assert extending.build(user["sets"] / "one") == user["sets"].resolve() / "one" / m["library"]["file"]
     shutil.move(str(other / "two"), str(user["sets"] / "two"))       # two sets in the user directory, one name
     with pytest.raises(extending.UserSetError) as e:
         extending.discover("us_shared")
