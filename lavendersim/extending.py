@@ -191,7 +191,7 @@ def read_manifest(directory) -> dict:
 
 def _library_entry_ok(e) -> bool:
     return (isinstance(e, dict) and isinstance(e.get("file"), str) and isinstance(e.get("sha256"), str)
-            and re.fullmatch(r"build/[A-Za-z0-9_.-]+", e["file"]) is not None)
+            and re.fullmatch(r"build/[A-Za-z0-9_][A-Za-z0-9_.-]*", e["file"]) is not None)   # no "..", no dot files
 
 
 def _manifest_or_none(directory: Path) -> dict | None:
