@@ -93,7 +93,8 @@ def lock_path(out_dir, name: str) -> Path:
 
 def _holder(fd: int) -> str:
     try:
-        text = os.pread(fd, 64, 0).decode("ascii", "replace").strip()
+        os.lseek(fd, 0, os.SEEK_SET)
+        text = os.read(fd, 64).decode("ascii", "replace").strip()
     except OSError:
         text = ""
     return f"pid {text}" if text.isdigit() else "pid unknown"
@@ -170,7 +171,8 @@ def lab_lock(out_dir, name: str) -> Iterator[Path]:
                 raise _fail(folder, f"another run ({_holder(fd)}) is writing it (lock {path}); wait for it to "
                                     "finish or write to another --out")
             os.ftruncate(fd, 0)
-            os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
+            os.lseek(fd, 0, os.SEEK_SET)
+            os.write(fd, f"{os.getpid()}\n".encode())
         except BaseException:
             os.close(fd)
             raise
