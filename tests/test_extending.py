@@ -56,6 +56,7 @@ def guide(tmp_path_factory):
     assert cmd[:3] == ["lavendersim", "derive", "--user"]
     r = run_lavendersim(cmd[1:], work, env)
     assert r.returncode == 0, r.stdout + r.stderr
+    assert r.stderr == ""          # nothing on stderr when all is well (a derive-time RuntimeWarning was printed once)
     old = os.environ.get(extending.ENV)
     os.environ[extending.ENV] = str(user)  # this process finds the set by name, as a user's would
     yield {"work": work, "user": user, "env": env, "cmd": cmd, "run": r, "set": user / "sets" / "my_effects"}
