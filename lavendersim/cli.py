@@ -174,10 +174,18 @@ def _add_lqr(sub) -> None:
 BUILDERS = {"derive": _add_derive, "lab": _add_lab, "lqr": _add_lqr, "view": _add_view, "bench": _add_bench}
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse with its usage errors on one line (the error, then where --help is), exit code 2; every
+    subcommand's parser is one too (add_subparsers builds them with the parent's class)."""
+
+    def error(self, message: str):
+        self.exit(2, f"{self.prog}: error: {' '.join(message.split())} (`{self.prog} --help` lists the options)\n")
+
+
 def _top_parser(full: str | None) -> argparse.ArgumentParser:
     """The parser; `full` names the one command whose own parser is built (None: names only)."""
-    p = argparse.ArgumentParser(prog="lavendersim", description=__doc__.split("\n\n")[0],
-                                epilog="`lavendersim COMMAND --help` describes a command.")
+    p = _Parser(prog="lavendersim", description=__doc__.split("\n\n")[0],
+                epilog="`lavendersim COMMAND --help` describes a command.")
     p.add_argument("--version", action="version", version=f"lavendersim {__version__}")
     sub = p.add_subparsers(dest="cmd", required=True, metavar="COMMAND")
     for name, text in COMMANDS.items():

@@ -418,3 +418,11 @@ def test_export_c_replaces_a_link_planted_in_its_folder_and_keeps_the_target(tmp
     assert target.read_text() == "keep me"
     assert not (d / "controller.c").is_symlink() and "controller" in (d / "controller.c").read_text()
     assert sorted(p.name for p in d.iterdir()) == ["controller.c", "controller.h", "main.c"]   # no temporaries left
+
+
+@pytest.mark.parametrize("argv", [["lab", "01", "--dt", "abc"], ["lab", "nope"], ["nope"], [], ["view"],
+                                  ["bench", "--rounds", "x"], ["lab", "01", "--quiet", "--verbose"],
+                                  ["lqr", "--scenario", "nope"]])
+def test_a_usage_error_is_one_line_naming_the_option_and_help(argv):
+    line = _one_line(_run(*argv))
+    assert "error:" in line and "--help" in line
