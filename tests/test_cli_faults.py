@@ -426,3 +426,22 @@ def test_export_c_replaces_a_link_planted_in_its_folder_and_keeps_the_target(tmp
 def test_a_usage_error_is_one_line_naming_the_option_and_help(argv):
     line = _one_line(_run(*argv))
     assert "error:" in line and "--help" in line
+
+
+def test_without_an_atomic_exchange_the_two_renames_leave_one_whole_folder(tmp_path, monkeypatch):
+    from lavendersim.derive import atomic
+
+    monkeypatch.setattr(atomic, "exchange", lambda a, b: False)   # a file system without RENAME_EXCHANGE
+    target = _secret(tmp_path)
+    out = tmp_path / "out"
+    _result(value=1.0).save(out)
+    (out / "t" / "notes.md").unlink()
+    (out / "t" / "notes.md").symlink_to(target)
+    _result(value=2.0).save(out)
+    assert target.read_text() == "keep me" and O.leftovers(out, "t") == []
+    assert (out / "t" / "notes.md").read_text() == "value 2.0\n"
+    # killed between the two renames: OUT/NAME missing, the old folder aside; the next run puts it back first
+    os.rename(out / "t", out / ".t.lab-old-999999999")
+    O.check_folder(out, "t")
+    _result(value=3.0).save(out)
+    assert O.leftovers(out, "t") == [] and json.loads((out / "t" / "results.json").read_text())["x"] == 3.0
