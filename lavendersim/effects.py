@@ -205,8 +205,17 @@ class ImmutableEffectError(V.LavenderInputError, AttributeError):
     """
 
 
-def _rebuild_effect(class_name: str, name: str, body, values: dict):
-    """Unpickle an Effect: a declared one by its registered name (validated again), else its class by name."""
+def _rebuild_effect(class_name: str, name: str, body, values: dict, source: str | None = None):
+    """Unpickle an Effect: a declared one by its registered name (validated again). A user effect not registered
+    in this process (a worker, a fresh interpreter) is registered first from its set's folder ``source`` (verified
+    against its manifest by extending.load), else found by name in the user directory."""
+    if name not in EFFECTS:
+        from . import extending   # the user-set loader (lazy: extending registers its effects through this module)
+
+        if source is not None and source != "built-in":
+            extending.load(source)
+        else:
+            extending.discover(name)
     if name in EFFECTS:
         return EFFECTS[name](body=body, **values)
     raise V.LavenderInputError("effect", f"{name!r} is not a registered effect in this process (load its user set "
@@ -284,7 +293,7 @@ class Effect:
     def __reduce__(self):
         if self.spec is None:   # a hand-written subclass: rebuilt from its class (importable by reference)
             return (_rebuild_plain, (type(self), self.body, dict(self.values)))
-        return (_rebuild_effect, (type(self).__name__, self.name, self.body, dict(self.values)))
+        return (_rebuild_effect, (type(self).__name__, self.name, self.body, dict(self.values), self.spec.source))
 
     def __copy__(self):
         return self

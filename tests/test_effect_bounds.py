@@ -218,6 +218,24 @@ def test_a_user_declared_decay_gets_the_bound(tmp_path):
         "    lv.Sim(s, dt=0.1, integrator='euler')\n"
         "except lv.LavenderInputError as e:\n"
         "    print('refused', e.field)\n")
+    script += ("import pickle\n"
+               "s2 = lv.Scene()\n"
+               "s2.add_body(lv.Body('b', 2.0, (0.5, 1.0, 1.5), omega_b=(0.1, 0, 0)))\n"
+               "s2.add_effect('bounded_spin_drag', body='b', c=0.01)\n"
+               "sim = lv.Sim(s2, dt=0.1, integrator='rk4')\n"
+               "sim.run(5)\n"
+               "open('sim.pkl', 'wb').write(pickle.dumps(sim))\n"
+               "sim.run(5)\n"
+               "print(repr(sim.x.tobytes()))\n")
     r = subprocess.run([sys.executable, "-c", script], cwd=tmp_path, env=env, capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
-    assert r.stdout.strip() == "refused bounded_spin_drag"
+    refused, after = r.stdout.strip().splitlines()
+    assert refused == "refused bounded_spin_drag"
+    # a fresh process that never loaded the set unpickles the Sim (the effect's set is found and verified)
+    fresh = ("import pickle\n"
+             "sim = pickle.loads(open('sim.pkl', 'rb').read())\n"
+             "sim.run(5)\n"
+             "print(repr(sim.x.tobytes()))\n")
+    r = subprocess.run([sys.executable, "-c", fresh], cwd=tmp_path, env=env, capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.strip() == after
