@@ -30,9 +30,15 @@ source_suffix = {".rst": "restructuredtext", ".md": "myst-nb", ".ipynb": "myst-n
 root_doc = "index"
 exclude_patterns = ["_build", "Thumbs.db", ".DS_Store", "**/.ipynb_checkpoints"]
 
-# The notebooks (docs/nb -> ../notebooks) are stored with outputs stripped and rendered as they are:
-# their source cells, never executed here (CI executes every one in tests/test_notebooks.py).
-nb_execution_mode = "off"
+# The notebooks (docs/nb -> ../notebooks) are stored with outputs stripped; the build executes them
+# (their plots and tables appear on the pages) through jupyter-cache, in a cache keyed by the sources the
+# outputs depend on (the package, the labs, the printed kernels, the notebooks), so a rebuild re-runs a
+# notebook only when one of those changed. LAVENDERSIM_DOCS_EXECUTE=off renders the stored cells only
+# (quick edits; no [viewer]/[control] extras needed); =force re-executes everything.
+nb_execution_mode = os.environ.get("LAVENDERSIM_DOCS_EXECUTE", "cache")
+nb_execution_timeout = 900            # per cell, s (the hard-cases notebook runs its lab)
+nb_execution_raise_on_error = True    # a failing cell fails the build
+nb_execution_show_tb = True
 
 # numpydoc-style docstrings, read by napoleon
 napoleon_google_docstring = False
@@ -47,6 +53,7 @@ autodoc_mock_imports: list[str] = []
 add_module_names = False
 
 myst_enable_extensions = ["dollarmath", "colon_fence"]
+myst_dmath_double_inline = True     # $$…$$ inside a paragraph (the notebooks' cards) is display math
 myst_heading_anchors = 3
 # the README's headings skip levels (H1 -> H3) where it is included as the concepts page
 # the types "ndarray, shape (3,)" would cross-reference the two attributes named shape
@@ -130,6 +137,21 @@ def _make_gallery(app) -> None:
 
 
 exclude_patterns.append("_gallery")
+
+
+def _sources_key() -> str:
+    """What the notebooks' outputs depend on: the package, the labs, the printed kernels, the notebooks."""
+    h = hashlib.sha256(lavendersim.__version__.encode())
+    files = [*ROOT.glob("lavendersim/**/*.py"), *ROOT.glob("labs/*.py"), *ROOT.glob("generated/*.py"),
+             ROOT / "generated" / "manifest.json", *ROOT.glob("notebooks/*.ipynb")]
+    for f in sorted(files):
+        h.update(str(f.relative_to(ROOT)).encode() + f.read_bytes())
+    return h.hexdigest()[:16]
+
+
+# in the source tree (docs/_build, ignored by git), so every build of this checkout shares it, whatever
+# its output folder (tests/test_docs.py builds into a temporary one)
+nb_execution_cache_path = str(DOCS / "_build" / "jupyter_cache" / _sources_key())
 
 
 def setup(app):
