@@ -13,6 +13,8 @@ pivot_kinematics after every step.
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from ..effects import ROW_BODY
@@ -163,6 +165,9 @@ class _Plan:
         self.m_f, self.I_f = self.m[self.forced], self.I[self.forced]
         self.damped_f = self.index.velocity  # bodies with an effect that reads v_w or omega_b
         self.wheeled = (kind & KIND_WHEELS) != 0
+        self.nb = nb
+        self.source = (params.copy(), effects.copy(), None if rows is None else rows.copy())  # for _subplan
+        self.subplans = {}
         self.I_free = self.I[self.free]
         pivot = np.flatnonzero(kind == KIND_JOINT)
         wheeled = np.flatnonzero(self.wheeled)   # one wheel model: one group
@@ -582,96 +587,219 @@ class NumpyBackend:
 
 
 # Dormand–Prince 5(4) (Hairer, Nørsett & Wanner, Solving ODEs I, table 5.2): T.DP_A, T.DP_E and the controller
-# constants are printed from derive/tableaux.py, the same doubles as the C step loop's.
+# constants are printed from derive/tableaux.py, the same doubles as the C step loop's. The algorithm is the C
+# backend's advance_dopri5 (csrc/step.c), per body: each body has its own step size, substeps, rejections, count
+# and failure; the bodies still inside an output interval are stepped together (vectorized over the body axis),
+# the others held (a substep of length 0 whose results are not kept). Every operation is C's, in C's order, so a
+# body's numbers are C's and do not depend on which other bodies share the scene (bitwise: powers are taken with
+# libm's pow through math.pow, as C's; NumPy's power may be a vector library's, within an ulp of it).
+
+_DP_DIVERGED, _DP_TOLERANCE = 1, 2   # a body's failure (0: none)
+_DP_FIELDS = ("y", "k0", "h", "cnt", "ncols", "t", "sub", "rej", "live", "why")
+_DP_SUBPLANS_MAX = 64                 # cached subset plans per plan
 
 
-def _dp_norms(e, y, yn, rtol, atol, ncols):
-    """Per body RMS of e / (atol + rtol max(|y|, |yn|)) over its ncols numbers (13, or 16 with wheels)."""
+def _dp_norm(e, y, yn, rtol, atol, ncols):
+    """Per body (row) RMS of e / (atol + rtol max(|y|, |yn|)) over its ncols numbers (C's dp_norm): an exact zero
+    counts 0 (even with atol = 0); the squares are summed left to right (cumsum: C's order, not NumPy's pairwise
+    sum). The numbers past ncols (a plain body's Omega, a wheeled body's padded slots) are exactly 0."""
     sc = atol + rtol * np.maximum(np.abs(y), np.abs(yn))
-    z = np.divide(e, sc, out=np.zeros_like(e), where=e != 0)  # an exact zero counts 0 (even with atol = 0)
-    return np.sqrt(np.sum(z * z, axis=1) / ncols)  # plain bodies' Omega columns are exactly 0
+    z = np.divide(e, sc, out=np.zeros_like(e), where=e != 0)
+    return np.sqrt(np.cumsum(z * z, axis=1)[:, -1] / ncols)
+
+
+def _dp_pow(a, p):
+    """a ** p elementwise (a >= 0, NaN or inf; |p| < 1) by libm's pow, as C's (math.pow)."""
+    return np.array([math.pow(v, p) for v in a.tolist()], dtype=float).reshape(a.shape)
+
+
+def _subplan(plan, idx):
+    """The plan of bodies idx (sorted indices into plan's) alone, cached on plan. A body's right-hand side reads
+    its own row only, so each body of the subset gets the numbers it gets in the whole scene."""
+    if idx.size == plan.nb:
+        return plan
+    key = idx.tobytes()
+    sub = plan.subplans.get(key)
+    if sub is None:
+        params, effects, rows = plan.source
+        body = effects[:, ROW_BODY].astype(np.int64)
+        pos = np.full(plan.nb, -1, np.int64)
+        pos[idx] = np.arange(idx.size)
+        keep = body < 0                                  # every-body effects, and the subset's own
+        keep[~keep] = pos[body[~keep]] >= 0
+        eff = effects[keep].copy()
+        own = body[keep] >= 0
+        eff[own, ROW_BODY] = pos[body[keep][own]]
+        if len(plan.subplans) >= _DP_SUBPLANS_MAX:
+            plan.subplans.clear()
+        sub = plan.subplans[key] = _Plan(params[idx], eff, None if rows is None else rows[idx])
+    return sub
+
+
+def _dp_rhs(plan, y, u):
+    """d/dt of y, rows of plan's bodies: (n, 13), or [x, Omega] (n, XS_SIZE) with u their applied wheel torques."""
+    if plan.has_models:
+        return plan.rhs(y, u)
+    if plan.all_free and y.shape[1] > LY.STATE_SIZE:  # plain, effect-free bodies of a scene with models
+        out = np.zeros_like(y)
+        out[:, X] = plan.K.rigid_body_rhs_free(y[:, X], plan.I)
+        return out
+    return plan.rhs(y)
+
+
+def _dp_initial_h(plan, y, f0, u, rtol, atol, dt, ncols):
+    """Hairer's starting step (Solving ODEs I, II.4) per body (C's dp_initial_h), from f0 = f(y) and one more
+    evaluation; dt where it is not a positive finite number."""
+    d0 = _dp_norm(y, y, y, rtol, atol, ncols)
+    d1 = _dp_norm(f0, y, y, rtol, atol, ncols)
+    h0 = np.where((d0 < T.DP_INIT_SMALL) | (d1 < T.DP_INIT_SMALL), T.DP_INIT_TINY_H, T.DP_INIT_FRAC * d0 / d1)
+    h0 = np.where(h0 > dt, dt, h0)
+    f1 = _dp_rhs(plan, y + h0[:, None] * f0, u)
+    d2 = _dp_norm((f1 - f0) / h0[:, None], y, y, rtol, atol, ncols)
+    mx = np.where(d1 > d2, d1, d2)
+    shrink = h0 * T.DP_INIT_SHRINK
+    h1 = np.where(mx <= T.DP_INIT_FLAT, np.where(shrink > T.DP_INIT_TINY_H, shrink, T.DP_INIT_TINY_H),
+                  _dp_pow(T.DP_INIT_FRAC / mx, T.DP_INIT_EXPONENT))
+    grow = T.DP_INIT_GROW * h0
+    h = np.where(grow < h1, grow, h1)
+    return np.where(np.isfinite(h) & (h > 0.0), h, dt)
+
+
+def _dp_stages(plan, y, k0, hs, u):
+    """The six new stages of substeps of lengths hs ((n, 1)) from k0 = f(y): returns (the 5th-order solution,
+    i.e. stage 7's point; f there; hs times the error estimate). Sums as C's: a_0 k_0 + a_1 k_1 + ... left to
+    right, zero coefficients included."""
+    k = [k0]
+    for s in range(1, 7):
+        a = T.DP_A[s]
+        acc = a[0] * k[0]
+        for j in range(1, s):
+            acc += a[j] * k[j]
+        yn = y + hs * acc
+        k.append(_dp_rhs(plan, yn, u))
+    acc = T.DP_E[0] * k[0]
+    for j in range(1, 7):
+        acc += T.DP_E[j] * k[j]
+    return yn, k[6], hs * acc
+
+
+def _dp_next_h(w, e, hs, clipped):
+    """The controller (C's, per body): the next proposal after an accepted (e <= 1) or rejected substep of hs
+    (read for the running bodies only)."""
+    p = np.ones_like(e)
+    live = w["live"]
+    p[live] = _dp_pow(np.where(e[live] > 0.0, e[live], 1.0), T.DP_ERR_EXPONENT)  # e = 0 or NaN: p is not read
+    p = T.DP_SAFETY * p
+    fa = np.where(e == 0.0, T.DP_FACMAX, p)                  # accepted
+    fa = np.where(fa > T.DP_FACMAX, T.DP_FACMAX, fa)
+    fa = np.where(fa < T.DP_FACMIN, T.DP_FACMIN, fa)
+    fa = np.where(w["rej"] & (fa > 1.0), 1.0, fa)            # no growth right after a rejection
+    hf = hs * fa
+    # a step shortened to land on the output time does not shrink the proposal
+    h_ok = np.where(clipped & (fa >= 1.0) & (w["h"] > hf), w["h"], hf)
+    fr = np.where(np.isfinite(e), p, T.DP_FACMIN)            # rejected
+    fr = np.where(fr < T.DP_FACMIN, T.DP_FACMIN, fr)
+    fr = np.where(fr > 1.0, 1.0, fr)
+    return np.where(e <= 1.0, h_ok, hs * fr)
+
+
+def _dp_substep(plan, w, u, dt, rtol, atol, normalize):
+    """One substep attempt of every running body of w (C's `while (t < dt)` body: stages, error, controller,
+    normalization and joint, FSAL, the failure rules), in place. Held bodies (w["live"] False) keep everything."""
+    y, live = w["y"], w["live"]
+    rem = dt - w["t"]
+    clipped = w["h"] >= rem
+    hs = np.where(live, np.where(clipped, rem, w["h"]), 0.0)
+    yn, k7, err = _dp_stages(plan, y, w["k0"], hs[:, None], u)
+    w["cnt"][live] += 6
+    e = _dp_norm(err, y, yn, rtol, atol, w["ncols"])
+    ok = live & (e <= 1.0)
+    w["h"] = np.where(live, _dp_next_h(w, e, hs, clipped), w["h"])
+    w["t"] = np.where(ok, np.where(clipped, dt, w["t"] + hs), w["t"])
+    if normalize:
+        _normalize(yn)
+    if plan.has_models:
+        plan.constrain(yn)
+    diverged = ok & ~np.isfinite(yn).all(axis=1)
+    good = ok & ~diverged
+    y[good], w["k0"][good] = yn[good], k7[good]             # FSAL: f at the new (un-normalized) point
+    w["rej"] = np.where(live, ~ok, w["rej"])
+    w["why"][diverged] = _DP_DIVERGED
+    live &= ~diverged
+    w["sub"][live] += 1
+    tol = live & ((w["h"] < DOPRI5_HMIN_REL * dt) | (w["sub"] > DOPRI5_MAX_SUBSTEPS))
+    w["why"][tol] = _DP_TOLERANCE
+    live &= ~tol & (w["t"] < dt)
+
+
+def _dp_interval(plan, full, u, dt, rtol, atol, normalize):
+    """Every body of full across one output interval dt, by substeps: while at most half of the working set is
+    still running, those go on alone (on their subset plan, _subplan), so a fast body costs the others nothing."""
+    nb = full["y"].shape[0]
+    full.update(t=np.zeros(nb), sub=np.zeros(nb, np.int64), rej=np.zeros(nb, bool), live=np.ones(nb, bool),
+                why=np.zeros(nb, np.int8))
+    W, w, sp, uw = None, full, plan, u          # W None: the working set is every body (w is full itself)
+    while True:
+        n_live = int(np.count_nonzero(w["live"]))
+        if n_live == 0:
+            break
+        if 2 * n_live <= w["live"].size:
+            live = np.flatnonzero(w["live"])
+            if W is not None:
+                _dp_scatter(full, w, W)
+            W = live if W is None else W[live]
+            w = {k: full[k][W] for k in _DP_FIELDS}
+            sp, uw = _subplan(plan, W), None if u is None else u[W]
+        _dp_substep(sp, w, uw, dt, rtol, atol, normalize)
+    if W is not None:
+        _dp_scatter(full, w, W)
+
+
+def _dp_scatter(full, w, W):
+    for k in _DP_FIELDS:
+        full[k][W] = w[k]
+
+
+def _dp_start(plan, full, fresh, u, rtol, atol, dt):
+    """Before an output step: f(y) for the bodies in fresh (each call's first step; a wheeled body's every step,
+    its held torque may change), then the starting step of bodies without a valid proposal; counted per body."""
+    x, k0, cnt = full["y"], full["k0"], full["cnt"]
+    for sel in (fresh, ~(full["h"] > 0.0) | ~np.isfinite(full["h"])):
+        idx = np.flatnonzero(sel)
+        if not idx.size:
+            continue
+        sp, ui = _subplan(plan, idx), None if u is None else u[idx]
+        if sel is fresh:
+            k0[idx] = _dp_rhs(sp, x[idx], ui)
+        else:
+            full["h"][idx] = _dp_initial_h(sp, x[idx], k0[idx], ui, rtol, atol, dt, full["ncols"][idx])
+        cnt[idx] += 1
 
 
 def _dopri5(plan, x, normalize, dt, n_steps, rtol, atol, hs, nfev, command=None, applied=None):
-    """Advance every body by n_steps output steps of exactly dt with one shared step size: the error
-    norm is the largest body's. hs (nb,) holds the proposal (all equal), nfev (nb,) the count; both
-    updated in place. k1 is reused (FSAL) within the call, recomputed each output step with wheels
-    (their held torque may change)."""
+    """Advance every body by n_steps output steps of exactly dt, each on its own step sizes (the C backend's
+    advance_dopri5, vectorized over bodies). hs (nb,) holds each body's proposal, nfev (nb,) its count; both
+    updated in place. k1 is reused (FSAL) within the call. A failure raises DivergenceError naming the first
+    failing step and, there, the lowest failing body (C's choice), with x at that body's last accepted state."""
     nb = x.shape[0]
-    ncols = (plan.norm_cols if x.shape[1] > LY.STATE_SIZE else np.full(nb, float(LY.STATE_SIZE)))
-    hmin = DOPRI5_HMIN_REL * dt
-    h = float(hs[0]) if nb else dt
-    k1 = None
-    count = 0
-    u = None
+    ext = x.shape[1] > LY.STATE_SIZE
+    full = {"y": x, "k0": np.empty_like(x), "h": hs.copy(), "cnt": np.zeros(nb),
+            "ncols": plan.norm_cols if ext else np.full(nb, float(LY.STATE_SIZE))}
+    fresh = np.ones(nb, bool)
     for i in range(n_steps):
-        if command is not None:
-            u = plan.applied(x, command)
-            if plan.wheels:
-                k1 = None
-        f = (lambda y: plan.rhs(y, u)) if plan.has_models else plan.rhs  # noqa: E731
-        if k1 is None:
-            k1 = f(x)
-            count += 1
-        if not (h > 0.0 and np.isfinite(h)):
-            h, n_init = _initial_h(f, x, k1, rtol, atol, dt, ncols)
-            count += n_init
-        t, sub, rejected = 0.0, 0, False
-        while t < dt:
-            rem = dt - t
-            clipped = h >= rem
-            hh = rem if clipped else h
-            k = [k1]
-            for s_ in range(1, 7):
-                acc = sum(a * kj for a, kj in zip(T.DP_A[s_], k) if a != 0.0)
-                k.append(f(x + hh * acc))
-            count += 6
-            yn = x + hh * sum(a * kj for a, kj in zip(T.DP_A[6], k) if a != 0.0)
-            err = hh * sum(e * kj for e, kj in zip(T.DP_E, k) if e != 0.0)
-            norms = _dp_norms(err, x, yn, rtol, atol, ncols)
-            e = float(np.max(norms)) if np.all(np.isfinite(norms)) else np.inf
-            if e <= 1.0:
-                fac = T.DP_FACMAX if e == 0.0 else min(T.DP_FACMAX, max(T.DP_FACMIN, T.DP_SAFETY * e ** T.DP_ERR_EXPONENT))
-                if rejected:
-                    fac = min(fac, 1.0)
-                t = dt if clipped else t + hh
-                if not (clipped and fac >= 1.0 and h > hh * fac):
-                    h = hh * fac
-                if normalize:
-                    _normalize(yn)
-                if plan.has_models:
-                    plan.constrain(yn)
-                if not np.isfinite(yn).all():
-                    b = int(np.flatnonzero(~np.isfinite(yn).all(axis=1))[0])
-                    raise DivergenceError(i, b, divergence_cause(x[b, X], dt, "dopri5", *plan.wheel_info(x, b)))
-                x[...] = yn
-                k1 = k[6]
-                rejected = False
+        u = None if command is None else plan.applied(x, command)
+        _dp_start(plan, full, fresh, u, rtol, atol, dt)
+        fresh = plan.wheeled.copy() if ext else np.zeros(nb, bool)
+        _dp_interval(plan, full, u, dt, rtol, atol, normalize)
+        failed = np.flatnonzero(full["why"])
+        if failed.size:
+            b = int(failed[0])
+            if full["why"][b] == _DP_TOLERANCE:
+                cause = tolerance_cause(Adaptive(rtol, atol, 0), float(full["h"][b]), dt, x[b, X])
             else:
-                fac = max(T.DP_FACMIN, T.DP_SAFETY * e ** T.DP_ERR_EXPONENT) if np.isfinite(e) else T.DP_FACMIN
-                h = hh * min(fac, 1.0)
-                rejected = True
-            sub += 1
-            if h < hmin or sub > DOPRI5_MAX_SUBSTEPS:
-                bad = ~np.isfinite(norms)
-                b = int(np.flatnonzero(bad)[0]) if bad.any() else int(np.argmax(norms))
-                raise DivergenceError(i, b, tolerance_cause(Adaptive(rtol, atol, 0), h, dt, x[b]))
+                cause = divergence_cause(x[b, X], dt, "dopri5", *plan.wheel_info(x, b))
+            raise DivergenceError(i, b, cause)
         if u is not None:
             applied[plan.wheeled] = u[plan.wheeled]
-    hs[...] = h
-    nfev += count
-
-
-def _initial_h(f, x, f0, rtol, atol, dt, ncols):
-    """Hairer's starting step (Solving ODEs I, II.4), shared by all bodies (the smallest); 1 evaluation."""
-    d0 = float(np.min(_dp_norms(x, x, x, rtol, atol, ncols)))
-    d1 = float(np.max(_dp_norms(f0, x, x, rtol, atol, ncols)))
-    h0 = T.DP_INIT_TINY_H if (d0 < T.DP_INIT_SMALL or d1 < T.DP_INIT_SMALL) else T.DP_INIT_FRAC * d0 / d1
-    h0 = min(h0, dt)
-    f1 = f(x + h0 * f0)
-    d2 = float(np.max(_dp_norms((f1 - f0) / h0, x, x, rtol, atol, ncols)))
-    mx = max(d1, d2)
-    h1 = (max(T.DP_INIT_TINY_H, h0 * T.DP_INIT_SHRINK) if mx <= T.DP_INIT_FLAT
-          else (T.DP_INIT_FRAC / mx) ** T.DP_INIT_EXPONENT)
-    h = min(T.DP_INIT_GROW * h0, h1)
-    return (h if np.isfinite(h) and h > 0 else dt), 1
+    hs[...] = full["h"]
+    nfev += full["cnt"]
