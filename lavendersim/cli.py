@@ -72,13 +72,15 @@ def _derive(args) -> int:
 
     from lavendersim import validate as V
 
-    if args.out and not args.check:
+    if args.out is not None and not args.check:   # --out '' is refused, never taken for "no --out"
         out_dir = V.writable_dir("out", args.out)  # exit 2 and one line, before anything is derived
         # derive swaps a complete sibling folder in (derive/atomic.py): the parent must be writable too
         V.writable_dir("out", out_dir.resolve().parent)
     if args.user:
         return _derive_user(args)
-    out = Path(args.out) if args.out else generated_dir()
+    if args.out is not None and not str(args.out):
+        raise V.LavenderInputError("out", "expected a directory path", ", got ''")
+    out = Path(args.out) if args.out is not None else generated_dir()
     t0 = time.perf_counter()
     if args.check:
         stale = codegen.check(out, full=args.full)

@@ -445,3 +445,16 @@ def test_without_an_atomic_exchange_the_two_renames_leave_one_whole_folder(tmp_p
     O.check_folder(out, "t")
     _result(value=3.0).save(out)
     assert O.leftovers(out, "t") == [] and json.loads((out / "t" / "results.json").read_text())["x"] == 3.0
+
+
+def test_derive_with_an_empty_out_is_refused_and_writes_nothing(monkeypatch, capsys):
+    from lavendersim.derive import codegen
+
+    calls = []
+    monkeypatch.setattr(codegen, "write", lambda out, *a, **k: calls.append(out) or [])   # never the package's generated/
+    monkeypatch.setattr(codegen, "check", lambda out, *a, **k: calls.append(out) or [])
+    for argv in (["derive", "--out", ""], ["derive", "--check", "--out", ""]):
+        assert cli.main(argv) == 2
+        err = capsys.readouterr().err
+        assert len(err.strip().splitlines()) == 1 and "out" in err
+    assert calls == []
