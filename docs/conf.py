@@ -25,6 +25,7 @@ extensions = [
     "sphinx.ext.napoleon",
     "sphinx.ext.mathjax",
     "sphinx.ext.viewcode",
+    "sphinx.ext.intersphinx",
 ]
 source_suffix = {".rst": "restructuredtext", ".md": "myst-nb", ".ipynb": "myst-nb"}
 root_doc = "index"
@@ -61,6 +62,9 @@ suppress_warnings = ["myst.header", "ref.python"]
 
 html_theme = "alabaster"
 html_title = f"LavenderSim {release}"
+html_static_path = ["_static"]
+html_css_files = ["lavendersim.css"]
+html_theme_options = {"page_width": "1200px", "sidebar_width": "260px"}
 
 
 # Docstrings write norms as |x| (plain text reads best in help()); in reStructuredText |x| would be a
@@ -137,6 +141,17 @@ def _make_gallery(app) -> None:
 
 
 exclude_patterns.append("_gallery")
+
+# Links into Python, NumPy, python-control and Gymnasium. The build runs offline (CI has no network), so
+# the inventories are local: docs/_inv/*.inv list the objects the pages link, with the projects' URLs
+# (docs/_inv/make_inventories.py writes them).
+intersphinx_mapping = {
+    "python": ("https://docs.python.org/3/", str(DOCS / "_inv" / "python.inv")),
+    "numpy": ("https://numpy.org/doc/stable/", str(DOCS / "_inv" / "numpy.inv")),
+    "control": ("https://python-control.readthedocs.io/en/latest/", str(DOCS / "_inv" / "control.inv")),
+    "gymnasium": ("https://gymnasium.farama.org/", str(DOCS / "_inv" / "gymnasium.inv")),
+}
+intersphinx_timeout = 5
 
 
 def _sources_key() -> str:

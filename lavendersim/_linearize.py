@@ -413,7 +413,9 @@ class Linearization(ct.StateSpace):
     """A python-control ``StateSpace`` (continuous, or discrete after :meth:`sample`) with what the
     lavendersim designs need: the operating point, the input map and the controllable subspace.
 
-    Attributes (besides StateSpace's A, B, C, D, dt, state/input/output labels)
+    Besides StateSpace's A, B, C, D, dt and state/input/output labels:
+
+    Attributes
     ----------
     bodies : list of BodyRef
         Each body's operating point and its block of the error state.

@@ -61,6 +61,8 @@ class ReactionWheelCubeVectorEnv(VectorEnv):
         The single environment's arguments (task, backend, control_dt, dt, damping, init_angle_deg,
         max_tilt_deg, target_q or the chapter cube's parameters), validated by it.
 
+    Notes
+    -----
     Observations (N, 10) float32, actions (N, 3) float32 in [-1, 1], rewards (N,) float64,
     terminations and truncations (N,) bool.
     """
