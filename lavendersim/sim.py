@@ -102,6 +102,7 @@ from __future__ import annotations
 import os
 import sys
 import threading
+import types
 import warnings
 import weakref
 
@@ -249,6 +250,7 @@ class ImmutableSimError(V.LavenderInputError, AttributeError):
 # what a built Sim keeps fixed (assignment raises ImmutableSimError)
 _FIXED = frozenset({"dt", "integrator", "normalize", "backend", "names", "bodies", "on_bound", "max_growth", "dtype",
                     "params", "effects", "x", "p_w", "q", "v_w", "omega_b", "Omega", "t", "pipeline"})
+_SETTERS = frozenset({"steps", "rhs_evals"})   # the validated setters: the only public assignments to a built Sim
 _LIVE: "weakref.WeakSet[Sim]" = weakref.WeakSet()   # every Sim of this process (the fork handler resets their locks)
 
 
@@ -291,7 +293,7 @@ class Trajectory:
 
     def __init__(self, names: list[str], t: np.ndarray, x: np.ndarray, Omega: np.ndarray | None = None,
                  wheel_counts=None):
-        self.names, self.t, self.x = names, t, x
+        self.names, self.t, self.x = list(names), t, x
         self.Omega = np.zeros(x.shape[:-1] + (LY.WHEELS_MAX,)) if Omega is None else Omega
         self.wheel_counts = (np.full(len(names), LY.WHEELS_BODY_AXES) if wheel_counts is None
                              else np.asarray(wheel_counts, dtype=np.int64))
@@ -381,8 +383,8 @@ class Sim:
             raise V.LavenderInputError("normalize", "must be True or False", f", got {normalize!r}")
         self.normalize = bool(normalize)
         self.backend = backends.get(backend)
-        self.names = list(scene.bodies)
-        self.bodies = dict(scene.bodies)
+        self.names = tuple(scene.bodies)                        # read-only: a pickle rebuilds the Sim from them
+        self.bodies = types.MappingProxyType(dict(scene.bodies))
         for e in scene.effects:  # an effect no declaration printed is an error, never a no-op
             effects_mod.check_declared(e)
         tables = scene.tables()   # a body given a full inertia tensor is stepped in its principal frame
@@ -487,10 +489,15 @@ class Sim:
 
     # ---- settings are fixed; the state changes only through validated calls -------------------
     def __setattr__(self, name: str, value) -> None:
-        if name in _FIXED and self.__dict__.get("_built"):
-            raise ImmutableSimError(f"sim.{name}", "is fixed when the Sim is built (a changed setting would not mean "
-                                    "the same on both backends): build a new Sim; the state changes through set_state, "
-                                    "set_wheel_command(s) and set_effect_params")
+        if self.__dict__.get("_built") and not name.startswith("_") and name not in _SETTERS:
+            if name in _FIXED:
+                raise ImmutableSimError(f"sim.{name}", "is fixed when the Sim is built (a changed setting would not "
+                                        "mean the same on both backends): build a new Sim; the state changes through "
+                                        "set_state, set_wheel_command(s) and set_effect_params")
+            what = ("is a method of Sim" if callable(getattr(type(self), name, None)) else "is read-only"
+                    if hasattr(type(self), name) else "is not an attribute of Sim (a misspelt setting would be ignored)")
+            raise ImmutableSimError(f"sim.{name}", f"{what}: a built Sim takes no assignment but its validated "
+                                    "setters steps and rhs_evals")
         object.__setattr__(self, name, value)
 
     def __delattr__(self, name: str) -> None:
@@ -1077,7 +1084,7 @@ class Sim:
                 return
             self._fast, self._ctr, self._lock = fast, fast, _Guard(fast)
             fast.set_fallback(self._step_slow)
-            self.step = fast.step_or_fallback
+            object.__setattr__(self, "step", fast.step_or_fallback)   # (built: no public assignment)
         self._fast_n = self._chunk
 
     def _check_written(self) -> None:

@@ -16,6 +16,8 @@ well under a minute.
 from __future__ import annotations
 
 import math
+import os
+import pickle
 import warnings
 
 import numpy as np
@@ -376,3 +378,260 @@ def test_fuzz_live_viewer_frames(live_viewer, payload):
     event("frame published")
     assert v.wait_applied(n, 60.0)       # raises ViewerError if the frame could not be drawn
     assert v.stats()["failed"] == 0 and v.last_error is None
+
+
+# ---------------------------------------------------------------- a built Sim: mutation, threads, pickling, fork ------
+# (issue 28) Nothing reaches the stepper unvalidated, no update is lost to a second thread, a pickled Sim steps on bit for
+# bit, a fork while another thread runs never hangs. Each example builds Sims and steps them: few examples per property.
+FUZZ_SIM = settings(FUZZ, max_examples=40)
+FUZZ_THREADS = settings(FUZZ, max_examples=25)
+FUZZ_FORK = settings(FUZZ, max_examples=12)
+SETTERS = ("steps", "rhs_evals")        # the validated setters of a built Sim; every other public name is refused
+
+
+def _steps(backend: str, n: int) -> int:
+    """n steps on the C backend, a sixth of them on NumPy (its Python step path: ~5 ms per step of this scene)."""
+    return n if backend == "c" else n // 6
+
+
+def _built(backend: str, integrator: str = "rk4", wheels: bool = True):
+    """A two-body Sim (a tumbling satellite with an applied torque, a cube with three wheels) and the torque effect."""
+    s = lv.Scene()
+    s.add_body(lv.Body("sat", 12.0, [[0.2, 0.004, -0.002], [0.004, 0.25, 0.003], [-0.002, 0.003, 0.08]],
+                       omega_b=[0.3, -0.2, 0.5]))
+    s.add_body(lv.Body.box("cube", 1.0, (0.2, 0.2, 0.2), omega_b=[0.1, 0.2, -0.3]))
+    if wheels:
+        s.add_effect("reaction_wheels", body="cube", J=[1e-4] * 3, torque_limit=0.1, speed_limit=100.0)
+    push = s.add_effect("applied_torque", body="sat", torque_w=[0.0, 0.0, 1e-3])
+    return lv.Sim(s, dt=1e-3, integrator=integrator, backend=backend), push
+
+
+def _bits_of(sim: lv.Sim) -> tuple:
+    """Everything a step can change, as bytes (== is bit for bit, NaN and -0.0 included)."""
+    return (sim.x.tobytes(), sim.Omega.tobytes(), sim.wheel_torques_applied.tobytes(), sim.steps, sim.rhs_evals,
+            np.float64(sim.t).tobytes())
+
+
+def _names_of_a_sim() -> list[str]:
+    sim, _ = _built("numpy")
+    return sorted(n for n in dir(sim) if not n.startswith("_"))
+
+
+SIM_NAMES = _names_of_a_sim()
+values = st.one_of(scalars, vectors(3), st.integers(0, 40), st.just(None), st.just("same"),
+                  st.just(lv.Body.box("sat", 5.0, (1.0, 1.0, 1.0))))     # a valid body of the same name, other mass
+
+
+@FUZZ_SIM
+@given(name=st.one_of(st.sampled_from(SIM_NAMES), st.sampled_from(["dT", "omega", "state_", "wheels", "brand_new"])),
+       value=values, backend=st.sampled_from(BACKENDS), before=st.integers(0, 30), after=st.integers(1, 40),
+       inplace=st.booleans())
+def test_fuzz_mutation_after_construction(name, value, backend, before, after, inplace):
+    """Assigning any public name of a built Sim raises ImmutableSimError naming ``sim.<name>`` or is a validated setter
+    (then it is a LavenderInputError naming the setter, or it is accepted and means the same on a reference Sim); an
+    in-place change of what a public attribute returns (an array, a dict, a list) is refused or changes nothing the
+    Sim steps or pickles. Either way stepping on is bit for bit what a Sim that saw only the accepted setter does, and
+    a pickled copy steps alike."""
+    from lavendersim.sim import ImmutableSimError
+
+    sim, _ = _built(backend)
+    ref, _ = _built(backend)
+    before, after = _steps(backend, before), max(1, _steps(backend, after))
+    sim.run(before)
+    ref.run(before)
+    accepted = False
+    if inplace and name in SIM_NAMES and not callable(getattr(sim, name)):
+        target = getattr(sim, name)
+        event(f"in place: {type(target).__name__}")
+        try:
+            if isinstance(target, np.ndarray):
+                target.flat[0] = 123.0
+            elif isinstance(target, dict):
+                target[next(iter(target))] = value
+            elif isinstance(target, list):
+                target.append(value)
+            elif isinstance(target, tuple):
+                return
+            else:
+                return
+        except (ValueError, TypeError, AttributeError) as exc:     # read-only arrays, mappings, tuples
+            event(f"in place refused: {type(exc).__name__}")
+    else:
+        v = getattr(sim, name, None) if isinstance(value, str) and value == "same" else value
+        try:
+            setattr(sim, name, v)
+            accepted = True
+        except ImmutableSimError as exc:
+            assert exc.field == f"sim.{name}"
+            event("assignment: ImmutableSimError")
+        except LavenderInputError as exc:
+            assert name in SETTERS and exc.field == name, f"{name}: {exc}"
+            event("assignment: setter refused")
+        if accepted:
+            assert name in SETTERS, f"sim.{name} = {v!r} was accepted: neither refused nor a validated setter"
+            setattr(ref, name, v)
+            event("assignment: setter accepted")
+    assert _bits_of(sim) == _bits_of(ref)
+    copy_ = pickle.loads(pickle.dumps(sim))
+    for s in (sim, ref, copy_):
+        try:
+            _quiet(s.run, after)
+        except DivergenceError:
+            pass
+    assert _bits_of(sim) == _bits_of(ref) == _bits_of(copy_)
+
+
+OPS = st.one_of(
+    st.tuples(st.just("set_state"), st.fixed_dictionaries({}, optional={
+        "omega_b": st.lists(st.floats(-1, 1), min_size=3, max_size=3),
+        "q": st.sampled_from([(0.0, 0.0, 0.0, 1.0), (0.1, 0.2, 0.3, 0.9), (0.0, 0.0, math.sin(0.3), math.cos(0.3))])})),
+    st.tuples(st.just("set_wheel_command"), st.lists(st.floats(-0.1, 0.1), min_size=3, max_size=3)),
+    st.tuples(st.just("set_effect_params"), st.lists(st.floats(-1e-2, 1e-2), min_size=3, max_size=3)))
+
+
+def _apply(sim: lv.Sim, push, op) -> None:
+    kind, arg = op
+    if kind == "set_state":
+        sim.set_state("sat", **arg)
+    elif kind == "set_wheel_command":
+        sim.set_wheel_command("cube", arg)
+    else:
+        sim.set_effect_params(push, torque_w=arg)
+
+
+def _landings(bounds: list[tuple[int, int]], boundaries: list[int], start: int = 0) -> list[tuple[int, ...]]:
+    """Every non-decreasing choice of a run boundary per operation within its observed [before, after] step counts."""
+    if not bounds:
+        return [()]
+    lo, hi = bounds[0]
+    return [(k, *rest) for k in boundaries if max(lo, start) <= k <= hi for rest in _landings(bounds[1:], boundaries, k)]
+
+
+@FUZZ_THREADS
+@given(ops=st.lists(OPS, min_size=1, max_size=3), backend=st.sampled_from(BACKENDS),
+       delays=st.lists(st.sampled_from([0.0, 0.0005, 0.002]), min_size=3, max_size=3))
+def test_fuzz_threads_never_lose_an_update(ops, backend, delays):
+    """set_state, set_wheel_command and set_effect_params from a second thread while a run goes on land between two
+    runs and are never lost: the final state is, bit for bit, a serial replay with each operation at a run boundary
+    (within the step counts the second thread saw before and after it)."""
+    import threading
+    import time
+
+    m, calls = (400, 6) if backend == "c" else (3, 4)
+    sim, push = _built(backend)
+    boundaries = [m * i for i in range(calls + 1)]
+    bounds, errors = [], []
+    started = threading.Event()
+
+    def runner():
+        try:
+            started.set()
+            for _ in range(calls):
+                sim.run(m)
+        except BaseException as exc:   # recorded: the test fails naming it
+            errors.append(exc)
+
+    t = threading.Thread(target=runner)
+    t.start()
+    started.wait(30)
+    for op, delay in zip(ops, delays):
+        time.sleep(delay)
+        lo = sim.steps
+        _apply(sim, push, op)
+        bounds.append((lo, sim.steps))
+    t.join(120)
+    assert not t.is_alive() and not errors, errors
+    final = _bits_of(sim)
+    for landing in _landings(bounds, boundaries):
+        ref, ref_push = _built(backend)
+        done = 0
+        for op, k in zip(ops, landing):
+            ref.run(k - done)
+            done = k
+            _apply(ref, ref_push, op)
+        ref.run(m * calls - done)
+        if _bits_of(ref) == final:
+            event(f"landed at {landing}")
+            return
+    pytest.fail(f"no serial replay gives the final state (ops {[o[0] for o in ops]}, step bounds {bounds}): a lost update")
+
+
+@FUZZ_SIM
+@given(backend=st.sampled_from(BACKENDS), integrator=st.sampled_from(["rk4", "dopri5", "implicit_gyro", "euler",
+                                                                     "semi_implicit_euler", "splitting"]),
+       before=st.integers(0, 60), after=st.integers(1, 60), ops=st.lists(OPS, max_size=2),
+       how=st.sampled_from(["pickle", "deepcopy"]))
+def test_fuzz_pickling_at_a_random_step(backend, integrator, before, after, ops, how):
+    """A pickle (or deepcopy) round trip at any step, after any held command or effect change, steps on bit for bit."""
+    import copy
+
+    try:
+        sim, push = _built(backend, integrator, wheels=integrator not in ("implicit_gyro",))
+    except LavenderInputError:
+        event(f"{integrator} refuses the scene")
+        return
+    for op in ops:
+        if op[0] == "set_wheel_command" and integrator == "implicit_gyro":
+            continue
+        _apply(sim, push, op)
+    before, after = _steps(backend, before), max(1, _steps(backend, after))
+    try:
+        _quiet(sim.run, before)
+    except DivergenceError:
+        return
+    twin = pickle.loads(pickle.dumps(sim)) if how == "pickle" else copy.deepcopy(sim)
+    assert twin is not sim and _bits_of(twin) == _bits_of(sim)
+    for s in (sim, twin):
+        try:
+            _quiet(s.run, after)
+        except DivergenceError as exc:
+            event(f"diverged: {exc.cause[:30]}")
+    assert _bits_of(twin) == _bits_of(sim)
+
+
+@pytest.mark.skipif(not hasattr(os, "fork"), reason="no os.fork on this platform")
+@FUZZ_FORK
+@given(backend=st.sampled_from(BACKENDS), delay=st.sampled_from([0.0, 0.0002, 0.001, 0.005]),
+       child_steps=st.integers(1, 20))
+def test_fuzz_fork_while_another_thread_runs(backend, delay, child_steps):
+    """os.fork while a second thread runs the Sim: the child steps the Sim on (its lock is fresh, whoever held it in
+    the parent) and exits 0; the parent's run finishes too."""
+    import threading
+    import time
+
+    sim, _ = _built(backend)
+    stop, errors = threading.Event(), []
+
+    def runner():
+        try:
+            while not stop.is_set():
+                sim.run(200 if backend == "c" else 3)
+        except BaseException as exc:   # recorded: the test fails naming it
+            errors.append(exc)
+
+    t = threading.Thread(target=runner)
+    t.start()
+    time.sleep(delay)
+    pid = os.fork()
+    if pid == 0:          # the child: only this thread exists; never back into pytest/hypothesis
+        code = 1
+        try:
+            n0 = sim.steps
+            sim.run(child_steps)
+            code = 0 if sim.steps == n0 + child_steps and np.all(np.isfinite(sim.x)) else 3
+        finally:
+            os._exit(code)
+    stop.set()
+    t.join(120)
+    deadline = time.monotonic() + 120
+    while True:
+        done, status = os.waitpid(pid, os.WNOHANG)
+        if done:
+            break
+        if time.monotonic() > deadline:
+            os.kill(pid, 9)
+            os.waitpid(pid, 0)
+            pytest.fail("the forked child hung")
+        time.sleep(0.01)
+    assert os.WIFEXITED(status) and os.WEXITSTATUS(status) == 0, status
+    assert not t.is_alive() and not errors, errors
