@@ -38,11 +38,55 @@ double.
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import sympy as sp
 
 from .codegen import HEADER
 
 R = sp.Rational
+
+
+@dataclass(frozen=True)
+class Integrator:
+    """One integrator of the registry: everything a backend, the Sim or a lab asks about it is here.
+
+    name: what users pass to ``Sim(..., integrator=)``; code: its number in the C step loop; family: the stepper
+    that runs it ("explicit_rk": a Runge–Kutta tableau; "adaptive_rk": an embedded pair with step control;
+    "composition": kicks and exact flows; "implicit": a Newton step; "lie_group_rk": a tableau in exponential
+    coordinates); order: its order torque-free; evals: right-hand-side evaluations per step as counted
+    (None: adaptive, counted as it runs; see backends.rhs_per_step); plain_only: no spherical_joint or
+    reaction_wheels (its exact sub-flows use a free body's principal inertia); float32: runs in single
+    precision; summary: one line."""
+
+    name: str
+    code: int
+    family: str
+    order: int
+    evals: object
+    plain_only: bool
+    float32: bool
+    summary: str
+
+    @property
+    def adaptive(self) -> bool:
+        return self.family == "adaptive_rk"
+
+
+# The registry (issue 29): nothing else lists integrators; C and Python print it from here. Codes are fixed
+# (saved runs and the C step loop's switch use them); a new integrator takes the next code.
+FAMILIES = ("explicit_rk", "adaptive_rk", "composition", "implicit", "lie_group_rk")
+# Status codes of the C step loop (generated/tableaux.h LV_*; the C backend reads them from tableaux.py)
+STATUS = (("OK", 0, "the steps were taken"),
+          ("DIVERGED", 1, "a state became non-finite; see fail_step / fail_body"),
+          ("TOLERANCE", 2, "dopri5: the step size fell below dt*DP_HMIN_REL (or over DP_MAX_SUBSTEPS substeps in one "
+                           "step) without meeting rtol/atol; same state contract as DIVERGED, and h[fail_body] holds "
+                           "the step size that was too small"),
+          ("NO_ROOT", 3, "implicit_gyro: the Newton solve of a step did not converge (no root near omega); same "
+                         "state contract as DIVERGED"),
+          ("BAD_ARGUMENT", -1, "an argument the step loop refuses; nothing changed"),
+          ("UNKNOWN_EFFECT", -2, "an effect row's code is no declared effect's (*fail_step = the row); nothing changed"),
+          ("NO_MEMORY", -3, "the per-body effect index could not be allocated; nothing changed"))
 
 RK4_C = (R(0), R(1, 2), R(1, 2), R(1))                 # nodes: stage s is evaluated at x + c_s dt k_{s-1}
 RK4_B_NUM = (1, 2, 2, 1)                               # weights b = RK4_B_NUM / RK4_B_DEN
@@ -185,6 +229,30 @@ GYRO_TOL_SQ = 1e-32                 # stop when |delta|^2 <= this * |omega_next|
 GYRO_ACCEPT_SQ = 1e-20              # after GYRO_MAX_ITER iterations the last update must be at most 1e-10 |omega_next|
                                     # (an ill-conditioned solve stalls at rounding); else the step has no root: divergence
 
+INTEGRATORS = (
+    Integrator("euler", 0, "explicit_rk", 1, 1, False, True, "explicit Euler"),
+    Integrator("semi_implicit_euler", 1, "explicit_rk", 1, 1, False, True,
+               "symplectic Euler: v and omega first, then p and q with the new rates"),
+    Integrator("rk4", 2, "explicit_rk", 4, 4, False, True, "the classic Runge–Kutta method"),
+    Integrator("dopri5", 3, "adaptive_rk", 5, None, False, False, "Dormand–Prince 5(4), per-body step size control"),
+    Integrator("splitting", 4, "composition", 2, 1, True, False,
+               "Strang splitting: exact principal-axis flows, the loads' half kicks around them"),
+    Integrator("implicit_gyro", 5, "implicit", 1, 1, True, False,
+               "implicit gyroscopic term (Newton), exp-map attitude update"),
+    Integrator("splitting4", 6, "composition", 4, len(SPLIT4_GAMMA), True, False,
+               "Suzuki's symmetric composition of the splitting step"),
+    Integrator("rk4_expmap", 7, "lie_group_rk", 4, 4, True, False, "RK4 in exponential coordinates of q (RKMK4)"),
+    Integrator("symtop4", 8, "composition", 4, len(SYMTOP4_GAMMA), True, False,
+               "symmetric-top splitting, Suzuki's composition"),
+    Integrator("symtop_bm6", 9, "composition", 6, len(SYMTOP4_GAMMA), True, False,
+               "symmetric-top splitting, Blanes–Moan S10 (torque-free; with effects symtop4's kicked stages)"),
+)
+
+
+def integrator_names() -> list[str]:
+    return [i.name for i in INTEGRATORS]
+
+
 # Validity bounds, one per integrator (issue 11): the run is trusted while
 #     |omega| * dt * (I_max / I_min) ** WDT_RATIO_EXPONENT[name]  <=  WDT_MAX[name]
 # (|omega| rad/s, dt s, per body; beyond it Sim raises DivergenceError naming the bound, or warns with
@@ -274,8 +342,26 @@ def dp_e() -> tuple:
     return tuple(b - bh for b, bh in zip(dp_b(), DP_B_HAT))
 
 
+def _check_registry() -> None:
+    """The registry is consistent: codes 0..n-1 once each, known families, every bound declared for it."""
+    codes = sorted(i.code for i in INTEGRATORS)
+    if codes != list(range(len(INTEGRATORS))) or len({i.name for i in INTEGRATORS}) != len(INTEGRATORS):
+        raise RuntimeError("derive: integrator codes must be 0..n-1, names unique")
+    for i in INTEGRATORS:
+        if i.family not in FAMILIES:
+            raise RuntimeError(f"derive: integrator {i.name}: unknown family {i.family!r}")
+        if (i.evals is None) != i.adaptive:
+            raise RuntimeError(f"derive: integrator {i.name}: evals is None exactly for the adaptive family")
+    fixed = {i.name for i in INTEGRATORS if not i.adaptive}
+    if set(WDT_MAX) != fixed or set(WDT_RATIO_EXPONENT) != fixed:
+        raise RuntimeError("derive: every fixed-step integrator, and only those, has a validity bound (WDT_MAX)")
+    if set(real_axis_stability()) != {i.name for i in INTEGRATORS}:
+        raise RuntimeError("derive: every integrator has a decay stability limit (real_axis_stability)")
+
+
 def _check() -> None:
     """Derivation-time proofs of the order conditions that identify the tableaux."""
+    _check_registry()
     c = [sum(row, R(0)) for row in DP_A]
     b, bh = dp_b(), DP_B_HAT
     for w, p in ((b, 5), (bh, 4)):
@@ -352,11 +438,32 @@ def _scalars() -> list[tuple[str, str, str]]:
     return out
 
 
+def _c_registry() -> list[str]:
+    """The integrator registry and the step loop's status codes, for C."""
+    up = [(i.name.upper(), i) for i in INTEGRATORS]
+    out = ["/* The integrators (derive/tableaux.py INTEGRATORS): codes, capabilities, and LV_INTEGRATORS(X) = X(NAME, code)",
+           "   for each (the module's constants). Nothing else lists them. */", "enum {"]
+    out += [f"    LV_INTEGRATOR_{n} = {i.code}," for n, i in up[:-1]] + [f"    LV_INTEGRATOR_{up[-1][0]} = {up[-1][1].code}", "};"]
+    last = max(INTEGRATORS, key=lambda i: i.code)
+    out.append(f"#define LV_INTEGRATOR_LAST LV_INTEGRATOR_{last.name.upper()}")
+    for macro, pick in (("PLAIN_ONLY", lambda i: i.plain_only), ("FLOAT32", lambda i: i.float32),
+                        ("ADAPTIVE", lambda i: i.adaptive)):
+        terms = " || ".join(f"(i) == LV_INTEGRATOR_{i.name.upper()}" for i in INTEGRATORS if pick(i)) or "0"
+        out.append(f"#define LV_INTEGRATOR_{macro}(i) ({terms})")
+    out.append("#define LV_INTEGRATORS(X) " + " ".join(f"X({n}, {i.code})" for n, i in up))
+    out += ["", "/* Status codes of the step loop */", "enum {"]
+    out += [f"    LV_{n} = {c}," + f" /* {doc} */" for n, c, doc in STATUS[:-1]]
+    n, c, doc = STATUS[-1]
+    out += [f"    LV_{n} = {c} /* {doc} */", "};", ""]
+    return out
+
+
 def print_c() -> str:
     """generated/tableaux.h: #defines for scalars, static const arrays for the tableaux."""
     _check()
-    out = [f"/* {HEADER} */", "/* Integrator tableaux and constants (derive/tableaux.py). Included by the step loop only. */",
+    out = [f"/* {HEADER} */", "/* The integrator registry, tableaux and constants (derive/tableaux.py). Included through step.h. */",
            "#ifndef LAVENDERSIM_TABLEAUX_H", "#define LAVENDERSIM_TABLEAUX_H", ""]
+    out += _c_registry()
     out += [f"#define LV_{n} {c}" for n, c, _ in _scalars()]
     out += ["", "/* Dormand-Prince 5(4): A (row 6 = the 5th-order weights, FSAL) and E = b - b_hat */",
             "static const double LV_DP_A[7][6] = {"]
@@ -395,6 +502,19 @@ def print_python() -> str:
     """generated/tableaux.py."""
     _check()
     out = [f'"""{HEADER}', "", "Integrator tableaux and constants (derive/tableaux.py), the same doubles as tableaux.h.", '"""', ""]
+    out += ["# The integrators (derive/tableaux.py INTEGRATORS): nothing else lists them",
+            "INTEGRATOR_CODES = {" + ", ".join(f"{i.name!r}: {i.code}" for i in INTEGRATORS) + "}",
+            "INTEGRATOR_FAMILY = {" + ", ".join(f"{i.name!r}: {i.family!r}" for i in INTEGRATORS) + "}",
+            "INTEGRATOR_ORDER = {" + ", ".join(f"{i.name!r}: {i.order}" for i in INTEGRATORS) + "}",
+            "# right-hand-side evaluations per step as counted (None: adaptive, counted as it runs)",
+            "RHS_PER_STEP = {" + ", ".join(f"{i.name!r}: {i.evals!r}" for i in INTEGRATORS) + "}",
+            "INTEGRATOR_SUMMARY = {" + ", ".join(f"{i.name!r}: {i.summary!r}" for i in INTEGRATORS) + "}",
+            "ADAPTIVE = (" + "".join(f"{i.name!r}, " for i in INTEGRATORS if i.adaptive) + ")",
+            "PLAIN_ONLY = (" + "".join(f"{i.name!r}, " for i in INTEGRATORS if i.plain_only) + ")",
+            "FLOAT32_INTEGRATORS = (" + "".join(f"{i.name!r}, " for i in INTEGRATORS if i.float32) + ")",
+            "# status codes of the C step loop (tableaux.h LV_*)"]
+    out += [f"STATUS_{n} = {c}" for n, c, _ in STATUS]
+    out.append("")
     out += [f"{n} = {p}" for n, _, p in _scalars()]
     out.append("")
     out.append("# Dormand-Prince 5(4): DP_A[s] (stage s's coefficients; DP_A[6] = the 5th-order weights, FSAL), DP_E = b - b_hat")

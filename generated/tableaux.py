@@ -3,6 +3,25 @@
 Integrator tableaux and constants (derive/tableaux.py), the same doubles as tableaux.h.
 """
 
+# The integrators (derive/tableaux.py INTEGRATORS): nothing else lists them
+INTEGRATOR_CODES = {'euler': 0, 'semi_implicit_euler': 1, 'rk4': 2, 'dopri5': 3, 'splitting': 4, 'implicit_gyro': 5, 'splitting4': 6, 'rk4_expmap': 7, 'symtop4': 8, 'symtop_bm6': 9}
+INTEGRATOR_FAMILY = {'euler': 'explicit_rk', 'semi_implicit_euler': 'explicit_rk', 'rk4': 'explicit_rk', 'dopri5': 'adaptive_rk', 'splitting': 'composition', 'implicit_gyro': 'implicit', 'splitting4': 'composition', 'rk4_expmap': 'lie_group_rk', 'symtop4': 'composition', 'symtop_bm6': 'composition'}
+INTEGRATOR_ORDER = {'euler': 1, 'semi_implicit_euler': 1, 'rk4': 4, 'dopri5': 5, 'splitting': 2, 'implicit_gyro': 1, 'splitting4': 4, 'rk4_expmap': 4, 'symtop4': 4, 'symtop_bm6': 6}
+# right-hand-side evaluations per step as counted (None: adaptive, counted as it runs)
+RHS_PER_STEP = {'euler': 1, 'semi_implicit_euler': 1, 'rk4': 4, 'dopri5': None, 'splitting': 1, 'implicit_gyro': 1, 'splitting4': 5, 'rk4_expmap': 4, 'symtop4': 5, 'symtop_bm6': 5}
+INTEGRATOR_SUMMARY = {'euler': 'explicit Euler', 'semi_implicit_euler': 'symplectic Euler: v and omega first, then p and q with the new rates', 'rk4': 'the classic Runge–Kutta method', 'dopri5': 'Dormand–Prince 5(4), per-body step size control', 'splitting': "Strang splitting: exact principal-axis flows, the loads' half kicks around them", 'implicit_gyro': 'implicit gyroscopic term (Newton), exp-map attitude update', 'splitting4': "Suzuki's symmetric composition of the splitting step", 'rk4_expmap': 'RK4 in exponential coordinates of q (RKMK4)', 'symtop4': "symmetric-top splitting, Suzuki's composition", 'symtop_bm6': "symmetric-top splitting, Blanes–Moan S10 (torque-free; with effects symtop4's kicked stages)"}
+ADAPTIVE = ('dopri5', )
+PLAIN_ONLY = ('splitting', 'implicit_gyro', 'splitting4', 'rk4_expmap', 'symtop4', 'symtop_bm6', )
+FLOAT32_INTEGRATORS = ('euler', 'semi_implicit_euler', 'rk4', )
+# status codes of the C step loop (tableaux.h LV_*)
+STATUS_OK = 0
+STATUS_DIVERGED = 1
+STATUS_TOLERANCE = 2
+STATUS_NO_ROOT = 3
+STATUS_BAD_ARGUMENT = -1
+STATUS_UNKNOWN_EFFECT = -2
+STATUS_NO_MEMORY = -3
+
 DP_MAX_SUBSTEPS = 1_000_000
 GYRO_MAX_ITER = 30
 RK4_B_DEN = 6

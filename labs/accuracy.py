@@ -84,7 +84,6 @@ from __future__ import annotations
 
 import csv
 import functools
-import inspect
 import io
 import math
 import os
@@ -103,6 +102,7 @@ from lavendersim import reference as R
 from lavendersim import validate as V
 from lavendersim._install import extra_command
 from lavendersim.errors import DivergenceError, ValidityBoundWarning
+from lavendersim.generated import tableaux as TABLEAUX
 from lavendersim.kernels import K
 from lavendersim import figures as F
 
@@ -121,10 +121,9 @@ TIME_MARGIN = 0.10        # wall times within 10% count as equally fast (min-of-
 ORDER_WINDOW = (1e-10, 0.2)
 ORDER_TOL = 0.35
 # expected convergence order of attitude error in dt for integrators we know by name
-EXPECTED_ORDER = {"euler": 1, "semi_implicit_euler": 1, "rk4": 4, "midpoint": 2, "implicit_midpoint": 2,
-                  "splitting": 2, "implicit_gyro": 1, "splitting4": 4, "rk4_expmap": 4, "symtop4": 4, "symtop_bm6": 6, "strang": 2, "lie_poisson": 2, "rkmk4": 4, "heun": 2, "rk2": 2}
+# each fixed-step integrator's order torque-free, from the printed registry (derive/tableaux.py)
+EXPECTED_ORDER = {n: o for n, o in TABLEAUX.INTEGRATOR_ORDER.items() if n not in B.ADAPTIVE}
 ADAPTIVE_ERROR_FACTOR = 100.0
-ADAPTIVE_NAMES = {"dopri5", "dopri45", "rk45", "rkf45", "adaptive", "bs23", "dop853", "cash_karp"}
 DRIFT_DT_EXP, DRIFT_RTOL = 6, 1e-6        # the runs drawn in drift_vs_time.png
 NUMPY_RUN_BUDGET_S = 0.8                  # one NumPy run longer than this ends its dt sweep (full mode)
 
@@ -212,36 +211,25 @@ def options_from_args(args) -> dict:
 
 # ------------------------------------------------------------------------------------------ discovery
 
-def _sim_accepts_tolerances() -> bool:
-    params = inspect.signature(lv.Sim.__init__).parameters
-    return "rtol" in params and "atol" in params
-
-
 def adaptive_integrators() -> list[str]:
-    """Integrators that take rtol/atol: those the backends package lists as ADAPTIVE, else by name."""
-    if not _sim_accepts_tolerances():
-        return []
-    listed = getattr(B, "ADAPTIVE", None)
-    names = set(listed) if listed is not None else ADAPTIVE_NAMES
-    return [n for n in B.INTEGRATORS if n in names]
+    """Integrators that take rtol/atol (the printed registry's adaptive ones)."""
+    return list(B.ADAPTIVE)
 
 
 def _probe(m: "Method") -> str | None:
-    """None if the Sim can step this integrator on this backend, else why not."""
-    listed = getattr(B, "ADAPTIVE", ())
-    if m.integrator in listed and m.param != "rtol":
-        return "adaptive, but Sim takes no rtol/atol yet"
+    """None if the Sim steps this integrator on this backend, else why not: every registered integrator must
+    (the lab records a failure as a failed check, never as 'unavailable')."""
     try:
         sim = _make_sim(cases()["diag_w1"], m, 1e-6 if m.param == "rtol" else 2.0 ** -4)
         sim.run(1)
-    except Exception as exc:  # an integrator that does not work here is reported, not fatal
+    except Exception as exc:  # recorded as the failed check runs_<label>
         return f"{type(exc).__name__}: {exc}"
     return None
 
 
 def methods(mujoco_ok: bool) -> tuple[list[Method], dict]:
-    """The methods to measure and {label: reason} for the integrators that cannot run here."""
-    out, unavailable = [], {}
+    """The methods to measure and {label: reason} for the registered integrators that raised when probed."""
+    out, broken = [], {}
     adaptive = adaptive_integrators()
     for backend in ("c", "numpy"):
         for name, stages in B.INTEGRATORS.items():
@@ -250,14 +238,14 @@ def methods(mujoco_ok: bool) -> tuple[list[Method], dict]:
                        None if stages is None else int(stages))
             why = _probe(m)
             if why:
-                unavailable[m.label] = why
+                broken[m.label] = why
             else:
                 out.append(m)
     for name in getattr(B, "FLOAT32_INTEGRATORS", ()):   # the precision axis: float32 beside float64, C backend
         m = Method(f"{name} [c float32]", "lavendersim", name, "c", "dt", int(B.INTEGRATORS[name]), dtype="float32")
         why = _probe(m)
         if why:
-            unavailable[m.label] = why
+            broken[m.label] = why
         else:
             out.append(m)
     for name in ("RK45", "DOP853"):
@@ -265,7 +253,7 @@ def methods(mujoco_ok: bool) -> tuple[list[Method], dict]:
     if mujoco_ok:
         for name, stages in (("Euler", 1), ("implicitfast", 1), ("RK4", 4)):
             out.append(Method(f"MuJoCo {name}", "mujoco", name, "mujoco", "dt", stages))
-    return out, unavailable
+    return out, broken
 
 
 def _mujoco():
@@ -815,15 +803,15 @@ def compute(backend: str = "auto", quick: bool = True, mujoco: bool = True, prog
     mj, mj_missing = (None, "skipped (mujoco=False)") if not mujoco else _mujoco()
     all_cases = cases()
     use = [all_cases[c] for c in cfg["cases"]]
-    meths, unavailable = methods(mj is not None)
+    meths, broken = methods(mj is not None)
     labels = [m.label for m in meths]
     stamp = machine_stamp(mj)
-    for label, why in unavailable.items():
-        say(f"not measured: {label}: {why}")
+    for label, why in broken.items():
+        say(f"FAILED to run: {label}: {why}")
     say(f"{len(use)} cases x {len(meths)} methods; integrators {list(B.INTEGRATORS)}; "
         f"adaptive {adaptive_integrators() or 'none'}; MuJoCo {stamp['mujoco'] or 'not available: ' + str(mj_missing)}")
 
-    checks: list[C.Check] = []
+    checks: list[C.Check] = [C.holds(f"runs_{_key(label)}", False, why) for label, why in broken.items()]
     figures: dict = {}
     exacts = {}
     for case in use:
@@ -984,8 +972,8 @@ def compute(backend: str = "auto", quick: bool = True, mujoco: bool = True, prog
     table_text = format_table(table)
 
     # ---------------------------------------------------------------- figures and params
-    for label, why in unavailable.items():
-        figures[f"unavailable_{_key(label)}"] = why
+    for label, why in broken.items():
+        figures[f"failed_{_key(label)}"] = why
     figures["float32"] = ("measured: " + ", ".join(f"{n} [c float32]" for n in getattr(B, "FLOAT32_INTEGRATORS", ()))
                           + " (Sim(dtype='float32'), C backend; NumPy's float32 is bitwise C's)")
     figures["mujoco"] = (f"measured (mujoco {stamp['mujoco']})" if mj is not None
@@ -1116,7 +1104,7 @@ def format_table(table: list[dict]) -> str:
 
 _FAMILY_STYLE = {"c": "-", "numpy": "--", "scipy": ":", "mujoco": "-."}
 _F32_STYLE = ":"          # float32 differs from float64 in line style and hollow markers, not only in label
-_REFERENCE = ("rk4", "dopri5")   # drawn in grey on the peers' panels, for scale
+_REFERENCE = ("rk4",) + B.ADAPTIVE   # the classic method and the adaptive one(s): grey on the peers' panels, for scale
 
 
 def _styles(meths) -> dict:

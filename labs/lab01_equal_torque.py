@@ -30,6 +30,7 @@ import math
 import numpy as np
 
 import lavendersim as lv
+from lavendersim import backends
 from lavendersim import validate as V
 from lavendersim.kernels import K
 from lavendersim import figures as F
@@ -46,6 +47,7 @@ TORQUE_W = (0.0, 0.0, 0.02)
 T_END = 0.1
 DT = 1e-3
 INTEGRATOR = "rk4"
+CHAPTER_INTEGRATORS = backends.of_family("explicit_rk")   # the chapter's methods: euler, semi_implicit_euler, rk4
 ALPHA_CUBE, ALPHA_ROD, RATIO = 3.0, 0.02 / (0.68 / 12.0), 8.5
 TOL = 1e-9
 IDENTITY = np.array([0.0, 0.0, 0.0, 1.0])
@@ -53,7 +55,7 @@ IDENTITY = np.array([0.0, 0.0, 0.0, 1.0])
 
 def add_arguments(parser) -> None:
     parser.add_argument("--dt", type=float, default=DT, help="time step in s (default 1e-3); 0.1 s / dt must be an integer")
-    parser.add_argument("--integrator", default=INTEGRATOR, choices=("euler", "semi_implicit_euler", "rk4"),
+    parser.add_argument("--integrator", default=INTEGRATOR, choices=CHAPTER_INTEGRATORS,
                         help="failure mode: euler shows integration error in the rotation angle (default rk4)")
     parser.add_argument("--damping", type=float, default=0.0, metavar="C",
                         help="failure mode: angular damping c in N·m·s/rad on every body (e.g. 0.01); the ratio is no longer constant")
@@ -110,7 +112,7 @@ def compute(backend: str = "auto", dt: float = DT, integrator: str = INTEGRATOR,
     """Run the lab and return its :class:`~lavendersim.labs.common.LabResult`; writes nothing."""
     backend = C.check_backend(backend)
     dt = V.dt("dt", dt)
-    integrator = V.choice("integrator", integrator, ("euler", "semi_implicit_euler", "rk4"))
+    integrator = V.choice("integrator", integrator, CHAPTER_INTEGRATORS)
     c = V.scalar("damping", damping, nonnegative=True)
     n = C.steps("dt", T_END, dt)  # at most C.MAX_STEPS, a whole number of steps
     tau = np.array(TORQUE_W)

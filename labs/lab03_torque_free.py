@@ -47,6 +47,7 @@ import numpy as np
 
 import lavendersim as lv
 from lavendersim import figures as F
+from lavendersim import backends
 from lavendersim import validate as V
 from lavendersim.kernels import K
 
@@ -62,6 +63,7 @@ OMEGA_MIXED = (3.0, 2.0, 1.0)
 T_END = 3.0
 DT = 1e-3
 INTEGRATOR = "rk4"
+CHAPTER_INTEGRATORS = backends.of_family("explicit_rk")   # the chapter's methods: euler, semi_implicit_euler, rk4
 MIXED_CHANGE, MIXED_TOL = 3.30, 0.005  # the chapter's two decimals
 PRINCIPAL_TOL = 1e-12
 MOMENTUM_LIMIT = 4e-7
@@ -75,7 +77,7 @@ PAW5_SPIN, PAW5_PERTURB, PAW5_T = 3.0, 0.01, 10.0
 
 def add_arguments(parser) -> None:
     parser.add_argument("--dt", type=float, default=DT, help="time step in s (default 1e-3)")
-    parser.add_argument("--integrator", default=INTEGRATOR, choices=("euler", "semi_implicit_euler", "rk4"),
+    parser.add_argument("--integrator", default=INTEGRATOR, choices=CHAPTER_INTEGRATORS,
                         help="failure mode: euler shows energy drift (default rk4)")
     parser.add_argument("--no-normalize", action="store_true", help="failure mode: do not renormalize q after each step")
     parser.add_argument("--search", action="store_true",
@@ -178,7 +180,7 @@ def compute(backend: str = "auto", dt: float = DT, integrator: str = INTEGRATOR,
     """Run the lab and return its :class:`~lavendersim.labs.common.LabResult`; writes nothing."""
     backend = C.check_backend(backend)
     dt = V.dt("dt", dt)
-    integrator = V.choice("integrator", integrator, ("euler", "semi_implicit_euler", "rk4"))
+    integrator = V.choice("integrator", integrator, CHAPTER_INTEGRATORS)
     if not isinstance(normalize, (bool, np.bool_)) or not isinstance(search, (bool, np.bool_)):
         raise V.LavenderInputError("normalize", "normalize and search must be True or False")
     C.steps("dt", max(T_END, PAW5_T, *(SEARCH_TIMES if search else ())), dt, whole=False)  # at most C.MAX_STEPS

@@ -25,21 +25,25 @@ from ..generated import layout as LAYOUT
 from ..generated import tableaux as TABLEAUX
 from ..generated.layout import KIND_JOINT, KIND_WHEELS, MODEL_LAYOUT, MODEL_SIZE  # noqa: F401  (re-exported)
 
-# name -> RHS evaluations per step (None: adaptive, counted as it runs). See rhs_per_step for how the
-# structure-preserving methods are counted.
-INTEGRATORS = {"euler": 1, "semi_implicit_euler": 1, "rk4": 4, "dopri5": None, "splitting": 1, "implicit_gyro": 1,
-               "splitting4": TABLEAUX.SPLIT4_STAGES, "rk4_expmap": 4, "symtop4": TABLEAUX.SYMTOP4_STAGES,
-               "symtop_bm6": TABLEAUX.SYMTOP4_STAGES}
-ADAPTIVE = ("dopri5",)
-# Integrators that step plain rigid bodies only (no spherical_joint, no reaction_wheels): their exact
-# sub-flows / implicit solve use the diagonal principal inertia of a free body.
-PLAIN_ONLY = ("splitting", "implicit_gyro", "splitting4", "rk4_expmap", "symtop4", "symtop_bm6")
+# The integrator registry, printed from derive/tableaux.py (nothing else lists integrators): name -> RHS
+# evaluations per step (None: adaptive, counted as it runs; see rhs_per_step for how the structure-preserving
+# methods are counted), the adaptive ones, and those that step plain rigid bodies only (no spherical_joint, no
+# reaction_wheels: their exact sub-flows / implicit solve use the diagonal principal inertia of a free body).
+INTEGRATORS = dict(TABLEAUX.RHS_PER_STEP)
+ADAPTIVE = TABLEAUX.ADAPTIVE
+PLAIN_ONLY = TABLEAUX.PLAIN_ONLY
 BACKENDS = ("c", "numpy")
 # Precisions of the state (Sim(..., dtype=)): float32 runs the single-precision printing of the same kernels
 # (generated/kernels_f32.c, generated/kernels_numpy_f32.py) for these integrators on plain bodies with
 # built-in effects; anything else is float64 only.
 DTYPES = ("float64", "float32")
-FLOAT32_INTEGRATORS = ("euler", "semi_implicit_euler", "rk4")
+FLOAT32_INTEGRATORS = TABLEAUX.FLOAT32_INTEGRATORS
+
+
+def of_family(family: str) -> tuple:
+    """The registered integrators of one family (derive/tableaux.py FAMILIES), in code order: e.g. "explicit_rk"
+    = euler, semi_implicit_euler, rk4 (the chapter's labs offer these)."""
+    return tuple(n for n, f in TABLEAUX.INTEGRATOR_FAMILY.items() if f == family)
 
 DOPRI5_HMIN_REL = TABLEAUX.DP_HMIN_REL          # a substep below dt * this means the tolerance cannot be met
 DOPRI5_MAX_SUBSTEPS = TABLEAUX.DP_MAX_SUBSTEPS  # ... as do more substeps than this within one output step
@@ -96,12 +100,12 @@ def rhs_per_step(integrator: str, effects: np.ndarray, nb: int) -> int | None:
         ``integrator`` is not in INTEGRATORS.
     """
     n = INTEGRATORS[integrator]
-    if integrator not in ("splitting", "splitting4", "symtop4", "symtop_bm6") or n is None or len(effects) == 0:
+    if TABLEAUX.INTEGRATOR_FAMILY[integrator] != "composition" or n is None or len(effects) == 0:
         return n
     from ..effects import ROW_CODE, velocity_dependent
 
     per = 4 if velocity_dependent(np.unique(effects[:, ROW_CODE].astype(np.int64))) else 2
-    return per * (n if integrator in ("splitting4", "symtop4", "symtop_bm6") else 1)
+    return per * n     # n stages (splitting: 1), each kicked twice (four evaluations with a velocity-reading load)
 
 # Per-body model row (float64), MODEL_LAYOUT / MODEL_SIZE printed from derive/layout.py: kind is a bit set,
 # KIND_JOINT | KIND_WHEELS (the wheels on the row's A_b columns: one wheel model, body-axis wheels are A_b = [I | 0]).

@@ -17,15 +17,14 @@ import numpy as np
 from .. import validate as V
 from ..effects import ROW, ROW_BODY
 from ..errors import DivergenceError, StaleBuildError
+from ..generated import tableaux as TABLEAUX
 from .._install import rebuild_command
 from ..generated import layout as LY
 from . import FLOAT32_INTEGRATORS, KIND_WHEELS, PLAIN_ONLY, Adaptive, Models, no_root_cause, norm_safe, tolerance_cause
 
 REBUILD = rebuild_command()
 HASHED = ("kernels.c", "kernels.h", "layout.h", "tableaux.h", "kernels_f32.c", "kernels_f32.h")  # every generated file the extension compiles
-INTEGRATOR_CODES = {"euler": 0, "semi_implicit_euler": 1, "rk4": 2, "dopri5": 3, "splitting": 4, "implicit_gyro": 5,
-                    "splitting4": 6, "rk4_expmap": 7, "symtop4": 8,
-                    "symtop_bm6": 9}
+INTEGRATOR_CODES = TABLEAUX.INTEGRATOR_CODES   # the printed registry (derive/tableaux.py)
 
 try:
     from .. import _lavender_c as _c
@@ -419,13 +418,13 @@ class CBackend:
         extra = extra + (user,)
         status, step, body = _c.simulate(state, params, effects, INTEGRATOR_CODES[integrator],
                                          1 if normalize else 0, float(dt), int(n_steps), *extra)
-        if status == 0:
+        if status == TABLEAUX.STATUS_OK:
             return
         if not restore:
             raise DivergenceError(step, body, NOT_RESTORED)
         tol_cause = None
         if adaptive is not None and integrator == "dopri5":
-            if status == 2:
+            if status == TABLEAUX.STATUS_TOLERANCE:
                 tol_cause = tolerance_cause(adaptive, float(adaptive.h[body]), float(dt), state[body])
             adaptive.h[...] = snap_h
             adaptive.nfev[...] = snap_n
@@ -441,7 +440,7 @@ class CBackend:
                 model = (rows[body], W0, None if W0 is None else pre_W, command[body])
         if tol_cause is not None:
             raise DivergenceError(step, body, tol_cause)
-        if status == 3:  # LV_NO_ROOT: implicit_gyro's Newton solve did not converge
+        if status == TABLEAUX.STATUS_NO_ROOT:  # implicit_gyro's Newton solve did not converge
             raise DivergenceError(step, body, no_root_cause(pre, params[body, LY.PARAM_I_B], float(dt)))
         raise DivergenceError(step, body, _cause(snapshot[body], pre, params, effects, body, step,
                                                  float(dt), integrator, model))
@@ -463,7 +462,7 @@ class CBackend:
         snapshot = state.copy() if restore else None
         status, step, body = _c.simulate_f32(state, params32, effects32, INTEGRATOR_CODES[integrator],
                                              1 if normalize else 0, float(dt), int(n_steps))
-        if status == 0:
+        if status == TABLEAUX.STATUS_OK:
             return
         if not restore:
             raise DivergenceError(step, body, NOT_RESTORED)

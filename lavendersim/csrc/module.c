@@ -520,6 +520,15 @@ static struct PyModuleDef moduledef = {
     "LavenderSim compiled backend: the generated C kernels and the C stepping loop.", -1, methods,
     NULL, NULL, NULL, NULL};
 
+/* One constant per integrator of the printed registry (generated/tableaux.h LV_INTEGRATORS): _c.RK4 == 2, ... */
+static int add_integrators(PyObject *m)
+{
+#define LV_ADD_INTEGRATOR(name, code) if (PyModule_AddIntConstant(m, #name, code) != 0) return -1;
+    LV_INTEGRATORS(LV_ADD_INTEGRATOR)
+#undef LV_ADD_INTEGRATOR
+    return 0;
+}
+
 PyMODINIT_FUNC PyInit__lavender_c(void)
 {
     PyObject *m = PyModule_Create(&moduledef);
@@ -528,21 +537,11 @@ PyMODINIT_FUNC PyInit__lavender_c(void)
         PyModule_AddIntConstant(m, "KERNEL_COUNT", LV_KERNEL_COUNT) != 0 ||
         PyModule_AddIntConstant(m, "EFFECT_ABI", LV_EFFECT_ABI) != 0 ||
         PyModule_AddIntConstant(m, "EFFECT_USER_BASE", LV_EFFECT_USER_BASE) != 0 ||
-        PyModule_AddIntConstant(m, "EULER", LV_INTEGRATOR_EULER) != 0 ||
-        PyModule_AddIntConstant(m, "SEMI_IMPLICIT_EULER", LV_INTEGRATOR_SEMI_IMPLICIT_EULER) != 0 ||
-        PyModule_AddIntConstant(m, "RK4", LV_INTEGRATOR_RK4) != 0 ||
-        PyModule_AddIntConstant(m, "DOPRI5", LV_INTEGRATOR_DOPRI5) != 0 ||
-        PyModule_AddIntConstant(m, "SPLITTING", LV_INTEGRATOR_SPLITTING) != 0 ||
-        PyModule_AddIntConstant(m, "IMPLICIT_GYRO", LV_INTEGRATOR_IMPLICIT_GYRO) != 0 ||
-        PyModule_AddIntConstant(m, "SPLITTING4", LV_INTEGRATOR_SPLITTING4) != 0 ||
-        PyModule_AddIntConstant(m, "RK4_EXPMAP", LV_INTEGRATOR_RK4_EXPMAP) != 0 ||
         PyModule_AddIntConstant(m, "ISA_SCALAR", LV_ISA_SCALAR) != 0 ||
         PyModule_AddIntConstant(m, "ISA_BASE", LV_ISA_BASE) != 0 ||
         PyModule_AddIntConstant(m, "ISA_AVX2", LV_ISA_AVX2) != 0 ||
         PyModule_AddIntConstant(m, "ISA_AVX512", LV_ISA_AVX512) != 0 ||
-        PyModule_AddIntConstant(m, "SYMTOP4", LV_INTEGRATOR_SYMTOP4) != 0 ||
-        PyModule_AddIntConstant(m, "SYMTOP_BM6", LV_INTEGRATOR_SYMTOP_BM6) != 0 ||
-        lv_add_stepper_type(m) != 0) {
+        add_integrators(m) != 0 || lv_add_stepper_type(m) != 0) {
         Py_DECREF(m);
         return NULL;
     }

@@ -8,6 +8,7 @@
    declared in derive/layout.py and printed as named offsets in generated/layout.h. */
 #include "layout.h"
 #include "kernels.h"
+#include "tableaux.h"
 
 /* Wheel slots (rates, motor commands, applied torques) per model body: the XS layout's Omega length,
    WHEELS_MAX of derive/layout.py. Every wheeled body (LV_KIND_WHEELS) is stepped by the one N-wheel model
@@ -54,23 +55,9 @@ typedef struct {
     double *applied;        /* nb x LV_NW, saturated torques used in the last step, N m */
 } lv_models;
 
-enum {
-    LV_INTEGRATOR_EULER = 0,
-    LV_INTEGRATOR_SEMI_IMPLICIT_EULER = 1,
-    LV_INTEGRATOR_RK4 = 2,
-    LV_INTEGRATOR_DOPRI5 = 3,        /* adaptive Dormand-Prince 5(4), FSAL; needs an lv_adaptive */
-    LV_INTEGRATOR_SPLITTING = 4,     /* Strang splitting, exact axis sub-flows; plain bodies only */
-    LV_INTEGRATOR_IMPLICIT_GYRO = 5, /* implicit gyroscopic term (Newton), exp-map q; plain bodies only */
-    LV_INTEGRATOR_SPLITTING4 = 6,    /* symmetric composition of the splitting step, order 4; plain bodies only */
-    LV_INTEGRATOR_RK4_EXPMAP = 7,    /* RK4 in exponential coordinates of q (RKMK4); plain bodies only */
-    LV_INTEGRATOR_SYMTOP4 = 8,       /* symmetric-top splitting, Suzuki composition, order 4; plain bodies only */
-    LV_INTEGRATOR_SYMTOP_BM6 = 9     /* symmetric-top splitting, Blanes-Moan S10, order 6; plain bodies only */
-};
-#define LV_INTEGRATOR_LAST LV_INTEGRATOR_SYMTOP_BM6
-/* The integrators that step plain bodies only, one by one (advance_structured). */
-#define LV_INTEGRATOR_PLAIN_ONLY(i) ((i) == LV_INTEGRATOR_SPLITTING || (i) == LV_INTEGRATOR_IMPLICIT_GYRO \
-                                     || (i) == LV_INTEGRATOR_SPLITTING4 || (i) == LV_INTEGRATOR_RK4_EXPMAP \
-                                     || (i) == LV_INTEGRATOR_SYMTOP4 || (i) == LV_INTEGRATOR_SYMTOP_BM6)
+/* The integrators (LV_INTEGRATOR_*, LV_INTEGRATOR_PLAIN_ONLY(i): plain bodies only, one by one in
+   advance_structured) and the status codes (LV_OK, LV_DIVERGED, ...) are printed from derive/tableaux.py's
+   registry into generated/tableaux.h. */
 
 /* Adaptive stepping (dopri5): every body is stepped with its own step sizes; each of the n_steps
    steps advances it by exactly dt with as many accepted substeps as its error estimate needs.
@@ -82,18 +69,6 @@ typedef struct {
     double *nfev;
 } lv_adaptive;
 
-enum {
-    LV_OK = 0,
-    LV_DIVERGED = 1,    /* a state became non-finite; see fail_step / fail_body */
-    LV_TOLERANCE = 2,   /* dopri5: the step size fell below dt*1e-12 (or over 10^6 substeps in one step)
-                           without meeting rtol/atol; same state contract as LV_DIVERGED, and h[fail_body]
-                           holds the step size that was too small */
-    LV_NO_ROOT = 3,     /* implicit_gyro: the Newton solve of a step did not converge (no root near omega);
-                           same state contract as LV_DIVERGED */
-    LV_BAD_ARGUMENT = -1,
-    LV_UNKNOWN_EFFECT = -2, /* an effect row's code is no declared effect's (*fail_step = the row); nothing changed */
-    LV_NO_MEMORY = -3       /* the per-body effect index could not be allocated; nothing changed */
-};
 
 /* The instruction sets of the batched RK4 paths (plain bodies: csrc/batch_simd.h; jointed wheel bodies:
    csrc/model_simd.h): LV_ISA_SCALAR turns them off (every body on the scalar block or per-body path), LV_ISA_BASE is the build's baseline (SSE2 on x86-64), AVX2 and
