@@ -10,6 +10,7 @@ import pytest
 
 import lavendersim as lv
 from lavendersim import backends as B
+from lavendersim.backends import numpy_backend as NB
 
 BACKENDS = ["c", "numpy"]
 RTOL, ATOL = 1e-10, 1e-12
@@ -99,9 +100,13 @@ def test_c_and_numpy_agree_bitwise_with_a_jointed_wheeled_body():
     assert np.any(Wn != 0.0)
 
 
-def test_a_body_does_not_depend_on_its_neighbours():
+@pytest.mark.parametrize("compact", [0, None, float("inf")], ids=["subsets-always", "subsets-default", "subsets-never"])
+def test_a_body_does_not_depend_on_its_neighbours(compact, monkeypatch):
     """NumPy: a body alone == the same body beside a fast spinner and other loaded bodies (listed before and after
-    it), bitwise, with its own h and count; and a plain body beside a wheeled one == alone (the extended state)."""
+    it), bitwise, with its own h and count; and a plain body beside a wheeled one == alone (the extended state).
+    Whether the bodies still running go on alone on a subset plan or beside held ones changes no number."""
+    if compact is not None:
+        monkeypatch.setattr(NB, "_DP_COMPACT_WORK", compact)
     me = ("me", I_ASYM, TUMBLE)
     alone = advance(scene([me], LOADS[:1]), "numpy", 4, calls=2)
     for bodies in ([me, RATES[3]], [RATES[3], RATES[0], me, RATES[2]]):
