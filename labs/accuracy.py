@@ -107,6 +107,7 @@ from lavendersim.kernels import K
 from lavendersim import figures as F
 
 from . import common as C
+from .diverged import failed_figure
 
 NAME = "accuracy"
 TITLE = "what accuracy costs in time: work-precision of every integrator x dt x backend, scipy and MuJoCo"
@@ -776,6 +777,7 @@ def run(out_dir=C.DEFAULT_OUT, backend: str = "auto", **options) -> C.LabResult:
     return compute(backend, **options).save(out_dir)
 
 
+@failed_figure
 def compute(backend: str = "auto", quick: bool = True, mujoco: bool = True, progress: bool = False,
             workers: int | None = None, dask: str | None = None) -> C.LabResult:
     """Run the study and return its LabResult, writing nothing; ``quick=True`` (the Python default, what ``lab all`` runs) is the reduced

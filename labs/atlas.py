@@ -107,6 +107,7 @@ from lavendersim.kernels import K
 from lavendersim import figures as F
 
 from . import common as C
+from .diverged import failed_figure
 from . import hard_cases as H
 
 NAME = "atlas"
@@ -871,6 +872,7 @@ def run(out_dir=C.DEFAULT_OUT, backend: str = "auto", **options) -> C.LabResult:
     return compute(backend, **options).save(out_dir)
 
 
+@failed_figure
 def compute(backend: str = "auto", quick: bool = True, workers: int | None = None, dask: str | None = None,
             rtol: float = RTOL, progress: bool = False) -> C.LabResult:
     """Compute the atlas and return its LabResult, writing nothing (see the module docstring).

@@ -7,9 +7,14 @@ settings an explicit integrator cannot step faithfully. The Sim says so — a
 is: its result has one check, ``no_divergence``, failed, with the divergence recorded in results.json
 (``divergence``: the Sim's words; ``divergence_step``, ``divergence_t``, ``divergence_body`` or
 ``divergence_field``), the options it ran with as its parameters, and no plot. The command line exits 1,
-like any failed figure.
+like any failed figure. Every lab module's ``compute`` is decorated with :func:`failed_figure`, so the
+module's own ``compute``/``run`` return it too.
 """
 from __future__ import annotations
+
+import functools
+import inspect
+import sys
 
 from lavendersim import validate as V
 from lavendersim.errors import DivergenceError
@@ -68,6 +73,36 @@ def diverged_result(lab: str, exc: Exception, backend: str, options: dict) -> C.
     params = {"backend": str(backend), **{k: _param(v) for k, v in options.items() if k != "progress"}}
     checks = [C.holds("no_divergence", False, note)]
     return C.make_result(lab, figures, params, checks)
+
+
+def failed_figure(compute):
+    """Decorate a lab module's ``compute(backend, **options)``: a divergence (:data:`DIVERGED`) is returned as
+    :func:`diverged_result` (the lab's ``NAME``, the options as bound to the signature, defaults included).
+
+    Parameters
+    ----------
+    compute : callable
+        The lab's ``compute``.
+
+    Returns
+    -------
+    callable
+        Same signature, never raising DIVERGED.
+    """
+    signature = inspect.signature(compute)
+
+    @functools.wraps(compute)
+    def wrapper(*args, **kwargs):
+        try:
+            return compute(*args, **kwargs)
+        except DIVERGED as exc:
+            bound = signature.bind(*args, **kwargs)
+            bound.apply_defaults()
+            options = dict(bound.arguments)
+            backend = options.pop("backend", "auto")
+            return diverged_result(sys.modules[compute.__module__].NAME, exc, backend, options)
+
+    return wrapper
 
 
 def compute_or_failed(mod, backend: str, options: dict) -> C.LabResult:

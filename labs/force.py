@@ -20,6 +20,7 @@ from lavendersim.kernels import K
 from lavendersim import figures as S   # (F is the force here)
 
 from . import common as C
+from .diverged import failed_figure
 
 NAME = "force"
 TITLE = "off-center force: torque = r x F, zero along the lever arm, reversed at -r; checked in the simulator"
@@ -51,6 +52,7 @@ def run(out_dir=C.DEFAULT_OUT, backend: str = "auto", **options) -> C.LabResult:
     return compute(backend, **options).save(out_dir)
 
 
+@failed_figure
 def compute(backend: str = "auto", offset: float = R_W[0]) -> C.LabResult:
     """Run the lab and return its :class:`~lavendersim.labs.common.LabResult`; writes nothing."""
     backend = C.check_backend(backend)

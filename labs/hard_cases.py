@@ -82,6 +82,7 @@ from lavendersim.kernels import K
 from lavendersim import figures as F
 
 from . import common as C
+from .diverged import failed_figure
 
 NAME = "hard"
 TITLE = "hard cases stay numerically stable: a named catalogue with asserted bounds; which integrators survive each"
@@ -865,6 +866,7 @@ def run(out_dir=C.DEFAULT_OUT, backend: str = "auto", **options) -> C.LabResult:
     return compute(backend, **options).save(out_dir)
 
 
+@failed_figure
 def compute(backend: str = "auto", cases=None, integrator: str | None = None, progress: bool = False) -> C.LabResult:
     """Run the catalogue and return its :class:`~lavendersim.labs.common.LabResult`; writes nothing.
 

@@ -36,6 +36,7 @@ from lavendersim.kernels import K
 from lavendersim import figures as F
 
 from . import common as C
+from .diverged import failed_figure
 
 NAME = "01"
 TITLE = "equal torque, unequal response: cube vs rod angular acceleration (paw-check 3: rod rotated 90° about y)"
@@ -108,6 +109,7 @@ def run(out_dir=C.DEFAULT_OUT, backend: str = "auto", **options) -> C.LabResult:
     return compute(backend, **options).save(out_dir)
 
 
+@failed_figure
 def compute(backend: str = "auto", dt: float = DT, integrator: str = INTEGRATOR, damping: float = 0.0) -> C.LabResult:
     """Run the lab and return its :class:`~lavendersim.labs.common.LabResult`; writes nothing."""
     backend = C.check_backend(backend)

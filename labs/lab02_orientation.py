@@ -36,6 +36,7 @@ from lavendersim.kernels import K
 from lavendersim import figures as F
 
 from . import common as C
+from .diverged import failed_figure
 
 NAME = "02"
 TITLE = "Euler-angle addition vs quaternion integration of a constant world angular velocity (paw-check 4)"
@@ -103,6 +104,7 @@ def run(out_dir=C.DEFAULT_OUT, backend: str = "auto", **options) -> C.LabResult:
     return compute(backend, **options).save(out_dir)
 
 
+@failed_figure
 def compute(backend: str = "auto", dt: float = DT, single_axis: bool = False) -> C.LabResult:
     """Run the lab and return its :class:`~lavendersim.labs.common.LabResult`; writes nothing."""
     C.check_backend(backend)  # validated only: this lab evaluates the generated NumPy kernels, no simulator

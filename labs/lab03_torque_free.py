@@ -52,6 +52,7 @@ from lavendersim import validate as V
 from lavendersim.kernels import K
 
 from . import common as C
+from .diverged import failed_figure
 
 NAME = "03"
 TITLE = "torque-free rigid body: principal-axis spin vs mixed-axis tumbling; paw-check 5 (near each principal axis)"
@@ -175,6 +176,7 @@ def run(out_dir=C.DEFAULT_OUT, backend: str = "auto", **options) -> C.LabResult:
     return compute(backend, **options).save(out_dir)
 
 
+@failed_figure
 def compute(backend: str = "auto", dt: float = DT, integrator: str = INTEGRATOR, normalize: bool = True,
             search: bool = False) -> C.LabResult:
     """Run the lab and return its :class:`~lavendersim.labs.common.LabResult`; writes nothing."""

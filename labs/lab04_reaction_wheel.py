@@ -41,6 +41,7 @@ from lavendersim import validate as V
 from lavendersim import figures as F
 
 from . import common as C
+from .diverged import failed_figure
 
 NAME = "04"
 TITLE = "reaction wheel: cube and wheel spin opposite ways (paw-check 6: reversed command), coupling, saturation, exact momentum exchange"
@@ -90,6 +91,7 @@ def run(out_dir=C.DEFAULT_OUT, backend: str = "auto", **options) -> C.LabResult:
     return compute(backend, **options).save(out_dir)
 
 
+@failed_figure
 def compute(backend: str = "auto", torque: float = TORQUE, T: float = T_END) -> C.LabResult:
     """Run the lab and return its :class:`~lavendersim.labs.common.LabResult`; writes nothing."""
     backend = C.check_backend(backend)

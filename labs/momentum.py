@@ -18,6 +18,7 @@ from lavendersim import particles as P
 from lavendersim import figures as F
 
 from . import common as C
+from .diverged import failed_figure
 
 NAME = "momentum"
 TITLE = "particle system: COM, p, L about the COM; L = I omega for rigid motion; paw-check 1 (double the masses)"
@@ -58,6 +59,7 @@ def run(out_dir=C.DEFAULT_OUT, backend: str = "auto", **options) -> C.LabResult:
     return compute(backend, **options).save(out_dir)
 
 
+@failed_figure
 def compute(backend: str = "auto", mass_scale: float = 2.0) -> C.LabResult:
     """Run the lab and return its :class:`~lavendersim.labs.common.LabResult`; writes nothing."""
     C.check_backend(backend)  # validated only: this lab evaluates the generated NumPy kernels, no simulator

@@ -458,3 +458,12 @@ def test_derive_with_an_empty_out_is_refused_and_writes_nothing(monkeypatch, cap
         err = capsys.readouterr().err
         assert len(err.strip().splitlines()) == 1 and "out" in err
     assert calls == []
+
+
+def test_a_lab_modules_own_compute_and_run_return_the_divergence(tmp_path):
+    from lavendersim.labs import lab01_equal_torque as L01
+
+    res = L01.compute("numpy", damping=100)
+    assert not res.passed and res["damping"] == 100 and res["dt"] == L01.DT and res["backend"] == "numpy"
+    res = L01.run(tmp_path, backend="numpy", damping=100)
+    assert json.loads((tmp_path / "01" / "results.json").read_text())["check_no_divergence"] is False
