@@ -166,7 +166,9 @@ class _Plan:
         self.damped_f = self.index.velocity  # bodies with an effect that reads v_w or omega_b
         self.wheeled = (kind & KIND_WHEELS) != 0
         self.nb = nb
-        self.source = (params.copy(), effects.copy(), None if rows is None else rows.copy())  # for _subplan
+        # the arrays it was built from, for dopri5's subset plans (_subplan); NumpyBackend.plan replaces them by
+        # read-only views of its key's bytes (the arrays as they were, no copy)
+        self.source = (params, effects, rows)
         self.subplans = {}
         self.I_free = self.I[self.free]
         pivot = np.flatnonzero(kind == KIND_JOINT)
@@ -527,6 +529,8 @@ class NumpyBackend:
         key = (params.dtype.str, params.tobytes(), effects.tobytes(), None if rows is None else rows.tobytes())
         if key != self._plan_key:
             self._plan, self._plan_key = _Plan(params, effects, rows), key
+            self._plan.source = tuple(None if a is None else np.frombuffer(b, a.dtype).reshape(a.shape)
+                                      for a, b in zip((params, effects, rows), key[1:]))
         return self._plan
 
     def advance(self, state, params, effects, integrator: str, normalize: bool, dt: float, n_steps: int,
