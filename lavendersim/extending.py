@@ -43,6 +43,7 @@ import types
 from pathlib import Path
 
 from . import validate as V
+from .errors import PicklableError
 
 ENV = "LAVENDERSIM_USER_DIR"
 CFLAGS = ["-O3", "-std=c99", "-fno-math-errno", "-fPIC", "-shared", "-fvisibility=hidden"]  # never -ffast-math
@@ -54,7 +55,7 @@ MANIFEST_FORMAT = 1
 _SETS: dict[Path, "UserSet"] = {}  # loaded sets by directory
 
 
-class UserBuildError(RuntimeError):
+class UserBuildError(PicklableError, RuntimeError):
     """Compiling a user set's C failed, no compiler was found, or ``$CC`` names none.
 
     Parameters
@@ -67,12 +68,11 @@ class UserBuildError(RuntimeError):
         The file holding the full output.
     """
 
+    _init_fields = ("summary", "output", "log")   # crosses process boundaries with them (errors.PicklableError)
+
     def __init__(self, summary: str, output: str = "", log: str | None = None):
         self.summary, self.output, self.log = summary, output, log
         super().__init__(summary + (f"\n{output}" if output else ""))
-
-    def __reduce__(self):   # crosses process boundaries with its fields
-        return (type(self), (self.summary, self.output, self.log))
 
 
 class UserSetError(V.LavenderInputError):
