@@ -177,16 +177,8 @@ static int arguments_ok(const Stepper *s)
     const double *ef = (const double *)s->buf[FS_EFFECTS].buf;
     long e;
     for (e = 0; e < s->ne; e++) {
-        const double *row = ef + e * s->row_size;
-        const double code = row[LV_EFFECT_ROW_CODE], body = row[LV_EFFECT_ROW_BODY];
         int np;
-        if (!(code == floor(code) && fabs(code) < 1e9)) return 0;
-        np = lv_effect_n_params((int)code);
-        if (np < 0 && (int)code >= LV_EFFECT_USER_BASE && (int)code - LV_EFFECT_USER_BASE < s->user.n
-            && s->user.entries[(int)code - LV_EFFECT_USER_BASE].fn != NULL)
-            np = s->user.entries[(int)code - LV_EFFECT_USER_BASE].n_params;
-        if (np < 0 || np > s->row_size - LV_EFFECT_ROW_PARAMS) return 0;
-        if (!(body == -1 || (body >= 0 && body < (double)s->nb && body == floor(body)))) return 0;
+        if (lv_effect_row_check(ef + e * s->row_size, s->row_size, s->nb, &s->user, &np) != LV_OK) return 0;
     }
     if (s->has_models) {
         long b;

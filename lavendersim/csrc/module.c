@@ -129,18 +129,15 @@ static int check_effects(const double *ef, Py_ssize_t ne, Py_ssize_t row_size, P
                          const lv_user_effect *user, long n_user)
 {
     Py_ssize_t e;
+    lv_user_effects table;
+    table.entries = user;
+    table.n = n_user;
     for (e = 0; e < ne; e++) {
         const double *row = ef + e * row_size;
         const double kind = row[LV_EFFECT_ROW_CODE], body = row[LV_EFFECT_ROW_BODY];
-        int np = -1;
-        if (kind == floor(kind) && fabs(kind) < 1e9) {
-            const int code = (int)kind;
-            np = lv_effect_n_params(code);
-            if (np < 0 && code >= LV_EFFECT_USER_BASE && code - LV_EFFECT_USER_BASE < n_user
-                && user[code - LV_EFFECT_USER_BASE].fn != NULL)
-                np = user[code - LV_EFFECT_USER_BASE].n_params;
-        }
-        if (np < 0 || np > row_size - LV_EFFECT_ROW_PARAMS) {
+        int np;
+        const int status = lv_effect_row_check(row, (long)row_size, (long)nb, &table, &np);
+        if (status == LV_UNKNOWN_EFFECT) {
             PyObject *ko = PyFloat_FromDouble(kind), *known = builtin_codes_text();
             if (np < 0)
                 PyErr_Format(PyExc_ValueError,
@@ -153,7 +150,7 @@ static int check_effects(const double *ef, Py_ssize_t ne, Py_ssize_t row_size, P
             Py_XDECREF(known);
             return -1;
         }
-        if (!(body == -1 || (body >= 0 && body < (double)nb && body == floor(body)))) {
+        if (status == LV_BAD_ARGUMENT) {
             PyObject *bo = PyFloat_FromDouble(body);
             PyErr_Format(PyExc_ValueError, "simulate: effects[%zd] body must be -1 (every body) or an index in [0, %zd), got %R",
                          e, nb, bo);

@@ -85,6 +85,18 @@ static int effect_info(int code, const lv_user_effects *user, int *flags, lv_eff
     return -1;
 }
 
+int lv_effect_row_check(const double *row, long row_size, long nb, const lv_user_effects *user, int *np)
+{
+    const double code = row[LV_EFFECT_ROW_CODE], body = row[LV_EFFECT_ROW_BODY];
+    int flags;
+    lv_effect_fn fn;
+    *np = -1;
+    if (code == floor(code) && fabs(code) < 1e9) *np = effect_info((int)code, user, &flags, &fn);
+    if (*np < 0 || *np > row_size - LV_EFFECT_ROW_PARAMS) return LV_UNKNOWN_EFFECT;
+    if (!(body == -1 || (body >= 0 && body < (double)nb && body == floor(body)))) return LV_BAD_ARGUMENT;
+    return LV_OK;
+}
+
 static void index_free(lv_effect_index *ix)
 {
     free(ix->start);
@@ -110,11 +122,10 @@ static int index_build(lv_effect_index *ix, const double *effects, long ne, long
     if (ix->start == NULL || ix->flags == NULL) { index_free(ix); return LV_NO_MEMORY; }
     for (e = 0; e < ne; e++) {
         const double *row = effects + e * row_size;
-        const int code = (int)row[LV_EFFECT_ROW_CODE];
+        int np;
+        const int status = lv_effect_row_check(row, row_size, nb, user, &np);
         const long target = (long)row[LV_EFFECT_ROW_BODY];
-        const int np = (double)code == row[LV_EFFECT_ROW_CODE] ? effect_info(code, user, &flags, &fn) : -1;
-        if (np < 0 || np > row_size - LV_EFFECT_ROW_PARAMS) { *bad_row = e; index_free(ix); return LV_UNKNOWN_EFFECT; }
-        if (target < -1 || target >= nb) { *bad_row = e; index_free(ix); return LV_BAD_ARGUMENT; }
+        if (status != LV_OK) { *bad_row = e; index_free(ix); return status; }
         if (target == -1) n_every++; else ix->start[target + 1]++;
     }
     for (b = 0; b < nb; b++) ix->start[b + 1] += ix->start[b] + n_every;

@@ -110,6 +110,12 @@ const char *lv_isa_name(int isa);
    an effect body outside [-1, nb) returns LV_BAD_ARGUMENT, an effect code no declared effect has (built
    in or in `user`) LV_UNKNOWN_EFFECT with *fail_step = its row (nothing changed, never a silent no-op).
    `adaptive` is read only by dopri5. */
+/* The one check of an effect row (index_build here, simulate()'s argument check in module.c, the fast path's in
+   fast_step.c): LV_OK with *np = its parameter count; LV_UNKNOWN_EFFECT for a code no declared effect has (built in,
+   or in `user`, which may be NULL) or whose parameters do not fit a row of row_size (*np says which: < 0 or the
+   count); LV_BAD_ARGUMENT for a body other than -1 (every body) or an integer index in [0, nb). */
+int lv_effect_row_check(const double *row, long row_size, long nb, const lv_user_effects *user, int *np);
+
 int lv_simulate(double *state, const double *params, long nb,
                 const double *effects, long ne, long row_size, const lv_user_effects *user,
                 const lv_models *models, int integrator, int normalize, double dt, long n_steps,
