@@ -16,6 +16,7 @@ import pprint
 
 from . import effect as E
 from .effect_decay import decay_rate
+from .printers import NpPrinter
 from .layout import STATE
 
 C_ARGS = ("const double *p, const double *x, const double *v_w, double m, const double *I_b, "
@@ -253,8 +254,6 @@ def meta_module(effects: list[tuple[int | None, E.EffectDecl]], header: str, ext
 
 def _decay_function(d: E.EffectDecl, rate) -> list[str]:
     """The printed decay rate of one effect: (p (n, n_params), m (n,), I_b (n, 3)) -> (n,), 1/s."""
-    from .codegen import NpPrinter
-
     off = d.offsets()
     body = [f"    {p.name} = p[..., {off[p.name]}]" for p in d.params if p.symbol in rate.free_symbols]
     body += [f"    {s} = I_b[..., {i}]" for i, s in enumerate(E.STATE.I_b) if s in rate.free_symbols]

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import sympy as sp
 
-from .codegen import HEADER
+from .printers import HEADER
 
 # Reaction wheels per body inside a Sim: every wheeled body carries this many wheel slots (rates, motor
 # commands, applied torques, inertias, axes) and is stepped by the one N-wheel model, the printed

@@ -42,7 +42,7 @@ from dataclasses import dataclass
 
 import sympy as sp
 
-from .codegen import HEADER
+from .printers import HEADER
 
 R = sp.Rational
 
