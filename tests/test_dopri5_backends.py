@@ -63,6 +63,15 @@ def test_c_and_numpy_agree_bitwise_per_body(bodies, effects):
         assert nn[0] * 10 < nn[-1] and hn[0] > 10 * hn[-1]
 
 
+def test_powers_by_math_pow_give_the_same_numbers(monkeypatch):
+    """The controller's powers through math.pow (the path taken where NumPy's power is not libm's pow): C = NumPy
+    bitwise all the same."""
+    monkeypatch.setattr(NB, "_numpy_power_is_libm", lambda p: False)
+    out = {b: advance(scene(RATES, LOADS), b, 4) for b in BACKENDS}
+    for a, b in zip(out["c"], out["numpy"]):
+        assert np.array_equal(a, b)
+
+
 def test_tumbling_body_meets_its_tolerance_through_the_flip():
     """The tumbling body against a fine RK4 (2 s, dt 1e-4: its error ~1e-14): within 1e-8 on both backends."""
     s = scene([("b", I_ASYM, TUMBLE)])
