@@ -29,6 +29,7 @@ from typing import TYPE_CHECKING, Any, Self
 import numpy as np
 
 from . import validate as V
+from ._shapes import extent, shape_of
 from .bodies import BodyState
 from .generated import layout as LY
 
@@ -477,9 +478,7 @@ _DEFAULT_COLORS = ([0.51, 0.87, 0.76, 0.95], [0.95, 0.66, 0.77, 0.95], [0.55, 0.
 def _default_overlays(trajectory: Trajectory, bodies: Mapping[str, Any]) -> Callable[[Snapshot], dict]:
     """Each body's axes and its angular velocity (world), the arrows scaled so that the fastest
     spin recorded draws about as long as the largest body."""
-    from .viewer import _extent, _shape_of
-
-    ext = max(_extent(*_shape_of(bodies[n])) for n in trajectory.names)
+    ext = max(extent(*shape_of(bodies[n])) for n in trajectory.names)
     x = np.asarray(trajectory.x)
     w_max = float(np.max(np.linalg.norm(x[..., LY.STATE_OMEGA_B], axis=-1))) if x.size else 0.0
     scale = 0.8 * ext / w_max if w_max > 0 else 1.0

@@ -118,6 +118,9 @@ class EffectSpec:
         ``"built-in"`` or the directory of the user set it was loaded from.
     user_set : object, optional
         The loaded user set (lavendersim.extending.UserSet), None for a built-in.
+    decay_rate : callable or None, optional
+        For a pure linear decay (derive/effect_decay.py), its printed rate ``f(p (n, n_params), m (n,), I_b (n, 3))
+        -> (n,)``, 1/s; None otherwise.
     """
 
     name: str
@@ -361,13 +364,11 @@ class _WheelsCheck:
     def check_body(self, body) -> None:
         """One J per axis, unit axes; the body with its wheels free keeps a positive definite inertia
         (I_b − A_b J A_bᵀ; on the body axes: J_i < I_b[i]); cutoff is 0 or 1."""
-        from .wheel_layout import axes
-
         if self.values["cutoff"] not in (0.0, 1.0):
             raise V.LavenderInputError(f"{self.name}.cutoff", "must be 0 (torque–speed line) or 1 (hard cut-off at speed_limit)",
                                        f", got {self.values['cutoff']!r}")
         I_b, J = body.I_b, self.values["J"]
-        A_b = axes(f"{self.name}.axes_b", self.values["axes_b"].T)
+        A_b = V.wheel_axes(f"{self.name}.axes_b", self.values["axes_b"].T)
         if J.size != A_b.shape[1]:
             raise V.LavenderInputError(f"{self.name}.J", f"needs one inertia per wheel axis (axes_b has {A_b.shape[1]} rows)",
                                        f", got {J.size}")

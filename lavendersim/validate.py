@@ -808,3 +808,42 @@ def writable_file(field: str, path: str | os.PathLike[str]) -> Path:
     if p.exists() and not os.access(p, os.W_OK):
         raise LavenderInputError(field, f"cannot write to {p}", " (permission denied)")
     return p
+
+
+WHEEL_UNIT_TOL = 1e-9   # |‖a_i‖ − 1| allowed for a wheel axis
+
+
+def wheel_axes(field_name: str, A_b: ArrayLike, *, span: bool = False) -> np.ndarray:
+    """Check a wheel axis matrix: (3, N) with N ≥ 1, finite, unit columns; ``span``: rank 3 (every
+    body axis reachable — needed for attitude control).
+
+    Parameters
+    ----------
+    field_name : str
+        The name used in the error message.
+    A_b : array_like (3, N)
+        Wheel spin axes as columns, body frame (a single (3,) axis is one wheel).
+    span : bool, default False
+        Also require the columns to span 3-D space.
+
+    Returns
+    -------
+    ndarray (3, N)
+
+    Raises
+    ------
+    lavendersim.validate.LavenderInputError
+        Naming ``field_name`` and the rule broken.
+    """
+    A = array(field_name, A_b, (3, None)) if np.ndim(A_b) != 1 else vector(field_name, A_b)[:, None]
+    if A.shape[1] < 1:
+        raise LavenderInputError(field_name, "needs at least one wheel axis (shape (3, N), N ≥ 1)")
+    norms = np.linalg.norm(A, axis=0)
+    bad = np.flatnonzero(np.abs(norms - 1.0) > WHEEL_UNIT_TOL)
+    if bad.size:
+        raise LavenderInputError(field_name, "each wheel axis (column) must be a unit vector",
+                                   f", column {int(bad[0])} has norm {norms[bad[0]]:.6g}")
+    if span and np.linalg.matrix_rank(A, tol=1e-9) < 3:
+        raise LavenderInputError(field_name, "the wheel axes must span 3-D space (rank 3) for attitude control",
+                                   f", rank {np.linalg.matrix_rank(A, tol=1e-9)} with {A.shape[1]} wheel(s)")
+    return A

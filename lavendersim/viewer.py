@@ -88,6 +88,8 @@ from . import _playback as PB
 from . import validate as V
 from ._install import require
 from ._playback import Controls, Player, Snapshot
+from ._shapes import extent as _extent
+from ._shapes import shape_of as _shape_of
 from .generated import layout as LY
 from .kernels import K as KN
 
@@ -398,23 +400,6 @@ def _cone_mesh(radius: float, n: int = 24):
         j = (i + 1) % n
         faces += [[i, j, n], [n + 1, j, i]]
     return verts.astype(np.float32), np.array(faces, dtype=np.uint32)
-
-
-def _shape_of(body) -> tuple:
-    """(kind, dims) to draw: the body's shape, or the box with its mass and moments, along the body axes
-    (for a full inertia tensor: the box of its diagonal in the body frame, an approximation drawn in the
-    user's axes)."""
-    shape = getattr(body, "shape", None)
-    if shape and shape[0] in ("box", "cylinder", "sphere"):
-        return shape[0], tuple(float(x) for x in shape[1])
-    m = float(body.mass)
-    I = np.asarray(body.I_b if getattr(body, "principal", True) else np.diag(body.inertia_b), dtype=float)
-    sq = [max(6.0 * (I[(k + 1) % 3] + I[(k + 2) % 3] - I[k]) / m, 1e-6) for k in range(3)]
-    return "box", tuple(math.sqrt(s) for s in sq)
-
-
-def _extent(kind: str, dims: tuple) -> float:
-    return max(dims) if kind == "box" else (2 * max(dims) if kind == "sphere" else max(2 * dims[0], dims[1]))
 
 
 # --------------------------------------------------------------------------

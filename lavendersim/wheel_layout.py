@@ -21,7 +21,7 @@ from . import validate as V
 from .kernels import K as KN
 
 MOTORS = ("line", "cutoff")
-UNIT_TOL = 1e-9   # |‖a_i‖ − 1| allowed for an axis
+UNIT_TOL = V.WHEEL_UNIT_TOL
 
 
 def printed_counts() -> tuple[int, ...]:
@@ -31,40 +31,7 @@ def printed_counts() -> tuple[int, ...]:
     return tuple(sorted(int(k[6:-9]) for k in dir(KG) if k.startswith("wheels") and k.endswith("_body_rhs")))
 
 
-def axes(field_name: str, A_b: ArrayLike, *, span: bool = False) -> np.ndarray:
-    """Check a wheel axis matrix: (3, N) with N ≥ 1, finite, unit columns; ``span``: rank 3 (every
-    body axis reachable — needed for attitude control).
-
-    Parameters
-    ----------
-    field_name : str
-        The name used in the error message.
-    A_b : array_like (3, N)
-        Wheel spin axes as columns, body frame (a single (3,) axis is one wheel).
-    span : bool, default False
-        Also require the columns to span 3-D space.
-
-    Returns
-    -------
-    ndarray (3, N)
-
-    Raises
-    ------
-    lavendersim.validate.LavenderInputError
-        Naming ``field_name`` and the rule broken.
-    """
-    A = V.array(field_name, A_b, (3, None)) if np.ndim(A_b) != 1 else V.vector(field_name, A_b)[:, None]
-    if A.shape[1] < 1:
-        raise V.LavenderInputError(field_name, "needs at least one wheel axis (shape (3, N), N ≥ 1)")
-    norms = np.linalg.norm(A, axis=0)
-    bad = np.flatnonzero(np.abs(norms - 1.0) > UNIT_TOL)
-    if bad.size:
-        raise V.LavenderInputError(field_name, "each wheel axis (column) must be a unit vector",
-                                   f", column {int(bad[0])} has norm {norms[bad[0]]:.6g}")
-    if span and np.linalg.matrix_rank(A, tol=1e-9) < 3:
-        raise V.LavenderInputError(field_name, "the wheel axes must span 3-D space (rank 3) for attitude control",
-                                   f", rank {np.linalg.matrix_rank(A, tol=1e-9)} with {A.shape[1]} wheel(s)")
-    return A
+axes = V.wheel_axes   # the check of a wheel axis matrix lives with the other validation (effects use it too)
 
 
 def null_space(A_b: ArrayLike) -> np.ndarray:

@@ -41,8 +41,18 @@ FLOAT32_INTEGRATORS = TABLEAUX.FLOAT32_INTEGRATORS
 
 
 def of_family(family: str) -> tuple:
-    """The registered integrators of one family (derive/tableaux.py FAMILIES), in code order: e.g. "explicit_rk"
-    = euler, semi_implicit_euler, rk4 (the chapter's labs offer these)."""
+    """The registered integrators of one family, in code order.
+
+    Parameters
+    ----------
+    family : str
+        One of derive/tableaux.py's FAMILIES, e.g. "explicit_rk" (euler, semi_implicit_euler, rk4: the chapter's
+        labs offer these).
+
+    Returns
+    -------
+    tuple of str
+    """
     return tuple(n for n, f in TABLEAUX.INTEGRATOR_FAMILY.items() if f == family)
 
 DOPRI5_HMIN_REL = TABLEAUX.DP_HMIN_REL          # a substep below dt * this means the tolerance cannot be met
