@@ -619,7 +619,7 @@ def _dp_norm(e, y, yn, rtol, atol, ncols):
 
 def _dp_pow(a, p):
     """a ** p elementwise (a >= 0, NaN or inf; |p| < 1) as C's libm pow: NumPy's power where it gives libm's
-    (_numpy_power_is_libm), else math.pow per element (~3x the time of the whole controller)."""
+    (_numpy_power_is_libm), else math.pow per element (~30 % of the CPU time of 1e3 equal-rate bodies)."""
     if _numpy_power_is_libm(p):
         return a ** p
     return np.fromiter(map(math.pow, a.ravel().tolist(), itertools.repeat(p)), float, a.size).reshape(a.shape)
