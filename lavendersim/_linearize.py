@@ -33,7 +33,8 @@ import numpy as np
 from . import backends
 from . import effects as E
 from . import validate as V
-from .control import attitude_error, controllable_basis, perturbed, uncontrollable
+from .attitude import attitude_error, perturbed
+from .lqr import controllable_basis, uncontrollable
 from .generated import kernels_casadi as KC
 from .generated import layout as LY
 from .kernels import K as KN

@@ -233,7 +233,7 @@ class Spacecraft:
 def _weight(path: str, value: Any, n: int, name: str) -> Any:
     """Q or R as written: a number, the n diagonal entries, or the (n, n) matrix; checked on load as design checks
     it (real finite entries within lavendersim.control.WEIGHT_MAX, symmetric, Q PSD, R PD), named by its key."""
-    from .control import _weight as weight_matrix
+    from .lqr import _weight as weight_matrix
 
     if isinstance(value, list) and value and isinstance(value[0], list):
         M = SF.rows(path, value, n, min_rows=n, max_rows=n)

@@ -309,7 +309,7 @@ def default_weights(scene: Scene, body: str | None = None, *, attitude_deg: floa
     attitude_deg = V.positive("attitude_deg", attitude_deg)
     rate = V.positive("rate", rate)
     fs, ft = V.positive("wheel_speed_fraction", wheel_speed_fraction), V.positive("torque_fraction", torque_fraction)
-    from .control import WEIGHT_MAX
+    from .lqr import WEIGHT_MAX
 
     def bryson(name: str, value: float, scale: float) -> float:
         x = value * scale
@@ -529,7 +529,9 @@ class Controller:
 def _operating_point(scene: Scene, body: str, wh: Wheels, q_ref: np.ndarray, null_bias: float
                      ) -> tuple[Any, np.ndarray, np.ndarray, int]:
     """(continuous Linearization at rest at q_ref with Omega_ref, Omega_ref, M, rank of the axes)."""
-    from . import control as lc
+    require("control", "control", "the StateSpace linearization")
+    require("casadi", "control", "the CasADi linearization")
+    from ._linearize import linearize_scene   # needs python-control and CasADi: imported on first design
 
     M, r = allocation(wh.A_b)
     n = wh.n
@@ -543,8 +545,8 @@ def _operating_point(scene: Scene, body: str, wh: Wheels, q_ref: np.ndarray, nul
             raise V.LavenderInputError("null_bias", "the null-space wheel-speed target must stay below speed_limit",
                                        f", got max |Omega_ref| = {np.abs(Om_ref).max():.4g} rad/s")
     u0 = wh.c_w * Om_ref
-    lin = lc.linearize(scene, {body: {"q": q_ref, "omega_b": np.zeros(3), "Omega": Om_ref}}, {f"{body}.u": u0},
-                       inputs=[f"{body}.u"], name=f"{body}_wheels")
+    lin = linearize_scene(scene, {body: {"q": q_ref, "omega_b": np.zeros(3), "Omega": Om_ref}}, {f"{body}.u": u0},
+                          inputs=[f"{body}.u"], outputs=None, dt=None, name=f"{body}_wheels")
     if lin.equilibrium_residual > 1e-9 * max(1.0, float(np.max(np.abs(lin.A)))):
         raise V.LavenderInputError("q_ref", "is not an equilibrium of the scene (the right-hand side is not zero at rest "
                                    "there: a body under gravity on a joint must have its COM straight above the pivot)",
@@ -621,7 +623,7 @@ def design(scene: Scene, body: str | None = None, *, period: float, delay: float
         eigenvalue (per sample, and the continuous rate) and its states; marginal ones (conserved momenta,
         a free body's position, an unactuated axis of a free body) are designed around as before.
     """
-    from . import control as lc
+    from . import lqr as lc
 
     body = wheeled_body(scene, body)
     Ts = V.positive("period", period)
