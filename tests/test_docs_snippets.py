@@ -23,7 +23,8 @@ def test_every_page_has_a_snippet():
 
 
 @pytest.mark.parametrize("page, index, code", SNIPPETS, ids=[f"{p}-{i}" for p, i, _ in SNIPPETS])
-def test_python_snippet_runs_as_written(page, index, code, capsys):
+def test_python_snippet_runs_as_written(page, index, code, capsys, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)          # a snippet may write a file (labs.md saves a PNG)
     if "lavendersim.viewer" in code:
         require("viewer")
         code = code.replace("Viewer(port=8080)", "Viewer(port=0)")   # the fixed port may be taken here
