@@ -20,9 +20,9 @@ Integrators (`integrator=`; `sim.rhs_evals` counts right-hand-side evaluations, 
   growth in [0.2, 5], no growth right after a rejection; the proposal is kept between steps). A
   substep below dt·1e-12, or more than 10⁶ substeps in one step, raises DivergenceError naming the
   step and body ("could not meet rtol/atol"). Any body (joints and wheels too; wheel torques held
-  over each dt). The C backend chooses each body's step sizes independently; NumPy uses one shared
-  step (the largest body error decides), so results agree to the tolerance, not bitwise. rhs_evals
-  is the largest per-body count (C), or the shared count (NumPy) — per body for a single body. FSAL:
+  over each dt). Each body chooses its own step sizes, on both backends by the same algorithm (the
+  NumPy backend mirrors C's operation for operation: the results are bitwise equal, per-body step
+  sizes and counts too). rhs_evals is the largest per-body count — per body for a single body. FSAL:
   the last stage is the next substep's first, within one run()/step() call; each call starts with
   one fresh evaluation (the state may have been set in between), as does every output step of a
   body with wheels (its held torque may change). q is normalized after every accepted substep.
@@ -932,7 +932,7 @@ class Sim:
         if n is None:
             head = (f"{self.integrator}: adaptive (rtol={self.rtol:g}, atol={self.atol:g}), RHS evaluations counted, "
                     f"each step advances exactly dt on the {self.backend.name} backend"
-                    + (" (per-body step sizes)" if self.backend.name == "c" else " (one shared step size)"))
+                    + " (per-body step sizes)")
         else:
             head = f"{self.integrator}: {n} RHS evaluation{'s' if n > 1 else ''} per step on the {self.backend.name} backend"
         lines = [head + (", then normalize q" if self.normalize else ", q not normalized")]
