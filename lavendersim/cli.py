@@ -22,6 +22,7 @@ COMMANDS = {
     "lqr": "design an LQR wheel controller for a spacecraft file and fly its maneuver (control extra)",
     "view": "run a scene live in the browser viewer (viewer extra)",
     "bench": "speed as ratios against peers measured in the same run",
+    "effects": "list the effects a scene can declare and their parameters (units, rules, defaults)",
 }
 
 
@@ -173,7 +174,46 @@ def _add_lqr(sub) -> None:
     register_cli(sub)
 
 
-BUILDERS = {"derive": _add_derive, "lab": _add_lab, "lqr": _add_lqr, "view": _add_view, "bench": _add_bench}
+def _load_user_sets() -> None:
+    """Load every set in the user directory (``lavendersim effects`` lists the user's effects too); a set that
+    cannot be loaded is named on stderr in one line and skipped."""
+    from lavendersim import extending
+
+    root = extending.sets_dir()
+    for d in sorted(p for p in root.iterdir() if p.is_dir()) if root.is_dir() else ():
+        try:
+            extending.load(d)
+        except Exception as exc:  # noqa: BLE001 - a broken set must not hide the others
+            print(f"lavendersim effects: skipped the user set {d} ({' '.join(str(exc).split())})", file=sys.stderr)
+
+
+def _effects(args) -> int:
+    import json
+
+    from lavendersim import effects
+
+    if args.name is None:
+        _load_user_sets()
+    if args.json:
+        print(json.dumps(effects.list_effects(args.name), indent=1, ensure_ascii=False))
+    else:
+        print(effects.describe(args.name), end="")
+    return 0
+
+
+def _add_effects(sub) -> None:
+    e = sub.add_parser("effects", help=COMMANDS["effects"],
+                       description="List the effects a scene can declare (built-in and the user sets in the user "
+                                   "directory) with each parameter's shape, unit, rule, default and frame; the same as "
+                                   "lavendersim.effects.describe() / list_effects().")
+    e.add_argument("name", metavar="NAME", nargs="?", default=None, help="only this effect")
+    e.add_argument("--json", action="store_true", help="print machine-readable JSON (a list, one object per effect) "
+                                                       "to stdout")
+    e.set_defaults(fn=_effects)
+
+
+BUILDERS = {"derive": _add_derive, "lab": _add_lab, "lqr": _add_lqr, "view": _add_view, "bench": _add_bench,
+            "effects": _add_effects}
 
 
 class _Parser(argparse.ArgumentParser):

@@ -784,3 +784,111 @@ def _force_spec(name: str) -> EffectSpec:
     if isinstance(name, str) and name in REGISTRY and REGISTRY[name].kind != "force":
         raise V.LavenderInputError("effect", f"{name!r} is a model effect: it has no force or torque expression")
     return REGISTRY[V.choice("effect", name, [n for n, s in REGISTRY.items() if s.kind == "force"])]
+
+
+# ---------------------------------------------------------------------------------------------
+# Listing: what effects there are and what they take
+# ---------------------------------------------------------------------------------------------
+
+
+def _spec_named(name: str) -> EffectSpec:
+    """The spec of a registered effect (a user one in the user directory is loaded on first use, as in make)."""
+    if isinstance(name, str) and name not in REGISTRY and re.match(r"^[a-z][a-z0-9_]*$", name):
+        from . import extending
+
+        extending.discover(name)
+    return REGISTRY[V.choice("effect", name, REGISTRY)]
+
+
+def _decay_text(spec: EffectSpec) -> str | None:
+    """The first sentence of a decay effect's printed rate function (what the rate is, its unit)."""
+    if spec.decay_rate is None:
+        return None
+    doc = " ".join((getattr(spec.decay_rate, "__doc__", None) or "").split())
+    head = doc.split(": ", 1)[-1].split(" (p:")[0].split(". ")[0].rstrip(".")
+    return head or "a linear decay"
+
+
+def list_effects(name: str | None = None) -> list[dict]:
+    """The registered effects (built-in and the loaded user sets') and their parameters, as plain values.
+
+    Parameters
+    ----------
+    name : str, optional
+        Only this effect (a user effect in the user directory is loaded on first use, as by ``make``).
+
+    Returns
+    -------
+    list of dict
+        One dict per effect, in registration order: ``name``, ``kind`` ("force" or "model"), ``summary``,
+        ``source`` ("built-in" or the user set's directory), ``code``, ``reads`` (state it reads, e.g.
+        ``["q", "omega_b"]``), ``outputs`` (``"F_w"``, ``"tau_w"``), ``decay`` (bool), ``decay_rate``
+        (what the rate of a pure linear decay is, 1/s, else None), ``per_body`` (bool) and ``params``: a list
+        of dicts ``name``, ``shape`` (list; with ``upto`` the first length is a maximum), ``shape_text``
+        (e.g. ``"(1 … 4, 3)"``), ``unit`` (SI, "" for dimensionless), ``rule`` ("finite", "positive",
+        "nonnegative"), ``default`` (None: required), ``required``, ``frame`` ("body", "world" or None),
+        ``doc``. JSON-ready.
+
+    Raises
+    ------
+    LavenderInputError
+        ``name`` is not a registered effect (the message lists the known ones).
+    """
+    specs = [_spec_named(name)] if name is not None else list(REGISTRY.values())
+    out = []
+    for s in specs:
+        params = [{"name": p.name, "shape": list(p.shape), "shape_text": p.text() if p.shape else "()",
+                   "upto": p.upto, "unit": p.unit, "rule": p.rule,
+                   "default": np.asarray(p.default, float).tolist() if p.default is not None else None,
+                   "required": p.default is None, "frame": p.frame, "doc": p.doc} for p in s.params]
+        out.append({"name": s.name, "kind": s.kind, "summary": s.summary, "source": s.source, "code": s.code,
+                    "reads": list(s.state_inputs), "outputs": list(s.outputs), "decay": s.is_decay,
+                    "decay_rate": _decay_text(s), "per_body": s.kind == "model", "params": params})
+    return out
+
+
+def _describe_one(e: dict) -> list[str]:
+    where = "built-in" if e["source"] == "built-in" else f"user set {e['source']}"
+    reads = ", ".join(e["reads"]) or "nothing of the state"
+    body = "body= required, one per body" if e["per_body"] else "body= one body or None (every body)"
+    lines = [f"{e['name']} ({e['kind']}, {where}): {e['summary']}.",
+             f"  reads {reads}; {body}" + (f"; adds {', '.join(e['outputs'])}" if e["outputs"] else "")]
+    if e["decay"]:
+        lines.append(f"  a pure linear decay, rate (1/s): {e['decay_rate']} (an explicit step is stable while "
+                     "rate·dt stays below the integrator's REAL_AXIS_STABILITY)")
+    for p in e["params"]:
+        dflt = "required" if p["required"] else f"default {p['default']}"
+        frame = f", {p['frame']} frame" if p["frame"] else ""
+        lines.append(f"  {p['name']:<13} {p['shape_text']:<11} {p['unit'] or 'dimensionless':<13} {p['rule']:<11} "
+                     f"{dflt}{frame} — {p['doc']}")
+    return lines
+
+
+def describe(name: str | None = None) -> str:
+    """The registered effects (built-in and the loaded user sets') and their parameters, as text.
+
+    Each effect: its name, kind, where it is declared, summary, what state it reads, whether it is a pure
+    linear decay (and its rate); each parameter: shape, SI unit, validation rule, default (or "required"),
+    frame and meaning. ``lavendersim effects [NAME] [--json]`` prints the same (with the user directory's
+    sets loaded).
+
+    Parameters
+    ----------
+    name : str, optional
+        Only this effect (a user effect in the user directory is loaded on first use).
+
+    Returns
+    -------
+    str
+        Several lines per effect.
+
+    Raises
+    ------
+    LavenderInputError
+        ``name`` is not a registered effect.
+
+    See Also
+    --------
+    list_effects : the same as plain values.
+    """
+    return "\n".join(line for e in list_effects(name) for line in _describe_one(e)) + "\n"
