@@ -818,41 +818,74 @@ class Response:
                 "torque_limit": self.torque_limit, "speed_limit": self.speed_limit, "within_limits": self.within_limits,
                 "L_drift": self.L_drift}
 
-    def plot(self, path: Any = None, title: str = "") -> Any:
-        """Four panels against t (attitude error, log; body rates; applied torques; wheel speeds).
+    def plot(self, path: Any = None, title: str = "", *, axes: Any = None) -> Any:
+        """Four panels against t (attitude error, log; body rates; applied torques; wheel speeds), in the house
+        style (lavendersim.figures: Okabe–Ito colours, components told apart by line style too, legends below
+        the panels).
 
         Parameters
         ----------
         path : str or os.PathLike, optional
             Write the figure there (PNG, 100 dpi); otherwise only return it.
         title : str, optional
+            Figure title (not set when ``axes`` is given).
+        axes : sequence of 4 matplotlib Axes, optional
+            Draw into these (row order: error, rates, torques, wheel speeds) instead of a new figure.
 
         Returns
         -------
         matplotlib.figure.Figure
-        """
-        from .figures import new_figure
+            A new figure whose ``show()`` works (lavendersim.figures.new_figure), or the one holding ``axes``.
 
-        fig, ax = new_figure(2, 2, size=(11, 7), title=title or "sampled closed loop")
-        a = ax[0, 0]
-        a.semilogy(self.t, np.maximum(self.error_deg, 1e-9))
-        a.axhline(self.threshold_deg, color="tab:red", ls=":", label=f"{self.threshold_deg:g}°")
-        st = self.settling_time()
-        if math.isfinite(st):
-            a.axvline(st, color="tab:gray", ls="--", label=f"settled {st:.3g} s")
-        a.set_xlabel("t (s)"); a.set_ylabel("attitude error (deg)"); a.legend(fontsize=8)
+        Raises
+        ------
+        LavenderInputError
+            ``axes`` does not hold 4 axes.
+        """
+        from .figures import new_figure, style_axes
+
+        fig, ax = new_figure(2, 2, size=(11, 7.5), title=None if axes is not None else title or "sampled closed loop",
+                             ax=axes)
+        if axes is not None:
+            for a in ax.flat:
+                style_axes(a)
+        self._plot_error(ax[0, 0])
         for a, data, lab, unit, lim in ((ax[0, 1], self.omega_b, "ω", "body rate ω_b (rad/s)", None),
                                         (ax[1, 0], self.applied, "u", "applied wheel torque (N·m)", self.torque_limit),
                                         (ax[1, 1], self.Omega, "Ω", "wheel speed Ω (rad/s)", self.speed_limit)):
-            names = "xyz" if lab == "ω" else [str(i + 1) for i in range(data.shape[1])]
-            for i, c in enumerate(names):
-                a.plot(self.t, data[:, i], label=f"{lab}_{c}")
-            if lim is not None and np.abs(data).max(initial=0) > 0.5 * lim:
-                a.axhline(lim, color="k", ls=":", lw=0.8); a.axhline(-lim, color="k", ls=":", lw=0.8)
-            a.set_xlabel("t (s)"); a.set_ylabel(unit); a.legend(fontsize=8)
+            self._plot_components(a, data, lab, lim)
+            a.set_xlabel("t (s)"); a.set_ylabel(unit)
         if path is not None:
             fig.savefig(path, dpi=100)
         return fig
+
+    def _plot_error(self, a: Any) -> None:
+        """The attitude error (log) with its threshold and the settling time."""
+        from .figures import BLUE, GREY, VERMILLION, legend_below
+
+        a.semilogy(self.t, np.maximum(self.error_deg, 1e-9), color=BLUE, label="attitude error")
+        a.axhline(self.threshold_deg, color=VERMILLION, ls=":", label=f"threshold {self.threshold_deg:g}°")
+        st = self.settling_time()
+        if math.isfinite(st):
+            a.axvline(st, color=GREY, ls="--", label=f"settled {st:.3g} s")
+        a.set_xlabel("t (s)"); a.set_ylabel("attitude error (deg)")
+        legend_below(a, ncols=3)
+
+    def _plot_components(self, a: Any, data: np.ndarray, lab: str, lim: float | None) -> None:
+        """One line per body axis (x/y/z styles) or per wheel (palette colour and line style), limits dotted."""
+        from .figures import BLACK, CYCLE, LINESTYLES, axis_style, legend_below
+
+        for i in range(data.shape[1]):
+            if lab == "ω":
+                style = axis_style(i, marker=None)
+                name = "xyz"[i]
+            else:
+                style = {"color": CYCLE[i % len(CYCLE)], "ls": LINESTYLES[i % len(LINESTYLES)]}
+                name = str(i + 1)
+            a.plot(self.t, data[:, i], label=f"{lab}_{name}", **style)
+        if lim is not None and np.abs(data).max(initial=0) > 0.5 * lim:
+            a.axhline(lim, color=BLACK, ls=":", lw=0.8, label="limit"); a.axhline(-lim, color=BLACK, ls=":", lw=0.8)
+        legend_below(a, ncols=min(data.shape[1] + 1, 5))
 
 
 def _substeps(Ts: float, delay: float, dt: float | None) -> tuple[int, int]:

@@ -379,6 +379,8 @@ class ReactionWheelCubeEnv(gym.Env):
             self._fig = Figure(figsize=(3.2, 3.2), dpi=100)
             FigureCanvasAgg(self._fig)
             self._ax = self._fig.add_subplot(projection="3d")
+        from ..figures import axis_style
+
         ax = self._ax
         ax.cla()
         s = self.size
@@ -392,8 +394,8 @@ class ReactionWheelCubeEnv(gym.Env):
             for b_ in range(a_ + 1, 8):
                 if np.sum(corners[a_] != corners[b_]) == 1:
                     ax.plot(*pts[[a_, b_]].T, color="0.4", lw=1)
-        for i, col in enumerate(("tab:red", "tab:green", "tab:blue")):
-            ax.quiver(*com, *(R[:, i] * s * 0.9), color=col, lw=2)
+        for i in range(3):   # body x, y, z in the house colours (lavendersim.figures.AXIS_STYLE)
+            ax.quiver(*com, *(R[:, i] * s * 0.9), color=axis_style(i)["color"], lw=2)
         lim = s * 1.2
         ax.set_xlim(-lim, lim); ax.set_ylim(-lim, lim); ax.set_zlim(-lim * (0.3 if self.task == "corner" else 1), lim * (1.7 if self.task == "corner" else 1))
         ax.set_title(f"t = {0 if self.sim is None else self.sim.t:.2f} s", fontsize=8)
