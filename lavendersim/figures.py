@@ -81,10 +81,22 @@ def _figure_class():
                     _pylab_helpers.Gcf._set_new_active_manager(manager)
             super().show(warn)
 
+    LabFigure.__qualname__ = "LabFigure"
     return LabFigure
 
 
 _LAB_FIGURE = None
+
+
+def __getattr__(name: str):
+    """``LabFigure``: the figure class of :func:`new_figure`, built on first use (importing this module does not
+    import matplotlib)."""
+    global _LAB_FIGURE
+    if name == "LabFigure":
+        if _LAB_FIGURE is None:
+            _LAB_FIGURE = _figure_class()
+        return _LAB_FIGURE
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def new_figure(nrows: int = 1, ncols: int = 1, *, size=(8.0, 4.5), title: str | None = None, ax=None):

@@ -367,7 +367,7 @@ def _design(sys_or_A: Any, args: tuple, discrete: bool, *, labels: list[str] | N
 
 def lqr(sys: Any, *args: Any) -> LQRResult:
     """Continuous LQR, python-control conventions: ``lqr(sys, Q, R)`` with a ``control.StateSpace``
-    (a :class:`Linearization` or any continuous one), ``lqr((A, B), Q, R)`` or ``lqr(A, B, Q, R)``.
+    (a :class:`~lavendersim.control.Linearization` or any continuous one), ``lqr((A, B), Q, R)`` or ``lqr(A, B, Q, R)``.
 
     When (A, B) is not controllable (internal wheel torques conserve momentum) the design is made on
     the controllable subspace (orthonormal Krylov basis T): ``Kc, Sc = control.lqr(TᵀAT, TᵀB, TᵀQT,
