@@ -19,12 +19,19 @@ DOTTED = re.compile(r"(?<![\w./-])(lavendersim(?:\.[A-Za-z_]\w*)+)")
 PATHLIKE = re.compile(r"lavendersim\.(?:py|toml|json|md|h|c)$")
 
 
+# the packages that live outside lavendersim/ (pyproject's package-dir): walked as well
+REMAPPED = ("lavendersim.derive", "lavendersim.generated", "lavendersim.labs")
+
+
+def _public(name: str) -> bool:
+    return not any(part.startswith("_") for part in name.split(".")[1:]) or name.endswith("._linearize")
+
+
 def _modules():
-    names = ["lavendersim"]
-    for m in pkgutil.walk_packages(lavendersim.__path__, "lavendersim."):
-        if not any(part.startswith("_") and part != "__init__" for part in m.name.split(".")[1:]) \
-                or m.name.split(".")[-1] in ("_linearize",):
-            names.append(m.name)
+    names = ["lavendersim", *REMAPPED]
+    for pkg in ["lavendersim", *REMAPPED]:
+        names += [m.name for m in pkgutil.walk_packages(importlib.import_module(pkg).__path__, pkg + ".")
+                  if _public(m.name) and m.name not in names]
     out = []
     for name in names:
         try:
