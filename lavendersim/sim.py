@@ -272,6 +272,38 @@ if hasattr(os, "register_at_fork"):
 L_FLOOR = 1e-6
 
 
+def wheeled_momentum_norms(rows: np.ndarray, x: np.ndarray, Omega: np.ndarray, idx: np.ndarray,
+                           reference: bool = False) -> np.ndarray:
+    """|L| (body + wheels, world) of the wheeled bodies idx, one batched call of the printed momentum kernel
+    (backends.wheel_momentum_batch; bitwise the per-body wheel_momentum).
+
+    Parameters
+    ----------
+    rows : ndarray (nb, MODEL_SIZE)
+        Model rows of every body.
+    x : ndarray (nb, >= STATE_SIZE)
+        States.
+    Omega : ndarray (nb, WHEELS_MAX)
+        Wheel rates, rad/s.
+    idx : ndarray (n,) of int
+        The wheeled bodies.
+    reference : bool
+        The growth check's reference: at least L_FLOOR times |L_body| + Σ J_i |Omega_i| (Sim._invariants).
+
+    Returns
+    -------
+    ndarray (n,)
+        kg·m²/s.
+    """
+    r, W = rows[idx], Omega[idx]
+    Lb, Lw = backends.wheel_momentum_batch(r, x[idx, LY.STATE_Q], x[idx, LY.STATE_OMEGA_B], W)
+    L = np.linalg.norm(Lb + Lw, axis=-1)
+    if reference:
+        floor = L_FLOOR * (np.linalg.norm(Lb, axis=-1) + np.abs(r[:, LY.MODEL_J] * W).sum(axis=-1))
+        L = np.where(floor > L, floor, L)     # max(L, floor) as Python's max: a NaN L stays NaN
+    return L
+
+
 class Trajectory:
     """Recorded samples of a run (returned by :meth:`Sim.record`).
 
@@ -657,6 +689,7 @@ class Sim:
         self._free_wheels = ~acted & (kind == KIND_WHEELS)  # total |L| conserved (motor torques are internal)
         self._free_any = bool(self._free.any())
         self._free_wheels_idx = [int(i) for i in np.flatnonzero(self._free_wheels)]
+        self._fw = np.flatnonzero(self._free_wheels)          # the same, as an index array (one batched kernel call)
         # bodies effects act on (not jointed: the joint's reaction is no declared load): a growth budget
         loaded = acted & ((kind & KIND_JOINT) == 0)
         self._budget = (load_checks.LoadBudget(self._params, self._effects, self._models.rows, loaded, self.dt, self.max_growth)
@@ -685,12 +718,8 @@ class Sim:
                 I_b, w_b = self._params[f][:, LY.PARAM_I_B], x[f][:, LY.STATE_OMEGA_B]
                 E[f] = K.kinetic_energy(self._params[f, LY.PARAM_M], I_b, x[f][:, LY.STATE_V_W], w_b)
                 L[f] = np.linalg.norm(K.body_momentum(I_b, w_b), axis=-1)
-            for i in self._free_wheels_idx:
-                Lb, Lw = backends.wheel_momentum(self._models.rows[i], x[i, LY.STATE_Q], x[i, LY.STATE_OMEGA_B], Omega[i])
-                L[i] = np.linalg.norm(Lb + Lw)
-                if reference:
-                    parts = np.linalg.norm(Lb) + float(np.abs(self._models.rows[i, LY.MODEL_J] * Omega[i]).sum())
-                    L[i] = max(L[i], L_FLOOR * parts)
+            if self._free_wheels_idx:
+                L[self._fw] = wheeled_momentum_norms(self._models.rows, x, Omega, self._fw, reference)
         return E, L
 
     def _reference(self) -> None:

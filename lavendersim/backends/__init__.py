@@ -266,6 +266,36 @@ def wheel_momentum(row: np.ndarray, q: np.ndarray, omega_b: np.ndarray, Omega: n
     return np.asarray(Lb), np.asarray(Lw)
 
 
+def wheel_momentum_batch(rows: np.ndarray, q: np.ndarray, omega_b: np.ndarray,
+                         Omega: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`wheel_momentum` of n wheeled bodies in one call of the same printed kernel (it broadcasts over
+    a leading batch axis; every operation is elementwise, so row k is bitwise ``wheel_momentum(rows[k], ...)``).
+
+    Parameters
+    ----------
+    rows : ndarray (n, MODEL_SIZE)
+        The bodies' model rows (kind with KIND_WHEELS).
+    q : ndarray (n, 4)
+        Orientations (x, y, z, w), R_WB.
+    omega_b : ndarray (n, 3)
+        Angular velocities, body frame, rad/s.
+    Omega : ndarray (n, WHEELS_MAX)
+        Wheel rates relative to each body, rad/s.
+
+    Returns
+    -------
+    L_body_w, L_wheels_w : ndarray (n, 3)
+        kg·m²/s, world frame.
+    """
+    from ..kernels import K
+
+    n = rows.shape[0]
+    I_p = rows[:, LAYOUT.MODEL_I_P].reshape(n, 3, 3)
+    A_b = rows[:, LAYOUT.MODEL_A_B].reshape(n, 3, LAYOUT.WHEELS_MAX)
+    Lb, Lw, _ = getattr(K, f"wheels{LAYOUT.WHEELS_MAX}_momentum")(q, omega_b, Omega, I_p, A_b, rows[:, LAYOUT.MODEL_J])
+    return (np.broadcast_to(np.asarray(Lb), (n, 3)), np.broadcast_to(np.asarray(Lw), (n, 3)))
+
+
 BACKEND_CHOICES = ("auto",) + BACKENDS
 _UNSET = object()
 _c_problem: object = _UNSET   # why the C backend cannot be used (str), None if it can; looked up once

@@ -1,0 +1,162 @@
+"""Issue 30, scale: the growth check of wheeled bodies is one batched kernel call (bitwise the per-body
+loop it replaced), and Scene.add_effect indexes effects per body (the same refusals, O(1) per call).
+
+Behaviour only: no timing here (the figures are in the issue's note, measured in CPU time)."""
+import warnings
+
+import numpy as np
+import pytest
+
+import lavendersim as lv
+from lavendersim import backends
+from lavendersim import sim as sim_mod
+from lavendersim.errors import DivergenceError, ValidityBoundWarning
+from lavendersim.generated import layout as LY
+from lavendersim.validate import LavenderInputError
+
+
+def _loop_invariants(sim, x, Omega, reference=False):
+    """Sim._invariants as it was before issue 30: a Python loop over the free wheeled bodies."""
+    nb = len(sim.names)
+    E, L = np.zeros(nb), np.zeros(nb)
+    with np.errstate(over="ignore", invalid="ignore"):
+        if sim._free_any:
+            f = sim._free
+            I_b, w_b = sim._params[f][:, LY.PARAM_I_B], x[f][:, LY.STATE_OMEGA_B]
+            E[f] = sim_mod.K.kinetic_energy(sim._params[f, LY.PARAM_M], I_b, x[f][:, LY.STATE_V_W], w_b)
+            L[f] = np.linalg.norm(sim_mod.K.body_momentum(I_b, w_b), axis=-1)
+        for i in np.flatnonzero(sim._free_wheels):
+            Lb, Lw = backends.wheel_momentum(sim._models.rows[i], x[i, LY.STATE_Q], x[i, LY.STATE_OMEGA_B], Omega[i])
+            L[i] = np.linalg.norm(Lb + Lw)
+            if reference:
+                parts = np.linalg.norm(Lb) + float(np.abs(sim._models.rows[i, LY.MODEL_J] * Omega[i]).sum())
+                L[i] = max(L[i], sim_mod.L_FLOOR * parts)
+    return E, L
+
+
+def _loop_momenta(budget, x, Omega):
+    """LoadBudget._momenta as it was before issue 30 (per-body loop over the wheeled bodies)."""
+    nb = x.shape[0]
+    L, P = np.zeros(nb), np.zeros(nb)
+    with np.errstate(over="ignore", invalid="ignore"):
+        f = budget.plain
+        if f.any():
+            L[f] = np.linalg.norm(sim_mod.K.body_momentum(budget.params[f][:, LY.PARAM_I_B], x[f][:, LY.STATE_OMEGA_B]), axis=-1)
+        for i in budget.wheeled:
+            Lb, Lw = backends.wheel_momentum(budget.rows[i], x[i, LY.STATE_Q], x[i, LY.STATE_OMEGA_B], Omega[i])
+            L[i] = np.linalg.norm(Lb + Lw)
+        P[budget.loaded] = budget.params[budget.loaded, LY.PARAM_M] * np.linalg.norm(x[budget.loaded][:, LY.STATE_V_W], axis=-1)
+    return L, P
+
+
+def _mixed_scene(rng):
+    """Plain, full-inertia and wheeled bodies (2, 3, 4 wheels), some with an applied torque."""
+    sc = lv.Scene()
+    full = np.array([[0.03, 0.004, -0.002], [0.004, 0.05, 0.001], [-0.002, 0.001, 0.04]])
+    for i in range(24):
+        w = rng.normal(size=3) * 3
+        if i % 6 == 0:
+            sc.add_body(lv.Body(f"b{i}", 1.0, full, omega_b=w))
+        else:
+            sc.add_body(lv.Body.box(f"b{i}", 1.0 + 0.1 * i, (0.1, 0.2 + 0.01 * i, 0.3), omega_b=w))
+        n = (0, 3, 4, 2)[i % 4]
+        if n:
+            A = rng.normal(size=(3, n))
+            A /= np.linalg.norm(A, axis=0)
+            sc.add_effect("reaction_wheels", body=f"b{i}", axes_b=A.T, J=list(1e-4 * (1 + rng.random(n))),
+                          torque_limit=0.1, speed_limit=200.0)
+        if i % 5 == 0:
+            sc.add_effect("applied_torque", body=f"b{i}", torque_w=[0.0, 1e-3, 0.0])
+    return sc
+
+
+def _states(sim, rng):
+    """The current state and perturbed ones: large and tiny rates, wheels spinning, a NaN and an inf row."""
+    x0, W0 = sim._x.copy(), sim._models.Omega.copy()
+    out = [(x0, W0)]
+    for scale in (1e-9, 1.0, 1e6):
+        x, W = x0.copy(), W0.copy()
+        x[:, LY.STATE_OMEGA_B] = rng.normal(size=(x.shape[0], 3)) * scale
+        q = rng.normal(size=(x.shape[0], 4))
+        x[:, LY.STATE_Q] = q / np.linalg.norm(q, axis=1, keepdims=True)
+        W[:] = rng.normal(size=W.shape) * scale * 10
+        out.append((x, W))
+    x, W = out[-1][0].copy(), out[-1][1].copy()
+    x[1, LY.STATE_OMEGA_B.start] = np.nan
+    x[2, LY.STATE_OMEGA_B.start] = np.inf
+    W[3, 0] = np.inf
+    out.append((x, W))
+    return out
+
+
+@pytest.mark.parametrize("backend", ["c", "numpy"])
+def test_batched_invariants_equal_the_per_body_loop_bitwise(backend):
+    rng = np.random.default_rng(30)
+    sim = lv.Sim(_mixed_scene(rng), dt=1e-3, backend=backend)
+    assert len(sim._fw) >= 6 and sim._free_any and sim._budget is not None and len(sim._budget.wheeled) >= 2
+    for x, W in _states(sim, rng):
+        for reference in (False, True):
+            E, L = sim._invariants(x, W, reference=reference)
+            E2, L2 = _loop_invariants(sim, x, W, reference=reference)
+            np.testing.assert_array_equal(E, E2)
+            np.testing.assert_array_equal(L, L2)     # bitwise, NaN where the loop had NaN
+        Lb, Pb = sim._budget._momenta(x, W)
+        Lb2, Pb2 = _loop_momenta(sim._budget, x, W)
+        np.testing.assert_array_equal(Lb, Lb2)
+        np.testing.assert_array_equal(Pb, Pb2)
+    assert sim._L0[sim._fw].min() > 0
+
+
+def test_wheel_momentum_batch_rows_are_wheel_momentum():
+    rng = np.random.default_rng(3)
+    sim = lv.Sim(_mixed_scene(rng), dt=1e-3)
+    idx = sim._fw
+    x, W = _states(sim, rng)[2]
+    Lb, Lw = backends.wheel_momentum_batch(sim._models.rows[idx], x[idx, LY.STATE_Q], x[idx, LY.STATE_OMEGA_B], W[idx])
+    assert Lb.shape == Lw.shape == (idx.size, 3)
+    for k, i in enumerate(idx):
+        b, w = backends.wheel_momentum(sim._models.rows[i], x[i, LY.STATE_Q], x[i, LY.STATE_OMEGA_B], W[i])
+        np.testing.assert_array_equal(Lb[k], b)
+        np.testing.assert_array_equal(Lw[k], w)
+
+
+def _diverging_scene(loaded):
+    sc = lv.Scene()
+    for i in range(6):
+        sc.add_body(lv.Body.box(f"w{i}", 1.0, (0.1, 0.2, 0.3), omega_b=[0.3, 0.2 + 0.05 * i, 0.1]))
+        sc.add_effect("reaction_wheels", body=f"w{i}", J=[1e-4] * 3, torque_limit=0.1, speed_limit=100.0)
+        if loaded:
+            sc.add_effect("applied_torque", body=f"w{i}", torque_w=[0.0, 0.0, 1e-6])
+    # one body spins fast: euler's energy (and |L|) grows on it first
+    sc.add_body(lv.Body.box("fast", 1.0, (0.1, 0.2, 0.3), omega_b=[30.0, 45.0, 20.0]))
+    sc.add_effect("reaction_wheels", body="fast", J=[1e-4] * 3, torque_limit=0.1, speed_limit=100.0)
+    if loaded:
+        sc.add_effect("applied_torque", body="fast", torque_w=[0.0, 0.0, 1e-6])
+    return sc
+
+
+def _divergence(loaded, backend, loop):
+    sim = lv.Sim(_diverging_scene(loaded), dt=0.02, integrator="euler", backend=backend, on_bound="warn")
+    if loop:   # the reference: the per-body loops of before issue 30
+        sim._invariants = lambda x, W, reference=False: _loop_invariants(sim, x, W, reference)
+        if sim._budget is not None:
+            sim._budget._momenta = lambda x, W: _loop_momenta(sim._budget, x, W)
+        sim._reference()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ValidityBoundWarning)
+        with pytest.raises(DivergenceError) as ei:
+            sim.run(5000)
+    return ei.value, sim.steps, sim._x.copy()
+
+
+@pytest.mark.parametrize("loaded", [False, True])
+@pytest.mark.parametrize("backend", ["c", "numpy"])
+def test_a_diverging_wheeled_body_is_named_at_the_same_step(loaded, backend):
+    e, steps, x = _divergence(loaded, backend, loop=False)
+    e2, steps2, x2 = _divergence(loaded, backend, loop=True)
+    assert e.body_name == "fast" and e.body == 6
+    assert (e.step, e.body, e.cause, e.t) == (e2.step, e2.body, e2.cause, e2.t)
+    assert steps == steps2
+    np.testing.assert_array_equal(x, x2)
+    # the growth check fired (not the validity bound, which only warns here): free or load budget
+    assert ("loads can supply" in e.cause) if loaded else e.cause.startswith("|L| grew")
