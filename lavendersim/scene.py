@@ -1,6 +1,7 @@
 """A scene: bodies plus the effects it declares, and nothing else."""
 from __future__ import annotations
 
+import itertools
 from types import MappingProxyType
 from typing import NamedTuple
 
@@ -20,6 +21,83 @@ def _declared(effect: Effect) -> bool:
     except V.LavenderInputError:
         return False
     return True
+
+
+class _EffectList(list):
+    """Scene.effects: a list that keeps an index of its effects per body, so that add_effect and add_body
+    look up the effects on one body in O(effects on it) instead of scanning them all (issue 30).
+
+    append updates the index in O(1); any other change (insert, remove, slice assignment, sort, …) drops it
+    and the next look-up rebuilds it from the list, so the index is never stale however the list is edited."""
+
+    __slots__ = ("_ix",)
+
+    def __init__(self, *args):
+        super().__init__(*args)
+        self._ix = None
+
+    def __reduce_ex__(self, protocol):   # pickles as a plain list's items (the index is rebuilt on demand)
+        return (_EffectList, (list(self),))
+
+    def _index(self) -> dict:
+        """{"per_body": {(name, body): count}, "models": {body: [effect]}, "on": {body: [(position, effect)]},
+        "all": [(position, effect)]}: per-body effects by name and body and by body; the other effects by their
+        body (None: every body); each in list order."""
+        if self._ix is None:
+            self._ix = {"per_body": {}, "models": {}, "on": {}, "all": []}
+            for k, e in enumerate(self):
+                self._add(k, e)
+        return self._ix
+
+    def _add(self, k: int, e) -> None:
+        ix = self._ix
+        if getattr(e, "per_body", False):
+            key = (e.name, e.body)
+            ix["per_body"][key] = ix["per_body"].get(key, 0) + 1
+            ix["models"].setdefault(e.body, []).append(e)
+        elif getattr(e, "body", None) is None:
+            ix["all"].append((k, e))
+        else:
+            ix["on"].setdefault(e.body, []).append((k, e))
+
+    def append(self, e) -> None:
+        super().append(e)
+        if self._ix is not None:
+            self._add(len(self) - 1, e)
+
+    def has_per_body(self, name: str, body: str) -> bool:
+        """A per-body effect `name` on `body` is in the list."""
+        return self._index()["per_body"].get((name, body), 0) > 0
+
+    def models_on(self, body: str) -> list:
+        """The per-body effects on `body`, in list order."""
+        return self._index()["models"].get(body, [])
+
+    def forces_on(self, body: str | None) -> list:
+        """The effects that are not per-body and act on `body` (body None and, if given, body == `body`),
+        in list order."""
+        ix = self._index()
+        mine = ix["on"].get(body, []) if body is not None else []
+        if not mine:
+            return [e for _, e in ix["all"]]
+        if not ix["all"]:
+            return [e for _, e in mine]
+        return [e for _, e in sorted(ix["all"] + mine, key=lambda ke: ke[0])]
+
+
+def _dropping_index(name):
+    def method(self, *args, **kwargs):
+        self._ix = None
+        return getattr(list, name)(self, *args, **kwargs)
+    method.__name__ = name
+    method.__doc__ = getattr(list, name).__doc__
+    return method
+
+
+for _name in ("__setitem__", "__delitem__", "__iadd__", "__imul__", "extend", "insert", "remove", "pop", "clear",
+              "sort", "reverse"):
+    setattr(_EffectList, _name, _dropping_index(_name))
+del _name
 
 
 class Scene:
@@ -42,7 +120,19 @@ class Scene:
     @V.keywords
     def __init__(self):
         self._bodies: dict[str, Body] = {}
-        self.effects: list[Effect] = []
+        self._pos: dict[str, int] = {}       # body name -> position (Scene.index), filled on demand
+        self.effects = []
+
+    @property
+    def effects(self) -> list:
+        """The declared effects, in the order added (a list; add with add_effect, which validates).
+
+        Assigning a list stores a copy of it (the scene keeps an index of its effects per body)."""
+        return self._effects
+
+    @effects.setter
+    def effects(self, value) -> None:
+        self._effects = _EffectList(value)
 
     @property
     def bodies(self) -> MappingProxyType:
@@ -72,7 +162,7 @@ class Scene:
             raise V.LavenderInputError("body", "must be a lavendersim.Body", f", got {type(body).__name__}")
         if body.name in self.bodies:
             raise V.LavenderInputError("body.name", f"duplicate name {body.name!r}")
-        every = [e for e in self.effects if not e.per_body and e.body is None and _declared(e)]
+        every = [e for e in self.effects.forces_on(None) if _declared(e)]
         why = load_overflow(every, body) if every else None
         if why:
             raise V.LavenderInputError("body", f"{why} with the scene's effects on every body "
@@ -115,7 +205,7 @@ class Scene:
         if effect.per_body:
             if effect.body is None:  # an Effect built by hand without a body
                 raise V.LavenderInputError(f"{effect.name}.body", "is required (the name of the body it acts on)")
-            if any(e.name == effect.name and e.body == effect.body for e in self.effects):
+            if self.effects.has_per_body(effect.name, effect.body):
                 raise V.LavenderInputError(f"{effect.name}.body", f"body {effect.body!r} already has a {effect.name}; "
                                            "at most one per body")
             if hasattr(effect, "check_body"):
@@ -123,8 +213,8 @@ class Scene:
         elif _declared(effect):  # an undeclared effect is refused by Sim (naming how to declare it)
             targets = list(self.bodies.values()) if effect.body is None else [self.bodies[effect.body]]
             for b in targets:
-                mine = [e for e in self.effects if not e.per_body and e.body in (None, b.name) and _declared(e)]
-                why = load_overflow([effect], b) or load_overflow(mine + [effect], b)
+                mine = [e for e in self.effects.forces_on(b.name) if _declared(e)]
+                why = load_overflow([effect], b) or (load_overflow(mine + [effect], b) if mine else None)
                 if why:
                     raise V.LavenderInputError(largest_param(effect), f"too large: {why}"
                                                + (f" (with {', '.join(e.name for e in mine)})" if mine else ""))
@@ -150,7 +240,10 @@ class Scene:
         """
         if name not in self.bodies:
             raise V.LavenderInputError("body", f"unknown body {name!r}; bodies: {', '.join(self.bodies) or 'none'}")
-        return list(self.bodies).index(name)
+        if len(self._pos) != len(self._bodies):      # bodies are only ever added: extend the positions
+            start = len(self._pos)
+            self._pos.update((n, start + i) for i, n in enumerate(itertools.islice(self._bodies, start, None)))
+        return self._pos[name]
 
     def model_effects(self, name: str) -> dict:
         """The per-body (model) effects declared on body `name`.
@@ -165,7 +258,7 @@ class Scene:
         dict
             ``{"spherical_joint": e, "reaction_wheels": e}``, only the ones declared.
         """
-        return {e.name: e for e in self.effects if e.per_body and e.body == name}
+        return {e.name: e for e in self.effects.models_on(name)}
 
     def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(state (nb, 13), params (nb, 4) = [m, I_x, I_y, I_z], effects (ne, width)) for the backends.

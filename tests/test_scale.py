@@ -160,3 +160,99 @@ def test_a_diverging_wheeled_body_is_named_at_the_same_step(loaded, backend):
     np.testing.assert_array_equal(x, x2)
     # the growth check fired (not the validity bound, which only warns here): free or load budget
     assert ("loads can supply" in e.cause) if loaded else e.cause.startswith("|L| grew")
+
+
+# ---- Scene.add_effect: an index per body, the same refusals --------------------------------------------
+
+def _scene_of(n):
+    sc = lv.Scene()
+    sc.add_bodies([f"b{i}" for i in range(n)], np.ones(n), np.tile([0.02, 0.03, 0.04], (n, 1)))
+    return sc
+
+
+def _refusal(sc, *args, **kw):
+    before = list(sc.effects)
+    with pytest.raises(LavenderInputError) as ei:
+        sc.add_effect(*args, **kw)
+    assert sc.effects == before          # nothing half-applied
+    return ei.value.field, str(ei.value)
+
+
+def test_duplicate_per_body_effects_are_refused_with_the_same_field():
+    sc = _scene_of(5)
+    for i in range(5):
+        sc.add_effect("reaction_wheels", body=f"b{i}", J=[1e-4] * 3, torque_limit=0.1, speed_limit=100.0)
+    field, text = _refusal(sc, "reaction_wheels", body="b3", J=[1e-4] * 3, torque_limit=0.1, speed_limit=100.0)
+    assert field == "reaction_wheels.body" and "body 'b3' already has a reaction_wheels; at most one per body" in text
+    field, text = _refusal(sc, "applied_torque", body="nobody", torque_w=[0, 0, 1.0])
+    assert field == "applied_torque.body" and "unknown body 'nobody'" in text
+    # another per-body effect on the same body, or the same effect on a body without one, is accepted
+    sc.add_effect("spherical_joint", body="b3", anchor_w=[0.0, 0.0, 0.0])
+    assert set(sc.model_effects("b3")) == {"reaction_wheels", "spherical_joint"}
+    assert set(sc.model_effects("b4")) == {"reaction_wheels"} and sc.model_effects("b0")["reaction_wheels"].body == "b0"
+
+
+def test_the_index_follows_edits_of_the_effects_list():
+    """scene.effects stays a list one may edit (envs/vector.py appends to it): the duplicate check sees every
+    edit, appends and removals alike."""
+    sc = _scene_of(3)
+    from lavendersim.effects import make
+    e = make("reaction_wheels", body="b1", J=[1e-4] * 3, torque_limit=0.1, speed_limit=100.0)
+    sc.effects.append(e)                      # direct append: the index sees it
+    assert _refusal(sc, e)[0] == "reaction_wheels.body"
+    sc.effects.remove(e)                      # removal: the body may have one again
+    sc.add_effect(e)
+    assert sc.effects == [e] and sc.model_effects("b1") == {"reaction_wheels": e}
+    sc.effects = []                           # assignment (tests/test_extending.py does it)
+    assert sc.model_effects("b1") == {}
+    sc.add_effect(e)
+    del sc.effects[0]
+    sc.add_effect(e)
+    assert sc.effects == [e]
+    sc.effects.insert(0, make("applied_torque", body="b2", torque_w=[0, 0, 1.0]))
+    assert _refusal(sc, e)[0] == "reaction_wheels.body"
+    import pickle
+    sc2 = pickle.loads(pickle.dumps(sc))
+    assert [x.name for x in sc2.effects] == ["applied_torque", "reaction_wheels"]
+    assert _refusal(sc2, e)[0] == "reaction_wheels.body"
+
+
+def test_overflowing_loads_are_refused_naming_the_same_field_and_effects():
+    """The messages are the ones the scanning add_effect gave (recorded from it at 38f795f): the effects
+    already on the body are named in the order declared."""
+    sc = _scene_of(4)
+    sc.add_effect("applied_torque", body="b2", torque_w=[0.0, 0.0, 1.5e298])
+    sc.add_effect("gravity", g_w=[0.0, 0.0, -9.81])
+    tail = "at its initial state = 1.5e+300 rad/s²; the bound is 1e+300 rad/s² (with applied_torque, gravity)"
+    for body in ("b2", None):     # on b2 alone, or scene-wide: b2 is the body it overflows on
+        field, text = _refusal(sc, "applied_torque", body=body, torque_w=[0.0, 0.0, 1.5e298])
+        assert field == "applied_torque.torque_w"
+        assert text == ("applied_torque.torque_w: too large: the angular acceleration |tau|/min(I_b) on body 'b2' "
+                        + tail)
+    field, text = _refusal(sc, "force_at_point", body="b1", r_b=[1.0, 0, 0], F_w=[0, 0, 1e301])
+    assert (field, text) == ("force_at_point.F_w", "force_at_point.F_w: too large: the net force on body 'b1' at its "
+                             "initial state = 1e+301 N; the bound is 1e+300 N (with gravity)")
+    field, text = _refusal(sc, "gravity", g_w=[0.0, 0.0, -1e301])
+    assert (field, text) == ("gravity.g_w", "gravity.g_w: too large: the net force on body 'b0' at its initial state "
+                             "= 1e+301 N; the bound is 1e+300 N (with gravity)")
+    with pytest.raises(LavenderInputError) as ei:
+        sc.add_body(lv.Body("huge", 1e300, (1.0, 1.0, 1.0)))
+    assert ei.value.field == "body" and str(ei.value) == (
+        "body: the net force on body 'huge' at its initial state = 9.81e+300 N; the bound is 1e+300 N with the "
+        "scene's effects on every body (gravity)")
+    assert "huge" not in sc.bodies and [e.name for e in sc.effects] == ["applied_torque", "gravity"]
+
+
+def test_scene_index_and_tables_with_many_per_body_effects():
+    n = 300
+    sc = _scene_of(n)
+    for i in range(n - 1, -1, -1):
+        sc.add_effect("applied_torque", body=f"b{i}", torque_w=[0.0, 0.0, 1e-3 * i])
+    assert [sc.index(f"b{i}") for i in (0, 17, n - 1)] == [0, 17, n - 1]
+    sc.add_body(lv.Body("late", 1.0, (1.0, 1.0, 1.0)))
+    assert sc.index("late") == n
+    with pytest.raises(LavenderInputError):
+        sc.index("nobody")
+    t = sc.tables()
+    body_col = t.effects[:, 1].astype(int)
+    np.testing.assert_array_equal(body_col, np.arange(n - 1, -1, -1))
