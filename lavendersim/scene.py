@@ -9,7 +9,8 @@ import numpy as np
 
 from . import validate as V
 from .bodies import P, Q, STATE_SIZE, VEL, W, Body
-from .effects import ROW_PARAMS, Effect, check_declared, largest_param, load_overflow, make, row_width
+from .effects import (MAX_LOAD, ROW_PARAMS, Effect, check_declared, largest_param, load_overflow, make, numpy_apply,
+                      row_width)
 from .frames import PrincipalFrames
 from .generated import layout as LY
 from .kernels import K
@@ -211,7 +212,11 @@ class Scene:
             if hasattr(effect, "check_body"):
                 effect.check_body(self.bodies[effect.body])
         elif _declared(effect):  # an undeclared effect is refused by Sim (naming how to declare it)
-            targets = list(self.bodies.values()) if effect.body is None else [self.bodies[effect.body]]
+            if effect.body is None:   # the exact check below only where a vectorized bound cannot rule it out
+                bodies = list(self.bodies.values())
+                targets = [bodies[i] for i in _overflow_suspects(effect, self.effects, bodies)]
+            else:
+                targets = [self.bodies[effect.body]]
             for b in targets:
                 mine = [e for e in self.effects.forces_on(b.name) if _declared(e)]
                 why = load_overflow([effect], b) or (load_overflow(mine + [effect], b) if mine else None)
@@ -294,6 +299,63 @@ class Scene:
             rows.extend(mine)
         effects = np.ascontiguousarray(np.array(rows, dtype=np.float64).reshape(len(rows), width))
         return Tables(state, params, effects, forces, rows_of, frames)
+
+
+# relative margin of the vectorized overflow bound: covers the rounding of the exact check's sums and norms
+_BOUND_MARGIN = 1e-9
+
+
+def _row_norms(a, n: int) -> np.ndarray:
+    """|a| per row of an (n, 3)-broadcastable array (0 for None), scaled by max|a| (no overflow or underflow
+    of the squares); inf or NaN where a row is not finite."""
+    if a is None:
+        return np.zeros(n)
+    a = np.broadcast_to(np.asarray(a, dtype=np.float64), (n, 3))
+    s = np.max(np.abs(a), axis=1)
+    safe = np.where(s > 0, s, 1.0)
+    return np.where(s > 0, s * np.sqrt(np.sum((a / safe[:, None]) ** 2, axis=1)), s)
+
+
+def _overflow_suspects(effect: Effect, effects: "_EffectList", bodies: list) -> np.ndarray:
+    """The bodies (indices, in order) on which adding the every-body force effect `effect` might overflow:
+    the exact, per-body check (load_overflow) runs on these only.
+
+    A body is cleared when the triangle bound Σ_e |F_e| (and Σ_e |tau_e|, and both over the body's mass and
+    smallest moment) of every declared force effect on it, the new one included, each evaluated in one batched
+    call of its printed NumPy function at the initial states, stays below MAX_LOAD by a margin: then neither
+    the new effect alone nor the sum can exceed the bound. Anything the bound cannot decide (a non-finite term,
+    a function that fails on a batch) leaves the body — or, on an error, every body — to the exact check."""
+    n = len(bodies)
+    try:
+        x = np.stack([b.x0 for b in bodies])
+        m = np.array([b.mass for b in bodies], dtype=np.float64)
+        I_b = np.stack([b.I_b for b in bodies])
+        SF, ST = np.zeros(n), np.zeros(n)
+        with np.errstate(all="ignore"):
+            for e in [e for e in effects.forces_on(None) if _declared(e)] + [effect]:   # on every body
+                p = e.params_flat()
+                f, t = numpy_apply(e.code)(np.broadcast_to(p, (n, p.size)), x, x[:, LY.STATE_V_W], m, I_b)
+                SF += _row_norms(f, n)
+                ST += _row_norms(t, n)
+            groups: dict[int, tuple[list, list]] = {}       # effects on one body each, by code
+            pos = {b.name: i for i, b in enumerate(bodies)}
+            for body, mine in effects._index()["on"].items():
+                for _, e in mine:
+                    if body in pos and _declared(e):
+                        idx, ps = groups.setdefault(e.code, ([], []))
+                        idx.append(pos[body])
+                        ps.append(e.params_flat())
+            for code, (idx, ps) in groups.items():
+                k = np.asarray(idx, dtype=np.int64)
+                xs = x[k]
+                f, t = numpy_apply(code)(np.stack(ps), xs, xs[:, LY.STATE_V_W], m[k], I_b[k])
+                np.add.at(SF, k, _row_norms(f, k.size))
+                np.add.at(ST, k, _row_norms(t, k.size))
+            lim = MAX_LOAD * (1 - _BOUND_MARGIN)
+            ok = (SF <= lim) & (ST <= lim) & (SF / m <= lim) & (ST / np.min(I_b, axis=1) <= lim)
+    except Exception:   # noqa: BLE001  (a user effect that cannot run batched: the exact check decides everywhere)
+        return np.arange(n)
+    return np.flatnonzero(~ok)
 
 
 class Tables(NamedTuple):

@@ -256,3 +256,47 @@ def test_scene_index_and_tables_with_many_per_body_effects():
     t = sc.tables()
     body_col = t.effects[:, 1].astype(int)
     np.testing.assert_array_equal(body_col, np.arange(n - 1, -1, -1))
+
+
+def _scanning_check(sc, effect):
+    """The every-body overflow check as the scanning add_effect did it: the first body's message, or None."""
+    from lavendersim.effects import largest_param, load_overflow
+    for b in sc.bodies.values():
+        mine = [e for e in sc.effects if not e.per_body and e.body in (None, b.name)]
+        why = load_overflow([effect], b) or load_overflow(mine + [effect], b)
+        if why:
+            return largest_param(effect) + ": too large: " + why + (
+                f" (with {', '.join(e.name for e in mine)})" if mine else "")
+    return None
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_every_body_effects_refused_exactly_where_the_scan_refused(seed):
+    """The vectorized bound only clears bodies; near the limit (loads within 1e-12 of MAX_LOAD, cancelling
+    sums, tiny masses) the refusal and its message are the scanning check's."""
+    from lavendersim.effects import MAX_LOAD, make
+    rng = np.random.default_rng(seed)
+    n = 40
+    sc = lv.Scene()
+    q = rng.normal(size=(n, 4))
+    sc.add_bodies([f"b{i}" for i in range(n)], 10.0 ** rng.uniform(-1, 3, n), np.tile([0.02, 0.03, 0.04], (n, 1)),
+                  q=q, omega_b=rng.normal(size=(n, 3)))
+    for i in rng.choice(n, 15, replace=False):
+        sc.add_effect("applied_torque", body=f"b{i}", torque_w=rng.normal(size=3) * 1e297)
+        if i % 2:
+            sc.add_effect("force_at_point", body=f"b{i}", r_b=[0.1, 0.0, 0.0], F_w=-rng.normal(size=3) * 1e295)
+    tried = refused = 0
+    for k in range(12):
+        scale = MAX_LOAD * (1 + rng.choice([-1e-12, 1e-12, -0.5, 1.0])) * 0.02
+        e = (make("applied_torque", torque_w=[0.0, 0.0, scale]) if k % 3 == 0 else
+             make("force_at_point", r_b=[0.0, 0.05, 0.0], F_w=rng.normal(size=3) * scale * 10 ** rng.uniform(-4, 1)) if k % 3 == 1
+             else make("gravity", g_w=[0.0, 0.0, -scale * 10 ** rng.uniform(-3, 1)]))
+        want = _scanning_check(sc, e)
+        tried += 1
+        if want is None:
+            sc.add_effect(e)
+            sc.effects.remove(e)      # keep the scene as it was for the next trial
+        else:
+            refused += 1
+            assert _refusal(sc, e)[1] == want
+    assert refused >= 2 and tried - refused >= 2
