@@ -709,7 +709,10 @@ class Sim:
 
         reference: the growth check's reference |L| of a wheeled body is at least L_FLOOR times the momentum
         its parts carry (|L_body| + Σ J_i |Omega_i|): a total that cancels to rounding (wheels spinning in the
-        layout's null space, the body at rest) cannot double by rounding alone and be called a divergence."""
+        layout's null space, the body at rest) cannot double by rounding alone and be called a divergence.
+
+        The wheeled bodies go through one batched call of the momentum kernel (wheeled_momentum_norms), about
+        1 µs per body per chunk at N = 3e4 (measured, issue 30), not a Python loop per body."""
         nb = len(self.names)
         E, L = np.zeros(nb), np.zeros(nb)
         with np.errstate(over="ignore", invalid="ignore"):
