@@ -135,6 +135,15 @@ class Scene:
     def effects(self, value) -> None:
         self._effects = _EffectList(value)
 
+    def __setstate__(self, state: dict) -> None:
+        """Unpickle, also a Scene pickled before issue 30 (its effects a plain list under "effects")."""
+        state = dict(state)
+        effects = state.pop("effects", None)
+        self.__dict__.update(state)
+        self.__dict__.setdefault("_pos", {})
+        if effects is not None or "_effects" not in state:
+            self.effects = effects or []
+
     @property
     def bodies(self) -> MappingProxyType:
         """The bodies by name, in the order added: a read-only view (add with add_body, which validates)."""
