@@ -17,8 +17,9 @@ from lavendersim import backends
 from lavendersim.errors import DivergenceError, ValidityBoundWarning
 from lavendersim.generated import tableaux as TABLEAUX
 
-from derive import effect_decay, effects as derive_effects
-from derive.effect import STATE, effect, param
+from lavendersim.derive import effect_decay
+from lavendersim.derive import effects as derive_effects
+from lavendersim.derive.effect import STATE, effect, param
 
 FIXED = [n for n in backends.INTEGRATORS if n not in backends.ADAPTIVE]
 BACKENDS = ["c", "numpy"]

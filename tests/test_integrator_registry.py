@@ -7,7 +7,7 @@ accuracy lab's expected orders and the validity/decay bounds all come from the r
 import ast
 from pathlib import Path
 
-from derive import tableaux as T
+from lavendersim.derive import tableaux as T
 from lavendersim import backends
 from lavendersim.backends import c_backend
 from lavendersim.generated import tableaux as TABLEAUX
