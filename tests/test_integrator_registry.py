@@ -63,7 +63,7 @@ def test_no_hand_written_list_of_integrators():
 
 
 def test_the_accuracy_lab_never_calls_a_raising_integrator_unavailable(monkeypatch):
-    from labs import accuracy
+    from lavendersim.labs import accuracy
 
     real = accuracy._make_sim
 
