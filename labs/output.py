@@ -36,6 +36,7 @@ from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
 
 from lavendersim import validate as V
+from lavendersim.derive.atomic import _fsync_dir   # (light: derive/__init__ and atomic import no SymPy)
 
 MARKER = "INCOMPLETE"
 RESULTS = "results.json"
@@ -301,16 +302,6 @@ def _write(path: Path, payload) -> None:
             f.write(payload.encode("utf-8") if isinstance(payload, str) else bytes(payload))
         f.flush()
         os.fsync(f.fileno())
-
-
-def _fsync_dir(path: Path) -> None:
-    if os.name == "nt":   # pragma: no cover
-        return
-    fd = os.open(path, os.O_RDONLY)
-    try:
-        os.fsync(fd)
-    finally:
-        os.close(fd)
 
 
 def _swap_in(new: Path, folder: Path) -> None:
