@@ -35,7 +35,6 @@ from .generated import layout as LY
 
 if TYPE_CHECKING:  # annotations only
     from .sim import Sim, Trajectory
-    from .viewer import Viewer
 
 SPEED_MIN, SPEED_MAX, SPEED_STEP = 0.05, 4.0, 0.05   # the speed slider: simulated s per wall-clock s
 SPEED_MARKS = ((0.05, "0.05×"), (1.0, "1×"), (2.0, "2×"), (4.0, "4×"))
@@ -564,7 +563,7 @@ class Player:
         The exception that stopped it, if any.
     """
 
-    def __init__(self, viewer: Viewer, source: Any, rate_hz: float) -> None:
+    def __init__(self, viewer: Any, source: Any, rate_hz: float) -> None:   # viewer: a lavendersim.viewer.Viewer
         self.viewer, self.source, self.rate_hz = viewer, source, rate_hz
         self.controls = viewer.controls
         self.frames = 0

@@ -150,7 +150,8 @@ def chapter_cube(scenario: str = "center", *, mass: float = 1.0, size: float = 0
     lavendersim.validate.LavenderInputError
         A parameter out of range, naming it.
     """
-    import lavendersim as lv
+    from .bodies import Body
+    from .scene import Scene
 
     scenario = V.choice("scenario", scenario, SCENARIOS)
     motor = V.choice("motor", motor, MOTORS)
@@ -164,8 +165,8 @@ def chapter_cube(scenario: str = "center", *, mass: float = 1.0, size: float = 0
     g = V.scalar("g", g, nonnegative=True)
     q0 = cube_upright_q(scenario) if q is None else V.quaternion("q", q)
     p_w = np.asarray(KN.quat_rotate(q0, cube_r_b(scenario, size)), dtype=float)
-    scene = lv.Scene()
-    scene.add_body(lv.Body.box(name, mass=mass, size=(size, size, size), p_w=p_w, q=q0, omega_b=omega_b))
+    scene = Scene()
+    scene.add_body(Body.box(name, mass=mass, size=(size, size, size), p_w=p_w, q=q0, omega_b=omega_b))
     scene.add_effect("spherical_joint", body=name, anchor_w=[0.0, 0.0, 0.0])
     scene.add_effect("reaction_wheels", body=name, J=Jv.tolist(), torque_limit=torque_limit, speed_limit=speed_limit,
                      c_w=wheel_damping, cutoff=float(motor == "cutoff"))
@@ -286,7 +287,8 @@ def finite_difference(lin: Any, scene: Scene, *, backend: str = "auto", h: float
     lavendersim.validate.LavenderInputError
         If ``h`` or ``dt`` is not a positive finite number.
     """
-    import lavendersim as lv
+    from .scene import Scene
+    from .sim import Sim
 
     from . import effects as E
 
@@ -300,7 +302,7 @@ def finite_difference(lin: Any, scene: Scene, *, backend: str = "auto", h: float
     def scene_with(du):
         if not any(r.kind == "effect" for r in lin.input_refs):
             return scene
-        new = lv.Scene()
+        new = Scene()
         for b in scene.bodies.values():
             new.add_body(b)
         for k, e in enumerate(scene.effects):
@@ -313,7 +315,7 @@ def finite_difference(lin: Any, scene: Scene, *, backend: str = "auto", h: float
         return new
 
     def phi(x, du):
-        sim = lv.Sim(scene_with(du), dt=dt, integrator="euler", backend=backend, max_growth=None)
+        sim = Sim(scene_with(du), dt=dt, integrator="euler", backend=backend, max_growth=None)
         for r in lin.input_refs:
             if r.kind == "wheels":
                 sim.set_wheel_command(r.body, lin.u0[r.offset:r.offset + r.size] + du[r.offset:r.offset + r.size])

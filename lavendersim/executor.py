@@ -97,7 +97,7 @@ def local_cores() -> int:
 
 
 def _worker_version() -> str:
-    from lavendersim._version import __version__ as v
+    from ._version import __version__ as v
 
     return v
 

@@ -10,6 +10,6 @@ from ._integrity import check_generated, generated_dir
 
 check_generated(generated_dir() / "kernels_numpy.py")
 
-from lavendersim.generated import kernels_numpy as K  # noqa: E402,F401  (re-exported)
+from .generated import kernels_numpy as K  # noqa: E402,F401  (re-exported)
 
 __all__ = ["K"]

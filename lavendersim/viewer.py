@@ -1022,11 +1022,13 @@ class Viewer:
 def _tumble_scene():
     """A torque-free box (0.4 x 0.25 x 0.1 m, 1 kg) tumbling near its intermediate axis: body axes,
     angular velocity (world) and the conserved world angular momentum."""
-    import lavendersim as lv
+    from .bodies import Body
+    from .scene import Scene
+    from .sim import Sim
 
-    scene = lv.Scene()
-    scene.add_body(lv.Body.box("box", 1.0, (0.4, 0.25, 0.1), omega_b=(0.05, 4.0, 0.05)))
-    sim = lv.Sim(scene, dt=1e-3)
+    scene = Scene()
+    scene.add_body(Body.box("box", 1.0, (0.4, 0.25, 0.1), omega_b=(0.05, 4.0, 0.05)))
+    sim = Sim(scene, dt=1e-3)
 
     def overlays(sim):
         s = sim.state("box")
@@ -1045,12 +1047,12 @@ def _wheel_scene():
     """The reaction-wheel cube balancing on its corner (lavendersim.control's Cubli-like model,
     15 cm, 1 kg) from a 3° tilt under LQR wheel control: cube axes, angular velocity and the
     motor torque acting on the cube (−u), as in the chapter's example payload."""
-    import lavendersim as lv
+    from .sim import Sim
     from lavendersim import control as C
 
     scene = C.chapter_cube("corner")
     ctrl = C.design(scene, period=2e-3, q_ref=C.cube_upright_q("corner"), weights={"attitude_deg": 0.5})
-    sim = lv.Sim(C.chapter_cube("corner", q=C.rotated(ctrl.q_ref, (1.0, -1.0, 0.0), 3.0)), dt=1e-3)
+    sim = Sim(C.chapter_cube("corner", q=C.rotated(ctrl.q_ref, (1.0, -1.0, 0.0), 3.0)), dt=1e-3)
 
     def advance(sim, dt):
         for _ in range(max(1, int(round(dt / ctrl.Ts)))):

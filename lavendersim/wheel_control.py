@@ -1146,18 +1146,19 @@ def perturbed_inertia(scene: Scene, body: str, scale: ArrayLike) -> Scene:
     Scene
         A new scene (same effects, the body rebuilt; its shape for the viewer is dropped).
     """
-    import lavendersim as lv
+    from .bodies import Body
+    from .scene import Scene
 
     from . import effects as E
 
     s = V.vector("scale", scale)
     if np.any(s <= 0):
         raise V.LavenderInputError("scale", "inertia factors must be positive", f", got {s.tolist()}")
-    new = lv.Scene()
+    new = Scene()
     for name, b in scene.bodies.items():
         if name == body:
             x0 = np.asarray(b.x0, float)
-            b = lv.Body(name, b.mass, _perturbed_tensor(b, s), p_w=x0[0:3], q=x0[3:7], v_w=x0[7:10], omega_b=x0[10:13])
+            b = Body(name, b.mass, _perturbed_tensor(b, s), p_w=x0[0:3], q=x0[3:7], v_w=x0[7:10], omega_b=x0[10:13])
         new.add_body(b)
     for e in scene.effects:
         new.add_effect(E.make(e.name, body=e.body, **dict(e.values)))

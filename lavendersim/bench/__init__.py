@@ -237,8 +237,8 @@ def interleaved(cases: dict, rounds: int, label: str = "") -> dict:
 # --------------------------------------------------------------------------- scenes
 
 def body(name: str = "body"):
-    import lavendersim as lv
-    return lv.Body.box(name, MASS, SIZE, q=Q0, omega_b=OMEGA_B0, v_w=V_W0)
+    from ..bodies import Body
+    return Body.box(name, MASS, SIZE, q=Q0, omega_b=OMEGA_B0, v_w=V_W0)
 
 
 def inertia() -> np.ndarray:
@@ -250,12 +250,13 @@ def initial_state() -> np.ndarray:
 
 
 def single_sim(backend: str = "c", integrator: str = "rk4", effects=()):
-    import lavendersim as lv
-    scene = lv.Scene()
+    from ..scene import Scene
+    from ..sim import Sim
+    scene = Scene()
     scene.add_body(body())
     for name, params in effects:
         scene.add_effect(name, body="body", **params)
-    sim = lv.Sim(scene, dt=DT, integrator=integrator, backend=backend)
+    sim = Sim(scene, dt=DT, integrator=integrator, backend=backend)
     if any(name == "reaction_wheels" for name, _ in effects):
         sim.set_wheel_command("body", WHEEL_COMMAND)
     return sim
@@ -264,15 +265,17 @@ def single_sim(backend: str = "c", integrator: str = "rk4", effects=()):
 def batch_sim(n: int, backend: str, torque: bool = False, dtype: str = "float64"):
     """n copies of the body with slightly different spins (independent trajectories); with torque,
     each body has its own applied_torque (n effects, one per body); dtype: the Sim's precision."""
-    import lavendersim as lv
-    scene = lv.Scene()
+    from ..bodies import Body
+    from ..scene import Scene
+    from ..sim import Sim
+    scene = Scene()
     rng = np.random.default_rng(n)
     for i in range(n):
         w = np.asarray(OMEGA_B0) * (1.0 + 0.1 * rng.standard_normal(3))
-        scene.add_body(lv.Body.box(f"b{i}", MASS, SIZE, q=Q0, omega_b=w, v_w=V_W0))
+        scene.add_body(Body.box(f"b{i}", MASS, SIZE, q=Q0, omega_b=w, v_w=V_W0))
         if torque:
             scene.add_effect("applied_torque", body=f"b{i}", torque_w=PER_BODY_TORQUE)
-    return lv.Sim(scene, dt=DT, integrator="rk4", backend=backend, dtype=dtype)
+    return Sim(scene, dt=DT, integrator="rk4", backend=backend, dtype=dtype)
 
 
 # --------------------------------------------------------------------------- hand-written reference

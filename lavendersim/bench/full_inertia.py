@@ -22,18 +22,20 @@ I_FULL = np.array([[0.2, 0.004, -0.002], [0.004, 0.25, 0.003], [-0.002, 0.003, 0
 
 
 def _sim(n: int, full: bool):
-    import lavendersim as lv
+    from ..bodies import Body
+    from ..scene import Scene
+    from ..sim import Sim
 
     I = I_FULL if full else np.linalg.eigvalsh(I_FULL)
     rng = np.random.default_rng(n)
-    scene = lv.Scene()
+    scene = Scene()
     for i in range(n):
         q = rng.standard_normal(4)
-        scene.add_body(lv.Body(f"b{i}", 12.0, I, q=q / np.linalg.norm(q), omega_b=0.1 * rng.standard_normal(3)))
+        scene.add_body(Body(f"b{i}", 12.0, I, q=q / np.linalg.norm(q), omega_b=0.1 * rng.standard_normal(3)))
     scene.add_effect("gravity", g_w=[0.0, 0.0, -9.81])
     scene.add_effect("angular_damping", c=1e-4)
     scene.add_effect("force_at_point", r_b=[0.05, -0.02, 0.1], F_w=[0.0, 1e-3, 0.0])
-    return lv.Sim(scene, dt=1e-3, integrator="rk4", backend="c")
+    return Sim(scene, dt=1e-3, integrator="rk4", backend="c")
 
 
 def inertia_section(quick: bool, rounds: int, interleaved) -> dict:

@@ -27,15 +27,17 @@ def _arrays(n: int) -> dict:
 
 
 def _build(a: dict, batched: bool):
-    import lavendersim as lv
+    from ..bodies import Body
+    from ..scene import Scene
+    from ..sim import Sim
 
-    scene = lv.Scene()
+    scene = Scene()
     if batched:
         scene.add_bodies(a["names"], a["masses"], a["I_b"], q=a["q"], omega_b=a["omega_b"])
     else:
         for i, name in enumerate(a["names"]):
-            scene.add_body(lv.Body(name, float(a["masses"][i]), a["I_b"][i], q=a["q"][i], omega_b=a["omega_b"][i]))
-    return lv.Sim(scene, dt=1e-3, integrator="rk4", backend="c")
+            scene.add_body(Body(name, float(a["masses"][i]), a["I_b"][i], q=a["q"][i], omega_b=a["omega_b"][i]))
+    return Sim(scene, dt=1e-3, integrator="rk4", backend="c")
 
 
 def scene_section(quick: bool, rounds: int, interleaved) -> dict:

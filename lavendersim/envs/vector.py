@@ -101,7 +101,9 @@ class ReactionWheelCubeVectorEnv(VectorEnv):
 
     # ---- construction --------------------------------------------------------------------
     def _build_sim(self):
-        import lavendersim as lv
+        from ..bodies import Body
+        from ..scene import Scene
+        from ..sim import Sim
 
         from ..effects import make
 
@@ -110,10 +112,10 @@ class ReactionWheelCubeVectorEnv(VectorEnv):
         cube, s = tmpl.bodies[BODY], one.size
         q_up = V.quaternion("q0", lc.cube_upright_q(one.task))
         p_w = np.asarray(K.quat_rotate(q_up, one.r_b), dtype=float)
-        scene = lv.Scene()
+        scene = Scene()
         wheels = dict(tmpl.model_effects(BODY)["reaction_wheels"].values)
         for i in range(n):
-            body = lv.Body.box(f"cube{i}", mass=cube.mass, size=(s, s, s), p_w=p_w, q=q_up)
+            body = Body.box(f"cube{i}", mass=cube.mass, size=(s, s, s), p_w=p_w, q=q_up)
             scene.add_body(body)
         for i in range(n):   # validated model effects, one pair per body (new names: no duplicate scan needed)
             scene.effects.append(make("spherical_joint", body=f"cube{i}", anchor_w=[0.0, 0.0, 0.0]))
@@ -121,7 +123,7 @@ class ReactionWheelCubeVectorEnv(VectorEnv):
         for e in tmpl.effects:   # the force effects, declared once for every cube
             if not e.per_body:
                 scene.add_effect(e.name, **dict(e.values))
-        sim = lv.Sim(scene, dt=self._one.dt, integrator="rk4", backend=self._one.backend)
+        sim = Sim(scene, dt=self._one.dt, integrator="rk4", backend=self._one.backend)
         sim._fast_chunks()     # one step's run inside C (Stepper.advance: run's checks and results), any N
         return sim
 
