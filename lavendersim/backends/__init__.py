@@ -55,6 +55,57 @@ def of_family(family: str) -> tuple:
     """
     return tuple(n for n, f in TABLEAUX.INTEGRATOR_FAMILY.items() if f == family)
 
+
+class Tableau:
+    """An explicit Runge–Kutta method declared by its Butcher tableau (a user's, from ``lavendersim derive --user``).
+
+    Both backends step it with one generic explicit-RK stepper (``Sim(..., integrator=name)``), with effects,
+    joints and wheels, in float64.
+
+    Parameters
+    ----------
+    name : str
+        What users pass to ``Sim(..., integrator=)``; must not be a built-in integrator's name.
+    c : (s,) float
+        The nodes; c[i] = sum(A[i, :i]).
+    A : (s, s) float
+        The coefficients, strictly lower triangular (explicit).
+    b : (s,) float
+        The weights.
+    order : int
+        The order the tableau's declaration claims (checked against the order conditions on registration).
+    source : str
+        Where it was declared (the user set's name), for messages.
+    """
+
+    __slots__ = ("name", "c", "A", "b", "order", "source")
+
+    def __init__(self, name: str, c, A, b, order: int, source: str = ""):
+        self.name, self.order, self.source = str(name), int(order), str(source)
+        self.c = np.ascontiguousarray(c, dtype=np.float64)
+        self.A = np.ascontiguousarray(A, dtype=np.float64)
+        self.b = np.ascontiguousarray(b, dtype=np.float64)
+        for arr in (self.c, self.A, self.b):
+            arr.setflags(write=False)
+
+    @property
+    def stages(self) -> int:
+        return int(self.b.shape[0])
+
+    def __repr__(self) -> str:
+        return f"Tableau({self.name!r}, stages={self.stages}, order={self.order}, source={self.source!r})"
+
+
+# User-declared explicit Runge-Kutta integrators by name (filled by lavendersim.extending when a user set that
+# declares TABLEAUX loads). The built-in registry above never changes; these come and go with user sets.
+USER_TABLEAUX: dict[str, Tableau] = {}
+
+
+def tableau_of(name: str) -> Tableau | None:
+    """The user-declared tableau named ``name``, or None for a built-in (or unknown) integrator."""
+    return USER_TABLEAUX.get(name)
+
+
 DOPRI5_HMIN_REL = TABLEAUX.DP_HMIN_REL          # a substep below dt * this means the tolerance cannot be met
 DOPRI5_MAX_SUBSTEPS = TABLEAUX.DP_MAX_SUBSTEPS  # ... as do more substeps than this within one output step
 
