@@ -76,12 +76,20 @@ class Tableau:
         The order the tableau's declaration claims (checked against the order conditions on registration).
     source : str
         Where it was declared (the user set's name), for messages.
+    real_axis : float or None, optional
+        Its stability limit on the negative real axis, |lambda| h (derive computes it from R(z); the Sim's
+        decay check reads it as it reads REAL_AXIS_STABILITY for a built-in).
+    wdt_max : float or None, optional
+        Its validity bound |omega| dt <= wdt_max (ratio exponent 0, as rk4's; derive computes it from R(iy)).
     """
 
-    __slots__ = ("name", "c", "A", "b", "order", "source")
+    __slots__ = ("name", "c", "A", "b", "order", "source", "real_axis", "wdt_max")
 
-    def __init__(self, name: str, c, A, b, order: int, source: str = ""):
+    def __init__(self, name: str, c, A, b, order: int, source: str = "", *, real_axis: float | None = None,
+                 wdt_max: float | None = None):
         self.name, self.order, self.source = str(name), int(order), str(source)
+        self.real_axis = None if real_axis is None else float(real_axis)
+        self.wdt_max = None if wdt_max is None else float(wdt_max)
         self.c = np.ascontiguousarray(c, dtype=np.float64)
         self.A = np.ascontiguousarray(A, dtype=np.float64)
         self.b = np.ascontiguousarray(b, dtype=np.float64)
@@ -160,6 +168,9 @@ def rhs_per_step(integrator: str, effects: np.ndarray, nb: int) -> int | None:
     KeyError
         ``integrator`` is not in INTEGRATORS.
     """
+    tab = USER_TABLEAUX.get(integrator)
+    if tab is not None:
+        return tab.stages
     n = INTEGRATORS[integrator]
     if TABLEAUX.INTEGRATOR_FAMILY[integrator] != "composition" or n is None or len(effects) == 0:
         return n
