@@ -25,7 +25,7 @@ from ..generated import layout as LY
 from ..generated import tableaux as T
 from ..kernels import K
 from . import (DOPRI5_HMIN_REL, DOPRI5_MAX_SUBSTEPS, FLOAT32_INTEGRATORS, KIND_JOINT, KIND_WHEELS, PLAIN_ONLY,
-               Adaptive, Models, divergence_cause, no_root_cause, tolerance_cause, wheel_counts)
+               Adaptive, Models, divergence_cause, no_root_cause, tableau_of, tolerance_cause, wheel_counts)
 
 P, Q, V, W = LY.STATE_P_W, LY.STATE_Q, LY.STATE_V_W, LY.STATE_OMEGA_B  # state-row fields
 X, OM = LY.XS_X, LY.XS_OMEGA                                               # extended state [x, Omega]
@@ -480,6 +480,52 @@ def _implicit_gyro(plan, x, h):
     return xn
 
 
+class _ExplicitRK:
+    """An explicit Runge–Kutta tableau as the generic stepper reads it: for each stage the nonzero (j, a_ij) in
+    increasing j, the nonzero (i, b_i) in increasing i, and a divisor of the weights (b_i = weights / den; a
+    user's Tableau has den = 1). Stage i is evaluated at x + h (a_ij0 k_j0 + a_ij1 k_j1 + ...), summed left to
+    right; the step ends at x + (h / den) (b_i0 k_i0 + b_i1 k_i1 + ...): the C backend's generic stepper, in
+    its order (requests.md, session 14)."""
+
+    __slots__ = ("rows", "weights", "den")
+
+    def __init__(self, A, b, den=1.0):
+        s = len(b)
+        self.rows = tuple(tuple((j, float(A[i][j])) for j in range(i) if A[i][j] != 0.0) for i in range(s))
+        self.weights = tuple((i, float(w)) for i, w in enumerate(b) if w != 0.0)
+        self.den = float(den)
+
+    @staticmethod
+    def combine(terms, ks):
+        """a_0 k_j0 + a_1 k_j1 + ... left to right (a coefficient of 1 multiplies exactly: skipped)."""
+        acc = None
+        for j, a in terms:
+            t = ks[j] if a == 1.0 else a * ks[j]
+            acc = t if acc is None else acc + t
+        return acc
+
+    def step(self, f, x, h):
+        """One step of x' = f(x) of length h."""
+        ks = []
+        for terms in self.rows:
+            ks.append(f(x if not terms else x + h * self.combine(terms, ks)))
+        return x + (h / self.den) * self.combine(self.weights, ks)
+
+
+_USER_RK: dict = {}   # user Tableau (by identity) -> its _ExplicitRK
+
+
+def _user_rk(name: str):
+    """The generic stepper's form of the user-declared tableau ``name`` (backends.tableau_of), or None."""
+    tab = tableau_of(name)
+    if tab is None:
+        return None
+    rk = _USER_RK.get(name)
+    if rk is None or rk[0] is not tab:
+        rk = _USER_RK[name] = (tab, _ExplicitRK(tab.A, tab.b))
+    return rk[1]
+
+
 def step(plan: _Plan, x: np.ndarray, integrator: str, normalize: bool, dt: float, u=None) -> np.ndarray:
     """One step of every body; returns the new state array. x is (nb, 13), or (nb, 16) = [x, Omega]
     with u the wheeled bodies' applied torques when the plan has joints or wheels."""
@@ -511,6 +557,8 @@ def step(plan: _Plan, x: np.ndarray, integrator: str, normalize: bool, dt: float
         k3 = f(x + (T.RK4_C2 * dt) * k2)
         k4 = f(x + (T.RK4_C3 * dt) * k3)
         xn = x + (dt / T.RK4_B_DEN) * (T.RK4_B0 * k1 + T.RK4_B1 * k2 + T.RK4_B2 * k3 + T.RK4_B3 * k4)
+    elif (rk := _user_rk(integrator)) is not None:
+        xn = rk.step(f, x, dt)
     else:  # validated by Sim; kept for direct callers
         raise ValueError(f"integrator: unknown {integrator!r}")
     if normalize:
@@ -539,6 +587,8 @@ class NumpyBackend:
                 models: Models | None = None, adaptive: Adaptive | None = None, *, restore: bool = True) -> None:
         # restore: accepted for the C backend's interface; this backend always restores (it steps a copy)
         if isinstance(state, np.ndarray) and state.dtype == np.float32:   # single precision throughout
+            if tableau_of(integrator) is not None:
+                raise ValueError(f"integrator: {integrator!r} (a user-declared tableau) steps float64 only")
             if integrator not in FLOAT32_INTEGRATORS:
                 raise ValueError(f"integrator: float32 steps {', '.join(FLOAT32_INTEGRATORS)} only, got {integrator!r}")
             if models is not None and np.any(np.asarray(models.rows)[:, LY.MODEL_KIND] != 0):
