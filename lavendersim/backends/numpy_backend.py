@@ -276,44 +276,48 @@ def _kick(plan, x, h):
     x[:, V], x[:, W] = K.splitting_kick(plan.m, plan.I, x[:, V], x[:, W], F, tb, h)
 
 
-def _splitting(plan, x, h):
-    """kick(h/2); p += h v; the free rotation over h (splitting_rotation: the Strang sequence of exact
-    principal-axis flows); kick(h/2)."""
-    xn = x.copy()
-    forced = plan.forced.size > 0
-    if forced:
-        _kick(plan, xn, T.SPLIT_KICK * h)
-    xn[:, P] = K.translation_drift(xn[:, P], xn[:, V], h)
-    xn[:, Q], xn[:, W] = K.splitting_rotation(plan.I, xn[:, Q], xn[:, W], h)
-    if forced:
-        _kick(plan, xn, T.SPLIT_KICK * h)
-    return xn
-
-
-_AXIS_FLOWS = (K.axis_flow_x, K.axis_flow_y, K.axis_flow_z)
-
-
-def _splitting4(plan, x, h):
-    """splitting4: the splitting step (_splitting) applied with steps gamma_i h, i = 1 … SPLIT4_STAGES
-    (T.SPLIT4_GAMMA, a symmetric composition of order 4; derive/tableaux.py) to bodies with effects.
-    Bodies without take the same flows as one sequence (T.SPLIT4_SEQ, neighbours about one axis merged)
-    on L_b = I ω (body_momentum), turned back into ω once (body_rate), and p drifts by h v — the C
-    backend's splitting4_step, operation for operation."""
+def _composition(plan, x, h, stages, rotate):
+    """One step of a composition of exact flows (splitting, splitting4, symtop4, symtop_bm6). Bodies with effects
+    take the stages γ_i (stages) in turn: kick(γ_i h/2) (_kick, SPLIT_KICK), p += γ_i h v (translation_drift),
+    the stage's rotation, kick(γ_i h/2). Bodies without drift p by h v and take the whole step's rotation.
+    rotate(I, q, w, h, stage) -> (q, w): stage i's rotation over γ_i h, or the whole step's (stage None).
+    The C backend's splitting / splitting4 / symtop steps, operation for operation."""
     xn = x.copy()
     if plan.forced.size:
-        xf = x
-        for g in T.SPLIT4_GAMMA:
-            xf = _splitting(plan, xf, g * h)
+        xf = x.copy()
+        for s, g in enumerate(stages):
+            gh = g * h
+            _kick(plan, xf, T.SPLIT_KICK * gh)
+            xf[:, P] = K.translation_drift(xf[:, P], xf[:, V], gh)
+            xf[:, Q], xf[:, W] = rotate(plan.I, xf[:, Q], xf[:, W], h, s)
+            _kick(plan, xf, T.SPLIT_KICK * gh)
         xn[plan.forced] = xf[plan.forced]
     free = slice(None) if not plan.forced.size else plan.free
     I = plan.I[free]
     if I.shape[0]:
         xn[free, P] = K.translation_drift(x[free, P], x[free, V], h)
-        q, L = x[free, Q], K.body_momentum(I, x[free, W])
-        for a, f in T.SPLIT4_SEQ:
-            q, L = _AXIS_FLOWS[a](I, q, L, f * h)
-        xn[free, Q], xn[free, W] = q, K.body_rate(I, L)
+        xn[free, Q], xn[free, W] = rotate(I, x[free, Q], x[free, W], h, None)
     return xn
+
+
+def _splitting_rotation(I, q, w, h, stage):
+    """splitting (one stage, γ = 1): the Strang sequence of exact principal-axis flows (splitting_rotation) over h."""
+    return K.splitting_rotation(I, q, w, h)
+
+
+_AXIS_FLOWS = (K.axis_flow_x, K.axis_flow_y, K.axis_flow_z)
+
+
+def _splitting4_rotation(I, q, w, h, stage):
+    """splitting4 (T.SPLIT4_GAMMA, a symmetric composition of order 4 of the splitting step): stage i's Strang
+    rotation over γ_i h; the whole step (stage None) as one sequence of axis flows (T.SPLIT4_SEQ, neighbours
+    about one axis merged) on L_b = I ω (body_momentum), turned back into ω once (body_rate)."""
+    if stage is not None:
+        return K.splitting_rotation(I, q, w, T.SPLIT4_GAMMA[stage] * h)
+    L = K.body_momentum(I, w)
+    for a, f in T.SPLIT4_SEQ:
+        q, L = _AXIS_FLOWS[a](I, q, L, f * h)
+    return q, K.body_rate(I, L)
 
 
 _SYMTOP_FLOWS = (K.symtop_axis_flow_x, K.symtop_axis_flow_y, K.symtop_axis_flow_z)
@@ -358,35 +362,12 @@ def _symtop_rotation(I, q, L, h, stage=None):
     return q, L
 
 
-def _symtop_composition(plan, x, h, rotate):
-    """One step of symtop4 or symtop_bm6 (rotate(I, q, L, h, stage): the method's rotation, stage None for
-    the whole step). Bodies without effects drift p by h v and take the rotation on L_b = I ω
-    (body_momentum), turned back into ω once (body_rate). Bodies with effects: for each stage γ_i of
-    T.SYMTOP4_GAMMA, kick(γ_i h/2), drift p by γ_i h, the stage's rotation, kick(γ_i h/2). The C backend's
-    symtop_step, operation for operation."""
-    xn = x.copy()
-    if plan.forced.size:
-        xf = x.copy()
-        for s, g in enumerate(T.SYMTOP4_GAMMA):
-            gh = g * h
-            _kick(plan, xf, T.SPLIT_KICK * gh)
-            xf[:, P] = K.translation_drift(xf[:, P], xf[:, V], gh)
-            q, L = rotate(plan.I, xf[:, Q], K.body_momentum(plan.I, xf[:, W]), h, s)
-            xf[:, Q], xf[:, W] = q, K.body_rate(plan.I, L)
-            _kick(plan, xf, T.SPLIT_KICK * gh)
-        xn[plan.forced] = xf[plan.forced]
-    free = slice(None) if not plan.forced.size else plan.free
-    I = plan.I[free]
-    if I.shape[0]:
-        xn[free, P] = K.translation_drift(x[free, P], x[free, V], h)
-        q, L = rotate(I, x[free, Q], K.body_momentum(I, x[free, W]), h, None)
-        xn[free, Q], xn[free, W] = q, K.body_rate(I, L)
-    return xn
-
-
-def _symtop4(plan, x, h):
-    """symtop4: _symtop_composition with the merged / Strang rotations of _symtop_rotation."""
-    return _symtop_composition(plan, x, h, _symtop_rotation)
+def _on_momentum(rotate):
+    """A rotation on (q, L_b) as one on (q, ω): L_b = I ω (body_momentum) before, ω = I⁻¹ L_b (body_rate) after."""
+    def on_rates(I, q, w, h, stage):
+        q, L = rotate(I, q, K.body_momentum(I, w), h, stage)
+        return q, K.body_rate(I, L)
+    return on_rates
 
 
 def _symtop_bm6_rotation(I, q, L, h):
@@ -414,39 +395,6 @@ def _symtop_bm6_rotation(I, q, L, h):
 def _symtop_bm6_stage(I, q, L, h, stage):
     """_symtop_bm6_rotation for the whole step (stage None) or over stage's γ_i h."""
     return _symtop_bm6_rotation(I, q, L, h if stage is None else T.SYMTOP4_GAMMA[stage] * h)
-
-
-def _symtop_bm6(plan, x, h):
-    """symtop_bm6: _symtop_composition with the Blanes–Moan rotation (_symtop_bm6_rotation); with effects
-    symtop4's kicked stages around it."""
-    return _symtop_composition(plan, x, h, _symtop_bm6_stage)
-
-
-def _rk4_expmap(plan, x, h):
-    """rk4_expmap (RKMK4): the RK4 tableau on (p, v, u, ω) with the attitude q = q₀ ⊗ exp(u/2), u the
-    body rotation vector since the step's start (u₀ = 0). Each stage evaluates the right-hand side at its
-    attitude (quat_exp_step(q₀, u, 1)) and u̇ = rkmk_dexpinv(u, ω); the end attitude is q₀ ⊗ exp(u₁/2),
-    unit to rounding. The same operations in the same order as the C backend's rk4_expmap_step."""
-    q0 = x[:, Q]
-    y = x.copy()
-    y[:, Q] = 0.0                        # the Q slot holds u (3) and a 0
-    c = (T.RK4_C1 * h, T.RK4_C2 * h, T.RK4_C3 * h)
-    ks = []
-    xs = x
-    for s in range(4):
-        if s:
-            ys = y + c[s - 1] * ks[-1]
-            xs = ys.copy()
-            xs[:, Q] = K.quat_exp_step(q0, ys[:, U], 1.0)
-        else:
-            ys = y
-        k = plan.rhs(xs)
-        k[:, U] = K.rkmk_dexpinv(ys[:, U], ys[:, W])
-        k[:, U0] = 0.0
-        ks.append(k)
-    yn = y + (h / T.RK4_B_DEN) * (T.RK4_B0 * ks[0] + T.RK4_B1 * ks[1] + T.RK4_B2 * ks[2] + T.RK4_B3 * ks[3])
-    yn[:, Q] = K.quat_exp_step(q0, yn[:, U], 1.0)
-    return yn
 
 
 def gyro_newton(I, w, tau_b, h, iterations: int = T.GYRO_MAX_ITER):
@@ -526,37 +474,81 @@ def _user_rk(name: str):
     return rk[1]
 
 
+def _rk4_tableau() -> _ExplicitRK:
+    """RK4 as derive/tableaux.py declares it: stage s at x + c_s h k_{s-1} (a subdiagonal A, a_{s,s-1} = RK4_C[s]),
+    weights RK4_B_NUM / RK4_B_DEN."""
+    n = len(T.RK4_C)
+    A = [[T.RK4_C[i] if j == i - 1 else 0.0 for j in range(n)] for i in range(n)]
+    return _ExplicitRK(A, T.RK4_B_NUM, T.RK4_B_DEN)
+
+
+_RK4 = _rk4_tableau()
+_EULER = _ExplicitRK([[0.0]], [1.0])
+
+
+def _rk4_expmap(plan, f, x, h):
+    """rk4_expmap (RKMK4): the RK4 tableau (_RK4) on y = (p, v, u, ω) with the attitude q = q₀ ⊗ exp(u/2), u the
+    body rotation vector since the step's start (u₀ = 0, in q's first three slots, the fourth held at 0). Each
+    stage evaluates the right-hand side at its attitude (quat_exp_step(q₀, u, 1); the first at x itself) and
+    u̇ = rkmk_dexpinv(u, ω); the end attitude is q₀ ⊗ exp(u₁/2), unit to rounding. The same operations in the
+    same order as the C backend's rk4_expmap_step."""
+    q0 = x[:, Q]
+    y0 = x.copy()
+    y0[:, Q] = 0.0
+
+    def f_lie(y):
+        xs = x
+        if y is not y0:
+            xs = y.copy()
+            xs[:, Q] = K.quat_exp_step(q0, y[:, U], 1.0)
+        k = plan.rhs(xs)
+        k[:, U] = K.rkmk_dexpinv(y[:, U], y[:, W])
+        k[:, U0] = 0.0
+        return k
+
+    yn = _RK4.step(f_lie, y0, h)
+    yn[:, Q] = K.quat_exp_step(q0, yn[:, U], 1.0)
+    return yn
+
+
+def _semi_implicit_euler(plan, f, x, h):
+    """Symplectic Euler: v, ω (and the wheel rates) first from k = f(x), then p and q with the new rates."""
+    k = f(x)
+    xn = x.copy()
+    for part in (V, W) + ((OM,) if x.shape[1] > LY.STATE_SIZE else ()):
+        xn[:, part] += h * k[:, part]
+    xn[:, P] = plan.K.translation_drift(x[:, P], xn[:, V], h)
+    xn[:, Q] += h * plan.K.quat_derivative_body(x[:, Q], xn[:, W])
+    return xn
+
+
+def _compose(stages, rotate):
+    return lambda plan, f, x, h: _composition(plan, x, h, stages, rotate)  # noqa: E731
+
+
+# Each built-in integrator's stepper, by family (generated/tableaux.py INTEGRATOR_FAMILY): explicit_rk through the
+# tableau stepper (semi_implicit_euler, partitioned, its own member); the compositions through _composition with
+# their printed stage fractions and rotation; dopri5 (adaptive_rk) is NumpyBackend.advance's _dopri5 loop.
+_STEPPERS = {
+    "euler": lambda plan, f, x, h: _EULER.step(f, x, h),
+    "rk4": lambda plan, f, x, h: _RK4.step(f, x, h),
+    "semi_implicit_euler": _semi_implicit_euler,
+    "rk4_expmap": _rk4_expmap,
+    "implicit_gyro": lambda plan, f, x, h: _implicit_gyro(plan, x, h),
+    "splitting": _compose((1.0,), _splitting_rotation),
+    "splitting4": _compose(T.SPLIT4_GAMMA, _splitting4_rotation),
+    "symtop4": _compose(T.SYMTOP4_GAMMA, _on_momentum(_symtop_rotation)),
+    "symtop_bm6": _compose(T.SYMTOP4_GAMMA, _on_momentum(_symtop_bm6_stage)),
+}
+
+
 def step(plan: _Plan, x: np.ndarray, integrator: str, normalize: bool, dt: float, u=None) -> np.ndarray:
     """One step of every body; returns the new state array. x is (nb, 13), or (nb, 16) = [x, Omega]
     with u the wheeled bodies' applied torques when the plan has joints or wheels."""
     f = (lambda y: plan.rhs(y, u)) if plan.has_models else plan.rhs  # noqa: E731
-    if integrator == "euler":
-        xn = x + dt * f(x)
-    elif integrator == "semi_implicit_euler":
-        k = f(x)
-        xn = x.copy()
-        for part in (V, W) + ((OM,) if x.shape[1] > LY.STATE_SIZE else ()):  # v, omega (and Omega) first
-            xn[:, part] += dt * k[:, part]
-        xn[:, P] = plan.K.translation_drift(x[:, P], xn[:, V], dt)
-        xn[:, Q] += dt * plan.K.quat_derivative_body(x[:, Q], xn[:, W])
-    elif integrator == "splitting":
-        xn = _splitting(plan, x, dt)
-    elif integrator == "implicit_gyro":
-        xn = _implicit_gyro(plan, x, dt)
-    elif integrator == "splitting4":
-        xn = _splitting4(plan, x, dt)
-    elif integrator == "rk4_expmap":
-        xn = _rk4_expmap(plan, x, dt)
-    elif integrator == "symtop4":
-        xn = _symtop4(plan, x, dt)
-    elif integrator == "symtop_bm6":
-        xn = _symtop_bm6(plan, x, dt)
-    elif integrator == "rk4":
-        k1 = f(x)
-        k2 = f(x + (T.RK4_C1 * dt) * k1)
-        k3 = f(x + (T.RK4_C2 * dt) * k2)
-        k4 = f(x + (T.RK4_C3 * dt) * k3)
-        xn = x + (dt / T.RK4_B_DEN) * (T.RK4_B0 * k1 + T.RK4_B1 * k2 + T.RK4_B2 * k3 + T.RK4_B3 * k4)
+    stepper = _STEPPERS.get(integrator)
+    if stepper is not None:
+        xn = stepper(plan, f, x, dt)
     elif (rk := _user_rk(integrator)) is not None:
         xn = rk.step(f, x, dt)
     else:  # validated by Sim; kept for direct callers
