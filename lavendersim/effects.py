@@ -30,6 +30,7 @@ from types import MappingProxyType
 
 import numpy as np
 
+from . import user_sets
 from . import validate as V
 from .generated import effects_meta as _META
 
@@ -211,14 +212,12 @@ class ImmutableEffectError(V.LavenderInputError, AttributeError):
 def _rebuild_effect(class_name: str, name: str, body, values: dict, source: str | None = None):
     """Unpickle an Effect: a declared one by its registered name (validated again). A user effect not registered
     in this process (a worker, a fresh interpreter) is registered first from its set's folder ``source`` (verified
-    against its manifest by extending.load), else found by name in the user directory."""
+    against its manifest by lavendersim.user_sets.open_set), else found by name in the user directory."""
     if name not in EFFECTS:
-        from . import extending   # the user-set loader (lazy: extending registers its effects through this module)
-
         if source is not None and source != "built-in":
-            extending.load(source)
+            register_set(user_sets.open_set(source))
         else:
-            extending.discover(name)
+            _discover(name)
     if name in EFFECTS:
         return EFFECTS[name](body=body, **values)
     raise V.LavenderInputError("effect", f"{name!r} is not a registered effect in this process (load its user set "
@@ -491,6 +490,46 @@ for _entry in _META.EFFECTS:
 del _entry, _cls
 
 
+def register_set(s) -> None:
+    """Register the effects of an opened user set (lavendersim.user_sets.UserSet): each gets a code from
+    USER_CODE_BASE (a set registered again keeps its codes). Every clash is found before anything is registered.
+
+    Parameters
+    ----------
+    s : lavendersim.user_sets.UserSet
+
+    Raises
+    ------
+    lavendersim.validate.LavenderInputError
+        An effect named as a built-in one, or (UserSetError) one another registered set declares.
+    """
+    if all(n in REGISTRY and REGISTRY[n].user_set is s for n in s.effect_names):
+        return
+    for entry in s.meta.EFFECTS:
+        prev = REGISTRY.get(entry["name"])
+        if prev is not None and prev.source == "built-in":
+            raise V.LavenderInputError("user effects", f"{entry['name']!r} in {s.declaration} is the name of a "
+                                       "built-in effect; rename it")
+        if prev is not None and prev.user_set is not None and prev.user_set.directory != s.directory:
+            o = prev.user_set
+            raise user_sets.UserSetError("user set", f"effect {entry['name']!r} is declared by {s.declaration} (set "
+                                         f"{s.directory}) and by {o.declaration} (set {o.directory}, loaded first)",
+                                         "; an effect name belongs to one set: rename it in one of the files")
+    for entry in s.meta.EFFECTS:
+        prev = REGISTRY.get(entry["name"])
+        code = prev.code if prev is not None and prev.user_set is not None else None   # the same set, loaded before
+        if code is None:
+            code = max([c for c in BY_CODE if c >= USER_CODE_BASE], default=USER_CODE_BASE - 1) + 1
+        register(EffectSpec.from_meta(entry, code=code, source=str(s.directory), user_set=s))
+
+
+def _discover(name: str) -> None:
+    """Register the set in the user directory that declares effect `name`, if there is one."""
+    d = user_sets.find(name, "effects")
+    if d is not None:
+        register_set(user_sets.open_set(d))
+
+
 def make(name: str, body: str | None = None, **params) -> Effect:
     """Build an effect by name (a built-in, a loaded user effect, or one found in the user directory —
     see lavendersim.extending); unknown names raise naming the known ones.
@@ -509,9 +548,7 @@ def make(name: str, body: str | None = None, **params) -> Effect:
     Effect
     """
     if isinstance(name, str) and name not in EFFECTS and re.match(r"^[a-z][a-z0-9_]*$", name):
-        from . import extending
-
-        extending.discover(name)
+        _discover(name)
     return EFFECTS[V.choice("effect", name, EFFECTS)](body=body, **params)
 
 
@@ -704,9 +741,9 @@ def load_user(path) -> list[str]:
     -------
     list of str
     """
-    from . import extending
-
-    return extending.load(path).effect_names
+    s = user_sets.open_set(user_sets.directory_of(path))
+    register_set(s)
+    return s.effect_names
 
 
 def _casadi_kernel(spec: EffectSpec):
@@ -778,9 +815,7 @@ def casadi_function(name: str):
 
 def _force_spec(name: str) -> EffectSpec:
     if isinstance(name, str) and name not in REGISTRY:
-        from . import extending
-
-        extending.discover(name)
+        _discover(name)
     if isinstance(name, str) and name in REGISTRY and REGISTRY[name].kind != "force":
         raise V.LavenderInputError("effect", f"{name!r} is a model effect: it has no force or torque expression")
     return REGISTRY[V.choice("effect", name, [n for n, s in REGISTRY.items() if s.kind == "force"])]
@@ -794,9 +829,7 @@ def _force_spec(name: str) -> EffectSpec:
 def _spec_named(name: str) -> EffectSpec:
     """The spec of a registered effect (a user one in the user directory is loaded on first use, as in make)."""
     if isinstance(name, str) and name not in REGISTRY and re.match(r"^[a-z][a-z0-9_]*$", name):
-        from . import extending
-
-        extending.discover(name)
+        _discover(name)
     return REGISTRY[V.choice("effect", name, REGISTRY)]
 
 
