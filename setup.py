@@ -9,6 +9,12 @@ CPython glue (lavendersim/csrc/*.c). The sha256 of the generated C sources (HASH
     LAVENDERSIM_NATIVE=1 pip install -e .    # add -march=native (not portable; see the measurements)
     LAVENDERSIM_SANITIZE=1 pip install --target DIR .  # AddressSanitizer + UBSan build, for testing only
         (-O1 -g; run Python with LD_PRELOAD=$(gcc -print-file-name=libasan.so); .ci/sanitize does it all)
+    LAVENDERSIM_BUILD_CACHE=DIR pip install -e .   # where compiled extensions are cached (default
+        ~/.cache/lavendersim/build, or $XDG_CACHE_HOME/lavendersim/build); LAVENDERSIM_BUILD_CACHE=0: no cache
+
+The build cache: every `pip install -e '.[extra]'` runs this build again. A build whose inputs are the same -
+every C source and header it compiles, the flags and macros, the compiler's `--version`, the Python ABI and
+platform - reuses the extension compiled the first time instead of compiling for minutes again.
 
 A missing or failing C compiler stops the build with an explanation; it is never skipped silently.
 """
@@ -16,7 +22,11 @@ from __future__ import annotations
 
 import hashlib
 import os
+import shutil
+import subprocess
 import sys
+import sysconfig
+import tempfile
 from pathlib import Path
 
 from setuptools import Extension, setup
@@ -52,10 +62,81 @@ class BuildExt(build_ext):
             raise SystemExit(_explain(exc)) from exc
 
     def build_extension(self, ext):
+        target = Path(self.get_ext_fullpath(ext.name))
+        cache = cache_dir()
+        key = cache_key(ext, self.compiler.compiler_so) if cache is not None else None
+        if key is not None and cache_fetch(cache, key, target):
+            print(f"lavendersim._lavender_c: reusing the build cached as {key[:16]} in {cache}", file=sys.stderr)
+            return
         try:
             super().build_extension(ext)
         except Exception as exc:  # noqa: BLE001 - re-raised with context, never swallowed
             raise SystemExit(_explain(exc)) from exc
+        if key is not None:
+            cache_store(cache, key, target)
+
+
+def cache_dir() -> Path | None:
+    """The build cache's folder (LAVENDERSIM_BUILD_CACHE, else $XDG_CACHE_HOME or ~/.cache, /lavendersim/build),
+    or None when LAVENDERSIM_BUILD_CACHE is 0/off/false/no."""
+    env = os.environ.get("LAVENDERSIM_BUILD_CACHE", "").strip()
+    if env.lower() in ("0", "off", "false", "no"):
+        return None
+    if env:
+        return Path(env).expanduser()
+    return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "lavendersim" / "build"
+
+
+def _compiler_identity(compiler_so) -> str:
+    """The compiler command and its `--version` output ('' when it cannot be run: the build then fails anyway)."""
+    cmd = list(compiler_so or [])
+    if not cmd:
+        return ""
+    try:
+        out = subprocess.run([cmd[0], "--version"], capture_output=True, text=True, timeout=60).stdout
+    except (OSError, subprocess.SubprocessError) as exc:
+        out = f"unavailable: {exc}"
+    return " ".join(cmd) + "\n" + out
+
+
+def cache_key(ext, compiler_so) -> str:
+    """sha256 over everything the compiled extension depends on: the contents of its sources and of every header
+    beside them (csrc/, generated/), its flags and macros, the compiler and its version, Python's ABI and platform."""
+    h = hashlib.sha256()
+    files = set(map(Path, ext.sources)) | set(map(Path, ext.depends))
+    for d in ext.include_dirs:
+        files |= set(Path(d).glob("*.h")) | set(Path(d).glob("*.c"))
+    for f in sorted(files, key=str):
+        p = f if f.is_absolute() else HERE / f
+        h.update(f"{f.as_posix()} {hashlib.sha256(p.read_bytes()).hexdigest()}\n".encode())
+    for part in (ext.name, ext.extra_compile_args, ext.extra_link_args, ext.define_macros, ext.include_dirs,
+                 _compiler_identity(compiler_so), sys.version, sysconfig.get_platform(),
+                 sysconfig.get_config_var("EXT_SUFFIX"), sysconfig.get_config_var("CFLAGS")):
+        h.update(repr(part).encode() + b"\n")
+    return h.hexdigest()
+
+
+def cache_fetch(cache: Path, key: str, target: Path) -> bool:
+    """Copy the cached extension `key` to `target`; False when there is none (or it cannot be read)."""
+    src = cache / f"{key}{target.suffix}"
+    if not src.is_file():
+        return False
+    target.parent.mkdir(parents=True, exist_ok=True)
+    shutil.copy2(src, target)
+    return True
+
+
+def cache_store(cache: Path, key: str, target: Path) -> None:
+    """Keep a copy of the freshly built `target` under `key` (written to a temporary name, then renamed, so a
+    concurrent install never reads half a file). A cache that cannot be written is only reported."""
+    try:
+        cache.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=cache, suffix=".part")
+        os.close(fd)
+        shutil.copy2(target, tmp)
+        os.replace(tmp, cache / f"{key}{target.suffix}")
+    except OSError as exc:
+        print(f"lavendersim._lavender_c: not cached ({cache}: {exc})", file=sys.stderr)
 
 
 def _explain(exc: Exception) -> str:
@@ -111,4 +192,5 @@ def extensions() -> list[Extension]:
     )]
 
 
-setup(ext_modules=extensions(), cmdclass={"build_ext": BuildExt})
+if __name__ == "__main__":  # setuptools runs this file as __main__; tests import it to check the cache key
+    setup(ext_modules=extensions(), cmdclass={"build_ext": BuildExt})

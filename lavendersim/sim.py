@@ -215,11 +215,24 @@ def validity_bound(integrator: str) -> tuple[float, float] | None:
     (0.1, 0.0)
     """
     if integrator not in TB.WDT_MAX:
+    tab = backends.tableau_of(integrator)   # a user's explicit tableau: its bound from R(iy) (derive/user.py)
+    if tab is not None:
+        return (tab.wdt_max, 0.0) if tab.wdt_max is not None else None
         return None
     return float(TB.WDT_MAX[integrator]), float(TB.WDT_RATIO_EXPONENT.get(integrator, 0.0))
 
 
 def _rebuild_sim(bodies: list, effects: list, kwargs: dict, state: dict) -> "Sim":
+def _integrator(name) -> str:
+    """A built-in integrator's name, or a user tableau's (registered, or found in the user directory and loaded:
+    lavendersim.extending.tableau); else LavenderInputError naming the known ones."""
+    if isinstance(name, str) and name not in backends.INTEGRATORS:
+        from . import extending
+
+        return extending.tableau(name).name
+    return V.choice("integrator", name, backends.INTEGRATORS)
+
+
     """Unpickle a Sim: build it from its scene and settings, then load its snapshot."""
     scene = Scene()
     for b in bodies:
@@ -410,7 +423,7 @@ class Sim:
         if not isinstance(scene, Scene):
             raise V.LavenderInputError("scene", "must be a lavendersim.Scene", f", got {type(scene).__name__}")
         self.dt = V.dt("dt", dt)   # dt and the other settings are fixed once built (Sim.__setattr__)
-        self.integrator = V.choice("integrator", integrator, backends.INTEGRATORS)
+        self.integrator = _integrator(integrator)
         if not isinstance(normalize, (bool, np.bool_)):
             raise V.LavenderInputError("normalize", "must be True or False", f", got {normalize!r}")
         self.normalize = bool(normalize)
@@ -666,6 +679,7 @@ class Sim:
         models = (None,) * 4 if m is None else (m.rows, m.Omega, m.command, m.applied)
         bound = np.inf if self._bound is None else float(self._bound[0])
         return c_backend._c.Stepper(self._x, self._params, self._effects if self._effects.size else self._effects.reshape(0, 2),
+                or self.integrator not in backends.INTEGRATORS   # a user tableau: through advance (no Stepper code)
                                     c_backend.INTEGRATOR_CODES[self.integrator], 1 if self.normalize else 0, float(self.dt),
                                     int(self._per_step), MAX_STEPS, self._wdt_scale, bound, self._g_fast,
                                     c_backend.user_effect_table(self._effects), *models)
