@@ -1,8 +1,8 @@
 """User declarations: effects and kernels declared in one file outside the package, printed like ours.
 
 A declaration file is plain Python that imports ``lavendersim.derive.effect`` (and, for plain kernels,
-``lavendersim.derive.kernel``) and defines ``EFFECTS`` (a list of ``effect(...)``) and/or ``KERNELS``
-(a list of ``Kernel(...)``). Its set name is the file's stem. :func:`render_user` prints, with the
+``lavendersim.derive.kernel``) and defines ``EFFECTS`` (a list of ``effect(...)``), ``KERNELS``
+(a list of ``Kernel(...)``) and/or ``TABLEAUX`` (a list of :func:`tableau`, explicit Runge–Kutta methods). Its set name is the file's stem. :func:`render_user` prints, with the
 same printers as the built-ins: kernels.h / kernels.c (one shared library: kernels ``lvu_<set>_*``,
 effects ``lvu_effect_<name>``), kernels_numpy.py (kernels and the effects' NumPy dispatch),
 kernels_casadi.py, effects_meta.py (the metadata lavendersim.effects reads) and EQUATIONS.md.
@@ -20,8 +20,12 @@ import importlib.util
 import re
 import sys
 import traceback
+from dataclasses import dataclass
+from fractions import Fraction
+from functools import lru_cache
 from pathlib import Path
 
+import numpy as np
 import sympy as sp
 
 from .effect import EffectDecl
@@ -73,8 +77,8 @@ def _line_in(path: Path, exc: BaseException) -> str:
     return line
 
 
-def load_declarations(path) -> tuple[list[EffectDecl], list[Kernel]]:
-    """Run a declaration file and return its EFFECTS and KERNELS (each optional, not both empty).
+def load_declarations(path) -> tuple[list[EffectDecl], list[Kernel], list["TableauDecl"]]:
+    """Run a declaration file and return its EFFECTS, KERNELS and TABLEAUX (each optional, not all empty).
 
     Raises
     ------
@@ -100,18 +104,20 @@ def load_declarations(path) -> tuple[list[EffectDecl], list[Kernel]]:
         sys.modules.pop(name, None)
     effects = _listed(path, module, "EFFECTS", EffectDecl, "an effect(...) of lavendersim.derive.effect")
     kernels = _listed(path, module, "KERNELS", Kernel, "a Kernel(...) of lavendersim.derive.kernel")
-    if not effects and not kernels:
-        raise DeclarationError(f"{path}: declares nothing; define EFFECTS = [effect(...), ...] and/or "
-                               "KERNELS = [Kernel(...), ...]")
+    tableaux = _listed(path, module, "TABLEAUX", TableauDecl, "a tableau(...) of lavendersim.derive.user")
+    if not effects and not kernels and not tableaux:
+        raise DeclarationError(f"{path}: declares nothing; define EFFECTS = [effect(...), ...], "
+                               "KERNELS = [Kernel(...), ...] and/or TABLEAUX = [tableau(...), ...]")
     for e in effects:
         if e.kind != "force":
             raise DeclarationError(f"{path}: EFFECTS[{effects.index(e)}] ({e.name!r}) is a model effect; a user set "
                                    "declares force effects made with effect()")
     names = [e.kernel_name for e in effects] + [k.name for k in kernels]
     dup = sorted({n for n in names if names.count(n) > 1})
+    dup = dup or sorted({t.name for t in tableaux if [u.name for u in tableaux].count(t.name) > 1})
     if dup:
         raise DeclarationError(f"{path}: duplicate names {dup}")
-    return effects, kernels
+    return effects, kernels, tableaux
 
 
 def _listed(path: Path, module, attr: str, cls, what: str) -> list:
@@ -178,18 +184,23 @@ def _printed(path: Path, k: Kernel, printers: dict):
         raise DeclarationError(f"{path}: {_label(k)}: {_explain(exc)}") from exc
 
 
-def _print_files(printed: list, effects: list, set_name: str, extra: dict) -> dict[str, str]:
+def _print_files(printed: list, effects: list, set_name: str, extra: dict, tableaux: tuple = ()) -> dict[str, str]:
     from . import codegen
     from .effect_print import meta_module
 
     header = codegen.USER_HEADER
     coded = [(None, e) for e in effects]
     h, c = codegen.print_c_user(printed, effects, set_name)
+    md = codegen.print_markdown(printed, coded, title=f"User equations: {set_name}", header=header)
+    if tableaux:   # the same doubles for C (exported arrays) and Python (effects_meta.TABLEAUX)
+        th, tc = _c_tableaux(tableaux)
+        h = h[:h.rindex("#endif")] + "\n".join(th) + "\n\n#endif\n"
+        c, md = c + "\n".join(tc) + "\n", md + _md_tableaux(tableaux)
+        extra = {**extra, "tableaux": tuple(t.meta() for t in tableaux)}
     return {"kernels.h": h, "kernels.c": c,
             "kernels_numpy.py": codegen.print_numpy(printed, coded, header=header),
             "kernels_casadi.py": codegen.print_casadi(printed, header=header),
-            "effects_meta.py": meta_module(coded, header, extra),
-            "EQUATIONS.md": codegen.print_markdown(printed, coded, title=f"User equations: {set_name}", header=header)}
+            "effects_meta.py": meta_module(coded, header, extra), "EQUATIONS.md": md}
 
 
 def _culprit(printed: list, decls: list, set_name: str, extra: dict) -> str:
@@ -219,7 +230,7 @@ def render_user(path) -> tuple[str, dict[str, str]]:
     """
     path = Path(path).resolve()
     set_name = set_name_of(path)
-    effects, kernels = load_declarations(path)
+    effects, kernels, tableaux = load_declarations(path)
     printers = _printers()
     user_kernels = [(k, k) for k in kernels] + [(_effect_kernel(path, e), e) for e in effects]
     printed = [_printed(path, k, printers) for k, _ in user_kernels]
@@ -227,7 +238,7 @@ def render_user(path) -> tuple[str, dict[str, str]]:
              "declaration_sha256": hashlib.sha256(path.read_bytes()).hexdigest(),
              "kernels": tuple(k.name for k in kernels)}
     try:
-        files = _print_files(printed, effects, set_name, extra)
+        files = _print_files(printed, effects, set_name, extra, tuple(tableaux))
     except RecursionError:
         raise DeclarationError(f"{path}: {_culprit(printed, [d for _, d in user_kernels], set_name, extra)}an "
                                "expression is nested too deeply to print (RecursionError); build a long sum or "
@@ -243,3 +254,284 @@ def render_user(path) -> tuple[str, dict[str, str]]:
                 raise DeclarationError(f"{path}: the printed {name} is not valid Python (line {exc.lineno}: "
                                        f"{exc.msg}); this is a printer bug, please report it") from None
     return set_name, files
+
+
+# ---------------------------------------------------------------------------------------------
+# Explicit Runge–Kutta tableaux declared by users (TABLEAUX = [tableau(...)])
+# ---------------------------------------------------------------------------------------------
+
+MAX_ORDER = 8        # order conditions are checked up to here (115 trees of order 8)
+MAX_STAGES = 16
+GROWTH_PER_STEP = sp.Rational(101, 100)   # |R(iy)|^2 allowed when R is not stable on the imaginary axis (euler's 0.1)
+
+
+@dataclass(frozen=True)
+class TableauDecl:
+    """An explicit Runge–Kutta method declared by its Butcher tableau, validated (see :func:`tableau`).
+
+    c, A (s×s, strictly lower), b: SymPy numbers (exact: Rational or exact irrational) or floats (then
+    ``exact`` is False); real_axis and wdt_max: its validity bounds (floats)."""
+
+    name: str
+    summary: str
+    c: tuple
+    A: tuple
+    b: tuple
+    order: int
+    exact: bool
+    real_axis: float
+    wdt_max: float
+
+    @property
+    def stages(self) -> int:
+        return len(self.b)
+
+    def doubles(self) -> dict:
+        """c, A (rows), b as the correctly rounded doubles both backends use."""
+        return {"c": tuple(map(_double, self.c)), "A": tuple(tuple(map(_double, r)) for r in self.A),
+                "b": tuple(map(_double, self.b))}
+
+    def meta(self) -> dict:
+        """The entry printed into effects_meta.py's TABLEAUX (lavendersim.extending registers it)."""
+        out = {"name": self.name, "summary": self.summary, "order": self.order, "stages": self.stages}
+        out.update(self.doubles())
+        if self.exact:
+            out["exact"] = {"c": tuple(map(str, self.c)), "A": tuple(tuple(map(str, r)) for r in self.A),
+                            "b": tuple(map(str, self.b))}
+        out.update(real_axis=self.real_axis, wdt_max=self.wdt_max)
+        return out
+
+
+def _double(x) -> float:
+    """The correctly rounded double of an exact number (a Rational by integer division), or the float."""
+    if isinstance(x, float):
+        return x
+    if isinstance(x, sp.Rational):
+        return int(x.p) / int(x.q)
+    return float(sp.N(x, 40))
+
+
+def _number(where: str, x):
+    """One tableau entry as a SymPy exact number or a finite float; ValueError naming `where` otherwise."""
+    if isinstance(x, bool):
+        raise ValueError(f"{where} must be a number, got {x!r}")
+    if isinstance(x, (float, np.floating)):
+        if not np.isfinite(x):
+            raise ValueError(f"{where} must be finite, got {x!r}")
+        return float(x)
+    if isinstance(x, (int, np.integer, Fraction)):
+        return sp.Rational(Fraction(x).numerator, Fraction(x).denominator)
+    if isinstance(x, str):
+        try:
+            return sp.Rational(x.strip())
+        except (TypeError, ValueError):
+            raise ValueError(f"{where} = {x!r} is not a rational like '1/6' or '0.25'") from None
+    if isinstance(x, sp.Basic) and x.is_number:
+        if x.has(sp.Float):
+            return _number(where, float(x))
+        if x.is_real and x.is_finite:
+            return sp.nsimplify(x) if x.is_Rational else x
+        raise ValueError(f"{where} = {x} is not a finite real number")
+    raise ValueError(f"{where} must be a number (int, Fraction, 'p/q', float or an exact SymPy number), got "
+                     f"{type(x).__name__} {_one_line(repr(x))[:40]}")
+
+
+def _rows(name: str, A, s: int) -> tuple:
+    """A as s full rows of s numbers: row i given as its i strictly lower entries or as all s (zeros from i on)."""
+    if not isinstance(A, (list, tuple)) or len(A) != s:
+        raise ValueError(f"tableau {name!r}: A must be a list of {s} rows (one per stage, as b has {s} weights), got "
+                         f"{len(A) if isinstance(A, (list, tuple)) else type(A).__name__}")
+    out = []
+    for i, row in enumerate(A):
+        if not isinstance(row, (list, tuple)) or len(row) not in (i, s):
+            raise ValueError(f"tableau {name!r}: A[{i}] must list its {i} entries left of the diagonal (or all {s}), "
+                             f"got {len(row) if isinstance(row, (list, tuple)) else type(row).__name__}")
+        vals = [_number(f"tableau {name!r}: A[{i}][{j}]", v) for j, v in enumerate(row)]
+        for j in range(i, len(vals)):
+            if vals[j] != 0:
+                raise ValueError(f"tableau {name!r}: A must be strictly lower triangular (an explicit method), but "
+                                 f"A[{i}][{j}] = {vals[j]} (j >= i)")
+        out.append(tuple(vals[:i]) + (sp.Integer(0),) * (s - i))
+    return tuple(out)
+
+
+def _same(x, y) -> bool:
+    if isinstance(x, float) or isinstance(y, float):
+        return abs(float(x) - float(y)) <= 1e-14 * max(1.0, abs(float(x)), abs(float(y)))
+    return sp.simplify(x - y) == 0
+
+
+@lru_cache(maxsize=None)
+def _trees(n: int) -> tuple:
+    """The rooted trees with n vertices, each a sorted tuple of its root's subtrees (() is the single vertex)."""
+    if n == 1:
+        return ((),)
+    out = set()
+
+    def grow(left: int, kids: tuple) -> None:
+        if left == 0:
+            out.add(tuple(sorted(kids)))
+            return
+        for size in range(1, left + 1):
+            for t in _trees(size):
+                if not kids or t >= kids[-1]:
+                    grow(left - size, kids + (t,))
+    grow(n - 1, ())
+    return tuple(sorted(out))
+
+
+def _gamma(t: tuple) -> int:
+    size = 1 + sum(_size(u) for u in t)
+    return size * int(np.prod([_gamma(u) for u in t], dtype=object)) if t else 1
+
+
+def _size(t: tuple) -> int:
+    return 1 + sum(_size(u) for u in t)
+
+
+def _weights(t: tuple, A: tuple, s: int) -> list:
+    """Φ(t): the stage vector of the elementary weight (ones for the single vertex, Π_children A Φ(child))."""
+    out = [sp.Integer(1)] * s
+    for u in t:
+        g = _weights(u, A, s)
+        Ag = [sum((A[i][j] * g[j] for j in range(i)), sp.Integer(0)) for i in range(s)]
+        out = [o * a for o, a in zip(out, Ag)]
+    return out
+
+
+def _tree_text(t: tuple) -> str:
+    """The condition's vector in words: c for A·1, products as powers (Σ b_i (that)_i = 1/γ)."""
+    if not t:
+        return "1"
+    parts = ["c" if not u else f"A({_tree_text(u)})" for u in t]
+    return "·".join(f"{p}^{parts.count(p)}" if parts.count(p) > 1 else p for p in dict.fromkeys(parts))
+
+
+def _check_order(name: str, A: tuple, b: tuple, order: int, exact: bool) -> None:
+    """Every order condition Σ b_i Φ_i(t) = 1/γ(t), |t| <= order (Butcher); ValueError naming the first that fails."""
+    s = len(b)
+    for n in range(1, order + 1):
+        for t in _trees(n):
+            lhs = sum((bi * g for bi, g in zip(b, _weights(t, A, s))), sp.Integer(0))
+            want = sp.Rational(1, _gamma(t))
+            ok = sp.simplify(lhs - want) == 0 if exact else abs(float(lhs) - float(want)) <= 1e-12 * max(1.0, sum(
+                abs(float(bi * g)) for bi, g in zip(b, _weights(t, A, s))))
+            if not ok:
+                got = sp.nsimplify(lhs) if exact else float(lhs)
+                raise ValueError(f"tableau {name!r} declares order {order}, but an order-{n} condition fails: "
+                                 f"Σ b_i ({_tree_text(t)})_i = {got}, must be {want} (it has order {n - 1})")
+
+
+def _first_root(poly: sp.Expr, y: sp.Symbol) -> float | None:
+    """The smallest positive real root of a polynomial in y (its root at 0, of any multiplicity, set aside)."""
+    p = sp.Poly(poly, y)
+    k = min(m for (m,), _ in p.terms())
+    p = sp.Poly(sp.expand(sp.cancel(p.as_expr() / y**k)), y)
+    roots = [float(sp.re(r)) for r in p.nroots(n=30, maxsteps=500) if abs(sp.im(r)) < 1e-20 and sp.re(r) > 1e-12]
+    return min(roots) if roots else None
+
+
+def imaginary_axis_bound(R_z: sp.Expr) -> float:
+    """The validity bound |ω| dt of an explicit tableau, as derive/tableaux.py's WDT_MAX states it for rk4 and euler:
+    the y where |R(iy)| first exceeds 1 (rk4: 2√2) when R is stable on the imaginary axis near 0, else where
+    |R(iy)|² reaches GROWTH_PER_STEP = 1.01, a mode growing 0.5 % per step (euler: 0.1)."""
+    z, y = sp.Symbol("z"), sp.Symbol("y", real=True)
+    a = sp.Poly(R_z, z).all_coeffs()[::-1]        # R(z) = Σ a_k z^k; |R(iy)|² = (Σ_even ...)² + (Σ_odd ...)²
+    re = sum((a[k] * (-1) ** (k // 2) * y**k for k in range(0, len(a), 2)), sp.Integer(0))
+    im = sum((a[k] * (-1) ** (k // 2) * y**k for k in range(1, len(a), 2)), sp.Integer(0))
+    mod2 = sp.expand(re**2 + im**2)
+    p = sp.Poly(sp.expand(mod2 - 1), y)
+    low = [c for (k,), c in sorted(p.terms()) if abs(float(c)) > 1e-14]
+    if low and float(low[0]) < 0:
+        return _first_root(p.as_expr(), y)
+    return _first_root(sp.expand(mod2 - GROWTH_PER_STEP), y)
+
+
+def tableau(name: str, A, b, order: int, c=None, summary: str = "") -> TableauDecl:
+    """An explicit Runge–Kutta method for ``Sim(..., integrator=name)``, declared in a user's file
+    (``TABLEAUX = [tableau(...)]``, docs/extending.md).
+
+    Parameters
+    ----------
+    name : str
+        Lowercase letters, digits, _; not a built-in integrator's name.
+    A : list of s rows
+        Row i lists its i entries left of the diagonal (``[[], [1/2], [-1, 2]]``), or all s entries with zeros
+        from the diagonal on. Entries: int, fractions.Fraction, a string ``"p/q"``, an exact SymPy number
+        (checked exactly) or a float (checked to 1e-12).
+    b : list of s numbers
+        The weights.
+    order : int
+        Its order, 1 … MAX_ORDER: every Butcher order condition up to it must hold.
+    c : list of s numbers, optional
+        The nodes; derived as the row sums of A when omitted, and must equal them when given.
+    summary : str, optional
+        One line, shown in EQUATIONS.md.
+
+    Returns
+    -------
+    TableauDecl
+
+    Raises
+    ------
+    ValueError
+        Naming the tableau, the field and the rule broken.
+    """
+    from .tableaux import _real_axis_limit, _stability_polynomial, integrator_names
+
+    if not isinstance(name, str) or not _SET_NAME.match(name):
+        raise ValueError(f"tableau name must be lowercase letters, digits and _, starting with a letter, got {name!r}")
+    if name in integrator_names():
+        raise ValueError(f"tableau {name!r} is the name of a built-in integrator; rename it")
+    if isinstance(order, bool) or not isinstance(order, (int, np.integer)) or not 1 <= order <= MAX_ORDER:
+        raise ValueError(f"tableau {name!r}: order must be an integer 1 … {MAX_ORDER}, got {order!r}")
+    if not isinstance(b, (list, tuple)) or not 1 <= len(b) <= MAX_STAGES:
+        raise ValueError(f"tableau {name!r}: b must be a list of 1 … {MAX_STAGES} weights, got "
+                         f"{len(b) if isinstance(b, (list, tuple)) else type(b).__name__}")
+    s = len(b)
+    bv = tuple(_number(f"tableau {name!r}: b[{i}]", v) for i, v in enumerate(b))
+    Av = _rows(name, A, s)
+    sums = tuple(sum(Av[i][:i], sp.Integer(0)) for i in range(s))
+    if c is None:
+        cv = sums
+    else:
+        if not isinstance(c, (list, tuple)) or len(c) != s:
+            raise ValueError(f"tableau {name!r}: c must be a list of {s} nodes (as b), got "
+                             f"{len(c) if isinstance(c, (list, tuple)) else type(c).__name__}")
+        cv = tuple(_number(f"tableau {name!r}: c[{i}]", v) for i, v in enumerate(c))
+        for i in range(s):
+            if not _same(cv[i], sums[i]):
+                raise ValueError(f"tableau {name!r}: c[{i}] = {cv[i]}, but the sum of A[{i}] is {sums[i]} "
+                                 "(c_i = Σ_j A_ij)")
+    exact = not any(isinstance(v, float) for v in bv + cv + sum(Av, ()))
+    _check_order(name, Av, bv, int(order), exact)
+    R_z = _stability_polynomial([r[:i] for i, r in enumerate(Av)], list(bv))
+    return TableauDecl(name, " ".join(str(summary).split()), cv, Av, bv, int(order), exact,
+                       _real_axis_limit(R_z), imaginary_axis_bound(R_z))
+
+
+def _c_tableaux(tableaux: list[TableauDecl]) -> tuple[list[str], list[str]]:
+    """kernels.h declarations and kernels.c definitions of the tableaux: lvu_tableau_<name> = c, A row-major, b
+    (the doubles effects_meta.py holds, printed with repr: C parses the same double)."""
+    h, c = [], ["/* ---- User tableaux: c (s), A (s x s, row-major), b (s) ---- */"]
+    for t in tableaux:
+        d = t.doubles()
+        vals = list(d["c"]) + [v for r in d["A"] for v in r] + list(d["b"])
+        n = len(vals)
+        h.append(f"/* {t.name}: explicit Runge-Kutta, {t.stages} stages, order {t.order}. {t.summary} */")
+        h.append(f"extern const double lvu_tableau_{t.name}[{n}];")
+        c.append(f"LV_EXPORT const double lvu_tableau_{t.name}[{n}] = {{{', '.join(map(repr, vals))}}};")
+    return h, c
+
+
+def _md_tableaux(tableaux: list[TableauDecl]) -> str:
+    out = ["", "## Tableaux (explicit Runge–Kutta)", ""]
+    for t in tableaux:
+        show = (lambda v: sp.latex(v)) if t.exact else repr
+        rows = [f"{show(t.c[i])} & " + " & ".join(show(v) for v in t.A[i]) for i in range(t.stages)]
+        out += [f"### {t.name}", "", t.summary, "",
+                f"Order {t.order} (every order condition up to it checked), {t.stages} stages; stable on the negative "
+                f"real axis for |λ|h < {t.real_axis:.6g}; validity bound |ω|·dt ≤ {t.wdt_max:.6g}.", "",
+                "$$\\begin{array}{c|" + "c" * t.stages + "}" + " \\\\ ".join(rows) + " \\\\ \\hline & "
+                + " & ".join(show(v) for v in t.b) + "\\end{array}$$", ""]
+    return "\n".join(out)

@@ -62,7 +62,8 @@ def decay_limit(integrator: str) -> float | None:
     """The integrator's stability limit for a decay (|lambda| dt), or None (adaptive: it has none)."""
     if integrator in backends.ADAPTIVE:
         return None
-    return TABLEAUX.REAL_AXIS_STABILITY[integrator]
+    tab = backends.tableau_of(integrator)   # a user's explicit tableau: its limit from R(z) (derive/user.py)
+    return tab.real_axis if tab is not None else TABLEAUX.REAL_AXIS_STABILITY[integrator]
 
 
 def decay_excess(effects: np.ndarray, params: np.ndarray, dt: float, integrator: str) -> tuple[int, float, float] | None:

@@ -233,6 +233,7 @@ def _integrator(name) -> str:
     return V.choice("integrator", name, backends.INTEGRATORS)
 
 
+def _rebuild_sim(bodies: list, effects: list, kwargs: dict, state: dict) -> "Sim":
     """Unpickle a Sim: build it from its scene and settings, then load its snapshot."""
     scene = Scene()
     for b in bodies:
@@ -240,8 +241,8 @@ def _integrator(name) -> str:
     for e in effects:
         scene.add_effect(e)
     sim = Sim(scene, **kwargs)
-    if state.get("fast_chunks"):     # run(n)'s C fast path for any n, as the original had (Sim._fast_chunks)
-        sim._fast_chunks()
+    if state.get("fast_chunks"):     # run(n)'s C fast path for any n, as the original had (Sim.fast_chunks)
+        sim.fast_chunks()
     sim._load_snapshot(state)
     return sim
 
@@ -678,8 +679,8 @@ class Sim:
         m = self._models if self._has_models else None
         models = (None,) * 4 if m is None else (m.rows, m.Omega, m.command, m.applied)
         bound = np.inf if self._bound is None else float(self._bound[0])
-        return c_backend._c.Stepper(self._x, self._params, self._effects if self._effects.size else self._effects.reshape(0, 2),
                 or self.integrator not in backends.INTEGRATORS   # a user tableau: through advance (no Stepper code)
+        return c_backend._c.Stepper(self._x, self._params, self._effects if self._effects.size else self._effects.reshape(0, 2),
                                     c_backend.INTEGRATOR_CODES[self.integrator], 1 if self.normalize else 0, float(self.dt),
                                     int(self._per_step), MAX_STEPS, self._wdt_scale, bound, self._g_fast,
                                     c_backend.user_effect_table(self._effects), *models)

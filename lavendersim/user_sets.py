@@ -279,6 +279,7 @@ class UserSet:
                 ident = _file_id(os.fstat(fd))
                 same = _file_id(os.stat(path)) == ident
                 lib = _open_library(path, self.effect_names, self.name, self.kernel_names, str(self.declaration))
+                self._check_tableaux(lib, path)
                 if not (same and _file_id(os.stat(path)) == ident):
                     raise _set_error(f"{path} was replaced while it was being checked and loaded",
                                      "; load the set again")
@@ -286,6 +287,19 @@ class UserSet:
             finally:
                 os.close(fd)
         return self._lib
+
+    def _check_tableaux(self, lib: ctypes.CDLL, path: Path) -> None:
+        """The library's lvu_tableau_<name> arrays hold the very doubles of effects_meta.TABLEAUX (c, A, b)."""
+        for t in self.tableaux:
+            want = list(t["c"]) + [v for row in t["A"] for v in row] + list(t["b"])
+            try:
+                got = list((ctypes.c_double * len(want)).in_dll(lib, f"lvu_tableau_{t['name']}"))
+            except ValueError:
+                got = None
+            if got != want:
+                raise _set_error(f"{path}: tableau {t['name']!r} is {'missing' if got is None else 'not the same doubles'}"
+                                 " in the library and in effects_meta.py", f"; run `lavendersim derive --user "
+                                 f"{self.declaration}` again")
 
     def c_function(self, effect: str) -> int:
         """Address of the compiled accumulating function of one of the set's effects.
