@@ -214,15 +214,14 @@ def validity_bound(integrator: str) -> tuple[float, float] | None:
     >>> validity_bound("euler")
     (0.1, 0.0)
     """
-    if integrator not in TB.WDT_MAX:
     tab = backends.tableau_of(integrator)   # a user's explicit tableau: its bound from R(iy) (derive/user.py)
     if tab is not None:
         return (tab.wdt_max, 0.0) if tab.wdt_max is not None else None
+    if integrator not in TB.WDT_MAX:
         return None
     return float(TB.WDT_MAX[integrator]), float(TB.WDT_RATIO_EXPONENT.get(integrator, 0.0))
 
 
-def _rebuild_sim(bodies: list, effects: list, kwargs: dict, state: dict) -> "Sim":
 def _integrator(name) -> str:
     """A built-in integrator's name, or a user tableau's (registered, or found in the user directory and loaded:
     lavendersim.extending.tableau); else LavenderInputError naming the known ones."""
@@ -241,8 +240,8 @@ def _rebuild_sim(bodies: list, effects: list, kwargs: dict, state: dict) -> "Sim
     for e in effects:
         scene.add_effect(e)
     sim = Sim(scene, **kwargs)
-    if state.get("fast_chunks"):     # run(n)'s C fast path for any n, as the original had (Sim.fast_chunks)
-        sim.fast_chunks()
+    if state.get("fast_chunks"):     # run(n)'s C fast path for any n, as the original had (Sim._fast_chunks)
+        sim._fast_chunks()
     sim._load_snapshot(state)
     return sim
 
@@ -671,6 +670,7 @@ class Sim:
         fast path holds the GIL; cap=False: built whatever the size, see _fast_chunks), or a Python without the GIL."""
         gil = getattr(sys, "_is_gil_enabled", lambda: True)()
         if (self.backend.name != "c" or self._per_step is None or not gil or self.dtype != "float64"
+                or self.integrator not in backends.INTEGRATORS   # a user tableau: through advance (no Stepper code)
                 or (self._py_growth and self.max_growth is not None)
                 or (cap and len(self.names) * self._per_step > FAST_STEP_WORK)):
             return None
@@ -679,7 +679,6 @@ class Sim:
         m = self._models if self._has_models else None
         models = (None,) * 4 if m is None else (m.rows, m.Omega, m.command, m.applied)
         bound = np.inf if self._bound is None else float(self._bound[0])
-                or self.integrator not in backends.INTEGRATORS   # a user tableau: through advance (no Stepper code)
         return c_backend._c.Stepper(self._x, self._params, self._effects if self._effects.size else self._effects.reshape(0, 2),
                                     c_backend.INTEGRATOR_CODES[self.integrator], 1 if self.normalize else 0, float(self.dt),
                                     int(self._per_step), MAX_STEPS, self._wdt_scale, bound, self._g_fast,
