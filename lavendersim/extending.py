@@ -285,7 +285,8 @@ def tableau(name: str) -> backends.Tableau:
         Two sets declare it, or its set's files do not match its manifest.
     """
     if isinstance(name, str) and name not in backends.USER_TABLEAUX and name not in backends.INTEGRATORS:
-        d = U.find(name, "tableaux")
+        opened = [o.directory for o in U.opened() if name in o.tableau_names]   # e.g. by effects.load_user(DIR)
+        d = opened[0] if opened else U.find(name, "tableaux")
         if d is not None:
             load(d)
     tab = backends.USER_TABLEAUX.get(name) if isinstance(name, str) else None
