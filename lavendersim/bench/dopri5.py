@@ -1,0 +1,111 @@
+"""The dopri5 section of `lavendersim bench`: LavenderSim's adaptive Dormand–Prince 5(4) against a hand C DOPRI5.
+
+One torque-free body (the bench's box), rtol = 1e-6, atol = 1e-9, output interval DT_OUT, stepped by
+``Sim.run(n)`` on the C backend and by the hand-written peer (handwritten_dopri5.c: the same algorithm and
+controller, only q and omega_b through the stages, compiled now with the extension's flags, called through
+ctypes), interleaved (CPU time, min over rounds). The figure is the cost per right-hand-side evaluation:
+time / ``sim.rhs_evals`` against time / the peer's count (target: LavenderSim <= 1.2x the peer). Before
+timing, both advance the same state by AGREE_STEPS output steps: their states and evaluation counts are
+recorded (the peer is right when they agree to ~1e-12 with equal counts).
+"""
+from __future__ import annotations
+
+import ctypes
+from pathlib import Path
+
+import numpy as np
+
+SOURCE = Path(__file__).resolve().parent / "handwritten_dopri5.c"
+DT_OUT = 0.1
+RTOL, ATOL = 1e-6, 1e-9
+AGREE_STEPS = 200
+_dp = ctypes.POINTER(ctypes.c_double)
+
+
+class HandDopri5:
+    """handwritten_dopri5.c compiled by ``compile_c`` (lavendersim.bench), one body per call."""
+
+    def __init__(self, compile_c):
+        lib, self.command = compile_c(SOURCE, [])
+        f = lib.lv_ref_dopri5_free
+        f.argtypes = [_dp, _dp, ctypes.c_double, ctypes.c_long, ctypes.c_double, ctypes.c_double, _dp, _dp]
+        f.restype = ctypes.c_long
+        self._f = f
+        self.h = np.zeros(1)      # the step proposal, kept between calls (<= 0: Hairer's starting step)
+        self.nfev = np.zeros(1)   # right-hand-side evaluations, cumulative
+
+    def advance(self, x: np.ndarray, I_b: np.ndarray, dt: float, n_steps: int) -> int:
+        """Advance x (13,) float64 in place by n_steps output steps of dt; -1, or the step that failed."""
+        if x.dtype != np.float64 or x.shape != (13,) or not x.flags.c_contiguous:
+            raise TypeError("x must be a C-contiguous float64 array of shape (13,)")
+        I_b = np.ascontiguousarray(I_b, dtype=np.float64)
+        return int(self._f(x.ctypes.data_as(_dp), I_b.ctypes.data_as(_dp), float(dt), int(n_steps), RTOL, ATOL,
+                           self.h.ctypes.data_as(_dp), self.nfev.ctypes.data_as(_dp)))
+
+
+def agreement(peer: HandDopri5, single_sim, x0: np.ndarray, I_b: np.ndarray, n_steps: int = AGREE_STEPS) -> dict:
+    """The peer and ``Sim(dopri5)`` from x0 over n_steps output steps: largest state difference, both counts."""
+    sim = single_sim("c", "dopri5", dt=DT_OUT)
+    sim.run(n_steps)
+    x = x0.copy()
+    peer.h[0], peer.nfev[0] = 0.0, 0.0
+    status = peer.advance(x, I_b, DT_OUT, n_steps)
+    return {"steps": n_steps, "status": status, "max_abs_diff": float(np.max(np.abs(np.asarray(sim.x)[0] - x))),
+            "rhs_evals_lavendersim": int(sim.rhs_evals), "rhs_evals_hand": int(peer.nfev[0])}
+
+
+def dopri5_section(quick: bool, rounds: int, interleaved, compile_c, single_sim, x0, I_b) -> dict:
+    """Time Sim(dopri5).run against the peer; ns per output step and per right-hand-side evaluation."""
+    n = 200 if quick else 10_000
+    peer = HandDopri5(compile_c)
+    out = {"dt": DT_OUT, "rtol": RTOL, "atol": ATOL, "steps": n, "compile_command": peer.command,
+           "agreement": agreement(peer, single_sim, x0, I_b)}
+    sim = single_sim("c", "dopri5", dt=DT_OUT)
+    x = x0.copy()
+    sim.run(1)
+    peer.h[0] = 0.0
+    peer.advance(x, I_b, DT_OUT, 1)
+    evals = {"lavendersim": [], "hand": []}
+
+    def ours():
+        e0 = sim.rhs_evals
+        sim.run(n)
+        evals["lavendersim"].append(sim.rhs_evals - e0)
+
+    def hand():
+        e0 = float(peer.nfev[0])
+        peer.advance(x, I_b, DT_OUT, n)
+        evals["hand"].append(float(peer.nfev[0]) - e0)
+
+    t = interleaved({"lavendersim": (ours, n), "hand": (hand, n)}, rounds, "dopri5")
+    for k in t:   # every round takes the same steps; the per-evaluation figure uses the timed calls' count
+        per = max(evals[k][-1], 1) / n
+        t[k]["rhs_per_step"] = per
+        t[k]["ns_per_rhs"] = t[k]["ns_min"] / per
+    out.update(t)
+    out["ratio_per_rhs"] = t["lavendersim"]["ns_per_rhs"] / t["hand"]["ns_per_rhs"]
+    return out
+
+
+def standing_lines(res: dict, line, targets: dict) -> list[dict]:
+    d = res.get("dopri5") or {}
+    v = d.get("ratio_per_rhs")
+    basis = ("not measured (section failed or no compiler)" if v is None else
+             f"ns per right-hand-side evaluation, one body, dt = {d['dt']} s, rtol {d['rtol']:g}: "
+             f"{d['lavendersim']['ns_per_rhs']:.1f} against {d['hand']['ns_per_rhs']:.1f} "
+             f"(handwritten_dopri5.c); states agree to {d['agreement']['max_abs_diff']:.1e}")
+    return [line("dopri5 per RHS evaluation / hand C DOPRI5", v, targets["dopri5_per_rhs_vs_hand"], "max", "x", basis)]
+
+
+def report_lines(res: dict, fmt) -> list[str]:
+    d = res.get("dopri5")
+    if not d:
+        return []
+    a = d["agreement"]
+    L = ["", f"dopri5, one body, C (dt = {d['dt']} s, rtol {d['rtol']:g}, atol {d['atol']:g})   per output step  "
+             "RHS/step  ns per RHS"]
+    for k, label in (("lavendersim", "LavenderSim Sim.run"), ("hand", "hand C DOPRI5 (handwritten_dopri5.c)")):
+        L.append(f"  {label:<40}{fmt(d[k]['ns_min'])}  {d[k]['rhs_per_step']:8.2f}  {d[k]['ns_per_rhs']:9.1f}")
+    L.append(f"  agreement over {a['steps']} steps: max |Δx| = {a['max_abs_diff']:.2e}; RHS evaluations "
+             f"{a['rhs_evals_lavendersim']} (ours) vs {a['rhs_evals_hand']} (hand)")
+    return L

@@ -1,0 +1,187 @@
+/* The hand-written DOPRI5 peer of `lavendersim bench`: one torque-free rigid body stepped with
+   Dormand-Prince 5(4), written directly in C99 (not part of the extension; the bench compiles it at run
+   time with the extension's flags and calls it through ctypes). The bench divides its time by its
+   right-hand-side evaluations and compares that with LavenderSim's dopri5 (time / sim.rhs_evals).
+
+   Same algorithm as LavenderSim's dopri5 (lavendersim/sim.py docstring): dt is the output interval,
+   each output step is covered by accepted substeps, the last one clipped to land on it; FSAL within a
+   call (each call starts with one fresh evaluation); Hairer's RMS error norm over the 13 state numbers
+   with sc = atol + rtol max(|y|, |y_new|); controller safety 0.9, factor in [0.2, 5], no growth right
+   after a rejection, a clipped step does not shrink the proposal; Hairer's starting step when h <= 0;
+   q normalized after every accepted substep. What a hand loop for this body can skip, it skips: only
+   q and omega_b (7 numbers) go through the stages (v' = 0, so p moves by h v and the p and v errors
+   are 0), the tableau is unrolled (no zero entries), and nothing is carried for wheels.
+
+   state x (13) = p_w[3], q[4] (x, y, z, w), v_w[3], omega_b[3]; I_b principal moments.
+   Returns -1 after n_steps output steps (x, *h updated; *nfev += evaluations), or the 0-based output
+   step at which the step size fell below dt*1e-12, passed 1e6 substeps, or the state went non-finite. */
+#include <math.h>
+
+#define A21 (1.0 / 5.0)
+#define A31 (3.0 / 40.0)
+#define A32 (9.0 / 40.0)
+#define A41 (44.0 / 45.0)
+#define A42 (-56.0 / 15.0)
+#define A43 (32.0 / 9.0)
+#define A51 (19372.0 / 6561.0)
+#define A52 (-25360.0 / 2187.0)
+#define A53 (64448.0 / 6561.0)
+#define A54 (-212.0 / 729.0)
+#define A61 (9017.0 / 3168.0)
+#define A62 (-355.0 / 33.0)
+#define A63 (46732.0 / 5247.0)
+#define A64 (49.0 / 176.0)
+#define A65 (-5103.0 / 18656.0)
+#define B1 (35.0 / 384.0)
+#define B3 (500.0 / 1113.0)
+#define B4 (125.0 / 192.0)
+#define B5 (-2187.0 / 6784.0)
+#define B6 (11.0 / 84.0)
+#define E1 (71.0 / 57600.0)
+#define E3 (-71.0 / 16695.0)
+#define E4 (71.0 / 1920.0)
+#define E5 (-17253.0 / 339200.0)
+#define E6 (22.0 / 525.0)
+#define E7 (-1.0 / 40.0)
+
+/* z = (qx, qy, qz, qw, w0, w1, w2) -> z' (q' = q (x) (w, 0) / 2, Euler's equations division-free) */
+static inline void rhs7(const double *z, const double *c, double *d)
+{
+    const double t0 = 0.5 * z[4], t1 = 0.5 * z[5], t2 = 0.5 * z[6];
+    d[0] = t0 * z[3] - t1 * z[2] + t2 * z[1];
+    d[1] = t0 * z[2] + t1 * z[3] - t2 * z[0];
+    d[2] = -t0 * z[1] + t1 * z[0] + t2 * z[3];
+    d[3] = -t0 * z[0] - t1 * z[1] - t2 * z[2];
+    d[4] = c[0] * z[5] * z[6];
+    d[5] = c[1] * z[4] * z[6];
+    d[6] = c[2] * z[4] * z[5];
+}
+
+/* Hairer's RMS norm over the 13 numbers; e, y, yn hold the 7 of q and omega (p and v contribute 0 error). */
+static double norm7(const double *e, const double *y, const double *yn, double rtol, double atol)
+{
+    double s = 0.0;
+    int i;
+    for (i = 0; i < 7; i++) {
+        const double a = fabs(y[i]), b = fabs(yn[i]);
+        const double z = e[i] / (atol + rtol * (a > b ? a : b));
+        s += z * z;
+    }
+    return sqrt(s / 13.0);
+}
+
+/* Hairer's starting step from f0 = f(y) over all 13 numbers (II.4), one more evaluation. */
+static double initial_h(const double *x, const double *z, const double *f0, const double *c, double rtol,
+                        double atol, double dt, double *nfev)
+{
+    double s0 = 0.0, s1 = 0.0, s2 = 0.0, d0, d1, d2, h0, h1, mx, z1[7], f1[7];
+    int i;
+    for (i = 0; i < 13; i++) {
+        const double sc = atol + rtol * fabs(x[i]);
+        const double fi = i < 3 ? x[7 + i] : (i >= 3 && i < 7) ? f0[i - 3] : i >= 10 ? f0[i - 6] : 0.0;
+        s0 += (x[i] / sc) * (x[i] / sc);
+        s1 += (fi / sc) * (fi / sc);
+    }
+    d0 = sqrt(s0 / 13.0);
+    d1 = sqrt(s1 / 13.0);
+    h0 = (d0 < 1e-5 || d1 < 1e-5) ? 1e-6 : 0.01 * d0 / d1;
+    if (h0 > dt) h0 = dt;
+    for (i = 0; i < 7; i++) z1[i] = z[i] + h0 * f0[i];
+    rhs7(z1, c, f1);
+    *nfev += 1;
+    for (i = 0; i < 7; i++) {
+        const double sc = atol + rtol * fabs(z[i]), di = (f1[i] - f0[i]) / h0;
+        s2 += (di / sc) * (di / sc);
+    }
+    d2 = sqrt(s2 / 13.0);
+    mx = d1 > d2 ? d1 : d2;
+    h1 = mx <= 1e-15 ? (h0 * 1e-3 > 1e-6 ? h0 * 1e-3 : 1e-6) : pow(0.01 / mx, 0.2);
+    h0 = 100.0 * h0 < h1 ? 100.0 * h0 : h1;
+    return isfinite(h0) && h0 > 0.0 ? h0 : dt;
+}
+
+long lv_ref_dopri5_free(double *x, const double *I_b, double dt, long n_steps, double rtol, double atol,
+                        double *h_io, double *nfev_out)
+{
+    const double c[3] = {(I_b[1] - I_b[2]) / I_b[0], (I_b[2] - I_b[0]) / I_b[1], (I_b[0] - I_b[1]) / I_b[2]};
+    double z[7], zn[7], k1[7], k2[7], k3[7], k4[7], k5[7], k6[7], k7[7], t[7], err[7], nfev = 0.0, h = *h_io;
+    const double hmin = 1e-12 * dt;
+    long s;
+    int i;
+    for (i = 0; i < 4; i++) z[i] = x[3 + i];
+    for (i = 0; i < 3; i++) z[4 + i] = x[10 + i];
+    rhs7(z, c, k1);
+    nfev += 1;
+    if (!(h > 0.0) || !isfinite(h)) h = initial_h(x, z, k1, c, rtol, atol, dt, &nfev);
+    for (s = 0; s < n_steps; s++) {
+        double tt = 0.0;
+        long sub = 0;
+        int rejected = 0;
+        while (tt < dt) {
+            const double rem = dt - tt;
+            const int clipped = h >= rem;
+            const double hs = clipped ? rem : h;
+            double e;
+            for (i = 0; i < 7; i++) t[i] = z[i] + hs * (A21 * k1[i]);
+            rhs7(t, c, k2);
+            for (i = 0; i < 7; i++) t[i] = z[i] + hs * (A31 * k1[i] + A32 * k2[i]);
+            rhs7(t, c, k3);
+            for (i = 0; i < 7; i++) t[i] = z[i] + hs * (A41 * k1[i] + A42 * k2[i] + A43 * k3[i]);
+            rhs7(t, c, k4);
+            for (i = 0; i < 7; i++) t[i] = z[i] + hs * (A51 * k1[i] + A52 * k2[i] + A53 * k3[i] + A54 * k4[i]);
+            rhs7(t, c, k5);
+            for (i = 0; i < 7; i++)
+                t[i] = z[i] + hs * (A61 * k1[i] + A62 * k2[i] + A63 * k3[i] + A64 * k4[i] + A65 * k5[i]);
+            rhs7(t, c, k6);
+            for (i = 0; i < 7; i++) zn[i] = z[i] + hs * (B1 * k1[i] + B3 * k3[i] + B4 * k4[i] + B5 * k5[i] + B6 * k6[i]);
+            rhs7(zn, c, k7);
+            nfev += 6;
+            for (i = 0; i < 7; i++)
+                err[i] = hs * (E1 * k1[i] + E3 * k3[i] + E4 * k4[i] + E5 * k5[i] + E6 * k6[i] + E7 * k7[i]);
+            e = norm7(err, z, zn, rtol, atol);
+            if (e <= 1.0) {
+                double fac = e == 0.0 ? 5.0 : 0.9 * pow(e, -0.2), r;
+                if (fac > 5.0) fac = 5.0;
+                if (fac < 0.2) fac = 0.2;
+                if (rejected && fac > 1.0) fac = 1.0;
+                tt = clipped ? dt : tt + hs;
+                if (!(clipped && fac >= 1.0 && h > hs * fac)) h = hs * fac;
+                r = 1.0 / sqrt(zn[0] * zn[0] + zn[1] * zn[1] + zn[2] * zn[2] + zn[3] * zn[3]);
+                for (i = 0; i < 4; i++) zn[i] *= r;
+                for (i = 0; i < 7; i++) {
+                    if (!isfinite(zn[i])) {
+                        for (i = 0; i < 4; i++) x[3 + i] = z[i];
+                        for (i = 0; i < 3; i++) x[10 + i] = z[i + 4];
+                        *h_io = h;
+                        *nfev_out += nfev;
+                        return s;
+                    }
+                }
+                for (i = 0; i < 3; i++) x[i] += hs * x[7 + i];
+                for (i = 0; i < 7; i++) {
+                    z[i] = zn[i];
+                    k1[i] = k7[i]; /* FSAL: f at the new (un-normalized) point */
+                }
+                rejected = 0;
+            } else {
+                double fac = isfinite(e) ? 0.9 * pow(e, -0.2) : 0.2;
+                if (fac < 0.2) fac = 0.2;
+                if (fac > 1.0) fac = 1.0;
+                h = hs * fac;
+                rejected = 1;
+            }
+            if (h < hmin || ++sub > 1000000L) {
+                for (i = 0; i < 4; i++) x[3 + i] = z[i];
+                for (i = 0; i < 3; i++) x[10 + i] = z[i + 4];
+                *h_io = h;
+                *nfev_out += nfev;
+                return s;
+            }
+        }
+    }
+    for (i = 0; i < 4; i++) x[3 + i] = z[i];
+    for (i = 0; i < 3; i++) x[10 + i] = z[i + 4];
+    *h_io = h;
+    *nfev_out += nfev;
+    return -1;
+}

@@ -1,0 +1,103 @@
+/* The best torque-free RK4 batch loop we can write by hand: the peer the bench's "floor" lines compare
+   against. Unlike handwritten_rk4.c it is NOT constrained to the generated kernels' arithmetic: it does
+   the fewest floating-point operations we know for one RK4 step of a torque-free rigid body, with fused
+   multiply-adds, so its results differ from LavenderSim's in the last bits (the bench checks they agree
+   to 1e-12). Compiled by the bench with -O3 -march=native -ffp-contract=fast (never -ffast-math).
+
+   Per body-step only q (4) and omega_b (3) go through the four stages:
+     G(q, w) = q (x) (w, 0)          (so q' = G / 2: the 1/2 is folded into the stage coefficients)
+     f(w)_x = k_x w_y w_z, k_x = (I_y - I_z) / I_x (cyclic; once per call, not per step)
+   the stage states q + (dt/4) G, w + (dt/2) f (the last stage: dt/2, dt), the RK4 sums accumulated into
+   the new state with one FMA per number and stage, p += dt v (v' = 0, so RK4 is exact there), and q
+   normalized (one sqrt, one division). About 207 flops per body-step (an FMA counts 2).
+
+   lv_fma_rk4_free_soa: n bodies stored as structure of arrays, X[k*n + b] = number k of body b (13 rows
+   of n; state order p_w[3], q[4] (x, y, z, w), v_w[3], omega_b[3]), I[k*n + b] = I_k of body b.
+   Tiles of TILE bodies are copied into local rows (no aliasing), stepped n_steps times, copied back. */
+#include <math.h>
+
+#define TILE 128
+
+/* G = q (x) (w, 0), q = (x, y, z, w) */
+#define QDOT(g, qx, qy, qz, qw, w0, w1, w2)                                                          \
+    const double g##x = fma(w0, qw, fma(w2, qy, -(w1 * qz)));                                        \
+    const double g##y = fma(w0, qz, fma(w1, qw, -(w2 * qx)));                                        \
+    const double g##z = fma(w1, qx, fma(w2, qw, -(w0 * qy)));                                        \
+    const double g##w = -fma(w0, qx, fma(w1, qy, w2 * qz))
+#define WDOT(f, w0, w1, w2)                                                                          \
+    const double f##0 = c0 * (w1 * w2), f##1 = c1 * (w0 * w2), f##2 = c2 * (w0 * w1)
+
+void lv_fma_rk4_free_soa(double *X, const double *I, long n, double dt, long n_steps)
+{
+    double T[13][TILE], J[3][TILE];
+    const double hq2 = 0.25 * dt, hq4 = 0.5 * dt;         /* q stages: (dt/2)/2, dt/2 */
+    const double hw2 = 0.5 * dt, hw4 = dt;                /* omega stages */
+    const double aq1 = dt / 12.0, aq2 = dt / 6.0;         /* q sum: (dt/6)(1, 2, 2, 1) / 2 */
+    const double aw1 = dt / 6.0, aw2 = dt / 3.0;          /* omega sum: (dt/6)(1, 2, 2, 1) */
+    long s, b, b0, m;
+    int k;
+    for (b0 = 0; b0 < n; b0 += m) {
+        m = n - b0 < TILE ? n - b0 : TILE;
+        for (k = 0; k < 13; k++)
+            for (b = 0; b < m; b++) T[k][b] = X[k * n + b0 + b];
+        for (b = 0; b < m; b++) {
+            const double I0 = I[b0 + b], I1 = I[n + b0 + b], I2 = I[2 * n + b0 + b];
+            J[0][b] = (I1 - I2) / I0;
+            J[1][b] = (I2 - I0) / I1;
+            J[2][b] = (I0 - I1) / I2;
+        }
+        for (s = 0; s < n_steps; s++) {
+            for (b = 0; b < m; b++) {
+                const double c0 = J[0][b], c1 = J[1][b], c2 = J[2][b];
+                const double qx = T[3][b], qy = T[4][b], qz = T[5][b], qw = T[6][b];
+                const double w0 = T[10][b], w1 = T[11][b], w2 = T[12][b];
+                double nx, ny, nz, nw, n0, n1, n2, r;
+                QDOT(g1, qx, qy, qz, qw, w0, w1, w2);
+                WDOT(f1, w0, w1, w2);
+                const double ax = fma(hq2, g1x, qx), ay = fma(hq2, g1y, qy), az = fma(hq2, g1z, qz), aw = fma(hq2, g1w, qw);
+                const double a0 = fma(hw2, f10, w0), a1 = fma(hw2, f11, w1), a2 = fma(hw2, f12, w2);
+                nx = fma(aq1, g1x, qx); ny = fma(aq1, g1y, qy); nz = fma(aq1, g1z, qz); nw = fma(aq1, g1w, qw);
+                n0 = fma(aw1, f10, w0); n1 = fma(aw1, f11, w1); n2 = fma(aw1, f12, w2);
+                QDOT(g2, ax, ay, az, aw, a0, a1, a2);
+                WDOT(f2, a0, a1, a2);
+                const double bx = fma(hq2, g2x, qx), by = fma(hq2, g2y, qy), bz = fma(hq2, g2z, qz), bw = fma(hq2, g2w, qw);
+                const double b0_ = fma(hw2, f20, w0), b1 = fma(hw2, f21, w1), b2 = fma(hw2, f22, w2);
+                nx = fma(aq2, g2x, nx); ny = fma(aq2, g2y, ny); nz = fma(aq2, g2z, nz); nw = fma(aq2, g2w, nw);
+                n0 = fma(aw2, f20, n0); n1 = fma(aw2, f21, n1); n2 = fma(aw2, f22, n2);
+                QDOT(g3, bx, by, bz, bw, b0_, b1, b2);
+                WDOT(f3, b0_, b1, b2);
+                const double ex = fma(hq4, g3x, qx), ey = fma(hq4, g3y, qy), ez = fma(hq4, g3z, qz), ew = fma(hq4, g3w, qw);
+                const double e0 = fma(hw4, f30, w0), e1 = fma(hw4, f31, w1), e2 = fma(hw4, f32, w2);
+                nx = fma(aq2, g3x, nx); ny = fma(aq2, g3y, ny); nz = fma(aq2, g3z, nz); nw = fma(aq2, g3w, nw);
+                n0 = fma(aw2, f30, n0); n1 = fma(aw2, f31, n1); n2 = fma(aw2, f32, n2);
+                QDOT(g4, ex, ey, ez, ew, e0, e1, e2);
+                WDOT(f4, e0, e1, e2);
+                nx = fma(aq1, g4x, nx); ny = fma(aq1, g4y, ny); nz = fma(aq1, g4z, nz); nw = fma(aq1, g4w, nw);
+                T[10][b] = fma(aw1, f40, n0); T[11][b] = fma(aw1, f41, n1); T[12][b] = fma(aw1, f42, n2);
+                r = 1.0 / sqrt(fma(nx, nx, fma(ny, ny, fma(nz, nz, nw * nw))));
+                T[3][b] = nx * r; T[4][b] = ny * r; T[5][b] = nz * r; T[6][b] = nw * r;
+                T[0][b] = fma(dt, T[7][b], T[0][b]);
+                T[1][b] = fma(dt, T[8][b], T[1][b]);
+                T[2][b] = fma(dt, T[9][b], T[2][b]);
+            }
+        }
+        for (k = 0; k < 13; k++)
+            for (b = 0; b < m; b++) X[k * n + b0 + b] = T[k][b];
+    }
+}
+
+/* The peak FMA rate this loop gets from the CPU: 64 independent accumulators (enough chains to cover the
+   FMA latency of every pipe at any vector width), n_iter rounds of acc = acc * a + b each; 128 flops per
+   round. Returns their sum, so nothing is optimized away. The bench divides FMA_FLOPS by this rate: the
+   floor of a torque-free RK4 body-step on this machine. */
+double lv_peak_fma(long n_iter, double a, double b)
+{
+    double acc[64], s = 0.0;
+    long it;
+    int i;
+    for (i = 0; i < 64; i++) acc[i] = (double)i;
+    for (it = 0; it < n_iter; it++)
+        for (i = 0; i < 64; i++) acc[i] = fma(acc[i], a, b);
+    for (i = 0; i < 64; i++) s += acc[i];
+    return s;
+}
