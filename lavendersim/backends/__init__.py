@@ -98,6 +98,7 @@ class Tableau:
 
     @property
     def stages(self) -> int:
+        """s, the number of stages (right-hand-side evaluations per step)."""
         return int(self.b.shape[0])
 
     def __repr__(self) -> str:
@@ -110,7 +111,17 @@ USER_TABLEAUX: dict[str, Tableau] = {}
 
 
 def tableau_of(name: str) -> Tableau | None:
-    """The user-declared tableau named ``name``, or None for a built-in (or unknown) integrator."""
+    """The user-declared tableau named ``name``, or None for a built-in (or unknown) integrator.
+
+    Parameters
+    ----------
+    name : str
+        An integrator name.
+
+    Returns
+    -------
+    Tableau or None
+    """
     return USER_TABLEAUX.get(name)
 
 
