@@ -355,7 +355,7 @@ def resolve(workers: int | None = None, dask: str | None = None, *, feature: str
 
 
 def map_tasks(fn: Callable[[Any], Any], tasks: Iterable[Any], executor: Executor | None = None, *,
-              feature: str = "a dask sweep") -> list:
+              feature: str = "a dask sweep", progress: Callable[[int], Any] | None = None) -> list:
     """``[fn(t) for t in tasks]`` on ``executor`` (default: serial), in task order.
 
     Parameters
@@ -368,10 +368,21 @@ def map_tasks(fn: Callable[[Any], Any], tasks: Iterable[Any], executor: Executor
         From :func:`resolve`; None runs serially in this process.
     feature : str
         Named in the missing-extra error of a Dask executor.
+    progress : callable, optional
+        Called with the number of tasks just done: the tasks then go in chunks of 4 per worker, so a
+        progress bar moves while the sweep runs (None: one ``map`` call).
 
     Returns
     -------
     list
         The results in task order.
     """
-    return (executor or Executor()).map(fn, tasks, feature=feature)
+    executor = executor or Executor()
+    if progress is None:
+        return executor.map(fn, tasks, feature=feature)
+    tasks, out = list(tasks), []
+    chunk = max(1, 4 * int(executor.workers or 1))
+    for i in range(0, len(tasks), chunk):
+        out += executor.map(fn, tasks[i:i + chunk], feature=feature)
+        progress(len(tasks[i:i + chunk]))
+    return out

@@ -594,7 +594,7 @@ def figures(sc: Spacecraft, controller: Any, response: Any) -> dict:
 
 
 def monte_carlo(sc: Spacecraft, controller: Any, n: int | None = None, *, executor: Any = None,
-                backend: str = "auto") -> dict:
+                backend: str = "auto", progress: Any = None) -> dict:
     """Fly the nominal controller on ``n`` plants (:func:`lavendersim.control.monte_carlo`): the body's inertia
     perturbed by ``[monte_carlo] inertia_uncertainty`` and the file's sensors with a new seed per run.
 
@@ -608,6 +608,8 @@ def monte_carlo(sc: Spacecraft, controller: Any, n: int | None = None, *, execut
     executor : lavendersim.executor.Executor, optional
         Where the runs go (default: this process).
     backend : {"auto", "c", "numpy"}, default "auto"
+    progress : callable, optional
+        Called with the number of runs just done (see :func:`lavendersim.control.monte_carlo`).
 
     Returns
     -------
@@ -623,7 +625,8 @@ def monte_carlo(sc: Spacecraft, controller: Any, n: int | None = None, *, execut
     portable.lin = None
     out = _stack().monte_carlo(sc.scene, portable, n=n, seed=spec.seed, T=m.duration, q0=sc.q0, Omega0=m.Omega0,
                                sensors=sensors(sc), inertia_spread=spec.inertia_uncertainty, dt=sc.dt,
-                               threshold_deg=m.settle_threshold_deg, backend=backend, executor=executor)
+                               threshold_deg=m.settle_threshold_deg, backend=backend, executor=executor,
+                               progress=progress)
     limit = m.settle_within
     out["settle_within"] = limit
     out["settled_within"] = sum(1 for r in out["samples"] if r["settled"] and (limit is None or r["settling_time"] <= limit))

@@ -1233,7 +1233,7 @@ class SweepError(V.LavenderInputError):
 def monte_carlo(scene: Scene, controller: Controller, *, n: int, seed: int = 0, T: float, q0: ArrayLike | None = None,
                 omega0: ArrayLike | None = None, Omega0: ArrayLike | None = None, sensors: Sensors | None = None,
                 inertia_spread: float = 0.1, dt: float | None = None, threshold_deg: float = THRESHOLD_DEG,
-                backend: str = "auto", executor: Any = None) -> dict:
+                backend: str = "auto", executor: Any = None, progress: Callable[[int], Any] | None = None) -> dict:
     """Fly one controller on n plants: noise seeds ``seed + i`` and the body's inertia perturbed.
 
     Sample i uses ``sensors`` with seed ``sensors.seed + seed + i`` (default Sensors: noise-free, so only
@@ -1261,6 +1261,9 @@ def monte_carlo(scene: Scene, controller: Controller, *, n: int, seed: int = 0, 
         Relative half-width of the uniform inertia factors, in [0, 1).
     executor : lavendersim.executor.Executor, optional
         Serial, local processes or Dask (default serial).
+    progress : callable, optional
+        Called with the number of draws just done (a progress bar's ``update``); the draws whose plant is
+        refused count at once.
 
     Returns
     -------
@@ -1307,7 +1310,10 @@ def monte_carlo(scene: Scene, controller: Controller, *, n: int, seed: int = 0, 
             continue
         tasks.append({**base, "scene": plant, "sensors": replace(sensors, seed=sensors.seed + seed + i)})
         where.append(i)
-    for i, s in zip(where, X.map_tasks(monte_carlo_sample, tasks, executor, feature="lavendersim lqr --dask")):
+    if progress is not None and n > len(tasks):
+        progress(n - len(tasks))
+    for i, s in zip(where, X.map_tasks(monte_carlo_sample, tasks, executor, feature="lavendersim lqr --dask",
+                                       progress=progress)):
         samples[i] = s
     for i, s in enumerate(samples):
         s["index"], s["seed"], s["inertia_scale"] = i, sensors.seed + seed + i, scales[i].tolist()
