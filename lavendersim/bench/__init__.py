@@ -1,12 +1,14 @@
 """`lavendersim bench` — speed, as ratios measured in one run.
 
-    lavendersim bench [--quick] [--json PATH] [--rounds R] [--no-mujoco]
+    lavendersim bench [--quick] [--json] [--out FILE] [--rounds R] [--no-mujoco] [--only SECTION,...]
     python -m lavendersim.bench ...
 
 Everything is measured in one process on one (shared, noisy) machine, so the figures that matter
-are ratios against references measured in the same run. Repetitions are interleaved (round-robin
-over all cases of a section, R rounds), and each figure is the minimum over the rounds (the median
-is kept too); ratios are of minima.
+are ratios against references measured in the same run. Every timing is CPU time of this process
+(time.process_time: a loaded machine slows a case less than the wall clock says; only the
+two-thread cases, whose point is the wall clock, are timed by it and say so). Repetitions are
+interleaved (round-robin over all cases of a section, R rounds), and each figure is the minimum
+over the rounds (the median is kept too); ratios are of minima, of peers measured in the same run.
 
 Sections (one body: a solid box 2 kg, 0.8 x 0.4 x 0.2 m, asymmetric, omega_b0 = (1, 0.5, 0.2) rad/s,
 v0 = (0.1, 0, 0) m/s, dt = 1e-3 s, RK4, q normalized each step):
@@ -35,25 +37,33 @@ v0 = (0.1, 0, 0) m/s, dt = 1e-3 s, RK4, q normalized each step):
 * full inertia (lavendersim/bench/full_inertia.py) — bodies given the 6U CubeSat's full tensor against the same
   bodies given its principal moments, with gravity, damping and a force at r_b, at N = 1 and 1e3: Sim.run
   ns per body-step and the state readout (target <= 1.5x);
+* effect cost (lavendersim/bench/effect_cost.py) — gravity, applied torque, damping, gravity + damping
+  and the guide's user effect against plain bodies at N = 1e3, 1e4, 1e5;
+* dopri5 (lavendersim/bench/dopri5.py) — ns per right-hand-side evaluation against a hand C DOPRI5;
+* NumPy peers (lavendersim/bench/numpy_section.py) — the NumPy backend against hand NumPy (numpy_peers.py,
+  N = 1e3, 1e5) and a pure-Python loop (N = 1);
+* the best hand loop — beside the bitwise SoA peer, handwritten_fma.c: the fewest flops we know for a
+  torque-free RK4 step (only q and omega_b through the stages, FMA, -O3 -march=native), and the flop
+  floor of this CPU (FMA_FLOPS per body-step / the peak FMA rate a C loop measures now);
+* small scenes — N = 4 and 8 bodies per body-step against the largest N (batched section);
 * agreement — the hand-written kernel against the Sim (same trajectory to ~1e-12), and MuJoCo's
   trajectory against ours and against the exact torque-free motion over 1 s.
 
 The project's speed targets are printed as PASS/MISS lines; a miss never changes the exit status.
+A section that crashes is recorded (its error in ``errors``), the others still run and print, and
+:func:`failed_sections` is not empty: ``lavendersim bench`` then exits 1 with one line naming them.
 `--quick` is a short version (small step counts, N up to 1e3) for tests: they check that it runs
 and that its output and JSON are well formed, never the timings.
 """
 from __future__ import annotations
 
-import argparse
 import ctypes
 import datetime as _dt
-import json
 import os
 import platform
 import shutil
 import statistics
 import subprocess
-import sys
 import tempfile
 import time
 from pathlib import Path
@@ -63,14 +73,22 @@ import numpy as np
 from .. import validate as V
 from .._install import extra_command
 from ..generated import layout as LY
+from . import dopri5 as _dopri5
+from . import effect_cost as _effect_cost
 from . import envs as _envs
 from . import full_inertia as _inertia
+from . import numpy_section as _numpy_section
 from . import scenes as _scenes
 
 SCHEMA = "lavendersim-bench/1"
 HERE = Path(__file__).resolve().parent
 KERNEL_SOURCE = HERE / "handwritten_rk4.c"
 CFLAGS = ["-O3", "-std=c99", "-fno-math-errno", "-ffp-contract=off", "-fPIC", "-shared"]  # the extension's (setup.py)
+# the unconstrained peer: contraction into FMA allowed, this CPU's instruction set (never -ffast-math)
+FMA_SOURCE = HERE / "handwritten_fma.c"
+FMA_VARIANTS = (("native", ["-march=native", "-ffp-contract=fast"]),
+                ("native_512", ["-march=native", "-ffp-contract=fast", "-mprefer-vector-width=512"]))
+FMA_FLOPS = 221   # flops per body-step of lv_fma_rk4_free_soa (an FMA counts 2; sqrt and division 1 each)
 # the hand-written SoA peer, compiled once per instruction set (LV_ISA_* level -> name, extra flags)
 SOA_ISAS = ((1, "sse2", []), (2, "avx2", ["-mavx2"]), (3, "avx512f", ["-mavx512f"]))
 
@@ -99,12 +117,18 @@ TARGETS = {
     "scene_build_s": 0.2,              # Scene + add_bodies(1e4) + Sim(...), seconds, at most (issue 12)
     "state_lookup_ratio": 2.0,         # sim.state(name) at N = 1e4 / at N = 10, at most (O(1): ~1; a scan: ~1000)
     "full_inertia_ratio": 1.5,         # a full-tensor body / the same body by principal moments, ns per body-step (issue 26)
+    "small_scene_ratio": 2.0,          # ns per body-step at N = 4 and 8 / at the largest N, at most (issue 30)
+    "dopri5_per_rhs_vs_hand": 1.2,     # dopri5 ns per RHS evaluation / the hand C DOPRI5's, at most (issue 30)
+    "simd_batch_vs_flop_floor": 1.3,   # C batch loop / the flop floor (FMA_FLOPS / peak FMA rate), at most (issue 30)
+    "numpy_vs_hand_numpy": 1.5,        # NumPy backend / hand NumPy RK4 (numpy_peers.py), N >= 1e3, at most (issue 30)
+    "numpy_single_vs_python": 1.0,     # NumPy backend / a pure-Python RK4 loop, one body, at most (issue 30)
 }
+SMALL_SIZES = (4, 8)
 PER_BODY_SIZES_FULL = (1, 100, 10_000)
 PER_BODY_SIZES_QUICK = (1, 100)
 PER_BODY_TORQUE = (1e-3, 2e-3, -1e-3)
-BATCH_SIZES_FULL = (1, 10, 100, 1_000, 10_000, 100_000)
-BATCH_SIZES_QUICK = (1, 10, 100, 1_000)
+BATCH_SIZES_FULL = (1, 4, 8, 10, 100, 1_000, 10_000, 100_000)
+BATCH_SIZES_QUICK = (1, 4, 8, 10, 100, 1_000)
 SIMD_SIZES_FULL = (1_000, 10_000)
 SIMD_SIZES_QUICK = (1_000,)
 THREADS_MIN_N = 1_000  # the SIMD batch sizes that also time two threads
@@ -122,8 +146,12 @@ EFFECT_SETS = (
 WHEEL_COMMAND = (1e-3, -5e-4, 2e-4)
 
 
+_PROGRESS = [None]   # the current run's progress callable (msg -> None), or None: silent
+
+
 def _progress(msg: str) -> None:
-    print(f"  … {msg}", file=sys.stderr, flush=True)
+    if _PROGRESS[0] is not None:
+        _PROGRESS[0](msg)
 
 
 # --------------------------------------------------------------------------- machine stamp
@@ -219,19 +247,25 @@ def _stats(seconds: list[float], units: int) -> dict:
 
 
 def interleaved(cases: dict, rounds: int, label: str = "") -> dict:
-    """cases: name -> (fn, units). Warm each once, then `rounds` rounds, each timing every case once
-    in turn (round-robin, so a noisy stretch hits all cases alike). Returns name -> _stats."""
-    for fn, _ in cases.values():
+    """cases: name -> (fn, units) or (fn, units, "wall"). Warm each once, then `rounds` rounds, each
+    timing every case once in turn (round-robin, so a noisy stretch hits all cases alike). A case is
+    timed in CPU time of the process (time.process_time), or by the wall clock when marked "wall" (a
+    case running on several threads, whose CPU time would hide the speed-up). Returns name -> _stats
+    (with "clock": "cpu" or "wall")."""
+    for fn, *_ in cases.values():
         fn()
     times = {k: [] for k in cases}
+    clocks = {k: time.perf_counter if c[2:] == ("wall",) else time.process_time for k, c in cases.items()}
     for r in range(rounds):
         if label:
             _progress(f"{label}: round {r + 1}/{rounds}")
-        for k, (fn, _) in cases.items():
-            t0 = time.perf_counter()
+        for k, (fn, *_) in cases.items():
+            clock = clocks[k]
+            t0 = clock()
             fn()
-            times[k].append(time.perf_counter() - t0)
-    return {k: _stats(times[k], cases[k][1]) for k in cases}
+            times[k].append(clock() - t0)
+    return {k: {**_stats(times[k], cases[k][1]), "clock": "wall" if clocks[k] is time.perf_counter else "cpu"}
+            for k in cases}
 
 
 # --------------------------------------------------------------------------- scenes
@@ -249,14 +283,14 @@ def initial_state() -> np.ndarray:
     return np.asarray(body().x0, dtype=float).copy()
 
 
-def single_sim(backend: str = "c", integrator: str = "rk4", effects=()):
+def single_sim(backend: str = "c", integrator: str = "rk4", effects=(), dt: float = DT):
     from ..scene import Scene
     from ..sim import Sim
     scene = Scene()
     scene.add_body(body())
     for name, params in effects:
         scene.add_effect(name, body="body", **params)
-    sim = Sim(scene, dt=DT, integrator=integrator, backend=backend)
+    sim = Sim(scene, dt=dt, integrator=integrator, backend=backend)
     if any(name == "reaction_wheels" for name, _ in effects):
         sim.set_wheel_command("body", WHEEL_COMMAND)
     return sim
@@ -280,23 +314,39 @@ def batch_sim(n: int, backend: str, torque: bool = False, dtype: str = "float64"
 
 # --------------------------------------------------------------------------- hand-written reference
 
+class NoCompiler(RuntimeError):
+    """No C compiler: the hand-written peers are not measured (not a crash of the bench)."""
+
+
+def compile_c(source: Path, extra: list[str], cc: str | None = None) -> tuple[ctypes.CDLL, str]:
+    """Compile source with the extension's flags (CFLAGS) + extra into a temporary shared library and load it.
+
+    Returns the library (it stays mapped after its file is removed) and the command. Raises NoCompiler without
+    a compiler, RuntimeError with the compiler's message when it fails."""
+    cc = cc or compiler()
+    if cc is None:
+        raise NoCompiler("no C compiler found (set CC, or install cc/gcc)")
+    d = tempfile.mkdtemp(prefix="lavendersim-bench-")
+    try:
+        lib = Path(d) / (source.stem + ".so")
+        cmd = cc.split() + CFLAGS + list(extra) + [str(source), "-o", str(lib), "-lm"]
+        r = subprocess.run(cmd, capture_output=True, text=True)
+        if r.returncode != 0:
+            raise RuntimeError(f"compiling {source.name} failed ({' '.join(cmd)}): {r.stderr.strip()[-400:]}")
+        return ctypes.CDLL(str(lib)), " ".join(cmd)
+    finally:
+        shutil.rmtree(d, ignore_errors=True)
+
+
 class HandwrittenKernel:
     """handwritten_rk4.c compiled now into a temporary shared library, called through ctypes."""
 
     def __init__(self, cc: str | None = None):
         self.cc = cc or compiler()
         if self.cc is None:
-            raise RuntimeError("no C compiler found (set CC, or install cc/gcc)")
+            raise NoCompiler("no C compiler found (set CC, or install cc/gcc)")
         self.flags = list(CFLAGS)
-        self._dir = tempfile.mkdtemp(prefix="lavendersim-bench-")
-        lib = Path(self._dir) / "handwritten_rk4.so"
-        cmd = self.cc.split() + self.flags + [str(KERNEL_SOURCE), "-o", str(lib), "-lm"]
-        r = subprocess.run(cmd, capture_output=True, text=True)
-        if r.returncode != 0:
-            raise RuntimeError(f"compiling {KERNEL_SOURCE.name} failed ({' '.join(cmd)}):\n{r.stderr.strip()}")
-        self.command = " ".join(cmd)
-        self._lib = ctypes.CDLL(str(lib))
-        shutil.rmtree(self._dir, ignore_errors=True)  # the library stays mapped
+        self._lib, self.command = compile_c(KERNEL_SOURCE, [], self.cc)
         f = self._lib.lv_ref_rk4_free
         f.argtypes = [ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_double),
                       ctypes.c_double, ctypes.c_long, ctypes.c_int]
@@ -306,35 +356,58 @@ class HandwrittenKernel:
         self.floor = {}  # ISA name -> lv_ref_divider_floor_soa of that copy (the divider's limit)
         self.soa_commands = {}
         self.soa_errors = {}
+        self.fma = {}   # variant name -> lv_fma_rk4_free_soa of handwritten_fma.c compiled with FMA_VARIANTS' flags
+        self.peak_fma = None   # lv_peak_fma of the first variant
+        self.fma_commands = {}
+        self.fma_errors = {}
+
+    def compile_fma(self, variants=FMA_VARIANTS) -> None:
+        """Compile the unconstrained FMA peer once per (name, flags) (a failing one is recorded, not raised)."""
+        for name, extra in variants:
+            try:
+                so, cmd = compile_c(FMA_SOURCE, list(extra), self.cc)   # the last -ffp-contract wins
+            except RuntimeError as exc:
+                self.fma_errors[name] = str(exc)
+                continue
+            f = so.lv_fma_rk4_free_soa
+            f.argtypes = [ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_double), ctypes.c_long,
+                          ctypes.c_double, ctypes.c_long]
+            f.restype = None
+            self.fma[name] = f
+            self.fma_commands[name] = cmd
+            if self.peak_fma is None:
+                p = so.lv_peak_fma
+                p.argtypes = [ctypes.c_long, ctypes.c_double, ctypes.c_double]
+                p.restype = ctypes.c_double
+                self.peak_fma = p
+
+    def advance_fma(self, name: str, X: np.ndarray, I: np.ndarray, dt: float, n_steps: int) -> None:
+        """As advance_soa, with the FMA peer compiled as variant name (results differ in the last bits)."""
+        _check_soa(X, I)
+        dp = ctypes.POINTER(ctypes.c_double)
+        self.fma[name](X.ctypes.data_as(dp), I.ctypes.data_as(dp), X.shape[1], float(dt), int(n_steps))
 
     def compile_soa(self, isas) -> None:
         """Compile the SoA peer once per (name, flags) in isas (a failing one is recorded, not raised)."""
         for name, extra in isas:
-            d = tempfile.mkdtemp(prefix="lavendersim-bench-")
-            lib = Path(d) / f"handwritten_rk4_{name}.so"
-            cmd = self.cc.split() + self.flags + extra + [str(KERNEL_SOURCE), "-o", str(lib), "-lm"]
-            r = subprocess.run(cmd, capture_output=True, text=True)
-            if r.returncode != 0:
-                self.soa_errors[name] = r.stderr.strip()[-400:]
-                shutil.rmtree(d, ignore_errors=True)
+            try:
+                so, cmd = compile_c(KERNEL_SOURCE, extra, self.cc)
+            except RuntimeError as exc:
+                self.soa_errors[name] = str(exc)
                 continue
-            so = ctypes.CDLL(str(lib))
-            shutil.rmtree(d, ignore_errors=True)
             for table, f in ((self.soa, so.lv_ref_rk4_free_soa), (self.floor, so.lv_ref_divider_floor_soa)):
                 f.argtypes = [ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_double), ctypes.c_long,
                               ctypes.c_double, ctypes.c_long]
                 f.restype = None
                 table[name] = f
-            self.soa_commands[name] = " ".join(cmd)
+            self.soa_commands[name] = cmd
 
     def advance_soa(self, isa: str, X: np.ndarray, I: np.ndarray, dt: float, n_steps: int, floor: bool = False) -> None:
         """Advance the bodies of X (13, n) float64 (struct of arrays) in place with the SoA peer of isa;
         I (3, n) their principal moments. floor: run the divider's floor loop instead (X then holds
         meaningless numbers)."""
         n = X.shape[1]
-        if X.dtype != np.float64 or X.shape[0] != 13 or not X.flags.c_contiguous or I.shape != (3, n) \
-                or I.dtype != np.float64 or not I.flags.c_contiguous:
-            raise TypeError("X must be C-contiguous float64 (13, n) and I float64 (3, n)")
+        _check_soa(X, I)
         dp = ctypes.POINTER(ctypes.c_double)
         (self.floor if floor else self.soa)[isa](X.ctypes.data_as(dp), I.ctypes.data_as(dp), n, float(dt), int(n_steps))
 
@@ -345,6 +418,27 @@ class HandwrittenKernel:
         I_b = np.ascontiguousarray(I_b, dtype=np.float64)
         dp = ctypes.POINTER(ctypes.c_double)
         return int(self._f(x.ctypes.data_as(dp), I_b.ctypes.data_as(dp), float(dt), int(n_steps), 1 if check else 0))
+
+
+def _check_soa(X: np.ndarray, I: np.ndarray) -> None:
+    n = X.shape[1]
+    if X.dtype != np.float64 or X.shape[0] != 13 or not X.flags.c_contiguous or I.shape != (3, n) \
+            or I.dtype != np.float64 or not I.flags.c_contiguous:
+        raise TypeError("X must be C-contiguous float64 (13, n) and I float64 (3, n)")
+
+
+def fma_agreement(kernel: HandwrittenKernel, n: int = 257, n_steps: int = 1_000) -> dict:
+    """Each FMA variant against the Sim (C, RK4) over n_steps from batch_sim(n)'s bodies: largest difference."""
+    state0, _, X0, I = _batch_arrays(n)
+    sim = batch_sim(n, "c")
+    sim.run(n_steps)
+    ref = np.asarray(sim.x, dtype=float).reshape(n, LY.STATE_SIZE)
+    out = {"bodies": n, "steps": n_steps}
+    for name in kernel.fma:
+        X = X0.copy()
+        kernel.advance_fma(name, X, I, DT, n_steps)
+        out[f"max_abs_diff_{name}"] = float(np.max(np.abs(X.T - ref)))
+    return out
 
 
 def handwritten_agreement(kernel: HandwrittenKernel, n_steps: int = 10_000, every: int = 1_000,
@@ -431,8 +525,8 @@ class MujocoBody:
 
 def mujoco_agreement(n_steps: int = 1000) -> dict:
     """MuJoCo (each integrator) against LavenderSim's C RK4 and against the exact torque-free motion
-    (lavendersim.reference.torque_free) over n_steps steps from the same state."""
-    from lavendersim import reference as ref
+    (lavendersim.oracle.torque_free) over n_steps steps from the same state."""
+    from lavendersim import oracle as ref
     t = DT * np.arange(1, n_steps + 1)
     exact = ref.torque_free(inertia(), OMEGA_B0, Q0, t)
     ours = single_sim("c").record(n_steps).x[1:, 0]
@@ -526,13 +620,23 @@ def simd_batch(kernel, sizes, body_steps: int, rounds: int) -> dict:
                 st = state0.copy()
                 cases[f"lavendersim_{nm}"] = (lambda lvl=lvl, st=st: (C.isa(lvl), be.advance(st, params, empty, "rk4",
                                                                                              True, DT, steps)), steps * n)
-            if n >= THREADS_MIN_N:
+            if n >= THREADS_MIN_N:   # one thread against two by the wall clock (CPU time would hide the speed-up)
+                st1 = state0.copy()
+                cases["lavendersim_1_thread_wall"] = (lambda st=st1: (C.isa(-1), be.advance(st, params, empty, "rk4", True,
+                                                                                          DT, steps)), steps * n, "wall")
                 st2 = state0.copy()
                 cases["lavendersim_2_threads"] = (lambda st=st2: _two_threads(C, be, st, params, empty, steps),
-                                                  steps * n)
+                                                  steps * n, "wall")
             for nm in hand:
                 X = X0.copy()
                 cases[f"hand_soa_{nm}"] = (lambda nm=nm, X=X: kernel.advance_soa(nm, X, I, DT, steps), steps * n)
+            fma = {} if kernel is None else kernel.fma
+            for nm in fma:
+                X = X0.copy()
+                cases[f"hand_fma_{nm}"] = (lambda nm=nm, X=X: kernel.advance_fma(nm, X, I, DT, steps), steps * n)
+            if kernel is not None and kernel.peak_fma is not None:   # ns per flop at the peak FMA rate
+                k_it = max(1_000, 2 * body_steps)
+                cases["peak_fma"] = (lambda k_it=k_it: kernel.peak_fma(k_it, 0.999999, 1e-7), 128 * k_it)
             floor_isa = list(hand)[-1] if hand else None   # the widest hand copy
             if floor_isa is not None:
                 X = X0.copy()
@@ -541,8 +645,17 @@ def simd_batch(kernel, sizes, body_steps: int, rounds: int) -> dict:
             t = interleaved(cases, rounds, f"SIMD batch N = {n}")
             row = {"n_bodies": n, "steps": steps, "bitwise_identical": bitwise, "divider_floor_isa": floor_isa, **t}
             ours = t[f"lavendersim_{info['best']}"]["ns_min"]
+            if fma:
+                best_fma = min(fma, key=lambda nm: t[f"hand_fma_{nm}"]["ns_min"])
+                row["best_fma"] = best_fma
+                row["ratio_to_hand_fma"] = ours / t[f"hand_fma_{best_fma}"]["ns_min"]
+                if "peak_fma" in t:
+                    row["peak_gflops"] = 1.0 / t["peak_fma"]["ns_min"]
+                    row["flop_floor_ns"] = FMA_FLOPS * t["peak_fma"]["ns_min"]
+                    row["ratio_to_flop_floor"] = ours / row["flop_floor_ns"]
+                    row["hand_fma_over_flop_floor"] = t[f"hand_fma_{best_fma}"]["ns_min"] / row["flop_floor_ns"]
             if "lavendersim_2_threads" in t:
-                row["threads_speedup"] = ours / t["lavendersim_2_threads"]["ns_min"]
+                row["threads_speedup"] = t["lavendersim_1_thread_wall"]["ns_min"] / t["lavendersim_2_threads"]["ns_min"]
             if hand:
                 best_hand = min(hand, key=lambda nm: t[f"hand_soa_{nm}"]["ns_min"])
                 row["best_hand_isa"] = best_hand
@@ -580,43 +693,34 @@ def settings(quick: bool) -> dict:
             "agreement_steps": 10_000, "mujoco_agreement_steps": 1_000}
 
 
-def run(quick: bool = False, rounds: int | None = None, use_mujoco: bool = True) -> dict:
-    cfg = settings(quick)
-    if rounds is not None:
-        cfg["rounds"] = V.integer("rounds", rounds, minimum=1)
-        if cfg["rounds"] > MAX_ROUNDS:
-            raise V.LavenderInputError("rounds", f"must be at most {MAX_ROUNDS}", f", got {rounds}")
-    R = cfg["rounds"]
-    res: dict = {"schema": SCHEMA, "quick": quick, "machine": machine_stamp(),
-                 "config": {"body": {"shape": "box", "mass": MASS, "size": list(SIZE), "I_b": inertia().tolist(),
-                                     "q0": list(Q0), "omega_b0": list(OMEGA_B0), "v_w0": list(V_W0)},
-                            "dt": DT, "integrator": "rk4", "normalize": True, "statistic": "min over rounds",
-                            **{k: (list(v) if isinstance(v, tuple) else v) for k, v in cfg.items()}},
-                 "targets": TARGETS}
+SECTIONS = ("handwritten", "single", "batched", "effects", "per_body", "float32", "simd", "effect_cost", "dopri5",
+            "numpy_peers", "env", "scenes", "inertia", "mujoco_agreement")
 
-    # ---- hand-written reference
-    hw = {"available": False, "source": str(KERNEL_SOURCE)}
-    kernel = None
+
+def _sec_handwritten(ctx) -> None:
+    cfg, res = ctx["cfg"], ctx["res"]
+    hw = res["handwritten"] = {"available": False, "source": str(KERNEL_SOURCE)}
     try:
         kernel = HandwrittenKernel()
-        hw.update(available=True, compile_command=kernel.command)
-        isa = extension_isa()
-        if isa is not None:
-            kernel.compile_soa([(nm, extra) for lvl, nm, extra in SOA_ISAS if lvl <= isa["best_level"]])
-            hw.update(soa_compile_commands=kernel.soa_commands, soa_compile_errors=kernel.soa_errors)
-        _progress("hand-written kernel compiled; checking it against the Sim")
-        hw["agreement"] = handwritten_agreement(kernel, cfg["agreement_steps"], max(1, cfg["agreement_steps"] // 10))
-    except Exception as exc:  # noqa: BLE001 - reported in the output, the rest still runs
-        hw["error"] = f"{type(exc).__name__}: {exc}"
-    res["handwritten"] = hw
+    except NoCompiler as exc:   # not a crash: the peers are not measured
+        hw["error"] = str(exc)
+        return
+    ctx["kernel"] = kernel
+    hw.update(available=True, compile_command=kernel.command)
+    isa = extension_isa()
+    if isa is not None:
+        kernel.compile_soa([(nm, extra) for lvl, nm, extra in SOA_ISAS if lvl <= isa["best_level"]])
+        hw.update(soa_compile_commands=kernel.soa_commands, soa_compile_errors=kernel.soa_errors)
+    kernel.compile_fma()
+    hw.update(fma_compile_commands=kernel.fma_commands, fma_compile_errors=kernel.fma_errors)
+    _progress("hand-written kernels compiled; checking them against the Sim")
+    hw["agreement"] = handwritten_agreement(kernel, cfg["agreement_steps"], max(1, cfg["agreement_steps"] // 10))
+    if kernel.fma:
+        hw["fma_agreement"] = fma_agreement(kernel)
 
-    # ---- MuJoCo availability
-    mj_ok, mj_why = mujoco_available() if use_mujoco else (False, "skipped (--no-mujoco)")
-    mj = {"available": mj_ok}
-    if not mj_ok:
-        mj["reason"] = mj_why
 
-    # ---- single body, all cases interleaved
+def _single_cases(ctx) -> dict:
+    cfg, kernel = ctx["cfg"], ctx.get("kernel")
     n_c, n_np, n_py = cfg["c_steps"], cfg["numpy_steps"], cfg["py_step_calls"]
     sim_c, sim_np = single_sim("c"), single_sim("numpy")
     sim_pc, sim_pn = single_sim("c"), single_sim("numpy")
@@ -634,35 +738,47 @@ def run(quick: bool = False, rounds: int | None = None, use_mujoco: bool = True)
         xh, xhc, I_b = initial_state(), initial_state(), inertia()
         cases["handwritten_c"] = (lambda: kernel.advance(xh, I_b, DT, n_c), n_c)
         cases["handwritten_c_checked"] = (lambda: kernel.advance(xhc, I_b, DT, n_c, check=True), n_c)
-    mj_bodies = {}
-    if mj_ok:
-        try:
-            for integ in MUJOCO_INTEGRATORS:
-                mb = MujocoBody(integ)
-                mj_bodies[integ] = mb
-                n_s = cfg["mj_step_steps"]
-                cases[f"mujoco_{integ}_mj_step"] = (lambda mb=mb, n_s=n_s: mb.step_loop(n_s), n_s)
-                if mb.rollout is not None:
-                    n_r = cfg["mj_rollout_steps"]
-                    buf = np.empty((1, n_r, mb.nstate))
-                    cases[f"mujoco_{integ}_rollout"] = (lambda mb=mb, n_r=n_r, buf=buf: mb.rollout_states(n_r, buf), n_r)
-            # mj_step on a model with no bodies: what one call from Python costs beyond the physics (binding overhead)
-            m0 = mj_bodies["RK4"].mj.MjModel.from_xml_string("<mujoco/>")
-            d0 = mj_bodies["RK4"].mj.MjData(m0)
-            cases["mujoco_empty_mj_step"] = (lambda st=mj_bodies["RK4"].mj.mj_step, m0=m0, d0=d0, n=n_py:
-                                             [st(m0, d0) for _ in range(n)], n_py)
-            mj["version"] = mj_bodies["RK4"].mj.__version__
-            mj["rollout"] = mj_bodies["RK4"].rollout is not None
-        except Exception as exc:  # noqa: BLE001
-            mj = {"available": False, "reason": f"mujoco imported but failed: {type(exc).__name__}: {exc}"}
-            cases = {k: v for k, v in cases.items() if not k.startswith("mujoco_")}
-            mj_ok = False
-    _progress(f"single body: {len(cases)} cases interleaved, {R} rounds")
-    single = interleaved(cases, R, "single body")
-    res["single_body"] = single
+    return cases
 
-    # ---- batched
-    batched = []
+
+def _mujoco_cases(ctx, cases: dict) -> None:
+    cfg, mj = ctx["cfg"], ctx["mj"]
+    n_py = cfg["py_step_calls"]
+    try:
+        bodies = {}
+        for integ in MUJOCO_INTEGRATORS:
+            mb = bodies[integ] = MujocoBody(integ)
+            n_s = cfg["mj_step_steps"]
+            cases[f"mujoco_{integ}_mj_step"] = (lambda mb=mb, n_s=n_s: mb.step_loop(n_s), n_s)
+            if mb.rollout is not None:
+                n_r = cfg["mj_rollout_steps"]
+                buf = np.empty((1, n_r, mb.nstate))
+                cases[f"mujoco_{integ}_rollout"] = (lambda mb=mb, n_r=n_r, buf=buf: mb.rollout_states(n_r, buf), n_r)
+        # mj_step on a model with no bodies: what one call from Python costs beyond the physics (binding overhead)
+        mjm = bodies["RK4"].mj
+        m0 = mjm.MjModel.from_xml_string("<mujoco/>")
+        d0 = mjm.MjData(m0)
+        cases["mujoco_empty_mj_step"] = (lambda st=mjm.mj_step, m0=m0, d0=d0, n=n_py: [st(m0, d0) for _ in range(n)],
+                                         n_py)
+        mj.update(version=mjm.__version__, rollout=bodies["RK4"].rollout is not None)
+    except Exception as exc:  # noqa: BLE001 - an optional peer that does not work here: reported, not a crash
+        mj.clear()
+        mj.update(available=False, reason=f"mujoco imported but failed: {type(exc).__name__}: {exc}")
+        for k in [k for k in cases if k.startswith("mujoco_")]:
+            del cases[k]
+
+
+def _sec_single(ctx) -> None:
+    cases = _single_cases(ctx)
+    if ctx["mj"]["available"]:
+        _mujoco_cases(ctx, cases)
+    _progress(f"single body: {len(cases)} cases interleaved, {ctx['R']} rounds")
+    ctx["res"]["single_body"] = interleaved(cases, ctx["R"], "single body")
+
+
+def _sec_batched(ctx) -> None:
+    cfg, R = ctx["cfg"], ctx["R"]
+    batched = ctx["res"]["batched"] = []
     for n in cfg["batch_sizes"]:
         _progress(f"batched: N = {n}: building scenes")
         sc, sn = batch_sim(n, "c"), batch_sim(n, "numpy")
@@ -670,55 +786,128 @@ def run(quick: bool = False, rounds: int | None = None, use_mujoco: bool = True)
         steps_n = max(2, min(2_000, cfg["numpy_body_steps"] // n))
         t = interleaved({"c": (lambda sc=sc, s=steps_c: sc.run(s), steps_c * n),
                          "numpy": (lambda sn=sn, s=steps_n: sn.run(s), steps_n * n)}, R, f"batched N = {n}")
-        batched.append({"n_bodies": n, "c_steps": steps_c, "numpy_steps": steps_n,
-                        "c": t["c"], "numpy": t["numpy"]})
+        batched.append({"n_bodies": n, "c_steps": steps_c, "numpy_steps": steps_n, "c": t["c"], "numpy": t["numpy"]})
         del sc, sn
-    res["batched"] = batched
 
-    # ---- effect sets (cumulative), all interleaved
+
+def _sec_effects(ctx) -> None:
     eff_cases, acc = {}, []
-    n_e = cfg["effect_steps"]
+    n_e = ctx["cfg"]["effect_steps"]
     for name, effs in EFFECT_SETS:
         acc = acc + effs
         s = single_sim("c", effects=list(acc))
         eff_cases[name] = (lambda s=s: s.run(n_e), n_e)
-    _progress(f"effects: {len(eff_cases)} sets interleaved, {R} rounds")
-    et = interleaved(eff_cases, R, "effects")
+    _progress(f"effects: {len(eff_cases)} sets interleaved, {ctx['R']} rounds")
+    et = interleaved(eff_cases, ctx["R"], "effects")
     base = et["torque-free"]["ns_min"]
     acc = []
-    res["effects"] = []
+    out = ctx["res"]["effects"] = []
     for name, effs in EFFECT_SETS:
         acc = acc + effs
-        res["effects"].append({"name": name, "effects": [e for e, _ in acc], **et[name],
-                               "ratio_to_torque_free": et[name]["ns_min"] / base})
+        out.append({"name": name, "effects": [e for e, _ in acc], **et[name], "ratio_to_torque_free": et[name]["ns_min"] / base})
 
-    res["per_body_effects"] = per_body_effects(cfg["per_body_sizes"], cfg["c_body_steps"], R)
-    res["float32_batch"] = float32_batch(cfg["simd_sizes"], cfg["c_body_steps"], R)
 
-    if extension_isa() is not None:
-        res["simd_batch"] = simd_batch(kernel, cfg["simd_sizes"], cfg["c_body_steps"], R)
-
-    # ---- ReactionWheelCube-v0 and its vector env (lavendersim/bench/envs.py)
+def _sec_dopri5(ctx) -> None:
     try:
-        res["env"] = _envs.env_section(quick, R, interleaved)
-    except Exception as exc:  # noqa: BLE001 - reported in the output, the rest still runs
-        res["env"] = {"available": False, "reason": f"failed: {type(exc).__name__}: {exc}"}
+        ctx["res"]["dopri5"] = _dopri5.dopri5_section(ctx["quick"], ctx["R"], interleaved, compile_c, single_sim,
+                                                      initial_state(), inertia())
+    except NoCompiler as exc:
+        ctx["res"]["dopri5"] = {"unavailable": str(exc)}
 
-    # ---- building a large scene (lavendersim/bench/scenes.py)
-    res["scenes"] = _scenes.scene_section(quick, R, interleaved)
 
-    # ---- full inertia tensors against principal moments (lavendersim/bench/full_inertia.py)
-    res["inertia"] = _inertia.inertia_section(quick, R, interleaved)
+def _sec_mujoco_agreement(ctx) -> None:
+    mj = ctx["mj"]
+    if mj["available"]:
+        _progress("MuJoCo trajectory agreement")
+        mj["agreement"] = mujoco_agreement(ctx["cfg"]["mujoco_agreement_steps"])
 
-    # ---- MuJoCo trajectory agreement
-    if mj_ok:
-        try:
-            _progress("MuJoCo trajectory agreement")
-            mj["agreement"] = mujoco_agreement(cfg["mujoco_agreement_steps"])
-        except Exception as exc:  # noqa: BLE001
-            mj["agreement_error"] = f"{type(exc).__name__}: {exc}"
-    res["mujoco"] = mj
 
+RUNNERS = {
+    "handwritten": _sec_handwritten,
+    "single": _sec_single,
+    "batched": _sec_batched,
+    "effects": _sec_effects,
+    "per_body": lambda ctx: ctx["res"].__setitem__("per_body_effects", per_body_effects(
+        ctx["cfg"]["per_body_sizes"], ctx["cfg"]["c_body_steps"], ctx["R"])),
+    "float32": lambda ctx: ctx["res"].__setitem__("float32_batch", float32_batch(
+        ctx["cfg"]["simd_sizes"], ctx["cfg"]["c_body_steps"], ctx["R"])),
+    "simd": lambda ctx: extension_isa() is not None and ctx["res"].__setitem__("simd_batch", simd_batch(
+        ctx.get("kernel"), ctx["cfg"]["simd_sizes"], ctx["cfg"]["c_body_steps"], ctx["R"])),
+    "effect_cost": lambda ctx: ctx["res"].__setitem__("effect_cost", _effect_cost.effect_cost_section(
+        ctx["quick"], ctx["R"], interleaved, ctx["cfg"]["c_body_steps"], _progress)),
+    "dopri5": _sec_dopri5,
+    "numpy_peers": lambda ctx: ctx["res"].__setitem__("numpy_peers", _numpy_section.numpy_section(
+        ctx["quick"], ctx["R"], interleaved, batch_sim, ctx["cfg"]["numpy_body_steps"], _progress)),
+    "env": lambda ctx: ctx["res"].__setitem__("env", _envs.env_section(ctx["quick"], ctx["R"], interleaved)),
+    "scenes": lambda ctx: ctx["res"].__setitem__("scenes", _scenes.scene_section(ctx["quick"], ctx["R"], interleaved)),
+    "inertia": lambda ctx: ctx["res"].__setitem__("inertia", _inertia.inertia_section(ctx["quick"], ctx["R"],
+                                                                                      interleaved)),
+    "mujoco_agreement": _sec_mujoco_agreement,
+}
+
+
+def failed_sections(res: dict) -> list[dict]:
+    """The sections of a run that crashed: [{"section", "error"}] (empty when every section ran)."""
+    return list(res.get("errors", []))
+
+
+def run(quick: bool = False, rounds: int | None = None, use_mujoco: bool = True, only=None, progress=None) -> dict:
+    """Run the bench (see the module docstring) and return every figure as a JSON-ready dict.
+
+    Parameters
+    ----------
+    quick : bool, optional
+        The short version (small step counts, N up to 1e3).
+    rounds : int, optional
+        Interleaved rounds per section (default 5; 2 with quick), 1 ... MAX_ROUNDS.
+    use_mujoco : bool, optional
+        Measure MuJoCo when it is installed.
+    only : iterable of str, optional
+        Run only these sections (names in SECTIONS); default all.
+    progress : callable, optional
+        Called with a short message before each phase and round (default: silent).
+
+    Returns
+    -------
+    dict
+        Schema SCHEMA; ``errors`` lists the sections that crashed (section, error), ``standing`` the
+        PASS/MISS/N/A lines, ``ratios`` the ratios.
+    """
+    cfg = settings(quick)
+    if rounds is not None:
+        cfg["rounds"] = V.integer("rounds", rounds, minimum=1)
+        if cfg["rounds"] > MAX_ROUNDS:
+            raise V.LavenderInputError("rounds", f"must be at most {MAX_ROUNDS}", f", got {rounds}")
+    only = list(SECTIONS) if only is None else list(only)
+    bad = [s for s in only if s not in SECTIONS]
+    if bad:
+        raise V.LavenderInputError("only", f"must name sections of {', '.join(SECTIONS)}", f", got {', '.join(bad)}")
+    res: dict = {"schema": SCHEMA, "quick": quick, "machine": machine_stamp(),
+                 "config": {"body": {"shape": "box", "mass": MASS, "size": list(SIZE), "I_b": inertia().tolist(),
+                                     "q0": list(Q0), "omega_b0": list(OMEGA_B0), "v_w0": list(V_W0)},
+                            "dt": DT, "integrator": "rk4", "normalize": True, "statistic": "min over rounds",
+                            "clock": "CPU time of the process (time.process_time); two-thread cases: wall clock",
+                            "sections": only, **{k: (list(v) if isinstance(v, tuple) else v) for k, v in cfg.items()}},
+                 "targets": TARGETS, "errors": [], "handwritten": {"available": False}}
+    mj_ok, mj_why = mujoco_available() if use_mujoco else (False, "skipped (--no-mujoco)")
+    ctx = {"cfg": cfg, "R": cfg["rounds"], "quick": quick, "res": res,
+           "mj": {"available": True} if mj_ok else {"available": False, "reason": mj_why}}
+    _PROGRESS[0] = progress
+    try:
+        for name in SECTIONS:
+            if name not in only:
+                continue
+            try:
+                RUNNERS[name](ctx)
+            except Exception as exc:  # noqa: BLE001 - recorded; the other sections still run; the CLI exits 1
+                res["errors"].append({"section": name, "error": f"{type(exc).__name__}: {' '.join(str(exc).split())}"})
+    finally:
+        _PROGRESS[0] = None
+    try:
+        res["machine"]["loadavg_end"] = [round(x, 2) for x in os.getloadavg()]
+    except OSError:
+        res["machine"]["loadavg_end"] = None
+    res["mujoco"] = ctx["mj"]
     res["ratios"] = ratios(res)
     res["standing"] = standing(res)
     return res
@@ -761,35 +950,59 @@ def per_body_effects(sizes, body_steps: int, rounds: int) -> list[dict]:
 
 
 def _ns(res, key):
-    v = res["single_body"].get(key)
+    v = (res.get("single_body") or {}).get(key)
     return None if v is None else v["ns_min"]
 
 
+def _div(a, b):
+    return None if a is None or b is None or not b else a / b
+
+
 def ratios(res: dict) -> dict:
+    """Every ratio of the run by name (a section that did not run has none)."""
     c = _ns(res, "c_rk4")
     r = {}
     for k in ("handwritten_c", "handwritten_c_checked"):
-        if _ns(res, k):
-            r[f"c_rk4_over_{k}"] = c / _ns(res, k)
+        r[f"c_rk4_over_{k}"] = _div(c, _ns(res, k))
     for k in ("numpy_rk4", "python_step_c", "python_step_numpy"):
-        r[f"{k}_over_c_rk4"] = _ns(res, k) / c
+        r[f"{k}_over_c_rk4"] = _div(_ns(res, k), c)
     for integ in MUJOCO_INTEGRATORS:
         for how in ("mj_step", "rollout"):
-            v = _ns(res, f"mujoco_{integ}_{how}")
-            if v:
-                r[f"mujoco_{integ}_{how}_over_c_rk4"] = v / c
-    for b in res["batched"]:
+            r[f"mujoco_{integ}_{how}_over_c_rk4"] = _div(_ns(res, f"mujoco_{integ}_{how}"), c)
+    for b in res.get("batched", []):
         n = b["n_bodies"]
-        r[f"batched_{n}_c_ns_per_body_step_over_single"] = b["c"]["ns_min"] / c
+        r[f"batched_{n}_c_ns_per_body_step_over_single"] = _div(b["c"]["ns_min"], c)
         r[f"batched_{n}_numpy_over_c"] = b["numpy"]["ns_min"] / b["c"]["ns_min"]
-    for e in res["effects"]:
+    small = _small_scenes(res)
+    for n, v in (small or {}).get("ratios", {}).items():
+        r[f"small_scene_{n}_over_N_{small['large_n']}"] = v
+    for e in res.get("effects", []):
         r[f"effects[{e['name']}]_over_torque_free"] = e["ratio_to_torque_free"]
     for p in res.get("per_body_effects", []):
         r[f"per_body_applied_torque_{p['n_bodies']}_over_plain"] = p["ratio"]
     for row in (res.get("simd_batch") or {}).get("sizes", []):
-        if "ratio_to_hand_soa" in row:
-            r[f"simd_batch_{row['n_bodies']}_over_hand_soa"] = row["ratio_to_hand_soa"]
-    return r
+        for key in ("ratio_to_hand_soa", "ratio_to_hand_fma", "ratio_to_flop_floor", "hand_fma_over_flop_floor"):
+            if key in row:
+                r[f"simd_batch_{row['n_bodies']}_{key}"] = row[key]
+    for n, row in (res.get("effect_cost") or {}).get("sizes", {}).items():
+        for nm, v in row["ratios"].items():
+            if nm != "plain":
+                r[f"effect_cost[{nm}]_{n}_over_plain"] = v
+    for n, v in (res.get("numpy_peers") or {}).get("sizes", {}).items():
+        r[f"numpy_{n}_over_{v['peer']}"] = v["ratio"]
+    d = res.get("dopri5") or {}
+    if "ratio_per_rhs" in d:
+        r["dopri5_per_rhs_over_hand"] = d["ratio_per_rhs"]
+    return {k: v for k, v in r.items() if v is not None}
+
+
+def _small_scenes(res: dict) -> dict | None:
+    """ns per body-step at N = SMALL_SIZES over the largest N of the batched section (None without them)."""
+    rows = {b["n_bodies"]: b["c"]["ns_min"] for b in res.get("batched", [])}
+    if not rows or not all(n in rows for n in SMALL_SIZES):
+        return None
+    big = max(rows)
+    return {"large_n": big, "ratios": {n: rows[n] / rows[big] for n in SMALL_SIZES}}
 
 
 def _line(name, value, limit, kind, unit, basis):
@@ -800,45 +1013,61 @@ def _line(name, value, limit, kind, unit, basis):
             "kind": kind, "unit": unit, "basis": basis}
 
 
-def standing(res: dict) -> list[dict]:
+def _standing_single(res: dict) -> list[dict]:
     c = _ns(res, "c_rk4")
     out = [_line("C single-body RK4", c, TARGETS["c_single_rk4_ns"], "max", "ns/step",
                  "Sim.run(n), one C call, min over rounds")]
-    mj_step, mj_roll = _ns(res, "mujoco_RK4_mj_step"), _ns(res, "mujoco_RK4_rollout")
-    out.append(_line("faster than MuJoCo RK4 (mj_step loop)", None if mj_step is None else mj_step / c,
+    out.append(_line("faster than MuJoCo RK4 (mj_step loop)", _div(_ns(res, "mujoco_RK4_mj_step"), c),
                      TARGETS["mujoco_rk4_speedup"], "min", "x", "MuJoCo mj_step in a Python loop / LavenderSim C"))
-    out.append(_line("faster than MuJoCo RK4 (rollout, in C)", None if mj_roll is None else mj_roll / c,
+    out.append(_line("faster than MuJoCo RK4 (rollout, in C)", _div(_ns(res, "mujoco_RK4_rollout"), c),
                      TARGETS["mujoco_rk4_speedup"], "min", "x", "mujoco.rollout / LavenderSim C"))
-    big = [b for b in res["batched"] if b["n_bodies"] >= 1000]
+    big = [b for b in res.get("batched", []) if b["n_bodies"] >= 1000]
     worst = max((b["c"]["ns_min"] for b in big), default=None)
     out.append(_line("batched ns per body-step (worst of N >= 1e3)", worst, TARGETS["batched_ns_per_body_step"],
                      "max", "ns/body-step", "N = " + ", ".join(f"{b['n_bodies']:g}" for b in big)))
-    hw = _ns(res, "handwritten_c")
-    out.append(_line("RK4 torque-free single body \u2264 1.1\u00d7 hand C", None if hw is None else c / hw,
+    small = _small_scenes(res)
+    out.append(_line(f"small scenes N = {', '.join(map(str, SMALL_SIZES))} / the largest N, per body-step (worst)",
+                     None if small is None else max(small["ratios"].values()), TARGETS["small_scene_ratio"], "max", "x",
+                     "batched section not run" if small is None else
+                     "Sim.run in C, torque-free; " + ", ".join(f"N = {n}: {v:.2f}" for n, v in small["ratios"].items())
+                     + f" x N = {small['large_n']:g}"))
+    out.append(_line("RK4 torque-free single body \u2264 1.1\u00d7 hand C", _div(c, _ns(res, "handwritten_c")),
                      TARGETS["torque_free_vs_handwritten"], "max", "x",
                      "LavenderSim C / handwritten_rk4.c (inlined, same arithmetic, -O3; no checks)"))
+    return out
+
+
+def _standing_simd(res: dict) -> list[dict]:
     sb = res.get("simd_batch") or {"sizes": []}
     rows = [r for r in sb["sizes"] if r["n_bodies"] >= 1000]
     worst = max((r["ratio_to_hand_soa"] for r in rows if "ratio_to_hand_soa" in r), default=None)
-    out.append(_line("SIMD batch loop / hand-written SoA loop (worst of N >= 1e3)", worst,
-                     TARGETS["simd_batch_vs_hand_soa"], "max", "x",
-                     f"one C call, LavenderSim at {sb.get('best_isa')} / the fastest hand copy; "
-                     "N = " + ", ".join(f"{r['n_bodies']:g}" for r in rows)))
+    out = [_line("SIMD batch loop / hand-written SoA loop (worst of N >= 1e3)", worst,
+                 TARGETS["simd_batch_vs_hand_soa"], "max", "x",
+                 f"one C call, LavenderSim at {sb.get('best_isa')} / the fastest bitwise hand copy; "
+                 "N = " + ", ".join(f"{r['n_bodies']:g}" for r in rows))]
+    fl = [r for r in rows if "ratio_to_flop_floor" in r]
+    out.append(_line("SIMD batch loop / the flop floor (worst of N >= 1e3)",
+                     max((r["ratio_to_flop_floor"] for r in fl), default=None), TARGETS["simd_batch_vs_flop_floor"],
+                     "max", "x", "no FMA peer (no compiler)" if not fl else
+                     f"floor = {FMA_FLOPS} flops / the peak FMA rate measured now "
+                     + ", ".join(f"({r['peak_gflops']:.1f} Gflop/s: {r['flop_floor_ns']:.2f} ns)" for r in fl)
+                     + "; the best hand loop (handwritten_fma.c, FMA, -march=native) is at "
+                     + ", ".join(f"{r['hand_fma_over_flop_floor']:.2f}x" for r in fl) + " of it"))
     ns512 = max((r["lavendersim_avx512f"]["ns_min"] for r in rows if "lavendersim_avx512f" in r), default=None)
     floor = max((r["divider_floor"]["ns_min"] for r in rows
                  if r.get("divider_floor_isa") == "avx512f" and "divider_floor" in r), default=None)
     out.append(_line("SIMD batch ns per body-step on AVX-512 (worst of N >= 1e3)", ns512,
                      TARGETS["simd_batch_ns_avx512"], "max", "ns/body-step",
                      ("one C call at avx512f" if ns512 is not None else "this CPU or build has no AVX-512 path")
-                     + ("" if floor is None else f"; the divider alone (the normalization's 1 div + 1 sqrt per body-step, required for "
-                        f"bitwise results) takes {floor:.2f}")))
+                     + ("" if floor is None else f"; the divider alone (the normalization's 1 div + 1 sqrt per body-step, "
+                        f"required for bitwise results) takes {floor:.2f}")))
     for p in res.get("per_body_effects", []):
         out.append(_line(f"one applied_torque per body / plain body, N = {p['n_bodies']:g}", p["ratio"],
                          TARGETS["per_body_effect_ratio"], "max", "x", "ns per body-step, same run"))
     big = [r for r in sb["sizes"] if r["n_bodies"] >= 10_000 and "threads_speedup" in r]
     out.append(_line("two threads / one, SIMD batch loop (worst of N >= 1e4)",
                      min((r["threads_speedup"] for r in big), default=None), TARGETS["threads2_speedup"], "min", "x",
-                     "one C call at the best ISA, tiles split over 2 threads; "
+                     "one C call at the best ISA, tiles split over 2 threads, wall clock (CPU time hides a speed-up); "
                      + (f"{os.cpu_count()} cores, load {(res['machine'].get('loadavg') or ['?'])[0]}" if big
                         else "not measured (N >= 1e4 is not in this run)")))
     f32 = [r for r in res.get("float32_batch", []) if r["n_bodies"] >= 1000]
@@ -846,16 +1075,27 @@ def standing(res: dict) -> list[dict]:
                      TARGETS["float32_batch_speedup"], "min", "x",
                      "Sim.run on the C backend, float64 ns / float32 ns per body-step, same rounds; N = "
                      + ", ".join(f"{r['n_bodies']:g}" for r in f32)))
+    return out
+
+
+def _standing_step(res: dict) -> list[dict]:
     py, bare, mj0 = _ns(res, "python_step_c"), _ns(res, "c_call_1step"), _ns(res, "mujoco_empty_mj_step")
     basis = "min over rounds" + ("" if bare is None else f"; _c.simulate for one step {bare / 1e3:.3f} µs: the general entry, "
                                                   "which parses and checks its arguments and indexes the effects per call; sim.step() "
                                                   "calls a C stepper prepared once")
     if mj0 is not None:
         basis += f"; mujoco.mj_step on an empty model (its Python-call overhead) {mj0 / 1e3:.3f} µs"
-    out.append(_line("one Python sim.step(), c backend", py, TARGETS["python_step_c_ns"], "max", "ns/call", basis))
-    out += _envs.standing_lines(res, _line, TARGETS)
-    out += _scenes.standing_lines(res, _line, TARGETS)
-    out += _inertia.standing_lines(res, _line, TARGETS)
+    return [_line("one Python sim.step(), c backend", py, TARGETS["python_step_c_ns"], "max", "ns/call", basis)]
+
+
+def standing(res: dict) -> list[dict]:
+    """The PASS/MISS/N/A line of every target (N/A: its section did not run, or crashed)."""
+    out = _standing_single(res) + _standing_simd(res) + _standing_step(res)
+    out += _effect_cost.standing_lines(res, _line, TARGETS)
+    out += _dopri5.standing_lines(res, _line, TARGETS)
+    out += _numpy_section.standing_lines(res, _line, TARGETS)
+    for mod in (_envs, _scenes, _inertia):   # each says N/A when its section did not run
+        out += mod.standing_lines(res, _line, TARGETS)
     return out
 
 
@@ -872,17 +1112,42 @@ def _f(ns: float) -> str:
 def report(res: dict) -> str:
     m = res["machine"]
     L = [f"lavendersim bench{' --quick' if res['quick'] else ''} — speed as ratios measured in one run",
-         f"machine : {m['cpu']}; {m['cores']} cores ({m['cores_usable']} usable); load {m['loadavg']}",
+         f"machine : {m['cpu']}; {m['cores']} cores ({m['cores_usable']} usable); load {m['loadavg']} at the start, "
+         f"{m.get('loadavg_end')} at the end",
          f"software: {m['python']}, numpy {m['numpy']}, mujoco {m['mujoco'] or 'not installed'}, "
          f"lavendersim {m['lavendersim']}; compiler {m['compiler_version'] or 'none'}",
          f"isa     : extension's batch path {m.get('isa') or 'n/a'}; cpu flags {' '.join(m.get('cpu_flags') or []) or 'n/a'}",
          f"commit  : {m['git_commit'] or 'unknown'}{' (dirty)' if m['git_dirty'] else ''}; {m['date']}",
          f"body    : box {MASS} kg {SIZE} m, I_b = {np.array2string(inertia(), precision=5)}, "
-         f"omega_b0 = {OMEGA_B0}, dt = {DT} s, RK4, q normalized; min of {res['config']['rounds']} interleaved rounds",
-         ""]
-    s = res["single_body"]
+         f"omega_b0 = {OMEGA_B0}, dt = {DT} s, RK4, q normalized; CPU time, min of {res['config']['rounds']} "
+         "interleaved rounds"]
+    for part in (_report_single, _report_batched, _report_simd, _report_mujoco):
+        L += part(res)
+    L += _envs.report_lines(res, _f)
+    L += _scenes.report_lines(res, _f)
+    L += _inertia.report_lines(res, _f)
+    L += _effect_cost.report_lines(res, _f)
+    L += _dopri5.report_lines(res, _f)
+    L += _numpy_section.report_lines(res, _f)
+    L.append("")
+    L.append("targets")
+    for t in res["standing"]:
+        if t["value"] is None:
+            L.append(f"  N/A   {t['name']}: not measured ({t['basis']})")
+            continue
+        op = "<=" if t["kind"] == "max" else ">="
+        L.append(f"  {t['status']:<5} {t['name']}: {t['value']:.3g} {t['unit']} (target {op} {t['limit']:g}; {t['basis']})")
+    for e in failed_sections(res):
+        L.append(f"  CRASH section {e['section']}: {e['error']}")
+    return "\n".join(L)
+
+
+def _report_single(res: dict) -> list[str]:
+    s, hw = res.get("single_body"), res["handwritten"]
+    if s is None:
+        return []
     c = s["c_rk4"]["ns_min"]
-    hw = res["handwritten"]
+    L = [""]
     L.append("single body                                         per step     median   x C")
     rows = [("c_rk4", f"LavenderSim C, Sim.run({s['c_rk4']['units_per_call']:.0e} steps)"),
             ("handwritten_c", "hand-written C99 RK4 (ctypes, 1 call)"),
@@ -904,17 +1169,26 @@ def report(res: dict) -> str:
         a = hw["agreement"]
         L.append(f"  hand-written vs Sim ({a['steps']} steps): max |Δx| = {a['max_abs_diff']:.2e}"
                  f"{' (bitwise identical)' if a.get('bitwise') else ''}")
+    if "fma_agreement" in hw:
+        a = hw["fma_agreement"]
+        L.append(f"  hand FMA SoA loop vs Sim ({a['bodies']} bodies, {a['steps']} steps): max |Δx| = "
+                 + ", ".join(f"{v:.2e} ({k[len('max_abs_diff_'):]})" for k, v in a.items() if k.startswith("max_abs")))
     mj = res["mujoco"]
     if not mj["available"]:
         L.append(f"  MuJoCo: not measured — {mj.get('reason')}")
-    L.append("")
-    L.append("batched: N bodies in one C call                 C ns/body-step  NumPy ns/body-step  NumPy/C")
-    for b in res["batched"]:
+    return L
+
+
+def _report_batched(res: dict) -> list[str]:
+    L = []
+    if res.get("batched"):
+        L += ["", "batched: N bodies in one C call                 C ns/body-step  NumPy ns/body-step  NumPy/C"]
+    for b in res.get("batched", []):
         L.append(f"  N = {b['n_bodies']:<8g} ({b['c_steps']:>8} steps C, {b['numpy_steps']:>5} NumPy) "
                  f"{b['c']['ns_min']:10.1f}  {b['numpy']['ns_min']:14.1f}  {b['numpy']['ns_min'] / b['c']['ns_min']:10.1f}")
-    L.append("")
-    L.append("effect sets on one body, C (cumulative)           ns/step   x torque-free")
-    for e in res["effects"]:
+    if res.get("effects"):
+        L += ["", "effect sets on one body, C (cumulative)           ns/step   x torque-free"]
+    for e in res.get("effects", []):
         L.append(f"  {e['name']:<46}{e['ns_min']:8.1f}   {e['ratio_to_torque_free']:6.2f}")
     if res.get("per_body_effects"):
         L.append("")
@@ -928,6 +1202,11 @@ def report(res: dict) -> str:
         for r in res["float32_batch"]:
             L.append(f"  N = {r['n_bodies']:<8g} ({r['steps']:>8} steps)                     {r['float64']['ns_min']:10.2f}"
                      f"  {r['float32']['ns_min']:9.2f}  {r['speedup']:7.2f}x  {r['max_abs_diff_after_steps']:.2e}")
+    return L
+
+
+def _report_simd(res: dict) -> list[str]:
+    L = []
     sb = res.get("simd_batch")
     if sb and sb["sizes"]:
         L.append("")
@@ -935,13 +1214,22 @@ def report(res: dict) -> str:
         hands = [k[len("hand_soa_"):] for k in sb["sizes"][0] if k.startswith("hand_soa_")]
         L.append(f"SIMD batch, ns/body-step: the C batch loop (one call) per instruction set (best here: "
                  f"{sb['best_isa']}) and the hand-written SoA loop")
+        fmas = [k[len("hand_fma_"):] for k, v in sb["sizes"][0].items() if k.startswith("hand_fma_") and isinstance(v, dict)]
         L.append("  N          " + "".join(f"{'ours ' + nm:>14}" for nm in names)
-                 + "".join(f"{'hand ' + nm:>14}" for nm in hands) + "   ours/hand  bitwise")
+                 + "".join(f"{'hand ' + nm:>14}" for nm in hands) + "".join(f"{'fma ' + nm:>16}" for nm in fmas)
+                 + "   ours/hand  ours/fma  ours/floor  bitwise")
         for r in sb["sizes"]:
             L.append(f"  {r['n_bodies']:<9g}" + "".join(f"{r['lavendersim_' + nm]['ns_min']:14.2f}" for nm in names)
                      + "".join(f"{r['hand_soa_' + nm]['ns_min']:14.2f}" for nm in hands)
-                     + (f"{r['ratio_to_hand_soa']:12.2f}" if "ratio_to_hand_soa" in r else f"{'—':>12}")
+                     + "".join(f"{r['hand_fma_' + nm]['ns_min']:16.2f}" for nm in fmas)
+                     + "".join(f"{r[k]:{w}.2f}" if k in r else f"{'—':>{w}}" for k, w in
+                               (("ratio_to_hand_soa", 12), ("ratio_to_hand_fma", 10), ("ratio_to_flop_floor", 12)))
                      + f"  {'yes' if r['bitwise_identical'] else 'NO'}")
+        for r in sb["sizes"]:
+            if "flop_floor_ns" in r:
+                L.append(f"  N = {r['n_bodies']:g}: flop floor {r['flop_floor_ns']:.2f} ns/body-step ({FMA_FLOPS} flops at "
+                         f"{r['peak_gflops']:.1f} Gflop/s, the FMA rate a C loop reaches now); the FMA hand loop is at "
+                         f"{r['hand_fma_over_flop_floor']:.2f}x of it")
         for r in sb["sizes"]:
             if "divider_floor" in r:
                 L.append(f"  N = {r['n_bodies']:g}: divider floor at {r['divider_floor_isa']} {r['divider_floor']['ns_min']:.2f} "
@@ -949,7 +1237,12 @@ def report(res: dict) -> str:
         for r in sb["sizes"]:
             if "threads_speedup" in r:
                 L.append(f"  N = {r['n_bodies']:g}: two threads {r['lavendersim_2_threads']['ns_min']:.2f} ns/body-step, "
-                         f"speed-up {r['threads_speedup']:.2f}x over one")
+                         f"speed-up {r['threads_speedup']:.2f}x over one (both by the wall clock)")
+    return L
+
+
+def _report_mujoco(res: dict) -> list[str]:
+    L, mj = [], res["mujoco"]
     if mj["available"] and "agreement" in mj:
         a = mj["agreement"]
         L.append("")
@@ -963,61 +1256,4 @@ def report(res: dict) -> str:
         for integ in MUJOCO_INTEGRATORS:
             L.append(row(f"MuJoCo {integ} vs LavenderSim RK4", a[f"mujoco_{integ}_vs_lavendersim_rk4"]))
             L.append(row(f"MuJoCo {integ} vs exact", a[f"mujoco_{integ}_vs_exact"]))
-    elif "agreement_error" in mj:
-        L.append(f"MuJoCo agreement failed: {mj['agreement_error']}")
-    L += _envs.report_lines(res, _f)
-    L += _scenes.report_lines(res, _f)
-    L += _inertia.report_lines(res, _f)
-    L.append("")
-    L.append("targets")
-    for t in res["standing"]:
-        if t["value"] is None:
-            L.append(f"  N/A   {t['name']}: not measured ({t['basis']})")
-            continue
-        op = "<=" if t["kind"] == "max" else ">="
-        L.append(f"  {t['status']:<5} {t['name']}: {t['value']:.3g} {t['unit']} (target {op} {t['limit']:g}; {t['basis']})")
-    return "\n".join(L)
-
-
-def _jsonable(o):
-    if isinstance(o, dict):
-        return {str(k): _jsonable(v) for k, v in o.items()}
-    if isinstance(o, (list, tuple)):
-        return [_jsonable(v) for v in o]
-    if isinstance(o, (np.floating, np.integer)):
-        return o.item()
-    if isinstance(o, float) and not np.isfinite(o):
-        return None
-    return o
-
-
-def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--quick", action="store_true", help="short run (small step counts, N up to 1e3) for tests")
-    p.add_argument("--json", metavar="PATH", help="write every figure to PATH as JSON")
-    p.add_argument("--rounds", type=int, default=None, help="interleaved rounds per section (default 5; 2 with --quick)")
-    p.add_argument("--no-mujoco", action="store_true", help="skip MuJoCo even when it is installed")
-
-
-def command(args) -> int:
-    if args.rounds is not None:  # checked before any measurement (run() checks again for Python callers)
-        V.integer("rounds", args.rounds, minimum=1)
-    if args.json is not None:
-        V.writable_file("json", args.json)  # before a run of minutes, not after
-    res = run(quick=args.quick, rounds=args.rounds, use_mujoco=not args.no_mujoco)
-    print(report(res), flush=True)
-    if args.json is not None:
-        path = Path(args.json)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(json.dumps(_jsonable(res), indent=1) + "\n", encoding="utf-8")
-        print(f"\nwrote {path}")
-    return 0  # a missed target is reported, never an error
-
-
-def main(argv=None) -> int:
-    p = argparse.ArgumentParser(prog="python -m lavendersim.bench", description=__doc__.split("\n\n")[0])
-    add_arguments(p)
-    try:
-        return command(p.parse_args(argv))
-    except V.LavenderInputError as exc:  # as `lavendersim bench` does: one line, exit 2
-        print(f"python -m lavendersim.bench: invalid input: {exc}", file=sys.stderr)
-        return 2
+    return L

@@ -1,6 +1,6 @@
-"""`python -m lavendersim.bench` — the same as `lavendersim bench`."""
+"""`python -m lavendersim.bench` — the same as `lavendersim bench` (its options are in lavendersim.cli.bench)."""
 import sys
 
-from . import main
+from lavendersim.cli import main
 
-sys.exit(main())
+sys.exit(main(["bench", *sys.argv[1:]]))

@@ -90,7 +90,7 @@ def dopri5_section(quick: bool, rounds: int, interleaved, compile_c, single_sim,
 def standing_lines(res: dict, line, targets: dict) -> list[dict]:
     d = res.get("dopri5") or {}
     v = d.get("ratio_per_rhs")
-    basis = ("not measured (section failed or no compiler)" if v is None else
+    basis = (d.get("unavailable", "section not run or crashed") if v is None else
              f"ns per right-hand-side evaluation, one body, dt = {d['dt']} s, rtol {d['rtol']:g}: "
              f"{d['lavendersim']['ns_per_rhs']:.1f} against {d['hand']['ns_per_rhs']:.1f} "
              f"(handwritten_dopri5.c); states agree to {d['agreement']['max_abs_diff']:.1e}")

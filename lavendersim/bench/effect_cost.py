@@ -107,7 +107,7 @@ def standing_lines(res: dict, line, targets: dict) -> list[dict]:
     for nm, _, limit in SETS[1:]:
         vals = {n: row["ratios"][nm] for n, row in ec["sizes"].items() if nm in row["ratios"]}
         worst = max(vals.values(), default=None)
-        basis = ("not measured: " + (ec.get("user_effect") or "section failed")) if worst is None else (
+        basis = (ec.get("user_effect") or "section not run or crashed") if worst is None else (
             "ns per body-step / plain body's, Sim.run in C, same rounds; N = " + ", ".join(vals)
             + f"; flat in N: largest / smallest ratio {max(vals.values()) / min(vals.values()):.2f}")
         out.append(line(f"{nm} / plain body (worst of N)", worst, limit, "max", "x", basis))

@@ -1,0 +1,87 @@
+"""The NumPy-backend section of `lavendersim bench`: the backend against hand-written NumPy and plain Python (issue 30).
+
+The peers are lavendersim/bench/numpy_peers.py (written by hand, not the printed kernels): ``hand_rk4_soa`` (struct
+of arrays, coefficients once per run) at N = 1e3 and 1e5 (quick: 1e3), and ``python_rk4`` (one body, Python
+floats) at N = 1, each interleaved with ``Sim(..., backend="numpy").run`` on the same bodies (torque-free RK4, q
+normalized; CPU time, min over rounds). Targets: the backend within 1.5x of the hand NumPy loop at every N, and
+no slower than the Python loop for one body. Before timing, each peer and the backend advance the same state by
+AGREE_STEPS steps; the largest difference is recorded (the peers are right when it is ~1e-12 or less).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+SIZES_FULL = (1_000, 100_000)
+SIZES_QUICK = (1_000,)
+AGREE_STEPS = 50
+
+
+def numpy_section(quick: bool, rounds: int, interleaved, batch_sim, body_steps: int, progress=None) -> dict:
+    """Time the NumPy backend against its peers (see the module docstring).
+
+    Returns
+    -------
+    dict
+        ``sizes``: N -> {"numpy", "hand" stats (ns per body-step), "ratio" (numpy / hand), "steps",
+        "max_abs_diff"}.
+    """
+    from . import inertia
+    from . import numpy_peers as P
+
+    out = {"sizes": {}}
+    for n in (1,) + (SIZES_QUICK if quick else SIZES_FULL):
+        if progress:
+            progress(f"NumPy backend vs hand peers: N = {n}")
+        sim, ref = batch_sim(n, "numpy"), batch_sim(n, "numpy")
+        I = np.ascontiguousarray(np.tile(inertia()[:, None], (1, n)))
+        steps = max(2, min(2_000, body_steps // n))
+        ref.run(AGREE_STEPS)
+        if n == 1:
+            x0 = P.python_state(np.asarray(sim.x))
+            got = np.asarray(P.python_rk4(x0, I[:, 0], sim.dt, AGREE_STEPS))
+            state = {"x": list(x0)}
+
+            def hand(steps=steps):
+                state["x"] = P.python_rk4(state["x"], I[:, 0], sim.dt, steps)
+        else:
+            X = P.soa_state(np.asarray(sim.x).reshape(n, -1))
+            Xa = X.copy()
+            P.hand_rk4_soa(Xa, I, sim.dt, AGREE_STEPS)
+            got = Xa.T
+
+            def hand(steps=steps, X=X):
+                P.hand_rk4_soa(X, I, sim.dt, steps)
+        diff = float(np.max(np.abs(np.asarray(ref.x).reshape(n, -1) - np.asarray(got).reshape(n, -1))))
+        t = interleaved({"numpy": (lambda s=sim, k=steps: s.run(k), steps * n), "hand": (hand, steps * n)}, rounds,
+                        f"NumPy vs hand N = {n}")
+        out["sizes"][str(n)] = {"steps": steps, **t, "ratio": t["numpy"]["ns_min"] / t["hand"]["ns_min"],
+                                "peer": "python_rk4" if n == 1 else "hand_rk4_soa", "max_abs_diff": diff}
+        del sim, ref
+    return out
+
+
+def standing_lines(res: dict, line, targets: dict) -> list[dict]:
+    sec = (res.get("numpy_peers") or {}).get("sizes", {})
+    one = sec.get("1")
+    big = {n: v for n, v in sec.items() if n != "1"}
+    worst = max((v["ratio"] for v in big.values()), default=None)
+    return [
+        line("NumPy backend / hand NumPy RK4 (worst of N >= 1e3)", worst, targets["numpy_vs_hand_numpy"], "max", "x",
+             "section not run or crashed" if worst is None else "Sim(backend='numpy').run / numpy_peers.hand_rk4_soa, ns per "
+             "body-step; " + ", ".join(f"N = {n}: {v['ratio']:.2f}x" for n, v in big.items())),
+        line("NumPy backend / a pure-Python RK4 loop, one body", None if one is None else one["ratio"],
+             targets["numpy_single_vs_python"], "max", "x",
+             "section not run or crashed" if one is None else f"{one['numpy']['ns_min'] / 1e3:.1f} µs against "
+             f"{one['hand']['ns_min'] / 1e3:.1f} µs per step (numpy_peers.python_rk4)"),
+    ]
+
+
+def report_lines(res: dict, fmt) -> list[str]:
+    sec = (res.get("numpy_peers") or {}).get("sizes")
+    if not sec:
+        return []
+    L = ["", "NumPy backend against hand peers (torque-free RK4)   backend ns/body-step   peer   ratio  max|Δx|"]
+    for n, v in sec.items():
+        L.append(f"  N = {n:<8} ({v['peer']:<12}, {v['steps']:>5} steps) {v['numpy']['ns_min']:12.1f} "
+                 f"{v['hand']['ns_min']:12.1f} {v['ratio']:7.2f}  {v['max_abs_diff']:.1e}")
+    return L
