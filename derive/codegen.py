@@ -213,7 +213,11 @@ def print_c_user(printed: list[Printed], effects: list, set_name: str) -> tuple[
 def _np_kernel(p: Printed, pr: NpPrinter, dtype: str = "float64") -> list[str]:
     k = p.k
     doc = "\n".join(f"    {line}" if line else "" for line in _np_doc_lines(k)).lstrip()
-    out = [f"def {k.name}({', '.join(a.name for a in k.inputs)}):", f'    """{doc}    """']
+    # out=: the arrays to write the outputs into (one per output, None: allocate), e.g. component-major (k, n)
+    # buffers' transposes, so a struct-of-arrays caller writes each component contiguously and allocates nothing
+    doc = doc.replace("\n\n    Returns", "\n    out : tuple of (ndarray or None), optional\n        arrays the outputs are "
+                      "written into, in order (None: a new array); none may overlap an input\n\n    Returns", 1)
+    out = [f"def {k.name}({', '.join(a.name for a in k.inputs)}, *, out=None):", f'    """{doc}    """']
     for a in k.inputs:
         out.append(f"    {a.name} = numpy.asarray({a.name}, dtype=numpy.{dtype})")
     lead = []
@@ -236,7 +240,8 @@ def _np_kernel(p: Printed, pr: NpPrinter, dtype: str = "float64") -> list[str]:
     rets = []
     for a in k.outputs:
         shp = "" if a.shape == () else " + " + repr(tuple(a.shape))
-        out.append(f"{ind}{a.name}_out = numpy.empty(batch{shp}" + (")" if dtype == "float64" else f", dtype=numpy.{dtype})"))
+        out.append(f"{ind}{a.name}_out = numpy.empty(batch{shp}" + (")" if dtype == "float64" else f", dtype=numpy.{dtype})")
+                   + f" if out is None or out[{len(rets)}] is None else out[{len(rets)}]")
         for i in range(a.size):
             e = p.reduced[idx]
             idx += 1
@@ -253,11 +258,9 @@ def _np_kernel(p: Printed, pr: NpPrinter, dtype: str = "float64") -> list[str]:
 
 
 def print_numpy(printed: list[Printed], effects: list | None = None, header: str = HEADER,
-                self_check: bool = False, dtype: str = "float64") -> str:
-    """kernels_numpy.py: every kernel vectorized, the KERNELS table and the effects' dispatch.
-
-    self_check: the module's first statement checks its own sha256 against the manifest.json beside it
-    (lavendersim._integrity.check_generated), so a hand edit or a truncation raises at import."""
+                dtype: str = "float64") -> str:
+    """kernels_numpy.py: every kernel vectorized, the KERNELS table and the effects' dispatch. The module imports
+    NumPy only (the runtime's loader checks it against manifest.json: lavendersim._integrity)."""
     from . import effect_print
 
     pr = NpPrinter() if dtype == "float64" else NpPrinterF32()
@@ -267,11 +270,6 @@ def print_numpy(printed: list[Printed], effects: list | None = None, header: str
            "(..., n) broadcasts against the others; scalars may be floats or arrays of the batch shape.",
            "Quaternions are (x, y, z, w), scalar last; matrices are (..., 3, 3)." + ("" if prec else '"""'),
            *prec[:-1], *(prec[-1:] and [prec[-1] + '"""'])]
-    if self_check:
-        out += ["from lavendersim._integrity import check_generated as _check_generated",
-                "",
-                "_check_generated(__file__)  # this file against manifest.json: edited or truncated -> GeneratedFileError",
-                ""]
     body = []
     meta = []
     for p in printed:
@@ -436,38 +434,39 @@ def tool_versions() -> dict:
     return {"python": platform.python_version(), "sympy": sp.__version__}
 
 
-def render() -> dict[str, str]:
-    """Every file of generated/ (except manifest.json) as text, from a fresh derivation."""
+def render(progress=None) -> dict[str, str]:
+    """Every file of generated/ (except manifest.json) as text, from a fresh derivation. progress: an optional
+    callable given a short phrase before each phase (the CLI shows it)."""
     from . import all_effects, all_kernels
     from .effect_print import meta_module
 
-    printed = [Printed(k) for k in all_kernels()]
+    step = progress or (lambda _msg: None)
+    step("deriving the equations")
+    kernels = all_kernels()
+    step(f"simplifying {len(kernels)} kernels")
+    printed = [Printed(k) for k in kernels]
     effects = list(enumerate(all_effects(), start=1))
     forces = [(c, d) for c, d in effects if d.kind == "force"]
+    step("printing C, NumPy and CasADi")
     h, c = print_c(printed, forces)
     h32, c32 = print_c_f32(printed, forces)
-    files = {"kernels.h": h, "kernels.c": c, "kernels_numpy.py": print_numpy(printed, forces, self_check=True),
+    files = {"kernels.h": h, "kernels.c": c, "kernels_numpy.py": print_numpy(printed, forces),
              "kernels_f32.h": h32, "kernels_f32.c": c32,
-             "kernels_numpy_f32.py": print_numpy(printed, forces, self_check=True, dtype="float32"),
-             "kernels_casadi.py": print_casadi(printed), "effects_meta.py": meta_module(effects, HEADER),
-             "EQUATIONS.md": print_markdown(printed, effects)}
+             "kernels_numpy_f32.py": print_numpy(printed, forces, dtype="float32"),
+             "kernels_casadi.py": print_casadi(printed), "effects_meta.py": meta_module(effects, HEADER)}
+    step("printing EQUATIONS.md")
+    files["EQUATIONS.md"] = print_markdown(printed, effects)
+    step("printing the layouts and integrator tableaux")
     files.update(contract_files())
     files["__init__.py"] = package_init(sorted(n for n in files if n.endswith(".py")))
     return files
 
 
 def package_init(modules: list[str]) -> str:
-    """generated/__init__.py: importing any generated module first checks these Python modules against
-    manifest.json (lavendersim._integrity.check_generated), so a hand edit of layout.py, tableaux.py,
-    effects_meta.py, kernels_casadi.py or kernels_numpy.py raises GeneratedFileError instead of silently
-    changing what the NumPy backend computes — also a file cut mid-statement, which a module's own
-    first-line check cannot catch (Python compiles the whole file first)."""
-    names = ", ".join(repr(m) for m in modules)
-    return (f'"""{HEADER}"""\n'
-            "from pathlib import Path as _Path\n\n"
-            "from lavendersim._integrity import check_generated as _check_generated\n\n"
-            f"for _name in ({names},):\n"
-            "    _check_generated(_Path(__file__).with_name(_name))  # edited or truncated -> GeneratedFileError\n")
+    """generated/__init__.py: a docstring only (generated code imports nothing of the runtime). The runtime checks
+    each module against manifest.json when it imports it (lavendersim._integrity's import hook)."""
+    return (f'"""{HEADER}\n\nThe printed kernels and tables: {", ".join(m[:-3] for m in modules)}. Imported through '
+            'lavendersim, each module is first checked\nagainst manifest.json (lavendersim._integrity)."""\n')
 
 
 def contract_files() -> dict[str, str]:
@@ -488,7 +487,7 @@ def manifest_for(files: dict[str, str]) -> str:
     return json.dumps(body, indent=2, sort_keys=True) + "\n"
 
 
-def write(outdir: Path) -> list[str]:
+def write(outdir: Path, progress=None) -> list[str]:
     """Write generated/ atomically; return the files whose content changed.
 
     Every file is printed in memory first, then the folder is replaced as a whole
@@ -500,7 +499,8 @@ def write(outdir: Path) -> list[str]:
     from . import atomic
 
     outdir = Path(outdir)
-    files = render()
+    files = render(progress)
+    (progress or (lambda _msg: None))(f"writing {outdir}")
     files["manifest.json"] = manifest_for(files)
     owned = set()
     try:  # files an older derive wrote (listed in its manifest) are derive's to drop
@@ -510,7 +510,7 @@ def write(outdir: Path) -> list[str]:
     return atomic.replace_folder(outdir, files, owned=owned)
 
 
-def check(outdir: Path, full: bool = False) -> list[str]:
+def check(outdir: Path, full: bool = False, progress=None) -> list[str]:
     """Return the stale files of outdir (empty: current). Writes nothing.
 
     Fast path: when the manifest records this exact derive/ source hash and tool versions, and every
@@ -522,6 +522,8 @@ def check(outdir: Path, full: bool = False) -> list[str]:
         man = json.loads(man_path.read_text(encoding="utf-8"))
     except (OSError, ValueError):
         man = None
+    if man is not None:
+        (progress or (lambda _msg: None))("checking the manifest")
     if man is not None and not full and man.get("derive_sources_sha256") == source_hash() and man.get("tools") == tool_versions():
         stale = []
         for name, want in sorted(man.get("outputs_sha256", {}).items()):
@@ -530,7 +532,7 @@ def check(outdir: Path, full: bool = False) -> list[str]:
                 stale.append(name)
         if not stale:
             return []
-    files = render()
+    files = render(progress)
     stale = [name for name, text in sorted(files.items())
              if not (outdir / name).exists() or (outdir / name).read_text(encoding="utf-8") != text]
     # The manifest must record these derive/ sources and these outputs. The tool versions it

@@ -3013,6 +3013,121 @@ void lv_wheels4_motor(const double *command, const double *Omega, double torque_
 ));
 }
 
+void lv_quat_error_chart_inverse(const double *q_ref, const double *dtheta, double *q) {
+    const double q_ref_0 = q_ref[0];
+    const double q_ref_1 = q_ref[1];
+    const double q_ref_2 = q_ref[2];
+    const double q_ref_3 = q_ref[3];
+    const double dtheta_0 = dtheta[0];
+    const double dtheta_1 = dtheta[1];
+    const double dtheta_2 = dtheta[2];
+    const double t0 = ((1.0/2.0))*dtheta_0;
+    const double t1 = ((1.0/2.0))*dtheta_1;
+    const double t2 = ((1.0/2.0))*dtheta_2;
+    const double t3 = sqrt(-(1.0/4.0)*(dtheta_0*dtheta_0) - (1.0/4.0)*(dtheta_1*dtheta_1) - (1.0/4.0)*(dtheta_2*dtheta_2) + 1);
+    q[0] = q_ref_0*t3 + q_ref_1*t2 - q_ref_2*t1 + q_ref_3*t0;
+    q[1] = -q_ref_0*t2 + q_ref_1*t3 + q_ref_2*t0 + q_ref_3*t1;
+    q[2] = q_ref_0*t1 - q_ref_1*t0 + q_ref_2*t3 + q_ref_3*t2;
+    q[3] = -q_ref_0*t0 - q_ref_1*t1 - q_ref_2*t2 + q_ref_3*t3;
+}
+
+void lv_quat_normalize_scaled(const double *q, double *q_unit, double *norm) {
+    const double q_0 = q[0];
+    const double q_1 = q[1];
+    const double q_2 = q[2];
+    const double q_3 = q[3];
+    const double q_scale = fmax(fabs(q_0), fmax(fabs(q_1), fmax(fabs(q_2), fabs(q_3))));
+    const double q_scaled_0 = q_0/q_scale;
+    const double q_scaled_1 = q_1/q_scale;
+    const double q_scaled_2 = q_2/q_scale;
+    const double q_scaled_3 = q_3/q_scale;
+    const double q_scaled_norm = sqrt((q_scaled_0*q_scaled_0) + (q_scaled_1*q_scaled_1) + (q_scaled_2*q_scaled_2) + (q_scaled_3*q_scaled_3));
+    const double t0 = (1.0/q_scaled_norm);
+    q_unit[0] = q_scaled_0*t0;
+    q_unit[1] = q_scaled_1*t0;
+    q_unit[2] = q_scaled_2*t0;
+    q_unit[3] = q_scaled_3*t0;
+    norm[0] = ((q_scale == 0) ? (
+   0
+)
+: (
+   q_scale*q_scaled_norm
+));
+}
+
+void lv_wheels4_free_inertia(const double *I_p, const double *A_b, const double *J, double *M) {
+    const double I_p_00 = I_p[0];
+    const double I_p_01 = I_p[1];
+    const double I_p_02 = I_p[2];
+    const double I_p_11 = I_p[4];
+    const double I_p_12 = I_p[5];
+    const double I_p_22 = I_p[8];
+    const double A_b_00 = A_b[0];
+    const double A_b_01 = A_b[1];
+    const double A_b_02 = A_b[2];
+    const double A_b_03 = A_b[3];
+    const double A_b_10 = A_b[4];
+    const double A_b_11 = A_b[5];
+    const double A_b_12 = A_b[6];
+    const double A_b_13 = A_b[7];
+    const double A_b_20 = A_b[8];
+    const double A_b_21 = A_b[9];
+    const double A_b_22 = A_b[10];
+    const double A_b_23 = A_b[11];
+    const double J_0 = J[0];
+    const double J_1 = J[1];
+    const double J_2 = J[2];
+    const double J_3 = J[3];
+    const double t0 = A_b_00*J_0;
+    const double t1 = A_b_01*J_1;
+    const double t2 = A_b_02*J_2;
+    const double t3 = A_b_03*J_3;
+    const double t4 = -A_b_10*t0 - A_b_11*t1 - A_b_12*t2 - A_b_13*t3 + I_p_01;
+    const double t5 = -A_b_20*t0 - A_b_21*t1 - A_b_22*t2 - A_b_23*t3 + I_p_02;
+    const double t6 = -A_b_10*A_b_20*J_0 - A_b_11*A_b_21*J_1 - A_b_12*A_b_22*J_2 - A_b_13*A_b_23*J_3 + I_p_12;
+    M[0] = -(A_b_00*A_b_00)*J_0 - (A_b_01*A_b_01)*J_1 - (A_b_02*A_b_02)*J_2 - (A_b_03*A_b_03)*J_3 + I_p_00;
+    M[1] = t4;
+    M[2] = t5;
+    M[3] = t4;
+    M[4] = -(A_b_10*A_b_10)*J_0 - (A_b_11*A_b_11)*J_1 - (A_b_12*A_b_12)*J_2 - (A_b_13*A_b_13)*J_3 + I_p_11;
+    M[5] = t6;
+    M[6] = t5;
+    M[7] = t6;
+    M[8] = -(A_b_20*A_b_20)*J_0 - (A_b_21*A_b_21)*J_1 - (A_b_22*A_b_22)*J_2 - (A_b_23*A_b_23)*J_3 + I_p_22;
+}
+
+void lv_box_of_inertia(double m, const double *I_b, double *edges) {
+    const double I_b_0 = I_b[0];
+    const double I_b_1 = I_b[1];
+    const double I_b_2 = I_b[2];
+    const double t0 = (1.0/sqrt(m));
+    const double t1 = 6*I_b_0;
+    const double t2 = 6*I_b_1;
+    const double t3 = 6*I_b_2;
+    const double t4 = -t1 + t2 + t3;
+    const double t5 = (1.0/m);
+    const double t6 = t1 - t2 + t3;
+    const double t7 = t1 + t2 - t3;
+    edges[0] = ((t4*t5 > (1.0/1000000.0)) ? (
+   t0*sqrt(t4)
+)
+: (
+   (1.0/1000.0)
+));
+    edges[1] = ((t5*t6 > (1.0/1000000.0)) ? (
+   t0*sqrt(t6)
+)
+: (
+   (1.0/1000.0)
+));
+    edges[2] = ((t5*t7 > (1.0/1000000.0)) ? (
+   t0*sqrt(t7)
+)
+: (
+   (1.0/1000.0)
+));
+}
+
 /* ---- Scene effects: accumulating functions and dispatch -------------------------------------- */
 /* applied_torque: adds tau_com_w for one body. p = [torque_w(3)] */
 static inline void lv_effect_acc_applied_torque(const double *p, const double *x, const double *v_w, double m, const double *I_b, double *F, double *tau)
@@ -3186,6 +3301,10 @@ static void packed_wheels4_coefficients(const double *in, double *out) { lv_whee
 static void packed_wheels4_body_rhs_c(const double *in, double *out) { lv_wheels4_body_rhs_c(in + 0, in + 4, in + 7, in + 11, in + 20, in + 32, in + 36, in + 49, in + 52, in + 55, in + 58, in[62], out + 0, out + 4, out + 7); }
 static void packed_wheels4_momentum(const double *in, double *out) { lv_wheels4_momentum(in + 0, in + 4, in + 7, in + 11, in + 20, in + 32, out + 0, out + 3, out + 6); }
 static void packed_wheels4_motor(const double *in, double *out) { lv_wheels4_motor(in + 0, in + 4, in[8], in[9], in[10], out + 0); }
+static void packed_quat_error_chart_inverse(const double *in, double *out) { lv_quat_error_chart_inverse(in + 0, in + 4, out + 0); }
+static void packed_quat_normalize_scaled(const double *in, double *out) { lv_quat_normalize_scaled(in + 0, out + 0, out + 4); }
+static void packed_wheels4_free_inertia(const double *in, double *out) { lv_wheels4_free_inertia(in + 0, in + 9, in + 21, out + 0); }
+static void packed_box_of_inertia(const double *in, double *out) { lv_box_of_inertia(in[0], in + 1, out + 0); }
 
 const lv_kernel_info lv_kernel_table[LV_KERNEL_COUNT] = {
     {"particle_moments", 7, 6, packed_particle_moments},
@@ -3264,4 +3383,8 @@ const lv_kernel_info lv_kernel_table[LV_KERNEL_COUNT] = {
     {"wheels4_body_rhs_c", 63, 11, packed_wheels4_body_rhs_c},
     {"wheels4_momentum", 36, 10, packed_wheels4_momentum},
     {"wheels4_motor", 11, 4, packed_wheels4_motor},
+    {"quat_error_chart_inverse", 7, 4, packed_quat_error_chart_inverse},
+    {"quat_normalize_scaled", 4, 5, packed_quat_normalize_scaled},
+    {"wheels4_free_inertia", 25, 9, packed_wheels4_free_inertia},
+    {"box_of_inertia", 4, 3, packed_box_of_inertia},
 };

@@ -11,7 +11,7 @@ typedef struct {
     void (*packed)(const double *in, double *out);
 } lv_kernel_info;
 
-#define LV_KERNEL_COUNT 76
+#define LV_KERNEL_COUNT 80
 extern const lv_kernel_info lv_kernel_table[LV_KERNEL_COUNT];
 
 /* particle_moments: One particle's mass moment and momentum (summed: m r_COM and p).
@@ -601,6 +601,31 @@ void lv_wheels4_momentum(const double *q, const double *omega_b, const double *O
      in  cutoff scalar: 1: hard cut-off at speed_limit instead of the line; 0: the line
      out u [4]: applied motor torques, N·m */
 void lv_wheels4_motor(const double *command, const double *Omega, double torque_limit, double speed_limit, double cutoff, double *u);
+
+/* quat_error_chart_inverse: Orientation at an attitude error about a reference (inverse of quat_error_chart).
+     in  q_ref [4]: quaternion (x, y, z, w), scalar last, unit, body to world
+     in  dtheta [3]: attitude error, body frame, rad; |dtheta| < 2
+     out q [4]: quaternion (x, y, z, w), scalar last, unit, body to world */
+void lv_quat_error_chart_inverse(const double *q_ref, const double *dtheta, double *q);
+
+/* quat_normalize_scaled: Scale to unit length without overflow or underflow, and the norm.
+     in  q [4]: quaternion (x, y, z, w), scalar last
+     out q_unit [4]: quaternion (x, y, z, w), scalar last, unit (NaN for the zero quaternion)
+     out norm scalar: |q| (0 for the zero quaternion; may overflow to inf) */
+void lv_quat_normalize_scaled(const double *q, double *q_unit, double *norm);
+
+/* wheels4_free_inertia: Inertia of a wheeled body with its wheels free to spin.
+     in  I_p [3×3]: inertia with the wheels locked, body frame, kg·m², symmetric row-major
+     in  A_b [3×4]: wheel spin axes as columns (3×4; an unused slot is a zero column), body frame, row-major
+     in  J [4]: wheel axial inertias (4), kg·m²
+     out M [3×3]: 3×3, body frame, kg·m², row-major (must stay positive definite) */
+void lv_wheels4_free_inertia(const double *I_p, const double *A_b, const double *J, double *M);
+
+/* box_of_inertia: Edges of the uniform box with a given mass and principal moments.
+     in  m scalar: mass, kg
+     in  I_b [3]: principal moments (or the diagonal), kg·m²
+     out edges [3]: box edges along the body axes, m (each at least 0.001) */
+void lv_box_of_inertia(double m, const double *I_b, double *edges);
 
 /* ---- Scene effects (derive/effects.py): effect table layout, codes and dispatch ---------------- */
 #define LV_EFFECT_ROW_CODE 0     /* an effect table row: [code, body, parameters...] */

@@ -2494,3 +2494,98 @@ def wheels4_motor(command, Omega, torque_limit, speed_limit, cutoff):
     t50 = torque_limit*(-t13*t41 + 1)
     t51 = -t50
     return casadi.vertcat(casadi.if_else(t7, casadi.if_else(casadi.if_else(t1, casadi.logic_and(t3, (t4 < 0)), casadi.if_else(t5, casadi.logic_and(t3, (t4 > 0)), casadi.logic_and(t3, (Omega_0*command_0 > 0)))), 0, t6), casadi.if_else(casadi.logic_and(casadi.logic_and(casadi.logic_and(casadi.logic_or(t10, t12), casadi.logic_or(t10, t9)), casadi.logic_or(t12, t8)), casadi.logic_or(t8, t9)), 0, casadi.if_else(casadi.logic_and(casadi.logic_and((Omega_0 > 0), (command_0 > t14)), (Omega_0 < speed_limit)), t14, casadi.if_else(casadi.logic_and(casadi.logic_and((Omega_0 > t11), (Omega_0 < 0)), (command_0 < t15)), t15, t6)))), casadi.if_else(t7, casadi.if_else(casadi.if_else(t16, casadi.logic_and(t18, (t19 < 0)), casadi.if_else(t20, casadi.logic_and(t18, (t19 > 0)), casadi.logic_and(t18, (Omega_1*command_1 > 0)))), 0, t21), casadi.if_else(casadi.logic_and(casadi.logic_and(casadi.logic_and(casadi.logic_or(t22, t23), casadi.logic_or(t22, t25)), casadi.logic_or(t23, t24)), casadi.logic_or(t24, t25)), 0, casadi.if_else(casadi.logic_and(casadi.logic_and((Omega_1 > 0), (command_1 > t26)), (Omega_1 < speed_limit)), t26, casadi.if_else(casadi.logic_and(casadi.logic_and((Omega_1 > t11), (Omega_1 < 0)), (command_1 < t27)), t27, t21)))), casadi.if_else(t7, casadi.if_else(casadi.if_else(t28, casadi.logic_and(t30, (t31 < 0)), casadi.if_else(t32, casadi.logic_and(t30, (t31 > 0)), casadi.logic_and(t30, (Omega_2*command_2 > 0)))), 0, t33), casadi.if_else(casadi.logic_and(casadi.logic_and(casadi.logic_and(casadi.logic_or(t34, t35), casadi.logic_or(t34, t37)), casadi.logic_or(t35, t36)), casadi.logic_or(t36, t37)), 0, casadi.if_else(casadi.logic_and(casadi.logic_and((Omega_2 > 0), (command_2 > t38)), (Omega_2 < speed_limit)), t38, casadi.if_else(casadi.logic_and(casadi.logic_and((Omega_2 > t11), (Omega_2 < 0)), (command_2 < t39)), t39, t33)))), casadi.if_else(t7, casadi.if_else(casadi.if_else(t40, casadi.logic_and(t42, (t43 < 0)), casadi.if_else(t44, casadi.logic_and(t42, (t43 > 0)), casadi.logic_and(t42, (Omega_3*command_3 > 0)))), 0, t45), casadi.if_else(casadi.logic_and(casadi.logic_and(casadi.logic_and(casadi.logic_or(t46, t47), casadi.logic_or(t46, t49)), casadi.logic_or(t47, t48)), casadi.logic_or(t48, t49)), 0, casadi.if_else(casadi.logic_and(casadi.logic_and((Omega_3 > 0), (command_3 > t50)), (Omega_3 < speed_limit)), t50, casadi.if_else(casadi.logic_and(casadi.logic_and((Omega_3 > t11), (Omega_3 < 0)), (command_3 < t51)), t51, t45)))))
+
+
+def quat_error_chart_inverse(q_ref, dtheta):
+    """quat_error_chart_inverse: Orientation at an attitude error about a reference (inverse of quat_error_chart).
+      in  q_ref [4]: quaternion (x, y, z, w), scalar last, unit, body to world
+      in  dtheta [3]: attitude error, body frame, rad; |dtheta| < 2
+      out q [4]: quaternion (x, y, z, w), scalar last, unit, body to world"""
+    q_ref_0 = q_ref[0]
+    q_ref_1 = q_ref[1]
+    q_ref_2 = q_ref[2]
+    q_ref_3 = q_ref[3]
+    dtheta_0 = dtheta[0]
+    dtheta_1 = dtheta[1]
+    dtheta_2 = dtheta[2]
+    t0 = ((1.0/2.0))*dtheta_0
+    t1 = ((1.0/2.0))*dtheta_1
+    t2 = ((1.0/2.0))*dtheta_2
+    t3 = casadi.sqrt(-(1.0/4.0)*(dtheta_0*dtheta_0) - (1.0/4.0)*(dtheta_1*dtheta_1) - (1.0/4.0)*(dtheta_2*dtheta_2) + 1)
+    return casadi.vertcat(q_ref_0*t3 + q_ref_1*t2 - q_ref_2*t1 + q_ref_3*t0, -q_ref_0*t2 + q_ref_1*t3 + q_ref_2*t0 + q_ref_3*t1, q_ref_0*t1 - q_ref_1*t0 + q_ref_2*t3 + q_ref_3*t2, -q_ref_0*t0 - q_ref_1*t1 - q_ref_2*t2 + q_ref_3*t3)
+
+
+def quat_normalize_scaled(q):
+    """quat_normalize_scaled: Scale to unit length without overflow or underflow, and the norm.
+      in  q [4]: quaternion (x, y, z, w), scalar last
+      out q_unit [4]: quaternion (x, y, z, w), scalar last, unit (NaN for the zero quaternion)
+      out norm scalar: |q| (0 for the zero quaternion; may overflow to inf)"""
+    q_0 = q[0]
+    q_1 = q[1]
+    q_2 = q[2]
+    q_3 = q[3]
+    q_scale = casadi.fmax(casadi.fmax(casadi.fmax(casadi.fabs(q_0), casadi.fabs(q_1)), casadi.fabs(q_2)), casadi.fabs(q_3))
+    q_scaled_0 = q_0/q_scale
+    q_scaled_1 = q_1/q_scale
+    q_scaled_2 = q_2/q_scale
+    q_scaled_3 = q_3/q_scale
+    q_scaled_norm = casadi.sqrt((q_scaled_0*q_scaled_0) + (q_scaled_1*q_scaled_1) + (q_scaled_2*q_scaled_2) + (q_scaled_3*q_scaled_3))
+    t0 = (1.0/q_scaled_norm)
+    return casadi.vertcat(q_scaled_0*t0, q_scaled_1*t0, q_scaled_2*t0, q_scaled_3*t0), casadi.vertcat(casadi.if_else((q_scale == 0), 0, q_scale*q_scaled_norm))
+
+
+def wheels4_free_inertia(I_p, A_b, J):
+    """wheels4_free_inertia: Inertia of a wheeled body with its wheels free to spin.
+      in  I_p [3×3]: inertia with the wheels locked, body frame, kg·m², symmetric row-major
+      in  A_b [3×4]: wheel spin axes as columns (3×4; an unused slot is a zero column), body frame, row-major
+      in  J [4]: wheel axial inertias (4), kg·m²
+      out M [3×3]: 3×3, body frame, kg·m², row-major (must stay positive definite)"""
+    I_p_00 = I_p[0]
+    I_p_01 = I_p[1]
+    I_p_02 = I_p[2]
+    I_p_11 = I_p[4]
+    I_p_12 = I_p[5]
+    I_p_22 = I_p[8]
+    A_b_00 = A_b[0]
+    A_b_01 = A_b[1]
+    A_b_02 = A_b[2]
+    A_b_03 = A_b[3]
+    A_b_10 = A_b[4]
+    A_b_11 = A_b[5]
+    A_b_12 = A_b[6]
+    A_b_13 = A_b[7]
+    A_b_20 = A_b[8]
+    A_b_21 = A_b[9]
+    A_b_22 = A_b[10]
+    A_b_23 = A_b[11]
+    J_0 = J[0]
+    J_1 = J[1]
+    J_2 = J[2]
+    J_3 = J[3]
+    t0 = A_b_00*J_0
+    t1 = A_b_01*J_1
+    t2 = A_b_02*J_2
+    t3 = A_b_03*J_3
+    t4 = -A_b_10*t0 - A_b_11*t1 - A_b_12*t2 - A_b_13*t3 + I_p_01
+    t5 = -A_b_20*t0 - A_b_21*t1 - A_b_22*t2 - A_b_23*t3 + I_p_02
+    t6 = -A_b_10*A_b_20*J_0 - A_b_11*A_b_21*J_1 - A_b_12*A_b_22*J_2 - A_b_13*A_b_23*J_3 + I_p_12
+    return casadi.vertcat(-(A_b_00*A_b_00)*J_0 - (A_b_01*A_b_01)*J_1 - (A_b_02*A_b_02)*J_2 - (A_b_03*A_b_03)*J_3 + I_p_00, t4, t5, t4, -(A_b_10*A_b_10)*J_0 - (A_b_11*A_b_11)*J_1 - (A_b_12*A_b_12)*J_2 - (A_b_13*A_b_13)*J_3 + I_p_11, t6, t5, t6, -(A_b_20*A_b_20)*J_0 - (A_b_21*A_b_21)*J_1 - (A_b_22*A_b_22)*J_2 - (A_b_23*A_b_23)*J_3 + I_p_22)
+
+
+def box_of_inertia(m, I_b):
+    """box_of_inertia: Edges of the uniform box with a given mass and principal moments.
+      in  m scalar: mass, kg
+      in  I_b [3]: principal moments (or the diagonal), kg·m²
+      out edges [3]: box edges along the body axes, m (each at least 0.001)"""
+    I_b_0 = I_b[0]
+    I_b_1 = I_b[1]
+    I_b_2 = I_b[2]
+    t0 = (1.0/casadi.sqrt(m))
+    t1 = 6*I_b_0
+    t2 = 6*I_b_1
+    t3 = 6*I_b_2
+    t4 = -t1 + t2 + t3
+    t5 = (1.0/m)
+    t6 = t1 - t2 + t3
+    t7 = t1 + t2 - t3
+    return casadi.vertcat(casadi.if_else((t4*t5 > (1.0/1000000.0)), t0*casadi.sqrt(t4), (1.0/1000.0)), casadi.if_else((t5*t6 > (1.0/1000000.0)), t0*casadi.sqrt(t6), (1.0/1000.0)), casadi.if_else((t5*t7 > (1.0/1000000.0)), t0*casadi.sqrt(t7), (1.0/1000.0)))

@@ -3014,6 +3014,121 @@ void lvf_wheels4_motor(const float *command, const float *Omega, float torque_li
 ));
 }
 
+void lvf_quat_error_chart_inverse(const float *q_ref, const float *dtheta, float *q) {
+    const float q_ref_0 = q_ref[0];
+    const float q_ref_1 = q_ref[1];
+    const float q_ref_2 = q_ref[2];
+    const float q_ref_3 = q_ref[3];
+    const float dtheta_0 = dtheta[0];
+    const float dtheta_1 = dtheta[1];
+    const float dtheta_2 = dtheta[2];
+    const float t0 = ((1.0F/2.0F))*dtheta_0;
+    const float t1 = ((1.0F/2.0F))*dtheta_1;
+    const float t2 = ((1.0F/2.0F))*dtheta_2;
+    const float t3 = sqrtf(-(1.0F/4.0F)*(dtheta_0*dtheta_0) - (1.0F/4.0F)*(dtheta_1*dtheta_1) - (1.0F/4.0F)*(dtheta_2*dtheta_2) + 1);
+    q[0] = q_ref_0*t3 + q_ref_1*t2 - q_ref_2*t1 + q_ref_3*t0;
+    q[1] = -q_ref_0*t2 + q_ref_1*t3 + q_ref_2*t0 + q_ref_3*t1;
+    q[2] = q_ref_0*t1 - q_ref_1*t0 + q_ref_2*t3 + q_ref_3*t2;
+    q[3] = -q_ref_0*t0 - q_ref_1*t1 - q_ref_2*t2 + q_ref_3*t3;
+}
+
+void lvf_quat_normalize_scaled(const float *q, float *q_unit, float *norm) {
+    const float q_0 = q[0];
+    const float q_1 = q[1];
+    const float q_2 = q[2];
+    const float q_3 = q[3];
+    const float q_scale = fmaxf(fabsf(q_0), fmaxf(fabsf(q_1), fmaxf(fabsf(q_2), fabsf(q_3))));
+    const float q_scaled_0 = q_0/q_scale;
+    const float q_scaled_1 = q_1/q_scale;
+    const float q_scaled_2 = q_2/q_scale;
+    const float q_scaled_3 = q_3/q_scale;
+    const float q_scaled_norm = sqrtf((q_scaled_0*q_scaled_0) + (q_scaled_1*q_scaled_1) + (q_scaled_2*q_scaled_2) + (q_scaled_3*q_scaled_3));
+    const float t0 = (1.0F/q_scaled_norm);
+    q_unit[0] = q_scaled_0*t0;
+    q_unit[1] = q_scaled_1*t0;
+    q_unit[2] = q_scaled_2*t0;
+    q_unit[3] = q_scaled_3*t0;
+    norm[0] = ((q_scale == 0) ? (
+   0
+)
+: (
+   q_scale*q_scaled_norm
+));
+}
+
+void lvf_wheels4_free_inertia(const float *I_p, const float *A_b, const float *J, float *M) {
+    const float I_p_00 = I_p[0];
+    const float I_p_01 = I_p[1];
+    const float I_p_02 = I_p[2];
+    const float I_p_11 = I_p[4];
+    const float I_p_12 = I_p[5];
+    const float I_p_22 = I_p[8];
+    const float A_b_00 = A_b[0];
+    const float A_b_01 = A_b[1];
+    const float A_b_02 = A_b[2];
+    const float A_b_03 = A_b[3];
+    const float A_b_10 = A_b[4];
+    const float A_b_11 = A_b[5];
+    const float A_b_12 = A_b[6];
+    const float A_b_13 = A_b[7];
+    const float A_b_20 = A_b[8];
+    const float A_b_21 = A_b[9];
+    const float A_b_22 = A_b[10];
+    const float A_b_23 = A_b[11];
+    const float J_0 = J[0];
+    const float J_1 = J[1];
+    const float J_2 = J[2];
+    const float J_3 = J[3];
+    const float t0 = A_b_00*J_0;
+    const float t1 = A_b_01*J_1;
+    const float t2 = A_b_02*J_2;
+    const float t3 = A_b_03*J_3;
+    const float t4 = -A_b_10*t0 - A_b_11*t1 - A_b_12*t2 - A_b_13*t3 + I_p_01;
+    const float t5 = -A_b_20*t0 - A_b_21*t1 - A_b_22*t2 - A_b_23*t3 + I_p_02;
+    const float t6 = -A_b_10*A_b_20*J_0 - A_b_11*A_b_21*J_1 - A_b_12*A_b_22*J_2 - A_b_13*A_b_23*J_3 + I_p_12;
+    M[0] = -(A_b_00*A_b_00)*J_0 - (A_b_01*A_b_01)*J_1 - (A_b_02*A_b_02)*J_2 - (A_b_03*A_b_03)*J_3 + I_p_00;
+    M[1] = t4;
+    M[2] = t5;
+    M[3] = t4;
+    M[4] = -(A_b_10*A_b_10)*J_0 - (A_b_11*A_b_11)*J_1 - (A_b_12*A_b_12)*J_2 - (A_b_13*A_b_13)*J_3 + I_p_11;
+    M[5] = t6;
+    M[6] = t5;
+    M[7] = t6;
+    M[8] = -(A_b_20*A_b_20)*J_0 - (A_b_21*A_b_21)*J_1 - (A_b_22*A_b_22)*J_2 - (A_b_23*A_b_23)*J_3 + I_p_22;
+}
+
+void lvf_box_of_inertia(float m, const float *I_b, float *edges) {
+    const float I_b_0 = I_b[0];
+    const float I_b_1 = I_b[1];
+    const float I_b_2 = I_b[2];
+    const float t0 = (1.0F/sqrtf(m));
+    const float t1 = 6*I_b_0;
+    const float t2 = 6*I_b_1;
+    const float t3 = 6*I_b_2;
+    const float t4 = -t1 + t2 + t3;
+    const float t5 = (1.0F/m);
+    const float t6 = t1 - t2 + t3;
+    const float t7 = t1 + t2 - t3;
+    edges[0] = ((t4*t5 > (1.0F/1000000.0F)) ? (
+   t0*sqrtf(t4)
+)
+: (
+   (1.0F/1000.0F)
+));
+    edges[1] = ((t5*t6 > (1.0F/1000000.0F)) ? (
+   t0*sqrtf(t6)
+)
+: (
+   (1.0F/1000.0F)
+));
+    edges[2] = ((t5*t7 > (1.0F/1000000.0F)) ? (
+   t0*sqrtf(t7)
+)
+: (
+   (1.0F/1000.0F)
+));
+}
+
 /* ---- Scene effects in float: accumulating functions and dispatch ---------------------------- */
 /* applied_torque: adds tau_com_w for one body. p = [torque_w(3)] */
 static inline void lvf_effect_acc_applied_torque(const float *p, const float *x, const float *v_w, float m, const float *I_b, float *F, float *tau)

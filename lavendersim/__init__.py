@@ -53,6 +53,10 @@ def __dir__() -> list[str]:
     return sorted(set(globals()) | set(_EXPORTS))
 
 
+from ._integrity import install as _check_generated_on_import  # noqa: E402  (stdlib only; hashes nothing now)
+
+_check_generated_on_import()  # every lavendersim.generated module is checked against manifest.json before it runs
+
 from .envs import register as _register_envs  # noqa: E402  (light: never imports gymnasium)
 
 _register_envs()  # ReactionWheelCube-v0: gymnasium.make("lavendersim:ReactionWheelCube-v0")

@@ -1,25 +1,23 @@
-"""Import-time check of generated Python modules against generated/manifest.json.
+"""The check of generated Python modules against generated/manifest.json, done by the importer (generated code
+imports nothing of the runtime).
 
 The C backend embeds the hash of the generated C sources it was built from (StaleBuildError on a
-mismatch). The NumPy kernels are checked the same way when first imported: generated/kernels_numpy.py
-must have the sha256 that manifest.json records for it, else :class:`GeneratedFileError` names the file
-and the command that regenerates it — a hand edit (a box's inertia doubled) or a truncated file never
-runs silently and never surfaces as an AttributeError. One file is hashed once per process (cached
-by size and modification time); ``import lavendersim`` does not trigger it.
-
-Every way of importing a generated module is covered: derive prints generated/__init__.py to check
-every Python module of the package (kernels_numpy, kernels_casadi, layout, tableaux, effects_meta)
-before any of them is imported — this also catches a file cut mid-statement, which a module's own
-check cannot (Python compiles the whole file first); lavendersim.kernels checks kernels_numpy.py
-before importing it, and derive prints a call to :func:`check_generated` as the first statement of
-kernels_numpy.py (a copy of the file imported on its own).
-Standard library only.
+mismatch). The Python modules of generated/ are checked the same way when first imported: ``import
+lavendersim`` installs :class:`GeneratedChecker`, an import hook (a ``sys.meta_path`` finder) that, before any
+``lavendersim.generated.<module>`` is executed, verifies that its file has the sha256 manifest.json records
+for it, else raises :class:`GeneratedFileError` naming the file and the command that regenerates it — a hand
+edit (a box's inertia doubled) or a truncated file never runs silently, never surfaces as an AttributeError
+or a SyntaxError. One file is hashed once per process (cached by size and modification time); ``import
+lavendersim`` installs the hook only and hashes nothing. Standard library only.
 """
 from __future__ import annotations
 
 import hashlib
+import importlib.abc
+import importlib.machinery
 import json
 import os
+import sys
 from pathlib import Path
 
 from .errors import GeneratedFileError
@@ -78,3 +76,24 @@ def check_generated(path) -> None:
         raise _fail(path, f"does not match generated/manifest.json (sha256 {got[:12]}…, manifest {want[:12]}…; "
                           f"{st.st_size} bytes)")
     _OK[key] = sig
+
+
+class GeneratedChecker(importlib.abc.MetaPathFinder):
+    """Import hook: find ``lavendersim.generated.<module>`` as usual, then check its file (:func:`check_generated`)
+    before it is executed."""
+
+    PACKAGE = "lavendersim.generated."
+
+    def find_spec(self, fullname, path, target=None):
+        if not fullname.startswith(self.PACKAGE) or path is None:
+            return None
+        spec = importlib.machinery.PathFinder.find_spec(fullname, path, target)
+        if spec is not None and spec.origin and spec.origin.endswith(".py"):
+            check_generated(spec.origin)
+        return spec
+
+
+def install() -> None:
+    """Put :class:`GeneratedChecker` first on ``sys.meta_path`` (once per process)."""
+    if not any(isinstance(f, GeneratedChecker) for f in sys.meta_path):
+        sys.meta_path.insert(0, GeneratedChecker())

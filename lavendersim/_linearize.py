@@ -126,7 +126,7 @@ def _sim_of(sim_or_scene):
     from .sim import Sim
 
     if isinstance(sim_or_scene, Sim):   # the Sim keeps its scene's effect objects (the declarations)
-        return sim_or_scene, SimpleNamespace(effects=list(sim_or_scene._effect_objs))
+        return sim_or_scene, SimpleNamespace(effects=list(sim_or_scene.model.effects))
     if isinstance(sim_or_scene, Scene):
         return Sim(sim_or_scene, dt=1e-3, integrator="rk4", backend="numpy"), sim_or_scene
     raise V.LavenderInputError("sim_or_scene", "must be a lavendersim Sim or Scene", f", got {type(sim_or_scene).__name__}")
@@ -142,15 +142,14 @@ def body_refs(sim, x0: dict | None) -> list[BodyRef]:
     unknown = sorted(set(x0) - set(sim.names))
     if unknown:
         raise V.LavenderInputError("x0", f"unknown body {unknown[0]!r}; bodies: {', '.join(sim.names)}")
-    rows = sim._models.rows
+    model = sim.model
+    rows, frames = model.rows, model.frames
     refs, off = [], 0
-    frames = sim._frames
     for i, name in enumerate(sim.names):
-        kind = int(rows[i, LY.MODEL_KIND])
-        joint, wheels = bool(kind & LY.KIND_JOINT), bool(kind & LY.KIND_WHEELS)
-        n_w = int(sim._wheel_n[i])
+        joint, wheels = model.kind(i)
+        n_w = int(model.wheel_counts[i])
         x = sim.x[i].copy()
-        Om = sim._models.Omega[i, :n_w].copy()
+        Om = model.Omega[i, :n_w].copy()
         over = x0.get(name, {})
         allowed = {"q", "omega_b", "Omega"} | (set() if joint else {"p_w", "v_w"})
         bad = sorted(set(over) - allowed)
@@ -183,7 +182,8 @@ def body_refs(sim, x0: dict | None) -> list[BodyRef]:
 
 def input_refs(sim, scene, inputs) -> list[InputRef]:
     """Parse the input names (default: every wheeled body's commands)."""
-    wheeled = [n for n, r in zip(sim.names, sim._models.rows) if int(r[LY.MODEL_KIND]) & LY.KIND_WHEELS]
+    model = sim.model
+    wheeled = [n for i, n in enumerate(sim.names) if model.kind(i)[1]]
     if inputs is None:
         inputs = [f"{n}.u" for n in wheeled]
     if isinstance(inputs, str):
@@ -198,8 +198,8 @@ def input_refs(sim, scene, inputs) -> list[InputRef]:
             if head not in wheeled:
                 raise V.LavenderInputError("inputs", f"body {head!r} has no reaction_wheels", f", got {name!r}")
             i = sim.names.index(head)
-            ref = InputRef(name, "wheels", head, None, None, int(sim._wheel_n[i]), off,
-                           on_axes=not backends.on_body_axes(sim._models.rows[i]))
+            ref = InputRef(name, "wheels", head, None, None, int(model.wheel_counts[i]), off,
+                           on_axes=not backends.on_body_axes(model.rows[i]))
         else:
             idx = [k for k, e in enumerate(scene.effects) if e.name == head and not e.per_body]
             if len(idx) != 1:
@@ -246,16 +246,11 @@ def input_u0(sim, scene, ins: list[InputRef], u0) -> np.ndarray:
 # ------------------------------------------------------------------------------------------------
 
 
-def _attitude(q_ref: np.ndarray, dth):
-    half = dth / 2
-    return KC.quat_mul(ca.DM(q_ref), ca.vertcat(half, ca.sqrt(1 - ca.dot(half, half))))
-
-
 def _dtheta_dot(q_ref: np.ndarray, q, q_dot):
-    """d/dt dtheta with dtheta = 2 vec(q_ref* ⊗ q): linear in q, so its Jacobian is constant."""
+    """d/dt dtheta of the printed chart dtheta = quat_error_chart(q, q_ref) (2 vec(q_ref* ⊗ q) on the
+    chart's domain, e_w > 0: linear in q, so its Jacobian is constant)."""
     qs = ca.SX.sym("qs", 4)
-    e = 2 * KC.quat_mul(KC.quat_conj(ca.DM(q_ref)), qs)[0:3]
-    return ca.mtimes(ca.substitute(ca.jacobian(e, qs), qs, q), q_dot)
+    return ca.mtimes(ca.substitute(ca.jacobian(KC.quat_error_chart(qs, ca.DM(q_ref)), qs), qs, q), q_dot)
 
 
 def _loads(scene, ref: BodyRef, p_w, q, v_w, w, params_of):
@@ -281,7 +276,7 @@ def _body_rhs(scene, ref: BodyRef, xb, params_of, wheel_u):
     """The time derivative of this body's error block (CasADi column)."""
     r = ref.row
     get = ref.split(xb)
-    q = _attitude(ref.x[LY.STATE_Q], get["dtheta"])
+    q = KC.quat_error_chart_inverse(ca.DM(ref.x[LY.STATE_Q]), get["dtheta"])
     w = ca.DM(ref.x[LY.STATE_OMEGA_B]) + get["omega"]
     I_p, r_b = ca.DM(r[LY.MODEL_I_P]), ca.DM(r[LY.MODEL_R_B])
     if ref.joint:
@@ -298,8 +293,8 @@ def _body_rhs(scene, ref: BodyRef, xb, params_of, wheel_u):
         q_dot, out["omega"] = KC.pivot_body_rhs(q, w, I_p, r_b, F, tau)
     else:
         xd = KC.rigid_body_rhs(ca.vertcat(p_w, q, v_w, w), ref.m, ca.DM(ref.I_b), F, tau)
-        q_dot = xd[3:7]
-        out["p"], out["v"], out["omega"] = xd[0:3], xd[7:10], xd[10:13]
+        q_dot = xd[LY.STATE_Q]
+        out["p"], out["v"], out["omega"] = xd[LY.STATE_P_W], xd[LY.STATE_V_W], xd[LY.STATE_OMEGA_B]
     out["dtheta"] = _dtheta_dot(ref.x[LY.STATE_Q], q, q_dot)
     return ca.vertcat(*[out[b] for b in ref.blocks])
 

@@ -2,9 +2,9 @@
 Used by the viewer and by playback's default overlays (neither imports the other for it)."""
 from __future__ import annotations
 
-import math
-
 import numpy as np
+
+from .kernels import K
 
 
 def shape_of(body) -> tuple:
@@ -14,10 +14,8 @@ def shape_of(body) -> tuple:
     shape = getattr(body, "shape", None)
     if shape and shape[0] in ("box", "cylinder", "sphere"):
         return shape[0], tuple(float(x) for x in shape[1])
-    m = float(body.mass)
-    I = np.asarray(body.I_b if getattr(body, "principal", True) else np.diag(body.inertia_b), dtype=float)
-    sq = [max(6.0 * (I[(k + 1) % 3] + I[(k + 2) % 3] - I[k]) / m, 1e-6) for k in range(3)]
-    return "box", tuple(math.sqrt(s) for s in sq)
+    I = body.I_b if getattr(body, "principal", True) else np.diag(body.inertia_b)
+    return "box", tuple(float(a) for a in K.box_of_inertia(float(body.mass), I))   # the printed kernel (derive/measures.py)
 
 
 def extent(kind: str, dims: tuple) -> float:

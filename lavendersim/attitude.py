@@ -1,6 +1,7 @@
 """Attitude error coordinates about a reference orientation: the chart the linearization and the controllers
 use (dtheta = 2 vec(q_ref* ⊗ q), with the sign of the scalar part), its inverse, and helpers to rotate a
-reference. Quaternions (x, y, z, w); everything is built from the generated quaternion kernels."""
+reference. Quaternions (x, y, z, w); the chart and its inverse are the printed kernels quat_error_chart and
+quat_error_chart_inverse (derive/quaternion.py, derive/measures.py), as _linearize's CasADi twin."""
 from __future__ import annotations
 
 import math
@@ -28,9 +29,7 @@ def attitude_error(q: ArrayLike, q_ref: ArrayLike) -> np.ndarray:
         dtheta, rad, in the reference's body frame (the inverse of :func:`perturbed` for
         |dtheta| < 2).
     """
-    qe = np.asarray(KN.quat_mul(KN.quat_conj(np.asarray(q_ref, float)), np.asarray(q, float)), dtype=float)
-    sgn = np.where(qe[..., 3:4] < 0, -1.0, 1.0)
-    return 2.0 * sgn * qe[..., 0:3]
+    return KN.quat_error_chart(q, q_ref)
 
 
 def error_angle_deg(q: ArrayLike, q_ref: ArrayLike) -> np.ndarray:
@@ -77,7 +76,7 @@ def perturbed(q_ref: ArrayLike, dtheta: ArrayLike) -> np.ndarray:
     n2 = float(h @ h)
     if n2 >= 1:
         raise V.LavenderInputError("dtheta", "must satisfy |dtheta| < 2", f", got |dtheta| = {2 * math.sqrt(n2):.4g}")
-    return np.asarray(KN.quat_mul(np.asarray(q_ref, float), np.concatenate([h, [math.sqrt(1 - n2)]])), dtype=float)
+    return KN.quat_error_chart_inverse(q_ref, dtheta)
 
 
 def rotated(q_ref: ArrayLike, axis: ArrayLike, angle_deg: float) -> np.ndarray:

@@ -33,6 +33,8 @@ import numpy as np
 from . import user_sets
 from . import validate as V
 from .generated import effects_meta as _META
+from .generated import layout as LY
+from .kernels import K
 
 ROW_CODE, ROW_BODY, ROW_PARAMS = _META.ROW_CODE, _META.ROW_BODY, _META.ROW_PARAMS
 ROW_MIN_PARAMS = _META.ROW_MIN_PARAMS
@@ -380,7 +382,9 @@ class _WheelsCheck:
                                            f"I_b[{i}] = {I_b[i]:g} kg·m² (the body's inertia includes its wheels)",
                                            f", got {J[i]:g}")
             return
-        free = (np.diag(I_b) if principal else body.inertia_b) - (A_b * J) @ A_b.T   # body frame
+        A_pad, J_pad = np.zeros((3, LY.WHEELS_MAX)), np.zeros(LY.WHEELS_MAX)   # the printed kernel's slots, unused ones 0
+        A_pad[:, :J.size], J_pad[:J.size] = A_b, J
+        free = getattr(K, f"wheels{LY.WHEELS_MAX}_free_inertia")(np.diag(I_b) if principal else body.inertia_b, A_pad, J_pad)
         low = float(np.linalg.eigvalsh(free).min())
         if not low > 1e-12 * float(I_b.max()):
             raise V.LavenderInputError(f"{self.name}.J", "the body with its wheels free, I_b − A_b J A_bᵀ, must stay "

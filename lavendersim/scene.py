@@ -433,12 +433,10 @@ def _first_bad(field: str, bad: np.ndarray, check) -> None:
 
 def _unit_quaternions(q: np.ndarray) -> np.ndarray:
     """V.quaternion per row: zero rows rejected (naming the row), others scaled to unit length as it does."""
-    scale = np.max(np.abs(q), axis=1)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        u = q / scale[:, None]
-        scaled = np.sqrt(((u[:, 0] ** 2 + u[:, 1] ** 2) + u[:, 2] ** 2) + u[:, 3] ** 2)
-    _first_bad("q", ~(scale * scaled >= V.QUATERNION_MIN_NORM), lambda f, i: V.quaternion(f, q[i]))
-    return u / scaled[:, None]
+    with np.errstate(over="ignore"):   # the printed scaled normalization (derive/measures.py); |q| may be inf
+        q_unit, norm = K.quat_normalize_scaled(q)
+    _first_bad("q", ~(norm >= V.QUATERNION_MIN_NORM), lambda f, i: V.quaternion(f, q[i]))
+    return q_unit
 
 
 def _triangle_broken(I_b: np.ndarray) -> np.ndarray:

@@ -120,6 +120,7 @@ from .generated import layout as LY
 from .generated import tableaux as TB
 from .kernels import K
 from .scene import Scene, _effect_rows
+from .sim_model import SimModel
 
 MAX_STEPS = 2**53          # steps per call and in total: the step counter and t = steps*dt stay exact in float64
 CHUNK_WORK = 2**20         # right-hand-side evaluations (summed over bodies) per backend call between checks
@@ -240,8 +241,8 @@ def _rebuild_sim(bodies: list, effects: list, kwargs: dict, state: dict) -> "Sim
     for e in effects:
         scene.add_effect(e)
     sim = Sim(scene, **kwargs)
-    if state.get("fast_chunks"):     # run(n)'s C fast path for any n, as the original had (Sim._fast_chunks)
-        sim._fast_chunks()
+    if state.get("fast_chunks"):     # run(n)'s C fast path for any n, as the original had (Sim.fast_chunks)
+        sim.fast_chunks()
     sim._load_snapshot(state)
     return sim
 
@@ -549,6 +550,13 @@ class Sim:
         raise ImmutableSimError(f"sim.{name}", "cannot be deleted")
 
     @property
+    def model(self) -> SimModel:
+        """The model this Sim steps, read-only and live (:class:`lavendersim.sim_model.SimModel`: model rows, wheel
+        counts, stepped state, wheel arrays, principal frames, effect declarations, the C fast path): the public
+        API for applications (envs, linearization), which never read a Sim's private attributes."""
+        return SimModel(self)
+
+    @property
     def params(self) -> np.ndarray:
         """Per-body parameters (nb, 4) = [m, I_1, I_2, I_3] (principal moments) the backends step: read-only."""
         v = self._params.view()
@@ -667,7 +675,7 @@ class Sim:
         """The C fast path of step() (lavendersim/csrc/fast_step.c), or None where it does not apply: not the C
         backend, an adaptive integrator (unbounded work per step), a free wheeled body under the growth check
         (its |L| is computed in Python every step), a scene larger than FAST_STEP_WORK evaluations per step (the
-        fast path holds the GIL; cap=False: built whatever the size, see _fast_chunks), or a Python without the GIL."""
+        fast path holds the GIL; cap=False: built whatever the size, see fast_chunks), or a Python without the GIL."""
         gil = getattr(sys, "_is_gil_enabled", lambda: True)()
         if (self.backend.name != "c" or self._per_step is None or not gil or self.dtype != "float64"
                 or self.integrator not in backends.INTEGRATORS   # a user tableau: through advance (no Stepper code)
@@ -928,7 +936,7 @@ class Sim:
         rows[i, LY.MODEL_R_B] = r_b
         rows[i, LY.MODEL_ANCHOR_W] = anchor
 
-    def _reinit_body(self, i: int, p_w: np.ndarray, q: np.ndarray, omega_b: np.ndarray, Omega: np.ndarray) -> None:
+    def reinit_body(self, i: int, p_w: np.ndarray, q: np.ndarray, omega_b: np.ndarray, Omega: np.ndarray) -> None:
         """Body i as if this Sim had been built with it at rest-translation state (p_w, q, v_w = 0, omega_b) and
         then given wheel rates Omega by set_state: model row (joint r_b, I_p), growth reference, wheel command
         and applied torques zeroed. For batched resets (the vector env); the caller validated the values."""
@@ -1114,7 +1122,7 @@ class Sim:
             self._restore(start)
             raise
 
-    def _fast_chunks(self) -> None:
+    def fast_chunks(self) -> None:
         """Let run(n) take the C fast path (Stepper.advance) for any n up to one chunk, whatever the scene's size: for
         a caller that advances a large scene by a few steps per call (the vector env: N cubes, one run per env step).
         Stepper.advance checks the chunk's end as _advance does (the validity bound, the growth limits, finite) and
@@ -1123,7 +1131,7 @@ class Sim:
         Stepper is built here also beyond FAST_STEP_WORK (then sim.step() too runs inside C). On a new Sim only (no
         step taken: the Stepper's counters start at 0); where there is no C fast path at all, nothing changes."""
         if self.steps or self.rhs_evals:
-            raise RuntimeError("Sim._fast_chunks: only on a new Sim (no step taken)")
+            raise RuntimeError("Sim.fast_chunks: only on a new Sim (no step taken)")
         if self._fast is None:
             fast = self._make_stepper(cap=False)
             if fast is None:
@@ -1133,9 +1141,9 @@ class Sim:
             object.__setattr__(self, "step", fast.step_or_fallback)   # (built: no public assignment)
         self._fast_n = self._chunk
 
-    def _check_written(self) -> None:
+    def check_written(self) -> None:
         """_advance's check before stepping (the validity bound of a state written since the last check, e.g. by
-        _reinit_body), done now where the C screen passes it: the state is then marked checked, so the next run(n)
+        reinit_body), done now where the C screen passes it: the state is then marked checked, so the next run(n)
         can take the C fast path. Exactly what _advance would find (its check of a written state is this screen
         with growth off: passing it reports nothing). Where the screen does not pass, or there is no C fast path,
         nothing changes: run checks the state itself and raises or warns as before."""
@@ -1149,7 +1157,7 @@ class Sim:
 
     def _is_checked(self) -> bool:
         """The state is the last one that passed the checks: compared bytewise by the C stepper; else tracked by a
-        flag that every writer sets (set_state, _reinit_body; the views are read-only and their flag cannot be
+        flag that every writer sets (set_state, reinit_body; the views are read-only and their flag cannot be
         turned back on, so no public path writes the state without setting it)."""
         if self._fast is not None:
             return self._fast.is_checked()

@@ -455,15 +455,15 @@ def quaternion(field: str, value: ArrayLike) -> np.ndarray:
     LavenderInputError
         Naming `field` and the broken rule.
     """
-    q = array(field, value, (4,))
-    scale = float(np.max(np.abs(q)))
-    # scaled norm: no overflow for huge entries, no underflow for tiny ones; the true norm
-    # (scale * scaled) is only compared, never divided by (it may overflow to inf for 1e308 entries)
-    scaled = float(np.sqrt(np.sum((q / scale) ** 2))) if scale > 0 else 0.0
-    norm = scale * scaled
+    from .kernels import K   # (on first use: importing validate loads no generated module)
+
+    # the printed scaled normalization (derive/measures.py): no overflow for huge entries, no underflow for tiny
+    # ones; the true norm is only compared, never divided by (it may overflow to inf for 1e308 entries)
+    with np.errstate(over="ignore"):
+        q_unit, norm = K.quat_normalize_scaled(array(field, value, (4,)))
     if not norm >= QUATERNION_MIN_NORM:
-        raise LavenderInputError(field, f"zero quaternion (norm {norm:g}) cannot be normalized")
-    return (q / scale) / scaled
+        raise LavenderInputError(field, f"zero quaternion (norm {float(norm):g}) cannot be normalized")
+    return q_unit
 
 
 def _check_moments(field: str, m: np.ndarray) -> None:

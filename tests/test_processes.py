@@ -202,7 +202,7 @@ def test_an_env_copied_before_its_first_reset_and_after_close():
 @pytest.mark.parametrize("backend", ["c", "numpy"])
 def test_a_vector_env_pickles_and_deep_copies_bit_for_bit(backend):
     """The vector env's snapshot: its Sim (N cubes), per-cube generators, episode step counts, pending autoresets;
-    the copy keeps the Sim's C fast path for one env step (Sim._fast_chunks)."""
+    the copy keeps the Sim's C fast path for one env step (Sim.fast_chunks)."""
     require("gym")
     import gymnasium as gym
 

@@ -70,6 +70,8 @@ BODY = lc.BODY
 MAX_SUBSTEPS = 100_000  # simulator steps per control step (control_dt / dt), at most
 
 _NW = LY.WHEELS_BODY_AXES   # the cube's three wheels: the first slots of the Sim's wheel arrays
+# the observation's fields: q (x, y, z, w), omega_b (rad/s), the three wheel rates Omega (rad/s)
+OBS_Q, OBS_OMEGA_B, OBS_OMEGA = slice(0, 4), slice(4, 7), slice(7, 10)
 
 
 class ReactionWheelCubeEnv(gym.Env):
@@ -187,7 +189,7 @@ class ReactionWheelCubeEnv(gym.Env):
     def _raw(self) -> np.ndarray:
         """[q (4), omega_b (3), Omega (3)] of the cube (a copy, from the Sim's views)."""
         sim, raw = self.sim, np.empty(10)
-        raw[0:4], raw[4:7], raw[7:10] = sim.q[0], sim.omega_b[0], sim.Omega[0, :_NW]
+        raw[OBS_Q], raw[OBS_OMEGA_B], raw[OBS_OMEGA] = sim.q[0], sim.omega_b[0], sim.Omega[0, :_NW]
         return raw
 
     def _obs(self, raw=None) -> np.ndarray:
@@ -423,13 +425,12 @@ class _StepIO:
             return memoryview(a).cast("B").cast("d")
 
         self.sim = sim
-        m = sim._models
-        self.x = flat(sim._x[0])
+        m = sim.model
+        self.x = flat(m.state[0])
         self.Omega, self.command, self.applied = flat(m.Omega[0, :_NW]), flat(m.command[0, :_NW]), flat(m.applied[0, :_NW])
         self.applied_row = m.applied[0, :_NW]
-        fast = sim._fast
-        self.advance = fast.advance if fast is not None and 1 <= env.substeps <= sim._fast_n else None
-        self.counters, self.dt = sim._ctr, sim.dt     # sim.t = steps * dt
+        self.advance = m.advance if 1 <= env.substeps <= m.fast_steps else None
+        self.counters, self.dt = m.counters, sim.dt     # sim.t = steps * dt
         self.torque_limit = float(env.torque_limit)
         self.obs = np.zeros(10, np.float32)
         self.obs_mv = memoryview(self.obs)

@@ -16,7 +16,7 @@ each with its own, None keeps the generators. ``reset(options={"reset_mask": mas
 
 Speed: the cubes are advanced by one C call per step; ``lavendersim.backends.c_backend.threads(2)`` (process-wide)
 shares them over two threads, with bitwise the same results (tests/test_vector_env.py). The step's ``Sim.run`` takes
-the Sim's C fast path (``Stepper.advance``, enabled for any N by ``Sim._fast_chunks``): the same checks at the end of
+the Sim's C fast path (``Stepper.advance``, enabled for any N by ``Sim.fast_chunks``): the same checks at the end of
 the step and the same numbers as the Python path, which it falls back to for anything those checks refuse; it holds
 the GIL while the cubes are stepped. The rest of a step is a fixed number of NumPy calls on preallocated buffers
 (no Python loop over the sub-environments except over those being reset).
@@ -39,7 +39,7 @@ from ..errors import DivergenceError
 from ..generated import layout as LY
 from ..kernels import K
 from .. import control as lc
-from .reaction_wheel_cube import BODY, ReactionWheelCubeEnv, initial_q
+from .reaction_wheel_cube import BODY, OBS_OMEGA, OBS_OMEGA_B, OBS_Q, ReactionWheelCubeEnv, initial_q
 
 gym = require("gymnasium", "gym", "the ReactionWheelCube-v0 vector environment")
 require("gymnasium.vector", "gym", "the ReactionWheelCube-v0 vector environment")
@@ -124,14 +124,14 @@ class ReactionWheelCubeVectorEnv(VectorEnv):
             if not e.per_body:
                 scene.add_effect(e.name, **dict(e.values))
         sim = Sim(scene, dt=self._one.dt, integrator="rk4", backend=self._one.backend)
-        sim._fast_chunks()     # one step's run inside C (Stepper.advance: run's checks and results), any N
+        sim.fast_chunks()     # one step's run inside C (Stepper.advance: run's checks and results), any N
         return sim
 
     def _place(self, i: int, q0: np.ndarray, omega_b: np.ndarray, Omega: np.ndarray) -> None:
         """Cube i at the start of an episode, exactly as the single env's _make_sim builds it."""
         q0 = V.quaternion("q0", q0)
         p_w = np.asarray(K.quat_rotate(q0, self._one.r_b), dtype=float)
-        self.sim._reinit_body(i, p_w, V.quaternion("q", q0), omega_b, Omega)
+        self.sim.reinit_body(i, p_w, V.quaternion("q", q0), omega_b, Omega)
 
     def _reset_one(self, i: int) -> None:
         if self._rngs[i] is None:
@@ -170,7 +170,7 @@ class ReactionWheelCubeVectorEnv(VectorEnv):
             if seeds[i] is not None:
                 self._rngs[i], _ = seeding.np_random(int(seeds[i]))
             self._reset_one(int(i))
-        self.sim._check_written()     # the start states' pre-step check now: the first run can take the C fast path
+        self.sim.check_written()     # the start states' pre-step check now: the first run can take the C fast path
         self._started = True
         return self._obs(self._raw()), {}
 
@@ -184,10 +184,10 @@ class ReactionWheelCubeVectorEnv(VectorEnv):
         for i in resets:                         # next-step autoreset: these start over and do not step
             self._reset_one(int(i))
         if any_reset:
-            sim._check_written()     # the written states' pre-step check now: the run stays on the C fast path
+            sim.check_written()     # the written states' pre-step check now: the run stays on the C fast path
         # finite and saturated: written straight into the held commands (set_wheel_commands' array; every cube has
         # wheels), as a * torque_limit
-        cmd = sim._models.command[:, :LY.WHEELS_BODY_AXES]    # the cubes' three wheels: the first slots
+        cmd = sim.model.command[:, :LY.WHEELS_BODY_AXES]    # the cubes' three wheels: the first slots
         np.multiply(a, self.torque_limit, out=cmd)
         if any_reset:
             cmd[resets] = 0.0
@@ -195,12 +195,12 @@ class ReactionWheelCubeVectorEnv(VectorEnv):
         if any_reset:
             for i in resets:
                 self._place(int(i), *self._start[i])
-            sim._check_written()     # (again: the next step's run too)
+            sim.check_written()     # (again: the next step's run too)
         raw = self._raw()
         for b, (msg, pre) in diverged.items():
             raw[b] = pre
         obs = self._obs(raw)
-        q, w = raw[:, 0:4], raw[:, 4:7]
+        q, w = raw[:, OBS_Q], raw[:, OBS_OMEGA_B]
         theta = K.quat_error_angle(q, self._target)      # rad; the single env's kernel, its NumPy printing
         angle = np.degrees(theta)
         reward = -(theta * theta + 0.05 * np.einsum("ij,ij->i", w, w) + 0.01 * np.einsum("ij,ij->i", a, a))
@@ -251,7 +251,7 @@ class ReactionWheelCubeVectorEnv(VectorEnv):
     def _raw(self) -> np.ndarray:
         """[q, omega_b, Omega] of every cube, (N, 10), in a scratch buffer reused by the next call."""
         sim, raw = self.sim, self._raw_buf
-        raw[:, 0:4], raw[:, 4:7], raw[:, 7:10] = sim.q, sim.omega_b, sim.Omega[:, :LY.WHEELS_BODY_AXES]
+        raw[:, OBS_Q], raw[:, OBS_OMEGA_B], raw[:, OBS_OMEGA] = sim.q, sim.omega_b, sim.Omega[:, :LY.WHEELS_BODY_AXES]
         return raw
 
     def _actions(self, actions) -> np.ndarray:
@@ -283,7 +283,7 @@ class ReactionWheelCubeVectorEnv(VectorEnv):
     def _out_of_bounds(self, raw: np.ndarray) -> np.ndarray:
         """Per row: a body rate beyond rate_bound or a wheel rate beyond wheel_bound (NaN is not beyond)."""
         n, one = self.num_envs, self._one
-        w, Om = raw[:, 4:7], raw[:, 7:10]
+        w, Om = raw[:, OBS_OMEGA_B], raw[:, OBS_OMEGA]
         rb, wb = one.rate_bound, one.wheel_bound
         m0, m1, m2, m3, m4, m5 = np.max(np.abs(raw[:, 4:10]), axis=0).tolist()    # per column, over the rows
         if m0 <= rb and m1 <= rb and m2 <= rb and m3 <= wb and m4 <= wb and m5 <= wb:
