@@ -17,7 +17,7 @@ import numbers
 import os
 from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
-from typing import Any, SupportsFloat
+from typing import Any, ParamSpec, SupportsFloat, TypeVar
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -698,7 +698,11 @@ def safe_norm(a: ArrayLike) -> float:
         return float(scale * np.sqrt(np.sum((a / scale) ** 2)))
 
 
-def keywords(fn: Callable[..., Any]) -> Callable[..., Any]:
+_P = ParamSpec("_P")
+_R = TypeVar("_R")
+
+
+def keywords(fn: Callable[_P, _R]) -> Callable[_P, _R]:
     """Decorator: a call with an unknown keyword, a missing argument or too many positional
     arguments raises :class:`LavenderInputError` naming it (and the accepted names), not a
     ``TypeError``. Functions that take ``**kwargs`` check those themselves.
@@ -711,6 +715,7 @@ def keywords(fn: Callable[..., Any]) -> Callable[..., Any]:
     Returns
     -------
     callable
+        With ``fn``'s signature, for type checkers too (``ParamSpec``).
     """
     sig = inspect.signature(fn)
     params = sig.parameters
@@ -719,7 +724,7 @@ def keywords(fn: Callable[..., Any]) -> Callable[..., Any]:
     where = fn.__qualname__.replace(".__init__", "")
 
     @functools.wraps(fn)
-    def wrapper(*args, **kwargs):
+    def wrapper(*args: _P.args, **kwargs: _P.kwargs) -> _R:
         try:
             sig.bind(*args, **kwargs)
         except TypeError as exc:
@@ -737,7 +742,7 @@ def keywords(fn: Callable[..., Any]) -> Callable[..., Any]:
             raise LavenderInputError(field, f"{where}: {text}") from None
         return fn(*args, **kwargs)
 
-    wrapper.__signature__ = sig
+    wrapper.__signature__ = sig  # type: ignore[attr-defined]
     return wrapper
 
 

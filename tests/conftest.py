@@ -115,6 +115,7 @@ TOOLS = {
     "distributed": (_modules("dask", "distributed"), "pip install -e '.[distributed]'"),
     "docs": (_modules("sphinx", "myst_parser", "myst_nb"), "pip install -e '.[docs]'"),
     "notebooks": (_modules("nbclient", "nbformat", "ipykernel"), "pip install -e '.[docs]'"),
+    "mypy": (_modules("mypy.api"), "pip install -e '.[test]'"),
 }
 
 _missing: dict[str, str | None] = {}
