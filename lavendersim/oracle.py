@@ -1,4 +1,12 @@
-"""Accuracy references, in one place: labs, tests and benchmarks all use this module.
+"""The oracle: LavenderSim's deliberately independent accuracy references, in one place (labs, tests and
+benchmarks all measure against this module).
+
+Independent on purpose: nothing here is derived in derive/ or stepped by a backend. The exact solutions are
+written from the textbook (Landau & Lifshitz) with SciPy's special functions, and `dop853` is SciPy's
+integrator, not one of ours; this module imports no backend, no Sim and no integrator table. It uses the
+printed kernels only for bookkeeping it does not test (quaternion products and conversions, the energy and
+momentum of the initial state, the right-hand side `dop853` integrates by default), so that an error in the
+simulator's equations or integrators cannot hide by being repeated here. Do not "simplify" it into the runtime.
 
 * `constant_omega` — the closed-form attitude under a constant world angular velocity,
   q(t) = exp(t[ω_w]×) q0.
@@ -105,7 +113,7 @@ def attitude_error(q_a: ArrayLike, q_b: ArrayLike) -> np.ndarray:
     Examples
     --------
     >>> import numpy as np
-    >>> from lavendersim.reference import attitude_error
+    >>> from lavendersim.oracle import attitude_error
     >>> float(attitude_error([0, 0, 0, 1], [0, 0, np.sin(0.05), np.cos(0.05)]))   # 0.1 rad about z
     0.1
     """
@@ -493,7 +501,7 @@ def torque_free(I_b: ArrayLike, omega_b0: ArrayLike, q0: ArrayLike, t: ArrayLike
 
     Examples
     --------
-    >>> from lavendersim.reference import torque_free
+    >>> from lavendersim.oracle import torque_free
     >>> m = torque_free([1.0, 2.0, 3.0], [0.01, 1.0, 0.01], [0, 0, 0, 1], [0.0, 1.0])
     >>> m.kind, m.omega_b.shape
     ('asymmetric', (2, 3))

@@ -23,7 +23,7 @@ MODULES = (
     "lavendersim.validate",
     "lavendersim.control",
     "lavendersim.viewer",
-    "lavendersim.reference",
+    "lavendersim.oracle",
     "lavendersim.particles",
     "lavendersim.bodies",
     "lavendersim.envs.reaction_wheel_cube",

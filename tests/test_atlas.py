@@ -21,7 +21,7 @@ from lavendersim.labs import atlas as A
 from lavendersim import backends as B
 from lavendersim import executor as X
 from lavendersim import labs
-from lavendersim import reference as R
+from lavendersim import oracle as R
 from lavendersim._install import MissingExtraError
 from lavendersim.validate import LavenderInputError
 

@@ -24,7 +24,7 @@ from conftest import IN_CI, missing
 
 PUBLIC_MODULES = [
     "lavendersim", "lavendersim.bodies", "lavendersim.scene", "lavendersim.sim", "lavendersim.effects",
-    "lavendersim.errors", "lavendersim.validate", "lavendersim.reference", "lavendersim.particles",
+    "lavendersim.errors", "lavendersim.validate", "lavendersim.oracle", "lavendersim.particles",
     "lavendersim.extending", "lavendersim.executor", "lavendersim.derive.symbolic", "lavendersim.backends",
     "lavendersim.labs", "lavendersim.labs.common",    # labs/, installed as lavendersim.labs
     "lavendersim.scene_file", "lavendersim.spacecraft",
@@ -163,7 +163,7 @@ def test_public_api_is_large_enough_to_mean_something():
     assert len(names) > 150
     for expected in ("lavendersim.sim.Sim", "lavendersim.sim.Sim.run", "lavendersim.sim.Sim.record",
                      "lavendersim.scene.Scene.add_effect", "lavendersim.bodies.Body.box",
-                     "lavendersim.effects.AppliedTorque", "lavendersim.reference.torque_free",
+                     "lavendersim.effects.AppliedTorque", "lavendersim.oracle.torque_free",
                      "lavendersim.kernels.K.quat_mul", "lavendersim.derive.symbolic.euler_equations"):
         assert expected in names
 
@@ -210,7 +210,7 @@ def test_the_checker_catches_what_it_should():
 
 
 @pytest.mark.parametrize("modname", ["lavendersim.sim", "lavendersim.bodies", "lavendersim.scene",
-                                     "lavendersim.reference", "lavendersim.validate", "lavendersim.derive.symbolic"])
+                                     "lavendersim.oracle", "lavendersim.validate", "lavendersim.derive.symbolic"])
 def test_docstring_examples_run(modname):
     import doctest
 

@@ -15,7 +15,7 @@ import pytest
 
 import lavendersim as lv
 from lavendersim import backends
-from lavendersim import reference as R
+from lavendersim import oracle as R
 from lavendersim.errors import DivergenceError
 from lavendersim.labs import hard_cases as H
 

@@ -1,7 +1,7 @@
 """The fourth-order structure-preserving integrators: splitting4 (a symmetric composition of the exact-flow
 Strang splitting) and rk4_expmap (RK4 in exponential coordinates of the attitude, RKMK4).
 
-Orders are measured against the exact torque-free motion (lavendersim.reference.torque_free) and, with
+Orders are measured against the exact torque-free motion (lavendersim.oracle.torque_free) and, with
 loads, against dopri5 at rtol = atol = 1e-13; conservation over a long run; C and NumPy bitwise equal
 (the same operations in the same order); coefficients proved at derivation time.
 """
@@ -15,7 +15,7 @@ import pytest
 
 import lavendersim as lv
 from lavendersim import backends as B
-from lavendersim import reference as R
+from lavendersim import oracle as R
 from lavendersim.generated import tableaux as T
 from lavendersim.kernels import K
 

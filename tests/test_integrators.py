@@ -1,11 +1,11 @@
 """The integrators beyond euler / semi-implicit Euler / RK4 — dopri5, splitting, implicit_gyro — and the
-RHS counter, on both backends (never skipped), against lavendersim.reference."""
+RHS counter, on both backends (never skipped), against lavendersim.oracle."""
 import numpy as np
 import pytest
 
 import lavendersim as lv
 from lavendersim.errors import ValidityBoundWarning
-from lavendersim import reference as R
+from lavendersim import oracle as R
 
 # Long NumPy runs are in the slow set (NUMPY_SLOW: tests/conftest.py); test_c_and_numpy_agree
 # checks quickly that NumPy computes what C computes.

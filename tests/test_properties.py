@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 
 import lavendersim as lv
 from lavendersim import backends
-from lavendersim import reference as R
+from lavendersim import oracle as R
 from lavendersim.kernels import K
 
 # No timing checks: no per-example deadline, and not hypothesis's "data generation too slow" health

@@ -1,4 +1,4 @@
-"""lavendersim.reference: the exact torque-free motion and constant-ω attitude against DOP853,
+"""lavendersim.oracle: the exact torque-free motion and constant-ω attitude against DOP853,
 mpmath and independent closed forms; invariants; inertia order; the near-separatrix period;
 attitude_error and relative_drift."""
 from __future__ import annotations
@@ -11,7 +11,7 @@ import pytest
 from scipy.integrate import quad, solve_ivp
 from scipy.optimize import brentq
 
-from lavendersim import reference as R
+from lavendersim import oracle as R
 from lavendersim.generated import kernels_numpy as K
 
 Q0 = K.quat_normalize(np.array([0.3, -0.2, 0.5, 0.8]))

@@ -1,7 +1,7 @@
 """symtop4: the free rigid body split around a symmetric top, H = |L|²/(2 I_r) + ½ c_a L_a² + ½ c_b L_b²
 (exact sphere and axis flows), composed as splitting4 composes splitting (Suzuki, order 4).
 
-Orders against the exact torque-free motion (lavendersim.reference.torque_free) and, with loads, against
+Orders against the exact torque-free motion (lavendersim.oracle.torque_free) and, with loads, against
 dopri5 at rtol = atol = 1e-13; world L and |q| to rounding; C and NumPy bitwise equal; the validity bound.
 """
 from __future__ import annotations
@@ -11,7 +11,7 @@ import pytest
 
 import lavendersim as lv
 from lavendersim import backends as B
-from lavendersim import reference as R
+from lavendersim import oracle as R
 from lavendersim.backends import numpy_backend as NB
 from lavendersim.errors import ValidityBoundWarning
 from lavendersim.generated import tableaux as T
