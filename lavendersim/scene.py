@@ -1,7 +1,9 @@
 """A scene: bodies plus the effects it declares, and nothing else."""
 from __future__ import annotations
 
+import bisect
 import itertools
+from collections.abc import Mapping, Sequence
 from types import MappingProxyType
 from typing import NamedTuple
 
@@ -101,6 +103,134 @@ for _name in ("__setitem__", "__delitem__", "__iadd__", "__imul__", "extend", "i
 del _name
 
 
+class _BodyTable(Mapping):
+    """A scene's bodies by name, in the order added (issue 30): the bodies added in batches (add_bodies) are
+    columns — their names, initial states (k, 13) and [m, I_b] rows (k, 4) — and become Body objects only when
+    asked for (built once, kept); a Body given to add_body is kept as given. So a million bodies cost their
+    arrays, not a million Python objects.
+
+    ``frozen()`` is a view of the first len(self) bodies that later adds do not change (what a Sim keeps)."""
+
+    def __init__(self, core: dict | None = None, n: int | None = None):
+        self._c = core if core is not None else {"names": [], "pos": {}, "batches": [], "starts": [], "given": {},
+                                                      "made": {}}
+        self._n = n          # None: the scene's live table; else a frozen length
+
+    def __len__(self) -> int:
+        return len(self._c["names"]) if self._n is None else self._n
+
+    def __iter__(self):
+        names = self._c["names"]
+        return iter(names) if self._n is None else itertools.islice(names, self._n)
+
+    def __contains__(self, name) -> bool:
+        try:
+            i = self._c["pos"].get(name)
+        except TypeError:          # an unhashable name
+            return False
+        return i is not None and i < len(self)
+
+    def __getitem__(self, name) -> Body:
+        return self.body(self.position(name))
+
+    def __reduce__(self):          # pickles as its bodies (Body objects), rebuilt on load
+        return (_table_of, ([self.body(i) for i in range(len(self))],))
+
+    def position(self, name) -> int:
+        """The body's index (KeyError if it has none here; TypeError for an unhashable name)."""
+        i = self._c["pos"].get(name)
+        if i is None or i >= len(self):
+            raise KeyError(name)
+        return i
+
+    @property
+    def positions(self) -> "_BodyTable":
+        """A read-only name -> index mapping (``positions[name]``)."""
+        return _Positions(self._c, len(self))
+
+    @property
+    def names(self) -> list:
+        """The body names in order (the first len(self) entries; do not modify)."""
+        return self._c["names"]
+
+    def frozen(self) -> "_BodyTable":
+        return _BodyTable(self._c, len(self))
+
+    def body(self, i: int) -> Body:
+        """Body i: as given to add_body, or built from its batch's rows (once)."""
+        c = self._c
+        b = c["given"].get(i) or c["made"].get(i)
+        if b is None:
+            start, x, p = c["batches"][bisect.bisect_right(c["starts"], i) - 1]
+            c["made"][i] = b = _batch_body(c["names"][i], x[i - start], p[i - start])
+        return b
+
+    def add(self, body: Body) -> None:
+        c = self._c
+        c["given"][len(c["names"])] = body
+        c["pos"][body.name] = len(c["names"])
+        c["names"].append(body.name)
+
+    def add_batch(self, names: list, x: np.ndarray, p: np.ndarray) -> bool:
+        """Append validated bodies: names (k,) new in the table, read-only initial states x (k, 13) and [m, I_b]
+        rows p (k, 4); False (and nothing added) if a name repeats within `names`."""
+        c = self._c
+        start, pos = len(c["names"]), c["pos"]
+        pos.update(zip(names, range(start, start + len(names))))
+        if len(pos) != start + len(names):
+            for name in names:
+                pos.pop(name, None)
+            return False
+        c["batches"].append((start, x, p))
+        c["starts"].append(start)
+        c["names"].extend(names)
+        return True
+
+    def arrays(self) -> tuple[np.ndarray, np.ndarray, list]:
+        """(initial states (n, 13), [m, I_b] rows (n, 4), the bodies given as Body objects, in order) of the first
+        len(self) bodies: fresh arrays; the given bodies' rows are read from them now (a Body changed past its
+        immutability is then caught by _revalidate)."""
+        n, c = len(self), self._c
+        state, params = np.empty((n, STATE_SIZE)), np.empty((n, 4))
+        for start, x, p in c["batches"]:
+            k = min(len(x), n - start)
+            if k > 0:
+                state[start:start + k], params[start:start + k] = x[:k], p[:k]
+        idx = [i for i in c["given"] if i < n]
+        given = [c["given"][i] for i in idx]
+        if given:
+            state[idx] = np.stack([b.x0 for b in given])
+            params[idx] = np.stack([b.params for b in given])
+        return state, params, list(zip(idx, given))
+
+
+class _Positions(_BodyTable):
+    """name -> body index of the first n bodies (Sim._index)."""
+
+    def __getitem__(self, name) -> int:
+        return self.position(name)
+
+
+def _table_of(bodies: list) -> _BodyTable:
+    t = _BodyTable()
+    for b in bodies:
+        t.add(b)
+    return t
+
+
+def _batch_body(name: str, x0: np.ndarray, p: np.ndarray) -> Body:
+    """A Body from validated rows (its fields filled directly, as Body.__init__ would after validating)."""
+    b = object.__new__(Body)
+    for f, v in zip(("name", "mass", "I_b", "shape", "x0", "R_bp", "_tensor"),
+                    (name, float(p[0]), p[1:4], None, x0, _EYE, None)):
+        object.__setattr__(b, f, v)
+    return b
+
+
+_EYE = np.eye(3)        # the body frame of a batch-added body is principal (one read-only identity for all)
+_EYE.flags.writeable = False
+
+
 class Scene:
     """Bodies (by name, in the order added) and the effects declared on them.
 
@@ -120,8 +250,7 @@ class Scene:
 
     @V.keywords
     def __init__(self):
-        self._bodies: dict[str, Body] = {}
-        self._pos: dict[str, int] = {}       # body name -> position (Scene.index), filled on demand
+        self._bodies = _BodyTable()           # name -> Body, batches kept as arrays (see _BodyTable)
         self.effects = []
 
     @property
@@ -140,7 +269,9 @@ class Scene:
         state = dict(state)
         effects = state.pop("effects", None)
         self.__dict__.update(state)
-        self.__dict__.setdefault("_pos", {})
+        self.__dict__.pop("_pos", None)
+        if isinstance(self._bodies, dict):    # pickled before the body table
+            self._bodies = _table_of(list(self._bodies.values()))
         if effects is not None or "_effects" not in state:
             self.effects = effects or []
 
@@ -177,7 +308,7 @@ class Scene:
         if why:
             raise V.LavenderInputError("body", f"{why} with the scene's effects on every body "
                                        f"({', '.join(e.name for e in every)})")
-        self._bodies[body.name] = body
+        self._bodies.add(body)
         return body
 
     def add_effect(self, effect: Effect | str, body: str | None = None, **params) -> Effect:
@@ -222,8 +353,10 @@ class Scene:
                 effect.check_body(self.bodies[effect.body])
         elif _declared(effect):  # an undeclared effect is refused by Sim (naming how to declare it)
             if effect.body is None:   # the exact check below only where a vectorized bound cannot rule it out
-                bodies = list(self.bodies.values())
-                targets = [bodies[i] for i in _overflow_suspects(effect, self.effects, bodies)]
+                every = [e for e in self.effects.forces_on(None) if _declared(e)] + [effect]
+                x, params, _ = self._bodies.arrays()
+                targets = [self._bodies.body(int(i))
+                           for i in _overflow_suspects(every, self.effects, x, params, self._bodies.positions)]
             else:
                 targets = [self.bodies[effect.body]]
             for b in targets:
@@ -254,10 +387,7 @@ class Scene:
         """
         if name not in self.bodies:
             raise V.LavenderInputError("body", f"unknown body {name!r}; bodies: {', '.join(self.bodies) or 'none'}")
-        if len(self._pos) != len(self._bodies):      # bodies are only ever added: extend the positions
-            start = len(self._pos)
-            self._pos.update((n, start + i) for i, n in enumerate(itertools.islice(self._bodies, start, None)))
-        return self._pos[name]
+        return self._bodies.position(name)
 
     def model_effects(self, name: str) -> dict:
         """The per-body (model) effects declared on body `name`.
@@ -291,11 +421,17 @@ class Scene:
         k-th force effect) and the principal frames (None when every body frame is principal)."""
         if not self.bodies:
             raise V.LavenderInputError("scene.bodies", "a scene needs at least one body")
-        bodies = list(self.bodies.values())
-        frames = PrincipalFrames.of(bodies)
-        state = np.ascontiguousarray(np.stack([b.x0 for b in bodies]))
-        params = np.ascontiguousarray(np.stack([b.params for b in bodies]))
-        _revalidate(bodies, state, params)
+        state, params, given = self._bodies.arrays()
+        nb = len(state)
+        if given:   # batch-added bodies are the scene's own read-only arrays, validated when added
+            idx = [i for i, _ in given]
+            _revalidate([b.name for _, b in given], state[idx], params[idx])
+        rotated = [(i, b.R_bp) for i, b in given if not b.principal]
+        frames = None
+        if rotated:
+            R_bp = np.tile(np.eye(3), (nb, 1, 1))
+            R_bp[[i for i, _ in rotated]] = np.stack([R for _, R in rotated])
+            frames = PrincipalFrames(R_bp)
         if frames is not None:
             for i in frames.idx:
                 state[i] = frames.internal_row(int(i), state[i])
@@ -303,7 +439,7 @@ class Scene:
         width = row_width(forces)
         rows, rows_of = [], []
         for e in forces:
-            mine = _effect_rows(e, -1 if e.body is None else self.index(e.body), width, frames, len(bodies))
+            mine = _effect_rows(e, -1 if e.body is None else self.index(e.body), width, frames, nb)
             rows_of.append(list(range(len(rows), len(rows) + len(mine))))
             rows.extend(mine)
         effects = np.ascontiguousarray(np.array(rows, dtype=np.float64).reshape(len(rows), width))
@@ -325,30 +461,30 @@ def _row_norms(a, n: int) -> np.ndarray:
     return np.where(s > 0, s * np.sqrt(np.sum((a / safe[:, None]) ** 2, axis=1)), s)
 
 
-def _overflow_suspects(effect: Effect, effects: "_EffectList", bodies: list) -> np.ndarray:
-    """The bodies (indices, in order) on which adding the every-body force effect `effect` might overflow:
-    the exact, per-body check (load_overflow) runs on these only.
+def _overflow_suspects(every: list, effects: "_EffectList | None", x: np.ndarray, params: np.ndarray,
+                       pos=None) -> np.ndarray:
+    """The bodies (rows of the initial states x (n, 13) and [m, I_b] rows params (n, 4), in order) on which the
+    declared every-body force effects `every` together with (effects given) the per-body force effects of
+    `effects` on each body (pos: body name -> row) might overflow: the exact, per-body check (load_overflow)
+    runs on these only.
 
     A body is cleared when the triangle bound Σ_e |F_e| (and Σ_e |tau_e|, and both over the body's mass and
     smallest moment) of every declared force effect on it, the new one included, each evaluated in one batched
     call of its printed NumPy function at the initial states, stays below MAX_LOAD by a margin: then neither
     the new effect alone nor the sum can exceed the bound. Anything the bound cannot decide (a non-finite term,
     a function that fails on a batch) leaves the body — or, on an error, every body — to the exact check."""
-    n = len(bodies)
+    n = len(x)
     try:
-        x = np.stack([b.x0 for b in bodies])
-        m = np.array([b.mass for b in bodies], dtype=np.float64)
-        I_b = np.stack([b.I_b for b in bodies])
+        m, I_b = params[:, LY.PARAM_M], params[:, LY.PARAM_I_B]
         SF, ST = np.zeros(n), np.zeros(n)
         with np.errstate(all="ignore"):
-            for e in [e for e in effects.forces_on(None) if _declared(e)] + [effect]:   # on every body
+            for e in every:   # on every body
                 p = e.params_flat()
                 f, t = numpy_apply(e.code)(np.broadcast_to(p, (n, p.size)), x, x[:, LY.STATE_V_W], m, I_b)
                 SF += _row_norms(f, n)
                 ST += _row_norms(t, n)
             groups: dict[int, tuple[list, list]] = {}       # effects on one body each, by code
-            pos = {b.name: i for i, b in enumerate(bodies)}
-            for body, mine in effects._index()["on"].items():
+            for body, mine in (effects._index()["on"].items() if effects is not None else ()):
                 for _, e in mine:
                     if body in pos and _declared(e):
                         idx, ps = groups.setdefault(e.code, ([], []))
@@ -397,7 +533,7 @@ def _effect_rows(e: Effect, body_index: int, width: int, frames: PrincipalFrames
     return out
 
 
-def _revalidate(bodies: list, state: np.ndarray, params: np.ndarray) -> None:
+def _revalidate(names, state: np.ndarray, params: np.ndarray) -> None:
     """Body's rules once more over the stacked arrays a Sim is built from (vectorized; a Body is immutable, but
     object.__setattr__ gets past that): a body changed after validation is refused by name, not simulated."""
     m, I_b = params[:, LY.PARAM_M], params[:, LY.PARAM_I_B]
@@ -411,8 +547,8 @@ def _revalidate(bodies: list, state: np.ndarray, params: np.ndarray) -> None:
                "the initial state must be finite with a unit quaternion"))
     for field, bad, rule in checks:
         if bad.any():
-            b = bodies[int(np.flatnonzero(bad)[0])]
-            raise V.LavenderInputError(f"scene.bodies[{b.name!r}].{field}",
+            name = names[int(np.flatnonzero(bad)[0])]
+            raise V.LavenderInputError(f"scene.bodies[{name!r}].{field}",
                                        f"{rule}; the Body was changed after validation (object.__setattr__ gets "
                                        "past its immutability)")
 
@@ -475,8 +611,8 @@ def add_bodies(scene: Scene, names, masses, I_b, *, p_w=None, q=None, v_w=None, 
 
     Returns
     -------
-    list of Body
-        The new bodies, in order.
+    sequence of Body
+        The new bodies, in order (each built when first accessed: a million bodies are stored as arrays).
 
     Raises
     ------
@@ -490,12 +626,8 @@ def add_bodies(scene: Scene, names, masses, I_b, *, p_w=None, q=None, v_w=None, 
     for i, name in enumerate(names):
         if not isinstance(name, str) or not name:
             raise V.LavenderInputError(f"names[{i}]", "must be a non-empty string", f", got {V._describe(name)}")
-    seen: dict[str, int] = {}
-    for i, name in enumerate(names):
-        if name in scene.bodies or name in seen:
-            raise V.LavenderInputError(f"names[{i}]", f"duplicate name {name!r}"
-                                       + ("" if name in scene.bodies else f" (also names[{seen[name]}])"))
-        seen[name] = i
+    if not scene._bodies._c["pos"].keys().isdisjoint(names):
+        _first_duplicate(scene, names)
     m = _rows("masses", masses, n, None)
     _first_bad("masses", ~(m > 0), lambda f, i: V.positive(f, m[i]))
     I = _rows("I_b", I_b, n, 3)
@@ -512,33 +644,48 @@ def add_bodies(scene: Scene, names, masses, I_b, *, p_w=None, q=None, v_w=None, 
         x[:, W] = K.world_to_body(x[:, Q], _rows("omega_w", omega_w, n, 3)) if n else 0.0
     elif omega_b is not None:
         x[:, W] = _rows("omega_b", omega_b, n, 3)
-    I.flags.writeable = False
+    p = np.empty((n, 4))
+    p[:, LY.PARAM_M], p[:, LY.PARAM_I_B] = m, I
+    p.flags.writeable = False
     x.flags.writeable = False
-    # validated above, row by row as Body.__init__ does: fill the slots directly (Body refuses setattr)
-    set_name, set_mass, set_I, set_shape, set_x, set_R, set_T = (
-        Body.__dict__[f].__set__ for f in ("name", "mass", "I_b", "shape", "x0", "R_bp", "_tensor"))
-    eye = np.eye(3)   # principal moments: the body frame is principal (one read-only identity for all)
-    eye.flags.writeable = False
-    new = object.__new__
-    bodies = []
-    for name, mass, I_row, x_row in zip(names, m.tolist(), list(I), list(x)):
-        b = new(Body)
-        set_name(b, name)
-        set_mass(b, mass)
-        set_I(b, I_row)
-        set_shape(b, None)
-        set_x(b, x_row)
-        set_R(b, eye)
-        set_T(b, None)
-        bodies.append(b)
-    every = [e for e in scene.effects if not e.per_body and e.body is None and _declared(e)]
-    for i, b in enumerate(bodies if every else ()):
+    every = [e for e in scene.effects.forces_on(None) if _declared(e)]
+    for i in (_overflow_suspects(every, None, x, p) if every else ()):
+        b = _batch_body(names[i], x[i], p[i])
         why = load_overflow(every, b)
         if why:
             raise V.LavenderInputError(f"names[{i}]", f"body {b.name!r}: {why} with the scene's effects on every body "
                                        f"({', '.join(e.name for e in every)})")
-    scene._bodies.update(zip(names, bodies))
-    return bodies
+    start = len(scene._bodies)
+    if not scene._bodies.add_batch(names, x, p):      # a name repeated within `names`: nothing was added
+        _first_duplicate(scene, names)
+    return _Added(scene._bodies, start, n)
+
+
+def _first_duplicate(scene: Scene, names: list) -> None:
+    """Refuse the first name (in order) that is taken in the scene or repeats an earlier one."""
+    seen: dict[str, int] = {}
+    for i, name in enumerate(names):
+        if name in scene.bodies or name in seen:
+            raise V.LavenderInputError(f"names[{i}]", f"duplicate name {name!r}"
+                                       + ("" if name in scene.bodies else f" (also names[{seen[name]}])"))
+        seen[name] = i
+
+
+class _Added(Sequence):
+    """The bodies one add_bodies call added, in order: Body objects built on access (see _BodyTable)."""
+
+    def __init__(self, table: _BodyTable, start: int, n: int):
+        self._t, self._start, self._n = table, start, n
+
+    def __len__(self) -> int:
+        return self._n
+
+    def __getitem__(self, i):
+        if isinstance(i, slice):
+            return [self[k] for k in range(*i.indices(self._n))]
+        if not -self._n <= i < self._n:
+            raise IndexError(i)
+        return self._t.body(self._start + (i % self._n))
 
 
 Scene.add_bodies = add_bodies

@@ -429,8 +429,9 @@ class Sim:
             raise V.LavenderInputError("normalize", "must be True or False", f", got {normalize!r}")
         self.normalize = bool(normalize)
         self.backend = backends.get(backend)
-        self.names = tuple(scene.bodies)                        # read-only: a pickle rebuilds the Sim from them
-        self.bodies = types.MappingProxyType(dict(scene.bodies))
+        table = scene._bodies.frozen()     # the scene's bodies now (arrays; Body objects built on access)
+        self.names = tuple(table)                               # read-only: a pickle rebuilds the Sim from them
+        self.bodies = types.MappingProxyType(table)
         for e in scene.effects:  # an effect no declaration printed is an error, never a no-op
             effects_mod.check_declared(e)
         tables = scene.tables()   # a body given a full inertia tensor is stepped in its principal frame
@@ -438,7 +439,7 @@ class Sim:
         self._frames = tables.frames
         self._forces, self._rows_of = list(tables.forces), tables.rows_of   # force effects (current) and their rows
         self._forces_given = list(tables.forces)                            # ... as the scene gave them
-        self._index = {name: i for i, name in enumerate(self.names)}
+        self._index = table.positions      # name -> index
         self._effect_objs = list(scene.effects)
         self._models = self._build_models(scene)
         self._adaptive = None
@@ -710,6 +711,7 @@ class Sim:
         self._free = ~acted & (kind == 0)                      # E and |L| conserved
         self._free_wheels = ~acted & (kind == KIND_WHEELS)  # total |L| conserved (motor torques are internal)
         self._free_any = bool(self._free.any())
+        self._all_free = bool(self._free.all())
         self._free_wheels_idx = [int(i) for i in np.flatnonzero(self._free_wheels)]
         self._fw = np.flatnonzero(self._free_wheels)          # the same, as an index array (one batched kernel call)
         # bodies effects act on (not jointed: the joint's reaction is no declared load): a growth budget
@@ -739,9 +741,10 @@ class Sim:
         E, L = np.zeros(nb), np.zeros(nb)
         with np.errstate(over="ignore", invalid="ignore"):
             if self._free_any:
-                f = self._free
-                I_b, w_b = self._params[f][:, LY.PARAM_I_B], x[f][:, LY.STATE_OMEGA_B]
-                E[f] = K.kinetic_energy(self._params[f, LY.PARAM_M], I_b, x[f][:, LY.STATE_V_W], w_b)
+                f = slice(None) if self._all_free else self._free    # a view, not a copy, when every body is free
+                p, xf = self._params[f], x[f]
+                I_b, w_b = p[:, LY.PARAM_I_B], xf[:, LY.STATE_OMEGA_B]
+                E[f] = K.kinetic_energy(p[:, LY.PARAM_M], I_b, xf[:, LY.STATE_V_W], w_b)
                 L[f] = np.linalg.norm(K.body_momentum(I_b, w_b), axis=-1)
             if self._free_wheels_idx:
                 L[self._fw] = wheeled_momentum_norms(self._models.rows, x, Omega, self._fw, reference)
@@ -768,12 +771,16 @@ class Sim:
     def _safe_rates(self, f: np.ndarray) -> None:
         """w_safe (see _reference) of the free bodies selected by the boolean mask f, from the current E0."""
         f = f & self._free
-        if f.any() and self.max_growth is not None:
-            I = self._params[f][:, LY.PARAM_I_B]
+        k = int(np.count_nonzero(f))
+        if k and self.max_growth is not None:
+            if k == len(f):
+                f = slice(None)       # every body: views, not copies
+            p = self._params[f]
+            I = p[:, LY.PARAM_I_B]
             with np.errstate(over="ignore", invalid="ignore"):
-                T = K.kinetic_energy(self._params[f, LY.PARAM_M], I, self._x[f][:, LY.STATE_V_W], np.zeros((int(f.sum()), 3)))
-                half_Imax = K.kinetic_energy(np.zeros(int(f.sum())), np.repeat(I.max(axis=1)[:, None], 3, axis=1),
-                                             np.zeros((int(f.sum()), 3)), np.tile([1.0, 0.0, 0.0], (int(f.sum()), 1)))
+                T = K.kinetic_energy(p[:, LY.PARAM_M], I, self._x[f][:, LY.STATE_V_W], np.zeros((k, 3)))
+                half_Imax = K.kinetic_energy(np.zeros(k), np.repeat(I.max(axis=1)[:, None], 3, axis=1),
+                                             np.zeros((k, 3)), np.tile([1.0, 0.0, 0.0], (k, 1)))
                 room = np.maximum(self.max_growth * self._E0[f] - T, 0.0)
                 w_E = np.sqrt(room / half_Imax)
                 w_L = self.max_growth * self._L0[f] / I.max(axis=1)
@@ -898,7 +905,9 @@ class Sim:
         models = Models.empty(nb)
         rows = models.rows
         # a body without model effects: kind 0, I_p = diag(I_b), r_b = anchor = 0 (all bodies at once)
-        rows[:, LY.MODEL_I_P] = (self._params[:, LY.PARAM_I_B][:, :, None] * np.eye(3)).reshape(nb, 9)
+        I_p = rows[:, LY.MODEL_I_P]
+        for k in range(3):            # diag(I_b); the rest of the rows are zeros already
+            I_p[:, 4 * k] = self._params[:, LY.PARAM_I_B][:, k]
         modelled: dict[str, dict] = {}      # scene.model_effects(name) for every body at once
         for e in scene.effects:
             if e.per_body:
@@ -907,7 +916,9 @@ class Sim:
         for i, name in enumerate(self.names):
             if name in modelled:
                 self._model_row(i, modelled[name], rows)
-        self._wheel_n = models.wheel_counts     # wheels per body (the model rows' layouts never change)
+        self._wheel_n = np.zeros(nb, np.int64)  # wheels per body (the model rows' layouts never change)
+        wheeled = np.flatnonzero(rows[:, LY.MODEL_KIND].astype(np.int64) & KIND_WHEELS)
+        self._wheel_n[wheeled] = backends.wheel_counts(rows[wheeled])
         return models
 
     def _model_row(self, i: int, me: dict, rows: np.ndarray) -> None:
