@@ -193,23 +193,6 @@ class Point:
 
 # ------------------------------------------------------------------------------------------ options
 
-def add_arguments(parser) -> None:
-    parser.add_argument("--quick", action="store_true",
-                        help="reduced sweep (2 cases, dt 2^-4..2^-9, 1 repeat; < 20 s) for tests")
-    parser.add_argument("--no-mujoco", action="store_true", help="skip MuJoCo even when it is installed")
-    parser.add_argument("--workers", type=int, default=None, metavar="N",
-                        help="local processes computing the errors (default: every core; 1 = serial); "
-                             "the timing runs are always serial in this process")
-    parser.add_argument("--dask", default=None, metavar="ADDRESS",
-                        help="compute the errors on an existing Dask scheduler, e.g. tcp://host:8786 "
-                             "(the distributed extra); timing stays local and serial")
-
-
-def options_from_args(args) -> dict:
-    return {"quick": args.quick, "mujoco": not args.no_mujoco, "progress": not args.quiet,
-            "workers": args.workers, "dask": args.dask}
-
-
 # ------------------------------------------------------------------------------------------ discovery
 
 def adaptive_integrators() -> list[str]:
@@ -268,14 +251,6 @@ def _mujoco():
 
 # ------------------------------------------------------------------------------------------ measures
 
-def _invariants(I_b, q, w):
-    """Energy (T,) and world angular momentum (T, 3) of samples q (T, 4), omega_b (T, 3)."""
-    E = 0.5 * np.sum(I_b * w * w, axis=-1)
-    q = q / np.linalg.norm(q, axis=-1, keepdims=True)
-    L = K.angular_momentum_world(q, I_b, w)
-    return E, L
-
-
 def _envelope(series: np.ndarray, t: np.ndarray, n: int = 200):
     """(t, max-of-bin) of a series downsampled to at most n bins, for the drift plot."""
     if len(series) <= n:
@@ -285,8 +260,12 @@ def _envelope(series: np.ndarray, t: np.ndarray, n: int = 200):
             np.array([series[a:b].max() for a, b in zip(edges[:-1], edges[1:])]))
 
 
-def _score(pt: Point, case: Case, exact, t, q, w, keep_drift: bool, drifts: dict):
-    E, L = _invariants(case.I_b, q, w)
+def _score(pt: Point, case: Case, exact, t, x, keep_drift: bool, drifts: dict):
+    """Errors at T and drifts of E and L_w (the printed kernels) of samples x (T, 13), q normalized."""
+    x = np.array(x, dtype=float)
+    x[:, C.Q] = K.quat_normalize(x[:, C.Q])
+    q, w = x[:, C.Q], x[:, C.OMEGA_B]
+    E, L = C.energy_momentum(case.I_b, x, MASS)
     pt.attitude_error = float(R.attitude_error(q[-1], exact.q[-1]))
     pt.omega_error = float(np.linalg.norm(w[-1] - exact.omega_b[-1]))
     pt.energy_drift = R.relative_drift(E)
@@ -363,10 +342,10 @@ def _measure_sim(case, m, value, exact, drifts, keep_drift):
     pt.rhs_evals, pt.rhs_evals_source = _rhs_count(sim, m)
     xT = sim.x[0].copy()
     pt.final_x = xT.tolist()
-    _score(pt, case, exact, traj.t, x[:, 3:7], x[:, 10:13], keep_drift, drifts)
+    _score(pt, case, exact, traj.t, x, keep_drift, drifts)
     if adaptive:   # the error at T is the unclipped run's (_score used the sampled run's last sample)
-        pt.attitude_error = float(R.attitude_error(xT[3:7], exact.q[-1]))
-        pt.omega_error = float(np.linalg.norm(xT[10:13] - exact.omega_b[-1]))
+        pt.attitude_error = float(R.attitude_error(xT[C.Q], exact.q[-1]))
+        pt.omega_error = float(np.linalg.norm(xT[C.OMEGA_B] - exact.omega_b[-1]))
         pt.rhs_evals_source += " (one output step of T)"
     return pt
 
@@ -392,9 +371,7 @@ def _scipy_solver(case, m, rtol):
     from scipy.integrate import solve_ivp
 
     I_b = case.I_b
-    x0 = np.zeros(13)
-    x0[6] = 1.0
-    x0[10:13] = case.omega_b0
+    x0 = lv.Body("b", MASS, I_b, omega_b=case.omega_b0).x0
 
     def rhs(_t, x):
         return KN.rigid_body_rhs_free(x, I_b)
@@ -425,9 +402,9 @@ def _measure_scipy(case, m, rtol, exact, drifts, keep_drift):
     y = sol.y.T
     pt.steps = len(sol.t) - 1
     pt.rhs_evals, pt.rhs_evals_source = int(sol.nfev), "solve_ivp nfev"
-    q = y[:, 3:7] / np.linalg.norm(y[:, 3:7], axis=1, keepdims=True)
-    pt.final_x = np.concatenate([y[-1, :3], q[-1], y[-1, 7:]]).tolist()
-    _score(pt, case, exact, sol.t, q, y[:, 10:13], keep_drift, drifts)
+    y[:, C.Q] = K.quat_normalize(y[:, C.Q])
+    pt.final_x = y[-1].tolist()
+    _score(pt, case, exact, sol.t, y, keep_drift, drifts)
     return pt
 
 
@@ -490,11 +467,13 @@ def _measure_mujoco(mujoco, case, m, dt, exact, drifts, keep_drift):
         return pt
     if abs(st[-1, 0] - T_END) > 1e-9:
         raise RuntimeError(f"MuJoCo rollout ended at t = {st[-1, 0]!r}, expected {T_END}")
-    q = qpos[:, [4, 5, 6, 3]]                        # (w, x, y, z) -> (x, y, z, w)
-    w = qvel[:, 3:6]
+    x = np.empty((len(st), 13))                     # MuJoCo's free joint in the STATE layout
+    x[:, C.P_W], x[:, C.V_W] = qpos[:, :3], qvel[:, :3]
+    x[:, C.Q] = K.quat_normalize(qpos[:, [4, 5, 6, 3]])  # (w, x, y, z) -> (x, y, z, w)
+    x[:, C.OMEGA_B] = qvel[:, 3:6]                  # the free joint's angular velocity is in the body frame
     pt.rhs_evals, pt.rhs_evals_source = n * m.stages, "MuJoCo forward evaluations (steps x 4 for RK4, else steps)"
-    pt.final_x = np.concatenate([qpos[-1, :3], q[-1] / np.linalg.norm(q[-1]), qvel[-1, :3], w[-1]]).tolist()
-    _score(pt, case, exact, st[:, 0], q, w, keep_drift, drifts)
+    pt.final_x = x[-1].tolist()
+    _score(pt, case, exact, st[:, 0], x, keep_drift, drifts)
     return pt
 
 
@@ -933,7 +912,7 @@ def compute(backend: str = "auto", quick: bool = True, mujoco: bool = True, prog
                     worst = math.inf
                 elif a.ok:
                     xa, xb = np.array(a.final_x), np.array(b.final_x)
-                    d = max(float(R.attitude_error(xa[3:7], xb[3:7])), float(np.linalg.norm(xa[10:13] - xb[10:13])))
+                    d = max(float(R.attitude_error(xa[C.Q], xb[C.Q])), float(np.linalg.norm(xa[C.OMEGA_B] - xb[C.OMEGA_B])))
                     worst = max(worst, d / allow)
             what = "allowance 1e-9 (same algorithm)"
             checks.append(C.at_most(f"backends_agree_{name}_{case.name}", worst, 1.0,

@@ -97,7 +97,6 @@ import numpy as np
 import lavendersim as lv
 from lavendersim import backends as B
 from lavendersim import executor as X
-from lavendersim.generated import layout as LY
 from lavendersim.generated import tableaux as TABLEAUX
 from lavendersim import reference as R
 from lavendersim import validate as V
@@ -147,22 +146,6 @@ STATUSES = ("ok", "diverged", "blew_up", "silent_nan", "error", "not_run")
 # Without the C backend, cells longer than this are "not_run" (the quick atlas's |ω|·dt = 1e-4 column,
 # ~3e5 steps per cell, would take ~10 s each on NumPy: half an hour for lab all on a compiler-less machine).
 NUMPY_MAX_STEPS = 40_000
-
-
-def add_arguments(parser) -> None:
-    parser.add_argument("--quick", action="store_true",
-                        help="coarse grid: |ω|·dt 1e-4…10 one per decade, ratios 1, 1e3, 1e6 (~20 s on one core; what lab all runs)")
-    parser.add_argument("--workers", type=int, default=None, metavar="N",
-                        help="local worker processes (default: every core; 1 = serial in this process)")
-    parser.add_argument("--dask", default=None, metavar="ADDRESS",
-                        help="run the cells on an existing Dask scheduler, e.g. tcp://host:8786 (the distributed extra)")
-    parser.add_argument("--rtol", type=float, default=RTOL,
-                        help=f"dopri5's rtol (default {RTOL:g}; atol = rtol × {ATOL / RTOL:g})")
-
-
-def options_from_args(args) -> dict:
-    return {"quick": args.quick, "workers": args.workers, "dask": args.dask, "rtol": args.rtol,
-            "progress": not args.quiet}
 
 
 # ------------------------------------------------------------------------------------------ the grid
@@ -222,11 +205,10 @@ def cell_metrics(I_b: np.ndarray, w0: np.ndarray, x: np.ndarray, ref) -> dict:
         energy_drift, energy_gain, L_norm_drift, L_norm_gain, L_world_drift, attitude_error (rad),
         omega_error (relative to |ω0|); a value that overflows is None.
     """
-    q, w = x[:, LY.STATE_Q], x[:, LY.STATE_OMEGA_B]
+    q, w = x[:, C.Q], x[:, C.OMEGA_B]
     with np.errstate(over="ignore", invalid="ignore"):
-        E = 0.5 * np.sum(I_b * w * w, axis=1)
-        Ln = np.linalg.norm(I_b * w, axis=1)
-        Lw = K.angular_momentum_world(q, I_b, w)
+        E, Lw = C.energy_momentum(I_b, x)
+        Ln = np.linalg.norm(K.body_momentum(I_b, w), axis=1)
         m = {"energy_drift": R.relative_drift(E), "energy_gain": float(np.max(E / E[0] - 1.0)),
              "L_norm_drift": float(np.max(np.abs(Ln - Ln[0])) / Ln[0]), "L_norm_gain": float(np.max(Ln / Ln[0] - 1.0)),
              "L_world_drift": R.relative_drift(Lw), "attitude_error": None, "omega_error": None}

@@ -19,6 +19,8 @@ import numpy as np
 
 from lavendersim import backends
 from lavendersim import validate as V
+from lavendersim.generated import layout as LY
+from lavendersim.kernels import K
 from lavendersim.figures import new_figure  # noqa: F401  (the labs' figures; re-exported)
 
 DEFAULT_OUT = "lab-output"
@@ -37,84 +39,73 @@ NO_SIMULATOR = "none (kernels evaluated directly with the generated NumPy kernel
 # --------------------------------------------------------------------------
 
 
+# The comparators, defined once: rule -> (test(value, bound, tol), how a report says the expectation).
+RULES = {
+    "≈": (lambda v, b, tol: abs(v - b) <= tol, "{b} ± {tol}"),
+    "<=": (lambda v, b, _: v <= b, "<= {b}"),
+    "<": (lambda v, b, _: v < b, "< {b}"),
+    ">=": (lambda v, b, _: v >= b, ">= {b}"),
+    ">": (lambda v, b, _: v > b, "> {b}"),
+}
+HOLDS = "holds"     # the rule of a paw-check or failure-mode assertion (value is a bool)
+
+
 @dataclass(frozen=True)
 class Check:
-    """One acceptance check of a figure.
-
-    kind: ``"close"`` (|value - expected| <= tol), ``"max"`` (value <= limit), ``"below"``
-    (value < limit), ``"min"`` (value >= limit), ``"above"`` (value > limit) or ``"true"``
-    (a paw-check assertion; value is a bool).
+    """One acceptance check of a figure: ``value rule bound`` (and why it is the chapter's figure).
 
     Parameters
     ----------
     name : str
         The figure's name (results.json gets ``check_<name>``).
     value : float or bool
-        The figure (a bool for kind ``"true"``).
-    kind : {"close", "max", "below", "min", "above", "true"}
-    expected : float, optional
+        The figure (a bool for rule ``"holds"``).
+    rule : {"≈", "<=", "<", ">=", ">", "holds"}
+        ``"≈"``: |value - bound| <= tol; the others compare value with bound; ``"holds"``: value is true.
+    bound : float, optional
         The expected value or the limit.
     tol : float, optional
-        Absolute tolerance of a ``"close"`` check.
-    note : str, default ""
-        Said after the check in reports.
+        Absolute tolerance of a ``"≈"`` check.
+    why : str, default ""
+        Said after the check in reports (what the figure is, its unit, where the bound comes from).
     """
 
     name: str
     value: float | bool
-    kind: str
-    expected: float | None = None
+    rule: str
+    bound: float | None = None
     tol: float | None = None
-    note: str = ""
+    why: str = ""
 
     @property
     def passed(self) -> bool:
-        """Whether the check holds (a non-finite value fails every numeric kind).
+        """Whether the check holds (a non-finite value fails every numeric rule).
 
         Raises
         ------
         ValueError
-            Unknown ``kind``.
+            Unknown ``rule``.
         """
-        v = self.value
-        if self.kind == "true":
-            return bool(v)
-        if not isinstance(v, (int, float, np.floating, np.integer)) or not math.isfinite(float(v)):
-            return False
-        v = float(v)
-        if self.kind == "close":
-            return abs(v - self.expected) <= self.tol
-        if self.kind == "max":
-            return v <= self.expected
-        if self.kind == "below":
-            return v < self.expected
-        if self.kind == "min":
-            return v >= self.expected
-        if self.kind == "above":
-            return v > self.expected
-        raise ValueError(f"unknown check kind {self.kind!r}")
+        if self.rule == HOLDS:
+            return bool(self.value)
+        if self.rule not in RULES:
+            raise ValueError(f"unknown check rule {self.rule!r}")
+        return _finite(self.value) and RULES[self.rule][0](float(self.value), self.bound, self.tol)
 
     def describe(self) -> str:
         """``name = value (expected ...)`` in words, for PASS and FAIL lines alike."""
-        if self.kind == "true":
+        if self.rule == HOLDS:
             text = f"{self.name}: {'holds' if self.value else 'does NOT hold'}"
-        elif not _finite(self.value):
-            exp = (f"{_fmt(self.expected)} ± {_fmt(self.tol)}" if self.kind == "close"
-                   else f"{_OPS[self.kind]} {_fmt(self.expected)}")
-            got = "not computed" if math.isnan(float(self.value)) else f"infinite ({_fmt(self.value)})"
-            text = f"{self.name}: {got}, expected {exp}"
         else:
-            v = _fmt(self.value)
-            if self.kind == "close":
-                off = abs(float(self.value) - self.expected) if _finite(self.value) else float("nan")
-                text = (f"{self.name} = {v}, expected {_fmt(self.expected)} ± {_fmt(self.tol)}"
-                        f" (off by {_fmt(off)})")
+            exp = RULES[self.rule][1].format(b=_fmt(self.bound), tol=_fmt(self.tol) if self.tol is not None else "")
+            if not _finite(self.value):
+                got = "not computed" if math.isnan(float(self.value)) else f"infinite ({_fmt(self.value)})"
+                text = f"{self.name}: {got}, expected {exp}"
             else:
-                text = f"{self.name} = {v}, expected {_OPS[self.kind]} {_fmt(self.expected)}"
-        return text + (f" — {self.note}" if self.note else "")
-
-
-_OPS = {"max": "<=", "below": "<", "min": ">=", "above": ">"}
+                text = f"{self.name} = {_fmt(self.value)}, expected {exp}"
+                if self.rule == "≈":
+                    text += f" (off by {_fmt(abs(float(self.value) - self.bound))})"
+        return text + (f" — {self.why}" if self.why else "")
 
 
 def _finite(x) -> bool:
@@ -137,8 +128,53 @@ def _fmt(x) -> str:
     return f"{x:.6e}"
 
 
+def check(name: str, value, rule: str, bound=None, why: str = "") -> Check:
+    """One declared check: ``value rule bound``.
+
+    Parameters
+    ----------
+    name : str
+        The figure's name.
+    value : float or bool
+        The figure (a bool for ``"holds"``).
+    rule : {"≈", "<=", "<", ">=", ">", "holds"}
+        How value is compared with bound.
+    bound : float or (float, float), optional
+        The limit; for ``"≈"`` the pair (expected, absolute tolerance); None for ``"holds"``.
+    why : str, optional
+        Said after the check in reports.
+
+    Returns
+    -------
+    Check
+    """
+    if rule == HOLDS:
+        return Check(name, bool(value), HOLDS, None, None, why)
+    if rule == "≈":
+        return Check(name, float(value), rule, float(bound[0]), float(bound[1]), why)
+    if rule not in RULES:
+        raise ValueError(f"unknown check rule {rule!r}")
+    return Check(name, float(value), rule, float(bound), None, why)
+
+
+def checks(*rows) -> list[Check]:
+    """A lab's table of declared checks: one ``(name, value, rule, bound, why)`` row each (see :func:`check`);
+    a row that is None or False is left out (a check that does not apply to this run: ``cond and (row)``).
+
+    Parameters
+    ----------
+    *rows : tuple, None or False
+        ``(name, value, rule, bound, why)``.
+
+    Returns
+    -------
+    list of Check
+    """
+    return [check(*row) for row in rows if row]
+
+
 def close(name, value, expected, tol, note="") -> Check:
-    """|value - expected| <= tol.
+    """|value - expected| <= tol (the rule ``"≈"``).
 
     Parameters
     ----------
@@ -153,95 +189,11 @@ def close(name, value, expected, tol, note="") -> Check:
     -------
     Check
     """
-    return Check(name, float(value), "close", float(expected), float(tol), note)
-
-
-def at_most(name, value, limit, note="") -> Check:
-    """value <= limit.
-
-    Parameters
-    ----------
-    name : str
-        The figure's name.
-    value : float
-        The figure.
-    limit : float
-        The bound.
-    note : str, optional
-        Said after the check in reports.
-
-    Returns
-    -------
-    Check
-    """
-    return Check(name, float(value), "max", float(limit), None, note)
-
-
-def below(name, value, limit, note="") -> Check:
-    """value < limit.
-
-    Parameters
-    ----------
-    name : str
-        The figure's name.
-    value : float
-        The figure.
-    limit : float
-        The bound.
-    note : str, optional
-        Said after the check in reports.
-
-    Returns
-    -------
-    Check
-    """
-    return Check(name, float(value), "below", float(limit), None, note)
-
-
-def at_least(name, value, limit, note="") -> Check:
-    """value >= limit.
-
-    Parameters
-    ----------
-    name : str
-        The figure's name.
-    value : float
-        The figure.
-    limit : float
-        The bound.
-    note : str, optional
-        Said after the check in reports.
-
-    Returns
-    -------
-    Check
-    """
-    return Check(name, float(value), "min", float(limit), None, note)
-
-
-def above(name, value, limit, note="") -> Check:
-    """value > limit.
-
-    Parameters
-    ----------
-    name : str
-        The figure's name.
-    value : float
-        The figure.
-    limit : float
-        The bound.
-    note : str, optional
-        Said after the check in reports.
-
-    Returns
-    -------
-    Check
-    """
-    return Check(name, float(value), "above", float(limit), None, note)
+    return check(name, value, "≈", (expected, tol), note)
 
 
 def holds(name, condition, note="") -> Check:
-    """A paw-check or failure-mode assertion.
+    """A paw-check or failure-mode assertion (the rule ``"holds"``).
 
     Parameters
     ----------
@@ -256,7 +208,66 @@ def holds(name, condition, note="") -> Check:
     -------
     Check
     """
-    return Check(name, bool(condition), "true", None, None, note)
+    return check(name, condition, HOLDS, None, note)
+
+
+def _comparator(rule: str, words: str):
+    def compare(name, value, limit, note="") -> Check:
+        return check(name, value, rule, limit, note)
+    compare.__name__ = compare.__qualname__ = words
+    compare.__doc__ = f"""value {rule} limit.
+
+    Parameters
+    ----------
+    name : str
+        The figure's name.
+    value : float
+        The figure.
+    limit : float
+        The bound.
+    note : str, optional
+        Said after the check in reports.
+
+    Returns
+    -------
+    Check
+    """
+    return compare
+
+
+at_most, below, at_least, above = (_comparator(r, w) for r, w in
+                                   (("<=", "at_most"), ("<", "below"), (">=", "at_least"), (">", "above")))
+
+
+# --------------------------------------------------------------------------
+# the printed measures of a rigid body's state (generated/: kernels and the state layout)
+# --------------------------------------------------------------------------
+
+P_W, Q, V_W, OMEGA_B = LY.STATE_P_W, LY.STATE_Q, LY.STATE_V_W, LY.STATE_OMEGA_B   # named slices of a state row
+
+
+def energy_momentum(I_b, x, m=1.0):
+    """Kinetic energy and world angular momentum of rigid-body states, from the printed kernels.
+
+    Parameters
+    ----------
+    I_b : array_like (..., 3)
+        Principal moments, body frame, kg·m².
+    x : array_like (..., 13)
+        States (generated/layout.py STATE layout: p_w, q (x, y, z, w), v_w, omega_b).
+    m : float or array_like (...), default 1.0
+        Mass, kg (the labs' bodies have 1 kg).
+
+    Returns
+    -------
+    T : ndarray (...)
+        Kinetic energy (translational plus rotational), J.
+    L_w : ndarray (..., 3)
+        Angular momentum about the COM, world frame, kg·m²/s.
+    """
+    x = np.asarray(x, dtype=float)
+    w = x[..., OMEGA_B]
+    return K.kinetic_energy(m, I_b, x[..., V_W], w), K.angular_momentum_world(x[..., Q], I_b, w)
 
 
 # --------------------------------------------------------------------------

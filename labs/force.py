@@ -38,15 +38,6 @@ SIM_DT = 1e-6
 SIM_REL_TOL = 1e-8  # O(dt^2) truncation of omega(dt)/dt at dt = 1e-6, with margin
 
 
-def add_arguments(parser) -> None:
-    parser.add_argument("--offset", type=float, default=R_W[0], metavar="X",
-                        help="lever arm along x in m (default 0.3; paw-check 2 is always run at -0.3)")
-
-
-def options_from_args(args) -> dict:
-    return {"offset": args.offset}
-
-
 def run(out_dir=C.DEFAULT_OUT, backend: str = "auto", **options) -> C.LabResult:
     """:func:`compute`, then write OUT/force/ (results.json, force.png)."""
     return compute(backend, **options).save(out_dir)
@@ -57,22 +48,51 @@ def compute(backend: str = "auto", offset: float = R_W[0]) -> C.LabResult:
     """Run the lab and return its :class:`~lavendersim.labs.common.LabResult`; writes nothing."""
     backend = C.check_backend(backend)
     x = C.bounded("offset", offset)
-    r = np.array([x, 0.0, 0.0])
-    F = np.array(F_W)
-    chapter = x == R_W[0]
-
-    # --- pure kernels -------------------------------------------------------------------
+    r, F = np.array([x, 0.0, 0.0]), np.array(F_W)
+    F_along, r_neg = np.array([5.0, 0.0, 0.0]), np.array([-R_W[0], 0.0, 0.0])  # along the lever arm; paw-check 2
+    # pure kernels; only the perpendicular part contributes: F = [3, 4, 0] at r gives the torque of [0, 4, 0]
     tau = K.torque_from_force(r, F)
-    F_along = np.array([5.0, 0.0, 0.0])  # same magnitude, along the lever arm
-    tau_along = K.torque_from_force(r, F_along)
-    r_neg = np.array([-R_W[0], 0.0, 0.0])
-    tau_neg = K.torque_from_force(r_neg, F)  # paw-check 2
-    # only the perpendicular part contributes: F = [3, 4, 0] at r gives the torque of [0, 4, 0]
-    F_mixed = np.array([3.0, 4.0, 0.0])
-    tau_mixed = K.torque_from_force(r, F_mixed)
+    f = {"torque": tau, "torque_along_lever_arm": K.torque_from_force(r, F_along),
+         "torque_at_minus_offset": K.torque_from_force(r_neg, F),
+         "torque_mixed_force": K.torque_from_force(r, np.array([3.0, 4.0, 0.0]))}
     tau_perp = K.torque_from_force(r, np.array([0.0, 4.0, 0.0]))
+    sim_f, I_b, pipeline = _simulated(r, F, backend)
+    f.update(sim_f)
+    params = {
+        "backend": backend, "r_w": r, "F_w": F, "F_along_lever_w": F_along, "paw_check_r_w": r_neg,
+        "body": "box", "body_size": np.array(ROD_SIZE), "body_mass": ROD_MASS, "I_b": I_b,
+        "tilt_axis": np.array(TILT_AXIS), "tilt_angle": TILT_ANGLE, "sim_dt": SIM_DT, "integrator": "rk4",
+        "pipeline": " | ".join(pipeline),
+    }
+    chapter, worst = x == R_W[0], lambda v: float(np.max(np.abs(v)))
+    checks = C.checks(
+        chapter and ("torque", worst(tau - TAU_EXPECTED), "<=", EXACT_TOL, "max |tau - [0, 0, 1.5]| N·m (chapter)"),
+        not chapter and ("torque_z_equals_x_Fy", abs(tau[2] - x * F[1]) + abs(tau[0]) + abs(tau[1]), "<=", EXACT_TOL,
+                         f"offset {x} m: tau should be [0, 0, {x * F[1]}]"),
+        ("torque_along_lever_arm", worst(f["torque_along_lever_arm"]), "<=", EXACT_TOL,
+         "force along the lever arm gives zero torque"),
+        ("paw2_torque_at_minus_0.3", worst(f["torque_at_minus_offset"] - np.array([0.0, 0.0, -1.5])), "<=", EXACT_TOL,
+         "paw-check 2: F at -0.3 m gives [0, 0, -1.5] N·m"),
+        ("perpendicular_part_only", worst(f["torque_mixed_force"] - tau_perp), "<=", EXACT_TOL,
+         "F = [3, 4, 0] N gives the torque of its perpendicular part [0, 4, 0] N"),
+        ("alpha_sim_vs_apply_inv_inertia", f["alpha_rel_error"], "<=", SIM_REL_TOL,
+         "relative, body at rest in identity orientation"),
+        ("alpha_tilted_sim_vs_apply_inv_inertia", f["alpha_tilted_rel_error"], "<=", SIM_REL_TOL,
+         "relative, body at rest in a general orientation"),
+        ("apply_inv_inertia_equals_inverse_world_inertia", f["apply_inv_inertia_vs_matrix_inverse"], "<=", 1e-12,
+         "apply_inv_inertia(q, I_b, tau) == world_inertia(q, I_b)^-1 tau"),
+        ("com_acceleration_F_over_m", worst(f["com_acceleration_w"] - F / ROD_MASS), "<=", 1e-9,
+         "the force also accelerates the COM: a = F / m, m/s²"),
+    )
+    data = {"r": r, "F": F, "F_along": F_along, "tau": tau, "tau_along": f["torque_along_lever_arm"],
+            "tau_neg": f["torque_at_minus_offset"], "tau_mixed": f["torque_mixed_force"]}
+    return C.make_result(NAME, f, params, checks, {"force.png": _plot}, data,
+                         headline=("torque", "[0, 0, 1.5] N·m within 1e-12"))
 
-    # --- through the simulator -----------------------------------------------------------
+
+def _simulated(r, F, backend: str):
+    """One RK4 step of dt = 1e-6 s of the rod at rest (identity and tilted) under F at r: alpha and the COM's
+    acceleration against the kernels. Returns (figures, I_b, pipeline)."""
     q_tilt = K.axis_angle_to_quat(np.array(TILT_AXIS) / np.linalg.norm(TILT_AXIS), TILT_ANGLE)
     scene = lv.Scene()
     rod = scene.add_body(lv.Body.box("rod", mass=ROD_MASS, size=ROD_SIZE))
@@ -80,68 +100,26 @@ def compute(backend: str = "auto", offset: float = R_W[0]) -> C.LabResult:
     scene.add_effect("force_at_point", body="rod", r_b=r, F_w=F)
     scene.add_effect("force_at_point", body="rod_tilted", r_b=r, F_w=F)
     sim = lv.Sim(scene, dt=SIM_DT, integrator="rk4", backend=backend)
-    pipeline = sim.pipeline
     sim.step()
-    I_b = rod.I_b
-    alpha_pred = K.apply_inv_inertia(np.array([0.0, 0.0, 0.0, 1.0]), I_b, K.force_at_point(np.array([0, 0, 0, 1.0]), r, F))
+    I_b, identity = rod.I_b, np.array([0.0, 0.0, 0.0, 1.0])
+    alpha_pred = K.apply_inv_inertia(identity, I_b, K.force_at_point(identity, r, F))
     alpha_sim = sim.state("rod").omega_w / SIM_DT
     tau_tilt = K.force_at_point(q_tilt, r, F)  # = torque_from_force(R r_b, F)
     alpha_pred_tilt = K.apply_inv_inertia(q_tilt, I_b, tau_tilt)
     alpha_sim_tilt = sim.state("rod_tilted").omega_w / SIM_DT
     # I_w^-1 tau by a matrix inverse of world_inertia, as an independent cross-check of the kernel
     alpha_matrix_tilt = np.linalg.solve(K.world_inertia(q_tilt, I_b), tau_tilt)
-    a_com_sim = sim.state("rod").v_w / SIM_DT
 
     def rel(a, b):
         return float(np.max(np.abs(a - b)) / max(np.max(np.abs(b)), 1e-300))
 
-    figures = {
-        "torque": tau,
-        "torque_along_lever_arm": tau_along,
-        "torque_at_minus_offset": tau_neg,
-        "torque_mixed_force": tau_mixed,
-        "alpha_predicted_w": alpha_pred,
-        "alpha_simulated_w": alpha_sim,
-        "alpha_rel_error": rel(alpha_sim, alpha_pred),
-        "alpha_tilted_predicted_w": alpha_pred_tilt,
-        "alpha_tilted_simulated_w": alpha_sim_tilt,
+    return {
+        "alpha_predicted_w": alpha_pred, "alpha_simulated_w": alpha_sim, "alpha_rel_error": rel(alpha_sim, alpha_pred),
+        "alpha_tilted_predicted_w": alpha_pred_tilt, "alpha_tilted_simulated_w": alpha_sim_tilt,
         "alpha_tilted_rel_error": rel(alpha_sim_tilt, alpha_pred_tilt),
         "apply_inv_inertia_vs_matrix_inverse": rel(alpha_pred_tilt, alpha_matrix_tilt),
-        "com_acceleration_w": a_com_sim,
-    }
-    params = {
-        "backend": backend, "r_w": r, "F_w": F, "F_along_lever_w": F_along, "paw_check_r_w": r_neg,
-        "body": "box", "body_size": np.array(ROD_SIZE), "body_mass": ROD_MASS, "I_b": I_b,
-        "tilt_axis": np.array(TILT_AXIS), "tilt_angle": TILT_ANGLE, "sim_dt": SIM_DT, "integrator": "rk4",
-        "pipeline": " | ".join(pipeline),
-    }
-    checks = []
-    if chapter:
-        checks.append(C.at_most("torque", np.max(np.abs(tau - TAU_EXPECTED)), EXACT_TOL,
-                                "max |tau - [0, 0, 1.5]| N·m (chapter)"))
-    else:
-        checks.append(C.at_most("torque_z_equals_x_Fy", abs(tau[2] - x * F[1]) + abs(tau[0]) + abs(tau[1]), EXACT_TOL,
-                                f"offset {x} m: tau should be [0, 0, {x * F[1]}]"))
-    checks += [
-        C.at_most("torque_along_lever_arm", np.max(np.abs(tau_along)), EXACT_TOL, "force along the lever arm gives zero torque"),
-        C.at_most("paw2_torque_at_minus_0.3", np.max(np.abs(tau_neg - np.array([0.0, 0.0, -1.5]))), EXACT_TOL,
-                  "paw-check 2: F at -0.3 m gives [0, 0, -1.5] N·m"),
-        C.at_most("perpendicular_part_only", np.max(np.abs(tau_mixed - tau_perp)), EXACT_TOL,
-                  "F = [3, 4, 0] N gives the torque of its perpendicular part [0, 4, 0] N"),
-        C.at_most("alpha_sim_vs_apply_inv_inertia", rel(alpha_sim, alpha_pred), SIM_REL_TOL,
-                  "relative, body at rest in identity orientation"),
-        C.at_most("alpha_tilted_sim_vs_apply_inv_inertia", rel(alpha_sim_tilt, alpha_pred_tilt), SIM_REL_TOL,
-                  "relative, body at rest in a general orientation"),
-        C.at_most("apply_inv_inertia_equals_inverse_world_inertia", rel(alpha_pred_tilt, alpha_matrix_tilt), 1e-12,
-                  "apply_inv_inertia(q, I_b, tau) == world_inertia(q, I_b)^-1 tau"),
-        C.at_most("com_acceleration_F_over_m", np.max(np.abs(a_com_sim - F / ROD_MASS)), 1e-9,
-                  "the force also accelerates the COM: a = F / m, m/s²"),
-    ]
-
-    data = {"r": r, "F": F, "F_along": F_along, "tau": tau, "tau_along": tau_along, "tau_neg": tau_neg,
-            "tau_mixed": tau_mixed}
-    return C.make_result(NAME, figures, params, checks, {"force.png": _plot}, data,
-                         headline=("torque", "[0, 0, 1.5] N·m within 1e-12"))
+        "com_acceleration_w": sim.state("rod").v_w / SIM_DT,
+    }, I_b, sim.pipeline
 
 
 def _plot(d, ax=None):

@@ -52,16 +52,6 @@ PAW4_TOL = 1e-12
 PAW4_Q0_AXIS, PAW4_Q0_ANGLE = (0.0, 1.0, 0.0), math.pi / 2
 
 
-def add_arguments(parser) -> None:
-    parser.add_argument("--dt", type=float, default=DT, help="time step in s (default 0.01); T / dt must be an integer")
-    parser.add_argument("--single-axis", action="store_true",
-                        help="failure mode: omega = [|omega|, 0, 0] rad/s, which hides the Euler-angle bug")
-
-
-def options_from_args(args) -> dict:
-    return {"dt": args.dt, "single_axis": args.single_axis}
-
-
 def _steps(dt: float) -> int:
     return C.steps("dt", T_END, dt)  # at most C.MAX_STEPS, a whole number of steps
 
@@ -108,93 +98,78 @@ def run(out_dir=C.DEFAULT_OUT, backend: str = "auto", **options) -> C.LabResult:
 def compute(backend: str = "auto", dt: float = DT, single_axis: bool = False) -> C.LabResult:
     """Run the lab and return its :class:`~lavendersim.labs.common.LabResult`; writes nothing."""
     C.check_backend(backend)  # validated only: this lab evaluates the generated NumPy kernels, no simulator
-    backend = C.NO_SIMULATOR
     dt = V.dt("dt", dt)
     if not isinstance(single_axis, (bool, np.bool_)):
         raise V.LavenderInputError("single_axis", "must be True or False", f", got {single_axis!r}")
     n = _steps(dt)
-    w_mixed = np.array(OMEGA_W)
-    speed = float(np.linalg.norm(w_mixed))
-    w = np.array([speed, 0.0, 0.0]) if single_axis else w_mixed
-    t = np.arange(n + 1) * dt
-
-    H = integrate(w, dt, n)
-    Q = exact(w, t)
-    err_naive = C.angle_between_deg(K, H["naive"], Q)
-    err_quat = C.angle_between_deg(K, H["quaternion"], Q)
-    err_unnorm = C.angle_between_deg(K, H["unnormalized"], Q)
-    norm_unnorm = np.linalg.norm(H["unnormalized"], axis=1)
-    quat_closed = math.degrees(n * (speed * dt - 2 * math.atan(speed * dt / 2)))
-    norm_closed = (1 + (speed * dt / 2) ** 2) ** (n / 2)
-
-    # paw-check 4 from a rotated start, and (to show why) from the identity
-    q0 = K.axis_angle_to_quat(np.array(PAW4_Q0_AXIS), PAW4_Q0_ANGLE)
-    H4 = integrate(w, dt, n, q0)
-    Q4 = exact(w, t, q0)
-    body_vs_world = float(np.max(np.abs(H4["body"] - H4["quaternion"])))
-    body_err = C.angle_between_deg(K, H4["body"], Q4)
-    wrong_err = C.angle_between_deg(K, H4["wrong_order"], Q4)
-    body_vs_world_id = float(np.max(np.abs(H["body"] - H["quaternion"])))
-    wrong_err_id = C.angle_between_deg(K, H["wrong_order"], Q)
-
-    figures = {
-        "naive_euler_error_deg": float(err_naive[-1]),
-        "quaternion_error_deg": float(err_quat[-1]),
-        "quaternion_error_deg_closed_form": quat_closed,
-        "unnormalized_norm": float(norm_unnorm[-1]),
-        "unnormalized_norm_closed_form": norm_closed,
-        "unnormalized_error_deg": float(err_unnorm[-1]),
-        "naive_euler_max_error_deg": float(np.max(err_naive)),
-        "paw4_body_vs_world_max_abs": body_vs_world,
-        "paw4_body_form_error_deg": float(body_err[-1]),
-        "paw4_wrong_order_error_deg": float(wrong_err[-1]),
-        "paw4_identity_start_body_vs_world_max_abs": body_vs_world_id,
-        "paw4_identity_start_wrong_order_error_deg": float(wrong_err_id[-1]),
-    }
+    speed = float(np.linalg.norm(OMEGA_W))
+    w = np.array([speed, 0.0, 0.0]) if single_axis else np.array(OMEGA_W)
+    f, data = _measure(w, dt, n)
+    data["single_axis"] = single_axis
     params = {
-        "backend": backend, "omega_w": w, "dt": dt, "T": T_END, "n_steps": n, "q0": np.array([0.0, 0.0, 0.0, 1.0]),
+        "backend": C.NO_SIMULATOR, "omega_w": w, "dt": dt, "T": T_END, "n_steps": n, "q0": np.array([0.0, 0.0, 0.0, 1.0]),
         "single_axis": bool(single_axis), "euler_convention": "intrinsic XYZ, R = Rx(roll) Ry(pitch) Rz(yaw)",
-        "paw4_q0": q0,
+        "paw4_q0": PAW4_Q0,
     }
-
-    default = dt == DT and not single_axis
-    checks = []
-    if default or (single_axis and dt == DT):
-        # the quaternion figures depend only on |omega| and dt, so they hold for --single-axis too
-        checks += [
-            C.close("quaternion_error_deg", err_quat[-1], QUAT_DEG, QUAT_TOL, "chapter 0.0087°"),
-            C.close("unnormalized_norm", norm_unnorm[-1], NORM, NORM_TOL, "chapter 1.0138"),
-        ]
-    if default:
-        checks.insert(0, C.close("naive_euler_error_deg", err_naive[-1], NAIVE_DEG, NAIVE_TOL, "chapter 87.6°"))
-    if single_axis:
-        checks.append(C.at_most("single_axis_hides_euler_bug", err_naive[-1], 1e-9,
-                                "failure mode: Euler-angle addition is exact for a single-axis rotation (deg)"))
-    if dt != DT:
+    if dt != DT:   # the failure mode's reference: the chapter's dt
         ref = integrate(w, DT, _steps(DT))
-        ref_err = float(C.angle_between_deg(K, ref["quaternion"][-1:], exact(w, [T_END]))[0])
-        figures["quaternion_error_deg_at_dt_0.01"] = ref_err
-        figures["quaternion_error_ratio_vs_dt_0.01"] = float(err_quat[-1]) / ref_err
-        if dt > DT:
-            checks.append(C.above("larger_dt_increases_quaternion_error", float(err_quat[-1]) / ref_err, 1.0,
-                                  f"failure mode: error at dt = {dt:g} s over error at dt = 0.01 s"))
-    checks += [
-        C.close("quaternion_error_matches_closed_form", err_quat[-1], quat_closed, 1e-9,
-                "n (|w| dt - 2 atan(|w| dt / 2)), deg"),
-        C.close("unnormalized_norm_matches_closed_form", norm_unnorm[-1], norm_closed, 1e-12,
-                "(1 + (|w| dt / 2)^2)^(n / 2)"),
-        C.at_most("paw4_body_form_equals_world_form", body_vs_world, PAW4_TOL,
-                  "max |q_body - q_world| over the run, start 90° about y"),
-        C.above("paw4_wrong_order_diverges", wrong_err[-1], 1.0,
-                "body omega with the world-form order: error at T in degrees"),
-    ]
-
-    data = {"w": w, "dt": dt, "single_axis": single_axis, "t": t, "err_naive": err_naive, "err_quat": err_quat,
-            "err_unnorm": err_unnorm, "norm_unnorm": norm_unnorm, "norm_quat": np.linalg.norm(H["quaternion"], axis=1),
-            "body_err": body_err, "world_err": C.angle_between_deg(K, H4["quaternion"], Q4), "wrong_err": wrong_err}
-    return C.make_result(NAME, figures, params, checks, {"orientation.png": _plot}, data,
+        f["quaternion_error_deg_at_dt_0.01"] = float(C.angle_between_deg(K, ref["quaternion"][-1:], exact(w, [T_END]))[0])
+        f["quaternion_error_ratio_vs_dt_0.01"] = f["quaternion_error_deg"] / f["quaternion_error_deg_at_dt_0.01"]
+    chapter_dt = dt == DT
+    checks = C.checks(
+        chapter_dt and not single_axis and ("naive_euler_error_deg", f["naive_euler_error_deg"], "≈",
+                                            (NAIVE_DEG, NAIVE_TOL), "chapter 87.6°"),
+        # the quaternion figures depend only on |omega| and dt, so they hold for --single-axis too
+        chapter_dt and ("quaternion_error_deg", f["quaternion_error_deg"], "≈", (QUAT_DEG, QUAT_TOL), "chapter 0.0087°"),
+        chapter_dt and ("unnormalized_norm", f["unnormalized_norm"], "≈", (NORM, NORM_TOL), "chapter 1.0138"),
+        single_axis and ("single_axis_hides_euler_bug", f["naive_euler_error_deg"], "<=", 1e-9,
+                         "failure mode: Euler-angle addition is exact for a single-axis rotation (deg)"),
+        dt > DT and ("larger_dt_increases_quaternion_error", f["quaternion_error_ratio_vs_dt_0.01"], ">", 1.0,
+                     f"failure mode: error at dt = {dt:g} s over error at dt = 0.01 s"),
+        ("quaternion_error_matches_closed_form", f["quaternion_error_deg"], "≈",
+         (f["quaternion_error_deg_closed_form"], 1e-9), "n (|w| dt - 2 atan(|w| dt / 2)), deg"),
+        ("unnormalized_norm_matches_closed_form", f["unnormalized_norm"], "≈", (f["unnormalized_norm_closed_form"], 1e-12),
+         "(1 + (|w| dt / 2)^2)^(n / 2)"),
+        ("paw4_body_form_equals_world_form", f["paw4_body_vs_world_max_abs"], "<=", PAW4_TOL,
+         "max |q_body - q_world| over the run, start 90° about y"),
+        ("paw4_wrong_order_diverges", f["paw4_wrong_order_error_deg"], ">", 1.0,
+         "body omega with the world-form order: error at T in degrees"),
+    )
+    return C.make_result(NAME, f, params, checks, {"orientation.png": _plot}, data,
                          headline=("naive_euler_error_deg", f"{NAIVE_DEG:g} ± {NAIVE_TOL:g}° (quaternion "
                                    f"{QUAT_DEG:g}°) at the chapter's dt"))
+
+
+PAW4_Q0 = K.axis_angle_to_quat(np.array(PAW4_Q0_AXIS), PAW4_Q0_ANGLE)
+
+
+def _measure(w, dt: float, n: int):
+    """The figures of every method against exp(t [omega]x), from the identity and (paw-check 4) from PAW4_Q0."""
+    t = np.arange(n + 1) * dt
+    speed = float(np.linalg.norm(w))
+    H, Q = integrate(w, dt, n), exact(w, t)
+    H4, Q4 = integrate(w, dt, n, PAW4_Q0), exact(w, t, PAW4_Q0)
+    err = {k: C.angle_between_deg(K, H[k], Q) for k in ("naive", "quaternion", "unnormalized", "wrong_order")}
+    err4 = {k: C.angle_between_deg(K, H4[k], Q4) for k in ("body", "wrong_order", "quaternion")}
+    norm_unnorm = np.linalg.norm(H["unnormalized"], axis=1)
+    f = {
+        "naive_euler_error_deg": float(err["naive"][-1]),
+        "quaternion_error_deg": float(err["quaternion"][-1]),
+        "quaternion_error_deg_closed_form": math.degrees(n * (speed * dt - 2 * math.atan(speed * dt / 2))),
+        "unnormalized_norm": float(norm_unnorm[-1]),
+        "unnormalized_norm_closed_form": (1 + (speed * dt / 2) ** 2) ** (n / 2),
+        "unnormalized_error_deg": float(err["unnormalized"][-1]),
+        "naive_euler_max_error_deg": float(np.max(err["naive"])),
+        "paw4_body_vs_world_max_abs": float(np.max(np.abs(H4["body"] - H4["quaternion"]))),
+        "paw4_body_form_error_deg": float(err4["body"][-1]),
+        "paw4_wrong_order_error_deg": float(err4["wrong_order"][-1]),
+        "paw4_identity_start_body_vs_world_max_abs": float(np.max(np.abs(H["body"] - H["quaternion"]))),
+        "paw4_identity_start_wrong_order_error_deg": float(err["wrong_order"][-1]),
+    }
+    data = {"w": w, "dt": dt, "t": t, "err_naive": err["naive"], "err_quat": err["quaternion"],
+            "err_unnorm": err["unnormalized"], "norm_unnorm": norm_unnorm, "norm_quat": np.linalg.norm(H["quaternion"], axis=1),
+            "body_err": err4["body"], "world_err": err4["quaternion"], "wrong_err": err4["wrong_order"]}
+    return f, data
 
 
 def _plot(d, ax=None):

@@ -74,19 +74,7 @@ MOMENTUM_LIMIT = 4e-7
 FLOAT32_MOMENTUM_LIMIT = 1e-5
 PAW5_SIZE = (0.3, 0.2, 0.1)
 PAW5_SPIN, PAW5_PERTURB, PAW5_T = 3.0, 0.01, 10.0
-
-
-def add_arguments(parser) -> None:
-    parser.add_argument("--dt", type=float, default=DT, help="time step in s (default 1e-3)")
-    parser.add_argument("--integrator", default=INTEGRATOR, choices=CHAPTER_INTEGRATORS,
-                        help="failure mode: euler shows energy drift (default rk4)")
-    parser.add_argument("--no-normalize", action="store_true", help="failure mode: do not renormalize q after each step")
-    parser.add_argument("--search", action="store_true",
-                        help="also rerun the parameter search that chose the mixed-axis setup and print its hits")
-
-
-def options_from_args(args) -> dict:
-    return {"dt": args.dt, "integrator": args.integrator, "normalize": not args.no_normalize, "search": args.search}
+PAW5_AXES = ("x", "y", "z")
 
 
 # --------------------------------------------------------------------------------------------
@@ -164,11 +152,19 @@ def _simulate(bodies, T, dt, integrator, normalize, backend, dtype="float64"):
     return sim, sim.record(n)
 
 
-def _invariants(traj, name, body):
-    s = traj.body(name)
-    L = K.angular_momentum_world(s.q, body.I_b, s.omega_b)
-    E = K.kinetic_energy(body.mass, body.I_b, s.v_w, s.omega_b)
+def _invariants(traj, body):
+    """(L_w (T, 3), E (T,)) of ``body`` in ``traj``: the printed kernels (common.energy_momentum)."""
+    E, L = C.energy_momentum(body.I_b, traj.body(body.name).x, body.mass)
     return L, E
+
+
+def _energy_error(traj, body) -> float:
+    E = _invariants(traj, body)[1]
+    return float(np.max(np.abs(E - E[0]) / E[0]))
+
+
+def _qnorm_deviation(traj, name) -> float:
+    return float(np.max(np.abs(np.linalg.norm(traj.body(name).q, axis=1) - 1)))
 
 
 def run(out_dir=C.DEFAULT_OUT, backend: str = "auto", **options) -> C.LabResult:
@@ -186,140 +182,129 @@ def compute(backend: str = "auto", dt: float = DT, integrator: str = INTEGRATOR,
     if not isinstance(normalize, (bool, np.bool_)) or not isinstance(search, (bool, np.bool_)):
         raise V.LavenderInputError("normalize", "normalize and search must be True or False")
     C.steps("dt", max(T_END, PAW5_T, *(SEARCH_TIMES if search else ())), dt, whole=False)  # at most C.MAX_STEPS
-
-    principal = lv.Body.box("principal", mass=MASS, size=ROD_SIZE, omega_b=OMEGA_PRINCIPAL, p_w=[0, 0, 1])
-    mixed = lv.Body.box("mixed", mass=MASS, size=ROD_SIZE, omega_b=OMEGA_MIXED, p_w=[0, 0, -1])
-    sim, traj = _simulate([principal, mixed], T_END, dt, integrator, normalize, backend)
-    t = traj.t
-    wp = traj.body("principal").omega_b
-    wm = traj.body("mixed").omega_b
-    principal_change = float(np.linalg.norm(wp[-1] - wp[0]))
-    principal_change_max = float(np.max(np.linalg.norm(wp - wp[0], axis=1)))
-    mixed_change = float(np.linalg.norm(wm[-1] - wm[0]))
-    mixed_change_max = float(np.max(np.linalg.norm(wm - wm[0], axis=1)))
-    I = mixed.I_b
-    lam = (I[1] - I[0]) / I[1] * OMEGA_MIXED[0]
-    w_perp = float(np.hypot(OMEGA_MIXED[1], OMEGA_MIXED[2]))
-    closed = 2 * w_perp * abs(np.sin(lam * T_END / 2))
-    # closed-form omega_b(t) of the symmetric rod, for the plot
-    phase = (OMEGA_MIXED[1] + 1j * OMEGA_MIXED[2]) * np.exp(-1j * lam * t)
-
-    L_m, E_m = _invariants(traj, "mixed", mixed)
-    L_p, E_p = _invariants(traj, "principal", principal)
-    L_err = _rel_series(L_m, L_m[0])
-    E_err = np.abs(E_m - E_m[0]) / E_m[0]
-    momentum_error = float(np.max(L_err))
-    energy_error = float(np.max(E_err))
-    momentum_error_principal = float(np.max(_rel_series(L_p, L_p[0])))
-    # the same mixed spin with Sim(dtype="float32"): the precision the chapter's build had
-    _, traj32 = _simulate([mixed], T_END, dt, integrator, normalize, backend, dtype="float32")
-    L_32 = _invariants(traj32, "mixed", mixed)[0]
-    momentum_error_float32 = float(np.max(_rel_series(L_32, L_32[0])))
-    qnorm_dev = float(np.max(np.abs(np.linalg.norm(traj.body("mixed").q, axis=1) - 1)))
-
-    # paw-check 5
-    paw_names = ("x", "y", "z")
-    paw_bodies = []
-    for k, ax in enumerate(paw_names):
-        w0 = np.full(3, PAW5_SPIN * PAW5_PERTURB)
-        w0[k] = PAW5_SPIN
-        paw_bodies.append(lv.Body.box(f"near_{ax}", mass=MASS, size=PAW5_SIZE, omega_b=w0, p_w=[2.0 * k, 3.0, 0]))
-    _, traj5 = _simulate(paw_bodies, PAW5_T, dt, integrator, normalize, backend)
-    dev5 = {}
-    dev5_t = {}
-    for b, ax in zip(paw_bodies, paw_names):
-        w = traj5.body(b.name).omega_b
-        d = np.linalg.norm(w - w[0], axis=1)
-        dev5[ax], dev5_t[ax] = float(np.max(d)), d
-    I5 = paw_bodies[0].I_b
-    order = np.argsort(I5)
-    intermediate = paw_names[int(order[1])]
-    least_forgiving = max(dev5, key=dev5.get)
-    others = [dev5[a] for a in paw_names if a != intermediate]
-
-    figures = {
-        "principal_omega_change": principal_change, "principal_omega_change_max": principal_change_max,
-        "mixed_omega_change": mixed_change, "mixed_omega_change_closed_form": float(closed),
-        "mixed_omega_change_max": mixed_change_max, "mixed_omega_b_T": wm[-1],
-        "momentum_error": momentum_error, "momentum_error_float32": momentum_error_float32,
-        "momentum_error_principal": momentum_error_principal,
-        "energy_error": energy_error, "L_w0_mixed": L_m[0], "energy_mixed": float(E_m[0]),
-        "quaternion_norm_max_deviation": qnorm_dev,
-        "paw5_I_b": I5, "paw5_max_deviation_x": dev5["x"], "paw5_max_deviation_y": dev5["y"],
-        "paw5_max_deviation_z": dev5["z"], "paw5_intermediate_axis": intermediate,
-        "paw5_least_forgiving_axis": least_forgiving,
-    }
+    run = (dt, integrator, normalize, backend)
+    f, data, pipeline = _measure(*run)
+    f.update(_paw5(data, *run))
+    mixed = lv.Body.box("mixed", mass=MASS, size=ROD_SIZE, omega_b=OMEGA_MIXED)
+    default = integrator == INTEGRATOR and dt == DT and normalize
+    if not default:   # the failure modes' references: the chapter's run, the normalized run
+        f["energy_error_default_run"] = _energy_error(_simulate([mixed], T_END, DT, INTEGRATOR, True, backend)[1], mixed)
+    if not normalize:
+        f["quaternion_norm_max_deviation_normalized_run"] = _qnorm_deviation(
+            _simulate([mixed], T_END, dt, integrator, True, backend)[1], "mixed")
+    hits = []
+    if search:   # the candidate grid that chose the mixed-axis setup
+        hits, f["search_candidates"] = search_candidates()
+        f["search_hits"] = len(hits)
+        for i, h in enumerate(hits):
+            f[f"search_hit_{i}"] = (f"{h['body']}, omega0 = {list(h['omega0'])} rad/s, T = {h['T']} s, "
+                                    f"{h['definition']} = {h['value']:.5f}")
     params = {
-        "backend": backend, "body": "box", "body_size": np.array(ROD_SIZE), "mass": MASS, "I_b": I,
+        "backend": backend, "body": "box", "body_size": np.array(ROD_SIZE), "mass": MASS, "I_b": mixed.I_b,
         "omega_b0_principal": np.array(OMEGA_PRINCIPAL), "omega_b0_mixed": np.array(OMEGA_MIXED), "T": T_END,
         "dt": dt, "integrator": integrator, "normalize": bool(normalize),
         "change_definition": "|omega_b(T) - omega_b(0)| in rad/s",
         "momentum_error_definition": "max_t |L_w(t) - L_w(0)| / |L_w(0)|",
         "energy_error_definition": "max_t |E(t) - E(0)| / E(0)",
         "paw5_body_size": np.array(PAW5_SIZE), "paw5_spin": PAW5_SPIN, "paw5_perturbation": PAW5_PERTURB,
-        "paw5_T": PAW5_T, "pipeline": " | ".join(sim.pipeline),
+        "paw5_T": PAW5_T, "pipeline": " | ".join(pipeline),
     }
-    default = integrator == INTEGRATOR and dt == DT and normalize
-    checks = [
-        C.at_most("principal_omega_change", principal_change_max, PRINCIPAL_TOL,
-                  "max_t |omega_b(t) - omega_b(0)| for the principal spin, rad/s"),
-        C.holds("paw5_intermediate_axis_least_forgiving", least_forgiving == intermediate,
-                f"largest deviation about {least_forgiving} (deviations x {dev5['x']:.3g}, y {dev5['y']:.3g}, "
-                f"z {dev5['z']:.3g} rad/s); intermediate axis {intermediate}"),
-        C.above("paw5_intermediate_vs_others", dev5[intermediate] / max(others), 10.0,
-                "intermediate-axis deviation over the largest other one"),
-    ]
-    if default:
-        checks += [
-            C.close("mixed_omega_change", mixed_change, MIXED_CHANGE, MIXED_TOL,
-                    "chapter 3.30 rad/s (two decimals); |omega_b(T) - omega_b(0)|"),
-            C.close("mixed_omega_change_closed_form", mixed_change, closed, 1e-9,
-                    "2 |w_perp| |sin(lambda T / 2)| for the symmetric rod, rad/s"),
-            C.below("momentum_error", momentum_error, MOMENTUM_LIMIT, "chapter < 4e-7 (single precision)"),
-            C.below("momentum_error_float64", momentum_error, 1e-10, "float64 RK4 is far below the chapter's bound"),
-            C.below("momentum_error_float32", momentum_error_float32, FLOAT32_MOMENTUM_LIMIT,
-                    f"Sim(dtype='float32'), the same mixed spin, beside the chapter's < {MOMENTUM_LIMIT:g}: rounding "
-                    f"accumulates as a random walk over the {int(round(T_END / DT))} steps (~3 sqrt(n) eps_float32)"),
-            C.below("energy_error", energy_error, 1e-10, "relative, RK4"),
-        ]
-    else:
-        if integrator == INTEGRATOR and normalize:
-            # another dt with RK4: the chapter's figures should still hold at their own precision
-            checks += [
-                C.close("mixed_omega_change", mixed_change, MIXED_CHANGE, MIXED_TOL, f"chapter 3.30 rad/s at dt = {dt:g} s"),
-                C.below("momentum_error", momentum_error, MOMENTUM_LIMIT, f"chapter < 4e-7 at dt = {dt:g} s"),
-            ]
-        _, ref = _simulate([mixed], T_END, DT, INTEGRATOR, True, backend)
-        L_r, E_r = _invariants(ref, "mixed", mixed)
-        ref_energy = float(np.max(np.abs(E_r - E_r[0]) / E_r[0]))
-        figures["energy_error_default_run"] = ref_energy
-        if integrator != INTEGRATOR:
-            checks.append(C.above("failure_mode_energy_drift", energy_error / max(ref_energy, 1e-300), 1e3,
-                                  f"{integrator}: energy drift {energy_error:.3g} over RK4's {ref_energy:.3g}"))
-        if not normalize:
-            _, ref_n = _simulate([mixed], T_END, dt, integrator, True, backend)
-            ref_q = float(np.max(np.abs(np.linalg.norm(ref_n.body("mixed").q, axis=1) - 1)))
-            figures["quaternion_norm_max_deviation_normalized_run"] = ref_q
-            checks.append(C.above("failure_mode_quaternion_norm_drifts", qnorm_dev / max(ref_q, 1e-300), 4.0,
-                                  f"without normalization max ||q| - 1| = {qnorm_dev:.3g}, normalized run "
-                                  f"{ref_q:.3g} ({integrator}; RK4 keeps |q| near 1 by itself, explicit Euler does not)"))
-    if search:
-        hits, total = search_candidates()
-        figures["search_candidates"] = total
-        figures["search_hits"] = len(hits)
-        for i, h in enumerate(hits):
-            figures[f"search_hit_{i}"] = (f"{h['body']}, omega0 = {list(h['omega0'])} rad/s, T = {h['T']} s, "
-                                          f"{h['definition']} = {h['value']:.5f}")
-        checks.append(C.holds("search_picks_this_setup",
-                              any(h["body"].startswith("rod") and tuple(h["omega0"]) == OMEGA_MIXED and h["T"] == T_END
-                                  and h["definition"] == "|w(T)-w0|" for h in hits),
-                              "the lab's setup is among the candidate grid's hits"))
-
-    data = {"integrator": integrator, "dt": dt, "t": t, "wp": wp, "wm": wm, "phase": phase,
-            "principal_change": principal_change, "mixed_change": mixed_change, "L_err": L_err, "E_err": E_err,
-            "momentum_error": momentum_error, "t5": traj5.t, "dev5": dev5, "dev5_t": dev5_t}
-    return C.make_result(NAME, figures, params, checks, {"torque_free.png": _plot}, data,
+    checks = _checks(f, default, dt, integrator, normalize, None if not search else any(
+        h["body"].startswith("rod") and tuple(h["omega0"]) == OMEGA_MIXED and h["T"] == T_END
+        and h["definition"] == "|w(T)-w0|" for h in hits))
+    return C.make_result(NAME, f, params, checks, {"torque_free.png": _plot}, data,
                          headline=("mixed_omega_change", f"{MIXED_CHANGE:.2f} ± {MIXED_TOL:g} rad/s (chapter 3.30)"))
+
+
+def _measure(dt: float, integrator: str, normalize: bool, backend: str):
+    """The principal and the mixed spin (and the mixed one in float32): changes of omega_b, drifts of L_w and E."""
+    principal = lv.Body.box("principal", mass=MASS, size=ROD_SIZE, omega_b=OMEGA_PRINCIPAL, p_w=[0, 0, 1])
+    mixed = lv.Body.box("mixed", mass=MASS, size=ROD_SIZE, omega_b=OMEGA_MIXED, p_w=[0, 0, -1])
+    sim, traj = _simulate([principal, mixed], T_END, dt, integrator, normalize, backend)
+    t, wp, wm = traj.t, traj.body("principal").omega_b, traj.body("mixed").omega_b
+    I = mixed.I_b
+    lam = (I[1] - I[0]) / I[1] * OMEGA_MIXED[0]
+    w_perp = float(np.hypot(OMEGA_MIXED[1], OMEGA_MIXED[2]))
+    L_m, E_m = _invariants(traj, mixed)
+    L_err, E_err = _rel_series(L_m, L_m[0]), np.abs(E_m - E_m[0]) / E_m[0]
+    L_p = _invariants(traj, principal)[0]
+    # the same mixed spin with Sim(dtype="float32"): the precision the chapter's build had
+    L_32 = _invariants(_simulate([mixed], T_END, dt, integrator, normalize, backend, dtype="float32")[1], mixed)[0]
+    f = {
+        "principal_omega_change": float(np.linalg.norm(wp[-1] - wp[0])),
+        "principal_omega_change_max": float(np.max(np.linalg.norm(wp - wp[0], axis=1))),
+        "mixed_omega_change": float(np.linalg.norm(wm[-1] - wm[0])),
+        "mixed_omega_change_closed_form": float(2 * w_perp * abs(np.sin(lam * T_END / 2))),
+        "mixed_omega_change_max": float(np.max(np.linalg.norm(wm - wm[0], axis=1))), "mixed_omega_b_T": wm[-1],
+        "momentum_error": float(np.max(L_err)), "momentum_error_float32": float(np.max(_rel_series(L_32, L_32[0]))),
+        "momentum_error_principal": float(np.max(_rel_series(L_p, L_p[0]))),
+        "energy_error": float(np.max(E_err)), "L_w0_mixed": L_m[0], "energy_mixed": float(E_m[0]),
+        "quaternion_norm_max_deviation": _qnorm_deviation(traj, "mixed"),
+    }
+    # closed-form omega_b(t) of the symmetric rod, for the plot
+    data = {"integrator": integrator, "dt": dt, "t": t, "wp": wp, "wm": wm,
+            "phase": (OMEGA_MIXED[1] + 1j * OMEGA_MIXED[2]) * np.exp(-1j * lam * t),
+            "principal_change": f["principal_omega_change"], "mixed_change": f["mixed_omega_change"], "L_err": L_err,
+            "E_err": E_err, "momentum_error": f["momentum_error"]}
+    return f, data, sim.pipeline
+
+
+def _paw5(data: dict, dt: float, integrator: str, normalize: bool, backend: str) -> dict:
+    """Paw-check 5: the box spun near each principal axis; the largest deviation of omega_b per axis."""
+    paw_bodies = []
+    for k, ax in enumerate(PAW5_AXES):
+        w0 = np.full(3, PAW5_SPIN * PAW5_PERTURB)
+        w0[k] = PAW5_SPIN
+        paw_bodies.append(lv.Body.box(f"near_{ax}", mass=MASS, size=PAW5_SIZE, omega_b=w0, p_w=[2.0 * k, 3.0, 0]))
+    _, traj5 = _simulate(paw_bodies, PAW5_T, dt, integrator, normalize, backend)
+    dev5_t = {ax: np.linalg.norm(traj5.body(f"near_{ax}").omega_b - traj5.body(f"near_{ax}").omega_b[0], axis=1)
+              for ax in PAW5_AXES}
+    dev5 = {ax: float(np.max(d)) for ax, d in dev5_t.items()}
+    data.update(t5=traj5.t, dev5=dev5, dev5_t=dev5_t)
+    I5 = paw_bodies[0].I_b
+    return {"paw5_I_b": I5, "paw5_max_deviation_x": dev5["x"], "paw5_max_deviation_y": dev5["y"],
+            "paw5_max_deviation_z": dev5["z"], "paw5_intermediate_axis": PAW5_AXES[int(np.argsort(I5)[1])],
+            "paw5_least_forgiving_axis": max(dev5, key=dev5.get)}
+
+
+def _checks(f: dict, default: bool, dt: float, integrator: str, normalize: bool, search_hit: bool | None) -> list:
+    """The chapter's figures as declared checks (the default run), their failure modes, paw-check 5."""
+    inter, least = f["paw5_intermediate_axis"], f["paw5_least_forgiving_axis"]
+    dev5 = {a: f[f"paw5_max_deviation_{a}"] for a in PAW5_AXES}
+    rk4_elsewhere = not default and integrator == INTEGRATOR and normalize   # another dt with RK4
+    ref_E, ref_q = f.get("energy_error_default_run", 0.0), f.get("quaternion_norm_max_deviation_normalized_run", 0.0)
+    return C.checks(
+        ("principal_omega_change", f["principal_omega_change_max"], "<=", PRINCIPAL_TOL,
+         "max_t |omega_b(t) - omega_b(0)| for the principal spin, rad/s"),
+        ("paw5_intermediate_axis_least_forgiving", least == inter, "holds", None,
+         f"largest deviation about {least} (deviations x {dev5['x']:.3g}, y {dev5['y']:.3g}, z {dev5['z']:.3g} "
+         f"rad/s); intermediate axis {inter}"),
+        ("paw5_intermediate_vs_others", dev5[inter] / max(v for a, v in dev5.items() if a != inter), ">", 10.0,
+         "intermediate-axis deviation over the largest other one"),
+        default and ("mixed_omega_change", f["mixed_omega_change"], "≈", (MIXED_CHANGE, MIXED_TOL),
+                     "chapter 3.30 rad/s (two decimals); |omega_b(T) - omega_b(0)|"),
+        default and ("mixed_omega_change_closed_form", f["mixed_omega_change"], "≈",
+                     (f["mixed_omega_change_closed_form"], 1e-9),
+                     "2 |w_perp| |sin(lambda T / 2)| for the symmetric rod, rad/s"),
+        default and ("momentum_error", f["momentum_error"], "<", MOMENTUM_LIMIT, "chapter < 4e-7 (single precision)"),
+        default and ("momentum_error_float64", f["momentum_error"], "<", 1e-10,
+                     "float64 RK4 is far below the chapter's bound"),
+        default and ("momentum_error_float32", f["momentum_error_float32"], "<", FLOAT32_MOMENTUM_LIMIT,
+                     f"Sim(dtype='float32'), the same mixed spin, beside the chapter's < {MOMENTUM_LIMIT:g}: rounding "
+                     f"accumulates as a random walk over the {int(round(T_END / DT))} steps (~3 sqrt(n) eps_float32)"),
+        default and ("energy_error", f["energy_error"], "<", 1e-10, "relative, RK4"),
+        rk4_elsewhere and ("mixed_omega_change", f["mixed_omega_change"], "≈", (MIXED_CHANGE, MIXED_TOL),
+                           f"chapter 3.30 rad/s at dt = {dt:g} s"),
+        rk4_elsewhere and ("momentum_error", f["momentum_error"], "<", MOMENTUM_LIMIT, f"chapter < 4e-7 at dt = {dt:g} s"),
+        integrator != INTEGRATOR and ("failure_mode_energy_drift", f["energy_error"] / max(ref_E, 1e-300), ">", 1e3,
+                                      f"{integrator}: energy drift {f['energy_error']:.3g} over RK4's {ref_E:.3g}"),
+        not normalize and ("failure_mode_quaternion_norm_drifts", f["quaternion_norm_max_deviation"] / max(ref_q, 1e-300),
+                           ">", 4.0, f"without normalization max ||q| - 1| = {f['quaternion_norm_max_deviation']:.3g}, "
+                           f"normalized run {ref_q:.3g} ({integrator}; RK4 keeps |q| near 1 by itself, explicit Euler "
+                           f"does not)"),
+        search_hit is not None and ("search_picks_this_setup", search_hit, "holds", None,
+                                    "the lab's setup is among the candidate grid's hits"),
+    )
 
 
 def _plot(data, ax=None):
@@ -327,7 +312,6 @@ def _plot(data, ax=None):
     principal_change, mixed_change = data["principal_change"], data["mixed_change"]
     L_err, E_err, momentum_error = data["L_err"], data["E_err"], data["momentum_error"]
     dev5, dev5_t = data["dev5"], data["dev5_t"]
-    paw_names = ("x", "y", "z")
     fig, ax = C.new_figure(2, 2, size=(12, 8.5), title=f"Torque-free rod 0.8 × 0.2 × 0.2 m, {integrator}, dt = {dt:g} s",
                            ax=ax)
     a = ax[0, 0]
@@ -366,7 +350,7 @@ def _plot(data, ax=None):
     d = ax[1, 1]
     t5 = data["t5"]
     dfloor = 1e-6
-    for ax_name in paw_names:
+    for ax_name in PAW5_AXES:
         d.semilogy(t5[1:], np.maximum(dev5_t[ax_name][1:], dfloor), **F.axis_style(ax_name, marker=None),
                    label=f"near {ax_name} (max {dev5[ax_name]:.3g} rad/s)")
     d.set_ylim(dfloor, 1e2)

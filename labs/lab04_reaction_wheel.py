@@ -54,16 +54,6 @@ DAMPING = 1e-3
 BODY = lc.BODY
 
 
-def add_arguments(parser) -> None:
-    parser.add_argument("--torque", type=float, default=TORQUE, metavar="U",
-                        help="x-wheel command in N·m (default 0.05; below the 0.2 N·m limit)")
-    parser.add_argument("--T", type=float, default=T_END, help="duration of the sign runs in s (default 1)")
-
-
-def options_from_args(args) -> dict:
-    return {"torque": args.torque, "T": args.T}
-
-
 def _run(damping, u_of_t, T, backend, omega_b=(0, 0, 0), Omega=(0, 0, 0), momentum=False):
     """The chapter cube (centre joint, angular damping `damping`) starting at omega_b, Omega: hold u_of_t(t) per
     step; record t, omega_b, Omega, applied torque (and momenta)."""
@@ -106,95 +96,96 @@ def compute(backend: str = "auto", torque: float = TORQUE, T: float = T_END) -> 
     if int(round(T / DT)) < 2:
         raise V.LavenderInputError("T", f"must be at least 2 steps of {DT:g} s", f", got {T!r}")
     C.steps("T", T, DT, whole=False, limit=C.MAX_PY_STEPS, value=T)  # stepped in Python, every step recorded
-    const = lambda u: (lambda t: np.asarray(u, float))  # noqa: E731
-
-    pos = _run(DAMPING, const([U, 0, 0]), T, backend)
-    rev = _run(DAMPING, const([-U, 0, 0]), T, backend)
-    xs, ys = pos, _run(DAMPING, const([0, U, 0]), T, backend)
-    xy = _run(DAMPING, const([U, U, 0]), T, backend)
-    gyro = _run(DAMPING, const([U, 0, 0]), T, backend, Omega=(0, 0, 100.0))
-    sat = _run(DAMPING, const([0.5, 0, 0]), T_SAT, backend)
-    ex = _run(0.0, lambda t: np.array([0.08 * math.sin(7 * t), -0.05, 0.12 * math.cos(3 * t)]), T, backend,
-              omega_b=(0.3, -0.2, 0.5), momentum=True)
-
-    s = slice(1, None)  # samples after the command starts (t = 0 is the rest state, exactly 0)
-    wheel_all_positive = bool(np.all(pos["Om"][s, 0] > 0))
-    cube_all_negative = bool(np.all(pos["w"][s, 0] < 0))
-    rev_wheel_negative = bool(np.all(rev["Om"][s, 0] < 0))
-    rev_cube_positive = bool(np.all(rev["w"][s, 0] > 0))
-    mirror_err = float(max(np.max(np.abs(rev["Om"] + pos["Om"])), np.max(np.abs(rev["w"] + pos["w"]))))
-    reversed_ok = rev_wheel_negative and rev_cube_positive and mirror_err <= 1e-9 * np.max(np.abs(pos["Om"]))
-    other_axes = float(max(np.max(np.abs(pos["w"][:, 1:])), np.max(np.abs(pos["Om"][:, 1:]))))
-    ratio = float(pos["Om"][-1, 0] / -pos["w"][-1, 0])
-
-    coupling_z = float(max(np.max(np.abs(xy["w"][:, 2])), np.max(np.abs(xy["Om"][:, 2]))))
-    superposition = float(max(np.max(np.abs(xy["w"] - xs["w"] - ys["w"])), np.max(np.abs(xy["Om"] - xs["Om"] - ys["Om"]))))
-    gyro_ratio = float(np.max(np.abs(gyro["w"][:, 1])) / np.max(np.abs(gyro["w"][:, 0])))
-
-    sat_applied_max = float(np.max(np.abs(sat["u"])))
-    sat_first = float(sat["u"][1, 0])
-    sat_peak_speed = float(np.max(np.abs(sat["Om"][:, 0])))
-    # the largest one-step increase of Omega_x under full torque bounds the overshoot past the limit
-    step_incr = float(np.max(np.diff(sat["Om"][:, 0])))
-    # the torque–speed line: u[k+1] was applied over step k, from the wheel speed Om[k]
-    line = torque_limit * np.clip(1 - sat["Om"][:-1, 0] / speed_limit, 0, 1)
-    sat_line_err = float(np.max(np.abs(sat["u"][1:, 0] - np.minimum(0.5, line))))
-    sat_jump = float(np.max(np.abs(np.diff(sat["u"][1:, 0]))))
-    sat_speed_T = float(sat["Om"][-1, 0])
-
-    dLb, dLw = ex["Lb"] - ex["Lb"][0], ex["Lw"] - ex["Lw"][0]
-    scale = float(np.max(np.linalg.norm(dLw, axis=1)))
-    exchange_err = float(np.max(np.linalg.norm(dLb + dLw, axis=1)) / scale)
-    L_tot = ex["Lb"] + ex["Lw"]
-    total_drift = float(np.max(np.linalg.norm(L_tot - L_tot[0], axis=1)) / np.linalg.norm(L_tot[0]))
-
-    figures = {
-        "wheel_all_positive": wheel_all_positive, "cube_all_negative": cube_all_negative,
-        "reversed_wheel_all_negative": rev_wheel_negative, "reversed_cube_all_positive": rev_cube_positive,
-        "reversed_ok": bool(reversed_ok), "reversed_mirror_error": mirror_err,
-        "omega_x_T": float(pos["w"][-1, 0]), "Omega_x_T": float(pos["Om"][-1, 0]), "wheel_to_cube_rate_ratio": ratio,
-        "single_wheel_other_axes_max": other_axes,
-        "two_wheels_cross_axis_coupling": coupling_z, "two_wheels_superposition_error": superposition,
-        "two_wheels_omega_T": xy["w"][-1], "two_wheels_Omega_T": xy["Om"][-1],
-        "gyro_coupling_omega_y_over_omega_x": gyro_ratio, "gyro_omega_T": gyro["w"][-1],
-        "saturation_command": 0.5, "saturation_applied_max": sat_applied_max, "saturation_applied_first": sat_first,
-        "saturation_peak_wheel_speed": sat_peak_speed, "saturation_wheel_speed_T": sat_speed_T,
-        "saturation_step_increment": step_incr, "saturation_torque_speed_line_error": sat_line_err,
-        "saturation_max_torque_jump": sat_jump,
-        "momentum_exchange_error": exchange_err, "momentum_exchange_scale": scale, "total_momentum_drift": total_drift,
-    }
+    runs = _runs(U, T, backend)
+    f = _figures(runs, torque_limit, speed_limit)
     params = {"backend": backend, "torque": U, "T": T, "dt": DT, "integrator": "rk4", "damping": DAMPING,
               "mass": cube.mass, "size": cube.shape[1][0], "J": wheels["J"], "I_cube": cube.I_b,
               "torque_limit": torque_limit, "speed_limit": speed_limit,
               "gyro_Omega_z0": 100.0, "exchange_omega_b0": np.array([0.3, -0.2, 0.5]), "exchange_damping": 0.0}
-    checks = [
-        C.holds("wheel_all_positive", wheel_all_positive, f"every x-wheel sample in (0, {T:g}] s > 0"),
-        C.holds("cube_all_negative", cube_all_negative, f"every cube omega_x sample in (0, {T:g}] s < 0"),
-        C.holds("paw6_reversed_command_reverses_both", reversed_ok,
-                "reversed command: wheel all < 0, cube all > 0, an exact mirror of the positive run"),
-        C.above("wheel_faster_than_cube", ratio, 1.0, "|Omega_x| / |omega_x| at T: different magnitudes"),
-        C.at_most("single_wheel_stays_on_axis", other_axes, 1e-12, "y, z rates of the x-only run (rad/s)"),
-        C.at_most("two_wheels_z_coupling", coupling_z, 1e-9,
-                  "isotropic cube, equal wheels: no z response (rad/s)"),
-        C.above("gyroscopic_coupling_shown", gyro_ratio, 0.01,
-                "z wheel pre-spun at 100 rad/s: an x command turns the cube about y"),
-        C.close("saturation_clips_to_limit", sat_applied_max, torque_limit, 1e-15, "0.5 N·m command -> applied (N·m)"),
-        C.at_most("saturation_speed_limit", sat_peak_speed, speed_limit + step_incr,
-                  "x wheel stays within one step's increment of the 400 rad/s limit"),
-        C.at_most("saturation_follows_torque_speed_line", sat_line_err, 1e-12,
-                  "|applied u_x − 0.2 (1 − Ω_x/400)| over the run (N·m)"),
-        C.at_most("saturation_is_smooth", sat_jump, 0.01, "largest step-to-step change of the applied torque (N·m)"),
-        C.below("saturation_below_no_load_speed", sat_speed_T, speed_limit, "wheel speed at the end (rad/s)"),
-        C.at_most("momentum_exchange_error", exchange_err, 1e-9,
-                  "damping off, joint at the centre: max |ΔL_cube + ΔL_wheels| / max |ΔL_wheels|, world frame"),
-    ]
-
-    data = {"pos": pos, "rev": rev, "xy": xy, "gyro": gyro, "sat": sat, "ex": ex, "dLb": dLb, "dLw": dLw,
-            "scale": scale, "exchange_err": exchange_err, "U": U, "ratio": ratio, "coupling_z": coupling_z,
-            "gyro_ratio": gyro_ratio, "torque_limit": torque_limit, "speed_limit": speed_limit, "backend": backend}
-    return C.make_result(NAME, figures, params, checks, {"reaction_wheel.png": _plot}, data,
+    checks = C.checks(
+        ("wheel_all_positive", f["wheel_all_positive"], "holds", None, f"every x-wheel sample in (0, {T:g}] s > 0"),
+        ("cube_all_negative", f["cube_all_negative"], "holds", None, f"every cube omega_x sample in (0, {T:g}] s < 0"),
+        ("paw6_reversed_command_reverses_both", f["reversed_ok"], "holds", None,
+         "reversed command: wheel all < 0, cube all > 0, an exact mirror of the positive run"),
+        ("wheel_faster_than_cube", f["wheel_to_cube_rate_ratio"], ">", 1.0,
+         "|Omega_x| / |omega_x| at T: different magnitudes"),
+        ("single_wheel_stays_on_axis", f["single_wheel_other_axes_max"], "<=", 1e-12,
+         "y, z rates of the x-only run (rad/s)"),
+        ("two_wheels_z_coupling", f["two_wheels_cross_axis_coupling"], "<=", 1e-9,
+         "isotropic cube, equal wheels: no z response (rad/s)"),
+        ("gyroscopic_coupling_shown", f["gyro_coupling_omega_y_over_omega_x"], ">", 0.01,
+         "z wheel pre-spun at 100 rad/s: an x command turns the cube about y"),
+        ("saturation_clips_to_limit", f["saturation_applied_max"], "≈", (torque_limit, 1e-15),
+         "0.5 N·m command -> applied (N·m)"),
+        ("saturation_speed_limit", f["saturation_peak_wheel_speed"], "<=", speed_limit + f["saturation_step_increment"],
+         "x wheel stays within one step's increment of the 400 rad/s limit"),
+        ("saturation_follows_torque_speed_line", f["saturation_torque_speed_line_error"], "<=", 1e-12,
+         "|applied u_x − 0.2 (1 − Ω_x/400)| over the run (N·m)"),
+        ("saturation_is_smooth", f["saturation_max_torque_jump"], "<=", 0.01,
+         "largest step-to-step change of the applied torque (N·m)"),
+        ("saturation_below_no_load_speed", f["saturation_wheel_speed_T"], "<", speed_limit,
+         "wheel speed at the end (rad/s)"),
+        ("momentum_exchange_error", f["momentum_exchange_error"], "<=", 1e-9,
+         "damping off, joint at the centre: max |ΔL_cube + ΔL_wheels| / max |ΔL_wheels|, world frame"),
+    )
+    ex = runs["ex"]
+    data = {**runs, "dLb": ex["Lb"] - ex["Lb"][0], "dLw": ex["Lw"] - ex["Lw"][0], "scale": f["momentum_exchange_scale"],
+            "exchange_err": f["momentum_exchange_error"], "U": U, "ratio": f["wheel_to_cube_rate_ratio"],
+            "coupling_z": f["two_wheels_cross_axis_coupling"], "gyro_ratio": f["gyro_coupling_omega_y_over_omega_x"],
+            "torque_limit": torque_limit, "speed_limit": speed_limit, "backend": backend}
+    return C.make_result(NAME, f, params, checks, {"reaction_wheel.png": _plot}, data,
                          headline=("momentum_exchange_error", "<= 1e-9 (ΔL_cube = −ΔL_wheels; wheel and cube "
                                    "spin opposite ways)"))
+
+
+def _runs(U: float, T: float, backend: str) -> dict:
+    """The lab's runs: sign (x, reversed, y, x and y), gyroscopic, saturation and the momentum exchange."""
+    const = lambda u: (lambda t: np.asarray(u, float))  # noqa: E731
+    return {"pos": _run(DAMPING, const([U, 0, 0]), T, backend), "rev": _run(DAMPING, const([-U, 0, 0]), T, backend),
+            "ys": _run(DAMPING, const([0, U, 0]), T, backend), "xy": _run(DAMPING, const([U, U, 0]), T, backend),
+            "gyro": _run(DAMPING, const([U, 0, 0]), T, backend, Omega=(0, 0, 100.0)),
+            "sat": _run(DAMPING, const([0.5, 0, 0]), T_SAT, backend),
+            "ex": _run(0.0, lambda t: np.array([0.08 * math.sin(7 * t), -0.05, 0.12 * math.cos(3 * t)]), T, backend,
+                       omega_b=(0.3, -0.2, 0.5), momentum=True)}
+
+
+def _figures(r: dict, torque_limit: float, speed_limit: float) -> dict:
+    """The figures of the runs: signs and the mirror (paw-check 6), coupling, saturation, momentum exchange."""
+    pos, rev, xy, gyro, sat, ex = r["pos"], r["rev"], r["xy"], r["gyro"], r["sat"], r["ex"]
+    s = slice(1, None)  # samples after the command starts (t = 0 is the rest state, exactly 0)
+    mirror_err = float(max(np.max(np.abs(rev["Om"] + pos["Om"])), np.max(np.abs(rev["w"] + pos["w"]))))
+    rev_wheel_negative, rev_cube_positive = bool(np.all(rev["Om"][s, 0] < 0)), bool(np.all(rev["w"][s, 0] > 0))
+    # the torque–speed line: u[k+1] was applied over step k, from the wheel speed Om[k]
+    line = torque_limit * np.clip(1 - sat["Om"][:-1, 0] / speed_limit, 0, 1)
+    dLb, dLw = ex["Lb"] - ex["Lb"][0], ex["Lw"] - ex["Lw"][0]
+    scale = float(np.max(np.linalg.norm(dLw, axis=1)))
+    L_tot = ex["Lb"] + ex["Lw"]
+    return {
+        "wheel_all_positive": bool(np.all(pos["Om"][s, 0] > 0)), "cube_all_negative": bool(np.all(pos["w"][s, 0] < 0)),
+        "reversed_wheel_all_negative": rev_wheel_negative, "reversed_cube_all_positive": rev_cube_positive,
+        "reversed_ok": bool(rev_wheel_negative and rev_cube_positive and mirror_err <= 1e-9 * np.max(np.abs(pos["Om"]))),
+        "reversed_mirror_error": mirror_err,
+        "omega_x_T": float(pos["w"][-1, 0]), "Omega_x_T": float(pos["Om"][-1, 0]),
+        "wheel_to_cube_rate_ratio": float(pos["Om"][-1, 0] / -pos["w"][-1, 0]),
+        "single_wheel_other_axes_max": float(max(np.max(np.abs(pos["w"][:, 1:])), np.max(np.abs(pos["Om"][:, 1:])))),
+        "two_wheels_cross_axis_coupling": float(max(np.max(np.abs(xy["w"][:, 2])), np.max(np.abs(xy["Om"][:, 2])))),
+        "two_wheels_superposition_error": float(max(np.max(np.abs(xy["w"] - pos["w"] - r["ys"]["w"])),
+                                                    np.max(np.abs(xy["Om"] - pos["Om"] - r["ys"]["Om"])))),
+        "two_wheels_omega_T": xy["w"][-1], "two_wheels_Omega_T": xy["Om"][-1],
+        "gyro_coupling_omega_y_over_omega_x": float(np.max(np.abs(gyro["w"][:, 1])) / np.max(np.abs(gyro["w"][:, 0]))),
+        "gyro_omega_T": gyro["w"][-1],
+        "saturation_command": 0.5, "saturation_applied_max": float(np.max(np.abs(sat["u"]))),
+        "saturation_applied_first": float(sat["u"][1, 0]),
+        "saturation_peak_wheel_speed": float(np.max(np.abs(sat["Om"][:, 0]))),
+        "saturation_wheel_speed_T": float(sat["Om"][-1, 0]),
+        # the largest one-step increase of Omega_x under full torque bounds the overshoot past the limit
+        "saturation_step_increment": float(np.max(np.diff(sat["Om"][:, 0]))),
+        "saturation_torque_speed_line_error": float(np.max(np.abs(sat["u"][1:, 0] - np.minimum(0.5, line)))),
+        "saturation_max_torque_jump": float(np.max(np.abs(np.diff(sat["u"][1:, 0])))),
+        "momentum_exchange_error": float(np.max(np.linalg.norm(dLb + dLw, axis=1)) / scale),
+        "momentum_exchange_scale": scale,
+        "total_momentum_drift": float(np.max(np.linalg.norm(L_tot - L_tot[0], axis=1)) / np.linalg.norm(L_tot[0])),
+    }
 
 
 def _plot(d, ax=None):

@@ -33,15 +33,6 @@ FREE_VELOCITIES = ((1.0, 0.0, 0.0), (0.0, -2.0, 0.5), (0.3, 0.3, 0.3), (-1.0, 0.
 REL_TOL = 1e-12
 
 
-def add_arguments(parser) -> None:
-    parser.add_argument("--mass-scale", type=float, default=2.0, metavar="S",
-                        help="paw-check 1 multiplies every mass by S (default 2: exact in floating point)")
-
-
-def options_from_args(args) -> dict:
-    return {"mass_scale": args.mass_scale}
-
-
 def rigid_velocities(r_w, r_com, v_com, omega_w):
     """Velocities of points moving rigidly: v_i = v_COM + omega x (r_i - r_COM).
 
@@ -63,74 +54,60 @@ def run(out_dir=C.DEFAULT_OUT, backend: str = "auto", **options) -> C.LabResult:
 def compute(backend: str = "auto", mass_scale: float = 2.0) -> C.LabResult:
     """Run the lab and return its :class:`~lavendersim.labs.common.LabResult`; writes nothing."""
     C.check_backend(backend)  # validated only: this lab evaluates the generated NumPy kernels, no simulator
-    backend = C.NO_SIMULATOR
     s = C.bounded("mass_scale", mass_scale, positive=True)
-    m = np.array(MASSES)
-    r = np.array(POSITIONS)
-    omega = np.array(OMEGA_W)
-    v_com_in = np.array(V_COM)
-
-    M = P.total_mass(m)
-    r_com = P.center_of_mass(m, r)
-    v = rigid_velocities(r, r_com, v_com_in, omega)
-    p = P.linear_momentum(m, v)
-    v_com = P.com_velocity(m, v)
-    L = P.angular_momentum_com(m, r, v)
-    I = P.inertia_com(m, r)
-    I_omega = I @ omega
-    # the same body seen from another origin: r -> r + d changes neither p nor L about the COM
-    d = np.array([5.0, -3.0, 2.0])
-    L_shift = P.angular_momentum_com(m, r + d, v)
-
-    # paw-check 1: scale every mass
-    m2 = s * m
-    M2 = P.total_mass(m2)
-    r_com2 = P.center_of_mass(m2, r)
-    p2 = P.linear_momentum(m2, v)
-    v_com2 = P.com_velocity(m2, v)
-    L2 = P.angular_momentum_com(m2, r, v)
-    # omega recovered from L2 = I2 omega: the rotation rate is unchanged
-    omega2 = np.linalg.solve(P.inertia_com(m2, r), L2)
-
-    # non-rigid set
-    vf = np.array(FREE_VELOCITIES)
-    p_free = P.linear_momentum(m, vf)
-    v_com_free = P.com_velocity(m, vf)
-    L_free = P.angular_momentum_com(m, r, vf)
-
-    figures = {
-        "total_mass": M, "com_w": r_com, "com_velocity_w": v_com, "p_w": p, "L_com_w": L,
-        "I_com_w": I.ravel(), "I_omega_w": I_omega, "L_minus_I_omega_rel": _rel(L, I_omega),
-        "L_com_after_origin_shift_w": L_shift,
-        "scaled_total_mass": M2, "scaled_com_w": r_com2, "scaled_com_velocity_w": v_com2,
-        "scaled_p_w": p2, "scaled_L_com_w": L2, "scaled_omega_w": omega2,
-        "free_p_w": p_free, "free_com_velocity_w": v_com_free, "free_L_com_w": L_free,
-    }
+    m, r, omega, v_com_in = np.array(MASSES), np.array(POSITIONS), np.array(OMEGA_W), np.array(V_COM)
+    d = np.array([5.0, -3.0, 2.0])   # another origin: r -> r + d changes neither p nor L about the COM
+    vf = np.array(FREE_VELOCITIES)   # a non-rigid set
+    v = rigid_velocities(r, P.center_of_mass(m, r), v_com_in, omega)
+    f = {**_moments("", m, r, v), "I_com_w": P.inertia_com(m, r).ravel()}
+    f["I_omega_w"] = P.inertia_com(m, r) @ omega
+    f["L_minus_I_omega_rel"] = _rel(f["L_com_w"], f["I_omega_w"])
+    f["L_com_after_origin_shift_w"] = P.angular_momentum_com(m, r + d, v)
+    # paw-check 1: scale every mass; omega recovered from L2 = I2 omega: the rotation rate is unchanged
+    f.update(_moments("scaled_", s * m, r, v))
+    f["scaled_omega_w"] = np.linalg.solve(P.inertia_com(s * m, r), f["scaled_L_com_w"])
+    f.update({k: v for k, v in _moments("free_", m, r, vf).items() if k in FREE_FIGURES})
     params = {
-        "backend": backend, "masses": m, "positions_w": r.ravel(), "v_com_in_w": v_com_in,
+        "backend": C.NO_SIMULATOR, "masses": m, "positions_w": r.ravel(), "v_com_in_w": v_com_in,
         "omega_w": omega, "mass_scale": s, "origin_shift_w": d, "free_velocities_w": vf.ravel(),
     }
     exact = s == 2.0
     tol = 0.0 if exact else REL_TOL
     note = "exact: doubling is exact in binary floating point" if exact else f"relative {REL_TOL:g}"
-    checks = [
-        C.at_most("p_equals_m_vcom", _rel(p, M * v_com_in), REL_TOL, "p = sum m_i v_i = m v_COM (relative)"),
-        C.at_most("L_equals_I_omega", _rel(L, I_omega), REL_TOL,
-                  "L about the COM = I_COM omega, both in world axes (relative)"),
-        C.at_most("L_independent_of_origin", _rel(L_shift, L), REL_TOL, "L about the COM ignores where the origin is"),
-        C.at_most("paw1_com_unchanged", _rel(r_com2, r_com), tol, note),
-        C.at_most("paw1_com_velocity_unchanged", _rel(v_com2, v_com), tol, note),
-        C.at_most("paw1_omega_unchanged", _rel(omega2, omega), REL_TOL, "rotation rate from L = I omega (relative)"),
-        C.at_most("paw1_total_mass_scales", abs(M2 - s * M) / (s * M), tol, note),
-        C.at_most("paw1_p_scales", _rel(p2, s * p), tol, note),
-        C.at_most("paw1_L_scales", _rel(L2, s * L), tol, note),
-        C.at_most("free_p_equals_m_vcom", _rel(p_free, M * v_com_free), REL_TOL, "non-rigid set (relative)"),
-    ]
-
-    data = {"m": m, "r": r, "v": v, "r_com": r_com, "v_com": v_com, "p": p, "p2": p2, "L": L, "L2": L2,
-            "I_omega": I_omega, "s": s}
-    return C.make_result(NAME, figures, params, checks, {"momentum.png": _plot}, data,
+    M, L, p = f["total_mass"], f["L_com_w"], f["p_w"]
+    checks = C.checks(
+        ("p_equals_m_vcom", _rel(p, M * v_com_in), "<=", REL_TOL, "p = sum m_i v_i = m v_COM (relative)"),
+        ("L_equals_I_omega", f["L_minus_I_omega_rel"], "<=", REL_TOL,
+         "L about the COM = I_COM omega, both in world axes (relative)"),
+        ("L_independent_of_origin", _rel(f["L_com_after_origin_shift_w"], L), "<=", REL_TOL,
+         "L about the COM ignores where the origin is"),
+        ("paw1_com_unchanged", _rel(f["scaled_com_w"], f["com_w"]), "<=", tol, note),
+        ("paw1_com_velocity_unchanged", _rel(f["scaled_com_velocity_w"], f["com_velocity_w"]), "<=", tol, note),
+        ("paw1_omega_unchanged", _rel(f["scaled_omega_w"], omega), "<=", REL_TOL,
+         "rotation rate from L = I omega (relative)"),
+        ("paw1_total_mass_scales", abs(f["scaled_total_mass"] - s * M) / (s * M), "<=", tol, note),
+        ("paw1_p_scales", _rel(f["scaled_p_w"], s * p), "<=", tol, note),
+        ("paw1_L_scales", _rel(f["scaled_L_com_w"], s * L), "<=", tol, note),
+        ("free_p_equals_m_vcom", _rel(f["free_p_w"], M * f["free_com_velocity_w"]), "<=", REL_TOL,
+         "non-rigid set (relative)"),
+    )
+    data = {"m": m, "r": r, "v": v, "r_com": f["com_w"], "v_com": f["com_velocity_w"], "p": p, "p2": f["scaled_p_w"],
+            "L": L, "L2": f["scaled_L_com_w"], "I_omega": f["I_omega_w"], "s": s}
+    return C.make_result(NAME, {k: f[k] for k in FIGURES}, params, checks, {"momentum.png": _plot}, data,
                          headline=("L_minus_I_omega_rel", "<= 1e-12 (L about the COM = I ω)"))
+
+
+def _moments(prefix: str, m, r, v) -> dict:
+    """Total mass, COM, COM velocity, p and L about the COM of particles (the printed particle kernels)."""
+    return {f"{prefix}total_mass": P.total_mass(m), f"{prefix}com_w": P.center_of_mass(m, r),
+            f"{prefix}com_velocity_w": P.com_velocity(m, v), f"{prefix}p_w": P.linear_momentum(m, v),
+            f"{prefix}L_com_w": P.angular_momentum_com(m, r, v)}
+
+
+FREE_FIGURES = ("free_p_w", "free_com_velocity_w", "free_L_com_w")
+FIGURES = ("total_mass", "com_w", "com_velocity_w", "p_w", "L_com_w", "I_com_w", "I_omega_w", "L_minus_I_omega_rel",
+           "L_com_after_origin_shift_w", "scaled_total_mass", "scaled_com_w", "scaled_com_velocity_w", "scaled_p_w",
+           "scaled_L_com_w", "scaled_omega_w") + FREE_FIGURES   # results.json's order
 
 
 def _plot(d, ax=None):
