@@ -40,6 +40,8 @@ def test_spaces_and_return_types():
         assert rew.dtype == np.float64 and rew.shape == (N,) and np.all(np.isfinite(rew)) and np.all(rew <= 0)
         assert term.dtype == bool and trunc.dtype == bool and term.shape == trunc.shape == (N,)
         assert isinstance(info, dict) and info["angle_error_deg"].shape == (N,)
+        assert all(f"_{k}" in info for k in info if not k.startswith("_"))   # gymnasium's `_key` masks
+        assert "_diverged" not in info and info["_angle_error_deg"].dtype == bool and info["_angle_error_deg"].all()
         assert info["torque_applied"].shape == (N, 3)
     ve.close()
 
@@ -206,6 +208,9 @@ def test_fast_path_divergence_is_caught_and_reported_as_before():
     (o, r, t, u, info), second = outs[0]
     assert t.tolist() == [False, True, False] and r[1] == -1e3 and info["diverged"].tolist() == [False, True, False]
     assert "validity bound" in info["diverged_message"][1]
+    # gymnasium's `_key` masks: the divergence is about cube 1 only; the measures are about every cube
+    assert info["_diverged"].tolist() == [False, True, False] and info["_diverged_message"].tolist() == [False, True, False]
+    assert info["_angle_error_deg"].tolist() == [True, True, True] and info["_torque_applied"].all()
     np.testing.assert_equal(outs[0], outs[1])       # bitwise, the NaN angle of the diverged one at the same place
     assert second[1][1] == 0.0 and not second[2][1]          # autoreset by the next step
 

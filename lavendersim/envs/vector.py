@@ -226,7 +226,7 @@ class ReactionWheelCubeVectorEnv(VectorEnv):
         if any_reset:
             reward[resets], terminated[resets], truncated[resets] = 0.0, False, False
         self._needs_reset = terminated | truncated
-        return obs, reward, terminated, truncated, info
+        return obs, reward, terminated, truncated, _with_masks(info, n, diverged)
 
     def close_extras(self, **kwargs: Any) -> None:
         self.sim = None
@@ -294,3 +294,14 @@ class ReactionWheelCubeVectorEnv(VectorEnv):
 def make_vec_env(num_envs: int = 1, **kwargs: Any) -> ReactionWheelCubeVectorEnv:
     """The vector entry point registered for ReactionWheelCube-v0 (gymnasium.make_vec, vector_entry_point mode)."""
     return ReactionWheelCubeVectorEnv(num_envs=num_envs, **kwargs)
+
+
+def _with_masks(info: dict[str, Any], n: int, diverged: Mapping[int, Any]) -> dict[str, Any]:
+    """Gymnasium's vector-env convention: beside every key ``k`` a boolean array ``info["_k"]`` (n,) marks the
+    sub-environments the value is about. The per-cube measures are about every cube; ``diverged`` and
+    ``diverged_message`` only about the cubes that diverged in this step."""
+    every = np.ones(n, bool)
+    some = np.zeros(n, bool)
+    some[list(diverged)] = True
+    masks = {f"_{k}": (some.copy() if k.startswith("diverged") else every.copy()) for k in info}
+    return {**info, **masks}
