@@ -307,24 +307,28 @@ TABLEAUX = [tableau("tabtest_ralston3", A=[[], ["1/2"], [0, "3/4"]], b=["2/9", "
 '''
 
 
+@pytest.fixture(scope="module")
+def beside(tmp_path_factory):
+    """BESIDE derived (outside the user directory) once for the module; its tableau unregistered after."""
+    work = tmp_path_factory.mktemp("beside")
+    (work / "beside.py").write_text(BESIDE, encoding="utf-8")
+    yield extending.derive(work / "beside.py", out=work / "sets")
+    B.USER_TABLEAUX.pop("tabtest_ralston3", None)
+
+
 @pytest.mark.parametrize("backend", ["numpy", "c"])
-def test_a_tableau_beside_a_user_effect_in_one_file(tmp_path, backend):
+def test_a_tableau_beside_a_user_effect_in_one_file(beside, backend):
     """The set's tableau steps the set's effect: the same run as with the built-in angular_damping (the same law)."""
-    (tmp_path / "beside.py").write_text(BESIDE, encoding="utf-8")
-    s = extending.derive(tmp_path / "beside.py", out=tmp_path / "sets")
-    try:
-        assert s.effect_names == ["tabtest_spin_drag"] and s.tableau_names == ["tabtest_ralston3"]
-        del B.USER_TABLEAUX["tabtest_ralston3"]   # found again through the opened set (kept outside the user directory)
-        runs = []
-        for name, kw in (("tabtest_spin_drag", {"k": 0.05}), ("angular_damping", {"c": 0.05})):
-            scene = lv.Scene()
-            scene.add_body(lv.Body("b", 1.5, (0.2, 0.3, 0.4), omega_b=(1.0, -2.0, 0.5)))
-            scene.add_effect(name, body="b", **kw)
-            sim = lv.Sim(scene, dt=0.01, integrator="tabtest_ralston3", backend=backend)
-            sim.run(100)
-            runs.append(sim.x.copy())
-        assert B.tableau_of("tabtest_ralston3").source == str(s.directory)
-        np.testing.assert_allclose(runs[0], runs[1], rtol=1e-14, atol=1e-15)
-        assert np.max(np.abs(runs[0][0, LY.STATE_OMEGA_B] - (1.0, -2.0, 0.5))) > 0.05   # the drag acted
-    finally:
-        B.USER_TABLEAUX.pop("tabtest_ralston3", None)
+    assert beside.effect_names == ["tabtest_spin_drag"] and beside.tableau_names == ["tabtest_ralston3"]
+    B.USER_TABLEAUX.pop("tabtest_ralston3", None)   # found again through the opened set (outside the user directory)
+    runs = []
+    for name, kw in (("tabtest_spin_drag", {"k": 0.05}), ("angular_damping", {"c": 0.05})):
+        scene = lv.Scene()
+        scene.add_body(lv.Body("b", 1.5, (0.2, 0.3, 0.4), omega_b=(1.0, -2.0, 0.5)))
+        scene.add_effect(name, body="b", **kw)
+        sim = lv.Sim(scene, dt=0.01, integrator="tabtest_ralston3", backend=backend)
+        sim.run(100)
+        runs.append(sim.x.copy())
+    assert B.tableau_of("tabtest_ralston3").source == str(beside.directory)
+    np.testing.assert_allclose(runs[0], runs[1], rtol=1e-14, atol=1e-15)
+    assert np.max(np.abs(runs[0][0, LY.STATE_OMEGA_B] - (1.0, -2.0, 0.5))) > 0.05   # the drag acted
