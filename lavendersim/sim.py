@@ -950,7 +950,21 @@ class Sim:
     def reinit_body(self, i: int, p_w: np.ndarray, q: np.ndarray, omega_b: np.ndarray, Omega: np.ndarray) -> None:
         """Body i as if this Sim had been built with it at rest-translation state (p_w, q, v_w = 0, omega_b) and
         then given wheel rates Omega by set_state: model row (joint r_b, I_p), growth reference, wheel command
-        and applied torques zeroed. For batched resets (the vector env); the caller validated the values."""
+        and applied torques zeroed. For batched resets (the vector env); the values are not validated here.
+
+        Parameters
+        ----------
+        i : int
+            The body's index in ``names``.
+        p_w : ndarray (3,)
+            Position, world frame, m (a jointed body's is recomputed from q and its pivot).
+        q : ndarray (4,)
+            Orientation, body to world, unit quaternion (x, y, z, w).
+        omega_b : ndarray (3,)
+            Angular velocity, body frame, rad/s.
+        Omega : ndarray (N,)
+            Wheel rates relative to the body, rad/s (N <= the body's wheels; the others 0).
+        """
         with self._lock:
             self._dirty = True
             x = self._x[i]
