@@ -125,6 +125,33 @@ def tableau_of(name: str) -> Tableau | None:
     return USER_TABLEAUX.get(name)
 
 
+def rk_weights(tab: Tableau) -> tuple[np.ndarray, float]:
+    """The weights of a tableau's step as ``b_num / b_den``, the form both backends' explicit-RK stepper combine.
+
+    When every b_i is (to the bit) a rational with denominator at most 10**6, b_den is their common denominator
+    and b_num the integer numerators: then x + (dt / b_den) * sum(b_num k) is bitwise the built-in rk4 for RK4's
+    tableau (its dt/6 * (k1 + 2 k2 + 2 k3 + k4)). Otherwise (b, 1.0).
+
+    Parameters
+    ----------
+    tab : Tableau
+
+    Returns
+    -------
+    b_num : ndarray (s,) float64
+    b_den : float
+        > 0.
+    """
+    from fractions import Fraction
+    from math import lcm
+
+    fr = [Fraction(float(b)).limit_denominator(10 ** 6) for b in tab.b]
+    den = lcm(*(f.denominator for f in fr)) if fr else 1
+    if den <= 10 ** 6 and all(float(f) == float(b) for f, b in zip(fr, tab.b)):
+        return np.array([float(f * den) for f in fr], dtype=np.float64), float(den)
+    return np.array(tab.b, dtype=np.float64), 1.0
+
+
 DOPRI5_HMIN_REL = TABLEAUX.DP_HMIN_REL          # a substep below dt * this means the tolerance cannot be met
 DOPRI5_MAX_SUBSTEPS = TABLEAUX.DP_MAX_SUBSTEPS  # ... as do more substeps than this within one output step
 

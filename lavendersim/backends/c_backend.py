@@ -20,7 +20,8 @@ from ..errors import DivergenceError, StaleBuildError
 from ..generated import tableaux as TABLEAUX
 from .._install import rebuild_command
 from ..generated import layout as LY
-from . import FLOAT32_INTEGRATORS, KIND_WHEELS, PLAIN_ONLY, Adaptive, Models, no_root_cause, norm_safe, tolerance_cause
+from . import (FLOAT32_INTEGRATORS, KIND_WHEELS, PLAIN_ONLY, Adaptive, Models, Tableau, no_root_cause, norm_safe,
+               rk_weights, tableau_of, tolerance_cause)
 
 REBUILD = rebuild_command()
 HASHED = ("kernels.c", "kernels.h", "layout.h", "tableaux.h", "kernels_f32.c", "kernels_f32.h")  # every generated file the extension compiles
@@ -293,6 +294,25 @@ def _f64_rows(name: str, a, cols: int, nb: int, writable: bool = False) -> np.nd
     return a
 
 
+MAX_STAGES = 16  # LV_TABLEAU_MAX_STAGES (csrc/step.h)
+
+
+@functools.lru_cache(maxsize=64)
+def _tableau_arg(tab: Tableau) -> tuple:
+    """simulate's `tableau` argument (a (s, s), b_num (s,), b_den) for a user's explicit Runge-Kutta method; ValueError
+    naming `integrator` for a tableau C cannot step (its shapes, an implicit entry, a non-finite number, too many stages)."""
+    A, b, c = np.asarray(tab.A, np.float64), np.asarray(tab.b, np.float64), np.asarray(tab.c, np.float64)
+    s = b.shape[0] if b.ndim == 1 else -1
+    if not (1 <= s <= MAX_STAGES) or A.shape != (s, s) or c.shape != (s,):
+        raise ValueError(f"integrator: tableau {tab.name!r} must have b (s,), c (s,) and A (s, s) with 1 <= s <= "
+                         f"{MAX_STAGES}, got b {b.shape}, c {c.shape}, A {A.shape}")
+    if not (np.all(np.isfinite(A)) and np.all(np.isfinite(b))) or np.any(np.triu(A) != 0.0):
+        raise ValueError(f"integrator: tableau {tab.name!r} must be explicit (A strictly lower triangular) with finite "
+                         "entries")
+    b_num, b_den = rk_weights(tab)
+    return (np.ascontiguousarray(A), np.ascontiguousarray(b_num), float(b_den))
+
+
 MAX_THREADS = 64  # LV_MAX_THREADS (csrc/step.h)
 # the cause a DivergenceError names when advance(restore=False) failed (the caller restores and re-runs for the cause)
 NOT_RESTORED = "non-finite state or failed solve (arrays not restored: restore=False; re-run with restore=True for the cause)"
@@ -354,7 +374,8 @@ class CBackend:
         effects : ndarray (n, ROW)
             Effect table.
         integrator : str
-            A key of INTEGRATOR_CODES.
+            A key of INTEGRATOR_CODES, or a user's explicit Runge-Kutta method (``tableau_of(integrator)``, float64
+            only), stepped by the generic tableau stepper (csrc/step.c advance_tableau).
         normalize : bool
             Renormalize the quaternion (x, y, z, w) after each step.
         dt : float
@@ -374,15 +395,19 @@ class CBackend:
         Raises
         ------
         ValueError
-            Unknown integrator, dopri5 without ``adaptive``, or a PLAIN_ONLY integrator with a model body.
+            Unknown integrator, dopri5 without ``adaptive``, a PLAIN_ONLY integrator with a model body, or a user
+            tableau C cannot step (shapes, not explicit, more than MAX_STAGES stages) or on a float32 state.
         TypeError
             ``state`` is not a writable C-contiguous float64 array.
         lavendersim.errors.DivergenceError
             A body's state became non-finite or the solve failed; every array is left unchanged.
         """
-        if integrator not in INTEGRATOR_CODES:
+        tab = None if integrator in INTEGRATOR_CODES else tableau_of(integrator)
+        if integrator not in INTEGRATOR_CODES and tab is None:
             raise ValueError(f"integrator: must be one of {', '.join(INTEGRATOR_CODES)}, got {integrator!r}")
         if isinstance(state, np.ndarray) and state.dtype == np.float32:
+            if tab is not None:
+                raise ValueError(f"integrator: {integrator!r} (a user-declared tableau) steps float64 only")
             return self._advance_f32(state, params, effects, integrator, normalize, dt, n_steps, models, restore)
         if integrator == "dopri5" and adaptive is None:
             raise ValueError("integrator: dopri5 needs adaptive (a lavendersim.backends.Adaptive)")
@@ -415,8 +440,8 @@ class CBackend:
             extra = extra + (adaptive.h, adaptive.nfev, adaptive.rtol, adaptive.atol)
         else:
             extra = extra + (None, None, 0.0, 0.0)
-        extra = extra + (user,)
-        status, step, body = _c.simulate(state, params, effects, INTEGRATOR_CODES[integrator],
+        extra = extra + (user, None if tab is None else _tableau_arg(tab))
+        status, step, body = _c.simulate(state, params, effects, INTEGRATOR_CODES.get(integrator, 0),
                                          1 if normalize else 0, float(dt), int(n_steps), *extra)
         if status == TABLEAUX.STATUS_OK:
             return

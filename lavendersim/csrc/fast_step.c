@@ -285,7 +285,7 @@ static int fast_step(Stepper *s, long n)
         return 0;
     status = lv_simulate((double *)s->buf[FS_STATE].buf, (const double *)s->buf[FS_PARAMS].buf, s->nb,
                          (const double *)s->buf[FS_EFFECTS].buf, s->ne, s->row_size, s->user.n ? &s->user : NULL,
-                         s->has_models ? &s->models : NULL, s->integrator, s->normalize, s->dt, n, NULL,
+                         s->has_models ? &s->models : NULL, s->integrator, s->normalize, s->dt, n, NULL, NULL,
                          &fail_step, &fail_body);
     if (status != LV_OK || !checks_pass(s)) {
         snap_copy(s, 0);

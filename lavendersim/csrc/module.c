@@ -161,6 +161,50 @@ static int check_effects(const double *ef, Py_ssize_t ne, Py_ssize_t row_size, P
     return 0;
 }
 
+/* The user's explicit Runge-Kutta method: tableau = (a (s, s) strictly lower, b_num (s,), b_den > 0), float64 and
+   finite, 1 <= s <= LV_TABLEAU_MAX_STAGES (lv_tableau). On success *tab points into copies held by *a_buf, *b_buf
+   (the caller releases them); else a ValueError or TypeError naming the rule. */
+static int get_tableau(PyObject *obj, lv_tableau *tab, Py_buffer *a_buf, Py_buffer *b_buf)
+{
+    PyObject *a_obj, *b_obj;
+    double b_den;
+    Py_ssize_t s, i, j;
+    const double *a, *bn;
+    if (!PyTuple_Check(obj) || !PyArg_ParseTuple(obj, "OOd:simulate tableau", &a_obj, &b_obj, &b_den)) {
+        if (!PyErr_Occurred())
+            PyErr_SetString(PyExc_TypeError, "simulate: tableau must be a tuple (a (s, s), b_num (s,), b_den)");
+        return -1;
+    }
+    if (get_f64(a_obj, a_buf, 0, "simulate: tableau a") != 0) return -1;
+    if (get_f64(b_obj, b_buf, 0, "simulate: tableau b_num") != 0) { PyBuffer_Release(a_buf); return -1; }
+    s = b_buf->ndim == 1 ? b_buf->shape[0] : -1;
+    if (s < 1 || s > LV_TABLEAU_MAX_STAGES || a_buf->ndim != 2 || a_buf->shape[0] != s || a_buf->shape[1] != s) {
+        PyErr_Format(PyExc_ValueError, "simulate: tableau a must have shape (s, s) and b_num (s,) with 1 <= s <= %d",
+                     LV_TABLEAU_MAX_STAGES);
+        goto fail;
+    }
+    a = (const double *)a_buf->buf;
+    bn = (const double *)b_buf->buf;
+    for (i = 0; i < s; i++) {
+        if (!isfinite(bn[i])) goto bad;
+        for (j = 0; j < s; j++)
+            if (!isfinite(a[i * s + j]) || (j >= i && a[i * s + j] != 0.0)) goto bad;
+    }
+    if (!(b_den > 0.0 && isfinite(b_den))) goto bad;
+    tab->s = (int)s;
+    tab->a = a;
+    tab->b_num = bn;
+    tab->b_den = b_den;
+    return 0;
+bad:
+    PyErr_SetString(PyExc_ValueError, "simulate: tableau must be explicit (a strictly lower triangular) with finite "
+                                      "entries and b_den > 0");
+fail:
+    PyBuffer_Release(a_buf);
+    PyBuffer_Release(b_buf);
+    return -1;
+}
+
 static PyObject *py_kernels(PyObject *self, PyObject *noargs)
 {
     PyObject *out = PyList_New(LV_KERNEL_COUNT);
@@ -272,7 +316,10 @@ static PyObject *py_simulate(PyObject *self, PyObject *args)
 {
     PyObject *state_obj, *params_obj, *effects_obj;
     PyObject *rows_obj = Py_None, *omega_obj = Py_None, *cmd_obj = Py_None, *app_obj = Py_None;
-    PyObject *h_obj = Py_None, *nfev_obj = Py_None, *user_obj = Py_None;
+    PyObject *h_obj = Py_None, *nfev_obj = Py_None, *user_obj = Py_None, *tab_obj = Py_None;
+    lv_tableau tableau;
+    Py_buffer ta, tb;
+    int have_tab = 0;
     PyObject *result = NULL;
     lv_user_effect *user_entries = NULL;
     lv_user_effects user;
@@ -292,9 +339,9 @@ static PyObject *py_simulate(PyObject *self, PyObject *args)
     lv_models models;
     int status;
     (void)self;
-    if (!PyArg_ParseTuple(args, "OOOipdL|OOOOOOddO:simulate", &state_obj, &params_obj, &effects_obj, &integrator,
+    if (!PyArg_ParseTuple(args, "OOOipdL|OOOOOOddOO:simulate", &state_obj, &params_obj, &effects_obj, &integrator,
                           &normalize, &dt, &n_steps_ll, &rows_obj, &omega_obj, &cmd_obj, &app_obj,
-                          &h_obj, &nfev_obj, &rtol, &atol, &user_obj))
+                          &h_obj, &nfev_obj, &rtol, &atol, &user_obj, &tab_obj))
         return NULL;
     n_models = (rows_obj != Py_None) + (omega_obj != Py_None) + (cmd_obj != Py_None) + (app_obj != Py_None);
     if (n_models != 0 && n_models != 4) {
@@ -302,6 +349,7 @@ static PyObject *py_simulate(PyObject *self, PyObject *args)
                         "simulate: give all four of model_rows, Omega, command, applied, or none of them");
         return NULL;
     }
+    if (tab_obj != Py_None) integrator = LV_INTEGRATOR_EULER; /* ignored: the tableau is stepped */
     if (integrator < 0 || integrator > LV_INTEGRATOR_LAST) {
         PyErr_Format(PyExc_ValueError,
                      "simulate: integrator code must be 0 (euler), 1 (semi_implicit_euler), 2 (rk4), 3 (dopri5), "
@@ -324,13 +372,17 @@ static PyObject *py_simulate(PyObject *self, PyObject *args)
         PyErr_SetString(PyExc_ValueError, "simulate: dt must be finite");
         return NULL;
     }
-    if (get_user_table(user_obj, &user_entries, &n_user) != 0) return NULL;
+    if (tab_obj != Py_None) {
+        if (get_tableau(tab_obj, &tableau, &ta, &tb) != 0) return NULL;
+        have_tab = 1;
+    }
+    if (get_user_table(user_obj, &user_entries, &n_user) != 0) goto fail_tab;
     user.entries = user_entries;
     user.n = n_user;
-    if (get_f64(state_obj, &st, 1, "simulate: state") != 0) { free(user_entries); return NULL; }
-    if (get_f64(params_obj, &pr, 0, "simulate: params") != 0) { PyBuffer_Release(&st); free(user_entries); return NULL; }
+    if (get_f64(state_obj, &st, 1, "simulate: state") != 0) { free(user_entries); goto fail_tab; }
+    if (get_f64(params_obj, &pr, 0, "simulate: params") != 0) { PyBuffer_Release(&st); free(user_entries); goto fail_tab; }
     if (get_f64(effects_obj, &ef, 0, "simulate: effects") != 0) {
-        PyBuffer_Release(&st); PyBuffer_Release(&pr); free(user_entries); return NULL;
+        PyBuffer_Release(&st); PyBuffer_Release(&pr); free(user_entries); goto fail_tab;
     }
     if (n_models) {
         if (get_f64(rows_obj, &mr, 0, "simulate: model_rows") != 0) goto fail;
@@ -410,7 +462,7 @@ static PyObject *py_simulate(PyObject *self, PyObject *args)
     Py_BEGIN_ALLOW_THREADS
     status = lv_simulate((double *)st.buf, (const double *)pr.buf, (long)nb, (const double *)ef.buf, (long)ne,
                          (long)row_size, n_user ? &user : NULL, n_models ? &models : NULL, integrator, normalize, dt,
-                         (long)n_steps_ll, have_h ? &adaptive : NULL, &fail_step, &fail_body);
+                         (long)n_steps_ll, have_h ? &adaptive : NULL, have_tab ? &tableau : NULL, &fail_step, &fail_body);
     Py_END_ALLOW_THREADS
     if (status == LV_NO_MEMORY)
         PyErr_NoMemory();
@@ -434,6 +486,8 @@ fail: /* every exit releases the buffers it holds; result stays NULL on an error
     if (have_h) PyBuffer_Release(&hb);
     if (have_nf) PyBuffer_Release(&nf);
     free(user_entries);
+fail_tab:
+    if (have_tab) { PyBuffer_Release(&ta); PyBuffer_Release(&tb); }
     return result;
 }
 
@@ -491,7 +545,7 @@ static PyMethodDef methods[] = {
      "on one row of numbers (the inputs in the packed order of eval_kernel)."},
     {"simulate", py_simulate, METH_VARARGS,
      "simulate(state, params, effects, integrator, normalize, dt, n_steps[, model_rows, Omega, command, applied,\n"
-     "         h, nfev, rtol, atol, user_effects])\n"
+     "         h, nfev, rtol, atol, user_effects, tableau])\n"
      "  -> (status, step, body).\n"
      "state (nb,13) advanced in place; params (nb,4) [m, I_x, I_y, I_z]; effects (ne, >=2) [code, body, parameters...]\n"
      "(built-in codes, see generated/kernels.h, or user codes from LV_EFFECT_USER_BASE with user_effects: int64 (n,3)\n"
@@ -504,7 +558,9 @@ static PyMethodDef methods[] = {
      "integrator 0 euler, 1 semi-implicit euler, 2 rk4, 3 dopri5, 4 splitting, 5 implicit_gyro, 6 splitting4,\n"
      "7 rk4_expmap, 8 symtop4 (4-8: plain bodies only). status 2: dopri5 could not meet the tolerance (h[body] = the step that was too small). status 0 ok (step = body = -1); status 1: the\n"
      "state of `body` became non-finite at 0-based `step`: earlier bodies are fully advanced, that body\n"
-     "holds its last finite state (and wheel rates), later bodies are untouched."},
+     "holds its last finite state (and wheel rates), later bodies are untouched.\n"
+     "tableau (a (s,s) strictly lower, b_num (s,), b_den): a user's explicit Runge-Kutta method, stepped instead of\n"
+     "`integrator` on every body (csrc/step.h lv_tableau)."},
     {"simulate_f32", lv_py_simulate_f32, METH_VARARGS,
      "simulate_f32(state, params, effects, integrator, normalize, dt, n_steps) -> (status, step, body): simulate\n"
      "in float32 (csrc/step_f32.c) for plain bodies, integrators 0-2 and built-in effects; arrays float32."},

@@ -848,6 +848,70 @@ static long advance_dopri5(double *state, const double *params, long b, const lv
     return -1;
 }
 
+/* out = y + h * sum_j w[j] k[j] over j < n (lv_tableau's order: the first nonzero w[j] k[j], then the later nonzero
+   ones added in increasing j); y when every w[j] is zero. One row of an explicit Runge-Kutta tableau. */
+static void rk_row(double *out, const double *y, double h, const double *w, double k[][LV_XS_SIZE], int n)
+{
+    int i, j, j0 = 0;
+    while (j0 < n && w[j0] == 0.0) j0++;
+    if (j0 == n) {
+        memcpy(out, y, LV_XS_SIZE * sizeof(double));
+        return;
+    }
+    for (i = 0; i < LV_XS_SIZE; i++) {
+        double acc = w[j0] * k[j0][i];
+        for (j = j0 + 1; j < n; j++)
+            if (w[j] != 0.0) acc = acc + w[j] * k[j][i];
+        out[i] = y[i] + h * acc;
+    }
+}
+
+/* Advance body b (any kind) by n_steps of the user's explicit Runge-Kutta method tab (lv_tableau), as advance_model
+   steps rk4: wheel torques from the motor line at the start of each step and held over it, q normalized when
+   asked, a jointed body put back on its joint. Rows written only on success; returns -1, or the 0-based failing
+   step with last[] = its last finite [x, Omega]. */
+static long advance_tableau(double *state, const double *params, long b, const lv_models *md,
+                            const lv_effect_index *ix, const lv_tableau *tab, int normalize, double dt, long n_steps,
+                            double *last)
+{
+    body_ctx c;
+    double y[LV_XS_SIZE], yn[LV_XS_SIZE], k[LV_TABLEAU_MAX_STAGES][LV_XS_SIZE], applied[LV_NW];
+    const double *cmd = NULL;
+    long s;
+    int i;
+    ctx_init(&c, params, b, md, ix);
+    memcpy(y, state + b * LV_STATE_SIZE, LV_STATE_SIZE * sizeof(double));
+    for (i = 0; i < LV_NW; i++) y[LV_XS_OMEGA + i] = 0.0;
+    if (c.kind) {
+        memcpy(y + LV_XS_OMEGA, md->Omega + LV_NW * b, LV_NW * sizeof(double));
+        memcpy(applied, md->applied + LV_NW * b, sizeof applied);
+        cmd = md->command + LV_NW * b;
+    }
+    for (s = 0; s < n_steps; s++) {
+        if (c.kind & LV_KIND_WHEELS) lv_wheels_motor(c.r, cmd, y + LV_XS_OMEGA, c.u);
+        for (i = 0; i < tab->s; i++) {
+            rk_row(yn, y, dt, tab->a + i * tab->s, k, i);
+            ctx_rhs(&c, yn, k[i]);
+        }
+        rk_row(yn, y, dt / tab->b_den, tab->b_num, k, tab->s);
+        ctx_finish(&c, yn, normalize);
+        for (i = 0; i < LV_XS_SIZE; i++) {
+            if (!isfinite(yn[i])) {
+                memcpy(last, y, sizeof y);
+                return s;
+            }
+        }
+        memcpy(y, yn, sizeof y);
+        if (c.kind) memcpy(applied, c.u, sizeof applied);
+    }
+    memcpy(state + b * LV_STATE_SIZE, y, LV_STATE_SIZE * sizeof(double));
+    if (c.kind) {
+        memcpy(md->Omega + LV_NW * b, y + LV_XS_OMEGA, LV_NW * sizeof(double));
+        memcpy(md->applied + LV_NW * b, applied, sizeof applied);
+    }
+    return -1;
+}
+
 /* Force at the COM (world) and torque (body frame) of the effects on a plain body. */
 static void plain_loads(const body_ctx *c, const double *x, double *F, double *tau_b)
 {
@@ -1505,26 +1569,29 @@ static int advance_fixed(double *state, const double *params, long nb, const lv_
 int lv_simulate(double *state, const double *params, long nb,
                 const double *effects, long ne, long row_size, const lv_user_effects *user,
                 const lv_models *models, int integrator, int normalize, double dt, long n_steps,
-                const lv_adaptive *adaptive, long *fail_step, long *fail_body)
+                const lv_adaptive *adaptive, const lv_tableau *tableau, long *fail_step, long *fail_body)
 {
     lv_effect_index ix;
     double last[LV_BLOCK][LV_STATE_SIZE];
     long b, s, limit = n_steps, best_body = -1, *ids = NULL;
     int status = LV_OK;
-    if (integrator < LV_INTEGRATOR_EULER || integrator > LV_INTEGRATOR_LAST) return LV_BAD_ARGUMENT;
-    if (ne > 0 && row_size < LV_EFFECT_ROW_PARAMS) return LV_BAD_ARGUMENT;
-    if (integrator == LV_INTEGRATOR_DOPRI5 && (adaptive == NULL || !(adaptive->rtol > 0.0) || !(adaptive->atol >= 0.0)))
+    if (tableau != NULL && (tableau->s < 1 || tableau->s > LV_TABLEAU_MAX_STAGES || !(tableau->b_den > 0.0)))
         return LV_BAD_ARGUMENT;
-    if (LV_INTEGRATOR_PLAIN_ONLY(integrator) && models != NULL)
+    if (tableau == NULL && (integrator < LV_INTEGRATOR_EULER || integrator > LV_INTEGRATOR_LAST)) return LV_BAD_ARGUMENT;
+    if (ne > 0 && row_size < LV_EFFECT_ROW_PARAMS) return LV_BAD_ARGUMENT;
+    if (tableau == NULL && integrator == LV_INTEGRATOR_DOPRI5 && (adaptive == NULL || !(adaptive->rtol > 0.0) || !(adaptive->atol >= 0.0)))
+        return LV_BAD_ARGUMENT;
+    if (tableau == NULL && LV_INTEGRATOR_PLAIN_ONLY(integrator) && models != NULL)
         for (b = 0; b < nb; b++)
             if ((int)models->rows[b * LV_MODEL_SIZE + LV_MODEL_KIND] != 0) return LV_BAD_ARGUMENT;
     status = index_build(&ix, effects, ne, row_size, nb, user, fail_step);
     if (status != LV_OK) return status;
-    if (integrator == LV_INTEGRATOR_DOPRI5) {
+    if (tableau != NULL || integrator == LV_INTEGRATOR_DOPRI5) {
         for (b = 0; b < nb && limit > 0; b++) {
             double lastx[LV_XS_SIZE];
             int why = LV_DIVERGED;
-            s = advance_dopri5(state, params, b, models, &ix, normalize, dt, limit, adaptive, &why, lastx);
+            s = tableau != NULL ? advance_tableau(state, params, b, models, &ix, tableau, normalize, dt, limit, lastx)
+                                : advance_dopri5(state, params, b, models, &ix, normalize, dt, limit, adaptive, &why, lastx);
             if (s < 0) continue;
             memcpy(state + b * LV_STATE_SIZE, lastx, LV_STATE_SIZE * sizeof(double));
             if (models != NULL && (int)models->rows[b * LV_MODEL_SIZE + LV_MODEL_KIND] != 0)

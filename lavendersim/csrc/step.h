@@ -116,9 +116,26 @@ const char *lv_isa_name(int isa);
    count); LV_BAD_ARGUMENT for a body other than -1 (every body) or an integer index in [0, nb). */
 int lv_effect_row_check(const double *row, long row_size, long nb, const lv_user_effects *user, int *np);
 
+/* A user-declared explicit Runge-Kutta method (lavendersim.backends.Tableau), stepped by lv_simulate when given in
+   place of a built-in integrator: s stages (1 .. LV_TABLEAU_MAX_STAGES), a (s x s, row-major, strictly lower),
+   the weights b_num (s) over b_den. With h = dt and k_0 = f(x): stage i evaluates k_i = f(x + h * sum_j a[i][j] k_j)
+   (the first nonzero term, then the later nonzero ones added in increasing j; x itself for an all-zero row), and
+   the step ends at x + (h / b_den) * sum_i b_num[i] k_i (the same order, zero weights skipped): the NumPy
+   backend's operation order (lavendersim.backends.rk_weights gives b_num, b_den). */
+#define LV_TABLEAU_MAX_STAGES 16
+typedef struct {
+    int s;
+    const double *a;
+    const double *b_num;
+    double b_den;
+} lv_tableau;
+
+/* tableau: NULL, or a user's explicit Runge-Kutta method (then `integrator` is ignored): every body (any kind) is
+   stepped one by one as rk4 steps it (effects, joint, wheels with their torques held over the step, q normalized
+   when asked, the same divergence contract). */
 int lv_simulate(double *state, const double *params, long nb,
                 const double *effects, long ne, long row_size, const lv_user_effects *user,
                 const lv_models *models, int integrator, int normalize, double dt, long n_steps,
-                const lv_adaptive *adaptive, long *fail_step, long *fail_body);
+                const lv_adaptive *adaptive, const lv_tableau *tableau, long *fail_step, long *fail_body);
 
 #endif
