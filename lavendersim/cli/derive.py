@@ -24,7 +24,7 @@ def add_parser(sub) -> None:
     d.add_argument("--full", action="store_true", help="with --check: always re-derive in memory (skip the manifest fast path)")
     d.add_argument("--out", help="output directory (default: the package's generated/; with --user: the user "
                                  "directory's sets/, see lavendersim.extending)")
-    d.add_argument("--user", metavar="FILE", help="derive YOUR declarations (EFFECTS and/or KERNELS in FILE, see "
+    d.add_argument("--user", metavar="FILE", help="derive YOUR declarations (EFFECTS, KERNELS and/or TABLEAUX in FILE, see "
                                                   "docs/extending.md): print them and compile their C (cached)")
     d.set_defaults(fn=run)
 
@@ -141,6 +141,7 @@ def _user(args) -> int:
     if args.json:
         _common.emit_json({"directory": str(s.directory), "seconds": time.perf_counter() - t0,
                            "effects": list(s.effect_names), "kernels": list(s.kernel_names),
+                           "tableaux": list(getattr(s, "tableau_names", [])),
                            "library": str(s.library_path), "compiled": s.library_built_now is not False,
                            "replaced": None if s.replaced_declaration is None else str(s.replaced_declaration)})
         return 0
@@ -155,6 +156,10 @@ def _user(args) -> int:
     if s.kernel_names:
         lines.append(f"kernels: {', '.join(s.kernel_names)} (C: kernels.h; NumPy/CasADi: "
                      "lavendersim.extending.load(FILE).numpy/.casadi)")
+    tableaux = getattr(s, "tableaux", ())
+    if tableaux:
+        lines.append("tableaux: " + ", ".join(f"{t['name']} (order {t['order']}, {t['stages']} stages)" for t in tableaux)
+                     + " — Sim(..., integrator=NAME) on the c and numpy backends")
     lines.append(f"C library: {s.library_path} ({how}; its sha256 in {s.directory / extending.MANIFEST})")
     if args.out:
         lines.append(f"outside the user directory: load it with lavendersim.effects.load_user({str(s.directory)!r})")

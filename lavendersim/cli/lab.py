@@ -48,6 +48,7 @@ def lab_options(name: str) -> list[tuple[str, str, dict]]:
     the chapter's), except ``--quick``: the command line runs the full sweep unless asked."""
     from lavendersim import backends, labs
 
+    cases = ", ".join(labs.lab_module("hard").CASES) if name == "hard" else ""
     chapter = dict(choices=backends.of_family("explicit_rk"))   # the chapter's methods: euler, ..., rk4
     quick = ("--quick", "quick", dict(action="store_true", default=False))   # compute's default is the quick sweep
     workers = ("--workers", "workers", dict(type=int, metavar="N", help="local worker processes (default: every "
@@ -77,7 +78,7 @@ def lab_options(name: str) -> list[tuple[str, str, dict]]:
                                            "the 0.2 N·m limit)")),
                ("--T", "T", dict(type=float, help="duration of the sign runs in s (default 1)"))],
         "hard": [("--cases", "cases", dict(type=_names, metavar="A,B", help="comma-separated subset of the catalogue "
-                                           f"(default: all): {', '.join(labs.lab_module('hard').CASES)}")),
+                                           f"(default: all): {cases}")),
                  ("--integrator", "integrator", dict(help="failure mode: assert every bound with this integrator "
                                                      "instead of the one the issue names"))],
         "accuracy": [(quick[0], quick[1], dict(quick[2], help="reduced sweep (2 cases, dt 2^-4..2^-9, 1 repeat; "
