@@ -165,6 +165,7 @@ class Method:
     param: str            # dt | rtol
     stages: int | None = None
     dtype: str = "float64"  # the precision axis: Sim(dtype=...) ("float32": label "rk4 [c float32]")
+    order: int | None = None  # the expected order in dt (a fixed-step lavendersim integrator, float64)
 
 
 @dataclass
@@ -211,33 +212,48 @@ def _probe(m: "Method") -> str | None:
     return None
 
 
-def methods(mujoco_ok: bool) -> tuple[list[Method], dict]:
-    """The methods to measure and {label: reason} for the registered integrators that raised when probed."""
+def methods(mujoco_ok: bool, integrators=None) -> tuple[list[Method], dict]:
+    """The methods to measure and {label: reason} for the integrators that raised when probed.
+
+    ``integrators``: the lavendersim integrators to measure (None: every built-in one); a name that is not
+    built in is a user tableau (:func:`lavendersim.extending.tableau`), measured on both backends."""
     out, broken = [], {}
+    names = list(B.INTEGRATORS) if integrators is None else list(integrators)
     adaptive = adaptive_integrators()
-    for backend in ("c", "numpy"):
-        for name, stages in B.INTEGRATORS.items():
-            param = "rtol" if name in adaptive else "dt"
-            m = Method(f"{name} [{backend}]", "lavendersim", name, backend, param,
-                       None if stages is None else int(stages))
-            why = _probe(m)
-            if why:
-                broken[m.label] = why
-            else:
-                out.append(m)
-    for name in getattr(B, "FLOAT32_INTEGRATORS", ()):   # the precision axis: float32 beside float64, C backend
-        m = Method(f"{name} [c float32]", "lavendersim", name, "c", "dt", int(B.INTEGRATORS[name]), dtype="float32")
+
+    def probed(m: Method) -> None:
         why = _probe(m)
         if why:
             broken[m.label] = why
         else:
             out.append(m)
+
+    for backend in ("c", "numpy"):
+        for name in names:
+            stages, order = _stages_and_order(name)
+            param = "rtol" if name in adaptive else "dt"
+            probed(Method(f"{name} [{backend}]", "lavendersim", name, backend, param, stages, order=order))
+    for name in getattr(B, "FLOAT32_INTEGRATORS", ()):   # the precision axis: float32 beside float64, C backend
+        if name in names:
+            probed(Method(f"{name} [c float32]", "lavendersim", name, "c", "dt", int(B.INTEGRATORS[name]),
+                          dtype="float32"))
     for name in ("RK45", "DOP853"):
         out.append(Method(f"scipy {name}", "scipy", name, "scipy", "rtol"))
     if mujoco_ok:
-        for name, stages in (("Euler", 1), ("implicitfast", 1), ("RK4", 4)):
-            out.append(Method(f"MuJoCo {name}", "mujoco", name, "mujoco", "dt", stages))
+        for name, stages, order in (("Euler", 1, 1), ("implicitfast", 1, None), ("RK4", 4, 4)):
+            out.append(Method(f"MuJoCo {name}", "mujoco", name, "mujoco", "dt", stages, order=order))
     return out, broken
+
+
+def _stages_and_order(name: str) -> tuple[int | None, int | None]:
+    """(RHS evaluations per step, expected order) of a built-in integrator or a user tableau."""
+    if name in B.INTEGRATORS:
+        stages = B.INTEGRATORS[name]
+        return (None if stages is None else int(stages)), EXPECTED_ORDER.get(name)
+    from lavendersim import extending
+
+    tab = extending.tableau(name)   # LavenderInputError naming the known ones for an unknown name
+    return int(tab.stages), int(tab.order)
 
 
 def _mujoco():
@@ -261,11 +277,11 @@ def _envelope(series: np.ndarray, t: np.ndarray, n: int = 200):
 
 
 def _score(pt: Point, case: Case, exact, t, x, keep_drift: bool, drifts: dict):
-    """Errors at T and drifts of E and L_w (the printed kernels) of samples x (T, 13), q normalized."""
-    x = np.array(x, dtype=float)
-    x[:, C.Q] = K.quat_normalize(x[:, C.Q])
+    """Errors at T of samples x (T, 13); drifts of E and L_w (the printed kernels) with q normalized."""
     q, w = x[:, C.Q], x[:, C.OMEGA_B]
-    E, L = C.energy_momentum(case.I_b, x, MASS)
+    xn = np.array(x, dtype=float)
+    xn[:, C.Q] = K.quat_normalize(q)
+    E, L = C.energy_momentum(case.I_b, xn, MASS)
     pt.attitude_error = float(R.attitude_error(q[-1], exact.q[-1]))
     pt.omega_error = float(np.linalg.norm(w[-1] - exact.omega_b[-1]))
     pt.energy_drift = R.relative_drift(E)
@@ -758,20 +774,23 @@ def run(out_dir=C.DEFAULT_OUT, backend: str = "auto", **options) -> C.LabResult:
 
 @failed_figure
 def compute(backend: str = "auto", quick: bool = True, mujoco: bool = True, progress: bool = False,
-            workers: int | None = None, dask: str | None = None) -> C.LabResult:
+            workers: int | None = None, dask: str | None = None, integrators=None) -> C.LabResult:
     """Run the study and return its LabResult, writing nothing; ``quick=True`` (the Python default, what ``lab all`` runs) is the reduced
     sweep, ``quick=False`` the full one (the command line's default). ``backend`` is accepted for
     the labs' common interface and ignored: both backends are always measured. ``workers`` /
     ``dask`` choose where the errors are computed (lavendersim.executor.resolve: None = every
     local core, 1 = this process, or an existing Dask scheduler's address); the timing runs are
-    always serial in this process, after the error computation has finished."""
+    always serial in this process, after the error computation has finished. ``integrators``: the
+    lavendersim integrators to measure (None: every built-in one; a user tableau's name measures it on both
+    backends, against its declared order)."""
     C.check_backend(backend)
     for name, v in (("quick", quick), ("mujoco", mujoco), ("progress", progress)):
         if not isinstance(v, (bool, np.bool_)):
             raise V.LavenderInputError(name, "must be True or False", f", got {v!r}")
+    if integrators is not None and (isinstance(integrators, str) or not integrators):
+        raise V.LavenderInputError("integrators", "must be a non-empty list of integrator names", f", got {integrators!r}")
     cfg = QUICK if quick else FULL
     t_start = time.perf_counter()
-
     bar = C.progress(total=None, desc="lab accuracy", unit="run", enabled=progress)
 
     def say(msg):           # progress lines: on a terminal only, above the bar
@@ -782,19 +801,39 @@ def compute(backend: str = "auto", quick: bool = True, mujoco: bool = True, prog
     # unreachable scheduler is reported before any work is done.
     ex = X.resolve(workers=workers, dask=dask, feature="lavendersim lab accuracy --dask")
     mj, mj_missing = (None, "skipped (mujoco=False)") if not mujoco else _mujoco()
-    all_cases = cases()
-    use = [all_cases[c] for c in cfg["cases"]]
-    meths, broken = methods(mj is not None)
-    labels = [m.label for m in meths]
+    use = [cases()[c] for c in cfg["cases"]]
+    meths, broken = methods(mj is not None, integrators)
     stamp = machine_stamp(mj)
     for label, why in broken.items():
         say(f"FAILED to run: {label}: {why}")
-    say(f"{len(use)} cases x {len(meths)} methods; integrators {list(B.INTEGRATORS)}; "
+    say(f"{len(use)} cases x {len(meths)} methods; integrators {integrators or list(B.INTEGRATORS)}; "
         f"adaptive {adaptive_integrators() or 'none'}; MuJoCo {stamp['mujoco'] or 'not available: ' + str(mj_missing)}")
+    exacts, figures, rows = _references(use)
+    say("exact references agree with DOP853")
+    points, drifts, skipped = _sweeps(ex, mj, use, meths, cfg, exacts, bar, say)
+    stamp["loadavg_end"] = list(os.getloadavg()) if hasattr(os, "getloadavg") else None
+    stamp["errors_computed_on"] = ex.describe()
+    stamp["timing"] = "serial, in this process, after the error computation"
+    by = {}
+    for p in points:
+        by.setdefault((p.case, p.method), []).append(p)
+    orders = {key: _order(pts) for key, pts in by.items()}
+    per_case = verdicts(points)
+    checks = C.checks(*[(f"runs_{_key(label)}", False, "holds", None, why) for label, why in broken.items()], *rows,
+                      *(row for case in use for row in _case_checks(case, meths, by, orders)),
+                      ("verdicts_consistent", verdicts_consistent(points, per_case), "holds", None,
+                       "every 'beaten' method's points are each dominated by another method's point; every "
+                       "'on the Pareto front' method has an undominated point"))
+    names = list(B.INTEGRATORS) if integrators is None else list(integrators)
+    result = _result(figures, checks, use, meths, broken, points, drifts, skipped, by, orders, per_case, stamp, mj,
+                     mj_missing, cfg, quick, names)
+    say(f"done in {time.perf_counter() - t_start:.1f} s")
+    return result
 
-    checks: list[C.Check] = [C.holds(f"runs_{_key(label)}", False, why) for label, why in broken.items()]
-    figures: dict = {}
-    exacts = {}
+
+def _references(use: list[Case]):
+    """The exact motions (Jacobi) of the cases, their distance to DOP853 at T as figures and check rows."""
+    exacts, figures, rows = {}, {}, []
     for case in use:
         exact = R.torque_free(case.I_b, case.omega_b0, [0, 0, 0, 1], [0.0, T_END])
         ref = R.dop853(case.I_b, case.omega_b0, [0, 0, 0, 1], [T_END])
@@ -803,20 +842,21 @@ def compute(backend: str = "auto", quick: bool = True, mujoco: bool = True, prog
         dw = float(np.linalg.norm(ref.omega_b[-1] - exact.omega_b[-1]))
         figures[f"reference_vs_dop853_attitude_{case.name}"] = att
         figures[f"reference_vs_dop853_omega_{case.name}"] = dw
-        checks.append(C.at_most(f"reference_vs_dop853_{case.name}", max(att, dw), 1e-10,
-                                f"exact (Jacobi) vs DOP853 rtol=atol=1e-13 at T: attitude {att:.2e} rad, "
-                                f"omega {dw:.2e} rad/s ({exact.kind})"))
-    say("exact references agree with DOP853")
+        rows.append((f"reference_vs_dop853_{case.name}", max(att, dw), "<=", 1e-10,
+                     f"exact (Jacobi) vs DOP853 rtol=atol=1e-13 at T: attitude {att:.2e} rad, "
+                     f"omega {dw:.2e} rad/s ({exact.kind})"))
+    return exacts, figures, rows
 
+
+def _sweeps(ex, mj, use, meths, cfg, exacts, bar, say):
+    """Every case x method's sweep: errors on the executor, then the timing runs serially here.
+    Returns (points, drifts, skipped)."""
     tasks = sweep_tasks(use, meths, cfg, exacts)
     say(f"errors of {len(tasks)} sweeps on {ex.describe()} (timing follows, serially in this process)")
     bar.reset(total=len(tasks))
     bar.set_description("lab accuracy: errors")
     sweeps = C.map_with_progress(ex, measure_sweep, tasks, bar, feature="lavendersim lab accuracy --dask")
-    points: list[Point] = []
-    jobs: list = []
-    drifts: dict = {}
-    skipped: list[str] = []
+    points, jobs, drifts, skipped = [], [], {}, []
     for (case, m, values, _, _), sw in zip(tasks, sweeps):      # in task order, whatever finished first
         points += sw["points"]
         jobs += [None if p.diverged is not None else _timing_job(mj, case, m, p.value) for p in sw["points"]]
@@ -824,7 +864,6 @@ def compute(backend: str = "auto", quick: bool = True, mujoco: bool = True, prog
         if sw["skipped"]:
             skipped.append(sw["skipped"])
         say(f"{case.name}: {m.label} ({len(values)} {m.param} values) in {sw['seconds']:.1f} s")
-
     say(f"timing {sum(j is not None for j in jobs)} runs x {cfg['repeats']} interleaved repeats")
     timed = _time_jobs(jobs, cfg["repeats"], cfg["time_budget"] if cfg["time_budget"] else 0.0, say, bar)
     bar.close()
@@ -832,124 +871,121 @@ def compute(backend: str = "auto", quick: bool = True, mujoco: bool = True, prog
         if pt.ok and done:
             pt.wall_s, pt.repeats = best, done
             pt.wall_per_sim_s = best / T_END
-    stamp["loadavg_end"] = list(os.getloadavg()) if hasattr(os, "getloadavg") else None
-    stamp["errors_computed_on"] = ex.describe()
-    stamp["timing"] = "serial, in this process, after the error computation"
+    return points, drifts, skipped
 
-    # ---------------------------------------------------------------- orders and checks
-    by = {}
-    for p in points:
-        by.setdefault((p.case, p.method), []).append(p)
-    meth_of = {m.label: m for m in meths}
-    orders = {}
-    for (case, label), pts in by.items():
-        # a method accurate enough to leave the window after two dt (splitting4 on box_w1 reaches 1e-11 at
-        # dt = 2^-6): its slope from those two points
-        orders[(case, label)] = convergence_order(pts)
-        if orders[(case, label)] is None:
-            orders[(case, label)] = convergence_order(pts, min_points=2)
 
-    smallest = {}
-    for case in use:
-        for m in meths:
-            pts = [p for p in by.get((case.name, m.label), []) if p.ok]
-            if not pts:
-                continue
-            tight = min(pts, key=lambda p: p.value)
-            smallest[(case.name, m.label)] = tight
-            o = orders[(case.name, m.label)]
-            if m.dtype == "float32" and m.integrator == "rk4":
-                # float32 reaches its rounding floor (~1e-6 rad over 10 s) long before float64's
-                checks.append(C.at_most(f"float32_rk4_best_{case.name}", min(p.attitude_error for p in pts), 1e-4,
-                                        "float32 RK4 [c]: best attitude error over the dt sweep, rad (float64's "
-                                        "reaches 1e-9; the rounding floor of float32 over the run is ~1e-6)"))
-            if m.dtype != "float64":   # the order and convergence checks below are float64's (rounding floors float32)
-                continue
-            if m.family == "lavendersim" and m.param == "dt" and m.backend == "c" and m.integrator in EXPECTED_ORDER:
-                exp_o = EXPECTED_ORDER[m.integrator]
-                if o is None and all(p.attitude_error < ORDER_WINDOW[0] for p in pts):
-                    # exact here up to rounding at every dt (symtop4 on a symmetric top): no slope to measure
-                    checks.append(C.at_most(f"order_{m.integrator}_{case.name}_below_window",
-                                            max(p.attitude_error for p in pts), ORDER_WINDOW[0],
-                                            "every dt's attitude error below the order window: exact up to "
-                                            "rounding here, the order is not measurable"))
-                else:
-                    checks.append(C.close(f"order_{m.integrator}_{case.name}", o if o is not None else math.nan,
-                                          exp_o, ORDER_TOL, "slope of log attitude error vs log dt, C backend" + (
-                                              "" if o is not None else f"; fewer than 2 points with "
-                                              f"{ORDER_WINDOW[0]:g} < error < {ORDER_WINDOW[1]:g} rad to fit it")))
-            if m.family == "lavendersim" and m.integrator == "rk4" and m.backend == "c":
-                checks.append(C.at_most(f"rk4_smallest_dt_{case.name}", max(tight.attitude_error, tight.omega_error),
-                                        1e-9, f"RK4 [c] at dt = {_param_text('dt', tight.value)}: attitude "
-                                              f"{tight.attitude_error:.2e} rad, omega {tight.omega_error:.2e} rad/s"))
-            if m.param == "rtol":
-                # an adaptive method converges to the same reference: global error within 100 x rtol
-                checks.append(C.at_most(f"tightest_rtol_{_key(m.label)}_{case.name}", tight.attitude_error,
-                                        max(ADAPTIVE_ERROR_FACTOR * tight.value, ERROR_FLOOR),
-                                        f"{m.label} at rtol = {tight.value:.0e}: attitude error within "
-                                        f"{ADAPTIVE_ERROR_FACTOR:g} x rtol of the exact solution"))
-            if m.family == "mujoco" and m.integrator == "RK4":
-                checks.append(C.at_most(f"mujoco_rk4_smallest_dt_{case.name}",
-                                        max(tight.attitude_error, tight.omega_error), 1e-8,
-                                        f"MuJoCo RK4 converges to the exact solution (attitude "
-                                        f"{tight.attitude_error:.2e} rad, omega {tight.omega_error:.2e} rad/s)"))
-            if m.family == "mujoco" and m.integrator in ("RK4", "Euler"):
-                checks.append(C.close(f"mujoco_{m.integrator.lower()}_order_{case.name}",
-                                      o if o is not None else math.nan, 4 if m.integrator == "RK4" else 1, ORDER_TOL,
-                                      "MuJoCo: slope of log attitude error vs log dt"))
-        # numpy vs c at every common point
-        for name in B.INTEGRATORS:
-            pc = {p.value: p for p in by.get((case.name, f"{name} [c]"), [])}
-            pn = {p.value: p for p in by.get((case.name, f"{name} [numpy]"), [])}
-            common = set(pc) & set(pn)
-            if not common:
-                continue
-            worst = 0.0      # largest difference over its allowance
-            allow = 1e-9     # one algorithm on both backends (dopri5 too: per-body step sizes, bitwise)
-            for v in common:
-                a, b = pc[v], pn[v]
-                if a.ok != b.ok:
-                    worst = math.inf
-                elif a.ok:
-                    xa, xb = np.array(a.final_x), np.array(b.final_x)
-                    d = max(float(R.attitude_error(xa[C.Q], xb[C.Q])), float(np.linalg.norm(xa[C.OMEGA_B] - xb[C.OMEGA_B])))
-                    worst = max(worst, d / allow)
-            what = "allowance 1e-9 (same algorithm)"
-            checks.append(C.at_most(f"backends_agree_{name}_{case.name}", worst, 1.0,
-                                    f"max over {len(common)} common points of the C vs NumPy difference at T (attitude "
-                                    f"rad, omega rad/s) over its {what}"))
+def _order(pts: list[Point]) -> float | None:
+    """The convergence order of a sweep; a method accurate enough to leave the window after two dt (splitting4
+    on box_w1 reaches 1e-11 at dt = 2^-6): its slope from those two points."""
+    o = convergence_order(pts)
+    return convergence_order(pts, min_points=2) if o is None else o
 
-    per_case = verdicts(points)
-    per_case_rhs = verdicts([p for p in points if p.rhs_evals is not None], cost="rhs_evals")
-    overall = overall_verdicts(per_case, labels)
-    consistent = verdicts_consistent(points, per_case)
-    checks.append(C.holds("verdicts_consistent", consistent,
-                          "every 'beaten' method's points are each dominated by another method's point; every "
-                          "'on the Pareto front' method has an undominated point"))
 
-    # ---------------------------------------------------------------- table
+def _case_checks(case: Case, meths: list[Method], by: dict, orders: dict) -> list:
+    """One case's declared checks: each method's order and convergence, then C = NumPy per integrator."""
+    rows = []
+    for m in meths:
+        pts = [p for p in by.get((case.name, m.label), []) if p.ok]
+        if pts:
+            rows += _method_checks(case, m, pts, orders[(case.name, m.label)])
+    for name in dict.fromkeys(m.integrator for m in meths if m.family == "lavendersim"):
+        rows.append(_backends_agree(case, name, by))
+    return rows
+
+
+def _method_checks(case: Case, m: Method, pts: list[Point], o: float | None) -> list:
+    """The check rows of one method's sweep in one case (a False row does not apply to this method)."""
+    tight = min(pts, key=lambda p: p.value)
+    ours, f64 = m.family == "lavendersim", m.dtype == "float64"   # the order checks are float64's (float32 floors)
+    fixed_c = ours and f64 and m.param == "dt" and m.backend == "c" and m.order is not None
+    # exact here up to rounding at every dt (symtop4 on a symmetric top): no slope to measure
+    exact_here = o is None and all(p.attitude_error < ORDER_WINDOW[0] for p in pts)
+    tight_err = max(tight.attitude_error, tight.omega_error)
+    no_fit = f"; fewer than 2 points with {ORDER_WINDOW[0]:g} < error < {ORDER_WINDOW[1]:g} rad to fit it"
+    n = case.name
+    return [
+        # float32 reaches its rounding floor (~1e-6 rad over 10 s) long before float64's
+        m.dtype == "float32" and m.integrator == "rk4" and (
+            f"float32_rk4_best_{n}", min(p.attitude_error for p in pts), "<=", 1e-4,
+            "float32 RK4 [c]: best attitude error over the dt sweep, rad (float64's reaches 1e-9; the rounding floor "
+            "of float32 over the run is ~1e-6)"),
+        fixed_c and exact_here and (f"order_{m.integrator}_{n}_below_window", max(p.attitude_error for p in pts), "<=",
+                                    ORDER_WINDOW[0], "every dt's attitude error below the order window: exact up to "
+                                    "rounding here, the order is not measurable"),
+        fixed_c and not exact_here and (f"order_{m.integrator}_{n}", math.nan if o is None else o, "≈",
+                                        (m.order, ORDER_TOL), "slope of log attitude error vs log dt, C backend"
+                                        + ("" if o is not None else no_fit)),
+        ours and f64 and m.integrator == "rk4" and m.backend == "c" and (
+            f"rk4_smallest_dt_{n}", tight_err, "<=", 1e-9, f"RK4 [c] at dt = {_param_text('dt', tight.value)}: attitude "
+            f"{tight.attitude_error:.2e} rad, omega {tight.omega_error:.2e} rad/s"),
+        # an adaptive method converges to the same reference: global error within 100 x rtol
+        f64 and m.param == "rtol" and (
+            f"tightest_rtol_{_key(m.label)}_{n}", tight.attitude_error, "<=",
+            max(ADAPTIVE_ERROR_FACTOR * tight.value, ERROR_FLOOR), f"{m.label} at rtol = {tight.value:.0e}: attitude "
+            f"error within {ADAPTIVE_ERROR_FACTOR:g} x rtol of the exact solution"),
+        m.family == "mujoco" and m.integrator == "RK4" and (
+            f"mujoco_rk4_smallest_dt_{n}", tight_err, "<=", 1e-8, f"MuJoCo RK4 converges to the exact solution "
+            f"(attitude {tight.attitude_error:.2e} rad, omega {tight.omega_error:.2e} rad/s)"),
+        m.family == "mujoco" and m.order is not None and (
+            f"mujoco_{m.integrator.lower()}_order_{n}", math.nan if o is None else o, "≈", (m.order, ORDER_TOL),
+            "MuJoCo: slope of log attitude error vs log dt"),
+    ]
+
+
+def _backends_agree(case: Case, name: str, by: dict):
+    """The check row C = NumPy of integrator ``name`` at every dt (rtol) both measured in ``case`` (or False)."""
+    pc = {p.value: p for p in by.get((case.name, f"{name} [c]"), [])}
+    pn = {p.value: p for p in by.get((case.name, f"{name} [numpy]"), [])}
+    common = set(pc) & set(pn)
+    if not common:
+        return False
+    worst, allow = 0.0, 1e-9   # the largest difference over its allowance; one algorithm on both backends
+    for v in common:
+        a, b = pc[v], pn[v]
+        if a.ok != b.ok:
+            worst = math.inf
+        elif a.ok:
+            xa, xb = np.array(a.final_x), np.array(b.final_x)
+            d = max(float(R.attitude_error(xa[C.Q], xb[C.Q])), float(np.linalg.norm(xa[C.OMEGA_B] - xb[C.OMEGA_B])))
+            worst = max(worst, d / allow)
+    return (f"backends_agree_{name}_{case.name}", worst, "<=", 1.0, f"max over {len(common)} common points of the "
+            "C vs NumPy difference at T (attitude rad, omega rad/s) over its allowance 1e-9 (same algorithm)")
+
+
+def _summary_table(use, meths, by, orders, overall) -> list[dict]:
+    """One row per method: verdict, median order, the cost to reach 1e-3/1e-6/1e-9 rad, best error, drifts."""
     table = []
     for m in meths:
+        pts = {c.name: by.get((c.name, m.label), []) for c in use}
         row = {"method": m.label, "param": m.param, "verdict": overall[m.label]["verdict"],
                "verdict_text": overall[m.label]["text"]}
         os_ = [orders[(c.name, m.label)] for c in use if orders.get((c.name, m.label)) is not None]
         row["order"] = float(np.median(os_)) if os_ else None
         for tol in (1e-3, 1e-6, 1e-9):
-            cs = [cost_to_reach(by.get((c.name, m.label), []), tol) for c in use]
+            cs = [cost_to_reach(pts[c.name], tol) for c in use]
             row[f"us_per_sim_s_to_{tol:.0e}"] = None if any(x is None for x in cs) else 1e6 * max(cs)
-            es = [cost_to_reach(by.get((c.name, m.label), []), tol, "rhs_evals") for c in use]
+            es = [cost_to_reach(pts[c.name], tol, "rhs_evals") for c in use]
             row[f"rhs_evals_to_{tol:.0e}"] = None if any(x is None for x in es) else int(max(es))
-        errs = [p.attitude_error for c in use for p in by.get((c.name, m.label), []) if p.ok]
-        row["best_attitude_error"] = max(min(p.attitude_error for p in by.get((c.name, m.label), []) if p.ok)
+        errs = [p.attitude_error for c in use for p in pts[c.name] if p.ok]
+        row["best_attitude_error"] = max(min(p.attitude_error for p in pts[c.name] if p.ok)
                                          for c in use) if errs else None
-        dr = [p for c in use for p in by.get((c.name, m.label), []) if p.ok and
-              abs(p.value - (2.0 ** -DRIFT_DT_EXP if m.param == "dt" else DRIFT_RTOL)) <= 1e-9 * p.value]
+        drift_at = 2.0 ** -DRIFT_DT_EXP if m.param == "dt" else DRIFT_RTOL
+        dr = [p for c in use for p in pts[c.name] if p.ok and abs(p.value - drift_at) <= 1e-9 * p.value]
         row["energy_drift_at_drift_point"] = max(p.energy_drift for p in dr) if dr else None
         row["momentum_drift_at_drift_point"] = max(p.momentum_drift for p in dr) if dr else None
         table.append(row)
-    table_text = format_table(table)
+    return table
 
-    # ---------------------------------------------------------------- figures and params
+
+def _result(figures, checks, use, meths, broken, points, drifts, skipped, by, orders, per_case, stamp, mj, mj_missing,
+            cfg, quick, names) -> C.LabResult:
+    """The LabResult: figures (verdicts, orders, the table's lines), parameters and the nested data."""
+    labels = [m.label for m in meths]
+    per_case_rhs = verdicts([p for p in points if p.rhs_evals is not None], cost="rhs_evals")
+    overall = overall_verdicts(per_case, labels)
+    table = _summary_table(use, meths, by, orders, overall)
+    table_text = format_table(table)
+    meth_of = {m.label: m for m in meths}
     for label, why in broken.items():
         figures[f"failed_{_key(label)}"] = why
     figures["float32"] = ("measured: " + ", ".join(f"{n} [c float32]" for n in getattr(B, "FLOAT32_INTEGRATORS", ()))
@@ -967,7 +1003,7 @@ def compute(backend: str = "auto", quick: bool = True, mujoco: bool = True, prog
         figures["numpy_sweep_shortened"] = "; ".join(skipped)
     params = {
         "mode": "quick" if quick else "full", "cases": ", ".join(f"{c.name}: {c.label}" for c in use), "T": T_END,
-        "mass": MASS, "integrators": ", ".join(B.INTEGRATORS), "adaptive": ", ".join(adaptive_integrators()) or "none",
+        "mass": MASS, "integrators": ", ".join(names), "adaptive": ", ".join(adaptive_integrators()) or "none",
         "dt_sweep": ", ".join(_param_text("dt", 2.0 ** -k) for k in cfg["dt_exps"]),
         "numpy_dt_sweep": ", ".join(_param_text("dt", 2.0 ** -k) for k in cfg["numpy_dt_exps"]),
         "rtol_sweep": ", ".join(f"{r:.0e}" for r in cfg["rtols"]), "repeats": cfg["repeats"],
@@ -976,7 +1012,6 @@ def compute(backend: str = "auto", quick: bool = True, mujoco: bool = True, prog
         "versions": f"python {stamp['python']}, numpy {stamp['numpy']}, scipy {stamp['scipy']}, "
                     f"mujoco {stamp['mujoco']}, {stamp['compiler']}",
     }
-
     plot_data = {"use": use, "meths": meths, "points": points, "drifts": drifts, "per_case": per_case,
                  "per_case_rhs": per_case_rhs}
     plots = {name: functools.partial(_plot_one, name) for name in PLOT_NAMES}
@@ -999,16 +1034,18 @@ def compute(backend: str = "auto", quick: bool = True, mujoco: bool = True, prog
                           "param": m.param, "stages": m.stages} for m in meths]
     result["points"] = [_point_json(p) for p in points]
     result["drift_series"] = [{"case": c, "method": lab, **d} for (c, lab), d in drifts.items()]
+    result.extra_files["points.csv"] = _points_csv(points)
+    result.table_text = table_text
+    return result
+
+
+def _points_csv(points: list[Point]) -> str:
     f = io.StringIO(newline="")
-    cols = [k for k in _point_json(points[0]) if k != "final_x"]
-    w = csv.DictWriter(f, fieldnames=cols, extrasaction="ignore")
+    w = csv.DictWriter(f, fieldnames=[k for k in _point_json(points[0]) if k != "final_x"], extrasaction="ignore")
     w.writeheader()
     for p in points:
         w.writerow(_point_json(p))
-    result.extra_files["points.csv"] = f.getvalue()
-    result.table_text = table_text
-    say(f"done in {time.perf_counter() - t_start:.1f} s")
-    return result
+    return f.getvalue()
 
 
 def _key(label: str) -> str:

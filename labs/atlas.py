@@ -429,7 +429,7 @@ def _implicit_gyro_checks(cells, checks, fig) -> None:
                             "(at the samples; lab hard's bound)" + (f"; gains in {_where(gained)}" if gained else "")))
 
 
-def _splitting_checks(cells, checks, fig, name: str = "splitting", bound: float = SPLITTING_L_PER_STEP) -> None:
+def _splitting_checks(cells, checks, fig, name: str, bound: float) -> None:
     ran = _select(cells, name, status=("ok", "blew_up"))
     fig[f"{name}_max_L_world_drift"] = _worst(ran, "L_world_drift")
     per_step = [None if c["L_world_drift"] is None else c["L_world_drift"] / (c["steps"] * EPS) for c in ran]
@@ -441,7 +441,7 @@ def _splitting_checks(cells, checks, fig, name: str = "splitting", bound: float 
                             "rounding only, however large |ω|·dt"))
 
 
-def _adaptive_checks(cells, name, rtol, checks, fig) -> None:
+def _adaptive_checks(cells, checks, fig, name: str, rtol: float) -> None:
     mine = _select(cells, name)
     not_ok = [c for c in mine if c["status"] != "ok"]
     checks.append(C.holds(f"{name}_ok_everywhere", not not_ok and bool(mine),
@@ -485,23 +485,20 @@ def atlas_checks(cells: list[dict], integrators, rtol: float) -> tuple[list[C.Ch
                           "more than doubled E or |L| without a DivergenceError (beyond the bound a default Sim "
                           "raises; the atlas opts in with on_bound='warn' to map it)"
                           + (f"; found: {_where(silent)}" if silent else "")))
-    if _available("rk4", integrators, checks):
-        _rk4_checks(cells, checks, fig)
-    if _available("euler", integrators, checks):
-        checks.append(_unstable_at_top(cells, "euler", "euler_unstable_at_large_steps"))
-    if _available("implicit_gyro", integrators, checks):
-        _implicit_gyro_checks(cells, checks, fig)
-    if _available("splitting", integrators, checks):
-        _splitting_checks(cells, checks, fig)
-    if _available("splitting4", integrators, checks):
-        _splitting_checks(cells, checks, fig, "splitting4", SPLITTING4_L_PER_STEP)
-    if _available("symtop4", integrators, checks):
-        _splitting_checks(cells, checks, fig, "symtop4", SYMTOP4_L_PER_STEP)
-    if _available("symtop_bm6", integrators, checks):
-        _splitting_checks(cells, checks, fig, "symtop_bm6", SYMTOP_BM6_L_PER_STEP)
-    for name in B.ADAPTIVE:
+    # integrator -> its checks (each appends to checks and fig); one the registry lacks is a failed check
+    per_integrator = {
+        "rk4": _rk4_checks,
+        "euler": lambda *a: checks.append(_unstable_at_top(cells, "euler", "euler_unstable_at_large_steps")),
+        "implicit_gyro": _implicit_gyro_checks,
+        "splitting": functools.partial(_splitting_checks, name="splitting", bound=SPLITTING_L_PER_STEP),
+        "splitting4": functools.partial(_splitting_checks, name="splitting4", bound=SPLITTING4_L_PER_STEP),
+        "symtop4": functools.partial(_splitting_checks, name="symtop4", bound=SYMTOP4_L_PER_STEP),
+        "symtop_bm6": functools.partial(_splitting_checks, name="symtop_bm6", bound=SYMTOP_BM6_L_PER_STEP),
+        **{name: functools.partial(_adaptive_checks, name=name, rtol=rtol) for name in B.ADAPTIVE},
+    }
+    for name, add in per_integrator.items():
         if _available(name, integrators, checks):
-            _adaptive_checks(cells, name, rtol, checks, fig)
+            add(cells, checks, fig)
     return checks, fig
 
 
@@ -901,6 +898,18 @@ def compute(backend: str = "auto", quick: bool = True, workers: int | None = Non
     bar.close()
     wall = time.perf_counter() - t0
     say(f"{len(cells)} cells in {wall:.1f} s")
+    result = _result(cells, integrators, mode, backend, rtol, atol, wdts, ratios, quick)
+    result.run_info = {"executor": ex.describe(), "kind": ex.kind, "workers": ex.workers, "dask": ex.address,
+                       "wall_time_s": wall, "tasks": len(wdts) * len(ratios) * len(AXES), "cells": len(cells),
+                       "local_cores": X.local_cores(),
+                       "loadavg": list(os.getloadavg()) if hasattr(os, "getloadavg") else None}
+    result.extra_files["run.json"] = json.dumps(result.run_info, indent=1) + "\n"
+    say(f"done in {time.perf_counter() - t0:.1f} s")
+    return result
+
+
+def _result(cells, integrators, mode, backend, rtol, atol, wdts, ratios, quick) -> C.LabResult:
+    """The atlas's LabResult: its checks, the per-integrator summary, the parameters and the nested data."""
     checks, figures = atlas_checks(cells, integrators, rtol)
     figures.update(_summary(cells, integrators))
     hard_points = hard_case_points(wdts)
@@ -927,10 +936,4 @@ def compute(backend: str = "auto", quick: bool = True, workers: int | None = Non
                         "rk4_stability_limit_omega_dt": H.RK4_STABILITY}
     result["hard_case_points"] = hard_points
     result["cells"] = cells
-    result.run_info = {"executor": ex.describe(), "kind": ex.kind, "workers": ex.workers, "dask": ex.address,
-                       "wall_time_s": wall, "tasks": len(wdts) * len(ratios) * len(AXES), "cells": len(cells),
-                       "local_cores": X.local_cores(),
-                       "loadavg": list(os.getloadavg()) if hasattr(os, "getloadavg") else None}
-    result.extra_files["run.json"] = json.dumps(result.run_info, indent=1) + "\n"
-    say(f"done in {time.perf_counter() - t0:.1f} s")
     return result
