@@ -135,9 +135,9 @@ def test_lqr_bad_paths_are_one_line(tmp_path, argv, field):
     assert field in line
 
 
-@pytest.mark.parametrize("argv, field", [(["--json", ""], "json"), (["--json", "DIR"], "json"),
-                                         (["--json", "FILE/x.json"], "json")])
-def test_bench_bad_json_paths_are_one_line(tmp_path, argv, field):
+@pytest.mark.parametrize("argv, field", [(["--out", ""], "out"), (["--out", "DIR"], "out"),
+                                         (["--out", "FILE/x.json"], "out")])
+def test_bench_bad_out_paths_are_one_line(tmp_path, argv, field):   # bench --out FILE was --json FILE (issue 31)
     a_file = _paths(tmp_path)
     args = [a.replace("FILE", str(a_file)).replace("DIR", str(tmp_path)) for a in argv]
     assert field in _one_line(_run("bench", "--quick", *args))
