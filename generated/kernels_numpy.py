@@ -6,7 +6,7 @@ Quaternions are (x, y, z, w), scalar last; matrices are (..., 3, 3)."""
 import numpy
 
 
-def particle_moments(m, r_w, v_w):
+def particle_moments(m, r_w, v_w, *, out=None):
     """One particle's mass moment and momentum (summed: m r_COM and p).
 
     Generated kernel ``particle_moments``; inputs broadcast over leading batch axes.
@@ -19,6 +19,8 @@ def particle_moments(m, r_w, v_w):
         position, world, m
     v_w : array_like, shape (..., 3)
         velocity, world, m/s
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -37,18 +39,18 @@ def particle_moments(m, r_w, v_w):
     v_w_0 = v_w[..., 0]
     v_w_1 = v_w[..., 1]
     v_w_2 = v_w[..., 2]
-    m_r_out = numpy.empty(batch + (3,))
+    m_r_out = numpy.empty(batch + (3,)) if out is None or out[0] is None else out[0]
     m_r_out[..., 0] = m*r_w_0
     m_r_out[..., 1] = m*r_w_1
     m_r_out[..., 2] = m*r_w_2
-    p_out = numpy.empty(batch + (3,))
+    p_out = numpy.empty(batch + (3,)) if out is None or out[1] is None else out[1]
     p_out[..., 0] = m*v_w_0
     p_out[..., 1] = m*v_w_1
     p_out[..., 2] = m*v_w_2
     return m_r_out, p_out
 
 
-def particle_angular_momentum(m, r_w, v_w, r_com_w, v_com_w):
+def particle_angular_momentum(m, r_w, v_w, r_com_w, v_com_w, *, out=None):
     """One particle's angular momentum about the COM.
 
     Generated kernel ``particle_angular_momentum``; inputs broadcast over leading batch axes.
@@ -65,6 +67,8 @@ def particle_angular_momentum(m, r_w, v_w, r_com_w, v_com_w):
         centre of mass, world, m
     v_com_w : array_like, shape (..., 3)
         COM velocity, world, m/s
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -95,14 +99,14 @@ def particle_angular_momentum(m, r_w, v_w, r_com_w, v_com_w):
     t3 = -r_com_w_2 + r_w_2
     t4 = -r_com_w_0 + r_w_0
     t5 = -v_com_w_0 + v_w_0
-    L_w_out = numpy.empty(batch + (3,))
+    L_w_out = numpy.empty(batch + (3,)) if out is None or out[0] is None else out[0]
     L_w_out[..., 0] = -m*t2*t3 + t0*t1
     L_w_out[..., 1] = m*t3*t5 - t1*t4
     L_w_out[..., 2] = -m*t0*t5 + m*t2*t4
     return L_w_out
 
 
-def inertia_box(m, w, h, d):
+def inertia_box(m, w, h, d, *, out=None):
     """Principal inertia of a solid box, integrated over its volume.
 
     Generated kernel ``inertia_box``; inputs broadcast over leading batch axes.
@@ -117,6 +121,8 @@ def inertia_box(m, w, h, d):
         y side, m
     d : array_like, shape (...)
         z side, m
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -132,14 +138,14 @@ def inertia_box(m, w, h, d):
     t1 = (h*h)
     t2 = ((1.0/12.0))*m
     t3 = (w*w)
-    I_b_out = numpy.empty(batch + (3,))
+    I_b_out = numpy.empty(batch + (3,)) if out is None or out[0] is None else out[0]
     I_b_out[..., 0] = t2*(t0 + t1)
     I_b_out[..., 1] = t2*(t0 + t3)
     I_b_out[..., 2] = t2*(t1 + t3)
     return I_b_out
 
 
-def inertia_cylinder(m, r, h):
+def inertia_cylinder(m, r, h, *, out=None):
     """Principal inertia of a solid cylinder along body z.
 
     Generated kernel ``inertia_cylinder``; inputs broadcast over leading batch axes.
@@ -152,6 +158,8 @@ def inertia_cylinder(m, r, h):
         radius, m
     h : array_like, shape (...)
         height along z, m
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -164,14 +172,14 @@ def inertia_cylinder(m, r, h):
     batch = numpy.broadcast_shapes(m.shape, r.shape, h.shape)
     t0 = (r*r)
     t1 = ((1.0/12.0))*m*((h*h) + 3*t0)
-    I_b_out = numpy.empty(batch + (3,))
+    I_b_out = numpy.empty(batch + (3,)) if out is None or out[0] is None else out[0]
     I_b_out[..., 0] = t1
     I_b_out[..., 1] = t1
     I_b_out[..., 2] = ((1.0/2.0))*m*t0
     return I_b_out
 
 
-def inertia_sphere(m, r):
+def inertia_sphere(m, r, *, out=None):
     """Principal inertia of a solid sphere.
 
     Generated kernel ``inertia_sphere``; inputs broadcast over leading batch axes.
@@ -182,6 +190,8 @@ def inertia_sphere(m, r):
         mass, kg
     r : array_like, shape (...)
         radius, m
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -192,14 +202,14 @@ def inertia_sphere(m, r):
     r = numpy.asarray(r, dtype=numpy.float64)
     batch = numpy.broadcast_shapes(m.shape, r.shape)
     t0 = ((2.0/5.0))*m*(r*r)
-    I_b_out = numpy.empty(batch + (3,))
+    I_b_out = numpy.empty(batch + (3,)) if out is None or out[0] is None else out[0]
     I_b_out[..., 0] = t0
     I_b_out[..., 1] = t0
     I_b_out[..., 2] = t0
     return I_b_out
 
 
-def parallel_axis(I_c, m, d):
+def parallel_axis(I_c, m, d, *, out=None):
     """Inertia about a point offset by d from the centre of mass.
 
     Generated kernel ``parallel_axis``; inputs broadcast over leading batch axes.
@@ -212,6 +222,8 @@ def parallel_axis(I_c, m, d):
         mass, kg
     d : array_like, shape (..., 3)
         offset of the point from the COM, m (same frame as I_c)
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -241,7 +253,7 @@ def parallel_axis(I_c, m, d):
     t4 = -d_2*t2
     t5 = (d_0*d_0)
     t6 = -d_1*d_2*m
-    I_o_out = numpy.empty(batch + (3, 3))
+    I_o_out = numpy.empty(batch + (3, 3)) if out is None or out[0] is None else out[0]
     I_o_out[..., 0, 0] = I_c_00 + m*(t0 + t1)
     I_o_out[..., 0, 1] = I_c_01 + t3
     I_o_out[..., 0, 2] = I_c_02 + t4
@@ -254,7 +266,7 @@ def parallel_axis(I_c, m, d):
     return I_o_out
 
 
-def inertia_about_com(I_o, m, c):
+def inertia_about_com(I_o, m, c, *, out=None):
     """Inertia about the centre of mass from the inertia about a reference point O (CAD mass properties), the COM at c from O.
 
     Generated kernel ``inertia_about_com``; inputs broadcast over leading batch axes.
@@ -267,6 +279,8 @@ def inertia_about_com(I_o, m, c):
         mass, kg
     c : array_like, shape (..., 3)
         COM position relative to the reference point, m (same frame as I_o)
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -296,7 +310,7 @@ def inertia_about_com(I_o, m, c):
     t4 = c_2*t2
     t5 = (c_0*c_0)
     t6 = c_1*c_2*m
-    I_c_out = numpy.empty(batch + (3, 3))
+    I_c_out = numpy.empty(batch + (3, 3)) if out is None or out[0] is None else out[0]
     I_c_out[..., 0, 0] = I_o_00 - m*(t0 + t1)
     I_c_out[..., 0, 1] = I_o_01 + t3
     I_c_out[..., 0, 2] = I_o_02 + t4
@@ -309,7 +323,7 @@ def inertia_about_com(I_o, m, c):
     return I_c_out
 
 
-def world_inertia(q, I_b):
+def world_inertia(q, I_b, *, out=None):
     """Body inertia written in world coordinates.
 
     Generated kernel ``world_inertia``; inputs broadcast over leading batch axes.
@@ -320,6 +334,8 @@ def world_inertia(q, I_b):
         orientation (x, y, z, w), R_WB, unit
     I_b : array_like, shape (..., 3)
         principal moments, body frame, kg·m²
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -361,7 +377,7 @@ def world_inertia(q, I_b):
     t22 = -t16 - t8 + 1
     t23 = t13*t22 + t15*t21 + t18*t20
     t24 = I_b_0*t14*t21 + I_b_1*t17*t20 + I_b_2*t12*t22
-    I_w_out = numpy.empty(batch + (3, 3))
+    I_w_out = numpy.empty(batch + (3, 3)) if out is None or out[0] is None else out[0]
     I_w_out[..., 0, 0] = I_b_0*(t10*t10) + I_b_1*(t4*t4) + I_b_2*(t7*t7)
     I_w_out[..., 0, 1] = t19
     I_w_out[..., 0, 2] = t23
@@ -374,7 +390,7 @@ def world_inertia(q, I_b):
     return I_w_out
 
 
-def torque_from_force(r_w, F_w):
+def torque_from_force(r_w, F_w, *, out=None):
     """Torque of a force about the COM.
 
     Generated kernel ``torque_from_force``; inputs broadcast over leading batch axes.
@@ -385,6 +401,8 @@ def torque_from_force(r_w, F_w):
         application point relative to the COM, world frame, m
     F_w : array_like, shape (..., 3)
         force, world frame, N
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -400,14 +418,14 @@ def torque_from_force(r_w, F_w):
     F_w_0 = F_w[..., 0]
     F_w_1 = F_w[..., 1]
     F_w_2 = F_w[..., 2]
-    tau_w_out = numpy.empty(batch + (3,))
+    tau_w_out = numpy.empty(batch + (3,)) if out is None or out[0] is None else out[0]
     tau_w_out[..., 0] = -F_w_1*r_w_2 + F_w_2*r_w_1
     tau_w_out[..., 1] = F_w_0*r_w_2 - F_w_2*r_w_0
     tau_w_out[..., 2] = -F_w_0*r_w_1 + F_w_1*r_w_0
     return tau_w_out
 
 
-def force_at_point(q, r_b, F_w):
+def force_at_point(q, r_b, F_w, *, out=None):
     """Torque about the COM of a world force applied at a body-fixed point.
 
     Generated kernel ``force_at_point``; inputs broadcast over leading batch axes.
@@ -420,6 +438,8 @@ def force_at_point(q, r_b, F_w):
         application point relative to the COM, body frame, m
     F_w : array_like, shape (..., 3)
         force, world frame, N
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -453,14 +473,14 @@ def force_at_point(q, r_b, F_w):
     t10 = 2*(q_2*q_2)
     t11 = r_b_0*(t8 + t9) + r_b_1*(-t10 - t6) + r_b_2*(2*q_1*q_2 - t3)
     t12 = r_b_0*(-t10 - t5 + 1) + r_b_1*(t8 - t9) + r_b_2*(t1 + t2)
-    tau_w_out = numpy.empty(batch + (3,))
+    tau_w_out = numpy.empty(batch + (3,)) if out is None or out[0] is None else out[0]
     tau_w_out[..., 0] = -F_w_1*t7 + F_w_2*t11
     tau_w_out[..., 1] = F_w_0*t7 - F_w_2*t12
     tau_w_out[..., 2] = -F_w_0*t11 + F_w_1*t12
     return tau_w_out
 
 
-def effect_applied_torque(torque_w):
+def effect_applied_torque(torque_w, *, out=None):
     """A torque about the COM, world frame.
 
     Generated kernel ``effect_applied_torque``; inputs broadcast over leading batch axes.
@@ -469,6 +489,8 @@ def effect_applied_torque(torque_w):
     ----------
     torque_w : array_like, shape (..., 3)
         torque about the COM, world frame, N·m
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -480,14 +502,14 @@ def effect_applied_torque(torque_w):
     torque_w_0 = torque_w[..., 0]
     torque_w_1 = torque_w[..., 1]
     torque_w_2 = torque_w[..., 2]
-    tau_com_w_out = numpy.empty(batch + (3,))
+    tau_com_w_out = numpy.empty(batch + (3,)) if out is None or out[0] is None else out[0]
     tau_com_w_out[..., 0] = torque_w_0
     tau_com_w_out[..., 1] = torque_w_1
     tau_com_w_out[..., 2] = torque_w_2
     return tau_com_w_out
 
 
-def effect_force_at_point(q, r_b, F_w):
+def effect_force_at_point(q, r_b, F_w, *, out=None):
     """A world force applied at a body-fixed point: the force acts on the COM plus a torque.
 
     Generated kernel ``effect_force_at_point``; inputs broadcast over leading batch axes.
@@ -500,6 +522,8 @@ def effect_force_at_point(q, r_b, F_w):
         application point relative to the COM, body frame, m
     F_w : array_like, shape (..., 3)
         force, world frame, N
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -535,18 +559,18 @@ def effect_force_at_point(q, r_b, F_w):
     t10 = 2*(q_2*q_2)
     t11 = r_b_0*(t8 + t9) + r_b_1*(-t10 - t6) + r_b_2*(2*q_1*q_2 - t3)
     t12 = r_b_0*(-t10 - t5 + 1) + r_b_1*(t8 - t9) + r_b_2*(t1 + t2)
-    F_com_w_out = numpy.empty(batch + (3,))
+    F_com_w_out = numpy.empty(batch + (3,)) if out is None or out[0] is None else out[0]
     F_com_w_out[..., 0] = F_w_0
     F_com_w_out[..., 1] = F_w_1
     F_com_w_out[..., 2] = F_w_2
-    tau_com_w_out = numpy.empty(batch + (3,))
+    tau_com_w_out = numpy.empty(batch + (3,)) if out is None or out[1] is None else out[1]
     tau_com_w_out[..., 0] = -F_w_1*t7 + F_w_2*t11
     tau_com_w_out[..., 1] = F_w_0*t7 - F_w_2*t12
     tau_com_w_out[..., 2] = -F_w_0*t11 + F_w_1*t12
     return F_com_w_out, tau_com_w_out
 
 
-def effect_gravity(m, g_w):
+def effect_gravity(m, g_w, *, out=None):
     """Uniform gravity acting at the COM.
 
     Generated kernel ``effect_gravity``; inputs broadcast over leading batch axes.
@@ -557,6 +581,8 @@ def effect_gravity(m, g_w):
         mass, kg
     g_w : array_like, shape (..., 3)
         gravitational acceleration, world frame, m/s²
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -569,14 +595,14 @@ def effect_gravity(m, g_w):
     g_w_0 = g_w[..., 0]
     g_w_1 = g_w[..., 1]
     g_w_2 = g_w[..., 2]
-    F_com_w_out = numpy.empty(batch + (3,))
+    F_com_w_out = numpy.empty(batch + (3,)) if out is None or out[0] is None else out[0]
     F_com_w_out[..., 0] = g_w_0*m
     F_com_w_out[..., 1] = g_w_1*m
     F_com_w_out[..., 2] = g_w_2*m
     return F_com_w_out
 
 
-def effect_linear_damping(v_w, c):
+def effect_linear_damping(v_w, c, *, out=None):
     """Viscous drag on the COM velocity.
 
     Generated kernel ``effect_linear_damping``; inputs broadcast over leading batch axes.
@@ -587,6 +613,8 @@ def effect_linear_damping(v_w, c):
         COM velocity, world frame, m/s
     c : array_like, shape (...)
         viscous coefficient, N·s/m
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -599,14 +627,14 @@ def effect_linear_damping(v_w, c):
     v_w_0 = v_w[..., 0]
     v_w_1 = v_w[..., 1]
     v_w_2 = v_w[..., 2]
-    F_com_w_out = numpy.empty(batch + (3,))
+    F_com_w_out = numpy.empty(batch + (3,)) if out is None or out[0] is None else out[0]
     F_com_w_out[..., 0] = -c*v_w_0
     F_com_w_out[..., 1] = -c*v_w_1
     F_com_w_out[..., 2] = -c*v_w_2
     return F_com_w_out
 
 
-def effect_angular_damping(q, omega_b, c):
+def effect_angular_damping(q, omega_b, c, *, out=None):
     """Viscous drag on the angular velocity.
 
     Generated kernel ``effect_angular_damping``; inputs broadcast over leading batch axes.
@@ -619,6 +647,8 @@ def effect_angular_damping(q, omega_b, c):
         angular velocity, body frame, rad/s
     c : array_like, shape (...)
         viscous coefficient, N·m·s/rad
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -646,14 +676,14 @@ def effect_angular_damping(q, omega_b, c):
     t7 = 2*(q_2*q_2) - 1
     t8 = 2*q_0*q_3
     t9 = 2*(q_0*q_0)
-    tau_com_w_out = numpy.empty(batch + (3,))
+    tau_com_w_out = numpy.empty(batch + (3,)) if out is None or out[0] is None else out[0]
     tau_com_w_out[..., 0] = -c*(omega_b_0*(-t6 - t7) + omega_b_1*(t1 - t3) + omega_b_2*(t4 + t5))
     tau_com_w_out[..., 1] = -c*(omega_b_0*(t1 + t3) + omega_b_1*(-t7 - t9) + omega_b_2*(2*q_1*q_2 - t8))
     tau_com_w_out[..., 2] = -c*(omega_b_0*(t4 - t5) + omega_b_1*(q_1*t2 + t8) + omega_b_2*(-t6 - t9 + 1))
     return tau_com_w_out
 
 
-def quat_mul(a, b):
+def quat_mul(a, b, *, out=None):
     """Hamilton product.
 
     Generated kernel ``quat_mul``; inputs broadcast over leading batch axes.
@@ -664,6 +694,8 @@ def quat_mul(a, b):
         quaternion (x, y, z, w), scalar last
     b : array_like, shape (..., 4)
         quaternion (x, y, z, w), scalar last
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -681,7 +713,7 @@ def quat_mul(a, b):
     b_1 = b[..., 1]
     b_2 = b[..., 2]
     b_3 = b[..., 3]
-    ab_out = numpy.empty(batch + (4,))
+    ab_out = numpy.empty(batch + (4,)) if out is None or out[0] is None else out[0]
     ab_out[..., 0] = a_0*b_3 + a_1*b_2 - a_2*b_1 + a_3*b_0
     ab_out[..., 1] = -a_0*b_2 + a_1*b_3 + a_2*b_0 + a_3*b_1
     ab_out[..., 2] = a_0*b_1 - a_1*b_0 + a_2*b_3 + a_3*b_2
@@ -689,7 +721,7 @@ def quat_mul(a, b):
     return ab_out
 
 
-def quat_conj(q):
+def quat_conj(q, *, out=None):
     """Conjugate (inverse of a unit quaternion).
 
     Generated kernel ``quat_conj``; inputs broadcast over leading batch axes.
@@ -698,6 +730,8 @@ def quat_conj(q):
     ----------
     q : array_like, shape (..., 4)
         quaternion (x, y, z, w), scalar last
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -710,7 +744,7 @@ def quat_conj(q):
     q_1 = q[..., 1]
     q_2 = q[..., 2]
     q_3 = q[..., 3]
-    q_conj_out = numpy.empty(batch + (4,))
+    q_conj_out = numpy.empty(batch + (4,)) if out is None or out[0] is None else out[0]
     q_conj_out[..., 0] = -q_0
     q_conj_out[..., 1] = -q_1
     q_conj_out[..., 2] = -q_2
@@ -718,7 +752,7 @@ def quat_conj(q):
     return q_conj_out
 
 
-def quat_normalize(q):
+def quat_normalize(q, *, out=None):
     """Scale to unit length.
 
     Generated kernel ``quat_normalize``; inputs broadcast over leading batch axes.
@@ -727,6 +761,8 @@ def quat_normalize(q):
     ----------
     q : array_like, shape (..., 4)
         quaternion (x, y, z, w), scalar last
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -740,7 +776,7 @@ def quat_normalize(q):
     q_2 = q[..., 2]
     q_3 = q[..., 3]
     t0 = (1.0/numpy.sqrt((q_0*q_0) + (q_1*q_1) + (q_2*q_2) + (q_3*q_3)))
-    q_unit_out = numpy.empty(batch + (4,))
+    q_unit_out = numpy.empty(batch + (4,)) if out is None or out[0] is None else out[0]
     q_unit_out[..., 0] = q_0*t0
     q_unit_out[..., 1] = q_1*t0
     q_unit_out[..., 2] = q_2*t0
@@ -748,7 +784,7 @@ def quat_normalize(q):
     return q_unit_out
 
 
-def quat_rotate(q, v_b):
+def quat_rotate(q, v_b, *, out=None):
     """Rotate a body vector into the world frame.
 
     Generated kernel ``quat_rotate``; inputs broadcast over leading batch axes.
@@ -759,6 +795,8 @@ def quat_rotate(q, v_b):
         quaternion (x, y, z, w), scalar last, unit, R_WB
     v_b : array_like, shape (..., 3)
         vector, body frame
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -785,14 +823,14 @@ def quat_rotate(q, v_b):
     t7 = 2*(q_2*q_2) - 1
     t8 = 2*q_0*q_3
     t9 = 2*(q_0*q_0)
-    v_w_out = numpy.empty(batch + (3,))
+    v_w_out = numpy.empty(batch + (3,)) if out is None or out[0] is None else out[0]
     v_w_out[..., 0] = v_b_0*(-t6 - t7) + v_b_1*(t1 - t3) + v_b_2*(t4 + t5)
     v_w_out[..., 1] = v_b_0*(t1 + t3) + v_b_1*(-t7 - t9) + v_b_2*(2*q_1*q_2 - t8)
     v_w_out[..., 2] = v_b_0*(t4 - t5) + v_b_1*(q_1*t2 + t8) + v_b_2*(-t6 - t9 + 1)
     return v_w_out
 
 
-def quat_to_matrix(q):
+def quat_to_matrix(q, *, out=None):
     """Rotation matrix R_WB.
 
     Generated kernel ``quat_to_matrix``; inputs broadcast over leading batch axes.
@@ -801,6 +839,8 @@ def quat_to_matrix(q):
     ----------
     q : array_like, shape (..., 4)
         quaternion (x, y, z, w), scalar last, unit
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -823,7 +863,7 @@ def quat_to_matrix(q):
     t7 = q_3*t2
     t8 = 2*(q_0*q_0)
     t9 = 2*q_0*q_3
-    R_wb_out = numpy.empty(batch + (3, 3))
+    R_wb_out = numpy.empty(batch + (3, 3)) if out is None or out[0] is None else out[0]
     R_wb_out[..., 0, 0] = -t0 - t1
     R_wb_out[..., 0, 1] = t3 - t5
     R_wb_out[..., 0, 2] = t6 + t7
@@ -836,7 +876,7 @@ def quat_to_matrix(q):
     return R_wb_out
 
 
-def matrix_to_quat(R_wb):
+def matrix_to_quat(R_wb, *, out=None):
     """Quaternion of a rotation matrix (Shepperd's branch on the largest component).
 
     Generated kernel ``matrix_to_quat``; inputs broadcast over leading batch axes.
@@ -845,6 +885,8 @@ def matrix_to_quat(R_wb):
     ----------
     R_wb : array_like, shape (..., 3, 3)
         3×3 rotation, body → world, row-major
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -886,7 +928,7 @@ def matrix_to_quat(R_wb):
         t20 = -R_1 + R_3
         t21 = ((1.0/2.0))*t18
         t22 = ((1.0/2.0))*t11
-        q_out = numpy.empty(batch + (4,))
+        q_out = numpy.empty(batch + (4,)) if out is None or out[0] is None else out[0]
         q_out[..., 0] = numpy.select([t5,t9,t13,True], [t0*t4,((1.0/2.0))*t8,t11*t12,t14*t16], default=numpy.nan)
         q_out[..., 1] = numpy.select([t5,t9,t13,True], [t17*t4,t12*t18,((1.0/2.0))*t10,t16*t19], default=numpy.nan)
         q_out[..., 2] = numpy.select([t5,t9,t13,True], [t20*t4,t14*t21,t19*t22,((1.0/2.0))*t15], default=numpy.nan)
@@ -894,7 +936,7 @@ def matrix_to_quat(R_wb):
     return q_out
 
 
-def axis_angle_to_quat(axis, angle):
+def axis_angle_to_quat(axis, angle, *, out=None):
     """Quaternion of a rotation by angle about a unit axis.
 
     Generated kernel ``axis_angle_to_quat``; inputs broadcast over leading batch axes.
@@ -905,6 +947,8 @@ def axis_angle_to_quat(axis, angle):
         unit axis (any frame)
     angle : array_like, shape (...)
         angle, rad
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -919,7 +963,7 @@ def axis_angle_to_quat(axis, angle):
     axis_2 = axis[..., 2]
     t0 = ((1.0/2.0))*angle
     t1 = numpy.sin(t0)
-    q_out = numpy.empty(batch + (4,))
+    q_out = numpy.empty(batch + (4,)) if out is None or out[0] is None else out[0]
     q_out[..., 0] = axis_0*t1
     q_out[..., 1] = axis_1*t1
     q_out[..., 2] = axis_2*t1
@@ -927,7 +971,7 @@ def axis_angle_to_quat(axis, angle):
     return q_out
 
 
-def quat_from_two_vectors(a, b):
+def quat_from_two_vectors(a, b, *, out=None):
     """Shortest-arc rotation taking one unit vector onto another.
 
     Generated kernel ``quat_from_two_vectors``; inputs broadcast over leading batch axes.
@@ -938,6 +982,8 @@ def quat_from_two_vectors(a, b):
         unit vector (any frame)
     b : array_like, shape (..., 3)
         unit vector, same frame
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -965,7 +1011,7 @@ def quat_from_two_vectors(a, b):
         t8 = -a_0*b_2 + a_2*b_0
         t9 = t4 + 1
         t10 = (1.0/numpy.sqrt((t6*t6) + (t7*t7) + (t8*t8) + (t9*t9)))
-        q_out = numpy.empty(batch + (4,))
+        q_out = numpy.empty(batch + (4,)) if out is None or out[0] is None else out[0]
         q_out[..., 0] = numpy.select([t5,True], [t3*numpy.select([t1,True], [0,-a_2], default=numpy.nan),t10*t6], default=numpy.nan)
         q_out[..., 1] = numpy.select([t5,True], [t3*numpy.select([t1,True], [a_2,0], default=numpy.nan),t10*t8], default=numpy.nan)
         q_out[..., 2] = numpy.select([t5,True], [t3*numpy.select([t1,True], [-a_1,a_0], default=numpy.nan),t10*t7], default=numpy.nan)
@@ -973,7 +1019,7 @@ def quat_from_two_vectors(a, b):
     return q_out
 
 
-def quat_to_axis_angle(q):
+def quat_to_axis_angle(q, *, out=None):
     """Unit axis and angle in [0, 2π] of a unit quaternion.
 
     Generated kernel ``quat_to_axis_angle``; inputs broadcast over leading batch axes.
@@ -982,6 +1028,8 @@ def quat_to_axis_angle(q):
     ----------
     q : array_like, shape (..., 4)
         quaternion (x, y, z, w), scalar last, unit
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -1000,16 +1048,16 @@ def quat_to_axis_angle(q):
         t0 = numpy.sqrt((q_0*q_0) + (q_1*q_1) + (q_2*q_2))
         t1 = numpy.less_equal(t0, (1.0/1e+300))
         t2 = (1.0/t0)
-        axis_out = numpy.empty(batch + (3,))
+        axis_out = numpy.empty(batch + (3,)) if out is None or out[0] is None else out[0]
         axis_out[..., 0] = numpy.select([t1,True], [1,q_0*t2], default=numpy.nan)
         axis_out[..., 1] = numpy.select([t1,True], [0,q_1*t2], default=numpy.nan)
         axis_out[..., 2] = numpy.select([t1,True], [0,q_2*t2], default=numpy.nan)
-        angle_out = numpy.empty(batch)
+        angle_out = numpy.empty(batch) if out is None or out[1] is None else out[1]
         angle_out[...] = 2*numpy.arctan2(t0, q_3)
     return axis_out, angle_out
 
 
-def quat_error_angle(q, q_ref):
+def quat_error_angle(q, q_ref, *, out=None):
     """Angle of the rotation between two attitudes (q and −q alike), in [0, π].
 
     Generated kernel ``quat_error_angle``; inputs broadcast over leading batch axes.
@@ -1020,6 +1068,8 @@ def quat_error_angle(q, q_ref):
         quaternion (x, y, z, w), scalar last, unit
     q_ref : array_like, shape (..., 4)
         quaternion (x, y, z, w), scalar last, unit
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -1040,12 +1090,12 @@ def quat_error_angle(q, q_ref):
     t0 = q_0*q_ref_1 - q_1*q_ref_0 + q_2*q_ref_3 - q_3*q_ref_2
     t1 = q_0*q_ref_3 + q_1*q_ref_2 - q_2*q_ref_1 - q_3*q_ref_0
     t2 = -q_0*q_ref_2 + q_1*q_ref_3 + q_2*q_ref_0 - q_3*q_ref_1
-    angle_out = numpy.empty(batch)
+    angle_out = numpy.empty(batch) if out is None or out[0] is None else out[0]
     angle_out[...] = 2*numpy.arctan2(numpy.sqrt((t0*t0) + (t1*t1) + (t2*t2)), abs(q_0*q_ref_0 + q_1*q_ref_1 + q_2*q_ref_2 + q_3*q_ref_3))
     return angle_out
 
 
-def quat_error_chart(q, q_ref):
+def quat_error_chart(q, q_ref, *, out=None):
     """Attitude-error chart of the wheel controllers: 2 sgn(e_w) e_v (q and −q alike).
 
     Generated kernel ``quat_error_chart``; inputs broadcast over leading batch axes.
@@ -1056,6 +1106,8 @@ def quat_error_chart(q, q_ref):
         quaternion (x, y, z, w), scalar last, unit, body to world
     q_ref : array_like, shape (..., 4)
         quaternion (x, y, z, w), scalar last, unit, body to world
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -1080,14 +1132,14 @@ def quat_error_chart(q, q_ref):
         t3 = numpy.less(q_0*q_ref_0 + q_1*q_ref_1 + q_2*q_ref_2 + q_3*q_ref_3, 0)
         t4 = q_0*t1 - q_1*t0 - 2*q_2*q_ref_0 + 2*q_3*q_ref_1
         t5 = 2*q_0*q_ref_1 - 2*q_1*q_ref_0 + q_2*t0 - 2*q_3*q_ref_2
-        dtheta_out = numpy.empty(batch + (3,))
+        dtheta_out = numpy.empty(batch + (3,)) if out is None or out[0] is None else out[0]
         dtheta_out[..., 0] = numpy.select([t3,True], [-t2,t2], default=numpy.nan)
         dtheta_out[..., 1] = numpy.select([t3,True], [t4,-t4], default=numpy.nan)
         dtheta_out[..., 2] = numpy.select([t3,True], [-t5,t5], default=numpy.nan)
     return dtheta_out
 
 
-def euler_xyz_to_quat(roll, pitch, yaw):
+def euler_xyz_to_quat(roll, pitch, yaw, *, out=None):
     """Quaternion of intrinsic XYZ Euler angles, R = Rx(roll) Ry(pitch) Rz(yaw).
 
     Generated kernel ``euler_xyz_to_quat``; inputs broadcast over leading batch axes.
@@ -1100,6 +1152,8 @@ def euler_xyz_to_quat(roll, pitch, yaw):
         rad
     yaw : array_like, shape (...)
         rad
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -1122,7 +1176,7 @@ def euler_xyz_to_quat(roll, pitch, yaw):
     t9 = numpy.sin(t2)
     t10 = t8*t9
     t11 = t5*t9
-    q_out = numpy.empty(batch + (4,))
+    q_out = numpy.empty(batch + (4,)) if out is None or out[0] is None else out[0]
     q_out[..., 0] = t1*t6 + t10*t7
     q_out[..., 1] = -t1*t10 + t6*t7
     q_out[..., 2] = t1*t3*t8 + t11*t7
@@ -1130,7 +1184,7 @@ def euler_xyz_to_quat(roll, pitch, yaw):
     return q_out
 
 
-def quat_to_euler_xyz(q):
+def quat_to_euler_xyz(q, *, out=None):
     """Intrinsic XYZ Euler angles of a unit quaternion, exact through gimbal lock.
 
     Generated kernel ``quat_to_euler_xyz``; inputs broadcast over leading batch axes.
@@ -1139,6 +1193,8 @@ def quat_to_euler_xyz(q):
     ----------
     q : array_like, shape (..., 4)
         quaternion (x, y, z, w), scalar last, unit
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -1166,14 +1222,14 @@ def quat_to_euler_xyz(q):
         t11 = (1.0/t9)
         t12 = numpy.select([t10,True], [0,t11*t4], default=numpy.nan)
         t13 = numpy.select([t10,True], [1,t11*t6], default=numpy.nan)
-        rpy_out = numpy.empty(batch + (3,))
+        rpy_out = numpy.empty(batch + (3,)) if out is None or out[0] is None else out[0]
         rpy_out[..., 0] = numpy.arctan2(t4, t6)
         rpy_out[..., 1] = numpy.arctan2(t7 + t8, t9)
         rpy_out[..., 2] = numpy.arctan2(t12*(t7 - t8) + t13*(2*q_0*q_1 + q_3*t2), t12*(t1 + t3) + t13*(-2*(q_2*q_2) - t5))
     return rpy_out
 
 
-def quat_derivative_world(q, omega_w):
+def quat_derivative_world(q, omega_w, *, out=None):
     """Quaternion rate from world-frame angular velocity.
 
     Generated kernel ``quat_derivative_world``; inputs broadcast over leading batch axes.
@@ -1184,6 +1240,8 @@ def quat_derivative_world(q, omega_w):
         quaternion (x, y, z, w), scalar last
     omega_w : array_like, shape (..., 3)
         angular velocity, world frame, rad/s
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -1205,7 +1263,7 @@ def quat_derivative_world(q, omega_w):
     t2 = ((1.0/2.0))*omega_w_2
     t3 = ((1.0/2.0))*omega_w_0
     t4 = ((1.0/2.0))*omega_w_1
-    q_dot_out = numpy.empty(batch + (4,))
+    q_dot_out = numpy.empty(batch + (4,)) if out is None or out[0] is None else out[0]
     q_dot_out[..., 0] = omega_w_0*t0 + omega_w_1*t1 - q_1*t2
     q_dot_out[..., 1] = -omega_w_0*t1 + omega_w_1*t0 + q_0*t2
     q_dot_out[..., 2] = omega_w_2*t0 - q_0*t4 + q_1*t3
@@ -1213,7 +1271,7 @@ def quat_derivative_world(q, omega_w):
     return q_dot_out
 
 
-def quat_derivative_body(q, omega_b):
+def quat_derivative_body(q, omega_b, *, out=None):
     """Quaternion rate from body-frame angular velocity.
 
     Generated kernel ``quat_derivative_body``; inputs broadcast over leading batch axes.
@@ -1224,6 +1282,8 @@ def quat_derivative_body(q, omega_b):
         quaternion (x, y, z, w), scalar last
     omega_b : array_like, shape (..., 3)
         angular velocity, body frame, rad/s
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -1243,7 +1303,7 @@ def quat_derivative_body(q, omega_b):
     t0 = ((1.0/2.0))*omega_b_0
     t1 = ((1.0/2.0))*omega_b_1
     t2 = ((1.0/2.0))*omega_b_2
-    q_dot_out = numpy.empty(batch + (4,))
+    q_dot_out = numpy.empty(batch + (4,)) if out is None or out[0] is None else out[0]
     q_dot_out[..., 0] = q_1*t2 - q_2*t1 + q_3*t0
     q_dot_out[..., 1] = -q_0*t2 + q_2*t0 + q_3*t1
     q_dot_out[..., 2] = q_0*t1 - q_1*t0 + q_3*t2
@@ -1251,7 +1311,7 @@ def quat_derivative_body(q, omega_b):
     return q_dot_out
 
 
-def integrate_orientation(q, omega_w, dt):
+def integrate_orientation(q, omega_w, dt, *, out=None):
     """One explicit world-form step, then normalization (the chapter's default).
 
     Generated kernel ``integrate_orientation``; inputs broadcast over leading batch axes.
@@ -1264,6 +1324,8 @@ def integrate_orientation(q, omega_w, dt):
         angular velocity, world frame, rad/s
     dt : array_like, shape (...)
         time step, s
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -1291,7 +1353,7 @@ def integrate_orientation(q, omega_w, dt):
     t7 = dt*(omega_w_2*t0 - q_0*t5 + q_1*t4) + q_2
     t8 = dt*(-omega_w_0*t1 + omega_w_1*t0 + q_0*t2) + q_1
     t9 = (1.0/numpy.sqrt((t3*t3) + (t6*t6) + (t7*t7) + (t8*t8)))
-    q_next_out = numpy.empty(batch + (4,))
+    q_next_out = numpy.empty(batch + (4,)) if out is None or out[0] is None else out[0]
     q_next_out[..., 0] = t3*t9
     q_next_out[..., 1] = t8*t9
     q_next_out[..., 2] = t7*t9
@@ -1299,7 +1361,7 @@ def integrate_orientation(q, omega_w, dt):
     return q_next_out
 
 
-def euler_equations(I_b, omega_b, tau_b):
+def euler_equations(I_b, omega_b, tau_b, *, out=None):
     """Euler's rotation equations with external torque, body frame.
 
     Generated kernel ``euler_equations``; inputs broadcast over leading batch axes.
@@ -1312,6 +1374,8 @@ def euler_equations(I_b, omega_b, tau_b):
         angular velocity, body frame, rad/s
     tau_b : array_like, shape (..., 3)
         torque, body frame, N·m
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -1337,14 +1401,14 @@ def euler_equations(I_b, omega_b, tau_b):
     c_b_3 = (1.0/I_b_0)
     c_b_4 = (1.0/I_b_1)
     c_b_5 = (1.0/I_b_2)
-    omega_dot_b_out = numpy.empty(batch + (3,))
+    omega_dot_b_out = numpy.empty(batch + (3,)) if out is None or out[0] is None else out[0]
     omega_dot_b_out[..., 0] = c_b_0*omega_b_1*omega_b_2 + c_b_3*tau_b_0
     omega_dot_b_out[..., 1] = c_b_1*omega_b_0*omega_b_2 + c_b_4*tau_b_1
     omega_dot_b_out[..., 2] = c_b_2*omega_b_0*omega_b_1 + c_b_5*tau_b_2
     return omega_dot_b_out
 
 
-def rigid_body_rhs(x, m, I_b, F_w, tau_w):
+def rigid_body_rhs(x, m, I_b, F_w, tau_w, *, out=None):
     """State derivative under a world force at the COM and a world torque.
 
     Generated kernel ``rigid_body_rhs``; inputs broadcast over leading batch axes.
@@ -1361,6 +1425,8 @@ def rigid_body_rhs(x, m, I_b, F_w, tau_w):
         total force at the COM, world frame, N
     tau_w : array_like, shape (..., 3)
         total torque about the COM, world frame, N·m
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -1406,7 +1472,7 @@ def rigid_body_rhs(x, m, I_b, F_w, tau_w):
     t5 = -t4*x_4 + 2*tau_w_1*x_3
     t6 = t4*x_5 - 2*tau_w_2*x_3
     t7 = -2*tau_w_1*x_5 + 2*tau_w_2*x_4
-    x_dot_out = numpy.empty(batch + (13,))
+    x_dot_out = numpy.empty(batch + (13,)) if out is None or out[0] is None else out[0]
     x_dot_out[..., 0] = x_7
     x_dot_out[..., 1] = x_8
     x_dot_out[..., 2] = x_9
@@ -1423,7 +1489,7 @@ def rigid_body_rhs(x, m, I_b, F_w, tau_w):
     return x_dot_out
 
 
-def rigid_body_rhs_free(x, I_b):
+def rigid_body_rhs_free(x, I_b, *, out=None):
     """State derivative of a torque-free, force-free body.
 
     Generated kernel ``rigid_body_rhs_free``; inputs broadcast over leading batch axes.
@@ -1434,6 +1500,8 @@ def rigid_body_rhs_free(x, I_b):
         state (p_w[3] m, q[4] (x,y,z,w), v_w[3] m/s, omega_b[3] rad/s)
     I_b : array_like, shape (..., 3)
         principal moments, body frame, kg·m²
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -1462,7 +1530,7 @@ def rigid_body_rhs_free(x, I_b):
     t0 = ((1.0/2.0))*x_10
     t1 = ((1.0/2.0))*x_11
     t2 = ((1.0/2.0))*x_12
-    x_dot_out = numpy.empty(batch + (13,))
+    x_dot_out = numpy.empty(batch + (13,)) if out is None or out[0] is None else out[0]
     x_dot_out[..., 0] = x_7
     x_dot_out[..., 1] = x_8
     x_dot_out[..., 2] = x_9
@@ -1479,7 +1547,7 @@ def rigid_body_rhs_free(x, I_b):
     return x_dot_out
 
 
-def apply_inv_inertia(q, I_b, v):
+def apply_inv_inertia(q, I_b, v, *, out=None):
     """Multiply a world vector by I_W⁻¹: rotate into the body, apply the diagonal inverse, rotate back.
 
     Generated kernel ``apply_inv_inertia``; inputs broadcast over leading batch axes.
@@ -1492,6 +1560,8 @@ def apply_inv_inertia(q, I_b, v):
         principal moments, body frame, kg·m²
     v : array_like, shape (..., 3)
         vector, world frame (e.g. torque, N·m)
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -1540,14 +1610,14 @@ def apply_inv_inertia(q, I_b, v):
     t25 = -t11 - t19 + 1
     t26 = t16*t25 + t18*t24 + t21*t23
     t27 = t0*t20*t23 + t10*t17*t24 + t15*t25*t6
-    out_out = numpy.empty(batch + (3,))
+    out_out = numpy.empty(batch + (3,)) if out is None or out[0] is None else out[0]
     out_out[..., 0] = t22*v_1 + t26*v_2 + v_0*(t0*(t5*t5) + t10*(t13*t13) + t6*(t9*t9))
     out_out[..., 1] = t22*v_0 + t27*v_2 + v_1*(t0*(t20*t20) + t10*(t17*t17) + (t15*t15)*t6)
     out_out[..., 2] = t26*v_0 + t27*v_1 + v_2*(t0*(t23*t23) + t10*(t24*t24) + (t25*t25)*t6)
     return out_out
 
 
-def world_to_body(q, v_w):
+def world_to_body(q, v_w, *, out=None):
     """Express a world vector in the body frame.
 
     Generated kernel ``world_to_body``; inputs broadcast over leading batch axes.
@@ -1558,6 +1628,8 @@ def world_to_body(q, v_w):
         orientation (x, y, z, w), R_WB, unit
     v_w : array_like, shape (..., 3)
         vector, world frame
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -1584,14 +1656,14 @@ def world_to_body(q, v_w):
     t7 = 2*(q_2*q_2) - 1
     t8 = 2*q_0*q_3
     t9 = 2*(q_0*q_0)
-    v_b_out = numpy.empty(batch + (3,))
+    v_b_out = numpy.empty(batch + (3,)) if out is None or out[0] is None else out[0]
     v_b_out[..., 0] = v_0*(-t6 - t7) + v_1*(t1 + t3) + v_2*(t4 - t5)
     v_b_out[..., 1] = v_0*(t1 - t3) + v_1*(-t7 - t9) + v_2*(q_2*t0 + t8)
     v_b_out[..., 2] = v_0*(t4 + t5) + v_1*(2*q_1*q_2 - t8) + v_2*(-t6 - t9 + 1)
     return v_b_out
 
 
-def kinetic_energy(m, I_b, v_w, omega_b):
+def kinetic_energy(m, I_b, v_w, omega_b, *, out=None):
     """Translational plus rotational kinetic energy.
 
     Generated kernel ``kinetic_energy``; inputs broadcast over leading batch axes.
@@ -1606,6 +1678,8 @@ def kinetic_energy(m, I_b, v_w, omega_b):
         COM velocity, world frame, m/s
     omega_b : array_like, shape (..., 3)
         angular velocity, body frame, rad/s
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -1626,12 +1700,12 @@ def kinetic_energy(m, I_b, v_w, omega_b):
     omega_b_0 = omega_b[..., 0]
     omega_b_1 = omega_b[..., 1]
     omega_b_2 = omega_b[..., 2]
-    T_out = numpy.empty(batch)
+    T_out = numpy.empty(batch) if out is None or out[0] is None else out[0]
     T_out[...] = ((1.0/2.0))*I_b_0*(omega_b_0*omega_b_0) + ((1.0/2.0))*I_b_1*(omega_b_1*omega_b_1) + ((1.0/2.0))*I_b_2*(omega_b_2*omega_b_2) + ((1.0/2.0))*m*((v_w_0*v_w_0) + (v_w_1*v_w_1) + (v_w_2*v_w_2))
     return T_out
 
 
-def angular_momentum_world(q, I_b, omega_b):
+def angular_momentum_world(q, I_b, omega_b, *, out=None):
     """Angular momentum about the COM in the world frame.
 
     Generated kernel ``angular_momentum_world``; inputs broadcast over leading batch axes.
@@ -1644,6 +1718,8 @@ def angular_momentum_world(q, I_b, omega_b):
         principal moments, body frame, kg·m²
     omega_b : array_like, shape (..., 3)
         angular velocity, body frame, rad/s
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -1677,14 +1753,14 @@ def angular_momentum_world(q, I_b, omega_b):
     t10 = I_b_0*omega_b_0
     t11 = 2*q_0*q_3
     t12 = 2*(q_0*q_0)
-    L_w_out = numpy.empty(batch + (3,))
+    L_w_out = numpy.empty(batch + (3,)) if out is None or out[0] is None else out[0]
     L_w_out[..., 0] = t10*(-t8 - t9) + t4*(t1 - t3) + t7*(t5 + t6)
     L_w_out[..., 1] = t10*(t1 + t3) + t4*(-t12 - t9) + t7*(2*q_1*q_2 - t11)
     L_w_out[..., 2] = t10*(t5 - t6) + t4*(q_1*t2 + t11) + t7*(-t12 - t8 + 1)
     return L_w_out
 
 
-def rigid_body_rhs_torque(x, I_b, tau_w):
+def rigid_body_rhs_torque(x, I_b, tau_w, *, out=None):
     """State derivative under a world torque only (rigid_body_rhs with F_W = 0, for bodies whose effects add no force).
 
     Generated kernel ``rigid_body_rhs_torque``; inputs broadcast over leading batch axes.
@@ -1697,6 +1773,8 @@ def rigid_body_rhs_torque(x, I_b, tau_w):
         principal moments, body frame, kg·m²
     tau_w : array_like, shape (..., 3)
         total torque about the COM, world frame, N·m
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -1736,7 +1814,7 @@ def rigid_body_rhs_torque(x, I_b, tau_w):
     t4 = -t3*x_4 + 2*tau_w_1*x_3
     t5 = t3*x_5 - 2*tau_w_2*x_3
     t6 = -2*tau_w_1*x_5 + 2*tau_w_2*x_4
-    x_dot_out = numpy.empty(batch + (13,))
+    x_dot_out = numpy.empty(batch + (13,)) if out is None or out[0] is None else out[0]
     x_dot_out[..., 0] = x_7
     x_dot_out[..., 1] = x_8
     x_dot_out[..., 2] = x_9
@@ -1753,7 +1831,7 @@ def rigid_body_rhs_torque(x, I_b, tau_w):
     return x_dot_out
 
 
-def euler_coefficients(I_b):
+def euler_coefficients(I_b, *, out=None):
     """The inertia-only coefficients of Euler's equations, computed once per body and call.
 
     Generated kernel ``euler_coefficients``; inputs broadcast over leading batch axes.
@@ -1762,6 +1840,8 @@ def euler_coefficients(I_b):
     ----------
     I_b : array_like, shape (..., 3)
         principal moments, body frame, kg·m²
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -1779,7 +1859,7 @@ def euler_coefficients(I_b):
     c_b_3 = (1.0/I_b_0)
     c_b_4 = (1.0/I_b_1)
     c_b_5 = (1.0/I_b_2)
-    c_b_out = numpy.empty(batch + (6,))
+    c_b_out = numpy.empty(batch + (6,)) if out is None or out[0] is None else out[0]
     c_b_out[..., 0] = c_b_0
     c_b_out[..., 1] = c_b_1
     c_b_out[..., 2] = c_b_2
@@ -1789,7 +1869,7 @@ def euler_coefficients(I_b):
     return c_b_out
 
 
-def rigid_body_rhs_free_c(x, c_b):
+def rigid_body_rhs_free_c(x, c_b, *, out=None):
     """rigid_body_rhs_free on the Euler coefficients c_b (no division).
 
     Generated kernel ``rigid_body_rhs_free_c``; inputs broadcast over leading batch axes.
@@ -1800,6 +1880,8 @@ def rigid_body_rhs_free_c(x, c_b):
         state (p_w[3] m, q[4] (x,y,z,w), v_w[3] m/s, omega_b[3] rad/s)
     c_b : array_like, shape (..., 6)
         Euler coefficients (k_x, k_y, k_z, r_x, r_y, r_z), body frame: k_x = (I_y − I_z)/I_x (cyclic, dimensionless), r_x = 1/I_x (1/(kg·m²)); from euler_coefficients
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -1825,7 +1907,7 @@ def rigid_body_rhs_free_c(x, c_b):
     t0 = ((1.0/2.0))*x_10
     t1 = ((1.0/2.0))*x_11
     t2 = ((1.0/2.0))*x_12
-    x_dot_out = numpy.empty(batch + (13,))
+    x_dot_out = numpy.empty(batch + (13,)) if out is None or out[0] is None else out[0]
     x_dot_out[..., 0] = x_7
     x_dot_out[..., 1] = x_8
     x_dot_out[..., 2] = x_9
@@ -1842,7 +1924,7 @@ def rigid_body_rhs_free_c(x, c_b):
     return x_dot_out
 
 
-def rigid_body_rhs_torque_c(x, c_b, tau_w):
+def rigid_body_rhs_torque_c(x, c_b, tau_w, *, out=None):
     """rigid_body_rhs_torque on the Euler coefficients c_b (no division).
 
     Generated kernel ``rigid_body_rhs_torque_c``; inputs broadcast over leading batch axes.
@@ -1855,6 +1937,8 @@ def rigid_body_rhs_torque_c(x, c_b, tau_w):
         Euler coefficients (k_x, k_y, k_z, r_x, r_y, r_z), body frame: k_x = (I_y − I_z)/I_x (cyclic, dimensionless), r_x = 1/I_x (1/(kg·m²)); from euler_coefficients
     tau_w : array_like, shape (..., 3)
         total torque about the COM, world frame, N·m
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -1891,7 +1975,7 @@ def rigid_body_rhs_torque_c(x, c_b, tau_w):
     t4 = -t3*x_4 + 2*tau_w_1*x_3
     t5 = t3*x_5 - 2*tau_w_2*x_3
     t6 = -2*tau_w_1*x_5 + 2*tau_w_2*x_4
-    x_dot_out = numpy.empty(batch + (13,))
+    x_dot_out = numpy.empty(batch + (13,)) if out is None or out[0] is None else out[0]
     x_dot_out[..., 0] = x_7
     x_dot_out[..., 1] = x_8
     x_dot_out[..., 2] = x_9
@@ -1908,7 +1992,7 @@ def rigid_body_rhs_torque_c(x, c_b, tau_w):
     return x_dot_out
 
 
-def rigid_body_rhs_c(x, m, c_b, F_w, tau_w):
+def rigid_body_rhs_c(x, m, c_b, F_w, tau_w, *, out=None):
     """rigid_body_rhs on the Euler coefficients c_b (one division: F_W/m).
 
     Generated kernel ``rigid_body_rhs_c``; inputs broadcast over leading batch axes.
@@ -1925,6 +2009,8 @@ def rigid_body_rhs_c(x, m, c_b, F_w, tau_w):
         total force at the COM, world frame, N
     tau_w : array_like, shape (..., 3)
         total torque about the COM, world frame, N·m
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -1967,7 +2053,7 @@ def rigid_body_rhs_c(x, m, c_b, F_w, tau_w):
     t5 = -t4*x_4 + 2*tau_w_1*x_3
     t6 = t4*x_5 - 2*tau_w_2*x_3
     t7 = -2*tau_w_1*x_5 + 2*tau_w_2*x_4
-    x_dot_out = numpy.empty(batch + (13,))
+    x_dot_out = numpy.empty(batch + (13,)) if out is None or out[0] is None else out[0]
     x_dot_out[..., 0] = x_7
     x_dot_out[..., 1] = x_8
     x_dot_out[..., 2] = x_9
@@ -1984,7 +2070,7 @@ def rigid_body_rhs_c(x, m, c_b, F_w, tau_w):
     return x_dot_out
 
 
-def pivot_body_rhs(q, omega_b, I_p, r_b, F_w, tau_w):
+def pivot_body_rhs(q, omega_b, I_p, r_b, F_w, tau_w, *, out=None):
     """Rotation about a world-anchored spherical joint (no wheels).
 
     Generated kernel ``pivot_body_rhs``; inputs broadcast over leading batch axes.
@@ -2003,6 +2089,8 @@ def pivot_body_rhs(q, omega_b, I_p, r_b, F_w, tau_w):
         total force at the COM, world frame, N
     tau_w : array_like, shape (..., 3)
         total torque about the COM, world frame, N·m
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -2078,19 +2166,19 @@ def pivot_body_rhs(q, omega_b, I_p, r_b, F_w, tau_w):
     t35 = omega_b_0*t33 - omega_b_2*t15 - r_b_0*t34 + r_b_2*t30 + t22*tau_w_0 + t23*tau_w_2 + t25*tau_w_1
     t36 = -omega_b_1*t33 + omega_b_2*t16 + r_b_1*t34 - r_b_2*t26 + t27*tau_w_1 + t28*tau_w_2 + t29*tau_w_0
     t37 = -I_p_00*I_p_12 + I_p_01*I_p_02
-    q_dot_out = numpy.empty(batch + (4,))
+    q_dot_out = numpy.empty(batch + (4,)) if out is None or out[0] is None else out[0]
     q_dot_out[..., 0] = q_1*t2 - q_2*t1 + q_3*t0
     q_dot_out[..., 1] = -q_0*t2 + q_2*t0 + q_3*t1
     q_dot_out[..., 2] = q_0*t1 - q_1*t0 + q_3*t2
     q_dot_out[..., 3] = -q_0*t0 - q_1*t1 - q_2*t2
-    omega_dot_b_out = numpy.empty(batch + (3,))
+    omega_dot_b_out = numpy.empty(batch + (3,)) if out is None or out[1] is None else out[1]
     omega_dot_b_out[..., 0] = t6*(t31*t7 + t32*t35 + t36*(I_p_11*I_p_22 - t3))
     omega_dot_b_out[..., 1] = t6*(t31*t37 + t32*t36 + t35*(I_p_00*I_p_22 - t5))
     omega_dot_b_out[..., 2] = t6*(t31*(I_p_00*I_p_11 - t4) + t35*t37 + t36*t7)
     return q_dot_out, omega_dot_b_out
 
 
-def pivot_kinematics(q, omega_b, anchor_w, r_b):
+def pivot_kinematics(q, omega_b, anchor_w, r_b, *, out=None):
     """COM position and velocity of a body on a spherical joint.
 
     Generated kernel ``pivot_kinematics``; inputs broadcast over leading batch axes.
@@ -2105,6 +2193,8 @@ def pivot_kinematics(q, omega_b, anchor_w, r_b):
         joint anchor, world frame, m
     r_b : array_like, shape (..., 3)
         pivot → COM, body frame, m
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -2153,18 +2243,18 @@ def pivot_kinematics(q, omega_b, anchor_w, r_b):
     t19 = omega_b_0*r_b_1 - omega_b_1*r_b_0
     t20 = -omega_b_0*r_b_2 + omega_b_2*r_b_0
     t21 = omega_b_1*r_b_2 - omega_b_2*r_b_1
-    p_w_out = numpy.empty(batch + (3,))
+    p_w_out = numpy.empty(batch + (3,)) if out is None or out[0] is None else out[0]
     p_w_out[..., 0] = anchor_w_0 + r_b_0*t10 + r_b_1*t4 + r_b_2*t7
     p_w_out[..., 1] = anchor_w_1 + r_b_0*t11 + r_b_1*t15 + r_b_2*t13
     p_w_out[..., 2] = anchor_w_2 + r_b_0*t16 + r_b_1*t17 + r_b_2*t18
-    v_w_out = numpy.empty(batch + (3,))
+    v_w_out = numpy.empty(batch + (3,)) if out is None or out[1] is None else out[1]
     v_w_out[..., 0] = t10*t21 + t19*t7 + t20*t4
     v_w_out[..., 1] = t11*t21 + t13*t19 + t15*t20
     v_w_out[..., 2] = t16*t21 + t17*t20 + t18*t19
     return p_w_out, v_w_out
 
 
-def splitting_rotation(I_b, q, omega_b, h):
+def splitting_rotation(I_b, q, omega_b, h, *, out=None):
     """Free rotation over h by Strang splitting into exact principal-axis flows.
 
     Generated kernel ``splitting_rotation``; inputs broadcast over leading batch axes.
@@ -2179,6 +2269,8 @@ def splitting_rotation(I_b, q, omega_b, h):
         angular velocity, body frame, rad/s
     h : array_like, shape (...)
         time step, s
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -2257,19 +2349,19 @@ def splitting_rotation(I_b, q, omega_b, h):
     t52 = 1 - 2*(t49*t49)
     t53 = t21*t41 + t40*t42
     t54 = 2*t45*t49
-    q_next_out = numpy.empty(batch + (4,))
+    q_next_out = numpy.empty(batch + (4,)) if out is None or out[0] is None else out[0]
     q_next_out[..., 0] = t39*t45 + t48*t49
     q_next_out[..., 1] = t45*t51 + t49*t50
     q_next_out[..., 2] = t45*t50 - t49*t51
     q_next_out[..., 3] = -t39*t49 + t45*t48
-    omega_next_out = numpy.empty(batch + (3,))
+    omega_next_out = numpy.empty(batch + (3,)) if out is None or out[1] is None else out[1]
     omega_next_out[..., 0] = t43
     omega_next_out[..., 1] = t9*(t32*t52 + t53*t54)
     omega_next_out[..., 2] = t16*(-t32*t54 + t52*t53)
     return q_next_out, omega_next_out
 
 
-def axis_flow_x(I_b, q, L_b, tau):
+def axis_flow_x(I_b, q, L_b, tau, *, out=None):
     """Exact flow of H_x = L_x²/(2 I_x) on (q, L_B) for time τ.
 
     Generated kernel ``axis_flow_x``; inputs broadcast over leading batch axes.
@@ -2284,6 +2376,8 @@ def axis_flow_x(I_b, q, L_b, tau):
         angular momentum, body frame, kg·m²/s
     tau : array_like, shape (...)
         duration of the flow, s
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -2310,19 +2404,19 @@ def axis_flow_x(I_b, q, L_b, tau):
     t2 = numpy.sin(t0)
     t3 = 1 - 2*(t2*t2)
     t4 = 2*t1*t2
-    q_next_out = numpy.empty(batch + (4,))
+    q_next_out = numpy.empty(batch + (4,)) if out is None or out[0] is None else out[0]
     q_next_out[..., 0] = q_0*t1 + q_3*t2
     q_next_out[..., 1] = q_1*t1 + q_2*t2
     q_next_out[..., 2] = -q_1*t2 + q_2*t1
     q_next_out[..., 3] = -q_0*t2 + q_3*t1
-    L_next_out = numpy.empty(batch + (3,))
+    L_next_out = numpy.empty(batch + (3,)) if out is None or out[1] is None else out[1]
     L_next_out[..., 0] = L_b_0
     L_next_out[..., 1] = L_b_1*t3 + L_b_2*t4
     L_next_out[..., 2] = -L_b_1*t4 + L_b_2*t3
     return q_next_out, L_next_out
 
 
-def axis_flow_y(I_b, q, L_b, tau):
+def axis_flow_y(I_b, q, L_b, tau, *, out=None):
     """Exact flow of H_y = L_y²/(2 I_y) on (q, L_B) for time τ.
 
     Generated kernel ``axis_flow_y``; inputs broadcast over leading batch axes.
@@ -2337,6 +2431,8 @@ def axis_flow_y(I_b, q, L_b, tau):
         angular momentum, body frame, kg·m²/s
     tau : array_like, shape (...)
         duration of the flow, s
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -2363,19 +2459,19 @@ def axis_flow_y(I_b, q, L_b, tau):
     t2 = numpy.sin(t0)
     t3 = 1 - 2*(t2*t2)
     t4 = 2*t1*t2
-    q_next_out = numpy.empty(batch + (4,))
+    q_next_out = numpy.empty(batch + (4,)) if out is None or out[0] is None else out[0]
     q_next_out[..., 0] = q_0*t1 - q_2*t2
     q_next_out[..., 1] = q_1*t1 + q_3*t2
     q_next_out[..., 2] = q_0*t2 + q_2*t1
     q_next_out[..., 3] = -q_1*t2 + q_3*t1
-    L_next_out = numpy.empty(batch + (3,))
+    L_next_out = numpy.empty(batch + (3,)) if out is None or out[1] is None else out[1]
     L_next_out[..., 0] = L_b_0*t3 - L_b_2*t4
     L_next_out[..., 1] = L_b_1
     L_next_out[..., 2] = L_b_0*t4 + L_b_2*t3
     return q_next_out, L_next_out
 
 
-def axis_flow_z(I_b, q, L_b, tau):
+def axis_flow_z(I_b, q, L_b, tau, *, out=None):
     """Exact flow of H_z = L_z²/(2 I_z) on (q, L_B) for time τ.
 
     Generated kernel ``axis_flow_z``; inputs broadcast over leading batch axes.
@@ -2390,6 +2486,8 @@ def axis_flow_z(I_b, q, L_b, tau):
         angular momentum, body frame, kg·m²/s
     tau : array_like, shape (...)
         duration of the flow, s
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -2416,19 +2514,19 @@ def axis_flow_z(I_b, q, L_b, tau):
     t2 = numpy.sin(t0)
     t3 = 1 - 2*(t2*t2)
     t4 = 2*t1*t2
-    q_next_out = numpy.empty(batch + (4,))
+    q_next_out = numpy.empty(batch + (4,)) if out is None or out[0] is None else out[0]
     q_next_out[..., 0] = q_0*t1 + q_1*t2
     q_next_out[..., 1] = -q_0*t2 + q_1*t1
     q_next_out[..., 2] = q_2*t1 + q_3*t2
     q_next_out[..., 3] = -q_2*t2 + q_3*t1
-    L_next_out = numpy.empty(batch + (3,))
+    L_next_out = numpy.empty(batch + (3,)) if out is None or out[1] is None else out[1]
     L_next_out[..., 0] = L_b_0*t3 + L_b_1*t4
     L_next_out[..., 1] = -L_b_0*t4 + L_b_1*t3
     L_next_out[..., 2] = L_b_2
     return q_next_out, L_next_out
 
 
-def symtop_score(I_b):
+def symtop_score(I_b, *, out=None):
     """Size of the symmetric-top splitting error for each reference axis r.
 
     Generated kernel ``symtop_score``; inputs broadcast over leading batch axes.
@@ -2437,6 +2535,8 @@ def symtop_score(I_b):
     ----------
     I_b : array_like, shape (..., 3)
         principal moments, body frame, kg·m²
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -2454,14 +2554,14 @@ def symtop_score(I_b):
     t3 = (1.0/I_b_2)
     t4 = t1 + t3
     t5 = -t0 + t3
-    score_out = numpy.empty(batch + (3,))
+    score_out = numpy.empty(batch + (3,)) if out is None or out[0] is None else out[0]
     score_out[..., 0] = abs(t2*t4)
     score_out[..., 1] = abs(t2*t5)
     score_out[..., 2] = abs(t4*t5)
     return score_out
 
 
-def symtop_leftover(I_b, I_r):
+def symtop_leftover(I_b, I_r, *, out=None):
     """Coefficients left over when |L|²/(2 I_r) is split off the energy.
 
     Generated kernel ``symtop_leftover``; inputs broadcast over leading batch axes.
@@ -2472,6 +2572,8 @@ def symtop_leftover(I_b, I_r):
         principal moments, body frame, kg·m²
     I_r : array_like, shape (...)
         the reference moment I_b[r], kg·m²
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -2485,14 +2587,14 @@ def symtop_leftover(I_b, I_r):
     I_b_1 = I_b[..., 1]
     I_b_2 = I_b[..., 2]
     t0 = (1.0/I_r)
-    c_out = numpy.empty(batch + (3,))
+    c_out = numpy.empty(batch + (3,)) if out is None or out[0] is None else out[0]
     c_out[..., 0] = -t0 + (1.0/I_b_0)
     c_out[..., 1] = -t0 + (1.0/I_b_1)
     c_out[..., 2] = -t0 + (1.0/I_b_2)
     return c_out
 
 
-def symtop_axis_flow_x(q, L_b, c, tau):
+def symtop_axis_flow_x(q, L_b, c, tau, *, out=None):
     """Exact flow of ½ c L_x² on (q, L_B) for time τ.
 
     Generated kernel ``symtop_axis_flow_x``; inputs broadcast over leading batch axes.
@@ -2507,6 +2609,8 @@ def symtop_axis_flow_x(q, L_b, c, tau):
         coefficient of ½ L²_axis in the energy, 1/(kg·m²)
     tau : array_like, shape (...)
         duration of the flow, s
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -2532,19 +2636,19 @@ def symtop_axis_flow_x(q, L_b, c, tau):
     t2 = numpy.sin(t0)
     t3 = 1 - 2*(t2*t2)
     t4 = 2*t1*t2
-    q_next_out = numpy.empty(batch + (4,))
+    q_next_out = numpy.empty(batch + (4,)) if out is None or out[0] is None else out[0]
     q_next_out[..., 0] = q_0*t1 + q_3*t2
     q_next_out[..., 1] = q_1*t1 + q_2*t2
     q_next_out[..., 2] = -q_1*t2 + q_2*t1
     q_next_out[..., 3] = -q_0*t2 + q_3*t1
-    L_next_out = numpy.empty(batch + (3,))
+    L_next_out = numpy.empty(batch + (3,)) if out is None or out[1] is None else out[1]
     L_next_out[..., 0] = L_b_0
     L_next_out[..., 1] = L_b_1*t3 + L_b_2*t4
     L_next_out[..., 2] = -L_b_1*t4 + L_b_2*t3
     return q_next_out, L_next_out
 
 
-def symtop_axis_flow_y(q, L_b, c, tau):
+def symtop_axis_flow_y(q, L_b, c, tau, *, out=None):
     """Exact flow of ½ c L_y² on (q, L_B) for time τ.
 
     Generated kernel ``symtop_axis_flow_y``; inputs broadcast over leading batch axes.
@@ -2559,6 +2663,8 @@ def symtop_axis_flow_y(q, L_b, c, tau):
         coefficient of ½ L²_axis in the energy, 1/(kg·m²)
     tau : array_like, shape (...)
         duration of the flow, s
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -2584,19 +2690,19 @@ def symtop_axis_flow_y(q, L_b, c, tau):
     t2 = numpy.sin(t0)
     t3 = 1 - 2*(t2*t2)
     t4 = 2*t1*t2
-    q_next_out = numpy.empty(batch + (4,))
+    q_next_out = numpy.empty(batch + (4,)) if out is None or out[0] is None else out[0]
     q_next_out[..., 0] = q_0*t1 - q_2*t2
     q_next_out[..., 1] = q_1*t1 + q_3*t2
     q_next_out[..., 2] = q_0*t2 + q_2*t1
     q_next_out[..., 3] = -q_1*t2 + q_3*t1
-    L_next_out = numpy.empty(batch + (3,))
+    L_next_out = numpy.empty(batch + (3,)) if out is None or out[1] is None else out[1]
     L_next_out[..., 0] = L_b_0*t3 - L_b_2*t4
     L_next_out[..., 1] = L_b_1
     L_next_out[..., 2] = L_b_0*t4 + L_b_2*t3
     return q_next_out, L_next_out
 
 
-def symtop_axis_flow_z(q, L_b, c, tau):
+def symtop_axis_flow_z(q, L_b, c, tau, *, out=None):
     """Exact flow of ½ c L_z² on (q, L_B) for time τ.
 
     Generated kernel ``symtop_axis_flow_z``; inputs broadcast over leading batch axes.
@@ -2611,6 +2717,8 @@ def symtop_axis_flow_z(q, L_b, c, tau):
         coefficient of ½ L²_axis in the energy, 1/(kg·m²)
     tau : array_like, shape (...)
         duration of the flow, s
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -2636,19 +2744,19 @@ def symtop_axis_flow_z(q, L_b, c, tau):
     t2 = numpy.sin(t0)
     t3 = 1 - 2*(t2*t2)
     t4 = 2*t1*t2
-    q_next_out = numpy.empty(batch + (4,))
+    q_next_out = numpy.empty(batch + (4,)) if out is None or out[0] is None else out[0]
     q_next_out[..., 0] = q_0*t1 + q_1*t2
     q_next_out[..., 1] = -q_0*t2 + q_1*t1
     q_next_out[..., 2] = q_2*t1 + q_3*t2
     q_next_out[..., 3] = -q_2*t2 + q_3*t1
-    L_next_out = numpy.empty(batch + (3,))
+    L_next_out = numpy.empty(batch + (3,)) if out is None or out[1] is None else out[1]
     L_next_out[..., 0] = L_b_0*t3 + L_b_1*t4
     L_next_out[..., 1] = -L_b_0*t4 + L_b_1*t3
     L_next_out[..., 2] = L_b_2
     return q_next_out, L_next_out
 
 
-def sphere_flow(q, L_b, I_r, tau):
+def sphere_flow(q, L_b, I_r, tau, *, out=None):
     """Exact flow of |L|²/(2 I_r) on q for time τ (L_B is unchanged).
 
     Generated kernel ``sphere_flow``; inputs broadcast over leading batch axes.
@@ -2663,6 +2771,8 @@ def sphere_flow(q, L_b, I_r, tau):
         the reference moment I_b[r], kg·m²
     tau : array_like, shape (...)
         duration of the flow, s
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -2693,7 +2803,7 @@ def sphere_flow(q, L_b, I_r, tau):
         t8 = L_b_0*t7
         t9 = L_b_2*t7
         t10 = L_b_1*t7
-        q_next_out = numpy.empty(batch + (4,))
+        q_next_out = numpy.empty(batch + (4,)) if out is None or out[0] is None else out[0]
         q_next_out[..., 0] = q_0*t6 + q_1*t9 - q_2*t10 + q_3*t8
         q_next_out[..., 1] = -q_0*t9 + q_1*t6 + q_2*t8 + q_3*t10
         q_next_out[..., 2] = q_0*t10 - q_1*t8 + q_2*t6 + q_3*t9
@@ -2701,7 +2811,7 @@ def sphere_flow(q, L_b, I_r, tau):
     return q_next_out
 
 
-def body_momentum(I_b, omega_b):
+def body_momentum(I_b, omega_b, *, out=None):
     """Body angular momentum of a body with principal moments I_B.
 
     Generated kernel ``body_momentum``; inputs broadcast over leading batch axes.
@@ -2712,6 +2822,8 @@ def body_momentum(I_b, omega_b):
         principal moments, body frame, kg·m²
     omega_b : array_like, shape (..., 3)
         angular velocity, body frame, rad/s
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -2727,14 +2839,14 @@ def body_momentum(I_b, omega_b):
     omega_b_0 = omega_b[..., 0]
     omega_b_1 = omega_b[..., 1]
     omega_b_2 = omega_b[..., 2]
-    L_b_out = numpy.empty(batch + (3,))
+    L_b_out = numpy.empty(batch + (3,)) if out is None or out[0] is None else out[0]
     L_b_out[..., 0] = I_b_0*omega_b_0
     L_b_out[..., 1] = I_b_1*omega_b_1
     L_b_out[..., 2] = I_b_2*omega_b_2
     return L_b_out
 
 
-def body_rate(I_b, L_b):
+def body_rate(I_b, L_b, *, out=None):
     """Body angular velocity from the body angular momentum.
 
     Generated kernel ``body_rate``; inputs broadcast over leading batch axes.
@@ -2745,6 +2857,8 @@ def body_rate(I_b, L_b):
         principal moments, body frame, kg·m²
     L_b : array_like, shape (..., 3)
         angular momentum, body frame, kg·m²/s
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -2760,14 +2874,14 @@ def body_rate(I_b, L_b):
     L_b_0 = L_b[..., 0]
     L_b_1 = L_b[..., 1]
     L_b_2 = L_b[..., 2]
-    omega_b_out = numpy.empty(batch + (3,))
+    omega_b_out = numpy.empty(batch + (3,)) if out is None or out[0] is None else out[0]
     omega_b_out[..., 0] = L_b_0/I_b_0
     omega_b_out[..., 1] = L_b_1/I_b_1
     omega_b_out[..., 2] = L_b_2/I_b_2
     return omega_b_out
 
 
-def splitting_kick(m, I_b, v_w, omega_b, F_w, tau_b, h):
+def splitting_kick(m, I_b, v_w, omega_b, F_w, tau_b, h, *, out=None):
     """Kick of v and ω under a force and a body torque for time h (q, p fixed).
 
     Generated kernel ``splitting_kick``; inputs broadcast over leading batch axes.
@@ -2788,6 +2902,8 @@ def splitting_kick(m, I_b, v_w, omega_b, F_w, tau_b, h):
         torque, body frame, N·m
     h : array_like, shape (...)
         time step, s
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -2820,18 +2936,18 @@ def splitting_kick(m, I_b, v_w, omega_b, F_w, tau_b, h):
     tau_b_1 = tau_b[..., 1]
     tau_b_2 = tau_b[..., 2]
     t0 = h/m
-    v_next_out = numpy.empty(batch + (3,))
+    v_next_out = numpy.empty(batch + (3,)) if out is None or out[0] is None else out[0]
     v_next_out[..., 0] = F_w_0*t0 + v_w_0
     v_next_out[..., 1] = F_w_1*t0 + v_w_1
     v_next_out[..., 2] = F_w_2*t0 + v_w_2
-    omega_next_out = numpy.empty(batch + (3,))
+    omega_next_out = numpy.empty(batch + (3,)) if out is None or out[1] is None else out[1]
     omega_next_out[..., 0] = omega_b_0 + h*tau_b_0/I_b_0
     omega_next_out[..., 1] = omega_b_1 + h*tau_b_1/I_b_1
     omega_next_out[..., 2] = omega_b_2 + h*tau_b_2/I_b_2
     return v_next_out, omega_next_out
 
 
-def translation_drift(p_w, v_w, h):
+def translation_drift(p_w, v_w, h, *, out=None):
     """Drift of the COM position for time h.
 
     Generated kernel ``translation_drift``; inputs broadcast over leading batch axes.
@@ -2844,6 +2960,8 @@ def translation_drift(p_w, v_w, h):
         COM velocity, world frame, m/s
     h : array_like, shape (...)
         time step, s
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -2860,14 +2978,14 @@ def translation_drift(p_w, v_w, h):
     v_w_0 = v_w[..., 0]
     v_w_1 = v_w[..., 1]
     v_w_2 = v_w[..., 2]
-    p_next_out = numpy.empty(batch + (3,))
+    p_next_out = numpy.empty(batch + (3,)) if out is None or out[0] is None else out[0]
     p_next_out[..., 0] = h*v_w_0 + p_w_0
     p_next_out[..., 1] = h*v_w_1 + p_w_1
     p_next_out[..., 2] = h*v_w_2 + p_w_2
     return p_next_out
 
 
-def semi_implicit_translation(m, p_w, v_w, F_w, h):
+def semi_implicit_translation(m, p_w, v_w, F_w, h, *, out=None):
     """Semi-implicit Euler step of the COM under a force.
 
     Generated kernel ``semi_implicit_translation``; inputs broadcast over leading batch axes.
@@ -2884,6 +3002,8 @@ def semi_implicit_translation(m, p_w, v_w, F_w, h):
         force at the COM, world frame, N
     h : array_like, shape (...)
         time step, s
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -2911,18 +3031,18 @@ def semi_implicit_translation(m, p_w, v_w, F_w, h):
     t1 = F_w_0*t0 + v_w_0
     t2 = F_w_1*t0 + v_w_1
     t3 = F_w_2*t0 + v_w_2
-    p_next_out = numpy.empty(batch + (3,))
+    p_next_out = numpy.empty(batch + (3,)) if out is None or out[0] is None else out[0]
     p_next_out[..., 0] = h*t1 + p_w_0
     p_next_out[..., 1] = h*t2 + p_w_1
     p_next_out[..., 2] = h*t3 + p_w_2
-    v_next_out = numpy.empty(batch + (3,))
+    v_next_out = numpy.empty(batch + (3,)) if out is None or out[1] is None else out[1]
     v_next_out[..., 0] = t1
     v_next_out[..., 1] = t2
     v_next_out[..., 2] = t3
     return p_next_out, v_next_out
 
 
-def translation_rhs(m, v_w, F_w):
+def translation_rhs(m, v_w, F_w, *, out=None):
     """COM translation of a free body.
 
     Generated kernel ``translation_rhs``; inputs broadcast over leading batch axes.
@@ -2935,6 +3055,8 @@ def translation_rhs(m, v_w, F_w):
         COM velocity, world frame, m/s
     F_w : array_like, shape (..., 3)
         force at the COM, world frame, N
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -2954,18 +3076,18 @@ def translation_rhs(m, v_w, F_w):
     F_w_1 = F_w[..., 1]
     F_w_2 = F_w[..., 2]
     t0 = (1.0/m)
-    p_dot_out = numpy.empty(batch + (3,))
+    p_dot_out = numpy.empty(batch + (3,)) if out is None or out[0] is None else out[0]
     p_dot_out[..., 0] = v_w_0
     p_dot_out[..., 1] = v_w_1
     p_dot_out[..., 2] = v_w_2
-    v_dot_out = numpy.empty(batch + (3,))
+    v_dot_out = numpy.empty(batch + (3,)) if out is None or out[1] is None else out[1]
     v_dot_out[..., 0] = F_w_0*t0
     v_dot_out[..., 1] = F_w_1*t0
     v_dot_out[..., 2] = F_w_2*t0
     return p_dot_out, v_dot_out
 
 
-def implicit_gyro_residual(I_b, omega_b, tau_b, h, omega_next):
+def implicit_gyro_residual(I_b, omega_b, tau_b, h, omega_next, *, out=None):
     """Residual of the implicit gyroscopic step.
 
     Generated kernel ``implicit_gyro_residual``; inputs broadcast over leading batch axes.
@@ -2982,6 +3104,8 @@ def implicit_gyro_residual(I_b, omega_b, tau_b, h, omega_next):
         time step, s
     omega_next : array_like, shape (..., 3)
         current iterate of the new angular velocity ω⁺, body frame, rad/s
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -3007,14 +3131,14 @@ def implicit_gyro_residual(I_b, omega_b, tau_b, h, omega_next):
     omega_next_1 = omega_next[..., 1]
     omega_next_2 = omega_next[..., 2]
     t0 = omega_next_0*omega_next_2
-    g_out = numpy.empty(batch + (3,))
+    g_out = numpy.empty(batch + (3,)) if out is None or out[0] is None else out[0]
     g_out[..., 0] = I_b_0*(-omega_b_0 + omega_next_0) - h*tau_b_0 + h*(-I_b_1*omega_next_1*omega_next_2 + I_b_2*omega_next_1*omega_next_2)
     g_out[..., 1] = I_b_1*(-omega_b_1 + omega_next_1) - h*tau_b_1 + h*(I_b_0*t0 - I_b_2*t0)
     g_out[..., 2] = I_b_2*(-omega_b_2 + omega_next_2) - h*tau_b_2 + h*(-I_b_0*omega_next_0*omega_next_1 + I_b_1*omega_next_0*omega_next_1)
     return g_out
 
 
-def implicit_gyro_jacobian(I_b, h, omega_next):
+def implicit_gyro_jacobian(I_b, h, omega_next, *, out=None):
     """Jacobian of the implicit-gyro residual, differentiated by SymPy.
 
     Generated kernel ``implicit_gyro_jacobian``; inputs broadcast over leading batch axes.
@@ -3027,6 +3151,8 @@ def implicit_gyro_jacobian(I_b, h, omega_next):
         time step, s
     omega_next : array_like, shape (..., 3)
         current iterate of the new angular velocity ω⁺, body frame, rad/s
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -3046,7 +3172,7 @@ def implicit_gyro_jacobian(I_b, h, omega_next):
     t0 = -I_b_2*omega_next_2
     t1 = I_b_1*omega_next_1
     t2 = I_b_0*omega_next_0
-    J_out = numpy.empty(batch + (3, 3))
+    J_out = numpy.empty(batch + (3, 3)) if out is None or out[0] is None else out[0]
     J_out[..., 0, 0] = I_b_0
     J_out[..., 0, 1] = h*(-I_b_1*omega_next_2 - t0)
     J_out[..., 0, 2] = h*(I_b_2*omega_next_1 - t1)
@@ -3059,7 +3185,7 @@ def implicit_gyro_jacobian(I_b, h, omega_next):
     return J_out
 
 
-def implicit_gyro_newton(I_b, omega_b, tau_b, h, omega_next):
+def implicit_gyro_newton(I_b, omega_b, tau_b, h, omega_next, *, out=None):
     """One Newton update of the implicit gyroscopic step (adjugate solve).
 
     Generated kernel ``implicit_gyro_newton``; inputs broadcast over leading batch axes.
@@ -3076,6 +3202,8 @@ def implicit_gyro_newton(I_b, omega_b, tau_b, h, omega_next):
         time step, s
     omega_next : array_like, shape (..., 3)
         current iterate of the new angular velocity ω⁺, body frame, rad/s
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -3126,18 +3254,18 @@ def implicit_gyro_newton(I_b, omega_b, tau_b, h, omega_next):
     t21 = I_b_0*h
     t22 = t16*(t15*t17 + t18*(t11*t3*t7 - t2*t21) + t19*(I_b_0*I_b_2 - t3*t7*t8))
     t23 = t16*(t12*t17 + t18*(I_b_0*I_b_1 - t11*t13*t3) + t19*(t13*t3*t8 - t21*t4))
-    omega_new_out = numpy.empty(batch + (3,))
+    omega_new_out = numpy.empty(batch + (3,)) if out is None or out[0] is None else out[0]
     omega_new_out[..., 0] = omega_next_0 - t20
     omega_new_out[..., 1] = omega_next_1 - t22
     omega_new_out[..., 2] = omega_next_2 - t23
-    delta_out = numpy.empty(batch + (3,))
+    delta_out = numpy.empty(batch + (3,)) if out is None or out[1] is None else out[1]
     delta_out[..., 0] = t20
     delta_out[..., 1] = t22
     delta_out[..., 2] = t23
     return omega_new_out, delta_out
 
 
-def quat_exp_step(q, omega_b, h):
+def quat_exp_step(q, omega_b, h, *, out=None):
     """Attitude step by the exponential map of a body angular velocity held over h.
 
     Generated kernel ``quat_exp_step``; inputs broadcast over leading batch axes.
@@ -3150,6 +3278,8 @@ def quat_exp_step(q, omega_b, h):
         angular velocity, body frame, rad/s
     h : array_like, shape (...)
         time step, s
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -3177,7 +3307,7 @@ def quat_exp_step(q, omega_b, h):
         t6 = omega_b_0*t5
         t7 = omega_b_2*t5
         t8 = omega_b_1*t5
-        q_next_out = numpy.empty(batch + (4,))
+        q_next_out = numpy.empty(batch + (4,)) if out is None or out[0] is None else out[0]
         q_next_out[..., 0] = q_0*t4 + q_1*t7 - q_2*t8 + q_3*t6
         q_next_out[..., 1] = -q_0*t7 + q_1*t4 + q_2*t6 + q_3*t8
         q_next_out[..., 2] = q_0*t8 - q_1*t6 + q_2*t4 + q_3*t7
@@ -3185,7 +3315,7 @@ def quat_exp_step(q, omega_b, h):
     return q_next_out
 
 
-def rkmk_dexpinv(u_b, omega_b):
+def rkmk_dexpinv(u_b, omega_b, *, out=None):
     """Rate of the attitude's exponential coordinates (RKMK4, truncated dexp inverse).
 
     Generated kernel ``rkmk_dexpinv``; inputs broadcast over leading batch axes.
@@ -3196,6 +3326,8 @@ def rkmk_dexpinv(u_b, omega_b):
         rotation vector of the attitude relative to the step's start, body frame, rad
     omega_b : array_like, shape (..., 3)
         angular velocity, body frame, rad/s
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -3219,14 +3351,14 @@ def rkmk_dexpinv(u_b, omega_b):
     t5 = t3 - t4
     t6 = ((1.0/12.0))*u_b_2
     t7 = omega_b_2*u_b_1 - t0
-    u_dot_out = numpy.empty(batch + (3,))
+    u_dot_out = numpy.empty(batch + (3,)) if out is None or out[0] is None else out[0]
     u_dot_out[..., 0] = omega_b_0 + ((1.0/2.0))*omega_b_2*u_b_1 - (1.0/2.0)*t0 + t2*u_b_1 - t5*t6
     u_dot_out[..., 1] = omega_b_1 - t2*u_b_0 + ((1.0/2.0))*t3 - (1.0/2.0)*t4 + t6*t7
     u_dot_out[..., 2] = ((1.0/2.0))*omega_b_1*u_b_0 + omega_b_2 - (1.0/2.0)*t1 + ((1.0/12.0))*t5*u_b_0 - (1.0/12.0)*t7*u_b_1
     return u_dot_out
 
 
-def wheel_saturation(command, Omega, torque_limit, speed_limit):
+def wheel_saturation(command, Omega, torque_limit, speed_limit, *, out=None):
     """Motor torques actually applied: clipped, and cut off beyond the speed limit.
 
     Generated kernel ``wheel_saturation``; inputs broadcast over leading batch axes.
@@ -3241,6 +3373,8 @@ def wheel_saturation(command, Omega, torque_limit, speed_limit):
         N·m
     speed_limit : array_like, shape (...)
         rad/s
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -3272,14 +3406,14 @@ def wheel_saturation(command, Omega, torque_limit, speed_limit):
         t10 = numpy.less_equal(speed_limit, abs(Omega_2))
         t11 = Omega_2*torque_limit
         t12 = numpy.greater(command_2, torque_limit)
-        u_out = numpy.empty(batch + (3,))
+        u_out = numpy.empty(batch + (3,)) if out is None or out[0] is None else out[0]
         u_out[..., 0] = numpy.select([numpy.logical_and.reduce((t2,numpy.logical_or.reduce((numpy.logical_not(t1),numpy.less(t3, 0))),numpy.logical_or.reduce((t1,numpy.logical_not(t4),numpy.greater(t3, 0))),numpy.logical_or.reduce((t1,t4,numpy.greater(Omega_0*command_0, 0))))),True], [0,numpy.select([t1,t4,True], [t0,torque_limit,command_0], default=numpy.nan)], default=numpy.nan)
         u_out[..., 1] = numpy.select([numpy.logical_and.reduce((t6,numpy.logical_or.reduce((numpy.logical_not(t5),numpy.less(t7, 0))),numpy.logical_or.reduce((t5,numpy.logical_not(t8),numpy.greater(t7, 0))),numpy.logical_or.reduce((t5,t8,numpy.greater(Omega_1*command_1, 0))))),True], [0,numpy.select([t5,t8,True], [t0,torque_limit,command_1], default=numpy.nan)], default=numpy.nan)
         u_out[..., 2] = numpy.select([numpy.logical_and.reduce((t10,numpy.logical_or.reduce((numpy.logical_not(t9),numpy.less(t11, 0))),numpy.logical_or.reduce((t9,numpy.logical_not(t12),numpy.greater(t11, 0))),numpy.logical_or.reduce((t12,t9,numpy.greater(Omega_2*command_2, 0))))),True], [0,numpy.select([t9,t12,True], [t0,torque_limit,command_2], default=numpy.nan)], default=numpy.nan)
     return u_out
 
 
-def wheel_motor(command, Omega, torque_limit, speed_limit, cutoff):
+def wheel_motor(command, Omega, torque_limit, speed_limit, cutoff, *, out=None):
     """Motor torques actually applied: a torque–speed line from the stall torque to the no-load speed (cutoff = 0), or the hard cut-off of wheel_saturation (cutoff = 1).
 
     Generated kernel ``wheel_motor``; inputs broadcast over leading batch axes.
@@ -3296,6 +3430,8 @@ def wheel_motor(command, Omega, torque_limit, speed_limit, cutoff):
         no-load speed, rad/s
     cutoff : array_like, shape (...)
         1: hard cut-off at speed_limit instead of the line; 0: the line
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -3355,14 +3491,14 @@ def wheel_motor(command, Omega, torque_limit, speed_limit, cutoff):
         t37 = numpy.less_equal(Omega_2, t11)
         t38 = torque_limit*(-t13*t29 + 1)
         t39 = -t38
-        u_out = numpy.empty(batch + (3,))
+        u_out = numpy.empty(batch + (3,)) if out is None or out[0] is None else out[0]
         u_out[..., 0] = numpy.select([t7,True], [numpy.select([numpy.logical_and.reduce((t3,numpy.logical_or.reduce((numpy.logical_not(t1),numpy.less(t4, 0))),numpy.logical_or.reduce((t1,numpy.logical_not(t5),numpy.greater(t4, 0))),numpy.logical_or.reduce((t1,t5,numpy.greater(Omega_0*command_0, 0))))),True], [0,t6], default=numpy.nan),numpy.select([numpy.logical_and.reduce((numpy.logical_or.reduce((t10,t12)),numpy.logical_or.reduce((t10,t9)),numpy.logical_or.reduce((t12,t8)),numpy.logical_or.reduce((t8,t9)))),numpy.logical_and.reduce((numpy.greater(Omega_0, 0),numpy.greater(command_0, t14),numpy.less(Omega_0, speed_limit))),numpy.logical_and.reduce((numpy.greater(Omega_0, t11),numpy.less(Omega_0, 0),numpy.less(command_0, t15))),True], [0,t14,t15,t6], default=numpy.nan)], default=numpy.nan)
         u_out[..., 1] = numpy.select([t7,True], [numpy.select([numpy.logical_and.reduce((t18,numpy.logical_or.reduce((numpy.logical_not(t16),numpy.less(t19, 0))),numpy.logical_or.reduce((t16,numpy.logical_not(t20),numpy.greater(t19, 0))),numpy.logical_or.reduce((t16,t20,numpy.greater(Omega_1*command_1, 0))))),True], [0,t21], default=numpy.nan),numpy.select([numpy.logical_and.reduce((numpy.logical_or.reduce((t22,t23)),numpy.logical_or.reduce((t22,t25)),numpy.logical_or.reduce((t23,t24)),numpy.logical_or.reduce((t24,t25)))),numpy.logical_and.reduce((numpy.greater(Omega_1, 0),numpy.greater(command_1, t26),numpy.less(Omega_1, speed_limit))),numpy.logical_and.reduce((numpy.greater(Omega_1, t11),numpy.less(Omega_1, 0),numpy.less(command_1, t27))),True], [0,t26,t27,t21], default=numpy.nan)], default=numpy.nan)
         u_out[..., 2] = numpy.select([t7,True], [numpy.select([numpy.logical_and.reduce((t30,numpy.logical_or.reduce((numpy.logical_not(t28),numpy.less(t31, 0))),numpy.logical_or.reduce((t28,numpy.logical_not(t32),numpy.greater(t31, 0))),numpy.logical_or.reduce((t28,t32,numpy.greater(Omega_2*command_2, 0))))),True], [0,t33], default=numpy.nan),numpy.select([numpy.logical_and.reduce((numpy.logical_or.reduce((t34,t35)),numpy.logical_or.reduce((t34,t37)),numpy.logical_or.reduce((t35,t36)),numpy.logical_or.reduce((t36,t37)))),numpy.logical_and.reduce((numpy.greater(Omega_2, 0),numpy.greater(command_2, t38),numpy.less(Omega_2, speed_limit))),numpy.logical_and.reduce((numpy.greater(Omega_2, t11),numpy.less(Omega_2, 0),numpy.less(command_2, t39))),True], [0,t38,t39,t33], default=numpy.nan)], default=numpy.nan)
     return u_out
 
 
-def wheels3_body_rhs(q, omega_b, Omega, I_p, A_b, J, r_b, F_w, tau_w, u, c_w):
+def wheels3_body_rhs(q, omega_b, Omega, I_p, A_b, J, r_b, F_w, tau_w, u, c_w, *, out=None):
     """Body with 3 reaction wheels on arbitrary axes rotating about a pivot.
 
     Generated kernel ``wheels3_body_rhs``; inputs broadcast over leading batch axes.
@@ -3391,6 +3527,8 @@ def wheels3_body_rhs(q, omega_b, Omega, I_p, A_b, J, r_b, F_w, tau_w, u, c_w):
         motor torques on the wheels (body gets −A_b u), N·m
     c_w : array_like, shape (...)
         wheel damping, N·m·s/rad
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -3530,23 +3668,23 @@ def wheels3_body_rhs(q, omega_b, Omega, I_p, A_b, J, r_b, F_w, tau_w, u, c_w):
     t28 = k_w_0*t24 + k_w_1*t26 + k_w_2*t27
     t29 = k_w_3*t24 + k_w_4*t26 + k_w_5*t27
     t30 = k_w_6*t24 + k_w_7*t26 + k_w_8*t27
-    q_dot_out = numpy.empty(batch + (4,))
+    q_dot_out = numpy.empty(batch + (4,)) if out is None or out[0] is None else out[0]
     q_dot_out[..., 0] = q_1*t2 - q_2*t1 + q_3*t0
     q_dot_out[..., 1] = -q_0*t2 + q_2*t0 + q_3*t1
     q_dot_out[..., 2] = q_0*t1 - q_1*t0 + q_3*t2
     q_dot_out[..., 3] = -q_0*t0 - q_1*t1 - q_2*t2
-    omega_dot_b_out = numpy.empty(batch + (3,))
+    omega_dot_b_out = numpy.empty(batch + (3,)) if out is None or out[1] is None else out[1]
     omega_dot_b_out[..., 0] = t28
     omega_dot_b_out[..., 1] = t29
     omega_dot_b_out[..., 2] = t30
-    Omega_dot_out = numpy.empty(batch + (3,))
+    Omega_dot_out = numpy.empty(batch + (3,)) if out is None or out[2] is None else out[2]
     Omega_dot_out[..., 0] = -A_b_00*t28 - A_b_10*t29 - A_b_20*t30 + g_w_0*k_w_9
     Omega_dot_out[..., 1] = -A_b_01*t28 - A_b_11*t29 - A_b_21*t30 + g_w_1*k_w_10
     Omega_dot_out[..., 2] = -A_b_02*t28 - A_b_12*t29 - A_b_22*t30 + g_w_2*k_w_11
     return q_dot_out, omega_dot_b_out, Omega_dot_out
 
 
-def wheels3_momentum(q, omega_b, Omega, I_p, A_b, J):
+def wheels3_momentum(q, omega_b, Omega, I_p, A_b, J, *, out=None):
     """World angular momentum about the pivot of a body with 3 wheels, and the wheels' axial momenta.
 
     Generated kernel ``wheels3_momentum``; inputs broadcast over leading batch axes.
@@ -3565,6 +3703,8 @@ def wheels3_momentum(q, omega_b, Omega, I_p, A_b, J):
         wheel spin axes as columns (3×3, unit columns), body frame, row-major
     J : array_like, shape (..., 3)
         wheel axial inertias (3), kg·m²
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -3644,22 +3784,22 @@ def wheels3_momentum(q, omega_b, Omega, I_p, A_b, J):
     t31 = A_b_10*t28 + A_b_11*t29 + A_b_12*t30
     t32 = A_b_20*t28 + A_b_21*t29 + A_b_22*t30
     t33 = A_b_00*t28 + A_b_01*t29 + A_b_02*t30
-    L_body_w_out = numpy.empty(batch + (3,))
+    L_body_w_out = numpy.empty(batch + (3,)) if out is None or out[0] is None else out[0]
     L_body_w_out[..., 0] = t10*t4 + t13*t15 + t18*t19
     L_body_w_out[..., 1] = t10*t24 + t15*t22 + t19*t20
     L_body_w_out[..., 2] = t10*t26 + t15*t27 + t19*t25
-    L_wheels_w_out = numpy.empty(batch + (3,))
+    L_wheels_w_out = numpy.empty(batch + (3,)) if out is None or out[1] is None else out[1]
     L_wheels_w_out[..., 0] = t13*t32 + t18*t33 + t31*t4
     L_wheels_w_out[..., 1] = t20*t33 + t22*t32 + t24*t31
     L_wheels_w_out[..., 2] = t25*t33 + t26*t31 + t27*t32
-    h_w_out = numpy.empty(batch + (3,))
+    h_w_out = numpy.empty(batch + (3,)) if out is None or out[2] is None else out[2]
     h_w_out[..., 0] = t28
     h_w_out[..., 1] = t29
     h_w_out[..., 2] = t30
     return L_body_w_out, L_wheels_w_out, h_w_out
 
 
-def wheels3_motor(command, Omega, torque_limit, speed_limit, cutoff):
+def wheels3_motor(command, Omega, torque_limit, speed_limit, cutoff, *, out=None):
     """Motor torques actually applied on 3 wheels (the wheel_motor line, per wheel).
 
     Generated kernel ``wheels3_motor``; inputs broadcast over leading batch axes.
@@ -3676,6 +3816,8 @@ def wheels3_motor(command, Omega, torque_limit, speed_limit, cutoff):
         no-load speed, rad/s
     cutoff : array_like, shape (...)
         1: hard cut-off at speed_limit instead of the line; 0: the line
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -3735,14 +3877,14 @@ def wheels3_motor(command, Omega, torque_limit, speed_limit, cutoff):
         t37 = numpy.less_equal(Omega_2, t11)
         t38 = torque_limit*(-t13*t29 + 1)
         t39 = -t38
-        u_out = numpy.empty(batch + (3,))
+        u_out = numpy.empty(batch + (3,)) if out is None or out[0] is None else out[0]
         u_out[..., 0] = numpy.select([t7,True], [numpy.select([numpy.logical_and.reduce((t3,numpy.logical_or.reduce((numpy.logical_not(t1),numpy.less(t4, 0))),numpy.logical_or.reduce((t1,numpy.logical_not(t5),numpy.greater(t4, 0))),numpy.logical_or.reduce((t1,t5,numpy.greater(Omega_0*command_0, 0))))),True], [0,t6], default=numpy.nan),numpy.select([numpy.logical_and.reduce((numpy.logical_or.reduce((t10,t12)),numpy.logical_or.reduce((t10,t9)),numpy.logical_or.reduce((t12,t8)),numpy.logical_or.reduce((t8,t9)))),numpy.logical_and.reduce((numpy.greater(Omega_0, 0),numpy.greater(command_0, t14),numpy.less(Omega_0, speed_limit))),numpy.logical_and.reduce((numpy.greater(Omega_0, t11),numpy.less(Omega_0, 0),numpy.less(command_0, t15))),True], [0,t14,t15,t6], default=numpy.nan)], default=numpy.nan)
         u_out[..., 1] = numpy.select([t7,True], [numpy.select([numpy.logical_and.reduce((t18,numpy.logical_or.reduce((numpy.logical_not(t16),numpy.less(t19, 0))),numpy.logical_or.reduce((t16,numpy.logical_not(t20),numpy.greater(t19, 0))),numpy.logical_or.reduce((t16,t20,numpy.greater(Omega_1*command_1, 0))))),True], [0,t21], default=numpy.nan),numpy.select([numpy.logical_and.reduce((numpy.logical_or.reduce((t22,t23)),numpy.logical_or.reduce((t22,t25)),numpy.logical_or.reduce((t23,t24)),numpy.logical_or.reduce((t24,t25)))),numpy.logical_and.reduce((numpy.greater(Omega_1, 0),numpy.greater(command_1, t26),numpy.less(Omega_1, speed_limit))),numpy.logical_and.reduce((numpy.greater(Omega_1, t11),numpy.less(Omega_1, 0),numpy.less(command_1, t27))),True], [0,t26,t27,t21], default=numpy.nan)], default=numpy.nan)
         u_out[..., 2] = numpy.select([t7,True], [numpy.select([numpy.logical_and.reduce((t30,numpy.logical_or.reduce((numpy.logical_not(t28),numpy.less(t31, 0))),numpy.logical_or.reduce((t28,numpy.logical_not(t32),numpy.greater(t31, 0))),numpy.logical_or.reduce((t28,t32,numpy.greater(Omega_2*command_2, 0))))),True], [0,t33], default=numpy.nan),numpy.select([numpy.logical_and.reduce((numpy.logical_or.reduce((t34,t35)),numpy.logical_or.reduce((t34,t37)),numpy.logical_or.reduce((t35,t36)),numpy.logical_or.reduce((t36,t37)))),numpy.logical_and.reduce((numpy.greater(Omega_2, 0),numpy.greater(command_2, t38),numpy.less(Omega_2, speed_limit))),numpy.logical_and.reduce((numpy.greater(Omega_2, t11),numpy.less(Omega_2, 0),numpy.less(command_2, t39))),True], [0,t38,t39,t33], default=numpy.nan)], default=numpy.nan)
     return u_out
 
 
-def wheels4_body_rhs(q, omega_b, Omega, I_p, A_b, J, r_b, F_w, tau_w, u, c_w):
+def wheels4_body_rhs(q, omega_b, Omega, I_p, A_b, J, r_b, F_w, tau_w, u, c_w, *, out=None):
     """Body with 4 reaction wheels on arbitrary axes rotating about a pivot.
 
     Generated kernel ``wheels4_body_rhs``; inputs broadcast over leading batch axes.
@@ -3771,6 +3913,8 @@ def wheels4_body_rhs(q, omega_b, Omega, I_p, A_b, J, r_b, F_w, tau_w, u, c_w):
         motor torques on the wheels (body gets −A_b u), N·m
     c_w : array_like, shape (...)
         wheel damping, N·m·s/rad
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -3919,16 +4063,16 @@ def wheels4_body_rhs(q, omega_b, Omega, I_p, A_b, J, r_b, F_w, tau_w, u, c_w):
     t28 = k_w_0*t24 + k_w_1*t26 + k_w_2*t27
     t29 = k_w_3*t24 + k_w_4*t26 + k_w_5*t27
     t30 = k_w_6*t24 + k_w_7*t26 + k_w_8*t27
-    q_dot_out = numpy.empty(batch + (4,))
+    q_dot_out = numpy.empty(batch + (4,)) if out is None or out[0] is None else out[0]
     q_dot_out[..., 0] = q_1*t2 - q_2*t1 + q_3*t0
     q_dot_out[..., 1] = -q_0*t2 + q_2*t0 + q_3*t1
     q_dot_out[..., 2] = q_0*t1 - q_1*t0 + q_3*t2
     q_dot_out[..., 3] = -q_0*t0 - q_1*t1 - q_2*t2
-    omega_dot_b_out = numpy.empty(batch + (3,))
+    omega_dot_b_out = numpy.empty(batch + (3,)) if out is None or out[1] is None else out[1]
     omega_dot_b_out[..., 0] = t28
     omega_dot_b_out[..., 1] = t29
     omega_dot_b_out[..., 2] = t30
-    Omega_dot_out = numpy.empty(batch + (4,))
+    Omega_dot_out = numpy.empty(batch + (4,)) if out is None or out[2] is None else out[2]
     Omega_dot_out[..., 0] = -A_b_00*t28 - A_b_10*t29 - A_b_20*t30 + g_w_0*k_w_9
     Omega_dot_out[..., 1] = -A_b_01*t28 - A_b_11*t29 - A_b_21*t30 + g_w_1*k_w_10
     Omega_dot_out[..., 2] = -A_b_02*t28 - A_b_12*t29 - A_b_22*t30 + g_w_2*k_w_11
@@ -3936,7 +4080,7 @@ def wheels4_body_rhs(q, omega_b, Omega, I_p, A_b, J, r_b, F_w, tau_w, u, c_w):
     return q_dot_out, omega_dot_b_out, Omega_dot_out
 
 
-def wheels4_coefficients(I_p, A_b, J):
+def wheels4_coefficients(I_p, A_b, J, *, out=None):
     """The inertia-only coefficients of the 4-wheel equations, computed once per body and call.
 
     Generated kernel ``wheels4_coefficients``; inputs broadcast over leading batch axes.
@@ -3949,6 +4093,8 @@ def wheels4_coefficients(I_p, A_b, J):
         wheel spin axes as columns (3×4, unit columns), body frame, row-major
     J : array_like, shape (..., 4)
         wheel axial inertias (4), kg·m²
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -3997,7 +4143,7 @@ def wheels4_coefficients(I_p, A_b, J):
     t0 = C_01*inv_det_M
     t1 = C_02*inv_det_M
     t2 = C_12*inv_det_M
-    k_w_out = numpy.empty(batch + (13,))
+    k_w_out = numpy.empty(batch + (13,)) if out is None or out[0] is None else out[0]
     k_w_out[..., 0] = C_00*inv_det_M
     k_w_out[..., 1] = t0
     k_w_out[..., 2] = t1
@@ -4014,7 +4160,7 @@ def wheels4_coefficients(I_p, A_b, J):
     return k_w_out
 
 
-def wheels4_body_rhs_c(q, omega_b, Omega, I_p, A_b, J, k_w, r_b, F_w, tau_w, u, c_w):
+def wheels4_body_rhs_c(q, omega_b, Omega, I_p, A_b, J, k_w, r_b, F_w, tau_w, u, c_w, *, out=None):
     """wheels4_body_rhs on the coefficients k_w (no division).
 
     Generated kernel ``wheels4_body_rhs_c``; inputs broadcast over leading batch axes.
@@ -4045,6 +4191,8 @@ def wheels4_body_rhs_c(q, omega_b, Omega, I_p, A_b, J, k_w, r_b, F_w, tau_w, u, 
         motor torques on the wheels (body gets −A_b u), N·m
     c_w : array_like, shape (...)
         wheel damping, N·m·s/rad
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -4181,16 +4329,16 @@ def wheels4_body_rhs_c(q, omega_b, Omega, I_p, A_b, J, k_w, r_b, F_w, tau_w, u, 
     t28 = k_w_0*t24 + k_w_1*t26 + k_w_2*t27
     t29 = k_w_3*t24 + k_w_4*t26 + k_w_5*t27
     t30 = k_w_6*t24 + k_w_7*t26 + k_w_8*t27
-    q_dot_out = numpy.empty(batch + (4,))
+    q_dot_out = numpy.empty(batch + (4,)) if out is None or out[0] is None else out[0]
     q_dot_out[..., 0] = q_1*t2 - q_2*t1 + q_3*t0
     q_dot_out[..., 1] = -q_0*t2 + q_2*t0 + q_3*t1
     q_dot_out[..., 2] = q_0*t1 - q_1*t0 + q_3*t2
     q_dot_out[..., 3] = -q_0*t0 - q_1*t1 - q_2*t2
-    omega_dot_b_out = numpy.empty(batch + (3,))
+    omega_dot_b_out = numpy.empty(batch + (3,)) if out is None or out[1] is None else out[1]
     omega_dot_b_out[..., 0] = t28
     omega_dot_b_out[..., 1] = t29
     omega_dot_b_out[..., 2] = t30
-    Omega_dot_out = numpy.empty(batch + (4,))
+    Omega_dot_out = numpy.empty(batch + (4,)) if out is None or out[2] is None else out[2]
     Omega_dot_out[..., 0] = -A_b_00*t28 - A_b_10*t29 - A_b_20*t30 + g_w_0*k_w_9
     Omega_dot_out[..., 1] = -A_b_01*t28 - A_b_11*t29 - A_b_21*t30 + g_w_1*k_w_10
     Omega_dot_out[..., 2] = -A_b_02*t28 - A_b_12*t29 - A_b_22*t30 + g_w_2*k_w_11
@@ -4198,7 +4346,7 @@ def wheels4_body_rhs_c(q, omega_b, Omega, I_p, A_b, J, k_w, r_b, F_w, tau_w, u, 
     return q_dot_out, omega_dot_b_out, Omega_dot_out
 
 
-def wheels4_momentum(q, omega_b, Omega, I_p, A_b, J):
+def wheels4_momentum(q, omega_b, Omega, I_p, A_b, J, *, out=None):
     """World angular momentum about the pivot of a body with 4 wheels, and the wheels' axial momenta.
 
     Generated kernel ``wheels4_momentum``; inputs broadcast over leading batch axes.
@@ -4217,6 +4365,8 @@ def wheels4_momentum(q, omega_b, Omega, I_p, A_b, J):
         wheel spin axes as columns (3×4, unit columns), body frame, row-major
     J : array_like, shape (..., 4)
         wheel axial inertias (4), kg·m²
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -4303,15 +4453,15 @@ def wheels4_momentum(q, omega_b, Omega, I_p, A_b, J):
     t33 = A_b_10*t29 + A_b_11*t30 + A_b_12*t31 + A_b_13*t32
     t34 = A_b_20*t29 + A_b_21*t30 + A_b_22*t31 + A_b_23*t32
     t35 = A_b_00*t29 + A_b_01*t30 + A_b_02*t31 + A_b_03*t32
-    L_body_w_out = numpy.empty(batch + (3,))
+    L_body_w_out = numpy.empty(batch + (3,)) if out is None or out[0] is None else out[0]
     L_body_w_out[..., 0] = t11*t4 + t14*t16 + t19*t20
     L_body_w_out[..., 1] = t11*t25 + t16*t23 + t20*t21
     L_body_w_out[..., 2] = t11*t27 + t16*t28 + t20*t26
-    L_wheels_w_out = numpy.empty(batch + (3,))
+    L_wheels_w_out = numpy.empty(batch + (3,)) if out is None or out[1] is None else out[1]
     L_wheels_w_out[..., 0] = t14*t34 + t19*t35 + t33*t4
     L_wheels_w_out[..., 1] = t21*t35 + t23*t34 + t25*t33
     L_wheels_w_out[..., 2] = t26*t35 + t27*t33 + t28*t34
-    h_w_out = numpy.empty(batch + (4,))
+    h_w_out = numpy.empty(batch + (4,)) if out is None or out[2] is None else out[2]
     h_w_out[..., 0] = t29
     h_w_out[..., 1] = t30
     h_w_out[..., 2] = t31
@@ -4319,7 +4469,7 @@ def wheels4_momentum(q, omega_b, Omega, I_p, A_b, J):
     return L_body_w_out, L_wheels_w_out, h_w_out
 
 
-def wheels4_motor(command, Omega, torque_limit, speed_limit, cutoff):
+def wheels4_motor(command, Omega, torque_limit, speed_limit, cutoff, *, out=None):
     """Motor torques actually applied on 4 wheels (the wheel_motor line, per wheel).
 
     Generated kernel ``wheels4_motor``; inputs broadcast over leading batch axes.
@@ -4336,6 +4486,8 @@ def wheels4_motor(command, Omega, torque_limit, speed_limit, cutoff):
         no-load speed, rad/s
     cutoff : array_like, shape (...)
         1: hard cut-off at speed_limit instead of the line; 0: the line
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -4409,7 +4561,7 @@ def wheels4_motor(command, Omega, torque_limit, speed_limit, cutoff):
         t49 = numpy.less_equal(Omega_3, t11)
         t50 = torque_limit*(-t13*t41 + 1)
         t51 = -t50
-        u_out = numpy.empty(batch + (4,))
+        u_out = numpy.empty(batch + (4,)) if out is None or out[0] is None else out[0]
         u_out[..., 0] = numpy.select([t7,True], [numpy.select([numpy.logical_and.reduce((t3,numpy.logical_or.reduce((numpy.logical_not(t1),numpy.less(t4, 0))),numpy.logical_or.reduce((t1,numpy.logical_not(t5),numpy.greater(t4, 0))),numpy.logical_or.reduce((t1,t5,numpy.greater(Omega_0*command_0, 0))))),True], [0,t6], default=numpy.nan),numpy.select([numpy.logical_and.reduce((numpy.logical_or.reduce((t10,t12)),numpy.logical_or.reduce((t10,t9)),numpy.logical_or.reduce((t12,t8)),numpy.logical_or.reduce((t8,t9)))),numpy.logical_and.reduce((numpy.greater(Omega_0, 0),numpy.greater(command_0, t14),numpy.less(Omega_0, speed_limit))),numpy.logical_and.reduce((numpy.greater(Omega_0, t11),numpy.less(Omega_0, 0),numpy.less(command_0, t15))),True], [0,t14,t15,t6], default=numpy.nan)], default=numpy.nan)
         u_out[..., 1] = numpy.select([t7,True], [numpy.select([numpy.logical_and.reduce((t18,numpy.logical_or.reduce((numpy.logical_not(t16),numpy.less(t19, 0))),numpy.logical_or.reduce((t16,numpy.logical_not(t20),numpy.greater(t19, 0))),numpy.logical_or.reduce((t16,t20,numpy.greater(Omega_1*command_1, 0))))),True], [0,t21], default=numpy.nan),numpy.select([numpy.logical_and.reduce((numpy.logical_or.reduce((t22,t23)),numpy.logical_or.reduce((t22,t25)),numpy.logical_or.reduce((t23,t24)),numpy.logical_or.reduce((t24,t25)))),numpy.logical_and.reduce((numpy.greater(Omega_1, 0),numpy.greater(command_1, t26),numpy.less(Omega_1, speed_limit))),numpy.logical_and.reduce((numpy.greater(Omega_1, t11),numpy.less(Omega_1, 0),numpy.less(command_1, t27))),True], [0,t26,t27,t21], default=numpy.nan)], default=numpy.nan)
         u_out[..., 2] = numpy.select([t7,True], [numpy.select([numpy.logical_and.reduce((t30,numpy.logical_or.reduce((numpy.logical_not(t28),numpy.less(t31, 0))),numpy.logical_or.reduce((t28,numpy.logical_not(t32),numpy.greater(t31, 0))),numpy.logical_or.reduce((t28,t32,numpy.greater(Omega_2*command_2, 0))))),True], [0,t33], default=numpy.nan),numpy.select([numpy.logical_and.reduce((numpy.logical_or.reduce((t34,t35)),numpy.logical_or.reduce((t34,t37)),numpy.logical_or.reduce((t35,t36)),numpy.logical_or.reduce((t36,t37)))),numpy.logical_and.reduce((numpy.greater(Omega_2, 0),numpy.greater(command_2, t38),numpy.less(Omega_2, speed_limit))),numpy.logical_and.reduce((numpy.greater(Omega_2, t11),numpy.less(Omega_2, 0),numpy.less(command_2, t39))),True], [0,t38,t39,t33], default=numpy.nan)], default=numpy.nan)
@@ -4417,7 +4569,7 @@ def wheels4_motor(command, Omega, torque_limit, speed_limit, cutoff):
     return u_out
 
 
-def quat_error_chart_inverse(q_ref, dtheta):
+def quat_error_chart_inverse(q_ref, dtheta, *, out=None):
     """Orientation at an attitude error about a reference (inverse of quat_error_chart).
 
     Generated kernel ``quat_error_chart_inverse``; inputs broadcast over leading batch axes.
@@ -4428,6 +4580,8 @@ def quat_error_chart_inverse(q_ref, dtheta):
         quaternion (x, y, z, w), scalar last, unit, body to world
     dtheta : array_like, shape (..., 3)
         attitude error, body frame, rad; |dtheta| < 2
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -4448,7 +4602,7 @@ def quat_error_chart_inverse(q_ref, dtheta):
     t1 = ((1.0/2.0))*dtheta_1
     t2 = ((1.0/2.0))*dtheta_2
     t3 = numpy.sqrt(-(1.0/4.0)*(dtheta_0*dtheta_0) - (1.0/4.0)*(dtheta_1*dtheta_1) - (1.0/4.0)*(dtheta_2*dtheta_2) + 1)
-    q_out = numpy.empty(batch + (4,))
+    q_out = numpy.empty(batch + (4,)) if out is None or out[0] is None else out[0]
     q_out[..., 0] = q_ref_0*t3 + q_ref_1*t2 - q_ref_2*t1 + q_ref_3*t0
     q_out[..., 1] = -q_ref_0*t2 + q_ref_1*t3 + q_ref_2*t0 + q_ref_3*t1
     q_out[..., 2] = q_ref_0*t1 - q_ref_1*t0 + q_ref_2*t3 + q_ref_3*t2
@@ -4456,7 +4610,7 @@ def quat_error_chart_inverse(q_ref, dtheta):
     return q_out
 
 
-def quat_normalize_scaled(q):
+def quat_normalize_scaled(q, *, out=None):
     """Scale to unit length without overflow or underflow, and the norm.
 
     Generated kernel ``quat_normalize_scaled``; inputs broadcast over leading batch axes.
@@ -4465,6 +4619,8 @@ def quat_normalize_scaled(q):
     ----------
     q : array_like, shape (..., 4)
         quaternion (x, y, z, w), scalar last
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -4487,17 +4643,17 @@ def quat_normalize_scaled(q):
         q_scaled_3 = q_3/q_scale
         q_scaled_norm = numpy.sqrt((q_scaled_0*q_scaled_0) + (q_scaled_1*q_scaled_1) + (q_scaled_2*q_scaled_2) + (q_scaled_3*q_scaled_3))
         t0 = (1.0/q_scaled_norm)
-        q_unit_out = numpy.empty(batch + (4,))
+        q_unit_out = numpy.empty(batch + (4,)) if out is None or out[0] is None else out[0]
         q_unit_out[..., 0] = q_scaled_0*t0
         q_unit_out[..., 1] = q_scaled_1*t0
         q_unit_out[..., 2] = q_scaled_2*t0
         q_unit_out[..., 3] = q_scaled_3*t0
-        norm_out = numpy.empty(batch)
+        norm_out = numpy.empty(batch) if out is None or out[1] is None else out[1]
         norm_out[...] = numpy.select([numpy.equal(q_scale, 0),True], [0,q_scale*q_scaled_norm], default=numpy.nan)
     return q_unit_out, norm_out
 
 
-def wheels4_free_inertia(I_p, A_b, J):
+def wheels4_free_inertia(I_p, A_b, J, *, out=None):
     """Inertia of a wheeled body with its wheels free to spin.
 
     Generated kernel ``wheels4_free_inertia``; inputs broadcast over leading batch axes.
@@ -4510,6 +4666,8 @@ def wheels4_free_inertia(I_p, A_b, J):
         wheel spin axes as columns (3×4; an unused slot is a zero column), body frame, row-major
     J : array_like, shape (..., 4)
         wheel axial inertias (4), kg·m²
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -4549,7 +4707,7 @@ def wheels4_free_inertia(I_p, A_b, J):
     t4 = -A_b_10*t0 - A_b_11*t1 - A_b_12*t2 - A_b_13*t3 + I_p_01
     t5 = -A_b_20*t0 - A_b_21*t1 - A_b_22*t2 - A_b_23*t3 + I_p_02
     t6 = -A_b_10*A_b_20*J_0 - A_b_11*A_b_21*J_1 - A_b_12*A_b_22*J_2 - A_b_13*A_b_23*J_3 + I_p_12
-    M_out = numpy.empty(batch + (3, 3))
+    M_out = numpy.empty(batch + (3, 3)) if out is None or out[0] is None else out[0]
     M_out[..., 0, 0] = -(A_b_00*A_b_00)*J_0 - (A_b_01*A_b_01)*J_1 - (A_b_02*A_b_02)*J_2 - (A_b_03*A_b_03)*J_3 + I_p_00
     M_out[..., 0, 1] = t4
     M_out[..., 0, 2] = t5
@@ -4562,7 +4720,7 @@ def wheels4_free_inertia(I_p, A_b, J):
     return M_out
 
 
-def box_of_inertia(m, I_b):
+def box_of_inertia(m, I_b, *, out=None):
     """Edges of the uniform box with a given mass and principal moments.
 
     Generated kernel ``box_of_inertia``; inputs broadcast over leading batch axes.
@@ -4573,6 +4731,8 @@ def box_of_inertia(m, I_b):
         mass, kg
     I_b : array_like, shape (..., 3)
         principal moments (or the diagonal), kg·m²
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -4594,7 +4754,7 @@ def box_of_inertia(m, I_b):
         t5 = (1.0/m)
         t6 = t1 - t2 + t3
         t7 = t1 + t2 - t3
-        edges_out = numpy.empty(batch + (3,))
+        edges_out = numpy.empty(batch + (3,)) if out is None or out[0] is None else out[0]
         edges_out[..., 0] = numpy.select([numpy.greater(t4*t5, (1.0/1000000.0)),True], [t0*numpy.sqrt(t4),(1.0/1000.0)], default=numpy.nan)
         edges_out[..., 1] = numpy.select([numpy.greater(t5*t6, (1.0/1000000.0)),True], [t0*numpy.sqrt(t6),(1.0/1000.0)], default=numpy.nan)
         edges_out[..., 2] = numpy.select([numpy.greater(t5*t7, (1.0/1000000.0)),True], [t0*numpy.sqrt(t7),(1.0/1000.0)], default=numpy.nan)

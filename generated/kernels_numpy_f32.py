@@ -8,7 +8,7 @@ float32 (the same expressions as the C kernels of kernels_f32.c)."""
 import numpy
 
 
-def particle_moments(m, r_w, v_w):
+def particle_moments(m, r_w, v_w, *, out=None):
     """One particle's mass moment and momentum (summed: m r_COM and p).
 
     Generated kernel ``particle_moments``; inputs broadcast over leading batch axes.
@@ -21,6 +21,8 @@ def particle_moments(m, r_w, v_w):
         position, world, m
     v_w : array_like, shape (..., 3)
         velocity, world, m/s
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -39,18 +41,18 @@ def particle_moments(m, r_w, v_w):
     v_w_0 = v_w[..., 0]
     v_w_1 = v_w[..., 1]
     v_w_2 = v_w[..., 2]
-    m_r_out = numpy.empty(batch + (3,), dtype=numpy.float32)
+    m_r_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     m_r_out[..., 0] = m*r_w_0
     m_r_out[..., 1] = m*r_w_1
     m_r_out[..., 2] = m*r_w_2
-    p_out = numpy.empty(batch + (3,), dtype=numpy.float32)
+    p_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[1] is None else out[1]
     p_out[..., 0] = m*v_w_0
     p_out[..., 1] = m*v_w_1
     p_out[..., 2] = m*v_w_2
     return m_r_out, p_out
 
 
-def particle_angular_momentum(m, r_w, v_w, r_com_w, v_com_w):
+def particle_angular_momentum(m, r_w, v_w, r_com_w, v_com_w, *, out=None):
     """One particle's angular momentum about the COM.
 
     Generated kernel ``particle_angular_momentum``; inputs broadcast over leading batch axes.
@@ -67,6 +69,8 @@ def particle_angular_momentum(m, r_w, v_w, r_com_w, v_com_w):
         centre of mass, world, m
     v_com_w : array_like, shape (..., 3)
         COM velocity, world, m/s
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -97,14 +101,14 @@ def particle_angular_momentum(m, r_w, v_w, r_com_w, v_com_w):
     t3 = -r_com_w_2 + r_w_2
     t4 = -r_com_w_0 + r_w_0
     t5 = -v_com_w_0 + v_w_0
-    L_w_out = numpy.empty(batch + (3,), dtype=numpy.float32)
+    L_w_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     L_w_out[..., 0] = -m*t2*t3 + t0*t1
     L_w_out[..., 1] = m*t3*t5 - t1*t4
     L_w_out[..., 2] = -m*t0*t5 + m*t2*t4
     return L_w_out
 
 
-def inertia_box(m, w, h, d):
+def inertia_box(m, w, h, d, *, out=None):
     """Principal inertia of a solid box, integrated over its volume.
 
     Generated kernel ``inertia_box``; inputs broadcast over leading batch axes.
@@ -119,6 +123,8 @@ def inertia_box(m, w, h, d):
         y side, m
     d : array_like, shape (...)
         z side, m
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -134,14 +140,14 @@ def inertia_box(m, w, h, d):
     t1 = (h*h)
     t2 = ((numpy.float32(1.0)/numpy.float32(12.0)))*m
     t3 = (w*w)
-    I_b_out = numpy.empty(batch + (3,), dtype=numpy.float32)
+    I_b_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     I_b_out[..., 0] = t2*(t0 + t1)
     I_b_out[..., 1] = t2*(t0 + t3)
     I_b_out[..., 2] = t2*(t1 + t3)
     return I_b_out
 
 
-def inertia_cylinder(m, r, h):
+def inertia_cylinder(m, r, h, *, out=None):
     """Principal inertia of a solid cylinder along body z.
 
     Generated kernel ``inertia_cylinder``; inputs broadcast over leading batch axes.
@@ -154,6 +160,8 @@ def inertia_cylinder(m, r, h):
         radius, m
     h : array_like, shape (...)
         height along z, m
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -166,14 +174,14 @@ def inertia_cylinder(m, r, h):
     batch = numpy.broadcast_shapes(m.shape, r.shape, h.shape)
     t0 = (r*r)
     t1 = ((numpy.float32(1.0)/numpy.float32(12.0)))*m*((h*h) + 3*t0)
-    I_b_out = numpy.empty(batch + (3,), dtype=numpy.float32)
+    I_b_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     I_b_out[..., 0] = t1
     I_b_out[..., 1] = t1
     I_b_out[..., 2] = ((numpy.float32(1.0)/numpy.float32(2.0)))*m*t0
     return I_b_out
 
 
-def inertia_sphere(m, r):
+def inertia_sphere(m, r, *, out=None):
     """Principal inertia of a solid sphere.
 
     Generated kernel ``inertia_sphere``; inputs broadcast over leading batch axes.
@@ -184,6 +192,8 @@ def inertia_sphere(m, r):
         mass, kg
     r : array_like, shape (...)
         radius, m
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -194,14 +204,14 @@ def inertia_sphere(m, r):
     r = numpy.asarray(r, dtype=numpy.float32)
     batch = numpy.broadcast_shapes(m.shape, r.shape)
     t0 = ((numpy.float32(2.0)/numpy.float32(5.0)))*m*(r*r)
-    I_b_out = numpy.empty(batch + (3,), dtype=numpy.float32)
+    I_b_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     I_b_out[..., 0] = t0
     I_b_out[..., 1] = t0
     I_b_out[..., 2] = t0
     return I_b_out
 
 
-def parallel_axis(I_c, m, d):
+def parallel_axis(I_c, m, d, *, out=None):
     """Inertia about a point offset by d from the centre of mass.
 
     Generated kernel ``parallel_axis``; inputs broadcast over leading batch axes.
@@ -214,6 +224,8 @@ def parallel_axis(I_c, m, d):
         mass, kg
     d : array_like, shape (..., 3)
         offset of the point from the COM, m (same frame as I_c)
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -243,7 +255,7 @@ def parallel_axis(I_c, m, d):
     t4 = -d_2*t2
     t5 = (d_0*d_0)
     t6 = -d_1*d_2*m
-    I_o_out = numpy.empty(batch + (3, 3), dtype=numpy.float32)
+    I_o_out = numpy.empty(batch + (3, 3), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     I_o_out[..., 0, 0] = I_c_00 + m*(t0 + t1)
     I_o_out[..., 0, 1] = I_c_01 + t3
     I_o_out[..., 0, 2] = I_c_02 + t4
@@ -256,7 +268,7 @@ def parallel_axis(I_c, m, d):
     return I_o_out
 
 
-def inertia_about_com(I_o, m, c):
+def inertia_about_com(I_o, m, c, *, out=None):
     """Inertia about the centre of mass from the inertia about a reference point O (CAD mass properties), the COM at c from O.
 
     Generated kernel ``inertia_about_com``; inputs broadcast over leading batch axes.
@@ -269,6 +281,8 @@ def inertia_about_com(I_o, m, c):
         mass, kg
     c : array_like, shape (..., 3)
         COM position relative to the reference point, m (same frame as I_o)
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -298,7 +312,7 @@ def inertia_about_com(I_o, m, c):
     t4 = c_2*t2
     t5 = (c_0*c_0)
     t6 = c_1*c_2*m
-    I_c_out = numpy.empty(batch + (3, 3), dtype=numpy.float32)
+    I_c_out = numpy.empty(batch + (3, 3), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     I_c_out[..., 0, 0] = I_o_00 - m*(t0 + t1)
     I_c_out[..., 0, 1] = I_o_01 + t3
     I_c_out[..., 0, 2] = I_o_02 + t4
@@ -311,7 +325,7 @@ def inertia_about_com(I_o, m, c):
     return I_c_out
 
 
-def world_inertia(q, I_b):
+def world_inertia(q, I_b, *, out=None):
     """Body inertia written in world coordinates.
 
     Generated kernel ``world_inertia``; inputs broadcast over leading batch axes.
@@ -322,6 +336,8 @@ def world_inertia(q, I_b):
         orientation (x, y, z, w), R_WB, unit
     I_b : array_like, shape (..., 3)
         principal moments, body frame, kg·m²
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -363,7 +379,7 @@ def world_inertia(q, I_b):
     t22 = -t16 - t8 + 1
     t23 = t13*t22 + t15*t21 + t18*t20
     t24 = I_b_0*t14*t21 + I_b_1*t17*t20 + I_b_2*t12*t22
-    I_w_out = numpy.empty(batch + (3, 3), dtype=numpy.float32)
+    I_w_out = numpy.empty(batch + (3, 3), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     I_w_out[..., 0, 0] = I_b_0*(t10*t10) + I_b_1*(t4*t4) + I_b_2*(t7*t7)
     I_w_out[..., 0, 1] = t19
     I_w_out[..., 0, 2] = t23
@@ -376,7 +392,7 @@ def world_inertia(q, I_b):
     return I_w_out
 
 
-def torque_from_force(r_w, F_w):
+def torque_from_force(r_w, F_w, *, out=None):
     """Torque of a force about the COM.
 
     Generated kernel ``torque_from_force``; inputs broadcast over leading batch axes.
@@ -387,6 +403,8 @@ def torque_from_force(r_w, F_w):
         application point relative to the COM, world frame, m
     F_w : array_like, shape (..., 3)
         force, world frame, N
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -402,14 +420,14 @@ def torque_from_force(r_w, F_w):
     F_w_0 = F_w[..., 0]
     F_w_1 = F_w[..., 1]
     F_w_2 = F_w[..., 2]
-    tau_w_out = numpy.empty(batch + (3,), dtype=numpy.float32)
+    tau_w_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     tau_w_out[..., 0] = -F_w_1*r_w_2 + F_w_2*r_w_1
     tau_w_out[..., 1] = F_w_0*r_w_2 - F_w_2*r_w_0
     tau_w_out[..., 2] = -F_w_0*r_w_1 + F_w_1*r_w_0
     return tau_w_out
 
 
-def force_at_point(q, r_b, F_w):
+def force_at_point(q, r_b, F_w, *, out=None):
     """Torque about the COM of a world force applied at a body-fixed point.
 
     Generated kernel ``force_at_point``; inputs broadcast over leading batch axes.
@@ -422,6 +440,8 @@ def force_at_point(q, r_b, F_w):
         application point relative to the COM, body frame, m
     F_w : array_like, shape (..., 3)
         force, world frame, N
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -455,14 +475,14 @@ def force_at_point(q, r_b, F_w):
     t10 = 2*(q_2*q_2)
     t11 = r_b_0*(t8 + t9) + r_b_1*(-t10 - t6) + r_b_2*(2*q_1*q_2 - t3)
     t12 = r_b_0*(-t10 - t5 + 1) + r_b_1*(t8 - t9) + r_b_2*(t1 + t2)
-    tau_w_out = numpy.empty(batch + (3,), dtype=numpy.float32)
+    tau_w_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     tau_w_out[..., 0] = -F_w_1*t7 + F_w_2*t11
     tau_w_out[..., 1] = F_w_0*t7 - F_w_2*t12
     tau_w_out[..., 2] = -F_w_0*t11 + F_w_1*t12
     return tau_w_out
 
 
-def effect_applied_torque(torque_w):
+def effect_applied_torque(torque_w, *, out=None):
     """A torque about the COM, world frame.
 
     Generated kernel ``effect_applied_torque``; inputs broadcast over leading batch axes.
@@ -471,6 +491,8 @@ def effect_applied_torque(torque_w):
     ----------
     torque_w : array_like, shape (..., 3)
         torque about the COM, world frame, N·m
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -482,14 +504,14 @@ def effect_applied_torque(torque_w):
     torque_w_0 = torque_w[..., 0]
     torque_w_1 = torque_w[..., 1]
     torque_w_2 = torque_w[..., 2]
-    tau_com_w_out = numpy.empty(batch + (3,), dtype=numpy.float32)
+    tau_com_w_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     tau_com_w_out[..., 0] = torque_w_0
     tau_com_w_out[..., 1] = torque_w_1
     tau_com_w_out[..., 2] = torque_w_2
     return tau_com_w_out
 
 
-def effect_force_at_point(q, r_b, F_w):
+def effect_force_at_point(q, r_b, F_w, *, out=None):
     """A world force applied at a body-fixed point: the force acts on the COM plus a torque.
 
     Generated kernel ``effect_force_at_point``; inputs broadcast over leading batch axes.
@@ -502,6 +524,8 @@ def effect_force_at_point(q, r_b, F_w):
         application point relative to the COM, body frame, m
     F_w : array_like, shape (..., 3)
         force, world frame, N
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -537,18 +561,18 @@ def effect_force_at_point(q, r_b, F_w):
     t10 = 2*(q_2*q_2)
     t11 = r_b_0*(t8 + t9) + r_b_1*(-t10 - t6) + r_b_2*(2*q_1*q_2 - t3)
     t12 = r_b_0*(-t10 - t5 + 1) + r_b_1*(t8 - t9) + r_b_2*(t1 + t2)
-    F_com_w_out = numpy.empty(batch + (3,), dtype=numpy.float32)
+    F_com_w_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     F_com_w_out[..., 0] = F_w_0
     F_com_w_out[..., 1] = F_w_1
     F_com_w_out[..., 2] = F_w_2
-    tau_com_w_out = numpy.empty(batch + (3,), dtype=numpy.float32)
+    tau_com_w_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[1] is None else out[1]
     tau_com_w_out[..., 0] = -F_w_1*t7 + F_w_2*t11
     tau_com_w_out[..., 1] = F_w_0*t7 - F_w_2*t12
     tau_com_w_out[..., 2] = -F_w_0*t11 + F_w_1*t12
     return F_com_w_out, tau_com_w_out
 
 
-def effect_gravity(m, g_w):
+def effect_gravity(m, g_w, *, out=None):
     """Uniform gravity acting at the COM.
 
     Generated kernel ``effect_gravity``; inputs broadcast over leading batch axes.
@@ -559,6 +583,8 @@ def effect_gravity(m, g_w):
         mass, kg
     g_w : array_like, shape (..., 3)
         gravitational acceleration, world frame, m/s²
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -571,14 +597,14 @@ def effect_gravity(m, g_w):
     g_w_0 = g_w[..., 0]
     g_w_1 = g_w[..., 1]
     g_w_2 = g_w[..., 2]
-    F_com_w_out = numpy.empty(batch + (3,), dtype=numpy.float32)
+    F_com_w_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     F_com_w_out[..., 0] = g_w_0*m
     F_com_w_out[..., 1] = g_w_1*m
     F_com_w_out[..., 2] = g_w_2*m
     return F_com_w_out
 
 
-def effect_linear_damping(v_w, c):
+def effect_linear_damping(v_w, c, *, out=None):
     """Viscous drag on the COM velocity.
 
     Generated kernel ``effect_linear_damping``; inputs broadcast over leading batch axes.
@@ -589,6 +615,8 @@ def effect_linear_damping(v_w, c):
         COM velocity, world frame, m/s
     c : array_like, shape (...)
         viscous coefficient, N·s/m
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -601,14 +629,14 @@ def effect_linear_damping(v_w, c):
     v_w_0 = v_w[..., 0]
     v_w_1 = v_w[..., 1]
     v_w_2 = v_w[..., 2]
-    F_com_w_out = numpy.empty(batch + (3,), dtype=numpy.float32)
+    F_com_w_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     F_com_w_out[..., 0] = -c*v_w_0
     F_com_w_out[..., 1] = -c*v_w_1
     F_com_w_out[..., 2] = -c*v_w_2
     return F_com_w_out
 
 
-def effect_angular_damping(q, omega_b, c):
+def effect_angular_damping(q, omega_b, c, *, out=None):
     """Viscous drag on the angular velocity.
 
     Generated kernel ``effect_angular_damping``; inputs broadcast over leading batch axes.
@@ -621,6 +649,8 @@ def effect_angular_damping(q, omega_b, c):
         angular velocity, body frame, rad/s
     c : array_like, shape (...)
         viscous coefficient, N·m·s/rad
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -648,14 +678,14 @@ def effect_angular_damping(q, omega_b, c):
     t7 = 2*(q_2*q_2) - 1
     t8 = 2*q_0*q_3
     t9 = 2*(q_0*q_0)
-    tau_com_w_out = numpy.empty(batch + (3,), dtype=numpy.float32)
+    tau_com_w_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     tau_com_w_out[..., 0] = -c*(omega_b_0*(-t6 - t7) + omega_b_1*(t1 - t3) + omega_b_2*(t4 + t5))
     tau_com_w_out[..., 1] = -c*(omega_b_0*(t1 + t3) + omega_b_1*(-t7 - t9) + omega_b_2*(2*q_1*q_2 - t8))
     tau_com_w_out[..., 2] = -c*(omega_b_0*(t4 - t5) + omega_b_1*(q_1*t2 + t8) + omega_b_2*(-t6 - t9 + 1))
     return tau_com_w_out
 
 
-def quat_mul(a, b):
+def quat_mul(a, b, *, out=None):
     """Hamilton product.
 
     Generated kernel ``quat_mul``; inputs broadcast over leading batch axes.
@@ -666,6 +696,8 @@ def quat_mul(a, b):
         quaternion (x, y, z, w), scalar last
     b : array_like, shape (..., 4)
         quaternion (x, y, z, w), scalar last
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -683,7 +715,7 @@ def quat_mul(a, b):
     b_1 = b[..., 1]
     b_2 = b[..., 2]
     b_3 = b[..., 3]
-    ab_out = numpy.empty(batch + (4,), dtype=numpy.float32)
+    ab_out = numpy.empty(batch + (4,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     ab_out[..., 0] = a_0*b_3 + a_1*b_2 - a_2*b_1 + a_3*b_0
     ab_out[..., 1] = -a_0*b_2 + a_1*b_3 + a_2*b_0 + a_3*b_1
     ab_out[..., 2] = a_0*b_1 - a_1*b_0 + a_2*b_3 + a_3*b_2
@@ -691,7 +723,7 @@ def quat_mul(a, b):
     return ab_out
 
 
-def quat_conj(q):
+def quat_conj(q, *, out=None):
     """Conjugate (inverse of a unit quaternion).
 
     Generated kernel ``quat_conj``; inputs broadcast over leading batch axes.
@@ -700,6 +732,8 @@ def quat_conj(q):
     ----------
     q : array_like, shape (..., 4)
         quaternion (x, y, z, w), scalar last
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -712,7 +746,7 @@ def quat_conj(q):
     q_1 = q[..., 1]
     q_2 = q[..., 2]
     q_3 = q[..., 3]
-    q_conj_out = numpy.empty(batch + (4,), dtype=numpy.float32)
+    q_conj_out = numpy.empty(batch + (4,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     q_conj_out[..., 0] = -q_0
     q_conj_out[..., 1] = -q_1
     q_conj_out[..., 2] = -q_2
@@ -720,7 +754,7 @@ def quat_conj(q):
     return q_conj_out
 
 
-def quat_normalize(q):
+def quat_normalize(q, *, out=None):
     """Scale to unit length.
 
     Generated kernel ``quat_normalize``; inputs broadcast over leading batch axes.
@@ -729,6 +763,8 @@ def quat_normalize(q):
     ----------
     q : array_like, shape (..., 4)
         quaternion (x, y, z, w), scalar last
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -742,7 +778,7 @@ def quat_normalize(q):
     q_2 = q[..., 2]
     q_3 = q[..., 3]
     t0 = (1.0/numpy.sqrt((q_0*q_0) + (q_1*q_1) + (q_2*q_2) + (q_3*q_3)))
-    q_unit_out = numpy.empty(batch + (4,), dtype=numpy.float32)
+    q_unit_out = numpy.empty(batch + (4,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     q_unit_out[..., 0] = q_0*t0
     q_unit_out[..., 1] = q_1*t0
     q_unit_out[..., 2] = q_2*t0
@@ -750,7 +786,7 @@ def quat_normalize(q):
     return q_unit_out
 
 
-def quat_rotate(q, v_b):
+def quat_rotate(q, v_b, *, out=None):
     """Rotate a body vector into the world frame.
 
     Generated kernel ``quat_rotate``; inputs broadcast over leading batch axes.
@@ -761,6 +797,8 @@ def quat_rotate(q, v_b):
         quaternion (x, y, z, w), scalar last, unit, R_WB
     v_b : array_like, shape (..., 3)
         vector, body frame
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -787,14 +825,14 @@ def quat_rotate(q, v_b):
     t7 = 2*(q_2*q_2) - 1
     t8 = 2*q_0*q_3
     t9 = 2*(q_0*q_0)
-    v_w_out = numpy.empty(batch + (3,), dtype=numpy.float32)
+    v_w_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     v_w_out[..., 0] = v_b_0*(-t6 - t7) + v_b_1*(t1 - t3) + v_b_2*(t4 + t5)
     v_w_out[..., 1] = v_b_0*(t1 + t3) + v_b_1*(-t7 - t9) + v_b_2*(2*q_1*q_2 - t8)
     v_w_out[..., 2] = v_b_0*(t4 - t5) + v_b_1*(q_1*t2 + t8) + v_b_2*(-t6 - t9 + 1)
     return v_w_out
 
 
-def quat_to_matrix(q):
+def quat_to_matrix(q, *, out=None):
     """Rotation matrix R_WB.
 
     Generated kernel ``quat_to_matrix``; inputs broadcast over leading batch axes.
@@ -803,6 +841,8 @@ def quat_to_matrix(q):
     ----------
     q : array_like, shape (..., 4)
         quaternion (x, y, z, w), scalar last, unit
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -825,7 +865,7 @@ def quat_to_matrix(q):
     t7 = q_3*t2
     t8 = 2*(q_0*q_0)
     t9 = 2*q_0*q_3
-    R_wb_out = numpy.empty(batch + (3, 3), dtype=numpy.float32)
+    R_wb_out = numpy.empty(batch + (3, 3), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     R_wb_out[..., 0, 0] = -t0 - t1
     R_wb_out[..., 0, 1] = t3 - t5
     R_wb_out[..., 0, 2] = t6 + t7
@@ -838,7 +878,7 @@ def quat_to_matrix(q):
     return R_wb_out
 
 
-def matrix_to_quat(R_wb):
+def matrix_to_quat(R_wb, *, out=None):
     """Quaternion of a rotation matrix (Shepperd's branch on the largest component).
 
     Generated kernel ``matrix_to_quat``; inputs broadcast over leading batch axes.
@@ -847,6 +887,8 @@ def matrix_to_quat(R_wb):
     ----------
     R_wb : array_like, shape (..., 3, 3)
         3×3 rotation, body → world, row-major
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -888,7 +930,7 @@ def matrix_to_quat(R_wb):
         t20 = -R_1 + R_3
         t21 = ((numpy.float32(1.0)/numpy.float32(2.0)))*t18
         t22 = ((numpy.float32(1.0)/numpy.float32(2.0)))*t11
-        q_out = numpy.empty(batch + (4,), dtype=numpy.float32)
+        q_out = numpy.empty(batch + (4,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
         q_out[..., 0] = numpy.select([t5,t9,t13,True], [t0*t4,((numpy.float32(1.0)/numpy.float32(2.0)))*t8,t11*t12,t14*t16], default=numpy.nan)
         q_out[..., 1] = numpy.select([t5,t9,t13,True], [t17*t4,t12*t18,((numpy.float32(1.0)/numpy.float32(2.0)))*t10,t16*t19], default=numpy.nan)
         q_out[..., 2] = numpy.select([t5,t9,t13,True], [t20*t4,t14*t21,t19*t22,((numpy.float32(1.0)/numpy.float32(2.0)))*t15], default=numpy.nan)
@@ -896,7 +938,7 @@ def matrix_to_quat(R_wb):
     return q_out
 
 
-def axis_angle_to_quat(axis, angle):
+def axis_angle_to_quat(axis, angle, *, out=None):
     """Quaternion of a rotation by angle about a unit axis.
 
     Generated kernel ``axis_angle_to_quat``; inputs broadcast over leading batch axes.
@@ -907,6 +949,8 @@ def axis_angle_to_quat(axis, angle):
         unit axis (any frame)
     angle : array_like, shape (...)
         angle, rad
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -921,7 +965,7 @@ def axis_angle_to_quat(axis, angle):
     axis_2 = axis[..., 2]
     t0 = ((numpy.float32(1.0)/numpy.float32(2.0)))*angle
     t1 = numpy.sin(t0)
-    q_out = numpy.empty(batch + (4,), dtype=numpy.float32)
+    q_out = numpy.empty(batch + (4,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     q_out[..., 0] = axis_0*t1
     q_out[..., 1] = axis_1*t1
     q_out[..., 2] = axis_2*t1
@@ -929,7 +973,7 @@ def axis_angle_to_quat(axis, angle):
     return q_out
 
 
-def quat_from_two_vectors(a, b):
+def quat_from_two_vectors(a, b, *, out=None):
     """Shortest-arc rotation taking one unit vector onto another.
 
     Generated kernel ``quat_from_two_vectors``; inputs broadcast over leading batch axes.
@@ -940,6 +984,8 @@ def quat_from_two_vectors(a, b):
         unit vector (any frame)
     b : array_like, shape (..., 3)
         unit vector, same frame
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -967,7 +1013,7 @@ def quat_from_two_vectors(a, b):
         t8 = -a_0*b_2 + a_2*b_0
         t9 = t4 + 1
         t10 = (1.0/numpy.sqrt((t6*t6) + (t7*t7) + (t8*t8) + (t9*t9)))
-        q_out = numpy.empty(batch + (4,), dtype=numpy.float32)
+        q_out = numpy.empty(batch + (4,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
         q_out[..., 0] = numpy.select([t5,True], [t3*numpy.select([t1,True], [0,-a_2], default=numpy.nan),t10*t6], default=numpy.nan)
         q_out[..., 1] = numpy.select([t5,True], [t3*numpy.select([t1,True], [a_2,0], default=numpy.nan),t10*t8], default=numpy.nan)
         q_out[..., 2] = numpy.select([t5,True], [t3*numpy.select([t1,True], [-a_1,a_0], default=numpy.nan),t10*t7], default=numpy.nan)
@@ -975,7 +1021,7 @@ def quat_from_two_vectors(a, b):
     return q_out
 
 
-def quat_to_axis_angle(q):
+def quat_to_axis_angle(q, *, out=None):
     """Unit axis and angle in [0, 2π] of a unit quaternion.
 
     Generated kernel ``quat_to_axis_angle``; inputs broadcast over leading batch axes.
@@ -984,6 +1030,8 @@ def quat_to_axis_angle(q):
     ----------
     q : array_like, shape (..., 4)
         quaternion (x, y, z, w), scalar last, unit
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -1002,16 +1050,16 @@ def quat_to_axis_angle(q):
         t0 = numpy.sqrt((q_0*q_0) + (q_1*q_1) + (q_2*q_2))
         t1 = numpy.less_equal(t0, numpy.float32(1.0/1e+300))
         t2 = (1.0/t0)
-        axis_out = numpy.empty(batch + (3,), dtype=numpy.float32)
+        axis_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
         axis_out[..., 0] = numpy.select([t1,True], [1,q_0*t2], default=numpy.nan)
         axis_out[..., 1] = numpy.select([t1,True], [0,q_1*t2], default=numpy.nan)
         axis_out[..., 2] = numpy.select([t1,True], [0,q_2*t2], default=numpy.nan)
-        angle_out = numpy.empty(batch, dtype=numpy.float32)
+        angle_out = numpy.empty(batch, dtype=numpy.float32) if out is None or out[1] is None else out[1]
         angle_out[...] = 2*numpy.arctan2(t0, q_3)
     return axis_out, angle_out
 
 
-def quat_error_angle(q, q_ref):
+def quat_error_angle(q, q_ref, *, out=None):
     """Angle of the rotation between two attitudes (q and −q alike), in [0, π].
 
     Generated kernel ``quat_error_angle``; inputs broadcast over leading batch axes.
@@ -1022,6 +1070,8 @@ def quat_error_angle(q, q_ref):
         quaternion (x, y, z, w), scalar last, unit
     q_ref : array_like, shape (..., 4)
         quaternion (x, y, z, w), scalar last, unit
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -1042,12 +1092,12 @@ def quat_error_angle(q, q_ref):
     t0 = q_0*q_ref_1 - q_1*q_ref_0 + q_2*q_ref_3 - q_3*q_ref_2
     t1 = q_0*q_ref_3 + q_1*q_ref_2 - q_2*q_ref_1 - q_3*q_ref_0
     t2 = -q_0*q_ref_2 + q_1*q_ref_3 + q_2*q_ref_0 - q_3*q_ref_1
-    angle_out = numpy.empty(batch, dtype=numpy.float32)
+    angle_out = numpy.empty(batch, dtype=numpy.float32) if out is None or out[0] is None else out[0]
     angle_out[...] = 2*numpy.arctan2(numpy.sqrt((t0*t0) + (t1*t1) + (t2*t2)), abs(q_0*q_ref_0 + q_1*q_ref_1 + q_2*q_ref_2 + q_3*q_ref_3))
     return angle_out
 
 
-def quat_error_chart(q, q_ref):
+def quat_error_chart(q, q_ref, *, out=None):
     """Attitude-error chart of the wheel controllers: 2 sgn(e_w) e_v (q and −q alike).
 
     Generated kernel ``quat_error_chart``; inputs broadcast over leading batch axes.
@@ -1058,6 +1108,8 @@ def quat_error_chart(q, q_ref):
         quaternion (x, y, z, w), scalar last, unit, body to world
     q_ref : array_like, shape (..., 4)
         quaternion (x, y, z, w), scalar last, unit, body to world
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -1082,14 +1134,14 @@ def quat_error_chart(q, q_ref):
         t3 = numpy.less(q_0*q_ref_0 + q_1*q_ref_1 + q_2*q_ref_2 + q_3*q_ref_3, 0)
         t4 = q_0*t1 - q_1*t0 - 2*q_2*q_ref_0 + 2*q_3*q_ref_1
         t5 = 2*q_0*q_ref_1 - 2*q_1*q_ref_0 + q_2*t0 - 2*q_3*q_ref_2
-        dtheta_out = numpy.empty(batch + (3,), dtype=numpy.float32)
+        dtheta_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
         dtheta_out[..., 0] = numpy.select([t3,True], [-t2,t2], default=numpy.nan)
         dtheta_out[..., 1] = numpy.select([t3,True], [t4,-t4], default=numpy.nan)
         dtheta_out[..., 2] = numpy.select([t3,True], [-t5,t5], default=numpy.nan)
     return dtheta_out
 
 
-def euler_xyz_to_quat(roll, pitch, yaw):
+def euler_xyz_to_quat(roll, pitch, yaw, *, out=None):
     """Quaternion of intrinsic XYZ Euler angles, R = Rx(roll) Ry(pitch) Rz(yaw).
 
     Generated kernel ``euler_xyz_to_quat``; inputs broadcast over leading batch axes.
@@ -1102,6 +1154,8 @@ def euler_xyz_to_quat(roll, pitch, yaw):
         rad
     yaw : array_like, shape (...)
         rad
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -1124,7 +1178,7 @@ def euler_xyz_to_quat(roll, pitch, yaw):
     t9 = numpy.sin(t2)
     t10 = t8*t9
     t11 = t5*t9
-    q_out = numpy.empty(batch + (4,), dtype=numpy.float32)
+    q_out = numpy.empty(batch + (4,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     q_out[..., 0] = t1*t6 + t10*t7
     q_out[..., 1] = -t1*t10 + t6*t7
     q_out[..., 2] = t1*t3*t8 + t11*t7
@@ -1132,7 +1186,7 @@ def euler_xyz_to_quat(roll, pitch, yaw):
     return q_out
 
 
-def quat_to_euler_xyz(q):
+def quat_to_euler_xyz(q, *, out=None):
     """Intrinsic XYZ Euler angles of a unit quaternion, exact through gimbal lock.
 
     Generated kernel ``quat_to_euler_xyz``; inputs broadcast over leading batch axes.
@@ -1141,6 +1195,8 @@ def quat_to_euler_xyz(q):
     ----------
     q : array_like, shape (..., 4)
         quaternion (x, y, z, w), scalar last, unit
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -1168,14 +1224,14 @@ def quat_to_euler_xyz(q):
         t11 = (1.0/t9)
         t12 = numpy.select([t10,True], [0,t11*t4], default=numpy.nan)
         t13 = numpy.select([t10,True], [1,t11*t6], default=numpy.nan)
-        rpy_out = numpy.empty(batch + (3,), dtype=numpy.float32)
+        rpy_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
         rpy_out[..., 0] = numpy.arctan2(t4, t6)
         rpy_out[..., 1] = numpy.arctan2(t7 + t8, t9)
         rpy_out[..., 2] = numpy.arctan2(t12*(t7 - t8) + t13*(2*q_0*q_1 + q_3*t2), t12*(t1 + t3) + t13*(-2*(q_2*q_2) - t5))
     return rpy_out
 
 
-def quat_derivative_world(q, omega_w):
+def quat_derivative_world(q, omega_w, *, out=None):
     """Quaternion rate from world-frame angular velocity.
 
     Generated kernel ``quat_derivative_world``; inputs broadcast over leading batch axes.
@@ -1186,6 +1242,8 @@ def quat_derivative_world(q, omega_w):
         quaternion (x, y, z, w), scalar last
     omega_w : array_like, shape (..., 3)
         angular velocity, world frame, rad/s
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -1207,7 +1265,7 @@ def quat_derivative_world(q, omega_w):
     t2 = ((numpy.float32(1.0)/numpy.float32(2.0)))*omega_w_2
     t3 = ((numpy.float32(1.0)/numpy.float32(2.0)))*omega_w_0
     t4 = ((numpy.float32(1.0)/numpy.float32(2.0)))*omega_w_1
-    q_dot_out = numpy.empty(batch + (4,), dtype=numpy.float32)
+    q_dot_out = numpy.empty(batch + (4,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     q_dot_out[..., 0] = omega_w_0*t0 + omega_w_1*t1 - q_1*t2
     q_dot_out[..., 1] = -omega_w_0*t1 + omega_w_1*t0 + q_0*t2
     q_dot_out[..., 2] = omega_w_2*t0 - q_0*t4 + q_1*t3
@@ -1215,7 +1273,7 @@ def quat_derivative_world(q, omega_w):
     return q_dot_out
 
 
-def quat_derivative_body(q, omega_b):
+def quat_derivative_body(q, omega_b, *, out=None):
     """Quaternion rate from body-frame angular velocity.
 
     Generated kernel ``quat_derivative_body``; inputs broadcast over leading batch axes.
@@ -1226,6 +1284,8 @@ def quat_derivative_body(q, omega_b):
         quaternion (x, y, z, w), scalar last
     omega_b : array_like, shape (..., 3)
         angular velocity, body frame, rad/s
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -1245,7 +1305,7 @@ def quat_derivative_body(q, omega_b):
     t0 = ((numpy.float32(1.0)/numpy.float32(2.0)))*omega_b_0
     t1 = ((numpy.float32(1.0)/numpy.float32(2.0)))*omega_b_1
     t2 = ((numpy.float32(1.0)/numpy.float32(2.0)))*omega_b_2
-    q_dot_out = numpy.empty(batch + (4,), dtype=numpy.float32)
+    q_dot_out = numpy.empty(batch + (4,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     q_dot_out[..., 0] = q_1*t2 - q_2*t1 + q_3*t0
     q_dot_out[..., 1] = -q_0*t2 + q_2*t0 + q_3*t1
     q_dot_out[..., 2] = q_0*t1 - q_1*t0 + q_3*t2
@@ -1253,7 +1313,7 @@ def quat_derivative_body(q, omega_b):
     return q_dot_out
 
 
-def integrate_orientation(q, omega_w, dt):
+def integrate_orientation(q, omega_w, dt, *, out=None):
     """One explicit world-form step, then normalization (the chapter's default).
 
     Generated kernel ``integrate_orientation``; inputs broadcast over leading batch axes.
@@ -1266,6 +1326,8 @@ def integrate_orientation(q, omega_w, dt):
         angular velocity, world frame, rad/s
     dt : array_like, shape (...)
         time step, s
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -1293,7 +1355,7 @@ def integrate_orientation(q, omega_w, dt):
     t7 = dt*(omega_w_2*t0 - q_0*t5 + q_1*t4) + q_2
     t8 = dt*(-omega_w_0*t1 + omega_w_1*t0 + q_0*t2) + q_1
     t9 = (1.0/numpy.sqrt((t3*t3) + (t6*t6) + (t7*t7) + (t8*t8)))
-    q_next_out = numpy.empty(batch + (4,), dtype=numpy.float32)
+    q_next_out = numpy.empty(batch + (4,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     q_next_out[..., 0] = t3*t9
     q_next_out[..., 1] = t8*t9
     q_next_out[..., 2] = t7*t9
@@ -1301,7 +1363,7 @@ def integrate_orientation(q, omega_w, dt):
     return q_next_out
 
 
-def euler_equations(I_b, omega_b, tau_b):
+def euler_equations(I_b, omega_b, tau_b, *, out=None):
     """Euler's rotation equations with external torque, body frame.
 
     Generated kernel ``euler_equations``; inputs broadcast over leading batch axes.
@@ -1314,6 +1376,8 @@ def euler_equations(I_b, omega_b, tau_b):
         angular velocity, body frame, rad/s
     tau_b : array_like, shape (..., 3)
         torque, body frame, N·m
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -1339,14 +1403,14 @@ def euler_equations(I_b, omega_b, tau_b):
     c_b_3 = (1.0/I_b_0)
     c_b_4 = (1.0/I_b_1)
     c_b_5 = (1.0/I_b_2)
-    omega_dot_b_out = numpy.empty(batch + (3,), dtype=numpy.float32)
+    omega_dot_b_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     omega_dot_b_out[..., 0] = c_b_0*omega_b_1*omega_b_2 + c_b_3*tau_b_0
     omega_dot_b_out[..., 1] = c_b_1*omega_b_0*omega_b_2 + c_b_4*tau_b_1
     omega_dot_b_out[..., 2] = c_b_2*omega_b_0*omega_b_1 + c_b_5*tau_b_2
     return omega_dot_b_out
 
 
-def rigid_body_rhs(x, m, I_b, F_w, tau_w):
+def rigid_body_rhs(x, m, I_b, F_w, tau_w, *, out=None):
     """State derivative under a world force at the COM and a world torque.
 
     Generated kernel ``rigid_body_rhs``; inputs broadcast over leading batch axes.
@@ -1363,6 +1427,8 @@ def rigid_body_rhs(x, m, I_b, F_w, tau_w):
         total force at the COM, world frame, N
     tau_w : array_like, shape (..., 3)
         total torque about the COM, world frame, N·m
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -1408,7 +1474,7 @@ def rigid_body_rhs(x, m, I_b, F_w, tau_w):
     t5 = -t4*x_4 + 2*tau_w_1*x_3
     t6 = t4*x_5 - 2*tau_w_2*x_3
     t7 = -2*tau_w_1*x_5 + 2*tau_w_2*x_4
-    x_dot_out = numpy.empty(batch + (13,), dtype=numpy.float32)
+    x_dot_out = numpy.empty(batch + (13,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     x_dot_out[..., 0] = x_7
     x_dot_out[..., 1] = x_8
     x_dot_out[..., 2] = x_9
@@ -1425,7 +1491,7 @@ def rigid_body_rhs(x, m, I_b, F_w, tau_w):
     return x_dot_out
 
 
-def rigid_body_rhs_free(x, I_b):
+def rigid_body_rhs_free(x, I_b, *, out=None):
     """State derivative of a torque-free, force-free body.
 
     Generated kernel ``rigid_body_rhs_free``; inputs broadcast over leading batch axes.
@@ -1436,6 +1502,8 @@ def rigid_body_rhs_free(x, I_b):
         state (p_w[3] m, q[4] (x,y,z,w), v_w[3] m/s, omega_b[3] rad/s)
     I_b : array_like, shape (..., 3)
         principal moments, body frame, kg·m²
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -1464,7 +1532,7 @@ def rigid_body_rhs_free(x, I_b):
     t0 = ((numpy.float32(1.0)/numpy.float32(2.0)))*x_10
     t1 = ((numpy.float32(1.0)/numpy.float32(2.0)))*x_11
     t2 = ((numpy.float32(1.0)/numpy.float32(2.0)))*x_12
-    x_dot_out = numpy.empty(batch + (13,), dtype=numpy.float32)
+    x_dot_out = numpy.empty(batch + (13,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     x_dot_out[..., 0] = x_7
     x_dot_out[..., 1] = x_8
     x_dot_out[..., 2] = x_9
@@ -1481,7 +1549,7 @@ def rigid_body_rhs_free(x, I_b):
     return x_dot_out
 
 
-def apply_inv_inertia(q, I_b, v):
+def apply_inv_inertia(q, I_b, v, *, out=None):
     """Multiply a world vector by I_W⁻¹: rotate into the body, apply the diagonal inverse, rotate back.
 
     Generated kernel ``apply_inv_inertia``; inputs broadcast over leading batch axes.
@@ -1494,6 +1562,8 @@ def apply_inv_inertia(q, I_b, v):
         principal moments, body frame, kg·m²
     v : array_like, shape (..., 3)
         vector, world frame (e.g. torque, N·m)
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -1542,14 +1612,14 @@ def apply_inv_inertia(q, I_b, v):
     t25 = -t11 - t19 + 1
     t26 = t16*t25 + t18*t24 + t21*t23
     t27 = t0*t20*t23 + t10*t17*t24 + t15*t25*t6
-    out_out = numpy.empty(batch + (3,), dtype=numpy.float32)
+    out_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     out_out[..., 0] = t22*v_1 + t26*v_2 + v_0*(t0*(t5*t5) + t10*(t13*t13) + t6*(t9*t9))
     out_out[..., 1] = t22*v_0 + t27*v_2 + v_1*(t0*(t20*t20) + t10*(t17*t17) + (t15*t15)*t6)
     out_out[..., 2] = t26*v_0 + t27*v_1 + v_2*(t0*(t23*t23) + t10*(t24*t24) + (t25*t25)*t6)
     return out_out
 
 
-def world_to_body(q, v_w):
+def world_to_body(q, v_w, *, out=None):
     """Express a world vector in the body frame.
 
     Generated kernel ``world_to_body``; inputs broadcast over leading batch axes.
@@ -1560,6 +1630,8 @@ def world_to_body(q, v_w):
         orientation (x, y, z, w), R_WB, unit
     v_w : array_like, shape (..., 3)
         vector, world frame
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -1586,14 +1658,14 @@ def world_to_body(q, v_w):
     t7 = 2*(q_2*q_2) - 1
     t8 = 2*q_0*q_3
     t9 = 2*(q_0*q_0)
-    v_b_out = numpy.empty(batch + (3,), dtype=numpy.float32)
+    v_b_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     v_b_out[..., 0] = v_0*(-t6 - t7) + v_1*(t1 + t3) + v_2*(t4 - t5)
     v_b_out[..., 1] = v_0*(t1 - t3) + v_1*(-t7 - t9) + v_2*(q_2*t0 + t8)
     v_b_out[..., 2] = v_0*(t4 + t5) + v_1*(2*q_1*q_2 - t8) + v_2*(-t6 - t9 + 1)
     return v_b_out
 
 
-def kinetic_energy(m, I_b, v_w, omega_b):
+def kinetic_energy(m, I_b, v_w, omega_b, *, out=None):
     """Translational plus rotational kinetic energy.
 
     Generated kernel ``kinetic_energy``; inputs broadcast over leading batch axes.
@@ -1608,6 +1680,8 @@ def kinetic_energy(m, I_b, v_w, omega_b):
         COM velocity, world frame, m/s
     omega_b : array_like, shape (..., 3)
         angular velocity, body frame, rad/s
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -1628,12 +1702,12 @@ def kinetic_energy(m, I_b, v_w, omega_b):
     omega_b_0 = omega_b[..., 0]
     omega_b_1 = omega_b[..., 1]
     omega_b_2 = omega_b[..., 2]
-    T_out = numpy.empty(batch, dtype=numpy.float32)
+    T_out = numpy.empty(batch, dtype=numpy.float32) if out is None or out[0] is None else out[0]
     T_out[...] = ((numpy.float32(1.0)/numpy.float32(2.0)))*I_b_0*(omega_b_0*omega_b_0) + ((numpy.float32(1.0)/numpy.float32(2.0)))*I_b_1*(omega_b_1*omega_b_1) + ((numpy.float32(1.0)/numpy.float32(2.0)))*I_b_2*(omega_b_2*omega_b_2) + ((numpy.float32(1.0)/numpy.float32(2.0)))*m*((v_w_0*v_w_0) + (v_w_1*v_w_1) + (v_w_2*v_w_2))
     return T_out
 
 
-def angular_momentum_world(q, I_b, omega_b):
+def angular_momentum_world(q, I_b, omega_b, *, out=None):
     """Angular momentum about the COM in the world frame.
 
     Generated kernel ``angular_momentum_world``; inputs broadcast over leading batch axes.
@@ -1646,6 +1720,8 @@ def angular_momentum_world(q, I_b, omega_b):
         principal moments, body frame, kg·m²
     omega_b : array_like, shape (..., 3)
         angular velocity, body frame, rad/s
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -1679,14 +1755,14 @@ def angular_momentum_world(q, I_b, omega_b):
     t10 = I_b_0*omega_b_0
     t11 = 2*q_0*q_3
     t12 = 2*(q_0*q_0)
-    L_w_out = numpy.empty(batch + (3,), dtype=numpy.float32)
+    L_w_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     L_w_out[..., 0] = t10*(-t8 - t9) + t4*(t1 - t3) + t7*(t5 + t6)
     L_w_out[..., 1] = t10*(t1 + t3) + t4*(-t12 - t9) + t7*(2*q_1*q_2 - t11)
     L_w_out[..., 2] = t10*(t5 - t6) + t4*(q_1*t2 + t11) + t7*(-t12 - t8 + 1)
     return L_w_out
 
 
-def rigid_body_rhs_torque(x, I_b, tau_w):
+def rigid_body_rhs_torque(x, I_b, tau_w, *, out=None):
     """State derivative under a world torque only (rigid_body_rhs with F_W = 0, for bodies whose effects add no force).
 
     Generated kernel ``rigid_body_rhs_torque``; inputs broadcast over leading batch axes.
@@ -1699,6 +1775,8 @@ def rigid_body_rhs_torque(x, I_b, tau_w):
         principal moments, body frame, kg·m²
     tau_w : array_like, shape (..., 3)
         total torque about the COM, world frame, N·m
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -1738,7 +1816,7 @@ def rigid_body_rhs_torque(x, I_b, tau_w):
     t4 = -t3*x_4 + 2*tau_w_1*x_3
     t5 = t3*x_5 - 2*tau_w_2*x_3
     t6 = -2*tau_w_1*x_5 + 2*tau_w_2*x_4
-    x_dot_out = numpy.empty(batch + (13,), dtype=numpy.float32)
+    x_dot_out = numpy.empty(batch + (13,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     x_dot_out[..., 0] = x_7
     x_dot_out[..., 1] = x_8
     x_dot_out[..., 2] = x_9
@@ -1755,7 +1833,7 @@ def rigid_body_rhs_torque(x, I_b, tau_w):
     return x_dot_out
 
 
-def euler_coefficients(I_b):
+def euler_coefficients(I_b, *, out=None):
     """The inertia-only coefficients of Euler's equations, computed once per body and call.
 
     Generated kernel ``euler_coefficients``; inputs broadcast over leading batch axes.
@@ -1764,6 +1842,8 @@ def euler_coefficients(I_b):
     ----------
     I_b : array_like, shape (..., 3)
         principal moments, body frame, kg·m²
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -1781,7 +1861,7 @@ def euler_coefficients(I_b):
     c_b_3 = (1.0/I_b_0)
     c_b_4 = (1.0/I_b_1)
     c_b_5 = (1.0/I_b_2)
-    c_b_out = numpy.empty(batch + (6,), dtype=numpy.float32)
+    c_b_out = numpy.empty(batch + (6,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     c_b_out[..., 0] = c_b_0
     c_b_out[..., 1] = c_b_1
     c_b_out[..., 2] = c_b_2
@@ -1791,7 +1871,7 @@ def euler_coefficients(I_b):
     return c_b_out
 
 
-def rigid_body_rhs_free_c(x, c_b):
+def rigid_body_rhs_free_c(x, c_b, *, out=None):
     """rigid_body_rhs_free on the Euler coefficients c_b (no division).
 
     Generated kernel ``rigid_body_rhs_free_c``; inputs broadcast over leading batch axes.
@@ -1802,6 +1882,8 @@ def rigid_body_rhs_free_c(x, c_b):
         state (p_w[3] m, q[4] (x,y,z,w), v_w[3] m/s, omega_b[3] rad/s)
     c_b : array_like, shape (..., 6)
         Euler coefficients (k_x, k_y, k_z, r_x, r_y, r_z), body frame: k_x = (I_y − I_z)/I_x (cyclic, dimensionless), r_x = 1/I_x (1/(kg·m²)); from euler_coefficients
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -1827,7 +1909,7 @@ def rigid_body_rhs_free_c(x, c_b):
     t0 = ((numpy.float32(1.0)/numpy.float32(2.0)))*x_10
     t1 = ((numpy.float32(1.0)/numpy.float32(2.0)))*x_11
     t2 = ((numpy.float32(1.0)/numpy.float32(2.0)))*x_12
-    x_dot_out = numpy.empty(batch + (13,), dtype=numpy.float32)
+    x_dot_out = numpy.empty(batch + (13,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     x_dot_out[..., 0] = x_7
     x_dot_out[..., 1] = x_8
     x_dot_out[..., 2] = x_9
@@ -1844,7 +1926,7 @@ def rigid_body_rhs_free_c(x, c_b):
     return x_dot_out
 
 
-def rigid_body_rhs_torque_c(x, c_b, tau_w):
+def rigid_body_rhs_torque_c(x, c_b, tau_w, *, out=None):
     """rigid_body_rhs_torque on the Euler coefficients c_b (no division).
 
     Generated kernel ``rigid_body_rhs_torque_c``; inputs broadcast over leading batch axes.
@@ -1857,6 +1939,8 @@ def rigid_body_rhs_torque_c(x, c_b, tau_w):
         Euler coefficients (k_x, k_y, k_z, r_x, r_y, r_z), body frame: k_x = (I_y − I_z)/I_x (cyclic, dimensionless), r_x = 1/I_x (1/(kg·m²)); from euler_coefficients
     tau_w : array_like, shape (..., 3)
         total torque about the COM, world frame, N·m
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -1893,7 +1977,7 @@ def rigid_body_rhs_torque_c(x, c_b, tau_w):
     t4 = -t3*x_4 + 2*tau_w_1*x_3
     t5 = t3*x_5 - 2*tau_w_2*x_3
     t6 = -2*tau_w_1*x_5 + 2*tau_w_2*x_4
-    x_dot_out = numpy.empty(batch + (13,), dtype=numpy.float32)
+    x_dot_out = numpy.empty(batch + (13,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     x_dot_out[..., 0] = x_7
     x_dot_out[..., 1] = x_8
     x_dot_out[..., 2] = x_9
@@ -1910,7 +1994,7 @@ def rigid_body_rhs_torque_c(x, c_b, tau_w):
     return x_dot_out
 
 
-def rigid_body_rhs_c(x, m, c_b, F_w, tau_w):
+def rigid_body_rhs_c(x, m, c_b, F_w, tau_w, *, out=None):
     """rigid_body_rhs on the Euler coefficients c_b (one division: F_W/m).
 
     Generated kernel ``rigid_body_rhs_c``; inputs broadcast over leading batch axes.
@@ -1927,6 +2011,8 @@ def rigid_body_rhs_c(x, m, c_b, F_w, tau_w):
         total force at the COM, world frame, N
     tau_w : array_like, shape (..., 3)
         total torque about the COM, world frame, N·m
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -1969,7 +2055,7 @@ def rigid_body_rhs_c(x, m, c_b, F_w, tau_w):
     t5 = -t4*x_4 + 2*tau_w_1*x_3
     t6 = t4*x_5 - 2*tau_w_2*x_3
     t7 = -2*tau_w_1*x_5 + 2*tau_w_2*x_4
-    x_dot_out = numpy.empty(batch + (13,), dtype=numpy.float32)
+    x_dot_out = numpy.empty(batch + (13,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     x_dot_out[..., 0] = x_7
     x_dot_out[..., 1] = x_8
     x_dot_out[..., 2] = x_9
@@ -1986,7 +2072,7 @@ def rigid_body_rhs_c(x, m, c_b, F_w, tau_w):
     return x_dot_out
 
 
-def pivot_body_rhs(q, omega_b, I_p, r_b, F_w, tau_w):
+def pivot_body_rhs(q, omega_b, I_p, r_b, F_w, tau_w, *, out=None):
     """Rotation about a world-anchored spherical joint (no wheels).
 
     Generated kernel ``pivot_body_rhs``; inputs broadcast over leading batch axes.
@@ -2005,6 +2091,8 @@ def pivot_body_rhs(q, omega_b, I_p, r_b, F_w, tau_w):
         total force at the COM, world frame, N
     tau_w : array_like, shape (..., 3)
         total torque about the COM, world frame, N·m
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -2080,19 +2168,19 @@ def pivot_body_rhs(q, omega_b, I_p, r_b, F_w, tau_w):
     t35 = omega_b_0*t33 - omega_b_2*t15 - r_b_0*t34 + r_b_2*t30 + t22*tau_w_0 + t23*tau_w_2 + t25*tau_w_1
     t36 = -omega_b_1*t33 + omega_b_2*t16 + r_b_1*t34 - r_b_2*t26 + t27*tau_w_1 + t28*tau_w_2 + t29*tau_w_0
     t37 = -I_p_00*I_p_12 + I_p_01*I_p_02
-    q_dot_out = numpy.empty(batch + (4,), dtype=numpy.float32)
+    q_dot_out = numpy.empty(batch + (4,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     q_dot_out[..., 0] = q_1*t2 - q_2*t1 + q_3*t0
     q_dot_out[..., 1] = -q_0*t2 + q_2*t0 + q_3*t1
     q_dot_out[..., 2] = q_0*t1 - q_1*t0 + q_3*t2
     q_dot_out[..., 3] = -q_0*t0 - q_1*t1 - q_2*t2
-    omega_dot_b_out = numpy.empty(batch + (3,), dtype=numpy.float32)
+    omega_dot_b_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[1] is None else out[1]
     omega_dot_b_out[..., 0] = t6*(t31*t7 + t32*t35 + t36*(I_p_11*I_p_22 - t3))
     omega_dot_b_out[..., 1] = t6*(t31*t37 + t32*t36 + t35*(I_p_00*I_p_22 - t5))
     omega_dot_b_out[..., 2] = t6*(t31*(I_p_00*I_p_11 - t4) + t35*t37 + t36*t7)
     return q_dot_out, omega_dot_b_out
 
 
-def pivot_kinematics(q, omega_b, anchor_w, r_b):
+def pivot_kinematics(q, omega_b, anchor_w, r_b, *, out=None):
     """COM position and velocity of a body on a spherical joint.
 
     Generated kernel ``pivot_kinematics``; inputs broadcast over leading batch axes.
@@ -2107,6 +2195,8 @@ def pivot_kinematics(q, omega_b, anchor_w, r_b):
         joint anchor, world frame, m
     r_b : array_like, shape (..., 3)
         pivot → COM, body frame, m
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -2155,18 +2245,18 @@ def pivot_kinematics(q, omega_b, anchor_w, r_b):
     t19 = omega_b_0*r_b_1 - omega_b_1*r_b_0
     t20 = -omega_b_0*r_b_2 + omega_b_2*r_b_0
     t21 = omega_b_1*r_b_2 - omega_b_2*r_b_1
-    p_w_out = numpy.empty(batch + (3,), dtype=numpy.float32)
+    p_w_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     p_w_out[..., 0] = anchor_w_0 + r_b_0*t10 + r_b_1*t4 + r_b_2*t7
     p_w_out[..., 1] = anchor_w_1 + r_b_0*t11 + r_b_1*t15 + r_b_2*t13
     p_w_out[..., 2] = anchor_w_2 + r_b_0*t16 + r_b_1*t17 + r_b_2*t18
-    v_w_out = numpy.empty(batch + (3,), dtype=numpy.float32)
+    v_w_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[1] is None else out[1]
     v_w_out[..., 0] = t10*t21 + t19*t7 + t20*t4
     v_w_out[..., 1] = t11*t21 + t13*t19 + t15*t20
     v_w_out[..., 2] = t16*t21 + t17*t20 + t18*t19
     return p_w_out, v_w_out
 
 
-def splitting_rotation(I_b, q, omega_b, h):
+def splitting_rotation(I_b, q, omega_b, h, *, out=None):
     """Free rotation over h by Strang splitting into exact principal-axis flows.
 
     Generated kernel ``splitting_rotation``; inputs broadcast over leading batch axes.
@@ -2181,6 +2271,8 @@ def splitting_rotation(I_b, q, omega_b, h):
         angular velocity, body frame, rad/s
     h : array_like, shape (...)
         time step, s
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -2259,19 +2351,19 @@ def splitting_rotation(I_b, q, omega_b, h):
     t52 = 1 - 2*(t49*t49)
     t53 = t21*t41 + t40*t42
     t54 = 2*t45*t49
-    q_next_out = numpy.empty(batch + (4,), dtype=numpy.float32)
+    q_next_out = numpy.empty(batch + (4,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     q_next_out[..., 0] = t39*t45 + t48*t49
     q_next_out[..., 1] = t45*t51 + t49*t50
     q_next_out[..., 2] = t45*t50 - t49*t51
     q_next_out[..., 3] = -t39*t49 + t45*t48
-    omega_next_out = numpy.empty(batch + (3,), dtype=numpy.float32)
+    omega_next_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[1] is None else out[1]
     omega_next_out[..., 0] = t43
     omega_next_out[..., 1] = t9*(t32*t52 + t53*t54)
     omega_next_out[..., 2] = t16*(-t32*t54 + t52*t53)
     return q_next_out, omega_next_out
 
 
-def axis_flow_x(I_b, q, L_b, tau):
+def axis_flow_x(I_b, q, L_b, tau, *, out=None):
     """Exact flow of H_x = L_x²/(2 I_x) on (q, L_B) for time τ.
 
     Generated kernel ``axis_flow_x``; inputs broadcast over leading batch axes.
@@ -2286,6 +2378,8 @@ def axis_flow_x(I_b, q, L_b, tau):
         angular momentum, body frame, kg·m²/s
     tau : array_like, shape (...)
         duration of the flow, s
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -2312,19 +2406,19 @@ def axis_flow_x(I_b, q, L_b, tau):
     t2 = numpy.sin(t0)
     t3 = 1 - 2*(t2*t2)
     t4 = 2*t1*t2
-    q_next_out = numpy.empty(batch + (4,), dtype=numpy.float32)
+    q_next_out = numpy.empty(batch + (4,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     q_next_out[..., 0] = q_0*t1 + q_3*t2
     q_next_out[..., 1] = q_1*t1 + q_2*t2
     q_next_out[..., 2] = -q_1*t2 + q_2*t1
     q_next_out[..., 3] = -q_0*t2 + q_3*t1
-    L_next_out = numpy.empty(batch + (3,), dtype=numpy.float32)
+    L_next_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[1] is None else out[1]
     L_next_out[..., 0] = L_b_0
     L_next_out[..., 1] = L_b_1*t3 + L_b_2*t4
     L_next_out[..., 2] = -L_b_1*t4 + L_b_2*t3
     return q_next_out, L_next_out
 
 
-def axis_flow_y(I_b, q, L_b, tau):
+def axis_flow_y(I_b, q, L_b, tau, *, out=None):
     """Exact flow of H_y = L_y²/(2 I_y) on (q, L_B) for time τ.
 
     Generated kernel ``axis_flow_y``; inputs broadcast over leading batch axes.
@@ -2339,6 +2433,8 @@ def axis_flow_y(I_b, q, L_b, tau):
         angular momentum, body frame, kg·m²/s
     tau : array_like, shape (...)
         duration of the flow, s
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -2365,19 +2461,19 @@ def axis_flow_y(I_b, q, L_b, tau):
     t2 = numpy.sin(t0)
     t3 = 1 - 2*(t2*t2)
     t4 = 2*t1*t2
-    q_next_out = numpy.empty(batch + (4,), dtype=numpy.float32)
+    q_next_out = numpy.empty(batch + (4,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     q_next_out[..., 0] = q_0*t1 - q_2*t2
     q_next_out[..., 1] = q_1*t1 + q_3*t2
     q_next_out[..., 2] = q_0*t2 + q_2*t1
     q_next_out[..., 3] = -q_1*t2 + q_3*t1
-    L_next_out = numpy.empty(batch + (3,), dtype=numpy.float32)
+    L_next_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[1] is None else out[1]
     L_next_out[..., 0] = L_b_0*t3 - L_b_2*t4
     L_next_out[..., 1] = L_b_1
     L_next_out[..., 2] = L_b_0*t4 + L_b_2*t3
     return q_next_out, L_next_out
 
 
-def axis_flow_z(I_b, q, L_b, tau):
+def axis_flow_z(I_b, q, L_b, tau, *, out=None):
     """Exact flow of H_z = L_z²/(2 I_z) on (q, L_B) for time τ.
 
     Generated kernel ``axis_flow_z``; inputs broadcast over leading batch axes.
@@ -2392,6 +2488,8 @@ def axis_flow_z(I_b, q, L_b, tau):
         angular momentum, body frame, kg·m²/s
     tau : array_like, shape (...)
         duration of the flow, s
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -2418,19 +2516,19 @@ def axis_flow_z(I_b, q, L_b, tau):
     t2 = numpy.sin(t0)
     t3 = 1 - 2*(t2*t2)
     t4 = 2*t1*t2
-    q_next_out = numpy.empty(batch + (4,), dtype=numpy.float32)
+    q_next_out = numpy.empty(batch + (4,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     q_next_out[..., 0] = q_0*t1 + q_1*t2
     q_next_out[..., 1] = -q_0*t2 + q_1*t1
     q_next_out[..., 2] = q_2*t1 + q_3*t2
     q_next_out[..., 3] = -q_2*t2 + q_3*t1
-    L_next_out = numpy.empty(batch + (3,), dtype=numpy.float32)
+    L_next_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[1] is None else out[1]
     L_next_out[..., 0] = L_b_0*t3 + L_b_1*t4
     L_next_out[..., 1] = -L_b_0*t4 + L_b_1*t3
     L_next_out[..., 2] = L_b_2
     return q_next_out, L_next_out
 
 
-def symtop_score(I_b):
+def symtop_score(I_b, *, out=None):
     """Size of the symmetric-top splitting error for each reference axis r.
 
     Generated kernel ``symtop_score``; inputs broadcast over leading batch axes.
@@ -2439,6 +2537,8 @@ def symtop_score(I_b):
     ----------
     I_b : array_like, shape (..., 3)
         principal moments, body frame, kg·m²
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -2456,14 +2556,14 @@ def symtop_score(I_b):
     t3 = (1.0/I_b_2)
     t4 = t1 + t3
     t5 = -t0 + t3
-    score_out = numpy.empty(batch + (3,), dtype=numpy.float32)
+    score_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     score_out[..., 0] = abs(t2*t4)
     score_out[..., 1] = abs(t2*t5)
     score_out[..., 2] = abs(t4*t5)
     return score_out
 
 
-def symtop_leftover(I_b, I_r):
+def symtop_leftover(I_b, I_r, *, out=None):
     """Coefficients left over when |L|²/(2 I_r) is split off the energy.
 
     Generated kernel ``symtop_leftover``; inputs broadcast over leading batch axes.
@@ -2474,6 +2574,8 @@ def symtop_leftover(I_b, I_r):
         principal moments, body frame, kg·m²
     I_r : array_like, shape (...)
         the reference moment I_b[r], kg·m²
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -2487,14 +2589,14 @@ def symtop_leftover(I_b, I_r):
     I_b_1 = I_b[..., 1]
     I_b_2 = I_b[..., 2]
     t0 = (1.0/I_r)
-    c_out = numpy.empty(batch + (3,), dtype=numpy.float32)
+    c_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     c_out[..., 0] = -t0 + (1.0/I_b_0)
     c_out[..., 1] = -t0 + (1.0/I_b_1)
     c_out[..., 2] = -t0 + (1.0/I_b_2)
     return c_out
 
 
-def symtop_axis_flow_x(q, L_b, c, tau):
+def symtop_axis_flow_x(q, L_b, c, tau, *, out=None):
     """Exact flow of ½ c L_x² on (q, L_B) for time τ.
 
     Generated kernel ``symtop_axis_flow_x``; inputs broadcast over leading batch axes.
@@ -2509,6 +2611,8 @@ def symtop_axis_flow_x(q, L_b, c, tau):
         coefficient of ½ L²_axis in the energy, 1/(kg·m²)
     tau : array_like, shape (...)
         duration of the flow, s
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -2534,19 +2638,19 @@ def symtop_axis_flow_x(q, L_b, c, tau):
     t2 = numpy.sin(t0)
     t3 = 1 - 2*(t2*t2)
     t4 = 2*t1*t2
-    q_next_out = numpy.empty(batch + (4,), dtype=numpy.float32)
+    q_next_out = numpy.empty(batch + (4,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     q_next_out[..., 0] = q_0*t1 + q_3*t2
     q_next_out[..., 1] = q_1*t1 + q_2*t2
     q_next_out[..., 2] = -q_1*t2 + q_2*t1
     q_next_out[..., 3] = -q_0*t2 + q_3*t1
-    L_next_out = numpy.empty(batch + (3,), dtype=numpy.float32)
+    L_next_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[1] is None else out[1]
     L_next_out[..., 0] = L_b_0
     L_next_out[..., 1] = L_b_1*t3 + L_b_2*t4
     L_next_out[..., 2] = -L_b_1*t4 + L_b_2*t3
     return q_next_out, L_next_out
 
 
-def symtop_axis_flow_y(q, L_b, c, tau):
+def symtop_axis_flow_y(q, L_b, c, tau, *, out=None):
     """Exact flow of ½ c L_y² on (q, L_B) for time τ.
 
     Generated kernel ``symtop_axis_flow_y``; inputs broadcast over leading batch axes.
@@ -2561,6 +2665,8 @@ def symtop_axis_flow_y(q, L_b, c, tau):
         coefficient of ½ L²_axis in the energy, 1/(kg·m²)
     tau : array_like, shape (...)
         duration of the flow, s
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -2586,19 +2692,19 @@ def symtop_axis_flow_y(q, L_b, c, tau):
     t2 = numpy.sin(t0)
     t3 = 1 - 2*(t2*t2)
     t4 = 2*t1*t2
-    q_next_out = numpy.empty(batch + (4,), dtype=numpy.float32)
+    q_next_out = numpy.empty(batch + (4,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     q_next_out[..., 0] = q_0*t1 - q_2*t2
     q_next_out[..., 1] = q_1*t1 + q_3*t2
     q_next_out[..., 2] = q_0*t2 + q_2*t1
     q_next_out[..., 3] = -q_1*t2 + q_3*t1
-    L_next_out = numpy.empty(batch + (3,), dtype=numpy.float32)
+    L_next_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[1] is None else out[1]
     L_next_out[..., 0] = L_b_0*t3 - L_b_2*t4
     L_next_out[..., 1] = L_b_1
     L_next_out[..., 2] = L_b_0*t4 + L_b_2*t3
     return q_next_out, L_next_out
 
 
-def symtop_axis_flow_z(q, L_b, c, tau):
+def symtop_axis_flow_z(q, L_b, c, tau, *, out=None):
     """Exact flow of ½ c L_z² on (q, L_B) for time τ.
 
     Generated kernel ``symtop_axis_flow_z``; inputs broadcast over leading batch axes.
@@ -2613,6 +2719,8 @@ def symtop_axis_flow_z(q, L_b, c, tau):
         coefficient of ½ L²_axis in the energy, 1/(kg·m²)
     tau : array_like, shape (...)
         duration of the flow, s
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -2638,19 +2746,19 @@ def symtop_axis_flow_z(q, L_b, c, tau):
     t2 = numpy.sin(t0)
     t3 = 1 - 2*(t2*t2)
     t4 = 2*t1*t2
-    q_next_out = numpy.empty(batch + (4,), dtype=numpy.float32)
+    q_next_out = numpy.empty(batch + (4,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     q_next_out[..., 0] = q_0*t1 + q_1*t2
     q_next_out[..., 1] = -q_0*t2 + q_1*t1
     q_next_out[..., 2] = q_2*t1 + q_3*t2
     q_next_out[..., 3] = -q_2*t2 + q_3*t1
-    L_next_out = numpy.empty(batch + (3,), dtype=numpy.float32)
+    L_next_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[1] is None else out[1]
     L_next_out[..., 0] = L_b_0*t3 + L_b_1*t4
     L_next_out[..., 1] = -L_b_0*t4 + L_b_1*t3
     L_next_out[..., 2] = L_b_2
     return q_next_out, L_next_out
 
 
-def sphere_flow(q, L_b, I_r, tau):
+def sphere_flow(q, L_b, I_r, tau, *, out=None):
     """Exact flow of |L|²/(2 I_r) on q for time τ (L_B is unchanged).
 
     Generated kernel ``sphere_flow``; inputs broadcast over leading batch axes.
@@ -2665,6 +2773,8 @@ def sphere_flow(q, L_b, I_r, tau):
         the reference moment I_b[r], kg·m²
     tau : array_like, shape (...)
         duration of the flow, s
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -2695,7 +2805,7 @@ def sphere_flow(q, L_b, I_r, tau):
         t8 = L_b_0*t7
         t9 = L_b_2*t7
         t10 = L_b_1*t7
-        q_next_out = numpy.empty(batch + (4,), dtype=numpy.float32)
+        q_next_out = numpy.empty(batch + (4,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
         q_next_out[..., 0] = q_0*t6 + q_1*t9 - q_2*t10 + q_3*t8
         q_next_out[..., 1] = -q_0*t9 + q_1*t6 + q_2*t8 + q_3*t10
         q_next_out[..., 2] = q_0*t10 - q_1*t8 + q_2*t6 + q_3*t9
@@ -2703,7 +2813,7 @@ def sphere_flow(q, L_b, I_r, tau):
     return q_next_out
 
 
-def body_momentum(I_b, omega_b):
+def body_momentum(I_b, omega_b, *, out=None):
     """Body angular momentum of a body with principal moments I_B.
 
     Generated kernel ``body_momentum``; inputs broadcast over leading batch axes.
@@ -2714,6 +2824,8 @@ def body_momentum(I_b, omega_b):
         principal moments, body frame, kg·m²
     omega_b : array_like, shape (..., 3)
         angular velocity, body frame, rad/s
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -2729,14 +2841,14 @@ def body_momentum(I_b, omega_b):
     omega_b_0 = omega_b[..., 0]
     omega_b_1 = omega_b[..., 1]
     omega_b_2 = omega_b[..., 2]
-    L_b_out = numpy.empty(batch + (3,), dtype=numpy.float32)
+    L_b_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     L_b_out[..., 0] = I_b_0*omega_b_0
     L_b_out[..., 1] = I_b_1*omega_b_1
     L_b_out[..., 2] = I_b_2*omega_b_2
     return L_b_out
 
 
-def body_rate(I_b, L_b):
+def body_rate(I_b, L_b, *, out=None):
     """Body angular velocity from the body angular momentum.
 
     Generated kernel ``body_rate``; inputs broadcast over leading batch axes.
@@ -2747,6 +2859,8 @@ def body_rate(I_b, L_b):
         principal moments, body frame, kg·m²
     L_b : array_like, shape (..., 3)
         angular momentum, body frame, kg·m²/s
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -2762,14 +2876,14 @@ def body_rate(I_b, L_b):
     L_b_0 = L_b[..., 0]
     L_b_1 = L_b[..., 1]
     L_b_2 = L_b[..., 2]
-    omega_b_out = numpy.empty(batch + (3,), dtype=numpy.float32)
+    omega_b_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     omega_b_out[..., 0] = L_b_0/I_b_0
     omega_b_out[..., 1] = L_b_1/I_b_1
     omega_b_out[..., 2] = L_b_2/I_b_2
     return omega_b_out
 
 
-def splitting_kick(m, I_b, v_w, omega_b, F_w, tau_b, h):
+def splitting_kick(m, I_b, v_w, omega_b, F_w, tau_b, h, *, out=None):
     """Kick of v and ω under a force and a body torque for time h (q, p fixed).
 
     Generated kernel ``splitting_kick``; inputs broadcast over leading batch axes.
@@ -2790,6 +2904,8 @@ def splitting_kick(m, I_b, v_w, omega_b, F_w, tau_b, h):
         torque, body frame, N·m
     h : array_like, shape (...)
         time step, s
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -2822,18 +2938,18 @@ def splitting_kick(m, I_b, v_w, omega_b, F_w, tau_b, h):
     tau_b_1 = tau_b[..., 1]
     tau_b_2 = tau_b[..., 2]
     t0 = h/m
-    v_next_out = numpy.empty(batch + (3,), dtype=numpy.float32)
+    v_next_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     v_next_out[..., 0] = F_w_0*t0 + v_w_0
     v_next_out[..., 1] = F_w_1*t0 + v_w_1
     v_next_out[..., 2] = F_w_2*t0 + v_w_2
-    omega_next_out = numpy.empty(batch + (3,), dtype=numpy.float32)
+    omega_next_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[1] is None else out[1]
     omega_next_out[..., 0] = omega_b_0 + h*tau_b_0/I_b_0
     omega_next_out[..., 1] = omega_b_1 + h*tau_b_1/I_b_1
     omega_next_out[..., 2] = omega_b_2 + h*tau_b_2/I_b_2
     return v_next_out, omega_next_out
 
 
-def translation_drift(p_w, v_w, h):
+def translation_drift(p_w, v_w, h, *, out=None):
     """Drift of the COM position for time h.
 
     Generated kernel ``translation_drift``; inputs broadcast over leading batch axes.
@@ -2846,6 +2962,8 @@ def translation_drift(p_w, v_w, h):
         COM velocity, world frame, m/s
     h : array_like, shape (...)
         time step, s
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -2862,14 +2980,14 @@ def translation_drift(p_w, v_w, h):
     v_w_0 = v_w[..., 0]
     v_w_1 = v_w[..., 1]
     v_w_2 = v_w[..., 2]
-    p_next_out = numpy.empty(batch + (3,), dtype=numpy.float32)
+    p_next_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     p_next_out[..., 0] = h*v_w_0 + p_w_0
     p_next_out[..., 1] = h*v_w_1 + p_w_1
     p_next_out[..., 2] = h*v_w_2 + p_w_2
     return p_next_out
 
 
-def semi_implicit_translation(m, p_w, v_w, F_w, h):
+def semi_implicit_translation(m, p_w, v_w, F_w, h, *, out=None):
     """Semi-implicit Euler step of the COM under a force.
 
     Generated kernel ``semi_implicit_translation``; inputs broadcast over leading batch axes.
@@ -2886,6 +3004,8 @@ def semi_implicit_translation(m, p_w, v_w, F_w, h):
         force at the COM, world frame, N
     h : array_like, shape (...)
         time step, s
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -2913,18 +3033,18 @@ def semi_implicit_translation(m, p_w, v_w, F_w, h):
     t1 = F_w_0*t0 + v_w_0
     t2 = F_w_1*t0 + v_w_1
     t3 = F_w_2*t0 + v_w_2
-    p_next_out = numpy.empty(batch + (3,), dtype=numpy.float32)
+    p_next_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     p_next_out[..., 0] = h*t1 + p_w_0
     p_next_out[..., 1] = h*t2 + p_w_1
     p_next_out[..., 2] = h*t3 + p_w_2
-    v_next_out = numpy.empty(batch + (3,), dtype=numpy.float32)
+    v_next_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[1] is None else out[1]
     v_next_out[..., 0] = t1
     v_next_out[..., 1] = t2
     v_next_out[..., 2] = t3
     return p_next_out, v_next_out
 
 
-def translation_rhs(m, v_w, F_w):
+def translation_rhs(m, v_w, F_w, *, out=None):
     """COM translation of a free body.
 
     Generated kernel ``translation_rhs``; inputs broadcast over leading batch axes.
@@ -2937,6 +3057,8 @@ def translation_rhs(m, v_w, F_w):
         COM velocity, world frame, m/s
     F_w : array_like, shape (..., 3)
         force at the COM, world frame, N
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -2956,18 +3078,18 @@ def translation_rhs(m, v_w, F_w):
     F_w_1 = F_w[..., 1]
     F_w_2 = F_w[..., 2]
     t0 = (1.0/m)
-    p_dot_out = numpy.empty(batch + (3,), dtype=numpy.float32)
+    p_dot_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     p_dot_out[..., 0] = v_w_0
     p_dot_out[..., 1] = v_w_1
     p_dot_out[..., 2] = v_w_2
-    v_dot_out = numpy.empty(batch + (3,), dtype=numpy.float32)
+    v_dot_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[1] is None else out[1]
     v_dot_out[..., 0] = F_w_0*t0
     v_dot_out[..., 1] = F_w_1*t0
     v_dot_out[..., 2] = F_w_2*t0
     return p_dot_out, v_dot_out
 
 
-def implicit_gyro_residual(I_b, omega_b, tau_b, h, omega_next):
+def implicit_gyro_residual(I_b, omega_b, tau_b, h, omega_next, *, out=None):
     """Residual of the implicit gyroscopic step.
 
     Generated kernel ``implicit_gyro_residual``; inputs broadcast over leading batch axes.
@@ -2984,6 +3106,8 @@ def implicit_gyro_residual(I_b, omega_b, tau_b, h, omega_next):
         time step, s
     omega_next : array_like, shape (..., 3)
         current iterate of the new angular velocity ω⁺, body frame, rad/s
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -3009,14 +3133,14 @@ def implicit_gyro_residual(I_b, omega_b, tau_b, h, omega_next):
     omega_next_1 = omega_next[..., 1]
     omega_next_2 = omega_next[..., 2]
     t0 = omega_next_0*omega_next_2
-    g_out = numpy.empty(batch + (3,), dtype=numpy.float32)
+    g_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     g_out[..., 0] = I_b_0*(-omega_b_0 + omega_next_0) - h*tau_b_0 + h*(-I_b_1*omega_next_1*omega_next_2 + I_b_2*omega_next_1*omega_next_2)
     g_out[..., 1] = I_b_1*(-omega_b_1 + omega_next_1) - h*tau_b_1 + h*(I_b_0*t0 - I_b_2*t0)
     g_out[..., 2] = I_b_2*(-omega_b_2 + omega_next_2) - h*tau_b_2 + h*(-I_b_0*omega_next_0*omega_next_1 + I_b_1*omega_next_0*omega_next_1)
     return g_out
 
 
-def implicit_gyro_jacobian(I_b, h, omega_next):
+def implicit_gyro_jacobian(I_b, h, omega_next, *, out=None):
     """Jacobian of the implicit-gyro residual, differentiated by SymPy.
 
     Generated kernel ``implicit_gyro_jacobian``; inputs broadcast over leading batch axes.
@@ -3029,6 +3153,8 @@ def implicit_gyro_jacobian(I_b, h, omega_next):
         time step, s
     omega_next : array_like, shape (..., 3)
         current iterate of the new angular velocity ω⁺, body frame, rad/s
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -3048,7 +3174,7 @@ def implicit_gyro_jacobian(I_b, h, omega_next):
     t0 = -I_b_2*omega_next_2
     t1 = I_b_1*omega_next_1
     t2 = I_b_0*omega_next_0
-    J_out = numpy.empty(batch + (3, 3), dtype=numpy.float32)
+    J_out = numpy.empty(batch + (3, 3), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     J_out[..., 0, 0] = I_b_0
     J_out[..., 0, 1] = h*(-I_b_1*omega_next_2 - t0)
     J_out[..., 0, 2] = h*(I_b_2*omega_next_1 - t1)
@@ -3061,7 +3187,7 @@ def implicit_gyro_jacobian(I_b, h, omega_next):
     return J_out
 
 
-def implicit_gyro_newton(I_b, omega_b, tau_b, h, omega_next):
+def implicit_gyro_newton(I_b, omega_b, tau_b, h, omega_next, *, out=None):
     """One Newton update of the implicit gyroscopic step (adjugate solve).
 
     Generated kernel ``implicit_gyro_newton``; inputs broadcast over leading batch axes.
@@ -3078,6 +3204,8 @@ def implicit_gyro_newton(I_b, omega_b, tau_b, h, omega_next):
         time step, s
     omega_next : array_like, shape (..., 3)
         current iterate of the new angular velocity ω⁺, body frame, rad/s
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -3128,18 +3256,18 @@ def implicit_gyro_newton(I_b, omega_b, tau_b, h, omega_next):
     t21 = I_b_0*h
     t22 = t16*(t15*t17 + t18*(t11*t3*t7 - t2*t21) + t19*(I_b_0*I_b_2 - t3*t7*t8))
     t23 = t16*(t12*t17 + t18*(I_b_0*I_b_1 - t11*t13*t3) + t19*(t13*t3*t8 - t21*t4))
-    omega_new_out = numpy.empty(batch + (3,), dtype=numpy.float32)
+    omega_new_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     omega_new_out[..., 0] = omega_next_0 - t20
     omega_new_out[..., 1] = omega_next_1 - t22
     omega_new_out[..., 2] = omega_next_2 - t23
-    delta_out = numpy.empty(batch + (3,), dtype=numpy.float32)
+    delta_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[1] is None else out[1]
     delta_out[..., 0] = t20
     delta_out[..., 1] = t22
     delta_out[..., 2] = t23
     return omega_new_out, delta_out
 
 
-def quat_exp_step(q, omega_b, h):
+def quat_exp_step(q, omega_b, h, *, out=None):
     """Attitude step by the exponential map of a body angular velocity held over h.
 
     Generated kernel ``quat_exp_step``; inputs broadcast over leading batch axes.
@@ -3152,6 +3280,8 @@ def quat_exp_step(q, omega_b, h):
         angular velocity, body frame, rad/s
     h : array_like, shape (...)
         time step, s
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -3179,7 +3309,7 @@ def quat_exp_step(q, omega_b, h):
         t6 = omega_b_0*t5
         t7 = omega_b_2*t5
         t8 = omega_b_1*t5
-        q_next_out = numpy.empty(batch + (4,), dtype=numpy.float32)
+        q_next_out = numpy.empty(batch + (4,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
         q_next_out[..., 0] = q_0*t4 + q_1*t7 - q_2*t8 + q_3*t6
         q_next_out[..., 1] = -q_0*t7 + q_1*t4 + q_2*t6 + q_3*t8
         q_next_out[..., 2] = q_0*t8 - q_1*t6 + q_2*t4 + q_3*t7
@@ -3187,7 +3317,7 @@ def quat_exp_step(q, omega_b, h):
     return q_next_out
 
 
-def rkmk_dexpinv(u_b, omega_b):
+def rkmk_dexpinv(u_b, omega_b, *, out=None):
     """Rate of the attitude's exponential coordinates (RKMK4, truncated dexp inverse).
 
     Generated kernel ``rkmk_dexpinv``; inputs broadcast over leading batch axes.
@@ -3198,6 +3328,8 @@ def rkmk_dexpinv(u_b, omega_b):
         rotation vector of the attitude relative to the step's start, body frame, rad
     omega_b : array_like, shape (..., 3)
         angular velocity, body frame, rad/s
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -3221,14 +3353,14 @@ def rkmk_dexpinv(u_b, omega_b):
     t5 = t3 - t4
     t6 = ((numpy.float32(1.0)/numpy.float32(12.0)))*u_b_2
     t7 = omega_b_2*u_b_1 - t0
-    u_dot_out = numpy.empty(batch + (3,), dtype=numpy.float32)
+    u_dot_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     u_dot_out[..., 0] = omega_b_0 + ((numpy.float32(1.0)/numpy.float32(2.0)))*omega_b_2*u_b_1 - (numpy.float32(1.0)/numpy.float32(2.0))*t0 + t2*u_b_1 - t5*t6
     u_dot_out[..., 1] = omega_b_1 - t2*u_b_0 + ((numpy.float32(1.0)/numpy.float32(2.0)))*t3 - (numpy.float32(1.0)/numpy.float32(2.0))*t4 + t6*t7
     u_dot_out[..., 2] = ((numpy.float32(1.0)/numpy.float32(2.0)))*omega_b_1*u_b_0 + omega_b_2 - (numpy.float32(1.0)/numpy.float32(2.0))*t1 + ((numpy.float32(1.0)/numpy.float32(12.0)))*t5*u_b_0 - (numpy.float32(1.0)/numpy.float32(12.0))*t7*u_b_1
     return u_dot_out
 
 
-def wheel_saturation(command, Omega, torque_limit, speed_limit):
+def wheel_saturation(command, Omega, torque_limit, speed_limit, *, out=None):
     """Motor torques actually applied: clipped, and cut off beyond the speed limit.
 
     Generated kernel ``wheel_saturation``; inputs broadcast over leading batch axes.
@@ -3243,6 +3375,8 @@ def wheel_saturation(command, Omega, torque_limit, speed_limit):
         N·m
     speed_limit : array_like, shape (...)
         rad/s
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -3274,14 +3408,14 @@ def wheel_saturation(command, Omega, torque_limit, speed_limit):
         t10 = numpy.less_equal(speed_limit, abs(Omega_2))
         t11 = Omega_2*torque_limit
         t12 = numpy.greater(command_2, torque_limit)
-        u_out = numpy.empty(batch + (3,), dtype=numpy.float32)
+        u_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
         u_out[..., 0] = numpy.select([numpy.logical_and.reduce((t2,numpy.logical_or.reduce((numpy.logical_not(t1),numpy.less(t3, 0))),numpy.logical_or.reduce((t1,numpy.logical_not(t4),numpy.greater(t3, 0))),numpy.logical_or.reduce((t1,t4,numpy.greater(Omega_0*command_0, 0))))),True], [0,numpy.select([t1,t4,True], [t0,torque_limit,command_0], default=numpy.nan)], default=numpy.nan)
         u_out[..., 1] = numpy.select([numpy.logical_and.reduce((t6,numpy.logical_or.reduce((numpy.logical_not(t5),numpy.less(t7, 0))),numpy.logical_or.reduce((t5,numpy.logical_not(t8),numpy.greater(t7, 0))),numpy.logical_or.reduce((t5,t8,numpy.greater(Omega_1*command_1, 0))))),True], [0,numpy.select([t5,t8,True], [t0,torque_limit,command_1], default=numpy.nan)], default=numpy.nan)
         u_out[..., 2] = numpy.select([numpy.logical_and.reduce((t10,numpy.logical_or.reduce((numpy.logical_not(t9),numpy.less(t11, 0))),numpy.logical_or.reduce((t9,numpy.logical_not(t12),numpy.greater(t11, 0))),numpy.logical_or.reduce((t12,t9,numpy.greater(Omega_2*command_2, 0))))),True], [0,numpy.select([t9,t12,True], [t0,torque_limit,command_2], default=numpy.nan)], default=numpy.nan)
     return u_out
 
 
-def wheel_motor(command, Omega, torque_limit, speed_limit, cutoff):
+def wheel_motor(command, Omega, torque_limit, speed_limit, cutoff, *, out=None):
     """Motor torques actually applied: a torque–speed line from the stall torque to the no-load speed (cutoff = 0), or the hard cut-off of wheel_saturation (cutoff = 1).
 
     Generated kernel ``wheel_motor``; inputs broadcast over leading batch axes.
@@ -3298,6 +3432,8 @@ def wheel_motor(command, Omega, torque_limit, speed_limit, cutoff):
         no-load speed, rad/s
     cutoff : array_like, shape (...)
         1: hard cut-off at speed_limit instead of the line; 0: the line
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -3357,14 +3493,14 @@ def wheel_motor(command, Omega, torque_limit, speed_limit, cutoff):
         t37 = numpy.less_equal(Omega_2, t11)
         t38 = torque_limit*(-t13*t29 + 1)
         t39 = -t38
-        u_out = numpy.empty(batch + (3,), dtype=numpy.float32)
+        u_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
         u_out[..., 0] = numpy.select([t7,True], [numpy.select([numpy.logical_and.reduce((t3,numpy.logical_or.reduce((numpy.logical_not(t1),numpy.less(t4, 0))),numpy.logical_or.reduce((t1,numpy.logical_not(t5),numpy.greater(t4, 0))),numpy.logical_or.reduce((t1,t5,numpy.greater(Omega_0*command_0, 0))))),True], [0,t6], default=numpy.nan),numpy.select([numpy.logical_and.reduce((numpy.logical_or.reduce((t10,t12)),numpy.logical_or.reduce((t10,t9)),numpy.logical_or.reduce((t12,t8)),numpy.logical_or.reduce((t8,t9)))),numpy.logical_and.reduce((numpy.greater(Omega_0, 0),numpy.greater(command_0, t14),numpy.less(Omega_0, speed_limit))),numpy.logical_and.reduce((numpy.greater(Omega_0, t11),numpy.less(Omega_0, 0),numpy.less(command_0, t15))),True], [0,t14,t15,t6], default=numpy.nan)], default=numpy.nan)
         u_out[..., 1] = numpy.select([t7,True], [numpy.select([numpy.logical_and.reduce((t18,numpy.logical_or.reduce((numpy.logical_not(t16),numpy.less(t19, 0))),numpy.logical_or.reduce((t16,numpy.logical_not(t20),numpy.greater(t19, 0))),numpy.logical_or.reduce((t16,t20,numpy.greater(Omega_1*command_1, 0))))),True], [0,t21], default=numpy.nan),numpy.select([numpy.logical_and.reduce((numpy.logical_or.reduce((t22,t23)),numpy.logical_or.reduce((t22,t25)),numpy.logical_or.reduce((t23,t24)),numpy.logical_or.reduce((t24,t25)))),numpy.logical_and.reduce((numpy.greater(Omega_1, 0),numpy.greater(command_1, t26),numpy.less(Omega_1, speed_limit))),numpy.logical_and.reduce((numpy.greater(Omega_1, t11),numpy.less(Omega_1, 0),numpy.less(command_1, t27))),True], [0,t26,t27,t21], default=numpy.nan)], default=numpy.nan)
         u_out[..., 2] = numpy.select([t7,True], [numpy.select([numpy.logical_and.reduce((t30,numpy.logical_or.reduce((numpy.logical_not(t28),numpy.less(t31, 0))),numpy.logical_or.reduce((t28,numpy.logical_not(t32),numpy.greater(t31, 0))),numpy.logical_or.reduce((t28,t32,numpy.greater(Omega_2*command_2, 0))))),True], [0,t33], default=numpy.nan),numpy.select([numpy.logical_and.reduce((numpy.logical_or.reduce((t34,t35)),numpy.logical_or.reduce((t34,t37)),numpy.logical_or.reduce((t35,t36)),numpy.logical_or.reduce((t36,t37)))),numpy.logical_and.reduce((numpy.greater(Omega_2, 0),numpy.greater(command_2, t38),numpy.less(Omega_2, speed_limit))),numpy.logical_and.reduce((numpy.greater(Omega_2, t11),numpy.less(Omega_2, 0),numpy.less(command_2, t39))),True], [0,t38,t39,t33], default=numpy.nan)], default=numpy.nan)
     return u_out
 
 
-def wheels3_body_rhs(q, omega_b, Omega, I_p, A_b, J, r_b, F_w, tau_w, u, c_w):
+def wheels3_body_rhs(q, omega_b, Omega, I_p, A_b, J, r_b, F_w, tau_w, u, c_w, *, out=None):
     """Body with 3 reaction wheels on arbitrary axes rotating about a pivot.
 
     Generated kernel ``wheels3_body_rhs``; inputs broadcast over leading batch axes.
@@ -3393,6 +3529,8 @@ def wheels3_body_rhs(q, omega_b, Omega, I_p, A_b, J, r_b, F_w, tau_w, u, c_w):
         motor torques on the wheels (body gets −A_b u), N·m
     c_w : array_like, shape (...)
         wheel damping, N·m·s/rad
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -3532,23 +3670,23 @@ def wheels3_body_rhs(q, omega_b, Omega, I_p, A_b, J, r_b, F_w, tau_w, u, c_w):
     t28 = k_w_0*t24 + k_w_1*t26 + k_w_2*t27
     t29 = k_w_3*t24 + k_w_4*t26 + k_w_5*t27
     t30 = k_w_6*t24 + k_w_7*t26 + k_w_8*t27
-    q_dot_out = numpy.empty(batch + (4,), dtype=numpy.float32)
+    q_dot_out = numpy.empty(batch + (4,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     q_dot_out[..., 0] = q_1*t2 - q_2*t1 + q_3*t0
     q_dot_out[..., 1] = -q_0*t2 + q_2*t0 + q_3*t1
     q_dot_out[..., 2] = q_0*t1 - q_1*t0 + q_3*t2
     q_dot_out[..., 3] = -q_0*t0 - q_1*t1 - q_2*t2
-    omega_dot_b_out = numpy.empty(batch + (3,), dtype=numpy.float32)
+    omega_dot_b_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[1] is None else out[1]
     omega_dot_b_out[..., 0] = t28
     omega_dot_b_out[..., 1] = t29
     omega_dot_b_out[..., 2] = t30
-    Omega_dot_out = numpy.empty(batch + (3,), dtype=numpy.float32)
+    Omega_dot_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[2] is None else out[2]
     Omega_dot_out[..., 0] = -A_b_00*t28 - A_b_10*t29 - A_b_20*t30 + g_w_0*k_w_9
     Omega_dot_out[..., 1] = -A_b_01*t28 - A_b_11*t29 - A_b_21*t30 + g_w_1*k_w_10
     Omega_dot_out[..., 2] = -A_b_02*t28 - A_b_12*t29 - A_b_22*t30 + g_w_2*k_w_11
     return q_dot_out, omega_dot_b_out, Omega_dot_out
 
 
-def wheels3_momentum(q, omega_b, Omega, I_p, A_b, J):
+def wheels3_momentum(q, omega_b, Omega, I_p, A_b, J, *, out=None):
     """World angular momentum about the pivot of a body with 3 wheels, and the wheels' axial momenta.
 
     Generated kernel ``wheels3_momentum``; inputs broadcast over leading batch axes.
@@ -3567,6 +3705,8 @@ def wheels3_momentum(q, omega_b, Omega, I_p, A_b, J):
         wheel spin axes as columns (3×3, unit columns), body frame, row-major
     J : array_like, shape (..., 3)
         wheel axial inertias (3), kg·m²
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -3646,22 +3786,22 @@ def wheels3_momentum(q, omega_b, Omega, I_p, A_b, J):
     t31 = A_b_10*t28 + A_b_11*t29 + A_b_12*t30
     t32 = A_b_20*t28 + A_b_21*t29 + A_b_22*t30
     t33 = A_b_00*t28 + A_b_01*t29 + A_b_02*t30
-    L_body_w_out = numpy.empty(batch + (3,), dtype=numpy.float32)
+    L_body_w_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     L_body_w_out[..., 0] = t10*t4 + t13*t15 + t18*t19
     L_body_w_out[..., 1] = t10*t24 + t15*t22 + t19*t20
     L_body_w_out[..., 2] = t10*t26 + t15*t27 + t19*t25
-    L_wheels_w_out = numpy.empty(batch + (3,), dtype=numpy.float32)
+    L_wheels_w_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[1] is None else out[1]
     L_wheels_w_out[..., 0] = t13*t32 + t18*t33 + t31*t4
     L_wheels_w_out[..., 1] = t20*t33 + t22*t32 + t24*t31
     L_wheels_w_out[..., 2] = t25*t33 + t26*t31 + t27*t32
-    h_w_out = numpy.empty(batch + (3,), dtype=numpy.float32)
+    h_w_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[2] is None else out[2]
     h_w_out[..., 0] = t28
     h_w_out[..., 1] = t29
     h_w_out[..., 2] = t30
     return L_body_w_out, L_wheels_w_out, h_w_out
 
 
-def wheels3_motor(command, Omega, torque_limit, speed_limit, cutoff):
+def wheels3_motor(command, Omega, torque_limit, speed_limit, cutoff, *, out=None):
     """Motor torques actually applied on 3 wheels (the wheel_motor line, per wheel).
 
     Generated kernel ``wheels3_motor``; inputs broadcast over leading batch axes.
@@ -3678,6 +3818,8 @@ def wheels3_motor(command, Omega, torque_limit, speed_limit, cutoff):
         no-load speed, rad/s
     cutoff : array_like, shape (...)
         1: hard cut-off at speed_limit instead of the line; 0: the line
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -3737,14 +3879,14 @@ def wheels3_motor(command, Omega, torque_limit, speed_limit, cutoff):
         t37 = numpy.less_equal(Omega_2, t11)
         t38 = torque_limit*(-t13*t29 + 1)
         t39 = -t38
-        u_out = numpy.empty(batch + (3,), dtype=numpy.float32)
+        u_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
         u_out[..., 0] = numpy.select([t7,True], [numpy.select([numpy.logical_and.reduce((t3,numpy.logical_or.reduce((numpy.logical_not(t1),numpy.less(t4, 0))),numpy.logical_or.reduce((t1,numpy.logical_not(t5),numpy.greater(t4, 0))),numpy.logical_or.reduce((t1,t5,numpy.greater(Omega_0*command_0, 0))))),True], [0,t6], default=numpy.nan),numpy.select([numpy.logical_and.reduce((numpy.logical_or.reduce((t10,t12)),numpy.logical_or.reduce((t10,t9)),numpy.logical_or.reduce((t12,t8)),numpy.logical_or.reduce((t8,t9)))),numpy.logical_and.reduce((numpy.greater(Omega_0, 0),numpy.greater(command_0, t14),numpy.less(Omega_0, speed_limit))),numpy.logical_and.reduce((numpy.greater(Omega_0, t11),numpy.less(Omega_0, 0),numpy.less(command_0, t15))),True], [0,t14,t15,t6], default=numpy.nan)], default=numpy.nan)
         u_out[..., 1] = numpy.select([t7,True], [numpy.select([numpy.logical_and.reduce((t18,numpy.logical_or.reduce((numpy.logical_not(t16),numpy.less(t19, 0))),numpy.logical_or.reduce((t16,numpy.logical_not(t20),numpy.greater(t19, 0))),numpy.logical_or.reduce((t16,t20,numpy.greater(Omega_1*command_1, 0))))),True], [0,t21], default=numpy.nan),numpy.select([numpy.logical_and.reduce((numpy.logical_or.reduce((t22,t23)),numpy.logical_or.reduce((t22,t25)),numpy.logical_or.reduce((t23,t24)),numpy.logical_or.reduce((t24,t25)))),numpy.logical_and.reduce((numpy.greater(Omega_1, 0),numpy.greater(command_1, t26),numpy.less(Omega_1, speed_limit))),numpy.logical_and.reduce((numpy.greater(Omega_1, t11),numpy.less(Omega_1, 0),numpy.less(command_1, t27))),True], [0,t26,t27,t21], default=numpy.nan)], default=numpy.nan)
         u_out[..., 2] = numpy.select([t7,True], [numpy.select([numpy.logical_and.reduce((t30,numpy.logical_or.reduce((numpy.logical_not(t28),numpy.less(t31, 0))),numpy.logical_or.reduce((t28,numpy.logical_not(t32),numpy.greater(t31, 0))),numpy.logical_or.reduce((t28,t32,numpy.greater(Omega_2*command_2, 0))))),True], [0,t33], default=numpy.nan),numpy.select([numpy.logical_and.reduce((numpy.logical_or.reduce((t34,t35)),numpy.logical_or.reduce((t34,t37)),numpy.logical_or.reduce((t35,t36)),numpy.logical_or.reduce((t36,t37)))),numpy.logical_and.reduce((numpy.greater(Omega_2, 0),numpy.greater(command_2, t38),numpy.less(Omega_2, speed_limit))),numpy.logical_and.reduce((numpy.greater(Omega_2, t11),numpy.less(Omega_2, 0),numpy.less(command_2, t39))),True], [0,t38,t39,t33], default=numpy.nan)], default=numpy.nan)
     return u_out
 
 
-def wheels4_body_rhs(q, omega_b, Omega, I_p, A_b, J, r_b, F_w, tau_w, u, c_w):
+def wheels4_body_rhs(q, omega_b, Omega, I_p, A_b, J, r_b, F_w, tau_w, u, c_w, *, out=None):
     """Body with 4 reaction wheels on arbitrary axes rotating about a pivot.
 
     Generated kernel ``wheels4_body_rhs``; inputs broadcast over leading batch axes.
@@ -3773,6 +3915,8 @@ def wheels4_body_rhs(q, omega_b, Omega, I_p, A_b, J, r_b, F_w, tau_w, u, c_w):
         motor torques on the wheels (body gets −A_b u), N·m
     c_w : array_like, shape (...)
         wheel damping, N·m·s/rad
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -3921,16 +4065,16 @@ def wheels4_body_rhs(q, omega_b, Omega, I_p, A_b, J, r_b, F_w, tau_w, u, c_w):
     t28 = k_w_0*t24 + k_w_1*t26 + k_w_2*t27
     t29 = k_w_3*t24 + k_w_4*t26 + k_w_5*t27
     t30 = k_w_6*t24 + k_w_7*t26 + k_w_8*t27
-    q_dot_out = numpy.empty(batch + (4,), dtype=numpy.float32)
+    q_dot_out = numpy.empty(batch + (4,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     q_dot_out[..., 0] = q_1*t2 - q_2*t1 + q_3*t0
     q_dot_out[..., 1] = -q_0*t2 + q_2*t0 + q_3*t1
     q_dot_out[..., 2] = q_0*t1 - q_1*t0 + q_3*t2
     q_dot_out[..., 3] = -q_0*t0 - q_1*t1 - q_2*t2
-    omega_dot_b_out = numpy.empty(batch + (3,), dtype=numpy.float32)
+    omega_dot_b_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[1] is None else out[1]
     omega_dot_b_out[..., 0] = t28
     omega_dot_b_out[..., 1] = t29
     omega_dot_b_out[..., 2] = t30
-    Omega_dot_out = numpy.empty(batch + (4,), dtype=numpy.float32)
+    Omega_dot_out = numpy.empty(batch + (4,), dtype=numpy.float32) if out is None or out[2] is None else out[2]
     Omega_dot_out[..., 0] = -A_b_00*t28 - A_b_10*t29 - A_b_20*t30 + g_w_0*k_w_9
     Omega_dot_out[..., 1] = -A_b_01*t28 - A_b_11*t29 - A_b_21*t30 + g_w_1*k_w_10
     Omega_dot_out[..., 2] = -A_b_02*t28 - A_b_12*t29 - A_b_22*t30 + g_w_2*k_w_11
@@ -3938,7 +4082,7 @@ def wheels4_body_rhs(q, omega_b, Omega, I_p, A_b, J, r_b, F_w, tau_w, u, c_w):
     return q_dot_out, omega_dot_b_out, Omega_dot_out
 
 
-def wheels4_coefficients(I_p, A_b, J):
+def wheels4_coefficients(I_p, A_b, J, *, out=None):
     """The inertia-only coefficients of the 4-wheel equations, computed once per body and call.
 
     Generated kernel ``wheels4_coefficients``; inputs broadcast over leading batch axes.
@@ -3951,6 +4095,8 @@ def wheels4_coefficients(I_p, A_b, J):
         wheel spin axes as columns (3×4, unit columns), body frame, row-major
     J : array_like, shape (..., 4)
         wheel axial inertias (4), kg·m²
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -3999,7 +4145,7 @@ def wheels4_coefficients(I_p, A_b, J):
     t0 = C_01*inv_det_M
     t1 = C_02*inv_det_M
     t2 = C_12*inv_det_M
-    k_w_out = numpy.empty(batch + (13,), dtype=numpy.float32)
+    k_w_out = numpy.empty(batch + (13,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     k_w_out[..., 0] = C_00*inv_det_M
     k_w_out[..., 1] = t0
     k_w_out[..., 2] = t1
@@ -4016,7 +4162,7 @@ def wheels4_coefficients(I_p, A_b, J):
     return k_w_out
 
 
-def wheels4_body_rhs_c(q, omega_b, Omega, I_p, A_b, J, k_w, r_b, F_w, tau_w, u, c_w):
+def wheels4_body_rhs_c(q, omega_b, Omega, I_p, A_b, J, k_w, r_b, F_w, tau_w, u, c_w, *, out=None):
     """wheels4_body_rhs on the coefficients k_w (no division).
 
     Generated kernel ``wheels4_body_rhs_c``; inputs broadcast over leading batch axes.
@@ -4047,6 +4193,8 @@ def wheels4_body_rhs_c(q, omega_b, Omega, I_p, A_b, J, k_w, r_b, F_w, tau_w, u, 
         motor torques on the wheels (body gets −A_b u), N·m
     c_w : array_like, shape (...)
         wheel damping, N·m·s/rad
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -4183,16 +4331,16 @@ def wheels4_body_rhs_c(q, omega_b, Omega, I_p, A_b, J, k_w, r_b, F_w, tau_w, u, 
     t28 = k_w_0*t24 + k_w_1*t26 + k_w_2*t27
     t29 = k_w_3*t24 + k_w_4*t26 + k_w_5*t27
     t30 = k_w_6*t24 + k_w_7*t26 + k_w_8*t27
-    q_dot_out = numpy.empty(batch + (4,), dtype=numpy.float32)
+    q_dot_out = numpy.empty(batch + (4,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     q_dot_out[..., 0] = q_1*t2 - q_2*t1 + q_3*t0
     q_dot_out[..., 1] = -q_0*t2 + q_2*t0 + q_3*t1
     q_dot_out[..., 2] = q_0*t1 - q_1*t0 + q_3*t2
     q_dot_out[..., 3] = -q_0*t0 - q_1*t1 - q_2*t2
-    omega_dot_b_out = numpy.empty(batch + (3,), dtype=numpy.float32)
+    omega_dot_b_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[1] is None else out[1]
     omega_dot_b_out[..., 0] = t28
     omega_dot_b_out[..., 1] = t29
     omega_dot_b_out[..., 2] = t30
-    Omega_dot_out = numpy.empty(batch + (4,), dtype=numpy.float32)
+    Omega_dot_out = numpy.empty(batch + (4,), dtype=numpy.float32) if out is None or out[2] is None else out[2]
     Omega_dot_out[..., 0] = -A_b_00*t28 - A_b_10*t29 - A_b_20*t30 + g_w_0*k_w_9
     Omega_dot_out[..., 1] = -A_b_01*t28 - A_b_11*t29 - A_b_21*t30 + g_w_1*k_w_10
     Omega_dot_out[..., 2] = -A_b_02*t28 - A_b_12*t29 - A_b_22*t30 + g_w_2*k_w_11
@@ -4200,7 +4348,7 @@ def wheels4_body_rhs_c(q, omega_b, Omega, I_p, A_b, J, k_w, r_b, F_w, tau_w, u, 
     return q_dot_out, omega_dot_b_out, Omega_dot_out
 
 
-def wheels4_momentum(q, omega_b, Omega, I_p, A_b, J):
+def wheels4_momentum(q, omega_b, Omega, I_p, A_b, J, *, out=None):
     """World angular momentum about the pivot of a body with 4 wheels, and the wheels' axial momenta.
 
     Generated kernel ``wheels4_momentum``; inputs broadcast over leading batch axes.
@@ -4219,6 +4367,8 @@ def wheels4_momentum(q, omega_b, Omega, I_p, A_b, J):
         wheel spin axes as columns (3×4, unit columns), body frame, row-major
     J : array_like, shape (..., 4)
         wheel axial inertias (4), kg·m²
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -4305,15 +4455,15 @@ def wheels4_momentum(q, omega_b, Omega, I_p, A_b, J):
     t33 = A_b_10*t29 + A_b_11*t30 + A_b_12*t31 + A_b_13*t32
     t34 = A_b_20*t29 + A_b_21*t30 + A_b_22*t31 + A_b_23*t32
     t35 = A_b_00*t29 + A_b_01*t30 + A_b_02*t31 + A_b_03*t32
-    L_body_w_out = numpy.empty(batch + (3,), dtype=numpy.float32)
+    L_body_w_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     L_body_w_out[..., 0] = t11*t4 + t14*t16 + t19*t20
     L_body_w_out[..., 1] = t11*t25 + t16*t23 + t20*t21
     L_body_w_out[..., 2] = t11*t27 + t16*t28 + t20*t26
-    L_wheels_w_out = numpy.empty(batch + (3,), dtype=numpy.float32)
+    L_wheels_w_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[1] is None else out[1]
     L_wheels_w_out[..., 0] = t14*t34 + t19*t35 + t33*t4
     L_wheels_w_out[..., 1] = t21*t35 + t23*t34 + t25*t33
     L_wheels_w_out[..., 2] = t26*t35 + t27*t33 + t28*t34
-    h_w_out = numpy.empty(batch + (4,), dtype=numpy.float32)
+    h_w_out = numpy.empty(batch + (4,), dtype=numpy.float32) if out is None or out[2] is None else out[2]
     h_w_out[..., 0] = t29
     h_w_out[..., 1] = t30
     h_w_out[..., 2] = t31
@@ -4321,7 +4471,7 @@ def wheels4_momentum(q, omega_b, Omega, I_p, A_b, J):
     return L_body_w_out, L_wheels_w_out, h_w_out
 
 
-def wheels4_motor(command, Omega, torque_limit, speed_limit, cutoff):
+def wheels4_motor(command, Omega, torque_limit, speed_limit, cutoff, *, out=None):
     """Motor torques actually applied on 4 wheels (the wheel_motor line, per wheel).
 
     Generated kernel ``wheels4_motor``; inputs broadcast over leading batch axes.
@@ -4338,6 +4488,8 @@ def wheels4_motor(command, Omega, torque_limit, speed_limit, cutoff):
         no-load speed, rad/s
     cutoff : array_like, shape (...)
         1: hard cut-off at speed_limit instead of the line; 0: the line
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -4411,7 +4563,7 @@ def wheels4_motor(command, Omega, torque_limit, speed_limit, cutoff):
         t49 = numpy.less_equal(Omega_3, t11)
         t50 = torque_limit*(-t13*t41 + 1)
         t51 = -t50
-        u_out = numpy.empty(batch + (4,), dtype=numpy.float32)
+        u_out = numpy.empty(batch + (4,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
         u_out[..., 0] = numpy.select([t7,True], [numpy.select([numpy.logical_and.reduce((t3,numpy.logical_or.reduce((numpy.logical_not(t1),numpy.less(t4, 0))),numpy.logical_or.reduce((t1,numpy.logical_not(t5),numpy.greater(t4, 0))),numpy.logical_or.reduce((t1,t5,numpy.greater(Omega_0*command_0, 0))))),True], [0,t6], default=numpy.nan),numpy.select([numpy.logical_and.reduce((numpy.logical_or.reduce((t10,t12)),numpy.logical_or.reduce((t10,t9)),numpy.logical_or.reduce((t12,t8)),numpy.logical_or.reduce((t8,t9)))),numpy.logical_and.reduce((numpy.greater(Omega_0, 0),numpy.greater(command_0, t14),numpy.less(Omega_0, speed_limit))),numpy.logical_and.reduce((numpy.greater(Omega_0, t11),numpy.less(Omega_0, 0),numpy.less(command_0, t15))),True], [0,t14,t15,t6], default=numpy.nan)], default=numpy.nan)
         u_out[..., 1] = numpy.select([t7,True], [numpy.select([numpy.logical_and.reduce((t18,numpy.logical_or.reduce((numpy.logical_not(t16),numpy.less(t19, 0))),numpy.logical_or.reduce((t16,numpy.logical_not(t20),numpy.greater(t19, 0))),numpy.logical_or.reduce((t16,t20,numpy.greater(Omega_1*command_1, 0))))),True], [0,t21], default=numpy.nan),numpy.select([numpy.logical_and.reduce((numpy.logical_or.reduce((t22,t23)),numpy.logical_or.reduce((t22,t25)),numpy.logical_or.reduce((t23,t24)),numpy.logical_or.reduce((t24,t25)))),numpy.logical_and.reduce((numpy.greater(Omega_1, 0),numpy.greater(command_1, t26),numpy.less(Omega_1, speed_limit))),numpy.logical_and.reduce((numpy.greater(Omega_1, t11),numpy.less(Omega_1, 0),numpy.less(command_1, t27))),True], [0,t26,t27,t21], default=numpy.nan)], default=numpy.nan)
         u_out[..., 2] = numpy.select([t7,True], [numpy.select([numpy.logical_and.reduce((t30,numpy.logical_or.reduce((numpy.logical_not(t28),numpy.less(t31, 0))),numpy.logical_or.reduce((t28,numpy.logical_not(t32),numpy.greater(t31, 0))),numpy.logical_or.reduce((t28,t32,numpy.greater(Omega_2*command_2, 0))))),True], [0,t33], default=numpy.nan),numpy.select([numpy.logical_and.reduce((numpy.logical_or.reduce((t34,t35)),numpy.logical_or.reduce((t34,t37)),numpy.logical_or.reduce((t35,t36)),numpy.logical_or.reduce((t36,t37)))),numpy.logical_and.reduce((numpy.greater(Omega_2, 0),numpy.greater(command_2, t38),numpy.less(Omega_2, speed_limit))),numpy.logical_and.reduce((numpy.greater(Omega_2, t11),numpy.less(Omega_2, 0),numpy.less(command_2, t39))),True], [0,t38,t39,t33], default=numpy.nan)], default=numpy.nan)
@@ -4419,7 +4571,7 @@ def wheels4_motor(command, Omega, torque_limit, speed_limit, cutoff):
     return u_out
 
 
-def quat_error_chart_inverse(q_ref, dtheta):
+def quat_error_chart_inverse(q_ref, dtheta, *, out=None):
     """Orientation at an attitude error about a reference (inverse of quat_error_chart).
 
     Generated kernel ``quat_error_chart_inverse``; inputs broadcast over leading batch axes.
@@ -4430,6 +4582,8 @@ def quat_error_chart_inverse(q_ref, dtheta):
         quaternion (x, y, z, w), scalar last, unit, body to world
     dtheta : array_like, shape (..., 3)
         attitude error, body frame, rad; |dtheta| < 2
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -4450,7 +4604,7 @@ def quat_error_chart_inverse(q_ref, dtheta):
     t1 = ((numpy.float32(1.0)/numpy.float32(2.0)))*dtheta_1
     t2 = ((numpy.float32(1.0)/numpy.float32(2.0)))*dtheta_2
     t3 = numpy.sqrt(-(numpy.float32(1.0)/numpy.float32(4.0))*(dtheta_0*dtheta_0) - (numpy.float32(1.0)/numpy.float32(4.0))*(dtheta_1*dtheta_1) - (numpy.float32(1.0)/numpy.float32(4.0))*(dtheta_2*dtheta_2) + 1)
-    q_out = numpy.empty(batch + (4,), dtype=numpy.float32)
+    q_out = numpy.empty(batch + (4,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     q_out[..., 0] = q_ref_0*t3 + q_ref_1*t2 - q_ref_2*t1 + q_ref_3*t0
     q_out[..., 1] = -q_ref_0*t2 + q_ref_1*t3 + q_ref_2*t0 + q_ref_3*t1
     q_out[..., 2] = q_ref_0*t1 - q_ref_1*t0 + q_ref_2*t3 + q_ref_3*t2
@@ -4458,7 +4612,7 @@ def quat_error_chart_inverse(q_ref, dtheta):
     return q_out
 
 
-def quat_normalize_scaled(q):
+def quat_normalize_scaled(q, *, out=None):
     """Scale to unit length without overflow or underflow, and the norm.
 
     Generated kernel ``quat_normalize_scaled``; inputs broadcast over leading batch axes.
@@ -4467,6 +4621,8 @@ def quat_normalize_scaled(q):
     ----------
     q : array_like, shape (..., 4)
         quaternion (x, y, z, w), scalar last
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -4489,17 +4645,17 @@ def quat_normalize_scaled(q):
         q_scaled_3 = q_3/q_scale
         q_scaled_norm = numpy.sqrt((q_scaled_0*q_scaled_0) + (q_scaled_1*q_scaled_1) + (q_scaled_2*q_scaled_2) + (q_scaled_3*q_scaled_3))
         t0 = (1.0/q_scaled_norm)
-        q_unit_out = numpy.empty(batch + (4,), dtype=numpy.float32)
+        q_unit_out = numpy.empty(batch + (4,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
         q_unit_out[..., 0] = q_scaled_0*t0
         q_unit_out[..., 1] = q_scaled_1*t0
         q_unit_out[..., 2] = q_scaled_2*t0
         q_unit_out[..., 3] = q_scaled_3*t0
-        norm_out = numpy.empty(batch, dtype=numpy.float32)
+        norm_out = numpy.empty(batch, dtype=numpy.float32) if out is None or out[1] is None else out[1]
         norm_out[...] = numpy.select([numpy.equal(q_scale, 0),True], [0,q_scale*q_scaled_norm], default=numpy.nan)
     return q_unit_out, norm_out
 
 
-def wheels4_free_inertia(I_p, A_b, J):
+def wheels4_free_inertia(I_p, A_b, J, *, out=None):
     """Inertia of a wheeled body with its wheels free to spin.
 
     Generated kernel ``wheels4_free_inertia``; inputs broadcast over leading batch axes.
@@ -4512,6 +4668,8 @@ def wheels4_free_inertia(I_p, A_b, J):
         wheel spin axes as columns (3×4; an unused slot is a zero column), body frame, row-major
     J : array_like, shape (..., 4)
         wheel axial inertias (4), kg·m²
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -4551,7 +4709,7 @@ def wheels4_free_inertia(I_p, A_b, J):
     t4 = -A_b_10*t0 - A_b_11*t1 - A_b_12*t2 - A_b_13*t3 + I_p_01
     t5 = -A_b_20*t0 - A_b_21*t1 - A_b_22*t2 - A_b_23*t3 + I_p_02
     t6 = -A_b_10*A_b_20*J_0 - A_b_11*A_b_21*J_1 - A_b_12*A_b_22*J_2 - A_b_13*A_b_23*J_3 + I_p_12
-    M_out = numpy.empty(batch + (3, 3), dtype=numpy.float32)
+    M_out = numpy.empty(batch + (3, 3), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     M_out[..., 0, 0] = -(A_b_00*A_b_00)*J_0 - (A_b_01*A_b_01)*J_1 - (A_b_02*A_b_02)*J_2 - (A_b_03*A_b_03)*J_3 + I_p_00
     M_out[..., 0, 1] = t4
     M_out[..., 0, 2] = t5
@@ -4564,7 +4722,7 @@ def wheels4_free_inertia(I_p, A_b, J):
     return M_out
 
 
-def box_of_inertia(m, I_b):
+def box_of_inertia(m, I_b, *, out=None):
     """Edges of the uniform box with a given mass and principal moments.
 
     Generated kernel ``box_of_inertia``; inputs broadcast over leading batch axes.
@@ -4575,6 +4733,8 @@ def box_of_inertia(m, I_b):
         mass, kg
     I_b : array_like, shape (..., 3)
         principal moments (or the diagonal), kg·m²
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
     Returns
     -------
@@ -4596,7 +4756,7 @@ def box_of_inertia(m, I_b):
         t5 = (1.0/m)
         t6 = t1 - t2 + t3
         t7 = t1 + t2 - t3
-        edges_out = numpy.empty(batch + (3,), dtype=numpy.float32)
+        edges_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
         edges_out[..., 0] = numpy.select([numpy.greater(t4*t5, (numpy.float32(1.0)/numpy.float32(1000000.0))),True], [t0*numpy.sqrt(t4),(numpy.float32(1.0)/numpy.float32(1000.0))], default=numpy.nan)
         edges_out[..., 1] = numpy.select([numpy.greater(t5*t6, (numpy.float32(1.0)/numpy.float32(1000000.0))),True], [t0*numpy.sqrt(t6),(numpy.float32(1.0)/numpy.float32(1000.0))], default=numpy.nan)
         edges_out[..., 2] = numpy.select([numpy.greater(t5*t7, (numpy.float32(1.0)/numpy.float32(1000000.0))),True], [t0*numpy.sqrt(t7),(numpy.float32(1.0)/numpy.float32(1000.0))], default=numpy.nan)
