@@ -117,6 +117,30 @@ def test_lab_all_json_has_an_object_per_lab(tmp_path, capsys, monkeypatch):
     assert cap.err == ""
 
 
+def test_a_single_labs_default_report_is_short(capsys):
+    """The default: the figures and one line; --verbose adds the parameters, each check and the files (issue 31)."""
+    from argparse import Namespace
+
+    from lavendersim.cli import lab as L
+    from lavendersim.labs import common as C
+
+    res = C.make_result("t", {"x": 1.5, "y": [0.0, 2.0]}, {"p": 2, "q": "long " * 40},
+                        [C.holds("ok", True), C.holds("also", True)])
+    args = dict(quiet=False, json=False, verbose=False)
+    assert L._report(res, Namespace(**args)) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert out[1:] == ["  x = 1.5", "  y = [0, 2]", "lab t: all 2 checks pass (every parameter and check: --verbose)"]
+    assert L._report(res, Namespace(**{**args, "verbose": True})) == 0
+    verbose = capsys.readouterr().out
+    assert "PASS  also" in verbose and "p=2" in verbose and len(verbose.splitlines()) > len(out)
+    assert L._report(res, Namespace(**{**args, "quiet": True})) == 0
+    assert capsys.readouterr() == ("", "")
+    bad = C.make_result("t", {"x": 1.5}, {}, [C.holds("ok", False, "it broke")])
+    assert L._report(bad, Namespace(**args)) == 1
+    cap = capsys.readouterr()
+    assert "x = 1.5" in cap.out and "ok" in cap.err and "FAILED" in cap.err
+
+
 # ---- effects -----------------------------------------------------------------------------------------------
 
 def test_effects_quiet_prints_nothing_and_an_unknown_name_is_still_one_line(capsys):

@@ -110,7 +110,8 @@ def _lab_parent() -> argparse.ArgumentParser:
     out.add_argument("--quiet", action="store_true",
                      help="print only failures; no progress bar (a bar is shown on a terminal only)")
     out.add_argument("--verbose", action="store_true",
-                     help="print every parameter in full (lab all: each lab's figures and checks too)")
+                     help="also print every parameter in full, each check and the files written (lab all: each "
+                          "lab's figures and checks too)")
     return p
 
 
@@ -160,7 +161,7 @@ def _check_view(args) -> None:
 def run_one(args) -> int:
     """``lavendersim lab NAME``: compute, save OUT/NAME/, report; then --view."""
     from lavendersim import labs
-    from lavendersim.labs.common import check_out_dir, report
+    from lavendersim.labs.common import check_out_dir
     from lavendersim.labs.diverged import compute_or_failed
     from lavendersim.labs.output import check_folder, lab_lock
     from lavendersim.validate import LavenderInputError
@@ -181,8 +182,25 @@ def run_one(args) -> int:
         return _invalid(args.lab_name, exc)
     if args.json:
         _common.emit_json(dict(result))
-    code = report(result, verbosity=_verbosity(args))
+    code = _report(result, args)
     return _view(args) or code if view else code
+
+
+def _report(result, args) -> int:
+    """One lab's report; 0 if every check passes, else 1. By default short (issue 31): the figures and one line;
+    --verbose adds every parameter, each check and the files written; --quiet/--json: the failures only."""
+    from lavendersim.labs import common as C
+
+    verbosity = _verbosity(args)
+    if verbosity != 1:
+        return C.report(result, verbosity=verbosity)
+    print(f"== lab {result.lab} -> {result.out_dir}")
+    for k in result.figure_names:
+        print(f"  {k} = {C._show(result[k])}")
+    if not result.passed:
+        return C.report(result, verbosity=0)
+    print(f"lab {result.lab}: all {len(result.checks)} checks pass (every parameter and check: --verbose)")
+    return 0
 
 
 def _view(args) -> int:
