@@ -38,7 +38,7 @@ From Python::
     lin = lc.linearize(scene)                              # a python-control StateSpace
     K, S, E = lc.dlqr(lin.sample(0.01), Q, R)
 
-From the shell: ``lavendersim lqr --spacecraft FILE`` (lavendersim.cli_lqr; ``--scenario center|corner`` and
+From the shell: ``lavendersim lqr --spacecraft FILE`` (lavendersim.cli.lqr; ``--scenario center|corner`` and
 ``--layout pyramid4`` fly the chapter's cubes from the shipped spacecraft files).
 """
 from __future__ import annotations
