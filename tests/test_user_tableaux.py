@@ -332,3 +332,25 @@ def test_a_tableau_beside_a_user_effect_in_one_file(beside, backend):
     assert B.tableau_of("tabtest_ralston3").source == str(beside.directory)
     np.testing.assert_allclose(runs[0], runs[1], rtol=1e-14, atol=1e-15)
     assert np.max(np.abs(runs[0][0, LY.STATE_OMEGA_B] - (1.0, -2.0, 0.5))) > 0.05   # the drag acted
+
+
+def test_the_accuracy_lab_measures_it_with_its_declared_order(guide):
+    """lab accuracy's integrators=[...] (the CLI's --integrators): kutta3's slope is checked against its declared 3;
+    the same coefficients registered claiming order 4 (bypassing derive) fail that check."""
+    from lavendersim.labs import accuracy
+
+    k3 = extending.tableau("kutta3")
+    B.USER_TABLEAUX["tabtest_k3_claims4"] = B.Tableau("tabtest_k3_claims4", k3.c, k3.A, k3.b, 4, "tests",
+                                                      real_axis=k3.real_axis, wdt_max=k3.wdt_max)
+    try:
+        r = accuracy.compute("auto", quick=True, mujoco=False, workers=1, integrators=["kutta3", "tabtest_k3_claims4"])
+    finally:
+        del B.USER_TABLEAUX["tabtest_k3_claims4"]
+    checks = {c.name: c for c in r.checks}
+    orders = [c for n, c in checks.items() if n.startswith("order_kutta3_")]
+    assert len(orders) == 2 and all(c.passed and abs(c.value - 3.0) < 0.1 for c in orders)
+    assert all(c.passed for n, c in checks.items() if n.startswith("backends_agree_kutta3_"))
+    wrong = [c for n, c in checks.items() if n.startswith("order_tabtest_k3_claims4_")]
+    assert len(wrong) == 2 and not any(c.passed for c in wrong)
+    with pytest.raises(LavenderInputError, match="kutta4"):
+        accuracy.compute("auto", quick=True, mujoco=False, workers=1, integrators=["kutta4"])
