@@ -1183,62 +1183,72 @@ def make_plots(use, meths, points, drifts, per_case, per_case_rhs, only: str | N
     NumPy, the peers); big circles are points of methods on the front of that plot's own verdict
     (attitude error vs time, or vs RHS evaluations); the omega plot marks none. ``ax``: with ``only``,
     the axes to draw that plot into (rows × columns of it, in row order)."""
-    from matplotlib.ticker import NullFormatter
-
     styles = _styles(meths)
     plots = {}
-    n = len(use)
     specs = (("work_precision_time.png", "wall_per_sim_s", 1e6, "wall time per simulated second (µs)",
               "attitude_error", "attitude error at T (rad)", True),
              ("work_precision_rhs.png", "rhs_evals", 1.0, "RHS evaluations over T = 10 s",
               "attitude_error", "attitude error at T (rad)", False),
              ("work_precision_omega.png", "wall_per_sim_s", 1e6, "wall time per simulated second (µs)",
               "omega_error", "|ω(T) − ω_exact(T)| (rad/s)", True))
-    for fname, xkey, xscale, xlabel, ykey, ylabel, both_backends in specs:
-        if only is not None and fname != only:
-            continue
-        groups = [g for g in _GROUPS if both_backends or "NumPy" not in g[0]]    # numpy: the C counts and errors
-        ncols = len(groups)
-        fig, axes = C.new_figure(n, ncols, size=(5.0 * ncols + 2.6, 3.7 * n + 0.6), ax=ax,
-                                 title=f"{ylabel.split(' (')[0]} vs {xlabel.split(' (')[0]}, torque-free, T = {T_END:g} s"
-                                       + ("" if both_backends else " (NumPy: the same counts and errors as C)"))
-        for k, case in enumerate(use):
-            marks = {"wall_per_sim_s": per_case, "rhs_evals": per_case_rhs}[xkey] if ykey == "attitude_error" else {}
-            for j, (gtitle, member) in enumerate(groups):
-                a = axes[k, j]
-                peers = "peers" in gtitle
-                for m in meths:
-                    grey = peers and m.backend == "c" and m.integrator in _REFERENCE and m.dtype == "float64"
-                    if not (member(m) or grey):
-                        continue
-                    pts = [p for p in points if p.case == case.name and p.method == m.label and p.ok
-                           and getattr(p, xkey) is not None and getattr(p, ykey) is not None]
-                    if not pts:
-                        continue
-                    key = m.integrator if m.family == "lavendersim" else m.label
-                    front = set(marks.get(case.name, {}).get(m.label, {}).get("overall_front_points", []))
-                    _draw_method(a, m, pts, xkey, xscale, ykey, styles[key], front, grey=grey)
-                if ykey == "attitude_error":
-                    a.axhline(ERROR_CEILING, color=F.GREY, lw=0.6, ls=":")
-                    a.axhline(ERROR_FLOOR, color=F.GREY, lw=0.6, ls=":")
-                a.set_xlabel(xlabel)
-                if j == 0:
-                    a.set_ylabel(f"{case.label}\n{ylabel}", fontsize=9)
-                if k == 0:
-                    a.set_title(gtitle, fontsize=9)
-                a.grid(True, which="major", alpha=0.3)
-            for j in range(1, ncols):                          # one y range per case row
-                axes[k, j].sharey(axes[k, 0])
-        for a in axes.ravel():
-            a.xaxis.set_minor_formatter(NullFormatter())      # a decade or less: no crowded minor labels
-        if ax is None:
-            fig.legend(*_legend(styles), loc="outside right center", fontsize=7,
-                       title=("circled: the case's Pareto front\n" if ykey == "attitude_error" else "")
-                       + "colour + marker: the integrator", title_fontsize=7)
-        plots[fname] = fig
+    for spec in specs:
+        if only is None or spec[0] == only:
+            marks = {"wall_per_sim_s": per_case, "rhs_evals": per_case_rhs}[spec[1]] if spec[4] == "attitude_error" else {}
+            plots[spec[0]] = _work_precision_figure(spec, use, meths, points, marks, styles, ax)
+    if only in (None, "drift_vs_time.png"):
+        plots["drift_vs_time.png"] = _drift_figure(use, meths, drifts, styles, ax)
+    return plots
 
-    if only is not None and only != "drift_vs_time.png":
-        return plots
+
+def _work_precision_figure(spec, use, meths, points, marks, styles, ax=None):
+    """One work-precision PNG (``spec``: file, x key, x scale, x label, y key, y label, NumPy shown)."""
+    from matplotlib.ticker import NullFormatter
+
+    _, xkey, xscale, xlabel, ykey, ylabel, both_backends = spec
+    n = len(use)
+    groups = [g for g in _GROUPS if both_backends or "NumPy" not in g[0]]    # numpy: the C counts and errors
+    ncols = len(groups)
+    fig, axes = C.new_figure(n, ncols, size=(5.0 * ncols + 2.6, 3.7 * n + 0.6), ax=ax,
+                             title=f"{ylabel.split(' (')[0]} vs {xlabel.split(' (')[0]}, torque-free, T = {T_END:g} s"
+                                   + ("" if both_backends else " (NumPy: the same counts and errors as C)"))
+    for k, case in enumerate(use):
+        for j, (gtitle, member) in enumerate(groups):
+            a = axes[k, j]
+            peers = "peers" in gtitle
+            for m in meths:
+                grey = peers and m.backend == "c" and m.integrator in _REFERENCE and m.dtype == "float64"
+                if not (member(m) or grey):
+                    continue
+                pts = [p for p in points if p.case == case.name and p.method == m.label and p.ok
+                       and getattr(p, xkey) is not None and getattr(p, ykey) is not None]
+                if not pts:
+                    continue
+                key = m.integrator if m.family == "lavendersim" else m.label
+                front = set(marks.get(case.name, {}).get(m.label, {}).get("overall_front_points", []))
+                _draw_method(a, m, pts, xkey, xscale, ykey, styles[key], front, grey=grey)
+            if ykey == "attitude_error":
+                a.axhline(ERROR_CEILING, color=F.GREY, lw=0.6, ls=":")
+                a.axhline(ERROR_FLOOR, color=F.GREY, lw=0.6, ls=":")
+            a.set_xlabel(xlabel)
+            if j == 0:
+                a.set_ylabel(f"{case.label}\n{ylabel}", fontsize=9)
+            if k == 0:
+                a.set_title(gtitle, fontsize=9)
+            a.grid(True, which="major", alpha=0.3)
+        for j in range(1, ncols):                          # one y range per case row
+            axes[k, j].sharey(axes[k, 0])
+    for a in axes.ravel():
+        a.xaxis.set_minor_formatter(NullFormatter())      # a decade or less: no crowded minor labels
+    if ax is None:
+        fig.legend(*_legend(styles), loc="outside right center", fontsize=7,
+                   title=("circled: the case's Pareto front\n" if ykey == "attitude_error" else "")
+                   + "colour + marker: the integrator", title_fontsize=7)
+    return fig
+
+
+def _drift_figure(use, meths, drifts, styles, ax=None):
+    """drift_vs_time.png: relative energy and world-L drift over the run, a column per case."""
+    n = len(use)
     fig, axes = C.new_figure(2, n, size=(max(4.2 * n + 3, 9.0), 8), ax=ax,
                              title=f"relative drift over the run\n(C backend at dt = 2^-{DRIFT_DT_EXP} s; "
                                    f"rtol = {DRIFT_RTOL:.0e} for adaptive/scipy; MuJoCo at dt = 2^-{DRIFT_DT_EXP} s)")
@@ -1265,5 +1275,4 @@ def make_plots(use, meths, points, drifts, per_case, per_case_rhs, only: str | N
     if ax is None:
         handles, labs_ = axes[0, 0].get_legend_handles_labels()
         fig.legend(handles, labs_, loc="outside right center", fontsize=7)
-    plots["drift_vs_time.png"] = fig
-    return plots
+    return fig

@@ -251,19 +251,10 @@ def run_cell(integrator: str, wdt: float, ratio: float, axis: str, backend: str,
     dict
         The cell's row of results.json (see the module docstring).
     """
-    I_b, w0 = inertia(ratio), initial_omega(axis)
-    dt, n = wdt / OMEGA, horizon_steps(wdt)
-    adaptive = integrator in B.ADAPTIVE
-    cell = {"integrator": integrator, "omega_dt": wdt, "ratio": ratio, "axis": axis, "status": None,
-            "energy_drift": None, "energy_gain": None, "L_norm_drift": None, "L_norm_gain": None, "L_world_drift": None,
-            "attitude_error": None, "omega_error": None, "steps": n, "dt": dt, "T": n * dt, "rhs_evals": None,
-            "backend": H.fast_backend(backend) if n > H.C_BACKEND_ABOVE else backend,
-            "rtol": rtol if adaptive else None, "atol": atol if adaptive else None,
-            "diverged_at_step": None, "message": None, "I_b": I_b.tolist(), "omega_b0": w0.tolist()}
+    cell = _new_cell(integrator, wdt, ratio, axis, backend, rtol, atol)
+    I_b, w0, dt, n, adaptive = inertia(ratio), initial_omega(axis), cell["dt"], cell["steps"], cell["rtol"] is not None
     scene = lv.Scene()
     scene.add_body(lv.Body("body", 1.0, I_b, omega_b=w0, q=H.Q0))
-    bound = S.validity_bound(integrator)
-    cell["within_bound"] = bool(bound is None or float(np.linalg.norm(w0)) * dt * ratio ** bound[1] <= bound[0])
     if n > NUMPY_MAX_STEPS and cell["backend"] != "c":     # long, and the C backend is unavailable
         cell.update(status="not_run", message=f"{n} steps on the NumPy backend: not run (more than NUMPY_MAX_STEPS = "
                                               f"{NUMPY_MAX_STEPS} without the C backend: {B.c_unavailable()})")
@@ -291,6 +282,20 @@ def run_cell(integrator: str, wdt: float, ratio: float, axis: str, backend: str,
     cell.update(m)
     cell["status"] = "blew_up" if _blew_up(m) else "ok"
     return cell
+
+
+def _new_cell(integrator: str, wdt: float, ratio: float, axis: str, backend: str, rtol: float, atol: float) -> dict:
+    """A cell's row before it runs: its body, spin, steps, backend and whether it is within the validity bound."""
+    I_b, w0 = inertia(ratio), initial_omega(axis)
+    dt, n = wdt / OMEGA, horizon_steps(wdt)
+    adaptive, bound = integrator in B.ADAPTIVE, S.validity_bound(integrator)
+    return {"integrator": integrator, "omega_dt": wdt, "ratio": ratio, "axis": axis, "status": None,
+            "energy_drift": None, "energy_gain": None, "L_norm_drift": None, "L_norm_gain": None, "L_world_drift": None,
+            "attitude_error": None, "omega_error": None, "steps": n, "dt": dt, "T": n * dt, "rhs_evals": None,
+            "backend": H.fast_backend(backend) if n > H.C_BACKEND_ABOVE else backend,
+            "rtol": rtol if adaptive else None, "atol": atol if adaptive else None,
+            "diverged_at_step": None, "message": None, "I_b": I_b.tolist(), "omega_b0": w0.tolist(),
+            "within_bound": bool(bound is None or float(np.linalg.norm(w0)) * dt * ratio ** bound[1] <= bound[0])}
 
 
 def run_group(task: tuple) -> list[dict]:

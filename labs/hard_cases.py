@@ -477,18 +477,23 @@ def case_near_antipodal_quaternions(ctx) -> CaseOut:
         f[f"antipodal_matrix_to_quat_{name}"] = e2
         f[f"antipodal_axis_angle_{name}"] = e3
         m2q_worst, aa_worst = max(m2q_worst, e2), max(aa_worst, e3)
-    out.checks += [
-        C.at_most("antipodal_same_matrix", f["antipodal_matrix_difference"], 0.0, "max |R(q) − R(−q)|, exactly 0"),
-        C.at_most("antipodal_attitude_error", f["antipodal_attitude_error"], 1e-15, "attitude_error(q, −q), rad"),
-        C.at_most("antipodal_eps_attitude", f["antipodal_eps_attitude_ratio"], 4.0,
-                  "attitude_error(q, −q + ε) / |ε| for |ε| ~ 1e-12"),
-        C.at_most("antipodal_matrix_to_quat", m2q_worst, 1e-15, "matrix_to_quat(R(q)) vs q near w = 0 and w = ±1, rad"),
-        C.at_most("antipodal_axis_angle", aa_worst, 1e-15,
-                  "axis_angle_to_quat(quat_to_axis_angle(q)) vs q near w = 0 and w = ±1, rad"),
-        C.holds("antipodal_kernels_finite", finite, "no NaN from matrix_to_quat / quat_to_axis_angle near w = 0, ±1"),
-    ]
-    # stepping from q and −q, with a world torque so R(q) enters the dynamics
-    named = ctx.assert_with or "rk4"
+    out.checks += C.checks(
+        ("antipodal_same_matrix", f["antipodal_matrix_difference"], "<=", 0.0, "max |R(q) − R(−q)|, exactly 0"),
+        ("antipodal_attitude_error", f["antipodal_attitude_error"], "<=", 1e-15, "attitude_error(q, −q), rad"),
+        ("antipodal_eps_attitude", f["antipodal_eps_attitude_ratio"], "<=", 4.0,
+         "attitude_error(q, −q + ε) / |ε| for |ε| ~ 1e-12"),
+        ("antipodal_matrix_to_quat", m2q_worst, "<=", 1e-15, "matrix_to_quat(R(q)) vs q near w = 0 and w = ±1, rad"),
+        ("antipodal_axis_angle", aa_worst, "<=", 1e-15,
+         "axis_angle_to_quat(quat_to_axis_angle(q)) vs q near w = 0 and w = ±1, rad"),
+        ("antipodal_kernels_finite", finite, "holds", None, "no NaN from matrix_to_quat / quat_to_axis_angle near "
+                                                            "w = 0, ±1"),
+    )
+    return _antipodal_stepping(ctx, out)
+
+
+def _antipodal_stepping(ctx, out: CaseOut) -> CaseOut:
+    """Stepping from q and −q, with a world torque so R(q) enters the dynamics: q_a = −q_b, ω_a = ω_b."""
+    f, named = out.figures, ctx.assert_with or "rk4"
     I_b, w0 = (1.0, 2.0, 3.0), (1.0, 0.5, 0.2)
     torque = ("applied_torque", {"torque_w": [0.1, -0.2, 0.05]})
     row = {}
@@ -754,16 +759,11 @@ def _plots(d, ax=None):
     """hard_cases.png from the result's data: flips, the dt range, every asserted bound, the survival table.
 
     ``ax``: four Axes to draw into instead (flips, dt range, bounds, survival), in that order."""
-    from matplotlib.colors import ListedColormap
-    from matplotlib.patches import Patch
-
-    ratios, passed = d["bound_ratios"], d["passed"]
-    survival, integrators = d["survival"], d["integrators"]
     if ax is not None:
         fig, axes = C.new_figure(1, 4, ax=ax)
         a, b, c, sv = axes.ravel()
     else:
-        fig, _ = C.new_figure(1, 1, size=(15, 6.5 + 0.16 * max(len(ratios), len(survival) * 2)))
+        fig, _ = C.new_figure(1, 1, size=(15, 6.5 + 0.16 * max(len(d["bound_ratios"]), len(d["survival"]) * 2)))
         fig.clear()
         fig.suptitle("Hard cases: asserted bounds and the figures measured")
         gs = fig.add_gridspec(3, 2, height_ratios=[1, 1, 1.3], width_ratios=[1, 1.1])
@@ -771,16 +771,28 @@ def _plots(d, ax=None):
         c, sv = fig.add_subplot(gs[0:2, 1]), fig.add_subplot(gs[2, :])
         for x in (a, b, c, sv):
             F.style_axes(x)
-    if d["flips"] is not None:
-        f = d["flips"]
+    _draw_flips(a, d["flips"])
+    _draw_dt_range(b, d["dt_range"])
+    _draw_bounds(c, d["bound_ratios"], d["passed"])
+    _draw_survival(sv, d["survival"], d["integrators"])
+    return fig
+
+
+def _draw_flips(a, f) -> None:
+    """Intermediate-axis flips: ω_2 and the exact flip times."""
+    if f is not None:
         a.plot(f["t"], f["w2"], lw=0.8, color=F.BLUE, label="ω_2 (RK4, dt = 1e-3)")
         a.plot(f["exact"], np.zeros_like(f["exact"]), "x", color=F.VERMILLION, mew=2, label="exact flip times (4K(m)/λ)")
         a.legend(fontsize=8, loc="lower left")
     a.set_xlabel("time t (s)")
     a.set_ylabel("ω_2 (rad/s)")
     a.set_title("intermediate-axis flips: diag(1,2,3), ω0 = (1e-3, 5, 1e-3)", fontsize=10)
-    if d["dt_range"] is not None:
-        for k, (bname, rows) in enumerate(d["dt_range"]["rows"].items()):
+
+
+def _draw_dt_range(b, dtr) -> None:
+    """The dt range: the error at T against its bound, per body."""
+    if dtr is not None:
+        for k, (bname, rows) in enumerate(dtr["rows"].items()):
             dt = np.array([r[0] for r in rows])
             e = np.array([r[1] for r in rows], float)
             bd = np.array([r[2] for r in rows])
@@ -794,8 +806,14 @@ def _plots(d, ax=None):
         b.legend(fontsize=7, loc="upper left")
     b.set_xlabel("dt (s)")
     b.set_ylabel("error at T (rad; relative ω)")
-    named = d["dt_range"]["named"] if d["dt_range"] else "rk4"
+    named = dtr["named"] if dtr else "rk4"
     b.set_title(f"dt range ({named}): error at T against its bound", fontsize=10)
+
+
+def _draw_bounds(c, ratios, passed) -> None:
+    """Every asserted upper bound: figure / bound on a log axis, the missed ones hatched."""
+    from matplotlib.patches import Patch
+
     names = list(ratios)
     vals = [min(max(r, 1e-8), 1e3) if math.isfinite(r) else 1e3 for r in ratios.values()]
     y = np.arange(len(names))
@@ -816,6 +834,13 @@ def _plots(d, ax=None):
                       Patch(facecolor=bad_style["color"], hatch=bad_style["hatch"], edgecolor="white",
                             label="bound missed (hatched)")],
              fontsize=7, loc="lower right")
+
+
+def _draw_survival(sv, survival, integrators) -> None:
+    """Which integrators survive each case: a colour and a word per cell."""
+    from matplotlib.colors import ListedColormap
+    from matplotlib.patches import Patch
+
     rows = list(survival)
     M = np.array([[_status_code(survival[r].get(i, "error")) for i in integrators] for r in rows]).T
     sv.imshow(M, cmap=ListedColormap([k[0] for k in STATUS_KEY]), vmin=0, vmax=3, aspect="auto")
@@ -827,7 +852,6 @@ def _plots(d, ax=None):
     sv.set_title("which integrators survive each case (survival.md has the words)", fontsize=10)
     sv.legend(handles=[Patch(facecolor=k[0], edgecolor=F.GREY, label=k[1]) for k in STATUS_KEY], loc="upper left",
              bbox_to_anchor=(1.01, 1.0), fontsize=8, title="cell colour", title_fontsize=8)
-    return fig
 
 
 def run(out_dir=C.DEFAULT_OUT, backend: str = "auto", **options) -> C.LabResult:
