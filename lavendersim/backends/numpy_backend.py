@@ -75,6 +75,16 @@ class _EffectIndex:
             if spec.velocity_dependent:
                 self.velocity[pair_loc[sel]] = True
             self.uses_v |= spec.uses_v_w
+        # every effect acts on every body (no per-body rows): each effect evaluated on all the bodies at once, in
+        # table order, with its own parameters: the same sums, no gather or scatter
+        self.uniform = None
+        if n and every.size == len(effects):
+            self.uniform = []
+            for r in every:
+                spec = E.spec_for_code(int(effects[r, E.ROW_CODE]))
+                apply = E.numpy_apply(spec.code) if kmod is None else kmod.EFFECT_APPLY[spec.name]
+                self.uniform.append((apply, effects[r, E.ROW_PARAMS:].copy(), "F_w" in spec.outputs,
+                                     "tau_w" in spec.outputs))
         self.ranks = []  # per rank k: (bodies, pairs) adding a force, (bodies, pairs) adding a torque
         for k in range(int(rank.max()) + 1 if rank.size else 0):
             f = np.flatnonzero((rank == k) & has_F)
@@ -87,6 +97,14 @@ class _EffectIndex:
         n = x.shape[0]
         F, tau = np.zeros((n, 3), self.dtype), np.zeros((n, 3), self.dtype)
         if not self.npairs:
+            return F, tau
+        if self.uniform is not None:
+            for apply, p, has_F, has_T in self.uniform:
+                f, t = apply(p, x, v, self.m, self.I)
+                if has_F:
+                    F += f
+                if has_T:
+                    tau += t
             return F, tau
         cF, cT = np.empty((self.npairs, 3), self.dtype), np.empty((self.npairs, 3), self.dtype)
         for apply, sel, loc, p in self.groups:
@@ -173,6 +191,9 @@ class _Plan:
         self.source = (params, effects, rows)
         self.subplans = {}
         self.I_free = self.I[self.free]
+        self.c_free = self.K.euler_coefficients(self.I_free)     # Euler's coefficients, once per plan
+        self.c_f = self.K.euler_coefficients(self.I_f)
+        self.works = {}
         pivot = np.flatnonzero(kind == KIND_JOINT)
         wheeled = np.flatnonzero(self.wheeled)   # one wheel model: one group
         self.wheels = [_Group(wheeled, effects, self.m, self.I, rows)] if wheeled.size else []
@@ -185,19 +206,39 @@ class _Plan:
             r = rows[self.jointed]
             self.j_anchor, self.j_r_b = r[:, LY.MODEL_ANCHOR_W].copy(), r[:, LY.MODEL_R_B].copy()
 
-    def rhs(self, x: np.ndarray, u: np.ndarray | None = None) -> np.ndarray:
-        """d/dt of x (nb, 13), or of [x, Omega] (nb, XS_SIZE) with u (nb, WHEELS_MAX) when bodies have models."""
+    def work(self, x: np.ndarray, stages: int) -> _Work:
+        """The explicit Runge–Kutta stepper's work buffers for states shaped as x, kept for the next call."""
+        key = (x.shape, x.dtype.str, stages)
+        w = self.works.get(key)
+        if w is None:
+            w = self.works[key] = _Work(x.shape, x.dtype, stages)
+        return w
+
+    def quat_buffer(self, x: np.ndarray) -> np.ndarray:
+        """A struct-of-arrays (n, 4) buffer for the normalized quaternions of states shaped as x."""
+        key = (x.shape[0], x.dtype.str, "q")
+        w = self.works.get(key)
+        if w is None:
+            w = self.works[key] = np.empty((4, x.shape[0]), x.dtype).T
+        return w
+
+    def rhs(self, x: np.ndarray, u: np.ndarray | None = None, out: np.ndarray | None = None) -> np.ndarray:
+        """d/dt of x (nb, 13), or of [x, Omega] (nb, XS_SIZE) with u (nb, WHEELS_MAX) when bodies have models; into
+        out (of x's shape) if given. Plain bodies use Euler's coefficients computed once per plan (the _c kernels)."""
         if self.all_free:
-            return self.K.rigid_body_rhs_free(x, self.I)
-        out = np.empty_like(x)
+            return self.K.rigid_body_rhs_free_c(x, self.c_free, out=(out,))
+        out = np.empty_like(x) if out is None else out
         if x.shape[1] > LY.STATE_SIZE:
             out[:, OM] = 0.0
         if self.free.size:
-            out[self.free, X] = self.K.rigid_body_rhs_free(x[self.free, X], self.I_free)
-        if self.forced.size:
+            out[self.free, X] = self.K.rigid_body_rhs_free_c(x[self.free, X], self.c_free)
+        if self.forced.size == self.nb:     # every body plain with effects: no gather, no scatter
+            F, tau = self.index.sums(x, x[:, V])
+            self.K.rigid_body_rhs_c(x, self.m_f, self.c_f, F, tau, out=(out,))
+        elif self.forced.size:
             xf = x[self.forced, X]
             F, tau = self.index.sums(xf, xf[:, V])
-            out[self.forced, X] = self.K.rigid_body_rhs(xf, self.m_f, self.I_f, F, tau)
+            out[self.forced, X] = self.K.rigid_body_rhs_c(xf, self.m_f, self.c_f, F, tau)
         for g in self.wheels:
             xg = x[g.idx]
             F, tau = g.index.sums(xg, g.velocity(xg))
@@ -444,20 +485,39 @@ class _ExplicitRK:
         self.den = float(den)
 
     @staticmethod
-    def combine(terms, ks):
-        """a_0 k_j0 + a_1 k_j1 + ... left to right (a coefficient of 1 multiplies exactly: skipped)."""
+    def axpy(x, h, terms, ks, out=None, tmp=None):
+        """x + h (a_0 k_j0 + a_1 k_j1 + ...), the sum left to right (a coefficient of 1 multiplies exactly: skipped),
+        written into out (None: a new array); tmp: scratch of out's shape. x may be out, a k_j may not."""
         acc = None
         for j, a in terms:
-            t = ks[j] if a == 1.0 else a * ks[j]
-            acc = t if acc is None else acc + t
-        return acc
+            t = ks[j] if a == 1.0 else np.multiply(ks[j], a, out=out if acc is None else tmp)
+            acc = t if acc is None else np.add(acc, t, out=out)
+        return np.add(x, np.multiply(acc, h, out=out), out=out)
 
-    def step(self, f, x, h):
-        """One step of x' = f(x) of length h."""
-        ks = []
-        for terms in self.rows:
-            ks.append(f(x if not terms else x + h * self.combine(terms, ks)))
-        return x + (h / self.den) * self.combine(self.weights, ks)
+    def step(self, f, x, h, work=None):
+        """One step of x' = f(x) of length h; f(y, out) returns f(y), in out if it can (out None: a new array).
+        work: a _Work of x's shape (its buffers are written; the result is its xn), or None to allocate."""
+        ks = [None] * len(self.rows)
+        for i, terms in enumerate(self.rows):
+            y = x if not terms else self.axpy(x, h, terms, ks, work and work.y, work and work.t)
+            ks[i] = f(y, work and work.ks[i])
+        return self.axpy(x, h / self.den, self.weights, ks, work and work.xn, work and work.t)
+
+
+class _Work:
+    """Work buffers of one state shape (n, k) for the explicit Runge–Kutta stepper, struct-of-arrays: each is the
+    (n, k) transpose of a C-contiguous (k, n) array, so every state number of all bodies is one contiguous row."""
+
+    def __init__(self, shape, dtype, stages):
+        def new():
+            return np.empty(shape[::-1], dtype).T
+        self.ks = [new() for _ in range(stages)]
+        self.y, self.t, self.xn = new(), new(), new()
+
+
+def _soa(a: np.ndarray) -> np.ndarray:
+    """A struct-of-arrays copy of rows a (n, k): the transpose of a C-contiguous (k, n) array."""
+    return np.array(a.T, order="C").T
 
 
 _USER_RK: dict = {}   # user Tableau (by identity) -> its _ExplicitRK
@@ -496,7 +556,7 @@ def _rk4_expmap(plan, f, x, h):
     y0 = x.copy()
     y0[:, Q] = 0.0
 
-    def f_lie(y):
+    def f_lie(y, out=None):
         xs = x
         if y is not y0:
             xs = y.copy()
@@ -530,8 +590,8 @@ def _compose(stages, rotate):
 # tableau stepper (semi_implicit_euler, partitioned, its own member); the compositions through _composition with
 # their printed stage fractions and rotation; dopri5 (adaptive_rk) is NumpyBackend.advance's _dopri5 loop.
 _STEPPERS = {
-    "euler": lambda plan, f, x, h: _EULER.step(f, x, h),
-    "rk4": lambda plan, f, x, h: _RK4.step(f, x, h),
+    "euler": lambda plan, f, x, h: _EULER.step(f, x, h, plan.work(x, 1)),
+    "rk4": lambda plan, f, x, h: _RK4.step(f, x, h, plan.work(x, len(_RK4.rows))),
     "semi_implicit_euler": _semi_implicit_euler,
     "rk4_expmap": _rk4_expmap,
     "implicit_gyro": lambda plan, f, x, h: _implicit_gyro(plan, x, h),
@@ -545,16 +605,17 @@ _STEPPERS = {
 def step(plan: _Plan, x: np.ndarray, integrator: str, normalize: bool, dt: float, u=None) -> np.ndarray:
     """One step of every body; returns the new state array. x is (nb, 13), or (nb, 16) = [x, Omega]
     with u the wheeled bodies' applied torques when the plan has joints or wheels."""
-    f = (lambda y: plan.rhs(y, u)) if plan.has_models else plan.rhs  # noqa: E731
+    def f(y, out=None):
+        return plan.rhs(y, u, out)
     stepper = _STEPPERS.get(integrator)
     if stepper is not None:
         xn = stepper(plan, f, x, dt)
     elif (rk := _user_rk(integrator)) is not None:
-        xn = rk.step(f, x, dt)
+        xn = rk.step(f, x, dt, plan.work(x, len(rk.rows)))
     else:  # validated by Sim; kept for direct callers
         raise ValueError(f"integrator: unknown {integrator!r}")
     if normalize:
-        _normalize(xn, plan.K)
+        xn[:, Q] = plan.K.quat_normalize(xn[:, Q], out=(plan.quat_buffer(xn),))
     if plan.has_models:
         plan.constrain(xn)
     return xn
@@ -599,12 +660,12 @@ class NumpyBackend:
             def loop(plan, x, integrator, normalize, dt, n_steps, command=None, applied=None):  # noqa: E306
                 _dopri5(plan, x, normalize, dt, n_steps, adaptive.rtol, adaptive.atol, h, nfev, command, applied)
         if not plan.has_models:
-            x = state.copy()
+            x = _soa(state)                  # the working copy, struct-of-arrays (a contiguous row per number)
             with np.errstate(over="ignore", invalid="ignore", divide="ignore"):  # non-finite results are caught below
                 loop(plan, x, integrator, normalize, dt, n_steps)
             state[...] = x
         else:
-            x = np.concatenate([state, models.Omega], axis=1)
+            x = _soa(np.concatenate([state, models.Omega], axis=1))
             applied = models.applied.copy()
             with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
                 loop(plan, x, integrator, normalize, dt, n_steps, models.command, applied)
@@ -626,7 +687,7 @@ class NumpyBackend:
                 if no_root[b]:
                     plan.no_root = None
                     raise DivergenceError(i, b, no_root_cause(x[b, X], plan.I[b], dt))
-            if not np.isfinite(xn).all():
+            if not np.isfinite(np.sum(xn)) and not np.isfinite(xn).all():   # the sum first: one pass, no array
                 b = int(np.flatnonzero(~np.isfinite(xn).all(axis=1))[0])
                 raise DivergenceError(i, b, divergence_cause(x[b, X], dt, integrator, *plan.wheel_info(x, b)))
             x[...] = xn
