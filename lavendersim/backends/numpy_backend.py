@@ -25,7 +25,8 @@ from ..generated import layout as LY
 from ..generated import tableaux as T
 from ..kernels import K
 from . import (DOPRI5_HMIN_REL, DOPRI5_MAX_SUBSTEPS, FLOAT32_INTEGRATORS, KIND_JOINT, KIND_WHEELS, PLAIN_ONLY,
-               Adaptive, Models, divergence_cause, no_root_cause, tableau_of, tolerance_cause, wheel_counts)
+               Adaptive, Models, divergence_cause, no_root_cause, rk_weights, tableau_of, tolerance_cause,
+               wheel_counts)
 
 P, Q, V, W = LY.STATE_P_W, LY.STATE_Q, LY.STATE_V_W, LY.STATE_OMEGA_B  # state-row fields
 X, OM = LY.XS_X, LY.XS_OMEGA                                               # extended state [x, Omega]
@@ -530,7 +531,7 @@ def _user_rk(name: str):
         return None
     rk = _USER_RK.get(name)
     if rk is None or rk[0] is not tab:
-        rk = _USER_RK[name] = (tab, _ExplicitRK(tab.A, tab.b))
+        rk = _USER_RK[name] = (tab, _ExplicitRK(tab.A, *rk_weights(tab)))
     return rk[1]
 
 
