@@ -23,7 +23,7 @@ import pytest
 from conftest import IN_CI, missing
 
 PUBLIC_MODULES = [
-    "lavendersim", "lavendersim.bodies", "lavendersim.scene", "lavendersim.sim", "lavendersim.effects",
+    "lavendersim", "lavendersim.bodies", "lavendersim.scene", "lavendersim.sim", "lavendersim.sim_model", "lavendersim.effects",
     "lavendersim.errors", "lavendersim.validate", "lavendersim.oracle", "lavendersim.particles",
     "lavendersim.extending", "lavendersim.executor", "lavendersim.derive.symbolic", "lavendersim.backends",
     "lavendersim.labs", "lavendersim.labs.common",    # labs/, installed as lavendersim.labs
