@@ -1024,7 +1024,8 @@ def _standing_single(res: dict) -> list[dict]:
     big = [b for b in res.get("batched", []) if b["n_bodies"] >= 1000]
     worst = max((b["c"]["ns_min"] for b in big), default=None)
     out.append(_line("batched ns per body-step (worst of N >= 1e3)", worst, TARGETS["batched_ns_per_body_step"],
-                     "max", "ns/body-step", "N = " + ", ".join(f"{b['n_bodies']:g}" for b in big)))
+                     "max", "ns/body-step", ("N = " + ", ".join(f"{b['n_bodies']:g}" for b in big)) if big
+                     else "batched section not run"))
     small = _small_scenes(res)
     out.append(_line(f"small scenes N = {', '.join(map(str, SMALL_SIZES))} / the largest N, per body-step (worst)",
                      None if small is None else max(small["ratios"].values()), TARGETS["small_scene_ratio"], "max", "x",
@@ -1043,12 +1044,12 @@ def _standing_simd(res: dict) -> list[dict]:
     worst = max((r["ratio_to_hand_soa"] for r in rows if "ratio_to_hand_soa" in r), default=None)
     out = [_line("SIMD batch loop / hand-written SoA loop (worst of N >= 1e3)", worst,
                  TARGETS["simd_batch_vs_hand_soa"], "max", "x",
-                 f"one C call, LavenderSim at {sb.get('best_isa')} / the fastest bitwise hand copy; "
-                 "N = " + ", ".join(f"{r['n_bodies']:g}" for r in rows))]
+                 (f"one C call, LavenderSim at {sb.get('best_isa')} / the fastest bitwise hand copy; "
+                  "N = " + ", ".join(f"{r['n_bodies']:g}" for r in rows)) if rows else "simd section not run")]
     fl = [r for r in rows if "ratio_to_flop_floor" in r]
     out.append(_line("SIMD batch loop / the flop floor (worst of N >= 1e3)",
                      max((r["ratio_to_flop_floor"] for r in fl), default=None), TARGETS["simd_batch_vs_flop_floor"],
-                     "max", "x", "no FMA peer (no compiler)" if not fl else
+                     "max", "x", "simd section not run, or no compiler for the FMA peer" if not fl else
                      f"floor = {FMA_FLOPS} flops / the peak FMA rate measured now "
                      + ", ".join(f"({r['peak_gflops']:.1f} Gflop/s: {r['flop_floor_ns']:.2f} ns)" for r in fl)
                      + "; the best hand loop (handwritten_fma.c, FMA, -march=native) is at "
@@ -1073,8 +1074,8 @@ def _standing_simd(res: dict) -> list[dict]:
     f32 = [r for r in res.get("float32_batch", []) if r["n_bodies"] >= 1000]
     out.append(_line("float32 / float64 batch throughput (worst of N >= 1e3)", min((r["speedup"] for r in f32), default=None),
                      TARGETS["float32_batch_speedup"], "min", "x",
-                     "Sim.run on the C backend, float64 ns / float32 ns per body-step, same rounds; N = "
-                     + ", ".join(f"{r['n_bodies']:g}" for r in f32)))
+                     ("Sim.run on the C backend, float64 ns / float32 ns per body-step, same rounds; N = "
+                      + ", ".join(f"{r['n_bodies']:g}" for r in f32)) if f32 else "float32 section not run"))
     return out
 
 
