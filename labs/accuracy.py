@@ -784,9 +784,7 @@ def compute(backend: str = "auto", quick: bool = True, mujoco: bool = True, prog
     lavendersim integrators to measure (None: every built-in one; a user tableau's name measures it on both
     backends, against its declared order)."""
     C.check_backend(backend)
-    for name, v in (("quick", quick), ("mujoco", mujoco), ("progress", progress)):
-        if not isinstance(v, (bool, np.bool_)):
-            raise V.LavenderInputError(name, "must be True or False", f", got {v!r}")
+    C.flags(quick=quick, mujoco=mujoco, progress=progress)
     if integrators is not None and (isinstance(integrators, str) or not integrators):
         raise V.LavenderInputError("integrators", "must be a non-empty list of integrator names", f", got {integrators!r}")
     cfg = QUICK if quick else FULL

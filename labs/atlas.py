@@ -490,20 +490,19 @@ def atlas_checks(cells: list[dict], integrators, rtol: float) -> tuple[list[C.Ch
                           "more than doubled E or |L| without a DivergenceError (beyond the bound a default Sim "
                           "raises; the atlas opts in with on_bound='warn' to map it)"
                           + (f"; found: {_where(silent)}" if silent else "")))
-    # integrator -> its checks (each appends to checks and fig); one the registry lacks is a failed check
-    per_integrator = {
-        "rk4": _rk4_checks,
-        "euler": lambda *a: checks.append(_unstable_at_top(cells, "euler", "euler_unstable_at_large_steps")),
-        "implicit_gyro": _implicit_gyro_checks,
-        "splitting": functools.partial(_splitting_checks, name="splitting", bound=SPLITTING_L_PER_STEP),
-        "splitting4": functools.partial(_splitting_checks, name="splitting4", bound=SPLITTING4_L_PER_STEP),
-        "symtop4": functools.partial(_splitting_checks, name="symtop4", bound=SYMTOP4_L_PER_STEP),
-        "symtop_bm6": functools.partial(_splitting_checks, name="symtop_bm6", bound=SYMTOP_BM6_L_PER_STEP),
-        **{name: functools.partial(_adaptive_checks, name=name, rtol=rtol) for name in B.ADAPTIVE},
-    }
-    for name, add in per_integrator.items():
+    def declare(name, add):   # integrator -> its checks (appending to checks and fig); a missing one fails
         if _available(name, integrators, checks):
             add(cells, checks, fig)
+
+    declare("rk4", _rk4_checks)
+    declare("euler", lambda *a: checks.append(_unstable_at_top(cells, "euler", "euler_unstable_at_large_steps")))
+    declare("implicit_gyro", _implicit_gyro_checks)
+    declare("splitting", functools.partial(_splitting_checks, name="splitting", bound=SPLITTING_L_PER_STEP))
+    declare("splitting4", functools.partial(_splitting_checks, name="splitting4", bound=SPLITTING4_L_PER_STEP))
+    declare("symtop4", functools.partial(_splitting_checks, name="symtop4", bound=SYMTOP4_L_PER_STEP))
+    declare("symtop_bm6", functools.partial(_splitting_checks, name="symtop_bm6", bound=SYMTOP_BM6_L_PER_STEP))
+    for name in B.ADAPTIVE:
+        declare(name, functools.partial(_adaptive_checks, name=name, rtol=rtol))
     return checks, fig
 
 
@@ -817,9 +816,7 @@ def _plot_one(name: str, d: dict, ax=None):
 # ------------------------------------------------------------------------------------------ run
 
 def _validate(quick, rtol, progress):
-    for name, v in (("quick", quick), ("progress", progress)):
-        if not isinstance(v, (bool, np.bool_)):
-            raise V.LavenderInputError(name, "must be True or False", f", got {v!r}")
+    C.flags(quick=quick, progress=progress)
     rtol = V.scalar("rtol", rtol, positive=True)
     if not 1e-14 <= rtol < 1:
         raise V.LavenderInputError("rtol", "must be in [1e-14, 1)", f", got {rtol!r}")

@@ -679,6 +679,24 @@ def check_out_dir(out_dir, lab: str | None = None) -> Path:
     return V.writable_dir("out", out_dir)
 
 
+def flags(**named) -> None:
+    """Each keyword must be a bool (True or False); LavenderInputError naming the first that is not.
+
+    Parameters
+    ----------
+    **named : bool
+        Option name -> value.
+
+    Raises
+    ------
+    lavendersim.validate.LavenderInputError
+        Naming the option.
+    """
+    for name, v in named.items():
+        if not isinstance(v, (bool, np.bool_)):
+            raise V.LavenderInputError(name, "must be True or False", f", got {v!r}")
+
+
 def check_backend(backend) -> str:
     """The backend name ``backend`` stands for (:func:`lavendersim.backends.resolve`).
 

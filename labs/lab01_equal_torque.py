@@ -63,17 +63,24 @@ def _angle_about_z(q) -> np.ndarray:
     return ang * np.sign(np.where(axis[..., 2] == 0, 1.0, axis[..., 2]))
 
 
-def float32_ratio(backend: str, dt: float, integrator: str, c: float) -> float:
-    """omega_cube / omega_rod after T_END from the same cube and rod stepped with Sim(..., dtype="float32")
-    (the chapter's single-precision build printed 8.499998)."""
+def _scene(c: float, rod_y90: bool = True):
+    """The cube and the rod (and the rod rotated 90° about y), each with the torque; angular damping c if c > 0."""
     scene = lv.Scene()
     scene.add_body(lv.Body.box("cube", mass=MASS, size=CUBE_SIZE, p_w=[-0.6, 0, 0]))
     scene.add_body(lv.Body.box("rod", mass=MASS, size=ROD_SIZE, p_w=[0.6, 0, 0]))
-    for name in ("cube", "rod"):
+    if rod_y90:
+        scene.add_body(lv.Body.box("rod_y90", mass=MASS, size=ROD_SIZE, q=Q_Y90, p_w=[0, 1.0, 0]))
+    for name in list(scene.bodies):
         scene.add_effect("applied_torque", body=name, torque_w=TORQUE_W)
     if c > 0:
         scene.add_effect("angular_damping", c=c)
-    sim = lv.Sim(scene, dt=dt, integrator=integrator, backend=backend, dtype="float32")
+    return scene
+
+
+def float32_ratio(backend: str, dt: float, integrator: str, c: float) -> float:
+    """omega_cube / omega_rod after T_END from the same cube and rod stepped with Sim(..., dtype="float32")
+    (the chapter's single-precision build printed 8.499998)."""
+    sim = lv.Sim(_scene(c, rod_y90=False), dt=dt, integrator=integrator, backend=backend, dtype="float32")
     sim.run(int(round(T_END / dt)))
     return float(sim.state("cube").omega_w[2] / sim.state("rod").omega_w[2])
 
@@ -113,14 +120,8 @@ def compute(backend: str = "auto", dt: float = DT, integrator: str = INTEGRATOR,
 def _measure(backend: str, dt: float, integrator: str, c: float, n: int):
     """The figures (alpha analytic and simulated, the ratio, paw-check 3, theta), the plot's data, the pipeline."""
     tau = np.array(TORQUE_W)
-    scene = lv.Scene()
-    cube = scene.add_body(lv.Body.box("cube", mass=MASS, size=CUBE_SIZE, p_w=[-0.6, 0, 0]))
-    rod = scene.add_body(lv.Body.box("rod", mass=MASS, size=ROD_SIZE, p_w=[0.6, 0, 0]))
-    scene.add_body(lv.Body.box("rod_y90", mass=MASS, size=ROD_SIZE, q=Q_Y90, p_w=[0, 1.0, 0]))
-    for name in ("cube", "rod", "rod_y90"):
-        scene.add_effect("applied_torque", body=name, torque_w=tau)
-    if c > 0:
-        scene.add_effect("angular_damping", c=c)
+    scene = _scene(c)
+    cube, rod = scene.bodies["cube"], scene.bodies["rod"]
     sim = lv.Sim(scene, dt=dt, integrator=integrator, backend=backend)
     traj = sim.record(n)
     t = traj.t

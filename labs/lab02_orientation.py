@@ -99,8 +99,7 @@ def compute(backend: str = "auto", dt: float = DT, single_axis: bool = False) ->
     """Run the lab and return its :class:`~lavendersim.labs.common.LabResult`; writes nothing."""
     C.check_backend(backend)  # validated only: this lab evaluates the generated NumPy kernels, no simulator
     dt = V.dt("dt", dt)
-    if not isinstance(single_axis, (bool, np.bool_)):
-        raise V.LavenderInputError("single_axis", "must be True or False", f", got {single_axis!r}")
+    C.flags(single_axis=single_axis)
     n = _steps(dt)
     speed = float(np.linalg.norm(OMEGA_W))
     w = np.array([speed, 0.0, 0.0]) if single_axis else np.array(OMEGA_W)

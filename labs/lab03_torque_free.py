@@ -179,8 +179,7 @@ def compute(backend: str = "auto", dt: float = DT, integrator: str = INTEGRATOR,
     backend = C.check_backend(backend)
     dt = V.dt("dt", dt)
     integrator = V.choice("integrator", integrator, CHAPTER_INTEGRATORS)
-    if not isinstance(normalize, (bool, np.bool_)) or not isinstance(search, (bool, np.bool_)):
-        raise V.LavenderInputError("normalize", "normalize and search must be True or False")
+    C.flags(normalize=normalize, search=search)
     C.steps("dt", max(T_END, PAW5_T, *(SEARCH_TIMES if search else ())), dt, whole=False)  # at most C.MAX_STEPS
     run = (dt, integrator, normalize, backend)
     f, data, pipeline = _measure(*run)
