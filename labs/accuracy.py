@@ -1,7 +1,7 @@
 """Lab accuracy: what accuracy costs in time — work-precision of every integrator, both backends, and peers.
 
 Cases (torque-free, start at identity, T = 10 s; the reference is the exact motion of
-lavendersim.reference.torque_free, Jacobi elliptic functions):
+lavendersim.oracle.torque_free, Jacobi elliptic functions):
   * box_w1, box_w2: the chapter's box 0.8 x 0.2 x 0.2 m, 1 kg (I_b = [0.08, 0.68, 0.68]/12 kg·m²),
     omega_b(0) = [1, 0.5, 0.2] and [0.1, 2, 0.1] rad/s;
   * diag_w1, diag_w2: I_b = diag(1, 2, 3) kg·m², 1 kg, the same two omega_b(0).
@@ -27,7 +27,7 @@ Measures per point (a method at one dt or rtol, one case):
   * attitude error at T: attitude_error(q(T), q_exact(T)) in rad; omega error |omega_b(T) -
     omega_exact(T)| in rad/s;
   * energy drift max_t |E(t) - E(0)| / E(0) and world angular-momentum drift
-    max_t |L_w(t) - L_w(0)| / |L_w(0)| (lavendersim.reference.relative_drift) over every step (every
+    max_t |L_w(t) - L_w(0)| / |L_w(0)| (lavendersim.oracle.relative_drift) over every step (every
     accepted step for scipy; every dt-sample for an adaptive Sim); q normalized before L_w for scipy;
   * wall time per simulated second: the minimum over repeats of one whole run's wall time / T
     (repeats are interleaved round-robin across all points so slow drifts of the machine's load
@@ -98,7 +98,7 @@ import numpy as np
 import lavendersim as lv
 from lavendersim import backends as B
 from lavendersim import executor as X
-from lavendersim import reference as R
+from lavendersim import oracle as R
 from lavendersim import validate as V
 from lavendersim._install import extra_command
 from lavendersim.errors import DivergenceError, ValidityBoundWarning

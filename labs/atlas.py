@@ -34,7 +34,7 @@ Per cell (results.json "cells", sorted by integrator, axis, ratio, |ω|·dt — 
   energy_drift     max over the samples |E(t) − E(0)| / E(0);   energy_gain  max (E(t)/E(0) − 1)
   L_norm_drift     max | |L_b(t)| − |L_b(0)| | / |L_b(0)|   (|L|, the Casimir)
   L_world_drift    max |L_w(t) − L_w(0)| / |L_w(0)|           (the conserved world vector; ≥ the above)
-  attitude_error   max rotation angle (rad) to lavendersim.reference.torque_free (the exact
+  attitude_error   max rotation angle (rad) to lavendersim.oracle.torque_free (the exact
                    Jacobi-elliptic motion) at the samples; omega_error  max |ω − ω_exact| / |ω0|
   steps, rhs_evals, dt, T, backend, rtol/atol (adaptive), diverged_at_step, message
   within_bound     |ω0|·dt·ratio^p ≤ the integrator's declared validity bound (derive/tableaux.py: WDT_MAX,
@@ -98,7 +98,7 @@ import lavendersim as lv
 from lavendersim import backends as B
 from lavendersim import executor as X
 from lavendersim.generated import tableaux as TABLEAUX
-from lavendersim import reference as R
+from lavendersim import oracle as R
 from lavendersim import validate as V
 from lavendersim import sim as S
 from lavendersim.errors import DivergenceError, ValidityBoundWarning
@@ -324,7 +324,7 @@ def run_group(task: tuple) -> list[dict]:
     cells = []
     for integ in integrators:
         c = run_cell(integ, wdt, ratio, axis, backend, rtol, atol, ref)
-        c["reference"] = why or f"reference.torque_free ({ref.kind})"
+        c["reference"] = why or f"oracle.torque_free ({ref.kind})"
         cells.append(c)
     return cells
 

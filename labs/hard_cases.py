@@ -14,10 +14,10 @@ fails) only for the integrator the issue names for that case (``rk4`` unless sta
 instead (a failure mode: ``--integrator euler`` fails most of them).
 
 Conventions: quaternions (x, y, z, w), scalar last, q = R_WB; ω_b in the body frame; relative
-drift = max_t |x(t) − x(0)| / |x(0)| (lavendersim.reference.relative_drift); attitude error = the
-rotation angle between two orientations (reference.attitude_error, rad); ω error = max_t
-|ω_b(t) − ω_ref(t)| / |ω_b(0)|. The exact torque-free motion (reference.torque_free, Jacobi
-elliptic functions) is the reference; DOP853 at rtol = atol = 1e-13 (reference.dop853) checks it.
+drift = max_t |x(t) − x(0)| / |x(0)| (lavendersim.oracle.relative_drift); attitude error = the
+rotation angle between two orientations (oracle.attitude_error, rad); ω error = max_t
+|ω_b(t) − ω_ref(t)| / |ω_b(0)|. The exact torque-free motion (oracle.torque_free, Jacobi
+elliptic functions) is the reference; DOP853 at rtol = atol = 1e-13 (oracle.dop853) checks it.
 Runs longer than 5 000 steps use the C backend whatever --backend says (the catalogue is about
 stability, not about the NumPy backend's speed); the backend of each trial is in results.json.
 
@@ -76,7 +76,7 @@ import numpy as np
 
 import lavendersim as lv
 from lavendersim import backends
-from lavendersim import reference as R
+from lavendersim import oracle as R
 from lavendersim import validate as V
 from lavendersim.errors import DivergenceError, ValidityBoundWarning
 from lavendersim.kernels import K
@@ -195,7 +195,7 @@ class Trial:
     every: int
     integrator: str
     bounds: dict                       # metric -> (limit, note)
-    reference: bool = True             # compare with reference.torque_free at the samples
+    reference: bool = True             # compare with oracle.torque_free at the samples
     extra: object = None               # callable(trial, run, ref) -> dict of further metrics
     description: str = ""
     dop853: bool = False               # also check the exact reference against DOP853
