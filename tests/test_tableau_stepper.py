@@ -248,7 +248,7 @@ def test_the_extension_refuses_a_malformed_tableau_argument():
     x0, params, eff, _ = arrays(scene(False))
     A, b = np.zeros((2, 2)), np.array([0.5, 0.5])
     for tab, msg in [((A, np.ones(3), 1.0), "shape"), ((np.ones((2, 2)), b, 1.0), "explicit"),
-                     ((A, b, 0.0), "b_den > 0"), ((A, b), "")]:
+                     ((A, b, 0.0), "b_den > 0"), ((A, b), "tableau")]:
         with pytest.raises((ValueError, TypeError), match=msg):
             c_backend._c.simulate(x0.copy(), params, eff, 2, 1, 0.01, 1, None, None, None, None, None, None, 0.0, 0.0,
                                   None, tab)

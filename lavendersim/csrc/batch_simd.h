@@ -60,28 +60,20 @@ typedef void (*lv_tile_fn)(double (*LV_RESTRICT T)[LV_TILE], const double (*LV_R
    coefficient c_b[k] (LV_EULER_*).
    NORMALIZE: q normalized after each step (the generated kernel), as on the scalar path. LOAD, RHS:
    the lane's constant effect sums and its right-hand side (LV_TILE_LOAD_*, LV_TILE_RHS_*). */
+#define LV_TILE_FOR(stmt) for (i = 0; i < LV_STATE_SIZE; i++) stmt
+#define LV_TILE_AT(v) v[i]
 #define LV_TILE_RK4(NORMALIZE, LOAD, RHS)                                                               \
     {                                                                                                   \
-        const double h2 = LV_RK4_C1 * dt, h3 = LV_RK4_C2 * dt, h4 = LV_RK4_C3 * dt, h6 = dt / LV_RK4_B_DEN; \
         long s, b;                                                                                      \
         int i;                                                                                          \
         for (s = 0; s < n_steps; s++) {                                                                 \
             for (b = 0; b < m; b++) {                                                                   \
-                double x[LV_STATE_SIZE], k1[LV_STATE_SIZE], k2[LV_STATE_SIZE], k3[LV_STATE_SIZE],       \
-                    k4[LV_STATE_SIZE], tmp[LV_STATE_SIZE], xn[LV_STATE_SIZE], cf[LV_EULER_SIZE];        \
+                double x[LV_STATE_SIZE], k[LV_STATE_SIZE], acc[LV_STATE_SIZE], tmp[LV_STATE_SIZE],      \
+                    xn[LV_STATE_SIZE], cf[LV_EULER_SIZE];                                               \
                 LOAD;                                                                                   \
                 for (i = 0; i < LV_STATE_SIZE; i++) x[i] = T[i][b];                                     \
                 for (i = 0; i < LV_EULER_SIZE; i++) cf[i] = J[i][b];                                    \
-                RHS(x, k1);                                                                             \
-                for (i = 0; i < LV_STATE_SIZE; i++) tmp[i] = x[i] + h2 * k1[i];                         \
-                RHS(tmp, k2);                                                                           \
-                for (i = 0; i < LV_STATE_SIZE; i++) tmp[i] = x[i] + h3 * k2[i];                         \
-                RHS(tmp, k3);                                                                           \
-                for (i = 0; i < LV_STATE_SIZE; i++) tmp[i] = x[i] + h4 * k3[i];                         \
-                RHS(tmp, k4);                                                                           \
-                for (i = 0; i < LV_STATE_SIZE; i++)                                                     \
-                    xn[i] = x[i] + h6 * (LV_RK4_B0 * k1[i] + LV_RK4_B1 * k2[i] + LV_RK4_B2 * k3[i]      \
-                                         + LV_RK4_B3 * k4[i]);                                          \
+                LV_RK4_STEP(double, RHS, LV_TILE_FOR, LV_TILE_AT, dt, x, xn, k, acc, tmp);              \
                 if (NORMALIZE) lv_quat_normalize(xn + LV_STATE_Q, xn + LV_STATE_Q);                    \
                 for (i = 0; i < LV_STATE_SIZE; i++) T[i][b] = xn[i];                                    \
             }                                                                                           \
@@ -103,29 +95,17 @@ typedef void (*lv_tile_fn)(double (*LV_RESTRICT T)[LV_TILE], const double (*LV_R
     LV_DEFINE_TILE(tile_rk4_norm_full_##SUFFIX, ATTR, 1, FULL)                                          \
     LV_DEFINE_TILE(tile_rk4_raw_full_##SUFFIX, ATTR, 0, FULL)
 
-LV_DEFINE_TILES(base, )
-#if LV_HAVE_ISA_CLONES
-LV_DEFINE_TILES(avx2, __attribute__((target("avx2"))))
-LV_DEFINE_TILES(avx512, __attribute__((target("avx512f"))))
-#endif
-
-#define LV_TILE_PICK(SUFFIX)                                                                            \
-    (kind == LV_RHS_FREE     ? (normalize ? tile_rk4_norm_free_##SUFFIX : tile_rk4_raw_free_##SUFFIX)     \
-     : kind == LV_RHS_TORQUE ? (normalize ? tile_rk4_norm_torque_##SUFFIX : tile_rk4_raw_torque_##SUFFIX) \
-                             : (normalize ? tile_rk4_norm_full_##SUFFIX : tile_rk4_raw_full_##SUFFIX))
+LV_ISA_COPIES(LV_DEFINE_TILES)
 
 /* The tile stepper of instruction set isa (LV_ISA_*; one this CPU supports, see lv_isa_best) for
    right-hand side kind (LV_RHS_*; with effects: constant ones, see LV_TP_*). */
 static lv_tile_fn tile_rk4_fn(int isa, int normalize, int kind)
 {
-#if LV_HAVE_ISA_CLONES
-    if (isa == LV_ISA_AVX512) return LV_TILE_PICK(avx512);
-    if (isa == LV_ISA_AVX2) return LV_TILE_PICK(avx2);
-#endif
     (void)isa;
-    return LV_TILE_PICK(base);
+    return kind == LV_RHS_FREE     ? (normalize ? LV_ISA_PICK(isa, tile_rk4_norm_free) : LV_ISA_PICK(isa, tile_rk4_raw_free))
+         : kind == LV_RHS_TORQUE ? (normalize ? LV_ISA_PICK(isa, tile_rk4_norm_torque) : LV_ISA_PICK(isa, tile_rk4_raw_torque))
+                                 : (normalize ? LV_ISA_PICK(isa, tile_rk4_norm_full) : LV_ISA_PICK(isa, tile_rk4_raw_full));
 }
-#undef LV_TILE_PICK
 
 /* Whether every effect on plain body b reads no state (a built-in effect without LV_EFFECT_USES_STATE):
    its force and torque sums are then constant and the body may take the SIMD tiles with effects. */

@@ -23,19 +23,14 @@
    (rigid_body_rhs_free_c / _torque_c / _c: bitwise the I_b kernels, the same printed arithmetic), so a
    torque-free step divides by nothing but the normalization's 1/sqrt (as csrc/batch_simd.h in float64).
    The loop over the bodies of a tile, with the kernels inlined (flatten), is what the compiler vectorizes for
-   the first three kinds (one body per lane; 16 float lanes in AVX-512, one copy per instruction set through
-   target_clones); the "any effects" tiles take the same loop with the effect dispatch (scalar). */
+   the first three kinds (one body per lane; 16 float lanes in AVX-512, one copy per instruction set: LV_ISA_COPIES,
+   picked by lv_isa_get() as the float64 tiles are); the "any effects" tiles take the same loop with the effect
+   dispatch (scalar). */
 
 #if defined(__GNUC__) || defined(__clang__)
 #define LV_FIXED_FLATTEN __attribute__((flatten))
 #else
 #define LV_FIXED_FLATTEN
-#endif
-/* One copy of the torque-free tile per instruction set, chosen by the loader (GCC ifunc, x86-64 Linux). */
-#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && defined(__linux__) && !defined(LV_NO_CLONES)
-#define LV_FIXED_CLONES __attribute__((target_clones("avx512f", "avx2", "default")))
-#else
-#define LV_FIXED_CLONES
 #endif
 
 #define LV_FIXED_TILE 64  /* bodies per tile */
@@ -97,15 +92,18 @@ static inline void LV_FN(rhs)(const LV_FN(tile) *LV_RESTRICT t, long b, int kind
 static inline void LV_FN(body_step)(const LV_FN(tile) *LV_RESTRICT t, long b, LV_REAL *x, int kind, int integrator,
                                     int normalize, LV_REAL dt)
 {
-    const LV_REAL h2 = (LV_REAL)LV_RK4_C1 * dt, h3 = (LV_REAL)LV_RK4_C2 * dt, h4 = (LV_REAL)LV_RK4_C3 * dt;
-    const LV_REAL h6 = dt / (LV_REAL)LV_RK4_B_DEN;
-    const LV_REAL b0 = (LV_REAL)LV_RK4_B0, b1 = (LV_REAL)LV_RK4_B1, b2 = (LV_REAL)LV_RK4_B2, b3 = (LV_REAL)LV_RK4_B3;
-    LV_REAL k1[LV_STATE_SIZE], k2[LV_STATE_SIZE], k3[LV_STATE_SIZE], k4[LV_STATE_SIZE], tmp[LV_STATE_SIZE];
+    LV_REAL k1[LV_STATE_SIZE], acc[LV_STATE_SIZE], tmp[LV_STATE_SIZE];
     int i;
-    LV_FN(rhs)(t, b, kind, x, k1);
-    if (integrator == LV_INTEGRATOR_EULER) {
+#define LV_FIXED_RHS(in, out) LV_FN(rhs)(t, b, kind, in, out)
+#define LV_FIXED_FOR(stmt) for (i = 0; i < LV_STATE_SIZE; i++) stmt
+#define LV_FIXED_AT(v) v[i]
+    if (integrator == LV_INTEGRATOR_RK4) {
+        LV_RK4_STEP(LV_REAL, LV_FIXED_RHS, LV_FIXED_FOR, LV_FIXED_AT, dt, x, x, k1, acc, tmp);
+    } else if (integrator == LV_INTEGRATOR_EULER) {
+        LV_FIXED_RHS(x, k1);
         for (i = 0; i < LV_STATE_SIZE; i++) x[i] = x[i] + dt * k1[i];
-    } else if (integrator == LV_INTEGRATOR_SEMI_IMPLICIT_EULER) {
+    } else { /* LV_INTEGRATOR_SEMI_IMPLICIT_EULER */
+        LV_FIXED_RHS(x, k1);
         for (i = 0; i < 3; i++) { /* v', omega' first */
             x[LV_STATE_V_W + i] = x[LV_STATE_V_W + i] + dt * k1[LV_STATE_V_W + i];
             x[LV_STATE_OMEGA_B + i] = x[LV_STATE_OMEGA_B + i] + dt * k1[LV_STATE_OMEGA_B + i];
@@ -113,15 +111,10 @@ static inline void LV_FN(body_step)(const LV_FN(tile) *LV_RESTRICT t, long b, LV
         LV_K(translation_drift)(x + LV_STATE_P_W, x + LV_STATE_V_W, dt, x + LV_STATE_P_W); /* p + dt v' */
         LV_K(quat_derivative_body)(x + LV_STATE_Q, x + LV_STATE_OMEGA_B, tmp);             /* q rate at omega' */
         for (i = 0; i < 4; i++) x[LV_STATE_Q + i] = x[LV_STATE_Q + i] + dt * tmp[i];
-    } else { /* LV_INTEGRATOR_RK4 */
-        for (i = 0; i < LV_STATE_SIZE; i++) tmp[i] = x[i] + h2 * k1[i];
-        LV_FN(rhs)(t, b, kind, tmp, k2);
-        for (i = 0; i < LV_STATE_SIZE; i++) tmp[i] = x[i] + h3 * k2[i];
-        LV_FN(rhs)(t, b, kind, tmp, k3);
-        for (i = 0; i < LV_STATE_SIZE; i++) tmp[i] = x[i] + h4 * k3[i];
-        LV_FN(rhs)(t, b, kind, tmp, k4);
-        for (i = 0; i < LV_STATE_SIZE; i++) x[i] = x[i] + h6 * (b0 * k1[i] + b1 * k2[i] + b2 * k3[i] + b3 * k4[i]);
     }
+#undef LV_FIXED_RHS
+#undef LV_FIXED_FOR
+#undef LV_FIXED_AT
     if (normalize) LV_K(quat_normalize)(x + LV_STATE_Q, x + LV_STATE_Q);
 }
 
@@ -142,42 +135,49 @@ static inline void LV_FN(tile_steps)(LV_FN(tile) *LV_RESTRICT t, int kind, int i
 
 typedef void (*LV_FN(tile_fn))(LV_FN(tile) *LV_RESTRICT t, LV_REAL dt, long n_steps);
 
-/* One specialized (constant kind, integrator and normalize flag) copy of the tile loop each: the loop over
-   the bodies of a tile vectorizes for LV_FIXED_FREE / _TORQUE / _FORCE (one body per lane); LV_FIXED_ANY
-   (the effect dispatch) stays scalar. */
-#define LV_FIXED_TILE_FN(NAME, KIND, INTEGRATOR, NORMALIZE)                                                   \
-    LV_FIXED_CLONES LV_FIXED_FLATTEN static void LV_FN(NAME)(LV_FN(tile) *LV_RESTRICT t, LV_REAL dt, long n_steps) \
+/* One specialized (constant kind, integrator and normalize flag) copy of the tile loop each, per instruction set
+   (LV_ISA_COPIES): the loop over the bodies of a tile vectorizes for LV_FIXED_FREE / _TORQUE / _FORCE (one body
+   per lane); LV_FIXED_ANY (the effect dispatch) stays scalar (the base copy only). */
+#define LV_FIXED_TILE_FN(NAME, KIND, INTEGRATOR, NORMALIZE, SUFFIX, ATTR)                                     \
+    ATTR LV_FIXED_FLATTEN static void LV_PASTE(LV_FN(NAME), _##SUFFIX)(LV_FN(tile) *LV_RESTRICT t, LV_REAL dt, \
+                                                                       long n_steps)                          \
     {                                                                                                         \
         LV_FN(tile_steps)(t, KIND, INTEGRATOR, NORMALIZE, dt, n_steps);                                       \
     }
-#define LV_FIXED_TILE_KIND(K, KIND)                                                  \
-    LV_FIXED_TILE_FN(K##_euler_n, KIND, LV_INTEGRATOR_EULER, 1)                      \
-    LV_FIXED_TILE_FN(K##_euler_r, KIND, LV_INTEGRATOR_EULER, 0)                      \
-    LV_FIXED_TILE_FN(K##_semi_n, KIND, LV_INTEGRATOR_SEMI_IMPLICIT_EULER, 1)         \
-    LV_FIXED_TILE_FN(K##_semi_r, KIND, LV_INTEGRATOR_SEMI_IMPLICIT_EULER, 0)         \
-    LV_FIXED_TILE_FN(K##_rk4_n, KIND, LV_INTEGRATOR_RK4, 1)                          \
-    LV_FIXED_TILE_FN(K##_rk4_r, KIND, LV_INTEGRATOR_RK4, 0)
-LV_FIXED_TILE_KIND(free, LV_FIXED_FREE)
-LV_FIXED_TILE_KIND(torque, LV_FIXED_TORQUE)
-LV_FIXED_TILE_KIND(force, LV_FIXED_FORCE)
-#undef LV_FIXED_CLONES
-#define LV_FIXED_CLONES
-LV_FIXED_TILE_KIND(any, LV_FIXED_ANY)
+#define LV_FIXED_TILE_KIND(K, KIND, SUFFIX, ATTR)                                            \
+    LV_FIXED_TILE_FN(K##_euler_n, KIND, LV_INTEGRATOR_EULER, 1, SUFFIX, ATTR)                \
+    LV_FIXED_TILE_FN(K##_euler_r, KIND, LV_INTEGRATOR_EULER, 0, SUFFIX, ATTR)                \
+    LV_FIXED_TILE_FN(K##_semi_n, KIND, LV_INTEGRATOR_SEMI_IMPLICIT_EULER, 1, SUFFIX, ATTR)   \
+    LV_FIXED_TILE_FN(K##_semi_r, KIND, LV_INTEGRATOR_SEMI_IMPLICIT_EULER, 0, SUFFIX, ATTR)   \
+    LV_FIXED_TILE_FN(K##_rk4_n, KIND, LV_INTEGRATOR_RK4, 1, SUFFIX, ATTR)                    \
+    LV_FIXED_TILE_FN(K##_rk4_r, KIND, LV_INTEGRATOR_RK4, 0, SUFFIX, ATTR)
+#define LV_FIXED_TILES(SUFFIX, ATTR)                                                         \
+    LV_FIXED_TILE_KIND(free, LV_FIXED_FREE, SUFFIX, ATTR)                                    \
+    LV_FIXED_TILE_KIND(torque, LV_FIXED_TORQUE, SUFFIX, ATTR)                                \
+    LV_FIXED_TILE_KIND(force, LV_FIXED_FORCE, SUFFIX, ATTR)
+LV_ISA_COPIES(LV_FIXED_TILES)
+LV_FIXED_TILE_KIND(any, LV_FIXED_ANY, base, )
+#undef LV_FIXED_TILES
 #undef LV_FIXED_TILE_KIND
 #undef LV_FIXED_TILE_FN
 
-#define LV_FIXED_PICK(K)                                                                                       \
-    (integrator == LV_INTEGRATOR_EULER ? (normalize ? LV_FN(K##_euler_n) : LV_FN(K##_euler_r))                 \
-     : integrator == LV_INTEGRATOR_SEMI_IMPLICIT_EULER ? (normalize ? LV_FN(K##_semi_n) : LV_FN(K##_semi_r))   \
-                                                       : (normalize ? LV_FN(K##_rk4_n) : LV_FN(K##_rk4_r)))
-/* The tile loop of kind (LV_FIXED_*), integrator and normalize flag. */
-static LV_FN(tile_fn) LV_FN(tile_pick)(int kind, int integrator, int normalize)
+#define LV_FIXED_ISA(NAME) LV_ISA_PICK(isa, NAME)
+#define LV_FIXED_BASE(NAME) LV_PASTE(NAME, _base)
+#define LV_FIXED_PICK(K, PICK)                                                                                   \
+    (integrator == LV_INTEGRATOR_EULER ? (normalize ? PICK(LV_FN(K##_euler_n)) : PICK(LV_FN(K##_euler_r)))       \
+     : integrator == LV_INTEGRATOR_SEMI_IMPLICIT_EULER ? (normalize ? PICK(LV_FN(K##_semi_n)) : PICK(LV_FN(K##_semi_r))) \
+                                                       : (normalize ? PICK(LV_FN(K##_rk4_n)) : PICK(LV_FN(K##_rk4_r))))
+/* The tile loop of kind (LV_FIXED_*), integrator and normalize flag, in instruction set isa (LV_ISA_*). */
+static LV_FN(tile_fn) LV_FN(tile_pick)(int kind, int integrator, int normalize, int isa)
 {
-    return kind == LV_FIXED_FREE ? LV_FIXED_PICK(free)
-         : kind == LV_FIXED_TORQUE ? LV_FIXED_PICK(torque)
-         : kind == LV_FIXED_FORCE ? LV_FIXED_PICK(force) : LV_FIXED_PICK(any);
+    (void)isa;
+    return kind == LV_FIXED_FREE ? LV_FIXED_PICK(free, LV_FIXED_ISA)
+         : kind == LV_FIXED_TORQUE ? LV_FIXED_PICK(torque, LV_FIXED_ISA)
+         : kind == LV_FIXED_FORCE ? LV_FIXED_PICK(force, LV_FIXED_ISA) : LV_FIXED_PICK(any, LV_FIXED_BASE);
 }
 #undef LV_FIXED_PICK
+#undef LV_FIXED_ISA
+#undef LV_FIXED_BASE
 
 static int LV_FN(tile_finite)(const LV_FN(tile) *t, long b)
 {
@@ -222,7 +222,7 @@ static long LV_FN(tile_run)(LV_FN(tile) *t, LV_FN(tile) *snap, LV_FN(tile_fn) fn
 /* The contract of lv_simulate (step.h) for plain bodies, integrator euler / semi_implicit_euler / rk4 and
    built-in effect codes (the caller checked them: any other code returns LV_UNKNOWN_EFFECT). */
 static int LV_FN(simulate)(LV_REAL *state, const LV_REAL *params, long nb, const LV_REAL *effects, long ne,
-                           long row_size, int integrator, int normalize, LV_REAL dt, long n_steps,
+                           long row_size, int integrator, int normalize, LV_REAL dt, long n_steps, int isa,
                            long *fail_step, long *fail_body)
 {
     long *start = NULL, *order = NULL, *fill = NULL, e, b, j, k, n_every = 0, limit = n_steps, best = -1, s, fb;
@@ -282,7 +282,7 @@ static int LV_FN(simulate)(LV_REAL *state, const LV_REAL *params, long nb, const
     memcpy(next, first, sizeof first);
     for (b = 0; b < nb; b++) order[next[flags[b]]++] = b;
     for (kind = 0; kind < LV_FIXED_KINDS; kind++) {
-        const LV_FN(tile_fn) fn = LV_FN(tile_pick)(kind, integrator, normalize);
+        const LV_FN(tile_fn) fn = LV_FN(tile_pick)(kind, integrator, normalize, isa);
         const long *ids = order + first[kind];
         j = first[kind + 1] - first[kind];
         for (k = 0; k < j; k += t->nt) {

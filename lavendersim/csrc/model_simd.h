@@ -90,20 +90,15 @@ typedef void (*lv_mtile_fn)(lv_mtile *LV_RESTRICT t, const lv_effect_ref *refs, 
         COMBINE                                                                                         \
     }
 
-#define LV_MT_FIRST(W, H)                                                                               \
-    LV_MT_UNROLL for (i = 0; i < LV_XS_SIZE; i++) {                                                     \
-        t->A[i][b] = W * k[i];                                                                          \
-        t->T[i][b] = t->Y[i][b] + H * k[i];                                                             \
-    }
-#define LV_MT_MID(W, H)                                                                                 \
-    LV_MT_UNROLL for (i = 0; i < LV_XS_SIZE; i++) {                                                     \
-        t->A[i][b] = t->A[i][b] + W * k[i];                                                             \
-        t->T[i][b] = t->Y[i][b] + H * k[i];                                                             \
-    }
+/* Stages 1-3 (LV_RK4_UPDATE): the weighted sum t->A and the next stage's input t->T; the last stage: the step's end. */
+#define LV_MT_NEXT(STAGE)                                                                               \
+    LV_MT_UNROLL for (i = 0; i < LV_XS_SIZE; i++)                                                       \
+        (void)LV_RK4_UPDATE(double, STAGE, dt, t->Y[i][b], k[i], t->A[i][b], t->T[i][b]);
 #define LV_MT_LAST(NORMALIZE)                                                                           \
     {                                                                                                   \
         double yn[LV_XS_SIZE];                                                                          \
-        LV_MT_UNROLL for (i = 0; i < LV_XS_SIZE; i++) yn[i] = t->Y[i][b] + h6 * (t->A[i][b] + LV_RK4_B3 * k[i]); \
+        LV_MT_UNROLL for (i = 0; i < LV_XS_SIZE; i++)                                                   \
+            (void)LV_RK4_UPDATE(double, 4, dt, t->Y[i][b], k[i], t->A[i][b], yn[i]);                    \
         if (NORMALIZE) lv_quat_normalize(yn + LV_STATE_Q, yn + LV_STATE_Q);                             \
         lv_pivot_kinematics(yn + LV_STATE_Q, yn + LV_STATE_OMEGA_B, r + LV_MODEL_ANCHOR_W,             \
                             r + LV_MODEL_R_B, yn + LV_STATE_P_W, yn + LV_STATE_V_W);                    \
@@ -142,7 +137,6 @@ static int mtile_code_known(int code) { return lv_effect_n_params(code) >= 0; }
                                                    long n_refs, int needs_v, int normalize, long m,     \
                                                    double dt, long n_steps)                             \
     {                                                                                                   \
-        const double h2 = LV_RK4_C1 * dt, h3 = LV_RK4_C2 * dt, h4 = LV_RK4_C3 * dt, h6 = dt / LV_RK4_B_DEN; \
         long s, b, e;                                                                                   \
         int i;                                                                                          \
         for (s = 0; s < n_steps; s++) {                                                                 \
@@ -156,31 +150,23 @@ static int mtile_code_known(int code) { return lv_effect_n_params(code) >= 0; }
                 LV_MT_UNROLL for (i = 0; i < LV_XS_SIZE; i++) t->T[i][b] = t->Y[i][b];                  \
             }                                                                                           \
             LV_MT_EFFECTS                                                                               \
-            LV_MT_STAGE_RHS(LV_MT_FIRST(LV_RK4_B0, h2))                                                 \
+            LV_MT_STAGE_RHS(LV_MT_NEXT(1))                                                              \
             LV_MT_EFFECTS                                                                               \
-            LV_MT_STAGE_RHS(LV_MT_MID(LV_RK4_B1, h3))                                                   \
+            LV_MT_STAGE_RHS(LV_MT_NEXT(2))                                                              \
             LV_MT_EFFECTS                                                                               \
-            LV_MT_STAGE_RHS(LV_MT_MID(LV_RK4_B2, h4))                                                   \
+            LV_MT_STAGE_RHS(LV_MT_NEXT(3))                                                              \
             LV_MT_EFFECTS                                                                               \
             if (normalize) { LV_MT_STAGE_RHS(LV_MT_LAST(1)) }                                           \
             else { LV_MT_STAGE_RHS(LV_MT_LAST(0)) }                                                     \
         }                                                                                               \
     }
 
-LV_DEFINE_MTILE(base, )
-#if LV_HAVE_ISA_CLONES
-LV_DEFINE_MTILE(avx2, __attribute__((target("avx2"))))
-LV_DEFINE_MTILE(avx512, __attribute__((target("avx512f"))))
-#endif
+LV_ISA_COPIES(LV_DEFINE_MTILE)
 
 static lv_mtile_fn mtile_rk4_fn(int isa)
 {
-#if LV_HAVE_ISA_CLONES
-    if (isa == LV_ISA_AVX512) return mtile_rk4_avx512;
-    if (isa == LV_ISA_AVX2) return mtile_rk4_avx2;
-#endif
     (void)isa;
-    return mtile_rk4_base;
+    return LV_ISA_PICK(isa, mtile_rk4);
 }
 
 /* Whether model body b may join the group of body b0 (b0 itself: whether it may lead one): kind LV_MKIND,

@@ -25,12 +25,6 @@
 #else
 #define LV_RESTRICT restrict
 #endif
-/* Per-instruction-set copies of the batched loops, dispatched at run time (x86 with GCC or clang). */
-#if (defined(__GNUC__) || defined(__clang__)) && (defined(__x86_64__) || defined(__i386__))
-#define LV_HAVE_ISA_CLONES 1
-#else
-#define LV_HAVE_ISA_CLONES 0
-#endif
 
 /* Threads for the SIMD tiles of one call (POSIX threads; elsewhere one). */
 #if !defined(_WIN32) && (defined(__unix__) || defined(__APPLE__))
@@ -204,7 +198,8 @@ static int all_finite(const double *x)
    arithmetic is exactly the single-body sequence, so results do not depend on the blocking. */
 #define LV_BLOCK 8
 
-/* Advance bodies ids[0 .. n-1] (n <= LV_BLOCK, ascending) by n_steps. Their rows are read at the start
+/* Advance bodies ids[0 .. n-1] (n <= LV_BLOCK, ascending) by n_steps of euler or semi-implicit Euler (RK4 takes
+   advance_free_rk4). Their rows are read at the start
    and written only on success. Returns -1 on success, else the 0-based failing step; then *fail_j is the
    first (lowest-index) body of the block that went non-finite at that step and last[] holds the block's
    last finite states. */
@@ -213,12 +208,10 @@ static inline long advance_block(double *state, const double *params, const long
                           double dt, long n_steps, int *fail_j, double last[][LV_STATE_SIZE])
 {
     double x[LV_BLOCK][LV_STATE_SIZE], xn[LV_BLOCK][LV_STATE_SIZE], k1[LV_BLOCK][LV_STATE_SIZE],
-        k2[LV_BLOCK][LV_STATE_SIZE], k3[LV_BLOCK][LV_STATE_SIZE], k4[LV_BLOCK][LV_STATE_SIZE],
         tmp[LV_BLOCK][LV_STATE_SIZE];
     const double *prm[LV_BLOCK];
     const lv_effect_ref *refs[LV_BLOCK];
     long n_refs[LV_BLOCK];
-    const double h2 = LV_RK4_C1 * dt, h3 = LV_RK4_C2 * dt, h4 = LV_RK4_C3 * dt, h6 = dt / LV_RK4_B_DEN;
     long s;
     int i, j;
     for (j = 0; j < n; j++) {
@@ -230,14 +223,11 @@ static inline long advance_block(double *state, const double *params, const long
     }
 #define RHS(in, out) for (j = 0; j < n; j++) body_rhs(in[j], prm[j], refs[j], n_refs[j], out[j])
     for (s = 0; s < n_steps; s++) {
-        switch (integrator) {
-        case LV_INTEGRATOR_EULER:
-            RHS(x, k1);
+        RHS(x, k1);
+        if (integrator == LV_INTEGRATOR_EULER) {
             for (j = 0; j < n; j++)
                 for (i = 0; i < LV_STATE_SIZE; i++) xn[j][i] = x[j][i] + dt * k1[j][i];
-            break;
-        case LV_INTEGRATOR_SEMI_IMPLICIT_EULER:
-            RHS(x, k1);
+        } else { /* LV_INTEGRATOR_SEMI_IMPLICIT_EULER */
             for (j = 0; j < n; j++) {
                 for (i = 0; i < 3; i++) {                                         /* v', omega' */
                     xn[j][LV_STATE_V_W + i] = x[j][LV_STATE_V_W + i] + dt * k1[j][LV_STATE_V_W + i];
@@ -247,23 +237,6 @@ static inline long advance_block(double *state, const double *params, const long
                 lv_quat_derivative_body(x[j] + LV_STATE_Q, xn[j] + LV_STATE_OMEGA_B, tmp[j]);          /* q rate at omega' */
                 for (i = 0; i < 4; i++) xn[j][LV_STATE_Q + i] = x[j][LV_STATE_Q + i] + dt * tmp[j][i];
             }
-            break;
-        default: /* LV_INTEGRATOR_RK4; stage quaternions left unnormalized */
-            RHS(x, k1);
-            for (j = 0; j < n; j++)
-                for (i = 0; i < LV_STATE_SIZE; i++) tmp[j][i] = x[j][i] + h2 * k1[j][i];
-            RHS(tmp, k2);
-            for (j = 0; j < n; j++)
-                for (i = 0; i < LV_STATE_SIZE; i++) tmp[j][i] = x[j][i] + h3 * k2[j][i];
-            RHS(tmp, k3);
-            for (j = 0; j < n; j++)
-                for (i = 0; i < LV_STATE_SIZE; i++) tmp[j][i] = x[j][i] + h4 * k3[j][i];
-            RHS(tmp, k4);
-            for (j = 0; j < n; j++)
-                for (i = 0; i < LV_STATE_SIZE; i++)
-                    xn[j][i] = x[j][i] + h6 * (LV_RK4_B0 * k1[j][i] + LV_RK4_B1 * k2[j][i] + LV_RK4_B2 * k3[j][i]
-                                               + LV_RK4_B3 * k4[j][i]);
-            break;
         }
         if (normalize)
             for (j = 0; j < n; j++) lv_quat_normalize(xn[j] + LV_STATE_Q, xn[j] + LV_STATE_Q);
@@ -306,24 +279,13 @@ enum { LV_RHS_FREE = 0, LV_RHS_TORQUE = 1, LV_RHS_FULL = 2 };
         }                                                                                               \
     } while (0)
 
-/* One RK4 step of bodies 0 .. n-1: x -> xn (LV_RK4_RHS, the RK4 combination, q normalized with the
-   generated kernel when asked). */
+/* One RK4 step of bodies 0 .. n-1: x -> xn (LV_RK4_RHS, LV_RK4_STEP, q normalized with the generated kernel when
+   asked). */
+#define LV_BLOCK_FOR(stmt) for (j = 0; j < n; j++) for (i = 0; i < LV_STATE_SIZE; i++) stmt
+#define LV_BLOCK_AT(v) v[j][i]
 #define LV_FREE_RK4_STEP()                                                                              \
     do {                                                                                                \
-        LV_RK4_RHS(x, k1);                                                                              \
-        for (j = 0; j < n; j++)                                                                         \
-            for (i = 0; i < LV_STATE_SIZE; i++) tmp[j][i] = x[j][i] + h2 * k1[j][i];                    \
-        LV_RK4_RHS(tmp, k2);                                                                            \
-        for (j = 0; j < n; j++)                                                                         \
-            for (i = 0; i < LV_STATE_SIZE; i++) tmp[j][i] = x[j][i] + h3 * k2[j][i];                    \
-        LV_RK4_RHS(tmp, k3);                                                                            \
-        for (j = 0; j < n; j++)                                                                         \
-            for (i = 0; i < LV_STATE_SIZE; i++) tmp[j][i] = x[j][i] + h4 * k3[j][i];                    \
-        LV_RK4_RHS(tmp, k4);                                                                            \
-        for (j = 0; j < n; j++)                                                                         \
-            for (i = 0; i < LV_STATE_SIZE; i++)                                                         \
-                xn[j][i] = x[j][i] + h6 * (LV_RK4_B0 * k1[j][i] + LV_RK4_B1 * k2[j][i]                  \
-                                           + LV_RK4_B2 * k3[j][i] + LV_RK4_B3 * k4[j][i]);              \
+        LV_RK4_STEP(double, LV_RK4_RHS, LV_BLOCK_FOR, LV_BLOCK_AT, dt, x, xn, k, acc, tmp);             \
         if (normalize)                                                                                  \
             for (j = 0; j < n; j++) lv_quat_normalize(xn[j] + LV_STATE_Q, xn[j] + LV_STATE_Q);          \
     } while (0)
@@ -348,13 +310,12 @@ static inline long advance_free_rk4(double *state, const double *params, const l
                                     const lv_effect_index *ix, int forced, int constant, int normalize,
                                     double dt, long n_steps, int *fail_j, double last[][LV_STATE_SIZE])
 {
-    double x[LV_BLOCK][LV_STATE_SIZE], xn[LV_BLOCK][LV_STATE_SIZE], k1[LV_BLOCK][LV_STATE_SIZE],
-        k2[LV_BLOCK][LV_STATE_SIZE], k3[LV_BLOCK][LV_STATE_SIZE], k4[LV_BLOCK][LV_STATE_SIZE],
-        tmp[LV_BLOCK][LV_STATE_SIZE], I[LV_BLOCK][3], cf[LV_BLOCK][LV_EULER_SIZE], snap[LV_BLOCK][LV_STATE_SIZE];
+    double x[LV_BLOCK][LV_STATE_SIZE], xn[LV_BLOCK][LV_STATE_SIZE], k[LV_BLOCK][LV_STATE_SIZE],
+        acc[LV_BLOCK][LV_STATE_SIZE], tmp[LV_BLOCK][LV_STATE_SIZE], I[LV_BLOCK][3], cf[LV_BLOCK][LV_EULER_SIZE],
+        snap[LV_BLOCK][LV_STATE_SIZE];
     double F[LV_BLOCK][3], tau[LV_BLOCK][3], m[LV_BLOCK];
     const lv_effect_ref *refs[LV_BLOCK];
     long n_refs[LV_BLOCK];
-    const double h2 = LV_RK4_C1 * dt, h3 = LV_RK4_C2 * dt, h4 = LV_RK4_C3 * dt, h6 = dt / LV_RK4_B_DEN;
     long s, c, cm;
     int i, j, ok;
     for (j = 0; j < n; j++) {
@@ -397,6 +358,8 @@ static inline long advance_free_rk4(double *state, const double *params, const l
     return -1;
 }
 #undef LV_FREE_RK4_STEP
+#undef LV_BLOCK_FOR
+#undef LV_BLOCK_AT
 #undef LV_RK4_RHS
 
 #include "batch_simd.h"
@@ -553,9 +516,8 @@ static inline long advance_model(double *state, const double *params, long b, co
     const double *r = md->rows + b * LV_MODEL_SIZE;
     const double m = params[b * LV_PARAM_SIZE + LV_PARAM_M];
     const double *cmd = md->command + LV_NW * b;
-    double y[LV_XS_SIZE], yn[LV_XS_SIZE], k1[LV_XS_SIZE], k2[LV_XS_SIZE], k3[LV_XS_SIZE], k4[LV_XS_SIZE], tmp[LV_XS_SIZE];
+    double y[LV_XS_SIZE], yn[LV_XS_SIZE], k1[LV_XS_SIZE], acc[LV_XS_SIZE], tmp[LV_XS_SIZE];
     double u[LV_NW] = {0.0}, applied[LV_NW], kw[LV_WCOEF_SIZE] = {0.0};
-    const double h2 = LV_RK4_C1 * dt, h3 = LV_RK4_C2 * dt, h4 = LV_RK4_C3 * dt, h6 = dt / LV_RK4_B_DEN;
     const double *I_b = params + b * LV_PARAM_SIZE + LV_PARAM_I_B;
     const lv_effect_ref *refs = ix->refs + ix->start[b];
     const long n_refs = ix->start[b + 1] - ix->start[b];
@@ -567,6 +529,8 @@ static inline long advance_model(double *state, const double *params, long b, co
     memcpy(applied, md->applied + LV_NW * b, sizeof applied);
     if (kind & LV_KIND_WHEELS) lv_wheels_coefficients(r, kw);
 #define MRHS(in, out) model_rhs_of(in, u, m, I_b, r, kw, kind, needs_v, builtin, refs, n_refs, out)
+#define XS_FOR(stmt) LV_XS_UNROLL for (i = 0; i < LV_XS_SIZE; i++) stmt
+#define XS_AT(v) v[i]
     for (s = 0; s < n_steps; s++) {
         if (kind & LV_KIND_WHEELS) lv_wheels_motor(r, cmd, y + LV_XS_OMEGA, u);
         switch (integrator) {
@@ -586,15 +550,7 @@ static inline long advance_model(double *state, const double *params, long b, co
             for (i = 0; i < 4; i++) yn[LV_STATE_Q + i] = y[LV_STATE_Q + i] + dt * tmp[i];
             break;
         default: /* LV_INTEGRATOR_RK4 */
-            MRHS(y, k1);
-            LV_XS_UNROLL for (i = 0; i < LV_XS_SIZE; i++) tmp[i] = y[i] + h2 * k1[i];
-            MRHS(tmp, k2);
-            LV_XS_UNROLL for (i = 0; i < LV_XS_SIZE; i++) tmp[i] = y[i] + h3 * k2[i];
-            MRHS(tmp, k3);
-            LV_XS_UNROLL for (i = 0; i < LV_XS_SIZE; i++) tmp[i] = y[i] + h4 * k3[i];
-            MRHS(tmp, k4);
-            LV_XS_UNROLL for (i = 0; i < LV_XS_SIZE; i++)
-                yn[i] = y[i] + h6 * (LV_RK4_B0 * k1[i] + LV_RK4_B1 * k2[i] + LV_RK4_B2 * k3[i] + LV_RK4_B3 * k4[i]);
+            LV_RK4_STEP(double, MRHS, XS_FOR, XS_AT, dt, y, yn, k1, acc, tmp);
             break;
         }
         if (normalize) lv_quat_normalize(yn + LV_STATE_Q, yn + LV_STATE_Q);
@@ -611,6 +567,8 @@ static inline long advance_model(double *state, const double *params, long b, co
         memcpy(applied, u, sizeof u);
     }
 #undef MRHS
+#undef XS_FOR
+#undef XS_AT
     memcpy(state + b * LV_STATE_SIZE, y, LV_STATE_SIZE * sizeof(double));
     memcpy(md->Omega + LV_NW * b, y + LV_XS_OMEGA, LV_NW * sizeof(double));
     memcpy(md->applied + LV_NW * b, applied, sizeof applied);
@@ -1120,6 +1078,18 @@ static void symtop_bm6_stage(const double *I, double *q, double *L, double h, in
     symtop_bm6_rotation(I, q, L, stage < 0 ? h : LV_SYMTOP4_GAMMA[stage] * h);
 }
 
+/* rk4_expmap's stage derivative k at ys (p, u, v, omega): the right-hand side at q0 (x) exp(u/2) (x itself at the
+   first stage, u = 0), u' = rkmk_dexpinv(u, omega), the fourth slot held at 0. */
+static void expmap_stage(const body_ctx *c, const double *x, const double *q0, const double *ys, int first, double *k)
+{
+    double xs[LV_STATE_SIZE];
+    memcpy(xs, first ? x : ys, sizeof xs);
+    if (!first) lv_quat_exp_step(q0, ys + LV_STATE_Q, 1.0, xs + LV_STATE_Q);
+    body_rhs(xs, c->prm, c->refs, c->n_refs, k);
+    lv_rkmk_dexpinv(ys + LV_STATE_Q, ys + LV_STATE_OMEGA_B, k + LV_STATE_Q);
+    k[LV_STATE_Q + 3] = 0.0;
+}
+
 /* One rk4_expmap step (RKMK4): the RK4 tableau on (p, u, v, omega) with u (the body rotation vector since
    the step's start, u0 = 0) kept in q's first three slots and the fourth held at 0. Stage s evaluates the
    right-hand side at the attitude q0 (x) exp(u/2) (quat_exp_step with h = 1) and u' = rkmk_dexpinv(u, omega);
@@ -1127,27 +1097,18 @@ static void symtop_bm6_stage(const double *I, double *q, double *L, double h, in
    NumPy backend's _rk4_expmap (bitwise equal results). */
 static void rk4_expmap_step(const body_ctx *c, double *x, double h)
 {
-    double y[LV_STATE_SIZE], ys[LV_STATE_SIZE], xs[LV_STATE_SIZE], k[4][LV_STATE_SIZE], q0[4];
-    const double cs[3] = {LV_RK4_C1 * h, LV_RK4_C2 * h, LV_RK4_C3 * h}, h6 = h / LV_RK4_B_DEN;
-    int s, i;
+    double y[LV_STATE_SIZE], ys[LV_STATE_SIZE], k[LV_STATE_SIZE], acc[LV_STATE_SIZE], q0[4];
+    int i;
     memcpy(q0, x + LV_STATE_Q, sizeof q0);
     memcpy(y, x, sizeof y);
     for (i = 0; i < 4; i++) y[LV_STATE_Q + i] = 0.0;
-    for (s = 0; s < 4; s++) {
-        if (s) {
-            for (i = 0; i < LV_STATE_SIZE; i++) ys[i] = y[i] + cs[s - 1] * k[s - 1][i];
-            memcpy(xs, ys, sizeof xs);
-            lv_quat_exp_step(q0, ys + LV_STATE_Q, 1.0, xs + LV_STATE_Q);
-        } else {
-            memcpy(ys, y, sizeof ys);
-            memcpy(xs, x, sizeof xs);
-        }
-        body_rhs(xs, c->prm, c->refs, c->n_refs, k[s]);
-        lv_rkmk_dexpinv(ys + LV_STATE_Q, ys + LV_STATE_OMEGA_B, k[s] + LV_STATE_Q);
-        k[s][LV_STATE_Q + 3] = 0.0;
-    }
-    for (i = 0; i < LV_STATE_SIZE; i++)
-        y[i] = y[i] + h6 * (LV_RK4_B0 * k[0][i] + LV_RK4_B1 * k[1][i] + LV_RK4_B2 * k[2][i] + LV_RK4_B3 * k[3][i]);
+#define EXPMAP_RHS(in, out) expmap_stage(c, x, q0, in, (const double *)(in) == (const double *)y, out)
+#define EXPMAP_FOR(stmt) for (i = 0; i < LV_STATE_SIZE; i++) stmt
+#define EXPMAP_AT(v) v[i]
+    LV_RK4_STEP(double, EXPMAP_RHS, EXPMAP_FOR, EXPMAP_AT, h, y, y, k, acc, ys);
+#undef EXPMAP_RHS
+#undef EXPMAP_FOR
+#undef EXPMAP_AT
     memcpy(x, y, sizeof y);
     lv_quat_exp_step(q0, y + LV_STATE_Q, 1.0, x + LV_STATE_Q);
 }

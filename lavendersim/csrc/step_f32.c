@@ -25,6 +25,6 @@
 int lv_simulate_f32(float *state, const float *params, long nb, const float *effects, long ne, long row_size,
                     int integrator, int normalize, float dt, long n_steps, long *fail_step, long *fail_body)
 {
-    return simulate_f32(state, params, nb, effects, ne, row_size, integrator, normalize, dt, n_steps,
+    return simulate_f32(state, params, nb, effects, ne, row_size, integrator, normalize, dt, n_steps, lv_isa_get(),
                         fail_step, fail_body);
 }
