@@ -92,6 +92,11 @@ class Check:
             raise ValueError(f"unknown check rule {self.rule!r}")
         return _finite(self.value) and RULES[self.rule][0](float(self.value), self.bound, self.tol)
 
+    @property
+    def expected(self) -> float | None:
+        """The bound (the expected value of a ``"≈"`` check, the limit of the others; None for ``"holds"``)."""
+        return self.bound
+
     def describe(self) -> str:
         """``name = value (expected ...)`` in words, for PASS and FAIL lines alike."""
         if self.rule == HOLDS:
