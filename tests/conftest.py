@@ -184,7 +184,7 @@ def derived_once(monkeypatch, derivation):
     """codegen.render() returns (a copy of) the session's derivation instead of deriving again."""
     from lavendersim.derive import codegen
 
-    monkeypatch.setattr(codegen, "render", lambda: dict(derivation.files))
+    monkeypatch.setattr(codegen, "render", lambda progress=None: dict(derivation.files))
     return derivation
 
 

@@ -353,7 +353,7 @@ def a_file(tmp_path) -> Path:
 
 @pytest.mark.parametrize("argv", [
     ["lab", "01", "--out", "{f}/sub"], ["lab", "force", "--out", "{f}"], ["lab", "all", "--out", "{f}"],
-    ["bench", "--quick", "--json", "{f}/x.json"], ["derive", "--out", "{f}/gen"],
+    ["bench", "--quick", "--out", "{f}/x.json"], ["derive", "--out", "{f}/gen"],
     ["derive", "--user", "{d}"], ["bench", "--rounds", "-1"], ["bench", "--rounds", "0"],
 ])
 def test_cli_unwritable_paths_and_bad_counts_exit_2_one_line(argv, a_file, capsys):
