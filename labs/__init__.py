@@ -13,10 +13,9 @@ failed check ``no_divergence`` with the divergence recorded (:mod:`lavendersim.l
 module's own ``compute`` raises it). OUT/NAME/ is written whole, never through a link, one run at a time
 (:mod:`lavendersim.labs.output`).
 
-Every lab module defines NAME, TITLE, ``add_arguments(parser)`` (its failure-mode options),
-``options_from_args(args) -> dict``, ``compute(backend, **options)`` (compute -> checks -> the
+Every lab module defines NAME, TITLE, ``compute(backend, **options)`` (compute -> checks -> the
 plots' data; no files) and ``run(out_dir, backend, **options)`` (compute, then save). The command
-line itself is :mod:`lavendersim.cli.lab`.
+line, with each lab's options, is :mod:`lavendersim.cli.lab`.
 """
 from __future__ import annotations
 

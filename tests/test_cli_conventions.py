@@ -274,3 +274,20 @@ def test_python_dash_m_runs_the_command_line(module):
     r = subprocess.run([sys.executable, "-m", module, "effects", "--quiet", "--bogus"], capture_output=True,
                        text=True, timeout=300)
     assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1 and "Traceback" not in r.stderr
+
+
+def test_lab_accuracy_integrators_reach_compute(monkeypatch, tmp_path):
+    """lab accuracy --integrators A,B is the compute keyword integrators=[A, B] (H3's user tableaux use it)."""
+    from lavendersim import labs
+    from lavendersim.labs import common as C
+
+    seen = {}
+
+    def compute(backend="auto", **options):
+        seen.update(options)
+        return C.make_result("accuracy", {"x": 1.0}, {}, [C.holds("ok", True)])
+
+    monkeypatch.setattr(labs.lab_module("accuracy"), "compute", compute)
+    assert cli.main(["lab", "accuracy", "--integrators", "rk4, euler", "--quick", "--workers", "1",
+                     "--out", str(tmp_path), "--quiet"]) == 0
+    assert seen["integrators"] == ["rk4", "euler"] and seen["quick"] is True and seen["workers"] == 1

@@ -86,7 +86,11 @@ def lab_options(name: str) -> list[tuple[str, str, dict]]:
                      ("--no-mujoco", "mujoco", dict(action="store_false", help="skip MuJoCo even when it is installed")),
                      (*workers[:2], dict(workers[2], help=workers[2]["help"] + "; the timing runs are always serial "
                                                                                "in this process")),
-                     (*dask[:2], dict(dask[2], help=dask[2]["help"] + "; timing stays local and serial"))],
+                     (*dask[:2], dict(dask[2], help=dask[2]["help"] + "; timing stays local and serial")),
+                     ("--integrators", "integrators", dict(type=_names, metavar="A,B", help="comma-separated lavendersim "
+                      "integrators to measure (default: every built-in); a name that is not built in is a user's tableau "
+                      "(lavendersim derive --user, docs/extending.md), measured on both backends with its declared "
+                      "order as the expected slope"))],
         "atlas": [(quick[0], quick[1], dict(quick[2], help="coarse grid: |ω|·dt 1e-4…10 one per decade, ratios 1, "
                                                            "1e3, 1e6 (~20 s on one core; what lab all runs)")),
                   workers, dask,
