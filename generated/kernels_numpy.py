@@ -32,7 +32,7 @@ def particle_moments(m, r_w, v_w, *, out=None):
     m = numpy.asarray(m, dtype=numpy.float64)
     r_w = numpy.asarray(r_w, dtype=numpy.float64)
     v_w = numpy.asarray(v_w, dtype=numpy.float64)
-    batch = numpy.broadcast_shapes(m.shape, r_w.shape[:-1], v_w.shape[:-1])
+    batch = m.shape if m.shape == r_w.shape[:-1] == v_w.shape[:-1] else numpy.broadcast_shapes(m.shape, r_w.shape[:-1], v_w.shape[:-1])
     r_w_0 = r_w[..., 0]
     r_w_1 = r_w[..., 1]
     r_w_2 = r_w[..., 2]
@@ -80,7 +80,7 @@ def particle_angular_momentum(m, r_w, v_w, r_com_w, v_com_w, *, out=None):
     v_w = numpy.asarray(v_w, dtype=numpy.float64)
     r_com_w = numpy.asarray(r_com_w, dtype=numpy.float64)
     v_com_w = numpy.asarray(v_com_w, dtype=numpy.float64)
-    batch = numpy.broadcast_shapes(m.shape, r_w.shape[:-1], v_w.shape[:-1], r_com_w.shape[:-1], v_com_w.shape[:-1])
+    batch = m.shape if m.shape == r_w.shape[:-1] == v_w.shape[:-1] == r_com_w.shape[:-1] == v_com_w.shape[:-1] else numpy.broadcast_shapes(m.shape, r_w.shape[:-1], v_w.shape[:-1], r_com_w.shape[:-1], v_com_w.shape[:-1])
     r_w_0 = r_w[..., 0]
     r_w_1 = r_w[..., 1]
     r_w_2 = r_w[..., 2]
@@ -133,7 +133,7 @@ def inertia_box(m, w, h, d, *, out=None):
     w = numpy.asarray(w, dtype=numpy.float64)
     h = numpy.asarray(h, dtype=numpy.float64)
     d = numpy.asarray(d, dtype=numpy.float64)
-    batch = numpy.broadcast_shapes(m.shape, w.shape, h.shape, d.shape)
+    batch = m.shape if m.shape == w.shape == h.shape == d.shape else numpy.broadcast_shapes(m.shape, w.shape, h.shape, d.shape)
     t0 = (d*d)
     t1 = (h*h)
     t2 = ((1.0/12.0))*m
@@ -169,7 +169,7 @@ def inertia_cylinder(m, r, h, *, out=None):
     m = numpy.asarray(m, dtype=numpy.float64)
     r = numpy.asarray(r, dtype=numpy.float64)
     h = numpy.asarray(h, dtype=numpy.float64)
-    batch = numpy.broadcast_shapes(m.shape, r.shape, h.shape)
+    batch = m.shape if m.shape == r.shape == h.shape else numpy.broadcast_shapes(m.shape, r.shape, h.shape)
     t0 = (r*r)
     t1 = ((1.0/12.0))*m*((h*h) + 3*t0)
     I_b_out = numpy.empty(batch + (3,)) if out is None or out[0] is None else out[0]
@@ -200,7 +200,7 @@ def inertia_sphere(m, r, *, out=None):
     """
     m = numpy.asarray(m, dtype=numpy.float64)
     r = numpy.asarray(r, dtype=numpy.float64)
-    batch = numpy.broadcast_shapes(m.shape, r.shape)
+    batch = m.shape if m.shape == r.shape else numpy.broadcast_shapes(m.shape, r.shape)
     t0 = ((2.0/5.0))*m*(r*r)
     I_b_out = numpy.empty(batch + (3,)) if out is None or out[0] is None else out[0]
     I_b_out[..., 0] = t0
@@ -233,7 +233,7 @@ def parallel_axis(I_c, m, d, *, out=None):
     I_c = numpy.asarray(I_c, dtype=numpy.float64)
     m = numpy.asarray(m, dtype=numpy.float64)
     d = numpy.asarray(d, dtype=numpy.float64)
-    batch = numpy.broadcast_shapes(I_c.shape[:-2], m.shape, d.shape[:-1])
+    batch = I_c.shape[:-2] if I_c.shape[:-2] == m.shape == d.shape[:-1] else numpy.broadcast_shapes(I_c.shape[:-2], m.shape, d.shape[:-1])
     I_c_00 = I_c[..., 0, 0]
     I_c_01 = I_c[..., 0, 1]
     I_c_02 = I_c[..., 0, 2]
@@ -290,7 +290,7 @@ def inertia_about_com(I_o, m, c, *, out=None):
     I_o = numpy.asarray(I_o, dtype=numpy.float64)
     m = numpy.asarray(m, dtype=numpy.float64)
     c = numpy.asarray(c, dtype=numpy.float64)
-    batch = numpy.broadcast_shapes(I_o.shape[:-2], m.shape, c.shape[:-1])
+    batch = I_o.shape[:-2] if I_o.shape[:-2] == m.shape == c.shape[:-1] else numpy.broadcast_shapes(I_o.shape[:-2], m.shape, c.shape[:-1])
     I_o_00 = I_o[..., 0, 0]
     I_o_01 = I_o[..., 0, 1]
     I_o_02 = I_o[..., 0, 2]
@@ -344,7 +344,7 @@ def world_inertia(q, I_b, *, out=None):
     """
     q = numpy.asarray(q, dtype=numpy.float64)
     I_b = numpy.asarray(I_b, dtype=numpy.float64)
-    batch = numpy.broadcast_shapes(q.shape[:-1], I_b.shape[:-1])
+    batch = q.shape[:-1] if q.shape[:-1] == I_b.shape[:-1] else numpy.broadcast_shapes(q.shape[:-1], I_b.shape[:-1])
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -411,7 +411,7 @@ def torque_from_force(r_w, F_w, *, out=None):
     """
     r_w = numpy.asarray(r_w, dtype=numpy.float64)
     F_w = numpy.asarray(F_w, dtype=numpy.float64)
-    batch = numpy.broadcast_shapes(r_w.shape[:-1], F_w.shape[:-1])
+    batch = r_w.shape[:-1] if r_w.shape[:-1] == F_w.shape[:-1] else numpy.broadcast_shapes(r_w.shape[:-1], F_w.shape[:-1])
     r_w_0 = r_w[..., 0]
     r_w_1 = r_w[..., 1]
     r_w_2 = r_w[..., 2]
@@ -449,7 +449,7 @@ def force_at_point(q, r_b, F_w, *, out=None):
     q = numpy.asarray(q, dtype=numpy.float64)
     r_b = numpy.asarray(r_b, dtype=numpy.float64)
     F_w = numpy.asarray(F_w, dtype=numpy.float64)
-    batch = numpy.broadcast_shapes(q.shape[:-1], r_b.shape[:-1], F_w.shape[:-1])
+    batch = q.shape[:-1] if q.shape[:-1] == r_b.shape[:-1] == F_w.shape[:-1] else numpy.broadcast_shapes(q.shape[:-1], r_b.shape[:-1], F_w.shape[:-1])
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -498,7 +498,7 @@ def effect_applied_torque(torque_w, *, out=None):
         torque about the COM, world frame, N·m
     """
     torque_w = numpy.asarray(torque_w, dtype=numpy.float64)
-    batch = numpy.broadcast_shapes(torque_w.shape[:-1])
+    batch = torque_w.shape[:-1]
     torque_w_0 = torque_w[..., 0]
     torque_w_1 = torque_w[..., 1]
     torque_w_2 = torque_w[..., 2]
@@ -535,7 +535,7 @@ def effect_force_at_point(q, r_b, F_w, *, out=None):
     q = numpy.asarray(q, dtype=numpy.float64)
     r_b = numpy.asarray(r_b, dtype=numpy.float64)
     F_w = numpy.asarray(F_w, dtype=numpy.float64)
-    batch = numpy.broadcast_shapes(q.shape[:-1], r_b.shape[:-1], F_w.shape[:-1])
+    batch = q.shape[:-1] if q.shape[:-1] == r_b.shape[:-1] == F_w.shape[:-1] else numpy.broadcast_shapes(q.shape[:-1], r_b.shape[:-1], F_w.shape[:-1])
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -591,7 +591,7 @@ def effect_gravity(m, g_w, *, out=None):
     """
     m = numpy.asarray(m, dtype=numpy.float64)
     g_w = numpy.asarray(g_w, dtype=numpy.float64)
-    batch = numpy.broadcast_shapes(m.shape, g_w.shape[:-1])
+    batch = m.shape if m.shape == g_w.shape[:-1] else numpy.broadcast_shapes(m.shape, g_w.shape[:-1])
     g_w_0 = g_w[..., 0]
     g_w_1 = g_w[..., 1]
     g_w_2 = g_w[..., 2]
@@ -623,7 +623,7 @@ def effect_linear_damping(v_w, c, *, out=None):
     """
     v_w = numpy.asarray(v_w, dtype=numpy.float64)
     c = numpy.asarray(c, dtype=numpy.float64)
-    batch = numpy.broadcast_shapes(v_w.shape[:-1], c.shape)
+    batch = v_w.shape[:-1] if v_w.shape[:-1] == c.shape else numpy.broadcast_shapes(v_w.shape[:-1], c.shape)
     v_w_0 = v_w[..., 0]
     v_w_1 = v_w[..., 1]
     v_w_2 = v_w[..., 2]
@@ -658,7 +658,7 @@ def effect_angular_damping(q, omega_b, c, *, out=None):
     q = numpy.asarray(q, dtype=numpy.float64)
     omega_b = numpy.asarray(omega_b, dtype=numpy.float64)
     c = numpy.asarray(c, dtype=numpy.float64)
-    batch = numpy.broadcast_shapes(q.shape[:-1], omega_b.shape[:-1], c.shape)
+    batch = q.shape[:-1] if q.shape[:-1] == omega_b.shape[:-1] == c.shape else numpy.broadcast_shapes(q.shape[:-1], omega_b.shape[:-1], c.shape)
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -704,7 +704,7 @@ def quat_mul(a, b, *, out=None):
     """
     a = numpy.asarray(a, dtype=numpy.float64)
     b = numpy.asarray(b, dtype=numpy.float64)
-    batch = numpy.broadcast_shapes(a.shape[:-1], b.shape[:-1])
+    batch = a.shape[:-1] if a.shape[:-1] == b.shape[:-1] else numpy.broadcast_shapes(a.shape[:-1], b.shape[:-1])
     a_0 = a[..., 0]
     a_1 = a[..., 1]
     a_2 = a[..., 2]
@@ -739,7 +739,7 @@ def quat_conj(q, *, out=None):
         quaternion (x, y, z, w), scalar last
     """
     q = numpy.asarray(q, dtype=numpy.float64)
-    batch = numpy.broadcast_shapes(q.shape[:-1])
+    batch = q.shape[:-1]
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -770,7 +770,7 @@ def quat_normalize(q, *, out=None):
         quaternion (x, y, z, w), scalar last
     """
     q = numpy.asarray(q, dtype=numpy.float64)
-    batch = numpy.broadcast_shapes(q.shape[:-1])
+    batch = q.shape[:-1]
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -805,7 +805,7 @@ def quat_rotate(q, v_b, *, out=None):
     """
     q = numpy.asarray(q, dtype=numpy.float64)
     v_b = numpy.asarray(v_b, dtype=numpy.float64)
-    batch = numpy.broadcast_shapes(q.shape[:-1], v_b.shape[:-1])
+    batch = q.shape[:-1] if q.shape[:-1] == v_b.shape[:-1] else numpy.broadcast_shapes(q.shape[:-1], v_b.shape[:-1])
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -848,7 +848,7 @@ def quat_to_matrix(q, *, out=None):
         3×3 rotation, body → world, row-major
     """
     q = numpy.asarray(q, dtype=numpy.float64)
-    batch = numpy.broadcast_shapes(q.shape[:-1])
+    batch = q.shape[:-1]
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -894,7 +894,7 @@ def matrix_to_quat(R_wb, *, out=None):
         quaternion (x, y, z, w), scalar last
     """
     R_wb = numpy.asarray(R_wb, dtype=numpy.float64)
-    batch = numpy.broadcast_shapes(R_wb.shape[:-2])
+    batch = R_wb.shape[:-2]
     R_0 = R_wb[..., 0, 0]
     R_1 = R_wb[..., 0, 1]
     R_2 = R_wb[..., 0, 2]
@@ -957,7 +957,7 @@ def axis_angle_to_quat(axis, angle, *, out=None):
     """
     axis = numpy.asarray(axis, dtype=numpy.float64)
     angle = numpy.asarray(angle, dtype=numpy.float64)
-    batch = numpy.broadcast_shapes(axis.shape[:-1], angle.shape)
+    batch = axis.shape[:-1] if axis.shape[:-1] == angle.shape else numpy.broadcast_shapes(axis.shape[:-1], angle.shape)
     axis_0 = axis[..., 0]
     axis_1 = axis[..., 1]
     axis_2 = axis[..., 2]
@@ -992,7 +992,7 @@ def quat_from_two_vectors(a, b, *, out=None):
     """
     a = numpy.asarray(a, dtype=numpy.float64)
     b = numpy.asarray(b, dtype=numpy.float64)
-    batch = numpy.broadcast_shapes(a.shape[:-1], b.shape[:-1])
+    batch = a.shape[:-1] if a.shape[:-1] == b.shape[:-1] else numpy.broadcast_shapes(a.shape[:-1], b.shape[:-1])
     a_0 = a[..., 0]
     a_1 = a[..., 1]
     a_2 = a[..., 2]
@@ -1039,7 +1039,7 @@ def quat_to_axis_angle(q, *, out=None):
         angle, rad
     """
     q = numpy.asarray(q, dtype=numpy.float64)
-    batch = numpy.broadcast_shapes(q.shape[:-1])
+    batch = q.shape[:-1]
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -1078,7 +1078,7 @@ def quat_error_angle(q, q_ref, *, out=None):
     """
     q = numpy.asarray(q, dtype=numpy.float64)
     q_ref = numpy.asarray(q_ref, dtype=numpy.float64)
-    batch = numpy.broadcast_shapes(q.shape[:-1], q_ref.shape[:-1])
+    batch = q.shape[:-1] if q.shape[:-1] == q_ref.shape[:-1] else numpy.broadcast_shapes(q.shape[:-1], q_ref.shape[:-1])
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -1116,7 +1116,7 @@ def quat_error_chart(q, q_ref, *, out=None):
     """
     q = numpy.asarray(q, dtype=numpy.float64)
     q_ref = numpy.asarray(q_ref, dtype=numpy.float64)
-    batch = numpy.broadcast_shapes(q.shape[:-1], q_ref.shape[:-1])
+    batch = q.shape[:-1] if q.shape[:-1] == q_ref.shape[:-1] else numpy.broadcast_shapes(q.shape[:-1], q_ref.shape[:-1])
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -1163,7 +1163,7 @@ def euler_xyz_to_quat(roll, pitch, yaw, *, out=None):
     roll = numpy.asarray(roll, dtype=numpy.float64)
     pitch = numpy.asarray(pitch, dtype=numpy.float64)
     yaw = numpy.asarray(yaw, dtype=numpy.float64)
-    batch = numpy.broadcast_shapes(roll.shape, pitch.shape, yaw.shape)
+    batch = roll.shape if roll.shape == pitch.shape == yaw.shape else numpy.broadcast_shapes(roll.shape, pitch.shape, yaw.shape)
     t0 = ((1.0/2.0))*yaw
     t1 = numpy.sin(t0)
     t2 = ((1.0/2.0))*roll
@@ -1202,7 +1202,7 @@ def quat_to_euler_xyz(q, *, out=None):
         (roll, pitch, yaw), rad
     """
     q = numpy.asarray(q, dtype=numpy.float64)
-    batch = numpy.broadcast_shapes(q.shape[:-1])
+    batch = q.shape[:-1]
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -1250,7 +1250,7 @@ def quat_derivative_world(q, omega_w, *, out=None):
     """
     q = numpy.asarray(q, dtype=numpy.float64)
     omega_w = numpy.asarray(omega_w, dtype=numpy.float64)
-    batch = numpy.broadcast_shapes(q.shape[:-1], omega_w.shape[:-1])
+    batch = q.shape[:-1] if q.shape[:-1] == omega_w.shape[:-1] else numpy.broadcast_shapes(q.shape[:-1], omega_w.shape[:-1])
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -1292,7 +1292,7 @@ def quat_derivative_body(q, omega_b, *, out=None):
     """
     q = numpy.asarray(q, dtype=numpy.float64)
     omega_b = numpy.asarray(omega_b, dtype=numpy.float64)
-    batch = numpy.broadcast_shapes(q.shape[:-1], omega_b.shape[:-1])
+    batch = q.shape[:-1] if q.shape[:-1] == omega_b.shape[:-1] else numpy.broadcast_shapes(q.shape[:-1], omega_b.shape[:-1])
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -1335,7 +1335,7 @@ def integrate_orientation(q, omega_w, dt, *, out=None):
     q = numpy.asarray(q, dtype=numpy.float64)
     omega_w = numpy.asarray(omega_w, dtype=numpy.float64)
     dt = numpy.asarray(dt, dtype=numpy.float64)
-    batch = numpy.broadcast_shapes(q.shape[:-1], omega_w.shape[:-1], dt.shape)
+    batch = q.shape[:-1] if q.shape[:-1] == omega_w.shape[:-1] == dt.shape else numpy.broadcast_shapes(q.shape[:-1], omega_w.shape[:-1], dt.shape)
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -1385,7 +1385,7 @@ def euler_equations(I_b, omega_b, tau_b, *, out=None):
     I_b = numpy.asarray(I_b, dtype=numpy.float64)
     omega_b = numpy.asarray(omega_b, dtype=numpy.float64)
     tau_b = numpy.asarray(tau_b, dtype=numpy.float64)
-    batch = numpy.broadcast_shapes(I_b.shape[:-1], omega_b.shape[:-1], tau_b.shape[:-1])
+    batch = I_b.shape[:-1] if I_b.shape[:-1] == omega_b.shape[:-1] == tau_b.shape[:-1] else numpy.broadcast_shapes(I_b.shape[:-1], omega_b.shape[:-1], tau_b.shape[:-1])
     I_b_0 = I_b[..., 0]
     I_b_1 = I_b[..., 1]
     I_b_2 = I_b[..., 2]
@@ -1438,7 +1438,7 @@ def rigid_body_rhs(x, m, I_b, F_w, tau_w, *, out=None):
     I_b = numpy.asarray(I_b, dtype=numpy.float64)
     F_w = numpy.asarray(F_w, dtype=numpy.float64)
     tau_w = numpy.asarray(tau_w, dtype=numpy.float64)
-    batch = numpy.broadcast_shapes(x.shape[:-1], m.shape, I_b.shape[:-1], F_w.shape[:-1], tau_w.shape[:-1])
+    batch = x.shape[:-1] if x.shape[:-1] == m.shape == I_b.shape[:-1] == F_w.shape[:-1] == tau_w.shape[:-1] else numpy.broadcast_shapes(x.shape[:-1], m.shape, I_b.shape[:-1], F_w.shape[:-1], tau_w.shape[:-1])
     x_3 = x[..., 3]
     x_4 = x[..., 4]
     x_5 = x[..., 5]
@@ -1510,7 +1510,7 @@ def rigid_body_rhs_free(x, I_b, *, out=None):
     """
     x = numpy.asarray(x, dtype=numpy.float64)
     I_b = numpy.asarray(I_b, dtype=numpy.float64)
-    batch = numpy.broadcast_shapes(x.shape[:-1], I_b.shape[:-1])
+    batch = x.shape[:-1] if x.shape[:-1] == I_b.shape[:-1] else numpy.broadcast_shapes(x.shape[:-1], I_b.shape[:-1])
     x_3 = x[..., 3]
     x_4 = x[..., 4]
     x_5 = x[..., 5]
@@ -1571,7 +1571,7 @@ def apply_inv_inertia(q, I_b, v, *, out=None):
     q = numpy.asarray(q, dtype=numpy.float64)
     I_b = numpy.asarray(I_b, dtype=numpy.float64)
     v = numpy.asarray(v, dtype=numpy.float64)
-    batch = numpy.broadcast_shapes(q.shape[:-1], I_b.shape[:-1], v.shape[:-1])
+    batch = q.shape[:-1] if q.shape[:-1] == I_b.shape[:-1] == v.shape[:-1] else numpy.broadcast_shapes(q.shape[:-1], I_b.shape[:-1], v.shape[:-1])
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -1638,7 +1638,7 @@ def world_to_body(q, v_w, *, out=None):
     """
     q = numpy.asarray(q, dtype=numpy.float64)
     v_w = numpy.asarray(v_w, dtype=numpy.float64)
-    batch = numpy.broadcast_shapes(q.shape[:-1], v_w.shape[:-1])
+    batch = q.shape[:-1] if q.shape[:-1] == v_w.shape[:-1] else numpy.broadcast_shapes(q.shape[:-1], v_w.shape[:-1])
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -1690,7 +1690,7 @@ def kinetic_energy(m, I_b, v_w, omega_b, *, out=None):
     I_b = numpy.asarray(I_b, dtype=numpy.float64)
     v_w = numpy.asarray(v_w, dtype=numpy.float64)
     omega_b = numpy.asarray(omega_b, dtype=numpy.float64)
-    batch = numpy.broadcast_shapes(m.shape, I_b.shape[:-1], v_w.shape[:-1], omega_b.shape[:-1])
+    batch = m.shape if m.shape == I_b.shape[:-1] == v_w.shape[:-1] == omega_b.shape[:-1] else numpy.broadcast_shapes(m.shape, I_b.shape[:-1], v_w.shape[:-1], omega_b.shape[:-1])
     I_b_0 = I_b[..., 0]
     I_b_1 = I_b[..., 1]
     I_b_2 = I_b[..., 2]
@@ -1729,7 +1729,7 @@ def angular_momentum_world(q, I_b, omega_b, *, out=None):
     q = numpy.asarray(q, dtype=numpy.float64)
     I_b = numpy.asarray(I_b, dtype=numpy.float64)
     omega_b = numpy.asarray(omega_b, dtype=numpy.float64)
-    batch = numpy.broadcast_shapes(q.shape[:-1], I_b.shape[:-1], omega_b.shape[:-1])
+    batch = q.shape[:-1] if q.shape[:-1] == I_b.shape[:-1] == omega_b.shape[:-1] else numpy.broadcast_shapes(q.shape[:-1], I_b.shape[:-1], omega_b.shape[:-1])
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -1784,7 +1784,7 @@ def rigid_body_rhs_torque(x, I_b, tau_w, *, out=None):
     x = numpy.asarray(x, dtype=numpy.float64)
     I_b = numpy.asarray(I_b, dtype=numpy.float64)
     tau_w = numpy.asarray(tau_w, dtype=numpy.float64)
-    batch = numpy.broadcast_shapes(x.shape[:-1], I_b.shape[:-1], tau_w.shape[:-1])
+    batch = x.shape[:-1] if x.shape[:-1] == I_b.shape[:-1] == tau_w.shape[:-1] else numpy.broadcast_shapes(x.shape[:-1], I_b.shape[:-1], tau_w.shape[:-1])
     x_3 = x[..., 3]
     x_4 = x[..., 4]
     x_5 = x[..., 5]
@@ -1849,7 +1849,7 @@ def euler_coefficients(I_b, *, out=None):
         (k_x, k_y, k_z, r_x, r_y, r_z), body frame; k dimensionless, r 1/(kg·m²)
     """
     I_b = numpy.asarray(I_b, dtype=numpy.float64)
-    batch = numpy.broadcast_shapes(I_b.shape[:-1])
+    batch = I_b.shape[:-1]
     I_b_0 = I_b[..., 0]
     I_b_1 = I_b[..., 1]
     I_b_2 = I_b[..., 2]
@@ -1890,7 +1890,7 @@ def rigid_body_rhs_free_c(x, c_b, *, out=None):
     """
     x = numpy.asarray(x, dtype=numpy.float64)
     c_b = numpy.asarray(c_b, dtype=numpy.float64)
-    batch = numpy.broadcast_shapes(x.shape[:-1], c_b.shape[:-1])
+    batch = x.shape[:-1] if x.shape[:-1] == c_b.shape[:-1] else numpy.broadcast_shapes(x.shape[:-1], c_b.shape[:-1])
     x_3 = x[..., 3]
     x_4 = x[..., 4]
     x_5 = x[..., 5]
@@ -1948,7 +1948,7 @@ def rigid_body_rhs_torque_c(x, c_b, tau_w, *, out=None):
     x = numpy.asarray(x, dtype=numpy.float64)
     c_b = numpy.asarray(c_b, dtype=numpy.float64)
     tau_w = numpy.asarray(tau_w, dtype=numpy.float64)
-    batch = numpy.broadcast_shapes(x.shape[:-1], c_b.shape[:-1], tau_w.shape[:-1])
+    batch = x.shape[:-1] if x.shape[:-1] == c_b.shape[:-1] == tau_w.shape[:-1] else numpy.broadcast_shapes(x.shape[:-1], c_b.shape[:-1], tau_w.shape[:-1])
     x_3 = x[..., 3]
     x_4 = x[..., 4]
     x_5 = x[..., 5]
@@ -2022,7 +2022,7 @@ def rigid_body_rhs_c(x, m, c_b, F_w, tau_w, *, out=None):
     c_b = numpy.asarray(c_b, dtype=numpy.float64)
     F_w = numpy.asarray(F_w, dtype=numpy.float64)
     tau_w = numpy.asarray(tau_w, dtype=numpy.float64)
-    batch = numpy.broadcast_shapes(x.shape[:-1], m.shape, c_b.shape[:-1], F_w.shape[:-1], tau_w.shape[:-1])
+    batch = x.shape[:-1] if x.shape[:-1] == m.shape == c_b.shape[:-1] == F_w.shape[:-1] == tau_w.shape[:-1] else numpy.broadcast_shapes(x.shape[:-1], m.shape, c_b.shape[:-1], F_w.shape[:-1], tau_w.shape[:-1])
     x_3 = x[..., 3]
     x_4 = x[..., 4]
     x_5 = x[..., 5]
@@ -2105,7 +2105,7 @@ def pivot_body_rhs(q, omega_b, I_p, r_b, F_w, tau_w, *, out=None):
     r_b = numpy.asarray(r_b, dtype=numpy.float64)
     F_w = numpy.asarray(F_w, dtype=numpy.float64)
     tau_w = numpy.asarray(tau_w, dtype=numpy.float64)
-    batch = numpy.broadcast_shapes(q.shape[:-1], omega_b.shape[:-1], I_p.shape[:-2], r_b.shape[:-1], F_w.shape[:-1], tau_w.shape[:-1])
+    batch = q.shape[:-1] if q.shape[:-1] == omega_b.shape[:-1] == I_p.shape[:-2] == r_b.shape[:-1] == F_w.shape[:-1] == tau_w.shape[:-1] else numpy.broadcast_shapes(q.shape[:-1], omega_b.shape[:-1], I_p.shape[:-2], r_b.shape[:-1], F_w.shape[:-1], tau_w.shape[:-1])
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -2207,7 +2207,7 @@ def pivot_kinematics(q, omega_b, anchor_w, r_b, *, out=None):
     omega_b = numpy.asarray(omega_b, dtype=numpy.float64)
     anchor_w = numpy.asarray(anchor_w, dtype=numpy.float64)
     r_b = numpy.asarray(r_b, dtype=numpy.float64)
-    batch = numpy.broadcast_shapes(q.shape[:-1], omega_b.shape[:-1], anchor_w.shape[:-1], r_b.shape[:-1])
+    batch = q.shape[:-1] if q.shape[:-1] == omega_b.shape[:-1] == anchor_w.shape[:-1] == r_b.shape[:-1] else numpy.broadcast_shapes(q.shape[:-1], omega_b.shape[:-1], anchor_w.shape[:-1], r_b.shape[:-1])
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -2283,7 +2283,7 @@ def splitting_rotation(I_b, q, omega_b, h, *, out=None):
     q = numpy.asarray(q, dtype=numpy.float64)
     omega_b = numpy.asarray(omega_b, dtype=numpy.float64)
     h = numpy.asarray(h, dtype=numpy.float64)
-    batch = numpy.broadcast_shapes(I_b.shape[:-1], q.shape[:-1], omega_b.shape[:-1], h.shape)
+    batch = I_b.shape[:-1] if I_b.shape[:-1] == q.shape[:-1] == omega_b.shape[:-1] == h.shape else numpy.broadcast_shapes(I_b.shape[:-1], q.shape[:-1], omega_b.shape[:-1], h.shape)
     I_b_0 = I_b[..., 0]
     I_b_1 = I_b[..., 1]
     I_b_2 = I_b[..., 2]
@@ -2390,7 +2390,7 @@ def axis_flow_x(I_b, q, L_b, tau, *, out=None):
     q = numpy.asarray(q, dtype=numpy.float64)
     L_b = numpy.asarray(L_b, dtype=numpy.float64)
     tau = numpy.asarray(tau, dtype=numpy.float64)
-    batch = numpy.broadcast_shapes(I_b.shape[:-1], q.shape[:-1], L_b.shape[:-1], tau.shape)
+    batch = I_b.shape[:-1] if I_b.shape[:-1] == q.shape[:-1] == L_b.shape[:-1] == tau.shape else numpy.broadcast_shapes(I_b.shape[:-1], q.shape[:-1], L_b.shape[:-1], tau.shape)
     I_b_0 = I_b[..., 0]
     q_0 = q[..., 0]
     q_1 = q[..., 1]
@@ -2445,7 +2445,7 @@ def axis_flow_y(I_b, q, L_b, tau, *, out=None):
     q = numpy.asarray(q, dtype=numpy.float64)
     L_b = numpy.asarray(L_b, dtype=numpy.float64)
     tau = numpy.asarray(tau, dtype=numpy.float64)
-    batch = numpy.broadcast_shapes(I_b.shape[:-1], q.shape[:-1], L_b.shape[:-1], tau.shape)
+    batch = I_b.shape[:-1] if I_b.shape[:-1] == q.shape[:-1] == L_b.shape[:-1] == tau.shape else numpy.broadcast_shapes(I_b.shape[:-1], q.shape[:-1], L_b.shape[:-1], tau.shape)
     I_b_1 = I_b[..., 1]
     q_0 = q[..., 0]
     q_1 = q[..., 1]
@@ -2500,7 +2500,7 @@ def axis_flow_z(I_b, q, L_b, tau, *, out=None):
     q = numpy.asarray(q, dtype=numpy.float64)
     L_b = numpy.asarray(L_b, dtype=numpy.float64)
     tau = numpy.asarray(tau, dtype=numpy.float64)
-    batch = numpy.broadcast_shapes(I_b.shape[:-1], q.shape[:-1], L_b.shape[:-1], tau.shape)
+    batch = I_b.shape[:-1] if I_b.shape[:-1] == q.shape[:-1] == L_b.shape[:-1] == tau.shape else numpy.broadcast_shapes(I_b.shape[:-1], q.shape[:-1], L_b.shape[:-1], tau.shape)
     I_b_2 = I_b[..., 2]
     q_0 = q[..., 0]
     q_1 = q[..., 1]
@@ -2544,7 +2544,7 @@ def symtop_score(I_b, *, out=None):
         1/(kg·m²)², one per reference axis r = 0, 1, 2
     """
     I_b = numpy.asarray(I_b, dtype=numpy.float64)
-    batch = numpy.broadcast_shapes(I_b.shape[:-1])
+    batch = I_b.shape[:-1]
     I_b_0 = I_b[..., 0]
     I_b_1 = I_b[..., 1]
     I_b_2 = I_b[..., 2]
@@ -2582,7 +2582,7 @@ def symtop_leftover(I_b, I_r, *, out=None):
     """
     I_b = numpy.asarray(I_b, dtype=numpy.float64)
     I_r = numpy.asarray(I_r, dtype=numpy.float64)
-    batch = numpy.broadcast_shapes(I_b.shape[:-1], I_r.shape)
+    batch = I_b.shape[:-1] if I_b.shape[:-1] == I_r.shape else numpy.broadcast_shapes(I_b.shape[:-1], I_r.shape)
     I_b_0 = I_b[..., 0]
     I_b_1 = I_b[..., 1]
     I_b_2 = I_b[..., 2]
@@ -2623,7 +2623,7 @@ def symtop_axis_flow_x(q, L_b, c, tau, *, out=None):
     L_b = numpy.asarray(L_b, dtype=numpy.float64)
     c = numpy.asarray(c, dtype=numpy.float64)
     tau = numpy.asarray(tau, dtype=numpy.float64)
-    batch = numpy.broadcast_shapes(q.shape[:-1], L_b.shape[:-1], c.shape, tau.shape)
+    batch = q.shape[:-1] if q.shape[:-1] == L_b.shape[:-1] == c.shape == tau.shape else numpy.broadcast_shapes(q.shape[:-1], L_b.shape[:-1], c.shape, tau.shape)
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -2677,7 +2677,7 @@ def symtop_axis_flow_y(q, L_b, c, tau, *, out=None):
     L_b = numpy.asarray(L_b, dtype=numpy.float64)
     c = numpy.asarray(c, dtype=numpy.float64)
     tau = numpy.asarray(tau, dtype=numpy.float64)
-    batch = numpy.broadcast_shapes(q.shape[:-1], L_b.shape[:-1], c.shape, tau.shape)
+    batch = q.shape[:-1] if q.shape[:-1] == L_b.shape[:-1] == c.shape == tau.shape else numpy.broadcast_shapes(q.shape[:-1], L_b.shape[:-1], c.shape, tau.shape)
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -2731,7 +2731,7 @@ def symtop_axis_flow_z(q, L_b, c, tau, *, out=None):
     L_b = numpy.asarray(L_b, dtype=numpy.float64)
     c = numpy.asarray(c, dtype=numpy.float64)
     tau = numpy.asarray(tau, dtype=numpy.float64)
-    batch = numpy.broadcast_shapes(q.shape[:-1], L_b.shape[:-1], c.shape, tau.shape)
+    batch = q.shape[:-1] if q.shape[:-1] == L_b.shape[:-1] == c.shape == tau.shape else numpy.broadcast_shapes(q.shape[:-1], L_b.shape[:-1], c.shape, tau.shape)
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -2783,7 +2783,7 @@ def sphere_flow(q, L_b, I_r, tau, *, out=None):
     L_b = numpy.asarray(L_b, dtype=numpy.float64)
     I_r = numpy.asarray(I_r, dtype=numpy.float64)
     tau = numpy.asarray(tau, dtype=numpy.float64)
-    batch = numpy.broadcast_shapes(q.shape[:-1], L_b.shape[:-1], I_r.shape, tau.shape)
+    batch = q.shape[:-1] if q.shape[:-1] == L_b.shape[:-1] == I_r.shape == tau.shape else numpy.broadcast_shapes(q.shape[:-1], L_b.shape[:-1], I_r.shape, tau.shape)
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -2832,7 +2832,7 @@ def body_momentum(I_b, omega_b, *, out=None):
     """
     I_b = numpy.asarray(I_b, dtype=numpy.float64)
     omega_b = numpy.asarray(omega_b, dtype=numpy.float64)
-    batch = numpy.broadcast_shapes(I_b.shape[:-1], omega_b.shape[:-1])
+    batch = I_b.shape[:-1] if I_b.shape[:-1] == omega_b.shape[:-1] else numpy.broadcast_shapes(I_b.shape[:-1], omega_b.shape[:-1])
     I_b_0 = I_b[..., 0]
     I_b_1 = I_b[..., 1]
     I_b_2 = I_b[..., 2]
@@ -2867,7 +2867,7 @@ def body_rate(I_b, L_b, *, out=None):
     """
     I_b = numpy.asarray(I_b, dtype=numpy.float64)
     L_b = numpy.asarray(L_b, dtype=numpy.float64)
-    batch = numpy.broadcast_shapes(I_b.shape[:-1], L_b.shape[:-1])
+    batch = I_b.shape[:-1] if I_b.shape[:-1] == L_b.shape[:-1] else numpy.broadcast_shapes(I_b.shape[:-1], L_b.shape[:-1])
     I_b_0 = I_b[..., 0]
     I_b_1 = I_b[..., 1]
     I_b_2 = I_b[..., 2]
@@ -2919,7 +2919,7 @@ def splitting_kick(m, I_b, v_w, omega_b, F_w, tau_b, h, *, out=None):
     F_w = numpy.asarray(F_w, dtype=numpy.float64)
     tau_b = numpy.asarray(tau_b, dtype=numpy.float64)
     h = numpy.asarray(h, dtype=numpy.float64)
-    batch = numpy.broadcast_shapes(m.shape, I_b.shape[:-1], v_w.shape[:-1], omega_b.shape[:-1], F_w.shape[:-1], tau_b.shape[:-1], h.shape)
+    batch = m.shape if m.shape == I_b.shape[:-1] == v_w.shape[:-1] == omega_b.shape[:-1] == F_w.shape[:-1] == tau_b.shape[:-1] == h.shape else numpy.broadcast_shapes(m.shape, I_b.shape[:-1], v_w.shape[:-1], omega_b.shape[:-1], F_w.shape[:-1], tau_b.shape[:-1], h.shape)
     I_b_0 = I_b[..., 0]
     I_b_1 = I_b[..., 1]
     I_b_2 = I_b[..., 2]
@@ -2971,7 +2971,7 @@ def translation_drift(p_w, v_w, h, *, out=None):
     p_w = numpy.asarray(p_w, dtype=numpy.float64)
     v_w = numpy.asarray(v_w, dtype=numpy.float64)
     h = numpy.asarray(h, dtype=numpy.float64)
-    batch = numpy.broadcast_shapes(p_w.shape[:-1], v_w.shape[:-1], h.shape)
+    batch = p_w.shape[:-1] if p_w.shape[:-1] == v_w.shape[:-1] == h.shape else numpy.broadcast_shapes(p_w.shape[:-1], v_w.shape[:-1], h.shape)
     p_w_0 = p_w[..., 0]
     p_w_1 = p_w[..., 1]
     p_w_2 = p_w[..., 2]
@@ -3017,7 +3017,7 @@ def semi_implicit_translation(m, p_w, v_w, F_w, h, *, out=None):
     v_w = numpy.asarray(v_w, dtype=numpy.float64)
     F_w = numpy.asarray(F_w, dtype=numpy.float64)
     h = numpy.asarray(h, dtype=numpy.float64)
-    batch = numpy.broadcast_shapes(m.shape, p_w.shape[:-1], v_w.shape[:-1], F_w.shape[:-1], h.shape)
+    batch = m.shape if m.shape == p_w.shape[:-1] == v_w.shape[:-1] == F_w.shape[:-1] == h.shape else numpy.broadcast_shapes(m.shape, p_w.shape[:-1], v_w.shape[:-1], F_w.shape[:-1], h.shape)
     p_w_0 = p_w[..., 0]
     p_w_1 = p_w[..., 1]
     p_w_2 = p_w[..., 2]
@@ -3068,7 +3068,7 @@ def translation_rhs(m, v_w, F_w, *, out=None):
     m = numpy.asarray(m, dtype=numpy.float64)
     v_w = numpy.asarray(v_w, dtype=numpy.float64)
     F_w = numpy.asarray(F_w, dtype=numpy.float64)
-    batch = numpy.broadcast_shapes(m.shape, v_w.shape[:-1], F_w.shape[:-1])
+    batch = m.shape if m.shape == v_w.shape[:-1] == F_w.shape[:-1] else numpy.broadcast_shapes(m.shape, v_w.shape[:-1], F_w.shape[:-1])
     v_w_0 = v_w[..., 0]
     v_w_1 = v_w[..., 1]
     v_w_2 = v_w[..., 2]
@@ -3117,7 +3117,7 @@ def implicit_gyro_residual(I_b, omega_b, tau_b, h, omega_next, *, out=None):
     tau_b = numpy.asarray(tau_b, dtype=numpy.float64)
     h = numpy.asarray(h, dtype=numpy.float64)
     omega_next = numpy.asarray(omega_next, dtype=numpy.float64)
-    batch = numpy.broadcast_shapes(I_b.shape[:-1], omega_b.shape[:-1], tau_b.shape[:-1], h.shape, omega_next.shape[:-1])
+    batch = I_b.shape[:-1] if I_b.shape[:-1] == omega_b.shape[:-1] == tau_b.shape[:-1] == h.shape == omega_next.shape[:-1] else numpy.broadcast_shapes(I_b.shape[:-1], omega_b.shape[:-1], tau_b.shape[:-1], h.shape, omega_next.shape[:-1])
     I_b_0 = I_b[..., 0]
     I_b_1 = I_b[..., 1]
     I_b_2 = I_b[..., 2]
@@ -3162,7 +3162,7 @@ def implicit_gyro_jacobian(I_b, h, omega_next, *, out=None):
     I_b = numpy.asarray(I_b, dtype=numpy.float64)
     h = numpy.asarray(h, dtype=numpy.float64)
     omega_next = numpy.asarray(omega_next, dtype=numpy.float64)
-    batch = numpy.broadcast_shapes(I_b.shape[:-1], h.shape, omega_next.shape[:-1])
+    batch = I_b.shape[:-1] if I_b.shape[:-1] == h.shape == omega_next.shape[:-1] else numpy.broadcast_shapes(I_b.shape[:-1], h.shape, omega_next.shape[:-1])
     I_b_0 = I_b[..., 0]
     I_b_1 = I_b[..., 1]
     I_b_2 = I_b[..., 2]
@@ -3217,7 +3217,7 @@ def implicit_gyro_newton(I_b, omega_b, tau_b, h, omega_next, *, out=None):
     tau_b = numpy.asarray(tau_b, dtype=numpy.float64)
     h = numpy.asarray(h, dtype=numpy.float64)
     omega_next = numpy.asarray(omega_next, dtype=numpy.float64)
-    batch = numpy.broadcast_shapes(I_b.shape[:-1], omega_b.shape[:-1], tau_b.shape[:-1], h.shape, omega_next.shape[:-1])
+    batch = I_b.shape[:-1] if I_b.shape[:-1] == omega_b.shape[:-1] == tau_b.shape[:-1] == h.shape == omega_next.shape[:-1] else numpy.broadcast_shapes(I_b.shape[:-1], omega_b.shape[:-1], tau_b.shape[:-1], h.shape, omega_next.shape[:-1])
     I_b_0 = I_b[..., 0]
     I_b_1 = I_b[..., 1]
     I_b_2 = I_b[..., 2]
@@ -3289,7 +3289,7 @@ def quat_exp_step(q, omega_b, h, *, out=None):
     q = numpy.asarray(q, dtype=numpy.float64)
     omega_b = numpy.asarray(omega_b, dtype=numpy.float64)
     h = numpy.asarray(h, dtype=numpy.float64)
-    batch = numpy.broadcast_shapes(q.shape[:-1], omega_b.shape[:-1], h.shape)
+    batch = q.shape[:-1] if q.shape[:-1] == omega_b.shape[:-1] == h.shape else numpy.broadcast_shapes(q.shape[:-1], omega_b.shape[:-1], h.shape)
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -3336,7 +3336,7 @@ def rkmk_dexpinv(u_b, omega_b, *, out=None):
     """
     u_b = numpy.asarray(u_b, dtype=numpy.float64)
     omega_b = numpy.asarray(omega_b, dtype=numpy.float64)
-    batch = numpy.broadcast_shapes(u_b.shape[:-1], omega_b.shape[:-1])
+    batch = u_b.shape[:-1] if u_b.shape[:-1] == omega_b.shape[:-1] else numpy.broadcast_shapes(u_b.shape[:-1], omega_b.shape[:-1])
     u_b_0 = u_b[..., 0]
     u_b_1 = u_b[..., 1]
     u_b_2 = u_b[..., 2]
@@ -3385,7 +3385,7 @@ def wheel_saturation(command, Omega, torque_limit, speed_limit, *, out=None):
     Omega = numpy.asarray(Omega, dtype=numpy.float64)
     torque_limit = numpy.asarray(torque_limit, dtype=numpy.float64)
     speed_limit = numpy.asarray(speed_limit, dtype=numpy.float64)
-    batch = numpy.broadcast_shapes(command.shape[:-1], Omega.shape[:-1], torque_limit.shape, speed_limit.shape)
+    batch = command.shape[:-1] if command.shape[:-1] == Omega.shape[:-1] == torque_limit.shape == speed_limit.shape else numpy.broadcast_shapes(command.shape[:-1], Omega.shape[:-1], torque_limit.shape, speed_limit.shape)
     command_0 = command[..., 0]
     command_1 = command[..., 1]
     command_2 = command[..., 2]
@@ -3443,7 +3443,7 @@ def wheel_motor(command, Omega, torque_limit, speed_limit, cutoff, *, out=None):
     torque_limit = numpy.asarray(torque_limit, dtype=numpy.float64)
     speed_limit = numpy.asarray(speed_limit, dtype=numpy.float64)
     cutoff = numpy.asarray(cutoff, dtype=numpy.float64)
-    batch = numpy.broadcast_shapes(command.shape[:-1], Omega.shape[:-1], torque_limit.shape, speed_limit.shape, cutoff.shape)
+    batch = command.shape[:-1] if command.shape[:-1] == Omega.shape[:-1] == torque_limit.shape == speed_limit.shape == cutoff.shape else numpy.broadcast_shapes(command.shape[:-1], Omega.shape[:-1], torque_limit.shape, speed_limit.shape, cutoff.shape)
     command_0 = command[..., 0]
     command_1 = command[..., 1]
     command_2 = command[..., 2]
@@ -3550,7 +3550,7 @@ def wheels3_body_rhs(q, omega_b, Omega, I_p, A_b, J, r_b, F_w, tau_w, u, c_w, *,
     tau_w = numpy.asarray(tau_w, dtype=numpy.float64)
     u = numpy.asarray(u, dtype=numpy.float64)
     c_w = numpy.asarray(c_w, dtype=numpy.float64)
-    batch = numpy.broadcast_shapes(q.shape[:-1], omega_b.shape[:-1], Omega.shape[:-1], I_p.shape[:-2], A_b.shape[:-2], J.shape[:-1], r_b.shape[:-1], F_w.shape[:-1], tau_w.shape[:-1], u.shape[:-1], c_w.shape)
+    batch = q.shape[:-1] if q.shape[:-1] == omega_b.shape[:-1] == Omega.shape[:-1] == I_p.shape[:-2] == A_b.shape[:-2] == J.shape[:-1] == r_b.shape[:-1] == F_w.shape[:-1] == tau_w.shape[:-1] == u.shape[:-1] == c_w.shape else numpy.broadcast_shapes(q.shape[:-1], omega_b.shape[:-1], Omega.shape[:-1], I_p.shape[:-2], A_b.shape[:-2], J.shape[:-1], r_b.shape[:-1], F_w.shape[:-1], tau_w.shape[:-1], u.shape[:-1], c_w.shape)
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -3721,7 +3721,7 @@ def wheels3_momentum(q, omega_b, Omega, I_p, A_b, J, *, out=None):
     I_p = numpy.asarray(I_p, dtype=numpy.float64)
     A_b = numpy.asarray(A_b, dtype=numpy.float64)
     J = numpy.asarray(J, dtype=numpy.float64)
-    batch = numpy.broadcast_shapes(q.shape[:-1], omega_b.shape[:-1], Omega.shape[:-1], I_p.shape[:-2], A_b.shape[:-2], J.shape[:-1])
+    batch = q.shape[:-1] if q.shape[:-1] == omega_b.shape[:-1] == Omega.shape[:-1] == I_p.shape[:-2] == A_b.shape[:-2] == J.shape[:-1] else numpy.broadcast_shapes(q.shape[:-1], omega_b.shape[:-1], Omega.shape[:-1], I_p.shape[:-2], A_b.shape[:-2], J.shape[:-1])
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -3829,7 +3829,7 @@ def wheels3_motor(command, Omega, torque_limit, speed_limit, cutoff, *, out=None
     torque_limit = numpy.asarray(torque_limit, dtype=numpy.float64)
     speed_limit = numpy.asarray(speed_limit, dtype=numpy.float64)
     cutoff = numpy.asarray(cutoff, dtype=numpy.float64)
-    batch = numpy.broadcast_shapes(command.shape[:-1], Omega.shape[:-1], torque_limit.shape, speed_limit.shape, cutoff.shape)
+    batch = command.shape[:-1] if command.shape[:-1] == Omega.shape[:-1] == torque_limit.shape == speed_limit.shape == cutoff.shape else numpy.broadcast_shapes(command.shape[:-1], Omega.shape[:-1], torque_limit.shape, speed_limit.shape, cutoff.shape)
     command_0 = command[..., 0]
     command_1 = command[..., 1]
     command_2 = command[..., 2]
@@ -3936,7 +3936,7 @@ def wheels4_body_rhs(q, omega_b, Omega, I_p, A_b, J, r_b, F_w, tau_w, u, c_w, *,
     tau_w = numpy.asarray(tau_w, dtype=numpy.float64)
     u = numpy.asarray(u, dtype=numpy.float64)
     c_w = numpy.asarray(c_w, dtype=numpy.float64)
-    batch = numpy.broadcast_shapes(q.shape[:-1], omega_b.shape[:-1], Omega.shape[:-1], I_p.shape[:-2], A_b.shape[:-2], J.shape[:-1], r_b.shape[:-1], F_w.shape[:-1], tau_w.shape[:-1], u.shape[:-1], c_w.shape)
+    batch = q.shape[:-1] if q.shape[:-1] == omega_b.shape[:-1] == Omega.shape[:-1] == I_p.shape[:-2] == A_b.shape[:-2] == J.shape[:-1] == r_b.shape[:-1] == F_w.shape[:-1] == tau_w.shape[:-1] == u.shape[:-1] == c_w.shape else numpy.broadcast_shapes(q.shape[:-1], omega_b.shape[:-1], Omega.shape[:-1], I_p.shape[:-2], A_b.shape[:-2], J.shape[:-1], r_b.shape[:-1], F_w.shape[:-1], tau_w.shape[:-1], u.shape[:-1], c_w.shape)
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -4104,7 +4104,7 @@ def wheels4_coefficients(I_p, A_b, J, *, out=None):
     I_p = numpy.asarray(I_p, dtype=numpy.float64)
     A_b = numpy.asarray(A_b, dtype=numpy.float64)
     J = numpy.asarray(J, dtype=numpy.float64)
-    batch = numpy.broadcast_shapes(I_p.shape[:-2], A_b.shape[:-2], J.shape[:-1])
+    batch = I_p.shape[:-2] if I_p.shape[:-2] == A_b.shape[:-2] == J.shape[:-1] else numpy.broadcast_shapes(I_p.shape[:-2], A_b.shape[:-2], J.shape[:-1])
     I_p_00 = I_p[..., 0, 0]
     I_p_01 = I_p[..., 0, 1]
     I_p_02 = I_p[..., 0, 2]
@@ -4215,7 +4215,7 @@ def wheels4_body_rhs_c(q, omega_b, Omega, I_p, A_b, J, k_w, r_b, F_w, tau_w, u, 
     tau_w = numpy.asarray(tau_w, dtype=numpy.float64)
     u = numpy.asarray(u, dtype=numpy.float64)
     c_w = numpy.asarray(c_w, dtype=numpy.float64)
-    batch = numpy.broadcast_shapes(q.shape[:-1], omega_b.shape[:-1], Omega.shape[:-1], I_p.shape[:-2], A_b.shape[:-2], J.shape[:-1], k_w.shape[:-1], r_b.shape[:-1], F_w.shape[:-1], tau_w.shape[:-1], u.shape[:-1], c_w.shape)
+    batch = q.shape[:-1] if q.shape[:-1] == omega_b.shape[:-1] == Omega.shape[:-1] == I_p.shape[:-2] == A_b.shape[:-2] == J.shape[:-1] == k_w.shape[:-1] == r_b.shape[:-1] == F_w.shape[:-1] == tau_w.shape[:-1] == u.shape[:-1] == c_w.shape else numpy.broadcast_shapes(q.shape[:-1], omega_b.shape[:-1], Omega.shape[:-1], I_p.shape[:-2], A_b.shape[:-2], J.shape[:-1], k_w.shape[:-1], r_b.shape[:-1], F_w.shape[:-1], tau_w.shape[:-1], u.shape[:-1], c_w.shape)
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -4383,7 +4383,7 @@ def wheels4_momentum(q, omega_b, Omega, I_p, A_b, J, *, out=None):
     I_p = numpy.asarray(I_p, dtype=numpy.float64)
     A_b = numpy.asarray(A_b, dtype=numpy.float64)
     J = numpy.asarray(J, dtype=numpy.float64)
-    batch = numpy.broadcast_shapes(q.shape[:-1], omega_b.shape[:-1], Omega.shape[:-1], I_p.shape[:-2], A_b.shape[:-2], J.shape[:-1])
+    batch = q.shape[:-1] if q.shape[:-1] == omega_b.shape[:-1] == Omega.shape[:-1] == I_p.shape[:-2] == A_b.shape[:-2] == J.shape[:-1] else numpy.broadcast_shapes(q.shape[:-1], omega_b.shape[:-1], Omega.shape[:-1], I_p.shape[:-2], A_b.shape[:-2], J.shape[:-1])
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -4499,7 +4499,7 @@ def wheels4_motor(command, Omega, torque_limit, speed_limit, cutoff, *, out=None
     torque_limit = numpy.asarray(torque_limit, dtype=numpy.float64)
     speed_limit = numpy.asarray(speed_limit, dtype=numpy.float64)
     cutoff = numpy.asarray(cutoff, dtype=numpy.float64)
-    batch = numpy.broadcast_shapes(command.shape[:-1], Omega.shape[:-1], torque_limit.shape, speed_limit.shape, cutoff.shape)
+    batch = command.shape[:-1] if command.shape[:-1] == Omega.shape[:-1] == torque_limit.shape == speed_limit.shape == cutoff.shape else numpy.broadcast_shapes(command.shape[:-1], Omega.shape[:-1], torque_limit.shape, speed_limit.shape, cutoff.shape)
     command_0 = command[..., 0]
     command_1 = command[..., 1]
     command_2 = command[..., 2]
@@ -4590,7 +4590,7 @@ def quat_error_chart_inverse(q_ref, dtheta, *, out=None):
     """
     q_ref = numpy.asarray(q_ref, dtype=numpy.float64)
     dtheta = numpy.asarray(dtheta, dtype=numpy.float64)
-    batch = numpy.broadcast_shapes(q_ref.shape[:-1], dtheta.shape[:-1])
+    batch = q_ref.shape[:-1] if q_ref.shape[:-1] == dtheta.shape[:-1] else numpy.broadcast_shapes(q_ref.shape[:-1], dtheta.shape[:-1])
     q_ref_0 = q_ref[..., 0]
     q_ref_1 = q_ref[..., 1]
     q_ref_2 = q_ref[..., 2]
@@ -4630,7 +4630,7 @@ def quat_normalize_scaled(q, *, out=None):
         |q| (0 for the zero quaternion; may overflow to inf)
     """
     q = numpy.asarray(q, dtype=numpy.float64)
-    batch = numpy.broadcast_shapes(q.shape[:-1])
+    batch = q.shape[:-1]
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -4677,7 +4677,7 @@ def wheels4_free_inertia(I_p, A_b, J, *, out=None):
     I_p = numpy.asarray(I_p, dtype=numpy.float64)
     A_b = numpy.asarray(A_b, dtype=numpy.float64)
     J = numpy.asarray(J, dtype=numpy.float64)
-    batch = numpy.broadcast_shapes(I_p.shape[:-2], A_b.shape[:-2], J.shape[:-1])
+    batch = I_p.shape[:-2] if I_p.shape[:-2] == A_b.shape[:-2] == J.shape[:-1] else numpy.broadcast_shapes(I_p.shape[:-2], A_b.shape[:-2], J.shape[:-1])
     I_p_00 = I_p[..., 0, 0]
     I_p_01 = I_p[..., 0, 1]
     I_p_02 = I_p[..., 0, 2]
@@ -4741,7 +4741,7 @@ def box_of_inertia(m, I_b, *, out=None):
     """
     m = numpy.asarray(m, dtype=numpy.float64)
     I_b = numpy.asarray(I_b, dtype=numpy.float64)
-    batch = numpy.broadcast_shapes(m.shape, I_b.shape[:-1])
+    batch = m.shape if m.shape == I_b.shape[:-1] else numpy.broadcast_shapes(m.shape, I_b.shape[:-1])
     I_b_0 = I_b[..., 0]
     I_b_1 = I_b[..., 1]
     I_b_2 = I_b[..., 2]

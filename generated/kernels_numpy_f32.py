@@ -34,7 +34,7 @@ def particle_moments(m, r_w, v_w, *, out=None):
     m = numpy.asarray(m, dtype=numpy.float32)
     r_w = numpy.asarray(r_w, dtype=numpy.float32)
     v_w = numpy.asarray(v_w, dtype=numpy.float32)
-    batch = numpy.broadcast_shapes(m.shape, r_w.shape[:-1], v_w.shape[:-1])
+    batch = m.shape if m.shape == r_w.shape[:-1] == v_w.shape[:-1] else numpy.broadcast_shapes(m.shape, r_w.shape[:-1], v_w.shape[:-1])
     r_w_0 = r_w[..., 0]
     r_w_1 = r_w[..., 1]
     r_w_2 = r_w[..., 2]
@@ -82,7 +82,7 @@ def particle_angular_momentum(m, r_w, v_w, r_com_w, v_com_w, *, out=None):
     v_w = numpy.asarray(v_w, dtype=numpy.float32)
     r_com_w = numpy.asarray(r_com_w, dtype=numpy.float32)
     v_com_w = numpy.asarray(v_com_w, dtype=numpy.float32)
-    batch = numpy.broadcast_shapes(m.shape, r_w.shape[:-1], v_w.shape[:-1], r_com_w.shape[:-1], v_com_w.shape[:-1])
+    batch = m.shape if m.shape == r_w.shape[:-1] == v_w.shape[:-1] == r_com_w.shape[:-1] == v_com_w.shape[:-1] else numpy.broadcast_shapes(m.shape, r_w.shape[:-1], v_w.shape[:-1], r_com_w.shape[:-1], v_com_w.shape[:-1])
     r_w_0 = r_w[..., 0]
     r_w_1 = r_w[..., 1]
     r_w_2 = r_w[..., 2]
@@ -135,7 +135,7 @@ def inertia_box(m, w, h, d, *, out=None):
     w = numpy.asarray(w, dtype=numpy.float32)
     h = numpy.asarray(h, dtype=numpy.float32)
     d = numpy.asarray(d, dtype=numpy.float32)
-    batch = numpy.broadcast_shapes(m.shape, w.shape, h.shape, d.shape)
+    batch = m.shape if m.shape == w.shape == h.shape == d.shape else numpy.broadcast_shapes(m.shape, w.shape, h.shape, d.shape)
     t0 = (d*d)
     t1 = (h*h)
     t2 = ((numpy.float32(1.0)/numpy.float32(12.0)))*m
@@ -171,7 +171,7 @@ def inertia_cylinder(m, r, h, *, out=None):
     m = numpy.asarray(m, dtype=numpy.float32)
     r = numpy.asarray(r, dtype=numpy.float32)
     h = numpy.asarray(h, dtype=numpy.float32)
-    batch = numpy.broadcast_shapes(m.shape, r.shape, h.shape)
+    batch = m.shape if m.shape == r.shape == h.shape else numpy.broadcast_shapes(m.shape, r.shape, h.shape)
     t0 = (r*r)
     t1 = ((numpy.float32(1.0)/numpy.float32(12.0)))*m*((h*h) + 3*t0)
     I_b_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
@@ -202,7 +202,7 @@ def inertia_sphere(m, r, *, out=None):
     """
     m = numpy.asarray(m, dtype=numpy.float32)
     r = numpy.asarray(r, dtype=numpy.float32)
-    batch = numpy.broadcast_shapes(m.shape, r.shape)
+    batch = m.shape if m.shape == r.shape else numpy.broadcast_shapes(m.shape, r.shape)
     t0 = ((numpy.float32(2.0)/numpy.float32(5.0)))*m*(r*r)
     I_b_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     I_b_out[..., 0] = t0
@@ -235,7 +235,7 @@ def parallel_axis(I_c, m, d, *, out=None):
     I_c = numpy.asarray(I_c, dtype=numpy.float32)
     m = numpy.asarray(m, dtype=numpy.float32)
     d = numpy.asarray(d, dtype=numpy.float32)
-    batch = numpy.broadcast_shapes(I_c.shape[:-2], m.shape, d.shape[:-1])
+    batch = I_c.shape[:-2] if I_c.shape[:-2] == m.shape == d.shape[:-1] else numpy.broadcast_shapes(I_c.shape[:-2], m.shape, d.shape[:-1])
     I_c_00 = I_c[..., 0, 0]
     I_c_01 = I_c[..., 0, 1]
     I_c_02 = I_c[..., 0, 2]
@@ -292,7 +292,7 @@ def inertia_about_com(I_o, m, c, *, out=None):
     I_o = numpy.asarray(I_o, dtype=numpy.float32)
     m = numpy.asarray(m, dtype=numpy.float32)
     c = numpy.asarray(c, dtype=numpy.float32)
-    batch = numpy.broadcast_shapes(I_o.shape[:-2], m.shape, c.shape[:-1])
+    batch = I_o.shape[:-2] if I_o.shape[:-2] == m.shape == c.shape[:-1] else numpy.broadcast_shapes(I_o.shape[:-2], m.shape, c.shape[:-1])
     I_o_00 = I_o[..., 0, 0]
     I_o_01 = I_o[..., 0, 1]
     I_o_02 = I_o[..., 0, 2]
@@ -346,7 +346,7 @@ def world_inertia(q, I_b, *, out=None):
     """
     q = numpy.asarray(q, dtype=numpy.float32)
     I_b = numpy.asarray(I_b, dtype=numpy.float32)
-    batch = numpy.broadcast_shapes(q.shape[:-1], I_b.shape[:-1])
+    batch = q.shape[:-1] if q.shape[:-1] == I_b.shape[:-1] else numpy.broadcast_shapes(q.shape[:-1], I_b.shape[:-1])
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -413,7 +413,7 @@ def torque_from_force(r_w, F_w, *, out=None):
     """
     r_w = numpy.asarray(r_w, dtype=numpy.float32)
     F_w = numpy.asarray(F_w, dtype=numpy.float32)
-    batch = numpy.broadcast_shapes(r_w.shape[:-1], F_w.shape[:-1])
+    batch = r_w.shape[:-1] if r_w.shape[:-1] == F_w.shape[:-1] else numpy.broadcast_shapes(r_w.shape[:-1], F_w.shape[:-1])
     r_w_0 = r_w[..., 0]
     r_w_1 = r_w[..., 1]
     r_w_2 = r_w[..., 2]
@@ -451,7 +451,7 @@ def force_at_point(q, r_b, F_w, *, out=None):
     q = numpy.asarray(q, dtype=numpy.float32)
     r_b = numpy.asarray(r_b, dtype=numpy.float32)
     F_w = numpy.asarray(F_w, dtype=numpy.float32)
-    batch = numpy.broadcast_shapes(q.shape[:-1], r_b.shape[:-1], F_w.shape[:-1])
+    batch = q.shape[:-1] if q.shape[:-1] == r_b.shape[:-1] == F_w.shape[:-1] else numpy.broadcast_shapes(q.shape[:-1], r_b.shape[:-1], F_w.shape[:-1])
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -500,7 +500,7 @@ def effect_applied_torque(torque_w, *, out=None):
         torque about the COM, world frame, N·m
     """
     torque_w = numpy.asarray(torque_w, dtype=numpy.float32)
-    batch = numpy.broadcast_shapes(torque_w.shape[:-1])
+    batch = torque_w.shape[:-1]
     torque_w_0 = torque_w[..., 0]
     torque_w_1 = torque_w[..., 1]
     torque_w_2 = torque_w[..., 2]
@@ -537,7 +537,7 @@ def effect_force_at_point(q, r_b, F_w, *, out=None):
     q = numpy.asarray(q, dtype=numpy.float32)
     r_b = numpy.asarray(r_b, dtype=numpy.float32)
     F_w = numpy.asarray(F_w, dtype=numpy.float32)
-    batch = numpy.broadcast_shapes(q.shape[:-1], r_b.shape[:-1], F_w.shape[:-1])
+    batch = q.shape[:-1] if q.shape[:-1] == r_b.shape[:-1] == F_w.shape[:-1] else numpy.broadcast_shapes(q.shape[:-1], r_b.shape[:-1], F_w.shape[:-1])
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -593,7 +593,7 @@ def effect_gravity(m, g_w, *, out=None):
     """
     m = numpy.asarray(m, dtype=numpy.float32)
     g_w = numpy.asarray(g_w, dtype=numpy.float32)
-    batch = numpy.broadcast_shapes(m.shape, g_w.shape[:-1])
+    batch = m.shape if m.shape == g_w.shape[:-1] else numpy.broadcast_shapes(m.shape, g_w.shape[:-1])
     g_w_0 = g_w[..., 0]
     g_w_1 = g_w[..., 1]
     g_w_2 = g_w[..., 2]
@@ -625,7 +625,7 @@ def effect_linear_damping(v_w, c, *, out=None):
     """
     v_w = numpy.asarray(v_w, dtype=numpy.float32)
     c = numpy.asarray(c, dtype=numpy.float32)
-    batch = numpy.broadcast_shapes(v_w.shape[:-1], c.shape)
+    batch = v_w.shape[:-1] if v_w.shape[:-1] == c.shape else numpy.broadcast_shapes(v_w.shape[:-1], c.shape)
     v_w_0 = v_w[..., 0]
     v_w_1 = v_w[..., 1]
     v_w_2 = v_w[..., 2]
@@ -660,7 +660,7 @@ def effect_angular_damping(q, omega_b, c, *, out=None):
     q = numpy.asarray(q, dtype=numpy.float32)
     omega_b = numpy.asarray(omega_b, dtype=numpy.float32)
     c = numpy.asarray(c, dtype=numpy.float32)
-    batch = numpy.broadcast_shapes(q.shape[:-1], omega_b.shape[:-1], c.shape)
+    batch = q.shape[:-1] if q.shape[:-1] == omega_b.shape[:-1] == c.shape else numpy.broadcast_shapes(q.shape[:-1], omega_b.shape[:-1], c.shape)
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -706,7 +706,7 @@ def quat_mul(a, b, *, out=None):
     """
     a = numpy.asarray(a, dtype=numpy.float32)
     b = numpy.asarray(b, dtype=numpy.float32)
-    batch = numpy.broadcast_shapes(a.shape[:-1], b.shape[:-1])
+    batch = a.shape[:-1] if a.shape[:-1] == b.shape[:-1] else numpy.broadcast_shapes(a.shape[:-1], b.shape[:-1])
     a_0 = a[..., 0]
     a_1 = a[..., 1]
     a_2 = a[..., 2]
@@ -741,7 +741,7 @@ def quat_conj(q, *, out=None):
         quaternion (x, y, z, w), scalar last
     """
     q = numpy.asarray(q, dtype=numpy.float32)
-    batch = numpy.broadcast_shapes(q.shape[:-1])
+    batch = q.shape[:-1]
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -772,7 +772,7 @@ def quat_normalize(q, *, out=None):
         quaternion (x, y, z, w), scalar last
     """
     q = numpy.asarray(q, dtype=numpy.float32)
-    batch = numpy.broadcast_shapes(q.shape[:-1])
+    batch = q.shape[:-1]
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -807,7 +807,7 @@ def quat_rotate(q, v_b, *, out=None):
     """
     q = numpy.asarray(q, dtype=numpy.float32)
     v_b = numpy.asarray(v_b, dtype=numpy.float32)
-    batch = numpy.broadcast_shapes(q.shape[:-1], v_b.shape[:-1])
+    batch = q.shape[:-1] if q.shape[:-1] == v_b.shape[:-1] else numpy.broadcast_shapes(q.shape[:-1], v_b.shape[:-1])
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -850,7 +850,7 @@ def quat_to_matrix(q, *, out=None):
         3×3 rotation, body → world, row-major
     """
     q = numpy.asarray(q, dtype=numpy.float32)
-    batch = numpy.broadcast_shapes(q.shape[:-1])
+    batch = q.shape[:-1]
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -896,7 +896,7 @@ def matrix_to_quat(R_wb, *, out=None):
         quaternion (x, y, z, w), scalar last
     """
     R_wb = numpy.asarray(R_wb, dtype=numpy.float32)
-    batch = numpy.broadcast_shapes(R_wb.shape[:-2])
+    batch = R_wb.shape[:-2]
     R_0 = R_wb[..., 0, 0]
     R_1 = R_wb[..., 0, 1]
     R_2 = R_wb[..., 0, 2]
@@ -959,7 +959,7 @@ def axis_angle_to_quat(axis, angle, *, out=None):
     """
     axis = numpy.asarray(axis, dtype=numpy.float32)
     angle = numpy.asarray(angle, dtype=numpy.float32)
-    batch = numpy.broadcast_shapes(axis.shape[:-1], angle.shape)
+    batch = axis.shape[:-1] if axis.shape[:-1] == angle.shape else numpy.broadcast_shapes(axis.shape[:-1], angle.shape)
     axis_0 = axis[..., 0]
     axis_1 = axis[..., 1]
     axis_2 = axis[..., 2]
@@ -994,7 +994,7 @@ def quat_from_two_vectors(a, b, *, out=None):
     """
     a = numpy.asarray(a, dtype=numpy.float32)
     b = numpy.asarray(b, dtype=numpy.float32)
-    batch = numpy.broadcast_shapes(a.shape[:-1], b.shape[:-1])
+    batch = a.shape[:-1] if a.shape[:-1] == b.shape[:-1] else numpy.broadcast_shapes(a.shape[:-1], b.shape[:-1])
     a_0 = a[..., 0]
     a_1 = a[..., 1]
     a_2 = a[..., 2]
@@ -1041,7 +1041,7 @@ def quat_to_axis_angle(q, *, out=None):
         angle, rad
     """
     q = numpy.asarray(q, dtype=numpy.float32)
-    batch = numpy.broadcast_shapes(q.shape[:-1])
+    batch = q.shape[:-1]
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -1080,7 +1080,7 @@ def quat_error_angle(q, q_ref, *, out=None):
     """
     q = numpy.asarray(q, dtype=numpy.float32)
     q_ref = numpy.asarray(q_ref, dtype=numpy.float32)
-    batch = numpy.broadcast_shapes(q.shape[:-1], q_ref.shape[:-1])
+    batch = q.shape[:-1] if q.shape[:-1] == q_ref.shape[:-1] else numpy.broadcast_shapes(q.shape[:-1], q_ref.shape[:-1])
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -1118,7 +1118,7 @@ def quat_error_chart(q, q_ref, *, out=None):
     """
     q = numpy.asarray(q, dtype=numpy.float32)
     q_ref = numpy.asarray(q_ref, dtype=numpy.float32)
-    batch = numpy.broadcast_shapes(q.shape[:-1], q_ref.shape[:-1])
+    batch = q.shape[:-1] if q.shape[:-1] == q_ref.shape[:-1] else numpy.broadcast_shapes(q.shape[:-1], q_ref.shape[:-1])
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -1165,7 +1165,7 @@ def euler_xyz_to_quat(roll, pitch, yaw, *, out=None):
     roll = numpy.asarray(roll, dtype=numpy.float32)
     pitch = numpy.asarray(pitch, dtype=numpy.float32)
     yaw = numpy.asarray(yaw, dtype=numpy.float32)
-    batch = numpy.broadcast_shapes(roll.shape, pitch.shape, yaw.shape)
+    batch = roll.shape if roll.shape == pitch.shape == yaw.shape else numpy.broadcast_shapes(roll.shape, pitch.shape, yaw.shape)
     t0 = ((numpy.float32(1.0)/numpy.float32(2.0)))*yaw
     t1 = numpy.sin(t0)
     t2 = ((numpy.float32(1.0)/numpy.float32(2.0)))*roll
@@ -1204,7 +1204,7 @@ def quat_to_euler_xyz(q, *, out=None):
         (roll, pitch, yaw), rad
     """
     q = numpy.asarray(q, dtype=numpy.float32)
-    batch = numpy.broadcast_shapes(q.shape[:-1])
+    batch = q.shape[:-1]
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -1252,7 +1252,7 @@ def quat_derivative_world(q, omega_w, *, out=None):
     """
     q = numpy.asarray(q, dtype=numpy.float32)
     omega_w = numpy.asarray(omega_w, dtype=numpy.float32)
-    batch = numpy.broadcast_shapes(q.shape[:-1], omega_w.shape[:-1])
+    batch = q.shape[:-1] if q.shape[:-1] == omega_w.shape[:-1] else numpy.broadcast_shapes(q.shape[:-1], omega_w.shape[:-1])
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -1294,7 +1294,7 @@ def quat_derivative_body(q, omega_b, *, out=None):
     """
     q = numpy.asarray(q, dtype=numpy.float32)
     omega_b = numpy.asarray(omega_b, dtype=numpy.float32)
-    batch = numpy.broadcast_shapes(q.shape[:-1], omega_b.shape[:-1])
+    batch = q.shape[:-1] if q.shape[:-1] == omega_b.shape[:-1] else numpy.broadcast_shapes(q.shape[:-1], omega_b.shape[:-1])
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -1337,7 +1337,7 @@ def integrate_orientation(q, omega_w, dt, *, out=None):
     q = numpy.asarray(q, dtype=numpy.float32)
     omega_w = numpy.asarray(omega_w, dtype=numpy.float32)
     dt = numpy.asarray(dt, dtype=numpy.float32)
-    batch = numpy.broadcast_shapes(q.shape[:-1], omega_w.shape[:-1], dt.shape)
+    batch = q.shape[:-1] if q.shape[:-1] == omega_w.shape[:-1] == dt.shape else numpy.broadcast_shapes(q.shape[:-1], omega_w.shape[:-1], dt.shape)
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -1387,7 +1387,7 @@ def euler_equations(I_b, omega_b, tau_b, *, out=None):
     I_b = numpy.asarray(I_b, dtype=numpy.float32)
     omega_b = numpy.asarray(omega_b, dtype=numpy.float32)
     tau_b = numpy.asarray(tau_b, dtype=numpy.float32)
-    batch = numpy.broadcast_shapes(I_b.shape[:-1], omega_b.shape[:-1], tau_b.shape[:-1])
+    batch = I_b.shape[:-1] if I_b.shape[:-1] == omega_b.shape[:-1] == tau_b.shape[:-1] else numpy.broadcast_shapes(I_b.shape[:-1], omega_b.shape[:-1], tau_b.shape[:-1])
     I_b_0 = I_b[..., 0]
     I_b_1 = I_b[..., 1]
     I_b_2 = I_b[..., 2]
@@ -1440,7 +1440,7 @@ def rigid_body_rhs(x, m, I_b, F_w, tau_w, *, out=None):
     I_b = numpy.asarray(I_b, dtype=numpy.float32)
     F_w = numpy.asarray(F_w, dtype=numpy.float32)
     tau_w = numpy.asarray(tau_w, dtype=numpy.float32)
-    batch = numpy.broadcast_shapes(x.shape[:-1], m.shape, I_b.shape[:-1], F_w.shape[:-1], tau_w.shape[:-1])
+    batch = x.shape[:-1] if x.shape[:-1] == m.shape == I_b.shape[:-1] == F_w.shape[:-1] == tau_w.shape[:-1] else numpy.broadcast_shapes(x.shape[:-1], m.shape, I_b.shape[:-1], F_w.shape[:-1], tau_w.shape[:-1])
     x_3 = x[..., 3]
     x_4 = x[..., 4]
     x_5 = x[..., 5]
@@ -1512,7 +1512,7 @@ def rigid_body_rhs_free(x, I_b, *, out=None):
     """
     x = numpy.asarray(x, dtype=numpy.float32)
     I_b = numpy.asarray(I_b, dtype=numpy.float32)
-    batch = numpy.broadcast_shapes(x.shape[:-1], I_b.shape[:-1])
+    batch = x.shape[:-1] if x.shape[:-1] == I_b.shape[:-1] else numpy.broadcast_shapes(x.shape[:-1], I_b.shape[:-1])
     x_3 = x[..., 3]
     x_4 = x[..., 4]
     x_5 = x[..., 5]
@@ -1573,7 +1573,7 @@ def apply_inv_inertia(q, I_b, v, *, out=None):
     q = numpy.asarray(q, dtype=numpy.float32)
     I_b = numpy.asarray(I_b, dtype=numpy.float32)
     v = numpy.asarray(v, dtype=numpy.float32)
-    batch = numpy.broadcast_shapes(q.shape[:-1], I_b.shape[:-1], v.shape[:-1])
+    batch = q.shape[:-1] if q.shape[:-1] == I_b.shape[:-1] == v.shape[:-1] else numpy.broadcast_shapes(q.shape[:-1], I_b.shape[:-1], v.shape[:-1])
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -1640,7 +1640,7 @@ def world_to_body(q, v_w, *, out=None):
     """
     q = numpy.asarray(q, dtype=numpy.float32)
     v_w = numpy.asarray(v_w, dtype=numpy.float32)
-    batch = numpy.broadcast_shapes(q.shape[:-1], v_w.shape[:-1])
+    batch = q.shape[:-1] if q.shape[:-1] == v_w.shape[:-1] else numpy.broadcast_shapes(q.shape[:-1], v_w.shape[:-1])
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -1692,7 +1692,7 @@ def kinetic_energy(m, I_b, v_w, omega_b, *, out=None):
     I_b = numpy.asarray(I_b, dtype=numpy.float32)
     v_w = numpy.asarray(v_w, dtype=numpy.float32)
     omega_b = numpy.asarray(omega_b, dtype=numpy.float32)
-    batch = numpy.broadcast_shapes(m.shape, I_b.shape[:-1], v_w.shape[:-1], omega_b.shape[:-1])
+    batch = m.shape if m.shape == I_b.shape[:-1] == v_w.shape[:-1] == omega_b.shape[:-1] else numpy.broadcast_shapes(m.shape, I_b.shape[:-1], v_w.shape[:-1], omega_b.shape[:-1])
     I_b_0 = I_b[..., 0]
     I_b_1 = I_b[..., 1]
     I_b_2 = I_b[..., 2]
@@ -1731,7 +1731,7 @@ def angular_momentum_world(q, I_b, omega_b, *, out=None):
     q = numpy.asarray(q, dtype=numpy.float32)
     I_b = numpy.asarray(I_b, dtype=numpy.float32)
     omega_b = numpy.asarray(omega_b, dtype=numpy.float32)
-    batch = numpy.broadcast_shapes(q.shape[:-1], I_b.shape[:-1], omega_b.shape[:-1])
+    batch = q.shape[:-1] if q.shape[:-1] == I_b.shape[:-1] == omega_b.shape[:-1] else numpy.broadcast_shapes(q.shape[:-1], I_b.shape[:-1], omega_b.shape[:-1])
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -1786,7 +1786,7 @@ def rigid_body_rhs_torque(x, I_b, tau_w, *, out=None):
     x = numpy.asarray(x, dtype=numpy.float32)
     I_b = numpy.asarray(I_b, dtype=numpy.float32)
     tau_w = numpy.asarray(tau_w, dtype=numpy.float32)
-    batch = numpy.broadcast_shapes(x.shape[:-1], I_b.shape[:-1], tau_w.shape[:-1])
+    batch = x.shape[:-1] if x.shape[:-1] == I_b.shape[:-1] == tau_w.shape[:-1] else numpy.broadcast_shapes(x.shape[:-1], I_b.shape[:-1], tau_w.shape[:-1])
     x_3 = x[..., 3]
     x_4 = x[..., 4]
     x_5 = x[..., 5]
@@ -1851,7 +1851,7 @@ def euler_coefficients(I_b, *, out=None):
         (k_x, k_y, k_z, r_x, r_y, r_z), body frame; k dimensionless, r 1/(kg·m²)
     """
     I_b = numpy.asarray(I_b, dtype=numpy.float32)
-    batch = numpy.broadcast_shapes(I_b.shape[:-1])
+    batch = I_b.shape[:-1]
     I_b_0 = I_b[..., 0]
     I_b_1 = I_b[..., 1]
     I_b_2 = I_b[..., 2]
@@ -1892,7 +1892,7 @@ def rigid_body_rhs_free_c(x, c_b, *, out=None):
     """
     x = numpy.asarray(x, dtype=numpy.float32)
     c_b = numpy.asarray(c_b, dtype=numpy.float32)
-    batch = numpy.broadcast_shapes(x.shape[:-1], c_b.shape[:-1])
+    batch = x.shape[:-1] if x.shape[:-1] == c_b.shape[:-1] else numpy.broadcast_shapes(x.shape[:-1], c_b.shape[:-1])
     x_3 = x[..., 3]
     x_4 = x[..., 4]
     x_5 = x[..., 5]
@@ -1950,7 +1950,7 @@ def rigid_body_rhs_torque_c(x, c_b, tau_w, *, out=None):
     x = numpy.asarray(x, dtype=numpy.float32)
     c_b = numpy.asarray(c_b, dtype=numpy.float32)
     tau_w = numpy.asarray(tau_w, dtype=numpy.float32)
-    batch = numpy.broadcast_shapes(x.shape[:-1], c_b.shape[:-1], tau_w.shape[:-1])
+    batch = x.shape[:-1] if x.shape[:-1] == c_b.shape[:-1] == tau_w.shape[:-1] else numpy.broadcast_shapes(x.shape[:-1], c_b.shape[:-1], tau_w.shape[:-1])
     x_3 = x[..., 3]
     x_4 = x[..., 4]
     x_5 = x[..., 5]
@@ -2024,7 +2024,7 @@ def rigid_body_rhs_c(x, m, c_b, F_w, tau_w, *, out=None):
     c_b = numpy.asarray(c_b, dtype=numpy.float32)
     F_w = numpy.asarray(F_w, dtype=numpy.float32)
     tau_w = numpy.asarray(tau_w, dtype=numpy.float32)
-    batch = numpy.broadcast_shapes(x.shape[:-1], m.shape, c_b.shape[:-1], F_w.shape[:-1], tau_w.shape[:-1])
+    batch = x.shape[:-1] if x.shape[:-1] == m.shape == c_b.shape[:-1] == F_w.shape[:-1] == tau_w.shape[:-1] else numpy.broadcast_shapes(x.shape[:-1], m.shape, c_b.shape[:-1], F_w.shape[:-1], tau_w.shape[:-1])
     x_3 = x[..., 3]
     x_4 = x[..., 4]
     x_5 = x[..., 5]
@@ -2107,7 +2107,7 @@ def pivot_body_rhs(q, omega_b, I_p, r_b, F_w, tau_w, *, out=None):
     r_b = numpy.asarray(r_b, dtype=numpy.float32)
     F_w = numpy.asarray(F_w, dtype=numpy.float32)
     tau_w = numpy.asarray(tau_w, dtype=numpy.float32)
-    batch = numpy.broadcast_shapes(q.shape[:-1], omega_b.shape[:-1], I_p.shape[:-2], r_b.shape[:-1], F_w.shape[:-1], tau_w.shape[:-1])
+    batch = q.shape[:-1] if q.shape[:-1] == omega_b.shape[:-1] == I_p.shape[:-2] == r_b.shape[:-1] == F_w.shape[:-1] == tau_w.shape[:-1] else numpy.broadcast_shapes(q.shape[:-1], omega_b.shape[:-1], I_p.shape[:-2], r_b.shape[:-1], F_w.shape[:-1], tau_w.shape[:-1])
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -2209,7 +2209,7 @@ def pivot_kinematics(q, omega_b, anchor_w, r_b, *, out=None):
     omega_b = numpy.asarray(omega_b, dtype=numpy.float32)
     anchor_w = numpy.asarray(anchor_w, dtype=numpy.float32)
     r_b = numpy.asarray(r_b, dtype=numpy.float32)
-    batch = numpy.broadcast_shapes(q.shape[:-1], omega_b.shape[:-1], anchor_w.shape[:-1], r_b.shape[:-1])
+    batch = q.shape[:-1] if q.shape[:-1] == omega_b.shape[:-1] == anchor_w.shape[:-1] == r_b.shape[:-1] else numpy.broadcast_shapes(q.shape[:-1], omega_b.shape[:-1], anchor_w.shape[:-1], r_b.shape[:-1])
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -2285,7 +2285,7 @@ def splitting_rotation(I_b, q, omega_b, h, *, out=None):
     q = numpy.asarray(q, dtype=numpy.float32)
     omega_b = numpy.asarray(omega_b, dtype=numpy.float32)
     h = numpy.asarray(h, dtype=numpy.float32)
-    batch = numpy.broadcast_shapes(I_b.shape[:-1], q.shape[:-1], omega_b.shape[:-1], h.shape)
+    batch = I_b.shape[:-1] if I_b.shape[:-1] == q.shape[:-1] == omega_b.shape[:-1] == h.shape else numpy.broadcast_shapes(I_b.shape[:-1], q.shape[:-1], omega_b.shape[:-1], h.shape)
     I_b_0 = I_b[..., 0]
     I_b_1 = I_b[..., 1]
     I_b_2 = I_b[..., 2]
@@ -2392,7 +2392,7 @@ def axis_flow_x(I_b, q, L_b, tau, *, out=None):
     q = numpy.asarray(q, dtype=numpy.float32)
     L_b = numpy.asarray(L_b, dtype=numpy.float32)
     tau = numpy.asarray(tau, dtype=numpy.float32)
-    batch = numpy.broadcast_shapes(I_b.shape[:-1], q.shape[:-1], L_b.shape[:-1], tau.shape)
+    batch = I_b.shape[:-1] if I_b.shape[:-1] == q.shape[:-1] == L_b.shape[:-1] == tau.shape else numpy.broadcast_shapes(I_b.shape[:-1], q.shape[:-1], L_b.shape[:-1], tau.shape)
     I_b_0 = I_b[..., 0]
     q_0 = q[..., 0]
     q_1 = q[..., 1]
@@ -2447,7 +2447,7 @@ def axis_flow_y(I_b, q, L_b, tau, *, out=None):
     q = numpy.asarray(q, dtype=numpy.float32)
     L_b = numpy.asarray(L_b, dtype=numpy.float32)
     tau = numpy.asarray(tau, dtype=numpy.float32)
-    batch = numpy.broadcast_shapes(I_b.shape[:-1], q.shape[:-1], L_b.shape[:-1], tau.shape)
+    batch = I_b.shape[:-1] if I_b.shape[:-1] == q.shape[:-1] == L_b.shape[:-1] == tau.shape else numpy.broadcast_shapes(I_b.shape[:-1], q.shape[:-1], L_b.shape[:-1], tau.shape)
     I_b_1 = I_b[..., 1]
     q_0 = q[..., 0]
     q_1 = q[..., 1]
@@ -2502,7 +2502,7 @@ def axis_flow_z(I_b, q, L_b, tau, *, out=None):
     q = numpy.asarray(q, dtype=numpy.float32)
     L_b = numpy.asarray(L_b, dtype=numpy.float32)
     tau = numpy.asarray(tau, dtype=numpy.float32)
-    batch = numpy.broadcast_shapes(I_b.shape[:-1], q.shape[:-1], L_b.shape[:-1], tau.shape)
+    batch = I_b.shape[:-1] if I_b.shape[:-1] == q.shape[:-1] == L_b.shape[:-1] == tau.shape else numpy.broadcast_shapes(I_b.shape[:-1], q.shape[:-1], L_b.shape[:-1], tau.shape)
     I_b_2 = I_b[..., 2]
     q_0 = q[..., 0]
     q_1 = q[..., 1]
@@ -2546,7 +2546,7 @@ def symtop_score(I_b, *, out=None):
         1/(kg·m²)², one per reference axis r = 0, 1, 2
     """
     I_b = numpy.asarray(I_b, dtype=numpy.float32)
-    batch = numpy.broadcast_shapes(I_b.shape[:-1])
+    batch = I_b.shape[:-1]
     I_b_0 = I_b[..., 0]
     I_b_1 = I_b[..., 1]
     I_b_2 = I_b[..., 2]
@@ -2584,7 +2584,7 @@ def symtop_leftover(I_b, I_r, *, out=None):
     """
     I_b = numpy.asarray(I_b, dtype=numpy.float32)
     I_r = numpy.asarray(I_r, dtype=numpy.float32)
-    batch = numpy.broadcast_shapes(I_b.shape[:-1], I_r.shape)
+    batch = I_b.shape[:-1] if I_b.shape[:-1] == I_r.shape else numpy.broadcast_shapes(I_b.shape[:-1], I_r.shape)
     I_b_0 = I_b[..., 0]
     I_b_1 = I_b[..., 1]
     I_b_2 = I_b[..., 2]
@@ -2625,7 +2625,7 @@ def symtop_axis_flow_x(q, L_b, c, tau, *, out=None):
     L_b = numpy.asarray(L_b, dtype=numpy.float32)
     c = numpy.asarray(c, dtype=numpy.float32)
     tau = numpy.asarray(tau, dtype=numpy.float32)
-    batch = numpy.broadcast_shapes(q.shape[:-1], L_b.shape[:-1], c.shape, tau.shape)
+    batch = q.shape[:-1] if q.shape[:-1] == L_b.shape[:-1] == c.shape == tau.shape else numpy.broadcast_shapes(q.shape[:-1], L_b.shape[:-1], c.shape, tau.shape)
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -2679,7 +2679,7 @@ def symtop_axis_flow_y(q, L_b, c, tau, *, out=None):
     L_b = numpy.asarray(L_b, dtype=numpy.float32)
     c = numpy.asarray(c, dtype=numpy.float32)
     tau = numpy.asarray(tau, dtype=numpy.float32)
-    batch = numpy.broadcast_shapes(q.shape[:-1], L_b.shape[:-1], c.shape, tau.shape)
+    batch = q.shape[:-1] if q.shape[:-1] == L_b.shape[:-1] == c.shape == tau.shape else numpy.broadcast_shapes(q.shape[:-1], L_b.shape[:-1], c.shape, tau.shape)
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -2733,7 +2733,7 @@ def symtop_axis_flow_z(q, L_b, c, tau, *, out=None):
     L_b = numpy.asarray(L_b, dtype=numpy.float32)
     c = numpy.asarray(c, dtype=numpy.float32)
     tau = numpy.asarray(tau, dtype=numpy.float32)
-    batch = numpy.broadcast_shapes(q.shape[:-1], L_b.shape[:-1], c.shape, tau.shape)
+    batch = q.shape[:-1] if q.shape[:-1] == L_b.shape[:-1] == c.shape == tau.shape else numpy.broadcast_shapes(q.shape[:-1], L_b.shape[:-1], c.shape, tau.shape)
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -2785,7 +2785,7 @@ def sphere_flow(q, L_b, I_r, tau, *, out=None):
     L_b = numpy.asarray(L_b, dtype=numpy.float32)
     I_r = numpy.asarray(I_r, dtype=numpy.float32)
     tau = numpy.asarray(tau, dtype=numpy.float32)
-    batch = numpy.broadcast_shapes(q.shape[:-1], L_b.shape[:-1], I_r.shape, tau.shape)
+    batch = q.shape[:-1] if q.shape[:-1] == L_b.shape[:-1] == I_r.shape == tau.shape else numpy.broadcast_shapes(q.shape[:-1], L_b.shape[:-1], I_r.shape, tau.shape)
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -2834,7 +2834,7 @@ def body_momentum(I_b, omega_b, *, out=None):
     """
     I_b = numpy.asarray(I_b, dtype=numpy.float32)
     omega_b = numpy.asarray(omega_b, dtype=numpy.float32)
-    batch = numpy.broadcast_shapes(I_b.shape[:-1], omega_b.shape[:-1])
+    batch = I_b.shape[:-1] if I_b.shape[:-1] == omega_b.shape[:-1] else numpy.broadcast_shapes(I_b.shape[:-1], omega_b.shape[:-1])
     I_b_0 = I_b[..., 0]
     I_b_1 = I_b[..., 1]
     I_b_2 = I_b[..., 2]
@@ -2869,7 +2869,7 @@ def body_rate(I_b, L_b, *, out=None):
     """
     I_b = numpy.asarray(I_b, dtype=numpy.float32)
     L_b = numpy.asarray(L_b, dtype=numpy.float32)
-    batch = numpy.broadcast_shapes(I_b.shape[:-1], L_b.shape[:-1])
+    batch = I_b.shape[:-1] if I_b.shape[:-1] == L_b.shape[:-1] else numpy.broadcast_shapes(I_b.shape[:-1], L_b.shape[:-1])
     I_b_0 = I_b[..., 0]
     I_b_1 = I_b[..., 1]
     I_b_2 = I_b[..., 2]
@@ -2921,7 +2921,7 @@ def splitting_kick(m, I_b, v_w, omega_b, F_w, tau_b, h, *, out=None):
     F_w = numpy.asarray(F_w, dtype=numpy.float32)
     tau_b = numpy.asarray(tau_b, dtype=numpy.float32)
     h = numpy.asarray(h, dtype=numpy.float32)
-    batch = numpy.broadcast_shapes(m.shape, I_b.shape[:-1], v_w.shape[:-1], omega_b.shape[:-1], F_w.shape[:-1], tau_b.shape[:-1], h.shape)
+    batch = m.shape if m.shape == I_b.shape[:-1] == v_w.shape[:-1] == omega_b.shape[:-1] == F_w.shape[:-1] == tau_b.shape[:-1] == h.shape else numpy.broadcast_shapes(m.shape, I_b.shape[:-1], v_w.shape[:-1], omega_b.shape[:-1], F_w.shape[:-1], tau_b.shape[:-1], h.shape)
     I_b_0 = I_b[..., 0]
     I_b_1 = I_b[..., 1]
     I_b_2 = I_b[..., 2]
@@ -2973,7 +2973,7 @@ def translation_drift(p_w, v_w, h, *, out=None):
     p_w = numpy.asarray(p_w, dtype=numpy.float32)
     v_w = numpy.asarray(v_w, dtype=numpy.float32)
     h = numpy.asarray(h, dtype=numpy.float32)
-    batch = numpy.broadcast_shapes(p_w.shape[:-1], v_w.shape[:-1], h.shape)
+    batch = p_w.shape[:-1] if p_w.shape[:-1] == v_w.shape[:-1] == h.shape else numpy.broadcast_shapes(p_w.shape[:-1], v_w.shape[:-1], h.shape)
     p_w_0 = p_w[..., 0]
     p_w_1 = p_w[..., 1]
     p_w_2 = p_w[..., 2]
@@ -3019,7 +3019,7 @@ def semi_implicit_translation(m, p_w, v_w, F_w, h, *, out=None):
     v_w = numpy.asarray(v_w, dtype=numpy.float32)
     F_w = numpy.asarray(F_w, dtype=numpy.float32)
     h = numpy.asarray(h, dtype=numpy.float32)
-    batch = numpy.broadcast_shapes(m.shape, p_w.shape[:-1], v_w.shape[:-1], F_w.shape[:-1], h.shape)
+    batch = m.shape if m.shape == p_w.shape[:-1] == v_w.shape[:-1] == F_w.shape[:-1] == h.shape else numpy.broadcast_shapes(m.shape, p_w.shape[:-1], v_w.shape[:-1], F_w.shape[:-1], h.shape)
     p_w_0 = p_w[..., 0]
     p_w_1 = p_w[..., 1]
     p_w_2 = p_w[..., 2]
@@ -3070,7 +3070,7 @@ def translation_rhs(m, v_w, F_w, *, out=None):
     m = numpy.asarray(m, dtype=numpy.float32)
     v_w = numpy.asarray(v_w, dtype=numpy.float32)
     F_w = numpy.asarray(F_w, dtype=numpy.float32)
-    batch = numpy.broadcast_shapes(m.shape, v_w.shape[:-1], F_w.shape[:-1])
+    batch = m.shape if m.shape == v_w.shape[:-1] == F_w.shape[:-1] else numpy.broadcast_shapes(m.shape, v_w.shape[:-1], F_w.shape[:-1])
     v_w_0 = v_w[..., 0]
     v_w_1 = v_w[..., 1]
     v_w_2 = v_w[..., 2]
@@ -3119,7 +3119,7 @@ def implicit_gyro_residual(I_b, omega_b, tau_b, h, omega_next, *, out=None):
     tau_b = numpy.asarray(tau_b, dtype=numpy.float32)
     h = numpy.asarray(h, dtype=numpy.float32)
     omega_next = numpy.asarray(omega_next, dtype=numpy.float32)
-    batch = numpy.broadcast_shapes(I_b.shape[:-1], omega_b.shape[:-1], tau_b.shape[:-1], h.shape, omega_next.shape[:-1])
+    batch = I_b.shape[:-1] if I_b.shape[:-1] == omega_b.shape[:-1] == tau_b.shape[:-1] == h.shape == omega_next.shape[:-1] else numpy.broadcast_shapes(I_b.shape[:-1], omega_b.shape[:-1], tau_b.shape[:-1], h.shape, omega_next.shape[:-1])
     I_b_0 = I_b[..., 0]
     I_b_1 = I_b[..., 1]
     I_b_2 = I_b[..., 2]
@@ -3164,7 +3164,7 @@ def implicit_gyro_jacobian(I_b, h, omega_next, *, out=None):
     I_b = numpy.asarray(I_b, dtype=numpy.float32)
     h = numpy.asarray(h, dtype=numpy.float32)
     omega_next = numpy.asarray(omega_next, dtype=numpy.float32)
-    batch = numpy.broadcast_shapes(I_b.shape[:-1], h.shape, omega_next.shape[:-1])
+    batch = I_b.shape[:-1] if I_b.shape[:-1] == h.shape == omega_next.shape[:-1] else numpy.broadcast_shapes(I_b.shape[:-1], h.shape, omega_next.shape[:-1])
     I_b_0 = I_b[..., 0]
     I_b_1 = I_b[..., 1]
     I_b_2 = I_b[..., 2]
@@ -3219,7 +3219,7 @@ def implicit_gyro_newton(I_b, omega_b, tau_b, h, omega_next, *, out=None):
     tau_b = numpy.asarray(tau_b, dtype=numpy.float32)
     h = numpy.asarray(h, dtype=numpy.float32)
     omega_next = numpy.asarray(omega_next, dtype=numpy.float32)
-    batch = numpy.broadcast_shapes(I_b.shape[:-1], omega_b.shape[:-1], tau_b.shape[:-1], h.shape, omega_next.shape[:-1])
+    batch = I_b.shape[:-1] if I_b.shape[:-1] == omega_b.shape[:-1] == tau_b.shape[:-1] == h.shape == omega_next.shape[:-1] else numpy.broadcast_shapes(I_b.shape[:-1], omega_b.shape[:-1], tau_b.shape[:-1], h.shape, omega_next.shape[:-1])
     I_b_0 = I_b[..., 0]
     I_b_1 = I_b[..., 1]
     I_b_2 = I_b[..., 2]
@@ -3291,7 +3291,7 @@ def quat_exp_step(q, omega_b, h, *, out=None):
     q = numpy.asarray(q, dtype=numpy.float32)
     omega_b = numpy.asarray(omega_b, dtype=numpy.float32)
     h = numpy.asarray(h, dtype=numpy.float32)
-    batch = numpy.broadcast_shapes(q.shape[:-1], omega_b.shape[:-1], h.shape)
+    batch = q.shape[:-1] if q.shape[:-1] == omega_b.shape[:-1] == h.shape else numpy.broadcast_shapes(q.shape[:-1], omega_b.shape[:-1], h.shape)
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -3338,7 +3338,7 @@ def rkmk_dexpinv(u_b, omega_b, *, out=None):
     """
     u_b = numpy.asarray(u_b, dtype=numpy.float32)
     omega_b = numpy.asarray(omega_b, dtype=numpy.float32)
-    batch = numpy.broadcast_shapes(u_b.shape[:-1], omega_b.shape[:-1])
+    batch = u_b.shape[:-1] if u_b.shape[:-1] == omega_b.shape[:-1] else numpy.broadcast_shapes(u_b.shape[:-1], omega_b.shape[:-1])
     u_b_0 = u_b[..., 0]
     u_b_1 = u_b[..., 1]
     u_b_2 = u_b[..., 2]
@@ -3387,7 +3387,7 @@ def wheel_saturation(command, Omega, torque_limit, speed_limit, *, out=None):
     Omega = numpy.asarray(Omega, dtype=numpy.float32)
     torque_limit = numpy.asarray(torque_limit, dtype=numpy.float32)
     speed_limit = numpy.asarray(speed_limit, dtype=numpy.float32)
-    batch = numpy.broadcast_shapes(command.shape[:-1], Omega.shape[:-1], torque_limit.shape, speed_limit.shape)
+    batch = command.shape[:-1] if command.shape[:-1] == Omega.shape[:-1] == torque_limit.shape == speed_limit.shape else numpy.broadcast_shapes(command.shape[:-1], Omega.shape[:-1], torque_limit.shape, speed_limit.shape)
     command_0 = command[..., 0]
     command_1 = command[..., 1]
     command_2 = command[..., 2]
@@ -3445,7 +3445,7 @@ def wheel_motor(command, Omega, torque_limit, speed_limit, cutoff, *, out=None):
     torque_limit = numpy.asarray(torque_limit, dtype=numpy.float32)
     speed_limit = numpy.asarray(speed_limit, dtype=numpy.float32)
     cutoff = numpy.asarray(cutoff, dtype=numpy.float32)
-    batch = numpy.broadcast_shapes(command.shape[:-1], Omega.shape[:-1], torque_limit.shape, speed_limit.shape, cutoff.shape)
+    batch = command.shape[:-1] if command.shape[:-1] == Omega.shape[:-1] == torque_limit.shape == speed_limit.shape == cutoff.shape else numpy.broadcast_shapes(command.shape[:-1], Omega.shape[:-1], torque_limit.shape, speed_limit.shape, cutoff.shape)
     command_0 = command[..., 0]
     command_1 = command[..., 1]
     command_2 = command[..., 2]
@@ -3552,7 +3552,7 @@ def wheels3_body_rhs(q, omega_b, Omega, I_p, A_b, J, r_b, F_w, tau_w, u, c_w, *,
     tau_w = numpy.asarray(tau_w, dtype=numpy.float32)
     u = numpy.asarray(u, dtype=numpy.float32)
     c_w = numpy.asarray(c_w, dtype=numpy.float32)
-    batch = numpy.broadcast_shapes(q.shape[:-1], omega_b.shape[:-1], Omega.shape[:-1], I_p.shape[:-2], A_b.shape[:-2], J.shape[:-1], r_b.shape[:-1], F_w.shape[:-1], tau_w.shape[:-1], u.shape[:-1], c_w.shape)
+    batch = q.shape[:-1] if q.shape[:-1] == omega_b.shape[:-1] == Omega.shape[:-1] == I_p.shape[:-2] == A_b.shape[:-2] == J.shape[:-1] == r_b.shape[:-1] == F_w.shape[:-1] == tau_w.shape[:-1] == u.shape[:-1] == c_w.shape else numpy.broadcast_shapes(q.shape[:-1], omega_b.shape[:-1], Omega.shape[:-1], I_p.shape[:-2], A_b.shape[:-2], J.shape[:-1], r_b.shape[:-1], F_w.shape[:-1], tau_w.shape[:-1], u.shape[:-1], c_w.shape)
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -3723,7 +3723,7 @@ def wheels3_momentum(q, omega_b, Omega, I_p, A_b, J, *, out=None):
     I_p = numpy.asarray(I_p, dtype=numpy.float32)
     A_b = numpy.asarray(A_b, dtype=numpy.float32)
     J = numpy.asarray(J, dtype=numpy.float32)
-    batch = numpy.broadcast_shapes(q.shape[:-1], omega_b.shape[:-1], Omega.shape[:-1], I_p.shape[:-2], A_b.shape[:-2], J.shape[:-1])
+    batch = q.shape[:-1] if q.shape[:-1] == omega_b.shape[:-1] == Omega.shape[:-1] == I_p.shape[:-2] == A_b.shape[:-2] == J.shape[:-1] else numpy.broadcast_shapes(q.shape[:-1], omega_b.shape[:-1], Omega.shape[:-1], I_p.shape[:-2], A_b.shape[:-2], J.shape[:-1])
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -3831,7 +3831,7 @@ def wheels3_motor(command, Omega, torque_limit, speed_limit, cutoff, *, out=None
     torque_limit = numpy.asarray(torque_limit, dtype=numpy.float32)
     speed_limit = numpy.asarray(speed_limit, dtype=numpy.float32)
     cutoff = numpy.asarray(cutoff, dtype=numpy.float32)
-    batch = numpy.broadcast_shapes(command.shape[:-1], Omega.shape[:-1], torque_limit.shape, speed_limit.shape, cutoff.shape)
+    batch = command.shape[:-1] if command.shape[:-1] == Omega.shape[:-1] == torque_limit.shape == speed_limit.shape == cutoff.shape else numpy.broadcast_shapes(command.shape[:-1], Omega.shape[:-1], torque_limit.shape, speed_limit.shape, cutoff.shape)
     command_0 = command[..., 0]
     command_1 = command[..., 1]
     command_2 = command[..., 2]
@@ -3938,7 +3938,7 @@ def wheels4_body_rhs(q, omega_b, Omega, I_p, A_b, J, r_b, F_w, tau_w, u, c_w, *,
     tau_w = numpy.asarray(tau_w, dtype=numpy.float32)
     u = numpy.asarray(u, dtype=numpy.float32)
     c_w = numpy.asarray(c_w, dtype=numpy.float32)
-    batch = numpy.broadcast_shapes(q.shape[:-1], omega_b.shape[:-1], Omega.shape[:-1], I_p.shape[:-2], A_b.shape[:-2], J.shape[:-1], r_b.shape[:-1], F_w.shape[:-1], tau_w.shape[:-1], u.shape[:-1], c_w.shape)
+    batch = q.shape[:-1] if q.shape[:-1] == omega_b.shape[:-1] == Omega.shape[:-1] == I_p.shape[:-2] == A_b.shape[:-2] == J.shape[:-1] == r_b.shape[:-1] == F_w.shape[:-1] == tau_w.shape[:-1] == u.shape[:-1] == c_w.shape else numpy.broadcast_shapes(q.shape[:-1], omega_b.shape[:-1], Omega.shape[:-1], I_p.shape[:-2], A_b.shape[:-2], J.shape[:-1], r_b.shape[:-1], F_w.shape[:-1], tau_w.shape[:-1], u.shape[:-1], c_w.shape)
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -4106,7 +4106,7 @@ def wheels4_coefficients(I_p, A_b, J, *, out=None):
     I_p = numpy.asarray(I_p, dtype=numpy.float32)
     A_b = numpy.asarray(A_b, dtype=numpy.float32)
     J = numpy.asarray(J, dtype=numpy.float32)
-    batch = numpy.broadcast_shapes(I_p.shape[:-2], A_b.shape[:-2], J.shape[:-1])
+    batch = I_p.shape[:-2] if I_p.shape[:-2] == A_b.shape[:-2] == J.shape[:-1] else numpy.broadcast_shapes(I_p.shape[:-2], A_b.shape[:-2], J.shape[:-1])
     I_p_00 = I_p[..., 0, 0]
     I_p_01 = I_p[..., 0, 1]
     I_p_02 = I_p[..., 0, 2]
@@ -4217,7 +4217,7 @@ def wheels4_body_rhs_c(q, omega_b, Omega, I_p, A_b, J, k_w, r_b, F_w, tau_w, u, 
     tau_w = numpy.asarray(tau_w, dtype=numpy.float32)
     u = numpy.asarray(u, dtype=numpy.float32)
     c_w = numpy.asarray(c_w, dtype=numpy.float32)
-    batch = numpy.broadcast_shapes(q.shape[:-1], omega_b.shape[:-1], Omega.shape[:-1], I_p.shape[:-2], A_b.shape[:-2], J.shape[:-1], k_w.shape[:-1], r_b.shape[:-1], F_w.shape[:-1], tau_w.shape[:-1], u.shape[:-1], c_w.shape)
+    batch = q.shape[:-1] if q.shape[:-1] == omega_b.shape[:-1] == Omega.shape[:-1] == I_p.shape[:-2] == A_b.shape[:-2] == J.shape[:-1] == k_w.shape[:-1] == r_b.shape[:-1] == F_w.shape[:-1] == tau_w.shape[:-1] == u.shape[:-1] == c_w.shape else numpy.broadcast_shapes(q.shape[:-1], omega_b.shape[:-1], Omega.shape[:-1], I_p.shape[:-2], A_b.shape[:-2], J.shape[:-1], k_w.shape[:-1], r_b.shape[:-1], F_w.shape[:-1], tau_w.shape[:-1], u.shape[:-1], c_w.shape)
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -4385,7 +4385,7 @@ def wheels4_momentum(q, omega_b, Omega, I_p, A_b, J, *, out=None):
     I_p = numpy.asarray(I_p, dtype=numpy.float32)
     A_b = numpy.asarray(A_b, dtype=numpy.float32)
     J = numpy.asarray(J, dtype=numpy.float32)
-    batch = numpy.broadcast_shapes(q.shape[:-1], omega_b.shape[:-1], Omega.shape[:-1], I_p.shape[:-2], A_b.shape[:-2], J.shape[:-1])
+    batch = q.shape[:-1] if q.shape[:-1] == omega_b.shape[:-1] == Omega.shape[:-1] == I_p.shape[:-2] == A_b.shape[:-2] == J.shape[:-1] else numpy.broadcast_shapes(q.shape[:-1], omega_b.shape[:-1], Omega.shape[:-1], I_p.shape[:-2], A_b.shape[:-2], J.shape[:-1])
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -4501,7 +4501,7 @@ def wheels4_motor(command, Omega, torque_limit, speed_limit, cutoff, *, out=None
     torque_limit = numpy.asarray(torque_limit, dtype=numpy.float32)
     speed_limit = numpy.asarray(speed_limit, dtype=numpy.float32)
     cutoff = numpy.asarray(cutoff, dtype=numpy.float32)
-    batch = numpy.broadcast_shapes(command.shape[:-1], Omega.shape[:-1], torque_limit.shape, speed_limit.shape, cutoff.shape)
+    batch = command.shape[:-1] if command.shape[:-1] == Omega.shape[:-1] == torque_limit.shape == speed_limit.shape == cutoff.shape else numpy.broadcast_shapes(command.shape[:-1], Omega.shape[:-1], torque_limit.shape, speed_limit.shape, cutoff.shape)
     command_0 = command[..., 0]
     command_1 = command[..., 1]
     command_2 = command[..., 2]
@@ -4592,7 +4592,7 @@ def quat_error_chart_inverse(q_ref, dtheta, *, out=None):
     """
     q_ref = numpy.asarray(q_ref, dtype=numpy.float32)
     dtheta = numpy.asarray(dtheta, dtype=numpy.float32)
-    batch = numpy.broadcast_shapes(q_ref.shape[:-1], dtheta.shape[:-1])
+    batch = q_ref.shape[:-1] if q_ref.shape[:-1] == dtheta.shape[:-1] else numpy.broadcast_shapes(q_ref.shape[:-1], dtheta.shape[:-1])
     q_ref_0 = q_ref[..., 0]
     q_ref_1 = q_ref[..., 1]
     q_ref_2 = q_ref[..., 2]
@@ -4632,7 +4632,7 @@ def quat_normalize_scaled(q, *, out=None):
         |q| (0 for the zero quaternion; may overflow to inf)
     """
     q = numpy.asarray(q, dtype=numpy.float32)
-    batch = numpy.broadcast_shapes(q.shape[:-1])
+    batch = q.shape[:-1]
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -4679,7 +4679,7 @@ def wheels4_free_inertia(I_p, A_b, J, *, out=None):
     I_p = numpy.asarray(I_p, dtype=numpy.float32)
     A_b = numpy.asarray(A_b, dtype=numpy.float32)
     J = numpy.asarray(J, dtype=numpy.float32)
-    batch = numpy.broadcast_shapes(I_p.shape[:-2], A_b.shape[:-2], J.shape[:-1])
+    batch = I_p.shape[:-2] if I_p.shape[:-2] == A_b.shape[:-2] == J.shape[:-1] else numpy.broadcast_shapes(I_p.shape[:-2], A_b.shape[:-2], J.shape[:-1])
     I_p_00 = I_p[..., 0, 0]
     I_p_01 = I_p[..., 0, 1]
     I_p_02 = I_p[..., 0, 2]
@@ -4743,7 +4743,7 @@ def box_of_inertia(m, I_b, *, out=None):
     """
     m = numpy.asarray(m, dtype=numpy.float32)
     I_b = numpy.asarray(I_b, dtype=numpy.float32)
-    batch = numpy.broadcast_shapes(m.shape, I_b.shape[:-1])
+    batch = m.shape if m.shape == I_b.shape[:-1] else numpy.broadcast_shapes(m.shape, I_b.shape[:-1])
     I_b_0 = I_b[..., 0]
     I_b_1 = I_b[..., 1]
     I_b_2 = I_b[..., 2]
