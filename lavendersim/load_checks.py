@@ -32,7 +32,8 @@ from .generated import tableaux as TABLEAUX
 def decay_rows(effects: np.ndarray) -> np.ndarray:
     """Boolean mask of the effect table's rows whose effect is a pure linear decay (it has a printed rate)."""
     codes = effects[:, effects_mod.ROW_CODE].astype(np.int64) if len(effects) else np.zeros(0, np.int64)
-    return np.array([effects_mod.spec_for_code(c).is_decay for c in codes], dtype=bool)
+    codes, at = np.unique(codes, return_inverse=True)     # one look-up per code, not per row
+    return np.array([effects_mod.spec_for_code(c).is_decay for c in codes], dtype=bool)[at.reshape(-1)]
 
 
 def decay_stiffness(effects: np.ndarray, params: np.ndarray) -> np.ndarray:

@@ -11,8 +11,8 @@ import numpy as np
 
 from . import validate as V
 from .bodies import P, Q, STATE_SIZE, VEL, W, Body
-from .effects import (MAX_LOAD, ROW_PARAMS, Effect, check_declared, largest_param, load_overflow, make, numpy_apply,
-                      row_width)
+from .effects import (EFFECTS, MAX_LOAD, ROW, ROW_BODY, ROW_CODE, ROW_PARAMS, Effect, check_declared, largest_param,
+                      load_overflow, make, numpy_apply)
 from .frames import PrincipalFrames
 from .generated import layout as LY
 from .kernels import K
@@ -67,6 +67,27 @@ class _EffectList(list):
         super().append(e)
         if self._ix is not None:
             self._add(len(self) - 1, e)
+
+    def append_many(self, effects: list) -> None:
+        """Append effects in order, keeping the index (list.extend drops it)."""
+        start = len(self)
+        list.extend(self, effects)
+        ix = self._ix
+        if ix is None:
+            return
+        if all(getattr(e, "per_body", False) for e in effects):    # (a batch is one class: one pass, inline)
+            pb, models = ix["per_body"], ix["models"]
+            for e in effects:
+                key = (e.name, e.body)
+                pb[key] = pb.get(key, 0) + 1
+                models.setdefault(e.body, []).append(e)
+        elif all(getattr(e, "body", None) is not None and not getattr(e, "per_body", False) for e in effects):
+            on = ix["on"]
+            for k, e in enumerate(effects, start):
+                on.setdefault(e.body, []).append((k, e))
+        else:
+            for k, e in enumerate(effects, start):
+                self._add(k, e)
 
     def has_per_body(self, name: str, body: str) -> bool:
         """A per-body effect `name` on `body` is in the list."""
@@ -368,6 +389,33 @@ class Scene:
         self.effects.append(effect)
         return effect
 
+    def add_effects(self, effect: str, bodies, **params) -> list[Effect]:
+        """Declare one effect on each of many bodies at once: what ``add_effect(effect, body=b, **params_b)`` for
+        each b in order declares, validated over whole arrays (issue 30).
+
+        Parameters
+        ----------
+        effect : str
+            An effect name acting on one body (``"applied_torque"``, ``"reaction_wheels"``, ...).
+        bodies : sequence of str, (n,)
+            The body of each effect, in order.
+        **params
+            The effect's parameters by name: a value of the declared shape is shared by every effect; an array
+            with one more leading axis of length n gives each body its own, e.g. ``torque_w`` (n, 3).
+
+        Returns
+        -------
+        list of Effect
+            The effects as stored, in order.
+
+        Raises
+        ------
+        LavenderInputError
+            The error ``add_effect`` raises for the first body whose effect it refuses (the same field and rule),
+            naming that body; nothing is added.
+        """
+        return _add_effects(self, effect, bodies, params)
+
     def index(self, name: str) -> int:
         """The position of body `name` in the state arrays.
 
@@ -436,13 +484,7 @@ class Scene:
             for i in frames.idx:
                 state[i] = frames.internal_row(int(i), state[i])
         forces = [e for e in self.effects if not e.per_body]
-        width = row_width(forces)
-        rows, rows_of = [], []
-        for e in forces:
-            mine = _effect_rows(e, -1 if e.body is None else self.index(e.body), width, frames, nb)
-            rows_of.append(list(range(len(rows), len(rows) + len(mine))))
-            rows.extend(mine)
-        effects = np.ascontiguousarray(np.array(rows, dtype=np.float64).reshape(len(rows), width))
+        effects, rows_of = _force_table(self, forces, frames, nb)
         return Tables(state, params, effects, forces, rows_of, frames)
 
 
@@ -461,46 +503,57 @@ def _row_norms(a, n: int) -> np.ndarray:
     return np.where(s > 0, s * np.sqrt(np.sum((a / safe[:, None]) ** 2, axis=1)), s)
 
 
+def _load_sums(every: list, effects: "_EffectList | None", x: np.ndarray, params: np.ndarray,
+               pos=None) -> tuple[np.ndarray, np.ndarray]:
+    """Σ_e |F_e| and Σ_e |tau_e| per body (rows of the initial states x (n, 13) and [m, I_b] rows params (n, 4))
+    over the declared every-body force effects `every` and (effects given) the per-body force effects of `effects`
+    on each body (pos: body name -> row), each evaluated in one batched call of its printed NumPy function.
+
+    A body whose sums stay below MAX_LOAD by a margin (_clear; also over its mass and smallest moment) cannot
+    overflow with any subset of these effects: the exact, per-body check (load_overflow) runs on the others only
+    (a non-finite term is never cleared; a function that fails on a batch raises, and the caller checks all)."""
+    n = len(x)
+    m, I_b = params[:, LY.PARAM_M], params[:, LY.PARAM_I_B]
+    SF, ST = np.zeros(n), np.zeros(n)
+    with np.errstate(all="ignore"):
+        for e in every:   # on every body
+            p = e.params_flat()
+            f, t = numpy_apply(e.code)(np.broadcast_to(p, (n, p.size)), x, x[:, LY.STATE_V_W], m, I_b)
+            SF += _row_norms(f, n)
+            ST += _row_norms(t, n)
+        groups: dict[int, tuple[list, list]] = {}       # effects on one body each, by code
+        for body, mine in (effects._index()["on"].items() if effects is not None else ()):
+            for _, e in mine:
+                if body in pos and _declared(e):
+                    idx, ps = groups.setdefault(e.code, ([], []))
+                    idx.append(pos[body])
+                    ps.append(e.params_flat())
+        for code, (idx, ps) in groups.items():
+            k = np.asarray(idx, dtype=np.int64)
+            xs = x[k]
+            f, t = numpy_apply(code)(np.stack(ps), xs, xs[:, LY.STATE_V_W], m[k], I_b[k])
+            np.add.at(SF, k, _row_norms(f, k.size))
+            np.add.at(ST, k, _row_norms(t, k.size))
+    return SF, ST
+
+
+def _clear(SF: np.ndarray, ST: np.ndarray, params: np.ndarray) -> np.ndarray:
+    """Bodies whose load sums (see _load_sums) stay below MAX_LOAD by the margin, as force, torque and both
+    accelerations."""
+    lim = MAX_LOAD * (1 - _BOUND_MARGIN)
+    with np.errstate(all="ignore"):
+        return ((SF <= lim) & (ST <= lim) & (SF / params[:, LY.PARAM_M] <= lim)
+                & (ST / np.min(params[:, LY.PARAM_I_B], axis=1) <= lim))
+
+
 def _overflow_suspects(every: list, effects: "_EffectList | None", x: np.ndarray, params: np.ndarray,
                        pos=None) -> np.ndarray:
-    """The bodies (rows of the initial states x (n, 13) and [m, I_b] rows params (n, 4), in order) on which the
-    declared every-body force effects `every` together with (effects given) the per-body force effects of
-    `effects` on each body (pos: body name -> row) might overflow: the exact, per-body check (load_overflow)
-    runs on these only.
-
-    A body is cleared when the triangle bound Σ_e |F_e| (and Σ_e |tau_e|, and both over the body's mass and
-    smallest moment) of every declared force effect on it, the new one included, each evaluated in one batched
-    call of its printed NumPy function at the initial states, stays below MAX_LOAD by a margin: then neither
-    the new effect alone nor the sum can exceed the bound. Anything the bound cannot decide (a non-finite term,
-    a function that fails on a batch) leaves the body — or, on an error, every body — to the exact check."""
-    n = len(x)
+    """The bodies (rows of x, in order) the exact overflow check must look at: those _load_sums cannot clear, or
+    every body when an effect cannot run batched."""
     try:
-        m, I_b = params[:, LY.PARAM_M], params[:, LY.PARAM_I_B]
-        SF, ST = np.zeros(n), np.zeros(n)
-        with np.errstate(all="ignore"):
-            for e in every:   # on every body
-                p = e.params_flat()
-                f, t = numpy_apply(e.code)(np.broadcast_to(p, (n, p.size)), x, x[:, LY.STATE_V_W], m, I_b)
-                SF += _row_norms(f, n)
-                ST += _row_norms(t, n)
-            groups: dict[int, tuple[list, list]] = {}       # effects on one body each, by code
-            for body, mine in (effects._index()["on"].items() if effects is not None else ()):
-                for _, e in mine:
-                    if body in pos and _declared(e):
-                        idx, ps = groups.setdefault(e.code, ([], []))
-                        idx.append(pos[body])
-                        ps.append(e.params_flat())
-            for code, (idx, ps) in groups.items():
-                k = np.asarray(idx, dtype=np.int64)
-                xs = x[k]
-                f, t = numpy_apply(code)(np.stack(ps), xs, xs[:, LY.STATE_V_W], m[k], I_b[k])
-                np.add.at(SF, k, _row_norms(f, k.size))
-                np.add.at(ST, k, _row_norms(t, k.size))
-            lim = MAX_LOAD * (1 - _BOUND_MARGIN)
-            ok = (SF <= lim) & (ST <= lim) & (SF / m <= lim) & (ST / np.min(I_b, axis=1) <= lim)
+        return np.flatnonzero(~_clear(*_load_sums(every, effects, x, params, pos), params))
     except Exception:   # noqa: BLE001  (a user effect that cannot run batched: the exact check decides everywhere)
-        return np.arange(n)
-    return np.flatnonzero(~ok)
+        return np.arange(len(x))
 
 
 class Tables(NamedTuple):
@@ -512,6 +565,63 @@ class Tables(NamedTuple):
     forces: list
     rows_of: list
     frames: PrincipalFrames | None
+
+
+def _force_table(scene: Scene, forces: list, frames: PrincipalFrames | None, nb: int) -> tuple[np.ndarray, list]:
+    """The effect table of the force effects (one row each, [code, body, parameters …]; an every-body effect with a
+    body-frame parameter in a scene with a rotated body one row per body) and each effect's rows. Runs of effects
+    of one class that need no rotation are stacked batched (the rows Effect.row writes, without a call each)."""
+    pos, at = scene._bodies.positions, scene._bodies._c["pos"]
+    blocks, rows_of, k, lo = [], [], 0, 0
+    while lo < len(forces):
+        e = forces[lo]
+        hi = lo + 1
+        if _unrotated(e, frames, pos):
+            while hi < len(forces) and type(forces[hi]) is type(e) and _unrotated(forces[hi], frames, pos):
+                hi += 1
+            run = forces[lo:hi]
+            body = np.fromiter((-1 if f.body is None else at.get(f.body, -2) for f in run), np.float64, len(run))
+            if (body == -2).any() or (body >= nb).any():   # a body not (yet) in the scene: index raises naming it
+                scene.index(run[int(np.flatnonzero((body == -2) | (body >= nb))[0])].body)
+            flat = _stacked_params(run)
+            block = np.zeros((len(run), ROW_PARAMS + flat.shape[1]))
+            block[:, ROW_CODE], block[:, ROW_BODY], block[:, ROW_PARAMS:] = e.code, body, flat
+            rows_of.extend([j] for j in range(k, k + len(run)))
+        else:
+            block = _effect_rows(e, -1 if e.body is None else scene.index(e.body), 0, frames, nb)
+            block = np.array(block, dtype=np.float64).reshape(len(block), -1)
+            rows_of.append(list(range(k, k + len(block))))
+        blocks.append(block)
+        k += len(block)
+        lo = hi
+    width = max([ROW] + [b.shape[1] for b in blocks])
+    table = np.zeros((k, width))
+    k = 0
+    for b in blocks:
+        table[k:k + len(b), :b.shape[1]] = b
+        k += len(b)
+    return table, rows_of
+
+
+def _unrotated(e: Effect, frames: PrincipalFrames | None, pos) -> bool:
+    """Effect e's row needs no rotation into a principal frame (see _effect_rows)."""
+    if frames is None or not any(p.frame == "body" for p in (e.spec.params if e.spec is not None else ())):
+        return True
+    return e.body is not None and e.body in pos and frames.rotation(pos[e.body]) is None
+
+
+def _stacked_params(run: list) -> np.ndarray:
+    """Effect.params_flat of each effect of one class, stacked (k, n_params)."""
+    fields = type(run[0]).fields
+    try:
+        cols = [np.asarray([e.values[f] for e in run], dtype=np.float64).reshape(len(run), -1) for f in fields]
+    except ValueError:     # parameters of different lengths: one call each
+        flats = [e.params_flat() for e in run]
+        out = np.zeros((len(run), max(f.size for f in flats)))
+        for j, f in enumerate(flats):
+            out[j, :f.size] = f
+        return out
+    return np.concatenate(cols, axis=1) if cols else np.zeros((len(run), 0))
 
 
 def _effect_rows(e: Effect, body_index: int, width: int, frames: PrincipalFrames | None, nb: int) -> list[np.ndarray]:
@@ -689,3 +799,195 @@ class _Added(Sequence):
 
 
 Scene.add_bodies = add_bodies
+
+
+# ---- batched add_effects (issue 30): add_effect's checks over whole arrays ------------------------------------
+
+def _add_effects(scene: Scene, name, bodies, params: dict) -> list[Effect]:
+    """Scene.add_effects: a vectorized screen flags every row that might fail one of add_effect's checks (a
+    parameter's rule, an unknown or repeated body, the body check of wheels and joints, an overflowing load);
+    the unflagged stretches are appended directly and each flagged row goes through add_effect itself, in order.
+    The screen never clears a row add_effect would refuse, so the first refusal is add_effect's; it is raised
+    naming the body, after every effect of this call has been taken out again."""
+    if isinstance(bodies, (str, bytes)) or not hasattr(bodies, "__len__"):
+        raise V.LavenderInputError("bodies", "expected a sequence of body names", f", got {V._describe(bodies)}")
+    bodies = list(bodies)
+    n = len(bodies)
+    if n == 0:
+        return []
+    per_row = {}                    # parameter -> (n, ...) float64 array of one value per body
+    shared = dict(params)
+    cls = EFFECTS.get(name) if isinstance(name, str) else None
+    flags = np.zeros(n, bool)
+    flags[0] = True                 # the first row through add_effect: it validates the shared values and the class
+    if cls is None or cls.spec is None:
+        flags[:] = True
+    else:
+        specs = {p.name: p for p in cls.spec.params}
+        for f, v in params.items():
+            p = specs.get(f)
+            a = _per_body_values(v, p, n)
+            if a is None:
+                continue
+            per_row[f] = a
+            del shared[f]
+            flags |= _breaks_rule(a, p)
+    table = scene._bodies
+    pos = table._c["pos"]
+    idx = np.fromiter((pos.get(b, -1) if isinstance(b, str) and b else -1 for b in bodies), np.int64, n)
+    flags |= idx < 0
+    first = scene.effects.__len__()
+    effects = []
+    if not flags.all():
+        try:   # a shared value the screen cannot read is judged by add_effect on row 0: then every row goes there
+            flags |= _model_flags(scene, cls, idx, per_row, shared, bodies)
+            if not cls.per_body and _declared_class(cls):
+                flags |= _load_flags(scene, cls, idx, per_row, shared, n)
+        except Exception:   # noqa: BLE001
+            flags[:] = True
+    try:
+        for lo, hi, bad in _stretches(flags):
+            if bad:
+                for i in range(lo, hi):
+                    try:
+                        scene.add_effect(name, body=bodies[i], **_row_params(shared, per_row, i))
+                    except V.LavenderInputError as err:
+                        raise V.LavenderInputError(err.field, err.rule, f"{err.detail} (bodies[{i}] = {bodies[i]!r})") from None
+                effects.extend(scene.effects[len(scene.effects) - (hi - lo):])
+            else:
+                new = _make_rows(scene.effects[first], shared, per_row, bodies, lo, hi)
+                scene.effects.append_many(new)
+                effects.extend(new)
+    except BaseException:
+        del scene.effects[first:]       # nothing half-applied
+        raise
+    return effects
+
+
+def _per_body_values(v, p, n: int) -> np.ndarray | None:
+    """Parameter value v as one value per body (a float64 (n, *shape) array), or None when it is one shared
+    value (of the declared shape) — or anything the screen does not read (add_effect judges it on row 0)."""
+    if p is None:
+        return None
+    try:
+        a = np.asarray(v)
+    except Exception:   # noqa: BLE001
+        return None
+    if a.dtype.kind not in "iuf" or a.ndim != len(p.shape) + 1 or a.shape[0] != n:
+        return None
+    return np.asarray(a, dtype=np.float64)
+
+
+def _breaks_rule(a: np.ndarray, p) -> np.ndarray:
+    """Rows of a per-body parameter array that break its declared rule (finite; > 0 / >= 0; an upto length)."""
+    flat = a.reshape(len(a), -1)
+    with np.errstate(invalid="ignore"):
+        bad = ~np.isfinite(flat).all(axis=1)
+        if p.rule == "positive":
+            bad |= ~(flat > 0).all(axis=1)
+        elif p.rule == "nonnegative":
+            bad |= ~(flat >= 0).all(axis=1)
+    if (p.upto and not 1 <= a.shape[1] <= p.shape[0]) or (not p.upto and a.shape[1:] != tuple(p.shape)):
+        bad[:] = True
+    return bad
+
+
+def _model_flags(scene: Scene, cls, idx: np.ndarray, per_row: dict, shared: dict, bodies: list) -> np.ndarray:
+    """Rows a per-body (model) effect might be refused on: the body has one already, or earlier in this call;
+    the wheels' check against the body where it is not the plain J < I_b of three wheels on the body axes."""
+    n = len(idx)
+    flags = np.zeros(n, bool)
+    if not cls.per_body:
+        return flags
+    ix = scene.effects._index()["per_body"]
+    flags |= np.fromiter(((cls.name, b) in ix for b in bodies), bool, n)
+    _, first = np.unique(idx, return_index=True)
+    repeat = np.ones(n, bool)
+    repeat[first] = False
+    flags |= repeat
+    if not hasattr(cls, "check_body"):
+        return flags
+    given = scene._bodies._c["given"]
+    axes = shared.get("axes_b", cls.defaults.get("axes_b"))
+    simple = (cls.name == "reaction_wheels" and "axes_b" not in per_row and "cutoff" not in per_row
+              and axes is not None and np.array_equal(np.asarray(axes, dtype=float), np.eye(3))
+              and not (given and any(int(i) in given and not given[int(i)].principal for i in idx)))
+    if not simple:
+        flags[:] = True
+        return flags
+    _, params, _ = scene._bodies.arrays()
+    J = per_row["J"] if "J" in per_row else np.asarray(shared.get("J"), dtype=np.float64)[None]
+    if J.shape[1:] != (3,):
+        flags[:] = True
+        return flags
+    with np.errstate(invalid="ignore"):
+        flags |= ~(J < params[np.maximum(idx, 0)][:, LY.PARAM_I_B]).all(axis=1)
+    return flags
+
+
+def _declared_class(cls) -> bool:
+    return _declared(object.__new__(cls))
+
+
+def _load_flags(scene: Scene, cls, idx: np.ndarray, per_row: dict, shared: dict, n: int) -> np.ndarray:
+    """Rows whose body might be refused for an overflowing load: the triangle bound (see _overflow_suspects) of
+    the scene's force effects on the body plus every effect of this call on it is not clear of MAX_LOAD."""
+    x, params, _ = scene._bodies.arrays()
+    try:
+        SF, ST = _load_sums([e for e in scene.effects.forces_on(None) if _declared(e)], scene.effects, x, params,
+                            scene._bodies.positions)
+        k = np.maximum(idx, 0)
+        P = _flat_params(cls, shared, per_row, n)
+        with np.errstate(all="ignore"):
+            f, t = numpy_apply(cls.code)(P, x[k], x[k][:, LY.STATE_V_W], params[k, LY.PARAM_M], params[k][:, LY.PARAM_I_B])
+            np.add.at(SF, k, _row_norms(f, n))
+            np.add.at(ST, k, _row_norms(t, n))
+            ok = _clear(SF, ST, params)
+    except Exception:   # noqa: BLE001  (the exact check decides)
+        return np.ones(n, bool)
+    return ~ok[k]
+
+
+def _flat_params(cls, shared: dict, per_row: dict, n: int) -> np.ndarray:
+    """The effects' parameters in row order (Effect.params_flat per row), (n, n_params)."""
+    cols = []
+    for f in cls.fields:
+        v = per_row[f] if f in per_row else np.broadcast_to(
+            np.asarray(shared.get(f, cls.defaults.get(f)), dtype=np.float64), (n,) + np.shape(shared.get(f, cls.defaults.get(f))))
+        cols.append(np.asarray(v, dtype=np.float64).reshape(n, -1))
+    return np.concatenate(cols, axis=1) if cols else np.zeros((n, 0))
+
+
+def _stretches(flags: np.ndarray):
+    """(lo, hi, flagged) runs of equal flags, in order."""
+    edges = np.flatnonzero(np.diff(flags.astype(np.int8))) + 1
+    bounds = [0, *edges.tolist(), len(flags)]
+    return [(lo, hi, bool(flags[lo])) for lo, hi in zip(bounds[:-1], bounds[1:])]
+
+
+def _row_params(shared: dict, per_row: dict, i: int) -> dict:
+    return {**shared, **{f: a[i] for f, a in per_row.items()}}
+
+
+def _make_rows(template: Effect, shared: dict, per_row: dict, bodies: list, lo: int, hi: int) -> list[Effect]:
+    """Effects lo..hi-1 like `template` (the call's first effect, which add_effect validated): its values for the
+    shared parameters, read-only rows of the validated per-body arrays for the others; built as Effect.__init__
+    would after validating (it refuses setattr)."""
+    cls, tv = type(template), template.values
+    cols = {}
+    for f, a in per_row.items():
+        a.flags.writeable = False
+        cols[f] = a[lo:hi].tolist() if a.ndim == 1 else list(a[lo:hi])
+    base = {f: tv[f] for f in cls.fields}      # in field order, as Effect.__init__ builds it
+    out = []
+    new = object.__new__
+    for j, i in enumerate(range(lo, hi)):
+        e = new(cls)
+        d = e.__dict__
+        values = base.copy()
+        for f, col in cols.items():
+            values[f] = col[j]
+        d["body"] = bodies[i]
+        d["values"] = MappingProxyType(values)
+        out.append(e)
+    return out

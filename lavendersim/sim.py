@@ -233,6 +233,22 @@ def _integrator(name) -> str:
     return V.choice("integrator", name, backends.INTEGRATORS)
 
 
+def _wheel_rows(rows: np.ndarray, n_w: int, group: list) -> None:
+    """The model rows of bodies whose only model effect is reaction_wheels with n_w wheels, in a principal body
+    frame: what Sim._model_row writes for each ((body index, effect) pairs), for all of them at once."""
+    idx = np.array([i for i, _ in group], dtype=np.int64)
+    vals = [e.values for _, e in group]
+    pad_J = np.ones((len(idx), LY.WHEELS_MAX))
+    pad_J[:, :n_w] = np.stack([v["J"] for v in vals])
+    pad_A = np.zeros((len(idx), 3, LY.WHEELS_MAX))
+    pad_A[:, :, :n_w] = np.stack([v["axes_b"] for v in vals]).transpose(0, 2, 1)    # A_b = axes_bᵀ
+    rows[idx, LY.MODEL_J], rows[idx, LY.MODEL_A_B] = pad_J, pad_A.reshape(len(idx), -1)
+    for f, col in (("torque_limit", LY.MODEL_TORQUE_LIMIT), ("speed_limit", LY.MODEL_SPEED_LIMIT),
+                   ("c_w", LY.MODEL_C_W), ("cutoff", LY.MODEL_CUTOFF)):
+        rows[idx, col] = [v[f] for v in vals]
+    rows[idx, LY.MODEL_KIND] = KIND_WHEELS
+
+
 def _rebuild_sim(bodies: list, effects: list, kwargs: dict, state: dict) -> "Sim":
     """Unpickle a Sim: build it from its scene and settings, then load its snapshot."""
     scene = Scene()
@@ -432,8 +448,11 @@ class Sim:
         table = scene._bodies.frozen()     # the scene's bodies now (arrays; Body objects built on access)
         self.names = tuple(table)                               # read-only: a pickle rebuilds the Sim from them
         self.bodies = types.MappingProxyType(table)
+        checked = set()
         for e in scene.effects:  # an effect no declaration printed is an error, never a no-op
-            effects_mod.check_declared(e)
+            if type(e) not in checked:     # (name, code and spec are class attributes: one check per class)
+                effects_mod.check_declared(e)
+                checked.add(type(e))
         tables = scene.tables()   # a body given a full inertia tensor is stepped in its principal frame
         self._x, self._params, self._effects = tables.state, tables.params, tables.effects
         self._frames = tables.frames
@@ -913,9 +932,19 @@ class Sim:
             if e.per_body:
                 modelled.setdefault(e.body, {})[e.name] = e
         self._modelled = modelled
-        for i, name in enumerate(self.names):
-            if name in modelled:
-                self._model_row(i, modelled[name], rows)
+        wheels_only: dict[int, list] = {}     # wheel count -> [(body index, effect)]: rows written batched
+        at = scene._bodies._c["pos"]          # (every modelled body is one of this Sim's: the scene checked it)
+        for name, me in modelled.items():
+            i = at.get(name, nb)
+            if i >= nb:           # not one of this Sim's bodies (an effects list assigned by hand): no row, as before
+                continue
+            if len(me) == 1 and "reaction_wheels" in me and (self._frames is None or self._frames.rotation(i) is None):
+                e = me["reaction_wheels"]
+                wheels_only.setdefault(e.values["J"].size, []).append((i, e))
+            else:
+                self._model_row(i, me, rows)
+        for n_w, group in wheels_only.items():
+            _wheel_rows(rows, n_w, group)
         self._wheel_n = np.zeros(nb, np.int64)  # wheels per body (the model rows' layouts never change)
         wheeled = np.flatnonzero(rows[:, LY.MODEL_KIND].astype(np.int64) & KIND_WHEELS)
         self._wheel_n[wheeled] = backends.wheel_counts(rows[wheeled])

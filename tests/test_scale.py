@@ -2,6 +2,7 @@
 loop it replaced), and Scene.add_effect indexes effects per body (the same refusals, O(1) per call).
 
 Behaviour only: no timing here (the figures are in the issue's note, measured in CPU time)."""
+import pickle
 import warnings
 
 import numpy as np
@@ -12,6 +13,7 @@ from lavendersim import backends
 from lavendersim import sim as sim_mod
 from lavendersim.errors import DivergenceError, ValidityBoundWarning
 from lavendersim.generated import layout as LY
+from lavendersim.effects import ImmutableEffectError
 from lavendersim.validate import LavenderInputError
 
 
@@ -300,3 +302,128 @@ def test_every_body_effects_refused_exactly_where_the_scan_refused(seed):
             refused += 1
             assert _refusal(sc, e)[1] == want
     assert refused >= 2 and tried - refused >= 2
+
+
+# ---- session 14: bodies kept as arrays, Scene.add_effects, batched Sim construction ----------------------------
+
+def _plain(n, seed=7, **kw):
+    rng = np.random.default_rng(seed)
+    sc = lv.Scene()
+    sc.add_bodies([f"b{i}" for i in range(n)], 10.0 ** rng.uniform(-1, 1, n), rng.uniform(1.0, 1.5, (n, 3)),
+                  omega_b=rng.normal(size=(n, 3)), p_w=rng.normal(size=(n, 3)), **kw)
+    return sc
+
+
+def _mixed_by_loop(n, tq, J):
+    """The scene add_effects builds, one add_effect per body (the path it must equal)."""
+    sc = _plain(n)
+    for i in range(n):
+        sc.add_effect("reaction_wheels", body=f"b{i}", J=J[i], torque_limit=0.1, speed_limit=50.0)
+    for i in range(n):
+        sc.add_effect("applied_torque", body=f"b{i}", torque_w=tq[i])
+    sc.add_effect("gravity", g_w=[0.0, 0.0, -9.81])
+    sc.add_effect("force_at_point", body="b3", F_w=[1.0, 0.0, 0.0], r_b=[0.0, 0.1, 0.0])
+    return sc
+
+
+@pytest.mark.parametrize("backend", ["c", "numpy"])
+def test_add_effects_builds_the_scene_and_sim_the_loop_builds_bitwise(backend):
+    n = 40
+    rng = np.random.default_rng(3)
+    tq, J = rng.normal(size=(n, 3)) * 1e-3, rng.uniform(1e-4, 5e-4, (n, 3))
+    one = _mixed_by_loop(n, tq, J)
+    many = _plain(n)
+    names = [f"b{i}" for i in range(n)]
+    wheels = many.add_effects("reaction_wheels", names, J=J, torque_limit=0.1, speed_limit=50.0)
+    torques = many.add_effects("applied_torque", names, torque_w=tq)
+    many.add_effect("gravity", g_w=[0.0, 0.0, -9.81])
+    many.add_effect("force_at_point", body="b3", F_w=[1.0, 0.0, 0.0], r_b=[0.0, 0.1, 0.0])
+    assert [e.body for e in wheels] == names == [e.body for e in torques]
+    assert [repr(e) for e in sorted(one.effects, key=repr)] == [repr(e) for e in sorted(many.effects, key=repr)]
+    assert many.model_effects("b5")["reaction_wheels"] is wheels[5]
+    with pytest.raises(ImmutableEffectError):
+        torques[0].body = "b1"
+    assert not torques[2].values["torque_w"].flags.writeable
+    sa, sb = lv.Sim(one, dt=1e-3, backend=backend), lv.Sim(many, dt=1e-3, backend=backend)
+    # the force table lists the same rows (the loop interleaves the two effects per body: compare as sets)
+    assert sorted(map(tuple, sa.effects)) == sorted(map(tuple, sb.effects))
+    assert np.array_equal(sa.model.rows, sb.model.rows) and np.array_equal(sa.x, sb.x)
+    sa.run(30)
+    sb.run(30)
+    assert np.array_equal(sa.x, sb.x) and np.array_equal(sa.model.Omega, sb.model.Omega)
+
+
+@pytest.mark.parametrize("bad, field, at", [
+    (lambda tq: np.r_[tq[:7], [[np.nan, 0, 0]], tq[8:]], "applied_torque.torque_w", 7),
+    (lambda tq: np.r_[tq[:11], [[1e301, 0, 0]], tq[12:]], "applied_torque.torque_w", 11),
+])
+def test_add_effects_refuses_the_first_bad_body_as_add_effect_does_and_adds_nothing(bad, field, at):
+    n = 20
+    tq = bad(np.random.default_rng(1).normal(size=(n, 3)))
+    names = [f"b{i}" for i in range(n)]
+    loop = _plain(n)
+    with pytest.raises(LavenderInputError) as one:
+        for i in range(n):
+            loop.add_effect("applied_torque", body=names[i], torque_w=tq[i])
+    sc = _plain(n)
+    before = list(sc.effects)
+    with pytest.raises(LavenderInputError) as many:
+        sc.add_effects("applied_torque", names, torque_w=tq)
+    assert many.value.field == one.value.field == field and many.value.rule == one.value.rule
+    assert str(many.value) == str(one.value) + f" (bodies[{at}] = 'b{at}')"
+    assert sc.effects == before and not sc.effects.has_per_body("applied_torque", "b0")
+    assert len(lv.Sim(sc, dt=1e-3).effects) == 0          # nothing half-applied
+
+
+def test_add_effects_refuses_per_body_duplicates_unknown_bodies_and_heavy_wheels_by_name():
+    sc = _plain(6)
+    sc.add_effect("reaction_wheels", body="b3", J=[1e-4] * 3, torque_limit=0.1, speed_limit=50.0)
+    cases = [(["b0", "b1", "b3"], [1e-4] * 3, "reaction_wheels.body: body 'b3' already has a reaction_wheels; at most "
+              "one per body (bodies[2] = 'b3')"),
+             (["b0", "b1", "b0"], [1e-4] * 3, "(bodies[2] = 'b0')"),
+             (["b0", "nope"], [1e-4] * 3, "reaction_wheels.body: unknown body 'nope'"),
+             (["b0", "b1"], [[1e-4] * 3, [1e-4, 5.0, 1e-4]], "reaction_wheels.J: J[1] must be below the body's "
+              "principal moment")]
+    for bodies, J, text in cases:
+        with pytest.raises(LavenderInputError, match=None) as err:
+            sc.add_effects("reaction_wheels", bodies, J=np.asarray(J) if np.ndim(J) == 2 else J, torque_limit=0.1,
+                           speed_limit=50.0)
+        assert text in str(err.value) and f"bodies[{len(bodies) - 1}]" in str(err.value)
+        assert [e.body for e in sc.effects] == ["b3"]
+    with pytest.raises(LavenderInputError, match=r"^effect: .*bodies\[0\]"):
+        sc.add_effects("no_such_effect", ["b0"])
+    assert sc.add_effects("applied_torque", []) == []
+
+
+def test_bodies_of_add_bodies_are_arrays_until_asked_for_and_keep_their_identity():
+    sc = _plain(5)
+    given = sc.add_body(lv.Body("g", 2.0, (1.0, 1.0, 1.5), omega_b=(0.0, 0.0, 1.0)))
+    more = sc.add_bodies(["c0", "c1"], [1.0, 3.0], [[1.0, 1.0, 1.0], [1.0, 2.0, 2.5]])
+    assert list(sc.bodies) == [f"b{i}" for i in range(5)] + ["g", "c0", "c1"] and len(more) == 2
+    assert more[1] is sc.bodies["c1"] and more[-1] is more[1] and sc.bodies["g"] is given
+    assert more[1].mass == 3.0 and np.array_equal(more[1].I_b, [1.0, 2.0, 2.5])
+    assert not more[1].x0.flags.writeable and more[1].principal
+    assert "c1" in sc.bodies and "zz" not in sc.bodies and ["unhashable"] not in sc.bodies
+    assert sc.index("c0") == 6 and sc.index("g") == 5
+    sim = lv.Sim(sc, dt=1e-3)
+    sc.add_bodies(["late"], [1.0], [[1.0, 1.0, 1.0]])            # after the Sim: not one of its bodies
+    assert "late" not in sim.bodies and len(sim.bodies) == 8 and sim.names[-1] == "c1"
+    with pytest.raises(LavenderInputError, match="unknown body 'late'"):
+        sim.state("late")
+    back = pickle.loads(pickle.dumps(sc))
+    assert list(back.bodies) == list(sc.bodies) and np.array_equal(back.tables().state, sc.tables().state)
+    s2 = pickle.loads(pickle.dumps(sim))
+    assert np.array_equal(s2.x, sim.x) and s2.names == sim.names
+
+
+def test_a_scene_wide_effect_then_add_bodies_refuses_the_first_overflowing_row_as_add_body_does():
+    sc = lv.Scene()
+    sc.add_body(lv.Body("a", 1.0, (1.0, 1.0, 1.0)))
+    sc.add_effect("gravity", g_w=[0.0, 0.0, -1e299])
+    masses = [1.0, 2.0, 50.0, 60.0]                            # |F| = m g: 5e300 is the first beyond 1e300
+    with pytest.raises(LavenderInputError) as many:
+        sc.add_bodies(["p", "q", "r", "s"], masses, [[1.0, 1.0, 1.0]] * 4)
+    with pytest.raises(LavenderInputError) as one:
+        sc.add_body(lv.Body("r", 50.0, (1.0, 1.0, 1.0)))
+    assert many.value.field == "names[2]" and one.value.rule in many.value.rule
+    assert list(sc.bodies) == ["a"]
