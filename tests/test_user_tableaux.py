@@ -8,6 +8,7 @@ among them; the derived bounds reproduce the built-ins' rules.
 """
 from __future__ import annotations
 
+import json
 import math
 import os
 import pickle
@@ -354,3 +355,16 @@ def test_the_accuracy_lab_measures_it_with_its_declared_order(guide):
     assert len(wrong) == 2 and not any(c.passed for c in wrong)
     with pytest.raises(LavenderInputError, match="kutta4"):
         accuracy.compute("auto", quick=True, mujoco=False, workers=1, integrators=["kutta4"])
+
+
+def test_lab_accuracy_takes_it_on_the_command_line(guide, tmp_path):
+    """`lavendersim lab accuracy --integrators kutta3` (the guide's sentence), quick, as a user runs it."""
+    r = run_lavendersim(["lab", "accuracy", "--quick", "--no-mujoco", "--workers", "1", "--integrators", "kutta3",
+                         "--json", "--out", str(tmp_path)], guide["work"], guide["env"])
+    assert r.returncode == 0, r.stderr
+    d = json.loads(r.stdout)
+    assert d["integrators"] == "kutta3" and d["passed"] is True
+    assert d["check_order_kutta3_box_w1"] is True and abs(d["order_kutta3_c_box_w1"] - 3.0) < 0.1
+    bad = run_lavendersim(["lab", "accuracy", "--quick", "--integrators", "kutta4", "--out", str(tmp_path)],
+                          guide["work"], guide["env"])
+    assert bad.returncode == 2 and len(bad.stderr.strip().splitlines()) == 1 and "kutta4" in bad.stderr
