@@ -585,15 +585,16 @@ def divergence_cause(x_before: np.ndarray, dt: float, integrator: str, Omega_bef
         W = None if Omega_before is None else float(np.linalg.norm(Omega_before))
     if not np.all(np.isfinite(x_before)) or (Omega_before is not None and not np.all(np.isfinite(Omega_before))):
         return "the state was already non-finite before the step"
+    tab = USER_TABLEAUX.get(integrator)   # a user's tableau carries its own bounds (derive/user.py)
     if wheels is not None:
         J, c_w = np.asarray(wheels[0], dtype=np.float64), float(wheels[1])
         stiff = c_w * dt / float(np.min(J))
-        wlimit = TABLEAUX.REAL_AXIS_STABILITY.get(integrator)      # from the integrator's own tableau
+        wlimit = tab.real_axis if tab else TABLEAUX.REAL_AXIS_STABILITY.get(integrator)   # from its own tableau
         if wlimit is not None and stiff > wlimit:
             return (f"wheel damping c_w*dt/J = {stiff:.3g} is beyond the stability limit of {integrator} "
                     f"({wlimit:.4g}); the wheel rates Omega blew up: reduce dt or c_w")
     wdt = w * dt
-    limit = TABLEAUX.WDT_MAX.get(integrator)                    # the validity bound (derive/tableaux.py)
+    limit = tab.wdt_max if tab else TABLEAUX.WDT_MAX.get(integrator)   # the validity bound (derive/tableaux.py)
     if limit is not None and wdt > limit:
         return (f"|omega|*dt = {wdt:.3g} is beyond {integrator}'s validity bound (|omega|*dt <= {limit:.4g}, "
                 "times (I_max/I_min)**WDT_RATIO_EXPONENT); reduce dt")
