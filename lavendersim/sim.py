@@ -72,7 +72,8 @@ rtol/atol with a fixed-step integrator) raise LavenderInputError at construction
 
 Divergence before infinity (checked per chunk of steps, so the stepping itself is unchanged bit for bit):
 a run is advanced in chunks of about CHUNK_WORK right-hand-side evaluations (on the C backend with a fixed-step
-integrator at least CHUNK_MIN_STEPS steps within CHUNK_WORK_MAX evaluations); after each chunk every body
+integrator at least CHUNK_MIN_STEPS steps within CHUNK_WORK_MAX evaluations, CHUNK_WORK_MAX_PLAIN for a scene of
+plain bodies without effects); after each chunk every body
 is checked against
 
 * its integrator's validity bound, |omega|*dt*(I_max/I_min)**p <= WDT_MAX (declared once in
@@ -127,11 +128,14 @@ CHUNK_WORK = 2**20         # right-hand-side evaluations (summed over bodies) pe
 CHUNK_MIN_STEPS = 64       # C backend, fixed step: a chunk is at least this many steps (a call's setup and checks,
 CHUNK_WORK_MAX = 2**25     # ~60-100 ns per body, then cost ~1-2 ns per body-step) within this many evaluations (the
                            # latency of KeyboardInterrupt: ~0.1 s for plain RK4 bodies, ~4 s for wheeled ones)
+CHUNK_WORK_MAX_PLAIN = 2**28   # the same for plain bodies without effects (the SIMD tiles, ~1.5 ns per evaluation):
+                           # at 1e6 bodies a chunk stays 64 steps (~0.5 s); at 8 the C call streaming the state in
+                           # and out and the check reading it cost 1.3-1.4x the stepping (measured, issue 30)
 ON_BOUND = ("raise", "warn")
 FAST_STEP_WORK = 4096      # step() runs inside C (holding the GIL) for scenes of at most this many evaluations per step
 
 
-def chunk_steps(work: int, long_ok: bool) -> int:
+def chunk_steps(work: int, long_ok: bool, cap: int | None = None) -> int:
     """Steps per backend call between checks: CHUNK_WORK's worth, and with long_ok at least CHUNK_MIN_STEPS as
     long as that stays within CHUNK_WORK_MAX evaluations (large scenes, whose checks and C setup per call would
     otherwise be paid every step or two).
@@ -142,6 +146,8 @@ def chunk_steps(work: int, long_ok: bool) -> int:
         Right-hand-side evaluations per step, summed over the bodies.
     long_ok : bool
         The C backend with a fixed-step integrator (its results do not depend on the chunk edges).
+    cap : int, optional
+        The most evaluations a long chunk takes (default CHUNK_WORK_MAX).
 
     Returns
     -------
@@ -150,7 +156,7 @@ def chunk_steps(work: int, long_ok: bool) -> int:
     """
     work = max(1, work)
     n = max(1, CHUNK_WORK // work)
-    return max(n, min(CHUNK_MIN_STEPS, CHUNK_WORK_MAX // work)) if long_ok else n
+    return max(n, min(CHUNK_MIN_STEPS, (CHUNK_WORK_MAX if cap is None else cap) // work)) if long_ok else n
 
 
 def _read_only_views(x: np.ndarray, Omega: np.ndarray, applied: np.ndarray) -> tuple[np.ndarray, ...]:
@@ -741,7 +747,9 @@ class Sim:
         self._py_growth = bool(self._free_wheels_idx or (self._budget is not None and self._budget.wheeled))
         self._warned: set[int] = set()
         evals = self._per_step if self._per_step is not None else 12
-        self._chunk = chunk_steps(nb * evals, self.backend.name == "c" and self._per_step is not None)
+        plain = not self._has_models and not len(self._effects)     # the SIMD tiles: a longer chunk still returns soon
+        self._chunk = chunk_steps(nb * evals, self.backend.name == "c" and self._per_step is not None,
+                                  CHUNK_WORK_MAX_PLAIN if plain else CHUNK_WORK_MAX)
         self._reference()
 
     def _invariants(self, x: np.ndarray, Omega: np.ndarray, reference: bool = False) -> tuple[np.ndarray, np.ndarray]:
