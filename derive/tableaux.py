@@ -91,6 +91,9 @@ STATUS = (("OK", 0, "the steps were taken"),
 RK4_C = (R(0), R(1, 2), R(1, 2), R(1))                 # nodes: stage s is evaluated at x + c_s dt k_{s-1}
 RK4_B_NUM = (1, 2, 2, 1)                               # weights b = RK4_B_NUM / RK4_B_DEN
 RK4_B_DEN = 6
+# The explicit Runge-Kutta integrators whose stage s is evaluated at x + c_s dt k_{s-1} (a subdiagonal tableau):
+# name -> (nodes c, weights b_num, divisor b_den). Their C update and step are printed from these (_c_explicit_rk).
+EXPLICIT_RK = {"euler": ((R(0),), (1,), 1), "rk4": (RK4_C, RK4_B_NUM, RK4_B_DEN)}
 
 DP_A = (
     (),
@@ -458,6 +461,21 @@ def _c_registry() -> list[str]:
     return out
 
 
+def _c_explicit_rk(name: str, c, b_num, b_den) -> list[str]:
+    """LV_<NAME>_UPDATE and LV_<NAME>_STEP of a subdiagonal explicit Runge-Kutta tableau (EXPLICIT_RK), for C."""
+    N, s = name.upper(), len(c)
+    last = f"(acc) + (REAL){_f(b_num[-1])} * (k)" if s > 1 else f"(REAL){_f(b_num[0])} * (k)"
+    cases = [f"(STAGE) == {i} ? ((acc) = {'(acc) + ' if i > 1 else ''}(REAL){_f(b_num[i - 1])} * (k), "
+             f"(out) = (x) + (REAL){_f(c[i])} * (dt) * (k))" for i in range(1, s)]
+    end = f"((out) = (x) + (dt) / (REAL){_f(b_den)} * ({last}))"
+    upd = f"#define LV_{N}_UPDATE(REAL, STAGE, dt, x, k, acc, out) \\\n    (" + " \\\n     : ".join(cases + [end]) + ")"
+    step = [f"#define LV_{N}_STEP(REAL, RHS, FOR, AT, dt, x, xn, k, acc, tmp) do {{"]
+    for i in range(1, s + 1):
+        step.append(f"    RHS({'x' if i == 1 else 'tmp'}, k); "
+                    f"FOR((void)LV_{N}_UPDATE(REAL, {i}, dt, AT(x), AT(k), AT(acc), AT({'xn' if i == s else 'tmp'})));")
+    return [upd, " \\\n".join(step) + " \\\n} while (0)"]
+
+
 def print_c() -> str:
     """generated/tableaux.h: #defines for scalars, static const arrays for the tableaux."""
     _check()
@@ -465,6 +483,15 @@ def print_c() -> str:
            "#ifndef LAVENDERSIM_TABLEAUX_H", "#define LAVENDERSIM_TABLEAUX_H", ""]
     out += _c_registry()
     out += [f"#define LV_{n} {c}" for n, c, _ in _scalars()]
+    out += ["", "/* The explicit Runge-Kutta integrators of EXPLICIT_RK, stage s at x + c_s dt k_{s-1}: LV_<NAME>_UPDATE(REAL,",
+            "   STAGE, dt, x, k, acc, out) is one number's update after stage STAGE's derivative k (1 .. s; a constant",
+            "   where it can be): before the last, the running weighted sum acc (b_1 k_1 + b_2 k_2 + ..., left to right) and",
+            "   the next stage's input out = x + (c_{STAGE+1} dt) k; at the last, the step's end",
+            "   out = x + (dt / b_den) (acc + b_s k). LV_<NAME>_STEP runs every stage on whole vectors: RHS(in, out) the",
+            "   right-hand side, FOR(stmt) runs stmt for every number of a vector, AT(v) names that number of v; k, acc and",
+            "   tmp are scratch vectors; xn may be x. Every path of csrc/ steps these integrators through them. */"]
+    for name, (c, b_num, b_den) in EXPLICIT_RK.items():
+        out += _c_explicit_rk(name, c, b_num, b_den)
     out += ["", "/* Dormand-Prince 5(4): A (row 6 = the 5th-order weights, FSAL) and E = b - b_hat */",
             "static const double LV_DP_A[7][6] = {"]
     for row in DP_A:
@@ -524,6 +551,9 @@ def print_python() -> str:
     out.append("DP_E = (" + ", ".join(_f(e) for e in dp_e()) + ")")
     out.append("RK4_C = (" + ", ".join(_f(c) for c in RK4_C) + ")")
     out.append("RK4_B_NUM = (" + ", ".join(_f(n) for n in RK4_B_NUM) + ")")
+    out.append("# explicit RK integrators, stage s at x + c_s dt k_{s-1}: name -> (c, b_num, b_den), as tableaux.h prints them")
+    fl = lambda v: tuple(float(_f(x)) for x in v)  # noqa: E731  (the doubles tableaux.h prints)
+    out.append("EXPLICIT_RK = " + repr({n: (fl(c), fl(b), float(_f(d))) for n, (c, b, d) in EXPLICIT_RK.items()}))
     out.append("# Strang splitting of the free rotation: (axis, fraction of h)")
     out.append("STRANG = (" + ", ".join(f"({a}, {_f(f)})" for a, f in STRANG) + ")")
     out.append("# splitting4: the Strang step applied with step gamma_i h, in this order (symmetric composition, order 4)")

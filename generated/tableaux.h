@@ -85,6 +85,30 @@ enum {
 #define LV_WDT_MAX_SYMTOP_BM6 1.0
 #define LV_WDT_RATIO_EXPONENT_SYMTOP_BM6 0.5
 
+/* The explicit Runge-Kutta integrators of EXPLICIT_RK, stage s at x + c_s dt k_{s-1}: LV_<NAME>_UPDATE(REAL,
+   STAGE, dt, x, k, acc, out) is one number's update after stage STAGE's derivative k (1 .. s; a constant
+   where it can be): before the last, the running weighted sum acc (b_1 k_1 + b_2 k_2 + ..., left to right) and
+   the next stage's input out = x + (c_{STAGE+1} dt) k; at the last, the step's end
+   out = x + (dt / b_den) (acc + b_s k). LV_<NAME>_STEP runs every stage on whole vectors: RHS(in, out) the
+   right-hand side, FOR(stmt) runs stmt for every number of a vector, AT(v) names that number of v; k, acc and
+   tmp are scratch vectors; xn may be x. Every path of csrc/ steps these integrators through them. */
+#define LV_EULER_UPDATE(REAL, STAGE, dt, x, k, acc, out) \
+    (((out) = (x) + (dt) / (REAL)1.0 * ((REAL)1.0 * (k))))
+#define LV_EULER_STEP(REAL, RHS, FOR, AT, dt, x, xn, k, acc, tmp) do { \
+    RHS(x, k); FOR((void)LV_EULER_UPDATE(REAL, 1, dt, AT(x), AT(k), AT(acc), AT(xn))); \
+} while (0)
+#define LV_RK4_UPDATE(REAL, STAGE, dt, x, k, acc, out) \
+    ((STAGE) == 1 ? ((acc) = (REAL)1.0 * (k), (out) = (x) + (REAL)0.5 * (dt) * (k)) \
+     : (STAGE) == 2 ? ((acc) = (acc) + (REAL)2.0 * (k), (out) = (x) + (REAL)0.5 * (dt) * (k)) \
+     : (STAGE) == 3 ? ((acc) = (acc) + (REAL)2.0 * (k), (out) = (x) + (REAL)1.0 * (dt) * (k)) \
+     : ((out) = (x) + (dt) / (REAL)6.0 * ((acc) + (REAL)1.0 * (k))))
+#define LV_RK4_STEP(REAL, RHS, FOR, AT, dt, x, xn, k, acc, tmp) do { \
+    RHS(x, k); FOR((void)LV_RK4_UPDATE(REAL, 1, dt, AT(x), AT(k), AT(acc), AT(tmp))); \
+    RHS(tmp, k); FOR((void)LV_RK4_UPDATE(REAL, 2, dt, AT(x), AT(k), AT(acc), AT(tmp))); \
+    RHS(tmp, k); FOR((void)LV_RK4_UPDATE(REAL, 3, dt, AT(x), AT(k), AT(acc), AT(tmp))); \
+    RHS(tmp, k); FOR((void)LV_RK4_UPDATE(REAL, 4, dt, AT(x), AT(k), AT(acc), AT(xn))); \
+} while (0)
+
 /* Dormand-Prince 5(4): A (row 6 = the 5th-order weights, FSAL) and E = b - b_hat */
 static const double LV_DP_A[7][6] = {
     {0.0, 0.0, 0.0, 0.0, 0.0, 0.0},

@@ -86,6 +86,8 @@ DP_A = (
 DP_E = (0.0012326388888888888, 0.0, -0.0042527702905061394, 0.03697916666666667, -0.05086379716981132, 0.0419047619047619, -0.025)
 RK4_C = (0.0, 0.5, 0.5, 1.0)
 RK4_B_NUM = (1.0, 2.0, 2.0, 1.0)
+# explicit RK integrators, stage s at x + c_s dt k_{s-1}: name -> (c, b_num, b_den), as tableaux.h prints them
+EXPLICIT_RK = {'euler': ((0.0,), (1.0,), 1.0), 'rk4': ((0.0, 0.5, 0.5, 1.0), (1.0, 2.0, 2.0, 1.0), 6.0)}
 # Strang splitting of the free rotation: (axis, fraction of h)
 STRANG = ((0, 0.5), (1, 0.5), (2, 1.0), (1, 0.5), (0, 0.5))
 # splitting4: the Strang step applied with step gamma_i h, in this order (symmetric composition, order 4)

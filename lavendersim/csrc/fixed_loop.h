@@ -100,8 +100,7 @@ static inline void LV_FN(body_step)(const LV_FN(tile) *LV_RESTRICT t, long b, LV
     if (integrator == LV_INTEGRATOR_RK4) {
         LV_RK4_STEP(LV_REAL, LV_FIXED_RHS, LV_FIXED_FOR, LV_FIXED_AT, dt, x, x, k1, acc, tmp);
     } else if (integrator == LV_INTEGRATOR_EULER) {
-        LV_FIXED_RHS(x, k1);
-        for (i = 0; i < LV_STATE_SIZE; i++) x[i] = x[i] + dt * k1[i];
+        LV_EULER_STEP(LV_REAL, LV_FIXED_RHS, LV_FIXED_FOR, LV_FIXED_AT, dt, x, x, k1, acc, tmp);
     } else { /* LV_INTEGRATOR_SEMI_IMPLICIT_EULER */
         LV_FIXED_RHS(x, k1);
         for (i = 0; i < 3; i++) { /* v', omega' first */

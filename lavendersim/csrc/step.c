@@ -193,6 +193,10 @@ static int all_finite(const double *x)
     return 1;
 }
 
+/* Every number i of bodies j = 0 .. n-1 of a lockstep block (the FOR and AT of LV_RK4_STEP, tableaux.h). */
+#define LV_BLOCK_FOR(stmt) for (j = 0; j < n; j++) for (i = 0; i < LV_STATE_SIZE; i++) stmt
+#define LV_BLOCK_AT(v) v[j][i]
+
 /* Bodies stepped in lockstep: one body's step is a chain of dependent divisions and square roots
    (latency-bound), so interleaving a few independent bodies lets the CPU overlap them. Each body's
    arithmetic is exactly the single-body sequence, so results do not depend on the blocking. */
@@ -223,11 +227,10 @@ static inline long advance_block(double *state, const double *params, const long
     }
 #define RHS(in, out) for (j = 0; j < n; j++) body_rhs(in[j], prm[j], refs[j], n_refs[j], out[j])
     for (s = 0; s < n_steps; s++) {
-        RHS(x, k1);
         if (integrator == LV_INTEGRATOR_EULER) {
-            for (j = 0; j < n; j++)
-                for (i = 0; i < LV_STATE_SIZE; i++) xn[j][i] = x[j][i] + dt * k1[j][i];
+            LV_EULER_STEP(double, RHS, LV_BLOCK_FOR, LV_BLOCK_AT, dt, x, xn, k1, k1, tmp);
         } else { /* LV_INTEGRATOR_SEMI_IMPLICIT_EULER */
+            RHS(x, k1);
             for (j = 0; j < n; j++) {
                 for (i = 0; i < 3; i++) {                                         /* v', omega' */
                     xn[j][LV_STATE_V_W + i] = x[j][LV_STATE_V_W + i] + dt * k1[j][LV_STATE_V_W + i];
@@ -281,8 +284,6 @@ enum { LV_RHS_FREE = 0, LV_RHS_TORQUE = 1, LV_RHS_FULL = 2 };
 
 /* One RK4 step of bodies 0 .. n-1: x -> xn (LV_RK4_RHS, LV_RK4_STEP, q normalized with the generated kernel when
    asked). */
-#define LV_BLOCK_FOR(stmt) for (j = 0; j < n; j++) for (i = 0; i < LV_STATE_SIZE; i++) stmt
-#define LV_BLOCK_AT(v) v[j][i]
 #define LV_FREE_RK4_STEP()                                                                              \
     do {                                                                                                \
         LV_RK4_STEP(double, LV_RK4_RHS, LV_BLOCK_FOR, LV_BLOCK_AT, dt, x, xn, k, acc, tmp);             \
@@ -535,8 +536,7 @@ static inline long advance_model(double *state, const double *params, long b, co
         if (kind & LV_KIND_WHEELS) lv_wheels_motor(r, cmd, y + LV_XS_OMEGA, u);
         switch (integrator) {
         case LV_INTEGRATOR_EULER:
-            MRHS(y, k1);
-            LV_XS_UNROLL for (i = 0; i < LV_XS_SIZE; i++) yn[i] = y[i] + dt * k1[i];
+            LV_EULER_STEP(double, MRHS, XS_FOR, XS_AT, dt, y, yn, k1, acc, tmp);
             break;
         case LV_INTEGRATOR_SEMI_IMPLICIT_EULER:
             MRHS(y, k1);

@@ -70,31 +70,9 @@ typedef struct {
 } lv_adaptive;
 
 
-/* ---- the RK4 update, written once -----------------------------------------------------------------------
-   LV_RK4_UPDATE(REAL, STAGE, dt, x, k, acc, out) is one number's update after stage STAGE's derivative k (STAGE
-   1 .. 4, a constant where it can be; the tableau's constants LV_RK4_* of generated/tableaux.h in type REAL):
-   stages 1-3 add k to the running weighted sum acc (B0 k1 + B1 k2 + B2 k3, left to right) and write the next
-   stage's input out = x + (C_STAGE dt) k; stage 4 writes the step's end out = x + (dt / B_DEN) (acc + B3 k4).
-   Every RK4 path of csrc/ (the scalar blocks, the SIMD tiles, the model bodies and tiles, float32, rk4_expmap)
-   updates with it, so all give the same bits. LV_RK4_STEP runs the four stages on whole vectors: RHS(in, out) the
-   right-hand side, FOR(stmt) runs stmt for every number of a vector, AT(v) names that number of vector v; k, acc
-   and tmp are scratch vectors; xn may be x. */
-#define LV_RK4_UPDATE(REAL, STAGE, dt, x, k, acc, out)                                                   \
-    ((STAGE) == 1   ? ((acc) = (REAL)LV_RK4_B0 * (k), (out) = (x) + (REAL)LV_RK4_C1 * (dt) * (k))        \
-     : (STAGE) == 2 ? ((acc) = (acc) + (REAL)LV_RK4_B1 * (k), (out) = (x) + (REAL)LV_RK4_C2 * (dt) * (k)) \
-     : (STAGE) == 3 ? ((acc) = (acc) + (REAL)LV_RK4_B2 * (k), (out) = (x) + (REAL)LV_RK4_C3 * (dt) * (k)) \
-                    : ((out) = (x) + (dt) / (REAL)LV_RK4_B_DEN * ((acc) + (REAL)LV_RK4_B3 * (k))))
-#define LV_RK4_STEP(REAL, RHS, FOR, AT, dt, x, xn, k, acc, tmp)                                          \
-    do {                                                                                                 \
-        RHS(x, k);                                                                                       \
-        FOR((void)LV_RK4_UPDATE(REAL, 1, dt, AT(x), AT(k), AT(acc), AT(tmp)));                           \
-        RHS(tmp, k);                                                                                     \
-        FOR((void)LV_RK4_UPDATE(REAL, 2, dt, AT(x), AT(k), AT(acc), AT(tmp)));                           \
-        RHS(tmp, k);                                                                                     \
-        FOR((void)LV_RK4_UPDATE(REAL, 3, dt, AT(x), AT(k), AT(acc), AT(tmp)));                           \
-        RHS(tmp, k);                                                                                     \
-        FOR((void)LV_RK4_UPDATE(REAL, 4, dt, AT(x), AT(k), AT(acc), AT(xn)));                            \
-    } while (0)
+/* The RK4 and Euler updates are printed from their tableaux (derive/tableaux.py EXPLICIT_RK) into generated/tableaux.h:
+   LV_RK4_UPDATE / LV_RK4_STEP and LV_EULER_UPDATE / LV_EULER_STEP. Every path of csrc/ that steps rk4 or euler (the
+   scalar blocks, the SIMD tiles, the model bodies and tiles, float32, rk4_expmap) updates through them. */
 
 /* ---- one copy of a function per instruction set ---------------------------------------------------------
    LV_ISA_COPIES(DEF) expands DEF(SUFFIX, ATTR) once per instruction set: base (the build's flags), and on x86
