@@ -368,3 +368,13 @@ def test_lab_accuracy_takes_it_on_the_command_line(guide, tmp_path):
     bad = run_lavendersim(["lab", "accuracy", "--quick", "--integrators", "kutta4", "--out", str(tmp_path)],
                           guide["work"], guide["env"])
     assert bad.returncode == 2 and len(bad.stderr.strip().splitlines()) == 1 and "kutta4" in bad.stderr
+
+
+def test_loading_a_second_set_with_the_same_tableau_name_is_refused(guide, tmp_path):
+    """Derived elsewhere (--out: no other set there to compare with), the clash is found when the set loads."""
+    extending.tableau("kutta3")
+    other = declare(tmp_path, 'tableau("kutta3", ' + KUTTA3 + ')', "elsewhere_methods")
+    with pytest.raises(extending.UserSetError, match=r"tableau 'kutta3' is declared by .*elsewhere_methods\.py .* and by "
+                                                     r"the set .*my_methods, loaded first"):
+        extending.derive(other, out=tmp_path / "sets", compile=False)
+    assert B.tableau_of("kutta3").source == str(guide["set"].resolve())   # the first stays
