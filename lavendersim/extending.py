@@ -193,9 +193,8 @@ def build(directory) -> Path:
 
 
 
-def _register_tableaux(s: UserSet) -> None:
-    """Register the set's tableaux in backends.USER_TABLEAUX (replacing the ones an earlier load of the same set
-    registered, dropping those it no longer declares); every clash is found before anything is registered."""
+def _check_tableaux(s: UserSet) -> None:
+    """Raise if one of the set's tableaux is named as a built-in integrator or as another loaded set's tableau."""
     from .generated import tableaux as TB
 
     for t in s.tableaux:
@@ -207,6 +206,11 @@ def _register_tableaux(s: UserSet) -> None:
             raise _set_error(f"tableau {t['name']!r} is declared by {s.declaration} (set {s.directory}) and by the set "
                              f"{prev.source}, loaded first", "; a tableau name belongs to one set: rename it in one of "
                              "the files")
+
+
+def _register_tableaux(s: UserSet) -> None:
+    """Register the set's tableaux in backends.USER_TABLEAUX (replacing the ones an earlier load of the same set
+    registered, dropping those it no longer declares)."""
     for name in [n for n, t in backends.USER_TABLEAUX.items() if t.source == str(s.directory)]:
         del backends.USER_TABLEAUX[name]
     for t in s.tableaux:
@@ -239,6 +243,7 @@ def load(path, reload: bool = False) -> UserSet:
         one of its effect or tableau names belongs to another loaded set.
     """
     s = U.open_set(U.directory_of(path), reload=reload)
+    _check_tableaux(s)   # before the effects are registered: a clash leaves nothing half-registered
     E.register_set(s)
     _register_tableaux(s)
     return s

@@ -371,10 +371,17 @@ def test_lab_accuracy_takes_it_on_the_command_line(guide, tmp_path):
 
 
 def test_loading_a_second_set_with_the_same_tableau_name_is_refused(guide, tmp_path):
-    """Derived elsewhere (--out: no other set there to compare with), the clash is found when the set loads."""
+    """Derived elsewhere (--out: no other set there to compare with), the clash is found when the set loads, before
+    anything of it is registered (its effect neither)."""
+    from lavendersim import effects as E
+
     extending.tableau("kutta3")
-    other = declare(tmp_path, 'tableau("kutta3", ' + KUTTA3 + ')', "elsewhere_methods")
+    other = tmp_path / "elsewhere_methods.py"
+    other.write_text(BESIDE.replace("tabtest_spin_drag", "tabtest_elsewhere_drag").replace(
+        'tableau("tabtest_ralston3", A=[[], ["1/2"], [0, "3/4"]], b=["2/9", "1/3", "4/9"]', 'tableau("kutta3", '
+        + KUTTA3.replace(", order=3", "")), encoding="utf-8")
     with pytest.raises(extending.UserSetError, match=r"tableau 'kutta3' is declared by .*elsewhere_methods\.py .* and by "
                                                      r"the set .*my_methods, loaded first"):
         extending.derive(other, out=tmp_path / "sets", compile=False)
     assert B.tableau_of("kutta3").source == str(guide["set"].resolve())   # the first stays
+    assert "tabtest_elsewhere_drag" not in E.REGISTRY                      # nothing of the refused set
