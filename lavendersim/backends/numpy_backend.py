@@ -215,6 +215,16 @@ class _Plan:
             w = self.works[key] = _Work(x.shape, x.dtype, stages)
         return w
 
+    def adopt(self, xn: np.ndarray, x: np.ndarray) -> np.ndarray:
+        """The state after a step: xn itself when it is a work buffer (x, the state before, takes its place: no
+        copy), else x with xn copied in."""
+        for w in self.works.values():
+            if isinstance(w, _Work) and w.xn is xn:
+                w.xn = x
+                return xn
+        x[...] = xn
+        return x
+
     def quat_buffer(self, x: np.ndarray) -> np.ndarray:
         """A struct-of-arrays (n, 4) buffer for the normalized quaternions of states shaped as x."""
         key = (x.shape[0], x.dtype.str, "q")
@@ -489,6 +499,9 @@ class _ExplicitRK:
     def axpy(x, h, terms, ks, out=None, tmp=None):
         """x + h (a_0 k_j0 + a_1 k_j1 + ...), the sum left to right (a coefficient of 1 multiplies exactly: skipped),
         written into out (None: a new array); tmp: scratch of out's shape. x may be out, a k_j may not."""
+        if len(terms) == 1 and math.frexp(terms[0][1])[0] == 0.5:   # one term, a = ±2^e: h (a k) = (a h) k exactly
+            (j, a), = terms
+            return np.add(x, np.multiply(ks[j], a * h, out=out), out=out)
         acc = None
         for j, a in terms:
             t = ks[j] if a == 1.0 else np.multiply(ks[j], a, out=out if acc is None else tmp)
@@ -678,22 +691,25 @@ class NumpyBackend:
 
     @staticmethod
     def _loop(plan, x, integrator, normalize, dt, n_steps, command=None, applied=None) -> None:
+        cur = x
         for i in range(n_steps):
-            u = None if command is None else plan.applied(x, command)
-            xn = step(plan, x, integrator, normalize, dt, u)
+            u = None if command is None else plan.applied(cur, command)
+            xn = step(plan, cur, integrator, normalize, dt, u)
             no_root = getattr(plan, "no_root", None)
             if no_root is not None:
                 bad = no_root | ~np.isfinite(xn).all(axis=1)
                 b = int(np.flatnonzero(bad)[0])
                 if no_root[b]:
                     plan.no_root = None
-                    raise DivergenceError(i, b, no_root_cause(x[b, X], plan.I[b], dt))
+                    raise DivergenceError(i, b, no_root_cause(cur[b, X], plan.I[b], dt))
             if not np.isfinite(np.sum(xn)) and not np.isfinite(xn).all():   # the sum first: one pass, no array
                 b = int(np.flatnonzero(~np.isfinite(xn).all(axis=1))[0])
-                raise DivergenceError(i, b, divergence_cause(x[b, X], dt, integrator, *plan.wheel_info(x, b)))
-            x[...] = xn
+                raise DivergenceError(i, b, divergence_cause(cur[b, X], dt, integrator, *plan.wheel_info(cur, b)))
+            cur = plan.adopt(xn, cur)
             if u is not None:
                 applied[plan.wheeled] = u[plan.wheeled]
+        if cur is not x:
+            x[...] = cur
 
 
 # Dormand–Prince 5(4) (Hairer, Nørsett & Wanner, Solving ODEs I, table 5.2): T.DP_A, T.DP_E and the controller
