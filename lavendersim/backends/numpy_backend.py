@@ -548,19 +548,17 @@ def _user_rk(name: str):
     return rk[1]
 
 
-def _rk4_tableau() -> _ExplicitRK:
-    """RK4 as derive/tableaux.py declares it: stage s at x + c_s h k_{s-1} (a subdiagonal A, a_{s,s-1} = RK4_C[s]),
-    weights RK4_B_NUM / RK4_B_DEN."""
-    n = len(T.RK4_C)
-    A = [[T.RK4_C[i] if j == i - 1 else 0.0 for j in range(n)] for i in range(n)]
-    return _ExplicitRK(A, T.RK4_B_NUM, T.RK4_B_DEN)
+def _explicit_rk(c, b_num, b_den) -> _ExplicitRK:
+    """A built-in explicit RK as generated/tableaux.py EXPLICIT_RK prints it: stage s at x + c_s h k_{s-1} (a
+    subdiagonal A, a_{s,s-1} = c_s), weights b_num / b_den."""
+    n = len(c)
+    return _ExplicitRK([[c[i] if j == i - 1 else 0.0 for j in range(n)] for i in range(n)], b_num, b_den)
 
 
-_RK4 = _rk4_tableau()
-_EULER = _ExplicitRK([[0.0]], [1.0])
+_RK4 = _explicit_rk(*T.EXPLICIT_RK["rk4"])     # also rk4_expmap's tableau
 
 
-def _rk4_expmap(plan, f, x, h):
+def _step_rk4_expmap(plan, f, x, h):
     """rk4_expmap (RKMK4): the RK4 tableau (_RK4) on y = (p, v, u, ω) with the attitude q = q₀ ⊗ exp(u/2), u the
     body rotation vector since the step's start (u₀ = 0, in q's first three slots, the fourth held at 0). Each
     stage evaluates the right-hand side at its attitude (quat_exp_step(q₀, u, 1); the first at x itself) and
@@ -585,7 +583,7 @@ def _rk4_expmap(plan, f, x, h):
     return yn
 
 
-def _semi_implicit_euler(plan, f, x, h):
+def _step_semi_implicit_euler(plan, f, x, h):
     """Symplectic Euler: v, ω (and the wheel rates) first from k = f(x), then p and q with the new rates."""
     k = f(x)
     xn = x.copy()
@@ -596,24 +594,32 @@ def _semi_implicit_euler(plan, f, x, h):
     return xn
 
 
-def _compose(stages, rotate):
+def _step_implicit_gyro(plan, f, x, h):
+    return _implicit_gyro(plan, x, h)
+
+
+def _composition_step(stages, rotate):
     return lambda plan, f, x, h: _composition(plan, x, h, stages, rotate)  # noqa: E731
 
 
-# Each built-in integrator's stepper, by family (generated/tableaux.py INTEGRATOR_FAMILY): explicit_rk through the
-# tableau stepper (semi_implicit_euler, partitioned, its own member); the compositions through _composition with
-# their printed stage fractions and rotation; dopri5 (adaptive_rk) is NumpyBackend.advance's _dopri5 loop.
-_STEPPERS = {
-    "euler": lambda plan, f, x, h: _EULER.step(f, x, h, plan.work(x, 1)),
-    "rk4": lambda plan, f, x, h: _RK4.step(f, x, h, plan.work(x, len(_RK4.rows))),
-    "semi_implicit_euler": _semi_implicit_euler,
-    "rk4_expmap": _rk4_expmap,
-    "implicit_gyro": lambda plan, f, x, h: _implicit_gyro(plan, x, h),
-    "splitting": _compose((1.0,), _splitting_rotation),
-    "splitting4": _compose(T.SPLIT4_GAMMA, _splitting4_rotation),
-    "symtop4": _compose(T.SYMTOP4_GAMMA, _on_momentum(_symtop_rotation)),
-    "symtop_bm6": _compose(T.SYMTOP4_GAMMA, _on_momentum(_symtop_bm6_stage)),
-}
+# The compositions: their printed stage fractions (one stage for splitting) and each one's rotation
+_step_splitting = _composition_step((1.0,), _splitting_rotation)
+_step_splitting4 = _composition_step(T.SPLIT4_GAMMA, _splitting4_rotation)
+_step_symtop4 = _composition_step(T.SYMTOP4_GAMMA, _on_momentum(_symtop_rotation))
+_step_symtop_bm6 = _composition_step(T.SYMTOP4_GAMMA, _on_momentum(_symtop_bm6_stage))
+
+
+def _stepper_of(name: str):
+    """The stepper of a registered integrator: an explicit RK through the tableau stepper (generated/tableaux.py
+    EXPLICIT_RK), else its family's member _step_<name> (semi_implicit_euler, partitioned; rk4_expmap, the RK4
+    tableau in exponential coordinates; implicit_gyro; the compositions); dopri5 is advance's _dopri5 loop (None)."""
+    if name in T.EXPLICIT_RK:
+        rk = _explicit_rk(*T.EXPLICIT_RK[name])
+        return lambda plan, f, x, h: rk.step(f, x, h, plan.work(x, len(rk.rows)))  # noqa: E731
+    return globals().get(f"_step_{name}")
+
+
+_STEPPERS = {name: _stepper_of(name) for name in T.INTEGRATOR_CODES}
 
 
 def step(plan: _Plan, x: np.ndarray, integrator: str, normalize: bool, dt: float, u=None) -> np.ndarray:
