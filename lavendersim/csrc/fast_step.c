@@ -427,7 +427,7 @@ static PyObject *py_checks_pass(PyObject *self, PyObject *args)
         const char *f = buf[0].format ? buf[0].format : "B";
         const int f32 = buf[0].itemsize == 4 && (strcmp(f, "f") == 0 || strcmp(f, "<f") == 0 || strcmp(f, "=f") == 0);
         nb = buf[0].len / buf[0].itemsize / LV_STATE_SIZE;
-        if (!f32 && (buf[0].itemsize != 8 || strcmp(f, "d") != 0 && strcmp(f, "<d") != 0 && strcmp(f, "=d") != 0))
+        if (!f32 && (buf[0].itemsize != 8 || (strcmp(f, "d") != 0 && strcmp(f, "<d") != 0 && strcmp(f, "=d") != 0)))
             ok = -1;
         if (buf[0].len != nb * LV_STATE_SIZE * buf[0].itemsize) ok = -1;
         for (i = 1; i < 4; i++)

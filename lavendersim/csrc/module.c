@@ -352,8 +352,8 @@ static PyObject *py_simulate(PyObject *self, PyObject *args)
     if (tab_obj != Py_None) integrator = LV_INTEGRATOR_EULER; /* ignored: the tableau is stepped */
     if (integrator < 0 || integrator > LV_INTEGRATOR_LAST) {
         PyErr_Format(PyExc_ValueError,
-                     "simulate: integrator code must be 0 (euler), 1 (semi_implicit_euler), 2 (rk4), 3 (dopri5), "
-                     "4 (splitting), 5 (implicit_gyro), 6 (splitting4), 7 (rk4_expmap) or 8 (symtop4), got %d", integrator);
+                     "simulate: integrator code must be 0 .. %d (the module's constants, "
+                     "lavendersim.generated.tableaux.INTEGRATOR_CODES), got %d", LV_INTEGRATOR_LAST, integrator);
         return NULL;
     }
     if (integrator == LV_INTEGRATOR_DOPRI5 && (h_obj == Py_None || nfev_obj == Py_None)) {
@@ -470,7 +470,7 @@ static PyObject *py_simulate(PyObject *self, PyObject *args)
         PyErr_Format(PyExc_ValueError, "simulate: effects[%ld] has a code no declared effect has", fail_step);
     else if (status < 0)
         PyErr_SetString(PyExc_ValueError, "simulate: lv_simulate rejected its arguments "
-                        "(splitting, implicit_gyro, splitting4, rk4_expmap and symtop4 step plain bodies only: no joint or wheels)");
+                        "(the PLAIN_ONLY integrators of lavendersim.generated.tableaux step plain bodies only: no joint or wheels)");
     else if (status == LV_OK)
         result = Py_BuildValue("(iii)", 0, -1, -1);
     else
@@ -555,8 +555,8 @@ static PyMethodDef methods[] = {
      "in place; command (nb,4) held; applied (nb,4) receives the saturated wheel torques of the last step.\n"
      "The model arrays may be None (all four). dopri5 needs h (nb,) (per-body step proposals, in/out; <= 0:\n"
      "choose) and nfev (nb,) (RHS evaluations added per body), rtol > 0, atol >= 0.\n"
-     "integrator 0 euler, 1 semi-implicit euler, 2 rk4, 3 dopri5, 4 splitting, 5 implicit_gyro, 6 splitting4,\n"
-     "7 rk4_expmap, 8 symtop4 (4-8: plain bodies only). status 2: dopri5 could not meet the tolerance (h[body] = the step that was too small). status 0 ok (step = body = -1); status 1: the\n"
+     "integrator: a code of the printed registry (the module's constants EULER, RK4, ...; PLAIN_ONLY ones step plain\n"
+     "bodies only). status 2: dopri5 could not meet the tolerance (h[body] = the step that was too small). status 0 ok (step = body = -1); status 1: the\n"
      "state of `body` became non-finite at 0-based `step`: earlier bodies are fully advanced, that body\n"
      "holds its last finite state (and wheel rates), later bodies are untouched.\n"
      "tableau (a (s,s) strictly lower, b_num (s,), b_den): a user's explicit Runge-Kutta method, stepped instead of\n"
