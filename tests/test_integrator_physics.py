@@ -298,9 +298,9 @@ def test_no_hand_written_physics_or_tableau_in_the_step_code(path):
 
 def test_no_cross_product_typed_by_hand_anywhere_in_the_runtime():
     """Issue 10's grep check: cross products are derived kernels (generated/), never typed in
-    lavendersim/ or csrc/ — reference.py, the deliberately independent reference, excepted."""
+    lavendersim/ or csrc/ — oracle.py, the deliberately independent oracle (was reference.py), excepted."""
     pkg = ROOT / "lavendersim"
-    files = [p for p in pkg.rglob("*") if p.suffix in (".py", ".c", ".h") and p.name != "reference.py"
+    files = [p for p in pkg.rglob("*") if p.suffix in (".py", ".c", ".h") and p.name != "oracle.py"
              and "generated" not in p.parts]
     assert len(files) > 20
     offenders = []
