@@ -1231,35 +1231,43 @@ static int run_shares(void *shares, size_t size, int n_sh, lv_share_fn run, long
 }
 
 /* RK4 on up to LV_BLOCK plain bodies of ids with effects, in lockstep, all of one right-hand side kind
-   (LV_RHS_TORQUE or LV_RHS_FULL). Every call below has constant arguments and is inlined with its
-   kernels and the effect dispatch (flatten), so each block size and kind compiles to its own loop. */
-LV_FLATTEN static long advance_forced_rk4(double *state, const double *params, const long *ids, int n,
-                                          const lv_effect_index *ix, int kind, int normalize, double dt, long n_steps,
-                                          int *fail_j, double last[][LV_STATE_SIZE])
-{
+   (LV_RHS_TORQUE or LV_RHS_FULL), one copy per instruction set (LV_ISA_COPIES; the same IEEE operations in each).
+   Every call below has constant arguments and is inlined with its kernels and the effect dispatch (flatten), so
+   each block size and kind compiles to its own loop. */
+typedef long (*lv_forced_fn)(double *state, const double *params, const long *ids, int n, const lv_effect_index *ix,
+                             int kind, int normalize, double dt, long n_steps, int *fail_j, double last[][LV_STATE_SIZE]);
+#define LV_DEFINE_FORCED(SUFFIX, ATTR)                                                                  \
+    ATTR LV_FLATTEN static long advance_forced_rk4_##SUFFIX(double *state, const double *params, const long *ids, \
+        int n, const lv_effect_index *ix, int kind, int normalize, double dt, long n_steps, int *fail_j, \
+        double last[][LV_STATE_SIZE])                                                                   \
+    {                                                                                                   \
+        switch (kind) {                                                                                 \
+        case LV_RHS_TORQUE: return LV_FORCED(LV_RHS_TORQUE, 0);                                         \
+        case LV_RHS_TORQUE + LV_RHS_CONSTANT: return LV_FORCED(LV_RHS_TORQUE, 1);                       \
+        case LV_RHS_FULL + LV_RHS_CONSTANT: return LV_FORCED(LV_RHS_FULL, 1);                           \
+        default: return LV_FORCED(LV_RHS_FULL, 0);                                                      \
+        }                                                                                               \
+    }
 #define LV_FORCED(KIND, CONST)                                                                          \
     (n == LV_BLOCK ? advance_free_rk4(state, params, ids, LV_BLOCK, ix, KIND, CONST, normalize, dt, n_steps, fail_j, last) \
      : n == 1      ? advance_free_rk4(state, params, ids, 1, ix, KIND, CONST, normalize, dt, n_steps, fail_j, last)        \
                    : advance_free_rk4(state, params, ids, n, ix, KIND, CONST, normalize, dt, n_steps, fail_j, last))
-    switch (kind) {
-    case LV_RHS_TORQUE: return LV_FORCED(LV_RHS_TORQUE, 0);
-    case LV_RHS_TORQUE + LV_RHS_CONSTANT: return LV_FORCED(LV_RHS_TORQUE, 1);
-    case LV_RHS_FULL + LV_RHS_CONSTANT: return LV_FORCED(LV_RHS_FULL, 1);
-    default: return LV_FORCED(LV_RHS_FULL, 0);
-    }
+LV_ISA_COPIES(LV_DEFINE_FORCED)
 #undef LV_FORCED
-}
+#undef LV_DEFINE_FORCED
 
 /* RK4 on up to LV_BLOCK plain bodies of ids in lockstep, all of one right-hand side kind (LV_RHS_*). The
    torque-free calls have constant block sizes and normalize flags, so the compiler specializes them, and
    flatten inlines the generated right-hand side into each loop (GCC 12 at -O3 kept 24 out-of-line calls of
    lv_rigid_body_rhs_free in these loops without it: ~2x a torque-free step). */
 LV_FLATTEN static long advance_rk4_group(double *state, const double *params, const long *ids, int n, const lv_effect_index *ix,
-                              int kind, int normalize, double dt, long n_steps, int *fail_j,
+                              int kind, int normalize, double dt, long n_steps, int isa, int *fail_j,
                               double last[][LV_STATE_SIZE])
 {
-    if (kind != LV_RHS_FREE)
-        return advance_forced_rk4(state, params, ids, n, ix, kind, normalize, dt, n_steps, fail_j, last);
+    if (kind != LV_RHS_FREE) {
+        const lv_forced_fn fn = LV_ISA_PICK(isa, advance_forced_rk4);
+        return fn(state, params, ids, n, ix, kind, normalize, dt, n_steps, fail_j, last);
+    }
     if (n == LV_BLOCK)
         return normalize ? advance_free_rk4(state, params, ids, LV_BLOCK, ix, LV_RHS_FREE, 0, 1, dt, n_steps, fail_j, last)
                          : advance_free_rk4(state, params, ids, LV_BLOCK, ix, LV_RHS_FREE, 0, 0, dt, n_steps, fail_j, last);
@@ -1273,11 +1281,11 @@ LV_FLATTEN static long advance_rk4_group(double *state, const double *params, co
    RK4 on the fast path, the other integrators on the generic block (constant block sizes let the
    compiler specialize it; flatten inlines the kernels and the effect dispatch into each). */
 LV_FLATTEN static long advance_group(double *state, const double *params, const long *ids, int n, const lv_effect_index *ix,
-                          int kind, int integrator, int normalize, double dt, long n_steps, int *fail_j,
+                          int kind, int integrator, int normalize, double dt, long n_steps, int isa, int *fail_j,
                           double last[][LV_STATE_SIZE])
 {
     if (integrator == LV_INTEGRATOR_RK4)
-        return advance_rk4_group(state, params, ids, n, ix, kind, normalize, dt, n_steps, fail_j, last);
+        return advance_rk4_group(state, params, ids, n, ix, kind, normalize, dt, n_steps, isa, fail_j, last);
     if (n == LV_BLOCK)
         return advance_block(state, params, ids, LV_BLOCK, ix, integrator, normalize, dt, n_steps, fail_j, last);
     if (n == 1)
@@ -1515,7 +1523,7 @@ static int advance_fixed(double *state, const double *params, long nb, const lv_
             n = (int)(count[cls] - k < LV_BLOCK ? count[cls] - k : LV_BLOCK);
             lim = run_limit(list[k], *limit, *best, n_steps);
             if (lim <= 0) continue;
-            s = advance_group(state, params, list + k, n, ix, cls, integrator, normalize, dt, lim, &j, last);
+            s = advance_group(state, params, list + k, n, ix, cls, integrator, normalize, dt, lim, isa, &j, last);
             /* the block stops at its first failing step, j its lowest failing body there (lockstep) */
             if (s < 0 || !earlier(s, list[k + j], *limit, *best)) continue;
             memcpy(state + list[k + j] * LV_STATE_SIZE, last[j], sizeof last[j]);
