@@ -13,6 +13,7 @@ import pytest
 import sympy as sp
 
 import lavendersim as lv
+from conftest import NUMPY_SLOW
 from lavendersim import backends
 from lavendersim.errors import DivergenceError, ValidityBoundWarning
 from lavendersim.generated import tableaux as TABLEAUX
@@ -69,7 +70,7 @@ def test_every_integrator_has_a_decay_limit():
 
 
 # ---- the printed limit is the real threshold, on both backends -------------------------------------------
-@pytest.mark.parametrize("backend", BACKENDS)
+@pytest.mark.parametrize("backend", NUMPY_SLOW)   # NumPy: up to 16 s per integrator when loaded; slow set
 @pytest.mark.parametrize("integrator", FIXED)
 def test_the_printed_limit_is_where_a_linear_decay_turns_unstable(integrator, backend):
     limit = TABLEAUX.REAL_AXIS_STABILITY[integrator]
@@ -167,7 +168,7 @@ def _loaded_scene() -> lv.Scene:
     return s
 
 
-@pytest.mark.parametrize("backend", BACKENDS)
+@pytest.mark.parametrize("backend", NUMPY_SLOW)   # NumPy: 47 s on a loaded machine (C: <1 s); slow set
 def test_real_loads_never_trip_the_growth_check(backend):
     sim = lv.Sim(_loaded_scene(), dt=1e-3, integrator="rk4", backend=backend)
     for _ in range(20):                       # many calls, the C fast path and the Python path both
