@@ -109,7 +109,10 @@ def test_c_and_numpy_agree_bitwise_with_a_jointed_wheeled_body():
     assert np.any(Wn != 0.0)
 
 
-@pytest.mark.parametrize("compact", [0, None, float("inf")], ids=["subsets-always", "subsets-default", "subsets-never"])
+# the default plan in the default set; forcing subsets always / never (8 s each when loaded) in the slow set
+@pytest.mark.parametrize("compact", [pytest.param(0, marks=pytest.mark.slow), None,
+                                     pytest.param(float("inf"), marks=pytest.mark.slow)],
+                         ids=["subsets-always", "subsets-default", "subsets-never"])
 def test_a_body_does_not_depend_on_its_neighbours(compact, monkeypatch):
     """NumPy: a body alone == the same body beside a fast spinner and other loaded bodies (listed before and after
     it), bitwise, with its own h and count; and a plain body beside a wheeled one == alone (the extended state).
