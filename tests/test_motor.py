@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 import lavendersim as lv
+from conftest import NUMPY_SLOW
 from lavendersim.kernels import K
 from lavendersim.validate import LavenderInputError
 
@@ -63,7 +64,7 @@ def test_sim_applies_the_line(backend):
                                    rtol=0, atol=1e-15)
 
 
-@pytest.mark.parametrize("backend", BACKENDS)
+@pytest.mark.parametrize("backend", NUMPY_SLOW)   # NumPy: 20-45 s when loaded; in the slow set
 def test_driving_from_rest_is_smooth_and_stays_below_no_load_speed(backend):
     """Full command for 3 s: the applied torque falls smoothly (no 0 ↔ 0.2 flips), the wheel speed
     rises monotonically toward but below 400 rad/s; with cutoff=1 the old flipping is still there."""
@@ -83,7 +84,7 @@ def test_driving_from_rest_is_smooth_and_stays_below_no_load_speed(backend):
             assert W.max() >= SL and np.max(np.abs(np.diff(u))) == pytest.approx(TL)
 
 
-@pytest.mark.parametrize("backend", BACKENDS)
+@pytest.mark.parametrize("backend", NUMPY_SLOW)   # NumPy: 20-45 s when loaded; in the slow set
 def test_viscous_friction_with_the_line_settles_below_no_load(backend):
     """With c_w the steady wheel speed solves stall (1 − Ω/Ω0) = c_w Ω: Ω* = stall / (stall/Ω0 + c_w)."""
     c_w = 2e-4

@@ -23,8 +23,13 @@ def _state(effect, integrator, backend, steps):
     return sim.x.copy()
 
 
-@pytest.mark.parametrize("backend", ["c", "numpy"])
-@pytest.mark.parametrize("integrator", list(backends.INTEGRATORS))
+# NumPy with the composed integrators (9-23 s each when loaded) in the slow set; NumPy with the others stays
+_NUMPY_SLOW_FOR = ("symtop_bm6", "symtop4", "splitting4")
+
+
+@pytest.mark.parametrize("integrator,backend", [
+    pytest.param(i, b, marks=pytest.mark.slow) if (b == "numpy" and i in _NUMPY_SLOW_FOR) else (i, b)
+    for b in ("c", "numpy") for i in backends.INTEGRATORS])
 def test_a_zero_strength_effect_gives_the_bits_of_no_effect(integrator, backend):
     steps = 10_000 if backend == "c" else 500
     ref = _state(None, integrator, backend, steps)
