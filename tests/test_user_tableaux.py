@@ -357,6 +357,10 @@ def test_the_accuracy_lab_measures_it_with_its_declared_order(guide):
         accuracy.compute("auto", quick=True, mujoco=False, workers=1, integrators=["kutta4"])
 
 
+# slow set: the whole quick accuracy lab again in a subprocess (28 s when loaded); in-process the lab measures
+# the tableau (test_the_accuracy_lab_measures_it_with_its_declared_order) and the option reaches compute
+# (test_cli_conventions.py::test_lab_accuracy_integrators_reach_compute)
+@pytest.mark.slow
 def test_lab_accuracy_takes_it_on_the_command_line(guide, tmp_path):
     """`lavendersim lab accuracy --integrators kutta3` (the guide's sentence), quick, as a user runs it."""
     r = run_lavendersim(["lab", "accuracy", "--quick", "--no-mujoco", "--workers", "1", "--integrators", "kutta3",
