@@ -46,7 +46,8 @@ The `slow` set
 --------------
 `@pytest.mark.slow` marks end-to-end repeats of what faster tests already cover: the whole
 `lab all` command, a lab again through its CLI, a long run on the NumPy backend whose C twin stays
-(`@pytest.mark.parametrize("backend", NUMPY_SLOW)`; NumPy = C is checked quickly elsewhere). Plain
+(`@pytest.mark.parametrize("backend", NUMPY_SLOW)`; NumPy = C is checked quickly elsewhere), the costly cases
+of a parametrization whose cheaper siblings stay (`pytest.param(..., marks=pytest.mark.slow)`). Plain
 `pytest` DESELECTS them, so the README's test command stays within minutes; they run with
 
     pytest -m slow                # only the slow set (.ci/run runs it after the README test command)
