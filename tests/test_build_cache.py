@@ -90,18 +90,22 @@ def test_unwritable_cache_is_reported_not_fatal(S, tmp_path, capsys):
 
 @pytest.mark.slow
 def test_second_build_reuses_the_first(tmp_path):
-    """Two builds of the real extension from the same sources: the second reports the reuse and is bitwise the
-    first (compiles once: a few minutes)."""
+    """Two wheel builds of the real extension from the same sources (pip's isolated build, as an install does):
+    the second reports the reuse and carries bitwise the first's extension (compiles once: a few minutes)."""
+    import zipfile
+
     env = dict(os.environ, LAVENDERSIM_BUILD_CACHE=str(tmp_path / "cache"))
-    outs = []
+    outs, sos = [], []
     for i in range(2):
-        run = subprocess.run([sys.executable, "setup.py", "build_ext", "--build-lib", str(tmp_path / f"lib{i}"),
-                              "--build-temp", str(tmp_path / f"tmp{i}")], cwd=ROOT, env=env,
-                             capture_output=True, text=True, timeout=3600)
-        assert run.returncode == 0, run.stderr[-2000:]
-        outs.append(run.stderr)
+        run = subprocess.run([sys.executable, "-m", "pip", "wheel", "-v", "--no-deps", "-w", str(tmp_path / f"w{i}"),
+                              str(ROOT)], env=env, capture_output=True, text=True, timeout=3600)
+        assert run.returncode == 0, run.stdout[-2000:] + run.stderr[-2000:]
+        outs.append(run.stdout + run.stderr)
+        (wheel,) = (tmp_path / f"w{i}").glob("*.whl")
+        with zipfile.ZipFile(wheel) as z:
+            (name,) = [n for n in z.namelist() if n.startswith("lavendersim/_lavender_c")]
+            sos.append(z.read(name))
     assert "reusing the build cached" not in outs[0]
     assert "reusing the build cached" in outs[1]
-    so = [next((tmp_path / f"lib{i}" / "lavendersim").glob("_lavender_c*")) for i in range(2)]
-    assert so[0].read_bytes() == so[1].read_bytes()
-    assert len(list((tmp_path / "cache").iterdir())) == 1
+    assert sos[0] == sos[1]
+    assert len([p for p in (tmp_path / "cache").iterdir() if p.suffix == ".so"]) == 1
