@@ -100,7 +100,11 @@ def test_design_refuses_a_falling_axis_no_wheel_reaches():
     lin = lc.linearize(scene, {"cube": {"q": q0}})
     with pytest.raises(lc.DesignError) as c:
         lc.lqr(lin, np.eye(lin.nstates), 1.0)
-    assert c.value.eigenvalue == pytest.approx(sigma, rel=1e-9) and "cube_dtheta_x" in c.value.states
+    # the tilt is a double root: any basis of its 2-D eigenspace is right, so which tilt angles the first mode names
+    # turns on the last bits of A (it named dtheta_x before the attitude chart was printed, dtheta_y/z after)
+    assert c.value.eigenvalue == pytest.approx(sigma, rel=1e-9)
+    assert any(s.startswith("cube_dtheta_") for s in c.value.states)
+    assert not any("Omega" in s for s in c.value.states)
     with pytest.raises(lc.DesignError) as d:
         lc.dlqr(lin.sample(2e-3), np.eye(lin.nstates), 1.0)
     assert abs(d.value.eigenvalue - e.value.eigenvalue) < 1e-9 and f"{sigma:+.4g}/s" in str(d.value)
