@@ -155,3 +155,22 @@ def test_rebuild_command_fits_an_editable_install(monkeypatch, tmp_path):
     assert _install.rebuild_command() == "pip install --force-reinstall --no-deps lavendersim"
     monkeypatch.setattr(_install, "_direct_url", lambda: None)
     assert _install.rebuild_command().startswith("pip install -e .")
+
+
+def test_every_package_folder_is_in_the_wheel():
+    """pyproject lists the packages a wheel (a non-editable install) carries. An editable install finds any
+    folder with an __init__.py, so a package missing from the list works here and is absent from a wheel: the
+    CLI package went missing that way once (lavendersim/cli/, session 14)."""
+    import tomllib
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    tool = tomllib.loads((root / "pyproject.toml").read_text())["tool"]["setuptools"]
+    listed, remap = set(tool["packages"]), tool["package-dir"]
+    found = set()
+    for name, folder in remap.items():
+        for init in (root / folder).rglob("__init__.py"):
+            rel = init.parent.relative_to(root / folder).parts
+            if "__pycache__" not in rel and not any(p.startswith(".") for p in rel):
+                found.add(".".join((name, *rel)))
+    assert found <= listed, f"packages missing from pyproject's [tool.setuptools] packages: {sorted(found - listed)}"
