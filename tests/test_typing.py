@@ -7,6 +7,7 @@ out a plain path entry. The strict editable mode installs a tree of links that b
 so. This test installs a copy of the tree that way into a venv and runs mypy on a user's snippet against it."""
 from __future__ import annotations
 
+import re
 import shutil
 import subprocess
 import sys
@@ -49,10 +50,11 @@ def test_mypy_sees_an_editable_install_and_the_real_signatures(tmp_path):
                                 "--cache-dir", str(tmp_path / "mypy_cache"), str(snippet)])
     assert "import-not-found" not in out and "import-untyped" not in out, out
     lines = out.splitlines()
+    # mypy spells builtins "builtins.float" up to 1.13 and "float" after: either is the real signature
     box = next(l for l in lines if ":3: note: Revealed type is" in l)
-    assert "mass: builtins.float" in box and "-> lavendersim.bodies.Body" in box, box
+    assert re.search(r"mass: (builtins\.)?float\b", box) and "-> lavendersim.bodies.Body" in box, box
     sim = next(l for l in lines if ":4: note: Revealed type is" in l)
-    assert "scene: lavendersim.scene.Scene" in sim and "integrator: builtins.str" in sim, sim
+    assert "scene: lavendersim.scene.Scene" in sim and re.search(r"integrator: (builtins\.)?str\b", sim), sim
     assert any(':5: error: Argument "mass" to "box" of "Body" has incompatible type "str"' in l for l in lines), out
     assert status == 1, (out, err)
 
