@@ -1048,7 +1048,7 @@ def _wheel_scene():
     15 cm, 1 kg) from a 3° tilt under LQR wheel control: cube axes, angular velocity and the
     motor torque acting on the cube (−u), as in the chapter's example payload."""
     from .sim import Sim
-    from lavendersim import control as C
+    from . import control as C
 
     scene = C.chapter_cube("corner")
     ctrl = C.design(scene, period=2e-3, q_ref=C.cube_upright_q("corner"), weights={"attitude_deg": 0.5})

@@ -27,8 +27,8 @@ REBUILD = rebuild_command()
 HASHED = ("kernels.c", "kernels.h", "layout.h", "tableaux.h", "kernels_f32.c", "kernels_f32.h")  # every generated file the extension compiles
 INTEGRATOR_CODES = TABLEAUX.INTEGRATOR_CODES   # the printed registry (derive/tableaux.py)
 
-try:
-    from .. import _lavender_c as _c
+try:  # the compiled extension (lavendersim/_lavender_c*.so): it imports nothing of the package
+    import lavendersim._lavender_c as _c
 except ImportError as exc:  # not built (or built for another interpreter)
     raise ImportError(
         "lavendersim's C backend (lavendersim._lavender_c) is not built or failed to load "
@@ -44,9 +44,9 @@ def generated_dir() -> Path:
     -------
     Path
     """
-    import lavendersim.generated as g
+    from ..generated import layout  # any module of the package: its folder is the package's
 
-    return Path(g.__file__).resolve().parent
+    return Path(layout.__file__).resolve().parent
 
 
 def generated_hash(gen_dir: Path) -> str:
@@ -159,7 +159,7 @@ def eval_kernel(name: str, *inputs):
     ValueError
         An input whose trailing shape does not match.
     """
-    from lavendersim.generated.kernels_numpy import KERNELS
+    from ..generated.kernels_numpy import KERNELS
 
     if name not in KERNELS or name not in _INDEX:
         raise KeyError(f"eval_kernel: unknown kernel {name!r}")

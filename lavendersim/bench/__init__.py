@@ -837,7 +837,7 @@ RUNNERS = {
         ctx["quick"], ctx["R"], interleaved, ctx["cfg"]["c_body_steps"], _progress)),
     "dopri5": _sec_dopri5,
     "numpy_peers": lambda ctx: ctx["res"].__setitem__("numpy_peers", _numpy_section.numpy_section(
-        ctx["quick"], ctx["R"], interleaved, batch_sim, ctx["cfg"]["numpy_body_steps"], _progress)),
+        ctx["quick"], ctx["R"], interleaved, batch_sim, inertia(), ctx["cfg"]["numpy_body_steps"], _progress)),
     "env": lambda ctx: ctx["res"].__setitem__("env", _envs.env_section(ctx["quick"], ctx["R"], interleaved)),
     "scenes": lambda ctx: ctx["res"].__setitem__("scenes", _scenes.scene_section(ctx["quick"], ctx["R"], interleaved)),
     "inertia": lambda ctx: ctx["res"].__setitem__("inertia", _inertia.inertia_section(ctx["quick"], ctx["R"],

@@ -16,7 +16,7 @@ SIZES_QUICK = (1_000,)
 AGREE_STEPS = 50
 
 
-def numpy_section(quick: bool, rounds: int, interleaved, batch_sim, body_steps: int, progress=None) -> dict:
+def numpy_section(quick: bool, rounds: int, interleaved, batch_sim, I_b, body_steps: int, progress=None) -> dict:
     """Time the NumPy backend against its peers (see the module docstring).
 
     Returns
@@ -25,7 +25,6 @@ def numpy_section(quick: bool, rounds: int, interleaved, batch_sim, body_steps: 
         ``sizes``: N -> {"numpy", "hand" stats (ns per body-step), "ratio" (numpy / hand), "steps",
         "max_abs_diff"}.
     """
-    from . import inertia
     from . import numpy_peers as P
 
     out = {"sizes": {}}
@@ -33,7 +32,7 @@ def numpy_section(quick: bool, rounds: int, interleaved, batch_sim, body_steps: 
         if progress:
             progress(f"NumPy backend vs hand peers: N = {n}")
         sim, ref = batch_sim(n, "numpy"), batch_sim(n, "numpy")
-        I = np.ascontiguousarray(np.tile(inertia()[:, None], (1, n)))
+        I = np.ascontiguousarray(np.tile(np.asarray(I_b, dtype=float)[:, None], (1, n)))
         steps = max(2, min(2_000, body_steps // n))
         ref.run(AGREE_STEPS)
         if n == 1:
