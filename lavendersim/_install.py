@@ -1,6 +1,6 @@
 """What this installation of LavenderSim has: optional extras, and how to rebuild it.
 
-The core (``pip install lavendersim``) runs the simulator, the kernels, the chapter's labs and
+The core (``pip install -e .`` from a clone; the distribution is ``lavender-rigid-body``) runs the simulator, the kernels, the chapter's labs and
 ``lavendersim derive``. Heavier features live in extras; a feature whose extra is missing raises
 :class:`MissingExtraError` naming the extra and the command that installs it (the CLI prints that
 one line and exits 2).
@@ -13,6 +13,7 @@ from pathlib import Path
 from types import ModuleType
 from urllib.parse import unquote, urlparse
 
+from ._version import DISTRIBUTION
 from .errors import PicklableError
 
 # extra -> the packages it installs (as imported)
@@ -26,7 +27,7 @@ EXTRAS = {
 
 
 def extra_command(extra: str) -> str:
-    """The command that installs ``extra``: ``pip install 'lavendersim[<extra>]'``; for an
+    """The command that installs ``extra``: ``pip install 'lavender-rigid-body[<extra>]'``; for an
     editable install ``pip install -e '<its source folder>[<extra>]'``; run from a source tree
     that is not installed, ``pip install -e '.[<extra>]'``."""
     if extra not in EXTRAS and extra not in ("test", "all"):
@@ -34,14 +35,15 @@ def extra_command(extra: str) -> str:
     if _direct_url() is None:  # run from a source tree, not installed
         return f"pip install -e '.[{extra}]'  (from the repository root)"
     src = _editable_source()
-    return f"pip install -e '{src}[{extra}]'" if src else f"pip install 'lavendersim[{extra}]'"
+    return f"pip install -e '{src}[{extra}]'" if src else f"pip install '{DISTRIBUTION}[{extra}]'"
 
 
 class MissingExtraError(PicklableError, ImportError):
     """A feature needs an optional extra that is not installed.
 
-    The message is one line: ``"<feature> needs the <extra> extra: pip install
-    'lavendersim[<extra>]'"``; the three are kept as attributes.
+    The message is one line: ``"<feature> needs the <extra> extra: <extra_command(extra)>"``
+    (``pip install -e '<source folder>[<extra>]'`` for an editable install); the three are kept as
+    attributes.
 
     Parameters
     ----------
@@ -57,7 +59,7 @@ class MissingExtraError(PicklableError, ImportError):
 
     def __init__(self, feature: str, extra: str, module: str):
         self.feature, self.extra, self.module = feature, extra, module
-        super().__init__(f"{feature} needs the {extra} extra: pip install 'lavendersim[{extra}]' "
+        super().__init__(f"{feature} needs the {extra} extra: {extra_command(extra)} "
                          f"(module {module!r} is not installed)", name=module)
 
 
@@ -87,7 +89,7 @@ def _direct_url() -> dict | None:
     from importlib import metadata
 
     try:
-        text = metadata.distribution("lavendersim").read_text("direct_url.json")
+        text = metadata.distribution(DISTRIBUTION).read_text("direct_url.json")
     except metadata.PackageNotFoundError:
         return None
     try:
@@ -110,7 +112,7 @@ def rebuild_command() -> str:
 
     Editable install: ``pip install -e <its source folder>``; installed from a local folder:
     ``pip install --force-reinstall <that folder>``; from an index or a wheel: ``pip install
-    --force-reinstall --no-deps lavendersim``; not installed (run from a source tree):
+    --force-reinstall --no-deps lavender-rigid-body``; not installed (run from a source tree):
     ``pip install -e .`` from the repository root."""
     info = _direct_url()
     if info is None:
@@ -122,4 +124,4 @@ def rebuild_command() -> str:
         return f"pip install -e {unquote(parsed.path)}"
     if local:
         return f"pip install --force-reinstall --no-deps {unquote(parsed.path)}"
-    return "pip install --force-reinstall --no-deps lavendersim"
+    return f"pip install --force-reinstall --no-deps {DISTRIBUTION}"

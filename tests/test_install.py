@@ -90,7 +90,9 @@ def test_a_missing_extra_is_one_line_and_exit_2(blocked, args, extra, tmp_path):
     assert r.returncode == 2, (r.stdout, r.stderr)
     lines = r.stderr.strip().splitlines()
     assert len(lines) == 1, r.stderr
-    assert f"needs the {extra} extra: pip install 'lavendersim[{extra}]'" in lines[0]
+    # the editable install names its own source folder; never the index's `lavendersim` (another project)
+    assert f"needs the {extra} extra: pip install -e '" in lines[0] and f"[{extra}]'" in lines[0], lines[0]
+    assert "'lavendersim[" not in lines[0]
     assert "Traceback" not in r.stderr
 
 
@@ -152,7 +154,7 @@ def test_rebuild_command_fits_an_editable_install(monkeypatch, tmp_path):
     monkeypatch.setattr(_install, "_direct_url", lambda: {"url": tmp_path.as_uri(), "dir_info": {}})
     assert _install.rebuild_command() == f"pip install --force-reinstall --no-deps {tmp_path}"
     monkeypatch.setattr(_install, "_direct_url", lambda: {"url": "https://files.example/lavendersim.whl", "archive_info": {}})
-    assert _install.rebuild_command() == "pip install --force-reinstall --no-deps lavendersim"
+    assert _install.rebuild_command() == "pip install --force-reinstall --no-deps lavender-rigid-body"
     monkeypatch.setattr(_install, "_direct_url", lambda: None)
     assert _install.rebuild_command().startswith("pip install -e .")
 

@@ -51,7 +51,7 @@ def env_section(quick: bool, rounds: int, interleaved) -> dict:
     try:
         import gymnasium
     except ImportError:
-        return {"available": False, "reason": "gymnasium is not installed (pip install 'lavendersim[gym]')"}
+        return {"available": False, "reason": "gymnasium is not installed (pip install -e '.[gym]')"}
     cfg = settings(quick)
     n_env, n_vec = cfg["env_steps"], cfg["vector_steps"]
     env_id = "lavendersim:ReactionWheelCube-v0"

@@ -19,7 +19,7 @@ def add_parser(sub) -> None:
                        description="Speed of LavenderSim as ratios against peers measured in the same run, in CPU "
                                    "time; prints PASS/MISS against the project's speed targets (a miss never fails "
                                    "the command; a crashed section exits 1). MuJoCo is measured when the bench extra "
-                                   "is installed: pip install 'lavendersim[bench]'.")
+                                   "is installed: pip install -e '.[bench]'.")
     b.add_argument("--quick", action="store_true", help="short run (small step counts, N up to 1e3) for tests")
     b.add_argument("--out", metavar="FILE", help="also write every figure to FILE as JSON")
     b.add_argument("--rounds", type=int, default=None, help="interleaved rounds per section (default 5; 2 with --quick)")

@@ -19,7 +19,7 @@ def add_parser(sub) -> None:
 
     v = sub.add_parser("view", help=HELP, parents=[_common.parent(json=False)],
                        description="Run a scene in real time and stream it to a browser page "
-                                   f"(scenes: {', '.join(SCENES)}). Needs the viewer extra: pip install 'lavendersim[viewer]'.")
+                                   f"(scenes: {', '.join(SCENES)}). Needs the viewer extra: pip install -e '.[viewer]'.")
     v.add_argument("scene", metavar="NAME", help=f"scene to run: {', '.join(SCENES)}")
     v.add_argument("--duration", type=float, default=None, help="simulated seconds to run (default: until Ctrl-C)")
     v.add_argument("--host", default=DEFAULT_HOST, help=f"interface to bind (default {DEFAULT_HOST}: this machine only; "
