@@ -239,11 +239,15 @@ def _integrator(name) -> str:
     return V.choice("integrator", name, backends.INTEGRATORS)
 
 
-def _wheel_rows(rows: np.ndarray, n_w: int, group: list) -> None:
+def _wheel_rows(rows: np.ndarray, n_w: int, group: list, I_b: np.ndarray) -> None:
     """The model rows of bodies whose only model effect is reaction_wheels with n_w wheels, in a principal body
-    frame: what Sim._model_row writes for each ((body index, effect) pairs), for all of them at once."""
+    frame: what Sim._model_row writes for each ((body index, effect) pairs), for all of them at once (I_b: the
+    principal moments of every body, (nb, 3))."""
     idx = np.array([i for i, _ in group], dtype=np.int64)
     vals = [e.values for _, e in group]
+    I_p = np.zeros((len(idx), 3, 3))                # about the COM (no joint): diag(I_b)
+    I_p[:, [0, 1, 2], [0, 1, 2]] = I_b[idx]
+    rows[idx, LY.MODEL_I_P] = I_p.reshape(len(idx), 9)
     pad_J = np.ones((len(idx), LY.WHEELS_MAX))
     pad_J[:, :n_w] = np.stack([v["J"] for v in vals])
     pad_A = np.zeros((len(idx), 3, LY.WHEELS_MAX))
@@ -495,7 +499,7 @@ class Sim:
             if not max_growth > 1.0:
                 raise V.LavenderInputError("max_growth", "must be > 1 (or None: no growth check)", f", got {max_growth!r}")
         self.max_growth = max_growth
-        self._has_models = bool(self._models.rows[:, LY.MODEL_KIND].any())
+        self._has_models = bool(self._kinds.any())
         # the arrays the backend steps: float64, or float32 copies of the state, params and effect table
         self._step_params, self._step_effects = self._params, self._effects
         if self.dtype == "float32":
@@ -732,7 +736,7 @@ class Sim:
             body = self._effects[:, ROW_BODY].astype(np.int64)
             acted[:] = bool(np.any(body < 0))
             acted[body[body >= 0]] = True
-        kind = self._models.rows[:, LY.MODEL_KIND].astype(np.int64) if nb else np.zeros(0, np.int64)
+        kind = self._kinds
         self._free = ~acted & (kind == 0)                      # E and |L| conserved
         self._free_wheels = ~acted & (kind == KIND_WHEELS)  # total |L| conserved (motor torques are internal)
         self._free_any = bool(self._free.any())
@@ -931,10 +935,8 @@ class Sim:
         nb = len(self.names)
         models = Models.empty(nb)
         rows = models.rows
-        # a body without model effects: kind 0, I_p = diag(I_b), r_b = anchor = 0 (all bodies at once)
-        I_p = rows[:, LY.MODEL_I_P]
-        for k in range(3):            # diag(I_b); the rest of the rows are zeros already
-            I_p[:, 4 * k] = self._params[:, LY.PARAM_I_B][:, k]
+        # a body without model effects keeps its all-zero row (kind 0: the steppers ignore it), never written, so
+        # a scene of plain bodies never touches the (nb, MODEL_SIZE) rows' pages (288 B per body at 1e6 bodies)
         modelled: dict[str, dict] = {}      # scene.model_effects(name) for every body at once
         for e in scene.effects:
             if e.per_body:
@@ -952,15 +954,23 @@ class Sim:
             else:
                 self._model_row(i, me, rows)
         for n_w, group in wheels_only.items():
-            _wheel_rows(rows, n_w, group)
+            _wheel_rows(rows, n_w, group, self._params[:, LY.PARAM_I_B])
+        # each body's kind, read from the modelled bodies' rows only (reading the whole column would fault every page)
+        at_rows = np.fromiter((at.get(name, nb) for name in modelled), np.int64, len(modelled))
+        at_rows = at_rows[at_rows < nb]
+        self._kinds = np.zeros(nb, np.int64)
+        self._kinds[at_rows] = rows[at_rows, LY.MODEL_KIND].astype(np.int64)
         self._wheel_n = np.zeros(nb, np.int64)  # wheels per body (the model rows' layouts never change)
-        wheeled = np.flatnonzero(rows[:, LY.MODEL_KIND].astype(np.int64) & KIND_WHEELS)
+        wheeled = np.flatnonzero(self._kinds & KIND_WHEELS)
         self._wheel_n[wheeled] = backends.wheel_counts(rows[wheeled])
         return models
 
     def _model_row(self, i: int, me: dict, rows: np.ndarray) -> None:
         """Body i's model row from its model effects me and its current state (a jointed body's r_b, I_p
         from its q and p_w; its p_w, v_w then set from pivot_kinematics)."""
+        if not me:                      # a plain body: its row is all zeros (kind 0, ignored by the steppers)
+            rows[i] = 0.0
+            return
         m, I_b = self._params[i, LY.PARAM_M], self._params[i, LY.PARAM_I_B]
         kind, I_p, r_b, anchor = 0, np.diag(I_b), np.zeros(3), np.zeros(3)
         if "spherical_joint" in me:
