@@ -132,6 +132,7 @@ CHUNK_WORK_MAX_PLAIN = 2**28   # the same for plain bodies without effects (the 
                            # at 1e6 bodies a chunk stays 64 steps (~0.5 s); at 8 the C call streaming the state in
                            # and out and the check reading it cost 1.3-1.4x the stepping (measured, issue 30)
 ON_BOUND = ("raise", "warn")
+CHECK_BLOCK = 1 << 16       # bodies per kernel call when the checks read every body: bounded temporaries at 1e6
 FAST_STEP_WORK = 4096      # step() runs inside C (holding the GIL) for scenes of at most this many evaluations per step
 
 
@@ -237,6 +238,21 @@ def _integrator(name) -> str:
 
         return extending.tableau(name).name
     return V.choice("integrator", name, backends.INTEGRATORS)
+
+
+def _check_blocks(mask: np.ndarray):
+    """The bodies the boolean mask (nb,) selects, as (selector, count) blocks of at most CHECK_BLOCK bodies: a slice
+    where a block is wholly selected (views, not copies), else the block's selected indices. The checks' kernels
+    run block by block, so their temporaries stay small at any N (peak memory at 1e6 bodies, issue 30)."""
+    n = len(mask)
+    for a in range(0, n, CHECK_BLOCK):
+        b = min(a + CHECK_BLOCK, n)
+        m = mask[a:b]
+        if m.all():
+            yield slice(a, b), b - a
+        elif m.any():
+            idx = np.flatnonzero(m) + a
+            yield idx, len(idx)
 
 
 def _wheel_rows(rows: np.ndarray, n_w: int, group: list, I_b: np.ndarray) -> None:
@@ -771,8 +787,7 @@ class Sim:
         nb = len(self.names)
         E, L = np.zeros(nb), np.zeros(nb)
         with np.errstate(over="ignore", invalid="ignore"):
-            if self._free_any:
-                f = slice(None) if self._all_free else self._free    # a view, not a copy, when every body is free
+            for f, _ in _check_blocks(self._free) if self._free_any else ():
                 p, xf = self._params[f], x[f]
                 I_b, w_b = p[:, LY.PARAM_I_B], xf[:, LY.STATE_OMEGA_B]
                 E[f] = K.kinetic_energy(p[:, LY.PARAM_M], I_b, xf[:, LY.STATE_V_W], w_b)
@@ -801,11 +816,9 @@ class Sim:
 
     def _safe_rates(self, f: np.ndarray) -> None:
         """w_safe (see _reference) of the free bodies selected by the boolean mask f, from the current E0."""
-        f = f & self._free
-        k = int(np.count_nonzero(f))
-        if k and self.max_growth is not None:
-            if k == len(f):
-                f = slice(None)       # every body: views, not copies
+        if self.max_growth is None:
+            return
+        for f, k in _check_blocks(f & self._free):
             p = self._params[f]
             I = p[:, LY.PARAM_I_B]
             with np.errstate(over="ignore", invalid="ignore"):

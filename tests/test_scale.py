@@ -445,3 +445,44 @@ def test_plain_scenes_keep_long_chunks_at_a_million_bodies_scale_and_results_do_
     plain.run(70)
     short.run(70)
     assert np.array_equal(plain.x, short.x) and plain.steps == short.steps == 70
+
+
+# ---- the checks' reference values, block by block (peak memory at 1e6 bodies) ------------------------------
+
+def _mixed_scene(n):
+    """n bodies: every third one under an applied torque, every fifth with wheels, the others free."""
+    rng = np.random.default_rng(3)
+    sc = lv.Scene()
+    sc.add_bodies([f"b{i}" for i in range(n)], 1.0 + rng.random(n), 0.03 + 0.01 * rng.random((n, 3)),
+                  omega_b=rng.normal(size=(n, 3)), v_w=rng.normal(size=(n, 3)))
+    sc.add_effects("applied_torque", bodies=[f"b{i}" for i in range(0, n, 3)], torque_w=[0.0, 0.0, 1e-3])
+    sc.add_effects("reaction_wheels", bodies=[f"b{i}" for i in range(1, n, 5)], J=[1e-4] * 3, torque_limit=0.1,
+                   speed_limit=100.0)
+    return sc
+
+
+def test_the_checks_reference_values_do_not_depend_on_the_block_size(monkeypatch):
+    """Sim._invariants and _safe_rates run their kernels CHECK_BLOCK bodies at a time; blocks of 7 (partly
+    selected, wholly selected and empty ones) give bitwise the values of one block."""
+    sc = _mixed_scene(60)
+    one = lv.Sim(sc, dt=1e-3)
+    monkeypatch.setattr(sim_mod, "CHECK_BLOCK", 7)
+    blocks = lv.Sim(sc, dt=1e-3)
+    assert one._free.sum() > 20 and not one._free.all()
+    for name in ("_E0", "_L0", "_w_safe", "_g_fast"):
+        np.testing.assert_array_equal(getattr(blocks, name), getattr(one, name), err_msg=name)
+    assert np.isfinite(one._g_fast[one._free]).all() and (one._E0[one._free] > 0).all()
+    for s in (one, blocks):
+        s.run(50)
+    np.testing.assert_array_equal(blocks.x, one.x)
+
+
+def test_a_plain_bodys_model_row_is_never_written():
+    """A plain body's model row stays all zeros (kind 0, ignored by the steppers); a wheeled body's holds its
+    inertia diag(I_b) and its wheels."""
+    sc = _mixed_scene(20)
+    s = lv.Sim(sc, dt=1e-3)
+    rows, wheeled = s.model.rows, s.model.wheel_counts > 0
+    assert not rows[~wheeled].any()
+    I_p = rows[wheeled][:, LY.MODEL_I_P].reshape(-1, 3, 3)
+    np.testing.assert_array_equal(I_p, np.stack([np.diag(d) for d in s.params[wheeled][:, LY.PARAM_I_B]]))
