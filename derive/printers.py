@@ -149,6 +149,27 @@ class NpPrinterF32(NpPrinter):
         return f"(numpy.float32({float(expr.p)!r})/numpy.float32({float(expr.q)!r}))"
 
 
+class MathPrinter(PythonCodePrinter):
+    """Python source over Python floats (the math module): the NumPy printer's expressions with math.sqrt for
+    numpy.sqrt, so each operation is the same IEEE operation in the same order. A Piecewise with no branch left
+    is NaN (as numpy.select's default); other powers are math.pow (raises where NumPy would give NaN)."""
+
+    def __init__(self):
+        super().__init__({"fully_qualified_modules": True})
+
+    def _print_Pow(self, expr, rational=False):
+        return (_small_pow(self, expr, "*", "1.0", "math.sqrt")
+                or f"math.pow({self._print(expr.base)}, {self._print(expr.exp)})")
+
+    def _print_Rational(self, expr):
+        return f"({float(expr.p)!r}/{float(expr.q)!r})"
+
+    def _print_Piecewise(self, expr):
+        if expr.args[-1].cond != sp.true:
+            expr = sp.Piecewise(*expr.args, (sp.nan, True))
+        return super()._print_Piecewise(expr)
+
+
 class CasadiPrinter(PythonCodePrinter):
     """Python source over casadi symbols (SX/MX/DM): branches become casadi.if_else."""
 

@@ -1,0 +1,87 @@
+"""Print the kernels for Python floats (generated/kernels_scalar.py): the NumPy backend's path for a few bodies.
+
+Each kernel takes its array inputs as flat sequences of floats (row-major), its scalar inputs as floats, and returns
+each array output as a tuple of floats (several outputs as a tuple of those). The expressions are the NumPy
+printing's, operation for operation (printers.MathPrinter), so a body's numbers equal the vectorized kernels'.
+The effects' accumulating functions follow derive/effect_print.py's convention on the same sequences.
+"""
+from __future__ import annotations
+
+import sympy as sp
+
+from . import effect as E
+from .layout import STATE
+from .printers import HEADER, MathPrinter
+
+
+def _unpack(k, used: set) -> list[str]:
+    """One tuple unpacking per array input a kernel reads: its used symbols by name, the others `_`."""
+    out, seen = [], set()
+    for a in k.inputs:
+        if a.shape == () or not any(s in used for s in a.flat):
+            continue
+        names = []
+        for s in a.flat:
+            names.append(str(s) if s in used and s not in seen else "_")
+            seen.add(s)
+        out.append(f"    {', '.join(names)}{',' if len(names) == 1 else ''} = {a.name}")
+    return out
+
+
+def _number(pr: MathPrinter, e) -> str:
+    return repr(float(e)) if e.is_Number else pr.doprint(e)
+
+
+def scalar_kernel(p, pr: MathPrinter) -> list[str]:
+    """One kernel (a codegen.Printed) as a Python function on floats."""
+    k = p.k
+    out = [f"def {k.name}({', '.join(a.name for a in k.inputs)}):", f'    """{k.summary} (floats; see the module)."""']
+    out += _unpack(k, p.used)
+    out += [f"    {t} = {pr.doprint(e)}" for t, e in p.temps]
+    idx, rets = 0, []
+    for a in k.outputs:
+        items = [_number(pr, sp.sympify(p.reduced[idx + i])) for i in range(a.size)]
+        idx += a.size
+        rets.append(items[0] if a.shape == () else f"({', '.join(items)}{',' if a.size == 1 else ''})")
+    return out + [f"    return {', '.join(rets)}", "", ""]
+
+
+def _arg(decl: E.EffectDecl, a) -> str:
+    if a.name in ("v_w", "m", "I_b"):
+        return a.name
+    if any(f.name == a.name for f in STATE.fields):
+        sl = STATE.slice(a.name)
+        return f"x[{sl.start}:{sl.stop}]"
+    o = decl.offsets()[a.name]
+    return f"p[{o}]" if a.shape == () else f"p[{o}:{o + a.size}]"
+
+
+def scalar_dispatch(effects: list) -> list[str]:
+    """apply(p, x, v_w, m, I_b) -> (F_w or None, tau_w or None) per effect, on one body's floats; EFFECT_APPLY by
+    name and EFFECT_APPLY_BY_CODE by built-in code."""
+    out = ["# ---- Scene effects: apply(p, x, v_w, m, I_b) -> (F_w or None, tau_w or None), one body: p its parameters",
+           "# (the row after [code, body]), x its state (13 floats), v_w the COM velocity it sees, m, I_b (3 floats).", ""]
+    for _, d in effects:
+        k = d.kernel()
+        outs = dict(d.outputs)
+        call = f"{k.name}({', '.join(_arg(d, a) for a in k.inputs)})"
+        ret = call if len(outs) == 2 else f"{call}, None" if E.OUT_FORCE in outs else f"None, {call}"
+        out += [f"def effect_apply_{d.name}(p, x, v_w, m, I_b):", f'    """{d.name}: {d.summary}."""',
+                f"    return {ret}", "", ""]
+    out += ["EFFECT_APPLY = {", *[f"    {d.name!r}: effect_apply_{d.name}," for _, d in effects], "}",
+            "EFFECT_APPLY_BY_CODE = {", *[f"    {c}: effect_apply_{d.name}," for c, d in effects if c is not None], "}"]
+    return out
+
+
+def print_scalar(printed: list, effects: list) -> str:
+    """generated/kernels_scalar.py: every kernel for Python floats, and the effects' dispatch (effects: the
+    built-in force effects [(code, EffectDecl)])."""
+    pr = MathPrinter()
+    body = []
+    for p in printed:
+        body += scalar_kernel(p, pr)
+    head = [f'"""{HEADER}', "", "LavenderSim kernels for Python floats (one body per call): an array input is a flat",
+            "sequence of floats (row-major; quaternions (x, y, z, w), scalar last), an array output a tuple of floats,",
+            "several outputs a tuple of those. The same operations in the same order as kernels_numpy.py (a division by",
+            'zero or a domain error raises where NumPy gives inf or NaN)."""', "import math", "", ""]
+    return "\n".join(head + body + scalar_dispatch(effects)) + "\n"
