@@ -176,3 +176,52 @@ def test_every_package_folder_is_in_the_wheel():
             if "__pycache__" not in rel and not any(p.startswith(".") for p in rel):
                 found.add(".".join((name, *rel)))
     assert found <= listed, f"packages missing from pyproject's [tool.setuptools] packages: {sorted(found - listed)}"
+
+
+def _tracked_files(root) -> set[str] | None:
+    try:
+        r = subprocess.run(["git", "ls-files"], cwd=root, capture_output=True, text=True, timeout=120)
+    except OSError:
+        return None
+    return set(r.stdout.split()) if r.returncode == 0 and r.stdout else None
+
+
+def test_the_sdist_holds_every_tracked_file(monkeypatch):
+    """The sdist is the whole project: its tests, notebooks and docs site need the files they read (the
+    sdist of session 13 lacked notebooks/, docs/conf.py, docs/api* and .ci/sanitize, and its test run failed).
+    MANIFEST.in is applied as setuptools' sdist applies it (its FileList) to this checkout; every file git
+    tracks must be matched, except the three below. A built sdist agreed (session 15: `python -m build
+    --sdist`, then its listing against `git ls-files`)."""
+    from pathlib import Path
+
+    from setuptools.command.egg_info import FileList
+
+    root = Path(__file__).resolve().parents[1]
+    tracked = _tracked_files(root)
+    if tracked is None:
+        pytest.skip("not a git checkout (an unpacked sdist): nothing to compare the manifest with")
+    monkeypatch.chdir(root)
+    files = FileList()
+    files.findall(".")
+    for line in (root / "MANIFEST.in").read_text().splitlines():
+        if line.strip() and not line.lstrip().startswith("#"):
+            files.process_template_line(line.strip())
+    shipped = {str(Path(f)) for f in files.files}
+    # not needed by anything in the sdist: the two ignore files; docs/nb is a link whose target
+    # (notebooks/*.ipynb) the sdist stores as copies under docs/nb/
+    left_out = {".gitignore", "docs/.gitignore", "docs/nb"}
+    missing = sorted(tracked - shipped - left_out)
+    assert not missing, f"tracked files MANIFEST.in does not put in the sdist: {missing}"
+    assert {"docs/nb/force.ipynb", "notebooks/force.ipynb", "docs/conf.py", ".ci/sanitize"} <= shipped
+
+
+def test_the_classifiers_claim_only_what_ci_tests():
+    """CI runs CPython 3.11 on Linux (.ci/run); the classifiers name no other version or system."""
+    import tomllib
+    from pathlib import Path
+
+    classifiers = tomllib.loads((Path(__file__).resolve().parents[1] / "pyproject.toml").read_text())["project"]["classifiers"]
+    versions = [c for c in classifiers if c.startswith("Programming Language :: Python :: 3.")]
+    systems = [c for c in classifiers if c.startswith("Operating System ::")]
+    assert versions == ["Programming Language :: Python :: 3.11"], versions
+    assert systems == ["Operating System :: POSIX :: Linux"], systems
