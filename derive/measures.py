@@ -5,7 +5,8 @@ backend (issue 29, "the last hand physics goes to derive/"):
   attitude error dtheta about a reference, q = q_ref ⊗ [dtheta/2, sqrt(1 − |dtheta/2|²)];
 * the inertia of a wheeled body with its wheels free, I − A J Aᵀ (the WHEELS_MAX-slot layout);
 * the quaternion scaled to unit length without overflow or underflow (divided by max|q_i| first);
-* the box of uniform density with a given mass and principal moments (what the viewer draws).
+* the box of uniform density with a given mass and principal moments (what the viewer draws);
+* the velocity of a point moving with a rigid body, v = v_COM + ω × r (the momentum lab's particles).
 
 Quaternions (x, y, z, w), scalar last; SI units.
 """
@@ -51,6 +52,7 @@ def kernels() -> list[Kernel]:
     I_p, A, J = sym3("I_p"), mat("A_b", 3, WHEELS_MAX), vec("J", WHEELS_MAX)
     m, I3 = scalar("m", positive=True), vec("I_b", 3)
     edge2 = [6 * (I3[(k + 1) % 3] + I3[(k + 2) % 3] - I3[k]) / m for k in range(3)]
+    v_com, omega_w, r_w = vec("v_com_w", 3), vec("omega_w", 3), vec("r_w", 3)
     edges = sp.Matrix([sp.sqrt(sp.Piecewise((e, e > BOX_EDGE2_MIN), (BOX_EDGE2_MIN, True))) for e in edge2])
     return [
         Kernel("quat_error_chart_inverse", "Orientation at an attitude error about a reference (inverse of quat_error_chart)",
@@ -75,6 +77,12 @@ def kernels() -> list[Kernel]:
                     "row-major", "unit_vector"),
                 Arg("J", J, f"wheel axial inertias ({WHEELS_MAX}), kg·m²", "positive")],
                [Arg("M", I_p - A * sp.diag(*J) * A.T, "3×3, body frame, kg·m², row-major (must stay positive definite)")], g),
+        Kernel("rigid_point_velocity", "Velocity of a point moving with a rigid body",
+               r"v = v_{COM} + \omega \times r",
+               [Arg("v_com_w", v_com, "velocity of the centre of mass, world frame, m/s"),
+                Arg("omega_w", omega_w, "angular velocity, world frame, rad/s"),
+                Arg("r_w", r_w, "the point relative to the centre of mass, world frame, m")],
+               [Arg("v_w", v_com + omega_w.cross(r_w), "velocity of the point, world frame, m/s")], g),
         Kernel("box_of_inertia", "Edges of the uniform box with a given mass and principal moments",
                r"a_k = \sqrt{6 (I_{k+1} + I_{k+2} - I_k) / m}",
                [Arg("m", m, "mass, kg", "positive"), Arg("I_b", I3, "principal moments (or the diagonal), kg·m²", "spd_diag")],

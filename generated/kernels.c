@@ -3096,6 +3096,21 @@ void lv_wheels4_free_inertia(const double *I_p, const double *A_b, const double 
     M[8] = -(A_b_20*A_b_20)*J_0 - (A_b_21*A_b_21)*J_1 - (A_b_22*A_b_22)*J_2 - (A_b_23*A_b_23)*J_3 + I_p_22;
 }
 
+void lv_rigid_point_velocity(const double *v_com_w, const double *omega_w, const double *r_w, double *v_w) {
+    const double v_com_w_0 = v_com_w[0];
+    const double v_com_w_1 = v_com_w[1];
+    const double v_com_w_2 = v_com_w[2];
+    const double omega_w_0 = omega_w[0];
+    const double omega_w_1 = omega_w[1];
+    const double omega_w_2 = omega_w[2];
+    const double r_w_0 = r_w[0];
+    const double r_w_1 = r_w[1];
+    const double r_w_2 = r_w[2];
+    v_w[0] = omega_w_1*r_w_2 - omega_w_2*r_w_1 + v_com_w_0;
+    v_w[1] = -omega_w_0*r_w_2 + omega_w_2*r_w_0 + v_com_w_1;
+    v_w[2] = omega_w_0*r_w_1 - omega_w_1*r_w_0 + v_com_w_2;
+}
+
 void lv_box_of_inertia(double m, const double *I_b, double *edges) {
     const double I_b_0 = I_b[0];
     const double I_b_1 = I_b[1];
@@ -3304,6 +3319,7 @@ static void packed_wheels4_motor(const double *in, double *out) { lv_wheels4_mot
 static void packed_quat_error_chart_inverse(const double *in, double *out) { lv_quat_error_chart_inverse(in + 0, in + 4, out + 0); }
 static void packed_quat_normalize_scaled(const double *in, double *out) { lv_quat_normalize_scaled(in + 0, out + 0, out + 4); }
 static void packed_wheels4_free_inertia(const double *in, double *out) { lv_wheels4_free_inertia(in + 0, in + 9, in + 21, out + 0); }
+static void packed_rigid_point_velocity(const double *in, double *out) { lv_rigid_point_velocity(in + 0, in + 3, in + 6, out + 0); }
 static void packed_box_of_inertia(const double *in, double *out) { lv_box_of_inertia(in[0], in + 1, out + 0); }
 
 const lv_kernel_info lv_kernel_table[LV_KERNEL_COUNT] = {
@@ -3386,5 +3402,6 @@ const lv_kernel_info lv_kernel_table[LV_KERNEL_COUNT] = {
     {"quat_error_chart_inverse", 7, 4, packed_quat_error_chart_inverse},
     {"quat_normalize_scaled", 4, 5, packed_quat_normalize_scaled},
     {"wheels4_free_inertia", 25, 9, packed_wheels4_free_inertia},
+    {"rigid_point_velocity", 9, 3, packed_rigid_point_velocity},
     {"box_of_inertia", 4, 3, packed_box_of_inertia},
 };

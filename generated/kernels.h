@@ -11,7 +11,7 @@ typedef struct {
     void (*packed)(const double *in, double *out);
 } lv_kernel_info;
 
-#define LV_KERNEL_COUNT 80
+#define LV_KERNEL_COUNT 81
 extern const lv_kernel_info lv_kernel_table[LV_KERNEL_COUNT];
 
 /* particle_moments: One particle's mass moment and momentum (summed: m r_COM and p).
@@ -620,6 +620,13 @@ void lv_quat_normalize_scaled(const double *q, double *q_unit, double *norm);
      in  J [4]: wheel axial inertias (4), kg·m²
      out M [3×3]: 3×3, body frame, kg·m², row-major (must stay positive definite) */
 void lv_wheels4_free_inertia(const double *I_p, const double *A_b, const double *J, double *M);
+
+/* rigid_point_velocity: Velocity of a point moving with a rigid body.
+     in  v_com_w [3]: velocity of the centre of mass, world frame, m/s
+     in  omega_w [3]: angular velocity, world frame, rad/s
+     in  r_w [3]: the point relative to the centre of mass, world frame, m
+     out v_w [3]: velocity of the point, world frame, m/s */
+void lv_rigid_point_velocity(const double *v_com_w, const double *omega_w, const double *r_w, double *v_w);
 
 /* box_of_inertia: Edges of the uniform box with a given mass and principal moments.
      in  m scalar: mass, kg

@@ -2572,6 +2572,24 @@ def wheels4_free_inertia(I_p, A_b, J):
     return casadi.vertcat(-(A_b_00*A_b_00)*J_0 - (A_b_01*A_b_01)*J_1 - (A_b_02*A_b_02)*J_2 - (A_b_03*A_b_03)*J_3 + I_p_00, t4, t5, t4, -(A_b_10*A_b_10)*J_0 - (A_b_11*A_b_11)*J_1 - (A_b_12*A_b_12)*J_2 - (A_b_13*A_b_13)*J_3 + I_p_11, t6, t5, t6, -(A_b_20*A_b_20)*J_0 - (A_b_21*A_b_21)*J_1 - (A_b_22*A_b_22)*J_2 - (A_b_23*A_b_23)*J_3 + I_p_22)
 
 
+def rigid_point_velocity(v_com_w, omega_w, r_w):
+    """rigid_point_velocity: Velocity of a point moving with a rigid body.
+      in  v_com_w [3]: velocity of the centre of mass, world frame, m/s
+      in  omega_w [3]: angular velocity, world frame, rad/s
+      in  r_w [3]: the point relative to the centre of mass, world frame, m
+      out v_w [3]: velocity of the point, world frame, m/s"""
+    v_com_w_0 = v_com_w[0]
+    v_com_w_1 = v_com_w[1]
+    v_com_w_2 = v_com_w[2]
+    omega_w_0 = omega_w[0]
+    omega_w_1 = omega_w[1]
+    omega_w_2 = omega_w[2]
+    r_w_0 = r_w[0]
+    r_w_1 = r_w[1]
+    r_w_2 = r_w[2]
+    return casadi.vertcat(omega_w_1*r_w_2 - omega_w_2*r_w_1 + v_com_w_0, -omega_w_0*r_w_2 + omega_w_2*r_w_0 + v_com_w_1, omega_w_0*r_w_1 - omega_w_1*r_w_0 + v_com_w_2)
+
+
 def box_of_inertia(m, I_b):
     """box_of_inertia: Edges of the uniform box with a given mass and principal moments.
       in  m scalar: mass, kg

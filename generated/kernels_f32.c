@@ -3097,6 +3097,21 @@ void lvf_wheels4_free_inertia(const float *I_p, const float *A_b, const float *J
     M[8] = -(A_b_20*A_b_20)*J_0 - (A_b_21*A_b_21)*J_1 - (A_b_22*A_b_22)*J_2 - (A_b_23*A_b_23)*J_3 + I_p_22;
 }
 
+void lvf_rigid_point_velocity(const float *v_com_w, const float *omega_w, const float *r_w, float *v_w) {
+    const float v_com_w_0 = v_com_w[0];
+    const float v_com_w_1 = v_com_w[1];
+    const float v_com_w_2 = v_com_w[2];
+    const float omega_w_0 = omega_w[0];
+    const float omega_w_1 = omega_w[1];
+    const float omega_w_2 = omega_w[2];
+    const float r_w_0 = r_w[0];
+    const float r_w_1 = r_w[1];
+    const float r_w_2 = r_w[2];
+    v_w[0] = omega_w_1*r_w_2 - omega_w_2*r_w_1 + v_com_w_0;
+    v_w[1] = -omega_w_0*r_w_2 + omega_w_2*r_w_0 + v_com_w_1;
+    v_w[2] = omega_w_0*r_w_1 - omega_w_1*r_w_0 + v_com_w_2;
+}
+
 void lvf_box_of_inertia(float m, const float *I_b, float *edges) {
     const float I_b_0 = I_b[0];
     const float I_b_1 = I_b[1];

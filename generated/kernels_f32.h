@@ -163,6 +163,8 @@ void lvf_quat_error_chart_inverse(const float *q_ref, const float *dtheta, float
 void lvf_quat_normalize_scaled(const float *q, float *q_unit, float *norm);
 /* wheels4_free_inertia: Inertia of a wheeled body with its wheels free to spin (float; see kernels.h) */
 void lvf_wheels4_free_inertia(const float *I_p, const float *A_b, const float *J, float *M);
+/* rigid_point_velocity: Velocity of a point moving with a rigid body (float; see kernels.h) */
+void lvf_rigid_point_velocity(const float *v_com_w, const float *omega_w, const float *r_w, float *v_w);
 /* box_of_inertia: Edges of the uniform box with a given mass and principal moments (float; see kernels.h) */
 void lvf_box_of_inertia(float m, const float *I_b, float *edges);
 

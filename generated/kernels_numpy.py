@@ -4720,6 +4720,47 @@ def wheels4_free_inertia(I_p, A_b, J, *, out=None):
     return M_out
 
 
+def rigid_point_velocity(v_com_w, omega_w, r_w, *, out=None):
+    """Velocity of a point moving with a rigid body.
+
+    Generated kernel ``rigid_point_velocity``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    v_com_w : array_like, shape (..., 3)
+        velocity of the centre of mass, world frame, m/s
+    omega_w : array_like, shape (..., 3)
+        angular velocity, world frame, rad/s
+    r_w : array_like, shape (..., 3)
+        the point relative to the centre of mass, world frame, m
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
+
+    Returns
+    -------
+    v_w : ndarray, shape (..., 3)
+        velocity of the point, world frame, m/s
+    """
+    v_com_w = numpy.asarray(v_com_w, dtype=numpy.float64)
+    omega_w = numpy.asarray(omega_w, dtype=numpy.float64)
+    r_w = numpy.asarray(r_w, dtype=numpy.float64)
+    batch = v_com_w.shape[:-1] if v_com_w.shape[:-1] == omega_w.shape[:-1] == r_w.shape[:-1] else numpy.broadcast_shapes(v_com_w.shape[:-1], omega_w.shape[:-1], r_w.shape[:-1])
+    v_com_w_0 = v_com_w[..., 0]
+    v_com_w_1 = v_com_w[..., 1]
+    v_com_w_2 = v_com_w[..., 2]
+    omega_w_0 = omega_w[..., 0]
+    omega_w_1 = omega_w[..., 1]
+    omega_w_2 = omega_w[..., 2]
+    r_w_0 = r_w[..., 0]
+    r_w_1 = r_w[..., 1]
+    r_w_2 = r_w[..., 2]
+    v_w_out = numpy.empty(batch + (3,)) if out is None or out[0] is None else out[0]
+    v_w_out[..., 0] = omega_w_1*r_w_2 - omega_w_2*r_w_1 + v_com_w_0
+    v_w_out[..., 1] = -omega_w_0*r_w_2 + omega_w_2*r_w_0 + v_com_w_1
+    v_w_out[..., 2] = omega_w_0*r_w_1 - omega_w_1*r_w_0 + v_com_w_2
+    return v_w_out
+
+
 def box_of_inertia(m, I_b, *, out=None):
     """Edges of the uniform box with a given mass and principal moments.
 
@@ -4842,6 +4883,7 @@ KERNELS = {
     'quat_error_chart_inverse': (quat_error_chart_inverse, [('q_ref', (4,)), ('dtheta', (3,))], [('q', (4,))]),
     'quat_normalize_scaled': (quat_normalize_scaled, [('q', (4,))], [('q_unit', (4,)), ('norm', ())]),
     'wheels4_free_inertia': (wheels4_free_inertia, [('I_p', (3, 3)), ('A_b', (3, 4)), ('J', (4,))], [('M', (3, 3))]),
+    'rigid_point_velocity': (rigid_point_velocity, [('v_com_w', (3,)), ('omega_w', (3,)), ('r_w', (3,))], [('v_w', (3,))]),
     'box_of_inertia': (box_of_inertia, [('m', ()), ('I_b', (3,))], [('edges', (3,))]),
 }
 

@@ -1594,6 +1594,14 @@ def wheels4_free_inertia(I_p, A_b, J):
     return (-(A_b_00*A_b_00)*J_0 - (A_b_01*A_b_01)*J_1 - (A_b_02*A_b_02)*J_2 - (A_b_03*A_b_03)*J_3 + I_p_00, t4, t5, t4, -(A_b_10*A_b_10)*J_0 - (A_b_11*A_b_11)*J_1 - (A_b_12*A_b_12)*J_2 - (A_b_13*A_b_13)*J_3 + I_p_11, t6, t5, t6, -(A_b_20*A_b_20)*J_0 - (A_b_21*A_b_21)*J_1 - (A_b_22*A_b_22)*J_2 - (A_b_23*A_b_23)*J_3 + I_p_22)
 
 
+def rigid_point_velocity(v_com_w, omega_w, r_w):
+    """Velocity of a point moving with a rigid body (floats; see the module)."""
+    v_com_w_0, v_com_w_1, v_com_w_2 = v_com_w
+    omega_w_0, omega_w_1, omega_w_2 = omega_w
+    r_w_0, r_w_1, r_w_2 = r_w
+    return (omega_w_1*r_w_2 - omega_w_2*r_w_1 + v_com_w_0, -omega_w_0*r_w_2 + omega_w_2*r_w_0 + v_com_w_1, omega_w_0*r_w_1 - omega_w_1*r_w_0 + v_com_w_2)
+
+
 def box_of_inertia(m, I_b):
     """Edges of the uniform box with a given mass and principal moments (floats; see the module)."""
     I_b_0, I_b_1, I_b_2 = I_b
