@@ -650,161 +650,10 @@ static void ctx_init(body_ctx *c, const double *params, long b, const lv_models 
     if (c->kind & LV_KIND_WHEELS) lv_wheels_coefficients(c->r, c->kw);
 }
 
-/* Dormand-Prince 5(4): LV_DP_A, LV_DP_E and the controller constants come from generated/tableaux.h
-   (derive/tableaux.py). The nodes c_i are not needed: the right-hand side does not depend on time. */
-
-/* RMS of e / (atol + rtol max(|y|, |yn|)) over the first n numbers (Hairer's norm). */
-static double dp_norm(const double *e, const double *y, const double *yn, int n, double rtol, double atol)
-{
-    double s = 0.0;
-    int i;
-    for (i = 0; i < n; i++) {
-        const double a = fabs(y[i]), bb = fabs(yn[i]);
-        const double sc = atol + rtol * (a > bb ? a : bb);
-        if (e[i] != 0.0) { /* an exact zero counts 0, even with atol = 0 */
-            const double z = e[i] / sc;
-            s += z * z;
-        }
-    }
-    return sqrt(s / n);
-}
-
-/* Hairer's starting step (Solving ODEs I, II.4): from f0 = f(y) and one more evaluation. */
-static double dp_initial_h(const body_ctx *c, const double *y, const double *f0, int n, double rtol, double atol,
-                           double dt, double *nfev)
-{
-    double y1[LV_XS_SIZE], f1[LV_XS_SIZE], d[LV_XS_SIZE], d0, d1, d2, h0, h1, mx;
-    int i;
-    for (i = 0; i < n; i++) d[i] = 0.0;
-    d0 = dp_norm(y, y, y, n, rtol, atol);
-    d1 = dp_norm(f0, y, y, n, rtol, atol);
-    h0 = (d0 < LV_DP_INIT_SMALL || d1 < LV_DP_INIT_SMALL) ? LV_DP_INIT_TINY_H : LV_DP_INIT_FRAC * d0 / d1;
-    if (h0 > dt) h0 = dt;
-    for (i = 0; i < LV_XS_SIZE; i++) y1[i] = y[i] + h0 * f0[i];
-    ctx_rhs(c, y1, f1);
-    *nfev += 1;
-    for (i = 0; i < n; i++) d[i] = (f1[i] - f0[i]) / h0;
-    d2 = dp_norm(d, y, y, n, rtol, atol);
-    mx = d1 > d2 ? d1 : d2;
-    h1 = mx <= LV_DP_INIT_FLAT ? (h0 * LV_DP_INIT_SHRINK > LV_DP_INIT_TINY_H ? h0 * LV_DP_INIT_SHRINK : LV_DP_INIT_TINY_H)
-                               : pow(LV_DP_INIT_FRAC / mx, LV_DP_INIT_EXPONENT);
-    h0 = LV_DP_INIT_GROW * h0 < h1 ? LV_DP_INIT_GROW * h0 : h1;
-    return isfinite(h0) && h0 > 0.0 ? h0 : dt;
-}
-
-/* After an accepted substep: normalize q, put a jointed body back on its joint. */
-static void ctx_finish(const body_ctx *c, double *y, int normalize)
-{
-    if (normalize) lv_quat_normalize(y + LV_STATE_Q, y + LV_STATE_Q);
-    if (c->kind & LV_KIND_JOINT)
-        lv_pivot_kinematics(y + LV_STATE_Q, y + LV_STATE_OMEGA_B, c->r + LV_MODEL_ANCHOR_W, c->r + LV_MODEL_R_B,
-                            y + LV_STATE_P_W, y + LV_STATE_V_W);
-}
-
-/* Advance body b by n_steps output steps of dt with dopri5. Returns -1 on success (rows written), else
-   the failing step with *why = LV_DIVERGED or LV_TOLERANCE and last[] = its last accepted state. */
-static long advance_dopri5(double *state, const double *params, long b, const lv_models *md, const lv_effect_index *ix,
-                           int normalize, double dt, long n_steps, const lv_adaptive *ad, int *why, double *last)
-{
-    body_ctx c;
-    double y[LV_XS_SIZE], yn[LV_XS_SIZE], k[7][LV_XS_SIZE], tmp[LV_XS_SIZE], err[LV_XS_SIZE], applied[LV_NW];
-    double h, nfev = 0.0;
-    const double rtol = ad->rtol, atol = ad->atol, hmin = LV_DP_HMIN_REL * dt;
-    const double *cmd = NULL;
-    int have_k1 = 0, n, i, s2, j;
-    long s;
-    ctx_init(&c, params, b, md, ix);
-    /* the error norm's numbers: the state and the rates of the wheels in use (the padded slots stay 0) */
-    n = c.kind & LV_KIND_WHEELS ? LV_XS_OMEGA + lv_wheel_count(c.r) : LV_STATE_SIZE;
-    memcpy(y, state + b * LV_STATE_SIZE, LV_STATE_SIZE * sizeof(double));
-    for (i = 0; i < LV_NW; i++) y[LV_XS_OMEGA + i] = 0.0;
-    if (c.kind) {
-        memcpy(y + LV_XS_OMEGA, md->Omega + LV_NW * b, LV_NW * sizeof(double));
-        memcpy(applied, md->applied + LV_NW * b, sizeof applied);
-        cmd = md->command + LV_NW * b;
-    }
-    h = ad->h[b];
-    for (s = 0; s < n_steps; s++) {
-        double t = 0.0;
-        long sub = 0;
-        int rejected = 0;
-        if (c.kind & LV_KIND_WHEELS) {
-            lv_wheels_motor(c.r, cmd, y + LV_XS_OMEGA, c.u);
-            have_k1 = 0; /* the held torque may change at each output step */
-        }
-        if (!have_k1) {
-            ctx_rhs(&c, y, k[0]);
-            nfev += 1;
-            have_k1 = 1;
-        }
-        if (!(h > 0.0) || !isfinite(h)) h = dp_initial_h(&c, y, k[0], n, rtol, atol, dt, &nfev);
-        while (t < dt) {
-            const double rem = dt - t;
-            const int clipped = h >= rem;
-            const double hs = clipped ? rem : h;
-            double e;
-            for (s2 = 1; s2 < 7; s2++) {
-                for (i = 0; i < LV_XS_SIZE; i++) {
-                    double acc = 0.0;
-                    for (j = 0; j < s2; j++) acc += LV_DP_A[s2][j] * k[j][i];
-                    tmp[i] = y[i] + hs * acc;
-                }
-                ctx_rhs(&c, tmp, k[s2]);
-            }
-            nfev += 6;
-            for (i = 0; i < LV_XS_SIZE; i++) yn[i] = tmp[i]; /* stage 7 is evaluated at the 5th-order solution */
-            for (i = 0; i < LV_XS_SIZE; i++) {
-                double acc = 0.0;
-                for (j = 0; j < 7; j++) acc += LV_DP_E[j] * k[j][i];
-                err[i] = hs * acc;
-            }
-            e = dp_norm(err, y, yn, n, rtol, atol);
-            if (e <= 1.0) {
-                double fac = e == 0.0 ? LV_DP_FACMAX : LV_DP_SAFETY * pow(e, LV_DP_ERR_EXPONENT);
-                if (fac > LV_DP_FACMAX) fac = LV_DP_FACMAX;
-                if (fac < LV_DP_FACMIN) fac = LV_DP_FACMIN;
-                if (rejected && fac > 1.0) fac = 1.0;
-                t = clipped ? dt : t + hs;
-                /* a step shortened to land on the output time does not shrink the proposal */
-                if (!(clipped && fac >= 1.0 && h > hs * fac)) h = hs * fac;
-                ctx_finish(&c, yn, normalize);
-                for (i = 0; i < LV_XS_SIZE; i++) {
-                    if (!isfinite(yn[i])) {
-                        *why = LV_DIVERGED;
-                        memcpy(last, y, sizeof y);
-                        ad->nfev[b] += nfev;
-                        return s;
-                    }
-                }
-                memcpy(y, yn, sizeof y);
-                memcpy(k[0], k[6], sizeof k[0]); /* FSAL: f at the new (un-normalized) point */
-                rejected = 0;
-            } else {
-                double fac = isfinite(e) ? LV_DP_SAFETY * pow(e, LV_DP_ERR_EXPONENT) : LV_DP_FACMIN;
-                if (fac < LV_DP_FACMIN) fac = LV_DP_FACMIN;
-                if (fac > 1.0) fac = 1.0;
-                h = hs * fac;
-                rejected = 1;
-            }
-            if (h < hmin || ++sub > LV_DP_MAX_SUBSTEPS) {
-                *why = LV_TOLERANCE;
-                memcpy(last, y, sizeof y);
-                ad->h[b] = h;
-                ad->nfev[b] += nfev;
-                return s;
-            }
-        }
-        if (c.kind) memcpy(applied, c.u, sizeof applied);
-    }
-    memcpy(state + b * LV_STATE_SIZE, y, LV_STATE_SIZE * sizeof(double));
-    if (c.kind) {
-        memcpy(md->Omega + LV_NW * b, y + LV_XS_OMEGA, LV_NW * sizeof(double));
-        memcpy(md->applied + LV_NW * b, applied, sizeof applied);
-    }
-    ad->h[b] = h;
-    ad->nfev[b] += nfev;
-    return -1;
-}
+/* ---- the explicit Runge-Kutta family, one stage loop: a user's tableau (lv_tableau) and dopri5 -------------
+   Dormand-Prince 5(4) is the printed tableau LV_DP_A (generated/tableaux.h; its last row is the 5th-order solution,
+   FSAL) with the error weights LV_DP_E and a step-size controller on top. The nodes c_i are not needed: the
+   right-hand side does not depend on time. */
 
 /* out = y + h * sum_j w[j] k[j] over j < n (lv_tableau's order: the first nonzero w[j] k[j], then the later nonzero
    ones added in increasing j); y when every w[j] is zero. One row of an explicit Runge-Kutta tableau. */
@@ -824,19 +673,139 @@ static void rk_row(double *out, const double *y, double h, const double *w, doub
     }
 }
 
-/* Advance body b (any kind) by n_steps of the user's explicit Runge-Kutta method tab (lv_tableau), as advance_model
-   steps rk4: wheel torques from the motor line at the start of each step and held over it, q normalized when
-   asked, a jointed body put back on its joint. Rows written only on success; returns -1, or the 0-based failing
-   step with last[] = its last finite [x, Omega]. */
-static long advance_tableau(double *state, const double *params, long b, const lv_models *md,
-                            const lv_effect_index *ix, const lv_tableau *tab, int normalize, double dt, long n_steps,
-                            double *last)
+/* The stages first .. s-1 of the tableau a (row i at a + i * lda) at y with step h: k[i] = f(y + h sum_j a[i][j] k[j])
+   (rk_row); out holds the last stage's input. */
+static void rk_stages(const body_ctx *c, const double *y, double h, const double *a, int lda, int first, int s,
+                      double k[][LV_XS_SIZE], double *out)
+{
+    int i;
+    for (i = first; i < s; i++) {
+        rk_row(out, y, h, a + i * lda, k, i);
+        ctx_rhs(c, out, k[i]);
+    }
+}
+
+/* Accept the step's end yn: normalize q, put a jointed body back on its joint, then y = yn when every number is
+   finite. 0 (y untouched) when one is not. */
+static int rk_accept(const body_ctx *c, double *y, double *yn, int normalize)
+{
+    int i;
+    if (normalize) lv_quat_normalize(yn + LV_STATE_Q, yn + LV_STATE_Q);
+    if (c->kind & LV_KIND_JOINT)
+        lv_pivot_kinematics(yn + LV_STATE_Q, yn + LV_STATE_OMEGA_B, c->r + LV_MODEL_ANCHOR_W, c->r + LV_MODEL_R_B,
+                            yn + LV_STATE_P_W, yn + LV_STATE_V_W);
+    for (i = 0; i < LV_XS_SIZE; i++)
+        if (!isfinite(yn[i])) return 0;
+    memcpy(y, yn, LV_XS_SIZE * sizeof(double));
+    return 1;
+}
+
+/* RMS of e / (atol + rtol max(|y|, |yn|)) over the first n numbers (Hairer's norm). */
+static double dp_norm(const double *e, const double *y, const double *yn, int n, double rtol, double atol)
+{
+    double s = 0.0;
+    int i;
+    for (i = 0; i < n; i++) {
+        const double a = fabs(y[i]), bb = fabs(yn[i]);
+        const double sc = atol + rtol * (a > bb ? a : bb);
+        if (e[i] != 0.0) { /* an exact zero counts 0, even with atol = 0 */
+            const double z = e[i] / sc;
+            s += z * z;
+        }
+    }
+    return sqrt(s / n);
+}
+
+/* dopri5's controller state of one body: the step-size proposal h, the norm's count n (the state and the rates of the
+   wheels in use; the padded slots stay 0), whether k[0] holds f(y) (FSAL), the evaluations spent. */
+typedef struct {
+    double h, nfev, rtol, atol;
+    int n, have_k1;
+} dp_control;
+
+/* Hairer's starting step (Solving ODEs I, II.4): from f0 = f(y) and one more evaluation. */
+static double dp_initial_h(const body_ctx *c, const double *y, const double *f0, dp_control *d, double dt)
+{
+    double y1[LV_XS_SIZE], f1[LV_XS_SIZE], dd[LV_XS_SIZE], d0, d1, d2, h0, h1, mx;
+    int i;
+    for (i = 0; i < d->n; i++) dd[i] = 0.0;
+    d0 = dp_norm(y, y, y, d->n, d->rtol, d->atol);
+    d1 = dp_norm(f0, y, y, d->n, d->rtol, d->atol);
+    h0 = (d0 < LV_DP_INIT_SMALL || d1 < LV_DP_INIT_SMALL) ? LV_DP_INIT_TINY_H : LV_DP_INIT_FRAC * d0 / d1;
+    if (h0 > dt) h0 = dt;
+    for (i = 0; i < LV_XS_SIZE; i++) y1[i] = y[i] + h0 * f0[i];
+    ctx_rhs(c, y1, f1);
+    d->nfev += 1;
+    for (i = 0; i < d->n; i++) dd[i] = (f1[i] - f0[i]) / h0;
+    d2 = dp_norm(dd, y, y, d->n, d->rtol, d->atol);
+    mx = d1 > d2 ? d1 : d2;
+    h1 = mx <= LV_DP_INIT_FLAT ? (h0 * LV_DP_INIT_SHRINK > LV_DP_INIT_TINY_H ? h0 * LV_DP_INIT_SHRINK : LV_DP_INIT_TINY_H)
+                               : pow(LV_DP_INIT_FRAC / mx, LV_DP_INIT_EXPONENT);
+    h0 = LV_DP_INIT_GROW * h0 < h1 ? LV_DP_INIT_GROW * h0 : h1;
+    return isfinite(h0) && h0 > 0.0 ? h0 : dt;
+}
+
+/* Advance y by exactly dt in accepted dopri5 substeps (the LV_DP_A stages through rk_stages, the error estimate
+   h sum_j E_j k_j, Hairer's controller). LV_OK; else LV_DIVERGED or LV_TOLERANCE with y the last accepted state. */
+static int dp_output_step(const body_ctx *c, double *y, double k[][LV_XS_SIZE], dp_control *d, double dt, int normalize)
+{
+    static const double zero[LV_XS_SIZE];
+    double yn[LV_XS_SIZE], err[LV_XS_SIZE], t = 0.0;
+    long sub = 0;
+    int rejected = 0;
+    if (!d->have_k1) {
+        ctx_rhs(c, y, k[0]);
+        d->nfev += 1;
+        d->have_k1 = 1;
+    }
+    if (!(d->h > 0.0) || !isfinite(d->h)) d->h = dp_initial_h(c, y, k[0], d, dt);
+    while (t < dt) {
+        const double rem = dt - t;
+        const int clipped = d->h >= rem;
+        const double hs = clipped ? rem : d->h;
+        double e;
+        rk_stages(c, y, hs, &LV_DP_A[0][0], 6, 1, 7, k, yn); /* yn: stage 7's point, the 5th-order solution */
+        d->nfev += 6;
+        rk_row(err, zero, hs, LV_DP_E, k, 7);
+        e = dp_norm(err, y, yn, d->n, d->rtol, d->atol);
+        if (e <= 1.0) {
+            double fac = e == 0.0 ? LV_DP_FACMAX : LV_DP_SAFETY * pow(e, LV_DP_ERR_EXPONENT);
+            if (fac > LV_DP_FACMAX) fac = LV_DP_FACMAX;
+            if (fac < LV_DP_FACMIN) fac = LV_DP_FACMIN;
+            if (rejected && fac > 1.0) fac = 1.0;
+            t = clipped ? dt : t + hs;
+            /* a step shortened to land on the output time does not shrink the proposal */
+            if (!(clipped && fac >= 1.0 && d->h > hs * fac)) d->h = hs * fac;
+            if (!rk_accept(c, y, yn, normalize)) return LV_DIVERGED;
+            memcpy(k[0], k[6], sizeof k[0]); /* FSAL: f at the new (un-normalized) point */
+            rejected = 0;
+        } else {
+            double fac = isfinite(e) ? LV_DP_SAFETY * pow(e, LV_DP_ERR_EXPONENT) : LV_DP_FACMIN;
+            if (fac < LV_DP_FACMIN) fac = LV_DP_FACMIN;
+            if (fac > 1.0) fac = 1.0;
+            d->h = hs * fac;
+            rejected = 1;
+        }
+        if (d->h < LV_DP_HMIN_REL * dt || ++sub > LV_DP_MAX_SUBSTEPS) return LV_TOLERANCE;
+    }
+    return LV_OK;
+}
+
+/* Advance body b (any kind) by n_steps steps of dt of an explicit Runge-Kutta method: the user's tableau tab, or
+   (ad != NULL) dopri5 with its per-body step sizes (lv_adaptive). Wheel torques from the motor line at the start of
+   each step, held over it; q normalized when asked; a jointed body put back on its joint. Rows written only on
+   success; returns -1, or the 0-based failing step with *why = LV_DIVERGED or LV_TOLERANCE and last[] = its last
+   finite [x, Omega]. */
+static long advance_rk(double *state, const double *params, long b, const lv_models *md, const lv_effect_index *ix,
+                       const lv_tableau *tab, const lv_adaptive *ad, int normalize, double dt, long n_steps, int *why,
+                       double *last)
 {
     body_ctx c;
+    dp_control d = {0.0, 0.0, 0.0, 0.0, 0, 0};
     double y[LV_XS_SIZE], yn[LV_XS_SIZE], k[LV_TABLEAU_MAX_STAGES][LV_XS_SIZE], applied[LV_NW];
     const double *cmd = NULL;
     long s;
-    int i;
+    int i, st = LV_OK;
     ctx_init(&c, params, b, md, ix);
     memcpy(y, state + b * LV_STATE_SIZE, LV_STATE_SIZE * sizeof(double));
     for (i = 0; i < LV_NW; i++) y[LV_XS_OMEGA + i] = 0.0;
@@ -845,22 +814,32 @@ static long advance_tableau(double *state, const double *params, long b, const l
         memcpy(applied, md->applied + LV_NW * b, sizeof applied);
         cmd = md->command + LV_NW * b;
     }
-    for (s = 0; s < n_steps; s++) {
-        if (c.kind & LV_KIND_WHEELS) lv_wheels_motor(c.r, cmd, y + LV_XS_OMEGA, c.u);
-        for (i = 0; i < tab->s; i++) {
-            rk_row(yn, y, dt, tab->a + i * tab->s, k, i);
-            ctx_rhs(&c, yn, k[i]);
+    if (ad != NULL) {
+        d.h = ad->h[b], d.nfev = 0.0, d.rtol = ad->rtol, d.atol = ad->atol, d.have_k1 = 0;
+        d.n = c.kind & LV_KIND_WHEELS ? LV_XS_OMEGA + lv_wheel_count(c.r) : LV_STATE_SIZE;
+    }
+    for (s = 0; s < n_steps && st == LV_OK; s++) {
+        if (c.kind & LV_KIND_WHEELS) {
+            lv_wheels_motor(c.r, cmd, y + LV_XS_OMEGA, c.u);
+            d.have_k1 = 0; /* the held torque may change at each output step */
         }
-        rk_row(yn, y, dt / tab->b_den, tab->b_num, k, tab->s);
-        ctx_finish(&c, yn, normalize);
-        for (i = 0; i < LV_XS_SIZE; i++) {
-            if (!isfinite(yn[i])) {
-                memcpy(last, y, sizeof y);
-                return s;
-            }
+        if (ad != NULL) {
+            st = dp_output_step(&c, y, k, &d, dt, normalize);
+        } else {
+            rk_stages(&c, y, dt, tab->a, tab->s, 0, tab->s, k, yn);
+            rk_row(yn, y, dt / tab->b_den, tab->b_num, k, tab->s);
+            st = rk_accept(&c, y, yn, normalize) ? LV_OK : LV_DIVERGED;
         }
-        memcpy(y, yn, sizeof y);
-        if (c.kind) memcpy(applied, c.u, sizeof applied);
+        if (st == LV_OK && c.kind) memcpy(applied, c.u, sizeof applied);
+    }
+    if (ad != NULL) {
+        if (st != LV_DIVERGED) ad->h[b] = d.h;
+        ad->nfev[b] += d.nfev;
+    }
+    if (st != LV_OK) {
+        *why = st;
+        memcpy(last, y, sizeof y);
+        return s - 1;
     }
     memcpy(state + b * LV_STATE_SIZE, y, LV_STATE_SIZE * sizeof(double));
     if (c.kind) {
@@ -1559,8 +1538,8 @@ int lv_simulate(double *state, const double *params, long nb,
         for (b = 0; b < nb && limit > 0; b++) {
             double lastx[LV_XS_SIZE];
             int why = LV_DIVERGED;
-            s = tableau != NULL ? advance_tableau(state, params, b, models, &ix, tableau, normalize, dt, limit, lastx)
-                                : advance_dopri5(state, params, b, models, &ix, normalize, dt, limit, adaptive, &why, lastx);
+            s = advance_rk(state, params, b, models, &ix, tableau, tableau != NULL ? NULL : adaptive, normalize, dt, limit,
+                           &why, lastx);
             if (s < 0) continue;
             memcpy(state + b * LV_STATE_SIZE, lastx, LV_STATE_SIZE * sizeof(double));
             if (models != NULL && (int)models->rows[b * LV_MODEL_SIZE + LV_MODEL_KIND] != 0)
