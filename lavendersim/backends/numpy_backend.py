@@ -24,6 +24,7 @@ from ..errors import DivergenceError
 from ..generated import layout as LY
 from ..generated import tableaux as T
 from ..kernels import K
+from . import numpy_scalar as SC
 from . import (DOPRI5_HMIN_REL, DOPRI5_MAX_SUBSTEPS, FLOAT32_INTEGRATORS, KIND_JOINT, KIND_WHEELS, PLAIN_ONLY,
                Adaptive, Models, divergence_cause, no_root_cause, rk_weights, tableau_of, tolerance_cause,
                wheel_counts)
@@ -195,6 +196,7 @@ class _Plan:
         self.c_free = self.K.euler_coefficients(self.I_free)     # Euler's coefficients, once per plan
         self.c_f = self.K.euler_coefficients(self.I_f)
         self.works = {}
+        self.scalar = None     # numpy_scalar.ScalarBodies, built on first use
         pivot = np.flatnonzero(kind == KIND_JOINT)
         wheeled = np.flatnonzero(self.wheeled)   # one wheel model: one group
         self.wheels = [_Group(wheeled, effects, self.m, self.I, rows)] if wheeled.size else []
@@ -555,7 +557,8 @@ def _explicit_rk(c, b_num, b_den) -> _ExplicitRK:
     return _ExplicitRK([[c[i] if j == i - 1 else 0.0 for j in range(n)] for i in range(n)], b_num, b_den)
 
 
-_RK4 = _explicit_rk(*T.EXPLICIT_RK["rk4"])     # also rk4_expmap's tableau
+_BUILTIN_RK = {name: _explicit_rk(*tab) for name, tab in T.EXPLICIT_RK.items()}
+_RK4 = _BUILTIN_RK["rk4"]     # also rk4_expmap's tableau
 
 
 def _step_rk4_expmap(plan, f, x, h):
@@ -614,7 +617,7 @@ def _stepper_of(name: str):
     EXPLICIT_RK), else its family's member _step_<name> (semi_implicit_euler, partitioned; rk4_expmap, the RK4
     tableau in exponential coordinates; implicit_gyro; the compositions); dopri5 is advance's _dopri5 loop (None)."""
     if name in T.EXPLICIT_RK:
-        rk = _explicit_rk(*T.EXPLICIT_RK[name])
+        rk = _BUILTIN_RK[name]
         return lambda plan, f, x, h: rk.step(f, x, h, plan.work(x, len(rk.rows)))  # noqa: E731
     return globals().get(f"_step_{name}")
 
@@ -673,6 +676,8 @@ class NumpyBackend:
             raise ValueError(f"integrator: {integrator} steps plain rigid bodies only (no spherical_joint or reaction_wheels)")
         if integrator == "dopri5" and adaptive is None:
             raise ValueError("integrator: dopri5 needs adaptive (a lavendersim.backends.Adaptive)")
+        if self._scalar(plan, state, integrator, normalize, dt, n_steps):
+            return
         loop = self._loop
         if integrator == "dopri5":
             h, nfev = adaptive.h.copy(), adaptive.nfev.copy()
@@ -694,6 +699,25 @@ class NumpyBackend:
             models.applied[...] = applied
         if integrator == "dopri5":
             adaptive.h[...], adaptive.nfev[...] = h, nfev
+
+    @staticmethod
+    def _scalar(plan, state, integrator, normalize, dt, n_steps) -> bool:
+        """A few plain float64 bodies on an explicit Runge–Kutta tableau: stepped in Python floats (numpy_scalar,
+        bitwise the vectorized path) when every effect has a float printing. False: not taken, or handed back."""
+        if plan.has_models or plan.nb > SC.SCALAR_MAX_BODIES or plan.K is not K or state.dtype != np.float64:
+            return False
+        rk = _BUILTIN_RK.get(integrator) or _user_rk(integrator)
+        if rk is None:
+            return False
+        if plan.scalar is None:
+            plan.scalar = SC.ScalarBodies(plan.source[0], plan.source[1])
+        if not plan.scalar.ok:
+            return False
+        try:
+            SC.advance(plan.scalar, state, rk, normalize, dt, n_steps)
+        except SC.Fallback:
+            return False
+        return True
 
     @staticmethod
     def _loop(plan, x, integrator, normalize, dt, n_steps, command=None, applied=None) -> None:
