@@ -89,6 +89,13 @@ class Body:
     """
 
     __slots__ = _FIELDS
+    name: str
+    mass: float
+    I_b: np.ndarray                                   # (3,) kg·m², read-only
+    shape: tuple[str, tuple[float, ...]] | None
+    x0: np.ndarray                                    # (13,) the initial state, read-only
+    R_bp: np.ndarray                                  # (3, 3), read-only
+    _tensor: np.ndarray | None                        # (3, 3) as given, None for a principal body
 
     @V.keywords
     def __init__(self, name: str, mass: float, inertia: ArrayLike, *, p_w: ArrayLike = (0, 0, 0),

@@ -24,9 +24,10 @@ by ``Sim`` with a LavenderInputError, and both backends refuse an unknown code i
 from __future__ import annotations
 
 import re
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-
 from types import MappingProxyType
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 
@@ -137,8 +138,8 @@ class EffectSpec:
     flags: int
     kernel: str | None
     source: str = "built-in"
-    user_set: object = field(default=None, repr=False, compare=False)
-    decay_rate: object = field(default=None, repr=False, compare=False)
+    user_set: user_sets.UserSet | None = field(default=None, repr=False, compare=False)
+    decay_rate: Callable[..., np.ndarray] | None = field(default=None, repr=False, compare=False)
 
     @property
     def is_decay(self) -> bool:
@@ -250,6 +251,8 @@ class Effect:
     """
 
     spec: EffectSpec | None = None
+    body: str | None                 # set once by __init__ (an Effect is immutable)
+    values: Mapping[str, Any]        # the validated parameters by name, read-only
     name = ""
     code = 0
     per_body = False  # True: changes the body's model (joint, wheels); body= required
@@ -362,6 +365,9 @@ class Effect:
 class _WheelsCheck:
     """Hand-written check of reaction_wheels against its body (a relation the declaration cannot state)."""
 
+    name: str                        # an Effect's (the class this mixes into)
+    values: Mapping[str, Any]
+
     def check_body(self, body) -> None:
         """One J per axis, unit axes; the body with its wheels free keeps a positive definite inertia
         (I_b − A_b J A_bᵀ; on the body axes: J_i < I_b[i]); cutoff is 0 or 1."""
@@ -405,6 +411,9 @@ class _WheelsCheck:
 class _JointCheck:
     """Hand-written check of spherical_joint against its body: the pivot's model must be finite."""
 
+    name: str                        # an Effect's (the class this mixes into)
+    values: Mapping[str, Any]
+
     def check_body(self, body) -> None:
         """The inertia about the pivot (parallel axis, m |r_b|²) and the pivot kinematics at the body's
         initial state must be finite: an anchor_w too far from the COM is rejected here, naming anchor_w."""
@@ -427,7 +436,7 @@ _HAND_CHECKS = {"reaction_wheels": _WheelsCheck, "spherical_joint": _JointCheck}
 
 REGISTRY: dict[str, EffectSpec] = {}   # name -> spec of every known effect (built-in and loaded user ones)
 BY_CODE: dict[int, EffectSpec] = {}    # code -> spec (user codes stay valid after a set is reloaded)
-EFFECTS: dict[str, type] = {}          # name -> its Effect class
+EFFECTS: dict[str, type[Effect]] = {}          # name -> its Effect class
 
 
 def _class_name(name: str) -> str:
@@ -448,17 +457,17 @@ def _effect_doc(spec: EffectSpec) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _effect_class(spec: EffectSpec) -> type:
+def _effect_class(spec: EffectSpec) -> type[Effect]:
     attrs = {"spec": spec, "name": spec.name, "code": spec.code, "per_body": spec.kind == "model",
              "fields": tuple(p.name for p in spec.params),
              "defaults": {p.name: p.default for p in spec.params if p.default is not None},
              "__doc__": _effect_doc(spec),
              "__module__": __name__}
     bases = (_HAND_CHECKS[spec.name], Effect) if spec.name in _HAND_CHECKS else (Effect,)
-    return type(_class_name(spec.name), bases, attrs)
+    return cast("type[Effect]", type(_class_name(spec.name), bases, attrs))
 
 
-def register(spec: EffectSpec) -> type:
+def register(spec: EffectSpec) -> type[Effect]:
     """Add a declared effect to the registry (the built-ins at import; user sets when loaded).
 
     Parameters
@@ -492,6 +501,15 @@ for _entry in _META.EFFECTS:
     _cls = register(EffectSpec.from_meta(_entry))
     globals()[_cls.__name__] = _cls  # AppliedTorque, ForceAtPoint, Gravity, … SphericalJoint, ReactionWheels
 del _entry, _cls
+
+if TYPE_CHECKING:   # the classes registered above by name, for type checkers (lavendersim.Gravity, ...)
+    class AppliedTorque(Effect): ...
+    class ForceAtPoint(Effect): ...
+    class Gravity(Effect): ...
+    class LinearDamping(Effect): ...
+    class AngularDamping(Effect): ...
+    class SphericalJoint(_JointCheck, Effect): ...
+    class ReactionWheels(_WheelsCheck, Effect): ...
 
 
 def register_set(s) -> None:
@@ -754,6 +772,7 @@ def _casadi_kernel(spec: EffectSpec):
     from ._install import require
 
     require("casadi", "control", "the CasADi expression of an effect")
+    assert spec.kernel is not None, spec.name   # a force effect (_force_spec) always has its kernel
     if spec.user_set is None:
         from .generated import kernels_casadi as KC
         return getattr(KC, spec.kernel)

@@ -8,6 +8,7 @@ from types import MappingProxyType
 from typing import NamedTuple
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from . import validate as V
 from .bodies import P, Q, STATE_SIZE, VEL, W, Body
@@ -35,9 +36,9 @@ class _EffectList(list):
 
     __slots__ = ("_ix",)
 
-    def __init__(self, *args):
+    def __init__(self, *args) -> None:
         super().__init__(*args)
-        self._ix = None
+        self._ix: dict | None = None
 
     def __reduce_ex__(self, protocol):   # pickles as a plain list's items (the index is rebuilt on demand)
         return (_EffectList, (list(self),))
@@ -53,7 +54,7 @@ class _EffectList(list):
         return self._ix
 
     def _add(self, k: int, e) -> None:
-        ix = self._ix
+        ix = self._index()
         if getattr(e, "per_body", False):
             key = (e.name, e.body)
             ix["per_body"][key] = ix["per_body"].get(key, 0) + 1
@@ -165,9 +166,9 @@ class _BodyTable(Mapping):
         return i
 
     @property
-    def positions(self) -> "_BodyTable":
+    def positions(self) -> "_Positions":
         """A read-only name -> index mapping (``positions[name]``)."""
-        return _Positions(self._c, len(self))
+        return _Positions(self.frozen())
 
     @property
     def names(self) -> list:
@@ -225,11 +226,23 @@ class _BodyTable(Mapping):
         return state, params, list(zip(idx, given))
 
 
-class _Positions(_BodyTable):
-    """name -> body index of the first n bodies (Sim._index)."""
+class _Positions(Mapping):
+    """name -> body index of the bodies of a (frozen) body table."""
+
+    def __init__(self, table: _BodyTable) -> None:
+        self._t = table
 
     def __getitem__(self, name) -> int:
-        return self.position(name)
+        return self._t.position(name)
+
+    def __len__(self) -> int:
+        return len(self._t)
+
+    def __iter__(self):
+        return iter(self._t)
+
+    def __contains__(self, name) -> bool:
+        return name in self._t
 
 
 def _table_of(bodies: list) -> _BodyTable:
@@ -272,10 +285,10 @@ class Scene:
     @V.keywords
     def __init__(self):
         self._bodies = _BodyTable()           # name -> Body, batches kept as arrays (see _BodyTable)
-        self.effects = []
+        self._effects = _EffectList()
 
     @property
-    def effects(self) -> list:
+    def effects(self) -> _EffectList:
         """The declared effects, in the order added (a list; add with add_effect, which validates).
 
         Assigning a list stores a copy of it (the scene keeps an index of its effects per body)."""
@@ -294,7 +307,7 @@ class Scene:
         if isinstance(self._bodies, dict):    # pickled before the body table
             self._bodies = _table_of(list(self._bodies.values()))
         if effects is not None or "_effects" not in state:
-            self.effects = effects or []
+            self._effects = _EffectList(effects or [])
 
     @property
     def bodies(self) -> MappingProxyType:
@@ -375,9 +388,9 @@ class Scene:
         elif _declared(effect):  # an undeclared effect is refused by Sim (naming how to declare it)
             if effect.body is None:   # the exact check below only where a vectorized bound cannot rule it out
                 every = [e for e in self.effects.forces_on(None) if _declared(e)] + [effect]
-                x, params, _ = self._bodies.arrays()
+                x, rows, _ = self._bodies.arrays()
                 targets = [self._bodies.body(int(i))
-                           for i in _overflow_suspects(every, self.effects, x, params, self._bodies.positions)]
+                           for i in _overflow_suspects(every, self.effects, x, rows, self._bodies.positions)]
             else:
                 targets = [self.bodies[effect.body]]
             for b in targets:
@@ -388,6 +401,12 @@ class Scene:
                                                + (f" (with {', '.join(e.name for e in mine)})" if mine else ""))
         self.effects.append(effect)
         return effect
+
+    def add_bodies(self, names: Sequence[str], masses: ArrayLike, I_b: ArrayLike, *, p_w: ArrayLike | None = None,
+                   q: ArrayLike | None = None, v_w: ArrayLike | None = None, omega_b: ArrayLike | None = None,
+                   omega_w: ArrayLike | None = None) -> Sequence[Body]:
+        # the docstring is add_bodies's (below), set after it
+        return add_bodies(self, names, masses, I_b, p_w=p_w, q=q, v_w=v_w, omega_b=omega_b, omega_w=omega_w)
 
     def add_effects(self, effect: str, bodies, **params) -> list[Effect]:
         """Declare one effect on each of many bodies at once: what ``add_effect(effect, body=b, **params_b)`` for
@@ -572,7 +591,9 @@ def _force_table(scene: Scene, forces: list, frames: PrincipalFrames | None, nb:
     body-frame parameter in a scene with a rotated body one row per body) and each effect's rows. Runs of effects
     of one class that need no rotation are stacked batched (the rows Effect.row writes, without a call each)."""
     pos, at = scene._bodies.positions, scene._bodies._c["pos"]
-    blocks, rows_of, k, lo = [], [], 0, 0
+    blocks: list[np.ndarray] = []
+    rows_of: list[list[int]] = []
+    k, lo = 0, 0
     while lo < len(forces):
         e = forces[lo]
         hi = lo + 1
@@ -588,8 +609,8 @@ def _force_table(scene: Scene, forces: list, frames: PrincipalFrames | None, nb:
             block[:, ROW_CODE], block[:, ROW_BODY], block[:, ROW_PARAMS:] = e.code, body, flat
             rows_of.extend([j] for j in range(k, k + len(run)))
         else:
-            block = _effect_rows(e, -1 if e.body is None else scene.index(e.body), 0, frames, nb)
-            block = np.array(block, dtype=np.float64).reshape(len(block), -1)
+            rows = _effect_rows(e, -1 if e.body is None else scene.index(e.body), 0, frames, nb)
+            block = np.array(rows, dtype=np.float64).reshape(len(rows), -1)
             rows_of.append(list(range(k, k + len(block))))
         blocks.append(block)
         k += len(block)
@@ -689,8 +710,8 @@ def _triangle_broken(I_b: np.ndarray) -> np.ndarray:
     """Per row of (n, 3) principal moments: some moment exceeds the sum of the other two (rel. V.TRIANGLE_RTOL)."""
     with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
         u = I_b / np.max(I_b, axis=1)[:, None]
-        return np.stack([u[:, k] - (u[:, i] + u[:, j]) > V.TRIANGLE_RTOL
-                         for k, (i, j) in enumerate(((1, 2), (0, 2), (0, 1)))], axis=1).any(axis=1)
+        return np.asarray(np.stack([u[:, k] - (u[:, i] + u[:, j]) > V.TRIANGLE_RTOL
+                                    for k, (i, j) in enumerate(((1, 2), (0, 2), (0, 1)))], axis=1).any(axis=1))
 
 
 def _principal_moments(I_b: np.ndarray) -> None:
@@ -699,7 +720,9 @@ def _principal_moments(I_b: np.ndarray) -> None:
 
 
 @V.keywords
-def add_bodies(scene: Scene, names, masses, I_b, *, p_w=None, q=None, v_w=None, omega_b=None, omega_w=None) -> list[Body]:
+def add_bodies(scene: Scene, names: Sequence[str], masses: ArrayLike, I_b: ArrayLike, *, p_w: ArrayLike | None = None,
+               q: ArrayLike | None = None, v_w: ArrayLike | None = None, omega_b: ArrayLike | None = None,
+               omega_w: ArrayLike | None = None) -> Sequence[Body]:
     """Add n bodies at once, validated as Body(...) + Scene.add_body validate each, over whole arrays.
 
     Parameters
@@ -798,7 +821,7 @@ class _Added(Sequence):
         return self._t.body(self._start + (i % self._n))
 
 
-Scene.add_bodies = add_bodies
+Scene.add_bodies.__doc__ = add_bodies.__doc__
 
 
 # ---- batched add_effects (issue 30): add_effect's checks over whole arrays ------------------------------------
@@ -838,7 +861,7 @@ def _add_effects(scene: Scene, name, bodies, params: dict) -> list[Effect]:
     flags |= idx < 0
     first = scene.effects.__len__()
     effects = []
-    if not flags.all():
+    if not flags.all() and cls is not None:   # (cls None: every row is flagged)
         try:   # a shared value the screen cannot read is judged by add_effect on row 0: then every row goes there
             flags |= _model_flags(scene, cls, idx, per_row, shared, bodies)
             if not cls.per_body and _declared_class(cls):

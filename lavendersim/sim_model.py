@@ -2,14 +2,19 @@
 that need more than the per-body accessors — so that no application touches a Sim's private attributes."""
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from .generated import layout as LY
 
+if TYPE_CHECKING:
+    from .sim import Sim
+
 
 def _ro(a: np.ndarray) -> np.ndarray:
     """A read-only view sharing memory with a (its WRITEABLE flag cannot be turned back on)."""
-    return np.frombuffer(memoryview(a).toreadonly(), dtype=a.dtype).reshape(a.shape)
+    return np.frombuffer(a.data.toreadonly(), dtype=a.dtype).reshape(a.shape)
 
 
 def _attr(get, doc: str) -> property:
@@ -32,8 +37,9 @@ class SimModel:
     """
 
     __slots__ = ("_sim",)
+    _sim: Sim
 
-    def __init__(self, sim):
+    def __init__(self, sim: Sim) -> None:
         object.__setattr__(self, "_sim", sim)
 
     def __setattr__(self, name, value):

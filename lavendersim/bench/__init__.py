@@ -66,7 +66,9 @@ import statistics
 import subprocess
 import tempfile
 import time
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -90,7 +92,7 @@ FMA_VARIANTS = (("native", ["-march=native", "-ffp-contract=fast"]),
                 ("native_512", ["-march=native", "-ffp-contract=fast", "-mprefer-vector-width=512"]))
 FMA_FLOPS = 221   # flops per body-step of lv_fma_rk4_free_soa (an FMA counts 2; sqrt and division 1 each)
 # the hand-written SoA peer, compiled once per instruction set (LV_ISA_* level -> name, extra flags)
-SOA_ISAS = ((1, "sse2", []), (2, "avx2", ["-mavx2"]), (3, "avx512f", ["-mavx512f"]))
+SOA_ISAS: tuple[tuple[int, str, list[str]], ...] = ((1, "sse2", []), (2, "avx2", ["-mavx2"]), (3, "avx512f", ["-mavx512f"]))
 
 # The body every section uses.
 MASS = 2.0
@@ -134,7 +136,7 @@ SIMD_SIZES_QUICK = (1_000,)
 THREADS_MIN_N = 1_000  # the SIMD batch sizes that also time two threads
 MUJOCO_INTEGRATORS = ("RK4", "Euler", "implicitfast")
 
-EFFECT_SETS = (
+EFFECT_SETS: tuple[tuple[str, list[tuple[str, dict[str, Any]]]], ...] = (
     ("torque-free", []),
     ("+ applied torque", [("applied_torque", {"torque_w": [1e-3, 2e-3, -1e-3]})]),
     ("+ damping", [("linear_damping", {"c": 0.05}), ("angular_damping", {"c": 2e-3})]),
@@ -146,7 +148,7 @@ EFFECT_SETS = (
 WHEEL_COMMAND = (1e-3, -5e-4, 2e-4)
 
 
-_PROGRESS = [None]   # the current run's progress callable (msg -> None), or None: silent
+_PROGRESS: list[Callable[[str], None] | None] = [None]   # the current run's progress callable (msg -> None), or None: silent
 
 
 def _progress(msg: str) -> None:
@@ -254,7 +256,7 @@ def interleaved(cases: dict, rounds: int, label: str = "") -> dict:
     (with "clock": "cpu" or "wall")."""
     for fn, *_ in cases.values():
         fn()
-    times = {k: [] for k in cases}
+    times: dict[str, list[float]] = {k: [] for k in cases}
     clocks = {k: time.perf_counter if c[2:] == ("wall",) else time.process_time for k, c in cases.items()}
     for r in range(rounds):
         if label:
@@ -352,14 +354,15 @@ class HandwrittenKernel:
                       ctypes.c_double, ctypes.c_long, ctypes.c_int]
         f.restype = ctypes.c_long
         self._f = f
-        self.soa = {}  # ISA name -> lv_ref_rk4_free_soa of a copy compiled for it
-        self.floor = {}  # ISA name -> lv_ref_divider_floor_soa of that copy (the divider's limit)
-        self.soa_commands = {}
-        self.soa_errors = {}
-        self.fma = {}   # variant name -> lv_fma_rk4_free_soa of handwritten_fma.c compiled with FMA_VARIANTS' flags
-        self.peak_fma = None   # lv_peak_fma of the first variant
-        self.fma_commands = {}
-        self.fma_errors = {}
+        self.soa: dict[str, Callable[..., Any]] = {}  # ISA name -> lv_ref_rk4_free_soa of a copy compiled for it
+        self.floor: dict[str, Callable[..., Any]] = {}  # ISA name -> lv_ref_divider_floor_soa of that copy (the divider's limit)
+        self.soa_commands: dict[str, str] = {}
+        self.soa_errors: dict[str, str] = {}
+        # variant name -> lv_fma_rk4_free_soa of handwritten_fma.c compiled with FMA_VARIANTS' flags
+        self.fma: dict[str, Callable[..., Any]] = {}
+        self.peak_fma: Callable[..., float] | None = None   # lv_peak_fma of the first variant
+        self.fma_commands: dict[str, str] = {}
+        self.fma_errors: dict[str, str] = {}
 
     def compile_fma(self, variants=FMA_VARIANTS) -> None:
         """Compile the unconstrained FMA peer once per (name, flags) (a failing one is recorded, not raised)."""
@@ -433,7 +436,7 @@ def fma_agreement(kernel: HandwrittenKernel, n: int = 257, n_steps: int = 1_000)
     sim = batch_sim(n, "c")
     sim.run(n_steps)
     ref = np.asarray(sim.x, dtype=float).reshape(n, LY.STATE_SIZE)
-    out = {"bodies": n, "steps": n_steps}
+    out: dict[str, float] = {"bodies": n, "steps": n_steps}
     for name in kernel.fma:
         X = X0.copy()
         kernel.advance_fma(name, X, I, DT, n_steps)
@@ -587,6 +590,12 @@ def _batch_arrays(n: int):
     return state, params, np.ascontiguousarray(state.T), np.ascontiguousarray(params[:, 1:].T)
 
 
+def _at_isa(C, level: int, be, state: np.ndarray, params: np.ndarray, empty: np.ndarray, steps: int) -> None:
+    """Select the C extension's instruction-set level (-1: its best), then one batch RK4 advance of `steps`."""
+    C.isa(level)
+    be.advance(state, params, empty, "rk4", True, DT, steps)
+
+
 def simd_batch(kernel, sizes, body_steps: int, rounds: int) -> dict:
     """The C batch loop (one CBackend.advance call, torque-free RK4, q normalized) at every instruction
     set the CPU has, against the hand-written SoA loop compiled for each, interleaved; ns per body-step.
@@ -594,6 +603,7 @@ def simd_batch(kernel, sizes, body_steps: int, rounds: int) -> dict:
     from .. import _lavender_c as C
     from ..backends.c_backend import ROW, CBackend
     info = extension_isa()
+    assert info is not None   # (the import of the extension above succeeded)
     be = CBackend()
     empty = np.zeros((0, ROW))
     out = {"isa_levels": [nm for _, nm in info["levels"]], "best_isa": info["best"], "sizes": []}
@@ -602,7 +612,7 @@ def simd_batch(kernel, sizes, body_steps: int, rounds: int) -> dict:
         for n in sizes:
             _progress(f"SIMD batch: N = {n}")
             state0, params, X0, I = _batch_arrays(n)
-            outs = {}
+            outs: dict[str, np.ndarray] = {}
             for lvl, nm in info["levels"]:
                 C.isa(lvl)
                 st = state0.copy()
@@ -615,15 +625,15 @@ def simd_batch(kernel, sizes, body_steps: int, rounds: int) -> dict:
             ref = outs[f"lavendersim_{info['levels'][0][1]}"]
             bitwise = all(np.array_equal(ref, v) for v in outs.values())
             steps = max(2, body_steps // n)
-            cases = {}
+            cases: dict[str, tuple[Any, ...]] = {}
             for lvl, nm in info["levels"]:
                 st = state0.copy()
-                cases[f"lavendersim_{nm}"] = (lambda lvl=lvl, st=st: (C.isa(lvl), be.advance(st, params, empty, "rk4",
-                                                                                             True, DT, steps)), steps * n)
+                cases[f"lavendersim_{nm}"] = (lambda lvl=lvl, st=st: _at_isa(C, lvl, be, st, params, empty, steps),
+                                              steps * n)
             if n >= THREADS_MIN_N:   # one thread against two by the wall clock (CPU time would hide the speed-up)
                 st1 = state0.copy()
-                cases["lavendersim_1_thread_wall"] = (lambda st=st1: (C.isa(-1), be.advance(st, params, empty, "rk4", True,
-                                                                                          DT, steps)), steps * n, "wall")
+                cases["lavendersim_1_thread_wall"] = (lambda st=st1: _at_isa(C, -1, be, st, params, empty, steps),
+                                                      steps * n, "wall")
                 st2 = state0.copy()
                 cases["lavendersim_2_threads"] = (lambda st=st2: _two_threads(C, be, st, params, empty, steps),
                                                   steps * n, "wall")
@@ -791,7 +801,8 @@ def _sec_batched(ctx) -> None:
 
 
 def _sec_effects(ctx) -> None:
-    eff_cases, acc = {}, []
+    eff_cases: dict[str, tuple[Any, ...]] = {}
+    acc: list[tuple[str, dict[str, Any]]] = []
     n_e = ctx["cfg"]["effect_steps"]
     for name, effs in EFFECT_SETS:
         acc = acc + effs
@@ -890,7 +901,7 @@ def run(quick: bool = False, rounds: int | None = None, use_mujoco: bool = True,
                             "sections": only, **{k: (list(v) if isinstance(v, tuple) else v) for k, v in cfg.items()}},
                  "targets": TARGETS, "errors": [], "handwritten": {"available": False}}
     mj_ok, mj_why = mujoco_available() if use_mujoco else (False, "skipped (--no-mujoco)")
-    ctx = {"cfg": cfg, "R": cfg["rounds"], "quick": quick, "res": res,
+    ctx: dict[str, Any] = {"cfg": cfg, "R": cfg["rounds"], "quick": quick, "res": res,
            "mj": {"available": True} if mj_ok else {"available": False, "reason": mj_why}}
     _PROGRESS[0] = progress
     try:
@@ -961,7 +972,7 @@ def _div(a, b):
 def ratios(res: dict) -> dict:
     """Every ratio of the run by name (a section that did not run has none)."""
     c = _ns(res, "c_rk4")
-    r = {}
+    r: dict[str, Any] = {}
     for k in ("handwritten_c", "handwritten_c_checked"):
         r[f"c_rk4_over_{k}"] = _div(c, _ns(res, k))
     for k in ("numpy_rk4", "python_step_c", "python_step_numpy"):
@@ -975,7 +986,7 @@ def ratios(res: dict) -> dict:
         r[f"batched_{n}_numpy_over_c"] = b["numpy"]["ns_min"] / b["c"]["ns_min"]
     small = _small_scenes(res)
     for n, v in (small or {}).get("ratios", {}).items():
-        r[f"small_scene_{n}_over_N_{small['large_n']}"] = v
+        r[f"small_scene_{n}_over_N_{(small or {})['large_n']}"] = v
     for e in res.get("effects", []):
         r[f"effects[{e['name']}]_over_torque_free"] = e["ratio_to_torque_free"]
     for p in res.get("per_body_effects", []):

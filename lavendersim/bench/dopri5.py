@@ -65,7 +65,7 @@ def dopri5_section(quick: bool, rounds: int, interleaved, compile_c, single_sim,
     sim.run(1)
     peer.h[0] = 0.0
     peer.advance(x, I_b, DT_OUT, 1)
-    evals = {"lavendersim": [], "hand": []}
+    evals: dict[str, list] = {"lavendersim": [], "hand": []}
 
     def ours():
         e0 = sim.rhs_evals

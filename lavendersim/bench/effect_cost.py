@@ -15,6 +15,7 @@ from __future__ import annotations
 import re
 import tempfile
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -23,7 +24,7 @@ SIZES_QUICK = (1_000,)
 TORQUE_W = (1e-3, 2e-3, -1e-3)
 GG_PARAMS = {"mu": 3.986e14, "center_w": (0.0, 0.0, -7.0e6)}   # Earth, the bodies 7000 km from its center
 DAMPING = [("linear_damping", {"c": 0.05}), ("angular_damping", {"c": 2e-3})]
-SETS = (
+SETS: tuple[tuple[str, list[tuple[str, dict[str, Any]]], float | None], ...] = (
     ("plain", [], None),
     ("gravity", [("gravity", {})], 1.3),
     ("applied torque", [("applied_torque", {"torque_w": list(TORQUE_W)})], 1.6),
@@ -84,7 +85,8 @@ def effect_cost_section(quick: bool, rounds: int, interleaved, body_steps: int, 
         except Exception as exc:  # noqa: BLE001 - reported as the reason; the built-in effects still run
             why = f"deriving the guide's set failed: {type(exc).__name__}: {exc}"
     sets = [(nm, effs) for nm, effs, _ in SETS if not (why and any(e == "gravity_gradient" for e, _ in effs))]
-    out = {"sizes": {}, "user_effect": why}
+    sizes_out: dict[str, dict] = {}
+    out = {"sizes": sizes_out, "user_effect": why}
     for n in sizes:
         if progress:
             progress(f"effect cost: N = {n}: building {len(sets)} scenes")
@@ -93,7 +95,7 @@ def effect_cost_section(quick: bool, rounds: int, interleaved, body_steps: int, 
         t = interleaved({nm: (lambda s=s: s.run(steps), steps * n) for nm, s in sims.items()}, rounds,
                         f"effect cost N = {n}")
         base = t["plain"]["ns_min"]
-        out["sizes"][str(n)] = {"steps": steps, **t, "ratios": {nm: t[nm]["ns_min"] / base for nm in t}}
+        sizes_out[str(n)] = {"steps": steps, **t, "ratios": {nm: t[nm]["ns_min"] / base for nm in t}}
         del sims
     if tmp is not None:
         tmp.cleanup()

@@ -19,6 +19,7 @@ reason) without gymnasium (the ``gym`` extra).
 from __future__ import annotations
 
 import os
+from typing import Any
 
 import numpy as np
 
@@ -52,16 +53,20 @@ def env_section(quick: bool, rounds: int, interleaved) -> dict:
         import gymnasium
     except ImportError:
         return {"available": False, "reason": "gymnasium is not installed (pip install -e '.[gym]')"}
+    from ..envs.reaction_wheel_cube import ReactionWheelCubeEnv
+    from ..envs.vector import ReactionWheelCubeVectorEnv
     cfg = settings(quick)
     n_env, n_vec = cfg["env_steps"], cfg["vector_steps"]
     env_id = "lavendersim:ReactionWheelCube-v0"
     wrapped = gymnasium.make(env_id, max_episode_steps=10**9)
     bare = gymnasium.make(env_id).unwrapped
     phys = gymnasium.make(env_id).unwrapped
+    assert isinstance(phys, ReactionWheelCubeEnv), type(phys)
     for e in (wrapped, bare, phys):
         e.reset(seed=0)
     acts = [np.array(ACTION, np.float32), -np.array(ACTION, np.float32)]
     sim = phys.sim
+    assert sim is not None   # (built by reset)
     sim.set_wheel_command("cube", np.array(ACTION) * phys.torque_limit)
     k = phys.substeps
 
@@ -74,7 +79,9 @@ def env_section(quick: bool, rounds: int, interleaved) -> dict:
     vec = gymnasium.make_vec(env_id, num_envs=VECTOR_N, vectorization_mode="vector_entry_point")
     vec.reset(seed=0)
     A = [np.tile(a, (VECTOR_N, 1)) for a in acts]
-    vsim = vec.unwrapped.sim
+    vec_env = vec.unwrapped
+    assert isinstance(vec_env, ReactionWheelCubeVectorEnv), type(vec_env)
+    vsim = vec_env.sim
     vsim.set_wheel_commands(np.tile(np.array(ACTION) * phys.torque_limit, (VECTOR_N, 1)))
     have_c = vsim.backend.name == "c"
 
@@ -99,7 +106,7 @@ def env_section(quick: bool, rounds: int, interleaved) -> dict:
         return run
 
     n_env -= n_env % 2
-    cases = {
+    cases: dict[str, tuple[Any, ...]] = {
         "env_wrapped": (lambda: loop(wrapped.step, n_env), n_env),
         "env_unwrapped": (lambda: loop(bare.step, n_env), n_env),
         "physics": (lambda: [sim.run(k) for _ in range(n_env)], n_env),
@@ -126,7 +133,7 @@ def env_section(quick: bool, rounds: int, interleaved) -> dict:
             "gymnasium": gymnasium.__version__, "wrappers": str(wrapped), **cfg, "cases": t, "ratios": ratios}
 
 
-def best_vector_ns(sec: dict) -> tuple[float | None, str]:
+def best_vector_ns(sec: dict) -> tuple[float, str]:
     """The vector env's ns per env-step for the target: one thread, CPU time (two threads are timed by the wall
     clock, which a loaded machine inflates: their speed-up is reported beside it, not mixed into it)."""
     return sec["cases"]["vector"]["ns_min"], "threads(1), CPU time"
