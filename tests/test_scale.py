@@ -449,7 +449,7 @@ def test_plain_scenes_keep_long_chunks_at_a_million_bodies_scale_and_results_do_
 
 # ---- the checks' reference values, block by block (peak memory at 1e6 bodies) ------------------------------
 
-def _mixed_scene(n):
+def _three_kinds_scene(n):
     """n bodies: every third one under an applied torque, every fifth with wheels, the others free."""
     rng = np.random.default_rng(3)
     sc = lv.Scene()
@@ -464,7 +464,7 @@ def _mixed_scene(n):
 def test_the_checks_reference_values_do_not_depend_on_the_block_size(monkeypatch):
     """Sim._invariants and _safe_rates run their kernels CHECK_BLOCK bodies at a time; blocks of 7 (partly
     selected, wholly selected and empty ones) give bitwise the values of one block."""
-    sc = _mixed_scene(60)
+    sc = _three_kinds_scene(60)
     one = lv.Sim(sc, dt=1e-3)
     monkeypatch.setattr(sim_mod, "CHECK_BLOCK", 7)
     blocks = lv.Sim(sc, dt=1e-3)
@@ -480,7 +480,7 @@ def test_the_checks_reference_values_do_not_depend_on_the_block_size(monkeypatch
 def test_a_plain_bodys_model_row_is_never_written():
     """A plain body's model row stays all zeros (kind 0, ignored by the steppers); a wheeled body's holds its
     inertia diag(I_b) and its wheels."""
-    sc = _mixed_scene(20)
+    sc = _three_kinds_scene(20)
     s = lv.Sim(sc, dt=1e-3)
     rows, wheeled = s.model.rows, s.model.wheel_counts > 0
     assert not rows[~wheeled].any()
