@@ -73,6 +73,23 @@ def scalar_dispatch(effects: list) -> list[str]:
     return out
 
 
+def row_tables(printed: list) -> list[str]:
+    """READS: kernel -> {input: flat indices its expressions read}; ZEROS: kernel -> {output: flat indices that are
+    identically 0}. A stepper forms only the stage rows a kernel reads, and steps rows whose rate is 0 as constants."""
+    reads, zeros = [], []
+    for p in printed:
+        k = p.k
+        r = {a.name: tuple(i for i, s in enumerate(a.flat) if s in p.used) for a in k.inputs if a.shape != ()}
+        reads.append(f"    {k.name!r}: {r!r},")
+        z, idx = {}, 0
+        for a in k.outputs:
+            z[a.name] = tuple(i for i in range(a.size) if sp.sympify(p.reduced[idx + i]) == 0)
+            idx += a.size
+        zeros.append(f"    {k.name!r}: {z!r},")
+    return (["", "", "# kernel -> {array input: the flat indices it reads}", "READS = {", *reads, "}",
+             "# kernel -> {array output: the flat indices that are identically 0}", "ZEROS = {", *zeros, "}"])
+
+
 def print_scalar(printed: list, effects: list) -> str:
     """generated/kernels_scalar.py: every kernel for Python floats, and the effects' dispatch (effects: the
     built-in force effects [(code, EffectDecl)])."""
@@ -84,4 +101,4 @@ def print_scalar(printed: list, effects: list) -> str:
             "sequence of floats (row-major; quaternions (x, y, z, w), scalar last), an array output a tuple of floats,",
             "several outputs a tuple of those. The same operations in the same order as kernels_numpy.py (a division by",
             'zero or a domain error raises where NumPy gives inf or NaN)."""', "import math", "", ""]
-    return "\n".join(head + body + scalar_dispatch(effects)) + "\n"
+    return "\n".join(head + body + scalar_dispatch(effects) + row_tables(printed)) + "\n"

@@ -165,6 +165,64 @@ class _Group:
         out[:, V] = np.where(self.jointed[:, None], 0.0, v_dot)
 
 
+# Bodies from which a step forms the rows its right-hand side reads one run each (fewer bytes) rather than one run
+# over them (fewer NumPy calls); measured: /work/notes/s15/H6.md
+ROWS_SPLIT_BODIES = 8192
+
+
+def _runs(rows) -> tuple[tuple[int, int], ...]:
+    """Sorted row numbers as contiguous runs [(start, stop)]."""
+    out = []
+    for r in sorted(rows):
+        if out and out[-1][1] == r:
+            out[-1][1] = r + 1
+        else:
+            out.append([r, r + 1])
+    return tuple(map(tuple, out))
+
+
+class _StateRows:
+    """The state rows an explicit Runge–Kutta step of plain bodies forms, from the printed READS and ZEROS tables
+    (generated/kernels_scalar.py): in a stage only the rows its right-hand side reads (the kernels' and the effects'
+    inputs); a row whose rate is identically 0 (every kernel in use prints 0) as x + z, z the step's sum over zeros
+    (±0: the same number as the full sum); the other rows as the full sum. Runs (start, stop) of rows."""
+
+    __slots__ = ("stage", "zero", "end", "few")
+
+    def __init__(self, width, reads, zeros):
+        self.stage = _runs(set(reads) - set(zeros))
+        self.zero = _runs(zeros)
+        self.end = _runs(set(range(width)) - set(zeros))
+        # below ROWS_SPLIT_BODIES a NumPy call costs more than its rows: one run over the rows read, zero rates
+        # summed in full (the same numbers), and every row at the end
+        self.few = _StateRows.__new__(_StateRows)
+        self.few.stage, self.few.zero, self.few.end = _runs(range(min(reads), max(reads) + 1)), (), ((0, width),)
+        self.few.few = self.few
+
+    def at(self, n: int) -> _StateRows:
+        """The runs for n bodies (fewer NumPy calls for small n)."""
+        return self if n >= ROWS_SPLIT_BODIES else self.few
+
+    @staticmethod
+    def of(plan, effects) -> _StateRows:
+        from .. import effects as E
+        from ..generated import kernels_scalar as KS
+
+        if not hasattr(KS, "READS"):       # a generated/ printed before the tables: every row, as before
+            return None
+        reads, zeros = set(), set(range(LY.STATE_SIZE))
+        kernels = (["rigid_body_rhs_free_c"] if plan.free.size else []) + (["rigid_body_rhs_c"] if plan.forced.size else [])
+        for name in kernels:
+            reads |= set(KS.READS[name]["x"])
+            zeros &= set(KS.ZEROS[name]["x_dot"])
+        for code in set(effects[:, E.ROW_CODE].astype(int).tolist()) if plan.forced.size else ():
+            spec = E.spec_for_code(code)
+            for field in spec.state_inputs + (("v_w",) if spec.uses_v_w else ()):
+                sl = getattr(LY, f"STATE_{field.upper()}", None)
+                reads |= set(range(sl.start, sl.stop)) if sl is not None else set()
+        return _StateRows(LY.STATE_SIZE, reads, zeros)
+
+
 class _Plan:
     """Which kernels run for which bodies: precomputed once per (params, effects, model rows)."""
 
@@ -197,6 +255,7 @@ class _Plan:
         self.c_f = self.K.euler_coefficients(self.I_f)
         self.works = {}
         self.scalar = None     # numpy_scalar.ScalarBodies, built on first use
+        self.rows = None if self.has_models else _StateRows.of(self, effects)
         pivot = np.flatnonzero(kind == KIND_JOINT)
         wheeled = np.flatnonzero(self.wheeled)   # one wheel model: one group
         self.wheels = [_Group(wheeled, effects, self.m, self.I, rows)] if wheeled.size else []
@@ -510,14 +569,43 @@ class _ExplicitRK:
             acc = t if acc is None else np.add(acc, t, out=out)
         return np.add(x, np.multiply(acc, h, out=out), out=out)
 
-    def step(self, f, x, h, work=None):
+    def step(self, f, x, h, work=None, rows=None):
         """One step of x' = f(x) of length h; f(y, out) returns f(y), in out if it can (out None: a new array).
-        work: a _Work of x's shape (its buffers are written; the result is its xn), or None to allocate."""
+        work: a _Work of x's shape (its buffers are written; the result is its xn), or None to allocate.
+        rows: a _StateRows (with work) to form only the rows it names, else every row."""
+        if rows is not None and work is not None:
+            return self._step_rows(f, x, h, work, rows)
         ks = [None] * len(self.rows)
         for i, terms in enumerate(self.rows):
             y = x if not terms else self.axpy(x, h, terms, ks, work and work.y, work and work.t)
             ks[i] = f(y, work and work.ks[i])
         return self.axpy(x, h / self.den, self.weights, ks, work and work.xn, work and work.t)
+
+
+    def _sums(self, x, h, terms, ks, out, tmp, runs, zero):
+        """axpy over the rows of runs, and x + z on the zero-rate rows (z: the sum over zero rates, computed as axpy
+        computes it, from -0.0 so that x + z is that sum's result)."""
+        X, O, T = x.T, out.T, tmp.T
+        for a, b in runs:
+            self.axpy(X[a:b], h, terms, [None if k is None else k.T[a:b] for k in ks], O[a:b], T[a:b])
+        if zero:
+            z = _ZERO_SUMS.get((self, terms, h))
+            if z is None:
+                z = _ZERO_SUMS[self, terms, h] = float(self.axpy(np.full(1, -0.0), h, terms, [np.zeros(1)] * len(ks))[0])
+            for a, b in zero:
+                np.add(X[a:b], z, out=O[a:b])
+        return out
+
+    def _step_rows(self, f, x, h, work, rows):
+        rows = rows.at(x.shape[0])
+        ks = [None] * len(self.rows)
+        for i, terms in enumerate(self.rows):
+            y = x if not terms else self._sums(x, h, terms, ks, work.y, work.t, rows.stage, rows.zero)
+            ks[i] = f(y, work.ks[i])
+        return self._sums(x, h / self.den, self.weights, ks, work.xn, work.t, rows.end, rows.zero)
+
+
+_ZERO_SUMS: dict = {}   # (tableau, terms, h) -> the sum over zero rates (±0.0)
 
 
 class _Work:
@@ -618,7 +706,7 @@ def _stepper_of(name: str):
     tableau in exponential coordinates; implicit_gyro; the compositions); dopri5 is advance's _dopri5 loop (None)."""
     if name in T.EXPLICIT_RK:
         rk = _BUILTIN_RK[name]
-        return lambda plan, f, x, h: rk.step(f, x, h, plan.work(x, len(rk.rows)))  # noqa: E731
+        return lambda plan, f, x, h: rk.step(f, x, h, plan.work(x, len(rk.rows)), plan.rows)  # noqa: E731
     return globals().get(f"_step_{name}")
 
 
@@ -634,7 +722,7 @@ def step(plan: _Plan, x: np.ndarray, integrator: str, normalize: bool, dt: float
     if stepper is not None:
         xn = stepper(plan, f, x, dt)
     elif (rk := _user_rk(integrator)) is not None:
-        xn = rk.step(f, x, dt, plan.work(x, len(rk.rows)))
+        xn = rk.step(f, x, dt, plan.work(x, len(rk.rows)), plan.rows)
     else:  # validated by Sim; kept for direct callers
         raise ValueError(f"integrator: unknown {integrator!r}")
     if normalize:
