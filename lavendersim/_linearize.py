@@ -188,7 +188,8 @@ def input_refs(sim, scene, inputs) -> list[InputRef]:
         inputs = [f"{n}.u" for n in wheeled]
     if isinstance(inputs, str):
         inputs = [inputs]
-    out, off = [], 0
+    out: list[InputRef] = []
+    off = 0
     for name in inputs:
         if not isinstance(name, str) or "." not in name:
             raise V.LavenderInputError("inputs", "each input is 'BODY.u' (wheel commands) or 'EFFECT.PARAM' (a declared "
@@ -331,7 +332,7 @@ def casadi_error_rhs(scene, refs: list[BodyRef], ins: list[InputRef], u0: np.nda
 
     parts = []
     for ref in refs:
-        wu = next((u[r.offset:r.offset + r.size] for r in ins if r.kind == "wheels" and r.body == ref.name), None)
+        wu: ca.SX | ca.DM | None = next((u[r.offset:r.offset + r.size] for r in ins if r.kind == "wheels" and r.body == ref.name), None)
         if ref.wheels and wu is None:   # not an input: held at the Sim's command (set by the caller via u0 of the ref)
             wu = ca.DM(ref_command(ref))
         parts.append(_body_rhs(scene, ref, x[ref.offset:ref.offset + ref.size], params_of, wu))
@@ -374,10 +375,11 @@ def jacobians(f: ca.Function, n: int, m: int) -> tuple[np.ndarray, np.ndarray, n
 
 def state_of(refs: list[BodyRef], sim) -> np.ndarray:
     """The error-coordinate state of a Sim built from the same scene."""
-    parts = []
+    parts: list[np.ndarray] = []
     for ref in refs:
         i = sim.names.index(ref.name)
         x, xr = sim.state(ref.name).x, ref.x_pub   # both in the body frame
+        assert xr is not None   # (set by __post_init__)
         blk = {"dtheta": attitude_error(x[LY.STATE_Q], xr[LY.STATE_Q]),
                "omega": x[LY.STATE_OMEGA_B] - xr[LY.STATE_OMEGA_B]}
         if not ref.joint:
@@ -392,6 +394,7 @@ def set_state(refs: list[BodyRef], sim, x: np.ndarray) -> None:
     """Put a Sim (built from the same scene) at the error-coordinate state x."""
     for ref in refs:
         get, xr = ref.split(x[ref.offset:ref.offset + ref.size]), ref.x_pub
+        assert xr is not None   # (set by __post_init__)
         kw = {"q": perturbed(xr[LY.STATE_Q], get["dtheta"]), "omega_b": xr[LY.STATE_OMEGA_B] + get["omega"]}
         if not ref.joint:
             kw["p_w"], kw["v_w"] = xr[LY.STATE_P_W] + get["p"], xr[LY.STATE_V_W] + get["v"]

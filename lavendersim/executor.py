@@ -162,6 +162,8 @@ class Executor:
             worker could not load; the message names the task.
         lavendersim._install.MissingExtraError
             Dask executor without the distributed extra installed.
+        lavendersim.validate.LavenderInputError
+            A Dask executor built without a scheduler address (``address``).
         WorkerMismatchError
             The Dask workers run another LavenderSim version.
         """
@@ -170,6 +172,9 @@ class Executor:
             return [fn(t) for t in tasks]
         if self.kind == PROCESSES:
             return _map_processes(fn, tasks, min(self.workers, len(tasks)))
+        if not self.address:   # distributed.Client(None) would start a local cluster of its own, silently
+            raise V.LavenderInputError("address", "a Dask executor needs its scheduler's address "
+                                       "(lavendersim.executor.resolve(dask='tcp://host:8786'))")
         return _map_dask(fn, tasks, self.address, feature)
 
 

@@ -140,14 +140,15 @@ def derive(declaration, out=None, compile: bool = True) -> UserSet:
     from .derive.user import render_user
 
     decl = Path(declaration).expanduser().resolve()
-    set_name, files = render_user(decl)
+    set_name, printed = render_user(decl)
+    files: dict[str, str | bytes] = dict(printed)
     root = (Path(out).expanduser() if out is not None else sets_dir()).resolve()
     directory = root / set_name
     if directory.parent.is_dir():
         recover(directory)   # an interrupted swap is repaired before the folder is judged
     _check_folder(directory)
     replaced = _check_identity(directory, decl, set_name)
-    effects, kernels, tableaux = _meta_names(files["effects_meta.py"])
+    effects, kernels, tableaux = _meta_names(printed["effects_meta.py"])
     _check_names(root, directory, decl, {"effects": effects, "tableaux": tableaux})
     library, built = None, None
     if compile:
@@ -189,6 +190,7 @@ def build(directory) -> Path:
     if s.manifest.get("library") is None or compiler() != s.manifest["library"].get("compiler"):
         s.manifest, s.library_built_now = U._add_library(s)
     s.library()
+    assert s.library_path is not None   # (the manifest names the library now)
     return s.library_path
 
 

@@ -51,6 +51,7 @@ def decay_stiffness(effects: np.ndarray, params: np.ndarray) -> np.ndarray:
     for r in np.flatnonzero(decay_rows(effects)):
         row = effects[r]
         spec = effects_mod.spec_for_code(int(row[effects_mod.ROW_CODE]))
+        assert spec.decay_rate is not None, spec.name   # (decay_rows picked it)
         body = int(row[effects_mod.ROW_BODY])
         idx = np.arange(nb) if body < 0 else np.array([body])
         p = np.repeat(row[effects_mod.ROW_PARAMS:effects_mod.ROW_PARAMS + spec.n_params][None], idx.size, axis=0)
@@ -86,7 +87,7 @@ def decay_text(integrator: str, rdt: float, limit: float) -> str:
 def _supplying_groups(effects: np.ndarray, nb: int) -> list[tuple[int, np.ndarray, np.ndarray]]:
     """The effect rows that are not decays, grouped by code: (code, parameter rows (k, n_params), body indices (k,)),
     a scene-wide row expanded to every body."""
-    out = []
+    out: list[tuple[int, np.ndarray, np.ndarray]] = []
     if not len(effects):
         return out
     rows = effects[~decay_rows(effects)]

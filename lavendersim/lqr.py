@@ -43,8 +43,8 @@ def controllable_basis(A: np.ndarray, B: np.ndarray, tol: float = 1e-9, discrete
         A = A - np.eye(n)
     if B.size == 0:
         return np.zeros((n, 0))
-    An = A / max(np.linalg.norm(A, 2), 1e-300)
-    Bn = B / max(np.linalg.norm(B, 2), 1e-300)
+    An = A / max(float(np.linalg.norm(A, 2)), 1e-300)
+    Bn = B / max(float(np.linalg.norm(B, 2)), 1e-300)
     U, s, _ = np.linalg.svd(Bn, full_matrices=False)
     new = U[:, s > tol * max(s.max(), 1e-300)]
     basis = new
@@ -176,7 +176,7 @@ def _stability_tol(A: np.ndarray, block: np.ndarray, discrete: bool) -> float:
     n = A.shape[0]
     fast = float(np.max(np.abs(np.linalg.eigvals(A - np.eye(n) if discrete else A)), initial=0.0))
     eps = np.finfo(float).eps
-    return STABILITY_RTOL * fast + 10.0 * math.sqrt(eps * np.linalg.norm(A, 2) * max(np.linalg.norm(block, 2), eps))
+    return STABILITY_RTOL * fast + 10.0 * math.sqrt(eps * np.linalg.norm(A, 2) * max(float(np.linalg.norm(block, 2)), eps))
 
 
 def _mode_states(w: np.ndarray, labels: list[str]) -> tuple[str, ...]:

@@ -20,6 +20,7 @@ import subprocess
 import sys
 import tempfile
 import types
+from collections.abc import Sequence
 from pathlib import Path
 
 from . import validate as V
@@ -233,8 +234,9 @@ class UserSet:
         self.tableau_names = [t["name"] for t in self.tableaux]
         self.numpy = _module(f"lavendersim_user_{self.name}_numpy_{tag}", self.directory / "kernels_numpy.py",
                              src["kernels_numpy.py"])
-        self._casadi = None
-        self._lib = None
+        self._casadi: types.ModuleType | None = None
+        self._lib: ctypes.CDLL | None = None
+        self.replaced_declaration: Path | None = None   # set by extending.derive_user when it replaced another set
         lib = self.manifest.get("library")
         self.library_path: Path | None = self.directory / lib["file"] if lib else None
         self.library_built_now: bool | None = None  # True: compiled by this process; False: reused from the cache
@@ -315,7 +317,9 @@ class UserSet:
             The C function's address (the C backend calls it per body).
         """
         fn = getattr(self.library(), f"lvu_effect_{effect}")
-        return int(ctypes.cast(fn, ctypes.c_void_p).value)
+        address = ctypes.cast(fn, ctypes.c_void_p).value
+        assert address is not None, effect   # (a symbol dlsym found is never NULL)
+        return address
 
 
 def _file_id(st: os.stat_result) -> tuple[int, int, int, int]:
@@ -391,8 +395,8 @@ def _compile(directory: Path, set_name: str, sources: dict, cmd: list[str], symb
     log = root / f"{set_name}.compile.log"
     root.mkdir(parents=True, exist_ok=True)
     _remove_dead_compiles(root, set_name)
-    with tempfile.TemporaryDirectory(prefix=f".{set_name}.compile-{os.getpid()}-", dir=root) as tmp:
-        tmp = Path(tmp)
+    with tempfile.TemporaryDirectory(prefix=f".{set_name}.compile-{os.getpid()}-", dir=root) as tmp_dir:
+        tmp = Path(tmp_dir)
         for n in SOURCES:
             (tmp / n).write_text(sources[n], encoding="utf-8")
         full = cmd + CFLAGS + [str(tmp / "kernels.c"), "-o", str(tmp / name), "-lm"]
@@ -416,7 +420,7 @@ def _compile(directory: Path, set_name: str, sources: dict, cmd: list[str], symb
 
 
 def _manifest_text(set_name: str, declaration: Path, files: dict, effects: list, kernels: list,
-                   library: dict | None, tableaux: list = ()) -> str:
+                   library: dict | None, tableaux: Sequence = ()) -> str:
     m = {"format": MANIFEST_FORMAT, "set_name": set_name, "declaration": str(declaration),
          "declaration_sha256": _sha(declaration.read_bytes()), "effects": list(effects), "kernels": list(kernels),
          "tableaux": list(tableaux),

@@ -80,7 +80,7 @@ class LavenderInputError(PicklableError, ValueError):
     mass
     """
 
-    _init_fields = ("field", "rule", "detail")   # pickles with them (lavendersim.errors.PicklableError)
+    _init_fields: tuple[str, ...] = ("field", "rule", "detail")   # pickles with them (lavendersim.errors.PicklableError)
 
     def __init__(self, field: str, rule: str, detail: str = "") -> None:
         self.field = field
@@ -270,7 +270,7 @@ def vector(field: str, value: ArrayLike, n: int = 3) -> np.ndarray:
 # --------------------------------------------------------------------------
 
 
-def scalar(field: str, value: SupportsFloat, *, positive: bool = False, nonnegative: bool = False) -> float:
+def scalar(field: str, value: object, *, positive: bool = False, nonnegative: bool = False) -> float:
     """Validate a finite real number (bools rejected); return it as a float.
 
     ``positive=True`` requires > 0; ``nonnegative=True`` requires >= 0.
@@ -280,7 +280,7 @@ def scalar(field: str, value: SupportsFloat, *, positive: bool = False, nonnegat
     field : str
         The name an error message gives the value (e.g. ``"omega_b"``, ``"scene.bodies"``).
     value : float
-        The input.
+        The input (anything: what is not a finite real number is refused).
     positive, nonnegative : bool, optional
         Extra rules.
 
@@ -311,7 +311,7 @@ def scalar(field: str, value: SupportsFloat, *, positive: bool = False, nonnegat
         try:
             x = float(value)
         except OverflowError:
-            x = np.inf if value > 0 else -np.inf
+            x = -np.inf if value < 0 else np.inf
     else:
         raise LavenderInputError(field, "expected a real number", f", got {_describe(value)}")
     if not np.isfinite(x) or (positive and not x > 0) or (nonnegative and not x >= 0):
@@ -487,17 +487,17 @@ def _eigh(field: str, sym: np.ndarray, scale: float, vectors: bool = False):
     A result that is not finite (eigenvalues beyond the float64 range) is rejected naming `field`."""
     moderate = scale == 0 or 1e-100 <= scale <= 1e100
     try:
-        out = (np.linalg.eigh if vectors else np.linalg.eigvalsh)(sym if moderate else sym / scale)
+        a = sym if moderate else sym / scale
+        eig, vecs = np.linalg.eigh(a) if vectors else (np.linalg.eigvalsh(a), None)
     except np.linalg.LinAlgError as exc:  # not expected for a finite symmetric input; never leak it
         raise LavenderInputError(field, "inertia tensor: eigenvalues could not be computed", f" ({exc})") from None
-    eig = out[0] if vectors else out
     if not moderate:
         with np.errstate(over="ignore"):
             eig = eig * scale
     if not np.all(np.isfinite(eig)):
         raise LavenderInputError(field, f"inertia tensor entries too large (max |I| = {scale:g}): its "
                                  "eigenvalues overflow a float64")
-    return (eig, out[1]) if vectors else eig
+    return (eig, vecs) if vectors else eig
 
 
 def _checked_tensor(field: str, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:

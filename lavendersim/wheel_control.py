@@ -675,7 +675,7 @@ def _fold(lin: Any, K: np.ndarray, idx: np.ndarray, n: int, m: int, nx: int, lag
     I = np.eye(n)
     Kx = K[:, :n]
     gain_x = Kx @ (I - P) - G               # u − u0 = −gain_x x − K_a (a − a_ss) − K_p (u_prev − u_ss) ...
-    blocks, upd = [], []
+    blocks: list[np.ndarray] = []
     off = n
     if lag > 0:
         Ka = K[:, off:off + m]
@@ -924,6 +924,7 @@ class _Actuator:
         if steps == 0:
             return None
         sim, body = self.sim, self.body
+        first: np.ndarray | None
         if self.lag == 0:
             sim.set_wheel_command(body, c)
             sim.run(1)
@@ -1300,13 +1301,13 @@ def monte_carlo(scene: Scene, controller: Controller, *, n: int, seed: int = 0, 
     scales = 1 + spread * rng.uniform(-1, 1, (n, 3))
     base = {"controller": controller, "T": T, "q0": a["q0"], "omega0": a["omega0"], "Omega0": a["Omega0"], "dt": dt,
             "threshold_deg": threshold_deg, "backend": backend}
-    samples: list[dict | None] = [None] * n
+    drawn: list[dict | None] = [None] * n
     tasks, where = [], []
     for i in range(n):
         try:
             plant = perturbed_inertia(scene, body, scales[i])
         except V.LavenderInputError as exc:     # this draw's inertia is not a rigid body's
-            samples[i] = _failed(exc, "plant")
+            drawn[i] = _failed(exc, "plant")
             continue
         tasks.append({**base, "scene": plant, "sensors": replace(sensors, seed=sensors.seed + seed + i)})
         where.append(i)
@@ -1314,7 +1315,9 @@ def monte_carlo(scene: Scene, controller: Controller, *, n: int, seed: int = 0, 
         progress(n - len(tasks))
     for i, s in zip(where, X.map_tasks(monte_carlo_sample, tasks, executor, feature="lavendersim lqr --dask",
                                        progress=progress)):
-        samples[i] = s
+        drawn[i] = s
+    samples = [s for s in drawn if s is not None]
+    assert len(samples) == n   # (each draw failed on its plant or ran)
     for i, s in enumerate(samples):
         s["index"], s["seed"], s["inertia_scale"] = i, sensors.seed + seed + i, scales[i].tolist()
         s["inertia_b"] = _perturbed_tensor(scene.bodies[body], scales[i]).tolist()

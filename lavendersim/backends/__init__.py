@@ -598,6 +598,6 @@ def divergence_cause(x_before: np.ndarray, dt: float, integrator: str, Omega_bef
     if limit is not None and wdt > limit:
         return (f"|omega|*dt = {wdt:.3g} is beyond {integrator}'s validity bound (|omega|*dt <= {limit:.4g}, "
                 "times (I_max/I_min)**WDT_RATIO_EXPONENT); reduce dt")
-    wheels = "" if W is None else f", |Omega| = {W:.3g} rad/s"
-    return (f"state grew without bound (|omega| = {w:.3g} rad/s{wheels}, |v| = {v:.3g} m/s, dt = {dt:g} s); "
+    wheel_rates = "" if W is None else f", |Omega| = {W:.3g} rad/s"
+    return (f"state grew without bound (|omega| = {w:.3g} rad/s{wheel_rates}, |v| = {v:.3g} m/s, dt = {dt:g} s); "
             "check effect strengths (damping c*dt/I, wheel damping c_w*dt/J, forces) and the integrator")

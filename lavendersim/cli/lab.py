@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from typing import Any
 
 from . import _common
 
@@ -50,12 +51,13 @@ def lab_options(name: str) -> list[tuple[str, str, dict]]:
 
     cases = ", ".join(labs.lab_module("hard").CASES) if name == "hard" else ""
     chapter = dict(choices=backends.of_family("explicit_rk"))   # the chapter's methods: euler, ..., rk4
-    quick = ("--quick", "quick", dict(action="store_true", default=False))   # compute's default is the quick sweep
-    workers = ("--workers", "workers", dict(type=int, metavar="N", help="local worker processes (default: every "
+    Option = tuple[str, str, dict[str, Any]]   # (flag, dest, add_argument's keywords)
+    quick: Option = ("--quick", "quick", dict(action="store_true", default=False))   # compute's default is the quick sweep
+    workers: Option = ("--workers", "workers", dict(type=int, metavar="N", help="local worker processes (default: every "
                                             "core; 1 = serial in this process)"))
-    dask = ("--dask", "dask", dict(metavar="ADDRESS", help="run on an existing Dask scheduler, e.g. tcp://host:8786 "
+    dask: Option = ("--dask", "dask", dict(metavar="ADDRESS", help="run on an existing Dask scheduler, e.g. tcp://host:8786 "
                                    "(the distributed extra)"))
-    table = {
+    table: dict[str, list[Option]] = {
         "force": [("--offset", "offset", dict(type=float, metavar="X", help="lever arm along x in m (default 0.3; "
                                              "paw-check 2 is always run at -0.3)"))],
         "momentum": [("--mass-scale", "mass_scale", dict(type=float, metavar="S", help="paw-check 1 multiplies every "
@@ -263,7 +265,8 @@ def _run_all_locked(args) -> int:
         quick = ", ".join(f"{n} ({', '.join(f'{k}={v}' for k, v in o.items())})" for n, o in labs.ALL_OPTIONS.items())
         say(f"lab all: {len(labs.LABS)} labs, backend {args.backend}, results in {args.out}/NAME/; "
             f"quick mode for {quick} — `lab accuracy` and `lab atlas` run the full sweeps; details with --verbose")
-    failed, results = [], {}
+    failed: list[str] = []
+    results: dict[str, Any] = {}   # name -> its LabResult, or {"error": message}
     for name in labs.LABS:
         bar.set_description(f"lab all: {name}")
         t0 = time.perf_counter()

@@ -78,7 +78,9 @@ def _source(args) -> str:
     if args.layout == "pyramid4":
         if args.scenario is not None:
             raise V.LavenderInputError("--scenario", "--layout pyramid4 is a free cube: it has no scenario")
-        return LAYOUTS["pyramid4"]
+        shipped = LAYOUTS["pyramid4"]
+        assert shipped is not None
+        return shipped
     return SCENARIOS[args.scenario or "center"]
 
 

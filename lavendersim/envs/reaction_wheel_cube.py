@@ -61,10 +61,14 @@ from ..generated import layout as LY
 from ..kernels import K
 
 if TYPE_CHECKING:
-    from ..sim import Sim
+    import gymnasium as gym
+    from gymnasium import spaces
+    from matplotlib.figure import Figure
 
-gym = require("gymnasium", "gym", "the ReactionWheelCube-v0 environment")
-spaces = require("gymnasium.spaces", "gym", "the ReactionWheelCube-v0 environment")
+    from ..sim import Sim
+else:   # at run time through require: a missing gymnasium names the extra that installs it
+    gym = require("gymnasium", "gym", "the ReactionWheelCube-v0 environment")
+    spaces = require("gymnasium.spaces", "gym", "the ReactionWheelCube-v0 environment")
 
 BODY = lc.BODY
 MAX_SUBSTEPS = 100_000  # simulator steps per control step (control_dt / dt), at most
@@ -112,6 +116,8 @@ class ReactionWheelCubeEnv(gym.Env):
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 50}
+    action_space: spaces.Box
+    observation_space: spaces.Box
 
     @V.keywords
     def __init__(self, task: str = "center", backend: str = "auto", render_mode: str | None = None, *,
@@ -160,7 +166,7 @@ class ReactionWheelCubeEnv(gym.Env):
         hi = np.array([1.0] * 4 + [self.rate_bound] * 3 + [self.wheel_bound] * 3, dtype=np.float32)
         self.observation_space = spaces.Box(-hi, hi, dtype=np.float32)
         self.sim: Sim | None = None
-        self._fig = None
+        self._fig: Figure | None = None
         self._last_u = np.zeros(3)
         self._io: _StepIO | None = None
 
@@ -186,9 +192,15 @@ class ReactionWheelCubeEnv(gym.Env):
             sim.set_state(BODY, Omega=Omega)
         return sim
 
+    def _live_sim(self) -> Sim:
+        """The episode's Sim (RuntimeError before the first reset and after close)."""
+        if self.sim is None:
+            raise RuntimeError("ReactionWheelCube-v0: call reset() first")
+        return self.sim
+
     def _raw(self) -> np.ndarray:
         """[q (4), omega_b (3), Omega (3)] of the cube (a copy, from the Sim's views)."""
-        sim, raw = self.sim, np.empty(10)
+        sim, raw = self._live_sim(), np.empty(10)
         raw[OBS_Q], raw[OBS_OMEGA_B], raw[OBS_OMEGA] = sim.q[0], sim.omega_b[0], sim.Omega[0, :_NW]
         return raw
 
@@ -210,7 +222,7 @@ class ReactionWheelCubeEnv(gym.Env):
         -------
         float
         """
-        q = self.sim.state(BODY).q if q is None else q
+        q = self._live_sim().state(BODY).q if q is None else q
         return math.degrees(error_angle_fn()(float(q[0]), float(q[1]), float(q[2]), float(q[3]), *self._tq))
 
     def tilt_deg(self, q: ArrayLike | None = None) -> float:
@@ -225,7 +237,7 @@ class ReactionWheelCubeEnv(gym.Env):
         -------
         float
         """
-        q = self.sim.state(BODY).q if q is None else q
+        q = self._live_sim().state(BODY).q if q is None else q
         d = K.quat_rotate(q, np.ones(3) / math.sqrt(3.0))
         return float(math.degrees(math.atan2(math.hypot(float(d[0]), float(d[1])), float(d[2]))))
 
@@ -278,7 +290,7 @@ class ReactionWheelCubeEnv(gym.Env):
         return self._obs(), self._info()
 
     def _info(self, angle=None, tilt=None, **extra) -> dict:
-        info = {"t": float(self.sim.t), "angle_error_deg": self.angle_error_deg() if angle is None else angle,
+        info = {"t": float(self._live_sim().t), "angle_error_deg": self.angle_error_deg() if angle is None else angle,
                 "torque_applied": np.asarray(self._last_u, dtype=float)}
         if self.task == "corner":
             info["tilt_deg"] = self.tilt_deg() if tilt is None else tilt
@@ -320,7 +332,8 @@ class ReactionWheelCubeEnv(gym.Env):
         a0, a1, a2 = _action3(action)
         # validated (finite, saturated) above: written straight into the held command (set_wheel_command's array)
         tl, cmd = io.torque_limit, io.command
-        cmd[0], cmd[1], cmd[2] = a0 * tl, a1 * tl, a2 * tl
+        # (typeshed's memoryview.__setitem__ takes ints only; this view's format is "d")
+        cmd[0], cmd[1], cmd[2] = a0 * tl, a1 * tl, a2 * tl  # type: ignore[call-overload]
         if io.advance is None or not io.advance(self.substeps):   # the C fast path of Sim.run, else Sim.run
             try:
                 sim.run(self.substeps)
@@ -374,8 +387,9 @@ class ReactionWheelCubeEnv(gym.Env):
         """The current frame as an (H, W, 3) uint8 image (render_mode "rgb_array"), or None."""
         if self.render_mode is None:
             return None
+        from matplotlib.backends.backend_agg import FigureCanvasAgg
+
         if self._fig is None:
-            from matplotlib.backends.backend_agg import FigureCanvasAgg
             from matplotlib.figure import Figure
 
             self._fig = Figure(figsize=(3.2, 3.2), dpi=100)
@@ -401,8 +415,10 @@ class ReactionWheelCubeEnv(gym.Env):
         lim = s * 1.2
         ax.set_xlim(-lim, lim); ax.set_ylim(-lim, lim); ax.set_zlim(-lim * (0.3 if self.task == "corner" else 1), lim * (1.7 if self.task == "corner" else 1))
         ax.set_title(f"t = {0 if self.sim is None else self.sim.t:.2f} s", fontsize=8)
-        self._fig.canvas.draw()
-        return np.asarray(self._fig.canvas.buffer_rgba())[..., :3].copy()
+        canvas = self._fig.canvas
+        assert isinstance(canvas, FigureCanvasAgg)   # (set above)
+        canvas.draw()
+        return np.asarray(canvas.buffer_rgba())[..., :3].copy()
 
     def close(self) -> None:
         """Release the simulator and the figure."""
@@ -419,10 +435,25 @@ class _StepIO:
 
     __slots__ = ("sim", "x", "Omega", "command", "applied", "applied_row", "advance", "counters", "dt", "torque_limit",
                  "obs", "obs_mv", "w_in", "Om_in", "error_angle")
+    sim: Sim
+    x: memoryview[float]
+    Omega: memoryview[float]
+    command: memoryview[float]
+    applied: memoryview[float]
+    applied_row: np.ndarray
+    advance: Callable[[int], bool] | None
+    counters: Any
+    dt: float
+    torque_limit: float
+    obs: np.ndarray
+    obs_mv: memoryview[float]
+    w_in: float
+    Om_in: float
+    error_angle: Callable[..., float]
 
     def __init__(self, env: ReactionWheelCubeEnv, sim: Sim) -> None:
-        def flat(a: np.ndarray) -> memoryview:
-            return memoryview(a).cast("B").cast("d")
+        def flat(a: np.ndarray) -> memoryview[float]:
+            return a.data.cast("B").cast("d")
 
         self.sim = sim
         m = sim.model
@@ -433,7 +464,7 @@ class _StepIO:
         self.counters, self.dt = m.counters, sim.dt     # sim.t = steps * dt
         self.torque_limit = float(env.torque_limit)
         self.obs = np.zeros(10, np.float32)
-        self.obs_mv = memoryview(self.obs)
+        self.obs_mv = self.obs.data.cast("B").cast("f")
         high = env.observation_space.high
         self.w_in = min(float(env.rate_bound), float(high[4]))
         self.Om_in = min(float(env.wheel_bound), float(high[7]))

@@ -134,12 +134,14 @@ class ReactionWheelCubeVectorEnv(VectorEnv):
         self.sim.reinit_body(i, p_w, V.quaternion("q", q0), omega_b, Omega)
 
     def _reset_one(self, i: int) -> None:
-        if self._rngs[i] is None:
-            self._rngs[i], _ = seeding.np_random(None)
+        rng = self._rngs[i]
+        if rng is None:
+            rng, _ = seeding.np_random(None)
+            self._rngs[i] = rng
         one = self._one
-        q0 = initial_q(self._rngs[i], self.task, one.target_q, one.init_angle_deg)
-        self._start[i] = (q0, np.zeros(3), np.zeros(3))
-        self._place(i, *self._start[i])
+        q0 = initial_q(rng, self.task, one.target_q, one.init_angle_deg)
+        start = self._start[i] = (q0, np.zeros(3), np.zeros(3))
+        self._place(i, *start)
         self._elapsed[i] = 0
         self._needs_reset[i] = False
 
@@ -157,6 +159,7 @@ class ReactionWheelCubeVectorEnv(VectorEnv):
             if mask.dtype != bool or mask.shape != (n,):
                 raise V.LavenderInputError("options.reset_mask", f"must be a bool array of shape ({n},)",
                                            f", got {V._describe(options['reset_mask'])}")
+        seeds: list[int | None]
         if seed is None:
             seeds = [None] * n
         elif isinstance(seed, (list, tuple)):
@@ -167,8 +170,9 @@ class ReactionWheelCubeVectorEnv(VectorEnv):
             first = V.integer("seed", seed, minimum=0)
             seeds = [first + i for i in range(n)]
         for i in np.flatnonzero(mask):
-            if seeds[i] is not None:
-                self._rngs[i], _ = seeding.np_random(int(seeds[i]))
+            s = seeds[i]
+            if s is not None:
+                self._rngs[i], _ = seeding.np_random(s)
             self._reset_one(int(i))
         self.sim.check_written()     # the start states' pre-step check now: the first run can take the C fast path
         self._started = True
