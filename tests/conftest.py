@@ -42,6 +42,10 @@ codegen.render() of those kernels); `derived_once` makes `codegen.render()` retu
 so `codegen.check(..., full=True)` and the CLI's `derive --check` compare against it instead of
 deriving again.
 
+Likewise the two sweeps of `lab all` are computed once per session, from an empty working directory:
+`quick_accuracy` and `quick_atlas` (`.result`, never saved; `.written`; `.saved(out)`: a saved copy, as
+`labs.run` writes it), shared by test_accuracy_lab, test_atlas and test_lab_library.
+
 The `slow` set
 --------------
 `@pytest.mark.slow` marks end-to-end repeats of what faster tests already cover: the whole
@@ -178,6 +182,36 @@ def derivation():
         mp.setattr(D, "all_kernels", lambda: kernels)    # render() would otherwise derive again
         files = codegen.render()
     return SimpleNamespace(kernels=kernels, files=files)
+
+
+@pytest.fixture(scope="session")
+def quick_accuracy(tmp_path_factory):
+    """The quick accuracy lab (`lab all`'s), computed once per session: see :func:`_computed_once`."""
+    return _computed_once(tmp_path_factory, "accuracy", quick=True)
+
+
+@pytest.fixture(scope="session")
+def quick_atlas(tmp_path_factory):
+    """The quick stability atlas (`lab all`'s), serial, computed once per session: see :func:`_computed_once`."""
+    return _computed_once(tmp_path_factory, "atlas", quick=True, workers=1)
+
+
+def _computed_once(tmp_path_factory, name: str, **options):
+    """``labs.compute(name, **options)`` from an empty working directory, for every test module that
+    checks a lab's output (test_accuracy_lab, test_atlas, test_lab_library): ``.result`` (never saved:
+    use ``.saved(out)``), ``.written`` (what compute left in its working directory: must be nothing),
+    ``.saved(out)``: a copy saved to ``out`` as ``labs.run(name, out, **options)`` would."""
+    import copy
+    from types import SimpleNamespace
+
+    from lavendersim import labs
+
+    cwd = tmp_path_factory.mktemp(f"{name}_cwd")
+    with pytest.MonkeyPatch.context() as mp:
+        mp.chdir(cwd)
+        result = labs.compute(name, **options)
+    written = sorted(p.name for p in cwd.rglob("*"))
+    return SimpleNamespace(result=result, written=written, saved=lambda out: copy.copy(result).save(out))
 
 
 @pytest.fixture

@@ -13,33 +13,31 @@ from matplotlib.figure import Figure
 
 from lavendersim import labs
 
-# quick options where a lab is slow: a few hard cases, tiny accuracy and atlas grids (the figures are drawn
-# from whatever the run produced; the checks of these reduced runs are not what is tested here)
+# quick options where a lab is slow: a few hard cases; the quick accuracy lab and atlas are the session's (conftest's
+# quick_accuracy and quick_atlas, computed once from an empty working directory for their own test modules too)
 HARD_CASES = ["intermediate_axis_flips", "dt_range", "euler_at_gimbal_lock"]
-TINY_ACCURACY = dict(cases=("box_w1",), dt_exps=(4, 5, 6), numpy_dt_exps=(4,), numpy_budget=0.3,
-                     rtols=(1e-3, 1e-4, 1e-5), numpy_rtols=(1e-3,), mj_dt_exps=(4, 5, 6), repeats=1, time_budget=0.0)
+SHARED = ("accuracy", "atlas")
 
 
 def _options(name):
-    return {"hard": {"cases": HARD_CASES}, "accuracy": {"quick": True, "mujoco": False, "workers": 1},
-            "atlas": {"quick": True, "workers": 1}}.get(name, {})
+    return {"hard": {"cases": HARD_CASES}}.get(name, {})
 
 
 @pytest.fixture(scope="module")
-def results(tmp_path_factory):
+def results(tmp_path_factory, quick_accuracy, quick_atlas):
     """Every lab computed once, from an empty working directory that must stay empty."""
     mp = pytest.MonkeyPatch()
     cwd = tmp_path_factory.mktemp("cwd")
     mp.chdir(cwd)
-    acc = labs.lab_module("accuracy")
-    atlas = labs.lab_module("atlas")
-    mp.setattr(acc, "QUICK", TINY_ACCURACY)
-    mp.setitem(atlas.GRIDS, "quick", ((1e-2, 10.0), (1.0, 1e3)))
     try:
-        out = {name: labs.compute(name, backend="auto", **_options(name)) for name in labs.LABS}
+        out = {name: labs.compute(name, backend="auto", **_options(name)) for name in labs.LABS if name not in SHARED}
         written = sorted(p.name for p in cwd.rglob("*"))
     finally:
         mp.undo()
+    for name, shared in zip(SHARED, (quick_accuracy, quick_atlas)):
+        out[name] = shared.result
+        written += shared.written
+    assert set(out) == set(labs.LABS)
     return out, written
 
 
