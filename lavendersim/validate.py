@@ -194,7 +194,7 @@ def _real_array(field: str, value) -> np.ndarray:
             try:
                 out[idx] = float(item)
             except OverflowError:
-                out[idx] = np.inf if item > 0 else -np.inf
+                out[idx] = -np.inf if item < 0 else np.inf
         return out
     raise LavenderInputError(field, "expected real numbers", f", got {_describe(value)} (dtype {arr.dtype})")
 
