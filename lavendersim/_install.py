@@ -59,7 +59,11 @@ class MissingExtraError(PicklableError, ImportError):
 
     def __init__(self, feature: str, extra: str, module: str):
         self.feature, self.extra, self.module = feature, extra, module
-        super().__init__(f"{feature} needs the {extra} extra: {extra_command(extra)} "
+        try:
+            command = extra_command(extra)
+        except ValueError:   # not one of ours (an extra named by a caller): the plain form
+            command = f"pip install '{DISTRIBUTION}[{extra}]'"
+        super().__init__(f"{feature} needs the {extra} extra: {command} "
                          f"(module {module!r} is not installed)", name=module)
 
 
