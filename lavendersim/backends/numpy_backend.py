@@ -79,14 +79,17 @@ class _EffectIndex:
             self.uses_v |= spec.uses_v_w
         # every effect acts on every body (no per-body rows): each effect evaluated on all the bodies at once, in
         # table order, with its own parameters: the same sums, no gather or scatter
+        # An effect that reads no state value (its kernel's inputs: parameters, m, I_b) is evaluated once here.
         self.uniform = None
         if n and every.size == len(effects):
             self.uniform = []
             for r in every:
                 spec = E.spec_for_code(int(effects[r, E.ROW_CODE]))
                 apply = E.numpy_apply(spec.code) if kmod is None else kmod.EFFECT_APPLY[spec.name]
-                self.uniform.append((apply, effects[r, E.ROW_PARAMS:].copy(), "F_w" in spec.outputs,
-                                     "tau_w" in spec.outputs))
+                p = np.broadcast_to(effects[r, E.ROW_PARAMS:].copy(), (n, effects.shape[1] - E.ROW_PARAMS))
+                const = None if set(spec.state_inputs) - {"m", "I_b"} or spec.uses_v_w else apply(p, None, None,
+                                                                                                 self.m, self.I)
+                self.uniform.append((apply, p, "F_w" in spec.outputs, "tau_w" in spec.outputs, const))
         self.ranks = []  # per rank k: (bodies, pairs) adding a force, (bodies, pairs) adding a torque
         for k in range(int(rank.max()) + 1 if rank.size else 0):
             f = np.flatnonzero((rank == k) & has_F)
@@ -101,8 +104,8 @@ class _EffectIndex:
         if not self.npairs:
             return F, tau
         if self.uniform is not None:
-            for apply, p, has_F, has_T in self.uniform:
-                f, t = apply(p, x, v, self.m, self.I)
+            for apply, p, has_F, has_T, const in self.uniform:
+                f, t = const or apply(p, x, v, self.m, self.I)
                 if has_F:
                     F += f
                 if has_T:
