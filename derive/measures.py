@@ -87,4 +87,29 @@ def kernels() -> list[Kernel]:
                r"a_k = \sqrt{6 (I_{k+1} + I_{k+2} - I_k) / m}",
                [Arg("m", m, "mass, kg", "positive"), Arg("I_b", I3, "principal moments (or the diagonal), kg·m²", "spd_diag")],
                [Arg("edges", edges, f"box edges along the body axes, m (each at least {float(sp.sqrt(BOX_EDGE2_MIN)):g})")], g),
+    ] + _validity_kernels(g)
+
+
+def _validity_kernels(g: str) -> list[Kernel]:
+    """The validity bound |omega| dt (I_max/I_min)^p <= WDT_MAX (derive/tableaux.py), in two parts: a body's scale
+    dt (I_max/I_min)^p, computed once per scene, and |omega| times it, computed at every check."""
+    I3, dt, p = vec("I_b", 3), scalar("dt", positive=True), sp.Symbol("p", nonnegative=True)
+    ratio, w = sp.Symbol("I_ratio", positive=True), sp.Symbol("w_abs", nonnegative=True)
+    om, scale = vec("omega_b", 3), scalar("scale", positive=True)
+    return [
+        Kernel("validity_scale", "Scale of a body's validity measure: dt (I_max/I_min)^p",
+               r"s = dt\,(I_{max}/I_{min})^p",
+               [Arg("I_b", I3, "principal moments, kg·m²", "spd_diag"), Arg("dt", dt, "step, s", "positive"),
+                Arg("p", p, "the integrator's ratio exponent (WDT_RATIO_EXPONENT), >= 0", "positive")],
+               [Arg("scale", dt * ratio ** p, "s; |omega| times it is the validity measure")], g,
+               where=[(ratio, sp.Max(*I3) / sp.Min(*I3))]),
+        Kernel("validity_wdt", "A body's validity measure |omega| dt (I_max/I_min)^p and its |omega|",
+               r"w = \lVert\omega\rVert,\ v = w\,s",
+               [Arg("omega_b", om, "angular velocity, body frame, rad/s"),
+                Arg("scale", scale, "validity_scale of the body, s", "positive")],
+               [Arg("omega_norm", w, "|omega|, rad/s (inf when it overflows)"),
+                Arg("wdt", w * scale, "the measure the integrator's WDT_MAX bounds (dimensionless)")], g,
+               where=[(w, sp.sqrt(om.dot(om)))],
+               notes=["Sim checks wdt <= WDT_MAX (derive/tableaux.py) per body; the C step screen uses the same "
+                      "kernel, so both decide on the same double."]),
     ]

@@ -199,6 +199,45 @@ def bm6_sequence() -> tuple[tuple, tuple]:
     return tuple(a + a[-2::-1]), tuple(b + b[::-1])
 
 
+# The compositions (family "composition"), declared as programs of flows: a body with effects takes the stages
+# γ_i of `gamma` in turn, each the `kicked` program over γ_i h; a body without effects takes the `free` program
+# once over h. A program is a sequence of (flow, fraction): the flow runs for fraction × (the stage's time).
+# Flows: kick (the loads on v and omega, splitting_kick; explicit midpoint with damping), drift (p += τ v),
+# momentum / rate (omega -> L_b = I omega, and back; no time), strang (splitting_rotation on omega), axis_x/y/z (the
+# exact principal-axis flow on L_b), top_a / top_b (the symmetric-top split's axis flows of ½ c_a L_a², ½ c_b L_b²),
+# top_b_nz (top_b, skipped when c_b = 0: a symmetric top's turn by 0), sphere (the flow of |L|²/(2 I_r)). The C
+# composition engine walks these tables (csrc/step.c composition_step).
+FLOWS = ("kick", "drift", "momentum", "rate", "strang", "axis_x", "axis_y", "axis_z", "top_a", "top_b", "top_b_nz",
+         "sphere")
+
+
+def compositions() -> dict:
+    """name -> (gamma, kicked, free) of every composition integrator (see FLOWS); fractions exact."""
+    strang, drift = (("strang", R(1)),), (("drift", R(1)),)
+
+    def on_momentum(flows):
+        return (("momentum", R(0)),) + tuple(flows) + (("rate", R(0)),)
+
+    def kicked(rotation):
+        return (("kick", SPLIT_KICK),) + drift + tuple(rotation) + (("kick", SPLIT_KICK),)
+
+    def top(fa, fb):            # A(a_0) B(b_0) A(a_1) ... A(a_s); A = the top_a axis flow, then the sphere flow
+        out = []
+        for i, f in enumerate(fa):
+            out += [("top_a", f), ("sphere", f)] + ([("top_b", fb[i])] if i < len(fb) else [])
+        return out
+
+    fp, fq = bm6_sequence()     # P(p_0) Q(q_0) ... P(p_s), then one sphere flow for the whole time
+    bm6 = [fl for i, f in enumerate(fp) for fl in [("top_b_nz", f)] + ([("top_a", fq[i])] if i < len(fq) else [])]
+    bm6 = on_momentum(bm6 + [("sphere", R(1))])
+    return {"splitting": ((R(1),), kicked(strang), drift + strang),
+            "splitting4": (SPLIT4_GAMMA, kicked(strang),
+                           drift + on_momentum((f"axis_{'xyz'[a]}", f) for a, f in split4_sequence())),
+            "symtop4": (SYMTOP4_GAMMA, kicked(on_momentum(top((SYMTOP_STRANG_A,) * 2, (R(1),)))),
+                        drift + on_momentum(top(*symtop4_sequence()))),
+            "symtop_bm6": (SYMTOP4_GAMMA, kicked(bm6), drift + bm6)}
+
+
 def _check_bm6() -> None:
     """symtop_bm6's sequence: palindromic, A and B each flow for total time h, and order 6: on exp(h X) with
     X = P + Q for two fixed non-commuting 4×4 matrices (40-digit mpmath), the one-step error of the
@@ -358,6 +397,11 @@ def _check_registry() -> None:
     fixed = {i.name for i in INTEGRATORS if not i.adaptive}
     if set(WDT_MAX) != fixed or set(WDT_RATIO_EXPONENT) != fixed:
         raise RuntimeError("derive: every fixed-step integrator, and only those, has a validity bound (WDT_MAX)")
+    comp = compositions()
+    if set(comp) != {i.name for i in INTEGRATORS if i.family == "composition"}:
+        raise RuntimeError("derive: every composition integrator, and only those, has a program (compositions())")
+    if any(f not in FLOWS for g, kicked, free in comp.values() for f, _ in kicked + free):
+        raise RuntimeError("derive: a composition program names a flow not in FLOWS")
     if set(real_axis_stability()) != {i.name for i in INTEGRATORS}:
         raise RuntimeError("derive: every integrator has a decay stability limit (real_axis_stability)")
 
@@ -453,6 +497,9 @@ def _c_registry() -> list[str]:
                         ("ADAPTIVE", lambda i: i.adaptive)):
         terms = " || ".join(f"(i) == LV_INTEGRATOR_{i.name.upper()}" for i in INTEGRATORS if pick(i)) or "0"
         out.append(f"#define LV_INTEGRATOR_{macro}(i) ({terms})")
+    for fam in FAMILIES:
+        terms = " || ".join(f"(i) == LV_INTEGRATOR_{i.name.upper()}" for i in INTEGRATORS if i.family == fam) or "0"
+        out.append(f"#define LV_INTEGRATOR_IS_{fam.upper()}(i) ({terms})")
     out.append("#define LV_INTEGRATORS(X) " + " ".join(f"X({n}, {i.code})" for n, i in up))
     out += ["", "/* Status codes of the step loop */", "enum {"]
     out += [f"    LV_{n} = {c}," + f" /* {doc} */" for n, c, doc in STATUS[:-1]]
@@ -474,6 +521,33 @@ def _c_explicit_rk(name: str, c, b_num, b_den) -> list[str]:
         step.append(f"    RHS({'x' if i == 1 else 'tmp'}, k); "
                     f"FOR((void)LV_{N}_UPDATE(REAL, {i}, dt, AT(x), AT(k), AT(acc), AT({'xn' if i == s else 'tmp'})));")
     return [upd, " \\\n".join(step) + " \\\n} while (0)"]
+
+
+def _num(x) -> str:
+    """A float literal of an exact rational (_f) or algebraic number (_fa)."""
+    return _f(x) if isinstance(sp.sympify(x), sp.Rational) else _fa(x)
+
+
+def _c_compositions() -> list[str]:
+    """The composition programs (compositions(), FLOWS) as tables the C composition engine walks."""
+    out = ["", "/* The compositions (derive/tableaux.py compositions()): a body with effects takes the n_stages stages",
+           "   gamma_i in turn, each the `kicked` program over gamma_i h; a body without effects the `free` program once",
+           "   over h. Each lv_flow runs flow for frac times the stage's time (LV_FLOW_*: derive/tableaux.py FLOWS). */",
+           "enum { " + ", ".join(f"LV_FLOW_{f.upper()}" for f in FLOWS) + " };",
+           "typedef struct { int flow; double frac; } lv_flow;",
+           "typedef struct {", "    int n_stages;", "    const double *gamma;", "    int n_kicked;",
+           "    const lv_flow *kicked;", "    int n_free;", "    const lv_flow *free;", "} lv_composition;"]
+    entries = []
+    for name, (g, kicked, free) in compositions().items():
+        N = name.upper()
+        out.append(f"static const double LV_{N}_GAMMA[{len(g)}] = {{" + ", ".join(_num(x) for x in g) + "};")
+        for part, prog in (("KICKED", kicked), ("FREE", free)):
+            flows = [f"{{LV_FLOW_{f.upper()}, {_num(x)}}}" for f, x in prog]
+            rows = [", ".join(flows[i:i + 4]) for i in range(0, len(flows), 4)]
+            out.append(f"static const lv_flow LV_{N}_{part}[{len(prog)}] = {{\n    " + ",\n    ".join(rows) + "};")
+        entries.append(f"    [LV_INTEGRATOR_{N}] = {{{len(g)}, LV_{N}_GAMMA, {len(kicked)}, LV_{N}_KICKED, "
+                       f"{len(free)}, LV_{N}_FREE}}")
+    return out + ["static const lv_composition LV_COMPOSITIONS[LV_INTEGRATOR_LAST + 1] = {", ",\n".join(entries), "};"]
 
 
 def print_c() -> str:
@@ -499,26 +573,7 @@ def print_c() -> str:
         out.append("    {" + ", ".join(vals) + "},")
     out.append("};")
     out.append("static const double LV_DP_E[7] = {" + ", ".join(_f(e) for e in dp_e()) + "};")
-    out += ["", "/* splitting4: the Strang step applied LV_SPLIT4_STAGES times with step gamma_i h (symmetric composition,",
-            "   order 4) */",
-            "static const double LV_SPLIT4_GAMMA[LV_SPLIT4_STAGES] = {" + ", ".join(_fa(g) for g in SPLIT4_GAMMA) + "};",
-            "/* splitting4 without effects: the substeps' exact axis flows as one sequence, neighbours about one axis",
-            "   merged: flow k turns about body axis LV_SPLIT4_AXIS[k] for LV_SPLIT4_FRAC[k] * h */",
-            "static const int LV_SPLIT4_AXIS[LV_SPLIT4_FLOWS] = {" + ", ".join(str(a) for a, _ in split4_sequence()) + "};",
-            "static const double LV_SPLIT4_FRAC[LV_SPLIT4_FLOWS] = {" + ", ".join(_fa(f) for _, f in split4_sequence()) + "};"]
-    fa, fb = symtop4_sequence()
-    out += ["/* symtop4 without effects: A(LV_SYMTOP4_A_FRAC[0] h) B(LV_SYMTOP4_B_FRAC[0] h) A(...[1] h) ... A(...[s] h),",
-            "   A = sphere flow + axis flow of the larger leftover coefficient, B = axis flow of the smaller; with",
-            "   effects the Strang step A(gamma_i h/2) B(gamma_i h) A(gamma_i h/2) inside the splitting's kicks */",
-            "static const double LV_SYMTOP4_GAMMA[LV_SYMTOP4_STAGES] = {" + ", ".join(_fa(g) for g in SYMTOP4_GAMMA) + "};",
-            "static const double LV_SYMTOP4_A_FRAC[LV_SYMTOP4_STAGES + 1] = {" + ", ".join(_fa(f) for f in fa) + "};",
-            "static const double LV_SYMTOP4_B_FRAC[LV_SYMTOP4_STAGES] = {" + ", ".join(_fa(f) for f in fb) + "};"]
-    fp, fq = bm6_sequence()
-    out += ["/* symtop_bm6 (Blanes & Moan S10, order 6) on the symtop4 split: P(LV_BM6_P_FRAC[0] h) Q(LV_BM6_Q_FRAC[0] h)",
-            "   P(...[1] h) ... P(...[LV_BM6_FLOWS] h), P = the axis flow with the smaller leftover |c|, Q = the larger's,",
-            "   then one sphere flow for h (it commutes with both) */",
-            "static const double LV_BM6_P_FRAC[LV_BM6_FLOWS + 1] = {" + ", ".join(_f(f) for f in fp) + "};",
-            "static const double LV_BM6_Q_FRAC[LV_BM6_FLOWS] = {" + ", ".join(_f(f) for f in fq) + "};"]
+    out += _c_compositions()
     seq = " ".join(f"{'xyz'[a]}({'h' if f == 1 else f'{f}*h'})" for a, f in STRANG)
     out += ["", f"/* Strang splitting of the free rotation, {seq}: composed in derive/ into the kernel",
             "   lv_splitting_rotation (no table is needed at run time). */", "", "#endif", ""]
@@ -571,6 +626,11 @@ def print_python() -> str:
     out.append("# P = the axis flow with the smaller leftover |c|, Q = the larger's; then one sphere flow for h")
     out.append("BM6_P_FRAC = (" + ", ".join(_f(f) for f in fp) + ")")
     out.append("BM6_Q_FRAC = (" + ", ".join(_f(f) for f in fq) + ")")
+    out.append("# the compositions: name -> (gamma, kicked program, free program), each program ((flow, fraction), ...)")
+    out.append("COMPOSITIONS = {" + ", ".join(
+        f"{n!r}: (({''.join(_num(x) + ', ' for x in g)}), "
+        + ", ".join("(" + "".join(f"({f!r}, {_num(x)}), " for f, x in prog) + ")" for prog in (k, fr)) + ")"
+        for n, (g, k, fr) in compositions().items()) + "}")
     out.append("# validity bounds: |omega| dt (I_max/I_min)**WDT_RATIO_EXPONENT[name] <= WDT_MAX[name] (derive/tableaux.py)")
     out.append("WDT_MAX = {" + ", ".join(f"{n!r}: {float(WDT_MAX[n])!r}" for n in sorted(WDT_MAX)) + "}")
     out.append("WDT_RATIO_EXPONENT = {" + ", ".join(f"{n!r}: {float(WDT_RATIO_EXPONENT[n])!r}"

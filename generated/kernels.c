@@ -3143,6 +3143,23 @@ void lv_box_of_inertia(double m, const double *I_b, double *edges) {
 ));
 }
 
+void lv_validity_scale(const double *I_b, double dt, double p, double *scale) {
+    const double I_b_0 = I_b[0];
+    const double I_b_1 = I_b[1];
+    const double I_b_2 = I_b[2];
+    const double I_ratio = fmax(I_b_0, fmax(I_b_1, I_b_2))/fmin(I_b_0, fmin(I_b_1, I_b_2));
+    scale[0] = pow(I_ratio, p)*dt;
+}
+
+void lv_validity_wdt(const double *omega_b, double scale, double *omega_norm, double *wdt) {
+    const double omega_b_0 = omega_b[0];
+    const double omega_b_1 = omega_b[1];
+    const double omega_b_2 = omega_b[2];
+    const double w_abs = sqrt((omega_b_0*omega_b_0) + (omega_b_1*omega_b_1) + (omega_b_2*omega_b_2));
+    omega_norm[0] = w_abs;
+    wdt[0] = scale*w_abs;
+}
+
 /* ---- Scene effects: accumulating functions and dispatch -------------------------------------- */
 /* applied_torque: adds tau_com_w for one body. p = [torque_w(3)] */
 static inline void lv_effect_acc_applied_torque(const double *p, const double *x, const double *v_w, double m, const double *I_b, double *F, double *tau)
@@ -3321,6 +3338,8 @@ static void packed_quat_normalize_scaled(const double *in, double *out) { lv_qua
 static void packed_wheels4_free_inertia(const double *in, double *out) { lv_wheels4_free_inertia(in + 0, in + 9, in + 21, out + 0); }
 static void packed_rigid_point_velocity(const double *in, double *out) { lv_rigid_point_velocity(in + 0, in + 3, in + 6, out + 0); }
 static void packed_box_of_inertia(const double *in, double *out) { lv_box_of_inertia(in[0], in + 1, out + 0); }
+static void packed_validity_scale(const double *in, double *out) { lv_validity_scale(in + 0, in[3], in[4], out + 0); }
+static void packed_validity_wdt(const double *in, double *out) { lv_validity_wdt(in + 0, in[3], out + 0, out + 1); }
 
 const lv_kernel_info lv_kernel_table[LV_KERNEL_COUNT] = {
     {"particle_moments", 7, 6, packed_particle_moments},
@@ -3404,4 +3423,6 @@ const lv_kernel_info lv_kernel_table[LV_KERNEL_COUNT] = {
     {"wheels4_free_inertia", 25, 9, packed_wheels4_free_inertia},
     {"rigid_point_velocity", 9, 3, packed_rigid_point_velocity},
     {"box_of_inertia", 4, 3, packed_box_of_inertia},
+    {"validity_scale", 5, 1, packed_validity_scale},
+    {"validity_wdt", 4, 2, packed_validity_wdt},
 };

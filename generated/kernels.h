@@ -11,7 +11,7 @@ typedef struct {
     void (*packed)(const double *in, double *out);
 } lv_kernel_info;
 
-#define LV_KERNEL_COUNT 81
+#define LV_KERNEL_COUNT 83
 extern const lv_kernel_info lv_kernel_table[LV_KERNEL_COUNT];
 
 /* particle_moments: One particle's mass moment and momentum (summed: m r_COM and p).
@@ -633,6 +633,20 @@ void lv_rigid_point_velocity(const double *v_com_w, const double *omega_w, const
      in  I_b [3]: principal moments (or the diagonal), kg·m²
      out edges [3]: box edges along the body axes, m (each at least 0.001) */
 void lv_box_of_inertia(double m, const double *I_b, double *edges);
+
+/* validity_scale: Scale of a body's validity measure: dt (I_max/I_min)^p.
+     in  I_b [3]: principal moments, kg·m²
+     in  dt scalar: step, s
+     in  p scalar: the integrator's ratio exponent (WDT_RATIO_EXPONENT), >= 0
+     out scale scalar: s; |omega| times it is the validity measure */
+void lv_validity_scale(const double *I_b, double dt, double p, double *scale);
+
+/* validity_wdt: A body's validity measure |omega| dt (I_max/I_min)^p and its |omega|.
+     in  omega_b [3]: angular velocity, body frame, rad/s
+     in  scale scalar: validity_scale of the body, s
+     out omega_norm scalar: |omega|, rad/s (inf when it overflows)
+     out wdt scalar: the measure the integrator's WDT_MAX bounds (dimensionless) */
+void lv_validity_wdt(const double *omega_b, double scale, double *omega_norm, double *wdt);
 
 /* ---- Scene effects (derive/effects.py): effect table layout, codes and dispatch ---------------- */
 #define LV_EFFECT_ROW_CODE 0     /* an effect table row: [code, body, parameters...] */

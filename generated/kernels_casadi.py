@@ -2607,3 +2607,29 @@ def box_of_inertia(m, I_b):
     t6 = t1 - t2 + t3
     t7 = t1 + t2 - t3
     return casadi.vertcat(casadi.if_else((t4*t5 > (1.0/1000000.0)), t0*casadi.sqrt(t4), (1.0/1000.0)), casadi.if_else((t5*t6 > (1.0/1000000.0)), t0*casadi.sqrt(t6), (1.0/1000.0)), casadi.if_else((t5*t7 > (1.0/1000000.0)), t0*casadi.sqrt(t7), (1.0/1000.0)))
+
+
+def validity_scale(I_b, dt, p):
+    """validity_scale: Scale of a body's validity measure: dt (I_max/I_min)^p.
+      in  I_b [3]: principal moments, kg·m²
+      in  dt scalar: step, s
+      in  p scalar: the integrator's ratio exponent (WDT_RATIO_EXPONENT), >= 0
+      out scale scalar: s; |omega| times it is the validity measure"""
+    I_b_0 = I_b[0]
+    I_b_1 = I_b[1]
+    I_b_2 = I_b[2]
+    I_ratio = casadi.fmax(casadi.fmax(I_b_0, I_b_1), I_b_2)/casadi.fmin(casadi.fmin(I_b_0, I_b_1), I_b_2)
+    return casadi.vertcat(casadi.power(I_ratio, p)*dt)
+
+
+def validity_wdt(omega_b, scale):
+    """validity_wdt: A body's validity measure |omega| dt (I_max/I_min)^p and its |omega|.
+      in  omega_b [3]: angular velocity, body frame, rad/s
+      in  scale scalar: validity_scale of the body, s
+      out omega_norm scalar: |omega|, rad/s (inf when it overflows)
+      out wdt scalar: the measure the integrator's WDT_MAX bounds (dimensionless)"""
+    omega_b_0 = omega_b[0]
+    omega_b_1 = omega_b[1]
+    omega_b_2 = omega_b[2]
+    w_abs = casadi.sqrt((omega_b_0*omega_b_0) + (omega_b_1*omega_b_1) + (omega_b_2*omega_b_2))
+    return casadi.vertcat(w_abs), casadi.vertcat(scale*w_abs)

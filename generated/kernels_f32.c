@@ -3144,6 +3144,23 @@ void lvf_box_of_inertia(float m, const float *I_b, float *edges) {
 ));
 }
 
+void lvf_validity_scale(const float *I_b, float dt, float p, float *scale) {
+    const float I_b_0 = I_b[0];
+    const float I_b_1 = I_b[1];
+    const float I_b_2 = I_b[2];
+    const float I_ratio = fmaxf(I_b_0, fmaxf(I_b_1, I_b_2))/fminf(I_b_0, fminf(I_b_1, I_b_2));
+    scale[0] = powf(I_ratio, p)*dt;
+}
+
+void lvf_validity_wdt(const float *omega_b, float scale, float *omega_norm, float *wdt) {
+    const float omega_b_0 = omega_b[0];
+    const float omega_b_1 = omega_b[1];
+    const float omega_b_2 = omega_b[2];
+    const float w_abs = sqrtf((omega_b_0*omega_b_0) + (omega_b_1*omega_b_1) + (omega_b_2*omega_b_2));
+    omega_norm[0] = w_abs;
+    wdt[0] = scale*w_abs;
+}
+
 /* ---- Scene effects in float: accumulating functions and dispatch ---------------------------- */
 /* applied_torque: adds tau_com_w for one body. p = [torque_w(3)] */
 static inline void lvf_effect_acc_applied_torque(const float *p, const float *x, const float *v_w, float m, const float *I_b, float *F, float *tau)

@@ -167,5 +167,9 @@ void lvf_wheels4_free_inertia(const float *I_p, const float *A_b, const float *J
 void lvf_rigid_point_velocity(const float *v_com_w, const float *omega_w, const float *r_w, float *v_w);
 /* box_of_inertia: Edges of the uniform box with a given mass and principal moments (float; see kernels.h) */
 void lvf_box_of_inertia(float m, const float *I_b, float *edges);
+/* validity_scale: Scale of a body's validity measure: dt (I_max/I_min)^p (float; see kernels.h) */
+void lvf_validity_scale(const float *I_b, float dt, float p, float *scale);
+/* validity_wdt: A body's validity measure |omega| dt (I_max/I_min)^p and its |omega| (float; see kernels.h) */
+void lvf_validity_wdt(const float *omega_b, float scale, float *omega_norm, float *wdt);
 
 #endif

@@ -4804,6 +4804,75 @@ def box_of_inertia(m, I_b, *, out=None):
     return edges_out
 
 
+def validity_scale(I_b, dt, p, *, out=None):
+    """Scale of a body's validity measure: dt (I_max/I_min)^p.
+
+    Generated kernel ``validity_scale``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    I_b : array_like, shape (..., 3)
+        principal moments, kg·m²
+    dt : array_like, shape (...)
+        step, s
+    p : array_like, shape (...)
+        the integrator's ratio exponent (WDT_RATIO_EXPONENT), >= 0
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
+
+    Returns
+    -------
+    scale : ndarray, shape (...)
+        s; |omega| times it is the validity measure
+    """
+    I_b = numpy.asarray(I_b, dtype=numpy.float32)
+    dt = numpy.asarray(dt, dtype=numpy.float32)
+    p = numpy.asarray(p, dtype=numpy.float32)
+    batch = I_b.shape[:-1] if I_b.shape[:-1] == dt.shape == p.shape else numpy.broadcast_shapes(I_b.shape[:-1], dt.shape, p.shape)
+    I_b_0 = I_b[..., 0]
+    I_b_1 = I_b[..., 1]
+    I_b_2 = I_b[..., 2]
+    I_ratio = numpy.maximum(numpy.maximum(I_b_0, I_b_1), I_b_2)/numpy.minimum(numpy.minimum(I_b_0, I_b_1), I_b_2)
+    scale_out = numpy.empty(batch, dtype=numpy.float32) if out is None or out[0] is None else out[0]
+    scale_out[...] = I_ratio**p*dt
+    return scale_out
+
+
+def validity_wdt(omega_b, scale, *, out=None):
+    """A body's validity measure |omega| dt (I_max/I_min)^p and its |omega|.
+
+    Generated kernel ``validity_wdt``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    omega_b : array_like, shape (..., 3)
+        angular velocity, body frame, rad/s
+    scale : array_like, shape (...)
+        validity_scale of the body, s
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
+
+    Returns
+    -------
+    omega_norm : ndarray, shape (...)
+        |omega|, rad/s (inf when it overflows)
+    wdt : ndarray, shape (...)
+        the measure the integrator's WDT_MAX bounds (dimensionless)
+    """
+    omega_b = numpy.asarray(omega_b, dtype=numpy.float32)
+    scale = numpy.asarray(scale, dtype=numpy.float32)
+    batch = omega_b.shape[:-1] if omega_b.shape[:-1] == scale.shape else numpy.broadcast_shapes(omega_b.shape[:-1], scale.shape)
+    omega_b_0 = omega_b[..., 0]
+    omega_b_1 = omega_b[..., 1]
+    omega_b_2 = omega_b[..., 2]
+    w_abs = numpy.sqrt((omega_b_0*omega_b_0) + (omega_b_1*omega_b_1) + (omega_b_2*omega_b_2))
+    omega_norm_out = numpy.empty(batch, dtype=numpy.float32) if out is None or out[0] is None else out[0]
+    omega_norm_out[...] = w_abs
+    wdt_out = numpy.empty(batch, dtype=numpy.float32) if out is None or out[1] is None else out[1]
+    wdt_out[...] = scale*w_abs
+    return omega_norm_out, wdt_out
+
+
 # name -> (function, [(input, shape)], [(output, shape)]), in the order of the C kernel table
 KERNELS = {
     'particle_moments': (particle_moments, [('m', ()), ('r_w', (3,)), ('v_w', (3,))], [('m_r', (3,)), ('p', (3,))]),
@@ -4887,6 +4956,8 @@ KERNELS = {
     'wheels4_free_inertia': (wheels4_free_inertia, [('I_p', (3, 3)), ('A_b', (3, 4)), ('J', (4,))], [('M', (3, 3))]),
     'rigid_point_velocity': (rigid_point_velocity, [('v_com_w', (3,)), ('omega_w', (3,)), ('r_w', (3,))], [('v_w', (3,))]),
     'box_of_inertia': (box_of_inertia, [('m', ()), ('I_b', (3,))], [('edges', (3,))]),
+    'validity_scale': (validity_scale, [('I_b', (3,)), ('dt', ()), ('p', ())], [('scale', ())]),
+    'validity_wdt': (validity_wdt, [('omega_b', (3,)), ('scale', ())], [('omega_norm', ()), ('wdt', ())]),
 }
 
 

@@ -1616,6 +1616,20 @@ def box_of_inertia(m, I_b):
     return (((t0*math.sqrt(t4)) if (t4*t5 > (1.0/1000000.0)) else ((1.0/1000.0))), ((t0*math.sqrt(t6)) if (t5*t6 > (1.0/1000000.0)) else ((1.0/1000.0))), ((t0*math.sqrt(t7)) if (t5*t7 > (1.0/1000000.0)) else ((1.0/1000.0))))
 
 
+def validity_scale(I_b, dt, p):
+    """Scale of a body's validity measure: dt (I_max/I_min)^p (floats; see the module)."""
+    I_b_0, I_b_1, I_b_2 = I_b
+    I_ratio = max(I_b_0, I_b_1, I_b_2)/min(I_b_0, I_b_1, I_b_2)
+    return math.pow(I_ratio, p)*dt
+
+
+def validity_wdt(omega_b, scale):
+    """A body's validity measure |omega| dt (I_max/I_min)^p and its |omega| (floats; see the module)."""
+    omega_b_0, omega_b_1, omega_b_2 = omega_b
+    w_abs = math.sqrt((omega_b_0*omega_b_0) + (omega_b_1*omega_b_1) + (omega_b_2*omega_b_2))
+    return w_abs, scale*w_abs
+
+
 # ---- Scene effects: apply(p, x, v_w, m, I_b) -> (F_w or None, tau_w or None), one body: p its parameters
 # (the row after [code, body]), x its state (13 floats), v_w the COM velocity it sees, m, I_b (3 floats).
 
@@ -1743,6 +1757,8 @@ READS = {
     'wheels4_free_inertia': {'I_p': (0, 1, 2, 3, 4, 5, 6, 7, 8), 'A_b': (0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11), 'J': (0, 1, 2, 3)},
     'rigid_point_velocity': {'v_com_w': (0, 1, 2), 'omega_w': (0, 1, 2), 'r_w': (0, 1, 2)},
     'box_of_inertia': {'I_b': (0, 1, 2)},
+    'validity_scale': {'I_b': (0, 1, 2)},
+    'validity_wdt': {'omega_b': (0, 1, 2)},
 }
 # kernel -> {array output: the flat indices that are identically 0}
 ZEROS = {
@@ -1827,4 +1843,6 @@ ZEROS = {
     'wheels4_free_inertia': {'M': ()},
     'rigid_point_velocity': {'v_w': ()},
     'box_of_inertia': {'edges': ()},
+    'validity_scale': {'scale': ()},
+    'validity_wdt': {'omega_norm': (), 'wdt': ()},
 }

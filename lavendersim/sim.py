@@ -742,10 +742,9 @@ class Sim:
     def _setup_checks(self) -> None:
         nb = len(self.names)
         I = self._params[:, LY.PARAM_I_B]
-        self._ratio = (I.max(axis=1) / I.min(axis=1)) if nb else np.zeros(0)
         self._bound = validity_bound(self.integrator)
         p = 0.0 if self._bound is None else self._bound[1]
-        self._wdt_scale = self.dt * (self._ratio ** p if p else np.ones(nb))
+        self._wdt_scale = K.validity_scale(I, self.dt, p)     # dt (I_max/I_min)**p, printed (derive/measures.py)
         acted = np.zeros(nb, bool)
         if len(self._effects):
             from .effects import ROW_BODY
@@ -836,13 +835,11 @@ class Sim:
                 self._g_fast[f, 1] = np.where(E0 > 0, self.max_growth * E0 * margin, np.inf)
                 self._g_fast[f, 2] = np.where(L0 > 0, (self.max_growth * L0) ** 2 * margin, np.inf)
 
-    def _wdt(self, x: np.ndarray, w: np.ndarray | None = None) -> np.ndarray:
-        """Per body |omega|*dt*(I_max/I_min)**p, the quantity the validity bound limits (w: |omega| if known)."""
-        p = 0.0 if self._bound is None else self._bound[1]
+    def _wdt(self, x: np.ndarray, bodies=slice(None)) -> np.ndarray:
+        """|omega|*dt*(I_max/I_min)**p of rows x (of those bodies), the quantity the validity bound limits (the printed
+        validity_wdt, as the C screen)."""
         with np.errstate(over="ignore", invalid="ignore"):   # an overflowing norm is inf: beyond any bound
-            if w is None:
-                w = np.linalg.norm(x[:, LY.STATE_OMEGA_B], axis=-1)
-            return w * self.dt * (self._ratio ** p if p else 1.0)
+            return K.validity_wdt(x[:, LY.STATE_OMEGA_B], self._wdt_scale[bodies])[1]
 
     def _bound_text(self, value: float) -> str:
         wmax, p = self._bound
@@ -870,10 +867,8 @@ class Sim:
             if screen(x, self._params, self._wdt_scale, bound, self._g_fast if growth else self._g_inf):
                 return None
         with np.errstate(over="ignore", invalid="ignore"):   # an overflowing norm is inf: beyond any bound
-            om = x[:, LY.STATE_OMEGA_B]
-            w = np.sqrt(np.add.reduce(om * om, axis=1))
-        if self._bound is not None and not w.size == 0 and not float((w * self._wdt_scale).max()) <= self._bound[0]:
-            v = self._wdt(x)
+            w, v = K.validity_wdt(x[:, LY.STATE_OMEGA_B], self._wdt_scale)
+        if self._bound is not None and not w.size == 0 and not float(v.max()) <= self._bound[0]:
             bad = ~(v <= self._bound[0])
             if bad.any():
                 if self.on_bound == "raise":
@@ -1465,7 +1460,7 @@ class Sim:
             raise V.LavenderInputError(field if (omega_b is not None or omega_w is not None) else "v_w",
                                        "the body's kinetic energy is not representable (overflows float64)")
         if self._bound is not None:
-            wdt = float(self._wdt(x[None])[0])
+            wdt = float(self._wdt(x[None], [i])[0])
             if not wdt <= self._bound[0]:
                 if self.on_bound == "raise":
                     raise V.ValidityBoundError(field, self._bound_text(wdt) + " (Sim(..., on_bound='warn') to allow it)")

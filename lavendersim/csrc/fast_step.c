@@ -234,9 +234,10 @@ static int screen_pass(const double *x, const double *params, long nb, const dou
 {
     long b;
     for (b = 0; b < nb; b++) {
-        const double *xb = x + b * LV_STATE_SIZE, *om = xb + LV_STATE_OMEGA_B;
-        const double w = sqrt(om[0] * om[0] + om[1] * om[1] + om[2] * om[2]);
-        if (!(w * scale[b] <= bound) || !growth_pass(xb, params + b * LV_PARAM_SIZE, G + b * LV_G_COLS, w)) return 0;
+        const double *xb = x + b * LV_STATE_SIZE;
+        double w, wdt;
+        lv_validity_wdt(xb + LV_STATE_OMEGA_B, scale[b], &w, &wdt); /* the printed validity measure, as Sim's */
+        if (!(wdt <= bound) || !growth_pass(xb, params + b * LV_PARAM_SIZE, G + b * LV_G_COLS, w)) return 0;
     }
     return 1;
 }
@@ -259,14 +260,13 @@ static int screen_pass_f32(const float *x, const double *params, long nb, const 
     int k;
     for (b = 0; b < nb; b++) {
         const double *g = G + b * LV_G_COLS;
-        double xb[LV_STATE_SIZE], gb[LV_G_COLS], w;
+        double xb[LV_STATE_SIZE], gb[LV_G_COLS], w, wdt;
         for (k = 0; k < LV_STATE_SIZE; k++) xb[k] = (double)x[b * LV_STATE_SIZE + k];
-        w = sqrt(xb[LV_STATE_OMEGA_B] * xb[LV_STATE_OMEGA_B] + xb[LV_STATE_OMEGA_B + 1] * xb[LV_STATE_OMEGA_B + 1]
-                 + xb[LV_STATE_OMEGA_B + 2] * xb[LV_STATE_OMEGA_B + 2]);
+        lv_validity_wdt(xb + LV_STATE_OMEGA_B, scale[b], &w, &wdt);
         gb[LV_G_W] = g[LV_G_W] * keep; /* a NaN w fails the bound test below */
         gb[LV_G_E] = g[LV_G_E] * keep;
         gb[LV_G_L2] = g[LV_G_L2] * keep;
-        if (!(w * scale[b] <= bound * keep) || !growth_pass(xb, params + b * LV_PARAM_SIZE, gb, w)) return 0;
+        if (!(wdt <= bound * keep) || !growth_pass(xb, params + b * LV_PARAM_SIZE, gb, w)) return 0;
     }
     return 1;
 }

@@ -245,11 +245,15 @@ static int LV_FN(simulate)(LV_REAL *state, const LV_REAL *params, long nb, const
     /* the effect index (CSR, table order per body), as step.c's */
     for (e = 0; e < ne; e++) {
         const LV_REAL *row = effects + e * row_size;
-        const int code = (int)row[LV_EFFECT_ROW_CODE];
-        const long body = (long)row[LV_EFFECT_ROW_BODY];
-        const int np = (LV_REAL)code == row[LV_EFFECT_ROW_CODE] ? lv_effect_n_params(code) : -1;
-        if (np < 0 || np > row_size - LV_EFFECT_ROW_PARAMS) { *fail_step = e; status = LV_UNKNOWN_EFFECT; goto done; }
-        if (body < -1 || body >= nb || (LV_REAL)body != row[LV_EFFECT_ROW_BODY]) { status = LV_BAD_ARGUMENT; goto done; }
+        double head[LV_EFFECT_ROW_PARAMS]; /* code and body, exact in double: the one row check (step.c) */
+        int np, code;
+        long body;
+        for (k = 0; k < LV_EFFECT_ROW_PARAMS; k++) head[k] = (double)row[k];
+        status = lv_effect_row_check(head, row_size, nb, NULL, &np);
+        if (status == LV_UNKNOWN_EFFECT) *fail_step = e;
+        if (status != LV_OK) goto done;
+        code = (int)row[LV_EFFECT_ROW_CODE];
+        body = (long)row[LV_EFFECT_ROW_BODY];
         if (body == -1) { n_every++; every_flags |= lv_effect_flags(code); }
         else { start[body + 1]++; flags[body] |= lv_effect_flags(code); }
     }

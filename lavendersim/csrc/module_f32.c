@@ -71,13 +71,17 @@ PyObject *lv_py_simulate_f32(PyObject *self, PyObject *args)
     }
     for (e = 0; status == LV_OK && e < ne; e++) {
         const float *row = (const float *)ef.buf + e * row_size;
-        const float code = row[LV_EFFECT_ROW_CODE], body = row[LV_EFFECT_ROW_BODY];
-        const int np = code == floorf(code) && fabsf(code) < 1e6f ? lv_effect_n_params((int)code) : -1;
-        if (np < 0 || np > row_size - LV_EFFECT_ROW_PARAMS) {
+        double head[LV_EFFECT_ROW_PARAMS]; /* code and body, exact in double: the one row check (step.c) */
+        int k, np, check;
+        for (k = 0; k < LV_EFFECT_ROW_PARAMS; k++) head[k] = (double)row[k];
+        check = lv_effect_row_check(head, row_size, (long)nb, NULL, &np);
+        if (check == LV_UNKNOWN_EFFECT) {
+            PyObject *code = PyFloat_FromDouble(head[LV_EFFECT_ROW_CODE]);
             PyErr_Format(PyExc_ValueError, "simulate_f32: effects[%zd] code %R is not a built-in effect with parameters "
-                         "that fit the row (float32 steps built-in effects only)", e, PyFloat_FromDouble(code));
+                         "that fit the row (float32 steps built-in effects only)", e, code);
+            Py_XDECREF(code);
             status = LV_BAD_ARGUMENT;
-        } else if (!(body == -1.0f || (body >= 0.0f && body < (float)nb && body == floorf(body)))) {
+        } else if (check != LV_OK) {
             PyErr_Format(PyExc_ValueError, "simulate_f32: effects[%zd] body must be -1 or an index in [0, %zd)", e, nb);
             status = LV_BAD_ARGUMENT;
         }

@@ -876,18 +876,6 @@ static void kick(const body_ctx *c, double *x, double h, int damped)
     lv_splitting_kick(c->m, I, x + LV_STATE_V_W, x + LV_STATE_OMEGA_B, F, tb, h, x + LV_STATE_V_W, x + LV_STATE_OMEGA_B);
 }
 
-/* One splitting step: kick(h/2), drift p by h v, the free rotation over h (splitting_rotation: the Strang
-   sequence of exact principal-axis flows), kick(h/2). Second order, symmetric; torque-free it conserves L_w
-   and |L_b| exactly (to rounding). */
-static void splitting_step(const body_ctx *c, double *x, double h, int damped)
-{
-    if (c->has) kick(c, x, LV_SPLIT_KICK * h, damped);
-    lv_translation_drift(x + LV_STATE_P_W, x + LV_STATE_V_W, h, x + LV_STATE_P_W);
-    lv_splitting_rotation(c->prm + LV_PARAM_I_B, x + LV_STATE_Q, x + LV_STATE_OMEGA_B, h, x + LV_STATE_Q,
-                          x + LV_STATE_OMEGA_B);
-    if (c->has) kick(c, x, LV_SPLIT_KICK * h, damped);
-}
-
 /* Solve I (w1 - w) + h w1 x (I w1) = h tau_b for w1 by Newton's method (implicit_gyro_newton: the derived
    residual, its SymPy Jacobian and the adjugate solve) to rounding, at most LV_GYRO_MAX_ITER iterations,
    starting from w1 = w. Solved exactly, the torque-free step never gains energy:
@@ -925,50 +913,27 @@ static int gyro_step(const body_ctx *c, double *x, double h)
     return ok;
 }
 
-/* One splitting4 step: splitting_step with step gamma_i h, i = 1 .. LV_SPLIT4_STAGES (LV_SPLIT4_GAMMA, a
-   symmetric composition of order 4; derive/tableaux.py). A body without effects takes the same flows as one
-   sequence (LV_SPLIT4_AXIS / LV_SPLIT4_FRAC: neighbours about one axis merged, 21 flows instead of 25) on
-   L_b = I omega (body_momentum), carried between the flows and turned back into omega once (body_rate), and
-   p drifts by h v. Torque-free it conserves L_w and |L_b| to rounding. */
-static void splitting4_step(const body_ctx *c, double *x, double h, int damped)
-{
-    const double *I = c->prm + LV_PARAM_I_B;
-    double L[3];
-    int i;
-    if (c->has) {
-        for (i = 0; i < LV_SPLIT4_STAGES; i++) splitting_step(c, x, LV_SPLIT4_GAMMA[i] * h, damped);
-        return;
-    }
-    lv_translation_drift(x + LV_STATE_P_W, x + LV_STATE_V_W, h, x + LV_STATE_P_W);
-    lv_body_momentum(I, x + LV_STATE_OMEGA_B, L);
-    for (i = 0; i < LV_SPLIT4_FLOWS; i++) {
-        const double tau = LV_SPLIT4_FRAC[i] * h;
-        if (LV_SPLIT4_AXIS[i] == 0)
-            lv_axis_flow_x(I, x + LV_STATE_Q, L, tau, x + LV_STATE_Q, L);
-        else if (LV_SPLIT4_AXIS[i] == 1)
-            lv_axis_flow_y(I, x + LV_STATE_Q, L, tau, x + LV_STATE_Q, L);
-        else
-            lv_axis_flow_z(I, x + LV_STATE_Q, L, tau, x + LV_STATE_Q, L);
-    }
-    lv_body_rate(I, L, x + LV_STATE_OMEGA_B);
-}
+/* symtop4's split of inertia I (symtop_score, symtop_leftover): the reference axis r (the smallest score, the first on
+   ties: the intermediate principal axis), the A axis (the larger leftover coefficient |c_a| of the other two, the first
+   on ties) and the B axis, I_r, c_a, c_b. */
+typedef struct {
+    int a, b;
+    double I_r, c_a, c_b;
+} symtop_split;
 
-/* symtop4's split of body c (symtop_score, symtop_leftover): the reference axis r (the smallest score, the
-   first on ties: the intermediate principal axis), the A axis (the larger leftover coefficient |c_a| of the
-   other two, the first on ties) and the B axis; *I_r, *c_a, *c_b. */
-static void symtop_axes(const double *I, int *a, int *b, double *I_r, double *c_a, double *c_b)
+static void symtop_axes(const double *I, symtop_split *t)
 {
     double score[3], c[3];
     int r = 0, i, j, k;
     lv_symtop_score(I, score);
     for (i = 1; i < 3; i++)
         if (score[i] < score[r]) r = i;
-    *I_r = I[r];
+    t->I_r = I[r];
     lv_symtop_leftover(I, I[r], c);
     j = (r + 1) % 3;
     k = (r + 2) % 3;
     if (fabs(c[k]) > fabs(c[j])) { i = j; j = k; k = i; }
-    *a = j; *b = k; *c_a = c[j]; *c_b = c[k];
+    t->a = j; t->b = k; t->c_a = c[j]; t->c_b = c[k];
 }
 
 /* The exact flow for time tau of 1/2 cf L_ax^2 on (q, L) (symtop_axis_flow_{x,y,z}), in place. */
@@ -982,79 +947,40 @@ static void symtop_axis(int ax, double cf, double *q, double *L, double tau)
         lv_symtop_axis_flow_z(q, L, cf, tau, q, L);
 }
 
-/* symtop4's rotation part on (q, L) (body c's split from symtop_axes): without effects the merged sequence
-   A(a_0 h) B(b_0 h) A(a_1 h) ... A(a_s h) (LV_SYMTOP4_A_FRAC / LV_SYMTOP4_B_FRAC); `stage` >= 0 gives
-   stage's Strang step A(gamma h/2) B(gamma h) A(gamma h/2) (gamma = LV_SYMTOP4_GAMMA[stage]). A(tau) is the
-   axis flow of 1/2 c_a L_a^2 then the sphere flow of |L|^2/(2 I_r) (they commute); B(tau) the axis flow of
-   1/2 c_b L_b^2. */
-static void symtop_rotation(const double *I, double *q, double *L, double h, int stage)
-{
-    double I_r, c_a, c_b;
-    int a, b, i, n = stage < 0 ? LV_SYMTOP4_STAGES : 1;
-    symtop_axes(I, &a, &b, &I_r, &c_a, &c_b);
-    for (i = 0; i <= n; i++) {
-        const double ta = stage < 0 ? LV_SYMTOP4_A_FRAC[i] * h : LV_SYMTOP_STRANG_A * LV_SYMTOP4_GAMMA[stage] * h;
-        symtop_axis(a, c_a, q, L, ta);
-        lv_sphere_flow(q, L, I_r, ta, q);
-        if (i < n) symtop_axis(b, c_b, q, L, stage < 0 ? LV_SYMTOP4_B_FRAC[i] * h : LV_SYMTOP4_GAMMA[stage] * h);
-    }
-}
-
-/* A rotation of the symmetric-top split on (q, L) of body I: stage < 0, the whole step h torque-free;
-   else the rotation of stage `stage` of symtop4's kicked composition (over LV_SYMTOP4_GAMMA[stage] h). */
-typedef void (*symtop_rotation_fn)(const double *I, double *q, double *L, double h, int stage);
-
-/* One step of symtop4 or symtop_bm6 (rotate: the method's rotation). Without effects: p drifts by h v; the
-   rotation on L_b = I omega (body_momentum), turned back into omega once (body_rate); torque-free it
-   conserves L_w and |L_b| to rounding and is exact for a symmetric top (c_b = 0). With effects: for each
-   stage gamma_i of LV_SYMTOP4_GAMMA, kick(gamma_i h/2), drift p by gamma_i h, the stage's rotation,
-   kick(gamma_i h/2) (splitting4's composition: order 4 with loads of p and q only, 3 with a
-   velocity-dependent effect). The same operations in the same order as the NumPy backend's
-   _symtop_composition. */
-static inline void symtop_step(const body_ctx *c, double *x, double h, int damped, symtop_rotation_fn rotate)
+/* One step of a composition m (generated/tableaux.h LV_COMPOSITIONS, derive/tableaux.py compositions()): a body with
+   effects takes the stages gamma_i in turn, each m->kicked over g = gamma_i h; a body without effects m->free once
+   over g = h. Flow k runs for frac_k g: kick (the loads on v and omega), drift (p += tau v), momentum / rate (omega to
+   L_b = I omega and back), strang (splitting_rotation), axis_x/y/z (principal-axis flows on L_b), top_a / top_b /
+   top_b_nz (the symmetric-top split t's axis flows; top_b_nz skipped when c_b = 0) and sphere. The NumPy backend's
+   _composition, operation for operation. */
+static void composition_step(const body_ctx *c, const symtop_split *t, const lv_composition *m, double *x, double h,
+                             int damped)
 {
     const double *I = c->prm + LV_PARAM_I_B;
-    double L[3];
-    int i;
-    if (!c->has) {
-        lv_translation_drift(x + LV_STATE_P_W, x + LV_STATE_V_W, h, x + LV_STATE_P_W);
-        lv_body_momentum(I, x + LV_STATE_OMEGA_B, L);
-        rotate(I, x + LV_STATE_Q, L, h, -1);
-        lv_body_rate(I, L, x + LV_STATE_OMEGA_B);
-        return;
+    double *q = x + LV_STATE_Q, *w = x + LV_STATE_OMEGA_B, L[3] = {0.0, 0.0, 0.0};
+    const lv_flow *prog = c->has ? m->kicked : m->free;
+    const int n_stages = c->has ? m->n_stages : 1, n = c->has ? m->n_kicked : m->n_free;
+    int i, k;
+    for (i = 0; i < n_stages; i++) {
+        const double g = c->has ? m->gamma[i] * h : h;
+        for (k = 0; k < n; k++) {
+            const double tau = prog[k].frac * g;
+            switch (prog[k].flow) {
+            case LV_FLOW_KICK: kick(c, x, tau, damped); break;
+            case LV_FLOW_DRIFT: lv_translation_drift(x + LV_STATE_P_W, x + LV_STATE_V_W, tau, x + LV_STATE_P_W); break;
+            case LV_FLOW_MOMENTUM: lv_body_momentum(I, w, L); break;
+            case LV_FLOW_RATE: lv_body_rate(I, L, w); break;
+            case LV_FLOW_STRANG: lv_splitting_rotation(I, q, w, tau, q, w); break;
+            case LV_FLOW_AXIS_X: lv_axis_flow_x(I, q, L, tau, q, L); break;
+            case LV_FLOW_AXIS_Y: lv_axis_flow_y(I, q, L, tau, q, L); break;
+            case LV_FLOW_AXIS_Z: lv_axis_flow_z(I, q, L, tau, q, L); break;
+            case LV_FLOW_TOP_A: symtop_axis(t->a, t->c_a, q, L, tau); break;
+            case LV_FLOW_TOP_B_NZ: if (t->c_b == 0.0) break; /* fall through */
+            case LV_FLOW_TOP_B: symtop_axis(t->b, t->c_b, q, L, tau); break;
+            case LV_FLOW_SPHERE: lv_sphere_flow(q, L, t->I_r, tau, q); break;
+            }
+        }
     }
-    for (i = 0; i < LV_SYMTOP4_STAGES; i++) {
-        const double g = LV_SYMTOP4_GAMMA[i] * h;
-        kick(c, x, LV_SPLIT_KICK * g, damped);
-        lv_translation_drift(x + LV_STATE_P_W, x + LV_STATE_V_W, g, x + LV_STATE_P_W);
-        lv_body_momentum(I, x + LV_STATE_OMEGA_B, L);
-        rotate(I, x + LV_STATE_Q, L, h, i);
-        lv_body_rate(I, L, x + LV_STATE_OMEGA_B);
-        kick(c, x, LV_SPLIT_KICK * g, damped);
-    }
-}
-
-/* symtop_bm6's rotation on (q, L) for time h (body c's split from symtop_axes): the Blanes-Moan S10 sequence
-   P(p_0 h) Q(q_0 h) P(p_1 h) ... P(p_s h) (LV_BM6_P_FRAC / LV_BM6_Q_FRAC), P the axis flow with the smaller
-   leftover coefficient (symtop4's B axis), Q the larger's (symtop4's A axis); then one sphere flow of
-   |L|^2/(2 I_r) for h (it commutes with both axis flows). A symmetric top (c_b = 0) skips the P flows: each
-   is then a turn by 0 (cos 0 = 1, sin 0 = 0), leaving q and L bit for bit as they are. */
-static void symtop_bm6_rotation(const double *I, double *q, double *L, double h)
-{
-    double I_r, c_a, c_b;
-    int a, b, i;
-    symtop_axes(I, &a, &b, &I_r, &c_a, &c_b);
-    for (i = 0; i <= LV_BM6_FLOWS; i++) {
-        if (c_b != 0.0) symtop_axis(b, c_b, q, L, LV_BM6_P_FRAC[i] * h);
-        if (i < LV_BM6_FLOWS) symtop_axis(a, c_a, q, L, LV_BM6_Q_FRAC[i] * h);
-    }
-    lv_sphere_flow(q, L, I_r, h, q);
-}
-
-/* symtop_bm6's rotation as a symtop_rotation_fn: the whole step, or a stage's gamma_i h. */
-static void symtop_bm6_stage(const double *I, double *q, double *L, double h, int stage)
-{
-    symtop_bm6_rotation(I, q, L, stage < 0 ? h : LV_SYMTOP4_GAMMA[stage] * h);
 }
 
 /* rk4_expmap's stage derivative k at ys (p, u, v, omega): the right-hand side at q0 (x) exp(u/2) (x itself at the
@@ -1092,31 +1018,28 @@ static void rk4_expmap_step(const body_ctx *c, double *x, double h)
     lv_quat_exp_step(q0, y + LV_STATE_Q, 1.0, x + LV_STATE_Q);
 }
 
-/* Advance plain body b by n_steps of a plain-only integrator (splitting, implicit_gyro, splitting4,
-   rk4_expmap, symtop4); contract as advance_block with n = 1, and *why = LV_DIVERGED (non-finite) or LV_NO_ROOT
-   (implicit_gyro's Newton solve did not converge). */
+/* Advance plain body b by n_steps of a plain-only integrator, by its family (LV_INTEGRATOR_IS_*): a composition
+   (composition_step on its printed program), RK4 in exponential coordinates (rk4_expmap_step) or the implicit
+   gyroscopic step (gyro_step); contract as advance_block with n = 1, and *why = LV_DIVERGED (non-finite) or
+   LV_NO_ROOT (implicit_gyro's Newton solve did not converge). */
 static long advance_structured(double *state, const double *params, long b, const lv_effect_index *ix,
                                int integrator, int normalize, double dt, long n_steps, double *last, int *why)
 {
     body_ctx c;
+    symtop_split t;
     double x[LV_STATE_SIZE], xn[LV_STATE_SIZE];
     int damped, i;
     long s;
     ctx_init(&c, params, b, NULL, ix);
     damped = (c.flags & (LV_EFFECT_USES_V | LV_EFFECT_USES_OMEGA)) != 0;
+    symtop_axes(c.prm + LV_PARAM_I_B, &t);
     memcpy(x, state + b * LV_STATE_SIZE, sizeof x);
     for (s = 0; s < n_steps; s++) {
         memcpy(xn, x, sizeof x);
-        if (integrator == LV_INTEGRATOR_SPLITTING)
-            splitting_step(&c, xn, dt, damped);
-        else if (integrator == LV_INTEGRATOR_SPLITTING4)
-            splitting4_step(&c, xn, dt, damped);
-        else if (integrator == LV_INTEGRATOR_RK4_EXPMAP)
+        if (LV_INTEGRATOR_IS_COMPOSITION(integrator))
+            composition_step(&c, &t, &LV_COMPOSITIONS[integrator], xn, dt, damped);
+        else if (LV_INTEGRATOR_IS_LIE_GROUP_RK(integrator))
             rk4_expmap_step(&c, xn, dt);
-        else if (integrator == LV_INTEGRATOR_SYMTOP4)
-            symtop_step(&c, xn, dt, damped, symtop_rotation);
-        else if (integrator == LV_INTEGRATOR_SYMTOP_BM6)
-            symtop_step(&c, xn, dt, damped, symtop_bm6_stage);
         else if (!gyro_step(&c, xn, dt)) {
             *why = LV_NO_ROOT;
             memcpy(last, x, sizeof x);
