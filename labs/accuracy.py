@@ -91,7 +91,8 @@ import sys
 import sysconfig
 import time
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -128,14 +129,14 @@ ADAPTIVE_ERROR_FACTOR = 100.0
 DRIFT_DT_EXP, DRIFT_RTOL = 6, 1e-6        # the runs drawn in drift_vs_time.png
 NUMPY_RUN_BUDGET_S = 0.8                  # one NumPy run longer than this ends its dt sweep (full mode)
 
-FULL = dict(cases=("box_w1", "box_w2", "diag_w1", "diag_w2"), dt_exps=tuple(range(4, 13)),
-            numpy_dt_exps=tuple(range(4, 13)), numpy_budget=NUMPY_RUN_BUDGET_S,
-            rtols=tuple(10.0 ** -k for k in range(3, 14)), numpy_rtols=tuple(10.0 ** -k for k in range(3, 14)),
-            mj_dt_exps=tuple(range(4, 13)), repeats=5, time_budget=0.25)
-QUICK = dict(cases=("box_w1", "diag_w2"), dt_exps=tuple(range(4, 11)), numpy_dt_exps=(4, 5, 6), numpy_budget=0.3,
-             rtols=tuple(10.0 ** -k for k in range(3, 9)), numpy_rtols=(1e-3, 1e-4, 1e-5), mj_dt_exps=tuple(range(4, 11)),
-             repeats=1,
-             time_budget=0.0)
+FULL: dict[str, Any] = dict(cases=("box_w1", "box_w2", "diag_w1", "diag_w2"), dt_exps=tuple(range(4, 13)),
+                            numpy_dt_exps=tuple(range(4, 13)), numpy_budget=NUMPY_RUN_BUDGET_S,
+                            rtols=tuple(10.0 ** -k for k in range(3, 14)),
+                            numpy_rtols=tuple(10.0 ** -k for k in range(3, 14)),
+                            mj_dt_exps=tuple(range(4, 13)), repeats=5, time_budget=0.25)
+QUICK: dict[str, Any] = dict(cases=("box_w1", "diag_w2"), dt_exps=tuple(range(4, 11)), numpy_dt_exps=(4, 5, 6),
+                             numpy_budget=0.3, rtols=tuple(10.0 ** -k for k in range(3, 9)),
+                             numpy_rtols=(1e-3, 1e-4, 1e-5), mj_dt_exps=tuple(range(4, 11)), repeats=1, time_budget=0.0)
 
 
 @dataclass(frozen=True)
@@ -177,10 +178,10 @@ class Point:
     steps: int | None = None
     rhs_evals: int | None = None
     rhs_evals_source: str = ""
-    attitude_error: float | None = None
-    omega_error: float | None = None
-    energy_drift: float | None = None
-    momentum_drift: float | None = None
+    attitude_error: float = math.nan       # NaN: not measured (null in results.json)
+    omega_error: float = math.nan
+    energy_drift: float = math.nan
+    momentum_drift: float = math.nan
     wall_s: float | None = None
     wall_per_sim_s: float | None = None
     repeats: int = 0
@@ -189,7 +190,7 @@ class Point:
 
     @property
     def ok(self) -> bool:
-        return self.diverged is None and self.attitude_error is not None and math.isfinite(self.attitude_error)
+        return self.diverged is None and math.isfinite(self.attitude_error)
 
 
 # ------------------------------------------------------------------------------------------ options
@@ -235,8 +236,7 @@ def methods(mujoco_ok: bool, integrators=None) -> tuple[list[Method], dict]:
             probed(Method(f"{name} [{backend}]", "lavendersim", name, backend, param, stages, order=order))
     for name in getattr(B, "FLOAT32_INTEGRATORS", ()):   # the precision axis: float32 beside float64, C backend
         if name in names:
-            probed(Method(f"{name} [c float32]", "lavendersim", name, "c", "dt", int(B.INTEGRATORS[name]),
-                          dtype="float32"))
+            probed(Method(f"{name} [c float32]", "lavendersim", name, "c", "dt", B.INTEGRATORS[name], dtype="float32"))
     for name in ("RK45", "DOP853"):
         out.append(Method(f"scipy {name}", "scipy", name, "scipy", "rtol"))
     if mujoco_ok:
@@ -366,6 +366,13 @@ def _measure_sim(case, m, value, exact, drifts, keep_drift):
     return pt
 
 
+def _timed(run) -> float:
+    """The wall time of one call run(), s."""
+    t0 = time.perf_counter()
+    run()
+    return time.perf_counter() - t0
+
+
 def _sim_job(case, m, value):
     """The timed run of a Sim point: a fresh Sim (constructed outside the timed region), run to T."""
     n = 1 if m.param == "rtol" else int(round(T_END / value))
@@ -374,9 +381,7 @@ def _sim_job(case, m, value):
         s = _make_sim(case, m, value)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", ValidityBoundWarning)
-            t0 = time.perf_counter()
-            s.run(n)
-            return time.perf_counter() - t0
+            return _timed(lambda: s.run(n))
 
     return job
 
@@ -399,14 +404,7 @@ def _scipy_solver(case, m, rtol):
 
 
 def _scipy_job(case, m, rtol):
-    solve = _scipy_solver(case, m, rtol)
-
-    def job():
-        t0 = time.perf_counter()
-        solve()
-        return time.perf_counter() - t0
-
-    return job
+    return functools.partial(_timed, _scipy_solver(case, m, rtol))
 
 
 def _measure_scipy(case, m, rtol, exact, drifts, keep_drift):
@@ -460,13 +458,7 @@ def _mujoco_job(mujoco, case, m, dt):
     from mujoco import rollout
 
     model, data, s0, n = _mujoco_setup(mujoco, case, m, dt)
-
-    def job():
-        t0 = time.perf_counter()
-        rollout.rollout(model, data, s0[None, :], nstep=n)
-        return time.perf_counter() - t0
-
-    return job
+    return functools.partial(_timed, lambda: rollout.rollout(model, data, s0[None, :], nstep=n))
 
 
 def _measure_mujoco(mujoco, case, m, dt, exact, drifts, keep_drift):
@@ -483,7 +475,7 @@ def _measure_mujoco(mujoco, case, m, dt, exact, drifts, keep_drift):
         return pt
     if abs(st[-1, 0] - T_END) > 1e-9:
         raise RuntimeError(f"MuJoCo rollout ended at t = {st[-1, 0]!r}, expected {T_END}")
-    x = np.empty((len(st), 13))                     # MuJoCo's free joint in the STATE layout
+    x = np.empty((len(st), C.LY.STATE_SIZE))        # MuJoCo's free joint in the STATE layout
     x[:, C.P_W], x[:, C.V_W] = qpos[:, :3], qvel[:, :3]
     x[:, C.Q] = K.quat_normalize(qpos[:, [4, 5, 6, 3]])  # (w, x, y, z) -> (x, y, z, w)
     x[:, C.OMEGA_B] = qvel[:, 3:6]                  # the free joint's angular velocity is in the body frame
@@ -570,7 +562,8 @@ def measure_sweep(task: tuple) -> dict:
 def _measure_sweep(task: tuple) -> dict:
     case, m, values, exact, numpy_budget = task
     mj = _mujoco()[0] if m.family == "mujoco" else None
-    points, drifts, skipped = [], {}, None
+    points, skipped = [], None
+    drifts: dict = {}
     t_m = time.perf_counter()
     for v in values:
         keep = (m.param == "dt" and abs(v - 2.0 ** -DRIFT_DT_EXP) < 1e-15) or \
@@ -673,7 +666,7 @@ def verdicts(points: list[Point], cost: str = "wall_per_sim_s") -> dict:
         pts = [p for p in points if p.case == case and p.ok and getattr(p, cost) is not None
                and p.attitude_error <= ERROR_CEILING]
         pool = [(p.method, p.attitude_error, getattr(p, cost)) for p in pts]
-        per = {}
+        per: dict = {}
         for method in sorted({p.method for p in points if p.case == case}):
             mine = [p for p in pts if p.method == method]
             if not mine:
@@ -734,6 +727,11 @@ def _rank(label: str) -> tuple:
 
 def _few(labels: list[str], n: int = 3) -> str:
     return ", ".join(labels[:n]) + (f" and {len(labels) - n} more" if len(labels) > n else "")
+
+
+def _worst(costs: list[float | None]) -> float | None:
+    """The largest cost, or None when one of them is None (a case that never reaches the tolerance)."""
+    return None if any(c is None for c in costs) else max(c for c in costs if c is not None)
 
 
 def cost_to_reach(points: list[Point], tol: float, cost: str = "wall_per_sim_s") -> float | None:
@@ -812,7 +810,7 @@ def compute(backend: str = "auto", quick: bool = True, mujoco: bool = True, prog
     stamp["loadavg_end"] = list(os.getloadavg()) if hasattr(os, "getloadavg") else None
     stamp["errors_computed_on"] = ex.describe()
     stamp["timing"] = "serial, in this process, after the error computation"
-    by = {}
+    by: dict[tuple[str, str], list[Point]] = {}
     for p in points:
         by.setdefault((p.case, p.method), []).append(p)
     orders = {key: _order(pts) for key, pts in by.items()}
@@ -960,10 +958,10 @@ def _summary_table(use, meths, by, orders, overall) -> list[dict]:
         os_ = [orders[(c.name, m.label)] for c in use if orders.get((c.name, m.label)) is not None]
         row["order"] = float(np.median(os_)) if os_ else None
         for tol in (1e-3, 1e-6, 1e-9):
-            cs = [cost_to_reach(pts[c.name], tol) for c in use]
-            row[f"us_per_sim_s_to_{tol:.0e}"] = None if any(x is None for x in cs) else 1e6 * max(cs)
-            es = [cost_to_reach(pts[c.name], tol, "rhs_evals") for c in use]
-            row[f"rhs_evals_to_{tol:.0e}"] = None if any(x is None for x in es) else int(max(es))
+            cs = _worst([cost_to_reach(pts[c.name], tol) for c in use])
+            es = _worst([cost_to_reach(pts[c.name], tol, "rhs_evals") for c in use])
+            row[f"us_per_sim_s_to_{tol:.0e}"] = None if cs is None else 1e6 * cs
+            row[f"rhs_evals_to_{tol:.0e}"] = None if es is None else int(es)
         errs = [p.attitude_error for c in use for p in pts[c.name] if p.ok]
         row["best_attitude_error"] = max(min(p.attitude_error for p in pts[c.name] if p.ok)
                                          for c in use) if errs else None
@@ -1033,7 +1031,6 @@ def _result(figures, checks, use, meths, broken, points, drifts, skipped, by, or
     result["points"] = [_point_json(p) for p in points]
     result["drift_series"] = [{"case": c, "method": lab, **d} for (c, lab), d in drifts.items()]
     result.extra_files["points.csv"] = _points_csv(points)
-    result.table_text = table_text
     return result
 
 
@@ -1050,20 +1047,9 @@ def _key(label: str) -> str:
     return "".join(ch if ch.isalnum() else "_" for ch in label.lower()).strip("_").replace("__", "_")
 
 
-def _num(x):
-    if x is None:
-        return None
-    x = float(x)
-    return x if math.isfinite(x) else None
-
-
 def _point_json(p: Point) -> dict:
-    return {"case": p.case, "method": p.method, "param": p.param, "value": p.value, "steps": p.steps,
-            "rhs_evals": p.rhs_evals, "rhs_evals_source": p.rhs_evals_source,
-            "attitude_error": _num(p.attitude_error), "omega_error": _num(p.omega_error),
-            "energy_drift": _num(p.energy_drift), "momentum_drift": _num(p.momentum_drift),
-            "wall_s": _num(p.wall_s), "wall_per_sim_s": _num(p.wall_per_sim_s), "repeats": p.repeats,
-            "diverged": p.diverged, "final_x": p.final_x}
+    """The point's fields, in order, as results.json and points.csv hold them (a float not measured or not finite: null)."""
+    return {k: C.finite_or_none(v) if isinstance(v, float) else v for k, v in asdict(p).items()}
 
 
 def verdicts_consistent(points: list[Point], per_case: dict) -> bool:
@@ -1129,10 +1115,6 @@ def _styles(meths) -> dict:
             names.append(key)
     colors = [c for c in F.CYCLE if c != F.YELLOW]        # yellow is too faint for a line on white
     return {n: {"color": colors[i % len(colors)], "marker": F.MARKERS[i % len(F.MARKERS)]} for i, n in enumerate(names)}
-
-
-def _colors(meths):
-    return {k: s["color"] for k, s in _styles(meths).items()}
 
 
 PLOT_NAMES = ("work_precision_time.png", "work_precision_rhs.png", "work_precision_omega.png", "drift_vs_time.png")

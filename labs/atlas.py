@@ -91,6 +91,7 @@ import os
 import sys
 import time
 import warnings
+from typing import Any
 
 import numpy as np
 
@@ -178,13 +179,6 @@ def make_tasks(wdts, ratios, integrators, backend: str, rtol: float, atol: float
 
 # ------------------------------------------------------------------------------------------ one cell
 
-def _num(x):
-    if x is None:
-        return None
-    x = float(x)
-    return x if math.isfinite(x) else None
-
-
 def cell_metrics(I_b: np.ndarray, w0: np.ndarray, x: np.ndarray, ref) -> dict:
     """Drifts and errors of one run's samples.
 
@@ -215,7 +209,7 @@ def cell_metrics(I_b: np.ndarray, w0: np.ndarray, x: np.ndarray, ref) -> dict:
         if ref is not None:
             m["attitude_error"] = float(np.max(R.attitude_error(ref.q, q)))
             m["omega_error"] = float(np.max(np.linalg.norm(ref.omega_b - w, axis=1)) / np.linalg.norm(w0))
-    return {k: _num(v) for k, v in m.items()}
+    return {k: C.finite_or_none(v) for k, v in m.items()}
 
 
 def _blew_up(m: dict) -> bool:
@@ -264,8 +258,8 @@ def run_cell(integrator: str, wdt: float, ratio: float, axis: str, backend: str,
         # on_bound="warn" (a default Sim raises DivergenceError there); the growth check stays at its default
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", ValidityBoundWarning)
-            sim = lv.Sim(scene, dt=dt, integrator=integrator, backend=cell["backend"], on_bound="warn",
-                         **({"rtol": rtol, "atol": atol} if adaptive else {}))
+            tols: dict[str, Any] = {"rtol": rtol, "atol": atol} if adaptive else {}
+            sim = lv.Sim(scene, dt=dt, integrator=integrator, backend=cell["backend"], on_bound="warn", **tols)
             tr = sim.record(n, n // SAMPLES)
     except DivergenceError as exc:
         cell.update(status="diverged", diverged_at_step=int(exc.step), message=str(exc))
@@ -324,7 +318,7 @@ def run_group(task: tuple) -> list[dict]:
     cells = []
     for integ in integrators:
         c = run_cell(integ, wdt, ratio, axis, backend, rtol, atol, ref)
-        c["reference"] = why or f"oracle.torque_free ({ref.kind})"
+        c["reference"] = why if ref is None else f"oracle.torque_free ({ref.kind})"
         cells.append(c)
     return cells
 
@@ -437,9 +431,8 @@ def _implicit_gyro_checks(cells, checks, fig) -> None:
 def _splitting_checks(cells, checks, fig, name: str, bound: float) -> None:
     ran = _select(cells, name, status=("ok", "blew_up"))
     fig[f"{name}_max_L_world_drift"] = _worst(ran, "L_world_drift")
-    per_step = [None if c["L_world_drift"] is None else c["L_world_drift"] / (c["steps"] * EPS) for c in ran]
-    fig[f"{name}_max_L_world_drift_per_step_eps"] = d = (math.inf if None in per_step
-                                                         else max(per_step, default=0.0))
+    per_step = [math.inf if c["L_world_drift"] is None else c["L_world_drift"] / (c["steps"] * EPS) for c in ran]
+    fig[f"{name}_max_L_world_drift_per_step_eps"] = d = max(per_step, default=0.0)
     checks.append(C.at_most(f"{name}_conserves_L", d, bound,
                             f"max over the {len(ran)} cells where {name} ran (blow-ups included: exact axis "
                             "rotations keep L_w whatever |ω|·dt) of world-L drift / (steps × machine epsilon): "
@@ -601,8 +594,8 @@ def _decorate(ax, integ, axis, row, col, nrows, xe, ye, hard_points) -> None:
         ax.set_xlim(xe[0], xe[-1])
         ax.set_ylim(ye[0], ye[-1])
         for axis_, edges in ((ax.xaxis, xe), (ax.yaxis, ye)):
-            ks = range(math.ceil(math.log10(edges[0])), math.floor(math.log10(edges[-1])) + 1)
-            ks = [k for k in ks if k >= 0] if axis_ is ax.yaxis else list(ks)     # ratios start at 1
+            ks = list(range(math.ceil(math.log10(edges[0])), math.floor(math.log10(edges[-1])) + 1))
+            ks = [k for k in ks if k >= 0] if axis_ is ax.yaxis else ks     # ratios start at 1
             ks = ks[::math.ceil(len(ks) / 7)]
             axis_.set_major_locator(FixedLocator([10.0 ** k for k in ks]))  # decades, no minor ticks, plain text
             axis_.set_major_formatter(FixedFormatter([_decade(10.0 ** k) for k in ks]))
@@ -723,6 +716,7 @@ def metric_figure(metric: str, cells, integrators, wdts, ratios, hard_points, ax
     """Heat maps of one metric: rows = integrators, columns = spin axes, one colour bar.
 
     Returns (file name, matplotlib Figure)."""
+    from matplotlib.artist import Artist
     from matplotlib.colors import ListedColormap, LogNorm
     from matplotlib.lines import Line2D
     from matplotlib.patches import Patch
@@ -751,7 +745,7 @@ def metric_figure(metric: str, cells, integrators, wdts, ratios, hard_points, ax
             _decorate(ax, integ, axis, *_place(r, c, len(integrators)), xe, ye, hard_points)
     cb = fig.colorbar(mesh, ax=axes, location="right", shrink=0.5, pad=0.01, extend="both")
     cb.set_label(label + f"  (values < {FLOOR:.0e}, incl. 0, at the bottom)", fontsize=8)
-    extra = [Line2D([], [], color="k", lw=1.6, label="lab hard's bound " + bound_text.format(b=bound)
+    extra: list[Artist] = [Line2D([], [], color="k", lw=1.6, label="lab hard's bound " + bound_text.format(b=bound)
                     + " holds inside the outline")]
     if any(c["status"] == "ok" and c[metric] is None for c in cells):
         extra.append(Patch(facecolor=STATUS_COLORS["no_reference"], edgecolor="k", lw=0.5,
@@ -798,7 +792,7 @@ def status_figure(cells, integrators, wdts, ratios, hard_points, ax=None):
 def make_plots(cells, integrators, wdts, ratios, hard_points, only: str | None = None, ax=None) -> dict:
     """{file name: Figure} of the atlas (only the one named ``only`` when given; ``ax``: its axes,
     integrators × 3 spin axes in row order)."""
-    plots = {}
+    plots: dict = {}
     if only in (None, "atlas_status.png"):
         plots.update([status_figure(cells, integrators, wdts, ratios, hard_points, ax=ax)])
     for metric in METRICS:
@@ -866,7 +860,7 @@ def compute(backend: str = "auto", quick: bool = True, workers: int | None = Non
     -------
     LabResult
         The flat figures and checks, plus ``"grid"``, ``"cells"``, ``"bounds"`` and
-        ``"hard_case_points"`` (all also in results.json); ``result.run_info`` is what run.json holds.
+        ``"hard_case_points"`` (all also in results.json); run.json holds how it ran (executor, wall time, load).
     """
     backend = C.check_backend(backend)
     rtol = _validate(quick, rtol, progress)
@@ -890,11 +884,10 @@ def compute(backend: str = "auto", quick: bool = True, workers: int | None = Non
     wall = time.perf_counter() - t0
     say(f"{len(cells)} cells in {wall:.1f} s")
     result = _result(cells, integrators, mode, backend, rtol, atol, wdts, ratios, quick)
-    result.run_info = {"executor": ex.describe(), "kind": ex.kind, "workers": ex.workers, "dask": ex.address,
-                       "wall_time_s": wall, "tasks": len(wdts) * len(ratios) * len(AXES), "cells": len(cells),
-                       "local_cores": X.local_cores(),
-                       "loadavg": list(os.getloadavg()) if hasattr(os, "getloadavg") else None}
-    result.extra_files["run.json"] = json.dumps(result.run_info, indent=1) + "\n"
+    run_info = {"executor": ex.describe(), "kind": ex.kind, "workers": ex.workers, "dask": ex.address,
+                "wall_time_s": wall, "tasks": len(wdts) * len(ratios) * len(AXES), "cells": len(cells),
+                "local_cores": X.local_cores(), "loadavg": list(os.getloadavg()) if hasattr(os, "getloadavg") else None}
+    result.extra_files["run.json"] = json.dumps(run_info, indent=1) + "\n"
     say(f"done in {time.perf_counter() - t0:.1f} s")
     return result
 

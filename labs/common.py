@@ -108,9 +108,24 @@ class Check:
                 text = f"{self.name}: {got}, expected {exp}"
             else:
                 text = f"{self.name} = {_fmt(self.value)}, expected {exp}"
-                if self.rule == "≈":
+                if self.rule == "≈" and self.bound is not None:
                     text += f" (off by {_fmt(abs(float(self.value) - self.bound))})"
         return text + (f" — {self.why}" if self.why else "")
+
+
+def finite_or_none(x) -> float | None:
+    """float(x) when it is finite, else None (how results.json says a figure was not measured).
+
+    Parameters
+    ----------
+    x : float or None
+        A figure.
+
+    Returns
+    -------
+    float or None
+    """
+    return float(x) if x is not None and _finite(x) else None
 
 
 def _finite(x) -> bool:
@@ -782,7 +797,8 @@ def parameters_text(result: LabResult, width: int = PARAM_WIDTH, longest: int = 
     """
     import textwrap
 
-    short, long_ = [], []
+    short: list[str] = []
+    long_: list[str] = []
     for k in result.param_names:
         text = _show(result[k])
         (short if len(text) <= longest else long_).append(f"{k}={text}" if len(text) <= longest else k)

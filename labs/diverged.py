@@ -37,7 +37,7 @@ def _param(v):
         return repr(v)
 
 
-def diverged_result(lab: str, exc: Exception, backend: str, options: dict) -> C.LabResult:
+def diverged_result(lab: str, exc: DivergenceError | V.ValidityBoundError, backend: str, options: dict) -> C.LabResult:
     """The failed :class:`~lavendersim.labs.common.LabResult` of a lab whose simulation diverged.
 
     Parameters

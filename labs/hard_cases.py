@@ -70,7 +70,9 @@ import functools
 import math
 import time
 import warnings
+from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -89,7 +91,7 @@ NAME = "hard"
 TITLE = "hard cases stay numerically stable: a named catalogue with asserted bounds; which integrators survive each"
 
 C_BACKEND_ABOVE = 5_000           # runs longer than this many steps use the C backend
-Q0 = np.array([0.1, 0.2, 0.3, 0.9]) / np.linalg.norm([0.1, 0.2, 0.3, 0.9])
+Q0 = K.quat_normalize([0.1, 0.2, 0.3, 0.9])
 IDENTITY = np.array([0.0, 0.0, 0.0, 1.0])
 
 CASES = ("intermediate_axis_flips", "fast_major_spin", "thin_rod", "extreme_inertia_ratios", "near_equal_moments",
@@ -105,9 +107,9 @@ class Run:
     """One simulation: t (T,), x (T, nb, 13) on success; error (DivergenceError or other) otherwise."""
     integrator: str
     backend: str
-    t: np.ndarray | None = None
-    x: np.ndarray | None = None
-    error: BaseException | None = None
+    t: np.ndarray = field(default_factory=lambda: np.empty(0))
+    x: np.ndarray = field(default_factory=lambda: np.empty((0, 0, C.LY.STATE_SIZE)))
+    error: Exception | None = None
     wall: float = 0.0
 
     @property
@@ -196,7 +198,7 @@ class Trial:
     integrator: str
     bounds: dict                       # metric -> (limit, note)
     reference: bool = True             # compare with oracle.torque_free at the samples
-    extra: object = None               # callable(trial, run, ref) -> dict of further metrics
+    extra: Callable[..., dict] | None = None   # callable(trial, run, ref) -> dict of further metrics
     description: str = ""
     dop853: bool = False               # also check the exact reference against DOP853
 
@@ -214,7 +216,7 @@ class CaseOut:
     plot: dict = field(default_factory=dict)          # data for the summary figure
 
 
-def _status_of(run: Run, metrics: dict | None, bounds: dict) -> str:
+def _status_of(run: Run, metrics: dict, bounds: dict) -> str:
     if run.error is not None:
         if isinstance(run.error, DivergenceError):
             return f"diverged at step {run.error.step}"
@@ -240,8 +242,7 @@ def run_trial(trial: Trial, integrators: list[str], backend: str, assert_with: s
     every = trial.every
     t_samples = np.arange(0, n + 1, every) * trial.dt
     ref = R.torque_free(trial.I_b, trial.w0, trial.q0, t_samples) if trial.reference else None
-    row = {}
-    asserted_metrics = None
+    row, runs = {}, {}
     long_on_numpy = n > C_BACKEND_ABOVE and fast_backend(backend) != "c"
     for integ in integrators:
         if long_on_numpy and integ != named:
@@ -249,14 +250,13 @@ def run_trial(trial: Trial, integrators: list[str], backend: str, assert_with: s
             row[integ] = f"not run: {n} steps need the C backend (unavailable here)"
             continue
         run = simulate([("body", trial.I_b, trial.w0, trial.q0)], trial.dt, n, every, integ, backend)
-        metrics = None
+        metrics: dict = {}
         if run.error is None and not run.silent_nan:
             metrics = standard_metrics(trial.I_b, trial.w0, run.x[:, 0], ref)
             if trial.extra is not None:
                 metrics.update(trial.extra(trial, run, ref))
         row[integ] = _status_of(run, metrics, trial.bounds)
-        if integ == named:
-            asserted_metrics = (run, metrics)
+        runs[integ] = (run, metrics)
     out.survival[trial.name] = row
     p = trial.name
     out.params[f"{p}_setup"] = (f"I_b = {list(trial.I_b)} kg·m², omega_b0 = {list(trial.w0)} rad/s, "
@@ -268,7 +268,7 @@ def run_trial(trial: Trial, integrators: list[str], backend: str, assert_with: s
                                   f"{named!r} is not in lavendersim.backends.INTEGRATORS "
                                   f"({', '.join(integrators)}): the bounds of {p} cannot be checked"))
         return out
-    run, metrics = asserted_metrics
+    run, metrics = runs[named]
     if run.error is not None or run.silent_nan:
         why = "a silent NaN" if run.silent_nan else f"{type(run.error).__name__}: {run.error}"
         out.checks.append(C.holds(f"{p}_runs", False, f"{named}: {why}"))
@@ -403,7 +403,8 @@ def case_dt_range(ctx) -> CaseOut:
                 label = f"dt_range_{bname}_dt{dt:.0e}"
                 if run.error is not None:
                     div = isinstance(run.error, DivergenceError)
-                    named_ok = div and "|omega|*dt" in str(run.error) and run.error.body_name == "body"
+                    named_ok = (isinstance(run.error, DivergenceError) and "|omega|*dt" in str(run.error)
+                                and run.error.body_name == "body")
                     statuses.append(f"{dt:.0e}: diverged" if div else f"{dt:.0e}: error")
                     err = math.nan
                     ok = named_ok and must_diverge
@@ -446,8 +447,7 @@ def case_dt_range(ctx) -> CaseOut:
 
 
 def _rand_q(rng, n):
-    q = rng.normal(size=(n, 4))
-    return q / np.linalg.norm(q, axis=1, keepdims=True)
+    return K.quat_normalize(rng.normal(size=(n, 4)))
 
 
 def case_near_antipodal_quaternions(ctx) -> CaseOut:
@@ -468,7 +468,7 @@ def case_near_antipodal_quaternions(ctx) -> CaseOut:
     }
     m2q_worst, aa_worst, finite = 0.0, 0.0, True
     for name, qq in families.items():
-        qq = qq / np.linalg.norm(qq, axis=1, keepdims=True)
+        qq = K.quat_normalize(qq)
         q2 = K.matrix_to_quat(K.quat_to_matrix(qq))
         ax, ang = K.quat_to_axis_angle(qq)
         q3 = K.axis_angle_to_quat(ax, ang)
@@ -587,7 +587,7 @@ def divergence_trial(integrator: str, backend: str, steps: int = DIVERGENCE_STEP
     scene = lv.Scene()
     scene.add_body(lv.Body("calm", 1.0, DIV_I, omega_b=DIV_CALM))
     scene.add_body(lv.Body("spinner", 1.0, DIV_I, omega_b=DIV_SPIN, q=Q0))
-    out = {"error": None, "unchanged": False, "finite": False, "sim": None}
+    out: dict[str, Any] = {"error": None, "unchanged": False, "finite": False, "sim": None}
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", ValidityBoundWarning)
@@ -735,7 +735,7 @@ def _bound_ratios(checks) -> dict:
 
 def _plot_data(outs: dict) -> dict:
     """What hard_cases.png draws, taken from the cases' runs (arrays only; nothing is re-run to draw)."""
-    d = {"flips": None, "dt_range": None}
+    d: dict[str, dict | None] = {"flips": None, "dt_range": None}
     flips = outs.get("intermediate_axis_flips")
     if flips and "intermediate_axis_flips" in flips.plot:
         run, ref = flips.plot["intermediate_axis_flips"]
@@ -892,13 +892,11 @@ def compute(backend: str = "auto", cases=None, integrator: str | None = None, pr
               "long_runs_backend": f"{fast_backend(backend)} (runs over {C_BACKEND_ABOVE} steps)", **allc.params}
     ratios = _bound_ratios(allc.checks)
     figures["worst_figure_over_bound"] = max(ratios.values(), default=0.0)
-    figures["worst_figure_over_bound_name"] = max(ratios, key=ratios.get) if ratios else "none"
+    figures["worst_figure_over_bound_name"] = max(ratios, key=lambda k: ratios[k]) if ratios else "none"
     data = {"survival": allc.survival, "integrators": integrators, "bound_ratios": ratios,
             "passed": {ch.name: ch.passed for ch in allc.checks}, **_plot_data(outs)}
     result = C.make_result(NAME, figures, params, allc.checks, {"hard_cases.png": _plots}, data,
                            headline=("worst_figure_over_bound", "<= 1 (every asserted figure within its bound)"))
-    table = survival_table(allc.survival, integrators)
-    result.extra_files["survival.md"] = "# Which integrators survive each hard case\n\n" + table
-    result.survival = allc.survival
-    result.survival_table = table
+    result.extra_files["survival.md"] = ("# Which integrators survive each hard case\n\n"
+                                         + survival_table(allc.survival, integrators))
     return result

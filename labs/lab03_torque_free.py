@@ -263,7 +263,7 @@ def _paw5(data: dict, dt: float, integrator: str, normalize: bool, backend: str)
     I5 = paw_bodies[0].I_b
     return {"paw5_I_b": I5, "paw5_max_deviation_x": dev5["x"], "paw5_max_deviation_y": dev5["y"],
             "paw5_max_deviation_z": dev5["z"], "paw5_intermediate_axis": PAW5_AXES[int(np.argsort(I5)[1])],
-            "paw5_least_forgiving_axis": max(dev5, key=dev5.get)}
+            "paw5_least_forgiving_axis": max(dev5, key=lambda a: dev5[a])}
 
 
 def _checks(f: dict, default: bool, dt: float, integrator: str, normalize: bool, search_hit: bool | None) -> list:

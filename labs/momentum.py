@@ -16,6 +16,7 @@ import numpy as np
 
 from lavendersim import particles as P
 from lavendersim import figures as F
+from lavendersim.kernels import K
 
 from . import common as C
 from .diverged import failed_figure
@@ -31,13 +32,6 @@ OMEGA_W = (0.4, -1.1, 2.0)    # rad/s, world frame
 # non-rigid set: arbitrary velocities (m/s)
 FREE_VELOCITIES = ((1.0, 0.0, 0.0), (0.0, -2.0, 0.5), (0.3, 0.3, 0.3), (-1.0, 0.5, 0.0), (0.2, 0.0, -0.4))
 REL_TOL = 1e-12
-
-
-def rigid_velocities(r_w, r_com, v_com, omega_w):
-    """Velocities of points moving rigidly: v_i = v_COM + omega x (r_i - r_COM).
-
-    This builds the lab's input motion (kinematics of the scenario), not an equation under test."""
-    return v_com + np.cross(omega_w, r_w - r_com)
 
 
 def _rel(a, b) -> float:
@@ -58,7 +52,7 @@ def compute(backend: str = "auto", mass_scale: float = 2.0) -> C.LabResult:
     m, r, omega, v_com_in = np.array(MASSES), np.array(POSITIONS), np.array(OMEGA_W), np.array(V_COM)
     d = np.array([5.0, -3.0, 2.0])   # another origin: r -> r + d changes neither p nor L about the COM
     vf = np.array(FREE_VELOCITIES)   # a non-rigid set
-    v = rigid_velocities(r, P.center_of_mass(m, r), v_com_in, omega)
+    v = K.rigid_point_velocity(v_com_in, omega, r - P.center_of_mass(m, r))   # the points move rigidly (the input)
     f = {**_moments("", m, r, v), "I_com_w": P.inertia_com(m, r).ravel()}
     f["I_omega_w"] = P.inertia_com(m, r) @ omega
     f["L_minus_I_omega_rel"] = _rel(f["L_com_w"], f["I_omega_w"])

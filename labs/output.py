@@ -31,6 +31,7 @@ import os
 import re
 import shutil
 import stat
+import sys
 import threading
 from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
@@ -43,11 +44,10 @@ RESULTS = "results.json"
 _SIBLING = re.compile(r"^\.(?P<name>.+)\.lab-(?P<kind>new|old)-(?P<pid>\d+)$")
 
 
-try:   # POSIX: flock; Windows: msvcrt.locking (both released when the process ends)
-    import fcntl
-except ImportError:   # pragma: no cover - not POSIX
-    fcntl = None
+if sys.platform == "win32":   # pragma: no cover - Windows: msvcrt.locking (both released when the process ends)
     import msvcrt
+else:                         # POSIX: flock
+    import fcntl
 
 _held_lock = threading.Lock()
 _held: dict[tuple[str, str], list] = {}   # (real OUT, NAME) -> [owning thread id, depth, fd]
@@ -116,10 +116,10 @@ def _open_lock(path: Path, folder: Path) -> int:
 
 def _try_lock(fd: int) -> bool:
     try:
-        if fcntl is not None:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        else:   # pragma: no cover - Windows
+        if sys.platform == "win32":   # pragma: no cover - Windows
             msvcrt.locking(fd, msvcrt.LK_NBLCK, 1)
+        else:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
     except OSError as exc:
         if exc.errno in (errno.EWOULDBLOCK, errno.EAGAIN, errno.EACCES, errno.EDEADLK):
             return False
@@ -233,7 +233,7 @@ def _recover(out: Path, name: str, folder: Path) -> None:
     the fallback, with OUT/NAME missing, is put back; the rest is removed."""
     left = leftovers(out, name)
     if not os.path.lexists(folder):
-        olds = [p for p in left if _SIBLING.match(p.name)["kind"] == "old" and p.is_dir() and not p.is_symlink()]
+        olds = [p for p in left if p.name.rsplit("-", 2)[1] == "old" and p.is_dir() and not p.is_symlink()]
         if olds:
             os.rename(olds[-1], folder)
             left.remove(olds[-1])

@@ -44,6 +44,13 @@ MAX_RATE_HZ = 1000.0     # frames per wall-clock second, at most
 MAX_TOGGLES = 64         # vector checkboxes, at most (labels that change every frame would add one each)
 
 
+def flag(field: str, value: object) -> bool:
+    """``value`` when it is a bool; else LavenderInputError naming ``field``."""
+    if not isinstance(value, bool):
+        raise V.LavenderInputError(field, "expected a bool", f", got {V._describe(value)}")
+    return value
+
+
 def vector_key(k: int, label: str) -> str:
     """The toggle that shows or hides vector ``k``: its label, or ``"vector k+1"`` without one."""
     return label or f"vector {k + 1}"
@@ -153,8 +160,7 @@ class Controls:
         ----------
         paused : bool
         """
-        if not isinstance(paused, bool):
-            raise V.LavenderInputError("paused", "expected a bool", f", got {V._describe(paused)}")
+        flag("paused", paused)
         with self._cv:
             if paused == self._paused:
                 return
@@ -195,8 +201,7 @@ class Controls:
         ----------
         show : bool
         """
-        if not isinstance(show, bool):
-            raise V.LavenderInputError("show", "expected a bool", f", got {V._describe(show)}")
+        flag("show", show)
         with self._cv:
             if show == self._show_axes:
                 return
@@ -215,8 +220,7 @@ class Controls:
         """
         if not isinstance(key, str):
             raise V.LavenderInputError("key", "expected a vector label (str)", f", got {V._describe(key)}")
-        if not isinstance(show, bool):
-            raise V.LavenderInputError("show", "expected a bool", f", got {V._describe(show)}")
+        flag("show", show)
         with self._cv:
             if self._vectors.get(key, True) == show and key in self._vectors:
                 return

@@ -85,15 +85,10 @@ class PrincipalFrames:
         k = self._pos.get(int(i))
         out = np.array(x, dtype=np.float64, copy=True)
         if k is not None:
-            q = self._to_p[k] @ out[STATE_Q]
-            out[STATE_Q] = q / np.sqrt(q @ q)   # q_wb and q_bp are unit: this only removes the product's rounding
+            # q_wb and q_bp are unit: the normalization only removes the product's rounding
+            out[STATE_Q] = K.quat_normalize(self._to_p[k] @ out[STATE_Q])
             out[STATE_OMEGA_B] = self.R[k].T @ out[STATE_OMEGA_B]
         return out
-
-    def to_principal(self, i: int, v_b: np.ndarray) -> np.ndarray:
-        """Body-frame vectors of body i, (3,) or (3, N) columns, in its principal frame."""
-        R = self.rotation(i)
-        return np.array(v_b, dtype=np.float64, copy=True) if R is None else R.T @ v_b
 
 
 def public_rows(frames: "PrincipalFrames | None", x: np.ndarray) -> np.ndarray:

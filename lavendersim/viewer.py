@@ -67,6 +67,7 @@ from __future__ import annotations
 
 import atexit
 import copy
+import dataclasses
 import difflib
 import html
 import ipaddress
@@ -125,7 +126,7 @@ _TOP_KEYS = {"axes", "vectors"}
 # --------------------------------------------------------------------------
 
 
-def _keys(field: str, item, allowed: set, required: set = frozenset()) -> None:
+def _keys(field: str, item, allowed: set[str], required: Iterable[str] = ()) -> None:
     if not isinstance(item, Mapping):
         raise V.LavenderInputError(field, "expected a dict", f", got {V._describe(item)}")
     for k in item:
@@ -262,23 +263,32 @@ def check_host(host: object) -> str:
                                f", got {host!r} ({'; '.join(errors)})")
 
 
-def _resolve(host: str) -> list[str]:
-    """getaddrinfo in a daemon thread, bounded by RESOLVE_TIMEOUT_S (a stuck resolver never hangs us)."""
-    box: dict = {}
+def _within(seconds: float, name: str, fn: Callable[[], Any]) -> dict[str, Any]:
+    """Call fn() in a daemon thread named `name`, waiting at most `seconds` (a stuck call never hangs us):
+    {"ok": its result}, {"err": what it raised} (re-raised by the caller, in its thread), or {} if still running."""
+    box: dict[str, Any] = {}
 
     def work():
         try:
-            box["ok"] = socket.getaddrinfo(host, None, type=socket.SOCK_STREAM)
-        except OSError as exc:
+            box["ok"] = fn()
+        except BaseException as exc:
             box["err"] = exc
 
-    t = threading.Thread(target=work, name="lavendersim-resolve", daemon=True)
+    t = threading.Thread(target=work, name=name, daemon=True)
     t.start()
-    t.join(RESOLVE_TIMEOUT_S)
-    if t.is_alive():
+    t.join(seconds)
+    return dict(box) if not t.is_alive() else {}
+
+
+def _resolve(host: str) -> list[str]:
+    """getaddrinfo in a daemon thread, bounded by RESOLVE_TIMEOUT_S (a stuck resolver never hangs us)."""
+    box = _within(RESOLVE_TIMEOUT_S, "lavendersim-resolve", lambda: socket.getaddrinfo(host, None, type=socket.SOCK_STREAM))
+    if not box:
         raise V.LavenderInputError("host", f"could not be resolved within {RESOLVE_TIMEOUT_S:g} s", f", got {host!r}")
-    if "err" in box:
+    if isinstance(box.get("err"), OSError):
         raise V.LavenderInputError("host", "could not be resolved", f", got {host!r} ({box['err']})")
+    if "err" in box:
+        raise box["err"]
     return list(dict.fromkeys(info[4][0] for info in box["ok"]))
 
 
@@ -412,35 +422,27 @@ POSE_P = slice(0, LY.STATE_P_W.stop - LY.STATE_P_W.start)
 POSE_Q = slice(POSE_P.stop, POSE_P.stop + LY.STATE_Q.stop - LY.STATE_Q.start)
 
 
+@dataclasses.dataclass(slots=True)
 class _Frame:
-    __slots__ = ("number", "t", "names", "shapes", "pose", "overlays", "published_at")
-
-    def copy(self) -> _Frame:
-        g = _Frame()
-        for k in self.__slots__:
-            setattr(g, k, getattr(self, k))
-        return g
+    t: float
+    names: tuple[str, ...]
+    shapes: tuple
+    pose: np.ndarray                     # (nb, 7): POSE_P, POSE_Q
+    overlays: dict[str, list[dict[str, Any]]]
+    published_at: float
+    number: int = 0
 
 
 def _start_server(viser, host: str, port: int, label: str, verbose: bool):
     """ViserServer(...) bounded by BIND_TIMEOUT_S: viser retries 1000 ports and then waits forever."""
-    box: dict = {}
-
-    def work():
-        try:
-            box["server"] = viser.ViserServer(host=host, port=port, label=label, verbose=verbose)
-        except BaseException as exc:  # reported below, in the caller's thread
-            box["err"] = exc
-
-    t = threading.Thread(target=work, name="lavendersim-viewer-bind", daemon=True)
-    t.start()
-    t.join(BIND_TIMEOUT_S)
-    if t.is_alive():
+    box = _within(BIND_TIMEOUT_S, "lavendersim-viewer-bind",
+                  lambda: viser.ViserServer(host=host, port=port, label=label, verbose=verbose))
+    if not box:
         raise V.LavenderInputError("host", f"could not bind {host}:{port} (or any of the next ports) within "
                                    f"{BIND_TIMEOUT_S:g} s", "")
     if "err" in box:
         raise box["err"]
-    return box["server"]
+    return box["ok"]
 
 
 class Viewer:
@@ -513,7 +515,7 @@ class Viewer:
         self.last_error: BaseException | None = None
         # scene bookkeeping (touched only by the apply thread, read under _state_lock)
         self._state_lock = threading.Lock()
-        self._signature = None
+        self._signature: tuple | None = None   # (names, shapes) of the scene built
         self._bodies: dict = {}     # name -> {"node", "shape", "axes"}
         self._vectors: list = []    # [{"node", "shaft", "head", "label"}]
         self._cache: dict = {}      # (handle id, prop) -> last value assigned
@@ -524,7 +526,11 @@ class Viewer:
         # a viewer left open (a notebook, a script) is closed at interpreter exit before viser stops
         # its server (atexit runs last-registered first), so a player never writes to a stopped one
         ref = weakref.ref(self)
-        self._at_exit = lambda: (v := ref()) is not None and v.close()
+
+        def at_exit() -> None:
+            if (v := ref()) is not None:
+                v.close()
+        self._at_exit = at_exit
         atexit.register(self._at_exit)
 
     # ---- public ---------------------------------------------------------------------------
@@ -561,18 +567,14 @@ class Viewer:
         """
         names, x, bodies = self._sim_parts(sim)
         ov = validate_overlays(overlays, names)
-        f = _Frame()
-        f.t = float(getattr(sim, "t", 0.0))
-        f.names = tuple(names)
-        f.shapes = tuple(_shape_of(bodies[n]) for n in names)
-        f.pose = np.concatenate([x[:, LY.STATE_P_W], x[:, LY.STATE_Q]], axis=1).astype(float)  # POSE_P, POSE_Q
-        if not np.all(np.isfinite(f.pose)):
+        pose = np.concatenate([x[:, LY.STATE_P_W], x[:, LY.STATE_Q]], axis=1).astype(float)  # POSE_P, POSE_Q
+        if not np.all(np.isfinite(pose)):
             raise V.LavenderInputError("sim", "state is not finite (diverged?); nothing published")
-        f.overlays = ov
-        f.published_at = time.perf_counter()
-        if np.max(np.abs(f.pose[:, POSE_P])) > FLOAT32_MAX:
+        if np.max(np.abs(pose[:, POSE_P])) > FLOAT32_MAX:
             raise V.LavenderInputError("sim", f"a body position is beyond ±{FLOAT32_MAX:g} m (drawn in float32); "
                                        "nothing published")
+        f = _Frame(float(getattr(sim, "t", 0.0)), tuple(names), tuple(_shape_of(bodies[n]) for n in names), pose, ov,
+                   time.perf_counter())
         with self._lock:
             if self._stop.is_set():
                 raise RuntimeError("viewer is closed")
@@ -595,10 +597,8 @@ class Viewer:
             if self._stop.is_set() or self._last is None:
                 return self._published
             if self._pending is None:
-                f = self._last.copy()
                 self._published += 1
-                f.number = self._published
-                self._pending = self._last = f
+                self._pending = self._last = dataclasses.replace(self._last, number=self._published)
             number = self._pending.number
         self._wake.set()
         return number
@@ -779,9 +779,7 @@ class Viewer:
             Naming ``trajectory``, ``bodies``, ``overlays`` or an option when it is bad (nothing started).
         """
         found, overlays = PB.check_trajectory(trajectory, bodies, overlays)
-        if not isinstance(loop, bool):
-            raise V.LavenderInputError("loop", "expected a bool", f", got {V._describe(loop)}")
-        source = PB._ReplaySource(trajectory, found, overlays, loop)
+        source = PB._ReplaySource(trajectory, found, overlays, PB.flag("loop", loop))
         snap, payload = source.frame()          # the first sample draws: a bad payload stops here
         validate_overlays(payload, snap.names)
         return self._start(source, rate_hz, speed, paused, start, source.t)
@@ -791,9 +789,8 @@ class Viewer:
         if not MIN_RATE_HZ <= rate_hz <= PB.MAX_RATE_HZ:
             raise V.LavenderInputError("rate_hz", f"must be within [{MIN_RATE_HZ:g}, {PB.MAX_RATE_HZ:g}] frames per second",
                                        f", got {rate_hz!r}")
-        for field, flag in (("paused", paused), ("start", start)):
-            if not isinstance(flag, bool):
-                raise V.LavenderInputError(field, "expected a bool", f", got {V._describe(flag)}")
+        PB.flag("paused", paused)
+        PB.flag("start", start)
         if speed is not None:
             speed = V.positive("speed", speed)
             if not PB.SPEED_MIN <= speed <= PB.SPEED_MAX:
@@ -837,9 +834,10 @@ class Viewer:
         try:
             from IPython import get_ipython
             from IPython.display import HTML, display
+            shell = get_ipython()
         except ImportError:
-            get_ipython = None
-        if get_ipython is not None and get_ipython() is not None:
+            shell = None
+        if shell is not None:
             display(HTML(self._inline_html(height)))
         else:
             print(f"LavenderSim viewer: {self.url}")
@@ -958,7 +956,7 @@ class Viewer:
         return self._vectors[k]
 
     def _apply(self, f: _Frame) -> None:
-        state = {"frame": f.number, "t": f.t, "bodies": {}, "axes": {}, "vectors": [], "hidden": []}
+        state: dict[str, Any] = {"frame": f.number, "t": f.t, "bodies": {}, "axes": {}, "vectors": [], "hidden": []}
         ctl = self.controls
         keys = [PB.vector_key(k, v["label"]) for k, v in enumerate(f.overlays["vectors"])]
         ctl.ensure_vector_toggles(keys)
@@ -1139,13 +1137,12 @@ def run_scene(name: str, *, duration: float | None = None, host: str = DEFAULT_H
     if duration is not None:
         duration = V.scalar("duration", duration, nonnegative=True)
     rate_hz = V.positive("rate_hz", rate_hz)
-    if not isinstance(replay, bool):
-        raise V.LavenderInputError("replay", "expected a bool", f", got {V._describe(replay)}")
+    PB.flag("replay", replay)
     sim, overlays, advance = SCENES[name]()
     if not MIN_RATE_HZ <= rate_hz <= 1.0 / sim.dt:  # a frame must advance at least one step, at most 1/MIN_RATE_HZ s
         raise V.LavenderInputError("rate_hz", f"must be within [{MIN_RATE_HZ:g}, {1.0 / sim.dt:g}] frames per simulated "
                                    f"second (scene {name!r} steps dt = {sim.dt:g} s)", f", got {rate_hz!r}")
-    record_s = (DEFAULT_REPLAY_S if duration is None else duration) if replay else None
+    record_s = DEFAULT_REPLAY_S if duration is None else duration   # (replay only)
     if replay and record_s * rate_hz > MAX_REPLAY_SAMPLES:
         raise V.LavenderInputError("duration", f"with replay, duration * rate_hz must be at most {MAX_REPLAY_SAMPLES} "
                                    "samples", f", got {record_s:g} s at {rate_hz:g} Hz")

@@ -47,10 +47,10 @@ def test_lab_files_and_survival_table(lab):
     table = (lab.out_dir / "survival.md").read_text()
     for integ in backends.INTEGRATORS:  # every integrator is a column and has a status per trial
         assert integ in table.splitlines()[2]
-        for row in lab.survival:
+        for row in lab.data["survival"]:
             assert f"survival_{row}_{integ}" in data
-    assert not any("SILENT NaN" in s for row in lab.survival.values() for s in row.values())
-    assert lab.survival["intermediate_axis_flips"]["rk4"] == "pass"
+    assert not any("SILENT NaN" in s for row in lab.data["survival"].values() for s in row.values())
+    assert lab.data["survival"]["intermediate_axis_flips"]["rk4"] == "pass"
 
 
 def test_intermediate_axis_flips(lab):
