@@ -18,7 +18,7 @@ from conftest import NUMPY_SLOW, have
 from lavendersim import bench
 
 
-N_TARGETS = 25   # target lines besides the per-body ones
+N_TARGETS = 26   # target lines besides the per-body ones
 
 
 @pytest.fixture(scope="module")
@@ -176,6 +176,8 @@ def test_quick_json_has_the_issue_30_ratios(quick):
     assert r["numpy_1_over_python_rk4"] > 0 and npx["1"]["max_abs_diff"] <= 1e-12, npx["1"]
     for n in bench.numpy_section.SIZES_QUICK:
         assert r[f"numpy_{n}_over_hand_rk4_soa"] > 0 and npx[str(n)]["max_abs_diff"] <= 1e-12, npx[str(n)]
+    for n, v in d["numpy_peers"]["effects"].items():   # gravity+damping: the peers type the drag torque in the body
+        assert v["ratio"] > 0 and v["max_abs_diff"] <= 1e-12, (n, v)   # frame, equal to the printed one to rounding
     if have("cc"):
         assert r["dopri5_per_rhs_over_hand"] > 0
         a = d["dopri5"]["agreement"]
