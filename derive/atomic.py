@@ -28,6 +28,7 @@ import os
 import re
 import shutil
 import sys
+from collections.abc import Mapping
 from pathlib import Path
 
 IGNORED = ("__pycache__",)  # dropped with the old folder: Python rebuilds it
@@ -81,6 +82,7 @@ def recover(outdir) -> list[str]:
     dead = []
     for p in leftovers(outdir):
         m = _LEFTOVER.match(p.name)
+        assert m is not None   # (leftovers() matched it)
         if not _alive(int(m["pid"])) or int(m["pid"]) == os.getpid():
             dead.append((m["kind"], p))
     if not outdir.exists():
@@ -154,7 +156,7 @@ def exchange(a: Path, b: Path) -> bool:
     raise OSError(err, f"renameat2(RENAME_EXCHANGE) {a} <-> {b}: {os.strerror(err)}")
 
 
-def replace_folder(outdir, files: dict[str, str | bytes], owned=(), keep=()) -> list[str]:
+def replace_folder(outdir, files: Mapping[str, str | bytes], owned=(), keep=()) -> list[str]:
     """Make outdir hold exactly `files` (name -> text or bytes) plus the `keep` entries it already had,
     swapping the whole folder in at once; return the names whose content changed (sorted).
 

@@ -240,7 +240,7 @@ def _np_kernel(p: Printed, pr: NpPrinter, dtype: str = "float64") -> list[str]:
     for t, e in p.temps:
         out.append(f"{ind}{t} = {pr.doprint(e)}")
     idx = 0
-    rets = []
+    rets: list[str] = []
     for a in k.outputs:
         shp = "" if a.shape == () else " + " + repr(tuple(a.shape))
         out.append(f"{ind}{a.name}_out = numpy.empty(batch{shp}" + (")" if dtype == "float64" else f", dtype=numpy.{dtype})")

@@ -13,6 +13,7 @@ derive.layout.STATE, the parameter offsets from the declaration.
 from __future__ import annotations
 
 import pprint
+from collections.abc import Sequence
 
 from . import effect as E
 from .effect_decay import decay_rate
@@ -226,7 +227,7 @@ def meta_entry(code: int | None, d: E.EffectDecl) -> dict:
             "decay_rate": f"decay_rate_{d.name}" if decay_rate(d) is not None else None}
 
 
-def meta_module(effects: list[tuple[int | None, E.EffectDecl]], header: str, extra: dict | None = None) -> str:
+def meta_module(effects: Sequence[tuple[int | None, E.EffectDecl]], header: str, extra: dict | None = None) -> str:
     """A Python module holding the effects' metadata and the table layout constants."""
     lines = [f'"""{header}', "", "Effect metadata printed from the declarations (derive.effect): codes, parameter layout",
              "(shape, unit, rule, default, offset within the row's parameters), outputs, the state values each",

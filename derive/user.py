@@ -20,6 +20,7 @@ import importlib.util
 import re
 import sys
 import traceback
+from collections.abc import Sequence
 from dataclasses import dataclass
 from fractions import Fraction
 from functools import lru_cache
@@ -48,7 +49,7 @@ def set_name_of(path: Path) -> str:
     return stem
 
 
-def _one_line(text: str) -> str:
+def _one_line(text: object) -> str:
     return " ".join(str(text).split())
 
 
@@ -92,6 +93,8 @@ def load_declarations(path) -> tuple[list[EffectDecl], list[Kernel], list["Table
         raise FileNotFoundError(f"{path}: no such declaration file")
     name = f"lavendersim_user_declaration_{set_name_of(path)}"
     spec = importlib.util.spec_from_file_location(name, path)
+    if spec is None or spec.loader is None:   # a name Python does not load as source (no .py)
+        raise DeclarationError(f"{path}: a declaration file is Python source: its name must end in .py")
     module = importlib.util.module_from_spec(spec)
     sys.modules[name] = module
     try:
@@ -320,7 +323,8 @@ def _number(where: str, x):
             raise ValueError(f"{where} must be finite, got {x!r}")
         return float(x)
     if isinstance(x, (int, np.integer, Fraction)):
-        return sp.Rational(Fraction(x).numerator, Fraction(x).denominator)
+        f = x if isinstance(x, Fraction) else Fraction(int(x))
+        return sp.Rational(f.numerator, f.denominator)
     if isinstance(x, str):
         try:
             return sp.Rational(x.strip())
@@ -442,9 +446,10 @@ def imaginary_axis_bound(R_z: sp.Expr) -> float:
     mod2 = sp.expand(re**2 + im**2)
     p = sp.Poly(sp.expand(mod2 - 1), y)
     low = [c for (k,), c in sorted(p.terms()) if abs(float(c)) > 1e-14]
-    if low and float(low[0]) < 0:
-        return _first_root(p.as_expr(), y)
-    return _first_root(sp.expand(mod2 - GROWTH_PER_STEP), y)
+    root = _first_root(p.as_expr() if low and float(low[0]) < 0 else sp.expand(mod2 - GROWTH_PER_STEP), y)
+    if root is None:   # (|R(iy)|² of a consistent tableau grows without bound: a root exists)
+        raise ValueError(f"no validity bound |ω|·dt found on the imaginary axis for R(z) = {R_z}")
+    return root
 
 
 def tableau(name: str, A, b, order: int, c=None, summary: str = "") -> TableauDecl:
@@ -510,7 +515,7 @@ def tableau(name: str, A, b, order: int, c=None, summary: str = "") -> TableauDe
                        _real_axis_limit(R_z), imaginary_axis_bound(R_z))
 
 
-def _c_tableaux(tableaux: list[TableauDecl]) -> tuple[list[str], list[str]]:
+def _c_tableaux(tableaux: Sequence[TableauDecl]) -> tuple[list[str], list[str]]:
     """kernels.h declarations and kernels.c definitions of the tableaux: lvu_tableau_<name> = c, A row-major, b
     (the doubles effects_meta.py holds, printed with repr: C parses the same double)."""
     h, c = [], ["/* ---- User tableaux: c (s), A (s x s, row-major), b (s) ---- */"]
@@ -524,7 +529,7 @@ def _c_tableaux(tableaux: list[TableauDecl]) -> tuple[list[str], list[str]]:
     return h, c
 
 
-def _md_tableaux(tableaux: list[TableauDecl]) -> str:
+def _md_tableaux(tableaux: Sequence[TableauDecl]) -> str:
     out = ["", "## Tableaux (explicit Runge–Kutta)", ""]
     for t in tableaux:
         show = (lambda v: sp.latex(v)) if t.exact else repr

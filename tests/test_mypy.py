@@ -133,3 +133,14 @@ def test_body_positions_are_a_mapping_of_indices():
     assert "d" not in pos and len(pos) == 3          # a view of the bodies at the time it was taken
     with pytest.raises(KeyError):
         pos["d"]
+
+
+def test_a_declaration_file_not_ending_in_py_is_named_not_an_attribute_error(tmp_path):
+    """importlib finds no loader for a name without .py: `derive --user decl.txt` said "AttributeError: 'NoneType'
+    object has no attribute 'loader'"."""
+    from lavendersim.derive.user import DeclarationError, load_declarations
+
+    decl = tmp_path / "decl.txt"
+    decl.write_text("EFFECTS = []\n")
+    with pytest.raises(DeclarationError, match=r"decl\.txt: a declaration file is Python source: its name must end in \.py"):
+        load_declarations(decl)
