@@ -17,6 +17,7 @@ from ..generated import layout as LY
 SIZES_FULL = (1_000, 100_000)
 SIZES_QUICK = (1_000,)
 AGREE_STEPS = 50
+MIN_STEPS = 32   # steps per timed call at least (full run): the stepping, not a run's setup (4 steps at N = 1e5 before)
 
 
 GRAVITY, C_LIN, C_ANG = (0.0, 0.0, -9.81), 0.1, 0.05    # the "gravity+damping" case: scene-wide effects
@@ -80,10 +81,10 @@ def numpy_section(quick: bool, rounds: int, interleaved, batch_sim, I_b, body_st
         if progress:
             progress(f"NumPy backend vs hand peers: N = {n}")
         I = np.ascontiguousarray(np.tile(np.asarray(I_b, dtype=float)[:, None], (1, n)))
-        steps = max(2, min(2_000, body_steps // n))
+        steps = max(2 if quick else MIN_STEPS, min(2_000, body_steps // n))
         sim = batch_sim(n, "numpy")
         out["sizes"][str(n)] = _case(n, sim, batch_sim(n, "numpy"), I, steps, rounds, interleaved, False)
-        out["effects"][str(n)] = _case(n, _with_effects(sim), _with_effects(sim), I, max(2, steps // 3), rounds,
+        out["effects"][str(n)] = _case(n, _with_effects(sim), _with_effects(sim), I, max(2, steps // 2), rounds,
                                        interleaved, True)
         del sim
     return out
