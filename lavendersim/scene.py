@@ -402,6 +402,7 @@ class Scene:
         self.effects.append(effect)
         return effect
 
+    @V.keywords  # unknown keyword arguments raise LavenderInputError naming them (as the function below)
     def add_bodies(self, names: Sequence[str], masses: ArrayLike, I_b: ArrayLike, *, p_w: ArrayLike | None = None,
                    q: ArrayLike | None = None, v_w: ArrayLike | None = None, omega_b: ArrayLike | None = None,
                    omega_w: ArrayLike | None = None) -> Sequence[Body]:
