@@ -106,6 +106,7 @@ import threading
 import types
 import warnings
 import weakref
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -164,7 +165,7 @@ def _read_only_views(x: np.ndarray, Omega: np.ndarray, applied: np.ndarray) -> t
     """(x, p_w, q, v_w, omega_b, Omega, applied) as read-only views sharing memory with the arrays. Each is a view
     over a read-only memoryview of the array, so NumPy refuses to turn their WRITEABLE flag back on."""
     def ro(a: np.ndarray) -> np.ndarray:
-        return np.frombuffer(memoryview(a).toreadonly(), dtype=a.dtype).reshape(a.shape)
+        return np.frombuffer(a.data.toreadonly(), dtype=a.dtype).reshape(a.shape)
 
     xr = ro(x)
     return (xr, xr[:, LY.STATE_P_W], xr[:, LY.STATE_Q], xr[:, LY.STATE_V_W], xr[:, LY.STATE_OMEGA_B], ro(Omega), ro(applied))
@@ -379,7 +380,7 @@ class Trajectory:
         wheels). Default: every body WHEELS_BODY_AXES.
     """
 
-    def __init__(self, names: list[str], t: np.ndarray, x: np.ndarray, Omega: np.ndarray | None = None,
+    def __init__(self, names: Sequence[str], t: np.ndarray, x: np.ndarray, Omega: np.ndarray | None = None,
                  wheel_counts=None):
         self.names, self.t, self.x = list(names), t, x
         self.Omega = np.zeros(x.shape[:-1] + (LY.WHEELS_MAX,)) if Omega is None else Omega
@@ -459,6 +460,11 @@ class Sim:
     0.035294
     """
 
+    # set by the setup methods __init__ calls (declared here: some are read by methods defined before them)
+    _chunk: int
+    _budget: load_checks.LoadBudget | None
+    _py_growth: bool
+
     @V.keywords  # unknown keyword arguments raise LavenderInputError naming them
     def __init__(self, scene: Scene, dt: float = 1e-3, integrator: str = "rk4", backend: str = "auto", normalize: bool = True,
                  rtol: float | None = None, atol: float | None = None, *, on_bound: str = "raise",
@@ -522,7 +528,7 @@ class Sim:
             self._x = self._x.astype(np.float32)
             self._step_params, self._step_effects = self._params.astype(np.float32), self._effects.astype(np.float32)
         self._dirty = True         # the state was written since the last check (see _is_checked)
-        self._snap_buf = None      # _advance's reusable snapshot buffers
+        self._snap_buf: tuple[np.ndarray, ...] | None = None      # _advance's reusable snapshot buffers
         self._check_decays(self._effects, "Sim")
         self._setup_checks()
         self._fast = self._make_stepper()
@@ -539,7 +545,7 @@ class Sim:
         self._views = _read_only_views(self._x, self._models.Omega, self._models.applied)
         if self._fast is not None:   # sim.step() straight into C; the Python path only when C steps aside
             self._fast.set_fallback(self._step_slow)
-            self.step = self._fast.step_or_fallback
+            setattr(self, "step", self._fast.step_or_fallback)   # this instance's step is C's (shadows Sim.step)
         self._built = True
         _LIVE.add(self)
 
@@ -571,11 +577,13 @@ class Sim:
             for name in ("rows", "Omega", "command", "applied"):
                 getattr(m, name)[...] = st[name]
             if st["adaptive"] is not None:
+                assert self._adaptive is not None   # (built with the same settings)
                 self._adaptive.h[...], self._adaptive.nfev[...] = st["adaptive"]
             self._ctr.steps, self._ctr.rhs_evals = st["steps"], st["rhs_evals"]
             self._E0[...], self._L0[...], self._w_safe[...], self._g_fast[...] = st["E0"], st["L0"], st["w_safe"], st["g_fast"]
             self._warned = set(st["warned"])
             if st.get("budget") is not None:
+                assert self._budget is not None   # (built with the same settings)
                 self._budget.restore(st["budget"])
             self._dirty = True   # checked again before the next step (a check of a state that passed passes)
 
@@ -654,6 +662,7 @@ class Sim:
 
     def _public(self, a: np.ndarray) -> np.ndarray:
         """Internal state rows in the body frames: a read-only converted copy (bodies with full tensors)."""
+        assert self._frames is not None   # (called for a scene with full tensors only)
         out = self._frames.public(a)
         out.flags.writeable = False
         return out
@@ -764,7 +773,7 @@ class Sim:
                         if self.max_growth is not None and loaded.any() else None)
         # bodies whose growth check needs Python every chunk (total |L| of body and wheels)
         self._py_growth = bool(self._free_wheels_idx or (self._budget is not None and self._budget.wheeled))
-        self._warned: set[int] = set()
+        self._warned = set()
         evals = self._per_step if self._per_step is not None else 12
         plain = not self._has_models and not len(self._effects)     # the SIMD tiles: a longer chunk still returns soon
         self._chunk = chunk_steps(nb * evals, self.backend.name == "c" and self._per_step is not None,
@@ -842,6 +851,7 @@ class Sim:
             return K.validity_wdt(x[:, LY.STATE_OMEGA_B], self._wdt_scale[bodies])[1]
 
     def _bound_text(self, value: float) -> str:
+        assert self._bound is not None   # (a value beyond the bound was found)
         wmax, p = self._bound
         what = "|omega|*dt" + (f"*(I_max/I_min)**{p:g}" if p else "")
         return (f"{what} = {value:.3g} is beyond {self.integrator}'s validity bound {wmax:.4g} (WDT_MAX, "
@@ -926,6 +936,7 @@ class Sim:
             self._models.Omega[...] = W
             self._models.applied[...] = u
         if ad is not None:
+            assert self._adaptive is not None   # (a snapshot of this Sim)
             self._adaptive.h[...], self._adaptive.nfev[...] = ad
 
     @property
@@ -1109,7 +1120,11 @@ class Sim:
         before = None if ad is None else ad.nfev.copy()
         self.backend.advance(self._x, self._step_params, self._step_effects, self.integrator, self.normalize, self.dt, n, models,
                              *(() if ad is None else (ad,)), restore=restore)
-        self._ctr.rhs_evals += n * self._per_step if ad is None else int(np.max(ad.nfev - before, initial=0))
+        if ad is None or before is None:
+            assert self._per_step is not None   # (a fixed-step integrator)
+            self._ctr.rhs_evals += n * self._per_step
+        else:
+            self._ctr.rhs_evals += int(np.max(ad.nfev - before, initial=0))
         self._ctr.steps += n   # the stepping path bumps the counters directly (the public setters validate)
 
     def _locate(self, limit: int) -> tuple[int, int, str] | None:
@@ -1119,7 +1134,8 @@ class Sim:
         lo, hi = 0, limit
         while True:
             size = max(1, (hi - lo) // 16)
-            k, found = lo, None
+            k = lo
+            found: tuple[int, int, tuple | None] | None = None
             while k < hi:
                 m = min(size, hi - k)
                 pre = self._snapshot()
@@ -1415,8 +1431,9 @@ class Sim:
     def _set_state(self, name: str, *, p_w, q, v_w, omega_b, omega_w, Omega) -> None:
         i = self._i(name)
         kind = self._kind(i)
-        R_bp = None if self._frames is None else self._frames.rotation(i)
-        x = self._x[i].copy() if R_bp is None else self._frames.public_row(i, self._x[i])
+        frames = self._frames
+        R_bp = None if frames is None else frames.rotation(i)
+        x = self._x[i].copy() if frames is None or R_bp is None else frames.public_row(i, self._x[i])
         if kind & KIND_JOINT:
             for field, value in (("p_w", p_w), ("v_w", v_w)):
                 if value is not None:
@@ -1440,8 +1457,8 @@ class Sim:
                 raise V.LavenderInputError("Omega", f"body {name!r} has no reaction_wheels")
             W = np.zeros(LY.WHEELS_MAX)
             W[:self._wheel_n[i]] = V.vector("Omega", Omega, int(self._wheel_n[i]))
-        if R_bp is not None:   # back to the principal frame: only what was given (the rest keeps its bits)
-            given, x_int = self._frames.internal_row(i, x), self._x[i].copy()
+        if frames is not None and R_bp is not None:   # back to the principal frame: only what was given
+            given, x_int = frames.internal_row(i, x), self._x[i].copy()
             x_int[LY.STATE_P_W], x_int[LY.STATE_V_W] = x[LY.STATE_P_W], x[LY.STATE_V_W]
             if q is not None:
                 x_int[LY.STATE_Q] = given[LY.STATE_Q]
@@ -1545,6 +1562,7 @@ class Sim:
         self._forces[k] = new
         self._effect_objs[self._effect_objs.index(cur)] = new
         if self._budget is not None:   # new loads: the budget restarts from this (checked) state
+            assert self.max_growth is not None   # (a budget exists only with a growth check)
             self._budget = load_checks.LoadBudget(self._params, self._effects, self._models.rows, self._budget.loaded,
                                                   self.dt, self.max_growth)
             self._rebudget()

@@ -11,6 +11,7 @@ import functools
 import hashlib
 import json
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -163,7 +164,8 @@ def eval_kernel(name: str, *inputs):
 
     if name not in KERNELS or name not in _INDEX:
         raise KeyError(f"eval_kernel: unknown kernel {name!r}")
-    _, in_spec, out_spec = KERNELS[name]
+    entry: tuple[Any, ...] = KERNELS[name]   # (fn, [(input, shape)], [(output, shape)])
+    _, in_spec, out_spec = entry
     index, n_in, n_out = _INDEX[name]
     if len(inputs) != len(in_spec):
         raise TypeError(f"eval_kernel({name}): expected {len(in_spec)} inputs "
@@ -241,11 +243,11 @@ def _cause(start: np.ndarray, pre: np.ndarray, params: np.ndarray, effects: np.n
         return "non-finite input: the state was already non-finite before the step"
     from . import divergence_cause, wheel_counts
 
-    n = int(wheel_counts(model[0])) if W0 is not None else 0
-    wheels = None if W0 is None else (model[0][LY.MODEL_J][:n], model[0][LY.MODEL_C_W])
+    n = int(wheel_counts(model[0])) if model is not None and W0 is not None else 0
+    wheels = None if model is None or W0 is None else (model[0][LY.MODEL_J][:n], model[0][LY.MODEL_C_W])
     cause = divergence_cause(start, dt, integrator, None if W0 is None else W0[:n], wheels)
     if step > 0:
-        wtxt = "" if W0 is None else f", |Omega| = {norm_safe(model[2]):.3g} rad/s"
+        wtxt = "" if model is None or W0 is None else f", |Omega| = {norm_safe(model[2]):.3g} rad/s"
         cause += (f" (just before step {step}: |omega|*dt = {norm_safe(pre[LY.STATE_OMEGA_B]) * dt:.3g}, "
                   f"|v| = {norm_safe(pre[LY.STATE_V_W]):.3g} m/s{wtxt})")
     return cause
@@ -279,6 +281,7 @@ def user_effect_table(effects: np.ndarray) -> np.ndarray | None:
     table = np.zeros((int(user.max()) - E.USER_CODE_BASE + 1, 3), dtype=np.int64)
     for code in user:
         spec = E.spec_for_code(int(code))  # LavenderInputError for a code no declaration has
+        assert spec.user_set is not None   # (a user code)
         table[code - E.USER_CODE_BASE] = (spec.user_set.c_function(spec.name), spec.n_params, spec.flags)
     return table
 
@@ -422,7 +425,7 @@ class CBackend:
             effects = effects.reshape(0, ROW)
         user = user_effect_table(effects)
         snapshot = state.copy() if restore else None
-        extra = ()
+        extra: tuple[Any, ...] = ()
         if models is not None:
             nb = state.shape[0]
             rows = _f64_rows("rows", models.rows, LY.MODEL_SIZE, nb)
@@ -445,7 +448,7 @@ class CBackend:
                                          1 if normalize else 0, float(dt), int(n_steps), *extra)
         if status == TABLEAUX.STATUS_OK:
             return
-        if not restore:
+        if snapshot is None:   # (restore False: no copy of the state was taken)
             raise DivergenceError(step, body, NOT_RESTORED)
         tol_cause = None
         if adaptive is not None and integrator == "dopri5":
@@ -489,7 +492,7 @@ class CBackend:
                                              1 if normalize else 0, float(dt), int(n_steps))
         if status == TABLEAUX.STATUS_OK:
             return
-        if not restore:
+        if snapshot is None:   # (restore False: no copy of the state was taken)
             raise DivergenceError(step, body, NOT_RESTORED)
         pre = state[body].astype(np.float64)  # the failing body is left at its last finite state
         state[...] = snapshot

@@ -16,6 +16,7 @@ from __future__ import annotations
 import functools
 import itertools
 import math
+from typing import Any
 
 import numpy as np
 
@@ -175,13 +176,13 @@ ROWS_SPLIT_BODIES = 8192
 
 def _runs(rows) -> tuple[tuple[int, int], ...]:
     """Sorted row numbers as contiguous runs [(start, stop)]."""
-    out = []
+    out: list[list[int]] = []
     for r in sorted(rows):
         if out and out[-1][1] == r:
             out[-1][1] = r + 1
         else:
             out.append([r, r + 1])
-    return tuple(map(tuple, out))
+    return tuple((a, b) for a, b in out)
 
 
 class _StateRows:
@@ -207,7 +208,7 @@ class _StateRows:
         return self if n >= ROWS_SPLIT_BODIES else self.few
 
     @staticmethod
-    def of(plan, effects) -> _StateRows:
+    def of(plan, effects) -> _StateRows | None:
         from .. import effects as E
         from ..generated import kernels_scalar as KS
 
@@ -215,9 +216,11 @@ class _StateRows:
             return None
         reads, zeros = set(), set(range(LY.STATE_SIZE))
         kernels = (["rigid_body_rhs_free_c"] if plan.free.size else []) + (["rigid_body_rhs_c"] if plan.forced.size else [])
+        read_table: dict[str, Any] = KS.READS      # kernel -> argument -> the rows it reads
+        zero_table: dict[str, Any] = KS.ZEROS      # kernel -> output -> the rows it leaves 0
         for name in kernels:
-            reads |= set(KS.READS[name]["x"])
-            zeros &= set(KS.ZEROS[name]["x_dot"])
+            reads |= set(read_table[name]["x"])
+            zeros &= set(zero_table[name]["x_dot"])
         for code in set(effects[:, E.ROW_CODE].astype(int).tolist()) if plan.forced.size else ():
             spec = E.spec_for_code(code)
             for field in spec.state_inputs + (("v_w",) if spec.uses_v_w else ()):
@@ -251,12 +254,12 @@ class _Plan:
         self.nb = nb
         # the arrays it was built from, for dopri5's subset plans (_subplan); NumpyBackend.plan replaces them by
         # read-only views of its key's bytes (the arrays as they were, no copy)
-        self.source = (params, effects, rows)
-        self.subplans = {}
+        self.source: tuple[np.ndarray | None, ...] = (params, effects, rows)
+        self.subplans: dict[Any, _Plan] = {}
         self.I_free = self.I[self.free]
         self.c_free = self.K.euler_coefficients(self.I_free)     # Euler's coefficients, once per plan
         self.c_f = self.K.euler_coefficients(self.I_f)
-        self.works = {}
+        self.works: dict[Any, Any] = {}
         self.scalar = None     # numpy_scalar.ScalarBodies, built on first use
         self.rows = None if self.has_models else _StateRows.of(self, effects)
         pivot = np.flatnonzero(kind == KIND_JOINT)
@@ -268,6 +271,7 @@ class _Plan:
         self.norm_cols = np.where(self.wheeled, LY.XS_OMEGA.start + (wheel_counts(rows) if rows is not None else 0),
                                   LY.STATE_SIZE).astype(float)
         if self.jointed.size:
+            assert rows is not None   # (jointed bodies have model rows)
             r = rows[self.jointed]
             self.j_anchor, self.j_r_b = r[:, LY.MODEL_ANCHOR_W].copy(), r[:, LY.MODEL_R_B].copy()
 
@@ -315,20 +319,21 @@ class _Plan:
             F, tau = self.index.sums(xf, xf[:, V])
             out[self.forced, X] = self.K.rigid_body_rhs_c(xf, self.m_f, self.c_f, F, tau)
         for g in self.wheels:
+            assert u is not None   # (bodies with wheels step with their commands)
             xg = x[g.idx]
             F, tau = g.index.sums(xg, g.velocity(xg))
             o = np.empty((g.idx.size, LY.XS_SIZE))
             g.wheel_rhs(xg, F, tau, u[g.idx], o)
             g.translation(xg, F, o)
             out[g.idx] = o
-        g = self.pivot
-        if g is not None:
-            xg = x[g.idx]
-            F, tau = g.index.sums(xg, g.velocity(xg))
-            o = np.zeros((g.idx.size, LY.XS_SIZE))
-            o[:, Q], o[:, W] = K.pivot_body_rhs(xg[:, Q], xg[:, W], g.I_p, g.r_b, F, tau)
-            g.translation(xg, F, o)
-            out[g.idx] = o
+        p = self.pivot
+        if p is not None:
+            xg = x[p.idx]
+            F, tau = p.index.sums(xg, p.velocity(xg))
+            o = np.zeros((p.idx.size, LY.XS_SIZE))
+            o[:, Q], o[:, W] = K.pivot_body_rhs(xg[:, Q], xg[:, W], p.I_p, p.r_b, F, tau)
+            p.translation(xg, F, o)
+            out[p.idx] = o
         return out
 
     def loads(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -746,11 +751,11 @@ class NumpyBackend:
         key = (params.dtype.str, params.tobytes(), effects.tobytes(), None if rows is None else rows.tobytes())
         if key != self._plan_key:
             self._plan, self._plan_key = _Plan(params, effects, rows), key
-            self._plan.source = tuple(None if a is None else np.frombuffer(b, a.dtype).reshape(a.shape)
+            self._plan.source = tuple(None if a is None or b is None else np.frombuffer(b, a.dtype).reshape(a.shape)
                                       for a, b in zip((params, effects, rows), key[1:]))
         return self._plan
 
-    def advance(self, state, params, effects, integrator: str, normalize: bool, dt: float, n_steps: int,
+    def advance(self, state, params, effects, integrator: str, normalize: bool, dt: float | np.floating, n_steps: int,
                 models: Models | None = None, adaptive: Adaptive | None = None, *, restore: bool = True) -> None:
         # restore: accepted for the C backend's interface; this backend always restores (it steps a copy)
         if isinstance(state, np.ndarray) and state.dtype == np.float32:   # single precision throughout
@@ -771,6 +776,7 @@ class NumpyBackend:
             return
         loop = self._loop
         if integrator == "dopri5":
+            assert adaptive is not None   # (checked above)
             h, nfev = adaptive.h.copy(), adaptive.nfev.copy()
 
             def loop(plan, x, integrator, normalize, dt, n_steps, command=None, applied=None):  # noqa: E306
@@ -781,6 +787,7 @@ class NumpyBackend:
                 loop(plan, x, integrator, normalize, dt, n_steps)
             state[...] = x
         else:
+            assert models is not None   # (a plan with models was built from its rows)
             x = _soa(np.concatenate([state, models.Omega], axis=1))
             applied = models.applied.copy()
             with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
@@ -789,6 +796,7 @@ class NumpyBackend:
             models.Omega[...] = x[:, OM]
             models.applied[...] = applied
         if integrator == "dopri5":
+            assert adaptive is not None
             adaptive.h[...], adaptive.nfev[...] = h, nfev
 
     @staticmethod
