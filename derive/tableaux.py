@@ -364,7 +364,7 @@ def real_axis_stability() -> dict:
     kicks (_kicked_stages: splitting 4, its compositions with their γ_i). divergence_cause and the Sim's check of
     every declared decay (an effect's printed decay rate) name it."""
     # RK4 as tableaux.h applies it: stage s at x + c_s h k_{s-1}, i.e. a subdiagonal A with a_{s,s-1} = c_s
-    rk4_a = [[]] + [[0] * (s - 1) + [RK4_C[s]] for s in range(1, len(RK4_C))]
+    rk4_a: list[list] = [[]] + [[0] * (s - 1) + [RK4_C[s]] for s in range(1, len(RK4_C))]
     rk4 = _real_axis_limit(_stability_polynomial(rk4_a, [R(n, RK4_B_DEN) for n in RK4_B_NUM]))
     dp5 = _real_axis_limit(_stability_polynomial(DP_A[:6], DP_A[6]))
     euler = _real_axis_limit(1 + sp.Symbol("z"))

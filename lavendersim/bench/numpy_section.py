@@ -10,6 +10,8 @@ AGREE_STEPS steps; the largest difference is recorded (the peers are right when 
 """
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from ..generated import layout as LY
@@ -43,7 +45,7 @@ def _case(n, sim, ref, I, steps, rounds, interleaved, forced) -> dict:
     from . import numpy_peers as P
 
     m = np.asarray(sim.params)[:, LY.PARAM_M]
-    kw = dict(g_w=GRAVITY, c_lin=C_LIN, c_ang=C_ANG) if forced else {}
+    kw: dict[str, Any] = dict(g_w=GRAVITY, c_lin=C_LIN, c_ang=C_ANG) if forced else {}
     ref.run(AGREE_STEPS)
     if n == 1:
         x0 = P.python_state(np.asarray(sim.x))
@@ -58,11 +60,11 @@ def _case(n, sim, ref, I, steps, rounds, interleaved, forced) -> dict:
         P.hand_rk4_soa(Xa, I, sim.dt, AGREE_STEPS, m=m, **kw)
         got = Xa.T
 
-        def hand(steps=steps, X=X):
+        def hand(steps=steps):
             P.hand_rk4_soa(X, I, sim.dt, steps, m=m, **kw)
     diff = float(np.max(np.abs(np.asarray(ref.x).reshape(n, -1) - np.asarray(got).reshape(n, -1))))
-    t = interleaved({"numpy": (lambda s=sim, k=steps: s.run(k), steps * n), "hand": (hand, steps * n)}, rounds,
-                    f"NumPy vs hand N = {n}" + (" gravity+damping" if forced else ""))
+    cases: dict[str, tuple[Any, ...]] = {"numpy": (lambda s=sim, k=steps: s.run(k), steps * n), "hand": (hand, steps * n)}
+    t = interleaved(cases, rounds, f"NumPy vs hand N = {n}" + (" gravity+damping" if forced else ""))
     return {"steps": steps, **t, "ratio": t["numpy"]["ns_min"] / t["hand"]["ns_min"],
             "peer": "python_rk4" if n == 1 else "hand_rk4_soa", "max_abs_diff": diff}
 
@@ -76,7 +78,7 @@ def numpy_section(quick: bool, rounds: int, interleaved, batch_sim, I_b, body_st
         ``sizes``: N -> {"numpy", "hand" stats (ns per body-step), "ratio" (numpy / hand), "steps",
         "max_abs_diff"}, torque-free; ``effects``: the same with scene-wide gravity and damping.
     """
-    out = {"sizes": {}, "effects": {}}
+    out: dict[str, dict] = {"sizes": {}, "effects": {}}
     for n in (1,) + (SIZES_QUICK if quick else SIZES_FULL):
         if progress:
             progress(f"NumPy backend vs hand peers: N = {n}")
