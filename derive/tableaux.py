@@ -228,8 +228,8 @@ def compositions() -> dict:
         return out
 
     fp, fq = bm6_sequence()     # P(p_0) Q(q_0) ... P(p_s), then one sphere flow for the whole time
-    bm6 = [fl for i, f in enumerate(fp) for fl in [("top_b_nz", f)] + ([("top_a", fq[i])] if i < len(fq) else [])]
-    bm6 = on_momentum(bm6 + [("sphere", R(1))])
+    bm6_flows = [fl for i, f in enumerate(fp) for fl in [("top_b_nz", f)] + ([("top_a", fq[i])] if i < len(fq) else [])]
+    bm6 = on_momentum(bm6_flows + [("sphere", R(1))])
     return {"splitting": ((R(1),), kicked(strang), drift + strang),
             "splitting4": (SPLIT4_GAMMA, kicked(strang),
                            drift + on_momentum((f"axis_{'xyz'[a]}", f) for a, f in split4_sequence())),
