@@ -16,7 +16,7 @@ from __future__ import annotations
 import functools
 import itertools
 import math
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -397,50 +397,6 @@ def _kick(plan, x, h):
     x[:, V], x[:, W] = K.splitting_kick(plan.m, plan.I, x[:, V], x[:, W], F, tb, h)
 
 
-def _composition(plan, x, h, stages, rotate):
-    """One step of a composition of exact flows (splitting, splitting4, symtop4, symtop_bm6). Bodies with effects
-    take the stages γ_i (stages) in turn: kick(γ_i h/2) (_kick, SPLIT_KICK), p += γ_i h v (translation_drift),
-    the stage's rotation, kick(γ_i h/2). Bodies without drift p by h v and take the whole step's rotation.
-    rotate(I, q, w, h, stage) -> (q, w): stage i's rotation over γ_i h, or the whole step's (stage None).
-    The C backend's splitting / splitting4 / symtop steps, operation for operation."""
-    xn = x.copy()
-    if plan.forced.size:
-        xf = x.copy()
-        for s, g in enumerate(stages):
-            gh = g * h
-            _kick(plan, xf, T.SPLIT_KICK * gh)
-            xf[:, P] = K.translation_drift(xf[:, P], xf[:, V], gh)
-            xf[:, Q], xf[:, W] = rotate(plan.I, xf[:, Q], xf[:, W], h, s)
-            _kick(plan, xf, T.SPLIT_KICK * gh)
-        xn[plan.forced] = xf[plan.forced]
-    free = slice(None) if not plan.forced.size else plan.free
-    I = plan.I[free]
-    if I.shape[0]:
-        xn[free, P] = K.translation_drift(x[free, P], x[free, V], h)
-        xn[free, Q], xn[free, W] = rotate(I, x[free, Q], x[free, W], h, None)
-    return xn
-
-
-def _splitting_rotation(I, q, w, h, stage):
-    """splitting (one stage, γ = 1): the Strang sequence of exact principal-axis flows (splitting_rotation) over h."""
-    return K.splitting_rotation(I, q, w, h)
-
-
-_AXIS_FLOWS = (K.axis_flow_x, K.axis_flow_y, K.axis_flow_z)
-
-
-def _splitting4_rotation(I, q, w, h, stage):
-    """splitting4 (T.SPLIT4_GAMMA, a symmetric composition of order 4 of the splitting step): stage i's Strang
-    rotation over γ_i h; the whole step (stage None) as one sequence of axis flows (T.SPLIT4_SEQ, neighbours
-    about one axis merged) on L_b = I ω (body_momentum), turned back into ω once (body_rate)."""
-    if stage is not None:
-        return K.splitting_rotation(I, q, w, T.SPLIT4_GAMMA[stage] * h)
-    L = K.body_momentum(I, w)
-    for a, f in T.SPLIT4_SEQ:
-        q, L = _AXIS_FLOWS[a](I, q, L, f * h)
-    return q, K.body_rate(I, L)
-
-
 _SYMTOP_FLOWS = (K.symtop_axis_flow_x, K.symtop_axis_flow_y, K.symtop_axis_flow_z)
 
 
@@ -459,63 +415,140 @@ def symtop_axes(I):
     return a, b, I_r, c[rows, a], c[rows, b]
 
 
-def _symtop_rotation(I, q, L, h, stage=None):
-    """symtop4's rotation on rows (q, L_b): stage None, the merged sequence A(a_0 h) B(b_0 h) … A(a_s h)
-    (T.SYMTOP4_A_FRAC, T.SYMTOP4_B_FRAC); else stage's Strang step A(γ h/2) B(γ h) A(γ h/2). A(τ): the axis
-    flow of ½ c_a L_a² then the sphere flow of |L|²/(2 I_r); B(τ): the axis flow of ½ c_b L_b². Bodies are
-    grouped by their (a, b) axes; the C backend's symtop_rotation, operation for operation."""
+class _FlowRows(NamedTuple):
+    """Rows that take a program's rotation flows alike: their index (a slice for all), inertia, and for the
+    symmetric-top flows the axes a, b (one each for the group), I_r, c_a, c_b and whether c_b = 0."""
+    rows: Any
+    I: np.ndarray
+    a: int = 0
+    b: int = 0
+    I_r: Any = None
+    c_a: Any = None
+    c_b: Any = None
+    top: bool = False
+
+
+# The flows of derive/tableaux.py FLOWS (kick aside: it needs every body's loads, _kick) for time tau on a group g's
+# rows s = [p, v, q, ω, L_b], in place; as the C engine's composition_step.
+def _drift(s, tau, g):
+    s[0] = K.translation_drift(s[0], s[1], tau)
+
+
+def _momentum(s, tau, g):
+    s[4] = K.body_momentum(g.I, s[3])
+
+
+def _rate(s, tau, g):
+    s[3] = K.body_rate(g.I, s[4])
+
+
+def _strang(s, tau, g):
+    s[2], s[3] = K.splitting_rotation(g.I, s[2], s[3], tau)
+
+
+def _axis(flow):
+    def run(s, tau, g):
+        s[2], s[4] = flow(g.I, s[2], s[4], tau)
+    return run
+
+
+def _top_a(s, tau, g):
+    s[2], s[4] = _SYMTOP_FLOWS[g.a](s[2], s[4], g.c_a, tau)
+
+
+def _top_b(s, tau, g):
+    s[2], s[4] = _SYMTOP_FLOWS[g.b](s[2], s[4], g.c_b, tau)
+
+
+def _top_b_nz(s, tau, g):
+    if not g.top:   # c_b = 0: a turn by 0, skipped
+        _top_b(s, tau, g)
+
+
+def _sphere(s, tau, g):
+    s[2] = K.sphere_flow(s[2], s[4], g.I_r, tau)
+
+
+_ROW_FLOWS = {"drift": _drift, "momentum": _momentum, "rate": _rate, "strang": _strang,
+              "axis_x": _axis(K.axis_flow_x), "axis_y": _axis(K.axis_flow_y), "axis_z": _axis(K.axis_flow_z),
+              "top_a": _top_a, "top_b": _top_b, "top_b_nz": _top_b_nz, "sphere": _sphere}
+_TOP_FLOWS = {"top_a", "top_b", "top_b_nz", "sphere"}
+
+
+def _segments(program):
+    """A printed program ((flow, fraction), ...) as ("kick", fraction) and runs of row flows ((flow fn, fraction), ...)."""
+    out: list = []
+    for flow, frac in program:
+        if flow == "kick":
+            out.append(("kick", frac))
+        elif out and out[-1][0] == "rows":
+            out[-1][1].append((_ROW_FLOWS[flow], frac))
+        else:
+            out.append(("rows", [(_ROW_FLOWS[flow], frac)]))
+    return tuple((kind, tuple(body) if kind == "rows" else body) for kind, body in out)
+
+
+def _program(gammas, kicked, free):
+    """A composition (γ, kicked program, free program) as the engine walks it: γ, the two programs as _segments,
+    whether its rows need the symmetric-top split and whether c_b = 0 splits the groups (top_b_nz)."""
+    flows = {f for f, _ in kicked + free}
+    return gammas, _segments(kicked), _segments(free), bool(flows & _TOP_FLOWS), "top_b_nz" in flows
+
+
+_PROGRAMS = {name: _program(*c) for name, c in T.COMPOSITIONS.items()}   # generated/tableaux.py COMPOSITIONS
+
+
+def _groups(I, tops: bool, nz: bool, rows=slice(None)) -> list[_FlowRows]:
+    """The bodies rows (inertia I) as groups for the flows: one without symmetric-top flows; else one per (a, b)
+    (and c_b = 0 with top_b_nz), since a group's axis flows are one printed kernel."""
+    if not tops:
+        return [_FlowRows(rows, I)]
     a, b, I_r, c_a, c_b = symtop_axes(I)
-    if stage is None:
-        fa, fb = T.SYMTOP4_A_FRAC, T.SYMTOP4_B_FRAC
-    else:
-        g = T.SYMTOP4_GAMMA[stage]
-        fa, fb = (T.SYMTOP_STRANG_A * g, T.SYMTOP_STRANG_A * g), (g,)
-    q, L = q.copy(), L.copy()
-    for pa, pb in sorted(set(zip(a.tolist(), b.tolist()))):
-        m = (a == pa) & (b == pb)
-        qm, Lm = q[m], L[m]
-        for i, f in enumerate(fa):
-            qm, Lm = _SYMTOP_FLOWS[pa](qm, Lm, c_a[m], f * h)
-            qm = K.sphere_flow(qm, Lm, I_r[m], f * h)
-            if i < len(fb):
-                qm, Lm = _SYMTOP_FLOWS[pb](qm, Lm, c_b[m], fb[i] * h)
-        q[m], L[m] = qm, Lm
-    return q, L
+    top = (c_b == 0.0) if nz else np.zeros(a.shape, bool)
+    keys = sorted(set(zip(a.tolist(), b.tolist(), top.tolist())))
+    if len(keys) == 1:
+        return [_FlowRows(rows, I, *keys[0][:2], I_r, c_a, c_b, keys[0][2])]
+    out = []
+    for pa, pb, pt in keys:
+        m = np.flatnonzero((a == pa) & (b == pb) & (top == pt))
+        out.append(_FlowRows(m if isinstance(rows, slice) else rows[m], I[m], pa, pb, I_r[m], c_a[m], c_b[m], pt))
+    return out
 
 
-def _on_momentum(rotate):
-    """A rotation on (q, L_b) as one on (q, ω): L_b = I ω (body_momentum) before, ω = I⁻¹ L_b (body_rate) after."""
-    def on_rates(I, q, w, h, stage):
-        q, L = rotate(I, q, K.body_momentum(I, w), h, stage)
-        return q, K.body_rate(I, L)
-    return on_rates
+def _walk(plan, x, segments, g, groups, src=None) -> None:
+    """Program segments over time g on x (in place): a kick for frac g (_kick, every body), each run of row flows
+    for frac g on every group's rows in turn, the first run reading src's rows (default x)."""
+    src = x if src is None else src
+    for kind, body in segments:
+        if kind == "kick":
+            _kick(plan, x, body * g)
+            continue
+        for grp in groups:
+            r = grp.rows
+            s = [src[r, P], src[r, V], src[r, Q], src[r, W], None]
+            for fn, frac in body:
+                fn(s, frac * g, grp)
+            x[r, P], x[r, Q], x[r, W] = s[0], s[2], s[3]
+        src = x
 
 
-def _symtop_bm6_rotation(I, q, L, h):
-    """symtop_bm6's rotation on rows (q, L_b) for time h: the Blanes–Moan S10 sequence P(p_0 h) Q(q_0 h) …
-    P(p_s h) (T.BM6_P_FRAC, T.BM6_Q_FRAC), P the axis flow of ½ c_b L_b² (the smaller leftover |c|, symtop_axes'
-    b), Q that of ½ c_a L_a²; then one sphere flow of |L|²/(2 I_r) for h (it commutes with both). Bodies are
-    grouped by their (a, b) axes and whether c_b = 0 (a symmetric top: its P flows are turns by 0, skipped);
-    the C backend's symtop_bm6_rotation, operation for operation."""
-    a, b, I_r, c_a, c_b = symtop_axes(I)
-    q, L = q.copy(), L.copy()
-    fp, fq = T.BM6_P_FRAC, T.BM6_Q_FRAC
-    top = c_b == 0.0
-    for pa, pb, pt in sorted(set(zip(a.tolist(), b.tolist(), top.tolist()))):
-        m = (a == pa) & (b == pb) & (top == pt)
-        qm, Lm = q[m], L[m]
-        for i, f in enumerate(fp):
-            if not pt:
-                qm, Lm = _SYMTOP_FLOWS[pb](qm, Lm, c_b[m], f * h)
-            if i < len(fq):
-                qm, Lm = _SYMTOP_FLOWS[pa](qm, Lm, c_a[m], fq[i] * h)
-        q[m], L[m] = K.sphere_flow(qm, Lm, I_r[m], h), Lm
-    return q, L
-
-
-def _symtop_bm6_stage(I, q, L, h, stage):
-    """_symtop_bm6_rotation for the whole step (stage None) or over stage's γ_i h."""
-    return _symtop_bm6_rotation(I, q, L, h if stage is None else T.SYMTOP4_GAMMA[stage] * h)
+def _composition(plan, x, h, name):
+    """One step of the composition name (generated/tableaux.py COMPOSITIONS, derive/tableaux.py compositions()):
+    bodies with effects take the stages γ_i in turn, each the kicked program over γ_i h; bodies without it the
+    free program once over h. The C backend's composition_step, operation for operation."""
+    gammas, kicked, free_prog, tops, nz = _PROGRAMS[name]
+    xn = x.copy()
+    if plan.forced.size:
+        xf = x.copy()
+        groups = _groups(plan.I, tops, nz)
+        for gamma in gammas:
+            _walk(plan, xf, kicked, gamma * h, groups)
+        xn[plan.forced] = xf[plan.forced]
+    free = slice(None) if not plan.forced.size else plan.free
+    I = plan.I[free]
+    if I.shape[0]:
+        _walk(plan, xn, free_prog, h, _groups(I, tops, nz, free), src=x)
+    return xn
 
 
 def gyro_newton(I, w, tau_b, h, iterations: int = T.GYRO_MAX_ITER):
@@ -697,17 +730,6 @@ def _step_implicit_gyro(plan, f, x, h):
     return _implicit_gyro(plan, x, h)
 
 
-def _composition_step(stages, rotate):
-    return lambda plan, f, x, h: _composition(plan, x, h, stages, rotate)  # noqa: E731
-
-
-# The compositions: their printed stage fractions (one stage for splitting) and each one's rotation
-_step_splitting = _composition_step((1.0,), _splitting_rotation)
-_step_splitting4 = _composition_step(T.SPLIT4_GAMMA, _splitting4_rotation)
-_step_symtop4 = _composition_step(T.SYMTOP4_GAMMA, _on_momentum(_symtop_rotation))
-_step_symtop_bm6 = _composition_step(T.SYMTOP4_GAMMA, _on_momentum(_symtop_bm6_stage))
-
-
 def _stepper_of(name: str):
     """The stepper of a registered integrator: an explicit RK through the tableau stepper (generated/tableaux.py
     EXPLICIT_RK), else its family's member _step_<name> (semi_implicit_euler, partitioned; rk4_expmap, the RK4
@@ -715,6 +737,8 @@ def _stepper_of(name: str):
     if name in T.EXPLICIT_RK:
         rk = _BUILTIN_RK[name]
         return lambda plan, f, x, h: rk.step(f, x, h, plan.work(x, len(rk.rows)), plan.rows)  # noqa: E731
+    if name in _PROGRAMS:
+        return lambda plan, f, x, h: _composition(plan, x, h, name)  # noqa: E731
     return globals().get(f"_step_{name}")
 
 
