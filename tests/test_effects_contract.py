@@ -147,10 +147,6 @@ def test_half_integer_powers_print_without_pow_and_their_base_once():
     assert "pow(" not in body and body.count("r_0*r_0") == 1 and body.count("sqrt(") == 1, body
 
 
-def test_c_kernels_use_no_pow():
-    assert "pow(" not in (GEN / "kernels.c").read_text()
-
-
 # ---------------------------------------------------------------- per-body index
 
 def mixed_scene(bodies=range(21)):
