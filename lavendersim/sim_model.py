@@ -2,14 +2,11 @@
 that need more than the per-body accessors — so that no application touches a Sim's private attributes."""
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import Any
 
 import numpy as np
 
 from .generated import layout as LY
-
-if TYPE_CHECKING:
-    from .sim import Sim
 
 
 def _ro(a: np.ndarray) -> np.ndarray:
@@ -37,9 +34,9 @@ class SimModel:
     """
 
     __slots__ = ("_sim",)
-    _sim: Sim
+    _sim: Any    # the Sim (not imported: sim imports this module; no import circle, even for annotations)
 
-    def __init__(self, sim: Sim) -> None:
+    def __init__(self, sim: Any) -> None:
         object.__setattr__(self, "_sim", sim)
 
     def __setattr__(self, name, value):
