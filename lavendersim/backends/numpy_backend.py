@@ -26,7 +26,7 @@ from ..generated import layout as LY
 from ..generated import tableaux as T
 from ..kernels import K
 from . import numpy_scalar as SC
-from . import (DOPRI5_HMIN_REL, DOPRI5_MAX_SUBSTEPS, FLOAT32_INTEGRATORS, KIND_JOINT, KIND_WHEELS, PLAIN_ONLY,
+from .base import (DOPRI5_HMIN_REL, DOPRI5_MAX_SUBSTEPS, FLOAT32_INTEGRATORS, KIND_JOINT, KIND_WHEELS, PLAIN_ONLY,
                Adaptive, Models, divergence_cause, no_root_cause, rk_weights, tableau_of, tolerance_cause,
                wheel_counts)
 

@@ -570,7 +570,7 @@ def extension_isa() -> dict | None:
     """The C extension's instruction sets: {"levels": [(level, name), ...] this CPU can run (scalar
     first), "best": name} — None without the extension."""
     try:
-        from .. import _lavender_c as C
+        from ..backends.c_backend import _c as C
     except Exception:  # noqa: BLE001 - no C backend: the section is not run
         return None
     cur, _, best, best_name = C.isa()
@@ -600,8 +600,8 @@ def simd_batch(kernel, sizes, body_steps: int, rounds: int) -> dict:
     """The C batch loop (one CBackend.advance call, torque-free RK4, q normalized) at every instruction
     set the CPU has, against the hand-written SoA loop compiled for each, interleaved; ns per body-step.
     Also checks that every level and every hand copy give bitwise the same states after 50 steps."""
-    from .. import _lavender_c as C
     from ..backends.c_backend import ROW, CBackend
+    from ..backends.c_backend import _c as C
     info = extension_isa()
     assert info is not None   # (the import of the extension above succeeded)
     be = CBackend()
