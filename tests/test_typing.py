@@ -1,12 +1,15 @@
-"""Types reach users (issue 31): a type checker sees LavenderSim through an editable install, and the public
+"""Types reach users (issue 31): type checkers see LavenderSim through an editable install, and the public
 signatures survive the validation decorator (`validate.keywords` is typed with ParamSpec).
 
 Setuptools' default editable install puts an import hook in site-packages, which neither mypy nor pyright runs
 (they never execute code), and LavenderSim's package-dir remap (lavendersim.generated -> generated/, ...) rules
 out a plain path entry. The strict editable mode installs a tree of links that both follow; docs/install.md says
-so. This test installs a copy of the tree that way into a venv and runs mypy on a user's snippet against it."""
+so. The slow tests install a copy of the tree that way into a venv (once for the module) and run mypy and
+pyright (basedpyright, the test extra's pip-installable build of pyright with its own Node.js) on a user's
+snippet against it."""
 from __future__ import annotations
 
+import json
 import re
 import shutil
 import subprocess
@@ -15,7 +18,6 @@ from pathlib import Path
 
 import pytest
 
-from conftest import require
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -25,6 +27,7 @@ import lavendersim as lv
 reveal_type(lv.Body.box)
 reveal_type(lv.Sim)
 cube = lv.Body.box(name="cube", mass="heavy", size=(0.1, 0.1, 0.1))
+reveal_type(lv.Sim.__init__)
 '''
 
 
@@ -33,20 +36,28 @@ def _copy_tree(dst: Path) -> None:
                                                                ".pytest_cache", ".mypy_cache", "_build", ".hypothesis"))
 
 
-@pytest.mark.slow
-def test_mypy_sees_an_editable_install_and_the_real_signatures(tmp_path):
-    require("mypy")
-    from mypy import api
-
-    src, venv = tmp_path / "src", tmp_path / "venv"
+@pytest.fixture(scope="module")
+def strict_install(tmp_path_factory) -> Path:
+    """A venv (seeing this environment's packages) with a copy of the tree installed editable, strict mode:
+    the install docs/install.md tells type-checker users to make. Returns the venv's python."""
+    tmp = tmp_path_factory.mktemp("strict_install")
+    src, venv = tmp / "src", tmp / "venv"
     _copy_tree(src)
     subprocess.run([sys.executable, "-m", "venv", "--system-site-packages", str(venv)], check=True)
     run = subprocess.run([str(venv / "bin" / "python"), "-m", "pip", "install", "--no-deps", "-q", "-e", str(src),
                           "--config-settings", "editable_mode=strict"], capture_output=True, text=True, timeout=3600)
     assert run.returncode == 0, run.stdout[-2000:] + run.stderr[-2000:]
+    return venv / "bin" / "python"
+
+
+@pytest.mark.slow
+@pytest.mark.needs("mypy")
+def test_mypy_sees_an_editable_install_and_the_real_signatures(strict_install, tmp_path):
+    from mypy import api
+
     snippet = tmp_path / "user_code.py"
     snippet.write_text(SNIPPET)
-    out, err, status = api.run(["--python-executable", str(venv / "bin" / "python"), "--follow-imports=silent",
+    out, err, status = api.run(["--python-executable", str(strict_install), "--follow-imports=silent",
                                 "--cache-dir", str(tmp_path / "mypy_cache"), str(snippet)])
     assert "import-not-found" not in out and "import-untyped" not in out, out
     lines = out.splitlines()
@@ -57,6 +68,27 @@ def test_mypy_sees_an_editable_install_and_the_real_signatures(tmp_path):
     assert "scene: lavendersim.scene.Scene" in sim and re.search(r"integrator: (builtins\.)?str\b", sim), sim
     assert any(':5: error: Argument "mass" to "box" of "Body" has incompatible type "str"' in l for l in lines), out
     assert status == 1, (out, err)
+
+
+@pytest.mark.slow
+@pytest.mark.needs("pyright")
+def test_pyright_sees_an_editable_install_and_the_real_signatures(strict_install, tmp_path):
+    """basedpyright in pyright's own `standard` mode (its default adds checks of its own) on the same snippet."""
+    (tmp_path / "user_code.py").write_text(SNIPPET)
+    (tmp_path / "pyrightconfig.json").write_text(json.dumps({"typeCheckingMode": "standard"}))
+    run = subprocess.run([sys.executable, "-m", "basedpyright", "--outputjson", "--pythonpath", str(strict_install),
+                          "user_code.py"], cwd=tmp_path, capture_output=True, text=True, timeout=600)
+    report = json.loads(run.stdout)
+    diagnostics = report["generalDiagnostics"]
+    assert not any("could not be resolved" in d["message"] for d in diagnostics), diagnostics
+    said = {d["range"]["start"]["line"] + 1: d for d in diagnostics}
+    box, sim, wrong = said[3]["message"], said[6]["message"], said.get(5, {"severity": "nothing said"})
+    assert re.search(r'is "\(name: str, mass: float, size: .+, \*\*state: Any\) -> Body"$', box), box
+    assert re.search(r"\(self: Sim, scene: Scene, dt: float = .+, integrator: str = .+\) -> None", sim), sim
+    assert "*args" not in box + sim and "..." not in box + sim
+    assert (wrong["severity"], wrong.get("rule")) == ("error", "reportArgumentType"), wrong
+    assert '"mass"' in wrong["message"] and '"float"' in wrong["message"], wrong
+    assert report["summary"]["errorCount"] == 1 and run.returncode == 1, run.stdout[-3000:]
 
 
 def test_keywords_keeps_the_signature_for_type_checkers():
