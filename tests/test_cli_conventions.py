@@ -201,8 +201,20 @@ def test_derive_quiet_prints_nothing_and_json_is_the_summary(tmp_path, capsys, f
     cap = capsys.readouterr()
     data = json.loads(cap.out)
     assert data["changed"] == ["kernels.c"] and data["directory"] == str(tmp_path / "g") and data["seconds"] >= 0
-    assert data["rebuild"] and cap.err == ""
+    assert data["rebuild"] is None and cap.err == ""    # the package's C is built from its own generated/ only
     assert len(fake_codegen[0]) == 2
+
+
+def test_derive_asks_for_a_rebuild_only_for_the_packages_kernels(tmp_path, capsys, fake_codegen, monkeypatch):
+    """`derive --out DIR` told the user to rebuild the compiled backend although the package's kernels, which it is
+    built from, did not change (issue 31). Now only a C kernel changed in the package's own generated/ does."""
+    assert cli.main(["derive", "--out", str(tmp_path / "g")]) == 0
+    assert "rebuild the compiled backend" not in capsys.readouterr().out
+    monkeypatch.setattr(cli, "generated_dir", lambda: (tmp_path / "g").resolve())
+    assert cli.main(["derive", "--out", str(tmp_path / "g")]) == 0
+    assert "C kernels changed: rebuild the compiled backend with `" in capsys.readouterr().out
+    assert cli.main(["derive", "--json", "--quiet"]) == 0          # no --out: the package's folder
+    assert json.loads(capsys.readouterr().out)["rebuild"]
 
 
 def test_derive_on_a_terminal_draws_a_bar_not_lines(tmp_path, capsys, fake_codegen, monkeypatch):

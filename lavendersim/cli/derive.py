@@ -111,7 +111,11 @@ def _write(args, out: Path) -> int:
     except OutputFolderError as exc:
         return _common.fail(f"derive: {exc}")
     dt = time.perf_counter() - t0
-    rebuild = bool(changed) and any(n.startswith("kernels.") for n in changed)
+    # the compiled backend is built from the package's generated/ only: a folder elsewhere never needs a rebuild
+    from . import generated_dir
+
+    ours = out.resolve() == generated_dir()
+    rebuild = ours and any(n.startswith("kernels.") for n in changed)
     if args.json:
         _common.emit_json({"directory": str(out), "changed": changed, "seconds": dt,
                            "rebuild": rebuild_command() if rebuild else None})
