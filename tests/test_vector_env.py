@@ -46,6 +46,25 @@ def test_spaces_and_return_types():
     ve.close()
 
 
+def test_reset_info_is_the_single_envs_per_cube_with_masks():
+    """reset() returned an empty info; now the single env's reset measures (its clock `t` aside) per cube, the
+    `_key` masks marking the cubes that were reset (gymnasium's convention, as SyncVectorEnv's reset gives)."""
+    ve = _vec(3, task="corner")
+    obs, info = ve.reset(seed=5)
+    assert set(info) == {"angle_error_deg", "torque_applied", "tilt_deg", "_angle_error_deg", "_torque_applied",
+                         "_tilt_deg"}
+    for i in range(3):
+        o1, i1 = gym.make("lavendersim:ReactionWheelCube-v0", task="corner").unwrapped.reset(seed=5 + i)
+        np.testing.assert_array_equal(obs[i], o1)
+        for key in ("angle_error_deg", "tilt_deg"):     # the single env computes them one cube at a time
+            assert info[key][i] == pytest.approx(i1[key], rel=1e-12, abs=1e-12) and info[f"_{key}"][i], key
+        np.testing.assert_array_equal(info["torque_applied"][i], i1["torque_applied"])
+    ve.step(np.ones((3, 3), np.float32))
+    obs, info = ve.reset(options={"reset_mask": np.array([False, True, False])})
+    assert info["_tilt_deg"].tolist() == [False, True, False] == info["_angle_error_deg"].tolist()
+    ve.close()
+
+
 def test_seed_and_step_determinism():
     """check_reset_seed_determinism and check_step_determinism, batched: two envs seeded alike and given the same
     actions return equal data, exactly."""

@@ -37,6 +37,7 @@ INVENTORIES = {
     "gymnasium": ("Gymnasium", "1.0", [
         ("gymnasium.Env", "py:class", "api/env/#$"),
         ("gymnasium.make", "py:function", "api/registry/#$"),
+        ("gymnasium.make_vec", "py:function", "api/registry/#$"),
         ("gymnasium.vector.VectorEnv", "py:class", "api/vector/#$"),
         ("gymnasium.spaces.Box", "py:class", "api/spaces/fundamental/#$"),
     ]),

@@ -24,6 +24,10 @@ the GIL while the cubes are stepped. The rest of a step is a fixed number of Num
 A sub-environment whose simulation diverges (DivergenceError) terminates with reward -1e3 and the
 observation of its state before the step (as the single env), and ``info["diverged"]`` marks it; the others
 advance normally. No rendering (render_mode must be None).
+
+``info`` (of ``reset`` and ``step``) holds the single env's measures per cube, arrays with a leading axis N:
+``angle_error_deg``, ``torque_applied`` (N, 3) and, on the corner, ``tilt_deg`` (not its clock ``t``); beside each
+key ``k``, gymnasium's mask ``info["_k"]`` (N,) of the cubes it is about (after ``reset``: the cubes reset).
 """
 from __future__ import annotations
 
@@ -176,7 +180,14 @@ class ReactionWheelCubeVectorEnv(VectorEnv):
             self._reset_one(int(i))
         self.sim.check_written()     # the start states' pre-step check now: the first run can take the C fast path
         self._started = True
-        return self._obs(self._raw()), {}
+        raw = self._raw()
+        q = raw[:, OBS_Q]
+        info: dict[str, Any] = {"angle_error_deg": np.degrees(K.quat_error_angle(q, self._target)),
+                                "torque_applied": np.zeros((n, LY.WHEELS_BODY_AXES))}
+        if self.task == "corner":
+            info["tilt_deg"] = self._tilt_deg(q)
+        # the single env's reset info (but its clock `t`), per cube; the `_key` masks mark the cubes reset
+        return self._obs(raw), {**info, **{f"_{k}": mask.copy() for k in info}}
 
     def step(self, actions):
         if not self._started:
@@ -211,8 +222,7 @@ class ReactionWheelCubeVectorEnv(VectorEnv):
         terminated = self._out_of_bounds(raw)
         info: dict[str, Any] = {"angle_error_deg": angle, "torque_applied": sim.wheel_torques_applied[:, :LY.WHEELS_BODY_AXES].copy()}
         if self.task == "corner":
-            d = np.asarray(K.quat_rotate(q, np.ones(3) / math.sqrt(3.0)))
-            tilt = np.degrees(np.arctan2(np.hypot(d[:, 0], d[:, 1]), d[:, 2]))
+            tilt = self._tilt_deg(q)
             terminated |= tilt > self._one.max_tilt_deg
             info["tilt_deg"] = tilt
         if diverged:
@@ -270,6 +280,11 @@ class ReactionWheelCubeVectorEnv(VectorEnv):
         if not ok:
             np.copyto(a, V.array("actions", actions, (n, 3)))     # raises on anything but n x 3 finite real numbers
         return np.minimum(np.maximum(a, -1.0, out=a), 1.0, out=a)
+
+    def _tilt_deg(self, q: np.ndarray) -> np.ndarray:
+        """Per cube, the angle of its body diagonal from the world z axis, degrees (the single env's tilt_deg)."""
+        d = np.asarray(K.quat_rotate(q, np.ones(3) / math.sqrt(3.0)))
+        return np.degrees(np.arctan2(np.hypot(d[:, 0], d[:, 1]), d[:, 2]))
 
     def _obs(self, raw: np.ndarray) -> np.ndarray:
         """The observations: raw clipped to the bounds (as np.clip), float32 (a new array), non-finite numbers as 0.
