@@ -35,7 +35,8 @@ def _xrefs(html: str) -> list[tuple[bool, str]]:
 
 def test_pages_exist(site):
     for page in ("index", "concepts", "extending", "symbolic", "chapter_names", "notebooks", "api", "api/lavendersim.sim",
-                 "api/lavendersim.derive.symbolic", "api/lavendersim.generated.kernels_numpy"):
+                 "api/lavendersim.derive.symbolic", "api/lavendersim.backends",
+                 "api/lavendersim.generated.kernels_numpy"):
         assert (site / f"{page}.html").is_file(), page
 
 
