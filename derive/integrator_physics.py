@@ -75,7 +75,7 @@ def axis_flow_kernel(a: int, I_b, q, L_b, tau) -> "Kernel":
                    Arg("L_b", L_b, "angular momentum, body frame, kg·m²/s"), Arg("tau", tau, "duration of the flow, s")],
                   [Arg("q_next", qn, "orientation (unit when q is)"), Arg("L_next", sp.Matrix(Ln), "kg·m²/s, body frame")],
                   "Integrator physics",
-                  notes=["splitting4 applies the sequence printed in generated/tableaux (SPLIT4_SEQ) of these flows to "
+                  notes=["splitting4 applies the free program printed in generated/tableaux (COMPOSITIONS) of these flows to "
                          "bodies without effects; each keeps |L_B|, L_W and |q| to rounding."])
 
 

@@ -18,7 +18,7 @@ double.
   146 (1990) 319: for a symmetric basic method of order 2, Σγ = 1 and Σγ³ = 0 give order 4; Hairer,
   Lubich & Wanner, Geometric Numerical Integration, II.4 and V.3). The coefficients are algebraic
   numbers, printed as their correctly rounded doubles (evaluated to 50 digits first). A body without
-  effects takes the substeps' flows as one sequence (SPLIT4_SEQ, neighbours about one axis merged).
+  effects takes the substeps' flows as one sequence (split4_sequence, neighbours about one axis merged).
   Order 4 torque-free and with loads that depend on p and q only (each splitting step is then
   symmetric); order 3 with a velocity-dependent effect (the explicit-midpoint kick is not symmetric,
   so only the h³ error term cancels; measured error ratio 8 per halving with angular damping).
@@ -464,9 +464,7 @@ def _fa(x) -> str:
 
 def _scalars() -> list[tuple[str, str, str]]:
     """(name, C literal, Python literal) of every scalar constant."""
-    ints = [("DP_MAX_SUBSTEPS", DP_MAX_SUBSTEPS), ("GYRO_MAX_ITER", GYRO_MAX_ITER), ("RK4_B_DEN", RK4_B_DEN),
-            ("SPLIT4_STAGES", len(SPLIT4_GAMMA)), ("SPLIT4_FLOWS", len(split4_sequence())),
-            ("SYMTOP4_STAGES", len(SYMTOP4_GAMMA)), ("BM6_FLOWS", len(bm6_sequence()[1]))]
+    ints = [("DP_MAX_SUBSTEPS", DP_MAX_SUBSTEPS), ("GYRO_MAX_ITER", GYRO_MAX_ITER), ("RK4_B_DEN", RK4_B_DEN)]
     floats = [("DP_SAFETY", DP_SAFETY), ("DP_FACMIN", DP_FACMIN), ("DP_FACMAX", DP_FACMAX),
               ("DP_HMIN_REL", DP_HMIN_REL), ("DP_ERR_EXPONENT", -1.0 / (DP_ORDER_ERR + 1)),
               ("DP_INIT_SMALL", DP_INIT_SMALL), ("DP_INIT_TINY_H", DP_INIT_TINY_H), ("DP_INIT_FRAC", DP_INIT_FRAC),
@@ -475,7 +473,6 @@ def _scalars() -> list[tuple[str, str, str]]:
               ("GYRO_ACCEPT_SQ", GYRO_ACCEPT_SQ)]
     out = [(n, f"{v}L" if n == "DP_MAX_SUBSTEPS" else str(v), f"{v:_}") for n, v in ints]
     out += [(n, f"({float(v)!r})" if v < 0 else repr(float(v)), repr(float(v))) for n, v in floats]
-    out += [("SYMTOP_STRANG_A", _f(SYMTOP_STRANG_A), _f(SYMTOP_STRANG_A))]
     out += [("SPLIT_KICK", _f(SPLIT_KICK), _f(SPLIT_KICK)), ("SPLIT_MIDPOINT", _f(SPLIT_MIDPOINT), _f(SPLIT_MIDPOINT))]
     out += [(f"RK4_C{i}", _f(c), _f(c)) for i, c in enumerate(RK4_C)]
     out += [(f"RK4_B{i}", _f(n), _f(n)) for i, n in enumerate(RK4_B_NUM)]
@@ -611,21 +608,6 @@ def print_python() -> str:
     out.append("EXPLICIT_RK = " + repr({n: (fl(c), fl(b), float(_f(d))) for n, (c, b, d) in EXPLICIT_RK.items()}))
     out.append("# Strang splitting of the free rotation: (axis, fraction of h)")
     out.append("STRANG = (" + ", ".join(f"({a}, {_f(f)})" for a, f in STRANG) + ")")
-    out.append("# splitting4: the Strang step applied with step gamma_i h, in this order (symmetric composition, order 4)")
-    out.append("SPLIT4_GAMMA = (" + ", ".join(_fa(g) for g in SPLIT4_GAMMA) + ")")
-    out.append("# splitting4 without effects: its substeps' axis flows as one sequence (axis, fraction of h), neighbours merged")
-    out.append("SPLIT4_SEQ = (" + ", ".join(f"({a}, {_fa(f)})" for a, f in split4_sequence()) + ")")
-    fa, fb = symtop4_sequence()
-    out.append("# symtop4: the Strang step's stage fractions gamma_i (order 4), and without effects the merged sequence")
-    out.append("# A(SYMTOP4_A_FRAC[0] h) B(SYMTOP4_B_FRAC[0] h) A(SYMTOP4_A_FRAC[1] h) ... A(SYMTOP4_A_FRAC[s] h)")
-    out.append("SYMTOP4_GAMMA = (" + ", ".join(_fa(g) for g in SYMTOP4_GAMMA) + ")")
-    out.append("SYMTOP4_A_FRAC = (" + ", ".join(_fa(f) for f in fa) + ")")
-    out.append("SYMTOP4_B_FRAC = (" + ", ".join(_fa(f) for f in fb) + ")")
-    fp, fq = bm6_sequence()
-    out.append("# symtop_bm6 (Blanes & Moan S10, order 6): P(BM6_P_FRAC[0] h) Q(BM6_Q_FRAC[0] h) ... P(BM6_P_FRAC[-1] h),")
-    out.append("# P = the axis flow with the smaller leftover |c|, Q = the larger's; then one sphere flow for h")
-    out.append("BM6_P_FRAC = (" + ", ".join(_f(f) for f in fp) + ")")
-    out.append("BM6_Q_FRAC = (" + ", ".join(_f(f) for f in fq) + ")")
     out.append("# the compositions: name -> (gamma, kicked program, free program), each program ((flow, fraction), ...)")
     out.append("COMPOSITIONS = {" + ", ".join(
         f"{n!r}: (({''.join(_num(x) + ', ' for x in g)}), "

@@ -42,10 +42,6 @@ enum {
 #define LV_DP_MAX_SUBSTEPS 1000000L
 #define LV_GYRO_MAX_ITER 30
 #define LV_RK4_B_DEN 6
-#define LV_SPLIT4_STAGES 5
-#define LV_SPLIT4_FLOWS 21
-#define LV_SYMTOP4_STAGES 5
-#define LV_BM6_FLOWS 10
 #define LV_DP_SAFETY 0.9
 #define LV_DP_FACMIN 0.2
 #define LV_DP_FACMAX 5.0
@@ -60,7 +56,6 @@ enum {
 #define LV_DP_INIT_EXPONENT 0.2
 #define LV_GYRO_TOL_SQ 1e-32
 #define LV_GYRO_ACCEPT_SQ 1e-20
-#define LV_SYMTOP_STRANG_A 0.5
 #define LV_SPLIT_KICK 0.5
 #define LV_SPLIT_MIDPOINT 0.5
 #define LV_RK4_C0 0.0

@@ -134,14 +134,12 @@ BOUNDS = {"energy_drift": H.ROD_BOUNDS["energy_drift"][0], "L_world_drift": H.RO
 ENERGY_GAIN_BOUND = 1e-12        # lab hard's fast_major_spin_dt1e-2 bound for implicit_gyro
 EPS = float(np.finfo(float).eps)
 SPLITTING_L_PER_STEP = 4.0       # world-L drift of splitting ≤ 4 ε per step: rounding, linear in the steps
-# splitting4 (torque-free) applies len(SPLIT4_SEQ) = 21 axis flows per step where splitting applies 5: the same
-# allowance per flow (measured: 2.5 ε per step at most over the quick grid)
-SPLITTING4_L_PER_STEP = SPLITTING_L_PER_STEP * len(TABLEAUX.SPLIT4_SEQ) / len(TABLEAUX.STRANG)
-# symtop4 (torque-free) applies 2 SYMTOP4_STAGES + 1 axis flows and SYMTOP4_STAGES + 1 sphere flows (exact
-# rotations too) per step: the same allowance per flow
-SYMTOP4_L_PER_STEP = SPLITTING_L_PER_STEP * (3 * TABLEAUX.SYMTOP4_STAGES + 2) / len(TABLEAUX.STRANG)
-# symtop_bm6 (torque-free) applies 2 BM6_FLOWS + 1 axis flows and one sphere flow per step: the same allowance per flow
-SYMTOP_BM6_L_PER_STEP = SPLITTING_L_PER_STEP * (2 * TABLEAUX.BM6_FLOWS + 2) / len(TABLEAUX.STRANG)
+# a composition's torque-free step (its printed free program, generated/tableaux.py COMPOSITIONS) applies some exact
+# rotations (axis, top and sphere flows; strang = the STRANG sequence's) where splitting applies 5: the same
+# allowance per rotation (measured: splitting4 2.5 ε per step at most over the quick grid)
+_ROTATIONS = {n: sum(len(TABLEAUX.STRANG) if f == "strang" else f not in ("drift", "momentum", "rate") for f, _ in free)
+              for n, (_, _, free) in TABLEAUX.COMPOSITIONS.items()}
+L_PER_STEP = {n: SPLITTING_L_PER_STEP * k / len(TABLEAUX.STRANG) for n, k in _ROTATIONS.items()}
 RK4_SMALL_WDT = 1e-3
 STATUSES = ("ok", "diverged", "blew_up", "silent_nan", "error", "not_run")
 # Without the C backend, cells longer than this are "not_run" (the quick atlas's |ω|·dt = 1e-4 column,
@@ -490,10 +488,8 @@ def atlas_checks(cells: list[dict], integrators, rtol: float) -> tuple[list[C.Ch
     declare("rk4", _rk4_checks)
     declare("euler", lambda *a: checks.append(_unstable_at_top(cells, "euler", "euler_unstable_at_large_steps")))
     declare("implicit_gyro", _implicit_gyro_checks)
-    declare("splitting", functools.partial(_splitting_checks, name="splitting", bound=SPLITTING_L_PER_STEP))
-    declare("splitting4", functools.partial(_splitting_checks, name="splitting4", bound=SPLITTING4_L_PER_STEP))
-    declare("symtop4", functools.partial(_splitting_checks, name="symtop4", bound=SYMTOP4_L_PER_STEP))
-    declare("symtop_bm6", functools.partial(_splitting_checks, name="symtop_bm6", bound=SYMTOP_BM6_L_PER_STEP))
+    for name, bound in L_PER_STEP.items():
+        declare(name, functools.partial(_splitting_checks, name=name, bound=bound))
     for name in B.ADAPTIVE:
         declare(name, functools.partial(_adaptive_checks, name=name, rtol=rtol))
     return checks, fig
@@ -915,8 +911,8 @@ def _result(cells, integrators, mode, backend, rtol, atol, wdts, ratios, quick) 
                            headline=("cells_silent_nan_or_error", "0 (every cell ok, or a DivergenceError)"))
     result.mode = f"{mode} grid, {len(cells)} cells" + ("; `lab atlas` runs the full grid" if quick else "")
     result["grid"] = {"omega_dt": list(wdts), "ratio": list(ratios), "axis": list(AXES), "integrators": integrators}
-    result["bounds"] = {**BOUNDS, "implicit_gyro_energy_gain": ENERGY_GAIN_BOUND, "splitting_L_world_drift_per_step_eps": SPLITTING_L_PER_STEP,
-                        "splitting4_L_world_drift_per_step_eps": SPLITTING4_L_PER_STEP,
+    result["bounds"] = {**BOUNDS, "implicit_gyro_energy_gain": ENERGY_GAIN_BOUND, "splitting_L_world_drift_per_step_eps": L_PER_STEP["splitting"],
+                        "splitting4_L_world_drift_per_step_eps": L_PER_STEP["splitting4"],
                         "rk4_stability_limit_omega_dt": H.RK4_STABILITY}
     result["hard_case_points"] = hard_points
     result["cells"] = cells

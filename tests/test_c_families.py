@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import sympy as sp
 
 import lavendersim as lv
 from lavendersim import backends as B
@@ -47,21 +48,31 @@ def test_one_effect_row_check_in_c():
         assert "lv_effect_row_check(" in (CSRC / name).read_text(), name
 
 
-def test_printed_programs_are_the_numpy_backends_numbers():
-    """The C programs carry the same doubles the NumPy backend walks (SPLIT4_SEQ, SYMTOP4_*, BM6_*), every stage
-    list is the integrator's gamma, and only composition integrators have one."""
+def test_printed_programs_carry_the_declared_numbers():
+    """The printed programs (C and NumPy walk the same COMPOSITIONS) carry the correctly rounded doubles of the
+    exact fractions derive/tableaux.py declares (split4_sequence, symtop4_sequence, bm6_sequence), every stage list
+    is the integrator's gamma, and only composition integrators have one."""
+    from lavendersim.derive import tableaux as DT
+
+    def dbl(v):
+        return [float(sp.N(x, 50)) for x in v]
+
     assert sorted(T.COMPOSITIONS) == sorted(COMPOSITIONS)
     gamma, kicked, free = T.COMPOSITIONS["splitting4"]
-    assert gamma == T.SPLIT4_GAMMA
-    assert [(int("xyz".index(f[-1])), x) for f, x in free if f.startswith("axis_")] == list(T.SPLIT4_SEQ)
+    assert list(gamma) == dbl(DT.SPLIT4_GAMMA)
+    seq = DT.split4_sequence()
+    assert [(int("xyz".index(f[-1])), x) for f, x in free if f.startswith("axis_")] == list(zip(
+        [a for a, _ in seq], dbl(f for _, f in seq)))
     gamma, kicked, free = T.COMPOSITIONS["symtop4"]
-    assert gamma == T.SYMTOP4_GAMMA
-    assert [x for f, x in free if f == "top_a"] == [x for f, x in free if f == "sphere"] == list(T.SYMTOP4_A_FRAC)
-    assert [x for f, x in free if f == "top_b"] == list(T.SYMTOP4_B_FRAC)
-    assert [x for f, x in kicked if f in ("top_a", "sphere")] == [T.SYMTOP_STRANG_A] * 4
+    fa, fb = DT.symtop4_sequence()
+    assert list(gamma) == dbl(DT.SYMTOP4_GAMMA)
+    assert [x for f, x in free if f == "top_a"] == [x for f, x in free if f == "sphere"] == dbl(fa)
+    assert [x for f, x in free if f == "top_b"] == dbl(fb)
+    assert [x for f, x in kicked if f in ("top_a", "sphere")] == [0.5] * 4     # the Strang step A(h/2) B(h) A(h/2)
     gamma, kicked, free = T.COMPOSITIONS["symtop_bm6"]
-    assert [x for f, x in free if f == "top_b_nz"] == list(T.BM6_P_FRAC)
-    assert [x for f, x in free if f == "top_a"] == list(T.BM6_Q_FRAC)
+    fp, fq = DT.bm6_sequence()
+    assert [x for f, x in free if f == "top_b_nz"] == dbl(fp)
+    assert [x for f, x in free if f == "top_a"] == dbl(fq)
     for name in COMPOSITIONS:
         gamma, kicked, free = T.COMPOSITIONS[name]
         assert kicked[0] == kicked[-1] == ("kick", T.SPLIT_KICK) and free[0] == ("drift", 1.0)
