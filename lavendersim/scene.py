@@ -3,7 +3,8 @@ from __future__ import annotations
 
 import bisect
 import itertools
-from collections.abc import Mapping, Sequence
+import operator
+from collections.abc import Mapping, MutableSequence, Sequence
 from types import MappingProxyType
 from typing import NamedTuple
 
@@ -27,102 +28,303 @@ def _declared(effect: Effect) -> bool:
     return True
 
 
-class _EffectList(list):
-    """Scene.effects: a list that keeps an index of its effects per body, so that add_effect and add_body
-    look up the effects on one body in O(effects on it) instead of scanning them all (issue 30).
+class _Batch:
+    """One effect declared on many bodies (Scene.add_effects, issue 30): the effect class, the bodies (n,) and the
+    validated values — one shared value per parameter, or a read-only (n, ...) float64 column of one value per body.
+    It stands for n per-body Effects, each built only when read (then kept, so it keeps its identity); a scene
+    and a Sim read its columns directly. Immutable, as an Effect is: copies share it."""
 
-    append updates the index in O(1); any other change (insert, remove, slice assignment, sort, …) drops it
-    and the next look-up rebuilds it from the list, so the index is never stale however the list is edited."""
+    __slots__ = ("cls", "bodies", "shared", "cols", "_made", "_off", "_where")
 
-    __slots__ = ("_ix",)
+    def __init__(self, cls, bodies: list, shared: dict, cols: dict, made: dict | None = None, off: int = 0) -> None:
+        self.cls, self.bodies, self.shared, self.cols = cls, bodies, shared, cols
+        self._made: dict = made if made is not None else {}    # the effects built, by position + _off (shared by parts)
+        self._off = off
+        self._where: dict | None = None
 
-    def __init__(self, *args) -> None:
-        super().__init__(*args)
+    name = property(lambda self: self.cls.name)
+    code = property(lambda self: self.cls.code)
+    spec = property(lambda self: self.cls.spec)
+    per_body = property(lambda self: self.cls.per_body)
+
+    def __len__(self) -> int:
+        return len(self.bodies)
+
+    def __reduce__(self):   # its first effect pickles its class (a user effect's set is registered on load)
+        return (_batch_like, (self.effect(0), self.bodies, self.shared, self.cols))
+
+    def __copy__(self):
+        return self
+
+    def __deepcopy__(self, memo):
+        return self
+
+    def effect(self, j: int) -> Effect:
+        """The j-th effect: built as Effect.__init__ would after validating (it refuses setattr), once."""
+        e = self._made.get(j + self._off)
+        if e is None:
+            e = object.__new__(self.cls)
+            values = {f: (self.shared[f] if f in self.shared else
+                          float(self.cols[f][j]) if self.cols[f].ndim == 1 else self.cols[f][j]) for f in self.cls.fields}
+            e.__dict__["body"] = self.bodies[j]
+            e.__dict__["values"] = MappingProxyType(values)
+            self._made[j + self._off] = e
+        return e
+
+    def part(self, lo: int, hi: int) -> "_Batch":
+        """Effects lo..hi-1 as a batch (views of the columns; the effects built, and built later, shared)."""
+        return _Batch(self.cls, self.bodies[lo:hi], self.shared, {f: a[lo:hi] for f, a in self.cols.items()},
+                      self._made, self._off + lo)
+
+    def where(self, body: str) -> list:
+        """The positions j of `body` in this batch (in order)."""
+        if self._where is None:
+            w = dict(zip(self.bodies, range(len(self.bodies))))
+            if len(w) == len(self.bodies):
+                self._where = w
+            else:
+                self._where = {}
+                for j, b in enumerate(self.bodies):
+                    self._where.setdefault(b, []).append(j)
+        j = self._where.get(body)
+        return [] if j is None else j if isinstance(j, list) else [j]
+
+    def column(self, f: str) -> np.ndarray:
+        """Parameter f of every effect, (n, *shape) float64 (a shared value broadcast, read-only)."""
+        if f in self.cols:
+            return self.cols[f]
+        v = np.asarray(self.shared[f], dtype=np.float64)
+        return np.broadcast_to(v, (len(self.bodies),) + v.shape)
+
+    def params_flat(self) -> np.ndarray:
+        """Effect.params_flat of every effect, stacked (n, n_params)."""
+        n = len(self.bodies)
+        cols = [self.column(f).reshape(n, -1) for f in self.cls.fields]
+        return np.concatenate(cols, axis=1) if cols else np.zeros((n, 0))
+
+
+def _batch_like(first: Effect, bodies: list, shared: dict, cols: dict) -> _Batch:
+    """Unpickle a _Batch: its first effect (rebuilt and validated by Effect's unpickling) names the class and
+    validates the shared values; each column is checked against its parameter's declared rule again (as
+    add_effects' screen does) and made read-only."""
+    cls = type(first)
+    specs = {p.name: p for p in (cls.spec.params if cls.spec is not None else ())}
+    for f, a in cols.items():
+        a = np.asarray(a, dtype=np.float64)
+        if f not in specs or a.shape[:1] != (len(bodies),) or _breaks_rule(a, specs[f]).any():
+            raise V.LavenderInputError(f"{cls.name}.{f}", "a pickled batch's column breaks its declared rule or shape")
+        a.flags.writeable = False
+        cols[f] = a
+    shared = {f: first.values[f] for f in shared}
+    return _Batch(cls, list(bodies), shared, cols, {0: first})
+
+
+class _EffectList(MutableSequence):
+    """Scene.effects: the declared effects in order, a mutable sequence of Effects (edit it as a list). An
+    add_effects call is kept as one _Batch (its Effects built when read), so 1e5 per-body effects cost their
+    arrays (issue 30). It keeps an index of its effects per body, so that add_effect and add_body look up the
+    effects on one body in O(effects on it + batches) instead of scanning them all.
+
+    append keeps the index; any other edit drops it (rebuilt on the next look-up) and, where it falls inside a
+    batch, splits the batch there first, so the index is never stale however the list is edited."""
+
+    __slots__ = ("_items", "_ends", "_ix")
+
+    def __init__(self, effects=()) -> None:
+        self._items: list = list(effects.items() if isinstance(effects, _EffectList) else effects)
+        self._ends: list | None = None
         self._ix: dict | None = None
 
-    def __reduce_ex__(self, protocol):   # pickles as a plain list's items (the index is rebuilt on demand)
-        return (_EffectList, (list(self),))
+    def items(self) -> list:
+        """The entries as stored: Effects and _Batches (do not modify)."""
+        return self._items
+
+    def __reduce_ex__(self, protocol):   # pickles its entries (a batch as its columns); the index is rebuilt
+        return (_EffectList, (list(self._items),))
+
+    def _bounds(self) -> list:
+        if self._ends is None:
+            self._ends = list(itertools.accumulate(len(it) if type(it) is _Batch else 1 for it in self._items))
+        return self._ends
+
+    def __len__(self) -> int:
+        ends = self._bounds()
+        return ends[-1] if ends else 0
+
+    def _locate(self, k: int) -> tuple[int, int]:
+        """(entry, position in it) of effect k (0 <= k < len)."""
+        ends = self._bounds()
+        i = bisect.bisect_right(ends, k)
+        return i, k - (ends[i - 1] if i else 0)
+
+    def __getitem__(self, k):
+        if isinstance(k, slice):
+            return [self[j] for j in range(*k.indices(len(self)))]
+        n = len(self)
+        k = operator.index(k)
+        if not -n <= k < n:
+            raise IndexError("effect index out of range")
+        i, j = self._locate(k % n)
+        it = self._items[i]
+        return it.effect(j) if type(it) is _Batch else it
+
+    def __iter__(self):
+        for it in self._items:
+            if type(it) is _Batch:
+                yield from map(it.effect, range(len(it)))
+            else:
+                yield it
+
+    def __eq__(self, other) -> bool:
+        return isinstance(other, (list, tuple, _EffectList)) and list(self) == list(other)
+
+    __hash__ = None  # type: ignore[assignment]
+
+    def __repr__(self) -> str:
+        return repr(list(self))
+
+    def _split(self, k: int) -> int:
+        """Make effect k start an entry (splitting a batch there); its entry index (len(entries) at the end)."""
+        if k >= len(self):
+            return len(self._items)
+        i, j = self._locate(k)
+        if j:
+            b = self._items[i]
+            self._items[i:i + 1] = [b.part(0, j), b.part(j, len(b))]
+            self._ends = None
+            return i + 1
+        return i
+
+    def _edited(self) -> None:
+        self._ends = self._ix = None
+
+    def __setitem__(self, k, value) -> None:
+        if isinstance(k, slice) or isinstance(value, _Batch):
+            effects = list(self)
+            effects[k] = value
+            self._items = effects
+        else:
+            n = len(self)
+            k = operator.index(k) % n if -n <= k < n else operator.index(k)
+            if not 0 <= k < n:
+                raise IndexError("effect index out of range")
+            self._items[self._split(k):self._split(k + 1)] = [value]   # (the second split after the first)
+        self._edited()
+
+    def __delitem__(self, k) -> None:
+        lo, hi, step = k.indices(len(self)) if isinstance(k, slice) else (None, None, 1)
+        if isinstance(k, slice) and step == 1:
+            a = self._split(lo)
+            b = self._split(max(lo, hi))
+            del self._items[a:b]
+        elif isinstance(k, slice):
+            effects = list(self)
+            del effects[k]
+            self._items = effects
+        else:
+            n = len(self)
+            if not -n <= k < n:
+                raise IndexError("effect index out of range")
+            k = operator.index(k) % n
+            a = self._split(k)
+            del self._items[a:self._split(k + 1)]
+        self._edited()
+
+    def insert(self, k: int, value) -> None:
+        n = len(self)
+        k = max(0, min(n, k + n if k < 0 else k))
+        self._items.insert(self._split(k), value)
+        self._edited()
+
+    def clear(self) -> None:
+        self._items = []
+        self._edited()
+
+    def sort(self, *, key=None, reverse: bool = False) -> None:
+        """Sort in place, as list.sort."""
+        self._items = sorted(self, key=key, reverse=reverse)   # type: ignore[arg-type]
+        self._edited()
+
+    def append(self, e) -> None:
+        """Append an Effect, or a _Batch (one entry for its effects)."""
+        self._items.append(e)
+        if self._ends is not None:
+            self._ends.append(len(self) + (len(e) if type(e) is _Batch else 1))
+        if self._ix is not None:
+            self._add(len(self) - (len(e) if type(e) is _Batch else 1), e)
 
     def _index(self) -> dict:
-        """{"per_body": {(name, body): count}, "models": {body: [effect]}, "on": {body: [(position, effect)]},
-        "all": [(position, effect)]}: per-body effects by name and body and by body; the other effects by their
-        body (None: every body); each in list order."""
+        """{"per_body": {(name, body): count}, "models": {body: [(position, effect)]}, "on": {body: [(position, effect)]},
+        "all": [(position, effect)], "batches": [(position of its first effect, batch)]}: per-body Effects by name
+        and body and by body; the other Effects by their body (None: every body); each in list order."""
         if self._ix is None:
-            self._ix = {"per_body": {}, "models": {}, "on": {}, "all": []}
-            for k, e in enumerate(self):
-                self._add(k, e)
+            self._ix = {"per_body": {}, "models": {}, "on": {}, "all": [], "batches": []}
+            k = 0
+            for it in self._items:
+                self._add(k, it)
+                k += len(it) if type(it) is _Batch else 1
         return self._ix
 
     def _add(self, k: int, e) -> None:
         ix = self._index()
-        if getattr(e, "per_body", False):
+        if type(e) is _Batch:
+            ix["batches"].append((k, e))
+        elif getattr(e, "per_body", False):
             key = (e.name, e.body)
             ix["per_body"][key] = ix["per_body"].get(key, 0) + 1
-            ix["models"].setdefault(e.body, []).append(e)
+            ix["models"].setdefault(e.body, []).append((k, e))
         elif getattr(e, "body", None) is None:
             ix["all"].append((k, e))
         else:
             ix["on"].setdefault(e.body, []).append((k, e))
 
-    def append(self, e) -> None:
-        super().append(e)
-        if self._ix is not None:
-            self._add(len(self) - 1, e)
-
-    def append_many(self, effects: list) -> None:
-        """Append effects in order, keeping the index (list.extend drops it)."""
-        start = len(self)
-        list.extend(self, effects)
-        ix = self._ix
-        if ix is None:
-            return
-        if all(getattr(e, "per_body", False) for e in effects):    # (a batch is one class: one pass, inline)
-            pb, models = ix["per_body"], ix["models"]
-            for e in effects:
-                key = (e.name, e.body)
-                pb[key] = pb.get(key, 0) + 1
-                models.setdefault(e.body, []).append(e)
-        elif all(getattr(e, "body", None) is not None and not getattr(e, "per_body", False) for e in effects):
-            on = ix["on"]
-            for k, e in enumerate(effects, start):
-                on.setdefault(e.body, []).append((k, e))
-        else:
-            for k, e in enumerate(effects, start):
-                self._add(k, e)
-
     def has_per_body(self, name: str, body: str) -> bool:
         """A per-body effect `name` on `body` is in the list."""
-        return self._index()["per_body"].get((name, body), 0) > 0
+        ix = self._index()
+        return ix["per_body"].get((name, body), 0) > 0 or any(
+            b.per_body and b.name == name and b.where(body) for _, b in ix["batches"])
+
+    def have_per_body(self, name: str, bodies: list) -> np.ndarray:
+        """has_per_body(name, b) for each b of `bodies`, (n,) bool."""
+        ix = self._index()
+        out = np.fromiter(((name, b) in ix["per_body"] for b in bodies), bool, len(bodies))
+        for _, bt in ix["batches"]:
+            if bt.per_body and bt.name == name:
+                out |= np.fromiter((bool(bt.where(b)) for b in bodies), bool, len(bodies))
+        return out
 
     def models_on(self, body: str) -> list:
         """The per-body effects on `body`, in list order."""
-        return self._index()["models"].get(body, [])
+        ix = self._index()
+        mine = ix["models"].get(body, [])
+        batched = [(k + j, b.effect(j)) for k, b in ix["batches"] if b.per_body for j in b.where(body)]
+        return [e for _, e in (sorted(mine + batched, key=lambda ke: ke[0]) if batched else mine)]
 
     def forces_on(self, body: str | None) -> list:
         """The effects that are not per-body and act on `body` (body None and, if given, body == `body`),
         in list order."""
         ix = self._index()
-        mine = ix["on"].get(body, []) if body is not None else []
+        mine = list(ix["on"].get(body, [])) if body is not None else []
+        if body is not None:
+            mine += [(k + j, b.effect(j)) for k, b in ix["batches"] if not b.per_body for j in b.where(body)]
         if not mine:
             return [e for _, e in ix["all"]]
-        if not ix["all"]:
-            return [e for _, e in mine]
         return [e for _, e in sorted(ix["all"] + mine, key=lambda ke: ke[0])]
 
-
-def _dropping_index(name):
-    def method(self, *args, **kwargs):
-        self._ix = None
-        return getattr(list, name)(self, *args, **kwargs)
-    method.__name__ = name
-    method.__doc__ = getattr(list, name).__doc__
-    return method
-
-
-for _name in ("__setitem__", "__delitem__", "__iadd__", "__imul__", "extend", "insert", "remove", "pop", "clear",
-              "sort", "reverse"):
-    setattr(_EffectList, _name, _dropping_index(_name))
-del _name
+    def find(self, effect) -> int | None:
+        """The position of `effect` (this very object) in the list, or None; a batch's effects found by body."""
+        k = 0
+        for it in self._items:
+            if type(it) is _Batch:
+                for j in it.where(getattr(effect, "body", None)) if isinstance(getattr(effect, "body", None), str) else ():
+                    if it._made.get(j + it._off) is effect:
+                        return k + j
+                k += len(it)
+            else:
+                if it is effect:
+                    return k
+                k += 1
+        return None
 
 
 class _BodyTable(Mapping):
@@ -210,14 +412,18 @@ class _BodyTable(Mapping):
 
     def arrays(self) -> tuple[np.ndarray, np.ndarray, list]:
         """(initial states (n, 13), [m, I_b] rows (n, 4), the bodies given as Body objects, in order) of the first
-        len(self) bodies: fresh arrays; the given bodies' rows are read from them now (a Body changed past its
-        immutability is then caught by _revalidate)."""
+        len(self) bodies: a fresh state array; the rows of one add_bodies call (read-only, shared), else a fresh
+        array; the given bodies' rows are read from them now (a Body changed past its immutability is then caught
+        by _revalidate)."""
         n, c = len(self), self._c
-        state, params = np.empty((n, STATE_SIZE)), np.empty((n, 4))
+        shared = len(c["batches"]) == 1 and not c["given"] and n > 0    # one add_bodies call: its read-only rows
+        state, params = np.empty((n, STATE_SIZE)), c["batches"][0][2][:n] if shared else np.empty((n, 4))
         for start, x, p in c["batches"]:
             k = min(len(x), n - start)
             if k > 0:
-                state[start:start + k], params[start:start + k] = x[:k], p[:k]
+                state[start:start + k] = x[:k]
+                if params.flags.writeable:
+                    params[start:start + k] = p[:k]
         idx = [i for i in c["given"] if i < n]
         given = [c["given"][i] for i in idx]
         if given:
@@ -409,30 +615,44 @@ class Scene:
         # the docstring is add_bodies's (below), set after it
         return add_bodies(self, names, masses, I_b, p_w=p_w, q=q, v_w=v_w, omega_b=omega_b, omega_w=omega_w)
 
-    def add_effects(self, effect: str, bodies, **params) -> list[Effect]:
+    def add_effects(self, effect: str, bodies, **params) -> Sequence[Effect]:
         """Declare one effect on each of many bodies at once: what ``add_effect(effect, body=b, **params_b)`` for
-        each b in order declares, validated over whole arrays (issue 30).
+        each b in order declares, validated over whole arrays and kept as one batch (issue 30).
+
+        The batch is stored as its arrays (one entry of ``scene.effects``, which still reads as the n per-body
+        Effects, each built when first read): 1e5 per-body effects cost their numbers, not 1e5 objects.
 
         Parameters
         ----------
         effect : str
             An effect name acting on one body (``"applied_torque"``, ``"reaction_wheels"``, ...).
         bodies : sequence of str, (n,)
-            The body of each effect, in order.
+            The body of each effect, in order (a force effect may name a body more than once).
         **params
-            The effect's parameters by name: a value of the declared shape is shared by every effect; an array
-            with one more leading axis of length n gives each body its own, e.g. ``torque_w`` (n, 3).
+            The effect's parameters by name, in the units and frames its declaration states: a value of the
+            declared shape is shared by every effect; an array with one more leading axis of length n gives each
+            body its own, e.g. ``torque_w`` (n, 3), N·m, world frame. The arrays are copied.
 
         Returns
         -------
-        list of Effect
-            The effects as stored, in order.
+        sequence of Effect, (n,)
+            The effects as stored, in order (``effects[k]`` is ``scene.effects``'s object for that effect).
 
         Raises
         ------
         LavenderInputError
-            The error ``add_effect`` raises for the first body whose effect it refuses (the same field and rule),
-            naming that body; nothing is added.
+            The error ``add_effect`` raises for the first body whose effect it refuses (the same field and rule,
+            e.g. ``applied_torque.torque_w``), naming that body (``bodies[17] = 'b17'``); nothing is added.
+
+        Examples
+        --------
+        >>> import numpy as np, lavendersim as lv
+        >>> scene = lv.Scene()
+        >>> names = [f"b{i}" for i in range(3)]
+        >>> bodies = scene.add_bodies(names, np.ones(3), np.tile([0.02, 0.03, 0.04], (3, 1)))
+        >>> torques = scene.add_effects("applied_torque", names, torque_w=[[0, 0, 1e-3], [0, 1e-3, 0], [1e-3, 0, 0]])
+        >>> torques[1].body, torques[1].torque_w.tolist(), len(scene.effects)
+        ('b1', [0.0, 0.001, 0.0], 3)
         """
         return _add_effects(self, effect, bodies, params)
 
@@ -503,9 +723,9 @@ class Scene:
         if frames is not None:
             for i in frames.idx:
                 state[i] = frames.internal_row(int(i), state[i])
-        forces = [e for e in self.effects if not e.per_body]
+        forces = [e for e in self.effects.items() if not e.per_body]      # Effects and batches
         effects, rows_of = _force_table(self, forces, frames, nb)
-        return Tables(state, params, effects, forces, rows_of, frames)
+        return Tables(state, params, effects, _EffectList(forces), rows_of, frames)
 
 
 # relative margin of the vectorized overflow bound: covers the rounding of the exact check's sums and norms
@@ -548,10 +768,14 @@ def _load_sums(every: list, effects: "_EffectList | None", x: np.ndarray, params
                     idx, ps = groups.setdefault(e.code, ([], []))
                     idx.append(pos[body])
                     ps.append(e.params_flat())
-        for code, (idx, ps) in groups.items():
-            k = np.asarray(idx, dtype=np.int64)
+        runs = [(code, np.asarray(idx, dtype=np.int64), np.stack(ps)) for code, (idx, ps) in groups.items()]
+        for _, b in (effects._index()["batches"] if effects is not None else ()):
+            if not b.per_body and _declared(b):     # a batch of force effects: its columns, its bodies in x
+                k = np.fromiter((pos[name] if name in pos else -1 for name in b.bodies), np.int64, len(b))
+                runs.append((b.code, k[k >= 0], b.params_flat()[k >= 0]))
+        for code, k, P in runs:
             xs = x[k]
-            f, t = numpy_apply(code)(np.stack(ps), xs, xs[:, LY.STATE_V_W], m[k], I_b[k])
+            f, t = numpy_apply(code)(P, xs, xs[:, LY.STATE_V_W], m[k], I_b[k])
             np.add.at(SF, k, _row_norms(f, k.size))
             np.add.at(ST, k, _row_norms(t, k.size))
     return SF, ST
@@ -582,37 +806,42 @@ class Tables(NamedTuple):
     state: np.ndarray
     params: np.ndarray
     effects: np.ndarray
-    forces: list
-    rows_of: list
+    forces: "_EffectList"        # the force effects (rows_of[k]: the rows of forces[k])
+    rows_of: "_RowsOf"
     frames: PrincipalFrames | None
 
 
-def _force_table(scene: Scene, forces: list, frames: PrincipalFrames | None, nb: int) -> tuple[np.ndarray, list]:
-    """The effect table of the force effects (one row each, [code, body, parameters …]; an every-body effect with a
-    body-frame parameter in a scene with a rotated body one row per body) and each effect's rows. Runs of effects
-    of one class that need no rotation are stacked batched (the rows Effect.row writes, without a call each)."""
-    pos, at = scene._bodies.positions, scene._bodies._c["pos"]
+def _force_table(scene: Scene, forces: list, frames: PrincipalFrames | None, nb: int) -> tuple[np.ndarray, "_RowsOf"]:
+    """The effect table of the force effects (entries of scene.effects: Effects and batches; one row each,
+    [code, body, parameters …]; an every-body effect with a body-frame parameter in a scene with a rotated body one
+    row per body) and each effect's rows. Runs of effects of one class that need no rotation, and batches, are
+    stacked batched (the rows Effect.row writes, without a call each)."""
+    at = scene._bodies._c["pos"]
     blocks: list[np.ndarray] = []
-    rows_of: list[list[int]] = []
+    rows_of = _RowsOf()
     k, lo = 0, 0
     while lo < len(forces):
         e = forces[lo]
         hi = lo + 1
-        if _unrotated(e, frames, pos):
-            while hi < len(forces) and type(forces[hi]) is type(e) and _unrotated(forces[hi], frames, pos):
+        if type(e) is _Batch and not _unrotated(e, frames, scene._bodies.positions):
+            forces[lo:hi] = [e.effect(j) for j in range(len(e))]     # (a rotated body in it: effect by effect)
+            continue
+        if type(e) is _Batch or _unrotated(e, frames, scene._bodies.positions):
+            while (type(e) is not _Batch and hi < len(forces) and type(forces[hi]) is type(e)
+                   and _unrotated(forces[hi], frames, scene._bodies.positions)):
                 hi += 1
-            run = forces[lo:hi]
-            body = np.fromiter((-1 if f.body is None else at.get(f.body, -2) for f in run), np.float64, len(run))
+            run = e.bodies if type(e) is _Batch else [f.body for f in forces[lo:hi]]
+            body = np.fromiter((-1 if b is None else at.get(b, -2) for b in run), np.float64, len(run))
             if (body == -2).any() or (body >= nb).any():   # a body not (yet) in the scene: index raises naming it
-                scene.index(run[int(np.flatnonzero((body == -2) | (body >= nb))[0])].body)
-            flat = _stacked_params(run)
+                scene.index(run[int(np.flatnonzero((body == -2) | (body >= nb))[0])])
+            flat = e.params_flat() if type(e) is _Batch else _stacked_params(forces[lo:hi])
             block = np.zeros((len(run), ROW_PARAMS + flat.shape[1]))
             block[:, ROW_CODE], block[:, ROW_BODY], block[:, ROW_PARAMS:] = e.code, body, flat
-            rows_of.extend([j] for j in range(k, k + len(run)))
+            rows_of.run(k, len(run))
         else:
             rows = _effect_rows(e, -1 if e.body is None else scene.index(e.body), 0, frames, nb)
             block = np.array(rows, dtype=np.float64).reshape(len(rows), -1)
-            rows_of.append(list(range(k, k + len(block))))
+            rows_of.one(list(range(k, k + len(block))))
         blocks.append(block)
         k += len(block)
         lo = hi
@@ -625,10 +854,45 @@ def _force_table(scene: Scene, forces: list, frames: PrincipalFrames | None, nb:
     return table, rows_of
 
 
+class _RowsOf(Sequence):
+    """rows_of[k]: the effect-table rows of the k-th force effect (a list of ints), kept as runs of one row per
+    effect (a batch's n effects cost one run, not n lists)."""
+
+    def __init__(self) -> None:
+        self._starts: list[int] = []      # first effect of each run
+        self._runs: list[tuple] = []      # (first row, count) or (explicit rows,)
+        self._n = 0
+
+    def run(self, row: int, count: int) -> None:
+        self._starts.append(self._n)
+        self._runs.append((row, count))
+        self._n += count
+
+    def one(self, rows: list) -> None:
+        self._starts.append(self._n)
+        self._runs.append((rows,))
+        self._n += 1
+
+    def __len__(self) -> int:
+        return self._n
+
+    def __getitem__(self, k):
+        if isinstance(k, slice):
+            return [self[j] for j in range(*k.indices(self._n))]
+        if not -self._n <= k < self._n:
+            raise IndexError(k)
+        k %= self._n
+        i = bisect.bisect_right(self._starts, k) - 1
+        r = self._runs[i]
+        return list(r[0]) if len(r) == 1 else [r[0] + k - self._starts[i]]
+
+
 def _unrotated(e: Effect, frames: PrincipalFrames | None, pos) -> bool:
     """Effect e's row needs no rotation into a principal frame (see _effect_rows)."""
     if frames is None or not any(p.frame == "body" for p in (e.spec.params if e.spec is not None else ())):
         return True
+    if type(e) is _Batch:
+        return all(b in pos and frames.rotation(pos[b]) is None for b in e.bodies)
     return e.body is not None and e.body in pos and frames.rotation(pos[e.body]) is None
 
 
@@ -827,19 +1091,20 @@ Scene.add_bodies.__doc__ = add_bodies.__doc__
 
 # ---- batched add_effects (issue 30): add_effect's checks over whole arrays ------------------------------------
 
-def _add_effects(scene: Scene, name, bodies, params: dict) -> list[Effect]:
+def _add_effects(scene: Scene, name, bodies, params: dict) -> Sequence[Effect]:
     """Scene.add_effects: a vectorized screen flags every row that might fail one of add_effect's checks (a
     parameter's rule, an unknown or repeated body, the body check of wheels and joints, an overflowing load);
-    the unflagged stretches are appended directly and each flagged row goes through add_effect itself, in order.
+    the unflagged stretches are appended as batches and each flagged row goes through add_effect itself, in order.
     The screen never clears a row add_effect would refuse, so the first refusal is add_effect's; it is raised
-    naming the body, after every effect of this call has been taken out again."""
+    naming the body, after every effect of this call has been taken out again. Accepted, the call's effects
+    become one _Batch (the effects add_effect built kept in it)."""
     if isinstance(bodies, (str, bytes)) or not hasattr(bodies, "__len__"):
         raise V.LavenderInputError("bodies", "expected a sequence of body names", f", got {V._describe(bodies)}")
     bodies = list(bodies)
     n = len(bodies)
     if n == 0:
-        return []
-    per_row = {}                    # parameter -> (n, ...) float64 array of one value per body
+        return _BatchEffects(None)
+    per_row = {}                    # parameter -> (n, ...) float64 array of one value per body (a copy)
     shared = dict(params)
     cls = EFFECTS.get(name) if isinstance(name, str) else None
     flags = np.zeros(n, bool)
@@ -860,8 +1125,6 @@ def _add_effects(scene: Scene, name, bodies, params: dict) -> list[Effect]:
     pos = table._c["pos"]
     idx = np.fromiter((pos.get(b, -1) if isinstance(b, str) and b else -1 for b in bodies), np.int64, n)
     flags |= idx < 0
-    first = scene.effects.__len__()
-    effects = []
     if not flags.all() and cls is not None:   # (cls None: every row is flagged)
         try:   # a shared value the screen cannot read is judged by add_effect on row 0: then every row goes there
             flags |= _model_flags(scene, cls, idx, per_row, shared, bodies)
@@ -869,23 +1132,57 @@ def _add_effects(scene: Scene, name, bodies, params: dict) -> list[Effect]:
                 flags |= _load_flags(scene, cls, idx, per_row, shared, n)
         except Exception:   # noqa: BLE001
             flags[:] = True
+    items = scene.effects.items()
+    first = len(items)
+    made: dict[int, Effect] = {}
     try:
         for lo, hi, bad in _stretches(flags):
-            if bad:
-                for i in range(lo, hi):
-                    try:
-                        scene.add_effect(name, body=bodies[i], **_row_params(shared, per_row, i))
-                    except V.LavenderInputError as err:
-                        raise V.LavenderInputError(err.field, err.rule, f"{err.detail} (bodies[{i}] = {bodies[i]!r})") from None
-                effects.extend(scene.effects[len(scene.effects) - (hi - lo):])
-            else:
-                new = _make_rows(scene.effects[first], shared, per_row, bodies, lo, hi)
-                scene.effects.append_many(new)
-                effects.extend(new)
-    except BaseException:
-        del scene.effects[first:]       # nothing half-applied
-        raise
-    return effects
+            for i in range(lo, hi) if bad else ():
+                try:
+                    made[i] = scene.add_effect(name, body=bodies[i], **_row_params(shared, per_row, i))
+                except V.LavenderInputError as err:
+                    raise V.LavenderInputError(err.field, err.rule, f"{err.detail} (bodies[{i}] = {bodies[i]!r})") from None
+            if not bad:
+                scene.effects.append(_Batch(cls, bodies[lo:hi], _shared_values(made[0], per_row),
+                                            {f: a[lo:hi] for f, a in per_row.items()}))
+        batch = _Batch(type(made[0]), bodies, _shared_values(made[0], per_row), per_row, made)
+    finally:
+        del items[first:]       # the call's entries: replaced by one batch, or (refused) nothing half-applied
+        scene.effects._edited()
+    scene.effects.append(batch)
+    return _BatchEffects(batch)
+
+
+def _shared_values(template: Effect, per_row: dict) -> dict:
+    """The validated values of the parameters an add_effects call shares (those of its first effect)."""
+    return {f: v for f, v in template.values.items() if f not in per_row}
+
+
+class _BatchEffects(Sequence):
+    """The effects one add_effects call declared, in order (each built when first read; see _Batch)."""
+
+    def __init__(self, batch: _Batch | None) -> None:
+        self._b = batch
+
+    def __len__(self) -> int:
+        return 0 if self._b is None else len(self._b)
+
+    def __getitem__(self, i):
+        if isinstance(i, slice):
+            return [self[k] for k in range(*i.indices(len(self)))]
+        n = len(self)
+        if not -n <= i < n:
+            raise IndexError(i)
+        assert self._b is not None
+        return self._b.effect(i % n)
+
+    def __eq__(self, other) -> bool:
+        return isinstance(other, (list, tuple, Sequence)) and list(self) == list(other)
+
+    __hash__ = None  # type: ignore[assignment]
+
+    def __repr__(self) -> str:
+        return repr(list(self))
 
 
 def _per_body_values(v, p, n: int) -> np.ndarray | None:
@@ -899,7 +1196,9 @@ def _per_body_values(v, p, n: int) -> np.ndarray | None:
         return None
     if a.dtype.kind not in "iuf" or a.ndim != len(p.shape) + 1 or a.shape[0] != n:
         return None
-    return np.asarray(a, dtype=np.float64)
+    out = np.array(a, dtype=np.float64)     # a copy: the caller's array stays theirs (and writeable)
+    out.flags.writeable = False
+    return out
 
 
 def _breaks_rule(a: np.ndarray, p) -> np.ndarray:
@@ -923,8 +1222,7 @@ def _model_flags(scene: Scene, cls, idx: np.ndarray, per_row: dict, shared: dict
     flags = np.zeros(n, bool)
     if not cls.per_body:
         return flags
-    ix = scene.effects._index()["per_body"]
-    flags |= np.fromiter(((cls.name, b) in ix for b in bodies), bool, n)
+    flags |= scene.effects.have_per_body(cls.name, bodies)
     _, first = np.unique(idx, return_index=True)
     repeat = np.ones(n, bool)
     repeat[first] = False
@@ -991,27 +1289,3 @@ def _stretches(flags: np.ndarray):
 
 def _row_params(shared: dict, per_row: dict, i: int) -> dict:
     return {**shared, **{f: a[i] for f, a in per_row.items()}}
-
-
-def _make_rows(template: Effect, shared: dict, per_row: dict, bodies: list, lo: int, hi: int) -> list[Effect]:
-    """Effects lo..hi-1 like `template` (the call's first effect, which add_effect validated): its values for the
-    shared parameters, read-only rows of the validated per-body arrays for the others; built as Effect.__init__
-    would after validating (it refuses setattr)."""
-    cls, tv = type(template), template.values
-    cols = {}
-    for f, a in per_row.items():
-        a.flags.writeable = False
-        cols[f] = a[lo:hi].tolist() if a.ndim == 1 else list(a[lo:hi])
-    base = {f: tv[f] for f in cls.fields}      # in field order, as Effect.__init__ builds it
-    out = []
-    new = object.__new__
-    for j, i in enumerate(range(lo, hi)):
-        e = new(cls)
-        d = e.__dict__
-        values = base.copy()
-        for f, col in cols.items():
-            values[f] = col[j]
-        d["body"] = bodies[i]
-        d["values"] = MappingProxyType(values)
-        out.append(e)
-    return out

@@ -45,7 +45,7 @@ class SimModel:
     rows = _attr(lambda self: _ro(self._sim._models.rows), """ndarray (nb, MODEL_SIZE), read-only: per-body
         model rows (generated/layout.py MODEL_LAYOUT: kind, I_p, r_b, anchor_w, J, limits, c_w, A_b). A plain body's
         row (kind 0: no joint, no wheels) is all zeros and ignored by the steppers; its moments are in ``sim.params``.""")
-    wheel_counts = _attr(lambda self: _ro(np.asarray(self._sim._wheel_n)),
+    wheel_counts = _attr(lambda self: _ro(self._sim._wheel_n.astype(np.int64)),
                             "ndarray (nb,) int, read-only: reaction wheels per body (0 without).")
     state = _attr(lambda self: _ro(self._sim._x), """ndarray (nb, 13), read-only: the stepped state rows
         [p_w, q, v_w, omega_b] (STATE layout; principal frames), float64 or float32.""")

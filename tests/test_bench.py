@@ -18,7 +18,7 @@ from conftest import NUMPY_SLOW, have
 from lavendersim import bench
 
 
-N_TARGETS = 26   # target lines besides the per-body ones
+N_TARGETS = 30   # target lines besides the per-body ones (scenes.py: + the wheeled build and the 1e6 lines)
 
 
 @pytest.fixture(scope="module")
@@ -63,6 +63,9 @@ def test_quick_json_is_well_formed(quick):
     sc = d["scenes"]   # the scene-build section: --quick builds a tenth of the target's 1e4 bodies
     assert sc["n_bodies"] == bench.scenes.SCENE_N // 10
     assert 0 < sc["cases"]["build"]["ns_min"] and sc["state_ratio"] > 0 and sc["one_by_one_over_batched"] > 0
+    # issue 30's scaling lines: the wheeled build (a tenth of 1e5 in --quick); the 1e6 process in full runs only
+    assert sc["n_wheeled"] == bench.scenes.WHEELED_N // 10 and sc["cases"]["build_wheeled"]["ns_min"] > 0
+    assert "plain_big" in sc and sc["plain_big"] is None
     fi = d["inertia"]   # full tensors against principal moments, in the same rounds
     assert list(fi["sizes"]) == [str(n) for n in bench.full_inertia.SIZES_QUICK]
     assert all(v["run_ratio"] > 0 and v["read_ratio"] > 0 for v in fi["sizes"].values())
@@ -241,3 +244,10 @@ def test_dopri5_peer_computes_the_sims_trajectory():
     a = bench.dopri5.agreement(peer, bench.single_sim, bench.initial_state(), bench.inertia(), n_steps=300)
     assert a["status"] == -1 and a["max_abs_diff"] <= 1e-12, a
     assert a["rhs_evals_lavendersim"] == a["rhs_evals_hand"] > 300 * 6, a
+
+
+def test_the_plain_big_process_reports_build_memory_and_step_ratio():
+    """bench.scenes.plain_big (full runs: 1e6 bodies in a fresh process), small here: its figures are there."""
+    d = bench.scenes.plain_big(3000, 1000, 1)
+    assert d["n_bodies"] == 3000 and d["small_n"] == 1000 and d["build_s"] > 0 and d["rss_per_body_B"] >= 0
+    assert d["ns_big"] > 0 and d["ns_small"] > 0 and d["step_ratio"] == d["ns_big"] / d["ns_small"]

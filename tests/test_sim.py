@@ -429,9 +429,9 @@ def test_c_screen_serves_an_elongated_spinning_body_and_agrees_with_the_numpy_ch
 
 
 def test_chunks_of_large_scenes_on_c_are_long_and_change_nothing(monkeypatch):
-    """On the C backend a fixed-step run of a large scene is chunked in at least CHUNK_MIN_STEPS steps (within
-    CHUNK_WORK_MAX evaluations); NumPy and dopri5 keep CHUNK_WORK's chunks. The result is bitwise that of short
-    chunks."""
+    """On the C and NumPy backends a fixed-step run of a large scene is chunked in at least CHUNK_MIN_STEPS steps
+    (within CHUNK_WORK_MAX, NumPy CHUNK_WORK_MAX_NUMPY evaluations); dopri5 keeps CHUNK_WORK's chunks. The result
+    is bitwise that of short chunks."""
     from lavendersim import sim as S
 
     assert S.chunk_steps(4, False) == S.chunk_steps(4, True) == S.CHUNK_WORK // 4
@@ -440,9 +440,9 @@ def test_chunks_of_large_scenes_on_c_are_long_and_change_nothing(monkeypatch):
     assert S.chunk_steps(4 * 10**6, True) == S.CHUNK_WORK_MAX // (4 * 10**6) == 8
     assert S.chunk_steps(10**9, True) == 1
     n = 20_000
-    rng = np.random.default_rng(2)
 
     def sim(**kw):
+        rng = np.random.default_rng(2)          # the same scene every time
         sc = lv.Scene()
         sc.add_bodies([f"b{i}" for i in range(n)], np.ones(n), 1 + rng.random((n, 3)),
                       omega_b=2.0 * rng.standard_normal((n, 3)))
@@ -450,12 +450,17 @@ def test_chunks_of_large_scenes_on_c_are_long_and_change_nothing(monkeypatch):
 
     long_c = sim(integrator="rk4", backend="c")
     assert long_c._chunk == 64
-    assert sim(integrator="rk4", backend="numpy")._chunk == S.CHUNK_WORK // (4 * n)
+    long_np = sim(integrator="rk4", backend="numpy")
+    assert long_np._chunk == 64 and S.CHUNK_WORK_MAX_NUMPY // (4 * n) >= 64
     assert sim(integrator="dopri5", backend="c", rtol=1e-6)._chunk == S.CHUNK_WORK // (12 * n)
-    rng = np.random.default_rng(2)          # the same scene again, with CHUNK_WORK's chunks
     monkeypatch.setattr(S, "CHUNK_MIN_STEPS", 1)
     short_c = sim(integrator="rk4", backend="c")
     assert short_c._chunk == S.CHUNK_WORK // (4 * n) == 13
+    short_np = sim(integrator="rk4", backend="numpy")
+    assert short_np._chunk == 13
     long_c.run(150)
     short_c.run(150)
     assert np.array_equal(long_c.x, short_c.x) and long_c.steps == short_c.steps == 150
+    long_np.run(70)
+    short_np.run(70)
+    assert np.array_equal(long_np.x, short_np.x) and long_np.steps == short_np.steps == 70
