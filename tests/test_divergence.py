@@ -310,6 +310,22 @@ def test_splitting_extreme_inertia_ratio_is_refused(backend):
     lv.Sim(spinner(I_b=(1e-9, 1.0, 1.0), omega_b=(5.0, 1.0, 0.5)), integrator="rk4", backend=backend).run(10)
 
 
+def test_divergence_cause_measures_the_bound_as_the_sim():
+    """backends.divergence_cause names a failure's cause with the Sim's validity measure (the printed
+    validity_wdt, |omega| dt (I_max/I_min)**p): a 1:100 body at |omega| dt = 0.5 under splitting is 5 times beyond
+    its bound (it used to compare the bare 0.5 with 1 and guess "grew without bound"); rk4 has no ratio term."""
+    from lavendersim import backends as B
+
+    I_b, omega_b, dt = (1.0, 100.0, 100.0), (10.0, 0.0, 0.0), 0.05
+    x = np.zeros(13)
+    x[6], x[10:13] = 1.0, omega_b
+    why = B.divergence_cause(x, dt, "splitting", I_b)
+    assert why.startswith("|omega|*dt*(I_max/I_min)**0.5 = 5 is beyond splitting's validity bound 1"), why
+    with pytest.raises(lv.DivergenceError, match=r"\(I_max/I_min\)\*\*0\.5 = 5 is beyond splitting's validity"):
+        lv.Sim(spinner(I_b=I_b, omega_b=omega_b), integrator="splitting", dt=dt).run(1)
+    assert B.divergence_cause(x, dt, "rk4", I_b).startswith("state grew without bound (|omega| = 10 rad/s")
+
+
 def test_wheels_spinning_in_the_null_space_are_not_a_divergence():
     """Four pyramid wheels at 50 rad/s in the layout's null space on a body at rest: the total |L| is rounding
     (~1e-17), so a commanded slew must not be called a divergence by the growth check (its reference |L| is

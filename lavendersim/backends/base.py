@@ -447,8 +447,37 @@ def no_root_cause(x_before: np.ndarray, I_b: np.ndarray, dt: float) -> str:
             f"I_max/I_min = {float(I.max() / I.min()):.3g}); reduce dt")
 
 
-def divergence_cause(x_before: np.ndarray, dt: float, integrator: str, Omega_before: np.ndarray | None = None,
-                     wheels: tuple | None = None) -> str:
+def validity_bound(integrator: str) -> tuple[float, float] | None:
+    """The validity bound of an integrator, as declared in derive/tableaux.py.
+
+    Parameters
+    ----------
+    integrator : str
+        An integrator name (``lavendersim.backends.INTEGRATORS``, or a user's tableau).
+
+    Returns
+    -------
+    tuple of (float, float) or None
+        ``(WDT_MAX, WDT_RATIO_EXPONENT)``: a body stays within the bound while
+        ``|omega| * dt * (I_max / I_min)**p <= WDT_MAX`` (omega in rad/s, dt in s); None if the
+        integrator declares no bound (the adaptive ``dopri5`` controls its own error).
+
+    Examples
+    --------
+    >>> from lavendersim.sim import validity_bound
+    >>> validity_bound("euler")
+    (0.1, 0.0)
+    """
+    tab = USER_TABLEAUX.get(integrator)   # a user's explicit tableau: its bound from R(iy) (derive/user.py)
+    if tab is not None:
+        return (tab.wdt_max, 0.0) if tab.wdt_max is not None else None
+    if integrator not in TABLEAUX.WDT_MAX:
+        return None
+    return float(TABLEAUX.WDT_MAX[integrator]), float(TABLEAUX.WDT_RATIO_EXPONENT.get(integrator, 0.0))
+
+
+def divergence_cause(x_before: np.ndarray, dt: float, integrator: str, I_b: np.ndarray,
+                     Omega_before: np.ndarray | None = None, wheels: tuple | None = None) -> str:
     """A plain guess at why one body's step went non-finite, from its state before the step
     (and, for a body with reaction wheels, its wheel rates and wheels = (J, c_w)).
 
@@ -460,6 +489,9 @@ def divergence_cause(x_before: np.ndarray, dt: float, integrator: str, Omega_bef
         Step, s.
     integrator : str
         Its validity and stability bounds are looked up in the generated tableaux.
+    I_b : array_like (3,)
+        Principal inertia, body frame, kg·m²: the validity measure is the printed validity_wdt,
+        |omega| dt (I_max/I_min)**p, as the Sim's check and the C screen compute it.
     Omega_before : ndarray (3,), optional
         Wheel rates relative to the body before the step, rad/s.
     wheels : tuple (J, c_w), optional
@@ -470,8 +502,9 @@ def divergence_cause(x_before: np.ndarray, dt: float, integrator: str, Omega_bef
     str
         A one-line guess with the fix.
     """
+    from ..kernels import K
+
     with np.errstate(over="ignore", invalid="ignore"):
-        w = float(np.linalg.norm(x_before[LAYOUT.STATE_OMEGA_B]))
         v = float(np.linalg.norm(x_before[LAYOUT.STATE_V_W]))
         W = None if Omega_before is None else float(np.linalg.norm(Omega_before))
     if not np.all(np.isfinite(x_before)) or (Omega_before is not None and not np.all(np.isfinite(Omega_before))):
@@ -484,11 +517,14 @@ def divergence_cause(x_before: np.ndarray, dt: float, integrator: str, Omega_bef
         if wlimit is not None and stiff > wlimit:
             return (f"wheel damping c_w*dt/J = {stiff:.3g} is beyond the stability limit of {integrator} "
                     f"({wlimit:.4g}); the wheel rates Omega blew up: reduce dt or c_w")
-    wdt = w * dt
-    limit = tab.wdt_max if tab else TABLEAUX.WDT_MAX.get(integrator)   # the validity bound (derive/tableaux.py)
-    if limit is not None and wdt > limit:
-        return (f"|omega|*dt = {wdt:.3g} is beyond {integrator}'s validity bound (|omega|*dt <= {limit:.4g}, "
-                "times (I_max/I_min)**WDT_RATIO_EXPONENT); reduce dt")
+    bound = validity_bound(integrator)
+    p = 0.0 if bound is None else bound[1]
+    with np.errstate(over="ignore", invalid="ignore"):
+        scale = K.validity_scale(np.asarray(I_b, dtype=np.float64), dt, p)
+        w, wdt = (float(a) for a in K.validity_wdt(np.asarray(x_before[LAYOUT.STATE_OMEGA_B], np.float64), scale))
+    if bound is not None and wdt > bound[0]:
+        what = "|omega|*dt" + (f"*(I_max/I_min)**{p:g}" if p else "")
+        return f"{what} = {wdt:.3g} is beyond {integrator}'s validity bound {bound[0]:.4g} (WDT_MAX); reduce dt"
     wheel_rates = "" if W is None else f", |Omega| = {W:.3g} rad/s"
     return (f"state grew without bound (|omega| = {w:.3g} rad/s{wheel_rates}, |v| = {v:.3g} m/s, dt = {dt:g} s); "
             "check effect strengths (damping c*dt/I, wheel damping c_w*dt/J, forces) and the integrator")

@@ -250,7 +250,7 @@ def _cause(start: np.ndarray, pre: np.ndarray, params: np.ndarray, effects: np.n
 
     n = int(wheel_counts(model[0])) if model is not None and W0 is not None else 0
     wheels = None if model is None or W0 is None else (model[0][LY.MODEL_J][:n], model[0][LY.MODEL_C_W])
-    cause = divergence_cause(start, dt, integrator, None if W0 is None else W0[:n], wheels)
+    cause = divergence_cause(start, dt, integrator, params[body, LY.PARAM_I_B], None if W0 is None else W0[:n], wheels)
     if step > 0:
         wtxt = "" if model is None or W0 is None else f", |Omega| = {norm_safe(model[2]):.3g} rad/s"
         cause += (f" (just before step {step}: |omega|*dt = {norm_safe(pre[LY.STATE_OMEGA_B]) * dt:.3g}, "

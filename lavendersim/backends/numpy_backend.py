@@ -857,7 +857,7 @@ class NumpyBackend:
                     raise DivergenceError(i, b, no_root_cause(cur[b, X], plan.I[b], dt))
             if not np.isfinite(np.sum(xn)) and not np.isfinite(xn).all():   # the sum first: one pass, no array
                 b = int(np.flatnonzero(~np.isfinite(xn).all(axis=1))[0])
-                raise DivergenceError(i, b, divergence_cause(cur[b, X], dt, integrator, *plan.wheel_info(cur, b)))
+                raise DivergenceError(i, b, divergence_cause(cur[b, X], dt, integrator, plan.I[b], *plan.wheel_info(cur, b)))
             cur = plan.adopt(xn, cur)
             if u is not None:
                 applied[plan.wheeled] = u[plan.wheeled]
@@ -1094,7 +1094,7 @@ def _dopri5(plan, x, normalize, dt, n_steps, rtol, atol, hs, nfev, command=None,
             if full["why"][b] == _DP_TOLERANCE:
                 cause = tolerance_cause(Adaptive(rtol, atol, 0), float(full["h"][b]), dt, x[b, X])
             else:
-                cause = divergence_cause(x[b, X], dt, "dopri5", *plan.wheel_info(x, b))
+                cause = divergence_cause(x[b, X], dt, "dopri5", plan.I[b], *plan.wheel_info(x, b))
             raise DivergenceError(i, b, cause)
         if u is not None:
             applied[plan.wheeled] = u[plan.wheeled]
