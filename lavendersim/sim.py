@@ -120,7 +120,7 @@ from .errors import DivergenceError, ValidityBoundWarning
 from .frames import public_rows
 from .generated import layout as LY
 from .kernels import K
-from .scene import Scene, _effect_rows
+from .scene import Scene, _Batch, _EffectList, _effect_rows
 from .sim_model import SimModel
 
 MAX_STEPS = 2**53          # steps per call and in total: the step counter and t = steps*dt stay exact in float64
@@ -131,6 +131,9 @@ CHUNK_WORK_MAX = 2**25     # ~60-100 ns per body, then cost ~1-2 ns per body-ste
 CHUNK_WORK_MAX_PLAIN = 2**28   # the same for plain bodies without effects (the SIMD tiles, ~1.5 ns per evaluation):
                            # at 1e6 bodies a chunk stays 64 steps (~0.5 s); at 8 the C call streaming the state in
                            # and out and the check reading it cost 1.3-1.4x the stepping (measured, issue 30)
+CHUNK_WORK_MAX_NUMPY = 2**23   # the NumPy backend, fixed step: long chunks within this many evaluations (RK4 at 1e5
+                           # bodies: 20 steps, ~0.5 s torque-free, ~1.2 s with effects; at 2 steps per call its
+                           # check cost ~0.6x the stepping, H3's measurement, issue 30)
 ON_BOUND = ("raise", "warn")
 CHECK_BLOCK = 1 << 16       # bodies per kernel call when the checks read every body: bounded temporaries at 1e6
 FAST_STEP_WORK = 4096      # step() runs inside C (holding the GIL) for scenes of at most this many evaluations per step
@@ -146,7 +149,7 @@ def chunk_steps(work: int, long_ok: bool, cap: int | None = None) -> int:
     work : int
         Right-hand-side evaluations per step, summed over the bodies.
     long_ok : bool
-        The C backend with a fixed-step integrator (its results do not depend on the chunk edges).
+        The C or NumPy backend with a fixed-step integrator (their results do not depend on the chunk edges).
     cap : int, optional
         The most evaluations a long chunk takes (default CHUNK_WORK_MAX).
 
@@ -229,23 +232,24 @@ def _check_blocks(mask: np.ndarray):
             yield idx, len(idx)
 
 
-def _wheel_rows(rows: np.ndarray, n_w: int, group: list, I_b: np.ndarray) -> None:
-    """The model rows of bodies whose only model effect is reaction_wheels with n_w wheels, in a principal body
-    frame: what Sim._model_row writes for each ((body index, effect) pairs), for all of them at once (I_b: the
-    principal moments of every body, (nb, 3))."""
-    idx = np.array([i for i, _ in group], dtype=np.int64)
-    vals = [e.values for _, e in group]
-    I_p = np.zeros((len(idx), 3, 3))                # about the COM (no joint): diag(I_b)
+def _wheel_rows(rows: np.ndarray, idx: np.ndarray, column, I_b: np.ndarray) -> None:
+    """The model rows of bodies idx (k,) whose only model effect is reaction_wheels, in a principal body frame:
+    what Sim._model_row writes for each, for all of them at once. column(f): parameter f of their effects,
+    (k, *shape); I_b: the principal moments of every body, (nb, 3)."""
+    k = len(idx)
+    J = column("J")
+    n_w = J.shape[1]
+    I_p = np.zeros((k, 3, 3))                # about the COM (no joint): diag(I_b)
     I_p[:, [0, 1, 2], [0, 1, 2]] = I_b[idx]
-    rows[idx, LY.MODEL_I_P] = I_p.reshape(len(idx), 9)
-    pad_J = np.ones((len(idx), LY.WHEELS_MAX))
-    pad_J[:, :n_w] = np.stack([v["J"] for v in vals])
-    pad_A = np.zeros((len(idx), 3, LY.WHEELS_MAX))
-    pad_A[:, :, :n_w] = np.stack([v["axes_b"] for v in vals]).transpose(0, 2, 1)    # A_b = axes_bᵀ
-    rows[idx, LY.MODEL_J], rows[idx, LY.MODEL_A_B] = pad_J, pad_A.reshape(len(idx), -1)
+    rows[idx, LY.MODEL_I_P] = I_p.reshape(k, 9)
+    pad_J = np.ones((k, LY.WHEELS_MAX))
+    pad_J[:, :n_w] = J
+    pad_A = np.zeros((k, 3, LY.WHEELS_MAX))
+    pad_A[:, :, :n_w] = np.asarray(column("axes_b")).transpose(0, 2, 1)    # A_b = axes_bᵀ
+    rows[idx, LY.MODEL_J], rows[idx, LY.MODEL_A_B] = pad_J, pad_A.reshape(k, -1)
     for f, col in (("torque_limit", LY.MODEL_TORQUE_LIMIT), ("speed_limit", LY.MODEL_SPEED_LIMIT),
                    ("c_w", LY.MODEL_C_W), ("cutoff", LY.MODEL_CUTOFF)):
-        rows[idx, col] = [v[f] for v in vals]
+        rows[idx, col] = column(f)
     rows[idx, LY.MODEL_KIND] = KIND_WHEELS
 
 
@@ -255,7 +259,10 @@ def _rebuild_sim(bodies: list, effects: list, kwargs: dict, state: dict) -> "Sim
     for b in bodies:
         scene.add_body(b)
     for e in effects:
-        scene.add_effect(e)
+        if type(e) is _Batch:    # one add_effects call (validated again)
+            scene.add_effects(e.name, e.bodies, **e.shared, **e.cols)
+        else:
+            scene.add_effect(e)
     sim = Sim(scene, **kwargs)
     if state.get("fast_chunks"):     # run(n)'s C fast path for any n, as the original had (Sim.fast_chunks)
         sim.fast_chunks()
@@ -454,17 +461,18 @@ class Sim:
         self.names = tuple(table)                               # read-only: a pickle rebuilds the Sim from them
         self.bodies = types.MappingProxyType(table)
         checked = set()
-        for e in scene.effects:  # an effect no declaration printed is an error, never a no-op
-            if type(e) not in checked:     # (name, code and spec are class attributes: one check per class)
+        for e in scene.effects.items():  # an effect no declaration printed is an error, never a no-op
+            cls = e.cls if type(e) is _Batch else type(e)
+            if cls not in checked:     # (name, code and spec are class attributes: one check per class)
                 effects_mod.check_declared(e)
-                checked.add(type(e))
+                checked.add(cls)
         tables = scene.tables()   # a body given a full inertia tensor is stepped in its principal frame
         self._x, self._params, self._effects = tables.state, tables.params, tables.effects
         self._frames = tables.frames
-        self._forces, self._rows_of = list(tables.forces), tables.rows_of   # force effects (current) and their rows
-        self._forces_given = list(tables.forces)                            # ... as the scene gave them
+        self._forces, self._rows_of = tables.forces, tables.rows_of   # force effects (current) and their rows
+        self._forces_given = _EffectList(tables.forces)               # ... as the scene gave them
         self._index = table.positions      # name -> index
-        self._effect_objs = list(scene.effects)
+        self._effect_objs = _EffectList(scene.effects)       # (batches shared: immutable)
         self._models = self._build_models(scene)
         self._adaptive = None
         if self.integrator in ADAPTIVE:
@@ -510,7 +518,7 @@ class Sim:
             from .backends import c_backend
 
             self._screen = c_backend._c.checks_pass
-        self._g_inf = np.full((len(self.names), 3), np.inf)   # growth limits that never fire (growth=False)
+        self._g_inf_rows: np.ndarray | None = None     # growth limits that never fire (growth=False), made on first use
         self._ctr = self._fast if self._fast is not None else _Counters()
         self._lock = _Guard(self._fast)
         # run(n) inside C for n up to one chunk (checked at its end, as _advance checks a chunk) within the work cap
@@ -540,7 +548,7 @@ class Sim:
                   "on_bound": self.on_bound, "max_growth": self.max_growth, "dtype": self.dtype}
         if self._adaptive is not None:
             kwargs.update(rtol=self._adaptive.rtol, atol=self._adaptive.atol)
-        return (_rebuild_sim, ([self.bodies[n] for n in self.names], list(self._effect_objs), kwargs, state))
+        return (_rebuild_sim, ([self.bodies[n] for n in self.names], list(self._effect_objs.items()), kwargs, state))
 
     def _load_snapshot(self, st: dict) -> None:
         """Put a freshly built Sim (same scene and settings) at a pickled state (see __reduce__)."""
@@ -749,8 +757,9 @@ class Sim:
         self._warned = set()
         evals = self._per_step if self._per_step is not None else 12
         plain = not self._has_models and not len(self._effects)     # the SIMD tiles: a longer chunk still returns soon
-        self._chunk = chunk_steps(nb * evals, self.backend.name == "c" and self._per_step is not None,
-                                  CHUNK_WORK_MAX_PLAIN if plain else CHUNK_WORK_MAX)
+        c = self.backend.name == "c"
+        self._chunk = chunk_steps(nb * evals, self._per_step is not None and self.backend.name in ("c", "numpy"),
+                                  (CHUNK_WORK_MAX_PLAIN if plain else CHUNK_WORK_MAX) if c else CHUNK_WORK_MAX_NUMPY)
         self._reference()
 
     def _invariants(self, x: np.ndarray, Omega: np.ndarray, reference: bool = False) -> tuple[np.ndarray, np.ndarray]:
@@ -785,10 +794,10 @@ class Sim:
         costs nothing while a run is far from its limit."""
         self._E0, self._L0 = self._invariants(self._x, self._models.Omega, reference=True)
         nb = len(self.names)
-        self._w_safe = np.zeros(nb)
         # the C screen's growth limits per body (csrc/fast_step.c LV_G_*): no-work rate, max_growth * E0 and
         # (max_growth * L0)^2 with a rounding margin; +inf where no growth check can fire (not free, max_growth None)
         self._g_fast = np.full((nb, 3), np.inf)
+        self._w_safe = self._g_fast[:, 0]     # (a view: the free bodies' no-work rates are the screen's)
         self._safe_rates(self._free)
         if self._budget is not None:
             steps = self._ctr.steps if "_ctr" in self.__dict__ else 0
@@ -810,12 +819,17 @@ class Sim:
                 w_E = np.sqrt(room / half_Imax)
                 w_L = self.max_growth * self._L0[f] / I.max(axis=1)
                 self._w_safe[f] = np.minimum(w_E, w_L) * (1 - 1e-12)   # rounding margin: never skip a violation
-            self._g_fast[f, 0] = self._w_safe[f]
             with np.errstate(over="ignore"):
                 E0, L0 = self._E0[f], self._L0[f]
                 margin = 1 - 1e-12      # rounding: the C screen never passes what the NumPy check would refuse
                 self._g_fast[f, 1] = np.where(E0 > 0, self.max_growth * E0 * margin, np.inf)
                 self._g_fast[f, 2] = np.where(L0 > 0, (self.max_growth * L0) ** 2 * margin, np.inf)
+
+    def _g_inf(self) -> np.ndarray:
+        """(nb, 3) growth limits that never fire: the C screen's table when it checks the validity bound only."""
+        if self._g_inf_rows is None:
+            self._g_inf_rows = np.full((len(self.names), 3), np.inf)
+        return self._g_inf_rows
 
     def _wdt(self, x: np.ndarray, bodies=slice(None)) -> np.ndarray:
         """|omega|*dt*(I_max/I_min)**p of rows x (of those bodies), the quantity the validity bound limits (the printed
@@ -847,7 +861,7 @@ class Sim:
         if screen is not None and x is self._x and (not growth or self.max_growth is None or not self._py_growth):
             # one pass in C: every body inside the bound and (growth) inside its E and |L| limits -> nothing to report
             bound = np.inf if self._bound is None else self._bound[0]
-            if screen(x, self._params, self._wdt_scale, bound, self._g_fast if growth else self._g_inf):
+            if screen(x, self._params, self._wdt_scale, bound, self._g_fast if growth else self._g_inf()):
                 return None
         with np.errstate(over="ignore", invalid="ignore"):   # an overflowing norm is inf: beyond any bound
             w, v = K.validity_wdt(x[:, LY.STATE_OMEGA_B], self._wdt_scale)
@@ -929,13 +943,17 @@ class Sim:
         rows = models.rows
         # a body without model effects keeps its all-zero row (kind 0: the steppers ignore it), never written, so
         # a scene of plain bodies never touches the (nb, MODEL_SIZE) rows' pages (288 B per body at 1e6 bodies)
-        modelled: dict[str, dict] = {}      # scene.model_effects(name) for every body at once
-        for e in scene.effects:
-            if e.per_body:
+        at = scene._bodies._c["pos"]          # (every modelled body is one of this Sim's: the scene checked it)
+        modelled: dict[str, dict] = {}      # scene.model_effects(name) of the bodies not in a wheels-only batch
+        batches = []
+        for e in scene.effects.items():
+            if type(e) is _Batch and e.per_body:
+                batches.append((e, np.fromiter((at.get(b, nb) for b in e.bodies), np.int64, len(e))))
+            elif type(e) is not _Batch and e.per_body:
                 modelled.setdefault(e.body, {})[e.name] = e
+        self._wheel_batches = self._batched_wheels(batches, modelled)
         self._modelled = modelled
         wheels_only: dict[int, list] = {}     # wheel count -> [(body index, effect)]: rows written batched
-        at = scene._bodies._c["pos"]          # (every modelled body is one of this Sim's: the scene checked it)
         for name, me in modelled.items():
             i = at.get(name, nb)
             if i >= nb:           # not one of this Sim's bodies (an effects list assigned by hand): no row, as before
@@ -945,17 +963,54 @@ class Sim:
                 wheels_only.setdefault(e.values["J"].size, []).append((i, e))
             else:
                 self._model_row(i, me, rows)
-        for n_w, group in wheels_only.items():
-            _wheel_rows(rows, n_w, group, self._params[:, LY.PARAM_I_B])
+        I_b = self._params[:, LY.PARAM_I_B]
+        for group in wheels_only.values():
+            idx = np.array([i for i, _ in group], dtype=np.int64)
+            _wheel_rows(rows, idx, lambda f, g=group: np.stack([np.asarray(e.values[f], dtype=np.float64) for _, e in g]),
+                        I_b)
+        for b, idx in self._wheel_batches:
+            _wheel_rows(rows, idx, b.column, I_b)
         # each body's kind, read from the modelled bodies' rows only (reading the whole column would fault every page)
-        at_rows = np.fromiter((at.get(name, nb) for name in modelled), np.int64, len(modelled))
+        at_rows = np.concatenate([np.fromiter((at.get(name, nb) for name in modelled), np.int64, len(modelled))]
+                                 + [idx for _, idx in self._wheel_batches])
         at_rows = at_rows[at_rows < nb]
-        self._kinds = np.zeros(nb, np.int64)
-        self._kinds[at_rows] = rows[at_rows, LY.MODEL_KIND].astype(np.int64)
-        self._wheel_n = np.zeros(nb, np.int64)  # wheels per body (the model rows' layouts never change)
+        self._kinds = np.zeros(nb, np.int8)     # (int8: 1 B per body at 1e6 bodies)
+        self._kinds[at_rows] = rows[at_rows, LY.MODEL_KIND].astype(np.int8)
+        self._wheel_n = np.zeros(nb, np.int8)   # wheels per body (the model rows' layouts never change)
         wheeled = np.flatnonzero(self._kinds & KIND_WHEELS)
         self._wheel_n[wheeled] = backends.wheel_counts(rows[wheeled])
         return models
+
+    def _batched_wheels(self, batches: list, modelled: dict) -> list:
+        """The per-body batches (batch, body indices) that are reaction_wheels alone on their bodies, each body one
+        of this Sim's and principal: their rows are written from the batch's columns. The effects of the others go
+        into `modelled` (by body name), one by one."""
+        nb = len(self.names)
+        if not batches:
+            return []
+        count = np.zeros(nb + 1, np.int16)             # model effects per body (nb: not one of this Sim's)
+        pos = self._index
+        np.add.at(count, np.fromiter((pos[n] if n in pos else nb for n in modelled), np.int64, len(modelled)), 1)
+        for _, idx in batches:
+            np.add.at(count, np.minimum(idx, nb), 1)
+        rotated = np.zeros(nb + 1, bool)
+        if self._frames is not None:
+            rotated[self._frames.idx] = True
+        fast = []
+        for b, idx in batches:
+            if b.name == "reaction_wheels" and (idx < nb).all() and (count[idx] == 1).all() and not rotated[idx].any():
+                fast.append((b, idx))
+            else:
+                for j, name in enumerate(b.bodies):
+                    modelled.setdefault(name, {})[b.name] = b.effect(j)
+        return fast
+
+    def _model_effects(self, name: str) -> dict:
+        """Body `name`'s model effects by effect name (as scene.model_effects at construction)."""
+        for b, _ in self._wheel_batches:
+            for j in b.where(name):
+                return {b.name: b.effect(j)}
+        return self._modelled.get(name, {})
 
     def _model_row(self, i: int, me: dict, rows: np.ndarray) -> None:
         """Body i's model row from its model effects me and its current state (a jointed body's r_b, I_p
@@ -1008,7 +1063,7 @@ class Sim:
             self._dirty = True
             x = self._x[i]
             x[LY.STATE_P_W], x[LY.STATE_Q], x[LY.STATE_V_W], x[LY.STATE_OMEGA_B] = p_w, q, 0.0, omega_b
-            self._model_row(i, self._modelled.get(self.names[i], {}), self._models.rows)
+            self._model_row(i, self._model_effects(self.names[i]), self._models.rows)
             self._models.Omega[i] = 0.0
             self._models.Omega[i, :np.size(Omega)] = Omega
             self._models.command[i] = 0.0
@@ -1055,11 +1110,10 @@ class Sim:
             head = f"{self.integrator}: {n} RHS evaluation{'s' if n > 1 else ''} per step on the {self.backend.name} backend"
         lines = [head + (", then normalize q" if self.normalize else ", q not normalized")]
         for i, name in enumerate(self.names):
-            mine = [e for e in self._effect_objs if e.body in (None, name)]
+            model, forces = self._effect_objs.models_on(name), self._effect_objs.forces_on(name)   # (indexed per body)
+            mine = model + forces
             kind = self._kind(i)
             if kind:
-                model = [e for e in mine if e.per_body]
-                forces = [e for e in mine if not e.per_body]
                 kernel = (f"wheels{LY.WHEELS_MAX}_body_rhs ({self._wheel_n[i]} wheels on "
                           f"{'the body axes' if backends.on_body_axes(self._models.rows[i]) else 'axes_b'})"
                           if kind & KIND_WHEELS else "pivot_body_rhs")
@@ -1221,7 +1275,7 @@ class Sim:
             return
         with self._lock:
             if not f.is_checked() and screen(self._x, self._params, self._wdt_scale,
-                                             np.inf if self._bound is None else float(self._bound[0]), self._g_inf):
+                                             np.inf if self._bound is None else float(self._bound[0]), self._g_inf()):
                 self._mark_checked()
 
     def _is_checked(self) -> bool:
@@ -1507,8 +1561,8 @@ class Sim:
             return self._set_effect_params(effect, values)
 
     def _set_effect_params(self, effect, values: dict):
-        k = next((j for j, (cur, given) in enumerate(zip(self._forces, self._forces_given))
-                  if effect is cur or effect is given), None)
+        k = self._forces.find(effect)
+        k = self._forces_given.find(effect) if k is None else k
         if k is None:
             what = getattr(effect, "name", type(effect).__name__)
             rule = ("is a model effect (a constant of the body's model); build a new Sim to change it"
@@ -1533,7 +1587,9 @@ class Sim:
             if self._step_effects is not self._effects:
                 self._step_effects[r] = row
         self._forces[k] = new
-        self._effect_objs[self._effect_objs.index(cur)] = new
+        at = self._effect_objs.find(cur)
+        if at is not None:
+            self._effect_objs[at] = new
         if self._budget is not None:   # new loads: the budget restarts from this (checked) state
             assert self.max_growth is not None   # (a budget exists only with a growth check)
             self._budget = load_checks.LoadBudget(self._params, self._effects, self._models.rows, self._budget.loaded,
