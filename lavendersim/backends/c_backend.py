@@ -22,8 +22,8 @@ from ..errors import DivergenceError, StaleBuildError
 from ..generated import tableaux as TABLEAUX
 from .._install import rebuild_command
 from ..generated import layout as LY
-from .base import (FLOAT32_INTEGRATORS, KIND_WHEELS, PLAIN_ONLY, Adaptive, Models, Tableau, no_root_cause, norm_safe,
-               rk_weights, tableau_of, tolerance_cause)
+from .base import (ADAPTIVE, FLOAT32_INTEGRATORS, KIND_WHEELS, PLAIN_ONLY, Adaptive, Models, Tableau, no_root_cause,
+                   norm_safe, rk_weights, tableau_of, tolerance_cause)
 
 REBUILD = rebuild_command()
 HASHED = ("kernels.c", "kernels.h", "layout.h", "tableaux.h", "kernels_f32.c", "kernels_f32.h")  # every generated file the extension compiles
@@ -417,8 +417,8 @@ class CBackend:
             if tab is not None:
                 raise ValueError(f"integrator: {integrator!r} (a user-declared tableau) steps float64 only")
             return self._advance_f32(state, params, effects, integrator, normalize, dt, n_steps, models, restore)
-        if integrator == "dopri5" and adaptive is None:
-            raise ValueError("integrator: dopri5 needs adaptive (a lavendersim.backends.Adaptive)")
+        if integrator in ADAPTIVE and adaptive is None:
+            raise ValueError(f"integrator: {integrator} needs adaptive (a lavendersim.backends.Adaptive)")
         if integrator in PLAIN_ONLY and models is not None and np.any(np.asarray(models.rows)[:, LY.MODEL_KIND] != 0):
             raise ValueError(f"integrator: {integrator} steps plain rigid bodies only (no spherical_joint or reaction_wheels)")
         if not isinstance(state, np.ndarray) or state.dtype != np.float64 or not state.flags.c_contiguous \
@@ -442,7 +442,7 @@ class CBackend:
                 snap_W, snap_u = Omega.copy(), applied.copy()
         if not extra:
             extra = (None, None, None, None)
-        if adaptive is not None and integrator == "dopri5":
+        if adaptive is not None and integrator in ADAPTIVE:
             if restore:
                 snap_h, snap_n = adaptive.h.copy(), adaptive.nfev.copy()
             extra = extra + (adaptive.h, adaptive.nfev, adaptive.rtol, adaptive.atol)
@@ -456,7 +456,7 @@ class CBackend:
         if snapshot is None:   # (restore False: no copy of the state was taken)
             raise DivergenceError(step, body, NOT_RESTORED)
         tol_cause = None
-        if adaptive is not None and integrator == "dopri5":
+        if adaptive is not None and integrator in ADAPTIVE:
             if status == TABLEAUX.STATUS_TOLERANCE:
                 tol_cause = tolerance_cause(adaptive, float(adaptive.h[body]), float(dt), state[body])
             adaptive.h[...] = snap_h
