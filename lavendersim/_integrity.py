@@ -33,7 +33,11 @@ def generated_dir() -> Path:
     if spec is None or not spec.submodule_search_locations:
         raise GeneratedFileError("lavendersim.generated is missing: the package's generated/ folder is not there; "
                                  "run `lavendersim derive` from a source checkout (or reinstall lavendersim)")
-    return Path(list(spec.submodule_search_locations)[0])
+    folder = Path(list(spec.submodule_search_locations)[0])
+    # a strict editable install (docs/install.md) maps the package as a folder of links into the clone: the
+    # clone's generated/ is where __init__.py points (`lavendersim derive` must write there, not into the links)
+    init = folder / "__init__.py"
+    return init.resolve().parent if init.is_symlink() else folder
 
 
 def _fail(path: Path, why: str) -> GeneratedFileError:

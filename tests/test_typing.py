@@ -10,6 +10,7 @@ snippet against it."""
 from __future__ import annotations
 
 import json
+import os
 import re
 import shutil
 import subprocess
@@ -31,6 +32,11 @@ reveal_type(lv.Sim.__init__)
 '''
 
 
+def _env() -> dict[str, str]:
+    """This environment without PYTHONPATH: the venv must find lavendersim through its install, not a source tree."""
+    return {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+
+
 def _copy_tree(dst: Path) -> None:
     shutil.copytree(ROOT, dst, ignore=shutil.ignore_patterns(".git", "build", "*.so", "__pycache__", "*.egg-info",
                                                                ".pytest_cache", ".mypy_cache", "_build", ".hypothesis"))
@@ -45,15 +51,18 @@ def strict_install(tmp_path_factory) -> Path:
     _copy_tree(src)
     subprocess.run([sys.executable, "-m", "venv", "--system-site-packages", str(venv)], check=True)
     run = subprocess.run([str(venv / "bin" / "python"), "-m", "pip", "install", "--no-deps", "-q", "-e", str(src),
-                          "--config-settings", "editable_mode=strict"], capture_output=True, text=True, timeout=3600)
+                          "--config-settings", "editable_mode=strict"], env=_env(), capture_output=True, text=True,
+                         timeout=3600)
     assert run.returncode == 0, run.stdout[-2000:] + run.stderr[-2000:]
     return venv / "bin" / "python"
 
 
 @pytest.mark.slow
 @pytest.mark.needs("mypy")
-def test_mypy_sees_an_editable_install_and_the_real_signatures(strict_install, tmp_path):
+def test_mypy_sees_an_editable_install_and_the_real_signatures(strict_install, tmp_path, monkeypatch):
     from mypy import api
+
+    monkeypatch.delenv("PYTHONPATH", raising=False)     # mypy asks the venv's python for its sys.path
 
     snippet = tmp_path / "user_code.py"
     snippet.write_text(SNIPPET)
@@ -77,7 +86,7 @@ def test_pyright_sees_an_editable_install_and_the_real_signatures(strict_install
     (tmp_path / "user_code.py").write_text(SNIPPET)
     (tmp_path / "pyrightconfig.json").write_text(json.dumps({"typeCheckingMode": "standard"}))
     run = subprocess.run([sys.executable, "-m", "basedpyright", "--outputjson", "--pythonpath", str(strict_install),
-                          "user_code.py"], cwd=tmp_path, capture_output=True, text=True, timeout=600)
+                          "user_code.py"], cwd=tmp_path, env=_env(), capture_output=True, text=True, timeout=600)
     report = json.loads(run.stdout)
     diagnostics = report["generalDiagnostics"]
     assert not any("could not be resolved" in d["message"] for d in diagnostics), diagnostics
@@ -89,6 +98,22 @@ def test_pyright_sees_an_editable_install_and_the_real_signatures(strict_install
     assert (wrong["severity"], wrong.get("rule")) == ("error", "reportArgumentType"), wrong
     assert '"mass"' in wrong["message"] and '"float"' in wrong["message"], wrong
     assert report["summary"]["errorCount"] == 1 and run.returncode == 1, run.stdout[-3000:]
+
+
+@pytest.mark.slow
+def test_derive_in_a_strict_install_writes_the_clones_generated_folder(strict_install):
+    """The strict install's package is a folder of links; `lavendersim derive` (and its integrity check) must find
+    the clone's generated/, not the link folder (derive's folder swap would replace the links with files that the
+    next install throws away)."""
+    src = strict_install.parents[2] / "src"
+    code = ("from lavendersim._integrity import generated_dir; from lavendersim import cli, generated; "
+            "print(generated.__file__); print(generated_dir()); print(cli.generated_dir())")
+    run = subprocess.run([str(strict_install), "-c", code], capture_output=True, text=True, timeout=600,
+                         cwd=strict_install.parents[2], env=_env())
+    assert run.returncode == 0, run.stderr[-2000:]
+    package_file, found, for_cli = run.stdout.split()
+    assert "__editable__" in package_file                       # the import goes through the link tree
+    assert Path(found) == Path(for_cli) == (src / "generated").resolve()
 
 
 def test_keywords_keeps_the_signature_for_type_checkers():
