@@ -1159,7 +1159,8 @@ def perturbed_inertia(scene: Scene, body: str, scale: ArrayLike) -> Scene:
     for name, b in scene.bodies.items():
         if name == body:
             x0 = np.asarray(b.x0, float)
-            b = Body(name, b.mass, _perturbed_tensor(b, s), p_w=x0[0:3], q=x0[3:7], v_w=x0[7:10], omega_b=x0[10:13])
+            b = Body(name, b.mass, _perturbed_tensor(b, s), p_w=x0[LY.STATE_P_W], q=x0[LY.STATE_Q], v_w=x0[LY.STATE_V_W],
+                     omega_b=x0[LY.STATE_OMEGA_B])
         new.add_body(b)
     for e in scene.effects:
         new.add_effect(E.make(e.name, body=e.body, **dict(e.values)))
