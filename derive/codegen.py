@@ -6,6 +6,8 @@ enter a file body (they live in manifest.json).
 """
 from __future__ import annotations
 
+import ast
+
 import hashlib
 import json
 import platform
@@ -210,6 +212,22 @@ def print_c_user(printed: list[Printed], effects: list, set_name: str) -> tuple[
     return "\n".join(h) + "\n", "\n".join(c) + "\n"
 
 
+_UFUNCS = {ast.Add: "add", ast.Sub: "subtract", ast.Mult: "multiply", ast.Div: "divide"}
+
+
+def _np_assign(target: str, code: str) -> str:
+    """`target = code` with code's last operation writing into target (numpy.<ufunc>(left, right, out=target)): the
+    same operations in the same order, without a temporary and its copy (issue 30)."""
+    tree = ast.parse(code, mode="eval").body
+    if not any(isinstance(n, ast.Name) for n in ast.walk(tree)):     # a constant: assigned
+        return f"{target} = {code}"
+    if isinstance(tree, ast.BinOp) and type(tree.op) in _UFUNCS:
+        return f"numpy.{_UFUNCS[type(tree.op)]}({ast.unparse(tree.left)}, {ast.unparse(tree.right)}, out={target})"
+    if isinstance(tree, ast.UnaryOp) and isinstance(tree.op, ast.USub):
+        return f"numpy.negative({ast.unparse(tree.operand)}, out={target})"
+    return f"{target} = {code}"
+
+
 def _np_kernel(p: Printed, pr: NpPrinter, dtype: str = "float64") -> list[str]:
     k = p.k
     doc = "\n".join(f"    {line}" if line else "" for line in _np_doc_lines(k)).lstrip()
@@ -254,7 +272,7 @@ def _np_kernel(p: Printed, pr: NpPrinter, dtype: str = "float64") -> list[str]:
                 ix = f"..., {i}"
             else:
                 ix = f"..., {i // a.shape[1]}, {i % a.shape[1]}"
-            out.append(f"{ind}{a.name}_out[{ix}] = {pr.doprint(e)}")
+            out.append(ind + _np_assign(f"{a.name}_out[{ix}]", pr.doprint(e)))
         rets.append(f"{a.name}_out")
     out += [f"    return {', '.join(rets)}", "", ""]
     return out

@@ -168,6 +168,11 @@ _NP_APPLY_DOC = [
 ]
 
 
+_NP_OUT_DOC = ["", "    Other Parameters", "    ----------------",
+               "    out : (ndarray, ndarray), optional",
+               "        Arrays (n, 3) the force and the torque are written into (the one it has), as the kernel's out=."]
+
+
 def numpy_dispatch(effects: list[tuple[int | None, E.EffectDecl]]) -> list[str]:
     """NumPy: one accumulating function per effect, EFFECT_APPLY by name, and (built-ins) dispatch by code."""
     out = ["# ---- Scene effects: apply(p, x, v_w, m, I_b) -> (F_com_w or None, tau_com_w or None), rows",
@@ -176,12 +181,14 @@ def numpy_dispatch(effects: list[tuple[int | None, E.EffectDecl]]) -> list[str]:
     for _, d in effects:
         k = d.kernel()
         outs = dict(d.outputs)
-        out.append(f"def effect_apply_{d.name}(p, x, v_w, m, I_b):")
+        out.append(f"def effect_apply_{d.name}(p, x, v_w, m, I_b, *, out=None):")
         out.append(f'    """{d.name}: {d.summary}.')
         out += ["", "    Parameters", "    ----------", "    p : array_like, shape (n, n_params)",
                 f'        The effect\'s parameters per row: [{", ".join(f"{p.name}({p.size})" for p in d.params)}].']
-        out += _NP_APPLY_DOC + ['    """']
-        call = f"{k.name}({', '.join(_np_arg(d, a) for a in k.inputs)})"
+        out += _NP_APPLY_DOC + _NP_OUT_DOC + ['    """']
+        # out (F_w, tau_w): the buffers its outputs are written into (the kernel's out=), e.g. struct-of-arrays
+        sel = "out" if len(outs) == 2 else "out and out[:1]" if E.OUT_FORCE in outs else "out and out[1:]"
+        call = f"{k.name}({', '.join(_np_arg(d, a) for a in k.inputs)}, out={sel})"
         if len(outs) == 2:
             out.append(f"    return {call}")
         elif E.OUT_FORCE in outs:

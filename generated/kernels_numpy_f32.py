@@ -42,13 +42,13 @@ def particle_moments(m, r_w, v_w, *, out=None):
     v_w_1 = v_w[..., 1]
     v_w_2 = v_w[..., 2]
     m_r_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    m_r_out[..., 0] = m*r_w_0
-    m_r_out[..., 1] = m*r_w_1
-    m_r_out[..., 2] = m*r_w_2
+    numpy.multiply(m, r_w_0, out=m_r_out[..., 0])
+    numpy.multiply(m, r_w_1, out=m_r_out[..., 1])
+    numpy.multiply(m, r_w_2, out=m_r_out[..., 2])
     p_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[1] is None else out[1]
-    p_out[..., 0] = m*v_w_0
-    p_out[..., 1] = m*v_w_1
-    p_out[..., 2] = m*v_w_2
+    numpy.multiply(m, v_w_0, out=p_out[..., 0])
+    numpy.multiply(m, v_w_1, out=p_out[..., 1])
+    numpy.multiply(m, v_w_2, out=p_out[..., 2])
     return m_r_out, p_out
 
 
@@ -102,9 +102,9 @@ def particle_angular_momentum(m, r_w, v_w, r_com_w, v_com_w, *, out=None):
     t4 = -r_com_w_0 + r_w_0
     t5 = -v_com_w_0 + v_w_0
     L_w_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    L_w_out[..., 0] = -m*t2*t3 + t0*t1
-    L_w_out[..., 1] = m*t3*t5 - t1*t4
-    L_w_out[..., 2] = -m*t0*t5 + m*t2*t4
+    numpy.add(-m * t2 * t3, t0 * t1, out=L_w_out[..., 0])
+    numpy.subtract(m * t3 * t5, t1 * t4, out=L_w_out[..., 1])
+    numpy.add(-m * t0 * t5, m * t2 * t4, out=L_w_out[..., 2])
     return L_w_out
 
 
@@ -141,9 +141,9 @@ def inertia_box(m, w, h, d, *, out=None):
     t2 = ((numpy.float32(1.0)/numpy.float32(12.0)))*m
     t3 = (w*w)
     I_b_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    I_b_out[..., 0] = t2*(t0 + t1)
-    I_b_out[..., 1] = t2*(t0 + t3)
-    I_b_out[..., 2] = t2*(t1 + t3)
+    numpy.multiply(t2, t0 + t1, out=I_b_out[..., 0])
+    numpy.multiply(t2, t0 + t3, out=I_b_out[..., 1])
+    numpy.multiply(t2, t1 + t3, out=I_b_out[..., 2])
     return I_b_out
 
 
@@ -177,7 +177,7 @@ def inertia_cylinder(m, r, h, *, out=None):
     I_b_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     I_b_out[..., 0] = t1
     I_b_out[..., 1] = t1
-    I_b_out[..., 2] = ((numpy.float32(1.0)/numpy.float32(2.0)))*m*t0
+    numpy.multiply(numpy.float32(1.0) / numpy.float32(2.0) * m, t0, out=I_b_out[..., 2])
     return I_b_out
 
 
@@ -256,15 +256,15 @@ def parallel_axis(I_c, m, d, *, out=None):
     t5 = (d_0*d_0)
     t6 = -d_1*d_2*m
     I_o_out = numpy.empty(batch + (3, 3), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    I_o_out[..., 0, 0] = I_c_00 + m*(t0 + t1)
-    I_o_out[..., 0, 1] = I_c_01 + t3
-    I_o_out[..., 0, 2] = I_c_02 + t4
-    I_o_out[..., 1, 0] = I_c_10 + t3
-    I_o_out[..., 1, 1] = I_c_11 + m*(t1 + t5)
-    I_o_out[..., 1, 2] = I_c_12 + t6
-    I_o_out[..., 2, 0] = I_c_20 + t4
-    I_o_out[..., 2, 1] = I_c_21 + t6
-    I_o_out[..., 2, 2] = I_c_22 + m*(t0 + t5)
+    numpy.add(I_c_00, m * (t0 + t1), out=I_o_out[..., 0, 0])
+    numpy.add(I_c_01, t3, out=I_o_out[..., 0, 1])
+    numpy.add(I_c_02, t4, out=I_o_out[..., 0, 2])
+    numpy.add(I_c_10, t3, out=I_o_out[..., 1, 0])
+    numpy.add(I_c_11, m * (t1 + t5), out=I_o_out[..., 1, 1])
+    numpy.add(I_c_12, t6, out=I_o_out[..., 1, 2])
+    numpy.add(I_c_20, t4, out=I_o_out[..., 2, 0])
+    numpy.add(I_c_21, t6, out=I_o_out[..., 2, 1])
+    numpy.add(I_c_22, m * (t0 + t5), out=I_o_out[..., 2, 2])
     return I_o_out
 
 
@@ -313,15 +313,15 @@ def inertia_about_com(I_o, m, c, *, out=None):
     t5 = (c_0*c_0)
     t6 = c_1*c_2*m
     I_c_out = numpy.empty(batch + (3, 3), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    I_c_out[..., 0, 0] = I_o_00 - m*(t0 + t1)
-    I_c_out[..., 0, 1] = I_o_01 + t3
-    I_c_out[..., 0, 2] = I_o_02 + t4
-    I_c_out[..., 1, 0] = I_o_10 + t3
-    I_c_out[..., 1, 1] = I_o_11 - m*(t1 + t5)
-    I_c_out[..., 1, 2] = I_o_12 + t6
-    I_c_out[..., 2, 0] = I_o_20 + t4
-    I_c_out[..., 2, 1] = I_o_21 + t6
-    I_c_out[..., 2, 2] = I_o_22 - m*(t0 + t5)
+    numpy.subtract(I_o_00, m * (t0 + t1), out=I_c_out[..., 0, 0])
+    numpy.add(I_o_01, t3, out=I_c_out[..., 0, 1])
+    numpy.add(I_o_02, t4, out=I_c_out[..., 0, 2])
+    numpy.add(I_o_10, t3, out=I_c_out[..., 1, 0])
+    numpy.subtract(I_o_11, m * (t1 + t5), out=I_c_out[..., 1, 1])
+    numpy.add(I_o_12, t6, out=I_c_out[..., 1, 2])
+    numpy.add(I_o_20, t4, out=I_c_out[..., 2, 0])
+    numpy.add(I_o_21, t6, out=I_c_out[..., 2, 1])
+    numpy.subtract(I_o_22, m * (t0 + t5), out=I_c_out[..., 2, 2])
     return I_c_out
 
 
@@ -380,15 +380,15 @@ def world_inertia(q, I_b, *, out=None):
     t23 = t13*t22 + t15*t21 + t18*t20
     t24 = I_b_0*t14*t21 + I_b_1*t17*t20 + I_b_2*t12*t22
     I_w_out = numpy.empty(batch + (3, 3), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    I_w_out[..., 0, 0] = I_b_0*(t10*t10) + I_b_1*(t4*t4) + I_b_2*(t7*t7)
+    numpy.add(I_b_0 * (t10 * t10) + I_b_1 * (t4 * t4), I_b_2 * (t7 * t7), out=I_w_out[..., 0, 0])
     I_w_out[..., 0, 1] = t19
     I_w_out[..., 0, 2] = t23
     I_w_out[..., 1, 0] = t19
-    I_w_out[..., 1, 1] = I_b_0*(t14*t14) + I_b_1*(t17*t17) + I_b_2*(t12*t12)
+    numpy.add(I_b_0 * (t14 * t14) + I_b_1 * (t17 * t17), I_b_2 * (t12 * t12), out=I_w_out[..., 1, 1])
     I_w_out[..., 1, 2] = t24
     I_w_out[..., 2, 0] = t23
     I_w_out[..., 2, 1] = t24
-    I_w_out[..., 2, 2] = I_b_0*(t21*t21) + I_b_1*(t20*t20) + I_b_2*(t22*t22)
+    numpy.add(I_b_0 * (t21 * t21) + I_b_1 * (t20 * t20), I_b_2 * (t22 * t22), out=I_w_out[..., 2, 2])
     return I_w_out
 
 
@@ -421,9 +421,9 @@ def torque_from_force(r_w, F_w, *, out=None):
     F_w_1 = F_w[..., 1]
     F_w_2 = F_w[..., 2]
     tau_w_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    tau_w_out[..., 0] = -F_w_1*r_w_2 + F_w_2*r_w_1
-    tau_w_out[..., 1] = F_w_0*r_w_2 - F_w_2*r_w_0
-    tau_w_out[..., 2] = -F_w_0*r_w_1 + F_w_1*r_w_0
+    numpy.add(-F_w_1 * r_w_2, F_w_2 * r_w_1, out=tau_w_out[..., 0])
+    numpy.subtract(F_w_0 * r_w_2, F_w_2 * r_w_0, out=tau_w_out[..., 1])
+    numpy.add(-F_w_0 * r_w_1, F_w_1 * r_w_0, out=tau_w_out[..., 2])
     return tau_w_out
 
 
@@ -476,9 +476,9 @@ def force_at_point(q, r_b, F_w, *, out=None):
     t11 = r_b_0*(t8 + t9) + r_b_1*(-t10 - t6) + r_b_2*(2*q_1*q_2 - t3)
     t12 = r_b_0*(-t10 - t5 + 1) + r_b_1*(t8 - t9) + r_b_2*(t1 + t2)
     tau_w_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    tau_w_out[..., 0] = -F_w_1*t7 + F_w_2*t11
-    tau_w_out[..., 1] = F_w_0*t7 - F_w_2*t12
-    tau_w_out[..., 2] = -F_w_0*t11 + F_w_1*t12
+    numpy.add(-F_w_1 * t7, F_w_2 * t11, out=tau_w_out[..., 0])
+    numpy.subtract(F_w_0 * t7, F_w_2 * t12, out=tau_w_out[..., 1])
+    numpy.add(-F_w_0 * t11, F_w_1 * t12, out=tau_w_out[..., 2])
     return tau_w_out
 
 
@@ -566,9 +566,9 @@ def effect_force_at_point(q, r_b, F_w, *, out=None):
     F_com_w_out[..., 1] = F_w_1
     F_com_w_out[..., 2] = F_w_2
     tau_com_w_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[1] is None else out[1]
-    tau_com_w_out[..., 0] = -F_w_1*t7 + F_w_2*t11
-    tau_com_w_out[..., 1] = F_w_0*t7 - F_w_2*t12
-    tau_com_w_out[..., 2] = -F_w_0*t11 + F_w_1*t12
+    numpy.add(-F_w_1 * t7, F_w_2 * t11, out=tau_com_w_out[..., 0])
+    numpy.subtract(F_w_0 * t7, F_w_2 * t12, out=tau_com_w_out[..., 1])
+    numpy.add(-F_w_0 * t11, F_w_1 * t12, out=tau_com_w_out[..., 2])
     return F_com_w_out, tau_com_w_out
 
 
@@ -598,9 +598,9 @@ def effect_gravity(m, g_w, *, out=None):
     g_w_1 = g_w[..., 1]
     g_w_2 = g_w[..., 2]
     F_com_w_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    F_com_w_out[..., 0] = g_w_0*m
-    F_com_w_out[..., 1] = g_w_1*m
-    F_com_w_out[..., 2] = g_w_2*m
+    numpy.multiply(g_w_0, m, out=F_com_w_out[..., 0])
+    numpy.multiply(g_w_1, m, out=F_com_w_out[..., 1])
+    numpy.multiply(g_w_2, m, out=F_com_w_out[..., 2])
     return F_com_w_out
 
 
@@ -630,9 +630,9 @@ def effect_linear_damping(v_w, c, *, out=None):
     v_w_1 = v_w[..., 1]
     v_w_2 = v_w[..., 2]
     F_com_w_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    F_com_w_out[..., 0] = -c*v_w_0
-    F_com_w_out[..., 1] = -c*v_w_1
-    F_com_w_out[..., 2] = -c*v_w_2
+    numpy.multiply(-c, v_w_0, out=F_com_w_out[..., 0])
+    numpy.multiply(-c, v_w_1, out=F_com_w_out[..., 1])
+    numpy.multiply(-c, v_w_2, out=F_com_w_out[..., 2])
     return F_com_w_out
 
 
@@ -679,9 +679,9 @@ def effect_angular_damping(q, omega_b, c, *, out=None):
     t8 = 2*q_0*q_3
     t9 = 2*(q_0*q_0)
     tau_com_w_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    tau_com_w_out[..., 0] = -c*(omega_b_0*(-t6 - t7) + omega_b_1*(t1 - t3) + omega_b_2*(t4 + t5))
-    tau_com_w_out[..., 1] = -c*(omega_b_0*(t1 + t3) + omega_b_1*(-t7 - t9) + omega_b_2*(2*q_1*q_2 - t8))
-    tau_com_w_out[..., 2] = -c*(omega_b_0*(t4 - t5) + omega_b_1*(q_1*t2 + t8) + omega_b_2*(-t6 - t9 + 1))
+    numpy.multiply(-c, omega_b_0 * (-t6 - t7) + omega_b_1 * (t1 - t3) + omega_b_2 * (t4 + t5), out=tau_com_w_out[..., 0])
+    numpy.multiply(-c, omega_b_0 * (t1 + t3) + omega_b_1 * (-t7 - t9) + omega_b_2 * (2 * q_1 * q_2 - t8), out=tau_com_w_out[..., 1])
+    numpy.multiply(-c, omega_b_0 * (t4 - t5) + omega_b_1 * (q_1 * t2 + t8) + omega_b_2 * (-t6 - t9 + 1), out=tau_com_w_out[..., 2])
     return tau_com_w_out
 
 
@@ -716,10 +716,10 @@ def quat_mul(a, b, *, out=None):
     b_2 = b[..., 2]
     b_3 = b[..., 3]
     ab_out = numpy.empty(batch + (4,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    ab_out[..., 0] = a_0*b_3 + a_1*b_2 - a_2*b_1 + a_3*b_0
-    ab_out[..., 1] = -a_0*b_2 + a_1*b_3 + a_2*b_0 + a_3*b_1
-    ab_out[..., 2] = a_0*b_1 - a_1*b_0 + a_2*b_3 + a_3*b_2
-    ab_out[..., 3] = -a_0*b_0 - a_1*b_1 - a_2*b_2 + a_3*b_3
+    numpy.add(a_0 * b_3 + a_1 * b_2 - a_2 * b_1, a_3 * b_0, out=ab_out[..., 0])
+    numpy.add(-a_0 * b_2 + a_1 * b_3 + a_2 * b_0, a_3 * b_1, out=ab_out[..., 1])
+    numpy.add(a_0 * b_1 - a_1 * b_0 + a_2 * b_3, a_3 * b_2, out=ab_out[..., 2])
+    numpy.add(-a_0 * b_0 - a_1 * b_1 - a_2 * b_2, a_3 * b_3, out=ab_out[..., 3])
     return ab_out
 
 
@@ -747,9 +747,9 @@ def quat_conj(q, *, out=None):
     q_2 = q[..., 2]
     q_3 = q[..., 3]
     q_conj_out = numpy.empty(batch + (4,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    q_conj_out[..., 0] = -q_0
-    q_conj_out[..., 1] = -q_1
-    q_conj_out[..., 2] = -q_2
+    numpy.negative(q_0, out=q_conj_out[..., 0])
+    numpy.negative(q_1, out=q_conj_out[..., 1])
+    numpy.negative(q_2, out=q_conj_out[..., 2])
     q_conj_out[..., 3] = q_3
     return q_conj_out
 
@@ -779,10 +779,10 @@ def quat_normalize(q, *, out=None):
     q_3 = q[..., 3]
     t0 = (1.0/numpy.sqrt((q_0*q_0) + (q_1*q_1) + (q_2*q_2) + (q_3*q_3)))
     q_unit_out = numpy.empty(batch + (4,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    q_unit_out[..., 0] = q_0*t0
-    q_unit_out[..., 1] = q_1*t0
-    q_unit_out[..., 2] = q_2*t0
-    q_unit_out[..., 3] = q_3*t0
+    numpy.multiply(q_0, t0, out=q_unit_out[..., 0])
+    numpy.multiply(q_1, t0, out=q_unit_out[..., 1])
+    numpy.multiply(q_2, t0, out=q_unit_out[..., 2])
+    numpy.multiply(q_3, t0, out=q_unit_out[..., 3])
     return q_unit_out
 
 
@@ -826,9 +826,9 @@ def quat_rotate(q, v_b, *, out=None):
     t8 = 2*q_0*q_3
     t9 = 2*(q_0*q_0)
     v_w_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    v_w_out[..., 0] = v_b_0*(-t6 - t7) + v_b_1*(t1 - t3) + v_b_2*(t4 + t5)
-    v_w_out[..., 1] = v_b_0*(t1 + t3) + v_b_1*(-t7 - t9) + v_b_2*(2*q_1*q_2 - t8)
-    v_w_out[..., 2] = v_b_0*(t4 - t5) + v_b_1*(q_1*t2 + t8) + v_b_2*(-t6 - t9 + 1)
+    numpy.add(v_b_0 * (-t6 - t7) + v_b_1 * (t1 - t3), v_b_2 * (t4 + t5), out=v_w_out[..., 0])
+    numpy.add(v_b_0 * (t1 + t3) + v_b_1 * (-t7 - t9), v_b_2 * (2 * q_1 * q_2 - t8), out=v_w_out[..., 1])
+    numpy.add(v_b_0 * (t4 - t5) + v_b_1 * (q_1 * t2 + t8), v_b_2 * (-t6 - t9 + 1), out=v_w_out[..., 2])
     return v_w_out
 
 
@@ -866,15 +866,15 @@ def quat_to_matrix(q, *, out=None):
     t8 = 2*(q_0*q_0)
     t9 = 2*q_0*q_3
     R_wb_out = numpy.empty(batch + (3, 3), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    R_wb_out[..., 0, 0] = -t0 - t1
-    R_wb_out[..., 0, 1] = t3 - t5
-    R_wb_out[..., 0, 2] = t6 + t7
-    R_wb_out[..., 1, 0] = t3 + t5
-    R_wb_out[..., 1, 1] = -t1 - t8
-    R_wb_out[..., 1, 2] = 2*q_1*q_2 - t9
-    R_wb_out[..., 2, 0] = t6 - t7
-    R_wb_out[..., 2, 1] = q_1*t4 + t9
-    R_wb_out[..., 2, 2] = -t0 - t8 + 1
+    numpy.subtract(-t0, t1, out=R_wb_out[..., 0, 0])
+    numpy.subtract(t3, t5, out=R_wb_out[..., 0, 1])
+    numpy.add(t6, t7, out=R_wb_out[..., 0, 2])
+    numpy.add(t3, t5, out=R_wb_out[..., 1, 0])
+    numpy.subtract(-t1, t8, out=R_wb_out[..., 1, 1])
+    numpy.subtract(2 * q_1 * q_2, t9, out=R_wb_out[..., 1, 2])
+    numpy.subtract(t6, t7, out=R_wb_out[..., 2, 0])
+    numpy.add(q_1 * t4, t9, out=R_wb_out[..., 2, 1])
+    numpy.add(-t0 - t8, 1, out=R_wb_out[..., 2, 2])
     return R_wb_out
 
 
@@ -966,9 +966,9 @@ def axis_angle_to_quat(axis, angle, *, out=None):
     t0 = ((numpy.float32(1.0)/numpy.float32(2.0)))*angle
     t1 = numpy.sin(t0)
     q_out = numpy.empty(batch + (4,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    q_out[..., 0] = axis_0*t1
-    q_out[..., 1] = axis_1*t1
-    q_out[..., 2] = axis_2*t1
+    numpy.multiply(axis_0, t1, out=q_out[..., 0])
+    numpy.multiply(axis_1, t1, out=q_out[..., 1])
+    numpy.multiply(axis_2, t1, out=q_out[..., 2])
     q_out[..., 3] = numpy.cos(t0)
     return q_out
 
@@ -1055,7 +1055,7 @@ def quat_to_axis_angle(q, *, out=None):
         axis_out[..., 1] = numpy.select([t1,True], [0,q_1*t2], default=numpy.nan)
         axis_out[..., 2] = numpy.select([t1,True], [0,q_2*t2], default=numpy.nan)
         angle_out = numpy.empty(batch, dtype=numpy.float32) if out is None or out[1] is None else out[1]
-        angle_out[...] = 2*numpy.arctan2(t0, q_3)
+        numpy.multiply(2, numpy.arctan2(t0, q_3), out=angle_out[...])
     return axis_out, angle_out
 
 
@@ -1093,7 +1093,7 @@ def quat_error_angle(q, q_ref, *, out=None):
     t1 = q_0*q_ref_3 + q_1*q_ref_2 - q_2*q_ref_1 - q_3*q_ref_0
     t2 = -q_0*q_ref_2 + q_1*q_ref_3 + q_2*q_ref_0 - q_3*q_ref_1
     angle_out = numpy.empty(batch, dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    angle_out[...] = 2*numpy.arctan2(numpy.sqrt((t0*t0) + (t1*t1) + (t2*t2)), abs(q_0*q_ref_0 + q_1*q_ref_1 + q_2*q_ref_2 + q_3*q_ref_3))
+    numpy.multiply(2, numpy.arctan2(numpy.sqrt(t0 * t0 + t1 * t1 + t2 * t2), abs(q_0 * q_ref_0 + q_1 * q_ref_1 + q_2 * q_ref_2 + q_3 * q_ref_3)), out=angle_out[...])
     return angle_out
 
 
@@ -1179,10 +1179,10 @@ def euler_xyz_to_quat(roll, pitch, yaw, *, out=None):
     t10 = t8*t9
     t11 = t5*t9
     q_out = numpy.empty(batch + (4,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    q_out[..., 0] = t1*t6 + t10*t7
-    q_out[..., 1] = -t1*t10 + t6*t7
-    q_out[..., 2] = t1*t3*t8 + t11*t7
-    q_out[..., 3] = -t1*t11 + t3*t7*t8
+    numpy.add(t1 * t6, t10 * t7, out=q_out[..., 0])
+    numpy.add(-t1 * t10, t6 * t7, out=q_out[..., 1])
+    numpy.add(t1 * t3 * t8, t11 * t7, out=q_out[..., 2])
+    numpy.add(-t1 * t11, t3 * t7 * t8, out=q_out[..., 3])
     return q_out
 
 
@@ -1266,10 +1266,10 @@ def quat_derivative_world(q, omega_w, *, out=None):
     t3 = ((numpy.float32(1.0)/numpy.float32(2.0)))*omega_w_0
     t4 = ((numpy.float32(1.0)/numpy.float32(2.0)))*omega_w_1
     q_dot_out = numpy.empty(batch + (4,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    q_dot_out[..., 0] = omega_w_0*t0 + omega_w_1*t1 - q_1*t2
-    q_dot_out[..., 1] = -omega_w_0*t1 + omega_w_1*t0 + q_0*t2
-    q_dot_out[..., 2] = omega_w_2*t0 - q_0*t4 + q_1*t3
-    q_dot_out[..., 3] = -omega_w_2*t1 - q_0*t3 - q_1*t4
+    numpy.subtract(omega_w_0 * t0 + omega_w_1 * t1, q_1 * t2, out=q_dot_out[..., 0])
+    numpy.add(-omega_w_0 * t1 + omega_w_1 * t0, q_0 * t2, out=q_dot_out[..., 1])
+    numpy.add(omega_w_2 * t0 - q_0 * t4, q_1 * t3, out=q_dot_out[..., 2])
+    numpy.subtract(-omega_w_2 * t1 - q_0 * t3, q_1 * t4, out=q_dot_out[..., 3])
     return q_dot_out
 
 
@@ -1306,10 +1306,10 @@ def quat_derivative_body(q, omega_b, *, out=None):
     t1 = ((numpy.float32(1.0)/numpy.float32(2.0)))*omega_b_1
     t2 = ((numpy.float32(1.0)/numpy.float32(2.0)))*omega_b_2
     q_dot_out = numpy.empty(batch + (4,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    q_dot_out[..., 0] = q_1*t2 - q_2*t1 + q_3*t0
-    q_dot_out[..., 1] = -q_0*t2 + q_2*t0 + q_3*t1
-    q_dot_out[..., 2] = q_0*t1 - q_1*t0 + q_3*t2
-    q_dot_out[..., 3] = -q_0*t0 - q_1*t1 - q_2*t2
+    numpy.add(q_1 * t2 - q_2 * t1, q_3 * t0, out=q_dot_out[..., 0])
+    numpy.add(-q_0 * t2 + q_2 * t0, q_3 * t1, out=q_dot_out[..., 1])
+    numpy.add(q_0 * t1 - q_1 * t0, q_3 * t2, out=q_dot_out[..., 2])
+    numpy.subtract(-q_0 * t0 - q_1 * t1, q_2 * t2, out=q_dot_out[..., 3])
     return q_dot_out
 
 
@@ -1356,10 +1356,10 @@ def integrate_orientation(q, omega_w, dt, *, out=None):
     t8 = dt*(-omega_w_0*t1 + omega_w_1*t0 + q_0*t2) + q_1
     t9 = (1.0/numpy.sqrt((t3*t3) + (t6*t6) + (t7*t7) + (t8*t8)))
     q_next_out = numpy.empty(batch + (4,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    q_next_out[..., 0] = t3*t9
-    q_next_out[..., 1] = t8*t9
-    q_next_out[..., 2] = t7*t9
-    q_next_out[..., 3] = t6*t9
+    numpy.multiply(t3, t9, out=q_next_out[..., 0])
+    numpy.multiply(t8, t9, out=q_next_out[..., 1])
+    numpy.multiply(t7, t9, out=q_next_out[..., 2])
+    numpy.multiply(t6, t9, out=q_next_out[..., 3])
     return q_next_out
 
 
@@ -1404,9 +1404,9 @@ def euler_equations(I_b, omega_b, tau_b, *, out=None):
     c_b_4 = (1.0/I_b_1)
     c_b_5 = (1.0/I_b_2)
     omega_dot_b_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    omega_dot_b_out[..., 0] = c_b_0*omega_b_1*omega_b_2 + c_b_3*tau_b_0
-    omega_dot_b_out[..., 1] = c_b_1*omega_b_0*omega_b_2 + c_b_4*tau_b_1
-    omega_dot_b_out[..., 2] = c_b_2*omega_b_0*omega_b_1 + c_b_5*tau_b_2
+    numpy.add(c_b_0 * omega_b_1 * omega_b_2, c_b_3 * tau_b_0, out=omega_dot_b_out[..., 0])
+    numpy.add(c_b_1 * omega_b_0 * omega_b_2, c_b_4 * tau_b_1, out=omega_dot_b_out[..., 1])
+    numpy.add(c_b_2 * omega_b_0 * omega_b_1, c_b_5 * tau_b_2, out=omega_dot_b_out[..., 2])
     return omega_dot_b_out
 
 
@@ -1478,16 +1478,16 @@ def rigid_body_rhs(x, m, I_b, F_w, tau_w, *, out=None):
     x_dot_out[..., 0] = x_7
     x_dot_out[..., 1] = x_8
     x_dot_out[..., 2] = x_9
-    x_dot_out[..., 3] = t0*x_6 - t1*x_5 + t2*x_4
-    x_dot_out[..., 4] = t0*x_5 + t1*x_6 - t2*x_3
-    x_dot_out[..., 5] = -t0*x_4 + t1*x_3 + t2*x_6
-    x_dot_out[..., 6] = -t0*x_3 - t1*x_4 - t2*x_5
-    x_dot_out[..., 7] = F_w_0*t3
-    x_dot_out[..., 8] = F_w_1*t3
-    x_dot_out[..., 9] = F_w_2*t3
-    x_dot_out[..., 10] = c_b_0*x_11*x_12 + c_b_3*(t5*x_4 - t6*x_5 - t7*x_6 + tau_w_0)
-    x_dot_out[..., 11] = c_b_1*x_10*x_12 + c_b_4*(-t5*x_3 - t6*x_6 + t7*x_5 + tau_w_1)
-    x_dot_out[..., 12] = c_b_2*x_10*x_11 + c_b_5*(-t5*x_6 + t6*x_3 - t7*x_4 + tau_w_2)
+    numpy.add(t0 * x_6 - t1 * x_5, t2 * x_4, out=x_dot_out[..., 3])
+    numpy.subtract(t0 * x_5 + t1 * x_6, t2 * x_3, out=x_dot_out[..., 4])
+    numpy.add(-t0 * x_4 + t1 * x_3, t2 * x_6, out=x_dot_out[..., 5])
+    numpy.subtract(-t0 * x_3 - t1 * x_4, t2 * x_5, out=x_dot_out[..., 6])
+    numpy.multiply(F_w_0, t3, out=x_dot_out[..., 7])
+    numpy.multiply(F_w_1, t3, out=x_dot_out[..., 8])
+    numpy.multiply(F_w_2, t3, out=x_dot_out[..., 9])
+    numpy.add(c_b_0 * x_11 * x_12, c_b_3 * (t5 * x_4 - t6 * x_5 - t7 * x_6 + tau_w_0), out=x_dot_out[..., 10])
+    numpy.add(c_b_1 * x_10 * x_12, c_b_4 * (-t5 * x_3 - t6 * x_6 + t7 * x_5 + tau_w_1), out=x_dot_out[..., 11])
+    numpy.add(c_b_2 * x_10 * x_11, c_b_5 * (-t5 * x_6 + t6 * x_3 - t7 * x_4 + tau_w_2), out=x_dot_out[..., 12])
     return x_dot_out
 
 
@@ -1536,16 +1536,16 @@ def rigid_body_rhs_free(x, I_b, *, out=None):
     x_dot_out[..., 0] = x_7
     x_dot_out[..., 1] = x_8
     x_dot_out[..., 2] = x_9
-    x_dot_out[..., 3] = t0*x_6 - t1*x_5 + t2*x_4
-    x_dot_out[..., 4] = t0*x_5 + t1*x_6 - t2*x_3
-    x_dot_out[..., 5] = -t0*x_4 + t1*x_3 + t2*x_6
-    x_dot_out[..., 6] = -t0*x_3 - t1*x_4 - t2*x_5
+    numpy.add(t0 * x_6 - t1 * x_5, t2 * x_4, out=x_dot_out[..., 3])
+    numpy.subtract(t0 * x_5 + t1 * x_6, t2 * x_3, out=x_dot_out[..., 4])
+    numpy.add(-t0 * x_4 + t1 * x_3, t2 * x_6, out=x_dot_out[..., 5])
+    numpy.subtract(-t0 * x_3 - t1 * x_4, t2 * x_5, out=x_dot_out[..., 6])
     x_dot_out[..., 7] = 0
     x_dot_out[..., 8] = 0
     x_dot_out[..., 9] = 0
-    x_dot_out[..., 10] = c_b_0*x_11*x_12
-    x_dot_out[..., 11] = c_b_1*x_10*x_12
-    x_dot_out[..., 12] = c_b_2*x_10*x_11
+    numpy.multiply(c_b_0 * x_11, x_12, out=x_dot_out[..., 10])
+    numpy.multiply(c_b_1 * x_10, x_12, out=x_dot_out[..., 11])
+    numpy.multiply(c_b_2 * x_10, x_11, out=x_dot_out[..., 12])
     return x_dot_out
 
 
@@ -1613,9 +1613,9 @@ def apply_inv_inertia(q, I_b, v, *, out=None):
     t26 = t16*t25 + t18*t24 + t21*t23
     t27 = t0*t20*t23 + t10*t17*t24 + t15*t25*t6
     out_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    out_out[..., 0] = t22*v_1 + t26*v_2 + v_0*(t0*(t5*t5) + t10*(t13*t13) + t6*(t9*t9))
-    out_out[..., 1] = t22*v_0 + t27*v_2 + v_1*(t0*(t20*t20) + t10*(t17*t17) + (t15*t15)*t6)
-    out_out[..., 2] = t26*v_0 + t27*v_1 + v_2*(t0*(t23*t23) + t10*(t24*t24) + (t25*t25)*t6)
+    numpy.add(t22 * v_1 + t26 * v_2, v_0 * (t0 * (t5 * t5) + t10 * (t13 * t13) + t6 * (t9 * t9)), out=out_out[..., 0])
+    numpy.add(t22 * v_0 + t27 * v_2, v_1 * (t0 * (t20 * t20) + t10 * (t17 * t17) + t15 * t15 * t6), out=out_out[..., 1])
+    numpy.add(t26 * v_0 + t27 * v_1, v_2 * (t0 * (t23 * t23) + t10 * (t24 * t24) + t25 * t25 * t6), out=out_out[..., 2])
     return out_out
 
 
@@ -1659,9 +1659,9 @@ def world_to_body(q, v_w, *, out=None):
     t8 = 2*q_0*q_3
     t9 = 2*(q_0*q_0)
     v_b_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    v_b_out[..., 0] = v_0*(-t6 - t7) + v_1*(t1 + t3) + v_2*(t4 - t5)
-    v_b_out[..., 1] = v_0*(t1 - t3) + v_1*(-t7 - t9) + v_2*(q_2*t0 + t8)
-    v_b_out[..., 2] = v_0*(t4 + t5) + v_1*(2*q_1*q_2 - t8) + v_2*(-t6 - t9 + 1)
+    numpy.add(v_0 * (-t6 - t7) + v_1 * (t1 + t3), v_2 * (t4 - t5), out=v_b_out[..., 0])
+    numpy.add(v_0 * (t1 - t3) + v_1 * (-t7 - t9), v_2 * (q_2 * t0 + t8), out=v_b_out[..., 1])
+    numpy.add(v_0 * (t4 + t5) + v_1 * (2 * q_1 * q_2 - t8), v_2 * (-t6 - t9 + 1), out=v_b_out[..., 2])
     return v_b_out
 
 
@@ -1703,7 +1703,7 @@ def kinetic_energy(m, I_b, v_w, omega_b, *, out=None):
     omega_b_1 = omega_b[..., 1]
     omega_b_2 = omega_b[..., 2]
     T_out = numpy.empty(batch, dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    T_out[...] = ((numpy.float32(1.0)/numpy.float32(2.0)))*I_b_0*(omega_b_0*omega_b_0) + ((numpy.float32(1.0)/numpy.float32(2.0)))*I_b_1*(omega_b_1*omega_b_1) + ((numpy.float32(1.0)/numpy.float32(2.0)))*I_b_2*(omega_b_2*omega_b_2) + ((numpy.float32(1.0)/numpy.float32(2.0)))*m*((v_w_0*v_w_0) + (v_w_1*v_w_1) + (v_w_2*v_w_2))
+    numpy.add(numpy.float32(1.0) / numpy.float32(2.0) * I_b_0 * (omega_b_0 * omega_b_0) + numpy.float32(1.0) / numpy.float32(2.0) * I_b_1 * (omega_b_1 * omega_b_1) + numpy.float32(1.0) / numpy.float32(2.0) * I_b_2 * (omega_b_2 * omega_b_2), numpy.float32(1.0) / numpy.float32(2.0) * m * (v_w_0 * v_w_0 + v_w_1 * v_w_1 + v_w_2 * v_w_2), out=T_out[...])
     return T_out
 
 
@@ -1756,9 +1756,9 @@ def angular_momentum_world(q, I_b, omega_b, *, out=None):
     t11 = 2*q_0*q_3
     t12 = 2*(q_0*q_0)
     L_w_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    L_w_out[..., 0] = t10*(-t8 - t9) + t4*(t1 - t3) + t7*(t5 + t6)
-    L_w_out[..., 1] = t10*(t1 + t3) + t4*(-t12 - t9) + t7*(2*q_1*q_2 - t11)
-    L_w_out[..., 2] = t10*(t5 - t6) + t4*(q_1*t2 + t11) + t7*(-t12 - t8 + 1)
+    numpy.add(t10 * (-t8 - t9) + t4 * (t1 - t3), t7 * (t5 + t6), out=L_w_out[..., 0])
+    numpy.add(t10 * (t1 + t3) + t4 * (-t12 - t9), t7 * (2 * q_1 * q_2 - t11), out=L_w_out[..., 1])
+    numpy.add(t10 * (t5 - t6) + t4 * (q_1 * t2 + t11), t7 * (-t12 - t8 + 1), out=L_w_out[..., 2])
     return L_w_out
 
 
@@ -1820,16 +1820,16 @@ def rigid_body_rhs_torque(x, I_b, tau_w, *, out=None):
     x_dot_out[..., 0] = x_7
     x_dot_out[..., 1] = x_8
     x_dot_out[..., 2] = x_9
-    x_dot_out[..., 3] = t0*x_6 - t1*x_5 + t2*x_4
-    x_dot_out[..., 4] = t0*x_5 + t1*x_6 - t2*x_3
-    x_dot_out[..., 5] = -t0*x_4 + t1*x_3 + t2*x_6
-    x_dot_out[..., 6] = -t0*x_3 - t1*x_4 - t2*x_5
+    numpy.add(t0 * x_6 - t1 * x_5, t2 * x_4, out=x_dot_out[..., 3])
+    numpy.subtract(t0 * x_5 + t1 * x_6, t2 * x_3, out=x_dot_out[..., 4])
+    numpy.add(-t0 * x_4 + t1 * x_3, t2 * x_6, out=x_dot_out[..., 5])
+    numpy.subtract(-t0 * x_3 - t1 * x_4, t2 * x_5, out=x_dot_out[..., 6])
     x_dot_out[..., 7] = 0
     x_dot_out[..., 8] = 0
     x_dot_out[..., 9] = 0
-    x_dot_out[..., 10] = c_b_0*x_11*x_12 + c_b_3*(t4*x_4 - t5*x_5 - t6*x_6 + tau_w_0)
-    x_dot_out[..., 11] = c_b_1*x_10*x_12 + c_b_4*(-t4*x_3 - t5*x_6 + t6*x_5 + tau_w_1)
-    x_dot_out[..., 12] = c_b_2*x_10*x_11 + c_b_5*(-t4*x_6 + t5*x_3 - t6*x_4 + tau_w_2)
+    numpy.add(c_b_0 * x_11 * x_12, c_b_3 * (t4 * x_4 - t5 * x_5 - t6 * x_6 + tau_w_0), out=x_dot_out[..., 10])
+    numpy.add(c_b_1 * x_10 * x_12, c_b_4 * (-t4 * x_3 - t5 * x_6 + t6 * x_5 + tau_w_1), out=x_dot_out[..., 11])
+    numpy.add(c_b_2 * x_10 * x_11, c_b_5 * (-t4 * x_6 + t5 * x_3 - t6 * x_4 + tau_w_2), out=x_dot_out[..., 12])
     return x_dot_out
 
 
@@ -1913,16 +1913,16 @@ def rigid_body_rhs_free_c(x, c_b, *, out=None):
     x_dot_out[..., 0] = x_7
     x_dot_out[..., 1] = x_8
     x_dot_out[..., 2] = x_9
-    x_dot_out[..., 3] = t0*x_6 - t1*x_5 + t2*x_4
-    x_dot_out[..., 4] = t0*x_5 + t1*x_6 - t2*x_3
-    x_dot_out[..., 5] = -t0*x_4 + t1*x_3 + t2*x_6
-    x_dot_out[..., 6] = -t0*x_3 - t1*x_4 - t2*x_5
+    numpy.add(t0 * x_6 - t1 * x_5, t2 * x_4, out=x_dot_out[..., 3])
+    numpy.subtract(t0 * x_5 + t1 * x_6, t2 * x_3, out=x_dot_out[..., 4])
+    numpy.add(-t0 * x_4 + t1 * x_3, t2 * x_6, out=x_dot_out[..., 5])
+    numpy.subtract(-t0 * x_3 - t1 * x_4, t2 * x_5, out=x_dot_out[..., 6])
     x_dot_out[..., 7] = 0
     x_dot_out[..., 8] = 0
     x_dot_out[..., 9] = 0
-    x_dot_out[..., 10] = c_b_0*x_11*x_12
-    x_dot_out[..., 11] = c_b_1*x_10*x_12
-    x_dot_out[..., 12] = c_b_2*x_10*x_11
+    numpy.multiply(c_b_0 * x_11, x_12, out=x_dot_out[..., 10])
+    numpy.multiply(c_b_1 * x_10, x_12, out=x_dot_out[..., 11])
+    numpy.multiply(c_b_2 * x_10, x_11, out=x_dot_out[..., 12])
     return x_dot_out
 
 
@@ -1981,16 +1981,16 @@ def rigid_body_rhs_torque_c(x, c_b, tau_w, *, out=None):
     x_dot_out[..., 0] = x_7
     x_dot_out[..., 1] = x_8
     x_dot_out[..., 2] = x_9
-    x_dot_out[..., 3] = t0*x_6 - t1*x_5 + t2*x_4
-    x_dot_out[..., 4] = t0*x_5 + t1*x_6 - t2*x_3
-    x_dot_out[..., 5] = -t0*x_4 + t1*x_3 + t2*x_6
-    x_dot_out[..., 6] = -t0*x_3 - t1*x_4 - t2*x_5
+    numpy.add(t0 * x_6 - t1 * x_5, t2 * x_4, out=x_dot_out[..., 3])
+    numpy.subtract(t0 * x_5 + t1 * x_6, t2 * x_3, out=x_dot_out[..., 4])
+    numpy.add(-t0 * x_4 + t1 * x_3, t2 * x_6, out=x_dot_out[..., 5])
+    numpy.subtract(-t0 * x_3 - t1 * x_4, t2 * x_5, out=x_dot_out[..., 6])
     x_dot_out[..., 7] = 0
     x_dot_out[..., 8] = 0
     x_dot_out[..., 9] = 0
-    x_dot_out[..., 10] = c_b_0*x_11*x_12 + c_b_3*(t4*x_4 - t5*x_5 - t6*x_6 + tau_w_0)
-    x_dot_out[..., 11] = c_b_1*x_10*x_12 + c_b_4*(-t4*x_3 - t5*x_6 + t6*x_5 + tau_w_1)
-    x_dot_out[..., 12] = c_b_2*x_10*x_11 + c_b_5*(-t4*x_6 + t5*x_3 - t6*x_4 + tau_w_2)
+    numpy.add(c_b_0 * x_11 * x_12, c_b_3 * (t4 * x_4 - t5 * x_5 - t6 * x_6 + tau_w_0), out=x_dot_out[..., 10])
+    numpy.add(c_b_1 * x_10 * x_12, c_b_4 * (-t4 * x_3 - t5 * x_6 + t6 * x_5 + tau_w_1), out=x_dot_out[..., 11])
+    numpy.add(c_b_2 * x_10 * x_11, c_b_5 * (-t4 * x_6 + t5 * x_3 - t6 * x_4 + tau_w_2), out=x_dot_out[..., 12])
     return x_dot_out
 
 
@@ -2059,16 +2059,16 @@ def rigid_body_rhs_c(x, m, c_b, F_w, tau_w, *, out=None):
     x_dot_out[..., 0] = x_7
     x_dot_out[..., 1] = x_8
     x_dot_out[..., 2] = x_9
-    x_dot_out[..., 3] = t0*x_6 - t1*x_5 + t2*x_4
-    x_dot_out[..., 4] = t0*x_5 + t1*x_6 - t2*x_3
-    x_dot_out[..., 5] = -t0*x_4 + t1*x_3 + t2*x_6
-    x_dot_out[..., 6] = -t0*x_3 - t1*x_4 - t2*x_5
-    x_dot_out[..., 7] = F_w_0*t3
-    x_dot_out[..., 8] = F_w_1*t3
-    x_dot_out[..., 9] = F_w_2*t3
-    x_dot_out[..., 10] = c_b_0*x_11*x_12 + c_b_3*(t5*x_4 - t6*x_5 - t7*x_6 + tau_w_0)
-    x_dot_out[..., 11] = c_b_1*x_10*x_12 + c_b_4*(-t5*x_3 - t6*x_6 + t7*x_5 + tau_w_1)
-    x_dot_out[..., 12] = c_b_2*x_10*x_11 + c_b_5*(-t5*x_6 + t6*x_3 - t7*x_4 + tau_w_2)
+    numpy.add(t0 * x_6 - t1 * x_5, t2 * x_4, out=x_dot_out[..., 3])
+    numpy.subtract(t0 * x_5 + t1 * x_6, t2 * x_3, out=x_dot_out[..., 4])
+    numpy.add(-t0 * x_4 + t1 * x_3, t2 * x_6, out=x_dot_out[..., 5])
+    numpy.subtract(-t0 * x_3 - t1 * x_4, t2 * x_5, out=x_dot_out[..., 6])
+    numpy.multiply(F_w_0, t3, out=x_dot_out[..., 7])
+    numpy.multiply(F_w_1, t3, out=x_dot_out[..., 8])
+    numpy.multiply(F_w_2, t3, out=x_dot_out[..., 9])
+    numpy.add(c_b_0 * x_11 * x_12, c_b_3 * (t5 * x_4 - t6 * x_5 - t7 * x_6 + tau_w_0), out=x_dot_out[..., 10])
+    numpy.add(c_b_1 * x_10 * x_12, c_b_4 * (-t5 * x_3 - t6 * x_6 + t7 * x_5 + tau_w_1), out=x_dot_out[..., 11])
+    numpy.add(c_b_2 * x_10 * x_11, c_b_5 * (-t5 * x_6 + t6 * x_3 - t7 * x_4 + tau_w_2), out=x_dot_out[..., 12])
     return x_dot_out
 
 
@@ -2169,14 +2169,14 @@ def pivot_body_rhs(q, omega_b, I_p, r_b, F_w, tau_w, *, out=None):
     t36 = -omega_b_1*t33 + omega_b_2*t16 + r_b_1*t34 - r_b_2*t26 + t27*tau_w_1 + t28*tau_w_2 + t29*tau_w_0
     t37 = -I_p_00*I_p_12 + I_p_01*I_p_02
     q_dot_out = numpy.empty(batch + (4,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    q_dot_out[..., 0] = q_1*t2 - q_2*t1 + q_3*t0
-    q_dot_out[..., 1] = -q_0*t2 + q_2*t0 + q_3*t1
-    q_dot_out[..., 2] = q_0*t1 - q_1*t0 + q_3*t2
-    q_dot_out[..., 3] = -q_0*t0 - q_1*t1 - q_2*t2
+    numpy.add(q_1 * t2 - q_2 * t1, q_3 * t0, out=q_dot_out[..., 0])
+    numpy.add(-q_0 * t2 + q_2 * t0, q_3 * t1, out=q_dot_out[..., 1])
+    numpy.add(q_0 * t1 - q_1 * t0, q_3 * t2, out=q_dot_out[..., 2])
+    numpy.subtract(-q_0 * t0 - q_1 * t1, q_2 * t2, out=q_dot_out[..., 3])
     omega_dot_b_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[1] is None else out[1]
-    omega_dot_b_out[..., 0] = t6*(t31*t7 + t32*t35 + t36*(I_p_11*I_p_22 - t3))
-    omega_dot_b_out[..., 1] = t6*(t31*t37 + t32*t36 + t35*(I_p_00*I_p_22 - t5))
-    omega_dot_b_out[..., 2] = t6*(t31*(I_p_00*I_p_11 - t4) + t35*t37 + t36*t7)
+    numpy.multiply(t6, t31 * t7 + t32 * t35 + t36 * (I_p_11 * I_p_22 - t3), out=omega_dot_b_out[..., 0])
+    numpy.multiply(t6, t31 * t37 + t32 * t36 + t35 * (I_p_00 * I_p_22 - t5), out=omega_dot_b_out[..., 1])
+    numpy.multiply(t6, t31 * (I_p_00 * I_p_11 - t4) + t35 * t37 + t36 * t7, out=omega_dot_b_out[..., 2])
     return q_dot_out, omega_dot_b_out
 
 
@@ -2246,13 +2246,13 @@ def pivot_kinematics(q, omega_b, anchor_w, r_b, *, out=None):
     t20 = -omega_b_0*r_b_2 + omega_b_2*r_b_0
     t21 = omega_b_1*r_b_2 - omega_b_2*r_b_1
     p_w_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    p_w_out[..., 0] = anchor_w_0 + r_b_0*t10 + r_b_1*t4 + r_b_2*t7
-    p_w_out[..., 1] = anchor_w_1 + r_b_0*t11 + r_b_1*t15 + r_b_2*t13
-    p_w_out[..., 2] = anchor_w_2 + r_b_0*t16 + r_b_1*t17 + r_b_2*t18
+    numpy.add(anchor_w_0 + r_b_0 * t10 + r_b_1 * t4, r_b_2 * t7, out=p_w_out[..., 0])
+    numpy.add(anchor_w_1 + r_b_0 * t11 + r_b_1 * t15, r_b_2 * t13, out=p_w_out[..., 1])
+    numpy.add(anchor_w_2 + r_b_0 * t16 + r_b_1 * t17, r_b_2 * t18, out=p_w_out[..., 2])
     v_w_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[1] is None else out[1]
-    v_w_out[..., 0] = t10*t21 + t19*t7 + t20*t4
-    v_w_out[..., 1] = t11*t21 + t13*t19 + t15*t20
-    v_w_out[..., 2] = t16*t21 + t17*t20 + t18*t19
+    numpy.add(t10 * t21 + t19 * t7, t20 * t4, out=v_w_out[..., 0])
+    numpy.add(t11 * t21 + t13 * t19, t15 * t20, out=v_w_out[..., 1])
+    numpy.add(t16 * t21 + t17 * t20, t18 * t19, out=v_w_out[..., 2])
     return p_w_out, v_w_out
 
 
@@ -2352,14 +2352,14 @@ def splitting_rotation(I_b, q, omega_b, h, *, out=None):
     t53 = t21*t41 + t40*t42
     t54 = 2*t45*t49
     q_next_out = numpy.empty(batch + (4,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    q_next_out[..., 0] = t39*t45 + t48*t49
-    q_next_out[..., 1] = t45*t51 + t49*t50
-    q_next_out[..., 2] = t45*t50 - t49*t51
-    q_next_out[..., 3] = -t39*t49 + t45*t48
+    numpy.add(t39 * t45, t48 * t49, out=q_next_out[..., 0])
+    numpy.add(t45 * t51, t49 * t50, out=q_next_out[..., 1])
+    numpy.subtract(t45 * t50, t49 * t51, out=q_next_out[..., 2])
+    numpy.add(-t39 * t49, t45 * t48, out=q_next_out[..., 3])
     omega_next_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[1] is None else out[1]
     omega_next_out[..., 0] = t43
-    omega_next_out[..., 1] = t9*(t32*t52 + t53*t54)
-    omega_next_out[..., 2] = t16*(-t32*t54 + t52*t53)
+    numpy.multiply(t9, t32 * t52 + t53 * t54, out=omega_next_out[..., 1])
+    numpy.multiply(t16, -t32 * t54 + t52 * t53, out=omega_next_out[..., 2])
     return q_next_out, omega_next_out
 
 
@@ -2407,14 +2407,14 @@ def axis_flow_x(I_b, q, L_b, tau, *, out=None):
     t3 = 1 - 2*(t2*t2)
     t4 = 2*t1*t2
     q_next_out = numpy.empty(batch + (4,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    q_next_out[..., 0] = q_0*t1 + q_3*t2
-    q_next_out[..., 1] = q_1*t1 + q_2*t2
-    q_next_out[..., 2] = -q_1*t2 + q_2*t1
-    q_next_out[..., 3] = -q_0*t2 + q_3*t1
+    numpy.add(q_0 * t1, q_3 * t2, out=q_next_out[..., 0])
+    numpy.add(q_1 * t1, q_2 * t2, out=q_next_out[..., 1])
+    numpy.add(-q_1 * t2, q_2 * t1, out=q_next_out[..., 2])
+    numpy.add(-q_0 * t2, q_3 * t1, out=q_next_out[..., 3])
     L_next_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[1] is None else out[1]
     L_next_out[..., 0] = L_b_0
-    L_next_out[..., 1] = L_b_1*t3 + L_b_2*t4
-    L_next_out[..., 2] = -L_b_1*t4 + L_b_2*t3
+    numpy.add(L_b_1 * t3, L_b_2 * t4, out=L_next_out[..., 1])
+    numpy.add(-L_b_1 * t4, L_b_2 * t3, out=L_next_out[..., 2])
     return q_next_out, L_next_out
 
 
@@ -2462,14 +2462,14 @@ def axis_flow_y(I_b, q, L_b, tau, *, out=None):
     t3 = 1 - 2*(t2*t2)
     t4 = 2*t1*t2
     q_next_out = numpy.empty(batch + (4,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    q_next_out[..., 0] = q_0*t1 - q_2*t2
-    q_next_out[..., 1] = q_1*t1 + q_3*t2
-    q_next_out[..., 2] = q_0*t2 + q_2*t1
-    q_next_out[..., 3] = -q_1*t2 + q_3*t1
+    numpy.subtract(q_0 * t1, q_2 * t2, out=q_next_out[..., 0])
+    numpy.add(q_1 * t1, q_3 * t2, out=q_next_out[..., 1])
+    numpy.add(q_0 * t2, q_2 * t1, out=q_next_out[..., 2])
+    numpy.add(-q_1 * t2, q_3 * t1, out=q_next_out[..., 3])
     L_next_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[1] is None else out[1]
-    L_next_out[..., 0] = L_b_0*t3 - L_b_2*t4
+    numpy.subtract(L_b_0 * t3, L_b_2 * t4, out=L_next_out[..., 0])
     L_next_out[..., 1] = L_b_1
-    L_next_out[..., 2] = L_b_0*t4 + L_b_2*t3
+    numpy.add(L_b_0 * t4, L_b_2 * t3, out=L_next_out[..., 2])
     return q_next_out, L_next_out
 
 
@@ -2517,13 +2517,13 @@ def axis_flow_z(I_b, q, L_b, tau, *, out=None):
     t3 = 1 - 2*(t2*t2)
     t4 = 2*t1*t2
     q_next_out = numpy.empty(batch + (4,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    q_next_out[..., 0] = q_0*t1 + q_1*t2
-    q_next_out[..., 1] = -q_0*t2 + q_1*t1
-    q_next_out[..., 2] = q_2*t1 + q_3*t2
-    q_next_out[..., 3] = -q_2*t2 + q_3*t1
+    numpy.add(q_0 * t1, q_1 * t2, out=q_next_out[..., 0])
+    numpy.add(-q_0 * t2, q_1 * t1, out=q_next_out[..., 1])
+    numpy.add(q_2 * t1, q_3 * t2, out=q_next_out[..., 2])
+    numpy.add(-q_2 * t2, q_3 * t1, out=q_next_out[..., 3])
     L_next_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[1] is None else out[1]
-    L_next_out[..., 0] = L_b_0*t3 + L_b_1*t4
-    L_next_out[..., 1] = -L_b_0*t4 + L_b_1*t3
+    numpy.add(L_b_0 * t3, L_b_1 * t4, out=L_next_out[..., 0])
+    numpy.add(-L_b_0 * t4, L_b_1 * t3, out=L_next_out[..., 1])
     L_next_out[..., 2] = L_b_2
     return q_next_out, L_next_out
 
@@ -2590,9 +2590,9 @@ def symtop_leftover(I_b, I_r, *, out=None):
     I_b_2 = I_b[..., 2]
     t0 = (1.0/I_r)
     c_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    c_out[..., 0] = -t0 + (1.0/I_b_0)
-    c_out[..., 1] = -t0 + (1.0/I_b_1)
-    c_out[..., 2] = -t0 + (1.0/I_b_2)
+    numpy.add(-t0, 1.0 / I_b_0, out=c_out[..., 0])
+    numpy.add(-t0, 1.0 / I_b_1, out=c_out[..., 1])
+    numpy.add(-t0, 1.0 / I_b_2, out=c_out[..., 2])
     return c_out
 
 
@@ -2639,14 +2639,14 @@ def symtop_axis_flow_x(q, L_b, c, tau, *, out=None):
     t3 = 1 - 2*(t2*t2)
     t4 = 2*t1*t2
     q_next_out = numpy.empty(batch + (4,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    q_next_out[..., 0] = q_0*t1 + q_3*t2
-    q_next_out[..., 1] = q_1*t1 + q_2*t2
-    q_next_out[..., 2] = -q_1*t2 + q_2*t1
-    q_next_out[..., 3] = -q_0*t2 + q_3*t1
+    numpy.add(q_0 * t1, q_3 * t2, out=q_next_out[..., 0])
+    numpy.add(q_1 * t1, q_2 * t2, out=q_next_out[..., 1])
+    numpy.add(-q_1 * t2, q_2 * t1, out=q_next_out[..., 2])
+    numpy.add(-q_0 * t2, q_3 * t1, out=q_next_out[..., 3])
     L_next_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[1] is None else out[1]
     L_next_out[..., 0] = L_b_0
-    L_next_out[..., 1] = L_b_1*t3 + L_b_2*t4
-    L_next_out[..., 2] = -L_b_1*t4 + L_b_2*t3
+    numpy.add(L_b_1 * t3, L_b_2 * t4, out=L_next_out[..., 1])
+    numpy.add(-L_b_1 * t4, L_b_2 * t3, out=L_next_out[..., 2])
     return q_next_out, L_next_out
 
 
@@ -2693,14 +2693,14 @@ def symtop_axis_flow_y(q, L_b, c, tau, *, out=None):
     t3 = 1 - 2*(t2*t2)
     t4 = 2*t1*t2
     q_next_out = numpy.empty(batch + (4,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    q_next_out[..., 0] = q_0*t1 - q_2*t2
-    q_next_out[..., 1] = q_1*t1 + q_3*t2
-    q_next_out[..., 2] = q_0*t2 + q_2*t1
-    q_next_out[..., 3] = -q_1*t2 + q_3*t1
+    numpy.subtract(q_0 * t1, q_2 * t2, out=q_next_out[..., 0])
+    numpy.add(q_1 * t1, q_3 * t2, out=q_next_out[..., 1])
+    numpy.add(q_0 * t2, q_2 * t1, out=q_next_out[..., 2])
+    numpy.add(-q_1 * t2, q_3 * t1, out=q_next_out[..., 3])
     L_next_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[1] is None else out[1]
-    L_next_out[..., 0] = L_b_0*t3 - L_b_2*t4
+    numpy.subtract(L_b_0 * t3, L_b_2 * t4, out=L_next_out[..., 0])
     L_next_out[..., 1] = L_b_1
-    L_next_out[..., 2] = L_b_0*t4 + L_b_2*t3
+    numpy.add(L_b_0 * t4, L_b_2 * t3, out=L_next_out[..., 2])
     return q_next_out, L_next_out
 
 
@@ -2747,13 +2747,13 @@ def symtop_axis_flow_z(q, L_b, c, tau, *, out=None):
     t3 = 1 - 2*(t2*t2)
     t4 = 2*t1*t2
     q_next_out = numpy.empty(batch + (4,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    q_next_out[..., 0] = q_0*t1 + q_1*t2
-    q_next_out[..., 1] = -q_0*t2 + q_1*t1
-    q_next_out[..., 2] = q_2*t1 + q_3*t2
-    q_next_out[..., 3] = -q_2*t2 + q_3*t1
+    numpy.add(q_0 * t1, q_1 * t2, out=q_next_out[..., 0])
+    numpy.add(-q_0 * t2, q_1 * t1, out=q_next_out[..., 1])
+    numpy.add(q_2 * t1, q_3 * t2, out=q_next_out[..., 2])
+    numpy.add(-q_2 * t2, q_3 * t1, out=q_next_out[..., 3])
     L_next_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[1] is None else out[1]
-    L_next_out[..., 0] = L_b_0*t3 + L_b_1*t4
-    L_next_out[..., 1] = -L_b_0*t4 + L_b_1*t3
+    numpy.add(L_b_0 * t3, L_b_1 * t4, out=L_next_out[..., 0])
+    numpy.add(-L_b_0 * t4, L_b_1 * t3, out=L_next_out[..., 1])
     L_next_out[..., 2] = L_b_2
     return q_next_out, L_next_out
 
@@ -2806,10 +2806,10 @@ def sphere_flow(q, L_b, I_r, tau, *, out=None):
         t9 = L_b_2*t7
         t10 = L_b_1*t7
         q_next_out = numpy.empty(batch + (4,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-        q_next_out[..., 0] = q_0*t6 + q_1*t9 - q_2*t10 + q_3*t8
-        q_next_out[..., 1] = -q_0*t9 + q_1*t6 + q_2*t8 + q_3*t10
-        q_next_out[..., 2] = q_0*t10 - q_1*t8 + q_2*t6 + q_3*t9
-        q_next_out[..., 3] = -q_0*t8 - q_1*t10 - q_2*t9 + q_3*t6
+        numpy.add(q_0 * t6 + q_1 * t9 - q_2 * t10, q_3 * t8, out=q_next_out[..., 0])
+        numpy.add(-q_0 * t9 + q_1 * t6 + q_2 * t8, q_3 * t10, out=q_next_out[..., 1])
+        numpy.add(q_0 * t10 - q_1 * t8 + q_2 * t6, q_3 * t9, out=q_next_out[..., 2])
+        numpy.add(-q_0 * t8 - q_1 * t10 - q_2 * t9, q_3 * t6, out=q_next_out[..., 3])
     return q_next_out
 
 
@@ -2842,9 +2842,9 @@ def body_momentum(I_b, omega_b, *, out=None):
     omega_b_1 = omega_b[..., 1]
     omega_b_2 = omega_b[..., 2]
     L_b_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    L_b_out[..., 0] = I_b_0*omega_b_0
-    L_b_out[..., 1] = I_b_1*omega_b_1
-    L_b_out[..., 2] = I_b_2*omega_b_2
+    numpy.multiply(I_b_0, omega_b_0, out=L_b_out[..., 0])
+    numpy.multiply(I_b_1, omega_b_1, out=L_b_out[..., 1])
+    numpy.multiply(I_b_2, omega_b_2, out=L_b_out[..., 2])
     return L_b_out
 
 
@@ -2877,9 +2877,9 @@ def body_rate(I_b, L_b, *, out=None):
     L_b_1 = L_b[..., 1]
     L_b_2 = L_b[..., 2]
     omega_b_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    omega_b_out[..., 0] = L_b_0/I_b_0
-    omega_b_out[..., 1] = L_b_1/I_b_1
-    omega_b_out[..., 2] = L_b_2/I_b_2
+    numpy.divide(L_b_0, I_b_0, out=omega_b_out[..., 0])
+    numpy.divide(L_b_1, I_b_1, out=omega_b_out[..., 1])
+    numpy.divide(L_b_2, I_b_2, out=omega_b_out[..., 2])
     return omega_b_out
 
 
@@ -2939,13 +2939,13 @@ def splitting_kick(m, I_b, v_w, omega_b, F_w, tau_b, h, *, out=None):
     tau_b_2 = tau_b[..., 2]
     t0 = h/m
     v_next_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    v_next_out[..., 0] = F_w_0*t0 + v_w_0
-    v_next_out[..., 1] = F_w_1*t0 + v_w_1
-    v_next_out[..., 2] = F_w_2*t0 + v_w_2
+    numpy.add(F_w_0 * t0, v_w_0, out=v_next_out[..., 0])
+    numpy.add(F_w_1 * t0, v_w_1, out=v_next_out[..., 1])
+    numpy.add(F_w_2 * t0, v_w_2, out=v_next_out[..., 2])
     omega_next_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[1] is None else out[1]
-    omega_next_out[..., 0] = omega_b_0 + h*tau_b_0/I_b_0
-    omega_next_out[..., 1] = omega_b_1 + h*tau_b_1/I_b_1
-    omega_next_out[..., 2] = omega_b_2 + h*tau_b_2/I_b_2
+    numpy.add(omega_b_0, h * tau_b_0 / I_b_0, out=omega_next_out[..., 0])
+    numpy.add(omega_b_1, h * tau_b_1 / I_b_1, out=omega_next_out[..., 1])
+    numpy.add(omega_b_2, h * tau_b_2 / I_b_2, out=omega_next_out[..., 2])
     return v_next_out, omega_next_out
 
 
@@ -2981,9 +2981,9 @@ def translation_drift(p_w, v_w, h, *, out=None):
     v_w_1 = v_w[..., 1]
     v_w_2 = v_w[..., 2]
     p_next_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    p_next_out[..., 0] = h*v_w_0 + p_w_0
-    p_next_out[..., 1] = h*v_w_1 + p_w_1
-    p_next_out[..., 2] = h*v_w_2 + p_w_2
+    numpy.add(h * v_w_0, p_w_0, out=p_next_out[..., 0])
+    numpy.add(h * v_w_1, p_w_1, out=p_next_out[..., 1])
+    numpy.add(h * v_w_2, p_w_2, out=p_next_out[..., 2])
     return p_next_out
 
 
@@ -3034,9 +3034,9 @@ def semi_implicit_translation(m, p_w, v_w, F_w, h, *, out=None):
     t2 = F_w_1*t0 + v_w_1
     t3 = F_w_2*t0 + v_w_2
     p_next_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    p_next_out[..., 0] = h*t1 + p_w_0
-    p_next_out[..., 1] = h*t2 + p_w_1
-    p_next_out[..., 2] = h*t3 + p_w_2
+    numpy.add(h * t1, p_w_0, out=p_next_out[..., 0])
+    numpy.add(h * t2, p_w_1, out=p_next_out[..., 1])
+    numpy.add(h * t3, p_w_2, out=p_next_out[..., 2])
     v_next_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[1] is None else out[1]
     v_next_out[..., 0] = t1
     v_next_out[..., 1] = t2
@@ -3083,9 +3083,9 @@ def translation_rhs(m, v_w, F_w, *, out=None):
     p_dot_out[..., 1] = v_w_1
     p_dot_out[..., 2] = v_w_2
     v_dot_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[1] is None else out[1]
-    v_dot_out[..., 0] = F_w_0*t0
-    v_dot_out[..., 1] = F_w_1*t0
-    v_dot_out[..., 2] = F_w_2*t0
+    numpy.multiply(F_w_0, t0, out=v_dot_out[..., 0])
+    numpy.multiply(F_w_1, t0, out=v_dot_out[..., 1])
+    numpy.multiply(F_w_2, t0, out=v_dot_out[..., 2])
     return p_dot_out, v_dot_out
 
 
@@ -3134,9 +3134,9 @@ def implicit_gyro_residual(I_b, omega_b, tau_b, h, omega_next, *, out=None):
     omega_next_2 = omega_next[..., 2]
     t0 = omega_next_0*omega_next_2
     g_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    g_out[..., 0] = I_b_0*(-omega_b_0 + omega_next_0) - h*tau_b_0 + h*(-I_b_1*omega_next_1*omega_next_2 + I_b_2*omega_next_1*omega_next_2)
-    g_out[..., 1] = I_b_1*(-omega_b_1 + omega_next_1) - h*tau_b_1 + h*(I_b_0*t0 - I_b_2*t0)
-    g_out[..., 2] = I_b_2*(-omega_b_2 + omega_next_2) - h*tau_b_2 + h*(-I_b_0*omega_next_0*omega_next_1 + I_b_1*omega_next_0*omega_next_1)
+    numpy.add(I_b_0 * (-omega_b_0 + omega_next_0) - h * tau_b_0, h * (-I_b_1 * omega_next_1 * omega_next_2 + I_b_2 * omega_next_1 * omega_next_2), out=g_out[..., 0])
+    numpy.add(I_b_1 * (-omega_b_1 + omega_next_1) - h * tau_b_1, h * (I_b_0 * t0 - I_b_2 * t0), out=g_out[..., 1])
+    numpy.add(I_b_2 * (-omega_b_2 + omega_next_2) - h * tau_b_2, h * (-I_b_0 * omega_next_0 * omega_next_1 + I_b_1 * omega_next_0 * omega_next_1), out=g_out[..., 2])
     return g_out
 
 
@@ -3176,13 +3176,13 @@ def implicit_gyro_jacobian(I_b, h, omega_next, *, out=None):
     t2 = I_b_0*omega_next_0
     J_out = numpy.empty(batch + (3, 3), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     J_out[..., 0, 0] = I_b_0
-    J_out[..., 0, 1] = h*(-I_b_1*omega_next_2 - t0)
-    J_out[..., 0, 2] = h*(I_b_2*omega_next_1 - t1)
-    J_out[..., 1, 0] = h*(I_b_0*omega_next_2 + t0)
+    numpy.multiply(h, -I_b_1 * omega_next_2 - t0, out=J_out[..., 0, 1])
+    numpy.multiply(h, I_b_2 * omega_next_1 - t1, out=J_out[..., 0, 2])
+    numpy.multiply(h, I_b_0 * omega_next_2 + t0, out=J_out[..., 1, 0])
     J_out[..., 1, 1] = I_b_1
-    J_out[..., 1, 2] = h*(-I_b_2*omega_next_0 + t2)
-    J_out[..., 2, 0] = h*(-I_b_0*omega_next_1 + t1)
-    J_out[..., 2, 1] = h*(I_b_1*omega_next_0 - t2)
+    numpy.multiply(h, -I_b_2 * omega_next_0 + t2, out=J_out[..., 1, 2])
+    numpy.multiply(h, -I_b_0 * omega_next_1 + t1, out=J_out[..., 2, 0])
+    numpy.multiply(h, I_b_1 * omega_next_0 - t2, out=J_out[..., 2, 1])
     J_out[..., 2, 2] = I_b_2
     return J_out
 
@@ -3257,9 +3257,9 @@ def implicit_gyro_newton(I_b, omega_b, tau_b, h, omega_next, *, out=None):
     t22 = t16*(t15*t17 + t18*(t11*t3*t7 - t2*t21) + t19*(I_b_0*I_b_2 - t3*t7*t8))
     t23 = t16*(t12*t17 + t18*(I_b_0*I_b_1 - t11*t13*t3) + t19*(t13*t3*t8 - t21*t4))
     omega_new_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    omega_new_out[..., 0] = omega_next_0 - t20
-    omega_new_out[..., 1] = omega_next_1 - t22
-    omega_new_out[..., 2] = omega_next_2 - t23
+    numpy.subtract(omega_next_0, t20, out=omega_new_out[..., 0])
+    numpy.subtract(omega_next_1, t22, out=omega_new_out[..., 1])
+    numpy.subtract(omega_next_2, t23, out=omega_new_out[..., 2])
     delta_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[1] is None else out[1]
     delta_out[..., 0] = t20
     delta_out[..., 1] = t22
@@ -3310,10 +3310,10 @@ def quat_exp_step(q, omega_b, h, *, out=None):
         t7 = omega_b_2*t5
         t8 = omega_b_1*t5
         q_next_out = numpy.empty(batch + (4,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-        q_next_out[..., 0] = q_0*t4 + q_1*t7 - q_2*t8 + q_3*t6
-        q_next_out[..., 1] = -q_0*t7 + q_1*t4 + q_2*t6 + q_3*t8
-        q_next_out[..., 2] = q_0*t8 - q_1*t6 + q_2*t4 + q_3*t7
-        q_next_out[..., 3] = -q_0*t6 - q_1*t8 - q_2*t7 + q_3*t4
+        numpy.add(q_0 * t4 + q_1 * t7 - q_2 * t8, q_3 * t6, out=q_next_out[..., 0])
+        numpy.add(-q_0 * t7 + q_1 * t4 + q_2 * t6, q_3 * t8, out=q_next_out[..., 1])
+        numpy.add(q_0 * t8 - q_1 * t6 + q_2 * t4, q_3 * t7, out=q_next_out[..., 2])
+        numpy.add(-q_0 * t6 - q_1 * t8 - q_2 * t7, q_3 * t4, out=q_next_out[..., 3])
     return q_next_out
 
 
@@ -3354,9 +3354,9 @@ def rkmk_dexpinv(u_b, omega_b, *, out=None):
     t6 = ((numpy.float32(1.0)/numpy.float32(12.0)))*u_b_2
     t7 = omega_b_2*u_b_1 - t0
     u_dot_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    u_dot_out[..., 0] = omega_b_0 + ((numpy.float32(1.0)/numpy.float32(2.0)))*omega_b_2*u_b_1 - (numpy.float32(1.0)/numpy.float32(2.0))*t0 + t2*u_b_1 - t5*t6
-    u_dot_out[..., 1] = omega_b_1 - t2*u_b_0 + ((numpy.float32(1.0)/numpy.float32(2.0)))*t3 - (numpy.float32(1.0)/numpy.float32(2.0))*t4 + t6*t7
-    u_dot_out[..., 2] = ((numpy.float32(1.0)/numpy.float32(2.0)))*omega_b_1*u_b_0 + omega_b_2 - (numpy.float32(1.0)/numpy.float32(2.0))*t1 + ((numpy.float32(1.0)/numpy.float32(12.0)))*t5*u_b_0 - (numpy.float32(1.0)/numpy.float32(12.0))*t7*u_b_1
+    numpy.subtract(omega_b_0 + numpy.float32(1.0) / numpy.float32(2.0) * omega_b_2 * u_b_1 - numpy.float32(1.0) / numpy.float32(2.0) * t0 + t2 * u_b_1, t5 * t6, out=u_dot_out[..., 0])
+    numpy.add(omega_b_1 - t2 * u_b_0 + numpy.float32(1.0) / numpy.float32(2.0) * t3 - numpy.float32(1.0) / numpy.float32(2.0) * t4, t6 * t7, out=u_dot_out[..., 1])
+    numpy.subtract(numpy.float32(1.0) / numpy.float32(2.0) * omega_b_1 * u_b_0 + omega_b_2 - numpy.float32(1.0) / numpy.float32(2.0) * t1 + numpy.float32(1.0) / numpy.float32(12.0) * t5 * u_b_0, numpy.float32(1.0) / numpy.float32(12.0) * t7 * u_b_1, out=u_dot_out[..., 2])
     return u_dot_out
 
 
@@ -3671,18 +3671,18 @@ def wheels3_body_rhs(q, omega_b, Omega, I_p, A_b, J, r_b, F_w, tau_w, u, c_w, *,
     t29 = k_w_3*t24 + k_w_4*t26 + k_w_5*t27
     t30 = k_w_6*t24 + k_w_7*t26 + k_w_8*t27
     q_dot_out = numpy.empty(batch + (4,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    q_dot_out[..., 0] = q_1*t2 - q_2*t1 + q_3*t0
-    q_dot_out[..., 1] = -q_0*t2 + q_2*t0 + q_3*t1
-    q_dot_out[..., 2] = q_0*t1 - q_1*t0 + q_3*t2
-    q_dot_out[..., 3] = -q_0*t0 - q_1*t1 - q_2*t2
+    numpy.add(q_1 * t2 - q_2 * t1, q_3 * t0, out=q_dot_out[..., 0])
+    numpy.add(-q_0 * t2 + q_2 * t0, q_3 * t1, out=q_dot_out[..., 1])
+    numpy.add(q_0 * t1 - q_1 * t0, q_3 * t2, out=q_dot_out[..., 2])
+    numpy.subtract(-q_0 * t0 - q_1 * t1, q_2 * t2, out=q_dot_out[..., 3])
     omega_dot_b_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[1] is None else out[1]
     omega_dot_b_out[..., 0] = t28
     omega_dot_b_out[..., 1] = t29
     omega_dot_b_out[..., 2] = t30
     Omega_dot_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[2] is None else out[2]
-    Omega_dot_out[..., 0] = -A_b_00*t28 - A_b_10*t29 - A_b_20*t30 + g_w_0*k_w_9
-    Omega_dot_out[..., 1] = -A_b_01*t28 - A_b_11*t29 - A_b_21*t30 + g_w_1*k_w_10
-    Omega_dot_out[..., 2] = -A_b_02*t28 - A_b_12*t29 - A_b_22*t30 + g_w_2*k_w_11
+    numpy.add(-A_b_00 * t28 - A_b_10 * t29 - A_b_20 * t30, g_w_0 * k_w_9, out=Omega_dot_out[..., 0])
+    numpy.add(-A_b_01 * t28 - A_b_11 * t29 - A_b_21 * t30, g_w_1 * k_w_10, out=Omega_dot_out[..., 1])
+    numpy.add(-A_b_02 * t28 - A_b_12 * t29 - A_b_22 * t30, g_w_2 * k_w_11, out=Omega_dot_out[..., 2])
     return q_dot_out, omega_dot_b_out, Omega_dot_out
 
 
@@ -3787,13 +3787,13 @@ def wheels3_momentum(q, omega_b, Omega, I_p, A_b, J, *, out=None):
     t32 = A_b_20*t28 + A_b_21*t29 + A_b_22*t30
     t33 = A_b_00*t28 + A_b_01*t29 + A_b_02*t30
     L_body_w_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    L_body_w_out[..., 0] = t10*t4 + t13*t15 + t18*t19
-    L_body_w_out[..., 1] = t10*t24 + t15*t22 + t19*t20
-    L_body_w_out[..., 2] = t10*t26 + t15*t27 + t19*t25
+    numpy.add(t10 * t4 + t13 * t15, t18 * t19, out=L_body_w_out[..., 0])
+    numpy.add(t10 * t24 + t15 * t22, t19 * t20, out=L_body_w_out[..., 1])
+    numpy.add(t10 * t26 + t15 * t27, t19 * t25, out=L_body_w_out[..., 2])
     L_wheels_w_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[1] is None else out[1]
-    L_wheels_w_out[..., 0] = t13*t32 + t18*t33 + t31*t4
-    L_wheels_w_out[..., 1] = t20*t33 + t22*t32 + t24*t31
-    L_wheels_w_out[..., 2] = t25*t33 + t26*t31 + t27*t32
+    numpy.add(t13 * t32 + t18 * t33, t31 * t4, out=L_wheels_w_out[..., 0])
+    numpy.add(t20 * t33 + t22 * t32, t24 * t31, out=L_wheels_w_out[..., 1])
+    numpy.add(t25 * t33 + t26 * t31, t27 * t32, out=L_wheels_w_out[..., 2])
     h_w_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[2] is None else out[2]
     h_w_out[..., 0] = t28
     h_w_out[..., 1] = t29
@@ -4066,19 +4066,19 @@ def wheels4_body_rhs(q, omega_b, Omega, I_p, A_b, J, r_b, F_w, tau_w, u, c_w, *,
     t29 = k_w_3*t24 + k_w_4*t26 + k_w_5*t27
     t30 = k_w_6*t24 + k_w_7*t26 + k_w_8*t27
     q_dot_out = numpy.empty(batch + (4,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    q_dot_out[..., 0] = q_1*t2 - q_2*t1 + q_3*t0
-    q_dot_out[..., 1] = -q_0*t2 + q_2*t0 + q_3*t1
-    q_dot_out[..., 2] = q_0*t1 - q_1*t0 + q_3*t2
-    q_dot_out[..., 3] = -q_0*t0 - q_1*t1 - q_2*t2
+    numpy.add(q_1 * t2 - q_2 * t1, q_3 * t0, out=q_dot_out[..., 0])
+    numpy.add(-q_0 * t2 + q_2 * t0, q_3 * t1, out=q_dot_out[..., 1])
+    numpy.add(q_0 * t1 - q_1 * t0, q_3 * t2, out=q_dot_out[..., 2])
+    numpy.subtract(-q_0 * t0 - q_1 * t1, q_2 * t2, out=q_dot_out[..., 3])
     omega_dot_b_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[1] is None else out[1]
     omega_dot_b_out[..., 0] = t28
     omega_dot_b_out[..., 1] = t29
     omega_dot_b_out[..., 2] = t30
     Omega_dot_out = numpy.empty(batch + (4,), dtype=numpy.float32) if out is None or out[2] is None else out[2]
-    Omega_dot_out[..., 0] = -A_b_00*t28 - A_b_10*t29 - A_b_20*t30 + g_w_0*k_w_9
-    Omega_dot_out[..., 1] = -A_b_01*t28 - A_b_11*t29 - A_b_21*t30 + g_w_1*k_w_10
-    Omega_dot_out[..., 2] = -A_b_02*t28 - A_b_12*t29 - A_b_22*t30 + g_w_2*k_w_11
-    Omega_dot_out[..., 3] = -A_b_03*t28 - A_b_13*t29 - A_b_23*t30 + g_w_3*k_w_12
+    numpy.add(-A_b_00 * t28 - A_b_10 * t29 - A_b_20 * t30, g_w_0 * k_w_9, out=Omega_dot_out[..., 0])
+    numpy.add(-A_b_01 * t28 - A_b_11 * t29 - A_b_21 * t30, g_w_1 * k_w_10, out=Omega_dot_out[..., 1])
+    numpy.add(-A_b_02 * t28 - A_b_12 * t29 - A_b_22 * t30, g_w_2 * k_w_11, out=Omega_dot_out[..., 2])
+    numpy.add(-A_b_03 * t28 - A_b_13 * t29 - A_b_23 * t30, g_w_3 * k_w_12, out=Omega_dot_out[..., 3])
     return q_dot_out, omega_dot_b_out, Omega_dot_out
 
 
@@ -4146,19 +4146,19 @@ def wheels4_coefficients(I_p, A_b, J, *, out=None):
     t1 = C_02*inv_det_M
     t2 = C_12*inv_det_M
     k_w_out = numpy.empty(batch + (13,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    k_w_out[..., 0] = C_00*inv_det_M
+    numpy.multiply(C_00, inv_det_M, out=k_w_out[..., 0])
     k_w_out[..., 1] = t0
     k_w_out[..., 2] = t1
     k_w_out[..., 3] = t0
-    k_w_out[..., 4] = C_11*inv_det_M
+    numpy.multiply(C_11, inv_det_M, out=k_w_out[..., 4])
     k_w_out[..., 5] = t2
     k_w_out[..., 6] = t1
     k_w_out[..., 7] = t2
-    k_w_out[..., 8] = C_22*inv_det_M
-    k_w_out[..., 9] = (1.0/J_0)
-    k_w_out[..., 10] = (1.0/J_1)
-    k_w_out[..., 11] = (1.0/J_2)
-    k_w_out[..., 12] = (1.0/J_3)
+    numpy.multiply(C_22, inv_det_M, out=k_w_out[..., 8])
+    numpy.divide(1.0, J_0, out=k_w_out[..., 9])
+    numpy.divide(1.0, J_1, out=k_w_out[..., 10])
+    numpy.divide(1.0, J_2, out=k_w_out[..., 11])
+    numpy.divide(1.0, J_3, out=k_w_out[..., 12])
     return k_w_out
 
 
@@ -4332,19 +4332,19 @@ def wheels4_body_rhs_c(q, omega_b, Omega, I_p, A_b, J, k_w, r_b, F_w, tau_w, u, 
     t29 = k_w_3*t24 + k_w_4*t26 + k_w_5*t27
     t30 = k_w_6*t24 + k_w_7*t26 + k_w_8*t27
     q_dot_out = numpy.empty(batch + (4,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    q_dot_out[..., 0] = q_1*t2 - q_2*t1 + q_3*t0
-    q_dot_out[..., 1] = -q_0*t2 + q_2*t0 + q_3*t1
-    q_dot_out[..., 2] = q_0*t1 - q_1*t0 + q_3*t2
-    q_dot_out[..., 3] = -q_0*t0 - q_1*t1 - q_2*t2
+    numpy.add(q_1 * t2 - q_2 * t1, q_3 * t0, out=q_dot_out[..., 0])
+    numpy.add(-q_0 * t2 + q_2 * t0, q_3 * t1, out=q_dot_out[..., 1])
+    numpy.add(q_0 * t1 - q_1 * t0, q_3 * t2, out=q_dot_out[..., 2])
+    numpy.subtract(-q_0 * t0 - q_1 * t1, q_2 * t2, out=q_dot_out[..., 3])
     omega_dot_b_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[1] is None else out[1]
     omega_dot_b_out[..., 0] = t28
     omega_dot_b_out[..., 1] = t29
     omega_dot_b_out[..., 2] = t30
     Omega_dot_out = numpy.empty(batch + (4,), dtype=numpy.float32) if out is None or out[2] is None else out[2]
-    Omega_dot_out[..., 0] = -A_b_00*t28 - A_b_10*t29 - A_b_20*t30 + g_w_0*k_w_9
-    Omega_dot_out[..., 1] = -A_b_01*t28 - A_b_11*t29 - A_b_21*t30 + g_w_1*k_w_10
-    Omega_dot_out[..., 2] = -A_b_02*t28 - A_b_12*t29 - A_b_22*t30 + g_w_2*k_w_11
-    Omega_dot_out[..., 3] = -A_b_03*t28 - A_b_13*t29 - A_b_23*t30 + g_w_3*k_w_12
+    numpy.add(-A_b_00 * t28 - A_b_10 * t29 - A_b_20 * t30, g_w_0 * k_w_9, out=Omega_dot_out[..., 0])
+    numpy.add(-A_b_01 * t28 - A_b_11 * t29 - A_b_21 * t30, g_w_1 * k_w_10, out=Omega_dot_out[..., 1])
+    numpy.add(-A_b_02 * t28 - A_b_12 * t29 - A_b_22 * t30, g_w_2 * k_w_11, out=Omega_dot_out[..., 2])
+    numpy.add(-A_b_03 * t28 - A_b_13 * t29 - A_b_23 * t30, g_w_3 * k_w_12, out=Omega_dot_out[..., 3])
     return q_dot_out, omega_dot_b_out, Omega_dot_out
 
 
@@ -4456,13 +4456,13 @@ def wheels4_momentum(q, omega_b, Omega, I_p, A_b, J, *, out=None):
     t34 = A_b_20*t29 + A_b_21*t30 + A_b_22*t31 + A_b_23*t32
     t35 = A_b_00*t29 + A_b_01*t30 + A_b_02*t31 + A_b_03*t32
     L_body_w_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    L_body_w_out[..., 0] = t11*t4 + t14*t16 + t19*t20
-    L_body_w_out[..., 1] = t11*t25 + t16*t23 + t20*t21
-    L_body_w_out[..., 2] = t11*t27 + t16*t28 + t20*t26
+    numpy.add(t11 * t4 + t14 * t16, t19 * t20, out=L_body_w_out[..., 0])
+    numpy.add(t11 * t25 + t16 * t23, t20 * t21, out=L_body_w_out[..., 1])
+    numpy.add(t11 * t27 + t16 * t28, t20 * t26, out=L_body_w_out[..., 2])
     L_wheels_w_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[1] is None else out[1]
-    L_wheels_w_out[..., 0] = t14*t34 + t19*t35 + t33*t4
-    L_wheels_w_out[..., 1] = t21*t35 + t23*t34 + t25*t33
-    L_wheels_w_out[..., 2] = t26*t35 + t27*t33 + t28*t34
+    numpy.add(t14 * t34 + t19 * t35, t33 * t4, out=L_wheels_w_out[..., 0])
+    numpy.add(t21 * t35 + t23 * t34, t25 * t33, out=L_wheels_w_out[..., 1])
+    numpy.add(t26 * t35 + t27 * t33, t28 * t34, out=L_wheels_w_out[..., 2])
     h_w_out = numpy.empty(batch + (4,), dtype=numpy.float32) if out is None or out[2] is None else out[2]
     h_w_out[..., 0] = t29
     h_w_out[..., 1] = t30
@@ -4605,10 +4605,10 @@ def quat_error_chart_inverse(q_ref, dtheta, *, out=None):
     t2 = ((numpy.float32(1.0)/numpy.float32(2.0)))*dtheta_2
     t3 = numpy.sqrt(-(numpy.float32(1.0)/numpy.float32(4.0))*(dtheta_0*dtheta_0) - (numpy.float32(1.0)/numpy.float32(4.0))*(dtheta_1*dtheta_1) - (numpy.float32(1.0)/numpy.float32(4.0))*(dtheta_2*dtheta_2) + 1)
     q_out = numpy.empty(batch + (4,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    q_out[..., 0] = q_ref_0*t3 + q_ref_1*t2 - q_ref_2*t1 + q_ref_3*t0
-    q_out[..., 1] = -q_ref_0*t2 + q_ref_1*t3 + q_ref_2*t0 + q_ref_3*t1
-    q_out[..., 2] = q_ref_0*t1 - q_ref_1*t0 + q_ref_2*t3 + q_ref_3*t2
-    q_out[..., 3] = -q_ref_0*t0 - q_ref_1*t1 - q_ref_2*t2 + q_ref_3*t3
+    numpy.add(q_ref_0 * t3 + q_ref_1 * t2 - q_ref_2 * t1, q_ref_3 * t0, out=q_out[..., 0])
+    numpy.add(-q_ref_0 * t2 + q_ref_1 * t3 + q_ref_2 * t0, q_ref_3 * t1, out=q_out[..., 1])
+    numpy.add(q_ref_0 * t1 - q_ref_1 * t0 + q_ref_2 * t3, q_ref_3 * t2, out=q_out[..., 2])
+    numpy.add(-q_ref_0 * t0 - q_ref_1 * t1 - q_ref_2 * t2, q_ref_3 * t3, out=q_out[..., 3])
     return q_out
 
 
@@ -4646,10 +4646,10 @@ def quat_normalize_scaled(q, *, out=None):
         q_scaled_norm = numpy.sqrt((q_scaled_0*q_scaled_0) + (q_scaled_1*q_scaled_1) + (q_scaled_2*q_scaled_2) + (q_scaled_3*q_scaled_3))
         t0 = (1.0/q_scaled_norm)
         q_unit_out = numpy.empty(batch + (4,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-        q_unit_out[..., 0] = q_scaled_0*t0
-        q_unit_out[..., 1] = q_scaled_1*t0
-        q_unit_out[..., 2] = q_scaled_2*t0
-        q_unit_out[..., 3] = q_scaled_3*t0
+        numpy.multiply(q_scaled_0, t0, out=q_unit_out[..., 0])
+        numpy.multiply(q_scaled_1, t0, out=q_unit_out[..., 1])
+        numpy.multiply(q_scaled_2, t0, out=q_unit_out[..., 2])
+        numpy.multiply(q_scaled_3, t0, out=q_unit_out[..., 3])
         norm_out = numpy.empty(batch, dtype=numpy.float32) if out is None or out[1] is None else out[1]
         norm_out[...] = numpy.select([numpy.equal(q_scale, 0),True], [0,q_scale*q_scaled_norm], default=numpy.nan)
     return q_unit_out, norm_out
@@ -4710,15 +4710,15 @@ def wheels4_free_inertia(I_p, A_b, J, *, out=None):
     t5 = -A_b_20*t0 - A_b_21*t1 - A_b_22*t2 - A_b_23*t3 + I_p_02
     t6 = -A_b_10*A_b_20*J_0 - A_b_11*A_b_21*J_1 - A_b_12*A_b_22*J_2 - A_b_13*A_b_23*J_3 + I_p_12
     M_out = numpy.empty(batch + (3, 3), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    M_out[..., 0, 0] = -(A_b_00*A_b_00)*J_0 - (A_b_01*A_b_01)*J_1 - (A_b_02*A_b_02)*J_2 - (A_b_03*A_b_03)*J_3 + I_p_00
+    numpy.add(-(A_b_00 * A_b_00) * J_0 - A_b_01 * A_b_01 * J_1 - A_b_02 * A_b_02 * J_2 - A_b_03 * A_b_03 * J_3, I_p_00, out=M_out[..., 0, 0])
     M_out[..., 0, 1] = t4
     M_out[..., 0, 2] = t5
     M_out[..., 1, 0] = t4
-    M_out[..., 1, 1] = -(A_b_10*A_b_10)*J_0 - (A_b_11*A_b_11)*J_1 - (A_b_12*A_b_12)*J_2 - (A_b_13*A_b_13)*J_3 + I_p_11
+    numpy.add(-(A_b_10 * A_b_10) * J_0 - A_b_11 * A_b_11 * J_1 - A_b_12 * A_b_12 * J_2 - A_b_13 * A_b_13 * J_3, I_p_11, out=M_out[..., 1, 1])
     M_out[..., 1, 2] = t6
     M_out[..., 2, 0] = t5
     M_out[..., 2, 1] = t6
-    M_out[..., 2, 2] = -(A_b_20*A_b_20)*J_0 - (A_b_21*A_b_21)*J_1 - (A_b_22*A_b_22)*J_2 - (A_b_23*A_b_23)*J_3 + I_p_22
+    numpy.add(-(A_b_20 * A_b_20) * J_0 - A_b_21 * A_b_21 * J_1 - A_b_22 * A_b_22 * J_2 - A_b_23 * A_b_23 * J_3, I_p_22, out=M_out[..., 2, 2])
     return M_out
 
 
@@ -4757,9 +4757,9 @@ def rigid_point_velocity(v_com_w, omega_w, r_w, *, out=None):
     r_w_1 = r_w[..., 1]
     r_w_2 = r_w[..., 2]
     v_w_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    v_w_out[..., 0] = omega_w_1*r_w_2 - omega_w_2*r_w_1 + v_com_w_0
-    v_w_out[..., 1] = -omega_w_0*r_w_2 + omega_w_2*r_w_0 + v_com_w_1
-    v_w_out[..., 2] = omega_w_0*r_w_1 - omega_w_1*r_w_0 + v_com_w_2
+    numpy.add(omega_w_1 * r_w_2 - omega_w_2 * r_w_1, v_com_w_0, out=v_w_out[..., 0])
+    numpy.add(-omega_w_0 * r_w_2 + omega_w_2 * r_w_0, v_com_w_1, out=v_w_out[..., 1])
+    numpy.add(omega_w_0 * r_w_1 - omega_w_1 * r_w_0, v_com_w_2, out=v_w_out[..., 2])
     return v_w_out
 
 
@@ -4834,7 +4834,7 @@ def validity_scale(I_b, dt, p, *, out=None):
     I_b_2 = I_b[..., 2]
     I_ratio = numpy.maximum(numpy.maximum(I_b_0, I_b_1), I_b_2)/numpy.minimum(numpy.minimum(I_b_0, I_b_1), I_b_2)
     scale_out = numpy.empty(batch, dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    scale_out[...] = I_ratio**p*dt
+    numpy.multiply(I_ratio ** p, dt, out=scale_out[...])
     return scale_out
 
 
@@ -4869,7 +4869,7 @@ def validity_wdt(omega_b, scale, *, out=None):
     omega_norm_out = numpy.empty(batch, dtype=numpy.float32) if out is None or out[0] is None else out[0]
     omega_norm_out[...] = w_abs
     wdt_out = numpy.empty(batch, dtype=numpy.float32) if out is None or out[1] is None else out[1]
-    wdt_out[...] = scale*w_abs
+    numpy.multiply(scale, w_abs, out=wdt_out[...])
     return omega_norm_out, wdt_out
 
 
@@ -4965,7 +4965,7 @@ KERNELS = {
 # vectorized over a leading axis (one row per body the effect acts on). p: the effect's parameters
 # (its row after [code, body]); x: the body states; v_w: the COM velocities it sees; m, I_b.
 
-def effect_apply_applied_torque(p, x, v_w, m, I_b):
+def effect_apply_applied_torque(p, x, v_w, m, I_b, *, out=None):
     """applied_torque: A torque about the COM, world frame.
 
     Parameters
@@ -4987,11 +4987,16 @@ def effect_apply_applied_torque(p, x, v_w, m, I_b):
         Force at the COM, world frame, N (None: the effect has none).
     tau_w : ndarray, shape (n, 3) or None
         Torque about the COM, world frame, N·m (None: the effect has none).
+
+    Other Parameters
+    ----------------
+    out : (ndarray, ndarray), optional
+        Arrays (n, 3) the force and the torque are written into (the one it has), as the kernel's out=.
     """
-    return None, effect_applied_torque(p[..., 0:3])
+    return None, effect_applied_torque(p[..., 0:3], out=out and out[1:])
 
 
-def effect_apply_force_at_point(p, x, v_w, m, I_b):
+def effect_apply_force_at_point(p, x, v_w, m, I_b, *, out=None):
     """force_at_point: A world force applied at a body-fixed point: the force acts on the COM plus a torque.
 
     Parameters
@@ -5013,11 +5018,16 @@ def effect_apply_force_at_point(p, x, v_w, m, I_b):
         Force at the COM, world frame, N (None: the effect has none).
     tau_w : ndarray, shape (n, 3) or None
         Torque about the COM, world frame, N·m (None: the effect has none).
+
+    Other Parameters
+    ----------------
+    out : (ndarray, ndarray), optional
+        Arrays (n, 3) the force and the torque are written into (the one it has), as the kernel's out=.
     """
-    return effect_force_at_point(x[..., 3:7], p[..., 0:3], p[..., 3:6])
+    return effect_force_at_point(x[..., 3:7], p[..., 0:3], p[..., 3:6], out=out)
 
 
-def effect_apply_gravity(p, x, v_w, m, I_b):
+def effect_apply_gravity(p, x, v_w, m, I_b, *, out=None):
     """gravity: Uniform gravity acting at the COM.
 
     Parameters
@@ -5039,11 +5049,16 @@ def effect_apply_gravity(p, x, v_w, m, I_b):
         Force at the COM, world frame, N (None: the effect has none).
     tau_w : ndarray, shape (n, 3) or None
         Torque about the COM, world frame, N·m (None: the effect has none).
+
+    Other Parameters
+    ----------------
+    out : (ndarray, ndarray), optional
+        Arrays (n, 3) the force and the torque are written into (the one it has), as the kernel's out=.
     """
-    return effect_gravity(m, p[..., 0:3]), None
+    return effect_gravity(m, p[..., 0:3], out=out and out[:1]), None
 
 
-def effect_apply_linear_damping(p, x, v_w, m, I_b):
+def effect_apply_linear_damping(p, x, v_w, m, I_b, *, out=None):
     """linear_damping: Viscous drag on the COM velocity.
 
     Parameters
@@ -5065,11 +5080,16 @@ def effect_apply_linear_damping(p, x, v_w, m, I_b):
         Force at the COM, world frame, N (None: the effect has none).
     tau_w : ndarray, shape (n, 3) or None
         Torque about the COM, world frame, N·m (None: the effect has none).
+
+    Other Parameters
+    ----------------
+    out : (ndarray, ndarray), optional
+        Arrays (n, 3) the force and the torque are written into (the one it has), as the kernel's out=.
     """
-    return effect_linear_damping(v_w, p[..., 0]), None
+    return effect_linear_damping(v_w, p[..., 0], out=out and out[:1]), None
 
 
-def effect_apply_angular_damping(p, x, v_w, m, I_b):
+def effect_apply_angular_damping(p, x, v_w, m, I_b, *, out=None):
     """angular_damping: Viscous drag on the angular velocity.
 
     Parameters
@@ -5091,8 +5111,13 @@ def effect_apply_angular_damping(p, x, v_w, m, I_b):
         Force at the COM, world frame, N (None: the effect has none).
     tau_w : ndarray, shape (n, 3) or None
         Torque about the COM, world frame, N·m (None: the effect has none).
+
+    Other Parameters
+    ----------------
+    out : (ndarray, ndarray), optional
+        Arrays (n, 3) the force and the torque are written into (the one it has), as the kernel's out=.
     """
-    return None, effect_angular_damping(x[..., 3:7], x[..., 10:13], p[..., 0])
+    return None, effect_angular_damping(x[..., 3:7], x[..., 10:13], p[..., 0], out=out and out[1:])
 
 
 # effect name -> its apply function

@@ -14,6 +14,7 @@ pivot_kinematics after every step.
 from __future__ import annotations
 
 import functools
+import inspect
 import itertools
 import math
 from typing import Any, NamedTuple
@@ -90,27 +91,67 @@ class _EffectIndex:
                 p = np.broadcast_to(effects[r, E.ROW_PARAMS:].copy(), (n, effects.shape[1] - E.ROW_PARAMS))
                 const = None if set(spec.state_inputs) - {"m", "I_b"} or spec.uses_v_w else apply(p, None, None,
                                                                                                  self.m, self.I)
-                self.uniform.append((apply, p, "F_w" in spec.outputs, "tau_w" in spec.outputs, const))
+                takes_out = "out" in inspect.signature(apply).parameters     # (a user set printed before out=: no)
+                self.uniform.append((apply, p, "F_w" in spec.outputs, "tau_w" in spec.outputs, const, takes_out))
+            self.base = [self._constant_prefix(j) for j in (0, 1)]
         self.ranks = []  # per rank k: (bodies, pairs) adding a force, (bodies, pairs) adding a torque
         for k in range(int(rank.max()) + 1 if rank.size else 0):
             f = np.flatnonzero((rank == k) & has_F)
             t = np.flatnonzero((rank == k) & has_T)
             self.ranks.append((pair_loc[f], f, pair_loc[t], t))
 
-    def sums(self, x: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def _constant_prefix(self, j: int) -> tuple[int, np.ndarray | None]:
+        """Scene-wide effects, output j (0: force, 1: torque): (how many of its leading terms are constant, their
+        sum 0 + c_1 + c_2 + ... in table order, struct-of-arrays, or None)."""
+        terms = [u[4] and u[4][j] for u in self.uniform if u[2 + j]]
+        k = next((i for i, c in enumerate(terms) if c is None), len(terms))
+        if not k:
+            return 0, None
+        acc = _soa(np.zeros((self.m.shape[0], 3), self.dtype))
+        for c in terms[:k]:
+            acc += c
+        return k, acc
+
+    def _uniform_sums(self, x, v, out):
+        """sums() when every effect acts on every body: each effect on all the bodies at once, in table order, the
+        leading constant terms folded once per plan (_constant_prefix). out: (F, tau, and two scratch arrays of
+        their shape); the effects' kernels write into them where their printing takes out= (no copies)."""
+        done = [0, 0]       # terms of each output summed so far
+        for apply, p, has_F, has_T, const, takes_out in self.uniform:
+            dest: list = [None, None]
+            for j, has in enumerate((has_F, has_T)):
+                k, base = self.base[j]
+                done[j] += has
+                if has and done[j] > k:     # the first term is written into the sum itself, then + 0 in place
+                    dest[j] = out[j] if done[j] == 1 else out[2 + j]
+            if dest[0] is None and dest[1] is None:
+                continue
+            ft = const or (apply(p, x, v, self.m, self.I, out=tuple(dest)) if takes_out
+                           else apply(p, x, v, self.m, self.I))
+            for j in (0, 1):
+                if dest[j] is not None:
+                    # the running sum 0 + t_1 + t_2 + ...: the first term as t + 0 (the same number, -0 included)
+                    k, base = self.base[j]
+                    prev = base if done[j] == k + 1 else out[j]
+                    np.add(ft[j], 0.0, out=out[j]) if prev is None else np.add(prev, ft[j], out=out[j])
+        for j in (0, 1):
+            k, base = self.base[j]
+            if done[j] == 0:
+                out[j][...] = 0.0
+            elif done[j] == k:
+                out[j][...] = base
+        return out[0], out[1]
+
+    def sums(self, x: np.ndarray, v: np.ndarray, out: tuple[np.ndarray, ...] | None = None
+             ) -> tuple[np.ndarray, np.ndarray]:
         """Total force at the COM and torque about it (world), per body of idx: x their states (n, >= 13),
-        v the COM velocities the effects see."""
+        v the COM velocities the effects see; with uniform effects written into out when given (F, tau and two
+        scratch arrays of their shape: Plan.loads_buffer)."""
         n = x.shape[0]
+        if self.uniform is not None and self.npairs:
+            return self._uniform_sums(x, v, out or tuple(np.empty((n, 3), self.dtype) for _ in range(4)))
         F, tau = np.zeros((n, 3), self.dtype), np.zeros((n, 3), self.dtype)
         if not self.npairs:
-            return F, tau
-        if self.uniform is not None:
-            for apply, p, has_F, has_T, const in self.uniform:
-                f, t = const or apply(p, x, v, self.m, self.I)
-                if has_F:
-                    F += f
-                if has_T:
-                    tau += t
             return F, tau
         cF, cT = np.empty((self.npairs, 3), self.dtype), np.empty((self.npairs, 3), self.dtype)
         for apply, sel, loc, p in self.groups:
@@ -257,8 +298,9 @@ class _Plan:
         self.source: tuple[np.ndarray | None, ...] = (params, effects, rows)
         self.subplans: dict[Any, _Plan] = {}
         self.I_free = self.I[self.free]
-        self.c_free = self.K.euler_coefficients(self.I_free)     # Euler's coefficients, once per plan
-        self.c_f = self.K.euler_coefficients(self.I_f)
+        # Euler's coefficients, once per plan, struct-of-arrays (the kernels read each coefficient contiguously)
+        self.c_free = _soa(self.K.euler_coefficients(self.I_free))
+        self.c_f = _soa(self.K.euler_coefficients(self.I_f))
         self.works: dict[Any, Any] = {}
         self.scalar = None     # numpy_scalar.ScalarBodies, built on first use
         self.rows = None if self.has_models else _StateRows.of(self, effects)
@@ -293,6 +335,14 @@ class _Plan:
         x[...] = xn
         return x
 
+    def loads_buffer(self, x: np.ndarray) -> tuple[np.ndarray, ...]:
+        """Struct-of-arrays (n, 3) buffers for the force and torque sums of states shaped as x, and two scratch."""
+        key = (x.shape[0], x.dtype.str, "loads")
+        w = self.works.get(key)
+        if w is None:
+            w = self.works[key] = tuple(np.empty((3, x.shape[0]), x.dtype).T for _ in range(4))
+        return w
+
     def quat_buffer(self, x: np.ndarray) -> np.ndarray:
         """A struct-of-arrays (n, 4) buffer for the normalized quaternions of states shaped as x."""
         key = (x.shape[0], x.dtype.str, "q")
@@ -312,7 +362,7 @@ class _Plan:
         if self.free.size:
             out[self.free, X] = self.K.rigid_body_rhs_free_c(x[self.free, X], self.c_free)
         if self.forced.size == self.nb:     # every body plain with effects: no gather, no scatter
-            F, tau = self.index.sums(x, x[:, V])
+            F, tau = self.index.sums(x, x[:, V], self.loads_buffer(x))
             self.K.rigid_body_rhs_c(x, self.m_f, self.c_f, F, tau, out=(out,))
         elif self.forced.size:
             xf = x[self.forced, X]

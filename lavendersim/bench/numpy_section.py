@@ -63,10 +63,21 @@ def _case(n, sim, ref, I, steps, rounds, interleaved, forced) -> dict:
         def hand(steps=steps):
             P.hand_rk4_soa(X, I, sim.dt, steps, m=m, **kw)
     diff = float(np.max(np.abs(np.asarray(ref.x).reshape(n, -1) - np.asarray(got).reshape(n, -1))))
-    cases: dict[str, tuple[Any, ...]] = {"numpy": (lambda s=sim, k=steps: s.run(k), steps * n), "hand": (hand, steps * n)}
+    cases: dict[str, tuple[Any, ...]] = {"numpy": (lambda s=sim, k=steps: s.run(k), steps * n), "hand": (hand, steps * n),
+                                         "advance": (_advance(sim, steps), steps * n)}
     t = interleaved(cases, rounds, f"NumPy vs hand N = {n}" + (" gravity+damping" if forced else ""))
     return {"steps": steps, **t, "ratio": t["numpy"]["ns_min"] / t["hand"]["ns_min"],
+            "advance_ratio": t["advance"]["ns_min"] / t["hand"]["ns_min"],
             "peer": "python_rk4" if n == 1 else "hand_rk4_soa", "max_abs_diff": diff}
+
+
+def _advance(sim, steps: int):
+    """NumpyBackend.advance alone on a copy of sim's bodies (no Sim: its checks and chunking left out), steps a call."""
+    from ..backends.numpy_backend import NumpyBackend
+
+    be, x = NumpyBackend(), np.array(sim.x)
+    params, effects = np.array(sim.params), np.array(sim.effects)
+    return lambda k=steps: be.advance(x, params, effects, "rk4", True, sim.dt, k)
 
 
 def numpy_section(quick: bool, rounds: int, interleaved, batch_sim, I_b, body_steps: int, progress=None) -> dict:
@@ -76,7 +87,8 @@ def numpy_section(quick: bool, rounds: int, interleaved, batch_sim, I_b, body_st
     -------
     dict
         ``sizes``: N -> {"numpy", "hand" stats (ns per body-step), "ratio" (numpy / hand), "steps",
-        "max_abs_diff"}, torque-free; ``effects``: the same with scene-wide gravity and damping.
+        "max_abs_diff"; "advance" and "advance_ratio": NumpyBackend.advance alone}, torque-free; ``effects``: the
+        same with scene-wide gravity and damping.
     """
     out: dict[str, dict] = {"sizes": {}, "effects": {}}
     for n in (1,) + (SIZES_QUICK if quick else SIZES_FULL):
@@ -92,6 +104,11 @@ def numpy_section(quick: bool, rounds: int, interleaved, batch_sim, I_b, body_st
     return out
 
 
+def _per_n(rows: dict) -> str:
+    return ", ".join(f"N = {n}: {v['ratio']:.2f}x" + (f" ({v['advance_ratio']:.2f}x)" if "advance_ratio" in v else "")
+                     for n, v in rows.items())
+
+
 def standing_lines(res: dict, line, targets: dict) -> list[dict]:
     sec = (res.get("numpy_peers") or {}).get("sizes", {})
     one = sec.get("1")
@@ -102,11 +119,10 @@ def standing_lines(res: dict, line, targets: dict) -> list[dict]:
     return [
         line("NumPy backend / hand NumPy RK4, gravity+damping (worst of N >= 1e3)", worst_eff,
              targets["numpy_vs_hand_numpy"], "max", "x", "section not run or crashed" if worst_eff is None else
-             "scene-wide gravity, linear and angular damping; " + ", ".join(f"N = {n}: {v['ratio']:.2f}x"
-                                                                              for n, v in eff.items())),
+             "scene-wide gravity, linear and angular damping; Sim.run (advance alone) " + _per_n(eff)),
         line("NumPy backend / hand NumPy RK4 (worst of N >= 1e3)", worst, targets["numpy_vs_hand_numpy"], "max", "x",
              "section not run or crashed" if worst is None else "Sim(backend='numpy').run / numpy_peers.hand_rk4_soa, ns per "
-             "body-step; " + ", ".join(f"N = {n}: {v['ratio']:.2f}x" for n, v in big.items())),
+             "body-step (NumpyBackend.advance alone); " + _per_n(big)),
         line("NumPy backend / a pure-Python RK4 loop, one body", None if one is None else one["ratio"],
              targets["numpy_single_vs_python"], "max", "x",
              "section not run or crashed" if one is None else f"{one['numpy']['ns_min'] / 1e3:.1f} µs against "
@@ -120,8 +136,10 @@ def report_lines(res: dict, fmt) -> list[str]:
         return []
     L = []
     for title, rows in (("torque-free", sec), ("gravity+damping", (res.get("numpy_peers") or {}).get("effects", {}))):
-        L += ["", f"NumPy backend against hand peers (RK4, {title})   backend ns/body-step   peer   ratio  max|Δx|"]
+        L += ["", f"NumPy backend against hand peers (RK4, {title})   Sim.run ns/body-step   peer   ratio"
+                  "  (advance alone)  max|Δx|"]
         for n, v in rows.items():
+            adv = f"{v['advance_ratio']:7.2f}" if "advance_ratio" in v else "    n/a"
             L.append(f"  N = {n:<8} ({v['peer']:<12}, {v['steps']:>5} steps) {v['numpy']['ns_min']:12.1f} "
-                     f"{v['hand']['ns_min']:12.1f} {v['ratio']:7.2f}  {v['max_abs_diff']:.1e}")
+                     f"{v['hand']['ns_min']:12.1f} {v['ratio']:7.2f}  ({adv})        {v['max_abs_diff']:.1e}")
     return L
