@@ -124,9 +124,9 @@ class LoadBudget:
     def __init__(self, params, effects, rows, loaded, dt: float, growth: float):
         self.params, self.rows, self.dt, self.g = params, rows, float(dt), float(growth)
         self.loaded = np.asarray(loaded, bool)
-        kind = rows[:, LY.MODEL_KIND].astype(np.int64)
-        self.wheeled = [int(i) for i in np.flatnonzero(self.loaded & ((kind & backends.KIND_WHEELS) != 0))]
-        self._wheeled_idx = np.asarray(self.wheeled, dtype=np.int64)
+        kind = np.zeros(len(self.loaded), np.int64)     # read from the loaded bodies' rows only (untouched pages)
+        kind[self.loaded] = rows[self.loaded, LY.MODEL_KIND]
+        self.wheeled = np.flatnonzero(self.loaded & ((kind & backends.KIND_WHEELS) != 0))   # (indices)
         self.plain = self.loaded & ((kind & backends.KIND_WHEELS) == 0)
         self.idx = np.flatnonzero(self.loaded)
         self._groups = _supplying_groups(effects, params.shape[0])
@@ -149,8 +149,8 @@ class LoadBudget:
             f = self.plain
             if f.any():
                 L[f] = np.linalg.norm(K.body_momentum(self.params[f][:, LY.PARAM_I_B], x[f][:, LY.STATE_OMEGA_B]), axis=-1)
-            if self.wheeled:     # one batched call of the printed kernel (bitwise the per-body wheel_momentum)
-                w = self._wheeled_idx
+            if self.wheeled.size:     # one batched call of the printed kernel (bitwise the per-body wheel_momentum)
+                w = self.wheeled
                 Lb, Lw = backends.wheel_momentum_batch(self.rows[w], x[w, LY.STATE_Q], x[w, LY.STATE_OMEGA_B], Omega[w])
                 L[w] = np.linalg.norm(Lb + Lw, axis=-1)
             P[self.loaded] = self.params[self.loaded, LY.PARAM_M] * np.linalg.norm(x[self.loaded][:, LY.STATE_V_W], axis=-1)

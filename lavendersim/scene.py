@@ -34,13 +34,15 @@ class _Batch:
     It stands for n per-body Effects, each built only when read (then kept, so it keeps its identity); a scene
     and a Sim read its columns directly. Immutable, as an Effect is: copies share it."""
 
-    __slots__ = ("cls", "bodies", "shared", "cols", "_made", "_off", "_where")
+    __slots__ = ("cls", "bodies", "shared", "cols", "_made", "_off", "_where", "_at")
 
-    def __init__(self, cls, bodies: list, shared: dict, cols: dict, made: dict | None = None, off: int = 0) -> None:
+    def __init__(self, cls, bodies: list, shared: dict, cols: dict, made: dict | None = None, off: int = 0,
+                 at: tuple | None = None) -> None:
         self.cls, self.bodies, self.shared, self.cols = cls, bodies, shared, cols
         self._made: dict = made if made is not None else {}    # the effects built, by position + _off (shared by parts)
         self._off = off
         self._where: dict | None = None
+        self._at = at         # (a body table's core, the bodies' indices in it): see positions
 
     name = property(lambda self: self.cls.name)
     code = property(lambda self: self.cls.code)
@@ -74,7 +76,15 @@ class _Batch:
     def part(self, lo: int, hi: int) -> "_Batch":
         """Effects lo..hi-1 as a batch (views of the columns; the effects built, and built later, shared)."""
         return _Batch(self.cls, self.bodies[lo:hi], self.shared, {f: a[lo:hi] for f, a in self.cols.items()},
-                      self._made, self._off + lo)
+                      self._made, self._off + lo, None if self._at is None else (self._at[0], self._at[1][lo:hi]))
+
+    def positions(self, core: dict) -> np.ndarray:
+        """The bodies' indices (n,) in a body table (its core dict; -1: not in it), kept for that table (a body's
+        index never changes)."""
+        if self._at is None or self._at[0] is not core:
+            pos = core["pos"]
+            self._at = (core, np.fromiter((pos.get(b, -1) for b in self.bodies), np.int64, len(self.bodies)))
+        return self._at[1]
 
     def where(self, body: str) -> list:
         """The positions j of `body` in this batch (in order)."""
@@ -771,7 +781,9 @@ def _load_sums(every: list, effects: "_EffectList | None", x: np.ndarray, params
         runs = [(code, np.asarray(idx, dtype=np.int64), np.stack(ps)) for code, (idx, ps) in groups.items()]
         for _, b in (effects._index()["batches"] if effects is not None else ()):
             if not b.per_body and _declared(b):     # a batch of force effects: its columns, its bodies in x
-                k = np.fromiter((pos[name] if name in pos else -1 for name in b.bodies), np.int64, len(b))
+                k = b.positions(pos._t._c) if isinstance(pos, _Positions) else np.fromiter(
+                    (pos[name] if name in pos else -1 for name in b.bodies), np.int64, len(b))
+                k = np.where(k < len(x), k, -1)
                 runs.append((b.code, k[k >= 0], b.params_flat()[k >= 0]))
         for code, k, P in runs:
             xs = x[k]
@@ -831,7 +843,9 @@ def _force_table(scene: Scene, forces: list, frames: PrincipalFrames | None, nb:
                    and _unrotated(forces[hi], frames, scene._bodies.positions)):
                 hi += 1
             run = e.bodies if type(e) is _Batch else [f.body for f in forces[lo:hi]]
-            body = np.fromiter((-1 if b is None else at.get(b, -2) for b in run), np.float64, len(run))
+            body = (np.where(e.positions(scene._bodies._c) < 0, -2, e.positions(scene._bodies._c)).astype(np.float64)
+                    if type(e) is _Batch else
+                    np.fromiter((-1 if b is None else at.get(b, -2) for b in run), np.float64, len(run)))
             if (body == -2).any() or (body >= nb).any():   # a body not (yet) in the scene: index raises naming it
                 scene.index(run[int(np.flatnonzero((body == -2) | (body >= nb))[0])])
             flat = e.params_flat() if type(e) is _Batch else _stacked_params(forces[lo:hi])
@@ -1103,7 +1117,7 @@ def _add_effects(scene: Scene, name, bodies, params: dict) -> Sequence[Effect]:
     bodies = list(bodies)
     n = len(bodies)
     if n == 0:
-        return _BatchEffects(None)
+        return _EffectList()
     per_row = {}                    # parameter -> (n, ...) float64 array of one value per body (a copy)
     shared = dict(params)
     cls = EFFECTS.get(name) if isinstance(name, str) else None
@@ -1145,44 +1159,17 @@ def _add_effects(scene: Scene, name, bodies, params: dict) -> Sequence[Effect]:
             if not bad:
                 scene.effects.append(_Batch(cls, bodies[lo:hi], _shared_values(made[0], per_row),
                                             {f: a[lo:hi] for f, a in per_row.items()}))
-        batch = _Batch(type(made[0]), bodies, _shared_values(made[0], per_row), per_row, made)
+        batch = _Batch(type(made[0]), bodies, _shared_values(made[0], per_row), per_row, made, 0, (table._c, idx))
     finally:
         del items[first:]       # the call's entries: replaced by one batch, or (refused) nothing half-applied
         scene.effects._edited()
     scene.effects.append(batch)
-    return _BatchEffects(batch)
+    return _EffectList([batch])     # (a list of its own: editing it leaves the scene's alone)
 
 
 def _shared_values(template: Effect, per_row: dict) -> dict:
     """The validated values of the parameters an add_effects call shares (those of its first effect)."""
     return {f: v for f, v in template.values.items() if f not in per_row}
-
-
-class _BatchEffects(Sequence):
-    """The effects one add_effects call declared, in order (each built when first read; see _Batch)."""
-
-    def __init__(self, batch: _Batch | None) -> None:
-        self._b = batch
-
-    def __len__(self) -> int:
-        return 0 if self._b is None else len(self._b)
-
-    def __getitem__(self, i):
-        if isinstance(i, slice):
-            return [self[k] for k in range(*i.indices(len(self)))]
-        n = len(self)
-        if not -n <= i < n:
-            raise IndexError(i)
-        assert self._b is not None
-        return self._b.effect(i % n)
-
-    def __eq__(self, other) -> bool:
-        return isinstance(other, (list, tuple, Sequence)) and list(self) == list(other)
-
-    __hash__ = None  # type: ignore[assignment]
-
-    def __repr__(self) -> str:
-        return repr(list(self))
 
 
 def _per_body_values(v, p, n: int) -> np.ndarray | None:

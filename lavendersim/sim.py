@@ -746,14 +746,14 @@ class Sim:
         self._free_wheels = ~acted & (kind == KIND_WHEELS)  # total |L| conserved (motor torques are internal)
         self._free_any = bool(self._free.any())
         self._all_free = bool(self._free.all())
-        self._free_wheels_idx = [int(i) for i in np.flatnonzero(self._free_wheels)]
+        self._any_free_wheels = bool(self._free_wheels.any())
         self._fw = np.flatnonzero(self._free_wheels)          # the same, as an index array (one batched kernel call)
         # bodies effects act on (not jointed: the joint's reaction is no declared load): a growth budget
         loaded = acted & ((kind & KIND_JOINT) == 0)
         self._budget = (load_checks.LoadBudget(self._params, self._effects, self._models.rows, loaded, self.dt, self.max_growth)
                         if self.max_growth is not None and loaded.any() else None)
         # bodies whose growth check needs Python every chunk (total |L| of body and wheels)
-        self._py_growth = bool(self._free_wheels_idx or (self._budget is not None and self._budget.wheeled))
+        self._py_growth = bool(self._any_free_wheels or (self._budget is not None and self._budget.wheeled.size))
         self._warned = set()
         evals = self._per_step if self._per_step is not None else 12
         plain = not self._has_models and not len(self._effects)     # the SIMD tiles: a longer chunk still returns soon
@@ -782,7 +782,7 @@ class Sim:
                 I_b, w_b = p[:, LY.PARAM_I_B], xf[:, LY.STATE_OMEGA_B]
                 E[f] = K.kinetic_energy(p[:, LY.PARAM_M], I_b, xf[:, LY.STATE_V_W], w_b)
                 L[f] = np.linalg.norm(K.body_momentum(I_b, w_b), axis=-1)
-            if self._free_wheels_idx:
+            if self._any_free_wheels:
                 L[self._fw] = wheeled_momentum_norms(self._models.rows, x, Omega, self._fw, reference)
         return E, L
 
@@ -878,7 +878,7 @@ class Sim:
                             warnings.warn(f"body {self.names[b]!r}: {self._bound_text(float(v[b]))}; results beyond it "
                                           "are not trusted (on_bound='warn')", ValidityBoundWarning, stacklevel=4)
         g = self.max_growth
-        if growth and g is not None and (self._free_wheels_idx or (self._free_any and not bool((w <= self._w_safe).all()))):
+        if growth and g is not None and (self._any_free_wheels or (self._free_any and not bool((w <= self._w_safe).all()))):
             E, L = self._invariants(x, Omega)
             with np.errstate(over="ignore", invalid="ignore"):
                 badE = self._free & (self._E0 > 0) & ~(E <= g * self._E0)
@@ -948,7 +948,8 @@ class Sim:
         batches = []
         for e in scene.effects.items():
             if type(e) is _Batch and e.per_body:
-                batches.append((e, np.fromiter((at.get(b, nb) for b in e.bodies), np.int64, len(e))))
+                idx = e.positions(scene._bodies._c)
+                batches.append((e, np.where((idx < 0) | (idx >= nb), nb, idx)))
             elif type(e) is not _Batch and e.per_body:
                 modelled.setdefault(e.body, {})[e.name] = e
         self._wheel_batches = self._batched_wheels(batches, modelled)
