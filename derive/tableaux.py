@@ -95,6 +95,59 @@ RK4_B_DEN = 6
 # name -> (nodes c, weights b_num, divisor b_den). Their C update and step are printed from these (_c_explicit_rk).
 EXPLICIT_RK = {"euler": ((R(0),), (1,), 1), "rk4": (RK4_C, RK4_B_NUM, RK4_B_DEN)}
 
+
+def _stability_polynomial(A, b) -> sp.Expr:
+    """R(z) = 1 + z bᵀ (I − z A)⁻¹ 1 of an explicit Runge–Kutta tableau (y' = λy: y₁ = R(λh) y₀)."""
+    z = sp.Symbol("z")
+    n = len(b)
+    Am = sp.Matrix(n, n, lambda i, j: A[i][j] if j < len(A[i]) else 0)
+    return sp.expand(1 + z * (sp.Matrix(b).T * (sp.eye(n) - z * Am).inv() * sp.ones(n, 1))[0])
+
+
+def explicit_rk_polynomial(name: str) -> sp.Expr:
+    """R(z) of a built-in explicit RK (EXPLICIT_RK) as the backends apply it: a subdiagonal A, a_{s,s-1} = c_s."""
+    c, b_num, b_den = EXPLICIT_RK[name]
+    return _stability_polynomial([[]] + [[0] * (s - 1) + [c[s]] for s in range(1, len(c))], [R(n, b_den) for n in b_num])
+
+
+def _first_root(poly: sp.Expr, y: sp.Symbol) -> float | None:
+    """The smallest positive real root of a polynomial in y (its root at 0, of any multiplicity, set aside)."""
+    p = sp.Poly(poly, y)
+    k = min(m for (m,), _ in p.terms())
+    p = sp.Poly(sp.expand(sp.cancel(p.as_expr() / y**k)), y)
+    roots = [float(sp.re(r)) for r in p.nroots(n=30, maxsteps=500) if abs(sp.im(r)) < 1e-20 and sp.re(r) > 1e-12]
+    return min(roots) if roots else None
+
+
+GROWTH_PER_STEP = R(101, 100)   # |R(iy)|^2 allowed when R is not stable on the imaginary axis (euler's 0.1)
+
+
+def imaginary_axis_bound(R_z: sp.Expr) -> float:
+    """The validity bound |ω| dt of an explicit tableau (WDT_MAX of the explicit RKs, built-in and users'): the y
+    where |R(iy)| first exceeds 1 (rk4: 2√2) when R is stable on the imaginary axis near 0, else where
+    |R(iy)|² reaches GROWTH_PER_STEP = 1.01, a mode growing 0.5 % per step (euler: 0.1)."""
+    z, y = sp.Symbol("z"), sp.Symbol("y", real=True)
+    a = sp.Poly(R_z, z).all_coeffs()[::-1]        # R(z) = Σ a_k z^k; |R(iy)|² = (Σ_even ...)² + (Σ_odd ...)²
+    re = sum((a[k] * (-1) ** (k // 2) * y**k for k in range(0, len(a), 2)), sp.Integer(0))
+    im = sum((a[k] * (-1) ** (k // 2) * y**k for k in range(1, len(a), 2)), sp.Integer(0))
+    mod2 = sp.expand(re**2 + im**2)
+    p = sp.Poly(sp.expand(mod2 - 1), y)
+    low = [c for (k,), c in sorted(p.terms()) if abs(float(c)) > 1e-14]
+    root = _first_root(p.as_expr() if low and float(low[0]) < 0 else sp.expand(mod2 - GROWTH_PER_STEP), y)
+    if root is None:   # (|R(iy)|² of a consistent tableau grows without bound: a root exists)
+        raise ValueError(f"no validity bound |ω|·dt found on the imaginary axis for R(z) = {R_z}")
+    return root
+
+
+def _real_axis_limit(R_z: sp.Expr) -> float:
+    """The x > 0 where |R(−x)| first reaches 1: a decaying mode λ < 0 is stable for |λ| h below it."""
+    z, x = sp.Symbol("z"), sp.Symbol("x")
+    roots = []
+    for side in (1, -1):
+        poly = sp.Poly(sp.expand(R_z.subs(z, -x) - side), x)
+        roots += [float(sp.re(r)) for r in poly.nroots(n=30) if abs(sp.im(r)) < 1e-25 and sp.re(r) > 1e-12]
+    return min(roots)
+
 DP_A = (
     (),
     (R(1, 5),),
@@ -318,30 +371,13 @@ def integrator_names() -> list[str]:
 #    three axes, |omega| dt = 0.1 … 10): no cell within the bound drifts E by more than 2e-12; the first
 #    energy doubling is at |omega| dt = 10 (ratios 10 … 1000; symtop4's at 4.6), and the intermediate-axis
 #    spin's energy drift passes 1e-9 from |omega| dt (I_max/I_min)^(1/2) ~ 1.5 (symtop4: ~1 at ratio 100).
-WDT_MAX = {"euler": R(1, 10), "semi_implicit_euler": R(1, 10), "rk4": 2 * sp.sqrt(2), "splitting": R(1),
-           "implicit_gyro": sp.pi, "splitting4": R(1), "rk4_expmap": 2 * sp.sqrt(2),
-           "symtop4": R(1), "symtop_bm6": R(1)}
-WDT_RATIO_EXPONENT = {"euler": R(0), "semi_implicit_euler": R(0), "rk4": R(0), "splitting": R(1, 2),
+# The explicit RKs' bounds come from their tableaux (imaginary_axis_bound, as a user's tableau's: euler 0.1, rk4 2√2).
+WDT_MAX = {**{n: imaginary_axis_bound(explicit_rk_polynomial(n)) for n in EXPLICIT_RK}, "splitting": R(1),
+           "implicit_gyro": sp.pi, "splitting4": R(1), "symtop4": R(1), "symtop_bm6": R(1)}
+WDT_MAX.update(semi_implicit_euler=WDT_MAX["euler"], rk4_expmap=WDT_MAX["rk4"])
+WDT_RATIO_EXPONENT = {**{n: R(0) for n in EXPLICIT_RK}, "semi_implicit_euler": R(0), "splitting": R(1, 2),
                       "implicit_gyro": R(0), "splitting4": R(1, 2), "rk4_expmap": R(0),
                       "symtop4": R(1, 2), "symtop_bm6": R(1, 2)}
-
-
-def _stability_polynomial(A, b) -> sp.Expr:
-    """R(z) = 1 + z bᵀ (I − z A)⁻¹ 1 of an explicit Runge–Kutta tableau (y' = λy: y₁ = R(λh) y₀)."""
-    z = sp.Symbol("z")
-    n = len(b)
-    Am = sp.Matrix(n, n, lambda i, j: A[i][j] if j < len(A[i]) else 0)
-    return sp.expand(1 + z * (sp.Matrix(b).T * (sp.eye(n) - z * Am).inv() * sp.ones(n, 1))[0])
-
-
-def _real_axis_limit(R_z: sp.Expr) -> float:
-    """The x > 0 where |R(−x)| first reaches 1: a decaying mode λ < 0 is stable for |λ| h below it."""
-    z, x = sp.Symbol("z"), sp.Symbol("x")
-    roots = []
-    for side in (1, -1):
-        poly = sp.Poly(sp.expand(R_z.subs(z, -x) - side), x)
-        roots += [float(sp.re(r)) for r in poly.nroots(n=30) if abs(sp.im(r)) < 1e-25 and sp.re(r) > 1e-12]
-    return min(roots)
 
 
 def _kicked_stages(gammas) -> sp.Expr:
@@ -363,15 +399,11 @@ def real_axis_stability() -> dict:
     3.306…); implicit_gyro takes the loads at the step's start (explicit Euler in them: 2); the splitting family
     kicks (_kicked_stages: splitting 4, its compositions with their γ_i). divergence_cause and the Sim's check of
     every declared decay (an effect's printed decay rate) name it."""
-    # RK4 as tableaux.h applies it: stage s at x + c_s h k_{s-1}, i.e. a subdiagonal A with a_{s,s-1} = c_s
-    rk4_a: list[list] = [[]] + [[0] * (s - 1) + [RK4_C[s]] for s in range(1, len(RK4_C))]
-    rk4 = _real_axis_limit(_stability_polynomial(rk4_a, [R(n, RK4_B_DEN) for n in RK4_B_NUM]))
-    dp5 = _real_axis_limit(_stability_polynomial(DP_A[:6], DP_A[6]))
-    euler = _real_axis_limit(1 + sp.Symbol("z"))
-    split = _real_axis_limit(_kicked_stages((1,)))
+    out = {n: _real_axis_limit(explicit_rk_polynomial(n)) for n in EXPLICIT_RK}   # as tableaux.h applies them
     split4, symtop4 = _real_axis_limit(_kicked_stages(SPLIT4_GAMMA)), _real_axis_limit(_kicked_stages(SYMTOP4_GAMMA))
-    return {"euler": euler, "semi_implicit_euler": euler, "rk4": rk4, "rk4_expmap": rk4, "dopri5": dp5,
-            "implicit_gyro": euler, "splitting": split, "splitting4": split4, "symtop4": symtop4,
+    return {**out, "semi_implicit_euler": out["euler"], "rk4_expmap": out["rk4"], "implicit_gyro": out["euler"],
+            "dopri5": _real_axis_limit(_stability_polynomial(DP_A[:6], DP_A[6])),
+            "splitting": _real_axis_limit(_kicked_stages((1,))), "splitting4": split4, "symtop4": symtop4,
             "symtop_bm6": symtop4}
 
 

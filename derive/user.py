@@ -31,6 +31,7 @@ import sympy as sp
 
 from .effect import EffectDecl
 from .kernel import Kernel
+from .tableaux import _real_axis_limit, _stability_polynomial, imaginary_axis_bound, integrator_names
 
 _SET_NAME = re.compile(r"^[a-z][a-z0-9_]*$")
 
@@ -265,7 +266,6 @@ def render_user(path) -> tuple[str, dict[str, str]]:
 
 MAX_ORDER = 8        # order conditions are checked up to here (115 trees of order 8)
 MAX_STAGES = 16
-GROWTH_PER_STEP = sp.Rational(101, 100)   # |R(iy)|^2 allowed when R is not stable on the imaginary axis (euler's 0.1)
 
 
 @dataclass(frozen=True)
@@ -426,32 +426,6 @@ def _check_order(name: str, A: tuple, b: tuple, order: int, exact: bool) -> None
                                  f"Σ b_i ({_tree_text(t)})_i = {got}, must be {want} (it has order {n - 1})")
 
 
-def _first_root(poly: sp.Expr, y: sp.Symbol) -> float | None:
-    """The smallest positive real root of a polynomial in y (its root at 0, of any multiplicity, set aside)."""
-    p = sp.Poly(poly, y)
-    k = min(m for (m,), _ in p.terms())
-    p = sp.Poly(sp.expand(sp.cancel(p.as_expr() / y**k)), y)
-    roots = [float(sp.re(r)) for r in p.nroots(n=30, maxsteps=500) if abs(sp.im(r)) < 1e-20 and sp.re(r) > 1e-12]
-    return min(roots) if roots else None
-
-
-def imaginary_axis_bound(R_z: sp.Expr) -> float:
-    """The validity bound |ω| dt of an explicit tableau, as derive/tableaux.py's WDT_MAX states it for rk4 and euler:
-    the y where |R(iy)| first exceeds 1 (rk4: 2√2) when R is stable on the imaginary axis near 0, else where
-    |R(iy)|² reaches GROWTH_PER_STEP = 1.01, a mode growing 0.5 % per step (euler: 0.1)."""
-    z, y = sp.Symbol("z"), sp.Symbol("y", real=True)
-    a = sp.Poly(R_z, z).all_coeffs()[::-1]        # R(z) = Σ a_k z^k; |R(iy)|² = (Σ_even ...)² + (Σ_odd ...)²
-    re = sum((a[k] * (-1) ** (k // 2) * y**k for k in range(0, len(a), 2)), sp.Integer(0))
-    im = sum((a[k] * (-1) ** (k // 2) * y**k for k in range(1, len(a), 2)), sp.Integer(0))
-    mod2 = sp.expand(re**2 + im**2)
-    p = sp.Poly(sp.expand(mod2 - 1), y)
-    low = [c for (k,), c in sorted(p.terms()) if abs(float(c)) > 1e-14]
-    root = _first_root(p.as_expr() if low and float(low[0]) < 0 else sp.expand(mod2 - GROWTH_PER_STEP), y)
-    if root is None:   # (|R(iy)|² of a consistent tableau grows without bound: a root exists)
-        raise ValueError(f"no validity bound |ω|·dt found on the imaginary axis for R(z) = {R_z}")
-    return root
-
-
 def tableau(name: str, A, b, order: int, c=None, summary: str = "") -> TableauDecl:
     """An explicit Runge–Kutta method for ``Sim(..., integrator=name)``, declared in a user's file
     (``TABLEAUX = [tableau(...)]``, docs/extending.md).
@@ -482,8 +456,6 @@ def tableau(name: str, A, b, order: int, c=None, summary: str = "") -> TableauDe
     ValueError
         Naming the tableau, the field and the rule broken.
     """
-    from .tableaux import _real_axis_limit, _stability_polynomial, integrator_names
-
     if not isinstance(name, str) or not _SET_NAME.match(name):
         raise ValueError(f"tableau name must be lowercase letters, digits and _, starting with a letter, got {name!r}")
     if name in integrator_names():
