@@ -83,6 +83,7 @@ class _EffectIndex:
         # table order, with its own parameters: the same sums, no gather or scatter
         # An effect that reads no state value (its kernel's inputs: parameters, m, I_b) is evaluated once here.
         self.uniform = None
+        self.zeros: np.ndarray | None = None     # (n, 3) zeros, struct-of-arrays, made on first use (_zeros)
         if n and every.size == len(effects):
             self.uniform = []
             for r in every:
@@ -134,13 +135,17 @@ class _EffectIndex:
                     k, base = self.base[j]
                     prev = base if done[j] == k + 1 else out[j]
                     np.add(ft[j], 0.0, out=out[j]) if prev is None else np.add(prev, ft[j], out=out[j])
-        for j in (0, 1):
+        res = [out[0], out[1]]
+        for j in (0, 1):     # no term, or constant terms only: the plan's own array (read only; no copy)
             k, base = self.base[j]
-            if done[j] == 0:
-                out[j][...] = 0.0
-            elif done[j] == k:
-                out[j][...] = base
-        return out[0], out[1]
+            if done[j] == k:
+                res[j] = base if k else self._zeros()
+        return res[0], res[1]
+
+    def _zeros(self) -> np.ndarray:
+        if self.zeros is None:
+            self.zeros = _soa(np.zeros((self.m.shape[0], 3), self.dtype))
+        return self.zeros
 
     def sums(self, x: np.ndarray, v: np.ndarray, out: tuple[np.ndarray, ...] | None = None
              ) -> tuple[np.ndarray, np.ndarray]:
