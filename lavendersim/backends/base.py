@@ -382,7 +382,7 @@ def wheel_momentum_batch(rows: np.ndarray, q: np.ndarray, omega_b: np.ndarray,
 
 
 def norm_safe(v: np.ndarray) -> float:
-    """Euclidean norm without overflow for huge finite components (0 for non-finite input).
+    """Euclidean norm without overflow for huge finite components (validate.safe_norm), 0 for non-finite input.
 
     Parameters
     ----------
@@ -393,8 +393,7 @@ def norm_safe(v: np.ndarray) -> float:
     -------
     float
     """
-    s = float(np.max(np.abs(v))) if v.size else 0.0
-    return 0.0 if s == 0.0 or not np.isfinite(s) else s * float(np.sqrt(np.sum((v / s) ** 2)))
+    return V.safe_norm(v) if np.all(np.isfinite(v)) else 0.0
 
 
 def tolerance_cause(adaptive: Adaptive, h: float, dt: float, x: np.ndarray) -> str:
