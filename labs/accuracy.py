@@ -34,8 +34,8 @@ Measures per point (a method at one dt or rtol, one case):
     hit every method alike; 5 rounds in the full run, runs under 10 ms get up to 20); Sim
     construction is outside the timed region, the one Python call of Sim.run / solve_ivp /
     rollout inside it (a fixed ~10-20 µs per run that dominates the coarsest C points);
-  * RHS evaluations over the run: sim.rhs_evals when the Sim counts them, else steps x stages from
-    INTEGRATORS; solve_ivp's nfev; MuJoCo: forward-dynamics evaluations (1 per step, 4 for RK4).
+  * RHS evaluations over the run: sim.rhs_evals (every Sim counts them); solve_ivp's nfev; MuJoCo:
+    forward-dynamics evaluations (1 per step, 4 for RK4).
 
 Verdict (per case, on attitude error vs wall time per simulated second). A point B dominates a
 point A when B belongs to another method, err(B) <= err(A) and B is faster: time(B) < time(A)/1.1,
@@ -324,15 +324,6 @@ def _make_sim(case, m: Method, value, dt: float | None = None):
     return lv.Sim(_scene(case), dt=value, integrator=m.integrator, backend=m.backend, on_bound="warn", dtype=m.dtype)
 
 
-def _rhs_count(sim, m: Method) -> tuple[int | None, str]:
-    n = getattr(sim, "rhs_evals", None)
-    if n is not None:
-        return int(n), "sim.rhs_evals"
-    if m.param == "rtol" or m.stages is None:
-        return None, "not counted (adaptive; sim.rhs_evals missing)"
-    return int(sim.steps * m.stages), "steps x stages (INTEGRATORS)"
-
-
 def _measure_sim(case, m, value, exact, drifts, keep_drift):
     """Fixed step: one run recorded at every step gives the error at T and the drifts. Adaptive: the
     error at T and the RHS count come from one output step of T; the drifts from a second run with
@@ -355,7 +346,7 @@ def _measure_sim(case, m, value, exact, drifts, keep_drift):
         return pt
     x = traj.x[:, 0]
     pt.steps = None if adaptive else int(sim.steps)
-    pt.rhs_evals, pt.rhs_evals_source = _rhs_count(sim, m)
+    pt.rhs_evals, pt.rhs_evals_source = int(sim.rhs_evals), "sim.rhs_evals"   # (every Sim counts them)
     xT = sim.x[0].copy()
     pt.final_x = xT.tolist()
     _score(pt, case, exact, traj.t, x, keep_drift, drifts)
