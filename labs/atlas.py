@@ -581,10 +581,12 @@ def _decade(x: float) -> str:
     return {0: "1", 1: "10"}.get(k, f"1e{k}")
 
 
-def _decorate(ax, integ, axis, row, col, nrows, xe, ye, hard_points) -> None:
+def _decorate(ax, integ, axis, row, col, nrows, xe, ye, hard_points, scales: bool = True) -> None:
+    """Titles, labels, lines and markers of one panel; its scales, limits and ticks when ``scales`` (the lab's
+    figure shares them between all its panels: set once; the caller's axes (ax=) each)."""
     from matplotlib.ticker import FixedFormatter, FixedLocator, NullLocator
 
-    if True:                       # on every panel: shared in the lab's figure, not in the caller's (ax=)
+    if scales:
         ax.set_xscale("log")
         ax.set_yscale("log")
         ax.set_xlim(xe[0], xe[-1])
@@ -664,7 +666,9 @@ def _figure(integrators, title, ax=None):
         fig, axes = C.new_figure(n, len(AXES), ax=ax)
         return fig, axes
     nr, blocks = _layout(n)
-    fig, grid = C.new_figure(nr, blocks * len(AXES), size=(15.0, 2.0 * nr + 2.6), title=title)
+    # a fixed grid (_fit): constrained layout over 31 axes costs ~2.5 s of CPU a draw
+    fig, grid = C.new_figure(nr, blocks * len(AXES), size=(15.0, 2.0 * nr + 2.6), layout=None)
+    fig.suptitle(title, y=1 - 0.04 / fig.get_figheight(), va="top")
     for a in grid.flat[1:]:
         a.sharex(grid[0, 0])
         a.sharey(grid[0, 0])
@@ -678,6 +682,35 @@ def _figure(integrators, title, ax=None):
         if id(a) not in used:
             a.set_visible(False)
     return fig, axes
+
+
+#: the fixed grid of a lab figure (inches): left margin (y tick labels and label), top margin (suptitle and
+#: panel titles), gaps between panels (titles; hidden tick labels), height of x tick labels and label under the
+#: panels, the colour bar's width, its gap to the panels and the room right of it (ticks and label)
+GRID_IN = {"left": 0.58, "top": 0.48, "wgap": 0.13, "hgap": 0.32, "xlabels": 0.49, "cbar": 0.28, "cbar_pad": 0.13,
+           "cbar_room": 0.70}
+
+
+def _fit(fig, axes, legend, colorbar=None, label: str = ""):
+    """Place the panels on a fixed grid: the legend (lower center) under them, the colour bar (a mappable, with
+    its ``label``) right of them; what constrained layout gave, without its cost."""
+    w, h = fig.get_size_inches()
+    g = GRID_IN
+    legend_h = legend.get_window_extent(fig.canvas.get_renderer()).height / fig.dpi
+    right = g["cbar_pad"] + g["cbar"] + g["cbar_room"] if colorbar is not None else 0.04
+    grid = axes[0, 0].get_subplotspec().get_gridspec()
+    nr, nc = grid.get_geometry()
+    pw = (w - g["left"] - right - (nc - 1) * g["wgap"]) / nc
+    bottom = 0.05 + legend_h + g["xlabels"]
+    ph = (h - g["top"] - bottom - (nr - 1) * g["hgap"]) / nr
+    fig.subplots_adjust(left=g["left"] / w, right=1 - right / w, bottom=bottom / h, top=1 - g["top"] / h,
+                        wspace=g["wgap"] / pw, hspace=g["hgap"] / ph)
+    if colorbar is not None:
+        span = h - g["top"] - bottom
+        cax = fig.add_axes(((w - right + g["cbar_pad"]) / w, (bottom + span / 4) / h, g["cbar"] / w, span / 2 / h),
+                           label="<colorbar>")
+        cb = fig.colorbar(colorbar, cax=cax, extend="both")
+        cb.set_label(label, fontsize=8)
 
 
 def _metric_value(cell, metric) -> float:
@@ -720,6 +753,7 @@ def metric_figure(metric: str, cells, integrators, wdts, ratios, hard_points, ax
     fname, label, vmax, bound_text = METRICS[metric]
     bound = BOUNDS[metric]
     xe, ye = _edges(wdts), _edges(ratios)
+    own = ax is None            # the lab's figure (a fixed grid), not the caller's axes
     fig, axes = _figure(integrators, f"Stability atlas: {label.split('  ')[0]} over {ROTATIONS} rotations "
                                      f"(≥ {MIN_STEPS} steps), torque-free near-axis spin, |ω| = {OMEGA:g} rad/s", ax)
     norm = LogNorm(vmin=FLOOR, vmax=vmax)
@@ -738,17 +772,21 @@ def metric_figure(metric: str, cells, integrators, wdts, ratios, hard_points, ax
             inside = np.nan_to_num(val, nan=np.inf) <= bound
             _outline(ax, inside, xe, ye, colors="k", linewidths=1.6, zorder=4)
             _outline(ax, inside, xe, ye, colors="w", linewidths=0.6, zorder=4)
-            _decorate(ax, integ, axis, *_place(r, c, len(integrators)), xe, ye, hard_points)
-    cb = fig.colorbar(mesh, ax=axes, location="right", shrink=0.5, pad=0.01, extend="both")
-    cb.set_label(label + f"  (values < {FLOOR:.0e}, incl. 0, at the bottom)", fontsize=8)
+            _decorate(ax, integ, axis, *_place(r, c, len(integrators)), xe, ye, hard_points, not own or r + c == 0)
     extra: list[Artist] = [Line2D([], [], color="k", lw=1.6, label="lab hard's bound " + bound_text.format(b=bound)
                     + " holds inside the outline")]
     if any(c["status"] == "ok" and c[metric] is None for c in cells):
         extra.append(Patch(facecolor=STATUS_COLORS["no_reference"], edgecolor="k", lw=0.5,
                            label=STATUS_TEXT["no_reference"]))
     extra += _not_run_handle(cells)
-    fig.legend(handles=_legend_handles(extra, hatched=True), loc="outside lower center", ncols=3, fontsize=7.5,
-               frameon=False)
+    legend = fig.legend(handles=_legend_handles(extra, hatched=True), loc="outside lower center", ncols=3,
+                        fontsize=7.5, frameon=False)
+    cbar_label = label + f"  (values < {FLOOR:.0e}, incl. 0, at the bottom)"
+    if own:
+        _fit(fig, axes, legend, mesh, cbar_label)
+    else:
+        fig.colorbar(mesh, ax=axes, location="right", shrink=0.5, pad=0.01, extend="both").set_label(cbar_label,
+                                                                                                     fontsize=8)
     return fname, fig
 
 
@@ -767,6 +805,7 @@ def status_figure(cells, integrators, wdts, ratios, hard_points, ax=None):
     from matplotlib.patches import Patch
 
     xe, ye = _edges(wdts), _edges(ratios)
+    own = ax is None
     fig, axes = _figure(integrators, f"Stability atlas: where each integrator stays stable "
                                      f"({ROTATIONS} rotations, ≥ {MIN_STEPS} steps; near-axis spin, perturbation "
                                      f"{PERTURBATION:g}·|ω| on the other two axes)", ax)
@@ -776,12 +815,15 @@ def status_figure(cells, integrators, wdts, ratios, hard_points, ax=None):
             ax = axes[r, c]
             ax.pcolormesh(xe, ye, _grid(cells, integ, axis, wdts, ratios, _overview_code), cmap=cmap, vmin=-0.5,
                           vmax=len(OVERVIEW_COLORS) - 0.5, edgecolors="w", linewidth=0.3)
-            _decorate(ax, integ, axis, *_place(r, c, len(integrators)), xe, ye, hard_points)
+            _decorate(ax, integ, axis, *_place(r, c, len(integrators)), xe, ye, hard_points, not own or r + c == 0)
     bounds = ", ".join(f"{k.replace('_', ' ')} ≤ {b:.0e}" for k, b in BOUNDS.items())
     extra = [Patch(facecolor=OVERVIEW_COLORS[0], edgecolor="k", lw=0.5, label=f"stable, within lab hard's bounds ({bounds})"),
              Patch(facecolor=OVERVIEW_COLORS[1], edgecolor="k", lw=0.5, label="stable (finite, no blow-up), a bound missed")]
     extra += _not_run_handle(cells)
-    fig.legend(handles=_legend_handles(extra), loc="outside lower center", ncols=3, fontsize=7.5, frameon=False)
+    legend = fig.legend(handles=_legend_handles(extra), loc="outside lower center", ncols=3, fontsize=7.5,
+                        frameon=False)
+    if own:
+        _fit(fig, axes, legend)
     return "atlas_status.png", fig
 
 

@@ -99,7 +99,8 @@ def __getattr__(name: str):
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
-def new_figure(nrows: int = 1, ncols: int = 1, *, size=(8.0, 4.5), title: str | None = None, ax=None):
+def new_figure(nrows: int = 1, ncols: int = 1, *, size=(8.0, 4.5), title: str | None = None, ax=None,
+               layout: str | None = "constrained"):
     """A headless matplotlib Figure in the house style and its axes array, or the caller's axes.
 
     Parameters
@@ -112,6 +113,8 @@ def new_figure(nrows: int = 1, ncols: int = 1, *, size=(8.0, 4.5), title: str | 
         Figure title (suptitle; not set on a figure the caller passed ``ax`` of).
     ax : matplotlib Axes or sequence of Axes, optional
         Draw into these instead (``nrows * ncols`` of them, in row order); the figure is theirs.
+    layout : {"constrained", None}, default "constrained"
+        The figure's layout engine; None for a caller that places the axes itself (``subplots_adjust``).
 
     Returns
     -------
@@ -139,7 +142,7 @@ def new_figure(nrows: int = 1, ncols: int = 1, *, size=(8.0, 4.5), title: str | 
     global _LAB_FIGURE
     if _LAB_FIGURE is None:
         _LAB_FIGURE = _figure_class()
-    fig = _LAB_FIGURE(figsize=size, layout="constrained")
+    fig = _LAB_FIGURE(figsize=size, layout=layout)
     FigureCanvasAgg(fig)
     axes = fig.subplots(nrows, ncols, squeeze=False)
     for a in axes.flat:

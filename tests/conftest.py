@@ -62,6 +62,17 @@ of a parametrization whose cheaper siblings stay (`pytest.param(..., marks=pytes
 
 and a slow test named by node id on the command line (`pytest tests/test_labs.py::test_cli_all`)
 runs too. The session header says that slow tests are deselected; the summary counts them.
+
+Two workers for the whole suite
+-------------------------------
+pyproject's addopts say `-n auto --dist loadgroup` (pytest-xdist, in the test extra). `auto` is decided here
+(:func:`pytest_xdist_auto_num_workers`): a worker per core, at most 2 (MAX_WORKERS), when pytest runs the whole
+suite (no file or node id named: the README's `pytest`, .ci/run's `pytest -m slow`), and no workers (one process,
+as before) when files or tests are named, so `pytest tests/test_x.py` does not start two interpreters for one file.
+`-n 0` forces one process, `-n 2` two workers for any selection. Each worker computes the session fixtures it
+needs, so tests that share one run in the same worker (:func:`_xdist_groups`): every test of a module that uses
+`derivation`/`derived_once` in group "derivation", of a module that uses `quick_accuracy`/`quick_atlas` in group
+"labs", the tests of any other module together (its module fixtures computed once).
 """
 from __future__ import annotations
 
@@ -228,6 +239,48 @@ def derived_once(monkeypatch, derivation):
 
 # ---- hooks --------------------------------------------------------------------------------------
 
+#: the most workers `-n auto` starts (the suite is sized for an idle 2-core machine; more workers would each
+#: compute the session fixtures again)
+MAX_WORKERS = 2
+
+#: session fixtures (conftest's) whose users should share one worker -> the xdist group of their modules
+SHARED_GROUPS = {"derivation": "derivation", "derived_once": "derivation",
+                 "quick_accuracy": "labs", "quick_atlas": "labs"}
+
+
+def _whole_suite(config) -> bool:
+    """True when pytest runs the whole suite: no file, folder or node id named except the tests folder."""
+    here = Path(__file__).resolve().parent
+    return all(Path(config.invocation_params.dir, a.split("::")[0]).resolve() == here for a in config.args)
+
+
+@pytest.hookimpl(optionalhook=True)      # a pytest-xdist hook: unknown (and unused) without it
+def pytest_xdist_auto_num_workers(config):
+    """`-n auto` (pyproject's addopts): a worker per core, at most MAX_WORKERS, for the whole suite; one
+    process (0 workers) when files or tests are named. PYTEST_XDIST_AUTO_NUM_WORKERS overrides both."""
+    if os.environ.get("PYTEST_XDIST_AUTO_NUM_WORKERS"):
+        return None                                        # xdist's own rules
+    if not _whole_suite(config):
+        return 0
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    workers = min(cores, MAX_WORKERS)
+    return workers if workers > 1 else 0
+
+
+def _xdist_groups(items) -> dict:
+    """{item: xdist group}: a module's tests together; modules sharing a session fixture (SHARED_GROUPS) in
+    one group, so that fixture is computed by one worker only."""
+    module_group = {}
+    for item in items:
+        mod = item.nodeid.split("::")[0]
+        for name in item.fixturenames:
+            if name in SHARED_GROUPS:
+                module_group[mod] = SHARED_GROUPS[name]
+        module_group.setdefault(mod, None)
+    return {item: module_group[item.nodeid.split("::")[0]] or Path(item.nodeid.split("::")[0]).stem for item in items}
+
+
+
 def pytest_addoption(parser):
     parser.addoption("--run-slow", action="store_true", default=False,
                      help="also run tests marked slow (plain `pytest` deselects them; `-m slow` runs only them)")
@@ -260,7 +313,11 @@ def _slow_deselected(config) -> bool:
     return not (config.getoption("--run-slow") or config.getoption("markexpr"))
 
 
+@pytest.hookimpl(tryfirst=True)      # before xdist's worker reads the xdist_group marks
 def pytest_collection_modifyitems(config, items):
+    if getattr(config.option, "loadgroup", False):    # an xdist worker of `--dist loadgroup`
+        for item, group in _xdist_groups(items).items():
+            item.add_marker(pytest.mark.xdist_group(group))
     # `needs` markers: outside CI a missing tool becomes a skip marker (reported at the test's own
     # location); under CI=true pytest_runtest_setup below fails the test instead
     if not IN_CI:

@@ -1,13 +1,18 @@
 """The command line's faults, round two (issue 28): one line and exit 2 (or a failed figure, exit 1), never a
 traceback; lab output folders written whole, never through a link, one run at a time.
 
-Every command runs in a subprocess (what a user sees: exit code, stderr). The lab runs are the cheap ones: a
-failure mode diverges at once and writes results.json only. Folder mechanics are checked on a synthetic
+Commands run through the command line's `main()` in this process (_main: its parser, its guard, its messages;
+exit code, stdout and stderr captured, warnings shown as a fresh interpreter shows them). A few run in a real
+`python -m lavendersim.cli` subprocess (_run: what a user sees), and
+test_the_command_line_process_says_what_main_says checks that both give the same exit code and output. The lab
+runs are the cheap ones: a failure mode diverges at once and writes results.json only. Folder mechanics are checked on a synthetic
 LabResult (labs.common.make_result) so they run in milliseconds. Waits have generous deadlines that are
 only reached when the behaviour is broken; no duration is asserted.
 """
 from __future__ import annotations
 
+import contextlib
+import io
 import json
 import os
 import signal
@@ -15,6 +20,7 @@ import subprocess
 import sys
 import textwrap
 import threading
+import warnings
 from pathlib import Path
 
 import pytest
@@ -31,6 +37,26 @@ DEADLINE = 300.0   # s: a subprocess or an awaited event; reached only when some
 def _run(*args, env=None, timeout=DEADLINE):
     return subprocess.run([sys.executable, "-m", "lavendersim.cli", *map(str, args)], capture_output=True, text=True,
                           timeout=timeout, env=env)
+
+
+def _show(message, category, filename, lineno, file=None, line=None):
+    sys.stderr.write(warnings.formatwarning(message, category, filename, lineno, line))
+
+
+def _main(*args):
+    """`lavendersim ARGS` through cli.main in this process: a CompletedProcess like _run's (argparse's exit
+    included; a warning printed on stderr, as the interpreter prints it, never swallowed by pytest)."""
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err), warnings.catch_warnings():
+        warnings.simplefilter("default")
+        warnings.showwarning = _show
+        try:
+            code = cli.main([str(a) for a in args])
+        except SystemExit as exc:
+            code = exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 1)
+            if not isinstance(exc.code, (int, type(None))):
+                print(exc.code, file=sys.stderr)
+    return subprocess.CompletedProcess(list(args), code, out.getvalue(), err.getvalue())
 
 
 def _one_line(r, code=2):
@@ -52,7 +78,7 @@ FAILURE_MODES = [
 
 @pytest.mark.parametrize("lab, argv, options", FAILURE_MODES, ids=[m[0] for m in FAILURE_MODES])
 def test_a_failure_mode_that_diverges_is_a_failed_figure_with_results(tmp_path, lab, argv, options):
-    r = _run("lab", lab, *argv, "--out", tmp_path, "--quiet")
+    r = _main("lab", lab, *argv, "--out", tmp_path, "--quiet")
     assert r.returncode == 1, r.stderr
     assert "Traceback" not in r.stderr and "no_divergence" in r.stderr
     res = json.loads((tmp_path / lab / "results.json").read_text())
@@ -80,7 +106,7 @@ def test_labs_compute_returns_the_divergence_as_a_failed_result():
 
 
 def test_a_bad_option_is_still_exit_2_not_a_failed_figure(tmp_path):
-    line = _one_line(_run("lab", "01", "--damping", "-1", "--out", tmp_path))
+    line = _one_line(_main("lab", "01", "--damping", "-1", "--out", tmp_path))
     assert "damping" in line
     assert not (tmp_path / "01").exists()
 
@@ -96,7 +122,7 @@ def _paths(tmp_path):
 @pytest.mark.parametrize("out", ["FILE", "FILE/sub", "/proc/lavendersim-no-such-dir/out", ""])
 def test_lab_out_that_cannot_be_a_folder_is_one_line(tmp_path, out):
     a_file = _paths(tmp_path)
-    line = _one_line(_run("lab", "01", "--damping", "100", "--out", out.replace("FILE", str(a_file))))
+    line = _one_line(_main("lab", "01", "--damping", "100", "--out", out.replace("FILE", str(a_file))))
     assert "out" in line
     assert a_file.read_text() == "x"
 
@@ -112,7 +138,7 @@ def test_lab_out_in_a_read_only_folder_is_one_line(tmp_path):
     ro.mkdir()
     ro.chmod(0o555)
     try:
-        assert "out" in _one_line(_run("lab", "01", "--damping", "100", "--out", ro / "x"))
+        assert "out" in _one_line(_main("lab", "01", "--damping", "100", "--out", ro / "x"))
     finally:
         ro.chmod(0o755)
 
@@ -120,7 +146,7 @@ def test_lab_out_in_a_read_only_folder_is_one_line(tmp_path):
 @pytest.mark.needs("control")
 @pytest.mark.parametrize("plot", ["out.xyz", "out.PNGX", "plot.docx"])
 def test_lqr_plot_with_an_unknown_suffix_is_one_line_naming_the_allowed_ones(tmp_path, plot):
-    line = _one_line(_run("lqr", "--plot", tmp_path / plot))
+    line = _one_line(_main("lqr", "--plot", tmp_path / plot))
     assert "--plot" in line and ".png" in line and ".pdf" in line and ".svg" in line
     assert not (tmp_path / plot).exists()
 
@@ -131,7 +157,7 @@ def test_lqr_plot_with_an_unknown_suffix_is_one_line_naming_the_allowed_ones(tmp
                                          (["--monte-carlo", "2", "--dask", "nonsense"], "dask")])
 def test_lqr_bad_paths_are_one_line(tmp_path, argv, field):
     a_file = _paths(tmp_path)
-    line = _one_line(_run("lqr", *[a.replace("FILE", str(a_file)) for a in argv]))
+    line = _one_line(_main("lqr", *[a.replace("FILE", str(a_file)) for a in argv]))
     assert field in line
 
 
@@ -140,16 +166,16 @@ def test_lqr_bad_paths_are_one_line(tmp_path, argv, field):
 def test_bench_bad_out_paths_are_one_line(tmp_path, argv, field):   # bench --out FILE was --json FILE (issue 31)
     a_file = _paths(tmp_path)
     args = [a.replace("FILE", str(a_file)).replace("DIR", str(tmp_path)) for a in argv]
-    assert field in _one_line(_run("bench", "--quick", *args))
+    assert field in _one_line(_main("bench", "--quick", *args))
 
 
 @pytest.mark.parametrize("lab", ["atlas", "accuracy"])
 def test_a_dask_address_without_a_port_is_one_line(tmp_path, lab):
-    assert "dask" in _one_line(_run("lab", lab, "--quick", "--dask", "nonsense", "--out", tmp_path), 2)
+    assert "dask" in _one_line(_main("lab", lab, "--quick", "--dask", "nonsense", "--out", tmp_path), 2)
 
 
 def test_a_bad_view_host_of_a_lab_is_refused_before_the_lab_runs(tmp_path):
-    line = _one_line(_run("lab", "03", "--view", "--view-host", "0", "--out", tmp_path))
+    line = _one_line(_main("lab", "03", "--view", "--view-host", "0", "--out", tmp_path))
     assert "host" in line and "every interface" in line
     assert not (tmp_path / "03").exists()      # refused before the lab computed or wrote anything
 
@@ -223,7 +249,7 @@ def test_a_link_planted_by_hand_before_a_real_lab_run_keeps_its_target(tmp_path)
     target = _secret(tmp_path)
     (tmp_path / "out" / "01").mkdir(parents=True)
     (tmp_path / "out" / "01" / "results.json").symlink_to(target)
-    r = _run("lab", "01", "--damping", "100", "--out", tmp_path / "out", "--quiet")
+    r = _main("lab", "01", "--damping", "100", "--out", tmp_path / "out", "--quiet")
     assert r.returncode == 1 and "Traceback" not in r.stderr
     assert target.read_text() == "keep me"
     res = tmp_path / "out" / "01" / "results.json"
@@ -245,7 +271,7 @@ def test_the_command_line_refuses_a_linked_lab_folder_in_one_line_before_computi
     target = _secret(tmp_path)
     (tmp_path / "out").mkdir()
     (tmp_path / "out" / "01").symlink_to(target.parent, target_is_directory=True)
-    line = _one_line(_run("lab", "01", "--damping", "100", "--out", tmp_path / "out"))
+    line = _one_line(_main("lab", "01", "--damping", "100", "--out", tmp_path / "out"))
     assert "symbolic link" in line and "01" in line
     assert os.listdir(target.parent) == ["precious.txt"]
 
@@ -357,10 +383,10 @@ def test_a_second_run_into_the_same_folder_is_refused_naming_the_running_ones_pi
     out = tmp_path / "out"
     p = _holder(out, "01")
     try:
-        line = _one_line(_run("lab", "01", "--damping", "100", "--out", out))
+        line = _one_line(_main("lab", "01", "--damping", "100", "--out", out))
         assert str(p.pid) in line and str(out / "01") in line
         assert not (out / "01").exists()          # refused before anything was written
-        line = _one_line(_run("lab", "all", "--out", out))   # lab all takes every lab's folder first
+        line = _one_line(_main("lab", "all", "--out", out))   # lab all takes every lab's folder first
         assert str(p.pid) in line
         with pytest.raises(LavenderInputError, match=f"pid {p.pid}"):
             _result(lab="01").save(out)
@@ -368,7 +394,7 @@ def test_a_second_run_into_the_same_folder_is_refused_naming_the_running_ones_pi
     finally:
         _stop(p)
     # the holder was killed: the kernel released its lock, the next run writes
-    r = _run("lab", "01", "--damping", "100", "--out", out, "--quiet")
+    r = _main("lab", "01", "--damping", "100", "--out", out, "--quiet")
     assert r.returncode == 1 and (out / "01" / "results.json").is_file()
 
 
@@ -424,8 +450,21 @@ def test_export_c_replaces_a_link_planted_in_its_folder_and_keeps_the_target(tmp
                                   ["bench", "--rounds", "x"], ["lab", "01", "--quiet", "--verbose"],
                                   ["lqr", "--scenario", "nope"]])
 def test_a_usage_error_is_one_line_naming_the_option_and_help(argv):
-    line = _one_line(_run(*argv))
+    line = _one_line(_main(*argv))
     assert "error:" in line and "--help" in line
+
+
+@pytest.mark.parametrize("argv", [["lab", "01", "--dt", "abc"], ["nope"], ["lab", "01", "--damping", "-1", "--out", "OUT"],
+                                  ["lab", "01", "--damping", "100", "--out", "OUT", "--quiet"]],
+                         ids=["usage", "command", "input", "diverged"])
+def test_the_command_line_process_says_what_main_says(tmp_path, argv):
+    """The tests above run cli.main in-process (_main); `python -m lavendersim.cli` gives the same exit code,
+    stdout and stderr (usage errors, bad input, a failed figure)."""
+    argv = [a.replace("OUT", str(tmp_path / "a")) for a in argv]
+    r = _run(*argv)
+    m = _main(*argv)
+    assert (r.returncode, r.stdout, r.stderr) == (m.returncode, m.stdout, m.stderr)
+    assert r.returncode in (1, 2) and "Traceback" not in r.stderr
 
 
 def test_without_an_atomic_exchange_the_two_renames_leave_one_whole_folder(tmp_path, monkeypatch):
