@@ -96,8 +96,8 @@ class _Batch:
                 self._where = {}
                 for j, b in enumerate(self.bodies):
                     self._where.setdefault(b, []).append(j)
-        j = self._where.get(body)
-        return [] if j is None else j if isinstance(j, list) else [j]
+        at = self._where.get(body)
+        return [] if at is None else at if isinstance(at, list) else [at]
 
     def column(self, f: str) -> np.ndarray:
         """Parameter f of every effect, (n, *shape) float64 (a shared value broadcast, read-only)."""
@@ -222,7 +222,7 @@ class _EffectList(MutableSequence):
         self._edited()
 
     def __delitem__(self, k) -> None:
-        lo, hi, step = k.indices(len(self)) if isinstance(k, slice) else (None, None, 1)
+        lo, hi, step = k.indices(len(self)) if isinstance(k, slice) else (0, 0, 1)
         if isinstance(k, slice) and step == 1:
             a = self._split(lo)
             b = self._split(max(lo, hi))
@@ -326,7 +326,8 @@ class _EffectList(MutableSequence):
         k = 0
         for it in self._items:
             if type(it) is _Batch:
-                for j in it.where(getattr(effect, "body", None)) if isinstance(getattr(effect, "body", None), str) else ():
+                body = getattr(effect, "body", None)
+                for j in it.where(body) if isinstance(body, str) else ():
                     if it._made.get(j + it._off) is effect:
                         return k + j
                 k += len(it)
@@ -901,11 +902,11 @@ class _RowsOf(Sequence):
         return list(r[0]) if len(r) == 1 else [r[0] + k - self._starts[i]]
 
 
-def _unrotated(e: Effect, frames: PrincipalFrames | None, pos) -> bool:
+def _unrotated(e: "Effect | _Batch", frames: PrincipalFrames | None, pos) -> bool:
     """Effect e's row needs no rotation into a principal frame (see _effect_rows)."""
     if frames is None or not any(p.frame == "body" for p in (e.spec.params if e.spec is not None else ())):
         return True
-    if type(e) is _Batch:
+    if isinstance(e, _Batch):
         return all(b in pos and frames.rotation(pos[b]) is None for b in e.bodies)
     return e.body is not None and e.body in pos and frames.rotation(pos[e.body]) is None
 

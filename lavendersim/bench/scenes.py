@@ -180,7 +180,7 @@ def _issue30_lines(sec: dict | None, line) -> list[dict]:
                  "max", "B", why or "above the process's peak before the build"),
             line(f"{_n(PLAIN_BIG_N)} plain bodies: ns per body-step / at N = {_n(SCALE_SMALL_N)}", g("step_ratio"),
                  TARGETS["plain_big_step_ratio"], "max", "x",
-                 why or f"{big['ns_big']:.2f} against {big['ns_small']:.2f} ns per body-step (rk4, C)")]
+                 why or f"{g('ns_big'):.2f} against {g('ns_small'):.2f} ns per body-step (rk4, C)")]
 
 
 def report_lines(res: dict, fmt) -> list[str]:
