@@ -2,9 +2,9 @@
 
 The peers are lavendersim/bench/numpy_peers.py (written by hand, not the printed kernels): ``hand_rk4_soa`` (struct
 of arrays, coefficients once per run) at N = 1e3 and 1e5 (quick: 1e3), and ``python_rk4`` (one body, Python
-floats) at N = 1, each interleaved with ``Sim(..., backend="numpy").run`` on the same bodies (torque-free RK4, q
-normalized; CPU time, min over rounds), torque-free and with scene-wide gravity and damping (the peers type the
-same model). Targets: the backend within 1.5x of the hand NumPy loop at every N (both cases), and no slower than
+floats) at N = 1, each interleaved with ``Sim(..., backend="numpy").run`` and with ``NumpyBackend.advance`` alone
+(no Sim checks or chunks; ``advance_ratio``) on the same bodies (torque-free RK4, q normalized; CPU time, min over
+rounds), torque-free and with scene-wide gravity and damping (the peers type the same model). Targets: the backend within 1.5x of the hand NumPy loop at every N (both cases), and no slower than
 the Python loop for one body (torque-free). Before timing, each peer and the backend advance the same state by
 AGREE_STEPS steps; the largest difference is recorded (the peers are right when it is ~1e-12 or less).
 """
