@@ -50,8 +50,6 @@ FLAG_USES_OMEGA = 2   # reads omega_b
 FLAG_FORCE = 4        # adds a force (a body whose effects add none may use the torque-only right-hand side)
 FLAG_USES_STATE = 8   # reads any state value (without it the force and torque are constant over a step:
                       # the SIMD batch evaluates them once per call, csrc/batch_simd.h)
-FLAGS = {"uses_v_w": FLAG_USES_V, "uses_omega_b": FLAG_USES_OMEGA, "adds_force": FLAG_FORCE,
-         "uses_state": FLAG_USES_STATE}
 # Version of the calling convention of printed effect functions (checked when a user library loads).
 ABI_VERSION = 1
 _NAME = re.compile(r"^[a-z][a-z0-9_]*$")
