@@ -745,7 +745,6 @@ class Sim:
         self._free = ~acted & (kind == 0)                      # E and |L| conserved
         self._free_wheels = ~acted & (kind == KIND_WHEELS)  # total |L| conserved (motor torques are internal)
         self._free_any = bool(self._free.any())
-        self._all_free = bool(self._free.all())
         self._any_free_wheels = bool(self._free_wheels.any())
         self._fw = np.flatnonzero(self._free_wheels)          # the same, as an index array (one batched kernel call)
         # bodies effects act on (not jointed: the joint's reaction is no declared load): a growth budget
@@ -842,7 +841,7 @@ class Sim:
         wmax, p = self._bound
         what = "|omega|*dt" + (f"*(I_max/I_min)**{p:g}" if p else "")
         return (f"{what} = {value:.3g} is beyond {self.integrator}'s validity bound {wmax:.4g} (WDT_MAX, "
-                f"derive/tableaux.py); reduce dt" + ("" if self.integrator == "dopri5" else " or use dopri5"))
+                f"derive/tableaux.py); reduce dt" + ("" if self.integrator in ADAPTIVE else f" or use {ADAPTIVE[0]}"))
 
     def _violation(self, x: np.ndarray, Omega: np.ndarray, warn: bool = True, growth: bool = True) -> tuple[int, str] | None:
         """The first body (index, cause) of state x that fails a check (growth=False: the bound only), or None;
