@@ -204,7 +204,25 @@ class _Guard:
         return False
 
 
-validity_bound = backends.validity_bound   # (re-exported: lavendersim.sim.validity_bound, as before)
+def validity_bound(integrator: str) -> tuple[float, float] | None:
+    """The validity bound of an integrator: ``backends.validity_bound`` of the name as ``Sim`` resolves it.
+
+    Parameters
+    ----------
+    integrator : str
+        A built-in integrator's name or a user tableau's (found in the user directory and loaded, as ``Sim`` does).
+
+    Returns
+    -------
+    tuple of (float, float) or None
+        ``(WDT_MAX, WDT_RATIO_EXPONENT)``, or None for an integrator that declares no bound (adaptive ones).
+
+    Raises
+    ------
+    LavenderInputError
+        For a name that is neither built in nor a user's tableau (before, an unloaded user tableau gave None).
+    """
+    return backends.validity_bound(_integrator(integrator))
 
 
 def _integrator(name) -> str:
