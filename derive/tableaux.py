@@ -174,6 +174,43 @@ DP_INIT_FRAC = 0.01
 DP_INIT_FLAT = 1e-15
 DP_INIT_SHRINK = 1e-3
 DP_INIT_GROW = 100.0
+# The controller's factor SAFETY err^(-1/(DP_ORDER_ERR + 1)) without a libm power per substep (the same doubles on
+# both backends): r = err^(-1/5) by DP_ROOT5_NEWTON Newton steps r <- r (DP_ROOT5_A - err r^5) DP_ROOT5_B on
+# r^-5 = err, from the bit-pattern seed r0 = double(DP_ROOT5_SEED - bits(err) // 5) (an IEEE double's bits are
+# ~2^52 (log2 x + 1023): the seed is (1 + 1/5) 1023 2^52 lowered by DP_ROOT5_SHIFT 2^52, the shift that makes the
+# largest error after two steps least). Used for DP_ROOT5_LO <= err <= DP_ROOT5_HI; the factor is clamped to
+# [FACMIN, FACMAX] anyway outside (below LO: FACMAX; above HI, or not a number: FACMIN). Largest relative error
+# against err^(-1/5) over [LO, HI]: 2.6e-5 (_check_root5, at derive time): the controller is Hairer's to that factor.
+DP_ROOT5_NEWTON = 2
+DP_ROOT5_SHIFT = R(3, 50)
+DP_ROOT5_LO, DP_ROOT5_HI = 1e-6, 1e6
+DP_ROOT5_MAX_REL_ERR = 3e-5
+
+
+def dp_root5_seed() -> int:
+    """DP_ROOT5_SEED: the bits of the Newton start for err^(-1/5), see DP_ROOT5_NEWTON."""
+    q = DP_ORDER_ERR + 1
+    return int(sp.floor((1 + R(1, q)) * 1023 * 2 ** 52 - DP_ROOT5_SHIFT * 2 ** 52))
+
+
+def dp_root5(e: float) -> float:
+    """err^(-1/5) as both backends compute it (Python floats: the same IEEE operations)."""
+    import struct
+    q = DP_ORDER_ERR + 1
+    bits = struct.unpack("<Q", struct.pack("<d", e))[0]
+    r = struct.unpack("<d", struct.pack("<Q", dp_root5_seed() - bits // q))[0]
+    for _ in range(DP_ROOT5_NEWTON):
+        r2 = r * r
+        r = r * (float(q + 1) - e * (r2 * r2 * r)) * (1.0 / q)
+    return r
+
+
+# Dense output (Hairer, Norsett & Wanner, Solving ODEs I, II.6; dopri5.f's contd5): over an accepted substep
+# y0 -> y1 of length h, with Y1 = y1 - y0, Y2 = h k1 - Y1, Y3 = Y1 - h k7 - Y2 and Y4 = h sum_i DP_DENSE[i] k_i,
+# y(t0 + theta h) = y0 + theta (Y1 + (1 - theta) (Y2 + theta (Y3 + (1 - theta) Y4))), order 4 in theta h
+# (checked: _check_dense).
+DP_DENSE = (R(-12715105075, 11282082432), R(0), R(87487479700, 32700410799), R(-10690763975, 1880347072),
+            R(701980252875, 199316789632), R(-1453857185, 822651844), R(69997945, 29380423))
 
 STRANG = ((0, R(1, 2)), (1, R(1, 2)), (2, R(1)), (1, R(1, 2)), (0, R(1, 2)))
 SPLIT_KICK = R(1, 2)                # the loads kick v and omega for h/2 before and after the free flow
@@ -438,9 +475,38 @@ def _check_registry() -> None:
         raise RuntimeError("derive: every integrator has a decay stability limit (real_axis_stability)")
 
 
+def _check_root5() -> None:
+    """The controller's err^(-1/5) (dp_root5) is within DP_ROOT5_MAX_REL_ERR of the power over [LO, HI]."""
+    import math
+    n = 20001
+    lo, hi = math.log(DP_ROOT5_LO), math.log(DP_ROOT5_HI)
+    worst = max(abs(dp_root5(e) / e ** (-1.0 / (DP_ORDER_ERR + 1)) - 1.0)
+                for e in (math.exp(lo + (hi - lo) * i / (n - 1)) for i in range(n)))
+    if not worst <= DP_ROOT5_MAX_REL_ERR:
+        raise RuntimeError(f"derive: dp_root5 is {worst:.2e} off err^(-1/5) (allowed {DP_ROOT5_MAX_REL_ERR})")
+
+
+def _check_dense() -> None:
+    """The dense output's weights b_i(theta) meet sum_i b_i(theta) c_i^(k-1) = theta^k / k for k = 1..4 (order 4)
+    and give y1 at theta = 1."""
+    th = sp.Symbol("theta")
+    b, c = dp_b(), [sum(row, R(0)) for row in DP_A]
+    one = [R(1)] + [R(0)] * 6
+    last = [R(0)] * 6 + [R(1)]
+    w = [th * b[i] + th * (1 - th) * (one[i] - b[i]) + th ** 2 * (1 - th) * (2 * b[i] - one[i] - last[i])
+         + th ** 2 * (1 - th) ** 2 * DP_DENSE[i] for i in range(7)]
+    for k in range(1, 5):
+        if sp.expand(sum(w[i] * c[i] ** (k - 1) for i in range(7)) - th ** k / k) != 0:
+            raise RuntimeError(f"derive: the Dormand-Prince dense output fails sum b_i(theta) c_i^{k - 1} = theta^{k}/{k}")
+    if [sp.expand(x.subs(th, 1)) for x in w] != list(b):
+        raise RuntimeError("derive: the Dormand-Prince dense output does not end at y1")
+
+
 def _check() -> None:
     """Derivation-time proofs of the order conditions that identify the tableaux."""
     _check_registry()
+    _check_root5()
+    _check_dense()
     c = [sum(row, R(0)) for row in DP_A]
     b, bh = dp_b(), DP_B_HAT
     for w, p in ((b, 5), (bh, 4)):
@@ -502,8 +568,11 @@ def _scalars() -> list[tuple[str, str, str]]:
               ("DP_INIT_SMALL", DP_INIT_SMALL), ("DP_INIT_TINY_H", DP_INIT_TINY_H), ("DP_INIT_FRAC", DP_INIT_FRAC),
               ("DP_INIT_FLAT", DP_INIT_FLAT), ("DP_INIT_SHRINK", DP_INIT_SHRINK), ("DP_INIT_GROW", DP_INIT_GROW),
               ("DP_INIT_EXPONENT", 1.0 / (DP_ORDER_ERR + 1)), ("GYRO_TOL_SQ", GYRO_TOL_SQ),
-              ("GYRO_ACCEPT_SQ", GYRO_ACCEPT_SQ)]
+              ("GYRO_ACCEPT_SQ", GYRO_ACCEPT_SQ), ("DP_ROOT5_A", DP_ORDER_ERR + 2), ("DP_ROOT5_B", 1.0 / (DP_ORDER_ERR + 1)),
+              ("DP_ROOT5_LO", DP_ROOT5_LO), ("DP_ROOT5_HI", DP_ROOT5_HI)]
+    ints += [("DP_ROOT5_NEWTON", DP_ROOT5_NEWTON), ("DP_ROOT5_DIV", DP_ORDER_ERR + 1)]
     out = [(n, f"{v}L" if n == "DP_MAX_SUBSTEPS" else str(v), f"{v:_}") for n, v in ints]
+    out += [("DP_ROOT5_SEED", f"{dp_root5_seed()}ULL", str(dp_root5_seed()))]
     out += [(n, f"({float(v)!r})" if v < 0 else repr(float(v)), repr(float(v))) for n, v in floats]
     out += [("SPLIT_KICK", _f(SPLIT_KICK), _f(SPLIT_KICK)), ("SPLIT_MIDPOINT", _f(SPLIT_MIDPOINT), _f(SPLIT_MIDPOINT))]
     out += [(f"RK4_C{i}", _f(c), _f(c)) for i, c in enumerate(RK4_C)]
@@ -602,6 +671,8 @@ def print_c() -> str:
         out.append("    {" + ", ".join(vals) + "},")
     out.append("};")
     out.append("static const double LV_DP_E[7] = {" + ", ".join(_f(e) for e in dp_e()) + "};")
+    out.append("/* its dense output's weights (DP_DENSE: Y4 = h sum_i LV_DP_DENSE[i] k_i) */")
+    out.append("static const double LV_DP_DENSE[7] = {" + ", ".join(_f(d) for d in DP_DENSE) + "};")
     out += _c_compositions()
     seq = " ".join(f"{'xyz'[a]}({'h' if f == 1 else f'{f}*h'})" for a, f in STRANG)
     out += ["", f"/* Strang splitting of the free rotation, {seq}: composed in derive/ into the kernel",
@@ -633,6 +704,8 @@ def print_python() -> str:
     out.extend("    (" + ", ".join(_f(a) for a in row) + ("," if len(row) == 1 else "") + ")," for row in DP_A)
     out.append(")")
     out.append("DP_E = (" + ", ".join(_f(e) for e in dp_e()) + ")")
+    out.append("# its dense output's weights: Y4 = h sum_i DP_DENSE[i] k_i (derive/tableaux.py DP_DENSE)")
+    out.append("DP_DENSE = (" + ", ".join(_f(d) for d in DP_DENSE) + ")")
     out.append("RK4_C = (" + ", ".join(_f(c) for c in RK4_C) + ")")
     out.append("RK4_B_NUM = (" + ", ".join(_f(n) for n in RK4_B_NUM) + ")")
     out.append("# explicit RK integrators, stage s at x + c_s dt k_{s-1}: name -> (c, b_num, b_den), as tableaux.h prints them")

@@ -42,6 +42,13 @@ enum {
 #define LV_DP_MAX_SUBSTEPS 1000000L
 #define LV_GYRO_MAX_ITER 30
 #define LV_RK4_B_DEN 6
+#define LV_SPLIT4_STAGES 5
+#define LV_SPLIT4_FLOWS 21
+#define LV_SYMTOP4_STAGES 5
+#define LV_BM6_FLOWS 10
+#define LV_DP_ROOT5_NEWTON 2
+#define LV_DP_ROOT5_DIV 5
+#define LV_DP_ROOT5_SEED 5528348686582378659ULL
 #define LV_DP_SAFETY 0.9
 #define LV_DP_FACMIN 0.2
 #define LV_DP_FACMAX 5.0
@@ -56,6 +63,11 @@ enum {
 #define LV_DP_INIT_EXPONENT 0.2
 #define LV_GYRO_TOL_SQ 1e-32
 #define LV_GYRO_ACCEPT_SQ 1e-20
+#define LV_DP_ROOT5_A 6.0
+#define LV_DP_ROOT5_B 0.2
+#define LV_DP_ROOT5_LO 1e-06
+#define LV_DP_ROOT5_HI 1000000.0
+#define LV_SYMTOP_STRANG_A 0.5
 #define LV_SPLIT_KICK 0.5
 #define LV_SPLIT_MIDPOINT 0.5
 #define LV_RK4_C0 0.0
@@ -120,6 +132,8 @@ static const double LV_DP_A[7][6] = {
     {0.09114583333333333, 0.0, 0.44923629829290207, 0.6510416666666666, -0.322376179245283, 0.13095238095238096},
 };
 static const double LV_DP_E[7] = {0.0012326388888888888, 0.0, -0.0042527702905061394, 0.03697916666666667, -0.05086379716981132, 0.0419047619047619, -0.025};
+/* its dense output's weights (DP_DENSE: Y4 = h sum_i LV_DP_DENSE[i] k_i) */
+static const double LV_DP_DENSE[7] = {-1.1270175653862835, 0.0, 2.675424484351598, -5.685526961588504, 3.5219323679207912, -1.7672812570757455, 2.382468931778144};
 
 /* The compositions (derive/tableaux.py compositions()): a body with effects takes the n_stages stages
    gamma_i in turn, each the `kicked` program over gamma_i h; a body without effects the `free` program once

@@ -925,8 +925,9 @@ class NumpyBackend:
 # backend's advance_dopri5 (csrc/step.c), per body: each body has its own step size, substeps, rejections, count
 # and failure; the bodies still inside an output interval are stepped together (vectorized over the body axis),
 # the others held (a substep of length 0 whose results are not kept). Every operation is C's, in C's order, so a
-# body's numbers are C's and do not depend on which other bodies share the scene (bitwise: powers are libm's pow,
-# as C's, through NumPy's power where it is libm's, else math.pow: _dp_pow).
+# body's numbers are C's and do not depend on which other bodies share the scene (bitwise: the controller's factor
+# takes no power, _dp_factor; the starting step's power is libm's pow, as C's, through NumPy's power where it is
+# libm's, else math.pow: _dp_pow).
 
 _DP_DIVERGED, _DP_TOLERANCE = 1, 2   # a body's failure (0: none)
 _DP_FIELDS = ("y", "k0", "h", "cnt", "ncols", "t", "sub", "rej", "live", "why")
@@ -943,6 +944,18 @@ def _dp_norm(e, y, yn, rtol, atol, ncols):
     sc = atol + rtol * np.maximum(np.abs(y), np.abs(yn))
     z = np.divide(e, sc, out=np.zeros_like(e), where=e != 0)
     return np.sqrt(np.cumsum(z * z, axis=1)[:, -1] / ncols)
+
+
+def _dp_factor(e):
+    """The controller's factor SAFETY e^(-1/5) per body, as C's dp_factor (derive/tableaux.py DP_ROOT5_*): Newton
+    steps on r^-5 = e from a bit-pattern seed within [LO, HI]; FACMAX below (e = 0 included), FACMIN above or NaN."""
+    inside = (e >= T.DP_ROOT5_LO) & (e <= T.DP_ROOT5_HI)
+    ei = np.where(inside, e, 1.0)
+    r = (np.uint64(T.DP_ROOT5_SEED) - ei.view(np.uint64) // np.uint64(T.DP_ROOT5_DIV)).view(np.float64)
+    for _ in range(T.DP_ROOT5_NEWTON):
+        r2 = r * r
+        r = r * (T.DP_ROOT5_A - ei * (r2 * r2 * r)) * T.DP_ROOT5_B
+    return np.where(inside, T.DP_SAFETY * r, np.where(e < T.DP_ROOT5_LO, T.DP_FACMAX, T.DP_FACMIN))
 
 
 def _dp_pow(a, p):
@@ -1013,40 +1026,43 @@ def _dp_initial_h(plan, y, f0, u, rtol, atol, dt, ncols):
     return np.where(np.isfinite(h) & (h > 0.0), h, dt)
 
 
+def _dp_sum(w, k):
+    """sum_j w[j] k[j] over the nonzero w[j], left to right (C's dp_combine)."""
+    acc = None
+    for wj, kj in zip(w, k):
+        if wj != 0.0:
+            acc = wj * kj if acc is None else acc + wj * kj
+    return acc
+
+
 def _dp_stages(plan, y, k0, hs, u):
     """The six new stages of substeps of lengths hs ((n, 1)) from k0 = f(y): returns (the 5th-order solution,
-    i.e. stage 7's point; f there; hs times the error estimate). Sums as C's: a_0 k_0 + a_1 k_1 + ... left to
-    right, zero coefficients included."""
+    i.e. stage 7's point; f there; hs times the error estimate). Sums as C's (_dp_sum). A plain body without
+    effects (plan.free) moves p by hs v, with zero p and v errors (C's DP_FREE: only q and omega_b are staged)."""
     k = [k0]
     for s in range(1, 7):
-        a = T.DP_A[s]
-        acc = a[0] * k[0]
-        for j in range(1, s):
-            acc += a[j] * k[j]
-        yn = y + hs * acc
+        yn = y + hs * _dp_sum(T.DP_A[s][:s], k)
         k.append(_dp_rhs(plan, yn, u))
-    acc = T.DP_E[0] * k[0]
-    for j in range(1, 7):
-        acc += T.DP_E[j] * k[j]
-    return yn, k[6], hs * acc
+    err = hs * _dp_sum(T.DP_E, k)
+    f = plan.free
+    if f.size:
+        yn[f, P] = y[f, P] + hs[f] * y[f, V]
+        err[f, P] = 0.0
+        err[f, V] = 0.0
+    return yn, k[6], err
 
 
 def _dp_next_h(w, e, hs, clipped):
     """The controller (C's, per body): the next proposal after an accepted (e <= 1) or rejected substep of hs
     (read for the running bodies only)."""
-    p = np.ones_like(e)
-    live = w["live"]
-    p[live] = _dp_pow(np.where(e[live] > 0.0, e[live], 1.0), T.DP_ERR_EXPONENT)  # e = 0 or NaN: p is not read
-    p = T.DP_SAFETY * p
-    fa = np.where(e == 0.0, T.DP_FACMAX, p)                  # accepted
-    fa = np.where(fa > T.DP_FACMAX, T.DP_FACMAX, fa)
+    p = _dp_factor(e)
+    fa = np.where(p > T.DP_FACMAX, T.DP_FACMAX, p)           # accepted
     fa = np.where(fa < T.DP_FACMIN, T.DP_FACMIN, fa)
     fa = np.where(w["rej"] & (fa > 1.0), 1.0, fa)            # no growth right after a rejection
     hf = hs * fa
     # a step shortened to land on the output time does not shrink the proposal
     h_ok = np.where(clipped & (fa >= 1.0) & (w["h"] > hf), w["h"], hf)
-    fr = np.where(np.isfinite(e), p, T.DP_FACMIN)            # rejected
-    fr = np.where(fr < T.DP_FACMIN, T.DP_FACMIN, fr)
+    fr = np.where(p < T.DP_FACMIN, T.DP_FACMIN, p)           # rejected
     fr = np.where(fr > 1.0, 1.0, fr)
     return np.where(e <= 1.0, h_ok, hs * fr)
 

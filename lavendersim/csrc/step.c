@@ -5,6 +5,7 @@
    an out-of-line call per right-hand side (and, under -fPIC, through the PLT) cost ~20% of a
    torque-free RK4 step. Inlining does not change the arithmetic (no -ffast-math, no contraction). */
 #include <math.h>
+#include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -745,14 +746,103 @@ static double dp_initial_h(const body_ctx *c, const double *y, const double *f0,
     return isfinite(h0) && h0 > 0.0 ? h0 : dt;
 }
 
-/* Advance y by exactly dt in accepted dopri5 substeps (the LV_DP_A stages through rk_stages, the error estimate
-   h sum_j E_j k_j, Hairer's controller). LV_OK; else LV_DIVERGED or LV_TOLERANCE with y the last accepted state. */
-static int dp_output_step(const body_ctx *c, double *y, double k[][LV_XS_SIZE], dp_control *d, double dt, int normalize)
+/* The controller's factor SAFETY e^(-1/5) without pow (derive/tableaux.py DP_ROOT5_*): Newton steps on r^-5 = e from
+   a bit-pattern seed within [LO, HI]; FACMAX below (e = 0 included), FACMIN above or for NaN (before clamping). */
+static inline double dp_factor(double e)
 {
-    static const double zero[LV_XS_SIZE];
-    double yn[LV_XS_SIZE], err[LV_XS_SIZE], t = 0.0;
+    if (e >= LV_DP_ROOT5_LO && e <= LV_DP_ROOT5_HI) {
+        uint64_t bits;
+        double r;
+        int it;
+        memcpy(&bits, &e, sizeof bits);
+        bits = LV_DP_ROOT5_SEED - bits / LV_DP_ROOT5_DIV;
+        memcpy(&r, &bits, sizeof r);
+        for (it = 0; it < LV_DP_ROOT5_NEWTON; it++) {
+            const double r2 = r * r;
+            r = r * (LV_DP_ROOT5_A - e * (r2 * r2 * r)) * LV_DP_ROOT5_B;
+        }
+        return LV_DP_SAFETY * r;
+    }
+    return e < LV_DP_ROOT5_LO ? LV_DP_FACMAX : LV_DP_FACMIN;
+}
+
+/* The numbers of a body that go through dopri5's stages (DP_*): a plain body without effects only q and omega_b (its
+   v is constant, so p moves by h v and their error estimates are exactly zero), a plain body with effects its state,
+   any other body [x, Omega]. */
+enum { DP_FREE = 0, DP_PLAIN = 1, DP_MODEL = 2 };
+static const int DP_IDX[LV_XS_SIZE] = {0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16};
+static const int DP_IDX_FREE[7] = {LV_STATE_Q, LV_STATE_Q + 1, LV_STATE_Q + 2, LV_STATE_Q + 3,
+                                   LV_STATE_OMEGA_B, LV_STATE_OMEGA_B + 1, LV_STATE_OMEGA_B + 2};
+#define DP_IDX_OF(v) ((v) == DP_FREE ? DP_IDX_FREE : DP_IDX)
+#define DP_N_OF(v) ((v) == DP_FREE ? 7 : (v) == DP_PLAIN ? LV_STATE_SIZE : LV_XS_SIZE)
+
+/* out[i] = y[i] + h sum_{j < s, w[j] != 0} w[j] k[j][i] (left to right; y NULL: without y[i]) for the variant's
+   numbers i: with w a row of the printed tableau and everything unrolled, the zero entries cost nothing. */
+static inline void dp_combine(int v, double *out, const double *y, double h, const double *w, double k[][LV_XS_SIZE],
+                              int s)
+{
+    int ii, j;
+    LV_XS_UNROLL for (ii = 0; ii < DP_N_OF(v); ii++) {
+        const int i = DP_IDX_OF(v)[ii];
+        double acc = 0.0;
+        int first = 1;
+        LV_XS_UNROLL for (j = 0; j < s; j++) {
+            if (w[j] == 0.0) continue;
+            acc = first ? w[j] * k[j][i] : acc + w[j] * k[j][i];
+            first = 0;
+        }
+        out[i] = y != NULL ? y[i] + h * acc : h * acc;
+    }
+}
+
+/* The variant's right-hand side; cf a plain body's Euler coefficients (lv_euler_coefficients). */
+static inline void dp_rhs(int v, const body_ctx *c, const double *cf, const double *y, double *yd)
+{
+    if (v == DP_FREE) {
+        lv_rigid_body_rhs_free_c(y, cf, yd);
+    } else if (v == DP_PLAIN) {
+        double F[3] = {0.0, 0.0, 0.0}, tau[3] = {0.0, 0.0, 0.0};
+        effect_sums(y, y + LV_STATE_V_W, c->m, c->prm + LV_PARAM_I_B, c->refs, c->n_refs, F, tau);
+        lv_rigid_body_rhs_c(y, c->m, cf, F, tau, yd);
+    } else {
+        ctx_rhs(c, y, yd);
+    }
+}
+
+/* One substep attempt of hs from y (k[0] = f(y)): the six stages (k[6] = f(yn), FSAL), yn = the 5th-order solution
+   (a free body's p by hs v), and the error norm. */
+static inline double dp_attempt(int v, const body_ctx *c, const double *cf, const double *y, double hs,
+                                double k[][LV_XS_SIZE], double *yn, const dp_control *d)
+{
+    double err[LV_XS_SIZE], s = 0.0;
+    int st, ii;
+    LV_XS_UNROLL for (st = 1; st < 7; st++) {
+        dp_combine(v, yn, y, hs, LV_DP_A[st], k, st);
+        dp_rhs(v, c, cf, yn, k[st]);
+    }
+    if (v == DP_FREE)
+        for (ii = 0; ii < 3; ii++) yn[LV_STATE_P_W + ii] = y[LV_STATE_P_W + ii] + hs * y[LV_STATE_V_W + ii];
+    dp_combine(v, err, NULL, hs, LV_DP_E, k, 7);
+    LV_XS_UNROLL for (ii = 0; ii < DP_N_OF(v); ii++) {   /* dp_norm over the variant's numbers */
+        const int i = DP_IDX_OF(v)[ii];
+        const double a = fabs(y[i]), bb = fabs(yn[i]);
+        if (err[i] != 0.0) {
+            const double z = err[i] / (d->atol + d->rtol * (a > bb ? a : bb));
+            s += z * z;
+        }
+    }
+    return sqrt(s / d->n);
+}
+
+/* Advance y by exactly dt in accepted dopri5 substeps (dp_attempt, Hairer's controller with dp_factor). LV_OK; else
+   LV_DIVERGED or LV_TOLERANCE with y the last accepted state. */
+static inline int dp_output_step(int v, const body_ctx *c, const double *cf, double *y, double k[][LV_XS_SIZE],
+                                 dp_control *d, double dt, int normalize)
+{
+    double yn[LV_XS_SIZE], t = 0.0;
     long sub = 0;
-    int rejected = 0;
+    int rejected = 0, ii;
+    memcpy(yn, y, sizeof yn);
     if (!d->have_k1) {
         ctx_rhs(c, y, k[0]);
         d->nfev += 1;
@@ -763,13 +853,10 @@ static int dp_output_step(const body_ctx *c, double *y, double k[][LV_XS_SIZE], 
         const double rem = dt - t;
         const int clipped = d->h >= rem;
         const double hs = clipped ? rem : d->h;
-        double e;
-        rk_stages(c, y, hs, &LV_DP_A[0][0], 6, 1, 7, k, yn); /* yn: stage 7's point, the 5th-order solution */
+        const double e = dp_attempt(v, c, cf, y, hs, k, yn, d);
+        double fac = dp_factor(e);
         d->nfev += 6;
-        rk_row(err, zero, hs, LV_DP_E, k, 7);
-        e = dp_norm(err, y, yn, d->n, d->rtol, d->atol);
         if (e <= 1.0) {
-            double fac = e == 0.0 ? LV_DP_FACMAX : LV_DP_SAFETY * pow(e, LV_DP_ERR_EXPONENT);
             if (fac > LV_DP_FACMAX) fac = LV_DP_FACMAX;
             if (fac < LV_DP_FACMIN) fac = LV_DP_FACMIN;
             if (rejected && fac > 1.0) fac = 1.0;
@@ -777,10 +864,10 @@ static int dp_output_step(const body_ctx *c, double *y, double k[][LV_XS_SIZE], 
             /* a step shortened to land on the output time does not shrink the proposal */
             if (!(clipped && fac >= 1.0 && d->h > hs * fac)) d->h = hs * fac;
             if (!rk_accept(c, y, yn, normalize)) return LV_DIVERGED;
-            memcpy(k[0], k[6], sizeof k[0]); /* FSAL: f at the new (un-normalized) point */
+            LV_XS_UNROLL for (ii = 0; ii < DP_N_OF(v); ii++)   /* FSAL: f at the new (un-normalized) point */
+                k[0][DP_IDX_OF(v)[ii]] = k[6][DP_IDX_OF(v)[ii]];
             rejected = 0;
         } else {
-            double fac = isfinite(e) ? LV_DP_SAFETY * pow(e, LV_DP_ERR_EXPONENT) : LV_DP_FACMIN;
             if (fac < LV_DP_FACMIN) fac = LV_DP_FACMIN;
             if (fac > 1.0) fac = 1.0;
             d->h = hs * fac;
@@ -789,6 +876,25 @@ static int dp_output_step(const body_ctx *c, double *y, double k[][LV_XS_SIZE], 
         if (d->h < LV_DP_HMIN_REL * dt || ++sub > LV_DP_MAX_SUBSTEPS) return LV_TOLERANCE;
     }
     return LV_OK;
+}
+
+/* dp_output_step per variant, each its own loop with the right-hand side inlined. */
+LV_FLATTEN static int dp_output_step_free(const body_ctx *c, const double *cf, double *y, double k[][LV_XS_SIZE],
+                                          dp_control *d, double dt, int normalize)
+{
+    return dp_output_step(DP_FREE, c, cf, y, k, d, dt, normalize);
+}
+
+LV_FLATTEN static int dp_output_step_plain(const body_ctx *c, const double *cf, double *y, double k[][LV_XS_SIZE],
+                                           dp_control *d, double dt, int normalize)
+{
+    return dp_output_step(DP_PLAIN, c, cf, y, k, d, dt, normalize);
+}
+
+static int dp_output_step_model(const body_ctx *c, const double *cf, double *y, double k[][LV_XS_SIZE],
+                                dp_control *d, double dt, int normalize)
+{
+    return dp_output_step(DP_MODEL, c, cf, y, k, d, dt, normalize);
 }
 
 /* Advance body b (any kind) by n_steps steps of dt of an explicit Runge-Kutta method: the user's tableau tab, or
@@ -802,11 +908,12 @@ static long advance_rk(double *state, const double *params, long b, const lv_mod
 {
     body_ctx c;
     dp_control d = {0.0, 0.0, 0.0, 0.0, 0, 0};
-    double y[LV_XS_SIZE], yn[LV_XS_SIZE], k[LV_TABLEAU_MAX_STAGES][LV_XS_SIZE], applied[LV_NW];
+    double y[LV_XS_SIZE], yn[LV_XS_SIZE], k[LV_TABLEAU_MAX_STAGES][LV_XS_SIZE], applied[LV_NW], cf[6];
     const double *cmd = NULL;
     long s;
     int i, st = LV_OK;
     ctx_init(&c, params, b, md, ix);
+    lv_euler_coefficients(c.prm + LV_PARAM_I_B, cf);
     memcpy(y, state + b * LV_STATE_SIZE, LV_STATE_SIZE * sizeof(double));
     for (i = 0; i < LV_NW; i++) y[LV_XS_OMEGA + i] = 0.0;
     if (c.kind) {
@@ -824,7 +931,9 @@ static long advance_rk(double *state, const double *params, long b, const lv_mod
             d.have_k1 = 0; /* the held torque may change at each output step */
         }
         if (ad != NULL) {
-            st = dp_output_step(&c, y, k, &d, dt, normalize);
+            st = c.kind ? dp_output_step_model(&c, cf, y, k, &d, dt, normalize)
+                 : c.n_refs ? dp_output_step_plain(&c, cf, y, k, &d, dt, normalize)
+                 : dp_output_step_free(&c, cf, y, k, &d, dt, normalize);
         } else {
             rk_stages(&c, y, dt, tab->a, tab->s, 0, tab->s, k, yn);
             rk_row(yn, y, dt / tab->b_den, tab->b_num, k, tab->s);
