@@ -118,7 +118,17 @@ WCOEF = Layout("WCOEF", "wheel-model coefficients k_w of a wheeled body (derive/
     Field("J_inv", WHEELS_MAX, "1/J per wheel slot, 1/(kg·m²)"),
 ])
 
-LAYOUTS = (STATE, PARAM, MODEL, XS, EULER, WCOEF)
+DENSE = Layout("DENSE", "dopri5's dense output of a body, carried between calls (derive/tableaux.py DP_DENSE)", [
+    Field("valid", 1, "1: the fields below continue the state x_out the last call wrote; else start afresh"),
+    Field("ahead", 1, "how far the integrator's own time is ahead of the state's, s (>= 0)"),
+    Field("h_last", 1, "length of the last accepted substep, s"),
+    Field("z", XS.size, "the integrator's own [x, Omega], at the state's time + ahead"),
+    Field("f", XS.size, "d/dt of z: the next substep's first stage (FSAL)"),
+    Field("x_out", STATE.size, "the state the last call wrote"),
+    Field("coef", 5 * XS.size, "the last substep's dense-output coefficients Y0..Y4, row-major (5, XS)"),
+])
+
+LAYOUTS = (STATE, PARAM, MODEL, XS, EULER, WCOEF, DENSE)
 
 # Model kinds: bits of MODEL.kind.
 KINDS = (("JOINT", 1, "world-anchored spherical joint: p_w, v_w follow from q, omega"),

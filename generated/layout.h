@@ -61,6 +61,20 @@
 #define LV_WCOEF_J_INV_LEN 4
 #define LV_WCOEF_SIZE 13
 
+/* dopri5's dense output of a body, carried between calls (derive/tableaux.py DP_DENSE) (135) */
+#define LV_DENSE_VALID 0  /* [1] 1: the fields below continue the state x_out the last call wrote; else start afresh */
+#define LV_DENSE_AHEAD 1  /* [1] how far the integrator's own time is ahead of the state's, s (>= 0) */
+#define LV_DENSE_H_LAST 2  /* [1] length of the last accepted substep, s */
+#define LV_DENSE_Z 3  /* [17] the integrator's own [x, Omega], at the state's time + ahead */
+#define LV_DENSE_Z_LEN 17
+#define LV_DENSE_F 20  /* [17] d/dt of z: the next substep's first stage (FSAL) */
+#define LV_DENSE_F_LEN 17
+#define LV_DENSE_X_OUT 37  /* [13] the state the last call wrote */
+#define LV_DENSE_X_OUT_LEN 13
+#define LV_DENSE_COEF 50  /* [85] the last substep's dense-output coefficients Y0..Y4, row-major (5, XS) */
+#define LV_DENSE_COEF_LEN 85
+#define LV_DENSE_SIZE 135
+
 /* bits of the model row's kind */
 enum {
     LV_KIND_JOINT = 1,  /* world-anchored spherical joint: p_w, v_w follow from q, omega */

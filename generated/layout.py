@@ -67,6 +67,21 @@ WCOEF_J_INV_LEN = 4
 WCOEF_SIZE = 13
 WCOEF_LAYOUT = {'Minv': slice(0, 9), 'J_inv': slice(9, 13)}
 
+# dopri5's dense output of a body, carried between calls (derive/tableaux.py DP_DENSE)
+DENSE_VALID = 0  # [1] 1: the fields below continue the state x_out the last call wrote; else start afresh
+DENSE_AHEAD = 1  # [1] how far the integrator's own time is ahead of the state's, s (>= 0)
+DENSE_H_LAST = 2  # [1] length of the last accepted substep, s
+DENSE_Z = slice(3, 20)  # [17] the integrator's own [x, Omega], at the state's time + ahead
+DENSE_Z_LEN = 17
+DENSE_F = slice(20, 37)  # [17] d/dt of z: the next substep's first stage (FSAL)
+DENSE_F_LEN = 17
+DENSE_X_OUT = slice(37, 50)  # [13] the state the last call wrote
+DENSE_X_OUT_LEN = 13
+DENSE_COEF = slice(50, 135)  # [85] the last substep's dense-output coefficients Y0..Y4, row-major (5, XS)
+DENSE_COEF_LEN = 85
+DENSE_SIZE = 135
+DENSE_LAYOUT = {'valid': slice(0, 1), 'ahead': slice(1, 2), 'h_last': slice(2, 3), 'z': slice(3, 20), 'f': slice(20, 37), 'x_out': slice(37, 50), 'coef': slice(50, 135)}
+
 # bits of the model row's kind
 KIND_JOINT = 1  # world-anchored spherical joint: p_w, v_w follow from q, omega
 KIND_WHEELS = 2  # reaction wheels: up to WHEELS_MAX on the columns of A_b (wheels<WHEELS_MAX>_body_rhs), Omega integrated, motor torques saturated

@@ -22,10 +22,14 @@ Integrators (`integrator=`; `sim.rhs_evals` counts right-hand-side evaluations, 
   step and body ("could not meet rtol/atol"). Any body (joints and wheels too; wheel torques held
   over each dt). Each body chooses its own step sizes, on both backends by the same algorithm (the
   NumPy backend mirrors C's operation for operation: the results are bitwise equal, per-body step
-  sizes and counts too). rhs_evals is the largest per-body count — per body for a single body. FSAL:
-  the last stage is the next substep's first, within one run()/step() call; each call starts with
-  one fresh evaluation (the state may have been set in between), as does every output step of a
-  body with wheels (its held torque may change). q is normalized after every accepted substep.
+  sizes and counts too). rhs_evals is the largest per-body count — per body for a single body. Dense
+  output (a body without wheels): the integrator steps on past each output time and the state there
+  is read off the Dormand–Prince continuous extension (order 4; q normalized), so an output interval
+  forces no substep (step() after step() costs about what run(n) costs); it carries on across calls
+  while the state is the one the last call wrote (a state written in between, or set_effect_params,
+  starts afresh with one evaluation). A body with wheels lands on every output time (its held torque
+  may change there) and starts each output step with a fresh evaluation. FSAL otherwise: the last
+  stage is the next substep's first. q is normalized after every accepted substep.
 * "splitting": second-order Strang splitting of the free rigid body into the exact flows of
   L_a²/(2I_a) about the principal axes, 1(h/2) 2(h/2) 3(h) 2(h/2) 1(h/2) (q by exact axis rotations,
   unit by construction; torque-free, world L and |L_b| conserved to rounding, energy oscillates
@@ -560,7 +564,7 @@ class Sim:
                      "E0": self._E0.copy(), "L0": self._L0.copy(), "w_safe": self._w_safe.copy(),
                      "g_fast": self._g_fast.copy(), "warned": sorted(self._warned),
                      "budget": None if self._budget is None else self._budget.snapshot(),
-                     "adaptive": None if self._adaptive is None else (self._adaptive.h.copy(), self._adaptive.nfev.copy()),
+                     "adaptive": None if self._adaptive is None else self._adaptive.save(),
                      "fast_chunks": self._fast is not None and self._fast_n == self._chunk}
         kwargs = {"dt": self.dt, "integrator": self.integrator, "backend": self.backend.name, "normalize": self.normalize,
                   "on_bound": self.on_bound, "max_growth": self.max_growth, "dtype": self.dtype}
@@ -577,7 +581,7 @@ class Sim:
                 getattr(m, name)[...] = st[name]
             if st["adaptive"] is not None:
                 assert self._adaptive is not None   # (built with the same settings)
-                self._adaptive.h[...], self._adaptive.nfev[...] = st["adaptive"]
+                self._adaptive.load(st["adaptive"])
             self._ctr.steps, self._ctr.rhs_evals = st["steps"], st["rhs_evals"]
             self._E0[...], self._L0[...], self._w_safe[...], self._g_fast[...] = st["E0"], st["L0"], st["w_safe"], st["g_fast"]
             self._warned = set(st["warned"])
@@ -931,7 +935,7 @@ class Sim:
                 np.copyto(u, m.applied)
             else:
                 W = u = None
-        return (x, W, u, None if ad is None else (ad.h.copy(), ad.nfev.copy()), self.steps, self.rhs_evals)
+        return (x, W, u, None if ad is None else ad.save(), self.steps, self.rhs_evals)
 
     def _restore(self, snap: tuple) -> None:
         x, W, u, ad, self._ctr.steps, self._ctr.rhs_evals = snap   # values it read: no re-validation
@@ -941,7 +945,7 @@ class Sim:
             self._models.applied[...] = u
         if ad is not None:
             assert self._adaptive is not None   # (a snapshot of this Sim)
-            self._adaptive.h[...], self._adaptive.nfev[...] = ad
+            self._adaptive.load(ad)
 
     @property
     def rtol(self) -> float | None:
@@ -1608,6 +1612,8 @@ class Sim:
         at = self._effect_objs.find(cur)
         if at is not None:
             self._effect_objs[at] = new
+        if self._adaptive is not None:   # dopri5's dense output ran ahead under the old loads
+            self._adaptive.forget()
         if self._budget is not None:   # new loads: the budget restarts from this (checked) state
             assert self.max_growth is not None   # (a budget exists only with a growth check)
             self._budget = load_checks.LoadBudget(self._params, self._effects, self._models.rows, self._budget.loaded,

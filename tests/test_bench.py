@@ -18,7 +18,7 @@ from conftest import NUMPY_SLOW, have
 from lavendersim import bench
 
 
-N_TARGETS = 30   # target lines besides the per-body ones (scenes.py: + the wheeled build and the 1e6 lines)
+N_TARGETS = 31   # target lines besides the per-body ones (scenes.py: + the wheeled build and the 1e6 lines; dopri5: + dense output)
 
 
 @pytest.fixture(scope="module")

@@ -166,3 +166,66 @@ def test_a_failure_is_named_alike(order):
         assert np.array_equal(sim.x, before) and sim.rhs_evals == 0
         errs[backend] = (e.value.step, e.value.body_name, str(e.value))
     assert errs["c"] == errs["numpy"] and errs["c"][1] == "stiff" and "could not meet rtol" in errs["c"][2]
+
+
+def test_an_output_interval_forces_no_substep():
+    """Dense output (issue 30): 2 s of the tumbling body at rtol 1e-10 with an output interval of 0.01 s, by run(200)
+    and by 200 step() calls, takes the substeps of dt = 2 s (the outputs are read off the Dormand-Prince continuous
+    extension): the same RHS count, on both backends; run(200) and the 200 steps agree bitwise; every state within
+    1e-8 of a fine RK4. (Before: every output step clipped a substep and restarted FSAL, ~3.5x the evaluations.)"""
+    s = scene([("b", I_ASYM, TUMBLE)])
+    rk = lv.Sim(s, dt=1e-4, integrator="rk4", backend="c")
+    rk.run(20000)
+    kw = dict(integrator="dopri5", rtol=RTOL, atol=ATOL)
+    for backend in BACKENDS:
+        one = lv.Sim(s, dt=2.0, backend=backend, **kw)
+        one.run(1)
+        fine = lv.Sim(s, dt=0.01, backend=backend, **kw)
+        fine.run(200)
+        steps = lv.Sim(s, dt=0.01, backend=backend, **kw)
+        for _ in range(200):
+            steps.step()
+        assert fine.rhs_evals == one.rhs_evals == steps.rhs_evals
+        assert np.array_equal(steps.x, fine.x)
+        for sim in (one, fine):
+            np.testing.assert_allclose(sim.x, rk.x, rtol=0, atol=1e-8)
+
+
+def test_a_written_state_starts_afresh():
+    """The dense output carries on only while a body's state is the one the last call wrote: a body whose state was
+    written steps on exactly as with its dense output dropped (Adaptive.forget), the others as if nothing was
+    written (bitwise, both backends)."""
+    s = scene(RATES[:2], LOADS[1:2])
+    for backend in BACKENDS:
+        sim = lv.Sim(s, dt=0.25, integrator="dopri5", rtol=RTOL, atol=ATOL, backend=backend)
+        x = sim.x.copy()
+        ad = B.Adaptive(RTOL, ATOL, x.shape[0])
+        be = B.get(backend)
+        be.advance(x, sim.params, sim.effects, "dopri5", sim.normalize, 0.25, 3, None, ad)
+        runs = {}
+        for name, write, forget in (("written", True, False), ("forgotten", True, True), ("as is", False, False)):
+            xa, a = x.copy(), B.Adaptive(RTOL, ATOL, x.shape[0])
+            a.load(ad.save())
+            if write:
+                xa[0, 10] += 1e-3
+            if forget:
+                a.forget()
+            be.advance(xa, sim.params, sim.effects, "dopri5", sim.normalize, 0.25, 3, None, a)
+            runs[name] = (xa, a.nfev)
+        assert np.array_equal(runs["written"][0][0], runs["forgotten"][0][0])
+        assert runs["written"][1][0] == runs["forgotten"][1][0]
+        assert np.array_equal(runs["written"][0][1], runs["as is"][0][1])
+        assert not np.array_equal(runs["written"][0][1], runs["forgotten"][0][1])
+
+
+def test_a_pickled_sim_steps_on_bitwise():
+    """The dense output is part of what a Sim pickles (and what a failed call restores): a copy taken mid-run
+    continues bitwise."""
+    import pickle
+    for backend in BACKENDS:
+        sim = lv.Sim(scene(RATES[:2]), dt=0.1, integrator="dopri5", rtol=RTOL, atol=ATOL, backend=backend)
+        sim.run(3)
+        twin = pickle.loads(pickle.dumps(sim))
+        sim.run(4)
+        twin.run(4)
+        assert np.array_equal(sim.x, twin.x) and sim.rhs_evals == twin.rhs_evals

@@ -143,7 +143,10 @@ DOPRI5_MAX_SUBSTEPS = TABLEAUX.DP_MAX_SUBSTEPS  # ... as do more substeps than t
 
 class Adaptive:
     """Adaptive-stepping arrays shared by both backends: rtol, atol; h (nb,) each body's step-size
-    proposal carried between calls (0: choose one); nfev (nb,) RHS evaluations spent per body.
+    proposal carried between calls (0: choose one); nfev (nb,) RHS evaluations spent per body; dense
+    (nb, DENSE_SIZE) each wheel-less body's dense output carried between calls (layout DENSE: the
+    integrator's own state ahead of the output and its continuous extension; a row is used only while
+    the body's state is the one the last call wrote, so a written state starts afresh).
 
     Parameters
     ----------
@@ -151,12 +154,34 @@ class Adaptive:
         Relative and absolute error tolerances of dopri5.
     nb : int
         Number of bodies (``h`` and ``nfev`` start as zeros of shape (nb,)).
+    dense : bool, optional
+        Dense output (default True): an output step takes no substep of its own. False: every output
+        step lands on its time (the last substep clipped), as before session 16.
     """
 
-    def __init__(self, rtol: float, atol: float, nb: int):
+    def __init__(self, rtol: float, atol: float, nb: int, dense: bool = True):
         self.rtol, self.atol = float(rtol), float(atol)
         self.h = np.zeros(nb)
         self.nfev = np.zeros(nb)
+        self.dense = np.zeros((nb, LAYOUT.DENSE_SIZE)) if dense else None
+
+    def save(self) -> tuple:
+        """A copy of the arrays that evolve (h, nfev, dense), for load."""
+        return (self.h.copy(), self.nfev.copy(), None if self.dense is None else self.dense.copy())
+
+    def load(self, saved: tuple) -> None:
+        """Put back what save returned (a 2-tuple (h, nfev) of an older pickle: the dense output starts afresh)."""
+        self.h[...], self.nfev[...] = saved[0], saved[1]
+        if self.dense is not None:
+            if len(saved) > 2 and saved[2] is not None:
+                self.dense[...] = saved[2]
+            else:
+                self.forget()
+
+    def forget(self) -> None:
+        """Drop the dense output (the next call starts each body afresh from its state): the forces changed."""
+        if self.dense is not None:
+            self.dense[:, LAYOUT.DENSE_VALID] = 0.0
 
 
 def rhs_per_step(integrator: str, effects: np.ndarray, nb: int) -> int | None:

@@ -444,11 +444,12 @@ class CBackend:
             extra = (None, None, None, None)
         if adaptive is not None and integrator in ADAPTIVE:
             if restore:
-                snap_h, snap_n = adaptive.h.copy(), adaptive.nfev.copy()
+                saved = adaptive.save()
             extra = extra + (adaptive.h, adaptive.nfev, adaptive.rtol, adaptive.atol)
         else:
             extra = extra + (None, None, 0.0, 0.0)
-        extra = extra + (user, None if tab is None else _tableau_arg(tab))
+        extra = extra + (user, None if tab is None else _tableau_arg(tab),
+                         adaptive.dense if adaptive is not None and integrator == "dopri5" else None)
         status, step, body = _c.simulate(state, params, effects, INTEGRATOR_CODES.get(integrator, 0),
                                          1 if normalize else 0, float(dt), int(n_steps), *extra)
         if status == TABLEAUX.STATUS_OK:
@@ -459,8 +460,7 @@ class CBackend:
         if adaptive is not None and integrator in ADAPTIVE:
             if status == TABLEAUX.STATUS_TOLERANCE:
                 tol_cause = tolerance_cause(adaptive, float(adaptive.h[body]), float(dt), state[body])
-            adaptive.h[...] = snap_h
-            adaptive.nfev[...] = snap_n
+            adaptive.load(saved)
         pre = state[body].copy()  # the failing body is left at its last finite state
         state[...] = snapshot
         model = None

@@ -857,9 +857,11 @@ class NumpyBackend:
         if integrator == "dopri5":
             assert adaptive is not None   # (checked above)
             h, nfev = adaptive.h.copy(), adaptive.nfev.copy()
+            dense = None if adaptive.dense is None else adaptive.dense.copy()
 
             def loop(plan, x, integrator, normalize, dt, n_steps, command=None, applied=None):  # noqa: E306
-                _dopri5(plan, x, normalize, dt, n_steps, adaptive.rtol, adaptive.atol, h, nfev, command, applied)
+                _dopri5(plan, x, normalize, dt, n_steps, adaptive.rtol, adaptive.atol, h, nfev, command, applied,
+                        dense)
         if not plan.has_models:
             x = _soa(state)                  # the working copy, struct-of-arrays (a contiguous row per number)
             with np.errstate(over="ignore", invalid="ignore", divide="ignore"):  # non-finite results are caught below
@@ -877,6 +879,8 @@ class NumpyBackend:
         if integrator == "dopri5":
             assert adaptive is not None
             adaptive.h[...], adaptive.nfev[...] = h, nfev
+            if dense is not None:
+                adaptive.dense[...] = dense
 
     @staticmethod
     def _scalar(plan, state, integrator, normalize, dt, n_steps) -> bool:
@@ -1049,7 +1053,19 @@ def _dp_stages(plan, y, k0, hs, u):
         yn[f, P] = y[f, P] + hs[f] * y[f, V]
         err[f, P] = 0.0
         err[f, V] = 0.0
-    return yn, k[6], err
+    return yn, k[6], err, k
+
+
+def _dp_coeffs(plan, y0, y1, hs, k):
+    """The dense-output coefficients (n, 5, cols) of substeps y0 -> y1 (raw) of lengths hs ((n, 1)), as C's
+    dp_dense_coeffs: Y0 = y0, Y1 = y1 - y0, Y2 = hs k1 - Y1, Y3 = Y1 - hs k7 - Y2, Y4 = hs sum_i DP_DENSE[i] k_i;
+    a free body's p is linear (Y2..Y4 = 0)."""
+    d1 = y1 - y0
+    d2 = hs * k[0] - d1
+    Y = np.stack([y0, d1, d2, d1 - hs * k[6] - d2, hs * _dp_sum(T.DP_DENSE, k)], axis=1)
+    if plan.free.size:
+        Y[plan.free, 2:, P] = 0.0
+    return Y
 
 
 def _dp_next_h(w, e, hs, clipped):
@@ -1074,7 +1090,7 @@ def _dp_substep(plan, w, u, dt, rtol, atol, normalize):
     rem = dt - w["t"]
     clipped = w["h"] >= rem
     hs = np.where(live, np.where(clipped, rem, w["h"]), 0.0)
-    yn, k7, err = _dp_stages(plan, y, w["k0"], hs[:, None], u)
+    yn, k7, err, _ = _dp_stages(plan, y, w["k0"], hs[:, None], u)
     w["cnt"][live] += 6
     e = _dp_norm(err, y, yn, rtol, atol, w["ncols"])
     ok = live & (e <= 1.0)
@@ -1144,11 +1160,129 @@ def _dp_start(plan, full, fresh, u, rtol, atol, dt):
         cnt[idx] += 1
 
 
-def _dopri5(plan, x, normalize, dt, n_steps, rtol, atol, hs, nfev, command=None, applied=None):
-    """Advance every body by n_steps output steps of exactly dt, each on its own step sizes (the C backend's
-    advance_dopri5, vectorized over bodies). hs (nb,) holds each body's proposal, nfev (nb,) its count; both
-    updated in place. k1 is reused (FSAL) within the call. A failure raises DivergenceError naming the first
-    failing step and, there, the lowest failing body (C's choice), with x at that body's last accepted state."""
+def _dopri5(plan, x, normalize, dt, n_steps, rtol, atol, hs, nfev, command=None, applied=None, dense=None):
+    """Advance every body by n_steps output steps of dt (C's advance_rk with lv_adaptive): with dense (nb,
+    DENSE_SIZE) the bodies without wheels by dense output (_dp_dense_run), the others landing on every output
+    time (_dp_land); each group on its subset plan, the earliest failure (step, then body) raised, as C reports."""
+    wheeled = plan.wheeled if x.shape[1] > LY.STATE_SIZE else np.zeros(x.shape[0], bool)
+    if dense is None or n_steps == 0 or wheeled.all():
+        return _dp_land(plan, x, normalize, dt, n_steps, rtol, atol, hs, nfev, command, applied)
+    if not wheeled.any():
+        return _dp_dense_run(plan, x, normalize, dt, n_steps, rtol, atol, hs, nfev, dense)
+    fails = []
+    for sel in (np.flatnonzero(~wheeled), np.flatnonzero(wheeled)):
+        sp, xs, h, n = _subplan(plan, sel), x[sel], hs[sel], nfev[sel]
+        try:
+            if sel.size and wheeled[sel[0]]:
+                a = applied[sel]
+                _dp_land(sp, xs, normalize, dt, n_steps, rtol, atol, h, n, command[sel], a)
+                applied[sel] = a
+            else:
+                d = dense[sel]
+                _dp_dense_run(sp, xs, normalize, dt, n_steps, rtol, atol, h, n, d)
+                dense[sel] = d
+        except DivergenceError as e:
+            fails.append((e.step, int(sel[e.body]), e.cause))
+        x[sel], hs[sel], nfev[sel] = xs, h, n
+    if fails:
+        raise DivergenceError(*min(fails))
+
+
+def _dp_dense_run(plan, x, normalize, dt, n_steps, rtol, atol, hs, nfev, dense):
+    """Every body of plan (none with wheels) by n_steps output steps of dt with dense output (C's dp_dense_step,
+    vectorized): each integrates on unclipped (its own state z, `ahead` past the output) and the call's last output
+    is read off its last substep's continuous extension; the DENSE rows carry z, f(z) and the extension to the next call while
+    the state is the one written (else a body starts afresh from it). hs, nfev, dense updated in place."""
+    nb, cols = x.shape
+    D = dense
+    same = np.all(np.ascontiguousarray(x[:, X]).view(np.uint64) == D[:, LY.DENSE_X_OUT].view(np.uint64), axis=1)
+    valid = (D[:, LY.DENSE_VALID] == 1.0) & same
+    z = np.where(valid[:, None], D[:, LY.DENSE_Z][:, :cols], x)
+    k0 = D[:, LY.DENSE_F][:, :cols].copy()
+    Y = np.where(valid[:, None, None], D[:, LY.DENSE_COEF].reshape(nb, 5, LY.XS_SIZE)[:, :, :cols], 0.0)
+    ahead = np.where(valid, D[:, LY.DENSE_AHEAD], 0.0)
+    hl = np.where(valid, D[:, LY.DENSE_H_LAST], 0.0)
+    cnt = np.zeros(nb)
+    ncols = plan.norm_cols if cols > LY.STATE_SIZE else np.full(nb, float(LY.STATE_SIZE))
+    fresh = np.flatnonzero(~valid)
+    if fresh.size:
+        k0[fresh] = _dp_rhs(_subplan(plan, fresh), z[fresh], None)
+        cnt[fresh] += 1
+    h = hs.copy()
+    bad = np.flatnonzero(~(h > 0.0) | ~np.isfinite(h))
+    if bad.size:
+        h[bad] = _dp_initial_h(_subplan(plan, bad), z[bad], k0[bad], None, rtol, atol, dt, ncols[bad])
+        cnt[bad] += 1
+    for i in range(n_steps):
+        ahead = ahead - dt
+        live = ahead < 0.0
+        last = i == n_steps - 1      # no state between is seen: only the call's last is read off
+        if not last and not live.any():
+            continue
+        sub, rej, why = np.zeros(nb, np.int64), np.zeros(nb, bool), np.zeros(nb, np.int8)
+        while live.any():
+            step_h = np.where(live, h, 0.0)
+            yn, k7, err, ks = _dp_stages(plan, z, k0, step_h[:, None], None)
+            cnt[live] += 6
+            e = _dp_norm(err, z, yn, rtol, atol, ncols)
+            ok = live & (e <= 1.0)
+            h = np.where(live, _dp_next_h({"rej": rej, "h": h}, e, step_h, np.zeros(nb, bool)), h)
+            Yn = _dp_coeffs(plan, z, yn, step_h[:, None], ks)
+            if normalize:
+                _normalize(yn)
+            if plan.has_models:
+                plan.constrain(yn)
+            diverged = ok & ~np.isfinite(yn).all(axis=1)
+            good = ok & ~diverged
+            z[good], k0[good], Y[good] = yn[good], k7[good], Yn[good]   # FSAL: f at the new (un-normalized) point
+            ahead = np.where(good, ahead + step_h, ahead)
+            hl = np.where(good, step_h, hl)
+            rej = np.where(live, ~ok, rej)
+            why[diverged] = _DP_DIVERGED
+            live &= ~diverged
+            sub[live] += 1
+            tol = live & ((h < DOPRI5_HMIN_REL * dt) | (sub > DOPRI5_MAX_SUBSTEPS))
+            why[tol] = _DP_TOLERANCE
+            live &= ~tol & (ahead < 0.0)
+        if last:
+            th = ((hl - ahead) / hl)[:, None]
+            th1 = 1.0 - th
+            out = Y[:, 0] + th * (Y[:, 1] + th1 * (Y[:, 2] + th * (Y[:, 3] + th1 * Y[:, 4])))
+            at = ahead == 0.0
+            out[at] = z[at]
+            if normalize:
+                _normalize(out)
+            if plan.has_models:
+                plan.constrain(out)
+            why[(why == 0) & ~np.isfinite(out).all(axis=1)] = _DP_DIVERGED
+        failed = np.flatnonzero(why)
+        if failed.size:
+            b = int(failed[0])
+            if why[b] == _DP_TOLERANCE:
+                cause = tolerance_cause(Adaptive(rtol, atol, 0), float(h[b]), dt, x[b, X])
+            else:
+                cause = divergence_cause(x[b, X], dt, "dopri5", *plan.wheel_info(x, b))
+            raise DivergenceError(i, b, cause)
+        if last:
+            x[...] = out
+    D[:, LY.DENSE_VALID] = 1.0
+    D[:, LY.DENSE_AHEAD], D[:, LY.DENSE_H_LAST] = ahead, hl
+    D[:, LY.DENSE_Z.start:LY.DENSE_Z.start + cols] = z
+    D[:, LY.DENSE_F.start:LY.DENSE_F.start + cols] = k0
+    D[:, LY.DENSE_X_OUT] = x[:, X]
+    coef = np.zeros((nb, 5, LY.XS_SIZE))
+    coef[:, :, :cols] = Y
+    D[:, LY.DENSE_COEF] = coef.reshape(nb, -1)
+    hs[...] = h
+    nfev += cnt
+
+
+def _dp_land(plan, x, normalize, dt, n_steps, rtol, atol, hs, nfev, command=None, applied=None):
+    """Advance every body by n_steps output steps of exactly dt, each on its own step sizes, the last substep of
+    each clipped to land on it (C's dp_output_step, vectorized over bodies). hs (nb,) holds each body's proposal,
+    nfev (nb,) its count; both updated in place. k1 is reused (FSAL) within the call. A failure raises
+    DivergenceError naming the first failing step and, there, the lowest failing body (C's choice), with x at that
+    body's last accepted state."""
     nb = x.shape[0]
     ext = x.shape[1] > LY.STATE_SIZE
     full = {"y": x, "k0": np.empty_like(x), "h": hs.copy(), "cnt": np.zeros(nb),

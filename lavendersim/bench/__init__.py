@@ -121,6 +121,7 @@ TARGETS = {
     "full_inertia_ratio": 1.5,         # a full-tensor body / the same body by principal moments, ns per body-step (issue 26)
     "small_scene_ratio": 2.0,          # ns per body-step at N = 4 and 8 / at the largest N, at most (issue 30)
     "dopri5_per_rhs_vs_hand": 1.2,     # dopri5 ns per RHS evaluation / the hand C DOPRI5's, at most (issue 30)
+    "dopri5_dense_vs_coarse": 1.3,     # dopri5 CPU at an output interval of 0.01 s / at one output step, at most (issue 30)
     "simd_batch_vs_flop_floor": 1.3,   # C batch loop / the flop floor (FMA_FLOPS / peak FMA rate), at most (issue 30)
     "numpy_vs_hand_numpy": 1.5,        # NumPy backend / hand NumPy RK4 (numpy_peers.py), N >= 1e3, at most (issue 30)
     "numpy_single_vs_python": 1.0,     # NumPy backend / a pure-Python RK4 loop, one body, at most (issue 30)
@@ -824,6 +825,7 @@ def _sec_dopri5(ctx) -> None:
                                                       initial_state(), inertia())
     except NoCompiler as exc:
         ctx["res"]["dopri5"] = {"unavailable": str(exc)}
+    ctx["res"]["dopri5"]["dense"] = _dopri5.dense_section(ctx["quick"], ctx["R"], interleaved, single_sim)
 
 
 def _sec_mujoco_agreement(ctx) -> None:
@@ -1004,6 +1006,8 @@ def ratios(res: dict) -> dict:
     d = res.get("dopri5") or {}
     if "ratio_per_rhs" in d:
         r["dopri5_per_rhs_over_hand"] = d["ratio_per_rhs"]
+    if "ratio" in (d.get("dense") or {}):
+        r["dopri5_dense_over_coarse"] = d["dense"]["ratio"]
     return {k: v for k, v in r.items() if v is not None}
 
 

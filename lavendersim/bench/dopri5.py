@@ -7,6 +7,9 @@ ctypes), interleaved (CPU time, min over rounds). The figure is the cost per rig
 time / ``sim.rhs_evals`` against time / the peer's count (target: LavenderSim <= 1.2x the peer). Before
 timing, both advance the same state by AGREE_STEPS output steps: their states and evaluation counts are
 recorded (the peer is right when they agree to ~1e-12 with equal counts).
+
+Dense output: the same body over DENSE_T seconds by ``Sim.run(DENSE_T / DENSE_DT)`` at dt = DENSE_DT against
+``Sim.run(1)`` at dt = DENSE_T (target: at most 1.3x; before dense output each output step clipped a substep).
 """
 from __future__ import annotations
 
@@ -17,6 +20,8 @@ import numpy as np
 
 SOURCE = Path(__file__).resolve().parent / "handwritten_dopri5.c"
 DT_OUT = 0.1
+# dense output: T seconds by run(T / DENSE_DT) at dt = DENSE_DT against run(1) at dt = T (same body, same rtol)
+DENSE_T, DENSE_T_QUICK, DENSE_DT = 1000.0, 20.0, 0.01
 RTOL, ATOL = 1e-6, 1e-9
 AGREE_STEPS = 200
 _dp = ctypes.POINTER(ctypes.c_double)
@@ -87,6 +92,30 @@ def dopri5_section(quick: bool, rounds: int, interleaved, compile_c, single_sim,
     return out
 
 
+def dense_section(quick: bool, rounds: int, interleaved, single_sim) -> dict:
+    """CPU time of T seconds of the body at an output interval DENSE_DT (one run of T / DENSE_DT steps) against one
+    output step of T, both continuing their trajectories each round; RHS evaluations of each timed call."""
+    T = DENSE_T_QUICK if quick else DENSE_T
+    n = round(T / DENSE_DT)
+    sims = {"dt = T": (single_sim("c", "dopri5", dt=T), 1), f"dt = {DENSE_DT}": (single_sim("c", "dopri5", dt=DENSE_DT), n)}
+    evals: dict[str, int] = {}
+
+    def case(k):
+        sim, m = sims[k]
+
+        def run():
+            e0 = sim.rhs_evals
+            sim.run(m)
+            evals[k] = sim.rhs_evals - e0
+        return run
+
+    t = interleaved({k: (case(k), 1) for k in sims}, rounds, "dopri5 dense output")
+    coarse, fine = t["dt = T"], t[f"dt = {DENSE_DT}"]
+    return {"T": T, "dt": DENSE_DT, "coarse_s": coarse["ns_min"] * 1e-9, "fine_s": fine["ns_min"] * 1e-9,
+            "rhs_coarse": evals["dt = T"], "rhs_fine": evals[f"dt = {DENSE_DT}"],
+            "ratio": fine["ns_min"] / coarse["ns_min"]}
+
+
 def standing_lines(res: dict, line, targets: dict) -> list[dict]:
     d = res.get("dopri5") or {}
     v = d.get("ratio_per_rhs")
@@ -94,7 +123,15 @@ def standing_lines(res: dict, line, targets: dict) -> list[dict]:
              f"ns per right-hand-side evaluation, one body, dt = {d['dt']} s, rtol {d['rtol']:g}: "
              f"{d['lavendersim']['ns_per_rhs']:.1f} against {d['hand']['ns_per_rhs']:.1f} "
              f"(handwritten_dopri5.c); states agree to {d['agreement']['max_abs_diff']:.1e}")
-    return [line("dopri5 per RHS evaluation / hand C DOPRI5", v, targets["dopri5_per_rhs_vs_hand"], "max", "x", basis)]
+    g = d.get("dense") or {}
+    w = g.get("ratio")
+    dbasis = (d.get("unavailable", "section not run or crashed") if w is None else
+              f"{g['T']:g} s of one body at rtol {d['rtol']:g} by run({round(g['T'] / g['dt'])}) at dt = {g['dt']} against "
+              f"run(1) at dt = {g['T']:g}: {g['fine_s'] * 1e3:.2f} against {g['coarse_s'] * 1e3:.2f} ms CPU, RHS evaluations "
+              f"{g['rhs_fine']} against {g['rhs_coarse']}")
+    return [line("dopri5 per RHS evaluation / hand C DOPRI5", v, targets["dopri5_per_rhs_vs_hand"], "max", "x", basis),
+            line("dopri5 output interval 0.01 s / one output step (dense output)", w, targets["dopri5_dense_vs_coarse"],
+                 "max", "x", dbasis)]
 
 
 def report_lines(res: dict, fmt) -> list[str]:
@@ -108,4 +145,8 @@ def report_lines(res: dict, fmt) -> list[str]:
         L.append(f"  {label:<40}{fmt(d[k]['ns_min'])}  {d[k]['rhs_per_step']:8.2f}  {d[k]['ns_per_rhs']:9.1f}")
     L.append(f"  agreement over {a['steps']} steps: max |Δx| = {a['max_abs_diff']:.2e}; RHS evaluations "
              f"{a['rhs_evals_lavendersim']} (ours) vs {a['rhs_evals_hand']} (hand)")
+    g = d.get("dense")
+    if g:
+        L.append(f"  dense output, {g['T']:g} s: dt = {g['dt']} {g['fine_s'] * 1e3:.3f} ms ({g['rhs_fine']} RHS), "
+                 f"dt = T {g['coarse_s'] * 1e3:.3f} ms ({g['rhs_coarse']} RHS): {g['ratio']:.2f}x")
     return L

@@ -326,8 +326,9 @@ static PyObject *py_simulate(PyObject *self, PyObject *args)
     long n_user = 0;
     Py_ssize_t row_size = LV_EFFECT_ROW_PARAMS + LV_EFFECT_ROW_MIN_PARAMS;
     double rtol = 0.0, atol = 0.0;
-    Py_buffer hb, nf;
-    int have_h = 0, have_nf = 0;
+    Py_buffer hb, nf, dn;
+    int have_h = 0, have_nf = 0, have_dn = 0;
+    PyObject *dense_obj = Py_None;
     lv_adaptive adaptive;
     int integrator, normalize, n_models;
     double dt;
@@ -339,9 +340,9 @@ static PyObject *py_simulate(PyObject *self, PyObject *args)
     lv_models models;
     int status;
     (void)self;
-    if (!PyArg_ParseTuple(args, "OOOipdL|OOOOOOddOO:simulate", &state_obj, &params_obj, &effects_obj, &integrator,
+    if (!PyArg_ParseTuple(args, "OOOipdL|OOOOOOddOOO:simulate", &state_obj, &params_obj, &effects_obj, &integrator,
                           &normalize, &dt, &n_steps_ll, &rows_obj, &omega_obj, &cmd_obj, &app_obj,
-                          &h_obj, &nfev_obj, &rtol, &atol, &user_obj, &tab_obj))
+                          &h_obj, &nfev_obj, &rtol, &atol, &user_obj, &tab_obj, &dense_obj))
         return NULL;
     n_models = (rows_obj != Py_None) + (omega_obj != Py_None) + (cmd_obj != Py_None) + (app_obj != Py_None);
     if (n_models != 0 && n_models != 4) {
@@ -399,6 +400,10 @@ static PyObject *py_simulate(PyObject *self, PyObject *args)
         have_h = 1;
         if (get_f64(nfev_obj, &nf, 1, "simulate: nfev") != 0) goto fail;
         have_nf = 1;
+        if (dense_obj != Py_None) {
+            if (get_f64(dense_obj, &dn, 1, "simulate: dense") != 0) goto fail;
+            have_dn = 1;
+        }
     }
     if (rows_of(&st, LV_STATE_SIZE, "simulate: state", "[p_w(3), q(4), v_w(3), omega_b(3)]", &nb) != 0) goto fail;
     if (rows_of(&pr, LV_PARAM_SIZE, "simulate: params", "[m, I_x, I_y, I_z]", &np_rows) != 0) goto fail;
@@ -413,11 +418,17 @@ static PyObject *py_simulate(PyObject *self, PyObject *args)
                      nb, (Py_ssize_t)(hb.len / 8), (Py_ssize_t)(nf.len / 8));
         goto fail;
     }
+    if (have_dn && dn.len / 8 != nb * LV_DENSE_SIZE) {
+        PyErr_Format(PyExc_ValueError, "simulate: dense must hold %d float64 per body (%zd bodies), got %zd",
+                     LV_DENSE_SIZE, nb, (Py_ssize_t)(dn.len / 8));
+        goto fail;
+    }
     if (have_h) {
         adaptive.rtol = rtol;
         adaptive.atol = atol;
         adaptive.h = (double *)hb.buf;
         adaptive.nfev = (double *)nf.buf;
+        adaptive.dense = have_dn ? (double *)dn.buf : NULL;
     }
     if (n_models) {
         if (rows_of(&mr, LV_MODEL_SIZE, "simulate: model_rows",
@@ -485,6 +496,7 @@ fail: /* every exit releases the buffers it holds; result stays NULL on an error
     if (have_ap) PyBuffer_Release(&ap);
     if (have_h) PyBuffer_Release(&hb);
     if (have_nf) PyBuffer_Release(&nf);
+    if (have_dn) PyBuffer_Release(&dn);
     free(user_entries);
 fail_tab:
     if (have_tab) { PyBuffer_Release(&ta); PyBuffer_Release(&tb); }

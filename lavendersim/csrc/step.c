@@ -878,6 +878,142 @@ static inline int dp_output_step(int v, const body_ctx *c, const double *cf, dou
     return LV_OK;
 }
 
+/* dopri5 with dense output (a body without wheels, lv_adaptive.dense given): the integrator keeps its own state z,
+   `ahead` seconds past the output state, and steps on unclipped; an output time inside its last accepted substep (of
+   length hl) is read off the continuous extension (Y0..Y4, derive/tableaux.py DP_DENSE), so an output interval
+   forces no substep. Carried between calls in the body's DENSE row. */
+typedef struct {
+    double z[LV_XS_SIZE], Y[5][LV_XS_SIZE], ahead, hl;
+} dp_dense;
+
+/* The numbers an output interpolates: a body without a model its state, else [x, Omega]. */
+#define DP_NOUT_OF(v) ((v) == DP_MODEL ? LV_XS_SIZE : LV_STATE_SIZE)
+
+/* The dense-output coefficients of the accepted substep y0 -> y1 (raw, before normalizing) of length h: Y0 = y0,
+   Y1 = y1 - y0, Y2 = h k1 - Y1, Y3 = Y1 - h k7 - Y2, Y4 = h sum_i DP_DENSE[i] k_i; a free body's p is linear (Y0, Y1)
+   and its v constant (Y0). */
+static inline void dp_dense_coeffs(int v, const double *y0, const double *y1, double h, double k[][LV_XS_SIZE],
+                                   dp_dense *o)
+{
+    double y4[LV_XS_SIZE];
+    int ii;
+    dp_combine(v, y4, NULL, h, LV_DP_DENSE, k, 7);
+    LV_XS_UNROLL for (ii = 0; ii < DP_N_OF(v); ii++) {
+        const int i = DP_IDX_OF(v)[ii];
+        const double d1 = y1[i] - y0[i], d2 = h * k[0][i] - d1;
+        o->Y[0][i] = y0[i];
+        o->Y[1][i] = d1;
+        o->Y[2][i] = d2;
+        o->Y[3][i] = d1 - h * k[6][i] - d2;
+        o->Y[4][i] = y4[i];
+    }
+    if (v == DP_FREE)
+        for (ii = 0; ii < 3; ii++) {
+            const int p = LV_STATE_P_W + ii, w = LV_STATE_V_W + ii;
+            o->Y[0][p] = y0[p], o->Y[1][p] = y1[p] - y0[p], o->Y[2][p] = o->Y[3][p] = o->Y[4][p] = 0.0;
+            o->Y[0][w] = y0[w], o->Y[1][w] = y1[w] - y0[w], o->Y[2][w] = o->Y[3][w] = o->Y[4][w] = 0.0;
+        }
+}
+
+/* One output step of dt with dense output (z->ahead already lowered by dt; called when that made it negative, or at
+   the call's last output step): substeps (unclipped) until z is past the output time; with out (the call's
+   last output step: no state between is seen) then y = the continuous extension there (z itself when it lands on
+   it), q normalized, a jointed body put on its joint. LV_OK; else LV_DIVERGED or LV_TOLERANCE with y untouched. */
+static inline int dp_dense_step(int v, const body_ctx *c, const double *cf, double *y, double k[][LV_XS_SIZE],
+                                dp_control *d, dp_dense *z, double dt, int normalize, int out)
+{
+    double yn[LV_XS_SIZE], yo[LV_XS_SIZE];
+    long sub = 0;
+    int rejected = 0, ii;
+    memcpy(yn, z->z, sizeof yn);
+    while (z->ahead < 0.0) {
+        const double hs = d->h;
+        const double e = dp_attempt(v, c, cf, z->z, hs, k, yn, d);
+        double fac = dp_factor(e);
+        d->nfev += 6;
+        if (e <= 1.0) {
+            if (fac > LV_DP_FACMAX) fac = LV_DP_FACMAX;
+            if (fac < LV_DP_FACMIN) fac = LV_DP_FACMIN;
+            if (rejected && fac > 1.0) fac = 1.0;
+            d->h = hs * fac;
+            dp_dense_coeffs(v, z->z, yn, hs, k, z);
+            if (!rk_accept(c, z->z, yn, normalize)) return LV_DIVERGED;
+            LV_XS_UNROLL for (ii = 0; ii < DP_N_OF(v); ii++)   /* FSAL: f at the new (un-normalized) point */
+                k[0][DP_IDX_OF(v)[ii]] = k[6][DP_IDX_OF(v)[ii]];
+            z->ahead += hs;
+            z->hl = hs;
+            rejected = 0;
+        } else {
+            if (fac < LV_DP_FACMIN) fac = LV_DP_FACMIN;
+            if (fac > 1.0) fac = 1.0;
+            d->h = hs * fac;
+            rejected = 1;
+        }
+        if (d->h < LV_DP_HMIN_REL * dt || ++sub > LV_DP_MAX_SUBSTEPS) return LV_TOLERANCE;
+    }
+    if (!out) return LV_OK;
+    memcpy(yo, y, sizeof yo);
+    if (z->ahead == 0.0) {
+        memcpy(yo, z->z, DP_NOUT_OF(v) * sizeof(double));
+    } else {
+        const double th = (z->hl - z->ahead) / z->hl, th1 = 1.0 - th;
+        LV_XS_UNROLL for (ii = 0; ii < DP_NOUT_OF(v); ii++)
+            yo[ii] = z->Y[0][ii] + th * (z->Y[1][ii] + th1 * (z->Y[2][ii] + th * (z->Y[3][ii] + th1 * z->Y[4][ii])));
+    }
+    if (!rk_accept(c, y, yo, normalize)) return LV_DIVERGED;
+    return LV_OK;
+}
+
+/* The body's dense-output row -> z, k[0] (FSAL) when it continues y (valid, and y is the state the last call wrote);
+   else z = y, k[0] = f(y) (one evaluation). */
+static void dp_dense_load(const body_ctx *c, const double *row, const double *y, double k[][LV_XS_SIZE], dp_control *d,
+                          dp_dense *z)
+{
+    if (row[LV_DENSE_VALID] == 1.0 && memcmp(row + LV_DENSE_X_OUT, y, LV_STATE_SIZE * sizeof(double)) == 0) {
+        memcpy(z->z, row + LV_DENSE_Z, sizeof z->z);
+        memcpy(k[0], row + LV_DENSE_F, sizeof k[0]);
+        memcpy(z->Y, row + LV_DENSE_COEF, sizeof z->Y);
+        z->ahead = row[LV_DENSE_AHEAD];
+        z->hl = row[LV_DENSE_H_LAST];
+    } else {
+        memset(z, 0, sizeof *z);
+        memcpy(z->z, y, sizeof z->z);
+        ctx_rhs(c, y, k[0]);
+        d->nfev += 1;
+    }
+    d->have_k1 = 1;
+}
+
+static void dp_dense_store(double *row, const double *y, double k[][LV_XS_SIZE], const dp_dense *z)
+{
+    row[LV_DENSE_VALID] = 1.0;
+    row[LV_DENSE_AHEAD] = z->ahead;
+    row[LV_DENSE_H_LAST] = z->hl;
+    memcpy(row + LV_DENSE_Z, z->z, sizeof z->z);
+    memcpy(row + LV_DENSE_F, k[0], sizeof k[0]);
+    memcpy(row + LV_DENSE_X_OUT, y, LV_STATE_SIZE * sizeof(double));
+    memcpy(row + LV_DENSE_COEF, z->Y, sizeof z->Y);
+}
+
+/* dp_dense_step per variant (dense output), each its own loop with the right-hand side inlined. */
+LV_FLATTEN static int dp_dense_step_free(const body_ctx *c, const double *cf, double *y, double k[][LV_XS_SIZE],
+                                         dp_control *d, dp_dense *z, double dt, int normalize, int out)
+{
+    return dp_dense_step(DP_FREE, c, cf, y, k, d, z, dt, normalize, out);
+}
+
+LV_FLATTEN static int dp_dense_step_plain(const body_ctx *c, const double *cf, double *y, double k[][LV_XS_SIZE],
+                                          dp_control *d, dp_dense *z, double dt, int normalize, int out)
+{
+    return dp_dense_step(DP_PLAIN, c, cf, y, k, d, z, dt, normalize, out);
+}
+
+static int dp_dense_step_model(const body_ctx *c, const double *cf, double *y, double k[][LV_XS_SIZE],
+                               dp_control *d, dp_dense *z, double dt, int normalize, int out)
+{
+    return dp_dense_step(DP_MODEL, c, cf, y, k, d, z, dt, normalize, out);
+}
+
 /* dp_output_step per variant, each its own loop with the right-hand side inlined. */
 LV_FLATTEN static int dp_output_step_free(const body_ctx *c, const double *cf, double *y, double k[][LV_XS_SIZE],
                                           dp_control *d, double dt, int normalize)
@@ -910,8 +1046,9 @@ static long advance_rk(double *state, const double *params, long b, const lv_mod
     dp_control d = {0.0, 0.0, 0.0, 0.0, 0, 0};
     double y[LV_XS_SIZE], yn[LV_XS_SIZE], k[LV_TABLEAU_MAX_STAGES][LV_XS_SIZE], applied[LV_NW], cf[6];
     const double *cmd = NULL;
+    dp_dense z;
     long s;
-    int i, st = LV_OK;
+    int i, st = LV_OK, dense = 0;
     ctx_init(&c, params, b, md, ix);
     lv_euler_coefficients(c.prm + LV_PARAM_I_B, cf);
     memcpy(y, state + b * LV_STATE_SIZE, LV_STATE_SIZE * sizeof(double));
@@ -924,13 +1061,25 @@ static long advance_rk(double *state, const double *params, long b, const lv_mod
     if (ad != NULL) {
         d.h = ad->h[b], d.nfev = 0.0, d.rtol = ad->rtol, d.atol = ad->atol, d.have_k1 = 0;
         d.n = c.kind & LV_KIND_WHEELS ? LV_XS_OMEGA + lv_wheel_count(c.r) : LV_STATE_SIZE;
+        dense = ad->dense != NULL && !(c.kind & LV_KIND_WHEELS) && n_steps > 0;
+        if (dense) {
+            dp_dense_load(&c, ad->dense + b * LV_DENSE_SIZE, y, k, &d, &z);
+            if (!(d.h > 0.0) || !isfinite(d.h)) d.h = dp_initial_h(&c, z.z, k[0], &d, dt);
+        }
     }
     for (s = 0; s < n_steps && st == LV_OK; s++) {
         if (c.kind & LV_KIND_WHEELS) {
             lv_wheels_motor(c.r, cmd, y + LV_XS_OMEGA, c.u);
             d.have_k1 = 0; /* the held torque may change at each output step */
         }
-        if (ad != NULL) {
+        if (dense) {
+            const int out = s == n_steps - 1;
+            z.ahead -= dt;   /* an output step inside the last substep costs this and nothing else */
+            if (z.ahead < 0.0 || out)
+                st = c.kind ? dp_dense_step_model(&c, cf, y, k, &d, &z, dt, normalize, out)
+                     : c.n_refs ? dp_dense_step_plain(&c, cf, y, k, &d, &z, dt, normalize, out)
+                     : dp_dense_step_free(&c, cf, y, k, &d, &z, dt, normalize, out);
+        } else if (ad != NULL) {
             st = c.kind ? dp_output_step_model(&c, cf, y, k, &d, dt, normalize)
                  : c.n_refs ? dp_output_step_plain(&c, cf, y, k, &d, dt, normalize)
                  : dp_output_step_free(&c, cf, y, k, &d, dt, normalize);
@@ -944,6 +1093,7 @@ static long advance_rk(double *state, const double *params, long b, const lv_mod
     if (ad != NULL) {
         if (st != LV_DIVERGED) ad->h[b] = d.h;
         ad->nfev[b] += d.nfev;
+        if (dense && st == LV_OK) dp_dense_store(ad->dense + b * LV_DENSE_SIZE, y, k, &z);
     }
     if (st != LV_OK) {
         *why = st;

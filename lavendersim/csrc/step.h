@@ -62,11 +62,13 @@ typedef struct {
 /* Adaptive stepping (dopri5): every body is stepped with its own step sizes; each of the n_steps
    steps advances it by exactly dt with as many accepted substeps as its error estimate needs.
    h (nb) carries each body's step-size proposal between calls (<= 0: choose an initial one);
-   nfev (nb) is incremented by the right-hand-side evaluations spent on each body. */
+   nfev (nb) is incremented by the right-hand-side evaluations spent on each body. dense (nb x LV_DENSE_SIZE, or NULL:
+   every output step lands on its time) carries each wheel-less body's dense output between calls (layout.h DENSE). */
 typedef struct {
     double rtol, atol;
     double *h;
     double *nfev;
+    double *dense;
 } lv_adaptive;
 
 
