@@ -3,15 +3,17 @@
    time with the extension's flags and calls it through ctypes). The bench divides its time by its
    right-hand-side evaluations and compares that with LavenderSim's dopri5 (time / sim.rhs_evals).
 
-   Same algorithm as LavenderSim's dopri5 (lavendersim/sim.py docstring): dt is the output interval,
-   each output step is covered by accepted substeps, the last one clipped to land on it; FSAL within a
-   call (each call starts with one fresh evaluation); Hairer's RMS error norm over the 13 state numbers
-   with sc = atol + rtol max(|y|, |y_new|); controller safety 0.9, factor in [0.2, 5], no growth right
-   after a rejection, a clipped step does not shrink the proposal, the factor 0.9 e^(-1/5) by two Newton steps
-   from a bit-pattern seed (no pow per substep); Hairer's starting step when h <= 0;
-   q normalized after every accepted substep. What a hand loop for this body can skip, it skips: only
-   q and omega_b (7 numbers) go through the stages (v' = 0, so p moves by h v and the p and v errors
-   are 0), the tableau is unrolled (no zero entries), and nothing is carried for wheels.
+   Same algorithm as LavenderSim's dopri5 (lavendersim/sim.py docstring), dense output: dt is the output
+   interval; the substeps run on unclipped past the output times and the state at the call's last output
+   time is read off the Dormand-Prince continuous extension of the last accepted substep (Hairer's contd5);
+   FSAL within a call (each call starts with one fresh evaluation); Hairer's RMS error norm over the 13 state
+   numbers with sc = atol + rtol max(|y|, |y_new|); controller safety 0.9, factor in [0.2, 5], no growth
+   right after a rejection, the factor 0.9 e^(-1/5) by two Newton steps from a bit-pattern seed (no pow per
+   substep); Hairer's starting step when h <= 0; q normalized after every accepted substep and at the output.
+   What a hand loop for this body can skip, it skips: only q and omega_b (7 numbers) go through the stages
+   (v' = 0, so p moves by h v and the p and v errors are 0), the tableau is unrolled (no zero entries),
+   nothing is carried for wheels, and the continuous extension is formed once per call (the stages of the
+   last accepted substep are kept by swapping two stage sets, not copied).
 
    state x (13) = p_w[3], q[4] (x, y, z, w), v_w[3], omega_b[3]; I_b principal moments.
    Returns -1 after n_steps output steps (x, *h updated; *nfev += evaluations), or the 0-based output
@@ -122,87 +124,117 @@ static double initial_h(const double *x, const double *z, const double *f0, cons
     return isfinite(h0) && h0 > 0.0 ? h0 : dt;
 }
 
+#define D1 (-12715105075.0 / 11282082432.0)
+#define D3 (87487479700.0 / 32700410799.0)
+#define D4 (-10690763975.0 / 1880347072.0)
+#define D5 (701980252875.0 / 199316789632.0)
+#define D6 (-1453857185.0 / 822651844.0)
+#define D7 (69997945.0 / 29380423.0)
+
+static void store(double *x, const double *z, const double *p)
+{
+    int i;
+    for (i = 0; i < 3; i++) x[i] = p[i];
+    for (i = 0; i < 4; i++) x[3 + i] = z[i];
+    for (i = 0; i < 3; i++) x[10 + i] = z[i + 4];
+}
+
 long lv_ref_dopri5_free(double *x, const double *I_b, double dt, long n_steps, double rtol, double atol,
                         double *h_io, double *nfev_out)
 {
     const double c[3] = {(I_b[1] - I_b[2]) / I_b[0], (I_b[2] - I_b[0]) / I_b[1], (I_b[0] - I_b[1]) / I_b[2]};
-    double z[7], zn[7], k1[7], k2[7], k3[7], k4[7], k5[7], k6[7], k7[7], t[7], err[7], nfev = 0.0, h = *h_io;
+    double z[7], zn[7], K[2][7][7], t[7], err[7], p[3], z0[7], y1[7], p0[3], p1[3], nfev = 0.0, h = *h_io;
+    double ahead = 0.0, hl = 0.0;
     const double hmin = 1e-12 * dt;
     long s;
-    int i;
+    int i, cur = 0;
     for (i = 0; i < 4; i++) z[i] = x[3 + i];
-    for (i = 0; i < 3; i++) z[4 + i] = x[10 + i];
-    rhs7(z, c, k1);
+    for (i = 0; i < 3; i++) z[4 + i] = x[10 + i], p[i] = x[i];
+    rhs7(z, c, K[0][0]);
     nfev += 1;
-    if (!(h > 0.0) || !isfinite(h)) h = initial_h(x, z, k1, c, rtol, atol, dt, &nfev);
+    if (!(h > 0.0) || !isfinite(h)) h = initial_h(x, z, K[0][0], c, rtol, atol, dt, &nfev);
     for (s = 0; s < n_steps; s++) {
-        double tt = 0.0;
         long sub = 0;
         int rejected = 0;
-        while (tt < dt) {
-            const double rem = dt - tt;
-            const int clipped = h >= rem;
-            const double hs = clipped ? rem : h;
-            double e;
-            for (i = 0; i < 7; i++) t[i] = z[i] + hs * (A21 * k1[i]);
-            rhs7(t, c, k2);
-            for (i = 0; i < 7; i++) t[i] = z[i] + hs * (A31 * k1[i] + A32 * k2[i]);
-            rhs7(t, c, k3);
-            for (i = 0; i < 7; i++) t[i] = z[i] + hs * (A41 * k1[i] + A42 * k2[i] + A43 * k3[i]);
-            rhs7(t, c, k4);
-            for (i = 0; i < 7; i++) t[i] = z[i] + hs * (A51 * k1[i] + A52 * k2[i] + A53 * k3[i] + A54 * k4[i]);
-            rhs7(t, c, k5);
+        ahead -= dt;
+        while (ahead < 0.0) {
+            double (*k)[7] = K[cur];
+            const double hs = h;
+            double e, fac;
+            for (i = 0; i < 7; i++) t[i] = z[i] + hs * (A21 * k[0][i]);
+            rhs7(t, c, k[1]);
+            for (i = 0; i < 7; i++) t[i] = z[i] + hs * (A31 * k[0][i] + A32 * k[1][i]);
+            rhs7(t, c, k[2]);
+            for (i = 0; i < 7; i++) t[i] = z[i] + hs * (A41 * k[0][i] + A42 * k[1][i] + A43 * k[2][i]);
+            rhs7(t, c, k[3]);
             for (i = 0; i < 7; i++)
-                t[i] = z[i] + hs * (A61 * k1[i] + A62 * k2[i] + A63 * k3[i] + A64 * k4[i] + A65 * k5[i]);
-            rhs7(t, c, k6);
-            for (i = 0; i < 7; i++) zn[i] = z[i] + hs * (B1 * k1[i] + B3 * k3[i] + B4 * k4[i] + B5 * k5[i] + B6 * k6[i]);
-            rhs7(zn, c, k7);
+                t[i] = z[i] + hs * (A51 * k[0][i] + A52 * k[1][i] + A53 * k[2][i] + A54 * k[3][i]);
+            rhs7(t, c, k[4]);
+            for (i = 0; i < 7; i++)
+                t[i] = z[i] + hs * (A61 * k[0][i] + A62 * k[1][i] + A63 * k[2][i] + A64 * k[3][i] + A65 * k[4][i]);
+            rhs7(t, c, k[5]);
+            for (i = 0; i < 7; i++)
+                zn[i] = z[i] + hs * (B1 * k[0][i] + B3 * k[2][i] + B4 * k[3][i] + B5 * k[4][i] + B6 * k[5][i]);
+            rhs7(zn, c, k[6]);
             nfev += 6;
             for (i = 0; i < 7; i++)
-                err[i] = hs * (E1 * k1[i] + E3 * k3[i] + E4 * k4[i] + E5 * k5[i] + E6 * k6[i] + E7 * k7[i]);
+                err[i] = hs * (E1 * k[0][i] + E3 * k[2][i] + E4 * k[3][i] + E5 * k[4][i] + E6 * k[5][i] + E7 * k[6][i]);
             e = norm7(err, z, zn, rtol, atol);
+            fac = factor(e);
             if (e <= 1.0) {
-                double fac = factor(e), r;
+                double r;
                 if (fac > 5.0) fac = 5.0;
                 if (fac < 0.2) fac = 0.2;
                 if (rejected && fac > 1.0) fac = 1.0;
-                tt = clipped ? dt : tt + hs;
-                if (!(clipped && fac >= 1.0 && h > hs * fac)) h = hs * fac;
+                h = hs * fac;
+                for (i = 0; i < 7; i++) z0[i] = z[i], y1[i] = zn[i];   /* the substep, for the continuous extension */
+                for (i = 0; i < 3; i++) p0[i] = p[i], p1[i] = p[i] + hs * x[7 + i];
                 r = 1.0 / sqrt(zn[0] * zn[0] + zn[1] * zn[1] + zn[2] * zn[2] + zn[3] * zn[3]);
                 for (i = 0; i < 4; i++) zn[i] *= r;
                 for (i = 0; i < 7; i++) {
                     if (!isfinite(zn[i])) {
-                        for (i = 0; i < 4; i++) x[3 + i] = z[i];
-                        for (i = 0; i < 3; i++) x[10 + i] = z[i + 4];
                         *h_io = h;
                         *nfev_out += nfev;
                         return s;
                     }
                 }
-                for (i = 0; i < 3; i++) x[i] += hs * x[7 + i];
+                for (i = 0; i < 3; i++) p[i] = p1[i];
                 for (i = 0; i < 7; i++) {
                     z[i] = zn[i];
-                    k1[i] = k7[i]; /* FSAL: f at the new (un-normalized) point */
+                    K[1 - cur][0][i] = k[6][i]; /* FSAL: f at the new (un-normalized) point */
                 }
+                cur = 1 - cur;   /* K[1 - cur]: the stages of the last accepted substep */
+                ahead += hs;
+                hl = hs;
                 rejected = 0;
             } else {
-                double fac = factor(e);
                 if (fac < 0.2) fac = 0.2;
                 if (fac > 1.0) fac = 1.0;
                 h = hs * fac;
                 rejected = 1;
             }
             if (h < hmin || ++sub > 1000000L) {
-                for (i = 0; i < 4; i++) x[3 + i] = z[i];
-                for (i = 0; i < 3; i++) x[10 + i] = z[i + 4];
                 *h_io = h;
                 *nfev_out += nfev;
                 return s;
             }
         }
     }
-    for (i = 0; i < 4; i++) x[3 + i] = z[i];
-    for (i = 0; i < 3; i++) x[10 + i] = z[i + 4];
+    if (n_steps > 0 && ahead != 0.0) {   /* the output: Hairer's contd5 on the last accepted substep */
+        double (*k)[7] = K[1 - cur], out[7], po[3], r;
+        const double th = (hl - ahead) / hl, th1 = 1.0 - th;
+        for (i = 0; i < 7; i++) {
+            const double d1 = y1[i] - z0[i], d2 = hl * k[0][i] - d1, d3 = d1 - hl * k[6][i] - d2;
+            const double d4 = hl * (D1 * k[0][i] + D3 * k[2][i] + D4 * k[3][i] + D5 * k[4][i] + D6 * k[5][i] + D7 * k[6][i]);
+            out[i] = z0[i] + th * (d1 + th1 * (d2 + th * (d3 + th1 * d4)));
+        }
+        for (i = 0; i < 3; i++) po[i] = p0[i] + th * (p1[i] - p0[i]);
+        r = 1.0 / sqrt(out[0] * out[0] + out[1] * out[1] + out[2] * out[2] + out[3] * out[3]);
+        for (i = 0; i < 4; i++) out[i] *= r;
+        store(x, out, po);
+    } else {
+        store(x, z, p);
+    }
     *h_io = h;
     *nfev_out += nfev;
     return -1;

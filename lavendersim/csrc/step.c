@@ -809,6 +809,18 @@ static inline void dp_rhs(int v, const body_ctx *c, const double *cf, const doub
     }
 }
 
+/* rk_accept for the variant: a body without a model has no joint, and its numbers past its state stay 0. */
+static inline int dp_accept(int v, const body_ctx *c, double *y, double *yn, int normalize)
+{
+    int i;
+    if (v == DP_MODEL) return rk_accept(c, y, yn, normalize);
+    if (normalize) lv_quat_normalize(yn + LV_STATE_Q, yn + LV_STATE_Q);
+    for (i = 0; i < LV_STATE_SIZE; i++)
+        if (!isfinite(yn[i])) return 0;
+    memcpy(y, yn, LV_STATE_SIZE * sizeof(double));
+    return 1;
+}
+
 /* One substep attempt of hs from y (k[0] = f(y)): the six stages (k[6] = f(yn), FSAL), yn = the 5th-order solution
    (a free body's p by hs v), and the error norm. */
 static inline double dp_attempt(int v, const body_ctx *c, const double *cf, const double *y, double hs,
@@ -863,7 +875,7 @@ static inline int dp_output_step(int v, const body_ctx *c, const double *cf, dou
             t = clipped ? dt : t + hs;
             /* a step shortened to land on the output time does not shrink the proposal */
             if (!(clipped && fac >= 1.0 && d->h > hs * fac)) d->h = hs * fac;
-            if (!rk_accept(c, y, yn, normalize)) return LV_DIVERGED;
+            if (!dp_accept(v, c, y, yn, normalize)) return LV_DIVERGED;
             LV_XS_UNROLL for (ii = 0; ii < DP_N_OF(v); ii++)   /* FSAL: f at the new (un-normalized) point */
                 k[0][DP_IDX_OF(v)[ii]] = k[6][DP_IDX_OF(v)[ii]];
             rejected = 0;
@@ -937,7 +949,7 @@ static inline int dp_dense_step(int v, const body_ctx *c, const double *cf, doub
             if (rejected && fac > 1.0) fac = 1.0;
             d->h = hs * fac;
             dp_dense_coeffs(v, z->z, yn, hs, k, z);
-            if (!rk_accept(c, z->z, yn, normalize)) return LV_DIVERGED;
+            if (!dp_accept(v, c, z->z, yn, normalize)) return LV_DIVERGED;
             LV_XS_UNROLL for (ii = 0; ii < DP_N_OF(v); ii++)   /* FSAL: f at the new (un-normalized) point */
                 k[0][DP_IDX_OF(v)[ii]] = k[6][DP_IDX_OF(v)[ii]];
             z->ahead += hs;
@@ -960,7 +972,7 @@ static inline int dp_dense_step(int v, const body_ctx *c, const double *cf, doub
         LV_XS_UNROLL for (ii = 0; ii < DP_NOUT_OF(v); ii++)
             yo[ii] = z->Y[0][ii] + th * (z->Y[1][ii] + th1 * (z->Y[2][ii] + th * (z->Y[3][ii] + th1 * z->Y[4][ii])));
     }
-    if (!rk_accept(c, y, yo, normalize)) return LV_DIVERGED;
+    if (!dp_accept(v, c, y, yo, normalize)) return LV_DIVERGED;
     return LV_OK;
 }
 
