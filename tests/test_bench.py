@@ -239,11 +239,12 @@ def test_fma_peer_computes_the_sims_trajectory():
 
 @pytest.mark.needs("cc")
 def test_dopri5_peer_computes_the_sims_trajectory():
-    """The hand DOPRI5 (same controller) takes the Sim's steps: same states to 1e-12, same RHS counts."""
+    """The hand DOPRI5 (same controller, dense output) takes the Sim's steps: same states to 1e-12, same RHS counts
+    (dense output: fewer substeps than output steps at dt = 0.1 s, so the count is below 300 x 6 but above 300)."""
     peer = bench.dopri5.HandDopri5(bench.compile_c)
     a = bench.dopri5.agreement(peer, bench.single_sim, bench.initial_state(), bench.inertia(), n_steps=300)
     assert a["status"] == -1 and a["max_abs_diff"] <= 1e-12, a
-    assert a["rhs_evals_lavendersim"] == a["rhs_evals_hand"] > 300 * 6, a
+    assert a["rhs_evals_lavendersim"] == a["rhs_evals_hand"] > 300, a
 
 
 def test_the_plain_big_process_reports_build_memory_and_step_ratio():
