@@ -157,9 +157,12 @@ def print_c() -> str:
     out.extend(f"    LV_KIND_{n} = {v},  /* {doc} */" for n, v, doc in KINDS)
     out.append("};")
     out.extend(f"#define LV_{n} {v}  /* {doc} */" for n, v, doc in CONSTANTS)
+    from .wheel_layout import on_axes   # (wheel_layout imports this module)
+    axes = ", ".join(f"{float(a)!r}" for a in on_axes(WHEELS_MAX))
+    out.append(f"#define LV_WHEELS_ON_AXES_A_B {{{axes}}}  /* MODEL.A_b of the default layout, [I | 0] */")
     out.append("/* the printed kernels of every wheeled body (derive/wheel_layout.py, N = WHEELS_MAX) */")
     out.extend(f"#define LV_WHEELS_{part.upper()} lv_wheels{WHEELS_MAX}_{part}"
-               for part in ("coefficients", "body_rhs_c", "motor"))
+               for part in ("coefficients", "body_rhs_c", "on_axes_rhs_c", "motor"))
     out += ["", "#endif", ""]
     return "\n".join(out)
 

@@ -83,6 +83,11 @@ def layout_rhs_c(q, w, Om, I_p, A, J, k_w, r_b, F_w, tau_w, u, c_w) -> tuple[tup
     return (qmul(q, pure(w)) / 2, w_dot, Om_dot), where
 
 
+def on_axes(n: int) -> sp.Matrix:
+    """A_b of the default layout, three wheels on the body x, y, z axes and n − 3 padded slots: [I | 0] (3×n)."""
+    return sp.eye(3).row_join(sp.zeros(3, n - 3))
+
+
 def layout_momentum(q, w, Om, I_p, A, J):
     """(L_body_w, L_wheels_w, h_w): world momenta of the body (wheels locked, minus their spin) and of
     the wheels' spin about P; h_w = J (Aᵀω + Ω) the wheels' axial momenta (N)."""
@@ -134,7 +139,7 @@ def _check() -> None:
         if pad[0] != ref[0] or pad[1] != ref[1] or list(pad[2]) != list(ref[2]) + [0]:
             raise RuntimeError("derive: a padded wheel (zero axis, J = 1, at rest, no torque) changes the N-wheel equations")
         # the form the kernels print (named M, cofactors, 1/det M, coefficients k_w) is the same function
-        for A_n in (A, A.row_join(sp.zeros(3, 1))):
+        for A_n in (A, A.row_join(sp.zeros(3, 1)), on_axes(4)):
             n = A_n.shape[1]
             J_n, Om_n, u_n = (v.col_join(sp.Matrix(n - 3, 1, [z] * (n - 3))) for v, z in ((J, 1), (Om, 0), (u, 0)))
             k_w, where = coefficient_where(I_p, A_n, J_n)
@@ -177,6 +182,10 @@ def kernels_for(n: int) -> list[Kernel]:
     rates = [Arg("q_dot", q_dot, "1/s"), Arg("omega_dot_b", w_dot, "rad/s², body frame"), Arg("Omega_dot", Om_dot, "rad/s²")]
     KW = Arg("k_w", k_w, f"wheel-model coefficients [M⁻¹ (3×3 row-major, M = I_p − A_b J A_bᵀ, body frame, 1/(kg·m²)), "
              f"1/J ({n}, 1/(kg·m²))], from wheels{n}_coefficients")
+    # the default layout's right-hand side: the same equations with A_b = [I | 0] substituted (the A_b sums fold away)
+    axes = dict(zip(A, on_axes(n)))
+    axes_where = [(s, e.xreplace(axes)) for s, e in rhs_where]
+    axes_rates = [Arg(a.name, a.value.xreplace(axes), a.doc) for a in rates]
     coefficient_kernels = [] if n != WHEELS_MAX else [
         Kernel(f"wheels{n}_coefficients", f"The inertia-only coefficients of the {n}-wheel equations, computed once per body and call",
                r"k_w = [(I_P - A J A^T)^{-1},\ J^{-1}]",
@@ -189,6 +198,13 @@ def kernels_for(n: int) -> list[Kernel]:
                r"\dot\Omega = J^{-1}(u - c_w\Omega) - A^T\dot\omega",
                [Q, W, OM, IP, AB, JJ, KW, *loads], rates, g, where=rhs_where,
                notes=[f"Bitwise wheels{n}_body_rhs, given k_w = wheels{n}_coefficients(I_p, A_b, J) (the same printed arithmetic)."]),
+        Kernel(f"wheels{n}_on_axes_rhs_c", f"wheels{n}_body_rhs_c of the default layout, A_b = [I | 0] substituted",
+               r"\dot\omega = M^{-1}(\tau_P - \omega\times(I_P\omega + J\Omega) - (u - c_w\Omega)),\ "
+               r"\dot\Omega = J^{-1}(u - c_w\Omega) - [I | 0]^T\dot\omega",
+               [Q, W, OM, IP, JJ, KW, *loads], axes_rates, g, where=axes_where,
+               notes=[f"wheels{n}_body_rhs_c at A_b = [I | 0] (three wheels on the body axes, the other slots padded): "
+                      "the same expressions with the axes substituted, so the products by 1 and the terms times 0 "
+                      f"fold away; equal to wheels{n}_body_rhs_c up to the sign of a zero (x + 0·y is x)."]),
     ]
     return [
         Kernel(f"wheels{n}_body_rhs", f"Body with {n} reaction wheels on arbitrary axes rotating about a pivot",

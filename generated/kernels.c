@@ -2708,6 +2708,120 @@ void lv_wheels4_body_rhs_c(const double *q, const double *omega_b, const double 
     Omega_dot[3] = -A_b_03*t28 - A_b_13*t29 - A_b_23*t30 + g_w_3*k_w_12;
 }
 
+void lv_wheels4_on_axes_rhs_c(const double *q, const double *omega_b, const double *Omega, const double *I_p, const double *J, const double *k_w, const double *r_b, const double *F_w, const double *tau_w, const double *u, double c_w, double *q_dot, double *omega_dot_b, double *Omega_dot) {
+    const double q_0 = q[0];
+    const double q_1 = q[1];
+    const double q_2 = q[2];
+    const double q_3 = q[3];
+    const double omega_b_0 = omega_b[0];
+    const double omega_b_1 = omega_b[1];
+    const double omega_b_2 = omega_b[2];
+    const double Omega_0 = Omega[0];
+    const double Omega_1 = Omega[1];
+    const double Omega_2 = Omega[2];
+    const double Omega_3 = Omega[3];
+    const double I_p_00 = I_p[0];
+    const double I_p_01 = I_p[1];
+    const double I_p_02 = I_p[2];
+    const double I_p_11 = I_p[4];
+    const double I_p_12 = I_p[5];
+    const double I_p_22 = I_p[8];
+    const double J_0 = J[0];
+    const double J_1 = J[1];
+    const double J_2 = J[2];
+    const double J_3 = J[3];
+    const double k_w_0 = k_w[0];
+    const double k_w_1 = k_w[1];
+    const double k_w_2 = k_w[2];
+    const double k_w_3 = k_w[3];
+    const double k_w_4 = k_w[4];
+    const double k_w_5 = k_w[5];
+    const double k_w_6 = k_w[6];
+    const double k_w_7 = k_w[7];
+    const double k_w_8 = k_w[8];
+    const double k_w_9 = k_w[9];
+    const double k_w_10 = k_w[10];
+    const double k_w_11 = k_w[11];
+    const double k_w_12 = k_w[12];
+    const double r_b_0 = r_b[0];
+    const double r_b_1 = r_b[1];
+    const double r_b_2 = r_b[2];
+    const double F_w_0 = F_w[0];
+    const double F_w_1 = F_w[1];
+    const double F_w_2 = F_w[2];
+    const double tau_w_0 = tau_w[0];
+    const double tau_w_1 = tau_w[1];
+    const double tau_w_2 = tau_w[2];
+    const double u_0 = u[0];
+    const double u_1 = u[1];
+    const double u_2 = u[2];
+    const double u_3 = u[3];
+    const double JOmega_0 = J_0*Omega_0;
+    const double JOmega_1 = J_1*Omega_1;
+    const double JOmega_2 = J_2*Omega_2;
+    const double g_w_0 = -Omega_0*c_w + u_0;
+    const double g_w_1 = -Omega_1*c_w + u_1;
+    const double g_w_2 = -Omega_2*c_w + u_2;
+    const double g_w_3 = -Omega_3*c_w + u_3;
+    const double h_A_0 = JOmega_0;
+    const double h_A_1 = JOmega_1;
+    const double h_A_2 = JOmega_2;
+    const double I_omega_0 = I_p_00*omega_b_0 + I_p_01*omega_b_1 + I_p_02*omega_b_2;
+    const double I_omega_1 = I_p_01*omega_b_0 + I_p_11*omega_b_1 + I_p_12*omega_b_2;
+    const double I_omega_2 = I_p_02*omega_b_0 + I_p_12*omega_b_1 + I_p_22*omega_b_2;
+    const double H_b_0 = I_omega_0 + h_A_0;
+    const double H_b_1 = I_omega_1 + h_A_1;
+    const double H_b_2 = I_omega_2 + h_A_2;
+    const double wxH_0 = -H_b_1*omega_b_2 + H_b_2*omega_b_1;
+    const double wxH_1 = H_b_0*omega_b_2 - H_b_2*omega_b_0;
+    const double wxH_2 = -H_b_0*omega_b_1 + H_b_1*omega_b_0;
+    const double g_A_0 = g_w_0;
+    const double g_A_1 = g_w_1;
+    const double g_A_2 = g_w_2;
+    const double t0 = ((1.0/2.0))*omega_b_0;
+    const double t1 = ((1.0/2.0))*omega_b_1;
+    const double t2 = ((1.0/2.0))*omega_b_2;
+    const double t3 = 2*q_0;
+    const double t4 = q_1*t3;
+    const double t5 = 2*q_2*q_3;
+    const double t6 = t4 + t5;
+    const double t7 = q_2*t3;
+    const double t8 = 2*q_1;
+    const double t9 = q_3*t8;
+    const double t10 = t7 - t9;
+    const double t11 = 2*(q_2*q_2);
+    const double t12 = 2*(q_1*q_1) - 1;
+    const double t13 = -t11 - t12;
+    const double t14 = t7 + t9;
+    const double t15 = q_3*t3;
+    const double t16 = 2*q_1*q_2 - t15;
+    const double t17 = 2*(q_0*q_0);
+    const double t18 = -t12 - t17;
+    const double t19 = F_w_0*t14 + F_w_1*t16 + F_w_2*t18;
+    const double t20 = t4 - t5;
+    const double t21 = q_2*t8 + t15;
+    const double t22 = -t11 - t17 + 1;
+    const double t23 = F_w_0*t20 + F_w_1*t22 + F_w_2*t21;
+    const double t24 = -g_A_0 + r_b_1*t19 - r_b_2*t23 + t10*tau_w_2 + t13*tau_w_0 + t6*tau_w_1 - wxH_0;
+    const double t25 = F_w_0*t13 + F_w_1*t6 + F_w_2*t10;
+    const double t26 = -g_A_1 - r_b_0*t19 + r_b_2*t25 + t20*tau_w_0 + t21*tau_w_2 + t22*tau_w_1 - wxH_1;
+    const double t27 = -g_A_2 + r_b_0*t23 - r_b_1*t25 + t14*tau_w_0 + t16*tau_w_1 + t18*tau_w_2 - wxH_2;
+    const double t28 = k_w_0*t24 + k_w_1*t26 + k_w_2*t27;
+    const double t29 = k_w_3*t24 + k_w_4*t26 + k_w_5*t27;
+    const double t30 = k_w_6*t24 + k_w_7*t26 + k_w_8*t27;
+    q_dot[0] = q_1*t2 - q_2*t1 + q_3*t0;
+    q_dot[1] = -q_0*t2 + q_2*t0 + q_3*t1;
+    q_dot[2] = q_0*t1 - q_1*t0 + q_3*t2;
+    q_dot[3] = -q_0*t0 - q_1*t1 - q_2*t2;
+    omega_dot_b[0] = t28;
+    omega_dot_b[1] = t29;
+    omega_dot_b[2] = t30;
+    Omega_dot[0] = g_w_0*k_w_9 - t28;
+    Omega_dot[1] = g_w_1*k_w_10 - t29;
+    Omega_dot[2] = g_w_2*k_w_11 - t30;
+    Omega_dot[3] = g_w_3*k_w_12;
+}
+
 void lv_wheels4_momentum(const double *q, const double *omega_b, const double *Omega, const double *I_p, const double *A_b, const double *J, double *L_body_w, double *L_wheels_w, double *h_w) {
     const double q_0 = q[0];
     const double q_1 = q[1];
@@ -3331,6 +3445,7 @@ static void packed_wheels3_motor(const double *in, double *out) { lv_wheels3_mot
 static void packed_wheels4_body_rhs(const double *in, double *out) { lv_wheels4_body_rhs(in + 0, in + 4, in + 7, in + 11, in + 20, in + 32, in + 36, in + 39, in + 42, in + 45, in[49], out + 0, out + 4, out + 7); }
 static void packed_wheels4_coefficients(const double *in, double *out) { lv_wheels4_coefficients(in + 0, in + 9, in + 21, out + 0); }
 static void packed_wheels4_body_rhs_c(const double *in, double *out) { lv_wheels4_body_rhs_c(in + 0, in + 4, in + 7, in + 11, in + 20, in + 32, in + 36, in + 49, in + 52, in + 55, in + 58, in[62], out + 0, out + 4, out + 7); }
+static void packed_wheels4_on_axes_rhs_c(const double *in, double *out) { lv_wheels4_on_axes_rhs_c(in + 0, in + 4, in + 7, in + 11, in + 20, in + 24, in + 37, in + 40, in + 43, in + 46, in[50], out + 0, out + 4, out + 7); }
 static void packed_wheels4_momentum(const double *in, double *out) { lv_wheels4_momentum(in + 0, in + 4, in + 7, in + 11, in + 20, in + 32, out + 0, out + 3, out + 6); }
 static void packed_wheels4_motor(const double *in, double *out) { lv_wheels4_motor(in + 0, in + 4, in[8], in[9], in[10], out + 0); }
 static void packed_quat_error_chart_inverse(const double *in, double *out) { lv_quat_error_chart_inverse(in + 0, in + 4, out + 0); }
@@ -3416,6 +3531,7 @@ const lv_kernel_info lv_kernel_table[LV_KERNEL_COUNT] = {
     {"wheels4_body_rhs", 50, 11, packed_wheels4_body_rhs},
     {"wheels4_coefficients", 25, 13, packed_wheels4_coefficients},
     {"wheels4_body_rhs_c", 63, 11, packed_wheels4_body_rhs_c},
+    {"wheels4_on_axes_rhs_c", 51, 11, packed_wheels4_on_axes_rhs_c},
     {"wheels4_momentum", 36, 10, packed_wheels4_momentum},
     {"wheels4_motor", 11, 4, packed_wheels4_motor},
     {"quat_error_chart_inverse", 7, 4, packed_quat_error_chart_inverse},

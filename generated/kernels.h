@@ -11,7 +11,7 @@ typedef struct {
     void (*packed)(const double *in, double *out);
 } lv_kernel_info;
 
-#define LV_KERNEL_COUNT 83
+#define LV_KERNEL_COUNT 84
 extern const lv_kernel_info lv_kernel_table[LV_KERNEL_COUNT];
 
 /* particle_moments: One particle's mass moment and momentum (summed: m r_COM and p).
@@ -580,6 +580,23 @@ void lv_wheels4_coefficients(const double *I_p, const double *A_b, const double 
      out omega_dot_b [3]: rad/s², body frame
      out Omega_dot [4]: rad/s² */
 void lv_wheels4_body_rhs_c(const double *q, const double *omega_b, const double *Omega, const double *I_p, const double *A_b, const double *J, const double *k_w, const double *r_b, const double *F_w, const double *tau_w, const double *u, double c_w, double *q_dot, double *omega_dot_b, double *Omega_dot);
+
+/* wheels4_on_axes_rhs_c: wheels4_body_rhs_c of the default layout, A_b = [I | 0] substituted.
+     in  q [4]: orientation (x, y, z, w), R_WB
+     in  omega_b [3]: angular velocity, body frame, rad/s
+     in  Omega [4]: wheel rates relative to the body about their axes (4), rad/s
+     in  I_p [3×3]: inertia about the pivot (wheels locked), body frame, kg·m², symmetric row-major
+     in  J [4]: wheel axial inertias (4), kg·m²
+     in  k_w [13]: wheel-model coefficients [M⁻¹ (3×3 row-major, M = I_p − A_b J A_bᵀ, body frame, 1/(kg·m²)), 1/J (4, 1/(kg·m²))], from wheels4_coefficients
+     in  r_b [3]: pivot → COM, body frame, m
+     in  F_w [3]: total force at the COM, world frame, N
+     in  tau_w [3]: total torque about the COM, world frame, N·m
+     in  u [4]: motor torques on the wheels (body gets −A_b u), N·m
+     in  c_w scalar: wheel damping, N·m·s/rad
+     out q_dot [4]: 1/s
+     out omega_dot_b [3]: rad/s², body frame
+     out Omega_dot [4]: rad/s² */
+void lv_wheels4_on_axes_rhs_c(const double *q, const double *omega_b, const double *Omega, const double *I_p, const double *J, const double *k_w, const double *r_b, const double *F_w, const double *tau_w, const double *u, double c_w, double *q_dot, double *omega_dot_b, double *Omega_dot);
 
 /* wheels4_momentum: World angular momentum about the pivot of a body with 4 wheels, and the wheels' axial momenta.
      in  q [4]: orientation (x, y, z, w), R_WB

@@ -4346,6 +4346,176 @@ def wheels4_body_rhs_c(q, omega_b, Omega, I_p, A_b, J, k_w, r_b, F_w, tau_w, u, 
     return q_dot_out, omega_dot_b_out, Omega_dot_out
 
 
+def wheels4_on_axes_rhs_c(q, omega_b, Omega, I_p, J, k_w, r_b, F_w, tau_w, u, c_w, *, out=None):
+    """wheels4_body_rhs_c of the default layout, A_b = [I | 0] substituted.
+
+    Generated kernel ``wheels4_on_axes_rhs_c``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    q : array_like, shape (..., 4)
+        orientation (x, y, z, w), R_WB
+    omega_b : array_like, shape (..., 3)
+        angular velocity, body frame, rad/s
+    Omega : array_like, shape (..., 4)
+        wheel rates relative to the body about their axes (4), rad/s
+    I_p : array_like, shape (..., 3, 3)
+        inertia about the pivot (wheels locked), body frame, kg·m², symmetric row-major
+    J : array_like, shape (..., 4)
+        wheel axial inertias (4), kg·m²
+    k_w : array_like, shape (..., 13)
+        wheel-model coefficients [M⁻¹ (3×3 row-major, M = I_p − A_b J A_bᵀ, body frame, 1/(kg·m²)), 1/J (4, 1/(kg·m²))], from wheels4_coefficients
+    r_b : array_like, shape (..., 3)
+        pivot → COM, body frame, m
+    F_w : array_like, shape (..., 3)
+        total force at the COM, world frame, N
+    tau_w : array_like, shape (..., 3)
+        total torque about the COM, world frame, N·m
+    u : array_like, shape (..., 4)
+        motor torques on the wheels (body gets −A_b u), N·m
+    c_w : array_like, shape (...)
+        wheel damping, N·m·s/rad
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
+
+    Returns
+    -------
+    q_dot : ndarray, shape (..., 4)
+        1/s
+    omega_dot_b : ndarray, shape (..., 3)
+        rad/s², body frame
+    Omega_dot : ndarray, shape (..., 4)
+        rad/s²
+    """
+    q = numpy.asarray(q, dtype=numpy.float64)
+    omega_b = numpy.asarray(omega_b, dtype=numpy.float64)
+    Omega = numpy.asarray(Omega, dtype=numpy.float64)
+    I_p = numpy.asarray(I_p, dtype=numpy.float64)
+    J = numpy.asarray(J, dtype=numpy.float64)
+    k_w = numpy.asarray(k_w, dtype=numpy.float64)
+    r_b = numpy.asarray(r_b, dtype=numpy.float64)
+    F_w = numpy.asarray(F_w, dtype=numpy.float64)
+    tau_w = numpy.asarray(tau_w, dtype=numpy.float64)
+    u = numpy.asarray(u, dtype=numpy.float64)
+    c_w = numpy.asarray(c_w, dtype=numpy.float64)
+    batch = q.shape[:-1] if q.shape[:-1] == omega_b.shape[:-1] == Omega.shape[:-1] == I_p.shape[:-2] == J.shape[:-1] == k_w.shape[:-1] == r_b.shape[:-1] == F_w.shape[:-1] == tau_w.shape[:-1] == u.shape[:-1] == c_w.shape else numpy.broadcast_shapes(q.shape[:-1], omega_b.shape[:-1], Omega.shape[:-1], I_p.shape[:-2], J.shape[:-1], k_w.shape[:-1], r_b.shape[:-1], F_w.shape[:-1], tau_w.shape[:-1], u.shape[:-1], c_w.shape)
+    q_0 = q[..., 0]
+    q_1 = q[..., 1]
+    q_2 = q[..., 2]
+    q_3 = q[..., 3]
+    omega_b_0 = omega_b[..., 0]
+    omega_b_1 = omega_b[..., 1]
+    omega_b_2 = omega_b[..., 2]
+    Omega_0 = Omega[..., 0]
+    Omega_1 = Omega[..., 1]
+    Omega_2 = Omega[..., 2]
+    Omega_3 = Omega[..., 3]
+    I_p_00 = I_p[..., 0, 0]
+    I_p_01 = I_p[..., 0, 1]
+    I_p_02 = I_p[..., 0, 2]
+    I_p_11 = I_p[..., 1, 1]
+    I_p_12 = I_p[..., 1, 2]
+    I_p_22 = I_p[..., 2, 2]
+    J_0 = J[..., 0]
+    J_1 = J[..., 1]
+    J_2 = J[..., 2]
+    J_3 = J[..., 3]
+    k_w_0 = k_w[..., 0]
+    k_w_1 = k_w[..., 1]
+    k_w_2 = k_w[..., 2]
+    k_w_3 = k_w[..., 3]
+    k_w_4 = k_w[..., 4]
+    k_w_5 = k_w[..., 5]
+    k_w_6 = k_w[..., 6]
+    k_w_7 = k_w[..., 7]
+    k_w_8 = k_w[..., 8]
+    k_w_9 = k_w[..., 9]
+    k_w_10 = k_w[..., 10]
+    k_w_11 = k_w[..., 11]
+    k_w_12 = k_w[..., 12]
+    r_b_0 = r_b[..., 0]
+    r_b_1 = r_b[..., 1]
+    r_b_2 = r_b[..., 2]
+    F_w_0 = F_w[..., 0]
+    F_w_1 = F_w[..., 1]
+    F_w_2 = F_w[..., 2]
+    tau_w_0 = tau_w[..., 0]
+    tau_w_1 = tau_w[..., 1]
+    tau_w_2 = tau_w[..., 2]
+    u_0 = u[..., 0]
+    u_1 = u[..., 1]
+    u_2 = u[..., 2]
+    u_3 = u[..., 3]
+    JOmega_0 = J_0*Omega_0
+    JOmega_1 = J_1*Omega_1
+    JOmega_2 = J_2*Omega_2
+    g_w_0 = -Omega_0*c_w + u_0
+    g_w_1 = -Omega_1*c_w + u_1
+    g_w_2 = -Omega_2*c_w + u_2
+    g_w_3 = -Omega_3*c_w + u_3
+    h_A_0 = JOmega_0
+    h_A_1 = JOmega_1
+    h_A_2 = JOmega_2
+    I_omega_0 = I_p_00*omega_b_0 + I_p_01*omega_b_1 + I_p_02*omega_b_2
+    I_omega_1 = I_p_01*omega_b_0 + I_p_11*omega_b_1 + I_p_12*omega_b_2
+    I_omega_2 = I_p_02*omega_b_0 + I_p_12*omega_b_1 + I_p_22*omega_b_2
+    H_b_0 = I_omega_0 + h_A_0
+    H_b_1 = I_omega_1 + h_A_1
+    H_b_2 = I_omega_2 + h_A_2
+    wxH_0 = -H_b_1*omega_b_2 + H_b_2*omega_b_1
+    wxH_1 = H_b_0*omega_b_2 - H_b_2*omega_b_0
+    wxH_2 = -H_b_0*omega_b_1 + H_b_1*omega_b_0
+    g_A_0 = g_w_0
+    g_A_1 = g_w_1
+    g_A_2 = g_w_2
+    t0 = ((1.0/2.0))*omega_b_0
+    t1 = ((1.0/2.0))*omega_b_1
+    t2 = ((1.0/2.0))*omega_b_2
+    t3 = 2*q_0
+    t4 = q_1*t3
+    t5 = 2*q_2*q_3
+    t6 = t4 + t5
+    t7 = q_2*t3
+    t8 = 2*q_1
+    t9 = q_3*t8
+    t10 = t7 - t9
+    t11 = 2*(q_2*q_2)
+    t12 = 2*(q_1*q_1) - 1
+    t13 = -t11 - t12
+    t14 = t7 + t9
+    t15 = q_3*t3
+    t16 = 2*q_1*q_2 - t15
+    t17 = 2*(q_0*q_0)
+    t18 = -t12 - t17
+    t19 = F_w_0*t14 + F_w_1*t16 + F_w_2*t18
+    t20 = t4 - t5
+    t21 = q_2*t8 + t15
+    t22 = -t11 - t17 + 1
+    t23 = F_w_0*t20 + F_w_1*t22 + F_w_2*t21
+    t24 = -g_A_0 + r_b_1*t19 - r_b_2*t23 + t10*tau_w_2 + t13*tau_w_0 + t6*tau_w_1 - wxH_0
+    t25 = F_w_0*t13 + F_w_1*t6 + F_w_2*t10
+    t26 = -g_A_1 - r_b_0*t19 + r_b_2*t25 + t20*tau_w_0 + t21*tau_w_2 + t22*tau_w_1 - wxH_1
+    t27 = -g_A_2 + r_b_0*t23 - r_b_1*t25 + t14*tau_w_0 + t16*tau_w_1 + t18*tau_w_2 - wxH_2
+    t28 = k_w_0*t24 + k_w_1*t26 + k_w_2*t27
+    t29 = k_w_3*t24 + k_w_4*t26 + k_w_5*t27
+    t30 = k_w_6*t24 + k_w_7*t26 + k_w_8*t27
+    q_dot_out = numpy.empty(batch + (4,)) if out is None or out[0] is None else out[0]
+    numpy.add(q_1 * t2 - q_2 * t1, q_3 * t0, out=q_dot_out[..., 0])
+    numpy.add(-q_0 * t2 + q_2 * t0, q_3 * t1, out=q_dot_out[..., 1])
+    numpy.add(q_0 * t1 - q_1 * t0, q_3 * t2, out=q_dot_out[..., 2])
+    numpy.subtract(-q_0 * t0 - q_1 * t1, q_2 * t2, out=q_dot_out[..., 3])
+    omega_dot_b_out = numpy.empty(batch + (3,)) if out is None or out[1] is None else out[1]
+    omega_dot_b_out[..., 0] = t28
+    omega_dot_b_out[..., 1] = t29
+    omega_dot_b_out[..., 2] = t30
+    Omega_dot_out = numpy.empty(batch + (4,)) if out is None or out[2] is None else out[2]
+    numpy.subtract(g_w_0 * k_w_9, t28, out=Omega_dot_out[..., 0])
+    numpy.subtract(g_w_1 * k_w_10, t29, out=Omega_dot_out[..., 1])
+    numpy.subtract(g_w_2 * k_w_11, t30, out=Omega_dot_out[..., 2])
+    numpy.multiply(g_w_3, k_w_12, out=Omega_dot_out[..., 3])
+    return q_dot_out, omega_dot_b_out, Omega_dot_out
+
+
 def wheels4_momentum(q, omega_b, Omega, I_p, A_b, J, *, out=None):
     """World angular momentum about the pivot of a body with 4 wheels, and the wheels' axial momenta.
 
@@ -4947,6 +5117,7 @@ KERNELS = {
     'wheels4_body_rhs': (wheels4_body_rhs, [('q', (4,)), ('omega_b', (3,)), ('Omega', (4,)), ('I_p', (3, 3)), ('A_b', (3, 4)), ('J', (4,)), ('r_b', (3,)), ('F_w', (3,)), ('tau_w', (3,)), ('u', (4,)), ('c_w', ())], [('q_dot', (4,)), ('omega_dot_b', (3,)), ('Omega_dot', (4,))]),
     'wheels4_coefficients': (wheels4_coefficients, [('I_p', (3, 3)), ('A_b', (3, 4)), ('J', (4,))], [('k_w', (13,))]),
     'wheels4_body_rhs_c': (wheels4_body_rhs_c, [('q', (4,)), ('omega_b', (3,)), ('Omega', (4,)), ('I_p', (3, 3)), ('A_b', (3, 4)), ('J', (4,)), ('k_w', (13,)), ('r_b', (3,)), ('F_w', (3,)), ('tau_w', (3,)), ('u', (4,)), ('c_w', ())], [('q_dot', (4,)), ('omega_dot_b', (3,)), ('Omega_dot', (4,))]),
+    'wheels4_on_axes_rhs_c': (wheels4_on_axes_rhs_c, [('q', (4,)), ('omega_b', (3,)), ('Omega', (4,)), ('I_p', (3, 3)), ('J', (4,)), ('k_w', (13,)), ('r_b', (3,)), ('F_w', (3,)), ('tau_w', (3,)), ('u', (4,)), ('c_w', ())], [('q_dot', (4,)), ('omega_dot_b', (3,)), ('Omega_dot', (4,))]),
     'wheels4_momentum': (wheels4_momentum, [('q', (4,)), ('omega_b', (3,)), ('Omega', (4,)), ('I_p', (3, 3)), ('A_b', (3, 4)), ('J', (4,))], [('L_body_w', (3,)), ('L_wheels_w', (3,)), ('h_w', (4,))]),
     'wheels4_motor': (wheels4_motor, [('command', (4,)), ('Omega', (4,)), ('torque_limit', ()), ('speed_limit', ()), ('cutoff', ())], [('u', (4,))]),
     'quat_error_chart_inverse': (quat_error_chart_inverse, [('q_ref', (4,)), ('dtheta', (3,))], [('q', (4,))]),

@@ -1449,6 +1449,74 @@ def wheels4_body_rhs_c(q, omega_b, Omega, I_p, A_b, J, k_w, r_b, F_w, tau_w, u, 
     return (q_1*t2 - q_2*t1 + q_3*t0, -q_0*t2 + q_2*t0 + q_3*t1, q_0*t1 - q_1*t0 + q_3*t2, -q_0*t0 - q_1*t1 - q_2*t2), (t28, t29, t30), (-A_b_00*t28 - A_b_10*t29 - A_b_20*t30 + g_w_0*k_w_9, -A_b_01*t28 - A_b_11*t29 - A_b_21*t30 + g_w_1*k_w_10, -A_b_02*t28 - A_b_12*t29 - A_b_22*t30 + g_w_2*k_w_11, -A_b_03*t28 - A_b_13*t29 - A_b_23*t30 + g_w_3*k_w_12)
 
 
+def wheels4_on_axes_rhs_c(q, omega_b, Omega, I_p, J, k_w, r_b, F_w, tau_w, u, c_w):
+    """wheels4_body_rhs_c of the default layout, A_b = [I | 0] substituted (floats; see the module)."""
+    q_0, q_1, q_2, q_3 = q
+    omega_b_0, omega_b_1, omega_b_2 = omega_b
+    Omega_0, Omega_1, Omega_2, Omega_3 = Omega
+    I_p_00, I_p_01, I_p_02, _, I_p_11, I_p_12, _, _, I_p_22 = I_p
+    J_0, J_1, J_2, J_3 = J
+    k_w_0, k_w_1, k_w_2, k_w_3, k_w_4, k_w_5, k_w_6, k_w_7, k_w_8, k_w_9, k_w_10, k_w_11, k_w_12 = k_w
+    r_b_0, r_b_1, r_b_2 = r_b
+    F_w_0, F_w_1, F_w_2 = F_w
+    tau_w_0, tau_w_1, tau_w_2 = tau_w
+    u_0, u_1, u_2, u_3 = u
+    JOmega_0 = J_0*Omega_0
+    JOmega_1 = J_1*Omega_1
+    JOmega_2 = J_2*Omega_2
+    g_w_0 = -Omega_0*c_w + u_0
+    g_w_1 = -Omega_1*c_w + u_1
+    g_w_2 = -Omega_2*c_w + u_2
+    g_w_3 = -Omega_3*c_w + u_3
+    h_A_0 = JOmega_0
+    h_A_1 = JOmega_1
+    h_A_2 = JOmega_2
+    I_omega_0 = I_p_00*omega_b_0 + I_p_01*omega_b_1 + I_p_02*omega_b_2
+    I_omega_1 = I_p_01*omega_b_0 + I_p_11*omega_b_1 + I_p_12*omega_b_2
+    I_omega_2 = I_p_02*omega_b_0 + I_p_12*omega_b_1 + I_p_22*omega_b_2
+    H_b_0 = I_omega_0 + h_A_0
+    H_b_1 = I_omega_1 + h_A_1
+    H_b_2 = I_omega_2 + h_A_2
+    wxH_0 = -H_b_1*omega_b_2 + H_b_2*omega_b_1
+    wxH_1 = H_b_0*omega_b_2 - H_b_2*omega_b_0
+    wxH_2 = -H_b_0*omega_b_1 + H_b_1*omega_b_0
+    g_A_0 = g_w_0
+    g_A_1 = g_w_1
+    g_A_2 = g_w_2
+    t0 = ((1.0/2.0))*omega_b_0
+    t1 = ((1.0/2.0))*omega_b_1
+    t2 = ((1.0/2.0))*omega_b_2
+    t3 = 2*q_0
+    t4 = q_1*t3
+    t5 = 2*q_2*q_3
+    t6 = t4 + t5
+    t7 = q_2*t3
+    t8 = 2*q_1
+    t9 = q_3*t8
+    t10 = t7 - t9
+    t11 = 2*(q_2*q_2)
+    t12 = 2*(q_1*q_1) - 1
+    t13 = -t11 - t12
+    t14 = t7 + t9
+    t15 = q_3*t3
+    t16 = 2*q_1*q_2 - t15
+    t17 = 2*(q_0*q_0)
+    t18 = -t12 - t17
+    t19 = F_w_0*t14 + F_w_1*t16 + F_w_2*t18
+    t20 = t4 - t5
+    t21 = q_2*t8 + t15
+    t22 = -t11 - t17 + 1
+    t23 = F_w_0*t20 + F_w_1*t22 + F_w_2*t21
+    t24 = -g_A_0 + r_b_1*t19 - r_b_2*t23 + t10*tau_w_2 + t13*tau_w_0 + t6*tau_w_1 - wxH_0
+    t25 = F_w_0*t13 + F_w_1*t6 + F_w_2*t10
+    t26 = -g_A_1 - r_b_0*t19 + r_b_2*t25 + t20*tau_w_0 + t21*tau_w_2 + t22*tau_w_1 - wxH_1
+    t27 = -g_A_2 + r_b_0*t23 - r_b_1*t25 + t14*tau_w_0 + t16*tau_w_1 + t18*tau_w_2 - wxH_2
+    t28 = k_w_0*t24 + k_w_1*t26 + k_w_2*t27
+    t29 = k_w_3*t24 + k_w_4*t26 + k_w_5*t27
+    t30 = k_w_6*t24 + k_w_7*t26 + k_w_8*t27
+    return (q_1*t2 - q_2*t1 + q_3*t0, -q_0*t2 + q_2*t0 + q_3*t1, q_0*t1 - q_1*t0 + q_3*t2, -q_0*t0 - q_1*t1 - q_2*t2), (t28, t29, t30), (g_w_0*k_w_9 - t28, g_w_1*k_w_10 - t29, g_w_2*k_w_11 - t30, g_w_3*k_w_12)
+
+
 def wheels4_momentum(q, omega_b, Omega, I_p, A_b, J):
     """World angular momentum about the pivot of a body with 4 wheels, and the wheels' axial momenta (floats; see the module)."""
     q_0, q_1, q_2, q_3 = q
@@ -1750,6 +1818,7 @@ READS = {
     'wheels4_body_rhs': {'q': (0, 1, 2, 3), 'omega_b': (0, 1, 2), 'Omega': (0, 1, 2, 3), 'I_p': (0, 1, 2, 3, 4, 5, 6, 7, 8), 'A_b': (0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11), 'J': (0, 1, 2, 3), 'r_b': (0, 1, 2), 'F_w': (0, 1, 2), 'tau_w': (0, 1, 2), 'u': (0, 1, 2, 3)},
     'wheels4_coefficients': {'I_p': (0, 1, 2, 3, 4, 5, 6, 7, 8), 'A_b': (0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11), 'J': (0, 1, 2, 3)},
     'wheels4_body_rhs_c': {'q': (0, 1, 2, 3), 'omega_b': (0, 1, 2), 'Omega': (0, 1, 2, 3), 'I_p': (0, 1, 2, 3, 4, 5, 6, 7, 8), 'A_b': (0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11), 'J': (0, 1, 2, 3), 'k_w': (0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12), 'r_b': (0, 1, 2), 'F_w': (0, 1, 2), 'tau_w': (0, 1, 2), 'u': (0, 1, 2, 3)},
+    'wheels4_on_axes_rhs_c': {'q': (0, 1, 2, 3), 'omega_b': (0, 1, 2), 'Omega': (0, 1, 2, 3), 'I_p': (0, 1, 2, 3, 4, 5, 6, 7, 8), 'J': (0, 1, 2, 3), 'k_w': (0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12), 'r_b': (0, 1, 2), 'F_w': (0, 1, 2), 'tau_w': (0, 1, 2), 'u': (0, 1, 2, 3)},
     'wheels4_momentum': {'q': (0, 1, 2, 3), 'omega_b': (0, 1, 2), 'Omega': (0, 1, 2, 3), 'I_p': (0, 1, 2, 3, 4, 5, 6, 7, 8), 'A_b': (0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11), 'J': (0, 1, 2, 3)},
     'wheels4_motor': {'command': (0, 1, 2, 3), 'Omega': (0, 1, 2, 3)},
     'quat_error_chart_inverse': {'q_ref': (0, 1, 2, 3), 'dtheta': (0, 1, 2)},
@@ -1836,6 +1905,7 @@ ZEROS = {
     'wheels4_body_rhs': {'q_dot': (), 'omega_dot_b': (), 'Omega_dot': ()},
     'wheels4_coefficients': {'k_w': ()},
     'wheels4_body_rhs_c': {'q_dot': (), 'omega_dot_b': (), 'Omega_dot': ()},
+    'wheels4_on_axes_rhs_c': {'q_dot': (), 'omega_dot_b': (), 'Omega_dot': ()},
     'wheels4_momentum': {'L_body_w': (), 'L_wheels_w': (), 'h_w': ()},
     'wheels4_motor': {'u': ()},
     'quat_error_chart_inverse': {'q': ()},

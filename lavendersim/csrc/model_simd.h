@@ -85,7 +85,7 @@ typedef void (*lv_mtile_fn)(lv_mtile *LV_RESTRICT t, const lv_effect_ref *refs, 
         LV_MT_LOAD(F, F, 3);                                                                            \
         LV_MT_LOAD(tau, TAU, 3);                                                                        \
         LV_MT_LOAD(u, U, LV_NW);                                                                        \
-        lv_wheels_rhs(y, r, kw, F, tau, u, k);                                                          \
+        lv_wheels_rhs(on_axes, y, r, kw, F, tau, u, k);                                                          \
         for (i = 0; i < 3; i++) k[LV_STATE_P_W + i] = k[LV_STATE_V_W + i] = 0.0;                        \
         COMBINE                                                                                         \
     }
@@ -131,12 +131,13 @@ typedef void (*lv_mtile_fn)(lv_mtile *LV_RESTRICT t, const lv_effect_ref *refs, 
 static int mtile_code_known(int code) { return lv_effect_n_params(code) >= 0; }
 
 /* n_steps RK4 steps of the m bodies of tile t (kind LV_MKIND, effects refs[0 .. n_refs-1], the same for
-   every lane): advance_model's step for each lane. */
-#define LV_DEFINE_MTILE(SUFFIX, ATTR)                                                                   \
-    ATTR LV_FLATTEN static void mtile_rk4_##SUFFIX(lv_mtile *LV_RESTRICT t, const lv_effect_ref *refs,  \
-                                                   long n_refs, int needs_v, int normalize, long m,     \
-                                                   double dt, long n_steps)                             \
+   every lane): advance_model's step for each lane; AXES: the lanes' wheels are on the default layout (LV_ON_AXES). */
+#define LV_DEFINE_MTILE1(NAME, ATTR, AXES)                                                              \
+    ATTR LV_FLATTEN static void NAME(lv_mtile *LV_RESTRICT t, const lv_effect_ref *refs,                \
+                                     long n_refs, int needs_v, int normalize, long m,                   \
+                                     double dt, long n_steps)                                           \
     {                                                                                                   \
+        const int on_axes = AXES;                                                                       \
         long s, b, e;                                                                                   \
         int i;                                                                                          \
         for (s = 0; s < n_steps; s++) {                                                                 \
@@ -160,22 +161,26 @@ static int mtile_code_known(int code) { return lv_effect_n_params(code) >= 0; }
             else { LV_MT_STAGE_RHS(LV_MT_LAST(0)) }                                                     \
         }                                                                                               \
     }
+#define LV_DEFINE_MTILE(SUFFIX, ATTR)                                                                   \
+    LV_DEFINE_MTILE1(mtile_rk4_##SUFFIX, ATTR, 0)                                                       \
+    LV_DEFINE_MTILE1(mtile_rk4_axes_##SUFFIX, ATTR, 1)
 
 LV_ISA_COPIES(LV_DEFINE_MTILE)
 
-static lv_mtile_fn mtile_rk4_fn(int isa)
+static lv_mtile_fn mtile_rk4_fn(int isa, int on_axes)
 {
     (void)isa;
-    return LV_ISA_PICK(isa, mtile_rk4);
+    return on_axes ? LV_ISA_PICK(isa, mtile_rk4_axes) : LV_ISA_PICK(isa, mtile_rk4);
 }
 
 /* Whether model body b may join the group of body b0 (b0 itself: whether it may lead one): kind LV_MKIND,
-   effects all built in with codes the tile dispatches, and the same effects as b0's (same rows, same
-   order). */
+   wheels on the default layout or not as b0's (lv_step_kind), effects all built in with codes the tile
+   dispatches, and the same effects as b0's (same rows, same order). */
 static int mtile_member(const lv_models *md, const lv_effect_index *ix, long b, long b0)
 {
     long k, n = ix->start[b + 1] - ix->start[b];
-    if ((int)md->rows[b * LV_MODEL_SIZE + LV_MODEL_KIND] != LV_MKIND) return 0;
+    const int kind = lv_step_kind(md->rows + b * LV_MODEL_SIZE);
+    if ((kind & ~LV_ON_AXES) != LV_MKIND || kind != lv_step_kind(md->rows + b0 * LV_MODEL_SIZE)) return 0;
     if (n != ix->start[b0 + 1] - ix->start[b0]) return 0;
     if ((ix->flags[b] & LV_EFFECT_USES_V) != (ix->flags[b0] & LV_EFFECT_USES_V)) return 0;
     for (k = 0; k < n; k++) {
@@ -316,7 +321,7 @@ static int advance_mtile_threads(double *state, const double *params, const lv_m
         sh[t].n_steps = n_steps;
         sh[t].head.limit = *limit;
         sh[t].head.best = *best;
-        sh[t].fn = mtile_rk4_fn(isa);
+        sh[t].fn = mtile_rk4_fn(isa, (lv_step_kind(md->rows + list[0] * LV_MODEL_SIZE) & LV_ON_AXES) != 0);
         sh[t].normalize = normalize;
         sh[t].dt = dt;
         sh[t].head.status = LV_OK;

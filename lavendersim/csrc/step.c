@@ -429,15 +429,37 @@ static inline void lv_wheels_coefficients(const double *r, double *kw)
     LV_WHEELS_COEFFICIENTS(r + LV_MODEL_I_P, r + LV_MODEL_A_B, r + LV_MODEL_J, kw);
 }
 
+/* A bit the step loops add to a wheeled body's kind (beside the row's LV_KIND_* bits): its row is the default
+   layout, A_b = [I | 0] as derive prints it (LV_WHEELS_ON_AXES_A_B), so its stages take the one wheel model's
+   on-axes print (LV_WHEELS_ON_AXES_RHS_C: the same equations with A_b substituted). */
+#define LV_ON_AXES 0x100
+
+/* The kind a step loop steps body row r with: its row's kind, plus LV_ON_AXES for wheels on the default layout. */
+static int lv_step_kind(const double *r)
+{
+    static const double axes[LV_MODEL_A_B_LEN] = LV_WHEELS_ON_AXES_A_B;
+    const int kind = (int)r[LV_MODEL_KIND];
+    int i;
+    if (!(kind & LV_KIND_WHEELS)) return kind;
+    for (i = 0; i < LV_MODEL_A_B_LEN; i++)
+        if (r[LV_MODEL_A_B + i] != axes[i]) return kind;
+    return kind | LV_ON_AXES;
+}
+
 /* The rotational part of d/dt [x, Omega] (q, omega_b, Omega) of a body with wheels, F and tau its effect
    sums (world), u its applied motor torques, kw its coefficients (lv_wheels_coefficients): the one wheel model
-   on the row's axes (padded slots stay at rest). */
-static inline void lv_wheels_rhs(const double *y, const double *r, const double *kw, const double *F,
+   on the row's axes (padded slots stay at rest), its on-axes print when on_axes (equal up to the sign of a zero). */
+static inline void lv_wheels_rhs(int on_axes, const double *y, const double *r, const double *kw, const double *F,
                                  const double *tau, const double *u, double *yd)
 {
-    LV_WHEELS_BODY_RHS_C(y + LV_STATE_Q, y + LV_STATE_OMEGA_B, y + LV_XS_OMEGA, r + LV_MODEL_I_P, r + LV_MODEL_A_B,
-                         r + LV_MODEL_J, kw, r + LV_MODEL_R_B, F, tau, u, r[LV_MODEL_C_W], yd + LV_STATE_Q,
-                         yd + LV_STATE_OMEGA_B, yd + LV_XS_OMEGA);
+    if (on_axes)
+        LV_WHEELS_ON_AXES_RHS_C(y + LV_STATE_Q, y + LV_STATE_OMEGA_B, y + LV_XS_OMEGA, r + LV_MODEL_I_P, r + LV_MODEL_J,
+                                kw, r + LV_MODEL_R_B, F, tau, u, r[LV_MODEL_C_W], yd + LV_STATE_Q,
+                                yd + LV_STATE_OMEGA_B, yd + LV_XS_OMEGA);
+    else
+        LV_WHEELS_BODY_RHS_C(y + LV_STATE_Q, y + LV_STATE_OMEGA_B, y + LV_XS_OMEGA, r + LV_MODEL_I_P, r + LV_MODEL_A_B,
+                             r + LV_MODEL_J, kw, r + LV_MODEL_R_B, F, tau, u, r[LV_MODEL_C_W], yd + LV_STATE_Q,
+                             yd + LV_STATE_OMEGA_B, yd + LV_XS_OMEGA);
 }
 
 /* lv_wheels_rhs as a call, for the one-body-at-a-time loops (advance_model, dopri5): flattened into advance_model's
@@ -449,7 +471,7 @@ __attribute__((noinline))
 static void lv_wheels_rhs_call(const double *y, const double *r, const double *kw, const double *F, const double *tau,
                                const double *u, double *yd)
 {
-    lv_wheels_rhs(y, r, kw, F, tau, u, yd);
+    lv_wheels_rhs(0, y, r, kw, F, tau, u, yd);
 }
 
 /* The torques the motors of a body with wheels apply this step (the printed motor line, per wheel). */
@@ -487,7 +509,9 @@ static inline void model_rhs_of(const double *y, const double *u, double m, cons
     }
     if (builtin) builtin_effect_sums(y, v, m, I_b, refs, n_refs, F, tau);
     else effect_sums(y, v, m, I_b, refs, n_refs, F, tau);
-    if (kind & LV_KIND_WHEELS) {
+    if (kind & LV_ON_AXES) {
+        lv_wheels_rhs(1, y, r, kw, F, tau, u, yd); /* inlined: fewer numbers than the general print */
+    } else if (kind & LV_KIND_WHEELS) {
         lv_wheels_rhs_call(y, r, kw, F, tau, u, yd);
     } else {
         lv_pivot_body_rhs(y + LV_STATE_Q, y + LV_STATE_OMEGA_B, r + LV_MODEL_I_P, r + LV_MODEL_R_B, F, tau,
@@ -587,6 +611,8 @@ LV_FLATTEN static long advance_model_rk4(double *state, const double *params, lo
                                          double *last)
 {
     switch (kind) {
+    case LV_KIND_JOINT | LV_KIND_WHEELS | LV_ON_AXES: return LV_MODEL_RK4(LV_KIND_JOINT | LV_KIND_WHEELS | LV_ON_AXES);
+    case LV_KIND_WHEELS | LV_ON_AXES: return LV_MODEL_RK4(LV_KIND_WHEELS | LV_ON_AXES);
     case LV_KIND_JOINT | LV_KIND_WHEELS: return LV_MODEL_RK4(LV_KIND_JOINT | LV_KIND_WHEELS);
     case LV_KIND_WHEELS: return LV_MODEL_RK4(LV_KIND_WHEELS);
     default: return LV_MODEL_RK4(LV_KIND_JOINT);
@@ -598,7 +624,7 @@ static long advance_model_body(double *state, const double *params, long b, cons
                                const lv_effect_index *ix, int integrator, int normalize, double dt, long n_steps,
                                double *last)
 {
-    const int kind = (int)md->rows[b * LV_MODEL_SIZE + LV_MODEL_KIND];
+    const int kind = lv_step_kind(md->rows + b * LV_MODEL_SIZE);
     long k;
     int builtin = 1;
     for (k = ix->start[b]; k < ix->start[b + 1]; k++)
