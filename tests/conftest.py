@@ -44,9 +44,9 @@ codegen.render() of those kernels); `derived_once` makes `codegen.render()` retu
 so `codegen.check(..., full=True)` and the CLI's `derive --check` compare against it instead of
 deriving again.
 
-Likewise the two sweeps of `lab all` are computed once per session, from an empty working directory:
-`quick_accuracy` and `quick_atlas` (`.result`, never saved; `.written`; `.saved(out)`: a saved copy, as
-`labs.run` writes it), shared by test_accuracy_lab, test_atlas and test_lab_library.
+Likewise the two sweeps of `lab all` and lab hard are computed once per session, from an empty working
+directory: `quick_accuracy`, `quick_atlas` and `hard_lab` (`.result`, never saved; `.written`; `.saved(out)`: a
+saved copy, as `labs.run` writes it), shared by test_accuracy_lab, test_atlas, test_hard_cases and test_lab_library.
 
 The `slow` set
 --------------
@@ -71,8 +71,8 @@ suite (no file or node id named: the README's `pytest`, .ci/run's `pytest -m slo
 as before) when files or tests are named, so `pytest tests/test_x.py` does not start two interpreters for one file.
 `-n 0` forces one process, `-n 2` two workers for any selection. Each worker computes the session fixtures it
 needs, so tests that share one run in the same worker (:func:`_xdist_groups`): every test of a module that uses
-`derivation`/`derived_once` in group "derivation", of a module that uses `quick_accuracy`/`quick_atlas` in group
-"labs", the tests of any other module together (its module fixtures computed once).
+`derivation`/`derived_once` in group "derivation", of a module that uses `quick_accuracy`/`quick_atlas`/`hard_lab`
+in group "labs", the tests of any other module together (its module fixtures computed once).
 """
 from __future__ import annotations
 
@@ -205,6 +205,12 @@ def quick_accuracy(tmp_path_factory):
 
 
 @pytest.fixture(scope="session")
+def hard_lab(tmp_path_factory):
+    """Lab hard, every case (C backend when built), computed once per session: see :func:`_computed_once`."""
+    return _computed_once(tmp_path_factory, "hard", backend="auto")
+
+
+@pytest.fixture(scope="session")
 def quick_atlas(tmp_path_factory):
     """The quick stability atlas (`lab all`'s), serial, computed once per session: see :func:`_computed_once`."""
     return _computed_once(tmp_path_factory, "atlas", quick=True, workers=1)
@@ -245,7 +251,7 @@ MAX_WORKERS = 2
 
 #: session fixtures (conftest's) whose users should share one worker -> the xdist group of their modules
 SHARED_GROUPS = {"derivation": "derivation", "derived_once": "derivation",
-                 "quick_accuracy": "labs", "quick_atlas": "labs"}
+                 "quick_accuracy": "labs", "quick_atlas": "labs", "hard_lab": "labs"}
 
 
 def _whole_suite(config) -> bool:

@@ -13,28 +13,23 @@ from matplotlib.figure import Figure
 
 from lavendersim import labs
 
-# quick options where a lab is slow: a few hard cases; the quick accuracy lab and atlas are the session's (conftest's
-# quick_accuracy and quick_atlas, computed once from an empty working directory for their own test modules too)
-HARD_CASES = ["intermediate_axis_flips", "dt_range", "euler_at_gimbal_lock"]
-SHARED = ("accuracy", "atlas")
-
-
-def _options(name):
-    return {"hard": {"cases": HARD_CASES}}.get(name, {})
+# the slow labs are the session's (conftest's quick_accuracy, quick_atlas and hard_lab, computed once from an empty
+# working directory for their own test modules too)
+SHARED = ("accuracy", "atlas", "hard")
 
 
 @pytest.fixture(scope="module")
-def results(tmp_path_factory, quick_accuracy, quick_atlas):
+def results(tmp_path_factory, quick_accuracy, quick_atlas, hard_lab):
     """Every lab computed once, from an empty working directory that must stay empty."""
     mp = pytest.MonkeyPatch()
     cwd = tmp_path_factory.mktemp("cwd")
     mp.chdir(cwd)
     try:
-        out = {name: labs.compute(name, backend="auto", **_options(name)) for name in labs.LABS if name not in SHARED}
+        out = {name: labs.compute(name, backend="auto") for name in labs.LABS if name not in SHARED}
         written = sorted(p.name for p in cwd.rglob("*"))
     finally:
         mp.undo()
-    for name, shared in zip(SHARED, (quick_accuracy, quick_atlas)):
+    for name, shared in zip(SHARED, (quick_accuracy, quick_atlas, hard_lab)):
         out[name] = shared.result
         written += shared.written
     assert set(out) == set(labs.LABS)
