@@ -919,9 +919,13 @@ static inline int dp_output_step(int v, const body_ctx *c, const double *cf, dou
 /* dopri5 with dense output (a body without wheels, lv_adaptive.dense given): the integrator keeps its own state z,
    `ahead` seconds past the output state, and steps on unclipped; an output time inside its last accepted substep (of
    length hl) is read off the continuous extension (Y0..Y4, derive/tableaux.py DP_DENSE), so an output interval
-   forces no substep. Carried between calls in the body's DENSE row. */
+   forces no substep. Carried between calls in the body's DENSE row. The extension Y is formed only when an output is
+   read (have_Y 0: from the last accepted substep's z0, raw end y1 and stages, which stay in the stage set that is not
+   current: the caller's k and Kb take turns, cur naming the current one, so nothing is copied but z0, y1 and f). */
 typedef struct {
     double z[LV_XS_SIZE], Y[5][LV_XS_SIZE], ahead, hl;
+    double Kb[7][LV_XS_SIZE], z0[LV_XS_SIZE], y1[LV_XS_SIZE];
+    int cur, have_Y;
 } dp_dense;
 
 /* The numbers an output interpolates: a body without a model its state, else [x, Omega]. */
@@ -965,8 +969,9 @@ static inline int dp_dense_step(int v, const body_ctx *c, const double *cf, doub
     int rejected = 0, ii;
     memcpy(yn, z->z, sizeof yn);
     while (z->ahead < 0.0) {
+        double (*kc)[LV_XS_SIZE] = z->cur ? z->Kb : k, (*kn)[LV_XS_SIZE] = z->cur ? k : z->Kb;
         const double hs = d->h;
-        const double e = dp_attempt(v, c, cf, z->z, hs, k, yn, d);
+        const double e = dp_attempt(v, c, cf, z->z, hs, kc, yn, d);
         double fac = dp_factor(e);
         d->nfev += 6;
         if (e <= 1.0) {
@@ -974,10 +979,13 @@ static inline int dp_dense_step(int v, const body_ctx *c, const double *cf, doub
             if (fac < LV_DP_FACMIN) fac = LV_DP_FACMIN;
             if (rejected && fac > 1.0) fac = 1.0;
             d->h = hs * fac;
-            dp_dense_coeffs(v, z->z, yn, hs, k, z);
+            memcpy(z->z0, z->z, DP_NOUT_OF(v) * sizeof(double));
+            memcpy(z->y1, yn, DP_NOUT_OF(v) * sizeof(double));
             if (!dp_accept(v, c, z->z, yn, normalize)) return LV_DIVERGED;
             LV_XS_UNROLL for (ii = 0; ii < DP_N_OF(v); ii++)   /* FSAL: f at the new (un-normalized) point */
-                k[0][DP_IDX_OF(v)[ii]] = k[6][DP_IDX_OF(v)[ii]];
+                kn[0][DP_IDX_OF(v)[ii]] = kc[6][DP_IDX_OF(v)[ii]];
+            z->cur ^= 1;
+            z->have_Y = 0;
             z->ahead += hs;
             z->hl = hs;
             rejected = 0;
@@ -990,6 +998,10 @@ static inline int dp_dense_step(int v, const body_ctx *c, const double *cf, doub
         if (d->h < LV_DP_HMIN_REL * dt || ++sub > LV_DP_MAX_SUBSTEPS) return LV_TOLERANCE;
     }
     if (!out) return LV_OK;
+    if (!z->have_Y) {
+        dp_dense_coeffs(v, z->z0, z->y1, z->hl, z->cur ? k : z->Kb, z);
+        z->have_Y = 1;
+    }
     memcpy(yo, y, sizeof yo);
     if (z->ahead == 0.0) {
         memcpy(yo, z->z, DP_NOUT_OF(v) * sizeof(double));
@@ -1013,6 +1025,8 @@ static void dp_dense_load(const body_ctx *c, const double *row, const double *y,
         memcpy(z->Y, row + LV_DENSE_COEF, sizeof z->Y);
         z->ahead = row[LV_DENSE_AHEAD];
         z->hl = row[LV_DENSE_H_LAST];
+        z->cur = 0;
+        z->have_Y = 1;
     } else {
         memset(z, 0, sizeof *z);
         memcpy(z->z, y, sizeof z->z);
@@ -1028,7 +1042,7 @@ static void dp_dense_store(double *row, const double *y, double k[][LV_XS_SIZE],
     row[LV_DENSE_AHEAD] = z->ahead;
     row[LV_DENSE_H_LAST] = z->hl;
     memcpy(row + LV_DENSE_Z, z->z, sizeof z->z);
-    memcpy(row + LV_DENSE_F, k[0], sizeof k[0]);
+    memcpy(row + LV_DENSE_F, z->cur ? z->Kb[0] : k[0], sizeof k[0]);
     memcpy(row + LV_DENSE_X_OUT, y, LV_STATE_SIZE * sizeof(double));
     memcpy(row + LV_DENSE_COEF, z->Y, sizeof z->Y);
 }
