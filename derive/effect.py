@@ -48,10 +48,14 @@ USER_CODE_BASE = 1000
 FLAG_USES_V = 1       # reads v_w (a jointed body then needs its kinematic COM velocity)
 FLAG_USES_OMEGA = 2   # reads omega_b
 FLAG_FORCE = 4        # adds a force (a body whose effects add none may use the torque-only right-hand side)
-FLAG_USES_STATE = 8   # reads any state value (without it the force and torque are constant over a step:
-                      # the SIMD batch evaluates them once per call, csrc/batch_simd.h)
+FLAG_USES_STATE = 8   # reads a state value p_w, q, v_w or omega_b (without it the force and torque are constant
+                      # over a step, the mass and inertia being constants: the SIMD batch evaluates them once per
+                      # call, csrc/batch_simd.h)
 # Version of the calling convention of printed effect functions (checked when a user library loads).
 ABI_VERSION = 1
+# Lanes per row of the C SIMD tiles (csrc/batch_simd.h): the row stride of the tile form of an effect, which
+# user libraries export as lvu_effect_tile<TILE_LANES>_<name>_<isa> (an older library without it: no tiles).
+TILE_LANES = 64
 _NAME = re.compile(r"^[a-z][a-z0-9_]*$")
 _PARAM_NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
 
@@ -243,8 +247,9 @@ class EffectDecl:
     @property
     def flags(self) -> int:
         used = self.state_inputs
+        varying = any(f.name in used for f in LAYOUT_STATE.fields)   # m and I_b (params) are constants
         return ((FLAG_USES_V if "v_w" in used else 0) | (FLAG_USES_OMEGA if "omega_b" in used else 0)
-                | (FLAG_FORCE if self.force_w is not None else 0) | (FLAG_USES_STATE if used else 0))
+                | (FLAG_FORCE if self.force_w is not None else 0) | (FLAG_USES_STATE if varying else 0))
 
     @property
     def n_params(self) -> int:

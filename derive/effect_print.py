@@ -86,6 +86,14 @@ def c_header(effects: list[tuple[int, E.EffectDecl]]) -> list[str]:
           "   body: p its parameters, x the body state, v_w the COM velocity it sees (the state's, or a joint's",
           "   kinematic one), m and I_b the body's mass and principal moments. */",
           f"typedef void (*lv_effect_fn)({C_ARGS});",
+          f"#define LV_EFFECT_TILE {E.TILE_LANES} /* lanes per row of a SIMD tile (the tile form below) */",
+          "/* The tile form of an effect: lanes b0 .. b1-1 of a struct of arrays (lane b of row k at [k][b]): x the",
+          "   states (LV_STATE_SIZE rows), p the effect's parameters (a row each), m the masses, I_b the principal",
+          "   moments (3 rows); adds into F and tau (3 rows each), each lane as lv_effect_fn adds for one body (v_w: the",
+          "   state's). User libraries export one per instruction set: lvu_effect_tile<LV_EFFECT_TILE>_<name>_<isa>. */",
+          "typedef void (*lv_effect_tile_fn)(long b0, long b1, const double (*x)[LV_EFFECT_TILE], "
+          "const double (*p)[LV_EFFECT_TILE], const double *m, const double (*I_b)[LV_EFFECT_TILE], "
+          "double (*F)[LV_EFFECT_TILE], double (*tau)[LV_EFFECT_TILE]);",
           "/* The dispatch, static inline int lv_effect_apply(int code, <the arguments above>), is defined in",
           "   kernels.c (compile kernels.c into the translation unit that steps, so it inlines): it adds built-in",
           "   effect `code`'s force and torque and returns 0, or returns -1 for a code that is not a built-in",
@@ -135,14 +143,57 @@ def c_source_real(effects: list[tuple[int, E.EffectDecl]], prefix: str, real: st
     return c
 
 
+TILE_ISAS = ("base", "avx2", "avx512")   # the tile form's copies (LV_ISA_BASE .. LV_ISA_AVX512 of csrc/step.h)
+
+
+def c_tile_function(decl: E.EffectDecl) -> list[str]:
+    """A user effect's tile form (kernels.h's lv_effect_tile_fn): its accumulating function lane by lane over rows
+    of E.TILE_LANES doubles, defined once per instruction set (LVU_TILE_COPIES) so that the compiler vectorizes the
+    lane loop at each width; flatten inlines the effect and its kernel into the loop."""
+    outs = [("F", "F") if n == E.OUT_FORCE else ("tau", "tau") for n, _ in decl.outputs]
+    n, body = E.TILE_LANES, []
+    rows = f"(*{{}})[{n}]"
+    body.append(f"    for (b = b0; b < b1; b++) {{")
+    body.append(f"        double xl[{STATE.size}], pl[{max(decl.n_params, 1)}], il[3], F_l[3] = {{0, 0, 0}}, "
+                "tau_l[3] = {0, 0, 0};")
+    body.append(f"        for (i = 0; i < {STATE.size}; i++) xl[i] = x[i][b];")
+    if decl.n_params:
+        body.append(f"        for (i = 0; i < {decl.n_params}; i++) pl[i] = p[i][b];")
+    body.append("        for (i = 0; i < 3; i++) il[i] = I_b[i][b];")
+    for acc, _ in outs:
+        body.append(f"        for (i = 0; i < 3; i++) {acc}_l[i] = {acc}[i][b];")
+    body.append(f"        lvu_effect_{decl.name}(pl, xl, xl + {STATE.offset('v_w')}, m[b], il, F_l, tau_l);")
+    for acc, _ in outs:
+        body.append(f"        for (i = 0; i < 3; i++) {acc}[i][b] = {acc}_l[i];")
+    body.append("    }")
+    args = (f"long b0, long b1, const double {rows.format('x')}, const double {rows.format('p')}, const double *m, "
+            f"const double {rows.format('I_b')}, double {rows.format('F')}, double {rows.format('tau')}")
+    macro = f"LVU_TILE_{decl.name.upper()}"
+    lines = [f"#define {macro}(SUFFIX, ATTR) \\",
+             f"LV_EXPORT ATTR LVU_FLATTEN void lvu_effect_tile{n}_{decl.name}_##SUFFIX({args}) \\",
+             "{ \\", "    long b; \\", "    int i; \\"]
+    lines += [ln + " \\" for ln in body] + ["}", f"LVU_TILE_COPIES({macro})"]
+    return [f"/* {decl.name} over tile lanes (one copy per instruction set) */"] + lines
+
+
 def c_user_source(effects: list[E.EffectDecl], prefix: str) -> list[str]:
-    """A user set's exported effect functions (lvu_effect_<name>) and its ABI marker."""
+    """A user set's exported effect functions (lvu_effect_<name>), their tile forms and its ABI marker."""
     c = ["/* ---- User effects: exported accumulating functions (called by lavendersim's C stepping loop) --- */",
          '#if defined(__GNUC__) || defined(__clang__)', '#define LV_EXPORT __attribute__((visibility("default")))',
          "#else", "#define LV_EXPORT", "#endif",
          f"LV_EXPORT const int lvu_abi_version = {E.ABI_VERSION};", ""]
     for d in effects:
         c += c_effect_functions(d, prefix, f"lvu_effect_{d.name}", "LV_EXPORT ") + [""]
+    if effects:
+        c += ["/* ---- The effects' tile forms (lv_effect_tile_fn), for lavendersim's SIMD tiles ---------------- */",
+              "#if (defined(__GNUC__) || defined(__clang__)) && defined(__x86_64__)",
+              "#define LVU_TILE_COPIES(DEF) DEF(base, ) DEF(avx2, __attribute__((target(\"avx2\")))) "
+              "DEF(avx512, __attribute__((target(\"avx512f\"))))",
+              "#else", "#define LVU_TILE_COPIES(DEF) DEF(base, )", "#endif",
+              "#if defined(__GNUC__) || defined(__clang__)", "#define LVU_FLATTEN __attribute__((flatten))",
+              "#else", "#define LVU_FLATTEN", "#endif", ""]
+        for d in effects:
+            c += c_tile_function(d) + [""]
     return c
 
 
@@ -243,7 +294,9 @@ def meta_module(effects: Sequence[tuple[int | None, E.EffectDecl]], header: str,
              f"ROW_MIN_PARAMS = {E.ROW_MIN_PARAMS}", f"USER_CODE_BASE = {E.USER_CODE_BASE}",
              f"ABI_VERSION = {E.ABI_VERSION}",
              f"FLAG_USES_V, FLAG_USES_OMEGA, FLAG_FORCE = {E.FLAG_USES_V}, {E.FLAG_USES_OMEGA}, {E.FLAG_FORCE}",
-             f"FLAG_USES_STATE = {E.FLAG_USES_STATE}"]
+             f"FLAG_USES_STATE = {E.FLAG_USES_STATE}",
+             f"TILE_LANES, TILE_ISAS = {E.TILE_LANES}, {TILE_ISAS!r}  # a user effect's tile forms: "
+             "lvu_effect_tile<TILE_LANES>_<name>_<isa>"]
     for k, v in (extra or {}).items():
         lines.append(f"{k.upper()} = {v!r}")
     lines += ["", "EFFECTS = ("]

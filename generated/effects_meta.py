@@ -10,6 +10,7 @@ USER_CODE_BASE = 1000
 ABI_VERSION = 1
 FLAG_USES_V, FLAG_USES_OMEGA, FLAG_FORCE = 1, 2, 4
 FLAG_USES_STATE = 8
+TILE_LANES, TILE_ISAS = 64, ('base', 'avx2', 'avx512')  # a user effect's tile forms: lvu_effect_tile<TILE_LANES>_<name>_<isa>
 
 EFFECTS = (
     {'name': 'applied_torque',
@@ -75,7 +76,7 @@ EFFECTS = (
      'n_params': 3,
      'outputs': ('F_w',),
      'state_inputs': ('m',),
-     'flags': 12,
+     'flags': 4,
      'kernel': 'effect_gravity',
      'decay_rate': None},
     {'name': 'linear_damping',

@@ -3352,7 +3352,7 @@ int lv_effect_flags(int code)
     switch (code) {
     case LV_EFFECT_APPLIED_TORQUE: return 0;
     case LV_EFFECT_FORCE_AT_POINT: return 12;
-    case LV_EFFECT_GRAVITY: return 12;
+    case LV_EFFECT_GRAVITY: return 4;
     case LV_EFFECT_LINEAR_DAMPING: return 13;
     case LV_EFFECT_ANGULAR_DAMPING: return 10;
     default: return -1;

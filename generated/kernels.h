@@ -687,6 +687,12 @@ void lv_validity_wdt(const double *omega_b, double scale, double *omega_norm, do
    body: p its parameters, x the body state, v_w the COM velocity it sees (the state's, or a joint's
    kinematic one), m and I_b the body's mass and principal moments. */
 typedef void (*lv_effect_fn)(const double *p, const double *x, const double *v_w, double m, const double *I_b, double *F, double *tau);
+#define LV_EFFECT_TILE 64 /* lanes per row of a SIMD tile (the tile form below) */
+/* The tile form of an effect: lanes b0 .. b1-1 of a struct of arrays (lane b of row k at [k][b]): x the
+   states (LV_STATE_SIZE rows), p the effect's parameters (a row each), m the masses, I_b the principal
+   moments (3 rows); adds into F and tau (3 rows each), each lane as lv_effect_fn adds for one body (v_w: the
+   state's). User libraries export one per instruction set: lvu_effect_tile<LV_EFFECT_TILE>_<name>_<isa>. */
+typedef void (*lv_effect_tile_fn)(long b0, long b1, const double (*x)[LV_EFFECT_TILE], const double (*p)[LV_EFFECT_TILE], const double *m, const double (*I_b)[LV_EFFECT_TILE], double (*F)[LV_EFFECT_TILE], double (*tau)[LV_EFFECT_TILE]);
 /* The dispatch, static inline int lv_effect_apply(int code, <the arguments above>), is defined in
    kernels.c (compile kernels.c into the translation unit that steps, so it inlines): it adds built-in
    effect `code`'s force and torque and returns 0, or returns -1 for a code that is not a built-in

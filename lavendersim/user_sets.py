@@ -27,7 +27,9 @@ from . import validate as V
 from .errors import PicklableError
 
 ENV = "LAVENDERSIM_USER_DIR"
-CFLAGS = ["-O3", "-std=c99", "-fno-math-errno", "-fPIC", "-shared", "-fvisibility=hidden"]  # never -ffast-math
+# never -ffast-math; -fno-semantic-interposition: the exported effects inline into their tile forms (vectorized)
+CFLAGS = ["-O3", "-std=c99", "-fno-math-errno", "-ffp-contract=off", "-fno-semantic-interposition", "-fPIC", "-shared",
+          "-fvisibility=hidden"]
 SOURCES = ("kernels.c", "kernels.h")
 PRINTED = ("kernels.h", "kernels.c", "kernels_numpy.py", "kernels_casadi.py", "effects_meta.py", "EQUATIONS.md")
 MANIFEST = "manifest.json"
@@ -320,6 +322,18 @@ class UserSet:
         address = ctypes.cast(fn, ctypes.c_void_p).value
         assert address is not None, effect   # (a symbol dlsym found is never NULL)
         return address
+
+
+    def c_tile_functions(self, effect: str) -> tuple[int, int, int]:
+        """Addresses of an effect's tile form for the C SIMD tiles, per instruction set (base, avx2, avx512);
+        0 where the library has none (a library built before tile forms, or a copy this platform lacks)."""
+        from .generated import effects_meta
+        lib = self.library()
+        out = []
+        for isa in effects_meta.TILE_ISAS:
+            fn = getattr(lib, f"lvu_effect_tile{effects_meta.TILE_LANES}_{effect}_{isa}", None)
+            out.append(0 if fn is None else ctypes.cast(fn, ctypes.c_void_p).value or 0)
+        return out[0], out[1], out[2]
 
 
 def _file_id(st: os.stat_result) -> tuple[int, int, int, int]:

@@ -289,6 +289,40 @@ def test_c_and_numpy_agree_bitwise_with_built_in_effects_around(guide):
     assert np.array_equal(xs[0], xs[1])
 
 
+@pytest.mark.parametrize("n", [3, 37])
+def test_user_effects_on_the_simd_tiles_are_the_scalar_path_and_numpy_bitwise(guide, n):
+    """Many bodies under the guide's effects (and a built-in one) take the C effect tiles, the user effects through
+    their printed tile forms (one per instruction set): every instruction set gives the scalar path's and NumPy's
+    bits."""
+    import platform
+
+    from lavendersim import _lavender_c as C
+    from lavendersim.backends.c_backend import user_effect_table
+    rng = np.random.default_rng(n)
+    s = lv.Scene()
+    for i in range(n):
+        s.add_body(lv.Body.box(f"b{i}", 1.0 + rng.random(), tuple(0.1 + rng.random(3)), p_w=tuple(rng.standard_normal(3)),
+                               q=tuple(rng.standard_normal(4)), v_w=tuple(rng.standard_normal(3)),
+                               omega_b=tuple(rng.standard_normal(3))))
+    s.add_effect("gravity_gradient", mu=MU, center_w=CENTER)
+    s.add_effect("angular_damping", c=0.02)
+    s.add_effect("quadratic_drag", rho=RHO, cd_area=CDA)
+    ref = lv.Sim(s, dt=1e-3, integrator="rk4", backend="numpy")
+    ref.run(60)
+    table = user_effect_table(np.asarray(s.arrays()[2]))
+    assert table.shape[1] == 6
+    if platform.machine() in ("x86_64", "AMD64"):
+        assert (table[:, 3:] != 0).all()   # every effect's tile form, at every instruction set
+    try:
+        for level in range(C.isa(-1)[2] + 1):
+            C.isa(level)
+            sim = lv.Sim(s, dt=1e-3, integrator="rk4", backend="c")
+            sim.run(60)
+            assert np.array_equal(sim.x, ref.x), C.isa()[1]
+    finally:
+        C.isa(-1)
+
+
 # ---------------------------------------------------------------- step 4: CasADi
 
 def test_the_guides_casadi_example_runs(guide):

@@ -48,7 +48,8 @@ def test_isa_reports_names_and_caps_at_the_best(levels):
         C.isa(7)
 
 
-@pytest.mark.parametrize("n", [16, 17, 67, 131])        # 64 bodies per tile; lanes of 2, 4, 8
+@pytest.mark.parametrize("n", [2, 3, 4, 5, 8, 16, 17, 67, 131])   # 64 bodies per tile; lanes of 2, 4, 8; padded
+                                                                # small tiles
 @pytest.mark.parametrize("normalize", [True, False])
 def test_every_isa_is_the_scalar_path_bitwise(levels, n, normalize):
     sc = _scene(n, seed=n)
@@ -189,6 +190,73 @@ def test_divergence_in_a_constant_effect_tile_is_reported_as_on_the_scalar_path(
     for i in range(n):
         big = 1e296 * (1.0 + bad.index(i)) if i in bad else 1e-3
         sc.add_effect("applied_torque", body=f"b{i}", torque_w=[big, -big, big])
+    x0, params, effects = sc.arrays()
+    x0 = np.array(x0, dtype=np.float64, copy=True)
+    params = np.ascontiguousarray(params, dtype=np.float64)
+    effects = np.ascontiguousarray(effects, dtype=np.float64)
+    reports = []
+    for level in levels:
+        C.isa(level)
+        x = x0.copy()
+        status, step, body = C.simulate(x, params, effects, C.RK4, 1, 1e-2, 50)
+        reports.append((status, step, body, x[body].copy()))
+    assert reports[0][0] == 1 and reports[0][2] in bad and np.isfinite(reports[0][3]).all(), reports[0][:3]
+    for r in reports[1:]:
+        assert r[:3] == reports[0][:3]
+        np.testing.assert_array_equal(r[3], reports[0][3])
+
+
+def _state_effect_scene(n: int, seed: int, per_body: bool) -> lv.Scene:
+    """n random bodies under effects that read the state (the effect tiles): every body the same codes in the same
+    order, scene-wide (per_body False) or each its own parameters (per_body True)."""
+    sc = _scene(n, seed)
+    rng = np.random.default_rng(seed + 200)
+    if not per_body:
+        sc.add_effect("gravity", g_w=[0.0, 0.0, -9.81])
+        sc.add_effect("linear_damping", c=0.3)
+        sc.add_effect("angular_damping", c=2e-3)
+        return sc
+    for i in range(n):
+        sc.add_effect("angular_damping", body=f"b{i}", c=1e-3 * (0.05 + rng.random()))
+        sc.add_effect("force_at_point", body=f"b{i}", r_b=list(0.1 * rng.standard_normal(3)),
+                      F_w=list(1e-2 * rng.standard_normal(3)))
+        sc.add_effect("linear_damping", body=f"b{i}", c=rng.random())
+    return sc
+
+
+@pytest.mark.parametrize("n", [2, 5, 8, 16, 33, 67, 131])
+@pytest.mark.parametrize("normalize", [True, False])
+@pytest.mark.parametrize("per_body", [False, True])
+def test_state_reading_effects_on_the_tiles_are_the_scalar_path_bitwise(levels, n, normalize, per_body):
+    """Bodies with the same built-in effects that read the state take the effect tiles (stage passes); every level
+    gives the scalar path's bits, and the effects do act (the bodies end elsewhere than free ones)."""
+    sc = _state_effect_scene(n, 7 * n, per_body)
+    want = _run(sc, 0, 120, normalize)
+    assert np.isfinite(want).all()
+    for level in levels[1:]:
+        np.testing.assert_array_equal(_run(sc, level, 120, normalize), want, err_msg=C.isa(level)[1])
+    free = _run(_scene(n, 7 * n), 0, 120, normalize)
+    assert np.abs(want[:, 7:13] - free[:, 7:13]).min(axis=1).min() > 1e-9
+
+
+def test_state_reading_effect_tiles_with_two_threads(levels, two_threads):
+    sc = _state_effect_scene(300, 12, per_body=True)
+    want = _run(sc, 0, 60)
+    for threads in (1, 2):
+        C.threads(threads)
+        np.testing.assert_array_equal(_run(sc, levels[-1], 60), want, err_msg=f"{threads} threads")
+
+
+@pytest.mark.parametrize("bad", [[29], [40, 5], [63, 64]])
+def test_divergence_in_an_effect_tile_is_reported_as_on_the_scalar_path(levels, bad):
+    """A huge force at a point overflows within a few steps: every level reports the same step, body and last
+    finite state."""
+    n = 70
+    sc = _scene(n, seed=16)
+    for i in range(n):
+        big = 1e296 * (1.0 + bad.index(i)) if i in bad else 1e-3
+        sc.add_effect("force_at_point", body=f"b{i}", r_b=[0.1, 0.2, 0.3], F_w=[big, -big, big])
+        sc.add_effect("angular_damping", body=f"b{i}", c=0.1)
     x0, params, effects = sc.arrays()
     x0 = np.array(x0, dtype=np.float64, copy=True)
     params = np.ascontiguousarray(params, dtype=np.float64)

@@ -283,11 +283,12 @@ def user_effect_table(effects: np.ndarray) -> np.ndarray | None:
     user = codes[codes >= E.USER_CODE_BASE]
     if not user.size:
         return None
-    table = np.zeros((int(user.max()) - E.USER_CODE_BASE + 1, 3), dtype=np.int64)
+    table = np.zeros((int(user.max()) - E.USER_CODE_BASE + 1, 6), dtype=np.int64)
     for code in user:
         spec = E.spec_for_code(int(code))  # LavenderInputError for a code no declaration has
         assert spec.user_set is not None   # (a user code)
-        table[code - E.USER_CODE_BASE] = (spec.user_set.c_function(spec.name), spec.n_params, spec.flags)
+        table[code - E.USER_CODE_BASE] = (spec.user_set.c_function(spec.name), spec.n_params, spec.flags,
+                                          *spec.user_set.c_tile_functions(spec.name))
     return table
 
 

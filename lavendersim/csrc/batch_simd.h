@@ -1,8 +1,10 @@
 /* LavenderSim batched RK4 on struct-of-arrays tiles, vectorized by the compiler, with one copy per
-   instruction set chosen at run time: torque-free bodies, and bodies whose effects all read no state
+   instruction set chosen at run time: torque-free bodies; bodies whose effects all read no state
    (LV_EFFECT_USES_STATE clear: applied_torque, gravity), whose force and torque sums are evaluated once
    per call with the generated effect dispatch (effect_sums) and passed to the generated
-   lv_rigid_body_rhs_torque / lv_rigid_body_rhs in every stage, as the scalar path does.
+   lv_rigid_body_rhs_torque / lv_rigid_body_rhs in every stage, as the scalar path does; and bodies whose
+   effects read the state, all with the same effects (the effect tiles, LV_TILE_RK4_FX: stage passes, each
+   effect a lane loop of its generated form, a user effect its printed tile form).
 
    Speed (lavendersim bench, "SIMD batch"): x86's divider is not pipelined like the adders (AVX-512
    vdivpd: one per ~16 cycles for 8 lanes). The printed right-hand sides divide by nothing: the tile
@@ -30,19 +32,42 @@
 #ifndef LAVENDERSIM_BATCH_SIMD_H
 #define LAVENDERSIM_BATCH_SIMD_H
 
-/* Bodies per tile: 13 + 13 (snapshot) + 6 (c_b) + 7 (P) rows of LV_TILE doubles stay in L1 over a chunk of steps. */
-#define LV_TILE 64
-/* Groups of torque-free RK4 bodies smaller than this take the scalar block path (advance_free_rk4). */
+/* Bodies per tile: 13 + 13 (snapshot) + 6 (c_b) + 7 (P) rows of LV_TILE doubles stay in L1 over a chunk of steps
+   (kernels.h's LV_EFFECT_TILE: the row stride of the effects' tile forms, lv_effect_tile_fn). */
+#define LV_TILE LV_EFFECT_TILE
+/* Groups of plain RK4 bodies smaller than this take the scalar block path (advance_free_rk4); a smaller tile is
+   padded to LV_TILE_PAD(m) lanes (copies of its last body, never written back), so that the vector loop covers it
+   (the compiler's scalar remainder loop costs ~6x a lane): N = 2 .. 8 bodies ran on the scalar blocks at 35-57 ns
+   per body-step against 6.3 on the tiles. */
+#define LV_TILE_MIN 2
+#define LV_TILE_PAD(m) ((m) <= 4 ? 4 : ((m) + 7) / 8 * 8 < LV_TILE ? ((m) + 7) / 8 * 8 : LV_TILE)
+/* Groups of model bodies smaller than this stay off the model tiles (model_simd.h). */
 #define LV_SOA_MIN 16
 
-/* Rows of a tile's constant effect sums P[k][b] (bodies whose effects all read no state, see
-   LV_EFFECT_USES_STATE): the mass, then the force and the torque (world) summed over the body's effects
-   in table order, as effect_sums adds them at every stage (the same inputs give the same bits, so
-   summing them once per call changes nothing). */
-enum { LV_TP_M = 0, LV_TP_F = 1, LV_TP_TAU = 4, LV_TP_ROWS = 7 };
+/* Rows of a tile's per-body numbers P[k][b]: the mass, then the force and the torque (world) summed over the
+   body's effects in table order when they all read no state (LV_EFFECT_USES_STATE clear), as effect_sums adds
+   them at every stage (the same inputs give the same bits, so summing them once per call changes nothing), then
+   the principal moments (the effects' I_b input). */
+enum { LV_TP_M = 0, LV_TP_F = 1, LV_TP_TAU = 4, LV_TP_I = 7, LV_TP_ROWS = 10 };
+
+/* Effects that read the state, on the tiles (effect tiles): every body of a tile has the same effects in the same
+   order (codes[0 .. n_eff-1]; their parameters may differ per body), whose parameters are the rows
+   EP[off[e] .. off[e] + n_params - 1] of the tile (lane b: body b's row of effect e); a user effect is called
+   through its tile form utile[e] (lv_effect_tile_fn, printed by derive into the user's library). */
+#define LV_TE_EFFECTS 8   /* at most this many effects per body */
+#define LV_TE_PARAMS 32   /* at most this many parameters over a body's effects */
+#define LV_TE_LANES 32    /* bodies per stage pass: ~60 rows of LV_TE_LANES doubles stay in L1 */
+typedef struct {
+    int n_eff;
+    int codes[LV_TE_EFFECTS];
+    int off[LV_TE_EFFECTS];
+    lv_effect_tile_fn utile[LV_TE_EFFECTS];
+    double EP[LV_TE_PARAMS + LV_EFFECT_ROW_MIN_PARAMS][LV_TILE]; /* + room for a lane's full-width load */
+} lv_tile_fx;
 
 typedef void (*lv_tile_fn)(double (*LV_RESTRICT T)[LV_TILE], const double (*LV_RESTRICT J)[LV_TILE],
-                           const double (*LV_RESTRICT P)[LV_TILE], long m, double dt, long n_steps);
+                           const double (*LV_RESTRICT P)[LV_TILE], const lv_tile_fx *LV_RESTRICT fx, long m,
+                           double dt, long n_steps);
 
 /* One lane's right-hand side, per kind (LV_RHS_*): in, out, cf (the Euler coefficients c_b of body b); P as above. */
 #define LV_TILE_RHS_FREE(in, out) lv_rigid_body_rhs_free_c(in, cf, out)
@@ -66,6 +91,7 @@ typedef void (*lv_tile_fn)(double (*LV_RESTRICT T)[LV_TILE], const double (*LV_R
     {                                                                                                   \
         long s, b;                                                                                      \
         int i;                                                                                          \
+        (void)fx;                                                                                       \
         for (s = 0; s < n_steps; s++) {                                                                 \
             for (b = 0; b < m; b++) {                                                                   \
                 double x[LV_STATE_SIZE], k[LV_STATE_SIZE], acc[LV_STATE_SIZE], tmp[LV_STATE_SIZE],      \
@@ -80,31 +106,125 @@ typedef void (*lv_tile_fn)(double (*LV_RESTRICT T)[LV_TILE], const double (*LV_R
         }                                                                                               \
     }
 
+/* The effect tiles' RK4 step, cut into lane loops (stage passes) as model_simd.h does: per stage, the effect sums at
+   the stage input (F, TAU start at 0; one lane loop per effect, its code known outside the loop, so the
+   generated dispatch lv_effect_apply inlines to that effect alone; effects add in table order), then the right-hand
+   side and the RK4 combination (LV_RK4_UPDATE, tableaux.h): every lane does the scalar path's IEEE operations in
+   its order (advance_free_rk4 with effect_sums), so results are bitwise its. X: a stage's input, A: the weighted
+   sum of the stage derivatives. */
+#define LV_TE_CASE(CODE)                                                                                \
+    case CODE:                                                                                          \
+        for (b = b0; b < b1; b++) {                                                                     \
+            double x[LV_STATE_SIZE], p[LV_EFFECT_ROW_MIN_PARAMS], f[3], t[3], I[3];                     \
+            for (i = 0; i < LV_STATE_SIZE; i++) x[i] = in[i][b];                                        \
+            for (i = 0; i < LV_EFFECT_ROW_MIN_PARAMS; i++) p[i] = ep[i][b];                             \
+            for (i = 0; i < 3; i++) {                                                                   \
+                f[i] = F[i][b];                                                                         \
+                t[i] = TAU[i][b];                                                                       \
+                I[i] = P[LV_TP_I + i][b];                                                               \
+            }                                                                                           \
+            (void)lv_effect_apply(CODE, p, x, x + LV_STATE_V_W, P[LV_TP_M][b], I, f, t);                \
+            for (i = 0; i < 3; i++) {                                                                   \
+                F[i][b] = f[i];                                                                         \
+                TAU[i][b] = t[i];                                                                       \
+            }                                                                                           \
+        }                                                                                               \
+        break;
+/* The effect sums at the stage input IN (T, the step's start, or X), one lane loop per effect. */
+#define LV_TE_SUMS(IN)                                                                                  \
+    for (i = 0; i < 3; i++)                                                                             \
+        for (b = b0; b < b1; b++) F[i][b] = TAU[i][b] = 0.0;                                            \
+    for (e = 0; e < fx->n_eff; e++) {                                                                   \
+        const double (*ep)[LV_TILE] = fx->EP + fx->off[e], (*in)[LV_TILE] = (const double (*)[LV_TILE])IN; \
+        switch (fx->codes[e]) {                                                                         \
+        LV_EFFECT_BUILTINS(LV_TE_CASE)                                                                  \
+        default: fx->utile[e](b0, b1, in, ep, P[LV_TP_M], P + LV_TP_I, F, TAU); break;                   \
+        }                                                                                               \
+    }
+#define LV_TE_RHS_TORQUE (void)f, lv_rigid_body_rhs_torque_c(x, cf, t, k)
+#define LV_TE_RHS_FULL lv_rigid_body_rhs_c(x, P[LV_TP_M][b], cf, f, t, k)
+/* Stage STAGE's right-hand side at its input IN and the RK4 combination: the next stage's input X and the weighted
+   sum A, or (stage 4) the step's end in T. */
+#define LV_TE_STAGE(STAGE, IN, RHS, NORMALIZE)                                                          \
+    for (b = b0; b < b1; b++) {                                                                         \
+        double x[LV_STATE_SIZE], k[LV_STATE_SIZE], cf[LV_EULER_SIZE], f[3], t[3];                       \
+        for (i = 0; i < LV_STATE_SIZE; i++) x[i] = IN[i][b];                                            \
+        for (i = 0; i < LV_EULER_SIZE; i++) cf[i] = J[i][b];                                            \
+        for (i = 0; i < 3; i++) {                                                                       \
+            f[i] = F[i][b];                                                                             \
+            t[i] = TAU[i][b];                                                                           \
+        }                                                                                               \
+        RHS;                                                                                            \
+        if (STAGE < 4) {                                                                                \
+            for (i = 0; i < LV_STATE_SIZE; i++) (void)LV_RK4_UPDATE(double, STAGE, dt, T[i][b], k[i], A[i][b], X[i][b]); \
+        } else {                                                                                        \
+            double xn[LV_STATE_SIZE];                                                                   \
+            for (i = 0; i < LV_STATE_SIZE; i++) (void)LV_RK4_UPDATE(double, 4, dt, T[i][b], k[i], A[i][b], xn[i]); \
+            if (NORMALIZE) lv_quat_normalize(xn + LV_STATE_Q, xn + LV_STATE_Q);                        \
+            for (i = 0; i < LV_STATE_SIZE; i++) T[i][b] = xn[i];                                        \
+        }                                                                                               \
+    }
+#define LV_TILE_RK4_FX(NORMALIZE, KIND)                                                                 \
+    {                                                                                                   \
+        double X[LV_STATE_SIZE][LV_TILE], A[LV_STATE_SIZE][LV_TILE], F[3][LV_TILE], TAU[3][LV_TILE];    \
+        long s, b, b0, b1;                                                                              \
+        int i, e, st;                                                                                   \
+        for (b0 = 0; b0 < m; b0 = b1) {                                                                 \
+            b1 = m - b0 < LV_TE_LANES ? m : b0 + LV_TE_LANES;                                           \
+            for (s = 0; s < n_steps; s++) {                                                             \
+                LV_TE_SUMS(T)                                                                           \
+                LV_TE_STAGE(1, T, LV_TE_RHS_##KIND, NORMALIZE)                                          \
+                for (st = 2; st <= 4; st++) {                                                           \
+                    LV_TE_SUMS(X)                                                                       \
+                    if (st == 2) { LV_TE_STAGE(2, X, LV_TE_RHS_##KIND, NORMALIZE) }                     \
+                    else if (st == 3) { LV_TE_STAGE(3, X, LV_TE_RHS_##KIND, NORMALIZE) }                \
+                    else { LV_TE_STAGE(4, X, LV_TE_RHS_##KIND, NORMALIZE) }                             \
+                }                                                                                       \
+            }                                                                                           \
+        }                                                                                               \
+    }
+
 #define LV_DEFINE_TILE(NAME, ATTR, NORMALIZE, KIND)                                                     \
     ATTR LV_FLATTEN static void NAME(double (*LV_RESTRICT T)[LV_TILE], const double (*LV_RESTRICT J)[LV_TILE], \
-                                     const double (*LV_RESTRICT P)[LV_TILE], long m, double dt, long n_steps) \
+                                     const double (*LV_RESTRICT P)[LV_TILE], const lv_tile_fx *LV_RESTRICT fx, \
+                                     long m, double dt, long n_steps)                                   \
     LV_TILE_RK4(NORMALIZE, LV_TILE_LOAD_##KIND, LV_TILE_RHS_##KIND)
+#define LV_DEFINE_TILE_FX(NAME, ATTR, NORMALIZE, KIND)                                                  \
+    ATTR LV_FLATTEN static void NAME(double (*LV_RESTRICT T)[LV_TILE], const double (*LV_RESTRICT J)[LV_TILE], \
+                                     const double (*LV_RESTRICT P)[LV_TILE], const lv_tile_fx *LV_RESTRICT fx, \
+                                     long m, double dt, long n_steps)                                   \
+    LV_TILE_RK4_FX(NORMALIZE, KIND)
 
 /* One instruction set's tile steppers: q normalized / not, times torque-free / constant torque /
-   constant force and torque. */
+   constant force and torque / effects reading the state, without / with a force. */
 #define LV_DEFINE_TILES(SUFFIX, ATTR)                                                                   \
     LV_DEFINE_TILE(tile_rk4_norm_free_##SUFFIX, ATTR, 1, FREE)                                          \
     LV_DEFINE_TILE(tile_rk4_raw_free_##SUFFIX, ATTR, 0, FREE)                                           \
     LV_DEFINE_TILE(tile_rk4_norm_torque_##SUFFIX, ATTR, 1, TORQUE)                                      \
     LV_DEFINE_TILE(tile_rk4_raw_torque_##SUFFIX, ATTR, 0, TORQUE)                                       \
     LV_DEFINE_TILE(tile_rk4_norm_full_##SUFFIX, ATTR, 1, FULL)                                          \
-    LV_DEFINE_TILE(tile_rk4_raw_full_##SUFFIX, ATTR, 0, FULL)
+    LV_DEFINE_TILE(tile_rk4_raw_full_##SUFFIX, ATTR, 0, FULL)                                           \
+    LV_DEFINE_TILE_FX(tile_rk4_norm_fx_torque_##SUFFIX, ATTR, 1, TORQUE)                                \
+    LV_DEFINE_TILE_FX(tile_rk4_raw_fx_torque_##SUFFIX, ATTR, 0, TORQUE)                                 \
+    LV_DEFINE_TILE_FX(tile_rk4_norm_fx_full_##SUFFIX, ATTR, 1, FULL)                                    \
+    LV_DEFINE_TILE_FX(tile_rk4_raw_fx_full_##SUFFIX, ATTR, 0, FULL)
 
 LV_ISA_COPIES(LV_DEFINE_TILES)
 
-/* The tile stepper of instruction set isa (LV_ISA_*; one this CPU supports, see lv_isa_best) for
-   right-hand side kind (LV_RHS_*; with effects: constant ones, see LV_TP_*). */
-static lv_tile_fn tile_rk4_fn(int isa, int normalize, int kind)
+/* The tile stepper of instruction set isa (LV_ISA_*; one this CPU supports, see lv_isa_best) for the bodies of
+   rhs_kind class cls (step.c: LV_RHS_FREE; LV_RHS_TORQUE / LV_RHS_FULL with effects that read the state, the
+   effect tiles; + LV_RHS_CONSTANT with constant ones, see LV_TP_*), a group of count bodies. */
+static lv_tile_fn tile_rk4_fn(int isa, int normalize, int cls, long count)
 {
-    (void)isa;
-    return kind == LV_RHS_FREE     ? (normalize ? LV_ISA_PICK(isa, tile_rk4_norm_free) : LV_ISA_PICK(isa, tile_rk4_raw_free))
-         : kind == LV_RHS_TORQUE ? (normalize ? LV_ISA_PICK(isa, tile_rk4_norm_torque) : LV_ISA_PICK(isa, tile_rk4_raw_torque))
-                                 : (normalize ? LV_ISA_PICK(isa, tile_rk4_norm_full) : LV_ISA_PICK(isa, tile_rk4_raw_full));
+    if (count <= 4 && isa == LV_ISA_AVX512) isa = LV_ISA_AVX2; /* a tile of 4 lanes: AVX2's width */
+    switch (cls) {
+    case LV_RHS_FREE: return normalize ? LV_ISA_PICK(isa, tile_rk4_norm_free) : LV_ISA_PICK(isa, tile_rk4_raw_free);
+    case LV_RHS_TORQUE: return normalize ? LV_ISA_PICK(isa, tile_rk4_norm_fx_torque) : LV_ISA_PICK(isa, tile_rk4_raw_fx_torque);
+    case LV_RHS_FULL: return normalize ? LV_ISA_PICK(isa, tile_rk4_norm_fx_full) : LV_ISA_PICK(isa, tile_rk4_raw_fx_full);
+    case LV_RHS_TORQUE + LV_RHS_CONSTANT:
+        return normalize ? LV_ISA_PICK(isa, tile_rk4_norm_torque) : LV_ISA_PICK(isa, tile_rk4_raw_torque);
+    default: return normalize ? LV_ISA_PICK(isa, tile_rk4_norm_full) : LV_ISA_PICK(isa, tile_rk4_raw_full);
+    }
 }
 
 /* Whether every effect on plain body b reads no state (a built-in effect without LV_EFFECT_USES_STATE):
@@ -116,6 +236,66 @@ static int effects_constant(const lv_effect_index *ix, long b)
     for (k = ix->start[b]; k < ix->start[b + 1]; k++)
         if (ix->refs[k].user != NULL) return 0;
     return 1;
+}
+
+/* Effect `code`'s parameter count and, for a user effect, its tile form at instruction set isa (NULL: none, and
+   then the effect stays off the tiles). */
+static int tile_effect_info(const lv_effect_index *ix, int code, int isa, lv_effect_tile_fn *tile)
+{
+    const lv_user_effect *u;
+    *tile = NULL;
+    if (code < LV_EFFECT_USER_BASE) return lv_effect_n_params(code);
+    if (ix->user == NULL || code - LV_EFFECT_USER_BASE >= ix->user->n || isa < LV_ISA_BASE || isa > LV_ISA_AVX512)
+        return -1;
+    u = &ix->user->entries[code - LV_EFFECT_USER_BASE];
+    *tile = u->tile[isa - LV_ISA_BASE];
+    return *tile != NULL ? u->n_params : -1;
+}
+
+/* Whether the bodies list[0 .. count-1] may take the effect tiles at instruction set isa: each has the same
+   effects in the same order (the codes; parameters may differ), built in or user effects with a tile form, at
+   most LV_TE_EFFECTS of them with at most LV_TE_PARAMS parameters. */
+static int effects_tileable(const lv_effect_index *ix, const long *list, long count, int isa)
+{
+    const long n = count > 0 ? ix->start[list[0] + 1] - ix->start[list[0]] : 0;
+    const lv_effect_ref *r0 = count > 0 ? ix->refs + ix->start[list[0]] : NULL;
+    lv_effect_tile_fn tile;
+    long j, k, n_par = 0;
+    if (n < 1 || n > LV_TE_EFFECTS) return 0;
+    for (k = 0; k < n; k++) {
+        const int np = tile_effect_info(ix, r0[k].code, isa, &tile);
+        if (np < 0) return 0;
+        n_par += np;
+    }
+    if (n_par > LV_TE_PARAMS) return 0;
+    for (j = 1; j < count; j++) {
+        const lv_effect_ref *r = ix->refs + ix->start[list[j]];
+        if (ix->start[list[j] + 1] - ix->start[list[j]] != n) return 0;
+        for (k = 0; k < n; k++)
+            if (r[k].code != r0[k].code) return 0;
+    }
+    return 1;
+}
+
+/* The effect tiles' codes and per-lane parameters (lv_tile_fx) of the m bodies ids, from the index ix (bodies
+   effects_tileable accepts). */
+static void tile_fx_fill(lv_tile_fx *fx, const lv_effect_index *ix, const long *ids, long m)
+{
+    const lv_effect_ref *r0 = ix->refs + ix->start[ids[0]];
+    long j;
+    int e, k, o = 0;
+    fx->n_eff = (int)(ix->start[ids[0] + 1] - ix->start[ids[0]]);
+    if (fx->n_eff > LV_TE_EFFECTS) fx->n_eff = 0; /* (not an effect tile: unused) */
+    for (e = 0; e < fx->n_eff; e++) {
+        const int np = tile_effect_info(ix, r0[e].code, lv_isa_get(), &fx->utile[e]);
+        fx->codes[e] = r0[e].code;
+        fx->off[e] = o;
+        for (j = 0; j < m; j++) {
+            const double *p = ix->refs[ix->start[ids[j]] + e].p;
+            for (k = 0; k < np && o + k < LV_TE_PARAMS; k++) fx->EP[o + k][j] = p[k];
+        }
+        o += np;
+    }
 }
 
 static int tile_finite(const double (*T)[LV_TILE], long j)
@@ -138,6 +318,9 @@ static long advance_free_soa(double *state, const double *params, const long *id
 {
     double T[LV_STATE_SIZE][LV_TILE], S[LV_STATE_SIZE][LV_TILE], J[LV_EULER_SIZE][LV_TILE], P[LV_TP_ROWS][LV_TILE];
     const double (*Pc)[LV_TILE] = (const double (*)[LV_TILE])P;
+    const long mp = LV_TILE_PAD(m);
+    const int sums = ix != NULL && effects_constant(ix, ids[0]); /* the group's effects are constant (else: effect tile) */
+    lv_tile_fx fx;
     long c, cm, s, j;
     int k, ok;
     for (j = 0; j < m; j++) {
@@ -147,25 +330,38 @@ static long advance_free_soa(double *state, const double *params, const long *id
         lv_euler_coefficients(prm + LV_PARAM_I_B, cf);
         for (k = 0; k < LV_EULER_SIZE; k++) J[k][j] = cf[k];
         if (ix == NULL) continue;
+        P[LV_TP_M][j] = prm[LV_PARAM_M];
+        for (k = 0; k < 3; k++) P[LV_TP_I + k][j] = prm[LV_PARAM_I_B + k];
+        if (!sums) continue; /* an effect tile: its sums are taken per stage */
         effect_sums(x, x + LV_STATE_V_W, prm[LV_PARAM_M], prm + LV_PARAM_I_B, ix->refs + ix->start[ids[j]],
                     ix->start[ids[j] + 1] - ix->start[ids[j]], F, tau);
-        P[LV_TP_M][j] = prm[LV_PARAM_M];
         for (k = 0; k < 3; k++) {
             P[LV_TP_F + k][j] = F[k];
             P[LV_TP_TAU + k][j] = tau[k];
         }
     }
+    fx.n_eff = 0;
+    if (ix != NULL && !sums) {
+        memset(fx.EP, 0, sizeof fx.EP); /* the rows past an effect's parameters are loaded, never used */
+        tile_fx_fill(&fx, ix, ids, m);
+    }
+    for (j = m; j < mp; j++) { /* padding lanes: copies of the last body (stepped, never checked nor written back) */
+        for (k = 0; k < LV_STATE_SIZE; k++) T[k][j] = T[k][m - 1];
+        for (k = 0; k < LV_EULER_SIZE; k++) J[k][j] = J[k][m - 1];
+        for (k = 0; k < LV_TP_ROWS && ix != NULL; k++) P[k][j] = P[k][m - 1];
+        for (k = 0; k < LV_TE_PARAMS && fx.n_eff > 0; k++) fx.EP[k][j] = fx.EP[k][m - 1];
+    }
     for (c = 0; c < n_steps; c += cm) {
         cm = n_steps - c < LV_FREE_CHUNK ? n_steps - c : LV_FREE_CHUNK;
         memcpy(S, T, sizeof T);
-        fn(T, (const double (*)[LV_TILE])J, Pc, m, dt, cm);
+        fn(T, (const double (*)[LV_TILE])J, Pc, &fx, mp, dt, cm);
         ok = 1;
         for (j = 0; j < m; j++) ok &= tile_finite((const double (*)[LV_TILE])T, j);
         if (ok) continue;
         memcpy(T, S, sizeof T); /* some body went non-finite in this chunk: redo it step by step */
         for (s = 0; s < cm; s++) {
             memcpy(S, T, sizeof T);
-            fn(T, (const double (*)[LV_TILE])J, Pc, m, dt, 1);
+            fn(T, (const double (*)[LV_TILE])J, Pc, &fx, mp, dt, 1);
             for (j = 0; j < m; j++) {
                 if (!tile_finite((const double (*)[LV_TILE])T, j)) {
                     *fail_j = (int)j;

@@ -144,20 +144,16 @@ static int stepper_init(Stepper *s, PyObject *args, PyObject *kw)
         Py_buffer v;
         Py_ssize_t i;
         if (PyObject_GetBuffer(user_obj, &v, PyBUF_C_CONTIGUOUS) != 0) return -1;
-        if (v.len % 24 != 0) {
+        if (v.itemsize != 8 || v.ndim != 2 || (v.shape[1] != 3 && v.shape[1] != 6)) {
             PyBuffer_Release(&v);
-            PyErr_SetString(PyExc_ValueError, "Stepper: user_effects must be int64 (n, 3)");
+            PyErr_SetString(PyExc_ValueError, "Stepper: user_effects must be int64 (n, 3) or (n, 6)");
             return -1;
         }
-        s->user.n = (long)(v.len / 24);
+        s->user.n = (long)v.shape[0];
         s->user_entries = (lv_user_effect *)calloc((size_t)s->user.n + 1, sizeof(lv_user_effect));
         if (s->user_entries == NULL) { PyBuffer_Release(&v); PyErr_NoMemory(); return -1; }
-        for (i = 0; i < s->user.n; i++) {
-            const long long *r = (const long long *)v.buf + 3 * i;
-            s->user_entries[i].fn = (lv_effect_fn)(uintptr_t)r[0];
-            s->user_entries[i].n_params = (int)r[1];
-            s->user_entries[i].flags = (int)r[2];
-        }
+        for (i = 0; i < s->user.n; i++)
+            lv_user_table_row((const long long *)v.buf + v.shape[1] * i, (int)v.shape[1], &s->user_entries[i]);
         PyBuffer_Release(&v);
         s->user.entries = s->user_entries;
     }

@@ -70,8 +70,8 @@ static int rows_of(Py_buffer *v, Py_ssize_t cols, const char *what, const char *
     return -1;
 }
 
-/* The user-effect table: an int64 buffer (n, 3) of [function address, n_params, flags] rows, row i for
-   code LV_EFFECT_USER_BASE + i (address 0: no such code). On success *out is malloc'ed (or NULL for none). */
+/* The user-effect table: an int64 buffer (n, 3) of [function address, n_params, flags] rows, or (n, 6) with the
+   tile forms' addresses (lv_user_table_row), row i for code LV_EFFECT_USER_BASE + i (address 0: no such code). On success *out is malloc'ed (or NULL for none). */
 static int get_user_table(PyObject *obj, lv_user_effect **out, long *n)
 {
     Py_buffer v;
@@ -83,21 +83,19 @@ static int get_user_table(PyObject *obj, lv_user_effect **out, long *n)
     if (PyObject_GetBuffer(obj, &v, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT) != 0) return -1;
     f = v.format ? v.format : "B";
     if (f[0] == '@' || f[0] == '=' || f[0] == '<') f++;
-    if (v.itemsize != 8 || (strcmp(f, "q") != 0 && strcmp(f, "l") != 0) || v.ndim != 2 || v.shape[1] != 3) {
+    if (v.itemsize != 8 || (strcmp(f, "q") != 0 && strcmp(f, "l") != 0) || v.ndim != 2
+        || (v.shape[1] != 3 && v.shape[1] != 6)) {
         PyErr_SetString(PyExc_TypeError, "simulate: user_effects must be a C-contiguous int64 array of shape (n, 3) "
-                                         "[function address, n_params, flags]");
+                                         "[function address, n_params, flags] or (n, 6) [..., tile forms base, avx2, "
+                                         "avx512]");
         PyBuffer_Release(&v);
         return -1;
     }
     *n = (long)v.shape[0];
     *out = (lv_user_effect *)calloc((size_t)*n + 1, sizeof(lv_user_effect));
     if (*out == NULL) { PyBuffer_Release(&v); PyErr_NoMemory(); return -1; }
-    for (i = 0; i < v.shape[0]; i++) {
-        const int64_t *r = (const int64_t *)v.buf + 3 * i;
-        (*out)[i].fn = (lv_effect_fn)(uintptr_t)r[0];
-        (*out)[i].n_params = (int)r[1];
-        (*out)[i].flags = (int)r[2];
-    }
+    for (i = 0; i < v.shape[0]; i++)
+        lv_user_table_row((const long long *)v.buf + v.shape[1] * i, (int)v.shape[1], &(*out)[i]);
     PyBuffer_Release(&v);
     return 0;
 }

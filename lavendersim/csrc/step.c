@@ -56,6 +56,7 @@ typedef struct {
     long *start;
     lv_effect_ref *refs;
     int *flags;
+    const lv_user_effects *user; /* the user effects' table (NULL: none) */
 } lv_effect_index;
 
 /* Number of parameters of effect `code` (built-in, or a user code with an entry in `user`), its flags
@@ -114,6 +115,7 @@ static int index_build(lv_effect_index *ix, const double *effects, long ne, long
     ix->start = (long *)calloc((size_t)nb + 1, sizeof(long));
     ix->flags = (int *)calloc((size_t)nb + 1, sizeof(int));
     ix->refs = NULL;
+    ix->user = user;
     if (ix->start == NULL || ix->flags == NULL) { index_free(ix); return LV_NO_MEMORY; }
     for (e = 0; e < ne; e++) {
         const double *row = effects + e * row_size;
@@ -1701,7 +1703,7 @@ static int advance_fixed(double *state, const double *params, long nb, const lv_
 {
     double last[LV_BLOCK][LV_STATE_SIZE];
     long b, k, s, lim, n_models = 0, count[LV_RHS_CLASSES] = {0, 0, 0, 0, 0}, first[LV_RHS_CLASSES];
-    int j, n, cls, kind, status = LV_OK;
+    int j, n, cls, status = LV_OK;
     for (b = 0; b < nb; b++) {
         if (models != NULL && (int)models->rows[b * LV_MODEL_SIZE + LV_MODEL_KIND] != 0) n_models++;
         else count[rhs_kind(ix, b)]++;
@@ -1719,15 +1721,15 @@ static int advance_fixed(double *state, const double *params, long nb, const lv_
         status = LV_DIVERGED;
     for (cls = 0; cls < LV_RHS_CLASSES; cls++) {
         const long *list = ids + first[cls] - count[cls];
-        kind = cls > LV_RHS_FULL ? cls - LV_RHS_CONSTANT : cls;
-        /* RK4 groups of LV_SOA_MIN bodies or more on SIMD tiles (csrc/batch_simd.h), split over threads
-           when asked: torque-free ones, and those with constant effects (their sums are then evaluated
-           once per call, not at every stage); smaller such groups get the same on the scalar blocks (one
+        /* RK4 groups of LV_TILE_MIN bodies or more on SIMD tiles (csrc/batch_simd.h), split over threads
+           when asked: torque-free ones, those with constant effects (their sums are then evaluated
+           once per call, not at every stage), and those whose effects read the state when they all have the
+           same built-in effects (effects_tileable: the effect tiles); smaller such groups get the same on the scalar blocks (one
            body with one applied torque: 1.57-1.69x a plain body there, 1.74x on a 1-body tile; bench
            per-body effects, loaded machine) */
-        if ((cls == LV_RHS_FREE || cls > LV_RHS_FULL) && count[cls] >= LV_SOA_MIN
-            && integrator == LV_INTEGRATOR_RK4 && isa != LV_ISA_SCALAR) {
-            if (advance_soa_threads(state, params, list, count[cls], tile_rk4_fn(isa, normalize, kind),
+        if ((cls == LV_RHS_FREE || cls > LV_RHS_FULL || effects_tileable(ix, list, count[cls], isa))
+            && count[cls] >= LV_TILE_MIN && integrator == LV_INTEGRATOR_RK4 && isa != LV_ISA_SCALAR) {
+            if (advance_soa_threads(state, params, list, count[cls], tile_rk4_fn(isa, normalize, cls, count[cls]),
                                     cls == LV_RHS_FREE ? NULL : ix, dt, n_steps, threads, limit, best) == LV_DIVERGED)
                 status = LV_DIVERGED;
             continue;

@@ -6,6 +6,8 @@
 /* The state row (LV_STATE_*: p_w[3], q[4] (x,y,z,w), v_w[3], omega_b[3]), the params row (LV_PARAM_*: m,
    I_x, I_y, I_z), the per-body model row (LV_MODEL_*) and the extended state [x, Omega] (LV_XS_*) are
    declared in derive/layout.py and printed as named offsets in generated/layout.h. */
+#include <stdint.h>
+
 #include "layout.h"
 #include "kernels.h"
 #include "tableaux.h"
@@ -33,7 +35,19 @@ typedef struct {
     lv_effect_fn fn;  /* adds the effect's force and torque (the lv_effect_fn convention) */
     int n_params;     /* parameters it reads from its row */
     int flags;        /* LV_EFFECT_USES_*, LV_EFFECT_FORCE */
+    lv_effect_tile_fn tile[3]; /* its tile form per instruction set LV_ISA_BASE .. LV_ISA_AVX512 (NULL: none) */
 } lv_user_effect;
+
+/* The user-effect table's columns: [function address, n_params, flags], then optionally the tile forms' addresses
+   (base, avx2, avx512; 0: none). lv_user_table_row reads row r of a table of `cols` (3 or 6) int64 columns. */
+static inline void lv_user_table_row(const long long *r, int cols, lv_user_effect *u)
+{
+    int k;
+    u->fn = (lv_effect_fn)(uintptr_t)r[0];
+    u->n_params = (int)r[1];
+    u->flags = (int)r[2];
+    for (k = 0; k < 3; k++) u->tile[k] = cols >= 6 ? (lv_effect_tile_fn)(uintptr_t)r[3 + k] : NULL;
+}
 
 typedef struct {
     const lv_user_effect *entries;
