@@ -219,8 +219,7 @@ _NP_APPLY_DOC = [
 ]
 
 
-_NP_OUT_DOC = ["", "    Other Parameters", "    ----------------",
-               "    out : (ndarray, ndarray), optional",
+_NP_OUT_DOC = ["    out : (ndarray, ndarray), optional",
                "        Arrays (n, 3) the force and the torque are written into (the one it has), as the kernel's out=."]
 
 
@@ -236,7 +235,8 @@ def numpy_dispatch(effects: list[tuple[int | None, E.EffectDecl]]) -> list[str]:
         out.append(f'    """{d.name}: {d.summary}.')
         out += ["", "    Parameters", "    ----------", "    p : array_like, shape (n, n_params)",
                 f'        The effect\'s parameters per row: [{", ".join(f"{p.name}({p.size})" for p in d.params)}].']
-        out += _NP_APPLY_DOC + _NP_OUT_DOC + ['    """']
+        params_end = _NP_APPLY_DOC.index("    Returns") - 1    # out is the last parameter, before Returns
+        out += _NP_APPLY_DOC[:params_end] + _NP_OUT_DOC + _NP_APPLY_DOC[params_end:] + ['    """']
         # out (F_w, tau_w): the buffers its outputs are written into (the kernel's out=), e.g. struct-of-arrays
         sel = "out" if len(outs) == 2 else "out and out[:1]" if E.OUT_FORCE in outs else "out and out[1:]"
         call = f"{k.name}({', '.join(_np_arg(d, a) for a in k.inputs)}, out={sel})"

@@ -5149,6 +5149,8 @@ def effect_apply_applied_torque(p, x, v_w, m, I_b, *, out=None):
         Masses, kg.
     I_b : array_like, shape (n, 3)
         Principal moments, body frame, kg·m².
+    out : (ndarray, ndarray), optional
+        Arrays (n, 3) the force and the torque are written into (the one it has), as the kernel's out=.
 
     Returns
     -------
@@ -5156,11 +5158,6 @@ def effect_apply_applied_torque(p, x, v_w, m, I_b, *, out=None):
         Force at the COM, world frame, N (None: the effect has none).
     tau_w : ndarray, shape (n, 3) or None
         Torque about the COM, world frame, N·m (None: the effect has none).
-
-    Other Parameters
-    ----------------
-    out : (ndarray, ndarray), optional
-        Arrays (n, 3) the force and the torque are written into (the one it has), as the kernel's out=.
     """
     return None, effect_applied_torque(p[..., 0:3], out=out and out[1:])
 
@@ -5180,6 +5177,8 @@ def effect_apply_force_at_point(p, x, v_w, m, I_b, *, out=None):
         Masses, kg.
     I_b : array_like, shape (n, 3)
         Principal moments, body frame, kg·m².
+    out : (ndarray, ndarray), optional
+        Arrays (n, 3) the force and the torque are written into (the one it has), as the kernel's out=.
 
     Returns
     -------
@@ -5187,11 +5186,6 @@ def effect_apply_force_at_point(p, x, v_w, m, I_b, *, out=None):
         Force at the COM, world frame, N (None: the effect has none).
     tau_w : ndarray, shape (n, 3) or None
         Torque about the COM, world frame, N·m (None: the effect has none).
-
-    Other Parameters
-    ----------------
-    out : (ndarray, ndarray), optional
-        Arrays (n, 3) the force and the torque are written into (the one it has), as the kernel's out=.
     """
     return effect_force_at_point(x[..., 3:7], p[..., 0:3], p[..., 3:6], out=out)
 
@@ -5211,6 +5205,8 @@ def effect_apply_gravity(p, x, v_w, m, I_b, *, out=None):
         Masses, kg.
     I_b : array_like, shape (n, 3)
         Principal moments, body frame, kg·m².
+    out : (ndarray, ndarray), optional
+        Arrays (n, 3) the force and the torque are written into (the one it has), as the kernel's out=.
 
     Returns
     -------
@@ -5218,11 +5214,6 @@ def effect_apply_gravity(p, x, v_w, m, I_b, *, out=None):
         Force at the COM, world frame, N (None: the effect has none).
     tau_w : ndarray, shape (n, 3) or None
         Torque about the COM, world frame, N·m (None: the effect has none).
-
-    Other Parameters
-    ----------------
-    out : (ndarray, ndarray), optional
-        Arrays (n, 3) the force and the torque are written into (the one it has), as the kernel's out=.
     """
     return effect_gravity(m, p[..., 0:3], out=out and out[:1]), None
 
@@ -5242,6 +5233,8 @@ def effect_apply_linear_damping(p, x, v_w, m, I_b, *, out=None):
         Masses, kg.
     I_b : array_like, shape (n, 3)
         Principal moments, body frame, kg·m².
+    out : (ndarray, ndarray), optional
+        Arrays (n, 3) the force and the torque are written into (the one it has), as the kernel's out=.
 
     Returns
     -------
@@ -5249,11 +5242,6 @@ def effect_apply_linear_damping(p, x, v_w, m, I_b, *, out=None):
         Force at the COM, world frame, N (None: the effect has none).
     tau_w : ndarray, shape (n, 3) or None
         Torque about the COM, world frame, N·m (None: the effect has none).
-
-    Other Parameters
-    ----------------
-    out : (ndarray, ndarray), optional
-        Arrays (n, 3) the force and the torque are written into (the one it has), as the kernel's out=.
     """
     return effect_linear_damping(v_w, p[..., 0], out=out and out[:1]), None
 
@@ -5273,6 +5261,8 @@ def effect_apply_angular_damping(p, x, v_w, m, I_b, *, out=None):
         Masses, kg.
     I_b : array_like, shape (n, 3)
         Principal moments, body frame, kg·m².
+    out : (ndarray, ndarray), optional
+        Arrays (n, 3) the force and the torque are written into (the one it has), as the kernel's out=.
 
     Returns
     -------
@@ -5280,11 +5270,6 @@ def effect_apply_angular_damping(p, x, v_w, m, I_b, *, out=None):
         Force at the COM, world frame, N (None: the effect has none).
     tau_w : ndarray, shape (n, 3) or None
         Torque about the COM, world frame, N·m (None: the effect has none).
-
-    Other Parameters
-    ----------------
-    out : (ndarray, ndarray), optional
-        Arrays (n, 3) the force and the torque are written into (the one it has), as the kernel's out=.
     """
     return None, effect_angular_damping(x[..., 3:7], x[..., 10:13], p[..., 0], out=out and out[1:])
 

@@ -5151,6 +5151,8 @@ def effect_apply_applied_torque(p, x, v_w, m, I_b, *, out=None):
         Masses, kg.
     I_b : array_like, shape (n, 3)
         Principal moments, body frame, kg·m².
+    out : (ndarray, ndarray), optional
+        Arrays (n, 3) the force and the torque are written into (the one it has), as the kernel's out=.
 
     Returns
     -------
@@ -5158,11 +5160,6 @@ def effect_apply_applied_torque(p, x, v_w, m, I_b, *, out=None):
         Force at the COM, world frame, N (None: the effect has none).
     tau_w : ndarray, shape (n, 3) or None
         Torque about the COM, world frame, N·m (None: the effect has none).
-
-    Other Parameters
-    ----------------
-    out : (ndarray, ndarray), optional
-        Arrays (n, 3) the force and the torque are written into (the one it has), as the kernel's out=.
     """
     return None, effect_applied_torque(p[..., 0:3], out=out and out[1:])
 
@@ -5182,6 +5179,8 @@ def effect_apply_force_at_point(p, x, v_w, m, I_b, *, out=None):
         Masses, kg.
     I_b : array_like, shape (n, 3)
         Principal moments, body frame, kg·m².
+    out : (ndarray, ndarray), optional
+        Arrays (n, 3) the force and the torque are written into (the one it has), as the kernel's out=.
 
     Returns
     -------
@@ -5189,11 +5188,6 @@ def effect_apply_force_at_point(p, x, v_w, m, I_b, *, out=None):
         Force at the COM, world frame, N (None: the effect has none).
     tau_w : ndarray, shape (n, 3) or None
         Torque about the COM, world frame, N·m (None: the effect has none).
-
-    Other Parameters
-    ----------------
-    out : (ndarray, ndarray), optional
-        Arrays (n, 3) the force and the torque are written into (the one it has), as the kernel's out=.
     """
     return effect_force_at_point(x[..., 3:7], p[..., 0:3], p[..., 3:6], out=out)
 
@@ -5213,6 +5207,8 @@ def effect_apply_gravity(p, x, v_w, m, I_b, *, out=None):
         Masses, kg.
     I_b : array_like, shape (n, 3)
         Principal moments, body frame, kg·m².
+    out : (ndarray, ndarray), optional
+        Arrays (n, 3) the force and the torque are written into (the one it has), as the kernel's out=.
 
     Returns
     -------
@@ -5220,11 +5216,6 @@ def effect_apply_gravity(p, x, v_w, m, I_b, *, out=None):
         Force at the COM, world frame, N (None: the effect has none).
     tau_w : ndarray, shape (n, 3) or None
         Torque about the COM, world frame, N·m (None: the effect has none).
-
-    Other Parameters
-    ----------------
-    out : (ndarray, ndarray), optional
-        Arrays (n, 3) the force and the torque are written into (the one it has), as the kernel's out=.
     """
     return effect_gravity(m, p[..., 0:3], out=out and out[:1]), None
 
@@ -5244,6 +5235,8 @@ def effect_apply_linear_damping(p, x, v_w, m, I_b, *, out=None):
         Masses, kg.
     I_b : array_like, shape (n, 3)
         Principal moments, body frame, kg·m².
+    out : (ndarray, ndarray), optional
+        Arrays (n, 3) the force and the torque are written into (the one it has), as the kernel's out=.
 
     Returns
     -------
@@ -5251,11 +5244,6 @@ def effect_apply_linear_damping(p, x, v_w, m, I_b, *, out=None):
         Force at the COM, world frame, N (None: the effect has none).
     tau_w : ndarray, shape (n, 3) or None
         Torque about the COM, world frame, N·m (None: the effect has none).
-
-    Other Parameters
-    ----------------
-    out : (ndarray, ndarray), optional
-        Arrays (n, 3) the force and the torque are written into (the one it has), as the kernel's out=.
     """
     return effect_linear_damping(v_w, p[..., 0], out=out and out[:1]), None
 
@@ -5275,6 +5263,8 @@ def effect_apply_angular_damping(p, x, v_w, m, I_b, *, out=None):
         Masses, kg.
     I_b : array_like, shape (n, 3)
         Principal moments, body frame, kg·m².
+    out : (ndarray, ndarray), optional
+        Arrays (n, 3) the force and the torque are written into (the one it has), as the kernel's out=.
 
     Returns
     -------
@@ -5282,11 +5272,6 @@ def effect_apply_angular_damping(p, x, v_w, m, I_b, *, out=None):
         Force at the COM, world frame, N (None: the effect has none).
     tau_w : ndarray, shape (n, 3) or None
         Torque about the COM, world frame, N·m (None: the effect has none).
-
-    Other Parameters
-    ----------------
-    out : (ndarray, ndarray), optional
-        Arrays (n, 3) the force and the torque are written into (the one it has), as the kernel's out=.
     """
     return None, effect_angular_damping(x[..., 3:7], x[..., 10:13], p[..., 0], out=out and out[1:])
 
