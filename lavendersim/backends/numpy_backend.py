@@ -880,6 +880,7 @@ class NumpyBackend:
             assert adaptive is not None
             adaptive.h[...], adaptive.nfev[...] = h, nfev
             if dense is not None:
+                assert adaptive.dense is not None   # dense was read from it
                 adaptive.dense[...] = dense
 
     @staticmethod
