@@ -157,7 +157,6 @@ def print_c() -> str:
     out.extend(f"    LV_KIND_{n} = {v},  /* {doc} */" for n, v, doc in KINDS)
     out.append("};")
     out.extend(f"#define LV_{n} {v}  /* {doc} */" for n, v, doc in CONSTANTS)
-    from .wheel_layout import on_axes   # (wheel_layout imports this module)
     axes = ", ".join(f"{float(a)!r}" for a in on_axes(WHEELS_MAX))
     out.append(f"#define LV_WHEELS_ON_AXES_A_B {{{axes}}}  /* MODEL.A_b of the default layout, [I | 0] */")
     out.append("/* the printed kernels of every wheeled body (derive/wheel_layout.py, N = WHEELS_MAX) */")
@@ -165,6 +164,11 @@ def print_c() -> str:
                for part in ("coefficients", "body_rhs_c", "on_axes_rhs_c", "motor"))
     out += ["", "#endif", ""]
     return "\n".join(out)
+
+
+def on_axes(n: int) -> sp.Matrix:
+    """A_b of the default layout, three wheels on the body x, y, z axes and n − 3 padded slots: [I | 0] (3×n)."""
+    return sp.eye(3).row_join(sp.zeros(3, n - 3))
 
 
 def print_python() -> str:

@@ -22,7 +22,7 @@ import sympy as sp
 
 from .integrator_physics import motor
 from .kernel import Arg, Kernel, mat, scalar, vec
-from .layout import WCOEF, WHEELS_MAX
+from .layout import WCOEF, WHEELS_MAX, on_axes
 from .quaternion import pure, qmul, rotation_matrix
 from .wheel_cube import solve3, sym3, torque_about_pivot, wheel_rhs
 
@@ -81,11 +81,6 @@ def layout_rhs_c(q, w, Om, I_p, A, J, k_w, r_b, F_w, tau_w, u, c_w) -> tuple[tup
     w_dot = Minv * rhs
     Om_dot = sp.Matrix([g[i] * k_w[9 + i] for i in range(n)]) - A.T * w_dot
     return (qmul(q, pure(w)) / 2, w_dot, Om_dot), where
-
-
-def on_axes(n: int) -> sp.Matrix:
-    """A_b of the default layout, three wheels on the body x, y, z axes and n − 3 padded slots: [I | 0] (3×n)."""
-    return sp.eye(3).row_join(sp.zeros(3, n - 3))
 
 
 def layout_momentum(q, w, Om, I_p, A, J):
