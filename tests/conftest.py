@@ -78,6 +78,7 @@ from __future__ import annotations
 
 import importlib
 import os
+import signal
 from pathlib import Path
 
 import pytest
@@ -361,3 +362,10 @@ def pytest_runtest_setup(item):
     if IN_CI:
         for mark in item.iter_markers("needs"):
             require(*mark.args)
+
+
+def interruptible() -> None:
+    """preexec_fn for a child process a test interrupts with SIGINT. pytest-xdist's workers ignore SIGINT, an ignored
+    signal stays ignored across exec, and Python then installs no KeyboardInterrupt handler: the child would never
+    see the Ctrl-C the test sends."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)

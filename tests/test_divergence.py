@@ -17,7 +17,7 @@ from lavendersim.errors import ValidityBoundWarning
 from lavendersim.generated import tableaux as TB
 from lavendersim.validate import LavenderInputError
 
-from conftest import NUMPY_SLOW  # noqa: F401  (keeps the conftest import pattern of the suite)
+from conftest import NUMPY_SLOW, interruptible  # noqa: F401  (NUMPY_SLOW: the suite's conftest import pattern)
 
 BACKENDS = ["numpy", "c"]
 
@@ -280,7 +280,7 @@ except KeyboardInterrupt:
 def test_ctrl_c_stops_a_long_c_run():
     env = dict(os.environ, PYTHONSAFEPATH="1")
     p = subprocess.Popen([sys.executable, "-c", CHILD], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                         env=env, cwd="/")
+                         env=env, cwd="/", preexec_fn=interruptible)
     try:
         line = ""
         deadline = time.monotonic() + 120

@@ -24,6 +24,8 @@ from lavendersim import _playback as PB
 from lavendersim import viewer as VW
 from lavendersim.validate import LavenderInputError
 
+from conftest import interruptible
+
 pytestmark = pytest.mark.needs("viewer")
 
 DEADLINE = 60.0   # s, for events waited on: only ever reached when the behaviour is broken
@@ -369,7 +371,8 @@ def test_run_scene_replay_limits_the_recording():
 
 def test_view_replay_command_records_replays_and_stops_on_ctrl_c():
     proc = subprocess.Popen([sys.executable, "-m", "lavendersim.cli", "view", "tumble", "--replay", "--duration", "0.5",
-                             "--port", "0"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                             "--port", "0"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=interruptible)
     lines: list[str] = []
     why: list[BaseException] = []
 
