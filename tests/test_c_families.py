@@ -41,9 +41,10 @@ def test_csrc_names_no_integrator_of_a_table_driven_family():
 
 def test_one_effect_row_check_in_c():
     """Every C path validates effect rows with lv_effect_row_check (step.c): no other file looks a row's code up in
-    the effects' parameter counts (model_simd.h asks whether a code is built in, to pick its tiles: not a check)."""
+    the effects' parameter counts (model_simd.h and batch_simd.h ask a code's parameter count to pick its tiles, on
+    rows already checked: not a check)."""
     users = {p.name for p in CSRC.glob("*.[ch]") if "lv_effect_n_params(" in p.read_text()}
-    assert users <= {"step.c", "model_simd.h"}
+    assert users <= {"step.c", "model_simd.h", "batch_simd.h"}
     for name in ("fixed_loop.h", "module_f32.c", "module.c", "fast_step.c"):
         assert "lv_effect_row_check(" in (CSRC / name).read_text(), name
 
