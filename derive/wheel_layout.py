@@ -18,6 +18,8 @@ The wheel momentum h_w = J (A_bᵀ ω + Ω) (N components, each about its wheel'
 """
 from __future__ import annotations
 
+from typing import cast
+
 import sympy as sp
 
 from .integrator_physics import motor
@@ -180,7 +182,7 @@ def kernels_for(n: int) -> list[Kernel]:
     # the default layout's right-hand side: the same equations with A_b = [I | 0] substituted (the A_b sums fold away)
     axes = dict(zip(A, on_axes(n)))
     axes_where = [(s, e.xreplace(axes)) for s, e in rhs_where]
-    axes_rates = [Arg(a.name, a.value.xreplace(axes), a.doc) for a in rates]
+    axes_rates = [Arg(a.name, cast(sp.Matrix, a.value).xreplace(axes), a.doc) for a in rates]   # (Arg.value: object)
     coefficient_kernels = [] if n != WHEELS_MAX else [
         Kernel(f"wheels{n}_coefficients", f"The inertia-only coefficients of the {n}-wheel equations, computed once per body and call",
                r"k_w = [(I_P - A J A^T)^{-1},\ J^{-1}]",
