@@ -702,20 +702,6 @@ def largest_param(effect: Effect) -> str:
     return f"{effect.name}.{effect.fields[int(np.argmax(mags))]}"
 
 
-def row_width(effects) -> int:
-    """Width of the effect table for these effects: [code, body] plus the most parameters, at least ROW.
-
-    Parameters
-    ----------
-    effects : iterable of Effect
-
-    Returns
-    -------
-    int
-    """
-    return max([ROW] + [ROW_PARAMS + e.params_flat().size for e in effects])
-
-
 def numpy_apply(code: int):
     """The NumPy function of effect `code`: apply(p, x, v_w, m, I_b) -> (F_w or None, tau_w or None).
 
