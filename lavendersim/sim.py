@@ -139,6 +139,7 @@ CHUNK_WORK_MAX_NUMPY = 2**23   # the NumPy backend, fixed step: long chunks with
                            # bodies: 20 steps, ~0.5 s torque-free, ~1.2 s with effects; at 2 steps per call its
                            # check cost ~0.6x the stepping, H3's measurement, issue 30)
 ON_BOUND = ("raise", "warn")
+CONTRACT = ("off", "fma")  # Sim(contract=...): the torque-free SIMD tiles bitwise (default) or with fused multiply-adds
 CHECK_BLOCK = 1 << 16       # bodies per kernel call when the checks read every body: bounded temporaries at 1e6
 FAST_STEP_WORK = 4096      # step() runs inside C (holding the GIL) for scenes of at most this many evaluations per step
 
@@ -307,7 +308,7 @@ class ImmutableSimError(V.LavenderInputError, AttributeError):
 
 
 # what a built Sim keeps fixed (assignment raises ImmutableSimError)
-_FIXED = frozenset({"dt", "integrator", "normalize", "backend", "names", "bodies", "on_bound", "max_growth", "dtype",
+_FIXED = frozenset({"dt", "integrator", "normalize", "backend", "names", "bodies", "on_bound", "max_growth", "dtype", "contract",
                     "params", "effects", "x", "p_w", "q", "v_w", "omega_b", "Omega", "t", "pipeline"})
 _SETTERS = frozenset({"steps", "rhs_evals"})   # the validated setters: the only public assignments to a built Sim
 _LIVE: "weakref.WeakSet[Sim]" = weakref.WeakSet()   # every Sim of this process (the fork handler resets their locks)
@@ -444,6 +445,13 @@ class Sim:
         generated/kernels_numpy_f32.py) for euler, semi_implicit_euler and rk4 on plain bodies with built-in
         effects (anything else raises LavenderInputError naming dtype); the state, its views, state() and
         record() are then float32, while the divergence checks evaluate in float64.
+    contract : {"off", "fma"}
+        (keyword only) The arithmetic of the C backend's torque-free RK4 SIMD tiles (groups of two or more plain
+        bodies without effects, float64). "off" (default): bitwise the scalar path and the NumPy backend. "fma": a
+        copy of those tiles compiled with a*b+c fused into one rounding (AVX2/AVX-512 CPUs with FMA, GCC builds;
+        elsewhere the bitwise tiles run): faster, and no longer bitwise: the state differs from "off" in the last
+        bits (docs/performance.md gives the measured difference over a tumbling run). Every other body and path
+        steps bitwise in either mode. Needs backend "c" (resolved) and dtype "float64".
 
     Raises
     ------
@@ -470,7 +478,7 @@ class Sim:
     @V.keywords  # unknown keyword arguments raise LavenderInputError naming them
     def __init__(self, scene: Scene, dt: float = 1e-3, integrator: str = "rk4", backend: str = "auto", normalize: bool = True,
                  rtol: float | None = None, atol: float | None = None, *, on_bound: str = "raise",
-                 max_growth: float | None = 2.0, dtype: str = "float64"):
+                 max_growth: float | None = 2.0, dtype: str = "float64", contract: str = "off"):
         if not isinstance(scene, Scene):
             raise V.LavenderInputError("scene", "must be a lavendersim.Scene", f", got {type(scene).__name__}")
         self.dt = V.dt("dt", dt)   # dt and the other settings are fixed once built (Sim.__setattr__)
@@ -517,6 +525,7 @@ class Sim:
                         "integrator", f"{self.integrator!r} steps plain rigid bodies only, but body {name!r} has {what}; "
                         "use rk4 or dopri5 for jointed or wheeled bodies")
         self.dtype = self._check_dtype(dtype)
+        self.contract = self._check_contract(contract)
         self._per_step = backends.rhs_per_step(self.integrator, self._effects, len(self.names))
         self.on_bound = V.choice("on_bound", on_bound, ON_BOUND)
         if max_growth is not None:
@@ -567,7 +576,7 @@ class Sim:
                      "adaptive": None if self._adaptive is None else self._adaptive.save(),
                      "fast_chunks": self._fast is not None and self._fast_n == self._chunk}
         kwargs = {"dt": self.dt, "integrator": self.integrator, "backend": self.backend.name, "normalize": self.normalize,
-                  "on_bound": self.on_bound, "max_growth": self.max_growth, "dtype": self.dtype}
+                  "on_bound": self.on_bound, "max_growth": self.max_growth, "dtype": self.dtype, "contract": self.contract}
         if self._adaptive is not None:
             kwargs.update(rtol=self._adaptive.rtol, atol=self._adaptive.atol)
         return (_rebuild_sim, ([self.bodies[n] for n in self.names], list(self._effect_objs.items()), kwargs, state))
@@ -627,6 +636,14 @@ class Sim:
         v = self._effects.view()
         v.flags.writeable = False
         return v
+
+    def _check_contract(self, contract) -> str:
+        """contract as "off" or "fma"; "fma" only on the C backend in float64 (the FMA copy of its tiles)."""
+        name = V.choice("contract", contract if isinstance(contract, str) else repr(contract), CONTRACT)
+        if name == "fma" and (self.backend.name != "c" or self.dtype != "float64"):
+            raise V.LavenderInputError("contract", "'fma' applies to the C backend in float64 (its SIMD tiles), not "
+                                       f"backend {self.backend.name!r} with dtype {self.dtype!r}")
+        return name
 
     def _check_dtype(self, dtype) -> str:
         """dtype as "float64" or "float32" (also accepted: numpy.float32 / numpy.float64 and their dtypes); float32
@@ -736,6 +753,7 @@ class Sim:
         fast path holds the GIL; cap=False: built whatever the size, see fast_chunks), or a Python without the GIL."""
         gil = getattr(sys, "_is_gil_enabled", lambda: True)()
         if (self.backend.name != "c" or self._per_step is None or not gil or self.dtype != "float64"
+                or self.contract != "off"   # (the Stepper steps bitwise; contract="fma" goes through advance)
                 or self.integrator not in backends.INTEGRATORS   # a user tableau: through advance (no Stepper code)
                 or (self._py_growth and self.max_growth is not None)
                 or (cap and len(self.names) * self._per_step > FAST_STEP_WORK)):
@@ -1168,7 +1186,8 @@ class Sim:
         ad = self._adaptive
         before = None if ad is None else ad.nfev.copy()
         self.backend.advance(self._x, self._step_params, self._step_effects, self.integrator, self.normalize, self.dt, n, models,
-                             *(() if ad is None else (ad,)), restore=restore)
+                             *(() if ad is None else (ad,)), restore=restore,
+                             **({"contract": self.contract} if self.contract != "off" else {}))
         if ad is None or before is None:
             assert self._per_step is not None   # (a fixed-step integrator)
             self._ctr.rhs_evals += n * self._per_step

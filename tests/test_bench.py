@@ -18,7 +18,17 @@ from conftest import NUMPY_SLOW, have
 from lavendersim import bench
 
 
-N_TARGETS = 31   # target lines besides the per-body ones (scenes.py: + the wheeled build and the 1e6 lines; dopri5: + dense output)
+def bench_contract_available() -> bool:
+    """Whether the extension has the opt-in FMA tiles (False without the C extension)."""
+    try:
+        from lavendersim.backends.c_backend import contract_available
+    except ImportError:
+        return False
+    return contract_available()
+
+
+N_TARGETS = 32   # target lines besides the per-body ones (scenes.py: + the wheeled build and the 1e6 lines; dopri5: + dense output;
+                 # simd: + contract='fma' against the flop floor)
 
 
 @pytest.fixture(scope="module")
@@ -189,6 +199,9 @@ def test_quick_json_has_the_issue_30_ratios(quick):
             n = bench.SIMD_SIZES_QUICK[0]
             for key in ("ratio_to_hand_fma", "ratio_to_flop_floor", "hand_fma_over_flop_floor"):
                 assert r[f"simd_batch_{n}_{key}"] > 0
+            if bench_contract_available():   # the opt-in FMA tiles beside the bitwise ones, and how far they are
+                assert r[f"simd_batch_{n}_fma_ratio_to_flop_floor"] > 0
+                assert 0 < d["simd_batch"]["sizes"][0]["fma_max_abs_diff_50_steps"] <= 1e-12
         assert all(v <= 1e-12 for k, v in d["handwritten"]["fma_agreement"].items() if k.startswith("max_abs"))
 
 

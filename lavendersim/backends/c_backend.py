@@ -364,6 +364,13 @@ def isa() -> dict:
     return {"current": name, "best": best_name}
 
 
+def contract_available() -> bool:
+    """Whether ``contract="fma"`` has its FMA copy of the torque-free RK4 SIMD tiles here (a GCC build on a CPU with
+    AVX2 and FMA); without it that mode steps bitwise. An extension built before the copy existed: False."""
+    f = getattr(_c, "contract_available", None)
+    return bool(f()) if f is not None else False
+
+
 class CBackend:
     """advance(state, params, effects, integrator, normalize, dt, n_steps, models=None) inside C;
     see the module doc and lavendersim.backends."""
@@ -371,7 +378,8 @@ class CBackend:
     name = "c"
 
     def advance(self, state, params, effects, integrator: str, normalize: bool, dt: float, n_steps: int,
-                models: Models | None = None, adaptive: Adaptive | None = None, *, restore: bool = True) -> None:
+                models: Models | None = None, adaptive: Adaptive | None = None, *, restore: bool = True,
+                contract: str = "off") -> None:
         """Advance every body by n_steps steps inside C, in place (see lavendersim.backends).
 
         Parameters
@@ -400,6 +408,9 @@ class CBackend:
             taken per call: ~10-40 ns per body at 10^6 bodies). False, for a caller that keeps its own snapshot (Sim
             restores by replay): no copy; on divergence the arrays are left as the C call left them and the error
             names the step and body only.
+        contract : {"off", "fma"}, optional
+            "off" (default): bitwise. "fma": the torque-free RK4 SIMD tiles run their FMA copy where it exists
+            (:func:`contract_available`; results differ from "off" in the last bits); every other path is bitwise.
 
         Raises
         ------
@@ -452,7 +463,8 @@ class CBackend:
         extra = extra + (user, None if tab is None else _tableau_arg(tab),
                          adaptive.dense if adaptive is not None and integrator == "dopri5" else None)
         status, step, body = _c.simulate(state, params, effects, INTEGRATOR_CODES.get(integrator, 0),
-                                         1 if normalize else 0, float(dt), int(n_steps), *extra)
+                                         1 if normalize else 0, float(dt), int(n_steps), *extra,
+                                         *((1,) if contract == "fma" else ()))   # (an extension before 1: no arg)
         if status == TABLEAUX.STATUS_OK:
             return
         if snapshot is None:   # (restore False: no copy of the state was taken)

@@ -327,6 +327,7 @@ static PyObject *py_simulate(PyObject *self, PyObject *args)
     Py_buffer hb, nf, dn;
     int have_h = 0, have_nf = 0, have_dn = 0;
     PyObject *dense_obj = Py_None;
+    int contract = LV_CONTRACT_OFF, contract_was;
     lv_adaptive adaptive;
     int integrator, normalize, n_models;
     double dt;
@@ -338,10 +339,14 @@ static PyObject *py_simulate(PyObject *self, PyObject *args)
     lv_models models;
     int status;
     (void)self;
-    if (!PyArg_ParseTuple(args, "OOOipdL|OOOOOOddOOO:simulate", &state_obj, &params_obj, &effects_obj, &integrator,
+    if (!PyArg_ParseTuple(args, "OOOipdL|OOOOOOddOOOi:simulate", &state_obj, &params_obj, &effects_obj, &integrator,
                           &normalize, &dt, &n_steps_ll, &rows_obj, &omega_obj, &cmd_obj, &app_obj,
-                          &h_obj, &nfev_obj, &rtol, &atol, &user_obj, &tab_obj, &dense_obj))
+                          &h_obj, &nfev_obj, &rtol, &atol, &user_obj, &tab_obj, &dense_obj, &contract))
         return NULL;
+    if (contract != LV_CONTRACT_OFF && contract != LV_CONTRACT_FMA) {
+        PyErr_Format(PyExc_ValueError, "simulate: contract must be 0 (bitwise) or 1 (fma), got %d", contract);
+        return NULL;
+    }
     n_models = (rows_obj != Py_None) + (omega_obj != Py_None) + (cmd_obj != Py_None) + (app_obj != Py_None);
     if (n_models != 0 && n_models != 4) {
         PyErr_SetString(PyExc_ValueError,
@@ -469,9 +474,11 @@ static PyObject *py_simulate(PyObject *self, PyObject *args)
     }
     if (check_effects((const double *)ef.buf, ne, row_size, nb, user_entries, n_user) != 0) goto fail;
     Py_BEGIN_ALLOW_THREADS
+    contract_was = lv_contract_set(contract);
     status = lv_simulate((double *)st.buf, (const double *)pr.buf, (long)nb, (const double *)ef.buf, (long)ne,
                          (long)row_size, n_user ? &user : NULL, n_models ? &models : NULL, integrator, normalize, dt,
                          (long)n_steps_ll, have_h ? &adaptive : NULL, have_tab ? &tableau : NULL, &fail_step, &fail_body);
+    (void)lv_contract_set(contract_was);
     Py_END_ALLOW_THREADS
     if (status == LV_NO_MEMORY)
         PyErr_NoMemory();
@@ -534,6 +541,13 @@ static PyObject *py_threads(PyObject *self, PyObject *args)
     return PyLong_FromLong(lv_threads_get());
 }
 
+static PyObject *py_contract_available(PyObject *self, PyObject *noargs)
+{
+    (void)self;
+    (void)noargs;
+    return PyBool_FromLong(lv_contract_available());
+}
+
 PyObject *lv_py_simulate_f32(PyObject *self, PyObject *args); /* module_f32.c */
 
 static PyMethodDef methods[] = {
@@ -545,6 +559,9 @@ static PyMethodDef methods[] = {
      "isa([level]) -> (current, name, best, best_name): the instruction set of the batched torque-free RK4 path\n"
      "(ISA_SCALAR 0: off, ISA_BASE 1: the build's baseline (sse2 on x86-64), ISA_AVX2 2, ISA_AVX512 3); with level,\n"
      "select it first (capped at the best this CPU supports; -1: the best). All levels give bitwise the same results."},
+    {"contract_available", py_contract_available, METH_NOARGS,
+     "contract_available() -> bool: whether simulate(..., contract=1) has its FMA copy of the torque-free RK4 tiles\n"
+     "here (a GCC build on a CPU with AVX2 and FMA); without it contract=1 steps bitwise."},
     {"kernels", py_kernels, METH_NOARGS,
      "kernels() -> list of (name, n_in, n_out), in the order of the generated lv_kernel_table."},
     {"eval_kernel", py_eval_kernel, METH_VARARGS,
@@ -555,8 +572,9 @@ static PyMethodDef methods[] = {
      "on one row of numbers (the inputs in the packed order of eval_kernel)."},
     {"simulate", py_simulate, METH_VARARGS,
      "simulate(state, params, effects, integrator, normalize, dt, n_steps[, model_rows, Omega, command, applied,\n"
-     "         h, nfev, rtol, atol, user_effects, tableau])\n"
+     "         h, nfev, rtol, atol, user_effects, tableau, dense, contract])\n"
      "  -> (status, step, body).\n"
+     "contract: 0 (default) bitwise; 1 the FMA copy of the torque-free RK4 tiles (see contract_available).\n"
      "state (nb,13) advanced in place; params (nb,4) [m, I_x, I_y, I_z]; effects (ne, >=2) [code, body, parameters...]\n"
      "(built-in codes, see generated/kernels.h, or user codes from LV_EFFECT_USER_BASE with user_effects: int64 (n,3)\n"
      "[function address, n_params, flags] for codes base .. base+n-1; an undeclared code raises ValueError).\n"

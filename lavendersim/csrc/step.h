@@ -127,6 +127,15 @@ int lv_isa_set(int isa);
 #define LV_MAX_THREADS 64
 int lv_threads_get(void);
 int lv_threads_set(int threads);
+/* The arithmetic of the torque-free RK4 SIMD tiles in the calling thread's lv_simulate calls (csrc/batch_simd.h):
+   LV_CONTRACT_OFF (the default) bitwise the scalar path and NumPy; LV_CONTRACT_FMA a copy of those tiles compiled
+   with a*b+c contracted into fused multiply-adds (AVX2/AVX-512 with FMA, GCC builds: lv_contract_available), whose
+   results differ from the bitwise ones in the last bits. Every other path stays bitwise in either mode.
+   lv_contract_set returns the previous mode; it is per thread (lavendersim._lavender_c.simulate sets it around one
+   call). */
+enum { LV_CONTRACT_OFF = 0, LV_CONTRACT_FMA = 1 };
+int lv_contract_set(int mode);
+int lv_contract_available(void);
 /* A short name of LV_ISA_* isa ("scalar", "sse2" (x86-64) or "baseline", "avx2", "avx512f"). */
 const char *lv_isa_name(int isa);
 
