@@ -48,13 +48,14 @@ class Printed:
 
     def __init__(self, k: Kernel):
         self.k = k
-        self.ops_before = int(sum(sp.count_ops(e) for e in k.output_exprs))
+        self.output_exprs = k.output_exprs   # (substituting the where-symbols takes seconds for the largest: once)
+        self.ops_before = int(sum(sp.count_ops(e) for e in self.output_exprs))
         # Named subexpressions (k.where) are atoms to CSE and printed first, as written, as temporaries.
         exprs = k.printed_exprs
         temps, reduced = sp.cse(exprs, symbols=sp.numbered_symbols("t"), order="canonical")
         self.temps, self.reduced = _hoist_pow_bases(_used_where(k.where, exprs) + temps, reduced)
         self.ops_after = int(sum(sp.count_ops(e) for _, e in self.temps) + sum(sp.count_ops(e) for e in self.reduced))
-        self.has_piecewise = any(e.has(sp.Piecewise) for e in k.output_exprs)
+        self.has_piecewise = any(e.has(sp.Piecewise) for e in self.output_exprs)
         named = {s for s, _ in k.where}
         free = set().union(*(sp.sympify(e).free_symbols for e in exprs + [e for _, e in k.where])) if exprs else set()
         self.used = free - named
@@ -380,18 +381,33 @@ def _tex_value(a, exprs, names) -> str:
     return sp.latex(sp.Matrix(shape[0], shape[1], list(exprs)), symbol_names=names)
 
 
+def _more_symbols_than(exprs, limit: int) -> bool:
+    """True when the expressions hold more than `limit` symbols, each occurrence counted. sympy.latex prints every
+    occurrence (a name of at least one character), so more than LATEX_DIRECT_MAX means a direct form longer than that,
+    known without printing it (the largest kernels' direct forms, 0.5 MB of LaTeX printed only to be discarded, took
+    most of EQUATIONS.md's time)."""
+    count = 0
+    for e in exprs:
+        for x in sp.preorder_traversal(e):
+            count += x.is_Symbol
+            if count > limit:
+                return True
+    return False
+
+
 def latex_of(p: Printed) -> str:
     """The kernel's outputs as LaTeX printed by sympy.latex from its SymPy expressions: directly when
     short, else in the CSE form the code computes (temporaries t_i, then the outputs)."""
     k = p.k
-    names = _tex_symbols(k, [])
-    flat, idx, lines = k.output_exprs, 0, []
-    for a in k.outputs:
-        lines.append(f"{_tex_name(a.name)} = {_tex_value(a, flat[idx:idx + a.size], names)}")
-        idx += a.size
-    direct = r",\quad ".join(lines)
-    if len(direct) <= LATEX_DIRECT_MAX and not k.where:   # named subexpressions: show them (CSE form)
-        return direct
+    if not k.where and not _more_symbols_than(p.output_exprs, LATEX_DIRECT_MAX):   # named subexpressions: the CSE form
+        names = _tex_symbols(k, [])
+        flat, idx, lines = p.output_exprs, 0, []
+        for a in k.outputs:
+            lines.append(f"{_tex_name(a.name)} = {_tex_value(a, flat[idx:idx + a.size], names)}")
+            idx += a.size
+        direct = r",\quad ".join(lines)
+        if len(direct) <= LATEX_DIRECT_MAX:
+            return direct
     names = _tex_symbols(k, p.temps)
     rows = [f"{names[t]} &= {sp.latex(e, symbol_names=names)}" for t, e in p.temps]
     idx = 0

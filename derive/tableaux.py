@@ -38,6 +38,7 @@ double.
 """
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import sympy as sp
@@ -139,6 +140,7 @@ def imaginary_axis_bound(R_z: sp.Expr) -> float:
     return root
 
 
+@functools.cache   # (mpmath roots: ~2.5 s for the registry, which print_c, print_python and their checks each ask for)
 def _real_axis_limit(R_z: sp.Expr) -> float:
     """The x > 0 where |R(−x)| first reaches 1: a decaying mode λ < 0 is stable for |λ| h below it."""
     z, x = sp.Symbol("z"), sp.Symbol("x")
