@@ -135,7 +135,9 @@ KINDS = (("JOINT", 1, "world-anchored spherical joint: p_w, v_w follow from q, o
          ("WHEELS", 2, "reaction wheels: up to WHEELS_MAX on the columns of A_b (wheels<WHEELS_MAX>_body_rhs), Omega "
           "integrated, motor torques saturated"))
 CONSTANTS = (("WHEELS_MAX", WHEELS_MAX, "wheel slots per body (XS.Omega, MODEL.J, the columns of MODEL.A_b)"),
-             ("WHEELS_BODY_AXES", WHEELS_BODY_AXES, "wheels of the default layout: the body x, y, z axes, A_b = [I | 0]"))
+             ("WHEELS_BODY_AXES", WHEELS_BODY_AXES, "wheels of the default layout: the body x, y, z axes, A_b = [I | 0]"),
+             ("QUAT_RATE_SCALE", 0.5, "dq/dt = QUAT_RATE_SCALE q (x) [omega_b, 0] (rigid_body_rates_free_c returns the "
+              "product; a step folds the scale into its dt; checked in derive/rigid_body.py)"))
 
 
 def print_c() -> str:

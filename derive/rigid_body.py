@@ -18,9 +18,9 @@ from __future__ import annotations
 import sympy as sp
 
 from .kernel import Arg, Kernel, scalar, vec
-from .layout import EULER
+from .layout import CONSTANTS, EULER
 from .layout import STATE as X
-from .quaternion import quat_rate_body, rotate_to_body, rotation_matrix
+from .quaternion import pure, qmul, quat_rate_body, rotate_to_body, rotation_matrix
 
 STATE = "state (p_w[3] m, q[4] (x,y,z,w), v_w[3] m/s, omega_b[3] rad/s)"
 
@@ -52,6 +52,13 @@ def _check_euler(I_b, w, tau):
         raise RuntimeError("derive: per-axis Euler equations differ from I⁻¹(τ − ω × Iω)")
 
 
+def _check_rate_scale(q, w) -> None:
+    """Proof that dq/dt = QUAT_RATE_SCALE q ⊗ [ω_b, 0] (the printed constant a step folds into its dt)."""
+    scale = dict((n, v) for n, v, _ in CONSTANTS)["QUAT_RATE_SCALE"]
+    if (quat_rate_body(q, w) - sp.nsimplify(scale) * qmul(q, pure(w))).applyfunc(sp.expand) != sp.zeros(4, 1):
+        raise RuntimeError("derive: QUAT_RATE_SCALE is not the scale of quat_rate_body")
+
+
 def kernels() -> list[Kernel]:
     g = "Rigid-body dynamics"
     x = vec("x", X.size)
@@ -60,6 +67,7 @@ def kernels() -> list[Kernel]:
     omega_b, v_w, q, vec_w = vec("omega_b", 3), vec("v_w", 3), vec("q", 4), vec("v", 3)
     c_b = vec("c_b", EULER.size)
     _check_euler(I_b, omega_b, tau_b)
+    _check_rate_scale(q, omega_b)
     # c_b as named subexpressions of the kernels that take I_b: the same printed arithmetic as the *_c kernels
     where = list(zip(c_b, euler_coefficients(I_b)))
     xq, xv, xw = X.part(x, "q"), X.part(x, "v_w"), X.part(x, "omega_b")
@@ -127,4 +135,14 @@ def kernels() -> list[Kernel]:
                [Arg(*XS), Arg("m", m, "mass, kg", "positive"), Arg(*CB),
                 Arg("F_w", F_w, "total force at the COM, world frame, N"), Arg("tau_w", tau_w, "total torque about the COM, world frame, N·m")],
                [Arg("x_dot", full, "d/dt of the state")], g, notes=[same]),
+        Kernel("rigid_body_rates_free_c", "The rates a torque-free RK4 step stages: q ⊗ [ω_B, 0] and ω̇_B, on c_b",
+               r"g = q \otimes [\omega_B, 0] = \dot q / s,\ \dot\omega_x = k_x\omega_y\omega_z\ \text{(cyclic)}",
+               [Arg("q", q, "orientation (x, y, z, w), R_WB (a stage's value: unit to rounding)", "unit_quaternion"),
+                Arg("omega_b", omega_b, "angular velocity, body frame, rad/s"), Arg(*CB)],
+               [Arg("g", qmul(q, pure(omega_b)), "q ⊗ [ω_b, 0] = (dq/dt) / QUAT_RATE_SCALE, 1/s"),
+                Arg("omega_dot_b", euler_rhs_c(c_b, omega_b, sp.zeros(3, 1)), "angular acceleration, body frame, rad/s²")],
+               g, notes=["Only q and ω_b change within a torque-free step (v_W' = 0): the opt-in FMA tiles "
+                         "(Sim(..., contract=\"fma\"), csrc/batch_simd.h) stage these two with the step QUAT_RATE_SCALE·dt "
+                         "for q (the ½ of q̇ folded into it) and move p_W by one Euler step with v_W.",
+                         "Not bitwise rigid_body_rhs_free_c's q rate times QUAT_RATE_SCALE (there ½ multiplies ω first)."]),
     ]

@@ -1140,6 +1140,26 @@ void lv_rigid_body_rhs_c(const double *x, double m, const double *c_b, const dou
     x_dot[12] = c_b_2*x_10*x_11 + c_b_5*(-t5*x_6 + t6*x_3 - t7*x_4 + tau_w_2);
 }
 
+void lv_rigid_body_rates_free_c(const double *q, const double *omega_b, const double *c_b, double *g, double *omega_dot_b) {
+    const double q_0 = q[0];
+    const double q_1 = q[1];
+    const double q_2 = q[2];
+    const double q_3 = q[3];
+    const double omega_b_0 = omega_b[0];
+    const double omega_b_1 = omega_b[1];
+    const double omega_b_2 = omega_b[2];
+    const double c_b_0 = c_b[0];
+    const double c_b_1 = c_b[1];
+    const double c_b_2 = c_b[2];
+    g[0] = omega_b_0*q_3 - omega_b_1*q_2 + omega_b_2*q_1;
+    g[1] = omega_b_0*q_2 + omega_b_1*q_3 - omega_b_2*q_0;
+    g[2] = -omega_b_0*q_1 + omega_b_1*q_0 + omega_b_2*q_3;
+    g[3] = -omega_b_0*q_0 - omega_b_1*q_1 - omega_b_2*q_2;
+    omega_dot_b[0] = c_b_0*omega_b_1*omega_b_2;
+    omega_dot_b[1] = c_b_1*omega_b_0*omega_b_2;
+    omega_dot_b[2] = c_b_2*omega_b_0*omega_b_1;
+}
+
 void lv_pivot_body_rhs(const double *q, const double *omega_b, const double *I_p, const double *r_b, const double *F_w, const double *tau_w, double *q_dot, double *omega_dot_b) {
     const double q_0 = q[0];
     const double q_1 = q[1];
@@ -3414,6 +3434,7 @@ static void packed_euler_coefficients(const double *in, double *out) { lv_euler_
 static void packed_rigid_body_rhs_free_c(const double *in, double *out) { lv_rigid_body_rhs_free_c(in + 0, in + 13, out + 0); }
 static void packed_rigid_body_rhs_torque_c(const double *in, double *out) { lv_rigid_body_rhs_torque_c(in + 0, in + 13, in + 19, out + 0); }
 static void packed_rigid_body_rhs_c(const double *in, double *out) { lv_rigid_body_rhs_c(in + 0, in[13], in + 14, in + 20, in + 23, out + 0); }
+static void packed_rigid_body_rates_free_c(const double *in, double *out) { lv_rigid_body_rates_free_c(in + 0, in + 4, in + 7, out + 0, out + 4); }
 static void packed_pivot_body_rhs(const double *in, double *out) { lv_pivot_body_rhs(in + 0, in + 4, in + 7, in + 16, in + 19, in + 22, out + 0, out + 4); }
 static void packed_pivot_kinematics(const double *in, double *out) { lv_pivot_kinematics(in + 0, in + 4, in + 7, in + 10, out + 0, out + 3); }
 static void packed_splitting_rotation(const double *in, double *out) { lv_splitting_rotation(in + 0, in + 3, in + 7, in[10], out + 0, out + 4); }
@@ -3500,6 +3521,7 @@ const lv_kernel_info lv_kernel_table[LV_KERNEL_COUNT] = {
     {"rigid_body_rhs_free_c", 19, 13, packed_rigid_body_rhs_free_c},
     {"rigid_body_rhs_torque_c", 22, 13, packed_rigid_body_rhs_torque_c},
     {"rigid_body_rhs_c", 26, 13, packed_rigid_body_rhs_c},
+    {"rigid_body_rates_free_c", 13, 7, packed_rigid_body_rates_free_c},
     {"pivot_body_rhs", 25, 7, packed_pivot_body_rhs},
     {"pivot_kinematics", 13, 6, packed_pivot_kinematics},
     {"splitting_rotation", 11, 7, packed_splitting_rotation},

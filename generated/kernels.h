@@ -11,7 +11,7 @@ typedef struct {
     void (*packed)(const double *in, double *out);
 } lv_kernel_info;
 
-#define LV_KERNEL_COUNT 84
+#define LV_KERNEL_COUNT 85
 extern const lv_kernel_info lv_kernel_table[LV_KERNEL_COUNT];
 
 /* particle_moments: One particle's mass moment and momentum (summed: m r_COM and p).
@@ -293,6 +293,14 @@ void lv_rigid_body_rhs_torque_c(const double *x, const double *c_b, const double
      in  tau_w [3]: total torque about the COM, world frame, N·m
      out x_dot [13]: d/dt of the state */
 void lv_rigid_body_rhs_c(const double *x, double m, const double *c_b, const double *F_w, const double *tau_w, double *x_dot);
+
+/* rigid_body_rates_free_c: The rates a torque-free RK4 step stages: q ⊗ [ω_B, 0] and ω̇_B, on c_b.
+     in  q [4]: orientation (x, y, z, w), R_WB (a stage's value: unit to rounding)
+     in  omega_b [3]: angular velocity, body frame, rad/s
+     in  c_b [6]: Euler coefficients (k_x, k_y, k_z, r_x, r_y, r_z), body frame: k_x = (I_y − I_z)/I_x (cyclic, dimensionless), r_x = 1/I_x (1/(kg·m²)); from euler_coefficients
+     out g [4]: q ⊗ [ω_b, 0] = (dq/dt) / QUAT_RATE_SCALE, 1/s
+     out omega_dot_b [3]: angular acceleration, body frame, rad/s² */
+void lv_rigid_body_rates_free_c(const double *q, const double *omega_b, const double *c_b, double *g, double *omega_dot_b);
 
 /* pivot_body_rhs: Rotation about a world-anchored spherical joint (no wheels).
      in  q [4]: orientation (x, y, z, w), R_WB

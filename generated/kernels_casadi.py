@@ -1018,6 +1018,26 @@ def rigid_body_rhs_c(x, m, c_b, F_w, tau_w):
     return casadi.vertcat(x_7, x_8, x_9, t0*x_6 - t1*x_5 + t2*x_4, t0*x_5 + t1*x_6 - t2*x_3, -t0*x_4 + t1*x_3 + t2*x_6, -t0*x_3 - t1*x_4 - t2*x_5, F_w_0*t3, F_w_1*t3, F_w_2*t3, c_b_0*x_11*x_12 + c_b_3*(t5*x_4 - t6*x_5 - t7*x_6 + tau_w_0), c_b_1*x_10*x_12 + c_b_4*(-t5*x_3 - t6*x_6 + t7*x_5 + tau_w_1), c_b_2*x_10*x_11 + c_b_5*(-t5*x_6 + t6*x_3 - t7*x_4 + tau_w_2))
 
 
+def rigid_body_rates_free_c(q, omega_b, c_b):
+    """rigid_body_rates_free_c: The rates a torque-free RK4 step stages: q ⊗ [ω_B, 0] and ω̇_B, on c_b.
+      in  q [4]: orientation (x, y, z, w), R_WB (a stage's value: unit to rounding)
+      in  omega_b [3]: angular velocity, body frame, rad/s
+      in  c_b [6]: Euler coefficients (k_x, k_y, k_z, r_x, r_y, r_z), body frame: k_x = (I_y − I_z)/I_x (cyclic, dimensionless), r_x = 1/I_x (1/(kg·m²)); from euler_coefficients
+      out g [4]: q ⊗ [ω_b, 0] = (dq/dt) / QUAT_RATE_SCALE, 1/s
+      out omega_dot_b [3]: angular acceleration, body frame, rad/s²"""
+    q_0 = q[0]
+    q_1 = q[1]
+    q_2 = q[2]
+    q_3 = q[3]
+    omega_b_0 = omega_b[0]
+    omega_b_1 = omega_b[1]
+    omega_b_2 = omega_b[2]
+    c_b_0 = c_b[0]
+    c_b_1 = c_b[1]
+    c_b_2 = c_b[2]
+    return casadi.vertcat(omega_b_0*q_3 - omega_b_1*q_2 + omega_b_2*q_1, omega_b_0*q_2 + omega_b_1*q_3 - omega_b_2*q_0, -omega_b_0*q_1 + omega_b_1*q_0 + omega_b_2*q_3, -omega_b_0*q_0 - omega_b_1*q_1 - omega_b_2*q_2), casadi.vertcat(c_b_0*omega_b_1*omega_b_2, c_b_1*omega_b_0*omega_b_2, c_b_2*omega_b_0*omega_b_1)
+
+
 def pivot_body_rhs(q, omega_b, I_p, r_b, F_w, tau_w):
     """pivot_body_rhs: Rotation about a world-anchored spherical joint (no wheels).
       in  q [4]: orientation (x, y, z, w), R_WB

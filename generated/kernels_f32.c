@@ -1141,6 +1141,26 @@ void lvf_rigid_body_rhs_c(const float *x, float m, const float *c_b, const float
     x_dot[12] = c_b_2*x_10*x_11 + c_b_5*(-t5*x_6 + t6*x_3 - t7*x_4 + tau_w_2);
 }
 
+void lvf_rigid_body_rates_free_c(const float *q, const float *omega_b, const float *c_b, float *g, float *omega_dot_b) {
+    const float q_0 = q[0];
+    const float q_1 = q[1];
+    const float q_2 = q[2];
+    const float q_3 = q[3];
+    const float omega_b_0 = omega_b[0];
+    const float omega_b_1 = omega_b[1];
+    const float omega_b_2 = omega_b[2];
+    const float c_b_0 = c_b[0];
+    const float c_b_1 = c_b[1];
+    const float c_b_2 = c_b[2];
+    g[0] = omega_b_0*q_3 - omega_b_1*q_2 + omega_b_2*q_1;
+    g[1] = omega_b_0*q_2 + omega_b_1*q_3 - omega_b_2*q_0;
+    g[2] = -omega_b_0*q_1 + omega_b_1*q_0 + omega_b_2*q_3;
+    g[3] = -omega_b_0*q_0 - omega_b_1*q_1 - omega_b_2*q_2;
+    omega_dot_b[0] = c_b_0*omega_b_1*omega_b_2;
+    omega_dot_b[1] = c_b_1*omega_b_0*omega_b_2;
+    omega_dot_b[2] = c_b_2*omega_b_0*omega_b_1;
+}
+
 void lvf_pivot_body_rhs(const float *q, const float *omega_b, const float *I_p, const float *r_b, const float *F_w, const float *tau_w, float *q_dot, float *omega_dot_b) {
     const float q_0 = q[0];
     const float q_1 = q[1];

@@ -91,6 +91,8 @@ void lvf_rigid_body_rhs_free_c(const float *x, const float *c_b, float *x_dot);
 void lvf_rigid_body_rhs_torque_c(const float *x, const float *c_b, const float *tau_w, float *x_dot);
 /* rigid_body_rhs_c: rigid_body_rhs on the Euler coefficients c_b (one division: F_W/m) (float; see kernels.h) */
 void lvf_rigid_body_rhs_c(const float *x, float m, const float *c_b, const float *F_w, const float *tau_w, float *x_dot);
+/* rigid_body_rates_free_c: The rates a torque-free RK4 step stages: q ⊗ [ω_B, 0] and ω̇_B, on c_b (float; see kernels.h) */
+void lvf_rigid_body_rates_free_c(const float *q, const float *omega_b, const float *c_b, float *g, float *omega_dot_b);
 /* pivot_body_rhs: Rotation about a world-anchored spherical joint (no wheels) (float; see kernels.h) */
 void lvf_pivot_body_rhs(const float *q, const float *omega_b, const float *I_p, const float *r_b, const float *F_w, const float *tau_w, float *q_dot, float *omega_dot_b);
 /* pivot_kinematics: COM position and velocity of a body on a spherical joint (float; see kernels.h) */

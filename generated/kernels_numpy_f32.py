@@ -2072,6 +2072,55 @@ def rigid_body_rhs_c(x, m, c_b, F_w, tau_w, *, out=None):
     return x_dot_out
 
 
+def rigid_body_rates_free_c(q, omega_b, c_b, *, out=None):
+    """The rates a torque-free RK4 step stages: q ⊗ [ω_B, 0] and ω̇_B, on c_b.
+
+    Generated kernel ``rigid_body_rates_free_c``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    q : array_like, shape (..., 4)
+        orientation (x, y, z, w), R_WB (a stage's value: unit to rounding)
+    omega_b : array_like, shape (..., 3)
+        angular velocity, body frame, rad/s
+    c_b : array_like, shape (..., 6)
+        Euler coefficients (k_x, k_y, k_z, r_x, r_y, r_z), body frame: k_x = (I_y − I_z)/I_x (cyclic, dimensionless), r_x = 1/I_x (1/(kg·m²)); from euler_coefficients
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
+
+    Returns
+    -------
+    g : ndarray, shape (..., 4)
+        q ⊗ [ω_b, 0] = (dq/dt) / QUAT_RATE_SCALE, 1/s
+    omega_dot_b : ndarray, shape (..., 3)
+        angular acceleration, body frame, rad/s²
+    """
+    q = numpy.asarray(q, dtype=numpy.float32)
+    omega_b = numpy.asarray(omega_b, dtype=numpy.float32)
+    c_b = numpy.asarray(c_b, dtype=numpy.float32)
+    batch = q.shape[:-1] if q.shape[:-1] == omega_b.shape[:-1] == c_b.shape[:-1] else numpy.broadcast_shapes(q.shape[:-1], omega_b.shape[:-1], c_b.shape[:-1])
+    q_0 = q[..., 0]
+    q_1 = q[..., 1]
+    q_2 = q[..., 2]
+    q_3 = q[..., 3]
+    omega_b_0 = omega_b[..., 0]
+    omega_b_1 = omega_b[..., 1]
+    omega_b_2 = omega_b[..., 2]
+    c_b_0 = c_b[..., 0]
+    c_b_1 = c_b[..., 1]
+    c_b_2 = c_b[..., 2]
+    g_out = numpy.empty(batch + (4,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
+    numpy.add(omega_b_0 * q_3 - omega_b_1 * q_2, omega_b_2 * q_1, out=g_out[..., 0])
+    numpy.subtract(omega_b_0 * q_2 + omega_b_1 * q_3, omega_b_2 * q_0, out=g_out[..., 1])
+    numpy.add(-omega_b_0 * q_1 + omega_b_1 * q_0, omega_b_2 * q_3, out=g_out[..., 2])
+    numpy.subtract(-omega_b_0 * q_0 - omega_b_1 * q_1, omega_b_2 * q_2, out=g_out[..., 3])
+    omega_dot_b_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[1] is None else out[1]
+    numpy.multiply(c_b_0 * omega_b_1, omega_b_2, out=omega_dot_b_out[..., 0])
+    numpy.multiply(c_b_1 * omega_b_0, omega_b_2, out=omega_dot_b_out[..., 1])
+    numpy.multiply(c_b_2 * omega_b_0, omega_b_1, out=omega_dot_b_out[..., 2])
+    return g_out, omega_dot_b_out
+
+
 def pivot_body_rhs(q, omega_b, I_p, r_b, F_w, tau_w, *, out=None):
     """Rotation about a world-anchored spherical joint (no wheels).
 
@@ -5088,6 +5137,7 @@ KERNELS = {
     'rigid_body_rhs_free_c': (rigid_body_rhs_free_c, [('x', (13,)), ('c_b', (6,))], [('x_dot', (13,))]),
     'rigid_body_rhs_torque_c': (rigid_body_rhs_torque_c, [('x', (13,)), ('c_b', (6,)), ('tau_w', (3,))], [('x_dot', (13,))]),
     'rigid_body_rhs_c': (rigid_body_rhs_c, [('x', (13,)), ('m', ()), ('c_b', (6,)), ('F_w', (3,)), ('tau_w', (3,))], [('x_dot', (13,))]),
+    'rigid_body_rates_free_c': (rigid_body_rates_free_c, [('q', (4,)), ('omega_b', (3,)), ('c_b', (6,))], [('g', (4,)), ('omega_dot_b', (3,))]),
     'pivot_body_rhs': (pivot_body_rhs, [('q', (4,)), ('omega_b', (3,)), ('I_p', (3, 3)), ('r_b', (3,)), ('F_w', (3,)), ('tau_w', (3,))], [('q_dot', (4,)), ('omega_dot_b', (3,))]),
     'pivot_kinematics': (pivot_kinematics, [('q', (4,)), ('omega_b', (3,)), ('anchor_w', (3,)), ('r_b', (3,))], [('p_w', (3,)), ('v_w', (3,))]),
     'splitting_rotation': (splitting_rotation, [('I_b', (3,)), ('q', (4,)), ('omega_b', (3,)), ('h', ())], [('q_next', (4,)), ('omega_next', (3,))]),

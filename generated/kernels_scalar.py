@@ -618,6 +618,14 @@ def rigid_body_rhs_c(x, m, c_b, F_w, tau_w):
     return (x_7, x_8, x_9, t0*x_6 - t1*x_5 + t2*x_4, t0*x_5 + t1*x_6 - t2*x_3, -t0*x_4 + t1*x_3 + t2*x_6, -t0*x_3 - t1*x_4 - t2*x_5, F_w_0*t3, F_w_1*t3, F_w_2*t3, c_b_0*x_11*x_12 + c_b_3*(t5*x_4 - t6*x_5 - t7*x_6 + tau_w_0), c_b_1*x_10*x_12 + c_b_4*(-t5*x_3 - t6*x_6 + t7*x_5 + tau_w_1), c_b_2*x_10*x_11 + c_b_5*(-t5*x_6 + t6*x_3 - t7*x_4 + tau_w_2))
 
 
+def rigid_body_rates_free_c(q, omega_b, c_b):
+    """The rates a torque-free RK4 step stages: q ⊗ [ω_B, 0] and ω̇_B, on c_b (floats; see the module)."""
+    q_0, q_1, q_2, q_3 = q
+    omega_b_0, omega_b_1, omega_b_2 = omega_b
+    c_b_0, c_b_1, c_b_2, _, _, _ = c_b
+    return (omega_b_0*q_3 - omega_b_1*q_2 + omega_b_2*q_1, omega_b_0*q_2 + omega_b_1*q_3 - omega_b_2*q_0, -omega_b_0*q_1 + omega_b_1*q_0 + omega_b_2*q_3, -omega_b_0*q_0 - omega_b_1*q_1 - omega_b_2*q_2), (c_b_0*omega_b_1*omega_b_2, c_b_1*omega_b_0*omega_b_2, c_b_2*omega_b_0*omega_b_1)
+
+
 def pivot_body_rhs(q, omega_b, I_p, r_b, F_w, tau_w):
     """Rotation about a world-anchored spherical joint (no wheels) (floats; see the module)."""
     q_0, q_1, q_2, q_3 = q
@@ -1787,6 +1795,7 @@ READS = {
     'rigid_body_rhs_free_c': {'x': (3, 4, 5, 6, 7, 8, 9, 10, 11, 12), 'c_b': (0, 1, 2)},
     'rigid_body_rhs_torque_c': {'x': (3, 4, 5, 6, 7, 8, 9, 10, 11, 12), 'c_b': (0, 1, 2, 3, 4, 5), 'tau_w': (0, 1, 2)},
     'rigid_body_rhs_c': {'x': (3, 4, 5, 6, 7, 8, 9, 10, 11, 12), 'c_b': (0, 1, 2, 3, 4, 5), 'F_w': (0, 1, 2), 'tau_w': (0, 1, 2)},
+    'rigid_body_rates_free_c': {'q': (0, 1, 2, 3), 'omega_b': (0, 1, 2), 'c_b': (0, 1, 2)},
     'pivot_body_rhs': {'q': (0, 1, 2, 3), 'omega_b': (0, 1, 2), 'I_p': (0, 1, 2, 3, 4, 5, 6, 7, 8), 'r_b': (0, 1, 2), 'F_w': (0, 1, 2), 'tau_w': (0, 1, 2)},
     'pivot_kinematics': {'q': (0, 1, 2, 3), 'omega_b': (0, 1, 2), 'anchor_w': (0, 1, 2), 'r_b': (0, 1, 2)},
     'splitting_rotation': {'I_b': (0, 1, 2), 'q': (0, 1, 2, 3), 'omega_b': (0, 1, 2)},
@@ -1874,6 +1883,7 @@ ZEROS = {
     'rigid_body_rhs_free_c': {'x_dot': (7, 8, 9)},
     'rigid_body_rhs_torque_c': {'x_dot': (7, 8, 9)},
     'rigid_body_rhs_c': {'x_dot': ()},
+    'rigid_body_rates_free_c': {'g': (), 'omega_dot_b': ()},
     'pivot_body_rhs': {'q_dot': (), 'omega_dot_b': ()},
     'pivot_kinematics': {'p_w': (), 'v_w': ()},
     'splitting_rotation': {'q_next': (), 'omega_next': ()},

@@ -211,47 +211,47 @@ typedef void (*lv_tile_fn)(double (*LV_RESTRICT T)[LV_TILE], const double (*LV_R
 
 LV_ISA_COPIES(LV_DEFINE_TILES)
 
-/* The opt-in FMA copies (lv_contract_set(LV_CONTRACT_FMA), Sim(..., contract="fma")), torque-free bodies: the printed
-   right-hand side and RK4 update with only the rows whose rate changes within a step staged (q and omega_b); the
-   printed rate of v_w is 0, so p_w's rate (v_w) is constant over the step, where RK4 is one Euler step with the first
-   stage's rate (the printed LV_EULER_UPDATE), and v_w stays as it is. The same RK4 step mathematically, with 7 numbers
-   through the stages instead of 13 (a lane then stays in registers), compiled with -ffp-contract=fast for CPUs with
-   FMA, so the compiler fuses a*b+c into one rounding: not bitwise the scalar path nor NumPy (docs/performance.md
-   gives the measured difference). lavendersim bench (AVX2, load 12): 8.45-9.57 ns per body-step against 10.4-10.7
-   for the bitwise tile; in a harness, contraction alone on the bitwise tile's loop gained ~3 %, staging 7 rows
-   without contraction ~5 % (and different bits from NumPy's), both together ~15-20 %. */
-#define LV_TILE_STAGED(stmt)                                                                            \
-    do {                                                                                                \
-        for (i = LV_STATE_Q; i < LV_STATE_Q + LV_STATE_Q_LEN; i++) stmt;                                \
-        for (i = LV_STATE_OMEGA_B; i < LV_STATE_OMEGA_B + LV_STATE_OMEGA_B_LEN; i++) stmt;              \
-    } while (0)
+/* The opt-in FMA copies (lv_contract_set(LV_CONTRACT_FMA), Sim(..., contract="fma")), torque-free bodies: only q and
+   omega_b go through the stages (the printed rigid_body_rates_free_c: g = q (x) [omega_b, 0] and omega_b's rate, with
+   the printed LV_RK4_UPDATE, q's step LV_QUAT_RATE_SCALE * dt: the 1/2 of dq/dt folded into it); v_w's rate is 0,
+   so p_w's rate v_w is constant over the step, where RK4 is one Euler step (the printed LV_EULER_UPDATE), and v_w
+   stays as it is. The same RK4 step mathematically, 7 numbers through the stages instead of 13, compiled with
+   -ffp-contract=fast for CPUs with FMA, so the compiler fuses a*b+c into one rounding: not bitwise the scalar path
+   nor NumPy (docs/performance.md gives the measured difference). In a harness of these loops (AVX2, min of 15
+   interleaved rounds, a standalone copy): the bitwise tile 8.87 ns per body-step, this one 7.09 (the bitwise
+   loop contracted as it is: 7.94). */
+#define LV_TILE_STAGED(STAGE, IN_Q, IN_W, OUT_Q, OUT_W)                                                 \
+    lv_rigid_body_rates_free_c(IN_Q, IN_W, cf, g, wd);                                                  \
+    for (i = 0; i < LV_STATE_Q_LEN; i++) (void)LV_RK4_UPDATE(double, STAGE, hq, q0[i], g[i], aq[i], OUT_Q[i]); \
+    for (i = 0; i < LV_STATE_OMEGA_B_LEN; i++) (void)LV_RK4_UPDATE(double, STAGE, dt, w0[i], wd[i], aw[i], OUT_W[i])
 #define LV_DEFINE_TILE_STAGED(NAME, ATTR, NORMALIZE)                                                    \
     ATTR LV_FLATTEN static void NAME(double (*LV_RESTRICT T)[LV_TILE], const double (*LV_RESTRICT J)[LV_TILE], \
                                      const double (*LV_RESTRICT P)[LV_TILE], const lv_tile_fx *LV_RESTRICT fx, \
                                      long m, double dt, long n_steps)                                   \
     {                                                                                                   \
+        const double hq = LV_QUAT_RATE_SCALE * dt;                                                      \
         long s, b;                                                                                      \
         int i;                                                                                          \
         (void)fx;                                                                                       \
         (void)P;                                                                                        \
         for (s = 0; s < n_steps; s++) {                                                                 \
             for (b = 0; b < m; b++) {                                                                   \
-                double x[LV_STATE_SIZE], k[LV_STATE_SIZE], acc[LV_STATE_SIZE], tmp[LV_STATE_SIZE],      \
-                    xn[LV_STATE_SIZE], cf[LV_EULER_SIZE];                                               \
-                for (i = 0; i < LV_STATE_SIZE; i++) x[i] = tmp[i] = xn[i] = T[i][b];                    \
+                double q0[LV_STATE_Q_LEN], w0[LV_STATE_OMEGA_B_LEN], cf[LV_EULER_SIZE], g[LV_STATE_Q_LEN], \
+                    wd[LV_STATE_OMEGA_B_LEN], aq[LV_STATE_Q_LEN], aw[LV_STATE_OMEGA_B_LEN], tq[LV_STATE_Q_LEN], \
+                    tw[LV_STATE_OMEGA_B_LEN];                                                           \
+                for (i = 0; i < LV_STATE_Q_LEN; i++) q0[i] = T[LV_STATE_Q + i][b];                      \
+                for (i = 0; i < LV_STATE_OMEGA_B_LEN; i++) w0[i] = T[LV_STATE_OMEGA_B + i][b];          \
                 for (i = 0; i < LV_EULER_SIZE; i++) cf[i] = J[i][b];                                    \
-                lv_rigid_body_rhs_free_c(x, cf, k);                                                     \
-                for (i = LV_STATE_P_W; i < LV_STATE_P_W + LV_STATE_P_W_LEN; i++)                        \
-                    (void)LV_EULER_UPDATE(double, 1, dt, x[i], k[i], acc[i], xn[i]);                    \
-                LV_TILE_STAGED((void)LV_RK4_UPDATE(double, 1, dt, x[i], k[i], acc[i], tmp[i]));         \
-                lv_rigid_body_rhs_free_c(tmp, cf, k);                                                   \
-                LV_TILE_STAGED((void)LV_RK4_UPDATE(double, 2, dt, x[i], k[i], acc[i], tmp[i]));         \
-                lv_rigid_body_rhs_free_c(tmp, cf, k);                                                   \
-                LV_TILE_STAGED((void)LV_RK4_UPDATE(double, 3, dt, x[i], k[i], acc[i], tmp[i]));         \
-                lv_rigid_body_rhs_free_c(tmp, cf, k);                                                   \
-                LV_TILE_STAGED((void)LV_RK4_UPDATE(double, 4, dt, x[i], k[i], acc[i], xn[i]));          \
-                if (NORMALIZE) lv_quat_normalize(xn + LV_STATE_Q, xn + LV_STATE_Q);                    \
-                for (i = 0; i < LV_STATE_SIZE; i++) T[i][b] = xn[i];                                    \
+                LV_TILE_STAGED(1, q0, w0, tq, tw);                                                      \
+                LV_TILE_STAGED(2, tq, tw, tq, tw);                                                      \
+                LV_TILE_STAGED(3, tq, tw, tq, tw);                                                      \
+                LV_TILE_STAGED(4, tq, tw, tq, tw);                                                      \
+                if (NORMALIZE) lv_quat_normalize(tq, tq);                                               \
+                for (i = 0; i < LV_STATE_Q_LEN; i++) T[LV_STATE_Q + i][b] = tq[i];                      \
+                for (i = 0; i < LV_STATE_OMEGA_B_LEN; i++) T[LV_STATE_OMEGA_B + i][b] = tw[i];          \
+                for (i = 0; i < LV_STATE_P_W_LEN; i++)                                                  \
+                    (void)LV_EULER_UPDATE(double, 1, dt, T[LV_STATE_P_W + i][b], T[LV_STATE_V_W + i][b], aq[0], \
+                                          T[LV_STATE_P_W + i][b]);                                      \
             }                                                                                           \
         }                                                                                               \
     }
