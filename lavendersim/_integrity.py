@@ -84,15 +84,24 @@ def check_generated(path) -> None:
 
 class GeneratedChecker(importlib.abc.MetaPathFinder):
     """Import hook: find ``lavendersim.generated.<module>`` as usual, then check its file (:func:`check_generated`)
-    before it is executed."""
+    before it is executed.
+
+    It also finds any ``lavendersim.*`` module that a strict editable install (pyproject.toml's default,
+    docs/install.md) does not link yet: that install is a folder of links to the files the install saw, so a file
+    added to the clone since (a new module, a file a new derive/ step prints) is looked for in the folder the
+    package's ``__init__.py`` links to."""
 
     PACKAGE = "lavendersim.generated."
 
     def find_spec(self, fullname, path, target=None):
-        if not fullname.startswith(self.PACKAGE) or path is None:
+        if not fullname.startswith("lavendersim.") or path is None:
             return None
         spec = importlib.machinery.PathFinder.find_spec(fullname, path, target)
-        if spec is not None and spec.origin and spec.origin.endswith(".py"):
+        if spec is None:
+            linked = [Path(p, "__init__.py") for p in path]
+            clone = [str(i.resolve().parent) for i in linked if i.is_symlink()]
+            spec = importlib.machinery.PathFinder.find_spec(fullname, clone, target) if clone else None
+        if fullname.startswith(self.PACKAGE) and spec is not None and spec.origin and spec.origin.endswith(".py"):
             check_generated(spec.origin)
         return spec
 
