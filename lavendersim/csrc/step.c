@@ -966,14 +966,15 @@ static inline void dp_dense_coeffs(int v, const double *y0, const double *y1, do
 static inline int dp_dense_step(int v, const body_ctx *c, const double *cf, double *y, double k[][LV_XS_SIZE],
                                 dp_control *d, dp_dense *z, double dt, int normalize, int out)
 {
-    double yn[LV_XS_SIZE], yo[LV_XS_SIZE];
+    double yn[LV_XS_SIZE], yo[LV_XS_SIZE], zz[LV_XS_SIZE];   /* zz: z->z in a local (no aliasing with the stages) */
     long sub = 0;
-    int rejected = 0, ii;
-    memcpy(yn, z->z, sizeof yn);
+    int rejected = 0, ii, st = LV_OK;
+    memcpy(zz, z->z, sizeof zz);
+    memcpy(yn, zz, sizeof yn);
     while (z->ahead < 0.0) {
         double (*kc)[LV_XS_SIZE] = z->cur ? z->Kb : k, (*kn)[LV_XS_SIZE] = z->cur ? k : z->Kb;
         const double hs = d->h;
-        const double e = dp_attempt(v, c, cf, z->z, hs, kc, yn, d);
+        const double e = dp_attempt(v, c, cf, zz, hs, kc, yn, d);
         double fac = dp_factor(e);
         d->nfev += 6;
         if (e <= 1.0) {
@@ -981,9 +982,12 @@ static inline int dp_dense_step(int v, const body_ctx *c, const double *cf, doub
             if (fac < LV_DP_FACMIN) fac = LV_DP_FACMIN;
             if (rejected && fac > 1.0) fac = 1.0;
             d->h = hs * fac;
-            memcpy(z->z0, z->z, DP_NOUT_OF(v) * sizeof(double));
+            memcpy(z->z0, zz, DP_NOUT_OF(v) * sizeof(double));
             memcpy(z->y1, yn, DP_NOUT_OF(v) * sizeof(double));
-            if (!dp_accept(v, c, z->z, yn, normalize)) return LV_DIVERGED;
+            if (!dp_accept(v, c, zz, yn, normalize)) {
+                st = LV_DIVERGED;
+                break;
+            }
             LV_XS_UNROLL for (ii = 0; ii < DP_N_OF(v); ii++)   /* FSAL: f at the new (un-normalized) point */
                 kn[0][DP_IDX_OF(v)[ii]] = kc[6][DP_IDX_OF(v)[ii]];
             z->cur ^= 1;
@@ -997,9 +1001,13 @@ static inline int dp_dense_step(int v, const body_ctx *c, const double *cf, doub
             d->h = hs * fac;
             rejected = 1;
         }
-        if (d->h < LV_DP_HMIN_REL * dt || ++sub > LV_DP_MAX_SUBSTEPS) return LV_TOLERANCE;
+        if (d->h < LV_DP_HMIN_REL * dt || ++sub > LV_DP_MAX_SUBSTEPS) {
+            st = LV_TOLERANCE;
+            break;
+        }
     }
-    if (!out) return LV_OK;
+    memcpy(z->z, zz, sizeof zz);
+    if (st != LV_OK || !out) return st;
     if (!z->have_Y) {
         dp_dense_coeffs(v, z->z0, z->y1, z->hl, z->cur ? k : z->Kb, z);
         z->have_Y = 1;
@@ -1127,9 +1135,14 @@ static long advance_rk(double *state, const double *params, long b, const lv_mod
             d.have_k1 = 0; /* the held torque may change at each output step */
         }
         if (dense) {
+            double a = z.ahead - dt;
+            while (a >= 0.0 && s < n_steps - 1) {   /* an output step inside the last substep costs this only */
+                a -= dt;
+                s++;
+            }
             const int out = s == n_steps - 1;
-            z.ahead -= dt;   /* an output step inside the last substep costs this and nothing else */
-            if (z.ahead < 0.0 || out)
+            z.ahead = a;
+            if (a < 0.0 || out)
                 st = c.kind ? dp_dense_step_model(&c, cf, y, k, &d, &z, dt, normalize, out)
                      : c.n_refs ? dp_dense_step_plain(&c, cf, y, k, &d, &z, dt, normalize, out)
                      : dp_dense_step_free(&c, cf, y, k, &d, &z, dt, normalize, out);
