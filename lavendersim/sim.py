@@ -142,6 +142,7 @@ ON_BOUND = ("raise", "warn")
 CONTRACT = ("off", "fma")  # Sim(contract=...): the torque-free SIMD tiles bitwise (default) or with fused multiply-adds
 CHECK_BLOCK = 1 << 16       # bodies per kernel call when the checks read every body: bounded temporaries at 1e6
 FAST_STEP_WORK = 4096      # step() runs inside C (holding the GIL) for scenes of at most this many evaluations per step
+ADAPTIVE_STEP_WORK = 6     # an adaptive integrator's evaluations per body-step for that cap: one dopri5 substep
 
 
 def chunk_steps(work: int, long_ok: bool, cap: int | None = None) -> int:
@@ -553,7 +554,7 @@ class Sim:
         self._ctr = self._fast if self._fast is not None else _Counters()
         self._lock = _Guard(self._fast)
         # run(n) inside C for n up to one chunk (checked at its end, as _advance checks a chunk) within the work cap
-        self._fast_n = min(self._chunk, FAST_STEP_WORK // max(1, len(self.names) * (self._per_step or 1)))
+        self._fast_n = min(self._chunk, FAST_STEP_WORK // max(1, len(self.names) * (self._per_step or ADAPTIVE_STEP_WORK)))
         self._views = _read_only_views(self._x, self._models.Omega, self._models.applied)
         if self._fast is not None:   # sim.step() straight into C; the Python path only when C steps aside
             self._fast.set_fallback(self._step_slow)
@@ -748,25 +749,29 @@ class Sim:
 
     def _make_stepper(self, cap: bool = True):
         """The C fast path of step() (lavendersim/csrc/fast_step.c), or None where it does not apply: not the C
-        backend, an adaptive integrator (unbounded work per step), a free wheeled body under the growth check
-        (its |L| is computed in Python every step), a scene larger than FAST_STEP_WORK evaluations per step (the
-        fast path holds the GIL; cap=False: built whatever the size, see fast_chunks), or a Python without the GIL."""
+        backend, a free wheeled body under the growth check (its |L| is computed in Python every step), a scene
+        larger than FAST_STEP_WORK evaluations per step (an adaptive integrator counted ADAPTIVE_STEP_WORK per body;
+        the fast path holds the GIL; cap=False: built whatever the size, see fast_chunks), or a Python without the
+        GIL. An adaptive integrator's Stepper steps the Adaptive's arrays in place (fast_step.c)."""
         gil = getattr(sys, "_is_gil_enabled", lambda: True)()
-        if (self.backend.name != "c" or self._per_step is None or not gil or self.dtype != "float64"
+        work = self._per_step or ADAPTIVE_STEP_WORK
+        if (self.backend.name != "c" or not gil or self.dtype != "float64"
                 or self.contract != "off"   # (the Stepper steps bitwise; contract="fma" goes through advance)
                 or self.integrator not in backends.INTEGRATORS   # a user tableau: through advance (no Stepper code)
                 or (self._py_growth and self.max_growth is not None)
-                or (cap and len(self.names) * self._per_step > FAST_STEP_WORK)):
+                or (cap and len(self.names) * work > FAST_STEP_WORK)):
             return None
         from .backends import c_backend
 
         m = self._models if self._has_models else None
         models = (None,) * 4 if m is None else (m.rows, m.Omega, m.command, m.applied)
         bound = np.inf if self._bound is None else float(self._bound[0])
+        ad = self._adaptive
+        adaptive = () if ad is None else (ad.h, ad.nfev, ad.dense, ad.rtol, ad.atol)
         return c_backend._c.Stepper(self._x, self._params, self._effects if self._effects.size else self._effects.reshape(0, 2),
                                     c_backend.INTEGRATOR_CODES[self.integrator], 1 if self.normalize else 0, float(self.dt),
-                                    int(self._per_step), MAX_STEPS, self._wdt_scale, bound, self._g_fast,
-                                    c_backend.user_effect_table(self._effects), *models)
+                                    int(self._per_step or 0), MAX_STEPS, self._wdt_scale, bound, self._g_fast,
+                                    c_backend.user_effect_table(self._effects), *models, *adaptive)
 
     # ---- divergence checks ---------------------------------------------------------------
     def _setup_checks(self) -> None:

@@ -109,16 +109,9 @@ def test_c_and_numpy_agree_bitwise_with_a_jointed_wheeled_body():
     assert np.any(Wn != 0.0)
 
 
-# the default plan in the default set; forcing subsets always / never (8 s each when loaded) in the slow set
-@pytest.mark.parametrize("compact", [pytest.param(0, marks=pytest.mark.slow), None,
-                                     pytest.param(float("inf"), marks=pytest.mark.slow)],
-                         ids=["subsets-always", "subsets-default", "subsets-never"])
-def test_a_body_does_not_depend_on_its_neighbours(compact, monkeypatch):
+def test_a_body_does_not_depend_on_its_neighbours():
     """NumPy: a body alone == the same body beside a fast spinner and other loaded bodies (listed before and after
-    it), bitwise, with its own h and count; and a plain body beside a wheeled one == alone (the extended state).
-    Whether the bodies still running go on alone on a subset plan or beside held ones changes no number."""
-    if compact is not None:
-        monkeypatch.setattr(NB, "_DP_COMPACT_WORK", compact)
+    it), bitwise, with its own h and count; and a plain body beside a wheeled one == alone (the extended state)."""
     me = ("me", I_ASYM, TUMBLE)
     alone = advance(scene([me], LOADS[:1]), "numpy", 4, calls=2)
     for bodies in ([me, RATES[3]], [RATES[3], RATES[0], me, RATES[2]]):
@@ -229,3 +222,25 @@ def test_a_pickled_sim_steps_on_bitwise():
         sim.run(4)
         twin.run(4)
         assert np.array_equal(sim.x, twin.x) and sim.rhs_evals == twin.rhs_evals
+
+
+def test_without_a_carried_dense_output_each_call_starts_afresh():
+    """Adaptive(dense=False) carries nothing between calls: each call starts every body afresh from its state (as a
+    carried dense output that is forgotten after each call), C = NumPy bitwise (states, h, counts)."""
+    s = scene(RATES, LOADS)
+    out = {}
+    for backend in BACKENDS:
+        sim = lv.Sim(s, dt=0.25, integrator="dopri5", rtol=RTOL, atol=ATOL, backend=backend)
+        runs = []
+        for dense in (False, True):
+            x, ad = sim.x.copy(), B.Adaptive(RTOL, ATOL, sim.x.shape[0], dense=dense)
+            for _ in range(2):
+                B.get(backend).advance(x, sim.params, sim.effects, "dopri5", sim.normalize, 0.25, 3, None, ad)
+                ad.forget()
+            runs.append((x, ad.h, ad.nfev))
+        for a, b in zip(*runs):
+            assert np.array_equal(a, b)
+        out[backend] = runs[0]
+    for a, b in zip(out["c"], out["numpy"]):
+        assert np.array_equal(a, b)
+    assert np.all(out["c"][2] > 0)

@@ -169,7 +169,8 @@ def _scenes():
     forced.add_effect("angular_damping", body="b", c=0.05)
     cube = lc.chapter_cube("corner", damping=1e-3, omega_b=(0.2, -0.1, 0.3))
     return {"plain": (plain, "rk4"), "forced": (forced, "rk4"), "plain_euler": (plain, "euler"),
-            "splitting": (plain, "splitting"), "implicit_gyro": (forced, "implicit_gyro"), "cube": (cube, "rk4")}
+            "splitting": (plain, "splitting"), "implicit_gyro": (forced, "implicit_gyro"), "cube": (cube, "rk4"),
+            "dopri5": (forced, "dopri5"), "dopri5_cube": (cube, "dopri5")}
 
 
 def _sim(scene, integrator):

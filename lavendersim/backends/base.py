@@ -155,8 +155,9 @@ class Adaptive:
     nb : int
         Number of bodies (``h`` and ``nfev`` start as zeros of shape (nb,)).
     dense : bool, optional
-        Dense output (default True): an output step takes no substep of its own. False: every output
-        step lands on its time (the last substep clipped), as before session 16.
+        Carry each body's dense output between calls (default True). False: every call starts each
+        body afresh from its state (one evaluation); within a call the output steps still take no
+        substep of their own.
     """
 
     def __init__(self, rtol: float, atol: float, nb: int, dense: bool = True):

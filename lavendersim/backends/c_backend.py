@@ -461,7 +461,7 @@ class CBackend:
         else:
             extra = extra + (None, None, 0.0, 0.0)
         extra = extra + (user, None if tab is None else _tableau_arg(tab),
-                         adaptive.dense if adaptive is not None and integrator == "dopri5" else None)
+                         adaptive.dense if adaptive is not None and integrator in TABLEAUX.ADAPTIVE else None)
         status, step, body = _c.simulate(state, params, effects, INTEGRATOR_CODES.get(integrator, 0),
                                          1 if normalize else 0, float(dt), int(n_steps), *extra,
                                          *((1,) if contract == "fma" else ()))   # (an extension before 1: no arg)

@@ -849,19 +849,19 @@ class NumpyBackend:
         plan = self.plan(params, effects, None if models is None else models.rows)
         if integrator in PLAIN_ONLY and plan.has_models:
             raise ValueError(f"integrator: {integrator} steps plain rigid bodies only (no spherical_joint or reaction_wheels)")
-        if integrator == "dopri5" and adaptive is None:
-            raise ValueError("integrator: dopri5 needs adaptive (a lavendersim.backends.Adaptive)")
+        if integrator in T.ADAPTIVE and adaptive is None:
+            raise ValueError(f"integrator: {integrator} needs adaptive (a lavendersim.backends.Adaptive)")
         if self._scalar(plan, state, integrator, normalize, dt, n_steps):
             return
         loop = self._loop
-        if integrator == "dopri5":
+        if integrator in T.ADAPTIVE:
             assert adaptive is not None   # (checked above)
             h, nfev = adaptive.h.copy(), adaptive.nfev.copy()
             dense = None if adaptive.dense is None else adaptive.dense.copy()
 
             def loop(plan, x, integrator, normalize, dt, n_steps, command=None, applied=None):  # noqa: E306
-                _dopri5(plan, x, normalize, dt, n_steps, adaptive.rtol, adaptive.atol, h, nfev, command, applied,
-                        dense)
+                _dopri5(plan, x, integrator, normalize, dt, n_steps, adaptive.rtol, adaptive.atol, h, nfev, command,
+                        applied, dense)
         if not plan.has_models:
             x = _soa(state)                  # the working copy, struct-of-arrays (a contiguous row per number)
             with np.errstate(over="ignore", invalid="ignore", divide="ignore"):  # non-finite results are caught below
@@ -876,7 +876,7 @@ class NumpyBackend:
             state[...] = x[:, X]
             models.Omega[...] = x[:, OM]
             models.applied[...] = applied
-        if integrator == "dopri5":
+        if integrator in T.ADAPTIVE:
             assert adaptive is not None
             adaptive.h[...], adaptive.nfev[...] = h, nfev
             if dense is not None:
@@ -935,11 +935,7 @@ class NumpyBackend:
 # libm's, else math.pow: _dp_pow).
 
 _DP_DIVERGED, _DP_TOLERANCE = 1, 2   # a body's failure (0: none)
-_DP_FIELDS = ("y", "k0", "h", "cnt", "ncols", "t", "sub", "rej", "live", "why")
 _DP_SUBPLANS_MAX = 64                 # cached subset plans per plan
-# Going on with the running bodies alone pays when (substeps still to go) x (bodies dropped) is at least this: a
-# subset plan costs ~1 ms to build, a held body ~4 us per substep (1e3 bodies, 2 shared cores, NumPy 2.4)
-_DP_COMPACT_WORK = 256
 
 
 def _dp_norm(e, y, yn, rtol, atol, ncols):
@@ -1069,135 +1065,46 @@ def _dp_coeffs(plan, y0, y1, hs, k):
     return Y
 
 
-def _dp_next_h(w, e, hs, clipped):
-    """The controller (C's, per body): the next proposal after an accepted (e <= 1) or rejected substep of hs
-    (read for the running bodies only)."""
+def _dp_next_h(rej, h, e, hs, clipped):
+    """The controller (C's, per body): the next proposal after an accepted (e <= 1) or rejected substep of hs, with
+    h the proposal it was taken from (read for the running bodies only)."""
     p = _dp_factor(e)
     fa = np.where(p > T.DP_FACMAX, T.DP_FACMAX, p)           # accepted
     fa = np.where(fa < T.DP_FACMIN, T.DP_FACMIN, fa)
-    fa = np.where(w["rej"] & (fa > 1.0), 1.0, fa)            # no growth right after a rejection
+    fa = np.where(rej & (fa > 1.0), 1.0, fa)                 # no growth right after a rejection
     hf = hs * fa
     # a step shortened to land on the output time does not shrink the proposal
-    h_ok = np.where(clipped & (fa >= 1.0) & (w["h"] > hf), w["h"], hf)
+    h_ok = np.where(clipped & (fa >= 1.0) & (h > hf), h, hf)
     fr = np.where(p < T.DP_FACMIN, T.DP_FACMIN, p)           # rejected
     fr = np.where(fr > 1.0, 1.0, fr)
     return np.where(e <= 1.0, h_ok, hs * fr)
 
 
-def _dp_substep(plan, w, u, dt, rtol, atol, normalize):
-    """One substep attempt of every running body of w (C's `while (t < dt)` body: stages, error, controller,
-    normalization and joint, FSAL, the failure rules), in place. Held bodies (w["live"] False) keep everything."""
-    y, live = w["y"], w["live"]
-    rem = dt - w["t"]
-    clipped = w["h"] >= rem
-    hs = np.where(live, np.where(clipped, rem, w["h"]), 0.0)
-    yn, k7, err, _ = _dp_stages(plan, y, w["k0"], hs[:, None], u)
-    w["cnt"][live] += 6
-    e = _dp_norm(err, y, yn, rtol, atol, w["ncols"])
-    ok = live & (e <= 1.0)
-    w["h"] = np.where(live, _dp_next_h(w, e, hs, clipped), w["h"])
-    w["t"] = np.where(ok, np.where(clipped, dt, w["t"] + hs), w["t"])
-    if normalize:
-        _normalize(yn)
-    if plan.has_models:
-        plan.constrain(yn)
-    diverged = ok & ~np.isfinite(yn).all(axis=1)
-    good = ok & ~diverged
-    y[good], w["k0"][good] = yn[good], k7[good]             # FSAL: f at the new (un-normalized) point
-    w["rej"] = np.where(live, ~ok, w["rej"])
-    w["why"][diverged] = _DP_DIVERGED
-    live &= ~diverged
-    w["sub"][live] += 1
-    tol = live & ((w["h"] < DOPRI5_HMIN_REL * dt) | (w["sub"] > DOPRI5_MAX_SUBSTEPS))
-    w["why"][tol] = _DP_TOLERANCE
-    live &= ~tol & (w["t"] < dt)
+def _dp_fail(plan, x, integrator, why, h, i, rtol, atol, dt):
+    """DivergenceError of the lowest failing body at output step i (C's choice), with its last output state."""
+    b = int(np.flatnonzero(why)[0])
+    if why[b] == _DP_TOLERANCE:
+        cause = tolerance_cause(Adaptive(rtol, atol, 0), float(h[b]), dt, x[b, X])
+    else:
+        cause = divergence_cause(x[b, X], dt, integrator, plan.I[b], *plan.wheel_info(x, b))
+    return DivergenceError(i, b, cause)
 
 
-def _dp_interval(plan, full, u, dt, rtol, atol, normalize):
-    """Every body of full across one output interval dt, by substeps. When at most half of the working set is
-    still running, and enough work is left to pay for a subset plan (_DP_COMPACT_WORK) or it is cached, those go
-    on alone (on their subset plan, _subplan): a fast body costs the others little."""
-    nb = full["y"].shape[0]
-    full.update(t=np.zeros(nb), sub=np.zeros(nb, np.int64), rej=np.zeros(nb, bool), live=np.ones(nb, bool),
-                why=np.zeros(nb, np.int8))
-    W, w, sp, uw = None, full, plan, u          # W None: the working set is every body (w is full itself)
-    while True:
-        n_live = int(np.count_nonzero(w["live"]))
-        if n_live == 0:
-            break
-        if 2 * n_live <= w["live"].size:
-            live = np.flatnonzero(w["live"])
-            W_new = live if W is None else W[live]
-            todo = float(np.max((dt - w["t"][live]) / w["h"][live]))   # substeps still to go, roughly
-            if W_new.tobytes() in plan.subplans or todo * (w["live"].size - n_live) >= _DP_COMPACT_WORK:
-                if W is not None:
-                    _dp_scatter(full, w, W)
-                W = W_new
-                w = {k: full[k][W] for k in _DP_FIELDS}
-                sp, uw = _subplan(plan, W), None if u is None else u[W]
-        _dp_substep(sp, w, uw, dt, rtol, atol, normalize)
-    if W is not None:
-        _dp_scatter(full, w, W)
-
-
-def _dp_scatter(full, w, W):
-    for k in _DP_FIELDS:
-        full[k][W] = w[k]
-
-
-def _dp_start(plan, full, fresh, u, rtol, atol, dt):
-    """Before an output step: f(y) for the bodies in fresh (each call's first step; a wheeled body's every step,
-    its held torque may change), then the starting step of bodies without a valid proposal; counted per body."""
-    x, k0, cnt = full["y"], full["k0"], full["cnt"]
-    for sel in (fresh, ~(full["h"] > 0.0) | ~np.isfinite(full["h"])):
-        idx = np.flatnonzero(sel)
-        if not idx.size:
-            continue
-        sp, ui = _subplan(plan, idx), None if u is None else u[idx]
-        if sel is fresh:
-            k0[idx] = _dp_rhs(sp, x[idx], ui)
-        else:
-            full["h"][idx] = _dp_initial_h(sp, x[idx], k0[idx], ui, rtol, atol, dt, full["ncols"][idx])
-        cnt[idx] += 1
-
-
-def _dopri5(plan, x, normalize, dt, n_steps, rtol, atol, hs, nfev, command=None, applied=None, dense=None):
-    """Advance every body by n_steps output steps of dt (C's advance_rk with lv_adaptive): with dense (nb,
-    DENSE_SIZE) the bodies without wheels by dense output (_dp_dense_run), the others landing on every output
-    time (_dp_land); each group on its subset plan, the earliest failure (step, then body) raised, as C reports."""
-    wheeled = plan.wheeled if x.shape[1] > LY.STATE_SIZE else np.zeros(x.shape[0], bool)
-    if dense is None or n_steps == 0 or wheeled.all():
-        return _dp_land(plan, x, normalize, dt, n_steps, rtol, atol, hs, nfev, command, applied)
-    if not wheeled.any():
-        return _dp_dense_run(plan, x, normalize, dt, n_steps, rtol, atol, hs, nfev, dense)
-    fails = []
-    for sel in (np.flatnonzero(~wheeled), np.flatnonzero(wheeled)):
-        sp, xs, h, n = _subplan(plan, sel), x[sel], hs[sel], nfev[sel]
-        try:
-            if sel.size and wheeled[sel[0]]:
-                a = applied[sel]
-                _dp_land(sp, xs, normalize, dt, n_steps, rtol, atol, h, n, command[sel], a)
-                applied[sel] = a
-            else:
-                d = dense[sel]
-                _dp_dense_run(sp, xs, normalize, dt, n_steps, rtol, atol, h, n, d)
-                dense[sel] = d
-        except DivergenceError as e:
-            fails.append((e.step, int(sel[e.body]), e.cause))
-        x[sel], hs[sel], nfev[sel] = xs, h, n
-    if fails:
-        raise DivergenceError(*min(fails))
-
-
-def _dp_dense_run(plan, x, normalize, dt, n_steps, rtol, atol, hs, nfev, dense):
-    """Every body of plan (none with wheels) by n_steps output steps of dt with dense output (C's dp_dense_step,
-    vectorized): each integrates on unclipped (its own state z, `ahead` past the output) and the call's last output
-    is read off its last substep's continuous extension; the DENSE rows carry z, f(z) and the extension to the next call while
-    the state is the one written (else a body starts afresh from it). hs, nfev, dense updated in place."""
+def _dopri5(plan, x, integrator, normalize, dt, n_steps, rtol, atol, hs, nfev, command=None, applied=None, dense=None):
+    """Every body by n_steps output steps of dt (C's advance_rk with lv_adaptive, vectorized over bodies): each
+    integrates on unclipped (its own state z, `ahead` past the output) and an output is read off its last
+    substep's continuous extension; only the call's last output is formed, but a body with wheels lands on every
+    output time (its held torque changes there: the substep that would pass it is clipped). The DENSE rows (dense,
+    (nb, DENSE_SIZE); None: each call starts afresh) carry z, f(z) and the extension of a body without wheels to the
+    next call while its state is the one written (else it starts afresh from it). hs, nfev, dense updated in place;
+    the earliest failure (step, then body) raised, as C reports."""
+    if n_steps == 0:
+        return
     nb, cols = x.shape
-    D = dense
+    land = plan.wheeled if cols > LY.STATE_SIZE else np.zeros(nb, bool)
+    D = np.zeros((nb, LY.DENSE_SIZE)) if dense is None else dense
     same = np.all(np.ascontiguousarray(x[:, X]).view(np.uint64) == D[:, LY.DENSE_X_OUT].view(np.uint64), axis=1)
-    valid = (D[:, LY.DENSE_VALID] == 1.0) & same
+    valid = (D[:, LY.DENSE_VALID] == 1.0) & same & ~land
     z = np.where(valid[:, None], D[:, LY.DENSE_Z][:, :cols], x)
     k0 = D[:, LY.DENSE_F][:, :cols].copy()
     Y = np.where(valid[:, None, None], D[:, LY.DENSE_COEF].reshape(nb, 5, LY.XS_SIZE)[:, :, :cols], 0.0)
@@ -1205,29 +1112,33 @@ def _dp_dense_run(plan, x, normalize, dt, n_steps, rtol, atol, hs, nfev, dense):
     hl = np.where(valid, D[:, LY.DENSE_H_LAST], 0.0)
     cnt = np.zeros(nb)
     ncols = plan.norm_cols if cols > LY.STATE_SIZE else np.full(nb, float(LY.STATE_SIZE))
-    fresh = np.flatnonzero(~valid)
-    if fresh.size:
-        k0[fresh] = _dp_rhs(_subplan(plan, fresh), z[fresh], None)
-        cnt[fresh] += 1
     h = hs.copy()
-    bad = np.flatnonzero(~(h > 0.0) | ~np.isfinite(h))
-    if bad.size:
-        h[bad] = _dp_initial_h(_subplan(plan, bad), z[bad], k0[bad], None, rtol, atol, dt, ncols[bad])
-        cnt[bad] += 1
+    evaluate, no_clip = np.flatnonzero(~valid), np.zeros(nb, bool)
     for i in range(n_steps):
+        u = None if command is None else plan.applied(x, command)
+        if evaluate.size:   # f at z (the FSAL stage) under this step's loads: fresh bodies, and landing ones each step
+            k0[evaluate] = _dp_rhs(_subplan(plan, evaluate), z[evaluate], None if u is None else u[evaluate])
+            cnt[evaluate] += 1
+        evaluate = np.flatnonzero(land)
+        bad = np.flatnonzero(~(h > 0.0) | ~np.isfinite(h)) if i == 0 else evaluate[:0]
+        if bad.size:   # a starting step where there is no proposal
+            h[bad] = _dp_initial_h(_subplan(plan, bad), z[bad], k0[bad], None if u is None else u[bad], rtol, atol,
+                                   dt, ncols[bad])
+            cnt[bad] += 1
         ahead = ahead - dt
         live = ahead < 0.0
-        last = i == n_steps - 1      # no state between is seen: only the call's last is read off
+        last = i == n_steps - 1      # no state between is seen: only the call's last is read off (and landings)
         if not last and not live.any():
             continue
         sub, rej, why = np.zeros(nb, np.int64), np.zeros(nb, bool), np.zeros(nb, np.int8)
         while live.any():
-            step_h = np.where(live, h, 0.0)
-            yn, k7, err, ks = _dp_stages(plan, z, k0, step_h[:, None], None)
+            clipped = land & (h >= -ahead)
+            step_h = np.where(live, np.where(clipped, -ahead, h), 0.0)
+            yn, k7, err, ks = _dp_stages(plan, z, k0, step_h[:, None], u)
             cnt[live] += 6
             e = _dp_norm(err, z, yn, rtol, atol, ncols)
             ok = live & (e <= 1.0)
-            h = np.where(live, _dp_next_h({"rej": rej, "h": h}, e, step_h, np.zeros(nb, bool)), h)
+            h = np.where(live, _dp_next_h(rej, h, e, step_h, clipped if land.any() else no_clip), h)
             Yn = _dp_coeffs(plan, z, yn, step_h[:, None], ks)
             if normalize:
                 _normalize(yn)
@@ -1236,7 +1147,7 @@ def _dp_dense_run(plan, x, normalize, dt, n_steps, rtol, atol, hs, nfev, dense):
             diverged = ok & ~np.isfinite(yn).all(axis=1)
             good = ok & ~diverged
             z[good], k0[good], Y[good] = yn[good], k7[good], Yn[good]   # FSAL: f at the new (un-normalized) point
-            ahead = np.where(good, ahead + step_h, ahead)
+            ahead = np.where(good, np.where(clipped, 0.0, ahead + step_h), ahead)
             hl = np.where(good, step_h, hl)
             rej = np.where(live, ~ok, rej)
             why[diverged] = _DP_DIVERGED
@@ -1245,64 +1156,33 @@ def _dp_dense_run(plan, x, normalize, dt, n_steps, rtol, atol, hs, nfev, dense):
             tol = live & ((h < DOPRI5_HMIN_REL * dt) | (sub > DOPRI5_MAX_SUBSTEPS))
             why[tol] = _DP_TOLERANCE
             live &= ~tol & (ahead < 0.0)
-        if last:
+        put = np.ones(nb, bool) if last else land
+        if put.any():
             th = ((hl - ahead) / hl)[:, None]
             th1 = 1.0 - th
             out = Y[:, 0] + th * (Y[:, 1] + th1 * (Y[:, 2] + th * (Y[:, 3] + th1 * Y[:, 4])))
-            at = ahead == 0.0
-            out[at] = z[at]
             if normalize:
                 _normalize(out)
             if plan.has_models:
                 plan.constrain(out)
-            why[(why == 0) & ~np.isfinite(out).all(axis=1)] = _DP_DIVERGED
-        failed = np.flatnonzero(why)
-        if failed.size:
-            b = int(failed[0])
-            if why[b] == _DP_TOLERANCE:
-                cause = tolerance_cause(Adaptive(rtol, atol, 0), float(h[b]), dt, x[b, X])
-            else:
-                cause = divergence_cause(x[b, X], dt, "dopri5", *plan.wheel_info(x, b))
-            raise DivergenceError(i, b, cause)
-        if last:
-            x[...] = out
-    D[:, LY.DENSE_VALID] = 1.0
-    D[:, LY.DENSE_AHEAD], D[:, LY.DENSE_H_LAST] = ahead, hl
-    D[:, LY.DENSE_Z.start:LY.DENSE_Z.start + cols] = z
-    D[:, LY.DENSE_F.start:LY.DENSE_F.start + cols] = k0
-    D[:, LY.DENSE_X_OUT] = x[:, X]
-    coef = np.zeros((nb, 5, LY.XS_SIZE))
-    coef[:, :, :cols] = Y
-    D[:, LY.DENSE_COEF] = coef.reshape(nb, -1)
-    hs[...] = h
-    nfev += cnt
-
-
-def _dp_land(plan, x, normalize, dt, n_steps, rtol, atol, hs, nfev, command=None, applied=None):
-    """Advance every body by n_steps output steps of exactly dt, each on its own step sizes, the last substep of
-    each clipped to land on it (C's dp_output_step, vectorized over bodies). hs (nb,) holds each body's proposal,
-    nfev (nb,) its count; both updated in place. k1 is reused (FSAL) within the call. A failure raises
-    DivergenceError naming the first failing step and, there, the lowest failing body (C's choice), with x at that
-    body's last accepted state."""
-    nb = x.shape[0]
-    ext = x.shape[1] > LY.STATE_SIZE
-    full = {"y": x, "k0": np.empty_like(x), "h": hs.copy(), "cnt": np.zeros(nb),
-            "ncols": plan.norm_cols if ext else np.full(nb, float(LY.STATE_SIZE))}
-    fresh = np.ones(nb, bool)
-    for i in range(n_steps):
-        u = None if command is None else plan.applied(x, command)
-        _dp_start(plan, full, fresh, u, rtol, atol, dt)
-        fresh = plan.wheeled.copy() if ext else np.zeros(nb, bool)
-        _dp_interval(plan, full, u, dt, rtol, atol, normalize)
-        failed = np.flatnonzero(full["why"])
-        if failed.size:
-            b = int(failed[0])
-            if full["why"][b] == _DP_TOLERANCE:
-                cause = tolerance_cause(Adaptive(rtol, atol, 0), float(full["h"][b]), dt, x[b, X])
-            else:
-                cause = divergence_cause(x[b, X], dt, "dopri5", plan.I[b], *plan.wheel_info(x, b))
-            raise DivergenceError(i, b, cause)
+            at = ahead == 0.0            # landed on the output time: z itself (already normalized, on its joint)
+            out[at] = z[at]
+            why[put & (why == 0) & ~np.isfinite(out).all(axis=1)] = _DP_DIVERGED
+        if why.any():
+            raise _dp_fail(plan, x, integrator, why, h, i, rtol, atol, dt)
+        if put.any():
+            x[put] = out[put]
         if u is not None:
             applied[plan.wheeled] = u[plan.wheeled]
-    hs[...] = full["h"]
-    nfev += full["cnt"]
+    if dense is not None:
+        keep = ~land
+        D[keep, LY.DENSE_VALID] = 1.0
+        D[keep, LY.DENSE_AHEAD], D[keep, LY.DENSE_H_LAST] = ahead[keep], hl[keep]
+        D[keep, LY.DENSE_Z.start:LY.DENSE_Z.start + cols] = z[keep]
+        D[keep, LY.DENSE_F.start:LY.DENSE_F.start + cols] = k0[keep]
+        D[keep, LY.DENSE_X_OUT] = x[keep][:, X]
+        coef = np.zeros((nb, 5, LY.XS_SIZE))
+        coef[:, :, :cols] = Y
+        D[keep, LY.DENSE_COEF] = coef[keep].reshape(-1, 5 * LY.XS_SIZE)
+    hs[...] = h
+    nfev += cnt

@@ -11,7 +11,9 @@
    Otherwise it restores the arrays from the snapshot (bitwise) and returns False: the caller takes the
    Python path, which re-runs the step and raises or warns exactly as before. The GIL is held throughout
    (the Sim enables the fast path only for small scenes), so a step never interleaves with another
-   Python thread. Control flow only: every number comes from lv_simulate and the arrays Sim fills. */
+   Python thread. Control flow only: every number comes from lv_simulate and the arrays Sim fills.
+   dopri5 (an adaptive integrator): the Adaptive's arrays h, nfev and dense are stepped in place and are part of the
+   snapshot and of the "unchanged" test; rhs_evals grows by the largest per-body increment of nfev (Sim's rule). */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
 #include <math.h>
@@ -29,7 +31,8 @@
    does not apply). */
 enum { LV_G_W = 0, LV_G_E = 1, LV_G_L2 = 2, LV_G_COLS = 3 };
 
-enum { FS_STATE, FS_PARAMS, FS_EFFECTS, FS_WDT, FS_GROWTH, FS_ROWS, FS_OMEGA, FS_COMMAND, FS_APPLIED, FS_N };
+enum { FS_STATE, FS_PARAMS, FS_EFFECTS, FS_WDT, FS_GROWTH, FS_ROWS, FS_OMEGA, FS_COMMAND, FS_APPLIED, FS_H, FS_NFEV,
+       FS_DENSE, FS_N };
 
 typedef struct {
     PyObject_HEAD
@@ -38,8 +41,9 @@ typedef struct {
     lv_user_effect *user_entries;
     lv_user_effects user;
     lv_models models;
-    int has_models, integrator, normalize;
-    double dt, bound;
+    int has_models, integrator, normalize, adaptive;
+    double dt, bound, rtol, atol;
+    size_t n_snap;         /* doubles in snap */
     long nb, ne, row_size;
     double *snap;          /* x (nb*13), Omega (nb*3), applied (nb*3) of the last checked state */
     int valid;             /* snap holds a checked state */
@@ -93,19 +97,24 @@ static int take(Stepper *s, int i, PyObject *obj, int writable, Py_ssize_t n_dou
 }
 
 /* Stepper(state, params, effects, integrator, normalize, dt, per_step, max_steps, wdt_scale, bound, growth,
-           user_effects, rows, Omega, command, applied) — the model arrays all None or all given. */
+           user_effects, rows, Omega, command, applied[, h, nfev, dense, rtol, atol]) — the model arrays all None or
+   all given; an adaptive integrator with its Adaptive's h, nfev (nb,), dense (nb, LV_DENSE_SIZE) or None, rtol, atol. */
 static int stepper_init(Stepper *s, PyObject *args, PyObject *kw)
 {
-    PyObject *st, *pr, *ef, *wdt, *growth, *user_obj, *rows, *om, *cm, *ap;
+    PyObject *st, *pr, *ef, *wdt, *growth, *user_obj, *rows, *om, *cm, *ap, *h_obj = Py_None, *nfev_obj = Py_None,
+             *dense_obj = Py_None;
     long long per_step, max_steps;
     Py_ssize_t nb;
     (void)kw;
     stepper_release(s);
-    if (!PyArg_ParseTuple(args, "OOOipdLLOdOOOOOO:Stepper", &st, &pr, &ef, &s->integrator, &s->normalize, &s->dt,
-                          &per_step, &max_steps, &wdt, &s->bound, &growth, &user_obj, &rows, &om, &cm, &ap))
+    s->rtol = s->atol = 0.0;
+    if (!PyArg_ParseTuple(args, "OOOipdLLOdOOOOOO|OOOdd:Stepper", &st, &pr, &ef, &s->integrator, &s->normalize, &s->dt,
+                          &per_step, &max_steps, &wdt, &s->bound, &growth, &user_obj, &rows, &om, &cm, &ap, &h_obj,
+                          &nfev_obj, &dense_obj, &s->rtol, &s->atol))
         return -1;
-    if (s->integrator < 0 || s->integrator > LV_INTEGRATOR_LAST || s->integrator == LV_INTEGRATOR_DOPRI5) {
-        PyErr_SetString(PyExc_ValueError, "Stepper: a fixed-step integrator code (dopri5 is not served)");
+    s->adaptive = s->integrator >= 0 && s->integrator <= LV_INTEGRATOR_LAST && LV_INTEGRATOR_ADAPTIVE(s->integrator);
+    if (s->integrator < 0 || s->integrator > LV_INTEGRATOR_LAST || (s->adaptive && (h_obj == Py_None || nfev_obj == Py_None))) {
+        PyErr_SetString(PyExc_ValueError, "Stepper: an integrator code (an adaptive one with h, nfev, dense, rtol, atol)");
         return -1;
     }
     if (take(s, FS_STATE, st, 1, -1, "state") != 0) return -1;
@@ -138,6 +147,9 @@ static int stepper_init(Stepper *s, PyObject *args, PyObject *kw)
         s->models.command = (const double *)s->buf[FS_COMMAND].buf;
         s->models.applied = (double *)s->buf[FS_APPLIED].buf;
     }
+    if (s->adaptive && (take(s, FS_H, h_obj, 1, nb, "h") != 0 || take(s, FS_NFEV, nfev_obj, 1, nb, "nfev") != 0
+                        || (dense_obj != Py_None && take(s, FS_DENSE, dense_obj, 1, nb * LV_DENSE_SIZE, "dense") != 0)))
+        return -1;
     s->user.entries = NULL;
     s->user.n = 0;
     if (user_obj != Py_None) {
@@ -157,7 +169,10 @@ static int stepper_init(Stepper *s, PyObject *args, PyObject *kw)
         PyBuffer_Release(&v);
         s->user.entries = s->user_entries;
     }
-    s->snap = (double *)malloc(sizeof(double) * (size_t)nb * (LV_STATE_SIZE + 2 * LV_NW)); /* x, Omega, applied */
+    /* x, Omega, applied; then h, nfev, dense of an adaptive integrator */
+    s->n_snap = (size_t)nb * (LV_STATE_SIZE + 2 * LV_NW
+                              + (s->adaptive ? 2 + (s->have[FS_DENSE] ? LV_DENSE_SIZE : 0) : 0));
+    s->snap = (double *)malloc(sizeof(double) * s->n_snap);
     if (s->snap == NULL) { PyErr_NoMemory(); return -1; }
     s->valid = 0;
     s->busy = 0;
@@ -187,12 +202,29 @@ static int arguments_ok(const Stepper *s)
     return 1;
 }
 
+/* The adaptive arrays in the snapshot's order (h, nfev, dense), from offset nx + 2 nw: 0 .. 3 arrays. */
+static int adaptive_parts(const Stepper *s, double **part, size_t *len)
+{
+    static const int which[3] = {FS_H, FS_NFEV, FS_DENSE};
+    int i, n = 0;
+    for (i = 0; i < 3; i++)
+        if (s->adaptive && s->have[which[i]]) {
+            part[n] = (double *)s->buf[which[i]].buf;
+            len[n++] = (size_t)(s->buf[which[i]].len / 8);
+        }
+    return n;
+}
+
 /* Copy the arrays into the snapshot (to = 1) or back from it (to = 0). */
 static void snap_copy(Stepper *s, int to)
 {
     const size_t nx = (size_t)s->nb * LV_STATE_SIZE, nw = (size_t)s->nb * LV_NW;
-    double *x = (double *)s->buf[FS_STATE].buf;
+    double *x = (double *)s->buf[FS_STATE].buf, *part[3], *at = s->snap + nx + 2 * nw;
+    size_t len[3];
+    int i, n = adaptive_parts(s, part, len);
     if (to) memcpy(s->snap, x, nx * sizeof(double)); else memcpy(x, s->snap, nx * sizeof(double));
+    for (i = 0; i < n; at += len[i], i++)
+        if (to) memcpy(at, part[i], len[i] * sizeof(double)); else memcpy(part[i], at, len[i] * sizeof(double));
     if (!s->has_models) return;
     if (to) {
         memcpy(s->snap + nx, s->models.Omega, nw * sizeof(double));
@@ -206,7 +238,13 @@ static void snap_copy(Stepper *s, int to)
 static int unchanged(const Stepper *s)
 {
     const size_t nx = (size_t)s->nb * LV_STATE_SIZE, nw = (size_t)s->nb * LV_NW;
+    const double *at = s->snap + nx + 2 * nw;
+    double *part[3];
+    size_t len[3];
+    int i, n = adaptive_parts(s, part, len);
     if (!s->valid || memcmp(s->snap, s->buf[FS_STATE].buf, nx * sizeof(double)) != 0) return 0;
+    for (i = 0; i < n; at += len[i], i++)
+        if (memcmp(at, part[i], len[i] * sizeof(double)) != 0) return 0;
     return !s->has_models || memcmp(s->snap + nx, s->models.Omega, nw * sizeof(double)) == 0;
 }
 
@@ -275,21 +313,33 @@ static int checks_pass(const Stepper *s)
 
 static int fast_step(Stepper *s, long n)
 {
-    long fail_step = -1, fail_body = -1;
+    long fail_step = -1, fail_body = -1, b;
     int status;
+    lv_adaptive ad;
+    double inc = 0.0;
     if (s->busy || s->snap == NULL || n < 1 || s->steps + n > s->max_steps || !unchanged(s) || !arguments_ok(s))
         return 0;
+    if (s->adaptive) {
+        ad.rtol = s->rtol, ad.atol = s->atol;
+        ad.h = (double *)s->buf[FS_H].buf, ad.nfev = (double *)s->buf[FS_NFEV].buf;
+        ad.dense = s->have[FS_DENSE] ? (double *)s->buf[FS_DENSE].buf : NULL;
+    }
     status = lv_simulate((double *)s->buf[FS_STATE].buf, (const double *)s->buf[FS_PARAMS].buf, s->nb,
                          (const double *)s->buf[FS_EFFECTS].buf, s->ne, s->row_size, s->user.n ? &s->user : NULL,
-                         s->has_models ? &s->models : NULL, s->integrator, s->normalize, s->dt, n, NULL, NULL,
-                         &fail_step, &fail_body);
+                         s->has_models ? &s->models : NULL, s->integrator, s->normalize, s->dt, n,
+                         s->adaptive ? &ad : NULL, NULL, &fail_step, &fail_body);
     if (status != LV_OK || !checks_pass(s)) {
         snap_copy(s, 0);
         return 0;
     }
+    if (s->adaptive) {   /* the largest per-body increment (nfev's copy in the snapshot follows h's) */
+        const double *before = s->snap + (size_t)s->nb * (LV_STATE_SIZE + 2 * LV_NW + 1);
+        for (b = 0; b < s->nb; b++)
+            if (ad.nfev[b] - before[b] > inc) inc = ad.nfev[b] - before[b];
+    }
     snap_copy(s, 1);
     s->steps += n;
-    s->rhs_evals += s->per_step * n;
+    s->rhs_evals += s->adaptive ? (long long)inc : s->per_step * n;
     return 1;
 }
 

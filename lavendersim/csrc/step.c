@@ -746,10 +746,10 @@ static double dp_norm(const double *e, const double *y, const double *yn, int n,
 }
 
 /* dopri5's controller state of one body: the step-size proposal h, the norm's count n (the state and the rates of the
-   wheels in use; the padded slots stay 0), whether k[0] holds f(y) (FSAL), the evaluations spent. */
+   wheels in use; the padded slots stay 0), the evaluations spent. */
 typedef struct {
     double h, nfev, rtol, atol;
-    int n, have_k1;
+    int n;
 } dp_control;
 
 /* Hairer's starting step (Solving ODEs I, II.4): from f0 = f(y) and one more evaluation. */
@@ -874,54 +874,11 @@ static inline double dp_attempt(int v, const body_ctx *c, const double *cf, cons
     return sqrt(s / d->n);
 }
 
-/* Advance y by exactly dt in accepted dopri5 substeps (dp_attempt, Hairer's controller with dp_factor). LV_OK; else
-   LV_DIVERGED or LV_TOLERANCE with y the last accepted state. */
-static inline int dp_output_step(int v, const body_ctx *c, const double *cf, double *y, double k[][LV_XS_SIZE],
-                                 dp_control *d, double dt, int normalize)
-{
-    double yn[LV_XS_SIZE], t = 0.0;
-    long sub = 0;
-    int rejected = 0, ii;
-    memcpy(yn, y, sizeof yn);
-    if (!d->have_k1) {
-        ctx_rhs(c, y, k[0]);
-        d->nfev += 1;
-        d->have_k1 = 1;
-    }
-    if (!(d->h > 0.0) || !isfinite(d->h)) d->h = dp_initial_h(c, y, k[0], d, dt);
-    while (t < dt) {
-        const double rem = dt - t;
-        const int clipped = d->h >= rem;
-        const double hs = clipped ? rem : d->h;
-        const double e = dp_attempt(v, c, cf, y, hs, k, yn, d);
-        double fac = dp_factor(e);
-        d->nfev += 6;
-        if (e <= 1.0) {
-            if (fac > LV_DP_FACMAX) fac = LV_DP_FACMAX;
-            if (fac < LV_DP_FACMIN) fac = LV_DP_FACMIN;
-            if (rejected && fac > 1.0) fac = 1.0;
-            t = clipped ? dt : t + hs;
-            /* a step shortened to land on the output time does not shrink the proposal */
-            if (!(clipped && fac >= 1.0 && d->h > hs * fac)) d->h = hs * fac;
-            if (!dp_accept(v, c, y, yn, normalize)) return LV_DIVERGED;
-            LV_XS_UNROLL for (ii = 0; ii < DP_N_OF(v); ii++)   /* FSAL: f at the new (un-normalized) point */
-                k[0][DP_IDX_OF(v)[ii]] = k[6][DP_IDX_OF(v)[ii]];
-            rejected = 0;
-        } else {
-            if (fac < LV_DP_FACMIN) fac = LV_DP_FACMIN;
-            if (fac > 1.0) fac = 1.0;
-            d->h = hs * fac;
-            rejected = 1;
-        }
-        if (d->h < LV_DP_HMIN_REL * dt || ++sub > LV_DP_MAX_SUBSTEPS) return LV_TOLERANCE;
-    }
-    return LV_OK;
-}
-
-/* dopri5 with dense output (a body without wheels, lv_adaptive.dense given): the integrator keeps its own state z,
-   `ahead` seconds past the output state, and steps on unclipped; an output time inside its last accepted substep (of
-   length hl) is read off the continuous extension (Y0..Y4, derive/tableaux.py DP_DENSE), so an output interval
-   forces no substep. Carried between calls in the body's DENSE row. The extension Y is formed only when an output is
+/* dopri5 with dense output: the integrator keeps its own state z, `ahead` seconds past the output state, and steps on
+   unclipped; an output time inside its last accepted substep (of length hl) is read off the continuous extension
+   (Y0..Y4, derive/tableaux.py DP_DENSE), so an output interval forces no substep. Carried between calls in the body's
+   DENSE row (lv_adaptive.dense). A body with wheels lands on every output time instead (its held torque changes
+   there: the substep that would pass it is clipped to end on it, z is the output and nothing is carried). The extension Y is formed only when an output is
    read (have_Y 0: from the last accepted substep's z0, raw end y1 and stages, which stay in the stage set that is not
    current: the caller's k and Kb take turns, cur naming the current one, so nothing is copied but z0, y1 and f). */
 typedef struct {
@@ -959,64 +916,88 @@ static inline void dp_dense_coeffs(int v, const double *y0, const double *y1, do
         }
 }
 
-/* One output step of dt with dense output (z->ahead already lowered by dt; called when that made it negative, or at
-   the call's last output step): substeps (unclipped) until z is past the output time; with out (the call's
-   last output step: no state between is seen) then y = the continuous extension there (z itself when it lands on
-   it), q normalized, a jointed body put on its joint. LV_OK; else LV_DIVERGED or LV_TOLERANCE with y untouched. */
-static inline int dp_dense_step(int v, const body_ctx *c, const double *cf, double *y, double k[][LV_XS_SIZE],
-                                dp_control *d, dp_dense *z, double dt, int normalize, int out)
+/* Output steps *s_io .. of dt with dense output, up to the call's last (n_steps - 1) or, with land, this one only:
+   each lowers z->ahead by dt; one that leaves it >= 0 costs nothing else, else substeps (unclipped; with land the one
+   that would pass the output time clipped to end on it, the proposal not shrunk by that; rejections and the substep
+   count per output step) until z is past the output time. At the last output step (no state between is seen; every
+   step of a landing body) y = the continuous extension there, q normalized, a jointed body put on its joint (z itself
+   when it lands on it: already so). *s_io = the output step reached. LV_OK; else LV_DIVERGED or LV_TOLERANCE (at
+   output step *s_io) with y untouched. z, ahead and the step in locals: nothing aliases the stage stores. */
+static inline int dp_dense_run(int v, const body_ctx *c, const double *cf, double *y, double k[][LV_XS_SIZE],
+                               dp_control *d, dp_dense *z, double dt, int normalize, long *s_io, long n_steps, int land)
 {
-    double yn[LV_XS_SIZE], yo[LV_XS_SIZE], zz[LV_XS_SIZE];   /* zz: z->z in a local (no aliasing with the stages) */
-    long sub = 0;
-    int rejected = 0, ii, st = LV_OK;
+    double yn[LV_XS_SIZE], yo[LV_XS_SIZE], zz[LV_XS_SIZE], ahead = z->ahead - dt, h = d->h;
+    long s = *s_io;
+    int ii, st = LV_OK;
     memcpy(zz, z->z, sizeof zz);
     memcpy(yn, zz, sizeof yn);
-    while (z->ahead < 0.0) {
-        double (*kc)[LV_XS_SIZE] = z->cur ? z->Kb : k, (*kn)[LV_XS_SIZE] = z->cur ? k : z->Kb;
-        const double hs = d->h;
-        const double e = dp_attempt(v, c, cf, zz, hs, kc, yn, d);
-        double fac = dp_factor(e);
-        d->nfev += 6;
-        if (e <= 1.0) {
-            if (fac > LV_DP_FACMAX) fac = LV_DP_FACMAX;
-            if (fac < LV_DP_FACMIN) fac = LV_DP_FACMIN;
-            if (rejected && fac > 1.0) fac = 1.0;
-            d->h = hs * fac;
-            memcpy(z->z0, zz, DP_NOUT_OF(v) * sizeof(double));
-            memcpy(z->y1, yn, DP_NOUT_OF(v) * sizeof(double));
-            if (!dp_accept(v, c, zz, yn, normalize)) {
-                st = LV_DIVERGED;
+    while (ahead >= 0.0 && s < n_steps - 1) {   /* output steps inside the last substep cost this only */
+        ahead -= dt;
+        s++;
+    }
+    for (;;) {
+        long sub = 0;
+        int rejected = 0;
+        while (ahead < 0.0) {
+            double (*kc)[LV_XS_SIZE] = z->cur ? z->Kb : k, (*kn)[LV_XS_SIZE] = z->cur ? k : z->Kb;
+            const int clipped = land && h >= -ahead;
+            const double hs = clipped ? -ahead : h;
+            const double e = dp_attempt(v, c, cf, zz, hs, kc, yn, d);
+            double fac = dp_factor(e);
+            d->nfev += 6;
+            if (e <= 1.0) {
+                if (fac > LV_DP_FACMAX) fac = LV_DP_FACMAX;
+                if (fac < LV_DP_FACMIN) fac = LV_DP_FACMIN;
+                if (rejected && fac > 1.0) fac = 1.0;
+                if (!(clipped && fac >= 1.0 && h > hs * fac)) h = hs * fac;
+                memcpy(z->z0, zz, DP_NOUT_OF(v) * sizeof(double));
+                memcpy(z->y1, yn, DP_NOUT_OF(v) * sizeof(double));
+                if (!dp_accept(v, c, zz, yn, normalize)) {
+                    st = LV_DIVERGED;
+                    break;
+                }
+                LV_XS_UNROLL for (ii = 0; ii < DP_N_OF(v); ii++)   /* FSAL: f at the new (un-normalized) point */
+                    kn[0][DP_IDX_OF(v)[ii]] = kc[6][DP_IDX_OF(v)[ii]];
+                z->cur ^= 1;
+                z->have_Y = 0;
+                ahead = clipped ? 0.0 : ahead + hs;
+                z->hl = hs;
+                rejected = 0;
+            } else {
+                if (fac < LV_DP_FACMIN) fac = LV_DP_FACMIN;
+                if (fac > 1.0) fac = 1.0;
+                h = hs * fac;
+                rejected = 1;
+            }
+            if (h < LV_DP_HMIN_REL * dt || ++sub > LV_DP_MAX_SUBSTEPS) {
+                st = LV_TOLERANCE;
                 break;
             }
-            LV_XS_UNROLL for (ii = 0; ii < DP_N_OF(v); ii++)   /* FSAL: f at the new (un-normalized) point */
-                kn[0][DP_IDX_OF(v)[ii]] = kc[6][DP_IDX_OF(v)[ii]];
-            z->cur ^= 1;
-            z->have_Y = 0;
-            z->ahead += hs;
-            z->hl = hs;
-            rejected = 0;
-        } else {
-            if (fac < LV_DP_FACMIN) fac = LV_DP_FACMIN;
-            if (fac > 1.0) fac = 1.0;
-            d->h = hs * fac;
-            rejected = 1;
         }
-        if (d->h < LV_DP_HMIN_REL * dt || ++sub > LV_DP_MAX_SUBSTEPS) {
-            st = LV_TOLERANCE;
-            break;
+        if (st != LV_OK || land || s == n_steps - 1) break;
+        ahead -= dt;   /* the next output step, and those inside the last substep */
+        s++;
+        while (ahead >= 0.0 && s < n_steps - 1) {
+            ahead -= dt;
+            s++;
         }
     }
     memcpy(z->z, zz, sizeof zz);
-    if (st != LV_OK || !out) return st;
+    z->ahead = ahead;
+    d->h = h;
+    *s_io = s;
+    if (st != LV_OK) return st;
+    if (ahead == 0.0) {
+        memcpy(y, zz, DP_NOUT_OF(v) * sizeof(double));
+        return LV_OK;
+    }
     if (!z->have_Y) {
         dp_dense_coeffs(v, z->z0, z->y1, z->hl, z->cur ? k : z->Kb, z);
         z->have_Y = 1;
     }
     memcpy(yo, y, sizeof yo);
-    if (z->ahead == 0.0) {
-        memcpy(yo, z->z, DP_NOUT_OF(v) * sizeof(double));
-    } else {
-        const double th = (z->hl - z->ahead) / z->hl, th1 = 1.0 - th;
+    {
+        const double th = (z->hl - ahead) / z->hl, th1 = 1.0 - th;
         LV_XS_UNROLL for (ii = 0; ii < DP_NOUT_OF(v); ii++)
             yo[ii] = z->Y[0][ii] + th * (z->Y[1][ii] + th1 * (z->Y[2][ii] + th * (z->Y[3][ii] + th1 * z->Y[4][ii])));
     }
@@ -1024,12 +1005,11 @@ static inline int dp_dense_step(int v, const body_ctx *c, const double *cf, doub
     return LV_OK;
 }
 
-/* The body's dense-output row -> z, k[0] (FSAL) when it continues y (valid, and y is the state the last call wrote);
-   else z = y, k[0] = f(y) (one evaluation). */
-static void dp_dense_load(const body_ctx *c, const double *row, const double *y, double k[][LV_XS_SIZE], dp_control *d,
-                          dp_dense *z)
+/* The body's dense-output row -> z, k[0] (FSAL) when it continues y (row given and valid, y the state the last call
+   wrote): 1; else z = y: 0 (k[0] = f(y) is then the caller's). */
+static int dp_dense_load(const double *row, const double *y, double k[][LV_XS_SIZE], dp_dense *z)
 {
-    if (row[LV_DENSE_VALID] == 1.0 && memcmp(row + LV_DENSE_X_OUT, y, LV_STATE_SIZE * sizeof(double)) == 0) {
+    if (row != NULL && row[LV_DENSE_VALID] == 1.0 && memcmp(row + LV_DENSE_X_OUT, y, LV_STATE_SIZE * sizeof(double)) == 0) {
         memcpy(z->z, row + LV_DENSE_Z, sizeof z->z);
         memcpy(k[0], row + LV_DENSE_F, sizeof k[0]);
         memcpy(z->Y, row + LV_DENSE_COEF, sizeof z->Y);
@@ -1037,13 +1017,11 @@ static void dp_dense_load(const body_ctx *c, const double *row, const double *y,
         z->hl = row[LV_DENSE_H_LAST];
         z->cur = 0;
         z->have_Y = 1;
-    } else {
-        memset(z, 0, sizeof *z);
-        memcpy(z->z, y, sizeof z->z);
-        ctx_rhs(c, y, k[0]);
-        d->nfev += 1;
+        return 1;
     }
-    d->have_k1 = 1;
+    memset(z, 0, sizeof *z);
+    memcpy(z->z, y, sizeof z->z);
+    return 0;
 }
 
 static void dp_dense_store(double *row, const double *y, double k[][LV_XS_SIZE], const dp_dense *z)
@@ -1057,42 +1035,23 @@ static void dp_dense_store(double *row, const double *y, double k[][LV_XS_SIZE],
     memcpy(row + LV_DENSE_COEF, z->Y, sizeof z->Y);
 }
 
-/* dp_dense_step per variant (dense output), each its own loop with the right-hand side inlined. */
-LV_FLATTEN static int dp_dense_step_free(const body_ctx *c, const double *cf, double *y, double k[][LV_XS_SIZE],
-                                         dp_control *d, dp_dense *z, double dt, int normalize, int out)
+/* dp_dense_run per variant, each its own loop with the right-hand side inlined. */
+LV_FLATTEN static int dp_dense_run_free(const body_ctx *c, const double *cf, double *y, double k[][LV_XS_SIZE],
+                                        dp_control *d, dp_dense *z, double dt, int normalize, long *s, long n)
 {
-    return dp_dense_step(DP_FREE, c, cf, y, k, d, z, dt, normalize, out);
+    return dp_dense_run(DP_FREE, c, cf, y, k, d, z, dt, normalize, s, n, 0);
 }
 
-LV_FLATTEN static int dp_dense_step_plain(const body_ctx *c, const double *cf, double *y, double k[][LV_XS_SIZE],
-                                          dp_control *d, dp_dense *z, double dt, int normalize, int out)
+LV_FLATTEN static int dp_dense_run_plain(const body_ctx *c, const double *cf, double *y, double k[][LV_XS_SIZE],
+                                         dp_control *d, dp_dense *z, double dt, int normalize, long *s, long n)
 {
-    return dp_dense_step(DP_PLAIN, c, cf, y, k, d, z, dt, normalize, out);
+    return dp_dense_run(DP_PLAIN, c, cf, y, k, d, z, dt, normalize, s, n, 0);
 }
 
-static int dp_dense_step_model(const body_ctx *c, const double *cf, double *y, double k[][LV_XS_SIZE],
-                               dp_control *d, dp_dense *z, double dt, int normalize, int out)
+static int dp_dense_run_model(const body_ctx *c, const double *cf, double *y, double k[][LV_XS_SIZE], dp_control *d,
+                              dp_dense *z, double dt, int normalize, long *s, long n, int land)
 {
-    return dp_dense_step(DP_MODEL, c, cf, y, k, d, z, dt, normalize, out);
-}
-
-/* dp_output_step per variant, each its own loop with the right-hand side inlined. */
-LV_FLATTEN static int dp_output_step_free(const body_ctx *c, const double *cf, double *y, double k[][LV_XS_SIZE],
-                                          dp_control *d, double dt, int normalize)
-{
-    return dp_output_step(DP_FREE, c, cf, y, k, d, dt, normalize);
-}
-
-LV_FLATTEN static int dp_output_step_plain(const body_ctx *c, const double *cf, double *y, double k[][LV_XS_SIZE],
-                                           dp_control *d, double dt, int normalize)
-{
-    return dp_output_step(DP_PLAIN, c, cf, y, k, d, dt, normalize);
-}
-
-static int dp_output_step_model(const body_ctx *c, const double *cf, double *y, double k[][LV_XS_SIZE],
-                                dp_control *d, double dt, int normalize)
-{
-    return dp_output_step(DP_MODEL, c, cf, y, k, d, dt, normalize);
+    return dp_dense_run(DP_MODEL, c, cf, y, k, d, z, dt, normalize, s, n, land);
 }
 
 /* Advance body b (any kind) by n_steps steps of dt of an explicit Runge-Kutta method: the user's tableau tab, or
@@ -1105,12 +1064,13 @@ static long advance_rk(double *state, const double *params, long b, const lv_mod
                        double *last)
 {
     body_ctx c;
-    dp_control d = {0.0, 0.0, 0.0, 0.0, 0, 0};
+    dp_control d = {0.0, 0.0, 0.0, 0.0, 0};
     double y[LV_XS_SIZE], yn[LV_XS_SIZE], k[LV_TABLEAU_MAX_STAGES][LV_XS_SIZE], applied[LV_NW], cf[6];
     const double *cmd = NULL;
     dp_dense z;
+    double *row = NULL;
     long s;
-    int i, st = LV_OK, dense = 0;
+    int i, st = LV_OK, land = 0, fresh = 1;
     ctx_init(&c, params, b, md, ix);
     lv_euler_coefficients(c.prm + LV_PARAM_I_B, cf);
     memcpy(y, state + b * LV_STATE_SIZE, LV_STATE_SIZE * sizeof(double));
@@ -1121,46 +1081,40 @@ static long advance_rk(double *state, const double *params, long b, const lv_mod
         cmd = md->command + LV_NW * b;
     }
     if (ad != NULL) {
-        d.h = ad->h[b], d.nfev = 0.0, d.rtol = ad->rtol, d.atol = ad->atol, d.have_k1 = 0;
+        d.h = ad->h[b], d.nfev = 0.0, d.rtol = ad->rtol, d.atol = ad->atol;
         d.n = c.kind & LV_KIND_WHEELS ? LV_XS_OMEGA + lv_wheel_count(c.r) : LV_STATE_SIZE;
-        dense = ad->dense != NULL && !(c.kind & LV_KIND_WHEELS) && n_steps > 0;
-        if (dense) {
-            dp_dense_load(&c, ad->dense + b * LV_DENSE_SIZE, y, k, &d, &z);
-            if (!(d.h > 0.0) || !isfinite(d.h)) d.h = dp_initial_h(&c, z.z, k[0], &d, dt);
-        }
+        land = (c.kind & LV_KIND_WHEELS) != 0;   /* the held torque changes at each output time: land there */
+        row = ad->dense != NULL && !land ? ad->dense + b * LV_DENSE_SIZE : NULL;
+        fresh = !dp_dense_load(row, y, k, &z);
     }
-    for (s = 0; s < n_steps && st == LV_OK; s++) {
-        if (c.kind & LV_KIND_WHEELS) {
-            lv_wheels_motor(c.r, cmd, y + LV_XS_OMEGA, c.u);
-            d.have_k1 = 0; /* the held torque may change at each output step */
-        }
-        if (dense) {
-            double a = z.ahead - dt;
-            while (a >= 0.0 && s < n_steps - 1) {   /* an output step inside the last substep costs this only */
-                a -= dt;
-                s++;
+    if (ad != NULL) {
+        for (s = 0; s < n_steps && st == LV_OK; s++) {   /* a body without wheels: one dp_dense_run for all */
+            if (land) lv_wheels_motor(c.r, cmd, y + LV_XS_OMEGA, c.u);
+            if (fresh || land) {   /* f at z (the FSAL stage) under this step's loads */
+                ctx_rhs(&c, z.z, z.cur ? z.Kb[0] : k[0]);
+                d.nfev += 1;
+                fresh = 0;
             }
-            const int out = s == n_steps - 1;
-            z.ahead = a;
-            if (a < 0.0 || out)
-                st = c.kind ? dp_dense_step_model(&c, cf, y, k, &d, &z, dt, normalize, out)
-                     : c.n_refs ? dp_dense_step_plain(&c, cf, y, k, &d, &z, dt, normalize, out)
-                     : dp_dense_step_free(&c, cf, y, k, &d, &z, dt, normalize, out);
-        } else if (ad != NULL) {
-            st = c.kind ? dp_output_step_model(&c, cf, y, k, &d, dt, normalize)
-                 : c.n_refs ? dp_output_step_plain(&c, cf, y, k, &d, dt, normalize)
-                 : dp_output_step_free(&c, cf, y, k, &d, dt, normalize);
-        } else {
+            if (s == 0 && (!(d.h > 0.0) || !isfinite(d.h)))   /* a starting step where there is no proposal */
+                d.h = dp_initial_h(&c, z.z, z.cur ? z.Kb[0] : k[0], &d, dt);
+            st = c.kind ? dp_dense_run_model(&c, cf, y, k, &d, &z, dt, normalize, &s, n_steps, land)
+                 : c.n_refs ? dp_dense_run_plain(&c, cf, y, k, &d, &z, dt, normalize, &s, n_steps)
+                 : dp_dense_run_free(&c, cf, y, k, &d, &z, dt, normalize, &s, n_steps);
+            if (st == LV_OK && c.kind) memcpy(applied, c.u, sizeof applied);
+        }
+    } else {
+        for (s = 0; s < n_steps && st == LV_OK; s++) {
+            if (c.kind & LV_KIND_WHEELS) lv_wheels_motor(c.r, cmd, y + LV_XS_OMEGA, c.u);
             rk_stages(&c, y, dt, tab->a, tab->s, 0, tab->s, k, yn);
             rk_row(yn, y, dt / tab->b_den, tab->b_num, k, tab->s);
             st = rk_accept(&c, y, yn, normalize) ? LV_OK : LV_DIVERGED;
+            if (st == LV_OK && c.kind) memcpy(applied, c.u, sizeof applied);
         }
-        if (st == LV_OK && c.kind) memcpy(applied, c.u, sizeof applied);
     }
     if (ad != NULL) {
         if (st != LV_DIVERGED) ad->h[b] = d.h;
         ad->nfev[b] += d.nfev;
-        if (dense && st == LV_OK) dp_dense_store(ad->dense + b * LV_DENSE_SIZE, y, k, &z);
+        if (row != NULL && st == LV_OK && n_steps > 0) dp_dense_store(row, y, k, &z);
     }
     if (st != LV_OK) {
         *why = st;

@@ -77,7 +77,7 @@ typedef struct {
    steps advances it by exactly dt with as many accepted substeps as its error estimate needs.
    h (nb) carries each body's step-size proposal between calls (<= 0: choose an initial one);
    nfev (nb) is incremented by the right-hand-side evaluations spent on each body. dense (nb x LV_DENSE_SIZE, or NULL:
-   every output step lands on its time) carries each wheel-less body's dense output between calls (layout.h DENSE). */
+   every call starts afresh) carries each wheel-less body's dense output between calls (layout.h DENSE). */
 typedef struct {
     double rtol, atol;
     double *h;
