@@ -70,9 +70,10 @@ pyproject's addopts say `-n auto --dist loadgroup` (pytest-xdist, in the test ex
 suite (no file or node id named: the README's `pytest`, .ci/run's `pytest -m slow`), and no workers (one process,
 as before) when files or tests are named, so `pytest tests/test_x.py` does not start two interpreters for one file.
 `-n 0` forces one process, `-n 2` two workers for any selection. Each worker computes the session fixtures it
-needs, so tests that share one run in the same worker (:func:`_xdist_groups`): every test of a module that uses
-`derivation`/`derived_once` in group "derivation", of a module that uses `quick_accuracy`/`quick_atlas`/`hard_lab`
-in group "labs", the tests of any other module together (its module fixtures computed once).
+needs, so tests that share one run in the same worker (:func:`pytest_xdist_make_scheduler`, `--dist loadgroup`):
+every module that uses `derivation`/`derived_once` in group "derivation", every module that uses
+`quick_accuracy`/`quick_atlas`/`hard_lab` in group "labs", the tests of any other module together (its module
+fixtures computed once); the costliest groups first (FIRST), so that neither worker idles at the end.
 """
 from __future__ import annotations
 
@@ -274,18 +275,65 @@ def pytest_xdist_auto_num_workers(config):
     return workers if workers > 1 else 0
 
 
-def _xdist_groups(items) -> dict:
-    """{item: xdist group}: a module's tests together; modules sharing a session fixture (SHARED_GROUPS) in
-    one group, so that fixture is computed by one worker only."""
-    module_group = {}
-    for item in items:
-        mod = item.nodeid.split("::")[0]
-        for name in item.fixturenames:
-            if name in SHARED_GROUPS:
-                module_group[mod] = SHARED_GROUPS[name]
-        module_group.setdefault(mod, None)
-    return {item: module_group[item.nodeid.split("::")[0]] or Path(item.nodeid.split("::")[0]).stem for item in items}
+#: work units handed out first, in this order (the rest after them, most tests first): the costliest, so that
+#: neither worker waits at the end for the other's long one. Measured on two workers (CPU s, 2026-11-26): labs ~110,
+#: derivation ~120, test_docs 33, test_extending 26, test_user_sets 27, test_fuzz 24, test_labs 24, test_wheels_joint 24.
+#: A module missing here is still run, only perhaps later than it should be.
+FIRST = ("derivation", "labs", "test_docs", "test_user_sets", "test_extending", "test_fuzz", "test_labs",
+         "test_wheels_joint", "test_spacecraft", "test_cli_conventions", "test_bench", "test_symtop_bm6",
+         "test_monte_carlo", "test_vector_env", "test_highorder")
 
+
+def _shared_group(path: Path) -> str | None:
+    """The group (SHARED_GROUPS) of a test module, read from its source: a function of it (a test or one of its
+    fixtures) takes one of those session fixtures as an argument, or names one in a string (usefixtures)."""
+    import ast
+
+    try:
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+    except (OSError, SyntaxError, ValueError):
+        return None
+    for node in ast.walk(tree):
+        name = node.arg if isinstance(node, ast.arg) else getattr(node, "value", None) if isinstance(node, ast.Constant) else None
+        if isinstance(name, str) and name in SHARED_GROUPS:
+            return SHARED_GROUPS[name]
+    return None
+
+
+@pytest.hookimpl(optionalhook=True)      # a pytest-xdist hook, in the controlling process
+def pytest_xdist_make_scheduler(config, log):
+    """`--dist loadgroup` (pyproject's addopts): a module's tests on one worker (its module fixtures computed once),
+    the modules sharing a session fixture (SHARED_GROUPS) on one worker (computed once), the costliest first
+    (FIRST). The groups are decided here, in the controlling process, from the modules' source (_shared_group):
+    xdist's own loadgroup reads `xdist_group` marks from a suffix it writes into each node id, which pytest 9.2's
+    structured node ids ignore (pytest-xdist#1386: every test was then scheduled on its own, and both workers
+    computed the derivation and the lab fixtures)."""
+    if config.getvalue("dist") != "loadgroup":
+        return None
+    from xdist.scheduler import LoadScopeScheduling
+
+    class Groups(LoadScopeScheduling):
+        def __init__(self, config, log=None):
+            super().__init__(config, log)
+            self._groups: dict[str, str] = {}
+            self._ordered = False
+
+        def _split_scope(self, nodeid: str) -> str:
+            module = nodeid.split("::")[0]
+            if module not in self._groups:
+                self._groups[module] = _shared_group(config.rootpath / module) or Path(module).stem
+            return self._groups[module]
+
+        def _assign_work_unit(self, node) -> None:
+            if not self._ordered:     # the queue as schedule() filled it, the costliest units moved to its front
+                rank = {name: i for i, name in enumerate(FIRST)}
+                units = sorted(self.workqueue.items(), key=lambda u: (rank.get(u[0], len(FIRST)), -len(u[1])))
+                self.workqueue.clear()
+                self.workqueue.update(units)
+                self._ordered = True
+            super()._assign_work_unit(node)
+
+    return Groups(config, log)
 
 
 def pytest_addoption(parser):
@@ -320,11 +368,8 @@ def _slow_deselected(config) -> bool:
     return not (config.getoption("--run-slow") or config.getoption("markexpr"))
 
 
-@pytest.hookimpl(tryfirst=True)      # before xdist's worker reads the xdist_group marks
+@pytest.hookimpl(tryfirst=True)
 def pytest_collection_modifyitems(config, items):
-    if getattr(config.option, "loadgroup", False):    # an xdist worker of `--dist loadgroup`
-        for item, group in _xdist_groups(items).items():
-            item.add_marker(pytest.mark.xdist_group(group))
     # `needs` markers: outside CI a missing tool becomes a skip marker (reported at the test's own
     # location); under CI=true pytest_runtest_setup below fails the test instead
     if not IN_CI:
