@@ -78,6 +78,7 @@ fixtures computed once); the costliest groups first (FIRST), so that neither wor
 from __future__ import annotations
 
 import importlib
+import importlib.util
 import os
 import signal
 from pathlib import Path
@@ -108,6 +109,7 @@ def _modules(*names: str):
             except ImportError as exc:    # installed but broken: say how
                 return f"{name} does not import ({type(exc).__name__}: {exc})"
         return None
+    check.names = names    # type: ignore[attr-defined]   (for _installed: found without importing)
     return check
 
 
@@ -151,6 +153,21 @@ def missing(tool: str) -> str | None:
         why = check()
         _missing[tool] = None if why is None else f"needs {tool} ({why}): {how}"
     return _missing[tool]
+
+
+def _installed(tool: str) -> bool:
+    """A look without importing, for collection (every worker collects every module; importing playwright, viser,
+    distributed, mujoco and nbclient there cost each worker seconds): the tool's packages are found (and chromium's
+    binary is there). Whether they import is checked when a test that needs the tool starts (pytest_runtest_setup)."""
+    if tool == "chromium":
+        if not Path(CHROMIUM).exists():
+            return False
+        names: tuple = ("playwright",)
+    else:
+        names = getattr(TOOLS[tool][0], "names", None)
+        if names is None:                                  # (cc: a look on PATH)
+            return missing(tool) is None
+    return all(importlib.util.find_spec(n.split(".")[0]) is not None for n in names)
 
 
 def require(*tools: str) -> None:
@@ -370,15 +387,15 @@ def _slow_deselected(config) -> bool:
 
 @pytest.hookimpl(tryfirst=True)
 def pytest_collection_modifyitems(config, items):
-    # `needs` markers: outside CI a missing tool becomes a skip marker (reported at the test's own
-    # location); under CI=true pytest_runtest_setup below fails the test instead
+    # `needs` markers: outside CI a tool that is not installed becomes a skip marker (reported at the test's own
+    # location); one installed but not importing is skipped by pytest_runtest_setup below, which under CI=true
+    # fails the test instead
     if not IN_CI:
         for item in items:
             for mark in item.iter_markers("needs"):
                 for tool in mark.args:
-                    why = missing(tool)
-                    if why is not None:
-                        item.add_marker(pytest.mark.skip(reason=why))
+                    if not _installed(tool):
+                        item.add_marker(pytest.mark.skip(reason=missing(tool)))
     if not _slow_deselected(config):
         return
     named = _named_on_command_line(config)
@@ -402,11 +419,17 @@ def pytest_report_header(config):
 
 @pytest.hookimpl(tryfirst=True)
 def pytest_runtest_setup(item):
-    """Before any fixture: a `needs` marker's tools must be present (fail under CI; outside CI the
-    skip markers added at collection have already skipped the test)."""
-    if IN_CI:
-        for mark in item.iter_markers("needs"):
+    """Before any fixture, and before pytest reads the skip marks: a `needs` marker's tools must import. Outside CI
+    a tool that does not gets a skip mark (the skip reported at the test's own location; one not installed at all got
+    it at collection); under CI=true the test fails."""
+    for mark in item.iter_markers("needs"):
+        if IN_CI:
             require(*mark.args)
+            continue
+        for tool in mark.args:
+            why = missing(tool)
+            if why is not None:
+                item.add_marker(pytest.mark.skip(reason=why))
 
 
 def interruptible() -> None:
