@@ -1227,41 +1227,62 @@ static void symtop_axis(int ax, double cf, double *q, double *L, double tau)
         lv_symtop_axis_flow_z(q, L, cf, tau, q, L);
 }
 
-/* One step of a composition m (generated/tableaux.h LV_COMPOSITIONS, derive/tableaux.py compositions()): a body with
-   effects takes the stages gamma_i in turn, each m->kicked over g = gamma_i h; a body without effects m->free once
-   over g = h. Flow k runs for frac_k g: kick (the loads on v and omega), drift (p += tau v), momentum / rate (omega to
-   L_b = I omega and back), strang (splitting_rotation), axis_x/y/z (principal-axis flows on L_b), top_a / top_b /
-   top_b_nz (the symmetric-top split t's axis flows; top_b_nz skipped when c_b = 0) and sphere. The NumPy backend's
-   _composition, operation for operation. */
-static void composition_step(const body_ctx *c, const symtop_split *t, const lv_composition *m, double *x, double h,
-                             int damped)
+/* Flow f of a composition for time frac_f g on x (L: its body momentum while the program carries it): kick (the loads
+   on v and omega), drift (p += tau v), momentum / rate (omega to L_b = I omega and back), strang (splitting_rotation),
+   axis_x/y/z (principal-axis flows on L_b), top_a / top_b / top_b_nz (the symmetric-top split t's axis flows;
+   top_b_nz skipped when c_b = 0) and sphere. */
+static inline void composition_flow(const body_ctx *c, const symtop_split *t, const lv_flow *f, double *x, double *L,
+                                    double g, int damped)
 {
     const double *I = c->prm + LV_PARAM_I_B;
-    double *q = x + LV_STATE_Q, *w = x + LV_STATE_OMEGA_B, L[3] = {0.0, 0.0, 0.0};
-    const lv_flow *prog = c->has ? m->kicked : m->free;
-    const int n_stages = c->has ? m->n_stages : 1, n = c->has ? m->n_kicked : m->n_free;
-    int i, k;
-    for (i = 0; i < n_stages; i++) {
-        const double g = c->has ? m->gamma[i] * h : h;
-        for (k = 0; k < n; k++) {
-            const double tau = prog[k].frac * g;
-            switch (prog[k].flow) {
-            case LV_FLOW_KICK: kick(c, x, tau, damped); break;
-            case LV_FLOW_DRIFT: lv_translation_drift(x + LV_STATE_P_W, x + LV_STATE_V_W, tau, x + LV_STATE_P_W); break;
-            case LV_FLOW_MOMENTUM: lv_body_momentum(I, w, L); break;
-            case LV_FLOW_RATE: lv_body_rate(I, L, w); break;
-            case LV_FLOW_STRANG: lv_splitting_rotation(I, q, w, tau, q, w); break;
-            case LV_FLOW_AXIS_X: lv_axis_flow_x(I, q, L, tau, q, L); break;
-            case LV_FLOW_AXIS_Y: lv_axis_flow_y(I, q, L, tau, q, L); break;
-            case LV_FLOW_AXIS_Z: lv_axis_flow_z(I, q, L, tau, q, L); break;
-            case LV_FLOW_TOP_A: symtop_axis(t->a, t->c_a, q, L, tau); break;
-            case LV_FLOW_TOP_B_NZ: if (t->c_b == 0.0) break; /* fall through */
-            case LV_FLOW_TOP_B: symtop_axis(t->b, t->c_b, q, L, tau); break;
-            case LV_FLOW_SPHERE: lv_sphere_flow(q, L, t->I_r, tau, q); break;
-            }
-        }
+    double *q = x + LV_STATE_Q, *w = x + LV_STATE_OMEGA_B;
+    const double tau = f->frac * g;
+    switch (f->flow) {
+    case LV_FLOW_KICK: kick(c, x, tau, damped); break;
+    case LV_FLOW_DRIFT: lv_translation_drift(x + LV_STATE_P_W, x + LV_STATE_V_W, tau, x + LV_STATE_P_W); break;
+    case LV_FLOW_MOMENTUM: lv_body_momentum(I, w, L); break;
+    case LV_FLOW_RATE: lv_body_rate(I, L, w); break;
+    case LV_FLOW_STRANG: lv_splitting_rotation(I, q, w, tau, q, w); break;
+    case LV_FLOW_AXIS_X: lv_axis_flow_x(I, q, L, tau, q, L); break;
+    case LV_FLOW_AXIS_Y: lv_axis_flow_y(I, q, L, tau, q, L); break;
+    case LV_FLOW_AXIS_Z: lv_axis_flow_z(I, q, L, tau, q, L); break;
+    case LV_FLOW_TOP_A: symtop_axis(t->a, t->c_a, q, L, tau); break;
+    case LV_FLOW_TOP_B_NZ: if (t->c_b == 0.0) break; /* fall through */
+    case LV_FLOW_TOP_B: symtop_axis(t->b, t->c_b, q, L, tau); break;
+    case LV_FLOW_SPHERE: lv_sphere_flow(q, L, t->I_r, tau, q); break;
     }
 }
+
+/* One step of a composition m (generated/tableaux.h LV_COMPOSITIONS, derive/tableaux.py compositions()): a body with
+   effects takes the stages gamma_i in turn, each m->kicked over g = gamma_i h; a body without effects m->free once
+   over g = h (composition_flow). The NumPy backend's _composition, operation for operation. */
+static inline void composition_step(const body_ctx *c, const symtop_split *t, const lv_composition *m, double *x,
+                                    double h, int damped)
+{
+    double L[3] = {0.0, 0.0, 0.0};
+    int i, k;
+    if (!c->has) {
+        LV_XS_UNROLL for (k = 0; k < m->n_free; k++) composition_flow(c, t, &m->free[k], x, L, h, damped);
+        return;
+    }
+    for (i = 0; i < m->n_stages; i++) {
+        const double g = m->gamma[i] * h;
+        LV_XS_UNROLL for (k = 0; k < m->n_kicked; k++) composition_flow(c, t, &m->kicked[k], x, L, g, damped);
+    }
+}
+
+/* composition_step with each registered integrator's program a constant (LV_INTEGRATORS: the printed registry; an
+   integrator of another family has the empty program), so that the compiler lays the flows out in line. */
+typedef void (*composition_fn)(const body_ctx *c, const symtop_split *t, double *x, double h, int damped);
+#define LV_DEFINE_COMPOSITION(NAME, CODE)                                                                      \
+    LV_FLATTEN static void composition_##NAME(const body_ctx *c, const symtop_split *t, double *x, double h,    \
+                                              int damped)                                                       \
+    {                                                                                                           \
+        composition_step(c, t, &LV_COMPOSITIONS[CODE], x, h, damped);                                           \
+    }
+LV_INTEGRATORS(LV_DEFINE_COMPOSITION)
+#define LV_COMPOSITION_ENTRY(NAME, CODE) [CODE] = composition_##NAME,
+static const composition_fn LV_COMPOSITION_FNS[LV_INTEGRATOR_LAST + 1] = {LV_INTEGRATORS(LV_COMPOSITION_ENTRY)};
 
 /* rk4_expmap's stage derivative k at ys (p, u, v, omega): the right-hand side at q0 (x) exp(u/2) (x itself at the
    first stage, u = 0), u' = rkmk_dexpinv(u, omega), the fourth slot held at 0. */
@@ -1317,7 +1338,7 @@ static long advance_structured(double *state, const double *params, long b, cons
     for (s = 0; s < n_steps; s++) {
         memcpy(xn, x, sizeof x);
         if (LV_INTEGRATOR_IS_COMPOSITION(integrator))
-            composition_step(&c, &t, &LV_COMPOSITIONS[integrator], xn, dt, damped);
+            LV_COMPOSITION_FNS[integrator](&c, &t, xn, dt, damped);
         else if (LV_INTEGRATOR_IS_LIE_GROUP_RK(integrator))
             rk4_expmap_step(&c, xn, dt);
         else if (!gyro_step(&c, xn, dt)) {
