@@ -57,7 +57,7 @@ class Printed:
         self.ops_after = int(sum(sp.count_ops(e) for _, e in self.temps) + sum(sp.count_ops(e) for e in self.reduced))
         self.has_piecewise = any(e.has(sp.Piecewise) for e in self.output_exprs)
         named = {s for s, _ in k.where}
-        free = set().union(*(sp.sympify(e).free_symbols for e in exprs + [e for _, e in k.where])) if exprs else set()
+        free = set().union(*(sp.sympify(e).free_symbols for e in exprs + [e for _, e in _used_where(k.where, exprs)])) if exprs else set()
         self.used = free - named
         unknown = self.used - set(k.input_symbols)
         if unknown:

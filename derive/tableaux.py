@@ -383,6 +383,21 @@ INTEGRATORS = (
 )
 
 
+# The fixed-step paths of csrc/ (step.c advance_fixed and advance_model, fixed_loop.h, the SIMD tiles): path -> the
+# tableau it steps (EXPLICIT_RK's form), or None: the partitioned (symplectic) Euler step, the explicit_rk member
+# without a tableau (NumPy's _step_<name>). An explicit RK takes the path whose tableau is its own (tableau identity,
+# fixed_path); one without takes C's tableau stepper with its printed tableau (LV_TABLEAU_STEPPED), as a user's does.
+FIXED_PATHS = {"euler": ((R(0),), (1,), 1), "semi_implicit": None, "rk4": (RK4_C, RK4_B_NUM, RK4_B_DEN)}
+
+
+def fixed_path(i: Integrator) -> str | None:
+    """The C fixed-step path integrator i takes (FIXED_PATHS), None for the tableau stepper or another family."""
+    if i.family != "explicit_rk":
+        return None
+    tab = EXPLICIT_RK.get(i.name)
+    return next((p for p, t in FIXED_PATHS.items() if t == tab), None)
+
+
 def integrator_names() -> list[str]:
     return [i.name for i in INTEGRATORS]
 
@@ -468,6 +483,14 @@ def _check_registry() -> None:
     fixed = {i.name for i in INTEGRATORS if not i.adaptive}
     if set(WDT_MAX) != fixed or set(WDT_RATIO_EXPONENT) != fixed:
         raise RuntimeError("derive: every fixed-step integrator, and only those, has a validity bound (WDT_MAX)")
+    for i in INTEGRATORS:
+        if i.family == "explicit_rk" and i.name not in EXPLICIT_RK and fixed_path(i) != "semi_implicit":
+            raise RuntimeError(f"derive: explicit RK {i.name} has no tableau (EXPLICIT_RK)")
+        if i.float32 and fixed_path(i) is None:
+            raise RuntimeError(f"derive: integrator {i.name} is float32 but takes no fixed-step path (FIXED_PATHS): "
+                               "csrc/fixed_loop.h steps float32")
+    if [p for p in FIXED_PATHS if sum(fixed_path(i) == p for i in INTEGRATORS) != 1]:
+        raise RuntimeError("derive: each fixed-step path (FIXED_PATHS) is taken by one integrator")
     comp = compositions()
     if set(comp) != {i.name for i in INTEGRATORS if i.family == "composition"}:
         raise RuntimeError("derive: every composition integrator, and only those, has a program (compositions())")
@@ -601,6 +624,24 @@ def _c_registry() -> list[str]:
         terms = " || ".join(f"(i) == LV_INTEGRATOR_{i.name.upper()}" for i in INTEGRATORS if i.family == fam) or "0"
         out.append(f"#define LV_INTEGRATOR_IS_{fam.upper()}(i) ({terms})")
     out.append("#define LV_INTEGRATORS(X) " + " ".join(f"X({n}, {i.code})" for n, i in up))
+    out += ["/* The fixed-step paths of csrc/ (derive/tableaux.py FIXED_PATHS): LV_PATH_<path> is the code of the integrator that",
+            "   takes it (fixed_path: by tableau identity), LV_INTEGRATOR_FIXED_PATH(i) whether code i takes one. An explicit RK",
+            "   without one steps on the tableau stepper with its printed tableau: LV_TABLEAU_STEPPED(X) = X(code, s, A, b_num,",
+            "   b_den) for each. */",
+            "enum { " + ", ".join(f"LV_PATH_{fixed_path(i).upper()} = LV_INTEGRATOR_{i.name.upper()}"
+                                  for i in INTEGRATORS if fixed_path(i) is not None) + " };"]
+    paths = " || ".join(f"(i) == LV_PATH_{fixed_path(i).upper()}" for i in INTEGRATORS if fixed_path(i) is not None)
+    out.append(f"#define LV_INTEGRATOR_FIXED_PATH(i) ({paths})")
+    stepped = [i for i in INTEGRATORS if i.family == "explicit_rk" and fixed_path(i) is None]
+    for i in stepped:
+        c, b_num, b_den = EXPLICIT_RK[i.name]
+        s, N = len(c), i.name.upper()
+        A = [_f(c[r]) if k == r - 1 else "0.0" for r in range(s) for k in range(s)]
+        out.append(f"static const double LV_{N}_A[{s * s}] = {{" + ", ".join(A) + "};")
+        out.append(f"static const double LV_{N}_B_NUM[{s}] = {{" + ", ".join(_f(b) for b in b_num) + "};")
+    out.append("#define LV_TABLEAU_STEPPED(X)" + "".join(
+        f" X(LV_INTEGRATOR_{i.name.upper()}, {len(EXPLICIT_RK[i.name][0])}, LV_{i.name.upper()}_A, "
+        f"LV_{i.name.upper()}_B_NUM, {_f(EXPLICIT_RK[i.name][2])})" for i in stepped))
     out += ["", "/* Status codes of the step loop */", "enum {"]
     out += [f"    LV_{n} = {c}," + f" /* {doc} */" for n, c, doc in STATUS[:-1]]
     n, c, doc = STATUS[-1]

@@ -2749,7 +2749,6 @@ void lv_wheels4_on_axes_rhs_c(const double *q, const double *omega_b, const doub
     const double J_0 = J[0];
     const double J_1 = J[1];
     const double J_2 = J[2];
-    const double J_3 = J[3];
     const double k_w_0 = k_w[0];
     const double k_w_1 = k_w[1];
     const double k_w_2 = k_w[2];

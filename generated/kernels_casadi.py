@@ -2398,7 +2398,6 @@ def wheels4_on_axes_rhs_c(q, omega_b, Omega, I_p, J, k_w, r_b, F_w, tau_w, u, c_
     J_0 = J[0]
     J_1 = J[1]
     J_2 = J[2]
-    J_3 = J[3]
     k_w_0 = k_w[0]
     k_w_1 = k_w[1]
     k_w_2 = k_w[2]

@@ -2750,7 +2750,6 @@ void lvf_wheels4_on_axes_rhs_c(const float *q, const float *omega_b, const float
     const float J_0 = J[0];
     const float J_1 = J[1];
     const float J_2 = J[2];
-    const float J_3 = J[3];
     const float k_w_0 = k_w[0];
     const float k_w_1 = k_w[1];
     const float k_w_2 = k_w[2];

@@ -27,6 +27,13 @@ enum {
 #define LV_INTEGRATOR_IS_IMPLICIT(i) ((i) == LV_INTEGRATOR_IMPLICIT_GYRO)
 #define LV_INTEGRATOR_IS_LIE_GROUP_RK(i) ((i) == LV_INTEGRATOR_RK4_EXPMAP)
 #define LV_INTEGRATORS(X) X(EULER, 0) X(SEMI_IMPLICIT_EULER, 1) X(RK4, 2) X(DOPRI5, 3) X(SPLITTING, 4) X(IMPLICIT_GYRO, 5) X(SPLITTING4, 6) X(RK4_EXPMAP, 7) X(SYMTOP4, 8) X(SYMTOP_BM6, 9)
+/* The fixed-step paths of csrc/ (derive/tableaux.py FIXED_PATHS): LV_PATH_<path> is the code of the integrator that
+   takes it (fixed_path: by tableau identity), LV_INTEGRATOR_FIXED_PATH(i) whether code i takes one. An explicit RK
+   without one steps on the tableau stepper with its printed tableau: LV_TABLEAU_STEPPED(X) = X(code, s, A, b_num,
+   b_den) for each. */
+enum { LV_PATH_EULER = LV_INTEGRATOR_EULER, LV_PATH_SEMI_IMPLICIT = LV_INTEGRATOR_SEMI_IMPLICIT_EULER, LV_PATH_RK4 = LV_INTEGRATOR_RK4 };
+#define LV_INTEGRATOR_FIXED_PATH(i) ((i) == LV_PATH_EULER || (i) == LV_PATH_SEMI_IMPLICIT || (i) == LV_PATH_RK4)
+#define LV_TABLEAU_STEPPED(X)
 
 /* Status codes of the step loop */
 enum {

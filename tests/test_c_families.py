@@ -27,16 +27,40 @@ def _csrc_text() -> str:
     return "\n".join(p.read_text() for p in sorted(CSRC.glob("*.[ch]")))
 
 
-def test_csrc_names_no_integrator_of_a_table_driven_family():
-    """The compositions, the Lie-group RK and the implicit step are dispatched by family (LV_INTEGRATOR_IS_*) and
-    the compositions walk their printed programs: csrc/ names none of them."""
+def test_csrc_names_no_integrator():
+    """Integrator names and codes appear in derive/ and generated/ only (issue 29): the compositions, the Lie-group
+    RK and the implicit step are dispatched by family (LV_INTEGRATOR_IS_*), the compositions walk their printed
+    programs, the adaptive RK is LV_INTEGRATOR_ADAPTIVE(i), and the fixed-step paths are selected by the printed
+    LV_PATH_* (tableaux.h: the code of the integrator whose tableau each path steps). csrc/ names none of them."""
     text = _csrc_text()
-    for name, fam in T.INTEGRATOR_FAMILY.items():
-        if fam in ("composition", "lie_group_rk", "implicit"):
-            assert f"LV_INTEGRATOR_{name.upper()}" not in text, name
+    for name in T.INTEGRATOR_CODES:
+        assert f"LV_INTEGRATOR_{name.upper()}" not in text, name
     for name in ("splitting_step", "splitting4_step", "symtop_step", "symtop_bm6_rotation", "advance_dopri5",
                  "advance_tableau"):
         assert re.search(rf"\b{name}\s*\(", text) is None, name
+
+
+def test_fixed_paths_are_chosen_by_tableau_identity(monkeypatch):
+    """Each fixed-step path of csrc/ is taken by the integrator whose tableau is the path's (derive/tableaux.py
+    fixed_path), printed as LV_PATH_* = that integrator's code; a new built-in explicit RK (Heun's method, added to
+    the registry here) takes none and is printed for C's tableau stepper (LV_TABLEAU_STEPPED): derive-only."""
+    from lavendersim.derive import tableaux as DT
+    R = sp.Rational
+    taken = {p: [i.name for i in DT.INTEGRATORS if DT.fixed_path(i) == p] for p in DT.FIXED_PATHS}
+    assert taken == {"euler": ["euler"], "semi_implicit": ["semi_implicit_euler"], "rk4": ["rk4"]}
+    h = (Path(lv.__file__).parent / "generated" / "tableaux.h").read_text()
+    assert "LV_PATH_RK4 = LV_INTEGRATOR_RK4" in h and "#define LV_TABLEAU_STEPPED(X)\n" in h
+    heun = DT.Integrator("heun", len(DT.INTEGRATORS), "explicit_rk", 2, 2, False, False, "Heun's method")
+    monkeypatch.setattr(DT, "INTEGRATORS", DT.INTEGRATORS + (heun,))
+    monkeypatch.setitem(DT.EXPLICIT_RK, "heun", ((R(0), R(1)), (1, 1), 2))
+    monkeypatch.setitem(DT.WDT_MAX, "heun", R(1))
+    monkeypatch.setitem(DT.WDT_RATIO_EXPONENT, "heun", R(0))
+    assert DT.fixed_path(heun) is None
+    h = DT.print_c()
+    assert "static const double LV_HEUN_A[4] = {0.0, 0.0, 1.0, 0.0};" in h
+    assert "static const double LV_HEUN_B_NUM[2] = {1.0, 1.0};" in h
+    assert "#define LV_TABLEAU_STEPPED(X) X(LV_INTEGRATOR_HEUN, 2, LV_HEUN_A, LV_HEUN_B_NUM, 2.0)" in h
+    assert "(i) == LV_PATH_RK4)" in h and "LV_PATH_HEUN" not in h
 
 
 def test_one_effect_row_check_in_c():

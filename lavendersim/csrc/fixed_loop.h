@@ -97,11 +97,11 @@ static inline void LV_FN(body_step)(const LV_FN(tile) *LV_RESTRICT t, long b, LV
 #define LV_FIXED_RHS(in, out) LV_FN(rhs)(t, b, kind, in, out)
 #define LV_FIXED_FOR(stmt) for (i = 0; i < LV_STATE_SIZE; i++) stmt
 #define LV_FIXED_AT(v) v[i]
-    if (integrator == LV_INTEGRATOR_RK4) {
+    if (integrator == LV_PATH_RK4) {
         LV_RK4_STEP(LV_REAL, LV_FIXED_RHS, LV_FIXED_FOR, LV_FIXED_AT, dt, x, x, k1, acc, tmp);
-    } else if (integrator == LV_INTEGRATOR_EULER) {
+    } else if (integrator == LV_PATH_EULER) {
         LV_EULER_STEP(LV_REAL, LV_FIXED_RHS, LV_FIXED_FOR, LV_FIXED_AT, dt, x, x, k1, acc, tmp);
-    } else { /* LV_INTEGRATOR_SEMI_IMPLICIT_EULER */
+    } else { /* LV_PATH_SEMI_IMPLICIT */
         LV_FIXED_RHS(x, k1);
         for (i = 0; i < 3; i++) { /* v', omega' first */
             x[LV_STATE_V_W + i] = x[LV_STATE_V_W + i] + dt * k1[LV_STATE_V_W + i];
@@ -144,12 +144,12 @@ typedef void (*LV_FN(tile_fn))(LV_FN(tile) *LV_RESTRICT t, LV_REAL dt, long n_st
         LV_FN(tile_steps)(t, KIND, INTEGRATOR, NORMALIZE, dt, n_steps);                                       \
     }
 #define LV_FIXED_TILE_KIND(K, KIND, SUFFIX, ATTR)                                            \
-    LV_FIXED_TILE_FN(K##_euler_n, KIND, LV_INTEGRATOR_EULER, 1, SUFFIX, ATTR)                \
-    LV_FIXED_TILE_FN(K##_euler_r, KIND, LV_INTEGRATOR_EULER, 0, SUFFIX, ATTR)                \
-    LV_FIXED_TILE_FN(K##_semi_n, KIND, LV_INTEGRATOR_SEMI_IMPLICIT_EULER, 1, SUFFIX, ATTR)   \
-    LV_FIXED_TILE_FN(K##_semi_r, KIND, LV_INTEGRATOR_SEMI_IMPLICIT_EULER, 0, SUFFIX, ATTR)   \
-    LV_FIXED_TILE_FN(K##_rk4_n, KIND, LV_INTEGRATOR_RK4, 1, SUFFIX, ATTR)                    \
-    LV_FIXED_TILE_FN(K##_rk4_r, KIND, LV_INTEGRATOR_RK4, 0, SUFFIX, ATTR)
+    LV_FIXED_TILE_FN(K##_euler_n, KIND, LV_PATH_EULER, 1, SUFFIX, ATTR)                      \
+    LV_FIXED_TILE_FN(K##_euler_r, KIND, LV_PATH_EULER, 0, SUFFIX, ATTR)                      \
+    LV_FIXED_TILE_FN(K##_semi_n, KIND, LV_PATH_SEMI_IMPLICIT, 1, SUFFIX, ATTR)               \
+    LV_FIXED_TILE_FN(K##_semi_r, KIND, LV_PATH_SEMI_IMPLICIT, 0, SUFFIX, ATTR)               \
+    LV_FIXED_TILE_FN(K##_rk4_n, KIND, LV_PATH_RK4, 1, SUFFIX, ATTR)                          \
+    LV_FIXED_TILE_FN(K##_rk4_r, KIND, LV_PATH_RK4, 0, SUFFIX, ATTR)
 #define LV_FIXED_TILES(SUFFIX, ATTR)                                                         \
     LV_FIXED_TILE_KIND(free, LV_FIXED_FREE, SUFFIX, ATTR)                                    \
     LV_FIXED_TILE_KIND(torque, LV_FIXED_TORQUE, SUFFIX, ATTR)                                \
@@ -163,8 +163,8 @@ LV_FIXED_TILE_KIND(any, LV_FIXED_ANY, base, )
 #define LV_FIXED_ISA(NAME) LV_ISA_PICK(isa, NAME)
 #define LV_FIXED_BASE(NAME) LV_PASTE(NAME, _base)
 #define LV_FIXED_PICK(K, PICK)                                                                                   \
-    (integrator == LV_INTEGRATOR_EULER ? (normalize ? PICK(LV_FN(K##_euler_n)) : PICK(LV_FN(K##_euler_r)))       \
-     : integrator == LV_INTEGRATOR_SEMI_IMPLICIT_EULER ? (normalize ? PICK(LV_FN(K##_semi_n)) : PICK(LV_FN(K##_semi_r))) \
+    (integrator == LV_PATH_EULER ? (normalize ? PICK(LV_FN(K##_euler_n)) : PICK(LV_FN(K##_euler_r)))       \
+     : integrator == LV_PATH_SEMI_IMPLICIT ? (normalize ? PICK(LV_FN(K##_semi_n)) : PICK(LV_FN(K##_semi_r))) \
                                                        : (normalize ? PICK(LV_FN(K##_rk4_n)) : PICK(LV_FN(K##_rk4_r))))
 /* The tile loop of kind (LV_FIXED_*), integrator and normalize flag, in instruction set isa (LV_ISA_*). */
 static LV_FN(tile_fn) LV_FN(tile_pick)(int kind, int integrator, int normalize, int isa)
@@ -218,8 +218,9 @@ static long LV_FN(tile_run)(LV_FN(tile) *t, LV_FN(tile) *snap, LV_FN(tile_fn) fn
     return -1;
 }
 
-/* The contract of lv_simulate (step.h) for plain bodies, integrator euler / semi_implicit_euler / rk4 and
-   built-in effect codes (the caller checked them: any other code returns LV_UNKNOWN_EFFECT). */
+/* The contract of lv_simulate (step.h) for plain bodies, an integrator with a fixed-step path (tableaux.h
+   LV_INTEGRATOR_FIXED_PATH) and built-in effect codes (the caller checked them: any other code returns
+   LV_UNKNOWN_EFFECT). */
 static int LV_FN(simulate)(LV_REAL *state, const LV_REAL *params, long nb, const LV_REAL *effects, long ne,
                            long row_size, int integrator, int normalize, LV_REAL dt, long n_steps, int isa,
                            long *fail_step, long *fail_body)
@@ -231,9 +232,7 @@ static int LV_FN(simulate)(LV_REAL *state, const LV_REAL *params, long nb, const
     LV_FN(tile) *t = NULL, *snap = NULL;
     LV_REAL last[LV_STATE_SIZE];
     int status = LV_OK, kind;
-    if (integrator != LV_INTEGRATOR_EULER && integrator != LV_INTEGRATOR_SEMI_IMPLICIT_EULER
-        && integrator != LV_INTEGRATOR_RK4)
-        return LV_BAD_ARGUMENT;
+    if (!LV_INTEGRATOR_FIXED_PATH(integrator)) return LV_BAD_ARGUMENT;
     if (ne > 0 && row_size < LV_EFFECT_ROW_PARAMS) return LV_BAD_ARGUMENT;
     start = (long *)calloc((size_t)nb + 1, sizeof(long));
     order = (long *)malloc(((size_t)nb + 1) * sizeof(long));

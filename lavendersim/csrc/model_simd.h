@@ -340,7 +340,7 @@ static int advance_models_grouped(double *state, const double *params, const lv_
 {
     long k, b0 = -1, n_g = 0, n_r = 0, *rest;
     int status = LV_OK;
-    if (integrator == LV_INTEGRATOR_RK4 && isa != LV_ISA_SCALAR) {
+    if (integrator == LV_PATH_RK4 && isa != LV_ISA_SCALAR) {
         for (k = 0; k < count && b0 < 0; k++)
             if (mtile_member(md, ix, list[k], list[k])) b0 = list[k];
         if (b0 >= 0)

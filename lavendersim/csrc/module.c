@@ -329,7 +329,7 @@ static PyObject *py_simulate(PyObject *self, PyObject *args)
     PyObject *dense_obj = Py_None;
     int contract = LV_CONTRACT_OFF, contract_was;
     lv_adaptive adaptive;
-    int integrator, normalize, n_models;
+    int integrator, normalize, n_models, adaptive_rk;
     double dt;
     long long n_steps_ll;
     Py_buffer st, pr, ef, mr, om, cm, ap;
@@ -353,19 +353,20 @@ static PyObject *py_simulate(PyObject *self, PyObject *args)
                         "simulate: give all four of model_rows, Omega, command, applied, or none of them");
         return NULL;
     }
-    if (tab_obj != Py_None) integrator = LV_INTEGRATOR_EULER; /* ignored: the tableau is stepped */
-    if (integrator < 0 || integrator > LV_INTEGRATOR_LAST) {
+    if (tab_obj == Py_None && (integrator < 0 || integrator > LV_INTEGRATOR_LAST)) { /* (with a tableau: ignored) */
         PyErr_Format(PyExc_ValueError,
                      "simulate: integrator code must be 0 .. %d (the module's constants, "
                      "lavendersim.generated.tableaux.INTEGRATOR_CODES), got %d", LV_INTEGRATOR_LAST, integrator);
         return NULL;
     }
-    if (integrator == LV_INTEGRATOR_DOPRI5 && (h_obj == Py_None || nfev_obj == Py_None)) {
-        PyErr_SetString(PyExc_ValueError, "simulate: dopri5 needs h (nb,) and nfev (nb,) float64 arrays, rtol and atol");
+    adaptive_rk = tab_obj == Py_None && LV_INTEGRATOR_ADAPTIVE(integrator);
+    if (adaptive_rk && (h_obj == Py_None || nfev_obj == Py_None)) {
+        PyErr_SetString(PyExc_ValueError, "simulate: an adaptive integrator needs h (nb,) and nfev (nb,) float64 arrays, "
+                        "rtol and atol");
         return NULL;
     }
-    if (integrator == LV_INTEGRATOR_DOPRI5 && !(rtol > 0.0 && isfinite(rtol) && atol >= 0.0 && isfinite(atol))) {
-        PyErr_SetString(PyExc_ValueError, "simulate: dopri5 needs finite rtol > 0 and atol >= 0");
+    if (adaptive_rk && !(rtol > 0.0 && isfinite(rtol) && atol >= 0.0 && isfinite(atol))) {
+        PyErr_SetString(PyExc_ValueError, "simulate: an adaptive integrator needs finite rtol > 0 and atol >= 0");
         return NULL;
     }
     if (n_steps_ll < 0 || n_steps_ll > (long long)LONG_MAX) {
@@ -398,7 +399,7 @@ static PyObject *py_simulate(PyObject *self, PyObject *args)
         if (get_f64(app_obj, &ap, 1, "simulate: applied") != 0) goto fail;
         have_ap = 1;
     }
-    if (integrator == LV_INTEGRATOR_DOPRI5) {
+    if (adaptive_rk) {
         if (get_f64(h_obj, &hb, 1, "simulate: h") != 0) goto fail;
         have_h = 1;
         if (get_f64(nfev_obj, &nf, 1, "simulate: nfev") != 0) goto fail;

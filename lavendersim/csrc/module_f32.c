@@ -63,10 +63,9 @@ PyObject *lv_py_simulate_f32(PyObject *self, PyObject *args)
     } else if (n_steps < 0 || !(dt > 0.0) || !isfinite(dt)) {
         PyErr_SetString(PyExc_ValueError, "simulate_f32: n_steps must be >= 0 and dt finite and > 0");
         status = LV_BAD_ARGUMENT;
-    } else if (integrator != LV_INTEGRATOR_EULER && integrator != LV_INTEGRATOR_SEMI_IMPLICIT_EULER
-               && integrator != LV_INTEGRATOR_RK4) {
-        PyErr_Format(PyExc_ValueError, "simulate_f32: integrator %d: float32 steps euler (0), semi-implicit euler (1) "
-                     "and rk4 (2) only", integrator);
+    } else if (!(integrator >= 0 && integrator <= LV_INTEGRATOR_LAST && LV_INTEGRATOR_FLOAT32(integrator))) {
+        PyErr_Format(PyExc_ValueError, "simulate_f32: integrator %d does not step float32 (the registry's float32 "
+                     "integrators: lavendersim.generated.tableaux.FLOAT32_INTEGRATORS)", integrator);
         status = LV_BAD_ARGUMENT;
     }
     for (e = 0; status == LV_OK && e < ne; e++) {

@@ -230,9 +230,9 @@ static inline long advance_block(double *state, const double *params, const long
     }
 #define RHS(in, out) for (j = 0; j < n; j++) body_rhs(in[j], prm[j], refs[j], n_refs[j], out[j])
     for (s = 0; s < n_steps; s++) {
-        if (integrator == LV_INTEGRATOR_EULER) {
+        if (integrator == LV_PATH_EULER) {
             LV_EULER_STEP(double, RHS, LV_BLOCK_FOR, LV_BLOCK_AT, dt, x, xn, k1, k1, tmp);
-        } else { /* LV_INTEGRATOR_SEMI_IMPLICIT_EULER */
+        } else { /* LV_PATH_SEMI_IMPLICIT */
             RHS(x, k1);
             for (j = 0; j < n; j++) {
                 for (i = 0; i < 3; i++) {                                         /* v', omega' */
@@ -562,10 +562,10 @@ static inline long advance_model(double *state, const double *params, long b, co
     for (s = 0; s < n_steps; s++) {
         if (kind & LV_KIND_WHEELS) lv_wheels_motor(r, cmd, y + LV_XS_OMEGA, u);
         switch (integrator) {
-        case LV_INTEGRATOR_EULER:
+        case LV_PATH_EULER:
             LV_EULER_STEP(double, MRHS, XS_FOR, XS_AT, dt, y, yn, k1, acc, tmp);
             break;
-        case LV_INTEGRATOR_SEMI_IMPLICIT_EULER:
+        case LV_PATH_SEMI_IMPLICIT:
             MRHS(y, k1);
             for (i = 0; i < 3; i++) {                                    /* v', omega' */
                 yn[LV_STATE_V_W + i] = y[LV_STATE_V_W + i] + dt * k1[LV_STATE_V_W + i];
@@ -576,7 +576,7 @@ static inline long advance_model(double *state, const double *params, long b, co
             lv_quat_derivative_body(y + LV_STATE_Q, yn + LV_STATE_OMEGA_B, tmp);                /* q rate at omega' */
             for (i = 0; i < 4; i++) yn[LV_STATE_Q + i] = y[LV_STATE_Q + i] + dt * tmp[i];
             break;
-        default: /* LV_INTEGRATOR_RK4 */
+        default: /* LV_PATH_RK4 */
             LV_RK4_STEP(double, MRHS, XS_FOR, XS_AT, dt, y, yn, k1, acc, tmp);
             break;
         }
@@ -606,8 +606,8 @@ static inline long advance_model(double *state, const double *params, long b, co
    built-in effects only (the env's cube, the common case) gets a loop per kind with the kernels and the
    effect dispatch inlined (flatten); anything else the generic loop. Same arithmetic in the same order
    either way (inlining changes no operation), so the results are bitwise the same. */
-#define LV_MODEL_RK4(k) (normalize ? advance_model(state, params, b, md, ix, (k), 1, LV_INTEGRATOR_RK4, 1, dt, n_steps, last) \
-                                   : advance_model(state, params, b, md, ix, (k), 1, LV_INTEGRATOR_RK4, 0, dt, n_steps, last))
+#define LV_MODEL_RK4(k) (normalize ? advance_model(state, params, b, md, ix, (k), 1, LV_PATH_RK4, 1, dt, n_steps, last) \
+                                   : advance_model(state, params, b, md, ix, (k), 1, LV_PATH_RK4, 0, dt, n_steps, last))
 LV_FLATTEN static long advance_model_rk4(double *state, const double *params, long b, const lv_models *md,
                                          const lv_effect_index *ix, int kind, int normalize, double dt, long n_steps,
                                          double *last)
@@ -631,7 +631,7 @@ static long advance_model_body(double *state, const double *params, long b, cons
     int builtin = 1;
     for (k = ix->start[b]; k < ix->start[b + 1]; k++)
         if (ix->refs[k].user != NULL) builtin = 0;
-    if (integrator == LV_INTEGRATOR_RK4 && builtin)
+    if (integrator == LV_PATH_RK4 && builtin)
         return advance_model_rk4(state, params, b, md, ix, kind, normalize, dt, n_steps, last);
     return advance_model(state, params, b, md, ix, kind, 0, integrator, normalize, dt, n_steps, last);
 }
@@ -1487,7 +1487,7 @@ LV_FLATTEN static long advance_group(double *state, const double *params, const 
                           int kind, int integrator, int normalize, double dt, long n_steps, int isa, int *fail_j,
                           double last[][LV_STATE_SIZE])
 {
-    if (integrator == LV_INTEGRATOR_RK4)
+    if (integrator == LV_PATH_RK4)
         return advance_rk4_group(state, params, ids, n, ix, kind, normalize, dt, n_steps, isa, fail_j, last);
     if (n == LV_BLOCK)
         return advance_block(state, params, ids, LV_BLOCK, ix, integrator, normalize, dt, n_steps, fail_j, last);
@@ -1716,7 +1716,7 @@ static int advance_fixed(double *state, const double *params, long nb, const lv_
            body with one applied torque: 1.57-1.69x a plain body there, 1.74x on a 1-body tile; bench
            per-body effects, loaded machine) */
         if ((cls == LV_RHS_FREE || cls > LV_RHS_FULL || effects_tileable(ix, list, count[cls], isa))
-            && count[cls] >= LV_TILE_MIN && integrator == LV_INTEGRATOR_RK4 && isa != LV_ISA_SCALAR) {
+            && count[cls] >= LV_TILE_MIN && integrator == LV_PATH_RK4 && isa != LV_ISA_SCALAR) {
             if (advance_soa_threads(state, params, list, count[cls], tile_rk4_fn(isa, normalize, cls, count[cls]),
                                     cls == LV_RHS_FREE ? NULL : ix, dt, n_steps, threads, limit, best) == LV_DIVERGED)
                 status = LV_DIVERGED;
@@ -1738,6 +1738,21 @@ static int advance_fixed(double *state, const double *params, long nb, const lv_
     return status;
 }
 
+/* The printed tableau of a built-in explicit RK that takes no fixed-step path (tableaux.h LV_TABLEAU_STEPPED), else
+   NULL: such an integrator steps on the tableau stepper, as a user's tableau does. */
+static const lv_tableau *builtin_tableau(int integrator)
+{
+#define LV_STEPPED_TABLEAU(CODE, S, A, B_NUM, B_DEN)                   \
+    if (integrator == (CODE)) {                                        \
+        static const lv_tableau tab = {(S), (A), (B_NUM), (B_DEN)};    \
+        return &tab;                                                   \
+    }
+    LV_TABLEAU_STEPPED(LV_STEPPED_TABLEAU)
+#undef LV_STEPPED_TABLEAU
+    (void)integrator;
+    return NULL;
+}
+
 int lv_simulate(double *state, const double *params, long nb,
                 const double *effects, long ne, long row_size, const lv_user_effects *user,
                 const lv_models *models, int integrator, int normalize, double dt, long n_steps,
@@ -1749,16 +1764,17 @@ int lv_simulate(double *state, const double *params, long nb,
     int status = LV_OK;
     if (tableau != NULL && (tableau->s < 1 || tableau->s > LV_TABLEAU_MAX_STAGES || !(tableau->b_den > 0.0)))
         return LV_BAD_ARGUMENT;
-    if (tableau == NULL && (integrator < LV_INTEGRATOR_EULER || integrator > LV_INTEGRATOR_LAST)) return LV_BAD_ARGUMENT;
+    if (tableau == NULL && (integrator < 0 || integrator > LV_INTEGRATOR_LAST)) return LV_BAD_ARGUMENT;
+    if (tableau == NULL) tableau = builtin_tableau(integrator);
     if (ne > 0 && row_size < LV_EFFECT_ROW_PARAMS) return LV_BAD_ARGUMENT;
-    if (tableau == NULL && integrator == LV_INTEGRATOR_DOPRI5 && (adaptive == NULL || !(adaptive->rtol > 0.0) || !(adaptive->atol >= 0.0)))
+    if (tableau == NULL && LV_INTEGRATOR_ADAPTIVE(integrator) && (adaptive == NULL || !(adaptive->rtol > 0.0) || !(adaptive->atol >= 0.0)))
         return LV_BAD_ARGUMENT;
     if (tableau == NULL && LV_INTEGRATOR_PLAIN_ONLY(integrator) && models != NULL)
         for (b = 0; b < nb; b++)
             if ((int)models->rows[b * LV_MODEL_SIZE + LV_MODEL_KIND] != 0) return LV_BAD_ARGUMENT;
     status = index_build(&ix, effects, ne, row_size, nb, user, fail_step);
     if (status != LV_OK) return status;
-    if (tableau != NULL || integrator == LV_INTEGRATOR_DOPRI5) {
+    if (tableau != NULL || LV_INTEGRATOR_ADAPTIVE(integrator)) {
         for (b = 0; b < nb && limit > 0; b++) {
             double lastx[LV_XS_SIZE];
             int why = LV_DIVERGED;

@@ -70,8 +70,10 @@ typedef struct {
 } lv_models;
 
 /* The integrators (LV_INTEGRATOR_*, LV_INTEGRATOR_PLAIN_ONLY(i): plain bodies only, one by one in
-   advance_structured) and the status codes (LV_OK, LV_DIVERGED, ...) are printed from derive/tableaux.py's
-   registry into generated/tableaux.h. */
+   advance_structured), the fixed-step paths (LV_PATH_*: the code of the integrator that takes each; an explicit RK
+   without one steps on the tableau stepper with its printed tableau, LV_TABLEAU_STEPPED) and the status codes (LV_OK,
+   LV_DIVERGED, ...) are printed from derive/tableaux.py's registry into generated/tableaux.h: csrc/ names no
+   integrator. */
 
 /* Adaptive stepping (dopri5): every body is stepped with its own step sizes; each of the n_steps
    steps advances it by exactly dt with as many accepted substeps as its error estimate needs.

@@ -4,8 +4,8 @@
 
 /* lv_simulate (step.h) in float32 for plain bodies: state nb x LV_STATE_SIZE floats (in place), params
    nb x LV_PARAM_SIZE, effects ne rows of row_size floats [code, body (-1: every body), parameters...] with
-   built-in codes only (body indices exact in float: nb < 2^24). integrator: LV_INTEGRATOR_EULER,
-   LV_INTEGRATOR_SEMI_IMPLICIT_EULER or LV_INTEGRATOR_RK4 (else LV_BAD_ARGUMENT). Returns LV_OK, LV_DIVERGED
+   built-in codes only (body indices exact in float: nb < 2^24). integrator: a code with LV_INTEGRATOR_FLOAT32
+   (generated/tableaux.h; each takes a fixed-step path, LV_INTEGRATOR_FIXED_PATH; else LV_BAD_ARGUMENT). Returns LV_OK, LV_DIVERGED
    (*fail_step, *fail_body: the earliest failing step, then the lowest body; that body holds its last finite
    state, the others are unspecified), LV_UNKNOWN_EFFECT (*fail_step = the row; nothing changed),
    LV_BAD_ARGUMENT or LV_NO_MEMORY (nothing changed). */
