@@ -398,6 +398,11 @@ def fixed_path(i: Integrator) -> str | None:
     return next((p for p, t in FIXED_PATHS.items() if t == tab), None)
 
 
+def _paths() -> list[tuple[Integrator, str]]:
+    """(integrator, its fixed-step path) for those that take one, in registry order."""
+    return [(i, p) for i in INTEGRATORS if (p := fixed_path(i)) is not None]
+
+
 def integrator_names() -> list[str]:
     return [i.name for i in INTEGRATORS]
 
@@ -628,15 +633,13 @@ def _c_registry() -> list[str]:
             "   takes it (fixed_path: by tableau identity), LV_INTEGRATOR_FIXED_PATH(i) whether code i takes one. An explicit RK",
             "   without one steps on the tableau stepper with its printed tableau: LV_TABLEAU_STEPPED(X) = X(code, s, A, b_num,",
             "   b_den) for each. */",
-            "enum { " + ", ".join(f"LV_PATH_{fixed_path(i).upper()} = LV_INTEGRATOR_{i.name.upper()}"
-                                  for i in INTEGRATORS if fixed_path(i) is not None) + " };"]
-    paths = " || ".join(f"(i) == LV_PATH_{fixed_path(i).upper()}" for i in INTEGRATORS if fixed_path(i) is not None)
-    out.append(f"#define LV_INTEGRATOR_FIXED_PATH(i) ({paths})")
+            "enum { " + ", ".join(f"LV_PATH_{p.upper()} = LV_INTEGRATOR_{i.name.upper()}" for i, p in _paths()) + " };"]
+    out.append("#define LV_INTEGRATOR_FIXED_PATH(i) (" + " || ".join(f"(i) == LV_PATH_{p.upper()}" for _, p in _paths()) + ")")
     stepped = [i for i in INTEGRATORS if i.family == "explicit_rk" and fixed_path(i) is None]
     for i in stepped:
-        c, b_num, b_den = EXPLICIT_RK[i.name]
-        s, N = len(c), i.name.upper()
-        A = [_f(c[r]) if k == r - 1 else "0.0" for r in range(s) for k in range(s)]
+        nodes, b_num, _ = EXPLICIT_RK[i.name]
+        s, N = len(nodes), i.name.upper()
+        A = [_f(nodes[r]) if k == r - 1 else "0.0" for r in range(s) for k in range(s)]
         out.append(f"static const double LV_{N}_A[{s * s}] = {{" + ", ".join(A) + "};")
         out.append(f"static const double LV_{N}_B_NUM[{s}] = {{" + ", ".join(_f(b) for b in b_num) + "};")
     out.append("#define LV_TABLEAU_STEPPED(X)" + "".join(
