@@ -32,8 +32,7 @@ def test_csrc_names_no_integrator():
     RK and the implicit step are dispatched by family (LV_INTEGRATOR_IS_*), the compositions walk their printed
     programs, the adaptive RK is LV_INTEGRATOR_ADAPTIVE(i), and the fixed-step paths are selected by the printed
     LV_PATH_* (tableaux.h: the code of the integrator whose tableau each path steps). csrc/ names none of them."""
-    # (fast_step.c's old Stepper refusal, until H3's Stepper that serves the adaptive integrator lands; then a no-op)
-    text = _csrc_text().replace("s->integrator == LV_INTEGRATOR_DOPRI5", "")
+    text = _csrc_text()
     for name in T.INTEGRATOR_CODES:
         assert f"LV_INTEGRATOR_{name.upper()}" not in text, name
     for name in ("splitting_step", "splitting4_step", "symtop_step", "symtop_bm6_rotation", "advance_dopri5",
