@@ -92,6 +92,7 @@ class GeneratedChecker(importlib.abc.MetaPathFinder):
     package's ``__init__.py`` links to."""
 
     PACKAGE = "lavendersim.generated."
+    BESIDE = ("derive", "generated", "labs")   # pyproject.toml's package-dir (tests/test_generated_check.py checks it)
 
     def find_spec(self, fullname, path, target=None):
         if not fullname.startswith("lavendersim.") or path is None:
@@ -101,6 +102,12 @@ class GeneratedChecker(importlib.abc.MetaPathFinder):
             linked = [Path(p, "__init__.py") for p in path]
             clone = [str(i.resolve().parent) for i in linked if i.is_symlink()]
             spec = importlib.machinery.PathFinder.find_spec(fullname, clone, target) if clone else None
+        if spec is None and fullname.count(".") == 1 and fullname.split(".")[1] in self.BESIDE:
+            # `import lavendersim` found a checkout's own lavendersim/ folder (the current directory on sys.path:
+            # `python -m pytest` or a REPL in the clone) rather than the install: pyproject.toml's package-dir puts
+            # these subpackages in the checkout's top-level folders, beside it
+            beside = [str(Path(p).resolve().parent) for p in path if Path(p).resolve().parent.joinpath("pyproject.toml").is_file()]
+            spec = importlib.machinery.PathFinder.find_spec(fullname, beside, target) if beside else None
         if fullname.startswith(self.PACKAGE) and spec is not None and spec.origin and spec.origin.endswith(".py"):
             check_generated(spec.origin)
         return spec

@@ -165,3 +165,21 @@ def test_every_generated_python_module_is_checked_when_imported(gen_copy, name):
     with pytest.raises(GeneratedFileError, match=name.replace(".", r"\.")) as e:
         import_through_hook(gen_copy, name[:-3])
     assert "`lavendersim derive`" in str(e.value)
+
+
+def test_a_python_in_the_checkout_imports_the_remapped_subpackages():
+    """`python -m pytest` or a REPL started in the checkout puts the checkout first on sys.path, so `import lavendersim`
+    finds its lavendersim/ folder, which holds no generated/, derive/ or labs/ (pyproject.toml's package-dir puts them
+    beside it): the import hook finds them there. The strict editable install failed this (ModuleNotFoundError: No module
+    named 'lavendersim.generated' for every test module under `python -m pytest` in a clean clone)."""
+    import tomllib
+
+    root = Path(__file__).resolve().parents[1]
+    remap = tomllib.loads((root / "pyproject.toml").read_text(encoding="utf-8"))["tool"]["setuptools"]["package-dir"]
+    beside = sorted(k.split(".", 1)[1] for k, v in remap.items() if "." in k)
+    assert beside == sorted(_integrity.GeneratedChecker.BESIDE)
+    code = ("import lavendersim, lavendersim.generated.layout, lavendersim.derive, lavendersim.labs, pathlib\n"
+            "print(pathlib.Path(lavendersim.generated.layout.__file__).resolve().parent.name)\n")
+    r = subprocess.run([sys.executable, "-c", code], cwd=root, capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.split() == ["generated"]
