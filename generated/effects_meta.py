@@ -10,7 +10,6 @@ USER_CODE_BASE = 1000
 ABI_VERSION = 1
 FLAG_USES_V, FLAG_USES_OMEGA, FLAG_FORCE = 1, 2, 4
 FLAG_USES_STATE = 8
-FLAG_TORQUE_W, FLAG_TORQUE_B = 16, 32
 TILE_LANES, TILE_ISAS = 64, ('base', 'avx2', 'avx512')  # a user effect's tile forms: lvu_effect_tile<TILE_LANES>_<name>_<isa>
 
 EFFECTS = (
@@ -30,7 +29,7 @@ EFFECTS = (
      'n_params': 3,
      'outputs': ('tau_w',),
      'state_inputs': (),
-     'flags': 16,
+     'flags': 0,
      'kernel': 'effect_applied_torque',
      'decay_rate': None},
     {'name': 'force_at_point',
@@ -58,7 +57,7 @@ EFFECTS = (
      'n_params': 6,
      'outputs': ('F_w', 'tau_w'),
      'state_inputs': ('q',),
-     'flags': 28,
+     'flags': 12,
      'kernel': 'effect_force_at_point',
      'decay_rate': None},
     {'name': 'gravity',
@@ -115,9 +114,9 @@ EFFECTS = (
      'n_params': 1,
      'outputs': ('tau_w',),
      'state_inputs': ('q', 'omega_b'),
-     'flags': 42,
+     'flags': 10,
      'kernel': 'effect_angular_damping',
-     'decay_rate': None},
+     'decay_rate': 'decay_rate_angular_damping'},
     {'name': 'spherical_joint',
      'code': 6,
      'kind': 'model',
@@ -218,3 +217,16 @@ def decay_rate_linear_damping(p, m, I_b):
 
     c = p[..., 0]
     return numpy.asarray(c/m, dtype=float) + numpy.zeros(numpy.shape(m))
+
+
+def decay_rate_angular_damping(p, m, I_b):
+    """angular_damping: the rate max(D) of its linear decay, 1/s (p: (n, n_params) parameter rows; m: (n,) kg;
+    I_b: (n, 3) principal moments, kg·m²). An explicit step is stable while rate * dt stays below the
+    integrator's REAL_AXIS_STABILITY (generated/tableaux.py)."""
+    import numpy
+
+    c = p[..., 0]
+    I_b_0 = I_b[..., 0]
+    I_b_1 = I_b[..., 1]
+    I_b_2 = I_b[..., 2]
+    return numpy.asarray(numpy.maximum(numpy.maximum(c/I_b_0, c/I_b_1), c/I_b_2), dtype=float) + numpy.zeros(numpy.shape(m))
