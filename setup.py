@@ -122,7 +122,10 @@ def cache_fetch(cache: Path, key: str, target: Path) -> bool:
     if not src.is_file():
         return False
     target.parent.mkdir(parents=True, exist_ok=True)
-    shutil.copy2(src, target)
+    # a fresh mtime, not the cache entry's (copy2 kept it): setuptools copies the build into the checkout (editable
+    # installs) only when it is newer than the file there, so an older cache entry left a stale extension in place
+    shutil.copyfile(src, target)
+    shutil.copymode(src, target)
     return True
 
 

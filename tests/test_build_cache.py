@@ -68,6 +68,24 @@ def test_fetch_store_round_trip(S, tmp_path):
     assert out.read_bytes() == b"\x7fELF compiled"
 
 
+def test_a_fetched_build_is_newer_than_the_one_in_the_checkout(S, tmp_path):
+    """setuptools copies an editable install's extension into the checkout only when it is newer than the file there
+    (distutils copy_file's update): a fetch keeping the cache entry's old mtime left a stale extension in the clone
+    after a pull and a second `pip install -e .` (StaleBuildError in every C test of the lead's clean-clone run)."""
+    import os
+
+    built = tmp_path / "_x.so"
+    built.write_bytes(b"\x7fELF old sources")
+    cache = tmp_path / "cache"
+    S.cache_store(cache, "o" * 64, built)
+    os.utime(cache / ("o" * 64 + ".so"), (1_000_000_000, 1_000_000_000))      # an entry stored long ago
+    in_checkout = tmp_path / "checkout.so"
+    in_checkout.write_bytes(b"\x7fELF newer sources, installed since")
+    out = tmp_path / "out" / "_x.so"
+    assert S.cache_fetch(cache, "o" * 64, out)
+    assert out.stat().st_mtime >= in_checkout.stat().st_mtime
+
+
 def test_cache_dir_from_environment(S, tmp_path, monkeypatch):
     monkeypatch.setenv("LAVENDERSIM_BUILD_CACHE", str(tmp_path / "c"))
     assert S.cache_dir() == tmp_path / "c"
