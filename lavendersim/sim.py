@@ -528,6 +528,7 @@ class Sim:
         self.dtype = self._check_dtype(dtype)
         self.contract = self._check_contract(contract)
         self._per_step = backends.rhs_per_step(self.integrator, self._effects, len(self.names))
+        self._step_work = self._per_step or ADAPTIVE_STEP_WORK   # evaluations per body-step, for the work caps
         self.on_bound = V.choice("on_bound", on_bound, ON_BOUND)
         if max_growth is not None:
             max_growth = V.scalar("max_growth", max_growth, positive=True)
@@ -554,7 +555,7 @@ class Sim:
         self._ctr = self._fast if self._fast is not None else _Counters()
         self._lock = _Guard(self._fast)
         # run(n) inside C for n up to one chunk (checked at its end, as _advance checks a chunk) within the work cap
-        self._fast_n = min(self._chunk, FAST_STEP_WORK // max(1, len(self.names) * (self._per_step or ADAPTIVE_STEP_WORK)))
+        self._fast_n = min(self._chunk, FAST_STEP_WORK // max(1, len(self.names) * self._step_work))
         self._views = _read_only_views(self._x, self._models.Omega, self._models.applied)
         if self._fast is not None:   # sim.step() straight into C; the Python path only when C steps aside
             self._fast.set_fallback(self._step_slow)
@@ -754,12 +755,11 @@ class Sim:
         the fast path holds the GIL; cap=False: built whatever the size, see fast_chunks), or a Python without the
         GIL. An adaptive integrator's Stepper steps the Adaptive's arrays in place (fast_step.c)."""
         gil = getattr(sys, "_is_gil_enabled", lambda: True)()
-        work = self._per_step or ADAPTIVE_STEP_WORK
         if (self.backend.name != "c" or not gil or self.dtype != "float64"
                 or self.contract != "off"   # (the Stepper steps bitwise; contract="fma" goes through advance)
                 or self.integrator not in backends.INTEGRATORS   # a user tableau: through advance (no Stepper code)
                 or (self._py_growth and self.max_growth is not None)
-                or (cap and len(self.names) * work > FAST_STEP_WORK)):
+                or (cap and len(self.names) * self._step_work > FAST_STEP_WORK)):
             return None
         from .backends import c_backend
 
