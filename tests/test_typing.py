@@ -43,13 +43,26 @@ def _copy_tree(dst: Path) -> None:
                                                                ".pytest_cache", ".mypy_cache", "_build", ".hypothesis"))
 
 
+def _outer_site_dirs() -> list[str]:
+    """This environment's site-packages folders (where the dependencies are)."""
+    import site
+
+    return [d for d in [*site.getsitepackages(), site.getusersitepackages()] if Path(d).is_dir()]
+
+
 def _install(tmp: Path, *options: str) -> Path:
-    """A venv (seeing this environment's packages) with a copy of the tree installed editable by pip: the README's
-    `pip install -e .` (with `--no-deps`: the dependencies are this environment's) plus `options`. Returns the
-    venv's python."""
+    """A venv with a copy of the tree installed editable by pip: the README's `pip install -e .` (with `--no-deps`:
+    the dependencies are this environment's) plus `options`. Returns the venv's python.
+
+    The venv sees this environment's site-packages as plain path entries (a .pth listing the folders), not as site
+    folders (`--system-site-packages`): their .pth files are not run, so this environment's own editable install of
+    LavenderSim (CI's strict one puts its link tree on sys.path, and a path entry wins over a lenient install's
+    import hook) cannot shadow the venv's."""
     src, venv = tmp / "src", tmp / "venv"
     _copy_tree(src)
-    subprocess.run([sys.executable, "-m", "venv", "--system-site-packages", str(venv)], check=True)
+    subprocess.run([sys.executable, "-m", "venv", str(venv)], check=True)
+    (site_packages,) = venv.glob("lib/python*/site-packages")
+    (site_packages / "zz_outer_environment.pth").write_text("".join(d + "\n" for d in _outer_site_dirs()))
     run = subprocess.run([str(venv / "bin" / "python"), "-m", "pip", "install", "--no-deps", "-q", "-e", str(src),
                           *options], env=_env(), capture_output=True, text=True, timeout=3600)
     assert run.returncode == 0, run.stdout[-2000:] + run.stderr[-2000:]
