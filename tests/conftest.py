@@ -432,6 +432,45 @@ def pytest_runtest_setup(item):
                 item.add_marker(pytest.mark.skip(reason=why))
 
 
+def run_main(*args, env: dict | None = None, cwd=None):
+    """`lavendersim ARGS` through lavendersim.cli.main in this process (its parser, its guard, its messages): a
+    subprocess.CompletedProcess like `subprocess.run([sys.executable, "-m", "lavendersim", *args])`'s, exit code
+    (argparse's included), stdout and stderr captured, warnings printed on stderr as a fresh interpreter prints them.
+    `env`: variables set for the call (None as a value: unset), `cwd`: the working directory for the call. Starting an
+    interpreter (and SymPy, for derive) costs about a second of CPU; a test module checks each behaviour in a real
+    process once and runs the rest of its cases here."""
+    import contextlib
+    import io
+    import subprocess
+    import sys
+    import warnings
+
+    from lavendersim import cli
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        sys.stderr.write(warnings.formatwarning(message, category, filename, lineno, line))
+
+    out, err = io.StringIO(), io.StringIO()
+    with pytest.MonkeyPatch.context() as mp, contextlib.redirect_stdout(out), contextlib.redirect_stderr(err), \
+            warnings.catch_warnings():
+        for k, v in (env or {}).items():
+            if v is None:
+                mp.delenv(k, raising=False)
+            else:
+                mp.setenv(k, str(v))
+        if cwd is not None:
+            mp.chdir(cwd)
+        warnings.simplefilter("default")
+        warnings.showwarning = show
+        try:
+            code = cli.main([str(a) for a in args])
+        except SystemExit as exc:
+            code = exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 1)
+            if not isinstance(exc.code, (int, type(None))):
+                print(exc.code, file=sys.stderr)
+    return subprocess.CompletedProcess([str(a) for a in args], code, out.getvalue(), err.getvalue())
+
+
 def interruptible() -> None:
     """preexec_fn for a child process a test interrupts with SIGINT. pytest-xdist's workers ignore SIGINT, an ignored
     signal stays ignored across exec, and Python then installs no KeyboardInterrupt handler: the child would never

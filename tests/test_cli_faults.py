@@ -11,8 +11,6 @@ only reached when the behaviour is broken; no duration is asserted.
 """
 from __future__ import annotations
 
-import contextlib
-import io
 import json
 import os
 import signal
@@ -20,11 +18,11 @@ import subprocess
 import sys
 import textwrap
 import threading
-import warnings
 from pathlib import Path
 
 import pytest
 
+from conftest import run_main
 from lavendersim import cli
 from lavendersim.errors import DivergenceError
 from lavendersim.labs import common as C
@@ -39,24 +37,7 @@ def _run(*args, env=None, timeout=DEADLINE):
                           timeout=timeout, env=env)
 
 
-def _show(message, category, filename, lineno, file=None, line=None):
-    sys.stderr.write(warnings.formatwarning(message, category, filename, lineno, line))
-
-
-def _main(*args):
-    """`lavendersim ARGS` through cli.main in this process: a CompletedProcess like _run's (argparse's exit
-    included; a warning printed on stderr, as the interpreter prints it, never swallowed by pytest)."""
-    out, err = io.StringIO(), io.StringIO()
-    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err), warnings.catch_warnings():
-        warnings.simplefilter("default")
-        warnings.showwarning = _show
-        try:
-            code = cli.main([str(a) for a in args])
-        except SystemExit as exc:
-            code = exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 1)
-            if not isinstance(exc.code, (int, type(None))):
-                print(exc.code, file=sys.stderr)
-    return subprocess.CompletedProcess(list(args), code, out.getvalue(), err.getvalue())
+_main = run_main   # `lavendersim ARGS` through cli.main in this process (tests/conftest.py)
 
 
 def _one_line(r, code=2):

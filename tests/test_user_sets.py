@@ -1,8 +1,10 @@
 """User sets (`lavendersim derive --user FILE`): identified by their file, checked like generated/, written
 atomically, CC honoured or refused, and every declaration fault one line with exit 2 (issues 28 and 31).
 
-The CLI is run in subprocesses (its contract is the exit code and stderr); the manifest checks run in
-this process, and in a subprocess where a wrong answer would be a crash (a truncated library).
+The CLI is run in subprocesses (its contract is the exit code and stderr), its declaration faults through
+cli.main in this process (conftest.run_main; one real process per kind of fault checks that both say the same);
+the manifest checks run in this process, and in a subprocess where a wrong answer would be a crash (a truncated
+library).
 """
 from __future__ import annotations
 
@@ -22,7 +24,7 @@ import lavendersim as lv
 from lavendersim import extending
 from lavendersim.validate import LavenderInputError
 
-from conftest import have
+from conftest import have, run_main
 
 pytestmark = pytest.mark.needs("cc")
 
@@ -277,14 +279,28 @@ FAULTS = {
 
 @pytest.mark.parametrize("case", sorted(FAULTS))
 def test_every_declaration_fault_is_one_line_and_exit_2(user, case):
+    """Through cli.main in this process (run_main: the command's parser, guard and messages); the process itself
+    says the same (test_the_command_line_process_says_what_main_says)."""
     text, want = FAULTS[case]
     decl = user["tmp"] / "us_fault.py"
     decl.write_text(HEAD + text)
-    line = one_line_exit_2(cli(["derive", "--user", decl], user["env"], user["tmp"]))
+    line = one_line_exit_2(run_main("derive", "--user", decl, cwd=user["tmp"]))
     assert str(decl) in line
     for w in want:
         assert w in line, (w, line)
     assert not (user["sets"] / "us_fault").exists()
+
+
+@pytest.mark.parametrize("case", ["unprintable", "state_typo"])
+def test_the_command_line_process_says_what_main_says(user, case):
+    """`python -m lavendersim derive --user` (a real process: its exit code and stderr are the contract) gives what
+    run_main gives for a declaration fault: an error while printing, and one while running the user's file."""
+    decl = user["tmp"] / "us_fault.py"
+    decl.write_text(HEAD + FAULTS[case][0])
+    r = cli(["derive", "--user", decl], user["env"], user["tmp"])
+    m = run_main("derive", "--user", decl, cwd=user["tmp"])
+    assert (r.returncode, r.stdout, r.stderr) == (m.returncode, m.stdout, m.stderr)
+    one_line_exit_2(r)
 
 
 # ---------------------------------------------------------------- functions C99 and CasADi both have (issue 31)
