@@ -27,6 +27,10 @@ extensions = [
     "sphinx.ext.viewcode",
     "sphinx.ext.intersphinx",
 ]
+# LAVENDERSIM_DOCS_VIEWCODE=off leaves out the highlighted source pages (_modules/, a [source] link per object):
+# tests/test_docs checks the structure without them (4 s of its 32 s CPU); the full site (.ci/run, test_docs_site) has them
+if os.environ.get("LAVENDERSIM_DOCS_VIEWCODE") == "off":
+    extensions.remove("sphinx.ext.viewcode")
 source_suffix = {".rst": "restructuredtext", ".md": "myst-nb", ".ipynb": "myst-nb"}
 root_doc = "index"
 exclude_patterns = ["_build", "Thumbs.db", ".DS_Store", "**/.ipynb_checkpoints"]

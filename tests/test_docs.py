@@ -18,9 +18,11 @@ DOCS = ROOT / "docs"
 @pytest.fixture(scope="module")
 def site(tmp_path_factory):
     out = tmp_path_factory.mktemp("docs-html")
-    # the structure only: notebooks rendered as stored, the gallery's labs not run (the executed site with
-    # its pictures: tests/test_docs_site.py, in the slow set, and .ci/run's sphinx-build)
-    env = {**os.environ, "LAVENDERSIM_DOCS_EXECUTE": "off", "LAVENDERSIM_GALLERY": "skip"}
+    # the structure only: notebooks rendered as stored, the gallery's labs not run, no highlighted source pages
+    # (_modules/: none is checked here) (the executed site with its pictures and sources: tests/test_docs_site.py, in
+    # the slow set, and .ci/run's sphinx-build)
+    env = {**os.environ, "LAVENDERSIM_DOCS_EXECUTE": "off", "LAVENDERSIM_GALLERY": "skip",
+           "LAVENDERSIM_DOCS_VIEWCODE": "off"}
     r = subprocess.run([sys.executable, "-m", "sphinx", "-W", "--keep-going", "-q", "-b", "html", str(DOCS), str(out)],
                        capture_output=True, text=True, cwd=ROOT, timeout=1200, env=env)
     assert r.returncode == 0, f"sphinx-build -W failed (exit {r.returncode}):\n{r.stdout}\n{r.stderr}"

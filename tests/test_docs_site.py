@@ -20,7 +20,8 @@ DOCS = ROOT / "docs"
 @pytest.fixture(scope="module")
 def site(tmp_path_factory):
     out = tmp_path_factory.mktemp("docs-site")
-    env = {k: v for k, v in os.environ.items() if k not in ("LAVENDERSIM_DOCS_EXECUTE", "LAVENDERSIM_GALLERY")}
+    env = {k: v for k, v in os.environ.items() if k not in ("LAVENDERSIM_DOCS_EXECUTE", "LAVENDERSIM_GALLERY",
+                                                                 "LAVENDERSIM_DOCS_VIEWCODE")}
     r = subprocess.run([sys.executable, "-m", "sphinx", "-W", "--keep-going", "-q", "-b", "html", str(DOCS), str(out)],
                        capture_output=True, text=True, cwd=ROOT, timeout=3600, env=env)
     assert r.returncode == 0, f"sphinx-build -W failed (exit {r.returncode}):\n{r.stdout}\n{r.stderr[-5000:]}"
