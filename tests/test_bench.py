@@ -8,13 +8,11 @@ from __future__ import annotations
 
 import json
 import math
-import subprocess
-import sys
 
 import numpy as np
 import pytest
 
-from conftest import NUMPY_SLOW, have
+from conftest import NUMPY_SLOW, have, run_main
 from lavendersim import bench
 
 
@@ -33,10 +31,10 @@ N_TARGETS = 32   # target lines besides the per-body ones (scenes.py: + the whee
 
 @pytest.fixture(scope="module")
 def quick(tmp_path_factory):
+    """`lavendersim bench --quick --out FILE` through cli.main in this process (conftest.run_main: exit code, stdout
+    and stderr captured, stderr not a terminal as on a pipe); no interpreter started for it."""
     path = tmp_path_factory.mktemp("bench") / "bench.json"
-    r = subprocess.run([sys.executable, "-m", "lavendersim.cli", "bench", "--quick", "--out", str(path)],
-                       capture_output=True, text=True, timeout=300)
-    return r, path
+    return run_main("bench", "--quick", "--out", path), path
 
 
 def test_quick_runs_and_prints_its_standing(quick):
