@@ -215,7 +215,7 @@ def test_a_failed_derive_exits_2_and_keeps_the_last_good_set(user):
     decl = user["tmp"] / "us_keep.py"
     good = torque_decl("us_keep_push", 1.0)
     decl.write_text(good)
-    r = cli(["derive", "--user", decl], user["env"], user["tmp"])
+    r = run_main("derive", "--user", decl, cwd=user["tmp"])           # the last good set (in this process)
     assert r.returncode == 0, r.stderr
     folder = user["sets"] / "us_keep"
     before = snapshot(folder)
