@@ -89,5 +89,6 @@ enum {
 #define LV_WHEELS_BODY_RHS_C lv_wheels4_body_rhs_c
 #define LV_WHEELS_ON_AXES_RHS_C lv_wheels4_on_axes_rhs_c
 #define LV_WHEELS_MOTOR lv_wheels4_motor
+#define LV_WHEELS_MOMENTUM lv_wheels4_momentum
 
 #endif

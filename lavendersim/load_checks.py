@@ -192,20 +192,21 @@ class LoadBudget:
             return self.g * (self.L0 + t * self.RL), self.g * (self.P0 + t * self.RP)
 
     def screen_rows(self, G: np.ndarray, steps: int) -> None:
-        """The C screen's limits (csrc/fast_step.c LV_G_*) of the plain loaded bodies at step `steps`, in place:
-        no no-work rate, kinetic energy <= Pmax²/2m + Lmax²/2I_min, |L|² <= Lmax²; +inf for wheeled ones (their
-        total |L| is checked here only). Margin as Sim._safe_rates'."""
+        """The C screen's limits (csrc/fast_step.c LV_G_*) of the loaded bodies at step `steps`, in place: no
+        no-work rate, |L|² <= Lmax², and kinetic energy <= Pmax²/2m + Lmax²/2I_min (plain bodies) or (wheeled: the
+        screen's |L| is of body and wheels, its energy the translational one at omega 0) <= Pmax²/2m, which is
+        m|v| <= Pmax. Margin as Sim._safe_rates'."""
         if not self.loaded.any():
             return
         Lmax, Pmax = self.limits(steps)
         f = self.plain
         margin = 1 - 1e-12
         with np.errstate(over="ignore", invalid="ignore"):
-            E = Pmax[f] ** 2 / (2 * self.params[f, LY.PARAM_M]) + Lmax[f] ** 2 / (2 * self.params[f][:, LY.PARAM_I_B].min(axis=1))
-            G[f, 0] = -np.inf
-            G[f, 1] = E * margin
-            G[f, 2] = Lmax[f] ** 2 * margin
-        G[self.wheeled] = np.inf
+            T = Pmax ** 2 / (2 * self.params[:, LY.PARAM_M])
+            E = np.where(f, T + Lmax ** 2 / (2 * self.params[:, LY.PARAM_I_B].min(axis=1)), T)
+            G[self.loaded, 0] = -np.inf
+            G[self.loaded, 1] = E[self.loaded] * margin
+            G[self.loaded, 2] = Lmax[self.loaded] ** 2 * margin
 
     def violation(self, x, Omega, steps: int) -> tuple[int, str] | None:
         """The first loaded body beyond its budget at step `steps`: (body, cause), or None."""

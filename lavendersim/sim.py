@@ -474,7 +474,6 @@ class Sim:
     # set by the setup methods __init__ calls (declared here: some are read by methods defined before them)
     _chunk: int
     _budget: load_checks.LoadBudget | None
-    _py_growth: bool
 
     @V.keywords  # unknown keyword arguments raise LavenderInputError naming them
     def __init__(self, scene: Scene, dt: float = 1e-3, integrator: str = "rk4", backend: str = "auto", normalize: bool = True,
@@ -750,15 +749,13 @@ class Sim:
 
     def _make_stepper(self, cap: bool = True):
         """The C fast path of step() (lavendersim/csrc/fast_step.c), or None where it does not apply: not the C
-        backend, a free wheeled body under the growth check (its |L| is computed in Python every step), a scene
-        larger than FAST_STEP_WORK evaluations per step (an adaptive integrator counted ADAPTIVE_STEP_WORK per body;
-        the fast path holds the GIL; cap=False: built whatever the size, see fast_chunks), or a Python without the
-        GIL. An adaptive integrator's Stepper steps the Adaptive's arrays in place (fast_step.c)."""
+        backend, a scene larger than FAST_STEP_WORK evaluations per step (an adaptive integrator counted
+        ADAPTIVE_STEP_WORK per body; the fast path holds the GIL; cap=False: built whatever the size, see fast_chunks),
+        or a Python without the GIL. An adaptive integrator's Stepper steps the Adaptive's arrays in place (fast_step.c)."""
         gil = getattr(sys, "_is_gil_enabled", lambda: True)()
         if (self.backend.name != "c" or not gil or self.dtype != "float64"
                 or self.contract != "off"   # (the Stepper steps bitwise; contract="fma" goes through advance)
                 or self.integrator not in backends.INTEGRATORS   # a user tableau: through advance (no Stepper code)
-                or (self._py_growth and self.max_growth is not None)
                 or (cap and len(self.names) * self._step_work > FAST_STEP_WORK)):
             return None
         from .backends import c_backend
@@ -796,8 +793,6 @@ class Sim:
         loaded = acted & ((kind & KIND_JOINT) == 0)
         self._budget = (load_checks.LoadBudget(self._params, self._effects, self._models.rows, loaded, self.dt, self.max_growth)
                         if self.max_growth is not None and loaded.any() else None)
-        # bodies whose growth check needs Python every chunk (total |L| of body and wheels)
-        self._py_growth = bool(self._any_free_wheels or (self._budget is not None and self._budget.wheeled.size))
         self._warned = set()
         evals = self._per_step if self._per_step is not None else 12
         plain = not self._has_models and not len(self._effects)     # the SIMD tiles: a longer chunk still returns soon
@@ -842,16 +837,18 @@ class Sim:
         # (max_growth * L0)^2 with a rounding margin; +inf where no growth check can fire (not free, max_growth None)
         self._g_fast = np.full((nb, 3), np.inf)
         self._w_safe = self._g_fast[:, 0]     # (a view: the free bodies' no-work rates are the screen's)
-        self._safe_rates(self._free)
+        self._safe_rates(self._free | self._free_wheels)
         if self._budget is not None:
             steps = self._ctr.steps if "_ctr" in self.__dict__ else 0
             self._budget.reference(self._x, self._models.Omega, steps)
             self._budget.screen_rows(self._g_fast, steps)
 
     def _safe_rates(self, f: np.ndarray) -> None:
-        """w_safe (see _reference) of the free bodies selected by the boolean mask f, from the current E0."""
+        """w_safe (see _reference) and the screen's limits of the free bodies selected by the boolean mask f, from the
+        current E0 and L0 (a free wheeled body: its (max_growth L0)^2, for the |L| of body and wheels)."""
         if self.max_growth is None:
             return
+        fw = f & self._free_wheels     # the screen evaluates their |L| of body and wheels (no no-work rate, no E)
         for f, k in _check_blocks(f & self._free):
             p = self._params[f]
             I = p[:, LY.PARAM_I_B]
@@ -868,6 +865,10 @@ class Sim:
                 margin = 1 - 1e-12      # rounding: the C screen never passes what the NumPy check would refuse
                 self._g_fast[f, 1] = np.where(E0 > 0, self.max_growth * E0 * margin, np.inf)
                 self._g_fast[f, 2] = np.where(L0 > 0, (self.max_growth * L0) ** 2 * margin, np.inf)
+        with np.errstate(over="ignore"):
+            L0 = self._L0[fw]
+            self._g_fast[fw, 0], self._g_fast[fw, 1] = -np.inf, np.inf
+            self._g_fast[fw, 2] = np.where(L0 > 0, (self.max_growth * L0) ** 2 * (1 - 1e-12), np.inf)
 
     def _g_inf(self) -> np.ndarray:
         """(nb, 3) growth limits that never fire: the C screen's table when it checks the validity bound only."""
@@ -902,10 +903,12 @@ class Sim:
 
     def _violation_raw(self, x, Omega, warn, growth):
         screen = self._screen
-        if screen is not None and x is self._x and (not growth or self.max_growth is None or not self._py_growth):
-            # one pass in C: every body inside the bound and (growth) inside its E and |L| limits -> nothing to report
+        if screen is not None and x is self._x:
+            # one pass in C: every body inside the bound and (growth) inside its E and |L| limits (a wheeled body's
+            # |L| of body and wheels, from its model row and wheel rates) -> nothing to report
             bound = np.inf if self._bound is None else self._bound[0]
-            if screen(x, self._params, self._wdt_scale, bound, self._g_fast if growth else self._g_inf()):
+            models = (self._models.rows, Omega) if self._has_models else ()
+            if screen(x, self._params, self._wdt_scale, bound, self._g_fast if growth else self._g_inf(), *models):
                 return None
         with np.errstate(over="ignore", invalid="ignore"):   # an overflowing norm is inf: beyond any bound
             w, v = K.validity_wdt(x[:, LY.STATE_OMEGA_B], self._wdt_scale)

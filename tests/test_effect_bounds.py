@@ -189,6 +189,88 @@ def test_the_budget_survives_pickling_bit_for_bit():
     assert np.array_equal(sim.x, twin.x)
 
 
+# ---- wheeled bodies: their budget in the C screen (issue 29: no Python check per call) -----------------------
+def _wheeled(n: int = 3, effect: str | None = "applied_torque", **params) -> lv.Scene:
+    s = lv.Scene()
+    for i in range(n):
+        s.add_body(lv.Body.box(f"w{i}", 1.0, (0.1, 0.2, 0.3), v_w=(0.5, 0.0, 0.0), omega_b=(0.3, 0.2, 0.1)))
+        s.add_effect("reaction_wheels", body=f"w{i}", J=[1e-4] * 3, torque_limit=0.1, speed_limit=100.0)
+        if effect is not None:
+            s.add_effect(effect, body=f"w{i}", **(params or {"torque_w": (0.0, 0.0, 1e-3)}))
+    return s
+
+
+@pytest.mark.parametrize("loaded", [True, False])
+def test_calm_wheeled_bodies_pass_the_c_screen_and_never_reach_the_python_check(loaded):
+    """The growth check of a wheeled body (loaded: its budget, |L| of body and wheels and m|v|; free: its total |L|)
+    is held by the C screen like a plain body's, so run(1) and step() of a calm scene never evaluate it in Python
+    (at HEAD before this, LoadBudget.violation ran after every call: 16x the call's cost at 100 bodies)."""
+    sim = lv.Sim(_wheeled(effect="applied_torque" if loaded else None), dt=1e-3, integrator="rk4", backend="c")
+    for i in range(3):
+        sim.set_wheel_command(f"w{i}", (0.01, -0.02, 0.005))
+    assert sim._fast is not None, "step() runs inside C for a wheeled scene under the growth check"
+    assert (sim._budget is not None) == loaded
+    calls = []
+    if loaded:
+        real = sim._budget.violation
+        sim._budget.violation = lambda *a: calls.append(a) or real(*a)
+    else:
+        real_inv = sim._invariants
+        sim._invariants = lambda *a, **k: calls.append(a) or real_inv(*a, **k)
+    for _ in range(40):
+        sim.run(1)
+        sim.step()
+    sim.run(500)
+    assert calls == [] and sim.steps == 580
+    assert (sim._g_fast[:, 0] == -np.inf).all() and (sim._g_fast[:, 2] < np.inf).all()   # evaluated, finite limits
+
+
+def test_the_c_screen_reads_a_wheeled_bodys_total_momentum_and_translation():
+    """The screen's |L| of a wheeled body is of body and wheels (the printed wheel momentum: wheels spinning on a body
+    at rest carry all of it) and its energy is the translational one (m|v| <= Pmax, whatever the body's spin): it
+    passes at a limit just above the value the Python check computes and refuses just below it."""
+    from lavendersim.generated import layout as LY
+
+    sim = lv.Sim(_wheeled(), dt=1e-3, integrator="rk4", backend="c")
+    x, W, rows = sim._x.copy(), sim._models.Omega.copy(), sim._models.rows
+    x[0, LY.STATE_OMEGA_B] = 0.0
+    W[0] = (50.0, -20.0, 10.0, 0.0)
+    L, P = sim._budget._momenta(x, W)
+    assert L[0] > 0 and P[0] == 0.5
+    screen = sim._screen
+    G = np.full((3, 3), np.inf)
+    G[0] = (-np.inf, np.inf, L[0] ** 2 * (1 + 1e-9))
+    assert screen(x, sim.params, sim._wdt_scale, np.inf, G, rows, W)
+    G[0, 2] = L[0] ** 2 * (1 - 1e-9)
+    assert not screen(x, sim.params, sim._wdt_scale, np.inf, G, rows, W)
+    x[0, LY.STATE_OMEGA_B] = (5.0, 0.0, 0.0)   # a spin: rotational energy does not count against Pmax
+    G[0] = (-np.inf, P[0] ** 2 / 2 * (1 + 1e-9), np.inf)   # m = 1: Pmax^2 / 2m
+    assert screen(x, sim.params, sim._wdt_scale, np.inf, G, rows, W)
+    G[0, 1] = P[0] ** 2 / 2 * (1 - 1e-9)
+    assert not screen(x, sim.params, sim._wdt_scale, np.inf, G, rows, W)
+    G[0] = np.inf     # without the model rows the row would be screened as a plain body's
+    assert screen(x, sim.params, sim._wdt_scale, np.inf, G)
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+@pytest.mark.parametrize("kind,what", [("linear_damping", "|p| = "), ("angular_damping", "|L| = ")])
+def test_a_wheeled_body_beyond_its_budget_is_a_divergence(kind, what, backend):
+    """A stiff decay let through (on_bound='warn') on wheeled bodies: euler amplifies v (or omega) x2 per step; the
+    budget refuses it within a few steps, through the C screen as through NumPy, and the state is left as it was."""
+    dt, c = 0.01, (3.0 if kind == "linear_damping" else 3.0 * (0.1 ** 2 + 0.2 ** 2) / 12) / 0.01   # rate*dt = 3
+    with pytest.warns(ValidityBoundWarning):
+        sim = lv.Sim(_wheeled(1, kind, c=c), dt=dt, integrator="euler", backend=backend, on_bound="warn")
+    before = sim.x.copy()
+    with pytest.raises(DivergenceError) as e:
+        sim.run(2000)
+    assert e.value.step < 12 and what in e.value.cause and "loads can supply" in e.value.cause
+    assert np.array_equal(sim.x, before) and sim.steps == 0
+    with pytest.raises(DivergenceError) as e2:     # step() (inside C where the screen passes) finds the same step
+        for _ in range(20):
+            sim.step()
+    assert (e2.value.step, e2.value.cause) == (e.value.step, e.value.cause) and sim.steps == e.value.step
+
+
 def test_a_user_declared_decay_gets_the_bound(tmp_path):
     """A user's spin drag (docs/extending.md's way) is recognised by derive and bounded like the built-ins."""
     import os

@@ -168,9 +168,15 @@ def _scenes():
     forced.add_effect("gravity", g_w=(0.0, 0.0, -9.81))
     forced.add_effect("angular_damping", body="b", c=0.05)
     cube = lc.chapter_cube("corner", damping=1e-3, omega_b=(0.2, -0.1, 0.3))
+    free_sat, torqued_sat = lv.Scene(), lv.Scene()   # wheels, no joint: the growth check of body and wheels in C
+    for sc in (free_sat, torqued_sat):
+        sc.add_body(lv.Body.box("cube", 1.0, (0.1, 0.2, 0.3), v_w=(0.1, 0.0, 0.0), omega_b=(0.3, 0.2, 0.1)))
+        sc.add_effect("reaction_wheels", body="cube", J=[1e-4] * 3, torque_limit=0.1, speed_limit=100.0)
+    torqued_sat.add_effect("applied_torque", body="cube", torque_w=(0.0, 0.0, 1e-3))
     return {"plain": (plain, "rk4"), "forced": (forced, "rk4"), "plain_euler": (plain, "euler"),
             "splitting": (plain, "splitting"), "implicit_gyro": (forced, "implicit_gyro"), "cube": (cube, "rk4"),
-            "dopri5": (forced, "dopri5"), "dopri5_cube": (cube, "dopri5")}
+            "dopri5": (forced, "dopri5"), "dopri5_cube": (cube, "dopri5"), "free_sat": (free_sat, "rk4"),
+            "torqued_sat": (torqued_sat, "rk4")}
 
 
 def _sim(scene, integrator):

@@ -25,10 +25,12 @@
 #include "kernels.h"
 #include "step.h"
 
-/* The growth check's per-body limits, a row of G (nb, LV_G_COLS) that Sim fills (Sim._safe_rates): the no-work
-   rate w_safe (|omega| <= w_safe proves E and |L| inside their limits; +inf where no growth check applies), and the
-   limits themselves, max_growth * E0 and (max_growth * L0)^2, each shrunk by a rounding margin (+inf where the check
-   does not apply). */
+/* The growth check's per-body limits, a row of G (nb, LV_G_COLS) that Sim fills (Sim._safe_rates,
+   LoadBudget.screen_rows): the no-work rate w_safe (|omega| <= w_safe proves E and |L| inside their limits; +inf where
+   no growth check applies, -inf where the limits are always evaluated), and the limits themselves, each shrunk by a
+   rounding margin (+inf where the check does not apply): of the kinetic energy and of |L|^2 — for a wheeled body
+   (its model row's kind has LV_KIND_WHEELS) of its translational kinetic energy and of the total |L|^2 of body and
+   wheels (the motors' torques are internal). */
 enum { LV_G_W = 0, LV_G_E = 1, LV_G_L2 = 2, LV_G_COLS = 3 };
 
 enum { FS_STATE, FS_PARAMS, FS_EFFECTS, FS_WDT, FS_GROWTH, FS_ROWS, FS_OMEGA, FS_COMMAND, FS_APPLIED, FS_H, FS_NFEV,
@@ -249,29 +251,45 @@ static int unchanged(const Stepper *s)
 }
 
 /* 1 when body x (params prm) is inside its growth limits g: |omega| = w <= w_safe, else its kinetic energy and |L|^2
-   from the generated kinetic_energy and body_momentum kernels are at most g's limits (NaN fails). */
-static int growth_pass(const double *x, const double *prm, const double *g, double w)
+   from the generated kinetic_energy and body_momentum kernels are at most g's limits (NaN fails). A wheeled body (row
+   not NULL, its kind with LV_KIND_WHEELS; Omega its wheel rates): the kinetic energy at omega = 0 (translation) and
+   the total |L| of body and wheels from the printed LV_WHEELS_MOMENTUM, as LoadBudget._momenta and Sim._invariants. */
+static int growth_pass(const double *x, const double *prm, const double *g, double w, const double *row,
+                       const double *Omega)
 {
-    double T, L[3];
+    static const double at_rest[3] = {0.0, 0.0, 0.0};
+    double T, L[3], L_wheels[3], h[LV_NW];
+    int k;
     if (w <= g[LV_G_W]) return 1;
-    lv_kinetic_energy(prm[LV_PARAM_M], prm + LV_PARAM_I_B, x + LV_STATE_V_W, x + LV_STATE_OMEGA_B, &T);
-    lv_body_momentum(prm + LV_PARAM_I_B, x + LV_STATE_OMEGA_B, L);
+    if (row != NULL && ((int)row[LV_MODEL_KIND] & LV_KIND_WHEELS)) {
+        lv_kinetic_energy(prm[LV_PARAM_M], prm + LV_PARAM_I_B, x + LV_STATE_V_W, at_rest, &T);
+        LV_WHEELS_MOMENTUM(x + LV_STATE_Q, x + LV_STATE_OMEGA_B, Omega, row + LV_MODEL_I_P, row + LV_MODEL_A_B,
+                           row + LV_MODEL_J, L, L_wheels, h);
+        for (k = 0; k < 3; k++) L[k] += L_wheels[k];
+    } else {
+        lv_kinetic_energy(prm[LV_PARAM_M], prm + LV_PARAM_I_B, x + LV_STATE_V_W, x + LV_STATE_OMEGA_B, &T);
+        lv_body_momentum(prm + LV_PARAM_I_B, x + LV_STATE_OMEGA_B, L);
+    }
     return T <= g[LV_G_E] && L[0] * L[0] + L[1] * L[1] + L[2] * L[2] <= g[LV_G_L2];
 }
 
 /* 1 when every body's |omega| * scale <= bound and it passes growth_pass with its row of G (NaN fails): the
    per-chunk screen, shared by the Stepper and the module-level checks_pass. Exact where it passes: a body beyond
    its no-work rate has its invariants evaluated here, so a spinning body whose rate exceeds w_safe (any body with
-   I_max/I_min > max_growth) does not send every step to the Python path. */
+   I_max/I_min > max_growth) does not send every step to the Python path. rows, Omega: the model rows (nb,
+   LV_MODEL_SIZE) and wheel rates (nb, LV_NW), or NULL (no wheeled body). */
 static int screen_pass(const double *x, const double *params, long nb, const double *scale, double bound,
-                       const double *G)
+                       const double *G, const double *rows, const double *Omega)
 {
     long b;
     for (b = 0; b < nb; b++) {
         const double *xb = x + b * LV_STATE_SIZE;
         double w, wdt;
         lv_validity_wdt(xb + LV_STATE_OMEGA_B, scale[b], &w, &wdt); /* the printed validity measure, as Sim's */
-        if (!(wdt <= bound) || !growth_pass(xb, params + b * LV_PARAM_SIZE, G + b * LV_G_COLS, w)) return 0;
+        if (!(wdt <= bound)
+            || !growth_pass(xb, params + b * LV_PARAM_SIZE, G + b * LV_G_COLS, w,
+                            rows ? rows + b * LV_MODEL_SIZE : NULL, rows ? Omega + b * LV_NW : NULL))
+            return 0;
     }
     return 1;
 }
@@ -285,7 +303,8 @@ static int screen_pass(const double *x, const double *params, long nb, const dou
    converted to double (exact), the bound, the no-work rate and the E and |L|^2 limits shrunk by
    LV_SCREEN_F32_MARGIN. A body at or below the shrunk no-work rate is inside its limits by more than the margin
    (E <= T_v + I_max |omega|^2 / 2 and |L| <= I_max |omega|, the rate's definition in Sim._safe_rates), whatever
-   the NumPy check's float32 roundings. Passes only what the NumPy check passes. */
+   the NumPy check's float32 roundings. Passes only what the NumPy check passes. Plain bodies (float32 steps no
+   models). */
 static int screen_pass_f32(const float *x, const double *params, long nb, const double *scale, double bound,
                            const double *G)
 {
@@ -300,7 +319,7 @@ static int screen_pass_f32(const float *x, const double *params, long nb, const 
         gb[LV_G_W] = g[LV_G_W] * keep; /* a NaN w fails the bound test below */
         gb[LV_G_E] = g[LV_G_E] * keep;
         gb[LV_G_L2] = g[LV_G_L2] * keep;
-        if (!(wdt <= bound * keep) || !growth_pass(xb, params + b * LV_PARAM_SIZE, gb, w)) return 0;
+        if (!(wdt <= bound * keep) || !growth_pass(xb, params + b * LV_PARAM_SIZE, gb, w, NULL, NULL)) return 0;
     }
     return 1;
 }
@@ -308,7 +327,8 @@ static int screen_pass_f32(const float *x, const double *params, long nb, const 
 static int checks_pass(const Stepper *s)
 {
     return screen_pass((const double *)s->buf[FS_STATE].buf, (const double *)s->buf[FS_PARAMS].buf, s->nb,
-                       (const double *)s->buf[FS_WDT].buf, s->bound, (const double *)s->buf[FS_GROWTH].buf);
+                       (const double *)s->buf[FS_WDT].buf, s->bound, (const double *)s->buf[FS_GROWTH].buf,
+                       s->has_models ? s->models.rows : NULL, s->has_models ? s->models.Omega : NULL);
 }
 
 static int fast_step(Stepper *s, long n)
@@ -453,21 +473,24 @@ static PyTypeObject StepperType = {
     .tp_getset = stepper_getset,
 };
 
-/* checks_pass(x, params, wdt_scale, bound, growth) -> bool (x float64, or float32: screen_pass_f32): every body's
-   |omega| * wdt_scale <= bound and inside its
-   growth limits (screen_pass; growth (nb, 3) as LV_G_*), the Sim's screen of its per-chunk checks in one pass
-   without temporaries; False means "look closer" (the Sim's NumPy check decides and names the cause). */
+/* checks_pass(x, params, wdt_scale, bound, growth[, rows, Omega]) -> bool (x float64, or float32: screen_pass_f32):
+   every body's |omega| * wdt_scale <= bound and inside its growth limits (screen_pass; growth (nb, 3) as LV_G_*; rows
+   (nb, LV_MODEL_SIZE) and Omega (nb, LV_NW), float64, give the wheeled bodies their total |L|; float32 states are of
+   plain bodies), the Sim's screen of its per-chunk checks in one pass without temporaries; False means "look closer"
+   (the Sim's NumPy check decides and names the cause). */
 static PyObject *py_checks_pass(PyObject *self, PyObject *args)
 {
-    PyObject *obj[4];
-    Py_buffer buf[4];
-    const Py_ssize_t width[4] = {LV_STATE_SIZE, LV_PARAM_SIZE, 1, LV_G_COLS};
+    PyObject *obj[6] = {NULL, NULL, NULL, NULL, Py_None, Py_None};
+    Py_buffer buf[6];
+    const Py_ssize_t width[6] = {LV_STATE_SIZE, LV_PARAM_SIZE, 1, LV_G_COLS, LV_MODEL_SIZE, LV_NW};
     double bound;
     Py_ssize_t nb;
-    int ok = 1, i, got = 0;
+    int ok = 1, i, got = 0, n;
     (void)self;
-    if (!PyArg_ParseTuple(args, "OOOdO:checks_pass", &obj[0], &obj[1], &obj[2], &bound, &obj[3])) return NULL;
-    for (got = 0; got < 4; got++)
+    if (!PyArg_ParseTuple(args, "OOOdO|OO:checks_pass", &obj[0], &obj[1], &obj[2], &bound, &obj[3], &obj[4], &obj[5]))
+        return NULL;
+    n = obj[4] == Py_None ? 4 : 6;
+    for (got = 0; got < n; got++)
         if (PyObject_GetBuffer(obj[got], &buf[got], PyBUF_C_CONTIGUOUS | PyBUF_FORMAT) != 0) { ok = -2; break; }
     if (ok == 1) {
         const char *f = buf[0].format ? buf[0].format : "B";
@@ -475,18 +498,20 @@ static PyObject *py_checks_pass(PyObject *self, PyObject *args)
         nb = buf[0].len / buf[0].itemsize / LV_STATE_SIZE;
         if (!f32 && (buf[0].itemsize != 8 || (strcmp(f, "d") != 0 && strcmp(f, "<d") != 0 && strcmp(f, "=d") != 0)))
             ok = -1;
-        if (buf[0].len != nb * LV_STATE_SIZE * buf[0].itemsize) ok = -1;
-        for (i = 1; i < 4; i++)
+        if (buf[0].len != nb * LV_STATE_SIZE * buf[0].itemsize || (f32 && n == 6)) ok = -1;
+        for (i = 1; i < n; i++)
             if (buf[i].itemsize != 8 || buf[i].len != nb * width[i] * 8) ok = -1;
         if (ok < 0) {
             PyErr_SetString(PyExc_ValueError, "checks_pass: x (nb, 13) float64 or float32, params (nb, PARAM_SIZE), "
-                                              "wdt_scale (nb,), growth (nb, 3) float64");
+                                              "wdt_scale (nb,), growth (nb, 3) float64[, rows (nb, MODEL_SIZE), "
+                                              "Omega (nb, WHEELS_MAX) float64 with a float64 x]");
         } else {
             Py_BEGIN_ALLOW_THREADS
             ok = f32 ? screen_pass_f32((const float *)buf[0].buf, (const double *)buf[1].buf, (long)nb,
                                        (const double *)buf[2].buf, bound, (const double *)buf[3].buf)
                      : screen_pass((const double *)buf[0].buf, (const double *)buf[1].buf, (long)nb,
-                                   (const double *)buf[2].buf, bound, (const double *)buf[3].buf);
+                                   (const double *)buf[2].buf, bound, (const double *)buf[3].buf,
+                                   n == 6 ? (const double *)buf[4].buf : NULL, n == 6 ? (const double *)buf[5].buf : NULL);
             Py_END_ALLOW_THREADS
         }
     }
@@ -497,7 +522,8 @@ static PyObject *py_checks_pass(PyObject *self, PyObject *args)
 
 static PyMethodDef fast_functions[] = {
     {"checks_pass", py_checks_pass, METH_VARARGS,
-     "checks_pass(x, params, wdt_scale, bound, growth) -> bool: all |omega|*wdt_scale <= bound and inside the growth limits."},
+     "checks_pass(x, params, wdt_scale, bound, growth[, rows, Omega]) -> bool: all |omega|*wdt_scale <= bound and inside "
+     "the growth limits (rows, Omega: the wheeled bodies' total |L|)."},
     {NULL, NULL, 0, NULL}};
 
 int lv_add_stepper_type(PyObject *m)
