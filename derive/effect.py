@@ -51,6 +51,10 @@ FLAG_FORCE = 4        # adds a force (a body whose effects add none may use the 
 FLAG_USES_STATE = 8   # reads a state value p_w, q, v_w or omega_b (without it the force and torque are constant
                       # over a step, the mass and inertia being constants: the SIMD batch evaluates them once per
                       # call, csrc/batch_simd.h)
+FLAG_TORQUE_W = 16    # declares a torque in the world frame (torque_w)
+FLAG_TORQUE_B = 32    # declares its torque in the body frame only (torque_b, no torque_w): a plain body whose torques
+                      # are all body-frame adds them as such (the body dispatch, *_b) and its right-hand side rotates
+                      # nothing (rigid_body_rhs_body_c); elsewhere the effect adds R_WB tau_b as a world torque
 # Version of the calling convention of printed effect functions (checked when a user library loads).
 ABI_VERSION = 1
 # Lanes per row of the C SIMD tiles (csrc/batch_simd.h): the row stride of the tile form of an effect, which
@@ -156,8 +160,8 @@ class Param:
 
 
 # Output names of effect kernels, and names the printed dispatch code uses.
-OUT_FORCE, OUT_TORQUE = "F_com_w", "tau_com_w"
-_RESERVED = {"x", "p", "F", "tau", OUT_FORCE, OUT_TORQUE, "code", "body", "numpy", "casadi", "batch"}
+OUT_FORCE, OUT_TORQUE, OUT_TORQUE_B = "F_com_w", "tau_com_w", "tau_com_b"
+_RESERVED = {"x", "p", "F", "tau", OUT_FORCE, OUT_TORQUE, OUT_TORQUE_B, "code", "body", "numpy", "casadi", "batch"}
 
 
 def param(name: str, shape=(), unit: str = "", doc: str = "", rule: str = "finite", default=None, upto: bool = False) -> Param:
@@ -184,7 +188,8 @@ def param(name: str, shape=(), unit: str = "", doc: str = "", rule: str = "finit
 
 @dataclass
 class EffectDecl:
-    """One effect: its force (world, at the COM) and torque (world, about the COM) in SymPy."""
+    """One effect: its force (world, at the COM) and torque about the COM in SymPy, declared in the world frame
+    (torque_w) or in the body frame (torque_b; built-in effects only)."""
 
     name: str
     summary: str
@@ -194,6 +199,7 @@ class EffectDecl:
     kind: str = "force"
     caption: str = ""
     notes: list[str] = field(default_factory=list)
+    torque_b: sp.Matrix | None = None
 
     def __post_init__(self):
         if not _NAME.match(self.name) or keyword.iskeyword(self.name):
@@ -203,7 +209,7 @@ class EffectDecl:
         names = [p.name for p in self.params]
         if len(set(names)) != len(names):
             raise ValueError(f"effect {self.name}: duplicate parameter names {names}")
-        for label in ("force_w", "torque_w"):
+        for label in ("force_w", "torque_w", "torque_b"):
             v = getattr(self, label)
             if v is None:
                 continue
@@ -212,8 +218,8 @@ class EffectDecl:
                 raise ValueError(f"effect {self.name}: {label} must be a 3-vector (column), got shape {v.shape}")
             setattr(self, label, v)
         if self.kind == "force":
-            if self.force_w is None and self.torque_w is None:
-                raise ValueError(f"effect {self.name}: declare force_w and/or torque_w")
+            if self.force_w is None and self.torque_w is None and self.torque_b is None:
+                raise ValueError(f"effect {self.name}: declare force_w and/or torque_w (or torque_b)")
             allowed = {s for f in _State.FIELDS for s in STATE.symbols(f)} | {s for p in self.params for s in _flat(p.symbol)}
             unknown = self.free_symbols - allowed
             if unknown:
@@ -223,13 +229,30 @@ class EffectDecl:
             if odd:
                 raise ValueError(f"effect {self.name}: a force effect's parameters have a fixed shape () or (n,) "
                                  f"(its row layout is printed), not {odd[0]!r}")
-        elif self.force_w is not None or self.torque_w is not None:
+        elif self.force_w is not None or self.torque_w is not None or self.torque_b is not None:
             raise ValueError(f"effect {self.name}: a model effect declares parameters only")
 
     @property
+    def torque_world(self) -> sp.Matrix | None:
+        """The torque in the world frame: torque_w, plus R_WB torque_b when a body-frame torque is declared."""
+        if self.torque_b is None:
+            return self.torque_w
+        rotated = STATE.R_WB * self.torque_b
+        return rotated if self.torque_w is None else self.torque_w + rotated
+
+    @property
     def outputs(self) -> list[tuple[str, sp.Matrix]]:
-        """(kernel output name, expression) of the declared outputs, the force first."""
-        return [(n, v) for n, v in ((OUT_FORCE, self.force_w), (OUT_TORQUE, self.torque_w)) if v is not None]
+        """(kernel output name, expression) of the world-frame outputs (every backend's effect contract), the
+        force first."""
+        return [(n, v) for n, v in ((OUT_FORCE, self.force_w), (OUT_TORQUE, self.torque_world)) if v is not None]
+
+    @property
+    def body_outputs(self) -> list[tuple[str, sp.Matrix]] | None:
+        """The outputs of the body-frame form (FLAG_TORQUE_B: the force, world, then the torque, body frame), or
+        None when the effect has no such form."""
+        if self.torque_b is None or self.torque_w is not None:
+            return None
+        return [(n, v) for n, v in ((OUT_FORCE, self.force_w), (OUT_TORQUE_B, self.torque_b)) if v is not None]
 
     @property
     def free_symbols(self) -> set:
@@ -249,7 +272,9 @@ class EffectDecl:
         used = self.state_inputs
         varying = any(f.name in used for f in LAYOUT_STATE.fields)   # m and I_b (params) are constants
         return ((FLAG_USES_V if "v_w" in used else 0) | (FLAG_USES_OMEGA if "omega_b" in used else 0)
-                | (FLAG_FORCE if self.force_w is not None else 0) | (FLAG_USES_STATE if varying else 0))
+                | (FLAG_FORCE if self.force_w is not None else 0) | (FLAG_USES_STATE if varying else 0)
+                | (FLAG_TORQUE_W if self.torque_w is not None else 0)
+                | (FLAG_TORQUE_B if self.body_outputs is not None else 0))
 
     @property
     def n_params(self) -> int:
@@ -277,13 +302,28 @@ class EffectDecl:
                 for n, v in self.outputs]
         return Kernel(self.kernel_name, self.summary, self.caption, ins, outs, group, list(self.notes))
 
+    def body_kernel(self, group: str = "Scene effects") -> Kernel | None:
+        """The body-frame form (FLAG_TORQUE_B) as kernel effect_<name>_b: the force (world) and the torque as
+        declared, in the body frame; None without one."""
+        outputs = self.body_outputs
+        if self.kind != "force" or outputs is None:
+            return None
+        free = set().union(*(v.free_symbols for _, v in outputs))
+        ins = [Arg(f, STATE.value(f), *_State.DOCS[f]) for f in _State.FIELDS if free & set(STATE.symbols(f))]
+        ins += [Arg(p.name, p.symbol, f"{p.doc}, {p.unit}" if p.unit else p.doc, p.domain) for p in self.params]
+        outs = [Arg(n, v, "force at the COM, world frame, N" if n == OUT_FORCE else "torque about the COM, body frame, N·m")
+                for n, v in outputs]
+        return Kernel(self.kernel_name + "_b", self.summary + " (its body-frame form)", self.caption, ins, outs, group,
+                      ["The torque as declared, in the body frame: plain bodies whose torques are all body-frame add "
+                       "it so and rotate nothing; effect_" + self.name + " gives it in the world frame."])
+
 
 def _flat(v) -> list:
     return list(v) if isinstance(v, sp.MatrixBase) else [v]
 
 
 def effect(name: str, summary: str, params=(), force_w=None, torque_w=None, caption: str = "",
-           notes=()) -> EffectDecl:
+           notes=(), torque_b=None) -> EffectDecl:
     """Declare a force effect (see the module docstring).
 
     Parameters
@@ -295,13 +335,16 @@ def effect(name: str, summary: str, params=(), force_w=None, torque_w=None, capt
     params : sequence of Param
         The effect's parameters, in row order.
     force_w, torque_w : sympy.Matrix (3×1), optional
-        Force at the COM and torque about it, world frame (N, N·m). At least one.
+        Force at the COM and torque about it, world frame (N, N·m). At least one (or torque_b).
     caption : str, optional
         A human LaTeX caption shown beside the printed equation.
     notes : sequence of str
         Extra lines for EQUATIONS.md.
+    torque_b : sympy.Matrix (3×1), optional
+        Built-in effects: the torque about the COM in the body frame (N·m), instead of torque_w. Its world form
+        R_WB torque_b is printed too.
     """
-    return EffectDecl(name, summary, list(params), force_w, torque_w, "force", caption, list(notes))
+    return EffectDecl(name, summary, list(params), force_w, torque_w, "force", caption, list(notes), torque_b)
 
 
 def model_effect(name: str, summary: str, params=(), notes=()) -> EffectDecl:

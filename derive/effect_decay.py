@@ -1,7 +1,7 @@
 """Which effects are pure linear decays, and at what rate: the stiffness a Sim checks against its integrator.
 
 An effect is a *decay* when its accelerations — ``F_w / m`` on the COM velocity (world frame) and
-``I⁻¹ R_WBᵀ tau_w`` on ``omega_b`` (body frame) — are ``-D (v_w, omega_b)`` with ``D`` diagonal,
+``I⁻¹ (R_WBᵀ tau_w + tau_b)`` on ``omega_b`` (body frame) — are ``-D (v_w, omega_b)`` with ``D`` diagonal,
 non-negative, constant in the state (every ``p_w``, ``q``, ``v_w``, ``omega_b``) and zero at rest. Such a load only
 takes momentum out (``F·p = -m Σ d_i v_i² ≤ 0``; ``tau·L = -ω·D I ω ≤ 0`` with ``D`` and ``I`` diagonal), and
 an explicit step of it is stable while ``max(D)·dt`` stays below its integrator's limit on the negative real
@@ -27,10 +27,12 @@ REL_TOL = 1e-9         # relative agreement of the sampled Jacobians
 
 
 def _accelerations(d: EffectDecl) -> sp.Matrix:
-    """(F_w / m, I⁻¹ R_WBᵀ tau_w): 6 rows, in the effect's parameters and the state."""
+    """(F_w / m, I⁻¹ (R_WBᵀ tau_w + tau_b)): 6 rows, in the effect's parameters and the state."""
     zero = sp.zeros(3, 1)
     F = d.force_w if d.force_w is not None else zero
     tau_b = STATE.R_WB.T * (d.torque_w if d.torque_w is not None else zero)
+    if d.torque_b is not None:           # a body-frame torque (FLAG_TORQUE_B) as declared, not rotated there and back
+        tau_b = tau_b + d.torque_b
     return sp.Matrix([F[i] / STATE.m for i in range(3)] + [tau_b[i] / STATE.I_b[i] for i in range(3)])
 
 

@@ -43,22 +43,27 @@ def _c_arg(decl: E.EffectDecl, a) -> str:
     return f"p[{o}]" if a.shape == () else f"p + {o}"
 
 
-def c_effect_functions(decl: E.EffectDecl, prefix: str, fn_name: str, storage: str, real: str = "double") -> list[str]:
-    """The accumulating C function of one effect (calls its kernel, adds its outputs), in precision `real`."""
-    k = decl.kernel()
+def c_effect_functions(decl: E.EffectDecl, prefix: str, fn_name: str, storage: str, real: str = "double",
+                       body: bool = False) -> list[str]:
+    """The accumulating C function of one effect (calls its kernel, adds its outputs), in precision `real`; body:
+    its body-frame form (effect_<name>_b: the torque is added to tau in the body frame)."""
+    k = decl.body_kernel() if body else decl.kernel()
+    outputs = decl.body_outputs if body else decl.outputs
+    assert k is not None and outputs is not None     # body: only for effects with a body-frame form
     used = {a.name for a in k.inputs}
-    lines = [f"/* {decl.name}: adds {' and '.join(n for n, _ in decl.outputs)} for one body. "
+    lines = [f"/* {decl.name}: adds {' and '.join(n for n, _ in outputs)} for one body. "
              f"p = [{', '.join(f'{p.name}({p.size})' for p in decl.params)}] */",
              f"{storage}void {fn_name}({c_args(real)})", "{"]
-    lines += [f"    {real} {n}[3];" for n, _ in decl.outputs]
+    lines += [f"    {real} {n}[3];" for n, _ in outputs]
     unused = [n for n in ("p", "x", "v_w", "m", "I_b") if n not in used and not (n == "x" and used & {"p_w", "q", "omega_b"})
               and not (n == "p" and decl.params)]
-    unused += [n for n, out in (("F", E.OUT_FORCE), ("tau", E.OUT_TORQUE)) if out not in dict(decl.outputs)]
+    unused += [n for n, outs in (("F", (E.OUT_FORCE,)), ("tau", (E.OUT_TORQUE, E.OUT_TORQUE_B)))
+               if not set(outs) & set(dict(outputs))]
     if unused:
         lines.append("    " + " ".join(f"(void){n};" for n in unused))
-    args = [_c_arg(decl, a) for a in k.inputs] + [n for n, _ in decl.outputs]
+    args = [_c_arg(decl, a) for a in k.inputs] + [n for n, _ in outputs]
     lines.append(f"    {prefix}{k.name}({', '.join(args)});")
-    for n, _ in decl.outputs:
+    for n, _ in outputs:
         acc = "F" if n == E.OUT_FORCE else "tau"
         lines.append("    " + " ".join(f"{acc}[{i}] += {n}[{i}];" for i in range(3)))
     lines.append("}")
@@ -77,7 +82,9 @@ def c_header(effects: list[tuple[int, E.EffectDecl]]) -> list[str]:
          f"#define LV_EFFECT_USES_V {E.FLAG_USES_V}       /* flag: the effect reads v_w */",
          f"#define LV_EFFECT_USES_OMEGA {E.FLAG_USES_OMEGA}   /* flag: the effect reads omega_b */",
          f"#define LV_EFFECT_FORCE {E.FLAG_FORCE}        /* flag: the effect adds a force */",
-         f"#define LV_EFFECT_USES_STATE {E.FLAG_USES_STATE}   /* flag: the effect reads a state value (else constant) */"]
+         f"#define LV_EFFECT_USES_STATE {E.FLAG_USES_STATE}   /* flag: the effect reads a state value (else constant) */",
+         f"#define LV_EFFECT_TORQUE_W {E.FLAG_TORQUE_W}    /* flag: the effect declares a world-frame torque */",
+         f"#define LV_EFFECT_TORQUE_B {E.FLAG_TORQUE_B}    /* flag: its torque is declared in the body frame only (lv_effect_apply_b) */"]
     for code, d in effects:
         h.append(f"#define LV_EFFECT_{d.name.upper()} {code} /* p = [{', '.join(f'{p.name}({p.size})' for p in d.params)}] */")
     h += ["/* Every built-in effect code above, for a dispatch a stepping loop writes once: X(code) each. */",
@@ -97,7 +104,9 @@ def c_header(effects: list[tuple[int, E.EffectDecl]]) -> list[str]:
           "/* The dispatch, static inline int lv_effect_apply(int code, <the arguments above>), is defined in",
           "   kernels.c (compile kernels.c into the translation unit that steps, so it inlines): it adds built-in",
           "   effect `code`'s force and torque and returns 0, or returns -1 for a code that is not a built-in",
-          "   effect (then nothing is added: the caller reports it). */",
+          "   effect (then nothing is added: the caller reports it). lv_effect_apply_b (the same arguments) is the",
+          "   dispatch of a plain body whose torques are all declared in the body frame (LV_EFFECT_TORQUE_B, no",
+          "   LV_EFFECT_TORQUE_W): it adds such an effect's torque to tau in the body frame, else as lv_effect_apply. */",
           "/* Built-in effect `code`: its number of parameters, its LV_EFFECT_USES_* flags, its name; -1 (NULL)",
           "   for a code that is not a built-in effect. */",
           "int lv_effect_n_params(int code);", "int lv_effect_flags(int code);", "const char *lv_effect_name(int code);", ""]
@@ -121,6 +130,16 @@ def c_source(effects: list[tuple[int, E.EffectDecl]], prefix: str) -> list[str]:
           f"static inline int lv_effect_apply(int code, {C_ARGS})", "{", "    switch (code) {"]
     for _, d in effects:
         c.append(f"    case LV_EFFECT_{d.name.upper()}: lv_effect_acc_{d.name}(p, x, v_w, m, I_b, F, tau); return 0;")
+    c += ["    default: return -1; /* not a built-in effect: the caller reports it */", "    }", "}", ""]
+    body = [d for _, d in effects if d.body_outputs is not None]
+    for d in body:
+        c += c_effect_functions(d, prefix, f"lv_effect_acc_b_{d.name}", "static inline ", body=True) + [""]
+    c += ["/* lv_effect_apply for a plain body whose torques are all body-frame (LV_EFFECT_TORQUE_B): such an effect's",
+          "   torque added to tau in the body frame; 0, or -1 for a code that is not a built-in effect. */",
+          f"static inline int lv_effect_apply_b(int code, {C_ARGS})", "{", "    switch (code) {"]
+    for _, d in effects:
+        acc = f"lv_effect_acc_b_{d.name}" if d in body else f"lv_effect_acc_{d.name}"
+        c.append(f"    case LV_EFFECT_{d.name.upper()}: {acc}(p, x, v_w, m, I_b, F, tau); return 0;")
     c += ["    default: return -1; /* not a built-in effect: the caller reports it */", "    }", "}", ""]
     c += _switch("int lv_effect_n_params(int code)", effects, lambda d: str(d.n_params), "-1")
     c += _switch("int lv_effect_flags(int code)", effects, lambda d: str(d.flags), "-1")
@@ -223,6 +242,18 @@ _NP_OUT_DOC = ["    out : (ndarray, ndarray), optional",
                "        Arrays (n, 3) the force and the torque are written into (the one it has), as the kernel's out=."]
 
 
+def _np_apply_doc(d: E.EffectDecl, title: str, body: bool = False) -> list[str]:
+    """The numpydoc docstring of an effect's apply function (body: its body-frame form, tau_b second)."""
+    params_end = _NP_APPLY_DOC.index("    Returns") - 1    # out is the last parameter, before Returns
+    ret = _NP_APPLY_DOC[params_end:]
+    if body:
+        ret = ret[:-2] + ["    tau_b : ndarray, shape (n, 3) or None",
+                          "        Torque about the COM, body frame, N·m (None: the effect has none)."]
+    return [f'    """{title}', "", "    Parameters", "    ----------", "    p : array_like, shape (n, n_params)",
+            f'        The effect\'s parameters per row: [{", ".join(f"{p.name}({p.size})" for p in d.params)}].',
+            *_NP_APPLY_DOC[:params_end], *_NP_OUT_DOC, *ret, '    """']
+
+
 def numpy_dispatch(effects: list[tuple[int | None, E.EffectDecl]]) -> list[str]:
     """NumPy: one accumulating function per effect, EFFECT_APPLY by name, and (built-ins) dispatch by code."""
     out = ["# ---- Scene effects: apply(p, x, v_w, m, I_b) -> (F_com_w or None, tau_com_w or None), rows",
@@ -232,11 +263,7 @@ def numpy_dispatch(effects: list[tuple[int | None, E.EffectDecl]]) -> list[str]:
         k = d.kernel()
         outs = dict(d.outputs)
         out.append(f"def effect_apply_{d.name}(p, x, v_w, m, I_b, *, out=None):")
-        out.append(f'    """{d.name}: {d.summary}.')
-        out += ["", "    Parameters", "    ----------", "    p : array_like, shape (n, n_params)",
-                f'        The effect\'s parameters per row: [{", ".join(f"{p.name}({p.size})" for p in d.params)}].']
-        params_end = _NP_APPLY_DOC.index("    Returns") - 1    # out is the last parameter, before Returns
-        out += _NP_APPLY_DOC[:params_end] + _NP_OUT_DOC + _NP_APPLY_DOC[params_end:] + ['    """']
+        out += _np_apply_doc(d, f"{d.name}: {d.summary}.")
         # out (F_w, tau_w): the buffers its outputs are written into (the kernel's out=), e.g. struct-of-arrays
         sel = "out" if len(outs) == 2 else "out and out[:1]" if E.OUT_FORCE in outs else "out and out[1:]"
         call = f"{k.name}({', '.join(_np_arg(d, a) for a in k.inputs)}, out={sel})"
@@ -250,6 +277,23 @@ def numpy_dispatch(effects: list[tuple[int | None, E.EffectDecl]]) -> list[str]:
     out.append("# effect name -> its apply function")
     out.append("EFFECT_APPLY = {")
     out += [f"    {d.name!r}: effect_apply_{d.name}," for _, d in effects]
+    out.append("}")
+    body = [d for _, d in effects if d.body_outputs is not None]
+    if body:
+        out += ["", ""]
+        for d in body:
+            kb, bo = d.body_kernel(), d.body_outputs
+            assert kb is not None and bo is not None
+            outs = dict(bo)
+            sel = "out" if len(outs) == 2 else "out and out[1:]"
+            call = f"{kb.name}({', '.join(_np_arg(d, a) for a in kb.inputs)}, out={sel})"
+            out += [f"def effect_apply_b_{d.name}(p, x, v_w, m, I_b, *, out=None):",
+                    *_np_apply_doc(d, f"{d.name}, its body-frame form: as effect_apply_{d.name}, the torque in the body "
+                                   "frame\n    (a plain body whose torques are all body-frame, FLAG_TORQUE_B).", body=True),
+                    f"    return {call}" if len(outs) == 2 else f"    return None, {call}", "", ""]
+    out.append("# effect name -> its body-frame form (FLAG_TORQUE_B), for plain bodies whose torques are all body-frame")
+    out.append("EFFECT_APPLY_B = {")
+    out += [f"    {d.name!r}: effect_apply_b_{d.name}," for d in body]
     out.append("}")
     coded = [(c, d) for c, d in effects if c is not None]
     if coded:
@@ -295,6 +339,7 @@ def meta_module(effects: Sequence[tuple[int | None, E.EffectDecl]], header: str,
              f"ABI_VERSION = {E.ABI_VERSION}",
              f"FLAG_USES_V, FLAG_USES_OMEGA, FLAG_FORCE = {E.FLAG_USES_V}, {E.FLAG_USES_OMEGA}, {E.FLAG_FORCE}",
              f"FLAG_USES_STATE = {E.FLAG_USES_STATE}",
+             f"FLAG_TORQUE_W, FLAG_TORQUE_B = {E.FLAG_TORQUE_W}, {E.FLAG_TORQUE_B}",
              f"TILE_LANES, TILE_ISAS = {E.TILE_LANES}, {TILE_ISAS!r}  # a user effect's tile forms: "
              "lvu_effect_tile<TILE_LANES>_<name>_<isa>"]
     for k, v in (extra or {}).items():

@@ -37,8 +37,8 @@ def declarations() -> list[EffectDecl]:
         effect("gravity", "Uniform gravity acting at the COM", [g_w], force_w=S.m * g_w.symbol, caption=r"F_W = m\,g_W"),
         effect("linear_damping", "Viscous drag on the COM velocity", [c_lin], force_w=-c_lin.symbol * S.v_w,
                caption=r"F_W = -c\,v_W"),
-        effect("angular_damping", "Viscous drag on the angular velocity", [c_ang], torque_w=-c_ang.symbol * S.omega_w,
-               caption=r"\tau_W = -c\,R_{WB}\,\omega_B = -c\,\omega_W"),
+        effect("angular_damping", "Viscous drag on the angular velocity", [c_ang], torque_b=-c_ang.symbol * S.omega_b,
+               caption=r"\tau_B = -c\,\omega_B,\quad \tau_W = R_{WB}\,\tau_B = -c\,\omega_W"),
         model_effect("spherical_joint", "World-anchored ball joint: the body point at anchor_w when the Sim starts stays there",
                      [param("anchor_w", 3, "m", "joint anchor, world frame")]),
         model_effect("reaction_wheels", "Reaction wheels on body-fixed spin axes (default three, on body x, y, z); the body's "
@@ -71,4 +71,5 @@ def kernels() -> list[Kernel]:
                [Arg(*QU), Arg("r_b", r_b, "application point relative to the COM, body frame, m"), Arg("F_w", F_w, "force, world frame, N")],
                [Arg("tau_w", torque_at_point(q, r_b, F_w), "torque about the COM, world frame, N·m")], g),
     ]
-    return plain + [d.kernel() for d in declarations() if d.kind == "force"]
+    forces = [d for d in declarations() if d.kind == "force"]
+    return plain + [d.kernel() for d in forces] + [k for k in (d.body_kernel() for d in forces) if k is not None]

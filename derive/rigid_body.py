@@ -75,6 +75,9 @@ def kernels() -> list[Kernel]:
     full = X.assemble(p_w=xv, q=qdot, v_w=F_w / m, omega_b=euler_rhs_c(c_b, xw, rotate_to_body(xq, tau_w)))
     free = X.assemble(p_w=xv, q=qdot, v_w=sp.zeros(3, 1), omega_b=euler_rhs_c(c_b, xw, sp.zeros(3, 1)))
     torque = full.subs({F_w[i]: 0 for i in range(3)})
+    a_w = vec("a_w", 3)
+    force_only = X.assemble(p_w=xv, q=qdot, v_w=a_w, omega_b=euler_rhs_c(c_b, xw, sp.zeros(3, 1)))
+    body = X.assemble(p_w=xv, q=qdot, v_w=a_w, omega_b=euler_rhs_c(c_b, xw, tau_b))
     Rq = rotation_matrix(q)
     inv_apply = Rq * sp.diag(*[1 / I_b[i] for i in range(3)]) * Rq.T * vec_w
     ke = (m * v_w.dot(v_w) + sum(I_b[i] * omega_b[i] ** 2 for i in range(3))) / 2
@@ -145,4 +148,22 @@ def kernels() -> list[Kernel]:
                          "(Sim(..., contract=\"fma\"), csrc/batch_simd.h) stage these two with the step QUAT_RATE_SCALE·dt "
                          "for q (the ½ of q̇ folded into it) and move p_W by one Euler step with v_W.",
                          "Not bitwise rigid_body_rhs_free_c's q rate times QUAT_RATE_SCALE (there ½ multiplies ω first)."]),
+        Kernel("linear_acceleration", "Acceleration of the COM under a world force", r"a_W = F_W / m",
+               [Arg("m", m, "mass, kg", "positive"), Arg("F_w", F_w, "total force at the COM, world frame, N")],
+               [Arg("a_w", F_w / m, "COM acceleration, world frame, m/s²")], g,
+               notes=["Bitwise the v rate F_W/m of rigid_body_rhs: a step loop whose force is constant over a call "
+                      "divides once per call."]),
+        Kernel("rigid_body_rhs_force_c", "State derivative under a force only (no torque), on c_b and the COM acceleration",
+               r"\dot v_W = a_W,\ \dot\omega_x = k_x\omega_y\omega_z\ \text{(cyclic), else as rigid\_body\_rhs}",
+               [Arg(*XS), Arg(*CB), Arg("a_w", a_w, "COM acceleration F_W/m (linear_acceleration), world frame, m/s²")],
+               [Arg("x_dot", force_only, "d/dt of the state")], g,
+               notes=["For bodies whose effects declare no torque (gravity, linear damping): nothing rotated, no "
+                      "division (a_w is divided once per call when the force is constant)."]),
+        Kernel("rigid_body_rhs_body_c", "State derivative under a body-frame torque and a force, on c_b and the COM acceleration",
+               r"\dot v_W = a_W,\ \dot\omega_x = k_x\omega_y\omega_z + r_x \tau_{B,x}\ \text{(cyclic), else as rigid\_body\_rhs}",
+               [Arg(*XS), Arg(*CB), Arg("a_w", a_w, "COM acceleration F_W/m (linear_acceleration; 0 without a force), world frame, m/s²"),
+                Arg("tau_b", tau_b, "total torque about the COM, body frame, N·m")],
+               [Arg("x_dot", body, "d/dt of the state")], g,
+               notes=["For bodies whose torques are all declared in the body frame (angular_damping: tau_B = -c omega_B): "
+                      "nothing rotated."]),
     ]

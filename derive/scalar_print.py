@@ -70,6 +70,15 @@ def scalar_dispatch(effects: list) -> list[str]:
                 f"    return {ret}", "", ""]
     out += ["EFFECT_APPLY = {", *[f"    {d.name!r}: effect_apply_{d.name}," for _, d in effects], "}",
             "EFFECT_APPLY_BY_CODE = {", *[f"    {c}: effect_apply_{d.name}," for c, d in effects if c is not None], "}"]
+    body = [(c, d) for c, d in effects if d.body_outputs is not None]
+    for _, d in body:
+        k = d.body_kernel()
+        call = f"{k.name}({', '.join(_arg(d, a) for a in k.inputs)})"
+        ret = call if len(d.body_outputs) == 2 else f"None, {call}"
+        out += ["", "", f"def effect_apply_b_{d.name}(p, x, v_w, m, I_b):",
+                f'    """{d.name}, its body-frame form (the torque in the body frame)."""', f"    return {ret}"]
+    out += ["", "", "# built-in effect code -> its body-frame form (FLAG_TORQUE_B)", "EFFECT_APPLY_B_BY_CODE = {",
+            *[f"    {c}: effect_apply_b_{d.name}," for c, d in body if c is not None], "}"]
     return out
 
 

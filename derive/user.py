@@ -116,6 +116,9 @@ def load_declarations(path) -> tuple[list[EffectDecl], list[Kernel], list["Table
         if e.kind != "force":
             raise DeclarationError(f"{path}: EFFECTS[{effects.index(e)}] ({e.name!r}) is a model effect; a user set "
                                    "declares force effects made with effect()")
+        if e.torque_b is not None:
+            raise DeclarationError(f"{path}: EFFECTS[{effects.index(e)}] ({e.name!r}) declares torque_b; a user effect "
+                                   "declares its torque in the world frame: torque_w=STATE.R_WB * tau_b")
     names = [e.kernel_name for e in effects] + [k.name for k in kernels]
     dup = sorted({n for n in names if names.count(n) > 1})
     dup = dup or sorted({t.name for t in tableaux if [u.name for u in tableaux].count(t.name) > 1})

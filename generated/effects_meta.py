@@ -10,6 +10,7 @@ USER_CODE_BASE = 1000
 ABI_VERSION = 1
 FLAG_USES_V, FLAG_USES_OMEGA, FLAG_FORCE = 1, 2, 4
 FLAG_USES_STATE = 8
+FLAG_TORQUE_W, FLAG_TORQUE_B = 16, 32
 TILE_LANES, TILE_ISAS = 64, ('base', 'avx2', 'avx512')  # a user effect's tile forms: lvu_effect_tile<TILE_LANES>_<name>_<isa>
 
 EFFECTS = (
@@ -29,7 +30,7 @@ EFFECTS = (
      'n_params': 3,
      'outputs': ('tau_w',),
      'state_inputs': (),
-     'flags': 0,
+     'flags': 16,
      'kernel': 'effect_applied_torque',
      'decay_rate': None},
     {'name': 'force_at_point',
@@ -57,7 +58,7 @@ EFFECTS = (
      'n_params': 6,
      'outputs': ('F_w', 'tau_w'),
      'state_inputs': ('q',),
-     'flags': 12,
+     'flags': 28,
      'kernel': 'effect_force_at_point',
      'decay_rate': None},
     {'name': 'gravity',
@@ -114,7 +115,7 @@ EFFECTS = (
      'n_params': 1,
      'outputs': ('tau_w',),
      'state_inputs': ('q', 'omega_b'),
-     'flags': 10,
+     'flags': 42,
      'kernel': 'effect_angular_damping',
      'decay_rate': 'decay_rate_angular_damping'},
     {'name': 'spherical_joint',

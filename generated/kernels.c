@@ -284,15 +284,27 @@ void lv_effect_angular_damping(const double *q, const double *omega_b, double c,
     const double t1 = q_0*t0;
     const double t2 = 2*q_2;
     const double t3 = q_3*t2;
-    const double t4 = q_0*t2;
-    const double t5 = q_3*t0;
-    const double t6 = 2*(q_1*q_1);
-    const double t7 = 2*(q_2*q_2) - 1;
-    const double t8 = 2*q_0*q_3;
-    const double t9 = 2*(q_0*q_0);
-    tau_com_w[0] = -c*(omega_b_0*(-t6 - t7) + omega_b_1*(t1 - t3) + omega_b_2*(t4 + t5));
-    tau_com_w[1] = -c*(omega_b_0*(t1 + t3) + omega_b_1*(-t7 - t9) + omega_b_2*(2*q_1*q_2 - t8));
-    tau_com_w[2] = -c*(omega_b_0*(t4 - t5) + omega_b_1*(q_1*t2 + t8) + omega_b_2*(-t6 - t9 + 1));
+    const double t4 = c*omega_b_1;
+    const double t5 = q_0*t2;
+    const double t6 = q_3*t0;
+    const double t7 = c*omega_b_2;
+    const double t8 = 2*(q_1*q_1);
+    const double t9 = 2*(q_2*q_2) - 1;
+    const double t10 = c*omega_b_0;
+    const double t11 = 2*q_0*q_3;
+    const double t12 = 2*(q_0*q_0);
+    tau_com_w[0] = -t10*(-t8 - t9) - t4*(t1 - t3) - t7*(t5 + t6);
+    tau_com_w[1] = -t10*(t1 + t3) - t4*(-t12 - t9) - t7*(2*q_1*q_2 - t11);
+    tau_com_w[2] = -t10*(t5 - t6) - t4*(q_1*t2 + t11) - t7*(-t12 - t8 + 1);
+}
+
+void lv_effect_angular_damping_b(const double *omega_b, double c, double *tau_com_b) {
+    const double omega_b_0 = omega_b[0];
+    const double omega_b_1 = omega_b[1];
+    const double omega_b_2 = omega_b[2];
+    tau_com_b[0] = -c*omega_b_0;
+    tau_com_b[1] = -c*omega_b_1;
+    tau_com_b[2] = -c*omega_b_2;
 }
 
 void lv_quat_mul(const double *a, const double *b, double *ab) {
@@ -1158,6 +1170,92 @@ void lv_rigid_body_rates_free_c(const double *q, const double *omega_b, const do
     omega_dot_b[0] = c_b_0*omega_b_1*omega_b_2;
     omega_dot_b[1] = c_b_1*omega_b_0*omega_b_2;
     omega_dot_b[2] = c_b_2*omega_b_0*omega_b_1;
+}
+
+void lv_linear_acceleration(double m, const double *F_w, double *a_w) {
+    const double F_w_0 = F_w[0];
+    const double F_w_1 = F_w[1];
+    const double F_w_2 = F_w[2];
+    const double t0 = (1.0/m);
+    a_w[0] = F_w_0*t0;
+    a_w[1] = F_w_1*t0;
+    a_w[2] = F_w_2*t0;
+}
+
+void lv_rigid_body_rhs_force_c(const double *x, const double *c_b, const double *a_w, double *x_dot) {
+    const double x_3 = x[3];
+    const double x_4 = x[4];
+    const double x_5 = x[5];
+    const double x_6 = x[6];
+    const double x_7 = x[7];
+    const double x_8 = x[8];
+    const double x_9 = x[9];
+    const double x_10 = x[10];
+    const double x_11 = x[11];
+    const double x_12 = x[12];
+    const double c_b_0 = c_b[0];
+    const double c_b_1 = c_b[1];
+    const double c_b_2 = c_b[2];
+    const double a_w_0 = a_w[0];
+    const double a_w_1 = a_w[1];
+    const double a_w_2 = a_w[2];
+    const double t0 = ((1.0/2.0))*x_10;
+    const double t1 = ((1.0/2.0))*x_11;
+    const double t2 = ((1.0/2.0))*x_12;
+    x_dot[0] = x_7;
+    x_dot[1] = x_8;
+    x_dot[2] = x_9;
+    x_dot[3] = t0*x_6 - t1*x_5 + t2*x_4;
+    x_dot[4] = t0*x_5 + t1*x_6 - t2*x_3;
+    x_dot[5] = -t0*x_4 + t1*x_3 + t2*x_6;
+    x_dot[6] = -t0*x_3 - t1*x_4 - t2*x_5;
+    x_dot[7] = a_w_0;
+    x_dot[8] = a_w_1;
+    x_dot[9] = a_w_2;
+    x_dot[10] = c_b_0*x_11*x_12;
+    x_dot[11] = c_b_1*x_10*x_12;
+    x_dot[12] = c_b_2*x_10*x_11;
+}
+
+void lv_rigid_body_rhs_body_c(const double *x, const double *c_b, const double *a_w, const double *tau_b, double *x_dot) {
+    const double x_3 = x[3];
+    const double x_4 = x[4];
+    const double x_5 = x[5];
+    const double x_6 = x[6];
+    const double x_7 = x[7];
+    const double x_8 = x[8];
+    const double x_9 = x[9];
+    const double x_10 = x[10];
+    const double x_11 = x[11];
+    const double x_12 = x[12];
+    const double c_b_0 = c_b[0];
+    const double c_b_1 = c_b[1];
+    const double c_b_2 = c_b[2];
+    const double c_b_3 = c_b[3];
+    const double c_b_4 = c_b[4];
+    const double c_b_5 = c_b[5];
+    const double a_w_0 = a_w[0];
+    const double a_w_1 = a_w[1];
+    const double a_w_2 = a_w[2];
+    const double tau_b_0 = tau_b[0];
+    const double tau_b_1 = tau_b[1];
+    const double tau_b_2 = tau_b[2];
+    const double t0 = ((1.0/2.0))*x_10;
+    const double t1 = ((1.0/2.0))*x_11;
+    const double t2 = ((1.0/2.0))*x_12;
+    x_dot[0] = x_7;
+    x_dot[1] = x_8;
+    x_dot[2] = x_9;
+    x_dot[3] = t0*x_6 - t1*x_5 + t2*x_4;
+    x_dot[4] = t0*x_5 + t1*x_6 - t2*x_3;
+    x_dot[5] = -t0*x_4 + t1*x_3 + t2*x_6;
+    x_dot[6] = -t0*x_3 - t1*x_4 - t2*x_5;
+    x_dot[7] = a_w_0;
+    x_dot[8] = a_w_1;
+    x_dot[9] = a_w_2;
+    x_dot[10] = c_b_0*x_11*x_12 + c_b_3*tau_b_0;
+    x_dot[11] = c_b_1*x_10*x_12 + c_b_4*tau_b_1;
+    x_dot[12] = c_b_2*x_10*x_11 + c_b_5*tau_b_2;
 }
 
 void lv_pivot_body_rhs(const double *q, const double *omega_b, const double *I_p, const double *r_b, const double *F_w, const double *tau_w, double *q_dot, double *omega_dot_b) {
@@ -3354,6 +3452,29 @@ static inline int lv_effect_apply(int code, const double *p, const double *x, co
     }
 }
 
+/* angular_damping: adds tau_com_b for one body. p = [c(1)] */
+static inline void lv_effect_acc_b_angular_damping(const double *p, const double *x, const double *v_w, double m, const double *I_b, double *F, double *tau)
+{
+    double tau_com_b[3];
+    (void)v_w; (void)m; (void)I_b; (void)F;
+    lv_effect_angular_damping_b(x + 10 /* LV_STATE_OMEGA_B */, p[0], tau_com_b);
+    tau[0] += tau_com_b[0]; tau[1] += tau_com_b[1]; tau[2] += tau_com_b[2];
+}
+
+/* lv_effect_apply for a plain body whose torques are all body-frame (LV_EFFECT_TORQUE_B): such an effect's
+   torque added to tau in the body frame; 0, or -1 for a code that is not a built-in effect. */
+static inline int lv_effect_apply_b(int code, const double *p, const double *x, const double *v_w, double m, const double *I_b, double *F, double *tau)
+{
+    switch (code) {
+    case LV_EFFECT_APPLIED_TORQUE: lv_effect_acc_applied_torque(p, x, v_w, m, I_b, F, tau); return 0;
+    case LV_EFFECT_FORCE_AT_POINT: lv_effect_acc_force_at_point(p, x, v_w, m, I_b, F, tau); return 0;
+    case LV_EFFECT_GRAVITY: lv_effect_acc_gravity(p, x, v_w, m, I_b, F, tau); return 0;
+    case LV_EFFECT_LINEAR_DAMPING: lv_effect_acc_linear_damping(p, x, v_w, m, I_b, F, tau); return 0;
+    case LV_EFFECT_ANGULAR_DAMPING: lv_effect_acc_b_angular_damping(p, x, v_w, m, I_b, F, tau); return 0;
+    default: return -1; /* not a built-in effect: the caller reports it */
+    }
+}
+
 int lv_effect_n_params(int code)
 {
     switch (code) {
@@ -3369,11 +3490,11 @@ int lv_effect_n_params(int code)
 int lv_effect_flags(int code)
 {
     switch (code) {
-    case LV_EFFECT_APPLIED_TORQUE: return 0;
-    case LV_EFFECT_FORCE_AT_POINT: return 12;
+    case LV_EFFECT_APPLIED_TORQUE: return 16;
+    case LV_EFFECT_FORCE_AT_POINT: return 28;
     case LV_EFFECT_GRAVITY: return 4;
     case LV_EFFECT_LINEAR_DAMPING: return 13;
-    case LV_EFFECT_ANGULAR_DAMPING: return 10;
+    case LV_EFFECT_ANGULAR_DAMPING: return 42;
     default: return -1;
     }
 }
@@ -3405,6 +3526,7 @@ static void packed_effect_force_at_point(const double *in, double *out) { lv_eff
 static void packed_effect_gravity(const double *in, double *out) { lv_effect_gravity(in[0], in + 1, out + 0); }
 static void packed_effect_linear_damping(const double *in, double *out) { lv_effect_linear_damping(in + 0, in[3], out + 0); }
 static void packed_effect_angular_damping(const double *in, double *out) { lv_effect_angular_damping(in + 0, in + 4, in[7], out + 0); }
+static void packed_effect_angular_damping_b(const double *in, double *out) { lv_effect_angular_damping_b(in + 0, in[3], out + 0); }
 static void packed_quat_mul(const double *in, double *out) { lv_quat_mul(in + 0, in + 4, out + 0); }
 static void packed_quat_conj(const double *in, double *out) { lv_quat_conj(in + 0, out + 0); }
 static void packed_quat_normalize(const double *in, double *out) { lv_quat_normalize(in + 0, out + 0); }
@@ -3434,6 +3556,9 @@ static void packed_rigid_body_rhs_free_c(const double *in, double *out) { lv_rig
 static void packed_rigid_body_rhs_torque_c(const double *in, double *out) { lv_rigid_body_rhs_torque_c(in + 0, in + 13, in + 19, out + 0); }
 static void packed_rigid_body_rhs_c(const double *in, double *out) { lv_rigid_body_rhs_c(in + 0, in[13], in + 14, in + 20, in + 23, out + 0); }
 static void packed_rigid_body_rates_free_c(const double *in, double *out) { lv_rigid_body_rates_free_c(in + 0, in + 4, in + 7, out + 0, out + 4); }
+static void packed_linear_acceleration(const double *in, double *out) { lv_linear_acceleration(in[0], in + 1, out + 0); }
+static void packed_rigid_body_rhs_force_c(const double *in, double *out) { lv_rigid_body_rhs_force_c(in + 0, in + 13, in + 19, out + 0); }
+static void packed_rigid_body_rhs_body_c(const double *in, double *out) { lv_rigid_body_rhs_body_c(in + 0, in + 13, in + 19, in + 22, out + 0); }
 static void packed_pivot_body_rhs(const double *in, double *out) { lv_pivot_body_rhs(in + 0, in + 4, in + 7, in + 16, in + 19, in + 22, out + 0, out + 4); }
 static void packed_pivot_kinematics(const double *in, double *out) { lv_pivot_kinematics(in + 0, in + 4, in + 7, in + 10, out + 0, out + 3); }
 static void packed_splitting_rotation(const double *in, double *out) { lv_splitting_rotation(in + 0, in + 3, in + 7, in[10], out + 0, out + 4); }
@@ -3492,6 +3617,7 @@ const lv_kernel_info lv_kernel_table[LV_KERNEL_COUNT] = {
     {"effect_gravity", 4, 3, packed_effect_gravity},
     {"effect_linear_damping", 4, 3, packed_effect_linear_damping},
     {"effect_angular_damping", 8, 3, packed_effect_angular_damping},
+    {"effect_angular_damping_b", 4, 3, packed_effect_angular_damping_b},
     {"quat_mul", 8, 4, packed_quat_mul},
     {"quat_conj", 4, 4, packed_quat_conj},
     {"quat_normalize", 4, 4, packed_quat_normalize},
@@ -3521,6 +3647,9 @@ const lv_kernel_info lv_kernel_table[LV_KERNEL_COUNT] = {
     {"rigid_body_rhs_torque_c", 22, 13, packed_rigid_body_rhs_torque_c},
     {"rigid_body_rhs_c", 26, 13, packed_rigid_body_rhs_c},
     {"rigid_body_rates_free_c", 13, 7, packed_rigid_body_rates_free_c},
+    {"linear_acceleration", 4, 3, packed_linear_acceleration},
+    {"rigid_body_rhs_force_c", 22, 13, packed_rigid_body_rhs_force_c},
+    {"rigid_body_rhs_body_c", 25, 13, packed_rigid_body_rhs_body_c},
     {"pivot_body_rhs", 25, 7, packed_pivot_body_rhs},
     {"pivot_kinematics", 13, 6, packed_pivot_kinematics},
     {"splitting_rotation", 11, 7, packed_splitting_rotation},

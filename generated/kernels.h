@@ -11,7 +11,7 @@ typedef struct {
     void (*packed)(const double *in, double *out);
 } lv_kernel_info;
 
-#define LV_KERNEL_COUNT 85
+#define LV_KERNEL_COUNT 89
 extern const lv_kernel_info lv_kernel_table[LV_KERNEL_COUNT];
 
 /* particle_moments: One particle's mass moment and momentum (summed: m r_COM and p).
@@ -116,6 +116,12 @@ void lv_effect_linear_damping(const double *v_w, double c, double *F_com_w);
      in  c scalar: viscous coefficient, N·m·s/rad
      out tau_com_w [3]: torque about the COM, world frame, N·m */
 void lv_effect_angular_damping(const double *q, const double *omega_b, double c, double *tau_com_w);
+
+/* effect_angular_damping_b: Viscous drag on the angular velocity (its body-frame form).
+     in  omega_b [3]: angular velocity, body frame, rad/s
+     in  c scalar: viscous coefficient, N·m·s/rad
+     out tau_com_b [3]: torque about the COM, body frame, N·m */
+void lv_effect_angular_damping_b(const double *omega_b, double c, double *tau_com_b);
 
 /* quat_mul: Hamilton product.
      in  a [4]: quaternion (x, y, z, w), scalar last
@@ -301,6 +307,27 @@ void lv_rigid_body_rhs_c(const double *x, double m, const double *c_b, const dou
      out g [4]: q ⊗ [ω_b, 0] = (dq/dt) / QUAT_RATE_SCALE, 1/s
      out omega_dot_b [3]: angular acceleration, body frame, rad/s² */
 void lv_rigid_body_rates_free_c(const double *q, const double *omega_b, const double *c_b, double *g, double *omega_dot_b);
+
+/* linear_acceleration: Acceleration of the COM under a world force.
+     in  m scalar: mass, kg
+     in  F_w [3]: total force at the COM, world frame, N
+     out a_w [3]: COM acceleration, world frame, m/s² */
+void lv_linear_acceleration(double m, const double *F_w, double *a_w);
+
+/* rigid_body_rhs_force_c: State derivative under a force only (no torque), on c_b and the COM acceleration.
+     in  x [13]: state (p_w[3] m, q[4] (x,y,z,w), v_w[3] m/s, omega_b[3] rad/s)
+     in  c_b [6]: Euler coefficients (k_x, k_y, k_z, r_x, r_y, r_z), body frame: k_x = (I_y − I_z)/I_x (cyclic, dimensionless), r_x = 1/I_x (1/(kg·m²)); from euler_coefficients
+     in  a_w [3]: COM acceleration F_W/m (linear_acceleration), world frame, m/s²
+     out x_dot [13]: d/dt of the state */
+void lv_rigid_body_rhs_force_c(const double *x, const double *c_b, const double *a_w, double *x_dot);
+
+/* rigid_body_rhs_body_c: State derivative under a body-frame torque and a force, on c_b and the COM acceleration.
+     in  x [13]: state (p_w[3] m, q[4] (x,y,z,w), v_w[3] m/s, omega_b[3] rad/s)
+     in  c_b [6]: Euler coefficients (k_x, k_y, k_z, r_x, r_y, r_z), body frame: k_x = (I_y − I_z)/I_x (cyclic, dimensionless), r_x = 1/I_x (1/(kg·m²)); from euler_coefficients
+     in  a_w [3]: COM acceleration F_W/m (linear_acceleration; 0 without a force), world frame, m/s²
+     in  tau_b [3]: total torque about the COM, body frame, N·m
+     out x_dot [13]: d/dt of the state */
+void lv_rigid_body_rhs_body_c(const double *x, const double *c_b, const double *a_w, const double *tau_b, double *x_dot);
 
 /* pivot_body_rhs: Rotation about a world-anchored spherical joint (no wheels).
      in  q [4]: orientation (x, y, z, w), R_WB
@@ -684,6 +711,8 @@ void lv_validity_wdt(const double *omega_b, double scale, double *omega_norm, do
 #define LV_EFFECT_USES_OMEGA 2   /* flag: the effect reads omega_b */
 #define LV_EFFECT_FORCE 4        /* flag: the effect adds a force */
 #define LV_EFFECT_USES_STATE 8   /* flag: the effect reads a state value (else constant) */
+#define LV_EFFECT_TORQUE_W 16    /* flag: the effect declares a world-frame torque */
+#define LV_EFFECT_TORQUE_B 32    /* flag: its torque is declared in the body frame only (lv_effect_apply_b) */
 #define LV_EFFECT_APPLIED_TORQUE 1 /* p = [torque_w(3)] */
 #define LV_EFFECT_FORCE_AT_POINT 2 /* p = [r_b(3), F_w(3)] */
 #define LV_EFFECT_GRAVITY 3 /* p = [g_w(3)] */
@@ -704,7 +733,9 @@ typedef void (*lv_effect_tile_fn)(long b0, long b1, const double (*x)[LV_EFFECT_
 /* The dispatch, static inline int lv_effect_apply(int code, <the arguments above>), is defined in
    kernels.c (compile kernels.c into the translation unit that steps, so it inlines): it adds built-in
    effect `code`'s force and torque and returns 0, or returns -1 for a code that is not a built-in
-   effect (then nothing is added: the caller reports it). */
+   effect (then nothing is added: the caller reports it). lv_effect_apply_b (the same arguments) is the
+   dispatch of a plain body whose torques are all declared in the body frame (LV_EFFECT_TORQUE_B, no
+   LV_EFFECT_TORQUE_W): it adds such an effect's torque to tau in the body frame, else as lv_effect_apply. */
 /* Built-in effect `code`: its number of parameters, its LV_EFFECT_USES_* flags, its name; -1 (NULL)
    for a code that is not a built-in effect. */
 int lv_effect_n_params(int code);

@@ -309,13 +309,27 @@ def effect_angular_damping(q, omega_b, c):
     t1 = q_0*t0
     t2 = 2*q_2
     t3 = q_3*t2
-    t4 = q_0*t2
-    t5 = q_3*t0
-    t6 = 2*(q_1*q_1)
-    t7 = 2*(q_2*q_2) - 1
-    t8 = 2*q_0*q_3
-    t9 = 2*(q_0*q_0)
-    return casadi.vertcat(-c*(omega_b_0*(-t6 - t7) + omega_b_1*(t1 - t3) + omega_b_2*(t4 + t5)), -c*(omega_b_0*(t1 + t3) + omega_b_1*(-t7 - t9) + omega_b_2*(2*q_1*q_2 - t8)), -c*(omega_b_0*(t4 - t5) + omega_b_1*(q_1*t2 + t8) + omega_b_2*(-t6 - t9 + 1)))
+    t4 = c*omega_b_1
+    t5 = q_0*t2
+    t6 = q_3*t0
+    t7 = c*omega_b_2
+    t8 = 2*(q_1*q_1)
+    t9 = 2*(q_2*q_2) - 1
+    t10 = c*omega_b_0
+    t11 = 2*q_0*q_3
+    t12 = 2*(q_0*q_0)
+    return casadi.vertcat(-t10*(-t8 - t9) - t4*(t1 - t3) - t7*(t5 + t6), -t10*(t1 + t3) - t4*(-t12 - t9) - t7*(2*q_1*q_2 - t11), -t10*(t5 - t6) - t4*(q_1*t2 + t11) - t7*(-t12 - t8 + 1))
+
+
+def effect_angular_damping_b(omega_b, c):
+    """effect_angular_damping_b: Viscous drag on the angular velocity (its body-frame form).
+      in  omega_b [3]: angular velocity, body frame, rad/s
+      in  c scalar: viscous coefficient, N·m·s/rad
+      out tau_com_b [3]: torque about the COM, body frame, N·m"""
+    omega_b_0 = omega_b[0]
+    omega_b_1 = omega_b[1]
+    omega_b_2 = omega_b[2]
+    return casadi.vertcat(-c*omega_b_0, -c*omega_b_1, -c*omega_b_2)
 
 
 def quat_mul(a, b):
@@ -1036,6 +1050,81 @@ def rigid_body_rates_free_c(q, omega_b, c_b):
     c_b_1 = c_b[1]
     c_b_2 = c_b[2]
     return casadi.vertcat(omega_b_0*q_3 - omega_b_1*q_2 + omega_b_2*q_1, omega_b_0*q_2 + omega_b_1*q_3 - omega_b_2*q_0, -omega_b_0*q_1 + omega_b_1*q_0 + omega_b_2*q_3, -omega_b_0*q_0 - omega_b_1*q_1 - omega_b_2*q_2), casadi.vertcat(c_b_0*omega_b_1*omega_b_2, c_b_1*omega_b_0*omega_b_2, c_b_2*omega_b_0*omega_b_1)
+
+
+def linear_acceleration(m, F_w):
+    """linear_acceleration: Acceleration of the COM under a world force.
+      in  m scalar: mass, kg
+      in  F_w [3]: total force at the COM, world frame, N
+      out a_w [3]: COM acceleration, world frame, m/s²"""
+    F_w_0 = F_w[0]
+    F_w_1 = F_w[1]
+    F_w_2 = F_w[2]
+    t0 = (1.0/m)
+    return casadi.vertcat(F_w_0*t0, F_w_1*t0, F_w_2*t0)
+
+
+def rigid_body_rhs_force_c(x, c_b, a_w):
+    """rigid_body_rhs_force_c: State derivative under a force only (no torque), on c_b and the COM acceleration.
+      in  x [13]: state (p_w[3] m, q[4] (x,y,z,w), v_w[3] m/s, omega_b[3] rad/s)
+      in  c_b [6]: Euler coefficients (k_x, k_y, k_z, r_x, r_y, r_z), body frame: k_x = (I_y − I_z)/I_x (cyclic, dimensionless), r_x = 1/I_x (1/(kg·m²)); from euler_coefficients
+      in  a_w [3]: COM acceleration F_W/m (linear_acceleration), world frame, m/s²
+      out x_dot [13]: d/dt of the state"""
+    x_3 = x[3]
+    x_4 = x[4]
+    x_5 = x[5]
+    x_6 = x[6]
+    x_7 = x[7]
+    x_8 = x[8]
+    x_9 = x[9]
+    x_10 = x[10]
+    x_11 = x[11]
+    x_12 = x[12]
+    c_b_0 = c_b[0]
+    c_b_1 = c_b[1]
+    c_b_2 = c_b[2]
+    a_w_0 = a_w[0]
+    a_w_1 = a_w[1]
+    a_w_2 = a_w[2]
+    t0 = ((1.0/2.0))*x_10
+    t1 = ((1.0/2.0))*x_11
+    t2 = ((1.0/2.0))*x_12
+    return casadi.vertcat(x_7, x_8, x_9, t0*x_6 - t1*x_5 + t2*x_4, t0*x_5 + t1*x_6 - t2*x_3, -t0*x_4 + t1*x_3 + t2*x_6, -t0*x_3 - t1*x_4 - t2*x_5, a_w_0, a_w_1, a_w_2, c_b_0*x_11*x_12, c_b_1*x_10*x_12, c_b_2*x_10*x_11)
+
+
+def rigid_body_rhs_body_c(x, c_b, a_w, tau_b):
+    """rigid_body_rhs_body_c: State derivative under a body-frame torque and a force, on c_b and the COM acceleration.
+      in  x [13]: state (p_w[3] m, q[4] (x,y,z,w), v_w[3] m/s, omega_b[3] rad/s)
+      in  c_b [6]: Euler coefficients (k_x, k_y, k_z, r_x, r_y, r_z), body frame: k_x = (I_y − I_z)/I_x (cyclic, dimensionless), r_x = 1/I_x (1/(kg·m²)); from euler_coefficients
+      in  a_w [3]: COM acceleration F_W/m (linear_acceleration; 0 without a force), world frame, m/s²
+      in  tau_b [3]: total torque about the COM, body frame, N·m
+      out x_dot [13]: d/dt of the state"""
+    x_3 = x[3]
+    x_4 = x[4]
+    x_5 = x[5]
+    x_6 = x[6]
+    x_7 = x[7]
+    x_8 = x[8]
+    x_9 = x[9]
+    x_10 = x[10]
+    x_11 = x[11]
+    x_12 = x[12]
+    c_b_0 = c_b[0]
+    c_b_1 = c_b[1]
+    c_b_2 = c_b[2]
+    c_b_3 = c_b[3]
+    c_b_4 = c_b[4]
+    c_b_5 = c_b[5]
+    a_w_0 = a_w[0]
+    a_w_1 = a_w[1]
+    a_w_2 = a_w[2]
+    tau_b_0 = tau_b[0]
+    tau_b_1 = tau_b[1]
+    tau_b_2 = tau_b[2]
+    t0 = ((1.0/2.0))*x_10
+    t1 = ((1.0/2.0))*x_11
+    t2 = ((1.0/2.0))*x_12
+    return casadi.vertcat(x_7, x_8, x_9, t0*x_6 - t1*x_5 + t2*x_4, t0*x_5 + t1*x_6 - t2*x_3, -t0*x_4 + t1*x_3 + t2*x_6, -t0*x_3 - t1*x_4 - t2*x_5, a_w_0, a_w_1, a_w_2, c_b_0*x_11*x_12 + c_b_3*tau_b_0, c_b_1*x_10*x_12 + c_b_4*tau_b_1, c_b_2*x_10*x_11 + c_b_5*tau_b_2)
 
 
 def pivot_body_rhs(q, omega_b, I_p, r_b, F_w, tau_w):

@@ -285,15 +285,27 @@ void lvf_effect_angular_damping(const float *q, const float *omega_b, float c, f
     const float t1 = q_0*t0;
     const float t2 = 2*q_2;
     const float t3 = q_3*t2;
-    const float t4 = q_0*t2;
-    const float t5 = q_3*t0;
-    const float t6 = 2*(q_1*q_1);
-    const float t7 = 2*(q_2*q_2) - 1;
-    const float t8 = 2*q_0*q_3;
-    const float t9 = 2*(q_0*q_0);
-    tau_com_w[0] = -c*(omega_b_0*(-t6 - t7) + omega_b_1*(t1 - t3) + omega_b_2*(t4 + t5));
-    tau_com_w[1] = -c*(omega_b_0*(t1 + t3) + omega_b_1*(-t7 - t9) + omega_b_2*(2*q_1*q_2 - t8));
-    tau_com_w[2] = -c*(omega_b_0*(t4 - t5) + omega_b_1*(q_1*t2 + t8) + omega_b_2*(-t6 - t9 + 1));
+    const float t4 = c*omega_b_1;
+    const float t5 = q_0*t2;
+    const float t6 = q_3*t0;
+    const float t7 = c*omega_b_2;
+    const float t8 = 2*(q_1*q_1);
+    const float t9 = 2*(q_2*q_2) - 1;
+    const float t10 = c*omega_b_0;
+    const float t11 = 2*q_0*q_3;
+    const float t12 = 2*(q_0*q_0);
+    tau_com_w[0] = -t10*(-t8 - t9) - t4*(t1 - t3) - t7*(t5 + t6);
+    tau_com_w[1] = -t10*(t1 + t3) - t4*(-t12 - t9) - t7*(2*q_1*q_2 - t11);
+    tau_com_w[2] = -t10*(t5 - t6) - t4*(q_1*t2 + t11) - t7*(-t12 - t8 + 1);
+}
+
+void lvf_effect_angular_damping_b(const float *omega_b, float c, float *tau_com_b) {
+    const float omega_b_0 = omega_b[0];
+    const float omega_b_1 = omega_b[1];
+    const float omega_b_2 = omega_b[2];
+    tau_com_b[0] = -c*omega_b_0;
+    tau_com_b[1] = -c*omega_b_1;
+    tau_com_b[2] = -c*omega_b_2;
 }
 
 void lvf_quat_mul(const float *a, const float *b, float *ab) {
@@ -1159,6 +1171,92 @@ void lvf_rigid_body_rates_free_c(const float *q, const float *omega_b, const flo
     omega_dot_b[0] = c_b_0*omega_b_1*omega_b_2;
     omega_dot_b[1] = c_b_1*omega_b_0*omega_b_2;
     omega_dot_b[2] = c_b_2*omega_b_0*omega_b_1;
+}
+
+void lvf_linear_acceleration(float m, const float *F_w, float *a_w) {
+    const float F_w_0 = F_w[0];
+    const float F_w_1 = F_w[1];
+    const float F_w_2 = F_w[2];
+    const float t0 = (1.0F/m);
+    a_w[0] = F_w_0*t0;
+    a_w[1] = F_w_1*t0;
+    a_w[2] = F_w_2*t0;
+}
+
+void lvf_rigid_body_rhs_force_c(const float *x, const float *c_b, const float *a_w, float *x_dot) {
+    const float x_3 = x[3];
+    const float x_4 = x[4];
+    const float x_5 = x[5];
+    const float x_6 = x[6];
+    const float x_7 = x[7];
+    const float x_8 = x[8];
+    const float x_9 = x[9];
+    const float x_10 = x[10];
+    const float x_11 = x[11];
+    const float x_12 = x[12];
+    const float c_b_0 = c_b[0];
+    const float c_b_1 = c_b[1];
+    const float c_b_2 = c_b[2];
+    const float a_w_0 = a_w[0];
+    const float a_w_1 = a_w[1];
+    const float a_w_2 = a_w[2];
+    const float t0 = ((1.0F/2.0F))*x_10;
+    const float t1 = ((1.0F/2.0F))*x_11;
+    const float t2 = ((1.0F/2.0F))*x_12;
+    x_dot[0] = x_7;
+    x_dot[1] = x_8;
+    x_dot[2] = x_9;
+    x_dot[3] = t0*x_6 - t1*x_5 + t2*x_4;
+    x_dot[4] = t0*x_5 + t1*x_6 - t2*x_3;
+    x_dot[5] = -t0*x_4 + t1*x_3 + t2*x_6;
+    x_dot[6] = -t0*x_3 - t1*x_4 - t2*x_5;
+    x_dot[7] = a_w_0;
+    x_dot[8] = a_w_1;
+    x_dot[9] = a_w_2;
+    x_dot[10] = c_b_0*x_11*x_12;
+    x_dot[11] = c_b_1*x_10*x_12;
+    x_dot[12] = c_b_2*x_10*x_11;
+}
+
+void lvf_rigid_body_rhs_body_c(const float *x, const float *c_b, const float *a_w, const float *tau_b, float *x_dot) {
+    const float x_3 = x[3];
+    const float x_4 = x[4];
+    const float x_5 = x[5];
+    const float x_6 = x[6];
+    const float x_7 = x[7];
+    const float x_8 = x[8];
+    const float x_9 = x[9];
+    const float x_10 = x[10];
+    const float x_11 = x[11];
+    const float x_12 = x[12];
+    const float c_b_0 = c_b[0];
+    const float c_b_1 = c_b[1];
+    const float c_b_2 = c_b[2];
+    const float c_b_3 = c_b[3];
+    const float c_b_4 = c_b[4];
+    const float c_b_5 = c_b[5];
+    const float a_w_0 = a_w[0];
+    const float a_w_1 = a_w[1];
+    const float a_w_2 = a_w[2];
+    const float tau_b_0 = tau_b[0];
+    const float tau_b_1 = tau_b[1];
+    const float tau_b_2 = tau_b[2];
+    const float t0 = ((1.0F/2.0F))*x_10;
+    const float t1 = ((1.0F/2.0F))*x_11;
+    const float t2 = ((1.0F/2.0F))*x_12;
+    x_dot[0] = x_7;
+    x_dot[1] = x_8;
+    x_dot[2] = x_9;
+    x_dot[3] = t0*x_6 - t1*x_5 + t2*x_4;
+    x_dot[4] = t0*x_5 + t1*x_6 - t2*x_3;
+    x_dot[5] = -t0*x_4 + t1*x_3 + t2*x_6;
+    x_dot[6] = -t0*x_3 - t1*x_4 - t2*x_5;
+    x_dot[7] = a_w_0;
+    x_dot[8] = a_w_1;
+    x_dot[9] = a_w_2;
+    x_dot[10] = c_b_0*x_11*x_12 + c_b_3*tau_b_0;
+    x_dot[11] = c_b_1*x_10*x_12 + c_b_4*tau_b_1;
+    x_dot[12] = c_b_2*x_10*x_11 + c_b_5*tau_b_2;
 }
 
 void lvf_pivot_body_rhs(const float *q, const float *omega_b, const float *I_p, const float *r_b, const float *F_w, const float *tau_w, float *q_dot, float *omega_dot_b) {

@@ -35,6 +35,8 @@ void lvf_effect_gravity(float m, const float *g_w, float *F_com_w);
 void lvf_effect_linear_damping(const float *v_w, float c, float *F_com_w);
 /* effect_angular_damping: Viscous drag on the angular velocity (float; see kernels.h) */
 void lvf_effect_angular_damping(const float *q, const float *omega_b, float c, float *tau_com_w);
+/* effect_angular_damping_b: Viscous drag on the angular velocity (its body-frame form) (float; see kernels.h) */
+void lvf_effect_angular_damping_b(const float *omega_b, float c, float *tau_com_b);
 /* quat_mul: Hamilton product (float; see kernels.h) */
 void lvf_quat_mul(const float *a, const float *b, float *ab);
 /* quat_conj: Conjugate (inverse of a unit quaternion) (float; see kernels.h) */
@@ -93,6 +95,12 @@ void lvf_rigid_body_rhs_torque_c(const float *x, const float *c_b, const float *
 void lvf_rigid_body_rhs_c(const float *x, float m, const float *c_b, const float *F_w, const float *tau_w, float *x_dot);
 /* rigid_body_rates_free_c: The rates a torque-free RK4 step stages: q ⊗ [ω_B, 0] and ω̇_B, on c_b (float; see kernels.h) */
 void lvf_rigid_body_rates_free_c(const float *q, const float *omega_b, const float *c_b, float *g, float *omega_dot_b);
+/* linear_acceleration: Acceleration of the COM under a world force (float; see kernels.h) */
+void lvf_linear_acceleration(float m, const float *F_w, float *a_w);
+/* rigid_body_rhs_force_c: State derivative under a force only (no torque), on c_b and the COM acceleration (float; see kernels.h) */
+void lvf_rigid_body_rhs_force_c(const float *x, const float *c_b, const float *a_w, float *x_dot);
+/* rigid_body_rhs_body_c: State derivative under a body-frame torque and a force, on c_b and the COM acceleration (float; see kernels.h) */
+void lvf_rigid_body_rhs_body_c(const float *x, const float *c_b, const float *a_w, const float *tau_b, float *x_dot);
 /* pivot_body_rhs: Rotation about a world-anchored spherical joint (no wheels) (float; see kernels.h) */
 void lvf_pivot_body_rhs(const float *q, const float *omega_b, const float *I_p, const float *r_b, const float *F_w, const float *tau_w, float *q_dot, float *omega_dot_b);
 /* pivot_kinematics: COM position and velocity of a body on a spherical joint (float; see kernels.h) */

@@ -672,17 +672,52 @@ def effect_angular_damping(q, omega_b, c, *, out=None):
     t1 = q_0*t0
     t2 = 2*q_2
     t3 = q_3*t2
-    t4 = q_0*t2
-    t5 = q_3*t0
-    t6 = 2*(q_1*q_1)
-    t7 = 2*(q_2*q_2) - 1
-    t8 = 2*q_0*q_3
-    t9 = 2*(q_0*q_0)
+    t4 = c*omega_b_1
+    t5 = q_0*t2
+    t6 = q_3*t0
+    t7 = c*omega_b_2
+    t8 = 2*(q_1*q_1)
+    t9 = 2*(q_2*q_2) - 1
+    t10 = c*omega_b_0
+    t11 = 2*q_0*q_3
+    t12 = 2*(q_0*q_0)
     tau_com_w_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    numpy.multiply(-c, omega_b_0 * (-t6 - t7) + omega_b_1 * (t1 - t3) + omega_b_2 * (t4 + t5), out=tau_com_w_out[..., 0])
-    numpy.multiply(-c, omega_b_0 * (t1 + t3) + omega_b_1 * (-t7 - t9) + omega_b_2 * (2 * q_1 * q_2 - t8), out=tau_com_w_out[..., 1])
-    numpy.multiply(-c, omega_b_0 * (t4 - t5) + omega_b_1 * (q_1 * t2 + t8) + omega_b_2 * (-t6 - t9 + 1), out=tau_com_w_out[..., 2])
+    numpy.subtract(-t10 * (-t8 - t9) - t4 * (t1 - t3), t7 * (t5 + t6), out=tau_com_w_out[..., 0])
+    numpy.subtract(-t10 * (t1 + t3) - t4 * (-t12 - t9), t7 * (2 * q_1 * q_2 - t11), out=tau_com_w_out[..., 1])
+    numpy.subtract(-t10 * (t5 - t6) - t4 * (q_1 * t2 + t11), t7 * (-t12 - t8 + 1), out=tau_com_w_out[..., 2])
     return tau_com_w_out
+
+
+def effect_angular_damping_b(omega_b, c, *, out=None):
+    """Viscous drag on the angular velocity (its body-frame form).
+
+    Generated kernel ``effect_angular_damping_b``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    omega_b : array_like, shape (..., 3)
+        angular velocity, body frame, rad/s
+    c : array_like, shape (...)
+        viscous coefficient, N·m·s/rad
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
+
+    Returns
+    -------
+    tau_com_b : ndarray, shape (..., 3)
+        torque about the COM, body frame, N·m
+    """
+    omega_b = numpy.asarray(omega_b, dtype=numpy.float32)
+    c = numpy.asarray(c, dtype=numpy.float32)
+    batch = omega_b.shape[:-1] if omega_b.shape[:-1] == c.shape else numpy.broadcast_shapes(omega_b.shape[:-1], c.shape)
+    omega_b_0 = omega_b[..., 0]
+    omega_b_1 = omega_b[..., 1]
+    omega_b_2 = omega_b[..., 2]
+    tau_com_b_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
+    numpy.multiply(-c, omega_b_0, out=tau_com_b_out[..., 0])
+    numpy.multiply(-c, omega_b_1, out=tau_com_b_out[..., 1])
+    numpy.multiply(-c, omega_b_2, out=tau_com_b_out[..., 2])
+    return tau_com_b_out
 
 
 def quat_mul(a, b, *, out=None):
@@ -2119,6 +2154,170 @@ def rigid_body_rates_free_c(q, omega_b, c_b, *, out=None):
     numpy.multiply(c_b_1 * omega_b_0, omega_b_2, out=omega_dot_b_out[..., 1])
     numpy.multiply(c_b_2 * omega_b_0, omega_b_1, out=omega_dot_b_out[..., 2])
     return g_out, omega_dot_b_out
+
+
+def linear_acceleration(m, F_w, *, out=None):
+    """Acceleration of the COM under a world force.
+
+    Generated kernel ``linear_acceleration``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    m : array_like, shape (...)
+        mass, kg
+    F_w : array_like, shape (..., 3)
+        total force at the COM, world frame, N
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
+
+    Returns
+    -------
+    a_w : ndarray, shape (..., 3)
+        COM acceleration, world frame, m/s²
+    """
+    m = numpy.asarray(m, dtype=numpy.float32)
+    F_w = numpy.asarray(F_w, dtype=numpy.float32)
+    batch = m.shape if m.shape == F_w.shape[:-1] else numpy.broadcast_shapes(m.shape, F_w.shape[:-1])
+    F_w_0 = F_w[..., 0]
+    F_w_1 = F_w[..., 1]
+    F_w_2 = F_w[..., 2]
+    t0 = (1.0/m)
+    a_w_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
+    numpy.multiply(F_w_0, t0, out=a_w_out[..., 0])
+    numpy.multiply(F_w_1, t0, out=a_w_out[..., 1])
+    numpy.multiply(F_w_2, t0, out=a_w_out[..., 2])
+    return a_w_out
+
+
+def rigid_body_rhs_force_c(x, c_b, a_w, *, out=None):
+    """State derivative under a force only (no torque), on c_b and the COM acceleration.
+
+    Generated kernel ``rigid_body_rhs_force_c``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    x : array_like, shape (..., 13)
+        state (p_w[3] m, q[4] (x,y,z,w), v_w[3] m/s, omega_b[3] rad/s)
+    c_b : array_like, shape (..., 6)
+        Euler coefficients (k_x, k_y, k_z, r_x, r_y, r_z), body frame: k_x = (I_y − I_z)/I_x (cyclic, dimensionless), r_x = 1/I_x (1/(kg·m²)); from euler_coefficients
+    a_w : array_like, shape (..., 3)
+        COM acceleration F_W/m (linear_acceleration), world frame, m/s²
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
+
+    Returns
+    -------
+    x_dot : ndarray, shape (..., 13)
+        d/dt of the state
+    """
+    x = numpy.asarray(x, dtype=numpy.float32)
+    c_b = numpy.asarray(c_b, dtype=numpy.float32)
+    a_w = numpy.asarray(a_w, dtype=numpy.float32)
+    batch = x.shape[:-1] if x.shape[:-1] == c_b.shape[:-1] == a_w.shape[:-1] else numpy.broadcast_shapes(x.shape[:-1], c_b.shape[:-1], a_w.shape[:-1])
+    x_3 = x[..., 3]
+    x_4 = x[..., 4]
+    x_5 = x[..., 5]
+    x_6 = x[..., 6]
+    x_7 = x[..., 7]
+    x_8 = x[..., 8]
+    x_9 = x[..., 9]
+    x_10 = x[..., 10]
+    x_11 = x[..., 11]
+    x_12 = x[..., 12]
+    c_b_0 = c_b[..., 0]
+    c_b_1 = c_b[..., 1]
+    c_b_2 = c_b[..., 2]
+    a_w_0 = a_w[..., 0]
+    a_w_1 = a_w[..., 1]
+    a_w_2 = a_w[..., 2]
+    t0 = ((numpy.float32(1.0)/numpy.float32(2.0)))*x_10
+    t1 = ((numpy.float32(1.0)/numpy.float32(2.0)))*x_11
+    t2 = ((numpy.float32(1.0)/numpy.float32(2.0)))*x_12
+    x_dot_out = numpy.empty(batch + (13,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
+    x_dot_out[..., 0] = x_7
+    x_dot_out[..., 1] = x_8
+    x_dot_out[..., 2] = x_9
+    numpy.add(t0 * x_6 - t1 * x_5, t2 * x_4, out=x_dot_out[..., 3])
+    numpy.subtract(t0 * x_5 + t1 * x_6, t2 * x_3, out=x_dot_out[..., 4])
+    numpy.add(-t0 * x_4 + t1 * x_3, t2 * x_6, out=x_dot_out[..., 5])
+    numpy.subtract(-t0 * x_3 - t1 * x_4, t2 * x_5, out=x_dot_out[..., 6])
+    x_dot_out[..., 7] = a_w_0
+    x_dot_out[..., 8] = a_w_1
+    x_dot_out[..., 9] = a_w_2
+    numpy.multiply(c_b_0 * x_11, x_12, out=x_dot_out[..., 10])
+    numpy.multiply(c_b_1 * x_10, x_12, out=x_dot_out[..., 11])
+    numpy.multiply(c_b_2 * x_10, x_11, out=x_dot_out[..., 12])
+    return x_dot_out
+
+
+def rigid_body_rhs_body_c(x, c_b, a_w, tau_b, *, out=None):
+    """State derivative under a body-frame torque and a force, on c_b and the COM acceleration.
+
+    Generated kernel ``rigid_body_rhs_body_c``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    x : array_like, shape (..., 13)
+        state (p_w[3] m, q[4] (x,y,z,w), v_w[3] m/s, omega_b[3] rad/s)
+    c_b : array_like, shape (..., 6)
+        Euler coefficients (k_x, k_y, k_z, r_x, r_y, r_z), body frame: k_x = (I_y − I_z)/I_x (cyclic, dimensionless), r_x = 1/I_x (1/(kg·m²)); from euler_coefficients
+    a_w : array_like, shape (..., 3)
+        COM acceleration F_W/m (linear_acceleration; 0 without a force), world frame, m/s²
+    tau_b : array_like, shape (..., 3)
+        total torque about the COM, body frame, N·m
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
+
+    Returns
+    -------
+    x_dot : ndarray, shape (..., 13)
+        d/dt of the state
+    """
+    x = numpy.asarray(x, dtype=numpy.float32)
+    c_b = numpy.asarray(c_b, dtype=numpy.float32)
+    a_w = numpy.asarray(a_w, dtype=numpy.float32)
+    tau_b = numpy.asarray(tau_b, dtype=numpy.float32)
+    batch = x.shape[:-1] if x.shape[:-1] == c_b.shape[:-1] == a_w.shape[:-1] == tau_b.shape[:-1] else numpy.broadcast_shapes(x.shape[:-1], c_b.shape[:-1], a_w.shape[:-1], tau_b.shape[:-1])
+    x_3 = x[..., 3]
+    x_4 = x[..., 4]
+    x_5 = x[..., 5]
+    x_6 = x[..., 6]
+    x_7 = x[..., 7]
+    x_8 = x[..., 8]
+    x_9 = x[..., 9]
+    x_10 = x[..., 10]
+    x_11 = x[..., 11]
+    x_12 = x[..., 12]
+    c_b_0 = c_b[..., 0]
+    c_b_1 = c_b[..., 1]
+    c_b_2 = c_b[..., 2]
+    c_b_3 = c_b[..., 3]
+    c_b_4 = c_b[..., 4]
+    c_b_5 = c_b[..., 5]
+    a_w_0 = a_w[..., 0]
+    a_w_1 = a_w[..., 1]
+    a_w_2 = a_w[..., 2]
+    tau_b_0 = tau_b[..., 0]
+    tau_b_1 = tau_b[..., 1]
+    tau_b_2 = tau_b[..., 2]
+    t0 = ((numpy.float32(1.0)/numpy.float32(2.0)))*x_10
+    t1 = ((numpy.float32(1.0)/numpy.float32(2.0)))*x_11
+    t2 = ((numpy.float32(1.0)/numpy.float32(2.0)))*x_12
+    x_dot_out = numpy.empty(batch + (13,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
+    x_dot_out[..., 0] = x_7
+    x_dot_out[..., 1] = x_8
+    x_dot_out[..., 2] = x_9
+    numpy.add(t0 * x_6 - t1 * x_5, t2 * x_4, out=x_dot_out[..., 3])
+    numpy.subtract(t0 * x_5 + t1 * x_6, t2 * x_3, out=x_dot_out[..., 4])
+    numpy.add(-t0 * x_4 + t1 * x_3, t2 * x_6, out=x_dot_out[..., 5])
+    numpy.subtract(-t0 * x_3 - t1 * x_4, t2 * x_5, out=x_dot_out[..., 6])
+    x_dot_out[..., 7] = a_w_0
+    x_dot_out[..., 8] = a_w_1
+    x_dot_out[..., 9] = a_w_2
+    numpy.add(c_b_0 * x_11 * x_12, c_b_3 * tau_b_0, out=x_dot_out[..., 10])
+    numpy.add(c_b_1 * x_10 * x_12, c_b_4 * tau_b_1, out=x_dot_out[..., 11])
+    numpy.add(c_b_2 * x_10 * x_11, c_b_5 * tau_b_2, out=x_dot_out[..., 12])
+    return x_dot_out
 
 
 def pivot_body_rhs(q, omega_b, I_p, r_b, F_w, tau_w, *, out=None):
@@ -5108,6 +5307,7 @@ KERNELS = {
     'effect_gravity': (effect_gravity, [('m', ()), ('g_w', (3,))], [('F_com_w', (3,))]),
     'effect_linear_damping': (effect_linear_damping, [('v_w', (3,)), ('c', ())], [('F_com_w', (3,))]),
     'effect_angular_damping': (effect_angular_damping, [('q', (4,)), ('omega_b', (3,)), ('c', ())], [('tau_com_w', (3,))]),
+    'effect_angular_damping_b': (effect_angular_damping_b, [('omega_b', (3,)), ('c', ())], [('tau_com_b', (3,))]),
     'quat_mul': (quat_mul, [('a', (4,)), ('b', (4,))], [('ab', (4,))]),
     'quat_conj': (quat_conj, [('q', (4,))], [('q_conj', (4,))]),
     'quat_normalize': (quat_normalize, [('q', (4,))], [('q_unit', (4,))]),
@@ -5137,6 +5337,9 @@ KERNELS = {
     'rigid_body_rhs_torque_c': (rigid_body_rhs_torque_c, [('x', (13,)), ('c_b', (6,)), ('tau_w', (3,))], [('x_dot', (13,))]),
     'rigid_body_rhs_c': (rigid_body_rhs_c, [('x', (13,)), ('m', ()), ('c_b', (6,)), ('F_w', (3,)), ('tau_w', (3,))], [('x_dot', (13,))]),
     'rigid_body_rates_free_c': (rigid_body_rates_free_c, [('q', (4,)), ('omega_b', (3,)), ('c_b', (6,))], [('g', (4,)), ('omega_dot_b', (3,))]),
+    'linear_acceleration': (linear_acceleration, [('m', ()), ('F_w', (3,))], [('a_w', (3,))]),
+    'rigid_body_rhs_force_c': (rigid_body_rhs_force_c, [('x', (13,)), ('c_b', (6,)), ('a_w', (3,))], [('x_dot', (13,))]),
+    'rigid_body_rhs_body_c': (rigid_body_rhs_body_c, [('x', (13,)), ('c_b', (6,)), ('a_w', (3,)), ('tau_b', (3,))], [('x_dot', (13,))]),
     'pivot_body_rhs': (pivot_body_rhs, [('q', (4,)), ('omega_b', (3,)), ('I_p', (3, 3)), ('r_b', (3,)), ('F_w', (3,)), ('tau_w', (3,))], [('q_dot', (4,)), ('omega_dot_b', (3,))]),
     'pivot_kinematics': (pivot_kinematics, [('q', (4,)), ('omega_b', (3,)), ('anchor_w', (3,)), ('r_b', (3,))], [('p_w', (3,)), ('v_w', (3,))]),
     'splitting_rotation': (splitting_rotation, [('I_b', (3,)), ('q', (4,)), ('omega_b', (3,)), ('h', ())], [('q_next', (4,)), ('omega_next', (3,))]),
@@ -5332,6 +5535,41 @@ EFFECT_APPLY = {
     'gravity': effect_apply_gravity,
     'linear_damping': effect_apply_linear_damping,
     'angular_damping': effect_apply_angular_damping,
+}
+
+
+def effect_apply_b_angular_damping(p, x, v_w, m, I_b, *, out=None):
+    """angular_damping, its body-frame form: as effect_apply_angular_damping, the torque in the body frame
+    (a plain body whose torques are all body-frame, FLAG_TORQUE_B).
+
+    Parameters
+    ----------
+    p : array_like, shape (n, n_params)
+        The effect's parameters per row: [c(1)].
+    x : array_like, shape (n, 13)
+        Body states [p_w, q (x, y, z, w), v_w, omega_b] the effect acts on.
+    v_w : array_like, shape (n, 3)
+        COM velocities it sees, world frame, m/s.
+    m : array_like, shape (n,)
+        Masses, kg.
+    I_b : array_like, shape (n, 3)
+        Principal moments, body frame, kg·m².
+    out : (ndarray, ndarray), optional
+        Arrays (n, 3) the force and the torque are written into (the one it has), as the kernel's out=.
+
+    Returns
+    -------
+    F_w : ndarray, shape (n, 3) or None
+        Force at the COM, world frame, N (None: the effect has none).
+    tau_b : ndarray, shape (n, 3) or None
+        Torque about the COM, body frame, N·m (None: the effect has none).
+    """
+    return None, effect_angular_damping_b(x[..., 10:13], p[..., 0], out=out and out[1:])
+
+
+# effect name -> its body-frame form (FLAG_TORQUE_B), for plain bodies whose torques are all body-frame
+EFFECT_APPLY_B = {
+    'angular_damping': effect_apply_b_angular_damping,
 }
 # built-in effect code -> its apply function
 EFFECT_APPLY_BY_CODE = {

@@ -186,13 +186,22 @@ def effect_angular_damping(q, omega_b, c):
     t1 = q_0*t0
     t2 = 2*q_2
     t3 = q_3*t2
-    t4 = q_0*t2
-    t5 = q_3*t0
-    t6 = 2*(q_1*q_1)
-    t7 = 2*(q_2*q_2) - 1
-    t8 = 2*q_0*q_3
-    t9 = 2*(q_0*q_0)
-    return (-c*(omega_b_0*(-t6 - t7) + omega_b_1*(t1 - t3) + omega_b_2*(t4 + t5)), -c*(omega_b_0*(t1 + t3) + omega_b_1*(-t7 - t9) + omega_b_2*(2*q_1*q_2 - t8)), -c*(omega_b_0*(t4 - t5) + omega_b_1*(q_1*t2 + t8) + omega_b_2*(-t6 - t9 + 1)))
+    t4 = c*omega_b_1
+    t5 = q_0*t2
+    t6 = q_3*t0
+    t7 = c*omega_b_2
+    t8 = 2*(q_1*q_1)
+    t9 = 2*(q_2*q_2) - 1
+    t10 = c*omega_b_0
+    t11 = 2*q_0*q_3
+    t12 = 2*(q_0*q_0)
+    return (-t10*(-t8 - t9) - t4*(t1 - t3) - t7*(t5 + t6), -t10*(t1 + t3) - t4*(-t12 - t9) - t7*(2*q_1*q_2 - t11), -t10*(t5 - t6) - t4*(q_1*t2 + t11) - t7*(-t12 - t8 + 1))
+
+
+def effect_angular_damping_b(omega_b, c):
+    """Viscous drag on the angular velocity (its body-frame form) (floats; see the module)."""
+    omega_b_0, omega_b_1, omega_b_2 = omega_b
+    return (-c*omega_b_0, -c*omega_b_1, -c*omega_b_2)
 
 
 def quat_mul(a, b):
@@ -624,6 +633,36 @@ def rigid_body_rates_free_c(q, omega_b, c_b):
     omega_b_0, omega_b_1, omega_b_2 = omega_b
     c_b_0, c_b_1, c_b_2, _, _, _ = c_b
     return (omega_b_0*q_3 - omega_b_1*q_2 + omega_b_2*q_1, omega_b_0*q_2 + omega_b_1*q_3 - omega_b_2*q_0, -omega_b_0*q_1 + omega_b_1*q_0 + omega_b_2*q_3, -omega_b_0*q_0 - omega_b_1*q_1 - omega_b_2*q_2), (c_b_0*omega_b_1*omega_b_2, c_b_1*omega_b_0*omega_b_2, c_b_2*omega_b_0*omega_b_1)
+
+
+def linear_acceleration(m, F_w):
+    """Acceleration of the COM under a world force (floats; see the module)."""
+    F_w_0, F_w_1, F_w_2 = F_w
+    t0 = (1.0/m)
+    return (F_w_0*t0, F_w_1*t0, F_w_2*t0)
+
+
+def rigid_body_rhs_force_c(x, c_b, a_w):
+    """State derivative under a force only (no torque), on c_b and the COM acceleration (floats; see the module)."""
+    _, _, _, x_3, x_4, x_5, x_6, x_7, x_8, x_9, x_10, x_11, x_12 = x
+    c_b_0, c_b_1, c_b_2, _, _, _ = c_b
+    a_w_0, a_w_1, a_w_2 = a_w
+    t0 = ((1.0/2.0))*x_10
+    t1 = ((1.0/2.0))*x_11
+    t2 = ((1.0/2.0))*x_12
+    return (x_7, x_8, x_9, t0*x_6 - t1*x_5 + t2*x_4, t0*x_5 + t1*x_6 - t2*x_3, -t0*x_4 + t1*x_3 + t2*x_6, -t0*x_3 - t1*x_4 - t2*x_5, a_w_0, a_w_1, a_w_2, c_b_0*x_11*x_12, c_b_1*x_10*x_12, c_b_2*x_10*x_11)
+
+
+def rigid_body_rhs_body_c(x, c_b, a_w, tau_b):
+    """State derivative under a body-frame torque and a force, on c_b and the COM acceleration (floats; see the module)."""
+    _, _, _, x_3, x_4, x_5, x_6, x_7, x_8, x_9, x_10, x_11, x_12 = x
+    c_b_0, c_b_1, c_b_2, c_b_3, c_b_4, c_b_5 = c_b
+    a_w_0, a_w_1, a_w_2 = a_w
+    tau_b_0, tau_b_1, tau_b_2 = tau_b
+    t0 = ((1.0/2.0))*x_10
+    t1 = ((1.0/2.0))*x_11
+    t2 = ((1.0/2.0))*x_12
+    return (x_7, x_8, x_9, t0*x_6 - t1*x_5 + t2*x_4, t0*x_5 + t1*x_6 - t2*x_3, -t0*x_4 + t1*x_3 + t2*x_6, -t0*x_3 - t1*x_4 - t2*x_5, a_w_0, a_w_1, a_w_2, c_b_0*x_11*x_12 + c_b_3*tau_b_0, c_b_1*x_10*x_12 + c_b_4*tau_b_1, c_b_2*x_10*x_11 + c_b_5*tau_b_2)
 
 
 def pivot_body_rhs(q, omega_b, I_p, r_b, F_w, tau_w):
@@ -1750,6 +1789,17 @@ EFFECT_APPLY_BY_CODE = {
 }
 
 
+def effect_apply_b_angular_damping(p, x, v_w, m, I_b):
+    """angular_damping, its body-frame form (the torque in the body frame)."""
+    return None, effect_angular_damping_b(x[10:13], p[0])
+
+
+# built-in effect code -> its body-frame form (FLAG_TORQUE_B)
+EFFECT_APPLY_B_BY_CODE = {
+    5: effect_apply_b_angular_damping,
+}
+
+
 # kernel -> {array input: the flat indices it reads}
 READS = {
     'particle_moments': {'r_w': (0, 1, 2), 'v_w': (0, 1, 2)},
@@ -1767,6 +1817,7 @@ READS = {
     'effect_gravity': {'g_w': (0, 1, 2)},
     'effect_linear_damping': {'v_w': (0, 1, 2)},
     'effect_angular_damping': {'q': (0, 1, 2, 3), 'omega_b': (0, 1, 2)},
+    'effect_angular_damping_b': {'omega_b': (0, 1, 2)},
     'quat_mul': {'a': (0, 1, 2, 3), 'b': (0, 1, 2, 3)},
     'quat_conj': {'q': (0, 1, 2, 3)},
     'quat_normalize': {'q': (0, 1, 2, 3)},
@@ -1796,6 +1847,9 @@ READS = {
     'rigid_body_rhs_torque_c': {'x': (3, 4, 5, 6, 7, 8, 9, 10, 11, 12), 'c_b': (0, 1, 2, 3, 4, 5), 'tau_w': (0, 1, 2)},
     'rigid_body_rhs_c': {'x': (3, 4, 5, 6, 7, 8, 9, 10, 11, 12), 'c_b': (0, 1, 2, 3, 4, 5), 'F_w': (0, 1, 2), 'tau_w': (0, 1, 2)},
     'rigid_body_rates_free_c': {'q': (0, 1, 2, 3), 'omega_b': (0, 1, 2), 'c_b': (0, 1, 2)},
+    'linear_acceleration': {'F_w': (0, 1, 2)},
+    'rigid_body_rhs_force_c': {'x': (3, 4, 5, 6, 7, 8, 9, 10, 11, 12), 'c_b': (0, 1, 2), 'a_w': (0, 1, 2)},
+    'rigid_body_rhs_body_c': {'x': (3, 4, 5, 6, 7, 8, 9, 10, 11, 12), 'c_b': (0, 1, 2, 3, 4, 5), 'a_w': (0, 1, 2), 'tau_b': (0, 1, 2)},
     'pivot_body_rhs': {'q': (0, 1, 2, 3), 'omega_b': (0, 1, 2), 'I_p': (0, 1, 2, 3, 4, 5, 6, 7, 8), 'r_b': (0, 1, 2), 'F_w': (0, 1, 2), 'tau_w': (0, 1, 2)},
     'pivot_kinematics': {'q': (0, 1, 2, 3), 'omega_b': (0, 1, 2), 'anchor_w': (0, 1, 2), 'r_b': (0, 1, 2)},
     'splitting_rotation': {'I_b': (0, 1, 2), 'q': (0, 1, 2, 3), 'omega_b': (0, 1, 2)},
@@ -1855,6 +1909,7 @@ ZEROS = {
     'effect_gravity': {'F_com_w': ()},
     'effect_linear_damping': {'F_com_w': ()},
     'effect_angular_damping': {'tau_com_w': ()},
+    'effect_angular_damping_b': {'tau_com_b': ()},
     'quat_mul': {'ab': ()},
     'quat_conj': {'q_conj': ()},
     'quat_normalize': {'q_unit': ()},
@@ -1884,6 +1939,9 @@ ZEROS = {
     'rigid_body_rhs_torque_c': {'x_dot': (7, 8, 9)},
     'rigid_body_rhs_c': {'x_dot': ()},
     'rigid_body_rates_free_c': {'g': (), 'omega_dot_b': ()},
+    'linear_acceleration': {'a_w': ()},
+    'rigid_body_rhs_force_c': {'x_dot': ()},
+    'rigid_body_rhs_body_c': {'x_dot': ()},
     'pivot_body_rhs': {'q_dot': (), 'omega_dot_b': ()},
     'pivot_kinematics': {'p_w': (), 'v_w': ()},
     'splitting_rotation': {'q_next': (), 'omega_next': ()},

@@ -42,6 +42,30 @@ ROW_MIN_PARAMS = _META.ROW_MIN_PARAMS
 ROW = ROW_PARAMS + ROW_MIN_PARAMS  # the narrowest row (wider when an effect has more parameters)
 USER_CODE_BASE = _META.USER_CODE_BASE
 FLAG_USES_V, FLAG_USES_OMEGA, FLAG_FORCE = _META.FLAG_USES_V, _META.FLAG_USES_OMEGA, _META.FLAG_FORCE
+FLAG_TORQUE_W, FLAG_TORQUE_B = _META.FLAG_TORQUE_W, _META.FLAG_TORQUE_B
+# Right-hand side classes of plain bodies with effects (rhs_classes; csrc/step.c rhs_class, the same rule)
+RHS_FULL, RHS_FORCE, RHS_BODY, RHS_BODY_F = 0, 1, 2, 3
+
+
+def rhs_classes(flags: np.ndarray) -> np.ndarray:
+    """The right-hand side class of plain bodies with effects, from the OR of their effects' rhs_flags: RHS_BODY /
+    RHS_BODY_F when every torque is declared in the body frame (rigid_body_rhs_body_c on the effects' body-frame
+    forms), without / with a force; RHS_FORCE a force and no torque (rigid_body_rhs_force_c on a_w = F/m); else
+    RHS_FULL (rigid_body_rhs_c: world torques). The C backend picks by the same rule (csrc/step.c rhs_class).
+
+    Parameters
+    ----------
+    flags : ndarray of int
+        Per body, the OR of its effects' EffectSpec.rhs_flags.
+
+    Returns
+    -------
+    ndarray of int
+    """
+    tb = ((flags & FLAG_TORQUE_B) != 0) & ((flags & FLAG_TORQUE_W) == 0)
+    force = (flags & FLAG_FORCE) != 0
+    none = (flags & (FLAG_TORQUE_W | FLAG_TORQUE_B)) == 0
+    return np.where(tb, np.where(force, RHS_BODY_F, RHS_BODY), np.where(none, RHS_FORCE, RHS_FULL))
 
 
 @dataclass(frozen=True)
@@ -156,6 +180,15 @@ class EffectSpec:
     def uses_v_w(self) -> bool:
         """Reads v_w (a body on a spherical joint then computes its kinematic COM velocity)."""
         return bool(self.flags & FLAG_USES_V)
+
+    @property
+    def rhs_flags(self) -> int:
+        """The flags both backends pick a plain body's right-hand side by: a built-in effect's own; a user effect
+        adds its torque in the world frame (FLAG_TORQUE_W when it has one, never FLAG_TORQUE_B; a set derived before
+        these flags existed says so through its outputs)."""
+        if self.user_set is None:
+            return self.flags
+        return (self.flags & ~FLAG_TORQUE_B) | (FLAG_TORQUE_W if "tau_w" in self.outputs else 0)
 
     @classmethod
     def from_meta(cls, entry: dict, code: int | None = None, source: str = "built-in", user_set=None) -> "EffectSpec":

@@ -105,21 +105,15 @@ def cross(a, b):
     return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
 
 
-def rotate(q, v, sign=1.0):
-    """R(q) v (sign -1: R(q)^T v) as v + w t + u x t, t = 2 u x v: the stage states' q are not unit, and the
-    model rotates this way, so the reference must too."""
-    u = (sign * q[0], sign * q[1], sign * q[2])
-    t = [2.0 * c for c in cross(u, v)]
-    ut = cross(u, t)
-    return [v[i] + q[3] * t[i] + ut[i] for i in range(3)]
-
-
 def rhs(x, m, I, g, c_lin, c_ang):
-    """d/dt of one body's 13 numbers under gravity g (world), drag -c_lin v_w, torque -c_ang omega_w."""
+    """d/dt of one body's 13 numbers under gravity g (world), drag -c_lin v_w, torque -c_ang omega_b (body frame).
+
+    angular_damping declares tau_B = -c omega_B; a body whose torques are all body-frame takes it so (nothing
+    rotated). Its world form R^T(-c R omega_B) equals it on the unit sphere only: the stage states' q are not unit."""
     v, q, w = x[7:10], x[3:7], x[10:13]
     q_dot = [0.5 * c for c in quat_mul(q, (w[0], w[1], w[2], 0.0))]
     v_dot = [g[i] - c_lin * v[i] / m for i in range(3)]
-    tau_b = rotate(q, [-c_ang * c for c in rotate(q, w)], -1.0)
+    tau_b = [-c_ang * c for c in w]
     gyro = cross(w, [I[i] * w[i] for i in range(3)])
     w_dot = [(tau_b[i] - gyro[i]) / I[i] for i in range(3)]
     return list(v) + q_dot + v_dot + w_dot

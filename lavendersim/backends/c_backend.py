@@ -287,7 +287,7 @@ def user_effect_table(effects: np.ndarray) -> np.ndarray | None:
     for code in user:
         spec = E.spec_for_code(int(code))  # LavenderInputError for a code no declaration has
         assert spec.user_set is not None   # (a user code)
-        table[code - E.USER_CODE_BASE] = (spec.user_set.c_function(spec.name), spec.n_params, spec.flags,
+        table[code - E.USER_CODE_BASE] = (spec.user_set.c_function(spec.name), spec.n_params, spec.rhs_flags,
                                           *spec.user_set.c_tile_functions(spec.name))
     return table
 

@@ -27,6 +27,7 @@ from ..generated import layout as LY
 from ..generated import tableaux as T
 from ..kernels import K
 from . import numpy_scalar as SC
+from ..effects import RHS_BODY, RHS_BODY_F, RHS_FORCE, RHS_FULL
 from .base import (DOPRI5_HMIN_REL, DOPRI5_MAX_SUBSTEPS, FLOAT32_INTEGRATORS, KIND_JOINT, KIND_WHEELS, PLAIN_ONLY,
                Adaptive, Models, divergence_cause, no_root_cause, rk_weights, tableau_of, tolerance_cause,
                wheel_counts)
@@ -44,8 +45,15 @@ class _EffectIndex:
     (body, effect) pairs; the sums are then taken in each body's table order, so they are bitwise
     those of the C backend. A body pays for its own effects only; an unknown code raises."""
 
-    def __init__(self, effects: np.ndarray, idx: np.ndarray, m: np.ndarray, I: np.ndarray, kmod=None):
+    def __init__(self, effects: np.ndarray, idx: np.ndarray, m: np.ndarray, I: np.ndarray, kmod=None,
+                 body_frame=False):
         from .. import effects as E
+
+        def apply_of(spec):
+            """The effect's NumPy function; body_frame: its body-frame form when it has one (FLAG_TORQUE_B)."""
+            if body_frame and spec.rhs_flags & E.FLAG_TORQUE_B:
+                return K.EFFECT_APPLY_B[spec.name]
+            return E.numpy_apply(spec.code) if kmod is None else kmod.EFFECT_APPLY[spec.name]
 
         self.dtype = m.dtype   # float32 plans sum in float32 with the float32 printing of the effects (kmod)
 
@@ -73,7 +81,7 @@ class _EffectIndex:
         for code in np.unique(codes):
             spec = E.spec_for_code(int(code))  # LavenderInputError for a code no effect declares
             sel = np.flatnonzero(codes == code)
-            apply = E.numpy_apply(int(code)) if kmod is None else kmod.EFFECT_APPLY[spec.name]
+            apply = apply_of(spec)
             self.groups.append((apply, sel, pair_loc[sel], effects[pair_row[sel], E.ROW_PARAMS:].copy()))
             has_F[sel], has_T[sel] = "F_w" in spec.outputs, "tau_w" in spec.outputs
             if spec.velocity_dependent:
@@ -88,7 +96,7 @@ class _EffectIndex:
             self.uniform = []
             for r in every:
                 spec = E.spec_for_code(int(effects[r, E.ROW_CODE]))
-                apply = E.numpy_apply(spec.code) if kmod is None else kmod.EFFECT_APPLY[spec.name]
+                apply = apply_of(spec)
                 p = np.broadcast_to(effects[r, E.ROW_PARAMS:].copy(), (n, effects.shape[1] - E.ROW_PARAMS))
                 const = None if set(spec.state_inputs) - {"m", "I_b"} or spec.uses_v_w else apply(p, None, None,
                                                                                                  self.m, self.I)
@@ -294,6 +302,7 @@ class _Plan:
         self.free = np.flatnonzero(plain & ~touched)
         self.forced = np.flatnonzero(plain & touched)
         self.index = _EffectIndex(effects, self.forced, self.m, self.I, None if self.K is K else self.K)
+        self.fgroups: list[_ForcedGroup] | None = None    # the forced bodies by right-hand side class, on first use
         self.m_f, self.I_f = self.m[self.forced], self.I[self.forced]
         self.damped_f = self.index.velocity  # bodies with an effect that reads v_w or omega_b
         self.wheeled = (kind & KIND_WHEELS) != 0
@@ -366,13 +375,15 @@ class _Plan:
             out[:, OM] = 0.0
         if self.free.size:
             out[self.free, X] = self.K.rigid_body_rhs_free_c(x[self.free, X], self.c_free)
-        if self.forced.size == self.nb:     # every body plain with effects: no gather, no scatter
-            F, tau = self.index.sums(x, x[:, V], self.loads_buffer(x))
-            self.K.rigid_body_rhs_c(x, self.m_f, self.c_f, F, tau, out=(out,))
+        if self.forced.size and self.fgroups is None:
+            self.fgroups = _forced_groups(self)
+        fgroups = self.fgroups or []
+        if self.forced.size == self.nb and len(fgroups) == 1:  # every body plain, one class: no gather, no scatter
+            fgroups[0].rhs(self.K, x, x[:, V], self.loads_buffer(x), out)
         elif self.forced.size:
-            xf = x[self.forced, X]
-            F, tau = self.index.sums(xf, xf[:, V])
-            out[self.forced, X] = self.K.rigid_body_rhs_c(xf, self.m_f, self.c_f, F, tau)
+            for fg in fgroups:
+                xf = x[fg.idx, X]
+                out[fg.idx, X] = fg.rhs(self.K, xf, xf[:, V], None, None)
         for g in self.wheels:
             assert u is not None   # (bodies with wheels step with their commands)
             xg = x[g.idx]
@@ -425,6 +436,68 @@ class _Plan:
         if self.jointed.size:
             j = self.jointed
             x[j, P], x[j, V] = K.pivot_kinematics(x[j, Q], x[j, W], self.j_anchor, self.j_r_b)
+
+
+class _ForcedGroup:
+    """Plain bodies with effects of one right-hand side class: idx (into the plan's bodies), their effect index
+    (the body-frame forms for RHS_BODY*), masses and Euler coefficients."""
+
+    def __init__(self, cls, idx, index, m, c):
+        self.cls, self.idx, self.index, self.m, self.c = cls, idx, index, m, c
+        self.const_F: np.ndarray | None = None   # a constant force sum (the index's own array) and its a_w
+        self.a_w: np.ndarray | None = None
+        self.zeros: np.ndarray | None = None
+
+    def accel(self, K, F):
+        """a_w = F/m (linear_acceleration); once per plan when F is the index's constant sum."""
+        if F is self.const_F:
+            return self.a_w
+        a = _soa(K.linear_acceleration(self.m, F))
+        if self.index.uniform is not None and F is self.index.base[0][1]:
+            self.const_F, self.a_w = F, a
+        return a
+
+    def rhs(self, K, x, v, buf, out):
+        F, tau = self.index.sums(x, v, buf)
+        dest = None if out is None else (out,)
+        if self.cls == RHS_FORCE:
+            return K.rigid_body_rhs_force_c(x, self.c, self.accel(K, F), out=dest)
+        if self.cls == RHS_FULL:
+            return K.rigid_body_rhs_c(x, self.m, self.c, F, tau, out=dest)
+        if self.cls == RHS_BODY_F:
+            a = self.accel(K, F)
+        else:
+            if self.zeros is None:
+                self.zeros = _soa(np.zeros((self.m.shape[0], 3)))
+            a = self.zeros
+        return K.rigid_body_rhs_body_c(x, self.c, a, tau, out=dest)
+
+
+def _forced_groups(plan) -> list[_ForcedGroup]:
+    """The plan's plain bodies with effects by class; a float32 plan keeps the full kernel for all (its C loop,
+    csrc/fixed_loop.h, does too)."""
+    from .. import effects as E
+
+    if plan.K is not K:
+        return [_ForcedGroup(RHS_FULL, plan.forced, plan.index, plan.m_f, plan.c_f)]
+    params, effects, _ = plan.source
+    flags = np.zeros(plan.nb, np.int64)
+    for row in effects:
+        f = E.spec_for_code(int(row[E.ROW_CODE])).rhs_flags
+        b = int(row[E.ROW_BODY])
+        if b < 0:
+            flags |= f
+        else:
+            flags[b] |= f
+    cls = E.rhs_classes(flags[plan.forced])
+    out = []
+    for c in np.unique(cls):
+        sel = np.flatnonzero(cls == c)
+        idx = plan.forced[sel]
+        index = plan.index if c == RHS_FULL and sel.size == plan.forced.size else _EffectIndex(
+            effects, idx, plan.m, plan.I, None, body_frame=c in (RHS_BODY, RHS_BODY_F))
+        out.append(_ForcedGroup(int(c), idx, index, plan.m_f[sel], _soa(plan.c_f[sel])))
+    return out
 
 
 def _kernels_f32():

@@ -14,7 +14,9 @@ from __future__ import annotations
 
 import math
 
-from ..effects import ROW_BODY, ROW_CODE, ROW_PARAMS
+import numpy as np
+
+from ..effects import RHS_BODY, RHS_BODY_F, RHS_FORCE, RHS_FULL, ROW_BODY, ROW_CODE, ROW_PARAMS, rhs_classes, spec_for_code
 from ..generated import kernels_scalar as KS
 from ..generated import layout as LY
 
@@ -39,18 +41,28 @@ class ScalarBodies:
     def __init__(self, params, effects):
         self.bodies = []
         body = effects[:, ROW_BODY].astype(int).tolist() if len(effects) else []
-        applies = [KS.EFFECT_APPLY_BY_CODE.get(int(c)) for c in effects[:, ROW_CODE]] if len(effects) else []
+        codes = [int(c) for c in effects[:, ROW_CODE]] if len(effects) else []
+        applies = [KS.EFFECT_APPLY_BY_CODE.get(c) for c in codes]
         self.ok = all(a is not None for a in applies)
         rows = [tuple(r) for r in effects[:, ROW_PARAMS:].tolist()] if len(effects) else []
+        flags = [spec_for_code(c).rhs_flags if a is not None else 0 for c, a in zip(codes, applies)]
         for b, row in enumerate(params.tolist()):
             m, I = row[LY.PARAM_M], tuple(row[LY.PARAM_I_B])
-            mine = [(applies[r], rows[r]) for r in range(len(body)) if body[r] < 0 or body[r] == b]
-            self.bodies.append((KS.euler_coefficients(I), m, I, mine))
+            mine = [r for r in range(len(body)) if body[r] < 0 or body[r] == b]
+            f = 0
+            for r in mine:
+                f |= flags[r]
+            cls = int(rhs_classes(np.array([f]))[0])
+            body_form = cls in (RHS_BODY, RHS_BODY_F)
+            mine_fx = [(KS.EFFECT_APPLY_B_BY_CODE.get(codes[r], applies[r]) if body_form else applies[r], rows[r])
+                       for r in mine]
+            self.bodies.append((KS.euler_coefficients(I), m, I, (cls, mine_fx)))
 
 
 def _rhs(y, c, m, I, effects):
-    """d/dt of one plain body's state y (13 floats) with effects: their sums in table order (from 0.0, as the
-    vectorized sums) and rigid_body_rhs_c."""
+    """d/dt of one plain body's state y (13 floats) with effects (its class, [(apply, p)]): their sums in table order
+    (from 0.0, as the vectorized sums) and its class's right-hand side (numpy_backend._ForcedGroup.rhs)."""
+    cls, effects = effects
     Fx = Fy = Fz = Tx = Ty = Tz = 0.0
     v = y[_V]
     for apply, p in effects:
@@ -59,7 +71,12 @@ def _rhs(y, c, m, I, effects):
             Fx, Fy, Fz = Fx + f[0], Fy + f[1], Fz + f[2]
         if t is not None:
             Tx, Ty, Tz = Tx + t[0], Ty + t[1], Tz + t[2]
-    return KS.rigid_body_rhs_c(y, m, c, (Fx, Fy, Fz), (Tx, Ty, Tz))
+    if cls == RHS_FULL:
+        return KS.rigid_body_rhs_c(y, m, c, (Fx, Fy, Fz), (Tx, Ty, Tz))
+    a = KS.linear_acceleration(m, (Fx, Fy, Fz)) if cls != RHS_BODY else (0.0, 0.0, 0.0)
+    if cls == RHS_FORCE:
+        return KS.rigid_body_rhs_force_c(y, c, a)
+    return KS.rigid_body_rhs_body_c(y, c, a, (Tx, Ty, Tz))
 
 
 def _sum(terms, stage: str, i: int, h: str) -> str:

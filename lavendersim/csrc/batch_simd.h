@@ -73,6 +73,7 @@ typedef void (*lv_tile_fn)(double (*LV_RESTRICT T)[LV_TILE], const double (*LV_R
 #define LV_TILE_RHS_FREE(in, out) lv_rigid_body_rhs_free_c(in, cf, out)
 #define LV_TILE_RHS_TORQUE(in, out) lv_rigid_body_rhs_torque_c(in, cf, tau, out)
 #define LV_TILE_RHS_FULL(in, out) lv_rigid_body_rhs_c(in, mass, cf, F, tau, out)
+#define LV_TILE_RHS_FORCE(in, out) lv_rigid_body_rhs_force_c(in, cf, a, out)
 #define LV_TILE_LOAD_FREE (void)P
 #define LV_TILE_LOAD_TORQUE                                                                             \
     const double tau[3] = {P[LV_TP_TAU][b], P[LV_TP_TAU + 1][b], P[LV_TP_TAU + 2][b]}
@@ -80,6 +81,8 @@ typedef void (*lv_tile_fn)(double (*LV_RESTRICT T)[LV_TILE], const double (*LV_R
     const double tau[3] = {P[LV_TP_TAU][b], P[LV_TP_TAU + 1][b], P[LV_TP_TAU + 2][b]};                 \
     const double F[3] = {P[LV_TP_F][b], P[LV_TP_F + 1][b], P[LV_TP_F + 2][b]};                         \
     const double mass = P[LV_TP_M][b]
+#define LV_TILE_LOAD_FORCE /* LV_RHS_FORCE: the F rows hold a_w = F/m (advance_free_soa) */                    \
+    const double a[3] = {P[LV_TP_F][b], P[LV_TP_F + 1][b], P[LV_TP_F + 2][b]}
 
 /* n_steps RK4 steps of the m bodies of a tile: T[k][b] = state number k of body b, J[k][b] = its Euler
    coefficient c_b[k] (LV_EULER_*).
@@ -112,7 +115,9 @@ typedef void (*lv_tile_fn)(double (*LV_RESTRICT T)[LV_TILE], const double (*LV_R
    side and the RK4 combination (LV_RK4_UPDATE, tableaux.h): every lane does the scalar path's IEEE operations in
    its order (advance_free_rk4 with effect_sums), so results are bitwise its. X: a stage's input, A: the weighted
    sum of the stage derivatives. */
-#define LV_TE_CASE(CODE)                                                                                \
+#define LV_TE_CASE(CODE) LV_TE_CASE_WITH(CODE, lv_effect_apply)
+#define LV_TE_CASE_B(CODE) LV_TE_CASE_WITH(CODE, lv_effect_apply_b)
+#define LV_TE_CASE_WITH(CODE, APPLY)                                                                    \
     case CODE:                                                                                          \
         for (b = b0; b < b1; b++) {                                                                     \
             double x[LV_STATE_SIZE], p[LV_EFFECT_ROW_MIN_PARAMS], f[3], t[3], I[3];                     \
@@ -123,26 +128,37 @@ typedef void (*lv_tile_fn)(double (*LV_RESTRICT T)[LV_TILE], const double (*LV_R
                 t[i] = TAU[i][b];                                                                       \
                 I[i] = P[LV_TP_I + i][b];                                                               \
             }                                                                                           \
-            (void)lv_effect_apply(CODE, p, x, x + LV_STATE_V_W, P[LV_TP_M][b], I, f, t);                \
+            (void)APPLY(CODE, p, x, x + LV_STATE_V_W, P[LV_TP_M][b], I, f, t);                          \
             for (i = 0; i < 3; i++) {                                                                   \
                 F[i][b] = f[i];                                                                         \
                 TAU[i][b] = t[i];                                                                       \
             }                                                                                           \
         }                                                                                               \
         break;
-/* The effect sums at the stage input IN (T, the step's start, or X), one lane loop per effect. */
-#define LV_TE_SUMS(IN)                                                                                  \
+/* The effect sums at the stage input IN (T, the step's start, or X), one lane loop per effect; CASE the case of a
+   built-in effect (LV_TE_CASE: the generated dispatch lv_effect_apply; LV_TE_CASE_B: lv_effect_apply_b, for
+   LV_RHS_BODY*: body-frame torques). */
+#define LV_TE_SUMS(IN, CASE)                                                                            \
     for (i = 0; i < 3; i++)                                                                             \
         for (b = b0; b < b1; b++) F[i][b] = TAU[i][b] = 0.0;                                            \
     for (e = 0; e < fx->n_eff; e++) {                                                                   \
         const double (*ep)[LV_TILE] = fx->EP + fx->off[e], (*in)[LV_TILE] = (const double (*)[LV_TILE])IN; \
         switch (fx->codes[e]) {                                                                         \
-        LV_EFFECT_BUILTINS(LV_TE_CASE)                                                                  \
+        LV_EFFECT_BUILTINS(CASE)                                                                        \
         default: fx->utile[e](b0, b1, in, ep, P[LV_TP_M], P + LV_TP_I, F, TAU); break;                   \
         }                                                                                               \
     }
 #define LV_TE_RHS_TORQUE (void)f, lv_rigid_body_rhs_torque_c(x, cf, t, k)
 #define LV_TE_RHS_FULL lv_rigid_body_rhs_c(x, P[LV_TP_M][b], cf, f, t, k)
+#define LV_TE_RHS_FORCE (void)t, lv_linear_acceleration(P[LV_TP_M][b], f, f), lv_rigid_body_rhs_force_c(x, cf, f, k)
+#define LV_TE_RHS_BODY (void)f, lv_rigid_body_rhs_body_c(x, cf, lv_te_zero3, t, k)
+#define LV_TE_RHS_BODY_F lv_linear_acceleration(P[LV_TP_M][b], f, f), lv_rigid_body_rhs_body_c(x, cf, f, t, k)
+#define LV_TE_APPLY_TORQUE LV_TE_CASE
+#define LV_TE_APPLY_FULL LV_TE_CASE
+#define LV_TE_APPLY_FORCE LV_TE_CASE
+#define LV_TE_APPLY_BODY LV_TE_CASE_B
+#define LV_TE_APPLY_BODY_F LV_TE_CASE_B
+static const double lv_te_zero3[3] = {0.0, 0.0, 0.0};
 /* Stage STAGE's right-hand side at its input IN and the RK4 combination: the next stage's input X and the weighted
    sum A, or (stage 4) the step's end in T. */
 #define LV_TE_STAGE(STAGE, IN, RHS, NORMALIZE)                                                          \
@@ -172,10 +188,10 @@ typedef void (*lv_tile_fn)(double (*LV_RESTRICT T)[LV_TILE], const double (*LV_R
         for (b0 = 0; b0 < m; b0 = b1) {                                                                 \
             b1 = m - b0 < LV_TE_LANES ? m : b0 + LV_TE_LANES;                                           \
             for (s = 0; s < n_steps; s++) {                                                             \
-                LV_TE_SUMS(T)                                                                           \
+                LV_TE_SUMS(T, LV_TE_APPLY_##KIND)                                                       \
                 LV_TE_STAGE(1, T, LV_TE_RHS_##KIND, NORMALIZE)                                          \
                 for (st = 2; st <= 4; st++) {                                                           \
-                    LV_TE_SUMS(X)                                                                       \
+                    LV_TE_SUMS(X, LV_TE_APPLY_##KIND)                                                   \
                     if (st == 2) { LV_TE_STAGE(2, X, LV_TE_RHS_##KIND, NORMALIZE) }                     \
                     else if (st == 3) { LV_TE_STAGE(3, X, LV_TE_RHS_##KIND, NORMALIZE) }                \
                     else { LV_TE_STAGE(4, X, LV_TE_RHS_##KIND, NORMALIZE) }                             \
@@ -207,7 +223,15 @@ typedef void (*lv_tile_fn)(double (*LV_RESTRICT T)[LV_TILE], const double (*LV_R
     LV_DEFINE_TILE_FX(tile_rk4_norm_fx_torque_##SUFFIX, ATTR, 1, TORQUE)                                \
     LV_DEFINE_TILE_FX(tile_rk4_raw_fx_torque_##SUFFIX, ATTR, 0, TORQUE)                                 \
     LV_DEFINE_TILE_FX(tile_rk4_norm_fx_full_##SUFFIX, ATTR, 1, FULL)                                    \
-    LV_DEFINE_TILE_FX(tile_rk4_raw_fx_full_##SUFFIX, ATTR, 0, FULL)
+    LV_DEFINE_TILE_FX(tile_rk4_raw_fx_full_##SUFFIX, ATTR, 0, FULL)                                     \
+    LV_DEFINE_TILE(tile_rk4_norm_force_##SUFFIX, ATTR, 1, FORCE)                                        \
+    LV_DEFINE_TILE(tile_rk4_raw_force_##SUFFIX, ATTR, 0, FORCE)                                         \
+    LV_DEFINE_TILE_FX(tile_rk4_norm_fx_force_##SUFFIX, ATTR, 1, FORCE)                                  \
+    LV_DEFINE_TILE_FX(tile_rk4_raw_fx_force_##SUFFIX, ATTR, 0, FORCE)                                   \
+    LV_DEFINE_TILE_FX(tile_rk4_norm_fx_body_##SUFFIX, ATTR, 1, BODY)                                    \
+    LV_DEFINE_TILE_FX(tile_rk4_raw_fx_body_##SUFFIX, ATTR, 0, BODY)                                     \
+    LV_DEFINE_TILE_FX(tile_rk4_norm_fx_body_f_##SUFFIX, ATTR, 1, BODY_F)                                \
+    LV_DEFINE_TILE_FX(tile_rk4_raw_fx_body_f_##SUFFIX, ATTR, 0, BODY_F)
 
 LV_ISA_COPIES(LV_DEFINE_TILES)
 
@@ -318,6 +342,12 @@ static lv_tile_fn tile_rk4_fn(int isa, int normalize, int cls, long count)
     case LV_RHS_FULL: return normalize ? LV_ISA_PICK(isa, tile_rk4_norm_fx_full) : LV_ISA_PICK(isa, tile_rk4_raw_fx_full);
     case LV_RHS_TORQUE + LV_RHS_CONSTANT:
         return normalize ? LV_ISA_PICK(isa, tile_rk4_norm_torque) : LV_ISA_PICK(isa, tile_rk4_raw_torque);
+    case LV_RHS_FORCE: return normalize ? LV_ISA_PICK(isa, tile_rk4_norm_fx_force) : LV_ISA_PICK(isa, tile_rk4_raw_fx_force);
+    case LV_RHS_FORCE + LV_RHS_CONSTANT:
+        return normalize ? LV_ISA_PICK(isa, tile_rk4_norm_force) : LV_ISA_PICK(isa, tile_rk4_raw_force);
+    case LV_RHS_BODY: return normalize ? LV_ISA_PICK(isa, tile_rk4_norm_fx_body) : LV_ISA_PICK(isa, tile_rk4_raw_fx_body);
+    case LV_RHS_BODY_F:
+        return normalize ? LV_ISA_PICK(isa, tile_rk4_norm_fx_body_f) : LV_ISA_PICK(isa, tile_rk4_raw_fx_body_f);
     default: return normalize ? LV_ISA_PICK(isa, tile_rk4_norm_full) : LV_ISA_PICK(isa, tile_rk4_raw_full);
     }
 }
@@ -430,6 +460,8 @@ static long advance_free_soa(double *state, const double *params, const long *id
         if (!sums) continue; /* an effect tile: its sums are taken per stage */
         effect_sums(x, x + LV_STATE_V_W, prm[LV_PARAM_M], prm + LV_PARAM_I_B, ix->refs + ix->start[ids[j]],
                     ix->start[ids[j] + 1] - ix->start[ids[j]], F, tau);
+        if (!(ix->flags[ids[j]] & (LV_EFFECT_TORQUE_W | LV_EFFECT_TORQUE_B)))
+            lv_linear_acceleration(prm[LV_PARAM_M], F, F); /* LV_RHS_FORCE: a_w = F/m, once per call */
         for (k = 0; k < 3; k++) {
             P[LV_TP_F + k][j] = F[k];
             P[LV_TP_TAU + k][j] = tau[k];

@@ -173,19 +173,74 @@ static inline void builtin_effect_sums(const double *x, const double *v_w, doubl
     for (k = 0; k < n; k++) (void)lv_effect_apply(refs[k].code, refs[k].p, x, v_w, m, I_b, F, tau);
 }
 
-/* d/dt of one plain body's state: the free kernel when no effect applies, else the effects' force and
-   torque summed in table order and passed to the full right-hand side. */
-static void body_rhs(const double *x, const double *prm, const lv_effect_ref *refs, long n_refs, double *xdot)
+/* effect_sums for a plain body whose torques are all declared in the body frame (LV_RHS_BODY*): the generated
+   body dispatch, which adds those torques to tau in the body frame (user effects add no torque there). */
+static inline void effect_sums_b(const double *x, const double *v_w, double m, const double *I_b,
+                                 const lv_effect_ref *refs, long n, double *F, double *tau)
 {
-    const double m = prm[LV_PARAM_M];
+    long k;
+    for (k = 0; k < n; k++) {
+        if (refs[k].user != NULL)
+            refs[k].user(refs[k].p, x, v_w, m, I_b, F, tau);
+        else
+            (void)lv_effect_apply_b(refs[k].code, refs[k].p, x, v_w, m, I_b, F, tau);
+    }
+}
+
+/* Right-hand side classes of plain bodies (rhs_class, from the OR of their effects' flags): LV_RHS_FREE none;
+   LV_RHS_TORQUE world torques only; LV_RHS_FULL a force and world torques; LV_RHS_FORCE a force and no torque
+   (rigid_body_rhs_force_c on a_w = F/m: nothing rotated); LV_RHS_BODY / LV_RHS_BODY_F torques all declared in
+   the body frame (LV_EFFECT_TORQUE_B, the body dispatch), without / with a force (rigid_body_rhs_body_c; without
+   a force a_w = 0, bitwise the +0/m the NumPy backend divides). LV_RHS_CONSTANT is added to LV_RHS_TORQUE,
+   LV_RHS_FULL and LV_RHS_FORCE when every effect of the body reads no state (see rhs_kind). */
+enum { LV_RHS_FREE = 0, LV_RHS_TORQUE = 1, LV_RHS_FULL = 2, LV_RHS_FORCE = 5, LV_RHS_BODY = 8, LV_RHS_BODY_F = 9 };
+#define LV_RHS_CONSTANT 2
+#define LV_RHS_CLASSES 10
+#define rhs_constant(cls) ((cls) == LV_RHS_TORQUE + LV_RHS_CONSTANT || (cls) == LV_RHS_FULL + LV_RHS_CONSTANT || \
+                           (cls) == LV_RHS_FORCE + LV_RHS_CONSTANT)
+static inline int rhs_class(long n_refs, int flags)
+{
+    if (n_refs == 0) return LV_RHS_FREE;
+    if ((flags & LV_EFFECT_TORQUE_B) && !(flags & LV_EFFECT_TORQUE_W))
+        return (flags & LV_EFFECT_FORCE) ? LV_RHS_BODY_F : LV_RHS_BODY;
+    if (!(flags & (LV_EFFECT_TORQUE_W | LV_EFFECT_TORQUE_B))) return LV_RHS_FORCE;
+    return (flags & LV_EFFECT_FORCE) ? LV_RHS_FULL : LV_RHS_TORQUE;
+}
+
+/* d/dt of one plain body with effects (refs) of class cls (rhs_class, no LV_RHS_CONSTANT), cf its Euler
+   coefficients: the effects' sums in table order, then its class's right-hand side (LV_RHS_TORQUE takes the full
+   kernel, bitwise rigid_body_rhs_torque_c). */
+static inline void plain_rhs(int cls, const double *x, double m, const double *I_b, const double *cf,
+                             const lv_effect_ref *refs, long n_refs, double *xdot)
+{
+    double F[3] = {0.0, 0.0, 0.0}, tau[3] = {0.0, 0.0, 0.0}, a[3] = {0.0, 0.0, 0.0};
+    if (cls >= LV_RHS_BODY) {
+        effect_sums_b(x, x + LV_STATE_V_W, m, I_b, refs, n_refs, F, tau);
+        if (cls == LV_RHS_BODY_F) lv_linear_acceleration(m, F, a);
+        lv_rigid_body_rhs_body_c(x, cf, a, tau, xdot);
+        return;
+    }
+    effect_sums(x, x + LV_STATE_V_W, m, I_b, refs, n_refs, F, tau);
+    if (cls == LV_RHS_FORCE) {
+        lv_linear_acceleration(m, F, a);
+        lv_rigid_body_rhs_force_c(x, cf, a, xdot);
+    } else {
+        lv_rigid_body_rhs_c(x, m, cf, F, tau, xdot);
+    }
+}
+
+/* d/dt of one plain body's state: the free kernel when no effect applies, else plain_rhs by its class. */
+static void body_rhs(const double *x, const double *prm, const lv_effect_ref *refs, long n_refs, int flags,
+                     double *xdot)
+{
     const double *I_b = prm + LV_PARAM_I_B;
-    double F[3] = {0.0, 0.0, 0.0}, tau[3] = {0.0, 0.0, 0.0};
+    double cf[LV_EULER_SIZE];
     if (n_refs == 0) {
         lv_rigid_body_rhs_free(x, I_b, xdot);
         return;
     }
-    effect_sums(x, x + LV_STATE_V_W, m, I_b, refs, n_refs, F, tau);
-    lv_rigid_body_rhs(x, m, I_b, F, tau, xdot);
+    lv_euler_coefficients(I_b, cf);
+    plain_rhs(rhs_class(n_refs, flags), x, prm[LV_PARAM_M], I_b, cf, refs, n_refs, xdot);
 }
 
 static int all_finite(const double *x)
@@ -219,6 +274,7 @@ static inline long advance_block(double *state, const double *params, const long
     const double *prm[LV_BLOCK];
     const lv_effect_ref *refs[LV_BLOCK];
     long n_refs[LV_BLOCK];
+    int flags[LV_BLOCK];
     long s;
     int i, j;
     for (j = 0; j < n; j++) {
@@ -226,9 +282,10 @@ static inline long advance_block(double *state, const double *params, const long
         prm[j] = params + b * LV_PARAM_SIZE;
         refs[j] = ix->refs + ix->start[b];
         n_refs[j] = ix->start[b + 1] - ix->start[b];
+        flags[j] = ix->flags[b];
         memcpy(x[j], state + b * LV_STATE_SIZE, sizeof x[j]);
     }
-#define RHS(in, out) for (j = 0; j < n; j++) body_rhs(in[j], prm[j], refs[j], n_refs[j], out[j])
+#define RHS(in, out) for (j = 0; j < n; j++) body_rhs(in[j], prm[j], refs[j], n_refs[j], flags[j], out[j])
     for (s = 0; s < n_steps; s++) {
         if (integrator == LV_PATH_EULER) {
             LV_EULER_STEP(double, RHS, LV_BLOCK_FOR, LV_BLOCK_AT, dt, x, xn, k1, k1, tmp);
@@ -260,28 +317,28 @@ static inline long advance_block(double *state, const double *params, const long
     return -1;
 }
 
-/* Right-hand sides on the lockstep RK4 path (`forced`): LV_RHS_FREE the free kernel; else each body's
-   effects summed in table order, then LV_RHS_FULL the full kernel (as body_rhs), or LV_RHS_TORQUE the
-   torque-only one for bodies whose effects add no force (bitwise the full kernel with F = 0); with
-   `constant` (every effect of every body reads no state, see effects_constant) the sums were taken once
-   per call before the loop (the same inputs give the same bits, as on the SIMD tiles). Each on
-   the body's Euler coefficients c[j] (lv_euler_coefficients, once per call): the *_c kernels divide by
-   nothing and give bitwise the I_b kernels' results (the same printed arithmetic). */
-enum { LV_RHS_FREE = 0, LV_RHS_TORQUE = 1, LV_RHS_FULL = 2 };
-#define LV_RHS_CONSTANT 2 /* added to LV_RHS_TORQUE / LV_RHS_FULL: the body's effects read no state */
+/* Right-hand sides on the lockstep RK4 path (`forced`, rhs_class): LV_RHS_FREE the free kernel; else each body's
+   effects summed in table order (plain_rhs), the torque-only kernel for LV_RHS_TORQUE (bitwise the full kernel
+   with F = 0); with `constant` (every effect of every body reads no state, see effects_constant) the sums (and
+   LV_RHS_FORCE's a_w) were taken once per call before the loop (the same inputs give the same bits, as on the
+   SIMD tiles). Each on the body's Euler coefficients c[j] (lv_euler_coefficients, once per call): the *_c kernels
+   divide by nothing and give bitwise the I_b kernels' results (the same printed arithmetic). */
 #define LV_RK4_RHS(in, out)                                                                             \
     do {                                                                                                \
         if (forced == LV_RHS_FREE) {                                                                    \
             for (j = 0; j < n; j++) lv_rigid_body_rhs_free_c(in[j], cf[j], out[j]);                     \
-        } else {                                                                                        \
+        } else if (forced == LV_RHS_FORCE && constant) {                                                \
+            for (j = 0; j < n; j++) lv_rigid_body_rhs_force_c(in[j], cf[j], F[j], out[j]);              \
+        } else if (forced == LV_RHS_TORQUE) {                                                           \
             for (j = 0; j < n && !constant; j++) {                                                      \
                 F[j][0] = F[j][1] = F[j][2] = tau[j][0] = tau[j][1] = tau[j][2] = 0.0;                  \
                 effect_sums(in[j], in[j] + LV_STATE_V_W, m[j], I[j], refs[j], n_refs[j], F[j], tau[j]);  \
             }                                                                                           \
-            if (forced == LV_RHS_TORQUE)                                                                \
-                for (j = 0; j < n; j++) lv_rigid_body_rhs_torque_c(in[j], cf[j], tau[j], out[j]);       \
-            else                                                                                        \
-                for (j = 0; j < n; j++) lv_rigid_body_rhs_c(in[j], m[j], cf[j], F[j], tau[j], out[j]);  \
+            for (j = 0; j < n; j++) lv_rigid_body_rhs_torque_c(in[j], cf[j], tau[j], out[j]);           \
+        } else if (constant) {                                                                          \
+            for (j = 0; j < n; j++) lv_rigid_body_rhs_c(in[j], m[j], cf[j], F[j], tau[j], out[j]);      \
+        } else {                                                                                        \
+            for (j = 0; j < n; j++) plain_rhs(forced, in[j], m[j], I[j], cf[j], refs[j], n_refs[j], out[j]); \
         }                                                                                               \
     } while (0)
 
@@ -332,6 +389,7 @@ static inline long advance_free_rk4(double *state, const double *params, const l
         F[j][0] = F[j][1] = F[j][2] = tau[j][0] = tau[j][1] = tau[j][2] = 0.0;
         if (constant && forced != LV_RHS_FREE)
             effect_sums(x[j], x[j] + LV_STATE_V_W, m[j], I[j], refs[j], n_refs[j], F[j], tau[j]);
+        if (constant && forced == LV_RHS_FORCE) lv_linear_acceleration(m[j], F[j], F[j]); /* a_w, once per call */
     }
     for (c = 0; c < n_steps; c += cm) {
         cm = n_steps - c < LV_FREE_CHUNK ? n_steps - c : LV_FREE_CHUNK;
@@ -654,7 +712,7 @@ static void ctx_rhs(const body_ctx *c, const double *y, double *yd)
 {
     if (c->kind == 0) {
         int i;
-        body_rhs(y, c->prm, c->refs, c->n_refs, yd);
+        body_rhs(y, c->prm, c->refs, c->n_refs, c->flags, yd);
         for (i = 0; i < LV_NW; i++) yd[LV_XS_OMEGA + i] = 0.0;
     } else {
         model_rhs(y, c->u, c->m, c->prm + LV_PARAM_I_B, c->r, c->kw, c->kind, c->needs_v, c->refs, c->n_refs, yd);
@@ -829,9 +887,7 @@ static inline void dp_rhs(int v, const body_ctx *c, const double *cf, const doub
     if (v == DP_FREE) {
         lv_rigid_body_rhs_free_c(y, cf, yd);
     } else if (v == DP_PLAIN) {
-        double F[3] = {0.0, 0.0, 0.0}, tau[3] = {0.0, 0.0, 0.0};
-        effect_sums(y, y + LV_STATE_V_W, c->m, c->prm + LV_PARAM_I_B, c->refs, c->n_refs, F, tau);
-        lv_rigid_body_rhs_c(y, c->m, cf, F, tau, yd);
+        plain_rhs(rhs_class(c->n_refs, c->flags), y, c->m, c->prm + LV_PARAM_I_B, cf, c->refs, c->n_refs, yd);
     } else {
         ctx_rhs(c, y, yd);
     }
@@ -1291,7 +1347,7 @@ static void expmap_stage(const body_ctx *c, const double *x, const double *q0, c
     double xs[LV_STATE_SIZE];
     memcpy(xs, first ? x : ys, sizeof xs);
     if (!first) lv_quat_exp_step(q0, ys + LV_STATE_Q, 1.0, xs + LV_STATE_Q);
-    body_rhs(xs, c->prm, c->refs, c->n_refs, k);
+    body_rhs(xs, c->prm, c->refs, c->n_refs, c->flags, k);
     lv_rkmk_dexpinv(ys + LV_STATE_Q, ys + LV_STATE_OMEGA_B, k + LV_STATE_Q);
     k[LV_STATE_Q + 3] = 0.0;
 }
@@ -1448,6 +1504,10 @@ typedef long (*lv_forced_fn)(double *state, const double *params, const long *id
         case LV_RHS_TORQUE: return LV_FORCED(LV_RHS_TORQUE, 0);                                         \
         case LV_RHS_TORQUE + LV_RHS_CONSTANT: return LV_FORCED(LV_RHS_TORQUE, 1);                       \
         case LV_RHS_FULL + LV_RHS_CONSTANT: return LV_FORCED(LV_RHS_FULL, 1);                           \
+        case LV_RHS_FORCE: return LV_FORCED(LV_RHS_FORCE, 0);                                           \
+        case LV_RHS_FORCE + LV_RHS_CONSTANT: return LV_FORCED(LV_RHS_FORCE, 1);                         \
+        case LV_RHS_BODY: return LV_FORCED(LV_RHS_BODY, 0);                                             \
+        case LV_RHS_BODY_F: return LV_FORCED(LV_RHS_BODY_F, 0);                                         \
         default: return LV_FORCED(LV_RHS_FULL, 0);                                                      \
         }                                                                                               \
     }
@@ -1499,12 +1559,10 @@ LV_FLATTEN static long advance_group(double *state, const double *params, const 
 /* The right-hand side kind of plain body b (LV_RHS_*), plus LV_RHS_CONSTANT when it has effects and
    they are all constant (effects_constant: such a group takes the SIMD tiles with effects, or the
    scalar blocks with its sums taken once per call). */
-#define LV_RHS_CLASSES 5
 static int rhs_kind(const lv_effect_index *ix, long b)
 {
-    const int c = ix->start[b + 1] > ix->start[b] && effects_constant(ix, b) ? LV_RHS_CONSTANT : 0;
-    if (ix->start[b + 1] == ix->start[b]) return LV_RHS_FREE;
-    return c + ((ix->flags[b] & LV_EFFECT_FORCE) ? LV_RHS_FULL : LV_RHS_TORQUE);
+    const int cls = rhs_class(ix->start[b + 1] - ix->start[b], ix->flags[b]);
+    return cls != LV_RHS_FREE && cls < LV_RHS_BODY && effects_constant(ix, b) ? cls + LV_RHS_CONSTANT : cls;
 }
 
 /* ---- the SoA tiles of one call, over threads ---------------------------------------------------
@@ -1690,7 +1748,7 @@ static int advance_fixed(double *state, const double *params, long nb, const lv_
                          int isa, int threads, long *ids, long *limit, long *best)
 {
     double last[LV_BLOCK][LV_STATE_SIZE];
-    long b, k, s, lim, n_models = 0, count[LV_RHS_CLASSES] = {0, 0, 0, 0, 0}, first[LV_RHS_CLASSES];
+    long b, k, s, lim, n_models = 0, count[LV_RHS_CLASSES] = {0}, first[LV_RHS_CLASSES];
     int j, n, cls, status = LV_OK;
     for (b = 0; b < nb; b++) {
         if (models != NULL && (int)models->rows[b * LV_MODEL_SIZE + LV_MODEL_KIND] != 0) n_models++;
@@ -1715,7 +1773,7 @@ static int advance_fixed(double *state, const double *params, long nb, const lv_
            same built-in effects (effects_tileable: the effect tiles); smaller such groups get the same on the scalar blocks (one
            body with one applied torque: 1.57-1.69x a plain body there, 1.74x on a 1-body tile; bench
            per-body effects, loaded machine) */
-        if ((cls == LV_RHS_FREE || cls > LV_RHS_FULL || effects_tileable(ix, list, count[cls], isa))
+        if ((cls == LV_RHS_FREE || rhs_constant(cls) || effects_tileable(ix, list, count[cls], isa))
             && count[cls] >= LV_TILE_MIN && integrator == LV_PATH_RK4 && isa != LV_ISA_SCALAR) {
             if (advance_soa_threads(state, params, list, count[cls], tile_rk4_fn(isa, normalize, cls, count[cls]),
                                     cls == LV_RHS_FREE ? NULL : ix, dt, n_steps, threads, limit, best) == LV_DIVERGED)
