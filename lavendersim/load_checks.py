@@ -28,6 +28,10 @@ from .kernels import K
 from .generated import layout as LY
 from .generated import tableaux as TABLEAUX
 
+# The C screen's rounding margin on every limit it reads (Sim._safe_rates, LoadBudget.screen_rows): the screen never
+# passes what the NumPy check would refuse.
+SCREEN_MARGIN = 1 - 1e-12
+
 
 def decay_rows(effects: np.ndarray) -> np.ndarray:
     """Boolean mask of the effect table's rows whose effect is a pure linear decay (it has a printed rate)."""
@@ -200,7 +204,7 @@ class LoadBudget:
             return
         Lmax, Pmax = self.limits(steps)
         f = self.plain
-        margin = 1 - 1e-12
+        margin = SCREEN_MARGIN
         with np.errstate(over="ignore", invalid="ignore"):
             T = Pmax ** 2 / (2 * self.params[:, LY.PARAM_M])
             E = np.where(f, T + Lmax ** 2 / (2 * self.params[:, LY.PARAM_I_B].min(axis=1)), T)

@@ -859,16 +859,16 @@ class Sim:
                 room = np.maximum(self.max_growth * self._E0[f] - T, 0.0)
                 w_E = np.sqrt(room / half_Imax)
                 w_L = self.max_growth * self._L0[f] / I.max(axis=1)
-                self._w_safe[f] = np.minimum(w_E, w_L) * (1 - 1e-12)   # rounding margin: never skip a violation
+                self._w_safe[f] = np.minimum(w_E, w_L) * load_checks.SCREEN_MARGIN   # never skip a violation
             with np.errstate(over="ignore"):
                 E0, L0 = self._E0[f], self._L0[f]
-                margin = 1 - 1e-12      # rounding: the C screen never passes what the NumPy check would refuse
+                margin = load_checks.SCREEN_MARGIN
                 self._g_fast[f, 1] = np.where(E0 > 0, self.max_growth * E0 * margin, np.inf)
                 self._g_fast[f, 2] = np.where(L0 > 0, (self.max_growth * L0) ** 2 * margin, np.inf)
         with np.errstate(over="ignore"):
             L0 = self._L0[fw]
             self._g_fast[fw, 0], self._g_fast[fw, 1] = -np.inf, np.inf
-            self._g_fast[fw, 2] = np.where(L0 > 0, (self.max_growth * L0) ** 2 * (1 - 1e-12), np.inf)
+            self._g_fast[fw, 2] = np.where(L0 > 0, (self.max_growth * L0) ** 2 * load_checks.SCREEN_MARGIN, np.inf)
 
     def _g_inf(self) -> np.ndarray:
         """(nb, 3) growth limits that never fire: the C screen's table when it checks the validity bound only."""
