@@ -415,6 +415,13 @@ class Trajectory:
         return BodyState.of_slots(self.x[:, i], self.Omega[:, i], int(self.wheel_counts[i]))
 
 
+# The right-hand side a plain body with effects runs, per class (effects.rhs_classes; Sim.pipeline names it)
+_RHS_KERNEL = {effects_mod.RHS_FULL: "rigid_body_rhs (world torques)",
+               effects_mod.RHS_FORCE: "rigid_body_rhs_force (a force, no torque: a_w = F/m)",
+               effects_mod.RHS_BODY: "rigid_body_rhs_body (torques declared in the body frame)",
+               effects_mod.RHS_BODY_F: "rigid_body_rhs_body (a force; torques declared in the body frame)"}
+
+
 class Sim:
     """Steps a scene's bodies (see the module docstring).
 
@@ -1180,7 +1187,8 @@ class Sim:
                 lines.append(f"{name}: rigid_body_rhs_free (torque- and force-free; no effect terms)")
             else:
                 terms = " + ".join(e.describe() for e in mine)
-                lines.append(f"{name}: {terms} -> rigid_body_rhs")
+                flags = np.bitwise_or.reduce([e.spec.rhs_flags for e in mine])
+                lines.append(f"{name}: {terms} -> {_RHS_KERNEL[int(effects_mod.rhs_classes(np.array([flags]))[0])]}")
         if self._frames is not None:
             for i in self._frames.idx:
                 lines[1 + int(i)] += "; full inertia tensor: stepped in its principal frame (constant R_bp)"

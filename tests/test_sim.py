@@ -93,6 +93,23 @@ def test_pipeline_lists_only_declared_effects_per_body():
     p = lv.Sim(s, backend="numpy").pipeline
     assert p[1].startswith("a: rigid_body_rhs_free")
     assert "angular_damping" in p[2] and "gravity" not in " ".join(p)
+    assert p[2].endswith("-> rigid_body_rhs_body (torques declared in the body frame)")   # the kernel it runs
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_pipeline_names_the_right_hand_side_each_body_runs(backend):
+    """A force alone, world torques, body-frame torques with a force: the class both backends pick (rhs_classes)."""
+    s = lv.Scene()
+    for n in "abc":
+        s.add_body(lv.Body.box(n, 1, (1, 2, 3)))
+    s.add_effect("gravity", body="a")
+    s.add_effect("applied_torque", body="b", torque_w=[0.0, 0.0, 1.0])
+    s.add_effect("linear_damping", body="c", c=0.1)
+    s.add_effect("angular_damping", body="c", c=0.1)
+    p = lv.Sim(s, backend=backend).pipeline
+    assert p[1].endswith("-> rigid_body_rhs_force (a force, no torque: a_w = F/m)")
+    assert p[2].endswith("-> rigid_body_rhs (world torques)")
+    assert p[3].endswith("-> rigid_body_rhs_body (a force; torques declared in the body frame)")
 
 
 @pytest.mark.parametrize("backend", BACKENDS)
