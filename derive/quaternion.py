@@ -94,11 +94,16 @@ def _check_identities() -> None:
         raise RuntimeError("derive: R(q) v does not equal q ⊗ [v,0] ⊗ q*")
     if (rotate_to_body(q, v) - rotation_matrix(q).T * v).applyfunc(sp.expand) != sp.zeros(3, 1):
         raise RuntimeError("derive: rotate_to_body(q, v) is not R(q)ᵀ v as a polynomial")
-    a, b, c = sp.symbols("a b c", real=True)
-    qe = euler_xyz_quat(a, b, c)
-    d = (rotation_matrix(qe) - rot_x(a) * rot_y(b) * rot_z(c)).applyfunc(
-        lambda e: sp.simplify(sp.expand_trig(e)))
-    if d != sp.zeros(3, 3):
+    # Euler angles 2a, 2b, 2c: the quaternion holds cos/sin of a, b, c, the matrices (expand_trig) polynomials in them;
+    # each entry of the difference, with cos and sin as symbols, must reduce to 0 modulo cos^2 + sin^2 = 1 (exact, and
+    # ~40x cheaper than simplify on the entries)
+    half = sp.symbols("a b c", real=True)
+    qe = euler_xyz_quat(*(2 * h for h in half))
+    d = rotation_matrix(qe) - rot_x(2 * half[0]) * rot_y(2 * half[1]) * rot_z(2 * half[2])
+    cs = sp.symbols("c_a s_a c_b s_b c_c s_c")
+    poly = {f(h): cs[2 * i + j] for i, h in enumerate(half) for j, f in enumerate((sp.cos, sp.sin))}
+    circles = [cs[2 * i] ** 2 + cs[2 * i + 1] ** 2 - 1 for i in range(3)]
+    if any(sp.reduced(sp.expand(sp.expand_trig(e).xreplace(poly)), circles, *cs)[1] != 0 for e in d):
         raise RuntimeError("derive: Euler XYZ quaternion does not reproduce Rx Ry Rz")
 
 
