@@ -92,6 +92,7 @@ class _EffectIndex:
         # An effect that reads no state value (its kernel's inputs: parameters, m, I_b) is evaluated once here.
         self.uniform = None
         self.zeros: np.ndarray | None = None     # (n, 3) zeros, struct-of-arrays, made on first use (_zeros)
+        self.program: tuple | None = None       # _uniform_sums' calls (_uniform_program), on first use
         if n and every.size == len(effects):
             self.uniform = []
             for r in every:
@@ -121,34 +122,49 @@ class _EffectIndex:
             acc += c
         return k, acc
 
-    def _uniform_sums(self, x, v, out):
-        """sums() when every effect acts on every body: each effect on all the bodies at once, in table order, the
-        leading constant terms folded once per plan (_constant_prefix). out: (F, tau, and two scratch arrays of
-        their shape); the effects' kernels write into them where their printing takes out= (no copies)."""
-        done = [0, 0]       # terms of each output summed so far
+    def _uniform_program(self) -> tuple:
+        """_uniform_sums' calls, fixed once per plan: for each effect that adds a term each call (apply, p, its
+        constant output or None, takes_out, the out slots its output is written into (None: not written), the adds
+        (j, prev): out[j] = prev + t_j with prev None (t + 0), an array (the constant prefix) or j (the running sum)),
+        and per output the array returned when no term is added each call (None: out[j])."""
+        done, prog = [0, 0], []     # terms of each output summed so far
         for apply, p, has_F, has_T, const, takes_out in self.uniform:
             dest: list = [None, None]
+            adds = []
             for j, has in enumerate((has_F, has_T)):
                 k, base = self.base[j]
                 done[j] += has
                 if has and done[j] > k:     # the first term is written into the sum itself, then + 0 in place
-                    dest[j] = out[j] if done[j] == 1 else out[2 + j]
-            if dest[0] is None and dest[1] is None:
-                continue
-            ft = const or (apply(p, x, v, self.m, self.I, out=tuple(dest)) if takes_out
-                           else apply(p, x, v, self.m, self.I))
-            for j in (0, 1):
-                if dest[j] is not None:
-                    # the running sum 0 + t_1 + t_2 + ...: the first term as t + 0 (the same number, -0 included)
-                    k, base = self.base[j]
-                    prev = base if done[j] == k + 1 else out[j]
-                    np.add(ft[j], 0.0, out=out[j]) if prev is None else np.add(prev, ft[j], out=out[j])
-        res = [out[0], out[1]]
-        for j in (0, 1):     # no term, or constant terms only: the plan's own array (read only; no copy)
-            k, base = self.base[j]
-            if done[j] == k:
-                res[j] = base if k else self._zeros()
-        return res[0], res[1]
+                    dest[j] = j if done[j] == 1 else 2 + j
+                    adds.append((j, base if done[j] == k + 1 else j))
+            if adds:
+                prog.append((apply, p, const, takes_out, tuple(dest), tuple(adds)))
+        fixed = tuple(None if done[j] > self.base[j][0] else (self.base[j][1] if self.base[j][0] else self._zeros())
+                      for j in (0, 1))
+        return tuple(prog), fixed
+
+    def _uniform_sums(self, x, v, out):
+        """sums() when every effect acts on every body: each effect on all the bodies at once, in table order, the
+        leading constant terms folded once per plan (_constant_prefix). out: (F, tau, and two scratch arrays of
+        their shape); the effects' kernels write into them where their printing takes out= (no copies)."""
+        if self.program is None:
+            self.program = self._uniform_program()
+        m, I = self.m, self.I
+        for apply, p, const, takes_out, (a, b), adds in self.program[0]:
+            if const is not None:
+                ft = const
+            elif takes_out:
+                ft = apply(p, x, v, m, I, out=(None if a is None else out[a], None if b is None else out[b]))
+            else:
+                ft = apply(p, x, v, m, I)
+            for j, prev in adds:
+                # the running sum 0 + t_1 + t_2 + ...: the first term as t + 0 (the same number, -0 included)
+                if prev is None:
+                    np.add(ft[j], 0.0, out=out[j])
+                else:
+                    np.add(out[j] if isinstance(prev, int) else prev, ft[j], out=out[j])
+        fF, fT = self.program[1]     # no term, or constant terms only: the plan's own array (read only; no copy)
+        return out[0] if fF is None else fF, out[1] if fT is None else fT
 
     def _zeros(self) -> np.ndarray:
         if self.zeros is None:
@@ -447,15 +463,19 @@ class _ForcedGroup:
         self.const_F: np.ndarray | None = None   # a constant force sum (the index's own array) and its a_w
         self.a_w: np.ndarray | None = None
         self.zeros: np.ndarray | None = None
+        self.a_buf: np.ndarray | None = None
 
     def accel(self, K, F):
-        """a_w = F/m (linear_acceleration); once per plan when F is the index's constant sum."""
+        """a_w = F/m (linear_acceleration), struct-of-arrays; once per plan when F is the index's constant sum, else
+        into the group's buffer (rewritten at every call)."""
         if F is self.const_F:
             return self.a_w
-        a = _soa(K.linear_acceleration(self.m, F))
         if self.index.uniform is not None and F is self.index.base[0][1]:
-            self.const_F, self.a_w = F, a
-        return a
+            self.const_F, self.a_w = F, K.linear_acceleration(self.m, F, out=(_soa(np.empty_like(F)),))
+            return self.a_w
+        if self.a_buf is None or self.a_buf.shape != F.shape:
+            self.a_buf = _soa(np.empty_like(F))
+        return K.linear_acceleration(self.m, F, out=(self.a_buf,))
 
     def rhs(self, K, x, v, buf, out):
         F, tau = self.index.sums(x, v, buf)
@@ -481,14 +501,12 @@ def _forced_groups(plan) -> list[_ForcedGroup]:
     if plan.K is not K:
         return [_ForcedGroup(RHS_FULL, plan.forced, plan.index, plan.m_f, plan.c_f)]
     params, effects, _ = plan.source
-    flags = np.zeros(plan.nb, np.int64)
-    for row in effects:
-        f = E.spec_for_code(int(row[E.ROW_CODE])).rhs_flags
-        b = int(row[E.ROW_BODY])
-        if b < 0:
-            flags |= f
-        else:
-            flags[b] |= f
+    # each row's flags through its code's (one spec look-up per distinct code); a scene-wide row's to every body
+    codes, inv = np.unique(effects[:, E.ROW_CODE].astype(np.int64), return_inverse=True)
+    row_flags = np.array([E.spec_for_code(int(c)).rhs_flags for c in codes], np.int64)[inv.reshape(-1)]
+    body = effects[:, E.ROW_BODY].astype(np.int64)
+    flags = np.full(plan.nb, np.bitwise_or.reduce(row_flags[body < 0]) if (body < 0).any() else 0, np.int64)
+    np.bitwise_or.at(flags, body[body >= 0], row_flags[body >= 0])
     cls = E.rhs_classes(flags[plan.forced])
     out = []
     for c in np.unique(cls):
