@@ -8,7 +8,8 @@ body-frame drag torque as -c_ang ω_b; the backend rotates it into the world and
 they agree with the backend to the integrator's truncation error, not to the bit.
 
 * :func:`hand_rk4_soa` — struct-of-arrays (13, N) state, the inertia coefficients once per run, only q and ω
-  (and, with drag, v) through the stages, p and v advanced in closed form where the stages do not need them.
+  (and, with effects, v) through the stages, in preallocated buffers (ufuncs with out=, in-place sums; no rows
+  stacked into new arrays), p from v without a right-hand side of its own.
 * :func:`python_rk4` — one body, plain Python floats (lists and tuples), the same RK4.
 * :func:`soa_state` and :func:`python_state` turn the backend's (N, 13) rows into each peer's layout.
 """
@@ -41,10 +42,15 @@ def hand_rk4_soa(X: np.ndarray, I_b: np.ndarray, dt: float, n_steps: int, m=None
                  c_ang: float = 0.0) -> None:
     """Classic RK4 on N bodies in struct-of-arrays layout, q normalized after each step; X updated in place.
 
+    The stages go through preallocated (k, N) buffers (ufuncs with out=, no stacking of rows): torque-free, only
+    (q, omega) (7 rows) and p += dt v; with effects, the contiguous rows (q, v_w, omega) of X (10 rows), p from
+    the stages' v.
+
     Parameters
     ----------
     X : ndarray (13, N)
-        States, one row per number: p_w (m), q (x, y, z, w), v_w (m/s), omega_b (rad/s) (:func:`soa_state`).
+        States, C-contiguous, one row per number: p_w (m), q (x, y, z, w), v_w (m/s), omega_b (rad/s)
+        (:func:`soa_state`).
     I_b : ndarray (3, N)
         Principal moments, body frame, kg·m².
     dt : float
@@ -60,44 +66,70 @@ def hand_rk4_soa(X: np.ndarray, I_b: np.ndarray, dt: float, n_steps: int, m=None
         Angular drag coefficient, N·m·s/rad (torque -c_ang omega_w, i.e. -c_ang omega_b in the body frame).
     """
     k0, k1, k2, r0, r1, r2 = _coefficients(I_b)
-    if c_ang:
-        d0, d1, d2 = -c_ang * r0, -c_ang * r1, -c_ang * r2
-    forced = g_w is not None or c_lin
-    if forced:
-        g = np.zeros(3) if g_w is None else np.asarray(g_w, dtype=np.float64)
-        dv = -c_lin / np.asarray(m, dtype=np.float64) if c_lin else 0.0
-    p, q, v, w = X[0:3], X[3:7], X[7:10], X[10:13]
+    d = (-c_ang * r0, -c_ang * r1, -c_ang * r2) if c_ang else None
+    forced = g_w is not None or bool(c_lin)
+    g = (np.zeros(3) if g_w is None else np.asarray(g_w, dtype=np.float64))[:, None]
+    dv = -c_lin / np.asarray(m, dtype=np.float64) if c_lin else None
+    n = X.shape[1]
+    p, q = X[0:3], X[3:7]
+    rows = 10 if forced else 7                 # (q, v, omega) of X, or (q, omega) gathered
+    y = X[3:13] if forced else np.empty((7, n))
+    iw = 7 if forced else 4                    # omega's first row in y
+    ks = [np.empty((rows, n)) for _ in range(4)]
+    ys = [np.empty((rows, n)) for _ in range(3)]
+    s = np.empty((rows, n))
     h2, h6 = 0.5 * dt, dt / 6.0
 
-    def f(q, w):
-        qx, qy, qz, qw = q
-        wx, wy, wz = w
+    def f(y, k):
+        qx, qy, qz, qw = y[0:4]
+        wx, wy, wz = y[iw:iw + 3]
         hx, hy, hz = 0.5 * wx, 0.5 * wy, 0.5 * wz
-        dq = np.array((hx * qw - hy * qz + hz * qy, hx * qz + hy * qw - hz * qx,
-                       -hx * qy + hy * qx + hz * qw, -hx * qx - hy * qy - hz * qz))
-        dw = np.array((k0 * wy * wz, k1 * wx * wz, k2 * wx * wy))
-        if c_ang:
-            dw[0] += d0 * wx
-            dw[1] += d1 * wy
-            dw[2] += d2 * wz
-        return dq, dw
+        np.add(hx * qw - hy * qz, hz * qy, out=k[0])
+        np.subtract(hx * qz + hy * qw, hz * qx, out=k[1])
+        np.add(hy * qx - hx * qy, hz * qw, out=k[2])
+        np.negative(hx * qx + hy * qy + hz * qz, out=k[3])
+        if d is None:
+            np.multiply(k0 * wy, wz, out=k[iw])
+            np.multiply(k1 * wx, wz, out=k[iw + 1])
+            np.multiply(k2 * wx, wy, out=k[iw + 2])
+        else:
+            np.add(k0 * wy * wz, d[0] * wx, out=k[iw])
+            np.add(k1 * wx * wz, d[1] * wy, out=k[iw + 1])
+            np.add(k2 * wx * wy, d[2] * wz, out=k[iw + 2])
+        if forced:      # v' = g + dv v
+            kv = k[4:7]
+            if dv is None:
+                kv[...] = g
+            else:
+                np.multiply(y[4:7], dv, out=kv)
+                kv += g
 
     for _ in range(n_steps):
-        a_q, a_w = f(q, w)
-        b_q, b_w = f(q + h2 * a_q, w + h2 * a_w)
-        c_q, c_w = f(q + h2 * b_q, w + h2 * b_w)
-        d_q, d_w = f(q + dt * c_q, w + dt * c_w)
-        if forced:      # v' = g + dv v (linear, decoupled): RK4's stages in closed form
-            a_v = g[:, None] + dv * v
-            b_v = g[:, None] + dv * (v + h2 * a_v)
-            c_v = g[:, None] + dv * (v + h2 * b_v)
-            d_v = g[:, None] + dv * (v + dt * c_v)
-            p += h6 * (v + 2.0 * (v + h2 * a_v) + 2.0 * (v + h2 * b_v) + (v + dt * c_v))
-            v += h6 * (a_v + 2.0 * b_v + 2.0 * c_v + d_v)
+        if not forced:
+            y[0:4], y[4:7] = q, X[10:13]
+        f(y, ks[0])
+        for i, a in ((1, h2), (2, h2), (3, dt)):
+            np.multiply(ks[i - 1], a, out=ys[i - 1])
+            ys[i - 1] += y
+            f(ys[i - 1], ks[i])
+        if forced:      # p' = v: the stages' v
+            sp = s[0:3]
+            np.add(ys[0][4:7], ys[1][4:7], out=sp)
+            sp *= 2.0
+            sp += y[4:7]
+            sp += ys[2][4:7]
+            sp *= h6
+            p += sp
         else:
-            p += dt * v
-        q += h6 * (a_q + 2.0 * b_q + 2.0 * c_q + d_q)
-        w += h6 * (a_w + 2.0 * b_w + 2.0 * c_w + d_w)
+            p += dt * X[7:10]
+        np.add(ks[1], ks[2], out=s)
+        s *= 2.0
+        s += ks[0]
+        s += ks[3]
+        s *= h6
+        y += s
+        if not forced:
+            q[...], X[10:13] = y[0:4], y[4:7]
         q /= np.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
 
 
