@@ -1,13 +1,14 @@
 """`lavendersim derive` writes generated/ atomically: killed at any moment, the folder is old-and-intact
 or new-and-complete, and the next run cleans up what the killed one left.
 
-The kill tests run `lavendersim derive --out DIR` in a subprocess on a temporary copy of generated/
+The kill tests run `lavendersim derive --out DIR` in a process of its own on a temporary copy of generated/
 whose content is an "old generation" (every file changed, one retired file, a manifest recording
 them), SIGKILL it at seeded times spread over its run, and compare DIR's file set and sha256s with
 the old and the new manifests after every kill. The quick test skips the SymPy derivation (render()
-returns the committed files, which the manifest fast path proved current) and stretches every fsync
-by a few tens of milliseconds, so the kills land while files are being written; the slow one kills
-the real, unpatched derivation.
+returns the committed files, which the manifest fast path proved current), forks each derive from one
+interpreter that imported the CLI once, and stretches every fsync by a few tens of milliseconds, so the
+kills land while files are being written; the slow one kills the real, unpatched derivation (a fresh
+`python -m lavendersim.cli derive` each time).
 """
 from __future__ import annotations
 
@@ -34,30 +35,65 @@ from lavendersim.derive import atomic, codegen
 GEN = generated_dir()
 DEADLINE = 300.0   # s: generous, the machine is shared and loaded
 
-# The quick kill test's derive: the real CLI and codegen.write, with render() returning the committed
-# files (no SymPy) and each fsync stretched by DELAY so the write phase is long enough to hit.
+# The quick kill test's derives: the real CLI and codegen.write, with render() returning the committed
+# files (no SymPy) and each fsync stretched by DELAY so the write phase is long enough to hit. One server
+# interpreter imports them once; each derive is a process forked from it (a process of its own, killed by pid),
+# so a run does not pay an interpreter's start and the imports (~0.8 s CPU each, 14 runs).
+# Server protocol: a line "OUT<TAB>DELAY<TAB>PAUSE_AT<TAB>STDERR_FILE" forks a derive; the server prints
+# "pid N", releases it, prints "ended" when it has ended (not yet reaped, so a kill by pid cannot reach another
+# process), and after a line "reap", "exit RC" (a killed one: -9); the derive prints "started", "writing"
+# (first fsync), "paused" (in fsync PAUSE_AT, where it then sleeps to be killed).
 FAST_DERIVE = textwrap.dedent("""
-    import os, sys, time
+    import os, sys, time, traceback
     from pathlib import Path
     from lavendersim import cli
     from lavendersim.derive import codegen
-    gen, out, delay, pause_at = Path(sys.argv[1]), sys.argv[2], float(sys.argv[3]), int(sys.argv[4])
+    gen = Path(sys.argv[1])
     files = {p.name: p.read_text(encoding="utf-8") for p in gen.iterdir() if p.is_file() and p.name != "manifest.json"}
     codegen.render = lambda progress=None: dict(files)
     _fsync = os.fsync
-    calls = []
-    def slow_fsync(fd):
-        calls.append(fd)
-        if len(calls) == 1:
-            print("writing", flush=True)
-        if len(calls) == pause_at:      # stop here for good: the test kills the process at this point
-            print("paused", flush=True)
-            time.sleep(3600)
-        time.sleep(delay)
-        _fsync(fd)
-    os.fsync = slow_fsync
-    print("started", flush=True)
-    sys.exit(cli.main(["derive", "--out", out]))
+
+    def derive(out, delay, pause_at):
+        calls = []
+        def slow_fsync(fd):
+            calls.append(fd)
+            if len(calls) == 1:
+                print("writing", flush=True)
+            if len(calls) == pause_at:      # stop here for good: the test kills the process at this point
+                print("paused", flush=True)
+                time.sleep(3600)
+            time.sleep(delay)
+            _fsync(fd)
+        os.fsync = slow_fsync
+        print("started", flush=True)
+        return cli.main(["derive", "--out", out])
+
+    for line in sys.stdin:
+        out, delay, pause_at, err = line.rstrip("\\n").split("\\t")
+        go_r, go_w = os.pipe()
+        pid = os.fork()
+        if pid == 0:                        # the derive: waits until its pid is printed, exits as `python -c` would
+            os.close(go_w)
+            os.read(go_r, 1)
+            os.dup2(os.open(err, os.O_WRONLY | os.O_CREAT | os.O_TRUNC), 2)
+            try:
+                code = derive(out, float(delay), int(pause_at))
+            except SystemExit as exc:
+                code = exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 1)
+            except BaseException:
+                traceback.print_exc()
+                code = 1
+            sys.stdout.flush()
+            sys.stderr.flush()
+            os._exit(code)
+        os.close(go_r)
+        print(f"pid {pid}", flush=True)
+        os.write(go_w, b"g")
+        os.close(go_w)
+        os.waitid(os.P_PID, pid, os.WEXITED | os.WNOWAIT)    # ended, not reaped: its pid stays its own until "reap"
+        print("ended", flush=True)
+        assert sys.stdin.readline() == "reap\\n"
+        print(f"exit {os.waitstatus_to_exitcode(os.waitpid(pid, 0)[1])}", flush=True)
 """)
 
 
@@ -109,48 +145,87 @@ def state(out: Path, old_man: dict, new_man: dict) -> str:
     return f"a mix (manifest of neither run; not old: {bad_old})"
 
 
-def run_fast(out: Path, delay: float, kill_after: float | None, wait_for: str = "started", pause_at: int = 0) -> dict:
-    """One fast derive into out; SIGKILL it kill_after s after it printed `wait_for` (None: let it finish).
-    pause_at=k: the derive stops for good in its k-th fsync (and prints "paused"), to be killed there."""
-    proc = subprocess.Popen([sys.executable, "-c", FAST_DERIVE, str(GEN), str(out), str(delay), str(pause_at)],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    lines: queue.Queue = queue.Queue()
-    reader_stop = []            # why the reader thread stopped
+class FastDerives:
+    """The FAST_DERIVE server (a context manager): ``run(out, delay, kill_after, wait_for, pause_at)`` is one fast
+    derive into out, SIGKILLed kill_after s after it printed `wait_for` (None: let it finish); pause_at=k: the
+    derive stops for good in its k-th fsync (and prints "paused"), to be killed there."""
 
-    def reader():
+    def __init__(self, tmp_path: Path):
+        self.tmp = tmp_path
+        self.proc = subprocess.Popen([sys.executable, "-c", FAST_DERIVE, str(GEN)], stdin=subprocess.PIPE,
+                                     stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        self.lines: queue.Queue = queue.Queue()
+        self.reader_stop: list = []            # why the reader thread stopped
+        self.thread = threading.Thread(target=self._read, daemon=True)
+        self.thread.start()
+        self.runs = 0
+
+    def _read(self):
         try:
-            for line in proc.stdout:
-                lines.put(line.strip())
-            reader_stop.append("end of output")
+            for line in self.proc.stdout:
+                self.lines.put(line.strip())
+            self.reader_stop.append("end of output")
         except Exception as exc:  # noqa: BLE001 - recorded, reported by the assertion below
-            reader_stop.append(f"{type(exc).__name__}: {exc}")
+            self.reader_stop.append(f"{type(exc).__name__}: {exc}")
         finally:
-            lines.put(None)
+            self.lines.put(None)
 
-    thread = threading.Thread(target=reader, daemon=True)
-    thread.start()
-    deadline = time.monotonic() + DEADLINE
-    try:
-        while True:         # wait (generously) for the line to time the kill from; None: the output ended
-            try:
-                line = lines.get(timeout=max(0.1, deadline - time.monotonic()))
-            except queue.Empty:
-                raise AssertionError(f"derive printed no {wait_for!r} within {DEADLINE} s ({reader_stop})") from None
-            if line is None or line == wait_for:
-                break
-        t0 = time.monotonic()
-        if kill_after is not None and line is not None:
-            time.sleep(kill_after)
-            proc.send_signal(signal.SIGKILL)
-        rc = proc.wait(timeout=max(1.0, deadline - time.monotonic()))
-        return {"rc": rc, "seconds": time.monotonic() - t0, "stderr": proc.stderr.read()}
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
-        thread.join(timeout=60)
-        proc.stdout.close()
-        proc.stderr.close()
+    def _next(self, deadline: float, what: str) -> str:
+        try:
+            line = self.lines.get(timeout=max(0.1, deadline - time.monotonic()))
+        except queue.Empty:
+            raise AssertionError(f"derive printed no {what!r} within {DEADLINE} s ({self.reader_stop})") from None
+        if line is None:
+            raise AssertionError(f"the derive server ended ({self.reader_stop}): {self.proc.stderr.read()}")
+        return line
+
+    def run(self, out: Path, delay: float, kill_after: float | None, wait_for: str = "started",
+            pause_at: int = 0) -> dict:
+        self.runs += 1
+        err = self.tmp / f"derive_{self.runs}.stderr"
+        self.proc.stdin.write(f"{out}\t{delay}\t{pause_at}\t{err}\n")
+        self.proc.stdin.flush()
+        deadline = time.monotonic() + DEADLINE
+        line = self._next(deadline, "pid")
+        assert line.startswith("pid "), line
+        pid = int(line.split()[1])
+        ended = False
+        try:
+            while True:     # wait (generously) for the line to time the kill from; "ended": the derive ended
+                line = self._next(deadline, wait_for)
+                ended = line == "ended"
+                if line == wait_for or ended:
+                    break
+            t0 = time.monotonic()
+            if kill_after is not None and not ended:
+                time.sleep(kill_after)
+                os.kill(pid, signal.SIGKILL)                 # alive, or ended and not reaped: still this derive
+            while not ended:
+                ended = self._next(deadline, "ended") == "ended"
+            seconds = time.monotonic() - t0
+        finally:
+            if not ended:
+                os.kill(pid, signal.SIGKILL)
+        self.proc.stdin.write("reap\n")
+        self.proc.stdin.flush()
+        line = self._next(deadline, "exit")
+        assert line.startswith("exit "), line
+        return {"rc": int(line.split()[1]), "seconds": seconds, "stderr": err.read_text(errors="replace")}
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.proc.stdin.close()
+        try:
+            self.proc.wait(timeout=60)
+        finally:
+            if self.proc.poll() is None:
+                self.proc.kill()
+                self.proc.wait()
+            self.thread.join(timeout=60)
+            self.proc.stdout.close()
+            self.proc.stderr.close()
 
 
 def test_killed_while_writing_generated_is_old_or_new_never_a_mix(tmp_path):
@@ -158,8 +233,13 @@ def test_killed_while_writing_generated_is_old_or_new_never_a_mix(tmp_path):
     out = tmp_path / "generated"
     old_man = write_old_generation(out, files)
     assert state(out, old_man, new_man) == "old"
+    with FastDerives(tmp_path) as fast:
+        _kill_trials(fast, out, files, old_man, new_man)
+
+
+def _kill_trials(fast: FastDerives, out: Path, files: dict, old_man: dict, new_man: dict) -> None:
     delay = 0.03                           # s per fsync: 14 fsyncs, a write phase of about half a second
-    calib = run_fast(out, delay, None)     # one uninterrupted run: how long the write phase takes here
+    calib = fast.run(out, delay, None)     # one uninterrupted run: how long the write phase takes here
     assert calib["rc"] == 0, calib["stderr"]
     assert state(out, old_man, new_man) == "new"
     n_fsync = len(files) + 1 + 2           # every file, the manifest, the new folder, the parent after the swap
@@ -170,7 +250,7 @@ def test_killed_while_writing_generated_is_old_or_new_never_a_mix(tmp_path):
     # written, not yet swapped) and in the parent's fsync right after the swap
     for k in (1, n_fsync // 2, n_fsync - 1, n_fsync):
         old_man = write_old_generation(out, files)   # leftovers of the previous kill stay: the run cleans them
-        r = run_fast(out, delay, 0.0, "paused", pause_at=k)
+        r = fast.run(out, delay, 0.0, "paused", pause_at=k)
         trials.append((f"fsync {k}", r["rc"], state(out, old_man, new_man)))
     assert all(rc == -signal.SIGKILL for _, rc, _ in trials), trials
     assert [s for *_, s in trials] == ["old", "old", "old", "new"], trials
@@ -181,12 +261,12 @@ def test_killed_while_writing_generated_is_old_or_new_never_a_mix(tmp_path):
         old_man = write_old_generation(out, files)
         kill_after = window * 1.1 * (k + rng.random()) / n
         wait_for = "writing" if k % 2 else "started"
-        r = run_fast(out, delay, kill_after, wait_for)
+        r = fast.run(out, delay, kill_after, wait_for)
         trials.append((f"{kill_after:.3f} s after {wait_for}", r["rc"], state(out, old_man, new_man)))
     print("\nkill trials (when, exit code, generated/):", *trials, sep="\n  ")
     assert all(s in ("old", "new") for *_, s in trials), trials
     # the next, uninterrupted run finishes the job and removes every leftover of the killed ones
-    r = run_fast(out, 0.0, None)
+    r = fast.run(out, 0.0, None)
     assert r["rc"] == 0, r["stderr"]
     assert state(out, old_man, new_man) == "new"
     assert atomic.leftovers(out) == []
