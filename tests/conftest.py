@@ -45,8 +45,8 @@ so `codegen.check(..., full=True)` and the CLI's `derive --check` compare agains
 deriving again.
 
 Likewise the two sweeps of `lab all` and lab hard are computed once per session, from an empty working
-directory: `quick_accuracy`, `quick_atlas` and `hard_lab` (`.result`, never saved; `.written`; `.saved(out)`: a
-saved copy, as `labs.run` writes it), shared by test_accuracy_lab, test_atlas, test_hard_cases and test_lab_library.
+directory: `quick_accuracy`, `quick_atlas` and `hard_lab` (`.result`, never saved; `.written`; `.saved()`: a
+copy saved once per session, as `labs.run` writes it: drawing a lab's PNGs costs seconds), shared by test_accuracy_lab, test_atlas, test_hard_cases and test_lab_library.
 
 The `slow` set
 --------------
@@ -238,9 +238,11 @@ def quick_atlas(tmp_path_factory):
 def _computed_once(tmp_path_factory, name: str, **options):
     """``labs.compute(name, **options)`` from an empty working directory, for every test module that
     checks a lab's output (test_accuracy_lab, test_atlas, test_lab_library): ``.result`` (never saved:
-    use ``.saved(out)``), ``.written`` (what compute left in its working directory: must be nothing),
-    ``.saved(out)``: a copy saved to ``out`` as ``labs.run(name, out, **options)`` would."""
+    use ``.saved()``), ``.written`` (what compute left in its working directory: must be nothing),
+    ``.saved()``: a copy saved as ``labs.run(name, out, **options)`` would, to a session folder, once (every
+    caller gets that copy: its files are read, never changed)."""
     import copy
+    import functools
     from types import SimpleNamespace
 
     from lavendersim import labs
@@ -250,7 +252,8 @@ def _computed_once(tmp_path_factory, name: str, **options):
         mp.chdir(cwd)
         result = labs.compute(name, **options)
     written = sorted(p.name for p in cwd.rglob("*"))
-    return SimpleNamespace(result=result, written=written, saved=lambda out: copy.copy(result).save(out))
+    saved = functools.cache(lambda: copy.copy(result).save(tmp_path_factory.mktemp(f"{name}_saved")))
+    return SimpleNamespace(result=result, written=written, saved=saved)
 
 
 @pytest.fixture

@@ -19,11 +19,10 @@ from lavendersim.labs import accuracy as A
 
 
 @pytest.fixture(scope="module")
-def quick(tmp_path_factory, quick_accuracy):
-    """labs.run("accuracy", out, quick=True): the session's one quick accuracy lab (conftest), saved here."""
-    out = tmp_path_factory.mktemp("accuracy")
-    result = quick_accuracy.saved(out)
-    data = json.loads((out / "accuracy" / "results.json").read_text())
+def quick(quick_accuracy):
+    """labs.run("accuracy", out, quick=True): the session's one quick accuracy lab (conftest), saved once."""
+    result = quick_accuracy.saved()
+    data = json.loads((result.out_dir / "results.json").read_text())
     return result, data
 
 

@@ -52,11 +52,10 @@ def _need_distributed() -> None:
 
 
 @pytest.fixture(scope="module")
-def serial(tmp_path_factory, quick_atlas):
-    """labs.run("atlas", out, quick=True, workers=1): the session's one quick atlas (conftest), saved here."""
-    out = tmp_path_factory.mktemp("atlas_serial")
-    result = quick_atlas.saved(out)
-    text = (out / "atlas" / "results.json").read_text()
+def serial(quick_atlas):
+    """labs.run("atlas", out, quick=True, workers=1): the session's one quick atlas (conftest), saved once."""
+    result = quick_atlas.saved()
+    text = (result.out_dir / "results.json").read_text()
     return result, text, json.loads(text)
 
 

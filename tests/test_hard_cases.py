@@ -21,10 +21,10 @@ from lavendersim.labs import hard_cases as H
 
 
 @pytest.fixture(scope="module")
-def lab(tmp_path_factory, hard_lab):
-    """The session's lab hard (conftest's, shared with test_lab_library), saved as H.run saves it; on C."""
+def lab(hard_lab):
+    """The session's lab hard (conftest's, shared with test_lab_library), saved once as H.run saves it; on C."""
     assert hard_lab.result["backend"] == "c", "the C backend is not built (lavendersim's rebuild message says how)"
-    return hard_lab.saved(tmp_path_factory.mktemp("hard"))
+    return hard_lab.saved()
 
 
 def _checks(result, prefix):

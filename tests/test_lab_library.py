@@ -80,10 +80,10 @@ def test_save_writes_what_run_writes(results, tmp_path):
     assert r.out_dir == tmp_path / "momentum" and len(r.files) == 2
 
 
-def test_hard_survival_table_is_an_extra_file(results, tmp_path):
-    r = results[0]["hard"]
-    r.save(tmp_path)
-    assert (tmp_path / "hard" / "survival.md").read_text().startswith("# Which integrators survive")
+def test_hard_survival_table_is_an_extra_file(hard_lab):
+    r = hard_lab.saved()                                   # the session's lab hard, saved once (LabResult.save)
+    assert r.out_dir.name == "hard" and "survival.md" in [p.name for p in r.files]
+    assert (r.out_dir / "survival.md").read_text().startswith("# Which integrators survive")
 
 
 # ---------------------------------------------------------------------------------- nothing printed as nan
