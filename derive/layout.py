@@ -163,7 +163,7 @@ def print_c() -> str:
     out.append(f"#define LV_WHEELS_ON_AXES_A_B {{{axes}}}  /* MODEL.A_b of the default layout, [I | 0] */")
     out.append("/* the printed kernels of every wheeled body (derive/wheel_layout.py, N = WHEELS_MAX) */")
     out.extend(f"#define LV_WHEELS_{part.upper()} lv_wheels{WHEELS_MAX}_{part}"
-               for part in ("coefficients", "body_rhs_c", "on_axes_rhs_c", "motor", "momentum"))
+               for part in ("coefficients", "body_rhs_c", "on_axes_rhs_c", "motor", "momentum", "total_momentum"))
     out += ["", "#endif", ""]
     return "\n".join(out)
 

@@ -93,6 +93,12 @@ def layout_momentum(q, w, Om, I_p, A, J):
     return R * ((I_p - A * Jd * A.T) * w), R * (A * h), h
 
 
+def layout_total_momentum(q, w, Om, I_p, A, J):
+    """L_w = R (I_p ω + A J Ω): the world momentum of body and wheels about P in one sum, layout_momentum's
+    L_body_w + L_wheels_w with the A J Aᵀ ω terms cancelled (_check proves it)."""
+    return rotation_matrix(q) * (I_p * w + A * sp.diag(*J) * Om)
+
+
 def motor_n(command, Omega, torque_limit, speed_limit, cutoff) -> sp.Matrix:
     """integrator_physics.motor applied wheel by wheel (each wheel's line depends on its own Ω_i only)."""
     z = sp.Integer(0)
@@ -128,6 +134,9 @@ def _check() -> None:
         H = I_p * w + A * sp.diag(*J) * Om
         if I_p * w_dot + A * sp.diag(*J) * Om_dot + w.cross(H) != sp.zeros(3, 1):
             raise RuntimeError("derive: the N-wheel equations do not conserve angular momentum")
+        Lb, Lw, _ = layout_momentum(q, w, Om, I_p, A, J)
+        if layout_total_momentum(q, w, Om, I_p, A, J) != Lb + Lw:
+            raise RuntimeError("derive: the total wheel momentum differs from body + wheels")
         # a padded wheel (zero axis, J = 1, Omega = u = 0) changes nothing and stays at rest: one printed
         # N-wheel kernel can step any layout of fewer wheels (the plan for N-axis wheels inside Sim, issue 13)
         pad = layout_rhs(q, w, Om.col_join(sp.zeros(1, 1)), I_p, A.row_join(sp.zeros(3, 1)), J.col_join(sp.ones(1, 1)),
@@ -202,6 +211,11 @@ def kernels_for(n: int) -> list[Kernel]:
                notes=[f"wheels{n}_body_rhs_c at A_b = [I | 0] (three wheels on the body axes, the other slots padded): "
                       "the same expressions with the axes substituted, so the products by 1 and the terms times 0 "
                       f"fold away; equal to wheels{n}_body_rhs_c up to the sign of a zero (x + 0·y is x)."]),
+        Kernel(f"wheels{n}_total_momentum", f"World angular momentum about the pivot of a body with {n} wheels and its wheels, one sum",
+               r"L = R (I_P\omega + A J \Omega)", [Q, W, OM, IP, AB, JJ],
+               [Arg("L_w", layout_total_momentum(q, w, Om, I_p, A, J), "kg·m²/s, world")], g,
+               notes=[f"L_body_w + L_wheels_w of wheels{n}_momentum (proved equal at derive time) at a third of its "
+                      "arithmetic: the growth check's |L| of a wheeled body (C screen and NumPy check alike)."]),
     ]
     return [
         Kernel(f"wheels{n}_body_rhs", f"Body with {n} reaction wheels on arbitrary axes rotating about a pivot",

@@ -2939,6 +2939,62 @@ void lv_wheels4_on_axes_rhs_c(const double *q, const double *omega_b, const doub
     Omega_dot[3] = g_w_3*k_w_12;
 }
 
+void lv_wheels4_total_momentum(const double *q, const double *omega_b, const double *Omega, const double *I_p, const double *A_b, const double *J, double *L_w) {
+    const double q_0 = q[0];
+    const double q_1 = q[1];
+    const double q_2 = q[2];
+    const double q_3 = q[3];
+    const double omega_b_0 = omega_b[0];
+    const double omega_b_1 = omega_b[1];
+    const double omega_b_2 = omega_b[2];
+    const double Omega_0 = Omega[0];
+    const double Omega_1 = Omega[1];
+    const double Omega_2 = Omega[2];
+    const double Omega_3 = Omega[3];
+    const double I_p_00 = I_p[0];
+    const double I_p_01 = I_p[1];
+    const double I_p_02 = I_p[2];
+    const double I_p_11 = I_p[4];
+    const double I_p_12 = I_p[5];
+    const double I_p_22 = I_p[8];
+    const double A_b_00 = A_b[0];
+    const double A_b_01 = A_b[1];
+    const double A_b_02 = A_b[2];
+    const double A_b_03 = A_b[3];
+    const double A_b_10 = A_b[4];
+    const double A_b_11 = A_b[5];
+    const double A_b_12 = A_b[6];
+    const double A_b_13 = A_b[7];
+    const double A_b_20 = A_b[8];
+    const double A_b_21 = A_b[9];
+    const double A_b_22 = A_b[10];
+    const double A_b_23 = A_b[11];
+    const double J_0 = J[0];
+    const double J_1 = J[1];
+    const double J_2 = J[2];
+    const double J_3 = J[3];
+    const double t0 = 2*q_1;
+    const double t1 = q_0*t0;
+    const double t2 = 2*q_2;
+    const double t3 = q_3*t2;
+    const double t4 = J_0*Omega_0;
+    const double t5 = J_1*Omega_1;
+    const double t6 = J_2*Omega_2;
+    const double t7 = J_3*Omega_3;
+    const double t8 = A_b_10*t4 + A_b_11*t5 + A_b_12*t6 + A_b_13*t7 + I_p_01*omega_b_0 + I_p_11*omega_b_1 + I_p_12*omega_b_2;
+    const double t9 = q_0*t2;
+    const double t10 = q_3*t0;
+    const double t11 = A_b_20*t4 + A_b_21*t5 + A_b_22*t6 + A_b_23*t7 + I_p_02*omega_b_0 + I_p_12*omega_b_1 + I_p_22*omega_b_2;
+    const double t12 = 2*(q_1*q_1);
+    const double t13 = 2*(q_2*q_2) - 1;
+    const double t14 = A_b_00*t4 + A_b_01*t5 + A_b_02*t6 + A_b_03*t7 + I_p_00*omega_b_0 + I_p_01*omega_b_1 + I_p_02*omega_b_2;
+    const double t15 = 2*q_0*q_3;
+    const double t16 = 2*(q_0*q_0);
+    L_w[0] = t11*(t10 + t9) + t14*(-t12 - t13) + t8*(t1 - t3);
+    L_w[1] = t11*(2*q_1*q_2 - t15) + t14*(t1 + t3) + t8*(-t13 - t16);
+    L_w[2] = t11*(-t12 - t16 + 1) + t14*(-t10 + t9) + t8*(q_1*t2 + t15);
+}
+
 void lv_wheels4_momentum(const double *q, const double *omega_b, const double *Omega, const double *I_p, const double *A_b, const double *J, double *L_body_w, double *L_wheels_w, double *h_w) {
     const double q_0 = q[0];
     const double q_1 = q[1];
@@ -3591,6 +3647,7 @@ static void packed_wheels4_body_rhs(const double *in, double *out) { lv_wheels4_
 static void packed_wheels4_coefficients(const double *in, double *out) { lv_wheels4_coefficients(in + 0, in + 9, in + 21, out + 0); }
 static void packed_wheels4_body_rhs_c(const double *in, double *out) { lv_wheels4_body_rhs_c(in + 0, in + 4, in + 7, in + 11, in + 20, in + 32, in + 36, in + 49, in + 52, in + 55, in + 58, in[62], out + 0, out + 4, out + 7); }
 static void packed_wheels4_on_axes_rhs_c(const double *in, double *out) { lv_wheels4_on_axes_rhs_c(in + 0, in + 4, in + 7, in + 11, in + 20, in + 24, in + 37, in + 40, in + 43, in + 46, in[50], out + 0, out + 4, out + 7); }
+static void packed_wheels4_total_momentum(const double *in, double *out) { lv_wheels4_total_momentum(in + 0, in + 4, in + 7, in + 11, in + 20, in + 32, out + 0); }
 static void packed_wheels4_momentum(const double *in, double *out) { lv_wheels4_momentum(in + 0, in + 4, in + 7, in + 11, in + 20, in + 32, out + 0, out + 3, out + 6); }
 static void packed_wheels4_motor(const double *in, double *out) { lv_wheels4_motor(in + 0, in + 4, in[8], in[9], in[10], out + 0); }
 static void packed_quat_error_chart_inverse(const double *in, double *out) { lv_quat_error_chart_inverse(in + 0, in + 4, out + 0); }
@@ -3682,6 +3739,7 @@ const lv_kernel_info lv_kernel_table[LV_KERNEL_COUNT] = {
     {"wheels4_coefficients", 25, 13, packed_wheels4_coefficients},
     {"wheels4_body_rhs_c", 63, 11, packed_wheels4_body_rhs_c},
     {"wheels4_on_axes_rhs_c", 51, 11, packed_wheels4_on_axes_rhs_c},
+    {"wheels4_total_momentum", 36, 3, packed_wheels4_total_momentum},
     {"wheels4_momentum", 36, 10, packed_wheels4_momentum},
     {"wheels4_motor", 11, 4, packed_wheels4_motor},
     {"quat_error_chart_inverse", 7, 4, packed_quat_error_chart_inverse},

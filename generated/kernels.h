@@ -11,7 +11,7 @@ typedef struct {
     void (*packed)(const double *in, double *out);
 } lv_kernel_info;
 
-#define LV_KERNEL_COUNT 89
+#define LV_KERNEL_COUNT 90
 extern const lv_kernel_info lv_kernel_table[LV_KERNEL_COUNT];
 
 /* particle_moments: One particle's mass moment and momentum (summed: m r_COM and p).
@@ -632,6 +632,16 @@ void lv_wheels4_body_rhs_c(const double *q, const double *omega_b, const double 
      out omega_dot_b [3]: rad/s², body frame
      out Omega_dot [4]: rad/s² */
 void lv_wheels4_on_axes_rhs_c(const double *q, const double *omega_b, const double *Omega, const double *I_p, const double *J, const double *k_w, const double *r_b, const double *F_w, const double *tau_w, const double *u, double c_w, double *q_dot, double *omega_dot_b, double *Omega_dot);
+
+/* wheels4_total_momentum: World angular momentum about the pivot of a body with 4 wheels and its wheels, one sum.
+     in  q [4]: orientation (x, y, z, w), R_WB
+     in  omega_b [3]: angular velocity, body frame, rad/s
+     in  Omega [4]: wheel rates relative to the body about their axes (4), rad/s
+     in  I_p [3×3]: inertia about the pivot (wheels locked), body frame, kg·m², symmetric row-major
+     in  A_b [3×4]: wheel spin axes as columns (3×4, unit columns), body frame, row-major
+     in  J [4]: wheel axial inertias (4), kg·m²
+     out L_w [3]: kg·m²/s, world */
+void lv_wheels4_total_momentum(const double *q, const double *omega_b, const double *Omega, const double *I_p, const double *A_b, const double *J, double *L_w);
 
 /* wheels4_momentum: World angular momentum about the pivot of a body with 4 wheels, and the wheels' axial momenta.
      in  q [4]: orientation (x, y, z, w), R_WB

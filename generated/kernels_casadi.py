@@ -2569,6 +2569,68 @@ def wheels4_on_axes_rhs_c(q, omega_b, Omega, I_p, J, k_w, r_b, F_w, tau_w, u, c_
     return casadi.vertcat(q_1*t2 - q_2*t1 + q_3*t0, -q_0*t2 + q_2*t0 + q_3*t1, q_0*t1 - q_1*t0 + q_3*t2, -q_0*t0 - q_1*t1 - q_2*t2), casadi.vertcat(t28, t29, t30), casadi.vertcat(g_w_0*k_w_9 - t28, g_w_1*k_w_10 - t29, g_w_2*k_w_11 - t30, g_w_3*k_w_12)
 
 
+def wheels4_total_momentum(q, omega_b, Omega, I_p, A_b, J):
+    """wheels4_total_momentum: World angular momentum about the pivot of a body with 4 wheels and its wheels, one sum.
+      in  q [4]: orientation (x, y, z, w), R_WB
+      in  omega_b [3]: angular velocity, body frame, rad/s
+      in  Omega [4]: wheel rates relative to the body about their axes (4), rad/s
+      in  I_p [3×3]: inertia about the pivot (wheels locked), body frame, kg·m², symmetric row-major
+      in  A_b [3×4]: wheel spin axes as columns (3×4, unit columns), body frame, row-major
+      in  J [4]: wheel axial inertias (4), kg·m²
+      out L_w [3]: kg·m²/s, world"""
+    q_0 = q[0]
+    q_1 = q[1]
+    q_2 = q[2]
+    q_3 = q[3]
+    omega_b_0 = omega_b[0]
+    omega_b_1 = omega_b[1]
+    omega_b_2 = omega_b[2]
+    Omega_0 = Omega[0]
+    Omega_1 = Omega[1]
+    Omega_2 = Omega[2]
+    Omega_3 = Omega[3]
+    I_p_00 = I_p[0]
+    I_p_01 = I_p[1]
+    I_p_02 = I_p[2]
+    I_p_11 = I_p[4]
+    I_p_12 = I_p[5]
+    I_p_22 = I_p[8]
+    A_b_00 = A_b[0]
+    A_b_01 = A_b[1]
+    A_b_02 = A_b[2]
+    A_b_03 = A_b[3]
+    A_b_10 = A_b[4]
+    A_b_11 = A_b[5]
+    A_b_12 = A_b[6]
+    A_b_13 = A_b[7]
+    A_b_20 = A_b[8]
+    A_b_21 = A_b[9]
+    A_b_22 = A_b[10]
+    A_b_23 = A_b[11]
+    J_0 = J[0]
+    J_1 = J[1]
+    J_2 = J[2]
+    J_3 = J[3]
+    t0 = 2*q_1
+    t1 = q_0*t0
+    t2 = 2*q_2
+    t3 = q_3*t2
+    t4 = J_0*Omega_0
+    t5 = J_1*Omega_1
+    t6 = J_2*Omega_2
+    t7 = J_3*Omega_3
+    t8 = A_b_10*t4 + A_b_11*t5 + A_b_12*t6 + A_b_13*t7 + I_p_01*omega_b_0 + I_p_11*omega_b_1 + I_p_12*omega_b_2
+    t9 = q_0*t2
+    t10 = q_3*t0
+    t11 = A_b_20*t4 + A_b_21*t5 + A_b_22*t6 + A_b_23*t7 + I_p_02*omega_b_0 + I_p_12*omega_b_1 + I_p_22*omega_b_2
+    t12 = 2*(q_1*q_1)
+    t13 = 2*(q_2*q_2) - 1
+    t14 = A_b_00*t4 + A_b_01*t5 + A_b_02*t6 + A_b_03*t7 + I_p_00*omega_b_0 + I_p_01*omega_b_1 + I_p_02*omega_b_2
+    t15 = 2*q_0*q_3
+    t16 = 2*(q_0*q_0)
+    return casadi.vertcat(t11*(t10 + t9) + t14*(-t12 - t13) + t8*(t1 - t3), t11*(2*q_1*q_2 - t15) + t14*(t1 + t3) + t8*(-t13 - t16), t11*(-t12 - t16 + 1) + t14*(-t10 + t9) + t8*(q_1*t2 + t15))
+
+
 def wheels4_momentum(q, omega_b, Omega, I_p, A_b, J):
     """wheels4_momentum: World angular momentum about the pivot of a body with 4 wheels, and the wheels' axial momenta.
       in  q [4]: orientation (x, y, z, w), R_WB

@@ -2940,6 +2940,62 @@ void lvf_wheels4_on_axes_rhs_c(const float *q, const float *omega_b, const float
     Omega_dot[3] = g_w_3*k_w_12;
 }
 
+void lvf_wheels4_total_momentum(const float *q, const float *omega_b, const float *Omega, const float *I_p, const float *A_b, const float *J, float *L_w) {
+    const float q_0 = q[0];
+    const float q_1 = q[1];
+    const float q_2 = q[2];
+    const float q_3 = q[3];
+    const float omega_b_0 = omega_b[0];
+    const float omega_b_1 = omega_b[1];
+    const float omega_b_2 = omega_b[2];
+    const float Omega_0 = Omega[0];
+    const float Omega_1 = Omega[1];
+    const float Omega_2 = Omega[2];
+    const float Omega_3 = Omega[3];
+    const float I_p_00 = I_p[0];
+    const float I_p_01 = I_p[1];
+    const float I_p_02 = I_p[2];
+    const float I_p_11 = I_p[4];
+    const float I_p_12 = I_p[5];
+    const float I_p_22 = I_p[8];
+    const float A_b_00 = A_b[0];
+    const float A_b_01 = A_b[1];
+    const float A_b_02 = A_b[2];
+    const float A_b_03 = A_b[3];
+    const float A_b_10 = A_b[4];
+    const float A_b_11 = A_b[5];
+    const float A_b_12 = A_b[6];
+    const float A_b_13 = A_b[7];
+    const float A_b_20 = A_b[8];
+    const float A_b_21 = A_b[9];
+    const float A_b_22 = A_b[10];
+    const float A_b_23 = A_b[11];
+    const float J_0 = J[0];
+    const float J_1 = J[1];
+    const float J_2 = J[2];
+    const float J_3 = J[3];
+    const float t0 = 2*q_1;
+    const float t1 = q_0*t0;
+    const float t2 = 2*q_2;
+    const float t3 = q_3*t2;
+    const float t4 = J_0*Omega_0;
+    const float t5 = J_1*Omega_1;
+    const float t6 = J_2*Omega_2;
+    const float t7 = J_3*Omega_3;
+    const float t8 = A_b_10*t4 + A_b_11*t5 + A_b_12*t6 + A_b_13*t7 + I_p_01*omega_b_0 + I_p_11*omega_b_1 + I_p_12*omega_b_2;
+    const float t9 = q_0*t2;
+    const float t10 = q_3*t0;
+    const float t11 = A_b_20*t4 + A_b_21*t5 + A_b_22*t6 + A_b_23*t7 + I_p_02*omega_b_0 + I_p_12*omega_b_1 + I_p_22*omega_b_2;
+    const float t12 = 2*(q_1*q_1);
+    const float t13 = 2*(q_2*q_2) - 1;
+    const float t14 = A_b_00*t4 + A_b_01*t5 + A_b_02*t6 + A_b_03*t7 + I_p_00*omega_b_0 + I_p_01*omega_b_1 + I_p_02*omega_b_2;
+    const float t15 = 2*q_0*q_3;
+    const float t16 = 2*(q_0*q_0);
+    L_w[0] = t11*(t10 + t9) + t14*(-t12 - t13) + t8*(t1 - t3);
+    L_w[1] = t11*(2*q_1*q_2 - t15) + t14*(t1 + t3) + t8*(-t13 - t16);
+    L_w[2] = t11*(-t12 - t16 + 1) + t14*(-t10 + t9) + t8*(q_1*t2 + t15);
+}
+
 void lvf_wheels4_momentum(const float *q, const float *omega_b, const float *Omega, const float *I_p, const float *A_b, const float *J, float *L_body_w, float *L_wheels_w, float *h_w) {
     const float q_0 = q[0];
     const float q_1 = q[1];

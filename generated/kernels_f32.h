@@ -165,6 +165,8 @@ void lvf_wheels4_coefficients(const float *I_p, const float *A_b, const float *J
 void lvf_wheels4_body_rhs_c(const float *q, const float *omega_b, const float *Omega, const float *I_p, const float *A_b, const float *J, const float *k_w, const float *r_b, const float *F_w, const float *tau_w, const float *u, float c_w, float *q_dot, float *omega_dot_b, float *Omega_dot);
 /* wheels4_on_axes_rhs_c: wheels4_body_rhs_c of the default layout, A_b = [I | 0] substituted (float; see kernels.h) */
 void lvf_wheels4_on_axes_rhs_c(const float *q, const float *omega_b, const float *Omega, const float *I_p, const float *J, const float *k_w, const float *r_b, const float *F_w, const float *tau_w, const float *u, float c_w, float *q_dot, float *omega_dot_b, float *Omega_dot);
+/* wheels4_total_momentum: World angular momentum about the pivot of a body with 4 wheels and its wheels, one sum (float; see kernels.h) */
+void lvf_wheels4_total_momentum(const float *q, const float *omega_b, const float *Omega, const float *I_p, const float *A_b, const float *J, float *L_w);
 /* wheels4_momentum: World angular momentum about the pivot of a body with 4 wheels, and the wheels' axial momenta (float; see kernels.h) */
 void lvf_wheels4_momentum(const float *q, const float *omega_b, const float *Omega, const float *I_p, const float *A_b, const float *J, float *L_body_w, float *L_wheels_w, float *h_w);
 /* wheels4_motor: Motor torques actually applied on 4 wheels (the wheel_motor line, per wheel) (float; see kernels.h) */

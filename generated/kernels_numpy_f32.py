@@ -4765,6 +4765,97 @@ def wheels4_on_axes_rhs_c(q, omega_b, Omega, I_p, J, k_w, r_b, F_w, tau_w, u, c_
     return q_dot_out, omega_dot_b_out, Omega_dot_out
 
 
+def wheels4_total_momentum(q, omega_b, Omega, I_p, A_b, J, *, out=None):
+    """World angular momentum about the pivot of a body with 4 wheels and its wheels, one sum.
+
+    Generated kernel ``wheels4_total_momentum``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    q : array_like, shape (..., 4)
+        orientation (x, y, z, w), R_WB
+    omega_b : array_like, shape (..., 3)
+        angular velocity, body frame, rad/s
+    Omega : array_like, shape (..., 4)
+        wheel rates relative to the body about their axes (4), rad/s
+    I_p : array_like, shape (..., 3, 3)
+        inertia about the pivot (wheels locked), body frame, kg·m², symmetric row-major
+    A_b : array_like, shape (..., 3, 4)
+        wheel spin axes as columns (3×4, unit columns), body frame, row-major
+    J : array_like, shape (..., 4)
+        wheel axial inertias (4), kg·m²
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
+
+    Returns
+    -------
+    L_w : ndarray, shape (..., 3)
+        kg·m²/s, world
+    """
+    q = numpy.asarray(q, dtype=numpy.float32)
+    omega_b = numpy.asarray(omega_b, dtype=numpy.float32)
+    Omega = numpy.asarray(Omega, dtype=numpy.float32)
+    I_p = numpy.asarray(I_p, dtype=numpy.float32)
+    A_b = numpy.asarray(A_b, dtype=numpy.float32)
+    J = numpy.asarray(J, dtype=numpy.float32)
+    batch = q.shape[:-1] if q.shape[:-1] == omega_b.shape[:-1] == Omega.shape[:-1] == I_p.shape[:-2] == A_b.shape[:-2] == J.shape[:-1] else numpy.broadcast_shapes(q.shape[:-1], omega_b.shape[:-1], Omega.shape[:-1], I_p.shape[:-2], A_b.shape[:-2], J.shape[:-1])
+    q_0 = q[..., 0]
+    q_1 = q[..., 1]
+    q_2 = q[..., 2]
+    q_3 = q[..., 3]
+    omega_b_0 = omega_b[..., 0]
+    omega_b_1 = omega_b[..., 1]
+    omega_b_2 = omega_b[..., 2]
+    Omega_0 = Omega[..., 0]
+    Omega_1 = Omega[..., 1]
+    Omega_2 = Omega[..., 2]
+    Omega_3 = Omega[..., 3]
+    I_p_00 = I_p[..., 0, 0]
+    I_p_01 = I_p[..., 0, 1]
+    I_p_02 = I_p[..., 0, 2]
+    I_p_11 = I_p[..., 1, 1]
+    I_p_12 = I_p[..., 1, 2]
+    I_p_22 = I_p[..., 2, 2]
+    A_b_00 = A_b[..., 0, 0]
+    A_b_01 = A_b[..., 0, 1]
+    A_b_02 = A_b[..., 0, 2]
+    A_b_03 = A_b[..., 0, 3]
+    A_b_10 = A_b[..., 1, 0]
+    A_b_11 = A_b[..., 1, 1]
+    A_b_12 = A_b[..., 1, 2]
+    A_b_13 = A_b[..., 1, 3]
+    A_b_20 = A_b[..., 2, 0]
+    A_b_21 = A_b[..., 2, 1]
+    A_b_22 = A_b[..., 2, 2]
+    A_b_23 = A_b[..., 2, 3]
+    J_0 = J[..., 0]
+    J_1 = J[..., 1]
+    J_2 = J[..., 2]
+    J_3 = J[..., 3]
+    t0 = 2*q_1
+    t1 = q_0*t0
+    t2 = 2*q_2
+    t3 = q_3*t2
+    t4 = J_0*Omega_0
+    t5 = J_1*Omega_1
+    t6 = J_2*Omega_2
+    t7 = J_3*Omega_3
+    t8 = A_b_10*t4 + A_b_11*t5 + A_b_12*t6 + A_b_13*t7 + I_p_01*omega_b_0 + I_p_11*omega_b_1 + I_p_12*omega_b_2
+    t9 = q_0*t2
+    t10 = q_3*t0
+    t11 = A_b_20*t4 + A_b_21*t5 + A_b_22*t6 + A_b_23*t7 + I_p_02*omega_b_0 + I_p_12*omega_b_1 + I_p_22*omega_b_2
+    t12 = 2*(q_1*q_1)
+    t13 = 2*(q_2*q_2) - 1
+    t14 = A_b_00*t4 + A_b_01*t5 + A_b_02*t6 + A_b_03*t7 + I_p_00*omega_b_0 + I_p_01*omega_b_1 + I_p_02*omega_b_2
+    t15 = 2*q_0*q_3
+    t16 = 2*(q_0*q_0)
+    L_w_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
+    numpy.add(t11 * (t10 + t9) + t14 * (-t12 - t13), t8 * (t1 - t3), out=L_w_out[..., 0])
+    numpy.add(t11 * (2 * q_1 * q_2 - t15) + t14 * (t1 + t3), t8 * (-t13 - t16), out=L_w_out[..., 1])
+    numpy.add(t11 * (-t12 - t16 + 1) + t14 * (-t10 + t9), t8 * (q_1 * t2 + t15), out=L_w_out[..., 2])
+    return L_w_out
+
+
 def wheels4_momentum(q, omega_b, Omega, I_p, A_b, J, *, out=None):
     """World angular momentum about the pivot of a body with 4 wheels, and the wheels' axial momenta.
 
@@ -5372,6 +5463,7 @@ KERNELS = {
     'wheels4_coefficients': (wheels4_coefficients, [('I_p', (3, 3)), ('A_b', (3, 4)), ('J', (4,))], [('k_w', (13,))]),
     'wheels4_body_rhs_c': (wheels4_body_rhs_c, [('q', (4,)), ('omega_b', (3,)), ('Omega', (4,)), ('I_p', (3, 3)), ('A_b', (3, 4)), ('J', (4,)), ('k_w', (13,)), ('r_b', (3,)), ('F_w', (3,)), ('tau_w', (3,)), ('u', (4,)), ('c_w', ())], [('q_dot', (4,)), ('omega_dot_b', (3,)), ('Omega_dot', (4,))]),
     'wheels4_on_axes_rhs_c': (wheels4_on_axes_rhs_c, [('q', (4,)), ('omega_b', (3,)), ('Omega', (4,)), ('I_p', (3, 3)), ('J', (4,)), ('k_w', (13,)), ('r_b', (3,)), ('F_w', (3,)), ('tau_w', (3,)), ('u', (4,)), ('c_w', ())], [('q_dot', (4,)), ('omega_dot_b', (3,)), ('Omega_dot', (4,))]),
+    'wheels4_total_momentum': (wheels4_total_momentum, [('q', (4,)), ('omega_b', (3,)), ('Omega', (4,)), ('I_p', (3, 3)), ('A_b', (3, 4)), ('J', (4,))], [('L_w', (3,))]),
     'wheels4_momentum': (wheels4_momentum, [('q', (4,)), ('omega_b', (3,)), ('Omega', (4,)), ('I_p', (3, 3)), ('A_b', (3, 4)), ('J', (4,))], [('L_body_w', (3,)), ('L_wheels_w', (3,)), ('h_w', (4,))]),
     'wheels4_motor': (wheels4_motor, [('command', (4,)), ('Omega', (4,)), ('torque_limit', ()), ('speed_limit', ()), ('cutoff', ())], [('u', (4,))]),
     'quat_error_chart_inverse': (quat_error_chart_inverse, [('q_ref', (4,)), ('dtheta', (3,))], [('q', (4,))]),

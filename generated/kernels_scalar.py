@@ -1564,6 +1564,34 @@ def wheels4_on_axes_rhs_c(q, omega_b, Omega, I_p, J, k_w, r_b, F_w, tau_w, u, c_
     return (q_1*t2 - q_2*t1 + q_3*t0, -q_0*t2 + q_2*t0 + q_3*t1, q_0*t1 - q_1*t0 + q_3*t2, -q_0*t0 - q_1*t1 - q_2*t2), (t28, t29, t30), (g_w_0*k_w_9 - t28, g_w_1*k_w_10 - t29, g_w_2*k_w_11 - t30, g_w_3*k_w_12)
 
 
+def wheels4_total_momentum(q, omega_b, Omega, I_p, A_b, J):
+    """World angular momentum about the pivot of a body with 4 wheels and its wheels, one sum (floats; see the module)."""
+    q_0, q_1, q_2, q_3 = q
+    omega_b_0, omega_b_1, omega_b_2 = omega_b
+    Omega_0, Omega_1, Omega_2, Omega_3 = Omega
+    I_p_00, I_p_01, I_p_02, _, I_p_11, I_p_12, _, _, I_p_22 = I_p
+    A_b_00, A_b_01, A_b_02, A_b_03, A_b_10, A_b_11, A_b_12, A_b_13, A_b_20, A_b_21, A_b_22, A_b_23 = A_b
+    J_0, J_1, J_2, J_3 = J
+    t0 = 2*q_1
+    t1 = q_0*t0
+    t2 = 2*q_2
+    t3 = q_3*t2
+    t4 = J_0*Omega_0
+    t5 = J_1*Omega_1
+    t6 = J_2*Omega_2
+    t7 = J_3*Omega_3
+    t8 = A_b_10*t4 + A_b_11*t5 + A_b_12*t6 + A_b_13*t7 + I_p_01*omega_b_0 + I_p_11*omega_b_1 + I_p_12*omega_b_2
+    t9 = q_0*t2
+    t10 = q_3*t0
+    t11 = A_b_20*t4 + A_b_21*t5 + A_b_22*t6 + A_b_23*t7 + I_p_02*omega_b_0 + I_p_12*omega_b_1 + I_p_22*omega_b_2
+    t12 = 2*(q_1*q_1)
+    t13 = 2*(q_2*q_2) - 1
+    t14 = A_b_00*t4 + A_b_01*t5 + A_b_02*t6 + A_b_03*t7 + I_p_00*omega_b_0 + I_p_01*omega_b_1 + I_p_02*omega_b_2
+    t15 = 2*q_0*q_3
+    t16 = 2*(q_0*q_0)
+    return (t11*(t10 + t9) + t14*(-t12 - t13) + t8*(t1 - t3), t11*(2*q_1*q_2 - t15) + t14*(t1 + t3) + t8*(-t13 - t16), t11*(-t12 - t16 + 1) + t14*(-t10 + t9) + t8*(q_1*t2 + t15))
+
+
 def wheels4_momentum(q, omega_b, Omega, I_p, A_b, J):
     """World angular momentum about the pivot of a body with 4 wheels, and the wheels' axial momenta (floats; see the module)."""
     q_0, q_1, q_2, q_3 = q
@@ -1882,6 +1910,7 @@ READS = {
     'wheels4_coefficients': {'I_p': (0, 1, 2, 3, 4, 5, 6, 7, 8), 'A_b': (0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11), 'J': (0, 1, 2, 3)},
     'wheels4_body_rhs_c': {'q': (0, 1, 2, 3), 'omega_b': (0, 1, 2), 'Omega': (0, 1, 2, 3), 'I_p': (0, 1, 2, 3, 4, 5, 6, 7, 8), 'A_b': (0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11), 'J': (0, 1, 2, 3), 'k_w': (0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12), 'r_b': (0, 1, 2), 'F_w': (0, 1, 2), 'tau_w': (0, 1, 2), 'u': (0, 1, 2, 3)},
     'wheels4_on_axes_rhs_c': {'q': (0, 1, 2, 3), 'omega_b': (0, 1, 2), 'Omega': (0, 1, 2, 3), 'I_p': (0, 1, 2, 3, 4, 5, 6, 7, 8), 'J': (0, 1, 2), 'k_w': (0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12), 'r_b': (0, 1, 2), 'F_w': (0, 1, 2), 'tau_w': (0, 1, 2), 'u': (0, 1, 2, 3)},
+    'wheels4_total_momentum': {'q': (0, 1, 2, 3), 'omega_b': (0, 1, 2), 'Omega': (0, 1, 2, 3), 'I_p': (0, 1, 2, 3, 4, 5, 6, 7, 8), 'A_b': (0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11), 'J': (0, 1, 2, 3)},
     'wheels4_momentum': {'q': (0, 1, 2, 3), 'omega_b': (0, 1, 2), 'Omega': (0, 1, 2, 3), 'I_p': (0, 1, 2, 3, 4, 5, 6, 7, 8), 'A_b': (0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11), 'J': (0, 1, 2, 3)},
     'wheels4_motor': {'command': (0, 1, 2, 3), 'Omega': (0, 1, 2, 3)},
     'quat_error_chart_inverse': {'q_ref': (0, 1, 2, 3), 'dtheta': (0, 1, 2)},
@@ -1974,6 +2003,7 @@ ZEROS = {
     'wheels4_coefficients': {'k_w': ()},
     'wheels4_body_rhs_c': {'q_dot': (), 'omega_dot_b': (), 'Omega_dot': ()},
     'wheels4_on_axes_rhs_c': {'q_dot': (), 'omega_dot_b': (), 'Omega_dot': ()},
+    'wheels4_total_momentum': {'L_w': ()},
     'wheels4_momentum': {'L_body_w': (), 'L_wheels_w': (), 'h_w': ()},
     'wheels4_motor': {'u': ()},
     'quat_error_chart_inverse': {'q': ()},

@@ -90,5 +90,6 @@ enum {
 #define LV_WHEELS_ON_AXES_RHS_C lv_wheels4_on_axes_rhs_c
 #define LV_WHEELS_MOTOR lv_wheels4_motor
 #define LV_WHEELS_MOMENTUM lv_wheels4_momentum
+#define LV_WHEELS_TOTAL_MOMENTUM lv_wheels4_total_momentum
 
 #endif

@@ -153,10 +153,10 @@ class LoadBudget:
             f = self.plain
             if f.any():
                 L[f] = np.linalg.norm(K.body_momentum(self.params[f][:, LY.PARAM_I_B], x[f][:, LY.STATE_OMEGA_B]), axis=-1)
-            if self.wheeled.size:     # one batched call of the printed kernel (bitwise the per-body wheel_momentum)
+            if self.wheeled.size:     # one batched call of the printed total momentum (as the C screen's)
                 w = self.wheeled
-                Lb, Lw = backends.wheel_momentum_batch(self.rows[w], x[w, LY.STATE_Q], x[w, LY.STATE_OMEGA_B], Omega[w])
-                L[w] = np.linalg.norm(Lb + Lw, axis=-1)
+                L[w] = np.linalg.norm(backends.wheel_total_momentum_batch(self.rows[w], x[w, LY.STATE_Q],
+                                                                          x[w, LY.STATE_OMEGA_B], Omega[w]), axis=-1)
             P[self.loaded] = self.params[self.loaded, LY.PARAM_M] * np.linalg.norm(x[self.loaded][:, LY.STATE_V_W], axis=-1)
         return L, P
 

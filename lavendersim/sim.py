@@ -335,8 +335,8 @@ L_FLOOR = 1e-6
 
 def wheeled_momentum_norms(rows: np.ndarray, x: np.ndarray, Omega: np.ndarray, idx: np.ndarray,
                            reference: bool = False) -> np.ndarray:
-    """|L| (body + wheels, world) of the wheeled bodies idx, one batched call of the printed momentum kernel
-    (backends.wheel_momentum_batch; bitwise the per-body wheel_momentum).
+    """|L| (body + wheels, world) of the wheeled bodies idx, one batched call of the printed total momentum
+    (backends.wheel_total_momentum_batch, as the C screen's).
 
     Parameters
     ----------
@@ -356,10 +356,10 @@ def wheeled_momentum_norms(rows: np.ndarray, x: np.ndarray, Omega: np.ndarray, i
     ndarray (n,)
         kg·m²/s.
     """
-    r, W = rows[idx], Omega[idx]
-    Lb, Lw = backends.wheel_momentum_batch(r, x[idx, LY.STATE_Q], x[idx, LY.STATE_OMEGA_B], W)
-    L = np.linalg.norm(Lb + Lw, axis=-1)
+    r, W, q, w = rows[idx], Omega[idx], x[idx, LY.STATE_Q], x[idx, LY.STATE_OMEGA_B]
+    L = np.linalg.norm(backends.wheel_total_momentum_batch(r, q, w, W), axis=-1)
     if reference:
+        Lb, _ = backends.wheel_momentum_batch(r, q, w, W)
         floor = L_FLOOR * (np.linalg.norm(Lb, axis=-1) + np.abs(r[:, LY.MODEL_J] * W).sum(axis=-1))
         L = np.where(floor > L, floor, L)     # max(L, floor) as Python's max: a NaN L stays NaN
     return L

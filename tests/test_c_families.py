@@ -66,11 +66,14 @@ def test_fixed_paths_are_chosen_by_tableau_identity(monkeypatch):
 def test_one_effect_row_check_in_c():
     """Every C path validates effect rows with lv_effect_row_check (step.c): no other file looks a row's code up in
     the effects' parameter counts (model_simd.h and batch_simd.h ask a code's parameter count to pick its tiles, on
-    rows already checked: not a check)."""
+    rows already checked: not a check). The C fast path (fast_step.c) checks no row itself: lv_simulate's index_build
+    does, before anything is written (test_sim_faults: a bad row goes to the Python path, which names it)."""
     users = {p.name for p in CSRC.glob("*.[ch]") if "lv_effect_n_params(" in p.read_text()}
     assert users <= {"step.c", "model_simd.h", "batch_simd.h"}
-    for name in ("fixed_loop.h", "module_f32.c", "module.c", "fast_step.c"):
+    for name in ("fixed_loop.h", "module_f32.c", "module.c", "step.c"):
         assert "lv_effect_row_check(" in (CSRC / name).read_text(), name
+    fast = (CSRC / "fast_step.c").read_text()
+    assert "lv_simulate(" in fast and "lv_effect_row_check(" not in fast
 
 
 def test_printed_programs_carry_the_declared_numbers():

@@ -17,6 +17,12 @@ from lavendersim.effects import ImmutableEffectError
 from lavendersim.validate import LavenderInputError
 
 
+def _total(rows, x, Omega, i):
+    """Body i's total wheel momentum (the printed kernel on its row alone)."""
+    s = slice(i, i + 1)
+    return backends.wheel_total_momentum_batch(rows[s], x[s, LY.STATE_Q], x[s, LY.STATE_OMEGA_B], Omega[s])[0]
+
+
 def _loop_invariants(sim, x, Omega, reference=False):
     """Sim._invariants as it was before issue 30: a Python loop over the free wheeled bodies."""
     nb = len(sim.names)
@@ -29,7 +35,7 @@ def _loop_invariants(sim, x, Omega, reference=False):
             L[f] = np.linalg.norm(sim_mod.K.body_momentum(I_b, w_b), axis=-1)
         for i in np.flatnonzero(sim._free_wheels):
             Lb, Lw = backends.wheel_momentum(sim._models.rows[i], x[i, LY.STATE_Q], x[i, LY.STATE_OMEGA_B], Omega[i])
-            L[i] = np.linalg.norm(Lb + Lw)
+            L[i] = np.linalg.norm(_total(sim._models.rows, x, Omega, i))
             if reference:
                 parts = np.linalg.norm(Lb) + float(np.abs(sim._models.rows[i, LY.MODEL_J] * Omega[i]).sum())
                 L[i] = max(L[i], sim_mod.L_FLOOR * parts)
@@ -45,8 +51,7 @@ def _loop_momenta(budget, x, Omega):
         if f.any():
             L[f] = np.linalg.norm(sim_mod.K.body_momentum(budget.params[f][:, LY.PARAM_I_B], x[f][:, LY.STATE_OMEGA_B]), axis=-1)
         for i in budget.wheeled:
-            Lb, Lw = backends.wheel_momentum(budget.rows[i], x[i, LY.STATE_Q], x[i, LY.STATE_OMEGA_B], Omega[i])
-            L[i] = np.linalg.norm(Lb + Lw)
+            L[i] = np.linalg.norm(_total(budget.rows, x, Omega, i))
         P[budget.loaded] = budget.params[budget.loaded, LY.PARAM_M] * np.linalg.norm(x[budget.loaded][:, LY.STATE_V_W], axis=-1)
     return L, P
 
@@ -120,6 +125,10 @@ def test_wheel_momentum_batch_rows_are_wheel_momentum():
         b, w = backends.wheel_momentum(sim._models.rows[i], x[i, LY.STATE_Q], x[i, LY.STATE_OMEGA_B], W[i])
         np.testing.assert_array_equal(Lb[k], b)
         np.testing.assert_array_equal(Lw[k], w)
+        # the growth check's one-sum total is body + wheels up to rounding of the parts
+        L = backends.wheel_total_momentum_batch(sim._models.rows[idx], x[idx, LY.STATE_Q], x[idx, LY.STATE_OMEGA_B], W[idx])
+        parts = np.linalg.norm(b) + np.linalg.norm(w)
+        assert np.abs(L[k] - (b + w)).max() <= 1e-14 * parts and parts > 0
 
 
 def _diverging_scene(loaded):

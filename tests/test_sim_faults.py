@@ -15,6 +15,7 @@ import pytest
 
 import lavendersim as lv
 from lavendersim.errors import DivergenceError
+from lavendersim.generated import layout as LY
 from lavendersim.sim import ImmutableSimError
 
 BACKENDS = ["numpy", "c"]
@@ -195,3 +196,31 @@ def test_an_omega_w_whose_body_frame_value_overflows_is_refused_by_body():
     with pytest.raises(lv.LavenderInputError) as ei:
         lv.Body("b", 1.0, (1.0, 2.0, 3.0), q=[0.7, 0.2, 0.1, 0.9], omega_w=[1.7e308, -1.7e308, 1.7e308])
     assert ei.value.field == "omega_w"
+
+
+@pytest.mark.parametrize("edit, message", [("code", r"effects\[0\] code 999\.0 is not a declared effect"),
+                                           ("body", r"effects\[0\] body must be -1 \(every body\) or an index in \[0, 2\)"),
+                                           ("kind", r"model_rows\[1\] kind must be 0 \(plain\)")])
+def test_a_table_changed_behind_the_c_fast_paths_back_goes_to_the_python_path(edit, message):
+    """The C fast path (Stepper) does not re-check the effect table and model kinds itself: lv_simulate refuses a
+    bad effect code, effect body or model kind before it writes anything, the step falls back to the Python path,
+    and that names the row and the rule; nothing is stepped. A valid edit (set_effect_params) keeps the fast path;
+    an invalid one is refused there by name and changes nothing."""
+    sim = lv.Sim(_scene(), dt=1e-3, backend="c")
+    assert sim._fast is not None and sim._fast_n >= 1
+    push = next(e for e in sim._forces if e.name == "applied_torque")
+    with pytest.raises(lv.LavenderInputError, match="torque_w"):
+        sim.set_effect_params(push, torque_w=[0.0, np.nan, 0.0])
+    sim.set_effect_params(push, torque_w=[0.0, 0.0, 2e-3])
+    sim.run(1)
+    sim.step()
+    assert sim._fast.is_checked() and sim._fast.steps == 2   # both calls inside C
+    x0, steps = sim.x.copy(), sim.steps
+    arr, at, bad = {"code": (sim._effects, (0, 0), 999.0), "body": (sim._effects, (0, 1), 7.0),
+                    "kind": (sim._models.rows, (1, LY.MODEL_KIND), 5.0)}[edit]   # effects row 0: the torque on "sat"
+    arr[at] = bad
+    for call in (sim.step, lambda: sim.run(1), lambda: sim.run(50)):
+        with pytest.raises(ValueError, match=message):
+            call()
+        np.testing.assert_array_equal(sim.x, x0)
+        assert sim.steps == steps

@@ -407,6 +407,36 @@ def wheel_momentum_batch(rows: np.ndarray, q: np.ndarray, omega_b: np.ndarray,
     return (np.broadcast_to(np.asarray(Lb), (n, 3)), np.broadcast_to(np.asarray(Lw), (n, 3)))
 
 
+def wheel_total_momentum_batch(rows: np.ndarray, q: np.ndarray, omega_b: np.ndarray, Omega: np.ndarray) -> np.ndarray:
+    """World angular momentum about the pivot of n wheeled bodies and their wheels, L_body_w + L_wheels_w of
+    :func:`wheel_momentum_batch` in one sum (the printed wheels<WHEELS_MAX>_total_momentum, elementwise: row k is
+    the kernel of body k alone): the growth check's |L| of a wheeled body, as the C screen computes it.
+
+    Parameters
+    ----------
+    rows : ndarray (n, MODEL_SIZE)
+        The bodies' model rows (kind with KIND_WHEELS).
+    q : ndarray (n, 4)
+        Orientations (x, y, z, w), R_WB.
+    omega_b : ndarray (n, 3)
+        Angular velocities, body frame, rad/s.
+    Omega : ndarray (n, WHEELS_MAX)
+        Wheel rates relative to each body, rad/s.
+
+    Returns
+    -------
+    ndarray (n, 3)
+        kg·m²/s, world frame.
+    """
+    from ..kernels import K
+
+    n = rows.shape[0]
+    L = getattr(K, f"wheels{LAYOUT.WHEELS_MAX}_total_momentum")(q, omega_b, Omega, rows[:, LAYOUT.MODEL_I_P].reshape(n, 3, 3),
+                                                                rows[:, LAYOUT.MODEL_A_B].reshape(n, 3, LAYOUT.WHEELS_MAX),
+                                                                rows[:, LAYOUT.MODEL_J])
+    return np.broadcast_to(np.asarray(L), (n, 3))
+
+
 def norm_safe(v: np.ndarray) -> float:
     """Euclidean norm without overflow for huge finite components (validate.safe_norm), 0 for non-finite input.
 

@@ -183,27 +183,6 @@ static int stepper_init(Stepper *s, PyObject *args, PyObject *kw)
     return 0;
 }
 
-/* The checks module.c's simulate() makes per call (effect codes and bodies, model kinds), as a yes/no:
-   anything it would reject goes to the Python path, which raises the named error. */
-static int arguments_ok(const Stepper *s)
-{
-    const double *ef = (const double *)s->buf[FS_EFFECTS].buf;
-    long e;
-    for (e = 0; e < s->ne; e++) {
-        int np;
-        if (lv_effect_row_check(ef + e * s->row_size, s->row_size, s->nb, &s->user, &np) != LV_OK) return 0;
-    }
-    if (s->has_models) {
-        long b;
-        for (b = 0; b < s->nb; b++) {
-            const double kind = s->models.rows[b * LV_MODEL_SIZE + LV_MODEL_KIND];
-            if (!lv_kind_valid(kind)) return 0;
-            if (kind != 0 && LV_INTEGRATOR_PLAIN_ONLY(s->integrator)) return 0;
-        }
-    }
-    return 1;
-}
-
 /* The adaptive arrays in the snapshot's order (h, nfev, dense), from offset nx + 2 nw: 0 .. 3 arrays. */
 static int adaptive_parts(const Stepper *s, double **part, size_t *len)
 {
@@ -253,19 +232,18 @@ static int unchanged(const Stepper *s)
 /* 1 when body x (params prm) is inside its growth limits g: |omega| = w <= w_safe, else its kinetic energy and |L|^2
    from the generated kinetic_energy and body_momentum kernels are at most g's limits (NaN fails). A wheeled body (row
    not NULL, its kind with LV_KIND_WHEELS; Omega its wheel rates): the kinetic energy at omega = 0 (translation) and
-   the total |L| of body and wheels from the printed LV_WHEELS_MOMENTUM, as LoadBudget._momenta and Sim._invariants. */
+   the total |L| of body and wheels from the printed LV_WHEELS_TOTAL_MOMENTUM, as LoadBudget._momenta and
+   Sim._invariants (backends.wheel_total_momentum_batch, the NumPy print of the same kernel). */
 static int growth_pass(const double *x, const double *prm, const double *g, double w, const double *row,
                        const double *Omega)
 {
     static const double at_rest[3] = {0.0, 0.0, 0.0};
-    double T, L[3], L_wheels[3], h[LV_NW];
-    int k;
+    double T, L[3];
     if (w <= g[LV_G_W]) return 1;
     if (row != NULL && ((int)row[LV_MODEL_KIND] & LV_KIND_WHEELS)) {
         lv_kinetic_energy(prm[LV_PARAM_M], prm + LV_PARAM_I_B, x + LV_STATE_V_W, at_rest, &T);
-        LV_WHEELS_MOMENTUM(x + LV_STATE_Q, x + LV_STATE_OMEGA_B, Omega, row + LV_MODEL_I_P, row + LV_MODEL_A_B,
-                           row + LV_MODEL_J, L, L_wheels, h);
-        for (k = 0; k < 3; k++) L[k] += L_wheels[k];
+        LV_WHEELS_TOTAL_MOMENTUM(x + LV_STATE_Q, x + LV_STATE_OMEGA_B, Omega, row + LV_MODEL_I_P, row + LV_MODEL_A_B,
+                                 row + LV_MODEL_J, L);
     } else {
         lv_kinetic_energy(prm[LV_PARAM_M], prm + LV_PARAM_I_B, x + LV_STATE_V_W, x + LV_STATE_OMEGA_B, &T);
         lv_body_momentum(prm + LV_PARAM_I_B, x + LV_STATE_OMEGA_B, L);
@@ -337,7 +315,7 @@ static int fast_step(Stepper *s, long n)
     int status;
     lv_adaptive ad;
     double inc = 0.0;
-    if (s->busy || s->snap == NULL || n < 1 || s->steps + n > s->max_steps || !unchanged(s) || !arguments_ok(s))
+    if (s->busy || s->snap == NULL || n < 1 || s->steps + n > s->max_steps || !unchanged(s))
         return 0;
     if (s->adaptive) {
         ad.rtol = s->rtol, ad.atol = s->atol;
@@ -348,6 +326,8 @@ static int fast_step(Stepper *s, long n)
                          (const double *)s->buf[FS_EFFECTS].buf, s->ne, s->row_size, s->user.n ? &s->user : NULL,
                          s->has_models ? &s->models : NULL, s->integrator, s->normalize, s->dt, n,
                          s->adaptive ? &ad : NULL, NULL, &fail_step, &fail_body);
+    /* lv_simulate checks its arguments (effect codes and bodies, model kinds) before it writes anything: a table it
+       rejects, as a step that fails a check, goes to the Python path, which raises the named error */
     if (status != LV_OK || !checks_pass(s)) {
         snap_copy(s, 0);
         return 0;

@@ -1827,9 +1827,12 @@ int lv_simulate(double *state, const double *params, long nb,
     if (ne > 0 && row_size < LV_EFFECT_ROW_PARAMS) return LV_BAD_ARGUMENT;
     if (tableau == NULL && LV_INTEGRATOR_ADAPTIVE(integrator) && (adaptive == NULL || !(adaptive->rtol > 0.0) || !(adaptive->atol >= 0.0)))
         return LV_BAD_ARGUMENT;
-    if (tableau == NULL && LV_INTEGRATOR_PLAIN_ONLY(integrator) && models != NULL)
-        for (b = 0; b < nb; b++)
-            if ((int)models->rows[b * LV_MODEL_SIZE + LV_MODEL_KIND] != 0) return LV_BAD_ARGUMENT;
+    if (models != NULL)   /* a kind the step loop knows; the PLAIN_ONLY integrators step plain bodies only */
+        for (b = 0; b < nb; b++) {
+            const double kind = models->rows[b * LV_MODEL_SIZE + LV_MODEL_KIND];
+            if (!lv_kind_valid(kind) || (kind != 0 && tableau == NULL && LV_INTEGRATOR_PLAIN_ONLY(integrator)))
+                return LV_BAD_ARGUMENT;
+        }
     status = index_build(&ix, effects, ne, row_size, nb, user, fail_step);
     if (status != LV_OK) return status;
     if (tableau != NULL || LV_INTEGRATOR_ADAPTIVE(integrator)) {

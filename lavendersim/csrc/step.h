@@ -155,14 +155,13 @@ const char *lv_isa_name(int isa);
    NumPy backend's order). Then body fail_body holds its last finite state and wheel rates (before
    step fail_step; its applied row untouched) and, for LV_TOLERANCE, h[fail_body] as above; every
    other body's rows (state, Omega, applied, h, nfev) are unspecified (advanced by some number of
-   steps): the caller restores them from its snapshot. Model kinds must be valid (the caller validates); an
+   steps): the caller restores them from its snapshot. A model kind lv_kind_valid refuses, an
    unknown integrator, dopri5 without `adaptive`, a plain-only integrator (LV_INTEGRATOR_PLAIN_ONLY) with a body of nonzero kind, or
    an effect body outside [-1, nb) returns LV_BAD_ARGUMENT, an effect code no declared effect has (built
    in or in `user`) LV_UNKNOWN_EFFECT with *fail_step = its row (nothing changed, never a silent no-op).
    `adaptive` is read only by dopri5. */
-/* The one check of an effect row (index_build here, simulate()'s argument check in module.c, the fast path's in
-   fast_step.c): LV_OK with *np = its parameter count; LV_UNKNOWN_EFFECT for a code no declared effect has (built in,
-   or in `user`, which may be NULL) or whose parameters do not fit a row of row_size (*np says which: < 0 or the
+/* The one check of an effect row (index_build in step.c, simulate()'s argument check in module.c): LV_OK with *np =
+   its parameter count; LV_UNKNOWN_EFFECT for a code no declared effect has (built in, or in `user`, which may be NULL) or whose parameters do not fit a row of row_size (*np says which: < 0 or the
    count); LV_BAD_ARGUMENT for a body other than -1 (every body) or an integer index in [0, nb). */
 int lv_effect_row_check(const double *row, long row_size, long nb, const lv_user_effects *user, int *np);
 
