@@ -247,6 +247,58 @@ def test_state_reading_effect_tiles_with_two_threads(levels, two_threads):
         np.testing.assert_array_equal(_run(sc, levels[-1], 60), want, err_msg=f"{threads} threads")
 
 
+FUSED_SETS = (["linear_damping"], ["angular_damping"], ["angular_damping", "linear_damping"],
+              ["gravity", "angular_damping"], ["gravity", "gravity", "linear_damping", "angular_damping"],
+              ["linear_damping", "gravity", "angular_damping"])   # the last: no fused pattern (stage passes)
+
+
+@pytest.mark.parametrize("names", FUSED_SETS, ids="+".join)
+@pytest.mark.parametrize("n", [5, 67])
+@pytest.mark.parametrize("normalize", [True, False])
+def test_fused_effect_tiles_are_the_scalar_path_bitwise(levels, names, n, normalize):
+    """The fused effect tiles (batch_simd.h, LV_TF_*: a built-in pattern of damping effects after effects that read
+    no state, the whole step per lane) give the scalar path's bits, each body its own parameters."""
+    sc = _scene(n, 11 * n)
+    rng = np.random.default_rng(n)
+    for i in range(n):
+        for name in names:
+            if name == "gravity":
+                sc.add_effect(name, body=f"b{i}", g_w=list(rng.standard_normal(3)))
+            else:   # c dt / I well inside RK4's bound (the smallest I here is ~1e-3)
+                sc.add_effect(name, body=f"b{i}", c=(1.0 if name == "linear_damping" else 1e-4) * (0.05 + rng.random()))
+    want = _run(sc, 0, 120, normalize)
+    assert np.isfinite(want).all()
+    for level in levels[1:]:
+        np.testing.assert_array_equal(_run(sc, level, 120, normalize), want, err_msg=C.isa(level)[1])
+    free = _run(_scene(n, 11 * n), 0, 120, normalize)
+    assert np.abs(want[:, 7:13] - free[:, 7:13]).max(axis=1).min() > 1e-6
+
+
+@pytest.mark.parametrize("bad", [[29], [40, 5], [63, 64]])
+def test_divergence_in_a_fused_effect_tile_is_reported_as_on_the_scalar_path(levels, bad):
+    """A huge angular damping (c dt / I far above RK4's stability bound) overflows omega within a few steps in the
+    fused tile of linear + angular damping: every level reports the same step, body and last finite state."""
+    n = 70
+    sc = _scene(n, seed=17)
+    for i in range(n):
+        sc.add_effect("linear_damping", body=f"b{i}", c=0.1)
+        sc.add_effect("angular_damping", body=f"b{i}", c=1e150 * (1.0 + bad.index(i)) if i in bad else 1e-3)
+    x0, params, effects = sc.arrays()
+    x0 = np.array(x0, dtype=np.float64, copy=True)
+    params = np.ascontiguousarray(params, dtype=np.float64)
+    effects = np.ascontiguousarray(effects, dtype=np.float64)
+    reports = []
+    for level in levels:
+        C.isa(level)
+        x = x0.copy()
+        status, step, body = C.simulate(x, params, effects, C.RK4, 1, 1e-2, 50)
+        reports.append((status, step, body, x[body].copy()))
+    assert reports[0][0] == 1 and reports[0][2] in bad and np.isfinite(reports[0][3]).all(), reports[0][:3]
+    for r in reports[1:]:
+        assert r[:3] == reports[0][:3]
+        np.testing.assert_array_equal(r[3], reports[0][3])
+
+
 @pytest.mark.parametrize("bad", [[29], [40, 5], [63, 64]])
 def test_divergence_in_an_effect_tile_is_reported_as_on_the_scalar_path(levels, bad):
     """A huge force at a point overflows within a few steps: every level reports the same step, body and last

@@ -4,7 +4,8 @@
    per call with the generated effect dispatch (effect_sums) and passed to the generated
    lv_rigid_body_rhs_torque / lv_rigid_body_rhs in every stage, as the scalar path does; and bodies whose
    effects read the state, all with the same effects (the effect tiles, LV_TILE_RK4_FX: stage passes, each
-   effect a lane loop of its generated form, a user effect its printed tile form).
+   effect a lane loop of its generated form, a user effect its printed tile form; a built-in damping pattern
+   takes a fused tile instead, LV_TF_*: the plain tile's lane loop with those effects' codes compiled in).
 
    Speed (lavendersim bench, "SIMD batch"): x86's divider is not pipelined like the adders (AVX-512
    vdivpd: one per ~16 cycles for 8 lanes). The printed right-hand sides divide by nothing: the tile
@@ -62,6 +63,8 @@ typedef struct {
     int codes[LV_TE_EFFECTS];
     int off[LV_TE_EFFECTS];
     lv_effect_tile_fn utile[LV_TE_EFFECTS];
+    int fused; /* LV_TF_*: the fused tile of the effects' pattern (tile_fx_pattern), 0 none */
+    int first; /* the first effect of the pattern: effects 0 .. first-1 read no state (summed in P's F, TAU rows) */
     double EP[LV_TE_PARAMS + LV_EFFECT_ROW_MIN_PARAMS][LV_TILE]; /* + room for a lane's full-width load */
 } lv_tile_fx;
 
@@ -81,6 +84,11 @@ typedef void (*lv_tile_fn)(double (*LV_RESTRICT T)[LV_TILE], const double (*LV_R
     const double tau[3] = {P[LV_TP_TAU][b], P[LV_TP_TAU + 1][b], P[LV_TP_TAU + 2][b]};                 \
     const double F[3] = {P[LV_TP_F][b], P[LV_TP_F + 1][b], P[LV_TP_F + 2][b]};                         \
     const double mass = P[LV_TP_M][b]
+#if defined(__GNUC__) || defined(__clang__)
+#define LV_NOINLINE __attribute__((noinline))
+#else
+#define LV_NOINLINE
+#endif
 #define LV_TILE_LOAD_FORCE /* LV_RHS_FORCE: the F rows hold a_w = F/m (advance_free_soa) */                    \
     const double a[3] = {P[LV_TP_F][b], P[LV_TP_F + 1][b], P[LV_TP_F + 2][b]}
 
@@ -200,16 +208,84 @@ static const double lv_te_zero3[3] = {0.0, 0.0, 0.0};
         }                                                                                               \
     }
 
+/* The fused effect tiles: a built-in pattern of effects reading the state (LV_TF_*, tile_fx_pattern), each code
+   known to the compiler, so that the generated dispatch inlines to that effect alone inside the plain tile's lane
+   loop (LV_TILE_RK4: each lane's whole step in registers, no stage passes). The effects before the pattern read no
+   state: their sums start F and TAU (P's rows, summed per call in table order as effect_sums adds them: the same
+   bits), then each stage adds the pattern's effects in table order and takes the kind's right-hand side, as
+   LV_TE_SUMS and LV_TE_RHS_* do, so results are bitwise the effect tiles' (and the scalar path's). */
+enum { LV_TF_NONE = 0, LV_TF_LD_AD = 1, LV_TF_AD_LD = 2, LV_TF_LD = 3, LV_TF_AD = 4 };
+#define LV_TF_LD_AD_CODES LV_EFFECT_LINEAR_DAMPING, LV_EFFECT_ANGULAR_DAMPING
+#define LV_TF_AD_LD_CODES LV_EFFECT_ANGULAR_DAMPING, LV_EFFECT_LINEAR_DAMPING
+#define LV_TF_LD_CODES LV_EFFECT_LINEAR_DAMPING, 0
+#define LV_TF_AD_CODES LV_EFFECT_ANGULAR_DAMPING, 0
+#define LV_TF_LOAD                                                                                      \
+    const double mass = P[LV_TP_M][b], I[3] = {P[LV_TP_I][b], P[LV_TP_I + 1][b], P[LV_TP_I + 2][b]};    \
+    const double F0[3] = {P[LV_TP_F][b], P[LV_TP_F + 1][b], P[LV_TP_F + 2][b]};                         \
+    const double T0[3] = {P[LV_TP_TAU][b], P[LV_TP_TAU + 1][b], P[LV_TP_TAU + 2][b]};                   \
+    double p0[LV_EFFECT_ROW_MIN_PARAMS], p1[LV_EFFECT_ROW_MIN_PARAMS];                                  \
+    for (i = 0; i < LV_EFFECT_ROW_MIN_PARAMS; i++) {                                                    \
+        p0[i] = E0[i][b];                                                                               \
+        p1[i] = E1[i][b];                                                                               \
+    }
+/* A stage's effect sums of the pattern (codes C0, C1; C1 0: none) at the lane's input in, through APPLY. */
+#define LV_TF_SUMS(APPLY, C0, C1, in)                                                                   \
+    double f[3] = {F0[0], F0[1], F0[2]}, t[3] = {T0[0], T0[1], T0[2]};                                  \
+    (void)APPLY(C0, p0, in, in + LV_STATE_V_W, mass, I, f, t);                                          \
+    if (C1 != 0) (void)APPLY(C1, p1, in, in + LV_STATE_V_W, mass, I, f, t)
+#define LV_TF_C0(c0, c1) c0
+#define LV_TF_C1(c0, c1) c1
+#define LV_TF_RHS_BODY_F(in, out) LV_TF_RHS_BODY_F_(lv_c0, lv_c1, in, out)
+#define LV_TF_RHS_BODY(in, out) LV_TF_RHS_BODY_(lv_c0, lv_c1, in, out)
+#define LV_TF_RHS_FORCE(in, out) LV_TF_RHS_FORCE_(lv_c0, lv_c1, in, out)
+#define LV_TF_RHS_BODY_F_(C0, C1, in, out) do { LV_TF_SUMS(lv_effect_apply_b, C0, C1, in);                \
+    lv_linear_acceleration(mass, f, f); lv_rigid_body_rhs_body_c(in, cf, f, t, out); } while (0)
+#define LV_TF_RHS_BODY_(C0, C1, in, out) do { LV_TF_SUMS(lv_effect_apply_b, C0, C1, in);                  \
+    (void)f; lv_rigid_body_rhs_body_c(in, cf, lv_te_zero3, t, out); } while (0)
+#define LV_TF_RHS_FORCE_(C0, C1, in, out) do { LV_TF_SUMS(lv_effect_apply, C0, C1, in);                   \
+    (void)t; lv_linear_acceleration(mass, f, f); lv_rigid_body_rhs_force_c(in, cf, f, out); } while (0)
+#define LV_TF_CALL(M, ...) M(__VA_ARGS__)
+#define LV_TF_DEFINE(NAME, ATTR, NORMALIZE, KIND, PAT)                                                  \
+    ATTR LV_FLATTEN LV_NOINLINE static void NAME##_##PAT(double (*LV_RESTRICT T)[LV_TILE],             \
+        const double (*LV_RESTRICT J)[LV_TILE], const double (*LV_RESTRICT P)[LV_TILE],                 \
+        const lv_tile_fx *LV_RESTRICT fx, long m, double dt, long n_steps)                              \
+    {                                                                                                   \
+        const double (*E0)[LV_TILE] = fx->EP + fx->off[fx->first];                                      \
+        const double (*E1)[LV_TILE] = fx->EP + fx->off[fx->first + (fx->n_eff > fx->first + 1)];        \
+        enum { lv_c0 = LV_TF_CALL(LV_TF_C0, PAT##_CODES), lv_c1 = LV_TF_CALL(LV_TF_C1, PAT##_CODES) };   \
+        LV_TILE_RK4(NORMALIZE, LV_TF_LOAD, LV_TF_RHS_##KIND)                                            \
+    }
+/* The fused tiles of a kind (the patterns its bodies can have), and the calls of the effect tile NAME to them. */
+#define LV_TF_TILES_BODY_F(NAME, ATTR, NORMALIZE) LV_TF_DEFINE(NAME, ATTR, NORMALIZE, BODY_F, LV_TF_LD_AD)   \
+    LV_TF_DEFINE(NAME, ATTR, NORMALIZE, BODY_F, LV_TF_AD_LD) LV_TF_DEFINE(NAME, ATTR, NORMALIZE, BODY_F, LV_TF_AD)
+#define LV_TF_TILES_BODY(NAME, ATTR, NORMALIZE) LV_TF_DEFINE(NAME, ATTR, NORMALIZE, BODY, LV_TF_AD)
+#define LV_TF_TILES_FORCE(NAME, ATTR, NORMALIZE) LV_TF_DEFINE(NAME, ATTR, NORMALIZE, FORCE, LV_TF_LD)
+#define LV_TF_TILES_TORQUE(NAME, ATTR, NORMALIZE)
+#define LV_TF_TILES_FULL(NAME, ATTR, NORMALIZE)
+#define LV_TF_GO(NAME, PAT) case PAT: NAME##_##PAT(T, J, P, fx, m, dt, n_steps); return;
+#define LV_TF_CASES_BODY_F(NAME) LV_TF_GO(NAME, LV_TF_LD_AD) LV_TF_GO(NAME, LV_TF_AD_LD) LV_TF_GO(NAME, LV_TF_AD)
+#define LV_TF_CASES_BODY(NAME) LV_TF_GO(NAME, LV_TF_AD)
+#define LV_TF_CASES_FORCE(NAME) LV_TF_GO(NAME, LV_TF_LD)
+#define LV_TF_CASES_TORQUE(NAME)
+#define LV_TF_CASES_FULL(NAME)
+
 #define LV_DEFINE_TILE(NAME, ATTR, NORMALIZE, KIND)                                                     \
     ATTR LV_FLATTEN static void NAME(double (*LV_RESTRICT T)[LV_TILE], const double (*LV_RESTRICT J)[LV_TILE], \
                                      const double (*LV_RESTRICT P)[LV_TILE], const lv_tile_fx *LV_RESTRICT fx, \
                                      long m, double dt, long n_steps)                                   \
     LV_TILE_RK4(NORMALIZE, LV_TILE_LOAD_##KIND, LV_TILE_RHS_##KIND)
 #define LV_DEFINE_TILE_FX(NAME, ATTR, NORMALIZE, KIND)                                                  \
+    LV_TF_TILES_##KIND(NAME, ATTR, NORMALIZE)                                                           \
     ATTR LV_FLATTEN static void NAME(double (*LV_RESTRICT T)[LV_TILE], const double (*LV_RESTRICT J)[LV_TILE], \
                                      const double (*LV_RESTRICT P)[LV_TILE], const lv_tile_fx *LV_RESTRICT fx, \
                                      long m, double dt, long n_steps)                                   \
-    LV_TILE_RK4_FX(NORMALIZE, KIND)
+    {                                                                                                   \
+        switch (fx->fused) {                                                                            \
+        LV_TF_CASES_##KIND(NAME)                                                                        \
+        default: break;                                                                                 \
+        }                                                                                               \
+        LV_TILE_RK4_FX(NORMALIZE, KIND)                                                                 \
+    }
 
 /* One instruction set's tile steppers: q normalized / not, times torque-free / constant torque /
    constant force and torque / effects reading the state, without / with a force. */
@@ -402,6 +478,26 @@ static int effects_tileable(const lv_effect_index *ix, const long *list, long co
     return 1;
 }
 
+/* The fused tile of the effect tile fx (LV_TF_*, see LV_TF_DEFINE): after a run of built-in effects that read no state
+   (fx->first of them), the built-in pattern left; LV_TF_NONE for any other set (the effect tile's stage passes). */
+static void tile_fx_pattern(lv_tile_fx *fx)
+{
+    static const struct { int fused, n, c0, c1; } pats[] = {
+        {LV_TF_LD_AD, 2, LV_TF_LD_AD_CODES}, {LV_TF_AD_LD, 2, LV_TF_AD_LD_CODES},
+        {LV_TF_LD, 1, LV_TF_LD_CODES}, {LV_TF_AD, 1, LV_TF_AD_CODES}};
+    const int *c = fx->codes;
+    int f = 0, k;
+    while (f < fx->n_eff && c[f] < LV_EFFECT_USER_BASE && !(lv_effect_flags(c[f]) & LV_EFFECT_USES_STATE)) f++;
+    fx->fused = LV_TF_NONE;
+    fx->first = 0;
+    for (k = 0; k < (int)(sizeof pats / sizeof pats[0]); k++) {
+        if (fx->n_eff - f == pats[k].n && c[f] == pats[k].c0 && (pats[k].n == 1 || c[f + 1] == pats[k].c1)) {
+            fx->fused = pats[k].fused;
+            fx->first = f;
+        }
+    }
+}
+
 /* The effect tiles' codes and per-lane parameters (lv_tile_fx) of the m bodies ids, from the index ix (bodies
    effects_tileable accepts). */
 static void tile_fx_fill(lv_tile_fx *fx, const lv_effect_index *ix, const long *ids, long m)
@@ -421,6 +517,7 @@ static void tile_fx_fill(lv_tile_fx *fx, const lv_effect_index *ix, const long *
         }
         o += np;
     }
+    tile_fx_pattern(fx);
 }
 
 static int tile_finite(const double (*T)[LV_TILE], long j)
@@ -448,6 +545,11 @@ static long advance_free_soa(double *state, const double *params, const long *id
     lv_tile_fx fx;
     long c, cm, s, j;
     int k, ok;
+    fx.n_eff = fx.fused = fx.first = 0;
+    if (ix != NULL && !sums) {
+        memset(fx.EP, 0, sizeof fx.EP); /* the rows past an effect's parameters are loaded, never used */
+        tile_fx_fill(&fx, ix, ids, m);
+    }
     for (j = 0; j < m; j++) {
         const double *x = state + ids[j] * LV_STATE_SIZE, *prm = params + ids[j] * LV_PARAM_SIZE;
         double F[3] = {0.0, 0.0, 0.0}, tau[3] = {0.0, 0.0, 0.0}, cf[LV_EULER_SIZE];
@@ -457,20 +559,24 @@ static long advance_free_soa(double *state, const double *params, const long *id
         if (ix == NULL) continue;
         P[LV_TP_M][j] = prm[LV_PARAM_M];
         for (k = 0; k < 3; k++) P[LV_TP_I + k][j] = prm[LV_PARAM_I_B + k];
-        if (!sums) continue; /* an effect tile: its sums are taken per stage */
-        effect_sums(x, x + LV_STATE_V_W, prm[LV_PARAM_M], prm + LV_PARAM_I_B, ix->refs + ix->start[ids[j]],
-                    ix->start[ids[j] + 1] - ix->start[ids[j]], F, tau);
-        if (!(ix->flags[ids[j]] & (LV_EFFECT_TORQUE_W | LV_EFFECT_TORQUE_B)))
+        if (!sums) { /* an effect tile: the sums of the effects before its fused pattern here, the rest per stage */
+            const long nr = ix->start[ids[j] + 1] - ix->start[ids[j]];
+            if (rhs_class(nr, ix->flags[ids[j]]) >= LV_RHS_BODY)
+                effect_sums_b(x, x + LV_STATE_V_W, prm[LV_PARAM_M], prm + LV_PARAM_I_B, ix->refs + ix->start[ids[j]],
+                              fx.first, F, tau);
+            else
+                effect_sums(x, x + LV_STATE_V_W, prm[LV_PARAM_M], prm + LV_PARAM_I_B, ix->refs + ix->start[ids[j]],
+                            fx.first, F, tau);
+        } else {
+            effect_sums(x, x + LV_STATE_V_W, prm[LV_PARAM_M], prm + LV_PARAM_I_B, ix->refs + ix->start[ids[j]],
+                        ix->start[ids[j] + 1] - ix->start[ids[j]], F, tau);
+        }
+        if (sums && !(ix->flags[ids[j]] & (LV_EFFECT_TORQUE_W | LV_EFFECT_TORQUE_B)))
             lv_linear_acceleration(prm[LV_PARAM_M], F, F); /* LV_RHS_FORCE: a_w = F/m, once per call */
         for (k = 0; k < 3; k++) {
             P[LV_TP_F + k][j] = F[k];
             P[LV_TP_TAU + k][j] = tau[k];
         }
-    }
-    fx.n_eff = 0;
-    if (ix != NULL && !sums) {
-        memset(fx.EP, 0, sizeof fx.EP); /* the rows past an effect's parameters are loaded, never used */
-        tile_fx_fill(&fx, ix, ids, m);
     }
     for (j = m; j < mp; j++) { /* padding lanes: copies of the last body (stepped, never checked nor written back) */
         for (k = 0; k < LV_STATE_SIZE; k++) T[k][j] = T[k][m - 1];
