@@ -66,6 +66,24 @@ def test_mixed_scene_free_bodies_on_the_simd_path_are_bitwise(levels):
         np.testing.assert_array_equal(_run(sc, level, 100), want)
 
 
+def _assert_levels_report_alike(levels, x0, params, effects, bad):
+    """RK4 50 steps of dt 1e-2 from x0 at every instruction-set level: a body of `bad` diverges (status 1) with a
+    finite last state, and every level reports the same status, step, body and that body's last state bitwise."""
+    x0 = np.array(x0, dtype=np.float64, copy=True)
+    params = np.ascontiguousarray(params, dtype=np.float64)
+    effects = np.ascontiguousarray(effects, dtype=np.float64)
+    reports = []
+    for level in levels:
+        C.isa(level)
+        x = x0.copy()
+        status, step, body = C.simulate(x, params, effects, C.RK4, 1, 1e-2, 50)
+        reports.append((status, step, body, x[body].copy()))
+    assert reports[0][0] == 1 and reports[0][2] in bad and np.isfinite(reports[0][3]).all(), reports[0][:3]
+    for r in reports[1:]:
+        assert r[:3] == reports[0][:3]
+        np.testing.assert_array_equal(r[3], reports[0][3])
+
+
 @pytest.mark.parametrize("bad", [[29], [29, 5], [63, 64]])   # in a tile; two tiles; tile edges
 def test_divergence_in_a_tile_is_reported_as_on_the_scalar_path(levels, bad):
     """Bodies blow up among 70 (lv_simulate's contract): every level returns the same status, step and
@@ -74,19 +92,9 @@ def test_divergence_in_a_tile_is_reported_as_on_the_scalar_path(levels, bad):
     n = 70
     x0, params, _ = _scene(n, seed=4).arrays()
     x0 = np.array(x0, dtype=np.float64, copy=True)
-    params = np.ascontiguousarray(params, dtype=np.float64)
     for k, b in enumerate(bad):
         x0[b, 10:13] = [1e150 * (k + 1), 1e150, 1e150]   # overflows within a few steps
-    reports = []
-    for level in levels:
-        C.isa(level)
-        x = x0.copy()
-        status, step, body = C.simulate(x, params, np.zeros((0, ROW)), C.RK4, 1, 1e-2, 50)
-        reports.append((status, step, body, x[body].copy()))
-    assert reports[0][0] == 1 and reports[0][2] in bad and np.isfinite(reports[0][3]).all(), reports[0][:3]
-    for r in reports[1:]:
-        assert r[:3] == reports[0][:3]
-        np.testing.assert_array_equal(r[3], reports[0][3])
+    _assert_levels_report_alike(levels, x0, params, np.zeros((0, ROW)), bad)
 
 
 @pytest.fixture
@@ -190,20 +198,7 @@ def test_divergence_in_a_constant_effect_tile_is_reported_as_on_the_scalar_path(
     for i in range(n):
         big = 1e296 * (1.0 + bad.index(i)) if i in bad else 1e-3
         sc.add_effect("applied_torque", body=f"b{i}", torque_w=[big, -big, big])
-    x0, params, effects = sc.arrays()
-    x0 = np.array(x0, dtype=np.float64, copy=True)
-    params = np.ascontiguousarray(params, dtype=np.float64)
-    effects = np.ascontiguousarray(effects, dtype=np.float64)
-    reports = []
-    for level in levels:
-        C.isa(level)
-        x = x0.copy()
-        status, step, body = C.simulate(x, params, effects, C.RK4, 1, 1e-2, 50)
-        reports.append((status, step, body, x[body].copy()))
-    assert reports[0][0] == 1 and reports[0][2] in bad and np.isfinite(reports[0][3]).all(), reports[0][:3]
-    for r in reports[1:]:
-        assert r[:3] == reports[0][:3]
-        np.testing.assert_array_equal(r[3], reports[0][3])
+    _assert_levels_report_alike(levels, *sc.arrays(), bad)
 
 
 def _state_effect_scene(n: int, seed: int, per_body: bool) -> lv.Scene:
@@ -283,20 +278,7 @@ def test_divergence_in_a_fused_effect_tile_is_reported_as_on_the_scalar_path(lev
     for i in range(n):
         sc.add_effect("linear_damping", body=f"b{i}", c=0.1)
         sc.add_effect("angular_damping", body=f"b{i}", c=1e150 * (1.0 + bad.index(i)) if i in bad else 1e-3)
-    x0, params, effects = sc.arrays()
-    x0 = np.array(x0, dtype=np.float64, copy=True)
-    params = np.ascontiguousarray(params, dtype=np.float64)
-    effects = np.ascontiguousarray(effects, dtype=np.float64)
-    reports = []
-    for level in levels:
-        C.isa(level)
-        x = x0.copy()
-        status, step, body = C.simulate(x, params, effects, C.RK4, 1, 1e-2, 50)
-        reports.append((status, step, body, x[body].copy()))
-    assert reports[0][0] == 1 and reports[0][2] in bad and np.isfinite(reports[0][3]).all(), reports[0][:3]
-    for r in reports[1:]:
-        assert r[:3] == reports[0][:3]
-        np.testing.assert_array_equal(r[3], reports[0][3])
+    _assert_levels_report_alike(levels, *sc.arrays(), bad)
 
 
 @pytest.mark.parametrize("bad", [[29], [40, 5], [63, 64]])
@@ -309,17 +291,4 @@ def test_divergence_in_an_effect_tile_is_reported_as_on_the_scalar_path(levels, 
         big = 1e296 * (1.0 + bad.index(i)) if i in bad else 1e-3
         sc.add_effect("force_at_point", body=f"b{i}", r_b=[0.1, 0.2, 0.3], F_w=[big, -big, big])
         sc.add_effect("angular_damping", body=f"b{i}", c=0.1)
-    x0, params, effects = sc.arrays()
-    x0 = np.array(x0, dtype=np.float64, copy=True)
-    params = np.ascontiguousarray(params, dtype=np.float64)
-    effects = np.ascontiguousarray(effects, dtype=np.float64)
-    reports = []
-    for level in levels:
-        C.isa(level)
-        x = x0.copy()
-        status, step, body = C.simulate(x, params, effects, C.RK4, 1, 1e-2, 50)
-        reports.append((status, step, body, x[body].copy()))
-    assert reports[0][0] == 1 and reports[0][2] in bad and np.isfinite(reports[0][3]).all(), reports[0][:3]
-    for r in reports[1:]:
-        assert r[:3] == reports[0][:3]
-        np.testing.assert_array_equal(r[3], reports[0][3])
+    _assert_levels_report_alike(levels, *sc.arrays(), bad)
