@@ -134,6 +134,11 @@ class LoadBudget:
         self.plain = self.loaded & ((kind & backends.KIND_WHEELS) == 0)
         self.idx = np.flatnonzero(self.loaded)
         self._groups = _supplying_groups(effects, params.shape[0])
+        # screen_rows' per-body constants, once: the loaded bodies (a slice when all are), 2m, 2 I_min, plain
+        self._sel = slice(None) if self.loaded.all() else self.idx
+        self._2m = 2 * params[self._sel, LY.PARAM_M]
+        self._2I = 2 * params[self._sel, LY.PARAM_I_B].min(axis=1)
+        self._plain_sel = None if self.plain[self._sel].all() else self.plain[self._sel]
         nb = params.shape[0]
         self.L0, self.P0, self.RL, self.RP = np.zeros(nb), np.zeros(nb), np.zeros(nb), np.zeros(nb)
         self.t0 = np.zeros(nb)    # the step count of each body's reference
@@ -200,17 +205,21 @@ class LoadBudget:
         no-work rate, |L|² <= Lmax², and kinetic energy <= Pmax²/2m + Lmax²/2I_min (plain bodies) or (wheeled: the
         screen's |L| is of body and wheels, its energy the translational one at omega 0) <= Pmax²/2m, which is
         m|v| <= Pmax. Margin as Sim._safe_rates'."""
-        if not self.loaded.any():
+        s = self._sel
+        if not self.idx.size:
             return
-        Lmax, Pmax = self.limits(steps)
-        f = self.plain
-        margin = SCREEN_MARGIN
+        t = (steps - self.t0[s]) * self.dt       # limits(steps)' arithmetic, on the loaded bodies only
         with np.errstate(over="ignore", invalid="ignore"):
-            T = Pmax ** 2 / (2 * self.params[:, LY.PARAM_M])
-            E = np.where(f, T + Lmax ** 2 / (2 * self.params[:, LY.PARAM_I_B].min(axis=1)), T)
-            G[self.loaded, 0] = -np.inf
-            G[self.loaded, 1] = E[self.loaded] * margin
-            G[self.loaded, 2] = Lmax[self.loaded] ** 2 * margin
+            L2 = np.square(self.g * (self.L0[s] + t * self.RL[s]))
+            E = np.square(self.g * (self.P0[s] + t * self.RP[s]))
+            E /= self._2m
+            if self._plain_sel is None:
+                E += L2 / self._2I
+            else:
+                E = np.where(self._plain_sel, E + L2 / self._2I, E)
+            G[s, 0] = -np.inf
+            G[s, 1] = E * SCREEN_MARGIN
+            G[s, 2] = L2 * SCREEN_MARGIN
 
     def violation(self, x, Omega, steps: int) -> tuple[int, str] | None:
         """The first loaded body beyond its budget at step `steps`: (body, cause), or None."""
