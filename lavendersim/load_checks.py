@@ -133,13 +133,16 @@ class LoadBudget:
         self.wheeled = np.flatnonzero(self.loaded & ((kind & backends.KIND_WHEELS) != 0))   # (indices)
         self.plain = self.loaded & ((kind & backends.KIND_WHEELS) == 0)
         self.idx = np.flatnonzero(self.loaded)
-        self._groups = _supplying_groups(effects, params.shape[0])
-        # screen_rows' per-body constants, once: the loaded bodies (a slice when all are), 2m, 2 I_min, plain
-        self._sel = slice(None) if self.loaded.all() else self.idx
-        self._2m = 2 * params[self._sel, LY.PARAM_M]
-        self._2I = 2 * params[self._sel, LY.PARAM_I_B].min(axis=1)
-        self._plain_sel = None if self.plain[self._sel].all() else self.plain[self._sel]
         nb = params.shape[0]
+        # (a group over every body once, in order: its loads are added, not scattered with np.add.at)
+        self._groups = [(c, p, None if np.array_equal(i, np.arange(nb)) else i)
+                        for c, p, i in _supplying_groups(effects, nb)]
+        # per-body constants, once: the loaded (and plain) bodies (a slice when all are), 2m, 2 I_min
+        self._sel = slice(None) if self.loaded.all() else self.idx
+        self._psel = slice(None) if self.plain.all() else np.flatnonzero(self.plain)
+        self._2m = 2 * params[:, LY.PARAM_M]
+        self._2I = 2 * params[:, LY.PARAM_I_B].min(axis=1)
+        self._plain_sel = None if self.plain[self._sel].all() else self.plain[self._sel]
         self.L0, self.P0, self.RL, self.RP = np.zeros(nb), np.zeros(nb), np.zeros(nb), np.zeros(nb)
         self.t0 = np.zeros(nb)    # the step count of each body's reference
 
@@ -155,14 +158,15 @@ class LoadBudget:
         nb = x.shape[0]
         L, P = np.zeros(nb), np.zeros(nb)
         with np.errstate(over="ignore", invalid="ignore"):
-            f = self.plain
-            if f.any():
-                L[f] = np.linalg.norm(K.body_momentum(self.params[f][:, LY.PARAM_I_B], x[f][:, LY.STATE_OMEGA_B]), axis=-1)
+            f = self._psel
+            if self.plain.any():
+                L[f] = np.linalg.norm(K.body_momentum(self.params[f, LY.PARAM_I_B], x[f, LY.STATE_OMEGA_B]), axis=-1)
             if self.wheeled.size:     # one batched call of the printed total momentum (as the C screen's)
                 w = self.wheeled
                 L[w] = np.linalg.norm(backends.wheel_total_momentum_batch(self.rows[w], x[w, LY.STATE_Q],
                                                                           x[w, LY.STATE_OMEGA_B], Omega[w]), axis=-1)
-            P[self.loaded] = self.params[self.loaded, LY.PARAM_M] * np.linalg.norm(x[self.loaded][:, LY.STATE_V_W], axis=-1)
+            s = self._sel
+            P[s] = self.params[s, LY.PARAM_M] * np.linalg.norm(x[s, LY.STATE_V_W], axis=-1)
         return L, P
 
     def _rates(self, x) -> tuple[np.ndarray, np.ndarray]:
@@ -173,13 +177,15 @@ class LoadBudget:
         x = np.asarray(x[:, :LY.STATE_SIZE], dtype=np.float64)
         with np.errstate(all="ignore"):
             for code, p, idx in self._groups:
-                xs = x[idx]
-                f, t = effects_mod.numpy_apply(code)(p, xs, xs[:, LY.STATE_V_W], self.params[idx, LY.PARAM_M],
-                                                     self.params[idx][:, LY.PARAM_I_B])
-                if f is not None:
-                    np.add.at(F, idx, np.broadcast_to(f, (idx.size, 3)))
-                if t is not None:
-                    np.add.at(tau, idx, np.broadcast_to(t, (idx.size, 3)))
+                at = slice(None) if idx is None else idx
+                xs = x[at]
+                f, t = effects_mod.numpy_apply(code)(p, xs, xs[:, LY.STATE_V_W], self.params[at, LY.PARAM_M],
+                                                     self.params[at, LY.PARAM_I_B])
+                for acc, v in ((F, f), (tau, t)):
+                    if v is not None and idx is None:
+                        acc += v
+                    elif v is not None:
+                        np.add.at(acc, idx, np.broadcast_to(v, (idx.size, 3)))
             return np.linalg.norm(tau, axis=-1), np.linalg.norm(F, axis=-1)
 
     def reference(self, x, Omega, steps: int, mask=None) -> None:
@@ -212,11 +218,11 @@ class LoadBudget:
         with np.errstate(over="ignore", invalid="ignore"):
             L2 = np.square(self.g * (self.L0[s] + t * self.RL[s]))
             E = np.square(self.g * (self.P0[s] + t * self.RP[s]))
-            E /= self._2m
+            E /= self._2m[s]
             if self._plain_sel is None:
-                E += L2 / self._2I
+                E += L2 / self._2I[s]
             else:
-                E = np.where(self._plain_sel, E + L2 / self._2I, E)
+                E = np.where(self._plain_sel, E + L2 / self._2I[s], E)
             G[s, 0] = -np.inf
             G[s, 1] = E * SCREEN_MARGIN
             G[s, 2] = L2 * SCREEN_MARGIN
@@ -225,13 +231,13 @@ class LoadBudget:
         """The first loaded body beyond its budget at step `steps`: (body, cause), or None."""
         L, P = self._momenta(x, Omega)
         Lmax, Pmax = self.limits(steps, x)
-        f = self.plain
+        f, ps = self.plain, self._psel
         with np.errstate(over="ignore", invalid="ignore"):
             E = np.zeros(x.shape[0])
             if f.any():
-                E[f] = K.kinetic_energy(self.params[f, LY.PARAM_M], self.params[f][:, LY.PARAM_I_B],
-                                        x[f][:, LY.STATE_V_W], x[f][:, LY.STATE_OMEGA_B])
-            Emax = Pmax ** 2 / (2 * self.params[:, LY.PARAM_M]) + Lmax ** 2 / (2 * self.params[:, LY.PARAM_I_B].min(axis=1))
+                E[ps] = K.kinetic_energy(self.params[ps, LY.PARAM_M], self.params[ps, LY.PARAM_I_B],
+                                         x[ps, LY.STATE_V_W], x[ps, LY.STATE_OMEGA_B])
+            Emax = Pmax ** 2 / self._2m + Lmax ** 2 / self._2I
             bad = self.loaded & ~(L <= Lmax)
             badE = f & ~(E <= Emax)
             badP = self.loaded & ~f & ~(P <= Pmax)
