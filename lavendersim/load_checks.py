@@ -145,6 +145,7 @@ class LoadBudget:
         self._plain_sel = None if self.plain[self._sel].all() else self.plain[self._sel]
         self.L0, self.P0, self.RL, self.RP = np.zeros(nb), np.zeros(nb), np.zeros(nb), np.zeros(nb)
         self.t0 = np.zeros(nb)    # the step count of each body's reference
+        self._wrote = None        # the G screen_rows last filled, while its rows cannot change (no rates, no new data)
 
     def snapshot(self) -> tuple:
         """What pickling a Sim keeps of the budget (references, rates, reference steps)."""
@@ -152,6 +153,7 @@ class LoadBudget:
 
     def restore(self, snap: tuple) -> None:
         self.L0, self.P0, self.RL, self.RP, self.t0 = (np.array(a, dtype=np.float64) for a in snap)
+        self._wrote = None
 
     def _momenta(self, x, Omega) -> tuple[np.ndarray, np.ndarray]:
         """(|L|, |p|) per body (0 outside the check): body |I omega|, or body + wheels for a wheeled one."""
@@ -194,10 +196,12 @@ class LoadBudget:
         L, P = self._momenta(x, Omega)
         RL, RP = self._rates(x)
         self.L0[m], self.P0[m], self.RL[m], self.RP[m], self.t0[m] = L[m], P[m], RL[m], RP[m], steps
+        self._wrote = None
 
     def limits(self, steps: int, x=None) -> tuple[np.ndarray, np.ndarray]:
         """(Lmax, Pmax) per body at step `steps`; with x, its loads' rates count too (and are remembered)."""
         if x is not None:
+            self._wrote = None
             RL, RP = self._rates(x)
             with np.errstate(invalid="ignore"):
                 self.RL = np.fmax(self.RL, np.where(self.loaded, RL, 0.0))
@@ -212,7 +216,7 @@ class LoadBudget:
         screen's |L| is of body and wheels, its energy the translational one at omega 0) <= Pmax²/2m, which is
         m|v| <= Pmax. Margin as Sim._safe_rates'."""
         s = self._sel
-        if not self.idx.size:
+        if not self.idx.size or self._wrote is G:   # (rows written, and with no rates they do not grow with steps)
             return
         t = (steps - self.t0[s]) * self.dt       # limits(steps)' arithmetic, on the loaded bodies only
         with np.errstate(over="ignore", invalid="ignore"):
@@ -226,6 +230,7 @@ class LoadBudget:
             G[s, 0] = -np.inf
             G[s, 1] = E * SCREEN_MARGIN
             G[s, 2] = L2 * SCREEN_MARGIN
+        self._wrote = None if self.RL[s].any() or self.RP[s].any() else G
 
     def violation(self, x, Omega, steps: int) -> tuple[int, str] | None:
         """The first loaded body beyond its budget at step `steps`: (body, cause), or None."""
