@@ -145,6 +145,7 @@ class LoadBudget:
         self._plain_sel = None if self.plain[self._sel].all() else self.plain[self._sel]
         self.L0, self.P0, self.RL, self.RP = np.zeros(nb), np.zeros(nb), np.zeros(nb), np.zeros(nb)
         self.t0 = np.zeros(nb)    # the step count of each body's reference
+        self._scratch = None
         self._wrote = None        # the G screen_rows last filled, while its rows cannot change (no rates, no new data)
 
     def snapshot(self) -> tuple:
@@ -218,18 +219,25 @@ class LoadBudget:
         s = self._sel
         if not self.idx.size or self._wrote is G:   # (rows written, and with no rates they do not grow with steps)
             return
-        t = (steps - self.t0[s]) * self.dt       # limits(steps)' arithmetic, on the loaded bodies only
+        if self._scratch is None:                   # (made once: no fresh pages per call)
+            self._scratch = np.empty((3, self.idx.size))
+        t, L2, E = self._scratch                   # limits(steps)' arithmetic, on the loaded bodies only
         with np.errstate(over="ignore", invalid="ignore"):
-            L2 = np.square(self.g * (self.L0[s] + t * self.RL[s]))
-            E = np.square(self.g * (self.P0[s] + t * self.RP[s]))
+            np.subtract(steps, self.t0[s], out=t)
+            t *= self.dt
+            for out, ref, rate in ((L2, self.L0, self.RL), (E, self.P0, self.RP)):   # (g * (ref + t * rate))²
+                np.multiply(t, rate[s], out=out)
+                out += ref[s]
+                out *= self.g
+                np.square(out, out=out)
             E /= self._2m[s]
             if self._plain_sel is None:
-                E += L2 / self._2I[s]
+                E += np.divide(L2, self._2I[s], out=t)
             else:
                 E = np.where(self._plain_sel, E + L2 / self._2I[s], E)
             G[s, 0] = -np.inf
-            G[s, 1] = E * SCREEN_MARGIN
-            G[s, 2] = L2 * SCREEN_MARGIN
+            G[s, 1] = np.multiply(E, SCREEN_MARGIN, out=E)
+            G[s, 2] = np.multiply(L2, SCREEN_MARGIN, out=L2)
         self._wrote = None if self.RL[s].any() or self.RP[s].any() else G
 
     def violation(self, x, Omega, steps: int) -> tuple[int, str] | None:
