@@ -135,8 +135,8 @@ class LoadBudget:
         self.idx = np.flatnonzero(self.loaded)
         nb = params.shape[0]
         # (a group over every body once, in order: its loads are added, not scattered with np.add.at)
-        self._groups = [(c, p, None if np.array_equal(i, np.arange(nb)) else i)
-                        for c, p, i in _supplying_groups(effects, nb)]
+        self._groups: list[tuple[int, np.ndarray, np.ndarray | None]] = [
+            (c, p, None if np.array_equal(i, np.arange(nb)) else i) for c, p, i in _supplying_groups(effects, nb)]
         # per-body constants, once: the loaded (and plain) bodies (a slice when all are), 2m, 2 I_min
         self._sel = slice(None) if self.loaded.all() else self.idx
         self._psel = slice(None) if self.plain.all() else np.flatnonzero(self.plain)
@@ -145,8 +145,8 @@ class LoadBudget:
         self._plain_sel = None if self.plain[self._sel].all() else self.plain[self._sel]
         self.L0, self.P0, self.RL, self.RP = np.zeros(nb), np.zeros(nb), np.zeros(nb), np.zeros(nb)
         self.t0 = np.zeros(nb)    # the step count of each body's reference
-        self._scratch = None
-        self._wrote = None        # the G screen_rows last filled, while its rows cannot change (no rates, no new data)
+        self._scratch: np.ndarray | None = None
+        self._wrote: np.ndarray | None = None        # the G screen_rows last filled, while its rows cannot change (no rates, no new data)
 
     def snapshot(self) -> tuple:
         """What pickling a Sim keeps of the budget (references, rates, reference steps)."""
@@ -185,9 +185,11 @@ class LoadBudget:
                 f, t = effects_mod.numpy_apply(code)(p, xs, xs[:, LY.STATE_V_W], self.params[at, LY.PARAM_M],
                                                      self.params[at, LY.PARAM_I_B])
                 for acc, v in ((F, f), (tau, t)):
-                    if v is not None and idx is None:
+                    if v is None:
+                        continue
+                    if idx is None:
                         acc += v
-                    elif v is not None:
+                    else:
                         np.add.at(acc, idx, np.broadcast_to(v, (idx.size, 3)))
             return np.linalg.norm(tau, axis=-1), np.linalg.norm(F, axis=-1)
 
