@@ -348,6 +348,14 @@ def wheel_row(row: np.ndarray, J: np.ndarray, A_b: np.ndarray) -> int:
     return KIND_WHEELS
 
 
+def _wheel_model_args(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The wheel kernels' model arguments of one model row (MODEL_SIZE,) or of n rows (n, MODEL_SIZE): I_p (..., 3, 3),
+    A_b (..., 3, WHEELS_MAX) and J (..., WHEELS_MAX), views of the rows."""
+    lead = rows.shape[:-1]
+    return (rows[..., LAYOUT.MODEL_I_P].reshape(lead + (3, 3)),
+            rows[..., LAYOUT.MODEL_A_B].reshape(lead + (3, LAYOUT.WHEELS_MAX)), rows[..., LAYOUT.MODEL_J])
+
+
 def wheel_momentum(row: np.ndarray, q: np.ndarray, omega_b: np.ndarray, Omega: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """World angular momentum about the pivot of a wheeled body (wheels locked) and of its wheels' spin,
     from its model row, through the printed N-wheel kernel (wheels<WHEELS_MAX>_momentum, padded slots at rest).
@@ -370,10 +378,7 @@ def wheel_momentum(row: np.ndarray, q: np.ndarray, omega_b: np.ndarray, Omega: n
     """
     from ..kernels import K
 
-    I_p = row[LAYOUT.MODEL_I_P].reshape(3, 3)
-    Lb, Lw, _ = getattr(K, f"wheels{LAYOUT.WHEELS_MAX}_momentum")(q, omega_b, Omega, I_p,
-                                                                  row[LAYOUT.MODEL_A_B].reshape(3, LAYOUT.WHEELS_MAX),
-                                                                  row[LAYOUT.MODEL_J])
+    Lb, Lw, _ = getattr(K, f"wheels{LAYOUT.WHEELS_MAX}_momentum")(q, omega_b, Omega, *_wheel_model_args(row))
     return np.asarray(Lb), np.asarray(Lw)
 
 
@@ -401,9 +406,7 @@ def wheel_momentum_batch(rows: np.ndarray, q: np.ndarray, omega_b: np.ndarray,
     from ..kernels import K
 
     n = rows.shape[0]
-    I_p = rows[:, LAYOUT.MODEL_I_P].reshape(n, 3, 3)
-    A_b = rows[:, LAYOUT.MODEL_A_B].reshape(n, 3, LAYOUT.WHEELS_MAX)
-    Lb, Lw, _ = getattr(K, f"wheels{LAYOUT.WHEELS_MAX}_momentum")(q, omega_b, Omega, I_p, A_b, rows[:, LAYOUT.MODEL_J])
+    Lb, Lw, _ = getattr(K, f"wheels{LAYOUT.WHEELS_MAX}_momentum")(q, omega_b, Omega, *_wheel_model_args(rows))
     return (np.broadcast_to(np.asarray(Lb), (n, 3)), np.broadcast_to(np.asarray(Lw), (n, 3)))
 
 
@@ -431,9 +434,7 @@ def wheel_total_momentum_batch(rows: np.ndarray, q: np.ndarray, omega_b: np.ndar
     from ..kernels import K
 
     n = rows.shape[0]
-    L = getattr(K, f"wheels{LAYOUT.WHEELS_MAX}_total_momentum")(q, omega_b, Omega, rows[:, LAYOUT.MODEL_I_P].reshape(n, 3, 3),
-                                                                rows[:, LAYOUT.MODEL_A_B].reshape(n, 3, LAYOUT.WHEELS_MAX),
-                                                                rows[:, LAYOUT.MODEL_J])
+    L = getattr(K, f"wheels{LAYOUT.WHEELS_MAX}_total_momentum")(q, omega_b, Omega, *_wheel_model_args(rows))
     return np.broadcast_to(np.asarray(L), (n, 3))
 
 
