@@ -5,10 +5,17 @@ numbers bit for bit, or raises (ValueError, ZeroDivisionError) where NumPy meets
 by zero (checked with numpy.errstate(all="raise"); a kernel with branches evaluates them all in NumPy, so there the
 float kernel may raise on a branch NumPy leaves unused). matrix_to_quat is checked bitwise on rotation matrices.
 The effects' float dispatch equals the NumPy one.
+
+Where the NumPy printing calls a function NumPy evaluates with its own routines rather than the C library's
+(arctan2, arccos, arcsin, arctan, exp, log, tan, tanh, power: NumPy >= 2.4 has SIMD implementations of these, which
+differ from libm, and so from Python's math module, in the last bit at ~5 % of inputs; measured 1 ulp at most for
+each, 200 000 inputs), the two agree to 1 ulp instead (np.testing.assert_array_max_ulp); every other kernel (+ - * /,
+sqrt, sin, cos, min, max, branches) stays bitwise.
 """
 from __future__ import annotations
 
 import inspect
+import re
 
 import numpy as np
 import pytest
@@ -17,6 +24,8 @@ from lavendersim.generated import kernels_numpy as KN
 from lavendersim.generated import kernels_scalar as KS
 
 POINTS = 4
+# NumPy functions evaluated by NumPy's own routines (not libm): their kernels agree with math's to 1 ulp
+OWN_ROUTINES = re.compile(r"numpy\.(arctan2|arccos|arcsin|arctan|exp|log|tan|tanh|power)\(|\*\*")
 
 
 def _floats(a: np.ndarray):
@@ -32,6 +41,7 @@ def _flat(out, n_out: int) -> list[np.ndarray]:
 def test_scalar_kernel_is_numpy_bitwise(name):
     fn, ins, outs = KN.KERNELS[name]
     rng = np.random.default_rng(sum(map(ord, name)))
+    own = OWN_ROUTINES.search(inspect.getsource(fn)) is not None
     for _ in range(POINTS):
         args = [rng.uniform(0.5, 2.0, shape) for _, shape in ins]
         try:
@@ -45,7 +55,10 @@ def test_scalar_kernel_is_numpy_bitwise(name):
         with np.errstate(all="ignore"):
             want = fn(*args)
         for w, g in zip(_flat(want, len(outs)), _flat(got, len(outs))):
-            assert w.tobytes() == g.tobytes(), f"{name}: {w} != {g}"
+            if own:
+                np.testing.assert_array_max_ulp(w, g, maxulp=1)
+            else:
+                assert w.tobytes() == g.tobytes(), f"{name}: {w} != {g}"
 
 
 def test_every_kernel_is_printed_for_floats():

@@ -17,6 +17,12 @@ from lavendersim.effects import ImmutableEffectError
 from lavendersim.validate import LavenderInputError
 
 
+def _norm(v):
+    """|v| of one vector as np.linalg.norm(..., axis=-1) computes it for each row: sqrt(add.reduce(v*v)). (NumPy >= 2.4
+    computes np.linalg.norm of a 1-D array as sqrt(dot(v, v)) through BLAS, which may round differently.)"""
+    return float(np.sqrt(np.add.reduce(v * v, axis=-1)))
+
+
 def _total(rows, x, Omega, i):
     """Body i's total wheel momentum (the printed kernel on its row alone)."""
     s = slice(i, i + 1)
@@ -35,9 +41,9 @@ def _loop_invariants(sim, x, Omega, reference=False):
             L[f] = np.linalg.norm(sim_mod.K.body_momentum(I_b, w_b), axis=-1)
         for i in np.flatnonzero(sim._free_wheels):
             Lb, Lw = backends.wheel_momentum(sim._models.rows[i], x[i, LY.STATE_Q], x[i, LY.STATE_OMEGA_B], Omega[i])
-            L[i] = np.linalg.norm(_total(sim._models.rows, x, Omega, i))
+            L[i] = _norm(_total(sim._models.rows, x, Omega, i))
             if reference:
-                parts = np.linalg.norm(Lb) + float(np.abs(sim._models.rows[i, LY.MODEL_J] * Omega[i]).sum())
+                parts = _norm(Lb) + float(np.abs(sim._models.rows[i, LY.MODEL_J] * Omega[i]).sum())
                 L[i] = max(L[i], sim_mod.L_FLOOR * parts)
     return E, L
 
@@ -51,7 +57,7 @@ def _loop_momenta(budget, x, Omega):
         if f.any():
             L[f] = np.linalg.norm(sim_mod.K.body_momentum(budget.params[f][:, LY.PARAM_I_B], x[f][:, LY.STATE_OMEGA_B]), axis=-1)
         for i in budget.wheeled:
-            L[i] = np.linalg.norm(_total(budget.rows, x, Omega, i))
+            L[i] = _norm(_total(budget.rows, x, Omega, i))
         P[budget.loaded] = budget.params[budget.loaded, LY.PARAM_M] * np.linalg.norm(x[budget.loaded][:, LY.STATE_V_W], axis=-1)
     return L, P
 
