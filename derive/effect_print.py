@@ -16,6 +16,7 @@ import pprint
 from collections.abc import Sequence
 
 from . import effect as E
+from . import effect_fuse
 from .effect_decay import decay_rate
 from .printers import NpPrinter
 from .layout import STATE
@@ -109,8 +110,8 @@ def c_header(effects: list[tuple[int, E.EffectDecl]]) -> list[str]:
           "   LV_EFFECT_TORQUE_W): it adds such an effect's torque to tau in the body frame, else as lv_effect_apply. */",
           "/* Built-in effect `code`: its number of parameters, its LV_EFFECT_USES_* flags, its name; -1 (NULL)",
           "   for a code that is not a built-in effect. */",
-          "int lv_effect_n_params(int code);", "int lv_effect_flags(int code);", "const char *lv_effect_name(int code);", ""]
-    return h
+          "int lv_effect_n_params(int code);", "int lv_effect_flags(int code);", "const char *lv_effect_name(int code);"]
+    return h + effect_fuse.c_header(effects) + [""]
 
 
 def _switch(signature: str, effects, value, default: str) -> list[str]:

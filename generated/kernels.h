@@ -751,5 +751,19 @@ typedef void (*lv_effect_tile_fn)(long b0, long b1, const double (*x)[LV_EFFECT_
 int lv_effect_n_params(int code);
 int lv_effect_flags(int code);
 const char *lv_effect_name(int code);
+/* The fused effect tiles' patterns (derive/effect_fuse.py): after a run of effects that read no state, an
+   ordered sequence of up to LV_EFFECT_FUSED_MAX distinct built-in effects that read the state, each a lane
+   expression; batch_simd.h steps such a tile with the pattern's effect functions inlined in the plain tile's
+   lane loop. X(..., id, n, code_0, code_1): the pattern's id (from 1), its n effect codes in table order (0
+   past n). LV_EFFECT_FUSED_<kind>: the patterns a body of that right-hand-side class (step.c's LV_RHS_<kind>)
+   can have, whatever the effects before them add. */
+#define LV_EFFECT_FUSED_MAX 2
+#define LV_EFFECT_FUSED_COUNT 9
+#define LV_EFFECT_FUSED(X, ...) X(__VA_ARGS__, 1, 2, LV_EFFECT_FORCE_AT_POINT, LV_EFFECT_LINEAR_DAMPING) X(__VA_ARGS__, 2, 2, LV_EFFECT_FORCE_AT_POINT, LV_EFFECT_ANGULAR_DAMPING) X(__VA_ARGS__, 3, 2, LV_EFFECT_LINEAR_DAMPING, LV_EFFECT_FORCE_AT_POINT) X(__VA_ARGS__, 4, 2, LV_EFFECT_LINEAR_DAMPING, LV_EFFECT_ANGULAR_DAMPING) X(__VA_ARGS__, 5, 2, LV_EFFECT_ANGULAR_DAMPING, LV_EFFECT_FORCE_AT_POINT) X(__VA_ARGS__, 6, 2, LV_EFFECT_ANGULAR_DAMPING, LV_EFFECT_LINEAR_DAMPING) X(__VA_ARGS__, 7, 1, LV_EFFECT_FORCE_AT_POINT, 0) X(__VA_ARGS__, 8, 1, LV_EFFECT_LINEAR_DAMPING, 0) X(__VA_ARGS__, 9, 1, LV_EFFECT_ANGULAR_DAMPING, 0)
+#define LV_EFFECT_FUSED_TORQUE(X, ...) X(__VA_ARGS__, 9, 1, LV_EFFECT_ANGULAR_DAMPING, 0)
+#define LV_EFFECT_FUSED_FULL(X, ...) X(__VA_ARGS__, 1, 2, LV_EFFECT_FORCE_AT_POINT, LV_EFFECT_LINEAR_DAMPING) X(__VA_ARGS__, 2, 2, LV_EFFECT_FORCE_AT_POINT, LV_EFFECT_ANGULAR_DAMPING) X(__VA_ARGS__, 3, 2, LV_EFFECT_LINEAR_DAMPING, LV_EFFECT_FORCE_AT_POINT) X(__VA_ARGS__, 4, 2, LV_EFFECT_LINEAR_DAMPING, LV_EFFECT_ANGULAR_DAMPING) X(__VA_ARGS__, 5, 2, LV_EFFECT_ANGULAR_DAMPING, LV_EFFECT_FORCE_AT_POINT) X(__VA_ARGS__, 6, 2, LV_EFFECT_ANGULAR_DAMPING, LV_EFFECT_LINEAR_DAMPING) X(__VA_ARGS__, 7, 1, LV_EFFECT_FORCE_AT_POINT, 0) X(__VA_ARGS__, 8, 1, LV_EFFECT_LINEAR_DAMPING, 0) X(__VA_ARGS__, 9, 1, LV_EFFECT_ANGULAR_DAMPING, 0)
+#define LV_EFFECT_FUSED_FORCE(X, ...) X(__VA_ARGS__, 8, 1, LV_EFFECT_LINEAR_DAMPING, 0)
+#define LV_EFFECT_FUSED_BODY(X, ...) X(__VA_ARGS__, 9, 1, LV_EFFECT_ANGULAR_DAMPING, 0)
+#define LV_EFFECT_FUSED_BODY_F(X, ...) X(__VA_ARGS__, 4, 2, LV_EFFECT_LINEAR_DAMPING, LV_EFFECT_ANGULAR_DAMPING) X(__VA_ARGS__, 6, 2, LV_EFFECT_ANGULAR_DAMPING, LV_EFFECT_LINEAR_DAMPING) X(__VA_ARGS__, 9, 1, LV_EFFECT_ANGULAR_DAMPING, 0)
 
 #endif

@@ -141,6 +141,10 @@ SETS = {
     "damping": [("linear_damping", {"c": 0.05}), ("angular_damping", {"c": 2e-3})],
     "gravity + damping": [("gravity", {}), ("linear_damping", {"c": 0.05}), ("angular_damping", {"c": 2e-3})],
     "torque + damping": [("applied_torque", {"torque_w": [1e-3, 2e-3, -1e-3]}), ("angular_damping", {"c": 2e-3})],
+    "torque + linear and angular damping": [("applied_torque", {"torque_w": [1e-3, 2e-3, -1e-3]}),
+                                            ("linear_damping", {"c": 0.05}), ("angular_damping", {"c": 2e-3})],
+    "force at point + damping": [("force_at_point", {"r_b": [0.1, -0.05, 0.02], "F_w": [0.3, 0.0, -1.0]}),
+                                 ("angular_damping", {"c": 2e-3})],
 }
 
 

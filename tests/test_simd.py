@@ -244,23 +244,38 @@ def test_state_reading_effect_tiles_with_two_threads(levels, two_threads):
 
 FUSED_SETS = (["linear_damping"], ["angular_damping"], ["angular_damping", "linear_damping"],
               ["gravity", "angular_damping"], ["gravity", "gravity", "linear_damping", "angular_damping"],
-              ["linear_damping", "gravity", "angular_damping"])   # the last: no fused pattern (stage passes)
+              ["applied_torque", "angular_damping"],                          # TORQUE kind
+              ["applied_torque", "linear_damping", "angular_damping"],        # FULL kind
+              ["gravity", "applied_torque", "linear_damping"], ["force_at_point"],
+              ["applied_torque", "force_at_point", "angular_damping"],
+              ["linear_damping", "gravity", "angular_damping"],   # no fused pattern (stage passes): a constant after
+              ["linear_damping", "angular_damping", "force_at_point"])   # three state-reading effects: stage passes
+
+
+def _fused_params(name: str, rng) -> dict:
+    """Random parameters of effect `name` for the fused-tile scenes (damping: c dt / I well inside RK4's bound, the
+    smallest I here being ~1e-3)."""
+    if name == "gravity":
+        return {"g_w": list(rng.standard_normal(3))}
+    if name == "applied_torque":
+        return {"torque_w": list(1e-2 * rng.standard_normal(3))}
+    if name == "force_at_point":
+        return {"r_b": list(0.1 * rng.standard_normal(3)), "F_w": list(rng.standard_normal(3))}
+    return {"c": (1.0 if name == "linear_damping" else 1e-4) * (0.05 + rng.random())}
 
 
 @pytest.mark.parametrize("names", FUSED_SETS, ids="+".join)
 @pytest.mark.parametrize("n", [5, 67])
 @pytest.mark.parametrize("normalize", [True, False])
 def test_fused_effect_tiles_are_the_scalar_path_bitwise(levels, names, n, normalize):
-    """The fused effect tiles (batch_simd.h, LV_TF_*: a built-in pattern of damping effects after effects that read
-    no state, the whole step per lane) give the scalar path's bits, each body its own parameters."""
+    """The fused effect tiles (batch_simd.h, kernels.h's LV_EFFECT_FUSED: a pattern of built-in effects reading the
+    state after effects that read none, the whole step per lane), of every tile kind, give the scalar path's bits,
+    each body its own parameters."""
     sc = _scene(n, 11 * n)
     rng = np.random.default_rng(n)
     for i in range(n):
         for name in names:
-            if name == "gravity":
-                sc.add_effect(name, body=f"b{i}", g_w=list(rng.standard_normal(3)))
-            else:   # c dt / I well inside RK4's bound (the smallest I here is ~1e-3)
-                sc.add_effect(name, body=f"b{i}", c=(1.0 if name == "linear_damping" else 1e-4) * (0.05 + rng.random()))
+            sc.add_effect(name, body=f"b{i}", **_fused_params(name, rng))
     want = _run(sc, 0, 120, normalize)
     assert np.isfinite(want).all()
     for level in levels[1:]:
@@ -282,13 +297,17 @@ def test_divergence_in_a_fused_effect_tile_is_reported_as_on_the_scalar_path(lev
 
 
 @pytest.mark.parametrize("bad", [[29], [40, 5], [63, 64]])
-def test_divergence_in_an_effect_tile_is_reported_as_on_the_scalar_path(levels, bad):
-    """A huge force at a point overflows within a few steps: every level reports the same step, body and last
-    finite state."""
+@pytest.mark.parametrize("extra", [[], ["linear_damping"]], ids=["fused", "stage_passes"])
+def test_divergence_in_an_effect_tile_is_reported_as_on_the_scalar_path(levels, bad, extra):
+    """A huge force at a point overflows within a few steps, on the fused tile of force at point + angular damping
+    (the FULL kind) or, with a third state-reading effect, the effect tile's stage passes: every level reports the
+    same step, body and last finite state."""
     n = 70
     sc = _scene(n, seed=16)
     for i in range(n):
         big = 1e296 * (1.0 + bad.index(i)) if i in bad else 1e-3
         sc.add_effect("force_at_point", body=f"b{i}", r_b=[0.1, 0.2, 0.3], F_w=[big, -big, big])
         sc.add_effect("angular_damping", body=f"b{i}", c=0.1)
+        for name in extra:
+            sc.add_effect(name, body=f"b{i}", c=0.05)
     _assert_levels_report_alike(levels, *sc.arrays(), bad)

@@ -4,8 +4,8 @@
    per call with the generated effect dispatch (effect_sums) and passed to the generated
    lv_rigid_body_rhs_torque / lv_rigid_body_rhs in every stage, as the scalar path does; and bodies whose
    effects read the state, all with the same effects (the effect tiles, LV_TILE_RK4_FX: stage passes, each
-   effect a lane loop of its generated form, a user effect its printed tile form; a built-in damping pattern
-   takes a fused tile instead, LV_TF_*: the plain tile's lane loop with those effects' codes compiled in).
+   effect a lane loop of its generated form, a user effect its printed tile form; a pattern of built-in effects
+   (kernels.h's LV_EFFECT_FUSED) takes a fused tile instead: the plain tile's lane loop with those codes compiled in).
 
    Speed (lavendersim bench, "SIMD batch"): x86's divider is not pipelined like the adders (AVX-512
    vdivpd: one per ~16 cycles for 8 lanes). The printed right-hand sides divide by nothing: the tile
@@ -63,7 +63,7 @@ typedef struct {
     int codes[LV_TE_EFFECTS];
     int off[LV_TE_EFFECTS];
     lv_effect_tile_fn utile[LV_TE_EFFECTS];
-    int fused; /* LV_TF_*: the fused tile of the effects' pattern (tile_fx_pattern), 0 none */
+    int fused; /* the fused tile of the effects' pattern (its LV_EFFECT_FUSED id, tile_fx_pattern), 0 none */
     int first; /* the first effect of the pattern: effects 0 .. first-1 read no state (summed in P's F, TAU rows) */
     double EP[LV_TE_PARAMS + LV_EFFECT_ROW_MIN_PARAMS][LV_TILE]; /* + room for a lane's full-width load */
 } lv_tile_fx;
@@ -208,17 +208,17 @@ static const double lv_te_zero3[3] = {0.0, 0.0, 0.0};
         }                                                                                               \
     }
 
-/* The fused effect tiles: a built-in pattern of effects reading the state (LV_TF_*, tile_fx_pattern), each code
-   known to the compiler, so that the generated dispatch inlines to that effect alone inside the plain tile's lane
-   loop (LV_TILE_RK4: each lane's whole step in registers, no stage passes). The effects before the pattern read no
-   state: their sums start F and TAU (P's rows, summed per call in table order as effect_sums adds them: the same
-   bits), then each stage adds the pattern's effects in table order and takes the kind's right-hand side, as
-   LV_TE_SUMS and LV_TE_RHS_* do, so results are bitwise the effect tiles' (and the scalar path's). */
-enum { LV_TF_NONE = 0, LV_TF_LD_AD = 1, LV_TF_AD_LD = 2, LV_TF_LD = 3, LV_TF_AD = 4 };
-#define LV_TF_LD_AD_CODES LV_EFFECT_LINEAR_DAMPING, LV_EFFECT_ANGULAR_DAMPING
-#define LV_TF_AD_LD_CODES LV_EFFECT_ANGULAR_DAMPING, LV_EFFECT_LINEAR_DAMPING
-#define LV_TF_LD_CODES LV_EFFECT_LINEAR_DAMPING, 0
-#define LV_TF_AD_CODES LV_EFFECT_ANGULAR_DAMPING, 0
+/* The fused effect tiles: a pattern of built-in effects reading the state (kernels.h's LV_EFFECT_FUSED, printed by
+   derive/effect_fuse.py; tile_fx_pattern finds it), each code known to the compiler, so that the generated dispatch
+   inlines to that effect alone inside the plain tile's lane loop (LV_TILE_RK4: each lane's whole step in registers,
+   no stage passes). The effects before the pattern read no state: their sums start F and TAU (P's rows, summed per
+   call in table order as effect_sums adds them: the same bits), then each stage adds the pattern's effects in table
+   order and takes the kind's right-hand side, as LV_TE_SUMS and LV_TE_RHS_* do, so results are bitwise the effect
+   tiles' (and the scalar path's). Each kind's effect tile stepper NAME has one fused tile NAME_tf<id> per pattern of
+   LV_EFFECT_FUSED_<kind>. */
+#if LV_EFFECT_FUSED_MAX != 2
+#error "batch_simd.h's fused tiles load two parameter rows (p0, p1): LV_EFFECT_FUSED_MAX changed"
+#endif
 #define LV_TF_LOAD                                                                                      \
     const double mass = P[LV_TP_M][b], I[3] = {P[LV_TP_I][b], P[LV_TP_I + 1][b], P[LV_TP_I + 2][b]};    \
     const double F0[3] = {P[LV_TP_F][b], P[LV_TP_F + 1][b], P[LV_TP_F + 2][b]};                         \
@@ -233,41 +233,29 @@ enum { LV_TF_NONE = 0, LV_TF_LD_AD = 1, LV_TF_AD_LD = 2, LV_TF_LD = 3, LV_TF_AD 
     double f[3] = {F0[0], F0[1], F0[2]}, t[3] = {T0[0], T0[1], T0[2]};                                  \
     (void)APPLY(C0, p0, in, in + LV_STATE_V_W, mass, I, f, t);                                          \
     if (C1 != 0) (void)APPLY(C1, p1, in, in + LV_STATE_V_W, mass, I, f, t)
-#define LV_TF_C0(c0, c1) c0
-#define LV_TF_C1(c0, c1) c1
-#define LV_TF_RHS_BODY_F(in, out) LV_TF_RHS_BODY_F_(lv_c0, lv_c1, in, out)
-#define LV_TF_RHS_BODY(in, out) LV_TF_RHS_BODY_(lv_c0, lv_c1, in, out)
-#define LV_TF_RHS_FORCE(in, out) LV_TF_RHS_FORCE_(lv_c0, lv_c1, in, out)
-#define LV_TF_RHS_BODY_F_(C0, C1, in, out) do { LV_TF_SUMS(lv_effect_apply_b, C0, C1, in);                \
+#define LV_TF_RHS_BODY_F(in, out) do { LV_TF_SUMS(lv_effect_apply_b, lv_c0, lv_c1, in);                 \
     lv_linear_acceleration(mass, f, f); lv_rigid_body_rhs_body_c(in, cf, f, t, out); } while (0)
-#define LV_TF_RHS_BODY_(C0, C1, in, out) do { LV_TF_SUMS(lv_effect_apply_b, C0, C1, in);                  \
+#define LV_TF_RHS_BODY(in, out) do { LV_TF_SUMS(lv_effect_apply_b, lv_c0, lv_c1, in);                   \
     (void)f; lv_rigid_body_rhs_body_c(in, cf, lv_te_zero3, t, out); } while (0)
-#define LV_TF_RHS_FORCE_(C0, C1, in, out) do { LV_TF_SUMS(lv_effect_apply, C0, C1, in);                   \
+#define LV_TF_RHS_FORCE(in, out) do { LV_TF_SUMS(lv_effect_apply, lv_c0, lv_c1, in);                    \
     (void)t; lv_linear_acceleration(mass, f, f); lv_rigid_body_rhs_force_c(in, cf, f, out); } while (0)
-#define LV_TF_CALL(M, ...) M(__VA_ARGS__)
-#define LV_TF_DEFINE(NAME, ATTR, NORMALIZE, KIND, PAT)                                                  \
-    ATTR LV_FLATTEN LV_NOINLINE static void NAME##_##PAT(double (*LV_RESTRICT T)[LV_TILE],             \
+#define LV_TF_RHS_TORQUE(in, out) do { LV_TF_SUMS(lv_effect_apply, lv_c0, lv_c1, in);                   \
+    (void)f; lv_rigid_body_rhs_torque_c(in, cf, t, out); } while (0)
+#define LV_TF_RHS_FULL(in, out) do { LV_TF_SUMS(lv_effect_apply, lv_c0, lv_c1, in);                     \
+    lv_rigid_body_rhs_c(in, mass, cf, f, t, out); } while (0)
+/* The fused tile NAME_tf<ID> of the effect tile stepper NAME (kind KIND) for the pattern (ID, N, C0, C1). */
+#define LV_TF_DEFINE(NAME, ATTR, NORMALIZE, KIND, ID, N, C0, C1)                                        \
+    ATTR LV_FLATTEN LV_NOINLINE static void NAME##_tf##ID(double (*LV_RESTRICT T)[LV_TILE],             \
         const double (*LV_RESTRICT J)[LV_TILE], const double (*LV_RESTRICT P)[LV_TILE],                 \
         const lv_tile_fx *LV_RESTRICT fx, long m, double dt, long n_steps)                              \
     {                                                                                                   \
         const double (*E0)[LV_TILE] = fx->EP + fx->off[fx->first];                                      \
         const double (*E1)[LV_TILE] = fx->EP + fx->off[fx->first + (fx->n_eff > fx->first + 1)];        \
-        enum { lv_c0 = LV_TF_CALL(LV_TF_C0, PAT##_CODES), lv_c1 = LV_TF_CALL(LV_TF_C1, PAT##_CODES) };   \
+        enum { lv_c0 = C0, lv_c1 = C1 };                                                                \
         LV_TILE_RK4(NORMALIZE, LV_TF_LOAD, LV_TF_RHS_##KIND)                                            \
     }
-/* The fused tiles of a kind (the patterns its bodies can have), and the calls of the effect tile NAME to them. */
-#define LV_TF_TILES_BODY_F(NAME, ATTR, NORMALIZE) LV_TF_DEFINE(NAME, ATTR, NORMALIZE, BODY_F, LV_TF_LD_AD)   \
-    LV_TF_DEFINE(NAME, ATTR, NORMALIZE, BODY_F, LV_TF_AD_LD) LV_TF_DEFINE(NAME, ATTR, NORMALIZE, BODY_F, LV_TF_AD)
-#define LV_TF_TILES_BODY(NAME, ATTR, NORMALIZE) LV_TF_DEFINE(NAME, ATTR, NORMALIZE, BODY, LV_TF_AD)
-#define LV_TF_TILES_FORCE(NAME, ATTR, NORMALIZE) LV_TF_DEFINE(NAME, ATTR, NORMALIZE, FORCE, LV_TF_LD)
-#define LV_TF_TILES_TORQUE(NAME, ATTR, NORMALIZE)
-#define LV_TF_TILES_FULL(NAME, ATTR, NORMALIZE)
-#define LV_TF_GO(NAME, PAT) case PAT: NAME##_##PAT(T, J, P, fx, m, dt, n_steps); return;
-#define LV_TF_CASES_BODY_F(NAME) LV_TF_GO(NAME, LV_TF_LD_AD) LV_TF_GO(NAME, LV_TF_AD_LD) LV_TF_GO(NAME, LV_TF_AD)
-#define LV_TF_CASES_BODY(NAME) LV_TF_GO(NAME, LV_TF_AD)
-#define LV_TF_CASES_FORCE(NAME) LV_TF_GO(NAME, LV_TF_LD)
-#define LV_TF_CASES_TORQUE(NAME)
-#define LV_TF_CASES_FULL(NAME)
+/* The call of the effect tile stepper NAME to its fused tile of pattern ID (a case of its switch on fx->fused). */
+#define LV_TF_GO(NAME, ID, N, C0, C1) case ID: NAME##_tf##ID(T, J, P, fx, m, dt, n_steps); return;
 
 #define LV_DEFINE_TILE(NAME, ATTR, NORMALIZE, KIND)                                                     \
     ATTR LV_FLATTEN static void NAME(double (*LV_RESTRICT T)[LV_TILE], const double (*LV_RESTRICT J)[LV_TILE], \
@@ -275,13 +263,13 @@ enum { LV_TF_NONE = 0, LV_TF_LD_AD = 1, LV_TF_AD_LD = 2, LV_TF_LD = 3, LV_TF_AD 
                                      long m, double dt, long n_steps)                                   \
     LV_TILE_RK4(NORMALIZE, LV_TILE_LOAD_##KIND, LV_TILE_RHS_##KIND)
 #define LV_DEFINE_TILE_FX(NAME, ATTR, NORMALIZE, KIND)                                                  \
-    LV_TF_TILES_##KIND(NAME, ATTR, NORMALIZE)                                                           \
+    LV_EFFECT_FUSED_##KIND(LV_TF_DEFINE, NAME, ATTR, NORMALIZE, KIND)                                   \
     ATTR LV_FLATTEN static void NAME(double (*LV_RESTRICT T)[LV_TILE], const double (*LV_RESTRICT J)[LV_TILE], \
                                      const double (*LV_RESTRICT P)[LV_TILE], const lv_tile_fx *LV_RESTRICT fx, \
                                      long m, double dt, long n_steps)                                   \
     {                                                                                                   \
         switch (fx->fused) {                                                                            \
-        LV_TF_CASES_##KIND(NAME)                                                                        \
+        LV_EFFECT_FUSED_##KIND(LV_TF_GO, NAME)                                                          \
         default: break;                                                                                 \
         }                                                                                               \
         LV_TILE_RK4_FX(NORMALIZE, KIND)                                                                 \
@@ -478,20 +466,21 @@ static int effects_tileable(const lv_effect_index *ix, const long *list, long co
     return 1;
 }
 
-/* The fused tile of the effect tile fx (LV_TF_*, see LV_TF_DEFINE): after a run of built-in effects that read no state
-   (fx->first of them), the built-in pattern left; LV_TF_NONE for any other set (the effect tile's stage passes). */
+/* The fused tile of the effect tile fx (its id in LV_EFFECT_FUSED, see LV_TF_DEFINE): after a run of built-in effects
+   that read no state (fx->first of them), the pattern left; 0 for any other set (the effect tile's stage passes). */
+#define LV_TF_ROW(UNUSED, ID, N, C0, C1) {ID, N, {C0, C1}},
 static void tile_fx_pattern(lv_tile_fx *fx)
 {
-    static const struct { int fused, n, c0, c1; } pats[] = {
-        {LV_TF_LD_AD, 2, LV_TF_LD_AD_CODES}, {LV_TF_AD_LD, 2, LV_TF_AD_LD_CODES},
-        {LV_TF_LD, 1, LV_TF_LD_CODES}, {LV_TF_AD, 1, LV_TF_AD_CODES}};
+    static const struct { int fused, n, c[LV_EFFECT_FUSED_MAX]; } pats[LV_EFFECT_FUSED_COUNT] = {LV_EFFECT_FUSED(LV_TF_ROW, ~)};
     const int *c = fx->codes;
-    int f = 0, k;
+    int f = 0, k, e;
     while (f < fx->n_eff && c[f] < LV_EFFECT_USER_BASE && !(lv_effect_flags(c[f]) & LV_EFFECT_USES_STATE)) f++;
-    fx->fused = LV_TF_NONE;
+    fx->fused = 0;
     fx->first = 0;
-    for (k = 0; k < (int)(sizeof pats / sizeof pats[0]); k++) {
-        if (fx->n_eff - f == pats[k].n && c[f] == pats[k].c0 && (pats[k].n == 1 || c[f + 1] == pats[k].c1)) {
+    for (k = 0; k < LV_EFFECT_FUSED_COUNT; k++) {
+        if (fx->n_eff - f != pats[k].n) continue;
+        for (e = 0; e < pats[k].n && c[f + e] == pats[k].c[e]; e++) {}
+        if (e == pats[k].n) {
             fx->fused = pats[k].fused;
             fx->first = f;
         }

@@ -1,0 +1,86 @@
+"""The fused effect tiles' patterns (csrc/batch_simd.h), derived from the effect declarations and printed into
+kernels.h as X-macros.
+
+A tile of plain bodies whose effects read the state steps either in stage passes (one lane loop per effect and
+stage) or, when its effects are a *pattern* after a run of effects that read no state (their sums taken once per
+call), on a fused tile: the plain tile's lane loop, each lane's whole RK4 step in registers, with the pattern's
+generated effect functions inlined (their codes known to the compiler). A pattern is an ordered sequence of up to
+FUSED_MAX distinct built-in effects that read the state (FLAG_USES_STATE): their printed kernels are closed-form
+expressions of one body's numbers, so each is a lane expression. A user effect (its tile form, a call into the
+user's library) never fuses.
+
+A pattern's tile kinds are the right-hand-side classes a body with the pattern can have (csrc/step.c, rhs_class:
+which of FORCE, TORQUE_W, TORQUE_B its effects' flags carry), whatever the effects that read no state before it
+add: batch_simd.h compiles one fused tile per (kind, pattern) of this table, in each kind's effect tile stepper.
+"""
+from __future__ import annotations
+
+from collections.abc import Sequence
+from itertools import permutations
+
+from . import effect as E
+
+FUSED_MAX = 2   # effects per pattern (batch_simd.h's fused tile loads this many parameter rows)
+# Tile kinds of plain bodies with effects (csrc/step.c's LV_RHS_* names, batch_simd.h's LV_TILE_RHS_<kind>).
+TILE_KINDS = ("TORQUE", "FULL", "FORCE", "BODY", "BODY_F")
+
+
+def tile_kind(flags: int) -> str:
+    """The right-hand-side class of a plain body whose effects' flags OR to `flags` (at least one effect): body-frame
+    torques only (BODY, BODY_F with a force), no torque (FORCE), world torques (TORQUE, FULL with a force); the
+    rule of csrc/step.c's rhs_class."""
+    force = bool(flags & E.FLAG_FORCE)
+    if flags & E.FLAG_TORQUE_B and not flags & E.FLAG_TORQUE_W:
+        return "BODY_F" if force else "BODY"
+    if not flags & (E.FLAG_TORQUE_W | E.FLAG_TORQUE_B):
+        return "FORCE"
+    return "FULL" if force else "TORQUE"
+
+
+def _constant_flags(effects: Sequence[tuple[int, E.EffectDecl]]) -> set[int]:
+    """Every OR of the flags of a set of built-in force effects that read no state (the empty set's 0 included)."""
+    out = {0}
+    for _, d in effects:
+        if d.kind == "force" and not d.flags & E.FLAG_USES_STATE:
+            out |= {f | d.flags for f in out}
+    return out
+
+
+def patterns(effects: Sequence[tuple[int, E.EffectDecl]]) -> list[tuple[int, tuple[int, ...], tuple[str, ...]]]:
+    """The fused patterns of the built-in effects [(code, declaration)]: (id from 1, the effect codes in table order,
+    the tile kinds it applies to, in TILE_KINDS order), the longer patterns first, each length in code order."""
+    fusable = [(c, d) for c, d in effects if d.kind == "force" and d.flags & E.FLAG_USES_STATE]
+    extra = _constant_flags(effects)
+    out: list[tuple[int, tuple[int, ...], tuple[str, ...]]] = []
+    for n in range(FUSED_MAX, 0, -1):
+        for seq in permutations(fusable, n):
+            flags = 0
+            for _, d in seq:
+                flags |= d.flags
+            kinds = {tile_kind(flags | f) for f in extra}
+            out.append((len(out) + 1, tuple(c for c, _ in seq), tuple(k for k in TILE_KINDS if k in kinds)))
+    return out
+
+
+def c_header(effects: Sequence[tuple[int, E.EffectDecl]]) -> list[str]:
+    """kernels.h's table of the fused patterns: LV_EFFECT_FUSED(X, ...) every pattern and LV_EFFECT_FUSED_<kind>(X,
+    ...) those of one tile kind, each a call X(..., id, n, code_0, ..., code_{FUSED_MAX-1}) (codes past n: 0)."""
+    names = {c: f"LV_EFFECT_{d.name.upper()}" for c, d in effects}
+    pats = patterns(effects)
+
+    def row(pid: int, codes: tuple[int, ...]) -> str:
+        cs = [names[c] for c in codes] + ["0"] * (FUSED_MAX - len(codes))
+        return f"X(__VA_ARGS__, {pid}, {len(codes)}, {', '.join(cs)})"
+
+    h = ["/* The fused effect tiles' patterns (derive/effect_fuse.py): after a run of effects that read no state, an",
+         "   ordered sequence of up to LV_EFFECT_FUSED_MAX distinct built-in effects that read the state, each a lane",
+         "   expression; batch_simd.h steps such a tile with the pattern's effect functions inlined in the plain tile's",
+         "   lane loop. X(..., id, n, code_0, code_1): the pattern's id (from 1), its n effect codes in table order (0",
+         "   past n). LV_EFFECT_FUSED_<kind>: the patterns a body of that right-hand-side class (step.c's LV_RHS_<kind>)",
+         "   can have, whatever the effects before them add. */",
+         f"#define LV_EFFECT_FUSED_MAX {FUSED_MAX}",
+         f"#define LV_EFFECT_FUSED_COUNT {len(pats)}",
+         "#define LV_EFFECT_FUSED(X, ...) " + " ".join(row(p, c) for p, c, _ in pats)]
+    for kind in TILE_KINDS:
+        h.append((f"#define LV_EFFECT_FUSED_{kind}(X, ...) " + " ".join(row(p, c) for p, c, k in pats if kind in k)).rstrip())
+    return h

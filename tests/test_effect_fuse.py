@@ -1,0 +1,71 @@
+"""The fused effect tiles' table (derive/effect_fuse.py, printed into kernels.h as LV_EFFECT_FUSED*): which effect
+sequences batch_simd.h steps on a fused tile, and for which right-hand-side kinds, derived from the effect
+declarations (the C stepping of those tiles is checked bitwise in tests/test_simd.py)."""
+from __future__ import annotations
+
+from pathlib import Path
+
+from lavendersim.derive import effect as E
+from lavendersim.derive import effect_fuse, effects
+from lavendersim.derive.effect import STATE, effect, param
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def _builtins() -> list[tuple[int, E.EffectDecl]]:
+    return [(i + 1, d) for i, d in enumerate(d for d in effects.declarations() if d.kind == "force")]
+
+
+def _named(pats) -> dict[tuple[str, ...], tuple[str, ...]]:
+    names = {c: d.name for c, d in _builtins()}
+    return {tuple(names[c] for c in codes): kinds for _, codes, kinds in pats}
+
+
+def test_the_builtin_patterns_are_the_state_reading_effects_with_their_kinds():
+    got = _named(effect_fuse.patterns(_builtins()))
+    # gravity and applied_torque read no state: summed once per call, never in a pattern
+    assert not {n for seq in got for n in seq} & {"gravity", "applied_torque"}
+    assert got[("linear_damping", "angular_damping")] == ("FULL", "BODY_F")   # + applied_torque: FULL
+    assert got[("angular_damping", "linear_damping")] == ("FULL", "BODY_F")
+    assert got[("linear_damping",)] == ("FULL", "FORCE")
+    assert got[("angular_damping",)] == ("TORQUE", "FULL", "BODY", "BODY_F")
+    assert got[("force_at_point",)] == ("FULL",)
+    assert len(got) == 3 + 3 * 2                     # three effects: 3 singles, 6 ordered distinct pairs
+    assert all(len(seq) <= effect_fuse.FUSED_MAX for seq in got)
+    ids = [p for p, _, _ in effect_fuse.patterns(_builtins())]
+    assert ids == list(range(1, len(ids) + 1))
+
+
+def test_the_kinds_follow_the_flags():
+    assert effect_fuse.tile_kind(E.FLAG_TORQUE_B) == "BODY"
+    assert effect_fuse.tile_kind(E.FLAG_TORQUE_B | E.FLAG_FORCE) == "BODY_F"
+    assert effect_fuse.tile_kind(E.FLAG_TORQUE_B | E.FLAG_TORQUE_W) == "TORQUE"
+    assert effect_fuse.tile_kind(E.FLAG_TORQUE_W | E.FLAG_FORCE | E.FLAG_USES_STATE) == "FULL"
+    assert effect_fuse.tile_kind(E.FLAG_FORCE | E.FLAG_USES_V) == "FORCE"
+
+
+def test_a_new_state_reading_builtin_joins_the_patterns_and_a_constant_one_widens_the_kinds():
+    """The table is the declarations': a further state-reading effect gets its own patterns, and a constant effect
+    adding a force makes the force-free patterns reachable in the force kinds too."""
+    c = param("c", (), "N·s/m", "drag coefficient", rule="nonnegative")
+    spin = effect("spin_drag_w", "world spin drag", [c], torque_w=-c.symbol * STATE.omega_w)
+    F_w = param("F_w", 3, "N", "force, world frame")
+    lift = effect("lift", "a constant force", [F_w], force_w=F_w.symbol)
+    assert _kinds([(1, spin)]) == {("spin_drag_w",): ("TORQUE",)}
+    assert _kinds([(1, spin), (2, lift)]) == {("spin_drag_w",): ("TORQUE", "FULL")}
+    assert _kinds([(1, effects.declarations()[4]), (2, lift)]) == {("angular_damping",): ("BODY", "BODY_F")}
+
+
+def _kinds(decls) -> dict[tuple[str, ...], tuple[str, ...]]:
+    names = {c: d.name for c, d in decls}
+    return {tuple(names[c] for c in codes): kinds for _, codes, kinds in effect_fuse.patterns(decls)}
+
+
+def test_kernels_h_carries_the_table_and_batch_simd_names_no_effect():
+    h = (ROOT / "generated" / "kernels.h").read_text()
+    assert "#define LV_EFFECT_FUSED(X, ...) X(__VA_ARGS__, 1, 2, LV_EFFECT_FORCE_AT_POINT, LV_EFFECT_LINEAR_DAMPING)" in h
+    assert "#define LV_EFFECT_FUSED_BODY(X, ...) X(__VA_ARGS__, 9, 1, LV_EFFECT_ANGULAR_DAMPING, 0)\n" in h
+    assert f"#define LV_EFFECT_FUSED_COUNT {len(effect_fuse.patterns(_builtins()))}" in h
+    simd = (ROOT / "lavendersim" / "csrc" / "batch_simd.h").read_text()
+    for _, d in _builtins():
+        assert f"LV_EFFECT_{d.name.upper()}" not in simd, d.name
