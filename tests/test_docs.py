@@ -1,4 +1,11 @@
-"""The documentation site builds with warnings as errors, and its pages link what they name."""
+"""The documentation site builds with warnings as errors, and its pages link what they name.
+
+Slow set (issue 31, test time): its Sphinx build (the structure: notebooks as stored, no gallery, no source pages)
+cost ~30 s CPU, the largest setup of the README's `pytest` after the shared derivation and lab sweeps, and it
+checks the documentation, not the code a test run exercises. CI still builds and checks the site three ways:
+`pytest -m slow` runs this module and tests/test_docs_site.py (the full site: notebooks executed, the gallery),
+and .ci/run's `sphinx-build -W`. The names the docstrings point to are resolved quickly by
+tests/test_docstring_names.py, the numpydoc sections checked by tests/test_docstrings.py, in the default set."""
 from __future__ import annotations
 
 import os
@@ -9,7 +16,7 @@ from pathlib import Path
 
 import pytest
 
-pytestmark = pytest.mark.needs("docs")
+pytestmark = [pytest.mark.needs("docs"), pytest.mark.slow]
 
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = ROOT / "docs"

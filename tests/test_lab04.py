@@ -52,7 +52,7 @@ def test_lab04_backends_agree(lab04):
 
 
 def test_lab04_torque_option_and_bad_options(tmp_path):
-    r = labs.run("04", tmp_path, backend="c", torque=0.1, T=0.5)
+    r = labs.compute("04", backend="c", torque=0.1, T=0.5)    # the numbers only: no PNG (test_lab04 checks the files)
     assert r.passed and r["Omega_x_T"] > 0 and r["omega_x_T"] < 0
     for kw, field in (({"torque": 0.3}, "torque"), ({"torque": -0.1}, "torque"), ({"T": float("nan")}, "T")):
         with pytest.raises(LavenderInputError) as e:
@@ -87,7 +87,7 @@ def test_lab04_failing_check_exits_nonzero(tmp_path, monkeypatch, capsys):
         return out
 
     monkeypatch.setattr(L, "_run", flipped)
-    r = L.run(tmp_path, backend="c")
+    r = L.compute(backend="c")                   # the checks only: no PNG drawn
     assert not r.passed and r["wheel_all_positive"] is False
     assert C.report(r) == 1
     assert "wheel_all_positive" in capsys.readouterr().err
