@@ -46,7 +46,8 @@ deriving again.
 
 Likewise the two sweeps of `lab all` and lab hard are computed once per session, from an empty working
 directory: `quick_accuracy`, `quick_atlas` and `hard_lab` (`.result`, never saved; `.written`; `.saved()`: a
-copy saved once per session, as `labs.run` writes it: drawing a lab's PNGs costs seconds), shared by test_accuracy_lab, test_atlas, test_hard_cases and test_lab_library.
+copy saved once per session, as `labs.run` writes it: drawing a lab's PNGs costs seconds; `.figures()`: the Figures
+that save drew), shared by test_accuracy_lab, test_atlas, test_hard_cases and test_lab_library.
 
 The `slow` set
 --------------
@@ -240,7 +241,8 @@ def _computed_once(tmp_path_factory, name: str, **options):
     checks a lab's output (test_accuracy_lab, test_atlas, test_lab_library): ``.result`` (never saved:
     use ``.saved()``), ``.written`` (what compute left in its working directory: must be nothing),
     ``.saved()``: a copy saved as ``labs.run(name, out, **options)`` would, to a session folder, once (every
-    caller gets that copy: its files are read, never changed)."""
+    caller gets that copy: its files are read, never changed), ``.figures()``: {PNG name: Figure} drawn by that save
+    (each lab figure rendered once per session: the atlas' four cost ~7 s CPU to lay out and draw)."""
     import copy
     import functools
     from types import SimpleNamespace
@@ -252,8 +254,40 @@ def _computed_once(tmp_path_factory, name: str, **options):
         mp.chdir(cwd)
         result = labs.compute(name, **options)
     written = sorted(p.name for p in cwd.rglob("*"))
-    saved = functools.cache(lambda: copy.copy(result).save(tmp_path_factory.mktemp(f"{name}_saved")))
-    return SimpleNamespace(result=result, written=written, saved=saved)
+    drawn: dict = {}
+
+    @functools.cache
+    def saved():
+        """The copy saved once; the Figures its save drew into the PNGs kept in `drawn` (PNG name -> Figure)."""
+        twin = copy.copy(result)
+
+        def figure(fname=None, *, ax=None):
+            fig = type(twin).figure(twin, fname, ax=ax)
+            drawn[fname] = fig
+            savefig = fig.savefig
+
+            def save_and_keep_its_dpi(*args, **kwargs):    # measured later at the dpi its PNG was laid out at
+                savefig(*args, **kwargs)
+                fig.set_dpi(kwargs.get("dpi", fig.dpi))
+
+            fig.savefig = save_and_keep_its_dpi
+            return fig
+
+        twin.figure = figure                     # (an instance attribute: save() calls self.figure(fname))
+        try:
+            twin.save(tmp_path_factory.mktemp(f"{name}_saved"))
+        finally:
+            del twin.figure
+        return twin
+
+    def figures():
+        """{PNG name: Figure} as the saved copy's PNGs were drawn (saved() once; savefig laid each out and
+        rendered it, at the dpi each Figure now has): a test that looks at the figures takes these instead of
+        drawing them again."""
+        saved()
+        return dict(drawn)
+
+    return SimpleNamespace(result=result, written=written, saved=saved, figures=figures)
 
 
 @pytest.fixture
