@@ -19,6 +19,8 @@ import time
 import numpy as np
 import pytest
 
+from conftest import run_main
+
 import lavendersim as lv
 from lavendersim import viewer as VW
 from lavendersim.validate import LavenderInputError
@@ -618,8 +620,8 @@ def test_lab_view_option_streams_lab03(tmp_path):
 
 
 def test_lab_view_option_refused_for_a_lab_without_view():
-    r = subprocess.run([sys.executable, "-m", "lavendersim.cli", "lab", "force", "--view"],
-                       capture_output=True, text=True, timeout=300)
+    # argparse's refusal through cli.main in this process (the --view option of a real process: the test above)
+    r = run_main("lab", "force", "--view")
     # labs without a live view have no --view option: argparse refuses it (one line, exit 2)
     assert r.returncode == 2 and "unrecognized arguments: --view" in r.stderr, (r.returncode, r.stderr)
 
