@@ -143,12 +143,12 @@ typedef void (*lv_tile_fn)(double (*LV_RESTRICT T)[LV_TILE], const double (*LV_R
             }                                                                                           \
         }                                                                                               \
         break;
-/* The effect sums at the stage input IN (T, the step's start, or X), one lane loop per effect; CASE the case of a
+/* The effect sums at the stage input IN (T, the step's start, or X), one lane loop per effect, added into F and TAU
+   (zero: LV_TILE_RK4_FX zeroes them once per pass, LV_TE_STAGE again as it reads them, in its own lane loop, where
+   the stores vectorize; zeroing here, a loop of its own per row, compiled to 6 memset calls per stage); CASE the case of a
    built-in effect (LV_TE_CASE: the generated dispatch lv_effect_apply; LV_TE_CASE_B: lv_effect_apply_b, for
    LV_RHS_BODY*: body-frame torques). */
 #define LV_TE_SUMS(IN, CASE)                                                                            \
-    for (i = 0; i < 3; i++)                                                                             \
-        for (b = b0; b < b1; b++) F[i][b] = TAU[i][b] = 0.0;                                            \
     for (e = 0; e < fx->n_eff; e++) {                                                                   \
         const double (*ep)[LV_TILE] = fx->EP + fx->off[e], (*in)[LV_TILE] = (const double (*)[LV_TILE])IN; \
         switch (fx->codes[e]) {                                                                         \
@@ -177,6 +177,7 @@ static const double lv_te_zero3[3] = {0.0, 0.0, 0.0};
         for (i = 0; i < 3; i++) {                                                                       \
             f[i] = F[i][b];                                                                             \
             t[i] = TAU[i][b];                                                                           \
+            F[i][b] = TAU[i][b] = 0.0; /* the next stage's sums start at zero */                        \
         }                                                                                               \
         RHS;                                                                                            \
         if (STAGE < 4) {                                                                                \
@@ -195,6 +196,8 @@ static const double lv_te_zero3[3] = {0.0, 0.0, 0.0};
         int i, e, st;                                                                                   \
         for (b0 = 0; b0 < m; b0 = b1) {                                                                 \
             b1 = m - b0 < LV_TE_LANES ? m : b0 + LV_TE_LANES;                                           \
+            for (i = 0; i < 3; i++)                                                                     \
+                for (b = b0; b < b1; b++) F[i][b] = TAU[i][b] = 0.0;                                    \
             for (s = 0; s < n_steps; s++) {                                                             \
                 LV_TE_SUMS(T, LV_TE_APPLY_##KIND)                                                       \
                 LV_TE_STAGE(1, T, LV_TE_RHS_##KIND, NORMALIZE)                                          \
