@@ -1,5 +1,7 @@
 """The effects and their parameters are listed by a documented call (lavendersim.effects.describe / list_effects)
-and a CLI command (``lavendersim effects [NAME] [--json]``), built from the registered declarations (issue 31)."""
+and a CLI command (``lavendersim effects [NAME] [--json]``), built from the registered declarations (issue 31).
+A user set's effects listed by the command: test_extending::test_cli_lists_the_guides_effects (on the set its module
+fixture derives with the guide's command, not derived again here)."""
 from __future__ import annotations
 
 import json
@@ -93,31 +95,3 @@ def test_cli_unknown_name_is_one_line_exit_2():
     r = _run("no_such_effect")
     assert r.returncode == 2 and r.stdout == ""
     assert len(r.stderr.strip().splitlines()) == 1 and "no_such_effect" in r.stderr and "gravity" in r.stderr
-
-
-@pytest.mark.needs("cc")   # derive --user compiles the set's C
-def test_cli_lists_the_users_effects_from_the_user_directory(tmp_path):
-    """The guide's set (docs/extending.md) derived into a fresh user directory: `lavendersim effects` lists its
-    effects and parameters beside the built-ins, naming the set."""
-    import os
-    import shlex
-
-    from test_extending import guide_block
-
-    from lavendersim import extending
-
-    (tmp_path / "my_effects.py").write_text(guide_block("python my_effects.py"), encoding="utf-8")
-    env = {**os.environ, extending.ENV: str(tmp_path / "userdir")}
-    cmd = shlex.split(guide_block("bash").strip())
-    d = subprocess.run([*CLI, *cmd[1:]], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600)
-    assert d.returncode == 0, d.stdout + d.stderr
-    r = subprocess.run([*CLI, "effects", "--json"], env=env, capture_output=True, text=True, timeout=300)
-    assert r.returncode == 0 and r.stderr == "", r.stderr
-    listed = {e["name"]: e for e in json.loads(r.stdout)}
-    # every built-in (this process may hold user sets other tests loaded from elsewhere: not the child's)
-    assert {n for n, spec in E.REGISTRY.items() if spec.source == "built-in"} < set(listed)
-    gg = listed["gravity_gradient"]
-    assert gg["source"] != "built-in" and "my_effects" in gg["source"]
-    assert {p["name"] for p in gg["params"]} >= {"mu", "center_w"} and gg["reads"] == ["p_w", "q", "I_b"]
-    text = subprocess.run([*CLI, "effects", "quadratic_drag"], env=env, capture_output=True, text=True, timeout=300)
-    assert text.returncode == 0 and text.stdout.startswith("quadratic_drag (force, user set ")

@@ -417,6 +417,26 @@ def test_a_compiler_error_is_raised_with_its_full_output(guide, tmp_path, monkey
     assert not (tmp_path / "sets" / "broken_c").exists()     # nothing swapped in
 
 
+def test_cli_lists_the_guides_effects(guide):
+    """The guide's set, derived into a fresh user directory by the documented command (the module fixture):
+    `lavendersim effects` lists its effects and parameters beside the built-ins, naming the set (issue 31; was
+    test_effects_listing's, which derived the same set again into a user directory of its own)."""
+    import json
+
+    cli = [sys.executable, "-m", "lavendersim.cli"]
+    r = subprocess.run([*cli, "effects", "--json"], env=guide["env"], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0 and r.stderr == "", r.stderr
+    listed = {e["name"]: e for e in json.loads(r.stdout)}
+    # every built-in (this process may hold user sets other tests loaded from elsewhere: not the child's)
+    assert {n for n, spec in E.REGISTRY.items() if spec.source == "built-in"} < set(listed)
+    gg = listed["gravity_gradient"]
+    assert gg["source"] != "built-in" and "my_effects" in gg["source"]
+    assert {p["name"] for p in gg["params"]} >= {"mu", "center_w"} and gg["reads"] == ["p_w", "q", "I_b"]
+    text = subprocess.run([*cli, "effects", "quadratic_drag"], env=guide["env"], capture_output=True, text=True,
+                          timeout=300)
+    assert text.returncode == 0 and text.stdout.startswith("quadratic_drag (force, user set ")
+
+
 def test_a_user_effect_cannot_shadow_a_built_in(guide, tmp_path):
     decl = tmp_path / "shadow.py"
     decl.write_text("from lavendersim.derive.effect import STATE, effect, param\n"
