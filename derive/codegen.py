@@ -229,6 +229,165 @@ def _np_assign(target: str, code: str) -> str:
     return f"{target} = {code}"
 
 
+# elementwise calls a run of components may share (their arguments broadcast like the operators')
+_NP_ELEMENTWISE = {"numpy.sqrt", "numpy.minimum", "numpy.maximum", "numpy.float32"}
+
+
+def _np_template(code: str, comp: dict, j: int) -> ast.Expression | None:
+    """code's AST with each unpacked vector component (comp: name -> (input, index)) renamed `input@(index - j)`
+    (relative to component j of the output); None if it holds an operation that is not elementwise over a run of
+    components (a call other than _NP_ELEMENTWISE, a subscript, numpy.select)."""
+    tree = ast.parse(code, mode="eval")
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Call):
+            if ast.unparse(node.func) not in _NP_ELEMENTWISE:
+                return None
+        elif isinstance(node, ast.Name):
+            if node.id in comp:
+                a, i = comp[node.id]
+                node.id = f"{a}@{i - j}"
+        elif not isinstance(node, (ast.Expression, ast.BinOp, ast.UnaryOp, ast.Constant, ast.Attribute, ast.Load,
+                                   ast.operator, ast.unaryop)):
+            return None
+    return tree
+
+
+class _Block(ast.NodeTransformer):
+    """A run's template as one operation on slices: `input@off` -> input[..., i+off:i+off+L], a batch-shaped name
+    (a scalar input or a temporary) -> name[..., None] (broadcast over the run)."""
+
+    def __init__(self, i: int, n: int, batch_names: set):
+        self.i, self.n, self.batch_names = i, n, batch_names
+
+    def visit_Name(self, node):
+        if "@" in node.id:
+            a, off = node.id.split("@")
+            s = self.i + int(off)
+            return ast.parse(f"{a}[..., {s}:{s + self.n}]", mode="eval").body
+        if node.id in self.batch_names:
+            return ast.parse(f"{node.id}[..., None]", mode="eval").body
+        return node
+
+
+def _np_block(codes: list[str], first: int, comp: dict, sizes: dict, batch_names: set) -> str | None:
+    """codes (components first, first + 1, ...) as one operation on slices when they are one expression on shifted
+    components of the same inputs (e.g. -c*v_w_0, -c*v_w_1, -c*v_w_2, or copies x_7, x_8, x_9), else None."""
+    n = len(codes)
+    tpl = [t for j, c in enumerate(codes) if (t := _np_template(c, comp, first + j)) is not None]
+    if n < 2 or len(tpl) < n or len({ast.dump(t) for t in tpl}) != 1:
+        return None
+    tree = tpl[0]
+    shifted = [nm.id.split("@") for nm in ast.walk(tree) if isinstance(nm, ast.Name) and "@" in nm.id]
+    if not shifted or not all(0 <= first + int(o) and first + int(o) + n <= sizes[a] for a, o in shifted):
+        return None
+    return ast.unparse(_Block(first, n, batch_names).visit(tree).body)
+
+
+def _np_runs(codes: list[str], comp: dict, sizes: dict, batch_names: set, name: str) -> list[tuple[int, int, str, list]]:
+    """The components of one vector output `name` as runs (first, length, code, lines before): a run of components
+    that are one expression on shifted components (_np_block) prints as one operation on slices, the same operations
+    on every number (issue 30: fewer NumPy calls); the others one each, sharing an operand where _np_shared can."""
+    runs: list[tuple[int, int, str, list]] = []
+    j = 0
+    while j < len(codes):
+        e = len(codes)
+        while e > j + 1 and _np_block(codes[j:e], j, comp, sizes, batch_names) is None:
+            e -= 1
+        blk = _np_block(codes[j:e], j, comp, sizes, batch_names) if e > j + 1 else None
+        runs.append((j, e - j, blk, []) if blk is not None else (j, 1, codes[j], []))
+        j += runs[-1][1]
+    out: list[tuple[int, int, str, list]] = []
+    k = 0
+    while k < len(runs):
+        e = k     # the singles from k on whose last operation is the same binary one
+        trees: list = []
+        while e < len(runs) and runs[e][1] == 1:
+            t = ast.parse(runs[e][2], mode="eval").body
+            if not isinstance(t, ast.BinOp) or (trees and type(t.op) is not type(trees[0].op)):
+                break
+            trees.append(t)
+            e += 1
+        shared = _np_shared(trees, runs[k][0], comp, sizes, batch_names, name) if len(trees) > 1 else None
+        out.extend(shared or runs[k:max(e, k + 1)])
+        k = max(e, k + 1)
+    return out
+
+
+def _np_shared(trees: list, first: int, comp: dict, sizes: dict, batch_names: set, name: str) -> list | None:
+    """Components first, first + 1, ... (trees: each a binary operation, all the same one) when one operand of them
+    is a run (e.g. the r_x*tau_x, r_y*tau_y, r_z*tau_z of Euler's equations): that operand computed once, on
+    slices, into a temporary each reads (runs as _np_runs'), else None. An operand that is a component stays."""
+    tmp = f"{name}_{first}_{first + len(trees)}"
+    if tmp in comp or tmp in sizes or tmp in batch_names:
+        return None
+    for side in ("right", "left"):
+        if not all(isinstance(getattr(t, side), (ast.BinOp, ast.UnaryOp, ast.Call)) for t in trees):
+            continue
+        blk = _np_block([ast.unparse(getattr(t, side)) for t in trees], first, comp, sizes, batch_names)
+        if blk is None:
+            continue
+        out = []
+        for j, t in enumerate(trees):
+            setattr(t, side, ast.parse(f"{tmp}[..., {j}]", mode="eval").body)
+            out.append((first + j, 1, ast.unparse(t), [f"{tmp} = {blk}"] if j == 0 else []))
+        return out
+    return None
+
+
+def _np_temps(p: Printed, pr: NpPrinter, comp: dict, sizes: dict, batch_names: set) -> list[str]:
+    """The temporaries' lines; consecutive ones that are one expression on shifted components (e.g. the halves of
+    omega_b: t0 = 0.5*x_10, t1 = 0.5*x_11, t2 = 0.5*x_12) computed once on slices and read as its columns."""
+    names = [str(t) for t, _ in p.temps]
+    codes = [pr.doprint(e) for _, e in p.temps]
+    lines: list[str] = []
+    j = 0
+    while j < len(codes):
+        e = len(codes)
+        while e > j + 1 and _np_block(codes[j:e], 0, comp, sizes, batch_names) is None:
+            e -= 1
+        blk = _np_block(codes[j:e], 0, comp, sizes, batch_names) if e > j + 1 else None
+        run = f"{names[j]}_{e - j}"
+        if blk is None or run in comp or run in sizes or run in batch_names or run in names:
+            lines.append(f"{names[j]} = {codes[j]}")
+            j += 1
+            continue
+        lines.append(f"{run} = {blk}")
+        lines += [f"{names[i]} = {run}[..., {i - j}]" for i in range(j, e)]
+        j = e
+    return lines
+
+
+def _np_outputs(p: Printed, pr: NpPrinter, dtype: str, comp: dict, sizes: dict, batch_names: set
+                ) -> tuple[list[str], list[str]]:
+    """A NumPy kernel's temporaries and outputs (lines) and the names it returns."""
+    k = p.k
+    ind = "    "
+    body = []
+    if p.has_piecewise:
+        body.append("    with numpy.errstate(invalid='ignore', divide='ignore'):  # numpy.select evaluates every branch")
+        ind = "        "
+    body += [ind + line for line in _np_temps(p, pr, comp, sizes, batch_names)]
+    idx = 0
+    rets: list[str] = []
+    for a in k.outputs:
+        shp = "" if a.shape == () else " + " + repr(tuple(a.shape))
+        body.append(f"{ind}{a.name}_out = numpy.empty(batch{shp}" + (")" if dtype == "float64" else f", dtype=numpy.{dtype})")
+                    + f" if out is None or out[{len(rets)}] is None else out[{len(rets)}]")
+        codes = [pr.doprint(e) for e in p.reduced[idx:idx + a.size]]
+        idx += a.size
+        if a.shape == ():
+            body.append(ind + _np_assign(f"{a.name}_out[...]", codes[0]))
+        elif len(a.shape) == 1:
+            for i, n, code, pre in _np_runs(codes, comp, sizes, batch_names, a.name):
+                body += [ind + line for line in pre]
+                body.append(ind + _np_assign(f"{a.name}_out[..., {i}:{i + n}]" if n > 1 else f"{a.name}_out[..., {i}]", code))
+        else:
+            for i, code in enumerate(codes):
+                body.append(ind + _np_assign(f"{a.name}_out[..., {i // a.shape[1]}, {i % a.shape[1]}]", code))
+        rets.append(f"{a.name}_out")
+    return body, rets
+
+
 def _np_kernel(p: Printed, pr: NpPrinter, dtype: str = "float64") -> list[str]:
     k = p.k
     doc = "\n".join(f"    {line}" if line else "" for line in _np_doc_lines(k)).lstrip()
@@ -245,36 +404,29 @@ def _np_kernel(p: Printed, pr: NpPrinter, dtype: str = "float64") -> list[str]:
         lead.append(f"{a.name}.shape" if nd == 0 else f"{a.name}.shape[:-{nd}]")
     # the batch shape: equal input batch shapes (the usual call) compared in Python, broadcast_shapes (~20 us) otherwise
     same = " == ".join(lead)
-    out.append(f"    batch = {lead[0]}" if len(lead) == 1 else
-               f"    batch = {lead[0]} if {same} else numpy.broadcast_shapes({', '.join(lead)})")
+    # ... and only when an output is allocated (a caller passing every out= pays neither)
+    missing = " or ".join(["out is None"] + [f"out[{i}] is None" for i in range(len(k.outputs))])
+    out.append(f"    if {missing}:")
+    out.append(f"        batch = {lead[0]}" if len(lead) == 1 else
+               f"        batch = {lead[0]} if {same} else numpy.broadcast_shapes({', '.join(lead)})")
+
+    unpack: list[tuple[str, str]] = []     # (symbol, its line)
+    comp: dict[str, tuple[str, int]] = {}  # a 1-D input's component symbol -> (input, index)
 
     def emit(a, i, s):
         ix = f"{i}" if len(a.shape) == 1 else f"{i // a.shape[1]}, {i % a.shape[1]}"
-        out.append(f"    {s} = {a.name}[..., {ix}]")
+        unpack.append((str(s), f"    {s} = {a.name}[..., {ix}]"))
+        if len(a.shape) == 1:
+            comp[str(s)] = (a.name, i)
     _unpack(k, p.used, emit)
-    ind = "    "
-    if p.has_piecewise:
-        out.append("    with numpy.errstate(invalid='ignore', divide='ignore'):  # numpy.select evaluates every branch")
-        ind = "        "
-    for t, e in p.temps:
-        out.append(f"{ind}{t} = {pr.doprint(e)}")
-    idx = 0
-    rets: list[str] = []
-    for a in k.outputs:
-        shp = "" if a.shape == () else " + " + repr(tuple(a.shape))
-        out.append(f"{ind}{a.name}_out = numpy.empty(batch{shp}" + (")" if dtype == "float64" else f", dtype=numpy.{dtype})")
-                   + f" if out is None or out[{len(rets)}] is None else out[{len(rets)}]")
-        for i in range(a.size):
-            e = p.reduced[idx]
-            idx += 1
-            if a.shape == ():
-                ix = "..."
-            elif len(a.shape) == 1:
-                ix = f"..., {i}"
-            else:
-                ix = f"..., {i // a.shape[1]}, {i % a.shape[1]}"
-            out.append(ind + _np_assign(f"{a.name}_out[{ix}]", pr.doprint(e)))
-        rets.append(f"{a.name}_out")
+    sizes = {a.name: a.size for a in k.inputs}
+    # names that are arrays of the batch shape: the scalar inputs and the temporaries that read an input
+    batch_names = {a.name for a in k.inputs if a.shape == ()} | {str(t) for t, e in p.temps if e.free_symbols}
+    body, rets = _np_outputs(p, pr, dtype, comp, sizes, batch_names)
+    # only the components still read one by one are unpacked (a run reads its input's slice)
+    read = {n.id for line in body if not line.strip().startswith("with ")
+            for n in ast.walk(ast.parse(line.strip())) if isinstance(n, ast.Name)}
+    out += [line for s, line in unpack if s in read] + body
     out += [f"    return {', '.join(rets)}", "", ""]
     return out
 

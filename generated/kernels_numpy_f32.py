@@ -34,21 +34,12 @@ def particle_moments(m, r_w, v_w, *, out=None):
     m = numpy.asarray(m, dtype=numpy.float32)
     r_w = numpy.asarray(r_w, dtype=numpy.float32)
     v_w = numpy.asarray(v_w, dtype=numpy.float32)
-    batch = m.shape if m.shape == r_w.shape[:-1] == v_w.shape[:-1] else numpy.broadcast_shapes(m.shape, r_w.shape[:-1], v_w.shape[:-1])
-    r_w_0 = r_w[..., 0]
-    r_w_1 = r_w[..., 1]
-    r_w_2 = r_w[..., 2]
-    v_w_0 = v_w[..., 0]
-    v_w_1 = v_w[..., 1]
-    v_w_2 = v_w[..., 2]
+    if out is None or out[0] is None or out[1] is None:
+        batch = m.shape if m.shape == r_w.shape[:-1] == v_w.shape[:-1] else numpy.broadcast_shapes(m.shape, r_w.shape[:-1], v_w.shape[:-1])
     m_r_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    numpy.multiply(m, r_w_0, out=m_r_out[..., 0])
-    numpy.multiply(m, r_w_1, out=m_r_out[..., 1])
-    numpy.multiply(m, r_w_2, out=m_r_out[..., 2])
+    numpy.multiply(m[..., None], r_w[..., 0:3], out=m_r_out[..., 0:3])
     p_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[1] is None else out[1]
-    numpy.multiply(m, v_w_0, out=p_out[..., 0])
-    numpy.multiply(m, v_w_1, out=p_out[..., 1])
-    numpy.multiply(m, v_w_2, out=p_out[..., 2])
+    numpy.multiply(m[..., None], v_w[..., 0:3], out=p_out[..., 0:3])
     return m_r_out, p_out
 
 
@@ -82,7 +73,8 @@ def particle_angular_momentum(m, r_w, v_w, r_com_w, v_com_w, *, out=None):
     v_w = numpy.asarray(v_w, dtype=numpy.float32)
     r_com_w = numpy.asarray(r_com_w, dtype=numpy.float32)
     v_com_w = numpy.asarray(v_com_w, dtype=numpy.float32)
-    batch = m.shape if m.shape == r_w.shape[:-1] == v_w.shape[:-1] == r_com_w.shape[:-1] == v_com_w.shape[:-1] else numpy.broadcast_shapes(m.shape, r_w.shape[:-1], v_w.shape[:-1], r_com_w.shape[:-1], v_com_w.shape[:-1])
+    if out is None or out[0] is None:
+        batch = m.shape if m.shape == r_w.shape[:-1] == v_w.shape[:-1] == r_com_w.shape[:-1] == v_com_w.shape[:-1] else numpy.broadcast_shapes(m.shape, r_w.shape[:-1], v_w.shape[:-1], r_com_w.shape[:-1], v_com_w.shape[:-1])
     r_w_0 = r_w[..., 0]
     r_w_1 = r_w[..., 1]
     r_w_2 = r_w[..., 2]
@@ -135,7 +127,8 @@ def inertia_box(m, w, h, d, *, out=None):
     w = numpy.asarray(w, dtype=numpy.float32)
     h = numpy.asarray(h, dtype=numpy.float32)
     d = numpy.asarray(d, dtype=numpy.float32)
-    batch = m.shape if m.shape == w.shape == h.shape == d.shape else numpy.broadcast_shapes(m.shape, w.shape, h.shape, d.shape)
+    if out is None or out[0] is None:
+        batch = m.shape if m.shape == w.shape == h.shape == d.shape else numpy.broadcast_shapes(m.shape, w.shape, h.shape, d.shape)
     t0 = (d*d)
     t1 = (h*h)
     t2 = ((numpy.float32(1.0)/numpy.float32(12.0)))*m
@@ -171,7 +164,8 @@ def inertia_cylinder(m, r, h, *, out=None):
     m = numpy.asarray(m, dtype=numpy.float32)
     r = numpy.asarray(r, dtype=numpy.float32)
     h = numpy.asarray(h, dtype=numpy.float32)
-    batch = m.shape if m.shape == r.shape == h.shape else numpy.broadcast_shapes(m.shape, r.shape, h.shape)
+    if out is None or out[0] is None:
+        batch = m.shape if m.shape == r.shape == h.shape else numpy.broadcast_shapes(m.shape, r.shape, h.shape)
     t0 = (r*r)
     t1 = ((numpy.float32(1.0)/numpy.float32(12.0)))*m*((h*h) + 3*t0)
     I_b_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
@@ -202,7 +196,8 @@ def inertia_sphere(m, r, *, out=None):
     """
     m = numpy.asarray(m, dtype=numpy.float32)
     r = numpy.asarray(r, dtype=numpy.float32)
-    batch = m.shape if m.shape == r.shape else numpy.broadcast_shapes(m.shape, r.shape)
+    if out is None or out[0] is None:
+        batch = m.shape if m.shape == r.shape else numpy.broadcast_shapes(m.shape, r.shape)
     t0 = ((numpy.float32(2.0)/numpy.float32(5.0)))*m*(r*r)
     I_b_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     I_b_out[..., 0] = t0
@@ -235,7 +230,8 @@ def parallel_axis(I_c, m, d, *, out=None):
     I_c = numpy.asarray(I_c, dtype=numpy.float32)
     m = numpy.asarray(m, dtype=numpy.float32)
     d = numpy.asarray(d, dtype=numpy.float32)
-    batch = I_c.shape[:-2] if I_c.shape[:-2] == m.shape == d.shape[:-1] else numpy.broadcast_shapes(I_c.shape[:-2], m.shape, d.shape[:-1])
+    if out is None or out[0] is None:
+        batch = I_c.shape[:-2] if I_c.shape[:-2] == m.shape == d.shape[:-1] else numpy.broadcast_shapes(I_c.shape[:-2], m.shape, d.shape[:-1])
     I_c_00 = I_c[..., 0, 0]
     I_c_01 = I_c[..., 0, 1]
     I_c_02 = I_c[..., 0, 2]
@@ -248,11 +244,13 @@ def parallel_axis(I_c, m, d, *, out=None):
     d_0 = d[..., 0]
     d_1 = d[..., 1]
     d_2 = d[..., 2]
-    t0 = (d_1*d_1)
-    t1 = (d_2*d_2)
+    t0_2 = d[..., 1:3] * d[..., 1:3]
+    t0 = t0_2[..., 0]
+    t1 = t0_2[..., 1]
     t2 = d_0*m
-    t3 = -d_1*t2
-    t4 = -d_2*t2
+    t3_2 = -d[..., 1:3] * t2[..., None]
+    t3 = t3_2[..., 0]
+    t4 = t3_2[..., 1]
     t5 = (d_0*d_0)
     t6 = -d_1*d_2*m
     I_o_out = numpy.empty(batch + (3, 3), dtype=numpy.float32) if out is None or out[0] is None else out[0]
@@ -292,7 +290,8 @@ def inertia_about_com(I_o, m, c, *, out=None):
     I_o = numpy.asarray(I_o, dtype=numpy.float32)
     m = numpy.asarray(m, dtype=numpy.float32)
     c = numpy.asarray(c, dtype=numpy.float32)
-    batch = I_o.shape[:-2] if I_o.shape[:-2] == m.shape == c.shape[:-1] else numpy.broadcast_shapes(I_o.shape[:-2], m.shape, c.shape[:-1])
+    if out is None or out[0] is None:
+        batch = I_o.shape[:-2] if I_o.shape[:-2] == m.shape == c.shape[:-1] else numpy.broadcast_shapes(I_o.shape[:-2], m.shape, c.shape[:-1])
     I_o_00 = I_o[..., 0, 0]
     I_o_01 = I_o[..., 0, 1]
     I_o_02 = I_o[..., 0, 2]
@@ -305,11 +304,13 @@ def inertia_about_com(I_o, m, c, *, out=None):
     c_0 = c[..., 0]
     c_1 = c[..., 1]
     c_2 = c[..., 2]
-    t0 = (c_1*c_1)
-    t1 = (c_2*c_2)
+    t0_2 = c[..., 1:3] * c[..., 1:3]
+    t0 = t0_2[..., 0]
+    t1 = t0_2[..., 1]
     t2 = c_0*m
-    t3 = c_1*t2
-    t4 = c_2*t2
+    t3_2 = c[..., 1:3] * t2[..., None]
+    t3 = t3_2[..., 0]
+    t4 = t3_2[..., 1]
     t5 = (c_0*c_0)
     t6 = c_1*c_2*m
     I_c_out = numpy.empty(batch + (3, 3), dtype=numpy.float32) if out is None or out[0] is None else out[0]
@@ -346,7 +347,8 @@ def world_inertia(q, I_b, *, out=None):
     """
     q = numpy.asarray(q, dtype=numpy.float32)
     I_b = numpy.asarray(I_b, dtype=numpy.float32)
-    batch = q.shape[:-1] if q.shape[:-1] == I_b.shape[:-1] else numpy.broadcast_shapes(q.shape[:-1], I_b.shape[:-1])
+    if out is None or out[0] is None:
+        batch = q.shape[:-1] if q.shape[:-1] == I_b.shape[:-1] else numpy.broadcast_shapes(q.shape[:-1], I_b.shape[:-1])
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -413,7 +415,8 @@ def torque_from_force(r_w, F_w, *, out=None):
     """
     r_w = numpy.asarray(r_w, dtype=numpy.float32)
     F_w = numpy.asarray(F_w, dtype=numpy.float32)
-    batch = r_w.shape[:-1] if r_w.shape[:-1] == F_w.shape[:-1] else numpy.broadcast_shapes(r_w.shape[:-1], F_w.shape[:-1])
+    if out is None or out[0] is None:
+        batch = r_w.shape[:-1] if r_w.shape[:-1] == F_w.shape[:-1] else numpy.broadcast_shapes(r_w.shape[:-1], F_w.shape[:-1])
     r_w_0 = r_w[..., 0]
     r_w_1 = r_w[..., 1]
     r_w_2 = r_w[..., 2]
@@ -451,7 +454,8 @@ def force_at_point(q, r_b, F_w, *, out=None):
     q = numpy.asarray(q, dtype=numpy.float32)
     r_b = numpy.asarray(r_b, dtype=numpy.float32)
     F_w = numpy.asarray(F_w, dtype=numpy.float32)
-    batch = q.shape[:-1] if q.shape[:-1] == r_b.shape[:-1] == F_w.shape[:-1] else numpy.broadcast_shapes(q.shape[:-1], r_b.shape[:-1], F_w.shape[:-1])
+    if out is None or out[0] is None:
+        batch = q.shape[:-1] if q.shape[:-1] == r_b.shape[:-1] == F_w.shape[:-1] else numpy.broadcast_shapes(q.shape[:-1], r_b.shape[:-1], F_w.shape[:-1])
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -500,14 +504,10 @@ def effect_applied_torque(torque_w, *, out=None):
         torque about the COM, world frame, N·m
     """
     torque_w = numpy.asarray(torque_w, dtype=numpy.float32)
-    batch = torque_w.shape[:-1]
-    torque_w_0 = torque_w[..., 0]
-    torque_w_1 = torque_w[..., 1]
-    torque_w_2 = torque_w[..., 2]
+    if out is None or out[0] is None:
+        batch = torque_w.shape[:-1]
     tau_com_w_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    tau_com_w_out[..., 0] = torque_w_0
-    tau_com_w_out[..., 1] = torque_w_1
-    tau_com_w_out[..., 2] = torque_w_2
+    tau_com_w_out[..., 0:3] = torque_w[..., 0:3]
     return tau_com_w_out
 
 
@@ -537,7 +537,8 @@ def effect_force_at_point(q, r_b, F_w, *, out=None):
     q = numpy.asarray(q, dtype=numpy.float32)
     r_b = numpy.asarray(r_b, dtype=numpy.float32)
     F_w = numpy.asarray(F_w, dtype=numpy.float32)
-    batch = q.shape[:-1] if q.shape[:-1] == r_b.shape[:-1] == F_w.shape[:-1] else numpy.broadcast_shapes(q.shape[:-1], r_b.shape[:-1], F_w.shape[:-1])
+    if out is None or out[0] is None or out[1] is None:
+        batch = q.shape[:-1] if q.shape[:-1] == r_b.shape[:-1] == F_w.shape[:-1] else numpy.broadcast_shapes(q.shape[:-1], r_b.shape[:-1], F_w.shape[:-1])
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -562,9 +563,7 @@ def effect_force_at_point(q, r_b, F_w, *, out=None):
     t11 = r_b_0*(t8 + t9) + r_b_1*(-t10 - t6) + r_b_2*(2*q_1*q_2 - t3)
     t12 = r_b_0*(-t10 - t5 + 1) + r_b_1*(t8 - t9) + r_b_2*(t1 + t2)
     F_com_w_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    F_com_w_out[..., 0] = F_w_0
-    F_com_w_out[..., 1] = F_w_1
-    F_com_w_out[..., 2] = F_w_2
+    F_com_w_out[..., 0:3] = F_w[..., 0:3]
     tau_com_w_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[1] is None else out[1]
     numpy.add(-F_w_1 * t7, F_w_2 * t11, out=tau_com_w_out[..., 0])
     numpy.subtract(F_w_0 * t7, F_w_2 * t12, out=tau_com_w_out[..., 1])
@@ -593,14 +592,10 @@ def effect_gravity(m, g_w, *, out=None):
     """
     m = numpy.asarray(m, dtype=numpy.float32)
     g_w = numpy.asarray(g_w, dtype=numpy.float32)
-    batch = m.shape if m.shape == g_w.shape[:-1] else numpy.broadcast_shapes(m.shape, g_w.shape[:-1])
-    g_w_0 = g_w[..., 0]
-    g_w_1 = g_w[..., 1]
-    g_w_2 = g_w[..., 2]
+    if out is None or out[0] is None:
+        batch = m.shape if m.shape == g_w.shape[:-1] else numpy.broadcast_shapes(m.shape, g_w.shape[:-1])
     F_com_w_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    numpy.multiply(g_w_0, m, out=F_com_w_out[..., 0])
-    numpy.multiply(g_w_1, m, out=F_com_w_out[..., 1])
-    numpy.multiply(g_w_2, m, out=F_com_w_out[..., 2])
+    numpy.multiply(g_w[..., 0:3], m[..., None], out=F_com_w_out[..., 0:3])
     return F_com_w_out
 
 
@@ -625,14 +620,10 @@ def effect_linear_damping(v_w, c, *, out=None):
     """
     v_w = numpy.asarray(v_w, dtype=numpy.float32)
     c = numpy.asarray(c, dtype=numpy.float32)
-    batch = v_w.shape[:-1] if v_w.shape[:-1] == c.shape else numpy.broadcast_shapes(v_w.shape[:-1], c.shape)
-    v_w_0 = v_w[..., 0]
-    v_w_1 = v_w[..., 1]
-    v_w_2 = v_w[..., 2]
+    if out is None or out[0] is None:
+        batch = v_w.shape[:-1] if v_w.shape[:-1] == c.shape else numpy.broadcast_shapes(v_w.shape[:-1], c.shape)
     F_com_w_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    numpy.multiply(-c, v_w_0, out=F_com_w_out[..., 0])
-    numpy.multiply(-c, v_w_1, out=F_com_w_out[..., 1])
-    numpy.multiply(-c, v_w_2, out=F_com_w_out[..., 2])
+    numpy.multiply(-c[..., None], v_w[..., 0:3], out=F_com_w_out[..., 0:3])
     return F_com_w_out
 
 
@@ -660,7 +651,8 @@ def effect_angular_damping(q, omega_b, c, *, out=None):
     q = numpy.asarray(q, dtype=numpy.float32)
     omega_b = numpy.asarray(omega_b, dtype=numpy.float32)
     c = numpy.asarray(c, dtype=numpy.float32)
-    batch = q.shape[:-1] if q.shape[:-1] == omega_b.shape[:-1] == c.shape else numpy.broadcast_shapes(q.shape[:-1], omega_b.shape[:-1], c.shape)
+    if out is None or out[0] is None:
+        batch = q.shape[:-1] if q.shape[:-1] == omega_b.shape[:-1] == c.shape else numpy.broadcast_shapes(q.shape[:-1], omega_b.shape[:-1], c.shape)
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -709,14 +701,10 @@ def effect_angular_damping_b(omega_b, c, *, out=None):
     """
     omega_b = numpy.asarray(omega_b, dtype=numpy.float32)
     c = numpy.asarray(c, dtype=numpy.float32)
-    batch = omega_b.shape[:-1] if omega_b.shape[:-1] == c.shape else numpy.broadcast_shapes(omega_b.shape[:-1], c.shape)
-    omega_b_0 = omega_b[..., 0]
-    omega_b_1 = omega_b[..., 1]
-    omega_b_2 = omega_b[..., 2]
+    if out is None or out[0] is None:
+        batch = omega_b.shape[:-1] if omega_b.shape[:-1] == c.shape else numpy.broadcast_shapes(omega_b.shape[:-1], c.shape)
     tau_com_b_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    numpy.multiply(-c, omega_b_0, out=tau_com_b_out[..., 0])
-    numpy.multiply(-c, omega_b_1, out=tau_com_b_out[..., 1])
-    numpy.multiply(-c, omega_b_2, out=tau_com_b_out[..., 2])
+    numpy.multiply(-c[..., None], omega_b[..., 0:3], out=tau_com_b_out[..., 0:3])
     return tau_com_b_out
 
 
@@ -741,7 +729,8 @@ def quat_mul(a, b, *, out=None):
     """
     a = numpy.asarray(a, dtype=numpy.float32)
     b = numpy.asarray(b, dtype=numpy.float32)
-    batch = a.shape[:-1] if a.shape[:-1] == b.shape[:-1] else numpy.broadcast_shapes(a.shape[:-1], b.shape[:-1])
+    if out is None or out[0] is None:
+        batch = a.shape[:-1] if a.shape[:-1] == b.shape[:-1] else numpy.broadcast_shapes(a.shape[:-1], b.shape[:-1])
     a_0 = a[..., 0]
     a_1 = a[..., 1]
     a_2 = a[..., 2]
@@ -776,15 +765,11 @@ def quat_conj(q, *, out=None):
         quaternion (x, y, z, w), scalar last
     """
     q = numpy.asarray(q, dtype=numpy.float32)
-    batch = q.shape[:-1]
-    q_0 = q[..., 0]
-    q_1 = q[..., 1]
-    q_2 = q[..., 2]
+    if out is None or out[0] is None:
+        batch = q.shape[:-1]
     q_3 = q[..., 3]
     q_conj_out = numpy.empty(batch + (4,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    numpy.negative(q_0, out=q_conj_out[..., 0])
-    numpy.negative(q_1, out=q_conj_out[..., 1])
-    numpy.negative(q_2, out=q_conj_out[..., 2])
+    numpy.negative(q[..., 0:3], out=q_conj_out[..., 0:3])
     q_conj_out[..., 3] = q_3
     return q_conj_out
 
@@ -807,17 +792,15 @@ def quat_normalize(q, *, out=None):
         quaternion (x, y, z, w), scalar last
     """
     q = numpy.asarray(q, dtype=numpy.float32)
-    batch = q.shape[:-1]
+    if out is None or out[0] is None:
+        batch = q.shape[:-1]
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
     q_3 = q[..., 3]
     t0 = (1.0/numpy.sqrt((q_0*q_0) + (q_1*q_1) + (q_2*q_2) + (q_3*q_3)))
     q_unit_out = numpy.empty(batch + (4,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    numpy.multiply(q_0, t0, out=q_unit_out[..., 0])
-    numpy.multiply(q_1, t0, out=q_unit_out[..., 1])
-    numpy.multiply(q_2, t0, out=q_unit_out[..., 2])
-    numpy.multiply(q_3, t0, out=q_unit_out[..., 3])
+    numpy.multiply(q[..., 0:4], t0[..., None], out=q_unit_out[..., 0:4])
     return q_unit_out
 
 
@@ -842,7 +825,8 @@ def quat_rotate(q, v_b, *, out=None):
     """
     q = numpy.asarray(q, dtype=numpy.float32)
     v_b = numpy.asarray(v_b, dtype=numpy.float32)
-    batch = q.shape[:-1] if q.shape[:-1] == v_b.shape[:-1] else numpy.broadcast_shapes(q.shape[:-1], v_b.shape[:-1])
+    if out is None or out[0] is None:
+        batch = q.shape[:-1] if q.shape[:-1] == v_b.shape[:-1] else numpy.broadcast_shapes(q.shape[:-1], v_b.shape[:-1])
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -885,7 +869,8 @@ def quat_to_matrix(q, *, out=None):
         3×3 rotation, body → world, row-major
     """
     q = numpy.asarray(q, dtype=numpy.float32)
-    batch = q.shape[:-1]
+    if out is None or out[0] is None:
+        batch = q.shape[:-1]
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -931,7 +916,8 @@ def matrix_to_quat(R_wb, *, out=None):
         quaternion (x, y, z, w), scalar last
     """
     R_wb = numpy.asarray(R_wb, dtype=numpy.float32)
-    batch = R_wb.shape[:-2]
+    if out is None or out[0] is None:
+        batch = R_wb.shape[:-2]
     R_0 = R_wb[..., 0, 0]
     R_1 = R_wb[..., 0, 1]
     R_2 = R_wb[..., 0, 2]
@@ -994,16 +980,12 @@ def axis_angle_to_quat(axis, angle, *, out=None):
     """
     axis = numpy.asarray(axis, dtype=numpy.float32)
     angle = numpy.asarray(angle, dtype=numpy.float32)
-    batch = axis.shape[:-1] if axis.shape[:-1] == angle.shape else numpy.broadcast_shapes(axis.shape[:-1], angle.shape)
-    axis_0 = axis[..., 0]
-    axis_1 = axis[..., 1]
-    axis_2 = axis[..., 2]
+    if out is None or out[0] is None:
+        batch = axis.shape[:-1] if axis.shape[:-1] == angle.shape else numpy.broadcast_shapes(axis.shape[:-1], angle.shape)
     t0 = ((numpy.float32(1.0)/numpy.float32(2.0)))*angle
     t1 = numpy.sin(t0)
     q_out = numpy.empty(batch + (4,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    numpy.multiply(axis_0, t1, out=q_out[..., 0])
-    numpy.multiply(axis_1, t1, out=q_out[..., 1])
-    numpy.multiply(axis_2, t1, out=q_out[..., 2])
+    numpy.multiply(axis[..., 0:3], t1[..., None], out=q_out[..., 0:3])
     q_out[..., 3] = numpy.cos(t0)
     return q_out
 
@@ -1029,7 +1011,8 @@ def quat_from_two_vectors(a, b, *, out=None):
     """
     a = numpy.asarray(a, dtype=numpy.float32)
     b = numpy.asarray(b, dtype=numpy.float32)
-    batch = a.shape[:-1] if a.shape[:-1] == b.shape[:-1] else numpy.broadcast_shapes(a.shape[:-1], b.shape[:-1])
+    if out is None or out[0] is None:
+        batch = a.shape[:-1] if a.shape[:-1] == b.shape[:-1] else numpy.broadcast_shapes(a.shape[:-1], b.shape[:-1])
     a_0 = a[..., 0]
     a_1 = a[..., 1]
     a_2 = a[..., 2]
@@ -1076,7 +1059,8 @@ def quat_to_axis_angle(q, *, out=None):
         angle, rad
     """
     q = numpy.asarray(q, dtype=numpy.float32)
-    batch = q.shape[:-1]
+    if out is None or out[0] is None or out[1] is None:
+        batch = q.shape[:-1]
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -1115,7 +1099,8 @@ def quat_error_angle(q, q_ref, *, out=None):
     """
     q = numpy.asarray(q, dtype=numpy.float32)
     q_ref = numpy.asarray(q_ref, dtype=numpy.float32)
-    batch = q.shape[:-1] if q.shape[:-1] == q_ref.shape[:-1] else numpy.broadcast_shapes(q.shape[:-1], q_ref.shape[:-1])
+    if out is None or out[0] is None:
+        batch = q.shape[:-1] if q.shape[:-1] == q_ref.shape[:-1] else numpy.broadcast_shapes(q.shape[:-1], q_ref.shape[:-1])
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -1153,7 +1138,8 @@ def quat_error_chart(q, q_ref, *, out=None):
     """
     q = numpy.asarray(q, dtype=numpy.float32)
     q_ref = numpy.asarray(q_ref, dtype=numpy.float32)
-    batch = q.shape[:-1] if q.shape[:-1] == q_ref.shape[:-1] else numpy.broadcast_shapes(q.shape[:-1], q_ref.shape[:-1])
+    if out is None or out[0] is None:
+        batch = q.shape[:-1] if q.shape[:-1] == q_ref.shape[:-1] else numpy.broadcast_shapes(q.shape[:-1], q_ref.shape[:-1])
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -1200,7 +1186,8 @@ def euler_xyz_to_quat(roll, pitch, yaw, *, out=None):
     roll = numpy.asarray(roll, dtype=numpy.float32)
     pitch = numpy.asarray(pitch, dtype=numpy.float32)
     yaw = numpy.asarray(yaw, dtype=numpy.float32)
-    batch = roll.shape if roll.shape == pitch.shape == yaw.shape else numpy.broadcast_shapes(roll.shape, pitch.shape, yaw.shape)
+    if out is None or out[0] is None:
+        batch = roll.shape if roll.shape == pitch.shape == yaw.shape else numpy.broadcast_shapes(roll.shape, pitch.shape, yaw.shape)
     t0 = ((numpy.float32(1.0)/numpy.float32(2.0)))*yaw
     t1 = numpy.sin(t0)
     t2 = ((numpy.float32(1.0)/numpy.float32(2.0)))*roll
@@ -1239,7 +1226,8 @@ def quat_to_euler_xyz(q, *, out=None):
         (roll, pitch, yaw), rad
     """
     q = numpy.asarray(q, dtype=numpy.float32)
-    batch = q.shape[:-1]
+    if out is None or out[0] is None:
+        batch = q.shape[:-1]
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -1287,7 +1275,8 @@ def quat_derivative_world(q, omega_w, *, out=None):
     """
     q = numpy.asarray(q, dtype=numpy.float32)
     omega_w = numpy.asarray(omega_w, dtype=numpy.float32)
-    batch = q.shape[:-1] if q.shape[:-1] == omega_w.shape[:-1] else numpy.broadcast_shapes(q.shape[:-1], omega_w.shape[:-1])
+    if out is None or out[0] is None:
+        batch = q.shape[:-1] if q.shape[:-1] == omega_w.shape[:-1] else numpy.broadcast_shapes(q.shape[:-1], omega_w.shape[:-1])
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -1298,8 +1287,9 @@ def quat_derivative_world(q, omega_w, *, out=None):
     t0 = ((numpy.float32(1.0)/numpy.float32(2.0)))*q_3
     t1 = ((numpy.float32(1.0)/numpy.float32(2.0)))*q_2
     t2 = ((numpy.float32(1.0)/numpy.float32(2.0)))*omega_w_2
-    t3 = ((numpy.float32(1.0)/numpy.float32(2.0)))*omega_w_0
-    t4 = ((numpy.float32(1.0)/numpy.float32(2.0)))*omega_w_1
+    t3_2 = numpy.float32(1.0) / numpy.float32(2.0) * omega_w[..., 0:2]
+    t3 = t3_2[..., 0]
+    t4 = t3_2[..., 1]
     q_dot_out = numpy.empty(batch + (4,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     numpy.subtract(omega_w_0 * t0 + omega_w_1 * t1, q_1 * t2, out=q_dot_out[..., 0])
     numpy.add(-omega_w_0 * t1 + omega_w_1 * t0, q_0 * t2, out=q_dot_out[..., 1])
@@ -1329,17 +1319,16 @@ def quat_derivative_body(q, omega_b, *, out=None):
     """
     q = numpy.asarray(q, dtype=numpy.float32)
     omega_b = numpy.asarray(omega_b, dtype=numpy.float32)
-    batch = q.shape[:-1] if q.shape[:-1] == omega_b.shape[:-1] else numpy.broadcast_shapes(q.shape[:-1], omega_b.shape[:-1])
+    if out is None or out[0] is None:
+        batch = q.shape[:-1] if q.shape[:-1] == omega_b.shape[:-1] else numpy.broadcast_shapes(q.shape[:-1], omega_b.shape[:-1])
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
     q_3 = q[..., 3]
-    omega_b_0 = omega_b[..., 0]
-    omega_b_1 = omega_b[..., 1]
-    omega_b_2 = omega_b[..., 2]
-    t0 = ((numpy.float32(1.0)/numpy.float32(2.0)))*omega_b_0
-    t1 = ((numpy.float32(1.0)/numpy.float32(2.0)))*omega_b_1
-    t2 = ((numpy.float32(1.0)/numpy.float32(2.0)))*omega_b_2
+    t0_3 = numpy.float32(1.0) / numpy.float32(2.0) * omega_b[..., 0:3]
+    t0 = t0_3[..., 0]
+    t1 = t0_3[..., 1]
+    t2 = t0_3[..., 2]
     q_dot_out = numpy.empty(batch + (4,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     numpy.add(q_1 * t2 - q_2 * t1, q_3 * t0, out=q_dot_out[..., 0])
     numpy.add(-q_0 * t2 + q_2 * t0, q_3 * t1, out=q_dot_out[..., 1])
@@ -1372,7 +1361,8 @@ def integrate_orientation(q, omega_w, dt, *, out=None):
     q = numpy.asarray(q, dtype=numpy.float32)
     omega_w = numpy.asarray(omega_w, dtype=numpy.float32)
     dt = numpy.asarray(dt, dtype=numpy.float32)
-    batch = q.shape[:-1] if q.shape[:-1] == omega_w.shape[:-1] == dt.shape else numpy.broadcast_shapes(q.shape[:-1], omega_w.shape[:-1], dt.shape)
+    if out is None or out[0] is None:
+        batch = q.shape[:-1] if q.shape[:-1] == omega_w.shape[:-1] == dt.shape else numpy.broadcast_shapes(q.shape[:-1], omega_w.shape[:-1], dt.shape)
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -1384,8 +1374,9 @@ def integrate_orientation(q, omega_w, dt, *, out=None):
     t1 = ((numpy.float32(1.0)/numpy.float32(2.0)))*q_2
     t2 = ((numpy.float32(1.0)/numpy.float32(2.0)))*omega_w_2
     t3 = dt*(omega_w_0*t0 + omega_w_1*t1 - q_1*t2) + q_0
-    t4 = ((numpy.float32(1.0)/numpy.float32(2.0)))*omega_w_0
-    t5 = ((numpy.float32(1.0)/numpy.float32(2.0)))*omega_w_1
+    t4_2 = numpy.float32(1.0) / numpy.float32(2.0) * omega_w[..., 0:2]
+    t4 = t4_2[..., 0]
+    t5 = t4_2[..., 1]
     t6 = dt*(-omega_w_2*t1 - q_0*t4 - q_1*t5) + q_3
     t7 = dt*(omega_w_2*t0 - q_0*t5 + q_1*t4) + q_2
     t8 = dt*(-omega_w_0*t1 + omega_w_1*t0 + q_0*t2) + q_1
@@ -1422,7 +1413,8 @@ def euler_equations(I_b, omega_b, tau_b, *, out=None):
     I_b = numpy.asarray(I_b, dtype=numpy.float32)
     omega_b = numpy.asarray(omega_b, dtype=numpy.float32)
     tau_b = numpy.asarray(tau_b, dtype=numpy.float32)
-    batch = I_b.shape[:-1] if I_b.shape[:-1] == omega_b.shape[:-1] == tau_b.shape[:-1] else numpy.broadcast_shapes(I_b.shape[:-1], omega_b.shape[:-1], tau_b.shape[:-1])
+    if out is None or out[0] is None:
+        batch = I_b.shape[:-1] if I_b.shape[:-1] == omega_b.shape[:-1] == tau_b.shape[:-1] else numpy.broadcast_shapes(I_b.shape[:-1], omega_b.shape[:-1], tau_b.shape[:-1])
     I_b_0 = I_b[..., 0]
     I_b_1 = I_b[..., 1]
     I_b_2 = I_b[..., 2]
@@ -1435,9 +1427,10 @@ def euler_equations(I_b, omega_b, tau_b, *, out=None):
     c_b_0 = (I_b_1 - I_b_2)/I_b_0
     c_b_1 = (-I_b_0 + I_b_2)/I_b_1
     c_b_2 = (I_b_0 - I_b_1)/I_b_2
-    c_b_3 = (1.0/I_b_0)
-    c_b_4 = (1.0/I_b_1)
-    c_b_5 = (1.0/I_b_2)
+    c_b_3_3 = 1.0 / I_b[..., 0:3]
+    c_b_3 = c_b_3_3[..., 0]
+    c_b_4 = c_b_3_3[..., 1]
+    c_b_5 = c_b_3_3[..., 2]
     omega_dot_b_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     numpy.add(c_b_0 * omega_b_1 * omega_b_2, c_b_3 * tau_b_0, out=omega_dot_b_out[..., 0])
     numpy.add(c_b_1 * omega_b_0 * omega_b_2, c_b_4 * tau_b_1, out=omega_dot_b_out[..., 1])
@@ -1475,51 +1468,44 @@ def rigid_body_rhs(x, m, I_b, F_w, tau_w, *, out=None):
     I_b = numpy.asarray(I_b, dtype=numpy.float32)
     F_w = numpy.asarray(F_w, dtype=numpy.float32)
     tau_w = numpy.asarray(tau_w, dtype=numpy.float32)
-    batch = x.shape[:-1] if x.shape[:-1] == m.shape == I_b.shape[:-1] == F_w.shape[:-1] == tau_w.shape[:-1] else numpy.broadcast_shapes(x.shape[:-1], m.shape, I_b.shape[:-1], F_w.shape[:-1], tau_w.shape[:-1])
+    if out is None or out[0] is None:
+        batch = x.shape[:-1] if x.shape[:-1] == m.shape == I_b.shape[:-1] == F_w.shape[:-1] == tau_w.shape[:-1] else numpy.broadcast_shapes(x.shape[:-1], m.shape, I_b.shape[:-1], F_w.shape[:-1], tau_w.shape[:-1])
     x_3 = x[..., 3]
     x_4 = x[..., 4]
     x_5 = x[..., 5]
     x_6 = x[..., 6]
-    x_7 = x[..., 7]
-    x_8 = x[..., 8]
-    x_9 = x[..., 9]
     x_10 = x[..., 10]
     x_11 = x[..., 11]
     x_12 = x[..., 12]
     I_b_0 = I_b[..., 0]
     I_b_1 = I_b[..., 1]
     I_b_2 = I_b[..., 2]
-    F_w_0 = F_w[..., 0]
-    F_w_1 = F_w[..., 1]
-    F_w_2 = F_w[..., 2]
     tau_w_0 = tau_w[..., 0]
     tau_w_1 = tau_w[..., 1]
     tau_w_2 = tau_w[..., 2]
     c_b_0 = (I_b_1 - I_b_2)/I_b_0
     c_b_1 = (-I_b_0 + I_b_2)/I_b_1
     c_b_2 = (I_b_0 - I_b_1)/I_b_2
-    c_b_3 = (1.0/I_b_0)
-    c_b_4 = (1.0/I_b_1)
-    c_b_5 = (1.0/I_b_2)
-    t0 = ((numpy.float32(1.0)/numpy.float32(2.0)))*x_10
-    t1 = ((numpy.float32(1.0)/numpy.float32(2.0)))*x_11
-    t2 = ((numpy.float32(1.0)/numpy.float32(2.0)))*x_12
+    c_b_3_3 = 1.0 / I_b[..., 0:3]
+    c_b_3 = c_b_3_3[..., 0]
+    c_b_4 = c_b_3_3[..., 1]
+    c_b_5 = c_b_3_3[..., 2]
+    t0_3 = numpy.float32(1.0) / numpy.float32(2.0) * x[..., 10:13]
+    t0 = t0_3[..., 0]
+    t1 = t0_3[..., 1]
+    t2 = t0_3[..., 2]
     t3 = (1.0/m)
     t4 = 2*tau_w_0
     t5 = -t4*x_4 + 2*tau_w_1*x_3
     t6 = t4*x_5 - 2*tau_w_2*x_3
     t7 = -2*tau_w_1*x_5 + 2*tau_w_2*x_4
     x_dot_out = numpy.empty(batch + (13,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    x_dot_out[..., 0] = x_7
-    x_dot_out[..., 1] = x_8
-    x_dot_out[..., 2] = x_9
+    x_dot_out[..., 0:3] = x[..., 7:10]
     numpy.add(t0 * x_6 - t1 * x_5, t2 * x_4, out=x_dot_out[..., 3])
     numpy.subtract(t0 * x_5 + t1 * x_6, t2 * x_3, out=x_dot_out[..., 4])
     numpy.add(-t0 * x_4 + t1 * x_3, t2 * x_6, out=x_dot_out[..., 5])
     numpy.subtract(-t0 * x_3 - t1 * x_4, t2 * x_5, out=x_dot_out[..., 6])
-    numpy.multiply(F_w_0, t3, out=x_dot_out[..., 7])
-    numpy.multiply(F_w_1, t3, out=x_dot_out[..., 8])
-    numpy.multiply(F_w_2, t3, out=x_dot_out[..., 9])
+    numpy.multiply(F_w[..., 0:3], t3[..., None], out=x_dot_out[..., 7:10])
     numpy.add(c_b_0 * x_11 * x_12, c_b_3 * (t5 * x_4 - t6 * x_5 - t7 * x_6 + tau_w_0), out=x_dot_out[..., 10])
     numpy.add(c_b_1 * x_10 * x_12, c_b_4 * (-t5 * x_3 - t6 * x_6 + t7 * x_5 + tau_w_1), out=x_dot_out[..., 11])
     numpy.add(c_b_2 * x_10 * x_11, c_b_5 * (-t5 * x_6 + t6 * x_3 - t7 * x_4 + tau_w_2), out=x_dot_out[..., 12])
@@ -1547,14 +1533,12 @@ def rigid_body_rhs_free(x, I_b, *, out=None):
     """
     x = numpy.asarray(x, dtype=numpy.float32)
     I_b = numpy.asarray(I_b, dtype=numpy.float32)
-    batch = x.shape[:-1] if x.shape[:-1] == I_b.shape[:-1] else numpy.broadcast_shapes(x.shape[:-1], I_b.shape[:-1])
+    if out is None or out[0] is None:
+        batch = x.shape[:-1] if x.shape[:-1] == I_b.shape[:-1] else numpy.broadcast_shapes(x.shape[:-1], I_b.shape[:-1])
     x_3 = x[..., 3]
     x_4 = x[..., 4]
     x_5 = x[..., 5]
     x_6 = x[..., 6]
-    x_7 = x[..., 7]
-    x_8 = x[..., 8]
-    x_9 = x[..., 9]
     x_10 = x[..., 10]
     x_11 = x[..., 11]
     x_12 = x[..., 12]
@@ -1564,13 +1548,12 @@ def rigid_body_rhs_free(x, I_b, *, out=None):
     c_b_0 = (I_b_1 - I_b_2)/I_b_0
     c_b_1 = (-I_b_0 + I_b_2)/I_b_1
     c_b_2 = (I_b_0 - I_b_1)/I_b_2
-    t0 = ((numpy.float32(1.0)/numpy.float32(2.0)))*x_10
-    t1 = ((numpy.float32(1.0)/numpy.float32(2.0)))*x_11
-    t2 = ((numpy.float32(1.0)/numpy.float32(2.0)))*x_12
+    t0_3 = numpy.float32(1.0) / numpy.float32(2.0) * x[..., 10:13]
+    t0 = t0_3[..., 0]
+    t1 = t0_3[..., 1]
+    t2 = t0_3[..., 2]
     x_dot_out = numpy.empty(batch + (13,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    x_dot_out[..., 0] = x_7
-    x_dot_out[..., 1] = x_8
-    x_dot_out[..., 2] = x_9
+    x_dot_out[..., 0:3] = x[..., 7:10]
     numpy.add(t0 * x_6 - t1 * x_5, t2 * x_4, out=x_dot_out[..., 3])
     numpy.subtract(t0 * x_5 + t1 * x_6, t2 * x_3, out=x_dot_out[..., 4])
     numpy.add(-t0 * x_4 + t1 * x_3, t2 * x_6, out=x_dot_out[..., 5])
@@ -1608,7 +1591,8 @@ def apply_inv_inertia(q, I_b, v, *, out=None):
     q = numpy.asarray(q, dtype=numpy.float32)
     I_b = numpy.asarray(I_b, dtype=numpy.float32)
     v = numpy.asarray(v, dtype=numpy.float32)
-    batch = q.shape[:-1] if q.shape[:-1] == I_b.shape[:-1] == v.shape[:-1] else numpy.broadcast_shapes(q.shape[:-1], I_b.shape[:-1], v.shape[:-1])
+    if out is None or out[0] is None:
+        batch = q.shape[:-1] if q.shape[:-1] == I_b.shape[:-1] == v.shape[:-1] else numpy.broadcast_shapes(q.shape[:-1], I_b.shape[:-1], v.shape[:-1])
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -1675,7 +1659,8 @@ def world_to_body(q, v_w, *, out=None):
     """
     q = numpy.asarray(q, dtype=numpy.float32)
     v_w = numpy.asarray(v_w, dtype=numpy.float32)
-    batch = q.shape[:-1] if q.shape[:-1] == v_w.shape[:-1] else numpy.broadcast_shapes(q.shape[:-1], v_w.shape[:-1])
+    if out is None or out[0] is None:
+        batch = q.shape[:-1] if q.shape[:-1] == v_w.shape[:-1] else numpy.broadcast_shapes(q.shape[:-1], v_w.shape[:-1])
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -1727,7 +1712,8 @@ def kinetic_energy(m, I_b, v_w, omega_b, *, out=None):
     I_b = numpy.asarray(I_b, dtype=numpy.float32)
     v_w = numpy.asarray(v_w, dtype=numpy.float32)
     omega_b = numpy.asarray(omega_b, dtype=numpy.float32)
-    batch = m.shape if m.shape == I_b.shape[:-1] == v_w.shape[:-1] == omega_b.shape[:-1] else numpy.broadcast_shapes(m.shape, I_b.shape[:-1], v_w.shape[:-1], omega_b.shape[:-1])
+    if out is None or out[0] is None:
+        batch = m.shape if m.shape == I_b.shape[:-1] == v_w.shape[:-1] == omega_b.shape[:-1] else numpy.broadcast_shapes(m.shape, I_b.shape[:-1], v_w.shape[:-1], omega_b.shape[:-1])
     I_b_0 = I_b[..., 0]
     I_b_1 = I_b[..., 1]
     I_b_2 = I_b[..., 2]
@@ -1766,7 +1752,8 @@ def angular_momentum_world(q, I_b, omega_b, *, out=None):
     q = numpy.asarray(q, dtype=numpy.float32)
     I_b = numpy.asarray(I_b, dtype=numpy.float32)
     omega_b = numpy.asarray(omega_b, dtype=numpy.float32)
-    batch = q.shape[:-1] if q.shape[:-1] == I_b.shape[:-1] == omega_b.shape[:-1] else numpy.broadcast_shapes(q.shape[:-1], I_b.shape[:-1], omega_b.shape[:-1])
+    if out is None or out[0] is None:
+        batch = q.shape[:-1] if q.shape[:-1] == I_b.shape[:-1] == omega_b.shape[:-1] else numpy.broadcast_shapes(q.shape[:-1], I_b.shape[:-1], omega_b.shape[:-1])
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -1821,14 +1808,12 @@ def rigid_body_rhs_torque(x, I_b, tau_w, *, out=None):
     x = numpy.asarray(x, dtype=numpy.float32)
     I_b = numpy.asarray(I_b, dtype=numpy.float32)
     tau_w = numpy.asarray(tau_w, dtype=numpy.float32)
-    batch = x.shape[:-1] if x.shape[:-1] == I_b.shape[:-1] == tau_w.shape[:-1] else numpy.broadcast_shapes(x.shape[:-1], I_b.shape[:-1], tau_w.shape[:-1])
+    if out is None or out[0] is None:
+        batch = x.shape[:-1] if x.shape[:-1] == I_b.shape[:-1] == tau_w.shape[:-1] else numpy.broadcast_shapes(x.shape[:-1], I_b.shape[:-1], tau_w.shape[:-1])
     x_3 = x[..., 3]
     x_4 = x[..., 4]
     x_5 = x[..., 5]
     x_6 = x[..., 6]
-    x_7 = x[..., 7]
-    x_8 = x[..., 8]
-    x_9 = x[..., 9]
     x_10 = x[..., 10]
     x_11 = x[..., 11]
     x_12 = x[..., 12]
@@ -1841,20 +1826,20 @@ def rigid_body_rhs_torque(x, I_b, tau_w, *, out=None):
     c_b_0 = (I_b_1 - I_b_2)/I_b_0
     c_b_1 = (-I_b_0 + I_b_2)/I_b_1
     c_b_2 = (I_b_0 - I_b_1)/I_b_2
-    c_b_3 = (1.0/I_b_0)
-    c_b_4 = (1.0/I_b_1)
-    c_b_5 = (1.0/I_b_2)
-    t0 = ((numpy.float32(1.0)/numpy.float32(2.0)))*x_10
-    t1 = ((numpy.float32(1.0)/numpy.float32(2.0)))*x_11
-    t2 = ((numpy.float32(1.0)/numpy.float32(2.0)))*x_12
+    c_b_3_3 = 1.0 / I_b[..., 0:3]
+    c_b_3 = c_b_3_3[..., 0]
+    c_b_4 = c_b_3_3[..., 1]
+    c_b_5 = c_b_3_3[..., 2]
+    t0_3 = numpy.float32(1.0) / numpy.float32(2.0) * x[..., 10:13]
+    t0 = t0_3[..., 0]
+    t1 = t0_3[..., 1]
+    t2 = t0_3[..., 2]
     t3 = 2*tau_w_0
     t4 = -t3*x_4 + 2*tau_w_1*x_3
     t5 = t3*x_5 - 2*tau_w_2*x_3
     t6 = -2*tau_w_1*x_5 + 2*tau_w_2*x_4
     x_dot_out = numpy.empty(batch + (13,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    x_dot_out[..., 0] = x_7
-    x_dot_out[..., 1] = x_8
-    x_dot_out[..., 2] = x_9
+    x_dot_out[..., 0:3] = x[..., 7:10]
     numpy.add(t0 * x_6 - t1 * x_5, t2 * x_4, out=x_dot_out[..., 3])
     numpy.subtract(t0 * x_5 + t1 * x_6, t2 * x_3, out=x_dot_out[..., 4])
     numpy.add(-t0 * x_4 + t1 * x_3, t2 * x_6, out=x_dot_out[..., 5])
@@ -1886,16 +1871,18 @@ def euler_coefficients(I_b, *, out=None):
         (k_x, k_y, k_z, r_x, r_y, r_z), body frame; k dimensionless, r 1/(kg·m²)
     """
     I_b = numpy.asarray(I_b, dtype=numpy.float32)
-    batch = I_b.shape[:-1]
+    if out is None or out[0] is None:
+        batch = I_b.shape[:-1]
     I_b_0 = I_b[..., 0]
     I_b_1 = I_b[..., 1]
     I_b_2 = I_b[..., 2]
     c_b_0 = (I_b_1 - I_b_2)/I_b_0
     c_b_1 = (-I_b_0 + I_b_2)/I_b_1
     c_b_2 = (I_b_0 - I_b_1)/I_b_2
-    c_b_3 = (1.0/I_b_0)
-    c_b_4 = (1.0/I_b_1)
-    c_b_5 = (1.0/I_b_2)
+    c_b_3_3 = 1.0 / I_b[..., 0:3]
+    c_b_3 = c_b_3_3[..., 0]
+    c_b_4 = c_b_3_3[..., 1]
+    c_b_5 = c_b_3_3[..., 2]
     c_b_out = numpy.empty(batch + (6,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     c_b_out[..., 0] = c_b_0
     c_b_out[..., 1] = c_b_1
@@ -1927,27 +1914,24 @@ def rigid_body_rhs_free_c(x, c_b, *, out=None):
     """
     x = numpy.asarray(x, dtype=numpy.float32)
     c_b = numpy.asarray(c_b, dtype=numpy.float32)
-    batch = x.shape[:-1] if x.shape[:-1] == c_b.shape[:-1] else numpy.broadcast_shapes(x.shape[:-1], c_b.shape[:-1])
+    if out is None or out[0] is None:
+        batch = x.shape[:-1] if x.shape[:-1] == c_b.shape[:-1] else numpy.broadcast_shapes(x.shape[:-1], c_b.shape[:-1])
     x_3 = x[..., 3]
     x_4 = x[..., 4]
     x_5 = x[..., 5]
     x_6 = x[..., 6]
-    x_7 = x[..., 7]
-    x_8 = x[..., 8]
-    x_9 = x[..., 9]
     x_10 = x[..., 10]
     x_11 = x[..., 11]
     x_12 = x[..., 12]
     c_b_0 = c_b[..., 0]
     c_b_1 = c_b[..., 1]
     c_b_2 = c_b[..., 2]
-    t0 = ((numpy.float32(1.0)/numpy.float32(2.0)))*x_10
-    t1 = ((numpy.float32(1.0)/numpy.float32(2.0)))*x_11
-    t2 = ((numpy.float32(1.0)/numpy.float32(2.0)))*x_12
+    t0_3 = numpy.float32(1.0) / numpy.float32(2.0) * x[..., 10:13]
+    t0 = t0_3[..., 0]
+    t1 = t0_3[..., 1]
+    t2 = t0_3[..., 2]
     x_dot_out = numpy.empty(batch + (13,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    x_dot_out[..., 0] = x_7
-    x_dot_out[..., 1] = x_8
-    x_dot_out[..., 2] = x_9
+    x_dot_out[..., 0:3] = x[..., 7:10]
     numpy.add(t0 * x_6 - t1 * x_5, t2 * x_4, out=x_dot_out[..., 3])
     numpy.subtract(t0 * x_5 + t1 * x_6, t2 * x_3, out=x_dot_out[..., 4])
     numpy.add(-t0 * x_4 + t1 * x_3, t2 * x_6, out=x_dot_out[..., 5])
@@ -1985,14 +1969,12 @@ def rigid_body_rhs_torque_c(x, c_b, tau_w, *, out=None):
     x = numpy.asarray(x, dtype=numpy.float32)
     c_b = numpy.asarray(c_b, dtype=numpy.float32)
     tau_w = numpy.asarray(tau_w, dtype=numpy.float32)
-    batch = x.shape[:-1] if x.shape[:-1] == c_b.shape[:-1] == tau_w.shape[:-1] else numpy.broadcast_shapes(x.shape[:-1], c_b.shape[:-1], tau_w.shape[:-1])
+    if out is None or out[0] is None:
+        batch = x.shape[:-1] if x.shape[:-1] == c_b.shape[:-1] == tau_w.shape[:-1] else numpy.broadcast_shapes(x.shape[:-1], c_b.shape[:-1], tau_w.shape[:-1])
     x_3 = x[..., 3]
     x_4 = x[..., 4]
     x_5 = x[..., 5]
     x_6 = x[..., 6]
-    x_7 = x[..., 7]
-    x_8 = x[..., 8]
-    x_9 = x[..., 9]
     x_10 = x[..., 10]
     x_11 = x[..., 11]
     x_12 = x[..., 12]
@@ -2005,17 +1987,16 @@ def rigid_body_rhs_torque_c(x, c_b, tau_w, *, out=None):
     tau_w_0 = tau_w[..., 0]
     tau_w_1 = tau_w[..., 1]
     tau_w_2 = tau_w[..., 2]
-    t0 = ((numpy.float32(1.0)/numpy.float32(2.0)))*x_10
-    t1 = ((numpy.float32(1.0)/numpy.float32(2.0)))*x_11
-    t2 = ((numpy.float32(1.0)/numpy.float32(2.0)))*x_12
+    t0_3 = numpy.float32(1.0) / numpy.float32(2.0) * x[..., 10:13]
+    t0 = t0_3[..., 0]
+    t1 = t0_3[..., 1]
+    t2 = t0_3[..., 2]
     t3 = 2*tau_w_0
     t4 = -t3*x_4 + 2*tau_w_1*x_3
     t5 = t3*x_5 - 2*tau_w_2*x_3
     t6 = -2*tau_w_1*x_5 + 2*tau_w_2*x_4
     x_dot_out = numpy.empty(batch + (13,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    x_dot_out[..., 0] = x_7
-    x_dot_out[..., 1] = x_8
-    x_dot_out[..., 2] = x_9
+    x_dot_out[..., 0:3] = x[..., 7:10]
     numpy.add(t0 * x_6 - t1 * x_5, t2 * x_4, out=x_dot_out[..., 3])
     numpy.subtract(t0 * x_5 + t1 * x_6, t2 * x_3, out=x_dot_out[..., 4])
     numpy.add(-t0 * x_4 + t1 * x_3, t2 * x_6, out=x_dot_out[..., 5])
@@ -2059,14 +2040,12 @@ def rigid_body_rhs_c(x, m, c_b, F_w, tau_w, *, out=None):
     c_b = numpy.asarray(c_b, dtype=numpy.float32)
     F_w = numpy.asarray(F_w, dtype=numpy.float32)
     tau_w = numpy.asarray(tau_w, dtype=numpy.float32)
-    batch = x.shape[:-1] if x.shape[:-1] == m.shape == c_b.shape[:-1] == F_w.shape[:-1] == tau_w.shape[:-1] else numpy.broadcast_shapes(x.shape[:-1], m.shape, c_b.shape[:-1], F_w.shape[:-1], tau_w.shape[:-1])
+    if out is None or out[0] is None:
+        batch = x.shape[:-1] if x.shape[:-1] == m.shape == c_b.shape[:-1] == F_w.shape[:-1] == tau_w.shape[:-1] else numpy.broadcast_shapes(x.shape[:-1], m.shape, c_b.shape[:-1], F_w.shape[:-1], tau_w.shape[:-1])
     x_3 = x[..., 3]
     x_4 = x[..., 4]
     x_5 = x[..., 5]
     x_6 = x[..., 6]
-    x_7 = x[..., 7]
-    x_8 = x[..., 8]
-    x_9 = x[..., 9]
     x_10 = x[..., 10]
     x_11 = x[..., 11]
     x_12 = x[..., 12]
@@ -2076,31 +2055,25 @@ def rigid_body_rhs_c(x, m, c_b, F_w, tau_w, *, out=None):
     c_b_3 = c_b[..., 3]
     c_b_4 = c_b[..., 4]
     c_b_5 = c_b[..., 5]
-    F_w_0 = F_w[..., 0]
-    F_w_1 = F_w[..., 1]
-    F_w_2 = F_w[..., 2]
     tau_w_0 = tau_w[..., 0]
     tau_w_1 = tau_w[..., 1]
     tau_w_2 = tau_w[..., 2]
-    t0 = ((numpy.float32(1.0)/numpy.float32(2.0)))*x_10
-    t1 = ((numpy.float32(1.0)/numpy.float32(2.0)))*x_11
-    t2 = ((numpy.float32(1.0)/numpy.float32(2.0)))*x_12
+    t0_3 = numpy.float32(1.0) / numpy.float32(2.0) * x[..., 10:13]
+    t0 = t0_3[..., 0]
+    t1 = t0_3[..., 1]
+    t2 = t0_3[..., 2]
     t3 = (1.0/m)
     t4 = 2*tau_w_0
     t5 = -t4*x_4 + 2*tau_w_1*x_3
     t6 = t4*x_5 - 2*tau_w_2*x_3
     t7 = -2*tau_w_1*x_5 + 2*tau_w_2*x_4
     x_dot_out = numpy.empty(batch + (13,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    x_dot_out[..., 0] = x_7
-    x_dot_out[..., 1] = x_8
-    x_dot_out[..., 2] = x_9
+    x_dot_out[..., 0:3] = x[..., 7:10]
     numpy.add(t0 * x_6 - t1 * x_5, t2 * x_4, out=x_dot_out[..., 3])
     numpy.subtract(t0 * x_5 + t1 * x_6, t2 * x_3, out=x_dot_out[..., 4])
     numpy.add(-t0 * x_4 + t1 * x_3, t2 * x_6, out=x_dot_out[..., 5])
     numpy.subtract(-t0 * x_3 - t1 * x_4, t2 * x_5, out=x_dot_out[..., 6])
-    numpy.multiply(F_w_0, t3, out=x_dot_out[..., 7])
-    numpy.multiply(F_w_1, t3, out=x_dot_out[..., 8])
-    numpy.multiply(F_w_2, t3, out=x_dot_out[..., 9])
+    numpy.multiply(F_w[..., 0:3], t3[..., None], out=x_dot_out[..., 7:10])
     numpy.add(c_b_0 * x_11 * x_12, c_b_3 * (t5 * x_4 - t6 * x_5 - t7 * x_6 + tau_w_0), out=x_dot_out[..., 10])
     numpy.add(c_b_1 * x_10 * x_12, c_b_4 * (-t5 * x_3 - t6 * x_6 + t7 * x_5 + tau_w_1), out=x_dot_out[..., 11])
     numpy.add(c_b_2 * x_10 * x_11, c_b_5 * (-t5 * x_6 + t6 * x_3 - t7 * x_4 + tau_w_2), out=x_dot_out[..., 12])
@@ -2133,7 +2106,8 @@ def rigid_body_rates_free_c(q, omega_b, c_b, *, out=None):
     q = numpy.asarray(q, dtype=numpy.float32)
     omega_b = numpy.asarray(omega_b, dtype=numpy.float32)
     c_b = numpy.asarray(c_b, dtype=numpy.float32)
-    batch = q.shape[:-1] if q.shape[:-1] == omega_b.shape[:-1] == c_b.shape[:-1] else numpy.broadcast_shapes(q.shape[:-1], omega_b.shape[:-1], c_b.shape[:-1])
+    if out is None or out[0] is None or out[1] is None:
+        batch = q.shape[:-1] if q.shape[:-1] == omega_b.shape[:-1] == c_b.shape[:-1] else numpy.broadcast_shapes(q.shape[:-1], omega_b.shape[:-1], c_b.shape[:-1])
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -2177,15 +2151,11 @@ def linear_acceleration(m, F_w, *, out=None):
     """
     m = numpy.asarray(m, dtype=numpy.float32)
     F_w = numpy.asarray(F_w, dtype=numpy.float32)
-    batch = m.shape if m.shape == F_w.shape[:-1] else numpy.broadcast_shapes(m.shape, F_w.shape[:-1])
-    F_w_0 = F_w[..., 0]
-    F_w_1 = F_w[..., 1]
-    F_w_2 = F_w[..., 2]
+    if out is None or out[0] is None:
+        batch = m.shape if m.shape == F_w.shape[:-1] else numpy.broadcast_shapes(m.shape, F_w.shape[:-1])
     t0 = (1.0/m)
     a_w_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    numpy.multiply(F_w_0, t0, out=a_w_out[..., 0])
-    numpy.multiply(F_w_1, t0, out=a_w_out[..., 1])
-    numpy.multiply(F_w_2, t0, out=a_w_out[..., 2])
+    numpy.multiply(F_w[..., 0:3], t0[..., None], out=a_w_out[..., 0:3])
     return a_w_out
 
 
@@ -2213,37 +2183,29 @@ def rigid_body_rhs_force_c(x, c_b, a_w, *, out=None):
     x = numpy.asarray(x, dtype=numpy.float32)
     c_b = numpy.asarray(c_b, dtype=numpy.float32)
     a_w = numpy.asarray(a_w, dtype=numpy.float32)
-    batch = x.shape[:-1] if x.shape[:-1] == c_b.shape[:-1] == a_w.shape[:-1] else numpy.broadcast_shapes(x.shape[:-1], c_b.shape[:-1], a_w.shape[:-1])
+    if out is None or out[0] is None:
+        batch = x.shape[:-1] if x.shape[:-1] == c_b.shape[:-1] == a_w.shape[:-1] else numpy.broadcast_shapes(x.shape[:-1], c_b.shape[:-1], a_w.shape[:-1])
     x_3 = x[..., 3]
     x_4 = x[..., 4]
     x_5 = x[..., 5]
     x_6 = x[..., 6]
-    x_7 = x[..., 7]
-    x_8 = x[..., 8]
-    x_9 = x[..., 9]
     x_10 = x[..., 10]
     x_11 = x[..., 11]
     x_12 = x[..., 12]
     c_b_0 = c_b[..., 0]
     c_b_1 = c_b[..., 1]
     c_b_2 = c_b[..., 2]
-    a_w_0 = a_w[..., 0]
-    a_w_1 = a_w[..., 1]
-    a_w_2 = a_w[..., 2]
-    t0 = ((numpy.float32(1.0)/numpy.float32(2.0)))*x_10
-    t1 = ((numpy.float32(1.0)/numpy.float32(2.0)))*x_11
-    t2 = ((numpy.float32(1.0)/numpy.float32(2.0)))*x_12
+    t0_3 = numpy.float32(1.0) / numpy.float32(2.0) * x[..., 10:13]
+    t0 = t0_3[..., 0]
+    t1 = t0_3[..., 1]
+    t2 = t0_3[..., 2]
     x_dot_out = numpy.empty(batch + (13,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    x_dot_out[..., 0] = x_7
-    x_dot_out[..., 1] = x_8
-    x_dot_out[..., 2] = x_9
+    x_dot_out[..., 0:3] = x[..., 7:10]
     numpy.add(t0 * x_6 - t1 * x_5, t2 * x_4, out=x_dot_out[..., 3])
     numpy.subtract(t0 * x_5 + t1 * x_6, t2 * x_3, out=x_dot_out[..., 4])
     numpy.add(-t0 * x_4 + t1 * x_3, t2 * x_6, out=x_dot_out[..., 5])
     numpy.subtract(-t0 * x_3 - t1 * x_4, t2 * x_5, out=x_dot_out[..., 6])
-    x_dot_out[..., 7] = a_w_0
-    x_dot_out[..., 8] = a_w_1
-    x_dot_out[..., 9] = a_w_2
+    x_dot_out[..., 7:10] = a_w[..., 0:3]
     numpy.multiply(c_b_0 * x_11, x_12, out=x_dot_out[..., 10])
     numpy.multiply(c_b_1 * x_10, x_12, out=x_dot_out[..., 11])
     numpy.multiply(c_b_2 * x_10, x_11, out=x_dot_out[..., 12])
@@ -2277,46 +2239,33 @@ def rigid_body_rhs_body_c(x, c_b, a_w, tau_b, *, out=None):
     c_b = numpy.asarray(c_b, dtype=numpy.float32)
     a_w = numpy.asarray(a_w, dtype=numpy.float32)
     tau_b = numpy.asarray(tau_b, dtype=numpy.float32)
-    batch = x.shape[:-1] if x.shape[:-1] == c_b.shape[:-1] == a_w.shape[:-1] == tau_b.shape[:-1] else numpy.broadcast_shapes(x.shape[:-1], c_b.shape[:-1], a_w.shape[:-1], tau_b.shape[:-1])
+    if out is None or out[0] is None:
+        batch = x.shape[:-1] if x.shape[:-1] == c_b.shape[:-1] == a_w.shape[:-1] == tau_b.shape[:-1] else numpy.broadcast_shapes(x.shape[:-1], c_b.shape[:-1], a_w.shape[:-1], tau_b.shape[:-1])
     x_3 = x[..., 3]
     x_4 = x[..., 4]
     x_5 = x[..., 5]
     x_6 = x[..., 6]
-    x_7 = x[..., 7]
-    x_8 = x[..., 8]
-    x_9 = x[..., 9]
     x_10 = x[..., 10]
     x_11 = x[..., 11]
     x_12 = x[..., 12]
     c_b_0 = c_b[..., 0]
     c_b_1 = c_b[..., 1]
     c_b_2 = c_b[..., 2]
-    c_b_3 = c_b[..., 3]
-    c_b_4 = c_b[..., 4]
-    c_b_5 = c_b[..., 5]
-    a_w_0 = a_w[..., 0]
-    a_w_1 = a_w[..., 1]
-    a_w_2 = a_w[..., 2]
-    tau_b_0 = tau_b[..., 0]
-    tau_b_1 = tau_b[..., 1]
-    tau_b_2 = tau_b[..., 2]
-    t0 = ((numpy.float32(1.0)/numpy.float32(2.0)))*x_10
-    t1 = ((numpy.float32(1.0)/numpy.float32(2.0)))*x_11
-    t2 = ((numpy.float32(1.0)/numpy.float32(2.0)))*x_12
+    t0_3 = numpy.float32(1.0) / numpy.float32(2.0) * x[..., 10:13]
+    t0 = t0_3[..., 0]
+    t1 = t0_3[..., 1]
+    t2 = t0_3[..., 2]
     x_dot_out = numpy.empty(batch + (13,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    x_dot_out[..., 0] = x_7
-    x_dot_out[..., 1] = x_8
-    x_dot_out[..., 2] = x_9
+    x_dot_out[..., 0:3] = x[..., 7:10]
     numpy.add(t0 * x_6 - t1 * x_5, t2 * x_4, out=x_dot_out[..., 3])
     numpy.subtract(t0 * x_5 + t1 * x_6, t2 * x_3, out=x_dot_out[..., 4])
     numpy.add(-t0 * x_4 + t1 * x_3, t2 * x_6, out=x_dot_out[..., 5])
     numpy.subtract(-t0 * x_3 - t1 * x_4, t2 * x_5, out=x_dot_out[..., 6])
-    x_dot_out[..., 7] = a_w_0
-    x_dot_out[..., 8] = a_w_1
-    x_dot_out[..., 9] = a_w_2
-    numpy.add(c_b_0 * x_11 * x_12, c_b_3 * tau_b_0, out=x_dot_out[..., 10])
-    numpy.add(c_b_1 * x_10 * x_12, c_b_4 * tau_b_1, out=x_dot_out[..., 11])
-    numpy.add(c_b_2 * x_10 * x_11, c_b_5 * tau_b_2, out=x_dot_out[..., 12])
+    x_dot_out[..., 7:10] = a_w[..., 0:3]
+    x_dot_10_13 = c_b[..., 3:6] * tau_b[..., 0:3]
+    numpy.add(c_b_0 * x_11 * x_12, x_dot_10_13[..., 0], out=x_dot_out[..., 10])
+    numpy.add(c_b_1 * x_10 * x_12, x_dot_10_13[..., 1], out=x_dot_out[..., 11])
+    numpy.add(c_b_2 * x_10 * x_11, x_dot_10_13[..., 2], out=x_dot_out[..., 12])
     return x_dot_out
 
 
@@ -2355,7 +2304,8 @@ def pivot_body_rhs(q, omega_b, I_p, r_b, F_w, tau_w, *, out=None):
     r_b = numpy.asarray(r_b, dtype=numpy.float32)
     F_w = numpy.asarray(F_w, dtype=numpy.float32)
     tau_w = numpy.asarray(tau_w, dtype=numpy.float32)
-    batch = q.shape[:-1] if q.shape[:-1] == omega_b.shape[:-1] == I_p.shape[:-2] == r_b.shape[:-1] == F_w.shape[:-1] == tau_w.shape[:-1] else numpy.broadcast_shapes(q.shape[:-1], omega_b.shape[:-1], I_p.shape[:-2], r_b.shape[:-1], F_w.shape[:-1], tau_w.shape[:-1])
+    if out is None or out[0] is None or out[1] is None:
+        batch = q.shape[:-1] if q.shape[:-1] == omega_b.shape[:-1] == I_p.shape[:-2] == r_b.shape[:-1] == F_w.shape[:-1] == tau_w.shape[:-1] else numpy.broadcast_shapes(q.shape[:-1], omega_b.shape[:-1], I_p.shape[:-2], r_b.shape[:-1], F_w.shape[:-1], tau_w.shape[:-1])
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -2378,9 +2328,10 @@ def pivot_body_rhs(q, omega_b, I_p, r_b, F_w, tau_w, *, out=None):
     tau_w_0 = tau_w[..., 0]
     tau_w_1 = tau_w[..., 1]
     tau_w_2 = tau_w[..., 2]
-    t0 = ((numpy.float32(1.0)/numpy.float32(2.0)))*omega_b_0
-    t1 = ((numpy.float32(1.0)/numpy.float32(2.0)))*omega_b_1
-    t2 = ((numpy.float32(1.0)/numpy.float32(2.0)))*omega_b_2
+    t0_3 = numpy.float32(1.0) / numpy.float32(2.0) * omega_b[..., 0:3]
+    t0 = t0_3[..., 0]
+    t1 = t0_3[..., 1]
+    t2 = t0_3[..., 2]
     t3 = (I_p_12*I_p_12)
     t4 = (I_p_01*I_p_01)
     t5 = (I_p_02*I_p_02)
@@ -2457,7 +2408,8 @@ def pivot_kinematics(q, omega_b, anchor_w, r_b, *, out=None):
     omega_b = numpy.asarray(omega_b, dtype=numpy.float32)
     anchor_w = numpy.asarray(anchor_w, dtype=numpy.float32)
     r_b = numpy.asarray(r_b, dtype=numpy.float32)
-    batch = q.shape[:-1] if q.shape[:-1] == omega_b.shape[:-1] == anchor_w.shape[:-1] == r_b.shape[:-1] else numpy.broadcast_shapes(q.shape[:-1], omega_b.shape[:-1], anchor_w.shape[:-1], r_b.shape[:-1])
+    if out is None or out[0] is None or out[1] is None:
+        batch = q.shape[:-1] if q.shape[:-1] == omega_b.shape[:-1] == anchor_w.shape[:-1] == r_b.shape[:-1] else numpy.broadcast_shapes(q.shape[:-1], omega_b.shape[:-1], anchor_w.shape[:-1], r_b.shape[:-1])
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -2533,7 +2485,8 @@ def splitting_rotation(I_b, q, omega_b, h, *, out=None):
     q = numpy.asarray(q, dtype=numpy.float32)
     omega_b = numpy.asarray(omega_b, dtype=numpy.float32)
     h = numpy.asarray(h, dtype=numpy.float32)
-    batch = I_b.shape[:-1] if I_b.shape[:-1] == q.shape[:-1] == omega_b.shape[:-1] == h.shape else numpy.broadcast_shapes(I_b.shape[:-1], q.shape[:-1], omega_b.shape[:-1], h.shape)
+    if out is None or out[0] is None or out[1] is None:
+        batch = I_b.shape[:-1] if I_b.shape[:-1] == q.shape[:-1] == omega_b.shape[:-1] == h.shape else numpy.broadcast_shapes(I_b.shape[:-1], q.shape[:-1], omega_b.shape[:-1], h.shape)
     I_b_0 = I_b[..., 0]
     I_b_1 = I_b[..., 1]
     I_b_2 = I_b[..., 2]
@@ -2640,7 +2593,8 @@ def axis_flow_x(I_b, q, L_b, tau, *, out=None):
     q = numpy.asarray(q, dtype=numpy.float32)
     L_b = numpy.asarray(L_b, dtype=numpy.float32)
     tau = numpy.asarray(tau, dtype=numpy.float32)
-    batch = I_b.shape[:-1] if I_b.shape[:-1] == q.shape[:-1] == L_b.shape[:-1] == tau.shape else numpy.broadcast_shapes(I_b.shape[:-1], q.shape[:-1], L_b.shape[:-1], tau.shape)
+    if out is None or out[0] is None or out[1] is None:
+        batch = I_b.shape[:-1] if I_b.shape[:-1] == q.shape[:-1] == L_b.shape[:-1] == tau.shape else numpy.broadcast_shapes(I_b.shape[:-1], q.shape[:-1], L_b.shape[:-1], tau.shape)
     I_b_0 = I_b[..., 0]
     q_0 = q[..., 0]
     q_1 = q[..., 1]
@@ -2695,7 +2649,8 @@ def axis_flow_y(I_b, q, L_b, tau, *, out=None):
     q = numpy.asarray(q, dtype=numpy.float32)
     L_b = numpy.asarray(L_b, dtype=numpy.float32)
     tau = numpy.asarray(tau, dtype=numpy.float32)
-    batch = I_b.shape[:-1] if I_b.shape[:-1] == q.shape[:-1] == L_b.shape[:-1] == tau.shape else numpy.broadcast_shapes(I_b.shape[:-1], q.shape[:-1], L_b.shape[:-1], tau.shape)
+    if out is None or out[0] is None or out[1] is None:
+        batch = I_b.shape[:-1] if I_b.shape[:-1] == q.shape[:-1] == L_b.shape[:-1] == tau.shape else numpy.broadcast_shapes(I_b.shape[:-1], q.shape[:-1], L_b.shape[:-1], tau.shape)
     I_b_1 = I_b[..., 1]
     q_0 = q[..., 0]
     q_1 = q[..., 1]
@@ -2750,7 +2705,8 @@ def axis_flow_z(I_b, q, L_b, tau, *, out=None):
     q = numpy.asarray(q, dtype=numpy.float32)
     L_b = numpy.asarray(L_b, dtype=numpy.float32)
     tau = numpy.asarray(tau, dtype=numpy.float32)
-    batch = I_b.shape[:-1] if I_b.shape[:-1] == q.shape[:-1] == L_b.shape[:-1] == tau.shape else numpy.broadcast_shapes(I_b.shape[:-1], q.shape[:-1], L_b.shape[:-1], tau.shape)
+    if out is None or out[0] is None or out[1] is None:
+        batch = I_b.shape[:-1] if I_b.shape[:-1] == q.shape[:-1] == L_b.shape[:-1] == tau.shape else numpy.broadcast_shapes(I_b.shape[:-1], q.shape[:-1], L_b.shape[:-1], tau.shape)
     I_b_2 = I_b[..., 2]
     q_0 = q[..., 0]
     q_1 = q[..., 1]
@@ -2794,7 +2750,8 @@ def symtop_score(I_b, *, out=None):
         1/(kg·m²)², one per reference axis r = 0, 1, 2
     """
     I_b = numpy.asarray(I_b, dtype=numpy.float32)
-    batch = I_b.shape[:-1]
+    if out is None or out[0] is None:
+        batch = I_b.shape[:-1]
     I_b_0 = I_b[..., 0]
     I_b_1 = I_b[..., 1]
     I_b_2 = I_b[..., 2]
@@ -2832,15 +2789,11 @@ def symtop_leftover(I_b, I_r, *, out=None):
     """
     I_b = numpy.asarray(I_b, dtype=numpy.float32)
     I_r = numpy.asarray(I_r, dtype=numpy.float32)
-    batch = I_b.shape[:-1] if I_b.shape[:-1] == I_r.shape else numpy.broadcast_shapes(I_b.shape[:-1], I_r.shape)
-    I_b_0 = I_b[..., 0]
-    I_b_1 = I_b[..., 1]
-    I_b_2 = I_b[..., 2]
+    if out is None or out[0] is None:
+        batch = I_b.shape[:-1] if I_b.shape[:-1] == I_r.shape else numpy.broadcast_shapes(I_b.shape[:-1], I_r.shape)
     t0 = (1.0/I_r)
     c_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    numpy.add(-t0, 1.0 / I_b_0, out=c_out[..., 0])
-    numpy.add(-t0, 1.0 / I_b_1, out=c_out[..., 1])
-    numpy.add(-t0, 1.0 / I_b_2, out=c_out[..., 2])
+    numpy.add(-t0[..., None], 1.0 / I_b[..., 0:3], out=c_out[..., 0:3])
     return c_out
 
 
@@ -2873,7 +2826,8 @@ def symtop_axis_flow_x(q, L_b, c, tau, *, out=None):
     L_b = numpy.asarray(L_b, dtype=numpy.float32)
     c = numpy.asarray(c, dtype=numpy.float32)
     tau = numpy.asarray(tau, dtype=numpy.float32)
-    batch = q.shape[:-1] if q.shape[:-1] == L_b.shape[:-1] == c.shape == tau.shape else numpy.broadcast_shapes(q.shape[:-1], L_b.shape[:-1], c.shape, tau.shape)
+    if out is None or out[0] is None or out[1] is None:
+        batch = q.shape[:-1] if q.shape[:-1] == L_b.shape[:-1] == c.shape == tau.shape else numpy.broadcast_shapes(q.shape[:-1], L_b.shape[:-1], c.shape, tau.shape)
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -2927,7 +2881,8 @@ def symtop_axis_flow_y(q, L_b, c, tau, *, out=None):
     L_b = numpy.asarray(L_b, dtype=numpy.float32)
     c = numpy.asarray(c, dtype=numpy.float32)
     tau = numpy.asarray(tau, dtype=numpy.float32)
-    batch = q.shape[:-1] if q.shape[:-1] == L_b.shape[:-1] == c.shape == tau.shape else numpy.broadcast_shapes(q.shape[:-1], L_b.shape[:-1], c.shape, tau.shape)
+    if out is None or out[0] is None or out[1] is None:
+        batch = q.shape[:-1] if q.shape[:-1] == L_b.shape[:-1] == c.shape == tau.shape else numpy.broadcast_shapes(q.shape[:-1], L_b.shape[:-1], c.shape, tau.shape)
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -2981,7 +2936,8 @@ def symtop_axis_flow_z(q, L_b, c, tau, *, out=None):
     L_b = numpy.asarray(L_b, dtype=numpy.float32)
     c = numpy.asarray(c, dtype=numpy.float32)
     tau = numpy.asarray(tau, dtype=numpy.float32)
-    batch = q.shape[:-1] if q.shape[:-1] == L_b.shape[:-1] == c.shape == tau.shape else numpy.broadcast_shapes(q.shape[:-1], L_b.shape[:-1], c.shape, tau.shape)
+    if out is None or out[0] is None or out[1] is None:
+        batch = q.shape[:-1] if q.shape[:-1] == L_b.shape[:-1] == c.shape == tau.shape else numpy.broadcast_shapes(q.shape[:-1], L_b.shape[:-1], c.shape, tau.shape)
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -3033,7 +2989,8 @@ def sphere_flow(q, L_b, I_r, tau, *, out=None):
     L_b = numpy.asarray(L_b, dtype=numpy.float32)
     I_r = numpy.asarray(I_r, dtype=numpy.float32)
     tau = numpy.asarray(tau, dtype=numpy.float32)
-    batch = q.shape[:-1] if q.shape[:-1] == L_b.shape[:-1] == I_r.shape == tau.shape else numpy.broadcast_shapes(q.shape[:-1], L_b.shape[:-1], I_r.shape, tau.shape)
+    if out is None or out[0] is None:
+        batch = q.shape[:-1] if q.shape[:-1] == L_b.shape[:-1] == I_r.shape == tau.shape else numpy.broadcast_shapes(q.shape[:-1], L_b.shape[:-1], I_r.shape, tau.shape)
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -3082,17 +3039,10 @@ def body_momentum(I_b, omega_b, *, out=None):
     """
     I_b = numpy.asarray(I_b, dtype=numpy.float32)
     omega_b = numpy.asarray(omega_b, dtype=numpy.float32)
-    batch = I_b.shape[:-1] if I_b.shape[:-1] == omega_b.shape[:-1] else numpy.broadcast_shapes(I_b.shape[:-1], omega_b.shape[:-1])
-    I_b_0 = I_b[..., 0]
-    I_b_1 = I_b[..., 1]
-    I_b_2 = I_b[..., 2]
-    omega_b_0 = omega_b[..., 0]
-    omega_b_1 = omega_b[..., 1]
-    omega_b_2 = omega_b[..., 2]
+    if out is None or out[0] is None:
+        batch = I_b.shape[:-1] if I_b.shape[:-1] == omega_b.shape[:-1] else numpy.broadcast_shapes(I_b.shape[:-1], omega_b.shape[:-1])
     L_b_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    numpy.multiply(I_b_0, omega_b_0, out=L_b_out[..., 0])
-    numpy.multiply(I_b_1, omega_b_1, out=L_b_out[..., 1])
-    numpy.multiply(I_b_2, omega_b_2, out=L_b_out[..., 2])
+    numpy.multiply(I_b[..., 0:3], omega_b[..., 0:3], out=L_b_out[..., 0:3])
     return L_b_out
 
 
@@ -3117,17 +3067,10 @@ def body_rate(I_b, L_b, *, out=None):
     """
     I_b = numpy.asarray(I_b, dtype=numpy.float32)
     L_b = numpy.asarray(L_b, dtype=numpy.float32)
-    batch = I_b.shape[:-1] if I_b.shape[:-1] == L_b.shape[:-1] else numpy.broadcast_shapes(I_b.shape[:-1], L_b.shape[:-1])
-    I_b_0 = I_b[..., 0]
-    I_b_1 = I_b[..., 1]
-    I_b_2 = I_b[..., 2]
-    L_b_0 = L_b[..., 0]
-    L_b_1 = L_b[..., 1]
-    L_b_2 = L_b[..., 2]
+    if out is None or out[0] is None:
+        batch = I_b.shape[:-1] if I_b.shape[:-1] == L_b.shape[:-1] else numpy.broadcast_shapes(I_b.shape[:-1], L_b.shape[:-1])
     omega_b_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    numpy.divide(L_b_0, I_b_0, out=omega_b_out[..., 0])
-    numpy.divide(L_b_1, I_b_1, out=omega_b_out[..., 1])
-    numpy.divide(L_b_2, I_b_2, out=omega_b_out[..., 2])
+    numpy.divide(L_b[..., 0:3], I_b[..., 0:3], out=omega_b_out[..., 0:3])
     return omega_b_out
 
 
@@ -3169,31 +3112,13 @@ def splitting_kick(m, I_b, v_w, omega_b, F_w, tau_b, h, *, out=None):
     F_w = numpy.asarray(F_w, dtype=numpy.float32)
     tau_b = numpy.asarray(tau_b, dtype=numpy.float32)
     h = numpy.asarray(h, dtype=numpy.float32)
-    batch = m.shape if m.shape == I_b.shape[:-1] == v_w.shape[:-1] == omega_b.shape[:-1] == F_w.shape[:-1] == tau_b.shape[:-1] == h.shape else numpy.broadcast_shapes(m.shape, I_b.shape[:-1], v_w.shape[:-1], omega_b.shape[:-1], F_w.shape[:-1], tau_b.shape[:-1], h.shape)
-    I_b_0 = I_b[..., 0]
-    I_b_1 = I_b[..., 1]
-    I_b_2 = I_b[..., 2]
-    v_w_0 = v_w[..., 0]
-    v_w_1 = v_w[..., 1]
-    v_w_2 = v_w[..., 2]
-    omega_b_0 = omega_b[..., 0]
-    omega_b_1 = omega_b[..., 1]
-    omega_b_2 = omega_b[..., 2]
-    F_w_0 = F_w[..., 0]
-    F_w_1 = F_w[..., 1]
-    F_w_2 = F_w[..., 2]
-    tau_b_0 = tau_b[..., 0]
-    tau_b_1 = tau_b[..., 1]
-    tau_b_2 = tau_b[..., 2]
+    if out is None or out[0] is None or out[1] is None:
+        batch = m.shape if m.shape == I_b.shape[:-1] == v_w.shape[:-1] == omega_b.shape[:-1] == F_w.shape[:-1] == tau_b.shape[:-1] == h.shape else numpy.broadcast_shapes(m.shape, I_b.shape[:-1], v_w.shape[:-1], omega_b.shape[:-1], F_w.shape[:-1], tau_b.shape[:-1], h.shape)
     t0 = h/m
     v_next_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    numpy.add(F_w_0 * t0, v_w_0, out=v_next_out[..., 0])
-    numpy.add(F_w_1 * t0, v_w_1, out=v_next_out[..., 1])
-    numpy.add(F_w_2 * t0, v_w_2, out=v_next_out[..., 2])
+    numpy.add(F_w[..., 0:3] * t0[..., None], v_w[..., 0:3], out=v_next_out[..., 0:3])
     omega_next_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[1] is None else out[1]
-    numpy.add(omega_b_0, h * tau_b_0 / I_b_0, out=omega_next_out[..., 0])
-    numpy.add(omega_b_1, h * tau_b_1 / I_b_1, out=omega_next_out[..., 1])
-    numpy.add(omega_b_2, h * tau_b_2 / I_b_2, out=omega_next_out[..., 2])
+    numpy.add(omega_b[..., 0:3], h[..., None] * tau_b[..., 0:3] / I_b[..., 0:3], out=omega_next_out[..., 0:3])
     return v_next_out, omega_next_out
 
 
@@ -3221,17 +3146,10 @@ def translation_drift(p_w, v_w, h, *, out=None):
     p_w = numpy.asarray(p_w, dtype=numpy.float32)
     v_w = numpy.asarray(v_w, dtype=numpy.float32)
     h = numpy.asarray(h, dtype=numpy.float32)
-    batch = p_w.shape[:-1] if p_w.shape[:-1] == v_w.shape[:-1] == h.shape else numpy.broadcast_shapes(p_w.shape[:-1], v_w.shape[:-1], h.shape)
-    p_w_0 = p_w[..., 0]
-    p_w_1 = p_w[..., 1]
-    p_w_2 = p_w[..., 2]
-    v_w_0 = v_w[..., 0]
-    v_w_1 = v_w[..., 1]
-    v_w_2 = v_w[..., 2]
+    if out is None or out[0] is None:
+        batch = p_w.shape[:-1] if p_w.shape[:-1] == v_w.shape[:-1] == h.shape else numpy.broadcast_shapes(p_w.shape[:-1], v_w.shape[:-1], h.shape)
     p_next_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    numpy.add(h * v_w_0, p_w_0, out=p_next_out[..., 0])
-    numpy.add(h * v_w_1, p_w_1, out=p_next_out[..., 1])
-    numpy.add(h * v_w_2, p_w_2, out=p_next_out[..., 2])
+    numpy.add(h[..., None] * v_w[..., 0:3], p_w[..., 0:3], out=p_next_out[..., 0:3])
     return p_next_out
 
 
@@ -3267,20 +3185,16 @@ def semi_implicit_translation(m, p_w, v_w, F_w, h, *, out=None):
     v_w = numpy.asarray(v_w, dtype=numpy.float32)
     F_w = numpy.asarray(F_w, dtype=numpy.float32)
     h = numpy.asarray(h, dtype=numpy.float32)
-    batch = m.shape if m.shape == p_w.shape[:-1] == v_w.shape[:-1] == F_w.shape[:-1] == h.shape else numpy.broadcast_shapes(m.shape, p_w.shape[:-1], v_w.shape[:-1], F_w.shape[:-1], h.shape)
+    if out is None or out[0] is None or out[1] is None:
+        batch = m.shape if m.shape == p_w.shape[:-1] == v_w.shape[:-1] == F_w.shape[:-1] == h.shape else numpy.broadcast_shapes(m.shape, p_w.shape[:-1], v_w.shape[:-1], F_w.shape[:-1], h.shape)
     p_w_0 = p_w[..., 0]
     p_w_1 = p_w[..., 1]
     p_w_2 = p_w[..., 2]
-    v_w_0 = v_w[..., 0]
-    v_w_1 = v_w[..., 1]
-    v_w_2 = v_w[..., 2]
-    F_w_0 = F_w[..., 0]
-    F_w_1 = F_w[..., 1]
-    F_w_2 = F_w[..., 2]
     t0 = h/m
-    t1 = F_w_0*t0 + v_w_0
-    t2 = F_w_1*t0 + v_w_1
-    t3 = F_w_2*t0 + v_w_2
+    t1_3 = F_w[..., 0:3] * t0[..., None] + v_w[..., 0:3]
+    t1 = t1_3[..., 0]
+    t2 = t1_3[..., 1]
+    t3 = t1_3[..., 2]
     p_next_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     numpy.add(h * t1, p_w_0, out=p_next_out[..., 0])
     numpy.add(h * t2, p_w_1, out=p_next_out[..., 1])
@@ -3318,22 +3232,13 @@ def translation_rhs(m, v_w, F_w, *, out=None):
     m = numpy.asarray(m, dtype=numpy.float32)
     v_w = numpy.asarray(v_w, dtype=numpy.float32)
     F_w = numpy.asarray(F_w, dtype=numpy.float32)
-    batch = m.shape if m.shape == v_w.shape[:-1] == F_w.shape[:-1] else numpy.broadcast_shapes(m.shape, v_w.shape[:-1], F_w.shape[:-1])
-    v_w_0 = v_w[..., 0]
-    v_w_1 = v_w[..., 1]
-    v_w_2 = v_w[..., 2]
-    F_w_0 = F_w[..., 0]
-    F_w_1 = F_w[..., 1]
-    F_w_2 = F_w[..., 2]
+    if out is None or out[0] is None or out[1] is None:
+        batch = m.shape if m.shape == v_w.shape[:-1] == F_w.shape[:-1] else numpy.broadcast_shapes(m.shape, v_w.shape[:-1], F_w.shape[:-1])
     t0 = (1.0/m)
     p_dot_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    p_dot_out[..., 0] = v_w_0
-    p_dot_out[..., 1] = v_w_1
-    p_dot_out[..., 2] = v_w_2
+    p_dot_out[..., 0:3] = v_w[..., 0:3]
     v_dot_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[1] is None else out[1]
-    numpy.multiply(F_w_0, t0, out=v_dot_out[..., 0])
-    numpy.multiply(F_w_1, t0, out=v_dot_out[..., 1])
-    numpy.multiply(F_w_2, t0, out=v_dot_out[..., 2])
+    numpy.multiply(F_w[..., 0:3], t0[..., None], out=v_dot_out[..., 0:3])
     return p_dot_out, v_dot_out
 
 
@@ -3367,24 +3272,20 @@ def implicit_gyro_residual(I_b, omega_b, tau_b, h, omega_next, *, out=None):
     tau_b = numpy.asarray(tau_b, dtype=numpy.float32)
     h = numpy.asarray(h, dtype=numpy.float32)
     omega_next = numpy.asarray(omega_next, dtype=numpy.float32)
-    batch = I_b.shape[:-1] if I_b.shape[:-1] == omega_b.shape[:-1] == tau_b.shape[:-1] == h.shape == omega_next.shape[:-1] else numpy.broadcast_shapes(I_b.shape[:-1], omega_b.shape[:-1], tau_b.shape[:-1], h.shape, omega_next.shape[:-1])
+    if out is None or out[0] is None:
+        batch = I_b.shape[:-1] if I_b.shape[:-1] == omega_b.shape[:-1] == tau_b.shape[:-1] == h.shape == omega_next.shape[:-1] else numpy.broadcast_shapes(I_b.shape[:-1], omega_b.shape[:-1], tau_b.shape[:-1], h.shape, omega_next.shape[:-1])
     I_b_0 = I_b[..., 0]
     I_b_1 = I_b[..., 1]
     I_b_2 = I_b[..., 2]
-    omega_b_0 = omega_b[..., 0]
-    omega_b_1 = omega_b[..., 1]
-    omega_b_2 = omega_b[..., 2]
-    tau_b_0 = tau_b[..., 0]
-    tau_b_1 = tau_b[..., 1]
-    tau_b_2 = tau_b[..., 2]
     omega_next_0 = omega_next[..., 0]
     omega_next_1 = omega_next[..., 1]
     omega_next_2 = omega_next[..., 2]
     t0 = omega_next_0*omega_next_2
     g_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    numpy.add(I_b_0 * (-omega_b_0 + omega_next_0) - h * tau_b_0, h * (-I_b_1 * omega_next_1 * omega_next_2 + I_b_2 * omega_next_1 * omega_next_2), out=g_out[..., 0])
-    numpy.add(I_b_1 * (-omega_b_1 + omega_next_1) - h * tau_b_1, h * (I_b_0 * t0 - I_b_2 * t0), out=g_out[..., 1])
-    numpy.add(I_b_2 * (-omega_b_2 + omega_next_2) - h * tau_b_2, h * (-I_b_0 * omega_next_0 * omega_next_1 + I_b_1 * omega_next_0 * omega_next_1), out=g_out[..., 2])
+    g_0_3 = I_b[..., 0:3] * (-omega_b[..., 0:3] + omega_next[..., 0:3]) - h[..., None] * tau_b[..., 0:3]
+    numpy.add(g_0_3[..., 0], h * (-I_b_1 * omega_next_1 * omega_next_2 + I_b_2 * omega_next_1 * omega_next_2), out=g_out[..., 0])
+    numpy.add(g_0_3[..., 1], h * (I_b_0 * t0 - I_b_2 * t0), out=g_out[..., 1])
+    numpy.add(g_0_3[..., 2], h * (-I_b_0 * omega_next_0 * omega_next_1 + I_b_1 * omega_next_0 * omega_next_1), out=g_out[..., 2])
     return g_out
 
 
@@ -3412,7 +3313,8 @@ def implicit_gyro_jacobian(I_b, h, omega_next, *, out=None):
     I_b = numpy.asarray(I_b, dtype=numpy.float32)
     h = numpy.asarray(h, dtype=numpy.float32)
     omega_next = numpy.asarray(omega_next, dtype=numpy.float32)
-    batch = I_b.shape[:-1] if I_b.shape[:-1] == h.shape == omega_next.shape[:-1] else numpy.broadcast_shapes(I_b.shape[:-1], h.shape, omega_next.shape[:-1])
+    if out is None or out[0] is None:
+        batch = I_b.shape[:-1] if I_b.shape[:-1] == h.shape == omega_next.shape[:-1] else numpy.broadcast_shapes(I_b.shape[:-1], h.shape, omega_next.shape[:-1])
     I_b_0 = I_b[..., 0]
     I_b_1 = I_b[..., 1]
     I_b_2 = I_b[..., 2]
@@ -3467,7 +3369,8 @@ def implicit_gyro_newton(I_b, omega_b, tau_b, h, omega_next, *, out=None):
     tau_b = numpy.asarray(tau_b, dtype=numpy.float32)
     h = numpy.asarray(h, dtype=numpy.float32)
     omega_next = numpy.asarray(omega_next, dtype=numpy.float32)
-    batch = I_b.shape[:-1] if I_b.shape[:-1] == omega_b.shape[:-1] == tau_b.shape[:-1] == h.shape == omega_next.shape[:-1] else numpy.broadcast_shapes(I_b.shape[:-1], omega_b.shape[:-1], tau_b.shape[:-1], h.shape, omega_next.shape[:-1])
+    if out is None or out[0] is None or out[1] is None:
+        batch = I_b.shape[:-1] if I_b.shape[:-1] == omega_b.shape[:-1] == tau_b.shape[:-1] == h.shape == omega_next.shape[:-1] else numpy.broadcast_shapes(I_b.shape[:-1], omega_b.shape[:-1], tau_b.shape[:-1], h.shape, omega_next.shape[:-1])
     I_b_0 = I_b[..., 0]
     I_b_1 = I_b[..., 1]
     I_b_2 = I_b[..., 2]
@@ -3539,7 +3442,8 @@ def quat_exp_step(q, omega_b, h, *, out=None):
     q = numpy.asarray(q, dtype=numpy.float32)
     omega_b = numpy.asarray(omega_b, dtype=numpy.float32)
     h = numpy.asarray(h, dtype=numpy.float32)
-    batch = q.shape[:-1] if q.shape[:-1] == omega_b.shape[:-1] == h.shape else numpy.broadcast_shapes(q.shape[:-1], omega_b.shape[:-1], h.shape)
+    if out is None or out[0] is None:
+        batch = q.shape[:-1] if q.shape[:-1] == omega_b.shape[:-1] == h.shape else numpy.broadcast_shapes(q.shape[:-1], omega_b.shape[:-1], h.shape)
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -3586,7 +3490,8 @@ def rkmk_dexpinv(u_b, omega_b, *, out=None):
     """
     u_b = numpy.asarray(u_b, dtype=numpy.float32)
     omega_b = numpy.asarray(omega_b, dtype=numpy.float32)
-    batch = u_b.shape[:-1] if u_b.shape[:-1] == omega_b.shape[:-1] else numpy.broadcast_shapes(u_b.shape[:-1], omega_b.shape[:-1])
+    if out is None or out[0] is None:
+        batch = u_b.shape[:-1] if u_b.shape[:-1] == omega_b.shape[:-1] else numpy.broadcast_shapes(u_b.shape[:-1], omega_b.shape[:-1])
     u_b_0 = u_b[..., 0]
     u_b_1 = u_b[..., 1]
     u_b_2 = u_b[..., 2]
@@ -3635,7 +3540,8 @@ def wheel_saturation(command, Omega, torque_limit, speed_limit, *, out=None):
     Omega = numpy.asarray(Omega, dtype=numpy.float32)
     torque_limit = numpy.asarray(torque_limit, dtype=numpy.float32)
     speed_limit = numpy.asarray(speed_limit, dtype=numpy.float32)
-    batch = command.shape[:-1] if command.shape[:-1] == Omega.shape[:-1] == torque_limit.shape == speed_limit.shape else numpy.broadcast_shapes(command.shape[:-1], Omega.shape[:-1], torque_limit.shape, speed_limit.shape)
+    if out is None or out[0] is None:
+        batch = command.shape[:-1] if command.shape[:-1] == Omega.shape[:-1] == torque_limit.shape == speed_limit.shape else numpy.broadcast_shapes(command.shape[:-1], Omega.shape[:-1], torque_limit.shape, speed_limit.shape)
     command_0 = command[..., 0]
     command_1 = command[..., 1]
     command_2 = command[..., 2]
@@ -3693,7 +3599,8 @@ def wheel_motor(command, Omega, torque_limit, speed_limit, cutoff, *, out=None):
     torque_limit = numpy.asarray(torque_limit, dtype=numpy.float32)
     speed_limit = numpy.asarray(speed_limit, dtype=numpy.float32)
     cutoff = numpy.asarray(cutoff, dtype=numpy.float32)
-    batch = command.shape[:-1] if command.shape[:-1] == Omega.shape[:-1] == torque_limit.shape == speed_limit.shape == cutoff.shape else numpy.broadcast_shapes(command.shape[:-1], Omega.shape[:-1], torque_limit.shape, speed_limit.shape, cutoff.shape)
+    if out is None or out[0] is None:
+        batch = command.shape[:-1] if command.shape[:-1] == Omega.shape[:-1] == torque_limit.shape == speed_limit.shape == cutoff.shape else numpy.broadcast_shapes(command.shape[:-1], Omega.shape[:-1], torque_limit.shape, speed_limit.shape, cutoff.shape)
     command_0 = command[..., 0]
     command_1 = command[..., 1]
     command_2 = command[..., 2]
@@ -3800,7 +3707,8 @@ def wheels3_body_rhs(q, omega_b, Omega, I_p, A_b, J, r_b, F_w, tau_w, u, c_w, *,
     tau_w = numpy.asarray(tau_w, dtype=numpy.float32)
     u = numpy.asarray(u, dtype=numpy.float32)
     c_w = numpy.asarray(c_w, dtype=numpy.float32)
-    batch = q.shape[:-1] if q.shape[:-1] == omega_b.shape[:-1] == Omega.shape[:-1] == I_p.shape[:-2] == A_b.shape[:-2] == J.shape[:-1] == r_b.shape[:-1] == F_w.shape[:-1] == tau_w.shape[:-1] == u.shape[:-1] == c_w.shape else numpy.broadcast_shapes(q.shape[:-1], omega_b.shape[:-1], Omega.shape[:-1], I_p.shape[:-2], A_b.shape[:-2], J.shape[:-1], r_b.shape[:-1], F_w.shape[:-1], tau_w.shape[:-1], u.shape[:-1], c_w.shape)
+    if out is None or out[0] is None or out[1] is None or out[2] is None:
+        batch = q.shape[:-1] if q.shape[:-1] == omega_b.shape[:-1] == Omega.shape[:-1] == I_p.shape[:-2] == A_b.shape[:-2] == J.shape[:-1] == r_b.shape[:-1] == F_w.shape[:-1] == tau_w.shape[:-1] == u.shape[:-1] == c_w.shape else numpy.broadcast_shapes(q.shape[:-1], omega_b.shape[:-1], Omega.shape[:-1], I_p.shape[:-2], A_b.shape[:-2], J.shape[:-1], r_b.shape[:-1], F_w.shape[:-1], tau_w.shape[:-1], u.shape[:-1], c_w.shape)
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -3808,9 +3716,6 @@ def wheels3_body_rhs(q, omega_b, Omega, I_p, A_b, J, r_b, F_w, tau_w, u, c_w, *,
     omega_b_0 = omega_b[..., 0]
     omega_b_1 = omega_b[..., 1]
     omega_b_2 = omega_b[..., 2]
-    Omega_0 = Omega[..., 0]
-    Omega_1 = Omega[..., 1]
-    Omega_2 = Omega[..., 2]
     I_p_00 = I_p[..., 0, 0]
     I_p_01 = I_p[..., 0, 1]
     I_p_02 = I_p[..., 0, 2]
@@ -3838,9 +3743,6 @@ def wheels3_body_rhs(q, omega_b, Omega, I_p, A_b, J, r_b, F_w, tau_w, u, c_w, *,
     tau_w_0 = tau_w[..., 0]
     tau_w_1 = tau_w[..., 1]
     tau_w_2 = tau_w[..., 2]
-    u_0 = u[..., 0]
-    u_1 = u[..., 1]
-    u_2 = u[..., 2]
     M_00 = -(A_b_00*A_b_00)*J_0 - (A_b_01*A_b_01)*J_1 - (A_b_02*A_b_02)*J_2 + I_p_00
     M_01 = -A_b_00*A_b_10*J_0 - A_b_01*A_b_11*J_1 - A_b_02*A_b_12*J_2 + I_p_01
     M_02 = -A_b_00*A_b_20*J_0 - A_b_01*A_b_21*J_1 - A_b_02*A_b_22*J_2 + I_p_02
@@ -3863,15 +3765,18 @@ def wheels3_body_rhs(q, omega_b, Omega, I_p, A_b, J, r_b, F_w, tau_w, u, c_w, *,
     k_w_6 = C_02*inv_det_M
     k_w_7 = C_12*inv_det_M
     k_w_8 = C_22*inv_det_M
-    k_w_9 = (1.0/J_0)
-    k_w_10 = (1.0/J_1)
-    k_w_11 = (1.0/J_2)
-    JOmega_0 = J_0*Omega_0
-    JOmega_1 = J_1*Omega_1
-    JOmega_2 = J_2*Omega_2
-    g_w_0 = -Omega_0*c_w + u_0
-    g_w_1 = -Omega_1*c_w + u_1
-    g_w_2 = -Omega_2*c_w + u_2
+    k_w_9_3 = 1.0 / J[..., 0:3]
+    k_w_9 = k_w_9_3[..., 0]
+    k_w_10 = k_w_9_3[..., 1]
+    k_w_11 = k_w_9_3[..., 2]
+    JOmega_0_3 = J[..., 0:3] * Omega[..., 0:3]
+    JOmega_0 = JOmega_0_3[..., 0]
+    JOmega_1 = JOmega_0_3[..., 1]
+    JOmega_2 = JOmega_0_3[..., 2]
+    g_w_0_3 = -Omega[..., 0:3] * c_w[..., None] + u[..., 0:3]
+    g_w_0 = g_w_0_3[..., 0]
+    g_w_1 = g_w_0_3[..., 1]
+    g_w_2 = g_w_0_3[..., 2]
     h_A_0 = A_b_00*JOmega_0 + A_b_01*JOmega_1 + A_b_02*JOmega_2
     h_A_1 = A_b_10*JOmega_0 + A_b_11*JOmega_1 + A_b_12*JOmega_2
     h_A_2 = A_b_20*JOmega_0 + A_b_21*JOmega_1 + A_b_22*JOmega_2
@@ -3887,9 +3792,10 @@ def wheels3_body_rhs(q, omega_b, Omega, I_p, A_b, J, r_b, F_w, tau_w, u, c_w, *,
     g_A_0 = A_b_00*g_w_0 + A_b_01*g_w_1 + A_b_02*g_w_2
     g_A_1 = A_b_10*g_w_0 + A_b_11*g_w_1 + A_b_12*g_w_2
     g_A_2 = A_b_20*g_w_0 + A_b_21*g_w_1 + A_b_22*g_w_2
-    t0 = ((numpy.float32(1.0)/numpy.float32(2.0)))*omega_b_0
-    t1 = ((numpy.float32(1.0)/numpy.float32(2.0)))*omega_b_1
-    t2 = ((numpy.float32(1.0)/numpy.float32(2.0)))*omega_b_2
+    t0_3 = numpy.float32(1.0) / numpy.float32(2.0) * omega_b[..., 0:3]
+    t0 = t0_3[..., 0]
+    t1 = t0_3[..., 1]
+    t2 = t0_3[..., 2]
     t3 = 2*q_0
     t4 = q_1*t3
     t5 = 2*q_2*q_3
@@ -3971,7 +3877,8 @@ def wheels3_momentum(q, omega_b, Omega, I_p, A_b, J, *, out=None):
     I_p = numpy.asarray(I_p, dtype=numpy.float32)
     A_b = numpy.asarray(A_b, dtype=numpy.float32)
     J = numpy.asarray(J, dtype=numpy.float32)
-    batch = q.shape[:-1] if q.shape[:-1] == omega_b.shape[:-1] == Omega.shape[:-1] == I_p.shape[:-2] == A_b.shape[:-2] == J.shape[:-1] else numpy.broadcast_shapes(q.shape[:-1], omega_b.shape[:-1], Omega.shape[:-1], I_p.shape[:-2], A_b.shape[:-2], J.shape[:-1])
+    if out is None or out[0] is None or out[1] is None or out[2] is None:
+        batch = q.shape[:-1] if q.shape[:-1] == omega_b.shape[:-1] == Omega.shape[:-1] == I_p.shape[:-2] == A_b.shape[:-2] == J.shape[:-1] else numpy.broadcast_shapes(q.shape[:-1], omega_b.shape[:-1], Omega.shape[:-1], I_p.shape[:-2], A_b.shape[:-2], J.shape[:-1])
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -4079,7 +3986,8 @@ def wheels3_motor(command, Omega, torque_limit, speed_limit, cutoff, *, out=None
     torque_limit = numpy.asarray(torque_limit, dtype=numpy.float32)
     speed_limit = numpy.asarray(speed_limit, dtype=numpy.float32)
     cutoff = numpy.asarray(cutoff, dtype=numpy.float32)
-    batch = command.shape[:-1] if command.shape[:-1] == Omega.shape[:-1] == torque_limit.shape == speed_limit.shape == cutoff.shape else numpy.broadcast_shapes(command.shape[:-1], Omega.shape[:-1], torque_limit.shape, speed_limit.shape, cutoff.shape)
+    if out is None or out[0] is None:
+        batch = command.shape[:-1] if command.shape[:-1] == Omega.shape[:-1] == torque_limit.shape == speed_limit.shape == cutoff.shape else numpy.broadcast_shapes(command.shape[:-1], Omega.shape[:-1], torque_limit.shape, speed_limit.shape, cutoff.shape)
     command_0 = command[..., 0]
     command_1 = command[..., 1]
     command_2 = command[..., 2]
@@ -4186,7 +4094,8 @@ def wheels4_body_rhs(q, omega_b, Omega, I_p, A_b, J, r_b, F_w, tau_w, u, c_w, *,
     tau_w = numpy.asarray(tau_w, dtype=numpy.float32)
     u = numpy.asarray(u, dtype=numpy.float32)
     c_w = numpy.asarray(c_w, dtype=numpy.float32)
-    batch = q.shape[:-1] if q.shape[:-1] == omega_b.shape[:-1] == Omega.shape[:-1] == I_p.shape[:-2] == A_b.shape[:-2] == J.shape[:-1] == r_b.shape[:-1] == F_w.shape[:-1] == tau_w.shape[:-1] == u.shape[:-1] == c_w.shape else numpy.broadcast_shapes(q.shape[:-1], omega_b.shape[:-1], Omega.shape[:-1], I_p.shape[:-2], A_b.shape[:-2], J.shape[:-1], r_b.shape[:-1], F_w.shape[:-1], tau_w.shape[:-1], u.shape[:-1], c_w.shape)
+    if out is None or out[0] is None or out[1] is None or out[2] is None:
+        batch = q.shape[:-1] if q.shape[:-1] == omega_b.shape[:-1] == Omega.shape[:-1] == I_p.shape[:-2] == A_b.shape[:-2] == J.shape[:-1] == r_b.shape[:-1] == F_w.shape[:-1] == tau_w.shape[:-1] == u.shape[:-1] == c_w.shape else numpy.broadcast_shapes(q.shape[:-1], omega_b.shape[:-1], Omega.shape[:-1], I_p.shape[:-2], A_b.shape[:-2], J.shape[:-1], r_b.shape[:-1], F_w.shape[:-1], tau_w.shape[:-1], u.shape[:-1], c_w.shape)
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -4194,10 +4103,6 @@ def wheels4_body_rhs(q, omega_b, Omega, I_p, A_b, J, r_b, F_w, tau_w, u, c_w, *,
     omega_b_0 = omega_b[..., 0]
     omega_b_1 = omega_b[..., 1]
     omega_b_2 = omega_b[..., 2]
-    Omega_0 = Omega[..., 0]
-    Omega_1 = Omega[..., 1]
-    Omega_2 = Omega[..., 2]
-    Omega_3 = Omega[..., 3]
     I_p_00 = I_p[..., 0, 0]
     I_p_01 = I_p[..., 0, 1]
     I_p_02 = I_p[..., 0, 2]
@@ -4229,10 +4134,6 @@ def wheels4_body_rhs(q, omega_b, Omega, I_p, A_b, J, r_b, F_w, tau_w, u, c_w, *,
     tau_w_0 = tau_w[..., 0]
     tau_w_1 = tau_w[..., 1]
     tau_w_2 = tau_w[..., 2]
-    u_0 = u[..., 0]
-    u_1 = u[..., 1]
-    u_2 = u[..., 2]
-    u_3 = u[..., 3]
     M_00 = -(A_b_00*A_b_00)*J_0 - (A_b_01*A_b_01)*J_1 - (A_b_02*A_b_02)*J_2 - (A_b_03*A_b_03)*J_3 + I_p_00
     M_01 = -A_b_00*A_b_10*J_0 - A_b_01*A_b_11*J_1 - A_b_02*A_b_12*J_2 - A_b_03*A_b_13*J_3 + I_p_01
     M_02 = -A_b_00*A_b_20*J_0 - A_b_01*A_b_21*J_1 - A_b_02*A_b_22*J_2 - A_b_03*A_b_23*J_3 + I_p_02
@@ -4255,18 +4156,21 @@ def wheels4_body_rhs(q, omega_b, Omega, I_p, A_b, J, r_b, F_w, tau_w, u, c_w, *,
     k_w_6 = C_02*inv_det_M
     k_w_7 = C_12*inv_det_M
     k_w_8 = C_22*inv_det_M
-    k_w_9 = (1.0/J_0)
-    k_w_10 = (1.0/J_1)
-    k_w_11 = (1.0/J_2)
-    k_w_12 = (1.0/J_3)
-    JOmega_0 = J_0*Omega_0
-    JOmega_1 = J_1*Omega_1
-    JOmega_2 = J_2*Omega_2
-    JOmega_3 = J_3*Omega_3
-    g_w_0 = -Omega_0*c_w + u_0
-    g_w_1 = -Omega_1*c_w + u_1
-    g_w_2 = -Omega_2*c_w + u_2
-    g_w_3 = -Omega_3*c_w + u_3
+    k_w_9_4 = 1.0 / J[..., 0:4]
+    k_w_9 = k_w_9_4[..., 0]
+    k_w_10 = k_w_9_4[..., 1]
+    k_w_11 = k_w_9_4[..., 2]
+    k_w_12 = k_w_9_4[..., 3]
+    JOmega_0_4 = J[..., 0:4] * Omega[..., 0:4]
+    JOmega_0 = JOmega_0_4[..., 0]
+    JOmega_1 = JOmega_0_4[..., 1]
+    JOmega_2 = JOmega_0_4[..., 2]
+    JOmega_3 = JOmega_0_4[..., 3]
+    g_w_0_4 = -Omega[..., 0:4] * c_w[..., None] + u[..., 0:4]
+    g_w_0 = g_w_0_4[..., 0]
+    g_w_1 = g_w_0_4[..., 1]
+    g_w_2 = g_w_0_4[..., 2]
+    g_w_3 = g_w_0_4[..., 3]
     h_A_0 = A_b_00*JOmega_0 + A_b_01*JOmega_1 + A_b_02*JOmega_2 + A_b_03*JOmega_3
     h_A_1 = A_b_10*JOmega_0 + A_b_11*JOmega_1 + A_b_12*JOmega_2 + A_b_13*JOmega_3
     h_A_2 = A_b_20*JOmega_0 + A_b_21*JOmega_1 + A_b_22*JOmega_2 + A_b_23*JOmega_3
@@ -4282,9 +4186,10 @@ def wheels4_body_rhs(q, omega_b, Omega, I_p, A_b, J, r_b, F_w, tau_w, u, c_w, *,
     g_A_0 = A_b_00*g_w_0 + A_b_01*g_w_1 + A_b_02*g_w_2 + A_b_03*g_w_3
     g_A_1 = A_b_10*g_w_0 + A_b_11*g_w_1 + A_b_12*g_w_2 + A_b_13*g_w_3
     g_A_2 = A_b_20*g_w_0 + A_b_21*g_w_1 + A_b_22*g_w_2 + A_b_23*g_w_3
-    t0 = ((numpy.float32(1.0)/numpy.float32(2.0)))*omega_b_0
-    t1 = ((numpy.float32(1.0)/numpy.float32(2.0)))*omega_b_1
-    t2 = ((numpy.float32(1.0)/numpy.float32(2.0)))*omega_b_2
+    t0_3 = numpy.float32(1.0) / numpy.float32(2.0) * omega_b[..., 0:3]
+    t0 = t0_3[..., 0]
+    t1 = t0_3[..., 1]
+    t2 = t0_3[..., 2]
     t3 = 2*q_0
     t4 = q_1*t3
     t5 = 2*q_2*q_3
@@ -4354,7 +4259,8 @@ def wheels4_coefficients(I_p, A_b, J, *, out=None):
     I_p = numpy.asarray(I_p, dtype=numpy.float32)
     A_b = numpy.asarray(A_b, dtype=numpy.float32)
     J = numpy.asarray(J, dtype=numpy.float32)
-    batch = I_p.shape[:-2] if I_p.shape[:-2] == A_b.shape[:-2] == J.shape[:-1] else numpy.broadcast_shapes(I_p.shape[:-2], A_b.shape[:-2], J.shape[:-1])
+    if out is None or out[0] is None:
+        batch = I_p.shape[:-2] if I_p.shape[:-2] == A_b.shape[:-2] == J.shape[:-1] else numpy.broadcast_shapes(I_p.shape[:-2], A_b.shape[:-2], J.shape[:-1])
     I_p_00 = I_p[..., 0, 0]
     I_p_01 = I_p[..., 0, 1]
     I_p_02 = I_p[..., 0, 2]
@@ -4403,10 +4309,7 @@ def wheels4_coefficients(I_p, A_b, J, *, out=None):
     k_w_out[..., 6] = t1
     k_w_out[..., 7] = t2
     numpy.multiply(C_22, inv_det_M, out=k_w_out[..., 8])
-    numpy.divide(1.0, J_0, out=k_w_out[..., 9])
-    numpy.divide(1.0, J_1, out=k_w_out[..., 10])
-    numpy.divide(1.0, J_2, out=k_w_out[..., 11])
-    numpy.divide(1.0, J_3, out=k_w_out[..., 12])
+    numpy.divide(1.0, J[..., 0:4], out=k_w_out[..., 9:13])
     return k_w_out
 
 
@@ -4465,7 +4368,8 @@ def wheels4_body_rhs_c(q, omega_b, Omega, I_p, A_b, J, k_w, r_b, F_w, tau_w, u, 
     tau_w = numpy.asarray(tau_w, dtype=numpy.float32)
     u = numpy.asarray(u, dtype=numpy.float32)
     c_w = numpy.asarray(c_w, dtype=numpy.float32)
-    batch = q.shape[:-1] if q.shape[:-1] == omega_b.shape[:-1] == Omega.shape[:-1] == I_p.shape[:-2] == A_b.shape[:-2] == J.shape[:-1] == k_w.shape[:-1] == r_b.shape[:-1] == F_w.shape[:-1] == tau_w.shape[:-1] == u.shape[:-1] == c_w.shape else numpy.broadcast_shapes(q.shape[:-1], omega_b.shape[:-1], Omega.shape[:-1], I_p.shape[:-2], A_b.shape[:-2], J.shape[:-1], k_w.shape[:-1], r_b.shape[:-1], F_w.shape[:-1], tau_w.shape[:-1], u.shape[:-1], c_w.shape)
+    if out is None or out[0] is None or out[1] is None or out[2] is None:
+        batch = q.shape[:-1] if q.shape[:-1] == omega_b.shape[:-1] == Omega.shape[:-1] == I_p.shape[:-2] == A_b.shape[:-2] == J.shape[:-1] == k_w.shape[:-1] == r_b.shape[:-1] == F_w.shape[:-1] == tau_w.shape[:-1] == u.shape[:-1] == c_w.shape else numpy.broadcast_shapes(q.shape[:-1], omega_b.shape[:-1], Omega.shape[:-1], I_p.shape[:-2], A_b.shape[:-2], J.shape[:-1], k_w.shape[:-1], r_b.shape[:-1], F_w.shape[:-1], tau_w.shape[:-1], u.shape[:-1], c_w.shape)
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -4473,10 +4377,6 @@ def wheels4_body_rhs_c(q, omega_b, Omega, I_p, A_b, J, k_w, r_b, F_w, tau_w, u, 
     omega_b_0 = omega_b[..., 0]
     omega_b_1 = omega_b[..., 1]
     omega_b_2 = omega_b[..., 2]
-    Omega_0 = Omega[..., 0]
-    Omega_1 = Omega[..., 1]
-    Omega_2 = Omega[..., 2]
-    Omega_3 = Omega[..., 3]
     I_p_00 = I_p[..., 0, 0]
     I_p_01 = I_p[..., 0, 1]
     I_p_02 = I_p[..., 0, 2]
@@ -4495,10 +4395,6 @@ def wheels4_body_rhs_c(q, omega_b, Omega, I_p, A_b, J, k_w, r_b, F_w, tau_w, u, 
     A_b_21 = A_b[..., 2, 1]
     A_b_22 = A_b[..., 2, 2]
     A_b_23 = A_b[..., 2, 3]
-    J_0 = J[..., 0]
-    J_1 = J[..., 1]
-    J_2 = J[..., 2]
-    J_3 = J[..., 3]
     k_w_0 = k_w[..., 0]
     k_w_1 = k_w[..., 1]
     k_w_2 = k_w[..., 2]
@@ -4521,18 +4417,16 @@ def wheels4_body_rhs_c(q, omega_b, Omega, I_p, A_b, J, k_w, r_b, F_w, tau_w, u, 
     tau_w_0 = tau_w[..., 0]
     tau_w_1 = tau_w[..., 1]
     tau_w_2 = tau_w[..., 2]
-    u_0 = u[..., 0]
-    u_1 = u[..., 1]
-    u_2 = u[..., 2]
-    u_3 = u[..., 3]
-    JOmega_0 = J_0*Omega_0
-    JOmega_1 = J_1*Omega_1
-    JOmega_2 = J_2*Omega_2
-    JOmega_3 = J_3*Omega_3
-    g_w_0 = -Omega_0*c_w + u_0
-    g_w_1 = -Omega_1*c_w + u_1
-    g_w_2 = -Omega_2*c_w + u_2
-    g_w_3 = -Omega_3*c_w + u_3
+    JOmega_0_4 = J[..., 0:4] * Omega[..., 0:4]
+    JOmega_0 = JOmega_0_4[..., 0]
+    JOmega_1 = JOmega_0_4[..., 1]
+    JOmega_2 = JOmega_0_4[..., 2]
+    JOmega_3 = JOmega_0_4[..., 3]
+    g_w_0_4 = -Omega[..., 0:4] * c_w[..., None] + u[..., 0:4]
+    g_w_0 = g_w_0_4[..., 0]
+    g_w_1 = g_w_0_4[..., 1]
+    g_w_2 = g_w_0_4[..., 2]
+    g_w_3 = g_w_0_4[..., 3]
     h_A_0 = A_b_00*JOmega_0 + A_b_01*JOmega_1 + A_b_02*JOmega_2 + A_b_03*JOmega_3
     h_A_1 = A_b_10*JOmega_0 + A_b_11*JOmega_1 + A_b_12*JOmega_2 + A_b_13*JOmega_3
     h_A_2 = A_b_20*JOmega_0 + A_b_21*JOmega_1 + A_b_22*JOmega_2 + A_b_23*JOmega_3
@@ -4548,9 +4442,10 @@ def wheels4_body_rhs_c(q, omega_b, Omega, I_p, A_b, J, k_w, r_b, F_w, tau_w, u, 
     g_A_0 = A_b_00*g_w_0 + A_b_01*g_w_1 + A_b_02*g_w_2 + A_b_03*g_w_3
     g_A_1 = A_b_10*g_w_0 + A_b_11*g_w_1 + A_b_12*g_w_2 + A_b_13*g_w_3
     g_A_2 = A_b_20*g_w_0 + A_b_21*g_w_1 + A_b_22*g_w_2 + A_b_23*g_w_3
-    t0 = ((numpy.float32(1.0)/numpy.float32(2.0)))*omega_b_0
-    t1 = ((numpy.float32(1.0)/numpy.float32(2.0)))*omega_b_1
-    t2 = ((numpy.float32(1.0)/numpy.float32(2.0)))*omega_b_2
+    t0_3 = numpy.float32(1.0) / numpy.float32(2.0) * omega_b[..., 0:3]
+    t0 = t0_3[..., 0]
+    t1 = t0_3[..., 1]
+    t2 = t0_3[..., 2]
     t3 = 2*q_0
     t4 = q_1*t3
     t5 = 2*q_2*q_3
@@ -4648,7 +4543,8 @@ def wheels4_on_axes_rhs_c(q, omega_b, Omega, I_p, J, k_w, r_b, F_w, tau_w, u, c_
     tau_w = numpy.asarray(tau_w, dtype=numpy.float32)
     u = numpy.asarray(u, dtype=numpy.float32)
     c_w = numpy.asarray(c_w, dtype=numpy.float32)
-    batch = q.shape[:-1] if q.shape[:-1] == omega_b.shape[:-1] == Omega.shape[:-1] == I_p.shape[:-2] == J.shape[:-1] == k_w.shape[:-1] == r_b.shape[:-1] == F_w.shape[:-1] == tau_w.shape[:-1] == u.shape[:-1] == c_w.shape else numpy.broadcast_shapes(q.shape[:-1], omega_b.shape[:-1], Omega.shape[:-1], I_p.shape[:-2], J.shape[:-1], k_w.shape[:-1], r_b.shape[:-1], F_w.shape[:-1], tau_w.shape[:-1], u.shape[:-1], c_w.shape)
+    if out is None or out[0] is None or out[1] is None or out[2] is None:
+        batch = q.shape[:-1] if q.shape[:-1] == omega_b.shape[:-1] == Omega.shape[:-1] == I_p.shape[:-2] == J.shape[:-1] == k_w.shape[:-1] == r_b.shape[:-1] == F_w.shape[:-1] == tau_w.shape[:-1] == u.shape[:-1] == c_w.shape else numpy.broadcast_shapes(q.shape[:-1], omega_b.shape[:-1], Omega.shape[:-1], I_p.shape[:-2], J.shape[:-1], k_w.shape[:-1], r_b.shape[:-1], F_w.shape[:-1], tau_w.shape[:-1], u.shape[:-1], c_w.shape)
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -4656,19 +4552,12 @@ def wheels4_on_axes_rhs_c(q, omega_b, Omega, I_p, J, k_w, r_b, F_w, tau_w, u, c_
     omega_b_0 = omega_b[..., 0]
     omega_b_1 = omega_b[..., 1]
     omega_b_2 = omega_b[..., 2]
-    Omega_0 = Omega[..., 0]
-    Omega_1 = Omega[..., 1]
-    Omega_2 = Omega[..., 2]
-    Omega_3 = Omega[..., 3]
     I_p_00 = I_p[..., 0, 0]
     I_p_01 = I_p[..., 0, 1]
     I_p_02 = I_p[..., 0, 2]
     I_p_11 = I_p[..., 1, 1]
     I_p_12 = I_p[..., 1, 2]
     I_p_22 = I_p[..., 2, 2]
-    J_0 = J[..., 0]
-    J_1 = J[..., 1]
-    J_2 = J[..., 2]
     k_w_0 = k_w[..., 0]
     k_w_1 = k_w[..., 1]
     k_w_2 = k_w[..., 2]
@@ -4691,17 +4580,15 @@ def wheels4_on_axes_rhs_c(q, omega_b, Omega, I_p, J, k_w, r_b, F_w, tau_w, u, c_
     tau_w_0 = tau_w[..., 0]
     tau_w_1 = tau_w[..., 1]
     tau_w_2 = tau_w[..., 2]
-    u_0 = u[..., 0]
-    u_1 = u[..., 1]
-    u_2 = u[..., 2]
-    u_3 = u[..., 3]
-    JOmega_0 = J_0*Omega_0
-    JOmega_1 = J_1*Omega_1
-    JOmega_2 = J_2*Omega_2
-    g_w_0 = -Omega_0*c_w + u_0
-    g_w_1 = -Omega_1*c_w + u_1
-    g_w_2 = -Omega_2*c_w + u_2
-    g_w_3 = -Omega_3*c_w + u_3
+    JOmega_0_3 = J[..., 0:3] * Omega[..., 0:3]
+    JOmega_0 = JOmega_0_3[..., 0]
+    JOmega_1 = JOmega_0_3[..., 1]
+    JOmega_2 = JOmega_0_3[..., 2]
+    g_w_0_4 = -Omega[..., 0:4] * c_w[..., None] + u[..., 0:4]
+    g_w_0 = g_w_0_4[..., 0]
+    g_w_1 = g_w_0_4[..., 1]
+    g_w_2 = g_w_0_4[..., 2]
+    g_w_3 = g_w_0_4[..., 3]
     h_A_0 = JOmega_0
     h_A_1 = JOmega_1
     h_A_2 = JOmega_2
@@ -4717,9 +4604,10 @@ def wheels4_on_axes_rhs_c(q, omega_b, Omega, I_p, J, k_w, r_b, F_w, tau_w, u, c_
     g_A_0 = g_w_0
     g_A_1 = g_w_1
     g_A_2 = g_w_2
-    t0 = ((numpy.float32(1.0)/numpy.float32(2.0)))*omega_b_0
-    t1 = ((numpy.float32(1.0)/numpy.float32(2.0)))*omega_b_1
-    t2 = ((numpy.float32(1.0)/numpy.float32(2.0)))*omega_b_2
+    t0_3 = numpy.float32(1.0) / numpy.float32(2.0) * omega_b[..., 0:3]
+    t0 = t0_3[..., 0]
+    t1 = t0_3[..., 1]
+    t2 = t0_3[..., 2]
     t3 = 2*q_0
     t4 = q_1*t3
     t5 = 2*q_2*q_3
@@ -4798,7 +4686,8 @@ def wheels4_total_momentum(q, omega_b, Omega, I_p, A_b, J, *, out=None):
     I_p = numpy.asarray(I_p, dtype=numpy.float32)
     A_b = numpy.asarray(A_b, dtype=numpy.float32)
     J = numpy.asarray(J, dtype=numpy.float32)
-    batch = q.shape[:-1] if q.shape[:-1] == omega_b.shape[:-1] == Omega.shape[:-1] == I_p.shape[:-2] == A_b.shape[:-2] == J.shape[:-1] else numpy.broadcast_shapes(q.shape[:-1], omega_b.shape[:-1], Omega.shape[:-1], I_p.shape[:-2], A_b.shape[:-2], J.shape[:-1])
+    if out is None or out[0] is None:
+        batch = q.shape[:-1] if q.shape[:-1] == omega_b.shape[:-1] == Omega.shape[:-1] == I_p.shape[:-2] == A_b.shape[:-2] == J.shape[:-1] else numpy.broadcast_shapes(q.shape[:-1], omega_b.shape[:-1], Omega.shape[:-1], I_p.shape[:-2], A_b.shape[:-2], J.shape[:-1])
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -4806,10 +4695,6 @@ def wheels4_total_momentum(q, omega_b, Omega, I_p, A_b, J, *, out=None):
     omega_b_0 = omega_b[..., 0]
     omega_b_1 = omega_b[..., 1]
     omega_b_2 = omega_b[..., 2]
-    Omega_0 = Omega[..., 0]
-    Omega_1 = Omega[..., 1]
-    Omega_2 = Omega[..., 2]
-    Omega_3 = Omega[..., 3]
     I_p_00 = I_p[..., 0, 0]
     I_p_01 = I_p[..., 0, 1]
     I_p_02 = I_p[..., 0, 2]
@@ -4828,18 +4713,15 @@ def wheels4_total_momentum(q, omega_b, Omega, I_p, A_b, J, *, out=None):
     A_b_21 = A_b[..., 2, 1]
     A_b_22 = A_b[..., 2, 2]
     A_b_23 = A_b[..., 2, 3]
-    J_0 = J[..., 0]
-    J_1 = J[..., 1]
-    J_2 = J[..., 2]
-    J_3 = J[..., 3]
     t0 = 2*q_1
     t1 = q_0*t0
     t2 = 2*q_2
     t3 = q_3*t2
-    t4 = J_0*Omega_0
-    t5 = J_1*Omega_1
-    t6 = J_2*Omega_2
-    t7 = J_3*Omega_3
+    t4_4 = J[..., 0:4] * Omega[..., 0:4]
+    t4 = t4_4[..., 0]
+    t5 = t4_4[..., 1]
+    t6 = t4_4[..., 2]
+    t7 = t4_4[..., 3]
     t8 = A_b_10*t4 + A_b_11*t5 + A_b_12*t6 + A_b_13*t7 + I_p_01*omega_b_0 + I_p_11*omega_b_1 + I_p_12*omega_b_2
     t9 = q_0*t2
     t10 = q_3*t0
@@ -4893,7 +4775,8 @@ def wheels4_momentum(q, omega_b, Omega, I_p, A_b, J, *, out=None):
     I_p = numpy.asarray(I_p, dtype=numpy.float32)
     A_b = numpy.asarray(A_b, dtype=numpy.float32)
     J = numpy.asarray(J, dtype=numpy.float32)
-    batch = q.shape[:-1] if q.shape[:-1] == omega_b.shape[:-1] == Omega.shape[:-1] == I_p.shape[:-2] == A_b.shape[:-2] == J.shape[:-1] else numpy.broadcast_shapes(q.shape[:-1], omega_b.shape[:-1], Omega.shape[:-1], I_p.shape[:-2], A_b.shape[:-2], J.shape[:-1])
+    if out is None or out[0] is None or out[1] is None or out[2] is None:
+        batch = q.shape[:-1] if q.shape[:-1] == omega_b.shape[:-1] == Omega.shape[:-1] == I_p.shape[:-2] == A_b.shape[:-2] == J.shape[:-1] else numpy.broadcast_shapes(q.shape[:-1], omega_b.shape[:-1], Omega.shape[:-1], I_p.shape[:-2], A_b.shape[:-2], J.shape[:-1])
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -5009,7 +4892,8 @@ def wheels4_motor(command, Omega, torque_limit, speed_limit, cutoff, *, out=None
     torque_limit = numpy.asarray(torque_limit, dtype=numpy.float32)
     speed_limit = numpy.asarray(speed_limit, dtype=numpy.float32)
     cutoff = numpy.asarray(cutoff, dtype=numpy.float32)
-    batch = command.shape[:-1] if command.shape[:-1] == Omega.shape[:-1] == torque_limit.shape == speed_limit.shape == cutoff.shape else numpy.broadcast_shapes(command.shape[:-1], Omega.shape[:-1], torque_limit.shape, speed_limit.shape, cutoff.shape)
+    if out is None or out[0] is None:
+        batch = command.shape[:-1] if command.shape[:-1] == Omega.shape[:-1] == torque_limit.shape == speed_limit.shape == cutoff.shape else numpy.broadcast_shapes(command.shape[:-1], Omega.shape[:-1], torque_limit.shape, speed_limit.shape, cutoff.shape)
     command_0 = command[..., 0]
     command_1 = command[..., 1]
     command_2 = command[..., 2]
@@ -5100,7 +4984,8 @@ def quat_error_chart_inverse(q_ref, dtheta, *, out=None):
     """
     q_ref = numpy.asarray(q_ref, dtype=numpy.float32)
     dtheta = numpy.asarray(dtheta, dtype=numpy.float32)
-    batch = q_ref.shape[:-1] if q_ref.shape[:-1] == dtheta.shape[:-1] else numpy.broadcast_shapes(q_ref.shape[:-1], dtheta.shape[:-1])
+    if out is None or out[0] is None:
+        batch = q_ref.shape[:-1] if q_ref.shape[:-1] == dtheta.shape[:-1] else numpy.broadcast_shapes(q_ref.shape[:-1], dtheta.shape[:-1])
     q_ref_0 = q_ref[..., 0]
     q_ref_1 = q_ref[..., 1]
     q_ref_2 = q_ref[..., 2]
@@ -5108,9 +4993,10 @@ def quat_error_chart_inverse(q_ref, dtheta, *, out=None):
     dtheta_0 = dtheta[..., 0]
     dtheta_1 = dtheta[..., 1]
     dtheta_2 = dtheta[..., 2]
-    t0 = ((numpy.float32(1.0)/numpy.float32(2.0)))*dtheta_0
-    t1 = ((numpy.float32(1.0)/numpy.float32(2.0)))*dtheta_1
-    t2 = ((numpy.float32(1.0)/numpy.float32(2.0)))*dtheta_2
+    t0_3 = numpy.float32(1.0) / numpy.float32(2.0) * dtheta[..., 0:3]
+    t0 = t0_3[..., 0]
+    t1 = t0_3[..., 1]
+    t2 = t0_3[..., 2]
     t3 = numpy.sqrt(-(numpy.float32(1.0)/numpy.float32(4.0))*(dtheta_0*dtheta_0) - (numpy.float32(1.0)/numpy.float32(4.0))*(dtheta_1*dtheta_1) - (numpy.float32(1.0)/numpy.float32(4.0))*(dtheta_2*dtheta_2) + 1)
     q_out = numpy.empty(batch + (4,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     numpy.add(q_ref_0 * t3 + q_ref_1 * t2 - q_ref_2 * t1, q_ref_3 * t0, out=q_out[..., 0])
@@ -5140,17 +5026,19 @@ def quat_normalize_scaled(q, *, out=None):
         |q| (0 for the zero quaternion; may overflow to inf)
     """
     q = numpy.asarray(q, dtype=numpy.float32)
-    batch = q.shape[:-1]
+    if out is None or out[0] is None or out[1] is None:
+        batch = q.shape[:-1]
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
     q_3 = q[..., 3]
     with numpy.errstate(invalid='ignore', divide='ignore'):  # numpy.select evaluates every branch
         q_scale = numpy.maximum(numpy.maximum(numpy.maximum(abs(q_0), abs(q_1)), abs(q_2)), abs(q_3))
-        q_scaled_0 = q_0/q_scale
-        q_scaled_1 = q_1/q_scale
-        q_scaled_2 = q_2/q_scale
-        q_scaled_3 = q_3/q_scale
+        q_scaled_0_4 = q[..., 0:4] / q_scale[..., None]
+        q_scaled_0 = q_scaled_0_4[..., 0]
+        q_scaled_1 = q_scaled_0_4[..., 1]
+        q_scaled_2 = q_scaled_0_4[..., 2]
+        q_scaled_3 = q_scaled_0_4[..., 3]
         q_scaled_norm = numpy.sqrt((q_scaled_0*q_scaled_0) + (q_scaled_1*q_scaled_1) + (q_scaled_2*q_scaled_2) + (q_scaled_3*q_scaled_3))
         t0 = (1.0/q_scaled_norm)
         q_unit_out = numpy.empty(batch + (4,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
@@ -5187,7 +5075,8 @@ def wheels4_free_inertia(I_p, A_b, J, *, out=None):
     I_p = numpy.asarray(I_p, dtype=numpy.float32)
     A_b = numpy.asarray(A_b, dtype=numpy.float32)
     J = numpy.asarray(J, dtype=numpy.float32)
-    batch = I_p.shape[:-2] if I_p.shape[:-2] == A_b.shape[:-2] == J.shape[:-1] else numpy.broadcast_shapes(I_p.shape[:-2], A_b.shape[:-2], J.shape[:-1])
+    if out is None or out[0] is None:
+        batch = I_p.shape[:-2] if I_p.shape[:-2] == A_b.shape[:-2] == J.shape[:-1] else numpy.broadcast_shapes(I_p.shape[:-2], A_b.shape[:-2], J.shape[:-1])
     I_p_00 = I_p[..., 0, 0]
     I_p_01 = I_p[..., 0, 1]
     I_p_02 = I_p[..., 0, 2]
@@ -5254,7 +5143,8 @@ def rigid_point_velocity(v_com_w, omega_w, r_w, *, out=None):
     v_com_w = numpy.asarray(v_com_w, dtype=numpy.float32)
     omega_w = numpy.asarray(omega_w, dtype=numpy.float32)
     r_w = numpy.asarray(r_w, dtype=numpy.float32)
-    batch = v_com_w.shape[:-1] if v_com_w.shape[:-1] == omega_w.shape[:-1] == r_w.shape[:-1] else numpy.broadcast_shapes(v_com_w.shape[:-1], omega_w.shape[:-1], r_w.shape[:-1])
+    if out is None or out[0] is None:
+        batch = v_com_w.shape[:-1] if v_com_w.shape[:-1] == omega_w.shape[:-1] == r_w.shape[:-1] else numpy.broadcast_shapes(v_com_w.shape[:-1], omega_w.shape[:-1], r_w.shape[:-1])
     v_com_w_0 = v_com_w[..., 0]
     v_com_w_1 = v_com_w[..., 1]
     v_com_w_2 = v_com_w[..., 2]
@@ -5292,15 +5182,14 @@ def box_of_inertia(m, I_b, *, out=None):
     """
     m = numpy.asarray(m, dtype=numpy.float32)
     I_b = numpy.asarray(I_b, dtype=numpy.float32)
-    batch = m.shape if m.shape == I_b.shape[:-1] else numpy.broadcast_shapes(m.shape, I_b.shape[:-1])
-    I_b_0 = I_b[..., 0]
-    I_b_1 = I_b[..., 1]
-    I_b_2 = I_b[..., 2]
+    if out is None or out[0] is None:
+        batch = m.shape if m.shape == I_b.shape[:-1] else numpy.broadcast_shapes(m.shape, I_b.shape[:-1])
     with numpy.errstate(invalid='ignore', divide='ignore'):  # numpy.select evaluates every branch
         t0 = (1.0/numpy.sqrt(m))
-        t1 = 6*I_b_0
-        t2 = 6*I_b_1
-        t3 = 6*I_b_2
+        t1_3 = 6 * I_b[..., 0:3]
+        t1 = t1_3[..., 0]
+        t2 = t1_3[..., 1]
+        t3 = t1_3[..., 2]
         t4 = -t1 + t2 + t3
         t5 = (1.0/m)
         t6 = t1 - t2 + t3
@@ -5336,7 +5225,8 @@ def validity_scale(I_b, dt, p, *, out=None):
     I_b = numpy.asarray(I_b, dtype=numpy.float32)
     dt = numpy.asarray(dt, dtype=numpy.float32)
     p = numpy.asarray(p, dtype=numpy.float32)
-    batch = I_b.shape[:-1] if I_b.shape[:-1] == dt.shape == p.shape else numpy.broadcast_shapes(I_b.shape[:-1], dt.shape, p.shape)
+    if out is None or out[0] is None:
+        batch = I_b.shape[:-1] if I_b.shape[:-1] == dt.shape == p.shape else numpy.broadcast_shapes(I_b.shape[:-1], dt.shape, p.shape)
     I_b_0 = I_b[..., 0]
     I_b_1 = I_b[..., 1]
     I_b_2 = I_b[..., 2]
@@ -5369,7 +5259,8 @@ def validity_wdt(omega_b, scale, *, out=None):
     """
     omega_b = numpy.asarray(omega_b, dtype=numpy.float32)
     scale = numpy.asarray(scale, dtype=numpy.float32)
-    batch = omega_b.shape[:-1] if omega_b.shape[:-1] == scale.shape else numpy.broadcast_shapes(omega_b.shape[:-1], scale.shape)
+    if out is None or out[0] is None or out[1] is None:
+        batch = omega_b.shape[:-1] if omega_b.shape[:-1] == scale.shape else numpy.broadcast_shapes(omega_b.shape[:-1], scale.shape)
     omega_b_0 = omega_b[..., 0]
     omega_b_1 = omega_b[..., 1]
     omega_b_2 = omega_b[..., 2]
