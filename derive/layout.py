@@ -126,6 +126,9 @@ DENSE = Layout("DENSE", "dopri5's dense output of a body, carried between calls 
     Field("f", XS.size, "d/dt of z: the next substep's first stage (FSAL)"),
     Field("x_out", STATE.size, "the state the last call wrote"),
     Field("coef", 5 * XS.size, "the last substep's dense-output coefficients Y0..Y4, row-major (5, XS)"),
+    Field("lead0", 1, "the lead at the last accepted substep (or where the count restarted), s: ahead is "
+          "lead0 - passed dt, one rounding, while that holds bitwise (an output skip costs O(1), split-invariant)"),
+    Field("passed", 1, "output steps of dt since lead0 (an integer, as a double)"),
 ])
 
 LAYOUTS = (STATE, PARAM, MODEL, XS, EULER, WCOEF, DENSE)

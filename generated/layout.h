@@ -61,7 +61,7 @@
 #define LV_WCOEF_J_INV_LEN 4
 #define LV_WCOEF_SIZE 13
 
-/* dopri5's dense output of a body, carried between calls (derive/tableaux.py DP_DENSE) (135) */
+/* dopri5's dense output of a body, carried between calls (derive/tableaux.py DP_DENSE) (137) */
 #define LV_DENSE_VALID 0  /* [1] 1: the fields below continue the state x_out the last call wrote; else start afresh */
 #define LV_DENSE_AHEAD 1  /* [1] how far the integrator's own time is ahead of the state's, s (>= 0) */
 #define LV_DENSE_H_LAST 2  /* [1] length of the last accepted substep, s */
@@ -73,7 +73,9 @@
 #define LV_DENSE_X_OUT_LEN 13
 #define LV_DENSE_COEF 50  /* [85] the last substep's dense-output coefficients Y0..Y4, row-major (5, XS) */
 #define LV_DENSE_COEF_LEN 85
-#define LV_DENSE_SIZE 135
+#define LV_DENSE_LEAD0 135  /* [1] the lead at the last accepted substep (or where the count restarted), s: ahead is lead0 - passed dt, one rounding, while that holds bitwise (an output skip costs O(1), split-invariant) */
+#define LV_DENSE_PASSED 136  /* [1] output steps of dt since lead0 (an integer, as a double) */
+#define LV_DENSE_SIZE 137
 
 /* bits of the model row's kind */
 enum {

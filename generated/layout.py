@@ -79,8 +79,10 @@ DENSE_X_OUT = slice(37, 50)  # [13] the state the last call wrote
 DENSE_X_OUT_LEN = 13
 DENSE_COEF = slice(50, 135)  # [85] the last substep's dense-output coefficients Y0..Y4, row-major (5, XS)
 DENSE_COEF_LEN = 85
-DENSE_SIZE = 135
-DENSE_LAYOUT = {'valid': slice(0, 1), 'ahead': slice(1, 2), 'h_last': slice(2, 3), 'z': slice(3, 20), 'f': slice(20, 37), 'x_out': slice(37, 50), 'coef': slice(50, 135)}
+DENSE_LEAD0 = 135  # [1] the lead at the last accepted substep (or where the count restarted), s: ahead is lead0 - passed dt, one rounding, while that holds bitwise (an output skip costs O(1), split-invariant)
+DENSE_PASSED = 136  # [1] output steps of dt since lead0 (an integer, as a double)
+DENSE_SIZE = 137
+DENSE_LAYOUT = {'valid': slice(0, 1), 'ahead': slice(1, 2), 'h_last': slice(2, 3), 'z': slice(3, 20), 'f': slice(20, 37), 'x_out': slice(37, 50), 'coef': slice(50, 135), 'lead0': slice(135, 136), 'passed': slice(136, 137)}
 
 # bits of the model row's kind
 KIND_JOINT = 1  # world-anchored spherical joint: p_w, v_w follow from q, omega

@@ -1230,6 +1230,11 @@ def _dopri5(plan, x, integrator, normalize, dt, n_steps, rtol, atol, hs, nfev, c
     k0 = D[:, LY.DENSE_F][:, :cols].copy()
     Y = np.where(valid[:, None, None], D[:, LY.DENSE_COEF].reshape(nb, 5, LY.XS_SIZE)[:, :, :cols], 0.0)
     ahead = np.where(valid, D[:, LY.DENSE_AHEAD], 0.0)
+    # the lead after m output steps since a0 is a0 - m dt (one rounding, C's dp_skip); the row's count goes on while
+    # it still gives the lead it carries (the same dt)
+    a0, m = ahead.copy(), np.zeros(nb)
+    go_on = valid & (D[:, LY.DENSE_PASSED] > 0.0) & (D[:, LY.DENSE_LEAD0] - D[:, LY.DENSE_PASSED] * dt == ahead)
+    a0[go_on], m[go_on] = D[go_on, LY.DENSE_LEAD0], D[go_on, LY.DENSE_PASSED]
     hl = np.where(valid, D[:, LY.DENSE_H_LAST], 0.0)
     cnt = np.zeros(nb)
     ncols = plan.norm_cols if cols > LY.STATE_SIZE else np.full(nb, float(LY.STATE_SIZE))
@@ -1246,7 +1251,8 @@ def _dopri5(plan, x, integrator, normalize, dt, n_steps, rtol, atol, hs, nfev, c
             h[bad] = _dp_initial_h(_subplan(plan, bad), z[bad], k0[bad], None if u is None else u[bad], rtol, atol,
                                    dt, ncols[bad])
             cnt[bad] += 1
-        ahead = ahead - dt
+        m += 1.0
+        ahead = a0 - m * dt
         live = ahead < 0.0
         last = i == n_steps - 1      # no state between is seen: only the call's last is read off (and landings)
         if not last and not live.any():
@@ -1269,6 +1275,7 @@ def _dopri5(plan, x, integrator, normalize, dt, n_steps, rtol, atol, hs, nfev, c
             good = ok & ~diverged
             z[good], k0[good], Y[good] = yn[good], k7[good], Yn[good]   # FSAL: f at the new (un-normalized) point
             ahead = np.where(good, np.where(clipped, 0.0, ahead + step_h), ahead)
+            a0, m = np.where(good, ahead, a0), np.where(good, 0.0, m)
             hl = np.where(good, step_h, hl)
             rej = np.where(live, ~ok, rej)
             why[diverged] = _DP_DIVERGED
@@ -1299,6 +1306,7 @@ def _dopri5(plan, x, integrator, normalize, dt, n_steps, rtol, atol, hs, nfev, c
         keep = ~land
         D[keep, LY.DENSE_VALID] = 1.0
         D[keep, LY.DENSE_AHEAD], D[keep, LY.DENSE_H_LAST] = ahead[keep], hl[keep]
+        D[keep, LY.DENSE_LEAD0], D[keep, LY.DENSE_PASSED] = a0[keep], m[keep]
         D[keep, LY.DENSE_Z.start:LY.DENSE_Z.start + cols] = z[keep]
         D[keep, LY.DENSE_F.start:LY.DENSE_F.start + cols] = k0[keep]
         D[keep, LY.DENSE_X_OUT] = x[keep][:, X]

@@ -938,7 +938,7 @@ static inline double dp_attempt(int v, const body_ctx *c, const double *cf, cons
    read (have_Y 0: from the last accepted substep's z0, raw end y1 and stages, which stay in the stage set that is not
    current: the caller's k and Kb take turns, cur naming the current one, so nothing is copied but z0, y1 and f). */
 typedef struct {
-    double z[LV_XS_SIZE], Y[5][LV_XS_SIZE], ahead, hl;
+    double z[LV_XS_SIZE], Y[5][LV_XS_SIZE], ahead, hl, a0, m;   /* a0, m: DENSE lead0, passed (dp_skip) */
     double Kb[7][LV_XS_SIZE], z0[LV_XS_SIZE], y1[LV_XS_SIZE];
     int cur, have_Y;
 } dp_dense;
@@ -972,25 +972,45 @@ static inline void dp_dense_coeffs(int v, const double *y0, const double *y1, do
         }
 }
 
+/* The output steps the integrator's lead covers, in O(1) whatever their number: the lead after m output steps since
+   a0 (the lead at the last accepted substep or the call's start) is a0 - m dt, one rounding (not m subtractions;
+   NumPy's _dopri5 forms the same double). From m (a0 - m dt >= 0) to the smallest m' > m with a0 - m' dt < 0, at
+   most last - *s further steps (*s advanced alike; m' = that cap when the lead still covers it). a0 - m dt does not
+   increase with m, so a guess from a0 / dt (rdt = 1 / dt) corrected by one-step moves finds that m'. Returns
+   a0 - m' dt. */
+static inline double dp_skip(double a0, double dt, double rdt, long *m, long *s, long last)
+{
+    const long lo = *m + 1, top = *m + (last - *s);
+    const double g = a0 * rdt + 1.0;   /* a0 >= 0 here: (long) g is floor(a0 / dt) + 1, give or take one */
+    long j = !(g > (double)lo) ? lo : g >= (double)top ? top : (long)g;
+    while (j > lo && a0 - (double)(j - 1) * dt < 0.0) j--;
+    while (j < top && a0 - (double)j * dt >= 0.0) j++;
+    *s += j - *m;
+    *m = j;
+    return a0 - (double)j * dt;
+}
+
 /* Output steps *s_io .. of dt with dense output, up to the call's last (n_steps - 1) or, with land, this one only:
-   each lowers z->ahead by dt; one that leaves it >= 0 costs nothing else, else substeps (unclipped; with land the one
-   that would pass the output time clipped to end on it, the proposal not shrunk by that; rejections and the substep
-   count per output step) until z is past the output time. At the last output step (no state between is seen; every
+   each lowers the lead z->ahead by dt (dp_skip); one that leaves it >= 0 costs nothing else, else substeps
+   (unclipped; with land the one that would pass the output time clipped to end on it, the proposal not shrunk by
+   that; rejections and the substep count per output step) until z is past the output time. At the last output step (no state between is seen; every
    step of a landing body) y = the continuous extension there, q normalized, a jointed body put on its joint (z itself
    when it lands on it: already so). *s_io = the output step reached. LV_OK; else LV_DIVERGED or LV_TOLERANCE (at
    output step *s_io) with y untouched. z, ahead and the step in locals: nothing aliases the stage stores. */
 static inline int dp_dense_run(int v, const body_ctx *c, const double *cf, double *y, double k[][LV_XS_SIZE],
                                dp_control *d, dp_dense *z, double dt, int normalize, long *s_io, long n_steps, int land)
 {
-    double yn[LV_XS_SIZE], yo[LV_XS_SIZE], zz[LV_XS_SIZE], ahead = z->ahead - dt, h = d->h;
-    long s = *s_io;
+    double yn[LV_XS_SIZE], yo[LV_XS_SIZE], zz[LV_XS_SIZE], a0 = z->ahead, ahead, h = d->h;
+    const double rdt = 1.0 / dt;
+    long s = *s_io, m = 0;
     int ii, st = LV_OK;
+    if (z->m > 0.0 && z->a0 - z->m * dt == a0)   /* the count since the last substep goes on (same dt) */
+        a0 = z->a0, m = (long)z->m;
+    ahead = a0 - (double)++m * dt;
     memcpy(zz, z->z, sizeof zz);
     memcpy(yn, zz, sizeof yn);
-    while (ahead >= 0.0 && s < n_steps - 1) {   /* output steps inside the last substep cost this only */
-        ahead -= dt;
-        s++;
-    }
+    if (ahead >= 0.0 && s < n_steps - 1)   /* output steps inside the last substep cost this only */
+        ahead = dp_skip(a0, dt, rdt, &m, &s, n_steps - 1);
     for (;;) {
         long sub = 0;
         int rejected = 0;
@@ -1016,7 +1036,8 @@ static inline int dp_dense_run(int v, const body_ctx *c, const double *cf, doubl
                     kn[0][DP_IDX_OF(v)[ii]] = kc[6][DP_IDX_OF(v)[ii]];
                 z->cur ^= 1;
                 z->have_Y = 0;
-                ahead = clipped ? 0.0 : ahead + hs;
+                a0 = ahead = clipped ? 0.0 : ahead + hs;
+                m = 0;
                 z->hl = hs;
                 rejected = 0;
             } else {
@@ -1031,15 +1052,12 @@ static inline int dp_dense_run(int v, const body_ctx *c, const double *cf, doubl
             }
         }
         if (st != LV_OK || land || s == n_steps - 1) break;
-        ahead -= dt;   /* the next output step, and those inside the last substep */
-        s++;
-        while (ahead >= 0.0 && s < n_steps - 1) {
-            ahead -= dt;
-            s++;
-        }
+        ahead = dp_skip(a0, dt, rdt, &m, &s, n_steps - 1);   /* the next output step, and those inside the last substep */
     }
     memcpy(z->z, zz, sizeof zz);
     z->ahead = ahead;
+    z->a0 = a0;
+    z->m = (double)m;
     d->h = h;
     *s_io = s;
     if (st != LV_OK) return st;
@@ -1071,6 +1089,8 @@ static int dp_dense_load(const double *row, const double *y, double k[][LV_XS_SI
         memcpy(z->Y, row + LV_DENSE_COEF, sizeof z->Y);
         z->ahead = row[LV_DENSE_AHEAD];
         z->hl = row[LV_DENSE_H_LAST];
+        z->a0 = row[LV_DENSE_LEAD0];
+        z->m = row[LV_DENSE_PASSED];
         z->cur = 0;
         z->have_Y = 1;
         return 1;
@@ -1085,6 +1105,8 @@ static void dp_dense_store(double *row, const double *y, double k[][LV_XS_SIZE],
     row[LV_DENSE_VALID] = 1.0;
     row[LV_DENSE_AHEAD] = z->ahead;
     row[LV_DENSE_H_LAST] = z->hl;
+    row[LV_DENSE_LEAD0] = z->a0;
+    row[LV_DENSE_PASSED] = z->m;
     memcpy(row + LV_DENSE_Z, z->z, sizeof z->z);
     memcpy(row + LV_DENSE_F, z->cur ? z->Kb[0] : k[0], sizeof k[0]);
     memcpy(row + LV_DENSE_X_OUT, y, LV_STATE_SIZE * sizeof(double));
