@@ -179,8 +179,11 @@ static lv_mtile_fn mtile_rk4_fn(int isa, int on_axes)
 static int mtile_member(const lv_models *md, const lv_effect_index *ix, long b, long b0)
 {
     long k, n = ix->start[b + 1] - ix->start[b];
-    const int kind = lv_step_kind(md->rows + b * LV_MODEL_SIZE);
-    if ((kind & ~LV_ON_AXES) != LV_MKIND || kind != lv_step_kind(md->rows + b0 * LV_MODEL_SIZE)) return 0;
+    int kind;
+    /* the row's kind first: lv_step_kind's layout comparison only for the bodies of a model tile's kind */
+    if ((int)md->rows[b * LV_MODEL_SIZE + LV_MODEL_KIND] != LV_MKIND) return 0;
+    kind = lv_step_kind(md->rows + b * LV_MODEL_SIZE);
+    if (b != b0 && kind != lv_step_kind(md->rows + b0 * LV_MODEL_SIZE)) return 0;
     if (n != ix->start[b0 + 1] - ix->start[b0]) return 0;
     if ((ix->flags[b] & LV_EFFECT_USES_V) != (ix->flags[b0] & LV_EFFECT_USES_V)) return 0;
     for (k = 0; k < n; k++) {

@@ -87,9 +87,11 @@ int lv_effect_row_check(const double *row, long row_size, long nb, const lv_user
     int flags;
     lv_effect_fn fn;
     *np = -1;
-    if (code == floor(code) && fabs(code) < 1e9) *np = effect_info((int)code, user, &flags, &fn);
+    /* whole numbers by a truncating conversion (in range first: the conversion is defined there), not floor(): a
+       library call per row and call on the baseline build, twice per row */
+    if (fabs(code) < 1e9 && code == (double)(long)code) *np = effect_info((int)code, user, &flags, &fn);
     if (*np < 0 || *np > row_size - LV_EFFECT_ROW_PARAMS) return LV_UNKNOWN_EFFECT;
-    if (!(body == -1 || (body >= 0 && body < (double)nb && body == floor(body)))) return LV_BAD_ARGUMENT;
+    if (!(body == -1 || (body >= 0 && body < (double)nb && body == (double)(long)body))) return LV_BAD_ARGUMENT;
     return LV_OK;
 }
 
