@@ -69,3 +69,25 @@ def test_kernels_h_carries_the_table_and_batch_simd_names_no_effect():
     simd = (ROOT / "lavendersim" / "csrc" / "batch_simd.h").read_text()
     for _, d in _builtins():
         assert f"LV_EFFECT_{d.name.upper()}" not in simd, d.name
+
+
+def test_the_kinds_are_the_numpy_backends_rhs_classes():
+    """derive's tile_kind restates csrc/step.c's rhs_class (the C tiles' kinds); lavendersim.effects.rhs_classes is the
+    same rule for the NumPy backend (which has no separate world-torque-only class: TORQUE runs the FULL kernel, bitwise
+    in C too). Every combination of the three rhs flags gives the same class in both, so neither can drift alone."""
+    import numpy as np
+
+    from lavendersim import effects as RT
+
+    assert (E.FLAG_FORCE, E.FLAG_TORQUE_W, E.FLAG_TORQUE_B) == (RT.FLAG_FORCE, RT.FLAG_TORQUE_W, RT.FLAG_TORQUE_B)
+    python = {"BODY": RT.RHS_BODY, "BODY_F": RT.RHS_BODY_F, "FORCE": RT.RHS_FORCE, "FULL": RT.RHS_FULL,
+              "TORQUE": RT.RHS_FULL}
+    for force in (0, E.FLAG_FORCE):
+        for tw in (0, E.FLAG_TORQUE_W):
+            for tb in (0, E.FLAG_TORQUE_B):
+                flags = force | tw | tb
+                kind = effect_fuse.tile_kind(flags)
+                assert python[kind] == int(RT.rhs_classes(np.array([flags]))[0]), (flags, kind)
+                assert (kind in ("TORQUE", "FULL")) == bool(tw), flags   # a world torque always rotates
+                if flags:   # (effects with none of the three flags run the force kernel on zero sums)
+                    assert kind.endswith(("_F", "FULL", "FORCE")) == bool(force), flags
