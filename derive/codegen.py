@@ -611,9 +611,10 @@ def print_markdown(printed: list[Printed], effects: list | None = None, title: s
 
 
 def source_hash() -> str:
-    """Hash of the derive/ sources that define the equations and their printing."""
+    """Hash of the derive/ sources that define the equations and their printing (the real folder: under a strict
+    editable install this module is a link in a folder of links made at install time, which lacks a file added since)."""
     h = hashlib.sha256()
-    for f in sorted(Path(__file__).parent.glob("*.py")):
+    for f in sorted(Path(__file__).resolve().parent.glob("*.py")):
         h.update(f.name.encode())
         h.update(f.read_bytes())
     return h.hexdigest()
