@@ -207,7 +207,9 @@ def print_c_user(printed: list[Printed], effects: list, set_name: str) -> tuple[
         h += ["/* " + "\n   ".join(_doc_lines(p.k)) + " */", _c_sig(p.k, prefix) + ";", ""]
         c += ["LV_EXPORT " + line if i == 0 else line for i, line in enumerate(_c_kernel(p, pr, prefix))]
     for d in effects:
-        h.append(f"void lvu_effect_{d.name}({effect_print.C_ARGS});")
+        h.append(f"void {effect_print.user_function(d)}({effect_print.C_ARGS});")
+        if d.body_outputs is not None:   # its body-frame form (FLAG_TORQUE_B): the torque added in the body frame
+            h.append(f"void {effect_print.user_function(d, True)}({effect_print.C_ARGS});")
     c += effect_print.c_user_source(effects, prefix)
     h += ["", "#endif"]
     return "\n".join(h) + "\n", "\n".join(c) + "\n"

@@ -189,7 +189,7 @@ def param(name: str, shape=(), unit: str = "", doc: str = "", rule: str = "finit
 @dataclass
 class EffectDecl:
     """One effect: its force (world, at the COM) and torque about the COM in SymPy, declared in the world frame
-    (torque_w) or in the body frame (torque_b; built-in effects only)."""
+    (torque_w) or in the body frame (torque_b), built-in or user-declared."""
 
     name: str
     summary: str
@@ -341,8 +341,9 @@ def effect(name: str, summary: str, params=(), force_w=None, torque_w=None, capt
     notes : sequence of str
         Extra lines for EQUATIONS.md.
     torque_b : sympy.Matrix (3×1), optional
-        Built-in effects: the torque about the COM in the body frame (N·m), instead of torque_w. Its world form
-        R_WB torque_b is printed too.
+        The torque about the COM in the body frame (N·m), instead of torque_w (built-in and user effects). Its world
+        form R_WB torque_b is printed too; a plain body whose torques are all body-frame adds torque_b as it is and
+        rotates nothing (FLAG_TORQUE_B).
     """
     return EffectDecl(name, summary, list(params), force_w, torque_w, "force", caption, list(notes), torque_b)
 

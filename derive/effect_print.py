@@ -166,44 +166,62 @@ def c_source_real(effects: list[tuple[int, E.EffectDecl]], prefix: str, real: st
 TILE_ISAS = ("base", "avx2", "avx512")   # the tile form's copies (LV_ISA_BASE .. LV_ISA_AVX512 of csrc/step.h)
 
 
-def c_tile_function(decl: E.EffectDecl) -> list[str]:
+def user_function(decl: E.EffectDecl, body: bool = False) -> str:
+    """The name a user effect's accumulating function is exported under: lvu_effect_<name>, its body-frame form
+    lvu_effect_<name>_b (derive.user refuses a set where that name is another effect's)."""
+    return f"lvu_effect_{decl.name}_b" if body else f"lvu_effect_{decl.name}"
+
+
+def user_tile_function(decl: E.EffectDecl, isa: str, body: bool = False) -> str:
+    """The name of a user effect's tile form at instruction set isa (its body-frame form's: body)."""
+    return f"lvu_effect_tile{E.TILE_LANES}_{decl.name}{'_b' if body else ''}_{isa}"
+
+
+def c_tile_function(decl: E.EffectDecl, body: bool = False) -> list[str]:
     """A user effect's tile form (kernels.h's lv_effect_tile_fn): its accumulating function lane by lane over rows
     of E.TILE_LANES doubles, defined once per instruction set (LVU_TILE_COPIES) so that the compiler vectorizes the
-    lane loop at each width; flatten inlines the effect and its kernel into the loop."""
-    outs = [("F", "F") if n == E.OUT_FORCE else ("tau", "tau") for n, _ in decl.outputs]
-    n, body = E.TILE_LANES, []
+    lane loop at each width; flatten inlines the effect and its kernel into the loop. body: the tile form of its
+    body-frame form (the torque added to tau in the body frame)."""
+    outputs = decl.body_outputs if body else decl.outputs
+    assert outputs is not None
+    outs = [("F", "F") if n == E.OUT_FORCE else ("tau", "tau") for n, _ in outputs]
+    n, body_lines = E.TILE_LANES, []
     rows = f"(*{{}})[{n}]"
-    body.append(f"    for (b = b0; b < b1; b++) {{")
-    body.append(f"        double xl[{STATE.size}], pl[{max(decl.n_params, 1)}], il[3], F_l[3] = {{0, 0, 0}}, "
+    body_lines.append(f"    for (b = b0; b < b1; b++) {{")
+    body_lines.append(f"        double xl[{STATE.size}], pl[{max(decl.n_params, 1)}], il[3], F_l[3] = {{0, 0, 0}}, "
                 "tau_l[3] = {0, 0, 0};")
-    body.append(f"        for (i = 0; i < {STATE.size}; i++) xl[i] = x[i][b];")
+    body_lines.append(f"        for (i = 0; i < {STATE.size}; i++) xl[i] = x[i][b];")
     if decl.n_params:
-        body.append(f"        for (i = 0; i < {decl.n_params}; i++) pl[i] = p[i][b];")
-    body.append("        for (i = 0; i < 3; i++) il[i] = I_b[i][b];")
+        body_lines.append(f"        for (i = 0; i < {decl.n_params}; i++) pl[i] = p[i][b];")
+    body_lines.append("        for (i = 0; i < 3; i++) il[i] = I_b[i][b];")
     for acc, _ in outs:
-        body.append(f"        for (i = 0; i < 3; i++) {acc}_l[i] = {acc}[i][b];")
-    body.append(f"        lvu_effect_{decl.name}(pl, xl, xl + {STATE.offset('v_w')}, m[b], il, F_l, tau_l);")
+        body_lines.append(f"        for (i = 0; i < 3; i++) {acc}_l[i] = {acc}[i][b];")
+    body_lines.append(f"        {user_function(decl, body)}(pl, xl, xl + {STATE.offset('v_w')}, m[b], il, F_l, tau_l);")
     for acc, _ in outs:
-        body.append(f"        for (i = 0; i < 3; i++) {acc}[i][b] = {acc}_l[i];")
-    body.append("    }")
+        body_lines.append(f"        for (i = 0; i < 3; i++) {acc}[i][b] = {acc}_l[i];")
+    body_lines.append("    }")
     args = (f"long b0, long b1, const double {rows.format('x')}, const double {rows.format('p')}, const double *m, "
             f"const double {rows.format('I_b')}, double {rows.format('F')}, double {rows.format('tau')}")
-    macro = f"LVU_TILE_{decl.name.upper()}"
+    macro = f"LVU_TILE_{decl.name.upper()}{'_B' if body else ''}"
     lines = [f"#define {macro}(SUFFIX, ATTR) \\",
-             f"LV_EXPORT ATTR LVU_FLATTEN void lvu_effect_tile{n}_{decl.name}_##SUFFIX({args}) \\",
+             f"LV_EXPORT ATTR LVU_FLATTEN void {user_tile_function(decl, '', body)}##SUFFIX({args}) \\",
              "{ \\", "    long b; \\", "    int i; \\"]
-    lines += [ln + " \\" for ln in body] + ["}", f"LVU_TILE_COPIES({macro})"]
-    return [f"/* {decl.name} over tile lanes (one copy per instruction set) */"] + lines
+    lines += [ln + " \\" for ln in body_lines] + ["}", f"LVU_TILE_COPIES({macro})"]
+    what = f"{decl.name}'s body-frame form" if body else decl.name
+    return [f"/* {what} over tile lanes (one copy per instruction set) */"] + lines
 
 
 def c_user_source(effects: list[E.EffectDecl], prefix: str) -> list[str]:
-    """A user set's exported effect functions (lvu_effect_<name>), their tile forms and its ABI marker."""
+    """A user set's exported effect functions (lvu_effect_<name>; lvu_effect_<name>_b, the body-frame form of an
+    effect that declares torque_b), their tile forms and its ABI marker."""
     c = ["/* ---- User effects: exported accumulating functions (called by lavendersim's C stepping loop) --- */",
          '#if defined(__GNUC__) || defined(__clang__)', '#define LV_EXPORT __attribute__((visibility("default")))',
          "#else", "#define LV_EXPORT", "#endif",
          f"LV_EXPORT const int lvu_abi_version = {E.ABI_VERSION};", ""]
     for d in effects:
-        c += c_effect_functions(d, prefix, f"lvu_effect_{d.name}", "LV_EXPORT ") + [""]
+        c += c_effect_functions(d, prefix, user_function(d), "LV_EXPORT ") + [""]
+        if d.body_outputs is not None:   # FLAG_TORQUE_B: its body-frame form, for plain bodies of body-frame torques
+            c += c_effect_functions(d, prefix, user_function(d, True), "LV_EXPORT ", body=True) + [""]
     if effects:
         c += ["/* ---- The effects' tile forms (lv_effect_tile_fn), for lavendersim's SIMD tiles ---------------- */",
               "#if (defined(__GNUC__) || defined(__clang__)) && defined(__x86_64__)",
@@ -214,6 +232,8 @@ def c_user_source(effects: list[E.EffectDecl], prefix: str) -> list[str]:
               "#else", "#define LVU_FLATTEN", "#endif", ""]
         for d in effects:
             c += c_tile_function(d) + [""]
+            if d.body_outputs is not None:
+                c += c_tile_function(d, body=True) + [""]
     return c
 
 

@@ -116,10 +116,10 @@ def load_declarations(path) -> tuple[list[EffectDecl], list[Kernel], list["Table
         if e.kind != "force":
             raise DeclarationError(f"{path}: EFFECTS[{effects.index(e)}] ({e.name!r}) is a model effect; a user set "
                                    "declares force effects made with effect()")
-        if e.torque_b is not None:
-            raise DeclarationError(f"{path}: EFFECTS[{effects.index(e)}] ({e.name!r}) declares torque_b; a user effect "
-                                   "declares its torque in the world frame: torque_w=STATE.R_WB * tau_b")
-    names = [e.kernel_name for e in effects] + [k.name for k in kernels]
+    # an effect's kernel effect_<name> (C: lvu_effect_<name>), its body-frame form's effect_<name>_b (torque_b alone:
+    # lvu_effect_<name>_b) and the plain kernels share one namespace
+    names = ([e.kernel_name for e in effects] + [e.kernel_name + "_b" for e in effects if e.body_outputs is not None]
+             + [k.name for k in kernels])
     dup = sorted({n for n in names if names.count(n) > 1})
     dup = dup or sorted({t.name for t in tableaux if [u.name for u in tableaux].count(t.name) > 1})
     if dup:
@@ -220,9 +220,11 @@ def _culprit(printed: list, decls: list, set_name: str, extra: dict) -> str:
     return ""
 
 
-def _effect_kernel(path: Path, e: EffectDecl) -> Kernel:
+def _effect_kernels(path: Path, e: EffectDecl) -> list[Kernel]:
+    """The effect's kernel and, for an effect declaring torque_b alone (FLAG_TORQUE_B), its body-frame form's."""
     try:
-        return e.kernel(group="User effects")
+        body = e.body_kernel(group="User effects")
+        return [e.kernel(group="User effects")] + ([body] if body is not None else [])
     except Exception as exc:  # noqa: BLE001 - one line naming the effect
         raise DeclarationError(f"{path}: effect {e.name!r}: {_explain(exc)}") from exc
 
@@ -239,7 +241,7 @@ def render_user(path) -> tuple[str, dict[str, str]]:
     set_name = set_name_of(path)
     effects, kernels, tableaux = load_declarations(path)
     printers = _printers()
-    user_kernels = [(k, k) for k in kernels] + [(_effect_kernel(path, e), e) for e in effects]
+    user_kernels = [(k, k) for k in kernels] + [(ek, e) for e in effects for ek in _effect_kernels(path, e)]
     printed = [_printed(path, k, printers) for k, _ in user_kernels]
     extra = {"set_name": set_name, "declaration": str(path),
              "declaration_sha256": hashlib.sha256(path.read_bytes()).hexdigest(),

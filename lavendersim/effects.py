@@ -183,12 +183,13 @@ class EffectSpec:
 
     @property
     def rhs_flags(self) -> int:
-        """The flags both backends pick a plain body's right-hand side by: a built-in effect's own; a user effect
-        adds its torque in the world frame (FLAG_TORQUE_W when it has one, never FLAG_TORQUE_B; a set derived before
-        these flags existed says so through its outputs)."""
-        if self.user_set is None:
+        """The flags both backends pick a plain body's right-hand side by: the effect's own, for a built-in effect and
+        a user effect declaring its torque in the body frame (FLAG_TORQUE_B: its set exports the body-frame form);
+        a user effect of a world torque adds it in the world frame (FLAG_TORQUE_W: a set derived before these flags
+        existed says so through its outputs)."""
+        if self.user_set is None or self.flags & FLAG_TORQUE_B:
             return self.flags
-        return (self.flags & ~FLAG_TORQUE_B) | (FLAG_TORQUE_W if "tau_w" in self.outputs else 0)
+        return self.flags | (FLAG_TORQUE_W if "tau_w" in self.outputs else 0)
 
     @classmethod
     def from_meta(cls, entry: dict, code: int | None = None, source: str = "built-in", user_set=None) -> "EffectSpec":

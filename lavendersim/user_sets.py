@@ -305,33 +305,45 @@ class UserSet:
                                  " in the library and in effects_meta.py", f"; run `lavendersim derive --user "
                                  f"{self.declaration}` again")
 
-    def c_function(self, effect: str) -> int:
+    def c_function(self, effect: str, body: bool = False) -> int:
         """Address of the compiled accumulating function of one of the set's effects.
 
         Parameters
         ----------
         effect : str
             An effect of this set.
+        body : bool, optional
+            Its body-frame form instead (``lvu_effect_<name>_b``: the torque added in the body frame), which an
+            effect declaring ``torque_b`` alone has (FLAG_TORQUE_B in its flags).
 
         Returns
         -------
         int
             The C function's address (the C backend calls it per body).
+
+        Raises
+        ------
+        UserSetError
+            body, and the library does not export the body-frame form.
         """
-        fn = getattr(self.library(), f"lvu_effect_{effect}")
+        symbol = f"lvu_effect_{effect}_b" if body else f"lvu_effect_{effect}"
+        fn = getattr(self.library(), symbol, None)
+        if fn is None:
+            raise _set_error(f"{self.library_path} does not export {symbol}",
+                             f"; run `lavendersim derive --user {self.declaration}` again")
         address = ctypes.cast(fn, ctypes.c_void_p).value
         assert address is not None, effect   # (a symbol dlsym found is never NULL)
         return address
 
-
-    def c_tile_functions(self, effect: str) -> tuple[int, int, int]:
-        """Addresses of an effect's tile form for the C SIMD tiles, per instruction set (base, avx2, avx512);
-        0 where the library has none (a library built before tile forms, or a copy this platform lacks)."""
+    def c_tile_functions(self, effect: str, body: bool = False) -> tuple[int, int, int]:
+        """Addresses of an effect's tile form (body: its body-frame form's) for the C SIMD tiles, per instruction set
+        (base, avx2, avx512); 0 where the library has none (a library built before tile forms, or a copy this
+        platform lacks)."""
         from .generated import effects_meta
         lib = self.library()
         out = []
         for isa in effects_meta.TILE_ISAS:
-            fn = getattr(lib, f"lvu_effect_tile{effects_meta.TILE_LANES}_{effect}_{isa}", None)
+            fn = getattr(lib, f"lvu_effect_tile{effects_meta.TILE_LANES}_{effect}{'_b' if body else ''}_{isa}", None)
             out.append(0 if fn is None else ctypes.cast(fn, ctypes.c_void_p).value or 0)
         return out[0], out[1], out[2]
 

@@ -312,14 +312,17 @@ def test_user_effects_on_the_simd_tiles_are_the_scalar_path_and_numpy_bitwise(gu
     from lavendersim import effects as E
     rows = np.asarray(s.arrays()[2])
     table = user_effect_table(rows)
-    assert table.shape[1] == 6
+    assert table.shape[1] == 10
     # the table is indexed by user code; codes this scene does not use (other sets registered in this process by
     # other tests) are zero rows, so only the scene's own user effects are checked
     codes = np.unique(rows[:, E.ROW_CODE]).astype(np.int64)
     used = codes[codes >= E.USER_CODE_BASE] - E.USER_CODE_BASE
     assert len(used) == 2
+    gg = E.REGISTRY["gravity_gradient"].code - E.USER_CODE_BASE
+    drag = E.REGISTRY["quadratic_drag"].code - E.USER_CODE_BASE
+    assert (table[gg, 6:7] != 0).all() and (table[drag, 6:] == 0).all()   # the body-frame form of torque_b only
     if platform.machine() in ("x86_64", "AMD64"):
-        assert (table[used, 3:] != 0).all()   # every effect's tile form, at every instruction set
+        assert (table[used, 3:6] != 0).all() and (table[gg, 7:] != 0).all()   # tile forms, at every instruction set
     try:
         for level in range(C.isa(-1)[2] + 1):
             C.isa(level)
@@ -328,6 +331,101 @@ def test_user_effects_on_the_simd_tiles_are_the_scalar_path_and_numpy_bitwise(gu
             assert np.array_equal(sim.x, ref.x), C.isa()[1]
     finally:
         C.isa(-1)
+
+
+def test_the_body_frame_torque_has_both_forms_and_c_is_numpy_bitwise(guide):
+    """gravity_gradient declares torque_b: its set exports the world form (R_WB tau_b, lvu_effect_gravity_gradient)
+    and the body-frame form (tau_b, lvu_effect_gravity_gradient_b, NumPy EFFECT_APPLY_B); each equals the formula
+    written here, and C gives NumPy's bits for both."""
+    s = extending.load(guide["set"])
+    assert E.REGISTRY["gravity_gradient"].rhs_flags & E.FLAG_TORQUE_B
+    assert not E.REGISTRY["gravity_gradient"].rhs_flags & E.FLAG_TORQUE_W
+    assert set(s.numpy.EFFECT_APPLY_B) == {"gravity_gradient"}     # quadratic_drag has no torque: no body form
+    x, I_b = random_states(40)
+    m = np.full(40, 2.5)
+    p_gg = np.tile(np.concatenate([[MU], CENTER]), (40, 1))
+    F_w, tau_w = s.numpy.EFFECT_APPLY["gravity_gradient"](p_gg, x, x[:, 7:10], m, I_b)
+    F_b, tau_b = s.numpy.EFFECT_APPLY_B["gravity_gradient"](p_gg, x, x[:, 7:10], m, I_b)
+    assert F_w is None and F_b is None
+    lib = s.library()
+    dp = ctypes.POINTER(ctypes.c_double)
+    for i in range(40):
+        R = rot(x[i, 3:7])
+        want_w = gravity_gradient_w(x[i, 0:3], x[i, 3:7], I_b[i], MU, CENTER)
+        assert close(tau_w[i], want_w) and close(tau_b[i], R.T @ want_w)
+        for fn, want in (("lvu_effect_gravity_gradient", tau_w[i]), ("lvu_effect_gravity_gradient_b", tau_b[i])):
+            F, tau = np.zeros(3), np.zeros(3)
+            args = [np.ascontiguousarray(a, dtype=np.float64) for a in (p_gg[i], x[i], x[i, 7:10], I_b[i])]
+            getattr(lib, fn)(args[0].ctypes.data_as(dp), args[1].ctypes.data_as(dp), args[2].ctypes.data_as(dp),
+                             ctypes.c_double(m[i]), args[3].ctypes.data_as(dp), F.ctypes.data_as(dp),
+                             tau.ctypes.data_as(dp))
+            assert tau.tobytes() == (0.0 + want).tobytes() and not F.any(), fn
+
+
+@pytest.mark.parametrize("n", [1, 5, 40])
+def test_a_body_torque_user_effect_runs_on_the_body_or_world_right_hand_side_bitwise(guide, n):
+    """gravity_gradient alone (the body-torque right-hand side: its body-frame form, nothing rotated) and with a world
+    torque beside it (applied_torque: its world form, rotated back): C, at every instruction set (the effect tiles
+    from 2 bodies, the user tile forms of both frames), gives NumPy's bits, and both follow an independent RK4."""
+    from lavendersim import _lavender_c as C
+    rng = np.random.default_rng(n)
+    scenes = {}
+    for label, extra in (("body", []), ("world", [("applied_torque", {"torque_w": [1e-3, -2e-3, 5e-4]})])):
+        s = lv.Scene()
+        for i in range(n):
+            s.add_body(lv.Body.box(f"b{i}", 1.0 + rng.random(), tuple(0.1 + rng.random(3)),
+                                   p_w=tuple(3.0 * rng.standard_normal(3)), q=tuple(rng.standard_normal(4)),
+                                   v_w=tuple(rng.standard_normal(3)), omega_b=tuple(rng.standard_normal(3))))
+        s.add_effect("gravity_gradient", mu=MU, center_w=CENTER)
+        for name, p in extra:
+            s.add_effect(name, **p)
+        scenes[label] = s
+    for label, s in scenes.items():
+        ref = lv.Sim(s, dt=1e-3, integrator="rk4", backend="numpy")
+        x0 = ref.x.copy()
+        ref.run(80)
+        if label == "body":   # the independent RK4 (torque in the world frame, rotated back into the body)
+            for b in range(n):
+                want = reference_rk4_gg(x0[b], ref.params[b, 0], ref.params[b, 1:4], 1e-3, 80)
+                assert close(ref.x[b], want), (b, ref.x[b] - want)
+        try:
+            for level in range(C.isa(-1)[2] + 1):
+                C.isa(level)
+                sim = lv.Sim(s, dt=1e-3, integrator="rk4", backend="c")
+                sim.run(80)
+                assert np.array_equal(sim.x, ref.x), (label, C.isa()[1])
+        finally:
+            C.isa(-1)
+
+
+def reference_rk4_gg(x, m, I_b, dt, n):
+    """RK4 of one rigid body under gravity_gradient alone (MU, CENTER), q normalized after each step."""
+    def f(y):
+        q, w = y[3:7], y[10:13]
+        tau_b = rot(q).T @ gravity_gradient_w(y[0:3], q, I_b, MU, CENTER)
+        qw = np.array([q[3] * w[0] + q[1] * w[2] - q[2] * w[1], q[3] * w[1] + q[2] * w[0] - q[0] * w[2],
+                       q[3] * w[2] + q[0] * w[1] - q[1] * w[0], -q[0] * w[0] - q[1] * w[1] - q[2] * w[2]]) / 2
+        return np.concatenate([y[7:10], qw, np.zeros(3), (tau_b - np.cross(w, I_b * w)) / I_b])
+    for _ in range(n):
+        k1 = f(x)
+        k2 = f(x + dt / 2 * k1)
+        k3 = f(x + dt / 2 * k2)
+        k4 = f(x + dt * k3)
+        x = x + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+        x[3:7] /= np.linalg.norm(x[3:7])
+    return x
+
+
+def test_a_body_form_named_as_another_effect_is_refused(tmp_path):
+    """An effect declaring torque_b exports lvu_effect_<name>_b: an effect named <name>_b in the same file would
+    collide with it, and derive refuses the file naming the name."""
+    from lavendersim.derive.user import DeclarationError, load_declarations
+    decl = tmp_path / "clash.py"
+    decl.write_text("from lavendersim.derive.effect import STATE, effect\n"
+                    "EFFECTS = [effect('spin', 'a', torque_b=-STATE.omega_b),\n"
+                    "           effect('spin_b', 'b', torque_w=-STATE.omega_w)]\n", encoding="utf-8")
+    with pytest.raises(DeclarationError, match=r"duplicate names \['effect_spin_b'\]"):
+        load_declarations(decl)
 
 
 # ---------------------------------------------------------------- step 4: CasADi

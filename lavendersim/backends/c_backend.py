@@ -259,9 +259,11 @@ def _cause(start: np.ndarray, pre: np.ndarray, params: np.ndarray, effects: np.n
 
 
 def user_effect_table(effects: np.ndarray) -> np.ndarray | None:
-    """The C user-effect table for the codes in this effect table: int64 (n, 3) rows [function address,
-    n_params, flags], row i for code USER_CODE_BASE + i; None when no user code appears. Compiles (cached)
-    and loads each user set's library on first use.
+    """The C user-effect table for the codes in this effect table: int64 (n, 10) rows [function address,
+    n_params, flags, tile forms (base, avx2, avx512), body-frame form, its tile forms] (csrc/step.h
+    lv_user_table_row; 0: none, the body-frame ones for an effect declaring torque_b alone), row i for code
+    USER_CODE_BASE + i; None when no user code appears. Compiles (cached) and loads each user set's library on
+    first use.
 
     Parameters
     ----------
@@ -270,7 +272,7 @@ def user_effect_table(effects: np.ndarray) -> np.ndarray | None:
 
     Returns
     -------
-    ndarray (m, 3) of int64 or None
+    ndarray (m, 10) of int64 or None
 
     Raises
     ------
@@ -283,12 +285,15 @@ def user_effect_table(effects: np.ndarray) -> np.ndarray | None:
     user = codes[codes >= E.USER_CODE_BASE]
     if not user.size:
         return None
-    table = np.zeros((int(user.max()) - E.USER_CODE_BASE + 1, 6), dtype=np.int64)
+    table = np.zeros((int(user.max()) - E.USER_CODE_BASE + 1, 10), dtype=np.int64)
     for code in user:
         spec = E.spec_for_code(int(code))  # LavenderInputError for a code no declaration has
         assert spec.user_set is not None   # (a user code)
-        table[code - E.USER_CODE_BASE] = (spec.user_set.c_function(spec.name), spec.n_params, spec.rhs_flags,
-                                          *spec.user_set.c_tile_functions(spec.name))
+        s, body = spec.user_set, bool(spec.rhs_flags & E.FLAG_TORQUE_B)   # body: its body-frame forms (torque_b)
+        table[code - E.USER_CODE_BASE] = (s.c_function(spec.name), spec.n_params, spec.rhs_flags,
+                                          *s.c_tile_functions(spec.name),
+                                          s.c_function(spec.name, True) if body else 0,
+                                          *(s.c_tile_functions(spec.name, True) if body else (0, 0, 0)))
     return table
 
 

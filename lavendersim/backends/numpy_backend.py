@@ -51,8 +51,8 @@ class _EffectIndex:
 
         def apply_of(spec):
             """The effect's NumPy function; body_frame: its body-frame form when it has one (FLAG_TORQUE_B)."""
-            if body_frame and spec.rhs_flags & E.FLAG_TORQUE_B:
-                return K.EFFECT_APPLY_B[spec.name]
+            if body_frame and spec.rhs_flags & E.FLAG_TORQUE_B:   # a built-in's printed form, or the user set's
+                return (K if spec.user_set is None else spec.user_set.numpy).EFFECT_APPLY_B[spec.name]
             return E.numpy_apply(spec.code) if kmod is None else kmod.EFFECT_APPLY[spec.name]
 
         self.dtype = m.dtype   # float32 plans sum in float32 with the float32 printing of the effects (kmod)

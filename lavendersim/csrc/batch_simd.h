@@ -431,8 +431,10 @@ static int effects_constant(const lv_effect_index *ix, long b)
 }
 
 /* Effect `code`'s parameter count and, for a user effect, its tile form at instruction set isa (NULL: none, and
-   then the effect stays off the tiles). */
-static int tile_effect_info(const lv_effect_index *ix, int code, int isa, lv_effect_tile_fn *tile)
+   then the effect stays off the tiles); body: the group's torques are all body-frame (LV_RHS_BODY*), so a user
+   effect with a body-frame form (LV_EFFECT_TORQUE_B) is called through that form's tile form, as effect_sums_b
+   calls its body-frame form. */
+static int tile_effect_info(const lv_effect_index *ix, int code, int isa, int body, lv_effect_tile_fn *tile)
 {
     const lv_user_effect *u;
     *tile = NULL;
@@ -440,8 +442,14 @@ static int tile_effect_info(const lv_effect_index *ix, int code, int isa, lv_eff
     if (ix->user == NULL || code - LV_EFFECT_USER_BASE >= ix->user->n || isa < LV_ISA_BASE || isa > LV_ISA_AVX512)
         return -1;
     u = &ix->user->entries[code - LV_EFFECT_USER_BASE];
-    *tile = u->tile[isa - LV_ISA_BASE];
+    *tile = body && u->fn_b != NULL ? u->tile_b[isa - LV_ISA_BASE] : u->tile[isa - LV_ISA_BASE];
     return *tile != NULL ? u->n_params : -1;
+}
+
+/* Whether plain body b's torques are all body-frame (its right-hand side class LV_RHS_BODY*). */
+static int tile_body_frame(const lv_effect_index *ix, long b)
+{
+    return rhs_class(ix->start[b + 1] - ix->start[b], ix->flags[b]) >= LV_RHS_BODY;
 }
 
 /* Whether the bodies list[0 .. count-1] may take the effect tiles at instruction set isa: each has the same
@@ -455,7 +463,7 @@ static int effects_tileable(const lv_effect_index *ix, const long *list, long co
     long j, k, n_par = 0;
     if (n < 1 || n > LV_TE_EFFECTS) return 0;
     for (k = 0; k < n; k++) {
-        const int np = tile_effect_info(ix, r0[k].code, isa, &tile);
+        const int np = tile_effect_info(ix, r0[k].code, isa, tile_body_frame(ix, list[0]), &tile);
         if (np < 0) return 0;
         n_par += np;
     }
@@ -500,7 +508,7 @@ static void tile_fx_fill(lv_tile_fx *fx, const lv_effect_index *ix, const long *
     fx->n_eff = (int)(ix->start[ids[0] + 1] - ix->start[ids[0]]);
     if (fx->n_eff > LV_TE_EFFECTS) fx->n_eff = 0; /* (not an effect tile: unused) */
     for (e = 0; e < fx->n_eff; e++) {
-        const int np = tile_effect_info(ix, r0[e].code, lv_isa_get(), &fx->utile[e]);
+        const int np = tile_effect_info(ix, r0[e].code, lv_isa_get(), tile_body_frame(ix, ids[0]), &fx->utile[e]);
         fx->codes[e] = r0[e].code;
         fx->off[e] = o;
         for (j = 0; j < m; j++) {

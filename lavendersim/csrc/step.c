@@ -45,6 +45,7 @@
 typedef struct {
     const double *p;
     lv_effect_fn user;
+    lv_effect_fn user_b; /* a user effect's body-frame form (LV_EFFECT_TORQUE_B), else NULL */
     int code;
 } lv_effect_ref;
 
@@ -60,11 +61,13 @@ typedef struct {
 } lv_effect_index;
 
 /* Number of parameters of effect `code` (built-in, or a user code with an entry in `user`), its flags
-   and, for a user effect, its function; -1 if no declared effect has this code. */
-static int effect_info(int code, const lv_user_effects *user, int *flags, lv_effect_fn *fn)
+   and, for a user effect, its function and its body-frame form (fn_b may be NULL: not wanted); -1 if no declared
+   effect has this code. */
+static int effect_info(int code, const lv_user_effects *user, int *flags, lv_effect_fn *fn, lv_effect_fn *fn_b)
 {
     const int n = lv_effect_n_params(code);
     *fn = NULL;
+    if (fn_b != NULL) *fn_b = NULL;
     *flags = 0;
     if (n >= 0) {
         *flags = lv_effect_flags(code);
@@ -74,6 +77,7 @@ static int effect_info(int code, const lv_user_effects *user, int *flags, lv_eff
         const lv_user_effect *u = &user->entries[code - LV_EFFECT_USER_BASE];
         if (u->fn != NULL && u->n_params >= 0) {
             *fn = u->fn;
+            if (fn_b != NULL) *fn_b = u->fn_b;
             *flags = u->flags;
             return u->n_params;
         }
@@ -89,7 +93,7 @@ int lv_effect_row_check(const double *row, long row_size, long nb, const lv_user
     *np = -1;
     /* whole numbers by a truncating conversion (in range first: the conversion is defined there), not floor(): a
        library call per row and call on the baseline build, twice per row */
-    if (fabs(code) < 1e9 && code == (double)(long)code) *np = effect_info((int)code, user, &flags, &fn);
+    if (fabs(code) < 1e9 && code == (double)(long)code) *np = effect_info((int)code, user, &flags, &fn, NULL);
     if (*np < 0 || *np > row_size - LV_EFFECT_ROW_PARAMS) return LV_UNKNOWN_EFFECT;
     if (!(body == -1 || (body >= 0 && body < (double)nb && body == (double)(long)body))) return LV_BAD_ARGUMENT;
     return LV_OK;
@@ -138,7 +142,7 @@ static int index_build(lv_effect_index *ix, const double *effects, long ne, long
         lv_effect_ref ref;
         ref.code = (int)row[LV_EFFECT_ROW_CODE];
         ref.p = row + LV_EFFECT_ROW_PARAMS;
-        (void)effect_info(ref.code, user, &flags, &fn);
+        (void)effect_info(ref.code, user, &flags, &fn, &ref.user_b);
         ref.user = fn;
         if (target == -1) {
             for (b = 0; b < nb; b++) { ix->refs[fill[b]++] = ref; ix->flags[b] |= flags; }
@@ -176,13 +180,16 @@ static inline void builtin_effect_sums(const double *x, const double *v_w, doubl
 }
 
 /* effect_sums for a plain body whose torques are all declared in the body frame (LV_RHS_BODY*): the generated
-   body dispatch, which adds those torques to tau in the body frame (user effects add no torque there). */
+   body dispatch, which adds those torques to tau in the body frame, and a user effect's body-frame form (user_b;
+   a user effect without one adds no torque there). */
 static inline void effect_sums_b(const double *x, const double *v_w, double m, const double *I_b,
                                  const lv_effect_ref *refs, long n, double *F, double *tau)
 {
     long k;
     for (k = 0; k < n; k++) {
-        if (refs[k].user != NULL)
+        if (refs[k].user_b != NULL)
+            refs[k].user_b(refs[k].p, x, v_w, m, I_b, F, tau);
+        else if (refs[k].user != NULL)
             refs[k].user(refs[k].p, x, v_w, m, I_b, F, tau);
         else
             (void)lv_effect_apply_b(refs[k].code, refs[k].p, x, v_w, m, I_b, F, tau);

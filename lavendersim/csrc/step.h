@@ -34,12 +34,17 @@ static inline int lv_kind_valid(double kind)
 typedef struct {
     lv_effect_fn fn;  /* adds the effect's force and torque (the lv_effect_fn convention) */
     int n_params;     /* parameters it reads from its row */
-    int flags;        /* LV_EFFECT_USES_*, LV_EFFECT_FORCE */
+    int flags;        /* LV_EFFECT_USES_*, LV_EFFECT_FORCE, LV_EFFECT_TORQUE_W / _B */
     lv_effect_tile_fn tile[3]; /* its tile form per instruction set LV_ISA_BASE .. LV_ISA_AVX512 (NULL: none) */
+    lv_effect_fn fn_b; /* LV_EFFECT_TORQUE_B: its body-frame form (the torque added in the body frame, as
+                          lv_effect_apply_b adds a built-in's), else NULL */
+    lv_effect_tile_fn tile_b[3]; /* the body-frame form's tile forms (NULL: none) */
 } lv_user_effect;
 
 /* The user-effect table's columns: [function address, n_params, flags], then optionally the tile forms' addresses
-   (base, avx2, avx512; 0: none). lv_user_table_row reads row r of a table of `cols` (3 or 6) int64 columns. */
+   (base, avx2, avx512; 0: none), then optionally the body-frame form's address and its tile forms' (0: none).
+   lv_user_table_row reads row r of a table of `cols` (3, 6 or 10) int64 columns. A row flagged LV_EFFECT_TORQUE_B
+   without a body-frame form is read as a world-torque effect (LV_EFFECT_TORQUE_W): never a torque lost. */
 static inline void lv_user_table_row(const long long *r, int cols, lv_user_effect *u)
 {
     int k;
@@ -47,6 +52,10 @@ static inline void lv_user_table_row(const long long *r, int cols, lv_user_effec
     u->n_params = (int)r[1];
     u->flags = (int)r[2];
     for (k = 0; k < 3; k++) u->tile[k] = cols >= 6 ? (lv_effect_tile_fn)(uintptr_t)r[3 + k] : NULL;
+    u->fn_b = cols >= 10 ? (lv_effect_fn)(uintptr_t)r[6] : NULL;
+    for (k = 0; k < 3; k++) u->tile_b[k] = cols >= 10 ? (lv_effect_tile_fn)(uintptr_t)r[7 + k] : NULL;
+    if ((u->flags & LV_EFFECT_TORQUE_B) && u->fn_b == NULL)
+        u->flags = (u->flags & ~LV_EFFECT_TORQUE_B) | LV_EFFECT_TORQUE_W;
 }
 
 typedef struct {
