@@ -224,3 +224,43 @@ def test_a_table_changed_behind_the_c_fast_paths_back_goes_to_the_python_path(ed
             call()
         np.testing.assert_array_equal(sim.x, x0)
         assert sim.steps == steps
+
+
+@pytest.mark.parametrize("n_joint", [1, 20])   # 20: the jointed wheel bodies step on a model tile (csrc/model_simd.h)
+def test_the_c_fast_path_steps_a_rewritten_model_row_as_a_fresh_call_does(n_joint):
+    """The Stepper keeps its model rows' per-body decisions (the step kind, the wheel coefficients: csrc/step.h
+    lv_model_cache) from call to call instead of making them per call. A row rewritten between calls
+    (reinit_body moves a jointed body's pivot offset r_b, so its I_p and wheel coefficients change) is stepped inside C
+    exactly as the backend's advance steps it, which decides everything afresh: bitwise."""
+    from lavendersim.backends import Models, c_backend
+    sc = lv.Scene()
+    for i in range(n_joint):
+        sc.add_body(lv.Body.box(f"c{i}", 1.0, (0.15, 0.15, 0.15), p_w=(0.075, 0.0, 0.0), omega_b=(0.3, -0.2, 0.01 * i)))
+        sc.add_effect("spherical_joint", body=f"c{i}", anchor_w=[0.0, 0.0, 0.0])
+        sc.add_effect("reaction_wheels", body=f"c{i}", J=[2e-4, 3e-4, 2.5e-4], torque_limit=0.2, speed_limit=400.0)
+    sc.add_body(lv.Body("w", 12.0, I_SAT, omega_b=[0.3, -0.2, 0.5]))   # wheels off the body axes: the general print
+    sc.add_effect("reaction_wheels", body="w", J=[1e-4] * 3, axes_b=[[0.0, 0.6, 0.8], [1.0, 0.0, 0.0], [0.0, 0.8, -0.6]],
+                  torque_limit=0.1, speed_limit=100.0)
+    sc.add_effect("gravity")
+    sim = lv.Sim(sc, dt=1e-3, integrator="rk4", backend="c")
+    sim.set_wheel_command("c0", [0.01, -0.02, 0.005])
+    sim.set_wheel_command("w", [0.003, 0.0, -0.002])
+    sim.run(3)
+    sim.step()
+    assert sim._fast is not None and sim._fast.steps == 4        # inside C: the decisions kept since the first call
+    rows = sim.model.rows.copy()
+    sim.reinit_body(0, np.array([0.0, 0.06, 0.05]), np.array([0.0, np.sin(0.2), 0.0, np.cos(0.2)]),
+                    np.array([0.2, 0.1, -0.3]), np.array([5.0, -3.0, 1.0]))
+    assert not np.array_equal(sim.model.rows[0, LY.MODEL_I_P], rows[0, LY.MODEL_I_P])   # a new row for body 0
+    sim.set_wheel_command("c0", [-0.01, 0.0, 0.02])
+    sim.check_written()
+    m = sim._models
+    ref = Models(m.rows.copy(), m.Omega.copy(), m.command.copy(), m.applied.copy())
+    x = sim._x.copy()                                            # (the stepped rows: principal frames)
+    c_backend.CBackend().advance(x, sim._params.copy(), sim._effects.copy(), "rk4", sim.normalize, sim.dt, 5, ref)
+    sim.step()
+    sim.run(4)
+    assert sim._fast.steps == 9                                   # all of them inside C
+    np.testing.assert_array_equal(sim._x, x)
+    np.testing.assert_array_equal(m.Omega, ref.Omega)
+    np.testing.assert_array_equal(m.applied, ref.applied)

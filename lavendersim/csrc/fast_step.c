@@ -42,7 +42,7 @@ typedef struct {
     int have[FS_N];
     lv_user_effect *user_entries;
     lv_user_effects user;
-    lv_models models;
+    lv_models models;      /* models.cache: the model rows' per-body decisions, kept from call to call (step.h) */
     int has_models, integrator, normalize, adaptive;
     double dt, bound, rtol, atol;
     size_t n_snap;         /* doubles in snap */
@@ -63,6 +63,8 @@ static void stepper_release(Stepper *s)
     s->user_entries = NULL;
     free(s->snap);
     s->snap = NULL;
+    lv_model_cache_free(s->models.cache);
+    s->models.cache = NULL;
 }
 
 static int stepper_traverse(Stepper *s, visitproc visit, void *arg)
@@ -148,6 +150,8 @@ static int stepper_init(Stepper *s, PyObject *args, PyObject *kw)
         s->models.Omega = (double *)s->buf[FS_OMEGA].buf;
         s->models.command = (const double *)s->buf[FS_COMMAND].buf;
         s->models.applied = (double *)s->buf[FS_APPLIED].buf;
+        s->models.cache = lv_model_cache_new((long)nb);
+        if (s->models.cache == NULL) { PyErr_NoMemory(); return -1; }
     }
     if (s->adaptive && (take(s, FS_H, h_obj, 1, nb, "h") != 0 || take(s, FS_NFEV, nfev_obj, 1, nb, "nfev") != 0
                         || (dense_obj != Py_None && take(s, FS_DENSE, dense_obj, 1, nb * LV_DENSE_SIZE, "dense") != 0)))

@@ -33,7 +33,7 @@ typedef struct {
     double F[3][LV_MTILE], TAU[3][LV_MTILE]; /* the effect sums at the stage input */
     double U[LV_NW][LV_MTILE];           /* this step's applied wheel torques */
     double R[LV_MODEL_SIZE][LV_MTILE]; /* the model rows */
-    double KW[LV_WCOEF_SIZE][LV_MTILE]; /* the wheel coefficients (lv_wheels_coefficients), once per call */
+    double KW[LV_WCOEF_SIZE][LV_MTILE]; /* the wheel coefficients (model_coefficients: per call, or kept) */
     double P[LV_PARAM_SIZE][LV_MTILE]; /* the params rows (m, I_b) */
     double C[LV_NW][LV_MTILE];           /* the commands */
 } lv_mtile;
@@ -180,10 +180,10 @@ static int mtile_member(const lv_models *md, const lv_effect_index *ix, long b, 
 {
     long k, n = ix->start[b + 1] - ix->start[b];
     int kind;
-    /* the row's kind first: lv_step_kind's layout comparison only for the bodies of a model tile's kind */
+    /* the row's kind first: the step kind (a layout comparison, unless kept) only for a model tile's kind */
     if ((int)md->rows[b * LV_MODEL_SIZE + LV_MODEL_KIND] != LV_MKIND) return 0;
-    kind = lv_step_kind(md->rows + b * LV_MODEL_SIZE);
-    if (b != b0 && kind != lv_step_kind(md->rows + b0 * LV_MODEL_SIZE)) return 0;
+    kind = model_step_kind(md, b);
+    if (b != b0 && kind != model_step_kind(md, b0)) return 0;
     if (n != ix->start[b0 + 1] - ix->start[b0]) return 0;
     if ((ix->flags[b] & LV_EFFECT_USES_V) != (ix->flags[b0] & LV_EFFECT_USES_V)) return 0;
     for (k = 0; k < n; k++) {
@@ -227,7 +227,7 @@ static long advance_model_soa(double *state, const double *params, const lv_mode
             t.C[k][j] = md->command[LV_NW * b + k];
         }
         for (k = 0; k < LV_MODEL_SIZE; k++) t.R[k][j] = md->rows[b * LV_MODEL_SIZE + k];
-        lv_wheels_coefficients(md->rows + b * LV_MODEL_SIZE, kw);
+        model_coefficients(md, b, kw);
         for (k = 0; k < LV_WCOEF_SIZE; k++) t.KW[k][j] = kw[k];
         for (k = 0; k < LV_PARAM_SIZE; k++) t.P[k][j] = params[b * LV_PARAM_SIZE + k];
     }
@@ -324,7 +324,7 @@ static int advance_mtile_threads(double *state, const double *params, const lv_m
         sh[t].n_steps = n_steps;
         sh[t].head.limit = *limit;
         sh[t].head.best = *best;
-        sh[t].fn = mtile_rk4_fn(isa, (lv_step_kind(md->rows + list[0] * LV_MODEL_SIZE) & LV_ON_AXES) != 0);
+        sh[t].fn = mtile_rk4_fn(isa, (model_step_kind(md, list[0]) & LV_ON_AXES) != 0);
         sh[t].normalize = normalize;
         sh[t].dt = dt;
         sh[t].head.status = LV_OK;

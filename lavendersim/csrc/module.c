@@ -472,6 +472,7 @@ static PyObject *py_simulate(PyObject *self, PyObject *args)
         models.Omega = (double *)om.buf;
         models.command = (const double *)cm.buf;
         models.applied = (double *)ap.buf;
+        models.cache = NULL;
     }
     if (check_effects((const double *)ef.buf, ne, row_size, nb, user_entries, n_user) != 0) goto fail;
     Py_BEGIN_ALLOW_THREADS

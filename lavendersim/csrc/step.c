@@ -515,6 +515,68 @@ static int lv_step_kind(const double *r)
     return kind | LV_ON_AXES;
 }
 
+lv_model_cache *lv_model_cache_new(long nb)
+{
+    lv_model_cache *c = (lv_model_cache *)calloc(1, sizeof(lv_model_cache));
+    if (c == NULL) return NULL;
+    c->nb = nb;
+    c->rows = (double *)calloc((size_t)nb * LV_MODEL_SIZE + 1, sizeof(double));
+    c->kind = (int *)calloc((size_t)nb + 1, sizeof(int));
+    c->kw = (double *)calloc((size_t)nb * LV_WCOEF_SIZE + 1, sizeof(double));
+    if (c->rows == NULL || c->kind == NULL || c->kw == NULL) {
+        lv_model_cache_free(c);
+        return NULL;
+    }
+    return c;
+}
+
+void lv_model_cache_free(lv_model_cache *c)
+{
+    if (c == NULL) return;
+    free(c->rows);
+    free(c->kind);
+    free(c->kw);
+    free(c);
+}
+
+/* md's cache (if any) made valid for its nb rows: kept when the rows are bytewise those it was made from (then every
+   entry is what the rows give again), else made again from the rows. Called by lv_simulate after it checked the
+   rows' kinds, before any stepping thread starts. */
+static void model_cache_sync(const lv_models *md, long nb)
+{
+    lv_model_cache *c = md == NULL ? NULL : md->cache;
+    const size_t n = (size_t)nb * LV_MODEL_SIZE * sizeof(double);
+    long b;
+    if (c == NULL) return;
+    if (c->nb != nb) {
+        c->valid = 0;
+        return;
+    }
+    if (c->valid && memcmp(c->rows, md->rows, n) == 0) return;
+    for (b = 0; b < nb; b++) {
+        const double *r = md->rows + b * LV_MODEL_SIZE;
+        c->kind[b] = lv_step_kind(r);
+        if (c->kind[b] & LV_KIND_WHEELS) lv_wheels_coefficients(r, c->kw + b * LV_WCOEF_SIZE);
+    }
+    memcpy(c->rows, md->rows, n);
+    c->valid = 1;
+}
+
+/* lv_step_kind of body b's row, from md's cache when it holds one (model_cache_sync). */
+static inline int model_step_kind(const lv_models *md, long b)
+{
+    const lv_model_cache *c = md->cache;
+    return c != NULL && c->valid ? c->kind[b] : lv_step_kind(md->rows + b * LV_MODEL_SIZE);
+}
+
+/* lv_wheels_coefficients of body b's row into kw, from md's cache when it holds them (model_cache_sync). */
+static inline void model_coefficients(const lv_models *md, long b, double *kw)
+{
+    const lv_model_cache *c = md->cache;
+    if (c != NULL && c->valid) memcpy(kw, c->kw + b * LV_WCOEF_SIZE, LV_WCOEF_SIZE * sizeof(double));
+    else lv_wheels_coefficients(md->rows + b * LV_MODEL_SIZE, kw);
+}
+
 /* The rotational part of d/dt [x, Omega] (q, omega_b, Omega) of a body with wheels, F and tau its effect
    sums (world), u its applied motor torques, kw its coefficients (lv_wheels_coefficients): the one wheel model
    on the row's axes (padded slots stay at rest), its on-axes print when on_axes (equal up to the sign of a zero). */
@@ -622,7 +684,7 @@ static inline long advance_model(double *state, const double *params, long b, co
     memcpy(y, state + b * LV_STATE_SIZE, LV_STATE_SIZE * sizeof(double));
     memcpy(y + LV_XS_OMEGA, md->Omega + LV_NW * b, LV_NW * sizeof(double));
     memcpy(applied, md->applied + LV_NW * b, sizeof applied);
-    if (kind & LV_KIND_WHEELS) lv_wheels_coefficients(r, kw);
+    if (kind & LV_KIND_WHEELS) model_coefficients(md, b, kw);
 #define MRHS(in, out) model_rhs_of(in, u, m, I_b, r, kw, kind, needs_v, builtin, refs, n_refs, out)
 #define XS_FOR(stmt) LV_XS_UNROLL for (i = 0; i < LV_XS_SIZE; i++) stmt
 #define XS_AT(v) v[i]
@@ -693,7 +755,7 @@ static long advance_model_body(double *state, const double *params, long b, cons
                                const lv_effect_index *ix, int integrator, int normalize, double dt, long n_steps,
                                double *last)
 {
-    const int kind = lv_step_kind(md->rows + b * LV_MODEL_SIZE);
+    const int kind = model_step_kind(md, b);
     long k;
     int builtin = 1;
     for (k = ix->start[b]; k < ix->start[b + 1]; k++)
@@ -1891,6 +1953,7 @@ int lv_simulate(double *state, const double *params, long nb,
             status = why;
         }
     } else {
+        model_cache_sync(models, nb);
         ids = (long *)malloc(((size_t)nb + 1) * sizeof(long));
         status = ids == NULL ? LV_NO_MEMORY
                              : advance_fixed(state, params, nb, &ix, models, integrator, normalize, dt, n_steps,

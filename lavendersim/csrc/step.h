@@ -71,12 +71,32 @@ typedef struct {
 /* Per-body model data for bodies with a joint and/or wheels (all arrays nb rows).
    Omega (nb x LV_NW) is advanced in place; command (nb x LV_NW) is held over the call (zero-order hold);
    applied (nb x LV_NW) receives the saturated torques of the last step. */
+typedef struct lv_model_cache lv_model_cache;
 typedef struct {
     const double *rows;     /* nb x LV_MODEL_SIZE */
     double *Omega;          /* nb x LV_NW, wheel rates relative to the body, rad/s */
     const double *command;  /* nb x LV_NW, motor torque commands, N m */
     double *applied;        /* nb x LV_NW, saturated torques used in the last step, N m */
+    lv_model_cache *cache;  /* NULL, or the caller's per-body decisions kept from call to call (lv_model_cache) */
 } lv_models;
+
+/* What the fixed-step loops decide per model body from its row alone (the kind it is stepped with, its wheel
+   coefficients), kept by a caller that steps the same rows call after call (the Stepper, csrc/fast_step.c) instead
+   of redone per call. lv_simulate uses it only while the rows are bytewise those it was made from (one memcmp per
+   call) and otherwise makes it again from the rows: the same numbers either way. Made with lv_model_cache_new. */
+struct lv_model_cache {
+    long nb;
+    int valid;      /* the entries below were made from `rows` */
+    double *rows;   /* nb x LV_MODEL_SIZE: the rows they were made from */
+    int *kind;      /* nb: the kind the step loops step body b with (its row's kind, with LV_ON_AXES for wheels on the
+                       default layout) */
+    double *kw;     /* nb x LV_WCOEF_SIZE: the wheel coefficients of the wheeled bodies (others unset) */
+};
+
+/* A cache for nb bodies (empty: lv_simulate fills it on first use), or NULL (out of memory); freed by
+   lv_model_cache_free (NULL is fine). */
+lv_model_cache *lv_model_cache_new(long nb);
+void lv_model_cache_free(lv_model_cache *c);
 
 /* The integrators (LV_INTEGRATOR_*, LV_INTEGRATOR_PLAIN_ONLY(i): plain bodies only, one by one in
    advance_structured), the fixed-step paths (LV_PATH_*: the code of the integrator that takes each; an explicit RK
