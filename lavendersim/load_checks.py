@@ -108,6 +108,11 @@ def _supplying_groups(effects: np.ndarray, nb: int) -> list[tuple[int, np.ndarra
     return out
 
 
+def _reads_no_state(spec) -> bool:
+    """Whether an effect's loads depend on no state value (its kernel reads parameters, m, I_b only)."""
+    return not set(spec.state_inputs) - {"m", "I_b"} and not spec.uses_v_w
+
+
 class LoadBudget:
     """The growth budget of the bodies effects act on (module docstring): references, rates, limits.
 
@@ -143,6 +148,10 @@ class LoadBudget:
         self._2m = 2 * params[:, LY.PARAM_M]
         self._2I = 2 * params[:, LY.PARAM_I_B].min(axis=1)
         self._plain_sel = None if self.plain[self._sel].all() else self.plain[self._sel]
+        # every supplying load reads no state (gravity: m and g only): its rates are those of any state, computed on
+        # the first call and kept (_rates)
+        self._const_rates = all(_reads_no_state(effects_mod.spec_for_code(c)) for c, _, _ in self._groups)
+        self._rates_kept: tuple[np.ndarray, np.ndarray] | None = None
         self.L0, self.P0, self.RL, self.RP = np.zeros(nb), np.zeros(nb), np.zeros(nb), np.zeros(nb)
         self.t0 = np.zeros(nb)    # the step count of each body's reference
         self._scratch: np.ndarray | None = None
@@ -156,25 +165,37 @@ class LoadBudget:
         self.L0, self.P0, self.RL, self.RP, self.t0 = (np.array(a, dtype=np.float64) for a in snap)
         self._wrote = None
 
-    def _momenta(self, x, Omega) -> tuple[np.ndarray, np.ndarray]:
-        """(|L|, |p|) per body (0 outside the check): body |I omega|, or body + wheels for a wheeled one."""
+    def _momenta(self, x, Omega, v=None, w=None) -> tuple[np.ndarray, np.ndarray]:
+        """(|L|, |p|) per body (0 outside the check): body |I omega|, or body + wheels for a wheeled one. v, w: x's
+        v_w and omega_b columns when the caller has them (contiguous copies, _columns), else read from x."""
         nb = x.shape[0]
+        if v is None or w is None:
+            v, w = x[:, LY.STATE_V_W], x[:, LY.STATE_OMEGA_B]
         L, P = np.zeros(nb), np.zeros(nb)
         with np.errstate(over="ignore", invalid="ignore"):
             f = self._psel
             if self.plain.any():
-                L[f] = np.linalg.norm(K.body_momentum(self.params[f, LY.PARAM_I_B], x[f, LY.STATE_OMEGA_B]), axis=-1)
+                L[f] = np.linalg.norm(K.body_momentum(self.params[f, LY.PARAM_I_B], w[f]), axis=-1)
             if self.wheeled.size:     # one batched call of the printed total momentum (as the C screen's)
                 w = self.wheeled
                 L[w] = np.linalg.norm(backends.wheel_total_momentum_batch(self.rows[w], x[w, LY.STATE_Q],
                                                                           x[w, LY.STATE_OMEGA_B], Omega[w]), axis=-1)
             s = self._sel
-            P[s] = self.params[s, LY.PARAM_M] * np.linalg.norm(x[s, LY.STATE_V_W], axis=-1)
+            P[s] = self.params[s, LY.PARAM_M] * np.linalg.norm(v[s], axis=-1)
         return L, P
 
     def _rates(self, x) -> tuple[np.ndarray, np.ndarray]:
         """(|tau|, |F|) per body of the loads that can supply momentum (the decays left out), from the printed
-        NumPy effect functions, one call per effect code."""
+        NumPy effect functions, one call per effect code; when none reads the state, those of the first call (the
+        arrays are not written by the callers)."""
+        if self._rates_kept is not None:
+            return self._rates_kept
+        rates = self._rates_of(x)
+        if self._const_rates:
+            self._rates_kept = rates
+        return rates
+
+    def _rates_of(self, x) -> tuple[np.ndarray, np.ndarray]:
         nb = x.shape[0]
         F, tau = np.zeros((nb, 3)), np.zeros((nb, 3))
         x = np.asarray(x[:, :LY.STATE_SIZE], dtype=np.float64)
@@ -244,14 +265,16 @@ class LoadBudget:
 
     def violation(self, x, Omega, steps: int) -> tuple[int, str] | None:
         """The first loaded body beyond its budget at step `steps`: (body, cause), or None."""
-        L, P = self._momenta(x, Omega)
+        # v_w and omega_b read once from the rows of x (each strided read of a column streams all of x), for the
+        # momenta and the kinetic energy
+        v, w = np.ascontiguousarray(x[:, LY.STATE_V_W]), np.ascontiguousarray(x[:, LY.STATE_OMEGA_B])
+        L, P = self._momenta(x, Omega, v, w)
         Lmax, Pmax = self.limits(steps, x)
         f, ps = self.plain, self._psel
         with np.errstate(over="ignore", invalid="ignore"):
             E = np.zeros(x.shape[0])
             if f.any():
-                E[ps] = K.kinetic_energy(self.params[ps, LY.PARAM_M], self.params[ps, LY.PARAM_I_B],
-                                         x[ps, LY.STATE_V_W], x[ps, LY.STATE_OMEGA_B])
+                E[ps] = K.kinetic_energy(self.params[ps, LY.PARAM_M], self.params[ps, LY.PARAM_I_B], v[ps], w[ps])
             Emax = Pmax ** 2 / self._2m + Lmax ** 2 / self._2I
             bad = self.loaded & ~(L <= Lmax)
             badE = f & ~(E <= Emax)

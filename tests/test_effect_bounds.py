@@ -323,3 +323,39 @@ def test_a_user_declared_decay_gets_the_bound(tmp_path):
     r = subprocess.run([sys.executable, "-c", fresh], cwd=tmp_path, env=env, capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
     assert r.stdout.strip() == after
+
+
+def test_the_budget_keeps_the_rates_of_loads_that_read_no_state():
+    """LoadBudget._rates evaluates the supplying loads once when none reads the state (gravity: m g), the same
+    numbers as a fresh evaluation at any state; a load that reads the state (force_at_point rotates r_b by q) is
+    evaluated at every call. violation's momenta from the columns it gathers once equal those read from the rows."""
+    from lavendersim.generated import layout as LY
+
+    s = lv.Scene()
+    for i in range(5):
+        s.add_body(lv.Body(f"b{i}", 1.0 + i, (0.5, 1.0, 1.5), v_w=(1.0, -i, 0.5), omega_b=(0.2 * i, 0.1, -0.3)))
+    s.add_effect("gravity")
+    s.add_effect("linear_damping", c=0.3)
+    sim = lv.Sim(s, dt=1e-3, integrator="rk4", backend="numpy")
+    b = sim._budget
+    assert b is not None and b._const_rates
+    x1 = sim._x.copy()
+    x2 = x1 * 1.7
+    first = b._rates(x1)
+    assert b._rates(x2) is first
+    for kept, fresh in zip(first, b._rates_of(x2)):
+        assert np.array_equal(kept, fresh)
+    assert not first[0].any() and np.array_equal(first[1], [np.linalg.norm(np.array([0, 0, -9.81]) * (1.0 + i)) for i in range(5)])
+    v, w = np.ascontiguousarray(x2[:, LY.STATE_V_W]), np.ascontiguousarray(x2[:, LY.STATE_OMEGA_B])
+    for a, c in zip(b._momenta(x2, sim._models.Omega), b._momenta(x2, sim._models.Omega, v, w)):
+        assert np.array_equal(a, c) and (a > 0).all()
+
+    s.add_effect("force_at_point", body="b1", r_b=(1.0, 0.0, 0.0), F_w=(0.0, 0.0, 2.0))
+    sim = lv.Sim(s, dt=1e-3, integrator="rk4", backend="numpy")
+    b = sim._budget
+    assert b is not None and not b._const_rates
+    x = sim._x.copy()
+    r1 = b._rates(x)
+    x[1, LY.STATE_Q] = (0.0, np.sqrt(0.5), 0.0, np.sqrt(0.5))   # r_b turned along F: no torque
+    r2 = b._rates(x)
+    assert r2 is not r1 and r1[0][1] == pytest.approx(2.0) and r2[0][1] == pytest.approx(0.0, abs=1e-12)

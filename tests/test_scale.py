@@ -157,7 +157,7 @@ def _divergence(loaded, backend, loop):
     if loop:   # the reference: the per-body loops of before issue 30
         sim._invariants = lambda x, W, reference=False: _loop_invariants(sim, x, W, reference)
         if sim._budget is not None:
-            sim._budget._momenta = lambda x, W: _loop_momenta(sim._budget, x, W)
+            sim._budget._momenta = lambda x, W, *cols: _loop_momenta(sim._budget, x, W)   # (cols: v, w as gathered)
         sim._reference()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", ValidityBoundWarning)

@@ -391,14 +391,6 @@ class _Plan:
         self.last_loads = w
         return w
 
-    def quat_buffer(self, x: np.ndarray) -> np.ndarray:
-        """A struct-of-arrays (n, 4) buffer for the normalized quaternions of states shaped as x."""
-        key = (x.shape[0], x.dtype.str, "q")
-        w = self.works.get(key)
-        if w is None:
-            w = self.works[key] = np.empty((4, x.shape[0]), x.dtype).T
-        return w
-
     def rhs(self, x: np.ndarray, u: np.ndarray | None = None, out: np.ndarray | None = None) -> np.ndarray:
         """d/dt of x (nb, 13), or of [x, Omega] (nb, XS_SIZE) with u (nb, WHEELS_MAX) when bodies have models; into
         out (of x's shape) if given. Plain bodies use Euler's coefficients computed once per plan (the _c kernels)."""
@@ -487,27 +479,32 @@ class _ForcedGroup:
         self.zeros: np.ndarray | None = None
         self.a_buf: np.ndarray | None = None
 
-    def accel(self, K, F):
+    def accel(self, K, F, into=None):
         """a_w = F/m (linear_acceleration), struct-of-arrays; once per plan when F is the index's constant sum, else
-        into the group's buffer (rewritten at every call)."""
+        into `into` when given (the v rows of the right-hand side's output: the kernel's ``x_dot[7:10] = a_w`` is
+        then an assignment of an array to itself, which NumPy skips, instead of a copy), else into the group's
+        buffer (rewritten at every call)."""
         if F is self.const_F:
             return self.a_w
         if self.index.uniform is not None and F is self.index.base[0][1]:
             self.const_F, self.a_w = F, K.linear_acceleration(self.m, F, out=(_soa(np.empty_like(F)),))
             return self.a_w
-        if self.a_buf is None or self.a_buf.shape != F.shape:
-            self.a_buf = _soa(np.empty_like(F))
-        return K.linear_acceleration(self.m, F, out=(self.a_buf,))
+        if into is None:
+            if self.a_buf is None or self.a_buf.shape != F.shape:
+                self.a_buf = _soa(np.empty_like(F))
+            into = self.a_buf
+        return K.linear_acceleration(self.m, F, out=(into,))
 
     def rhs(self, K, x, v, buf, out):
         F, tau = self.index.sums(x, v, buf)
         dest = None if out is None else (out,)
+        into = None if out is None else out[:, V]     # a_w written where the kernel puts it (accel)
         if self.cls == RHS_FORCE:
-            return K.rigid_body_rhs_force_c(x, self.c, self.accel(K, F), out=dest)
+            return K.rigid_body_rhs_force_c(x, self.c, self.accel(K, F, into), out=dest)
         if self.cls == RHS_FULL:
             return K.rigid_body_rhs_c(x, self.m, self.c, F, tau, out=dest)
         if self.cls == RHS_BODY_F:
-            a = self.accel(K, F)
+            a = self.accel(K, F, into)
         else:
             if self.zeros is None:
                 self.zeros = _soa(np.zeros((self.m.shape[0], 3)))
@@ -807,11 +804,48 @@ class _ExplicitRK:
 
     def _step_rows(self, f, x, h, work, rows):
         rows = rows.at(x.shape[0])
+        bound = work.bound_to(self, x, h, rows)
         ks = [None] * len(self.rows)
         for i, terms in enumerate(self.rows):
-            y = x if not terms else self._sums(x, h, terms, ks, work.y, work.t, rows.stage, rows.zero)
+            if not terms:
+                y = x
+            elif bound is not None:
+                y = self._run(bound[i], h, terms, work.y)
+            else:
+                y = self._sums(x, h, terms, ks, work.y, work.t, rows.stage, rows.zero)
             ks[i] = f(y, work.ks[i])
+            if ks[i] is not work.ks[i]:    # (a right-hand side that could not write into its buffer)
+                bound = None
+        if bound is not None:
+            return self._run(bound[-1], h / self.den, self.weights, work.xn)
         return self._sums(x, h / self.den, self.weights, ks, work.xn, work.t, rows.end, rows.zero)
+
+    def _run(self, sums, h, terms, out):
+        """_sums on views bound once (_Work.bound_to): (x, k_j, out, tmp) per run, (x, out, z) per zero-rate run."""
+        runs, zero = sums
+        for X, ks, O, T in runs:
+            self.axpy(X, h, terms, ks, O, T)
+        for X, O, z in zero:
+            np.add(X, z, out=O)
+        return out
+
+    def bind(self, x, h, work, rows) -> tuple:
+        """The views _step_rows' sums read and write, per stage and for the end (_run's arguments), on x and the
+        buffers of work (its ks[j] being stage j's rates)."""
+        X, Y, Xn, T = x.T, work.y.T, work.xn.T, work.t.T
+        K = [k.T for k in work.ks]
+
+        def sums(out, terms, hh, runs, zero):
+            z = None
+            if zero:
+                z = _ZERO_SUMS.get((self, terms, hh))
+                if z is None:
+                    z = _ZERO_SUMS[self, terms, hh] = float(self.axpy(np.full(1, -0.0), hh, terms,
+                                                                      [np.zeros(1)] * len(K))[0])
+            return (tuple((X[a:b], [k[a:b] for k in K], out[a:b], T[a:b]) for a, b in runs),
+                    tuple((X[a:b], out[a:b], z) for a, b in zero))
+        return (tuple(sums(Y, terms, h, rows.stage, rows.zero) if terms else None for terms in self.rows)
+                + (sums(Xn, self.weights, h / self.den, rows.end, rows.zero),))
 
 
 _ZERO_SUMS: dict = {}   # (tableau, terms, h) -> the sum over zero rates (±0.0)
@@ -826,6 +860,17 @@ class _Work:
             return np.empty(shape[::-1], dtype).T
         self.ks = [new() for _ in range(stages)]
         self.y, self.t, self.xn = new(), new(), new()
+        # the stepper's views on these buffers for the last two (x, xn) pairs (a step's x and xn trade places: adopt)
+        self.bound: list[tuple] = []
+
+    def bound_to(self, rk, x, h, rows) -> tuple | None:
+        """rk.bind's views for a step from x (kept for the pair (x, xn) and the same tableau, h and rows)."""
+        for b in self.bound:
+            if b[0] is x and b[1] is self.xn and b[2] is rk and b[3] == h and b[4] is rows:
+                return b[5]
+        b = (x, self.xn, rk, h, rows, rk.bind(x, h, self, rows))
+        self.bound = [b] + self.bound[:1]
+        return b[5]
 
 
 def _total(x: np.ndarray) -> float:
@@ -934,7 +979,9 @@ def step(plan: _Plan, x: np.ndarray, integrator: str, normalize: bool, dt: float
     else:  # validated by Sim; kept for direct callers
         raise ValueError(f"integrator: unknown {integrator!r}")
     if normalize:
-        xn[:, Q] = plan.K.quat_normalize(xn[:, Q], out=(plan.quat_buffer(xn),))
+        # in place: the printed kernel reads q whole (its norm) before one multiply writes q_unit over it elementwise
+        q = xn[:, Q]
+        plan.K.quat_normalize(q, out=(q,))
     if plan.has_models:
         plan.constrain(xn)
     return xn
