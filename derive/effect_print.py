@@ -16,7 +16,7 @@ import pprint
 from collections.abc import Sequence
 
 from . import effect as E
-from . import effect_fuse
+from . import effect_fuse, effect_fuse_user
 from .effect_decay import decay_rate
 from .printers import NpPrinter
 from .layout import STATE
@@ -234,6 +234,7 @@ def c_user_source(effects: list[E.EffectDecl], prefix: str) -> list[str]:
             c += c_tile_function(d) + [""]
             if d.body_outputs is not None:
                 c += c_tile_function(d, body=True) + [""]
+        c += effect_fuse_user.c_fused_tiles(effects, user_function)
     return c
 
 

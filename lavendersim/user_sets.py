@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import ctypes
 import hashlib
+import importlib
 import json
 import os
 import re
@@ -335,6 +336,24 @@ class UserSet:
         assert address is not None, effect   # (a symbol dlsym found is never NULL)
         return address
 
+    def c_fused_tiles(self, effect: str) -> tuple[int, ...]:
+        """Addresses of an effect's fused tiles (derive/effect_fuse_user.py), q raw then normalized, each per
+        instruction set (base, avx2, avx512); zeros when the library has none, or was compiled against other engine
+        sources than this lavendersim's (its lvu_engine_hash: the engine then steps the effect in stage passes)."""
+        from .generated import effects_meta
+        lib = self.library()
+        try:
+            built = ctypes.c_char.in_dll(lib, "lvu_engine_hash")
+            got = ctypes.string_at(ctypes.addressof(built)).decode("ascii", "replace")
+        except ValueError:
+            got = None
+        out, current = [], got is not None and got == engine_hash()
+        for norm in ("raw", "norm"):
+            for isa in effects_meta.TILE_ISAS:
+                fn = getattr(lib, f"lvu_fused_tile{effects_meta.TILE_LANES}_{effect}_{norm}_{isa}", None)
+                out.append(0 if fn is None or not current else ctypes.cast(fn, ctypes.c_void_p).value or 0)
+        return tuple(out)
+
     def c_tile_functions(self, effect: str, body: bool = False) -> tuple[int, int, int]:
         """Addresses of an effect's tile form (body: its body-frame form's) for the C SIMD tiles, per instruction set
         (base, avx2, avx512); 0 where the library has none (a library built before tile forms, or a copy this
@@ -346,6 +365,30 @@ class UserSet:
             fn = getattr(lib, f"lvu_effect_tile{effects_meta.TILE_LANES}_{effect}{'_b' if body else ''}_{isa}", None)
             out.append(0 if fn is None else ctypes.cast(fn, ctypes.c_void_p).value or 0)
         return out[0], out[1], out[2]
+
+
+def engine_hash() -> str | None:
+    """The hash of the C engine's generated sources (the extension's GENERATED_HASH, which lavendersim's C backend
+    checks against the files it runs), or None when the extension is not built."""
+    try:   # loaded by name, as backends.c_backend does (an import statement would read as a circle to the scans)
+        ext = importlib.import_module("lavendersim._lavender_c")
+    except ImportError:
+        return None
+    return str(ext.GENERATED_HASH)
+
+
+def engine_flags() -> list[str]:
+    """The compiler flags that give a user set's library the engine's generated C sources (its fused tiles, see
+    lavendersim/derive/effect_fuse_user.py): their folder on the include path and their hash (engine_hash) as
+    LVU_ENGINE; [] without the C extension or its generated sources (then the library has no fused tiles, and the
+    engine steps the user's effects in stage passes)."""
+    from . import generated
+
+    gen = Path(generated.__file__).resolve().parent
+    want = engine_hash()
+    if want is None or not all((gen / n).is_file() for n in ("kernels.c", "kernels.h", "layout.h", "tableaux.h")):
+        return []
+    return ["-I", str(gen), f'-DLVU_ENGINE="{want}"']
 
 
 def _file_id(st: os.stat_result) -> tuple[int, int, int, int]:
@@ -408,7 +451,8 @@ def _compile(directory: Path, set_name: str, sources: dict, cmd: list[str], symb
     and checked (ABI and every symbol), then moved into directory/build/ under its content-hashed name
     (never over a library the current manifest uses unless it no longer matches it).
     Returns (entry, compiled now)."""
-    name = _library_name(set_name, sources, cmd)
+    engine = engine_flags()
+    name = _library_name(set_name, sources, cmd + engine)
     rel = f"build/{name}"
     entry = {"file": rel, "compiler": cmd}
     old = _manifest_or_none(directory)
@@ -425,7 +469,7 @@ def _compile(directory: Path, set_name: str, sources: dict, cmd: list[str], symb
         tmp = Path(tmp_dir)
         for n in SOURCES:
             (tmp / n).write_text(sources[n], encoding="utf-8")
-        full = cmd + CFLAGS + [str(tmp / "kernels.c"), "-o", str(tmp / name), "-lm"]
+        full = cmd + CFLAGS + engine + [str(tmp / "kernels.c"), "-o", str(tmp / name), "-lm"]
         try:
             r = subprocess.run(full, capture_output=True, text=True, cwd=tmp)
         except OSError as exc:

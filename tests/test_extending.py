@@ -312,7 +312,7 @@ def test_user_effects_on_the_simd_tiles_are_the_scalar_path_and_numpy_bitwise(gu
     from lavendersim import effects as E
     rows = np.asarray(s.arrays()[2])
     table = user_effect_table(rows)
-    assert table.shape[1] == 10
+    assert table.shape[1] == 16
     # the table is indexed by user code; codes this scene does not use (other sets registered in this process by
     # other tests) are zero rows, so only the scene's own user effects are checked
     codes = np.unique(rows[:, E.ROW_CODE]).astype(np.int64)
@@ -320,9 +320,9 @@ def test_user_effects_on_the_simd_tiles_are_the_scalar_path_and_numpy_bitwise(gu
     assert len(used) == 2
     gg = E.REGISTRY["gravity_gradient"].code - E.USER_CODE_BASE
     drag = E.REGISTRY["quadratic_drag"].code - E.USER_CODE_BASE
-    assert (table[gg, 6:7] != 0).all() and (table[drag, 6:] == 0).all()   # the body-frame form of torque_b only
-    if platform.machine() in ("x86_64", "AMD64"):
-        assert (table[used, 3:6] != 0).all() and (table[gg, 7:] != 0).all()   # tile forms, at every instruction set
+    assert (table[gg, 6:7] != 0).all() and (table[drag, 6:10] == 0).all()   # the body-frame form of torque_b only
+    if platform.machine() in ("x86_64", "AMD64"):   # tile forms and fused tiles (q raw / normalized), at every ISA
+        assert (table[used, 3:6] != 0).all() and (table[gg, 7:10] != 0).all() and (table[used, 10:] != 0).all()
     try:
         for level in range(C.isa(-1)[2] + 1):
             C.isa(level)
@@ -396,6 +396,56 @@ def test_a_body_torque_user_effect_runs_on_the_body_or_world_right_hand_side_bit
                 assert np.array_equal(sim.x, ref.x), (label, C.isa()[1])
         finally:
             C.isa(-1)
+
+
+@pytest.mark.parametrize("n", [5, 67])
+@pytest.mark.parametrize("normalize", [True, False])
+@pytest.mark.parametrize("effect", ["gravity_gradient", "quadratic_drag"])
+def test_a_user_effects_fused_tile_is_its_stage_passes_bitwise(guide, monkeypatch, n, normalize, effect):
+    """A tile of bodies whose one effect is a user effect steps on that effect's fused tile (printed into the user's
+    library by derive/effect_fuse_user.py, the engine's RK4 tile with the effect inlined; gravity_gradient: the body
+    torque's tile kind, quadratic_drag: a force's): at every instruction set it gives the bits of the effect tile's
+    stage passes (the same table without its fused tiles), of the scalar path and of NumPy, each body its own
+    parameters."""
+    import platform
+
+    from lavendersim import _lavender_c as C
+    from lavendersim.backends import c_backend
+    rng = np.random.default_rng(n)
+    s = lv.Scene()
+    for i in range(n):
+        s.add_body(lv.Body.box(f"b{i}", 1.0 + rng.random(), tuple(0.1 + rng.random(3)),
+                               p_w=tuple(3.0 * rng.standard_normal(3)), q=tuple(rng.standard_normal(4)),
+                               v_w=tuple(rng.standard_normal(3)), omega_b=tuple(rng.standard_normal(3))))
+        if effect == "gravity_gradient":
+            s.add_effect(effect, body=f"b{i}", mu=MU * (0.5 + rng.random()), center_w=tuple(0.1 * rng.random(3)))
+        else:
+            s.add_effect(effect, body=f"b{i}", rho=RHO * (0.5 + rng.random()), cd_area=CDA)
+    table = c_backend.user_effect_table(np.asarray(s.arrays()[2]))
+    code = E.REGISTRY[effect].code - E.USER_CODE_BASE
+    if platform.machine() in ("x86_64", "AMD64"):
+        assert (table[code, 10:] != 0).all()    # its fused tiles, q raw / normalized, at every instruction set
+    ref = lv.Sim(s, dt=1e-3, integrator="rk4", backend="numpy", normalize=normalize)
+    ref.run(90)
+    full = c_backend.user_effect_table
+
+    def without_fused(effects):
+        out = full(effects)
+        if out is not None:
+            out = out.copy()
+            out[:, 10:] = 0
+        return out
+
+    try:
+        for level in range(C.isa(-1)[2] + 1):
+            C.isa(level)
+            for table_of in (full, without_fused):
+                monkeypatch.setattr(c_backend, "user_effect_table", table_of)
+                sim = lv.Sim(s, dt=1e-3, integrator="rk4", backend="c", normalize=normalize)
+                sim.run(90)
+                assert np.array_equal(sim.x, ref.x), (C.isa()[1], table_of.__name__)
+    finally:
+        C.isa(-1)
 
 
 def reference_rk4_gg(x, m, I_b, dt, n):

@@ -259,9 +259,10 @@ def _cause(start: np.ndarray, pre: np.ndarray, params: np.ndarray, effects: np.n
 
 
 def user_effect_table(effects: np.ndarray) -> np.ndarray | None:
-    """The C user-effect table for the codes in this effect table: int64 (n, 10) rows [function address,
-    n_params, flags, tile forms (base, avx2, avx512), body-frame form, its tile forms] (csrc/step.h
-    lv_user_table_row; 0: none, the body-frame ones for an effect declaring torque_b alone), row i for code
+    """The C user-effect table for the codes in this effect table: int64 (n, 16) rows [function address,
+    n_params, flags, tile forms (base, avx2, avx512), body-frame form, its tile forms, fused tiles (q raw: base,
+    avx2, avx512; normalized: the same)] (csrc/step.h lv_user_table_row; 0: none, the body-frame ones for an
+    effect declaring torque_b alone, the fused ones for an effect that reads the state), row i for code
     USER_CODE_BASE + i; None when no user code appears. Compiles (cached) and loads each user set's library on
     first use.
 
@@ -272,7 +273,7 @@ def user_effect_table(effects: np.ndarray) -> np.ndarray | None:
 
     Returns
     -------
-    ndarray (m, 10) of int64 or None
+    ndarray (m, 16) of int64 or None
 
     Raises
     ------
@@ -285,7 +286,7 @@ def user_effect_table(effects: np.ndarray) -> np.ndarray | None:
     user = codes[codes >= E.USER_CODE_BASE]
     if not user.size:
         return None
-    table = np.zeros((int(user.max()) - E.USER_CODE_BASE + 1, 10), dtype=np.int64)
+    table = np.zeros((int(user.max()) - E.USER_CODE_BASE + 1, 16), dtype=np.int64)
     for code in user:
         spec = E.spec_for_code(int(code))  # LavenderInputError for a code no declaration has
         assert spec.user_set is not None   # (a user code)
@@ -293,7 +294,8 @@ def user_effect_table(effects: np.ndarray) -> np.ndarray | None:
         table[code - E.USER_CODE_BASE] = (s.c_function(spec.name), spec.n_params, spec.rhs_flags,
                                           *s.c_tile_functions(spec.name),
                                           s.c_function(spec.name, True) if body else 0,
-                                          *(s.c_tile_functions(spec.name, True) if body else (0, 0, 0)))
+                                          *(s.c_tile_functions(spec.name, True) if body else (0, 0, 0)),
+                                          *s.c_fused_tiles(spec.name))
     return table
 
 

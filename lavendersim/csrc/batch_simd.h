@@ -64,6 +64,7 @@ typedef struct {
     int off[LV_TE_EFFECTS];
     lv_effect_tile_fn utile[LV_TE_EFFECTS];
     int fused; /* the fused tile of the effects' pattern (its LV_EFFECT_FUSED id, tile_fx_pattern), 0 none */
+    lv_user_fused_fn ufused[2]; /* one user effect alone: its fused tile, q raw / normalized (NULL: none) */
     int first; /* the first effect of the pattern: effects 0 .. first-1 read no state (summed in P's F, TAU rows) */
     double EP[LV_TE_PARAMS + LV_EFFECT_ROW_MIN_PARAMS][LV_TILE]; /* + room for a lane's full-width load */
 } lv_tile_fx;
@@ -271,6 +272,10 @@ static const double lv_te_zero3[3] = {0.0, 0.0, 0.0};
                                      const double (*LV_RESTRICT P)[LV_TILE], const lv_tile_fx *LV_RESTRICT fx, \
                                      long m, double dt, long n_steps)                                   \
     {                                                                                                   \
+        if (fx->ufused[NORMALIZE] != NULL) { /* one user effect: its fused tile, in the user's library */    \
+            fx->ufused[NORMALIZE](T, J, fx->EP, P[LV_TP_M], P + LV_TP_I, m, dt, n_steps);                \
+            return;                                                                                     \
+        }                                                                                               \
         switch (fx->fused) {                                                                            \
         LV_EFFECT_FUSED_##KIND(LV_TF_GO, NAME)                                                          \
         default: break;                                                                                 \
@@ -518,6 +523,15 @@ static void tile_fx_fill(lv_tile_fx *fx, const lv_effect_index *ix, const long *
         o += np;
     }
     tile_fx_pattern(fx);
+    fx->ufused[0] = fx->ufused[1] = NULL;
+    if (fx->n_eff == 1 && fx->codes[0] >= LV_EFFECT_USER_BASE) { /* (tile_effect_info found its entry) */
+        const lv_user_effect *u = &ix->user->entries[fx->codes[0] - LV_EFFECT_USER_BASE];
+        const int isa = lv_isa_get();
+        if (isa >= LV_ISA_BASE && isa <= LV_ISA_AVX512) {
+            fx->ufused[0] = u->fused[0][isa - LV_ISA_BASE];
+            fx->ufused[1] = u->fused[1][isa - LV_ISA_BASE];
+        }
+    }
 }
 
 static int tile_finite(const double (*T)[LV_TILE], long j)
@@ -546,6 +560,7 @@ static long advance_free_soa(double *state, const double *params, const long *id
     long c, cm, s, j;
     int k, ok;
     fx.n_eff = fx.fused = fx.first = 0;
+    fx.ufused[0] = fx.ufused[1] = NULL;
     if (ix != NULL && !sums) {
         memset(fx.EP, 0, sizeof fx.EP); /* the rows past an effect's parameters are loaded, never used */
         tile_fx_fill(&fx, ix, ids, m);

@@ -162,9 +162,9 @@ static int stepper_init(Stepper *s, PyObject *args, PyObject *kw)
         Py_buffer v;
         Py_ssize_t i;
         if (PyObject_GetBuffer(user_obj, &v, PyBUF_C_CONTIGUOUS) != 0) return -1;
-        if (v.itemsize != 8 || v.ndim != 2 || (v.shape[1] != 3 && v.shape[1] != 6 && v.shape[1] != 10)) {
+        if (v.itemsize != 8 || v.ndim != 2 || (v.shape[1] != 3 && v.shape[1] != 6 && v.shape[1] != 10 && v.shape[1] != 16)) {
             PyBuffer_Release(&v);
-            PyErr_SetString(PyExc_ValueError, "Stepper: user_effects must be int64 (n, 3), (n, 6) or (n, 10)");
+            PyErr_SetString(PyExc_ValueError, "Stepper: user_effects must be int64 (n, 3), (n, 6), (n, 10) or (n, 16)");
             return -1;
         }
         s->user.n = (long)v.shape[0];

@@ -71,7 +71,7 @@ static int rows_of(Py_buffer *v, Py_ssize_t cols, const char *what, const char *
 }
 
 /* The user-effect table: an int64 buffer (n, 3) of [function address, n_params, flags] rows, or (n, 6) with the
-   tile forms' addresses, or (n, 10) with the body-frame form's too (lv_user_table_row), row i for code LV_EFFECT_USER_BASE + i (address 0: no such code). On success *out is malloc'ed (or NULL for none). */
+   tile forms' addresses, or (n, 10) with the body-frame form's too, or (n, 16) with the fused tiles' (lv_user_table_row), row i for code LV_EFFECT_USER_BASE + i (address 0: no such code). On success *out is malloc'ed (or NULL for none). */
 static int get_user_table(PyObject *obj, lv_user_effect **out, long *n)
 {
     Py_buffer v;
@@ -84,10 +84,11 @@ static int get_user_table(PyObject *obj, lv_user_effect **out, long *n)
     f = v.format ? v.format : "B";
     if (f[0] == '@' || f[0] == '=' || f[0] == '<') f++;
     if (v.itemsize != 8 || (strcmp(f, "q") != 0 && strcmp(f, "l") != 0) || v.ndim != 2
-        || (v.shape[1] != 3 && v.shape[1] != 6 && v.shape[1] != 10)) {
+        || (v.shape[1] != 3 && v.shape[1] != 6 && v.shape[1] != 10 && v.shape[1] != 16)) {
         PyErr_SetString(PyExc_TypeError, "simulate: user_effects must be a C-contiguous int64 array of shape (n, 3) "
                                          "[function address, n_params, flags], (n, 6) [..., tile forms base, avx2, "
-                                         "avx512] or (n, 10) [..., body-frame form, its tile forms base, avx2, avx512]");
+                                         "avx512], (n, 10) [..., body-frame form, its tile forms base, avx2, avx512] or "
+                                         "(n, 16) [..., fused tiles raw base, avx2, avx512, normalized base, avx2, avx512]");
         PyBuffer_Release(&v);
         return -1;
     }

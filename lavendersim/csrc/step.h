@@ -31,6 +31,14 @@ static inline int lv_kind_valid(double kind)
    (lv_effect_apply) are generated from the effect declarations (generated/kernels.h). User effects are
    compiled apart and reach the stepping loop through this table: entry i serves code
    LV_EFFECT_USER_BASE + i (fn NULL: no such code). */
+/* A user effect's fused tile (derive/effect_fuse_user.py, in the user's library): n_steps RK4 steps of the m lanes of a
+   tile whose bodies' one effect is that effect, its function inlined into the plain tile's lane loop: T the states
+   (LV_STATE_SIZE rows), J the Euler coefficients (LV_EULER_SIZE rows), p the effect's parameters (a row each), m_row
+   the masses, I_b the principal moments (3 rows); bitwise the effect tile's stage passes. */
+typedef void (*lv_user_fused_fn)(double (*T)[LV_EFFECT_TILE], const double (*J)[LV_EFFECT_TILE],
+                                 const double (*p)[LV_EFFECT_TILE], const double *m_row,
+                                 const double (*I_b)[LV_EFFECT_TILE], long m, double dt, long n_steps);
+
 typedef struct {
     lv_effect_fn fn;  /* adds the effect's force and torque (the lv_effect_fn convention) */
     int n_params;     /* parameters it reads from its row */
@@ -39,12 +47,14 @@ typedef struct {
     lv_effect_fn fn_b; /* LV_EFFECT_TORQUE_B: its body-frame form (the torque added in the body frame, as
                           lv_effect_apply_b adds a built-in's), else NULL */
     lv_effect_tile_fn tile_b[3]; /* the body-frame form's tile forms (NULL: none) */
+    lv_user_fused_fn fused[2][3]; /* its fused tiles (q raw / normalized x LV_ISA_BASE .. LV_ISA_AVX512; NULL: none) */
 } lv_user_effect;
 
 /* The user-effect table's columns: [function address, n_params, flags], then optionally the tile forms' addresses
-   (base, avx2, avx512; 0: none), then optionally the body-frame form's address and its tile forms' (0: none).
-   lv_user_table_row reads row r of a table of `cols` (3, 6 or 10) int64 columns. A row flagged LV_EFFECT_TORQUE_B
-   without a body-frame form is read as a world-torque effect (LV_EFFECT_TORQUE_W): never a torque lost. */
+   (base, avx2, avx512; 0: none), then optionally the body-frame form's address and its tile forms' (0: none), then
+   optionally the fused tiles' (q raw: base, avx2, avx512; q normalized: the same; 0: none). lv_user_table_row reads
+   row r of a table of `cols` (3, 6, 10 or 16) int64 columns. A row flagged LV_EFFECT_TORQUE_B without a body-frame
+   form is read as a world-torque effect (LV_EFFECT_TORQUE_W, no fused tile): never a torque lost. */
 static inline void lv_user_table_row(const long long *r, int cols, lv_user_effect *u)
 {
     int k;
@@ -54,8 +64,11 @@ static inline void lv_user_table_row(const long long *r, int cols, lv_user_effec
     for (k = 0; k < 3; k++) u->tile[k] = cols >= 6 ? (lv_effect_tile_fn)(uintptr_t)r[3 + k] : NULL;
     u->fn_b = cols >= 10 ? (lv_effect_fn)(uintptr_t)r[6] : NULL;
     for (k = 0; k < 3; k++) u->tile_b[k] = cols >= 10 ? (lv_effect_tile_fn)(uintptr_t)r[7 + k] : NULL;
-    if ((u->flags & LV_EFFECT_TORQUE_B) && u->fn_b == NULL)
+    for (k = 0; k < 6; k++) u->fused[k / 3][k % 3] = cols >= 16 ? (lv_user_fused_fn)(uintptr_t)r[10 + k] : NULL;
+    if ((u->flags & LV_EFFECT_TORQUE_B) && u->fn_b == NULL) {
         u->flags = (u->flags & ~LV_EFFECT_TORQUE_B) | LV_EFFECT_TORQUE_W;
+        for (k = 0; k < 6; k++) u->fused[k / 3][k % 3] = NULL;
+    }
 }
 
 typedef struct {
