@@ -140,7 +140,9 @@ KINDS = (("JOINT", 1, "world-anchored spherical joint: p_w, v_w follow from q, o
 CONSTANTS = (("WHEELS_MAX", WHEELS_MAX, "wheel slots per body (XS.Omega, MODEL.J, the columns of MODEL.A_b)"),
              ("WHEELS_BODY_AXES", WHEELS_BODY_AXES, "wheels of the default layout: the body x, y, z axes, A_b = [I | 0]"),
              ("QUAT_RATE_SCALE", 0.5, "dq/dt = QUAT_RATE_SCALE q (x) [omega_b, 0] (rigid_body_rates_free_c returns the "
-              "product; a step folds the scale into its dt; checked in derive/rigid_body.py)"))
+              "product; a step folds the scale into its dt; checked in derive/rigid_body.py)"),
+             ("QUAT_RENORM_EPS_MAX", 2.0 ** -18, "|eps| = ||q|^2 - 1| up to which quat_renormalize_near_unit leaves "
+              "|q| within 2^-53 of 1 by its series alone (checked in derive/quaternion.py); beyond it, q / |q|"))
 
 
 def print_c() -> str:

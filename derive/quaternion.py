@@ -9,6 +9,11 @@ from __future__ import annotations
 import sympy as sp
 
 from .kernel import Arg, Kernel, scalar, vec
+from .layout import CONSTANTS
+
+# Terms of the series of (1 + eps)^(-1/2) that quat_renormalize_near_unit keeps: eps^0 .. eps^RENORM_ORDER. An even
+# order keeps the polynomial positive for every eps (q's direction kept even outside the validity range).
+RENORM_ORDER = 2
 
 
 def qmul(a: sp.Matrix, b: sp.Matrix) -> sp.Matrix:
@@ -81,6 +86,44 @@ def rot_z(c_):
 def axis_angle_quat(u: sp.Matrix, theta) -> sp.Matrix:
     s = sp.sin(theta / 2)
     return sp.Matrix([u[0] * s, u[1] * s, u[2] * s, sp.cos(theta / 2)])
+
+
+def renorm_series(eps: sp.Symbol, order: int = RENORM_ORDER) -> sp.Expr:
+    """1/sqrt(1 + eps) to order eps^order, in Horner form: 1 - eps/2 + 3 eps^2/8 (order 2)."""
+    c = [sp.binomial(sp.Rational(-1, 2), k) for k in range(order + 1)]
+    p = c[order]
+    for k in range(order - 1, -1, -1):
+        p = c[k] + eps * p
+    return p
+
+
+def renorm_error_bound(order: int, eps_max) -> sp.Rational:
+    """An upper bound of ||q p(eps)| - 1| = |sqrt(1 + eps) p(eps) - 1| over |eps| <= eps_max < 1, exact: the
+    series' first dropped coefficient |c| eps_max^(order+1) / (1 - eps_max) (the coefficients of (1 + eps)^(-1/2)
+    fall in magnitude, so the geometric sum bounds the tail for either sign of eps), times sqrt(1 + eps_max) < 1 +
+    eps_max."""
+    d = sp.nsimplify(eps_max)
+    c = abs(sp.binomial(sp.Rational(-1, 2), order + 1))
+    return c * d ** (order + 1) / (1 - d) * (1 + d)
+
+
+def _check_renorm(order: int) -> sp.Rational:
+    """Derivation-time proofs for quat_renormalize_near_unit: the polynomial is the Taylor series of 1/sqrt(1 + eps)
+    to eps^order, positive for every real eps (the direction of q is kept), and within QUAT_RENORM_EPS_MAX it
+    leaves |q| within 2^-53 of 1 (below a double's rounding of 1). Returns the bound."""
+    e = sp.Symbol("eps", real=True)
+    p = renorm_series(e, order)
+    taylor = sp.series(1 / sp.sqrt(1 + e), e, 0, order + 1).removeO()
+    if sp.expand(p - taylor) != 0:
+        raise RuntimeError("derive: renorm_series is not the Taylor series of 1/sqrt(1 + eps)")
+    if order % 2 or sp.Poly(sp.expand(p), e).count_roots() != 0:
+        raise RuntimeError("derive: renorm_series has a real root (q's direction would flip)")
+    eps_max = dict((n, v) for n, v, _ in CONSTANTS)["QUAT_RENORM_EPS_MAX"]
+    bound = renorm_error_bound(order, eps_max)
+    if not bound <= sp.Rational(1, 2**53):
+        raise RuntimeError(f"derive: QUAT_RENORM_EPS_MAX = {eps_max} is too wide for order {order}: "
+                           f"||q| - 1| up to {float(bound):.3g}")
+    return bound
 
 
 def _check_identities() -> None:
@@ -191,6 +234,13 @@ def kernels() -> list[Kernel]:
     from_two = sp.Matrix([sp.Piecewise((perp[i] / sp.sqrt(perp.dot(perp)), flip), (arc[i] / sp.sqrt(arc.dot(arc)), True))
                           for i in range(3)] + [sp.Piecewise((0, flip), (arc[3] / sp.sqrt(arc.dot(arc)), True))])
 
+    # Near-unit renormalization without sqrt or division (the opt-in FMA tiles, after each RK4 step): q p(eps),
+    # eps = |q|^2 - 1, p the series of 1/sqrt(1 + eps); the direction exact, |q| within 2^-53 of 1 while
+    # |eps| <= QUAT_RENORM_EPS_MAX (the caller checks eps and takes quat_normalize beyond it).
+    renorm_bound = _check_renorm(RENORM_ORDER)
+    eps = sp.Symbol("eps_q", real=True)
+    near = q * renorm_series(eps)
+
     Q = "quaternion (x, y, z, w), scalar last"
     return [
         Kernel("quat_mul", "Hamilton product", r"a \otimes b = \begin{bmatrix} a_w b_v + b_w a_v + a_v \times b_v \\ a_w b_w - a_v \cdot b_v \end{bmatrix}",
@@ -199,6 +249,18 @@ def kernels() -> list[Kernel]:
                [Arg("q", q, Q)], [Arg("q_conj", qconj(q), Q)], g),
         Kernel("quat_normalize", "Scale to unit length", r"\hat q = q / \lVert q \rVert",
                [Arg("q", q, Q)], [Arg("q_unit", q / qnorm, Q)], g),
+        Kernel("quat_renormalize_near_unit", "Scale a near-unit quaternion to unit length without sqrt or division",
+               r"\hat q = q\,(1 - \tfrac12\varepsilon + \tfrac38\varepsilon^2),\ \varepsilon = \lVert q \rVert^2 - 1",
+               [Arg("q", q, Q + ", |q| near 1", "unit_quaternion")],
+               [Arg("q_unit", near, Q + ", unit to rounding while |eps| <= QUAT_RENORM_EPS_MAX"),
+                Arg("eps", eps, "|q|^2 - 1: the caller takes quat_normalize where |eps| > QUAT_RENORM_EPS_MAX (or NaN)")],
+               g, where=[(eps, q.dot(q) - 1)],
+               notes=[f"The Taylor series of 1/sqrt(1 + eps) to eps^{RENORM_ORDER} (checked at derive time): q's "
+                      "direction exact (the polynomial has no real root), ||q_unit| - 1| <= "
+                      f"{float(renorm_bound):.2g} from the series for |eps| <= QUAT_RENORM_EPS_MAX = 2^-18, below "
+                      "a double's rounding; after an RK4 step from a unit q, eps is the step's rounding (~1e-16) "
+                      "plus its O((|omega| dt)^6) norm error.",
+                      "Not bitwise quat_normalize: the opt-in FMA tiles (Sim(..., contract=\"fma\")) use it."]),
         Kernel("quat_rotate", "Rotate a body vector into the world frame", r"v_w = R(q)\,v_b = (q \otimes [v_b,0] \otimes q^*)_v",
                [Arg("q", q, Q + ", unit, R_WB", "unit_quaternion"), Arg("v_b", v_b, "vector, body frame")],
                [Arg("v_w", rotate(q, v_b), "vector, world frame")], g),

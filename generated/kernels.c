@@ -345,6 +345,20 @@ void lv_quat_normalize(const double *q, double *q_unit) {
     q_unit[3] = q_3*t0;
 }
 
+void lv_quat_renormalize_near_unit(const double *q, double *q_unit, double *eps) {
+    const double q_0 = q[0];
+    const double q_1 = q[1];
+    const double q_2 = q[2];
+    const double q_3 = q[3];
+    const double eps_q = (q_0*q_0) + (q_1*q_1) + (q_2*q_2) + (q_3*q_3) - 1;
+    const double t0 = eps_q*(((3.0/8.0))*eps_q + (-1.0/2.0)) + 1;
+    q_unit[0] = q_0*t0;
+    q_unit[1] = q_1*t0;
+    q_unit[2] = q_2*t0;
+    q_unit[3] = q_3*t0;
+    eps[0] = eps_q;
+}
+
 void lv_quat_rotate(const double *q, const double *v_b, double *v_w) {
     const double q_0 = q[0];
     const double q_1 = q[1];
@@ -3586,6 +3600,7 @@ static void packed_effect_angular_damping_b(const double *in, double *out) { lv_
 static void packed_quat_mul(const double *in, double *out) { lv_quat_mul(in + 0, in + 4, out + 0); }
 static void packed_quat_conj(const double *in, double *out) { lv_quat_conj(in + 0, out + 0); }
 static void packed_quat_normalize(const double *in, double *out) { lv_quat_normalize(in + 0, out + 0); }
+static void packed_quat_renormalize_near_unit(const double *in, double *out) { lv_quat_renormalize_near_unit(in + 0, out + 0, out + 4); }
 static void packed_quat_rotate(const double *in, double *out) { lv_quat_rotate(in + 0, in + 4, out + 0); }
 static void packed_quat_to_matrix(const double *in, double *out) { lv_quat_to_matrix(in + 0, out + 0); }
 static void packed_matrix_to_quat(const double *in, double *out) { lv_matrix_to_quat(in + 0, out + 0); }
@@ -3678,6 +3693,7 @@ const lv_kernel_info lv_kernel_table[LV_KERNEL_COUNT] = {
     {"quat_mul", 8, 4, packed_quat_mul},
     {"quat_conj", 4, 4, packed_quat_conj},
     {"quat_normalize", 4, 4, packed_quat_normalize},
+    {"quat_renormalize_near_unit", 4, 5, packed_quat_renormalize_near_unit},
     {"quat_rotate", 7, 3, packed_quat_rotate},
     {"quat_to_matrix", 4, 9, packed_quat_to_matrix},
     {"matrix_to_quat", 9, 4, packed_matrix_to_quat},

@@ -11,7 +11,7 @@ typedef struct {
     void (*packed)(const double *in, double *out);
 } lv_kernel_info;
 
-#define LV_KERNEL_COUNT 90
+#define LV_KERNEL_COUNT 91
 extern const lv_kernel_info lv_kernel_table[LV_KERNEL_COUNT];
 
 /* particle_moments: One particle's mass moment and momentum (summed: m r_COM and p).
@@ -138,6 +138,12 @@ void lv_quat_conj(const double *q, double *q_conj);
      in  q [4]: quaternion (x, y, z, w), scalar last
      out q_unit [4]: quaternion (x, y, z, w), scalar last */
 void lv_quat_normalize(const double *q, double *q_unit);
+
+/* quat_renormalize_near_unit: Scale a near-unit quaternion to unit length without sqrt or division.
+     in  q [4]: quaternion (x, y, z, w), scalar last, |q| near 1
+     out q_unit [4]: quaternion (x, y, z, w), scalar last, unit to rounding while |eps| <= QUAT_RENORM_EPS_MAX
+     out eps scalar: |q|^2 - 1: the caller takes quat_normalize where |eps| > QUAT_RENORM_EPS_MAX (or NaN) */
+void lv_quat_renormalize_near_unit(const double *q, double *q_unit, double *eps);
 
 /* quat_rotate: Rotate a body vector into the world frame.
      in  q [4]: quaternion (x, y, z, w), scalar last, unit, R_WB

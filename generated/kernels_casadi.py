@@ -371,6 +371,20 @@ def quat_normalize(q):
     return casadi.vertcat(q_0*t0, q_1*t0, q_2*t0, q_3*t0)
 
 
+def quat_renormalize_near_unit(q):
+    """quat_renormalize_near_unit: Scale a near-unit quaternion to unit length without sqrt or division.
+      in  q [4]: quaternion (x, y, z, w), scalar last, |q| near 1
+      out q_unit [4]: quaternion (x, y, z, w), scalar last, unit to rounding while |eps| <= QUAT_RENORM_EPS_MAX
+      out eps scalar: |q|^2 - 1: the caller takes quat_normalize where |eps| > QUAT_RENORM_EPS_MAX (or NaN)"""
+    q_0 = q[0]
+    q_1 = q[1]
+    q_2 = q[2]
+    q_3 = q[3]
+    eps_q = (q_0*q_0) + (q_1*q_1) + (q_2*q_2) + (q_3*q_3) - 1
+    t0 = eps_q*(((3.0/8.0))*eps_q + (-1.0/2.0)) + 1
+    return casadi.vertcat(q_0*t0, q_1*t0, q_2*t0, q_3*t0), casadi.vertcat(eps_q)
+
+
 def quat_rotate(q, v_b):
     """quat_rotate: Rotate a body vector into the world frame.
       in  q [4]: quaternion (x, y, z, w), scalar last, unit, R_WB

@@ -346,6 +346,20 @@ void lvf_quat_normalize(const float *q, float *q_unit) {
     q_unit[3] = q_3*t0;
 }
 
+void lvf_quat_renormalize_near_unit(const float *q, float *q_unit, float *eps) {
+    const float q_0 = q[0];
+    const float q_1 = q[1];
+    const float q_2 = q[2];
+    const float q_3 = q[3];
+    const float eps_q = (q_0*q_0) + (q_1*q_1) + (q_2*q_2) + (q_3*q_3) - 1;
+    const float t0 = eps_q*(((3.0F/8.0F))*eps_q + (-1.0F/2.0F)) + 1;
+    q_unit[0] = q_0*t0;
+    q_unit[1] = q_1*t0;
+    q_unit[2] = q_2*t0;
+    q_unit[3] = q_3*t0;
+    eps[0] = eps_q;
+}
+
 void lvf_quat_rotate(const float *q, const float *v_b, float *v_w) {
     const float q_0 = q[0];
     const float q_1 = q[1];

@@ -43,6 +43,8 @@ void lvf_quat_mul(const float *a, const float *b, float *ab);
 void lvf_quat_conj(const float *q, float *q_conj);
 /* quat_normalize: Scale to unit length (float; see kernels.h) */
 void lvf_quat_normalize(const float *q, float *q_unit);
+/* quat_renormalize_near_unit: Scale a near-unit quaternion to unit length without sqrt or division (float; see kernels.h) */
+void lvf_quat_renormalize_near_unit(const float *q, float *q_unit, float *eps);
 /* quat_rotate: Rotate a body vector into the world frame (float; see kernels.h) */
 void lvf_quat_rotate(const float *q, const float *v_b, float *v_w);
 /* quat_to_matrix: Rotation matrix R_WB (float; see kernels.h) */

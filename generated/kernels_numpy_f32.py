@@ -804,6 +804,41 @@ def quat_normalize(q, *, out=None):
     return q_unit_out
 
 
+def quat_renormalize_near_unit(q, *, out=None):
+    """Scale a near-unit quaternion to unit length without sqrt or division.
+
+    Generated kernel ``quat_renormalize_near_unit``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    q : array_like, shape (..., 4)
+        quaternion (x, y, z, w), scalar last, |q| near 1
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
+
+    Returns
+    -------
+    q_unit : ndarray, shape (..., 4)
+        quaternion (x, y, z, w), scalar last, unit to rounding while |eps| <= QUAT_RENORM_EPS_MAX
+    eps : ndarray, shape (...)
+        |q|^2 - 1: the caller takes quat_normalize where |eps| > QUAT_RENORM_EPS_MAX (or NaN)
+    """
+    q = numpy.asarray(q, dtype=numpy.float32)
+    if out is None or out[0] is None or out[1] is None:
+        batch = q.shape[:-1]
+    q_0 = q[..., 0]
+    q_1 = q[..., 1]
+    q_2 = q[..., 2]
+    q_3 = q[..., 3]
+    eps_q = (q_0*q_0) + (q_1*q_1) + (q_2*q_2) + (q_3*q_3) - 1
+    t0 = eps_q*(((numpy.float32(3.0)/numpy.float32(8.0)))*eps_q + (numpy.float32(-1.0)/numpy.float32(2.0))) + 1
+    q_unit_out = numpy.empty(batch + (4,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
+    numpy.multiply(q[..., 0:4], t0[..., None], out=q_unit_out[..., 0:4])
+    eps_out = numpy.empty(batch, dtype=numpy.float32) if out is None or out[1] is None else out[1]
+    eps_out[...] = eps_q
+    return q_unit_out, eps_out
+
+
 def quat_rotate(q, v_b, *, out=None):
     """Rotate a body vector into the world frame.
 
@@ -5293,6 +5328,7 @@ KERNELS = {
     'quat_mul': (quat_mul, [('a', (4,)), ('b', (4,))], [('ab', (4,))]),
     'quat_conj': (quat_conj, [('q', (4,))], [('q_conj', (4,))]),
     'quat_normalize': (quat_normalize, [('q', (4,))], [('q_unit', (4,))]),
+    'quat_renormalize_near_unit': (quat_renormalize_near_unit, [('q', (4,))], [('q_unit', (4,)), ('eps', ())]),
     'quat_rotate': (quat_rotate, [('q', (4,)), ('v_b', (3,))], [('v_w', (3,))]),
     'quat_to_matrix': (quat_to_matrix, [('q', (4,))], [('R_wb', (3, 3))]),
     'matrix_to_quat': (matrix_to_quat, [('R_wb', (3, 3))], [('q', (4,))]),

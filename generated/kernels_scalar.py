@@ -224,6 +224,14 @@ def quat_normalize(q):
     return (q_0*t0, q_1*t0, q_2*t0, q_3*t0)
 
 
+def quat_renormalize_near_unit(q):
+    """Scale a near-unit quaternion to unit length without sqrt or division (floats; see the module)."""
+    q_0, q_1, q_2, q_3 = q
+    eps_q = (q_0*q_0) + (q_1*q_1) + (q_2*q_2) + (q_3*q_3) - 1
+    t0 = eps_q*(((3.0/8.0))*eps_q + (-1.0/2.0)) + 1
+    return (q_0*t0, q_1*t0, q_2*t0, q_3*t0), eps_q
+
+
 def quat_rotate(q, v_b):
     """Rotate a body vector into the world frame (floats; see the module)."""
     q_0, q_1, q_2, q_3 = q
@@ -1849,6 +1857,7 @@ READS = {
     'quat_mul': {'a': (0, 1, 2, 3), 'b': (0, 1, 2, 3)},
     'quat_conj': {'q': (0, 1, 2, 3)},
     'quat_normalize': {'q': (0, 1, 2, 3)},
+    'quat_renormalize_near_unit': {'q': (0, 1, 2, 3)},
     'quat_rotate': {'q': (0, 1, 2, 3), 'v_b': (0, 1, 2)},
     'quat_to_matrix': {'q': (0, 1, 2, 3)},
     'matrix_to_quat': {'R_wb': (0, 1, 2, 3, 4, 5, 6, 7, 8)},
@@ -1942,6 +1951,7 @@ ZEROS = {
     'quat_mul': {'ab': ()},
     'quat_conj': {'q_conj': ()},
     'quat_normalize': {'q_unit': ()},
+    'quat_renormalize_near_unit': {'q_unit': (), 'eps': ()},
     'quat_rotate': {'v_w': ()},
     'quat_to_matrix': {'R_wb': ()},
     'matrix_to_quat': {'q': ()},

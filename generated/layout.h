@@ -85,6 +85,7 @@ enum {
 #define LV_WHEELS_MAX 4  /* wheel slots per body (XS.Omega, MODEL.J, the columns of MODEL.A_b) */
 #define LV_WHEELS_BODY_AXES 3  /* wheels of the default layout: the body x, y, z axes, A_b = [I | 0] */
 #define LV_QUAT_RATE_SCALE 0.5  /* dq/dt = QUAT_RATE_SCALE q (x) [omega_b, 0] (rigid_body_rates_free_c returns the product; a step folds the scale into its dt; checked in derive/rigid_body.py) */
+#define LV_QUAT_RENORM_EPS_MAX 3.814697265625e-06  /* |eps| = ||q|^2 - 1| up to which quat_renormalize_near_unit leaves |q| within 2^-53 of 1 by its series alone (checked in derive/quaternion.py); beyond it, q / |q| */
 #define LV_WHEELS_ON_AXES_A_B {1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0}  /* MODEL.A_b of the default layout, [I | 0] */
 /* the printed kernels of every wheeled body (derive/wheel_layout.py, N = WHEELS_MAX) */
 #define LV_WHEELS_COEFFICIENTS lv_wheels4_coefficients

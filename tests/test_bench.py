@@ -249,6 +249,22 @@ def test_fma_peer_computes_the_sims_trajectory():
 
 
 @pytest.mark.needs("cc")
+def test_fma_peer_normalizes_a_state_far_from_unit_exactly():
+    """The FMA peer's series normalization (as the FMA tiles') falls back to q / |q| beyond its range: bodies
+    started at |q|^2 = 9 and 0.25 beside unit ones end one step later unit to rounding, as the Sim's bitwise path."""
+    kernel = bench.HandwrittenKernel()
+    kernel.compile_fma()
+    assert kernel.fma, kernel.fma_errors
+    _, _, X0, I = bench._batch_arrays(16)
+    X0[3:7, 2] *= 3.0
+    X0[3:7, 9] *= 0.5
+    for name in kernel.fma:
+        X = X0.copy()
+        kernel.advance_fma(name, X, I, bench.DT, 1)
+        assert float(np.max(np.abs(np.linalg.norm(X[3:7], axis=0) - 1.0))) <= 4e-16, name
+
+
+@pytest.mark.needs("cc")
 def test_dopri5_peer_computes_the_sims_trajectory():
     """The hand DOPRI5 (same controller, dense output) takes the Sim's steps: same states to 1e-12, same RHS counts
     (dense output: fewer substeps than output steps at dt = 0.1 s, so the count is below 300 x 6 but above 300)."""

@@ -11,6 +11,8 @@ import pytest
 
 import lavendersim as lv
 from lavendersim.backends.c_backend import contract_available
+from lavendersim.generated import kernels_numpy
+from lavendersim.generated import layout as LY
 from lavendersim.validate import LavenderInputError
 
 # Measured (session 17's host, AVX2 + FMA): these 17 tumbling bodies (|omega_b| up to 9.2 rad/s), 400 RK4 steps of
@@ -85,3 +87,60 @@ def test_contract_is_fixed_once_built():
     assert sim.contract == "fma"
     with pytest.raises(LavenderInputError, match="contract"):
         sim.contract = "off"
+
+
+def _norm_error(x: np.ndarray) -> float:
+    q = x[:, LY.STATE_Q]
+    return float(np.max(np.abs(np.sqrt(np.sum(q * q, axis=1)) - 1.0)))
+
+
+def test_near_unit_renormalization_holds_in_its_range_and_is_wrong_beyond():
+    """The printed series (derive/quaternion.py) keeps q's direction and gives |q| = 1 to rounding for |eps| up to
+    QUAT_RENORM_EPS_MAX; well beyond it the norm is visibly off, which is why the FMA tiles fall back there."""
+    rng = np.random.default_rng(5)
+    u = rng.standard_normal((2000, 4))
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    for scale2, bound in ((1.0 + LY.QUAT_RENORM_EPS_MAX, 4e-16), (1.0 - LY.QUAT_RENORM_EPS_MAX, 4e-16),
+                          (1.0 + 64 * LY.QUAT_RENORM_EPS_MAX, None)):
+        q = u * np.sqrt(scale2)
+        q_unit, eps = kernels_numpy.quat_renormalize_near_unit(q)
+        np.testing.assert_allclose(eps, scale2 - 1.0, rtol=1e-9)
+        err = float(np.max(np.abs(np.linalg.norm(q_unit, axis=1) - 1.0)))
+        np.testing.assert_allclose(q_unit / np.linalg.norm(q_unit, axis=1, keepdims=True), u, rtol=0, atol=8e-16)  # a few roundings
+        if bound is not None:
+            assert err <= bound, (scale2, err)
+        else:   # 5/16 (64 eps_max)^3 ~ 4e-12: the series alone would leave that norm error
+            assert err > 1e-12, err
+
+
+@pytest.mark.skipif(not contract_available(), reason="no FMA copy of the tiles on this build / CPU")
+def test_fma_tiles_normalize_a_state_far_from_unit_exactly():
+    """A state written far from unit (|q|^2 = 9, 0.25, or 1 + 100 eps_max), through the backend: the first step's
+    eps is beyond the series' range, the tile's pass divides by |q| there: unit to rounding, as the bitwise path,
+    and the other lanes of the same tile (unit q) keep the series."""
+    from lavendersim.backends.c_backend import ROW, CBackend
+    sim = lv.Sim(_tumbling(24), dt=1e-2, integrator="rk4", backend="c")
+    x0, params = np.array(sim.x, copy=True), np.array(sim._step_params, copy=True)
+    for b, s in ((0, 3.0), (5, 0.5), (17, np.sqrt(1 + 100 * LY.QUAT_RENORM_EPS_MAX))):
+        x0[b, LY.STATE_Q] *= s
+    be, empty = CBackend(), np.zeros((0, ROW))
+    off, fma = x0.copy(), x0.copy()
+    be.advance(off, params, empty, "rk4", True, 1e-2, 3)
+    be.advance(fma, params, empty, "rk4", True, 1e-2, 3, contract="fma")
+    assert _norm_error(fma) <= 4e-16
+    assert float(np.max(np.abs(fma - off))) <= FMA_BOUND
+
+
+@pytest.mark.skipif(not contract_available(), reason="no FMA copy of the tiles on this build / CPU")
+def test_fma_tiles_normalize_wild_steps_exactly():
+    """|omega| dt up to ~0.9: RK4's own norm error per step (~(|omega| dt / 2)^6 / 72) is far beyond the series' range
+    for some bodies of the tile; every q still ends unit to rounding, and close to the bitwise path's."""
+    sc = lv.Scene()
+    rng = np.random.default_rng(11)
+    for i in range(16):
+        sc.add_body(lv.Body.box(f"b{i}", 1.0, (0.3, 0.2, 0.1), q=tuple(rng.standard_normal(4)),
+                                omega_b=tuple((0.5 + 0.1 * i) * rng.standard_normal(3) / 0.05)))
+    off, fma = _run(sc, 50, backend="c"), _run(sc, 50, backend="c", contract="fma")
+    assert _norm_error(fma) <= 4e-16
+    assert _norm_error(off) <= 4e-16
+    assert float(np.max(np.abs(fma - off))) <= 1e-9   # chaotic tumbling at |omega| dt ~ 1: rounding grows fast

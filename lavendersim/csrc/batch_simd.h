@@ -313,9 +313,27 @@ LV_ISA_COPIES(LV_DEFINE_TILES)
    so p_w's rate v_w is constant over the step, where RK4 is one Euler step (the printed LV_EULER_UPDATE), and v_w
    stays as it is. The same RK4 step mathematically, 7 numbers through the stages instead of 13, compiled with
    -ffp-contract=fast for CPUs with FMA, so the compiler fuses a*b+c into one rounding: not bitwise the scalar path
-   nor NumPy (docs/performance.md gives the measured difference). In a harness of these loops (AVX2, min of 15
+   nor NumPy (docs/performance.md gives the measured difference). q is renormalized without the divider by the
+   printed quat_renormalize_near_unit (tile_q_normalize_far below: its range and the exact fallback). In a harness of these loops (AVX2, min of 15
    interleaved rounds, a standalone copy): the bitwise tile 8.87 ns per body-step, this one 7.09 (the bitwise
    loop contracted as it is: 7.94). */
+/* The FMA tiles' normalization, q p(eps) (the printed quat_renormalize_near_unit: no sqrt, no division), holds
+   while |eps| = ||q|^2 - 1| <= LV_QUAT_RENORM_EPS_MAX; a lane beyond it (a state written far from unit, a wild step,
+   NaN) keeps its raw q in the step's lane loop and is flagged, and then this pass gives it q / |q| (the printed
+   quat_normalize) before the next step reads it: never a norm the series got wrong. Off the vector loop. */
+LV_NOINLINE static void tile_q_normalize_far(double (*LV_RESTRICT T)[LV_TILE], long m)
+{
+    long b;
+    int i;
+    for (b = 0; b < m; b++) {
+        double q[LV_STATE_Q_LEN], qn[LV_STATE_Q_LEN], eps;
+        for (i = 0; i < LV_STATE_Q_LEN; i++) q[i] = T[LV_STATE_Q + i][b];
+        lv_quat_renormalize_near_unit(q, qn, &eps);
+        if (fabs(eps) <= LV_QUAT_RENORM_EPS_MAX) continue; /* this lane took the series */
+        lv_quat_normalize(q, q);
+        for (i = 0; i < LV_STATE_Q_LEN; i++) T[LV_STATE_Q + i][b] = q[i];
+    }
+}
 #define LV_TILE_STAGED(STAGE, IN_Q, IN_W, OUT_Q, OUT_W)                                                 \
     lv_rigid_body_rates_free_c(IN_Q, IN_W, cf, g, wd);                                                  \
     for (i = 0; i < LV_STATE_Q_LEN; i++) (void)LV_RK4_UPDATE(double, STAGE, hq, q0[i], g[i], aq[i], OUT_Q[i]); \
@@ -331,6 +349,7 @@ LV_ISA_COPIES(LV_DEFINE_TILES)
         (void)fx;                                                                                       \
         (void)P;                                                                                        \
         for (s = 0; s < n_steps; s++) {                                                                 \
+            long far = 0; /* a lane whose |q|^2 - 1 is beyond QUAT_RENORM_EPS_MAX this step */          \
             for (b = 0; b < m; b++) {                                                                   \
                 double q0[LV_STATE_Q_LEN], w0[LV_STATE_OMEGA_B_LEN], cf[LV_EULER_SIZE], g[LV_STATE_Q_LEN], \
                     wd[LV_STATE_OMEGA_B_LEN], aq[LV_STATE_Q_LEN], aw[LV_STATE_OMEGA_B_LEN], tq[LV_STATE_Q_LEN], \
@@ -342,13 +361,21 @@ LV_ISA_COPIES(LV_DEFINE_TILES)
                 LV_TILE_STAGED(2, tq, tw, tq, tw);                                                      \
                 LV_TILE_STAGED(3, tq, tw, tq, tw);                                                      \
                 LV_TILE_STAGED(4, tq, tw, tq, tw);                                                      \
-                if (NORMALIZE) lv_quat_normalize(tq, tq);                                               \
-                for (i = 0; i < LV_STATE_Q_LEN; i++) T[LV_STATE_Q + i][b] = tq[i];                      \
+                if (NORMALIZE) { /* q's direction kept; in range its norm 1 to rounding, else q left for the tile's pass */ \
+                    double qn[LV_STATE_Q_LEN], eps;                                                     \
+                    lv_quat_renormalize_near_unit(tq, qn, &eps);                                        \
+                    const int near = fabs(eps) <= LV_QUAT_RENORM_EPS_MAX; /* false for NaN */           \
+                    far |= !near;                                                                       \
+                    for (i = 0; i < LV_STATE_Q_LEN; i++) T[LV_STATE_Q + i][b] = near ? qn[i] : tq[i];   \
+                } else {                                                                                \
+                    for (i = 0; i < LV_STATE_Q_LEN; i++) T[LV_STATE_Q + i][b] = tq[i];                  \
+                }                                                                                       \
                 for (i = 0; i < LV_STATE_OMEGA_B_LEN; i++) T[LV_STATE_OMEGA_B + i][b] = tw[i];          \
                 for (i = 0; i < LV_STATE_P_W_LEN; i++)                                                  \
                     (void)LV_EULER_UPDATE(double, 1, dt, T[LV_STATE_P_W + i][b], T[LV_STATE_V_W + i][b], aq[0], \
                                           T[LV_STATE_P_W + i][b]);                                      \
             }                                                                                           \
+            if (far) tile_q_normalize_far(T, m);                                                        \
         }                                                                                               \
     }
 #if LV_HAVE_ISA_CLONES && defined(__GNUC__) && !defined(__clang__)
