@@ -231,6 +231,34 @@ def _np_assign(target: str, code: str) -> str:
     return f"{target} = {code}"
 
 
+def _np_lead_neg(code: str) -> str:
+    """code with each sum whose left term is a negated product and whose right term is not, `-a*b + r`, written as
+    `r - a*b`: the same number ((-a)*b is -(a*b) exactly, x - y is x + (-y), a sum commutes; signed zeros
+    included) without the negation's NumPy call (one array pass). The C printing keeps the SymPy form."""
+    class LeadNeg(ast.NodeTransformer):
+        def visit_BinOp(self, node):
+            self.generic_visit(node)
+            if isinstance(node.op, ast.Add):
+                left = _unnegated(node.left)
+                if left is not None and _unnegated(node.right) is None:
+                    return ast.BinOp(node.right, ast.Sub(), left)
+            return node
+
+    tree = ast.parse(code, mode="eval")
+    new = ast.unparse(LeadNeg().visit(tree))
+    return code if new == ast.unparse(ast.parse(code, mode="eval")) else new
+
+
+def _unnegated(node):
+    """node = -a or a product -a * b * ... (its leftmost factor negated): a (* b * ...), else None."""
+    if isinstance(node, ast.UnaryOp) and isinstance(node.op, ast.USub):
+        return node.operand
+    if isinstance(node, ast.BinOp) and isinstance(node.op, ast.Mult):
+        left = _unnegated(node.left)
+        return None if left is None else ast.BinOp(left, ast.Mult(), node.right)
+    return None
+
+
 # elementwise calls a run of components may share (their arguments broadcast like the operators')
 _NP_ELEMENTWISE = {"numpy.sqrt", "numpy.minimum", "numpy.maximum", "numpy.float32"}
 
@@ -340,7 +368,7 @@ def _np_temps(p: Printed, pr: NpPrinter, comp: dict, sizes: dict, batch_names: s
     """The temporaries' lines; consecutive ones that are one expression on shifted components (e.g. the halves of
     omega_b: t0 = 0.5*x_10, t1 = 0.5*x_11, t2 = 0.5*x_12) computed once on slices and read as its columns."""
     names = [str(t) for t, _ in p.temps]
-    codes = [pr.doprint(e) for _, e in p.temps]
+    codes = [_np_lead_neg(pr.doprint(e)) for _, e in p.temps]
     lines: list[str] = []
     j = 0
     while j < len(codes):
@@ -375,7 +403,7 @@ def _np_outputs(p: Printed, pr: NpPrinter, dtype: str, comp: dict, sizes: dict, 
         shp = "" if a.shape == () else " + " + repr(tuple(a.shape))
         body.append(f"{ind}{a.name}_out = numpy.empty(batch{shp}" + (")" if dtype == "float64" else f", dtype=numpy.{dtype})")
                     + f" if out is None or out[{len(rets)}] is None else out[{len(rets)}]")
-        codes = [pr.doprint(e) for e in p.reduced[idx:idx + a.size]]
+        codes = [_np_lead_neg(pr.doprint(e)) for e in p.reduced[idx:idx + a.size]]
         idx += a.size
         if a.shape == ():
             body.append(ind + _np_assign(f"{a.name}_out[...]", codes[0]))

@@ -87,16 +87,16 @@ def particle_angular_momentum(m, r_w, v_w, r_com_w, v_com_w, *, out=None):
     v_com_w_0 = v_com_w[..., 0]
     v_com_w_1 = v_com_w[..., 1]
     v_com_w_2 = v_com_w[..., 2]
-    t0 = -r_com_w_1 + r_w_1
-    t1 = m*(-v_com_w_2 + v_w_2)
-    t2 = -v_com_w_1 + v_w_1
-    t3 = -r_com_w_2 + r_w_2
-    t4 = -r_com_w_0 + r_w_0
-    t5 = -v_com_w_0 + v_w_0
+    t0 = r_w_1 - r_com_w_1
+    t1 = m * (v_w_2 - v_com_w_2)
+    t2 = v_w_1 - v_com_w_1
+    t3 = r_w_2 - r_com_w_2
+    t4 = r_w_0 - r_com_w_0
+    t5 = v_w_0 - v_com_w_0
     L_w_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    numpy.add(-m * t2 * t3, t0 * t1, out=L_w_out[..., 0])
+    numpy.subtract(t0 * t1, m * t2 * t3, out=L_w_out[..., 0])
     numpy.subtract(m * t3 * t5, t1 * t4, out=L_w_out[..., 1])
-    numpy.add(-m * t0 * t5, m * t2 * t4, out=L_w_out[..., 2])
+    numpy.subtract(m * t2 * t4, m * t0 * t5, out=L_w_out[..., 2])
     return L_w_out
 
 
@@ -424,9 +424,9 @@ def torque_from_force(r_w, F_w, *, out=None):
     F_w_1 = F_w[..., 1]
     F_w_2 = F_w[..., 2]
     tau_w_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    numpy.add(-F_w_1 * r_w_2, F_w_2 * r_w_1, out=tau_w_out[..., 0])
+    numpy.subtract(F_w_2 * r_w_1, F_w_1 * r_w_2, out=tau_w_out[..., 0])
     numpy.subtract(F_w_0 * r_w_2, F_w_2 * r_w_0, out=tau_w_out[..., 1])
-    numpy.add(-F_w_0 * r_w_1, F_w_1 * r_w_0, out=tau_w_out[..., 2])
+    numpy.subtract(F_w_1 * r_w_0, F_w_0 * r_w_1, out=tau_w_out[..., 2])
     return tau_w_out
 
 
@@ -480,9 +480,9 @@ def force_at_point(q, r_b, F_w, *, out=None):
     t11 = r_b_0*(t8 + t9) + r_b_1*(-t10 - t6) + r_b_2*(2*q_1*q_2 - t3)
     t12 = r_b_0*(-t10 - t5 + 1) + r_b_1*(t8 - t9) + r_b_2*(t1 + t2)
     tau_w_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    numpy.add(-F_w_1 * t7, F_w_2 * t11, out=tau_w_out[..., 0])
+    numpy.subtract(F_w_2 * t11, F_w_1 * t7, out=tau_w_out[..., 0])
     numpy.subtract(F_w_0 * t7, F_w_2 * t12, out=tau_w_out[..., 1])
-    numpy.add(-F_w_0 * t11, F_w_1 * t12, out=tau_w_out[..., 2])
+    numpy.subtract(F_w_1 * t12, F_w_0 * t11, out=tau_w_out[..., 2])
     return tau_w_out
 
 
@@ -565,9 +565,9 @@ def effect_force_at_point(q, r_b, F_w, *, out=None):
     F_com_w_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     F_com_w_out[..., 0:3] = F_w[..., 0:3]
     tau_com_w_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[1] is None else out[1]
-    numpy.add(-F_w_1 * t7, F_w_2 * t11, out=tau_com_w_out[..., 0])
+    numpy.subtract(F_w_2 * t11, F_w_1 * t7, out=tau_com_w_out[..., 0])
     numpy.subtract(F_w_0 * t7, F_w_2 * t12, out=tau_com_w_out[..., 1])
-    numpy.add(-F_w_0 * t11, F_w_1 * t12, out=tau_com_w_out[..., 2])
+    numpy.subtract(F_w_1 * t12, F_w_0 * t11, out=tau_com_w_out[..., 2])
     return F_com_w_out, tau_com_w_out
 
 
@@ -741,7 +741,7 @@ def quat_mul(a, b, *, out=None):
     b_3 = b[..., 3]
     ab_out = numpy.empty(batch + (4,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     numpy.add(a_0 * b_3 + a_1 * b_2 - a_2 * b_1, a_3 * b_0, out=ab_out[..., 0])
-    numpy.add(-a_0 * b_2 + a_1 * b_3 + a_2 * b_0, a_3 * b_1, out=ab_out[..., 1])
+    numpy.add(a_1 * b_3 - a_0 * b_2 + a_2 * b_0, a_3 * b_1, out=ab_out[..., 1])
     numpy.add(a_0 * b_1 - a_1 * b_0 + a_2 * b_3, a_3 * b_2, out=ab_out[..., 2])
     numpy.add(-a_0 * b_0 - a_1 * b_1 - a_2 * b_2, a_3 * b_3, out=ab_out[..., 3])
     return ab_out
@@ -963,7 +963,7 @@ def matrix_to_quat(R_wb, *, out=None):
     R_7 = R_wb[..., 2, 1]
     R_8 = R_wb[..., 2, 2]
     with numpy.errstate(invalid='ignore', divide='ignore'):  # numpy.select evaluates every branch
-        t0 = -R_5 + R_7
+        t0 = R_7 - R_5
         t1 = R_0 + R_8
         t2 = R_4 + t1
         t3 = numpy.sqrt(t2 + 1)
@@ -983,7 +983,7 @@ def matrix_to_quat(R_wb, *, out=None):
         t17 = R_2 - R_6
         t18 = (1.0/t8)
         t19 = R_5 + R_7
-        t20 = -R_1 + R_3
+        t20 = R_3 - R_1
         t21 = ((numpy.float32(1.0)/numpy.float32(2.0)))*t18
         t22 = ((numpy.float32(1.0)/numpy.float32(2.0)))*t11
         q_out = numpy.empty(batch + (4,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
@@ -1063,7 +1063,7 @@ def quat_from_two_vectors(a, b, *, out=None):
         t5 = numpy.less_equal(t4, (numpy.float32(-999999999999.0)/numpy.float32(1000000000000.0)))
         t6 = a_1*b_2 - a_2*b_1
         t7 = a_0*b_1 - a_1*b_0
-        t8 = -a_0*b_2 + a_2*b_0
+        t8 = a_2 * b_0 - a_0 * b_2
         t9 = t4 + 1
         t10 = (1.0/numpy.sqrt((t6*t6) + (t7*t7) + (t8*t8) + (t9*t9)))
         q_out = numpy.empty(batch + (4,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
@@ -1146,7 +1146,7 @@ def quat_error_angle(q, q_ref, *, out=None):
     q_ref_3 = q_ref[..., 3]
     t0 = q_0*q_ref_1 - q_1*q_ref_0 + q_2*q_ref_3 - q_3*q_ref_2
     t1 = q_0*q_ref_3 + q_1*q_ref_2 - q_2*q_ref_1 - q_3*q_ref_0
-    t2 = -q_0*q_ref_2 + q_1*q_ref_3 + q_2*q_ref_0 - q_3*q_ref_1
+    t2 = q_1 * q_ref_3 - q_0 * q_ref_2 + q_2 * q_ref_0 - q_3 * q_ref_1
     angle_out = numpy.empty(batch, dtype=numpy.float32) if out is None or out[0] is None else out[0]
     numpy.multiply(2, numpy.arctan2(numpy.sqrt(t0 * t0 + t1 * t1 + t2 * t2), abs(q_0 * q_ref_0 + q_1 * q_ref_1 + q_2 * q_ref_2 + q_3 * q_ref_3)), out=angle_out[...])
     return angle_out
@@ -1237,9 +1237,9 @@ def euler_xyz_to_quat(roll, pitch, yaw, *, out=None):
     t11 = t5*t9
     q_out = numpy.empty(batch + (4,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     numpy.add(t1 * t6, t10 * t7, out=q_out[..., 0])
-    numpy.add(-t1 * t10, t6 * t7, out=q_out[..., 1])
+    numpy.subtract(t6 * t7, t1 * t10, out=q_out[..., 1])
     numpy.add(t1 * t3 * t8, t11 * t7, out=q_out[..., 2])
-    numpy.add(-t1 * t11, t3 * t7 * t8, out=q_out[..., 3])
+    numpy.subtract(t3 * t7 * t8, t1 * t11, out=q_out[..., 3])
     return q_out
 
 
@@ -1327,7 +1327,7 @@ def quat_derivative_world(q, omega_w, *, out=None):
     t4 = t3_2[..., 1]
     q_dot_out = numpy.empty(batch + (4,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     numpy.subtract(omega_w_0 * t0 + omega_w_1 * t1, q_1 * t2, out=q_dot_out[..., 0])
-    numpy.add(-omega_w_0 * t1 + omega_w_1 * t0, q_0 * t2, out=q_dot_out[..., 1])
+    numpy.add(omega_w_1 * t0 - omega_w_0 * t1, q_0 * t2, out=q_dot_out[..., 1])
     numpy.add(omega_w_2 * t0 - q_0 * t4, q_1 * t3, out=q_dot_out[..., 2])
     numpy.subtract(-omega_w_2 * t1 - q_0 * t3, q_1 * t4, out=q_dot_out[..., 3])
     return q_dot_out
@@ -1366,7 +1366,7 @@ def quat_derivative_body(q, omega_b, *, out=None):
     t2 = t0_3[..., 2]
     q_dot_out = numpy.empty(batch + (4,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     numpy.add(q_1 * t2 - q_2 * t1, q_3 * t0, out=q_dot_out[..., 0])
-    numpy.add(-q_0 * t2 + q_2 * t0, q_3 * t1, out=q_dot_out[..., 1])
+    numpy.add(q_2 * t0 - q_0 * t2, q_3 * t1, out=q_dot_out[..., 1])
     numpy.add(q_0 * t1 - q_1 * t0, q_3 * t2, out=q_dot_out[..., 2])
     numpy.subtract(-q_0 * t0 - q_1 * t1, q_2 * t2, out=q_dot_out[..., 3])
     return q_dot_out
@@ -1414,7 +1414,7 @@ def integrate_orientation(q, omega_w, dt, *, out=None):
     t5 = t4_2[..., 1]
     t6 = dt*(-omega_w_2*t1 - q_0*t4 - q_1*t5) + q_3
     t7 = dt*(omega_w_2*t0 - q_0*t5 + q_1*t4) + q_2
-    t8 = dt*(-omega_w_0*t1 + omega_w_1*t0 + q_0*t2) + q_1
+    t8 = dt * (omega_w_1 * t0 - omega_w_0 * t1 + q_0 * t2) + q_1
     t9 = (1.0/numpy.sqrt((t3*t3) + (t6*t6) + (t7*t7) + (t8*t8)))
     q_next_out = numpy.empty(batch + (4,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     numpy.multiply(t3, t9, out=q_next_out[..., 0])
@@ -1460,7 +1460,7 @@ def euler_equations(I_b, omega_b, tau_b, *, out=None):
     tau_b_1 = tau_b[..., 1]
     tau_b_2 = tau_b[..., 2]
     c_b_0 = (I_b_1 - I_b_2)/I_b_0
-    c_b_1 = (-I_b_0 + I_b_2)/I_b_1
+    c_b_1 = (I_b_2 - I_b_0) / I_b_1
     c_b_2 = (I_b_0 - I_b_1)/I_b_2
     c_b_3_3 = 1.0 / I_b[..., 0:3]
     c_b_3 = c_b_3_3[..., 0]
@@ -1519,7 +1519,7 @@ def rigid_body_rhs(x, m, I_b, F_w, tau_w, *, out=None):
     tau_w_1 = tau_w[..., 1]
     tau_w_2 = tau_w[..., 2]
     c_b_0 = (I_b_1 - I_b_2)/I_b_0
-    c_b_1 = (-I_b_0 + I_b_2)/I_b_1
+    c_b_1 = (I_b_2 - I_b_0) / I_b_1
     c_b_2 = (I_b_0 - I_b_1)/I_b_2
     c_b_3_3 = 1.0 / I_b[..., 0:3]
     c_b_3 = c_b_3_3[..., 0]
@@ -1531,19 +1531,19 @@ def rigid_body_rhs(x, m, I_b, F_w, tau_w, *, out=None):
     t2 = t0_3[..., 2]
     t3 = (1.0/m)
     t4 = 2*tau_w_0
-    t5 = -t4*x_4 + 2*tau_w_1*x_3
+    t5 = 2 * tau_w_1 * x_3 - t4 * x_4
     t6 = t4*x_5 - 2*tau_w_2*x_3
-    t7 = -2*tau_w_1*x_5 + 2*tau_w_2*x_4
+    t7 = 2 * tau_w_2 * x_4 - 2 * tau_w_1 * x_5
     x_dot_out = numpy.empty(batch + (13,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     x_dot_out[..., 0:3] = x[..., 7:10]
     numpy.add(t0 * x_6 - t1 * x_5, t2 * x_4, out=x_dot_out[..., 3])
     numpy.subtract(t0 * x_5 + t1 * x_6, t2 * x_3, out=x_dot_out[..., 4])
-    numpy.add(-t0 * x_4 + t1 * x_3, t2 * x_6, out=x_dot_out[..., 5])
+    numpy.add(t1 * x_3 - t0 * x_4, t2 * x_6, out=x_dot_out[..., 5])
     numpy.subtract(-t0 * x_3 - t1 * x_4, t2 * x_5, out=x_dot_out[..., 6])
     numpy.multiply(F_w[..., 0:3], t3[..., None], out=x_dot_out[..., 7:10])
     numpy.add(c_b_0 * x_11 * x_12, c_b_3 * (t5 * x_4 - t6 * x_5 - t7 * x_6 + tau_w_0), out=x_dot_out[..., 10])
     numpy.add(c_b_1 * x_10 * x_12, c_b_4 * (-t5 * x_3 - t6 * x_6 + t7 * x_5 + tau_w_1), out=x_dot_out[..., 11])
-    numpy.add(c_b_2 * x_10 * x_11, c_b_5 * (-t5 * x_6 + t6 * x_3 - t7 * x_4 + tau_w_2), out=x_dot_out[..., 12])
+    numpy.add(c_b_2 * x_10 * x_11, c_b_5 * (t6 * x_3 - t5 * x_6 - t7 * x_4 + tau_w_2), out=x_dot_out[..., 12])
     return x_dot_out
 
 
@@ -1581,7 +1581,7 @@ def rigid_body_rhs_free(x, I_b, *, out=None):
     I_b_1 = I_b[..., 1]
     I_b_2 = I_b[..., 2]
     c_b_0 = (I_b_1 - I_b_2)/I_b_0
-    c_b_1 = (-I_b_0 + I_b_2)/I_b_1
+    c_b_1 = (I_b_2 - I_b_0) / I_b_1
     c_b_2 = (I_b_0 - I_b_1)/I_b_2
     t0_3 = numpy.float32(1.0) / numpy.float32(2.0) * x[..., 10:13]
     t0 = t0_3[..., 0]
@@ -1591,7 +1591,7 @@ def rigid_body_rhs_free(x, I_b, *, out=None):
     x_dot_out[..., 0:3] = x[..., 7:10]
     numpy.add(t0 * x_6 - t1 * x_5, t2 * x_4, out=x_dot_out[..., 3])
     numpy.subtract(t0 * x_5 + t1 * x_6, t2 * x_3, out=x_dot_out[..., 4])
-    numpy.add(-t0 * x_4 + t1 * x_3, t2 * x_6, out=x_dot_out[..., 5])
+    numpy.add(t1 * x_3 - t0 * x_4, t2 * x_6, out=x_dot_out[..., 5])
     numpy.subtract(-t0 * x_3 - t1 * x_4, t2 * x_5, out=x_dot_out[..., 6])
     x_dot_out[..., 7] = 0
     x_dot_out[..., 8] = 0
@@ -1859,7 +1859,7 @@ def rigid_body_rhs_torque(x, I_b, tau_w, *, out=None):
     tau_w_1 = tau_w[..., 1]
     tau_w_2 = tau_w[..., 2]
     c_b_0 = (I_b_1 - I_b_2)/I_b_0
-    c_b_1 = (-I_b_0 + I_b_2)/I_b_1
+    c_b_1 = (I_b_2 - I_b_0) / I_b_1
     c_b_2 = (I_b_0 - I_b_1)/I_b_2
     c_b_3_3 = 1.0 / I_b[..., 0:3]
     c_b_3 = c_b_3_3[..., 0]
@@ -1870,21 +1870,21 @@ def rigid_body_rhs_torque(x, I_b, tau_w, *, out=None):
     t1 = t0_3[..., 1]
     t2 = t0_3[..., 2]
     t3 = 2*tau_w_0
-    t4 = -t3*x_4 + 2*tau_w_1*x_3
+    t4 = 2 * tau_w_1 * x_3 - t3 * x_4
     t5 = t3*x_5 - 2*tau_w_2*x_3
-    t6 = -2*tau_w_1*x_5 + 2*tau_w_2*x_4
+    t6 = 2 * tau_w_2 * x_4 - 2 * tau_w_1 * x_5
     x_dot_out = numpy.empty(batch + (13,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     x_dot_out[..., 0:3] = x[..., 7:10]
     numpy.add(t0 * x_6 - t1 * x_5, t2 * x_4, out=x_dot_out[..., 3])
     numpy.subtract(t0 * x_5 + t1 * x_6, t2 * x_3, out=x_dot_out[..., 4])
-    numpy.add(-t0 * x_4 + t1 * x_3, t2 * x_6, out=x_dot_out[..., 5])
+    numpy.add(t1 * x_3 - t0 * x_4, t2 * x_6, out=x_dot_out[..., 5])
     numpy.subtract(-t0 * x_3 - t1 * x_4, t2 * x_5, out=x_dot_out[..., 6])
     x_dot_out[..., 7] = 0
     x_dot_out[..., 8] = 0
     x_dot_out[..., 9] = 0
     numpy.add(c_b_0 * x_11 * x_12, c_b_3 * (t4 * x_4 - t5 * x_5 - t6 * x_6 + tau_w_0), out=x_dot_out[..., 10])
     numpy.add(c_b_1 * x_10 * x_12, c_b_4 * (-t4 * x_3 - t5 * x_6 + t6 * x_5 + tau_w_1), out=x_dot_out[..., 11])
-    numpy.add(c_b_2 * x_10 * x_11, c_b_5 * (-t4 * x_6 + t5 * x_3 - t6 * x_4 + tau_w_2), out=x_dot_out[..., 12])
+    numpy.add(c_b_2 * x_10 * x_11, c_b_5 * (t5 * x_3 - t4 * x_6 - t6 * x_4 + tau_w_2), out=x_dot_out[..., 12])
     return x_dot_out
 
 
@@ -1912,7 +1912,7 @@ def euler_coefficients(I_b, *, out=None):
     I_b_1 = I_b[..., 1]
     I_b_2 = I_b[..., 2]
     c_b_0 = (I_b_1 - I_b_2)/I_b_0
-    c_b_1 = (-I_b_0 + I_b_2)/I_b_1
+    c_b_1 = (I_b_2 - I_b_0) / I_b_1
     c_b_2 = (I_b_0 - I_b_1)/I_b_2
     c_b_3_3 = 1.0 / I_b[..., 0:3]
     c_b_3 = c_b_3_3[..., 0]
@@ -1969,7 +1969,7 @@ def rigid_body_rhs_free_c(x, c_b, *, out=None):
     x_dot_out[..., 0:3] = x[..., 7:10]
     numpy.add(t0 * x_6 - t1 * x_5, t2 * x_4, out=x_dot_out[..., 3])
     numpy.subtract(t0 * x_5 + t1 * x_6, t2 * x_3, out=x_dot_out[..., 4])
-    numpy.add(-t0 * x_4 + t1 * x_3, t2 * x_6, out=x_dot_out[..., 5])
+    numpy.add(t1 * x_3 - t0 * x_4, t2 * x_6, out=x_dot_out[..., 5])
     numpy.subtract(-t0 * x_3 - t1 * x_4, t2 * x_5, out=x_dot_out[..., 6])
     x_dot_out[..., 7] = 0
     x_dot_out[..., 8] = 0
@@ -2027,21 +2027,21 @@ def rigid_body_rhs_torque_c(x, c_b, tau_w, *, out=None):
     t1 = t0_3[..., 1]
     t2 = t0_3[..., 2]
     t3 = 2*tau_w_0
-    t4 = -t3*x_4 + 2*tau_w_1*x_3
+    t4 = 2 * tau_w_1 * x_3 - t3 * x_4
     t5 = t3*x_5 - 2*tau_w_2*x_3
-    t6 = -2*tau_w_1*x_5 + 2*tau_w_2*x_4
+    t6 = 2 * tau_w_2 * x_4 - 2 * tau_w_1 * x_5
     x_dot_out = numpy.empty(batch + (13,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     x_dot_out[..., 0:3] = x[..., 7:10]
     numpy.add(t0 * x_6 - t1 * x_5, t2 * x_4, out=x_dot_out[..., 3])
     numpy.subtract(t0 * x_5 + t1 * x_6, t2 * x_3, out=x_dot_out[..., 4])
-    numpy.add(-t0 * x_4 + t1 * x_3, t2 * x_6, out=x_dot_out[..., 5])
+    numpy.add(t1 * x_3 - t0 * x_4, t2 * x_6, out=x_dot_out[..., 5])
     numpy.subtract(-t0 * x_3 - t1 * x_4, t2 * x_5, out=x_dot_out[..., 6])
     x_dot_out[..., 7] = 0
     x_dot_out[..., 8] = 0
     x_dot_out[..., 9] = 0
     numpy.add(c_b_0 * x_11 * x_12, c_b_3 * (t4 * x_4 - t5 * x_5 - t6 * x_6 + tau_w_0), out=x_dot_out[..., 10])
     numpy.add(c_b_1 * x_10 * x_12, c_b_4 * (-t4 * x_3 - t5 * x_6 + t6 * x_5 + tau_w_1), out=x_dot_out[..., 11])
-    numpy.add(c_b_2 * x_10 * x_11, c_b_5 * (-t4 * x_6 + t5 * x_3 - t6 * x_4 + tau_w_2), out=x_dot_out[..., 12])
+    numpy.add(c_b_2 * x_10 * x_11, c_b_5 * (t5 * x_3 - t4 * x_6 - t6 * x_4 + tau_w_2), out=x_dot_out[..., 12])
     return x_dot_out
 
 
@@ -2099,19 +2099,19 @@ def rigid_body_rhs_c(x, m, c_b, F_w, tau_w, *, out=None):
     t2 = t0_3[..., 2]
     t3 = (1.0/m)
     t4 = 2*tau_w_0
-    t5 = -t4*x_4 + 2*tau_w_1*x_3
+    t5 = 2 * tau_w_1 * x_3 - t4 * x_4
     t6 = t4*x_5 - 2*tau_w_2*x_3
-    t7 = -2*tau_w_1*x_5 + 2*tau_w_2*x_4
+    t7 = 2 * tau_w_2 * x_4 - 2 * tau_w_1 * x_5
     x_dot_out = numpy.empty(batch + (13,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     x_dot_out[..., 0:3] = x[..., 7:10]
     numpy.add(t0 * x_6 - t1 * x_5, t2 * x_4, out=x_dot_out[..., 3])
     numpy.subtract(t0 * x_5 + t1 * x_6, t2 * x_3, out=x_dot_out[..., 4])
-    numpy.add(-t0 * x_4 + t1 * x_3, t2 * x_6, out=x_dot_out[..., 5])
+    numpy.add(t1 * x_3 - t0 * x_4, t2 * x_6, out=x_dot_out[..., 5])
     numpy.subtract(-t0 * x_3 - t1 * x_4, t2 * x_5, out=x_dot_out[..., 6])
     numpy.multiply(F_w[..., 0:3], t3[..., None], out=x_dot_out[..., 7:10])
     numpy.add(c_b_0 * x_11 * x_12, c_b_3 * (t5 * x_4 - t6 * x_5 - t7 * x_6 + tau_w_0), out=x_dot_out[..., 10])
     numpy.add(c_b_1 * x_10 * x_12, c_b_4 * (-t5 * x_3 - t6 * x_6 + t7 * x_5 + tau_w_1), out=x_dot_out[..., 11])
-    numpy.add(c_b_2 * x_10 * x_11, c_b_5 * (-t5 * x_6 + t6 * x_3 - t7 * x_4 + tau_w_2), out=x_dot_out[..., 12])
+    numpy.add(c_b_2 * x_10 * x_11, c_b_5 * (t6 * x_3 - t5 * x_6 - t7 * x_4 + tau_w_2), out=x_dot_out[..., 12])
     return x_dot_out
 
 
@@ -2156,7 +2156,7 @@ def rigid_body_rates_free_c(q, omega_b, c_b, *, out=None):
     g_out = numpy.empty(batch + (4,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     numpy.add(omega_b_0 * q_3 - omega_b_1 * q_2, omega_b_2 * q_1, out=g_out[..., 0])
     numpy.subtract(omega_b_0 * q_2 + omega_b_1 * q_3, omega_b_2 * q_0, out=g_out[..., 1])
-    numpy.add(-omega_b_0 * q_1 + omega_b_1 * q_0, omega_b_2 * q_3, out=g_out[..., 2])
+    numpy.add(omega_b_1 * q_0 - omega_b_0 * q_1, omega_b_2 * q_3, out=g_out[..., 2])
     numpy.subtract(-omega_b_0 * q_0 - omega_b_1 * q_1, omega_b_2 * q_2, out=g_out[..., 3])
     omega_dot_b_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[1] is None else out[1]
     numpy.multiply(c_b_0 * omega_b_1, omega_b_2, out=omega_dot_b_out[..., 0])
@@ -2238,7 +2238,7 @@ def rigid_body_rhs_force_c(x, c_b, a_w, *, out=None):
     x_dot_out[..., 0:3] = x[..., 7:10]
     numpy.add(t0 * x_6 - t1 * x_5, t2 * x_4, out=x_dot_out[..., 3])
     numpy.subtract(t0 * x_5 + t1 * x_6, t2 * x_3, out=x_dot_out[..., 4])
-    numpy.add(-t0 * x_4 + t1 * x_3, t2 * x_6, out=x_dot_out[..., 5])
+    numpy.add(t1 * x_3 - t0 * x_4, t2 * x_6, out=x_dot_out[..., 5])
     numpy.subtract(-t0 * x_3 - t1 * x_4, t2 * x_5, out=x_dot_out[..., 6])
     x_dot_out[..., 7:10] = a_w[..., 0:3]
     numpy.multiply(c_b_0 * x_11, x_12, out=x_dot_out[..., 10])
@@ -2294,7 +2294,7 @@ def rigid_body_rhs_body_c(x, c_b, a_w, tau_b, *, out=None):
     x_dot_out[..., 0:3] = x[..., 7:10]
     numpy.add(t0 * x_6 - t1 * x_5, t2 * x_4, out=x_dot_out[..., 3])
     numpy.subtract(t0 * x_5 + t1 * x_6, t2 * x_3, out=x_dot_out[..., 4])
-    numpy.add(-t0 * x_4 + t1 * x_3, t2 * x_6, out=x_dot_out[..., 5])
+    numpy.add(t1 * x_3 - t0 * x_4, t2 * x_6, out=x_dot_out[..., 5])
     numpy.subtract(-t0 * x_3 - t1 * x_4, t2 * x_5, out=x_dot_out[..., 6])
     x_dot_out[..., 7:10] = a_w[..., 0:3]
     x_dot_10_13 = c_b[..., 3:6] * tau_b[..., 0:3]
@@ -2392,19 +2392,19 @@ def pivot_body_rhs(q, omega_b, I_p, r_b, F_w, tau_w, *, out=None):
     t25 = -t17 - t24 + 1
     t26 = F_w_0*t22 + F_w_1*t25 + F_w_2*t23
     t27 = t20 + t21
-    t28 = -t11 + t9
+    t28 = t9 - t11
     t29 = -t18 - t24
     t30 = F_w_0*t29 + F_w_1*t27 + F_w_2*t28
-    t31 = -omega_b_0*t16 + omega_b_1*t15 + r_b_0*t26 - r_b_1*t30 + t12*tau_w_0 + t14*tau_w_1 + t19*tau_w_2
-    t32 = -I_p_01*I_p_22 + I_p_02*I_p_12
+    t31 = omega_b_1 * t15 - omega_b_0 * t16 + r_b_0 * t26 - r_b_1 * t30 + t12 * tau_w_0 + t14 * tau_w_1 + t19 * tau_w_2
+    t32 = I_p_02 * I_p_12 - I_p_01 * I_p_22
     t33 = I_p_02*omega_b_0 + I_p_12*omega_b_1 + I_p_22*omega_b_2
     t34 = F_w_0*t12 + F_w_1*t14 + F_w_2*t19
     t35 = omega_b_0*t33 - omega_b_2*t15 - r_b_0*t34 + r_b_2*t30 + t22*tau_w_0 + t23*tau_w_2 + t25*tau_w_1
-    t36 = -omega_b_1*t33 + omega_b_2*t16 + r_b_1*t34 - r_b_2*t26 + t27*tau_w_1 + t28*tau_w_2 + t29*tau_w_0
-    t37 = -I_p_00*I_p_12 + I_p_01*I_p_02
+    t36 = omega_b_2 * t16 - omega_b_1 * t33 + r_b_1 * t34 - r_b_2 * t26 + t27 * tau_w_1 + t28 * tau_w_2 + t29 * tau_w_0
+    t37 = I_p_01 * I_p_02 - I_p_00 * I_p_12
     q_dot_out = numpy.empty(batch + (4,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     numpy.add(q_1 * t2 - q_2 * t1, q_3 * t0, out=q_dot_out[..., 0])
-    numpy.add(-q_0 * t2 + q_2 * t0, q_3 * t1, out=q_dot_out[..., 1])
+    numpy.add(q_2 * t0 - q_0 * t2, q_3 * t1, out=q_dot_out[..., 1])
     numpy.add(q_0 * t1 - q_1 * t0, q_3 * t2, out=q_dot_out[..., 2])
     numpy.subtract(-q_0 * t0 - q_1 * t1, q_2 * t2, out=q_dot_out[..., 3])
     omega_dot_b_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[1] is None else out[1]
@@ -2478,7 +2478,7 @@ def pivot_kinematics(q, omega_b, anchor_w, r_b, *, out=None):
     t17 = q_1*t2 + t12
     t18 = -t14 - t8 + 1
     t19 = omega_b_0*r_b_1 - omega_b_1*r_b_0
-    t20 = -omega_b_0*r_b_2 + omega_b_2*r_b_0
+    t20 = omega_b_2 * r_b_0 - omega_b_0 * r_b_2
     t21 = omega_b_1*r_b_2 - omega_b_2*r_b_1
     p_w_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     numpy.add(anchor_w_0 + r_b_0 * t10 + r_b_1 * t4, r_b_2 * t7, out=p_w_out[..., 0])
@@ -2545,7 +2545,7 @@ def splitting_rotation(I_b, q, omega_b, h, *, out=None):
     t10 = t0*t9
     t11 = t10*t8
     t12 = numpy.cos(t11)
-    t13 = -q_0*t3 + q_3*t2
+    t13 = q_3 * t2 - q_0 * t3
     t14 = numpy.sin(t11)
     t15 = t12*t4 + t13*t14
     t16 = (1.0/I_b_2)
@@ -2557,12 +2557,12 @@ def splitting_rotation(I_b, q, omega_b, h, *, out=None):
     t22 = ((numpy.float32(1.0)/numpy.float32(2.0)))*h*t16*t21
     t23 = numpy.sin(t22)
     t24 = q_0*t2 + q_3*t3
-    t25 = -q_1*t3 + q_2*t2
+    t25 = q_2 * t2 - q_1 * t3
     t26 = t12*t24 - t14*t25
     t27 = numpy.cos(t22)
     t28 = t15*t23 + t26*t27
     t29 = 1 - 2*(t23*t23)
-    t30 = -t17*t20 + t18*t19
+    t30 = t18 * t19 - t17 * t20
     t31 = 2*t23*t27
     t32 = t29*t8 - t30*t31
     t33 = t10*t32
@@ -2575,11 +2575,11 @@ def splitting_rotation(I_b, q, omega_b, h, *, out=None):
     t40 = t29*t30 + t31*t8
     t41 = 1 - 2*(t38*t38)
     t42 = 2*t34*t38
-    t43 = (-t21*t42 + t40*t41)/I_b_0
+    t43 = (t40 * t41 - t21 * t42) / I_b_0
     t44 = t0*t43
     t45 = numpy.cos(t44)
     t46 = t15*t27 - t23*t26
-    t47 = -t23*t35 + t27*t36
+    t47 = t27 * t36 - t23 * t35
     t48 = t34*t47 - t38*t46
     t49 = numpy.sin(t44)
     t50 = t28*t38 + t34*t37
@@ -2591,11 +2591,11 @@ def splitting_rotation(I_b, q, omega_b, h, *, out=None):
     numpy.add(t39 * t45, t48 * t49, out=q_next_out[..., 0])
     numpy.add(t45 * t51, t49 * t50, out=q_next_out[..., 1])
     numpy.subtract(t45 * t50, t49 * t51, out=q_next_out[..., 2])
-    numpy.add(-t39 * t49, t45 * t48, out=q_next_out[..., 3])
+    numpy.subtract(t45 * t48, t39 * t49, out=q_next_out[..., 3])
     omega_next_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[1] is None else out[1]
     omega_next_out[..., 0] = t43
     numpy.multiply(t9, t32 * t52 + t53 * t54, out=omega_next_out[..., 1])
-    numpy.multiply(t16, -t32 * t54 + t52 * t53, out=omega_next_out[..., 2])
+    numpy.multiply(t16, t52 * t53 - t32 * t54, out=omega_next_out[..., 2])
     return q_next_out, omega_next_out
 
 
@@ -2644,14 +2644,16 @@ def axis_flow_x(I_b, q, L_b, tau, *, out=None):
     t3 = 1 - 2*(t2*t2)
     t4 = 2*t1*t2
     q_next_out = numpy.empty(batch + (4,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    numpy.add(q_0 * t1, q_3 * t2, out=q_next_out[..., 0])
-    numpy.add(q_1 * t1, q_2 * t2, out=q_next_out[..., 1])
-    numpy.add(-q_1 * t2, q_2 * t1, out=q_next_out[..., 2])
-    numpy.add(-q_0 * t2, q_3 * t1, out=q_next_out[..., 3])
+    q_next_0_2 = q[..., 0:2] * t1[..., None]
+    numpy.add(q_next_0_2[..., 0], q_3 * t2, out=q_next_out[..., 0])
+    numpy.add(q_next_0_2[..., 1], q_2 * t2, out=q_next_out[..., 1])
+    q_next_2_4 = q[..., 2:4] * t1[..., None]
+    numpy.subtract(q_next_2_4[..., 0], q_1 * t2, out=q_next_out[..., 2])
+    numpy.subtract(q_next_2_4[..., 1], q_0 * t2, out=q_next_out[..., 3])
     L_next_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[1] is None else out[1]
     L_next_out[..., 0] = L_b_0
     numpy.add(L_b_1 * t3, L_b_2 * t4, out=L_next_out[..., 1])
-    numpy.add(-L_b_1 * t4, L_b_2 * t3, out=L_next_out[..., 2])
+    numpy.subtract(L_b_2 * t3, L_b_1 * t4, out=L_next_out[..., 2])
     return q_next_out, L_next_out
 
 
@@ -2703,7 +2705,7 @@ def axis_flow_y(I_b, q, L_b, tau, *, out=None):
     numpy.subtract(q_0 * t1, q_2 * t2, out=q_next_out[..., 0])
     numpy.add(q_1 * t1, q_3 * t2, out=q_next_out[..., 1])
     numpy.add(q_0 * t2, q_2 * t1, out=q_next_out[..., 2])
-    numpy.add(-q_1 * t2, q_3 * t1, out=q_next_out[..., 3])
+    numpy.subtract(q_3 * t1, q_1 * t2, out=q_next_out[..., 3])
     L_next_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[1] is None else out[1]
     numpy.subtract(L_b_0 * t3, L_b_2 * t4, out=L_next_out[..., 0])
     L_next_out[..., 1] = L_b_1
@@ -2757,12 +2759,12 @@ def axis_flow_z(I_b, q, L_b, tau, *, out=None):
     t4 = 2*t1*t2
     q_next_out = numpy.empty(batch + (4,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     numpy.add(q_0 * t1, q_1 * t2, out=q_next_out[..., 0])
-    numpy.add(-q_0 * t2, q_1 * t1, out=q_next_out[..., 1])
+    numpy.subtract(q_1 * t1, q_0 * t2, out=q_next_out[..., 1])
     numpy.add(q_2 * t1, q_3 * t2, out=q_next_out[..., 2])
-    numpy.add(-q_2 * t2, q_3 * t1, out=q_next_out[..., 3])
+    numpy.subtract(q_3 * t1, q_2 * t2, out=q_next_out[..., 3])
     L_next_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[1] is None else out[1]
     numpy.add(L_b_0 * t3, L_b_1 * t4, out=L_next_out[..., 0])
-    numpy.add(-L_b_0 * t4, L_b_1 * t3, out=L_next_out[..., 1])
+    numpy.subtract(L_b_1 * t3, L_b_0 * t4, out=L_next_out[..., 1])
     L_next_out[..., 2] = L_b_2
     return q_next_out, L_next_out
 
@@ -2795,7 +2797,7 @@ def symtop_score(I_b, *, out=None):
     t2 = t0 + t1
     t3 = (1.0/I_b_2)
     t4 = t1 + t3
-    t5 = -t0 + t3
+    t5 = t3 - t0
     score_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     score_out[..., 0] = abs(t2*t4)
     score_out[..., 1] = abs(t2*t5)
@@ -2828,7 +2830,7 @@ def symtop_leftover(I_b, I_r, *, out=None):
         batch = I_b.shape[:-1] if I_b.shape[:-1] == I_r.shape else numpy.broadcast_shapes(I_b.shape[:-1], I_r.shape)
     t0 = (1.0/I_r)
     c_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    numpy.add(-t0[..., None], 1.0 / I_b[..., 0:3], out=c_out[..., 0:3])
+    numpy.subtract(1.0 / I_b[..., 0:3], t0[..., None], out=c_out[..., 0:3])
     return c_out
 
 
@@ -2876,14 +2878,16 @@ def symtop_axis_flow_x(q, L_b, c, tau, *, out=None):
     t3 = 1 - 2*(t2*t2)
     t4 = 2*t1*t2
     q_next_out = numpy.empty(batch + (4,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    numpy.add(q_0 * t1, q_3 * t2, out=q_next_out[..., 0])
-    numpy.add(q_1 * t1, q_2 * t2, out=q_next_out[..., 1])
-    numpy.add(-q_1 * t2, q_2 * t1, out=q_next_out[..., 2])
-    numpy.add(-q_0 * t2, q_3 * t1, out=q_next_out[..., 3])
+    q_next_0_2 = q[..., 0:2] * t1[..., None]
+    numpy.add(q_next_0_2[..., 0], q_3 * t2, out=q_next_out[..., 0])
+    numpy.add(q_next_0_2[..., 1], q_2 * t2, out=q_next_out[..., 1])
+    q_next_2_4 = q[..., 2:4] * t1[..., None]
+    numpy.subtract(q_next_2_4[..., 0], q_1 * t2, out=q_next_out[..., 2])
+    numpy.subtract(q_next_2_4[..., 1], q_0 * t2, out=q_next_out[..., 3])
     L_next_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[1] is None else out[1]
     L_next_out[..., 0] = L_b_0
     numpy.add(L_b_1 * t3, L_b_2 * t4, out=L_next_out[..., 1])
-    numpy.add(-L_b_1 * t4, L_b_2 * t3, out=L_next_out[..., 2])
+    numpy.subtract(L_b_2 * t3, L_b_1 * t4, out=L_next_out[..., 2])
     return q_next_out, L_next_out
 
 
@@ -2934,7 +2938,7 @@ def symtop_axis_flow_y(q, L_b, c, tau, *, out=None):
     numpy.subtract(q_0 * t1, q_2 * t2, out=q_next_out[..., 0])
     numpy.add(q_1 * t1, q_3 * t2, out=q_next_out[..., 1])
     numpy.add(q_0 * t2, q_2 * t1, out=q_next_out[..., 2])
-    numpy.add(-q_1 * t2, q_3 * t1, out=q_next_out[..., 3])
+    numpy.subtract(q_3 * t1, q_1 * t2, out=q_next_out[..., 3])
     L_next_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[1] is None else out[1]
     numpy.subtract(L_b_0 * t3, L_b_2 * t4, out=L_next_out[..., 0])
     L_next_out[..., 1] = L_b_1
@@ -2987,12 +2991,12 @@ def symtop_axis_flow_z(q, L_b, c, tau, *, out=None):
     t4 = 2*t1*t2
     q_next_out = numpy.empty(batch + (4,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     numpy.add(q_0 * t1, q_1 * t2, out=q_next_out[..., 0])
-    numpy.add(-q_0 * t2, q_1 * t1, out=q_next_out[..., 1])
+    numpy.subtract(q_1 * t1, q_0 * t2, out=q_next_out[..., 1])
     numpy.add(q_2 * t1, q_3 * t2, out=q_next_out[..., 2])
-    numpy.add(-q_2 * t2, q_3 * t1, out=q_next_out[..., 3])
+    numpy.subtract(q_3 * t1, q_2 * t2, out=q_next_out[..., 3])
     L_next_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[1] is None else out[1]
     numpy.add(L_b_0 * t3, L_b_1 * t4, out=L_next_out[..., 0])
-    numpy.add(-L_b_0 * t4, L_b_1 * t3, out=L_next_out[..., 1])
+    numpy.subtract(L_b_1 * t3, L_b_0 * t4, out=L_next_out[..., 1])
     L_next_out[..., 2] = L_b_2
     return q_next_out, L_next_out
 
@@ -3047,7 +3051,7 @@ def sphere_flow(q, L_b, I_r, tau, *, out=None):
         t10 = L_b_1*t7
         q_next_out = numpy.empty(batch + (4,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
         numpy.add(q_0 * t6 + q_1 * t9 - q_2 * t10, q_3 * t8, out=q_next_out[..., 0])
-        numpy.add(-q_0 * t9 + q_1 * t6 + q_2 * t8, q_3 * t10, out=q_next_out[..., 1])
+        numpy.add(q_1 * t6 - q_0 * t9 + q_2 * t8, q_3 * t10, out=q_next_out[..., 1])
         numpy.add(q_0 * t10 - q_1 * t8 + q_2 * t6, q_3 * t9, out=q_next_out[..., 2])
         numpy.add(-q_0 * t8 - q_1 * t10 - q_2 * t9, q_3 * t6, out=q_next_out[..., 3])
     return q_next_out
@@ -3317,10 +3321,10 @@ def implicit_gyro_residual(I_b, omega_b, tau_b, h, omega_next, *, out=None):
     omega_next_2 = omega_next[..., 2]
     t0 = omega_next_0*omega_next_2
     g_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    g_0_3 = I_b[..., 0:3] * (-omega_b[..., 0:3] + omega_next[..., 0:3]) - h[..., None] * tau_b[..., 0:3]
-    numpy.add(g_0_3[..., 0], h * (-I_b_1 * omega_next_1 * omega_next_2 + I_b_2 * omega_next_1 * omega_next_2), out=g_out[..., 0])
+    g_0_3 = I_b[..., 0:3] * (omega_next[..., 0:3] - omega_b[..., 0:3]) - h[..., None] * tau_b[..., 0:3]
+    numpy.add(g_0_3[..., 0], h * (I_b_2 * omega_next_1 * omega_next_2 - I_b_1 * omega_next_1 * omega_next_2), out=g_out[..., 0])
     numpy.add(g_0_3[..., 1], h * (I_b_0 * t0 - I_b_2 * t0), out=g_out[..., 1])
-    numpy.add(g_0_3[..., 2], h * (-I_b_0 * omega_next_0 * omega_next_1 + I_b_1 * omega_next_0 * omega_next_1), out=g_out[..., 2])
+    numpy.add(g_0_3[..., 2], h * (I_b_1 * omega_next_0 * omega_next_1 - I_b_0 * omega_next_0 * omega_next_1), out=g_out[..., 2])
     return g_out
 
 
@@ -3365,8 +3369,8 @@ def implicit_gyro_jacobian(I_b, h, omega_next, *, out=None):
     numpy.multiply(h, I_b_2 * omega_next_1 - t1, out=J_out[..., 0, 2])
     numpy.multiply(h, I_b_0 * omega_next_2 + t0, out=J_out[..., 1, 0])
     J_out[..., 1, 1] = I_b_1
-    numpy.multiply(h, -I_b_2 * omega_next_0 + t2, out=J_out[..., 1, 2])
-    numpy.multiply(h, -I_b_0 * omega_next_1 + t1, out=J_out[..., 2, 0])
+    numpy.multiply(h, t2 - I_b_2 * omega_next_0, out=J_out[..., 1, 2])
+    numpy.multiply(h, t1 - I_b_0 * omega_next_1, out=J_out[..., 2, 0])
     numpy.multiply(h, I_b_1 * omega_next_0 - t2, out=J_out[..., 2, 1])
     J_out[..., 2, 2] = I_b_2
     return J_out
@@ -3426,19 +3430,19 @@ def implicit_gyro_newton(I_b, omega_b, tau_b, h, omega_next, *, out=None):
     t5 = I_b_1*I_b_2 - t2*t3*t4
     t6 = I_b_1*omega_next_1
     t7 = I_b_2*omega_next_1 - t6
-    t8 = -I_b_0*omega_next_1 + t6
+    t8 = t6 - I_b_0 * omega_next_1
     t9 = I_b_1*h
     t10 = -I_b_2*omega_next_2
     t11 = I_b_0*omega_next_2 + t10
     t12 = t11*t3*t4 - t8*t9
     t13 = -I_b_1*omega_next_2 - t10
     t14 = I_b_2*h
-    t15 = -t11*t14 + t2*t3*t8
+    t15 = t2 * t3 * t8 - t11 * t14
     t16 = (1.0/(I_b_0*t5 + h*t12*t7 + h*t13*t15))
-    t17 = I_b_0*(-omega_b_0 + omega_next_0) - h*tau_b_0 + h*(I_b_2*omega_next_1*omega_next_2 - omega_next_2*t6)
-    t18 = I_b_2*(-omega_b_2 + omega_next_2) - h*tau_b_2 + h*(I_b_1*omega_next_0*omega_next_1 - omega_next_1*t0)
-    t19 = I_b_1*(-omega_b_1 + omega_next_1) - h*tau_b_1 + h*(omega_next_2*t0 - omega_next_2*t1)
-    t20 = t16*(t17*t5 + t18*(t13*t2*t3 - t7*t9) + t19*(-t13*t14 + t3*t4*t7))
+    t17 = I_b_0 * (omega_next_0 - omega_b_0) - h * tau_b_0 + h * (I_b_2 * omega_next_1 * omega_next_2 - omega_next_2 * t6)
+    t18 = I_b_2 * (omega_next_2 - omega_b_2) - h * tau_b_2 + h * (I_b_1 * omega_next_0 * omega_next_1 - omega_next_1 * t0)
+    t19 = I_b_1 * (omega_next_1 - omega_b_1) - h * tau_b_1 + h * (omega_next_2 * t0 - omega_next_2 * t1)
+    t20 = t16 * (t17 * t5 + t18 * (t13 * t2 * t3 - t7 * t9) + t19 * (t3 * t4 * t7 - t13 * t14))
     t21 = I_b_0*h
     t22 = t16*(t15*t17 + t18*(t11*t3*t7 - t2*t21) + t19*(I_b_0*I_b_2 - t3*t7*t8))
     t23 = t16*(t12*t17 + t18*(I_b_0*I_b_1 - t11*t13*t3) + t19*(t13*t3*t8 - t21*t4))
@@ -3492,13 +3496,13 @@ def quat_exp_step(q, omega_b, h, *, out=None):
         t2 = h*t1
         t3 = ((numpy.float32(1.0)/numpy.float32(2.0)))*t2
         t4 = numpy.cos(t3)
-        t5 = numpy.select([numpy.greater(t2, (numpy.float32(1.0)/numpy.float32(50000000.0))),True], [numpy.sin(t3)/t1,((numpy.float32(1.0)/numpy.float32(2.0)))*h*(-(numpy.float32(1.0)/numpy.float32(24.0))*(h*h)*t0 + 1)], default=numpy.nan)
+        t5 = numpy.select([numpy.greater(t2, numpy.float32(1.0) / numpy.float32(50000000.0)), True], [numpy.sin(t3) / t1, numpy.float32(1.0) / numpy.float32(2.0) * h * (1 - numpy.float32(1.0) / numpy.float32(24.0) * (h * h) * t0)], default=numpy.nan)
         t6 = omega_b_0*t5
         t7 = omega_b_2*t5
         t8 = omega_b_1*t5
         q_next_out = numpy.empty(batch + (4,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
         numpy.add(q_0 * t4 + q_1 * t7 - q_2 * t8, q_3 * t6, out=q_next_out[..., 0])
-        numpy.add(-q_0 * t7 + q_1 * t4 + q_2 * t6, q_3 * t8, out=q_next_out[..., 1])
+        numpy.add(q_1 * t4 - q_0 * t7 + q_2 * t6, q_3 * t8, out=q_next_out[..., 1])
         numpy.add(q_0 * t8 - q_1 * t6 + q_2 * t4, q_3 * t7, out=q_next_out[..., 2])
         numpy.add(-q_0 * t6 - q_1 * t8 - q_2 * t7, q_3 * t4, out=q_next_out[..., 3])
     return q_next_out
@@ -3657,7 +3661,7 @@ def wheel_motor(command, Omega, torque_limit, speed_limit, cutoff, *, out=None):
         t11 = -speed_limit
         t12 = numpy.less_equal(Omega_0, t11)
         t13 = (1.0/speed_limit)
-        t14 = torque_limit*(-t13*t2 + 1)
+        t14 = torque_limit * (1 - t13 * t2)
         t15 = -t14
         t16 = numpy.less(command_1, t0)
         t17 = abs(Omega_1)
@@ -3669,7 +3673,7 @@ def wheel_motor(command, Omega, torque_limit, speed_limit, cutoff, *, out=None):
         t23 = numpy.less(command_1, 0)
         t24 = numpy.greater(command_1, 0)
         t25 = numpy.less_equal(Omega_1, t11)
-        t26 = torque_limit*(-t13*t17 + 1)
+        t26 = torque_limit * (1 - t13 * t17)
         t27 = -t26
         t28 = numpy.less(command_2, t0)
         t29 = abs(Omega_2)
@@ -3681,7 +3685,7 @@ def wheel_motor(command, Omega, torque_limit, speed_limit, cutoff, *, out=None):
         t35 = numpy.less(command_2, 0)
         t36 = numpy.greater(command_2, 0)
         t37 = numpy.less_equal(Omega_2, t11)
-        t38 = torque_limit*(-t13*t29 + 1)
+        t38 = torque_limit * (1 - t13 * t29)
         t39 = -t38
         u_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
         u_out[..., 0] = numpy.select([t7,True], [numpy.select([numpy.logical_and.reduce((t3,numpy.logical_or.reduce((numpy.logical_not(t1),numpy.less(t4, 0))),numpy.logical_or.reduce((t1,numpy.logical_not(t5),numpy.greater(t4, 0))),numpy.logical_or.reduce((t1,t5,numpy.greater(Omega_0*command_0, 0))))),True], [0,t6], default=numpy.nan),numpy.select([numpy.logical_and.reduce((numpy.logical_or.reduce((t10,t12)),numpy.logical_or.reduce((t10,t9)),numpy.logical_or.reduce((t12,t8)),numpy.logical_or.reduce((t8,t9)))),numpy.logical_and.reduce((numpy.greater(Omega_0, 0),numpy.greater(command_0, t14),numpy.less(Omega_0, speed_limit))),numpy.logical_and.reduce((numpy.greater(Omega_0, t11),numpy.less(Omega_0, 0),numpy.less(command_0, t15))),True], [0,t14,t15,t6], default=numpy.nan)], default=numpy.nan)
@@ -3785,10 +3789,10 @@ def wheels3_body_rhs(q, omega_b, Omega, I_p, A_b, J, r_b, F_w, tau_w, u, c_w, *,
     M_12 = -A_b_10*A_b_20*J_0 - A_b_11*A_b_21*J_1 - A_b_12*A_b_22*J_2 + I_p_12
     M_22 = -(A_b_20*A_b_20)*J_0 - (A_b_21*A_b_21)*J_1 - (A_b_22*A_b_22)*J_2 + I_p_22
     C_00 = M_11*M_22 - (M_12*M_12)
-    C_01 = -M_01*M_22 + M_02*M_12
+    C_01 = M_02 * M_12 - M_01 * M_22
     C_02 = M_01*M_12 - M_02*M_11
     C_11 = M_00*M_22 - (M_02*M_02)
-    C_12 = -M_00*M_12 + M_01*M_02
+    C_12 = M_01 * M_02 - M_00 * M_12
     C_22 = M_00*M_11 - (M_01*M_01)
     inv_det_M = (1.0/(C_00*M_00 + C_01*M_01 + C_02*M_02))
     k_w_0 = C_00*inv_det_M
@@ -3808,7 +3812,7 @@ def wheels3_body_rhs(q, omega_b, Omega, I_p, A_b, J, r_b, F_w, tau_w, u, c_w, *,
     JOmega_0 = JOmega_0_3[..., 0]
     JOmega_1 = JOmega_0_3[..., 1]
     JOmega_2 = JOmega_0_3[..., 2]
-    g_w_0_3 = -Omega[..., 0:3] * c_w[..., None] + u[..., 0:3]
+    g_w_0_3 = u[..., 0:3] - Omega[..., 0:3] * c_w[..., None]
     g_w_0 = g_w_0_3[..., 0]
     g_w_1 = g_w_0_3[..., 1]
     g_w_2 = g_w_0_3[..., 2]
@@ -3821,9 +3825,9 @@ def wheels3_body_rhs(q, omega_b, Omega, I_p, A_b, J, r_b, F_w, tau_w, u, c_w, *,
     H_b_0 = I_omega_0 + h_A_0
     H_b_1 = I_omega_1 + h_A_1
     H_b_2 = I_omega_2 + h_A_2
-    wxH_0 = -H_b_1*omega_b_2 + H_b_2*omega_b_1
+    wxH_0 = H_b_2 * omega_b_1 - H_b_1 * omega_b_2
     wxH_1 = H_b_0*omega_b_2 - H_b_2*omega_b_0
-    wxH_2 = -H_b_0*omega_b_1 + H_b_1*omega_b_0
+    wxH_2 = H_b_1 * omega_b_0 - H_b_0 * omega_b_1
     g_A_0 = A_b_00*g_w_0 + A_b_01*g_w_1 + A_b_02*g_w_2
     g_A_1 = A_b_10*g_w_0 + A_b_11*g_w_1 + A_b_12*g_w_2
     g_A_2 = A_b_20*g_w_0 + A_b_21*g_w_1 + A_b_22*g_w_2
@@ -3852,16 +3856,16 @@ def wheels3_body_rhs(q, omega_b, Omega, I_p, A_b, J, r_b, F_w, tau_w, u, c_w, *,
     t21 = q_2*t8 + t15
     t22 = -t11 - t17 + 1
     t23 = F_w_0*t20 + F_w_1*t22 + F_w_2*t21
-    t24 = -g_A_0 + r_b_1*t19 - r_b_2*t23 + t10*tau_w_2 + t13*tau_w_0 + t6*tau_w_1 - wxH_0
+    t24 = r_b_1 * t19 - g_A_0 - r_b_2 * t23 + t10 * tau_w_2 + t13 * tau_w_0 + t6 * tau_w_1 - wxH_0
     t25 = F_w_0*t13 + F_w_1*t6 + F_w_2*t10
     t26 = -g_A_1 - r_b_0*t19 + r_b_2*t25 + t20*tau_w_0 + t21*tau_w_2 + t22*tau_w_1 - wxH_1
-    t27 = -g_A_2 + r_b_0*t23 - r_b_1*t25 + t14*tau_w_0 + t16*tau_w_1 + t18*tau_w_2 - wxH_2
+    t27 = r_b_0 * t23 - g_A_2 - r_b_1 * t25 + t14 * tau_w_0 + t16 * tau_w_1 + t18 * tau_w_2 - wxH_2
     t28 = k_w_0*t24 + k_w_1*t26 + k_w_2*t27
     t29 = k_w_3*t24 + k_w_4*t26 + k_w_5*t27
     t30 = k_w_6*t24 + k_w_7*t26 + k_w_8*t27
     q_dot_out = numpy.empty(batch + (4,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     numpy.add(q_1 * t2 - q_2 * t1, q_3 * t0, out=q_dot_out[..., 0])
-    numpy.add(-q_0 * t2 + q_2 * t0, q_3 * t1, out=q_dot_out[..., 1])
+    numpy.add(q_2 * t0 - q_0 * t2, q_3 * t1, out=q_dot_out[..., 1])
     numpy.add(q_0 * t1 - q_1 * t0, q_3 * t2, out=q_dot_out[..., 2])
     numpy.subtract(-q_0 * t0 - q_1 * t1, q_2 * t2, out=q_dot_out[..., 3])
     omega_dot_b_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[1] is None else out[1]
@@ -4044,7 +4048,7 @@ def wheels3_motor(command, Omega, torque_limit, speed_limit, cutoff, *, out=None
         t11 = -speed_limit
         t12 = numpy.less_equal(Omega_0, t11)
         t13 = (1.0/speed_limit)
-        t14 = torque_limit*(-t13*t2 + 1)
+        t14 = torque_limit * (1 - t13 * t2)
         t15 = -t14
         t16 = numpy.less(command_1, t0)
         t17 = abs(Omega_1)
@@ -4056,7 +4060,7 @@ def wheels3_motor(command, Omega, torque_limit, speed_limit, cutoff, *, out=None
         t23 = numpy.less(command_1, 0)
         t24 = numpy.greater(command_1, 0)
         t25 = numpy.less_equal(Omega_1, t11)
-        t26 = torque_limit*(-t13*t17 + 1)
+        t26 = torque_limit * (1 - t13 * t17)
         t27 = -t26
         t28 = numpy.less(command_2, t0)
         t29 = abs(Omega_2)
@@ -4068,7 +4072,7 @@ def wheels3_motor(command, Omega, torque_limit, speed_limit, cutoff, *, out=None
         t35 = numpy.less(command_2, 0)
         t36 = numpy.greater(command_2, 0)
         t37 = numpy.less_equal(Omega_2, t11)
-        t38 = torque_limit*(-t13*t29 + 1)
+        t38 = torque_limit * (1 - t13 * t29)
         t39 = -t38
         u_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
         u_out[..., 0] = numpy.select([t7,True], [numpy.select([numpy.logical_and.reduce((t3,numpy.logical_or.reduce((numpy.logical_not(t1),numpy.less(t4, 0))),numpy.logical_or.reduce((t1,numpy.logical_not(t5),numpy.greater(t4, 0))),numpy.logical_or.reduce((t1,t5,numpy.greater(Omega_0*command_0, 0))))),True], [0,t6], default=numpy.nan),numpy.select([numpy.logical_and.reduce((numpy.logical_or.reduce((t10,t12)),numpy.logical_or.reduce((t10,t9)),numpy.logical_or.reduce((t12,t8)),numpy.logical_or.reduce((t8,t9)))),numpy.logical_and.reduce((numpy.greater(Omega_0, 0),numpy.greater(command_0, t14),numpy.less(Omega_0, speed_limit))),numpy.logical_and.reduce((numpy.greater(Omega_0, t11),numpy.less(Omega_0, 0),numpy.less(command_0, t15))),True], [0,t14,t15,t6], default=numpy.nan)], default=numpy.nan)
@@ -4176,10 +4180,10 @@ def wheels4_body_rhs(q, omega_b, Omega, I_p, A_b, J, r_b, F_w, tau_w, u, c_w, *,
     M_12 = -A_b_10*A_b_20*J_0 - A_b_11*A_b_21*J_1 - A_b_12*A_b_22*J_2 - A_b_13*A_b_23*J_3 + I_p_12
     M_22 = -(A_b_20*A_b_20)*J_0 - (A_b_21*A_b_21)*J_1 - (A_b_22*A_b_22)*J_2 - (A_b_23*A_b_23)*J_3 + I_p_22
     C_00 = M_11*M_22 - (M_12*M_12)
-    C_01 = -M_01*M_22 + M_02*M_12
+    C_01 = M_02 * M_12 - M_01 * M_22
     C_02 = M_01*M_12 - M_02*M_11
     C_11 = M_00*M_22 - (M_02*M_02)
-    C_12 = -M_00*M_12 + M_01*M_02
+    C_12 = M_01 * M_02 - M_00 * M_12
     C_22 = M_00*M_11 - (M_01*M_01)
     inv_det_M = (1.0/(C_00*M_00 + C_01*M_01 + C_02*M_02))
     k_w_0 = C_00*inv_det_M
@@ -4201,7 +4205,7 @@ def wheels4_body_rhs(q, omega_b, Omega, I_p, A_b, J, r_b, F_w, tau_w, u, c_w, *,
     JOmega_1 = JOmega_0_4[..., 1]
     JOmega_2 = JOmega_0_4[..., 2]
     JOmega_3 = JOmega_0_4[..., 3]
-    g_w_0_4 = -Omega[..., 0:4] * c_w[..., None] + u[..., 0:4]
+    g_w_0_4 = u[..., 0:4] - Omega[..., 0:4] * c_w[..., None]
     g_w_0 = g_w_0_4[..., 0]
     g_w_1 = g_w_0_4[..., 1]
     g_w_2 = g_w_0_4[..., 2]
@@ -4215,9 +4219,9 @@ def wheels4_body_rhs(q, omega_b, Omega, I_p, A_b, J, r_b, F_w, tau_w, u, c_w, *,
     H_b_0 = I_omega_0 + h_A_0
     H_b_1 = I_omega_1 + h_A_1
     H_b_2 = I_omega_2 + h_A_2
-    wxH_0 = -H_b_1*omega_b_2 + H_b_2*omega_b_1
+    wxH_0 = H_b_2 * omega_b_1 - H_b_1 * omega_b_2
     wxH_1 = H_b_0*omega_b_2 - H_b_2*omega_b_0
-    wxH_2 = -H_b_0*omega_b_1 + H_b_1*omega_b_0
+    wxH_2 = H_b_1 * omega_b_0 - H_b_0 * omega_b_1
     g_A_0 = A_b_00*g_w_0 + A_b_01*g_w_1 + A_b_02*g_w_2 + A_b_03*g_w_3
     g_A_1 = A_b_10*g_w_0 + A_b_11*g_w_1 + A_b_12*g_w_2 + A_b_13*g_w_3
     g_A_2 = A_b_20*g_w_0 + A_b_21*g_w_1 + A_b_22*g_w_2 + A_b_23*g_w_3
@@ -4246,16 +4250,16 @@ def wheels4_body_rhs(q, omega_b, Omega, I_p, A_b, J, r_b, F_w, tau_w, u, c_w, *,
     t21 = q_2*t8 + t15
     t22 = -t11 - t17 + 1
     t23 = F_w_0*t20 + F_w_1*t22 + F_w_2*t21
-    t24 = -g_A_0 + r_b_1*t19 - r_b_2*t23 + t10*tau_w_2 + t13*tau_w_0 + t6*tau_w_1 - wxH_0
+    t24 = r_b_1 * t19 - g_A_0 - r_b_2 * t23 + t10 * tau_w_2 + t13 * tau_w_0 + t6 * tau_w_1 - wxH_0
     t25 = F_w_0*t13 + F_w_1*t6 + F_w_2*t10
     t26 = -g_A_1 - r_b_0*t19 + r_b_2*t25 + t20*tau_w_0 + t21*tau_w_2 + t22*tau_w_1 - wxH_1
-    t27 = -g_A_2 + r_b_0*t23 - r_b_1*t25 + t14*tau_w_0 + t16*tau_w_1 + t18*tau_w_2 - wxH_2
+    t27 = r_b_0 * t23 - g_A_2 - r_b_1 * t25 + t14 * tau_w_0 + t16 * tau_w_1 + t18 * tau_w_2 - wxH_2
     t28 = k_w_0*t24 + k_w_1*t26 + k_w_2*t27
     t29 = k_w_3*t24 + k_w_4*t26 + k_w_5*t27
     t30 = k_w_6*t24 + k_w_7*t26 + k_w_8*t27
     q_dot_out = numpy.empty(batch + (4,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     numpy.add(q_1 * t2 - q_2 * t1, q_3 * t0, out=q_dot_out[..., 0])
-    numpy.add(-q_0 * t2 + q_2 * t0, q_3 * t1, out=q_dot_out[..., 1])
+    numpy.add(q_2 * t0 - q_0 * t2, q_3 * t1, out=q_dot_out[..., 1])
     numpy.add(q_0 * t1 - q_1 * t0, q_3 * t2, out=q_dot_out[..., 2])
     numpy.subtract(-q_0 * t0 - q_1 * t1, q_2 * t2, out=q_dot_out[..., 3])
     omega_dot_b_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[1] is None else out[1]
@@ -4325,10 +4329,10 @@ def wheels4_coefficients(I_p, A_b, J, *, out=None):
     M_12 = -A_b_10*A_b_20*J_0 - A_b_11*A_b_21*J_1 - A_b_12*A_b_22*J_2 - A_b_13*A_b_23*J_3 + I_p_12
     M_22 = -(A_b_20*A_b_20)*J_0 - (A_b_21*A_b_21)*J_1 - (A_b_22*A_b_22)*J_2 - (A_b_23*A_b_23)*J_3 + I_p_22
     C_00 = M_11*M_22 - (M_12*M_12)
-    C_01 = -M_01*M_22 + M_02*M_12
+    C_01 = M_02 * M_12 - M_01 * M_22
     C_02 = M_01*M_12 - M_02*M_11
     C_11 = M_00*M_22 - (M_02*M_02)
-    C_12 = -M_00*M_12 + M_01*M_02
+    C_12 = M_01 * M_02 - M_00 * M_12
     C_22 = M_00*M_11 - (M_01*M_01)
     inv_det_M = (1.0/(C_00*M_00 + C_01*M_01 + C_02*M_02))
     t0 = C_01*inv_det_M
@@ -4457,7 +4461,7 @@ def wheels4_body_rhs_c(q, omega_b, Omega, I_p, A_b, J, k_w, r_b, F_w, tau_w, u, 
     JOmega_1 = JOmega_0_4[..., 1]
     JOmega_2 = JOmega_0_4[..., 2]
     JOmega_3 = JOmega_0_4[..., 3]
-    g_w_0_4 = -Omega[..., 0:4] * c_w[..., None] + u[..., 0:4]
+    g_w_0_4 = u[..., 0:4] - Omega[..., 0:4] * c_w[..., None]
     g_w_0 = g_w_0_4[..., 0]
     g_w_1 = g_w_0_4[..., 1]
     g_w_2 = g_w_0_4[..., 2]
@@ -4471,9 +4475,9 @@ def wheels4_body_rhs_c(q, omega_b, Omega, I_p, A_b, J, k_w, r_b, F_w, tau_w, u, 
     H_b_0 = I_omega_0 + h_A_0
     H_b_1 = I_omega_1 + h_A_1
     H_b_2 = I_omega_2 + h_A_2
-    wxH_0 = -H_b_1*omega_b_2 + H_b_2*omega_b_1
+    wxH_0 = H_b_2 * omega_b_1 - H_b_1 * omega_b_2
     wxH_1 = H_b_0*omega_b_2 - H_b_2*omega_b_0
-    wxH_2 = -H_b_0*omega_b_1 + H_b_1*omega_b_0
+    wxH_2 = H_b_1 * omega_b_0 - H_b_0 * omega_b_1
     g_A_0 = A_b_00*g_w_0 + A_b_01*g_w_1 + A_b_02*g_w_2 + A_b_03*g_w_3
     g_A_1 = A_b_10*g_w_0 + A_b_11*g_w_1 + A_b_12*g_w_2 + A_b_13*g_w_3
     g_A_2 = A_b_20*g_w_0 + A_b_21*g_w_1 + A_b_22*g_w_2 + A_b_23*g_w_3
@@ -4502,16 +4506,16 @@ def wheels4_body_rhs_c(q, omega_b, Omega, I_p, A_b, J, k_w, r_b, F_w, tau_w, u, 
     t21 = q_2*t8 + t15
     t22 = -t11 - t17 + 1
     t23 = F_w_0*t20 + F_w_1*t22 + F_w_2*t21
-    t24 = -g_A_0 + r_b_1*t19 - r_b_2*t23 + t10*tau_w_2 + t13*tau_w_0 + t6*tau_w_1 - wxH_0
+    t24 = r_b_1 * t19 - g_A_0 - r_b_2 * t23 + t10 * tau_w_2 + t13 * tau_w_0 + t6 * tau_w_1 - wxH_0
     t25 = F_w_0*t13 + F_w_1*t6 + F_w_2*t10
     t26 = -g_A_1 - r_b_0*t19 + r_b_2*t25 + t20*tau_w_0 + t21*tau_w_2 + t22*tau_w_1 - wxH_1
-    t27 = -g_A_2 + r_b_0*t23 - r_b_1*t25 + t14*tau_w_0 + t16*tau_w_1 + t18*tau_w_2 - wxH_2
+    t27 = r_b_0 * t23 - g_A_2 - r_b_1 * t25 + t14 * tau_w_0 + t16 * tau_w_1 + t18 * tau_w_2 - wxH_2
     t28 = k_w_0*t24 + k_w_1*t26 + k_w_2*t27
     t29 = k_w_3*t24 + k_w_4*t26 + k_w_5*t27
     t30 = k_w_6*t24 + k_w_7*t26 + k_w_8*t27
     q_dot_out = numpy.empty(batch + (4,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     numpy.add(q_1 * t2 - q_2 * t1, q_3 * t0, out=q_dot_out[..., 0])
-    numpy.add(-q_0 * t2 + q_2 * t0, q_3 * t1, out=q_dot_out[..., 1])
+    numpy.add(q_2 * t0 - q_0 * t2, q_3 * t1, out=q_dot_out[..., 1])
     numpy.add(q_0 * t1 - q_1 * t0, q_3 * t2, out=q_dot_out[..., 2])
     numpy.subtract(-q_0 * t0 - q_1 * t1, q_2 * t2, out=q_dot_out[..., 3])
     omega_dot_b_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[1] is None else out[1]
@@ -4619,7 +4623,7 @@ def wheels4_on_axes_rhs_c(q, omega_b, Omega, I_p, J, k_w, r_b, F_w, tau_w, u, c_
     JOmega_0 = JOmega_0_3[..., 0]
     JOmega_1 = JOmega_0_3[..., 1]
     JOmega_2 = JOmega_0_3[..., 2]
-    g_w_0_4 = -Omega[..., 0:4] * c_w[..., None] + u[..., 0:4]
+    g_w_0_4 = u[..., 0:4] - Omega[..., 0:4] * c_w[..., None]
     g_w_0 = g_w_0_4[..., 0]
     g_w_1 = g_w_0_4[..., 1]
     g_w_2 = g_w_0_4[..., 2]
@@ -4633,9 +4637,9 @@ def wheels4_on_axes_rhs_c(q, omega_b, Omega, I_p, J, k_w, r_b, F_w, tau_w, u, c_
     H_b_0 = I_omega_0 + h_A_0
     H_b_1 = I_omega_1 + h_A_1
     H_b_2 = I_omega_2 + h_A_2
-    wxH_0 = -H_b_1*omega_b_2 + H_b_2*omega_b_1
+    wxH_0 = H_b_2 * omega_b_1 - H_b_1 * omega_b_2
     wxH_1 = H_b_0*omega_b_2 - H_b_2*omega_b_0
-    wxH_2 = -H_b_0*omega_b_1 + H_b_1*omega_b_0
+    wxH_2 = H_b_1 * omega_b_0 - H_b_0 * omega_b_1
     g_A_0 = g_w_0
     g_A_1 = g_w_1
     g_A_2 = g_w_2
@@ -4664,16 +4668,16 @@ def wheels4_on_axes_rhs_c(q, omega_b, Omega, I_p, J, k_w, r_b, F_w, tau_w, u, c_
     t21 = q_2*t8 + t15
     t22 = -t11 - t17 + 1
     t23 = F_w_0*t20 + F_w_1*t22 + F_w_2*t21
-    t24 = -g_A_0 + r_b_1*t19 - r_b_2*t23 + t10*tau_w_2 + t13*tau_w_0 + t6*tau_w_1 - wxH_0
+    t24 = r_b_1 * t19 - g_A_0 - r_b_2 * t23 + t10 * tau_w_2 + t13 * tau_w_0 + t6 * tau_w_1 - wxH_0
     t25 = F_w_0*t13 + F_w_1*t6 + F_w_2*t10
     t26 = -g_A_1 - r_b_0*t19 + r_b_2*t25 + t20*tau_w_0 + t21*tau_w_2 + t22*tau_w_1 - wxH_1
-    t27 = -g_A_2 + r_b_0*t23 - r_b_1*t25 + t14*tau_w_0 + t16*tau_w_1 + t18*tau_w_2 - wxH_2
+    t27 = r_b_0 * t23 - g_A_2 - r_b_1 * t25 + t14 * tau_w_0 + t16 * tau_w_1 + t18 * tau_w_2 - wxH_2
     t28 = k_w_0*t24 + k_w_1*t26 + k_w_2*t27
     t29 = k_w_3*t24 + k_w_4*t26 + k_w_5*t27
     t30 = k_w_6*t24 + k_w_7*t26 + k_w_8*t27
     q_dot_out = numpy.empty(batch + (4,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     numpy.add(q_1 * t2 - q_2 * t1, q_3 * t0, out=q_dot_out[..., 0])
-    numpy.add(-q_0 * t2 + q_2 * t0, q_3 * t1, out=q_dot_out[..., 1])
+    numpy.add(q_2 * t0 - q_0 * t2, q_3 * t1, out=q_dot_out[..., 1])
     numpy.add(q_0 * t1 - q_1 * t0, q_3 * t2, out=q_dot_out[..., 2])
     numpy.subtract(-q_0 * t0 - q_1 * t1, q_2 * t2, out=q_dot_out[..., 3])
     omega_dot_b_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[1] is None else out[1]
@@ -4769,7 +4773,7 @@ def wheels4_total_momentum(q, omega_b, Omega, I_p, A_b, J, *, out=None):
     L_w_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     numpy.add(t11 * (t10 + t9) + t14 * (-t12 - t13), t8 * (t1 - t3), out=L_w_out[..., 0])
     numpy.add(t11 * (2 * q_1 * q_2 - t15) + t14 * (t1 + t3), t8 * (-t13 - t16), out=L_w_out[..., 1])
-    numpy.add(t11 * (-t12 - t16 + 1) + t14 * (-t10 + t9), t8 * (q_1 * t2 + t15), out=L_w_out[..., 2])
+    numpy.add(t11 * (-t12 - t16 + 1) + t14 * (t9 - t10), t8 * (q_1 * t2 + t15), out=L_w_out[..., 2])
     return L_w_out
 
 
@@ -4952,7 +4956,7 @@ def wheels4_motor(command, Omega, torque_limit, speed_limit, cutoff, *, out=None
         t11 = -speed_limit
         t12 = numpy.less_equal(Omega_0, t11)
         t13 = (1.0/speed_limit)
-        t14 = torque_limit*(-t13*t2 + 1)
+        t14 = torque_limit * (1 - t13 * t2)
         t15 = -t14
         t16 = numpy.less(command_1, t0)
         t17 = abs(Omega_1)
@@ -4964,7 +4968,7 @@ def wheels4_motor(command, Omega, torque_limit, speed_limit, cutoff, *, out=None
         t23 = numpy.less(command_1, 0)
         t24 = numpy.greater(command_1, 0)
         t25 = numpy.less_equal(Omega_1, t11)
-        t26 = torque_limit*(-t13*t17 + 1)
+        t26 = torque_limit * (1 - t13 * t17)
         t27 = -t26
         t28 = numpy.less(command_2, t0)
         t29 = abs(Omega_2)
@@ -4976,7 +4980,7 @@ def wheels4_motor(command, Omega, torque_limit, speed_limit, cutoff, *, out=None
         t35 = numpy.less(command_2, 0)
         t36 = numpy.greater(command_2, 0)
         t37 = numpy.less_equal(Omega_2, t11)
-        t38 = torque_limit*(-t13*t29 + 1)
+        t38 = torque_limit * (1 - t13 * t29)
         t39 = -t38
         t40 = numpy.less(command_3, t0)
         t41 = abs(Omega_3)
@@ -4988,7 +4992,7 @@ def wheels4_motor(command, Omega, torque_limit, speed_limit, cutoff, *, out=None
         t47 = numpy.less(command_3, 0)
         t48 = numpy.greater(command_3, 0)
         t49 = numpy.less_equal(Omega_3, t11)
-        t50 = torque_limit*(-t13*t41 + 1)
+        t50 = torque_limit * (1 - t13 * t41)
         t51 = -t50
         u_out = numpy.empty(batch + (4,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
         u_out[..., 0] = numpy.select([t7,True], [numpy.select([numpy.logical_and.reduce((t3,numpy.logical_or.reduce((numpy.logical_not(t1),numpy.less(t4, 0))),numpy.logical_or.reduce((t1,numpy.logical_not(t5),numpy.greater(t4, 0))),numpy.logical_or.reduce((t1,t5,numpy.greater(Omega_0*command_0, 0))))),True], [0,t6], default=numpy.nan),numpy.select([numpy.logical_and.reduce((numpy.logical_or.reduce((t10,t12)),numpy.logical_or.reduce((t10,t9)),numpy.logical_or.reduce((t12,t8)),numpy.logical_or.reduce((t8,t9)))),numpy.logical_and.reduce((numpy.greater(Omega_0, 0),numpy.greater(command_0, t14),numpy.less(Omega_0, speed_limit))),numpy.logical_and.reduce((numpy.greater(Omega_0, t11),numpy.less(Omega_0, 0),numpy.less(command_0, t15))),True], [0,t14,t15,t6], default=numpy.nan)], default=numpy.nan)
@@ -5035,7 +5039,7 @@ def quat_error_chart_inverse(q_ref, dtheta, *, out=None):
     t3 = numpy.sqrt(-(numpy.float32(1.0)/numpy.float32(4.0))*(dtheta_0*dtheta_0) - (numpy.float32(1.0)/numpy.float32(4.0))*(dtheta_1*dtheta_1) - (numpy.float32(1.0)/numpy.float32(4.0))*(dtheta_2*dtheta_2) + 1)
     q_out = numpy.empty(batch + (4,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     numpy.add(q_ref_0 * t3 + q_ref_1 * t2 - q_ref_2 * t1, q_ref_3 * t0, out=q_out[..., 0])
-    numpy.add(-q_ref_0 * t2 + q_ref_1 * t3 + q_ref_2 * t0, q_ref_3 * t1, out=q_out[..., 1])
+    numpy.add(q_ref_1 * t3 - q_ref_0 * t2 + q_ref_2 * t0, q_ref_3 * t1, out=q_out[..., 1])
     numpy.add(q_ref_0 * t1 - q_ref_1 * t0 + q_ref_2 * t3, q_ref_3 * t2, out=q_out[..., 2])
     numpy.add(-q_ref_0 * t0 - q_ref_1 * t1 - q_ref_2 * t2, q_ref_3 * t3, out=q_out[..., 3])
     return q_out
@@ -5191,7 +5195,7 @@ def rigid_point_velocity(v_com_w, omega_w, r_w, *, out=None):
     r_w_2 = r_w[..., 2]
     v_w_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     numpy.add(omega_w_1 * r_w_2 - omega_w_2 * r_w_1, v_com_w_0, out=v_w_out[..., 0])
-    numpy.add(-omega_w_0 * r_w_2 + omega_w_2 * r_w_0, v_com_w_1, out=v_w_out[..., 1])
+    numpy.add(omega_w_2 * r_w_0 - omega_w_0 * r_w_2, v_com_w_1, out=v_w_out[..., 1])
     numpy.add(omega_w_0 * r_w_1 - omega_w_1 * r_w_0, v_com_w_2, out=v_w_out[..., 2])
     return v_w_out
 
@@ -5225,7 +5229,7 @@ def box_of_inertia(m, I_b, *, out=None):
         t1 = t1_3[..., 0]
         t2 = t1_3[..., 1]
         t3 = t1_3[..., 2]
-        t4 = -t1 + t2 + t3
+        t4 = t2 - t1 + t3
         t5 = (1.0/m)
         t6 = t1 - t2 + t3
         t7 = t1 + t2 - t3

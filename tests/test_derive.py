@@ -122,3 +122,25 @@ def test_other_tool_versions_printing_identical_files_are_current(tmp_path, deri
     man["derive_sources_sha256"] = "0" * 64
     (out / "manifest.json").write_text(json.dumps(man, indent=2, sort_keys=True) + "\n")
     assert codegen.check(out) == ["manifest.json"]
+
+
+def test_the_numpy_printing_writes_a_leading_negated_product_as_a_subtraction():
+    """codegen._np_lead_neg: `-a*b + r` is printed `r - a*b` (one NumPy call fewer), only where the left term is
+    negated and the right is not, and it is the same number bit for bit, signed zeros and infinities included."""
+    f = codegen._np_lead_neg
+    assert f("-t0 * x_4 + t1 * x_3") == "t1 * x_3 - t0 * x_4"
+    assert f("-a*b*c + d*e + f") == "d * e - a * b * c + f"
+    assert f("x*(-a + c)") == "x * (c - a)"
+    for same in ("-t0 * x_3 - t1 * x_4", "a + b", "-a*b + -c*d", "a/(-b) + c"):
+        assert f(same) == same
+    rng = np.random.default_rng(30)
+    vals = np.concatenate([rng.standard_normal(4000) * 10.0 ** rng.integers(-8, 8, 4000),
+                           [0.0, -0.0, np.inf, -np.inf, 1e-320, -1e-320, 1e308, -1e308]])
+    a, b, c, d, e = (rng.choice(vals, 20000) for _ in range(5))
+    for code in ("-a * b + c", "-a * b * c + d * e", "-a + b", "-a * b + c + e"):
+        env = dict(a=a, b=b, c=c, d=d, e=e)
+        with np.errstate(all="ignore"):
+            before, after = eval(code, env), eval(f(code), env)
+        fin = ~np.isnan(before)
+        assert np.array_equal(np.isnan(before), np.isnan(after))
+        assert np.array_equal(before[fin].view(np.int64), after[fin].view(np.int64)), code
