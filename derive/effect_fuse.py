@@ -9,8 +9,9 @@ FUSED_MAX distinct built-in effects that read the state (FLAG_USES_STATE): their
 expressions of one body's numbers, so each is a lane expression. A user effect (its tile form, a call into the
 user's library) never fuses.
 
-A pattern's tile kinds are the right-hand-side classes a body with the pattern can have (csrc/step.c, rhs_class:
-which of FORCE, TORQUE_W, TORQUE_B its effects' flags carry), whatever the effects that read no state before it
+A pattern's tile kinds are the right-hand-side classes a body with the pattern can have (tile_kind: which of
+FORCE, TORQUE_W, TORQUE_B its effects' flags carry; printed as a table for csrc/step.c's rhs_class and the NumPy
+backend's rhs_classes), whatever the effects that read no state before it
 add: batch_simd.h compiles one fused tile per (kind, pattern) of this table, in each kind's effect tile stepper.
 """
 from __future__ import annotations
@@ -25,16 +26,45 @@ FUSED_MAX = 2   # effects per pattern (batch_simd.h's fused tile loads this many
 TILE_KINDS = ("TORQUE", "FULL", "FORCE", "BODY", "BODY_F")
 
 
+# The effect flags that choose a plain body's right-hand-side class; bit j of an index of the printed table
+# (kinds_by_flags) says whether RHS_BITS[j] is among the body's flags.
+RHS_BITS = (E.FLAG_FORCE, E.FLAG_TORQUE_W, E.FLAG_TORQUE_B)
+
+
 def tile_kind(flags: int) -> str:
     """The right-hand-side class of a plain body whose effects' flags OR to `flags` (at least one effect): body-frame
-    torques only (BODY, BODY_F with a force), no torque (FORCE), world torques (TORQUE, FULL with a force); the
-    rule of csrc/step.c's rhs_class."""
+    torques only (BODY, BODY_F with a force), no torque (FORCE), world torques (TORQUE, FULL with a force). The one
+    statement of the rule: printed as a table (kinds_by_flags) for csrc/step.c's rhs_class and the NumPy backend's
+    lavendersim.effects.rhs_classes."""
     force = bool(flags & E.FLAG_FORCE)
     if flags & E.FLAG_TORQUE_B and not flags & E.FLAG_TORQUE_W:
         return "BODY_F" if force else "BODY"
     if not flags & (E.FLAG_TORQUE_W | E.FLAG_TORQUE_B):
         return "FORCE"
     return "FULL" if force else "TORQUE"
+
+
+def kinds_by_flags() -> tuple[str, ...]:
+    """tile_kind of every combination of RHS_BITS: entry i for the flags holding RHS_BITS[j] exactly when bit j of i
+    is set (2 ** len(RHS_BITS) entries)."""
+    return tuple(tile_kind(sum(b for j, b in enumerate(RHS_BITS) if i >> j & 1)) for i in range(1 << len(RHS_BITS)))
+
+
+def rhs_c_header() -> list[str]:
+    """kernels.h's printed rule: LV_RHS_FLAGS_INDEX(flags), the table index of an OR of effect flags, and
+    LV_RHS_KINDS_BY_FLAGS(K), the initializer of the table, each kind named K(kind) (kind in TILE_KINDS)."""
+    names = {E.FLAG_FORCE: "LV_EFFECT_FORCE", E.FLAG_TORQUE_W: "LV_EFFECT_TORQUE_W", E.FLAG_TORQUE_B: "LV_EFFECT_TORQUE_B"}
+    index = " | ".join(f"((((flags) & {names[b]}) != 0) << {j})" for j, b in enumerate(RHS_BITS))
+    return ["/* The right-hand-side class of a plain body with effects, from the OR of their flags (derive/effect_fuse.py",
+            "   tile_kind, printed as a table): LV_RHS_KINDS_BY_FLAGS(K)[LV_RHS_FLAGS_INDEX(flags)], K(kind) naming",
+            "   each class (TORQUE, FULL, FORCE, BODY, BODY_F). */",
+            f"#define LV_RHS_FLAGS_INDEX(flags) ({index})",
+            f"#define LV_RHS_KINDS_BY_FLAGS(K) {{{', '.join(f'K({k})' for k in kinds_by_flags())}}}"]
+
+
+def meta_extra() -> dict:
+    """effects_meta.py's printed rule (the NumPy backend's copy of the table): RHS_BITS and RHS_KINDS_BY_FLAGS."""
+    return {"rhs_bits": RHS_BITS, "rhs_kinds_by_flags": kinds_by_flags()}
 
 
 def _constant_flags(effects: Sequence[tuple[int, E.EffectDecl]]) -> set[int]:
@@ -83,4 +113,4 @@ def c_header(effects: Sequence[tuple[int, E.EffectDecl]]) -> list[str]:
          "#define LV_EFFECT_FUSED(X, ...) " + " ".join(row(p, c) for p, c, _ in pats)]
     for kind in TILE_KINDS:
         h.append((f"#define LV_EFFECT_FUSED_{kind}(X, ...) " + " ".join(row(p, c) for p, c, k in pats if kind in k)).rstrip())
-    return h
+    return h + rhs_c_header()

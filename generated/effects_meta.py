@@ -12,6 +12,8 @@ FLAG_USES_V, FLAG_USES_OMEGA, FLAG_FORCE = 1, 2, 4
 FLAG_USES_STATE = 8
 FLAG_TORQUE_W, FLAG_TORQUE_B = 16, 32
 TILE_LANES, TILE_ISAS = 64, ('base', 'avx2', 'avx512')  # a user effect's tile forms: lvu_effect_tile<TILE_LANES>_<name>_<isa>
+RHS_BITS = (4, 16, 32)
+RHS_KINDS_BY_FLAGS = ('FORCE', 'FORCE', 'TORQUE', 'FULL', 'BODY', 'BODY_F', 'TORQUE', 'FULL')
 
 EFFECTS = (
     {'name': 'applied_torque',

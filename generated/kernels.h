@@ -771,5 +771,10 @@ const char *lv_effect_name(int code);
 #define LV_EFFECT_FUSED_FORCE(X, ...) X(__VA_ARGS__, 8, 1, LV_EFFECT_LINEAR_DAMPING, 0)
 #define LV_EFFECT_FUSED_BODY(X, ...) X(__VA_ARGS__, 9, 1, LV_EFFECT_ANGULAR_DAMPING, 0)
 #define LV_EFFECT_FUSED_BODY_F(X, ...) X(__VA_ARGS__, 4, 2, LV_EFFECT_LINEAR_DAMPING, LV_EFFECT_ANGULAR_DAMPING) X(__VA_ARGS__, 6, 2, LV_EFFECT_ANGULAR_DAMPING, LV_EFFECT_LINEAR_DAMPING) X(__VA_ARGS__, 9, 1, LV_EFFECT_ANGULAR_DAMPING, 0)
+/* The right-hand-side class of a plain body with effects, from the OR of their flags (derive/effect_fuse.py
+   tile_kind, printed as a table): LV_RHS_KINDS_BY_FLAGS(K)[LV_RHS_FLAGS_INDEX(flags)], K(kind) naming
+   each class (TORQUE, FULL, FORCE, BODY, BODY_F). */
+#define LV_RHS_FLAGS_INDEX(flags) (((((flags) & LV_EFFECT_FORCE) != 0) << 0) | ((((flags) & LV_EFFECT_TORQUE_W) != 0) << 1) | ((((flags) & LV_EFFECT_TORQUE_B) != 0) << 2))
+#define LV_RHS_KINDS_BY_FLAGS(K) {K(FORCE), K(FORCE), K(TORQUE), K(FULL), K(BODY), K(BODY_F), K(TORQUE), K(FULL)}
 
 #endif

@@ -43,15 +43,21 @@ ROW = ROW_PARAMS + ROW_MIN_PARAMS  # the narrowest row (wider when an effect has
 USER_CODE_BASE = _META.USER_CODE_BASE
 FLAG_USES_V, FLAG_USES_OMEGA, FLAG_FORCE = _META.FLAG_USES_V, _META.FLAG_USES_OMEGA, _META.FLAG_FORCE
 FLAG_TORQUE_W, FLAG_TORQUE_B = _META.FLAG_TORQUE_W, _META.FLAG_TORQUE_B
-# Right-hand side classes of plain bodies with effects (rhs_classes; csrc/step.c rhs_class, the same rule)
+# Right-hand side classes of plain bodies with effects (rhs_classes), the NumPy backend's codes of the kinds derive
+# prints (TORQUE, world torques only, runs the FULL kernel here: bitwise the same, as in C)
 RHS_FULL, RHS_FORCE, RHS_BODY, RHS_BODY_F = 0, 1, 2, 3
+_RHS_OF_KIND = {"TORQUE": RHS_FULL, "FULL": RHS_FULL, "FORCE": RHS_FORCE, "BODY": RHS_BODY, "BODY_F": RHS_BODY_F}
+# the printed rule (derive/effect_fuse.py tile_kind): class per combination of the flags RHS_BITS
+RHS_BITS: tuple[int, ...] = _META.RHS_BITS
+_RHS_BY_INDEX = np.array([_RHS_OF_KIND[k] for k in _META.RHS_KINDS_BY_FLAGS], dtype=np.intp)
 
 
 def rhs_classes(flags: np.ndarray) -> np.ndarray:
     """The right-hand side class of plain bodies with effects, from the OR of their effects' rhs_flags: RHS_BODY /
     RHS_BODY_F when every torque is declared in the body frame (rigid_body_rhs_body_c on the effects' body-frame
     forms), without / with a force; RHS_FORCE a force and no torque (rigid_body_rhs_force_c on a_w = F/m); else
-    RHS_FULL (rigid_body_rhs_c: world torques). The C backend picks by the same rule (csrc/step.c rhs_class).
+    RHS_FULL (rigid_body_rhs_c: world torques). The rule is derive's, printed as a table into effects_meta
+    (RHS_KINDS_BY_FLAGS) and kernels.h (csrc/step.c rhs_class reads the same table).
 
     Parameters
     ----------
@@ -61,11 +67,13 @@ def rhs_classes(flags: np.ndarray) -> np.ndarray:
     Returns
     -------
     ndarray of int
+        Per body, RHS_FULL, RHS_FORCE, RHS_BODY or RHS_BODY_F (flags' shape).
     """
-    tb = ((flags & FLAG_TORQUE_B) != 0) & ((flags & FLAG_TORQUE_W) == 0)
-    force = (flags & FLAG_FORCE) != 0
-    none = (flags & (FLAG_TORQUE_W | FLAG_TORQUE_B)) == 0
-    return np.where(tb, np.where(force, RHS_BODY_F, RHS_BODY), np.where(none, RHS_FORCE, RHS_FULL))
+    flags = np.asarray(flags)
+    index = np.zeros(flags.shape, dtype=np.intp)
+    for j, bit in enumerate(RHS_BITS):
+        index |= ((flags & bit) != 0).astype(np.intp) << j
+    return _RHS_BY_INDEX[index]
 
 
 @dataclass(frozen=True)

@@ -72,22 +72,58 @@ def test_kernels_h_carries_the_table_and_batch_simd_names_no_effect():
 
 
 def test_the_kinds_are_the_numpy_backends_rhs_classes():
-    """derive's tile_kind restates csrc/step.c's rhs_class (the C tiles' kinds); lavendersim.effects.rhs_classes is the
-    same rule for the NumPy backend (which has no separate world-torque-only class: TORQUE runs the FULL kernel, bitwise
-    in C too). Every combination of the three rhs flags gives the same class in both, so neither can drift alone."""
+    """derive's tile_kind is the one statement of the right-hand-side class rule: printed as a table into
+    effects_meta (lavendersim.effects.rhs_classes, the NumPy backend, which has no separate world-torque-only class:
+    TORQUE runs the FULL kernel, bitwise in C too) and kernels.h (csrc/step.c's rhs_class). Every combination of the
+    three rhs flags gives tile_kind's class through the printed tables."""
     import numpy as np
 
     from lavendersim import effects as RT
+    from lavendersim.generated import effects_meta
 
     assert (E.FLAG_FORCE, E.FLAG_TORQUE_W, E.FLAG_TORQUE_B) == (RT.FLAG_FORCE, RT.FLAG_TORQUE_W, RT.FLAG_TORQUE_B)
+    assert effects_meta.RHS_BITS == effect_fuse.RHS_BITS
+    assert effects_meta.RHS_KINDS_BY_FLAGS == effect_fuse.kinds_by_flags()
     python = {"BODY": RT.RHS_BODY, "BODY_F": RT.RHS_BODY_F, "FORCE": RT.RHS_FORCE, "FULL": RT.RHS_FULL,
               "TORQUE": RT.RHS_FULL}
+    every = []
     for force in (0, E.FLAG_FORCE):
         for tw in (0, E.FLAG_TORQUE_W):
             for tb in (0, E.FLAG_TORQUE_B):
-                flags = force | tw | tb
-                kind = effect_fuse.tile_kind(flags)
-                assert python[kind] == int(RT.rhs_classes(np.array([flags]))[0]), (flags, kind)
-                assert (kind in ("TORQUE", "FULL")) == bool(tw), flags   # a world torque always rotates
-                if flags:   # (effects with none of the three flags run the force kernel on zero sums)
-                    assert kind.endswith(("_F", "FULL", "FORCE")) == bool(force), flags
+                for other in (0, E.FLAG_USES_STATE | E.FLAG_USES_V | E.FLAG_USES_OMEGA):   # flags the rule ignores
+                    flags = force | tw | tb | other
+                    kind = effect_fuse.tile_kind(flags)
+                    every.append((flags, python[kind]))
+                    assert python[kind] == int(RT.rhs_classes(np.array([flags]))[0]), (flags, kind)
+                    assert (kind in ("TORQUE", "FULL")) == bool(tw), flags   # a world torque always rotates
+                    if flags & ~other:   # (effects with none of the three flags run the force kernel on zero sums)
+                        assert kind.endswith(("_F", "FULL", "FORCE")) == bool(force), flags
+    flags_all, want = np.array([f for f, _ in every]).reshape(4, 4), np.array([c for _, c in every]).reshape(4, 4)
+    assert np.array_equal(RT.rhs_classes(flags_all), want)   # elementwise, in the flags' shape
+
+
+def test_kernels_h_prints_the_rhs_class_table_and_step_c_reads_it():
+    """The C table: LV_RHS_KINDS_BY_FLAGS indexed by LV_RHS_FLAGS_INDEX, evaluated here as C would for every
+    combination of the flags, gives tile_kind; step.c's rhs_class and effects.py's rhs_classes hold no copy of the
+    rule (they name none of the flags)."""
+    import re
+
+    h = (ROOT / "generated" / "kernels.h").read_text()
+    table = re.search(r"#define LV_RHS_KINDS_BY_FLAGS\(K\) \{(.*)\}\n", h).group(1)
+    kinds = tuple(re.fullmatch(r"K\((\w+)\)", k.strip()).group(1) for k in table.split(","))
+    index = re.search(r"#define LV_RHS_FLAGS_INDEX\(flags\) (.*)\n", h).group(1)
+    bits = {"LV_EFFECT_FORCE": E.FLAG_FORCE, "LV_EFFECT_TORQUE_W": E.FLAG_TORQUE_W, "LV_EFFECT_TORQUE_B": E.FLAG_TORQUE_B}
+    terms = re.findall(r"\(\(\(\(flags\) & (LV_EFFECT_\w+)\) != 0\) << (\d)\)", index)
+    assert len(terms) == 3 and index.count("|") == 2, index
+    for flags in range(64):
+        i = sum(int(flags & bits[name] != 0) << int(j) for name, j in terms)
+        assert kinds[i] == effect_fuse.tile_kind(flags), (flags, i)
+    step = (ROOT / "lavendersim" / "csrc" / "step.c").read_text()
+    body = step[step.index("static inline int rhs_class("):]
+    body = body[:body.index("\n}\n")]
+    assert "LV_RHS_BY_FLAGS[LV_RHS_FLAGS_INDEX(flags)]" in body and "LV_EFFECT_" not in body
+    assert "LV_RHS_KINDS_BY_FLAGS(LV_RHS_OF_KIND)" in step
+    eff = (ROOT / "lavendersim" / "effects.py").read_text()
+    rule = eff[eff.index("def rhs_classes("):]
+    rule = rule[:rule.index("\n\n\n")]
+    assert "FLAG_" not in rule and "RHS_BITS" in rule

@@ -200,20 +200,20 @@ static inline void effect_sums_b(const double *x, const double *v_w, double m, c
    LV_RHS_TORQUE world torques only; LV_RHS_FULL a force and world torques; LV_RHS_FORCE a force and no torque
    (rigid_body_rhs_force_c on a_w = F/m: nothing rotated); LV_RHS_BODY / LV_RHS_BODY_F torques all declared in
    the body frame (LV_EFFECT_TORQUE_B, the body dispatch), without / with a force (rigid_body_rhs_body_c; without
-   a force a_w = 0, bitwise the +0/m the NumPy backend divides). LV_RHS_CONSTANT is added to LV_RHS_TORQUE,
-   LV_RHS_FULL and LV_RHS_FORCE when every effect of the body reads no state (see rhs_kind). */
+   a force a_w = 0, bitwise the +0/m the NumPy backend divides). Which class a body with effects has is derive's
+   rule (derive/effect_fuse.py tile_kind), printed into kernels.h as a table over the flags (LV_RHS_KINDS_BY_FLAGS,
+   LV_RHS_FLAGS_INDEX). LV_RHS_CONSTANT is added to LV_RHS_TORQUE, LV_RHS_FULL and LV_RHS_FORCE when every effect
+   of the body reads no state (see rhs_kind). */
 enum { LV_RHS_FREE = 0, LV_RHS_TORQUE = 1, LV_RHS_FULL = 2, LV_RHS_FORCE = 5, LV_RHS_BODY = 8, LV_RHS_BODY_F = 9 };
 #define LV_RHS_CONSTANT 2
 #define LV_RHS_CLASSES 10
 #define rhs_constant(cls) ((cls) == LV_RHS_TORQUE + LV_RHS_CONSTANT || (cls) == LV_RHS_FULL + LV_RHS_CONSTANT || \
                            (cls) == LV_RHS_FORCE + LV_RHS_CONSTANT)
+#define LV_RHS_OF_KIND(kind) LV_RHS_##kind
+static const unsigned char LV_RHS_BY_FLAGS[] = LV_RHS_KINDS_BY_FLAGS(LV_RHS_OF_KIND);
 static inline int rhs_class(long n_refs, int flags)
 {
-    if (n_refs == 0) return LV_RHS_FREE;
-    if ((flags & LV_EFFECT_TORQUE_B) && !(flags & LV_EFFECT_TORQUE_W))
-        return (flags & LV_EFFECT_FORCE) ? LV_RHS_BODY_F : LV_RHS_BODY;
-    if (!(flags & (LV_EFFECT_TORQUE_W | LV_EFFECT_TORQUE_B))) return LV_RHS_FORCE;
-    return (flags & LV_EFFECT_FORCE) ? LV_RHS_FULL : LV_RHS_TORQUE;
+    return n_refs == 0 ? LV_RHS_FREE : LV_RHS_BY_FLAGS[LV_RHS_FLAGS_INDEX(flags)];
 }
 
 /* d/dt of one plain body with effects (refs) of class cls (rhs_class, no LV_RHS_CONSTANT), cf its Euler
