@@ -92,8 +92,9 @@ MU, CENTER = 2.0, np.array([0.1, 0.2, -0.3])
 RHO, CDA = 1.2, 0.05
 
 
-def reference_rk4(x, m, I_b, dt, n):
-    """RK4 of the rigid body under both user effects, q normalized after each step (as the Sim)."""
+def hand_rk4(x, I_b, dt, n, a_w=lambda v_w: np.zeros(3)):
+    """Classic RK4 of one rigid body under the guide's gravity gradient (MU, CENTER) and the COM acceleration
+    a_w(v_w), q normalized after each step (as the Sim): an independent NumPy oracle."""
     def f(y):
         q = y[3:7]
         w = y[10:13]
@@ -101,7 +102,7 @@ def reference_rk4(x, m, I_b, dt, n):
         qw = np.array([q[3] * w[0] + q[1] * w[2] - q[2] * w[1], q[3] * w[1] + q[2] * w[0] - q[0] * w[2],
                        q[3] * w[2] + q[0] * w[1] - q[1] * w[0], -q[0] * w[0] - q[1] * w[1] - q[2] * w[2]]) / 2
         wd = (tau_b - np.cross(w, I_b * w)) / I_b
-        return np.concatenate([y[7:10], qw, quadratic_drag_w(y[7:10], RHO, CDA) / m, wd])
+        return np.concatenate([y[7:10], qw, a_w(y[7:10]), wd])
     for _ in range(n):
         k1 = f(x)
         k2 = f(x + dt / 2 * k1)
@@ -110,6 +111,11 @@ def reference_rk4(x, m, I_b, dt, n):
         x = x + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
         x[3:7] /= np.linalg.norm(x[3:7])
     return x
+
+
+def reference_rk4(x, m, I_b, dt, n):
+    """RK4 of the rigid body under both user effects (gravity gradient, quadratic drag)."""
+    return hand_rk4(x, I_b, dt, n, lambda v_w: quadratic_drag_w(v_w, RHO, CDA) / m)
 
 
 def make_scene(extra_free: bool = False):
@@ -450,20 +456,7 @@ def test_a_user_effects_fused_tile_is_its_stage_passes_bitwise(guide, monkeypatc
 
 def reference_rk4_gg(x, m, I_b, dt, n):
     """RK4 of one rigid body under gravity_gradient alone (MU, CENTER), q normalized after each step."""
-    def f(y):
-        q, w = y[3:7], y[10:13]
-        tau_b = rot(q).T @ gravity_gradient_w(y[0:3], q, I_b, MU, CENTER)
-        qw = np.array([q[3] * w[0] + q[1] * w[2] - q[2] * w[1], q[3] * w[1] + q[2] * w[0] - q[0] * w[2],
-                       q[3] * w[2] + q[0] * w[1] - q[1] * w[0], -q[0] * w[0] - q[1] * w[1] - q[2] * w[2]]) / 2
-        return np.concatenate([y[7:10], qw, np.zeros(3), (tau_b - np.cross(w, I_b * w)) / I_b])
-    for _ in range(n):
-        k1 = f(x)
-        k2 = f(x + dt / 2 * k1)
-        k3 = f(x + dt / 2 * k2)
-        k4 = f(x + dt * k3)
-        x = x + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
-        x[3:7] /= np.linalg.norm(x[3:7])
-    return x
+    return hand_rk4(x, I_b, dt, n)
 
 
 def test_a_body_form_named_as_another_effect_is_refused(tmp_path):
