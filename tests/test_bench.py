@@ -228,6 +228,30 @@ def test_json_is_the_only_thing_on_stdout(capsys):
     assert err == ""   # no progress when stderr is not a terminal
 
 
+def test_markdown_reprints_a_saved_run_as_one_table_of_its_targets(quick):
+    """`--from RUN.json --markdown` measures nothing and prints the saved run's targets, one row each, with its
+    status and figure (the tables of docs/performance.md are pasted from it)."""
+    _, path = quick
+    d = json.loads(path.read_text())
+    r = run_main("bench", "--from", path, "--markdown")
+    assert r.returncode == 0, r.stderr
+    rows = [ln for ln in r.stdout.splitlines() if ln.startswith("| ") and not ln.startswith("| target |")]
+    assert len(rows) == len(d["standing"]) and (d["machine"]["git_commit"] or "unknown")[:12] in r.stdout
+    for row, t in zip(rows, d["standing"]):
+        cells = [c.strip() for c in row.strip("|").split(" | ")]
+        assert cells[3] == t["status"]
+        assert cells[1] == ("—" if t["value"] is None else f"{t['value']:.3g} {t['unit']}")
+    assert run_main("bench", "--from", path).stdout.rstrip().endswith(bench.report(d).rstrip().splitlines()[-1])
+
+
+def test_from_a_file_that_is_no_saved_run_is_one_line_exit_2(tmp_path):
+    bad = tmp_path / "x.json"
+    bad.write_text('{"a": 1}')
+    for path in (bad, tmp_path / "missing.json"):
+        r = run_main("bench", "--from", path, "--markdown")
+        assert r.returncode == 2 and r.stdout == "" and len(r.stderr.strip().splitlines()) == 1 and "from" in r.stderr
+
+
 def test_unknown_section_is_one_line_exit_2(capsys):
     from lavendersim import cli
 

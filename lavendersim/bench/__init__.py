@@ -1201,6 +1201,41 @@ def report(res: dict) -> str:
     return "\n".join(L)
 
 
+def targets_markdown(res: dict) -> str:
+    """Every target of one run as a Markdown table (the tables of docs/performance.md are this, pasted), headed by
+    the run's machine stamp: ``lavendersim bench --markdown`` prints it, ``--from RUN.json`` re-prints a saved run's.
+
+    Parameters
+    ----------
+    res : dict
+        One run's results (:func:`run`, or the JSON ``--out`` wrote).
+
+    Returns
+    -------
+    str
+        The stamp lines and a table: target, measured, limit, status, basis.
+    """
+    m = res["machine"]
+    L = [f"One run of `lavendersim bench{' --quick' if res['quick'] else ''}` (commit {(m['git_commit'] or 'unknown')[:12]}"
+         f"{', dirty' if m['git_dirty'] else ''}; {m['date']}; {m['cpu']}, {m['cores']} cores; batch path "
+         f"{m.get('isa') or 'n/a'}; load {m['loadavg']} at the start, {m.get('loadavg_end')} at the end; CPU time, "
+         f"min of {res['config']['rounds']} interleaved rounds).", "",
+         "| target | measured | limit | status | basis |", "|---|---|---|---|---|"]
+    def cell(text) -> str:   # a | inside a cell would end it
+        return str(text).replace("|", "\\|")
+
+    for t in res["standing"]:
+        if t["value"] is None:
+            L.append(f"| {cell(t['name'])} | — | {t['limit']:g} | N/A | {cell(t['basis'])} |")
+            continue
+        op = "≤" if t["kind"] == "max" else "≥"
+        L.append(f"| {cell(t['name'])} | {t['value']:.3g} {t['unit']} | {op} {t['limit']:g} | {t['status']} | "
+                 f"{cell(t['basis'])} |")
+    for e in failed_sections(res):
+        L.append(f"| section {e['section']} | crashed | — | CRASH | {cell(' '.join(str(e['error']).split()))} |")
+    return "\n".join(L)
+
+
 def _report_single(res: dict) -> list[str]:
     s, hw = res.get("single_body"), res["handwritten"]
     if s is None:
