@@ -309,9 +309,11 @@ def test_the_plain_big_process_reports_build_memory_and_step_ratio():
 @pytest.mark.skipif(not Path("/proc/self/clear_refs").exists(), reason="no resettable peak RSS (not Linux)")
 def test_the_plain_big_memory_is_the_builds_own_whatever_the_parents_peak():
     """Linux carries a parent's peak RSS into a child's ru_maxrss across fork and exec: measured that way, a child of a
-    large bench process read 0 B per body. The build's own peak above the resident set before it is at least the
-    13-double state the Sim holds per body (104 B), whatever the parent holds."""
+    large bench process read 0 B per body. The child's figure is its build's own: more than zero, and the same
+    (within allocator noise) whether this parent holds 320 MB more or not."""
+    alone = bench.scenes.plain_big(100_000, 1000, 1)
     held = np.ones(40_000_000)          # 320 MB resident in this (parent) process while the child runs
-    d = bench.scenes.plain_big(30_000, 1000, 1)
+    beside = bench.scenes.plain_big(100_000, 1000, 1)
     assert held[-1] == 1.0
-    assert d["rss_basis"].startswith("VmHWM") and d["rss_per_body_B"] >= 13 * 8, d
+    assert alone["rss_basis"].startswith("VmHWM") and alone["rss_per_body_B"] > 0, alone
+    assert 0.5 * alone["rss_per_body_B"] <= beside["rss_per_body_B"] <= 2 * alone["rss_per_body_B"], (alone, beside)
