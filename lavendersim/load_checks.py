@@ -177,9 +177,9 @@ class LoadBudget:
             if self.plain.any():
                 L[f] = np.linalg.norm(K.body_momentum(self.params[f, LY.PARAM_I_B], w[f]), axis=-1)
             if self.wheeled.size:     # one batched call of the printed total momentum (as the C screen's)
-                w = self.wheeled
-                L[w] = np.linalg.norm(backends.wheel_total_momentum_batch(self.rows[w], x[w, LY.STATE_Q],
-                                                                          x[w, LY.STATE_OMEGA_B], Omega[w]), axis=-1)
+                wh = self.wheeled
+                L[wh] = np.linalg.norm(backends.wheel_total_momentum_batch(self.rows[wh], x[wh, LY.STATE_Q], w[wh],
+                                                                           Omega[wh]), axis=-1)
             s = self._sel
             P[s] = self.params[s, LY.PARAM_M] * np.linalg.norm(v[s], axis=-1)
         return L, P
