@@ -787,41 +787,20 @@ class _ExplicitRK:
             ks[i] = f(y, work and work.ks[i])
         return self.axpy(x, h / self.den, self.weights, ks, work and work.xn, work and work.t)
 
-
-    def _sums(self, x, h, terms, ks, out, tmp, runs, zero):
-        """axpy over the rows of runs, and x + z on the zero-rate rows (z: the sum over zero rates, computed as axpy
-        computes it, from -0.0 so that x + z is that sum's result)."""
-        X, O, T = x.T, out.T, tmp.T
-        for a, b in runs:
-            self.axpy(X[a:b], h, terms, [None if k is None else k.T[a:b] for k in ks], O[a:b], T[a:b])
-        if zero:
-            z = _ZERO_SUMS.get((self, terms, h))
-            if z is None:
-                z = _ZERO_SUMS[self, terms, h] = float(self.axpy(np.full(1, -0.0), h, terms, [np.zeros(1)] * len(ks))[0])
-            for a, b in zero:
-                np.add(X[a:b], z, out=O[a:b])
-        return out
-
     def _step_rows(self, f, x, h, work, rows):
-        rows = rows.at(x.shape[0])
-        bound = work.bound_to(self, x, h, rows)
-        ks = [None] * len(self.rows)
+        """step on the rows of rows: each sum over the views bound for (x, work's buffers) (_Work.bound_to), which
+        read stage j's rates from work.ks[j] (a rate that f could not write there is copied in: the same numbers)."""
+        bound = work.bound_to(self, x, h, rows.at(x.shape[0]))
         for i, terms in enumerate(self.rows):
-            if not terms:
-                y = x
-            elif bound is not None:
-                y = self._run(bound[i], h, terms, work.y)
-            else:
-                y = self._sums(x, h, terms, ks, work.y, work.t, rows.stage, rows.zero)
-            ks[i] = f(y, work.ks[i])
-            if ks[i] is not work.ks[i]:    # (a right-hand side that could not write into its buffer)
-                bound = None
-        if bound is not None:
-            return self._run(bound[-1], h / self.den, self.weights, work.xn)
-        return self._sums(x, h / self.den, self.weights, ks, work.xn, work.t, rows.end, rows.zero)
+            k = f(self._run(bound[i], h, terms, work.y) if terms else x, work.ks[i])
+            if k is not work.ks[i]:
+                np.copyto(work.ks[i], k)
+        return self._run(bound[-1], h / self.den, self.weights, work.xn)
 
     def _run(self, sums, h, terms, out):
-        """_sums on views bound once (_Work.bound_to): (x, k_j, out, tmp) per run, (x, out, z) per zero-rate run."""
+        """axpy over the rows of each run, and x + z on the zero-rate rows (z: the sum over zero rates, computed as
+        axpy computes it, from -0.0 so that x + z is that sum's result), on views bound once (bind): (x, k_j, out,
+        tmp) per run, (x, out, z) per zero-rate run."""
         runs, zero = sums
         for X, ks, O, T in runs:
             self.axpy(X, h, terms, ks, O, T)
@@ -863,7 +842,7 @@ class _Work:
         # the stepper's views on these buffers for the last two (x, xn) pairs (a step's x and xn trade places: adopt)
         self.bound: list[tuple] = []
 
-    def bound_to(self, rk, x, h, rows) -> tuple | None:
+    def bound_to(self, rk, x, h, rows) -> tuple:
         """rk.bind's views for a step from x (kept for the pair (x, xn) and the same tableau, h and rows)."""
         for b in self.bound:
             if b[0] is x and b[1] is self.xn and b[2] is rk and b[3] == h and b[4] is rows:
