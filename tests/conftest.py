@@ -334,7 +334,7 @@ def pytest_xdist_auto_num_workers(config):
 #: derivation ~120, test_docs 33, test_extending 26, test_user_sets 27, test_fuzz 24, test_labs 24, test_wheels_joint 24.
 #: A module missing here is still run, only perhaps later than it should be.
 FIRST = ("derivation", "labs", "test_docs", "test_user_sets", "test_extending", "test_fuzz", "test_labs",
-         "test_wheels_joint", "test_spacecraft", "test_cli_conventions", "test_bench", "test_symtop_bm6",
+         "test_wheels_joint", "test_spacecraft", "test_cli_conventions", "test_bench", "test_symtop",
          "test_monte_carlo", "test_vector_env", "test_highorder")
 
 

@@ -9,9 +9,7 @@ and through CasADi when it is installed.
 from __future__ import annotations
 
 import ctypes
-import os
 import re
-import shlex
 import subprocess
 import sys
 from pathlib import Path
@@ -25,45 +23,22 @@ from lavendersim import extending
 from lavendersim.validate import LavenderInputError
 
 from conftest import have, require
+from guide_steps import followed, guide_block, run_lavendersim
 
 pytestmark = pytest.mark.needs("cc")  # the guide's command compiles the C of the set
 
-GUIDE = Path(__file__).resolve().parent.parent / "docs" / "extending.md"
 INTEGRATORS = ("euler", "semi_implicit_euler", "rk4", "dopri5", "splitting", "implicit_gyro", "splitting4", "rk4_expmap",
                "symtop4")
 RTOL = 1e-12
 
 
-def guide_block(info: str) -> str:
-    """The fenced code block of docs/extending.md whose info string is exactly `info`."""
-    blocks = re.findall(r"^```" + re.escape(info) + r"\n(.*?)^```", GUIDE.read_text(encoding="utf-8"), re.S | re.M)
-    assert len(blocks) == 1, f"docs/extending.md must have exactly one ```{info} block"
-    return blocks[0]
-
-
-def run_lavendersim(args: list[str], cwd, env) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "lavendersim", *args], cwd=cwd, env=env, capture_output=True, text=True)
-
-
 @pytest.fixture(scope="module")
 def guide(tmp_path_factory):
     """The guide's steps 1 and 2: write my_effects.py, run the documented command."""
-    work = tmp_path_factory.mktemp("guide")
-    user = work / "userdir"
-    (work / "my_effects.py").write_text(guide_block("python my_effects.py"), encoding="utf-8")
-    env = {**os.environ, extending.ENV: str(user)}
-    cmd = shlex.split(guide_block("bash").strip())
-    assert cmd[:3] == ["lavendersim", "derive", "--user"]
-    r = run_lavendersim(cmd[1:], work, env)
-    assert r.returncode == 0, r.stdout + r.stderr
-    assert r.stderr == ""          # nothing on stderr when all is well (a derive-time RuntimeWarning was printed once)
-    old = os.environ.get(extending.ENV)
-    os.environ[extending.ENV] = str(user)  # this process finds the set by name, as a user's would
-    yield {"work": work, "user": user, "env": env, "cmd": cmd, "run": r, "set": user / "sets" / "my_effects"}
-    if old is None:
-        os.environ.pop(extending.ENV, None)
-    else:
-        os.environ[extending.ENV] = old
+    with followed(tmp_path_factory.mktemp("guide"), "my_effects.py", "bash") as g:
+        # nothing on stderr when all is well (a derive-time RuntimeWarning was printed once)
+        assert g["run"].stderr == ""
+        yield g
 
 
 # ---------------------------------------------------------------- independent formulas (NumPy, written here)

@@ -1,7 +1,9 @@
-"""The C backend's generic explicit Runge–Kutta stepper (csrc/step.c advance_tableau, a user's backends.Tableau):
-classic RK4 declared as a tableau steps bitwise as the built-in rk4 (plain bodies, gravity + damping, wheeled and
-jointed bodies), Kutta's third-order method agrees with an independent plain-Python implementation to 1e-13 and
-with the NumPy backend's tableau stepper, and a tableau C cannot step is refused naming `integrator`."""
+"""The generic explicit Runge–Kutta stepper of both backends (a user's backends.Tableau; NumPy: numpy_backend's
+_ExplicitRK, C: csrc/step.c advance_tableau): classic RK4 declared as a tableau steps bitwise as the built-in rk4
+(plain bodies, gravity + damping, wheeled and jointed bodies), Kutta's third-order method agrees with an independent
+plain-Python implementation to 1e-13 (and with its stages written out on wheeled and jointed bodies), C = NumPy bitwise
+on a user tableau, a tableau a backend cannot step is refused naming `integrator`, and a divergence is reported with
+nothing half-applied."""
 import math
 
 import numpy as np
@@ -10,19 +12,26 @@ import pytest
 import lavendersim as lv
 from lavendersim import backends as B
 from lavendersim.backends import KIND_WHEELS, Models, Tableau, rk_weights, wheel_row
+from lavendersim.backends.numpy_backend import NumpyBackend, _Plan
 from lavendersim.effects import REGISTRY
 from lavendersim.errors import DivergenceError
 from lavendersim.generated import layout as LY
 from lavendersim.kernels import K
 
-c_backend = pytest.importorskip("lavendersim.backends.c_backend")
-from lavendersim.backends.numpy_backend import NumpyBackend  # noqa: E402
-
-RK4 = Tableau("test_c_rk4_tableau", [0, 0.5, 0.5, 1], [[0, 0, 0, 0], [0.5, 0, 0, 0], [0, 0.5, 0, 0], [0, 0, 1, 0]],
+RK4 = Tableau("test_rk4_tableau", [0, 0.5, 0.5, 1], [[0, 0, 0, 0], [0.5, 0, 0, 0], [0, 0.5, 0, 0], [0, 0, 1, 0]],
               [1 / 6, 1 / 3, 1 / 3, 1 / 6], 4, "tests")
-KUTTA3 = Tableau("test_c_kutta3", [0, 0.5, 1], [[0, 0, 0], [0.5, 0, 0], [-1.0, 2.0, 0]], [1 / 6, 2 / 3, 1 / 6], 3,
+KUTTA3 = Tableau("test_kutta3", [0, 0.5, 1], [[0, 0, 0], [0.5, 0, 0], [-1.0, 2.0, 0]], [1 / 6, 2 / 3, 1 / 6], 3,
                  "tests")
-C = c_backend.CBackend()
+
+
+def c_backend():
+    """The C backend (the test is skipped without the compiled extension)."""
+    return pytest.importorskip("lavendersim.backends.c_backend").CBackend()
+
+
+@pytest.fixture(params=["numpy", "c"])
+def backend(request):
+    return NumpyBackend() if request.param == "numpy" else c_backend()
 
 
 @pytest.fixture
@@ -53,6 +62,12 @@ def arrays(s):
     return sim.x.copy(), sim.params.copy(), sim.effects.copy(), sim.names
 
 
+def advanced(backend, x0, params, eff, name, n, normalize=True, dt=0.01):
+    x = x0.copy()
+    backend.advance(x, params, eff, name, normalize, dt, n)
+    return x
+
+
 def test_rk4_weights_are_their_common_denominator():
     np.testing.assert_array_equal(rk_weights(RK4)[0], [1.0, 2.0, 2.0, 1.0])
     assert rk_weights(RK4)[1] == 6.0
@@ -63,19 +78,17 @@ def test_rk4_weights_are_their_common_denominator():
 
 @pytest.mark.parametrize("normalize", [True, False])
 @pytest.mark.parametrize("effects", [False, True], ids=["free", "gravity+damping"])
-def test_rk4_declared_as_a_tableau_is_bitwise_the_builtin_rk4(tableaux, effects, normalize):
+def test_rk4_declared_as_a_tableau_is_bitwise_the_builtin_rk4(tableaux, backend, effects, normalize):
+    """b = (1/6, 1/3, 1/3, 1/6) is stepped as (1, 2, 2, 1)/6 (backends.rk_weights), as rk4."""
     x0, params, eff, _ = arrays(scene(effects))
-    runs = {}
-    for name in ("rk4", RK4.name):
-        x = x0.copy()
-        C.advance(x, params, eff, name, normalize, 0.01, 300)
-        runs[name] = x
-    assert np.max(np.abs(runs["rk4"] - x0)) > 0.1   # the bodies moved
-    np.testing.assert_array_equal(runs[RK4.name], runs["rk4"])
+    rk4 = advanced(backend, x0, params, eff, "rk4", 300, normalize)
+    assert np.max(np.abs(rk4 - x0)) > 0.1   # the bodies moved
+    np.testing.assert_array_equal(advanced(backend, x0, params, eff, RK4.name, 300, normalize), rk4)
 
 
-def test_many_bodies_on_the_builtin_fast_paths(tableaux):
-    """rk4 puts 40 torque-free bodies on SIMD tiles and lockstep blocks; the tableau steps them one by one: same bits."""
+def test_many_bodies_on_the_builtin_fast_paths(tableaux, backend):
+    """C's rk4 puts 40 torque-free bodies on SIMD tiles and lockstep blocks; the tableau steps them one by one: same
+    bits (NumPy: the built-in and the user tableau through the one stepper)."""
     rng = np.random.default_rng(3)
     nb = 40
     x0 = np.zeros((nb, LY.STATE_SIZE))
@@ -86,10 +99,8 @@ def test_many_bodies_on_the_builtin_fast_paths(tableaux):
     params = np.column_stack([rng.uniform(0.5, 2, nb), rng.uniform(0.5, 2, (nb, 3))])
     eff = np.zeros((1, 8))
     eff[0, :3] = [REGISTRY["angular_damping"].code, 7, 0.1]
-    a, b = x0.copy(), x0.copy()
-    C.advance(a, params, eff, "rk4", True, 0.01, 100)
-    C.advance(b, params, eff, RK4.name, True, 0.01, 100)
-    np.testing.assert_array_equal(a, b)
+    np.testing.assert_array_equal(advanced(backend, x0, params, eff, "rk4", 100),
+                                  advanced(backend, x0, params, eff, RK4.name, 100))
 
 
 # ---------------------------------------------------------------- an independent Kutta3, plain Python floats
@@ -130,19 +141,17 @@ def kutta3(x, dt, n, *args):
     return x
 
 
-def test_kutta3_against_an_independent_implementation(tableaux):
+def test_kutta3_against_an_independent_implementation(tableaux, backend):
     x0, params, eff, names = arrays(scene(True))
-    x = x0.copy()
-    C.advance(x, params, eff, KUTTA3.name, True, 0.01, 300)
+    x = advanced(backend, x0, params, eff, KUTTA3.name, 300)
     damping = {"a": (0.4, 0.3), "b": (0.0, 0.05), "c": (0.0, 0.0)}
     for i, name in enumerate(names):
         m, I = float(params[i, LY.PARAM_M]), [float(v) for v in params[i, LY.PARAM_I_B]]
         ref = np.array(kutta3([float(v) for v in x0[i]], 0.01, 300, m, I, (0.0, 0.0, -9.81), *damping[name]))
         assert np.max(np.abs(x[i] - ref) / np.maximum(1.0, np.abs(ref))) <= 1e-13, name
         assert np.max(np.abs(x[i] - x0[i])) > 0.1      # it moved: the comparison can fail
-    rk4 = x0.copy()
-    C.advance(rk4, params, eff, "rk4", True, 0.01, 300)
-    assert np.max(np.abs(x - rk4)) > 1e-9             # third order, not rk4 under another name
+    # third order, not rk4 under another name
+    assert np.max(np.abs(x - advanced(backend, x0, params, eff, "rk4", 300))) > 1e-9
 
 
 # ---------------------------------------------------------------- wheels and joints
@@ -191,20 +200,45 @@ def run(backend, name, state, params, effects, md, n=80, dt=0.005):
     return x, m
 
 
-def test_wheeled_and_jointed_bodies_rk4_bitwise(tableaux):
+def test_wheeled_and_jointed_bodies_rk4_bitwise(tableaux, backend):
     state, params, effects, md = models_scene(np.random.default_rng(5))
-    xa, ma = run(C, "rk4", state, params, effects, md)
-    xb, mb = run(C, RK4.name, state, params, effects, md)
+    xa, ma = run(backend, "rk4", state, params, effects, md)
+    xb, mb = run(backend, RK4.name, state, params, effects, md)
     assert np.max(np.abs(ma.Omega - md.Omega)) > 1e-3 and np.all(ma.applied[[1, 3, 4], :3] != 0)
     np.testing.assert_array_equal(xa, xb)
     np.testing.assert_array_equal(ma.Omega, mb.Omega)
     np.testing.assert_array_equal(ma.applied, mb.applied)
 
 
+def test_kutta3_on_wheeled_and_jointed_bodies_is_its_stages_written_out(tableaux, backend):
+    """Kutta3 on the NumPy plan's right-hand side, the stages written out (the wheel torques held over each step)."""
+    state, params, effects, md = models_scene(np.random.default_rng(5))
+    xk, mk = run(backend, KUTTA3.name, state, params, effects, md)
+    plan = _Plan(params, effects, md.rows)
+    y = np.concatenate([state, md.Omega], axis=1)
+    for _ in range(80):
+        u = plan.applied(y, md.command)
+        f = lambda z: plan.rhs(z, u)  # noqa: E731
+        k1 = f(y)
+        k2 = f(y + 0.005 * (0.5 * k1))
+        k3 = f(y + 0.005 * (-k1 + 2.0 * k2))
+        y = y + 0.005 * (k1 / 6 + 2 * k2 / 3 + k3 / 6)
+        y[:, LY.STATE_Q] = K.quat_normalize(y[:, LY.STATE_Q])
+        plan.constrain(y)
+    assert np.max(np.abs(xk - y[:, :LY.STATE_SIZE])) <= 1e-13 * max(1.0, np.max(np.abs(y)))
+    assert np.max(np.abs(mk.Omega - y[:, LY.XS_OMEGA])) <= 1e-13 * max(1.0, np.max(np.abs(mk.Omega)))
+    assert np.max(np.abs(xk - run(backend, "rk4", state, params, effects, md)[0])) > 1e-9    # a different method
+    # the jointed bodies stay on their joint
+    for b in (2, 3):
+        r_b, anchor = md.rows[b, LY.MODEL_R_B], md.rows[b, LY.MODEL_ANCHOR_W]
+        np.testing.assert_allclose(xk[b, LY.STATE_P_W] - K.quat_rotate(xk[b, LY.STATE_Q], r_b), anchor, atol=1e-12)
+
+
 @pytest.mark.parametrize("name", [KUTTA3.name, RK4.name])
 def test_c_equals_numpy_on_a_user_tableau(tableaux, name):
     """Both backends step a user tableau in the same operation order (csrc/step.h lv_tableau) with the same weights
     (backends.rk_weights): bitwise equal, plain, jointed and wheeled bodies alike."""
+    C = c_backend()
     state, params, effects, md = models_scene(np.random.default_rng(11))
     xc, mc = run(C, name, state, params, effects, md)
     xn, mn = run(NumpyBackend(), name, state, params, effects, md)
@@ -212,15 +246,21 @@ def test_c_equals_numpy_on_a_user_tableau(tableaux, name):
     np.testing.assert_array_equal(mc.Omega, mn.Omega)
     np.testing.assert_array_equal(mc.applied, mn.applied)
     x0, p0, e0, _ = arrays(scene(True))
-    a, b = x0.copy(), x0.copy()
-    C.advance(a, p0, e0, name, True, 0.01, 200)
-    NumpyBackend().advance(b, p0, e0, name, True, 0.01, 200)
-    np.testing.assert_array_equal(a, b)
+    np.testing.assert_array_equal(advanced(C, x0, p0, e0, name, 200), advanced(NumpyBackend(), x0, p0, e0, name, 200))
 
 
 # ---------------------------------------------------------------- refusals and divergence
 
+def test_float32_is_refused_naming_the_integrator(tableaux, backend):
+    x = np.zeros((1, LY.STATE_SIZE), np.float32)
+    x[0, 6] = 1
+    params = np.array([[1.0, 1.0, 2.0, 3.0]], np.float32)
+    with pytest.raises(ValueError, match=r"integrator: 'test_kutta3' \(a user-declared tableau\) steps float64 only"):
+        backend.advance(x, params, np.zeros((0, 8), np.float32), KUTTA3.name, True, 0.01, 1)
+
+
 def test_a_bad_tableau_is_refused_naming_integrator(tableaux):
+    C = c_backend()
     x0, params, eff, _ = arrays(scene(False))
     bad = {
         "test_c_wrong_shape": Tableau("test_c_wrong_shape", [0, 0.5], [[0, 0, 0], [0.5, 0, 0]], [0.5, 0.5], 2),
@@ -236,29 +276,29 @@ def test_a_bad_tableau_is_refused_naming_integrator(tableaux):
         np.testing.assert_array_equal(x, x0)
     with pytest.raises(ValueError, match=r"^integrator: must be one of .*got 'no_such_method'"):
         C.advance(x0.copy(), params, eff, "no_such_method", True, 0.01, 3)
-    with pytest.raises(ValueError, match=r"integrator: 'test_c_kutta3' \(a user-declared tableau\) steps float64 only"):
+    with pytest.raises(ValueError, match=r"integrator: 'test_kutta3' \(a user-declared tableau\) steps float64 only"):
         C.advance(x0.astype(np.float32), params, eff, KUTTA3.name, True, 0.01, 1)
 
 
 def test_the_extension_refuses_a_malformed_tableau_argument():
+    simulate = pytest.importorskip("lavendersim.backends.c_backend")._c.simulate
     x0, params, eff, _ = arrays(scene(False))
     A, b = np.zeros((2, 2)), np.array([0.5, 0.5])
     for tab, msg in [((A, np.ones(3), 1.0), "shape"), ((np.ones((2, 2)), b, 1.0), "explicit"),
                      ((A, b, 0.0), "b_den > 0"), ((A, b), "tableau")]:
         with pytest.raises((ValueError, TypeError), match=msg):
-            c_backend._c.simulate(x0.copy(), params, eff, 2, 1, 0.01, 1, None, None, None, None, None, None, 0.0, 0.0,
-                                  None, tab)
+            simulate(x0.copy(), params, eff, 2, 1, 0.01, 1, None, None, None, None, None, None, 0.0, 0.0, None, tab)
 
 
-def test_divergence_is_reported_and_nothing_is_half_applied(tableaux):
+def test_divergence_is_reported_and_nothing_is_half_applied(tableaux, backend):
     x0, params, eff, _ = arrays(scene(False))
     x0[1, LY.STATE_OMEGA_B] = (1e200, 1e200, 1e200)
     x = x0.copy()
     with pytest.raises(DivergenceError) as info:
-        C.advance(x, params, eff, KUTTA3.name, True, 0.01, 5)
+        backend.advance(x, params, eff, KUTTA3.name, True, 0.01, 5)
     assert info.value.body == 1 and info.value.step == 0
     np.testing.assert_array_equal(x, x0)
     # the same report as the built-in rk4's
     with pytest.raises(DivergenceError) as ref:
-        C.advance(x0.copy(), params, eff, "rk4", True, 0.01, 5)
+        backend.advance(x0.copy(), params, eff, "rk4", True, 0.01, 5)
     assert (ref.value.step, ref.value.body) == (info.value.step, info.value.body)

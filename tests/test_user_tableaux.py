@@ -12,8 +12,6 @@ import json
 import math
 import os
 import pickle
-import re
-import shlex
 import subprocess
 import sys
 from pathlib import Path
@@ -31,43 +29,20 @@ from lavendersim.generated import layout as LY
 from lavendersim.generated import tableaux as TB
 from lavendersim.validate import LavenderInputError
 
+from guide_steps import followed, guide_block, run_lavendersim  # noqa: E402
+
 pytestmark = pytest.mark.needs("cc")  # the guide's command compiles the set's C (its tableau's doubles)
 
-GUIDE = Path(__file__).resolve().parent.parent / "docs" / "extending.md"
 TOL = 1e-13
-
-
-def guide_block(info: str) -> str:
-    """The fenced code block of docs/extending.md whose info string is exactly `info`."""
-    blocks = re.findall(r"^```" + re.escape(info) + r"\n(.*?)^```", GUIDE.read_text(encoding="utf-8"), re.S | re.M)
-    assert len(blocks) == 1, f"docs/extending.md must have exactly one ```{info} block"
-    return blocks[0]
-
-
-def run_lavendersim(args: list[str], cwd, env) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "lavendersim", *args], cwd=cwd, env=env, capture_output=True, text=True)
 
 
 @pytest.fixture(scope="module")
 def guide(tmp_path_factory):
     """The section's first two steps: write my_methods.py, run the documented command."""
-    work = tmp_path_factory.mktemp("tableau_guide")
-    user = work / "userdir"
-    (work / "my_methods.py").write_text(guide_block("python my_methods.py"), encoding="utf-8")
-    env = {**os.environ, extending.ENV: str(user)}
-    cmd = shlex.split(guide_block("bash my_methods").strip())
-    assert cmd[:3] == ["lavendersim", "derive", "--user"]
-    r = run_lavendersim(cmd[1:], work, env)
-    assert r.returncode == 0, r.stdout + r.stderr
-    old = os.environ.get(extending.ENV)
-    os.environ[extending.ENV] = str(user)   # this process finds the tableau by name, as a user's would
-    yield {"work": work, "user": user, "env": env, "set": user / "sets" / "my_methods"}
-    for name in [n for n, t in B.USER_TABLEAUX.items() if t.source.startswith(str(user))]:
-        del B.USER_TABLEAUX[name]
-    if old is None:
-        os.environ.pop(extending.ENV, None)
-    else:
-        os.environ[extending.ENV] = old
+    with followed(tmp_path_factory.mktemp("tableau_guide"), "my_methods.py", "bash my_methods") as g:
+        yield g
+        for name in [n for n, t in B.USER_TABLEAUX.items() if t.source.startswith(str(g["user"]))]:
+            del B.USER_TABLEAUX[name]
 
 
 def guide_scene() -> lv.Scene:
