@@ -1720,6 +1720,11 @@ class Sim:
         wheels in its first N columns (zeros before the first step and beyond its wheels): a read-only view."""
         return self._views[6]
 
+    def _wheel_values(self, name: str, per_body: np.ndarray) -> np.ndarray:
+        """Body `name`'s wheel entries of per_body (nb, WHEELS_MAX), a copy (LavenderInputError without wheels)."""
+        i = self._wheeled(name)
+        return per_body[i, :self._wheel_n[i]].copy()
+
     def wheel_command(self, name: str) -> np.ndarray:
         """The commanded (unsaturated) wheel torques, N·m.
 
@@ -1733,8 +1738,7 @@ class Sim:
         ndarray, shape (N,)
             One entry per wheel, in the order of ``axes_b``.
         """
-        i = self._wheeled(name)
-        return self._models.command[i, :self._wheel_n[i]].copy()
+        return self._wheel_values(name, self._models.command)
 
     def wheel_command_applied(self, name: str) -> np.ndarray:
         """The saturated wheel torques used in the most recent step (zeros before the first), N·m.
@@ -1749,8 +1753,7 @@ class Sim:
         ndarray, shape (N,)
             One entry per wheel, in the order of ``axes_b``.
         """
-        i = self._wheeled(name)
-        return self._models.applied[i, :self._wheel_n[i]].copy()
+        return self._wheel_values(name, self._models.applied)
 
     def wheel_rates(self, name: str) -> np.ndarray:
         """Wheel rates relative to the body, rad/s.
@@ -1765,8 +1768,7 @@ class Sim:
         ndarray, shape (N,)
             One entry per wheel, in the order of ``axes_b``.
         """
-        i = self._wheeled(name)
-        return self._models.Omega[i, :self._wheel_n[i]].copy()
+        return self._wheel_values(name, self._models.Omega)
 
     def wheel_momentum_w(self, name: str) -> tuple[np.ndarray, np.ndarray]:
         """(L_body_w, L_wheels_w), world frame, kg·m²/s, from the wheels<N>_momentum kernel: about the
