@@ -124,7 +124,7 @@ from .errors import DivergenceError, ValidityBoundWarning
 from .frames import public_rows
 from .generated import layout as LY
 from .kernels import K
-from .scene import Scene, _Batch, _EffectList, _effect_rows
+from .scene import Scene, _Batch, _EffectList, _effect_rows, _name_index
 from .sim_model import SimModel
 
 MAX_STEPS = 2**53          # steps per call and in total: the step counter and t = steps*dt stay exact in float64
@@ -997,7 +997,6 @@ class Sim:
         rows = models.rows
         # a body without model effects keeps its all-zero row (kind 0: the steppers ignore it), never written, so
         # a scene of plain bodies never touches the (nb, MODEL_SIZE) rows' pages (288 B per body at 1e6 bodies)
-        at = scene._bodies._c["pos"]          # (every modelled body is one of this Sim's: the scene checked it)
         modelled: dict[str, dict] = {}      # scene.model_effects(name) of the bodies not in a wheels-only batch
         batches = []
         for e in scene.effects.items():
@@ -1009,7 +1008,8 @@ class Sim:
         self._wheel_batches = self._batched_wheels(batches, modelled)
         self._modelled = modelled
         wheels_only: dict[int, list] = {}     # wheel count -> [(body index, effect)]: rows written batched
-        for name, me in modelled.items():
+        at = _name_index(scene._bodies._c) if modelled else {}   # (every modelled body is one of this Sim's: the
+        for name, me in modelled.items():                        # scene checked it)
             i = at.get(name, nb)
             if i >= nb:           # not one of this Sim's bodies (an effects list assigned by hand): no row, as before
                 continue

@@ -431,6 +431,36 @@ def test_bodies_of_add_bodies_are_arrays_until_asked_for_and_keep_their_identity
     assert np.array_equal(s2.x, sim.x) and s2.names == sim.names
 
 
+def test_the_name_index_is_built_on_the_first_look_up_and_refuses_as_the_eager_one_did():
+    """add_bodies into an empty scene builds no name -> index dict (~63 B per body of the 1e6-body build's peak,
+    issue 30): duplicates are found with a set, and the index is built on the first look-up by name. The refusals,
+    look-ups and a Sim's bodies are those of the eager index."""
+    sc = lv.Scene()
+    with pytest.raises(LavenderInputError, match=r"names\[3\]: duplicate name 'b1' \(also names\[1\]\)"):
+        sc.add_bodies(["b0", "b1", "b2", "b1"], np.ones(4), np.ones((4, 3)))
+    assert len(sc.bodies) == 0 and list(sc.bodies) == []
+    sc.add_bodies([f"b{i}" for i in range(6)], np.arange(1.0, 7.0), np.ones((6, 3)))
+    table = sc._bodies._c
+    assert table["pos"] is None                                  # stepped by index: no dict yet
+    sim = lv.Sim(sc, dt=1e-3, backend="numpy")
+    assert table["pos"] is None and sim.names == tuple(f"b{i}" for i in range(6))
+    assert sim.state("b4").p_w.tolist() == [0.0, 0.0, 0.0] and sc.index("b5") == 5 and table["pos"] is not None
+    with pytest.raises(LavenderInputError, match=r"names\[1\]: duplicate name 'b2'$"):
+        sc.add_bodies(["n0", "b2"], [1.0, 1.0], np.ones((2, 3)))
+    with pytest.raises(LavenderInputError, match="body.name: duplicate name 'b0'"):
+        sc.add_body(lv.Body("b0", 1.0, (1.0, 1.0, 1.0)))
+    sc.add_body(lv.Body("g", 1.0, (1.0, 1.0, 1.0)))
+    sc.add_bodies(["n0", "n1"], [1.0, 2.0], np.ones((2, 3)))
+    assert [sc.index(n) for n in ("g", "n0", "n1", "b0")] == [6, 7, 8, 0] and sc.bodies["n1"].mass == 2.0
+    assert "n1" not in sim.bodies and sim.bodies["b3"].mass == 4.0
+    later = lv.Scene()                                           # a look-up before any index: built from the names
+    later.add_bodies(["a", "b"], [1.0, 2.0], np.ones((2, 3)))
+    later.add_body(lv.Body("c", 3.0, (1.0, 1.0, 1.0)))          # (its duplicate check builds it)
+    assert [later.index(n) for n in "abc"] == [0, 1, 2]
+    back = pickle.loads(pickle.dumps(sc))
+    assert list(back.bodies) == list(sc.bodies) and back.index("n1") == 8
+
+
 def test_a_scene_wide_effect_then_add_bodies_refuses_the_first_overflowing_row_as_add_body_does():
     sc = lv.Scene()
     sc.add_body(lv.Body("a", 1.0, (1.0, 1.0, 1.0)))
