@@ -596,6 +596,7 @@ class Sim:
             self._x[...] = st["x"]
             for name in ("rows", "Omega", "command", "applied"):
                 getattr(m, name)[...] = st[name]
+            self._rows_written()
             if st["adaptive"] is not None:
                 assert self._adaptive is not None   # (built with the same settings)
                 self._adaptive.load(st["adaptive"])
@@ -1072,6 +1073,7 @@ class Sim:
         from its q and p_w; its p_w, v_w then set from pivot_kinematics)."""
         if not me:                      # a plain body: its row is all zeros (kind 0, ignored by the steppers)
             rows[i] = 0.0
+            self._rows_written()
             return
         m, I_b = self._params[i, LY.PARAM_M], self._params[i, LY.PARAM_I_B]
         kind, I_p, r_b, anchor = 0, np.diag(I_b), np.zeros(3), np.zeros(3)
@@ -1095,6 +1097,15 @@ class Sim:
         rows[i, LY.MODEL_I_P] = np.asarray(I_p).reshape(9)
         rows[i, LY.MODEL_R_B] = r_b
         rows[i, LY.MODEL_ANCHOR_W] = anchor
+        self._rows_written()
+
+    def _rows_written(self) -> None:
+        """Tell the C Stepper (if built) that the model rows were written: it keeps what it decides from them (the step
+        kinds, the wheel coefficients: csrc/step.h lv_model_cache) until told. _model_row and _load_snapshot are the
+        rows' only writers once it exists (sim.model.rows is a read-only view)."""
+        fast = self.__dict__.get("_fast")
+        if fast is not None:
+            fast.rows_written()
 
     def reinit_body(self, i: int, p_w: np.ndarray, q: np.ndarray, omega_b: np.ndarray, Omega: np.ndarray) -> None:
         """Body i as if this Sim had been built with it at rest-translation state (p_w, q, v_w = 0, omega_b) and

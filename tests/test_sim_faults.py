@@ -264,3 +264,42 @@ def test_the_c_fast_path_steps_a_rewritten_model_row_as_a_fresh_call_does(n_join
     np.testing.assert_array_equal(sim._x, x)
     np.testing.assert_array_equal(m.Omega, ref.Omega)
     np.testing.assert_array_equal(m.applied, ref.applied)
+
+
+@pytest.mark.parametrize("integrator", ["rk4", "euler"])
+def test_the_c_fast_path_keeps_its_effect_index_and_reads_new_parameters_through_it(integrator):
+    """The Stepper keeps the effect index (each body's effects) of its last call while every row's code and body are
+    unchanged (csrc/step.h lv_model_cache). set_effect_params rewrites a row's parameters in place: the next calls
+    inside C step the new loads exactly as the backend's advance does with an index built afresh (bitwise), on wheeled
+    bodies and a plain one, with a scene-wide effect beside the per-body ones."""
+    from lavendersim.backends import Models, c_backend
+    sc = lv.Scene()
+    pushes = []
+    for i in range(6):
+        sc.add_body(lv.Body(f"b{i}", 1.0 + 0.1 * i, [0.1, 0.2, 0.3], omega_b=[0.3, -0.2, 0.1 * i]))
+        if i:
+            sc.add_effect("reaction_wheels", f"b{i}", J=[1e-4] * 3, torque_limit=0.1, speed_limit=100.0)
+        pushes.append(sc.add_effect("applied_torque", f"b{i}", torque_w=[1e-3 * i, 0.0, -1e-3]))
+    sc.add_effect("gravity")
+    sim = lv.Sim(sc, dt=1e-3, integrator=integrator, backend="c")
+    sim.set_wheel_command("b1", [0.01, -0.02, 0.005])
+    sim.run(3)
+    sim.step()
+    assert sim._fast is not None and sim._fast.steps == 4          # inside C: the index kept since the first call
+    table = sim._effects.copy()
+    start = (sim._x.copy(), sim._models.Omega.copy(), sim._models.applied.copy())
+    sim.set_effect_params(pushes[0], torque_w=[0.0, 2e-2, 0.0])     # a plain body's load
+    sim.set_effect_params(pushes[3], torque_w=[-3e-2, 0.0, 1e-2])   # a wheeled body's
+    m = sim._models
+    ref = Models(m.rows.copy(), m.Omega.copy(), m.command.copy(), m.applied.copy())
+    x = sim._x.copy()
+    c_backend.CBackend().advance(x, sim._params.copy(), sim._effects.copy(), integrator, sim.normalize, sim.dt, 5, ref)
+    sim.step()
+    sim.run(4)
+    assert sim._fast.steps == 9                                     # all of them inside C
+    np.testing.assert_array_equal(sim._x, x)
+    np.testing.assert_array_equal(m.Omega, ref.Omega)
+    np.testing.assert_array_equal(m.applied, ref.applied)
+    stale = Models(ref.rows, start[1].copy(), ref.command, start[2].copy())   # the loads as they were: other states
+    c_backend.CBackend().advance(start[0], sim._params.copy(), table, integrator, sim.normalize, sim.dt, 5, stale)
+    assert not np.array_equal(start[0], x)

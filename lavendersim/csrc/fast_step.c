@@ -42,7 +42,7 @@ typedef struct {
     int have[FS_N];
     lv_user_effect *user_entries;
     lv_user_effects user;
-    lv_models models;      /* models.cache: the model rows' per-body decisions, kept from call to call (step.h) */
+    lv_models models;      /* models.cache: what lv_simulate decides from the rows and the effect table, kept (step.h) */
     int has_models, integrator, normalize, adaptive;
     double dt, bound, rtol, atol;
     size_t n_snap;         /* doubles in snap */
@@ -150,7 +150,7 @@ static int stepper_init(Stepper *s, PyObject *args, PyObject *kw)
         s->models.Omega = (double *)s->buf[FS_OMEGA].buf;
         s->models.command = (const double *)s->buf[FS_COMMAND].buf;
         s->models.applied = (double *)s->buf[FS_APPLIED].buf;
-        s->models.cache = lv_model_cache_new((long)nb);
+        s->models.cache = lv_model_cache_new((long)nb, 1);   /* marked: Sim reports its writes (rows_written) */
         if (s->models.cache == NULL) { PyErr_NoMemory(); return -1; }
     }
     if (s->adaptive && (take(s, FS_H, h_obj, 1, nb, "h") != 0 || take(s, FS_NFEV, nfev_obj, 1, nb, "nfev") != 0
@@ -394,6 +394,15 @@ static PyObject *stepper_mark_checked(Stepper *s, PyObject *noargs)
     Py_RETURN_NONE;
 }
 
+/* rows_written(): the Sim wrote its model rows (Sim._model_row, _load_snapshot: their only writers once the Stepper
+   exists; the public view is read-only): the per-body decisions kept from them are made again at the next call. */
+static PyObject *stepper_rows_written(Stepper *s, PyObject *noargs)
+{
+    (void)noargs;
+    if (s->has_models) lv_model_cache_rows_written(s->models.cache);
+    Py_RETURN_NONE;
+}
+
 static PyObject *stepper_is_checked(Stepper *s, PyObject *noargs)
 {
     (void)noargs;
@@ -410,6 +419,8 @@ static PyMethodDef stepper_methods[] = {
     {"set_fallback", (PyCFunction)stepper_set_fallback, METH_O, "set_fallback(fn): what step_or_fallback calls."},
     {"mark_checked", (PyCFunction)stepper_mark_checked, METH_NOARGS,
      "mark_checked(): the current arrays passed the checks; snapshot them."},
+    {"rows_written", (PyCFunction)stepper_rows_written, METH_NOARGS,
+     "rows_written(): the model rows were written; what the Stepper keeps from them is made again at the next call."},
     {"is_checked", (PyCFunction)stepper_is_checked, METH_NOARGS,
      "is_checked() -> bool: state and wheel rates are bytewise those of the last mark_checked / step."},
     {NULL, NULL, 0, NULL}};

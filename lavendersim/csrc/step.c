@@ -515,19 +515,37 @@ static int lv_step_kind(const double *r)
     return kind | LV_ON_AXES;
 }
 
-lv_model_cache *lv_model_cache_new(long nb)
+lv_model_cache *lv_model_cache_new(long nb, int marked)
 {
     lv_model_cache *c = (lv_model_cache *)calloc(1, sizeof(lv_model_cache));
     if (c == NULL) return NULL;
     c->nb = nb;
-    c->rows = (double *)calloc((size_t)nb * LV_MODEL_SIZE + 1, sizeof(double));
+    c->marked = marked != 0;
+    c->rows = marked ? NULL : (double *)calloc((size_t)nb * LV_MODEL_SIZE + 1, sizeof(double));
     c->kind = (int *)calloc((size_t)nb + 1, sizeof(int));
     c->kw = (double *)calloc((size_t)nb * LV_WCOEF_SIZE + 1, sizeof(double));
-    if (c->rows == NULL || c->kind == NULL || c->kw == NULL) {
+    if ((c->rows == NULL && !marked) || c->kind == NULL || c->kw == NULL) {
         lv_model_cache_free(c);
         return NULL;
     }
     return c;
+}
+
+/* The effect index of a call, kept in a lv_model_cache with what it was built from (lv_model_cache, step.h). */
+struct lv_index_keep {
+    lv_effect_index ix;
+    const double *effects;
+    long ne, row_size, nb, user_n;
+    const lv_user_effects *user;
+    double *keys;   /* ne x 2: each row's code and body when the index was built */
+};
+
+static void index_keep_free(lv_index_keep *k)
+{
+    if (k == NULL) return;
+    index_free(&k->ix);
+    free(k->keys);
+    free(k);
 }
 
 void lv_model_cache_free(lv_model_cache *c)
@@ -536,12 +554,69 @@ void lv_model_cache_free(lv_model_cache *c)
     free(c->rows);
     free(c->kind);
     free(c->kw);
+    index_keep_free(c->index);
     free(c);
 }
 
-/* md's cache (if any) made valid for its nb rows: kept when the rows are bytewise those it was made from (then every
-   entry is what the rows give again), else made again from the rows. Called by lv_simulate after it checked the
-   rows' kinds, before any stepping thread starts. */
+void lv_model_cache_rows_written(lv_model_cache *c)
+{
+    if (c != NULL) c->valid = 0;
+}
+
+/* 1 when index k was built from this table: same address, size, bodies and user table, and every row's code and body
+   equal to those it was built from (then index_build would build and check the same index: it reads nothing else of
+   a row; a NaN compares unequal, so it is built and refused again). */
+static int index_kept(const lv_index_keep *k, const double *effects, long ne, long row_size, long nb,
+                      const lv_user_effects *user)
+{
+    long e;
+    if (k == NULL || k->effects != effects || k->ne != ne || k->row_size != row_size || k->nb != nb || k->user != user
+        || (user != NULL && k->user_n != user->n))
+        return 0;
+    for (e = 0; e < ne; e++) {
+        const double *row = effects + e * row_size;
+        if (row[LV_EFFECT_ROW_CODE] != k->keys[2 * e] || row[LV_EFFECT_ROW_BODY] != k->keys[2 * e + 1]) return 0;
+    }
+    return 1;
+}
+
+/* index_build, or the index c keeps when it was built from this table (index_kept); a freshly built index replaces
+   the kept one (when memory allows). *owned: 1 when the caller frees *ix (index_free), 0 when c keeps it. */
+static int index_for_call(lv_effect_index *ix, int *owned, lv_model_cache *c, const double *effects, long ne,
+                          long row_size, long nb, const lv_user_effects *user, long *bad_row)
+{
+    lv_index_keep *k;
+    long e;
+    int status;
+    *owned = 1;
+    if (c != NULL && index_kept(c->index, effects, ne, row_size, nb, user)) {
+        *ix = c->index->ix;
+        *owned = 0;
+        return LV_OK;
+    }
+    status = index_build(ix, effects, ne, row_size, nb, user, bad_row);
+    if (status != LV_OK || c == NULL) return status;
+    index_keep_free(c->index);
+    c->index = NULL;
+    k = (lv_index_keep *)calloc(1, sizeof(lv_index_keep));
+    if (k == NULL) return LV_OK;
+    k->keys = (double *)malloc(((size_t)ne * 2 + 1) * sizeof(double));
+    if (k->keys == NULL) { free(k); return LV_OK; }
+    for (e = 0; e < ne; e++) {
+        k->keys[2 * e] = effects[e * row_size + LV_EFFECT_ROW_CODE];
+        k->keys[2 * e + 1] = effects[e * row_size + LV_EFFECT_ROW_BODY];
+    }
+    k->ix = *ix;
+    k->effects = effects, k->ne = ne, k->row_size = row_size, k->nb = nb, k->user = user;
+    k->user_n = user != NULL ? user->n : 0;
+    c->index = k;
+    *owned = 0;
+    return LV_OK;
+}
+
+/* md's cache (if any) made valid for its nb rows: kept when the rows are those it was made from (compared bytewise,
+   or for a marked cache not reported written since), else made again from the rows. Called by lv_simulate after it
+   checked the rows' kinds, before any stepping thread starts. */
 static void model_cache_sync(const lv_models *md, long nb)
 {
     lv_model_cache *c = md == NULL ? NULL : md->cache;
@@ -552,13 +627,13 @@ static void model_cache_sync(const lv_models *md, long nb)
         c->valid = 0;
         return;
     }
-    if (c->valid && memcmp(c->rows, md->rows, n) == 0) return;
+    if (c->valid && (c->marked || memcmp(c->rows, md->rows, n) == 0)) return;
     for (b = 0; b < nb; b++) {
         const double *r = md->rows + b * LV_MODEL_SIZE;
         c->kind[b] = lv_step_kind(r);
         if (c->kind[b] & LV_KIND_WHEELS) lv_wheels_coefficients(r, c->kw + b * LV_WCOEF_SIZE);
     }
-    memcpy(c->rows, md->rows, n);
+    if (!c->marked) memcpy(c->rows, md->rows, n);
     c->valid = 1;
 }
 
@@ -1912,7 +1987,7 @@ int lv_simulate(double *state, const double *params, long nb,
     lv_effect_index ix;
     double last[LV_BLOCK][LV_STATE_SIZE];
     long b, s, limit = n_steps, best_body = -1, *ids = NULL;
-    int status = LV_OK;
+    int status = LV_OK, ix_owned = 1;
     if (tableau != NULL && (tableau->s < 1 || tableau->s > LV_TABLEAU_MAX_STAGES || !(tableau->b_den > 0.0)))
         return LV_BAD_ARGUMENT;
     if (tableau == NULL && (integrator < 0 || integrator > LV_INTEGRATOR_LAST)) return LV_BAD_ARGUMENT;
@@ -1926,7 +2001,8 @@ int lv_simulate(double *state, const double *params, long nb,
             if (!lv_kind_valid(kind) || (kind != 0 && tableau == NULL && LV_INTEGRATOR_PLAIN_ONLY(integrator)))
                 return LV_BAD_ARGUMENT;
         }
-    status = index_build(&ix, effects, ne, row_size, nb, user, fail_step);
+    status = index_for_call(&ix, &ix_owned, models != NULL ? models->cache : NULL, effects, ne, row_size, nb, user,
+                            fail_step);
     if (status != LV_OK) return status;
     if (tableau != NULL || LV_INTEGRATOR_ADAPTIVE(integrator)) {
         for (b = 0; b < nb && limit > 0; b++) {
@@ -1960,7 +2036,7 @@ int lv_simulate(double *state, const double *params, long nb,
                                              lv_isa_get(), lv_threads_get(), ids, &limit, &best_body);
         free(ids);
     }
-    index_free(&ix);
+    if (ix_owned) index_free(&ix);
     if (status != LV_OK && status != LV_NO_MEMORY) {
         *fail_step = limit;
         *fail_body = best_body;

@@ -93,23 +93,36 @@ typedef struct {
     lv_model_cache *cache;  /* NULL, or the caller's per-body decisions kept from call to call (lv_model_cache) */
 } lv_models;
 
-/* What the fixed-step loops decide per model body from its row alone (the kind it is stepped with, its wheel
-   coefficients), kept by a caller that steps the same rows call after call (the Stepper, csrc/fast_step.c) instead
-   of redone per call. lv_simulate uses it only while the rows are bytewise those it was made from (one memcmp per
-   call) and otherwise makes it again from the rows: the same numbers either way. Made with lv_model_cache_new. */
+/* What lv_simulate decides per call from the model rows and the effect table alone, kept by a caller that steps the
+   same arrays call after call (the Stepper, csrc/fast_step.c) instead of redone per call:
+   * per model body (the fixed-step loops): the kind it is stepped with, its wheel coefficients. Used while the rows
+     are those it was made from: compared bytewise per call (one memcmp), or, for a cache made `marked`, while the
+     owner has not reported a write to the rows (lv_model_cache_rows_written: the owner is the rows' only writer and
+     reports every write). Otherwise made again from the rows: the same numbers either way.
+   * the effect index (each body's effects, CSR) of the last call: used while the table is at the same address with
+     the same size and every row's code and body are those it was built from (ne pairs compared per call: the index
+     reads nothing else of a row, and its parameters are read through it at their current values), with the same user
+     table; otherwise built again (and checked again) as in any call.
+   Made with lv_model_cache_new. */
+typedef struct lv_index_keep lv_index_keep;
 struct lv_model_cache {
     long nb;
-    int valid;      /* the entries below were made from `rows` */
-    double *rows;   /* nb x LV_MODEL_SIZE: the rows they were made from */
+    int valid;      /* the entries below were made from the rows (as they are now) */
+    int marked;     /* the owner reports every write to the rows (no compare; rows is NULL) */
+    double *rows;   /* nb x LV_MODEL_SIZE: the rows they were made from (not marked) */
     int *kind;      /* nb: the kind the step loops step body b with (its row's kind, with LV_ON_AXES for wheels on the
                        default layout) */
     double *kw;     /* nb x LV_WCOEF_SIZE: the wheel coefficients of the wheeled bodies (others unset) */
+    lv_index_keep *index;   /* the last call's effect index and what it was built from, or NULL */
 };
 
 /* A cache for nb bodies (empty: lv_simulate fills it on first use), or NULL (out of memory); freed by
-   lv_model_cache_free (NULL is fine). */
-lv_model_cache *lv_model_cache_new(long nb);
+   lv_model_cache_free (NULL is fine). marked: the caller reports every write to the rows after the first call with
+   lv_model_cache_rows_written (then no compare per call). */
+lv_model_cache *lv_model_cache_new(long nb, int marked);
 void lv_model_cache_free(lv_model_cache *c);
+/* The rows of a marked cache were written: its per-body entries are made again at the next call. */
+void lv_model_cache_rows_written(lv_model_cache *c);
 
 /* The integrators (LV_INTEGRATOR_*, LV_INTEGRATOR_PLAIN_ONLY(i): plain bodies only, one by one in
    advance_structured), the fixed-step paths (LV_PATH_*: the code of the integrator that takes each; an explicit RK
