@@ -23,6 +23,11 @@
 #include <math.h>
 
 #define TILE 128
+#if defined(__GNUC__) || defined(__clang__)
+#define ALIGN_TILE __attribute__((aligned(64))) /* rows on a cache line (as handwritten_rk4.c's tiles) */
+#else
+#define ALIGN_TILE
+#endif
 #define EPS_MAX 0x1p-18 /* |e| up to which the series normalizes to rounding */
 
 /* G = q (x) (w, 0), q = (x, y, z, w) */
@@ -36,7 +41,8 @@
 
 void lv_fma_rk4_free_soa(double *X, const double *I, long n, double dt, long n_steps)
 {
-    double T[13][TILE], J[3][TILE];
+    ALIGN_TILE double T[13][TILE];
+    ALIGN_TILE double J[3][TILE];
     const double hq2 = 0.25 * dt, hq4 = 0.5 * dt;         /* q stages: (dt/2)/2, dt/2 */
     const double hw2 = 0.5 * dt, hw4 = dt;                /* omega stages */
     const double aq1 = dt / 12.0, aq2 = dt / 6.0;         /* q sum: (dt/6)(1, 2, 2, 1) / 2 */

@@ -30,6 +30,13 @@
 
 #define NX 13
 #define TILE 128 /* bodies per tile of the SoA peer */
+/* The SoA tiles' rows start on a cache line: an AVX-512 load of 8 lanes never straddles two (on the stack a tile is
+   otherwise 16-byte aligned, and a row 16 bytes off a 32-byte boundary cost ~9% in the extension's own tile). */
+#if defined(__GNUC__) || defined(__clang__)
+#define ALIGN_TILE __attribute__((aligned(64)))
+#else
+#define ALIGN_TILE
+#endif
 
 static inline void rhs_free(const double *x, const double *c, double *d)
 {
@@ -106,7 +113,8 @@ void lv_ref_rk4_free_soa(double *X, const double *I, long n, double dt, long n_s
 {
     /* a tile of bodies is copied into local rows (no aliasing for the compiler to fear) and stays in
        L1 over all the steps */
-    double T[NX][TILE], J[3][TILE];
+    ALIGN_TILE double T[NX][TILE];
+    ALIGN_TILE double J[3][TILE];
     const double h2 = 0.5 * dt, h6 = dt / 6.0;
     long s, b, b0, m;
     int k;
@@ -166,7 +174,7 @@ void lv_ref_rk4_free_soa(double *X, const double *I, long n, double dt, long n_s
    (its values are meaningless). */
 void lv_ref_divider_floor_soa(double *X, const double *I, long n, double dt, long n_steps)
 {
-    double T[NX][TILE];
+    ALIGN_TILE double T[NX][TILE];
     long s, b, b0, m;
     int k;
     (void)I;
