@@ -23,7 +23,7 @@ def __getattr__(name: str):
         return mod if name == "symbolic" else getattr(mod, name)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
-MODULES = ("particles", "inertia", "effects", "quaternion", "rigid_body", "wheel_cube", "integrator_physics", "wheel_layout", "measures")
+MODULES = ("particles", "inertia", "effects", "quaternion", "rigid_body", "wheel_cube", "integrator_physics", "wheel_layout", "measures", "growth_bound")
 
 
 def all_kernels():

@@ -139,6 +139,8 @@ KINDS = (("JOINT", 1, "world-anchored spherical joint: p_w, v_w follow from q, o
           "integrated, motor torques saturated"))
 CONSTANTS = (("WHEELS_MAX", WHEELS_MAX, "wheel slots per body (XS.Omega, MODEL.J, the columns of MODEL.A_b)"),
              ("WHEELS_BODY_AXES", WHEELS_BODY_AXES, "wheels of the default layout: the body x, y, z axes, A_b = [I | 0]"),
+             ("WHEELS_BOUND_SIZE", 1 + WHEELS_MAX, "factors of a wheeled row's momentum bound, [|I_p|_F, J_i |a_i|] "
+              "(derive/growth_bound.py)"),
              ("QUAT_RATE_SCALE", 0.5, "dq/dt = QUAT_RATE_SCALE q (x) [omega_b, 0] (rigid_body_rates_free_c returns the "
               "product; a step folds the scale into its dt; checked in derive/rigid_body.py)"),
              ("QUAT_RENORM_EPS_MAX", 2.0 ** -18, "|eps| = ||q|^2 - 1| up to which quat_renormalize_near_unit leaves "
@@ -168,7 +170,8 @@ def print_c() -> str:
     out.append(f"#define LV_WHEELS_ON_AXES_A_B {{{axes}}}  /* MODEL.A_b of the default layout, [I | 0] */")
     out.append("/* the printed kernels of every wheeled body (derive/wheel_layout.py, N = WHEELS_MAX) */")
     out.extend(f"#define LV_WHEELS_{part.upper()} lv_wheels{WHEELS_MAX}_{part}"
-               for part in ("coefficients", "body_rhs_c", "on_axes_rhs_c", "motor", "momentum", "total_momentum"))
+               for part in ("coefficients", "body_rhs_c", "on_axes_rhs_c", "motor", "momentum", "total_momentum",
+                            "momentum_bound_factors", "momentum_bound"))
     out += ["", "#endif", ""]
     return "\n".join(out)
 

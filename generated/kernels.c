@@ -3461,6 +3461,56 @@ void lv_validity_wdt(const double *omega_b, double scale, double *omega_norm, do
     wdt[0] = scale*w_abs;
 }
 
+void lv_wheels4_momentum_bound_factors(const double *I_p, const double *A_b, const double *J, double *c) {
+    const double I_p_00 = I_p[0];
+    const double I_p_01 = I_p[1];
+    const double I_p_02 = I_p[2];
+    const double I_p_11 = I_p[4];
+    const double I_p_12 = I_p[5];
+    const double I_p_22 = I_p[8];
+    const double A_b_00 = A_b[0];
+    const double A_b_01 = A_b[1];
+    const double A_b_02 = A_b[2];
+    const double A_b_03 = A_b[3];
+    const double A_b_10 = A_b[4];
+    const double A_b_11 = A_b[5];
+    const double A_b_12 = A_b[6];
+    const double A_b_13 = A_b[7];
+    const double A_b_20 = A_b[8];
+    const double A_b_21 = A_b[9];
+    const double A_b_22 = A_b[10];
+    const double A_b_23 = A_b[11];
+    const double J_0 = J[0];
+    const double J_1 = J[1];
+    const double J_2 = J[2];
+    const double J_3 = J[3];
+    c[0] = sqrt((I_p_00*I_p_00) + 2*(I_p_01*I_p_01) + 2*(I_p_02*I_p_02) + (I_p_11*I_p_11) + 2*(I_p_12*I_p_12) + (I_p_22*I_p_22));
+    c[1] = J_0*sqrt((A_b_00*A_b_00) + (A_b_10*A_b_10) + (A_b_20*A_b_20));
+    c[2] = J_1*sqrt((A_b_01*A_b_01) + (A_b_11*A_b_11) + (A_b_21*A_b_21));
+    c[3] = J_2*sqrt((A_b_02*A_b_02) + (A_b_12*A_b_12) + (A_b_22*A_b_22));
+    c[4] = J_3*sqrt((A_b_03*A_b_03) + (A_b_13*A_b_13) + (A_b_23*A_b_23));
+}
+
+void lv_wheels4_momentum_bound(const double *q, double omega_norm, const double *Omega, const double *c, double *L2_max) {
+    const double q_0 = q[0];
+    const double q_1 = q[1];
+    const double q_2 = q[2];
+    const double q_3 = q[3];
+    const double Omega_0 = Omega[0];
+    const double Omega_1 = Omega[1];
+    const double Omega_2 = Omega[2];
+    const double Omega_3 = Omega[3];
+    const double c_0 = c[0];
+    const double c_1 = c[1];
+    const double c_2 = c[2];
+    const double c_3 = c[3];
+    const double c_4 = c[4];
+    const double q_norm2 = (q_0*q_0) + (q_1*q_1) + (q_2*q_2) + (q_3*q_3);
+    const double s_q = q_norm2 + fabs(q_norm2 - 1);
+    const double L_bound = s_q*(c_0*omega_norm + c_1*fabs(Omega_0) + c_2*fabs(Omega_1) + c_3*fabs(Omega_2) + c_4*fabs(Omega_3));
+    L2_max[0] = ((10000000001.0/10000000000.0))*(L_bound*L_bound);
+}
+
 /* ---- Scene effects: accumulating functions and dispatch -------------------------------------- */
 /* applied_torque: adds tau_com_w for one body. p = [torque_w(3)] */
 static inline void lv_effect_acc_applied_torque(const double *p, const double *x, const double *v_w, double m, const double *I_b, double *F, double *tau)
@@ -3672,6 +3722,8 @@ static void packed_rigid_point_velocity(const double *in, double *out) { lv_rigi
 static void packed_box_of_inertia(const double *in, double *out) { lv_box_of_inertia(in[0], in + 1, out + 0); }
 static void packed_validity_scale(const double *in, double *out) { lv_validity_scale(in + 0, in[3], in[4], out + 0); }
 static void packed_validity_wdt(const double *in, double *out) { lv_validity_wdt(in + 0, in[3], out + 0, out + 1); }
+static void packed_wheels4_momentum_bound_factors(const double *in, double *out) { lv_wheels4_momentum_bound_factors(in + 0, in + 9, in + 21, out + 0); }
+static void packed_wheels4_momentum_bound(const double *in, double *out) { lv_wheels4_momentum_bound(in + 0, in[4], in + 5, in + 9, out + 0); }
 
 const lv_kernel_info lv_kernel_table[LV_KERNEL_COUNT] = {
     {"particle_moments", 7, 6, packed_particle_moments},
@@ -3765,4 +3817,6 @@ const lv_kernel_info lv_kernel_table[LV_KERNEL_COUNT] = {
     {"box_of_inertia", 4, 3, packed_box_of_inertia},
     {"validity_scale", 5, 1, packed_validity_scale},
     {"validity_wdt", 4, 2, packed_validity_wdt},
+    {"wheels4_momentum_bound_factors", 25, 5, packed_wheels4_momentum_bound_factors},
+    {"wheels4_momentum_bound", 14, 1, packed_wheels4_momentum_bound},
 };

@@ -11,7 +11,7 @@ typedef struct {
     void (*packed)(const double *in, double *out);
 } lv_kernel_info;
 
-#define LV_KERNEL_COUNT 91
+#define LV_KERNEL_COUNT 93
 extern const lv_kernel_info lv_kernel_table[LV_KERNEL_COUNT];
 
 /* particle_moments: One particle's mass moment and momentum (summed: m r_COM and p).
@@ -715,6 +715,21 @@ void lv_validity_scale(const double *I_b, double dt, double p, double *scale);
      out omega_norm scalar: |omega|, rad/s (inf when it overflows)
      out wdt scalar: the measure the integrator's WDT_MAX bounds (dimensionless) */
 void lv_validity_wdt(const double *omega_b, double scale, double *omega_norm, double *wdt);
+
+/* wheels4_momentum_bound_factors: A wheeled body's row factors of its momentum bound.
+     in  I_p [3×3]: inertia about the pivot (wheels locked), body frame, kg·m², symmetric row-major
+     in  A_b [3×4]: wheel spin axes as columns (3×4), body frame, row-major
+     in  J [4]: wheel axial inertias (4), kg·m²
+     out c [5]: [‖I_p‖_F (kg·m²), J_i |a_i| (4, kg·m²)] */
+void lv_wheels4_momentum_bound_factors(const double *I_p, const double *A_b, const double *J, double *c);
+
+/* wheels4_momentum_bound: An upper bound on the squared total momentum of a wheeled body, as computed.
+     in  q [4]: orientation (x, y, z, w), R_WB (any norm)
+     in  omega_norm scalar: |omega_b|, rad/s (validity_wdt's)
+     in  Omega [4]: wheel rates relative to the body (4), rad/s
+     in  c [5]: wheels4_momentum_bound_factors of the body's row
+     out L2_max scalar: (kg·m²/s)²: at least wheels4_total_momentum's |L|² as computed (epsilon = MOMENTUM_BOUND_SLACK = 1e-10, the rounding of both) */
+void lv_wheels4_momentum_bound(const double *q, double omega_norm, const double *Omega, const double *c, double *L2_max);
 
 /* ---- Scene effects (derive/effects.py): effect table layout, codes and dispatch ---------------- */
 #define LV_EFFECT_ROW_CODE 0     /* an effect table row: [code, body, parameters...] */

@@ -2936,3 +2936,60 @@ def validity_wdt(omega_b, scale):
     omega_b_2 = omega_b[2]
     w_abs = casadi.sqrt((omega_b_0*omega_b_0) + (omega_b_1*omega_b_1) + (omega_b_2*omega_b_2))
     return casadi.vertcat(w_abs), casadi.vertcat(scale*w_abs)
+
+
+def wheels4_momentum_bound_factors(I_p, A_b, J):
+    """wheels4_momentum_bound_factors: A wheeled body's row factors of its momentum bound.
+      in  I_p [3×3]: inertia about the pivot (wheels locked), body frame, kg·m², symmetric row-major
+      in  A_b [3×4]: wheel spin axes as columns (3×4), body frame, row-major
+      in  J [4]: wheel axial inertias (4), kg·m²
+      out c [5]: [‖I_p‖_F (kg·m²), J_i |a_i| (4, kg·m²)]"""
+    I_p_00 = I_p[0]
+    I_p_01 = I_p[1]
+    I_p_02 = I_p[2]
+    I_p_11 = I_p[4]
+    I_p_12 = I_p[5]
+    I_p_22 = I_p[8]
+    A_b_00 = A_b[0]
+    A_b_01 = A_b[1]
+    A_b_02 = A_b[2]
+    A_b_03 = A_b[3]
+    A_b_10 = A_b[4]
+    A_b_11 = A_b[5]
+    A_b_12 = A_b[6]
+    A_b_13 = A_b[7]
+    A_b_20 = A_b[8]
+    A_b_21 = A_b[9]
+    A_b_22 = A_b[10]
+    A_b_23 = A_b[11]
+    J_0 = J[0]
+    J_1 = J[1]
+    J_2 = J[2]
+    J_3 = J[3]
+    return casadi.vertcat(casadi.sqrt((I_p_00*I_p_00) + 2*(I_p_01*I_p_01) + 2*(I_p_02*I_p_02) + (I_p_11*I_p_11) + 2*(I_p_12*I_p_12) + (I_p_22*I_p_22)), J_0*casadi.sqrt((A_b_00*A_b_00) + (A_b_10*A_b_10) + (A_b_20*A_b_20)), J_1*casadi.sqrt((A_b_01*A_b_01) + (A_b_11*A_b_11) + (A_b_21*A_b_21)), J_2*casadi.sqrt((A_b_02*A_b_02) + (A_b_12*A_b_12) + (A_b_22*A_b_22)), J_3*casadi.sqrt((A_b_03*A_b_03) + (A_b_13*A_b_13) + (A_b_23*A_b_23)))
+
+
+def wheels4_momentum_bound(q, omega_norm, Omega, c):
+    """wheels4_momentum_bound: An upper bound on the squared total momentum of a wheeled body, as computed.
+      in  q [4]: orientation (x, y, z, w), R_WB (any norm)
+      in  omega_norm scalar: |omega_b|, rad/s (validity_wdt's)
+      in  Omega [4]: wheel rates relative to the body (4), rad/s
+      in  c [5]: wheels4_momentum_bound_factors of the body's row
+      out L2_max scalar: (kg·m²/s)²: at least wheels4_total_momentum's |L|² as computed (epsilon = MOMENTUM_BOUND_SLACK = 1e-10, the rounding of both)"""
+    q_0 = q[0]
+    q_1 = q[1]
+    q_2 = q[2]
+    q_3 = q[3]
+    Omega_0 = Omega[0]
+    Omega_1 = Omega[1]
+    Omega_2 = Omega[2]
+    Omega_3 = Omega[3]
+    c_0 = c[0]
+    c_1 = c[1]
+    c_2 = c[2]
+    c_3 = c[3]
+    c_4 = c[4]
+    q_norm2 = (q_0*q_0) + (q_1*q_1) + (q_2*q_2) + (q_3*q_3)
+    s_q = q_norm2 + casadi.fabs(q_norm2 - 1)
+    L_bound = s_q*(c_0*omega_norm + c_1*casadi.fabs(Omega_0) + c_2*casadi.fabs(Omega_1) + c_3*casadi.fabs(Omega_2) + c_4*casadi.fabs(Omega_3))
+    return casadi.vertcat(((10000000001.0/10000000000.0))*(L_bound*L_bound))

@@ -3462,6 +3462,56 @@ void lvf_validity_wdt(const float *omega_b, float scale, float *omega_norm, floa
     wdt[0] = scale*w_abs;
 }
 
+void lvf_wheels4_momentum_bound_factors(const float *I_p, const float *A_b, const float *J, float *c) {
+    const float I_p_00 = I_p[0];
+    const float I_p_01 = I_p[1];
+    const float I_p_02 = I_p[2];
+    const float I_p_11 = I_p[4];
+    const float I_p_12 = I_p[5];
+    const float I_p_22 = I_p[8];
+    const float A_b_00 = A_b[0];
+    const float A_b_01 = A_b[1];
+    const float A_b_02 = A_b[2];
+    const float A_b_03 = A_b[3];
+    const float A_b_10 = A_b[4];
+    const float A_b_11 = A_b[5];
+    const float A_b_12 = A_b[6];
+    const float A_b_13 = A_b[7];
+    const float A_b_20 = A_b[8];
+    const float A_b_21 = A_b[9];
+    const float A_b_22 = A_b[10];
+    const float A_b_23 = A_b[11];
+    const float J_0 = J[0];
+    const float J_1 = J[1];
+    const float J_2 = J[2];
+    const float J_3 = J[3];
+    c[0] = sqrtf((I_p_00*I_p_00) + 2*(I_p_01*I_p_01) + 2*(I_p_02*I_p_02) + (I_p_11*I_p_11) + 2*(I_p_12*I_p_12) + (I_p_22*I_p_22));
+    c[1] = J_0*sqrtf((A_b_00*A_b_00) + (A_b_10*A_b_10) + (A_b_20*A_b_20));
+    c[2] = J_1*sqrtf((A_b_01*A_b_01) + (A_b_11*A_b_11) + (A_b_21*A_b_21));
+    c[3] = J_2*sqrtf((A_b_02*A_b_02) + (A_b_12*A_b_12) + (A_b_22*A_b_22));
+    c[4] = J_3*sqrtf((A_b_03*A_b_03) + (A_b_13*A_b_13) + (A_b_23*A_b_23));
+}
+
+void lvf_wheels4_momentum_bound(const float *q, float omega_norm, const float *Omega, const float *c, float *L2_max) {
+    const float q_0 = q[0];
+    const float q_1 = q[1];
+    const float q_2 = q[2];
+    const float q_3 = q[3];
+    const float Omega_0 = Omega[0];
+    const float Omega_1 = Omega[1];
+    const float Omega_2 = Omega[2];
+    const float Omega_3 = Omega[3];
+    const float c_0 = c[0];
+    const float c_1 = c[1];
+    const float c_2 = c[2];
+    const float c_3 = c[3];
+    const float c_4 = c[4];
+    const float q_norm2 = (q_0*q_0) + (q_1*q_1) + (q_2*q_2) + (q_3*q_3);
+    const float s_q = q_norm2 + fabsf(q_norm2 - 1);
+    const float L_bound = s_q*(c_0*omega_norm + c_1*fabsf(Omega_0) + c_2*fabsf(Omega_1) + c_3*fabsf(Omega_2) + c_4*fabsf(Omega_3));
+    L2_max[0] = ((10000000001.0F/10000000000.0F))*(L_bound*L_bound);
+}
+
 /* ---- Scene effects in float: accumulating functions and dispatch ---------------------------- */
 /* applied_torque: adds tau_com_w for one body. p = [torque_w(3)] */
 static inline void lvf_effect_acc_applied_torque(const float *p, const float *x, const float *v_w, float m, const float *I_b, float *F, float *tau)

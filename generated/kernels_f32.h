@@ -187,5 +187,9 @@ void lvf_box_of_inertia(float m, const float *I_b, float *edges);
 void lvf_validity_scale(const float *I_b, float dt, float p, float *scale);
 /* validity_wdt: A body's validity measure |omega| dt (I_max/I_min)^p and its |omega| (float; see kernels.h) */
 void lvf_validity_wdt(const float *omega_b, float scale, float *omega_norm, float *wdt);
+/* wheels4_momentum_bound_factors: A wheeled body's row factors of its momentum bound (float; see kernels.h) */
+void lvf_wheels4_momentum_bound_factors(const float *I_p, const float *A_b, const float *J, float *c);
+/* wheels4_momentum_bound: An upper bound on the squared total momentum of a wheeled body, as computed (float; see kernels.h) */
+void lvf_wheels4_momentum_bound(const float *q, float omega_norm, const float *Omega, const float *c, float *L2_max);
 
 #endif

@@ -5311,6 +5311,113 @@ def validity_wdt(omega_b, scale, *, out=None):
     return omega_norm_out, wdt_out
 
 
+def wheels4_momentum_bound_factors(I_p, A_b, J, *, out=None):
+    """A wheeled body's row factors of its momentum bound.
+
+    Generated kernel ``wheels4_momentum_bound_factors``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    I_p : array_like, shape (..., 3, 3)
+        inertia about the pivot (wheels locked), body frame, kg·m², symmetric row-major
+    A_b : array_like, shape (..., 3, 4)
+        wheel spin axes as columns (3×4), body frame, row-major
+    J : array_like, shape (..., 4)
+        wheel axial inertias (4), kg·m²
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
+
+    Returns
+    -------
+    c : ndarray, shape (..., 5)
+        [‖I_p‖_F (kg·m²), J_i |a_i| (4, kg·m²)]
+    """
+    I_p = numpy.asarray(I_p, dtype=numpy.float32)
+    A_b = numpy.asarray(A_b, dtype=numpy.float32)
+    J = numpy.asarray(J, dtype=numpy.float32)
+    if out is None or out[0] is None:
+        batch = I_p.shape[:-2] if I_p.shape[:-2] == A_b.shape[:-2] == J.shape[:-1] else numpy.broadcast_shapes(I_p.shape[:-2], A_b.shape[:-2], J.shape[:-1])
+    I_p_00 = I_p[..., 0, 0]
+    I_p_01 = I_p[..., 0, 1]
+    I_p_02 = I_p[..., 0, 2]
+    I_p_11 = I_p[..., 1, 1]
+    I_p_12 = I_p[..., 1, 2]
+    I_p_22 = I_p[..., 2, 2]
+    A_b_00 = A_b[..., 0, 0]
+    A_b_01 = A_b[..., 0, 1]
+    A_b_02 = A_b[..., 0, 2]
+    A_b_03 = A_b[..., 0, 3]
+    A_b_10 = A_b[..., 1, 0]
+    A_b_11 = A_b[..., 1, 1]
+    A_b_12 = A_b[..., 1, 2]
+    A_b_13 = A_b[..., 1, 3]
+    A_b_20 = A_b[..., 2, 0]
+    A_b_21 = A_b[..., 2, 1]
+    A_b_22 = A_b[..., 2, 2]
+    A_b_23 = A_b[..., 2, 3]
+    J_0 = J[..., 0]
+    J_1 = J[..., 1]
+    J_2 = J[..., 2]
+    J_3 = J[..., 3]
+    c_out = numpy.empty(batch + (5,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
+    c_out[..., 0] = numpy.sqrt((I_p_00*I_p_00) + 2*(I_p_01*I_p_01) + 2*(I_p_02*I_p_02) + (I_p_11*I_p_11) + 2*(I_p_12*I_p_12) + (I_p_22*I_p_22))
+    numpy.multiply(J_0, numpy.sqrt(A_b_00 * A_b_00 + A_b_10 * A_b_10 + A_b_20 * A_b_20), out=c_out[..., 1])
+    numpy.multiply(J_1, numpy.sqrt(A_b_01 * A_b_01 + A_b_11 * A_b_11 + A_b_21 * A_b_21), out=c_out[..., 2])
+    numpy.multiply(J_2, numpy.sqrt(A_b_02 * A_b_02 + A_b_12 * A_b_12 + A_b_22 * A_b_22), out=c_out[..., 3])
+    numpy.multiply(J_3, numpy.sqrt(A_b_03 * A_b_03 + A_b_13 * A_b_13 + A_b_23 * A_b_23), out=c_out[..., 4])
+    return c_out
+
+
+def wheels4_momentum_bound(q, omega_norm, Omega, c, *, out=None):
+    """An upper bound on the squared total momentum of a wheeled body, as computed.
+
+    Generated kernel ``wheels4_momentum_bound``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    q : array_like, shape (..., 4)
+        orientation (x, y, z, w), R_WB (any norm)
+    omega_norm : array_like, shape (...)
+        |omega_b|, rad/s (validity_wdt's)
+    Omega : array_like, shape (..., 4)
+        wheel rates relative to the body (4), rad/s
+    c : array_like, shape (..., 5)
+        wheels4_momentum_bound_factors of the body's row
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
+
+    Returns
+    -------
+    L2_max : ndarray, shape (...)
+        (kg·m²/s)²: at least wheels4_total_momentum's |L|² as computed (epsilon = MOMENTUM_BOUND_SLACK = 1e-10, the rounding of both)
+    """
+    q = numpy.asarray(q, dtype=numpy.float32)
+    omega_norm = numpy.asarray(omega_norm, dtype=numpy.float32)
+    Omega = numpy.asarray(Omega, dtype=numpy.float32)
+    c = numpy.asarray(c, dtype=numpy.float32)
+    if out is None or out[0] is None:
+        batch = q.shape[:-1] if q.shape[:-1] == omega_norm.shape == Omega.shape[:-1] == c.shape[:-1] else numpy.broadcast_shapes(q.shape[:-1], omega_norm.shape, Omega.shape[:-1], c.shape[:-1])
+    q_0 = q[..., 0]
+    q_1 = q[..., 1]
+    q_2 = q[..., 2]
+    q_3 = q[..., 3]
+    Omega_0 = Omega[..., 0]
+    Omega_1 = Omega[..., 1]
+    Omega_2 = Omega[..., 2]
+    Omega_3 = Omega[..., 3]
+    c_0 = c[..., 0]
+    c_1 = c[..., 1]
+    c_2 = c[..., 2]
+    c_3 = c[..., 3]
+    c_4 = c[..., 4]
+    q_norm2 = (q_0*q_0) + (q_1*q_1) + (q_2*q_2) + (q_3*q_3)
+    s_q = q_norm2 + abs(q_norm2 - 1)
+    L_bound = s_q*(c_0*omega_norm + c_1*abs(Omega_0) + c_2*abs(Omega_1) + c_3*abs(Omega_2) + c_4*abs(Omega_3))
+    L2_max_out = numpy.empty(batch, dtype=numpy.float32) if out is None or out[0] is None else out[0]
+    numpy.multiply(numpy.float32(10000000001.0) / numpy.float32(10000000000.0), L_bound * L_bound, out=L2_max_out[...])
+    return L2_max_out
+
+
 # name -> (function, [(input, shape)], [(output, shape)]), in the order of the C kernel table
 KERNELS = {
     'particle_moments': (particle_moments, [('m', ()), ('r_w', (3,)), ('v_w', (3,))], [('m_r', (3,)), ('p', (3,))]),
@@ -5404,6 +5511,8 @@ KERNELS = {
     'box_of_inertia': (box_of_inertia, [('m', ()), ('I_b', (3,))], [('edges', (3,))]),
     'validity_scale': (validity_scale, [('I_b', (3,)), ('dt', ()), ('p', ())], [('scale', ())]),
     'validity_wdt': (validity_wdt, [('omega_b', (3,)), ('scale', ())], [('omega_norm', ()), ('wdt', ())]),
+    'wheels4_momentum_bound_factors': (wheels4_momentum_bound_factors, [('I_p', (3, 3)), ('A_b', (3, 4)), ('J', (4,))], [('c', (5,))]),
+    'wheels4_momentum_bound': (wheels4_momentum_bound, [('q', (4,)), ('omega_norm', ()), ('Omega', (4,)), ('c', (5,))], [('L2_max', ())]),
 }
 
 

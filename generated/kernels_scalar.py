@@ -1781,6 +1781,25 @@ def validity_wdt(omega_b, scale):
     return w_abs, scale*w_abs
 
 
+def wheels4_momentum_bound_factors(I_p, A_b, J):
+    """A wheeled body's row factors of its momentum bound (floats; see the module)."""
+    I_p_00, I_p_01, I_p_02, _, I_p_11, I_p_12, _, _, I_p_22 = I_p
+    A_b_00, A_b_01, A_b_02, A_b_03, A_b_10, A_b_11, A_b_12, A_b_13, A_b_20, A_b_21, A_b_22, A_b_23 = A_b
+    J_0, J_1, J_2, J_3 = J
+    return (math.sqrt((I_p_00*I_p_00) + 2*(I_p_01*I_p_01) + 2*(I_p_02*I_p_02) + (I_p_11*I_p_11) + 2*(I_p_12*I_p_12) + (I_p_22*I_p_22)), J_0*math.sqrt((A_b_00*A_b_00) + (A_b_10*A_b_10) + (A_b_20*A_b_20)), J_1*math.sqrt((A_b_01*A_b_01) + (A_b_11*A_b_11) + (A_b_21*A_b_21)), J_2*math.sqrt((A_b_02*A_b_02) + (A_b_12*A_b_12) + (A_b_22*A_b_22)), J_3*math.sqrt((A_b_03*A_b_03) + (A_b_13*A_b_13) + (A_b_23*A_b_23)))
+
+
+def wheels4_momentum_bound(q, omega_norm, Omega, c):
+    """An upper bound on the squared total momentum of a wheeled body, as computed (floats; see the module)."""
+    q_0, q_1, q_2, q_3 = q
+    Omega_0, Omega_1, Omega_2, Omega_3 = Omega
+    c_0, c_1, c_2, c_3, c_4 = c
+    q_norm2 = (q_0*q_0) + (q_1*q_1) + (q_2*q_2) + (q_3*q_3)
+    s_q = q_norm2 + abs(q_norm2 - 1)
+    L_bound = s_q*(c_0*omega_norm + c_1*abs(Omega_0) + c_2*abs(Omega_1) + c_3*abs(Omega_2) + c_4*abs(Omega_3))
+    return ((10000000001.0/10000000000.0))*(L_bound*L_bound)
+
+
 # ---- Scene effects: apply(p, x, v_w, m, I_b) -> (F_w or None, tau_w or None), one body: p its parameters
 # (the row after [code, body]), x its state (13 floats), v_w the COM velocity it sees, m, I_b (3 floats).
 
@@ -1929,6 +1948,8 @@ READS = {
     'box_of_inertia': {'I_b': (0, 1, 2)},
     'validity_scale': {'I_b': (0, 1, 2)},
     'validity_wdt': {'omega_b': (0, 1, 2)},
+    'wheels4_momentum_bound_factors': {'I_p': (0, 1, 2, 3, 4, 5, 6, 7, 8), 'A_b': (0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11), 'J': (0, 1, 2, 3)},
+    'wheels4_momentum_bound': {'q': (0, 1, 2, 3), 'Omega': (0, 1, 2, 3), 'c': (0, 1, 2, 3, 4)},
 }
 # kernel -> {array output: the flat indices that are identically 0}
 ZEROS = {
@@ -2023,4 +2044,6 @@ ZEROS = {
     'box_of_inertia': {'edges': ()},
     'validity_scale': {'scale': ()},
     'validity_wdt': {'omega_norm': (), 'wdt': ()},
+    'wheels4_momentum_bound_factors': {'c': ()},
+    'wheels4_momentum_bound': {'L2_max': ()},
 }

@@ -84,6 +84,7 @@ enum {
 };
 #define LV_WHEELS_MAX 4  /* wheel slots per body (XS.Omega, MODEL.J, the columns of MODEL.A_b) */
 #define LV_WHEELS_BODY_AXES 3  /* wheels of the default layout: the body x, y, z axes, A_b = [I | 0] */
+#define LV_WHEELS_BOUND_SIZE 5  /* factors of a wheeled row's momentum bound, [|I_p|_F, J_i |a_i|] (derive/growth_bound.py) */
 #define LV_QUAT_RATE_SCALE 0.5  /* dq/dt = QUAT_RATE_SCALE q (x) [omega_b, 0] (rigid_body_rates_free_c returns the product; a step folds the scale into its dt; checked in derive/rigid_body.py) */
 #define LV_QUAT_RENORM_EPS_MAX 3.814697265625e-06  /* |eps| = ||q|^2 - 1| up to which quat_renormalize_near_unit leaves |q| within 2^-53 of 1 by its series alone (checked in derive/quaternion.py); beyond it, q / |q| */
 #define LV_WHEELS_ON_AXES_A_B {1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0}  /* MODEL.A_b of the default layout, [I | 0] */
@@ -94,5 +95,7 @@ enum {
 #define LV_WHEELS_MOTOR lv_wheels4_motor
 #define LV_WHEELS_MOMENTUM lv_wheels4_momentum
 #define LV_WHEELS_TOTAL_MOMENTUM lv_wheels4_total_momentum
+#define LV_WHEELS_MOMENTUM_BOUND_FACTORS lv_wheels4_momentum_bound_factors
+#define LV_WHEELS_MOMENTUM_BOUND lv_wheels4_momentum_bound
 
 #endif

@@ -89,5 +89,6 @@ KIND_JOINT = 1  # world-anchored spherical joint: p_w, v_w follow from q, omega
 KIND_WHEELS = 2  # reaction wheels: up to WHEELS_MAX on the columns of A_b (wheels<WHEELS_MAX>_body_rhs), Omega integrated, motor torques saturated
 WHEELS_MAX = 4  # wheel slots per body (XS.Omega, MODEL.J, the columns of MODEL.A_b)
 WHEELS_BODY_AXES = 3  # wheels of the default layout: the body x, y, z axes, A_b = [I | 0]
+WHEELS_BOUND_SIZE = 5  # factors of a wheeled row's momentum bound, [|I_p|_F, J_i |a_i|] (derive/growth_bound.py)
 QUAT_RATE_SCALE = 0.5  # dq/dt = QUAT_RATE_SCALE q (x) [omega_b, 0] (rigid_body_rates_free_c returns the product; a step folds the scale into its dt; checked in derive/rigid_body.py)
 QUAT_RENORM_EPS_MAX = 3.814697265625e-06  # |eps| = ||q|^2 - 1| up to which quat_renormalize_near_unit leaves |q| within 2^-53 of 1 by its series alone (checked in derive/quaternion.py); beyond it, q / |q|

@@ -237,15 +237,22 @@ static int unchanged(const Stepper *s)
    from the generated kinetic_energy and body_momentum kernels are at most g's limits (NaN fails). A wheeled body (row
    not NULL, its kind with LV_KIND_WHEELS; Omega its wheel rates): the kinetic energy at omega = 0 (translation) and
    the total |L| of body and wheels from the printed LV_WHEELS_TOTAL_MOMENTUM, as LoadBudget._momenta and
-   Sim._invariants (backends.wheel_total_momentum_batch, the NumPy print of the same kernel). */
+   Sim._invariants (backends.wheel_total_momentum_batch, the NumPy print of the same kernel); with its row's
+   momentum-bound factors (bound, not NULL) first the printed LV_WHEELS_MOMENTUM_BOUND, an upper bound on that |L|^2
+   as computed (derive/growth_bound.py): inside the limit, |L| is not evaluated (the same answer, as |L|^2 <= it). */
 static int growth_pass(const double *x, const double *prm, const double *g, double w, const double *row,
-                       const double *Omega)
+                       const double *Omega, const double *bound)
 {
     static const double at_rest[3] = {0.0, 0.0, 0.0};
-    double T, L[3];
+    double T, L[3], L2_max;
     if (w <= g[LV_G_W]) return 1;
     if (row != NULL && ((int)row[LV_MODEL_KIND] & LV_KIND_WHEELS)) {
         lv_kinetic_energy(prm[LV_PARAM_M], prm + LV_PARAM_I_B, x + LV_STATE_V_W, at_rest, &T);
+        if (!(T <= g[LV_G_E])) return 0;
+        if (bound != NULL) {
+            LV_WHEELS_MOMENTUM_BOUND(x + LV_STATE_Q, w, Omega, bound, &L2_max);
+            if (L2_max <= g[LV_G_L2]) return 1;
+        }
         LV_WHEELS_TOTAL_MOMENTUM(x + LV_STATE_Q, x + LV_STATE_OMEGA_B, Omega, row + LV_MODEL_I_P, row + LV_MODEL_A_B,
                                  row + LV_MODEL_J, L);
     } else {
@@ -259,9 +266,10 @@ static int growth_pass(const double *x, const double *prm, const double *g, doub
    per-chunk screen, shared by the Stepper and the module-level checks_pass. Exact where it passes: a body beyond
    its no-work rate has its invariants evaluated here, so a spinning body whose rate exceeds w_safe (any body with
    I_max/I_min > max_growth) does not send every step to the Python path. rows, Omega: the model rows (nb,
-   LV_MODEL_SIZE) and wheel rates (nb, LV_NW), or NULL (no wheeled body). */
+   LV_MODEL_SIZE) and wheel rates (nb, LV_NW), or NULL (no wheeled body); factors: the rows' momentum-bound factors
+   (nb, LV_WHEELS_BOUND_SIZE: the Stepper's model cache, made from these rows), or NULL. */
 static int screen_pass(const double *x, const double *params, long nb, const double *scale, double bound,
-                       const double *G, const double *rows, const double *Omega)
+                       const double *G, const double *rows, const double *Omega, const double *factors)
 {
     long b;
     for (b = 0; b < nb; b++) {
@@ -270,7 +278,8 @@ static int screen_pass(const double *x, const double *params, long nb, const dou
         lv_validity_wdt(xb + LV_STATE_OMEGA_B, scale[b], &w, &wdt); /* the printed validity measure, as Sim's */
         if (!(wdt <= bound)
             || !growth_pass(xb, params + b * LV_PARAM_SIZE, G + b * LV_G_COLS, w,
-                            rows ? rows + b * LV_MODEL_SIZE : NULL, rows ? Omega + b * LV_NW : NULL))
+                            rows ? rows + b * LV_MODEL_SIZE : NULL, rows ? Omega + b * LV_NW : NULL,
+                            rows && factors ? factors + b * LV_WHEELS_BOUND_SIZE : NULL))
             return 0;
     }
     return 1;
@@ -301,16 +310,20 @@ static int screen_pass_f32(const float *x, const double *params, long nb, const 
         gb[LV_G_W] = g[LV_G_W] * keep; /* a NaN w fails the bound test below */
         gb[LV_G_E] = g[LV_G_E] * keep;
         gb[LV_G_L2] = g[LV_G_L2] * keep;
-        if (!(wdt <= bound * keep) || !growth_pass(xb, params + b * LV_PARAM_SIZE, gb, w, NULL, NULL)) return 0;
+        if (!(wdt <= bound * keep) || !growth_pass(xb, params + b * LV_PARAM_SIZE, gb, w, NULL, NULL, NULL)) return 0;
     }
     return 1;
 }
 
+/* The Stepper's screen after a call: the wheeled bodies' momentum bounds from its model cache when that is made from
+   the rows as they are (valid: lv_simulate's fixed-step calls make it; the rows are not written inside a call). */
 static int checks_pass(const Stepper *s)
 {
+    const lv_model_cache *c = s->has_models ? s->models.cache : NULL;
     return screen_pass((const double *)s->buf[FS_STATE].buf, (const double *)s->buf[FS_PARAMS].buf, s->nb,
                        (const double *)s->buf[FS_WDT].buf, s->bound, (const double *)s->buf[FS_GROWTH].buf,
-                       s->has_models ? s->models.rows : NULL, s->has_models ? s->models.Omega : NULL);
+                       s->has_models ? s->models.rows : NULL, s->has_models ? s->models.Omega : NULL,
+                       c != NULL && c->valid && c->nb == s->nb ? c->bound : NULL);
 }
 
 static int fast_step(Stepper *s, long n)
@@ -506,7 +519,8 @@ static PyObject *py_checks_pass(PyObject *self, PyObject *args)
                                        (const double *)buf[2].buf, bound, (const double *)buf[3].buf)
                      : screen_pass((const double *)buf[0].buf, (const double *)buf[1].buf, (long)nb,
                                    (const double *)buf[2].buf, bound, (const double *)buf[3].buf,
-                                   n == 6 ? (const double *)buf[4].buf : NULL, n == 6 ? (const double *)buf[5].buf : NULL);
+                                   n == 6 ? (const double *)buf[4].buf : NULL, n == 6 ? (const double *)buf[5].buf : NULL,
+                                   NULL);
             Py_END_ALLOW_THREADS
         }
     }

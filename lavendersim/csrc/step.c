@@ -524,7 +524,8 @@ lv_model_cache *lv_model_cache_new(long nb, int marked)
     c->rows = marked ? NULL : (double *)calloc((size_t)nb * LV_MODEL_SIZE + 1, sizeof(double));
     c->kind = (int *)calloc((size_t)nb + 1, sizeof(int));
     c->kw = (double *)calloc((size_t)nb * LV_WCOEF_SIZE + 1, sizeof(double));
-    if ((c->rows == NULL && !marked) || c->kind == NULL || c->kw == NULL) {
+    c->bound = (double *)calloc((size_t)nb * LV_WHEELS_BOUND_SIZE + 1, sizeof(double));
+    if ((c->rows == NULL && !marked) || c->kind == NULL || c->kw == NULL || c->bound == NULL) {
         lv_model_cache_free(c);
         return NULL;
     }
@@ -554,6 +555,7 @@ void lv_model_cache_free(lv_model_cache *c)
     free(c->rows);
     free(c->kind);
     free(c->kw);
+    free(c->bound);
     index_keep_free(c->index);
     free(c);
 }
@@ -631,7 +633,11 @@ static void model_cache_sync(const lv_models *md, long nb)
     for (b = 0; b < nb; b++) {
         const double *r = md->rows + b * LV_MODEL_SIZE;
         c->kind[b] = lv_step_kind(r);
-        if (c->kind[b] & LV_KIND_WHEELS) lv_wheels_coefficients(r, c->kw + b * LV_WCOEF_SIZE);
+        if (c->kind[b] & LV_KIND_WHEELS) {
+            lv_wheels_coefficients(r, c->kw + b * LV_WCOEF_SIZE);
+            LV_WHEELS_MOMENTUM_BOUND_FACTORS(r + LV_MODEL_I_P, r + LV_MODEL_A_B, r + LV_MODEL_J,
+                                             c->bound + b * LV_WHEELS_BOUND_SIZE);
+        }
     }
     if (!c->marked) memcpy(c->rows, md->rows, n);
     c->valid = 1;

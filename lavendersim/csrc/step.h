@@ -95,7 +95,8 @@ typedef struct {
 
 /* What lv_simulate decides per call from the model rows and the effect table alone, kept by a caller that steps the
    same arrays call after call (the Stepper, csrc/fast_step.c) instead of redone per call:
-   * per model body (the fixed-step loops): the kind it is stepped with, its wheel coefficients. Used while the rows
+   * per model body (the fixed-step loops): the kind it is stepped with, its wheel coefficients, its momentum-bound
+     factors (the Stepper's growth screen reads them while `valid`). Used while the rows
      are those it was made from: compared bytewise per call (one memcmp), or, for a cache made `marked`, while the
      owner has not reported a write to the rows (lv_model_cache_rows_written: the owner is the rows' only writer and
      reports every write). Otherwise made again from the rows: the same numbers either way.
@@ -113,6 +114,8 @@ struct lv_model_cache {
     int *kind;      /* nb: the kind the step loops step body b with (its row's kind, with LV_ON_AXES for wheels on the
                        default layout) */
     double *kw;     /* nb x LV_WCOEF_SIZE: the wheel coefficients of the wheeled bodies (others unset) */
+    double *bound;  /* nb x LV_WHEELS_BOUND_SIZE: the wheeled bodies' momentum-bound factors
+                       (LV_WHEELS_MOMENTUM_BOUND_FACTORS, for the growth screen; others unset) */
     lv_index_keep *index;   /* the last call's effect index and what it was built from, or NULL */
 };
 
