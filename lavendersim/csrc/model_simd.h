@@ -262,23 +262,12 @@ static long advance_model_soa(double *state, const double *params, const lv_mode
     return -1;
 }
 
-/* One share of a group's tiles over threads (as soa_share for plain bodies). */
-typedef struct {
-    lv_share_head head; /* first: run_shares reads it */
-    double *state;
-    const double *params;
-    const lv_models *md;
-    const lv_effect_index *ix;
-    const long *list;
-    long count, n_steps;
-    lv_mtile_fn fn;
-    int normalize;
-    double dt;
-} mtile_share;
-
+/* One share of a group's tiles over threads (advance_models_threads with unit LV_MTILE; as soa_share_run for plain
+   bodies): its bodies share one model_step_kind (mtile_member). */
 static void mtile_share_run(void *arg)
 {
-    mtile_share *const sh = (mtile_share *)arg;
+    model_share *const sh = (model_share *)arg;
+    const lv_mtile_fn fn = mtile_rk4_fn(sh->isa, (model_step_kind(sh->md, sh->list[0]) & LV_ON_AXES) != 0);
     double last[LV_XS_SIZE];
     long k, s, lim, n;
     int j;
@@ -286,8 +275,8 @@ static void mtile_share_run(void *arg)
         n = sh->count - k < LV_MTILE ? sh->count - k : LV_MTILE;
         lim = run_limit(sh->list[k], sh->head.limit, sh->head.best, sh->n_steps);
         if (lim <= 0) continue;
-        s = advance_model_soa(sh->state, sh->params, sh->md, sh->ix, sh->list + k, n, sh->fn, sh->normalize, sh->dt,
-                              lim, &j, last);
+        s = advance_model_soa(sh->state, sh->params, sh->md, sh->ix, sh->list + k, n, fn, sh->normalize, sh->dt, lim,
+                              &j, last);
         if (s < 0 || !earlier(s, sh->list[k + j], sh->head.limit, sh->head.best)) continue;
         memcpy(sh->state + sh->list[k + j] * LV_STATE_SIZE, last, LV_STATE_SIZE * sizeof(double));
         memcpy(sh->md->Omega + LV_NW * sh->list[k + j], last + LV_XS_OMEGA, LV_NW * sizeof(double));
@@ -298,40 +287,6 @@ static void mtile_share_run(void *arg)
 }
 
 
-/* The group list[0 .. count-1] (ascending) on model tiles, split into up to `threads` shares of whole
-   tiles (as advance_soa_threads). Returns LV_DIVERGED (with *limit, *best updated) or LV_OK. */
-static int advance_mtile_threads(double *state, const double *params, const lv_models *md, const lv_effect_index *ix,
-                                 const long *list, long count, int isa, int normalize, double dt, long n_steps,
-                                 int threads, long *limit, long *best)
-{
-    mtile_share sh[LV_MAX_THREADS];
-    const long tiles = (count + LV_MTILE - 1) / LV_MTILE;
-    long t0 = 0, most;
-    int t, n_sh;
-    n_sh = threads < 1 ? 1 : (threads > LV_MAX_THREADS ? LV_MAX_THREADS : threads);
-    most = count * n_steps / LV_MODEL_THREAD_WORK; /* shares the work pays for */
-    if (most < n_sh) n_sh = most < 1 ? 1 : (int)most;
-    if (n_sh > tiles) n_sh = (int)tiles;
-    for (t = 0; t < n_sh; t++) {
-        const long t1 = tiles * (t + 1) / n_sh;
-        const long b0 = t0 * LV_MTILE, b1 = t1 * LV_MTILE < count ? t1 * LV_MTILE : count;
-        sh[t].state = state;
-        sh[t].params = params;
-        sh[t].md = md;
-        sh[t].ix = ix;
-        sh[t].list = list + b0;
-        sh[t].count = b1 - b0;
-        sh[t].n_steps = n_steps;
-        sh[t].head.limit = *limit;
-        sh[t].head.best = *best;
-        sh[t].fn = mtile_rk4_fn(isa, (model_step_kind(md, list[0]) & LV_ON_AXES) != 0);
-        sh[t].normalize = normalize;
-        sh[t].dt = dt;
-        sh[t].head.status = LV_OK;
-        t0 = t1;
-    }
-    return run_shares(sh, sizeof sh[0], n_sh, mtile_share_run, limit, best);
-}
 
 /* The model bodies list[0 .. count-1] (ascending): RK4 (isa not LV_ISA_SCALAR) takes the group of the first
    body that may lead one (mtile_member) to the model tiles when it has LV_SOA_MIN bodies or more; every
@@ -351,19 +306,19 @@ static int advance_models_grouped(double *state, const double *params, const lv_
     }
     rest = n_g >= LV_SOA_MIN ? (long *)malloc((size_t)count * sizeof(long)) : NULL;
     if (rest == NULL)
-        return advance_models_threads(state, params, md, ix, list, count, integrator, normalize, dt, n_steps,
-                                      threads, limit, best);
+        return advance_models_threads(state, params, md, ix, list, count, 1, model_share_run, integrator, 0,
+                                      normalize, dt, n_steps, threads, limit, best);
     for (k = 0, n_g = 0; k < count; k++) {
         if (mtile_member(md, ix, list[k], b0)) list[n_g++] = list[k];
         else rest[n_r++] = list[k];
     }
     memcpy(list + n_g, rest, (size_t)n_r * sizeof(long));
     free(rest);
-    if (advance_mtile_threads(state, params, md, ix, list, n_g, isa, normalize, dt, n_steps, threads, limit, best)
-        == LV_DIVERGED)
+    if (advance_models_threads(state, params, md, ix, list, n_g, LV_MTILE, mtile_share_run, integrator, isa, normalize,
+                               dt, n_steps, threads, limit, best) == LV_DIVERGED)
         status = LV_DIVERGED;
-    if (n_r > 0 && advance_models_threads(state, params, md, ix, list + n_g, n_r, integrator, normalize, dt, n_steps,
-                                          threads, limit, best) == LV_DIVERGED)
+    if (n_r > 0 && advance_models_threads(state, params, md, ix, list + n_g, n_r, 1, model_share_run, integrator, 0,
+                                          normalize, dt, n_steps, threads, limit, best) == LV_DIVERGED)
         status = LV_DIVERGED;
     return status;
 }

@@ -1828,7 +1828,7 @@ typedef struct {
     const lv_effect_index *ix;
     const long *list;
     long count, n_steps;
-    int integrator, normalize;
+    int integrator, isa, normalize; /* isa: the model tiles' instruction set (mtile_share_run) */
     double dt;
 } model_share;
 
@@ -1857,38 +1857,43 @@ static void model_share_run(void *arg)
    costs about as much as ~100 body-steps). */
 #define LV_MODEL_THREAD_WORK 512
 
-/* The model bodies list[0 .. count-1] (ascending), split into up to `threads` shares of consecutive bodies (the
-   calling thread runs the first; a thread that cannot be started has its share run here). Returns LV_DIVERGED
-   (with *limit, *best updated as in advance_fixed) or LV_OK. */
+/* The model bodies list[0 .. count-1] (ascending), split into up to `threads` shares of consecutive bodies, whole
+   units of `unit` bodies each (1, or a model tile: LV_MTILE), no more shares than the work pays for; run steps a
+   share (model_share_run, or mtile_share_run on tiles of isa). The calling thread runs the first share; a thread
+   that cannot be started has its share run here. Returns LV_DIVERGED (with *limit, *best updated as in
+   advance_fixed) or LV_OK. */
 static int advance_models_threads(double *state, const double *params, const lv_models *md, const lv_effect_index *ix,
-                                  const long *list, long count, int integrator, int normalize, double dt,
-                                  long n_steps, int threads, long *limit, long *best)
+                                  const long *list, long count, long unit, lv_share_fn run, int integrator, int isa,
+                                  int normalize, double dt, long n_steps, int threads, long *limit, long *best)
 {
     model_share sh[LV_MAX_THREADS];
-    long k0 = 0, most;
+    const long units = (count + unit - 1) / unit;
+    long u0 = 0, most;
     int t, n_sh;
     n_sh = threads < 1 ? 1 : (threads > LV_MAX_THREADS ? LV_MAX_THREADS : threads);
     most = count * n_steps / LV_MODEL_THREAD_WORK; /* shares the work pays for */
     if (most < n_sh) n_sh = most < 1 ? 1 : (int)most;
-    if (n_sh > count) n_sh = count < 1 ? 1 : (int)count;
-    for (t = 0; t < n_sh; t++) { /* share t: list[k0 .. k1) */
-        const long k1 = count * (t + 1) / n_sh;
+    if (n_sh > units) n_sh = units < 1 ? 1 : (int)units;
+    for (t = 0; t < n_sh; t++) { /* share t: units [u0, u1) */
+        const long u1 = units * (t + 1) / n_sh;
+        const long b0 = u0 * unit, b1 = u1 * unit < count ? u1 * unit : count;
         sh[t].state = state;
         sh[t].params = params;
         sh[t].md = md;
         sh[t].ix = ix;
-        sh[t].list = list + k0;
-        sh[t].count = k1 - k0;
+        sh[t].list = list + b0;
+        sh[t].count = b1 - b0;
         sh[t].n_steps = n_steps;
         sh[t].head.limit = *limit;
         sh[t].head.best = *best;
         sh[t].integrator = integrator;
+        sh[t].isa = isa;
         sh[t].normalize = normalize;
         sh[t].dt = dt;
         sh[t].head.status = LV_OK;
-        k0 = k1;
+        u0 = u1;
     }
-    return run_shares(sh, sizeof sh[0], n_sh, model_share_run, limit, best);
+    return run_shares(sh, sizeof sh[0], n_sh, run, limit, best);
 }
 
 static int lv_threads_current = 1;
