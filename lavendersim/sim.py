@@ -1391,15 +1391,21 @@ class Sim:
         LavenderInputError
             If `n_steps` is not an integer in range.
         """
-        n = V.integer("n_steps", n_steps, minimum=0)
-        if n > MAX_STEPS:
-            raise V.LavenderInputError("n_steps", "must be at most MAX_STEPS = 2**53 (9.0e15)", f", got {n}")
-        if n:
-            f = self._fast
-            if f is not None and n <= self._fast_n and f.advance(n):
+        f = self._fast
+        if f is not None and type(n_steps) is int and 0 < n_steps <= self._fast_n:   # (valid as it is: V.integer's n)
+            if f.advance(n_steps):
                 return     # one chunk inside C, its end checked as _advance checks it
-            with self._lock:
-                self._advance(n)
+            n = n_steps
+        else:
+            n = V.integer("n_steps", n_steps, minimum=0)
+            if n > MAX_STEPS:
+                raise V.LavenderInputError("n_steps", "must be at most MAX_STEPS = 2**53 (9.0e15)", f", got {n}")
+            if not n:
+                return
+            if f is not None and n <= self._fast_n and f.advance(n):
+                return
+        with self._lock:
+            self._advance(n)
 
     def run_for(self, duration: float) -> None:
         """Advance by ``round(duration / dt)`` steps (as :meth:`run`).

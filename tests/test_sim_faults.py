@@ -303,3 +303,22 @@ def test_the_c_fast_path_keeps_its_effect_index_and_reads_new_parameters_through
     stale = Models(ref.rows, start[1].copy(), ref.command, start[2].copy())   # the loads as they were: other states
     c_backend.CBackend().advance(start[0], sim._params.copy(), table, integrator, sim.normalize, sim.dt, 5, stale)
     assert not np.array_equal(start[0], x)
+
+
+def test_run_takes_a_plain_int_straight_to_c_and_still_refuses_what_it_refused():
+    """run(n) with a plain int in (0, the fast chunk] goes to the Stepper without V.integer (the value is valid as it
+    is); every other argument is validated as before: NumPy integers step the same, bool, floats, negatives and
+    n > MAX_STEPS are refused naming n_steps, with nothing stepped."""
+    a, b = lv.Sim(_scene(), dt=1e-3, backend="c"), lv.Sim(_scene(), dt=1e-3, backend="c")
+    assert a._fast is not None and a._fast_n >= 3
+    a.run(3)
+    b.run(np.int64(3))
+    np.testing.assert_array_equal(a.x, b.x)
+    assert a.steps == b.steps == 3 and a._fast.steps == 3
+    for bad in (True, 1.0, -1, 2 ** 60, "1"):
+        with pytest.raises(lv.LavenderInputError) as e:
+            a.run(bad)
+        assert e.value.field == "n_steps"
+    a.run(0)
+    assert a.steps == 3
+    np.testing.assert_array_equal(a.x, b.x)
