@@ -78,7 +78,7 @@ typedef struct {
     int fused; /* the fused tile of the effects' pattern (its LV_EFFECT_FUSED id, tile_fx_pattern), 0 none */
     lv_user_fused_fn ufused[2]; /* one user effect alone: its fused tile, q raw / normalized (NULL: none) */
     int first; /* the first effect of the pattern: effects 0 .. first-1 read no state (summed in P's F, TAU rows) */
-    double EP[LV_TE_PARAMS + LV_EFFECT_ROW_MIN_PARAMS][LV_TILE]; /* + room for a lane's full-width load */
+    LV_ALIGN_TILE double EP[LV_TE_PARAMS + LV_EFFECT_ROW_MIN_PARAMS][LV_TILE]; /* + room for a lane's full-width load */
 } lv_tile_fx;
 
 typedef void (*lv_tile_fn)(double (*LV_RESTRICT T)[LV_TILE], const double (*LV_RESTRICT J)[LV_TILE],
@@ -204,7 +204,10 @@ static const double lv_te_zero3[3] = {0.0, 0.0, 0.0};
     }
 #define LV_TILE_RK4_FX(NORMALIZE, KIND)                                                                 \
     {                                                                                                   \
-        double X[LV_STATE_SIZE][LV_TILE], A[LV_STATE_SIZE][LV_TILE], F[3][LV_TILE], TAU[3][LV_TILE];    \
+        LV_ALIGN_TILE double X[LV_STATE_SIZE][LV_TILE];                                                 \
+        LV_ALIGN_TILE double A[LV_STATE_SIZE][LV_TILE];                                                 \
+        LV_ALIGN_TILE double F[3][LV_TILE];                                                             \
+        LV_ALIGN_TILE double TAU[3][LV_TILE];                                                           \
         long s, b, b0, b1;                                                                              \
         int i, e, st;                                                                                   \
         for (b0 = 0; b0 < m; b0 = b1) {                                                                 \
