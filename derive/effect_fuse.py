@@ -17,6 +17,7 @@ add: batch_simd.h compiles one fused tile per (kind, pattern) of this table, in 
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import NamedTuple
 from itertools import permutations
 
 from . import effect as E
@@ -29,6 +30,49 @@ TILE_KINDS = ("TORQUE", "FULL", "FORCE", "BODY", "BODY_F")
 # The effect flags that choose a plain body's right-hand-side class; bit j of an index of the printed table
 # (kinds_by_flags) says whether RHS_BITS[j] is among the body's flags.
 RHS_BITS = (E.FLAG_FORCE, E.FLAG_TORQUE_W, E.FLAG_TORQUE_B)
+
+
+class RhsCall(NamedTuple):
+    """What a plain body of one tile kind runs after its effects' sums f (force, world) and t (torque): the kernel and
+    its arguments, named from x (the state), mass, cf (the Euler coefficients c_b), f, t, zero (a zero vector) and out
+    (d/dt of x); accel: f is turned into a_w = F/m first (linear_acceleration, in place); body_frame: t sums the effects'
+    body-frame forms (the body dispatch). pipeline: the kernel and its words as Sim.pipeline names them."""
+    kernel: str
+    args: tuple[str, ...]
+    accel: bool
+    body_frame: bool
+    pipeline: str
+
+
+# The one statement of the kind -> right-hand side rule, printed into kernels.h (LV_RHS_CALL_<kind>,
+# LV_RHS_BODY_FRAME_<kind>: csrc/step.c's plain_rhs, batch_simd.h's effect tiles, the user's fused tiles of
+# effect_fuse_user) and effects_meta (RHS_KERNELS: Sim.pipeline). TORQUE runs the torque-only kernel, bitwise
+# rigid_body_rhs on a zero force (the NumPy backend runs that one: the pipeline names it); BODY's a_w is zero, bitwise
+# the +0/m of the NumPy backend.
+RHS_OF_KIND = {
+    "TORQUE": RhsCall("rigid_body_rhs_torque_c", ("x", "cf", "t", "out"), False, False, "rigid_body_rhs (world torques)"),
+    "FULL": RhsCall("rigid_body_rhs_c", ("x", "mass", "cf", "f", "t", "out"), False, False,
+                    "rigid_body_rhs (world torques)"),
+    "FORCE": RhsCall("rigid_body_rhs_force_c", ("x", "cf", "f", "out"), True, False,
+                     "rigid_body_rhs_force (a force, no torque: a_w = F/m)"),
+    "BODY": RhsCall("rigid_body_rhs_body_c", ("x", "cf", "zero", "t", "out"), False, True,
+                    "rigid_body_rhs_body (torques declared in the body frame)"),
+    "BODY_F": RhsCall("rigid_body_rhs_body_c", ("x", "cf", "f", "t", "out"), True, True,
+                      "rigid_body_rhs_body (a force; torques declared in the body frame)"),
+}
+RHS_CALL_PARAMS = ("x", "mass", "cf", "f", "t", "out")   # LV_RHS_CALL_<kind>'s parameters
+
+
+def rhs_call_c(kind: str) -> str:
+    """The C expression of kind's right-hand side (RHS_OF_KIND) on the macro parameters RHS_CALL_PARAMS."""
+    r = RHS_OF_KIND[kind]
+    used = set(r.args) | ({"mass", "f"} if r.accel else set())
+    parts = [f"(void)({p})" for p in RHS_CALL_PARAMS if p not in used]
+    if r.accel:
+        parts.append("lv_linear_acceleration(mass, f, f)")
+    args = ", ".join("(const double[3]){0.0, 0.0, 0.0}" if a == "zero" else a for a in r.args)
+    parts.append(f"lv_{r.kernel}({args})")
+    return f"({', '.join(parts)})"
 
 
 def tile_kind(flags: int) -> str:
@@ -51,20 +95,32 @@ def kinds_by_flags() -> tuple[str, ...]:
 
 
 def rhs_c_header() -> list[str]:
-    """kernels.h's printed rule: LV_RHS_FLAGS_INDEX(flags), the table index of an OR of effect flags, and
-    LV_RHS_KINDS_BY_FLAGS(K), the initializer of the table, each kind named K(kind) (kind in TILE_KINDS)."""
+    """kernels.h's printed rule: LV_RHS_FLAGS_INDEX(flags), the table index of an OR of effect flags,
+    LV_RHS_KINDS_BY_FLAGS(K), the initializer of the table, each kind named K(kind) (kind in TILE_KINDS), and each
+    kind's right-hand side (RHS_OF_KIND): LV_RHS_CALL_<kind>, LV_RHS_BODY_FRAME_<kind>, LV_RHS_KINDS(X)."""
     names = {E.FLAG_FORCE: "LV_EFFECT_FORCE", E.FLAG_TORQUE_W: "LV_EFFECT_TORQUE_W", E.FLAG_TORQUE_B: "LV_EFFECT_TORQUE_B"}
     index = " | ".join(f"((((flags) & {names[b]}) != 0) << {j})" for j, b in enumerate(RHS_BITS))
-    return ["/* The right-hand-side class of a plain body with effects, from the OR of their flags (derive/effect_fuse.py",
-            "   tile_kind, printed as a table): LV_RHS_KINDS_BY_FLAGS(K)[LV_RHS_FLAGS_INDEX(flags)], K(kind) naming",
-            "   each class (TORQUE, FULL, FORCE, BODY, BODY_F). */",
-            f"#define LV_RHS_FLAGS_INDEX(flags) ({index})",
-            f"#define LV_RHS_KINDS_BY_FLAGS(K) {{{', '.join(f'K({k})' for k in kinds_by_flags())}}}"]
+    out = ["/* The right-hand-side class of a plain body with effects, from the OR of their flags (derive/effect_fuse.py",
+           "   tile_kind, printed as a table): LV_RHS_KINDS_BY_FLAGS(K)[LV_RHS_FLAGS_INDEX(flags)], K(kind) naming",
+           "   each class (TORQUE, FULL, FORCE, BODY, BODY_F). */",
+           f"#define LV_RHS_FLAGS_INDEX(flags) ({index})",
+           f"#define LV_RHS_KINDS_BY_FLAGS(K) {{{', '.join(f'K({k})' for k in kinds_by_flags())}}}",
+           "/* Each class's right-hand side after its effects' sums (derive/effect_fuse.py RHS_OF_KIND):",
+           "   LV_RHS_CALL_<kind>(x, mass, cf, f, t, out) on the state x, the mass, the Euler coefficients cf, the sums f",
+           "   (force, world; overwritten with a_w = F/m where the class divides) and t (torque), into out = d/dt x;",
+           "   LV_RHS_BODY_FRAME_<kind>: 1 when t sums the effects' body-frame forms. LV_RHS_KINDS(X): X(kind) each. */",
+           "#define LV_RHS_KINDS(X) " + " ".join(f"X({k})" for k in TILE_KINDS)]
+    for kind in TILE_KINDS:
+        out += [f"#define LV_RHS_BODY_FRAME_{kind} {int(RHS_OF_KIND[kind].body_frame)}",
+                f"#define LV_RHS_CALL_{kind}({', '.join(RHS_CALL_PARAMS)}) {rhs_call_c(kind)}"]
+    return out
 
 
 def meta_extra() -> dict:
-    """effects_meta.py's printed rule (the NumPy backend's copy of the table): RHS_BITS and RHS_KINDS_BY_FLAGS."""
-    return {"rhs_bits": RHS_BITS, "rhs_kinds_by_flags": kinds_by_flags()}
+    """effects_meta.py's printed rule (the NumPy backend's copy of the table): RHS_BITS, RHS_KINDS_BY_FLAGS and
+    RHS_KERNELS (each kind's right-hand side as Sim.pipeline names it)."""
+    return {"rhs_bits": RHS_BITS, "rhs_kinds_by_flags": kinds_by_flags(),
+            "rhs_kernels": {k: RHS_OF_KIND[k].pipeline for k in TILE_KINDS}}
 
 
 def _constant_flags(effects: Sequence[tuple[int, E.EffectDecl]]) -> set[int]:

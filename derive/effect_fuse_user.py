@@ -11,23 +11,14 @@ the engine uses a fused tile only when it was compiled against the very sources 
 
 Every lane does the stage passes' IEEE operations in their order: the effect sums start at zero and the effect
 adds into them (its body-frame form for a body-frame torque alone, FLAG_TORQUE_B), then the tile kind's
-right-hand side (derive.effect_fuse.tile_kind, batch_simd.h's LV_TE_RHS_<kind>); results are bitwise the stage
-passes' (tests/test_extending.py checks it at every instruction set).
+right-hand side (derive.effect_fuse.tile_kind and RHS_OF_KIND: kernels.h's LV_RHS_CALL_<kind>, as the stage passes
+call it); results are bitwise the stage passes' (tests/test_extending.py checks it at every instruction set).
 """
 from __future__ import annotations
 
 from . import effect as E
-from .effect_fuse import tile_kind
+from .effect_fuse import RHS_OF_KIND, tile_kind
 
-# one lane's right-hand side after the effect sums f (force, world) and t (torque; body frame for BODY*), per tile
-# kind: batch_simd.h's LV_TE_RHS_<kind> on the same printed kernels
-_RHS = {
-    "BODY": "(void)f; lv_rigid_body_rhs_body_c(in, cf, lvu_zero3, t, out)",
-    "BODY_F": "lv_linear_acceleration(mass, f, f); lv_rigid_body_rhs_body_c(in, cf, f, t, out)",
-    "TORQUE": "(void)f; lv_rigid_body_rhs_torque_c(in, cf, t, out)",
-    "FULL": "lv_rigid_body_rhs_c(in, mass, cf, f, t, out)",
-    "FORCE": "(void)t; lv_linear_acceleration(mass, f, f); lv_rigid_body_rhs_force_c(in, cf, f, out)",
-}
 NORMALIZE = (("raw", 0), ("norm", 1))   # q left / normalized after each step (the engine's LV_DEFINE_TILES order)
 
 
@@ -53,18 +44,18 @@ def c_fused_tiles(effects: list[E.EffectDecl], user_function) -> list[str]:
          "#if defined(LVU_ENGINE)", "#include <layout.h>", "#include <tableaux.h>", "#include <kernels.c>",
          f"#if LV_EFFECT_TILE != {n}", "#error \"the engine's tile width is not the one this set was derived for\"",
          "#endif", "LV_EXPORT const char lvu_engine_hash[] = LVU_ENGINE;",
-         "static const double lvu_zero3[3] = {0.0, 0.0, 0.0};",
          "#define LVU_FOR(stmt) for (i = 0; i < LV_STATE_SIZE; i++) stmt", "#define LVU_AT(v) v[i]", ""]
     args = (f"double (*restrict T)[{n}], const double (*restrict J)[{n}], const double (*restrict p)[{n}], "
             f"const double *restrict m_row, const double (*restrict I_row)[{n}], long m, double dt, long n_steps")
     for d in fused:
         kind = tile_kind(d.flags)
-        body = kind in ("BODY", "BODY_F")
+        body = RHS_OF_KIND[kind].body_frame
         np_ = max(d.n_params, 1)
         rhs = f"LVU_RHS_{d.name.upper()}"
         c += [f"/* {d.name}: tile kind {kind}; the lane's effect sums start at zero, as the stage passes' do */",
               f"#define {rhs}(in, out) do {{ double f[3] = {{0.0, 0.0, 0.0}}, t[3] = {{0.0, 0.0, 0.0}}; "
-              f"{user_function(d, body)}(pl, in, in + LV_STATE_V_W, mass, I, f, t); {_RHS[kind]}; }} while (0)"]
+              f"{user_function(d, body)}(pl, in, in + LV_STATE_V_W, mass, I, f, t); "
+              f"LV_RHS_CALL_{kind}(in, mass, cf, f, t, out); }} while (0)"]
         macro = f"LVU_FUSED_{d.name.upper()}"
         lines = [f"#define {macro}(SUFFIX, ATTR, NORM, NORMALIZE)",
                  f"LV_EXPORT ATTR LVU_FLATTEN void lvu_fused_tile{n}_{d.name}_##NORM##_##SUFFIX({args})",

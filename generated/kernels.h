@@ -791,5 +791,20 @@ const char *lv_effect_name(int code);
    each class (TORQUE, FULL, FORCE, BODY, BODY_F). */
 #define LV_RHS_FLAGS_INDEX(flags) (((((flags) & LV_EFFECT_FORCE) != 0) << 0) | ((((flags) & LV_EFFECT_TORQUE_W) != 0) << 1) | ((((flags) & LV_EFFECT_TORQUE_B) != 0) << 2))
 #define LV_RHS_KINDS_BY_FLAGS(K) {K(FORCE), K(FORCE), K(TORQUE), K(FULL), K(BODY), K(BODY_F), K(TORQUE), K(FULL)}
+/* Each class's right-hand side after its effects' sums (derive/effect_fuse.py RHS_OF_KIND):
+   LV_RHS_CALL_<kind>(x, mass, cf, f, t, out) on the state x, the mass, the Euler coefficients cf, the sums f
+   (force, world; overwritten with a_w = F/m where the class divides) and t (torque), into out = d/dt x;
+   LV_RHS_BODY_FRAME_<kind>: 1 when t sums the effects' body-frame forms. LV_RHS_KINDS(X): X(kind) each. */
+#define LV_RHS_KINDS(X) X(TORQUE) X(FULL) X(FORCE) X(BODY) X(BODY_F)
+#define LV_RHS_BODY_FRAME_TORQUE 0
+#define LV_RHS_CALL_TORQUE(x, mass, cf, f, t, out) ((void)(mass), (void)(f), lv_rigid_body_rhs_torque_c(x, cf, t, out))
+#define LV_RHS_BODY_FRAME_FULL 0
+#define LV_RHS_CALL_FULL(x, mass, cf, f, t, out) (lv_rigid_body_rhs_c(x, mass, cf, f, t, out))
+#define LV_RHS_BODY_FRAME_FORCE 0
+#define LV_RHS_CALL_FORCE(x, mass, cf, f, t, out) ((void)(t), lv_linear_acceleration(mass, f, f), lv_rigid_body_rhs_force_c(x, cf, f, out))
+#define LV_RHS_BODY_FRAME_BODY 1
+#define LV_RHS_CALL_BODY(x, mass, cf, f, t, out) ((void)(mass), (void)(f), lv_rigid_body_rhs_body_c(x, cf, (const double[3]){0.0, 0.0, 0.0}, t, out))
+#define LV_RHS_BODY_FRAME_BODY_F 1
+#define LV_RHS_CALL_BODY_F(x, mass, cf, f, t, out) (lv_linear_acceleration(mass, f, f), lv_rigid_body_rhs_body_c(x, cf, f, t, out))
 
 #endif

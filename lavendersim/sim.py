@@ -122,6 +122,7 @@ from .bodies import BodyState
 from . import load_checks
 from .errors import DivergenceError, ValidityBoundWarning
 from .frames import public_rows
+from .generated import effects_meta as _META
 from .generated import layout as LY
 from .kernels import K
 from .scene import Scene, _Batch, _EffectList, _effect_rows, _name_index
@@ -416,10 +417,11 @@ class Trajectory:
 
 
 # The right-hand side a plain body with effects runs, per class (effects.rhs_classes; Sim.pipeline names it)
-_RHS_KERNEL = {effects_mod.RHS_FULL: "rigid_body_rhs (world torques)",
-               effects_mod.RHS_FORCE: "rigid_body_rhs_force (a force, no torque: a_w = F/m)",
-               effects_mod.RHS_BODY: "rigid_body_rhs_body (torques declared in the body frame)",
-               effects_mod.RHS_BODY_F: "rigid_body_rhs_body (a force; torques declared in the body frame)"}
+def _rhs_kernel(flags: int) -> str:
+    """The right-hand side a plain body runs whose effects' rhs_flags OR to `flags` (at least one effect), as the
+    pipeline names it: derive's rule, printed into effects_meta (RHS_BITS, RHS_KINDS_BY_FLAGS, RHS_KERNELS)."""
+    index = sum(1 << j for j, bit in enumerate(_META.RHS_BITS) if flags & bit)
+    return _META.RHS_KERNELS[_META.RHS_KINDS_BY_FLAGS[index]]
 
 
 class Sim:
@@ -1199,7 +1201,7 @@ class Sim:
             else:
                 terms = " + ".join(e.describe() for e in mine)
                 flags = np.bitwise_or.reduce([e.spec.rhs_flags for e in mine])
-                lines.append(f"{name}: {terms} -> {_RHS_KERNEL[int(effects_mod.rhs_classes(np.array([flags]))[0])]}")
+                lines.append(f"{name}: {terms} -> {_rhs_kernel(int(flags))}")
         if self._frames is not None:
             for i in self._frames.idx:
                 lines[1 + int(i)] += "; full inertia tensor: stepped in its principal frame (constant R_bp)"

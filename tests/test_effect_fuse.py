@@ -5,6 +5,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import pytest
+
 from lavendersim.derive import effect as E
 from lavendersim.derive import effect_fuse, effects
 from lavendersim.derive.effect import STATE, effect, param
@@ -127,3 +129,91 @@ def test_kernels_h_prints_the_rhs_class_table_and_step_c_reads_it():
     rule = eff[eff.index("def rhs_classes("):]
     rule = rule[:rule.index("\n\n\n")]
     assert "FLAG_" not in rule and "RHS_BITS" in rule
+
+
+def _printed_rhs(h: str) -> tuple[dict[str, str], dict[str, str], str]:
+    """kernels.h's LV_RHS_CALL_<kind> bodies, LV_RHS_BODY_FRAME_<kind> values and LV_RHS_KINDS list."""
+    import re
+
+    calls = dict(re.findall(r"#define LV_RHS_CALL_(\w+)\(x, mass, cf, f, t, out\) (.*)\n", h))
+    frames = dict(re.findall(r"#define LV_RHS_BODY_FRAME_(\w+) (\d)\n", h))
+    kinds = re.search(r"#define LV_RHS_KINDS\(X\) (.*)\n", h).group(1)
+    return calls, frames, kinds
+
+
+def test_each_kinds_right_hand_side_is_printed_once_and_the_backends_read_it():
+    """derive's RHS_OF_KIND is the one statement of what a kind runs after its sums: kernels.h prints it per kind
+    (LV_RHS_CALL_<kind>, LV_RHS_BODY_FRAME_<kind>), effects_meta its pipeline names; step.c's plain_rhs,
+    batch_simd.h's effect tiles and fused tiles, the user's fused tiles and Sim.pipeline name no kernel of it."""
+    from lavendersim.derive import effect_fuse_user
+    from lavendersim.generated import effects_meta
+
+    calls, frames, kinds = _printed_rhs((ROOT / "generated" / "kernels.h").read_text())
+    assert kinds == " ".join(f"X({k})" for k in effect_fuse.TILE_KINDS)
+    assert set(calls) == set(frames) == set(effect_fuse.TILE_KINDS) == set(effect_fuse.RHS_OF_KIND)
+    kernels = {f"lv_{r.kernel}(" for r in effect_fuse.RHS_OF_KIND.values()} | {"lv_linear_acceleration("}
+    for kind, r in effect_fuse.RHS_OF_KIND.items():
+        assert calls[kind] == effect_fuse.rhs_call_c(kind) and frames[kind] == str(int(r.body_frame)), kind
+        assert f"lv_{r.kernel}(" in calls[kind] and ("lv_linear_acceleration(mass, f, f)" in calls[kind]) == r.accel
+        assert effects_meta.RHS_KERNELS[kind] == r.pipeline
+    assert {k for k, r in effect_fuse.RHS_OF_KIND.items() if r.body_frame} == {"BODY", "BODY_F"}
+    assert effect_fuse.RHS_OF_KIND["BODY"].args[2] == "zero" and not effect_fuse.RHS_OF_KIND["BODY"].accel
+    simd = (ROOT / "lavendersim" / "csrc" / "batch_simd.h").read_text()
+    tiles = simd[simd.index("#define LV_TE_CASE(CODE)"):simd.index("#define LV_TF_DEFINE(")]
+    assert "LV_RHS_CALL_##KIND" in tiles and "LV_RHS_BODY_FRAME_##KIND" in tiles
+    assert not [k for k in kernels if k in tiles], "batch_simd.h's effect tiles name a right-hand side"
+    step = (ROOT / "lavendersim" / "csrc" / "step.c").read_text()
+    plain = step[step.index("static inline void plain_rhs("):]
+    plain = plain[:plain.index("\n}\n")]
+    assert "LV_RHS_CALL_##KIND" in plain and "LV_RHS_KINDS(" in plain
+    assert not [k for k in kernels if k in plain] and "LV_RHS_BODY" not in plain.replace("LV_RHS_BODY_FRAME_##", "")
+    c = param("c", (), "N·m·s", "drag")
+    decls = [effect("w_drag", "world drag", [c], torque_w=-c.symbol * STATE.omega_w),           # TORQUE
+             effect("b_drag", "body drag", [c], torque_b=-c.symbol * STATE.omega_b),            # BODY
+             effect("v_drag", "linear drag", [c], force_w=-c.symbol * STATE.v_w),               # FORCE
+             effect("vb_drag", "both", [c], force_w=-c.symbol * STATE.v_w, torque_b=-c.symbol * STATE.omega_b),
+             effect("vw_drag", "both", [c], force_w=-c.symbol * STATE.v_w, torque_w=-c.symbol * STATE.omega_w)]
+    fused = "\n".join(effect_fuse_user.c_fused_tiles(decls, lambda d, body: f"acc_{d.name}{'_b' * body}"))
+    for d in decls:
+        kind = effect_fuse.tile_kind(d.flags)
+        assert f"acc_{d.name}{'_b' * effect_fuse.RHS_OF_KIND[kind].body_frame}(pl," in fused
+        assert f"LV_RHS_CALL_{kind}(in, mass, cf, f, t, out)" in fused, d.name
+    assert sorted(effect_fuse.tile_kind(d.flags) for d in decls) == sorted(effect_fuse.TILE_KINDS)
+    assert not [k for k in kernels if k in fused]
+    sim = (ROOT / "lavendersim" / "sim.py").read_text()
+    assert "rigid_body_rhs_force" not in sim and "rigid_body_rhs_body" not in sim
+
+
+@pytest.mark.parametrize("integrator", ["rk4", "euler", "dopri5"])
+def test_both_backends_run_and_name_each_kinds_right_hand_side(integrator):
+    """A body of each kind, few (the scalar path's plain_rhs) and many (the effect tiles with rk4): C and NumPy
+    bitwise, and Sim.pipeline names RHS_KERNELS of each body's kind (derive's table) on both."""
+    import numpy as np
+
+    import lavendersim as lv
+    from lavendersim.generated import effects_meta
+
+    sets = {"TORQUE": [("applied_torque", {"torque_w": [1e-2, 0.0, -2e-2]}), ("angular_damping", {"c": 1e-2})],
+            "FULL": [("gravity", {}), ("applied_torque", {"torque_w": [0.0, 1e-2, 0.0]}), ("linear_damping", {"c": 0.1})],
+            "FORCE": [("linear_damping", {"c": 0.1})],
+            "BODY": [("angular_damping", {"c": 1e-2})],
+            "BODY_F": [("linear_damping", {"c": 0.1}), ("angular_damping", {"c": 1e-2})]}
+    rng = np.random.default_rng(7)
+    for per_kind in (1, 20):
+        s = lv.Scene()
+        for kind, effs in sets.items():
+            for j in range(per_kind):
+                name = f"{kind}{j}"
+                s.add_body(lv.Body.box(name, 1.5, (0.3, 0.5, 0.7), omega_b=rng.standard_normal(3),
+                                       v_w=rng.standard_normal(3)))
+                for e, p in effs:
+                    s.add_effect(e, body=name, **p)
+        runs = {}
+        for backend in ("c", "numpy"):
+            sim = lv.Sim(s, dt=1e-2, integrator=integrator, backend=backend)
+            for kind in sets:
+                line = next(ln for ln in sim.pipeline if ln.startswith(f"{kind}0:"))
+                assert line.endswith("-> " + effects_meta.RHS_KERNELS[kind]), (backend, line)
+            sim.run(50)
+            runs[backend] = np.array([sim.state(f"{k}{j}").x for k in sets for j in range(per_kind)])
+        np.testing.assert_array_equal(runs["c"], runs["numpy"])

@@ -169,17 +169,15 @@ typedef void (*lv_tile_fn)(double (*LV_RESTRICT T)[LV_TILE], const double (*LV_R
         default: fx->utile[e](b0, b1, in, ep, P[LV_TP_M], P + LV_TP_I, F, TAU); break;                   \
         }                                                                                               \
     }
-#define LV_TE_RHS_TORQUE (void)f, lv_rigid_body_rhs_torque_c(x, cf, t, k)
-#define LV_TE_RHS_FULL lv_rigid_body_rhs_c(x, P[LV_TP_M][b], cf, f, t, k)
-#define LV_TE_RHS_FORCE (void)t, lv_linear_acceleration(P[LV_TP_M][b], f, f), lv_rigid_body_rhs_force_c(x, cf, f, k)
-#define LV_TE_RHS_BODY (void)f, lv_rigid_body_rhs_body_c(x, cf, lv_te_zero3, t, k)
-#define LV_TE_RHS_BODY_F lv_linear_acceleration(P[LV_TP_M][b], f, f), lv_rigid_body_rhs_body_c(x, cf, f, t, k)
-#define LV_TE_APPLY_TORQUE LV_TE_CASE
-#define LV_TE_APPLY_FULL LV_TE_CASE
-#define LV_TE_APPLY_FORCE LV_TE_CASE
-#define LV_TE_APPLY_BODY LV_TE_CASE_B
-#define LV_TE_APPLY_BODY_F LV_TE_CASE_B
-static const double lv_te_zero3[3] = {0.0, 0.0, 0.0};
+/* A lane's right-hand side of kind KIND after its sums f, t (derive's rule, kernels.h's LV_RHS_CALL_<kind>), and the
+   case of a built-in effect in its sums: the body dispatch when the kind's torques are body-frame forms
+   (LV_RHS_BODY_FRAME_<kind>). */
+#define LV_TE_RHS(KIND) LV_RHS_CALL_##KIND(x, P[LV_TP_M][b], cf, f, t, k)
+#define LV_TE_APPLY(KIND) LV_TE_APPLY_FRAME(LV_RHS_BODY_FRAME_##KIND)
+#define LV_TE_APPLY_FRAME(BODY_FRAME) LV_TE_APPLY_FRAME_(BODY_FRAME)
+#define LV_TE_APPLY_FRAME_(BODY_FRAME) LV_TE_APPLY_FRAME_##BODY_FRAME
+#define LV_TE_APPLY_FRAME_0 LV_TE_CASE
+#define LV_TE_APPLY_FRAME_1 LV_TE_CASE_B
 /* Stage STAGE's right-hand side at its input IN and the RK4 combination: the next stage's input X and the weighted
    sum A, or (stage 4) the step's end in T. */
 #define LV_TE_STAGE(STAGE, IN, RHS, NORMALIZE)                                                          \
@@ -215,13 +213,13 @@ static const double lv_te_zero3[3] = {0.0, 0.0, 0.0};
             for (i = 0; i < 3; i++)                                                                     \
                 for (b = b0; b < b1; b++) F[i][b] = TAU[i][b] = 0.0;                                    \
             for (s = 0; s < n_steps; s++) {                                                             \
-                LV_TE_SUMS(T, LV_TE_APPLY_##KIND)                                                       \
-                LV_TE_STAGE(1, T, LV_TE_RHS_##KIND, NORMALIZE)                                          \
+                LV_TE_SUMS(T, LV_TE_APPLY(KIND))                                                        \
+                LV_TE_STAGE(1, T, LV_TE_RHS(KIND), NORMALIZE)                                           \
                 for (st = 2; st <= 4; st++) {                                                           \
-                    LV_TE_SUMS(X, LV_TE_APPLY_##KIND)                                                   \
-                    if (st == 2) { LV_TE_STAGE(2, X, LV_TE_RHS_##KIND, NORMALIZE) }                     \
-                    else if (st == 3) { LV_TE_STAGE(3, X, LV_TE_RHS_##KIND, NORMALIZE) }                \
-                    else { LV_TE_STAGE(4, X, LV_TE_RHS_##KIND, NORMALIZE) }                             \
+                    LV_TE_SUMS(X, LV_TE_APPLY(KIND))                                                    \
+                    if (st == 2) { LV_TE_STAGE(2, X, LV_TE_RHS(KIND), NORMALIZE) }                      \
+                    else if (st == 3) { LV_TE_STAGE(3, X, LV_TE_RHS(KIND), NORMALIZE) }                 \
+                    else { LV_TE_STAGE(4, X, LV_TE_RHS(KIND), NORMALIZE) }                              \
                 }                                                                                       \
             }                                                                                           \
         }                                                                                               \
@@ -252,16 +250,20 @@ static const double lv_te_zero3[3] = {0.0, 0.0, 0.0};
     double f[3] = {F0[0], F0[1], F0[2]}, t[3] = {T0[0], T0[1], T0[2]};                                  \
     (void)APPLY(C0, p0, in, in + LV_STATE_V_W, mass, I, f, t);                                          \
     if (C1 != 0) (void)APPLY(C1, p1, in, in + LV_STATE_V_W, mass, I, f, t)
-#define LV_TF_RHS_BODY_F(in, out) do { LV_TF_SUMS(lv_effect_apply_b, lv_c0, lv_c1, in);                 \
-    lv_linear_acceleration(mass, f, f); lv_rigid_body_rhs_body_c(in, cf, f, t, out); } while (0)
-#define LV_TF_RHS_BODY(in, out) do { LV_TF_SUMS(lv_effect_apply_b, lv_c0, lv_c1, in);                   \
-    (void)f; lv_rigid_body_rhs_body_c(in, cf, lv_te_zero3, t, out); } while (0)
-#define LV_TF_RHS_FORCE(in, out) do { LV_TF_SUMS(lv_effect_apply, lv_c0, lv_c1, in);                    \
-    (void)t; lv_linear_acceleration(mass, f, f); lv_rigid_body_rhs_force_c(in, cf, f, out); } while (0)
-#define LV_TF_RHS_TORQUE(in, out) do { LV_TF_SUMS(lv_effect_apply, lv_c0, lv_c1, in);                   \
-    (void)f; lv_rigid_body_rhs_torque_c(in, cf, t, out); } while (0)
-#define LV_TF_RHS_FULL(in, out) do { LV_TF_SUMS(lv_effect_apply, lv_c0, lv_c1, in);                     \
-    lv_rigid_body_rhs_c(in, mass, cf, f, t, out); } while (0)
+/* A stage's right-hand side of kind KIND at in (LV_TILE_RK4's RHS(in, out)): the pattern's sums through the kind's
+   dispatch (LV_RHS_BODY_FRAME_<kind>), then its right-hand side (kernels.h's LV_RHS_CALL_<kind>), as LV_TE_SUMS and
+   LV_TE_RHS do. */
+#define LV_TF_RHS(KIND, in, out) do { LV_TF_SUMS(LV_TF_APPLY(LV_RHS_BODY_FRAME_##KIND), lv_c0, lv_c1, in);      \
+    LV_RHS_CALL_##KIND(in, mass, cf, f, t, out); } while (0)
+#define LV_TF_APPLY(BODY_FRAME) LV_TF_APPLY_(BODY_FRAME)
+#define LV_TF_APPLY_(BODY_FRAME) LV_TF_APPLY_##BODY_FRAME
+#define LV_TF_APPLY_0 lv_effect_apply
+#define LV_TF_APPLY_1 lv_effect_apply_b
+#define LV_TF_RHS_TORQUE(in, out) LV_TF_RHS(TORQUE, in, out)
+#define LV_TF_RHS_FULL(in, out) LV_TF_RHS(FULL, in, out)
+#define LV_TF_RHS_FORCE(in, out) LV_TF_RHS(FORCE, in, out)
+#define LV_TF_RHS_BODY(in, out) LV_TF_RHS(BODY, in, out)
+#define LV_TF_RHS_BODY_F(in, out) LV_TF_RHS(BODY_F, in, out)
 /* The fused tile NAME_tf<ID> of the effect tile stepper NAME (kind KIND) for the pattern (ID, N, C0, C1). */
 #define LV_TF_DEFINE(NAME, ATTR, NORMALIZE, KIND, ID, N, C0, C1)                                        \
     ATTR LV_FLATTEN LV_NOINLINE static void NAME##_tf##ID(double (*LV_RESTRICT T)[LV_TILE],             \

@@ -217,25 +217,28 @@ static inline int rhs_class(long n_refs, int flags)
 }
 
 /* d/dt of one plain body with effects (refs) of class cls (rhs_class, no LV_RHS_CONSTANT), cf its Euler
-   coefficients: the effects' sums in table order, then its class's right-hand side (LV_RHS_TORQUE takes the full
-   kernel, bitwise rigid_body_rhs_torque_c). */
+   coefficients: the effects' sums in table order (their body-frame forms where the class says so), then its class's
+   right-hand side, both derive's rule (kernels.h's LV_RHS_BODY_FRAME_<kind>, LV_RHS_CALL_<kind>), as the tiles take
+   them. */
 static inline void plain_rhs(int cls, const double *x, double m, const double *I_b, const double *cf,
                              const lv_effect_ref *refs, long n_refs, double *xdot)
 {
-    double F[3] = {0.0, 0.0, 0.0}, tau[3] = {0.0, 0.0, 0.0}, a[3] = {0.0, 0.0, 0.0};
-    if (cls >= LV_RHS_BODY) {
-        effect_sums_b(x, x + LV_STATE_V_W, m, I_b, refs, n_refs, F, tau);
-        if (cls == LV_RHS_BODY_F) lv_linear_acceleration(m, F, a);
-        lv_rigid_body_rhs_body_c(x, cf, a, tau, xdot);
-        return;
+    double F[3] = {0.0, 0.0, 0.0}, tau[3] = {0.0, 0.0, 0.0};
+#define LV_PLAIN_RHS_OF(KIND)                                                                           \
+    if (LV_RHS_BODY_FRAME_##KIND)                                                                       \
+        effect_sums_b(x, x + LV_STATE_V_W, m, I_b, refs, n_refs, F, tau);                               \
+    else                                                                                                \
+        effect_sums(x, x + LV_STATE_V_W, m, I_b, refs, n_refs, F, tau);                                 \
+    LV_RHS_CALL_##KIND(x, m, cf, F, tau, xdot);                                                         \
+    return;
+#define LV_PLAIN_RHS_CASE(KIND) case LV_RHS_##KIND: { LV_PLAIN_RHS_OF(KIND) }
+    switch (cls) {
+    LV_RHS_KINDS(LV_PLAIN_RHS_CASE)
+    default: break;
     }
-    effect_sums(x, x + LV_STATE_V_W, m, I_b, refs, n_refs, F, tau);
-    if (cls == LV_RHS_FORCE) {
-        lv_linear_acceleration(m, F, a);
-        lv_rigid_body_rhs_force_c(x, cf, a, xdot);
-    } else {
-        lv_rigid_body_rhs_c(x, m, cf, F, tau, xdot);
-    }
+    LV_PLAIN_RHS_OF(FULL) /* (no other class has effects: rhs_class gives one of the kinds; the general one) */
+#undef LV_PLAIN_RHS_CASE
+#undef LV_PLAIN_RHS_OF
 }
 
 /* d/dt of one plain body's state: the free kernel when no effect applies, else plain_rhs by its class. */
