@@ -230,7 +230,7 @@ typedef void (*lv_tile_fn)(double (*LV_RESTRICT T)[LV_TILE], const double (*LV_R
    inlines to that effect alone inside the plain tile's lane loop (LV_TILE_RK4: each lane's whole step in registers,
    no stage passes). The effects before the pattern read no state: their sums start F and TAU (P's rows, summed per
    call in table order as effect_sums adds them: the same bits), then each stage adds the pattern's effects in table
-   order and takes the kind's right-hand side, as LV_TE_SUMS and LV_TE_RHS_* do, so results are bitwise the effect
+   order and takes the kind's right-hand side, as LV_TE_SUMS and LV_TE_RHS do, so results are bitwise the effect
    tiles' (and the scalar path's). Each kind's effect tile stepper NAME has one fused tile NAME_tf<id> per pattern of
    LV_EFFECT_FUSED_<kind>. */
 #if LV_EFFECT_FUSED_MAX != 2
