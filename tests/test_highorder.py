@@ -19,6 +19,8 @@ from lavendersim import oracle as R
 from lavendersim.generated import tableaux as T
 from lavendersim.kernels import K
 
+from loaded_body import loaded_errors
+
 HIGH = ("splitting4", "rk4_expmap")
 EPS = np.finfo(float).eps
 I_DIAG = (1.0, 2.0, 3.0)
@@ -121,40 +123,12 @@ def test_splitting4_beats_splitting_and_rk4_at_equal_dt():
     assert err["rk4_expmap"] < err["rk4"]
 
 
-def _loaded(integrator, dt, damping=None, backend="c", **kw):
-    effects = [("applied_torque", {"torque_w": [0.3, -0.1, 0.2]}), ("gravity", {"g_w": [0, 0, -9.81]})]
-    if damping is not None:
-        effects.append(("angular_damping", {"c": damping}))
-    bodies = [("b", (1.0, 2.0, 2.5), {"omega_b": W0, "v_w": (0.1, 0.0, 0.0)})]
-    scene = lv.Scene()
-    for name, I_b, k in bodies:
-        scene.add_body(lv.Body(name, 1.0, I_b, **k))
-    for name, params in effects:
-        scene.add_effect(name, **params)
-    return lv.Sim(scene, dt=dt, integrator=integrator, backend=backend, **kw)
-
-
-def _loaded_errors(integrator, damping, exps, backend):
-    T_end = 4.0
-    ref = _loaded("dopri5", 0.5, damping, backend, rtol=1e-13, atol=1e-13)
-    ref.run(8)
-    out = []
-    for k in exps:
-        dt = 2.0 ** -k
-        s = _loaded(integrator, dt, damping, backend)
-        s.run(int(round(T_end / dt)))
-        out.append(max(float(R.attitude_error(s.x[0, 3:7], ref.x[0, 3:7])),
-                       float(np.linalg.norm(s.x[0, 10:13] - ref.x[0, 10:13])),
-                       float(np.linalg.norm(s.x[0, 0:3] - ref.x[0, 0:3]))))
-    return out
-
-
 @pytest.mark.parametrize("integrator", HIGH)
 def test_fourth_order_with_attitude_dependent_loads(integrator):
     """A world-fixed torque (body torque depends on q) and gravity: still order 4 (splitting4's kicks are
     exact flows of position-only loads, so each splitting step stays symmetric)."""
     backend = _backends()[0]
-    e = _loaded_errors(integrator, None, range(3, 7), backend)
+    e = loaded_errors(integrator, None, range(3, 7), backend)
     r = _ratios(e)
     assert np.all((r > 14.0) & (r < 18.5)), (e, r)
 
@@ -162,7 +136,7 @@ def test_fourth_order_with_attitude_dependent_loads(integrator):
 def test_splitting4_with_strong_damping_is_third_order():
     """Documented limit: with a velocity-dependent effect each splitting kick is an explicit midpoint step,
     which is not symmetric, so the composition cancels the h³ error term only: order 3 (ratio 8)."""
-    e = _loaded_errors("splitting4", 1.5, range(3, 7), _backends()[0])
+    e = loaded_errors("splitting4", 1.5, range(3, 7), _backends()[0])
     r = _ratios(e)
     assert np.all((r > 7.0) & (r < 9.5)), (e, r)
 

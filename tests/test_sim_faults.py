@@ -226,13 +226,30 @@ def test_a_table_changed_behind_the_c_fast_paths_back_goes_to_the_python_path(ed
         assert sim.steps == steps
 
 
+def _steps_inside_c_as_a_fresh_advance(sim, integrator):
+    """sim.step() then sim.run(4), all inside C (the Stepper, 4 steps before), step its state, wheel rates and applied
+    torques bitwise as CBackend.advance does 5 steps from copies (a call that decides everything afresh). Returns that
+    call's state and models."""
+    from lavendersim.backends import Models, c_backend
+    m = sim._models
+    ref = Models(m.rows.copy(), m.Omega.copy(), m.command.copy(), m.applied.copy())
+    x = sim._x.copy()                                            # (the stepped rows: principal frames)
+    c_backend.CBackend().advance(x, sim._params.copy(), sim._effects.copy(), integrator, sim.normalize, sim.dt, 5, ref)
+    sim.step()
+    sim.run(4)
+    assert sim._fast.steps == 9                                   # all of them inside C
+    np.testing.assert_array_equal(sim._x, x)
+    np.testing.assert_array_equal(m.Omega, ref.Omega)
+    np.testing.assert_array_equal(m.applied, ref.applied)
+    return x, ref
+
+
 @pytest.mark.parametrize("n_joint", [1, 20])   # 20: the jointed wheel bodies step on a model tile (csrc/model_simd.h)
 def test_the_c_fast_path_steps_a_rewritten_model_row_as_a_fresh_call_does(n_joint):
     """The Stepper keeps its model rows' per-body decisions (the step kind, the wheel coefficients: csrc/step.h
     lv_model_cache) from call to call instead of making them per call. A row rewritten between calls
     (reinit_body moves a jointed body's pivot offset r_b, so its I_p and wheel coefficients change) is stepped inside C
     exactly as the backend's advance steps it, which decides everything afresh: bitwise."""
-    from lavendersim.backends import Models, c_backend
     sc = lv.Scene()
     for i in range(n_joint):
         sc.add_body(lv.Body.box(f"c{i}", 1.0, (0.15, 0.15, 0.15), p_w=(0.075, 0.0, 0.0), omega_b=(0.3, -0.2, 0.01 * i)))
@@ -254,16 +271,7 @@ def test_the_c_fast_path_steps_a_rewritten_model_row_as_a_fresh_call_does(n_join
     assert not np.array_equal(sim.model.rows[0, LY.MODEL_I_P], rows[0, LY.MODEL_I_P])   # a new row for body 0
     sim.set_wheel_command("c0", [-0.01, 0.0, 0.02])
     sim.check_written()
-    m = sim._models
-    ref = Models(m.rows.copy(), m.Omega.copy(), m.command.copy(), m.applied.copy())
-    x = sim._x.copy()                                            # (the stepped rows: principal frames)
-    c_backend.CBackend().advance(x, sim._params.copy(), sim._effects.copy(), "rk4", sim.normalize, sim.dt, 5, ref)
-    sim.step()
-    sim.run(4)
-    assert sim._fast.steps == 9                                   # all of them inside C
-    np.testing.assert_array_equal(sim._x, x)
-    np.testing.assert_array_equal(m.Omega, ref.Omega)
-    np.testing.assert_array_equal(m.applied, ref.applied)
+    _steps_inside_c_as_a_fresh_advance(sim, "rk4")
 
 
 @pytest.mark.parametrize("integrator", ["rk4", "euler"])
@@ -290,16 +298,7 @@ def test_the_c_fast_path_keeps_its_effect_index_and_reads_new_parameters_through
     start = (sim._x.copy(), sim._models.Omega.copy(), sim._models.applied.copy())
     sim.set_effect_params(pushes[0], torque_w=[0.0, 2e-2, 0.0])     # a plain body's load
     sim.set_effect_params(pushes[3], torque_w=[-3e-2, 0.0, 1e-2])   # a wheeled body's
-    m = sim._models
-    ref = Models(m.rows.copy(), m.Omega.copy(), m.command.copy(), m.applied.copy())
-    x = sim._x.copy()
-    c_backend.CBackend().advance(x, sim._params.copy(), sim._effects.copy(), integrator, sim.normalize, sim.dt, 5, ref)
-    sim.step()
-    sim.run(4)
-    assert sim._fast.steps == 9                                     # all of them inside C
-    np.testing.assert_array_equal(sim._x, x)
-    np.testing.assert_array_equal(m.Omega, ref.Omega)
-    np.testing.assert_array_equal(m.applied, ref.applied)
+    x, ref = _steps_inside_c_as_a_fresh_advance(sim, integrator)
     stale = Models(ref.rows, start[1].copy(), ref.command, start[2].copy())   # the loads as they were: other states
     c_backend.CBackend().advance(start[0], sim._params.copy(), table, integrator, sim.normalize, sim.dt, 5, stale)
     assert not np.array_equal(start[0], x)

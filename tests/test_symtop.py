@@ -18,6 +18,8 @@ from lavendersim.errors import ValidityBoundWarning
 from lavendersim.generated import tableaux as T
 from lavendersim.kernels import K
 
+from loaded_body import loaded_errors
+
 EPS = np.finfo(float).eps
 NAMES = ("symtop4", "symtop_bm6")
 I_DIAG = (1.0, 2.0, 3.0)
@@ -46,29 +48,6 @@ def _att_errors(I_b, w0, exps, backend, integrator="symtop4", T_end=10.0):
         s = _sim(dt, backend, [("b", I_b, {"omega_b": w0})], integrator=integrator)
         s.run(int(round(T_end / dt)))
         out.append(float(R.attitude_error(s.x[0, 3:7], ref.q[-1])))
-    return np.asarray(out)
-
-
-def _loaded(integrator, dt, damping=None, backend="c", **kw):
-    effects = [("applied_torque", {"torque_w": [0.3, -0.1, 0.2]}), ("gravity", {"g_w": [0, 0, -9.81]})]
-    if damping is not None:
-        effects.append(("angular_damping", {"c": damping}))
-    return _sim(dt, backend, [("b", (1.0, 2.0, 2.5), {"omega_b": W1, "v_w": (0.1, 0.0, 0.0)})], effects,
-                integrator=integrator, **kw)
-
-
-def _loaded_errors(integrator, damping, exps, backend):
-    T_end = 4.0
-    ref = _loaded("dopri5", 0.5, damping, backend, rtol=1e-13, atol=1e-13)
-    ref.run(8)
-    out = []
-    for k in exps:
-        dt = 2.0 ** -k
-        s = _loaded(integrator, dt, damping, backend)
-        s.run(int(round(T_end / dt)))
-        out.append(max(float(R.attitude_error(s.x[0, 3:7], ref.x[0, 3:7])),
-                       float(np.linalg.norm(s.x[0, 10:13] - ref.x[0, 10:13])),
-                       float(np.linalg.norm(s.x[0, 0:3] - ref.x[0, 0:3]))))
     return np.asarray(out)
 
 
@@ -131,14 +110,14 @@ def test_symtop4_more_accurate_than_splitting4_at_equal_dt():
 
 def test_symtop4_fourth_order_with_attitude_dependent_loads():
     """A world-fixed torque and gravity (loads of q and p only): each stage's kicks keep it symmetric: order 4."""
-    e = _loaded_errors("symtop4", None, range(3, 7), _backends()[0])
+    e = loaded_errors("symtop4", None, range(3, 7), _backends()[0])
     r = e[:-1] / e[1:]
     assert np.all((r > 14.0) & (r < 18.5)), (e, r)
 
 
 def test_symtop4_third_order_with_damping():
     """Documented limit (as splitting4): the midpoint kick of a velocity-dependent effect is not symmetric."""
-    e = _loaded_errors("symtop4", 1.5, range(3, 7), _backends()[0])
+    e = loaded_errors("symtop4", 1.5, range(3, 7), _backends()[0])
     r = e[:-1] / e[1:]
     assert np.all((r > 7.0) & (r < 9.5)), (e, r)
 
@@ -182,7 +161,7 @@ def test_symtop_bm6_far_more_accurate_than_symtop4_at_the_labs_coarsest_dt():
 
 def test_symtop_bm6_fourth_order_with_attitude_dependent_loads():
     """With effects the step is symtop4's kicked composition around this rotation: order 4 (documented)."""
-    e = _loaded_errors("symtop_bm6", None, range(3, 7), _backends()[0])
+    e = loaded_errors("symtop_bm6", None, range(3, 7), _backends()[0])
     r = e[:-1] / e[1:]
     assert np.all((r > 14.0) & (r < 18.5)), (e, r)
 
