@@ -25,8 +25,11 @@
 #define LV_MTILE 32
 #define LV_MKIND (LV_KIND_JOINT | LV_KIND_WHEELS)
 
+/* Every row is LV_MTILE doubles (256 bytes) and the first starts on a 64-byte boundary (LV_ALIGN_TILE, batch_simd.h: a
+   tile on the stack is otherwise 16-byte aligned, and at 16 or 48 bytes off a line every AVX-512 load or store of a
+   row straddles two cache lines). Layout only: the same operations on the same numbers. */
 typedef struct {
-    double Y[LV_XS_SIZE][LV_MTILE];  /* [x, Omega] at the start of the step */
+    LV_ALIGN_TILE double Y[LV_XS_SIZE][LV_MTILE];  /* [x, Omega] at the start of the step */
     double T[LV_XS_SIZE][LV_MTILE];  /* a stage's input */
     double A[LV_XS_SIZE][LV_MTILE];  /* the RK4 weighted sum of the stage derivatives so far */
     double V[3][LV_MTILE];           /* the joint's kinematic COM velocity at the stage input */
@@ -211,7 +214,7 @@ static long advance_model_soa(double *state, const double *params, const lv_mode
                               int *fail_j, double *last)
 {
     lv_mtile t;
-    double S[LV_XS_SIZE][LV_MTILE];
+    LV_ALIGN_TILE double S[LV_XS_SIZE][LV_MTILE];
     const long b0 = ids[0];
     const lv_effect_ref *refs = ix->refs + ix->start[b0];
     const long n_refs = ix->start[b0 + 1] - ix->start[b0];

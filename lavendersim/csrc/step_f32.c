@@ -2,6 +2,7 @@
    (fixed_loop.h) instantiated in single precision on the generated float kernels (generated/kernels_f32.c,
    compiled into this translation unit so they inline). Control flow only; see fixed_loop.h. */
 #include <math.h>
+#include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
 
