@@ -757,6 +757,12 @@ class Sim:
         with self._lock:
             self._ctr.rhs_evals = n
 
+    @property
+    def chunk_steps(self) -> int:
+        """Steps per backend call between checks (:func:`chunk_steps`): run(n) steps in chunks of this many, each
+        paying the backend call's setup and the checks at its end once. Read-only."""
+        return self._chunk
+
     def _make_stepper(self, cap: bool = True):
         """The C fast path of step() (lavendersim/csrc/fast_step.c), or None where it does not apply: not the C
         backend, a scene larger than FAST_STEP_WORK evaluations per step (an adaptive integrator counted

@@ -181,6 +181,9 @@ def test_quick_json_has_the_issue_30_ratios(quick):
         if "gravity_gradient" not in nm:   # the user effect is derived in the full run only
             for n in bench.effect_cost.SIZES_QUICK:
                 assert r[f"effect_cost[{nm}]_{n}_over_plain"] > 0
+    for row in d["effect_cost"]["sizes"].values():   # short calls of whole chunks (timing.py), as many per set
+        assert all(row["steps_per_call"][nm] % row["steps_per_chunk"][nm] == 0 for nm in row["ratios"])
+        assert len({row[nm]["rounds"] for nm in row["ratios"]}) == 1 and row["plain"]["rounds"] >= 2 * d["config"]["rounds"]
     for n in bench.SMALL_SIZES:
         assert r[f"small_scene_{n}_over_N_{max(bench.BATCH_SIZES_QUICK)}"] > 0
     assert any(nm.startswith("small scenes") for nm in names)

@@ -9,6 +9,9 @@ are ratios against references measured in the same run. Every timing is CPU time
 two-thread cases, whose point is the wall clock, are timed by it and say so). Repetitions are
 interleaved (round-robin over all cases of a section, R rounds), and each figure is the minimum
 over the rounds (the median is kept too); ratios are of minima, of peers measured in the same run.
+The effect-cost, dopri5 and SIMD-batch sections time many short calls of about equal length instead
+(timing.py: ~3 ms each, interleaved call by call, 20 per case per round; a disturbance on a shared host
+then spoils few samples and hits ours and the peer alike), minimum over all calls.
 
 Sections (one body: a solid box 2 kg, 0.8 x 0.4 x 0.2 m, asymmetric, omega_b0 = (1, 0.5, 0.2) rad/s,
 v0 = (0.1, 0, 0) m/s, dt = 1e-3 s, RK4, q normalized each step):
@@ -81,6 +84,7 @@ from . import envs as _envs
 from . import full_inertia as _inertia
 from . import numpy_section as _numpy_section
 from . import scenes as _scenes
+from . import timing as _timing
 
 SCHEMA = "lavendersim-bench/1"
 HERE = Path(__file__).resolve().parent
@@ -138,6 +142,7 @@ BATCH_SIZES_QUICK = (1, 4, 8, 10, 100, 1_000)
 SIMD_SIZES_FULL = (1_000, 10_000)
 SIMD_SIZES_QUICK = (1_000,)
 THREADS_MIN_N = 1_000  # the SIMD batch sizes that also time two threads
+SIMD_MIN_STEPS = 400   # steps per timed call at least: a batch call's setup (~30 ns per body: AoS <-> tiles) < 1.5 %
 MUJOCO_INTEGRATORS = ("RK4", "Euler", "implicitfast")
 
 EFFECT_SETS: tuple[tuple[str, list[tuple[str, dict[str, Any]]]], ...] = (
@@ -250,6 +255,11 @@ def _stats(seconds: list[float], units: int) -> dict:
     ns = [s / units * 1e9 for s in seconds]
     return {"ns_min": min(ns), "ns_median": statistics.median(ns), "units_per_call": units,
             "rounds": len(ns), "ns_samples": ns}
+
+
+def interleaved_calls(cases: dict, rounds: int, label: str = "") -> dict:
+    """timing.interleaved_calls (short calls of equal length, interleaved call by call) with the bench's progress."""
+    return _timing.interleaved_calls(cases, rounds, label, _progress)
 
 
 def interleaved(cases: dict, rounds: int, label: str = "") -> dict:
@@ -620,7 +630,9 @@ def _simd_kernel(ctx):
 
 def simd_batch(kernel, sizes, body_steps: int, rounds: int) -> dict:
     """The C batch loop (one CBackend.advance call, torque-free RK4, q normalized) at every instruction
-    set the CPU has, against the hand-written SoA loop compiled for each, interleaved; ns per body-step.
+    set the CPU has, against the hand-written SoA loop compiled for each; ns per body-step. Every case is timed in
+    timing.py's short calls interleaved call by call (~3 ms, at least SIMD_MIN_STEPS steps), the same for ours and the
+    peers; the two-thread pair by the wall clock in long calls (body_steps per call), interleaved round by round.
     Also checks that every level and every hand copy give bitwise the same states after 50 steps."""
     from ..backends.c_backend import ROW, CBackend, contract_available
     from ..backends.c_backend import _c as C
@@ -652,39 +664,37 @@ def simd_batch(kernel, sizes, body_steps: int, rounds: int) -> dict:
                 st = state0.copy()
                 _at_isa(C, -1, be, st, params, empty, 50, contract="fma")
                 fma_diff = float(np.max(np.abs(st - ref)))
-            steps = max(2, body_steps // n)
-            cases: dict[str, tuple[Any, ...]] = {}
+            cases: dict[str, tuple[Any, ...]] = {}   # fn(k): k steps (peak_fma: k iterations), timing.py's short calls
             for lvl, nm in info["levels"]:
                 st = state0.copy()
-                cases[f"lavendersim_{nm}"] = (lambda lvl=lvl, st=st: _at_isa(C, lvl, be, st, params, empty, steps),
-                                              steps * n)
+                cases[f"lavendersim_{nm}"] = (lambda k, lvl=lvl, st=st: _at_isa(C, lvl, be, st, params, empty, k), n)
             if fma_ours:
                 st = state0.copy()
-                cases["lavendersim_fma"] = (lambda st=st: _at_isa(C, -1, be, st, params, empty, steps, contract="fma"),
-                                            steps * n)
-            if n >= THREADS_MIN_N:   # one thread against two by the wall clock (CPU time would hide the speed-up)
-                st1 = state0.copy()
-                cases["lavendersim_1_thread_wall"] = (lambda st=st1: _at_isa(C, -1, be, st, params, empty, steps),
-                                                      steps * n, "wall")
-                st2 = state0.copy()
-                cases["lavendersim_2_threads"] = (lambda st=st2: _two_threads(C, be, st, params, empty, steps),
-                                                  steps * n, "wall")
+                cases["lavendersim_fma"] = (lambda k, st=st: _at_isa(C, -1, be, st, params, empty, k, contract="fma"), n)
             for nm in hand:
                 X = X0.copy()
-                cases[f"hand_soa_{nm}"] = (lambda nm=nm, X=X: kernel.advance_soa(nm, X, I, DT, steps), steps * n)
+                cases[f"hand_soa_{nm}"] = (lambda k, nm=nm, X=X: kernel.advance_soa(nm, X, I, DT, k), n)
             fma = {} if kernel is None else kernel.fma
             for nm in fma:
                 X = X0.copy()
-                cases[f"hand_fma_{nm}"] = (lambda nm=nm, X=X: kernel.advance_fma(nm, X, I, DT, steps), steps * n)
+                cases[f"hand_fma_{nm}"] = (lambda k, nm=nm, X=X: kernel.advance_fma(nm, X, I, DT, k), n)
             if kernel is not None and kernel.peak_fma is not None:   # ns per flop at the peak FMA rate
-                k_it = max(1_000, 2 * body_steps)
-                cases["peak_fma"] = (lambda k_it=k_it: kernel.peak_fma(k_it, 0.999999, 1e-7), 128 * k_it)
+                peak = kernel.peak_fma
+                cases["peak_fma"] = (lambda k, peak=peak: peak(k, 0.999999, 1e-7), 128)
             floor_isa = list(hand)[-1] if hand else None   # the widest hand copy
             if floor_isa is not None:
                 X = X0.copy()
-                cases["divider_floor"] = (lambda X=X: kernel.advance_soa(floor_isa, X, I, DT, steps, floor=True),
-                                          steps * n)
-            t = interleaved(cases, rounds, f"SIMD batch N = {n}")
+                cases["divider_floor"] = (lambda k, X=X: kernel.advance_soa(floor_isa, X, I, DT, k, floor=True), n)
+            t = _timing.interleaved_calls(cases, rounds, f"SIMD batch N = {n}", _progress, min_count=SIMD_MIN_STEPS)
+            steps = t[f"lavendersim_{info['best']}"]["count_per_call"]
+            if n >= THREADS_MIN_N:   # one thread against two by the wall clock (CPU time would hide the speed-up),
+                wsteps = max(2, body_steps // n)   # in long calls: a short one would time the threads' start
+                st1, st2 = state0.copy(), state0.copy()
+                t.update(interleaved({
+                    "lavendersim_1_thread_wall": (lambda st=st1: _at_isa(C, -1, be, st, params, empty, wsteps),
+                                                  wsteps * n, "wall"),
+                    "lavendersim_2_threads": (lambda st=st2: _two_threads(C, be, st, params, empty, wsteps),
+                                              wsteps * n, "wall")}, rounds, f"SIMD batch N = {n}, threads"))
             row = {"n_bodies": n, "steps": steps, "bitwise_identical": bitwise, "divider_floor_isa": floor_isa, **t}
             if fma_diff is not None:
                 row["fma_max_abs_diff_50_steps"] = fma_diff
@@ -856,11 +866,11 @@ def _sec_effects(ctx) -> None:
 
 def _sec_dopri5(ctx) -> None:
     try:
-        ctx["res"]["dopri5"] = _dopri5.dopri5_section(ctx["quick"], ctx["R"], interleaved, compile_c, single_sim,
+        ctx["res"]["dopri5"] = _dopri5.dopri5_section(ctx["quick"], ctx["R"], interleaved_calls, compile_c, single_sim,
                                                       initial_state(), inertia())
     except NoCompiler as exc:
         ctx["res"]["dopri5"] = {"unavailable": str(exc)}
-    ctx["res"]["dopri5"]["dense"] = _dopri5.dense_section(ctx["quick"], ctx["R"], interleaved, single_sim)
+    ctx["res"]["dopri5"]["dense"] = _dopri5.dense_section(ctx["quick"], ctx["R"], interleaved_calls, single_sim)
 
 
 def _sec_mujoco_agreement(ctx) -> None:
@@ -882,7 +892,7 @@ RUNNERS = {
     "simd": lambda ctx: extension_isa() is not None and ctx["res"].__setitem__("simd_batch", simd_batch(
         _simd_kernel(ctx), ctx["cfg"]["simd_sizes"], ctx["cfg"]["c_body_steps"], ctx["R"])),
     "effect_cost": lambda ctx: ctx["res"].__setitem__("effect_cost", _effect_cost.effect_cost_section(
-        ctx["quick"], ctx["R"], interleaved, ctx["cfg"]["c_body_steps"], _progress)),
+        ctx["quick"], ctx["R"], interleaved_calls, _progress)),
     "dopri5": _sec_dopri5,
     "numpy_peers": lambda ctx: ctx["res"].__setitem__("numpy_peers", _numpy_section.numpy_section(
         ctx["quick"], ctx["R"], interleaved, batch_sim, inertia(), ctx["cfg"]["numpy_body_steps"], _progress)),
@@ -935,6 +945,10 @@ def run(quick: bool = False, rounds: int | None = None, use_mujoco: bool = True,
                                      "q0": list(Q0), "omega_b0": list(OMEGA_B0), "v_w0": list(V_W0)},
                             "dt": DT, "integrator": "rk4", "normalize": True, "statistic": "min over rounds",
                             "clock": "CPU time of the process (time.process_time); two-thread cases: wall clock",
+                            "short_calls": {"sections": ["effect_cost", "dopri5", "simd"], "call_s": _timing.CALL_S,
+                                            "calls_per_round": _timing.CALLS_PER_ROUND,
+                                            "min_calls_per_round": _timing.MIN_CALLS_PER_ROUND,
+                                            "simd_min_steps": SIMD_MIN_STEPS},
                             "sections": only, **{k: (list(v) if isinstance(v, tuple) else v) for k, v in cfg.items()}},
                  "targets": TARGETS, "errors": [], "handwritten": {"available": False}}
     mj_ok, mj_why = mujoco_available() if use_mujoco else (False, "skipped (--no-mujoco)")

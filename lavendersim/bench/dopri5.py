@@ -3,8 +3,9 @@
 One torque-free body (the bench's box), rtol = 1e-6, atol = 1e-9, output interval DT_OUT, stepped by
 ``Sim.run(n)`` on the C backend and by the hand-written peer (handwritten_dopri5.c: the same algorithm and
 controller, only q and omega_b through the stages, compiled now with the extension's flags, called through
-ctypes), interleaved (CPU time, min over rounds). The figure is the cost per right-hand-side evaluation:
-time / ``sim.rhs_evals`` against time / the peer's count (target: LavenderSim <= 1.2x the peer). Before
+ctypes), interleaved call by call in short calls of equal length (timing.py; CPU time, min over the calls). The
+figure is the cost per right-hand-side evaluation: each call's time / its ``sim.rhs_evals`` against the same for
+the peer (target: LavenderSim <= 1.2x the peer). Before
 timing, both advance the same state by AGREE_STEPS output steps: their states and evaluation counts are
 recorded (the peer is right when they agree to ~1e-12 with equal counts).
 
@@ -59,42 +60,48 @@ def agreement(peer: HandDopri5, single_sim, x0: np.ndarray, I_b: np.ndarray, n_s
             "rhs_evals_lavendersim": int(sim.rhs_evals), "rhs_evals_hand": int(peer.nfev[0])}
 
 
-def dopri5_section(quick: bool, rounds: int, interleaved, compile_c, single_sim, x0, I_b) -> dict:
-    """Time Sim(dopri5).run against the peer; ns per output step and per right-hand-side evaluation."""
-    n = 200 if quick else 10_000
+def dopri5_section(quick: bool, rounds: int, interleaved_calls, compile_c, single_sim, x0, I_b) -> dict:
+    """Time Sim(dopri5).run against the peer in short calls of equal length interleaved call by call
+    (timing.interleaved_calls: output steps per call calibrated per side); ns per output step and per
+    right-hand-side evaluation, each the minimum over the calls."""
     peer = HandDopri5(compile_c)
-    out = {"dt": DT_OUT, "rtol": RTOL, "atol": ATOL, "steps": n, "compile_command": peer.command,
+    out = {"dt": DT_OUT, "rtol": RTOL, "atol": ATOL, "compile_command": peer.command,
            "agreement": agreement(peer, single_sim, x0, I_b)}
     sim = single_sim("c", "dopri5", dt=DT_OUT)
     x = x0.copy()
     sim.run(1)
     peer.h[0] = 0.0
     peer.advance(x, I_b, DT_OUT, 1)
-    evals: dict[str, list] = {"lavendersim": [], "hand": []}
 
-    def ours():
+    def ours(k: int) -> int:
         e0 = sim.rhs_evals
-        sim.run(n)
-        evals["lavendersim"].append(sim.rhs_evals - e0)
+        sim.run(k)
+        return int(sim.rhs_evals - e0)
 
-    def hand():
+    def hand(k: int) -> int:
         e0 = float(peer.nfev[0])
-        peer.advance(x, I_b, DT_OUT, n)
-        evals["hand"].append(float(peer.nfev[0]) - e0)
+        peer.advance(x, I_b, DT_OUT, k)
+        return int(float(peer.nfev[0]) - e0)
 
-    t = interleaved({"lavendersim": (ours, n), "hand": (hand, n)}, rounds, "dopri5")
-    for k in t:   # every round takes the same steps; the per-evaluation figure uses the timed calls' count
-        per = max(evals[k][-1], 1) / n
-        t[k]["rhs_per_step"] = per
-        t[k]["ns_per_rhs"] = t[k]["ns_min"] / per
+    t = interleaved_calls({"lavendersim": (ours, 1, "counted"), "hand": (hand, 1, "counted")}, rounds, "dopri5")
+    for k, v in t.items():   # the helper's figures are ns per RHS evaluation (fn returns the count)
+        steps = v["count_per_call"]
+        rhs = v.pop("units_samples")
+        per_rhs = v["ns_samples"]
+        per_step = [ns * u / steps for ns, u in zip(per_rhs, rhs)]
+        v.update(ns_per_rhs=min(per_rhs), ns_per_rhs_median=v["ns_median"], rhs_per_step=sum(rhs) / (steps * len(rhs)),
+                 ns_min=min(per_step), ns_median=float(np.median(per_step)), ns_samples=per_step,
+                 units_per_call=steps)
+    out["steps"] = t["lavendersim"]["count_per_call"]
     out.update(t)
     out["ratio_per_rhs"] = t["lavendersim"]["ns_per_rhs"] / t["hand"]["ns_per_rhs"]
     return out
 
 
-def dense_section(quick: bool, rounds: int, interleaved, single_sim) -> dict:
+def dense_section(quick: bool, rounds: int, interleaved_calls, single_sim) -> dict:
     """CPU time of T seconds of the body at an output interval DENSE_DT (one run of T / DENSE_DT steps) against one
-    output step of T, both continuing their trajectories each round; RHS evaluations of each timed call."""
+    output step of T, both continuing their trajectories; each call repeats its run as many times as ~2 ms take
+    (timing.interleaved_calls), interleaved call by call; RHS evaluations of one run."""
     T = DENSE_T_QUICK if quick else DENSE_T
     n = round(T / DENSE_DT)
     sims = {"dt = T": (single_sim("c", "dopri5", dt=T), 1), f"dt = {DENSE_DT}": (single_sim("c", "dopri5", dt=DENSE_DT), n)}
@@ -103,13 +110,14 @@ def dense_section(quick: bool, rounds: int, interleaved, single_sim) -> dict:
     def case(k):
         sim, m = sims[k]
 
-        def run():
-            e0 = sim.rhs_evals
-            sim.run(m)
-            evals[k] = sim.rhs_evals - e0
+        def run(reps: int) -> None:
+            for _ in range(reps):
+                e0 = sim.rhs_evals
+                sim.run(m)
+                evals[k] = sim.rhs_evals - e0
         return run
 
-    t = interleaved({k: (case(k), 1) for k in sims}, rounds, "dopri5 dense output")
+    t = interleaved_calls({k: (case(k), 1) for k in sims}, rounds, "dopri5 dense output")
     coarse, fine = t["dt = T"], t[f"dt = {DENSE_DT}"]
     return {"T": T, "dt": DENSE_DT, "coarse_s": coarse["ns_min"] * 1e-9, "fine_s": fine["ns_min"] * 1e-9,
             "rhs_coarse": evals["dt = T"], "rhs_fine": evals[f"dt = {DENSE_DT}"],

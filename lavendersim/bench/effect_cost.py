@@ -2,8 +2,9 @@
 
 At N = 1e3, 1e4, 1e5 bodies (quick: 1e3), one scene per effect set, built with one ``Scene.add_bodies`` and
 scene-wide ``add_effect`` calls, stepped by ``Sim.run`` on the C backend (RK4, dt = 1e-3 s), all sets of one
-N interleaved in the same rounds (CPU time, min over rounds). Each set's ns per body-step is divided by the
-plain scene's at the same N:
+N interleaved call by call in short calls of about equal length (timing.py: ~3 ms, or one chunk where a chunk
+takes longer; whole chunks of the Sim's steps between checks, calibrated per set; CPU time, min over all calls).
+Each set's ns per body-step is divided by the plain scene's at the same N:
 
 * gravity (target <= 1.3x), applied torque (<= 1.6x), linear + angular damping (<= 1.6x),
   gravity + damping (<= 1.8x), and one user effect, the guide's gravity gradient (docs/extending.md,
@@ -18,6 +19,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from .timing import CALL_S
 
 SIZES_FULL = (1_000, 10_000, 100_000)
 SIZES_QUICK = (1_000,)
@@ -66,13 +69,24 @@ def _scene(n: int, effects: list):
     return Sim(scene, dt=1e-3, integrator="rk4", backend="c")
 
 
-def effect_cost_section(quick: bool, rounds: int, interleaved, body_steps: int, progress=None) -> dict:
+def effect_cost_section(quick: bool, rounds: int, interleaved_calls, progress=None) -> dict:
     """Time every set of SETS at every N (see the module docstring).
+
+    Parameters
+    ----------
+    quick : bool
+        N = 1e3 only, no user effect.
+    rounds : int
+        Rounds of ``interleaved_calls`` (timing.py: CALLS_PER_ROUND short calls of each set per round).
+    interleaved_calls : callable
+        timing.interleaved_calls with the bench's progress bound.
 
     Returns
     -------
     dict
-        ``sizes``: N -> {set name -> stats (ns per body-step), ``ratios``: set name -> ns / plain ns};
+        ``sizes``: N -> {set name -> stats (ns per body-step), ``steps``: the plain scene's steps per call (whole
+        chunks), ``steps_per_call`` and ``steps_per_chunk``: set name -> steps per timed call, per chunk,
+        ``ratios``: set name -> ns / plain ns};
         ``user_effect``: None when measured, else why it was not.
     """
     sizes = SIZES_QUICK if quick else SIZES_FULL
@@ -91,11 +105,15 @@ def effect_cost_section(quick: bool, rounds: int, interleaved, body_steps: int, 
         if progress:
             progress(f"effect cost: N = {n}: building {len(sets)} scenes")
         sims = {nm: _scene(n, effs) for nm, effs in sets}
-        steps = max(2, body_steps // n)
-        t = interleaved({nm: (lambda s=s: s.run(steps), steps * n) for nm, s in sims.items()}, rounds,
-                        f"effect cost N = {n}")
+        # a call is k whole chunks (the Sim's steps between checks: each chunk pays its C setup and checks, ~30-60 ns
+        # per body, as a long run does; a call of part of a chunk would pay them over fewer steps)
+        cases = {nm: (lambda k, s=s: s.run(k * s.chunk_steps), n * s.chunk_steps) for nm, s in sims.items()}
+        t = interleaved_calls(cases, rounds, f"effect cost N = {n}")
         base = t["plain"]["ns_min"]
-        sizes_out[str(n)] = {"steps": steps, **t, "ratios": {nm: t[nm]["ns_min"] / base for nm in t}}
+        sizes_out[str(n)] = {"steps": t["plain"]["count_per_call"] * sims["plain"].chunk_steps, **t,
+                             "steps_per_call": {nm: t[nm]["count_per_call"] * sims[nm].chunk_steps for nm in t},
+                             "steps_per_chunk": {nm: sims[nm].chunk_steps for nm in t},
+                             "ratios": {nm: t[nm]["ns_min"] / base for nm in t}}
         del sims
     if tmp is not None:
         tmp.cleanup()
@@ -110,7 +128,8 @@ def standing_lines(res: dict, line, targets: dict) -> list[dict]:
         vals = {n: row["ratios"][nm] for n, row in ec["sizes"].items() if nm in row["ratios"]}
         worst = max(vals.values(), default=None)
         basis = (ec.get("user_effect") or "section not run or crashed") if worst is None else (
-            "ns per body-step / plain body's, Sim.run in C, same rounds; N = " + ", ".join(vals)
+            f"ns per body-step / plain body's, Sim.run in C, ~{CALL_S * 1e3:g} ms calls (whole chunks) interleaved "
+            "call by call, min; N = " + ", ".join(vals)
             + f"; flat in N: largest / smallest ratio {max(vals.values()) / min(vals.values()):.2f}")
         out.append(line(f"{nm} / plain body (worst of N)", worst, limit, "max", "x", basis))
     return out
