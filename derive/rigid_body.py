@@ -66,6 +66,7 @@ def kernels() -> list[Kernel]:
     I_b, F_w, tau_w, tau_b = vec("I_b", 3), vec("F_w", 3), vec("tau_w", 3), vec("tau_b", 3)
     omega_b, v_w, q, vec_w = vec("omega_b", 3), vec("v_w", 3), vec("q", 4), vec("v", 3)
     c_b = vec("c_b", EULER.size)
+    C_b, h_q = vec("C_b", 3), scalar("h_q")
     _check_euler(I_b, omega_b, tau_b)
     _check_rate_scale(q, omega_b)
     # c_b as named subexpressions of the kernels that take I_b: the same printed arithmetic as the *_c kernels
@@ -148,6 +149,21 @@ def kernels() -> list[Kernel]:
                          "(Sim(..., contract=\"fma\"), csrc/batch_simd.h) stage these two with the step QUAT_RATE_SCALE·dt "
                          "for q (the ½ of q̇ folded into it) and move p_W by one Euler step with v_W.",
                          "Not bitwise rigid_body_rhs_free_c's q rate times QUAT_RATE_SCALE (there ½ multiplies ω first)."]),
+        Kernel("rigid_body_increments_free_c", "A torque-free RK4 stage's scaled increments H = (s dt) (dq/dt, dω_B/dt)",
+               r"H_q = q \otimes [h_q \omega_B, 0],\ H_{\omega,x} = C_x \omega_y \omega_z\ \text{(cyclic)}",
+               [Arg("q", q, "orientation (x, y, z, w), R_WB (a stage's value: unit to rounding)", "unit_quaternion"),
+                Arg("omega_b", omega_b, "angular velocity, body frame, rad/s"),
+                Arg("C_b", C_b, "the gyroscopic coefficients times the stage scale, C_x = (s dt) k_x (cyclic; k_x of "
+                                "euler_coefficients, s of tableaux.h LV_RK4_SCALE), once per call, s"),
+                Arg("h_q", h_q, "q's scale (s dt) QUAT_RATE_SCALE, once per call, s")],
+               [Arg("H_q", qmul(q, pure(h_q * omega_b)), "(s dt) dq/dt, dimensionless"),
+                Arg("H_omega", euler_rhs_c(EULER.assemble(k=list(C_b), r=[0, 0, 0]), omega_b, sp.zeros(3, 1)),
+                    "(s dt) dω_B/dt, rad/s")],
+               g, notes=["The torque-free RK4 step of the default (bitwise) paths stages these increments of q and ω_b "
+                         "alone (tableaux.h LV_RK4_SCALED_UPDATE: the stage inputs and the step's end are then adds, "
+                         "and one multiply by the printed end factor); p_W moves by translation_drift with v_W (v_W' = 0, "
+                         "the weights sum to 1) and v_W is kept.",
+                         "The rate of q is scaled through ω_B (h_q ω_B first), as rigid_body_rhs_free_c scales it by ½."]),
         Kernel("linear_acceleration", "Acceleration of the COM under a world force", r"a_W = F_W / m",
                [Arg("m", m, "mass, kg", "positive"), Arg("F_w", F_w, "total force at the COM, world frame, N")],
                [Arg("a_w", F_w / m, "COM acceleration, world frame, m/s²")], g,

@@ -95,6 +95,40 @@ RK4_B_DEN = 6
 # The explicit Runge-Kutta integrators whose stage s is evaluated at x + c_s dt k_{s-1} (a subdiagonal tableau):
 # name -> (nodes c, weights b_num, divisor b_den). Their C update and step are printed from these (_c_explicit_rk).
 EXPLICIT_RK = {"euler": ((R(0),), (1,), 1), "rk4": (RK4_C, RK4_B_NUM, RK4_B_DEN)}
+# The explicit RKs whose torque-free step the default paths take in its scaled-increment form (scaled_program): C's
+# free-body paths (csrc/step.c lv_free_rk4_h, the SIMD tiles) and NumPy's (numpy_backend._free_rk4_h) print it.
+SCALED_RK = ("rk4",)
+
+
+def scaled_program(c, b_num, b_den) -> tuple:
+    """The scaled-increment form of a subdiagonal explicit RK (EXPLICIT_RK) on a torque-free body: (s, stages, end).
+
+    s is the common scale of the stage increments H_i = s dt k_i (the smallest nonzero node; a right-hand side
+    computes H_i at k_i's own cost by taking s dt into its constants: rigid_body_increments_free_c). Stage i
+    (1 .. n) is (w_i, m_i, shared): H_i enters the running sum acc = w_1 H_1 + w_2 H_2 + ... (left to right) with
+    w_i = b_num_i, and stage i+1's input is x + m_i H_i with m_i = c_{i+1} / s (None at the last stage); shared:
+    w_i = m_i (not 1), the multiple is formed once for both. The step ends at x + end acc, end = 1 / (b_den s)
+    (b_i dt k_i = end b_num_i H_i). A multiple 1 multiplies by nothing, 2 is H + H (exact, an add).
+    RK4: s = 1/2, stages (1, 1), (2, 1), (2, 2, shared), (1, -), end 1/3."""
+    s = min(x for x in c if x != 0)
+    n = len(c)
+    stages = tuple((R(b_num[i]), (c[i + 1] / s if i + 1 < n else None),
+                    i + 1 < n and R(b_num[i]) == c[i + 1] / s != 1) for i in range(n))
+    return s, stages, 1 / (R(b_den) * s)
+
+
+def _check_scaled(c, b_num, b_den) -> None:
+    """Proof that the scaled program's stage inputs and end are the tableau's (symbols x, k_1 .. k_n, dt)."""
+    s, stages, end = scaled_program(c, b_num, b_den)
+    x, dt = sp.symbols("x dt")
+    k = sp.symbols(f"k1:{len(c) + 1}")
+    H = [s * dt * ki for ki in k]
+    for i, (_, m, _) in enumerate(stages[:-1]):
+        if sp.expand(x + m * H[i] - (x + c[i + 1] * dt * k[i])) != 0:
+            raise RuntimeError(f"derive: the scaled program's stage {i + 2} input is not the tableau's")
+    acc = sum((w * Hi for (w, _, _), Hi in zip(stages, H)), sp.Integer(0))
+    if sp.expand(x + end * acc - (x + dt * sum(R(b, b_den) * ki for b, ki in zip(b_num, k)))) != 0:
+        raise RuntimeError("derive: the scaled program's end is not the tableau's step")
 
 
 def _stability_polynomial(A, b) -> sp.Expr:
@@ -548,6 +582,7 @@ def _check() -> None:
         raise RuntimeError("derive: Dormand–Prince nodes are not (0, 1/5, …, 1)")
     if sum(R(n, RK4_B_DEN) for n in RK4_B_NUM) != 1:
         raise RuntimeError("derive: RK4 weights do not sum to 1")
+    _check_scaled(RK4_C, RK4_B_NUM, RK4_B_DEN)
     if list(STRANG) != list(reversed(STRANG)):
         raise RuntimeError("derive: the Strang sequence is not symmetric")
     for axis in range(3):
@@ -667,6 +702,44 @@ def _c_explicit_rk(name: str, c, b_num, b_den) -> list[str]:
     return [upd, " \\\n".join(step) + " \\\n} while (0)"]
 
 
+def _c_scaled_rk(name: str, c, b_num, b_den) -> list[str]:
+    """LV_<NAME>_SCALE and LV_<NAME>_SCALED_UPDATE of a subdiagonal explicit RK in its scaled-increment form
+    (scaled_program), for C."""
+    N = name.upper()
+    s, stages, end = scaled_program(c, b_num, b_den)
+
+    def term(k, h="(H)"):
+        return h if k == 1 else f"({h} + {h})" if k == 2 else f"(REAL){_f(k)} * {h}"
+    cases = []
+    for i, (w, m, shared) in enumerate(stages[:-1], start=1):
+        if shared:
+            acc = "(acc) = (out)" if i == 1 else "(acc) = (acc) + (out)"
+            cases.append(f"(STAGE) == {i} ? ((out) = {term(w)}, {acc}, (out) = (x) + (out))")
+        else:
+            acc = f"(acc) = {term(w)}" if i == 1 else f"(acc) = (acc) + {term(w)}"
+            cases.append(f"(STAGE) == {i} ? ({acc}, (out) = (x) + {term(m)})")
+    w = stages[-1][0]
+    total = f"((acc) + {term(w)})" if len(stages) > 1 else term(w)
+    cases.append(f"((out) = (x) + {total}" + (f" * (REAL){_f(end)})" if end != 1 else ")"))
+    step = [f"#define LV_{N}_SCALED_STEP(REAL, RHS, FOR, AT, x, xn, H, acc, tmp) do {{"]
+    for i in range(1, len(stages) + 1):
+        step.append(f"    RHS({'x' if i == 1 else 'tmp'}, H); FOR((void)LV_{N}_SCALED_UPDATE(REAL, {i}, AT(x), AT(H), AT(acc), "
+                    f"AT({'xn' if i == len(stages) else 'tmp'})));")
+    return [f"#define LV_{N}_SCALE {_f(s)}",
+            f"#define LV_{N}_SCALED_UPDATE(REAL, STAGE, x, H, acc, out) \\\n    (" + " \\\n     : ".join(cases) + ")",
+            " \\\n".join(step) + " \\\n} while (0)"]
+
+
+def _py_scaled_rk() -> list[str]:
+    """SCALED_RK: name -> (s, ((w, m, shared), ...), end) of scaled_program, as tableaux.h prints it."""
+    def fl(v):
+        return None if v is None else float(_f(v))
+    out = {n: (fl(s), tuple((fl(w), fl(m), bool(sh)) for w, m, sh in st), fl(e))
+           for n, (s, st, e) in ((n, scaled_program(*t)) for n, t in EXPLICIT_RK.items() if n in SCALED_RK)}
+    return ["# the scaled-increment form of a torque-free step (derive/tableaux.py scaled_program): name -> (s, stages",
+            "# (w, m, shared), end); as tableaux.h's LV_<NAME>_SCALED_UPDATE", "SCALED_RK = " + repr(out)]
+
+
 def _num(x) -> str:
     """A float literal of an exact rational (_f) or algebraic number (_fa)."""
     return _f(x) if isinstance(sp.sympify(x), sp.Rational) else _fa(x)
@@ -710,6 +783,14 @@ def print_c() -> str:
             "   tmp are scratch vectors; xn may be x. Every path of csrc/ steps these integrators through them. */"]
     for name, (c, b_num, b_den) in EXPLICIT_RK.items():
         out += _c_explicit_rk(name, c, b_num, b_den)
+    out += ["", "/* The scaled-increment form of a torque-free step (derive/tableaux.py scaled_program): H_i = LV_<NAME>_SCALE",
+            "   dt k_i (rigid_body_increments_free_c); LV_<NAME>_SCALED_UPDATE(REAL, STAGE, x, H, acc, out) after stage",
+            "   STAGE's increment H: before the last, the running sum acc and the next stage's input out = x + m H (adds",
+            "   only); at the last, the step's end out = x + (acc + w H) * end. out may not be x (it holds a shared",
+            "   multiple first). LV_<NAME>_SCALED_STEP runs every stage as LV_<NAME>_STEP does, RHS(in, H) the increments",
+            "   (H, acc, tmp scratch; xn may be x). */"]
+    for name in SCALED_RK:
+        out += _c_scaled_rk(name, *EXPLICIT_RK[name])
     out += ["", "/* Dormand-Prince 5(4): A (row 6 = the 5th-order weights, FSAL) and E = b - b_hat */",
             "static const double LV_DP_A[7][6] = {"]
     for row in DP_A:
@@ -757,6 +838,7 @@ def print_python() -> str:
     out.append("# explicit RK integrators, stage s at x + c_s dt k_{s-1}: name -> (c, b_num, b_den), as tableaux.h prints them")
     fl = lambda v: tuple(float(_f(x)) for x in v)  # noqa: E731  (the doubles tableaux.h prints)
     out.append("EXPLICIT_RK = " + repr({n: (fl(c), fl(b), float(_f(d))) for n, (c, b, d) in EXPLICIT_RK.items()}))
+    out += _py_scaled_rk()
     out.append("# Strang splitting of the free rotation: (axis, fraction of h)")
     out.append("STRANG = (" + ", ".join(f"({a}, {_f(f)})" for a, f in STRANG) + ")")
     out.append("# the compositions: name -> (gamma, kicked program, free program), each program ((flow, fraction), ...)")

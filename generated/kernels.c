@@ -1186,6 +1186,29 @@ void lv_rigid_body_rates_free_c(const double *q, const double *omega_b, const do
     omega_dot_b[2] = c_b_2*omega_b_0*omega_b_1;
 }
 
+void lv_rigid_body_increments_free_c(const double *q, const double *omega_b, const double *C_b, double h_q, double *H_q, double *H_omega) {
+    const double q_0 = q[0];
+    const double q_1 = q[1];
+    const double q_2 = q[2];
+    const double q_3 = q[3];
+    const double omega_b_0 = omega_b[0];
+    const double omega_b_1 = omega_b[1];
+    const double omega_b_2 = omega_b[2];
+    const double C_b_0 = C_b[0];
+    const double C_b_1 = C_b[1];
+    const double C_b_2 = C_b[2];
+    const double t0 = h_q*omega_b_0;
+    const double t1 = h_q*omega_b_2;
+    const double t2 = h_q*omega_b_1;
+    H_q[0] = q_1*t1 - q_2*t2 + q_3*t0;
+    H_q[1] = -q_0*t1 + q_2*t0 + q_3*t2;
+    H_q[2] = q_0*t2 - q_1*t0 + q_3*t1;
+    H_q[3] = -q_0*t0 - q_1*t2 - q_2*t1;
+    H_omega[0] = C_b_0*omega_b_1*omega_b_2;
+    H_omega[1] = C_b_1*omega_b_0*omega_b_2;
+    H_omega[2] = C_b_2*omega_b_0*omega_b_1;
+}
+
 void lv_linear_acceleration(double m, const double *F_w, double *a_w) {
     const double F_w_0 = F_w[0];
     const double F_w_1 = F_w[1];
@@ -3677,6 +3700,7 @@ static void packed_rigid_body_rhs_free_c(const double *in, double *out) { lv_rig
 static void packed_rigid_body_rhs_torque_c(const double *in, double *out) { lv_rigid_body_rhs_torque_c(in + 0, in + 13, in + 19, out + 0); }
 static void packed_rigid_body_rhs_c(const double *in, double *out) { lv_rigid_body_rhs_c(in + 0, in[13], in + 14, in + 20, in + 23, out + 0); }
 static void packed_rigid_body_rates_free_c(const double *in, double *out) { lv_rigid_body_rates_free_c(in + 0, in + 4, in + 7, out + 0, out + 4); }
+static void packed_rigid_body_increments_free_c(const double *in, double *out) { lv_rigid_body_increments_free_c(in + 0, in + 4, in + 7, in[10], out + 0, out + 4); }
 static void packed_linear_acceleration(const double *in, double *out) { lv_linear_acceleration(in[0], in + 1, out + 0); }
 static void packed_rigid_body_rhs_force_c(const double *in, double *out) { lv_rigid_body_rhs_force_c(in + 0, in + 13, in + 19, out + 0); }
 static void packed_rigid_body_rhs_body_c(const double *in, double *out) { lv_rigid_body_rhs_body_c(in + 0, in + 13, in + 19, in + 22, out + 0); }
@@ -3772,6 +3796,7 @@ const lv_kernel_info lv_kernel_table[LV_KERNEL_COUNT] = {
     {"rigid_body_rhs_torque_c", 22, 13, packed_rigid_body_rhs_torque_c},
     {"rigid_body_rhs_c", 26, 13, packed_rigid_body_rhs_c},
     {"rigid_body_rates_free_c", 13, 7, packed_rigid_body_rates_free_c},
+    {"rigid_body_increments_free_c", 11, 7, packed_rigid_body_increments_free_c},
     {"linear_acceleration", 4, 3, packed_linear_acceleration},
     {"rigid_body_rhs_force_c", 22, 13, packed_rigid_body_rhs_force_c},
     {"rigid_body_rhs_body_c", 25, 13, packed_rigid_body_rhs_body_c},

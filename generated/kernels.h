@@ -11,7 +11,7 @@ typedef struct {
     void (*packed)(const double *in, double *out);
 } lv_kernel_info;
 
-#define LV_KERNEL_COUNT 93
+#define LV_KERNEL_COUNT 94
 extern const lv_kernel_info lv_kernel_table[LV_KERNEL_COUNT];
 
 /* particle_moments: One particle's mass moment and momentum (summed: m r_COM and p).
@@ -313,6 +313,15 @@ void lv_rigid_body_rhs_c(const double *x, double m, const double *c_b, const dou
      out g [4]: q ⊗ [ω_b, 0] = (dq/dt) / QUAT_RATE_SCALE, 1/s
      out omega_dot_b [3]: angular acceleration, body frame, rad/s² */
 void lv_rigid_body_rates_free_c(const double *q, const double *omega_b, const double *c_b, double *g, double *omega_dot_b);
+
+/* rigid_body_increments_free_c: A torque-free RK4 stage's scaled increments H = (s dt) (dq/dt, dω_B/dt).
+     in  q [4]: orientation (x, y, z, w), R_WB (a stage's value: unit to rounding)
+     in  omega_b [3]: angular velocity, body frame, rad/s
+     in  C_b [3]: the gyroscopic coefficients times the stage scale, C_x = (s dt) k_x (cyclic; k_x of euler_coefficients, s of tableaux.h LV_RK4_SCALE), once per call, s
+     in  h_q scalar: q's scale (s dt) QUAT_RATE_SCALE, once per call, s
+     out H_q [4]: (s dt) dq/dt, dimensionless
+     out H_omega [3]: (s dt) dω_B/dt, rad/s */
+void lv_rigid_body_increments_free_c(const double *q, const double *omega_b, const double *C_b, double h_q, double *H_q, double *H_omega);
 
 /* linear_acceleration: Acceleration of the COM under a world force.
      in  m scalar: mass, kg

@@ -1066,6 +1066,30 @@ def rigid_body_rates_free_c(q, omega_b, c_b):
     return casadi.vertcat(omega_b_0*q_3 - omega_b_1*q_2 + omega_b_2*q_1, omega_b_0*q_2 + omega_b_1*q_3 - omega_b_2*q_0, -omega_b_0*q_1 + omega_b_1*q_0 + omega_b_2*q_3, -omega_b_0*q_0 - omega_b_1*q_1 - omega_b_2*q_2), casadi.vertcat(c_b_0*omega_b_1*omega_b_2, c_b_1*omega_b_0*omega_b_2, c_b_2*omega_b_0*omega_b_1)
 
 
+def rigid_body_increments_free_c(q, omega_b, C_b, h_q):
+    """rigid_body_increments_free_c: A torque-free RK4 stage's scaled increments H = (s dt) (dq/dt, dω_B/dt).
+      in  q [4]: orientation (x, y, z, w), R_WB (a stage's value: unit to rounding)
+      in  omega_b [3]: angular velocity, body frame, rad/s
+      in  C_b [3]: the gyroscopic coefficients times the stage scale, C_x = (s dt) k_x (cyclic; k_x of euler_coefficients, s of tableaux.h LV_RK4_SCALE), once per call, s
+      in  h_q scalar: q's scale (s dt) QUAT_RATE_SCALE, once per call, s
+      out H_q [4]: (s dt) dq/dt, dimensionless
+      out H_omega [3]: (s dt) dω_B/dt, rad/s"""
+    q_0 = q[0]
+    q_1 = q[1]
+    q_2 = q[2]
+    q_3 = q[3]
+    omega_b_0 = omega_b[0]
+    omega_b_1 = omega_b[1]
+    omega_b_2 = omega_b[2]
+    C_b_0 = C_b[0]
+    C_b_1 = C_b[1]
+    C_b_2 = C_b[2]
+    t0 = h_q*omega_b_0
+    t1 = h_q*omega_b_2
+    t2 = h_q*omega_b_1
+    return casadi.vertcat(q_1*t1 - q_2*t2 + q_3*t0, -q_0*t1 + q_2*t0 + q_3*t2, q_0*t2 - q_1*t0 + q_3*t1, -q_0*t0 - q_1*t2 - q_2*t1), casadi.vertcat(C_b_0*omega_b_1*omega_b_2, C_b_1*omega_b_0*omega_b_2, C_b_2*omega_b_0*omega_b_1)
+
+
 def linear_acceleration(m, F_w):
     """linear_acceleration: Acceleration of the COM under a world force.
       in  m scalar: mass, kg

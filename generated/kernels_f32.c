@@ -1187,6 +1187,29 @@ void lvf_rigid_body_rates_free_c(const float *q, const float *omega_b, const flo
     omega_dot_b[2] = c_b_2*omega_b_0*omega_b_1;
 }
 
+void lvf_rigid_body_increments_free_c(const float *q, const float *omega_b, const float *C_b, float h_q, float *H_q, float *H_omega) {
+    const float q_0 = q[0];
+    const float q_1 = q[1];
+    const float q_2 = q[2];
+    const float q_3 = q[3];
+    const float omega_b_0 = omega_b[0];
+    const float omega_b_1 = omega_b[1];
+    const float omega_b_2 = omega_b[2];
+    const float C_b_0 = C_b[0];
+    const float C_b_1 = C_b[1];
+    const float C_b_2 = C_b[2];
+    const float t0 = h_q*omega_b_0;
+    const float t1 = h_q*omega_b_2;
+    const float t2 = h_q*omega_b_1;
+    H_q[0] = q_1*t1 - q_2*t2 + q_3*t0;
+    H_q[1] = -q_0*t1 + q_2*t0 + q_3*t2;
+    H_q[2] = q_0*t2 - q_1*t0 + q_3*t1;
+    H_q[3] = -q_0*t0 - q_1*t2 - q_2*t1;
+    H_omega[0] = C_b_0*omega_b_1*omega_b_2;
+    H_omega[1] = C_b_1*omega_b_0*omega_b_2;
+    H_omega[2] = C_b_2*omega_b_0*omega_b_1;
+}
+
 void lvf_linear_acceleration(float m, const float *F_w, float *a_w) {
     const float F_w_0 = F_w[0];
     const float F_w_1 = F_w[1];

@@ -97,6 +97,8 @@ void lvf_rigid_body_rhs_torque_c(const float *x, const float *c_b, const float *
 void lvf_rigid_body_rhs_c(const float *x, float m, const float *c_b, const float *F_w, const float *tau_w, float *x_dot);
 /* rigid_body_rates_free_c: The rates a torque-free RK4 step stages: q ⊗ [ω_B, 0] and ω̇_B, on c_b (float; see kernels.h) */
 void lvf_rigid_body_rates_free_c(const float *q, const float *omega_b, const float *c_b, float *g, float *omega_dot_b);
+/* rigid_body_increments_free_c: A torque-free RK4 stage's scaled increments H = (s dt) (dq/dt, dω_B/dt) (float; see kernels.h) */
+void lvf_rigid_body_increments_free_c(const float *q, const float *omega_b, const float *C_b, float h_q, float *H_q, float *H_omega);
 /* linear_acceleration: Acceleration of the COM under a world force (float; see kernels.h) */
 void lvf_linear_acceleration(float m, const float *F_w, float *a_w);
 /* rigid_body_rhs_force_c: State derivative under a force only (no torque), on c_b and the COM acceleration (float; see kernels.h) */

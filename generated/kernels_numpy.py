@@ -2163,6 +2163,62 @@ def rigid_body_rates_free_c(q, omega_b, c_b, *, out=None):
     return g_out, omega_dot_b_out
 
 
+def rigid_body_increments_free_c(q, omega_b, C_b, h_q, *, out=None):
+    """A torque-free RK4 stage's scaled increments H = (s dt) (dq/dt, dω_B/dt).
+
+    Generated kernel ``rigid_body_increments_free_c``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    q : array_like, shape (..., 4)
+        orientation (x, y, z, w), R_WB (a stage's value: unit to rounding)
+    omega_b : array_like, shape (..., 3)
+        angular velocity, body frame, rad/s
+    C_b : array_like, shape (..., 3)
+        the gyroscopic coefficients times the stage scale, C_x = (s dt) k_x (cyclic; k_x of euler_coefficients, s of tableaux.h LV_RK4_SCALE), once per call, s
+    h_q : array_like, shape (...)
+        q's scale (s dt) QUAT_RATE_SCALE, once per call, s
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
+
+    Returns
+    -------
+    H_q : ndarray, shape (..., 4)
+        (s dt) dq/dt, dimensionless
+    H_omega : ndarray, shape (..., 3)
+        (s dt) dω_B/dt, rad/s
+    """
+    q = numpy.asarray(q, dtype=numpy.float64)
+    omega_b = numpy.asarray(omega_b, dtype=numpy.float64)
+    C_b = numpy.asarray(C_b, dtype=numpy.float64)
+    h_q = numpy.asarray(h_q, dtype=numpy.float64)
+    if out is None or out[0] is None or out[1] is None:
+        batch = q.shape[:-1] if q.shape[:-1] == omega_b.shape[:-1] == C_b.shape[:-1] == h_q.shape else numpy.broadcast_shapes(q.shape[:-1], omega_b.shape[:-1], C_b.shape[:-1], h_q.shape)
+    q_0 = q[..., 0]
+    q_1 = q[..., 1]
+    q_2 = q[..., 2]
+    q_3 = q[..., 3]
+    omega_b_0 = omega_b[..., 0]
+    omega_b_1 = omega_b[..., 1]
+    omega_b_2 = omega_b[..., 2]
+    C_b_0 = C_b[..., 0]
+    C_b_1 = C_b[..., 1]
+    C_b_2 = C_b[..., 2]
+    t0 = h_q*omega_b_0
+    t1 = h_q*omega_b_2
+    t2 = h_q*omega_b_1
+    H_q_out = numpy.empty(batch + (4,)) if out is None or out[0] is None else out[0]
+    numpy.add(q_1 * t1 - q_2 * t2, q_3 * t0, out=H_q_out[..., 0])
+    numpy.add(q_2 * t0 - q_0 * t1, q_3 * t2, out=H_q_out[..., 1])
+    numpy.add(q_0 * t2 - q_1 * t0, q_3 * t1, out=H_q_out[..., 2])
+    numpy.subtract(-q_0 * t0 - q_1 * t2, q_2 * t1, out=H_q_out[..., 3])
+    H_omega_out = numpy.empty(batch + (3,)) if out is None or out[1] is None else out[1]
+    numpy.multiply(C_b_0 * omega_b_1, omega_b_2, out=H_omega_out[..., 0])
+    numpy.multiply(C_b_1 * omega_b_0, omega_b_2, out=H_omega_out[..., 1])
+    numpy.multiply(C_b_2 * omega_b_0, omega_b_1, out=H_omega_out[..., 2])
+    return H_q_out, H_omega_out
+
+
 def linear_acceleration(m, F_w, *, out=None):
     """Acceleration of the COM under a world force.
 
@@ -5464,6 +5520,7 @@ KERNELS = {
     'rigid_body_rhs_torque_c': (rigid_body_rhs_torque_c, [('x', (13,)), ('c_b', (6,)), ('tau_w', (3,))], [('x_dot', (13,))]),
     'rigid_body_rhs_c': (rigid_body_rhs_c, [('x', (13,)), ('m', ()), ('c_b', (6,)), ('F_w', (3,)), ('tau_w', (3,))], [('x_dot', (13,))]),
     'rigid_body_rates_free_c': (rigid_body_rates_free_c, [('q', (4,)), ('omega_b', (3,)), ('c_b', (6,))], [('g', (4,)), ('omega_dot_b', (3,))]),
+    'rigid_body_increments_free_c': (rigid_body_increments_free_c, [('q', (4,)), ('omega_b', (3,)), ('C_b', (3,)), ('h_q', ())], [('H_q', (4,)), ('H_omega', (3,))]),
     'linear_acceleration': (linear_acceleration, [('m', ()), ('F_w', (3,))], [('a_w', (3,))]),
     'rigid_body_rhs_force_c': (rigid_body_rhs_force_c, [('x', (13,)), ('c_b', (6,)), ('a_w', (3,))], [('x_dot', (13,))]),
     'rigid_body_rhs_body_c': (rigid_body_rhs_body_c, [('x', (13,)), ('c_b', (6,)), ('a_w', (3,)), ('tau_b', (3,))], [('x_dot', (13,))]),

@@ -643,6 +643,17 @@ def rigid_body_rates_free_c(q, omega_b, c_b):
     return (omega_b_0*q_3 - omega_b_1*q_2 + omega_b_2*q_1, omega_b_0*q_2 + omega_b_1*q_3 - omega_b_2*q_0, -omega_b_0*q_1 + omega_b_1*q_0 + omega_b_2*q_3, -omega_b_0*q_0 - omega_b_1*q_1 - omega_b_2*q_2), (c_b_0*omega_b_1*omega_b_2, c_b_1*omega_b_0*omega_b_2, c_b_2*omega_b_0*omega_b_1)
 
 
+def rigid_body_increments_free_c(q, omega_b, C_b, h_q):
+    """A torque-free RK4 stage's scaled increments H = (s dt) (dq/dt, dω_B/dt) (floats; see the module)."""
+    q_0, q_1, q_2, q_3 = q
+    omega_b_0, omega_b_1, omega_b_2 = omega_b
+    C_b_0, C_b_1, C_b_2 = C_b
+    t0 = h_q*omega_b_0
+    t1 = h_q*omega_b_2
+    t2 = h_q*omega_b_1
+    return (q_1*t1 - q_2*t2 + q_3*t0, -q_0*t1 + q_2*t0 + q_3*t2, q_0*t2 - q_1*t0 + q_3*t1, -q_0*t0 - q_1*t2 - q_2*t1), (C_b_0*omega_b_1*omega_b_2, C_b_1*omega_b_0*omega_b_2, C_b_2*omega_b_0*omega_b_1)
+
+
 def linear_acceleration(m, F_w):
     """Acceleration of the COM under a world force (floats; see the module)."""
     F_w_0, F_w_1, F_w_2 = F_w
@@ -1903,6 +1914,7 @@ READS = {
     'rigid_body_rhs_torque_c': {'x': (3, 4, 5, 6, 7, 8, 9, 10, 11, 12), 'c_b': (0, 1, 2, 3, 4, 5), 'tau_w': (0, 1, 2)},
     'rigid_body_rhs_c': {'x': (3, 4, 5, 6, 7, 8, 9, 10, 11, 12), 'c_b': (0, 1, 2, 3, 4, 5), 'F_w': (0, 1, 2), 'tau_w': (0, 1, 2)},
     'rigid_body_rates_free_c': {'q': (0, 1, 2, 3), 'omega_b': (0, 1, 2), 'c_b': (0, 1, 2)},
+    'rigid_body_increments_free_c': {'q': (0, 1, 2, 3), 'omega_b': (0, 1, 2), 'C_b': (0, 1, 2)},
     'linear_acceleration': {'F_w': (0, 1, 2)},
     'rigid_body_rhs_force_c': {'x': (3, 4, 5, 6, 7, 8, 9, 10, 11, 12), 'c_b': (0, 1, 2), 'a_w': (0, 1, 2)},
     'rigid_body_rhs_body_c': {'x': (3, 4, 5, 6, 7, 8, 9, 10, 11, 12), 'c_b': (0, 1, 2, 3, 4, 5), 'a_w': (0, 1, 2), 'tau_b': (0, 1, 2)},
@@ -1999,6 +2011,7 @@ ZEROS = {
     'rigid_body_rhs_torque_c': {'x_dot': (7, 8, 9)},
     'rigid_body_rhs_c': {'x_dot': ()},
     'rigid_body_rates_free_c': {'g': (), 'omega_dot_b': ()},
+    'rigid_body_increments_free_c': {'H_q': (), 'H_omega': ()},
     'linear_acceleration': {'a_w': ()},
     'rigid_body_rhs_force_c': {'x_dot': ()},
     'rigid_body_rhs_body_c': {'x_dot': ()},

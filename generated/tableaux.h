@@ -123,6 +123,25 @@ enum {
     RHS(tmp, k); FOR((void)LV_RK4_UPDATE(REAL, 4, dt, AT(x), AT(k), AT(acc), AT(xn))); \
 } while (0)
 
+/* The scaled-increment form of a torque-free step (derive/tableaux.py scaled_program): H_i = LV_<NAME>_SCALE
+   dt k_i (rigid_body_increments_free_c); LV_<NAME>_SCALED_UPDATE(REAL, STAGE, x, H, acc, out) after stage
+   STAGE's increment H: before the last, the running sum acc and the next stage's input out = x + m H (adds
+   only); at the last, the step's end out = x + (acc + w H) * end. out may not be x (it holds a shared
+   multiple first). LV_<NAME>_SCALED_STEP runs every stage as LV_<NAME>_STEP does, RHS(in, H) the increments
+   (H, acc, tmp scratch; xn may be x). */
+#define LV_RK4_SCALE 0.5
+#define LV_RK4_SCALED_UPDATE(REAL, STAGE, x, H, acc, out) \
+    ((STAGE) == 1 ? ((acc) = (H), (out) = (x) + (H)) \
+     : (STAGE) == 2 ? ((acc) = (acc) + ((H) + (H)), (out) = (x) + (H)) \
+     : (STAGE) == 3 ? ((out) = ((H) + (H)), (acc) = (acc) + (out), (out) = (x) + (out)) \
+     : ((out) = (x) + ((acc) + (H)) * (REAL)0.3333333333333333))
+#define LV_RK4_SCALED_STEP(REAL, RHS, FOR, AT, x, xn, H, acc, tmp) do { \
+    RHS(x, H); FOR((void)LV_RK4_SCALED_UPDATE(REAL, 1, AT(x), AT(H), AT(acc), AT(tmp))); \
+    RHS(tmp, H); FOR((void)LV_RK4_SCALED_UPDATE(REAL, 2, AT(x), AT(H), AT(acc), AT(tmp))); \
+    RHS(tmp, H); FOR((void)LV_RK4_SCALED_UPDATE(REAL, 3, AT(x), AT(H), AT(acc), AT(tmp))); \
+    RHS(tmp, H); FOR((void)LV_RK4_SCALED_UPDATE(REAL, 4, AT(x), AT(H), AT(acc), AT(xn))); \
+} while (0)
+
 /* Dormand-Prince 5(4): A (row 6 = the 5th-order weights, FSAL) and E = b - b_hat */
 static const double LV_DP_A[7][6] = {
     {0.0, 0.0, 0.0, 0.0, 0.0, 0.0},

@@ -92,6 +92,9 @@ RK4_C = (0.0, 0.5, 0.5, 1.0)
 RK4_B_NUM = (1.0, 2.0, 2.0, 1.0)
 # explicit RK integrators, stage s at x + c_s dt k_{s-1}: name -> (c, b_num, b_den), as tableaux.h prints them
 EXPLICIT_RK = {'euler': ((0.0,), (1.0,), 1.0), 'rk4': ((0.0, 0.5, 0.5, 1.0), (1.0, 2.0, 2.0, 1.0), 6.0)}
+# the scaled-increment form of a torque-free step (derive/tableaux.py scaled_program): name -> (s, stages
+# (w, m, shared), end); as tableaux.h's LV_<NAME>_SCALED_UPDATE
+SCALED_RK = {'rk4': (0.5, ((1.0, 1.0, False), (2.0, 1.0, False), (2.0, 2.0, True), (1.0, None, False)), 0.3333333333333333)}
 # Strang splitting of the free rotation: (axis, fraction of h)
 STRANG = ((0, 0.5), (1, 0.5), (2, 1.0), (1, 0.5), (0, 0.5))
 # the compositions: name -> (gamma, kicked program, free program), each program ((flow, fraction), ...)

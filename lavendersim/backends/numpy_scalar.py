@@ -25,8 +25,7 @@ from ..generated import layout as LY
 # step at N = 1; they cross near N = 30 (float / vectorized at N = 16: 0.58, 0.44; N = 32: 1.09, 0.85)
 SCALAR_MAX_BODIES = 24
 
-_Q = LY.STATE_Q
-_V = LY.STATE_V_W
+_P, _Q, _V, _W = LY.STATE_P_W, LY.STATE_Q, LY.STATE_V_W, LY.STATE_OMEGA_B
 
 
 class Fallback(Exception):
@@ -125,18 +124,58 @@ def _run_of(rk, normalize: bool):
     return run
 
 
-def advance(sb: ScalarBodies, state, rk, normalize: bool, dt: float, n_steps: int) -> None:
+def _term(k: float, H: float) -> float:
+    """k H as tableaux.h's LV_<NAME>_SCALED_UPDATE forms it (numpy_backend._h_term)."""
+    return H if k == 1.0 else H + H if k == 2.0 else H * k
+
+
+def _run_h(prog, x, n: int, h: float, c, normalize: bool):
+    """n torque-free steps of one body in the scaled-increment form prog (generated/tableaux.py SCALED_RK), in
+    floats: numpy_backend._free_rk4_h's operations in its order (C's lv_free_rk4_h)."""
+    s, stages, end = prog
+    sdt = s * h
+    C = tuple(ck * sdt for ck in c[LY.EULER_K])
+    hq = sdt * LY.QUAT_RATE_SCALE
+    for _ in range(n):
+        y = x[_Q] + x[_W]
+        Y, acc = y, [0.0] * len(y)
+        for i, (w, m, shared) in enumerate(stages):
+            Hq, Hw = KS.rigid_body_increments_free_c(Y[:4], Y[4:], C, hq)
+            H = Hq + Hw
+            nxt = []
+            for r in range(len(y)):
+                t = _term(w, H[r])
+                if i:
+                    t = acc[r] + t
+                if m is None:
+                    nxt.append(y[r] + (t * end if end != 1.0 else t))
+                elif shared:
+                    acc[r] = t
+                    nxt.append(y[r] + _term(w, H[r]))
+                else:
+                    acc[r] = t
+                    nxt.append(y[r] + _term(m, H[r]))
+            Y = tuple(nxt)
+        q = KS.quat_normalize(Y[:4]) if normalize else Y[:4]
+        x = tuple(KS.translation_drift(x[_P], x[_V], h)) + tuple(q) + tuple(x[_V]) + tuple(Y[4:])
+        if not math.isfinite(sum(x)):   # the sum first, as the vectorized check
+            raise Fallback
+    return x
+
+
+def advance(sb: ScalarBodies, state, rk, normalize: bool, dt: float, n_steps: int, scaled=None) -> None:
     """Step every body of state (n, 13) by n_steps of rk (an _ExplicitRK) of length dt, in floats; state is
-    written at the end, all bodies at once. Raises Fallback (state untouched) where the vectorized path must
-    decide."""
+    written at the end, all bodies at once; scaled: the scaled-increment form of rk (generated/tableaux.py
+    SCALED_RK) that torque-free bodies take, or None. Raises Fallback (state untouched) where the vectorized path
+    must decide."""
     run = _run_of(rk, normalize)
     out = []
     try:
         for x, (c, m, I, effects) in zip(state.tolist(), sb.bodies):
-            if effects:
-                out.append(run(x, n_steps, dt, _rhs, (c, m, I, effects)))
+            if scaled is not None and not effects[1]:   # torque-free (no effect of its own or scene-wide)
+                out.append(_run_h(scaled, tuple(x), n_steps, dt, c, normalize))
             else:
-                out.append(run(x, n_steps, dt, KS.rigid_body_rhs_free_c, (c,)))
+                out.append(run(x, n_steps, dt, _rhs, (c, m, I, effects)))
     except (ArithmeticError, ValueError) as e:
         raise Fallback from e
     state[...] = out

@@ -94,10 +94,15 @@ CFLAGS = ["-O3", "-std=c99", "-fno-math-errno", "-ffp-contract=off", "-fPIC", "-
 FMA_SOURCE = HERE / "handwritten_fma.c"
 FMA_VARIANTS = (("native", ["-march=native", "-ffp-contract=fast"]),
                 ("native_512", ["-march=native", "-ffp-contract=fast", "-mprefer-vector-width=512"]))
-# flops per body-step of lv_fma_rk4_free_soa normalizing with one sqrt and one division (an FMA counts 2; sqrt and
-# division 1 each). The peer now normalizes by the series of quat_renormalize_near_unit (224 flops, no divider work,
-# faster); the floor keeps the lower count, so it does not rise with the loop that beats it.
-FMA_FLOPS = 221
+# The fewest flops per body-step of any torque-free RK4 loop we know (an FMA counts 2; sqrt and division 1 each):
+# the scaled-increment form the default tiles print (csrc/step.c lv_free_rk4_h, session 23): per stage the
+# increments (dt/2) k of q and omega_b at k's own cost (21 multiplies, 8 adds: the dt/2 sits in the per-call
+# constants, 3 multiplies per body and call, not counted), the stage inputs and the end by 9 adds and 1 multiply per
+# number of (q, omega_b), q normalized (8 multiplies, 3 adds, one sqrt, one division), p += dt v (3 + 3):
+# 4 * 29 + 7 * 10 + 13 + 6 = 205 (102 multiplies, 101 adds). The hand FMA peer (lv_fma_rk4_free_soa) does 221
+# with a sqrt and a division (224 with its series); the floor keeps the lowest count, so it does not rise with
+# the loop that beats it.
+FMA_FLOPS = 205
 # the hand-written SoA peer, compiled once per instruction set (LV_ISA_* level -> name, extra flags)
 SOA_ISAS: tuple[tuple[int, str, list[str]], ...] = ((1, "sse2", []), (2, "avx2", ["-mavx2"]), (3, "avx512f", ["-mavx512f"]))
 

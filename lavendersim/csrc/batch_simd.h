@@ -86,11 +86,9 @@ typedef void (*lv_tile_fn)(double (*LV_RESTRICT T)[LV_TILE], const double (*LV_R
                            double dt, long n_steps);
 
 /* One lane's right-hand side, per kind (LV_RHS_*): in, out, cf (the Euler coefficients c_b of body b); P as above. */
-#define LV_TILE_RHS_FREE(in, out) lv_rigid_body_rhs_free_c(in, cf, out)
 #define LV_TILE_RHS_TORQUE(in, out) lv_rigid_body_rhs_torque_c(in, cf, tau, out)
 #define LV_TILE_RHS_FULL(in, out) lv_rigid_body_rhs_c(in, mass, cf, F, tau, out)
 #define LV_TILE_RHS_FORCE(in, out) lv_rigid_body_rhs_force_c(in, cf, a, out)
-#define LV_TILE_LOAD_FREE (void)P
 #define LV_TILE_LOAD_TORQUE                                                                             \
     const double tau[3] = {P[LV_TP_TAU][b], P[LV_TP_TAU + 1][b], P[LV_TP_TAU + 2][b]}
 #define LV_TILE_LOAD_FULL                                                                               \
@@ -125,6 +123,33 @@ typedef void (*lv_tile_fn)(double (*LV_RESTRICT T)[LV_TILE], const double (*LV_R
                 for (i = 0; i < LV_EULER_SIZE; i++) cf[i] = J[i][b];                                    \
                 LV_RK4_STEP(double, RHS, LV_TILE_FOR, LV_TILE_AT, dt, x, xn, k, acc, tmp);              \
                 if (NORMALIZE) lv_quat_normalize(xn + LV_STATE_Q, xn + LV_STATE_Q);                    \
+                for (i = 0; i < LV_STATE_SIZE; i++) T[i][b] = xn[i];                                    \
+            }                                                                                           \
+        }                                                                                               \
+    }
+
+/* The torque-free tile: each lane one body's lv_free_rk4_h (step.c: the scaled-increment RK4 step, bitwise the
+   scalar blocks'), its constants C (rows of LV_EULER_K_LEN) taken once per call. */
+#define LV_TILE_RK4_H(NORMALIZE)                                                                        \
+    {                                                                                                   \
+        LV_ALIGN_TILE double C[LV_EULER_K_LEN][LV_TILE];                                                \
+        double hq = 0.0;                                                                                \
+        long s, b;                                                                                      \
+        int i;                                                                                          \
+        (void)fx;                                                                                       \
+        (void)P;                                                                                        \
+        for (b = 0; b < m; b++) {                                                                       \
+            double cb[LV_EULER_SIZE], Cb[LV_EULER_K_LEN];                                               \
+            for (i = 0; i < LV_EULER_SIZE; i++) cb[i] = J[i][b];                                        \
+            hq = lv_free_rk4_scale(cb, dt, Cb);                                                         \
+            for (i = 0; i < LV_EULER_K_LEN; i++) C[i][b] = Cb[i];                                       \
+        }                                                                                               \
+        for (s = 0; s < n_steps; s++) {                                                                 \
+            for (b = 0; b < m; b++) {                                                                   \
+                double x[LV_STATE_SIZE], xn[LV_STATE_SIZE], Cb[LV_EULER_K_LEN];                         \
+                for (i = 0; i < LV_STATE_SIZE; i++) x[i] = T[i][b];                                     \
+                for (i = 0; i < LV_EULER_K_LEN; i++) Cb[i] = C[i][b];                                   \
+                lv_free_rk4_h(x, xn, Cb, hq, dt, NORMALIZE);                                            \
                 for (i = 0; i < LV_STATE_SIZE; i++) T[i][b] = xn[i];                                    \
             }                                                                                           \
         }                                                                                               \
@@ -283,6 +308,11 @@ typedef void (*lv_tile_fn)(double (*LV_RESTRICT T)[LV_TILE], const double (*LV_R
                                      const double (*LV_RESTRICT P)[LV_TILE], const lv_tile_fx *LV_RESTRICT fx, \
                                      long m, double dt, long n_steps)                                   \
     LV_TILE_RK4(NORMALIZE, LV_TILE_LOAD_##KIND, LV_TILE_RHS_##KIND)
+#define LV_DEFINE_TILE_H(NAME, ATTR, NORMALIZE)                                                         \
+    ATTR LV_FLATTEN static void NAME(double (*LV_RESTRICT T)[LV_TILE], const double (*LV_RESTRICT J)[LV_TILE], \
+                                     const double (*LV_RESTRICT P)[LV_TILE], const lv_tile_fx *LV_RESTRICT fx, \
+                                     long m, double dt, long n_steps)                                   \
+    LV_TILE_RK4_H(NORMALIZE)
 #define LV_DEFINE_TILE_FX(NAME, ATTR, NORMALIZE, KIND)                                                  \
     LV_EFFECT_FUSED_##KIND(LV_TF_DEFINE, NAME, ATTR, NORMALIZE, KIND)                                   \
     ATTR LV_FLATTEN static void NAME(double (*LV_RESTRICT T)[LV_TILE], const double (*LV_RESTRICT J)[LV_TILE], \
@@ -303,8 +333,8 @@ typedef void (*lv_tile_fn)(double (*LV_RESTRICT T)[LV_TILE], const double (*LV_R
 /* One instruction set's tile steppers: q normalized / not, times torque-free / constant torque /
    constant force and torque / effects reading the state, without / with a force. */
 #define LV_DEFINE_TILES(SUFFIX, ATTR)                                                                   \
-    LV_DEFINE_TILE(tile_rk4_norm_free_##SUFFIX, ATTR, 1, FREE)                                          \
-    LV_DEFINE_TILE(tile_rk4_raw_free_##SUFFIX, ATTR, 0, FREE)                                           \
+    LV_DEFINE_TILE_H(tile_rk4_norm_free_##SUFFIX, ATTR, 1)                                              \
+    LV_DEFINE_TILE_H(tile_rk4_raw_free_##SUFFIX, ATTR, 0)                                               \
     LV_DEFINE_TILE(tile_rk4_norm_torque_##SUFFIX, ATTR, 1, TORQUE)                                      \
     LV_DEFINE_TILE(tile_rk4_raw_torque_##SUFFIX, ATTR, 0, TORQUE)                                       \
     LV_DEFINE_TILE(tile_rk4_norm_full_##SUFFIX, ATTR, 1, FULL)                                          \
