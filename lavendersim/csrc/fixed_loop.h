@@ -196,6 +196,17 @@ static int LV_FN(tile_finite)(const LV_FN(tile) *t, long b)
     return 1;
 }
 
+/* Whether every body of tile t is finite: one pass over the rows (a lane loop that vectorizes, against 13 strided
+   reads and branches per body). */
+static int LV_FN(tile_all_finite)(const LV_FN(tile) *t)
+{
+    long b;
+    int k, bad = 0;
+    for (k = 0; k < LV_STATE_SIZE; k++)
+        for (b = 0; b < t->nt; b++) bad |= !isfinite(t->T[k][b]);
+    return !bad;
+}
+
 /* n_steps of a tile, checked per chunk of LV_FIXED_CHUNK steps; a chunk whose end state is non-finite is
    re-run step by step from its start (the same bits: a non-finite number never becomes finite again on these
    paths, new = old + something and normalization keeps a NaN) to find its first failing step. Returns -1, or
@@ -204,14 +215,12 @@ static long LV_FN(tile_run)(LV_FN(tile) *t, LV_FN(tile) *snap, LV_FN(tile_fn) fn
                             long *fail_b, LV_REAL *last)
 {
     long c, cm, r, b;
-    int ok, k;
+    int k;
     for (c = 0; c < n_steps; c += cm) {
         cm = n_steps - c < LV_FIXED_CHUNK ? n_steps - c : LV_FIXED_CHUNK;
         memcpy(snap->T, t->T, sizeof t->T);
         fn(t, dt, cm);
-        ok = 1;
-        for (b = 0; b < t->nt; b++) ok &= LV_FN(tile_finite)(t, b);
-        if (ok) continue;
+        if (LV_FN(tile_all_finite)(t)) continue;
         memcpy(t->T, snap->T, sizeof t->T); /* some body went non-finite in this chunk: redo it step by step */
         for (r = 0; r < cm; r++) {
             memcpy(snap->T, t->T, sizeof t->T);
@@ -226,6 +235,39 @@ static long LV_FN(tile_run)(LV_FN(tile) *t, LV_FN(tile) *snap, LV_FN(tile_fn) fn
         /* not reached: the non-finite end state of the chunk fails on the re-run */
     }
     return -1;
+}
+
+/* Tile t's bodies ids[0 .. t->nt-1] (of kind `kind`, LV_FIXED_*) from the arrays: states, masses, moments, effects,
+   for LV_FIXED_TORQUE / LV_FIXED_FORCE their constant effect sums (in table order), and their Euler coefficients (the
+   generated euler_coefficients, once per call) in a lane loop of their own, where the divisions vectorize. */
+static void LV_FN(tile_fill)(LV_FN(tile) *LV_RESTRICT t, const long *ids, int kind, const LV_REAL *state,
+                             const LV_REAL *params, const LV_FN(ref) *refs, const long *start)
+{
+    long b, e;
+    int i;
+    for (b = 0; b < t->nt; b++) {
+        const LV_REAL *x = state + ids[b] * LV_STATE_SIZE, *prm = params + ids[b] * LV_PARAM_SIZE;
+        LV_REAL F[3] = {0, 0, 0}, tau[3] = {0, 0, 0};
+        for (i = 0; i < LV_STATE_SIZE; i++) t->T[i][b] = x[i];
+        for (i = 0; i < 3; i++) t->I[i][b] = prm[LV_PARAM_I_B + i];
+        t->M[b] = prm[LV_PARAM_M];
+        t->refs[b] = refs + start[ids[b]];
+        t->nref[b] = start[ids[b] + 1] - start[ids[b]];
+        if (kind == LV_FIXED_TORQUE || kind == LV_FIXED_FORCE) /* the constant sums, in table order */
+            for (e = start[ids[b]]; e < start[ids[b] + 1]; e++)
+                (void)LV_EFFECT_APPLY(refs[e].code, refs[e].p, x, x + LV_STATE_V_W, prm[LV_PARAM_M], prm + LV_PARAM_I_B,
+                                      F, tau);
+        for (i = 0; i < 3; i++) {
+            t->P[i][b] = F[i];
+            t->P[3 + i][b] = tau[i];
+        }
+    }
+    for (b = 0; b < t->nt; b++) {
+        const LV_REAL I[3] = {t->I[0][b], t->I[1][b], t->I[2][b]};
+        LV_REAL cf[LV_EULER_SIZE];
+        LV_K(euler_coefficients)(I, cf);
+        for (i = 0; i < LV_EULER_SIZE; i++) t->C[i][b] = cf[i];
+    }
 }
 
 /* The contract of lv_simulate (step.h) for plain bodies, an integrator with a fixed-step path (tableaux.h
@@ -302,27 +344,7 @@ static int LV_FN(simulate)(LV_REAL *state, const LV_REAL *params, long nb, const
         for (k = 0; k < j; k += t->nt) {
             long lim;
             t->nt = j - k < LV_FIXED_TILE ? j - k : LV_FIXED_TILE;
-            for (b = 0; b < t->nt; b++) {
-                const long id = ids[k + b];
-                const LV_REAL *prm = params + id * LV_PARAM_SIZE;
-                LV_REAL x[LV_STATE_SIZE], cf[LV_EULER_SIZE], F[3] = {0, 0, 0}, tau[3] = {0, 0, 0};
-                int i;
-                for (i = 0; i < LV_STATE_SIZE; i++) t->T[i][b] = x[i] = state[id * LV_STATE_SIZE + i];
-                LV_K(euler_coefficients)(prm + LV_PARAM_I_B, cf);
-                for (i = 0; i < LV_EULER_SIZE; i++) t->C[i][b] = cf[i];
-                for (i = 0; i < 3; i++) t->I[i][b] = prm[LV_PARAM_I_B + i];
-                t->M[b] = prm[LV_PARAM_M];
-                t->refs[b] = refs + start[id];
-                t->nref[b] = start[id + 1] - start[id];
-                if (kind == LV_FIXED_TORQUE || kind == LV_FIXED_FORCE) /* the constant sums, in table order */
-                    for (e = start[id]; e < start[id + 1]; e++)
-                        (void)LV_EFFECT_APPLY(refs[e].code, refs[e].p, x, x + LV_STATE_V_W, prm[LV_PARAM_M],
-                                              prm + LV_PARAM_I_B, F, tau);
-                for (i = 0; i < 3; i++) {
-                    t->P[i][b] = F[i];
-                    t->P[3 + i][b] = tau[i];
-                }
-            }
+            LV_FN(tile_fill)(t, ids + k, kind, state, params, refs, start);
             lim = (best >= 0 && ids[k] < best && limit < n_steps) ? limit + 1 : limit;
             s = lim > 0 ? LV_FN(tile_run)(t, snap, fn, dt, lim, &fb, last) : -2;
             if (s == -2) continue;
