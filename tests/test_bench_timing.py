@@ -41,14 +41,14 @@ def clock(monkeypatch):
 
 
 def test_calibrate_reaches_the_call_length_and_respects_the_least_count(clock):
-    k, t = timing.calibrate(clock.case("a", 1e-8), clock, 3e-3)
-    assert k == 300_000 and t == pytest.approx(3e-3)
-    k, t = timing.calibrate(clock.case("b", 1e-2), clock, 3e-3)   # one count takes longer than a call: k = 1
-    assert k == 1 and t == pytest.approx(1e-2)
-    k, t = timing.calibrate(clock.case("c", 1e-6), clock, 3e-3, min_count=400)
+    k, t, last = timing.calibrate(clock.case("a", 1e-8), clock, 3e-3)
+    assert k == 300_000 and t == pytest.approx(3e-3) and last != k
+    k, t, last = timing.calibrate(clock.case("b", 1e-2), clock, 3e-3)   # one count takes longer than a call: k = 1
+    assert k == 1 and t == pytest.approx(1e-2) and last == 1
+    k, t, last = timing.calibrate(clock.case("c", 1e-6), clock, 3e-3, min_count=400)
     assert k == 3000
-    k, t = timing.calibrate(clock.case("d", 1e-4), clock, 3e-3, min_count=400)   # 30 would do; at least 400
-    assert k == 400 and t == pytest.approx(4e-2)
+    k, t, last = timing.calibrate(clock.case("d", 1e-4), clock, 3e-3, min_count=400)   # 30 would do; at least 400
+    assert k == 400 and t == pytest.approx(4e-2) and last == 400
 
 
 def test_cases_alternate_call_by_call_with_equal_lengths_and_the_min_per_case(clock):
@@ -68,6 +68,16 @@ def test_cases_alternate_call_by_call_with_equal_lengths_and_the_min_per_case(cl
     assert max(t["ours"]["ns_samples"]) == pytest.approx(2 * t["ours"]["ns_min"])
     assert t["ours"]["clock"] == "cpu" and t["ours"]["units_per_call"] == 600 * 1000
     assert "units_samples" not in t["ours"]
+
+
+def test_a_case_is_warmed_at_its_timed_length_once(clock):
+    """Calibration's last call warms a case whose count it already had (a long call is not repeated for nothing);
+    otherwise one warm call at the timed count precedes the timed ones."""
+    cases = {"long": (clock.case("long", 1e-2), 1), "short": (clock.case("short", 1e-6), 1)}
+    t = timing.interleaved_calls(cases, rounds=1, call_s=3e-3, per_round=2)
+    assert [k for nm, k in clock.log if nm == "long"] == [1, 1] + [1] * t["long"]["rounds"]   # warm-up, calibration
+    short = [k for nm, k in clock.log if nm == "short"]
+    assert short[-t["short"]["rounds"] - 1:] == [3000] * (t["short"]["rounds"] + 1)   # one warm call, then timed
 
 
 def test_long_calls_get_fewer_calls_per_round_but_the_same_for_every_case(clock):

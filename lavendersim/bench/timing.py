@@ -31,8 +31,9 @@ _CAL_MAX_COUNT = 1 << 40
 
 
 def calibrate(fn: Callable[[int], Any], clock: Callable[[], float] = time.process_time, call_s: float = CALL_S,
-              min_count: int = 1) -> tuple[int, float]:
-    """The count k (>= min_count) for which one call fn(k) takes about call_s seconds, and that call's length.
+              min_count: int = 1) -> tuple[int, float, int]:
+    """The count k (>= min_count) for which one call fn(k) takes about call_s seconds, that call's length, and the
+    count of the last call calibration made (k itself when the last call was already at the timed length).
 
     fn(min_count) runs once to warm up; then k grows (at most 64-fold per try, guided by the last reading) until one
     call takes at least a quarter of call_s, and is scaled to call_s from that reading (never below min_count)."""
@@ -42,12 +43,15 @@ def calibrate(fn: Callable[[int], Any], clock: Callable[[], float] = time.proces
         t0 = clock()
         fn(k)
         t = clock() - t0
-        if t >= call_s / 4 or k >= _CAL_MAX_COUNT:
+        if t <= 0 and k < _CAL_MAX_COUNT:
+            k = min(_CAL_MAX_COUNT, k * 64)
+        elif t >= call_s / 4 or k >= _CAL_MAX_COUNT:
             if t <= 0:
-                return k, t
+                return k, t, k
             kk = max(min_count, min(_CAL_MAX_COUNT, round(k * call_s / t)))
-            return kk, t * kk / k
-        k = min(_CAL_MAX_COUNT, k * 64 if t <= 0 else max(2 * k, min(64 * k, math.ceil(k * call_s / t))))
+            return kk, t * kk / k, k
+        else:
+            k = min(_CAL_MAX_COUNT, max(2 * k, min(64 * k, math.ceil(k * call_s / t))))
 
 
 def stats(ns: list[float], **extra) -> dict:
@@ -88,11 +92,12 @@ def interleaved_calls(cases: dict, rounds: int, label: str = "", progress: Calla
     """
     clocks = {nm: time.perf_counter if c[2:] == ("wall",) else time.process_time for nm, c in cases.items()}
     cal = {nm: calibrate(c[0], clocks[nm], call_s, min_count) for nm, c in cases.items()}
-    counts = {nm: k for nm, (k, _) in cal.items()}
-    one_pass = sum(t for _, t in cal.values())   # a round's budget: per_round calls of call_s per case
+    counts = {nm: k for nm, (k, _, _) in cal.items()}
+    one_pass = sum(t for _, t, _ in cal.values())   # a round's budget: per_round calls of call_s per case
     per_round = max(MIN_CALLS_PER_ROUND, min(per_round, round(per_round * call_s * len(cases) / max(one_pass, 1e-9))))
-    for nm, (fn, *_) in cases.items():   # one warm call at the timed length
-        fn(counts[nm])
+    for nm, (fn, *_) in cases.items():   # one warm call at the timed length (calibration's last call was not)
+        if cal[nm][2] != counts[nm]:
+            fn(counts[nm])
     names = list(cases)
     ns: dict[str, list[float]] = {nm: [] for nm in names}
     units: dict[str, list[float]] = {nm: [] for nm in names}
