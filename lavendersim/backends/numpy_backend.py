@@ -945,44 +945,52 @@ def _stepper_of(name: str):
 _STEPPERS = {name: _stepper_of(name) for name in T.INTEGRATOR_CODES}
 
 
-def _h_term(k: float, H):
-    """k H as tableaux.h's LV_<NAME>_SCALED_UPDATE forms it: 1 multiplies by nothing, 2 is H + H."""
-    return H if k == 1.0 else H + H if k == 2.0 else H * k
+def _h_term(k: float, H, out):
+    """k H as tableaux.h's LV_<NAME>_SCALED_UPDATE forms it (1 multiplies by nothing, 2 is H + H), into out unless
+    k = 1."""
+    return H if k == 1.0 else np.add(H, H, out=out) if k == 2.0 else np.multiply(H, k, out=out)
 
 
-def _free_rk4_h(K, prog, x: np.ndarray, c: np.ndarray, dt: float) -> np.ndarray:
+def _free_rk4_h(plan, prog, x: np.ndarray, c: np.ndarray, dt: float, xn: np.ndarray | None = None) -> np.ndarray:
     """One torque-free step of bodies x (n, 13) in the scaled-increment form prog (generated/tableaux.py SCALED_RK:
     (s, stages, end)), q not normalized; c (n, LY.EULER_SIZE) their Euler coefficients. The C backend's
     lv_free_rk4_h (csrc/step.c), operation for operation: the increments H_i = s dt k_i of q and omega_b from the
     printed rigid_body_increments_free_c (its constants C = (s dt) k_b, h_q = (s dt) QUAT_RATE_SCALE), each stage's
     input y + m H and the running sum of w H (a shared multiple formed once), the end y + (acc + w H) end; p_w by
-    the printed translation_drift with v_w, v_w kept. Returns a new struct-of-arrays state."""
+    the printed translation_drift with v_w, v_w kept. y = (q, omega_b) as (7, n) rows in buffers kept by the plan.
+    Returns xn (a new struct-of-arrays state when None)."""
     s, stages, end = prog
+    n = x.shape[0]
+    key = ("free_rk4_h", n)
+    buf = plan.works.get(key)
+    if buf is None:
+        buf = plan.works[key] = np.empty((6, LY.STATE_Q_LEN + LY.STATE_OMEGA_B_LEN, n))
+    y, Y, H, A, T1, T2 = buf
+    nq = LY.STATE_Q_LEN
     sdt = s * dt
     C = c[:, LY.EULER_K] * sdt
     hq = sdt * LY.QUAT_RATE_SCALE
-    y = (x[:, Q], x[:, W])
-    Y = y
-    acc: list = [None, None]
+    y[:nq], y[nq:] = x[:, Q].T, x[:, W].T
+    Hout = (H[:nq].T, H[nq:].T)
+    src = y
     for i, (w, m, shared) in enumerate(stages):
-        H = K.rigid_body_increments_free_c(Y[0], Y[1], C, hq)
-        nxt = []
-        for r in range(2):
-            if m is None:
-                t = acc[r] + _h_term(w, H[r]) if acc[r] is not None else _h_term(w, H[r])
-                nxt.append(y[r] + (t * end if end != 1.0 else t))
-            elif shared:
-                t = _h_term(w, H[r])
-                acc[r] = t if acc[r] is None else acc[r] + t
-                nxt.append(y[r] + t)
-            else:
-                t = _h_term(w, H[r])
-                acc[r] = t if acc[r] is None else acc[r] + t
-                nxt.append(y[r] + _h_term(m, H[r]))
-        Y = tuple(nxt)
-    xn = np.empty(x.shape[::-1], x.dtype).T
-    xn[:, Q], xn[:, W] = Y
-    xn[:, P] = K.translation_drift(x[:, P], x[:, V], dt)
+        K.rigid_body_increments_free_c(src[:nq].T, src[nq:].T, C, hq, out=Hout)
+        t = _h_term(w, H, T1)
+        if i == 0:
+            np.copyto(A, t)
+        else:
+            np.add(A, t, out=A)
+        if m is None:
+            if end != 1.0:
+                np.multiply(A, end, out=A)
+            np.add(y, A, out=A)
+        else:
+            np.add(y, t if shared else _h_term(m, H, T2), out=Y)
+            src = Y
+    if xn is None:
+        xn = np.empty(x.shape[::-1], x.dtype).T
+    xn[:, Q], xn[:, W] = A[:nq].T, A[nq:].T
+    K.translation_drift(x[:, P], x[:, V], dt, out=(xn[:, P],))
     xn[:, V] = x[:, V]
     return xn
 
@@ -995,10 +1003,10 @@ def step(plan: _Plan, x: np.ndarray, integrator: str, normalize: bool, dt: float
     stepper = _STEPPERS.get(integrator)
     prog = T.SCALED_RK.get(integrator) if plan.K is K and plan.free.size else None
     if prog is not None and plan.all_free:   # torque-free bodies: the scaled-increment form, as C's free paths
-        xn = _free_rk4_h(K, prog, x, plan.c_free, dt)
+        xn = _free_rk4_h(plan, prog, x, plan.c_free, dt, plan.work(x, len(prog[1])).xn)
     elif prog is not None and stepper is not None:   # ... and the others on the tableau stepper
         xn = stepper(plan, f, x, dt)
-        xn[plan.free, X] = _free_rk4_h(K, prog, _soa(x[plan.free, X]), plan.c_free, dt)
+        xn[plan.free, X] = _free_rk4_h(plan, prog, _soa(x[plan.free, X]), plan.c_free, dt)
     elif stepper is not None:
         xn = stepper(plan, f, x, dt)
     elif (rk := _user_rk(integrator)) is not None:

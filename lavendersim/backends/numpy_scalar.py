@@ -124,43 +124,57 @@ def _run_of(rk, normalize: bool):
     return run
 
 
-def _term(k: float, H: float) -> float:
-    """k H as tableaux.h's LV_<NAME>_SCALED_UPDATE forms it (numpy_backend._h_term)."""
-    return H if k == 1.0 else H + H if k == 2.0 else H * k
+def _term(k: float, h: str) -> str:
+    """k H as tableaux.h's LV_<NAME>_SCALED_UPDATE forms it (numpy_backend._h_term), as Python source."""
+    return h if k == 1.0 else f"({h} + {h})" if k == 2.0 else f"{h}*{k!r}"
 
 
-def _run_h(prog, x, n: int, h: float, c, normalize: bool):
-    """n torque-free steps of one body in the scaled-increment form prog (generated/tableaux.py SCALED_RK), in
-    floats: numpy_backend._free_rk4_h's operations in its order (C's lv_free_rk4_h)."""
-    s, stages, end = prog
-    sdt = s * h
-    C = tuple(ck * sdt for ck in c[LY.EULER_K])
-    hq = sdt * LY.QUAT_RATE_SCALE
-    for _ in range(n):
-        y = x[_Q] + x[_W]
-        Y, acc = y, [0.0] * len(y)
+_RUNS_H: dict = {}
+
+
+def _run_h_of(prog, normalize: bool):
+    """n torque-free steps of one body in the scaled-increment form prog (generated/tableaux.py SCALED_RK) as a
+    compiled Python function run(x, n, h, c) -> x (13 floats; c its Euler coefficients): numpy_backend._free_rk4_h's
+    operations in its order (C's lv_free_rk4_h), written out number by number."""
+    key = (prog, normalize)
+    run = _RUNS_H.get(key)
+    if run is None:
+        s, stages, end = prog
+        ny = (_Q.stop - _Q.start) + (_W.stop - _W.start)
+        ys = [f"y{r}" for r in range(ny)]
+        Ys, Hs, As = ([f"{v}{r}" for r in range(ny)] for v in "YHa")
+        nq = _Q.stop - _Q.start
+        src = ["def run(x, n, h, c):", f"    sdt = {s!r} * h",
+               "    C = (" + ", ".join(f"c[{k}] * sdt" for k in range(LY.EULER_K.start, LY.EULER_K.stop)) + ",)",
+               f"    hq = sdt * {LY.QUAT_RATE_SCALE!r}", "    for _ in range(n):",
+               f"        p, q, v, w = x[{_P.start}:{_P.stop}], x[{_Q.start}:{_Q.stop}], x[{_V.start}:{_V.stop}], "
+               f"x[{_W.start}:{_W.stop}]",
+               f"        {', '.join(ys)}, = q + w"]
+        cur = ys
         for i, (w, m, shared) in enumerate(stages):
-            Hq, Hw = KS.rigid_body_increments_free_c(Y[:4], Y[4:], C, hq)
-            H = Hq + Hw
-            nxt = []
-            for r in range(len(y)):
-                t = _term(w, H[r])
-                if i:
-                    t = acc[r] + t
+            src.append(f"        ({', '.join(Hs[:nq])}), ({', '.join(Hs[nq:])}) = inc(({', '.join(cur[:nq])},), "
+                       f"({', '.join(cur[nq:])},), C, hq)")
+            for r in range(ny):
+                t = _term(w, Hs[r])
+                if shared:
+                    src.append(f"        d{r} = {t}")
+                    t = f"d{r}"
+                acc = t if i == 0 else f"{As[r]} + {t}"
                 if m is None:
-                    nxt.append(y[r] + (t * end if end != 1.0 else t))
-                elif shared:
-                    acc[r] = t
-                    nxt.append(y[r] + _term(w, H[r]))
+                    src.append(f"        {Ys[r]} = {ys[r]} + " + (f"({acc})*{end!r}" if end != 1.0 else f"({acc})"))
                 else:
-                    acc[r] = t
-                    nxt.append(y[r] + _term(m, H[r]))
-            Y = tuple(nxt)
-        q = KS.quat_normalize(Y[:4]) if normalize else Y[:4]
-        x = tuple(KS.translation_drift(x[_P], x[_V], h)) + tuple(q) + tuple(x[_V]) + tuple(Y[4:])
-        if not math.isfinite(sum(x)):   # the sum first, as the vectorized check
-            raise Fallback
-    return x
+                    src.append(f"        {As[r]} = {acc}")
+                    src.append(f"        {Ys[r]} = {ys[r]} + {t if shared else _term(m, Hs[r])}")
+            cur = Ys
+        qn = f"normalize(({', '.join(Ys[:nq])},))" if normalize else f"({', '.join(Ys[:nq])},)"
+        src += [f"        x = tuple(drift(p, v, h)) + tuple({qn}) + v + ({', '.join(Ys[nq:])},)",
+                "        if not isfinite(sum(x)):   # the sum first, as the vectorized check", "            raise Fallback",
+                "    return x"]
+        ns = {"normalize": KS.quat_normalize, "isfinite": math.isfinite, "Fallback": Fallback,
+              "inc": KS.rigid_body_increments_free_c, "drift": KS.translation_drift}
+        exec("\n".join(src), ns)   # noqa: S102 (source built above from the printed program's numbers only)
+        run = _RUNS_H[key] = ns["run"]
+    return run
 
 
 def advance(sb: ScalarBodies, state, rk, normalize: bool, dt: float, n_steps: int, scaled=None) -> None:
@@ -173,7 +187,7 @@ def advance(sb: ScalarBodies, state, rk, normalize: bool, dt: float, n_steps: in
     try:
         for x, (c, m, I, effects) in zip(state.tolist(), sb.bodies):
             if scaled is not None and not effects[1]:   # torque-free (no effect of its own or scene-wide)
-                out.append(_run_h(scaled, tuple(x), n_steps, dt, c, normalize))
+                out.append(_run_h_of(scaled, normalize)(tuple(x), n_steps, dt, c))
             else:
                 out.append(run(x, n_steps, dt, _rhs, (c, m, I, effects)))
     except (ArithmeticError, ValueError) as e:
