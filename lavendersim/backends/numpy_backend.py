@@ -958,13 +958,14 @@ def _free_rk4_h(plan, prog, x: np.ndarray, c: np.ndarray, dt: float, xn: np.ndar
     printed rigid_body_increments_free_c (its constants C = (s dt) k_b, h_q = (s dt) QUAT_RATE_SCALE), each stage's
     input y + m H and the running sum of w H (a shared multiple formed once), the end y + (acc + w H) end; p_w by
     the printed translation_drift with v_w, v_w kept. y = (q, omega_b) as (7, n) rows in buffers kept by the plan.
+    In the plan's precision (plan.K; a float32 plan in float32, as step_f32.c's float32 tiles).
     Returns xn (a new struct-of-arrays state when None)."""
     s, stages, end = prog
     n = x.shape[0]
-    key = ("free_rk4_h", n)
+    key = ("free_rk4_h", n, x.dtype.str)
     buf = plan.works.get(key)
     if buf is None:
-        buf = plan.works[key] = np.empty((6, LY.STATE_Q_LEN + LY.STATE_OMEGA_B_LEN, n))
+        buf = plan.works[key] = np.empty((6, LY.STATE_Q_LEN + LY.STATE_OMEGA_B_LEN, n), x.dtype)
     y, Y, H, A, T1, T2 = buf
     nq = LY.STATE_Q_LEN
     sdt = s * dt
@@ -974,7 +975,7 @@ def _free_rk4_h(plan, prog, x: np.ndarray, c: np.ndarray, dt: float, xn: np.ndar
     Hout = (H[:nq].T, H[nq:].T)
     src = y
     for i, (w, m, shared) in enumerate(stages):
-        K.rigid_body_increments_free_c(src[:nq].T, src[nq:].T, C, hq, out=Hout)
+        plan.K.rigid_body_increments_free_c(src[:nq].T, src[nq:].T, C, hq, out=Hout)
         t = _h_term(w, H, T1)
         if i == 0:
             np.copyto(A, t)
@@ -990,7 +991,7 @@ def _free_rk4_h(plan, prog, x: np.ndarray, c: np.ndarray, dt: float, xn: np.ndar
     if xn is None:
         xn = np.empty(x.shape[::-1], x.dtype).T
     xn[:, Q], xn[:, W] = A[:nq].T, A[nq:].T
-    K.translation_drift(x[:, P], x[:, V], dt, out=(xn[:, P],))
+    plan.K.translation_drift(x[:, P], x[:, V], dt, out=(xn[:, P],))
     xn[:, V] = x[:, V]
     return xn
 
@@ -1001,8 +1002,9 @@ def step(plan: _Plan, x: np.ndarray, integrator: str, normalize: bool, dt: float
     def f(y, out=None):
         return plan.rhs(y, u, out)
     stepper = _STEPPERS.get(integrator)
-    prog = T.SCALED_RK.get(integrator) if plan.K is K and plan.free.size else None
-    if prog is not None and plan.all_free:   # torque-free bodies: the scaled-increment form, as C's free paths
+    # torque-free bodies: the scaled-increment form, as C's free paths (a float32 plan in float32, as step_f32.c's)
+    prog = T.SCALED_RK.get(integrator) if plan.free.size else None
+    if prog is not None and plan.all_free:
         xn = _free_rk4_h(plan, prog, x, plan.c_free, dt, plan.work(x, len(prog[1])).xn)
     elif prog is not None and stepper is not None:   # ... and the others on the tableau stepper
         xn = stepper(plan, f, x, dt)

@@ -52,10 +52,12 @@ enum { LV_FIXED_FREE = 0, LV_FIXED_TORQUE = 1, LV_FIXED_FORCE = 2, LV_FIXED_ANY 
 /* A tile of nt bodies (its arrays' rows are LV_FIXED_TILE numbers; LV_FN(simulate) places a tile on a 64-byte
    boundary: LV_FN(line_up)): T[k][b] state, C[k][b] Euler coefficients c_b (generated euler_coefficients, once per
    call), M[b] mass, I[k][b] principal moments (LV_FIXED_ANY: the effects' input), P[k][b] constant force
-   (0..2) and torque (3..5) sums (LV_FIXED_TORQUE / LV_FIXED_FORCE); refs[b] / nref[b] body b's effects. */
+   (0..2) and torque (3..5) sums (LV_FIXED_TORQUE / LV_FIXED_FORCE); refs[b] / nref[b] body b's effects; K[k][b]
+   the scaled-increment constants (LV_RK4_SCALE dt) k_b of LV_FIXED_FREE RK4 (LV_FN(free_rk4_h), per tile call). */
 typedef struct {
     LV_REAL T[LV_STATE_SIZE][LV_FIXED_TILE];
     LV_REAL C[LV_EULER_SIZE][LV_FIXED_TILE];
+    LV_REAL K[LV_EULER_K_LEN][LV_FIXED_TILE];
     LV_REAL M[LV_FIXED_TILE];
     LV_REAL I[3][LV_FIXED_TILE];
     LV_REAL P[6][LV_FIXED_TILE];
@@ -98,16 +100,42 @@ static inline void LV_FN(rhs)(const LV_FN(tile) *LV_RESTRICT t, long b, int kind
     else LV_K(rigid_body_rhs_c)(x, t->M[b], cf, F, tau, xd);
 }
 
-/* One step of body b of tile t, x -> x (q normalized when asked). */
+/* The torque-free RK4 step of body b of tile t, x -> x (q not normalized), in the scaled-increment form (derive/
+   tableaux.py scaled_program; tableaux.h LV_RK4_SCALED_STEP), csrc/step.c's lv_free_rk4_h in this precision (and
+   numpy_backend._free_rk4_h on a float32 plan): q and omega_b through the stages on the printed increments (constants
+   t->K and hq = (LV_RK4_SCALE dt) LV_QUAT_RATE_SCALE), p_w by the printed translation_drift with v_w, v_w kept. */
+#define LV_FIXED_H_ROWS (LV_STATE_Q_LEN + LV_STATE_OMEGA_B_LEN) /* y = (q, omega_b) */
+static inline void LV_FN(free_rk4_h)(const LV_FN(tile) *LV_RESTRICT t, long b, LV_REAL *x, LV_REAL hq, LV_REAL dt)
+{
+    LV_REAL y[LV_FIXED_H_ROWS], H[LV_FIXED_H_ROWS], acc[LV_FIXED_H_ROWS], tmp[LV_FIXED_H_ROWS], Ck[LV_EULER_K_LEN];
+    int i;
+    for (i = 0; i < LV_EULER_K_LEN; i++) Ck[i] = t->K[i][b];
+    for (i = 0; i < LV_STATE_Q_LEN; i++) y[i] = x[LV_STATE_Q + i];
+    for (i = 0; i < LV_STATE_OMEGA_B_LEN; i++) y[LV_STATE_Q_LEN + i] = x[LV_STATE_OMEGA_B + i];
+#define LV_FIXED_H_RHS(in, out) LV_K(rigid_body_increments_free_c)(in, in + LV_STATE_Q_LEN, Ck, hq, out, out + LV_STATE_Q_LEN)
+#define LV_FIXED_H_FOR(stmt) for (i = 0; i < LV_FIXED_H_ROWS; i++) stmt
+#define LV_FIXED_H_AT(v) v[i]
+    LV_RK4_SCALED_STEP(LV_REAL, LV_FIXED_H_RHS, LV_FIXED_H_FOR, LV_FIXED_H_AT, y, y, H, acc, tmp);
+#undef LV_FIXED_H_RHS
+#undef LV_FIXED_H_FOR
+#undef LV_FIXED_H_AT
+    LV_K(translation_drift)(x + LV_STATE_P_W, x + LV_STATE_V_W, dt, x + LV_STATE_P_W);
+    for (i = 0; i < LV_STATE_Q_LEN; i++) x[LV_STATE_Q + i] = y[i];
+    for (i = 0; i < LV_STATE_OMEGA_B_LEN; i++) x[LV_STATE_OMEGA_B + i] = y[LV_STATE_Q_LEN + i];
+}
+
+/* One step of body b of tile t, x -> x (q normalized when asked); hq: LV_FN(free_rk4_h)'s. */
 static inline void LV_FN(body_step)(const LV_FN(tile) *LV_RESTRICT t, long b, LV_REAL *x, int kind, int integrator,
-                                    int normalize, LV_REAL dt)
+                                    int normalize, LV_REAL dt, LV_REAL hq)
 {
     LV_REAL k1[LV_STATE_SIZE], acc[LV_STATE_SIZE], tmp[LV_STATE_SIZE];
     int i;
 #define LV_FIXED_RHS(in, out) LV_FN(rhs)(t, b, kind, in, out)
 #define LV_FIXED_FOR(stmt) for (i = 0; i < LV_STATE_SIZE; i++) stmt
 #define LV_FIXED_AT(v) v[i]
-    if (integrator == LV_PATH_RK4) {
+    if (integrator == LV_PATH_RK4 && kind == LV_FIXED_FREE) {
+        LV_FN(free_rk4_h)(t, b, x, hq, dt);
+    } else if (integrator == LV_PATH_RK4) {
         LV_RK4_STEP(LV_REAL, LV_FIXED_RHS, LV_FIXED_FOR, LV_FIXED_AT, dt, x, x, k1, acc, tmp);
     } else if (integrator == LV_PATH_EULER) {
         LV_EULER_STEP(LV_REAL, LV_FIXED_RHS, LV_FIXED_FOR, LV_FIXED_AT, dt, x, x, k1, acc, tmp);
@@ -130,13 +158,17 @@ static inline void LV_FN(body_step)(const LV_FN(tile) *LV_RESTRICT t, long b, LV
 static inline void LV_FN(tile_steps)(LV_FN(tile) *LV_RESTRICT t, int kind, int integrator, int normalize, LV_REAL dt,
                                      long n_steps)
 {
+    const LV_REAL sdt = (LV_REAL)LV_RK4_SCALE * dt, hq = sdt * (LV_REAL)LV_QUAT_RATE_SCALE;
     long s, b;
     int i;
+    if (kind == LV_FIXED_FREE && integrator == LV_PATH_RK4) /* LV_FN(free_rk4_h)'s constants, as lv_free_rk4_scale */
+        for (i = 0; i < LV_EULER_K_LEN; i++)
+            for (b = 0; b < t->nt; b++) t->K[i][b] = sdt * t->C[LV_EULER_K + i][b];
     for (s = 0; s < n_steps; s++) {
         for (b = 0; b < t->nt; b++) {
             LV_REAL x[LV_STATE_SIZE];
             for (i = 0; i < LV_STATE_SIZE; i++) x[i] = t->T[i][b];
-            LV_FN(body_step)(t, b, x, kind, integrator, normalize, dt);
+            LV_FN(body_step)(t, b, x, kind, integrator, normalize, dt, hq);
             for (i = 0; i < LV_STATE_SIZE; i++) t->T[i][b] = x[i];
         }
     }
