@@ -21,6 +21,7 @@ from typing import NamedTuple
 from itertools import permutations
 
 from . import effect as E
+from .rigid_body import INC_SCALE_SIZE
 
 FUSED_MAX = 2   # effects per pattern (batch_simd.h's fused tile loads this many parameter rows)
 # Tile kinds of plain bodies with effects (csrc/step.c's LV_RHS_* names, batch_simd.h's LV_TILE_RHS_<kind>).
@@ -42,6 +43,7 @@ class RhsCall(NamedTuple):
     accel: bool
     body_frame: bool
     pipeline: str
+    inc: tuple[str, tuple[str, ...]]   # the kind's scaled increments kernel and its arguments (sc: the constants S)
 
 
 # The one statement of the kind -> right-hand side rule, printed into kernels.h (LV_RHS_CALL_<kind>,
@@ -50,17 +52,32 @@ class RhsCall(NamedTuple):
 # rigid_body_rhs on a zero force (the NumPy backend runs that one: the pipeline names it); BODY's a_w is zero, bitwise
 # the +0/m of the NumPy backend.
 RHS_OF_KIND = {
-    "TORQUE": RhsCall("rigid_body_rhs_torque_c", ("x", "cf", "t", "out"), False, False, "rigid_body_rhs (world torques)"),
+    "TORQUE": RhsCall("rigid_body_rhs_torque_c", ("x", "cf", "t", "out"), False, False, "rigid_body_rhs (world torques)",
+                      ("rigid_body_increments_torque_c", ("x", "sc", "t", "out"))),
     "FULL": RhsCall("rigid_body_rhs_c", ("x", "mass", "cf", "f", "t", "out"), False, False,
-                    "rigid_body_rhs (world torques)"),
+                    "rigid_body_rhs (world torques)", ("rigid_body_increments_c", ("x", "sc", "f", "t", "out"))),
     "FORCE": RhsCall("rigid_body_rhs_force_c", ("x", "cf", "f", "out"), True, False,
-                     "rigid_body_rhs_force (a force, no torque: a_w = F/m)"),
+                     "rigid_body_rhs_force (a force, no torque: a_w = F/m)",
+                     ("rigid_body_increments_force_c", ("x", "sc", "f", "out"))),
     "BODY": RhsCall("rigid_body_rhs_body_c", ("x", "cf", "zero", "t", "out"), False, True,
-                    "rigid_body_rhs_body (torques declared in the body frame)"),
+                    "rigid_body_rhs_body (torques declared in the body frame)",
+                    ("rigid_body_increments_body_c", ("x", "sc", "zero", "t", "out"))),
     "BODY_F": RhsCall("rigid_body_rhs_body_c", ("x", "cf", "f", "t", "out"), True, True,
-                      "rigid_body_rhs_body (a force; torques declared in the body frame)"),
+                      "rigid_body_rhs_body (a force; torques declared in the body frame)",
+                      ("rigid_body_increments_body_c", ("x", "sc", "f", "t", "out"))),
 }
 RHS_CALL_PARAMS = ("x", "mass", "cf", "f", "t", "out")   # LV_RHS_CALL_<kind>'s parameters
+RHS_INC_PARAMS = ("x", "mass", "sc", "f", "t", "out")    # LV_RHS_INC_<kind>'s parameters
+
+
+def rhs_inc_c(kind: str) -> str:
+    """The C expression of kind's scaled increments (RHS_OF_KIND inc: rigid_body_increments*_c, s dt folded into the
+    constants sc = rigid_body_increment_scale's S, so the force sum f is not divided: H_v = h_m f) on RHS_INC_PARAMS."""
+    kernel, args = RHS_OF_KIND[kind].inc
+    parts = [f"(void)({p})" for p in RHS_INC_PARAMS if p not in args]
+    state = "(x) + LV_STATE_Q, (x) + LV_STATE_OMEGA_B, (x) + LV_STATE_V_W"   # the kernel's (q, omega_b, v_w)
+    a = ", ".join("(const double[3]){0.0, 0.0, 0.0}" if x == "zero" else state if x == "x" else x for x in args)
+    return f"({', '.join(parts + [f'lv_{kernel}({a})'])})"
 
 
 def rhs_call_c(kind: str) -> str:
@@ -109,10 +126,16 @@ def rhs_c_header() -> list[str]:
            "   LV_RHS_CALL_<kind>(x, mass, cf, f, t, out) on the state x, the mass, the Euler coefficients cf, the sums f",
            "   (force, world; overwritten with a_w = F/m where the class divides) and t (torque), into out = d/dt x;",
            "   LV_RHS_BODY_FRAME_<kind>: 1 when t sums the effects' body-frame forms. LV_RHS_KINDS(X): X(kind) each. */",
-           "#define LV_RHS_KINDS(X) " + " ".join(f"X({k})" for k in TILE_KINDS)]
+           "#define LV_RHS_KINDS(X) " + " ".join(f"X({k})" for k in TILE_KINDS),
+           "/* The built-in RK4 steps each class in the scaled-increment form (tableaux.h LV_RK4_SCALED_STEP on the 13",
+           "   numbers): LV_RHS_INC_<kind>(x, mass, sc, f, t, out), the increments H = (s dt) d/dt x into out after the",
+           "   same sums, sc the body's LV_INC_SCALE_SIZE constants (rigid_body_increment_scale: s dt folded into the",
+           "   Euler coefficients, 1/I, q's rate scale and 1/m, once per body and call). */",
+           f"#define LV_INC_SCALE_SIZE {INC_SCALE_SIZE}"]
     for kind in TILE_KINDS:
         out += [f"#define LV_RHS_BODY_FRAME_{kind} {int(RHS_OF_KIND[kind].body_frame)}",
-                f"#define LV_RHS_CALL_{kind}({', '.join(RHS_CALL_PARAMS)}) {rhs_call_c(kind)}"]
+                f"#define LV_RHS_CALL_{kind}({', '.join(RHS_CALL_PARAMS)}) {rhs_call_c(kind)}",
+                f"#define LV_RHS_INC_{kind}({', '.join(RHS_INC_PARAMS)}) {rhs_inc_c(kind)}"]
     return out
 
 
@@ -120,7 +143,8 @@ def meta_extra() -> dict:
     """effects_meta.py's printed rule (the NumPy backend's copy of the table): RHS_BITS, RHS_KINDS_BY_FLAGS and
     RHS_KERNELS (each kind's right-hand side as Sim.pipeline names it)."""
     return {"rhs_bits": RHS_BITS, "rhs_kinds_by_flags": kinds_by_flags(),
-            "rhs_kernels": {k: RHS_OF_KIND[k].pipeline for k in TILE_KINDS}}
+            "rhs_kernels": {k: RHS_OF_KIND[k].pipeline for k in TILE_KINDS},
+            "rhs_increments": {k: RHS_OF_KIND[k].inc[0] for k in TILE_KINDS}}
 
 
 def _constant_flags(effects: Sequence[tuple[int, E.EffectDecl]]) -> set[int]:

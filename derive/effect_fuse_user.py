@@ -5,13 +5,14 @@ stage passes (csrc/batch_simd.h LV_TILE_RK4_FX): per stage, a lane loop of the e
 user's library), then a lane loop of the right-hand side. The fused tile is the plain tile's lane loop instead
 (batch_simd.h LV_TILE_RK4: each lane's whole RK4 step in registers) with the effect's accumulating function
 inlined: it needs the engine's printed kernels (the right-hand sides, lv_quat_normalize), its layout and its RK4
-step (tableaux.h's LV_RK4_STEP), so the user's library is compiled with the engine's generated sources on its
+step (tableaux.h's LV_RK4_SCALED_STEP: the built-in RK4's scaled-increment form, each stage the kind's increments
+kernels.h LV_RHS_INC_<kind> on the lane's rigid_body_increment_scale constants), so the user's library is compiled with the engine's generated sources on its
 include path (lavendersim.user_sets: ``-DLVU_ENGINE=<their hash>``), and exports that hash (``lvu_engine_hash``):
 the engine uses a fused tile only when it was compiled against the very sources it runs (else the stage passes).
 
 Every lane does the stage passes' IEEE operations in their order: the effect sums start at zero and the effect
 adds into them (its body-frame form for a body-frame torque alone, FLAG_TORQUE_B), then the tile kind's
-right-hand side (derive.effect_fuse.tile_kind and RHS_OF_KIND: kernels.h's LV_RHS_CALL_<kind>, as the stage passes
+increments (derive.effect_fuse.tile_kind and RHS_OF_KIND: kernels.h's LV_RHS_INC_<kind>, as the stage passes
 call it); results are bitwise the stage passes' (tests/test_extending.py checks it at every instruction set).
 """
 from __future__ import annotations
@@ -55,21 +56,27 @@ def c_fused_tiles(effects: list[E.EffectDecl], user_function) -> list[str]:
         c += [f"/* {d.name}: tile kind {kind}; the lane's effect sums start at zero, as the stage passes' do */",
               f"#define {rhs}(in, out) do {{ double f[3] = {{0.0, 0.0, 0.0}}, t[3] = {{0.0, 0.0, 0.0}}; "
               f"{user_function(d, body)}(pl, in, in + LV_STATE_V_W, mass, I, f, t); "
-              f"LV_RHS_CALL_{kind}(in, mass, cf, f, t, out); }} while (0)"]
+              f"LV_RHS_INC_{kind}(in, mass, sc, f, t, out); }} while (0)"]
         macro = f"LVU_FUSED_{d.name.upper()}"
         lines = [f"#define {macro}(SUFFIX, ATTR, NORM, NORMALIZE)",
                  f"LV_EXPORT ATTR LVU_FLATTEN void lvu_fused_tile{n}_{d.name}_##NORM##_##SUFFIX({args})",
-                 "{", "    long s, b;", "    int i;", "    for (s = 0; s < n_steps; s++) {",
+                 "{", "    long s, b;", "    int i;", f"    double SC[LV_INC_SCALE_SIZE][{n}];",
+                 "    for (b = 0; b < m; b++) {   /* the lanes' increment constants, once per call */",
+                 "        double cb[LV_EULER_SIZE], sb[LV_INC_SCALE_SIZE];",
+                 "        for (i = 0; i < LV_EULER_SIZE; i++) cb[i] = J[i][b];",
+                 "        lv_rigid_body_increment_scale(cb, m_row[b], LV_RK4_SCALE * dt, sb);",
+                 "        for (i = 0; i < LV_INC_SCALE_SIZE; i++) SC[i][b] = sb[i];", "    }",
+                 "    for (s = 0; s < n_steps; s++) {",
                  "        for (b = 0; b < m; b++) {",
                  "            double x[LV_STATE_SIZE], k[LV_STATE_SIZE], acc[LV_STATE_SIZE], tmp[LV_STATE_SIZE], "
-                 f"xn[LV_STATE_SIZE], cf[LV_EULER_SIZE], pl[{np_}], I[3];",
+                 f"xn[LV_STATE_SIZE], sc[LV_INC_SCALE_SIZE], pl[{np_}], I[3];",
                  "            const double mass = m_row[b];",
                  "            (void)mass;",
                  f"            for (i = 0; i < {d.n_params}; i++) pl[i] = p[i][b];" if d.n_params else "            pl[0] = 0.0;",
                  "            for (i = 0; i < 3; i++) I[i] = I_row[i][b];",
                  "            for (i = 0; i < LV_STATE_SIZE; i++) x[i] = T[i][b];",
-                 "            for (i = 0; i < LV_EULER_SIZE; i++) cf[i] = J[i][b];",
-                 f"            LV_RK4_STEP(double, {rhs}, LVU_FOR, LVU_AT, dt, x, xn, k, acc, tmp);",
+                 "            for (i = 0; i < LV_INC_SCALE_SIZE; i++) sc[i] = SC[i][b];",
+                 f"            LV_RK4_SCALED_STEP(double, {rhs}, LVU_FOR, LVU_AT, x, xn, k, acc, tmp);",
                  "            if (NORMALIZE) lv_quat_normalize(xn + LV_STATE_Q, xn + LV_STATE_Q);",
                  "            for (i = 0; i < LV_STATE_SIZE; i++) T[i][b] = xn[i];", "        }", "    }", "}"]
         c += [ln + " \\" for ln in lines[:-1]] + [lines[-1]]

@@ -58,6 +58,38 @@ def _check_rate_scale(q, w) -> None:
     if (quat_rate_body(q, w) - sp.nsimplify(scale) * qmul(q, pure(w))).applyfunc(sp.expand) != sp.zeros(4, 1):
         raise RuntimeError("derive: QUAT_RATE_SCALE is not the scale of quat_rate_body")
 
+# The constants of a stage's scaled increments (rigid_body_increment_scale): C = sdt k_b (3), R = sdt r_b (3), h_q,
+# sdt, h_m = sdt/m; their count and offsets (printed into kernels.h by derive/effect_fuse.py: LV_INC_SCALE_SIZE).
+INC_SCALE_SIZE = 9
+INC_C, INC_R, INC_HQ, INC_SDT, INC_HM = slice(0, 3), slice(3, 6), 6, 7, 8
+
+
+def inc_scale(c_b, m, sdt) -> list:
+    """S = (sdt k_b, sdt r_b, sdt QUAT_RATE_SCALE, sdt, sdt/m) of the Euler coefficients c_b, the mass and sdt."""
+    scale = sp.nsimplify(dict((n, v) for n, v, _ in CONSTANTS)["QUAT_RATE_SCALE"])
+    k, r = EULER.part(c_b, "k"), EULER.part(c_b, "r")
+    return [sdt * k[i] for i in range(3)] + [sdt * r[i] for i in range(3)] + [sdt * scale, sdt, sdt / m]
+
+
+def increments(xq, xw, xv, S, F_w, tau_b) -> sp.Matrix:
+    """H = (s dt) x' of a body (q, omega_b, v_w) with the constants S (inc_scale): H_p = sdt v_W, H_q = q (x)
+    [h_q omega_B, 0], H_v = h_m F_W (0 when F_w is None), H_omega,x = C_x omega_y omega_z + R_x tau_B,x (cyclic; no
+    torque term when tau_b is None). On the symbols of rigid_body_increments_free_c (q, omega_b): the same printed
+    arithmetic for q and omega_b where the torque is zero (a body under a force alone turns bitwise as a free one)."""
+    coef = EULER.assemble(k=list(S[INC_C]), r=list(S[INC_R]))
+    return X.assemble(p_w=S[INC_SDT] * xv, q=qmul(xq, pure(S[INC_HQ] * xw)),
+                      v_w=sp.zeros(3, 1) if F_w is None else S[INC_HM] * F_w,
+                      omega_b=euler_rhs_c(coef, xw, sp.zeros(3, 1) if tau_b is None else tau_b))
+
+
+def _check_increments(xq, xw, xv, S, c_b, m, sdt, F_w, tau_w) -> None:
+    """Proof that the increments are sdt times rigid_body_rhs_c's rates (S = inc_scale(c_b, m, sdt))."""
+    rate = X.assemble(p_w=xv, q=quat_rate_body(xq, xw), v_w=F_w / m,
+                      omega_b=euler_rhs_c(c_b, xw, rotate_to_body(xq, tau_w)))
+    H = increments(xq, xw, xv, S, F_w, rotate_to_body(xq, tau_w)).subs(dict(zip(S, inc_scale(c_b, m, sdt))))
+    if (H - sdt * rate).applyfunc(sp.expand) != sp.zeros(X.size, 1):
+        raise RuntimeError("derive: the scaled increments are not s dt times the rates")
+
 
 def kernels() -> list[Kernel]:
     g = "Rigid-body dynamics"
@@ -67,8 +99,10 @@ def kernels() -> list[Kernel]:
     omega_b, v_w, q, vec_w = vec("omega_b", 3), vec("v_w", 3), vec("q", 4), vec("v", 3)
     c_b = vec("c_b", EULER.size)
     C_b, h_q = vec("C_b", 3), scalar("h_q")
+    S_b, sdt = vec("S_b", INC_SCALE_SIZE), scalar("sdt")
     _check_euler(I_b, omega_b, tau_b)
     _check_rate_scale(q, omega_b)
+    _check_increments(q, omega_b, v_w, S_b, c_b, m, sdt, F_w, tau_w)
     # c_b as named subexpressions of the kernels that take I_b: the same printed arithmetic as the *_c kernels
     where = list(zip(c_b, euler_coefficients(I_b)))
     xq, xv, xw = X.part(x, "q"), X.part(x, "v_w"), X.part(x, "omega_b")
@@ -87,6 +121,13 @@ def kernels() -> list[Kernel]:
           "(cyclic, dimensionless), r_x = 1/I_x (1/(kg·m²)); from euler_coefficients")
     QU = ("q", q, "orientation (x, y, z, w), R_WB, unit", "unit_quaternion")
     XS = ("x", x, STATE, "real")
+    SB = ("S_b", S_b, "the increments' constants (C_x, C_y, C_z, R_x, R_y, R_z, h_q, sdt, h_m) of "
+          "rigid_body_increment_scale, once per body and call")
+    QWV = (Arg("q", q, "orientation (x, y, z, w), R_WB (a stage's value: unit to rounding)", "unit_quaternion"),
+           Arg("omega_b", omega_b, "angular velocity, body frame, rad/s"),
+           Arg("v_w", v_w, "COM velocity, world frame, m/s"))
+    inc_note = ("The built-in RK4 steps a body with effects in the scaled-increment form (tableaux.h "
+                "LV_RK4_SCALED_STEP over the 13 numbers): a stage's input and the step's end are adds and one multiply.")
     same = "Bitwise the I_b kernel of the same name without _c, given c_b = euler_coefficients(I_b) (the same printed arithmetic)."
     return [
         Kernel("euler_equations", "Euler's rotation equations with external torque, body frame",
@@ -164,6 +205,35 @@ def kernels() -> list[Kernel]:
                          "and one multiply by the printed end factor); p_W moves by translation_drift with v_W (v_W' = 0, "
                          "the weights sum to 1) and v_W is kept.",
                          "The rate of q is scaled through ω_B (h_q ω_B first), as rigid_body_rhs_free_c scales it by ½."]),
+        Kernel("rigid_body_increment_scale", "The constants of an RK4 stage's scaled increments H = (s dt) x' of a body "
+               "with effects, once per body and call",
+               r"S = (s\,dt\,k_B,\ s\,dt\,r_B,\ s\,dt\,\mathrm{QUAT\_RATE\_SCALE},\ s\,dt,\ s\,dt/m)",
+               [Arg(*CB), Arg("m", m, "mass, kg", "positive"),
+                Arg("sdt", sdt, "the stage scale times the step, LV_RK4_SCALE dt (tableaux.h), s")],
+               [Arg("S_b", sp.Matrix(inc_scale(c_b, m, sdt)), "(C_x, C_y, C_z, R_x, R_y, R_z, h_q, sdt, h_m): C = sdt k_b, "
+                    "R = sdt r_b, h_q = sdt QUAT_RATE_SCALE, h_m = sdt/m")], g,
+               notes=["The increments kernels rigid_body_increments*_c take it: s dt is folded into the Euler "
+                      "coefficients, 1/I, q's rate scale and 1/m, so an increment costs what the rate costs."]),
+        Kernel("rigid_body_increments_c", "An RK4 stage's scaled increments H = (s dt) x' under a world force and torque",
+               r"H = (s\,dt)\,\dot x\ \text{of rigid\_body\_rhs, with } s\,dt \text{ in the constants S}",
+               [*QWV, Arg(*SB), Arg("F_w", F_w, "total force at the COM, world frame, N"),
+                Arg("tau_w", tau_w, "total torque about the COM, world frame, N·m")],
+               [Arg("H", increments(q, omega_b, v_w, S_b, F_w, rotate_to_body(q, tau_w)), "(s dt) d/dt of the state")], g,
+               notes=[inc_note]),
+        Kernel("rigid_body_increments_torque_c", "An RK4 stage's scaled increments under a world torque only",
+               r"H_v = 0,\ \text{else as rigid\_body\_increments\_c}",
+               [*QWV, Arg(*SB), Arg("tau_w", tau_w, "total torque about the COM, world frame, N·m")],
+               [Arg("H", increments(q, omega_b, v_w, S_b, None, rotate_to_body(q, tau_w)), "(s dt) d/dt of the state")], g,
+               notes=[inc_note]),
+        Kernel("rigid_body_increments_force_c", "An RK4 stage's scaled increments under a force only (no torque)",
+               r"H_{\omega,x} = C_x\omega_y\omega_z,\ H_v = h_m F_W,\ \text{else as rigid\_body\_increments\_c}",
+               [*QWV, Arg(*SB), Arg("F_w", F_w, "total force at the COM, world frame, N")],
+               [Arg("H", increments(q, omega_b, v_w, S_b, F_w, None), "(s dt) d/dt of the state")], g, notes=[inc_note]),
+        Kernel("rigid_body_increments_body_c", "An RK4 stage's scaled increments under a force and a body-frame torque",
+               r"H_{\omega,x} = C_x\omega_y\omega_z + R_x\tau_{B,x},\ H_v = h_m F_W",
+               [*QWV, Arg(*SB), Arg("F_w", F_w, "total force at the COM, world frame, N (0 without a force)"),
+                Arg("tau_b", tau_b, "total torque about the COM, body frame, N·m")],
+               [Arg("H", increments(q, omega_b, v_w, S_b, F_w, tau_b), "(s dt) d/dt of the state")], g, notes=[inc_note]),
         Kernel("linear_acceleration", "Acceleration of the COM under a world force", r"a_W = F_W / m",
                [Arg("m", m, "mass, kg", "positive"), Arg("F_w", F_w, "total force at the COM, world frame, N")],
                [Arg("a_w", F_w / m, "COM acceleration, world frame, m/s²")], g,

@@ -15,6 +15,7 @@ TILE_LANES, TILE_ISAS = 64, ('base', 'avx2', 'avx512')  # a user effect's tile f
 RHS_BITS = (4, 16, 32)
 RHS_KINDS_BY_FLAGS = ('FORCE', 'FORCE', 'TORQUE', 'FULL', 'BODY', 'BODY_F', 'TORQUE', 'FULL')
 RHS_KERNELS = {'TORQUE': 'rigid_body_rhs (world torques)', 'FULL': 'rigid_body_rhs (world torques)', 'FORCE': 'rigid_body_rhs_force (a force, no torque: a_w = F/m)', 'BODY': 'rigid_body_rhs_body (torques declared in the body frame)', 'BODY_F': 'rigid_body_rhs_body (a force; torques declared in the body frame)'}
+RHS_INCREMENTS = {'TORQUE': 'rigid_body_increments_torque_c', 'FULL': 'rigid_body_increments_c', 'FORCE': 'rigid_body_increments_force_c', 'BODY': 'rigid_body_increments_body_c', 'BODY_F': 'rigid_body_increments_body_c'}
 
 EFFECTS = (
     {'name': 'applied_torque',

@@ -1209,6 +1209,198 @@ void lv_rigid_body_increments_free_c(const double *q, const double *omega_b, con
     H_omega[2] = C_b_2*omega_b_0*omega_b_1;
 }
 
+void lv_rigid_body_increment_scale(const double *c_b, double m, double sdt, double *S_b) {
+    const double c_b_0 = c_b[0];
+    const double c_b_1 = c_b[1];
+    const double c_b_2 = c_b[2];
+    const double c_b_3 = c_b[3];
+    const double c_b_4 = c_b[4];
+    const double c_b_5 = c_b[5];
+    S_b[0] = c_b_0*sdt;
+    S_b[1] = c_b_1*sdt;
+    S_b[2] = c_b_2*sdt;
+    S_b[3] = c_b_3*sdt;
+    S_b[4] = c_b_4*sdt;
+    S_b[5] = c_b_5*sdt;
+    S_b[6] = ((1.0/2.0))*sdt;
+    S_b[7] = sdt;
+    S_b[8] = sdt/m;
+}
+
+void lv_rigid_body_increments_c(const double *q, const double *omega_b, const double *v_w, const double *S_b, const double *F_w, const double *tau_w, double *H) {
+    const double q_0 = q[0];
+    const double q_1 = q[1];
+    const double q_2 = q[2];
+    const double q_3 = q[3];
+    const double omega_b_0 = omega_b[0];
+    const double omega_b_1 = omega_b[1];
+    const double omega_b_2 = omega_b[2];
+    const double v_w_0 = v_w[0];
+    const double v_w_1 = v_w[1];
+    const double v_w_2 = v_w[2];
+    const double S_b_0 = S_b[0];
+    const double S_b_1 = S_b[1];
+    const double S_b_2 = S_b[2];
+    const double S_b_3 = S_b[3];
+    const double S_b_4 = S_b[4];
+    const double S_b_5 = S_b[5];
+    const double S_b_6 = S_b[6];
+    const double S_b_7 = S_b[7];
+    const double S_b_8 = S_b[8];
+    const double F_w_0 = F_w[0];
+    const double F_w_1 = F_w[1];
+    const double F_w_2 = F_w[2];
+    const double tau_w_0 = tau_w[0];
+    const double tau_w_1 = tau_w[1];
+    const double tau_w_2 = tau_w[2];
+    const double t0 = S_b_6*omega_b_0;
+    const double t1 = S_b_6*omega_b_2;
+    const double t2 = S_b_6*omega_b_1;
+    const double t3 = 2*q_0;
+    const double t4 = -2*q_1*tau_w_0 + t3*tau_w_1;
+    const double t5 = 2*q_2*tau_w_0 - t3*tau_w_2;
+    const double t6 = 2*q_1*tau_w_2 - 2*q_2*tau_w_1;
+    H[0] = S_b_7*v_w_0;
+    H[1] = S_b_7*v_w_1;
+    H[2] = S_b_7*v_w_2;
+    H[3] = q_1*t1 - q_2*t2 + q_3*t0;
+    H[4] = -q_0*t1 + q_2*t0 + q_3*t2;
+    H[5] = q_0*t2 - q_1*t0 + q_3*t1;
+    H[6] = -q_0*t0 - q_1*t2 - q_2*t1;
+    H[7] = F_w_0*S_b_8;
+    H[8] = F_w_1*S_b_8;
+    H[9] = F_w_2*S_b_8;
+    H[10] = S_b_0*omega_b_1*omega_b_2 + S_b_3*(q_1*t4 - q_2*t5 - q_3*t6 + tau_w_0);
+    H[11] = S_b_1*omega_b_0*omega_b_2 + S_b_4*(-q_0*t4 + q_2*t6 - q_3*t5 + tau_w_1);
+    H[12] = S_b_2*omega_b_0*omega_b_1 + S_b_5*(q_0*t5 - q_1*t6 - q_3*t4 + tau_w_2);
+}
+
+void lv_rigid_body_increments_torque_c(const double *q, const double *omega_b, const double *v_w, const double *S_b, const double *tau_w, double *H) {
+    const double q_0 = q[0];
+    const double q_1 = q[1];
+    const double q_2 = q[2];
+    const double q_3 = q[3];
+    const double omega_b_0 = omega_b[0];
+    const double omega_b_1 = omega_b[1];
+    const double omega_b_2 = omega_b[2];
+    const double v_w_0 = v_w[0];
+    const double v_w_1 = v_w[1];
+    const double v_w_2 = v_w[2];
+    const double S_b_0 = S_b[0];
+    const double S_b_1 = S_b[1];
+    const double S_b_2 = S_b[2];
+    const double S_b_3 = S_b[3];
+    const double S_b_4 = S_b[4];
+    const double S_b_5 = S_b[5];
+    const double S_b_6 = S_b[6];
+    const double S_b_7 = S_b[7];
+    const double tau_w_0 = tau_w[0];
+    const double tau_w_1 = tau_w[1];
+    const double tau_w_2 = tau_w[2];
+    const double t0 = S_b_6*omega_b_0;
+    const double t1 = S_b_6*omega_b_2;
+    const double t2 = S_b_6*omega_b_1;
+    const double t3 = 2*q_0;
+    const double t4 = -2*q_1*tau_w_0 + t3*tau_w_1;
+    const double t5 = 2*q_2*tau_w_0 - t3*tau_w_2;
+    const double t6 = 2*q_1*tau_w_2 - 2*q_2*tau_w_1;
+    H[0] = S_b_7*v_w_0;
+    H[1] = S_b_7*v_w_1;
+    H[2] = S_b_7*v_w_2;
+    H[3] = q_1*t1 - q_2*t2 + q_3*t0;
+    H[4] = -q_0*t1 + q_2*t0 + q_3*t2;
+    H[5] = q_0*t2 - q_1*t0 + q_3*t1;
+    H[6] = -q_0*t0 - q_1*t2 - q_2*t1;
+    H[7] = 0;
+    H[8] = 0;
+    H[9] = 0;
+    H[10] = S_b_0*omega_b_1*omega_b_2 + S_b_3*(q_1*t4 - q_2*t5 - q_3*t6 + tau_w_0);
+    H[11] = S_b_1*omega_b_0*omega_b_2 + S_b_4*(-q_0*t4 + q_2*t6 - q_3*t5 + tau_w_1);
+    H[12] = S_b_2*omega_b_0*omega_b_1 + S_b_5*(q_0*t5 - q_1*t6 - q_3*t4 + tau_w_2);
+}
+
+void lv_rigid_body_increments_force_c(const double *q, const double *omega_b, const double *v_w, const double *S_b, const double *F_w, double *H) {
+    const double q_0 = q[0];
+    const double q_1 = q[1];
+    const double q_2 = q[2];
+    const double q_3 = q[3];
+    const double omega_b_0 = omega_b[0];
+    const double omega_b_1 = omega_b[1];
+    const double omega_b_2 = omega_b[2];
+    const double v_w_0 = v_w[0];
+    const double v_w_1 = v_w[1];
+    const double v_w_2 = v_w[2];
+    const double S_b_0 = S_b[0];
+    const double S_b_1 = S_b[1];
+    const double S_b_2 = S_b[2];
+    const double S_b_6 = S_b[6];
+    const double S_b_7 = S_b[7];
+    const double S_b_8 = S_b[8];
+    const double F_w_0 = F_w[0];
+    const double F_w_1 = F_w[1];
+    const double F_w_2 = F_w[2];
+    const double t0 = S_b_6*omega_b_0;
+    const double t1 = S_b_6*omega_b_2;
+    const double t2 = S_b_6*omega_b_1;
+    H[0] = S_b_7*v_w_0;
+    H[1] = S_b_7*v_w_1;
+    H[2] = S_b_7*v_w_2;
+    H[3] = q_1*t1 - q_2*t2 + q_3*t0;
+    H[4] = -q_0*t1 + q_2*t0 + q_3*t2;
+    H[5] = q_0*t2 - q_1*t0 + q_3*t1;
+    H[6] = -q_0*t0 - q_1*t2 - q_2*t1;
+    H[7] = F_w_0*S_b_8;
+    H[8] = F_w_1*S_b_8;
+    H[9] = F_w_2*S_b_8;
+    H[10] = S_b_0*omega_b_1*omega_b_2;
+    H[11] = S_b_1*omega_b_0*omega_b_2;
+    H[12] = S_b_2*omega_b_0*omega_b_1;
+}
+
+void lv_rigid_body_increments_body_c(const double *q, const double *omega_b, const double *v_w, const double *S_b, const double *F_w, const double *tau_b, double *H) {
+    const double q_0 = q[0];
+    const double q_1 = q[1];
+    const double q_2 = q[2];
+    const double q_3 = q[3];
+    const double omega_b_0 = omega_b[0];
+    const double omega_b_1 = omega_b[1];
+    const double omega_b_2 = omega_b[2];
+    const double v_w_0 = v_w[0];
+    const double v_w_1 = v_w[1];
+    const double v_w_2 = v_w[2];
+    const double S_b_0 = S_b[0];
+    const double S_b_1 = S_b[1];
+    const double S_b_2 = S_b[2];
+    const double S_b_3 = S_b[3];
+    const double S_b_4 = S_b[4];
+    const double S_b_5 = S_b[5];
+    const double S_b_6 = S_b[6];
+    const double S_b_7 = S_b[7];
+    const double S_b_8 = S_b[8];
+    const double F_w_0 = F_w[0];
+    const double F_w_1 = F_w[1];
+    const double F_w_2 = F_w[2];
+    const double tau_b_0 = tau_b[0];
+    const double tau_b_1 = tau_b[1];
+    const double tau_b_2 = tau_b[2];
+    const double t0 = S_b_6*omega_b_0;
+    const double t1 = S_b_6*omega_b_2;
+    const double t2 = S_b_6*omega_b_1;
+    H[0] = S_b_7*v_w_0;
+    H[1] = S_b_7*v_w_1;
+    H[2] = S_b_7*v_w_2;
+    H[3] = q_1*t1 - q_2*t2 + q_3*t0;
+    H[4] = -q_0*t1 + q_2*t0 + q_3*t2;
+    H[5] = q_0*t2 - q_1*t0 + q_3*t1;
+    H[6] = -q_0*t0 - q_1*t2 - q_2*t1;
+    H[7] = F_w_0*S_b_8;
+    H[8] = F_w_1*S_b_8;
+    H[9] = F_w_2*S_b_8;
+    H[10] = S_b_0*omega_b_1*omega_b_2 + S_b_3*tau_b_0;
+    H[11] = S_b_1*omega_b_0*omega_b_2 + S_b_4*tau_b_1;
+    H[12] = S_b_2*omega_b_0*omega_b_1 + S_b_5*tau_b_2;
+}
+
 void lv_linear_acceleration(double m, const double *F_w, double *a_w) {
     const double F_w_0 = F_w[0];
     const double F_w_1 = F_w[1];
@@ -3701,6 +3893,11 @@ static void packed_rigid_body_rhs_torque_c(const double *in, double *out) { lv_r
 static void packed_rigid_body_rhs_c(const double *in, double *out) { lv_rigid_body_rhs_c(in + 0, in[13], in + 14, in + 20, in + 23, out + 0); }
 static void packed_rigid_body_rates_free_c(const double *in, double *out) { lv_rigid_body_rates_free_c(in + 0, in + 4, in + 7, out + 0, out + 4); }
 static void packed_rigid_body_increments_free_c(const double *in, double *out) { lv_rigid_body_increments_free_c(in + 0, in + 4, in + 7, in[10], out + 0, out + 4); }
+static void packed_rigid_body_increment_scale(const double *in, double *out) { lv_rigid_body_increment_scale(in + 0, in[6], in[7], out + 0); }
+static void packed_rigid_body_increments_c(const double *in, double *out) { lv_rigid_body_increments_c(in + 0, in + 4, in + 7, in + 10, in + 19, in + 22, out + 0); }
+static void packed_rigid_body_increments_torque_c(const double *in, double *out) { lv_rigid_body_increments_torque_c(in + 0, in + 4, in + 7, in + 10, in + 19, out + 0); }
+static void packed_rigid_body_increments_force_c(const double *in, double *out) { lv_rigid_body_increments_force_c(in + 0, in + 4, in + 7, in + 10, in + 19, out + 0); }
+static void packed_rigid_body_increments_body_c(const double *in, double *out) { lv_rigid_body_increments_body_c(in + 0, in + 4, in + 7, in + 10, in + 19, in + 22, out + 0); }
 static void packed_linear_acceleration(const double *in, double *out) { lv_linear_acceleration(in[0], in + 1, out + 0); }
 static void packed_rigid_body_rhs_force_c(const double *in, double *out) { lv_rigid_body_rhs_force_c(in + 0, in + 13, in + 19, out + 0); }
 static void packed_rigid_body_rhs_body_c(const double *in, double *out) { lv_rigid_body_rhs_body_c(in + 0, in + 13, in + 19, in + 22, out + 0); }
@@ -3797,6 +3994,11 @@ const lv_kernel_info lv_kernel_table[LV_KERNEL_COUNT] = {
     {"rigid_body_rhs_c", 26, 13, packed_rigid_body_rhs_c},
     {"rigid_body_rates_free_c", 13, 7, packed_rigid_body_rates_free_c},
     {"rigid_body_increments_free_c", 11, 7, packed_rigid_body_increments_free_c},
+    {"rigid_body_increment_scale", 8, 9, packed_rigid_body_increment_scale},
+    {"rigid_body_increments_c", 25, 13, packed_rigid_body_increments_c},
+    {"rigid_body_increments_torque_c", 22, 13, packed_rigid_body_increments_torque_c},
+    {"rigid_body_increments_force_c", 22, 13, packed_rigid_body_increments_force_c},
+    {"rigid_body_increments_body_c", 25, 13, packed_rigid_body_increments_body_c},
     {"linear_acceleration", 4, 3, packed_linear_acceleration},
     {"rigid_body_rhs_force_c", 22, 13, packed_rigid_body_rhs_force_c},
     {"rigid_body_rhs_body_c", 25, 13, packed_rigid_body_rhs_body_c},

@@ -11,7 +11,7 @@ typedef struct {
     void (*packed)(const double *in, double *out);
 } lv_kernel_info;
 
-#define LV_KERNEL_COUNT 94
+#define LV_KERNEL_COUNT 99
 extern const lv_kernel_info lv_kernel_table[LV_KERNEL_COUNT];
 
 /* particle_moments: One particle's mass moment and momentum (summed: m r_COM and p).
@@ -322,6 +322,51 @@ void lv_rigid_body_rates_free_c(const double *q, const double *omega_b, const do
      out H_q [4]: (s dt) dq/dt, dimensionless
      out H_omega [3]: (s dt) dω_B/dt, rad/s */
 void lv_rigid_body_increments_free_c(const double *q, const double *omega_b, const double *C_b, double h_q, double *H_q, double *H_omega);
+
+/* rigid_body_increment_scale: The constants of an RK4 stage's scaled increments H = (s dt) x' of a body with effects, once per body and call.
+     in  c_b [6]: Euler coefficients (k_x, k_y, k_z, r_x, r_y, r_z), body frame: k_x = (I_y − I_z)/I_x (cyclic, dimensionless), r_x = 1/I_x (1/(kg·m²)); from euler_coefficients
+     in  m scalar: mass, kg
+     in  sdt scalar: the stage scale times the step, LV_RK4_SCALE dt (tableaux.h), s
+     out S_b [9]: (C_x, C_y, C_z, R_x, R_y, R_z, h_q, sdt, h_m): C = sdt k_b, R = sdt r_b, h_q = sdt QUAT_RATE_SCALE, h_m = sdt/m */
+void lv_rigid_body_increment_scale(const double *c_b, double m, double sdt, double *S_b);
+
+/* rigid_body_increments_c: An RK4 stage's scaled increments H = (s dt) x' under a world force and torque.
+     in  q [4]: orientation (x, y, z, w), R_WB (a stage's value: unit to rounding)
+     in  omega_b [3]: angular velocity, body frame, rad/s
+     in  v_w [3]: COM velocity, world frame, m/s
+     in  S_b [9]: the increments' constants (C_x, C_y, C_z, R_x, R_y, R_z, h_q, sdt, h_m) of rigid_body_increment_scale, once per body and call
+     in  F_w [3]: total force at the COM, world frame, N
+     in  tau_w [3]: total torque about the COM, world frame, N·m
+     out H [13]: (s dt) d/dt of the state */
+void lv_rigid_body_increments_c(const double *q, const double *omega_b, const double *v_w, const double *S_b, const double *F_w, const double *tau_w, double *H);
+
+/* rigid_body_increments_torque_c: An RK4 stage's scaled increments under a world torque only.
+     in  q [4]: orientation (x, y, z, w), R_WB (a stage's value: unit to rounding)
+     in  omega_b [3]: angular velocity, body frame, rad/s
+     in  v_w [3]: COM velocity, world frame, m/s
+     in  S_b [9]: the increments' constants (C_x, C_y, C_z, R_x, R_y, R_z, h_q, sdt, h_m) of rigid_body_increment_scale, once per body and call
+     in  tau_w [3]: total torque about the COM, world frame, N·m
+     out H [13]: (s dt) d/dt of the state */
+void lv_rigid_body_increments_torque_c(const double *q, const double *omega_b, const double *v_w, const double *S_b, const double *tau_w, double *H);
+
+/* rigid_body_increments_force_c: An RK4 stage's scaled increments under a force only (no torque).
+     in  q [4]: orientation (x, y, z, w), R_WB (a stage's value: unit to rounding)
+     in  omega_b [3]: angular velocity, body frame, rad/s
+     in  v_w [3]: COM velocity, world frame, m/s
+     in  S_b [9]: the increments' constants (C_x, C_y, C_z, R_x, R_y, R_z, h_q, sdt, h_m) of rigid_body_increment_scale, once per body and call
+     in  F_w [3]: total force at the COM, world frame, N
+     out H [13]: (s dt) d/dt of the state */
+void lv_rigid_body_increments_force_c(const double *q, const double *omega_b, const double *v_w, const double *S_b, const double *F_w, double *H);
+
+/* rigid_body_increments_body_c: An RK4 stage's scaled increments under a force and a body-frame torque.
+     in  q [4]: orientation (x, y, z, w), R_WB (a stage's value: unit to rounding)
+     in  omega_b [3]: angular velocity, body frame, rad/s
+     in  v_w [3]: COM velocity, world frame, m/s
+     in  S_b [9]: the increments' constants (C_x, C_y, C_z, R_x, R_y, R_z, h_q, sdt, h_m) of rigid_body_increment_scale, once per body and call
+     in  F_w [3]: total force at the COM, world frame, N (0 without a force)
+     in  tau_b [3]: total torque about the COM, body frame, N·m
+     out H [13]: (s dt) d/dt of the state */
+void lv_rigid_body_increments_body_c(const double *q, const double *omega_b, const double *v_w, const double *S_b, const double *F_w, const double *tau_b, double *H);
 
 /* linear_acceleration: Acceleration of the COM under a world force.
      in  m scalar: mass, kg
@@ -805,15 +850,25 @@ const char *lv_effect_name(int code);
    (force, world; overwritten with a_w = F/m where the class divides) and t (torque), into out = d/dt x;
    LV_RHS_BODY_FRAME_<kind>: 1 when t sums the effects' body-frame forms. LV_RHS_KINDS(X): X(kind) each. */
 #define LV_RHS_KINDS(X) X(TORQUE) X(FULL) X(FORCE) X(BODY) X(BODY_F)
+/* The built-in RK4 steps each class in the scaled-increment form (tableaux.h LV_RK4_SCALED_STEP on the 13
+   numbers): LV_RHS_INC_<kind>(x, mass, sc, f, t, out), the increments H = (s dt) d/dt x into out after the
+   same sums, sc the body's LV_INC_SCALE_SIZE constants (rigid_body_increment_scale: s dt folded into the
+   Euler coefficients, 1/I, q's rate scale and 1/m, once per body and call). */
+#define LV_INC_SCALE_SIZE 9
 #define LV_RHS_BODY_FRAME_TORQUE 0
 #define LV_RHS_CALL_TORQUE(x, mass, cf, f, t, out) ((void)(mass), (void)(f), lv_rigid_body_rhs_torque_c(x, cf, t, out))
+#define LV_RHS_INC_TORQUE(x, mass, sc, f, t, out) ((void)(mass), (void)(f), lv_rigid_body_increments_torque_c((x) + LV_STATE_Q, (x) + LV_STATE_OMEGA_B, (x) + LV_STATE_V_W, sc, t, out))
 #define LV_RHS_BODY_FRAME_FULL 0
 #define LV_RHS_CALL_FULL(x, mass, cf, f, t, out) (lv_rigid_body_rhs_c(x, mass, cf, f, t, out))
+#define LV_RHS_INC_FULL(x, mass, sc, f, t, out) ((void)(mass), lv_rigid_body_increments_c((x) + LV_STATE_Q, (x) + LV_STATE_OMEGA_B, (x) + LV_STATE_V_W, sc, f, t, out))
 #define LV_RHS_BODY_FRAME_FORCE 0
 #define LV_RHS_CALL_FORCE(x, mass, cf, f, t, out) ((void)(t), lv_linear_acceleration(mass, f, f), lv_rigid_body_rhs_force_c(x, cf, f, out))
+#define LV_RHS_INC_FORCE(x, mass, sc, f, t, out) ((void)(mass), (void)(t), lv_rigid_body_increments_force_c((x) + LV_STATE_Q, (x) + LV_STATE_OMEGA_B, (x) + LV_STATE_V_W, sc, f, out))
 #define LV_RHS_BODY_FRAME_BODY 1
 #define LV_RHS_CALL_BODY(x, mass, cf, f, t, out) ((void)(mass), (void)(f), lv_rigid_body_rhs_body_c(x, cf, (const double[3]){0.0, 0.0, 0.0}, t, out))
+#define LV_RHS_INC_BODY(x, mass, sc, f, t, out) ((void)(mass), (void)(f), lv_rigid_body_increments_body_c((x) + LV_STATE_Q, (x) + LV_STATE_OMEGA_B, (x) + LV_STATE_V_W, sc, (const double[3]){0.0, 0.0, 0.0}, t, out))
 #define LV_RHS_BODY_FRAME_BODY_F 1
 #define LV_RHS_CALL_BODY_F(x, mass, cf, f, t, out) (lv_linear_acceleration(mass, f, f), lv_rigid_body_rhs_body_c(x, cf, f, t, out))
+#define LV_RHS_INC_BODY_F(x, mass, sc, f, t, out) ((void)(mass), lv_rigid_body_increments_body_c((x) + LV_STATE_Q, (x) + LV_STATE_OMEGA_B, (x) + LV_STATE_V_W, sc, f, t, out))
 
 #endif

@@ -1090,6 +1090,177 @@ def rigid_body_increments_free_c(q, omega_b, C_b, h_q):
     return casadi.vertcat(q_1*t1 - q_2*t2 + q_3*t0, -q_0*t1 + q_2*t0 + q_3*t2, q_0*t2 - q_1*t0 + q_3*t1, -q_0*t0 - q_1*t2 - q_2*t1), casadi.vertcat(C_b_0*omega_b_1*omega_b_2, C_b_1*omega_b_0*omega_b_2, C_b_2*omega_b_0*omega_b_1)
 
 
+def rigid_body_increment_scale(c_b, m, sdt):
+    """rigid_body_increment_scale: The constants of an RK4 stage's scaled increments H = (s dt) x' of a body with effects, once per body and call.
+      in  c_b [6]: Euler coefficients (k_x, k_y, k_z, r_x, r_y, r_z), body frame: k_x = (I_y − I_z)/I_x (cyclic, dimensionless), r_x = 1/I_x (1/(kg·m²)); from euler_coefficients
+      in  m scalar: mass, kg
+      in  sdt scalar: the stage scale times the step, LV_RK4_SCALE dt (tableaux.h), s
+      out S_b [9]: (C_x, C_y, C_z, R_x, R_y, R_z, h_q, sdt, h_m): C = sdt k_b, R = sdt r_b, h_q = sdt QUAT_RATE_SCALE, h_m = sdt/m"""
+    c_b_0 = c_b[0]
+    c_b_1 = c_b[1]
+    c_b_2 = c_b[2]
+    c_b_3 = c_b[3]
+    c_b_4 = c_b[4]
+    c_b_5 = c_b[5]
+    return casadi.vertcat(c_b_0*sdt, c_b_1*sdt, c_b_2*sdt, c_b_3*sdt, c_b_4*sdt, c_b_5*sdt, ((1.0/2.0))*sdt, sdt, sdt/m)
+
+
+def rigid_body_increments_c(q, omega_b, v_w, S_b, F_w, tau_w):
+    """rigid_body_increments_c: An RK4 stage's scaled increments H = (s dt) x' under a world force and torque.
+      in  q [4]: orientation (x, y, z, w), R_WB (a stage's value: unit to rounding)
+      in  omega_b [3]: angular velocity, body frame, rad/s
+      in  v_w [3]: COM velocity, world frame, m/s
+      in  S_b [9]: the increments' constants (C_x, C_y, C_z, R_x, R_y, R_z, h_q, sdt, h_m) of rigid_body_increment_scale, once per body and call
+      in  F_w [3]: total force at the COM, world frame, N
+      in  tau_w [3]: total torque about the COM, world frame, N·m
+      out H [13]: (s dt) d/dt of the state"""
+    q_0 = q[0]
+    q_1 = q[1]
+    q_2 = q[2]
+    q_3 = q[3]
+    omega_b_0 = omega_b[0]
+    omega_b_1 = omega_b[1]
+    omega_b_2 = omega_b[2]
+    v_w_0 = v_w[0]
+    v_w_1 = v_w[1]
+    v_w_2 = v_w[2]
+    S_b_0 = S_b[0]
+    S_b_1 = S_b[1]
+    S_b_2 = S_b[2]
+    S_b_3 = S_b[3]
+    S_b_4 = S_b[4]
+    S_b_5 = S_b[5]
+    S_b_6 = S_b[6]
+    S_b_7 = S_b[7]
+    S_b_8 = S_b[8]
+    F_w_0 = F_w[0]
+    F_w_1 = F_w[1]
+    F_w_2 = F_w[2]
+    tau_w_0 = tau_w[0]
+    tau_w_1 = tau_w[1]
+    tau_w_2 = tau_w[2]
+    t0 = S_b_6*omega_b_0
+    t1 = S_b_6*omega_b_2
+    t2 = S_b_6*omega_b_1
+    t3 = 2*q_0
+    t4 = -2*q_1*tau_w_0 + t3*tau_w_1
+    t5 = 2*q_2*tau_w_0 - t3*tau_w_2
+    t6 = 2*q_1*tau_w_2 - 2*q_2*tau_w_1
+    return casadi.vertcat(S_b_7*v_w_0, S_b_7*v_w_1, S_b_7*v_w_2, q_1*t1 - q_2*t2 + q_3*t0, -q_0*t1 + q_2*t0 + q_3*t2, q_0*t2 - q_1*t0 + q_3*t1, -q_0*t0 - q_1*t2 - q_2*t1, F_w_0*S_b_8, F_w_1*S_b_8, F_w_2*S_b_8, S_b_0*omega_b_1*omega_b_2 + S_b_3*(q_1*t4 - q_2*t5 - q_3*t6 + tau_w_0), S_b_1*omega_b_0*omega_b_2 + S_b_4*(-q_0*t4 + q_2*t6 - q_3*t5 + tau_w_1), S_b_2*omega_b_0*omega_b_1 + S_b_5*(q_0*t5 - q_1*t6 - q_3*t4 + tau_w_2))
+
+
+def rigid_body_increments_torque_c(q, omega_b, v_w, S_b, tau_w):
+    """rigid_body_increments_torque_c: An RK4 stage's scaled increments under a world torque only.
+      in  q [4]: orientation (x, y, z, w), R_WB (a stage's value: unit to rounding)
+      in  omega_b [3]: angular velocity, body frame, rad/s
+      in  v_w [3]: COM velocity, world frame, m/s
+      in  S_b [9]: the increments' constants (C_x, C_y, C_z, R_x, R_y, R_z, h_q, sdt, h_m) of rigid_body_increment_scale, once per body and call
+      in  tau_w [3]: total torque about the COM, world frame, N·m
+      out H [13]: (s dt) d/dt of the state"""
+    q_0 = q[0]
+    q_1 = q[1]
+    q_2 = q[2]
+    q_3 = q[3]
+    omega_b_0 = omega_b[0]
+    omega_b_1 = omega_b[1]
+    omega_b_2 = omega_b[2]
+    v_w_0 = v_w[0]
+    v_w_1 = v_w[1]
+    v_w_2 = v_w[2]
+    S_b_0 = S_b[0]
+    S_b_1 = S_b[1]
+    S_b_2 = S_b[2]
+    S_b_3 = S_b[3]
+    S_b_4 = S_b[4]
+    S_b_5 = S_b[5]
+    S_b_6 = S_b[6]
+    S_b_7 = S_b[7]
+    tau_w_0 = tau_w[0]
+    tau_w_1 = tau_w[1]
+    tau_w_2 = tau_w[2]
+    t0 = S_b_6*omega_b_0
+    t1 = S_b_6*omega_b_2
+    t2 = S_b_6*omega_b_1
+    t3 = 2*q_0
+    t4 = -2*q_1*tau_w_0 + t3*tau_w_1
+    t5 = 2*q_2*tau_w_0 - t3*tau_w_2
+    t6 = 2*q_1*tau_w_2 - 2*q_2*tau_w_1
+    return casadi.vertcat(S_b_7*v_w_0, S_b_7*v_w_1, S_b_7*v_w_2, q_1*t1 - q_2*t2 + q_3*t0, -q_0*t1 + q_2*t0 + q_3*t2, q_0*t2 - q_1*t0 + q_3*t1, -q_0*t0 - q_1*t2 - q_2*t1, 0, 0, 0, S_b_0*omega_b_1*omega_b_2 + S_b_3*(q_1*t4 - q_2*t5 - q_3*t6 + tau_w_0), S_b_1*omega_b_0*omega_b_2 + S_b_4*(-q_0*t4 + q_2*t6 - q_3*t5 + tau_w_1), S_b_2*omega_b_0*omega_b_1 + S_b_5*(q_0*t5 - q_1*t6 - q_3*t4 + tau_w_2))
+
+
+def rigid_body_increments_force_c(q, omega_b, v_w, S_b, F_w):
+    """rigid_body_increments_force_c: An RK4 stage's scaled increments under a force only (no torque).
+      in  q [4]: orientation (x, y, z, w), R_WB (a stage's value: unit to rounding)
+      in  omega_b [3]: angular velocity, body frame, rad/s
+      in  v_w [3]: COM velocity, world frame, m/s
+      in  S_b [9]: the increments' constants (C_x, C_y, C_z, R_x, R_y, R_z, h_q, sdt, h_m) of rigid_body_increment_scale, once per body and call
+      in  F_w [3]: total force at the COM, world frame, N
+      out H [13]: (s dt) d/dt of the state"""
+    q_0 = q[0]
+    q_1 = q[1]
+    q_2 = q[2]
+    q_3 = q[3]
+    omega_b_0 = omega_b[0]
+    omega_b_1 = omega_b[1]
+    omega_b_2 = omega_b[2]
+    v_w_0 = v_w[0]
+    v_w_1 = v_w[1]
+    v_w_2 = v_w[2]
+    S_b_0 = S_b[0]
+    S_b_1 = S_b[1]
+    S_b_2 = S_b[2]
+    S_b_6 = S_b[6]
+    S_b_7 = S_b[7]
+    S_b_8 = S_b[8]
+    F_w_0 = F_w[0]
+    F_w_1 = F_w[1]
+    F_w_2 = F_w[2]
+    t0 = S_b_6*omega_b_0
+    t1 = S_b_6*omega_b_2
+    t2 = S_b_6*omega_b_1
+    return casadi.vertcat(S_b_7*v_w_0, S_b_7*v_w_1, S_b_7*v_w_2, q_1*t1 - q_2*t2 + q_3*t0, -q_0*t1 + q_2*t0 + q_3*t2, q_0*t2 - q_1*t0 + q_3*t1, -q_0*t0 - q_1*t2 - q_2*t1, F_w_0*S_b_8, F_w_1*S_b_8, F_w_2*S_b_8, S_b_0*omega_b_1*omega_b_2, S_b_1*omega_b_0*omega_b_2, S_b_2*omega_b_0*omega_b_1)
+
+
+def rigid_body_increments_body_c(q, omega_b, v_w, S_b, F_w, tau_b):
+    """rigid_body_increments_body_c: An RK4 stage's scaled increments under a force and a body-frame torque.
+      in  q [4]: orientation (x, y, z, w), R_WB (a stage's value: unit to rounding)
+      in  omega_b [3]: angular velocity, body frame, rad/s
+      in  v_w [3]: COM velocity, world frame, m/s
+      in  S_b [9]: the increments' constants (C_x, C_y, C_z, R_x, R_y, R_z, h_q, sdt, h_m) of rigid_body_increment_scale, once per body and call
+      in  F_w [3]: total force at the COM, world frame, N (0 without a force)
+      in  tau_b [3]: total torque about the COM, body frame, N·m
+      out H [13]: (s dt) d/dt of the state"""
+    q_0 = q[0]
+    q_1 = q[1]
+    q_2 = q[2]
+    q_3 = q[3]
+    omega_b_0 = omega_b[0]
+    omega_b_1 = omega_b[1]
+    omega_b_2 = omega_b[2]
+    v_w_0 = v_w[0]
+    v_w_1 = v_w[1]
+    v_w_2 = v_w[2]
+    S_b_0 = S_b[0]
+    S_b_1 = S_b[1]
+    S_b_2 = S_b[2]
+    S_b_3 = S_b[3]
+    S_b_4 = S_b[4]
+    S_b_5 = S_b[5]
+    S_b_6 = S_b[6]
+    S_b_7 = S_b[7]
+    S_b_8 = S_b[8]
+    F_w_0 = F_w[0]
+    F_w_1 = F_w[1]
+    F_w_2 = F_w[2]
+    tau_b_0 = tau_b[0]
+    tau_b_1 = tau_b[1]
+    tau_b_2 = tau_b[2]
+    t0 = S_b_6*omega_b_0
+    t1 = S_b_6*omega_b_2
+    t2 = S_b_6*omega_b_1
+    return casadi.vertcat(S_b_7*v_w_0, S_b_7*v_w_1, S_b_7*v_w_2, q_1*t1 - q_2*t2 + q_3*t0, -q_0*t1 + q_2*t0 + q_3*t2, q_0*t2 - q_1*t0 + q_3*t1, -q_0*t0 - q_1*t2 - q_2*t1, F_w_0*S_b_8, F_w_1*S_b_8, F_w_2*S_b_8, S_b_0*omega_b_1*omega_b_2 + S_b_3*tau_b_0, S_b_1*omega_b_0*omega_b_2 + S_b_4*tau_b_1, S_b_2*omega_b_0*omega_b_1 + S_b_5*tau_b_2)
+
+
 def linear_acceleration(m, F_w):
     """linear_acceleration: Acceleration of the COM under a world force.
       in  m scalar: mass, kg

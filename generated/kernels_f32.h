@@ -99,6 +99,16 @@ void lvf_rigid_body_rhs_c(const float *x, float m, const float *c_b, const float
 void lvf_rigid_body_rates_free_c(const float *q, const float *omega_b, const float *c_b, float *g, float *omega_dot_b);
 /* rigid_body_increments_free_c: A torque-free RK4 stage's scaled increments H = (s dt) (dq/dt, dω_B/dt) (float; see kernels.h) */
 void lvf_rigid_body_increments_free_c(const float *q, const float *omega_b, const float *C_b, float h_q, float *H_q, float *H_omega);
+/* rigid_body_increment_scale: The constants of an RK4 stage's scaled increments H = (s dt) x' of a body with effects, once per body and call (float; see kernels.h) */
+void lvf_rigid_body_increment_scale(const float *c_b, float m, float sdt, float *S_b);
+/* rigid_body_increments_c: An RK4 stage's scaled increments H = (s dt) x' under a world force and torque (float; see kernels.h) */
+void lvf_rigid_body_increments_c(const float *q, const float *omega_b, const float *v_w, const float *S_b, const float *F_w, const float *tau_w, float *H);
+/* rigid_body_increments_torque_c: An RK4 stage's scaled increments under a world torque only (float; see kernels.h) */
+void lvf_rigid_body_increments_torque_c(const float *q, const float *omega_b, const float *v_w, const float *S_b, const float *tau_w, float *H);
+/* rigid_body_increments_force_c: An RK4 stage's scaled increments under a force only (no torque) (float; see kernels.h) */
+void lvf_rigid_body_increments_force_c(const float *q, const float *omega_b, const float *v_w, const float *S_b, const float *F_w, float *H);
+/* rigid_body_increments_body_c: An RK4 stage's scaled increments under a force and a body-frame torque (float; see kernels.h) */
+void lvf_rigid_body_increments_body_c(const float *q, const float *omega_b, const float *v_w, const float *S_b, const float *F_w, const float *tau_b, float *H);
 /* linear_acceleration: Acceleration of the COM under a world force (float; see kernels.h) */
 void lvf_linear_acceleration(float m, const float *F_w, float *a_w);
 /* rigid_body_rhs_force_c: State derivative under a force only (no torque), on c_b and the COM acceleration (float; see kernels.h) */

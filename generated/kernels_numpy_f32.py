@@ -2221,6 +2221,347 @@ def rigid_body_increments_free_c(q, omega_b, C_b, h_q, *, out=None):
     return H_q_out, H_omega_out
 
 
+def rigid_body_increment_scale(c_b, m, sdt, *, out=None):
+    """The constants of an RK4 stage's scaled increments H = (s dt) x' of a body with effects, once per body and call.
+
+    Generated kernel ``rigid_body_increment_scale``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    c_b : array_like, shape (..., 6)
+        Euler coefficients (k_x, k_y, k_z, r_x, r_y, r_z), body frame: k_x = (I_y − I_z)/I_x (cyclic, dimensionless), r_x = 1/I_x (1/(kg·m²)); from euler_coefficients
+    m : array_like, shape (...)
+        mass, kg
+    sdt : array_like, shape (...)
+        the stage scale times the step, LV_RK4_SCALE dt (tableaux.h), s
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
+
+    Returns
+    -------
+    S_b : ndarray, shape (..., 9)
+        (C_x, C_y, C_z, R_x, R_y, R_z, h_q, sdt, h_m): C = sdt k_b, R = sdt r_b, h_q = sdt QUAT_RATE_SCALE, h_m = sdt/m
+    """
+    c_b = numpy.asarray(c_b, dtype=numpy.float32)
+    m = numpy.asarray(m, dtype=numpy.float32)
+    sdt = numpy.asarray(sdt, dtype=numpy.float32)
+    if out is None or out[0] is None:
+        batch = c_b.shape[:-1] if c_b.shape[:-1] == m.shape == sdt.shape else numpy.broadcast_shapes(c_b.shape[:-1], m.shape, sdt.shape)
+    S_b_out = numpy.empty(batch + (9,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
+    numpy.multiply(c_b[..., 0:6], sdt[..., None], out=S_b_out[..., 0:6])
+    numpy.multiply(numpy.float32(1.0) / numpy.float32(2.0), sdt, out=S_b_out[..., 6])
+    S_b_out[..., 7] = sdt
+    numpy.divide(sdt, m, out=S_b_out[..., 8])
+    return S_b_out
+
+
+def rigid_body_increments_c(q, omega_b, v_w, S_b, F_w, tau_w, *, out=None):
+    """An RK4 stage's scaled increments H = (s dt) x' under a world force and torque.
+
+    Generated kernel ``rigid_body_increments_c``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    q : array_like, shape (..., 4)
+        orientation (x, y, z, w), R_WB (a stage's value: unit to rounding)
+    omega_b : array_like, shape (..., 3)
+        angular velocity, body frame, rad/s
+    v_w : array_like, shape (..., 3)
+        COM velocity, world frame, m/s
+    S_b : array_like, shape (..., 9)
+        the increments' constants (C_x, C_y, C_z, R_x, R_y, R_z, h_q, sdt, h_m) of rigid_body_increment_scale, once per body and call
+    F_w : array_like, shape (..., 3)
+        total force at the COM, world frame, N
+    tau_w : array_like, shape (..., 3)
+        total torque about the COM, world frame, N·m
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
+
+    Returns
+    -------
+    H : ndarray, shape (..., 13)
+        (s dt) d/dt of the state
+    """
+    q = numpy.asarray(q, dtype=numpy.float32)
+    omega_b = numpy.asarray(omega_b, dtype=numpy.float32)
+    v_w = numpy.asarray(v_w, dtype=numpy.float32)
+    S_b = numpy.asarray(S_b, dtype=numpy.float32)
+    F_w = numpy.asarray(F_w, dtype=numpy.float32)
+    tau_w = numpy.asarray(tau_w, dtype=numpy.float32)
+    if out is None or out[0] is None:
+        batch = q.shape[:-1] if q.shape[:-1] == omega_b.shape[:-1] == v_w.shape[:-1] == S_b.shape[:-1] == F_w.shape[:-1] == tau_w.shape[:-1] else numpy.broadcast_shapes(q.shape[:-1], omega_b.shape[:-1], v_w.shape[:-1], S_b.shape[:-1], F_w.shape[:-1], tau_w.shape[:-1])
+    q_0 = q[..., 0]
+    q_1 = q[..., 1]
+    q_2 = q[..., 2]
+    q_3 = q[..., 3]
+    omega_b_0 = omega_b[..., 0]
+    omega_b_1 = omega_b[..., 1]
+    omega_b_2 = omega_b[..., 2]
+    v_w_0 = v_w[..., 0]
+    v_w_1 = v_w[..., 1]
+    v_w_2 = v_w[..., 2]
+    S_b_0 = S_b[..., 0]
+    S_b_1 = S_b[..., 1]
+    S_b_2 = S_b[..., 2]
+    S_b_3 = S_b[..., 3]
+    S_b_4 = S_b[..., 4]
+    S_b_5 = S_b[..., 5]
+    S_b_6 = S_b[..., 6]
+    S_b_7 = S_b[..., 7]
+    S_b_8 = S_b[..., 8]
+    F_w_0 = F_w[..., 0]
+    F_w_1 = F_w[..., 1]
+    F_w_2 = F_w[..., 2]
+    tau_w_0 = tau_w[..., 0]
+    tau_w_1 = tau_w[..., 1]
+    tau_w_2 = tau_w[..., 2]
+    t0 = S_b_6*omega_b_0
+    t1 = S_b_6*omega_b_2
+    t2 = S_b_6*omega_b_1
+    t3 = 2*q_0
+    t4 = t3 * tau_w_1 - 2 * q_1 * tau_w_0
+    t5 = 2*q_2*tau_w_0 - t3*tau_w_2
+    t6 = 2*q_1*tau_w_2 - 2*q_2*tau_w_1
+    H_out = numpy.empty(batch + (13,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
+    numpy.multiply(S_b_7, v_w_0, out=H_out[..., 0])
+    numpy.multiply(S_b_7, v_w_1, out=H_out[..., 1])
+    numpy.multiply(S_b_7, v_w_2, out=H_out[..., 2])
+    numpy.add(q_1 * t1 - q_2 * t2, q_3 * t0, out=H_out[..., 3])
+    numpy.add(q_2 * t0 - q_0 * t1, q_3 * t2, out=H_out[..., 4])
+    numpy.add(q_0 * t2 - q_1 * t0, q_3 * t1, out=H_out[..., 5])
+    numpy.subtract(-q_0 * t0 - q_1 * t2, q_2 * t1, out=H_out[..., 6])
+    numpy.multiply(F_w_0, S_b_8, out=H_out[..., 7])
+    numpy.multiply(F_w_1, S_b_8, out=H_out[..., 8])
+    numpy.multiply(F_w_2, S_b_8, out=H_out[..., 9])
+    numpy.add(S_b_0 * omega_b_1 * omega_b_2, S_b_3 * (q_1 * t4 - q_2 * t5 - q_3 * t6 + tau_w_0), out=H_out[..., 10])
+    numpy.add(S_b_1 * omega_b_0 * omega_b_2, S_b_4 * (q_2 * t6 - q_0 * t4 - q_3 * t5 + tau_w_1), out=H_out[..., 11])
+    numpy.add(S_b_2 * omega_b_0 * omega_b_1, S_b_5 * (q_0 * t5 - q_1 * t6 - q_3 * t4 + tau_w_2), out=H_out[..., 12])
+    return H_out
+
+
+def rigid_body_increments_torque_c(q, omega_b, v_w, S_b, tau_w, *, out=None):
+    """An RK4 stage's scaled increments under a world torque only.
+
+    Generated kernel ``rigid_body_increments_torque_c``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    q : array_like, shape (..., 4)
+        orientation (x, y, z, w), R_WB (a stage's value: unit to rounding)
+    omega_b : array_like, shape (..., 3)
+        angular velocity, body frame, rad/s
+    v_w : array_like, shape (..., 3)
+        COM velocity, world frame, m/s
+    S_b : array_like, shape (..., 9)
+        the increments' constants (C_x, C_y, C_z, R_x, R_y, R_z, h_q, sdt, h_m) of rigid_body_increment_scale, once per body and call
+    tau_w : array_like, shape (..., 3)
+        total torque about the COM, world frame, N·m
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
+
+    Returns
+    -------
+    H : ndarray, shape (..., 13)
+        (s dt) d/dt of the state
+    """
+    q = numpy.asarray(q, dtype=numpy.float32)
+    omega_b = numpy.asarray(omega_b, dtype=numpy.float32)
+    v_w = numpy.asarray(v_w, dtype=numpy.float32)
+    S_b = numpy.asarray(S_b, dtype=numpy.float32)
+    tau_w = numpy.asarray(tau_w, dtype=numpy.float32)
+    if out is None or out[0] is None:
+        batch = q.shape[:-1] if q.shape[:-1] == omega_b.shape[:-1] == v_w.shape[:-1] == S_b.shape[:-1] == tau_w.shape[:-1] else numpy.broadcast_shapes(q.shape[:-1], omega_b.shape[:-1], v_w.shape[:-1], S_b.shape[:-1], tau_w.shape[:-1])
+    q_0 = q[..., 0]
+    q_1 = q[..., 1]
+    q_2 = q[..., 2]
+    q_3 = q[..., 3]
+    omega_b_0 = omega_b[..., 0]
+    omega_b_1 = omega_b[..., 1]
+    omega_b_2 = omega_b[..., 2]
+    v_w_0 = v_w[..., 0]
+    v_w_1 = v_w[..., 1]
+    v_w_2 = v_w[..., 2]
+    S_b_0 = S_b[..., 0]
+    S_b_1 = S_b[..., 1]
+    S_b_2 = S_b[..., 2]
+    S_b_3 = S_b[..., 3]
+    S_b_4 = S_b[..., 4]
+    S_b_5 = S_b[..., 5]
+    S_b_6 = S_b[..., 6]
+    S_b_7 = S_b[..., 7]
+    tau_w_0 = tau_w[..., 0]
+    tau_w_1 = tau_w[..., 1]
+    tau_w_2 = tau_w[..., 2]
+    t0 = S_b_6*omega_b_0
+    t1 = S_b_6*omega_b_2
+    t2 = S_b_6*omega_b_1
+    t3 = 2*q_0
+    t4 = t3 * tau_w_1 - 2 * q_1 * tau_w_0
+    t5 = 2*q_2*tau_w_0 - t3*tau_w_2
+    t6 = 2*q_1*tau_w_2 - 2*q_2*tau_w_1
+    H_out = numpy.empty(batch + (13,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
+    numpy.multiply(S_b_7, v_w_0, out=H_out[..., 0])
+    numpy.multiply(S_b_7, v_w_1, out=H_out[..., 1])
+    numpy.multiply(S_b_7, v_w_2, out=H_out[..., 2])
+    numpy.add(q_1 * t1 - q_2 * t2, q_3 * t0, out=H_out[..., 3])
+    numpy.add(q_2 * t0 - q_0 * t1, q_3 * t2, out=H_out[..., 4])
+    numpy.add(q_0 * t2 - q_1 * t0, q_3 * t1, out=H_out[..., 5])
+    numpy.subtract(-q_0 * t0 - q_1 * t2, q_2 * t1, out=H_out[..., 6])
+    H_out[..., 7] = 0
+    H_out[..., 8] = 0
+    H_out[..., 9] = 0
+    numpy.add(S_b_0 * omega_b_1 * omega_b_2, S_b_3 * (q_1 * t4 - q_2 * t5 - q_3 * t6 + tau_w_0), out=H_out[..., 10])
+    numpy.add(S_b_1 * omega_b_0 * omega_b_2, S_b_4 * (q_2 * t6 - q_0 * t4 - q_3 * t5 + tau_w_1), out=H_out[..., 11])
+    numpy.add(S_b_2 * omega_b_0 * omega_b_1, S_b_5 * (q_0 * t5 - q_1 * t6 - q_3 * t4 + tau_w_2), out=H_out[..., 12])
+    return H_out
+
+
+def rigid_body_increments_force_c(q, omega_b, v_w, S_b, F_w, *, out=None):
+    """An RK4 stage's scaled increments under a force only (no torque).
+
+    Generated kernel ``rigid_body_increments_force_c``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    q : array_like, shape (..., 4)
+        orientation (x, y, z, w), R_WB (a stage's value: unit to rounding)
+    omega_b : array_like, shape (..., 3)
+        angular velocity, body frame, rad/s
+    v_w : array_like, shape (..., 3)
+        COM velocity, world frame, m/s
+    S_b : array_like, shape (..., 9)
+        the increments' constants (C_x, C_y, C_z, R_x, R_y, R_z, h_q, sdt, h_m) of rigid_body_increment_scale, once per body and call
+    F_w : array_like, shape (..., 3)
+        total force at the COM, world frame, N
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
+
+    Returns
+    -------
+    H : ndarray, shape (..., 13)
+        (s dt) d/dt of the state
+    """
+    q = numpy.asarray(q, dtype=numpy.float32)
+    omega_b = numpy.asarray(omega_b, dtype=numpy.float32)
+    v_w = numpy.asarray(v_w, dtype=numpy.float32)
+    S_b = numpy.asarray(S_b, dtype=numpy.float32)
+    F_w = numpy.asarray(F_w, dtype=numpy.float32)
+    if out is None or out[0] is None:
+        batch = q.shape[:-1] if q.shape[:-1] == omega_b.shape[:-1] == v_w.shape[:-1] == S_b.shape[:-1] == F_w.shape[:-1] else numpy.broadcast_shapes(q.shape[:-1], omega_b.shape[:-1], v_w.shape[:-1], S_b.shape[:-1], F_w.shape[:-1])
+    q_0 = q[..., 0]
+    q_1 = q[..., 1]
+    q_2 = q[..., 2]
+    q_3 = q[..., 3]
+    omega_b_0 = omega_b[..., 0]
+    omega_b_1 = omega_b[..., 1]
+    omega_b_2 = omega_b[..., 2]
+    v_w_0 = v_w[..., 0]
+    v_w_1 = v_w[..., 1]
+    v_w_2 = v_w[..., 2]
+    S_b_0 = S_b[..., 0]
+    S_b_1 = S_b[..., 1]
+    S_b_2 = S_b[..., 2]
+    S_b_6 = S_b[..., 6]
+    S_b_7 = S_b[..., 7]
+    S_b_8 = S_b[..., 8]
+    F_w_0 = F_w[..., 0]
+    F_w_1 = F_w[..., 1]
+    F_w_2 = F_w[..., 2]
+    t0 = S_b_6*omega_b_0
+    t1 = S_b_6*omega_b_2
+    t2 = S_b_6*omega_b_1
+    H_out = numpy.empty(batch + (13,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
+    numpy.multiply(S_b_7, v_w_0, out=H_out[..., 0])
+    numpy.multiply(S_b_7, v_w_1, out=H_out[..., 1])
+    numpy.multiply(S_b_7, v_w_2, out=H_out[..., 2])
+    numpy.add(q_1 * t1 - q_2 * t2, q_3 * t0, out=H_out[..., 3])
+    numpy.add(q_2 * t0 - q_0 * t1, q_3 * t2, out=H_out[..., 4])
+    numpy.add(q_0 * t2 - q_1 * t0, q_3 * t1, out=H_out[..., 5])
+    numpy.subtract(-q_0 * t0 - q_1 * t2, q_2 * t1, out=H_out[..., 6])
+    numpy.multiply(F_w_0, S_b_8, out=H_out[..., 7])
+    numpy.multiply(F_w_1, S_b_8, out=H_out[..., 8])
+    numpy.multiply(F_w_2, S_b_8, out=H_out[..., 9])
+    numpy.multiply(S_b_0 * omega_b_1, omega_b_2, out=H_out[..., 10])
+    numpy.multiply(S_b_1 * omega_b_0, omega_b_2, out=H_out[..., 11])
+    numpy.multiply(S_b_2 * omega_b_0, omega_b_1, out=H_out[..., 12])
+    return H_out
+
+
+def rigid_body_increments_body_c(q, omega_b, v_w, S_b, F_w, tau_b, *, out=None):
+    """An RK4 stage's scaled increments under a force and a body-frame torque.
+
+    Generated kernel ``rigid_body_increments_body_c``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    q : array_like, shape (..., 4)
+        orientation (x, y, z, w), R_WB (a stage's value: unit to rounding)
+    omega_b : array_like, shape (..., 3)
+        angular velocity, body frame, rad/s
+    v_w : array_like, shape (..., 3)
+        COM velocity, world frame, m/s
+    S_b : array_like, shape (..., 9)
+        the increments' constants (C_x, C_y, C_z, R_x, R_y, R_z, h_q, sdt, h_m) of rigid_body_increment_scale, once per body and call
+    F_w : array_like, shape (..., 3)
+        total force at the COM, world frame, N (0 without a force)
+    tau_b : array_like, shape (..., 3)
+        total torque about the COM, body frame, N·m
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
+
+    Returns
+    -------
+    H : ndarray, shape (..., 13)
+        (s dt) d/dt of the state
+    """
+    q = numpy.asarray(q, dtype=numpy.float32)
+    omega_b = numpy.asarray(omega_b, dtype=numpy.float32)
+    v_w = numpy.asarray(v_w, dtype=numpy.float32)
+    S_b = numpy.asarray(S_b, dtype=numpy.float32)
+    F_w = numpy.asarray(F_w, dtype=numpy.float32)
+    tau_b = numpy.asarray(tau_b, dtype=numpy.float32)
+    if out is None or out[0] is None:
+        batch = q.shape[:-1] if q.shape[:-1] == omega_b.shape[:-1] == v_w.shape[:-1] == S_b.shape[:-1] == F_w.shape[:-1] == tau_b.shape[:-1] else numpy.broadcast_shapes(q.shape[:-1], omega_b.shape[:-1], v_w.shape[:-1], S_b.shape[:-1], F_w.shape[:-1], tau_b.shape[:-1])
+    q_0 = q[..., 0]
+    q_1 = q[..., 1]
+    q_2 = q[..., 2]
+    q_3 = q[..., 3]
+    omega_b_0 = omega_b[..., 0]
+    omega_b_1 = omega_b[..., 1]
+    omega_b_2 = omega_b[..., 2]
+    v_w_0 = v_w[..., 0]
+    v_w_1 = v_w[..., 1]
+    v_w_2 = v_w[..., 2]
+    S_b_0 = S_b[..., 0]
+    S_b_1 = S_b[..., 1]
+    S_b_2 = S_b[..., 2]
+    S_b_6 = S_b[..., 6]
+    S_b_7 = S_b[..., 7]
+    S_b_8 = S_b[..., 8]
+    F_w_0 = F_w[..., 0]
+    F_w_1 = F_w[..., 1]
+    F_w_2 = F_w[..., 2]
+    t0 = S_b_6*omega_b_0
+    t1 = S_b_6*omega_b_2
+    t2 = S_b_6*omega_b_1
+    H_out = numpy.empty(batch + (13,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
+    numpy.multiply(S_b_7, v_w_0, out=H_out[..., 0])
+    numpy.multiply(S_b_7, v_w_1, out=H_out[..., 1])
+    numpy.multiply(S_b_7, v_w_2, out=H_out[..., 2])
+    numpy.add(q_1 * t1 - q_2 * t2, q_3 * t0, out=H_out[..., 3])
+    numpy.add(q_2 * t0 - q_0 * t1, q_3 * t2, out=H_out[..., 4])
+    numpy.add(q_0 * t2 - q_1 * t0, q_3 * t1, out=H_out[..., 5])
+    numpy.subtract(-q_0 * t0 - q_1 * t2, q_2 * t1, out=H_out[..., 6])
+    numpy.multiply(F_w_0, S_b_8, out=H_out[..., 7])
+    numpy.multiply(F_w_1, S_b_8, out=H_out[..., 8])
+    numpy.multiply(F_w_2, S_b_8, out=H_out[..., 9])
+    H_10_13 = S_b[..., 3:6] * tau_b[..., 0:3]
+    numpy.add(S_b_0 * omega_b_1 * omega_b_2, H_10_13[..., 0], out=H_out[..., 10])
+    numpy.add(S_b_1 * omega_b_0 * omega_b_2, H_10_13[..., 1], out=H_out[..., 11])
+    numpy.add(S_b_2 * omega_b_0 * omega_b_1, H_10_13[..., 2], out=H_out[..., 12])
+    return H_out
+
+
 def linear_acceleration(m, F_w, *, out=None):
     """Acceleration of the COM under a world force.
 
@@ -5523,6 +5864,11 @@ KERNELS = {
     'rigid_body_rhs_c': (rigid_body_rhs_c, [('x', (13,)), ('m', ()), ('c_b', (6,)), ('F_w', (3,)), ('tau_w', (3,))], [('x_dot', (13,))]),
     'rigid_body_rates_free_c': (rigid_body_rates_free_c, [('q', (4,)), ('omega_b', (3,)), ('c_b', (6,))], [('g', (4,)), ('omega_dot_b', (3,))]),
     'rigid_body_increments_free_c': (rigid_body_increments_free_c, [('q', (4,)), ('omega_b', (3,)), ('C_b', (3,)), ('h_q', ())], [('H_q', (4,)), ('H_omega', (3,))]),
+    'rigid_body_increment_scale': (rigid_body_increment_scale, [('c_b', (6,)), ('m', ()), ('sdt', ())], [('S_b', (9,))]),
+    'rigid_body_increments_c': (rigid_body_increments_c, [('q', (4,)), ('omega_b', (3,)), ('v_w', (3,)), ('S_b', (9,)), ('F_w', (3,)), ('tau_w', (3,))], [('H', (13,))]),
+    'rigid_body_increments_torque_c': (rigid_body_increments_torque_c, [('q', (4,)), ('omega_b', (3,)), ('v_w', (3,)), ('S_b', (9,)), ('tau_w', (3,))], [('H', (13,))]),
+    'rigid_body_increments_force_c': (rigid_body_increments_force_c, [('q', (4,)), ('omega_b', (3,)), ('v_w', (3,)), ('S_b', (9,)), ('F_w', (3,))], [('H', (13,))]),
+    'rigid_body_increments_body_c': (rigid_body_increments_body_c, [('q', (4,)), ('omega_b', (3,)), ('v_w', (3,)), ('S_b', (9,)), ('F_w', (3,)), ('tau_b', (3,))], [('H', (13,))]),
     'linear_acceleration': (linear_acceleration, [('m', ()), ('F_w', (3,))], [('a_w', (3,))]),
     'rigid_body_rhs_force_c': (rigid_body_rhs_force_c, [('x', (13,)), ('c_b', (6,)), ('a_w', (3,))], [('x_dot', (13,))]),
     'rigid_body_rhs_body_c': (rigid_body_rhs_body_c, [('x', (13,)), ('c_b', (6,)), ('a_w', (3,)), ('tau_b', (3,))], [('x_dot', (13,))]),

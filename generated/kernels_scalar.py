@@ -654,6 +654,74 @@ def rigid_body_increments_free_c(q, omega_b, C_b, h_q):
     return (q_1*t1 - q_2*t2 + q_3*t0, -q_0*t1 + q_2*t0 + q_3*t2, q_0*t2 - q_1*t0 + q_3*t1, -q_0*t0 - q_1*t2 - q_2*t1), (C_b_0*omega_b_1*omega_b_2, C_b_1*omega_b_0*omega_b_2, C_b_2*omega_b_0*omega_b_1)
 
 
+def rigid_body_increment_scale(c_b, m, sdt):
+    """The constants of an RK4 stage's scaled increments H = (s dt) x' of a body with effects, once per body and call (floats; see the module)."""
+    c_b_0, c_b_1, c_b_2, c_b_3, c_b_4, c_b_5 = c_b
+    return (c_b_0*sdt, c_b_1*sdt, c_b_2*sdt, c_b_3*sdt, c_b_4*sdt, c_b_5*sdt, ((1.0/2.0))*sdt, sdt, sdt/m)
+
+
+def rigid_body_increments_c(q, omega_b, v_w, S_b, F_w, tau_w):
+    """An RK4 stage's scaled increments H = (s dt) x' under a world force and torque (floats; see the module)."""
+    q_0, q_1, q_2, q_3 = q
+    omega_b_0, omega_b_1, omega_b_2 = omega_b
+    v_w_0, v_w_1, v_w_2 = v_w
+    S_b_0, S_b_1, S_b_2, S_b_3, S_b_4, S_b_5, S_b_6, S_b_7, S_b_8 = S_b
+    F_w_0, F_w_1, F_w_2 = F_w
+    tau_w_0, tau_w_1, tau_w_2 = tau_w
+    t0 = S_b_6*omega_b_0
+    t1 = S_b_6*omega_b_2
+    t2 = S_b_6*omega_b_1
+    t3 = 2*q_0
+    t4 = -2*q_1*tau_w_0 + t3*tau_w_1
+    t5 = 2*q_2*tau_w_0 - t3*tau_w_2
+    t6 = 2*q_1*tau_w_2 - 2*q_2*tau_w_1
+    return (S_b_7*v_w_0, S_b_7*v_w_1, S_b_7*v_w_2, q_1*t1 - q_2*t2 + q_3*t0, -q_0*t1 + q_2*t0 + q_3*t2, q_0*t2 - q_1*t0 + q_3*t1, -q_0*t0 - q_1*t2 - q_2*t1, F_w_0*S_b_8, F_w_1*S_b_8, F_w_2*S_b_8, S_b_0*omega_b_1*omega_b_2 + S_b_3*(q_1*t4 - q_2*t5 - q_3*t6 + tau_w_0), S_b_1*omega_b_0*omega_b_2 + S_b_4*(-q_0*t4 + q_2*t6 - q_3*t5 + tau_w_1), S_b_2*omega_b_0*omega_b_1 + S_b_5*(q_0*t5 - q_1*t6 - q_3*t4 + tau_w_2))
+
+
+def rigid_body_increments_torque_c(q, omega_b, v_w, S_b, tau_w):
+    """An RK4 stage's scaled increments under a world torque only (floats; see the module)."""
+    q_0, q_1, q_2, q_3 = q
+    omega_b_0, omega_b_1, omega_b_2 = omega_b
+    v_w_0, v_w_1, v_w_2 = v_w
+    S_b_0, S_b_1, S_b_2, S_b_3, S_b_4, S_b_5, S_b_6, S_b_7, _ = S_b
+    tau_w_0, tau_w_1, tau_w_2 = tau_w
+    t0 = S_b_6*omega_b_0
+    t1 = S_b_6*omega_b_2
+    t2 = S_b_6*omega_b_1
+    t3 = 2*q_0
+    t4 = -2*q_1*tau_w_0 + t3*tau_w_1
+    t5 = 2*q_2*tau_w_0 - t3*tau_w_2
+    t6 = 2*q_1*tau_w_2 - 2*q_2*tau_w_1
+    return (S_b_7*v_w_0, S_b_7*v_w_1, S_b_7*v_w_2, q_1*t1 - q_2*t2 + q_3*t0, -q_0*t1 + q_2*t0 + q_3*t2, q_0*t2 - q_1*t0 + q_3*t1, -q_0*t0 - q_1*t2 - q_2*t1, 0.0, 0.0, 0.0, S_b_0*omega_b_1*omega_b_2 + S_b_3*(q_1*t4 - q_2*t5 - q_3*t6 + tau_w_0), S_b_1*omega_b_0*omega_b_2 + S_b_4*(-q_0*t4 + q_2*t6 - q_3*t5 + tau_w_1), S_b_2*omega_b_0*omega_b_1 + S_b_5*(q_0*t5 - q_1*t6 - q_3*t4 + tau_w_2))
+
+
+def rigid_body_increments_force_c(q, omega_b, v_w, S_b, F_w):
+    """An RK4 stage's scaled increments under a force only (no torque) (floats; see the module)."""
+    q_0, q_1, q_2, q_3 = q
+    omega_b_0, omega_b_1, omega_b_2 = omega_b
+    v_w_0, v_w_1, v_w_2 = v_w
+    S_b_0, S_b_1, S_b_2, _, _, _, S_b_6, S_b_7, S_b_8 = S_b
+    F_w_0, F_w_1, F_w_2 = F_w
+    t0 = S_b_6*omega_b_0
+    t1 = S_b_6*omega_b_2
+    t2 = S_b_6*omega_b_1
+    return (S_b_7*v_w_0, S_b_7*v_w_1, S_b_7*v_w_2, q_1*t1 - q_2*t2 + q_3*t0, -q_0*t1 + q_2*t0 + q_3*t2, q_0*t2 - q_1*t0 + q_3*t1, -q_0*t0 - q_1*t2 - q_2*t1, F_w_0*S_b_8, F_w_1*S_b_8, F_w_2*S_b_8, S_b_0*omega_b_1*omega_b_2, S_b_1*omega_b_0*omega_b_2, S_b_2*omega_b_0*omega_b_1)
+
+
+def rigid_body_increments_body_c(q, omega_b, v_w, S_b, F_w, tau_b):
+    """An RK4 stage's scaled increments under a force and a body-frame torque (floats; see the module)."""
+    q_0, q_1, q_2, q_3 = q
+    omega_b_0, omega_b_1, omega_b_2 = omega_b
+    v_w_0, v_w_1, v_w_2 = v_w
+    S_b_0, S_b_1, S_b_2, S_b_3, S_b_4, S_b_5, S_b_6, S_b_7, S_b_8 = S_b
+    F_w_0, F_w_1, F_w_2 = F_w
+    tau_b_0, tau_b_1, tau_b_2 = tau_b
+    t0 = S_b_6*omega_b_0
+    t1 = S_b_6*omega_b_2
+    t2 = S_b_6*omega_b_1
+    return (S_b_7*v_w_0, S_b_7*v_w_1, S_b_7*v_w_2, q_1*t1 - q_2*t2 + q_3*t0, -q_0*t1 + q_2*t0 + q_3*t2, q_0*t2 - q_1*t0 + q_3*t1, -q_0*t0 - q_1*t2 - q_2*t1, F_w_0*S_b_8, F_w_1*S_b_8, F_w_2*S_b_8, S_b_0*omega_b_1*omega_b_2 + S_b_3*tau_b_0, S_b_1*omega_b_0*omega_b_2 + S_b_4*tau_b_1, S_b_2*omega_b_0*omega_b_1 + S_b_5*tau_b_2)
+
+
 def linear_acceleration(m, F_w):
     """Acceleration of the COM under a world force (floats; see the module)."""
     F_w_0, F_w_1, F_w_2 = F_w
@@ -1915,6 +1983,11 @@ READS = {
     'rigid_body_rhs_c': {'x': (3, 4, 5, 6, 7, 8, 9, 10, 11, 12), 'c_b': (0, 1, 2, 3, 4, 5), 'F_w': (0, 1, 2), 'tau_w': (0, 1, 2)},
     'rigid_body_rates_free_c': {'q': (0, 1, 2, 3), 'omega_b': (0, 1, 2), 'c_b': (0, 1, 2)},
     'rigid_body_increments_free_c': {'q': (0, 1, 2, 3), 'omega_b': (0, 1, 2), 'C_b': (0, 1, 2)},
+    'rigid_body_increment_scale': {'c_b': (0, 1, 2, 3, 4, 5)},
+    'rigid_body_increments_c': {'q': (0, 1, 2, 3), 'omega_b': (0, 1, 2), 'v_w': (0, 1, 2), 'S_b': (0, 1, 2, 3, 4, 5, 6, 7, 8), 'F_w': (0, 1, 2), 'tau_w': (0, 1, 2)},
+    'rigid_body_increments_torque_c': {'q': (0, 1, 2, 3), 'omega_b': (0, 1, 2), 'v_w': (0, 1, 2), 'S_b': (0, 1, 2, 3, 4, 5, 6, 7), 'tau_w': (0, 1, 2)},
+    'rigid_body_increments_force_c': {'q': (0, 1, 2, 3), 'omega_b': (0, 1, 2), 'v_w': (0, 1, 2), 'S_b': (0, 1, 2, 6, 7, 8), 'F_w': (0, 1, 2)},
+    'rigid_body_increments_body_c': {'q': (0, 1, 2, 3), 'omega_b': (0, 1, 2), 'v_w': (0, 1, 2), 'S_b': (0, 1, 2, 3, 4, 5, 6, 7, 8), 'F_w': (0, 1, 2), 'tau_b': (0, 1, 2)},
     'linear_acceleration': {'F_w': (0, 1, 2)},
     'rigid_body_rhs_force_c': {'x': (3, 4, 5, 6, 7, 8, 9, 10, 11, 12), 'c_b': (0, 1, 2), 'a_w': (0, 1, 2)},
     'rigid_body_rhs_body_c': {'x': (3, 4, 5, 6, 7, 8, 9, 10, 11, 12), 'c_b': (0, 1, 2, 3, 4, 5), 'a_w': (0, 1, 2), 'tau_b': (0, 1, 2)},
@@ -2012,6 +2085,11 @@ ZEROS = {
     'rigid_body_rhs_c': {'x_dot': ()},
     'rigid_body_rates_free_c': {'g': (), 'omega_dot_b': ()},
     'rigid_body_increments_free_c': {'H_q': (), 'H_omega': ()},
+    'rigid_body_increment_scale': {'S_b': ()},
+    'rigid_body_increments_c': {'H': ()},
+    'rigid_body_increments_torque_c': {'H': (7, 8, 9)},
+    'rigid_body_increments_force_c': {'H': ()},
+    'rigid_body_increments_body_c': {'H': ()},
     'linear_acceleration': {'a_w': ()},
     'rigid_body_rhs_force_c': {'x_dot': ()},
     'rigid_body_rhs_body_c': {'x_dot': ()},

@@ -151,22 +151,32 @@ def test_each_kinds_right_hand_side_is_printed_once_and_the_backends_read_it():
     calls, frames, kinds = _printed_rhs((ROOT / "generated" / "kernels.h").read_text())
     assert kinds == " ".join(f"X({k})" for k in effect_fuse.TILE_KINDS)
     assert set(calls) == set(frames) == set(effect_fuse.TILE_KINDS) == set(effect_fuse.RHS_OF_KIND)
-    kernels = {f"lv_{r.kernel}(" for r in effect_fuse.RHS_OF_KIND.values()} | {"lv_linear_acceleration("}
+    kernels = ({f"lv_{r.kernel}(" for r in effect_fuse.RHS_OF_KIND.values()} | {"lv_linear_acceleration("}
+               | {f"lv_{r.inc[0]}(" for r in effect_fuse.RHS_OF_KIND.values()})
+    h = (ROOT / "generated" / "kernels.h").read_text()
     for kind, r in effect_fuse.RHS_OF_KIND.items():
         assert calls[kind] == effect_fuse.rhs_call_c(kind) and frames[kind] == str(int(r.body_frame)), kind
+        # the built-in RK4's scaled increments of the kind: printed once, beside its right-hand side
+        inc = f"#define LV_RHS_INC_{kind}({', '.join(effect_fuse.RHS_INC_PARAMS)}) {effect_fuse.rhs_inc_c(kind)}\n"
+        assert h.count(inc) == 1 and f"lv_{r.inc[0]}(" in inc, kind
         assert f"lv_{r.kernel}(" in calls[kind] and ("lv_linear_acceleration(mass, f, f)" in calls[kind]) == r.accel
         assert effects_meta.RHS_KERNELS[kind] == r.pipeline
     assert {k for k, r in effect_fuse.RHS_OF_KIND.items() if r.body_frame} == {"BODY", "BODY_F"}
     assert effect_fuse.RHS_OF_KIND["BODY"].args[2] == "zero" and not effect_fuse.RHS_OF_KIND["BODY"].accel
     simd = (ROOT / "lavendersim" / "csrc" / "batch_simd.h").read_text()
     tiles = simd[simd.index("#define LV_TE_CASE(CODE)"):simd.index("#define LV_TF_DEFINE(")]
-    assert "LV_RHS_CALL_##KIND" in tiles and "LV_RHS_BODY_FRAME_##KIND" in tiles
+    assert "LV_RHS_INC_##KIND" in tiles and "LV_RHS_BODY_FRAME_##KIND" in tiles
     assert not [k for k in kernels if k in tiles], "batch_simd.h's effect tiles name a right-hand side"
     step = (ROOT / "lavendersim" / "csrc" / "step.c").read_text()
     plain = step[step.index("static inline void plain_rhs("):]
     plain = plain[:plain.index("\n}\n")]
     assert "LV_RHS_CALL_##KIND" in plain and "LV_RHS_KINDS(" in plain
     assert not [k for k in kernels if k in plain] and "LV_RHS_BODY" not in plain.replace("LV_RHS_BODY_FRAME_##", "")
+    inc = step[step.index("static inline void plain_inc("):]
+    inc = inc[:inc.index("\n}\n")]
+    assert "LV_RHS_INC_##KIND" in inc and "LV_RHS_KINDS(" in inc and not [k for k in kernels if k in inc]
+    const = simd[simd.index("#define LV_TILE_RHS_TORQUE"):simd.index("#define LV_TILE_LOAD_TORQUE")]
+    assert not [k for k in kernels if k in const] and const.count("LV_RHS_INC_") == 3
     c = param("c", (), "N·m·s", "drag")
     decls = [effect("w_drag", "world drag", [c], torque_w=-c.symbol * STATE.omega_w),           # TORQUE
              effect("b_drag", "body drag", [c], torque_b=-c.symbol * STATE.omega_b),            # BODY
@@ -177,7 +187,7 @@ def test_each_kinds_right_hand_side_is_printed_once_and_the_backends_read_it():
     for d in decls:
         kind = effect_fuse.tile_kind(d.flags)
         assert f"acc_{d.name}{'_b' * effect_fuse.RHS_OF_KIND[kind].body_frame}(pl," in fused
-        assert f"LV_RHS_CALL_{kind}(in, mass, cf, f, t, out)" in fused, d.name
+        assert f"LV_RHS_INC_{kind}(in, mass, sc, f, t, out)" in fused, d.name
     assert sorted(effect_fuse.tile_kind(d.flags) for d in decls) == sorted(effect_fuse.TILE_KINDS)
     assert not [k for k in kernels if k in fused]
     sim = (ROOT / "lavendersim" / "sim.py").read_text()

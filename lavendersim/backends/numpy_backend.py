@@ -511,6 +511,30 @@ class _ForcedGroup:
             a = self.zeros
         return K.rigid_body_rhs_body_c(x, self.c, a, tau, out=dest)
 
+    def scales(self, K, sdt: float) -> np.ndarray:
+        """The bodies' constants S of the scaled increments (rigid_body_increment_scale: sdt = s dt folded into the
+        Euler coefficients, 1/I, q's rate scale and 1/m), struct-of-arrays, kept for the last sdt."""
+        key = getattr(self, "_sdt", None)
+        if key != sdt:
+            self._sdt, self._S = sdt, _soa(K.rigid_body_increment_scale(self.c, self.m, sdt))
+        return self._S
+
+    def inc(self, K, x, buf, S, out):
+        """The scaled increments H = s dt d/dt x of the group's bodies x (n, 13) into out: the effects' sums as rhs
+        takes them, then the class's printed increments kernel (effect_fuse.RHS_OF_KIND's inc, csrc/step.c plain_inc;
+        a force is not divided: H_v = h_m F)."""
+        q, w, v = x[:, Q], x[:, W], x[:, V]
+        F, tau = self.index.sums(x, v, buf)
+        if self.cls == RHS_FORCE:
+            return K.rigid_body_increments_force_c(q, w, v, S, F, out=(out,))
+        if self.cls == RHS_FULL:
+            return K.rigid_body_increments_c(q, w, v, S, F, tau, out=(out,))
+        if self.cls == RHS_BODY_F:
+            return K.rigid_body_increments_body_c(q, w, v, S, F, tau, out=(out,))
+        if self.zeros is None:
+            self.zeros = _soa(np.zeros((self.m.shape[0], 3)))
+        return K.rigid_body_increments_body_c(q, w, v, S, self.zeros, tau, out=(out,))
+
 
 def _forced_groups(plan) -> list[_ForcedGroup]:
     """The plan's plain bodies with effects by class; a float32 plan keeps the full kernel for all (its C loop,
@@ -996,19 +1020,72 @@ def _free_rk4_h(plan, prog, x: np.ndarray, c: np.ndarray, dt: float, xn: np.ndar
     return xn
 
 
+def _forced_rk4_h(plan, prog, fg, x: np.ndarray, dt: float, xn: np.ndarray | None = None) -> np.ndarray:
+    """One step of the bodies x (n, 13) of forced group fg in the scaled-increment form prog (generated/tableaux.py
+    SCALED_RK: (s, stages, end)) on all 13 numbers, q not normalized: the C backend's LV_RK4_SCALED_STEP with the
+    class's increments (csrc/step.c advance_free_rk4, the effect tiles), operation for operation: each stage's
+    increments H_i = s dt k_i (fg.inc), its input x + m H and the running sum of w H (a shared multiple formed once),
+    the end x + (acc + w H) end. Buffers kept by the plan. Returns xn (a new struct-of-arrays state when None)."""
+    s, stages, end = prog
+    n = x.shape[0]
+    key = ("forced_rk4_h", n, id(fg))
+    buf = plan.works.get(key)
+    if buf is None:
+        buf = plan.works[key] = tuple(np.empty((LY.STATE_SIZE, n)).T for _ in range(5))
+    H, A, Y, T1, T2 = buf
+    S = fg.scales(K, s * dt)
+    loads = plan.loads_buffer(x)
+    if xn is None:
+        xn = np.empty(x.shape[::-1], x.dtype).T
+    src = x
+    for i, (w, m, shared) in enumerate(stages):
+        fg.inc(K, src, loads, S, H)
+        t = _h_term(w, H, T1)
+        if i == 0:
+            np.copyto(A, t)
+        else:
+            np.add(A, t, out=A)
+        if m is None:
+            if end != 1.0:
+                np.multiply(A, end, out=A)
+            np.add(x, A, out=xn)
+        else:
+            np.add(x, t if shared else _h_term(m, H, T2), out=Y)
+            src = Y
+    return xn
+
+
+def _scaled_step(plan, prog, x, dt, stepper, f) -> np.ndarray:
+    """The built-in RK4's step of every body in its scaled-increment form: torque-free bodies by _free_rk4_h, each
+    forced group (plain bodies with effects) by _forced_rk4_h; bodies with models (wheels, joints) on the tableau
+    stepper (their rows first, the plain rows then written over them)."""
+    if plan.forced.size and plan.fgroups is None:
+        plan.fgroups = _forced_groups(plan)
+        plan.one = plan.fgroups[0] if plan.forced.size == plan.nb and len(plan.fgroups) == 1 else None
+    forced = plan.K is K   # (a float32 plan's bodies with effects: the tableau stepper, as fixed_loop.h)
+    if plan.one is not None and forced:   # every body plain, one class: no gather, no scatter
+        return _forced_rk4_h(plan, prog, plan.one, x, dt, plan.work(x, len(prog[1])).xn)
+    xn = stepper(plan, f, x, dt) if plan.has_models or not forced else np.empty(x.shape[::-1], x.dtype).T
+    if plan.free.size:
+        xn[plan.free, X] = _free_rk4_h(plan, prog, _soa(x[plan.free, X]), plan.c_free, dt)
+    for fg in plan.fgroups if forced and plan.fgroups else []:
+        xn[fg.idx, X] = _forced_rk4_h(plan, prog, fg, _soa(x[fg.idx, X]), dt)
+    return xn
+
+
 def step(plan: _Plan, x: np.ndarray, integrator: str, normalize: bool, dt: float, u=None) -> np.ndarray:
     """One step of every body; returns the new state array. x is (nb, 13), or (nb, 16) = [x, Omega]
     with u the wheeled bodies' applied torques when the plan has joints or wheels."""
     def f(y, out=None):
         return plan.rhs(y, u, out)
     stepper = _STEPPERS.get(integrator)
-    # torque-free bodies: the scaled-increment form, as C's free paths (a float32 plan in float32, as step_f32.c's)
-    prog = T.SCALED_RK.get(integrator) if plan.free.size else None
+    # torque-free bodies: the scaled-increment form, as C's free paths (a float32 plan in float32, as step_f32.c's);
+    # float64 bodies with effects too (a float32 plan's keep the tableau stepper, as fixed_loop.h's)
+    prog = T.SCALED_RK.get(integrator) if plan.free.size or (plan.forced.size and plan.K is K) else None
     if prog is not None and plan.all_free:
         xn = _free_rk4_h(plan, prog, x, plan.c_free, dt, plan.work(x, len(prog[1])).xn)
-    elif prog is not None and stepper is not None:   # ... and the others on the tableau stepper
-        xn = stepper(plan, f, x, dt)
-        xn[plan.free, X] = _free_rk4_h(plan, prog, _soa(x[plan.free, X]), plan.c_free, dt)
+    elif prog is not None and stepper is not None:   # bodies with effects too (models: the tableau stepper)
+        xn = _scaled_step(plan, prog, x, dt, stepper, f)
     elif stepper is not None:
         xn = stepper(plan, f, x, dt)
     elif (rk := _user_rk(integrator)) is not None:

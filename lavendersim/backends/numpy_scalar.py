@@ -78,6 +78,27 @@ def _rhs(y, c, m, I, effects):
     return KS.rigid_body_rhs_body_c(y, c, a, (Tx, Ty, Tz))
 
 
+def _inc(y, S, effects):
+    """The scaled increments H = s dt d/dt y of one plain body (13 floats) with effects (its class, [(apply, p)]) and
+    constants S (rigid_body_increment_scale): _rhs's sums, then the class's increments kernel
+    (numpy_backend._ForcedGroup.inc)."""
+    (cls, effects), m, I = effects
+    Fx = Fy = Fz = Tx = Ty = Tz = 0.0
+    v = y[_V]
+    for apply, p in effects:
+        f, t = apply(p, y, v, m, I)
+        if f is not None:
+            Fx, Fy, Fz = Fx + f[0], Fy + f[1], Fz + f[2]
+        if t is not None:
+            Tx, Ty, Tz = Tx + t[0], Ty + t[1], Tz + t[2]
+    q, w = y[_Q], y[_W]
+    if cls == RHS_FULL:
+        return KS.rigid_body_increments_c(q, w, v, S, (Fx, Fy, Fz), (Tx, Ty, Tz))
+    if cls == RHS_FORCE:
+        return KS.rigid_body_increments_force_c(q, w, v, S, (Fx, Fy, Fz))
+    return KS.rigid_body_increments_body_c(q, w, v, S, (Fx, Fy, Fz) if cls != RHS_BODY else (0.0, 0.0, 0.0), (Tx, Ty, Tz))
+
+
 def _sum(terms, stage: str, i: int, h: str) -> str:
     """Component i of x + h (a_0 k_j0 + ...) as Python source: numpy_backend._ExplicitRK.axpy's operations in its
     order (one term a = ±2^e: x + k (a h); else a coefficient of 1 not multiplied, the sum left to right, times h)."""
@@ -177,6 +198,47 @@ def _run_h_of(prog, normalize: bool):
     return run
 
 
+_RUNS_HF: dict = {}
+
+
+def _run_hf_of(prog, normalize: bool):
+    """n steps of one body with effects in the scaled-increment form prog (generated/tableaux.py SCALED_RK) on its 13
+    numbers as a compiled Python function run(x, n, S, args) -> x (S its increment constants, args _inc's effects):
+    numpy_backend._forced_rk4_h's operations in its order (C's LV_RK4_SCALED_STEP), written out number by number."""
+    key = (prog, normalize)
+    run = _RUNS_HF.get(key)
+    if run is None:
+        s, stages, end = prog
+        n = LY.STATE_SIZE
+        xs, Ys, Hs, As = ([f"{v}{r}" for r in range(n)] for v in "xYHa")
+        src = ["def run(x, n, S, args):", "    for _ in range(n):", f"        {', '.join(xs)}, = x"]
+        cur = xs
+        for i, (w, m, shared) in enumerate(stages):
+            src.append(f"        {', '.join(Hs)}, = inc(({', '.join(cur)},), S, args)")
+            for r in range(n):
+                t = _term(w, Hs[r])
+                if shared:
+                    src.append(f"        d{r} = {t}")
+                    t = f"d{r}"
+                acc = t if i == 0 else f"{As[r]} + {t}"
+                if m is None:
+                    src.append(f"        {Ys[r]} = {xs[r]} + " + (f"({acc})*{end!r}" if end != 1.0 else f"({acc})"))
+                else:
+                    src.append(f"        {As[r]} = {acc}")
+                    src.append(f"        {Ys[r]} = {xs[r]} + {t if shared else _term(m, Hs[r])}")
+            cur = Ys
+        src.append(f"        x = ({', '.join(Ys)},)")
+        if normalize:
+            q = _Q
+            src.append(f"        x = x[:{q.start}] + normalize(x[{q.start}:{q.stop}]) + x[{q.stop}:]")
+        src += ["        if not isfinite(sum(x)):   # the sum first, as the vectorized check", "            raise Fallback",
+                "    return x"]
+        ns = {"normalize": KS.quat_normalize, "isfinite": math.isfinite, "Fallback": Fallback, "inc": _inc}
+        exec("\n".join(src), ns)   # noqa: S102 (source built above from the printed program's numbers only)
+        run = _RUNS_HF[key] = ns["run"]
+    return run
+
+
 def advance(sb: ScalarBodies, state, rk, normalize: bool, dt: float, n_steps: int, scaled=None) -> None:
     """Step every body of state (n, 13) by n_steps of rk (an _ExplicitRK) of length dt, in floats; state is
     written at the end, all bodies at once; scaled: the scaled-increment form of rk (generated/tableaux.py
@@ -188,6 +250,9 @@ def advance(sb: ScalarBodies, state, rk, normalize: bool, dt: float, n_steps: in
         for x, (c, m, I, effects) in zip(state.tolist(), sb.bodies):
             if scaled is not None and not effects[1]:   # torque-free (no effect of its own or scene-wide)
                 out.append(_run_h_of(scaled, normalize)(tuple(x), n_steps, dt, c))
+            elif scaled is not None:   # with effects: the scaled-increment form on the 13 numbers
+                S = KS.rigid_body_increment_scale(c, m, scaled[0] * dt)
+                out.append(_run_hf_of(scaled, normalize)(tuple(x), n_steps, S, (effects, m, I)))
             else:
                 out.append(run(x, n_steps, dt, _rhs, (c, m, I, effects)))
     except (ArithmeticError, ValueError) as e:

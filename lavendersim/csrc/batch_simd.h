@@ -85,22 +85,22 @@ typedef void (*lv_tile_fn)(double (*LV_RESTRICT T)[LV_TILE], const double (*LV_R
                            const double (*LV_RESTRICT P)[LV_TILE], const lv_tile_fx *LV_RESTRICT fx, long m,
                            double dt, long n_steps);
 
-/* One lane's right-hand side, per kind (LV_RHS_*): in, out, cf (the Euler coefficients c_b of body b); P as above. */
-#define LV_TILE_RHS_TORQUE(in, out) lv_rigid_body_rhs_torque_c(in, cf, tau, out)
-#define LV_TILE_RHS_FULL(in, out) lv_rigid_body_rhs_c(in, mass, cf, F, tau, out)
-#define LV_TILE_RHS_FORCE(in, out) lv_rigid_body_rhs_force_c(in, cf, a, out)
+/* One lane's scaled increments (the built-in RK4's scaled-increment form), per kind (LV_RHS_*): in, out, sc (body
+   b's constants of rigid_body_increment_scale, LV_TILE_SCALES); P as above. */
+#define LV_TILE_RHS_TORQUE(in, out) LV_RHS_INC_TORQUE(in, 0.0, sc, tau, tau, out)
+#define LV_TILE_RHS_FULL(in, out) LV_RHS_INC_FULL(in, 0.0, sc, F, tau, out)
+#define LV_TILE_RHS_FORCE(in, out) LV_RHS_INC_FORCE(in, 0.0, sc, a, a, out)
 #define LV_TILE_LOAD_TORQUE                                                                             \
     const double tau[3] = {P[LV_TP_TAU][b], P[LV_TP_TAU + 1][b], P[LV_TP_TAU + 2][b]}
 #define LV_TILE_LOAD_FULL                                                                               \
     const double tau[3] = {P[LV_TP_TAU][b], P[LV_TP_TAU + 1][b], P[LV_TP_TAU + 2][b]};                 \
-    const double F[3] = {P[LV_TP_F][b], P[LV_TP_F + 1][b], P[LV_TP_F + 2][b]};                         \
-    const double mass = P[LV_TP_M][b]
+    const double F[3] = {P[LV_TP_F][b], P[LV_TP_F + 1][b], P[LV_TP_F + 2][b]}
 #if defined(__GNUC__) || defined(__clang__)
 #define LV_NOINLINE __attribute__((noinline))
 #else
 #define LV_NOINLINE
 #endif
-#define LV_TILE_LOAD_FORCE /* LV_RHS_FORCE: the F rows hold a_w = F/m (advance_free_soa) */                    \
+#define LV_TILE_LOAD_FORCE /* LV_RHS_FORCE: the F rows hold the force sum (its 1/m is sc's h_m) */           \
     const double a[3] = {P[LV_TP_F][b], P[LV_TP_F + 1][b], P[LV_TP_F + 2][b]}
 
 /* n_steps RK4 steps of the m bodies of a tile: T[k][b] = state number k of body b, J[k][b] = its Euler
@@ -109,19 +109,33 @@ typedef void (*lv_tile_fn)(double (*LV_RESTRICT T)[LV_TILE], const double (*LV_R
    the lane's constant effect sums and its right-hand side (LV_TILE_LOAD_*, LV_TILE_RHS_*). */
 #define LV_TILE_FOR(stmt) for (i = 0; i < LV_STATE_SIZE; i++) stmt
 #define LV_TILE_AT(v) v[i]
+/* The lanes' constants of the scaled increments (rigid_body_increment_scale of J's Euler coefficients, P's mass and
+   LV_RK4_SCALE dt), once per call: SC[k][b]. */
+#define LV_TILE_SCALES(SC)                                                                              \
+    for (b = 0; b < m; b++) {                                                                           \
+        double cb[LV_EULER_SIZE], sb[LV_INC_SCALE_SIZE];                                                \
+        for (i = 0; i < LV_EULER_SIZE; i++) cb[i] = J[i][b];                                            \
+        lv_rigid_body_increment_scale(cb, P[LV_TP_M][b], LV_RK4_SCALE * dt, sb);                        \
+        for (i = 0; i < LV_INC_SCALE_SIZE; i++) SC[i][b] = sb[i];                                       \
+    }
+/* The tiles of bodies with effects step the built-in RK4 in its scaled-increment form (tableaux.h
+   LV_RK4_SCALED_STEP on the 13 numbers, RHS(in, out) the lane's increments on its constants sc), bitwise the scalar
+   blocks' advance_free_rk4. */
 #define LV_TILE_RK4(NORMALIZE, LOAD, RHS)                                                               \
     {                                                                                                   \
+        LV_ALIGN_TILE double SC[LV_INC_SCALE_SIZE][LV_TILE];                                            \
         long s, b;                                                                                      \
         int i;                                                                                          \
         (void)fx;                                                                                       \
+        LV_TILE_SCALES(SC)                                                                              \
         for (s = 0; s < n_steps; s++) {                                                                 \
             for (b = 0; b < m; b++) {                                                                   \
                 double x[LV_STATE_SIZE], k[LV_STATE_SIZE], acc[LV_STATE_SIZE], tmp[LV_STATE_SIZE],      \
-                    xn[LV_STATE_SIZE], cf[LV_EULER_SIZE];                                               \
+                    xn[LV_STATE_SIZE], sc[LV_INC_SCALE_SIZE];                                           \
                 LOAD;                                                                                   \
                 for (i = 0; i < LV_STATE_SIZE; i++) x[i] = T[i][b];                                     \
-                for (i = 0; i < LV_EULER_SIZE; i++) cf[i] = J[i][b];                                    \
-                LV_RK4_STEP(double, RHS, LV_TILE_FOR, LV_TILE_AT, dt, x, xn, k, acc, tmp);              \
+                for (i = 0; i < LV_INC_SCALE_SIZE; i++) sc[i] = SC[i][b];                               \
+                LV_RK4_SCALED_STEP(double, RHS, LV_TILE_FOR, LV_TILE_AT, x, xn, k, acc, tmp);           \
                 if (NORMALIZE) lv_quat_normalize(xn + LV_STATE_Q, xn + LV_STATE_Q);                    \
                 for (i = 0; i < LV_STATE_SIZE; i++) T[i][b] = xn[i];                                    \
             }                                                                                           \
@@ -158,9 +172,10 @@ typedef void (*lv_tile_fn)(double (*LV_RESTRICT T)[LV_TILE], const double (*LV_R
 /* The effect tiles' RK4 step, cut into lane loops (stage passes) as model_simd.h does: per stage, the effect sums at
    the stage input (F, TAU start at 0; one lane loop per effect, its code known outside the loop, so the
    generated dispatch lv_effect_apply inlines to that effect alone; effects add in table order), then the right-hand
-   side and the RK4 combination (LV_RK4_UPDATE, tableaux.h): every lane does the scalar path's IEEE operations in
-   its order (advance_free_rk4 with effect_sums), so results are bitwise its. X: a stage's input, A: the weighted
-   sum of the stage derivatives. */
+   side's scaled increments (kernels.h LV_RHS_INC_<kind> on the lane's constants SC, LV_TILE_SCALES) and the
+   scaled-increment RK4 combination (LV_RK4_SCALED_UPDATE, tableaux.h): every lane does the scalar path's IEEE
+   operations in its order (advance_free_rk4 with effect_sums), so results are bitwise its. X: a stage's input, A:
+   the running sum of the increments. */
 #define LV_TE_CASE(CODE) LV_TE_CASE_WITH(CODE, lv_effect_apply)
 #define LV_TE_CASE_B(CODE) LV_TE_CASE_WITH(CODE, lv_effect_apply_b)
 #define LV_TE_CASE_WITH(CODE, APPLY)                                                                    \
@@ -194,10 +209,10 @@ typedef void (*lv_tile_fn)(double (*LV_RESTRICT T)[LV_TILE], const double (*LV_R
         default: fx->utile[e](b0, b1, in, ep, P[LV_TP_M], P + LV_TP_I, F, TAU); break;                   \
         }                                                                                               \
     }
-/* A lane's right-hand side of kind KIND after its sums f, t (derive's rule, kernels.h's LV_RHS_CALL_<kind>), and the
+/* A lane's right-hand side of kind KIND after its sums f, t (derive's rule, kernels.h's LV_RHS_INC_<kind>: its scaled increments), and the
    case of a built-in effect in its sums: the body dispatch when the kind's torques are body-frame forms
    (LV_RHS_BODY_FRAME_<kind>). */
-#define LV_TE_RHS(KIND) LV_RHS_CALL_##KIND(x, P[LV_TP_M][b], cf, f, t, k)
+#define LV_TE_RHS(KIND) LV_RHS_INC_##KIND(x, P[LV_TP_M][b], sc, f, t, k)
 #define LV_TE_APPLY(KIND) LV_TE_APPLY_FRAME(LV_RHS_BODY_FRAME_##KIND)
 #define LV_TE_APPLY_FRAME(BODY_FRAME) LV_TE_APPLY_FRAME_(BODY_FRAME)
 #define LV_TE_APPLY_FRAME_(BODY_FRAME) LV_TE_APPLY_FRAME_##BODY_FRAME
@@ -207,9 +222,9 @@ typedef void (*lv_tile_fn)(double (*LV_RESTRICT T)[LV_TILE], const double (*LV_R
    sum A, or (stage 4) the step's end in T. */
 #define LV_TE_STAGE(STAGE, IN, RHS, NORMALIZE)                                                          \
     for (b = b0; b < b1; b++) {                                                                         \
-        double x[LV_STATE_SIZE], k[LV_STATE_SIZE], cf[LV_EULER_SIZE], f[3], t[3];                       \
+        double x[LV_STATE_SIZE], k[LV_STATE_SIZE], sc[LV_INC_SCALE_SIZE], f[3], t[3];                   \
         for (i = 0; i < LV_STATE_SIZE; i++) x[i] = IN[i][b];                                            \
-        for (i = 0; i < LV_EULER_SIZE; i++) cf[i] = J[i][b];                                            \
+        for (i = 0; i < LV_INC_SCALE_SIZE; i++) sc[i] = SC[i][b];                                       \
         for (i = 0; i < 3; i++) {                                                                       \
             f[i] = F[i][b];                                                                             \
             t[i] = TAU[i][b];                                                                           \
@@ -217,10 +232,10 @@ typedef void (*lv_tile_fn)(double (*LV_RESTRICT T)[LV_TILE], const double (*LV_R
         }                                                                                               \
         RHS;                                                                                            \
         if (STAGE < 4) {                                                                                \
-            for (i = 0; i < LV_STATE_SIZE; i++) (void)LV_RK4_UPDATE(double, STAGE, dt, T[i][b], k[i], A[i][b], X[i][b]); \
+            for (i = 0; i < LV_STATE_SIZE; i++) (void)LV_RK4_SCALED_UPDATE(double, STAGE, T[i][b], k[i], A[i][b], X[i][b]); \
         } else {                                                                                        \
             double xn[LV_STATE_SIZE];                                                                   \
-            for (i = 0; i < LV_STATE_SIZE; i++) (void)LV_RK4_UPDATE(double, 4, dt, T[i][b], k[i], A[i][b], xn[i]); \
+            for (i = 0; i < LV_STATE_SIZE; i++) (void)LV_RK4_SCALED_UPDATE(double, 4, T[i][b], k[i], A[i][b], xn[i]); \
             if (NORMALIZE) lv_quat_normalize(xn + LV_STATE_Q, xn + LV_STATE_Q);                        \
             for (i = 0; i < LV_STATE_SIZE; i++) T[i][b] = xn[i];                                        \
         }                                                                                               \
@@ -231,8 +246,10 @@ typedef void (*lv_tile_fn)(double (*LV_RESTRICT T)[LV_TILE], const double (*LV_R
         LV_ALIGN_TILE double A[LV_STATE_SIZE][LV_TILE];                                                 \
         LV_ALIGN_TILE double F[3][LV_TILE];                                                             \
         LV_ALIGN_TILE double TAU[3][LV_TILE];                                                           \
+        LV_ALIGN_TILE double SC[LV_INC_SCALE_SIZE][LV_TILE];                                            \
         long s, b, b0, b1;                                                                              \
         int i, e, st;                                                                                   \
+        LV_TILE_SCALES(SC)                                                                              \
         for (b0 = 0; b0 < m; b0 = b1) {                                                                 \
             b1 = m - b0 < LV_TE_LANES ? m : b0 + LV_TE_LANES;                                           \
             for (i = 0; i < 3; i++)                                                                     \
@@ -276,10 +293,10 @@ typedef void (*lv_tile_fn)(double (*LV_RESTRICT T)[LV_TILE], const double (*LV_R
     (void)APPLY(C0, p0, in, in + LV_STATE_V_W, mass, I, f, t);                                          \
     if (C1 != 0) (void)APPLY(C1, p1, in, in + LV_STATE_V_W, mass, I, f, t)
 /* A stage's right-hand side of kind KIND at in (LV_TILE_RK4's RHS(in, out)): the pattern's sums through the kind's
-   dispatch (LV_RHS_BODY_FRAME_<kind>), then its right-hand side (kernels.h's LV_RHS_CALL_<kind>), as LV_TE_SUMS and
+   dispatch (LV_RHS_BODY_FRAME_<kind>), then its increments (kernels.h's LV_RHS_INC_<kind>), as LV_TE_SUMS and
    LV_TE_RHS do. */
 #define LV_TF_RHS(KIND, in, out) do { LV_TF_SUMS(LV_TF_APPLY(LV_RHS_BODY_FRAME_##KIND), lv_c0, lv_c1, in);      \
-    LV_RHS_CALL_##KIND(in, mass, cf, f, t, out); } while (0)
+    LV_RHS_INC_##KIND(in, mass, sc, f, t, out); } while (0)
 #define LV_TF_APPLY(BODY_FRAME) LV_TF_APPLY_(BODY_FRAME)
 #define LV_TF_APPLY_(BODY_FRAME) LV_TF_APPLY_##BODY_FRAME
 #define LV_TF_APPLY_0 lv_effect_apply
@@ -679,8 +696,6 @@ static long advance_free_soa(double *state, const double *params, const long *id
             effect_sums(x, x + LV_STATE_V_W, prm[LV_PARAM_M], prm + LV_PARAM_I_B, ix->refs + ix->start[ids[j]],
                         ix->start[ids[j] + 1] - ix->start[ids[j]], F, tau);
         }
-        if (sums && !(ix->flags[ids[j]] & (LV_EFFECT_TORQUE_W | LV_EFFECT_TORQUE_B)))
-            lv_linear_acceleration(prm[LV_PARAM_M], F, F); /* LV_RHS_FORCE: a_w = F/m, once per call */
         for (k = 0; k < 3; k++) {
             P[LV_TP_F + k][j] = F[k];
             P[LV_TP_TAU + k][j] = tau[k];

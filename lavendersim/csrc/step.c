@@ -241,6 +241,29 @@ static inline void plain_rhs(int cls, const double *x, double m, const double *I
 #undef LV_PLAIN_RHS_OF
 }
 
+/* plain_rhs's scaled increments H = (s dt) d/dt x (the built-in RK4's scaled-increment form): the same sums, then the
+   class's increments kernel (kernels.h's LV_RHS_INC_<kind>) on the body's constants sc (rigid_body_increment_scale). */
+static inline void plain_inc(int cls, const double *x, double m, const double *I_b, const double *sc,
+                             const lv_effect_ref *refs, long n_refs, double *H)
+{
+    double F[3] = {0.0, 0.0, 0.0}, tau[3] = {0.0, 0.0, 0.0};
+#define LV_PLAIN_INC_OF(KIND)                                                                           \
+    if (LV_RHS_BODY_FRAME_##KIND)                                                                       \
+        effect_sums_b(x, x + LV_STATE_V_W, m, I_b, refs, n_refs, F, tau);                               \
+    else                                                                                                \
+        effect_sums(x, x + LV_STATE_V_W, m, I_b, refs, n_refs, F, tau);                                 \
+    LV_RHS_INC_##KIND(x, m, sc, F, tau, H);                                                             \
+    return;
+#define LV_PLAIN_INC_CASE(KIND) case LV_RHS_##KIND: { LV_PLAIN_INC_OF(KIND) }
+    switch (cls) {
+    LV_RHS_KINDS(LV_PLAIN_INC_CASE)
+    default: break;
+    }
+    LV_PLAIN_INC_OF(FULL)
+#undef LV_PLAIN_INC_CASE
+#undef LV_PLAIN_INC_OF
+}
+
 /* d/dt of one plain body's state: the free kernel when no effect applies, else plain_rhs by its class. */
 static void body_rhs(const double *x, const double *prm, const lv_effect_ref *refs, long n_refs, int flags,
                      double *xdot)
@@ -368,40 +391,38 @@ static inline double lv_free_rk4_scale(const double *c_b, double dt, double *C)
     return sdt * LV_QUAT_RATE_SCALE;
 }
 
-/* Right-hand sides on the lockstep RK4 path (`forced`, rhs_class): LV_RHS_FREE the free kernel; else each body's
-   effects summed in table order (plain_rhs), the torque-only kernel for LV_RHS_TORQUE (bitwise the full kernel
-   with F = 0); with `constant` (every effect of every body reads no state, see effects_constant) the sums (and
-   LV_RHS_FORCE's a_w) were taken once per call before the loop (the same inputs give the same bits, as on the
-   SIMD tiles). Each on the body's Euler coefficients c[j] (lv_euler_coefficients, once per call): the *_c kernels
-   divide by nothing and give bitwise the I_b kernels' results (the same printed arithmetic). */
-#define LV_RK4_RHS(in, out)                                                                             \
+/* Increments on the lockstep RK4 path (`forced`, rhs_class), the built-in RK4's scaled-increment form (tableaux.h
+   LV_RK4_SCALED_STEP on the 13 numbers; LV_RHS_FREE takes lv_free_rk4_h instead): each body's effects summed in
+   table order (plain_inc), the torque-only kernel for LV_RHS_TORQUE; with `constant` (every effect of every body
+   reads no state, see effects_constant) the sums were taken once per call before the loop (the same inputs give
+   the same bits, as on the SIMD tiles). Each on the body's constants S[j] (rigid_body_increment_scale, once per
+   call: s dt folded into the Euler coefficients, 1/I, q's rate scale and 1/m). */
+#define LV_RK4_INC(in, out)                                                                             \
     do {                                                                                                \
-        if (forced == LV_RHS_FREE) {                                                                    \
-            for (j = 0; j < n; j++) lv_rigid_body_rhs_free_c(in[j], cf[j], out[j]);                     \
-        } else if (forced == LV_RHS_FORCE && constant) {                                                \
-            for (j = 0; j < n; j++) lv_rigid_body_rhs_force_c(in[j], cf[j], F[j], out[j]);              \
+        if (forced == LV_RHS_FORCE && constant) {                                                       \
+            for (j = 0; j < n; j++) LV_RHS_INC_FORCE(in[j], m[j], S[j], F[j], tau[j], out[j]);\
         } else if (forced == LV_RHS_TORQUE) {                                                           \
             for (j = 0; j < n && !constant; j++) {                                                      \
                 F[j][0] = F[j][1] = F[j][2] = tau[j][0] = tau[j][1] = tau[j][2] = 0.0;                  \
                 effect_sums(in[j], in[j] + LV_STATE_V_W, m[j], I[j], refs[j], n_refs[j], F[j], tau[j]);  \
             }                                                                                           \
-            for (j = 0; j < n; j++) lv_rigid_body_rhs_torque_c(in[j], cf[j], tau[j], out[j]);           \
+            for (j = 0; j < n; j++) LV_RHS_INC_TORQUE(in[j], m[j], S[j], F[j], tau[j], out[j]);\
         } else if (constant) {                                                                          \
-            for (j = 0; j < n; j++) lv_rigid_body_rhs_c(in[j], m[j], cf[j], F[j], tau[j], out[j]);      \
+            for (j = 0; j < n; j++) LV_RHS_INC_FULL(in[j], m[j], S[j], F[j], tau[j], out[j]);  \
         } else {                                                                                        \
-            for (j = 0; j < n; j++) plain_rhs(forced, in[j], m[j], I[j], cf[j], refs[j], n_refs[j], out[j]); \
+            for (j = 0; j < n; j++) plain_inc(forced, in[j], m[j], I[j], S[j], refs[j], n_refs[j], out[j]); \
         }                                                                                               \
     } while (0)
 
-/* One RK4 step of bodies 0 .. n-1: x -> xn (LV_RK4_RHS, LV_RK4_STEP, q normalized with the generated kernel when
-   asked). */
+/* One RK4 step of bodies 0 .. n-1: x -> xn (torque-free: lv_free_rk4_h; else LV_RK4_INC through
+   LV_RK4_SCALED_STEP), q normalized with the generated kernel when asked. */
 #define LV_FREE_RK4_STEP()                                                                              \
     do {                                                                                                \
         if (forced == LV_RHS_FREE) { /* torque-free: the scaled-increment form (lv_free_rk4_h) */       \
             for (j = 0; j < n; j++) lv_free_rk4_h(x[j], xn[j], Ch[j], hq, dt, normalize);               \
             break;                                                                                      \
         }                                                                                               \
-        LV_RK4_STEP(double, LV_RK4_RHS, LV_BLOCK_FOR, LV_BLOCK_AT, dt, x, xn, k, acc, tmp);             \
+        LV_RK4_SCALED_STEP(double, LV_RK4_INC, LV_BLOCK_FOR, LV_BLOCK_AT, x, xn, k, acc, tmp);          \
         if (normalize)                                                                                  \
             for (j = 0; j < n; j++) lv_quat_normalize(xn[j] + LV_STATE_Q, xn[j] + LV_STATE_Q);          \
     } while (0)
@@ -429,7 +450,8 @@ static inline long advance_free_rk4(double *state, const double *params, const l
     double x[LV_BLOCK][LV_STATE_SIZE], xn[LV_BLOCK][LV_STATE_SIZE], k[LV_BLOCK][LV_STATE_SIZE],
         acc[LV_BLOCK][LV_STATE_SIZE], tmp[LV_BLOCK][LV_STATE_SIZE], I[LV_BLOCK][3], cf[LV_BLOCK][LV_EULER_SIZE],
         snap[LV_BLOCK][LV_STATE_SIZE];
-    double F[LV_BLOCK][3], tau[LV_BLOCK][3], m[LV_BLOCK], Ch[LV_BLOCK][LV_EULER_K_LEN], hq = 0.0;
+    double F[LV_BLOCK][3], tau[LV_BLOCK][3], m[LV_BLOCK], Ch[LV_BLOCK][LV_EULER_K_LEN], hq = 0.0,
+        S[LV_BLOCK][LV_INC_SCALE_SIZE];
     const lv_effect_ref *refs[LV_BLOCK];
     long n_refs[LV_BLOCK];
     long s, c, cm;
@@ -445,7 +467,7 @@ static inline long advance_free_rk4(double *state, const double *params, const l
         F[j][0] = F[j][1] = F[j][2] = tau[j][0] = tau[j][1] = tau[j][2] = 0.0;
         if (constant && forced != LV_RHS_FREE)
             effect_sums(x[j], x[j] + LV_STATE_V_W, m[j], I[j], refs[j], n_refs[j], F[j], tau[j]);
-        if (constant && forced == LV_RHS_FORCE) lv_linear_acceleration(m[j], F[j], F[j]); /* a_w, once per call */
+        if (forced != LV_RHS_FREE) lv_rigid_body_increment_scale(cf[j], m[j], LV_RK4_SCALE * dt, S[j]);
     }
     for (c = 0; c < n_steps; c += cm) {
         cm = n_steps - c < LV_FREE_CHUNK ? n_steps - c : LV_FREE_CHUNK;
@@ -478,7 +500,7 @@ static inline long advance_free_rk4(double *state, const double *params, const l
 #undef LV_FREE_RK4_STEP
 #undef LV_BLOCK_FOR
 #undef LV_BLOCK_AT
-#undef LV_RK4_RHS
+#undef LV_RK4_INC
 
 #include "batch_simd.h"
 
