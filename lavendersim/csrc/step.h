@@ -147,8 +147,11 @@ typedef struct {
 
 
 /* The RK4 and Euler updates are printed from their tableaux (derive/tableaux.py EXPLICIT_RK) into generated/tableaux.h:
-   LV_RK4_UPDATE / LV_RK4_STEP and LV_EULER_UPDATE / LV_EULER_STEP. Every path of csrc/ that steps rk4 or euler (the
-   scalar blocks, the SIMD tiles, the model bodies and tiles, float32, rk4_expmap) updates through them. */
+   LV_RK4_UPDATE / LV_RK4_STEP and LV_EULER_UPDATE / LV_EULER_STEP, and the built-in rk4's scaled-increment form
+   (derive/tableaux.py scaled_program) as LV_RK4_SCALE / LV_RK4_SCALED_UPDATE / LV_RK4_SCALED_STEP. Every path of
+   csrc/ that steps rk4 or euler updates through them: plain bodies, torque-free or with effects, in the scaled form
+   (the scalar blocks, the SIMD tiles, float32's torque-free tiles); the model bodies and tiles, float32 bodies with
+   effects, the opt-in contract="fma" tiles and rk4_expmap through LV_RK4_STEP / LV_RK4_UPDATE. */
 
 /* ---- one copy of a function per instruction set ---------------------------------------------------------
    LV_ISA_COPIES(DEF) expands DEF(SUFFIX, ATTR) once per instruction set: base (the build's flags), and on x86
