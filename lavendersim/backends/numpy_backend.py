@@ -975,6 +975,30 @@ def _h_term(k: float, H, out):
     return H if k == 1.0 else np.add(H, H, out=out) if k == 2.0 else np.multiply(H, k, out=out)
 
 
+def _scaled_stages(prog, y, inc, H, A, Y, T1, T2, out):
+    """The stages of the scaled-increment form prog (generated/tableaux.py SCALED_RK: (s, stages, end)) from y, as
+    tableaux.h's LV_RK4_SCALED_STEP forms them: inc(src) writes the increments H_i = s dt k_i at the stage input src
+    into H; each stage's input y + m H (into Y) and the running sum of w H (into A; a shared multiple formed once);
+    the step's end y + (acc + w H) end into out (which may be A). T1, T2: scratch for the multiples. Returns out."""
+    _, stages, end = prog
+    src = y
+    for i, (w, m, shared) in enumerate(stages):
+        inc(src)
+        t = _h_term(w, H, T1)
+        if i == 0:
+            np.copyto(A, t)
+        else:
+            np.add(A, t, out=A)
+        if m is None:
+            if end != 1.0:
+                np.multiply(A, end, out=A)
+            np.add(y, A, out=out)
+        else:
+            np.add(y, t if shared else _h_term(m, H, T2), out=Y)
+            src = Y
+    return out
+
+
 def _free_rk4_h(plan, prog, x: np.ndarray, c: np.ndarray, dt: float, xn: np.ndarray | None = None) -> np.ndarray:
     """One torque-free step of bodies x (n, 13) in the scaled-increment form prog (generated/tableaux.py SCALED_RK:
     (s, stages, end)), q not normalized; c (n, LY.EULER_SIZE) their Euler coefficients. The C backend's
@@ -984,7 +1008,7 @@ def _free_rk4_h(plan, prog, x: np.ndarray, c: np.ndarray, dt: float, xn: np.ndar
     the printed translation_drift with v_w, v_w kept. y = (q, omega_b) as (7, n) rows in buffers kept by the plan.
     In the plan's precision (plan.K; a float32 plan in float32, as step_f32.c's float32 tiles).
     Returns xn (a new struct-of-arrays state when None)."""
-    s, stages, end = prog
+    s = prog[0]
     n = x.shape[0]
     key = ("free_rk4_h", n, x.dtype.str)
     buf = plan.works.get(key)
@@ -997,21 +1021,8 @@ def _free_rk4_h(plan, prog, x: np.ndarray, c: np.ndarray, dt: float, xn: np.ndar
     hq = sdt * LY.QUAT_RATE_SCALE
     y[:nq], y[nq:] = x[:, Q].T, x[:, W].T
     Hout = (H[:nq].T, H[nq:].T)
-    src = y
-    for i, (w, m, shared) in enumerate(stages):
-        plan.K.rigid_body_increments_free_c(src[:nq].T, src[nq:].T, C, hq, out=Hout)
-        t = _h_term(w, H, T1)
-        if i == 0:
-            np.copyto(A, t)
-        else:
-            np.add(A, t, out=A)
-        if m is None:
-            if end != 1.0:
-                np.multiply(A, end, out=A)
-            np.add(y, A, out=A)
-        else:
-            np.add(y, t if shared else _h_term(m, H, T2), out=Y)
-            src = Y
+    _scaled_stages(prog, y, lambda src: plan.K.rigid_body_increments_free_c(src[:nq].T, src[nq:].T, C, hq, out=Hout),
+                   H, A, Y, T1, T2, A)
     if xn is None:
         xn = np.empty(x.shape[::-1], x.dtype).T
     xn[:, Q], xn[:, W] = A[:nq].T, A[nq:].T
@@ -1026,7 +1037,7 @@ def _forced_rk4_h(plan, prog, fg, x: np.ndarray, dt: float, xn: np.ndarray | Non
     class's increments (csrc/step.c advance_free_rk4, the effect tiles), operation for operation: each stage's
     increments H_i = s dt k_i (fg.inc), its input x + m H and the running sum of w H (a shared multiple formed once),
     the end x + (acc + w H) end. Buffers kept by the plan. Returns xn (a new struct-of-arrays state when None)."""
-    s, stages, end = prog
+    s = prog[0]
     n = x.shape[0]
     key = ("forced_rk4_h", n, id(fg))
     buf = plan.works.get(key)
@@ -1037,22 +1048,7 @@ def _forced_rk4_h(plan, prog, fg, x: np.ndarray, dt: float, xn: np.ndarray | Non
     loads = plan.loads_buffer(x)
     if xn is None:
         xn = np.empty(x.shape[::-1], x.dtype).T
-    src = x
-    for i, (w, m, shared) in enumerate(stages):
-        fg.inc(K, src, loads, S, H)
-        t = _h_term(w, H, T1)
-        if i == 0:
-            np.copyto(A, t)
-        else:
-            np.add(A, t, out=A)
-        if m is None:
-            if end != 1.0:
-                np.multiply(A, end, out=A)
-            np.add(x, A, out=xn)
-        else:
-            np.add(x, t if shared else _h_term(m, H, T2), out=Y)
-            src = Y
-    return xn
+    return _scaled_stages(prog, x, lambda src: fg.inc(K, src, loads, S, H), H, A, Y, T1, T2, xn)
 
 
 def _scaled_step(plan, prog, x, dt, stepper, f) -> np.ndarray:

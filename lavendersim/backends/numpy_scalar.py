@@ -62,6 +62,18 @@ def _rhs(y, c, m, I, effects):
     """d/dt of one plain body's state y (13 floats) with effects (its class, [(apply, p)]): their sums in table order
     (from 0.0, as the vectorized sums) and its class's right-hand side (numpy_backend._ForcedGroup.rhs)."""
     cls, effects = effects
+    F, T = _sums(y, m, I, effects)
+    if cls == RHS_FULL:
+        return KS.rigid_body_rhs_c(y, m, c, F, T)
+    a = KS.linear_acceleration(m, F) if cls != RHS_BODY else (0.0, 0.0, 0.0)
+    if cls == RHS_FORCE:
+        return KS.rigid_body_rhs_force_c(y, c, a)
+    return KS.rigid_body_rhs_body_c(y, c, a, T)
+
+
+def _sums(y, m, I, effects):
+    """The force and torque sums (F, T) of one plain body's effects [(apply, p)] at its state y (13 floats), in table
+    order from 0.0, as the vectorized sums."""
     Fx = Fy = Fz = Tx = Ty = Tz = 0.0
     v = y[_V]
     for apply, p in effects:
@@ -70,12 +82,7 @@ def _rhs(y, c, m, I, effects):
             Fx, Fy, Fz = Fx + f[0], Fy + f[1], Fz + f[2]
         if t is not None:
             Tx, Ty, Tz = Tx + t[0], Ty + t[1], Tz + t[2]
-    if cls == RHS_FULL:
-        return KS.rigid_body_rhs_c(y, m, c, (Fx, Fy, Fz), (Tx, Ty, Tz))
-    a = KS.linear_acceleration(m, (Fx, Fy, Fz)) if cls != RHS_BODY else (0.0, 0.0, 0.0)
-    if cls == RHS_FORCE:
-        return KS.rigid_body_rhs_force_c(y, c, a)
-    return KS.rigid_body_rhs_body_c(y, c, a, (Tx, Ty, Tz))
+    return (Fx, Fy, Fz), (Tx, Ty, Tz)
 
 
 def _inc(y, S, effects):
@@ -83,20 +90,13 @@ def _inc(y, S, effects):
     constants S (rigid_body_increment_scale): _rhs's sums, then the class's increments kernel
     (numpy_backend._ForcedGroup.inc)."""
     (cls, effects), m, I = effects
-    Fx = Fy = Fz = Tx = Ty = Tz = 0.0
-    v = y[_V]
-    for apply, p in effects:
-        f, t = apply(p, y, v, m, I)
-        if f is not None:
-            Fx, Fy, Fz = Fx + f[0], Fy + f[1], Fz + f[2]
-        if t is not None:
-            Tx, Ty, Tz = Tx + t[0], Ty + t[1], Tz + t[2]
-    q, w = y[_Q], y[_W]
+    F, T = _sums(y, m, I, effects)
+    q, w, v = y[_Q], y[_W], y[_V]
     if cls == RHS_FULL:
-        return KS.rigid_body_increments_c(q, w, v, S, (Fx, Fy, Fz), (Tx, Ty, Tz))
+        return KS.rigid_body_increments_c(q, w, v, S, F, T)
     if cls == RHS_FORCE:
-        return KS.rigid_body_increments_force_c(q, w, v, S, (Fx, Fy, Fz))
-    return KS.rigid_body_increments_body_c(q, w, v, S, (Fx, Fy, Fz) if cls != RHS_BODY else (0.0, 0.0, 0.0), (Tx, Ty, Tz))
+        return KS.rigid_body_increments_force_c(q, w, v, S, F)
+    return KS.rigid_body_increments_body_c(q, w, v, S, F if cls != RHS_BODY else (0.0, 0.0, 0.0), T)
 
 
 def _sum(terms, stage: str, i: int, h: str) -> str:
@@ -150,6 +150,26 @@ def _term(k: float, h: str) -> str:
     return h if k == 1.0 else f"({h} + {h})" if k == 2.0 else f"{h}*{k!r}"
 
 
+def _stage_lines(i: int, w, m, shared: bool, end, ys, Ys, Hs, As) -> list[str]:
+    """Stage i of a scaled-increment program (generated/tableaux.py SCALED_RK) written out number by number, as
+    numpy_backend._scaled_stages forms it: from the increments Hs, the running sum of w H (into As; a shared multiple
+    formed once, d<r>) and the stage's input y + m H into Ys, or at the last stage (m None) the step's end
+    y + (acc + w H) end. ys, Ys, Hs, As: the names of the numbers."""
+    src = []
+    for r in range(len(ys)):
+        t = _term(w, Hs[r])
+        if shared:
+            src.append(f"        d{r} = {t}")
+            t = f"d{r}"
+        acc = t if i == 0 else f"{As[r]} + {t}"
+        if m is None:
+            src.append(f"        {Ys[r]} = {ys[r]} + " + (f"({acc})*{end!r}" if end != 1.0 else f"({acc})"))
+        else:
+            src.append(f"        {As[r]} = {acc}")
+            src.append(f"        {Ys[r]} = {ys[r]} + {t if shared else _term(m, Hs[r])}")
+    return src
+
+
 _RUNS_H: dict = {}
 
 
@@ -175,17 +195,7 @@ def _run_h_of(prog, normalize: bool):
         for i, (w, m, shared) in enumerate(stages):
             src.append(f"        ({', '.join(Hs[:nq])}), ({', '.join(Hs[nq:])}) = inc(({', '.join(cur[:nq])},), "
                        f"({', '.join(cur[nq:])},), C, hq)")
-            for r in range(ny):
-                t = _term(w, Hs[r])
-                if shared:
-                    src.append(f"        d{r} = {t}")
-                    t = f"d{r}"
-                acc = t if i == 0 else f"{As[r]} + {t}"
-                if m is None:
-                    src.append(f"        {Ys[r]} = {ys[r]} + " + (f"({acc})*{end!r}" if end != 1.0 else f"({acc})"))
-                else:
-                    src.append(f"        {As[r]} = {acc}")
-                    src.append(f"        {Ys[r]} = {ys[r]} + {t if shared else _term(m, Hs[r])}")
+            src += _stage_lines(i, w, m, shared, end, ys, Ys, Hs, As)
             cur = Ys
         qn = f"normalize(({', '.join(Ys[:nq])},))" if normalize else f"({', '.join(Ys[:nq])},)"
         src += [f"        x = tuple(drift(p, v, h)) + tuple({qn}) + v + ({', '.join(Ys[nq:])},)",
@@ -215,17 +225,7 @@ def _run_hf_of(prog, normalize: bool):
         cur = xs
         for i, (w, m, shared) in enumerate(stages):
             src.append(f"        {', '.join(Hs)}, = inc(({', '.join(cur)},), S, args)")
-            for r in range(n):
-                t = _term(w, Hs[r])
-                if shared:
-                    src.append(f"        d{r} = {t}")
-                    t = f"d{r}"
-                acc = t if i == 0 else f"{As[r]} + {t}"
-                if m is None:
-                    src.append(f"        {Ys[r]} = {xs[r]} + " + (f"({acc})*{end!r}" if end != 1.0 else f"({acc})"))
-                else:
-                    src.append(f"        {As[r]} = {acc}")
-                    src.append(f"        {Ys[r]} = {xs[r]} + {t if shared else _term(m, Hs[r])}")
+            src += _stage_lines(i, w, m, shared, end, xs, Ys, Hs, As)
             cur = Ys
         src.append(f"        x = ({', '.join(Ys)},)")
         if normalize:
