@@ -79,7 +79,7 @@ def test_rk4_weights_are_their_common_denominator():
 
 @pytest.mark.parametrize("normalize", [True, False])
 @pytest.mark.parametrize("effects", [False, True], ids=["free", "gravity+damping"])
-def test_rk4_declared_as_a_tableau_is_bitwise_the_builtin_rk4(tableaux, backend, effects, normalize):
+def test_rk4_declared_as_a_tableau_agrees_with_the_builtin_rk4_to_rounding(tableaux, backend, effects, normalize):
     """b = (1/6, 1/3, 1/3, 1/6) is stepped as (1, 2, 2, 1)/6 (backends.rk_weights). The built-in rk4 steps plain
     bodies, torque-free or with effects, in its scaled-increment form (tableaux.h LV_RK4_SCALED_STEP: the same
     method, other roundings), so the tableau agrees with it to rounding, not bitwise."""
