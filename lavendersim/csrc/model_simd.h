@@ -13,8 +13,9 @@
    in table order; the RK4 weighted sum B0 k1 + B1 k2 + B2 k3 + B3 k4 is accumulated left to right as C
    evaluates it; -ffp-contract=off), so results are bitwise advance_model's (tests/test_model_simd.py).
 
-   Speed (wheel cubes under scene-wide gravity and angular damping, RK4, one thread, CPU time, min of 7
-   interleaved rounds against isa(0), load ~0.5-1, Sim.run): N = 1024: scalar 289 ns/body-step, AVX-512 98
+   Speed when the tiles landed (48a0cca, 2026-11-23; wheel cubes under scene-wide gravity and angular damping, RK4,
+   one thread, CPU time, min of 7 interleaved rounds against isa(0), load ~0.5-1, Sim.run; the AVX-512 figure is ~45
+   ns at N = 1024 since the tiles were aligned, 5de4d66): N = 1024: scalar 289 ns/body-step, AVX-512 98
    (2.95x), AVX2 139 (2.1x), SSE2 239 (1.2x); N = 10^4: 299, 108 (2.8x), 153 (1.95x), 252 (1.2x). The lane
    copies must be unrolled for that (LV_MT_UNROLL): without it the loops over the model row stay
    loops, the lane loops around them are not vectorized, and the tiles were 0.65x the scalar path. */
