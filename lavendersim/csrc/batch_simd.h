@@ -325,22 +325,7 @@ typedef void (*lv_tile_fn)(double (*LV_RESTRICT T)[LV_TILE], const double (*LV_R
                                      const double (*LV_RESTRICT P)[LV_TILE], const lv_tile_fx *LV_RESTRICT fx, \
                                      long m, double dt, long n_steps)                                   \
     LV_TILE_RK4(NORMALIZE, LV_TILE_LOAD_##KIND, LV_TILE_RHS_##KIND)
-/* The torque-free tiles' instruction order (LV_TILE_H_SCHED_<isa>, added to the copy's target attribute): GCC's
-   pre-register-allocation scheduler (-fschedule-insns, off by default on x86) for the AVX-512 copy only. It interleaves
-   the lane loop's independent chains (q's and omega_b's stages, the normalization) before the registers are given out:
-   the same instructions (102 vmulpd, 101 vaddpd/vsubpd, one vsqrtpd and vdivpd per 8 bodies, no contraction: the
-   file's -ffp-contract=off holds), so the same bits, with 6 stack references per iteration instead of 13. Standalone
-   copy of the tile (64 bodies, min of 7, same binary, load ~3): 4.29 ns per body-step against 4.70 (~9 %). With 16
-   registers (AVX2, the baseline SSE2 copy) it spills more and is slower (7.5 against 6.4 ns), so those keep the
-   default. The opt-in FMA tiles' AVX-512 copies (tile_rk4_*_free_fma_avx512) take it too (~3 %, still contracted).
-   Control flow only: no arithmetic is written here. */
-#if defined(__GNUC__) && !defined(__clang__)
-#define LV_TILE_H_SCHED_avx512 __attribute__((optimize("schedule-insns")))
-#else
-#define LV_TILE_H_SCHED_avx512
-#endif
-#define LV_TILE_H_SCHED_avx2
-#define LV_TILE_H_SCHED_base
+/* The torque-free tiles' instruction order: LV_TILE_H_SCHED_<isa> (step.h). */
 #define LV_DEFINE_TILE_H(NAME, ATTR, NORMALIZE)                                                         \
     ATTR LV_FLATTEN static void NAME(double (*LV_RESTRICT T)[LV_TILE], const double (*LV_RESTRICT J)[LV_TILE], \
                                      const double (*LV_RESTRICT P)[LV_TILE], const lv_tile_fx *LV_RESTRICT fx, \

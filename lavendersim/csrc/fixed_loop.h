@@ -193,7 +193,7 @@ typedef void (*LV_FN(tile_fn))(LV_FN(tile) *LV_RESTRICT t, LV_REAL dt, long n_st
     LV_FIXED_TILE_FN(K##_rk4_n, KIND, LV_PATH_RK4, 1, SUFFIX, ATTR)                          \
     LV_FIXED_TILE_FN(K##_rk4_r, KIND, LV_PATH_RK4, 0, SUFFIX, ATTR)
 #define LV_FIXED_TILES(SUFFIX, ATTR)                                                         \
-    LV_FIXED_TILE_KIND(free, LV_FIXED_FREE, SUFFIX, ATTR)                                    \
+    LV_FIXED_TILE_KIND(free, LV_FIXED_FREE, SUFFIX, ATTR LV_TILE_H_SCHED_##SUFFIX)           \
     LV_FIXED_TILE_KIND(torque, LV_FIXED_TORQUE, SUFFIX, ATTR)                                \
     LV_FIXED_TILE_KIND(force, LV_FIXED_FORCE, SUFFIX, ATTR)
 LV_ISA_COPIES(LV_FIXED_TILES)

@@ -171,6 +171,24 @@ typedef struct {
 #endif
 #define LV_PASTE_(a, b) a##b
 #define LV_PASTE(a, b) LV_PASTE_(a, b) /* a and b expanded first */
+/* The torque-free tiles' instruction order (batch_simd.h, fixed_loop.h; LV_TILE_H_SCHED_<isa>, added to the copy's
+   target attribute): GCC's pre-register-allocation scheduler (-fschedule-insns, off by default on x86) for the AVX-512 copy only. It interleaves
+   the lane loop's independent chains (q's and omega_b's stages, the normalization) before the registers are given out:
+   the same instructions (102 vmulpd, 101 vaddpd/vsubpd, one vsqrtpd and vdivpd per 8 bodies, no contraction: the
+   file's -ffp-contract=off holds), so the same bits, with 6 stack references per iteration instead of 13. Standalone
+   copy of the tile (64 bodies, min of 7, same binary, load ~3): 4.29 ns per body-step against 4.70 (~9 %). With 16
+   registers (AVX2, the baseline SSE2 copy) it spills more and is slower (7.5 against 6.4 ns), so those keep the
+   default. The opt-in FMA tiles' AVX-512 copies (tile_rk4_*_free_fma_avx512) take it too (~3 %, still contracted).
+   The float32 torque-free tiles' AVX-512 copies (fixed_loop.h) take it too: 2.58-2.62 against 2.38-2.41 ns per
+   body-step at N = 1e3, 2.94-3.08 against 2.78-2.83 at 1e4 (Sim.run, load ~5, /work/notes/s24/lead/f32_probe.py).
+   Control flow only: no arithmetic is written here. */
+#if defined(__GNUC__) && !defined(__clang__)
+#define LV_TILE_H_SCHED_avx512 __attribute__((optimize("schedule-insns")))
+#else
+#define LV_TILE_H_SCHED_avx512
+#endif
+#define LV_TILE_H_SCHED_avx2
+#define LV_TILE_H_SCHED_base
 
 /* The instruction sets of the batched RK4 paths (plain bodies: csrc/batch_simd.h; jointed wheel bodies:
    csrc/model_simd.h): LV_ISA_SCALAR turns them off (every body on the scalar block or per-body path), LV_ISA_BASE is the build's baseline (SSE2 on x86-64), AVX2 and
