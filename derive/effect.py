@@ -55,6 +55,10 @@ FLAG_TORQUE_W = 16    # declares a torque in the world frame (torque_w)
 FLAG_TORQUE_B = 32    # declares its torque in the body frame only (torque_b, no torque_w): a plain body whose torques
                       # are all body-frame adds them as such (the body dispatch, *_b) and its right-hand side rotates
                       # nothing (rigid_body_rhs_body_c); elsewhere the effect adds R_WB tau_b as a world torque
+FLAG_COUPLED = 64     # couples translation and rotation: its force reads p_w, q or omega_b, or is not F0 - k v_w (F0, k
+                      # constant, k one scalar rate), or its torque reads p_w or v_w (affine_force). A plain body none of
+                      # whose effects carries it steps its translation by the printed affine flow of RK4 and stages
+                      # only (q, omega_b) (derive/rigid_body.py translation_flow*)
 # Version of the calling convention of printed effect functions (checked when a user library loads).
 ABI_VERSION = 1
 # Lanes per row of the C SIMD tiles (csrc/batch_simd.h): the row stride of the tile form of an effect, which
@@ -274,7 +278,50 @@ class EffectDecl:
         return ((FLAG_USES_V if "v_w" in used else 0) | (FLAG_USES_OMEGA if "omega_b" in used else 0)
                 | (FLAG_FORCE if self.force_w is not None else 0) | (FLAG_USES_STATE if varying else 0)
                 | (FLAG_TORQUE_W if self.torque_w is not None else 0)
-                | (FLAG_TORQUE_B if self.body_outputs is not None else 0))
+                | (FLAG_TORQUE_B if self.body_outputs is not None else 0)
+                | (FLAG_COUPLED if self.affine_force is None else 0))
+
+    @property
+    def affine_force(self) -> tuple[sp.Matrix, sp.Expr] | None:
+        """(F0, k) when the effect leaves translation and rotation decoupled: its force is F0 − k v_W with F0 (3,
+        world, N) and the scalar rate k (kg/s) free of the state (p_w, q, v_w, omega_b; m, I_b and the parameters
+        allowed), its torques read neither p_w nor v_w; None otherwise (FLAG_COUPLED). Decided from the declared
+        expressions: the force's derivatives in p_w, q and omega_b vanish, its Jacobian in v_w is −k times the
+        identity, and F0 + (−k) v_W expands to the force."""
+        if self.kind != "force":
+            return None
+        other = set(STATE.p_w) | set(STATE.q) | set(STATE.omega_b)
+        for t in (self.torque_w, self.torque_b):
+            if t is not None and t.free_symbols & (set(STATE.p_w) | set(STATE.v_w)):
+                return None
+        if self.force_w is None:
+            return sp.zeros(3, 1), sp.Integer(0)
+        F = self.force_w
+        if F.free_symbols & other:
+            return None
+        J = F.jacobian(STATE.v_w).applyfunc(sp.expand)
+        k = -J[0, 0]
+        state = set(STATE.v_w) | other
+        if (k.free_symbols & state) or (J + k * sp.eye(3)).applyfunc(sp.expand) != sp.zeros(3, 3):
+            return None
+        F0 = F.subs({s: 0 for s in STATE.v_w})
+        if (F0 - k * STATE.v_w - F).applyfunc(sp.expand) != sp.zeros(3, 1):
+            return None
+        return F0, k
+
+    def affine_kernel(self, group: str = "Scene effects") -> Kernel | None:
+        """effect_<name>_affine: the decoupled force's (F0, k) of affine_force (F = F0 − k v_W) from the mass and
+        the parameters, for an effect with a force and no FLAG_COUPLED; None otherwise."""
+        af = self.affine_force
+        if af is None or self.force_w is None:
+            return None
+        ins = [Arg("m", STATE.m, *_State.DOCS["m"])]
+        ins += [Arg(p.name, p.symbol, f"{p.doc}, {p.unit}" if p.unit else p.doc, p.domain) for p in self.params]
+        outs = [Arg("F0_w", af[0], "the force at v_W = 0, world frame, N"),
+                Arg("k", af[1], "the rate of the force in v_W (F = F0 − k v_W), kg/s")]
+        return Kernel(self.kernel_name + "_affine", self.summary + " (its affine form in v_W)", self.caption, ins, outs,
+                      group, ["F_W = F0_W − k v_W: a plain body whose effects all have this form (no FLAG_COUPLED) steps "
+                              "its translation by translation_flow on the summed F0 and k."])
 
     @property
     def n_params(self) -> int:

@@ -21,7 +21,7 @@ from typing import NamedTuple
 from itertools import permutations
 
 from . import effect as E
-from .rigid_body import INC_SCALE_SIZE
+from .rigid_body import FLOW_SIZE, INC_C, INC_HQ, INC_SCALE_SIZE
 
 FUSED_MAX = 2   # effects per pattern (batch_simd.h's fused tile loads this many parameter rows)
 # Tile kinds of plain bodies with effects (csrc/step.c's LV_RHS_* names, batch_simd.h's LV_TILE_RHS_<kind>).
@@ -144,7 +144,9 @@ def meta_extra() -> dict:
     RHS_KERNELS (each kind's right-hand side as Sim.pipeline names it)."""
     return {"rhs_bits": RHS_BITS, "rhs_kinds_by_flags": kinds_by_flags(),
             "rhs_kernels": {k: RHS_OF_KIND[k].pipeline for k in TILE_KINDS},
-            "rhs_increments": {k: RHS_OF_KIND[k].inc[0] for k in TILE_KINDS}}
+            "rhs_increments": {k: RHS_OF_KIND[k].inc[0] for k in TILE_KINDS},
+            "flag_coupled": E.FLAG_COUPLED, "rhs_split": SPLIT_OF_KIND,
+            "inc_scale_c": (INC_C.start, INC_C.stop), "inc_scale_hq": INC_HQ}
 
 
 def _constant_flags(effects: Sequence[tuple[int, E.EffectDecl]]) -> set[int]:
@@ -172,6 +174,40 @@ def patterns(effects: Sequence[tuple[int, E.EffectDecl]]) -> list[tuple[int, tup
     return out
 
 
+# The tile kinds whose bodies may step decoupled (no effect FLAG_COUPLED): their rotation staged on (q, omega_b) alone,
+# torque-free (1: rigid_body_increments_free_c) or under the body-frame torque sums (2: rigid_body_increments_rot_b_c),
+# their translation by translation_flow. World torques (TORQUE, FULL) keep the 13-number stages.
+SPLIT_OF_KIND = {"TORQUE": 0, "FULL": 0, "FORCE": 1, "BODY": 2, "BODY_F": 2}
+
+
+def pattern_split(effects: Sequence[tuple[int, E.EffectDecl]], codes: tuple[int, ...]) -> bool:
+    """Whether a pattern's effects all leave translation and rotation decoupled (no FLAG_COUPLED: affine_force)."""
+    decl = dict(effects)
+    return all(not decl[c].flags & E.FLAG_COUPLED for c in codes)
+
+
+def affine_c_source(effects: Sequence[tuple[int, E.EffectDecl]]) -> list[str]:
+    """kernels.h's lv_effect_affine(code, p, m, F0, k): adds a decoupled built-in effect's F0 (3) and k of its
+    printed effect_<name>_affine (F = F0 − k v_W) and returns 0; an effect without a force adds nothing (0); -1 for
+    a coupled or unknown code."""
+    out = ["/* The decoupled step's force of a built-in effect (derive/effect.py affine_force: F = F0 - k v_W): adds its",
+           "   F0 (world, N) into F0 and its rate k (kg/s) into *k; 0, or -1 when the effect couples (FLAG_COUPLED). */",
+           "static inline int lv_effect_affine(int code, const double *p, double m, double *F0, double *k)", "{",
+           "    double f[3], r;", "    (void)p; (void)m; (void)f; (void)r;", "    switch (code) {"]
+    for code, d in effects:
+        if d.kind != "force" or d.flags & E.FLAG_COUPLED:
+            continue
+        name = f"LV_EFFECT_{d.name.upper()}"
+        if d.force_w is None:
+            out.append(f"    case {name}: return 0;")
+            continue
+        offs = d.offsets()
+        args = ["m"] + [f"p[{offs[q.name]}]" if q.shape == () else f"p + {offs[q.name]}" for q in d.params]
+        out.append(f"    case {name}: lv_effect_{d.name}_affine({', '.join(args)}, f, &r); "
+                   "F0[0] += f[0]; F0[1] += f[1]; F0[2] += f[2]; *k += r; return 0;")
+    return out + ["    default: return -1;", "    }", "}"]
+
+
 def c_header(effects: Sequence[tuple[int, E.EffectDecl]]) -> list[str]:
     """kernels.h's table of the fused patterns: LV_EFFECT_FUSED(X, ...) every pattern and LV_EFFECT_FUSED_<kind>(X,
     ...) those of one tile kind, each a call X(..., id, n, code_0, ..., code_{FUSED_MAX-1}) (codes past n: 0)."""
@@ -193,4 +229,11 @@ def c_header(effects: Sequence[tuple[int, E.EffectDecl]]) -> list[str]:
          "#define LV_EFFECT_FUSED(X, ...) " + " ".join(row(p, c) for p, c, _ in pats)]
     for kind in TILE_KINDS:
         h.append((f"#define LV_EFFECT_FUSED_{kind}(X, ...) " + " ".join(row(p, c) for p, c, k in pats if kind in k)).rstrip())
-    return h + rhs_c_header()
+    h += ["/* LV_EFFECT_FUSED_SPLIT_<id>: 1 when the pattern's effects are all decoupled (no FLAG_COUPLED); LV_RHS_SPLIT_<kind>",
+          "   how a decoupled body of that kind stages its rotation (0 not split, 1 torque-free, 2 body-frame torques);",
+          "   LV_FLOW_SIZE translation_flow_scale's constants; LV_INC_SCALE_C / _HQ: C_b and h_q within S. */",
+          f"#define LV_EFFECT_COUPLED {E.FLAG_COUPLED} /* flag: the effect couples translation and rotation */",
+          f"#define LV_FLOW_SIZE {FLOW_SIZE}", f"#define LV_INC_SCALE_C {INC_C.start}", f"#define LV_INC_SCALE_HQ {INC_HQ}"]
+    h += [f"#define LV_EFFECT_FUSED_SPLIT_{p} {int(pattern_split(effects, c))}" for p, c, _ in pats]
+    h += [f"#define LV_RHS_SPLIT_{k} {SPLIT_OF_KIND[k]}" for k in TILE_KINDS]
+    return h + rhs_c_header() + affine_c_source(effects)

@@ -318,7 +318,13 @@ def numpy_dispatch(effects: list[tuple[int | None, E.EffectDecl]]) -> list[str]:
     out += [f"    {d.name!r}: effect_apply_b_{d.name}," for d in body]
     out.append("}")
     coded = [(c, d) for c, d in effects if c is not None]
+    affine = [(d, ak) for _, d in coded if (ak := d.affine_kernel()) is not None]
     if coded:
+        out += ["", "", "# built-in effect name -> its decoupled force's (F0_w (n, 3), k (n,)) from p (n, n_params) and m (n,)",
+                "# (derive/effect.py affine_force: F = F0 - k v_W; the effects with a force and no FLAG_COUPLED)",
+                "EFFECT_AFFINE = {"]
+        out += [f"    {d.name!r}: lambda p, m: {k.name}({', '.join(_np_arg(d, a) for a in k.inputs)})," for d, k in affine]
+        out += ["}", ""]
         out += ["# built-in effect code -> its apply function", "EFFECT_APPLY_BY_CODE = {"]
         out += [f"    {c}: effect_apply_{d.name}," for c, d in coded]
         out += ["}", "", "",

@@ -72,4 +72,5 @@ def kernels() -> list[Kernel]:
                [Arg("tau_w", torque_at_point(q, r_b, F_w), "torque about the COM, world frame, N·m")], g),
     ]
     forces = [d for d in declarations() if d.kind == "force"]
-    return plain + [d.kernel() for d in forces] + [k for k in (d.body_kernel() for d in forces) if k is not None]
+    return (plain + [d.kernel() for d in forces] + [k for k in (d.body_kernel() for d in forces) if k is not None]
+            + [k for k in (d.affine_kernel() for d in forces) if k is not None])

@@ -71,6 +71,35 @@ def inc_scale(c_b, m, sdt) -> list:
     return [sdt * k[i] for i in range(3)] + [sdt * r[i] for i in range(3)] + [sdt * scale, sdt, sdt / m]
 
 
+def affine_flow(c, b_num, b_den) -> tuple[sp.Expr, sp.Expr, sp.Expr, sp.Expr]:
+    """(R, P, Q, S), polynomials in z = λ dt: one step of the explicit subdiagonal RK (nodes c, weights b_num / b_den;
+    stage s at x + c_s dt k_{s-1}) on p' = v, v' = a − λ v (a, λ constant over the step) is exactly
+    v⁺ = R v + dt P a, p⁺ = p + dt Q v + dt² S a. Derived by applying the tableau to that linear system symbolically."""
+    z, dt, lam, a, v, p = sp.symbols("z dt lambda a v p")
+    kv: list[sp.Expr] = []
+    kp: list[sp.Expr] = []
+    for i, ci in enumerate(c):
+        vi = v + (ci * dt * kv[i - 1] if i else 0)
+        kv.append(a - lam * vi)
+        kp.append(vi)
+    b = [sp.Rational(n, b_den) for n in b_num]
+    v1 = sp.expand((v + dt * sum(bi * k for bi, k in zip(b, kv))).subs(lam, z / dt))
+    p1 = sp.expand((p + dt * sum(bi * k for bi, k in zip(b, kp))).subs(lam, z / dt))
+    R_, P_ = v1.coeff(v), sp.expand(v1.coeff(a) / dt)
+    Q_, S_ = sp.expand(p1.coeff(v) / dt), sp.expand(p1.coeff(a) / dt ** 2)
+    for e in (R_, P_, Q_, S_):
+        if e.free_symbols - {z}:
+            raise RuntimeError("derive: the affine flow's coefficients are not polynomials in z = λ dt")
+    if sp.expand(R_ * v + dt * P_ * a - v1) != 0 or sp.expand(p + dt * Q_ * v + dt ** 2 * S_ * a - p1) != 0:
+        raise RuntimeError("derive: the affine flow does not reproduce the tableau's step")
+    return R_, P_, Q_, S_
+
+
+# translation_flow_scale's constants T (once per body and call): R(z), dt Q(z), dv = dt P(z) a, dp = dt² S(z) a.
+FLOW_SIZE = 8
+FLOW_R, FLOW_Q, FLOW_DV, FLOW_DP = 0, 1, slice(2, 5), slice(5, 8)
+
+
 def increments(xq, xw, xv, S, F_w, tau_b) -> sp.Matrix:
     """H = (s dt) x' of a body (q, omega_b, v_w) with the constants S (inc_scale): H_p = sdt v_W, H_q = q (x)
     [h_q omega_B, 0], H_v = h_m F_W (0 when F_w is None), H_omega,x = C_x omega_y omega_z + R_x tau_B,x (cyclic; no
@@ -129,7 +158,7 @@ def kernels() -> list[Kernel]:
     inc_note = ("The built-in RK4 steps a body with effects in the scaled-increment form (tableaux.h "
                 "LV_RK4_SCALED_STEP over the 13 numbers): a stage's input and the step's end are adds and one multiply.")
     same = "Bitwise the I_b kernel of the same name without _c, given c_b = euler_coefficients(I_b) (the same printed arithmetic)."
-    return [
+    return flow_kernels(g) + [
         Kernel("euler_equations", "Euler's rotation equations with external torque, body frame",
                r"I_B \dot\omega_B + \omega_B \times (I_B \omega_B) = \tau_B",
                [Arg(*IB), Arg("omega_b", omega_b, "angular velocity, body frame, rad/s"), Arg("tau_b", tau_b, "torque, body frame, N·m")],
@@ -252,4 +281,53 @@ def kernels() -> list[Kernel]:
                [Arg("x_dot", body, "d/dt of the state")], g,
                notes=["For bodies whose torques are all declared in the body frame (angular_damping: tau_B = -c omega_B): "
                       "nothing rotated."]),
+    ]
+
+
+def flow_kernels(g: str) -> list[Kernel]:
+    """The decoupled step of the built-in RK4 (a plain body none of whose effects is FLAG_COUPLED, derive/effect.py):
+    translation by the affine flow (affine_flow of RK4's tableau: exact, per step two multiplies and two adds per
+    axis), rotation staged on (q, omega_b) alone with the body-frame torque (rigid_body_increments_rot_b_c)."""
+    from .tableaux import EXPLICIT_RK
+    R_, P_, Q_, S_ = affine_flow(*EXPLICIT_RK["rk4"])
+    z = sp.Symbol("z")
+    k, m, dt = scalar("k"), scalar("m", positive=True), scalar("dt")
+    F0, p_w, v_w, T = vec("F0_w", 3), vec("p_w", 3), vec("v_w", 3), vec("T", FLOW_SIZE)
+    a, lam, zz, hv, hp = vec("a_w", 3), scalar("lambda_"), scalar("z_"), scalar("h_v"), scalar("h_p")
+    where = [*zip(a, F0 / m), (lam, k / m), (zz, lam * dt),
+             (hv, dt * sp.horner(P_, z).subs(z, zz)), (hp, dt * dt * sp.horner(S_, z).subs(z, zz))]
+    outs = [sp.horner(R_, z).subs(z, zz), dt * sp.horner(Q_, z).subs(z, zz)] + [hv * a[i] for i in range(3)] + \
+        [hp * a[i] for i in range(3)]
+    t = vec("t_p", 3)
+    q, omega_b, tau_b, S_b = vec("q", 4), vec("omega_b", 3), vec("tau_b", 3), vec("S_b", INC_SCALE_SIZE)
+    H = increments(q, omega_b, vec("v_w", 3), S_b, None, tau_b)
+    return [
+        Kernel("translation_flow_scale", "The constants of RK4's exact step of the COM under a force F0_W − k v_W, "
+               "once per body and call",
+               r"z = (k/m)\,dt,\ T = (R(z),\ dt\,Q(z),\ dt\,P(z)\,a_W,\ dt^2 S(z)\,a_W),\ a_W = F0_W/m",
+               [Arg("k", k, "the summed rate of the body's forces in v_W (F = F0_W − k v_W), kg/s"),
+                Arg("F0_w", F0, "the summed force at v_W = 0, world frame, N"), Arg("m", m, "mass, kg", "positive"),
+                Arg("dt", dt, "step, s")],
+               [Arg("T", sp.Matrix(outs), "(R, dt Q, dv (3), dp (3)): translation_flow's constants")], g,
+               notes=["R, P, Q, S are RK4's step on p' = v, v' = a − λv (affine_flow: its tableau applied to the "
+                      "linear system in SymPy), polynomials in z = λ dt: at k = 0 exactly R = 1, dt Q = dt, dv = dt a, "
+                      "dp = (dt dt ½) a (the constant-acceleration flow)."],
+               where=where),
+        Kernel("translation_flow", "RK4's exact step of the COM under a force F0_W − k v_W (its constants T)",
+               r"v^+ = R\,v_W + dv,\ p^+ = (p_W + dt\,Q\,v_W) + dp",
+               [Arg("p_w", p_w, "COM position, world frame, m"), Arg("v_w", v_w, "COM velocity, world frame, m/s"),
+                Arg("T", T, "translation_flow_scale's constants")],
+               [Arg("p_next", sp.Matrix([t[i] + T[FLOW_DP][i] for i in range(3)]), "m, world frame"),
+                Arg("v_next", sp.Matrix([T[FLOW_R] * v_w[i] + T[FLOW_DV][i] for i in range(3)]), "m/s, world frame")],
+               g, notes=["Every add has two terms (p + dt Q v first): the same association in every printing."],
+               where=[(t[i], p_w[i] + T[FLOW_Q] * v_w[i]) for i in range(3)]),
+        Kernel("rigid_body_increments_rot_b_c", "An RK4 stage's scaled increments of (q, omega_b) alone under a "
+               "body-frame torque", r"H_q = q \otimes [h_q\omega_B, 0],\ H_{\omega,x} = C_x\omega_y\omega_z + R_x\tau_{B,x}",
+               [Arg("q", q, "orientation (x, y, z, w), R_WB (a stage's value: unit to rounding)", "unit_quaternion"),
+                Arg("omega_b", omega_b, "angular velocity, body frame, rad/s"),
+                Arg("S_b", S_b, "rigid_body_increment_scale's constants, once per body and call"),
+                Arg("tau_b", tau_b, "total torque about the COM, body frame, N·m")],
+               [Arg("H_q", X.part(H, "q"), "(s dt) dq/dt"), Arg("H_omega", X.part(H, "omega_b"), "(s dt) dω_B/dt, rad/s")],
+               g, notes=["rigid_body_increments_body_c's q and omega_b rows, for a body whose translation takes "
+                         "translation_flow."]),
     ]

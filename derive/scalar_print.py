@@ -79,6 +79,10 @@ def scalar_dispatch(effects: list) -> list[str]:
                 f'    """{d.name}, its body-frame form (the torque in the body frame)."""', f"    return {ret}"]
     out += ["", "", "# built-in effect code -> its body-frame form (FLAG_TORQUE_B)", "EFFECT_APPLY_B_BY_CODE = {",
             *[f"    {c}: effect_apply_b_{d.name}," for c, d in body if c is not None], "}"]
+    affine = [(c, d, k) for c, d in effects if c is not None and (k := d.affine_kernel()) is not None]
+    out += ["# built-in effect code -> its decoupled force's (F0_w, k) from p and m (derive/effect.py affine_force)",
+            "EFFECT_AFFINE_BY_CODE = {",
+            *[f"    {c}: lambda p, m: {k.name}({', '.join(_arg(d, a) for a in k.inputs)})," for c, d, k in affine], "}"]
     return out
 
 

@@ -16,6 +16,10 @@ RHS_BITS = (4, 16, 32)
 RHS_KINDS_BY_FLAGS = ('FORCE', 'FORCE', 'TORQUE', 'FULL', 'BODY', 'BODY_F', 'TORQUE', 'FULL')
 RHS_KERNELS = {'TORQUE': 'rigid_body_rhs (world torques)', 'FULL': 'rigid_body_rhs (world torques)', 'FORCE': 'rigid_body_rhs_force (a force, no torque: a_w = F/m)', 'BODY': 'rigid_body_rhs_body (torques declared in the body frame)', 'BODY_F': 'rigid_body_rhs_body (a force; torques declared in the body frame)'}
 RHS_INCREMENTS = {'TORQUE': 'rigid_body_increments_torque_c', 'FULL': 'rigid_body_increments_c', 'FORCE': 'rigid_body_increments_force_c', 'BODY': 'rigid_body_increments_body_c', 'BODY_F': 'rigid_body_increments_body_c'}
+FLAG_COUPLED = 64
+RHS_SPLIT = {'TORQUE': 0, 'FULL': 0, 'FORCE': 1, 'BODY': 2, 'BODY_F': 2}
+INC_SCALE_C = (0, 3)
+INC_SCALE_HQ = 6
 
 EFFECTS = (
     {'name': 'applied_torque',

@@ -307,6 +307,33 @@ void lv_effect_angular_damping_b(const double *omega_b, double c, double *tau_co
     tau_com_b[2] = -c*omega_b_2;
 }
 
+void lv_effect_force_at_point_affine(double m, const double *r_b, const double *F_w, double *F0_w, double *k) {
+    const double F_w_0 = F_w[0];
+    const double F_w_1 = F_w[1];
+    const double F_w_2 = F_w[2];
+    F0_w[0] = F_w_0;
+    F0_w[1] = F_w_1;
+    F0_w[2] = F_w_2;
+    k[0] = 0;
+}
+
+void lv_effect_gravity_affine(double m, const double *g_w, double *F0_w, double *k) {
+    const double g_w_0 = g_w[0];
+    const double g_w_1 = g_w[1];
+    const double g_w_2 = g_w[2];
+    F0_w[0] = g_w_0*m;
+    F0_w[1] = g_w_1*m;
+    F0_w[2] = g_w_2*m;
+    k[0] = 0;
+}
+
+void lv_effect_linear_damping_affine(double m, double c, double *F0_w, double *k) {
+    F0_w[0] = 0;
+    F0_w[1] = 0;
+    F0_w[2] = 0;
+    k[0] = c;
+}
+
 void lv_quat_mul(const double *a, const double *b, double *ab) {
     const double a_0 = a[0];
     const double a_1 = a[1];
@@ -767,6 +794,84 @@ void lv_integrate_orientation(const double *q, const double *omega_w, double dt,
     q_next[1] = t8*t9;
     q_next[2] = t7*t9;
     q_next[3] = t6*t9;
+}
+
+void lv_translation_flow_scale(double k, const double *F0_w, double m, double dt, double *T) {
+    const double F0_w_0 = F0_w[0];
+    const double F0_w_1 = F0_w[1];
+    const double F0_w_2 = F0_w[2];
+    const double a_w_0 = F0_w_0/m;
+    const double a_w_1 = F0_w_1/m;
+    const double a_w_2 = F0_w_2/m;
+    const double lambda_ = k/m;
+    const double z_ = dt*lambda_;
+    const double h_v = dt*(z_*(z_*((1.0/6.0) - (1.0/24.0)*z_) + (-1.0/2.0)) + 1);
+    const double h_p = (dt*dt)*(z_*(((1.0/24.0))*z_ + (-1.0/6.0)) + (1.0/2.0));
+    const double t0 = ((1.0/24.0))*z_ + (-1.0/6.0);
+    T[0] = z_*(z_*(t0*z_ + (1.0/2.0)) - 1) + 1;
+    T[1] = dt*(z_*(-t0*z_ + (-1.0/2.0)) + 1);
+    T[2] = a_w_0*h_v;
+    T[3] = a_w_1*h_v;
+    T[4] = a_w_2*h_v;
+    T[5] = a_w_0*h_p;
+    T[6] = a_w_1*h_p;
+    T[7] = a_w_2*h_p;
+}
+
+void lv_translation_flow(const double *p_w, const double *v_w, const double *T, double *p_next, double *v_next) {
+    const double p_w_0 = p_w[0];
+    const double p_w_1 = p_w[1];
+    const double p_w_2 = p_w[2];
+    const double v_w_0 = v_w[0];
+    const double v_w_1 = v_w[1];
+    const double v_w_2 = v_w[2];
+    const double T_0 = T[0];
+    const double T_1 = T[1];
+    const double T_2 = T[2];
+    const double T_3 = T[3];
+    const double T_4 = T[4];
+    const double T_5 = T[5];
+    const double T_6 = T[6];
+    const double T_7 = T[7];
+    const double t_p_0 = T_1*v_w_0 + p_w_0;
+    const double t_p_1 = T_1*v_w_1 + p_w_1;
+    const double t_p_2 = T_1*v_w_2 + p_w_2;
+    p_next[0] = T_5 + t_p_0;
+    p_next[1] = T_6 + t_p_1;
+    p_next[2] = T_7 + t_p_2;
+    v_next[0] = T_0*v_w_0 + T_2;
+    v_next[1] = T_0*v_w_1 + T_3;
+    v_next[2] = T_0*v_w_2 + T_4;
+}
+
+void lv_rigid_body_increments_rot_b_c(const double *q, const double *omega_b, const double *S_b, const double *tau_b, double *H_q, double *H_omega) {
+    const double q_0 = q[0];
+    const double q_1 = q[1];
+    const double q_2 = q[2];
+    const double q_3 = q[3];
+    const double omega_b_0 = omega_b[0];
+    const double omega_b_1 = omega_b[1];
+    const double omega_b_2 = omega_b[2];
+    const double S_b_0 = S_b[0];
+    const double S_b_1 = S_b[1];
+    const double S_b_2 = S_b[2];
+    const double S_b_3 = S_b[3];
+    const double S_b_4 = S_b[4];
+    const double S_b_5 = S_b[5];
+    const double S_b_6 = S_b[6];
+    const double tau_b_0 = tau_b[0];
+    const double tau_b_1 = tau_b[1];
+    const double tau_b_2 = tau_b[2];
+    const double t0 = S_b_6*omega_b_0;
+    const double t1 = S_b_6*omega_b_2;
+    const double t2 = S_b_6*omega_b_1;
+    H_q[0] = q_1*t1 - q_2*t2 + q_3*t0;
+    H_q[1] = -q_0*t1 + q_2*t0 + q_3*t2;
+    H_q[2] = q_0*t2 - q_1*t0 + q_3*t1;
+    H_q[3] = -q_0*t0 - q_1*t2 - q_2*t1;
+    H_omega[0] = S_b_0*omega_b_1*omega_b_2 + S_b_3*tau_b_0;
+    H_omega[1] = S_b_1*omega_b_0*omega_b_2 + S_b_4*tau_b_1;
+    H_omega[2] = S_b_2*omega_b_0*omega_b_1 + S_b_5*tau_b_2;
 }
 
 void lv_euler_equations(const double *I_b, const double *omega_b, const double *tau_b, double *omega_dot_b) {
@@ -3862,6 +3967,9 @@ static void packed_effect_gravity(const double *in, double *out) { lv_effect_gra
 static void packed_effect_linear_damping(const double *in, double *out) { lv_effect_linear_damping(in + 0, in[3], out + 0); }
 static void packed_effect_angular_damping(const double *in, double *out) { lv_effect_angular_damping(in + 0, in + 4, in[7], out + 0); }
 static void packed_effect_angular_damping_b(const double *in, double *out) { lv_effect_angular_damping_b(in + 0, in[3], out + 0); }
+static void packed_effect_force_at_point_affine(const double *in, double *out) { lv_effect_force_at_point_affine(in[0], in + 1, in + 4, out + 0, out + 3); }
+static void packed_effect_gravity_affine(const double *in, double *out) { lv_effect_gravity_affine(in[0], in + 1, out + 0, out + 3); }
+static void packed_effect_linear_damping_affine(const double *in, double *out) { lv_effect_linear_damping_affine(in[0], in[1], out + 0, out + 3); }
 static void packed_quat_mul(const double *in, double *out) { lv_quat_mul(in + 0, in + 4, out + 0); }
 static void packed_quat_conj(const double *in, double *out) { lv_quat_conj(in + 0, out + 0); }
 static void packed_quat_normalize(const double *in, double *out) { lv_quat_normalize(in + 0, out + 0); }
@@ -3879,6 +3987,9 @@ static void packed_quat_to_euler_xyz(const double *in, double *out) { lv_quat_to
 static void packed_quat_derivative_world(const double *in, double *out) { lv_quat_derivative_world(in + 0, in + 4, out + 0); }
 static void packed_quat_derivative_body(const double *in, double *out) { lv_quat_derivative_body(in + 0, in + 4, out + 0); }
 static void packed_integrate_orientation(const double *in, double *out) { lv_integrate_orientation(in + 0, in + 4, in[7], out + 0); }
+static void packed_translation_flow_scale(const double *in, double *out) { lv_translation_flow_scale(in[0], in + 1, in[4], in[5], out + 0); }
+static void packed_translation_flow(const double *in, double *out) { lv_translation_flow(in + 0, in + 3, in + 6, out + 0, out + 3); }
+static void packed_rigid_body_increments_rot_b_c(const double *in, double *out) { lv_rigid_body_increments_rot_b_c(in + 0, in + 4, in + 7, in + 16, out + 0, out + 4); }
 static void packed_euler_equations(const double *in, double *out) { lv_euler_equations(in + 0, in + 3, in + 6, out + 0); }
 static void packed_rigid_body_rhs(const double *in, double *out) { lv_rigid_body_rhs(in + 0, in[13], in + 14, in + 17, in + 20, out + 0); }
 static void packed_rigid_body_rhs_free(const double *in, double *out) { lv_rigid_body_rhs_free(in + 0, in + 13, out + 0); }
@@ -3963,6 +4074,9 @@ const lv_kernel_info lv_kernel_table[LV_KERNEL_COUNT] = {
     {"effect_linear_damping", 4, 3, packed_effect_linear_damping},
     {"effect_angular_damping", 8, 3, packed_effect_angular_damping},
     {"effect_angular_damping_b", 4, 3, packed_effect_angular_damping_b},
+    {"effect_force_at_point_affine", 7, 4, packed_effect_force_at_point_affine},
+    {"effect_gravity_affine", 4, 4, packed_effect_gravity_affine},
+    {"effect_linear_damping_affine", 2, 4, packed_effect_linear_damping_affine},
     {"quat_mul", 8, 4, packed_quat_mul},
     {"quat_conj", 4, 4, packed_quat_conj},
     {"quat_normalize", 4, 4, packed_quat_normalize},
@@ -3980,6 +4094,9 @@ const lv_kernel_info lv_kernel_table[LV_KERNEL_COUNT] = {
     {"quat_derivative_world", 7, 4, packed_quat_derivative_world},
     {"quat_derivative_body", 7, 4, packed_quat_derivative_body},
     {"integrate_orientation", 8, 4, packed_integrate_orientation},
+    {"translation_flow_scale", 6, 8, packed_translation_flow_scale},
+    {"translation_flow", 14, 6, packed_translation_flow},
+    {"rigid_body_increments_rot_b_c", 19, 7, packed_rigid_body_increments_rot_b_c},
     {"euler_equations", 9, 3, packed_euler_equations},
     {"rigid_body_rhs", 23, 13, packed_rigid_body_rhs},
     {"rigid_body_rhs_free", 16, 13, packed_rigid_body_rhs_free},

@@ -11,7 +11,7 @@ typedef struct {
     void (*packed)(const double *in, double *out);
 } lv_kernel_info;
 
-#define LV_KERNEL_COUNT 99
+#define LV_KERNEL_COUNT 105
 extern const lv_kernel_info lv_kernel_table[LV_KERNEL_COUNT];
 
 /* particle_moments: One particle's mass moment and momentum (summed: m r_COM and p).
@@ -123,6 +123,28 @@ void lv_effect_angular_damping(const double *q, const double *omega_b, double c,
      out tau_com_b [3]: torque about the COM, body frame, N·m */
 void lv_effect_angular_damping_b(const double *omega_b, double c, double *tau_com_b);
 
+/* effect_force_at_point_affine: A world force applied at a body-fixed point: the force acts on the COM plus a torque (its affine form in v_W).
+     in  m scalar: mass, kg
+     in  r_b [3]: application point relative to the COM, body frame, m
+     in  F_w [3]: force, world frame, N
+     out F0_w [3]: the force at v_W = 0, world frame, N
+     out k scalar: the rate of the force in v_W (F = F0 − k v_W), kg/s */
+void lv_effect_force_at_point_affine(double m, const double *r_b, const double *F_w, double *F0_w, double *k);
+
+/* effect_gravity_affine: Uniform gravity acting at the COM (its affine form in v_W).
+     in  m scalar: mass, kg
+     in  g_w [3]: gravitational acceleration, world frame, m/s²
+     out F0_w [3]: the force at v_W = 0, world frame, N
+     out k scalar: the rate of the force in v_W (F = F0 − k v_W), kg/s */
+void lv_effect_gravity_affine(double m, const double *g_w, double *F0_w, double *k);
+
+/* effect_linear_damping_affine: Viscous drag on the COM velocity (its affine form in v_W).
+     in  m scalar: mass, kg
+     in  c scalar: viscous coefficient, N·s/m
+     out F0_w [3]: the force at v_W = 0, world frame, N
+     out k scalar: the rate of the force in v_W (F = F0 − k v_W), kg/s */
+void lv_effect_linear_damping_affine(double m, double c, double *F0_w, double *k);
+
 /* quat_mul: Hamilton product.
      in  a [4]: quaternion (x, y, z, w), scalar last
      in  b [4]: quaternion (x, y, z, w), scalar last
@@ -221,6 +243,31 @@ void lv_quat_derivative_body(const double *q, const double *omega_b, double *q_d
      in  dt scalar: time step, s
      out q_next [4]: quaternion (x, y, z, w), scalar last, unit */
 void lv_integrate_orientation(const double *q, const double *omega_w, double dt, double *q_next);
+
+/* translation_flow_scale: The constants of RK4's exact step of the COM under a force F0_W − k v_W, once per body and call.
+     in  k scalar: the summed rate of the body's forces in v_W (F = F0_W − k v_W), kg/s
+     in  F0_w [3]: the summed force at v_W = 0, world frame, N
+     in  m scalar: mass, kg
+     in  dt scalar: step, s
+     out T [8]: (R, dt Q, dv (3), dp (3)): translation_flow's constants */
+void lv_translation_flow_scale(double k, const double *F0_w, double m, double dt, double *T);
+
+/* translation_flow: RK4's exact step of the COM under a force F0_W − k v_W (its constants T).
+     in  p_w [3]: COM position, world frame, m
+     in  v_w [3]: COM velocity, world frame, m/s
+     in  T [8]: translation_flow_scale's constants
+     out p_next [3]: m, world frame
+     out v_next [3]: m/s, world frame */
+void lv_translation_flow(const double *p_w, const double *v_w, const double *T, double *p_next, double *v_next);
+
+/* rigid_body_increments_rot_b_c: An RK4 stage's scaled increments of (q, omega_b) alone under a body-frame torque.
+     in  q [4]: orientation (x, y, z, w), R_WB (a stage's value: unit to rounding)
+     in  omega_b [3]: angular velocity, body frame, rad/s
+     in  S_b [9]: rigid_body_increment_scale's constants, once per body and call
+     in  tau_b [3]: total torque about the COM, body frame, N·m
+     out H_q [4]: (s dt) dq/dt
+     out H_omega [3]: (s dt) dω_B/dt, rad/s */
+void lv_rigid_body_increments_rot_b_c(const double *q, const double *omega_b, const double *S_b, const double *tau_b, double *H_q, double *H_omega);
 
 /* euler_equations: Euler's rotation equations with external torque, body frame.
      in  I_b [3]: principal moments, body frame, kg·m²
@@ -840,6 +887,27 @@ const char *lv_effect_name(int code);
 #define LV_EFFECT_FUSED_FORCE(X, ...) X(__VA_ARGS__, 8, 1, LV_EFFECT_LINEAR_DAMPING, 0)
 #define LV_EFFECT_FUSED_BODY(X, ...) X(__VA_ARGS__, 9, 1, LV_EFFECT_ANGULAR_DAMPING, 0)
 #define LV_EFFECT_FUSED_BODY_F(X, ...) X(__VA_ARGS__, 4, 2, LV_EFFECT_LINEAR_DAMPING, LV_EFFECT_ANGULAR_DAMPING) X(__VA_ARGS__, 6, 2, LV_EFFECT_ANGULAR_DAMPING, LV_EFFECT_LINEAR_DAMPING) X(__VA_ARGS__, 9, 1, LV_EFFECT_ANGULAR_DAMPING, 0)
+/* LV_EFFECT_FUSED_SPLIT_<id>: 1 when the pattern's effects are all decoupled (no FLAG_COUPLED); LV_RHS_SPLIT_<kind>
+   how a decoupled body of that kind stages its rotation (0 not split, 1 torque-free, 2 body-frame torques);
+   LV_FLOW_SIZE translation_flow_scale's constants; LV_INC_SCALE_C / _HQ: C_b and h_q within S. */
+#define LV_EFFECT_COUPLED 64 /* flag: the effect couples translation and rotation */
+#define LV_FLOW_SIZE 8
+#define LV_INC_SCALE_C 0
+#define LV_INC_SCALE_HQ 6
+#define LV_EFFECT_FUSED_SPLIT_1 1
+#define LV_EFFECT_FUSED_SPLIT_2 1
+#define LV_EFFECT_FUSED_SPLIT_3 1
+#define LV_EFFECT_FUSED_SPLIT_4 1
+#define LV_EFFECT_FUSED_SPLIT_5 1
+#define LV_EFFECT_FUSED_SPLIT_6 1
+#define LV_EFFECT_FUSED_SPLIT_7 1
+#define LV_EFFECT_FUSED_SPLIT_8 1
+#define LV_EFFECT_FUSED_SPLIT_9 1
+#define LV_RHS_SPLIT_TORQUE 0
+#define LV_RHS_SPLIT_FULL 0
+#define LV_RHS_SPLIT_FORCE 1
+#define LV_RHS_SPLIT_BODY 2
+#define LV_RHS_SPLIT_BODY_F 2
 /* The right-hand-side class of a plain body with effects, from the OR of their flags (derive/effect_fuse.py
    tile_kind, printed as a table): LV_RHS_KINDS_BY_FLAGS(K)[LV_RHS_FLAGS_INDEX(flags)], K(kind) naming
    each class (TORQUE, FULL, FORCE, BODY, BODY_F). */
@@ -870,5 +938,20 @@ const char *lv_effect_name(int code);
 #define LV_RHS_BODY_FRAME_BODY_F 1
 #define LV_RHS_CALL_BODY_F(x, mass, cf, f, t, out) (lv_linear_acceleration(mass, f, f), lv_rigid_body_rhs_body_c(x, cf, f, t, out))
 #define LV_RHS_INC_BODY_F(x, mass, sc, f, t, out) ((void)(mass), lv_rigid_body_increments_body_c((x) + LV_STATE_Q, (x) + LV_STATE_OMEGA_B, (x) + LV_STATE_V_W, sc, f, t, out))
+/* The decoupled step's force of a built-in effect (derive/effect.py affine_force: F = F0 - k v_W): adds its
+   F0 (world, N) into F0 and its rate k (kg/s) into *k; 0, or -1 when the effect couples (FLAG_COUPLED). */
+static inline int lv_effect_affine(int code, const double *p, double m, double *F0, double *k)
+{
+    double f[3], r;
+    (void)p; (void)m; (void)f; (void)r;
+    switch (code) {
+    case LV_EFFECT_APPLIED_TORQUE: return 0;
+    case LV_EFFECT_FORCE_AT_POINT: lv_effect_force_at_point_affine(m, p + 0, p + 3, f, &r); F0[0] += f[0]; F0[1] += f[1]; F0[2] += f[2]; *k += r; return 0;
+    case LV_EFFECT_GRAVITY: lv_effect_gravity_affine(m, p + 0, f, &r); F0[0] += f[0]; F0[1] += f[1]; F0[2] += f[2]; *k += r; return 0;
+    case LV_EFFECT_LINEAR_DAMPING: lv_effect_linear_damping_affine(m, p[0], f, &r); F0[0] += f[0]; F0[1] += f[1]; F0[2] += f[2]; *k += r; return 0;
+    case LV_EFFECT_ANGULAR_DAMPING: return 0;
+    default: return -1;
+    }
+}
 
 #endif

@@ -332,6 +332,40 @@ def effect_angular_damping_b(omega_b, c):
     return casadi.vertcat(-c*omega_b_0, -c*omega_b_1, -c*omega_b_2)
 
 
+def effect_force_at_point_affine(m, r_b, F_w):
+    """effect_force_at_point_affine: A world force applied at a body-fixed point: the force acts on the COM plus a torque (its affine form in v_W).
+      in  m scalar: mass, kg
+      in  r_b [3]: application point relative to the COM, body frame, m
+      in  F_w [3]: force, world frame, N
+      out F0_w [3]: the force at v_W = 0, world frame, N
+      out k scalar: the rate of the force in v_W (F = F0 − k v_W), kg/s"""
+    F_w_0 = F_w[0]
+    F_w_1 = F_w[1]
+    F_w_2 = F_w[2]
+    return casadi.vertcat(F_w_0, F_w_1, F_w_2), casadi.vertcat(0)
+
+
+def effect_gravity_affine(m, g_w):
+    """effect_gravity_affine: Uniform gravity acting at the COM (its affine form in v_W).
+      in  m scalar: mass, kg
+      in  g_w [3]: gravitational acceleration, world frame, m/s²
+      out F0_w [3]: the force at v_W = 0, world frame, N
+      out k scalar: the rate of the force in v_W (F = F0 − k v_W), kg/s"""
+    g_w_0 = g_w[0]
+    g_w_1 = g_w[1]
+    g_w_2 = g_w[2]
+    return casadi.vertcat(g_w_0*m, g_w_1*m, g_w_2*m), casadi.vertcat(0)
+
+
+def effect_linear_damping_affine(m, c):
+    """effect_linear_damping_affine: Viscous drag on the COM velocity (its affine form in v_W).
+      in  m scalar: mass, kg
+      in  c scalar: viscous coefficient, N·s/m
+      out F0_w [3]: the force at v_W = 0, world frame, N
+      out k scalar: the rate of the force in v_W (F = F0 − k v_W), kg/s"""
+    return casadi.vertcat(0, 0, 0), casadi.vertcat(c)
+
+
 def quat_mul(a, b):
     """quat_mul: Hamilton product.
       in  a [4]: quaternion (x, y, z, w), scalar last
@@ -672,6 +706,85 @@ def integrate_orientation(q, omega_w, dt):
     t8 = dt*(-omega_w_0*t1 + omega_w_1*t0 + q_0*t2) + q_1
     t9 = (1.0/casadi.sqrt((t3*t3) + (t6*t6) + (t7*t7) + (t8*t8)))
     return casadi.vertcat(t3*t9, t8*t9, t7*t9, t6*t9)
+
+
+def translation_flow_scale(k, F0_w, m, dt):
+    """translation_flow_scale: The constants of RK4's exact step of the COM under a force F0_W − k v_W, once per body and call.
+      in  k scalar: the summed rate of the body's forces in v_W (F = F0_W − k v_W), kg/s
+      in  F0_w [3]: the summed force at v_W = 0, world frame, N
+      in  m scalar: mass, kg
+      in  dt scalar: step, s
+      out T [8]: (R, dt Q, dv (3), dp (3)): translation_flow's constants"""
+    F0_w_0 = F0_w[0]
+    F0_w_1 = F0_w[1]
+    F0_w_2 = F0_w[2]
+    a_w_0 = F0_w_0/m
+    a_w_1 = F0_w_1/m
+    a_w_2 = F0_w_2/m
+    lambda_ = k/m
+    z_ = dt*lambda_
+    h_v = dt*(z_*(z_*((1.0/6.0) - (1.0/24.0)*z_) + (-1.0/2.0)) + 1)
+    h_p = (dt*dt)*(z_*(((1.0/24.0))*z_ + (-1.0/6.0)) + (1.0/2.0))
+    t0 = ((1.0/24.0))*z_ + (-1.0/6.0)
+    return casadi.vertcat(z_*(z_*(t0*z_ + (1.0/2.0)) - 1) + 1, dt*(z_*(-t0*z_ + (-1.0/2.0)) + 1), a_w_0*h_v, a_w_1*h_v, a_w_2*h_v, a_w_0*h_p, a_w_1*h_p, a_w_2*h_p)
+
+
+def translation_flow(p_w, v_w, T):
+    """translation_flow: RK4's exact step of the COM under a force F0_W − k v_W (its constants T).
+      in  p_w [3]: COM position, world frame, m
+      in  v_w [3]: COM velocity, world frame, m/s
+      in  T [8]: translation_flow_scale's constants
+      out p_next [3]: m, world frame
+      out v_next [3]: m/s, world frame"""
+    p_w_0 = p_w[0]
+    p_w_1 = p_w[1]
+    p_w_2 = p_w[2]
+    v_w_0 = v_w[0]
+    v_w_1 = v_w[1]
+    v_w_2 = v_w[2]
+    T_0 = T[0]
+    T_1 = T[1]
+    T_2 = T[2]
+    T_3 = T[3]
+    T_4 = T[4]
+    T_5 = T[5]
+    T_6 = T[6]
+    T_7 = T[7]
+    t_p_0 = T_1*v_w_0 + p_w_0
+    t_p_1 = T_1*v_w_1 + p_w_1
+    t_p_2 = T_1*v_w_2 + p_w_2
+    return casadi.vertcat(T_5 + t_p_0, T_6 + t_p_1, T_7 + t_p_2), casadi.vertcat(T_0*v_w_0 + T_2, T_0*v_w_1 + T_3, T_0*v_w_2 + T_4)
+
+
+def rigid_body_increments_rot_b_c(q, omega_b, S_b, tau_b):
+    """rigid_body_increments_rot_b_c: An RK4 stage's scaled increments of (q, omega_b) alone under a body-frame torque.
+      in  q [4]: orientation (x, y, z, w), R_WB (a stage's value: unit to rounding)
+      in  omega_b [3]: angular velocity, body frame, rad/s
+      in  S_b [9]: rigid_body_increment_scale's constants, once per body and call
+      in  tau_b [3]: total torque about the COM, body frame, N·m
+      out H_q [4]: (s dt) dq/dt
+      out H_omega [3]: (s dt) dω_B/dt, rad/s"""
+    q_0 = q[0]
+    q_1 = q[1]
+    q_2 = q[2]
+    q_3 = q[3]
+    omega_b_0 = omega_b[0]
+    omega_b_1 = omega_b[1]
+    omega_b_2 = omega_b[2]
+    S_b_0 = S_b[0]
+    S_b_1 = S_b[1]
+    S_b_2 = S_b[2]
+    S_b_3 = S_b[3]
+    S_b_4 = S_b[4]
+    S_b_5 = S_b[5]
+    S_b_6 = S_b[6]
+    tau_b_0 = tau_b[0]
+    tau_b_1 = tau_b[1]
+    tau_b_2 = tau_b[2]
+    t0 = S_b_6*omega_b_0
+    t1 = S_b_6*omega_b_2
+    t2 = S_b_6*omega_b_1
+    return casadi.vertcat(q_1*t1 - q_2*t2 + q_3*t0, -q_0*t1 + q_2*t0 + q_3*t2, q_0*t2 - q_1*t0 + q_3*t1, -q_0*t0 - q_1*t2 - q_2*t1), casadi.vertcat(S_b_0*omega_b_1*omega_b_2 + S_b_3*tau_b_0, S_b_1*omega_b_0*omega_b_2 + S_b_4*tau_b_1, S_b_2*omega_b_0*omega_b_1 + S_b_5*tau_b_2)
 
 
 def euler_equations(I_b, omega_b, tau_b):

@@ -308,6 +308,33 @@ void lvf_effect_angular_damping_b(const float *omega_b, float c, float *tau_com_
     tau_com_b[2] = -c*omega_b_2;
 }
 
+void lvf_effect_force_at_point_affine(float m, const float *r_b, const float *F_w, float *F0_w, float *k) {
+    const float F_w_0 = F_w[0];
+    const float F_w_1 = F_w[1];
+    const float F_w_2 = F_w[2];
+    F0_w[0] = F_w_0;
+    F0_w[1] = F_w_1;
+    F0_w[2] = F_w_2;
+    k[0] = 0;
+}
+
+void lvf_effect_gravity_affine(float m, const float *g_w, float *F0_w, float *k) {
+    const float g_w_0 = g_w[0];
+    const float g_w_1 = g_w[1];
+    const float g_w_2 = g_w[2];
+    F0_w[0] = g_w_0*m;
+    F0_w[1] = g_w_1*m;
+    F0_w[2] = g_w_2*m;
+    k[0] = 0;
+}
+
+void lvf_effect_linear_damping_affine(float m, float c, float *F0_w, float *k) {
+    F0_w[0] = 0;
+    F0_w[1] = 0;
+    F0_w[2] = 0;
+    k[0] = c;
+}
+
 void lvf_quat_mul(const float *a, const float *b, float *ab) {
     const float a_0 = a[0];
     const float a_1 = a[1];
@@ -768,6 +795,84 @@ void lvf_integrate_orientation(const float *q, const float *omega_w, float dt, f
     q_next[1] = t8*t9;
     q_next[2] = t7*t9;
     q_next[3] = t6*t9;
+}
+
+void lvf_translation_flow_scale(float k, const float *F0_w, float m, float dt, float *T) {
+    const float F0_w_0 = F0_w[0];
+    const float F0_w_1 = F0_w[1];
+    const float F0_w_2 = F0_w[2];
+    const float a_w_0 = F0_w_0/m;
+    const float a_w_1 = F0_w_1/m;
+    const float a_w_2 = F0_w_2/m;
+    const float lambda_ = k/m;
+    const float z_ = dt*lambda_;
+    const float h_v = dt*(z_*(z_*((1.0F/6.0F) - (1.0F/24.0F)*z_) + (-1.0F/2.0F)) + 1);
+    const float h_p = (dt*dt)*(z_*(((1.0F/24.0F))*z_ + (-1.0F/6.0F)) + (1.0F/2.0F));
+    const float t0 = ((1.0F/24.0F))*z_ + (-1.0F/6.0F);
+    T[0] = z_*(z_*(t0*z_ + (1.0F/2.0F)) - 1) + 1;
+    T[1] = dt*(z_*(-t0*z_ + (-1.0F/2.0F)) + 1);
+    T[2] = a_w_0*h_v;
+    T[3] = a_w_1*h_v;
+    T[4] = a_w_2*h_v;
+    T[5] = a_w_0*h_p;
+    T[6] = a_w_1*h_p;
+    T[7] = a_w_2*h_p;
+}
+
+void lvf_translation_flow(const float *p_w, const float *v_w, const float *T, float *p_next, float *v_next) {
+    const float p_w_0 = p_w[0];
+    const float p_w_1 = p_w[1];
+    const float p_w_2 = p_w[2];
+    const float v_w_0 = v_w[0];
+    const float v_w_1 = v_w[1];
+    const float v_w_2 = v_w[2];
+    const float T_0 = T[0];
+    const float T_1 = T[1];
+    const float T_2 = T[2];
+    const float T_3 = T[3];
+    const float T_4 = T[4];
+    const float T_5 = T[5];
+    const float T_6 = T[6];
+    const float T_7 = T[7];
+    const float t_p_0 = T_1*v_w_0 + p_w_0;
+    const float t_p_1 = T_1*v_w_1 + p_w_1;
+    const float t_p_2 = T_1*v_w_2 + p_w_2;
+    p_next[0] = T_5 + t_p_0;
+    p_next[1] = T_6 + t_p_1;
+    p_next[2] = T_7 + t_p_2;
+    v_next[0] = T_0*v_w_0 + T_2;
+    v_next[1] = T_0*v_w_1 + T_3;
+    v_next[2] = T_0*v_w_2 + T_4;
+}
+
+void lvf_rigid_body_increments_rot_b_c(const float *q, const float *omega_b, const float *S_b, const float *tau_b, float *H_q, float *H_omega) {
+    const float q_0 = q[0];
+    const float q_1 = q[1];
+    const float q_2 = q[2];
+    const float q_3 = q[3];
+    const float omega_b_0 = omega_b[0];
+    const float omega_b_1 = omega_b[1];
+    const float omega_b_2 = omega_b[2];
+    const float S_b_0 = S_b[0];
+    const float S_b_1 = S_b[1];
+    const float S_b_2 = S_b[2];
+    const float S_b_3 = S_b[3];
+    const float S_b_4 = S_b[4];
+    const float S_b_5 = S_b[5];
+    const float S_b_6 = S_b[6];
+    const float tau_b_0 = tau_b[0];
+    const float tau_b_1 = tau_b[1];
+    const float tau_b_2 = tau_b[2];
+    const float t0 = S_b_6*omega_b_0;
+    const float t1 = S_b_6*omega_b_2;
+    const float t2 = S_b_6*omega_b_1;
+    H_q[0] = q_1*t1 - q_2*t2 + q_3*t0;
+    H_q[1] = -q_0*t1 + q_2*t0 + q_3*t2;
+    H_q[2] = q_0*t2 - q_1*t0 + q_3*t1;
+    H_q[3] = -q_0*t0 - q_1*t2 - q_2*t1;
+    H_omega[0] = S_b_0*omega_b_1*omega_b_2 + S_b_3*tau_b_0;
+    H_omega[1] = S_b_1*omega_b_0*omega_b_2 + S_b_4*tau_b_1;
+    H_omega[2] = S_b_2*omega_b_0*omega_b_1 + S_b_5*tau_b_2;
 }
 
 void lvf_euler_equations(const float *I_b, const float *omega_b, const float *tau_b, float *omega_dot_b) {

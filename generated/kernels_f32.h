@@ -37,6 +37,12 @@ void lvf_effect_linear_damping(const float *v_w, float c, float *F_com_w);
 void lvf_effect_angular_damping(const float *q, const float *omega_b, float c, float *tau_com_w);
 /* effect_angular_damping_b: Viscous drag on the angular velocity (its body-frame form) (float; see kernels.h) */
 void lvf_effect_angular_damping_b(const float *omega_b, float c, float *tau_com_b);
+/* effect_force_at_point_affine: A world force applied at a body-fixed point: the force acts on the COM plus a torque (its affine form in v_W) (float; see kernels.h) */
+void lvf_effect_force_at_point_affine(float m, const float *r_b, const float *F_w, float *F0_w, float *k);
+/* effect_gravity_affine: Uniform gravity acting at the COM (its affine form in v_W) (float; see kernels.h) */
+void lvf_effect_gravity_affine(float m, const float *g_w, float *F0_w, float *k);
+/* effect_linear_damping_affine: Viscous drag on the COM velocity (its affine form in v_W) (float; see kernels.h) */
+void lvf_effect_linear_damping_affine(float m, float c, float *F0_w, float *k);
 /* quat_mul: Hamilton product (float; see kernels.h) */
 void lvf_quat_mul(const float *a, const float *b, float *ab);
 /* quat_conj: Conjugate (inverse of a unit quaternion) (float; see kernels.h) */
@@ -71,6 +77,12 @@ void lvf_quat_derivative_world(const float *q, const float *omega_w, float *q_do
 void lvf_quat_derivative_body(const float *q, const float *omega_b, float *q_dot);
 /* integrate_orientation: One explicit world-form step, then normalization (the chapter's default) (float; see kernels.h) */
 void lvf_integrate_orientation(const float *q, const float *omega_w, float dt, float *q_next);
+/* translation_flow_scale: The constants of RK4's exact step of the COM under a force F0_W − k v_W, once per body and call (float; see kernels.h) */
+void lvf_translation_flow_scale(float k, const float *F0_w, float m, float dt, float *T);
+/* translation_flow: RK4's exact step of the COM under a force F0_W − k v_W (its constants T) (float; see kernels.h) */
+void lvf_translation_flow(const float *p_w, const float *v_w, const float *T, float *p_next, float *v_next);
+/* rigid_body_increments_rot_b_c: An RK4 stage's scaled increments of (q, omega_b) alone under a body-frame torque (float; see kernels.h) */
+void lvf_rigid_body_increments_rot_b_c(const float *q, const float *omega_b, const float *S_b, const float *tau_b, float *H_q, float *H_omega);
 /* euler_equations: Euler's rotation equations with external torque, body frame (float; see kernels.h) */
 void lvf_euler_equations(const float *I_b, const float *omega_b, const float *tau_b, float *omega_dot_b);
 /* rigid_body_rhs: State derivative under a world force at the COM and a world torque (float; see kernels.h) */

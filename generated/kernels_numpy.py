@@ -706,6 +706,107 @@ def effect_angular_damping_b(omega_b, c, *, out=None):
     return tau_com_b_out
 
 
+def effect_force_at_point_affine(m, r_b, F_w, *, out=None):
+    """A world force applied at a body-fixed point: the force acts on the COM plus a torque (its affine form in v_W).
+
+    Generated kernel ``effect_force_at_point_affine``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    m : array_like, shape (...)
+        mass, kg
+    r_b : array_like, shape (..., 3)
+        application point relative to the COM, body frame, m
+    F_w : array_like, shape (..., 3)
+        force, world frame, N
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
+
+    Returns
+    -------
+    F0_w : ndarray, shape (..., 3)
+        the force at v_W = 0, world frame, N
+    k : ndarray, shape (...)
+        the rate of the force in v_W (F = F0 − k v_W), kg/s
+    """
+    m = numpy.asarray(m, dtype=numpy.float64)
+    r_b = numpy.asarray(r_b, dtype=numpy.float64)
+    F_w = numpy.asarray(F_w, dtype=numpy.float64)
+    if out is None or out[0] is None or out[1] is None:
+        batch = m.shape if m.shape == r_b.shape[:-1] == F_w.shape[:-1] else numpy.broadcast_shapes(m.shape, r_b.shape[:-1], F_w.shape[:-1])
+    F0_w_out = numpy.empty(batch + (3,)) if out is None or out[0] is None else out[0]
+    F0_w_out[..., 0:3] = F_w[..., 0:3]
+    k_out = numpy.empty(batch) if out is None or out[1] is None else out[1]
+    k_out[...] = 0
+    return F0_w_out, k_out
+
+
+def effect_gravity_affine(m, g_w, *, out=None):
+    """Uniform gravity acting at the COM (its affine form in v_W).
+
+    Generated kernel ``effect_gravity_affine``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    m : array_like, shape (...)
+        mass, kg
+    g_w : array_like, shape (..., 3)
+        gravitational acceleration, world frame, m/s²
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
+
+    Returns
+    -------
+    F0_w : ndarray, shape (..., 3)
+        the force at v_W = 0, world frame, N
+    k : ndarray, shape (...)
+        the rate of the force in v_W (F = F0 − k v_W), kg/s
+    """
+    m = numpy.asarray(m, dtype=numpy.float64)
+    g_w = numpy.asarray(g_w, dtype=numpy.float64)
+    if out is None or out[0] is None or out[1] is None:
+        batch = m.shape if m.shape == g_w.shape[:-1] else numpy.broadcast_shapes(m.shape, g_w.shape[:-1])
+    F0_w_out = numpy.empty(batch + (3,)) if out is None or out[0] is None else out[0]
+    numpy.multiply(g_w[..., 0:3], m[..., None], out=F0_w_out[..., 0:3])
+    k_out = numpy.empty(batch) if out is None or out[1] is None else out[1]
+    k_out[...] = 0
+    return F0_w_out, k_out
+
+
+def effect_linear_damping_affine(m, c, *, out=None):
+    """Viscous drag on the COM velocity (its affine form in v_W).
+
+    Generated kernel ``effect_linear_damping_affine``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    m : array_like, shape (...)
+        mass, kg
+    c : array_like, shape (...)
+        viscous coefficient, N·s/m
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
+
+    Returns
+    -------
+    F0_w : ndarray, shape (..., 3)
+        the force at v_W = 0, world frame, N
+    k : ndarray, shape (...)
+        the rate of the force in v_W (F = F0 − k v_W), kg/s
+    """
+    m = numpy.asarray(m, dtype=numpy.float64)
+    c = numpy.asarray(c, dtype=numpy.float64)
+    if out is None or out[0] is None or out[1] is None:
+        batch = m.shape if m.shape == c.shape else numpy.broadcast_shapes(m.shape, c.shape)
+    F0_w_out = numpy.empty(batch + (3,)) if out is None or out[0] is None else out[0]
+    F0_w_out[..., 0] = 0
+    F0_w_out[..., 1] = 0
+    F0_w_out[..., 2] = 0
+    k_out = numpy.empty(batch) if out is None or out[1] is None else out[1]
+    k_out[...] = c
+    return F0_w_out, k_out
+
+
 def quat_mul(a, b, *, out=None):
     """Hamilton product.
 
@@ -1420,6 +1521,170 @@ def integrate_orientation(q, omega_w, dt, *, out=None):
     numpy.multiply(t7, t9, out=q_next_out[..., 2])
     numpy.multiply(t6, t9, out=q_next_out[..., 3])
     return q_next_out
+
+
+def translation_flow_scale(k, F0_w, m, dt, *, out=None):
+    """The constants of RK4's exact step of the COM under a force F0_W − k v_W, once per body and call.
+
+    Generated kernel ``translation_flow_scale``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    k : array_like, shape (...)
+        the summed rate of the body's forces in v_W (F = F0_W − k v_W), kg/s
+    F0_w : array_like, shape (..., 3)
+        the summed force at v_W = 0, world frame, N
+    m : array_like, shape (...)
+        mass, kg
+    dt : array_like, shape (...)
+        step, s
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
+
+    Returns
+    -------
+    T : ndarray, shape (..., 8)
+        (R, dt Q, dv (3), dp (3)): translation_flow's constants
+    """
+    k = numpy.asarray(k, dtype=numpy.float64)
+    F0_w = numpy.asarray(F0_w, dtype=numpy.float64)
+    m = numpy.asarray(m, dtype=numpy.float64)
+    dt = numpy.asarray(dt, dtype=numpy.float64)
+    if out is None or out[0] is None:
+        batch = k.shape if k.shape == F0_w.shape[:-1] == m.shape == dt.shape else numpy.broadcast_shapes(k.shape, F0_w.shape[:-1], m.shape, dt.shape)
+    a_w_0_3 = F0_w[..., 0:3] / m[..., None]
+    a_w_0 = a_w_0_3[..., 0]
+    a_w_1 = a_w_0_3[..., 1]
+    a_w_2 = a_w_0_3[..., 2]
+    lambda_ = k/m
+    z_ = dt*lambda_
+    h_v = dt*(z_*(z_*((1.0/6.0) - (1.0/24.0)*z_) + (-1.0/2.0)) + 1)
+    h_p = (dt*dt)*(z_*(((1.0/24.0))*z_ + (-1.0/6.0)) + (1.0/2.0))
+    t0 = ((1.0/24.0))*z_ + (-1.0/6.0)
+    T_out = numpy.empty(batch + (8,)) if out is None or out[0] is None else out[0]
+    numpy.add(z_ * (z_ * (t0 * z_ + 1.0 / 2.0) - 1), 1, out=T_out[..., 0])
+    numpy.multiply(dt, z_ * (-1.0 / 2.0 - t0 * z_) + 1, out=T_out[..., 1])
+    numpy.multiply(a_w_0, h_v, out=T_out[..., 2])
+    numpy.multiply(a_w_1, h_v, out=T_out[..., 3])
+    numpy.multiply(a_w_2, h_v, out=T_out[..., 4])
+    numpy.multiply(a_w_0, h_p, out=T_out[..., 5])
+    numpy.multiply(a_w_1, h_p, out=T_out[..., 6])
+    numpy.multiply(a_w_2, h_p, out=T_out[..., 7])
+    return T_out
+
+
+def translation_flow(p_w, v_w, T, *, out=None):
+    """RK4's exact step of the COM under a force F0_W − k v_W (its constants T).
+
+    Generated kernel ``translation_flow``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    p_w : array_like, shape (..., 3)
+        COM position, world frame, m
+    v_w : array_like, shape (..., 3)
+        COM velocity, world frame, m/s
+    T : array_like, shape (..., 8)
+        translation_flow_scale's constants
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
+
+    Returns
+    -------
+    p_next : ndarray, shape (..., 3)
+        m, world frame
+    v_next : ndarray, shape (..., 3)
+        m/s, world frame
+    """
+    p_w = numpy.asarray(p_w, dtype=numpy.float64)
+    v_w = numpy.asarray(v_w, dtype=numpy.float64)
+    T = numpy.asarray(T, dtype=numpy.float64)
+    if out is None or out[0] is None or out[1] is None:
+        batch = p_w.shape[:-1] if p_w.shape[:-1] == v_w.shape[:-1] == T.shape[:-1] else numpy.broadcast_shapes(p_w.shape[:-1], v_w.shape[:-1], T.shape[:-1])
+    p_w_0 = p_w[..., 0]
+    p_w_1 = p_w[..., 1]
+    p_w_2 = p_w[..., 2]
+    v_w_0 = v_w[..., 0]
+    v_w_1 = v_w[..., 1]
+    v_w_2 = v_w[..., 2]
+    T_0 = T[..., 0]
+    T_1 = T[..., 1]
+    T_2 = T[..., 2]
+    T_3 = T[..., 3]
+    T_4 = T[..., 4]
+    T_5 = T[..., 5]
+    T_6 = T[..., 6]
+    T_7 = T[..., 7]
+    t_p_0 = T_1*v_w_0 + p_w_0
+    t_p_1 = T_1*v_w_1 + p_w_1
+    t_p_2 = T_1*v_w_2 + p_w_2
+    p_next_out = numpy.empty(batch + (3,)) if out is None or out[0] is None else out[0]
+    numpy.add(T_5, t_p_0, out=p_next_out[..., 0])
+    numpy.add(T_6, t_p_1, out=p_next_out[..., 1])
+    numpy.add(T_7, t_p_2, out=p_next_out[..., 2])
+    v_next_out = numpy.empty(batch + (3,)) if out is None or out[1] is None else out[1]
+    numpy.add(T_0 * v_w_0, T_2, out=v_next_out[..., 0])
+    numpy.add(T_0 * v_w_1, T_3, out=v_next_out[..., 1])
+    numpy.add(T_0 * v_w_2, T_4, out=v_next_out[..., 2])
+    return p_next_out, v_next_out
+
+
+def rigid_body_increments_rot_b_c(q, omega_b, S_b, tau_b, *, out=None):
+    """An RK4 stage's scaled increments of (q, omega_b) alone under a body-frame torque.
+
+    Generated kernel ``rigid_body_increments_rot_b_c``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    q : array_like, shape (..., 4)
+        orientation (x, y, z, w), R_WB (a stage's value: unit to rounding)
+    omega_b : array_like, shape (..., 3)
+        angular velocity, body frame, rad/s
+    S_b : array_like, shape (..., 9)
+        rigid_body_increment_scale's constants, once per body and call
+    tau_b : array_like, shape (..., 3)
+        total torque about the COM, body frame, N·m
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
+
+    Returns
+    -------
+    H_q : ndarray, shape (..., 4)
+        (s dt) dq/dt
+    H_omega : ndarray, shape (..., 3)
+        (s dt) dω_B/dt, rad/s
+    """
+    q = numpy.asarray(q, dtype=numpy.float64)
+    omega_b = numpy.asarray(omega_b, dtype=numpy.float64)
+    S_b = numpy.asarray(S_b, dtype=numpy.float64)
+    tau_b = numpy.asarray(tau_b, dtype=numpy.float64)
+    if out is None or out[0] is None or out[1] is None:
+        batch = q.shape[:-1] if q.shape[:-1] == omega_b.shape[:-1] == S_b.shape[:-1] == tau_b.shape[:-1] else numpy.broadcast_shapes(q.shape[:-1], omega_b.shape[:-1], S_b.shape[:-1], tau_b.shape[:-1])
+    q_0 = q[..., 0]
+    q_1 = q[..., 1]
+    q_2 = q[..., 2]
+    q_3 = q[..., 3]
+    omega_b_0 = omega_b[..., 0]
+    omega_b_1 = omega_b[..., 1]
+    omega_b_2 = omega_b[..., 2]
+    S_b_0 = S_b[..., 0]
+    S_b_1 = S_b[..., 1]
+    S_b_2 = S_b[..., 2]
+    S_b_6 = S_b[..., 6]
+    t0 = S_b_6*omega_b_0
+    t1 = S_b_6*omega_b_2
+    t2 = S_b_6*omega_b_1
+    H_q_out = numpy.empty(batch + (4,)) if out is None or out[0] is None else out[0]
+    numpy.add(q_1 * t1 - q_2 * t2, q_3 * t0, out=H_q_out[..., 0])
+    numpy.add(q_2 * t0 - q_0 * t1, q_3 * t2, out=H_q_out[..., 1])
+    numpy.add(q_0 * t2 - q_1 * t0, q_3 * t1, out=H_q_out[..., 2])
+    numpy.subtract(-q_0 * t0 - q_1 * t2, q_2 * t1, out=H_q_out[..., 3])
+    H_omega_out = numpy.empty(batch + (3,)) if out is None or out[1] is None else out[1]
+    H_omega_0_3 = S_b[..., 3:6] * tau_b[..., 0:3]
+    numpy.add(S_b_0 * omega_b_1 * omega_b_2, H_omega_0_3[..., 0], out=H_omega_out[..., 0])
+    numpy.add(S_b_1 * omega_b_0 * omega_b_2, H_omega_0_3[..., 1], out=H_omega_out[..., 1])
+    numpy.add(S_b_2 * omega_b_0 * omega_b_1, H_omega_0_3[..., 2], out=H_omega_out[..., 2])
+    return H_q_out, H_omega_out
 
 
 def euler_equations(I_b, omega_b, tau_b, *, out=None):
@@ -5831,6 +6096,9 @@ KERNELS = {
     'effect_linear_damping': (effect_linear_damping, [('v_w', (3,)), ('c', ())], [('F_com_w', (3,))]),
     'effect_angular_damping': (effect_angular_damping, [('q', (4,)), ('omega_b', (3,)), ('c', ())], [('tau_com_w', (3,))]),
     'effect_angular_damping_b': (effect_angular_damping_b, [('omega_b', (3,)), ('c', ())], [('tau_com_b', (3,))]),
+    'effect_force_at_point_affine': (effect_force_at_point_affine, [('m', ()), ('r_b', (3,)), ('F_w', (3,))], [('F0_w', (3,)), ('k', ())]),
+    'effect_gravity_affine': (effect_gravity_affine, [('m', ()), ('g_w', (3,))], [('F0_w', (3,)), ('k', ())]),
+    'effect_linear_damping_affine': (effect_linear_damping_affine, [('m', ()), ('c', ())], [('F0_w', (3,)), ('k', ())]),
     'quat_mul': (quat_mul, [('a', (4,)), ('b', (4,))], [('ab', (4,))]),
     'quat_conj': (quat_conj, [('q', (4,))], [('q_conj', (4,))]),
     'quat_normalize': (quat_normalize, [('q', (4,))], [('q_unit', (4,))]),
@@ -5848,6 +6116,9 @@ KERNELS = {
     'quat_derivative_world': (quat_derivative_world, [('q', (4,)), ('omega_w', (3,))], [('q_dot', (4,))]),
     'quat_derivative_body': (quat_derivative_body, [('q', (4,)), ('omega_b', (3,))], [('q_dot', (4,))]),
     'integrate_orientation': (integrate_orientation, [('q', (4,)), ('omega_w', (3,)), ('dt', ())], [('q_next', (4,))]),
+    'translation_flow_scale': (translation_flow_scale, [('k', ()), ('F0_w', (3,)), ('m', ()), ('dt', ())], [('T', (8,))]),
+    'translation_flow': (translation_flow, [('p_w', (3,)), ('v_w', (3,)), ('T', (8,))], [('p_next', (3,)), ('v_next', (3,))]),
+    'rigid_body_increments_rot_b_c': (rigid_body_increments_rot_b_c, [('q', (4,)), ('omega_b', (3,)), ('S_b', (9,)), ('tau_b', (3,))], [('H_q', (4,)), ('H_omega', (3,))]),
     'euler_equations': (euler_equations, [('I_b', (3,)), ('omega_b', (3,)), ('tau_b', (3,))], [('omega_dot_b', (3,))]),
     'rigid_body_rhs': (rigid_body_rhs, [('x', (13,)), ('m', ()), ('I_b', (3,)), ('F_w', (3,)), ('tau_w', (3,))], [('x_dot', (13,))]),
     'rigid_body_rhs_free': (rigid_body_rhs_free, [('x', (13,)), ('I_b', (3,))], [('x_dot', (13,))]),
@@ -6104,6 +6375,16 @@ def effect_apply_b_angular_damping(p, x, v_w, m, I_b, *, out=None):
 EFFECT_APPLY_B = {
     'angular_damping': effect_apply_b_angular_damping,
 }
+
+
+# built-in effect name -> its decoupled force's (F0_w (n, 3), k (n,)) from p (n, n_params) and m (n,)
+# (derive/effect.py affine_force: F = F0 - k v_W; the effects with a force and no FLAG_COUPLED)
+EFFECT_AFFINE = {
+    'force_at_point': lambda p, m: effect_force_at_point_affine(m, p[..., 0:3], p[..., 3:6]),
+    'gravity': lambda p, m: effect_gravity_affine(m, p[..., 0:3]),
+    'linear_damping': lambda p, m: effect_linear_damping_affine(m, p[..., 0]),
+}
+
 # built-in effect code -> its apply function
 EFFECT_APPLY_BY_CODE = {
     1: effect_apply_applied_torque,

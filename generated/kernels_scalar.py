@@ -204,6 +204,23 @@ def effect_angular_damping_b(omega_b, c):
     return (-c*omega_b_0, -c*omega_b_1, -c*omega_b_2)
 
 
+def effect_force_at_point_affine(m, r_b, F_w):
+    """A world force applied at a body-fixed point: the force acts on the COM plus a torque (its affine form in v_W) (floats; see the module)."""
+    F_w_0, F_w_1, F_w_2 = F_w
+    return (F_w_0, F_w_1, F_w_2), 0.0
+
+
+def effect_gravity_affine(m, g_w):
+    """Uniform gravity acting at the COM (its affine form in v_W) (floats; see the module)."""
+    g_w_0, g_w_1, g_w_2 = g_w
+    return (g_w_0*m, g_w_1*m, g_w_2*m), 0.0
+
+
+def effect_linear_damping_affine(m, c):
+    """Viscous drag on the COM velocity (its affine form in v_W) (floats; see the module)."""
+    return (0.0, 0.0, 0.0), c
+
+
 def quat_mul(a, b):
     """Hamilton product (floats; see the module)."""
     a_0, a_1, a_2, a_3 = a
@@ -426,6 +443,43 @@ def integrate_orientation(q, omega_w, dt):
     t8 = dt*(-omega_w_0*t1 + omega_w_1*t0 + q_0*t2) + q_1
     t9 = (1.0/math.sqrt((t3*t3) + (t6*t6) + (t7*t7) + (t8*t8)))
     return (t3*t9, t8*t9, t7*t9, t6*t9)
+
+
+def translation_flow_scale(k, F0_w, m, dt):
+    """The constants of RK4's exact step of the COM under a force F0_W − k v_W, once per body and call (floats; see the module)."""
+    F0_w_0, F0_w_1, F0_w_2 = F0_w
+    a_w_0 = F0_w_0/m
+    a_w_1 = F0_w_1/m
+    a_w_2 = F0_w_2/m
+    lambda_ = k/m
+    z_ = dt*lambda_
+    h_v = dt*(z_*(z_*((1.0/6.0) - (1.0/24.0)*z_) + (-1.0/2.0)) + 1)
+    h_p = (dt*dt)*(z_*(((1.0/24.0))*z_ + (-1.0/6.0)) + (1.0/2.0))
+    t0 = ((1.0/24.0))*z_ + (-1.0/6.0)
+    return (z_*(z_*(t0*z_ + (1.0/2.0)) - 1) + 1, dt*(z_*(-t0*z_ + (-1.0/2.0)) + 1), a_w_0*h_v, a_w_1*h_v, a_w_2*h_v, a_w_0*h_p, a_w_1*h_p, a_w_2*h_p)
+
+
+def translation_flow(p_w, v_w, T):
+    """RK4's exact step of the COM under a force F0_W − k v_W (its constants T) (floats; see the module)."""
+    p_w_0, p_w_1, p_w_2 = p_w
+    v_w_0, v_w_1, v_w_2 = v_w
+    T_0, T_1, T_2, T_3, T_4, T_5, T_6, T_7 = T
+    t_p_0 = T_1*v_w_0 + p_w_0
+    t_p_1 = T_1*v_w_1 + p_w_1
+    t_p_2 = T_1*v_w_2 + p_w_2
+    return (T_5 + t_p_0, T_6 + t_p_1, T_7 + t_p_2), (T_0*v_w_0 + T_2, T_0*v_w_1 + T_3, T_0*v_w_2 + T_4)
+
+
+def rigid_body_increments_rot_b_c(q, omega_b, S_b, tau_b):
+    """An RK4 stage's scaled increments of (q, omega_b) alone under a body-frame torque (floats; see the module)."""
+    q_0, q_1, q_2, q_3 = q
+    omega_b_0, omega_b_1, omega_b_2 = omega_b
+    S_b_0, S_b_1, S_b_2, S_b_3, S_b_4, S_b_5, S_b_6, _, _ = S_b
+    tau_b_0, tau_b_1, tau_b_2 = tau_b
+    t0 = S_b_6*omega_b_0
+    t1 = S_b_6*omega_b_2
+    t2 = S_b_6*omega_b_1
+    return (q_1*t1 - q_2*t2 + q_3*t0, -q_0*t1 + q_2*t0 + q_3*t2, q_0*t2 - q_1*t0 + q_3*t1, -q_0*t0 - q_1*t2 - q_2*t1), (S_b_0*omega_b_1*omega_b_2 + S_b_3*tau_b_0, S_b_1*omega_b_0*omega_b_2 + S_b_4*tau_b_1, S_b_2*omega_b_0*omega_b_1 + S_b_5*tau_b_2)
 
 
 def euler_equations(I_b, omega_b, tau_b):
@@ -1932,6 +1986,12 @@ def effect_apply_b_angular_damping(p, x, v_w, m, I_b):
 EFFECT_APPLY_B_BY_CODE = {
     5: effect_apply_b_angular_damping,
 }
+# built-in effect code -> its decoupled force's (F0_w, k) from p and m (derive/effect.py affine_force)
+EFFECT_AFFINE_BY_CODE = {
+    2: lambda p, m: effect_force_at_point_affine(m, p[0:3], p[3:6]),
+    3: lambda p, m: effect_gravity_affine(m, p[0:3]),
+    4: lambda p, m: effect_linear_damping_affine(m, p[0]),
+}
 
 
 # kernel -> {array input: the flat indices it reads}
@@ -1952,6 +2012,9 @@ READS = {
     'effect_linear_damping': {'v_w': (0, 1, 2)},
     'effect_angular_damping': {'q': (0, 1, 2, 3), 'omega_b': (0, 1, 2)},
     'effect_angular_damping_b': {'omega_b': (0, 1, 2)},
+    'effect_force_at_point_affine': {'r_b': (), 'F_w': (0, 1, 2)},
+    'effect_gravity_affine': {'g_w': (0, 1, 2)},
+    'effect_linear_damping_affine': {},
     'quat_mul': {'a': (0, 1, 2, 3), 'b': (0, 1, 2, 3)},
     'quat_conj': {'q': (0, 1, 2, 3)},
     'quat_normalize': {'q': (0, 1, 2, 3)},
@@ -1969,6 +2032,9 @@ READS = {
     'quat_derivative_world': {'q': (0, 1, 2, 3), 'omega_w': (0, 1, 2)},
     'quat_derivative_body': {'q': (0, 1, 2, 3), 'omega_b': (0, 1, 2)},
     'integrate_orientation': {'q': (0, 1, 2, 3), 'omega_w': (0, 1, 2)},
+    'translation_flow_scale': {'F0_w': (0, 1, 2)},
+    'translation_flow': {'p_w': (0, 1, 2), 'v_w': (0, 1, 2), 'T': (0, 1, 2, 3, 4, 5, 6, 7)},
+    'rigid_body_increments_rot_b_c': {'q': (0, 1, 2, 3), 'omega_b': (0, 1, 2), 'S_b': (0, 1, 2, 3, 4, 5, 6), 'tau_b': (0, 1, 2)},
     'euler_equations': {'I_b': (0, 1, 2), 'omega_b': (0, 1, 2), 'tau_b': (0, 1, 2)},
     'rigid_body_rhs': {'x': (3, 4, 5, 6, 7, 8, 9, 10, 11, 12), 'I_b': (0, 1, 2), 'F_w': (0, 1, 2), 'tau_w': (0, 1, 2)},
     'rigid_body_rhs_free': {'x': (3, 4, 5, 6, 7, 8, 9, 10, 11, 12), 'I_b': (0, 1, 2)},
@@ -2054,6 +2120,9 @@ ZEROS = {
     'effect_linear_damping': {'F_com_w': ()},
     'effect_angular_damping': {'tau_com_w': ()},
     'effect_angular_damping_b': {'tau_com_b': ()},
+    'effect_force_at_point_affine': {'F0_w': (), 'k': (0,)},
+    'effect_gravity_affine': {'F0_w': (), 'k': (0,)},
+    'effect_linear_damping_affine': {'F0_w': (0, 1, 2), 'k': ()},
     'quat_mul': {'ab': ()},
     'quat_conj': {'q_conj': ()},
     'quat_normalize': {'q_unit': ()},
@@ -2071,6 +2140,9 @@ ZEROS = {
     'quat_derivative_world': {'q_dot': ()},
     'quat_derivative_body': {'q_dot': ()},
     'integrate_orientation': {'q_next': ()},
+    'translation_flow_scale': {'T': ()},
+    'translation_flow': {'p_next': (), 'v_next': ()},
+    'rigid_body_increments_rot_b_c': {'H_q': (), 'H_omega': ()},
     'euler_equations': {'omega_dot_b': ()},
     'rigid_body_rhs': {'x_dot': ()},
     'rigid_body_rhs_free': {'x_dot': (7, 8, 9)},

@@ -50,6 +50,12 @@ _RHS_OF_KIND = {"TORQUE": RHS_FULL, "FULL": RHS_FULL, "FORCE": RHS_FORCE, "BODY"
 # the printed rule (derive/effect_fuse.py tile_kind): class per combination of the flags RHS_BITS
 RHS_BITS: tuple[int, ...] = _META.RHS_BITS
 _RHS_BY_INDEX = np.array([_RHS_OF_KIND[k] for k in _META.RHS_KINDS_BY_FLAGS], dtype=np.intp)
+# how a plain body of each class steps when none of its effects couples translation and rotation (FLAG_COUPLED clear,
+# all built-in, not all constant; derive/effect_fuse.py SPLIT_OF_KIND): 0 the 13-number stages, 1 its rotation staged
+# torque-free, 2 under its body-frame torque sums; its translation then by the printed translation_flow
+FLAG_COUPLED, FLAG_USES_STATE = _META.FLAG_COUPLED, _META.FLAG_USES_STATE
+RHS_SPLIT = {_RHS_OF_KIND[k]: v for k, v in _META.RHS_SPLIT.items() if k != "TORQUE"}
+INC_SCALE_C, INC_SCALE_HQ = slice(*_META.INC_SCALE_C), _META.INC_SCALE_HQ   # C_b and h_q within the increments' S
 
 
 def rhs_classes(flags: np.ndarray) -> np.ndarray:

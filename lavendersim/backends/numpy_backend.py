@@ -27,7 +27,7 @@ from ..generated import layout as LY
 from ..generated import tableaux as T
 from ..kernels import K
 from . import numpy_scalar as SC
-from ..effects import RHS_BODY, RHS_BODY_F, RHS_FORCE, RHS_FULL
+from ..effects import INC_SCALE_C, INC_SCALE_HQ, RHS_BODY, RHS_BODY_F, RHS_FORCE, RHS_FULL
 from .base import (DOPRI5_HMIN_REL, DOPRI5_MAX_SUBSTEPS, FLOAT32_INTEGRATORS, KIND_JOINT, KIND_WHEELS, PLAIN_ONLY,
                Adaptive, Models, divergence_cause, no_root_cause, rk_weights, tableau_of, tolerance_cause,
                wheel_counts)
@@ -75,6 +75,7 @@ class _EffectIndex:
         self.npairs = pair_row.size
         self.m, self.I = m[idx], I[idx]
         self.groups = []  # (apply, pair positions, body positions, parameters)
+        self.names: list[str] = []   # each group's effect name
         has_F, has_T = np.zeros(self.npairs, bool), np.zeros(self.npairs, bool)
         self.velocity = np.zeros(n, bool)  # bodies with an effect that reads v_w or omega_b
         self.uses_v = False                # some effect reads v_w
@@ -83,6 +84,7 @@ class _EffectIndex:
             sel = np.flatnonzero(codes == code)
             apply = apply_of(spec)
             self.groups.append((apply, sel, pair_loc[sel], effects[pair_row[sel], E.ROW_PARAMS:].copy()))
+            self.names.append(spec.name)
             has_F[sel], has_T[sel] = "F_w" in spec.outputs, "tau_w" in spec.outputs
             if spec.velocity_dependent:
                 self.velocity[pair_loc[sel]] = True
@@ -112,6 +114,22 @@ class _EffectIndex:
             f = np.flatnonzero((rank == k) & has_F)
             t = np.flatnonzero((rank == k) & has_T)
             self.ranks.append((pair_loc[f], f, pair_loc[t], t))
+
+    def affine(self, kmod) -> tuple[np.ndarray, np.ndarray]:
+        """The decoupled forces' sums per body (F0 (n, 3), k (n,)): each effect's printed affine form (kmod's
+        EFFECT_AFFINE: F = F0 − k v_W; an effect without a force adds nothing) added in table order from 0, as
+        csrc/step.c lv_split_flow_scale adds lv_effect_affine's."""
+        n = self.m.shape[0]
+        cF, ck = np.zeros((self.npairs, 3)), np.zeros(self.npairs)
+        for (_, sel, loc, p), name in zip(self.groups, self.names):
+            fn = kmod.EFFECT_AFFINE.get(name)
+            if fn is not None:
+                cF[sel], ck[sel] = fn(p, self.m[loc])
+        F0, k = np.zeros((n, 3)), np.zeros(n)
+        for locF, f, _, _ in self.ranks:
+            F0[locF] += cF[f]
+            k[locF] += ck[f]
+        return F0, k
 
     def _constant_prefix(self, j: int) -> tuple[int, np.ndarray | None]:
         """Scene-wide effects, output j (0: force, 1: torque): (how many of its leading terms are constant, their
@@ -472,8 +490,9 @@ class _ForcedGroup:
     """Plain bodies with effects of one right-hand side class: idx (into the plan's bodies), their effect index
     (the body-frame forms for RHS_BODY*), masses and Euler coefficients."""
 
-    def __init__(self, cls, idx, index, m, c):
+    def __init__(self, cls, idx, index, m, c, split=0):
         self.cls, self.idx, self.index, self.m, self.c = cls, idx, index, m, c
+        self.split = split   # E.RHS_SPLIT's rotation of a decoupled group (0: the 13-number stages)
         self.const_F: np.ndarray | None = None   # a constant force sum (the index's own array) and its a_w
         self.a_w: np.ndarray | None = None
         self.zeros: np.ndarray | None = None
@@ -519,6 +538,14 @@ class _ForcedGroup:
             self._sdt, self._S = sdt, _soa(K.rigid_body_increment_scale(self.c, self.m, sdt))
         return self._S
 
+    def flow(self, K, dt: float) -> np.ndarray:
+        """The bodies' translation_flow constants T (translation_flow_scale of their affine forces' sums, _EffectIndex
+        .affine), struct-of-arrays, kept for the last dt."""
+        if getattr(self, "_fdt", None) != dt:
+            F0, k = self.index.affine(K)
+            self._fdt, self._TF = dt, _soa(K.translation_flow_scale(k, F0, self.m, dt))
+        return self._TF
+
     def inc(self, K, x, buf, S, out):
         """The scaled increments H = s dt d/dt x of the group's bodies x (n, 13) into out: the effects' sums as rhs
         takes them, then the class's printed increments kernel (effect_fuse.RHS_OF_KIND's inc, csrc/step.c plain_inc;
@@ -546,18 +573,26 @@ def _forced_groups(plan) -> list[_ForcedGroup]:
     params, effects, _ = plan.source
     # each row's flags through its code's (one spec look-up per distinct code); a scene-wide row's to every body
     codes, inv = np.unique(effects[:, E.ROW_CODE].astype(np.int64), return_inverse=True)
-    row_flags = np.array([E.spec_for_code(int(c)).rhs_flags for c in codes], np.int64)[inv.reshape(-1)]
+    specs = [E.spec_for_code(int(c)) for c in codes]
+    # a user effect counts as coupling (its affine form is not printed: csrc/step.c effects_decoupled)
+    row_flags = np.array([s.rhs_flags | (E.FLAG_COUPLED if s.user_set is not None else 0) for s in specs],
+                         np.int64)[inv.reshape(-1)]
     body = effects[:, E.ROW_BODY].astype(np.int64)
     flags = np.full(plan.nb, np.bitwise_or.reduce(row_flags[body < 0]) if (body < 0).any() else 0, np.int64)
     np.bitwise_or.at(flags, body[body >= 0], row_flags[body >= 0])
-    cls = E.rhs_classes(flags[plan.forced])
+    fl = flags[plan.forced]
+    cls = E.rhs_classes(fl)
+    # decoupled (csrc/step.c rhs_kind: its class + LV_RHS_SPLIT): a kind that allows it, effects not all constant, none
+    # coupling; the group steps its rotation alone and its translation by the printed flow
+    split = np.array([E.RHS_SPLIT[int(c)] for c in cls], np.int64) * (
+        (fl & E.FLAG_USES_STATE != 0) & (fl & E.FLAG_COUPLED == 0))
     out = []
-    for c in np.unique(cls):
-        sel = np.flatnonzero(cls == c)
+    for c, sp in sorted(set(zip(cls.tolist(), split.tolist()))):
+        sel = np.flatnonzero((cls == c) & (split == sp))
         idx = plan.forced[sel]
         index = plan.index if c == RHS_FULL and sel.size == plan.forced.size else _EffectIndex(
             effects, idx, plan.m, plan.I, None, body_frame=c in (RHS_BODY, RHS_BODY_F))
-        out.append(_ForcedGroup(int(c), idx, index, plan.m_f[sel], _soa(plan.c_f[sel])))
+        out.append(_ForcedGroup(int(c), idx, index, plan.m_f[sel], _soa(plan.c_f[sel]), int(sp)))
     return out
 
 
@@ -1037,6 +1072,8 @@ def _forced_rk4_h(plan, prog, fg, x: np.ndarray, dt: float, xn: np.ndarray | Non
     class's increments (csrc/step.c advance_free_rk4, the effect tiles), operation for operation: each stage's
     increments H_i = s dt k_i (fg.inc), its input x + m H and the running sum of w H (a shared multiple formed once),
     the end x + (acc + w H) end. Buffers kept by the plan. Returns xn (a new struct-of-arrays state when None)."""
+    if fg.split:
+        return _split_rk4_h(plan, prog, fg, x, dt, xn)
     s = prog[0]
     n = x.shape[0]
     key = ("forced_rk4_h", n, id(fg))
@@ -1049,6 +1086,45 @@ def _forced_rk4_h(plan, prog, fg, x: np.ndarray, dt: float, xn: np.ndarray | Non
     if xn is None:
         xn = np.empty(x.shape[::-1], x.dtype).T
     return _scaled_stages(prog, x, lambda src: fg.inc(K, src, loads, S, H), H, A, Y, T1, T2, xn)
+
+
+def _split_rk4_h(plan, prog, fg, x: np.ndarray, dt: float, xn: np.ndarray | None = None) -> np.ndarray:
+    """One decoupled step of the bodies x (n, 13) of forced group fg (fg.split: E.RHS_SPLIT), q not normalized: the C
+    backend's LV_SPLIT_RK4_H (csrc/step.c; the tiles' LV_TILE_RK4_SPLIT), operation for operation. The rotation (q,
+    omega_b) alone through the scaled-increment stages (_scaled_stages, as _free_rk4_h): split 1 the torque-free
+    increments on S's C_b and h_q, split 2 the body-frame torque sums at each stage input (the states with q and
+    omega_b replaced; the torques read neither p_w nor v_w) and rigid_body_increments_rot_b_c; then p_w, v_w by the
+    printed translation_flow on the group's constants (fg.flow). Returns xn (a new struct-of-arrays state when None)."""
+    n = x.shape[0]
+    key = ("split_rk4_h", n, id(fg))
+    buf = plan.works.get(key)
+    if buf is None:
+        buf = plan.works[key] = (np.empty((6, LY.STATE_Q_LEN + LY.STATE_OMEGA_B_LEN, n)),
+                                 np.empty((LY.STATE_SIZE, n)).T)
+    (y, Y, H, A, T1, T2), xs = buf
+    S, TF = fg.scales(K, prog[0] * dt), fg.flow(K, dt)
+    nq = LY.STATE_Q_LEN
+    y[:nq], y[nq:] = x[:, Q].T, x[:, W].T
+    Hout = (H[:nq].T, H[nq:].T)
+    if fg.split == 1:
+        C, hq = S[:, INC_SCALE_C], S[:, INC_SCALE_HQ]
+
+        def inc(src):
+            return K.rigid_body_increments_free_c(src[:nq].T, src[nq:].T, C, hq, out=Hout)
+    else:
+        np.copyto(xs, x)
+        loads = plan.loads_buffer(x)
+
+        def inc(src):
+            xs[:, Q], xs[:, W] = src[:nq].T, src[nq:].T
+            tau = fg.index.sums(xs, xs[:, V], loads)[1]
+            return K.rigid_body_increments_rot_b_c(src[:nq].T, src[nq:].T, S, tau, out=Hout)
+    _scaled_stages(prog, y, inc, H, A, Y, T1, T2, A)
+    if xn is None:
+        xn = np.empty(x.shape[::-1], x.dtype).T
+    xn[:, Q], xn[:, W] = A[:nq].T, A[nq:].T
+    K.translation_flow(x[:, P], x[:, V], TF, out=(xn[:, P], xn[:, V]))
+    return xn
 
 
 def _scaled_step(plan, prog, x, dt, stepper, f) -> np.ndarray:

@@ -16,7 +16,8 @@ import math
 
 import numpy as np
 
-from ..effects import RHS_BODY, RHS_BODY_F, RHS_FORCE, RHS_FULL, ROW_BODY, ROW_CODE, ROW_PARAMS, rhs_classes, spec_for_code
+from ..effects import (FLAG_COUPLED, FLAG_USES_STATE, INC_SCALE_C, INC_SCALE_HQ, RHS_BODY, RHS_BODY_F, RHS_FORCE,
+                       RHS_FULL, RHS_SPLIT, ROW_BODY, ROW_CODE, ROW_PARAMS, rhs_classes, spec_for_code)
 from ..generated import kernels_scalar as KS
 from ..generated import layout as LY
 
@@ -55,13 +56,17 @@ class ScalarBodies:
             body_form = cls in (RHS_BODY, RHS_BODY_F)
             mine_fx = [(KS.EFFECT_APPLY_B_BY_CODE.get(codes[r], applies[r]) if body_form else applies[r], rows[r])
                        for r in mine]
-            self.bodies.append((KS.euler_coefficients(I), m, I, (cls, mine_fx)))
+            # decoupled (numpy_backend._forced_groups' rule): its rotation staged alone, its translation's flow on
+            # its affine forces' sums (table order from 0)
+            split = RHS_SPLIT[cls] if f & FLAG_USES_STATE and not f & FLAG_COUPLED else 0
+            aff = [(KS.EFFECT_AFFINE_BY_CODE[codes[r]], rows[r]) for r in mine if codes[r] in KS.EFFECT_AFFINE_BY_CODE]
+            self.bodies.append((KS.euler_coefficients(I), m, I, (cls, mine_fx, split, aff)))
 
 
 def _rhs(y, c, m, I, effects):
     """d/dt of one plain body's state y (13 floats) with effects (its class, [(apply, p)]): their sums in table order
     (from 0.0, as the vectorized sums) and its class's right-hand side (numpy_backend._ForcedGroup.rhs)."""
-    cls, effects = effects
+    cls, effects = effects[:2]
     F, T = _sums(y, m, I, effects)
     if cls == RHS_FULL:
         return KS.rigid_body_rhs_c(y, m, c, F, T)
@@ -89,7 +94,7 @@ def _inc(y, S, effects):
     """The scaled increments H = s dt d/dt y of one plain body (13 floats) with effects (its class, [(apply, p)]) and
     constants S (rigid_body_increment_scale): _rhs's sums, then the class's increments kernel
     (numpy_backend._ForcedGroup.inc)."""
-    (cls, effects), m, I = effects
+    (cls, effects, *_), m, I = effects
     F, T = _sums(y, m, I, effects)
     q, w, v = y[_Q], y[_W], y[_V]
     if cls == RHS_FULL:
@@ -239,6 +244,65 @@ def _run_hf_of(prog, normalize: bool):
     return run
 
 
+_RUNS_HS: dict = {}
+
+
+def _flow_scale(aff, m: float, dt: float):
+    """translation_flow_scale's constants of a decoupled body: its affine forces [(affine, p)] summed in table order
+    from 0.0 (numpy_backend._EffectIndex.affine, C's lv_split_flow_scale)."""
+    Fx = Fy = Fz = k = 0.0
+    for fn, p in aff:
+        f, r = fn(p, m)
+        Fx, Fy, Fz, k = Fx + f[0], Fy + f[1], Fz + f[2], k + r
+    return KS.translation_flow_scale(k, (Fx, Fy, Fz), m, dt)
+
+
+def _rot_b(q, w, S, p, v, args):
+    """A decoupled body's rotation increments under its body-frame torque sums at (q, w) (numpy_backend._split_rk4_h)."""
+    (_, effects, *_), m, I = args
+    return KS.rigid_body_increments_rot_b_c(q, w, S, _sums(p + q + v + w, m, I, effects)[1])
+
+
+def _rot_free(q, w, S, p, v, args):
+    """A decoupled body's torque-free rotation increments on S's C_b and h_q."""
+    return KS.rigid_body_increments_free_c(q, w, S[INC_SCALE_C], S[INC_SCALE_HQ])
+
+
+def _run_hs_of(prog, normalize: bool, split: int):
+    """n decoupled steps of one body (split: numpy_backend._split_rk4_h's) in the scaled-increment form prog as a
+    compiled Python function run(x, n, S, TF, args) -> x (S its increment constants, TF its flow constants, args
+    _inc's effects): the rotation (q, omega_b) through the stages, then translation_flow, written out number by
+    number."""
+    key = (prog, normalize, split)
+    run = _RUNS_HS.get(key)
+    if run is None:
+        _, stages, end = prog
+        ny = (_Q.stop - _Q.start) + (_W.stop - _W.start)
+        ys = [f"y{r}" for r in range(ny)]
+        Ys, Hs, As = ([f"{v}{r}" for r in range(ny)] for v in "YHa")
+        nq = _Q.stop - _Q.start
+        src = ["def run(x, n, S, TF, args):", "    for _ in range(n):",
+               f"        p, q, v, w = x[{_P.start}:{_P.stop}], x[{_Q.start}:{_Q.stop}], x[{_V.start}:{_V.stop}], "
+               f"x[{_W.start}:{_W.stop}]",
+               f"        {', '.join(ys)}, = q + w"]
+        cur = ys
+        for i, (w, m, shared) in enumerate(stages):
+            src.append(f"        ({', '.join(Hs[:nq])}), ({', '.join(Hs[nq:])}) = inc(({', '.join(cur[:nq])},), "
+                       f"({', '.join(cur[nq:])},), S, p, v, args)")
+            src += _stage_lines(i, w, m, shared, end, ys, Ys, Hs, As)
+            cur = Ys
+        qn = f"normalize(({', '.join(Ys[:nq])},))" if normalize else f"({', '.join(Ys[:nq])},)"
+        src += ["        pn, vn = flow(p, v, TF)",
+                f"        x = tuple(pn) + tuple({qn}) + tuple(vn) + ({', '.join(Ys[nq:])},)",
+                "        if not isfinite(sum(x)):   # the sum first, as the vectorized check", "            raise Fallback",
+                "    return x"]
+        ns = {"normalize": KS.quat_normalize, "isfinite": math.isfinite, "Fallback": Fallback,
+              "inc": _rot_free if split == 1 else _rot_b, "flow": KS.translation_flow}
+        exec("\n".join(src), ns)   # noqa: S102 (source built above from the printed program's numbers only)
+        run = _RUNS_HS[key] = ns["run"]
+    return run
+
+
 def advance(sb: ScalarBodies, state, rk, normalize: bool, dt: float, n_steps: int, scaled=None) -> None:
     """Step every body of state (n, 13) by n_steps of rk (an _ExplicitRK) of length dt, in floats; state is
     written at the end, all bodies at once; scaled: the scaled-increment form of rk (generated/tableaux.py
@@ -250,6 +314,10 @@ def advance(sb: ScalarBodies, state, rk, normalize: bool, dt: float, n_steps: in
         for x, (c, m, I, effects) in zip(state.tolist(), sb.bodies):
             if scaled is not None and not effects[1]:   # torque-free (no effect of its own or scene-wide)
                 out.append(_run_h_of(scaled, normalize)(tuple(x), n_steps, dt, c))
+            elif scaled is not None and effects[2]:   # decoupled: the rotation staged alone, the translation's flow
+                S = KS.rigid_body_increment_scale(c, m, scaled[0] * dt)
+                out.append(_run_hs_of(scaled, normalize, effects[2])(tuple(x), n_steps, S, _flow_scale(effects[3], m, dt),
+                                                                     (effects, m, I)))
             elif scaled is not None:   # with effects: the scaled-increment form on the 13 numbers
                 S = KS.rigid_body_increment_scale(c, m, scaled[0] * dt)
                 out.append(_run_hf_of(scaled, normalize)(tuple(x), n_steps, S, (effects, m, I)))

@@ -267,6 +267,64 @@ typedef void (*lv_tile_fn)(double (*LV_RESTRICT T)[LV_TILE], const double (*LV_R
         }                                                                                               \
     }
 
+/* The effect tiles' decoupled step (a body of class + LV_RHS_SPLIT, csrc/step.c rhs_kind: all effects built-in, none
+   coupling, not all constant) when its effects fuse into no pattern: each lane one body's LV_SPLIT_RK4_H (step.c, as
+   the scalar blocks), its torque sums through the body dispatch over the tile's codes in table order (LV_TE_SPLIT_SUMS)
+   and its flow constants from their affine forces (lv_effect_affine, table order from 0, as lv_split_flow_scale). */
+#define LV_TE_SPLIT_SUMS(xs, F, t)                                                                      \
+    for (e = 0; e < fx->n_eff; e++)                                                                     \
+        (void)lv_effect_apply_b(fx->codes[e], pe[e], xs, (xs) + LV_STATE_V_W, mass, I, F, t)
+#define LV_TE_SPLIT_RHS_B(in, out) LV_SPLIT_H_ROT_B(in, out, LV_TE_SPLIT_SUMS)
+#define LV_TE_SPLIT_LANE                                                                                \
+    const double mass = P[LV_TP_M][b], I[3] = {P[LV_TP_I][b], P[LV_TP_I + 1][b], P[LV_TP_I + 2][b]};    \
+    double pe[LV_TE_EFFECTS][LV_EFFECT_ROW_MIN_PARAMS];                                                 \
+    for (e = 0; e < fx->n_eff; e++)                                                                     \
+        for (i = 0; i < LV_EFFECT_ROW_MIN_PARAMS; i++) pe[e][i] = fx->EP[fx->off[e] + i][b];           \
+    (void)pe
+#define LV_TILE_RK4_FX_SPLIT(NORMALIZE, RHS)                                                            \
+    {                                                                                                   \
+        LV_ALIGN_TILE double SC[LV_INC_SCALE_SIZE][LV_TILE];                                            \
+        LV_ALIGN_TILE double TF[LV_FLOW_SIZE][LV_TILE];                                                 \
+        long s, b;                                                                                      \
+        int i, e;                                                                                       \
+        LV_TILE_SCALES(SC)                                                                              \
+        for (b = 0; b < m; b++) {                                                                       \
+            LV_TE_SPLIT_LANE;                                                                           \
+            double f0[3] = {0.0, 0.0, 0.0}, kk = 0.0, tf[LV_FLOW_SIZE];                                 \
+            (void)I;                                                                                    \
+            for (e = 0; e < fx->n_eff; e++) (void)lv_effect_affine(fx->codes[e], pe[e], mass, f0, &kk); \
+            lv_translation_flow_scale(kk, f0, mass, dt, tf);                                            \
+            for (i = 0; i < LV_FLOW_SIZE; i++) TF[i][b] = tf[i];                                        \
+        }                                                                                               \
+        for (s = 0; s < n_steps; s++) {                                                                 \
+            for (b = 0; b < m; b++) {                                                                   \
+                double x[LV_STATE_SIZE], xn[LV_STATE_SIZE], sc[LV_INC_SCALE_SIZE], tf[LV_FLOW_SIZE];    \
+                LV_TE_SPLIT_LANE;                                                                       \
+                (void)mass;                                                                             \
+                (void)I;                                                                                \
+                for (i = 0; i < LV_STATE_SIZE; i++) x[i] = T[i][b];                                     \
+                for (i = 0; i < LV_INC_SCALE_SIZE; i++) sc[i] = SC[i][b];                               \
+                for (i = 0; i < LV_FLOW_SIZE; i++) tf[i] = TF[i][b];                                    \
+                LV_SPLIT_RK4_H(RHS, x, xn, sc, tf, NORMALIZE);                                          \
+                for (i = 0; i < LV_STATE_SIZE; i++) T[i][b] = xn[i];                                    \
+            }                                                                                           \
+        }                                                                                               \
+    }
+#define LV_TE_SPLIT_TORQUE(NORMALIZE) /* world torques: not split (LV_RHS_SPLIT_TORQUE 0) */
+#define LV_TE_SPLIT_FULL(NORMALIZE)
+#define LV_TE_SPLIT_FORCE(NORMALIZE) LV_TILE_RK4_FX_SPLIT(NORMALIZE, LV_SPLIT_H_RHS_1)
+#define LV_TE_SPLIT_BODY(NORMALIZE) LV_TILE_RK4_FX_SPLIT(NORMALIZE, LV_TE_SPLIT_RHS_B)
+#define LV_TE_SPLIT_BODY_F(NORMALIZE) LV_TILE_RK4_FX_SPLIT(NORMALIZE, LV_TE_SPLIT_RHS_B)
+/* Whether the effect tile fx steps decoupled (its kind allows it: LV_RHS_SPLIT_<kind> != 0): every effect built-in and
+   none coupling (rhs_kind's rule; the tile's bodies are not all constant). */
+static int tile_fx_decoupled(const lv_tile_fx *fx)
+{
+    int e;
+    for (e = 0; e < fx->n_eff; e++)
+        if (fx->codes[e] >= LV_EFFECT_USER_BASE || (lv_effect_flags(fx->codes[e]) & LV_EFFECT_COUPLED)) return 0;
+    return fx->n_eff > 0;
+}
+
 /* The fused effect tiles: a pattern of built-in effects reading the state (kernels.h's LV_EFFECT_FUSED, printed by
    derive/effect_fuse.py; tile_fx_pattern finds it), each code known to the compiler, so that the generated dispatch
    inlines to that effect alone inside the plain tile's lane loop (LV_TILE_RK4: each lane's whole step in registers,
@@ -306,7 +364,79 @@ typedef void (*lv_tile_fn)(double (*LV_RESTRICT T)[LV_TILE], const double (*LV_R
 #define LV_TF_RHS_FORCE(in, out) LV_TF_RHS(FORCE, in, out)
 #define LV_TF_RHS_BODY(in, out) LV_TF_RHS(BODY, in, out)
 #define LV_TF_RHS_BODY_F(in, out) LV_TF_RHS(BODY_F, in, out)
-/* The fused tile NAME_tf<ID> of the effect tile stepper NAME (kind KIND) for the pattern (ID, N, C0, C1). */
+/* The decoupled step of a fused tile (a pattern of LV_EFFECT_FUSED_SPLIT_<id> in a kind of LV_RHS_SPLIT_<kind> != 0:
+   no effect couples translation and rotation, derive/effect.py FLAG_COUPLED): per lane and call, the affine force's
+   sums F0 (P's constant rows, then the pattern's lv_effect_affine in table order) and k, and translation_flow_scale's
+   constants TF; per step, the rotation alone (q, omega_b: 7 numbers) through the scaled-increment stages
+   (LV_RK4_SCALED_STEP) with the pattern's torque sums at each stage input (the lane's 13 numbers xs, q and omega_b
+   replaced), then translation_flow on (p_w, v_w). */
+#define LV_SPLIT_ROWS (LV_STATE_Q_LEN + LV_STATE_OMEGA_B_LEN) /* y = (q, omega_b) */
+#define LV_SPLIT_FOR(stmt) for (i = 0; i < LV_SPLIT_ROWS; i++) stmt
+#define LV_SPLIT_ROT_1(in, out) lv_rigid_body_increments_free_c(in, in + LV_STATE_Q_LEN, sc + LV_INC_SCALE_C,  \
+    sc[LV_INC_SCALE_HQ], out, out + LV_STATE_Q_LEN)
+#define LV_SPLIT_ROT_2(in, out) lv_rigid_body_increments_rot_b_c(in, in + LV_STATE_Q_LEN, sc, t, out,           \
+    out + LV_STATE_Q_LEN)
+#define LV_SPLIT_ROT(SPLIT, in, out) LV_SPLIT_ROT_(SPLIT, in, out)
+#define LV_SPLIT_ROT_(SPLIT, in, out) LV_SPLIT_ROT_##SPLIT(in, out)
+#define LV_TF_ROT(KIND, in, out) do {                                                                   \
+        for (i = 0; i < LV_STATE_Q_LEN; i++) xs[LV_STATE_Q + i] = in[i];                                 \
+        for (i = 0; i < LV_STATE_OMEGA_B_LEN; i++) xs[LV_STATE_OMEGA_B + i] = in[LV_STATE_Q_LEN + i];    \
+        {                                                                                               \
+            LV_TF_SUMS(LV_TF_APPLY(LV_RHS_BODY_FRAME_##KIND), lv_c0, lv_c1, xs);                        \
+            (void)f;                                                                                    \
+            (void)t;                                                                                    \
+            LV_SPLIT_ROT(LV_RHS_SPLIT_##KIND, in, out);                                                 \
+        }                                                                                               \
+    } while (0)
+#define LV_TF_ROT_FORCE(in, out) LV_TF_ROT(FORCE, in, out)
+#define LV_TF_ROT_BODY(in, out) LV_TF_ROT(BODY, in, out)
+#define LV_TF_ROT_BODY_F(in, out) LV_TF_ROT(BODY_F, in, out)
+#define LV_TF_SPLIT_TORQUE(NORMALIZE) /* world torques: not split (LV_RHS_SPLIT_TORQUE 0) */
+#define LV_TF_SPLIT_FULL(NORMALIZE)
+#define LV_TF_SPLIT_FORCE(NORMALIZE) LV_TILE_RK4_SPLIT(NORMALIZE, FORCE)
+#define LV_TF_SPLIT_BODY(NORMALIZE) LV_TILE_RK4_SPLIT(NORMALIZE, BODY)
+#define LV_TF_SPLIT_BODY_F(NORMALIZE) LV_TILE_RK4_SPLIT(NORMALIZE, BODY_F)
+#define LV_TILE_RK4_SPLIT(NORMALIZE, KIND)                                                              \
+    {                                                                                                   \
+        LV_ALIGN_TILE double SC[LV_INC_SCALE_SIZE][LV_TILE];                                            \
+        LV_ALIGN_TILE double TF[LV_FLOW_SIZE][LV_TILE];                                                 \
+        long s, b;                                                                                      \
+        int i;                                                                                          \
+        LV_TILE_SCALES(SC)                                                                              \
+        for (b = 0; b < m; b++) {                                                                       \
+            LV_TF_LOAD                                                                                  \
+            double f0[3] = {F0[0], F0[1], F0[2]}, kk = 0.0, tf[LV_FLOW_SIZE];                           \
+            (void)T0;                                                                                   \
+            (void)I;                                                                                    \
+            (void)lv_effect_affine(lv_c0, p0, mass, f0, &kk);                                           \
+            if (lv_c1 != 0) (void)lv_effect_affine(lv_c1, p1, mass, f0, &kk);                           \
+            lv_translation_flow_scale(kk, f0, mass, dt, tf);                                            \
+            for (i = 0; i < LV_FLOW_SIZE; i++) TF[i][b] = tf[i];                                        \
+        }                                                                                               \
+        for (s = 0; s < n_steps; s++) {                                                                 \
+            for (b = 0; b < m; b++) {                                                                   \
+                double xs[LV_STATE_SIZE], y[LV_SPLIT_ROWS], H[LV_SPLIT_ROWS], acc[LV_SPLIT_ROWS],       \
+                    tmp[LV_SPLIT_ROWS], sc[LV_INC_SCALE_SIZE], tf[LV_FLOW_SIZE], pn[3], vn[3];          \
+                LV_TF_LOAD                                                                              \
+                for (i = 0; i < LV_STATE_SIZE; i++) xs[i] = T[i][b];                                    \
+                for (i = 0; i < LV_INC_SCALE_SIZE; i++) sc[i] = SC[i][b];                               \
+                for (i = 0; i < LV_FLOW_SIZE; i++) tf[i] = TF[i][b];                                    \
+                lv_translation_flow(xs + LV_STATE_P_W, xs + LV_STATE_V_W, tf, pn, vn);                  \
+                for (i = 0; i < LV_STATE_Q_LEN; i++) y[i] = xs[LV_STATE_Q + i];                         \
+                for (i = 0; i < LV_STATE_OMEGA_B_LEN; i++) y[LV_STATE_Q_LEN + i] = xs[LV_STATE_OMEGA_B + i]; \
+                LV_RK4_SCALED_STEP(double, LV_TF_ROT_##KIND, LV_SPLIT_FOR, LV_TILE_AT, y, y, H, acc, tmp);  \
+                if (NORMALIZE) lv_quat_normalize(y, y);                                                 \
+                for (i = 0; i < 3; i++) {                                                               \
+                    T[LV_STATE_P_W + i][b] = pn[i];                                                     \
+                    T[LV_STATE_V_W + i][b] = vn[i];                                                     \
+                }                                                                                       \
+                for (i = 0; i < LV_STATE_Q_LEN; i++) T[LV_STATE_Q + i][b] = y[i];                       \
+                for (i = 0; i < LV_STATE_OMEGA_B_LEN; i++) T[LV_STATE_OMEGA_B + i][b] = y[LV_STATE_Q_LEN + i]; \
+            }                                                                                           \
+        }                                                                                               \
+    }
+/* The fused tile NAME_tf<ID> of the effect tile stepper NAME (kind KIND) for the pattern (ID, N, C0, C1): decoupled
+   (LV_TILE_RK4_SPLIT) when the pattern and the kind allow it, else the 13-number stages. */
 #define LV_TF_DEFINE(NAME, ATTR, NORMALIZE, KIND, ID, N, C0, C1)                                        \
     ATTR LV_FLATTEN LV_NOINLINE static void NAME##_tf##ID(double (*LV_RESTRICT T)[LV_TILE],             \
         const double (*LV_RESTRICT J)[LV_TILE], const double (*LV_RESTRICT P)[LV_TILE],                 \
@@ -315,7 +445,10 @@ typedef void (*lv_tile_fn)(double (*LV_RESTRICT T)[LV_TILE], const double (*LV_R
         const double (*E0)[LV_TILE] = fx->EP + fx->off[fx->first];                                      \
         const double (*E1)[LV_TILE] = fx->EP + fx->off[fx->first + (fx->n_eff > fx->first + 1)];        \
         enum { lv_c0 = C0, lv_c1 = C1 };                                                                \
-        LV_TILE_RK4(NORMALIZE, LV_TF_LOAD, LV_TF_RHS_##KIND)                                            \
+        if (LV_EFFECT_FUSED_SPLIT_##ID && LV_RHS_SPLIT_##KIND != 0) {                                   \
+            LV_TF_SPLIT_##KIND(NORMALIZE)                                                               \
+        } else                                                                                          \
+            LV_TILE_RK4(NORMALIZE, LV_TF_LOAD, LV_TF_RHS_##KIND)                                        \
     }
 /* The call of the effect tile stepper NAME to its fused tile of pattern ID (a case of its switch on fx->fused). */
 #define LV_TF_GO(NAME, ID, N, C0, C1) case ID: NAME##_tf##ID(T, J, P, fx, m, dt, n_steps); return;
@@ -344,6 +477,10 @@ typedef void (*lv_tile_fn)(double (*LV_RESTRICT T)[LV_TILE], const double (*LV_R
         switch (fx->fused) {                                                                            \
         LV_EFFECT_FUSED_##KIND(LV_TF_GO, NAME)                                                          \
         default: break;                                                                                 \
+        }                                                                                               \
+        if (LV_RHS_SPLIT_##KIND != 0 && tile_fx_decoupled(fx)) {                                        \
+            LV_TE_SPLIT_##KIND(NORMALIZE)                                                               \
+            return;                                                                                     \
         }                                                                                               \
         LV_TILE_RK4_FX(NORMALIZE, KIND)                                                                 \
     }
@@ -515,6 +652,8 @@ static lv_tile_fn tile_rk4_fn(int isa, int normalize, int cls, long count)
     case LV_RHS_BODY: return normalize ? LV_ISA_PICK(isa, tile_rk4_norm_fx_body) : LV_ISA_PICK(isa, tile_rk4_raw_fx_body);
     case LV_RHS_BODY_F:
         return normalize ? LV_ISA_PICK(isa, tile_rk4_norm_fx_body_f) : LV_ISA_PICK(isa, tile_rk4_raw_fx_body_f);
+    case LV_RHS_FORCE + LV_RHS_SPLIT: case LV_RHS_BODY + LV_RHS_SPLIT: case LV_RHS_BODY_F + LV_RHS_SPLIT:
+        return tile_rk4_fn(isa, normalize, cls - LV_RHS_SPLIT, count); /* their kind's effect tiles decide it */
     default: return normalize ? LV_ISA_PICK(isa, tile_rk4_norm_full) : LV_ISA_PICK(isa, tile_rk4_raw_full);
     }
 }

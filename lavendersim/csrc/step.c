@@ -206,7 +206,15 @@ static inline void effect_sums_b(const double *x, const double *v_w, double m, c
    of the body reads no state (see rhs_kind). */
 enum { LV_RHS_FREE = 0, LV_RHS_TORQUE = 1, LV_RHS_FULL = 2, LV_RHS_FORCE = 5, LV_RHS_BODY = 8, LV_RHS_BODY_F = 9 };
 #define LV_RHS_CONSTANT 2
-#define LV_RHS_CLASSES 10
+/* LV_RHS_SPLIT is added to the class of a plain body that steps decoupled (rhs_kind, effects_decoupled): a kind of
+   kernels.h's LV_RHS_SPLIT_<kind> != 0 (FORCE, BODY, BODY_F), effects not all constant, all built-in, none coupling
+   translation and rotation (LV_EFFECT_COUPLED clear: derive/effect.py affine_force). Its rotation is staged alone
+   (lv_split_rk4_h), its translation takes the printed affine flow. */
+#define LV_RHS_SPLIT 16
+#define LV_RHS_CLASSES (LV_RHS_SPLIT + 10)
+#define LV_RHS_SPLIT_OF(kind) [LV_RHS_##kind] = LV_RHS_SPLIT_##kind,
+static const unsigned char LV_SPLIT_BY_CLASS[LV_RHS_SPLIT] = {LV_RHS_KINDS(LV_RHS_SPLIT_OF)};
+#undef LV_RHS_SPLIT_OF
 #define rhs_constant(cls) ((cls) == LV_RHS_TORQUE + LV_RHS_CONSTANT || (cls) == LV_RHS_FULL + LV_RHS_CONSTANT || \
                            (cls) == LV_RHS_FORCE + LV_RHS_CONSTANT)
 #define LV_RHS_OF_KIND(kind) LV_RHS_##kind
@@ -382,6 +390,50 @@ static inline void lv_free_rk4_h(const double *x, double *xn, const double *C, d
     for (i = 0; i < LV_STATE_OMEGA_B_LEN; i++) xn[LV_STATE_OMEGA_B + i] = y[LV_STATE_Q_LEN + i];
 }
 
+/* One decoupled RK4 step of one body (class + LV_RHS_SPLIT), x -> xn: the rotation (q, omega_b) alone through the
+   scaled-increment stages (LV_RK4_SCALED_STEP, as lv_free_rk4_h), RHS its increments: LV_SPLIT_H_RHS_1 torque-free
+   (LV_RHS_SPLIT_<kind> 1), LV_SPLIT_H_ROT_B(in, out, SUMS) (2) the body-frame torque sums SUMS(xs, F, tau) at each
+   stage input (xs: the body's 13 numbers with q and
+   omega_b replaced; the torques read neither p_w nor v_w) and rigid_body_increments_rot_b_c, on the body's constants
+   sc (rigid_body_increment_scale); then p_w, v_w by the printed translation_flow on the constants tf
+   (translation_flow_scale, lv_split_flow_scale). The tiles (batch_simd.h LV_TILE_RK4_SPLIT) do the same per lane. */
+#define LV_SPLIT_RK4_H(RHS, x, xn, sc, tf, normalize)                                         \
+    do {                                                                                                \
+        double xs_[LV_STATE_SIZE], y_[LV_H_ROWS], H_[LV_H_ROWS], acc_[LV_H_ROWS], tmp_[LV_H_ROWS];      \
+        int i_;                                                                                         \
+        for (i_ = 0; i_ < LV_STATE_SIZE; i_++) xs_[i_] = (x)[i_];                                        \
+        (void)xs_; /* (read by the torque sums of LV_SPLIT_H_ROT_B only) */                             \
+        for (i_ = 0; i_ < LV_STATE_Q_LEN; i_++) y_[i_] = (x)[LV_STATE_Q + i_];                           \
+        for (i_ = 0; i_ < LV_STATE_OMEGA_B_LEN; i_++) y_[LV_STATE_Q_LEN + i_] = (x)[LV_STATE_OMEGA_B + i_]; \
+        LV_RK4_SCALED_STEP(double, RHS, LV_SPLIT_H_FOR, LV_SPLIT_H_AT, y_, y_, H_, acc_, tmp_); \
+        if (normalize) lv_quat_normalize(y_, y_);                                                       \
+        lv_translation_flow((x) + LV_STATE_P_W, (x) + LV_STATE_V_W, tf, (xn) + LV_STATE_P_W, (xn) + LV_STATE_V_W); \
+        for (i_ = 0; i_ < LV_STATE_Q_LEN; i_++) (xn)[LV_STATE_Q + i_] = y_[i_];                          \
+        for (i_ = 0; i_ < LV_STATE_OMEGA_B_LEN; i_++) (xn)[LV_STATE_OMEGA_B + i_] = y_[LV_STATE_Q_LEN + i_]; \
+    } while (0)
+#define LV_SPLIT_H_FOR(stmt) for (i_ = 0; i_ < LV_H_ROWS; i_++) stmt
+#define LV_SPLIT_H_AT(v) v[i_]
+#define LV_SPLIT_H_RHS_1(in, out) lv_rigid_body_increments_free_c(in, in + LV_STATE_Q_LEN, sc + LV_INC_SCALE_C,  \
+    sc[LV_INC_SCALE_HQ], out, out + LV_STATE_Q_LEN)
+#define LV_SPLIT_H_ROT_B(in, out, SUMS)                                                                    \
+    do {                                                                                                \
+        double F_[3] = {0.0, 0.0, 0.0}, t_[3] = {0.0, 0.0, 0.0};                                        \
+        for (i_ = 0; i_ < LV_STATE_Q_LEN; i_++) xs_[LV_STATE_Q + i_] = in[i_];                           \
+        for (i_ = 0; i_ < LV_STATE_OMEGA_B_LEN; i_++) xs_[LV_STATE_OMEGA_B + i_] = in[LV_STATE_Q_LEN + i_]; \
+        SUMS(xs_, F_, t_);                                                                              \
+        lv_rigid_body_increments_rot_b_c(in, in + LV_STATE_Q_LEN, sc, t_, out, out + LV_STATE_Q_LEN);   \
+    } while (0)
+
+/* The translation flow's constants tf (translation_flow_scale) of a body with the effects refs (all built-in,
+   decoupled): their affine forces' F0 and k (lv_effect_affine) summed in table order from 0. */
+static inline void lv_split_flow_scale(const lv_effect_ref *refs, long n, double m, double dt, double *tf)
+{
+    double F0[3] = {0.0, 0.0, 0.0}, k = 0.0;
+    long j;
+    for (j = 0; j < n; j++) (void)lv_effect_affine(refs[j].code, refs[j].p, m, F0, &k);
+    lv_translation_flow_scale(k, F0, m, dt, tf);
+}
+
 /* lv_free_rk4_h's constants of a call: C = (LV_RK4_SCALE dt) k_b from a body's Euler coefficients c_b, and hq. */
 static inline double lv_free_rk4_scale(const double *c_b, double dt, double *C)
 {
@@ -422,11 +474,25 @@ static inline double lv_free_rk4_scale(const double *c_b, double dt, double *C)
             for (j = 0; j < n; j++) lv_free_rk4_h(x[j], xn[j], Ch[j], hq, dt, normalize);               \
             break;                                                                                      \
         }                                                                                               \
+        if (forced & LV_RHS_SPLIT) { /* decoupled: the rotation staged alone, the translation's flow */  \
+            for (j = 0; j < n; j++) {                                                                   \
+                const double *sc = S[j];                                                                \
+                if (LV_SPLIT_BY_CLASS[forced - LV_RHS_SPLIT] == 1)                                      \
+                    LV_SPLIT_RK4_H(LV_SPLIT_H_RHS_1, x[j], xn[j], sc, TF[j], normalize);                \
+                else                                                                                    \
+                    LV_SPLIT_RK4_H(LV_SPLIT_H_RHS_J, x[j], xn[j], sc, TF[j], normalize);                \
+            }                                                                                           \
+            break;                                                                                      \
+        }                                                                                               \
         LV_RK4_SCALED_STEP(double, LV_RK4_INC, LV_BLOCK_FOR, LV_BLOCK_AT, x, xn, k, acc, tmp);          \
         if (normalize)                                                                                  \
             for (j = 0; j < n; j++) lv_quat_normalize(xn[j] + LV_STATE_Q, xn[j] + LV_STATE_Q);          \
     } while (0)
 
+
+/* A decoupled body's torque sums at a stage (LV_SPLIT_RK4_H's SUMS): its effects' body-frame forms (BODY kinds). */
+#define LV_SPLIT_SUMS_J(xs, F, t) effect_sums_b(xs, (xs) + LV_STATE_V_W, m[j], I[j], refs[j], n_refs[j], F, t)
+#define LV_SPLIT_H_RHS_J(in, out) LV_SPLIT_H_ROT_B(in, out, LV_SPLIT_SUMS_J)
 
 /* RK4 fast path on plain bodies, `forced` (LV_RHS_*) of them all: torque-free (no effect acts on them;
    the common free-flight scene), or with effects, each body summed over its own (from the index ix).
@@ -451,7 +517,7 @@ static inline long advance_free_rk4(double *state, const double *params, const l
         acc[LV_BLOCK][LV_STATE_SIZE], tmp[LV_BLOCK][LV_STATE_SIZE], I[LV_BLOCK][3], cf[LV_BLOCK][LV_EULER_SIZE],
         snap[LV_BLOCK][LV_STATE_SIZE];
     double F[LV_BLOCK][3], tau[LV_BLOCK][3], m[LV_BLOCK], Ch[LV_BLOCK][LV_EULER_K_LEN], hq = 0.0,
-        S[LV_BLOCK][LV_INC_SCALE_SIZE];
+        S[LV_BLOCK][LV_INC_SCALE_SIZE], TF[LV_BLOCK][LV_FLOW_SIZE];
     const lv_effect_ref *refs[LV_BLOCK];
     long n_refs[LV_BLOCK];
     long s, c, cm;
@@ -468,6 +534,7 @@ static inline long advance_free_rk4(double *state, const double *params, const l
         if (constant && forced != LV_RHS_FREE)
             effect_sums(x[j], x[j] + LV_STATE_V_W, m[j], I[j], refs[j], n_refs[j], F[j], tau[j]);
         if (forced != LV_RHS_FREE) lv_rigid_body_increment_scale(cf[j], m[j], LV_RK4_SCALE * dt, S[j]);
+        if (forced & LV_RHS_SPLIT) lv_split_flow_scale(refs[j], n_refs[j], m[j], dt, TF[j]);
     }
     for (c = 0; c < n_steps; c += cm) {
         cm = n_steps - c < LV_FREE_CHUNK ? n_steps - c : LV_FREE_CHUNK;
@@ -1751,6 +1818,9 @@ typedef long (*lv_forced_fn)(double *state, const double *params, const long *id
         case LV_RHS_FORCE + LV_RHS_CONSTANT: return LV_FORCED(LV_RHS_FORCE, 1);                         \
         case LV_RHS_BODY: return LV_FORCED(LV_RHS_BODY, 0);                                             \
         case LV_RHS_BODY_F: return LV_FORCED(LV_RHS_BODY_F, 0);                                         \
+        case LV_RHS_FORCE + LV_RHS_SPLIT: return LV_FORCED(LV_RHS_FORCE + LV_RHS_SPLIT, 0);             \
+        case LV_RHS_BODY + LV_RHS_SPLIT: return LV_FORCED(LV_RHS_BODY + LV_RHS_SPLIT, 0);               \
+        case LV_RHS_BODY_F + LV_RHS_SPLIT: return LV_FORCED(LV_RHS_BODY_F + LV_RHS_SPLIT, 0);           \
         default: return LV_FORCED(LV_RHS_FULL, 0);                                                      \
         }                                                                                               \
     }
@@ -1802,10 +1872,21 @@ LV_FLATTEN static long advance_group(double *state, const double *params, const 
 /* The right-hand side kind of plain body b (LV_RHS_*), plus LV_RHS_CONSTANT when it has effects and
    they are all constant (effects_constant: such a group takes the SIMD tiles with effects, or the
    scalar blocks with its sums taken once per call). */
+/* Whether plain body b's effects are all built-in and none couples translation and rotation (LV_EFFECT_COUPLED). */
+static int effects_decoupled(const lv_effect_index *ix, long b)
+{
+    long k;
+    if (ix->flags[b] & LV_EFFECT_COUPLED) return 0;
+    for (k = ix->start[b]; k < ix->start[b + 1]; k++)
+        if (ix->refs[k].user != NULL) return 0;
+    return 1;
+}
+
 static int rhs_kind(const lv_effect_index *ix, long b)
 {
     const int cls = rhs_class(ix->start[b + 1] - ix->start[b], ix->flags[b]);
-    return cls != LV_RHS_FREE && cls < LV_RHS_BODY && effects_constant(ix, b) ? cls + LV_RHS_CONSTANT : cls;
+    if (cls != LV_RHS_FREE && cls < LV_RHS_BODY && effects_constant(ix, b)) return cls + LV_RHS_CONSTANT;
+    return LV_SPLIT_BY_CLASS[cls] != 0 && effects_decoupled(ix, b) ? cls + LV_RHS_SPLIT : cls;
 }
 
 /* ---- the SoA tiles of one call, over threads ---------------------------------------------------
