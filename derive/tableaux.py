@@ -727,7 +727,27 @@ def _c_scaled_rk(name: str, c, b_num, b_den) -> list[str]:
                     f"AT({'xn' if i == len(stages) else 'tmp'})));")
     return [f"#define LV_{N}_SCALE {_f(s)}",
             f"#define LV_{N}_SCALED_UPDATE(REAL, STAGE, x, H, acc, out) \\\n    (" + " \\\n     : ".join(cases) + ")",
-            " \\\n".join(step) + " \\\n} while (0)"]
+            " \\\n".join(step) + " \\\n} while (0)", _c_scaled_fused(N, stages, end)]
+
+
+def _c_scaled_fused(N: str, stages, end) -> str:
+    """LV_<N>_SCALED_UPDATE_FUSED: the same scaled program (scaled_program's stages and end) for code compiled with
+    a*b+c contracted into FMAs (the opt-in contract="fma" tiles): a multiple 2 is two adds onto its target, (t + H) +
+    H, never H + H, which GCC folds into 2 H and then fuses into the sum: FMA-unit work where the adders are idle.
+    The same step to rounding (other roundings than LV_<N>_SCALED_UPDATE: not bitwise it)."""
+    def onto(t, k):
+        return f"{t} + (H)" if k == 1 else f"({t} + (H)) + (H)" if k == 2 else f"{t} + (REAL){_f(k)} * (H)"
+
+    def first(k):
+        return "(H)" if k == 1 else f"(REAL){_f(k)} * (H)"
+    cases = []
+    for i, (w, m, _) in enumerate(stages[:-1], start=1):
+        acc = f"(acc) = {first(w)}" if i == 1 else f"(acc) = {onto('(acc)', w)}"
+        cases.append(f"(STAGE) == {i} ? ({acc}, (out) = {onto('(x)', m)})")
+    w = stages[-1][0]
+    total = f"({onto('(acc)', w)})" if len(stages) > 1 else first(w)
+    cases.append(f"((out) = (x) + {total}" + (f" * (REAL){_f(end)})" if end != 1 else ")"))
+    return f"#define LV_{N}_SCALED_UPDATE_FUSED(REAL, STAGE, x, H, acc, out) \\\n    (" + " \\\n     : ".join(cases) + ")"
 
 
 def _py_scaled_rk() -> list[str]:

@@ -141,6 +141,11 @@ enum {
     RHS(tmp, H); FOR((void)LV_RK4_SCALED_UPDATE(REAL, 3, AT(x), AT(H), AT(acc), AT(tmp))); \
     RHS(tmp, H); FOR((void)LV_RK4_SCALED_UPDATE(REAL, 4, AT(x), AT(H), AT(acc), AT(xn))); \
 } while (0)
+#define LV_RK4_SCALED_UPDATE_FUSED(REAL, STAGE, x, H, acc, out) \
+    ((STAGE) == 1 ? ((acc) = (H), (out) = (x) + (H)) \
+     : (STAGE) == 2 ? ((acc) = ((acc) + (H)) + (H), (out) = (x) + (H)) \
+     : (STAGE) == 3 ? ((acc) = ((acc) + (H)) + (H), (out) = ((x) + (H)) + (H)) \
+     : ((out) = (x) + ((acc) + (H)) * (REAL)0.3333333333333333))
 
 /* Dormand-Prince 5(4): A (row 6 = the 5th-order weights, FSAL) and E = b - b_hat */
 static const double LV_DP_A[7][6] = {

@@ -46,7 +46,8 @@ v0 = (0.1, 0, 0) m/s, dt = 1e-3 s, RK4, q normalized each step):
 * NumPy peers (lavendersim/bench/numpy_section.py) — the NumPy backend against hand NumPy (numpy_peers.py,
   N = 1e3, 1e5) and a pure-Python loop (N = 1);
 * the best hand loop — beside the bitwise SoA peer, handwritten_fma.c: the fewest flops we know for a
-  torque-free RK4 step (only q and omega_b through the stages, FMA, -O3 -march=native), and the flop
+  torque-free RK4 step (only q and omega_b through the stages, FMA, -O3 -march=native; the classic stage form and
+  the scaled-increment form, each its own variants), and the flop
   floor of this CPU (FMA_FLOPS per body-step / the peak FMA rate a C loop measures now);
 * small scenes — N = 4 and 8 bodies per body-step against the largest N (batched section);
 * agreement — the hand-written kernel against the Sim (same trajectory to ~1e-12), and MuJoCo's
@@ -93,16 +94,23 @@ CFLAGS = ["-O3", "-std=c99", "-fno-math-errno", "-ffp-contract=off", "-fPIC", "-
 # the unconstrained peer: contraction into FMA allowed, this CPU's instruction set (never -ffast-math); GCC's pre-RA
 # scheduler (-fschedule-insns) as the extension's AVX-512 tiles have it (batch_simd.h LV_TILE_H_SCHED_avx512): ~3 % here
 FMA_SOURCE = HERE / "handwritten_fma.c"
-FMA_VARIANTS = (("native", ["-march=native", "-ffp-contract=fast", "-fschedule-insns"]),
-                ("native_512", ["-march=native", "-ffp-contract=fast", "-mprefer-vector-width=512", "-fschedule-insns"]))
+# (name, flags, function): the classic loop (stage sums as FMAs: contraction on) and the scaled-increment loop (its
+# products explicit fma(), its sums adds: contraction off, so GCC's fold of H + H into 2 H does not fuse them back)
+FMA_VARIANTS = (("native", ["-march=native", "-ffp-contract=fast", "-fschedule-insns"], "lv_fma_rk4_free_soa"),
+                ("native_512", ["-march=native", "-ffp-contract=fast", "-mprefer-vector-width=512", "-fschedule-insns"],
+                 "lv_fma_rk4_free_soa"),
+                ("scaled", ["-march=native", "-ffp-contract=off", "-fschedule-insns"], "lv_fma_rk4_free_soa_scaled"),
+                ("scaled_512", ["-march=native", "-ffp-contract=off", "-mprefer-vector-width=512", "-fschedule-insns"],
+                 "lv_fma_rk4_free_soa_scaled"))
 # The fewest flops per body-step of any torque-free RK4 loop we know (an FMA counts 2; sqrt and division 1 each):
 # the scaled-increment form the default tiles print (csrc/step.c lv_free_rk4_h, session 23): per stage the
 # increments (dt/2) k of q and omega_b at k's own cost (21 multiplies, 8 adds: the dt/2 sits in the per-call
 # constants, 3 multiplies per body and call, not counted), the stage inputs and the end by 9 adds and 1 multiply per
 # number of (q, omega_b), q normalized (8 multiplies, 3 adds, one sqrt, one division), p += dt v (3 + 3):
-# 4 * 29 + 7 * 10 + 13 + 6 = 205 (102 multiplies, 101 adds). The hand FMA peer (lv_fma_rk4_free_soa) does 221
-# with a sqrt and a division (224 with its series); the floor keeps the lowest count, so it does not rise with
-# the loop that beats it.
+# 4 * 29 + 7 * 10 + 13 + 6 = 205 (102 multiplies, 101 adds). The hand FMA peer's classic loop (lv_fma_rk4_free_soa)
+# does 221 with a sqrt and a division (224 with its series), its scaled loop (lv_fma_rk4_free_soa_scaled) 208 (the
+# series normalization 16 where q / |q| counts 13); the floor keeps the lowest count, so it does not rise with the
+# loop that beats it.
 FMA_FLOPS = 205
 # the hand-written SoA peer, compiled once per instruction set (LV_ISA_* level -> name, extra flags)
 # (avx512f: -fschedule-insns, as the extension's AVX-512 tile has it; it spills with 16 registers, so not avx2/sse2)
@@ -379,21 +387,21 @@ class HandwrittenKernel:
         self.floor: dict[str, Callable[..., Any]] = {}  # ISA name -> lv_ref_divider_floor_soa of that copy (the divider's limit)
         self.soa_commands: dict[str, str] = {}
         self.soa_errors: dict[str, str] = {}
-        # variant name -> lv_fma_rk4_free_soa of handwritten_fma.c compiled with FMA_VARIANTS' flags
+        # variant name -> its function of handwritten_fma.c compiled with FMA_VARIANTS' flags
         self.fma: dict[str, Callable[..., Any]] = {}
         self.peak_fma: Callable[..., float] | None = None   # lv_peak_fma of the first variant
         self.fma_commands: dict[str, str] = {}
         self.fma_errors: dict[str, str] = {}
 
     def compile_fma(self, variants=FMA_VARIANTS) -> None:
-        """Compile the unconstrained FMA peer once per (name, flags) (a failing one is recorded, not raised)."""
-        for name, extra in variants:
+        """Compile the unconstrained FMA peer once per (name, flags, function) (a failing one is recorded, not raised)."""
+        for name, extra, symbol in variants:
             try:
                 so, cmd = compile_c(FMA_SOURCE, list(extra), self.cc)   # the last -ffp-contract wins
             except RuntimeError as exc:
                 self.fma_errors[name] = str(exc)
                 continue
-            f = so.lv_fma_rk4_free_soa
+            f = getattr(so, symbol)
             f.argtypes = [ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_double), ctypes.c_long,
                           ctypes.c_double, ctypes.c_long]
             f.restype = None

@@ -513,15 +513,19 @@ static int tile_fx_decoupled(const lv_tile_fx *fx)
 LV_ISA_COPIES(LV_DEFINE_TILES)
 
 /* The opt-in FMA copies (lv_contract_set(LV_CONTRACT_FMA), Sim(..., contract="fma")), torque-free bodies: only q and
-   omega_b go through the stages (the printed rigid_body_rates_free_c: g = q (x) [omega_b, 0] and omega_b's rate, with
-   the printed LV_RK4_UPDATE, q's step LV_QUAT_RATE_SCALE * dt: the 1/2 of dq/dt folded into it); v_w's rate is 0,
-   so p_w's rate v_w is constant over the step, where RK4 is one Euler step (the printed LV_EULER_UPDATE), and v_w
-   stays as it is. The same RK4 step mathematically, 7 numbers through the stages instead of 13, compiled with
-   -ffp-contract=fast for CPUs with FMA, so the compiler fuses a*b+c into one rounding: not bitwise the scalar path
-   nor NumPy (docs/performance.md gives the measured difference). q is renormalized without the divider by the
-   printed quat_renormalize_near_unit (tile_q_normalize_far below: its range and the exact fallback). In a harness of these loops (AVX2, min of 15
-   interleaved rounds, a standalone copy): the bitwise tile 8.87 ns per body-step, this one 7.09 (the bitwise
-   loop contracted as it is: 7.94). */
+   omega_b go through the stages, in the default tiles' scaled-increment form (the printed
+   rigid_body_increments_free_c on the constants of lv_free_rk4_scale, once per call) with the printed
+   LV_RK4_SCALED_UPDATE_FUSED; p_w drifts by v_w (the printed translation_drift: v_w' = 0, RK4 is one Euler step there)
+   and v_w stays as it is. Compiled with -ffp-contract=fast for CPUs with FMA, so the compiler fuses a*b+c into one
+   rounding: not bitwise the scalar path nor NumPy (README and docs/performance.md give the measured difference).
+   Why this shape (Zen 4: multiplies and FMAs share two pipes, adds have two more): the increments' products fuse
+   into their sums, the stage sums stay adds (FUSED: a multiple 2 as two adds, since GCC folds H + H into 2 H and
+   fuses that into the sum); omega_b's increments (one product each) still fuse into each of their sums. The AVX-512
+   lane loop: 48 vmulpd, 68 FMAs, 43 vaddpd per 8 bodies. Measured (lavendersim bench --only simd, AVX-512, N = 1e3 /
+   1e4, load 4-6, alternating with main): 4.30-4.40 ns per body-step against 4.50-4.57 for the old stage form
+   (LV_RK4_UPDATE, its stage sums FMAs: 42 vmulpd + 85 FMAs); the scaled form with LV_RK4_SCALED_UPDATE read the same
+   as the old (51 + 74: GCC's 2 H), uncontracted 4.45 (104 vmulpd, 104 adds). q is renormalized without the divider
+   by the printed quat_renormalize_near_unit (tile_q_normalize_far below: its range and the exact fallback). */
 /* The FMA tiles' normalization, q p(eps) (the printed quat_renormalize_near_unit: no sqrt, no division), holds
    while |eps| = ||q|^2 - 1| <= LV_QUAT_RENORM_EPS_MAX; a lane beyond it (a state written far from unit, a wild step,
    NaN) keeps its raw q in the step's lane loop and is flagged, and then this pass gives it q / |q| (the printed
@@ -539,29 +543,40 @@ LV_NOINLINE static void tile_q_normalize_far(double (*LV_RESTRICT T)[LV_TILE], l
         for (i = 0; i < LV_STATE_Q_LEN; i++) T[LV_STATE_Q + i][b] = q[i];
     }
 }
+/* Stage STAGE of the scaled-increment RK4 step (as lv_free_rk4_h, with tableaux.h's LV_RK4_SCALED_UPDATE_FUSED: the
+   same program, its multiples 2 as two adds): the printed increments H = (s dt) (dq/dt, domega_b/dt) at (IN_Q, IN_W) on
+   the lane's constants (Cb, hq), then the running sums (aq, aw) and the next stage's input or (stage 4) the step's end
+   in (OUT_Q, OUT_W). */
 #define LV_TILE_STAGED(STAGE, IN_Q, IN_W, OUT_Q, OUT_W)                                                 \
-    lv_rigid_body_rates_free_c(IN_Q, IN_W, cf, g, wd);                                                  \
-    for (i = 0; i < LV_STATE_Q_LEN; i++) (void)LV_RK4_UPDATE(double, STAGE, hq, q0[i], g[i], aq[i], OUT_Q[i]); \
-    for (i = 0; i < LV_STATE_OMEGA_B_LEN; i++) (void)LV_RK4_UPDATE(double, STAGE, dt, w0[i], wd[i], aw[i], OUT_W[i])
+    lv_rigid_body_increments_free_c(IN_Q, IN_W, Cb, hq, Hq, Hw);                                        \
+    for (i = 0; i < LV_STATE_Q_LEN; i++) (void)LV_RK4_SCALED_UPDATE_FUSED(double, STAGE, q0[i], Hq[i], aq[i], OUT_Q[i]); \
+    for (i = 0; i < LV_STATE_OMEGA_B_LEN; i++) (void)LV_RK4_SCALED_UPDATE_FUSED(double, STAGE, w0[i], Hw[i], aw[i], OUT_W[i])
 #define LV_DEFINE_TILE_STAGED(NAME, ATTR, NORMALIZE)                                                    \
     ATTR LV_FLATTEN static void NAME(double (*LV_RESTRICT T)[LV_TILE], const double (*LV_RESTRICT J)[LV_TILE], \
                                      const double (*LV_RESTRICT P)[LV_TILE], const lv_tile_fx *LV_RESTRICT fx, \
                                      long m, double dt, long n_steps)                                   \
     {                                                                                                   \
-        const double hq = LV_QUAT_RATE_SCALE * dt;                                                      \
+        LV_ALIGN_TILE double C[LV_EULER_K_LEN][LV_TILE];                                                \
+        double hq = 0.0;                                                                                \
         long s, b;                                                                                      \
         int i;                                                                                          \
         (void)fx;                                                                                       \
         (void)P;                                                                                        \
+        for (b = 0; b < m; b++) { /* the lanes' constants, once per call (lv_free_rk4_scale) */         \
+            double cb[LV_EULER_SIZE], Cb[LV_EULER_K_LEN];                                               \
+            for (i = 0; i < LV_EULER_SIZE; i++) cb[i] = J[i][b];                                        \
+            hq = lv_free_rk4_scale(cb, dt, Cb);                                                         \
+            for (i = 0; i < LV_EULER_K_LEN; i++) C[i][b] = Cb[i];                                       \
+        }                                                                                               \
         for (s = 0; s < n_steps; s++) {                                                                 \
             long far = 0; /* a lane whose |q|^2 - 1 is beyond QUAT_RENORM_EPS_MAX this step */          \
             for (b = 0; b < m; b++) {                                                                   \
-                double q0[LV_STATE_Q_LEN], w0[LV_STATE_OMEGA_B_LEN], cf[LV_EULER_SIZE], g[LV_STATE_Q_LEN], \
-                    wd[LV_STATE_OMEGA_B_LEN], aq[LV_STATE_Q_LEN], aw[LV_STATE_OMEGA_B_LEN], tq[LV_STATE_Q_LEN], \
+                double q0[LV_STATE_Q_LEN], w0[LV_STATE_OMEGA_B_LEN], Cb[LV_EULER_K_LEN], Hq[LV_STATE_Q_LEN], \
+                    Hw[LV_STATE_OMEGA_B_LEN], aq[LV_STATE_Q_LEN], aw[LV_STATE_OMEGA_B_LEN], tq[LV_STATE_Q_LEN], \
                     tw[LV_STATE_OMEGA_B_LEN];                                                           \
                 for (i = 0; i < LV_STATE_Q_LEN; i++) q0[i] = T[LV_STATE_Q + i][b];                      \
                 for (i = 0; i < LV_STATE_OMEGA_B_LEN; i++) w0[i] = T[LV_STATE_OMEGA_B + i][b];          \
-                for (i = 0; i < LV_EULER_SIZE; i++) cf[i] = J[i][b];                                    \
+                for (i = 0; i < LV_EULER_K_LEN; i++) Cb[i] = C[i][b];                                   \
                 LV_TILE_STAGED(1, q0, w0, tq, tw);                                                      \
                 LV_TILE_STAGED(2, tq, tw, tq, tw);                                                      \
                 LV_TILE_STAGED(3, tq, tw, tq, tw);                                                      \
@@ -576,9 +591,13 @@ LV_NOINLINE static void tile_q_normalize_far(double (*LV_RESTRICT T)[LV_TILE], l
                     for (i = 0; i < LV_STATE_Q_LEN; i++) T[LV_STATE_Q + i][b] = tq[i];                  \
                 }                                                                                       \
                 for (i = 0; i < LV_STATE_OMEGA_B_LEN; i++) T[LV_STATE_OMEGA_B + i][b] = tw[i];          \
-                for (i = 0; i < LV_STATE_P_W_LEN; i++)                                                  \
-                    (void)LV_EULER_UPDATE(double, 1, dt, T[LV_STATE_P_W + i][b], T[LV_STATE_V_W + i][b], aq[0], \
-                                          T[LV_STATE_P_W + i][b]);                                      \
+                { /* p_w drifts by v_w (the printed translation_drift; v_w' = 0: RK4 is one Euler step there) */ \
+                    double p[LV_STATE_P_W_LEN], v[LV_STATE_V_W_LEN];                                    \
+                    for (i = 0; i < LV_STATE_P_W_LEN; i++) p[i] = T[LV_STATE_P_W + i][b];               \
+                    for (i = 0; i < LV_STATE_V_W_LEN; i++) v[i] = T[LV_STATE_V_W + i][b];               \
+                    lv_translation_drift(p, v, dt, p);                                                  \
+                    for (i = 0; i < LV_STATE_P_W_LEN; i++) T[LV_STATE_P_W + i][b] = p[i];               \
+                }                                                                                       \
             }                                                                                           \
             if (far) tile_q_normalize_far(T, m);                                                        \
         }                                                                                               \
