@@ -76,8 +76,8 @@ rtol/atol with a fixed-step integrator) raise LavenderInputError at construction
 
 Divergence before infinity (checked per chunk of steps, so the stepping itself is unchanged bit for bit):
 a run is advanced in chunks of about CHUNK_WORK right-hand-side evaluations (on the C backend with a fixed-step
-integrator at least CHUNK_MIN_STEPS steps within CHUNK_WORK_MAX evaluations, CHUNK_WORK_MAX_PLAIN for a scene of
-plain bodies without effects); after each chunk every body
+integrator at least CHUNK_MIN_STEPS steps within CHUNK_WORK_MAX evaluations, CHUNK_MIN_STEPS_PLAIN within
+CHUNK_WORK_MAX_PLAIN for a scene of plain bodies without effects); after each chunk every body
 is checked against
 
 * its integrator's validity bound, |omega|*dt*(I_max/I_min)**p <= WDT_MAX (declared once in
@@ -133,9 +133,11 @@ CHUNK_WORK = 2**20         # right-hand-side evaluations (summed over bodies) pe
 CHUNK_MIN_STEPS = 64       # C backend, fixed step: a chunk is at least this many steps (a call's setup and checks,
 CHUNK_WORK_MAX = 2**25     # ~60-100 ns per body, then cost ~1-2 ns per body-step) within this many evaluations (the
                            # latency of KeyboardInterrupt: ~0.1 s for plain RK4 bodies, ~4 s for wheeled ones)
-CHUNK_WORK_MAX_PLAIN = 2**28   # the same for plain bodies without effects (the SIMD tiles, ~1.5 ns per evaluation):
-                           # at 1e6 bodies a chunk stays 64 steps (~0.5 s); at 8 the C call streaming the state in
-                           # and out and the check reading it cost 1.3-1.4x the stepping (measured, issue 30)
+CHUNK_WORK_MAX_PLAIN = 2**30   # the same for plain bodies without effects (the SIMD tiles, ~1.2 ns per evaluation):
+CHUNK_MIN_STEPS_PLAIN = 256    # at least this many steps: at 1e6 bodies a chunk is 256 steps (~1.2 s); at 8 the C call
+                           # streaming the state in and out and the check reading it cost 1.3-1.4x the stepping; at 64
+                           # ~40 ns per body and chunk still, ~10 % (ns per body-step, Sim.run of one chunk, N = 1e4 /
+                           # 1e5 / 1e6: 5.08 / 5.07 / 5.05 at 64 steps, 4.60 / 4.56 / 4.57 at 256, 4.5 at 512; issue 30)
 CHUNK_WORK_MAX_NUMPY = 2**23   # the NumPy backend, fixed step: long chunks within this many evaluations (RK4 at 1e5
                            # bodies: 20 steps, ~0.5 s torque-free, ~1.2 s with effects; at 2 steps per call its
                            # check cost ~0.6x the stepping, H3's measurement, issue 30)
@@ -146,10 +148,10 @@ FAST_STEP_WORK = 4096      # step() runs inside C (holding the GIL) for scenes o
 ADAPTIVE_STEP_WORK = 6     # an adaptive integrator's evaluations per body-step for that cap: one dopri5 substep
 
 
-def chunk_steps(work: int, long_ok: bool, cap: int | None = None) -> int:
-    """Steps per backend call between checks: CHUNK_WORK's worth, and with long_ok at least CHUNK_MIN_STEPS as
-    long as that stays within CHUNK_WORK_MAX evaluations (large scenes, whose checks and C setup per call would
-    otherwise be paid every step or two).
+def chunk_steps(work: int, long_ok: bool, cap: int | None = None, min_steps: int | None = None) -> int:
+    """Steps per backend call between checks: CHUNK_WORK's worth, and with long_ok at least min_steps (default
+    CHUNK_MIN_STEPS) as long as that stays within cap evaluations (large scenes, whose checks and C setup per call
+    would otherwise be paid every step or two).
 
     Parameters
     ----------
@@ -159,6 +161,8 @@ def chunk_steps(work: int, long_ok: bool, cap: int | None = None) -> int:
         The C or NumPy backend with a fixed-step integrator (their results do not depend on the chunk edges).
     cap : int, optional
         The most evaluations a long chunk takes (default CHUNK_WORK_MAX).
+    min_steps : int, optional
+        The steps a long chunk takes at least within cap (default CHUNK_MIN_STEPS).
 
     Returns
     -------
@@ -167,7 +171,8 @@ def chunk_steps(work: int, long_ok: bool, cap: int | None = None) -> int:
     """
     work = max(1, work)
     n = max(1, CHUNK_WORK // work)
-    return max(n, min(CHUNK_MIN_STEPS, (CHUNK_WORK_MAX if cap is None else cap) // work)) if long_ok else n
+    least = CHUNK_MIN_STEPS if min_steps is None else min_steps
+    return max(n, min(least, (CHUNK_WORK_MAX if cap is None else cap) // work)) if long_ok else n
 
 
 def _read_only_views(x: np.ndarray, Omega: np.ndarray, applied: np.ndarray) -> tuple[np.ndarray, ...]:
@@ -814,7 +819,8 @@ class Sim:
         plain = not self._has_models and not len(self._effects)     # the SIMD tiles: a longer chunk still returns soon
         c = self.backend.name == "c"
         self._chunk = chunk_steps(nb * evals, self._per_step is not None and self.backend.name in ("c", "numpy"),
-                                  (CHUNK_WORK_MAX_PLAIN if plain else CHUNK_WORK_MAX) if c else CHUNK_WORK_MAX_NUMPY)
+                                  (CHUNK_WORK_MAX_PLAIN if plain else CHUNK_WORK_MAX) if c else CHUNK_WORK_MAX_NUMPY,
+                                  CHUNK_MIN_STEPS_PLAIN if plain and c else CHUNK_MIN_STEPS)
         self._reference()
 
     def _invariants(self, x: np.ndarray, Omega: np.ndarray, reference: bool = False) -> tuple[np.ndarray, np.ndarray]:

@@ -304,9 +304,13 @@ def test_dopri5_peer_computes_the_sims_trajectory():
 
 def test_the_plain_big_process_reports_build_memory_and_step_ratio():
     """bench.scenes.plain_big (full runs: 1e6 bodies in a fresh process), small here: its figures are there."""
-    d = bench.scenes.plain_big(3000, 1000, 1)
+    d = bench.scenes.plain_big(3000, 1000, 2)
     assert d["n_bodies"] == 3000 and d["small_n"] == 1000 and d["build_s"] > 0 and d["rss_per_body_B"] >= 0
     assert d["ns_big"] > 0 and d["ns_small"] > 0 and d["step_ratio"] == d["ns_big"] / d["ns_small"]
+    # every round kept (the min is the figure), with its page faults and system time per body-step
+    assert len(d["rounds"]["big"]) == len(d["rounds"]["small"]) == 2 and d["ns_big"] == min(d["rounds"]["big"])
+    assert d["ns_small"] == min(d["rounds"]["small"])
+    assert all(len(f) == 2 and f[0] >= 0 and f[1] >= 0 for key in ("big", "small") for f in d["faults_sys_ns"][key])
 
 
 @pytest.mark.skipif(not Path("/proc/self/clear_refs").exists(), reason="no resettable peak RSS (not Linux)")

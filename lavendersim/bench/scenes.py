@@ -28,6 +28,7 @@ SCENE_N = 10_000
 STATE_SMALL_N = 10
 WHEELED_N = 100_000
 PLAIN_BIG_N = 1_000_000
+PLAIN_BIG_ROUNDS = 5   # rounds of the PLAIN_BIG_N process at least (one chunk per big call, ~1.2 s): its min spans ~6 s
 SCALE_SMALL_N = 10_000
 TARGETS = {"wheeled_build_s": 2.0,       # WHEELED_N bodies with own wheels + applied_torque, Scene + Sim, s, at most
            "plain_big_build_s": 3.0,     # PLAIN_BIG_N plain bodies, add_bodies + Sim, s, at most
@@ -71,7 +72,7 @@ def _build_wheeled(a: dict):
 
 
 _BIG = """
-import json, sys, time
+import json, resource, sys, time
 from lavendersim.bench import scenes
 n, small, rounds = (int(v) for v in sys.argv[1:4])
 a, b = scenes._arrays(n), scenes._arrays(small)
@@ -83,14 +84,18 @@ build = time.process_time() - t0
 peak = scenes._rss_peak(basis)
 sm = scenes._build(b, True)
 steps = max(1, big._chunk)
-best = {"big": float("inf"), "small": float("inf")}
+per = {"big": [], "small": []}
+faults = {"big": [], "small": []}
 for _ in range(rounds):
     for key, sim, k in (("big", big, steps), ("small", sm, max(steps, 2**21 // small))):
-        t0 = time.process_time()
+        r0, t0 = resource.getrusage(resource.RUSAGE_SELF), time.process_time()
         sim.run(k)
-        best[key] = min(best[key], (time.process_time() - t0) / (k * len(sim.names)) * 1e9)
+        t1, r1 = time.process_time(), resource.getrusage(resource.RUSAGE_SELF)
+        per[key].append((t1 - t0) / (k * len(sim.names)) * 1e9)
+        faults[key].append([r1.ru_minflt - r0.ru_minflt, (r1.ru_stime - r0.ru_stime) / (k * len(sim.names)) * 1e9])
 print(json.dumps({"n_bodies": n, "build_s": build, "rss_per_body_B": (peak - base) * 1024 / n, "rss_basis": basis,
-                  "ns_big": best["big"], "ns_small": best["small"], "small_n": small, "steps": steps}))
+                  "ns_big": min(per["big"]), "ns_small": min(per["small"]), "small_n": small, "steps": steps,
+                  "rounds": per, "faults_sys_ns": faults}))
 """
 
 
@@ -137,9 +142,12 @@ def _rss_peak(basis: str) -> int:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
 
 
-def plain_big(n: int = PLAIN_BIG_N, small: int = SCALE_SMALL_N, rounds: int = 3) -> dict:
+def plain_big(n: int = PLAIN_BIG_N, small: int = SCALE_SMALL_N, rounds: int = PLAIN_BIG_ROUNDS) -> dict:
     """PLAIN_BIG_N plain bodies built and stepped in a fresh process (module docstring): ``build_s``,
-    ``rss_per_body_B``, ``ns_big`` / ``ns_small`` (ns per body-step at n and at `small`) and their ``step_ratio``."""
+    ``rss_per_body_B``, ``ns_big`` / ``ns_small`` (ns per body-step at n and at `small`, min over `rounds` interleaved
+    rounds of one ``run`` call each) and their ``step_ratio``; ``rounds`` (every round's ns per body-step, big and
+    small) and ``faults_sys_ns`` (each round's minor page faults and system CPU ns per body-step: a round that reads
+    slow says whether the kernel's page handling was in it)."""
     out = subprocess.run([sys.executable, "-c", _BIG, str(n), str(small), str(rounds)], capture_output=True,
                          text=True, timeout=1200, check=True)
     d = json.loads(out.stdout.strip().splitlines()[-1])
@@ -181,7 +189,7 @@ def scene_section(quick: bool, rounds: int, interleaved) -> dict:
     return {"n_bodies": n, "n_wheeled": nw, "cases": t,
             "state_ratio": t["state_big"]["ns_min"] / t["state_small"]["ns_min"],
             "one_by_one_over_batched": t["build_one_by_one"]["ns_min"] / t["build"]["ns_min"],
-            "plain_big": None if quick else plain_big()}
+            "plain_big": None if quick else plain_big(rounds=max(rounds, PLAIN_BIG_ROUNDS))}
 
 
 def standing_lines(res: dict, line, targets: dict) -> list[dict]:
