@@ -76,8 +76,8 @@ rtol/atol with a fixed-step integrator) raise LavenderInputError at construction
 
 Divergence before infinity (checked per chunk of steps, so the stepping itself is unchanged bit for bit):
 a run is advanced in chunks of about CHUNK_WORK right-hand-side evaluations (on the C backend with a fixed-step
-integrator at least CHUNK_MIN_STEPS steps within CHUNK_WORK_MAX evaluations, CHUNK_MIN_STEPS_PLAIN within
-CHUNK_WORK_MAX_PLAIN for a scene of plain bodies without effects); after each chunk every body
+integrator at least CHUNK_MIN_STEPS_C steps within CHUNK_WORK_MAX evaluations, CHUNK_WORK_MAX_PLAIN for a scene of
+plain bodies without effects; NumPy CHUNK_MIN_STEPS within CHUNK_WORK_MAX_NUMPY); after each chunk every body
 is checked against
 
 * its integrator's validity bound, |omega|*dt*(I_max/I_min)**p <= WDT_MAX (declared once in
@@ -130,11 +130,12 @@ from .sim_model import SimModel
 
 MAX_STEPS = 2**53          # steps per call and in total: the step counter and t = steps*dt stay exact in float64
 CHUNK_WORK = 2**20         # right-hand-side evaluations (summed over bodies) per backend call between checks
-CHUNK_MIN_STEPS = 64       # C backend, fixed step: a chunk is at least this many steps (a call's setup and checks,
-CHUNK_WORK_MAX = 2**25     # ~60-100 ns per body, then cost ~1-2 ns per body-step) within this many evaluations (the
+CHUNK_MIN_STEPS = 64       # NumPy backend, fixed step: a chunk is at least this many steps (a call's setup and checks,
+CHUNK_WORK_MAX = 2**25     # ~60-100 ns per body, then cost ~1-2 ns per body-step; C: CHUNK_MIN_STEPS_C) within this many evaluations (the
                            # latency of KeyboardInterrupt: ~0.1 s for plain RK4 bodies, ~4 s for wheeled ones)
 CHUNK_WORK_MAX_PLAIN = 2**30   # the same for plain bodies without effects (the SIMD tiles, ~1.2 ns per evaluation):
-CHUNK_MIN_STEPS_PLAIN = 256    # at least this many steps: at 1e6 bodies a chunk is 256 steps (~1.2 s); at 8 the C call
+CHUNK_MIN_STEPS_C = 256    # C: at least this many steps (any fixed-step scene, within its cap: the same for plain and
+                           # effect bodies, whose bench lines compare them): at 1e6 plain bodies 256 steps (~1.2 s); at 8 the C call
                            # streaming the state in and out and the check reading it cost 1.3-1.4x the stepping; at 64
                            # ~40 ns per body and chunk still, ~10 % (ns per body-step, Sim.run of one chunk, N = 1e4 /
                            # 1e5 / 1e6: 5.08 / 5.07 / 5.05 at 64 steps, 4.60 / 4.56 / 4.57 at 256, 4.5 at 512; issue 30)
@@ -820,7 +821,7 @@ class Sim:
         c = self.backend.name == "c"
         self._chunk = chunk_steps(nb * evals, self._per_step is not None and self.backend.name in ("c", "numpy"),
                                   (CHUNK_WORK_MAX_PLAIN if plain else CHUNK_WORK_MAX) if c else CHUNK_WORK_MAX_NUMPY,
-                                  CHUNK_MIN_STEPS_PLAIN if plain and c else CHUNK_MIN_STEPS)
+                                  CHUNK_MIN_STEPS_C if c else CHUNK_MIN_STEPS)
         self._reference()
 
     def _invariants(self, x: np.ndarray, Omega: np.ndarray, reference: bool = False) -> tuple[np.ndarray, np.ndarray]:

@@ -66,7 +66,7 @@ def test_growth_step_is_the_first_failing_one_across_chunks(backend, monkeypatch
     def failing_step(chunk):
         monkeypatch.setattr(S, "CHUNK_WORK", chunk)
         monkeypatch.setattr(S, "CHUNK_MIN_STEPS", 1)     # C too: chunks of CHUNK_WORK alone
-        monkeypatch.setattr(S, "CHUNK_MIN_STEPS_PLAIN", 1)   # (plain bodies on C: their longer chunks too)
+        monkeypatch.setattr(S, "CHUNK_MIN_STEPS_C", 1)   # (C: its longer chunks too)
         sim = lv.Sim(spinner(omega_b=(0.3, 0.3, 2.0)), dt=0.04, integrator="euler", backend=backend,
                      on_bound="warn", max_growth=1.5)
         with warnings.catch_warnings():

@@ -410,7 +410,7 @@ def test_a_failing_later_chunk_is_located_by_replay_bitwise(integrator, monkeypa
     def run(chunk_work):
         monkeypatch.setattr(S, "CHUNK_WORK", chunk_work)
         monkeypatch.setattr(S, "CHUNK_MIN_STEPS", 1)     # chunks of CHUNK_WORK alone (16: one step each)
-        monkeypatch.setattr(S, "CHUNK_MIN_STEPS_PLAIN", 1)   # (plain bodies on C: their longer chunks too)
+        monkeypatch.setattr(S, "CHUNK_MIN_STEPS_C", 1)   # (C: its longer chunks too)
         sim = lv.Sim(tumbling(omega_b=(0.2, 0.3, 8.0)), dt=1e-2, integrator="euler" if integrator == "rk4" else integrator,
                      backend="c", max_growth=2.0, **({"rtol": 1e-3} if integrator == "dopri5" else {}))
         sim.run(3)
@@ -474,12 +474,12 @@ def test_chunks_of_large_scenes_on_c_are_long_and_change_nothing(monkeypatch):
         return lv.Sim(sc, dt=1e-3, **kw)
 
     long_c = sim(integrator="rk4", backend="c")
-    assert long_c._chunk == S.CHUNK_MIN_STEPS_PLAIN == 256     # plain bodies on C: the SIMD tiles' longer chunks
+    assert long_c._chunk == S.CHUNK_MIN_STEPS_C == 256     # C: its longer chunks
     long_np = sim(integrator="rk4", backend="numpy")
     assert long_np._chunk == 64 and S.CHUNK_WORK_MAX_NUMPY // (4 * n) >= 64
     assert sim(integrator="dopri5", backend="c", rtol=1e-6)._chunk == S.CHUNK_WORK // (12 * n)
     monkeypatch.setattr(S, "CHUNK_MIN_STEPS", 1)
-    monkeypatch.setattr(S, "CHUNK_MIN_STEPS_PLAIN", 1)
+    monkeypatch.setattr(S, "CHUNK_MIN_STEPS_C", 1)
     short_c = sim(integrator="rk4", backend="c")
     assert short_c._chunk == S.CHUNK_WORK // (4 * n) == 13
     short_np = sim(integrator="rk4", backend="numpy")
