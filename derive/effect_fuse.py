@@ -21,7 +21,7 @@ from typing import NamedTuple
 from itertools import permutations
 
 from . import effect as E
-from .rigid_body import FLOW_SIZE, INC_C, INC_HQ, INC_SCALE_SIZE
+from .rigid_body import CONST_DP, CONST_DV, CONST_SIZE, CONST_TAU, FLOW_SIZE, INC_C, INC_HQ, INC_SCALE_SIZE
 
 FUSED_MAX = 2   # effects per pattern (batch_simd.h's fused tile loads this many parameter rows)
 # Tile kinds of plain bodies with effects (csrc/step.c's LV_RHS_* names, batch_simd.h's LV_TILE_RHS_<kind>).
@@ -66,6 +66,12 @@ RHS_OF_KIND = {
                       "rigid_body_rhs_body (a force; torques declared in the body frame)",
                       ("rigid_body_increments_body_c", ("x", "sc", "f", "t", "out"))),
 }
+# The constant kinds (every effect of the body reads no state): kind -> (torque, force). Such a body stages only
+# (q, omega_b): with its world torque sum (rigid_body_increments_torque_h) when `torque`, else as a torque-free body
+# (rigid_body_increments_free_c); its translation by the constant force's exact flow (translation_flow_constant) when
+# `force`, else translation_drift with v_w kept. Printed into kernels.h (LV_CONST_TORQUE_<kind>, LV_CONST_FORCE_<kind>:
+# csrc/step.c lv_const_rk4_h) and effects_meta (RHS_CONSTANT: the NumPy backends).
+CONSTANT_KINDS = {"TORQUE": (True, False), "FULL": (True, True), "FORCE": (False, True)}
 RHS_CALL_PARAMS = ("x", "mass", "cf", "f", "t", "out")   # LV_RHS_CALL_<kind>'s parameters
 RHS_INC_PARAMS = ("x", "mass", "sc", "f", "t", "out")    # LV_RHS_INC_<kind>'s parameters
 
@@ -131,7 +137,16 @@ def rhs_c_header() -> list[str]:
            "   numbers): LV_RHS_INC_<kind>(x, mass, sc, f, t, out), the increments H = (s dt) d/dt x into out after the",
            "   same sums, sc the body's LV_INC_SCALE_SIZE constants (rigid_body_increment_scale: s dt folded into the",
            "   Euler coefficients, 1/I, q's rate scale and 1/m, once per body and call). */",
-           f"#define LV_INC_SCALE_SIZE {INC_SCALE_SIZE}"]
+           f"#define LV_INC_SCALE_SIZE {INC_SCALE_SIZE}",
+           "/* A body whose effects all read no state (the constant kinds) stages only (q, omega_b) (csrc/step.c",
+           "   lv_const_rk4_h): LV_CONST_SIZE constants per body and call, S (LV_INC_SCALE_SIZE) at 0, the world torque sum",
+           "   at LV_CONST_TAU, constant_acceleration_steps' dv_w, dp_w at LV_CONST_DV, LV_CONST_DP; LV_CONST_TORQUE_<kind>:",
+           "   q and omega_b take the torque (rigid_body_increments_torque_h; else the torque-free increments),",
+           "   LV_CONST_FORCE_<kind>: p and v take translation_flow_constant (else translation_drift, v kept). */",
+           f"#define LV_CONST_SIZE {CONST_SIZE}", f"#define LV_CONST_TAU {CONST_TAU}", f"#define LV_CONST_DV {CONST_DV}",
+           f"#define LV_CONST_DP {CONST_DP}"]
+    for kind, (torque, force) in CONSTANT_KINDS.items():
+        out += [f"#define LV_CONST_TORQUE_{kind} {int(torque)}", f"#define LV_CONST_FORCE_{kind} {int(force)}"]
     for kind in TILE_KINDS:
         out += [f"#define LV_RHS_BODY_FRAME_{kind} {int(RHS_OF_KIND[kind].body_frame)}",
                 f"#define LV_RHS_CALL_{kind}({', '.join(RHS_CALL_PARAMS)}) {rhs_call_c(kind)}",
@@ -146,7 +161,7 @@ def meta_extra() -> dict:
             "rhs_kernels": {k: RHS_OF_KIND[k].pipeline for k in TILE_KINDS},
             "rhs_increments": {k: RHS_OF_KIND[k].inc[0] for k in TILE_KINDS},
             "flag_coupled": E.FLAG_COUPLED, "rhs_split": SPLIT_OF_KIND,
-            "inc_scale_c": (INC_C.start, INC_C.stop), "inc_scale_hq": INC_HQ}
+            "inc_scale_c": (INC_C.start, INC_C.stop), "inc_scale_hq": INC_HQ, "rhs_constant": CONSTANT_KINDS}
 
 
 def _constant_flags(effects: Sequence[tuple[int, E.EffectDecl]]) -> set[int]:

@@ -21,6 +21,7 @@ from .kernel import Arg, Kernel, scalar, vec
 from .layout import CONSTANTS, EULER
 from .layout import STATE as X
 from .quaternion import pure, qmul, quat_rate_body, rotate_to_body, rotation_matrix
+from .tableaux import EXPLICIT_RK, constant_acceleration_weights
 
 STATE = "state (p_w[3] m, q[4] (x,y,z,w), v_w[3] m/s, omega_b[3] rad/s)"
 
@@ -62,6 +63,12 @@ def _check_rate_scale(q, w) -> None:
 # sdt, h_m = sdt/m; their count and offsets (printed into kernels.h by derive/effect_fuse.py: LV_INC_SCALE_SIZE).
 INC_SCALE_SIZE = 9
 INC_C, INC_R, INC_HQ, INC_SDT, INC_HM = slice(0, 3), slice(3, 6), 6, 7, 8
+# A body whose effects all read no state (the constant kinds TORQUE, FULL, FORCE) steps only (q, omega_b) through the
+# stages and its translation by the exact flow of a constant acceleration; its constants per call, CONST_SIZE numbers:
+# S (rigid_body_increment_scale), the world torque sum tau_w, then dv_w, dp_w (constant_acceleration_steps). Printed
+# into kernels.h by derive/effect_fuse.py (LV_CONST_*).
+CONST_TAU, CONST_DV, CONST_DP = INC_SCALE_SIZE, INC_SCALE_SIZE + 3, INC_SCALE_SIZE + 6
+CONST_SIZE = INC_SCALE_SIZE + 9
 
 
 def inc_scale(c_b, m, sdt) -> list:
@@ -120,6 +127,34 @@ def _check_increments(xq, xw, xv, S, c_b, m, sdt, F_w, tau_w) -> None:
         raise RuntimeError("derive: the scaled increments are not s dt times the rates")
 
 
+def _check_torque_h(q, w, S_b, tau_w) -> None:
+    """Proof that rigid_body_increments_torque_h at a zero torque is rigid_body_increments_free_c on the constants
+    rigid_body_increment_scale_free prints (S's C and h_q): the constant kinds' rotation without a torque."""
+    H = increments(q, w, sp.zeros(3, 1), S_b, None, rotate_to_body(q, tau_w)).subs({t: 0 for t in tau_w})
+    free = X.assemble(p_w=sp.zeros(3, 1), q=qmul(q, pure(S_b[INC_HQ] * w)), v_w=sp.zeros(3, 1),
+                      omega_b=euler_rhs_c(EULER.assemble(k=list(S_b[INC_C]), r=[0, 0, 0]), w, sp.zeros(3, 1)))
+    for part in ("q", "omega_b"):
+        if (X.part(H, part) - X.part(free, part)).applyfunc(sp.expand) != sp.zeros(X.part(H, part).rows, 1):
+            raise RuntimeError("derive: the torque increments on (q, omega_b) at zero torque are not the free ones")
+
+
+def constant_flow(m, F_w, h, p_w, v_w) -> tuple:
+    """The built-in RK4's exact step of the translation p' = v, v' = a = F/m with F constant over the step
+    (tableaux.constant_acceleration_weights: v + w_v h a, p + w_v h v + w_p h² a), as printed: the per-call constants
+    (where, dv, dp) of constant_acceleration_steps and the step's (where, p_next, v_next) of translation_flow_constant.
+    p + h v is formed first as translation_drift forms it (w_v = 1 is required), then dp added: a zero force (dp = 0)
+    gives translation_drift's bits, v + 0 = v."""
+    w_v, w_p = constant_acceleration_weights(*EXPLICIT_RK["rk4"])
+    if w_v != 1:
+        raise RuntimeError("derive: RK4's weights do not sum to 1 (its drift is not translation_drift)")
+    a = vec("a_w", 3)
+    hh = scalar("hh")
+    steps = ([*zip(a, F_w / m), (hh, w_p * h * h)], h * a, hh * a)
+    d = vec("d_w", 3)
+    flow = (list(zip(d, p_w + h * v_w)), d + vec("dp_w", 3), v_w + vec("dv_w", 3))
+    return steps, flow
+
+
 def kernels() -> list[Kernel]:
     g = "Rigid-body dynamics"
     x = vec("x", X.size)
@@ -132,6 +167,11 @@ def kernels() -> list[Kernel]:
     _check_euler(I_b, omega_b, tau_b)
     _check_rate_scale(q, omega_b)
     _check_increments(q, omega_b, v_w, S_b, c_b, m, sdt, F_w, tau_w)
+    _check_torque_h(q, omega_b, S_b, tau_w)
+    h, p_w, dv_w, dp_w = scalar("h"), vec("p_w", 3), vec("dv_w", 3), vec("dp_w", 3)
+    (steps_where, dv, dp), (flow_where, p_next, v_next) = constant_flow(m, F_w, h, p_w, v_w)
+    S_expr = inc_scale(c_b, m, sdt)
+    H_tq = increments(q, omega_b, v_w, S_b, None, rotate_to_body(q, tau_w))
     # c_b as named subexpressions of the kernels that take I_b: the same printed arithmetic as the *_c kernels
     where = list(zip(c_b, euler_coefficients(I_b)))
     xq, xv, xw = X.part(x, "q"), X.part(x, "v_w"), X.part(x, "omega_b")
@@ -263,6 +303,41 @@ def kernels() -> list[Kernel]:
                [*QWV, Arg(*SB), Arg("F_w", F_w, "total force at the COM, world frame, N (0 without a force)"),
                 Arg("tau_b", tau_b, "total torque about the COM, body frame, N·m")],
                [Arg("H", increments(q, omega_b, v_w, S_b, F_w, tau_b), "(s dt) d/dt of the state")], g, notes=[inc_note]),
+        Kernel("rigid_body_increment_scale_free", "The constants of a torque-free RK4 stage's scaled increments "
+               "(rigid_body_increments_free_c), once per body and call",
+               r"C_B = s\,dt\,k_B,\ h_q = s\,dt\,\mathrm{QUAT\_RATE\_SCALE}",
+               [Arg(*CB), Arg("sdt", sdt, "the stage scale times the step, LV_RK4_SCALE dt (tableaux.h), s")],
+               [Arg("C_b", sp.Matrix(S_expr[INC_C]), "C = sdt k_b, s"), Arg("h_q", S_expr[INC_HQ], "sdt QUAT_RATE_SCALE, s")],
+               g, notes=["Bitwise rigid_body_increment_scale's C and h_q (the same printed products): a body under a "
+                         "force alone (FORCE) turns as a torque-free one."]),
+        Kernel("rigid_body_increments_torque_h", "A constant-torque RK4 stage's scaled increments of (q, ω_B) alone",
+               r"H_q = q \otimes [h_q \omega_B, 0],\ H_{\omega,x} = C_x\omega_y\omega_z + R_x (R^T\tau_W)_x",
+               [QWV[0], QWV[1], Arg(*SB), Arg("tau_w", tau_w, "total torque about the COM, world frame, N·m (constant "
+                                                               "over the call)")],
+               [Arg("H_q", X.part(H_tq, "q"), "(s dt) dq/dt, dimensionless"),
+                Arg("H_omega", X.part(H_tq, "omega_b"), "(s dt) dω_B/dt, rad/s")], g,
+               notes=["A body whose effects read no state (the constant kinds TORQUE, FULL) stages only q and ω_B "
+                      "(tableaux.h LV_RK4_SCALED_UPDATE), as a torque-free body does; its translation takes "
+                      "translation_flow_constant (FULL) or translation_drift with v_W kept (TORQUE).",
+                      "Bitwise rigid_body_increments_torque_c's q and ω_B rows (the same expressions)."]),
+        Kernel("constant_acceleration_steps", "The per-call constants of the exact RK4 step of a translation under a "
+               "constant force", r"\Delta v_W = w_v\,h\,F_W/m,\ \Delta p_W = w_p\,h^2\,F_W/m",
+               [Arg("m", m, "mass, kg", "positive"), Arg("F_w", F_w, "total force at the COM, world frame, N (constant)"),
+                Arg("h", h, "the step, s")],
+               [Arg("dv_w", dv, "velocity change over the step, world frame, m/s"),
+                Arg("dp_w", dp, "the acceleration's position change over the step, world frame, m")], g,
+               where=steps_where,
+               notes=["w_v = Σ b_i = 1, w_p = Σ b_i c_i = 1/2 derived from RK4's tableau "
+                      "(derive/tableaux.py constant_acceleration_weights): RK4 is exact on p' = v, v' = a."]),
+        Kernel("translation_flow_constant", "The exact RK4 step of a translation under a constant force",
+               r"p_W \leftarrow (p_W + h\,v_W) + \Delta p_W,\ v_W \leftarrow v_W + \Delta v_W",
+               [Arg("p_w", p_w, "COM position, world frame, m"), Arg("v_w", v_w, "COM velocity, world frame, m/s"),
+                Arg("h", h, "the step, s"), Arg("dv_w", dv_w, "constant_acceleration_steps' dv_w, m/s"),
+                Arg("dp_w", dp_w, "constant_acceleration_steps' dp_w, m")],
+               [Arg("p_next", p_next, "m, world frame"), Arg("v_next", v_next, "m/s, world frame")], g,
+               where=flow_where,
+               notes=["p_W + h v_W is translation_drift's (the same printed operation), then Δp_W is added: a zero "
+                      "force gives translation_drift's p and v + 0 (the bits of a body without the force)."]),
         Kernel("linear_acceleration", "Acceleration of the COM under a world force", r"a_W = F_W / m",
                [Arg("m", m, "mass, kg", "positive"), Arg("F_w", F_w, "total force at the COM, world frame, N")],
                [Arg("a_w", F_w / m, "COM acceleration, world frame, m/s²")], g,

@@ -131,6 +131,28 @@ def _check_scaled(c, b_num, b_den) -> None:
         raise RuntimeError("derive: the scaled program's end is not the tableau's step")
 
 
+def constant_acceleration_weights(c, b_num, b_den) -> tuple:
+    """(w_v, w_p) of a subdiagonal explicit RK (EXPLICIT_RK) on the translation p' = v, v' = a with a constant a: its
+    step is v⁺ = v + w_v dt a, p⁺ = p + w_v dt v + w_p dt² a, exactly (w_v = Σ b_i, w_p = Σ b_i c_i: the stages see
+    v + c_i dt a). Derived by running the tableau's stages on symbols and checked to be that form; RK4: (1, 1/2).
+    A body whose effects read no state steps its translation by it (rigid_body.py translation_flow_constant)."""
+    p, v, a, dt = sp.symbols("p v a dt")
+    kp, kv, prev = [], [], None
+    for ci in c:   # stage i is evaluated at x + c_i dt k_{i-1}
+        vi = v if prev is None else v + ci * dt * prev[1]
+        prev = (vi, a)
+        kp.append(vi)
+        kv.append(a)
+    b = [R(x, b_den) for x in b_num]
+    p1 = p + dt * sum((bi * k for bi, k in zip(b, kp)), sp.Integer(0))
+    v1 = v + dt * sum((bi * k for bi, k in zip(b, kv)), sp.Integer(0))
+    w_v, w_p = sum(b, sp.Integer(0)), sum((bi * ci for bi, ci in zip(b, c)), sp.Integer(0))
+    if sp.expand(v1 - (v + w_v * dt * a)) != 0 or sp.expand(p1 - (p + w_v * dt * v + w_p * dt ** 2 * a)) != 0:
+        raise RuntimeError("derive: the tableau's step of a constant acceleration is not v + w_v dt a, p + w_v dt v + "
+                           "w_p dt² a")
+    return w_v, w_p
+
+
 def _stability_polynomial(A, b) -> sp.Expr:
     """R(z) = 1 + z bᵀ (I − z A)⁻¹ 1 of an explicit Runge–Kutta tableau (y' = λy: y₁ = R(λh) y₀)."""
     z = sp.Symbol("z")

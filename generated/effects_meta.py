@@ -20,6 +20,7 @@ FLAG_COUPLED = 64
 RHS_SPLIT = {'TORQUE': 0, 'FULL': 0, 'FORCE': 1, 'BODY': 2, 'BODY_F': 2}
 INC_SCALE_C = (0, 3)
 INC_SCALE_HQ = 6
+RHS_CONSTANT = {'TORQUE': (True, False), 'FULL': (True, True), 'FORCE': (False, True)}
 
 EFFECTS = (
     {'name': 'applied_torque',

@@ -1506,6 +1506,90 @@ void lv_rigid_body_increments_body_c(const double *q, const double *omega_b, con
     H[12] = S_b_2*omega_b_0*omega_b_1 + S_b_5*tau_b_2;
 }
 
+void lv_rigid_body_increment_scale_free(const double *c_b, double sdt, double *C_b, double *h_q) {
+    const double c_b_0 = c_b[0];
+    const double c_b_1 = c_b[1];
+    const double c_b_2 = c_b[2];
+    C_b[0] = c_b_0*sdt;
+    C_b[1] = c_b_1*sdt;
+    C_b[2] = c_b_2*sdt;
+    h_q[0] = ((1.0/2.0))*sdt;
+}
+
+void lv_rigid_body_increments_torque_h(const double *q, const double *omega_b, const double *S_b, const double *tau_w, double *H_q, double *H_omega) {
+    const double q_0 = q[0];
+    const double q_1 = q[1];
+    const double q_2 = q[2];
+    const double q_3 = q[3];
+    const double omega_b_0 = omega_b[0];
+    const double omega_b_1 = omega_b[1];
+    const double omega_b_2 = omega_b[2];
+    const double S_b_0 = S_b[0];
+    const double S_b_1 = S_b[1];
+    const double S_b_2 = S_b[2];
+    const double S_b_3 = S_b[3];
+    const double S_b_4 = S_b[4];
+    const double S_b_5 = S_b[5];
+    const double S_b_6 = S_b[6];
+    const double tau_w_0 = tau_w[0];
+    const double tau_w_1 = tau_w[1];
+    const double tau_w_2 = tau_w[2];
+    const double t0 = S_b_6*omega_b_0;
+    const double t1 = S_b_6*omega_b_2;
+    const double t2 = S_b_6*omega_b_1;
+    const double t3 = 2*q_0;
+    const double t4 = -2*q_1*tau_w_0 + t3*tau_w_1;
+    const double t5 = 2*q_2*tau_w_0 - t3*tau_w_2;
+    const double t6 = 2*q_1*tau_w_2 - 2*q_2*tau_w_1;
+    H_q[0] = q_1*t1 - q_2*t2 + q_3*t0;
+    H_q[1] = -q_0*t1 + q_2*t0 + q_3*t2;
+    H_q[2] = q_0*t2 - q_1*t0 + q_3*t1;
+    H_q[3] = -q_0*t0 - q_1*t2 - q_2*t1;
+    H_omega[0] = S_b_0*omega_b_1*omega_b_2 + S_b_3*(q_1*t4 - q_2*t5 - q_3*t6 + tau_w_0);
+    H_omega[1] = S_b_1*omega_b_0*omega_b_2 + S_b_4*(-q_0*t4 + q_2*t6 - q_3*t5 + tau_w_1);
+    H_omega[2] = S_b_2*omega_b_0*omega_b_1 + S_b_5*(q_0*t5 - q_1*t6 - q_3*t4 + tau_w_2);
+}
+
+void lv_constant_acceleration_steps(double m, const double *F_w, double h, double *dv_w, double *dp_w) {
+    const double F_w_0 = F_w[0];
+    const double F_w_1 = F_w[1];
+    const double F_w_2 = F_w[2];
+    const double a_w_0 = F_w_0/m;
+    const double a_w_1 = F_w_1/m;
+    const double a_w_2 = F_w_2/m;
+    const double hh = ((1.0/2.0))*(h*h);
+    dv_w[0] = a_w_0*h;
+    dv_w[1] = a_w_1*h;
+    dv_w[2] = a_w_2*h;
+    dp_w[0] = a_w_0*hh;
+    dp_w[1] = a_w_1*hh;
+    dp_w[2] = a_w_2*hh;
+}
+
+void lv_translation_flow_constant(const double *p_w, const double *v_w, double h, const double *dv_w, const double *dp_w, double *p_next, double *v_next) {
+    const double p_w_0 = p_w[0];
+    const double p_w_1 = p_w[1];
+    const double p_w_2 = p_w[2];
+    const double v_w_0 = v_w[0];
+    const double v_w_1 = v_w[1];
+    const double v_w_2 = v_w[2];
+    const double dv_w_0 = dv_w[0];
+    const double dv_w_1 = dv_w[1];
+    const double dv_w_2 = dv_w[2];
+    const double dp_w_0 = dp_w[0];
+    const double dp_w_1 = dp_w[1];
+    const double dp_w_2 = dp_w[2];
+    const double d_w_0 = h*v_w_0 + p_w_0;
+    const double d_w_1 = h*v_w_1 + p_w_1;
+    const double d_w_2 = h*v_w_2 + p_w_2;
+    p_next[0] = d_w_0 + dp_w_0;
+    p_next[1] = d_w_1 + dp_w_1;
+    p_next[2] = d_w_2 + dp_w_2;
+    v_next[0] = dv_w_0 + v_w_0;
+    v_next[1] = dv_w_1 + v_w_1;
+    v_next[2] = dv_w_2 + v_w_2;
+}
+
 void lv_linear_acceleration(double m, const double *F_w, double *a_w) {
     const double F_w_0 = F_w[0];
     const double F_w_1 = F_w[1];
@@ -4009,6 +4093,10 @@ static void packed_rigid_body_increments_c(const double *in, double *out) { lv_r
 static void packed_rigid_body_increments_torque_c(const double *in, double *out) { lv_rigid_body_increments_torque_c(in + 0, in + 4, in + 7, in + 10, in + 19, out + 0); }
 static void packed_rigid_body_increments_force_c(const double *in, double *out) { lv_rigid_body_increments_force_c(in + 0, in + 4, in + 7, in + 10, in + 19, out + 0); }
 static void packed_rigid_body_increments_body_c(const double *in, double *out) { lv_rigid_body_increments_body_c(in + 0, in + 4, in + 7, in + 10, in + 19, in + 22, out + 0); }
+static void packed_rigid_body_increment_scale_free(const double *in, double *out) { lv_rigid_body_increment_scale_free(in + 0, in[6], out + 0, out + 3); }
+static void packed_rigid_body_increments_torque_h(const double *in, double *out) { lv_rigid_body_increments_torque_h(in + 0, in + 4, in + 7, in + 16, out + 0, out + 4); }
+static void packed_constant_acceleration_steps(const double *in, double *out) { lv_constant_acceleration_steps(in[0], in + 1, in[4], out + 0, out + 3); }
+static void packed_translation_flow_constant(const double *in, double *out) { lv_translation_flow_constant(in + 0, in + 3, in[6], in + 7, in + 10, out + 0, out + 3); }
 static void packed_linear_acceleration(const double *in, double *out) { lv_linear_acceleration(in[0], in + 1, out + 0); }
 static void packed_rigid_body_rhs_force_c(const double *in, double *out) { lv_rigid_body_rhs_force_c(in + 0, in + 13, in + 19, out + 0); }
 static void packed_rigid_body_rhs_body_c(const double *in, double *out) { lv_rigid_body_rhs_body_c(in + 0, in + 13, in + 19, in + 22, out + 0); }
@@ -4116,6 +4204,10 @@ const lv_kernel_info lv_kernel_table[LV_KERNEL_COUNT] = {
     {"rigid_body_increments_torque_c", 22, 13, packed_rigid_body_increments_torque_c},
     {"rigid_body_increments_force_c", 22, 13, packed_rigid_body_increments_force_c},
     {"rigid_body_increments_body_c", 25, 13, packed_rigid_body_increments_body_c},
+    {"rigid_body_increment_scale_free", 7, 4, packed_rigid_body_increment_scale_free},
+    {"rigid_body_increments_torque_h", 19, 7, packed_rigid_body_increments_torque_h},
+    {"constant_acceleration_steps", 5, 6, packed_constant_acceleration_steps},
+    {"translation_flow_constant", 13, 6, packed_translation_flow_constant},
     {"linear_acceleration", 4, 3, packed_linear_acceleration},
     {"rigid_body_rhs_force_c", 22, 13, packed_rigid_body_rhs_force_c},
     {"rigid_body_rhs_body_c", 25, 13, packed_rigid_body_rhs_body_c},

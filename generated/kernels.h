@@ -11,7 +11,7 @@ typedef struct {
     void (*packed)(const double *in, double *out);
 } lv_kernel_info;
 
-#define LV_KERNEL_COUNT 105
+#define LV_KERNEL_COUNT 109
 extern const lv_kernel_info lv_kernel_table[LV_KERNEL_COUNT];
 
 /* particle_moments: One particle's mass moment and momentum (summed: m r_COM and p).
@@ -414,6 +414,40 @@ void lv_rigid_body_increments_force_c(const double *q, const double *omega_b, co
      in  tau_b [3]: total torque about the COM, body frame, N·m
      out H [13]: (s dt) d/dt of the state */
 void lv_rigid_body_increments_body_c(const double *q, const double *omega_b, const double *v_w, const double *S_b, const double *F_w, const double *tau_b, double *H);
+
+/* rigid_body_increment_scale_free: The constants of a torque-free RK4 stage's scaled increments (rigid_body_increments_free_c), once per body and call.
+     in  c_b [6]: Euler coefficients (k_x, k_y, k_z, r_x, r_y, r_z), body frame: k_x = (I_y − I_z)/I_x (cyclic, dimensionless), r_x = 1/I_x (1/(kg·m²)); from euler_coefficients
+     in  sdt scalar: the stage scale times the step, LV_RK4_SCALE dt (tableaux.h), s
+     out C_b [3]: C = sdt k_b, s
+     out h_q scalar: sdt QUAT_RATE_SCALE, s */
+void lv_rigid_body_increment_scale_free(const double *c_b, double sdt, double *C_b, double *h_q);
+
+/* rigid_body_increments_torque_h: A constant-torque RK4 stage's scaled increments of (q, ω_B) alone.
+     in  q [4]: orientation (x, y, z, w), R_WB (a stage's value: unit to rounding)
+     in  omega_b [3]: angular velocity, body frame, rad/s
+     in  S_b [9]: the increments' constants (C_x, C_y, C_z, R_x, R_y, R_z, h_q, sdt, h_m) of rigid_body_increment_scale, once per body and call
+     in  tau_w [3]: total torque about the COM, world frame, N·m (constant over the call)
+     out H_q [4]: (s dt) dq/dt, dimensionless
+     out H_omega [3]: (s dt) dω_B/dt, rad/s */
+void lv_rigid_body_increments_torque_h(const double *q, const double *omega_b, const double *S_b, const double *tau_w, double *H_q, double *H_omega);
+
+/* constant_acceleration_steps: The per-call constants of the exact RK4 step of a translation under a constant force.
+     in  m scalar: mass, kg
+     in  F_w [3]: total force at the COM, world frame, N (constant)
+     in  h scalar: the step, s
+     out dv_w [3]: velocity change over the step, world frame, m/s
+     out dp_w [3]: the acceleration's position change over the step, world frame, m */
+void lv_constant_acceleration_steps(double m, const double *F_w, double h, double *dv_w, double *dp_w);
+
+/* translation_flow_constant: The exact RK4 step of a translation under a constant force.
+     in  p_w [3]: COM position, world frame, m
+     in  v_w [3]: COM velocity, world frame, m/s
+     in  h scalar: the step, s
+     in  dv_w [3]: constant_acceleration_steps' dv_w, m/s
+     in  dp_w [3]: constant_acceleration_steps' dp_w, m
+     out p_next [3]: m, world frame
+     out v_next [3]: m/s, world frame */
+void lv_translation_flow_constant(const double *p_w, const double *v_w, double h, const double *dv_w, const double *dp_w, double *p_next, double *v_next);
 
 /* linear_acceleration: Acceleration of the COM under a world force.
      in  m scalar: mass, kg
@@ -923,6 +957,21 @@ const char *lv_effect_name(int code);
    same sums, sc the body's LV_INC_SCALE_SIZE constants (rigid_body_increment_scale: s dt folded into the
    Euler coefficients, 1/I, q's rate scale and 1/m, once per body and call). */
 #define LV_INC_SCALE_SIZE 9
+/* A body whose effects all read no state (the constant kinds) stages only (q, omega_b) (csrc/step.c
+   lv_const_rk4_h): LV_CONST_SIZE constants per body and call, S (LV_INC_SCALE_SIZE) at 0, the world torque sum
+   at LV_CONST_TAU, constant_acceleration_steps' dv_w, dp_w at LV_CONST_DV, LV_CONST_DP; LV_CONST_TORQUE_<kind>:
+   q and omega_b take the torque (rigid_body_increments_torque_h; else the torque-free increments),
+   LV_CONST_FORCE_<kind>: p and v take translation_flow_constant (else translation_drift, v kept). */
+#define LV_CONST_SIZE 18
+#define LV_CONST_TAU 9
+#define LV_CONST_DV 12
+#define LV_CONST_DP 15
+#define LV_CONST_TORQUE_TORQUE 1
+#define LV_CONST_FORCE_TORQUE 0
+#define LV_CONST_TORQUE_FULL 1
+#define LV_CONST_FORCE_FULL 1
+#define LV_CONST_TORQUE_FORCE 0
+#define LV_CONST_FORCE_FORCE 1
 #define LV_RHS_BODY_FRAME_TORQUE 0
 #define LV_RHS_CALL_TORQUE(x, mass, cf, f, t, out) ((void)(mass), (void)(f), lv_rigid_body_rhs_torque_c(x, cf, t, out))
 #define LV_RHS_INC_TORQUE(x, mass, sc, f, t, out) ((void)(mass), (void)(f), lv_rigid_body_increments_torque_c((x) + LV_STATE_Q, (x) + LV_STATE_OMEGA_B, (x) + LV_STATE_V_W, sc, t, out))

@@ -1374,6 +1374,97 @@ def rigid_body_increments_body_c(q, omega_b, v_w, S_b, F_w, tau_b):
     return casadi.vertcat(S_b_7*v_w_0, S_b_7*v_w_1, S_b_7*v_w_2, q_1*t1 - q_2*t2 + q_3*t0, -q_0*t1 + q_2*t0 + q_3*t2, q_0*t2 - q_1*t0 + q_3*t1, -q_0*t0 - q_1*t2 - q_2*t1, F_w_0*S_b_8, F_w_1*S_b_8, F_w_2*S_b_8, S_b_0*omega_b_1*omega_b_2 + S_b_3*tau_b_0, S_b_1*omega_b_0*omega_b_2 + S_b_4*tau_b_1, S_b_2*omega_b_0*omega_b_1 + S_b_5*tau_b_2)
 
 
+def rigid_body_increment_scale_free(c_b, sdt):
+    """rigid_body_increment_scale_free: The constants of a torque-free RK4 stage's scaled increments (rigid_body_increments_free_c), once per body and call.
+      in  c_b [6]: Euler coefficients (k_x, k_y, k_z, r_x, r_y, r_z), body frame: k_x = (I_y − I_z)/I_x (cyclic, dimensionless), r_x = 1/I_x (1/(kg·m²)); from euler_coefficients
+      in  sdt scalar: the stage scale times the step, LV_RK4_SCALE dt (tableaux.h), s
+      out C_b [3]: C = sdt k_b, s
+      out h_q scalar: sdt QUAT_RATE_SCALE, s"""
+    c_b_0 = c_b[0]
+    c_b_1 = c_b[1]
+    c_b_2 = c_b[2]
+    return casadi.vertcat(c_b_0*sdt, c_b_1*sdt, c_b_2*sdt), casadi.vertcat(((1.0/2.0))*sdt)
+
+
+def rigid_body_increments_torque_h(q, omega_b, S_b, tau_w):
+    """rigid_body_increments_torque_h: A constant-torque RK4 stage's scaled increments of (q, ω_B) alone.
+      in  q [4]: orientation (x, y, z, w), R_WB (a stage's value: unit to rounding)
+      in  omega_b [3]: angular velocity, body frame, rad/s
+      in  S_b [9]: the increments' constants (C_x, C_y, C_z, R_x, R_y, R_z, h_q, sdt, h_m) of rigid_body_increment_scale, once per body and call
+      in  tau_w [3]: total torque about the COM, world frame, N·m (constant over the call)
+      out H_q [4]: (s dt) dq/dt, dimensionless
+      out H_omega [3]: (s dt) dω_B/dt, rad/s"""
+    q_0 = q[0]
+    q_1 = q[1]
+    q_2 = q[2]
+    q_3 = q[3]
+    omega_b_0 = omega_b[0]
+    omega_b_1 = omega_b[1]
+    omega_b_2 = omega_b[2]
+    S_b_0 = S_b[0]
+    S_b_1 = S_b[1]
+    S_b_2 = S_b[2]
+    S_b_3 = S_b[3]
+    S_b_4 = S_b[4]
+    S_b_5 = S_b[5]
+    S_b_6 = S_b[6]
+    tau_w_0 = tau_w[0]
+    tau_w_1 = tau_w[1]
+    tau_w_2 = tau_w[2]
+    t0 = S_b_6*omega_b_0
+    t1 = S_b_6*omega_b_2
+    t2 = S_b_6*omega_b_1
+    t3 = 2*q_0
+    t4 = -2*q_1*tau_w_0 + t3*tau_w_1
+    t5 = 2*q_2*tau_w_0 - t3*tau_w_2
+    t6 = 2*q_1*tau_w_2 - 2*q_2*tau_w_1
+    return casadi.vertcat(q_1*t1 - q_2*t2 + q_3*t0, -q_0*t1 + q_2*t0 + q_3*t2, q_0*t2 - q_1*t0 + q_3*t1, -q_0*t0 - q_1*t2 - q_2*t1), casadi.vertcat(S_b_0*omega_b_1*omega_b_2 + S_b_3*(q_1*t4 - q_2*t5 - q_3*t6 + tau_w_0), S_b_1*omega_b_0*omega_b_2 + S_b_4*(-q_0*t4 + q_2*t6 - q_3*t5 + tau_w_1), S_b_2*omega_b_0*omega_b_1 + S_b_5*(q_0*t5 - q_1*t6 - q_3*t4 + tau_w_2))
+
+
+def constant_acceleration_steps(m, F_w, h):
+    """constant_acceleration_steps: The per-call constants of the exact RK4 step of a translation under a constant force.
+      in  m scalar: mass, kg
+      in  F_w [3]: total force at the COM, world frame, N (constant)
+      in  h scalar: the step, s
+      out dv_w [3]: velocity change over the step, world frame, m/s
+      out dp_w [3]: the acceleration's position change over the step, world frame, m"""
+    F_w_0 = F_w[0]
+    F_w_1 = F_w[1]
+    F_w_2 = F_w[2]
+    a_w_0 = F_w_0/m
+    a_w_1 = F_w_1/m
+    a_w_2 = F_w_2/m
+    hh = ((1.0/2.0))*(h*h)
+    return casadi.vertcat(a_w_0*h, a_w_1*h, a_w_2*h), casadi.vertcat(a_w_0*hh, a_w_1*hh, a_w_2*hh)
+
+
+def translation_flow_constant(p_w, v_w, h, dv_w, dp_w):
+    """translation_flow_constant: The exact RK4 step of a translation under a constant force.
+      in  p_w [3]: COM position, world frame, m
+      in  v_w [3]: COM velocity, world frame, m/s
+      in  h scalar: the step, s
+      in  dv_w [3]: constant_acceleration_steps' dv_w, m/s
+      in  dp_w [3]: constant_acceleration_steps' dp_w, m
+      out p_next [3]: m, world frame
+      out v_next [3]: m/s, world frame"""
+    p_w_0 = p_w[0]
+    p_w_1 = p_w[1]
+    p_w_2 = p_w[2]
+    v_w_0 = v_w[0]
+    v_w_1 = v_w[1]
+    v_w_2 = v_w[2]
+    dv_w_0 = dv_w[0]
+    dv_w_1 = dv_w[1]
+    dv_w_2 = dv_w[2]
+    dp_w_0 = dp_w[0]
+    dp_w_1 = dp_w[1]
+    dp_w_2 = dp_w[2]
+    d_w_0 = h*v_w_0 + p_w_0
+    d_w_1 = h*v_w_1 + p_w_1
+    d_w_2 = h*v_w_2 + p_w_2
+    return casadi.vertcat(d_w_0 + dp_w_0, d_w_1 + dp_w_1, d_w_2 + dp_w_2), casadi.vertcat(dv_w_0 + v_w_0, dv_w_1 + v_w_1, dv_w_2 + v_w_2)
+
+
 def linear_acceleration(m, F_w):
     """linear_acceleration: Acceleration of the COM under a world force.
       in  m scalar: mass, kg

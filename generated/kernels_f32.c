@@ -1507,6 +1507,90 @@ void lvf_rigid_body_increments_body_c(const float *q, const float *omega_b, cons
     H[12] = S_b_2*omega_b_0*omega_b_1 + S_b_5*tau_b_2;
 }
 
+void lvf_rigid_body_increment_scale_free(const float *c_b, float sdt, float *C_b, float *h_q) {
+    const float c_b_0 = c_b[0];
+    const float c_b_1 = c_b[1];
+    const float c_b_2 = c_b[2];
+    C_b[0] = c_b_0*sdt;
+    C_b[1] = c_b_1*sdt;
+    C_b[2] = c_b_2*sdt;
+    h_q[0] = ((1.0F/2.0F))*sdt;
+}
+
+void lvf_rigid_body_increments_torque_h(const float *q, const float *omega_b, const float *S_b, const float *tau_w, float *H_q, float *H_omega) {
+    const float q_0 = q[0];
+    const float q_1 = q[1];
+    const float q_2 = q[2];
+    const float q_3 = q[3];
+    const float omega_b_0 = omega_b[0];
+    const float omega_b_1 = omega_b[1];
+    const float omega_b_2 = omega_b[2];
+    const float S_b_0 = S_b[0];
+    const float S_b_1 = S_b[1];
+    const float S_b_2 = S_b[2];
+    const float S_b_3 = S_b[3];
+    const float S_b_4 = S_b[4];
+    const float S_b_5 = S_b[5];
+    const float S_b_6 = S_b[6];
+    const float tau_w_0 = tau_w[0];
+    const float tau_w_1 = tau_w[1];
+    const float tau_w_2 = tau_w[2];
+    const float t0 = S_b_6*omega_b_0;
+    const float t1 = S_b_6*omega_b_2;
+    const float t2 = S_b_6*omega_b_1;
+    const float t3 = 2*q_0;
+    const float t4 = -2*q_1*tau_w_0 + t3*tau_w_1;
+    const float t5 = 2*q_2*tau_w_0 - t3*tau_w_2;
+    const float t6 = 2*q_1*tau_w_2 - 2*q_2*tau_w_1;
+    H_q[0] = q_1*t1 - q_2*t2 + q_3*t0;
+    H_q[1] = -q_0*t1 + q_2*t0 + q_3*t2;
+    H_q[2] = q_0*t2 - q_1*t0 + q_3*t1;
+    H_q[3] = -q_0*t0 - q_1*t2 - q_2*t1;
+    H_omega[0] = S_b_0*omega_b_1*omega_b_2 + S_b_3*(q_1*t4 - q_2*t5 - q_3*t6 + tau_w_0);
+    H_omega[1] = S_b_1*omega_b_0*omega_b_2 + S_b_4*(-q_0*t4 + q_2*t6 - q_3*t5 + tau_w_1);
+    H_omega[2] = S_b_2*omega_b_0*omega_b_1 + S_b_5*(q_0*t5 - q_1*t6 - q_3*t4 + tau_w_2);
+}
+
+void lvf_constant_acceleration_steps(float m, const float *F_w, float h, float *dv_w, float *dp_w) {
+    const float F_w_0 = F_w[0];
+    const float F_w_1 = F_w[1];
+    const float F_w_2 = F_w[2];
+    const float a_w_0 = F_w_0/m;
+    const float a_w_1 = F_w_1/m;
+    const float a_w_2 = F_w_2/m;
+    const float hh = ((1.0F/2.0F))*(h*h);
+    dv_w[0] = a_w_0*h;
+    dv_w[1] = a_w_1*h;
+    dv_w[2] = a_w_2*h;
+    dp_w[0] = a_w_0*hh;
+    dp_w[1] = a_w_1*hh;
+    dp_w[2] = a_w_2*hh;
+}
+
+void lvf_translation_flow_constant(const float *p_w, const float *v_w, float h, const float *dv_w, const float *dp_w, float *p_next, float *v_next) {
+    const float p_w_0 = p_w[0];
+    const float p_w_1 = p_w[1];
+    const float p_w_2 = p_w[2];
+    const float v_w_0 = v_w[0];
+    const float v_w_1 = v_w[1];
+    const float v_w_2 = v_w[2];
+    const float dv_w_0 = dv_w[0];
+    const float dv_w_1 = dv_w[1];
+    const float dv_w_2 = dv_w[2];
+    const float dp_w_0 = dp_w[0];
+    const float dp_w_1 = dp_w[1];
+    const float dp_w_2 = dp_w[2];
+    const float d_w_0 = h*v_w_0 + p_w_0;
+    const float d_w_1 = h*v_w_1 + p_w_1;
+    const float d_w_2 = h*v_w_2 + p_w_2;
+    p_next[0] = d_w_0 + dp_w_0;
+    p_next[1] = d_w_1 + dp_w_1;
+    p_next[2] = d_w_2 + dp_w_2;
+    v_next[0] = dv_w_0 + v_w_0;
+    v_next[1] = dv_w_1 + v_w_1;
+    v_next[2] = dv_w_2 + v_w_2;
+}
+
 void lvf_linear_acceleration(float m, const float *F_w, float *a_w) {
     const float F_w_0 = F_w[0];
     const float F_w_1 = F_w[1];

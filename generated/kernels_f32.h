@@ -121,6 +121,14 @@ void lvf_rigid_body_increments_torque_c(const float *q, const float *omega_b, co
 void lvf_rigid_body_increments_force_c(const float *q, const float *omega_b, const float *v_w, const float *S_b, const float *F_w, float *H);
 /* rigid_body_increments_body_c: An RK4 stage's scaled increments under a force and a body-frame torque (float; see kernels.h) */
 void lvf_rigid_body_increments_body_c(const float *q, const float *omega_b, const float *v_w, const float *S_b, const float *F_w, const float *tau_b, float *H);
+/* rigid_body_increment_scale_free: The constants of a torque-free RK4 stage's scaled increments (rigid_body_increments_free_c), once per body and call (float; see kernels.h) */
+void lvf_rigid_body_increment_scale_free(const float *c_b, float sdt, float *C_b, float *h_q);
+/* rigid_body_increments_torque_h: A constant-torque RK4 stage's scaled increments of (q, ω_B) alone (float; see kernels.h) */
+void lvf_rigid_body_increments_torque_h(const float *q, const float *omega_b, const float *S_b, const float *tau_w, float *H_q, float *H_omega);
+/* constant_acceleration_steps: The per-call constants of the exact RK4 step of a translation under a constant force (float; see kernels.h) */
+void lvf_constant_acceleration_steps(float m, const float *F_w, float h, float *dv_w, float *dp_w);
+/* translation_flow_constant: The exact RK4 step of a translation under a constant force (float; see kernels.h) */
+void lvf_translation_flow_constant(const float *p_w, const float *v_w, float h, const float *dv_w, const float *dp_w, float *p_next, float *v_next);
 /* linear_acceleration: Acceleration of the COM under a world force (float; see kernels.h) */
 void lvf_linear_acceleration(float m, const float *F_w, float *a_w);
 /* rigid_body_rhs_force_c: State derivative under a force only (no torque), on c_b and the COM acceleration (float; see kernels.h) */

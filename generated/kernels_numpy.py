@@ -2825,6 +2825,199 @@ def rigid_body_increments_body_c(q, omega_b, v_w, S_b, F_w, tau_b, *, out=None):
     return H_out
 
 
+def rigid_body_increment_scale_free(c_b, sdt, *, out=None):
+    """The constants of a torque-free RK4 stage's scaled increments (rigid_body_increments_free_c), once per body and call.
+
+    Generated kernel ``rigid_body_increment_scale_free``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    c_b : array_like, shape (..., 6)
+        Euler coefficients (k_x, k_y, k_z, r_x, r_y, r_z), body frame: k_x = (I_y − I_z)/I_x (cyclic, dimensionless), r_x = 1/I_x (1/(kg·m²)); from euler_coefficients
+    sdt : array_like, shape (...)
+        the stage scale times the step, LV_RK4_SCALE dt (tableaux.h), s
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
+
+    Returns
+    -------
+    C_b : ndarray, shape (..., 3)
+        C = sdt k_b, s
+    h_q : ndarray, shape (...)
+        sdt QUAT_RATE_SCALE, s
+    """
+    c_b = numpy.asarray(c_b, dtype=numpy.float64)
+    sdt = numpy.asarray(sdt, dtype=numpy.float64)
+    if out is None or out[0] is None or out[1] is None:
+        batch = c_b.shape[:-1] if c_b.shape[:-1] == sdt.shape else numpy.broadcast_shapes(c_b.shape[:-1], sdt.shape)
+    C_b_out = numpy.empty(batch + (3,)) if out is None or out[0] is None else out[0]
+    numpy.multiply(c_b[..., 0:3], sdt[..., None], out=C_b_out[..., 0:3])
+    h_q_out = numpy.empty(batch) if out is None or out[1] is None else out[1]
+    numpy.multiply(1.0 / 2.0, sdt, out=h_q_out[...])
+    return C_b_out, h_q_out
+
+
+def rigid_body_increments_torque_h(q, omega_b, S_b, tau_w, *, out=None):
+    """A constant-torque RK4 stage's scaled increments of (q, ω_B) alone.
+
+    Generated kernel ``rigid_body_increments_torque_h``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    q : array_like, shape (..., 4)
+        orientation (x, y, z, w), R_WB (a stage's value: unit to rounding)
+    omega_b : array_like, shape (..., 3)
+        angular velocity, body frame, rad/s
+    S_b : array_like, shape (..., 9)
+        the increments' constants (C_x, C_y, C_z, R_x, R_y, R_z, h_q, sdt, h_m) of rigid_body_increment_scale, once per body and call
+    tau_w : array_like, shape (..., 3)
+        total torque about the COM, world frame, N·m (constant over the call)
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
+
+    Returns
+    -------
+    H_q : ndarray, shape (..., 4)
+        (s dt) dq/dt, dimensionless
+    H_omega : ndarray, shape (..., 3)
+        (s dt) dω_B/dt, rad/s
+    """
+    q = numpy.asarray(q, dtype=numpy.float64)
+    omega_b = numpy.asarray(omega_b, dtype=numpy.float64)
+    S_b = numpy.asarray(S_b, dtype=numpy.float64)
+    tau_w = numpy.asarray(tau_w, dtype=numpy.float64)
+    if out is None or out[0] is None or out[1] is None:
+        batch = q.shape[:-1] if q.shape[:-1] == omega_b.shape[:-1] == S_b.shape[:-1] == tau_w.shape[:-1] else numpy.broadcast_shapes(q.shape[:-1], omega_b.shape[:-1], S_b.shape[:-1], tau_w.shape[:-1])
+    q_0 = q[..., 0]
+    q_1 = q[..., 1]
+    q_2 = q[..., 2]
+    q_3 = q[..., 3]
+    omega_b_0 = omega_b[..., 0]
+    omega_b_1 = omega_b[..., 1]
+    omega_b_2 = omega_b[..., 2]
+    S_b_0 = S_b[..., 0]
+    S_b_1 = S_b[..., 1]
+    S_b_2 = S_b[..., 2]
+    S_b_3 = S_b[..., 3]
+    S_b_4 = S_b[..., 4]
+    S_b_5 = S_b[..., 5]
+    S_b_6 = S_b[..., 6]
+    tau_w_0 = tau_w[..., 0]
+    tau_w_1 = tau_w[..., 1]
+    tau_w_2 = tau_w[..., 2]
+    t0 = S_b_6*omega_b_0
+    t1 = S_b_6*omega_b_2
+    t2 = S_b_6*omega_b_1
+    t3 = 2*q_0
+    t4 = t3 * tau_w_1 - 2 * q_1 * tau_w_0
+    t5 = 2*q_2*tau_w_0 - t3*tau_w_2
+    t6 = 2*q_1*tau_w_2 - 2*q_2*tau_w_1
+    H_q_out = numpy.empty(batch + (4,)) if out is None or out[0] is None else out[0]
+    numpy.add(q_1 * t1 - q_2 * t2, q_3 * t0, out=H_q_out[..., 0])
+    numpy.add(q_2 * t0 - q_0 * t1, q_3 * t2, out=H_q_out[..., 1])
+    numpy.add(q_0 * t2 - q_1 * t0, q_3 * t1, out=H_q_out[..., 2])
+    numpy.subtract(-q_0 * t0 - q_1 * t2, q_2 * t1, out=H_q_out[..., 3])
+    H_omega_out = numpy.empty(batch + (3,)) if out is None or out[1] is None else out[1]
+    numpy.add(S_b_0 * omega_b_1 * omega_b_2, S_b_3 * (q_1 * t4 - q_2 * t5 - q_3 * t6 + tau_w_0), out=H_omega_out[..., 0])
+    numpy.add(S_b_1 * omega_b_0 * omega_b_2, S_b_4 * (q_2 * t6 - q_0 * t4 - q_3 * t5 + tau_w_1), out=H_omega_out[..., 1])
+    numpy.add(S_b_2 * omega_b_0 * omega_b_1, S_b_5 * (q_0 * t5 - q_1 * t6 - q_3 * t4 + tau_w_2), out=H_omega_out[..., 2])
+    return H_q_out, H_omega_out
+
+
+def constant_acceleration_steps(m, F_w, h, *, out=None):
+    """The per-call constants of the exact RK4 step of a translation under a constant force.
+
+    Generated kernel ``constant_acceleration_steps``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    m : array_like, shape (...)
+        mass, kg
+    F_w : array_like, shape (..., 3)
+        total force at the COM, world frame, N (constant)
+    h : array_like, shape (...)
+        the step, s
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
+
+    Returns
+    -------
+    dv_w : ndarray, shape (..., 3)
+        velocity change over the step, world frame, m/s
+    dp_w : ndarray, shape (..., 3)
+        the acceleration's position change over the step, world frame, m
+    """
+    m = numpy.asarray(m, dtype=numpy.float64)
+    F_w = numpy.asarray(F_w, dtype=numpy.float64)
+    h = numpy.asarray(h, dtype=numpy.float64)
+    if out is None or out[0] is None or out[1] is None:
+        batch = m.shape if m.shape == F_w.shape[:-1] == h.shape else numpy.broadcast_shapes(m.shape, F_w.shape[:-1], h.shape)
+    a_w_0_3 = F_w[..., 0:3] / m[..., None]
+    a_w_0 = a_w_0_3[..., 0]
+    a_w_1 = a_w_0_3[..., 1]
+    a_w_2 = a_w_0_3[..., 2]
+    hh = ((1.0/2.0))*(h*h)
+    dv_w_out = numpy.empty(batch + (3,)) if out is None or out[0] is None else out[0]
+    numpy.multiply(a_w_0, h, out=dv_w_out[..., 0])
+    numpy.multiply(a_w_1, h, out=dv_w_out[..., 1])
+    numpy.multiply(a_w_2, h, out=dv_w_out[..., 2])
+    dp_w_out = numpy.empty(batch + (3,)) if out is None or out[1] is None else out[1]
+    numpy.multiply(a_w_0, hh, out=dp_w_out[..., 0])
+    numpy.multiply(a_w_1, hh, out=dp_w_out[..., 1])
+    numpy.multiply(a_w_2, hh, out=dp_w_out[..., 2])
+    return dv_w_out, dp_w_out
+
+
+def translation_flow_constant(p_w, v_w, h, dv_w, dp_w, *, out=None):
+    """The exact RK4 step of a translation under a constant force.
+
+    Generated kernel ``translation_flow_constant``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    p_w : array_like, shape (..., 3)
+        COM position, world frame, m
+    v_w : array_like, shape (..., 3)
+        COM velocity, world frame, m/s
+    h : array_like, shape (...)
+        the step, s
+    dv_w : array_like, shape (..., 3)
+        constant_acceleration_steps' dv_w, m/s
+    dp_w : array_like, shape (..., 3)
+        constant_acceleration_steps' dp_w, m
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
+
+    Returns
+    -------
+    p_next : ndarray, shape (..., 3)
+        m, world frame
+    v_next : ndarray, shape (..., 3)
+        m/s, world frame
+    """
+    p_w = numpy.asarray(p_w, dtype=numpy.float64)
+    v_w = numpy.asarray(v_w, dtype=numpy.float64)
+    h = numpy.asarray(h, dtype=numpy.float64)
+    dv_w = numpy.asarray(dv_w, dtype=numpy.float64)
+    dp_w = numpy.asarray(dp_w, dtype=numpy.float64)
+    if out is None or out[0] is None or out[1] is None:
+        batch = p_w.shape[:-1] if p_w.shape[:-1] == v_w.shape[:-1] == h.shape == dv_w.shape[:-1] == dp_w.shape[:-1] else numpy.broadcast_shapes(p_w.shape[:-1], v_w.shape[:-1], h.shape, dv_w.shape[:-1], dp_w.shape[:-1])
+    dp_w_0 = dp_w[..., 0]
+    dp_w_1 = dp_w[..., 1]
+    dp_w_2 = dp_w[..., 2]
+    d_w_0_3 = h[..., None] * v_w[..., 0:3] + p_w[..., 0:3]
+    d_w_0 = d_w_0_3[..., 0]
+    d_w_1 = d_w_0_3[..., 1]
+    d_w_2 = d_w_0_3[..., 2]
+    p_next_out = numpy.empty(batch + (3,)) if out is None or out[0] is None else out[0]
+    numpy.add(d_w_0, dp_w_0, out=p_next_out[..., 0])
+    numpy.add(d_w_1, dp_w_1, out=p_next_out[..., 1])
+    numpy.add(d_w_2, dp_w_2, out=p_next_out[..., 2])
+    v_next_out = numpy.empty(batch + (3,)) if out is None or out[1] is None else out[1]
+    numpy.add(dv_w[..., 0:3], v_w[..., 0:3], out=v_next_out[..., 0:3])
+    return p_next_out, v_next_out
+
+
 def linear_acceleration(m, F_w, *, out=None):
     """Acceleration of the COM under a world force.
 
@@ -6138,6 +6331,10 @@ KERNELS = {
     'rigid_body_increments_torque_c': (rigid_body_increments_torque_c, [('q', (4,)), ('omega_b', (3,)), ('v_w', (3,)), ('S_b', (9,)), ('tau_w', (3,))], [('H', (13,))]),
     'rigid_body_increments_force_c': (rigid_body_increments_force_c, [('q', (4,)), ('omega_b', (3,)), ('v_w', (3,)), ('S_b', (9,)), ('F_w', (3,))], [('H', (13,))]),
     'rigid_body_increments_body_c': (rigid_body_increments_body_c, [('q', (4,)), ('omega_b', (3,)), ('v_w', (3,)), ('S_b', (9,)), ('F_w', (3,)), ('tau_b', (3,))], [('H', (13,))]),
+    'rigid_body_increment_scale_free': (rigid_body_increment_scale_free, [('c_b', (6,)), ('sdt', ())], [('C_b', (3,)), ('h_q', ())]),
+    'rigid_body_increments_torque_h': (rigid_body_increments_torque_h, [('q', (4,)), ('omega_b', (3,)), ('S_b', (9,)), ('tau_w', (3,))], [('H_q', (4,)), ('H_omega', (3,))]),
+    'constant_acceleration_steps': (constant_acceleration_steps, [('m', ()), ('F_w', (3,)), ('h', ())], [('dv_w', (3,)), ('dp_w', (3,))]),
+    'translation_flow_constant': (translation_flow_constant, [('p_w', (3,)), ('v_w', (3,)), ('h', ()), ('dv_w', (3,)), ('dp_w', (3,))], [('p_next', (3,)), ('v_next', (3,))]),
     'linear_acceleration': (linear_acceleration, [('m', ()), ('F_w', (3,))], [('a_w', (3,))]),
     'rigid_body_rhs_force_c': (rigid_body_rhs_force_c, [('x', (13,)), ('c_b', (6,)), ('a_w', (3,))], [('x_dot', (13,))]),
     'rigid_body_rhs_body_c': (rigid_body_rhs_body_c, [('x', (13,)), ('c_b', (6,)), ('a_w', (3,)), ('tau_b', (3,))], [('x_dot', (13,))]),

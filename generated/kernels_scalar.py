@@ -776,6 +776,50 @@ def rigid_body_increments_body_c(q, omega_b, v_w, S_b, F_w, tau_b):
     return (S_b_7*v_w_0, S_b_7*v_w_1, S_b_7*v_w_2, q_1*t1 - q_2*t2 + q_3*t0, -q_0*t1 + q_2*t0 + q_3*t2, q_0*t2 - q_1*t0 + q_3*t1, -q_0*t0 - q_1*t2 - q_2*t1, F_w_0*S_b_8, F_w_1*S_b_8, F_w_2*S_b_8, S_b_0*omega_b_1*omega_b_2 + S_b_3*tau_b_0, S_b_1*omega_b_0*omega_b_2 + S_b_4*tau_b_1, S_b_2*omega_b_0*omega_b_1 + S_b_5*tau_b_2)
 
 
+def rigid_body_increment_scale_free(c_b, sdt):
+    """The constants of a torque-free RK4 stage's scaled increments (rigid_body_increments_free_c), once per body and call (floats; see the module)."""
+    c_b_0, c_b_1, c_b_2, _, _, _ = c_b
+    return (c_b_0*sdt, c_b_1*sdt, c_b_2*sdt), ((1.0/2.0))*sdt
+
+
+def rigid_body_increments_torque_h(q, omega_b, S_b, tau_w):
+    """A constant-torque RK4 stage's scaled increments of (q, ω_B) alone (floats; see the module)."""
+    q_0, q_1, q_2, q_3 = q
+    omega_b_0, omega_b_1, omega_b_2 = omega_b
+    S_b_0, S_b_1, S_b_2, S_b_3, S_b_4, S_b_5, S_b_6, _, _ = S_b
+    tau_w_0, tau_w_1, tau_w_2 = tau_w
+    t0 = S_b_6*omega_b_0
+    t1 = S_b_6*omega_b_2
+    t2 = S_b_6*omega_b_1
+    t3 = 2*q_0
+    t4 = -2*q_1*tau_w_0 + t3*tau_w_1
+    t5 = 2*q_2*tau_w_0 - t3*tau_w_2
+    t6 = 2*q_1*tau_w_2 - 2*q_2*tau_w_1
+    return (q_1*t1 - q_2*t2 + q_3*t0, -q_0*t1 + q_2*t0 + q_3*t2, q_0*t2 - q_1*t0 + q_3*t1, -q_0*t0 - q_1*t2 - q_2*t1), (S_b_0*omega_b_1*omega_b_2 + S_b_3*(q_1*t4 - q_2*t5 - q_3*t6 + tau_w_0), S_b_1*omega_b_0*omega_b_2 + S_b_4*(-q_0*t4 + q_2*t6 - q_3*t5 + tau_w_1), S_b_2*omega_b_0*omega_b_1 + S_b_5*(q_0*t5 - q_1*t6 - q_3*t4 + tau_w_2))
+
+
+def constant_acceleration_steps(m, F_w, h):
+    """The per-call constants of the exact RK4 step of a translation under a constant force (floats; see the module)."""
+    F_w_0, F_w_1, F_w_2 = F_w
+    a_w_0 = F_w_0/m
+    a_w_1 = F_w_1/m
+    a_w_2 = F_w_2/m
+    hh = ((1.0/2.0))*(h*h)
+    return (a_w_0*h, a_w_1*h, a_w_2*h), (a_w_0*hh, a_w_1*hh, a_w_2*hh)
+
+
+def translation_flow_constant(p_w, v_w, h, dv_w, dp_w):
+    """The exact RK4 step of a translation under a constant force (floats; see the module)."""
+    p_w_0, p_w_1, p_w_2 = p_w
+    v_w_0, v_w_1, v_w_2 = v_w
+    dv_w_0, dv_w_1, dv_w_2 = dv_w
+    dp_w_0, dp_w_1, dp_w_2 = dp_w
+    d_w_0 = h*v_w_0 + p_w_0
+    d_w_1 = h*v_w_1 + p_w_1
+    d_w_2 = h*v_w_2 + p_w_2
+    return (d_w_0 + dp_w_0, d_w_1 + dp_w_1, d_w_2 + dp_w_2), (dv_w_0 + v_w_0, dv_w_1 + v_w_1, dv_w_2 + v_w_2)
+
+
 def linear_acceleration(m, F_w):
     """Acceleration of the COM under a world force (floats; see the module)."""
     F_w_0, F_w_1, F_w_2 = F_w
@@ -2054,6 +2098,10 @@ READS = {
     'rigid_body_increments_torque_c': {'q': (0, 1, 2, 3), 'omega_b': (0, 1, 2), 'v_w': (0, 1, 2), 'S_b': (0, 1, 2, 3, 4, 5, 6, 7), 'tau_w': (0, 1, 2)},
     'rigid_body_increments_force_c': {'q': (0, 1, 2, 3), 'omega_b': (0, 1, 2), 'v_w': (0, 1, 2), 'S_b': (0, 1, 2, 6, 7, 8), 'F_w': (0, 1, 2)},
     'rigid_body_increments_body_c': {'q': (0, 1, 2, 3), 'omega_b': (0, 1, 2), 'v_w': (0, 1, 2), 'S_b': (0, 1, 2, 3, 4, 5, 6, 7, 8), 'F_w': (0, 1, 2), 'tau_b': (0, 1, 2)},
+    'rigid_body_increment_scale_free': {'c_b': (0, 1, 2)},
+    'rigid_body_increments_torque_h': {'q': (0, 1, 2, 3), 'omega_b': (0, 1, 2), 'S_b': (0, 1, 2, 3, 4, 5, 6), 'tau_w': (0, 1, 2)},
+    'constant_acceleration_steps': {'F_w': (0, 1, 2)},
+    'translation_flow_constant': {'p_w': (0, 1, 2), 'v_w': (0, 1, 2), 'dv_w': (0, 1, 2), 'dp_w': (0, 1, 2)},
     'linear_acceleration': {'F_w': (0, 1, 2)},
     'rigid_body_rhs_force_c': {'x': (3, 4, 5, 6, 7, 8, 9, 10, 11, 12), 'c_b': (0, 1, 2), 'a_w': (0, 1, 2)},
     'rigid_body_rhs_body_c': {'x': (3, 4, 5, 6, 7, 8, 9, 10, 11, 12), 'c_b': (0, 1, 2, 3, 4, 5), 'a_w': (0, 1, 2), 'tau_b': (0, 1, 2)},
@@ -2162,6 +2210,10 @@ ZEROS = {
     'rigid_body_increments_torque_c': {'H': (7, 8, 9)},
     'rigid_body_increments_force_c': {'H': ()},
     'rigid_body_increments_body_c': {'H': ()},
+    'rigid_body_increment_scale_free': {'C_b': (), 'h_q': ()},
+    'rigid_body_increments_torque_h': {'H_q': (), 'H_omega': ()},
+    'constant_acceleration_steps': {'dv_w': (), 'dp_w': ()},
+    'translation_flow_constant': {'p_next': (), 'v_next': ()},
     'linear_acceleration': {'a_w': ()},
     'rigid_body_rhs_force_c': {'x_dot': ()},
     'rigid_body_rhs_body_c': {'x_dot': ()},

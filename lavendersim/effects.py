@@ -82,6 +82,30 @@ def rhs_classes(flags: np.ndarray) -> np.ndarray:
     return _RHS_BY_INDEX[index]
 
 
+def constant_kind(flags: int, user: bool) -> tuple[bool, bool] | None:
+    """The step of a plain body with effects when they all read no state (derive/effect_fuse.py CONSTANT_KINDS,
+    printed as effects_meta RHS_CONSTANT; csrc/step.c lv_const_rk4_h): (torque, force) of its kind, or None when an
+    effect reads the state or is a user effect (csrc effects_constant).
+
+    Parameters
+    ----------
+    flags : int
+        The OR of the body's effects' EffectSpec.rhs_flags.
+    user : bool
+        Some effect of the body is a user effect.
+
+    Returns
+    -------
+    tuple of bool or None
+        (torque: q and omega_b take the world torque sum, force: p and v take the constant force's exact flow).
+    """
+    if user or flags & FLAG_USES_STATE:
+        return None
+    index = sum(1 << j for j, bit in enumerate(RHS_BITS) if flags & bit)
+    kind = _META.RHS_KINDS_BY_FLAGS[index]
+    return _META.RHS_CONSTANT.get(kind)
+
+
 @dataclass(frozen=True)
 class ParamSpec:
     """One declared parameter of an effect (printed by derive into effects_meta).

@@ -127,8 +127,32 @@ def test_gravity_leaves_the_rotation_bitwise_a_plain_bodys(backend, n):
     np.testing.assert_allclose(grav[:, 0:3], x0[:, 0:3] + x0[:, 7:10] * t + g * t * t / 2, rtol=0, atol=1e-12)
 
 
+@pytest.mark.parametrize("backend", BACKENDS)
+@pytest.mark.parametrize("n", [1, 16])
+def test_a_constant_torque_leaves_the_translation_bitwise_a_plain_bodys(backend, n):
+    """Bodies whose effects read no state stage only (q, omega_b) (csrc/step.c lv_const_rk4_h): a constant world
+    torque leaves p and v bitwise those of the same bodies without it (p by translation_drift, v kept), and gravity
+    added to it leaves q and omega_b bitwise the torque-only bodies' (its translation by the printed exact flow)."""
+    dt, steps = 1e-3, 200
+    torque = ("applied_torque", {"torque_w": [0.3, -0.2, 0.5]})
+    sims = [lv.Sim(_scene(n, effs, seed=7), dt=dt, integrator="rk4", backend=backend)
+            for effs in ([], [torque], [torque, ("gravity", {})])]
+    x0 = np.array(sims[2].x)
+    for sim in sims:
+        sim.run(steps)
+    plain, tq, both = (np.array(sim.x) for sim in sims)
+    assert plain[:, 0:3].tobytes() == tq[:, 0:3].tobytes() and plain[:, 7:10].tobytes() == tq[:, 7:10].tobytes()
+    assert tq[:, 3:7].tobytes() == both[:, 3:7].tobytes() and tq[:, 10:].tobytes() == both[:, 10:].tobytes()
+    assert plain[:, 10:].tobytes() != tq[:, 10:].tobytes()     # the torque acts
+    t, g = dt * steps, np.array([0.0, 0.0, -9.81])
+    np.testing.assert_allclose(both[:, 7:10], x0[:, 7:10] + g * t, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(both[:, 0:3], x0[:, 0:3] + x0[:, 7:10] * t + g * t * t / 2, rtol=0, atol=1e-12)
+
+
 SETS = {
     "gravity": [("gravity", {})],
+    "applied torque": [("applied_torque", {"torque_w": [1e-3, 2e-3, -1e-3]})],
+    "gravity + applied torque": [("gravity", {}), ("applied_torque", {"torque_w": [1e-3, 2e-3, -1e-3]})],
     "angular damping": [("angular_damping", {"c": 2e-3})],
     "damping": [("linear_damping", {"c": 0.05}), ("angular_damping", {"c": 2e-3})],
     "gravity + damping": [("gravity", {}), ("linear_damping", {"c": 0.05}), ("angular_damping", {"c": 2e-3})],

@@ -175,8 +175,14 @@ def test_each_kinds_right_hand_side_is_printed_once_and_the_backends_read_it():
     inc = step[step.index("static inline void plain_inc("):]
     inc = inc[:inc.index("\n}\n")]
     assert "LV_RHS_INC_##KIND" in inc and "LV_RHS_KINDS(" in inc and not [k for k in kernels if k in inc]
-    const = simd[simd.index("#define LV_TILE_RHS_TORQUE"):simd.index("#define LV_TILE_LOAD_TORQUE")]
-    assert not [k for k in kernels if k in const] and const.count("LV_RHS_INC_") == 3
+    # the constant kinds' tiles step each lane by step.c's lv_const_rk4_h on the printed per-kind flags
+    const = simd[simd.index("#define LV_TILE_RK4_C("):simd.index("/* The torque-free tile:")]
+    assert not [k for k in kernels if k in const] and "lv_const_rk4_h(" in const
+    assert "LV_CONST_TORQUE_##KIND" in const and "LV_CONST_FORCE_##KIND" in const
+    for kind, (torque, force) in effect_fuse.CONSTANT_KINDS.items():
+        assert h.count(f"#define LV_CONST_TORQUE_{kind} {int(torque)}\n") == 1, kind
+        assert h.count(f"#define LV_CONST_FORCE_{kind} {int(force)}\n") == 1, kind
+    assert effects_meta.RHS_CONSTANT == effect_fuse.CONSTANT_KINDS
     c = param("c", (), "N·m·s", "drag")
     decls = [effect("w_drag", "world drag", [c], torque_w=-c.symbol * STATE.omega_w),           # TORQUE
              effect("b_drag", "body drag", [c], torque_b=-c.symbol * STATE.omega_b),            # BODY

@@ -490,9 +490,12 @@ class _ForcedGroup:
     """Plain bodies with effects of one right-hand side class: idx (into the plan's bodies), their effect index
     (the body-frame forms for RHS_BODY*), masses and Euler coefficients."""
 
-    def __init__(self, cls, idx, index, m, c, split=0):
+    def __init__(self, cls, idx, index, m, c, split=0, const=None):
         self.cls, self.idx, self.index, self.m, self.c = cls, idx, index, m, c
         self.split = split   # E.RHS_SPLIT's rotation of a decoupled group (0: the 13-number stages)
+        # (torque, force) when every effect of the group's bodies reads no state (effects.constant_kind): the bodies
+        # then step (q, omega_b) alone (_const_rk4_h); None: as split says (_forced_rk4_h)
+        self.const: tuple[bool, bool] | None = const
         self.const_F: np.ndarray | None = None   # a constant force sum (the index's own array) and its a_w
         self.a_w: np.ndarray | None = None
         self.zeros: np.ndarray | None = None
@@ -577,22 +580,28 @@ def _forced_groups(plan) -> list[_ForcedGroup]:
     # a user effect counts as coupling (its affine form is not printed: csrc/step.c effects_decoupled)
     row_flags = np.array([s.rhs_flags | (E.FLAG_COUPLED if s.user_set is not None else 0) for s in specs],
                          np.int64)[inv.reshape(-1)]
+    row_user = np.array([s.user_set is not None for s in specs], bool)[inv.reshape(-1)]
     body = effects[:, E.ROW_BODY].astype(np.int64)
     flags = np.full(plan.nb, np.bitwise_or.reduce(row_flags[body < 0]) if (body < 0).any() else 0, np.int64)
     np.bitwise_or.at(flags, body[body >= 0], row_flags[body >= 0])
+    user = np.full(plan.nb, bool(row_user[body < 0].any()))
+    np.logical_or.at(user, body[body >= 0], row_user[body >= 0])
     fl = flags[plan.forced]
     cls = E.rhs_classes(fl)
     # decoupled (csrc/step.c rhs_kind: its class + LV_RHS_SPLIT): a kind that allows it, effects not all constant, none
     # coupling; the group steps its rotation alone and its translation by the printed flow
     split = np.array([E.RHS_SPLIT[int(c)] for c in cls], np.int64) * (
         (fl & E.FLAG_USES_STATE != 0) & (fl & E.FLAG_COUPLED == 0))
+    # effects reading no state (csrc/step.c rhs_kind + LV_RHS_CONSTANT): (q, omega_b) staged alone (_const_rk4_h)
+    const = [E.constant_kind(int(f), bool(u)) for f, u in zip(fl, user[plan.forced])]
+    ckey = np.array([0 if k is None else 1 + 2 * k[0] + k[1] for k in const], np.int64)
     out = []
-    for c, sp in sorted(set(zip(cls.tolist(), split.tolist()))):
-        sel = np.flatnonzero((cls == c) & (split == sp))
+    for c, sp, ck in sorted(set(zip(cls.tolist(), split.tolist(), ckey.tolist()))):
+        sel = np.flatnonzero((cls == c) & (split == sp) & (ckey == ck))
         idx = plan.forced[sel]
         index = plan.index if c == RHS_FULL and sel.size == plan.forced.size else _EffectIndex(
             effects, idx, plan.m, plan.I, None, body_frame=c in (RHS_BODY, RHS_BODY_F))
-        out.append(_ForcedGroup(int(c), idx, index, plan.m_f[sel], _soa(plan.c_f[sel]), int(sp)))
+        out.append(_ForcedGroup(int(c), idx, index, plan.m_f[sel], _soa(plan.c_f[sel]), int(sp), const[sel[0]]))
     return out
 
 
@@ -1034,35 +1043,71 @@ def _scaled_stages(prog, y, inc, H, A, Y, T1, T2, out):
     return out
 
 
-def _free_rk4_h(plan, prog, x: np.ndarray, c: np.ndarray, dt: float, xn: np.ndarray | None = None) -> np.ndarray:
-    """One torque-free step of bodies x (n, 13) in the scaled-increment form prog (generated/tableaux.py SCALED_RK:
-    (s, stages, end)), q not normalized; c (n, LY.EULER_SIZE) their Euler coefficients. The C backend's
-    lv_free_rk4_h (csrc/step.c), operation for operation: the increments H_i = s dt k_i of q and omega_b from the
-    printed rigid_body_increments_free_c (its constants C = (s dt) k_b, h_q = (s dt) QUAT_RATE_SCALE), each stage's
-    input y + m H and the running sum of w H (a shared multiple formed once), the end y + (acc + w H) end; p_w by
-    the printed translation_drift with v_w, v_w kept. y = (q, omega_b) as (7, n) rows in buffers kept by the plan.
-    In the plan's precision (plan.K; a float32 plan in float32, as step_f32.c's float32 tiles).
-    Returns xn (a new struct-of-arrays state when None)."""
-    s = prog[0]
+def _h_rows(plan, prog, x: np.ndarray, inc, key) -> np.ndarray:
+    """(q, omega_b) of bodies x (n, 13) after one step of the scaled-increment stages prog (generated/tableaux.py
+    SCALED_RK: (s, stages, end)), q not normalized, as (7, n) rows: the C backend's LV_H_STAGES (csrc/step.c
+    lv_rot_free_h, lv_rot_torque_h) operation for operation: inc(q, omega_b, out) writes a stage's increments
+    H_i = s dt k_i (a printed increments kernel), each stage's input y + m H and the running sum of w H (a shared
+    multiple formed once), the end y + (acc + w H) end. Buffers kept by the plan under key."""
     n = x.shape[0]
-    key = ("free_rk4_h", n, x.dtype.str)
     buf = plan.works.get(key)
     if buf is None:
         buf = plan.works[key] = np.empty((6, LY.STATE_Q_LEN + LY.STATE_OMEGA_B_LEN, n), x.dtype)
     y, Y, H, A, T1, T2 = buf
     nq = LY.STATE_Q_LEN
-    sdt = s * dt
-    C = c[:, LY.EULER_K] * sdt
-    hq = sdt * LY.QUAT_RATE_SCALE
     y[:nq], y[nq:] = x[:, Q].T, x[:, W].T
     Hout = (H[:nq].T, H[nq:].T)
-    _scaled_stages(prog, y, lambda src: plan.K.rigid_body_increments_free_c(src[:nq].T, src[nq:].T, C, hq, out=Hout),
-                   H, A, Y, T1, T2, A)
+    return _scaled_stages(prog, y, lambda src: inc(src[:nq].T, src[nq:].T, Hout), H, A, Y, T1, T2, A)
+
+
+def _h_store(A: np.ndarray, xn: np.ndarray | None, x: np.ndarray) -> np.ndarray:
+    """xn's q and omega_b from _h_rows' A (a new struct-of-arrays state when xn is None)."""
     if xn is None:
         xn = np.empty(x.shape[::-1], x.dtype).T
+    nq = LY.STATE_Q_LEN
     xn[:, Q], xn[:, W] = A[:nq].T, A[nq:].T
+    return xn
+
+
+def _free_rk4_h(plan, prog, x: np.ndarray, c: np.ndarray, dt: float, xn: np.ndarray | None = None) -> np.ndarray:
+    """One torque-free step of bodies x (n, 13) in the scaled-increment form prog (generated/tableaux.py SCALED_RK:
+    (s, stages, end)), q not normalized; c (n, LY.EULER_SIZE) their Euler coefficients. The C backend's
+    lv_free_rk4_h (csrc/step.c), operation for operation: q and omega_b by _h_rows on the printed
+    rigid_body_increments_free_c (its constants C, h_q from the printed rigid_body_increment_scale_free); p_w by
+    the printed translation_drift with v_w, v_w kept. In the plan's precision (plan.K; a float32 plan in float32, as
+    step_f32.c's float32 tiles). Returns xn (a new struct-of-arrays state when None)."""
+    C, hq = plan.K.rigid_body_increment_scale_free(c, prog[0] * dt)
+    A = _h_rows(plan, prog, x, lambda q, w, o: plan.K.rigid_body_increments_free_c(q, w, C, hq, out=o),
+                ("free_rk4_h", x.shape[0], x.dtype.str))
+    xn = _h_store(A, xn, x)
     plan.K.translation_drift(x[:, P], x[:, V], dt, out=(xn[:, P],))
     xn[:, V] = x[:, V]
+    return xn
+
+
+def _const_rk4_h(plan, prog, fg, x: np.ndarray, dt: float, xn: np.ndarray | None = None) -> np.ndarray:
+    """One step of the bodies x (n, 13) of forced group fg whose effects all read no state (fg.const = (torque,
+    force), effects.constant_kind), q not normalized: the C backend's lv_const_rk4_h (csrc/step.c) operation for
+    operation. The effects' sums (F, tau) once; q and omega_b by _h_rows on the printed rigid_body_increments_torque_h
+    (the constants S of rigid_body_increment_scale and tau) with a torque, else as a torque-free body (_free_rk4_h's
+    increments and constants: the same bits); p_w and v_w by the printed translation_flow_constant on
+    constant_acceleration_steps' dv, dp with a force, else translation_drift with v_w kept. Returns xn."""
+    torque, force = fg.const
+    F, tau = fg.index.sums(x, x[:, V], plan.loads_buffer(x))
+    key = ("const_rk4_h", x.shape[0], id(fg))
+    if torque:
+        S = fg.scales(K, prog[0] * dt)
+        A = _h_rows(plan, prog, x, lambda q, w, o: K.rigid_body_increments_torque_h(q, w, S, tau, out=o), key)
+    else:
+        C, hq = K.rigid_body_increment_scale_free(fg.c, prog[0] * dt)
+        A = _h_rows(plan, prog, x, lambda q, w, o: K.rigid_body_increments_free_c(q, w, C, hq, out=o), key)
+    xn = _h_store(A, xn, x)
+    if force:
+        dv, dp = K.constant_acceleration_steps(fg.m, F, dt)
+        K.translation_flow_constant(x[:, P], x[:, V], dt, dv, dp, out=(xn[:, P], xn[:, V]))
+    else:
+        K.translation_drift(x[:, P], x[:, V], dt, out=(xn[:, P],))
+        xn[:, V] = x[:, V]
     return xn
 
 
@@ -1127,6 +1172,12 @@ def _split_rk4_h(plan, prog, fg, x: np.ndarray, dt: float, xn: np.ndarray | None
     return xn
 
 
+def _group_rk4_h(plan, prog, fg, x, dt, xn=None) -> np.ndarray:
+    """One step of forced group fg's bodies x: _const_rk4_h when their effects all read no state, else
+    _forced_rk4_h."""
+    return (_const_rk4_h if fg.const is not None else _forced_rk4_h)(plan, prog, fg, x, dt, xn)
+
+
 def _scaled_step(plan, prog, x, dt, stepper, f) -> np.ndarray:
     """The built-in RK4's step of every body in its scaled-increment form: torque-free bodies by _free_rk4_h, each
     forced group (plain bodies with effects) by _forced_rk4_h; bodies with models (wheels, joints) on the tableau
@@ -1136,12 +1187,12 @@ def _scaled_step(plan, prog, x, dt, stepper, f) -> np.ndarray:
         plan.one = plan.fgroups[0] if plan.forced.size == plan.nb and len(plan.fgroups) == 1 else None
     forced = plan.K is K   # (a float32 plan's bodies with effects: the tableau stepper, as fixed_loop.h)
     if plan.one is not None and forced:   # every body plain, one class: no gather, no scatter
-        return _forced_rk4_h(plan, prog, plan.one, x, dt, plan.work(x, len(prog[1])).xn)
+        return _group_rk4_h(plan, prog, plan.one, x, dt, plan.work(x, len(prog[1])).xn)
     xn = stepper(plan, f, x, dt) if plan.has_models or not forced else np.empty(x.shape[::-1], x.dtype).T
     if plan.free.size:
         xn[plan.free, X] = _free_rk4_h(plan, prog, _soa(x[plan.free, X]), plan.c_free, dt)
     for fg in plan.fgroups if forced and plan.fgroups else []:
-        xn[fg.idx, X] = _forced_rk4_h(plan, prog, fg, _soa(x[fg.idx, X]), dt)
+        xn[fg.idx, X] = _group_rk4_h(plan, prog, fg, _soa(x[fg.idx, X]), dt)
     return xn
 
 

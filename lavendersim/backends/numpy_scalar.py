@@ -17,7 +17,7 @@ import math
 import numpy as np
 
 from ..effects import (FLAG_COUPLED, FLAG_USES_STATE, INC_SCALE_C, INC_SCALE_HQ, RHS_BODY, RHS_BODY_F, RHS_FORCE,
-                       RHS_FULL, RHS_SPLIT, ROW_BODY, ROW_CODE, ROW_PARAMS, rhs_classes, spec_for_code)
+                       RHS_FULL, RHS_SPLIT, ROW_BODY, ROW_CODE, ROW_PARAMS, constant_kind, rhs_classes, spec_for_code)
 from ..generated import kernels_scalar as KS
 from ..generated import layout as LY
 
@@ -35,7 +35,8 @@ class Fallback(Exception):
 
 class ScalarBodies:
     """Each body's constants as floats: Euler's coefficients, mass, moments and its effects in table order
-    [(apply, parameters)] (the every-body ones included); or None from build() when an effect has no float
+    [(apply, parameters)] (the every-body ones included), and the (torque, force) of its constant kind when its
+    effects all read no state (effects.constant_kind; else None); or None from build() when an effect has no float
     printing."""
 
     def __init__(self, params, effects):
@@ -46,6 +47,7 @@ class ScalarBodies:
         self.ok = all(a is not None for a in applies)
         rows = [tuple(r) for r in effects[:, ROW_PARAMS:].tolist()] if len(effects) else []
         flags = [spec_for_code(c).rhs_flags if a is not None else 0 for c, a in zip(codes, applies)]
+        user = [a is not None and spec_for_code(c).user_set is not None for c, a in zip(codes, applies)]
         for b, row in enumerate(params.tolist()):
             m, I = row[LY.PARAM_M], tuple(row[LY.PARAM_I_B])
             mine = [r for r in range(len(body)) if body[r] < 0 or body[r] == b]
@@ -60,7 +62,8 @@ class ScalarBodies:
             # its affine forces' sums (table order from 0)
             split = RHS_SPLIT[cls] if f & FLAG_USES_STATE and not f & FLAG_COUPLED else 0
             aff = [(KS.EFFECT_AFFINE_BY_CODE[codes[r]], rows[r]) for r in mine if codes[r] in KS.EFFECT_AFFINE_BY_CODE]
-            self.bodies.append((KS.euler_coefficients(I), m, I, (cls, mine_fx, split, aff)))
+            const = constant_kind(f, any(user[r] for r in mine)) if mine else None
+            self.bodies.append((KS.euler_coefficients(I), m, I, (cls, mine_fx, split, aff), const))
 
 
 def _rhs(y, c, m, I, effects):
@@ -178,11 +181,15 @@ def _stage_lines(i: int, w, m, shared: bool, end, ys, Ys, Hs, As) -> list[str]:
 _RUNS_H: dict = {}
 
 
-def _run_h_of(prog, normalize: bool):
-    """n torque-free steps of one body in the scaled-increment form prog (generated/tableaux.py SCALED_RK) as a
-    compiled Python function run(x, n, h, c) -> x (13 floats; c its Euler coefficients): numpy_backend._free_rk4_h's
-    operations in its order (C's lv_free_rk4_h), written out number by number."""
-    key = (prog, normalize)
+def _run_h_of(prog, normalize: bool, torque: bool = False, force: bool = False):
+    """n steps of one body that stages only (q, omega_b) in the scaled-increment form prog (generated/tableaux.py
+    SCALED_RK) as a compiled Python function run(x, n, h, R, dv, dp) -> x (13 floats), written out number by number:
+    numpy_backend._free_rk4_h's operations in its order (C's lv_free_rk4_h) for a torque-free body, or
+    numpy_backend._const_rk4_h's (C's lv_const_rk4_h) for a body whose effects read no state. The increments: with
+    torque the printed rigid_body_increments_torque_h on R = (S, tau_w), else rigid_body_increments_free_c on
+    R = (C, h_q) (rigid_body_increment_scale_free); p and v: with force the printed translation_flow_constant on
+    dv, dp (constant_acceleration_steps), else translation_drift with v kept."""
+    key = (prog, normalize, torque, force)
     run = _RUNS_H.get(key)
     if run is None:
         s, stages, end = prog
@@ -190,27 +197,41 @@ def _run_h_of(prog, normalize: bool):
         ys = [f"y{r}" for r in range(ny)]
         Ys, Hs, As = ([f"{v}{r}" for r in range(ny)] for v in "YHa")
         nq = _Q.stop - _Q.start
-        src = ["def run(x, n, h, c):", f"    sdt = {s!r} * h",
-               "    C = (" + ", ".join(f"c[{k}] * sdt" for k in range(LY.EULER_K.start, LY.EULER_K.stop)) + ",)",
-               f"    hq = sdt * {LY.QUAT_RATE_SCALE!r}", "    for _ in range(n):",
+        src = ["def run(x, n, h, R, dv, dp):", "    R0, R1 = R", "    for _ in range(n):",
                f"        p, q, v, w = x[{_P.start}:{_P.stop}], x[{_Q.start}:{_Q.stop}], x[{_V.start}:{_V.stop}], "
                f"x[{_W.start}:{_W.stop}]",
                f"        {', '.join(ys)}, = q + w"]
         cur = ys
         for i, (w, m, shared) in enumerate(stages):
             src.append(f"        ({', '.join(Hs[:nq])}), ({', '.join(Hs[nq:])}) = inc(({', '.join(cur[:nq])},), "
-                       f"({', '.join(cur[nq:])},), C, hq)")
+                       f"({', '.join(cur[nq:])},), R0, R1)")
             src += _stage_lines(i, w, m, shared, end, ys, Ys, Hs, As)
             cur = Ys
         qn = f"normalize(({', '.join(Ys[:nq])},))" if normalize else f"({', '.join(Ys[:nq])},)"
-        src += [f"        x = tuple(drift(p, v, h)) + tuple({qn}) + v + ({', '.join(Ys[nq:])},)",
-                "        if not isfinite(sum(x)):   # the sum first, as the vectorized check", "            raise Fallback",
+        if force:
+            src.append("        pn, vn = flow(p, v, h, dv, dp)")
+            src.append(f"        x = tuple(pn) + tuple({qn}) + tuple(vn) + ({', '.join(Ys[nq:])},)")
+        else:
+            src.append(f"        x = tuple(drift(p, v, h)) + tuple({qn}) + v + ({', '.join(Ys[nq:])},)")
+        src += ["        if not isfinite(sum(x)):   # the sum first, as the vectorized check", "            raise Fallback",
                 "    return x"]
         ns = {"normalize": KS.quat_normalize, "isfinite": math.isfinite, "Fallback": Fallback,
-              "inc": KS.rigid_body_increments_free_c, "drift": KS.translation_drift}
+              "inc": KS.rigid_body_increments_torque_h if torque else KS.rigid_body_increments_free_c,
+              "drift": KS.translation_drift, "flow": KS.translation_flow_constant}
         exec("\n".join(src), ns)   # noqa: S102 (source built above from the printed program's numbers only)
         run = _RUNS_H[key] = ns["run"]
     return run
+
+
+def _run_const(x, n_steps, dt, scaled, normalize, c, m, I, effects, const):
+    """n_steps of one body whose effects all read no state (const = (torque, force), effects.constant_kind) by
+    _run_h_of: their sums once (_sums, as numpy_backend._const_rk4_h takes them), then the call's constants."""
+    torque, force = const
+    F, T = _sums(x, m, I, effects[1])
+    sdt = scaled[0] * dt
+    R = (KS.rigid_body_increment_scale(c, m, sdt), T) if torque else KS.rigid_body_increment_scale_free(c, sdt)
+    dv, dp = KS.constant_acceleration_steps(m, F, dt) if force else (None, None)
+    return _run_h_of(scaled, normalize, torque, force)(x, n_steps, dt, R, dv, dp)
 
 
 _RUNS_HF: dict = {}
@@ -311,13 +332,16 @@ def advance(sb: ScalarBodies, state, rk, normalize: bool, dt: float, n_steps: in
     run = _run_of(rk, normalize)
     out = []
     try:
-        for x, (c, m, I, effects) in zip(state.tolist(), sb.bodies):
+        for x, (c, m, I, effects, const) in zip(state.tolist(), sb.bodies):
             if scaled is not None and not effects[1]:   # torque-free (no effect of its own or scene-wide)
-                out.append(_run_h_of(scaled, normalize)(tuple(x), n_steps, dt, c))
+                R = KS.rigid_body_increment_scale_free(c, scaled[0] * dt)
+                out.append(_run_h_of(scaled, normalize)(tuple(x), n_steps, dt, R, None, None))
             elif scaled is not None and effects[2]:   # decoupled: the rotation staged alone, the translation's flow
                 S = KS.rigid_body_increment_scale(c, m, scaled[0] * dt)
                 out.append(_run_hs_of(scaled, normalize, effects[2])(tuple(x), n_steps, S, _flow_scale(effects[3], m, dt),
                                                                      (effects, m, I)))
+            elif scaled is not None and const is not None:   # effects reading no state: (q, omega_b) staged alone
+                out.append(_run_const(tuple(x), n_steps, dt, scaled, normalize, c, m, I, effects, const))
             elif scaled is not None:   # with effects: the scaled-increment form on the 13 numbers
                 S = KS.rigid_body_increment_scale(c, m, scaled[0] * dt)
                 out.append(_run_hf_of(scaled, normalize)(tuple(x), n_steps, S, (effects, m, I)))

@@ -85,28 +85,16 @@ typedef void (*lv_tile_fn)(double (*LV_RESTRICT T)[LV_TILE], const double (*LV_R
                            const double (*LV_RESTRICT P)[LV_TILE], const lv_tile_fx *LV_RESTRICT fx, long m,
                            double dt, long n_steps);
 
-/* One lane's scaled increments (the built-in RK4's scaled-increment form), per kind (LV_RHS_*): in, out, sc (body
-   b's constants of rigid_body_increment_scale, LV_TILE_SCALES); P as above. */
-#define LV_TILE_RHS_TORQUE(in, out) LV_RHS_INC_TORQUE(in, 0.0, sc, tau, tau, out)
-#define LV_TILE_RHS_FULL(in, out) LV_RHS_INC_FULL(in, 0.0, sc, F, tau, out)
-#define LV_TILE_RHS_FORCE(in, out) LV_RHS_INC_FORCE(in, 0.0, sc, a, a, out)
-#define LV_TILE_LOAD_TORQUE                                                                             \
-    const double tau[3] = {P[LV_TP_TAU][b], P[LV_TP_TAU + 1][b], P[LV_TP_TAU + 2][b]}
-#define LV_TILE_LOAD_FULL                                                                               \
-    const double tau[3] = {P[LV_TP_TAU][b], P[LV_TP_TAU + 1][b], P[LV_TP_TAU + 2][b]};                 \
-    const double F[3] = {P[LV_TP_F][b], P[LV_TP_F + 1][b], P[LV_TP_F + 2][b]}
 #if defined(__GNUC__) || defined(__clang__)
 #define LV_NOINLINE __attribute__((noinline))
 #else
 #define LV_NOINLINE
 #endif
-#define LV_TILE_LOAD_FORCE /* LV_RHS_FORCE: the F rows hold the force sum (its 1/m is sc's h_m) */           \
-    const double a[3] = {P[LV_TP_F][b], P[LV_TP_F + 1][b], P[LV_TP_F + 2][b]}
 
 /* n_steps RK4 steps of the m bodies of a tile: T[k][b] = state number k of body b, J[k][b] = its Euler
    coefficient c_b[k] (LV_EULER_*).
-   NORMALIZE: q normalized after each step (the generated kernel), as on the scalar path. LOAD, RHS:
-   the lane's constant effect sums and its right-hand side (LV_TILE_LOAD_*, LV_TILE_RHS_*). */
+   NORMALIZE: q normalized after each step (the generated kernel), as on the scalar path. LOAD, RHS (LV_TILE_RK4,
+   the fused effect tiles): the lane's loads and its right-hand side. */
 #define LV_TILE_FOR(stmt) for (i = 0; i < LV_STATE_SIZE; i++) stmt
 #define LV_TILE_AT(v) v[i]
 /* The lanes' constants of the scaled increments (rigid_body_increment_scale of J's Euler coefficients, P's mass and
@@ -137,6 +125,40 @@ typedef void (*lv_tile_fn)(double (*LV_RESTRICT T)[LV_TILE], const double (*LV_R
                 for (i = 0; i < LV_INC_SCALE_SIZE; i++) sc[i] = SC[i][b];                               \
                 LV_RK4_SCALED_STEP(double, RHS, LV_TILE_FOR, LV_TILE_AT, x, xn, k, acc, tmp);           \
                 if (NORMALIZE) lv_quat_normalize(xn + LV_STATE_Q, xn + LV_STATE_Q);                    \
+                for (i = 0; i < LV_STATE_SIZE; i++) T[i][b] = xn[i];                                    \
+            }                                                                                           \
+        }                                                                                               \
+    }
+
+/* The tiles of bodies whose effects all read no state (a constant kind KIND: TORQUE, FULL, FORCE): each lane one
+   body's lv_const_rk4_h (step.c: (q, omega_b) staged alone, the translation by the constant force's exact flow or
+   drift; bitwise the scalar blocks'), its LV_CONST_SIZE constants (lv_const_scale of J's Euler coefficients and P's
+   mass and effect sums) taken once per call. A lane's constants are loaded in two loops of at most 16 numbers: GCC
+   peels a loop of up to 16 iterations whole, and a loop left inside the lane loop keeps it from vectorizing (one
+   loop of LV_CONST_SIZE = 18: the tile ran scalar, ~6x slower). */
+#define LV_TILE_RK4_C(NORMALIZE, KIND)                                                                  \
+    {                                                                                                   \
+        LV_ALIGN_TILE double KC[LV_CONST_SIZE][LV_TILE];                                                \
+        long s, b;                                                                                      \
+        int i;                                                                                          \
+        (void)fx;                                                                                       \
+        for (b = 0; b < m; b++) {                                                                       \
+            double cb[LV_EULER_SIZE], kb[LV_CONST_SIZE], F[3], tau[3];                                  \
+            for (i = 0; i < LV_EULER_SIZE; i++) cb[i] = J[i][b];                                        \
+            for (i = 0; i < 3; i++) {                                                                   \
+                F[i] = P[LV_TP_F + i][b];                                                               \
+                tau[i] = P[LV_TP_TAU + i][b];                                                           \
+            }                                                                                           \
+            lv_const_scale(cb, P[LV_TP_M][b], F, tau, dt, LV_CONST_FORCE_##KIND, kb);                   \
+            for (i = 0; i < LV_CONST_SIZE; i++) KC[i][b] = kb[i];                                       \
+        }                                                                                               \
+        for (s = 0; s < n_steps; s++) {                                                                 \
+            for (b = 0; b < m; b++) {                                                                   \
+                double x[LV_STATE_SIZE], xn[LV_STATE_SIZE], kb[LV_CONST_SIZE];                          \
+                for (i = 0; i < LV_STATE_SIZE; i++) x[i] = T[i][b];                                     \
+                for (i = 0; i < LV_INC_SCALE_SIZE; i++) kb[i] = KC[i][b]; /* two loops of <= 16: each */  \
+                for (i = LV_INC_SCALE_SIZE; i < LV_CONST_SIZE; i++) kb[i] = KC[i][b]; /* peeled whole */ \
+                lv_const_rk4_h(x, xn, kb, dt, LV_CONST_TORQUE_##KIND, LV_CONST_FORCE_##KIND, NORMALIZE); \
                 for (i = 0; i < LV_STATE_SIZE; i++) T[i][b] = xn[i];                                    \
             }                                                                                           \
         }                                                                                               \
@@ -457,7 +479,7 @@ static int tile_fx_decoupled(const lv_tile_fx *fx)
     ATTR LV_FLATTEN static void NAME(double (*LV_RESTRICT T)[LV_TILE], const double (*LV_RESTRICT J)[LV_TILE], \
                                      const double (*LV_RESTRICT P)[LV_TILE], const lv_tile_fx *LV_RESTRICT fx, \
                                      long m, double dt, long n_steps)                                   \
-    LV_TILE_RK4(NORMALIZE, LV_TILE_LOAD_##KIND, LV_TILE_RHS_##KIND)
+    LV_TILE_RK4_C(NORMALIZE, KIND)
 /* The torque-free tiles' instruction order: LV_TILE_H_SCHED_<isa> (step.h). */
 #define LV_DEFINE_TILE_H(NAME, ATTR, NORMALIZE)                                                         \
     ATTR LV_FLATTEN static void NAME(double (*LV_RESTRICT T)[LV_TILE], const double (*LV_RESTRICT J)[LV_TILE], \

@@ -363,30 +363,46 @@ static inline long advance_block(double *state, const double *params, const long
 /* One torque-free RK4 step of one body, x -> xn (13 numbers each, not overlapping), in the scaled-increment form
    (tableaux.h LV_RK4_SCALED_STEP, derive/tableaux.py scaled_program): only q and omega_b go through the stages, as
    increments H_i = LV_RK4_SCALE dt k_i that the printed rigid_body_increments_free_c computes at k_i's own cost (the
-   scale is in its constants: C = LV_RK4_SCALE dt k_b per body and call, lv_free_rk4_scale; hq = LV_RK4_SCALE dt
-   LV_QUAT_RATE_SCALE), so a stage's input and the step's end are adds and one multiply (~17% fewer multiplies than
+   scale is in its constants C and hq, the printed rigid_body_increment_scale_free per body and call,
+   lv_free_rk4_scale), so a stage's input and the step's end are adds and one multiply (~17% fewer multiplies than
    LV_RK4_STEP on 13 numbers); q normalized with the generated kernel when asked; p_w moves by the printed
    translation_drift with v_w (v_w' = 0 and the weights sum to 1: RK4 is one Euler step there), v_w is kept.
    Every torque-free RK4 body of the default paths takes it (the scalar blocks, the SIMD tiles per lane); the
    NumPy backend does the same operations (numpy_backend._free_rk4_h), so C = NumPy bitwise. */
 #define LV_H_ROWS (LV_STATE_Q_LEN + LV_STATE_OMEGA_B_LEN) /* y = (q, omega_b) */
-static inline void lv_free_rk4_h(const double *x, double *xn, const double *C, double hq, double dt, int normalize)
-{
-    double y[LV_H_ROWS], H[LV_H_ROWS], acc[LV_H_ROWS], tmp[LV_H_ROWS];
-    int i;
-    for (i = 0; i < LV_STATE_Q_LEN; i++) y[i] = x[LV_STATE_Q + i];
-    for (i = 0; i < LV_STATE_OMEGA_B_LEN; i++) y[LV_STATE_Q_LEN + i] = x[LV_STATE_OMEGA_B + i];
-#define LV_H_RHS(in, out) lv_rigid_body_increments_free_c(in, in + LV_STATE_Q_LEN, C, hq, out, out + LV_STATE_Q_LEN)
 #define LV_H_FOR(stmt) for (i = 0; i < LV_H_ROWS; i++) stmt
 #define LV_H_AT(v) v[i]
-    LV_RK4_SCALED_STEP(double, LV_H_RHS, LV_H_FOR, LV_H_AT, y, y, H, acc, tmp);
+/* y = (q, omega_b) of x after one step of the scaled-increment stages with the increments RHS(in, out) (on y's rows),
+   q normalized when asked. */
+#define LV_H_STAGES(x, y, RHS, normalize)                                                              \
+    do {                                                                                                \
+        double H[LV_H_ROWS], acc[LV_H_ROWS], tmp[LV_H_ROWS];                                            \
+        for (i = 0; i < LV_STATE_Q_LEN; i++) y[i] = x[LV_STATE_Q + i];                                  \
+        for (i = 0; i < LV_STATE_OMEGA_B_LEN; i++) y[LV_STATE_Q_LEN + i] = x[LV_STATE_OMEGA_B + i];     \
+        LV_RK4_SCALED_STEP(double, RHS, LV_H_FOR, LV_H_AT, y, y, H, acc, tmp);                          \
+        if (normalize) lv_quat_normalize(y, y);                                                         \
+    } while (0)
+/* (q, omega_b) of a torque-free body (rigid_body_increments_free_c on C, hq) into y. */
+static inline void lv_rot_free_h(const double *x, double *y, const double *C, double hq, int normalize)
+{
+    int i;
+#define LV_H_RHS(in, out) lv_rigid_body_increments_free_c(in, in + LV_STATE_Q_LEN, C, hq, out, out + LV_STATE_Q_LEN)
+    LV_H_STAGES(x, y, LV_H_RHS, normalize);
 #undef LV_H_RHS
-#undef LV_H_FOR
-#undef LV_H_AT
-    if (normalize) lv_quat_normalize(y, y);
-    lv_translation_drift(x + LV_STATE_P_W, x + LV_STATE_V_W, dt, xn + LV_STATE_P_W);
+}
+/* (q, omega_b) of a body under a constant world torque tau_w (rigid_body_increments_torque_h on S) into y. */
+static inline void lv_rot_torque_h(const double *x, double *y, const double *S, const double *tau_w, int normalize)
+{
+    int i;
+#define LV_H_RHS(in, out) lv_rigid_body_increments_torque_h(in, in + LV_STATE_Q_LEN, S, tau_w, out, out + LV_STATE_Q_LEN)
+    LV_H_STAGES(x, y, LV_H_RHS, normalize);
+#undef LV_H_RHS
+}
+/* xn's q and omega_b from y. */
+static inline void lv_h_store(const double *y, double *xn)
+{
+    int i;
     for (i = 0; i < LV_STATE_Q_LEN; i++) xn[LV_STATE_Q + i] = y[i];
-    for (i = 0; i < LV_STATE_V_W_LEN; i++) xn[LV_STATE_V_W + i] = x[LV_STATE_V_W + i];
     for (i = 0; i < LV_STATE_OMEGA_B_LEN; i++) xn[LV_STATE_OMEGA_B + i] = y[LV_STATE_Q_LEN + i];
 }
 
@@ -434,33 +450,82 @@ static inline void lv_split_flow_scale(const lv_effect_ref *refs, long n, double
     lv_translation_flow_scale(k, F0, m, dt, tf);
 }
 
-/* lv_free_rk4_h's constants of a call: C = (LV_RK4_SCALE dt) k_b from a body's Euler coefficients c_b, and hq. */
-static inline double lv_free_rk4_scale(const double *c_b, double dt, double *C)
+static inline void lv_free_rk4_h(const double *x, double *xn, const double *C, double hq, double dt, int normalize)
 {
-    const double sdt = LV_RK4_SCALE * dt;
+    double y[LV_H_ROWS];
     int i;
-    for (i = 0; i < LV_EULER_K_LEN; i++) C[i] = sdt * c_b[LV_EULER_K + i];
-    return sdt * LV_QUAT_RATE_SCALE;
+    lv_rot_free_h(x, y, C, hq, normalize);
+    lv_translation_drift(x + LV_STATE_P_W, x + LV_STATE_V_W, dt, xn + LV_STATE_P_W);
+    lv_h_store(y, xn);
+    for (i = 0; i < LV_STATE_V_W_LEN; i++) xn[LV_STATE_V_W + i] = x[LV_STATE_V_W + i];
 }
 
-/* Increments on the lockstep RK4 path (`forced`, rhs_class), the built-in RK4's scaled-increment form (tableaux.h
-   LV_RK4_SCALED_STEP on the 13 numbers; LV_RHS_FREE takes lv_free_rk4_h instead): each body's effects summed in
-   table order (plain_inc), the torque-only kernel for LV_RHS_TORQUE; with `constant` (every effect of every body
-   reads no state, see effects_constant) the sums were taken once per call before the loop (the same inputs give
-   the same bits, as on the SIMD tiles). Each on the body's constants S[j] (rigid_body_increment_scale, once per
-   call: s dt folded into the Euler coefficients, 1/I, q's rate scale and 1/m). */
+/* lv_free_rk4_h's constants of a call (the printed rigid_body_increment_scale_free): C = (LV_RK4_SCALE dt) k_b from a
+   body's Euler coefficients c_b, and hq. */
+static inline double lv_free_rk4_scale(const double *c_b, double dt, double *C)
+{
+    double hq;
+    lv_rigid_body_increment_scale_free(c_b, LV_RK4_SCALE * dt, C, &hq);
+    return hq;
+}
+
+/* One RK4 step of a body whose effects all read no state (a constant kind, kernels.h LV_CONST_*: TORQUE, FULL,
+   FORCE), x -> xn, in lv_free_rk4_h's form: only q and omega_b go through the stages, with the constant world torque
+   (torque: rigid_body_increments_torque_h) or as a torque-free body (the same lv_rot_free_h, on S's C and hq:
+   bitwise the torque-free constants); p_w and v_w by the constant force's exact flow (force: the printed
+   translation_flow_constant, RK4 being exact on p' = v, v' = F/m) or translation_drift with v_w kept. K: the body's
+   LV_CONST_SIZE constants of the call (lv_const_scale). The SIMD tiles take it per lane (LV_TILE_RK4_C), the NumPy
+   backend does the same operations (numpy_backend._const_rk4_h), so C = NumPy bitwise. */
+static inline void lv_const_rk4_h(const double *x, double *xn, const double *K, double dt, int torque, int force,
+                                  int normalize)
+{
+    double y[LV_H_ROWS];
+    int i;
+    if (torque)
+        lv_rot_torque_h(x, y, K, K + LV_CONST_TAU, normalize);
+    else
+        lv_rot_free_h(x, y, K + LV_INC_SCALE_C, K[LV_INC_SCALE_HQ], normalize);
+    if (force) {
+        lv_translation_flow_constant(x + LV_STATE_P_W, x + LV_STATE_V_W, dt, K + LV_CONST_DV, K + LV_CONST_DP,
+                                     xn + LV_STATE_P_W, xn + LV_STATE_V_W);
+    } else {
+        lv_translation_drift(x + LV_STATE_P_W, x + LV_STATE_V_W, dt, xn + LV_STATE_P_W);
+        for (i = 0; i < LV_STATE_V_W_LEN; i++) xn[LV_STATE_V_W + i] = x[LV_STATE_V_W + i];
+    }
+    lv_h_store(y, xn);
+}
+
+/* lv_const_rk4_h's constants K of a call for a body with Euler coefficients c_b, mass m and its constant effect sums
+   F (force) and tau (world torque): the printed rigid_body_increment_scale, tau, and with force the printed
+   constant_acceleration_steps (else zero). */
+static inline void lv_const_scale(const double *c_b, double m, const double *F, const double *tau, double dt,
+                                  int force, double *K)
+{
+    int i;
+    lv_rigid_body_increment_scale(c_b, m, LV_RK4_SCALE * dt, K);
+    for (i = 0; i < 3; i++) {
+        K[LV_CONST_TAU + i] = tau[i];
+        K[LV_CONST_DV + i] = K[LV_CONST_DP + i] = 0.0;
+    }
+    if (force) lv_constant_acceleration_steps(m, F, dt, K + LV_CONST_DV, K + LV_CONST_DP);
+}
+/* A constant kind's flags (LV_CONST_TORQUE_<kind>, LV_CONST_FORCE_<kind>) of class cls (LV_RHS_TORQUE, _FULL, _FORCE). */
+#define LV_CONST_OF(FLAG, cls) ((cls) == LV_RHS_TORQUE ? LV_CONST_##FLAG##_TORQUE                      \
+                                : (cls) == LV_RHS_FULL ? LV_CONST_##FLAG##_FULL : LV_CONST_##FLAG##_FORCE)
+
+/* Increments on the lockstep RK4 path (`forced`, rhs_class, effects reading the state: a constant kind takes
+   lv_const_rk4_h), the built-in RK4's scaled-increment form (tableaux.h LV_RK4_SCALED_STEP on the 13 numbers;
+   LV_RHS_FREE takes lv_free_rk4_h instead): each body's effects summed in table order (plain_inc), the torque-only
+   kernel for LV_RHS_TORQUE. Each on the body's constants S[j] (rigid_body_increment_scale, once per call: s dt folded
+   into the Euler coefficients, 1/I, q's rate scale and 1/m). */
 #define LV_RK4_INC(in, out)                                                                             \
     do {                                                                                                \
-        if (forced == LV_RHS_FORCE && constant) {                                                       \
-            for (j = 0; j < n; j++) LV_RHS_INC_FORCE(in[j], m[j], S[j], F[j], tau[j], out[j]);\
-        } else if (forced == LV_RHS_TORQUE) {                                                           \
-            for (j = 0; j < n && !constant; j++) {                                                      \
+        if (forced == LV_RHS_TORQUE) {                                                                  \
+            for (j = 0; j < n; j++) {                                                                   \
                 F[j][0] = F[j][1] = F[j][2] = tau[j][0] = tau[j][1] = tau[j][2] = 0.0;                  \
                 effect_sums(in[j], in[j] + LV_STATE_V_W, m[j], I[j], refs[j], n_refs[j], F[j], tau[j]);  \
             }                                                                                           \
             for (j = 0; j < n; j++) LV_RHS_INC_TORQUE(in[j], m[j], S[j], F[j], tau[j], out[j]);\
-        } else if (constant) {                                                                          \
-            for (j = 0; j < n; j++) LV_RHS_INC_FULL(in[j], m[j], S[j], F[j], tau[j], out[j]);  \
         } else {                                                                                        \
             for (j = 0; j < n; j++) plain_inc(forced, in[j], m[j], I[j], S[j], refs[j], n_refs[j], out[j]); \
         }                                                                                               \
@@ -482,6 +547,12 @@ static inline double lv_free_rk4_scale(const double *c_b, double dt, double *C)
                 else                                                                                    \
                     LV_SPLIT_RK4_H(LV_SPLIT_H_RHS_J, x[j], xn[j], sc, TF[j], normalize);                \
             }                                                                                           \
+            break;                                                                                      \
+        }                                                                                               \
+        if (constant) { /* effects reading no state: (q, omega_b) staged alone (lv_const_rk4_h) */     \
+            for (j = 0; j < n; j++)                                                                     \
+                lv_const_rk4_h(x[j], xn[j], Kc[j], dt, LV_CONST_OF(TORQUE, forced), LV_CONST_OF(FORCE, forced), \
+                               normalize);                                                              \
             break;                                                                                      \
         }                                                                                               \
         LV_RK4_SCALED_STEP(double, LV_RK4_INC, LV_BLOCK_FOR, LV_BLOCK_AT, x, xn, k, acc, tmp);          \
@@ -517,7 +588,7 @@ static inline long advance_free_rk4(double *state, const double *params, const l
         acc[LV_BLOCK][LV_STATE_SIZE], tmp[LV_BLOCK][LV_STATE_SIZE], I[LV_BLOCK][3], cf[LV_BLOCK][LV_EULER_SIZE],
         snap[LV_BLOCK][LV_STATE_SIZE];
     double F[LV_BLOCK][3], tau[LV_BLOCK][3], m[LV_BLOCK], Ch[LV_BLOCK][LV_EULER_K_LEN], hq = 0.0,
-        S[LV_BLOCK][LV_INC_SCALE_SIZE], TF[LV_BLOCK][LV_FLOW_SIZE];
+        S[LV_BLOCK][LV_INC_SCALE_SIZE], TF[LV_BLOCK][LV_FLOW_SIZE], Kc[LV_BLOCK][LV_CONST_SIZE];
     const lv_effect_ref *refs[LV_BLOCK];
     long n_refs[LV_BLOCK];
     long s, c, cm;
@@ -531,9 +602,12 @@ static inline long advance_free_rk4(double *state, const double *params, const l
         refs[j] = ix->refs + ix->start[ids[j]];
         n_refs[j] = ix->start[ids[j] + 1] - ix->start[ids[j]];
         F[j][0] = F[j][1] = F[j][2] = tau[j][0] = tau[j][1] = tau[j][2] = 0.0;
-        if (constant && forced != LV_RHS_FREE)
+        if (constant && forced != LV_RHS_FREE) {
             effect_sums(x[j], x[j] + LV_STATE_V_W, m[j], I[j], refs[j], n_refs[j], F[j], tau[j]);
-        if (forced != LV_RHS_FREE) lv_rigid_body_increment_scale(cf[j], m[j], LV_RK4_SCALE * dt, S[j]);
+            lv_const_scale(cf[j], m[j], F[j], tau[j], dt, LV_CONST_OF(FORCE, forced), Kc[j]);
+        } else if (forced != LV_RHS_FREE) {
+            lv_rigid_body_increment_scale(cf[j], m[j], LV_RK4_SCALE * dt, S[j]);
+        }
         if (forced & LV_RHS_SPLIT) lv_split_flow_scale(refs[j], n_refs[j], m[j], dt, TF[j]);
     }
     for (c = 0; c < n_steps; c += cm) {
