@@ -1069,6 +1069,18 @@ def _h_store(A: np.ndarray, xn: np.ndarray | None, x: np.ndarray) -> np.ndarray:
     return xn
 
 
+def _free_scale(plan, c: np.ndarray, sdt: float) -> tuple:
+    """The torque-free constants (C, h_q) of the Euler coefficients c (the printed rigid_body_increment_scale_free),
+    kept by the plan for the last sdt; h_q (sdt QUAT_RATE_SCALE, the same for every body) as one number, so the
+    increments multiply by a scalar, not a row (~8 % of a step at N = 1e3)."""
+    key = ("free_scale", id(c))
+    got = plan.works.get(key)
+    if got is None or got[0] != sdt or got[1] is not c:
+        C, hq = plan.K.rigid_body_increment_scale_free(c, sdt)
+        got = plan.works[key] = (sdt, c, C, hq.reshape(-1)[0] if hq.size else hq)
+    return got[2], got[3]
+
+
 def _free_rk4_h(plan, prog, x: np.ndarray, c: np.ndarray, dt: float, xn: np.ndarray | None = None) -> np.ndarray:
     """One torque-free step of bodies x (n, 13) in the scaled-increment form prog (generated/tableaux.py SCALED_RK:
     (s, stages, end)), q not normalized; c (n, LY.EULER_SIZE) their Euler coefficients. The C backend's
@@ -1076,7 +1088,7 @@ def _free_rk4_h(plan, prog, x: np.ndarray, c: np.ndarray, dt: float, xn: np.ndar
     rigid_body_increments_free_c (its constants C, h_q from the printed rigid_body_increment_scale_free); p_w by
     the printed translation_drift with v_w, v_w kept. In the plan's precision (plan.K; a float32 plan in float32, as
     step_f32.c's float32 tiles). Returns xn (a new struct-of-arrays state when None)."""
-    C, hq = plan.K.rigid_body_increment_scale_free(c, prog[0] * dt)
+    C, hq = _free_scale(plan, c, prog[0] * dt)
     A = _h_rows(plan, prog, x, lambda q, w, o: plan.K.rigid_body_increments_free_c(q, w, C, hq, out=o),
                 ("free_rk4_h", x.shape[0], x.dtype.str))
     xn = _h_store(A, xn, x)
@@ -1099,7 +1111,7 @@ def _const_rk4_h(plan, prog, fg, x: np.ndarray, dt: float, xn: np.ndarray | None
         S = fg.scales(K, prog[0] * dt)
         A = _h_rows(plan, prog, x, lambda q, w, o: K.rigid_body_increments_torque_h(q, w, S, tau, out=o), key)
     else:
-        C, hq = K.rigid_body_increment_scale_free(fg.c, prog[0] * dt)
+        C, hq = _free_scale(plan, fg.c, prog[0] * dt)
         A = _h_rows(plan, prog, x, lambda q, w, o: K.rigid_body_increments_free_c(q, w, C, hq, out=o), key)
     xn = _h_store(A, xn, x)
     if force:
