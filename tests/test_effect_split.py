@@ -8,10 +8,10 @@ import pytest
 import sympy as sp
 
 import lavendersim as lv
-from derive import effects as DE
-from derive import rigid_body as RB
-from derive import tableaux as TB
-from derive.effect import FLAG_COUPLED, STATE, effect, param
+from lavendersim.derive import effects as DE
+from lavendersim.derive import rigid_body as RB
+from lavendersim.derive import tableaux as TB
+from lavendersim.derive.effect import FLAG_COUPLED, STATE, effect, param
 from lavendersim import backends as B
 
 LIN, ANG, GRAV = ("linear_damping", {"c": 0.3}), ("angular_damping", {"c": 0.2}), ("gravity", {})
