@@ -178,6 +178,30 @@ def _stage_lines(i: int, w, m, shared: bool, end, ys, Ys, Hs, As) -> list[str]:
     return src
 
 
+def _rot_src(prog, normalize: bool, head: list[str], inc_args: str) -> tuple[list[str], str, str]:
+    """The source the writers of bodies that stage only (q, omega_b) share (_run_h_of, _run_hs_of): head (the def
+    line and what comes before the step loop), the loop's unpacking of x into p, q, v, w, and per stage of the
+    scaled-increment form prog the increments inc(q rows, omega_b rows, inc_args) and _stage_lines. Returns the lines,
+    the step's end q (normalized when asked) and its omega_b as source tuples."""
+    _, stages, end = prog
+    nq = _Q.stop - _Q.start
+    ny = nq + (_W.stop - _W.start)
+    ys = [f"y{r}" for r in range(ny)]
+    Ys, Hs, As = ([f"{v}{r}" for r in range(ny)] for v in "YHa")
+    src = head + ["    for _ in range(n):",
+                  f"        p, q, v, w = x[{_P.start}:{_P.stop}], x[{_Q.start}:{_Q.stop}], x[{_V.start}:{_V.stop}], "
+                  f"x[{_W.start}:{_W.stop}]",
+                  f"        {', '.join(ys)}, = q + w"]
+    cur = ys
+    for i, (w, m, shared) in enumerate(stages):
+        src.append(f"        ({', '.join(Hs[:nq])}), ({', '.join(Hs[nq:])}) = inc(({', '.join(cur[:nq])},), "
+                   f"({', '.join(cur[nq:])},), {inc_args})")
+        src += _stage_lines(i, w, m, shared, end, ys, Ys, Hs, As)
+        cur = Ys
+    qn = f"normalize(({', '.join(Ys[:nq])},))" if normalize else f"({', '.join(Ys[:nq])},)"
+    return src, qn, f"({', '.join(Ys[nq:])},)"
+
+
 _RUNS_H: dict = {}
 
 
@@ -192,27 +216,12 @@ def _run_h_of(prog, normalize: bool, torque: bool = False, force: bool = False):
     key = (prog, normalize, torque, force)
     run = _RUNS_H.get(key)
     if run is None:
-        s, stages, end = prog
-        ny = (_Q.stop - _Q.start) + (_W.stop - _W.start)
-        ys = [f"y{r}" for r in range(ny)]
-        Ys, Hs, As = ([f"{v}{r}" for r in range(ny)] for v in "YHa")
-        nq = _Q.stop - _Q.start
-        src = ["def run(x, n, h, R, dv, dp):", "    R0, R1 = R", "    for _ in range(n):",
-               f"        p, q, v, w = x[{_P.start}:{_P.stop}], x[{_Q.start}:{_Q.stop}], x[{_V.start}:{_V.stop}], "
-               f"x[{_W.start}:{_W.stop}]",
-               f"        {', '.join(ys)}, = q + w"]
-        cur = ys
-        for i, (w, m, shared) in enumerate(stages):
-            src.append(f"        ({', '.join(Hs[:nq])}), ({', '.join(Hs[nq:])}) = inc(({', '.join(cur[:nq])},), "
-                       f"({', '.join(cur[nq:])},), R0, R1)")
-            src += _stage_lines(i, w, m, shared, end, ys, Ys, Hs, As)
-            cur = Ys
-        qn = f"normalize(({', '.join(Ys[:nq])},))" if normalize else f"({', '.join(Ys[:nq])},)"
+        src, qn, wn = _rot_src(prog, normalize, ["def run(x, n, h, R, dv, dp):", "    R0, R1 = R"], "R0, R1")
         if force:
             src.append("        pn, vn = flow(p, v, h, dv, dp)")
-            src.append(f"        x = tuple(pn) + tuple({qn}) + tuple(vn) + ({', '.join(Ys[nq:])},)")
+            src.append(f"        x = tuple(pn) + tuple({qn}) + tuple(vn) + {wn}")
         else:
-            src.append(f"        x = tuple(drift(p, v, h)) + tuple({qn}) + v + ({', '.join(Ys[nq:])},)")
+            src.append(f"        x = tuple(drift(p, v, h)) + tuple({qn}) + v + {wn}")
         src += ["        if not isfinite(sum(x)):   # the sum first, as the vectorized check", "            raise Fallback",
                 "    return x"]
         ns = {"normalize": KS.quat_normalize, "isfinite": math.isfinite, "Fallback": Fallback,
@@ -297,24 +306,9 @@ def _run_hs_of(prog, normalize: bool, split: int):
     key = (prog, normalize, split)
     run = _RUNS_HS.get(key)
     if run is None:
-        _, stages, end = prog
-        ny = (_Q.stop - _Q.start) + (_W.stop - _W.start)
-        ys = [f"y{r}" for r in range(ny)]
-        Ys, Hs, As = ([f"{v}{r}" for r in range(ny)] for v in "YHa")
-        nq = _Q.stop - _Q.start
-        src = ["def run(x, n, S, TF, args):", "    for _ in range(n):",
-               f"        p, q, v, w = x[{_P.start}:{_P.stop}], x[{_Q.start}:{_Q.stop}], x[{_V.start}:{_V.stop}], "
-               f"x[{_W.start}:{_W.stop}]",
-               f"        {', '.join(ys)}, = q + w"]
-        cur = ys
-        for i, (w, m, shared) in enumerate(stages):
-            src.append(f"        ({', '.join(Hs[:nq])}), ({', '.join(Hs[nq:])}) = inc(({', '.join(cur[:nq])},), "
-                       f"({', '.join(cur[nq:])},), S, p, v, args)")
-            src += _stage_lines(i, w, m, shared, end, ys, Ys, Hs, As)
-            cur = Ys
-        qn = f"normalize(({', '.join(Ys[:nq])},))" if normalize else f"({', '.join(Ys[:nq])},)"
+        src, qn, wn = _rot_src(prog, normalize, ["def run(x, n, S, TF, args):"], "S, p, v, args")
         src += ["        pn, vn = flow(p, v, TF)",
-                f"        x = tuple(pn) + tuple({qn}) + tuple(vn) + ({', '.join(Ys[nq:])},)",
+                f"        x = tuple(pn) + tuple({qn}) + tuple(vn) + {wn}",
                 "        if not isfinite(sum(x)):   # the sum first, as the vectorized check", "            raise Fallback",
                 "    return x"]
         ns = {"normalize": KS.quat_normalize, "isfinite": math.isfinite, "Fallback": Fallback,
