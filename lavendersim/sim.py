@@ -77,7 +77,8 @@ rtol/atol with a fixed-step integrator) raise LavenderInputError at construction
 Divergence before infinity (checked per chunk of steps, so the stepping itself is unchanged bit for bit):
 a run is advanced in chunks of about CHUNK_WORK right-hand-side evaluations (on the C backend with a fixed-step
 integrator at least CHUNK_MIN_STEPS_C steps within CHUNK_WORK_MAX evaluations, CHUNK_WORK_MAX_PLAIN for a scene of
-plain bodies without effects; NumPy CHUNK_MIN_STEPS within CHUNK_WORK_MAX_NUMPY); after each chunk every body
+plain bodies without effects, CHUNK_WORK_MAX_EFFECTS for plain bodies with effects; NumPy CHUNK_MIN_STEPS within
+CHUNK_WORK_MAX_NUMPY); after each chunk every body
 is checked against
 
 * its integrator's validity bound, |omega|*dt*(I_max/I_min)**p <= WDT_MAX (declared once in
@@ -134,6 +135,12 @@ CHUNK_MIN_STEPS = 64       # NumPy backend, fixed step: a chunk is at least this
 CHUNK_WORK_MAX = 2**25     # ~60-100 ns per body, then cost ~1-2 ns per body-step; C: CHUNK_MIN_STEPS_C) within this many evaluations (the
                            # latency of KeyboardInterrupt: ~0.1 s for plain RK4 bodies, ~4 s for wheeled ones)
 CHUNK_WORK_MAX_PLAIN = 2**30   # the same for plain bodies without effects (the SIMD tiles, ~1.2 ns per evaluation):
+CHUNK_WORK_MAX_EFFECTS = 2**28   # the same for plain bodies with effects (no joint, no wheels: the SIMD effect tiles,
+                           # ~1.2-3.5 ns per evaluation; a user effect's stage passes ~8): at 1e5 bodies 256 steps
+                           # (0.1-0.4 s), at 1e6 67. Within CHUNK_WORK_MAX the chunk was 83 steps at 1e5 and its ~40 ns
+                           # per body cost showed: gravity 5.40 against 4.81 ns per body-step, applied torque 8.32
+                           # against 7.73, where plain bodies read 4.56 either way (Sim.run of whole chunks, one process,
+                           # interleaved; /work/notes/s24/lead/chunk_probe.py; issue 30's "flat in N")
 CHUNK_MIN_STEPS_C = 256    # C: at least this many steps (any fixed-step scene, within its cap: the same for plain and
                            # effect bodies, whose bench lines compare them): at 1e6 plain bodies 256 steps (~1.2 s); at 8 the C call
                            # streaming the state in and out and the check reading it cost 1.3-1.4x the stepping; at 64
@@ -817,10 +824,11 @@ class Sim:
                         if self.max_growth is not None and loaded.any() else None)
         self._warned = set()
         evals = self._per_step if self._per_step is not None else 12
-        plain = not self._has_models and not len(self._effects)     # the SIMD tiles: a longer chunk still returns soon
+        # the SIMD tiles (plain bodies, with or without effects): a longer chunk still returns soon
+        cap = CHUNK_WORK_MAX if self._has_models else CHUNK_WORK_MAX_EFFECTS if len(self._effects) else CHUNK_WORK_MAX_PLAIN
         c = self.backend.name == "c"
         self._chunk = chunk_steps(nb * evals, self._per_step is not None and self.backend.name in ("c", "numpy"),
-                                  (CHUNK_WORK_MAX_PLAIN if plain else CHUNK_WORK_MAX) if c else CHUNK_WORK_MAX_NUMPY,
+                                  cap if c else CHUNK_WORK_MAX_NUMPY,
                                   CHUNK_MIN_STEPS_C if c else CHUNK_MIN_STEPS)
         self._reference()
 

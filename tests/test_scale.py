@@ -504,8 +504,8 @@ def test_a_scene_wide_effect_then_add_bodies_refuses_the_first_overflowing_row_a
 
 def test_plain_scenes_keep_long_chunks_at_a_million_bodies_scale_and_results_do_not_change():
     """Plain effect-free bodies on C keep CHUNK_MIN_STEPS_C-step chunks up to CHUNK_WORK_MAX_PLAIN evaluations (the
-    SIMD tiles: 256 steps at 1e6 bodies); any other scene on C takes as many within CHUNK_WORK_MAX; the chunk edges
-    change nothing."""
+    SIMD tiles: 256 steps at 1e6 bodies), plain bodies with effects up to CHUNK_WORK_MAX_EFFECTS; a scene with wheels
+    or a joint takes as many within CHUNK_WORK_MAX; the chunk edges change nothing."""
     n = 140_000                                       # 4 n * 64 > CHUNK_WORK_MAX: the old cap shortens the chunk
     assert sim_mod.chunk_steps(4 * n, True) == sim_mod.CHUNK_WORK_MAX // (4 * n) == 59
     assert sim_mod.chunk_steps(4 * n, True, sim_mod.CHUNK_WORK_MAX_PLAIN) == sim_mod.CHUNK_MIN_STEPS
@@ -516,7 +516,10 @@ def test_plain_scenes_keep_long_chunks_at_a_million_bodies_scale_and_results_do_
     assert plain._chunk == sim_mod.CHUNK_MIN_STEPS_C
     heavy = _plain(n)
     heavy.add_effect("gravity", g_w=[0.0, 0.0, -9.81])
-    assert lv.Sim(heavy, dt=1e-3, integrator="rk4", backend="c")._chunk == 59
+    assert lv.Sim(heavy, dt=1e-3, integrator="rk4", backend="c")._chunk == sim_mod.CHUNK_MIN_STEPS_C
+    assert sim_mod.chunk_steps(4 * 10**6, True, sim_mod.CHUNK_WORK_MAX_EFFECTS, sim_mod.CHUNK_MIN_STEPS_C) == 67
+    wheeled = _three_kinds_scene(n)
+    assert lv.Sim(wheeled, dt=1e-3, integrator="rk4", backend="c")._chunk == 59
     short = lv.Sim(_plain(n), dt=1e-3, integrator="rk4", backend="c")
     object.__setattr__(short, "_chunk", 8)
     plain.run(300)                                    # one chunk and part of a second
