@@ -727,6 +727,8 @@ def simd_batch(kernel, sizes, body_steps: int, rounds: int) -> dict:
                     row["hand_fma_over_flop_floor"] = t[f"hand_fma_{best_fma}"]["ns_min"] / row["flop_floor_ns"]
             if "lavendersim_2_threads" in t:
                 row["threads_speedup"] = t["lavendersim_1_thread_wall"]["ns_min"] / t["lavendersim_2_threads"]["ns_min"]
+                row["threads_cores_got"] = _cores_got(lambda st=st2: _two_threads(C, be, st, params, empty, wsteps))
+                row["threads_loadavg"] = list(os.getloadavg())
             if hand:
                 best_hand = min(hand, key=lambda nm: t[f"hand_soa_{nm}"]["ns_min"])
                 row["best_hand_isa"] = best_hand
@@ -736,6 +738,16 @@ def simd_batch(kernel, sizes, body_steps: int, rounds: int) -> dict:
         C.isa(-1)
         C.threads(1)
     return out
+
+
+def _cores_got(fn, calls: int = 3) -> float:
+    """How many cores the process had while fn ran: its CPU time (every thread) over the wall clock, over a few
+    calls. Two threads that got ~2 and no speed-up point at the code; ~1 means the second core was busy (another
+    process: a wall-clock speed-up on a shared machine depends on it)."""
+    c0, w0 = time.process_time(), time.perf_counter()
+    for _ in range(calls):
+        fn()
+    return (time.process_time() - c0) / max(time.perf_counter() - w0, 1e-9)
 
 
 def _two_threads(C, be, st, params, empty, steps) -> None:
@@ -1156,8 +1168,8 @@ def _standing_simd(res: dict) -> list[dict]:
     out.append(_line("two threads / one, SIMD batch loop (worst of N >= 1e4)",
                      min((r["threads_speedup"] for r in big), default=None), TARGETS["threads2_speedup"], "min", "x",
                      "one C call at the best ISA, tiles split over 2 threads, wall clock (CPU time hides a speed-up); "
-                     + (f"{os.cpu_count()} cores, load {(res['machine'].get('loadavg') or ['?'])[0]}" if big
-                        else "not measured (N >= 1e4 is not in this run)")))
+                     + (f"{os.cpu_count()} cores, load {(res['machine'].get('loadavg') or ['?'])[0]}" + _cores_note(big)
+                        if big else "not measured (N >= 1e4 is not in this run)")))
     f32 = [r for r in res.get("float32_batch", []) if r["n_bodies"] >= 1000]
     out.append(_line("float32 / float64 batch throughput (worst of N >= 1e3)", min((r["speedup"] for r in f32), default=None),
                      TARGETS["float32_batch_speedup"], "min", "x",
@@ -1362,8 +1374,20 @@ def _report_simd(res: dict) -> list[str]:
         for r in sb["sizes"]:
             if "threads_speedup" in r:
                 L.append(f"  N = {r['n_bodies']:g}: two threads {r['lavendersim_2_threads']['ns_min']:.2f} ns/body-step, "
-                         f"speed-up {r['threads_speedup']:.2f}x over one (both by the wall clock)")
+                         f"speed-up {r['threads_speedup']:.2f}x over one (both by the wall clock)"
+                         + (f"; the process got {r['threads_cores_got']:.2f} cores then" if "threads_cores_got" in r
+                            else ""))
     return L
+
+
+def _cores_note(rows: list[dict]) -> str:
+    """The two-thread line's note: the cores the process got during those calls (CPU / wall) and the load then."""
+    got = [r for r in rows if "threads_cores_got" in r]
+    if not got:
+        return ""
+    return ("; the two threads got " + ", ".join(f"{r['threads_cores_got']:.2f}" for r in got)
+            + " cores (CPU time / wall; ~1: the second core was busy), load then "
+            + ", ".join(f"{r['threads_loadavg'][0]:.2f}" for r in got))
 
 
 def _report_mujoco(res: dict) -> list[str]:
