@@ -121,6 +121,7 @@ from . import validate as V
 from .backends import ADAPTIVE, KIND_JOINT, KIND_WHEELS, PLAIN_ONLY, Adaptive, Models
 from .bodies import BodyState
 from . import load_checks
+from . import pipeline as pipeline_mod
 from .errors import DivergenceError, ValidityBoundWarning
 from .frames import public_rows
 from .generated import effects_meta as _META
@@ -429,12 +430,6 @@ class Trajectory:
         return BodyState.of_slots(self.x[:, i], self.Omega[:, i], int(self.wheel_counts[i]))
 
 
-# The right-hand side a plain body with effects runs, per class (effects.rhs_classes; Sim.pipeline names it)
-def _rhs_kernel(flags: int) -> str:
-    """The right-hand side a plain body runs whose effects' rhs_flags OR to `flags` (at least one effect), as the
-    pipeline names it: derive's rule, printed into effects_meta (RHS_BITS, RHS_KINDS_BY_FLAGS, RHS_KERNELS)."""
-    index = sum(1 << j for j, bit in enumerate(_META.RHS_BITS) if flags & bit)
-    return _META.RHS_KERNELS[_META.RHS_KINDS_BY_FLAGS[index]]
 
 
 class Sim:
@@ -1189,7 +1184,18 @@ class Sim:
     # ---- what runs -------------------------------------------------------------------------
     @property
     def pipeline(self) -> list[str]:
-        """Each line is work done per step: the integrator, then per body its RHS kernels."""
+        """What runs per step: the integrator's line, then one line per body, ``"<name>: <effect terms> -> <kernels>"``.
+
+        A plain body's kernels are the printed kernels its step really runs on this Sim's backend and integrator, by
+        part ("stages (q, omega_b): rigid_body_increments_free_c; translation: translation_drift; constants:
+        rigid_body_increment_scale_free" for a torque-free RK4 body; a composition's flows), decided from derive's
+        tables (lavendersim/pipeline.py); a body with a joint or wheels names its model's right-hand side.
+
+        Returns
+        -------
+        list of str
+            1 + len(names) lines.
+        """
         n = self._per_step
         if n is None:
             head = (f"{self.integrator}: adaptive (rtol={self.rtol:g}, atol={self.atol:g}), RHS evaluations counted, "
@@ -1217,16 +1223,24 @@ class Sim:
                 else:
                     extra.append("translation: v_dot = F/m")
                 lines.append(f"{name}: {terms} -> {kernel} ({'; '.join(extra)})")
-            elif not mine:
-                lines.append(f"{name}: rigid_body_rhs_free (torque- and force-free; no effect terms)")
             else:
-                terms = " + ".join(e.describe() for e in mine)
-                flags = np.bitwise_or.reduce([e.spec.rhs_flags for e in mine])
-                lines.append(f"{name}: {terms} -> {_rhs_kernel(int(flags))}")
+                lines.append(f"{name}: {self._plain_line(mine)}")
         if self._frames is not None:
             for i in self._frames.idx:
                 lines[1 + int(i)] += "; full inertia tensor: stepped in its principal frame (constant R_bp)"
         return lines
+
+    def _plain_line(self, mine: list) -> str:
+        """Sim.pipeline's line of a plain body with the effects mine: its terms, then the printed kernels its step
+        runs on this Sim's backend and integrator (lavendersim/pipeline.py, from derive's tables)."""
+        flags = int(np.bitwise_or.reduce([e.spec.rhs_flags for e in mine])) if mine else 0
+        user = any(e.spec.user_set is not None for e in mine)
+        terms = " + ".join(e.describe() for e in mine) if mine else "torque- and force-free (no effect terms)"
+        if self.dtype == "float64" and self.integrator not in ("implicit_gyro", "rk4_expmap"):
+            return f"{terms} -> {pipeline_mod.plain_kernels(self.backend.name, self.integrator, flags, user)}"
+        # float32 (its own loops: csrc/fixed_loop.h) and the two structured steps: not itemized
+        kind = pipeline_mod.body_kind(flags) if flags or user else "torque-free"
+        return f"{terms} -> {self.integrator}'s {self.dtype} step of a {kind} body (its kernels are not itemized)"
 
     # ---- stepping -------------------------------------------------------------------------
     def _backend_advance(self, n: int, restore: bool = True) -> None:

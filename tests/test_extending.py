@@ -222,6 +222,9 @@ def test_every_integrator_on_both_backends(guide, integrator):
         sim.run(300)
         out[backend] = sim.x.copy()
         assert any("gravity_gradient(mu=" in line and "quadratic_drag(" in line for line in sim.pipeline)
+        if integrator == "rk4":   # user effects never split or stay constant: the 13-number stages of their kind
+            assert sim.pipeline[1].endswith("-> stages (13 numbers): rigid_body_increments_body_c; "
+                                            "constants: rigid_body_increment_scale"), sim.pipeline[1]
         if integrator == "splitting":  # quadratic_drag reads v: explicit-midpoint kicks, 2 evaluations each
             assert sim.rhs_evals == 300 * 4
     if integrator == "dopri5":  # per-body step sizes in C, one shared step in NumPy: agree to the tolerance

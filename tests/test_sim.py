@@ -82,7 +82,7 @@ def test_an_effect_at_zero_strength_gives_the_same_numbers(backend, name, params
     base.run(500)
     zero.run(500)
     np.testing.assert_allclose(zero.x, base.x, rtol=0, atol=1e-15)
-    assert "rigid_body_rhs_free" in base.pipeline[1] and name in zero.pipeline[1]
+    assert "rigid_body_increments_free_c" in base.pipeline[1] and name in zero.pipeline[1]
 
 
 def test_pipeline_lists_only_declared_effects_per_body():
@@ -91,14 +91,17 @@ def test_pipeline_lists_only_declared_effects_per_body():
     s.add_body(lv.Body.box("b", 1, (1, 2, 3)))
     s.add_effect("angular_damping", body="b", c=0.1)
     p = lv.Sim(s, backend="numpy").pipeline
-    assert p[1].startswith("a: rigid_body_rhs_free")
+    assert p[1].startswith("a: torque- and force-free (no effect terms) -> stages (q, omega_b): "
+                           "rigid_body_increments_free_c")
     assert "angular_damping" in p[2] and "gravity" not in " ".join(p)
-    assert p[2].endswith("-> rigid_body_rhs_body (torques declared in the body frame)")   # the kernel it runs
+    # the kernels it runs: a decoupled body-frame torque (its rotation staged alone, its translation's flow)
+    assert "-> stages (q, omega_b): rigid_body_increments_rot_b_c; translation: translation_flow;" in p[2]
 
 
 @pytest.mark.parametrize("backend", BACKENDS)
 def test_pipeline_names_the_right_hand_side_each_body_runs(backend):
-    """A force alone, world torques, body-frame torques with a force: the class both backends pick (rhs_classes)."""
+    """A force alone, world torques, body-frame torques with a force: the class both backends pick (rhs_classes) and
+    the right-hand side it runs under euler."""
     s = lv.Scene()
     for n in "abc":
         s.add_body(lv.Body.box(n, 1, (1, 2, 3)))
@@ -106,10 +109,10 @@ def test_pipeline_names_the_right_hand_side_each_body_runs(backend):
     s.add_effect("applied_torque", body="b", torque_w=[0.0, 0.0, 1.0])
     s.add_effect("linear_damping", body="c", c=0.1)
     s.add_effect("angular_damping", body="c", c=0.1)
-    p = lv.Sim(s, backend=backend).pipeline
-    assert p[1].endswith("-> rigid_body_rhs_force (a force, no torque: a_w = F/m)")
-    assert p[2].endswith("-> rigid_body_rhs (world torques)")
-    assert p[3].endswith("-> rigid_body_rhs_body (a force; torques declared in the body frame)")
+    p = lv.Sim(s, integrator="euler", backend=backend).pipeline
+    assert p[1].endswith("-> right-hand side: linear_acceleration, rigid_body_rhs_force_c")
+    assert p[2].endswith("-> right-hand side: " + ("rigid_body_rhs_torque_c" if backend == "c" else "rigid_body_rhs_c"))
+    assert p[3].endswith("-> right-hand side: linear_acceleration, rigid_body_rhs_body_c")
 
 
 @pytest.mark.parametrize("backend", BACKENDS)

@@ -389,7 +389,7 @@ def test_pipeline_names_the_joint_wheels_and_kernels(backend):
     assert "pivot_kinematics" in p["cube"]
     assert "spherical_joint" in p["pend"] and "pivot_body_rhs" in p["pend"] and "reaction_wheels" not in p["pend"]
     assert "reaction_wheels" in p["drone"] and "wheels4_body_rhs" in p["drone"] and "spherical_joint" not in p["drone"]
-    assert "rigid_body_rhs" in p["free"] and "wheel" not in p["free"] and "joint" not in p["free"]
+    assert "rigid_body_increments_free_c" in p["free"] and "wheel" not in p["free"] and "joint" not in p["free"]
 
 
 @pytest.mark.parametrize("backend", BACKENDS)
