@@ -139,8 +139,9 @@ def rhs_c_header() -> list[str]:
            "   Euler coefficients, 1/I, q's rate scale and 1/m, once per body and call). */",
            f"#define LV_INC_SCALE_SIZE {INC_SCALE_SIZE}",
            "/* A body whose effects all read no state (the constant kinds) stages only (q, omega_b) (csrc/step.c",
-           "   lv_const_rk4_h): LV_CONST_SIZE constants per body and call, S (LV_INC_SCALE_SIZE) at 0, the world torque sum",
-           "   at LV_CONST_TAU, constant_acceleration_steps' dv_w, dp_w at LV_CONST_DV, LV_CONST_DP; LV_CONST_TORQUE_<kind>:",
+           "   lv_const_rk4_h): LV_CONST_SIZE constants per body and call, S (LV_INC_SCALE_SIZE) at 0, the world torque's",
+           "   rigid_body_torque_constants (tau_w, 2 tau_w) at LV_CONST_TAU, constant_acceleration_steps' dv_w, dp_w at",
+           "   LV_CONST_DV, LV_CONST_DP; LV_CONST_TORQUE_<kind>:",
            "   q and omega_b take the torque (rigid_body_increments_torque_h; else the torque-free increments),",
            "   LV_CONST_FORCE_<kind>: p and v take translation_flow_constant (else translation_drift, v kept). */",
            f"#define LV_CONST_SIZE {CONST_SIZE}", f"#define LV_CONST_TAU {CONST_TAU}", f"#define LV_CONST_DV {CONST_DV}",
@@ -175,7 +176,8 @@ def _rk4_paths(backend: str) -> dict[str, tuple[tuple[str, tuple[str, ...]], ...
         out[f"CONST_{kind}"] = (
             (_STAGES_ROT, ("rigid_body_increments_torque_h",) if torque else free),
             (_TRANSLATION, ("translation_flow_constant",) if force else ("translation_drift",)),
-            (_CONSTANTS, (scale,) + (("constant_acceleration_steps",) if force else ())))
+            (_CONSTANTS, (scale,) + (("rigid_body_torque_constants",) if torque else ())
+             + (("constant_acceleration_steps",) if force else ())))
     for kind, split in SPLIT_OF_KIND.items():
         if split:
             out[f"SPLIT_{kind}"] = (

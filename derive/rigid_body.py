@@ -65,10 +65,13 @@ INC_SCALE_SIZE = 9
 INC_C, INC_R, INC_HQ, INC_SDT, INC_HM = slice(0, 3), slice(3, 6), 6, 7, 8
 # A body whose effects all read no state (the constant kinds TORQUE, FULL, FORCE) steps only (q, omega_b) through the
 # stages and its translation by the exact flow of a constant acceleration; its constants per call, CONST_SIZE numbers:
-# S (rigid_body_increment_scale), the world torque sum tau_w, then dv_w, dp_w (constant_acceleration_steps). Printed
-# into kernels.h by derive/effect_fuse.py (LV_CONST_*).
-CONST_TAU, CONST_DV, CONST_DP = INC_SCALE_SIZE, INC_SCALE_SIZE + 3, INC_SCALE_SIZE + 6
-CONST_SIZE = INC_SCALE_SIZE + 9
+# S (rigid_body_increment_scale), the world torque's constants T_w = (tau_w, 2 tau_w) (rigid_body_torque_constants,
+# CONST_TAU_SIZE numbers), then dv_w, dp_w (constant_acceleration_steps). Printed into kernels.h by
+# derive/effect_fuse.py (LV_CONST_*).
+CONST_TAU_SIZE = 6
+CONST_TAU, CONST_DV = INC_SCALE_SIZE, INC_SCALE_SIZE + CONST_TAU_SIZE
+CONST_DP = CONST_DV + 3
+CONST_SIZE = CONST_DP + 3
 
 
 def inc_scale(c_b, m, sdt) -> list:
@@ -127,15 +130,37 @@ def _check_increments(xq, xw, xv, S, c_b, m, sdt, F_w, tau_w) -> None:
         raise RuntimeError("derive: the scaled increments are not s dt times the rates")
 
 
-def _check_torque_h(q, w, S_b, tau_w) -> None:
+def _check_torque_h(q, w, S_b, T_w) -> None:
     """Proof that rigid_body_increments_torque_h at a zero torque is rigid_body_increments_free_c on the constants
     rigid_body_increment_scale_free prints (S's C and h_q): the constant kinds' rotation without a torque."""
-    H = increments(q, w, sp.zeros(3, 1), S_b, None, rotate_to_body(q, tau_w)).subs({t: 0 for t in tau_w})
+    H = increments(q, w, sp.zeros(3, 1), S_b, None, rotate_to_body_doubled(q, T_w[:3, 0], T_w[3:, 0]))
+    H = H.subs({t: 0 for t in T_w})
     free = X.assemble(p_w=sp.zeros(3, 1), q=qmul(q, pure(S_b[INC_HQ] * w)), v_w=sp.zeros(3, 1),
                       omega_b=euler_rhs_c(EULER.assemble(k=list(S_b[INC_C]), r=[0, 0, 0]), w, sp.zeros(3, 1)))
     for part in ("q", "omega_b"):
         if (X.part(H, part) - X.part(free, part)).applyfunc(sp.expand) != sp.zeros(X.part(H, part).rows, 1):
             raise RuntimeError("derive: the torque increments on (q, omega_b) at zero torque are not the free ones")
+
+
+def rotate_to_body_doubled(q: sp.Matrix, v_w: sp.Matrix, v2_w: sp.Matrix) -> sp.Matrix:
+    """rotate_to_body(q, v_w) with its doubled vector given: v2_w = 2 v_w, a per-call constant when v_w is (a constant
+    world torque), so a stage forms t = q_v × v2_w without the factor 2 (rotate_to_body's t = (2 q_v) × v costs a
+    multiply or an add per factor at every stage). Derived from rotate_to_body on v2_w/2: its t is then q_v × v2_w
+    and its lone v2_w/2 is v_w. The products are bitwise rotate_to_body's ((2a)·b and a·(2b) are the one exact 2ab,
+    rounded once; doubling is exact below overflow)."""
+    half = rotate_to_body(q, v2_w / 2)
+    out = half.xreplace({v2_w[i] / 2: v_w[i] for i in range(3)})
+    if any(v2_w[i] / 2 in e.atoms(sp.Mul) for e in out for i in range(3)):
+        raise RuntimeError("derive: rotate_to_body_doubled left a halved v2_w")
+    ref = rotate_to_body(q, v_w)
+    if (out.subs({v2_w[i]: 2 * v_w[i] for i in range(3)}) - ref).applyfunc(sp.expand) != sp.zeros(3, 1):
+        raise RuntimeError("derive: rotate_to_body_doubled is not rotate_to_body at v2_w = 2 v_w")
+    return out
+
+
+def torque_constants(tau_w: sp.Matrix) -> sp.Matrix:
+    """T_w = (tau_w, 2 tau_w): the constants rigid_body_increments_torque_h takes for a constant world torque."""
+    return sp.Matrix([*tau_w, *(2 * tau_w)])
 
 
 def constant_flow(m, F_w, h, p_w, v_w) -> tuple:
@@ -167,11 +192,13 @@ def kernels() -> list[Kernel]:
     _check_euler(I_b, omega_b, tau_b)
     _check_rate_scale(q, omega_b)
     _check_increments(q, omega_b, v_w, S_b, c_b, m, sdt, F_w, tau_w)
-    _check_torque_h(q, omega_b, S_b, tau_w)
+    # T_w's symbols: tau_w and tau2_w (= 2 tau_w), named so the printed sums keep rotate_to_body's term order (bitwise)
+    T_w = sp.Matrix([*tau_w, *vec("tau2_w", 3)])
+    _check_torque_h(q, omega_b, S_b, T_w)
     h, p_w, dv_w, dp_w = scalar("h"), vec("p_w", 3), vec("dv_w", 3), vec("dp_w", 3)
     (steps_where, dv, dp), (flow_where, p_next, v_next) = constant_flow(m, F_w, h, p_w, v_w)
     S_expr = inc_scale(c_b, m, sdt)
-    H_tq = increments(q, omega_b, v_w, S_b, None, rotate_to_body(q, tau_w))
+    H_tq = increments(q, omega_b, v_w, S_b, None, rotate_to_body_doubled(q, T_w[:3, 0], T_w[3:, 0]))
     # c_b as named subexpressions of the kernels that take I_b: the same printed arithmetic as the *_c kernels
     where = list(zip(c_b, euler_coefficients(I_b)))
     xq, xv, xw = X.part(x, "q"), X.part(x, "v_w"), X.part(x, "omega_b")
@@ -312,14 +339,21 @@ def kernels() -> list[Kernel]:
                          "force alone (FORCE) turns as a torque-free one."]),
         Kernel("rigid_body_increments_torque_h", "A constant-torque RK4 stage's scaled increments of (q, ω_B) alone",
                r"H_q = q \otimes [h_q \omega_B, 0],\ H_{\omega,x} = C_x\omega_y\omega_z + R_x (R^T\tau_W)_x",
-               [QWV[0], QWV[1], Arg(*SB), Arg("tau_w", tau_w, "total torque about the COM, world frame, N·m (constant "
-                                                               "over the call)")],
+               [QWV[0], QWV[1], Arg(*SB), Arg("T_w", T_w, "the world torque's constants (τ_W, 2τ_W) of "
+                                                           "rigid_body_torque_constants, once per body and call")],
                [Arg("H_q", X.part(H_tq, "q"), "(s dt) dq/dt, dimensionless"),
                 Arg("H_omega", X.part(H_tq, "omega_b"), "(s dt) dω_B/dt, rad/s")], g,
                notes=["A body whose effects read no state (the constant kinds TORQUE, FULL) stages only q and ω_B "
                       "(tableaux.h LV_RK4_SCALED_UPDATE), as a torque-free body does; its translation takes "
                       "translation_flow_constant (FULL) or translation_drift with v_W kept (TORQUE).",
-                      "Bitwise rigid_body_increments_torque_c's q and ω_B rows (the same expressions)."]),
+                      "R^T τ_W as rotate_to_body with the doubled torque given (rotate_to_body_doubled: t = q_v × 2τ_W, "
+                      "the factor 2 once per call): bitwise rigid_body_increments_torque_c's q and ω_B rows."]),
+        Kernel("rigid_body_torque_constants", "The constants of a constant world torque's stages "
+               "(rigid_body_increments_torque_h), once per body and call", r"T_W = (\tau_W,\ 2\tau_W)",
+               [Arg("tau_w", tau_w, "total torque about the COM, world frame, N·m (constant over the call)")],
+               [Arg("T_w", torque_constants(tau_w), "(τ_W, 2τ_W), N·m")], g,
+               notes=["2τ_W is exact (below overflow): rotate_to_body's t = (2 q_v) × τ_W is formed as q_v × (2τ_W), "
+                      "the same rounded products."]),
         Kernel("constant_acceleration_steps", "The per-call constants of the exact RK4 step of a translation under a "
                "constant force", r"\Delta v_W = w_v\,h\,F_W/m,\ \Delta p_W = w_p\,h^2\,F_W/m",
                [Arg("m", m, "mass, kg", "positive"), Arg("F_w", F_w, "total force at the COM, world frame, N (constant)"),

@@ -1516,7 +1516,7 @@ void lv_rigid_body_increment_scale_free(const double *c_b, double sdt, double *C
     h_q[0] = ((1.0/2.0))*sdt;
 }
 
-void lv_rigid_body_increments_torque_h(const double *q, const double *omega_b, const double *S_b, const double *tau_w, double *H_q, double *H_omega) {
+void lv_rigid_body_increments_torque_h(const double *q, const double *omega_b, const double *S_b, const double *T_w, double *H_q, double *H_omega) {
     const double q_0 = q[0];
     const double q_1 = q[1];
     const double q_2 = q[2];
@@ -1531,23 +1531,37 @@ void lv_rigid_body_increments_torque_h(const double *q, const double *omega_b, c
     const double S_b_4 = S_b[4];
     const double S_b_5 = S_b[5];
     const double S_b_6 = S_b[6];
-    const double tau_w_0 = tau_w[0];
-    const double tau_w_1 = tau_w[1];
-    const double tau_w_2 = tau_w[2];
+    const double tau_w_0 = T_w[0];
+    const double tau_w_1 = T_w[1];
+    const double tau_w_2 = T_w[2];
+    const double tau2_w_0 = T_w[3];
+    const double tau2_w_1 = T_w[4];
+    const double tau2_w_2 = T_w[5];
     const double t0 = S_b_6*omega_b_0;
     const double t1 = S_b_6*omega_b_2;
     const double t2 = S_b_6*omega_b_1;
-    const double t3 = 2*q_0;
-    const double t4 = -2*q_1*tau_w_0 + t3*tau_w_1;
-    const double t5 = 2*q_2*tau_w_0 - t3*tau_w_2;
-    const double t6 = 2*q_1*tau_w_2 - 2*q_2*tau_w_1;
+    const double t3 = q_0*tau2_w_1 - q_1*tau2_w_0;
+    const double t4 = -q_0*tau2_w_2 + q_2*tau2_w_0;
+    const double t5 = q_1*tau2_w_2 - q_2*tau2_w_1;
     H_q[0] = q_1*t1 - q_2*t2 + q_3*t0;
     H_q[1] = -q_0*t1 + q_2*t0 + q_3*t2;
     H_q[2] = q_0*t2 - q_1*t0 + q_3*t1;
     H_q[3] = -q_0*t0 - q_1*t2 - q_2*t1;
-    H_omega[0] = S_b_0*omega_b_1*omega_b_2 + S_b_3*(q_1*t4 - q_2*t5 - q_3*t6 + tau_w_0);
-    H_omega[1] = S_b_1*omega_b_0*omega_b_2 + S_b_4*(-q_0*t4 + q_2*t6 - q_3*t5 + tau_w_1);
-    H_omega[2] = S_b_2*omega_b_0*omega_b_1 + S_b_5*(q_0*t5 - q_1*t6 - q_3*t4 + tau_w_2);
+    H_omega[0] = S_b_0*omega_b_1*omega_b_2 + S_b_3*(q_1*t3 - q_2*t4 - q_3*t5 + tau_w_0);
+    H_omega[1] = S_b_1*omega_b_0*omega_b_2 + S_b_4*(-q_0*t3 + q_2*t5 - q_3*t4 + tau_w_1);
+    H_omega[2] = S_b_2*omega_b_0*omega_b_1 + S_b_5*(q_0*t4 - q_1*t5 - q_3*t3 + tau_w_2);
+}
+
+void lv_rigid_body_torque_constants(const double *tau_w, double *T_w) {
+    const double tau_w_0 = tau_w[0];
+    const double tau_w_1 = tau_w[1];
+    const double tau_w_2 = tau_w[2];
+    T_w[0] = tau_w_0;
+    T_w[1] = tau_w_1;
+    T_w[2] = tau_w_2;
+    T_w[3] = 2*tau_w_0;
+    T_w[4] = 2*tau_w_1;
+    T_w[5] = 2*tau_w_2;
 }
 
 void lv_constant_acceleration_steps(double m, const double *F_w, double h, double *dv_w, double *dp_w) {
@@ -4095,6 +4109,7 @@ static void packed_rigid_body_increments_force_c(const double *in, double *out) 
 static void packed_rigid_body_increments_body_c(const double *in, double *out) { lv_rigid_body_increments_body_c(in + 0, in + 4, in + 7, in + 10, in + 19, in + 22, out + 0); }
 static void packed_rigid_body_increment_scale_free(const double *in, double *out) { lv_rigid_body_increment_scale_free(in + 0, in[6], out + 0, out + 3); }
 static void packed_rigid_body_increments_torque_h(const double *in, double *out) { lv_rigid_body_increments_torque_h(in + 0, in + 4, in + 7, in + 16, out + 0, out + 4); }
+static void packed_rigid_body_torque_constants(const double *in, double *out) { lv_rigid_body_torque_constants(in + 0, out + 0); }
 static void packed_constant_acceleration_steps(const double *in, double *out) { lv_constant_acceleration_steps(in[0], in + 1, in[4], out + 0, out + 3); }
 static void packed_translation_flow_constant(const double *in, double *out) { lv_translation_flow_constant(in + 0, in + 3, in[6], in + 7, in + 10, out + 0, out + 3); }
 static void packed_linear_acceleration(const double *in, double *out) { lv_linear_acceleration(in[0], in + 1, out + 0); }
@@ -4205,7 +4220,8 @@ const lv_kernel_info lv_kernel_table[LV_KERNEL_COUNT] = {
     {"rigid_body_increments_force_c", 22, 13, packed_rigid_body_increments_force_c},
     {"rigid_body_increments_body_c", 25, 13, packed_rigid_body_increments_body_c},
     {"rigid_body_increment_scale_free", 7, 4, packed_rigid_body_increment_scale_free},
-    {"rigid_body_increments_torque_h", 19, 7, packed_rigid_body_increments_torque_h},
+    {"rigid_body_increments_torque_h", 22, 7, packed_rigid_body_increments_torque_h},
+    {"rigid_body_torque_constants", 3, 6, packed_rigid_body_torque_constants},
     {"constant_acceleration_steps", 5, 6, packed_constant_acceleration_steps},
     {"translation_flow_constant", 13, 6, packed_translation_flow_constant},
     {"linear_acceleration", 4, 3, packed_linear_acceleration},

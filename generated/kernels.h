@@ -11,7 +11,7 @@ typedef struct {
     void (*packed)(const double *in, double *out);
 } lv_kernel_info;
 
-#define LV_KERNEL_COUNT 109
+#define LV_KERNEL_COUNT 110
 extern const lv_kernel_info lv_kernel_table[LV_KERNEL_COUNT];
 
 /* particle_moments: One particle's mass moment and momentum (summed: m r_COM and p).
@@ -426,10 +426,15 @@ void lv_rigid_body_increment_scale_free(const double *c_b, double sdt, double *C
      in  q [4]: orientation (x, y, z, w), R_WB (a stage's value: unit to rounding)
      in  omega_b [3]: angular velocity, body frame, rad/s
      in  S_b [9]: the increments' constants (C_x, C_y, C_z, R_x, R_y, R_z, h_q, sdt, h_m) of rigid_body_increment_scale, once per body and call
-     in  tau_w [3]: total torque about the COM, world frame, N·m (constant over the call)
+     in  T_w [6]: the world torque's constants (τ_W, 2τ_W) of rigid_body_torque_constants, once per body and call
      out H_q [4]: (s dt) dq/dt, dimensionless
      out H_omega [3]: (s dt) dω_B/dt, rad/s */
-void lv_rigid_body_increments_torque_h(const double *q, const double *omega_b, const double *S_b, const double *tau_w, double *H_q, double *H_omega);
+void lv_rigid_body_increments_torque_h(const double *q, const double *omega_b, const double *S_b, const double *T_w, double *H_q, double *H_omega);
+
+/* rigid_body_torque_constants: The constants of a constant world torque's stages (rigid_body_increments_torque_h), once per body and call.
+     in  tau_w [3]: total torque about the COM, world frame, N·m (constant over the call)
+     out T_w [6]: (τ_W, 2τ_W), N·m */
+void lv_rigid_body_torque_constants(const double *tau_w, double *T_w);
 
 /* constant_acceleration_steps: The per-call constants of the exact RK4 step of a translation under a constant force.
      in  m scalar: mass, kg
@@ -958,14 +963,15 @@ const char *lv_effect_name(int code);
    Euler coefficients, 1/I, q's rate scale and 1/m, once per body and call). */
 #define LV_INC_SCALE_SIZE 9
 /* A body whose effects all read no state (the constant kinds) stages only (q, omega_b) (csrc/step.c
-   lv_const_rk4_h): LV_CONST_SIZE constants per body and call, S (LV_INC_SCALE_SIZE) at 0, the world torque sum
-   at LV_CONST_TAU, constant_acceleration_steps' dv_w, dp_w at LV_CONST_DV, LV_CONST_DP; LV_CONST_TORQUE_<kind>:
+   lv_const_rk4_h): LV_CONST_SIZE constants per body and call, S (LV_INC_SCALE_SIZE) at 0, the world torque's
+   rigid_body_torque_constants (tau_w, 2 tau_w) at LV_CONST_TAU, constant_acceleration_steps' dv_w, dp_w at
+   LV_CONST_DV, LV_CONST_DP; LV_CONST_TORQUE_<kind>:
    q and omega_b take the torque (rigid_body_increments_torque_h; else the torque-free increments),
    LV_CONST_FORCE_<kind>: p and v take translation_flow_constant (else translation_drift, v kept). */
-#define LV_CONST_SIZE 18
+#define LV_CONST_SIZE 21
 #define LV_CONST_TAU 9
-#define LV_CONST_DV 12
-#define LV_CONST_DP 15
+#define LV_CONST_DV 15
+#define LV_CONST_DP 18
 #define LV_CONST_TORQUE_TORQUE 1
 #define LV_CONST_FORCE_TORQUE 0
 #define LV_CONST_TORQUE_FULL 1

@@ -1386,12 +1386,12 @@ def rigid_body_increment_scale_free(c_b, sdt):
     return casadi.vertcat(c_b_0*sdt, c_b_1*sdt, c_b_2*sdt), casadi.vertcat(((1.0/2.0))*sdt)
 
 
-def rigid_body_increments_torque_h(q, omega_b, S_b, tau_w):
+def rigid_body_increments_torque_h(q, omega_b, S_b, T_w):
     """rigid_body_increments_torque_h: A constant-torque RK4 stage's scaled increments of (q, ω_B) alone.
       in  q [4]: orientation (x, y, z, w), R_WB (a stage's value: unit to rounding)
       in  omega_b [3]: angular velocity, body frame, rad/s
       in  S_b [9]: the increments' constants (C_x, C_y, C_z, R_x, R_y, R_z, h_q, sdt, h_m) of rigid_body_increment_scale, once per body and call
-      in  tau_w [3]: total torque about the COM, world frame, N·m (constant over the call)
+      in  T_w [6]: the world torque's constants (τ_W, 2τ_W) of rigid_body_torque_constants, once per body and call
       out H_q [4]: (s dt) dq/dt, dimensionless
       out H_omega [3]: (s dt) dω_B/dt, rad/s"""
     q_0 = q[0]
@@ -1408,17 +1408,29 @@ def rigid_body_increments_torque_h(q, omega_b, S_b, tau_w):
     S_b_4 = S_b[4]
     S_b_5 = S_b[5]
     S_b_6 = S_b[6]
-    tau_w_0 = tau_w[0]
-    tau_w_1 = tau_w[1]
-    tau_w_2 = tau_w[2]
+    tau_w_0 = T_w[0]
+    tau_w_1 = T_w[1]
+    tau_w_2 = T_w[2]
+    tau2_w_0 = T_w[3]
+    tau2_w_1 = T_w[4]
+    tau2_w_2 = T_w[5]
     t0 = S_b_6*omega_b_0
     t1 = S_b_6*omega_b_2
     t2 = S_b_6*omega_b_1
-    t3 = 2*q_0
-    t4 = -2*q_1*tau_w_0 + t3*tau_w_1
-    t5 = 2*q_2*tau_w_0 - t3*tau_w_2
-    t6 = 2*q_1*tau_w_2 - 2*q_2*tau_w_1
-    return casadi.vertcat(q_1*t1 - q_2*t2 + q_3*t0, -q_0*t1 + q_2*t0 + q_3*t2, q_0*t2 - q_1*t0 + q_3*t1, -q_0*t0 - q_1*t2 - q_2*t1), casadi.vertcat(S_b_0*omega_b_1*omega_b_2 + S_b_3*(q_1*t4 - q_2*t5 - q_3*t6 + tau_w_0), S_b_1*omega_b_0*omega_b_2 + S_b_4*(-q_0*t4 + q_2*t6 - q_3*t5 + tau_w_1), S_b_2*omega_b_0*omega_b_1 + S_b_5*(q_0*t5 - q_1*t6 - q_3*t4 + tau_w_2))
+    t3 = q_0*tau2_w_1 - q_1*tau2_w_0
+    t4 = -q_0*tau2_w_2 + q_2*tau2_w_0
+    t5 = q_1*tau2_w_2 - q_2*tau2_w_1
+    return casadi.vertcat(q_1*t1 - q_2*t2 + q_3*t0, -q_0*t1 + q_2*t0 + q_3*t2, q_0*t2 - q_1*t0 + q_3*t1, -q_0*t0 - q_1*t2 - q_2*t1), casadi.vertcat(S_b_0*omega_b_1*omega_b_2 + S_b_3*(q_1*t3 - q_2*t4 - q_3*t5 + tau_w_0), S_b_1*omega_b_0*omega_b_2 + S_b_4*(-q_0*t3 + q_2*t5 - q_3*t4 + tau_w_1), S_b_2*omega_b_0*omega_b_1 + S_b_5*(q_0*t4 - q_1*t5 - q_3*t3 + tau_w_2))
+
+
+def rigid_body_torque_constants(tau_w):
+    """rigid_body_torque_constants: The constants of a constant world torque's stages (rigid_body_increments_torque_h), once per body and call.
+      in  tau_w [3]: total torque about the COM, world frame, N·m (constant over the call)
+      out T_w [6]: (τ_W, 2τ_W), N·m"""
+    tau_w_0 = tau_w[0]
+    tau_w_1 = tau_w[1]
+    tau_w_2 = tau_w[2]
+    return casadi.vertcat(tau_w_0, tau_w_1, tau_w_2, 2*tau_w_0, 2*tau_w_1, 2*tau_w_2)
 
 
 def constant_acceleration_steps(m, F_w, h):

@@ -1517,7 +1517,7 @@ void lvf_rigid_body_increment_scale_free(const float *c_b, float sdt, float *C_b
     h_q[0] = ((1.0F/2.0F))*sdt;
 }
 
-void lvf_rigid_body_increments_torque_h(const float *q, const float *omega_b, const float *S_b, const float *tau_w, float *H_q, float *H_omega) {
+void lvf_rigid_body_increments_torque_h(const float *q, const float *omega_b, const float *S_b, const float *T_w, float *H_q, float *H_omega) {
     const float q_0 = q[0];
     const float q_1 = q[1];
     const float q_2 = q[2];
@@ -1532,23 +1532,37 @@ void lvf_rigid_body_increments_torque_h(const float *q, const float *omega_b, co
     const float S_b_4 = S_b[4];
     const float S_b_5 = S_b[5];
     const float S_b_6 = S_b[6];
-    const float tau_w_0 = tau_w[0];
-    const float tau_w_1 = tau_w[1];
-    const float tau_w_2 = tau_w[2];
+    const float tau_w_0 = T_w[0];
+    const float tau_w_1 = T_w[1];
+    const float tau_w_2 = T_w[2];
+    const float tau2_w_0 = T_w[3];
+    const float tau2_w_1 = T_w[4];
+    const float tau2_w_2 = T_w[5];
     const float t0 = S_b_6*omega_b_0;
     const float t1 = S_b_6*omega_b_2;
     const float t2 = S_b_6*omega_b_1;
-    const float t3 = 2*q_0;
-    const float t4 = -2*q_1*tau_w_0 + t3*tau_w_1;
-    const float t5 = 2*q_2*tau_w_0 - t3*tau_w_2;
-    const float t6 = 2*q_1*tau_w_2 - 2*q_2*tau_w_1;
+    const float t3 = q_0*tau2_w_1 - q_1*tau2_w_0;
+    const float t4 = -q_0*tau2_w_2 + q_2*tau2_w_0;
+    const float t5 = q_1*tau2_w_2 - q_2*tau2_w_1;
     H_q[0] = q_1*t1 - q_2*t2 + q_3*t0;
     H_q[1] = -q_0*t1 + q_2*t0 + q_3*t2;
     H_q[2] = q_0*t2 - q_1*t0 + q_3*t1;
     H_q[3] = -q_0*t0 - q_1*t2 - q_2*t1;
-    H_omega[0] = S_b_0*omega_b_1*omega_b_2 + S_b_3*(q_1*t4 - q_2*t5 - q_3*t6 + tau_w_0);
-    H_omega[1] = S_b_1*omega_b_0*omega_b_2 + S_b_4*(-q_0*t4 + q_2*t6 - q_3*t5 + tau_w_1);
-    H_omega[2] = S_b_2*omega_b_0*omega_b_1 + S_b_5*(q_0*t5 - q_1*t6 - q_3*t4 + tau_w_2);
+    H_omega[0] = S_b_0*omega_b_1*omega_b_2 + S_b_3*(q_1*t3 - q_2*t4 - q_3*t5 + tau_w_0);
+    H_omega[1] = S_b_1*omega_b_0*omega_b_2 + S_b_4*(-q_0*t3 + q_2*t5 - q_3*t4 + tau_w_1);
+    H_omega[2] = S_b_2*omega_b_0*omega_b_1 + S_b_5*(q_0*t4 - q_1*t5 - q_3*t3 + tau_w_2);
+}
+
+void lvf_rigid_body_torque_constants(const float *tau_w, float *T_w) {
+    const float tau_w_0 = tau_w[0];
+    const float tau_w_1 = tau_w[1];
+    const float tau_w_2 = tau_w[2];
+    T_w[0] = tau_w_0;
+    T_w[1] = tau_w_1;
+    T_w[2] = tau_w_2;
+    T_w[3] = 2*tau_w_0;
+    T_w[4] = 2*tau_w_1;
+    T_w[5] = 2*tau_w_2;
 }
 
 void lvf_constant_acceleration_steps(float m, const float *F_w, float h, float *dv_w, float *dp_w) {

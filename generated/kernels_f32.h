@@ -124,7 +124,9 @@ void lvf_rigid_body_increments_body_c(const float *q, const float *omega_b, cons
 /* rigid_body_increment_scale_free: The constants of a torque-free RK4 stage's scaled increments (rigid_body_increments_free_c), once per body and call (float; see kernels.h) */
 void lvf_rigid_body_increment_scale_free(const float *c_b, float sdt, float *C_b, float *h_q);
 /* rigid_body_increments_torque_h: A constant-torque RK4 stage's scaled increments of (q, ω_B) alone (float; see kernels.h) */
-void lvf_rigid_body_increments_torque_h(const float *q, const float *omega_b, const float *S_b, const float *tau_w, float *H_q, float *H_omega);
+void lvf_rigid_body_increments_torque_h(const float *q, const float *omega_b, const float *S_b, const float *T_w, float *H_q, float *H_omega);
+/* rigid_body_torque_constants: The constants of a constant world torque's stages (rigid_body_increments_torque_h), once per body and call (float; see kernels.h) */
+void lvf_rigid_body_torque_constants(const float *tau_w, float *T_w);
 /* constant_acceleration_steps: The per-call constants of the exact RK4 step of a translation under a constant force (float; see kernels.h) */
 void lvf_constant_acceleration_steps(float m, const float *F_w, float h, float *dv_w, float *dp_w);
 /* translation_flow_constant: The exact RK4 step of a translation under a constant force (float; see kernels.h) */

@@ -2857,7 +2857,7 @@ def rigid_body_increment_scale_free(c_b, sdt, *, out=None):
     return C_b_out, h_q_out
 
 
-def rigid_body_increments_torque_h(q, omega_b, S_b, tau_w, *, out=None):
+def rigid_body_increments_torque_h(q, omega_b, S_b, T_w, *, out=None):
     """A constant-torque RK4 stage's scaled increments of (q, ω_B) alone.
 
     Generated kernel ``rigid_body_increments_torque_h``; inputs broadcast over leading batch axes.
@@ -2870,8 +2870,8 @@ def rigid_body_increments_torque_h(q, omega_b, S_b, tau_w, *, out=None):
         angular velocity, body frame, rad/s
     S_b : array_like, shape (..., 9)
         the increments' constants (C_x, C_y, C_z, R_x, R_y, R_z, h_q, sdt, h_m) of rigid_body_increment_scale, once per body and call
-    tau_w : array_like, shape (..., 3)
-        total torque about the COM, world frame, N·m (constant over the call)
+    T_w : array_like, shape (..., 6)
+        the world torque's constants (τ_W, 2τ_W) of rigid_body_torque_constants, once per body and call
     out : tuple of (ndarray or None), optional
         arrays the outputs are written into, in order (None: a new array); none may overlap an input
 
@@ -2885,9 +2885,9 @@ def rigid_body_increments_torque_h(q, omega_b, S_b, tau_w, *, out=None):
     q = numpy.asarray(q, dtype=numpy.float64)
     omega_b = numpy.asarray(omega_b, dtype=numpy.float64)
     S_b = numpy.asarray(S_b, dtype=numpy.float64)
-    tau_w = numpy.asarray(tau_w, dtype=numpy.float64)
+    T_w = numpy.asarray(T_w, dtype=numpy.float64)
     if out is None or out[0] is None or out[1] is None:
-        batch = q.shape[:-1] if q.shape[:-1] == omega_b.shape[:-1] == S_b.shape[:-1] == tau_w.shape[:-1] else numpy.broadcast_shapes(q.shape[:-1], omega_b.shape[:-1], S_b.shape[:-1], tau_w.shape[:-1])
+        batch = q.shape[:-1] if q.shape[:-1] == omega_b.shape[:-1] == S_b.shape[:-1] == T_w.shape[:-1] else numpy.broadcast_shapes(q.shape[:-1], omega_b.shape[:-1], S_b.shape[:-1], T_w.shape[:-1])
     q_0 = q[..., 0]
     q_1 = q[..., 1]
     q_2 = q[..., 2]
@@ -2902,26 +2902,54 @@ def rigid_body_increments_torque_h(q, omega_b, S_b, tau_w, *, out=None):
     S_b_4 = S_b[..., 4]
     S_b_5 = S_b[..., 5]
     S_b_6 = S_b[..., 6]
-    tau_w_0 = tau_w[..., 0]
-    tau_w_1 = tau_w[..., 1]
-    tau_w_2 = tau_w[..., 2]
+    tau_w_0 = T_w[..., 0]
+    tau_w_1 = T_w[..., 1]
+    tau_w_2 = T_w[..., 2]
+    tau2_w_0 = T_w[..., 3]
+    tau2_w_1 = T_w[..., 4]
+    tau2_w_2 = T_w[..., 5]
     t0 = S_b_6*omega_b_0
     t1 = S_b_6*omega_b_2
     t2 = S_b_6*omega_b_1
-    t3 = 2*q_0
-    t4 = t3 * tau_w_1 - 2 * q_1 * tau_w_0
-    t5 = 2*q_2*tau_w_0 - t3*tau_w_2
-    t6 = 2*q_1*tau_w_2 - 2*q_2*tau_w_1
+    t3 = q_0*tau2_w_1 - q_1*tau2_w_0
+    t4 = q_2 * tau2_w_0 - q_0 * tau2_w_2
+    t5 = q_1*tau2_w_2 - q_2*tau2_w_1
     H_q_out = numpy.empty(batch + (4,)) if out is None or out[0] is None else out[0]
     numpy.add(q_1 * t1 - q_2 * t2, q_3 * t0, out=H_q_out[..., 0])
     numpy.add(q_2 * t0 - q_0 * t1, q_3 * t2, out=H_q_out[..., 1])
     numpy.add(q_0 * t2 - q_1 * t0, q_3 * t1, out=H_q_out[..., 2])
     numpy.subtract(-q_0 * t0 - q_1 * t2, q_2 * t1, out=H_q_out[..., 3])
     H_omega_out = numpy.empty(batch + (3,)) if out is None or out[1] is None else out[1]
-    numpy.add(S_b_0 * omega_b_1 * omega_b_2, S_b_3 * (q_1 * t4 - q_2 * t5 - q_3 * t6 + tau_w_0), out=H_omega_out[..., 0])
-    numpy.add(S_b_1 * omega_b_0 * omega_b_2, S_b_4 * (q_2 * t6 - q_0 * t4 - q_3 * t5 + tau_w_1), out=H_omega_out[..., 1])
-    numpy.add(S_b_2 * omega_b_0 * omega_b_1, S_b_5 * (q_0 * t5 - q_1 * t6 - q_3 * t4 + tau_w_2), out=H_omega_out[..., 2])
+    numpy.add(S_b_0 * omega_b_1 * omega_b_2, S_b_3 * (q_1 * t3 - q_2 * t4 - q_3 * t5 + tau_w_0), out=H_omega_out[..., 0])
+    numpy.add(S_b_1 * omega_b_0 * omega_b_2, S_b_4 * (q_2 * t5 - q_0 * t3 - q_3 * t4 + tau_w_1), out=H_omega_out[..., 1])
+    numpy.add(S_b_2 * omega_b_0 * omega_b_1, S_b_5 * (q_0 * t4 - q_1 * t5 - q_3 * t3 + tau_w_2), out=H_omega_out[..., 2])
     return H_q_out, H_omega_out
+
+
+def rigid_body_torque_constants(tau_w, *, out=None):
+    """The constants of a constant world torque's stages (rigid_body_increments_torque_h), once per body and call.
+
+    Generated kernel ``rigid_body_torque_constants``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    tau_w : array_like, shape (..., 3)
+        total torque about the COM, world frame, N·m (constant over the call)
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
+
+    Returns
+    -------
+    T_w : ndarray, shape (..., 6)
+        (τ_W, 2τ_W), N·m
+    """
+    tau_w = numpy.asarray(tau_w, dtype=numpy.float64)
+    if out is None or out[0] is None:
+        batch = tau_w.shape[:-1]
+    T_w_out = numpy.empty(batch + (6,)) if out is None or out[0] is None else out[0]
+    T_w_out[..., 0:3] = tau_w[..., 0:3]
+    numpy.multiply(2, tau_w[..., 0:3], out=T_w_out[..., 3:6])
+    return T_w_out
 
 
 def constant_acceleration_steps(m, F_w, h, *, out=None):
@@ -6332,7 +6360,8 @@ KERNELS = {
     'rigid_body_increments_force_c': (rigid_body_increments_force_c, [('q', (4,)), ('omega_b', (3,)), ('v_w', (3,)), ('S_b', (9,)), ('F_w', (3,))], [('H', (13,))]),
     'rigid_body_increments_body_c': (rigid_body_increments_body_c, [('q', (4,)), ('omega_b', (3,)), ('v_w', (3,)), ('S_b', (9,)), ('F_w', (3,)), ('tau_b', (3,))], [('H', (13,))]),
     'rigid_body_increment_scale_free': (rigid_body_increment_scale_free, [('c_b', (6,)), ('sdt', ())], [('C_b', (3,)), ('h_q', ())]),
-    'rigid_body_increments_torque_h': (rigid_body_increments_torque_h, [('q', (4,)), ('omega_b', (3,)), ('S_b', (9,)), ('tau_w', (3,))], [('H_q', (4,)), ('H_omega', (3,))]),
+    'rigid_body_increments_torque_h': (rigid_body_increments_torque_h, [('q', (4,)), ('omega_b', (3,)), ('S_b', (9,)), ('T_w', (6,))], [('H_q', (4,)), ('H_omega', (3,))]),
+    'rigid_body_torque_constants': (rigid_body_torque_constants, [('tau_w', (3,))], [('T_w', (6,))]),
     'constant_acceleration_steps': (constant_acceleration_steps, [('m', ()), ('F_w', (3,)), ('h', ())], [('dv_w', (3,)), ('dp_w', (3,))]),
     'translation_flow_constant': (translation_flow_constant, [('p_w', (3,)), ('v_w', (3,)), ('h', ()), ('dv_w', (3,)), ('dp_w', (3,))], [('p_next', (3,)), ('v_next', (3,))]),
     'linear_acceleration': (linear_acceleration, [('m', ()), ('F_w', (3,))], [('a_w', (3,))]),

@@ -782,20 +782,25 @@ def rigid_body_increment_scale_free(c_b, sdt):
     return (c_b_0*sdt, c_b_1*sdt, c_b_2*sdt), ((1.0/2.0))*sdt
 
 
-def rigid_body_increments_torque_h(q, omega_b, S_b, tau_w):
+def rigid_body_increments_torque_h(q, omega_b, S_b, T_w):
     """A constant-torque RK4 stage's scaled increments of (q, ω_B) alone (floats; see the module)."""
     q_0, q_1, q_2, q_3 = q
     omega_b_0, omega_b_1, omega_b_2 = omega_b
     S_b_0, S_b_1, S_b_2, S_b_3, S_b_4, S_b_5, S_b_6, _, _ = S_b
-    tau_w_0, tau_w_1, tau_w_2 = tau_w
+    tau_w_0, tau_w_1, tau_w_2, tau2_w_0, tau2_w_1, tau2_w_2 = T_w
     t0 = S_b_6*omega_b_0
     t1 = S_b_6*omega_b_2
     t2 = S_b_6*omega_b_1
-    t3 = 2*q_0
-    t4 = -2*q_1*tau_w_0 + t3*tau_w_1
-    t5 = 2*q_2*tau_w_0 - t3*tau_w_2
-    t6 = 2*q_1*tau_w_2 - 2*q_2*tau_w_1
-    return (q_1*t1 - q_2*t2 + q_3*t0, -q_0*t1 + q_2*t0 + q_3*t2, q_0*t2 - q_1*t0 + q_3*t1, -q_0*t0 - q_1*t2 - q_2*t1), (S_b_0*omega_b_1*omega_b_2 + S_b_3*(q_1*t4 - q_2*t5 - q_3*t6 + tau_w_0), S_b_1*omega_b_0*omega_b_2 + S_b_4*(-q_0*t4 + q_2*t6 - q_3*t5 + tau_w_1), S_b_2*omega_b_0*omega_b_1 + S_b_5*(q_0*t5 - q_1*t6 - q_3*t4 + tau_w_2))
+    t3 = q_0*tau2_w_1 - q_1*tau2_w_0
+    t4 = -q_0*tau2_w_2 + q_2*tau2_w_0
+    t5 = q_1*tau2_w_2 - q_2*tau2_w_1
+    return (q_1*t1 - q_2*t2 + q_3*t0, -q_0*t1 + q_2*t0 + q_3*t2, q_0*t2 - q_1*t0 + q_3*t1, -q_0*t0 - q_1*t2 - q_2*t1), (S_b_0*omega_b_1*omega_b_2 + S_b_3*(q_1*t3 - q_2*t4 - q_3*t5 + tau_w_0), S_b_1*omega_b_0*omega_b_2 + S_b_4*(-q_0*t3 + q_2*t5 - q_3*t4 + tau_w_1), S_b_2*omega_b_0*omega_b_1 + S_b_5*(q_0*t4 - q_1*t5 - q_3*t3 + tau_w_2))
+
+
+def rigid_body_torque_constants(tau_w):
+    """The constants of a constant world torque's stages (rigid_body_increments_torque_h), once per body and call (floats; see the module)."""
+    tau_w_0, tau_w_1, tau_w_2 = tau_w
+    return (tau_w_0, tau_w_1, tau_w_2, 2*tau_w_0, 2*tau_w_1, 2*tau_w_2)
 
 
 def constant_acceleration_steps(m, F_w, h):
@@ -2099,7 +2104,8 @@ READS = {
     'rigid_body_increments_force_c': {'q': (0, 1, 2, 3), 'omega_b': (0, 1, 2), 'v_w': (0, 1, 2), 'S_b': (0, 1, 2, 6, 7, 8), 'F_w': (0, 1, 2)},
     'rigid_body_increments_body_c': {'q': (0, 1, 2, 3), 'omega_b': (0, 1, 2), 'v_w': (0, 1, 2), 'S_b': (0, 1, 2, 3, 4, 5, 6, 7, 8), 'F_w': (0, 1, 2), 'tau_b': (0, 1, 2)},
     'rigid_body_increment_scale_free': {'c_b': (0, 1, 2)},
-    'rigid_body_increments_torque_h': {'q': (0, 1, 2, 3), 'omega_b': (0, 1, 2), 'S_b': (0, 1, 2, 3, 4, 5, 6), 'tau_w': (0, 1, 2)},
+    'rigid_body_increments_torque_h': {'q': (0, 1, 2, 3), 'omega_b': (0, 1, 2), 'S_b': (0, 1, 2, 3, 4, 5, 6), 'T_w': (0, 1, 2, 3, 4, 5)},
+    'rigid_body_torque_constants': {'tau_w': (0, 1, 2)},
     'constant_acceleration_steps': {'F_w': (0, 1, 2)},
     'translation_flow_constant': {'p_w': (0, 1, 2), 'v_w': (0, 1, 2), 'dv_w': (0, 1, 2), 'dp_w': (0, 1, 2)},
     'linear_acceleration': {'F_w': (0, 1, 2)},
@@ -2212,6 +2218,7 @@ ZEROS = {
     'rigid_body_increments_body_c': {'H': ()},
     'rigid_body_increment_scale_free': {'C_b': (), 'h_q': ()},
     'rigid_body_increments_torque_h': {'H_q': (), 'H_omega': ()},
+    'rigid_body_torque_constants': {'T_w': ()},
     'constant_acceleration_steps': {'dv_w': (), 'dp_w': ()},
     'translation_flow_constant': {'p_next': (), 'v_next': ()},
     'linear_acceleration': {'a_w': ()},

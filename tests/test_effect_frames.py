@@ -149,6 +149,30 @@ def test_a_constant_torque_leaves_the_translation_bitwise_a_plain_bodys(backend,
     np.testing.assert_allclose(both[:, 0:3], x0[:, 0:3] + x0[:, 7:10] * t + g * t * t / 2, rtol=0, atol=1e-12)
 
 
+@pytest.mark.parametrize("backend", ["c", "numpy"])
+def test_the_doubled_torque_stage_is_the_rotated_torques_bitwise(backend):
+    """rigid_body_increments_torque_h takes the world torque with its double (rigid_body_torque_constants, once per
+    call: t = q_v x (2 tau) where rotate_to_body forms (2 q_v) x tau at each stage): its rows are bitwise
+    rigid_body_increments_torque_c's (q, omega_b) rows, over torques of 1e-150 to 1e150 (subnormal and huge products
+    included), stage quaternions that are not unit, and signed zeros."""
+    from lavendersim.backends import c_backend
+    from lavendersim.generated import kernels_numpy as KN
+    call = (lambda name, *a: c_backend.eval_kernel(name, *a)) if backend == "c" else (
+        lambda name, *a: KN.KERNELS[name][0](*a))
+    rng = np.random.default_rng(30)
+    n = 4000
+    q = rng.standard_normal((n, 4)) * (1.0 + 1e-3 * rng.standard_normal((n, 1)))
+    w = rng.standard_normal((n, 3)) * 10.0 ** rng.integers(-3, 3, (n, 1))
+    v, S = rng.standard_normal((n, 3)), rng.standard_normal((n, 9))
+    tau = rng.standard_normal((n, 3)) * 10.0 ** rng.integers(-150, 150, (n, 1))
+    q[::7, 1], q[::11, 3], tau[::5, 2], tau[::13, 0] = 0.0, -0.0, -0.0, 0.0
+    Hq, Hw = call("rigid_body_increments_torque_h", q, w, S, call("rigid_body_torque_constants", tau))
+    H = call("rigid_body_increments_torque_c", q, w, v, S, tau)
+    assert np.isfinite(H).all()
+    assert Hq.tobytes() == np.ascontiguousarray(H[:, 3:7]).tobytes()
+    assert Hw.tobytes() == np.ascontiguousarray(H[:, 10:13]).tobytes()
+
+
 SETS = {
     "gravity": [("gravity", {})],
     "applied torque": [("applied_torque", {"torque_w": [1e-3, 2e-3, -1e-3]})],

@@ -1101,15 +1101,15 @@ def _const_rk4_h(plan, prog, fg, x: np.ndarray, dt: float, xn: np.ndarray | None
     """One step of the bodies x (n, 13) of forced group fg whose effects all read no state (fg.const = (torque,
     force), effects.constant_kind), q not normalized: the C backend's lv_const_rk4_h (csrc/step.c) operation for
     operation. The effects' sums (F, tau) once; q and omega_b by _h_rows on the printed rigid_body_increments_torque_h
-    (the constants S of rigid_body_increment_scale and tau) with a torque, else as a torque-free body (_free_rk4_h's
+    (the constants S of rigid_body_increment_scale and T = rigid_body_torque_constants(tau)) with a torque, else as a torque-free body (_free_rk4_h's
     increments and constants: the same bits); p_w and v_w by the printed translation_flow_constant on
     constant_acceleration_steps' dv, dp with a force, else translation_drift with v_w kept. Returns xn."""
     torque, force = fg.const
     F, tau = fg.index.sums(x, x[:, V], plan.loads_buffer(x))
     key = ("const_rk4_h", x.shape[0], id(fg))
     if torque:
-        S = fg.scales(K, prog[0] * dt)
-        A = _h_rows(plan, prog, x, lambda q, w, o: K.rigid_body_increments_torque_h(q, w, S, tau, out=o), key)
+        S, T = fg.scales(K, prog[0] * dt), K.rigid_body_torque_constants(tau)
+        A = _h_rows(plan, prog, x, lambda q, w, o: K.rigid_body_increments_torque_h(q, w, S, T, out=o), key)
     else:
         C, hq = _free_scale(plan, fg.c, prog[0] * dt)
         A = _h_rows(plan, prog, x, lambda q, w, o: K.rigid_body_increments_free_c(q, w, C, hq, out=o), key)

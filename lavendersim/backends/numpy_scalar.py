@@ -210,7 +210,7 @@ def _run_h_of(prog, normalize: bool, torque: bool = False, force: bool = False):
     SCALED_RK) as a compiled Python function run(x, n, h, R, dv, dp) -> x (13 floats), written out number by number:
     numpy_backend._free_rk4_h's operations in its order (C's lv_free_rk4_h) for a torque-free body, or
     numpy_backend._const_rk4_h's (C's lv_const_rk4_h) for a body whose effects read no state. The increments: with
-    torque the printed rigid_body_increments_torque_h on R = (S, tau_w), else rigid_body_increments_free_c on
+    torque the printed rigid_body_increments_torque_h on R = (S, rigid_body_torque_constants(tau_w)), else rigid_body_increments_free_c on
     R = (C, h_q) (rigid_body_increment_scale_free); p and v: with force the printed translation_flow_constant on
     dv, dp (constant_acceleration_steps), else translation_drift with v kept."""
     key = (prog, normalize, torque, force)
@@ -238,7 +238,8 @@ def _run_const(x, n_steps, dt, scaled, normalize, c, m, I, effects, const):
     torque, force = const
     F, T = _sums(x, m, I, effects[1])
     sdt = scaled[0] * dt
-    R = (KS.rigid_body_increment_scale(c, m, sdt), T) if torque else KS.rigid_body_increment_scale_free(c, sdt)
+    R = ((KS.rigid_body_increment_scale(c, m, sdt), KS.rigid_body_torque_constants(T)) if torque
+         else KS.rigid_body_increment_scale_free(c, sdt))
     dv, dp = KS.constant_acceleration_steps(m, F, dt) if force else (None, None)
     return _run_h_of(scaled, normalize, torque, force)(x, n_steps, dt, R, dv, dp)
 

@@ -390,11 +390,12 @@ static inline void lv_rot_free_h(const double *x, double *y, const double *C, do
     LV_H_STAGES(x, y, LV_H_RHS, normalize);
 #undef LV_H_RHS
 }
-/* (q, omega_b) of a body under a constant world torque tau_w (rigid_body_increments_torque_h on S) into y. */
-static inline void lv_rot_torque_h(const double *x, double *y, const double *S, const double *tau_w, int normalize)
+/* (q, omega_b) of a body under a constant world torque (rigid_body_increments_torque_h on S and the torque's
+   constants T_w of rigid_body_torque_constants) into y. */
+static inline void lv_rot_torque_h(const double *x, double *y, const double *S, const double *T_w, int normalize)
 {
     int i;
-#define LV_H_RHS(in, out) lv_rigid_body_increments_torque_h(in, in + LV_STATE_Q_LEN, S, tau_w, out, out + LV_STATE_Q_LEN)
+#define LV_H_RHS(in, out) lv_rigid_body_increments_torque_h(in, in + LV_STATE_Q_LEN, S, T_w, out, out + LV_STATE_Q_LEN)
     LV_H_STAGES(x, y, LV_H_RHS, normalize);
 #undef LV_H_RHS
 }
@@ -496,17 +497,16 @@ static inline void lv_const_rk4_h(const double *x, double *xn, const double *K, 
 }
 
 /* lv_const_rk4_h's constants K of a call for a body with Euler coefficients c_b, mass m and its constant effect sums
-   F (force) and tau (world torque): the printed rigid_body_increment_scale, tau, and with force the printed
-   constant_acceleration_steps (else zero). */
+   F (force) and tau (world torque): the printed rigid_body_increment_scale, rigid_body_torque_constants (tau, 2 tau:
+   the stages' rotation takes the doubled torque), and with force the printed constant_acceleration_steps (else
+   zero). */
 static inline void lv_const_scale(const double *c_b, double m, const double *F, const double *tau, double dt,
                                   int force, double *K)
 {
     int i;
     lv_rigid_body_increment_scale(c_b, m, LV_RK4_SCALE * dt, K);
-    for (i = 0; i < 3; i++) {
-        K[LV_CONST_TAU + i] = tau[i];
-        K[LV_CONST_DV + i] = K[LV_CONST_DP + i] = 0.0;
-    }
+    lv_rigid_body_torque_constants(tau, K + LV_CONST_TAU);
+    for (i = 0; i < 3; i++) K[LV_CONST_DV + i] = K[LV_CONST_DP + i] = 0.0;
     if (force) lv_constant_acceleration_steps(m, F, dt, K + LV_CONST_DV, K + LV_CONST_DP);
 }
 /* A constant kind's flags (LV_CONST_TORQUE_<kind>, LV_CONST_FORCE_<kind>) of class cls (LV_RHS_TORQUE, _FULL, _FORCE). */
