@@ -34,7 +34,7 @@ import sympy as sp
 from .kernel import Arg, Kernel, mat, scalar, vec
 from .layout import PARAM as LAYOUT_PARAM
 from .layout import STATE as LAYOUT_STATE
-from .quaternion import rotation_matrix
+from .quaternion import Rotation
 
 RULES = ("finite", "nonnegative", "positive")
 KINDS = ("force", "model")
@@ -85,7 +85,7 @@ class _State:
         self.p_w, self.q, self.v_w, self.omega_b = vec("p_w", 3), vec("q", 4), vec("v_w", 3), vec("omega_b", 3)
         self.m = scalar("m", positive=True)
         self.I_b = vec("I_b", 3)
-        self.R_WB = rotation_matrix(self.q)
+        self.R_WB = Rotation(self.q)                  # times a 3-vector: the sandwich (quaternion.Rotation)
         self.omega_w = self.R_WB * self.omega_b
 
     def value(self, name: str):
@@ -346,8 +346,18 @@ class EffectDecl:
         ins = [Arg(f, STATE.value(f), *_State.DOCS[f]) for f in self.state_inputs]
         ins += [Arg(p.name, p.symbol, f"{p.doc}, {p.unit}" if p.unit else p.doc, p.domain) for p in self.params]
         outs = [Arg(n, v, "force at the COM, world frame, N" if n == OUT_FORCE else "torque about the COM, world frame, N·m")
-                for n, v in self.outputs]
+                for n, v in self._printed(False)]
         return Kernel(self.kernel_name, self.summary, self.caption, ins, outs, group, list(self.notes))
+
+    def _printed(self, body: bool) -> list[tuple[str, sp.Matrix]]:
+        """The outputs (body: the body-frame form's) as the kernels print them: printed_form of the declared ones,
+        computed once per declaration."""
+        memo = self.__dict__.setdefault("_printed_memo", {})
+        if body not in memo:
+            outputs = self.body_outputs if body else self.outputs
+            assert outputs is not None
+            memo[body] = list(zip([n for n, _ in outputs], printed_form([v for _, v in outputs])))
+        return memo[body]
 
     def body_kernel(self, group: str = "Scene effects") -> Kernel | None:
         """The body-frame form (FLAG_TORQUE_B) as kernel effect_<name>_b: the force (world) and the torque as
@@ -359,7 +369,7 @@ class EffectDecl:
         ins = [Arg(f, STATE.value(f), *_State.DOCS[f]) for f in _State.FIELDS if free & set(STATE.symbols(f))]
         ins += [Arg(p.name, p.symbol, f"{p.doc}, {p.unit}" if p.unit else p.doc, p.domain) for p in self.params]
         outs = [Arg(n, v, "force at the COM, world frame, N" if n == OUT_FORCE else "torque about the COM, body frame, N·m")
-                for n, v in outputs]
+                for n, v in self._printed(True)]
         return Kernel(self.kernel_name + "_b", self.summary + " (its body-frame form)", self.caption, ins, outs, group,
                       ["The torque as declared, in the body frame: plain bodies whose torques are all body-frame add "
                        "it so and rotate nothing; effect_" + self.name + " gives it in the world frame."])
@@ -367,6 +377,51 @@ class EffectDecl:
 
 def _flat(v) -> list:
     return list(v) if isinstance(v, sp.MatrixBase) else [v]
+
+
+def _ops_after_cse(exprs: list) -> int:
+    """The operations a kernel of these expressions prints: count_ops over CSE's temporaries and results."""
+    temps, reduced = sp.cse(exprs, symbols=sp.numbered_symbols("t"), order="canonical")
+    return int(sum(sp.count_ops(e) for _, e in temps) + sum(sp.count_ops(e) for e in reduced))
+
+
+def _same_function(a: sp.Expr, b: sp.Expr) -> bool:
+    """Whether a and b are the same rational function of their symbols and radicals (proved: a − b over one
+    denominator, expanded, is 0; False when SymPy cannot show it)."""
+    try:
+        return sp.expand(sp.together(a - b)) == 0
+    except (TypeError, ValueError, NotImplementedError, RecursionError):
+        return False
+
+
+def printed_form(values: list[sp.Matrix]) -> list[sp.Matrix]:
+    """The form an effect's kernels print its outputs in: each entry with the factors common to the terms of its
+    sums pulled out (sp.factor_terms, e.g. r_y (I_z r_z) − r_z (I_y r_y) → r_y r_z (I_z − I_y), whose I_z − I_y
+    reads per-body constants only), kept when the kernel's operation count after CSE is lower and each entry is
+    proved the same function (_same_function); else the declared form. Every backend prints this one form (C
+    and NumPy stay bitwise equal); it differs from the declared arithmetic at rounding level only.
+
+    Parameters
+    ----------
+    values : list of sympy.Matrix
+        The outputs (3×1 each: force and/or torque) of one kernel.
+
+    Returns
+    -------
+    list of sympy.Matrix
+        The outputs to print, entry for entry the same functions.
+    """
+    flat = [e for v in values for e in v]
+    factored = [sp.factor_terms(e) for e in flat]
+    if factored == flat or _ops_after_cse(factored) >= _ops_after_cse(flat):
+        return values
+    if not all(_same_function(a, b) for a, b in zip(flat, factored)):
+        return values
+    out, i = [], 0
+    for v in values:
+        out.append(sp.Matrix(v.rows, v.cols, factored[i:i + len(v)]))
+        i += len(v)
+    return out
 
 
 def effect(name: str, summary: str, params=(), force_w=None, torque_w=None, caption: str = "",

@@ -13,12 +13,13 @@ from .effect import STATE as S
 from .effect import EffectDecl, effect, model_effect, param
 from .kernel import Arg, Kernel, vec
 from .layout import WHEELS_MAX
-from .quaternion import rotation_matrix
+from .quaternion import rotate_to_world
 
 
 def torque_at_point(q, r_b, F_w):
-    """Torque about the COM of a world force F_w applied at the body point r_b: (R_WB r_b) × F_w."""
-    return (rotation_matrix(q) * r_b).cross(F_w)
+    """Torque about the COM of a world force F_w applied at the body point r_b: (R_WB r_b) × F_w, R_WB r_b printed
+    as the sandwich (quaternion.rotate_to_world, the same polynomial)."""
+    return rotate_to_world(q, r_b).cross(F_w)
 
 
 def declarations() -> list[EffectDecl]:

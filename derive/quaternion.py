@@ -68,6 +68,77 @@ def rotate_to_body(q: sp.Matrix, v_w: sp.Matrix) -> sp.Matrix:
     return v_w - w * t + qv.cross(t)
 
 
+def rotate_to_world(q: sp.Matrix, v_b: sp.Matrix) -> sp.Matrix:
+    """R(q) v_b, the body vector v_b in the world frame, as v + w t + q_v × t with t = (2 q_v) × v (the sandwich
+    q ⊗ [v,0] ⊗ q* with its two cross products kept): 15 multiplies (2 q_v as adds) against the matrix form's ~18
+    (R(q) built, then R v). The same polynomial as rotation_matrix(q) * v_b for any q, unit or not (proved in
+    _check_identities); the rounding differs."""
+    qv, w = q[:3, 0], q[3]
+    t = (2 * qv).cross(v_b)
+    return v_b + w * t + qv.cross(t)
+
+
+class Rotation(sp.MutableDenseMatrix):
+    """R_WB = rotation_matrix(q), or its transpose, that multiplies 3-vectors as the sandwich.
+
+    Its entries are rotation_matrix(q)'s (its transpose's); ``R * v`` with a 3×1 matrix v is
+    rotate_to_world(q, v) (R_WB) or rotate_to_body(q, v) (R_WBᵀ), the same polynomial as the matrix
+    product, printed cheaper. ``.T`` keeps the flag; every other operation (entries, R·M, M·R, sums,
+    subs, copies) gives a plain Matrix, so no result of one is taken for a rotation. Not assignable.
+
+    Parameters
+    ----------
+    q : sympy.Matrix (4×1)
+        The quaternion (x, y, z, w) of R_WB.
+    transposed : bool
+        The transpose R_WBᵀ (world → body) instead of R_WB (body → world).
+    """
+
+    _op_priority = 10.02      # above Matrix's (10.01): M * R comes to __rmul__ (a plain product)
+
+    def __new__(cls, q: sp.Matrix, transposed: bool = False):
+        R = rotation_matrix(q)
+        obj = sp.MutableDenseMatrix._fromrep.__func__(cls, (R.T if transposed else R)._rep)
+        obj.q, obj.transposed = sp.Matrix(q), bool(transposed)
+        return obj
+
+    @classmethod
+    def _new(cls, *args, **kwargs):            # results of operations: plain matrices
+        return sp.MutableDenseMatrix._new(*args, **kwargs)
+
+    @classmethod
+    def _fromrep(cls, rep):
+        return sp.MutableDenseMatrix._fromrep(rep)
+
+    def plain(self) -> sp.Matrix:
+        """The matrix as a plain sympy Matrix (products of it are matrix products)."""
+        return sp.MutableDenseMatrix._new(self.rows, self.cols, list(self))
+
+    @property
+    def T(self) -> "Rotation":
+        return Rotation(self.q, not self.transposed)
+
+    def transpose(self) -> "Rotation":
+        return self.T
+
+    def __mul__(self, other):
+        if isinstance(other, sp.MatrixBase) and other.shape == (3, 1):
+            return (rotate_to_body if self.transposed else rotate_to_world)(self.q, sp.Matrix(other))
+        return self.plain() * other
+
+    def __matmul__(self, other):
+        return self.__mul__(other)
+
+    def __rmul__(self, other):
+        return other * self.plain() if isinstance(other, sp.MatrixBase) else self.plain().__rmul__(other)
+
+    def __rmatmul__(self, other):
+        return self.__rmul__(other)
+
+    def __setitem__(self, key, value):
+        raise TypeError("derive: a Rotation (STATE.R_WB) is not assignable; copy it with .plain() first")
+
+
 def rot_x(a):
     c, s = sp.cos(a), sp.sin(a)
     return sp.Matrix([[1, 0, 0], [0, c, -s], [0, s, c]])
@@ -127,7 +198,8 @@ def _check_renorm(order: int) -> sp.Rational:
 
 
 def _check_identities() -> None:
-    """Derivation-time proofs: R(q) from the sandwich product; Euler XYZ quaternion gives Rx Ry Rz."""
+    """Derivation-time proofs: R(q) from the sandwich product; rotate_to_body and rotate_to_world (Rotation's
+    products) are R(q)ᵀ v and R(q) v as polynomials; Euler XYZ quaternion gives Rx Ry Rz."""
     q = vec("q", 4)
     v = vec("v", 3)
     sandwich = qmul(qmul(q, pure(v)), qconj(q))[:3, 0]
@@ -137,6 +209,8 @@ def _check_identities() -> None:
         raise RuntimeError("derive: R(q) v does not equal q ⊗ [v,0] ⊗ q*")
     if (rotate_to_body(q, v) - rotation_matrix(q).T * v).applyfunc(sp.expand) != sp.zeros(3, 1):
         raise RuntimeError("derive: rotate_to_body(q, v) is not R(q)ᵀ v as a polynomial")
+    if (rotate_to_world(q, v) - rotation_matrix(q) * v).applyfunc(sp.expand) != sp.zeros(3, 1):
+        raise RuntimeError("derive: rotate_to_world(q, v) is not R(q) v as a polynomial")
     # Euler angles 2a, 2b, 2c: the quaternion holds cos/sin of a, b, c, the matrices (expand_trig) polynomials in them;
     # each entry of the difference, with cos and sin as symbols, must reduce to 0 modulo cos^2 + sin^2 = 1 (exact, and
     # ~40x cheaper than simplify on the entries)

@@ -195,22 +195,16 @@ void lv_force_at_point(const double *q, const double *r_b, const double *F_w, do
     const double F_w_0 = F_w[0];
     const double F_w_1 = F_w[1];
     const double F_w_2 = F_w[2];
-    const double t0 = 2*q_0;
-    const double t1 = q_2*t0;
-    const double t2 = 2*q_1*q_3;
-    const double t3 = q_3*t0;
-    const double t4 = 2*q_2;
-    const double t5 = 2*(q_1*q_1);
-    const double t6 = 2*(q_0*q_0) - 1;
-    const double t7 = r_b_0*(t1 - t2) + r_b_1*(q_1*t4 + t3) + r_b_2*(-t5 - t6);
-    const double t8 = q_1*t0;
-    const double t9 = q_3*t4;
-    const double t10 = 2*(q_2*q_2);
-    const double t11 = r_b_0*(t8 + t9) + r_b_1*(-t10 - t6) + r_b_2*(2*q_1*q_2 - t3);
-    const double t12 = r_b_0*(-t10 - t5 + 1) + r_b_1*(t8 - t9) + r_b_2*(t1 + t2);
-    tau_w[0] = -F_w_1*t7 + F_w_2*t11;
-    tau_w[1] = F_w_0*t7 - F_w_2*t12;
-    tau_w[2] = -F_w_0*t11 + F_w_1*t12;
+    const double t0 = 2*r_b_2;
+    const double t1 = -q_0*t0 + 2*q_2*r_b_0;
+    const double t2 = 2*q_0*r_b_1 - 2*q_1*r_b_0;
+    const double t3 = q_1*t0 - 2*q_2*r_b_1;
+    const double t4 = q_0*t1 - q_1*t3 + q_3*t2 + r_b_2;
+    const double t5 = -q_0*t2 + q_2*t3 + q_3*t1 + r_b_1;
+    const double t6 = q_1*t2 - q_2*t1 + q_3*t3 + r_b_0;
+    tau_w[0] = -F_w_1*t4 + F_w_2*t5;
+    tau_w[1] = F_w_0*t4 - F_w_2*t6;
+    tau_w[2] = -F_w_0*t5 + F_w_1*t6;
 }
 
 void lv_effect_applied_torque(const double *torque_w, double *tau_com_w) {
@@ -233,25 +227,19 @@ void lv_effect_force_at_point(const double *q, const double *r_b, const double *
     const double F_w_0 = F_w[0];
     const double F_w_1 = F_w[1];
     const double F_w_2 = F_w[2];
-    const double t0 = 2*q_0;
-    const double t1 = q_2*t0;
-    const double t2 = 2*q_1*q_3;
-    const double t3 = q_3*t0;
-    const double t4 = 2*q_2;
-    const double t5 = 2*(q_1*q_1);
-    const double t6 = 2*(q_0*q_0) - 1;
-    const double t7 = r_b_0*(t1 - t2) + r_b_1*(q_1*t4 + t3) + r_b_2*(-t5 - t6);
-    const double t8 = q_1*t0;
-    const double t9 = q_3*t4;
-    const double t10 = 2*(q_2*q_2);
-    const double t11 = r_b_0*(t8 + t9) + r_b_1*(-t10 - t6) + r_b_2*(2*q_1*q_2 - t3);
-    const double t12 = r_b_0*(-t10 - t5 + 1) + r_b_1*(t8 - t9) + r_b_2*(t1 + t2);
+    const double t0 = 2*r_b_2;
+    const double t1 = -q_0*t0 + 2*q_2*r_b_0;
+    const double t2 = 2*q_0*r_b_1 - 2*q_1*r_b_0;
+    const double t3 = q_1*t0 - 2*q_2*r_b_1;
+    const double t4 = q_0*t1 - q_1*t3 + q_3*t2 + r_b_2;
+    const double t5 = -q_0*t2 + q_2*t3 + q_3*t1 + r_b_1;
+    const double t6 = q_1*t2 - q_2*t1 + q_3*t3 + r_b_0;
     F_com_w[0] = F_w_0;
     F_com_w[1] = F_w_1;
     F_com_w[2] = F_w_2;
-    tau_com_w[0] = -F_w_1*t7 + F_w_2*t11;
-    tau_com_w[1] = F_w_0*t7 - F_w_2*t12;
-    tau_com_w[2] = -F_w_0*t11 + F_w_1*t12;
+    tau_com_w[0] = -F_w_1*t4 + F_w_2*t5;
+    tau_com_w[1] = F_w_0*t4 - F_w_2*t6;
+    tau_com_w[2] = -F_w_0*t5 + F_w_1*t6;
 }
 
 void lv_effect_gravity(double m, const double *g_w, double *F_com_w) {
@@ -280,22 +268,17 @@ void lv_effect_angular_damping(const double *q, const double *omega_b, double c,
     const double omega_b_0 = omega_b[0];
     const double omega_b_1 = omega_b[1];
     const double omega_b_2 = omega_b[2];
-    const double t0 = 2*q_1;
-    const double t1 = q_0*t0;
-    const double t2 = 2*q_2;
-    const double t3 = q_3*t2;
-    const double t4 = c*omega_b_1;
-    const double t5 = q_0*t2;
-    const double t6 = q_3*t0;
-    const double t7 = c*omega_b_2;
-    const double t8 = 2*(q_1*q_1);
-    const double t9 = 2*(q_2*q_2) - 1;
-    const double t10 = c*omega_b_0;
-    const double t11 = 2*q_0*q_3;
-    const double t12 = 2*(q_0*q_0);
-    tau_com_w[0] = -t10*(-t8 - t9) - t4*(t1 - t3) - t7*(t5 + t6);
-    tau_com_w[1] = -t10*(t1 + t3) - t4*(-t12 - t9) - t7*(2*q_1*q_2 - t11);
-    tau_com_w[2] = -t10*(t5 - t6) - t4*(q_1*t2 + t11) - t7*(-t12 - t8 + 1);
+    const double t0 = c*omega_b_0;
+    const double t1 = 2*c*omega_b_2*q_0 - 2*q_2*t0;
+    const double t2 = 2*q_1;
+    const double t3 = c*omega_b_1;
+    const double t4 = 2*t3;
+    const double t5 = -q_0*t4 + t0*t2;
+    const double t6 = c*omega_b_2;
+    const double t7 = q_2*t4 - t2*t6;
+    tau_com_w[0] = q_1*t5 - q_2*t1 + q_3*t7 - t0;
+    tau_com_w[1] = -q_0*t5 + q_2*t7 + q_3*t1 - t3;
+    tau_com_w[2] = q_0*t1 - q_1*t7 + q_3*t5 - t6;
 }
 
 void lv_effect_angular_damping_b(const double *omega_b, double c, double *tau_com_b) {

@@ -196,22 +196,16 @@ void lvf_force_at_point(const float *q, const float *r_b, const float *F_w, floa
     const float F_w_0 = F_w[0];
     const float F_w_1 = F_w[1];
     const float F_w_2 = F_w[2];
-    const float t0 = 2*q_0;
-    const float t1 = q_2*t0;
-    const float t2 = 2*q_1*q_3;
-    const float t3 = q_3*t0;
-    const float t4 = 2*q_2;
-    const float t5 = 2*(q_1*q_1);
-    const float t6 = 2*(q_0*q_0) - 1;
-    const float t7 = r_b_0*(t1 - t2) + r_b_1*(q_1*t4 + t3) + r_b_2*(-t5 - t6);
-    const float t8 = q_1*t0;
-    const float t9 = q_3*t4;
-    const float t10 = 2*(q_2*q_2);
-    const float t11 = r_b_0*(t8 + t9) + r_b_1*(-t10 - t6) + r_b_2*(2*q_1*q_2 - t3);
-    const float t12 = r_b_0*(-t10 - t5 + 1) + r_b_1*(t8 - t9) + r_b_2*(t1 + t2);
-    tau_w[0] = -F_w_1*t7 + F_w_2*t11;
-    tau_w[1] = F_w_0*t7 - F_w_2*t12;
-    tau_w[2] = -F_w_0*t11 + F_w_1*t12;
+    const float t0 = 2*r_b_2;
+    const float t1 = -q_0*t0 + 2*q_2*r_b_0;
+    const float t2 = 2*q_0*r_b_1 - 2*q_1*r_b_0;
+    const float t3 = q_1*t0 - 2*q_2*r_b_1;
+    const float t4 = q_0*t1 - q_1*t3 + q_3*t2 + r_b_2;
+    const float t5 = -q_0*t2 + q_2*t3 + q_3*t1 + r_b_1;
+    const float t6 = q_1*t2 - q_2*t1 + q_3*t3 + r_b_0;
+    tau_w[0] = -F_w_1*t4 + F_w_2*t5;
+    tau_w[1] = F_w_0*t4 - F_w_2*t6;
+    tau_w[2] = -F_w_0*t5 + F_w_1*t6;
 }
 
 void lvf_effect_applied_torque(const float *torque_w, float *tau_com_w) {
@@ -234,25 +228,19 @@ void lvf_effect_force_at_point(const float *q, const float *r_b, const float *F_
     const float F_w_0 = F_w[0];
     const float F_w_1 = F_w[1];
     const float F_w_2 = F_w[2];
-    const float t0 = 2*q_0;
-    const float t1 = q_2*t0;
-    const float t2 = 2*q_1*q_3;
-    const float t3 = q_3*t0;
-    const float t4 = 2*q_2;
-    const float t5 = 2*(q_1*q_1);
-    const float t6 = 2*(q_0*q_0) - 1;
-    const float t7 = r_b_0*(t1 - t2) + r_b_1*(q_1*t4 + t3) + r_b_2*(-t5 - t6);
-    const float t8 = q_1*t0;
-    const float t9 = q_3*t4;
-    const float t10 = 2*(q_2*q_2);
-    const float t11 = r_b_0*(t8 + t9) + r_b_1*(-t10 - t6) + r_b_2*(2*q_1*q_2 - t3);
-    const float t12 = r_b_0*(-t10 - t5 + 1) + r_b_1*(t8 - t9) + r_b_2*(t1 + t2);
+    const float t0 = 2*r_b_2;
+    const float t1 = -q_0*t0 + 2*q_2*r_b_0;
+    const float t2 = 2*q_0*r_b_1 - 2*q_1*r_b_0;
+    const float t3 = q_1*t0 - 2*q_2*r_b_1;
+    const float t4 = q_0*t1 - q_1*t3 + q_3*t2 + r_b_2;
+    const float t5 = -q_0*t2 + q_2*t3 + q_3*t1 + r_b_1;
+    const float t6 = q_1*t2 - q_2*t1 + q_3*t3 + r_b_0;
     F_com_w[0] = F_w_0;
     F_com_w[1] = F_w_1;
     F_com_w[2] = F_w_2;
-    tau_com_w[0] = -F_w_1*t7 + F_w_2*t11;
-    tau_com_w[1] = F_w_0*t7 - F_w_2*t12;
-    tau_com_w[2] = -F_w_0*t11 + F_w_1*t12;
+    tau_com_w[0] = -F_w_1*t4 + F_w_2*t5;
+    tau_com_w[1] = F_w_0*t4 - F_w_2*t6;
+    tau_com_w[2] = -F_w_0*t5 + F_w_1*t6;
 }
 
 void lvf_effect_gravity(float m, const float *g_w, float *F_com_w) {
@@ -281,22 +269,17 @@ void lvf_effect_angular_damping(const float *q, const float *omega_b, float c, f
     const float omega_b_0 = omega_b[0];
     const float omega_b_1 = omega_b[1];
     const float omega_b_2 = omega_b[2];
-    const float t0 = 2*q_1;
-    const float t1 = q_0*t0;
-    const float t2 = 2*q_2;
-    const float t3 = q_3*t2;
-    const float t4 = c*omega_b_1;
-    const float t5 = q_0*t2;
-    const float t6 = q_3*t0;
-    const float t7 = c*omega_b_2;
-    const float t8 = 2*(q_1*q_1);
-    const float t9 = 2*(q_2*q_2) - 1;
-    const float t10 = c*omega_b_0;
-    const float t11 = 2*q_0*q_3;
-    const float t12 = 2*(q_0*q_0);
-    tau_com_w[0] = -t10*(-t8 - t9) - t4*(t1 - t3) - t7*(t5 + t6);
-    tau_com_w[1] = -t10*(t1 + t3) - t4*(-t12 - t9) - t7*(2*q_1*q_2 - t11);
-    tau_com_w[2] = -t10*(t5 - t6) - t4*(q_1*t2 + t11) - t7*(-t12 - t8 + 1);
+    const float t0 = c*omega_b_0;
+    const float t1 = 2*c*omega_b_2*q_0 - 2*q_2*t0;
+    const float t2 = 2*q_1;
+    const float t3 = c*omega_b_1;
+    const float t4 = 2*t3;
+    const float t5 = -q_0*t4 + t0*t2;
+    const float t6 = c*omega_b_2;
+    const float t7 = q_2*t4 - t2*t6;
+    tau_com_w[0] = q_1*t5 - q_2*t1 + q_3*t7 - t0;
+    tau_com_w[1] = -q_0*t5 + q_2*t7 + q_3*t1 - t3;
+    tau_com_w[2] = q_0*t1 - q_1*t7 + q_3*t5 - t6;
 }
 
 void lvf_effect_angular_damping_b(const float *omega_b, float c, float *tau_com_b) {

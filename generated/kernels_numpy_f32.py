@@ -466,23 +466,17 @@ def force_at_point(q, r_b, F_w, *, out=None):
     F_w_0 = F_w[..., 0]
     F_w_1 = F_w[..., 1]
     F_w_2 = F_w[..., 2]
-    t0 = 2*q_0
-    t1 = q_2*t0
-    t2 = 2*q_1*q_3
-    t3 = q_3*t0
-    t4 = 2*q_2
-    t5 = 2*(q_1*q_1)
-    t6 = 2*(q_0*q_0) - 1
-    t7 = r_b_0*(t1 - t2) + r_b_1*(q_1*t4 + t3) + r_b_2*(-t5 - t6)
-    t8 = q_1*t0
-    t9 = q_3*t4
-    t10 = 2*(q_2*q_2)
-    t11 = r_b_0*(t8 + t9) + r_b_1*(-t10 - t6) + r_b_2*(2*q_1*q_2 - t3)
-    t12 = r_b_0*(-t10 - t5 + 1) + r_b_1*(t8 - t9) + r_b_2*(t1 + t2)
+    t0 = 2*r_b_2
+    t1 = 2 * q_2 * r_b_0 - q_0 * t0
+    t2 = 2*q_0*r_b_1 - 2*q_1*r_b_0
+    t3 = q_1*t0 - 2*q_2*r_b_1
+    t4 = q_0*t1 - q_1*t3 + q_3*t2 + r_b_2
+    t5 = q_2 * t3 - q_0 * t2 + q_3 * t1 + r_b_1
+    t6 = q_1*t2 - q_2*t1 + q_3*t3 + r_b_0
     tau_w_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    numpy.subtract(F_w_2 * t11, F_w_1 * t7, out=tau_w_out[..., 0])
-    numpy.subtract(F_w_0 * t7, F_w_2 * t12, out=tau_w_out[..., 1])
-    numpy.subtract(F_w_1 * t12, F_w_0 * t11, out=tau_w_out[..., 2])
+    numpy.subtract(F_w_2 * t5, F_w_1 * t4, out=tau_w_out[..., 0])
+    numpy.subtract(F_w_0 * t4, F_w_2 * t6, out=tau_w_out[..., 1])
+    numpy.subtract(F_w_1 * t6, F_w_0 * t5, out=tau_w_out[..., 2])
     return tau_w_out
 
 
@@ -549,25 +543,19 @@ def effect_force_at_point(q, r_b, F_w, *, out=None):
     F_w_0 = F_w[..., 0]
     F_w_1 = F_w[..., 1]
     F_w_2 = F_w[..., 2]
-    t0 = 2*q_0
-    t1 = q_2*t0
-    t2 = 2*q_1*q_3
-    t3 = q_3*t0
-    t4 = 2*q_2
-    t5 = 2*(q_1*q_1)
-    t6 = 2*(q_0*q_0) - 1
-    t7 = r_b_0*(t1 - t2) + r_b_1*(q_1*t4 + t3) + r_b_2*(-t5 - t6)
-    t8 = q_1*t0
-    t9 = q_3*t4
-    t10 = 2*(q_2*q_2)
-    t11 = r_b_0*(t8 + t9) + r_b_1*(-t10 - t6) + r_b_2*(2*q_1*q_2 - t3)
-    t12 = r_b_0*(-t10 - t5 + 1) + r_b_1*(t8 - t9) + r_b_2*(t1 + t2)
+    t0 = 2*r_b_2
+    t1 = 2 * q_2 * r_b_0 - q_0 * t0
+    t2 = 2*q_0*r_b_1 - 2*q_1*r_b_0
+    t3 = q_1*t0 - 2*q_2*r_b_1
+    t4 = q_0*t1 - q_1*t3 + q_3*t2 + r_b_2
+    t5 = q_2 * t3 - q_0 * t2 + q_3 * t1 + r_b_1
+    t6 = q_1*t2 - q_2*t1 + q_3*t3 + r_b_0
     F_com_w_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
     F_com_w_out[..., 0:3] = F_w[..., 0:3]
     tau_com_w_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[1] is None else out[1]
-    numpy.subtract(F_w_2 * t11, F_w_1 * t7, out=tau_com_w_out[..., 0])
-    numpy.subtract(F_w_0 * t7, F_w_2 * t12, out=tau_com_w_out[..., 1])
-    numpy.subtract(F_w_1 * t12, F_w_0 * t11, out=tau_com_w_out[..., 2])
+    numpy.subtract(F_w_2 * t5, F_w_1 * t4, out=tau_com_w_out[..., 0])
+    numpy.subtract(F_w_0 * t4, F_w_2 * t6, out=tau_com_w_out[..., 1])
+    numpy.subtract(F_w_1 * t6, F_w_0 * t5, out=tau_com_w_out[..., 2])
     return F_com_w_out, tau_com_w_out
 
 
@@ -660,23 +648,18 @@ def effect_angular_damping(q, omega_b, c, *, out=None):
     omega_b_0 = omega_b[..., 0]
     omega_b_1 = omega_b[..., 1]
     omega_b_2 = omega_b[..., 2]
-    t0 = 2*q_1
-    t1 = q_0*t0
-    t2 = 2*q_2
-    t3 = q_3*t2
-    t4 = c*omega_b_1
-    t5 = q_0*t2
-    t6 = q_3*t0
-    t7 = c*omega_b_2
-    t8 = 2*(q_1*q_1)
-    t9 = 2*(q_2*q_2) - 1
-    t10 = c*omega_b_0
-    t11 = 2*q_0*q_3
-    t12 = 2*(q_0*q_0)
+    t0 = c*omega_b_0
+    t1 = 2*c*omega_b_2*q_0 - 2*q_2*t0
+    t2 = 2*q_1
+    t3 = c*omega_b_1
+    t4 = 2*t3
+    t5 = t0 * t2 - q_0 * t4
+    t6 = c*omega_b_2
+    t7 = q_2*t4 - t2*t6
     tau_com_w_out = numpy.empty(batch + (3,), dtype=numpy.float32) if out is None or out[0] is None else out[0]
-    numpy.subtract(-t10 * (-t8 - t9) - t4 * (t1 - t3), t7 * (t5 + t6), out=tau_com_w_out[..., 0])
-    numpy.subtract(-t10 * (t1 + t3) - t4 * (-t12 - t9), t7 * (2 * q_1 * q_2 - t11), out=tau_com_w_out[..., 1])
-    numpy.subtract(-t10 * (t5 - t6) - t4 * (q_1 * t2 + t11), t7 * (-t12 - t8 + 1), out=tau_com_w_out[..., 2])
+    numpy.subtract(q_1 * t5 - q_2 * t1 + q_3 * t7, t0, out=tau_com_w_out[..., 0])
+    numpy.subtract(q_2 * t7 - q_0 * t5 + q_3 * t1, t3, out=tau_com_w_out[..., 1])
+    numpy.subtract(q_0 * t1 - q_1 * t7 + q_3 * t5, t6, out=tau_com_w_out[..., 2])
     return tau_com_w_out
 
 

@@ -352,7 +352,8 @@ def test_divergence_earliest_step_models_and_structured():
     # splitting (one body at a time in C): angular damping beyond its limit on body 0 (fails at step
     # ~250) and, stronger, on body 2 (fails at step 75). The exploding attitude is chaotic, so the exact
     # step follows the rounding of the derived splitting kernels (it was 76 with the hand-written flows, 75 until
-    # angular damping declared its torque in the body frame: its world form R(-c omega_b) now rounds differently).
+    # angular damping declared its torque in the body frame: its world form R(-c omega_b) rounds differently; 75
+    # again since R_WB tau_b prints as the quaternion sandwich, issue 30).
     pst, pp = random_bodies(np.random.default_rng(37), 3)
     eff = np.array([effect(5, 0, 150.0), effect(5, 2, 400.0)])
     res = {}
@@ -360,7 +361,7 @@ def test_divergence_earliest_step_models_and_structured():
         with pytest.raises(DivergenceError) as info:
             backend.advance(pst.copy(), pp, eff, "splitting", True, 0.05, 400)
         res[backend.name] = (info.value.step, info.value.body)
-    assert res["c"] == res["numpy"] == (76, 2)
+    assert res["c"] == res["numpy"] == (75, 2)
 
 
 def test_non_finite_input():

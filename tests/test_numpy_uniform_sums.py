@@ -48,6 +48,8 @@ def test_uniform_sums_are_the_per_body_sums_bitwise(name):
         got = uniform.sums(x, x[:, LY.STATE_V_W], out)
         for g, r in zip(got, ref):
             assert np.array_equal(g, r) and np.array_equal(np.signbit(g), np.signbit(r)), name
-    if name == "angular damping":     # at rest the kernel gives -0 (-c times +0); the sum, as C's, +0
+    if name == "angular damping":     # at rest the sum, as C's, is +0 (0 + t_1). The kernel's own zero was -0 (-c
+        # times +0) while R_WB tau_b printed as the matrix product; printed as the sandwich (issue 30) it is +0, so
+        # this case no longer holds a -0 term of its own (the signed-zero check above still runs on every table)
         raw = E.numpy_apply(E.REGISTRY["angular_damping"].code)(every[:, E.ROW_PARAMS:].repeat(N, 0), x, None, m, I)
-        assert np.signbit(raw[1][:4]).all() and not np.signbit(got[1][:4]).any()
+        assert not np.signbit(raw[1][:4]).any() and not np.signbit(got[1][:4]).any()
