@@ -10,6 +10,7 @@ from lavendersim.generated import layout as LY
 
 TABLES = {
     "gravity": [("gravity", {})],
+    "a negative zero term": [("gravity", {"g_w": [-0.0, 0.0, -1.0]})],
     "angular damping": [("angular_damping", {"c": 0.1})],
     "gravity + damping": [("gravity", {}), ("linear_damping", {"c": 0.1}), ("angular_damping", {"c": 0.05})],
     "a constant after a state term": [("linear_damping", {"c": 0.2}), ("gravity", {}),
@@ -53,3 +54,6 @@ def test_uniform_sums_are_the_per_body_sums_bitwise(name):
         # this case no longer holds a -0 term of its own (the signed-zero check above still runs on every table)
         raw = E.numpy_apply(E.REGISTRY["angular_damping"].code)(every[:, E.ROW_PARAMS:].repeat(N, 0), x, None, m, I)
         assert not np.signbit(raw[1][:4]).any() and not np.signbit(got[1][:4]).any()
+    if name == "a negative zero term":  # the kernel's force x is m times -0 = -0 on every body; the sum, as C's, +0
+        raw = E.numpy_apply(E.REGISTRY["gravity"].code)(every[:, E.ROW_PARAMS:].repeat(N, 0), x, None, m, I)
+        assert np.signbit(raw[0][:, 0]).all() and not np.signbit(got[0][:, 0]).any()
