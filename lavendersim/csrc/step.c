@@ -370,22 +370,24 @@ static inline long advance_block(double *state, const double *params, const long
    Every torque-free RK4 body of the default paths takes it (the scalar blocks, the SIMD tiles per lane); the
    NumPy backend does the same operations (numpy_backend._free_rk4_h), so C = NumPy bitwise. */
 #define LV_H_ROWS (LV_STATE_Q_LEN + LV_STATE_OMEGA_B_LEN) /* y = (q, omega_b) */
-#define LV_H_FOR(stmt) for (i = 0; i < LV_H_ROWS; i++) stmt
-#define LV_H_AT(v) v[i]
+#define LV_H_FOR(stmt) for (i_h_ = 0; i_h_ < LV_H_ROWS; i_h_++) stmt
+#define LV_H_AT(v) v[i_h_]
 /* y = (q, omega_b) of x after one step of the scaled-increment stages with the increments RHS(in, out) (on y's rows),
-   q normalized when asked. */
+   q normalized when asked: the one staging of every body that steps its rotation alone (lv_rot_free_h,
+   lv_rot_torque_h, the decoupled LV_SPLIT_RK4_H); lv_h_store writes y back. */
 #define LV_H_STAGES(x, y, RHS, normalize)                                                              \
     do {                                                                                                \
-        double H[LV_H_ROWS], acc[LV_H_ROWS], tmp[LV_H_ROWS];                                            \
-        for (i = 0; i < LV_STATE_Q_LEN; i++) y[i] = x[LV_STATE_Q + i];                                  \
-        for (i = 0; i < LV_STATE_OMEGA_B_LEN; i++) y[LV_STATE_Q_LEN + i] = x[LV_STATE_OMEGA_B + i];     \
-        LV_RK4_SCALED_STEP(double, RHS, LV_H_FOR, LV_H_AT, y, y, H, acc, tmp);                          \
+        double H_h_[LV_H_ROWS], acc_h_[LV_H_ROWS], tmp_h_[LV_H_ROWS];                                   \
+        int i_h_;                                                                                       \
+        for (i_h_ = 0; i_h_ < LV_STATE_Q_LEN; i_h_++) (y)[i_h_] = (x)[LV_STATE_Q + i_h_];               \
+        for (i_h_ = 0; i_h_ < LV_STATE_OMEGA_B_LEN; i_h_++)                                             \
+            (y)[LV_STATE_Q_LEN + i_h_] = (x)[LV_STATE_OMEGA_B + i_h_];                                  \
+        LV_RK4_SCALED_STEP(double, RHS, LV_H_FOR, LV_H_AT, y, y, H_h_, acc_h_, tmp_h_);                 \
         if (normalize) lv_quat_normalize(y, y);                                                         \
     } while (0)
 /* (q, omega_b) of a torque-free body (rigid_body_increments_free_c on C, hq) into y. */
 static inline void lv_rot_free_h(const double *x, double *y, const double *C, double hq, int normalize)
 {
-    int i;
 #define LV_H_RHS(in, out) lv_rigid_body_increments_free_c(in, in + LV_STATE_Q_LEN, C, hq, out, out + LV_STATE_Q_LEN)
     LV_H_STAGES(x, y, LV_H_RHS, normalize);
 #undef LV_H_RHS
@@ -394,7 +396,6 @@ static inline void lv_rot_free_h(const double *x, double *y, const double *C, do
    constants T_w of rigid_body_torque_constants) into y. */
 static inline void lv_rot_torque_h(const double *x, double *y, const double *S, const double *T_w, int normalize)
 {
-    int i;
 #define LV_H_RHS(in, out) lv_rigid_body_increments_torque_h(in, in + LV_STATE_Q_LEN, S, T_w, out, out + LV_STATE_Q_LEN)
     LV_H_STAGES(x, y, LV_H_RHS, normalize);
 #undef LV_H_RHS
@@ -408,28 +409,22 @@ static inline void lv_h_store(const double *y, double *xn)
 }
 
 /* One decoupled RK4 step of one body (class + LV_RHS_SPLIT), x -> xn: the rotation (q, omega_b) alone through the
-   scaled-increment stages (LV_RK4_SCALED_STEP, as lv_free_rk4_h), RHS its increments: LV_SPLIT_H_RHS_1 torque-free
+   scaled-increment stages (LV_H_STAGES, as lv_free_rk4_h), RHS its increments: LV_SPLIT_H_RHS_1 torque-free
    (LV_RHS_SPLIT_<kind> 1), LV_SPLIT_H_ROT_B(in, out, SUMS) (2) the body-frame torque sums SUMS(xs, F, tau) at each
    stage input (xs: the body's 13 numbers with q and
    omega_b replaced; the torques read neither p_w nor v_w) and rigid_body_increments_rot_b_c, on the body's constants
    sc (rigid_body_increment_scale); then p_w, v_w by the printed translation_flow on the constants tf
    (translation_flow_scale, lv_split_flow_scale). The tiles (batch_simd.h LV_TILE_RK4_SPLIT) do the same per lane. */
-#define LV_SPLIT_RK4_H(RHS, x, xn, sc, tf, normalize)                                         \
+#define LV_SPLIT_RK4_H(RHS, x, xn, sc, tf, normalize)                                                  \
     do {                                                                                                \
-        double xs_[LV_STATE_SIZE], y_[LV_H_ROWS], H_[LV_H_ROWS], acc_[LV_H_ROWS], tmp_[LV_H_ROWS];      \
+        double xs_[LV_STATE_SIZE], y_[LV_H_ROWS];                                                       \
         int i_;                                                                                         \
         for (i_ = 0; i_ < LV_STATE_SIZE; i_++) xs_[i_] = (x)[i_];                                        \
         (void)xs_; /* (read by the torque sums of LV_SPLIT_H_ROT_B only) */                             \
-        for (i_ = 0; i_ < LV_STATE_Q_LEN; i_++) y_[i_] = (x)[LV_STATE_Q + i_];                           \
-        for (i_ = 0; i_ < LV_STATE_OMEGA_B_LEN; i_++) y_[LV_STATE_Q_LEN + i_] = (x)[LV_STATE_OMEGA_B + i_]; \
-        LV_RK4_SCALED_STEP(double, RHS, LV_SPLIT_H_FOR, LV_SPLIT_H_AT, y_, y_, H_, acc_, tmp_); \
-        if (normalize) lv_quat_normalize(y_, y_);                                                       \
+        LV_H_STAGES(x, y_, RHS, normalize);                                                             \
         lv_translation_flow((x) + LV_STATE_P_W, (x) + LV_STATE_V_W, tf, (xn) + LV_STATE_P_W, (xn) + LV_STATE_V_W); \
-        for (i_ = 0; i_ < LV_STATE_Q_LEN; i_++) (xn)[LV_STATE_Q + i_] = y_[i_];                          \
-        for (i_ = 0; i_ < LV_STATE_OMEGA_B_LEN; i_++) (xn)[LV_STATE_OMEGA_B + i_] = y_[LV_STATE_Q_LEN + i_]; \
+        lv_h_store(y_, xn);                                                                             \
     } while (0)
-#define LV_SPLIT_H_FOR(stmt) for (i_ = 0; i_ < LV_H_ROWS; i_++) stmt
-#define LV_SPLIT_H_AT(v) v[i_]
 #define LV_SPLIT_H_RHS_1(in, out) lv_rigid_body_increments_free_c(in, in + LV_STATE_Q_LEN, sc + LV_INC_SCALE_C,  \
     sc[LV_INC_SCALE_HQ], out, out + LV_STATE_Q_LEN)
 #define LV_SPLIT_H_ROT_B(in, out, SUMS)                                                                    \
