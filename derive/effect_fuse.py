@@ -221,12 +221,14 @@ def pipeline_kernels() -> dict[str, dict[str, tuple[tuple[str, tuple[str, ...]],
 
 
 def meta_extra() -> dict:
-    """effects_meta.py's printed rule (the NumPy backend's copy of the table): RHS_BITS, RHS_KINDS_BY_FLAGS and
-    RHS_KERNELS (each kind's right-hand side as Sim.pipeline names it)."""
+    """effects_meta.py's printed rule (the NumPy backend's copy of the table): RHS_BITS, RHS_KINDS_BY_FLAGS,
+    RHS_KERNELS (each kind's right-hand side as Sim.pipeline names it), the NumPy classes (RHS_CLASSES,
+    RHS_CLASS_OF_KIND) and how each steps decoupled (RHS_SPLIT_BY_CLASS)."""
     return {"rhs_bits": RHS_BITS, "rhs_kinds_by_flags": kinds_by_flags(),
             "rhs_kernels": {k: RHS_OF_KIND[k].pipeline for k in TILE_KINDS},
             "rhs_increments": {k: RHS_OF_KIND[k].inc[0] for k in TILE_KINDS},
-            "flag_coupled": E.FLAG_COUPLED, "rhs_split": SPLIT_OF_KIND,
+            "flag_coupled": E.FLAG_COUPLED, "rhs_split": SPLIT_OF_KIND, "rhs_classes": NUMPY_CLASSES,
+            "rhs_class_of_kind": NUMPY_CLASS_OF_KIND, "rhs_split_by_class": split_by_class(),
             "inc_scale_c": (INC_C.start, INC_C.stop), "inc_scale_hq": INC_HQ, "rhs_constant": CONSTANT_KINDS,
             "pipeline_kernels": pipeline_kernels()}
 
@@ -260,6 +262,23 @@ def patterns(effects: Sequence[tuple[int, E.EffectDecl]]) -> list[tuple[int, tup
 # torque-free (1: rigid_body_increments_free_c) or under the body-frame torque sums (2: rigid_body_increments_rot_b_c),
 # their translation by translation_flow. World torques (TORQUE, FULL) keep the 13-number stages.
 SPLIT_OF_KIND = {"TORQUE": 0, "FULL": 0, "FORCE": 1, "BODY": 2, "BODY_F": 2}
+# The NumPy backends' right-hand-side classes (lavendersim.effects RHS_FULL, RHS_FORCE, RHS_BODY, RHS_BODY_F): the tile
+# kinds with TORQUE merged into FULL (a world torque alone runs rigid_body_rhs_c there on a zero force, bitwise the
+# torque-only kernel). Printed into effects_meta: RHS_CLASSES, RHS_CLASS_OF_KIND, RHS_SPLIT_BY_CLASS.
+NUMPY_CLASSES = ("FULL", "FORCE", "BODY", "BODY_F")
+NUMPY_CLASS_OF_KIND = {k: NUMPY_CLASSES.index("FULL" if k == "TORQUE" else k) for k in TILE_KINDS}
+
+
+def split_by_class() -> tuple[int, ...]:
+    """SPLIT_OF_KIND per NumPy class (NUMPY_CLASSES order): how a decoupled body of the class steps its rotation (0: the
+    13-number stages). The kinds a class merges must agree."""
+    out = []
+    for c, name in enumerate(NUMPY_CLASSES):
+        splits = {SPLIT_OF_KIND[k] for k in TILE_KINDS if NUMPY_CLASS_OF_KIND[k] == c}
+        if len(splits) != 1:
+            raise RuntimeError(f"derive: the kinds of NumPy class {name} step decoupled differently: {sorted(splits)}")
+        out.append(splits.pop())
+    return tuple(out)
 
 
 def pattern_split(effects: Sequence[tuple[int, E.EffectDecl]], codes: tuple[int, ...]) -> bool:

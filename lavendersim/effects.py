@@ -44,9 +44,9 @@ USER_CODE_BASE = _META.USER_CODE_BASE
 FLAG_USES_V, FLAG_USES_OMEGA, FLAG_FORCE = _META.FLAG_USES_V, _META.FLAG_USES_OMEGA, _META.FLAG_FORCE
 FLAG_TORQUE_W, FLAG_TORQUE_B = _META.FLAG_TORQUE_W, _META.FLAG_TORQUE_B
 # Right-hand side classes of plain bodies with effects (rhs_classes), the NumPy backend's codes of the kinds derive
-# prints (TORQUE, world torques only, runs the FULL kernel here: bitwise the same, as in C)
-RHS_FULL, RHS_FORCE, RHS_BODY, RHS_BODY_F = 0, 1, 2, 3
-_RHS_OF_KIND = {"TORQUE": RHS_FULL, "FULL": RHS_FULL, "FORCE": RHS_FORCE, "BODY": RHS_BODY, "BODY_F": RHS_BODY_F}
+# prints (RHS_CLASS_OF_KIND: TORQUE, world torques only, runs the FULL kernel here: bitwise the same, as in C)
+RHS_FULL, RHS_FORCE, RHS_BODY, RHS_BODY_F = (_META.RHS_CLASSES.index(k) for k in ("FULL", "FORCE", "BODY", "BODY_F"))
+_RHS_OF_KIND = _META.RHS_CLASS_OF_KIND
 # the printed rule (derive/effect_fuse.py tile_kind): class per combination of the flags RHS_BITS
 RHS_BITS: tuple[int, ...] = _META.RHS_BITS
 _RHS_BY_INDEX = np.array([_RHS_OF_KIND[k] for k in _META.RHS_KINDS_BY_FLAGS], dtype=np.intp)
@@ -54,7 +54,7 @@ _RHS_BY_INDEX = np.array([_RHS_OF_KIND[k] for k in _META.RHS_KINDS_BY_FLAGS], dt
 # all built-in, not all constant; derive/effect_fuse.py SPLIT_OF_KIND): 0 the 13-number stages, 1 its rotation staged
 # torque-free, 2 under its body-frame torque sums; its translation then by the printed translation_flow
 FLAG_COUPLED, FLAG_USES_STATE = _META.FLAG_COUPLED, _META.FLAG_USES_STATE
-RHS_SPLIT = {_RHS_OF_KIND[k]: v for k, v in _META.RHS_SPLIT.items() if k != "TORQUE"}
+RHS_SPLIT: tuple[int, ...] = _META.RHS_SPLIT_BY_CLASS   # by class (RHS_FULL ...)
 INC_SCALE_C, INC_SCALE_HQ = slice(*_META.INC_SCALE_C), _META.INC_SCALE_HQ   # C_b and h_q within the increments' S
 
 

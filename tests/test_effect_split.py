@@ -31,6 +31,29 @@ def test_rk4_affine_flow_is_its_stability_polynomials():
     assert [e.subs(z, 0) for e in (R, P, Q, S)] == [1, 1, 1, sp.Rational(1, 2)]   # the constant-acceleration flow
 
 
+def test_numpy_classes_step_decoupled_as_their_kinds_do_in_c():
+    """The NumPy backends' split table (effects.RHS_SPLIT, printed by derive per NumPy class: RHS_SPLIT_BY_CLASS) says,
+    for every kind C dispatches on (kernels.h LV_RHS_SPLIT_<kind>, effects_meta RHS_SPLIT), what C does; the kinds a
+    class merges (TORQUE into FULL) agree, and every class is some kind's."""
+    from lavendersim import effects as E
+    from lavendersim.derive import effect_fuse as EF
+    from lavendersim.generated import effects_meta as M
+    assert set(M.RHS_CLASS_OF_KIND) == set(M.RHS_SPLIT) == set(EF.TILE_KINDS)
+    for kind, split in M.RHS_SPLIT.items():
+        assert E.RHS_SPLIT[M.RHS_CLASS_OF_KIND[kind]] == split, kind
+    assert sorted(set(M.RHS_CLASS_OF_KIND.values())) == list(range(len(M.RHS_CLASSES))) == list(range(len(E.RHS_SPLIT)))
+    assert (E.RHS_FULL, E.RHS_FORCE, E.RHS_BODY, E.RHS_BODY_F) == tuple(M.RHS_CLASS_OF_KIND[k] for k in
+                                                                       ("FULL", "FORCE", "BODY", "BODY_F"))
+    saved = dict(EF.SPLIT_OF_KIND)
+    try:
+        EF.SPLIT_OF_KIND["TORQUE"] = 2       # TORQUE and FULL share a NumPy class: they must step alike
+        with pytest.raises(RuntimeError, match="FULL"):
+            EF.split_by_class()
+    finally:
+        EF.SPLIT_OF_KIND.clear()
+        EF.SPLIT_OF_KIND.update(saved)
+
+
 def test_derive_decides_which_effects_couple():
     flags = {d.name: d.flags for d in DE.declarations() if d.kind == "force"}
     for name in ("gravity", "linear_damping", "angular_damping", "applied_torque", "force_at_point"):
