@@ -10,6 +10,16 @@ from .generated import effects_meta as _META
 from .generated import tableaux as _TAB
 
 
+# The integrator families whose steps run structured kernels of their own (an implicit solve, the exp-map update):
+# a pipeline line names them, not the kernels inside (derive/tableaux.py declares each integrator's family).
+_NOT_ITEMIZED_FAMILIES = frozenset({"implicit", "lie_group_rk"})
+
+
+def itemized(integrator: str) -> bool:
+    """Whether plain_kernels itemizes the step of integrator (a built-in name or a user tableau's: explicit)."""
+    return _TAB.INTEGRATOR_FAMILY.get(integrator, "explicit_rk") not in _NOT_ITEMIZED_FAMILIES
+
+
 def body_kind(flags: int) -> str:
     """The right-hand-side kind (TORQUE, FULL, FORCE, BODY, BODY_F) of a plain body whose effects' rhs_flags OR to
     `flags` (at least one effect): derive's rule, printed as effects_meta.RHS_KINDS_BY_FLAGS."""

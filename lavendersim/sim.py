@@ -1236,7 +1236,7 @@ class Sim:
         flags = int(np.bitwise_or.reduce([e.spec.rhs_flags for e in mine])) if mine else 0
         user = any(e.spec.user_set is not None for e in mine)
         terms = " + ".join(e.describe() for e in mine) if mine else "torque- and force-free (no effect terms)"
-        if self.dtype == "float64" and self.integrator not in ("implicit_gyro", "rk4_expmap"):
+        if self.dtype == "float64" and pipeline_mod.itemized(self.integrator):
             return f"{terms} -> {pipeline_mod.plain_kernels(self.backend.name, self.integrator, flags, user)}"
         # float32 (its own loops: csrc/fixed_loop.h) and the two structured steps: not itemized
         kind = pipeline_mod.body_kind(flags) if flags or user else "torque-free"

@@ -172,3 +172,13 @@ def test_float32_lines_say_they_are_not_itemized():
     sim = lv.Sim(scene(), dt=1e-3, backend="numpy", dtype="float32")
     assert all(line.endswith("(its kernels are not itemized)") for line in sim.pipeline[1:])
     assert "a torque-free body" in sim.pipeline[1] and "FORCE body" in sim.pipeline[2]
+
+
+@pytest.mark.parametrize("integrator", ["implicit_gyro", "rk4_expmap"])
+def test_structured_steps_say_they_are_not_itemized(integrator):
+    """The implicit solve and the exp-map update run kernels of their own (their family, derive/tableaux.py): the
+    line says so and names no right-hand side; an explicit tableau of the same Sim is itemized."""
+    sim = lv.Sim(scene(), dt=1e-3, backend="numpy", integrator=integrator)
+    assert all(line.endswith("(its kernels are not itemized)") for line in sim.pipeline[1:])
+    assert not PL.kernel_names(sim.pipeline[1:])
+    assert not PL.itemized(integrator) and PL.itemized("rk4") and PL.itemized("a_user_tableau")
