@@ -103,7 +103,8 @@ static inline void LV_FN(rhs)(const LV_FN(tile) *LV_RESTRICT t, long b, int kind
 /* The torque-free RK4 step of body b of tile t, x -> x (q not normalized), in the scaled-increment form (derive/
    tableaux.py scaled_program; tableaux.h LV_RK4_SCALED_STEP), csrc/step.c's lv_free_rk4_h in this precision (and
    numpy_backend._free_rk4_h on a float32 plan): q and omega_b through the stages on the printed increments (constants
-   t->K and hq = (LV_RK4_SCALE dt) LV_QUAT_RATE_SCALE), p_w by the printed translation_drift with v_w, v_w kept. */
+   t->K and hq of the printed rigid_body_increment_scale_free, LV_FN(tile_steps)), p_w by the printed
+   translation_drift with v_w, v_w kept. */
 #define LV_FIXED_H_ROWS (LV_STATE_Q_LEN + LV_STATE_OMEGA_B_LEN) /* y = (q, omega_b) */
 static inline void LV_FN(free_rk4_h)(const LV_FN(tile) *LV_RESTRICT t, long b, LV_REAL *x, LV_REAL hq, LV_REAL dt)
 {
@@ -158,12 +159,18 @@ static inline void LV_FN(body_step)(const LV_FN(tile) *LV_RESTRICT t, long b, LV
 static inline void LV_FN(tile_steps)(LV_FN(tile) *LV_RESTRICT t, int kind, int integrator, int normalize, LV_REAL dt,
                                      long n_steps)
 {
-    const LV_REAL sdt = (LV_REAL)LV_RK4_SCALE * dt, hq = sdt * (LV_REAL)LV_QUAT_RATE_SCALE;
+    const LV_REAL sdt = (LV_REAL)LV_RK4_SCALE * dt;
+    LV_REAL hq = (LV_REAL)0;
     long s, b;
     int i;
-    if (kind == LV_FIXED_FREE && integrator == LV_PATH_RK4) /* LV_FN(free_rk4_h)'s constants, as lv_free_rk4_scale */
-        for (i = 0; i < LV_EULER_K_LEN; i++)
-            for (b = 0; b < t->nt; b++) t->K[i][b] = sdt * t->C[LV_EULER_K + i][b];
+    if (kind == LV_FIXED_FREE && integrator == LV_PATH_RK4) /* LV_FN(free_rk4_h)'s constants, as lv_free_rk4_scale: */
+        for (b = 0; b < t->nt; b++) { /* the printed rigid_body_increment_scale_free (hq: the same for every body) */
+            LV_REAL cb[LV_EULER_SIZE], Cb[LV_EULER_K_LEN], hb;
+            for (i = 0; i < LV_EULER_SIZE; i++) cb[i] = t->C[i][b];
+            LV_K(rigid_body_increment_scale_free)(cb, sdt, Cb, &hb);
+            for (i = 0; i < LV_EULER_K_LEN; i++) t->K[i][b] = Cb[i];
+            hq = hb;
+        }
     for (s = 0; s < n_steps; s++) {
         for (b = 0; b < t->nt; b++) {
             LV_REAL x[LV_STATE_SIZE];
