@@ -224,53 +224,40 @@ static inline int rhs_class(long n_refs, int flags)
     return n_refs == 0 ? LV_RHS_FREE : LV_RHS_BY_FLAGS[LV_RHS_FLAGS_INDEX(flags)];
 }
 
-/* d/dt of one plain body with effects (refs) of class cls (rhs_class, no LV_RHS_CONSTANT), cf its Euler
-   coefficients: the effects' sums in table order (their body-frame forms where the class says so), then its class's
-   right-hand side, both derive's rule (kernels.h's LV_RHS_BODY_FRAME_<kind>, LV_RHS_CALL_<kind>), as the tiles take
-   them. */
-static inline void plain_rhs(int cls, const double *x, double m, const double *I_b, const double *cf,
-                             const lv_effect_ref *refs, long n_refs, double *xdot)
-{
-    double F[3] = {0.0, 0.0, 0.0}, tau[3] = {0.0, 0.0, 0.0};
-#define LV_PLAIN_RHS_OF(KIND)                                                                           \
+/* One plain body with effects (refs) of class cls (rhs_class, no LV_RHS_CONSTANT): the effects' sums in table order
+   (their body-frame forms where the class says so), then CALL<kind>(x, m, K, F, tau, out) of its class, both derive's
+   rule (kernels.h's LV_RHS_BODY_FRAME_<kind>; LV_RHS_CALL_<kind> / LV_RHS_INC_<kind>), as the tiles take them; the
+   general kind FULL for any other class (none has effects: rhs_class gives one of the kinds). LV_PLAIN_BY_CLASS
+   writes the function NAME(cls, x, m, I_b, K, refs, n_refs, out) of one CALL, CASE its switch's case. */
+#define LV_PLAIN_OF(KIND, CALL, K)                                                                      \
     if (LV_RHS_BODY_FRAME_##KIND)                                                                       \
         effect_sums_b(x, x + LV_STATE_V_W, m, I_b, refs, n_refs, F, tau);                               \
     else                                                                                                \
         effect_sums(x, x + LV_STATE_V_W, m, I_b, refs, n_refs, F, tau);                                 \
-    LV_RHS_CALL_##KIND(x, m, cf, F, tau, xdot);                                                         \
+    CALL##KIND(x, m, K, F, tau, out);                                                                   \
     return;
-#define LV_PLAIN_RHS_CASE(KIND) case LV_RHS_##KIND: { LV_PLAIN_RHS_OF(KIND) }
-    switch (cls) {
-    LV_RHS_KINDS(LV_PLAIN_RHS_CASE)
-    default: break;
+#define LV_PLAIN_BY_CLASS(NAME, CASE, CALL, K)                                                          \
+    static inline void NAME(int cls, const double *x, double m, const double *I_b, const double *K,     \
+                            const lv_effect_ref *refs, long n_refs, double *out)                        \
+    {                                                                                                   \
+        double F[3] = {0.0, 0.0, 0.0}, tau[3] = {0.0, 0.0, 0.0};                                        \
+        switch (cls) {                                                                                  \
+        LV_RHS_KINDS(CASE)                                                                              \
+        default: break;                                                                                 \
+        }                                                                                               \
+        LV_PLAIN_OF(FULL, CALL, K)                                                                      \
     }
-    LV_PLAIN_RHS_OF(FULL) /* (no other class has effects: rhs_class gives one of the kinds; the general one) */
-#undef LV_PLAIN_RHS_CASE
-#undef LV_PLAIN_RHS_OF
-}
-
-/* plain_rhs's scaled increments H = (s dt) d/dt x (the built-in RK4's scaled-increment form): the same sums, then the
-   class's increments kernel (kernels.h's LV_RHS_INC_<kind>) on the body's constants sc (rigid_body_increment_scale). */
-static inline void plain_inc(int cls, const double *x, double m, const double *I_b, const double *sc,
-                             const lv_effect_ref *refs, long n_refs, double *H)
-{
-    double F[3] = {0.0, 0.0, 0.0}, tau[3] = {0.0, 0.0, 0.0};
-#define LV_PLAIN_INC_OF(KIND)                                                                           \
-    if (LV_RHS_BODY_FRAME_##KIND)                                                                       \
-        effect_sums_b(x, x + LV_STATE_V_W, m, I_b, refs, n_refs, F, tau);                               \
-    else                                                                                                \
-        effect_sums(x, x + LV_STATE_V_W, m, I_b, refs, n_refs, F, tau);                                 \
-    LV_RHS_INC_##KIND(x, m, sc, F, tau, H);                                                             \
-    return;
-#define LV_PLAIN_INC_CASE(KIND) case LV_RHS_##KIND: { LV_PLAIN_INC_OF(KIND) }
-    switch (cls) {
-    LV_RHS_KINDS(LV_PLAIN_INC_CASE)
-    default: break;
-    }
-    LV_PLAIN_INC_OF(FULL)
+/* plain_rhs: d/dt x (out) on the body's Euler coefficients cf (LV_RHS_CALL_<kind>). */
+#define LV_PLAIN_RHS_CASE(KIND) case LV_RHS_##KIND: { LV_PLAIN_OF(KIND, LV_RHS_CALL_, cf) }
+LV_PLAIN_BY_CLASS(plain_rhs, LV_PLAIN_RHS_CASE, LV_RHS_CALL_, cf)
+/* plain_inc: the scaled increments H = (s dt) d/dt x (out; the built-in RK4's scaled-increment form) on the body's
+   constants sc (rigid_body_increment_scale; LV_RHS_INC_<kind>). */
+#define LV_PLAIN_INC_CASE(KIND) case LV_RHS_##KIND: { LV_PLAIN_OF(KIND, LV_RHS_INC_, sc) }
+LV_PLAIN_BY_CLASS(plain_inc, LV_PLAIN_INC_CASE, LV_RHS_INC_, sc)
 #undef LV_PLAIN_INC_CASE
-#undef LV_PLAIN_INC_OF
-}
+#undef LV_PLAIN_RHS_CASE
+#undef LV_PLAIN_BY_CLASS
+#undef LV_PLAIN_OF
 
 /* d/dt of one plain body's state: the free kernel when no effect applies, else plain_rhs by its class. */
 static void body_rhs(const double *x, const double *prm, const lv_effect_ref *refs, long n_refs, int flags,
