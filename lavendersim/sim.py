@@ -557,6 +557,13 @@ class Sim:
         if self.dtype == "float32":
             self._x = self._x.astype(np.float32)
             self._step_params, self._step_effects = self._params.astype(np.float32), self._effects.astype(np.float32)
+        # C: what a backend call decides from the effect table and model rows (the effect index, the bodies' order),
+        # kept by this Sim from call to call (c_backend.call_cache: a large scene's chunk builds none of it)
+        self._c_cache = None
+        if self.backend.name == "c" and self.dtype == "float64":
+            from .backends import c_backend
+
+            self._c_cache = c_backend.call_cache(len(self.names), self._has_models)
         self._dirty = True         # the state was written since the last check (see _is_checked)
         self._snap_buf: tuple[np.ndarray, ...] | None = None      # _advance's reusable snapshot buffers
         self._check_decays(self._effects, "Sim")
@@ -1251,7 +1258,8 @@ class Sim:
         before = None if ad is None else ad.nfev.copy()
         self.backend.advance(self._x, self._step_params, self._step_effects, self.integrator, self.normalize, self.dt, n, models,
                              *(() if ad is None else (ad,)), restore=restore,
-                             **({"contract": self.contract} if self.contract != "off" else {}))
+                             **({"contract": self.contract} if self.contract != "off" else {}),
+                             **({"cache": self._c_cache} if self._c_cache is not None else {}))
         if ad is None or before is None:
             assert self._per_step is not None   # (a fixed-step integrator)
             self._ctr.rhs_evals += n * self._per_step

@@ -371,6 +371,26 @@ def isa() -> dict:
     return {"current": name, "best": best_name}
 
 
+def call_cache(nb: int, models: bool) -> Any:
+    """What a C call decides per call from the effect table (and the model rows), kept across calls for a caller
+    that advances the same nb bodies call after call (Sim): pass it as ``CBackend.advance(..., cache=...)``.
+
+    Parameters
+    ----------
+    nb : int
+        The bodies the calls step (>= 1).
+    models : bool
+        The calls pass model rows (joints, wheels): their per-body entries are kept too, compared bytewise per call.
+
+    Returns
+    -------
+    object or None
+        An opaque handle (freed with it), or None with an extension built before it existed.
+    """
+    f = getattr(_c, "call_cache", None)
+    return None if f is None else f(int(nb), bool(models))
+
+
 def contract_available() -> bool:
     """Whether ``contract="fma"`` has its FMA copy of the torque-free RK4 SIMD tiles here (a GCC build on a CPU with
     AVX2 and FMA); without it that mode steps bitwise. An extension built before the copy existed: False."""
@@ -386,7 +406,7 @@ class CBackend:
 
     def advance(self, state, params, effects, integrator: str, normalize: bool, dt: float, n_steps: int,
                 models: Models | None = None, adaptive: Adaptive | None = None, *, restore: bool = True,
-                contract: str = "off") -> None:
+                contract: str = "off", cache: Any = None) -> None:
         """Advance every body by n_steps steps inside C, in place (see lavendersim.backends).
 
         Parameters
@@ -418,6 +438,10 @@ class CBackend:
         contract : {"off", "fma"}, optional
             "off" (default): bitwise. "fma": the torque-free RK4 SIMD tiles run their FMA copy where it exists
             (:func:`contract_available`; results differ from "off" in the last bits); every other path is bitwise.
+        cache : object, optional
+            A :func:`call_cache` for these arrays, passed call after call (float64): what a call decides from the
+            effect table and the model rows (the effect index, the order of the bodies) is kept in it instead of built
+            per call. The same numbers with or without it; one call at a time per cache.
 
         Raises
         ------
@@ -469,9 +493,10 @@ class CBackend:
             extra = extra + (None, None, 0.0, 0.0)
         extra = extra + (user, None if tab is None else _tableau_arg(tab),
                          adaptive.dense if adaptive is not None and integrator in TABLEAUX.ADAPTIVE else None)
+        tail = ((1 if contract == "fma" else 0, cache) if cache is not None
+                else (1,) if contract == "fma" else ())   # (an extension before 1: no arg)
         status, step, body = _c.simulate(state, params, effects, INTEGRATOR_CODES.get(integrator, 0),
-                                         1 if normalize else 0, float(dt), int(n_steps), *extra,
-                                         *((1,) if contract == "fma" else ()))   # (an extension before 1: no arg)
+                                         1 if normalize else 0, float(dt), int(n_steps), *extra, *tail)
         if status == TABLEAUX.STATUS_OK:
             return
         if snapshot is None:   # (restore False: no copy of the state was taken)

@@ -150,9 +150,11 @@ static int stepper_init(Stepper *s, PyObject *args, PyObject *kw)
         s->models.Omega = (double *)s->buf[FS_OMEGA].buf;
         s->models.command = (const double *)s->buf[FS_COMMAND].buf;
         s->models.applied = (double *)s->buf[FS_APPLIED].buf;
-        s->models.cache = lv_model_cache_new((long)nb, 1);   /* marked: Sim reports its writes (rows_written) */
-        if (s->models.cache == NULL) { PyErr_NoMemory(); return -1; }
     }
+    /* marked: Sim reports its writes to the rows (rows_written); a plain scene's keeps only the effect index and the
+       bodies' order (no model entries) */
+    s->models.cache = lv_model_cache_new(s->has_models ? (long)nb : 0, 1);
+    if (s->models.cache == NULL) { PyErr_NoMemory(); return -1; }
     if (s->adaptive && (take(s, FS_H, h_obj, 1, nb, "h") != 0 || take(s, FS_NFEV, nfev_obj, 1, nb, "nfev") != 0
                         || (dense_obj != Py_None && take(s, FS_DENSE, dense_obj, 1, nb * LV_DENSE_SIZE, "dense") != 0)))
         return -1;
@@ -341,7 +343,7 @@ static int fast_step(Stepper *s, long n)
     }
     status = lv_simulate((double *)s->buf[FS_STATE].buf, (const double *)s->buf[FS_PARAMS].buf, s->nb,
                          (const double *)s->buf[FS_EFFECTS].buf, s->ne, s->row_size, s->user.n ? &s->user : NULL,
-                         s->has_models ? &s->models : NULL, s->integrator, s->normalize, s->dt, n,
+                         s->has_models ? &s->models : NULL, s->models.cache, s->integrator, s->normalize, s->dt, n,
                          s->adaptive ? &ad : NULL, NULL, &fail_step, &fail_body);
     /* lv_simulate checks its arguments (effect codes and bodies, model kinds) before it writes anything: a table it
        rejects, as a step that fails a check, goes to the Python path, which raises the named error */

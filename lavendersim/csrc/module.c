@@ -311,6 +311,8 @@ static PyObject *py_call_kernel(PyObject *self, PyObject *const *args, Py_ssize_
     return res;
 }
 
+#define LV_CALL_CACHE "lavendersim.call_cache" /* the capsule name of call_cache (below) */
+
 static PyObject *py_simulate(PyObject *self, PyObject *args)
 {
     PyObject *state_obj, *params_obj, *effects_obj;
@@ -327,7 +329,8 @@ static PyObject *py_simulate(PyObject *self, PyObject *args)
     double rtol = 0.0, atol = 0.0;
     Py_buffer hb, nf, dn;
     int have_h = 0, have_nf = 0, have_dn = 0;
-    PyObject *dense_obj = Py_None;
+    PyObject *dense_obj = Py_None, *cache_obj = Py_None;
+    lv_model_cache *kept = NULL;
     int contract = LV_CONTRACT_OFF, contract_was;
     lv_adaptive adaptive;
     int integrator, normalize, n_models, adaptive_rk;
@@ -340,10 +343,12 @@ static PyObject *py_simulate(PyObject *self, PyObject *args)
     lv_models models;
     int status;
     (void)self;
-    if (!PyArg_ParseTuple(args, "OOOipdL|OOOOOOddOOOi:simulate", &state_obj, &params_obj, &effects_obj, &integrator,
+    if (!PyArg_ParseTuple(args, "OOOipdL|OOOOOOddOOOiO:simulate", &state_obj, &params_obj, &effects_obj, &integrator,
                           &normalize, &dt, &n_steps_ll, &rows_obj, &omega_obj, &cmd_obj, &app_obj,
-                          &h_obj, &nfev_obj, &rtol, &atol, &user_obj, &tab_obj, &dense_obj, &contract))
+                          &h_obj, &nfev_obj, &rtol, &atol, &user_obj, &tab_obj, &dense_obj, &contract, &cache_obj))
         return NULL;
+    if (cache_obj != Py_None && (kept = (lv_model_cache *)PyCapsule_GetPointer(cache_obj, LV_CALL_CACHE)) == NULL)
+        return NULL;   /* (not a call_cache: PyCapsule_GetPointer set the TypeError / ValueError) */
     if (contract != LV_CONTRACT_OFF && contract != LV_CONTRACT_FMA) {
         PyErr_Format(PyExc_ValueError, "simulate: contract must be 0 (bitwise) or 1 (fma), got %d", contract);
         return NULL;
@@ -473,13 +478,13 @@ static PyObject *py_simulate(PyObject *self, PyObject *args)
         models.Omega = (double *)om.buf;
         models.command = (const double *)cm.buf;
         models.applied = (double *)ap.buf;
-        models.cache = NULL;
+        models.cache = kept;
     }
     if (check_effects((const double *)ef.buf, ne, row_size, nb, user_entries, n_user) != 0) goto fail;
     Py_BEGIN_ALLOW_THREADS
     contract_was = lv_contract_set(contract);
     status = lv_simulate((double *)st.buf, (const double *)pr.buf, (long)nb, (const double *)ef.buf, (long)ne,
-                         (long)row_size, n_user ? &user : NULL, n_models ? &models : NULL, integrator, normalize, dt,
+                         (long)row_size, n_user ? &user : NULL, n_models ? &models : NULL, kept, integrator, normalize, dt,
                          (long)n_steps_ll, have_h ? &adaptive : NULL, have_tab ? &tableau : NULL, &fail_step, &fail_body);
     (void)lv_contract_set(contract_was);
     Py_END_ALLOW_THREADS
@@ -553,6 +558,34 @@ static PyObject *py_contract_available(PyObject *self, PyObject *noargs)
 
 PyObject *lv_py_simulate_f32(PyObject *self, PyObject *args); /* module_f32.c */
 
+/* call_cache(nb, models) -> a capsule holding what lv_simulate decides from the effect table and (models: 1) the model
+   rows of nb bodies, kept from call to call (step.h lv_model_cache: the effect index and the fixed-step order of the
+   bodies, and with models the rows' entries, compared bytewise per call); simulate(..., cache) uses it. One call at a
+   time per cache (a Sim steps under its lock); freed with the capsule. */
+static void call_cache_free(PyObject *capsule)
+{
+    lv_model_cache_free((lv_model_cache *)PyCapsule_GetPointer(capsule, LV_CALL_CACHE));
+}
+
+static PyObject *py_call_cache(PyObject *self, PyObject *args)
+{
+    Py_ssize_t nb;
+    int with_models;
+    lv_model_cache *c;
+    PyObject *capsule;
+    (void)self;
+    if (!PyArg_ParseTuple(args, "np:call_cache", &nb, &with_models)) return NULL;
+    if (nb < 1) {
+        PyErr_SetString(PyExc_ValueError, "call_cache: nb must be >= 1");
+        return NULL;
+    }
+    c = lv_model_cache_new(with_models ? (long)nb : 0, 0);   /* not marked: the rows compared per call */
+    if (c == NULL) return PyErr_NoMemory();
+    capsule = PyCapsule_New(c, LV_CALL_CACHE, call_cache_free);
+    if (capsule == NULL) lv_model_cache_free(c);
+    return capsule;
+}
+
 static PyMethodDef methods[] = {
     {"threads", py_threads, METH_VARARGS,
      "threads([n]) -> n: the threads that share the SIMD tiles (torque-free RK4 groups of >= 16 bodies) and the\n"
@@ -573,11 +606,14 @@ static PyMethodDef methods[] = {
     {"call_kernel", (PyCFunction)(void (*)(void))py_call_kernel, METH_FASTCALL,
      "call_kernel(index, x0, ..., x{n_in-1}) -> float (one output) or tuple of n_out floats: packed kernel `index`\n"
      "on one row of numbers (the inputs in the packed order of eval_kernel)."},
+    {"call_cache", py_call_cache, METH_VARARGS,
+     "call_cache(nb, models) -> capsule: what simulate decides per call from the effect table (and model rows), kept"},
     {"simulate", py_simulate, METH_VARARGS,
      "simulate(state, params, effects, integrator, normalize, dt, n_steps[, model_rows, Omega, command, applied,\n"
-     "         h, nfev, rtol, atol, user_effects, tableau, dense, contract])\n"
+     "         h, nfev, rtol, atol, user_effects, tableau, dense, contract, cache])\n"
      "  -> (status, step, body).\n"
      "contract: 0 (default) bitwise; 1 the FMA copy of the torque-free RK4 tiles (see contract_available).\n"
+     "cache: None, or a call_cache(nb, models) the caller passes call after call (the same numbers either way).\n"
      "state (nb,13) advanced in place; params (nb,4) [m, I_x, I_y, I_z]; effects (ne, >=2) [code, body, parameters...]\n"
      "(built-in codes, see generated/kernels.h, or user codes from LV_EFFECT_USER_BASE with user_effects: int64 (n,3)\n"
      "[function address, n_params, flags] for codes base .. base+n-1; an undeclared code raises ValueError).\n"

@@ -731,6 +731,10 @@ struct lv_index_keep {
     long ne, row_size, nb, user_n;
     const lv_user_effects *user;
     double *keys;   /* ne x 2: each row's code and body when the index was built */
+    lv_user_effect *user_copy;   /* user_n: the user table's entries when it was built (the refs hold their fns) */
+    long *ids;      /* NULL, or advance_fixed's order of the bodies from this index and the model rows as they are
+                       (ids_build; dropped when model_cache_sync makes the rows' entries again) */
+    long count[LV_RHS_CLASSES], n_models;   /* with ids: ids_build's counts */
 };
 
 static void index_keep_free(lv_index_keep *k)
@@ -738,6 +742,8 @@ static void index_keep_free(lv_index_keep *k)
     if (k == NULL) return;
     index_free(&k->ix);
     free(k->keys);
+    free(k->user_copy);
+    free(k->ids);
     free(k);
 }
 
@@ -757,7 +763,8 @@ void lv_model_cache_rows_written(lv_model_cache *c)
     if (c != NULL) c->valid = 0;
 }
 
-/* 1 when index k was built from this table: same address, size, bodies and user table, and every row's code and body
+/* 1 when index k was built from this table: same address, size, bodies and user table (at the same address, with the
+   same entries: a caller may rebuild it per call, module.c simulate), and every row's code and body
    equal to those it was built from (then index_build would build and check the same index: it reads nothing else of
    a row; a NaN compares unequal, so it is built and refused again). */
 static int index_kept(const lv_index_keep *k, const double *effects, long ne, long row_size, long nb,
@@ -765,7 +772,8 @@ static int index_kept(const lv_index_keep *k, const double *effects, long ne, lo
 {
     long e;
     if (k == NULL || k->effects != effects || k->ne != ne || k->row_size != row_size || k->nb != nb || k->user != user
-        || (user != NULL && k->user_n != user->n))
+        || (user != NULL && (k->user_n != user->n || k->user_copy == NULL
+                             || memcmp(k->user_copy, user->entries, (size_t)user->n * sizeof *user->entries) != 0)))
         return 0;
     for (e = 0; e < ne; e++) {
         const double *row = effects + e * row_size;
@@ -800,6 +808,10 @@ static int index_for_call(lv_effect_index *ix, int *owned, lv_model_cache *c, co
         k->keys[2 * e] = effects[e * row_size + LV_EFFECT_ROW_CODE];
         k->keys[2 * e + 1] = effects[e * row_size + LV_EFFECT_ROW_BODY];
     }
+    if (user != NULL && user->n > 0) {   /* (else not kept: index_kept refuses a user table without its copy) */
+        k->user_copy = (lv_user_effect *)malloc((size_t)user->n * sizeof *user->entries);
+        if (k->user_copy != NULL) memcpy(k->user_copy, user->entries, (size_t)user->n * sizeof *user->entries);
+    }
     k->ix = *ix;
     k->effects = effects, k->ne = ne, k->row_size = row_size, k->nb = nb, k->user = user;
     k->user_n = user != NULL ? user->n : 0;
@@ -817,11 +829,15 @@ static void model_cache_sync(const lv_models *md, long nb)
     const size_t n = (size_t)nb * LV_MODEL_SIZE * sizeof(double);
     long b;
     if (c == NULL) return;
+    if (c->valid && c->nb == nb && (c->marked || memcmp(c->rows, md->rows, n) == 0)) return;
+    if (c->index != NULL) {   /* the kept order of the bodies read the rows' kinds: made again */
+        free(c->index->ids);
+        c->index->ids = NULL;
+    }
     if (c->nb != nb) {
         c->valid = 0;
         return;
     }
-    if (c->valid && (c->marked || memcmp(c->rows, md->rows, n) == 0)) return;
     for (b = 0; b < nb; b++) {
         const double *r = md->rows + b * LV_MODEL_SIZE;
         c->kind[b] = lv_step_kind(r);
@@ -2122,31 +2138,82 @@ int lv_threads_set(int threads)
 
 #include "model_simd.h"
 
-/* euler, semi-implicit Euler, rk4 over every body. Bodies with a joint or wheels are stepped one by one
-   (shared over `threads`, see advance_models_threads), except, under RK4 with SIMD on, one group of jointed
-   wheel bodies with the same built-in effects, on model tiles (advance_models_grouped, csrc/model_simd.h); plain bodies in lockstep blocks gathered by their work (rhs_kind): those no effect acts on together
-   (RK4: the torque-free fast path), those with effects by kind, so a plain body never leaves its path
-   because of a neighbour. ids: scratch for nb indices. Returns the status; *limit, *best as in
-   lv_simulate. */
-static int advance_fixed(double *state, const double *params, long nb, const lv_effect_index *ix,
-                         const lv_models *models, int integrator, int normalize, double dt, long n_steps,
-                         int isa, int threads, long *ids, long *limit, long *best)
+/* advance_fixed's order of the nb bodies into ids (nb): the model bodies (ascending) first, then the plain ones grouped
+   by class (rhs_kind), ascending within each; count[cls] the plain bodies of class cls, *n_models the model bodies. It
+   reads the index and the rows' kinds only, so a caller's cache keeps it with the index (ids_for_call). */
+static void ids_build(const lv_effect_index *ix, const lv_models *models, long nb, long *ids, long *count,
+                      long *n_models)
 {
-    double last[LV_BLOCK][LV_STATE_SIZE];
-    long b, k, s, lim, n_models = 0, count[LV_RHS_CLASSES] = {0}, first[LV_RHS_CLASSES];
-    int j, n, cls, status = LV_OK;
+    long b, k, first[LV_RHS_CLASSES];
+    int cls;
+    *n_models = 0;
+    for (cls = 0; cls < LV_RHS_CLASSES; cls++) count[cls] = 0;
     for (b = 0; b < nb; b++) {
-        if (models != NULL && (int)models->rows[b * LV_MODEL_SIZE + LV_MODEL_KIND] != 0) n_models++;
+        if (models != NULL && (int)models->rows[b * LV_MODEL_SIZE + LV_MODEL_KIND] != 0) ++*n_models;
         else count[rhs_kind(ix, b)]++;
     }
-    /* ids: the model bodies (ascending) first, then the plain ones grouped by class (rhs_kind), ascending within
-       each */
-    first[0] = n_models;
+    first[0] = *n_models;
     for (cls = 1; cls < LV_RHS_CLASSES; cls++) first[cls] = first[cls - 1] + count[cls - 1];
     for (b = 0, k = 0; b < nb; b++) {
         if (models != NULL && (int)models->rows[b * LV_MODEL_SIZE + LV_MODEL_KIND] != 0) ids[k++] = b;
         else ids[first[rhs_kind(ix, b)]++] = b;
     }
+}
+
+/* The order of the bodies for a call (ids_build) into count, *n_models: the one cache keeps with the call's index
+   (kept: the index is c's, index_for_call) when it has one, else built, and kept there when the index is; *owned 1
+   when the caller frees the returned ids. A kept order holds a copy of its model bodies' part after its nb + 1
+   entries, put back at each call (advance_models_grouped reorders that part in place). NULL: out of memory. */
+static long *ids_for_call(lv_model_cache *c, int kept, const lv_effect_index *ix, const lv_models *models, long nb,
+                          long *count, long *n_models, int *owned)
+{
+    lv_index_keep *const k = kept && c != NULL ? c->index : NULL;
+    long *ids;
+    *owned = 0;
+    if (k != NULL && k->ids != NULL) {
+        memcpy(count, k->count, sizeof k->count);
+        *n_models = k->n_models;
+        memcpy(k->ids, k->ids + nb + 1, (size_t)k->n_models * sizeof(long));
+        return k->ids;
+    }
+    ids = (long *)malloc(((size_t)nb + 1) * sizeof(long));
+    if (ids == NULL) return NULL;
+    ids_build(ix, models, nb, ids, count, n_models);
+    if (k != NULL && *n_models > 0) {   /* room for the model part's copy (else not kept: built again next call) */
+        long *grown = (long *)realloc(ids, ((size_t)nb + 1 + (size_t)*n_models) * sizeof(long));
+        if (grown == NULL) {
+            *owned = 1;
+            return ids;
+        }
+        ids = grown;
+        memcpy(ids + nb + 1, ids, (size_t)*n_models * sizeof(long));
+    }
+    if (k == NULL) {
+        *owned = 1;
+        return ids;
+    }
+    k->ids = ids;
+    memcpy(k->count, count, sizeof k->count);
+    k->n_models = *n_models;
+    return ids;
+}
+
+/* euler, semi-implicit Euler, rk4 over every body. Bodies with a joint or wheels are stepped one by one
+   (shared over `threads`, see advance_models_threads), except, under RK4 with SIMD on, one group of jointed
+   wheel bodies with the same built-in effects, on model tiles (advance_models_grouped, csrc/model_simd.h); plain bodies in lockstep blocks gathered by their work (rhs_kind): those no effect acts on together
+   (RK4: the torque-free fast path), those with effects by kind, so a plain body never leaves its path
+   because of a neighbour. ids, count, n_models: the order of the bodies (ids_build; advance_models_grouped reorders
+   the model bodies' part). Returns the status; *limit, *best as in lv_simulate. */
+static int advance_fixed(double *state, const double *params, const lv_effect_index *ix,
+                         const lv_models *models, int integrator, int normalize, double dt, long n_steps,
+                         int isa, int threads, long *ids, const long *count, long n_models, long *limit,
+                         long *best)
+{
+    double last[LV_BLOCK][LV_STATE_SIZE];
+    long k, s, lim, first[LV_RHS_CLASSES];
+    int j, n, cls, status = LV_OK;
+    first[0] = n_models + count[0];   /* (each class's list ends at first[cls]) */
+    for (cls = 1; cls < LV_RHS_CLASSES; cls++) first[cls] = first[cls - 1] + count[cls];
     if (n_models > 0 && advance_models_grouped(state, params, models, ix, ids, n_models, integrator, isa, normalize,
                                                dt, n_steps, threads, limit, best) == LV_DIVERGED)
         status = LV_DIVERGED;
@@ -2198,13 +2265,14 @@ static const lv_tableau *builtin_tableau(int integrator)
 
 int lv_simulate(double *state, const double *params, long nb,
                 const double *effects, long ne, long row_size, const lv_user_effects *user,
-                const lv_models *models, int integrator, int normalize, double dt, long n_steps,
-                const lv_adaptive *adaptive, const lv_tableau *tableau, long *fail_step, long *fail_body)
+                const lv_models *models, lv_model_cache *cache, int integrator, int normalize, double dt,
+                long n_steps, const lv_adaptive *adaptive, const lv_tableau *tableau, long *fail_step, long *fail_body)
 {
     lv_effect_index ix;
     double last[LV_BLOCK][LV_STATE_SIZE];
     long b, s, limit = n_steps, best_body = -1, *ids = NULL;
-    int status = LV_OK, ix_owned = 1;
+    int status = LV_OK, ix_owned = 1, ids_owned = 0;
+    if (models != NULL) cache = models->cache;
     if (tableau != NULL && (tableau->s < 1 || tableau->s > LV_TABLEAU_MAX_STAGES || !(tableau->b_den > 0.0)))
         return LV_BAD_ARGUMENT;
     if (tableau == NULL && (integrator < 0 || integrator > LV_INTEGRATOR_LAST)) return LV_BAD_ARGUMENT;
@@ -2218,8 +2286,7 @@ int lv_simulate(double *state, const double *params, long nb,
             if (!lv_kind_valid(kind) || (kind != 0 && tableau == NULL && LV_INTEGRATOR_PLAIN_ONLY(integrator)))
                 return LV_BAD_ARGUMENT;
         }
-    status = index_for_call(&ix, &ix_owned, models != NULL ? models->cache : NULL, effects, ne, row_size, nb, user,
-                            fail_step);
+    status = index_for_call(&ix, &ix_owned, cache, effects, ne, row_size, nb, user, fail_step);
     if (status != LV_OK) return status;
     if (tableau != NULL || LV_INTEGRATOR_ADAPTIVE(integrator)) {
         for (b = 0; b < nb && limit > 0; b++) {
@@ -2246,12 +2313,13 @@ int lv_simulate(double *state, const double *params, long nb,
             status = why;
         }
     } else {
+        long count[LV_RHS_CLASSES], n_models;
         model_cache_sync(models, nb);
-        ids = (long *)malloc(((size_t)nb + 1) * sizeof(long));
+        ids = ids_for_call(cache, !ix_owned, &ix, models, nb, count, &n_models, &ids_owned);
         status = ids == NULL ? LV_NO_MEMORY
-                             : advance_fixed(state, params, nb, &ix, models, integrator, normalize, dt, n_steps,
-                                             lv_isa_get(), lv_threads_get(), ids, &limit, &best_body);
-        free(ids);
+                             : advance_fixed(state, params, &ix, models, integrator, normalize, dt, n_steps,
+                                             lv_isa_get(), lv_threads_get(), ids, count, n_models, &limit, &best_body);
+        if (ids_owned) free(ids);
     }
     if (ix_owned) index_free(&ix);
     if (status != LV_OK && status != LV_NO_MEMORY) {

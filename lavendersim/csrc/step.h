@@ -100,7 +100,8 @@ typedef struct {
      are those it was made from: compared bytewise per call (one memcmp), or, for a cache made `marked`, while the
      owner has not reported a write to the rows (lv_model_cache_rows_written: the owner is the rows' only writer and
      reports every write). Otherwise made again from the rows: the same numbers either way.
-   * the effect index (each body's effects, CSR) of the last call: used while the table is at the same address with
+   * the effect index (each body's effects, CSR) of the last call, and the fixed-step loops' order of the bodies
+     made from it and the rows' kinds (made again with the rows' entries): used while the table is at the same address with
      the same size and every row's code and body are those it was built from (ne pairs compared per call: the index
      reads nothing else of a row, and its parameters are read through it at their current values), with the same user
      table; otherwise built again (and checked again) as in any call.
@@ -260,10 +261,13 @@ typedef struct {
 
 /* tableau: NULL, or a user's explicit Runge-Kutta method (then `integrator` is ignored): every body (any kind) is
    stepped one by one as rk4 steps it (effects, joint, wheels with their torques held over the step, q normalized
-   when asked, the same divergence contract). */
+   when asked, the same divergence contract).
+   cache: with models NULL, NULL or where a caller that steps the same arrays call after call keeps the effect index
+   and the order of the bodies (lv_model_cache's index; lv_model_cache_new(0, 1): no model entries are made); with
+   models, ignored (models->cache is used). */
 int lv_simulate(double *state, const double *params, long nb,
                 const double *effects, long ne, long row_size, const lv_user_effects *user,
-                const lv_models *models, int integrator, int normalize, double dt, long n_steps,
+                const lv_models *models, lv_model_cache *cache, int integrator, int normalize, double dt, long n_steps,
                 const lv_adaptive *adaptive, const lv_tableau *tableau, long *fail_step, long *fail_body);
 
 #endif
