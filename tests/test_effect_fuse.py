@@ -168,13 +168,13 @@ def test_each_kinds_right_hand_side_is_printed_once_and_the_backends_read_it():
     assert "LV_RHS_INC_##KIND" in tiles and "LV_RHS_BODY_FRAME_##KIND" in tiles
     assert not [k for k in kernels if k in tiles], "batch_simd.h's effect tiles name a right-hand side"
     step = (ROOT / "lavendersim" / "csrc" / "step.c").read_text()
-    plain = step[step.index("static inline void plain_rhs("):]
-    plain = plain[:plain.index("\n}\n")]
-    assert "LV_RHS_CALL_##KIND" in plain and "LV_RHS_KINDS(" in plain
+    # plain_rhs and plain_inc: one function body (LV_PLAIN_BY_CLASS) over the printed kinds, each calling its
+    # kind's printed right-hand side (LV_RHS_CALL_<kind>) or increments (LV_RHS_INC_<kind>), naming no kernel
+    plain = step[step.index("#define LV_PLAIN_OF("):step.index("#undef LV_PLAIN_OF")]
+    assert "CALL##KIND(" in plain and "LV_RHS_KINDS(CASE)" in plain
+    assert "LV_PLAIN_BY_CLASS(plain_rhs, LV_PLAIN_RHS_CASE, LV_RHS_CALL_," in plain
+    assert "LV_PLAIN_BY_CLASS(plain_inc, LV_PLAIN_INC_CASE, LV_RHS_INC_," in plain
     assert not [k for k in kernels if k in plain] and "LV_RHS_BODY" not in plain.replace("LV_RHS_BODY_FRAME_##", "")
-    inc = step[step.index("static inline void plain_inc("):]
-    inc = inc[:inc.index("\n}\n")]
-    assert "LV_RHS_INC_##KIND" in inc and "LV_RHS_KINDS(" in inc and not [k for k in kernels if k in inc]
     # the constant kinds' tiles step each lane by step.c's lv_const_rk4_h on the printed per-kind flags
     const = simd[simd.index("#define LV_TILE_RK4_C("):simd.index("/* The torque-free tile:")]
     assert not [k for k in kernels if k in const] and "lv_const_rk4_h(" in const
