@@ -101,9 +101,13 @@ def constant_kind(flags: int, user: bool) -> tuple[bool, bool] | None:
     """
     if user or flags & FLAG_USES_STATE:
         return None
-    index = sum(1 << j for j, bit in enumerate(RHS_BITS) if flags & bit)
-    kind = _META.RHS_KINDS_BY_FLAGS[index]
-    return _META.RHS_CONSTANT.get(kind)
+    return _META.RHS_CONSTANT.get(rhs_kind(flags))
+
+
+def rhs_kind(flags: int) -> str:
+    """The right-hand-side kind (TORQUE, FULL, FORCE, BODY, BODY_F) of a plain body whose effects' rhs_flags OR to
+    `flags` (at least one effect): derive's rule, printed as effects_meta.RHS_KINDS_BY_FLAGS over RHS_BITS."""
+    return _META.RHS_KINDS_BY_FLAGS[sum(1 << j for j, bit in enumerate(RHS_BITS) if flags & bit)]
 
 
 @dataclass(frozen=True)

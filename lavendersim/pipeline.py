@@ -6,6 +6,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
+from . import effects as _effects
 from .generated import effects_meta as _META
 from .generated import tableaux as _TAB
 
@@ -22,9 +23,8 @@ def itemized(integrator: str) -> bool:
 
 def body_kind(flags: int) -> str:
     """The right-hand-side kind (TORQUE, FULL, FORCE, BODY, BODY_F) of a plain body whose effects' rhs_flags OR to
-    `flags` (at least one effect): derive's rule, printed as effects_meta.RHS_KINDS_BY_FLAGS."""
-    index = sum(1 << j for j, bit in enumerate(_META.RHS_BITS) if flags & bit)
-    return _META.RHS_KINDS_BY_FLAGS[index]
+    `flags` (at least one effect): effects.rhs_kind, derive's printed rule."""
+    return _effects.rhs_kind(flags)
 
 
 def rk4_path(backend: str, flags: int, user: bool) -> str:

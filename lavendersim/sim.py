@@ -430,8 +430,6 @@ class Trajectory:
         return BodyState.of_slots(self.x[:, i], self.Omega[:, i], int(self.wheel_counts[i]))
 
 
-
-
 class Sim:
     """Steps a scene's bodies (see the module docstring).
 
