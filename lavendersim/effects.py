@@ -105,8 +105,19 @@ def constant_kind(flags: int, user: bool) -> tuple[bool, bool] | None:
 
 
 def rhs_kind(flags: int) -> str:
-    """The right-hand-side kind (TORQUE, FULL, FORCE, BODY, BODY_F) of a plain body whose effects' rhs_flags OR to
-    `flags` (at least one effect): derive's rule, printed as effects_meta.RHS_KINDS_BY_FLAGS over RHS_BITS."""
+    """The right-hand-side kind of a plain body with effects: derive's rule, printed as effects_meta.RHS_KINDS_BY_FLAGS
+    over RHS_BITS.
+
+    Parameters
+    ----------
+    flags : int
+        The OR of the body's effects' EffectSpec.rhs_flags (at least one effect).
+
+    Returns
+    -------
+    str
+        "TORQUE", "FULL", "FORCE", "BODY" or "BODY_F".
+    """
     return _META.RHS_KINDS_BY_FLAGS[sum(1 << j for j, bit in enumerate(RHS_BITS) if flags & bit)]
 
 
