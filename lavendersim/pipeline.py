@@ -1,10 +1,16 @@
 """What a plain body's step runs, for ``Sim.pipeline``: the path each backend takes for it (torque-free, constant
 effects, decoupled, the 13-number stages, or a right-hand side) and the printed kernels of that path, both read from
 derive's tables (generated/effects_meta.py: RHS_KINDS_BY_FLAGS, RHS_CONSTANT, RHS_SPLIT, PIPELINE_KERNELS;
-generated/tableaux.py: SCALED_RK, COMPOSITIONS). Nothing here names a kernel."""
+generated/tableaux.py: SCALED_RK, COMPOSITIONS). Nothing here names a kernel.
+
+``Pipeline`` is what the property returns: the integrator's line and each body's line on demand, and the scene's
+paths (bodies grouped by what their step runs, their indices as ranges), built in O(N) from the effect table."""
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Iterator, Sequence
+from typing import NamedTuple, overload
+
+import numpy as np
 
 from . import effects as _effects
 from .generated import effects_meta as _META
@@ -98,3 +104,202 @@ def kernel_names(lines: Sequence[str]) -> set[str]:
     names = {n for table in _META.PIPELINE_KERNELS.values() for parts in table.values() for _, ns in parts for n in ns}
     words = {w.strip(",;()") for line in lines for w in line.split()}
     return names & words
+
+
+# ---- the scene's paths ----------------------------------------------------------------------------------------------
+def path_keys(n: int, table: np.ndarray, extra: np.ndarray) -> np.ndarray:
+    """One int64 per body, equal for two bodies exactly when their steps run the same path: the codes of the effects
+    the effect table holds for it (a row's body -1: every body) and `extra`'s per-body part (model kind, wheels, ...).
+
+    Parameters
+    ----------
+    n : int
+        Bodies.
+    table : ndarray, shape (rows, width)
+        The Sim's effect table ([code, body, parameters ...] per row; effects.ROW_CODE, ROW_BODY).
+    extra : ndarray of int64, shape (n,)
+        The rest of each body's path, non-negative and below 2**16.
+
+    Returns
+    -------
+    ndarray of int64, shape (n,)
+        O(n) per distinct effect code; the codes' bits are renumbered densely when more than 46 codes occur.
+    """
+    key = np.array(extra, dtype=np.int64)
+    codes, bodies = table[:, _effects.ROW_CODE], table[:, _effects.ROW_BODY]
+    shift = 16
+    for c in np.unique(codes):
+        if shift > 62:                         # (more codes than bits: number the keys so far densely)
+            _, key = np.unique(key, return_inverse=True)
+            shift = max(int(key.max()).bit_length(), 1)
+        on = bodies[codes == c]
+        bit = np.int64(1) << np.int64(shift)
+        if (on < 0).any():
+            key |= bit
+        else:
+            key[on.astype(np.intp)] |= bit
+        shift += 1
+    return key
+
+
+class PathGroup(NamedTuple):
+    """The bodies of a scene whose steps run one path (Pipeline.groups).
+
+    Attributes
+    ----------
+    path : str
+        What their step runs: ``"<effect names> -> <kernels>"`` as a body line says it, without values.
+    n_bodies : int
+        How many bodies.
+    ranges : ndarray of int64, shape (r, 2)
+        Their indices (Sim.names order) as [start, stop) ranges, ascending.
+    """
+
+    path: str
+    n_bodies: int
+    ranges: np.ndarray
+
+    def indices(self) -> np.ndarray:
+        """The bodies' indices, ascending, int64 (n_bodies,)."""
+        return np.concatenate([np.arange(a, b) for a, b in self.ranges]) if len(self.ranges) else np.zeros(0, np.int64)
+
+
+def group_runs(key: np.ndarray) -> list[tuple[int, int, np.ndarray]]:
+    """The bodies grouped by key: (first body, count, [start, stop) ranges (r, 2)) per distinct key, ordered by first
+    body. O(n) over the bodies plus a sort of the runs of equal keys (bodies added together form one run)."""
+    n = key.size
+    if n == 0:
+        return []
+    starts = np.flatnonzero(np.concatenate(([True], key[1:] != key[:-1])))
+    stops = np.append(starts[1:], n)
+    _, first_run, run_group = np.unique(key[starts], return_index=True, return_inverse=True)
+    order = np.argsort(run_group, kind="stable")
+    bounds = np.searchsorted(run_group[order], np.arange(first_run.size + 1))
+    out = []
+    for g in np.argsort(first_run, kind="stable"):
+        runs = order[bounds[g]:bounds[g + 1]]
+        ranges = np.stack([starts[runs], stops[runs]], axis=1).astype(np.int64)
+        out.append((int(starts[first_run[g]]), int((ranges[:, 1] - ranges[:, 0]).sum()), ranges))
+    return out
+
+
+def ranges_text(ranges: np.ndarray, limit: int = 8) -> str:
+    """Ranges [start, stop) as "0–499, 750" (at most `limit`, then how many more)."""
+    words = [f"{a}" if b - a == 1 else f"{a}–{b - 1}" for a, b in ranges[:limit].tolist()]
+    more = len(ranges) - limit
+    return ", ".join(words) + (f", … (+{more} more ranges)" if more > 0 else "")
+
+
+class Pipeline(Sequence[str]):
+    """What a Sim's step runs (``Sim.pipeline``): a sequence of lines, ``[0]`` the integrator's, ``[1 + i]`` body i's
+    (``"<name>: <effect terms with values> -> <kernels>"``), each made when read; printed (``str``), the scene's
+    paths: one line per distinct path with its bodies as index ranges and their count, so it reads the same at any N.
+
+    Parameters
+    ----------
+    head : str
+        The integrator's line.
+    names : sequence of str
+        The bodies' names (Sim.names).
+    line : callable
+        line(i, values) -> body i's line without its name; values False: the effects' names only (the path).
+    keys : callable
+        keys() -> int64 (n,): equal for two bodies exactly when their steps run the same path (path_keys).
+    index : callable
+        index(name) -> the body's index (raises LavenderInputError naming an unknown body).
+
+    Notes
+    -----
+    The lines are read from the Sim when asked for: a Pipeline kept across ``Sim.set_effect_params`` shows the new
+    values. Building the grouped view is O(N) (one int64 key per body, runs of equal keys); a body's line is O(its
+    effects).
+    """
+
+    def __init__(self, head: str, names: Sequence[str], line: Callable[[int, bool], str],
+                 keys: Callable[[], np.ndarray], index: Callable[[str], int]):
+        self.head = head
+        self._names, self._line, self._keys, self._index = names, line, keys, index
+
+    def __len__(self) -> int:
+        return 1 + len(self._names)
+
+    @overload
+    def __getitem__(self, k: int) -> str: ...
+
+    @overload
+    def __getitem__(self, k: slice) -> list[str]: ...
+
+    def __getitem__(self, k: int | slice) -> str | list[str]:
+        if isinstance(k, slice):
+            return [self[j] for j in range(*k.indices(len(self)))]
+        n = len(self)
+        if not -n <= k < n:
+            raise IndexError(f"pipeline line {k} out of range ({n} lines: the integrator's, then one per body)")
+        k = k % n
+        return self.head if k == 0 else f"{self._names[k - 1]}: {self._line(k - 1, True)}"
+
+    def __iter__(self) -> Iterator[str]:
+        yield self.head
+        for i, name in enumerate(self._names):
+            yield f"{name}: {self._line(i, True)}"
+
+    def __eq__(self, other: object) -> bool:
+        if isinstance(other, (Pipeline, list, tuple)):
+            return len(self) == len(other) and all(a == b for a, b in zip(self, other))
+        return NotImplemented
+
+    __hash__ = None   # type: ignore[assignment]
+
+    def body(self, body: int | str) -> str:
+        """One body's line, ``"<name>: <effect terms with values> -> <kernels>"``.
+
+        Parameters
+        ----------
+        body : int or str
+            Its index (Sim.names order) or name.
+
+        Returns
+        -------
+        str
+        """
+        i = self._index(body) if isinstance(body, str) else int(body)
+        if not 0 <= i < len(self._names):
+            raise IndexError(f"body index {body} out of range ({len(self._names)} bodies)")
+        return self[1 + i]
+
+    def groups(self) -> list[PathGroup]:
+        """The scene's paths: the bodies grouped by what their step runs, ordered by their first body.
+
+        Returns
+        -------
+        list of PathGroup
+            (path, n_bodies, ranges) per distinct path; the n_bodies sum to the number of bodies.
+        """
+        return [PathGroup(self._line(first, False), count, ranges) for first, count, ranges in group_runs(self._keys())]
+
+    def summary(self, max_ranges: int = 8) -> str:
+        """The integrator's line, then one line per path, ``"bodies 0–499, 750 (501): <path>"``.
+
+        Parameters
+        ----------
+        max_ranges : int, optional
+            Index ranges shown per path (then how many more).
+
+        Returns
+        -------
+        str
+        """
+        out = [self.head]
+        for g in self.groups():
+            who = (f"body {g.ranges[0, 0]}" if g.n_bodies == 1
+                   else f"bodies {ranges_text(g.ranges, max_ranges)} ({g.n_bodies})")
+            out.append(f"{who}: {g.path}")
+        out.append("(one body's line with its values: sim.pipeline.body(i or name), or sim.pipeline[1 + i]; "
+                   "the paths as data: sim.pipeline.groups())")
+        return "\n".join(out)
+
+    def __str__(self) -> str:
+        return self.summary()
+
+    def __repr__(self) -> str:
+        return self.summary()

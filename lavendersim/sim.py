@@ -1188,18 +1188,22 @@ class Sim:
 
     # ---- what runs -------------------------------------------------------------------------
     @property
-    def pipeline(self) -> list[str]:
-        """What runs per step: the integrator's line, then one line per body, ``"<name>: <effect terms> -> <kernels>"``.
+    def pipeline(self) -> pipeline_mod.Pipeline:
+        """What runs per step: the integrator's line, each body's line, and the scene's paths.
 
-        A plain body's kernels are the printed kernels its step really runs on this Sim's backend and integrator, by
-        part ("stages (q, omega_b): rigid_body_increments_free_c; translation: translation_drift; constants:
-        rigid_body_increment_scale_free" for a torque-free RK4 body; a composition's flows), decided from derive's
-        tables (lavendersim/pipeline.py); a body with a joint or wheels names its model's right-hand side.
+        A sequence of lines: ``pipeline[0]`` the integrator's, ``pipeline[1 + i]`` (or ``pipeline.body(i or name)``)
+        body i's, ``"<name>: <effect terms> -> <kernels>"``. A plain body's kernels are the printed kernels its step
+        really runs on this Sim's backend and integrator, by part ("stages (q, omega_b):
+        rigid_body_increments_free_c; translation: translation_drift; constants: rigid_body_increment_scale_free"
+        for a torque-free RK4 body; a composition's flows), decided from derive's tables (lavendersim/pipeline.py); a
+        body with a joint or wheels names its model's right-hand side. Printed (``print(sim.pipeline)``), it is one
+        line per distinct path with the bodies' indices as ranges and their count (``pipeline.groups()`` the same as
+        data): readable at a million bodies, built in O(N).
 
         Returns
         -------
-        list of str
-            1 + len(names) lines.
+        lavendersim.pipeline.Pipeline
+            1 + len(names) lines, each made when read.
         """
         n = self._per_step
         if n is None:
@@ -1208,39 +1212,62 @@ class Sim:
                     + " (per-body step sizes)")
         else:
             head = f"{self.integrator}: {n} RHS evaluation{'s' if n > 1 else ''} per step on the {self.backend.name} backend"
-        lines = [head + (", then normalize q" if self.normalize else ", q not normalized")]
-        for i, name in enumerate(self.names):
-            model, forces = self._effect_objs.models_on(name), self._effect_objs.forces_on(name)   # (indexed per body)
-            mine = model + forces
-            kind = self._kind(i)
-            if kind:
-                kernel = (f"wheels{LY.WHEELS_MAX}_body_rhs ({self._wheel_n[i]} wheels on "
-                          f"{'the body axes' if backends.on_body_axes(self._models.rows[i]) else 'axes_b'})"
-                          if kind & KIND_WHEELS else "pivot_body_rhs")
-                terms = " + ".join(e.describe() for e in model + forces)
-                extra = []
-                if kind & KIND_WHEELS:
-                    extra.append("wheel torques saturated per step (zero-order hold)")
-                if kind & KIND_JOINT:
-                    r_b = self._models.rows[i, LY.MODEL_R_B]
-                    extra.append(f"r_b={np.array2string(r_b, precision=4)}; p_w, v_w from pivot_kinematics after each step"
-                                 + (" and for linear damping" if any(e.name == "linear_damping" for e in forces) else ""))
-                else:
-                    extra.append("translation: v_dot = F/m")
-                lines.append(f"{name}: {terms} -> {kernel} ({'; '.join(extra)})")
-            else:
-                lines.append(f"{name}: {self._plain_line(mine)}")
-        if self._frames is not None:
-            for i in self._frames.idx:
-                lines[1 + int(i)] += "; full inertia tensor: stepped in its principal frame (constant R_bp)"
-        return lines
+        head += ", then normalize q" if self.normalize else ", q not normalized"
+        return pipeline_mod.Pipeline(head, self.names, self._body_line, self._path_keys, self._i)
 
-    def _plain_line(self, mine: list) -> str:
+    def _path_keys(self) -> np.ndarray:
+        """Sim.pipeline's path of each body as one int64 (pipeline.path_keys): its effects' codes from the effect
+        table, its model kind, wheel count and layout, and whether it is stepped in a principal frame. O(N)."""
+        nb = len(self.names)
+        extra = self._kinds.astype(np.int64) | (self._wheel_n.astype(np.int64) << 2)
+        wheeled = np.flatnonzero(self._kinds & KIND_WHEELS)
+        if wheeled.size:   # the default layout (backends.on_body_axes, per row): only the line's words depend on it
+            extra[wheeled] |= np.fromiter((backends.on_body_axes(self._models.rows[i]) for i in wheeled), bool,
+                                          wheeled.size).astype(np.int64) << 10
+        if self._frames is not None:
+            extra[np.asarray(self._frames.idx, dtype=np.intp)] |= 1 << 11
+        return pipeline_mod.path_keys(nb, self._effects, extra)
+
+    def _body_line(self, i: int, values: bool = True) -> str:
+        """Sim.pipeline's line of body i without its name: its effect terms (with their values, or, values False,
+        their names: the path a group of bodies shares), then what its step runs."""
+        name = self.names[i]
+        model, forces = self._effect_objs.models_on(name), self._effect_objs.forces_on(name)   # (indexed per body)
+        mine = model + forces
+        kind = self._kind(i)
+        if kind:
+            kernel = (f"wheels{LY.WHEELS_MAX}_body_rhs ({self._wheel_n[i]} wheels on "
+                      f"{'the body axes' if backends.on_body_axes(self._models.rows[i]) else 'axes_b'})"
+                      if kind & KIND_WHEELS else "pivot_body_rhs")
+            extra = []
+            if kind & KIND_WHEELS:
+                extra.append("wheel torques saturated per step (zero-order hold)")
+            if kind & KIND_JOINT:
+                r_b = (f"r_b={np.array2string(self._models.rows[i, LY.MODEL_R_B], precision=4)}; " if values else "")
+                extra.append(f"{r_b}p_w, v_w from pivot_kinematics after each step"
+                             + (" and for linear damping" if any(e.name == "linear_damping" for e in forces) else ""))
+            else:
+                extra.append("translation: v_dot = F/m")
+            line = f"{self._terms(mine, values)} -> {kernel} ({'; '.join(extra)})"
+        else:
+            line = self._plain_line(mine, values)
+        if self._frames is not None and self._frames.rotation(i) is not None:
+            line += "; full inertia tensor: stepped in its principal frame (constant R_bp)"
+        return line
+
+    @staticmethod
+    def _terms(mine: list, values: bool) -> str:
+        """A body line's effect terms: each effect with its values, or (values False) the effects' names once each."""
+        if not mine:
+            return "torque- and force-free (no effect terms)"
+        return " + ".join(e.describe() for e in mine) if values else " + ".join(dict.fromkeys(e.name for e in mine))
+
+    def _plain_line(self, mine: list, values: bool = True) -> str:
         """Sim.pipeline's line of a plain body with the effects mine: its terms, then the printed kernels its step
         runs on this Sim's backend and integrator (lavendersim/pipeline.py, from derive's tables)."""
         flags = int(np.bitwise_or.reduce([e.spec.rhs_flags for e in mine])) if mine else 0
         user = any(e.spec.user_set is not None for e in mine)
-        terms = " + ".join(e.describe() for e in mine) if mine else "torque- and force-free (no effect terms)"
+        terms = self._terms(mine, values)
         if self.dtype == "float64" and pipeline_mod.itemized(self.integrator):
             return f"{terms} -> {pipeline_mod.plain_kernels(self.backend.name, self.integrator, flags, user)}"
         # float32 (its own loops: csrc/fixed_loop.h) and the two structured steps: not itemized

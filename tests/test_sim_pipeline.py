@@ -182,3 +182,99 @@ def test_structured_steps_say_they_are_not_itemized(integrator):
     assert all(line.endswith("(its kernels are not itemized)") for line in sim.pipeline[1:])
     assert not PL.kernel_names(sim.pipeline[1:])
     assert not PL.itemized(integrator) and PL.itemized("rk4") and PL.itemized("a_user_tableau")
+
+
+# ---- the scene's paths: one line per distinct path, readable at any N ----------------------------------------------
+def test_grouped_view_one_line_per_path_with_index_ranges():
+    """Bodies that run the same kernels share one line: their indices as ranges and their count; each member's own
+    line runs the same kernels and has the same effects (names) as its group's path."""
+    n = 40
+    names = [f"b{i}" for i in range(n)]
+    s = lv.Scene()
+    s.add_bodies(names, np.full(n, 1.5), np.tile([0.1, 0.2, 0.3], (n, 1)))
+    s.add_effects("applied_torque", names[5:10] + names[30:32], torque_w=np.tile([0.0, 0.01, 0.0], (7, 1)))
+    s.add_effect("linear_damping", body="b20", c=0.1)
+    s.add_effect("gravity", body="b20")
+    for backend in BACKENDS:
+        p = lv.Sim(s, dt=1e-3, backend=backend).pipeline
+        groups = p.groups()
+        assert [(g.n_bodies, g.ranges.tolist()) for g in groups] == [
+            (32, [[0, 5], [10, 20], [21, 30], [32, 40]]), (7, [[5, 10], [30, 32]]), (1, [[20, 21]])]
+        assert sum(g.n_bodies for g in groups) == n
+        for g in groups:
+            for i in g.indices():
+                line = p.body(int(i))
+                assert line.split(" -> ", 1)[1] == g.path.split(" -> ", 1)[1], (line, g.path)
+                assert [t.split("(")[0] for t in line.split(": ", 1)[1].split(" -> ")[0].split(" + ")] == \
+                    g.path.split(" -> ")[0].split(" + ") or g.path.startswith("torque- and force-free")
+        text = str(p).splitlines()
+        assert text[0] == p[0] and len(text) == 1 + len(groups) + 1
+        assert text[1].startswith("bodies 0\u20134, 10\u201319, 21\u201329, 32\u201339 (32): torque- and force-free")
+        assert text[2].startswith("bodies 5\u20139, 30\u201331 (7): applied_torque -> ")
+        assert text[3].startswith("body 20: linear_damping + gravity -> ") or text[3].startswith("body 20: gravity + ")
+        assert "torque_w=" not in str(p) and "torque_w=" in p.body("b5")   # values: per body only
+
+
+def test_grouped_view_stays_short_and_caps_the_ranges():
+    """Alternating paths: two lines whatever N, each with at most max_ranges ranges and how many more."""
+    n = 3000
+    names = [f"b{i}" for i in range(n)]
+    s = lv.Scene()
+    s.add_bodies(names, np.full(n, 1.5), np.tile([0.1, 0.2, 0.3], (n, 1)))
+    odd = names[1::2]
+    s.add_effects("applied_torque", odd, torque_w=np.tile([0.0, 0.01, 0.0], (len(odd), 1)))
+    p = lv.Sim(s, dt=1e-3, backend="numpy").pipeline
+    text = p.summary(max_ranges=3).splitlines()
+    assert len(text) == 4 and len(p) == n + 1
+    assert text[1] == ("bodies 0, 2, 4, \u2026 (+1497 more ranges) (1500): " + p.groups()[0].path)
+    assert p.groups()[1].indices().tolist() == list(range(1, n, 2))
+
+
+def test_pipeline_is_a_sequence_of_the_per_body_lines():
+    sim = lv.Sim(scene(), dt=1e-3, backend="numpy")
+    p = sim.pipeline
+    lines = list(p)
+    assert len(p) == len(lines) == 1 + len(EFFECTS) and p == lines and p == sim.pipeline
+    assert p[-1] == lines[-1] == p.body(len(EFFECTS) - 1) == p.body("coupled") and p[1:3] == lines[1:3]
+    assert p[0].startswith("rk4: 4 RHS evaluations per step")
+    with pytest.raises(IndexError):
+        p[len(p)]
+    with pytest.raises(IndexError):
+        p.body(len(EFFECTS))
+    with pytest.raises(lv.LavenderInputError, match="body"):
+        p.body("nobody")
+    assert repr(p) == str(p) and str(p).splitlines()[-1].startswith("(one body's line")
+
+
+def test_paths_of_wheels_joints_and_principal_frames_are_their_own():
+    """A body's model (wheel count, layout), joint and full inertia tensor part its path from a plain body's."""
+    s = lv.Scene()
+    for j in range(3):
+        s.add_body(lv.Body.box(f"w{j}", 1.5, (0.3, 0.5, 0.7)))
+    s.add_effect("reaction_wheels", body="w0", J=(5e-4, 5e-4, 5e-4), torque_limit=0.2, speed_limit=400.0)
+    s.add_effect("reaction_wheels", body="w1", J=(5e-4, 5e-4, 5e-4), torque_limit=0.2, speed_limit=400.0)
+    s.add_body(lv.Body("tensor", 1.0, [[0.2, 0.01, 0.0], [0.01, 0.3, 0.0], [0.0, 0.0, 0.4]]))
+    s.add_body(lv.Body.box("pend", 1.0, (0.1, 0.1, 0.5)))
+    s.add_effect("spherical_joint", body="pend", anchor_w=[0.0, 0.0, 1.0])
+    p = lv.Sim(s, dt=1e-3, backend="numpy").pipeline
+    got = [(g.n_bodies, g.ranges[:, 0].tolist()) for g in p.groups()]
+    assert got == [(2, [0]), (1, [2]), (1, [3]), (1, [4])], got
+    assert "wheels" in p.groups()[0].path and "full inertia tensor" in p.groups()[2].path
+    assert "pivot_body_rhs" in p.groups()[3].path and "r_b=" not in p.groups()[3].path and "r_b=" in p.body("pend")
+
+
+def test_path_keys_part_every_code_set_beyond_64_codes():
+    """More distinct effect codes than an int64 has bits: the keys are renumbered, still one per code set (and a
+    row for every body, body -1, counts for each)."""
+    rng = np.random.default_rng(5)
+    n, codes = 500, 90
+    rows = [(c, b) for b in range(n) for c in rng.choice(codes, size=rng.integers(0, 4), replace=False)]
+    extra = rng.integers(0, 3, n)
+    for every in ([], [(7, -1)]):
+        table = np.zeros((len(rows) + len(every), 4))
+        table[:, 0], table[:, 1] = [r[0] for r in rows + every], [r[1] for r in rows + every]
+        keys = PL.path_keys(n, table, extra)
+        sets = [(frozenset(c for c, b in rows + every if b in (i, -1)), int(extra[i])) for i in range(n)]
+        same = keys[:, None] == keys[None, :]
+        assert (same == np.array([[a == b for b in sets] for a in sets])).all()
+        assert len(set(sets)) > 300
