@@ -155,71 +155,6 @@ def rhs_c_header() -> list[str]:
     return out
 
 
-# Sim.pipeline's words for the parts of a plain body's step (pipeline_kernels)
-_STAGES_ROT, _STAGES_ALL, _TRANSLATION, _CONSTANTS, _RHS = ("stages (q, omega_b)", "stages (13 numbers)", "translation",
-                                                            "constants", "right-hand side")
-
-
-def _rk4_paths(backend: str) -> dict[str, tuple[tuple[str, tuple[str, ...]], ...]]:
-    """The built-in RK4's paths of a plain body on backend ("c" or "numpy") and the printed kernels each runs
-    (pipeline_kernels): FREE (no effect: csrc/step.c lv_free_rk4_h, numpy_backend._free_rk4_h), CONST_<kind> (every
-    effect reads no state, CONSTANT_KINDS: lv_const_rk4_h, _const_rk4_h), SPLIT_<kind> (decoupled, SPLIT_OF_KIND:
-    LV_SPLIT_RK4_H, _split_rk4_h), <kind> (the 13-number stages on the kind's increments: plain_inc, _forced_rk4_h)."""
-    free = ("rigid_body_increments_free_c",)
-    out: dict[str, tuple[tuple[str, tuple[str, ...]], ...]] = {
-        "FREE": ((_STAGES_ROT, free), (_TRANSLATION, ("translation_drift",)),
-                 (_CONSTANTS, ("rigid_body_increment_scale_free",)))}
-    for kind, (torque, force) in CONSTANT_KINDS.items():
-        # C takes the torque-free constants from rigid_body_increment_scale's S (lv_const_scale), NumPy from
-        # rigid_body_increment_scale_free (_free_scale): the same bits
-        scale = "rigid_body_increment_scale" if torque or backend == "c" else "rigid_body_increment_scale_free"
-        out[f"CONST_{kind}"] = (
-            (_STAGES_ROT, ("rigid_body_increments_torque_h",) if torque else free),
-            (_TRANSLATION, ("translation_flow_constant",) if force else ("translation_drift",)),
-            (_CONSTANTS, (scale,) + (("rigid_body_torque_constants",) if torque else ())
-             + (("constant_acceleration_steps",) if force else ())))
-    for kind, split in SPLIT_OF_KIND.items():
-        if split:
-            out[f"SPLIT_{kind}"] = (
-                (_STAGES_ROT, free if split == 1 else ("rigid_body_increments_rot_b_c",)),
-                (_TRANSLATION, ("translation_flow",)),
-                (_CONSTANTS, ("rigid_body_increment_scale", "translation_flow_scale")))
-    for kind in TILE_KINDS:
-        # the NumPy backend runs TORQUE on FULL's kernels (effects.RHS_FULL): bitwise the same on a zero force
-        inc = RHS_OF_KIND["FULL" if kind == "TORQUE" and backend == "numpy" else kind].inc[0]
-        out[kind] = ((_STAGES_ALL, (inc,)), (_CONSTANTS, ("rigid_body_increment_scale",)))
-    return out
-
-
-def _rhs_paths(backend: str) -> dict[str, tuple[tuple[str, tuple[str, ...]], ...]]:
-    """A plain body's right-hand side on backend, the integrators that step it (euler, semi_implicit_euler, dopri5,
-    a user's tableau; rk4 on float32 bodies with effects): FREE, and each kind's (RHS_OF_KIND; csrc/step.c body_rhs,
-    plain_rhs; numpy_backend _Plan.rhs, _ForcedGroup.rhs). A float32 body with effects runs FULL's (_forced_groups,
-    csrc/fixed_loop.h)."""
-    out: dict[str, tuple[tuple[str, tuple[str, ...]], ...]] = {
-        "FREE": ((_RHS, ("rigid_body_rhs_free" if backend == "c" else "rigid_body_rhs_free_c",)),)}
-    for kind in TILE_KINDS:
-        r = RHS_OF_KIND["FULL" if kind == "TORQUE" and backend == "numpy" else kind]
-        out[kind] = ((_RHS, (("linear_acceleration",) if r.accel else ()) + (r.kernel,)),)
-    return out
-
-
-def pipeline_kernels() -> dict[str, dict[str, tuple[tuple[str, tuple[str, ...]], ...]]]:
-    """The printed kernels a plain body's step runs, per backend ("c", "numpy") and path "<how>:<path>": how "rk4"
-    (the built-in RK4's scaled-increment paths, _rk4_paths), "rhs" (_rhs_paths), "dopri5" where it differs from
-    "rhs" (C's dopri5 steps a torque-free body on rigid_body_rhs_free_c, csrc/step.c dp_rhs). Each entry: (what,
-    kernels) pairs, what one of the words Sim.pipeline prints. Printed into effects_meta (PIPELINE_KERNELS); every
-    name is a kernel of generated/kernels.h (tests/test_sim_pipeline.py)."""
-    out = {}
-    for backend in ("c", "numpy"):
-        table = {f"rk4:{k}": v for k, v in _rk4_paths(backend).items()}
-        table.update({f"rhs:{k}": v for k, v in _rhs_paths(backend).items()})
-        if backend == "c":
-            table["dopri5:FREE"] = ((_RHS, ("rigid_body_rhs_free_c",)),)
-        out[backend] = table
-    return out
-
-
 def meta_extra() -> dict:
     """effects_meta.py's printed rule (the NumPy backend's copy of the table): RHS_BITS, RHS_KINDS_BY_FLAGS,
     RHS_KERNELS (each kind's right-hand side as Sim.pipeline names it), the NumPy classes (RHS_CLASSES,
@@ -230,7 +165,14 @@ def meta_extra() -> dict:
             "flag_coupled": E.FLAG_COUPLED, "rhs_split": SPLIT_OF_KIND, "rhs_classes": NUMPY_CLASSES,
             "rhs_class_of_kind": NUMPY_CLASS_OF_KIND, "rhs_split_by_class": split_by_class(),
             "inc_scale_c": (INC_C.start, INC_C.stop), "inc_scale_hq": INC_HQ, "rhs_constant": CONSTANT_KINDS,
-            "pipeline_kernels": pipeline_kernels()}
+            "pipeline_kernels": _pipeline_kernels()}
+
+
+def _pipeline_kernels() -> dict:
+    """Sim.pipeline's table (derive/pipeline_meta.py; imported here: it reads this module's tables)."""
+    from . import pipeline_meta
+
+    return pipeline_meta.pipeline_kernels()
 
 
 def _constant_flags(effects: Sequence[tuple[int, E.EffectDecl]]) -> set[int]:

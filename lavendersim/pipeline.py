@@ -17,16 +17,6 @@ from .generated import effects_meta as _META
 from .generated import tableaux as _TAB
 
 
-# The integrator families whose steps run structured kernels of their own (an implicit solve, the exp-map update):
-# a pipeline line names them, not the kernels inside (derive/tableaux.py declares each integrator's family).
-_NOT_ITEMIZED_FAMILIES = frozenset({"implicit", "lie_group_rk"})
-
-
-def itemized(integrator: str) -> bool:
-    """Whether plain_kernels itemizes the step of integrator (a built-in name or a user tableau's: explicit)."""
-    return _TAB.INTEGRATOR_FAMILY.get(integrator, "explicit_rk") not in _NOT_ITEMIZED_FAMILIES
-
-
 def body_kind(flags: int) -> str:
     """The right-hand-side kind (TORQUE, FULL, FORCE, BODY, BODY_F) of a plain body whose effects' rhs_flags OR to
     `flags` (at least one effect): effects.rhs_kind, derive's printed rule."""
@@ -63,7 +53,18 @@ def rk4_path(backend: str, flags: int, user: bool) -> str:
     return kind
 
 
-def plain_kernels(backend: str, integrator: str, flags: int, user: bool) -> str:
+def float32_path(flags: int) -> str:
+    """A plain float32 body's path (a key of PIPELINE_KERNELS[backend] after "float32:<how>:"): csrc/fixed_loop.h's
+    tile kind (LV_FIXED_*): "FREE" (no effect), "ANY" (some effect reads the state), else "CONST_FORCE" (a force) or
+    "CONST_TORQUE" (the loads summed once per call). float32 takes built-in effects only (Sim checks it)."""
+    if flags == 0:
+        return "FREE"
+    if flags & _META.FLAG_USES_STATE:
+        return "ANY"
+    return "CONST_FORCE" if flags & _META.FLAG_FORCE else "CONST_TORQUE"
+
+
+def plain_kernels(backend: str, integrator: str, flags: int, user: bool, dtype: str = "float64") -> str:
     """What a plain body's step runs on backend with integrator, as Sim.pipeline prints it: each part of the step and
     its printed kernels ("stages (q, omega_b): <kernel>; translation: <kernel>; constants: <kernels>"),
     or, for a composition, its printed flows (tableaux.COMPOSITIONS: the kicked program with effects, else the free
@@ -79,20 +80,25 @@ def plain_kernels(backend: str, integrator: str, flags: int, user: bool) -> str:
         The OR of the body's effects' rhs_flags (0: no effect).
     user : bool
         Some effect of the body is a user effect.
+    dtype : {"float64", "float32"}, optional
+        The Sim's dtype (float32: csrc/fixed_loop.h's tiles, float32_path).
 
     Returns
     -------
     str
         The parts, "; "-separated.
     """
-    if integrator in _TAB.COMPOSITIONS:
+    table = _META.PIPELINE_KERNELS[backend]
+    if dtype == "float32":
+        path = float32_path(flags)
+        parts = table.get(f"float32:{integrator}:{path}", table[f"float32:rhs:{path}"])
+    elif integrator in _TAB.COMPOSITIONS:
         _, kicked, free = _TAB.COMPOSITIONS[integrator]
         program = kicked if flags or user else free
         return "flows: " + ", ".join(dict.fromkeys(f for f, _ in program))
-    table = _META.PIPELINE_KERNELS[backend]
-    if integrator in _TAB.SCALED_RK:
+    elif integrator in _TAB.SCALED_RK:
         parts = table[f"{integrator}:{rk4_path(backend, flags, user)}"]
-    else:
+    else:   # a right-hand side, or an implicit / Lie-group step of its own (a row of its name)
         path = "FREE" if flags == 0 and not user else body_kind(flags)
         parts = table.get(f"{integrator}:{path}", table[f"rhs:{path}"])
     return "; ".join(f"{what}: {', '.join(names)}" for what, names in parts)

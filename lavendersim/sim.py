@@ -1195,8 +1195,10 @@ class Sim:
         body i's, ``"<name>: <effect terms> -> <kernels>"``. A plain body's kernels are the printed kernels its step
         really runs on this Sim's backend and integrator, by part ("stages (q, omega_b):
         rigid_body_increments_free_c; translation: translation_drift; constants: rigid_body_increment_scale_free"
-        for a torque-free RK4 body; a composition's flows), decided from derive's tables (lavendersim/pipeline.py); a
-        body with a joint or wheels names its model's right-hand side. Printed (``print(sim.pipeline)``), it is one
+        for a torque-free RK4 body; a composition's flows; implicit_gyro's loads, Newton solve and exp-map update;
+        rk4_expmap's right-hand side and exponential coordinates; a float32 body its tile's kernels), decided from
+        derive's tables (lavendersim/pipeline.py, derive/pipeline_meta.py); a body with a joint or wheels names its
+        model's right-hand side. Printed (``print(sim.pipeline)``), it is one
         line per distinct path with the bodies' indices as ranges and their count (``pipeline.groups()`` the same as
         data): readable at a million bodies, built in O(N).
 
@@ -1267,12 +1269,8 @@ class Sim:
         runs on this Sim's backend and integrator (lavendersim/pipeline.py, from derive's tables)."""
         flags = int(np.bitwise_or.reduce([e.spec.rhs_flags for e in mine])) if mine else 0
         user = any(e.spec.user_set is not None for e in mine)
-        terms = self._terms(mine, values)
-        if self.dtype == "float64" and pipeline_mod.itemized(self.integrator):
-            return f"{terms} -> {pipeline_mod.plain_kernels(self.backend.name, self.integrator, flags, user)}"
-        # float32 (its own loops: csrc/fixed_loop.h) and the two structured steps: not itemized
-        kind = pipeline_mod.body_kind(flags) if flags or user else "torque-free"
-        return f"{terms} -> {self.integrator}'s {self.dtype} step of a {kind} body (its kernels are not itemized)"
+        kernels = pipeline_mod.plain_kernels(self.backend.name, self.integrator, flags, user, self.dtype)
+        return f"{self._terms(mine, values)} -> {kernels}"
 
     # ---- stepping -------------------------------------------------------------------------
     def _backend_advance(self, n: int, restore: bool = True) -> None:

@@ -168,20 +168,152 @@ def test_no_kernel_is_named_in_lavendersim():
     assert not {n for n in names if re.search(rf"\b{n}\b", code)}
 
 
-def test_float32_lines_say_they_are_not_itemized():
-    sim = lv.Sim(scene(), dt=1e-3, backend="numpy", dtype="float32")
-    assert all(line.endswith("(its kernels are not itemized)") for line in sim.pipeline[1:])
-    assert "a torque-free body" in sim.pipeline[1] and "FORCE body" in sim.pipeline[2]
+# ---- float32, the implicit and the Lie-group steps: itemized from derive's rows too ------------------------------
+STEP_CASES = [("float64", "implicit_gyro"), ("float64", "rk4_expmap"), ("float64", "euler"),
+              ("float64", "semi_implicit_euler"), ("float32", "rk4"), ("float32", "euler"), ("float32", "semi_implicit_euler")]
+STEP_C = Path(__file__).resolve().parents[1] / "lavendersim" / "csrc"
 
 
-@pytest.mark.parametrize("integrator", ["implicit_gyro", "rk4_expmap"])
-def test_structured_steps_say_they_are_not_itemized(integrator):
-    """The implicit solve and the exp-map update run kernels of their own (their family, derive/tableaux.py): the
-    line says so and names no right-hand side; an explicit tableau of the same Sim is itemized."""
-    sim = lv.Sim(scene(), dt=1e-3, backend="numpy", integrator=integrator)
-    assert all(line.endswith("(its kernels are not itemized)") for line in sim.pipeline[1:])
-    assert not PL.kernel_names(sim.pipeline[1:])
-    assert not PL.itemized(integrator) and PL.itemized("rk4") and PL.itemized("a_user_tableau")
+def _c_function(text: str, head: str) -> str:
+    """The body of the C function whose definition starts with `head` (up to the next line that is a lone '}')."""
+    a = text.index(head)
+    return text[a:text.index("\n}\n", a)]
+
+
+def test_every_row_names_printed_kernels():
+    """Every kernel of every row (each backend, dtype, path) is printed: kernels.h for float64, the float32 printing
+    (lvf_<name>, generated/kernels_f32.c) for the float32 rows."""
+    from lavendersim.generated import effects_meta
+
+    have = declared()
+    f32 = set(re.findall(r"\blvf_(\w+)\(", (KERNELS_H.parent / "kernels_f32.c").read_text()))
+    for backend, table in effects_meta.PIPELINE_KERNELS.items():
+        for key, row in table.items():
+            names = {n for _, ns in row for n in ns}
+            assert names <= (f32 if key.startswith("float32:") else have), (backend, key, names - have)
+
+
+@pytest.mark.parametrize("dtype, integrator", STEP_CASES)
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_float32_and_structured_steps_are_itemized(backend, dtype, integrator):
+    """No line says "not itemized": each names its row's kernels; the float32 tiles' kinds part constant loads
+    (summed once per call on C) from state-reading ones, the implicit step names its loads only with effects."""
+    sim = lv.Sim(scene(), dt=1e-3, backend=backend, integrator=integrator, dtype=dtype)
+    lines = dict(line.split(": ", 1) for line in sim.pipeline[1:])
+    assert not any("not itemized" in v for v in lines.values())
+    have = declared()
+    for name, line in lines.items():
+        assert {k for ks in parts(f"{name}: {line}").values() for k in ks} <= have, line
+    if integrator == "implicit_gyro":
+        assert "world_to_body" not in lines["plain"] and "world_to_body" in lines["grav"]
+        assert all("implicit_gyro_newton, quat_exp_step" in v for v in lines.values())
+    if integrator == "rk4_expmap":
+        assert all(v.endswith("exponential coordinates: quat_exp_step, rkmk_dexpinv") for v in lines.values())
+        euler = dict(ln.split(": ", 1) for ln in lv.Sim(scene(), dt=1e-3, backend=backend,
+                                                       integrator="euler").pipeline[1:])
+        assert all(lines[n].split(" -> ")[1].startswith(euler[n].split(" -> ")[1]) for n in lines)   # the same rhs
+    if dtype == "float32":
+        once = "right-hand side (loads summed once per call)" if backend == "c" else "right-hand side"
+        positions = ({"positions (with the new rates)": ["translation_drift", "quat_derivative_body"]}
+                     if integrator == "semi_implicit_euler" else {})
+        assert parts("torque: " + lines["torque"]) == {
+            once: ["rigid_body_rhs_torque_c" if backend == "c" else "rigid_body_rhs_c"]} | positions
+        assert parts("grav: " + lines["grav"]) == {once: ["rigid_body_rhs_c"]} | positions
+        assert parts("damp: " + lines["damp"]) == {"right-hand side": ["rigid_body_rhs_c"]} | positions
+        free = parts("plain: " + lines["plain"])
+        assert free == ({"stages (q, omega_b)": ["rigid_body_increments_free_c"], "translation": ["translation_drift"],
+                         "constants": ["rigid_body_increment_scale_free"]} if integrator == "rk4"
+                        else {"right-hand side": ["rigid_body_rhs_free_c"]} if integrator == "euler"
+                        else {"right-hand side": ["rigid_body_rhs_free_c"],
+                              "positions (with the new rates)": ["translation_drift", "quat_derivative_body"]})
+
+
+@pytest.mark.parametrize("dtype, integrator", STEP_CASES)
+def test_the_numpy_backend_calls_what_float32_and_structured_lines_name(monkeypatch, dtype, integrator):
+    """Per body group (one path each, more bodies than the scalar path takes), the kernels one step calls in the
+    Sim's precision: every kernel its line names, and no kernel of any other row that its line does not name."""
+    from lavendersim.generated import effects_meta
+    from lavendersim.generated import kernels_numpy_f32
+
+    mod = K if dtype == "float64" else kernels_numpy_f32
+    rows = effects_meta.PIPELINE_KERNELS["numpy"]
+    every = {n for key, row in rows.items() for _, ns in row for n in ns if key.startswith("float32:") == (mod is not K)}
+    n = numpy_scalar.SCALAR_MAX_BODIES + 1
+    for name, effs in EFFECTS.items():
+        s = lv.Scene()
+        for j in range(n):
+            s.add_body(lv.Body.box(f"b{j}", 1.5, (0.3, 0.5, 0.7), omega_b=(0.1 * j, 0.2, -0.3), v_w=(1.0, 0.0, 0.5)))
+        for e, p in effs:
+            s.add_effect(e, **p)
+        sim = lv.Sim(s, dt=1e-3, backend="numpy", integrator=integrator, dtype=dtype)
+        named = {k for ks in parts(sim.pipeline[1]).values() for k in ks}
+        assert len(sim.pipeline.groups()) == 1
+        called: set[str] = set()
+        with monkeypatch.context() as m:
+            for k in every:
+                f = getattr(mod, k)
+                m.setattr(mod, k, lambda *a, _f=f, _k=k, **kw: (called.add(_k), _f(*a, **kw))[1])
+            sim.run(2)
+        assert named <= called, (name, named - called)
+        assert not (called & every) - named, (name, (called & every) - named)
+
+
+def test_the_c_float32_tiles_call_what_the_rows_name():
+    """csrc/fixed_loop.h (the float32 loop): its tile kinds are the rule pipeline.float32_path follows, each kind's
+    right-hand side is the kernel its row names, and the torque-free RK4 runs the float64 FREE row's kernels."""
+    from lavendersim.generated import effects_meta
+
+    rows = effects_meta.PIPELINE_KERNELS["c"]
+    text = (STEP_C / "fixed_loop.h").read_text()
+    assert re.search(r"start\[b \+ 1\] == start\[b\] \? LV_FIXED_FREE\s*: \(f & LV_EFFECT_USES_STATE\) \? LV_FIXED_ANY"
+                     r"\s*: \(f & LV_EFFECT_FORCE\) \? LV_FIXED_FORCE : LV_FIXED_TORQUE;", text)
+    rhs = _c_function(text, "static inline void LV_FN(rhs)")
+    called = {"FREE": re.search(r"kind == LV_FIXED_FREE\) \{\s*LV_K\((\w+)\)", rhs)[1],
+              "CONST_TORQUE": re.search(r"if \(kind == LV_FIXED_TORQUE\) LV_K\((\w+)\)", rhs)[1]}
+    called["CONST_FORCE"] = called["ANY"] = re.search(r"else LV_K\((\w+)\)", rhs)[1]
+    assert set(re.findall(r"LV_K\((\w+)\)", rhs)) == set(called.values())
+    for path, kernel in called.items():
+        assert [n for _, ns in rows[f"float32:rhs:{path}"] for n in ns] == [kernel], path
+    free = _c_function(text, "static inline void LV_FN(free_rk4_h)") + _c_function(text, "static inline void LV_FN(tile_steps)")
+    named = {n for _, ns in rows["float32:rk4:FREE"] for n in ns}
+    assert named == set(re.findall(r"LV_K\((\w+)\)", free)) - {"quat_normalize", "quat_derivative_body",
+                                                                 "translation_drift"} | {"translation_drift"}
+    assert "LV_FN(free_rk4_h)(t, b, x, hq, dt)" in _c_function(text, "static inline void LV_FN(body_step)")
+
+
+def test_the_c_structured_steps_call_what_the_rows_name():
+    """csrc/step.c: gyro_step (with gyro_newton and plain_loads) and rk4_expmap_step (with expmap_stage) call the
+    kernels their rows name beside the right-hand side (body_rhs: the rhs rows)."""
+    from lavendersim.generated import effects_meta
+    from lavendersim.generated import tableaux
+
+    rows = effects_meta.PIPELINE_KERNELS["c"]
+    text = (STEP_C / "step.c").read_text()
+
+    def calls(*heads: str) -> set[str]:
+        return {k for h in heads for k in re.findall(r"\blv_(\w+)\(", _c_function(text, h))}
+
+    def semi_implicit(src: str, pattern: str) -> set[str]:   # the partitioned Euler branch, up to the normalization
+        a = src.index("/* LV_PATH_SEMI_IMPLICIT */")
+        return set(re.findall(pattern, src[a:src.index("normalize", a)]))
+
+    for integrator in ("semi_implicit_euler",):   # (the one member of fixed path semi_implicit: test_integrators)
+        positions = {n for what, ns in rows[f"{integrator}:FREE"] if what.startswith("positions") for n in ns}
+        assert semi_implicit(text, r"\blv_(\w+)\(") == positions
+        assert semi_implicit((STEP_C / "fixed_loop.h").read_text(), r"LV_K\((\w+)\)") == positions
+        assert rows[f"float32:{integrator}:ANY"][-1] == rows[f"{integrator}:FULL"][-1]
+    implicit = calls("static int gyro_step(", "static int gyro_newton(", "static void plain_loads(")
+    lie = calls("static void rk4_expmap_step(", "static void expmap_stage(")
+    assert "body_rhs(xs," in _c_function(text, "static void expmap_stage(")
+    for integrator, family in tableaux.INTEGRATOR_FAMILY.items():
+        if family == "implicit":
+            assert {n for _, ns in rows[f"{integrator}:FULL"] for n in ns} == implicit
+            assert {n for _, ns in rows[f"{integrator}:FREE"] for n in ns} == implicit - {"world_to_body"}
+            assert "if (c->has) plain_loads(" in _c_function(text, "static int gyro_step(")
+        if family == "lie_group_rk":
+            for path in ("FREE", "FULL", "BODY"):
+                assert rows[f"{integrator}:{path}"] == rows[f"rhs:{path}"] + (("exponential coordinates",
+                                                                                tuple(sorted(lie))),)
 
 
 # ---- the scene's paths: one line per distinct path, readable at any N ----------------------------------------------
