@@ -15,6 +15,7 @@ from pathlib import Path
 
 import sympy as sp
 
+from .cse_pass import tidy
 from .kernel import Kernel
 from .printers import (HEADER, PREFIX, USER_HEADER, CasadiPrinter, CPrinter, CPrinterF32, NpPrinter,  # noqa: F401
                        NpPrinterF32, _hoist_pow_bases)   # (re-exported: derive.user and tests use codegen.<name>)
@@ -52,7 +53,7 @@ class Printed:
         self.ops_before = int(sum(sp.count_ops(e) for e in self.output_exprs))
         # Named subexpressions (k.where) are atoms to CSE and printed first, as written, as temporaries.
         exprs = k.printed_exprs
-        temps, reduced = sp.cse(exprs, symbols=sp.numbered_symbols("t"), order="canonical")
+        temps, reduced = tidy(*sp.cse(exprs, symbols=sp.numbered_symbols("t"), order="canonical"))
         self.temps, self.reduced = _hoist_pow_bases(_used_where(k.where, exprs) + temps, reduced)
         self.ops_after = int(sum(sp.count_ops(e) for _, e in self.temps) + sum(sp.count_ops(e) for e in self.reduced))
         self.has_piecewise = any(e.has(sp.Piecewise) for e in self.output_exprs)

@@ -54,7 +54,8 @@ def _hoist_pow_bases(temps: list, reduced: list) -> tuple[list, list]:
     """After CSE: give each compound base of a power printed as repeated products a temporary of its
     own (CSE does not, as the base occurs once in the tree), so no expression is printed twice.
     New temporaries continue the t numbering, each placed just before its first use."""
-    names = sp.numbered_symbols("t", start=len(temps))
+    taken = [int(t.name[1:]) for t, _ in temps if t.name[:1] == "t" and t.name[1:].isdigit()]
+    names = sp.numbered_symbols("t", start=max(taken, default=-1) + 1)   # (a CSE pass may have dropped some)
     cache: dict = {}
     out: list = []
 

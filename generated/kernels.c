@@ -137,8 +137,8 @@ void lv_world_inertia(const double *q, const double *I_b, double *I_w) {
     const double I_b_1 = I_b[1];
     const double I_b_2 = I_b[2];
     const double t0 = 2*q_1;
-    const double t1 = q_0*t0;
     const double t2 = 2*q_2;
+    const double t1 = q_0*t0;
     const double t3 = q_3*t2;
     const double t4 = t1 - t3;
     const double t5 = q_0*t2;
@@ -148,7 +148,7 @@ void lv_world_inertia(const double *q, const double *I_b, double *I_w) {
     const double t9 = 2*(q_2*q_2) - 1;
     const double t10 = -t8 - t9;
     const double t11 = 2*q_0*q_3;
-    const double t12 = 2*q_1*q_2 - t11;
+    const double t12 = q_1*t2 - t11;
     const double t13 = I_b_2*t7;
     const double t14 = t1 + t3;
     const double t15 = I_b_0*t10;
@@ -268,9 +268,9 @@ void lv_effect_angular_damping(const double *q, const double *omega_b, double c,
     const double omega_b_0 = omega_b[0];
     const double omega_b_1 = omega_b[1];
     const double omega_b_2 = omega_b[2];
+    const double t2 = 2*q_1;
     const double t0 = c*omega_b_0;
     const double t1 = 2*c*omega_b_2*q_0 - 2*q_2*t0;
-    const double t2 = 2*q_1;
     const double t3 = c*omega_b_1;
     const double t4 = 2*t3;
     const double t5 = -q_0*t4 + t0*t2;
@@ -378,8 +378,8 @@ void lv_quat_rotate(const double *q, const double *v_b, double *v_w) {
     const double v_b_1 = v_b[1];
     const double v_b_2 = v_b[2];
     const double t0 = 2*q_1;
-    const double t1 = q_0*t0;
     const double t2 = 2*q_2;
+    const double t1 = q_0*t0;
     const double t3 = q_3*t2;
     const double t4 = q_0*t2;
     const double t5 = q_3*t0;
@@ -388,7 +388,7 @@ void lv_quat_rotate(const double *q, const double *v_b, double *v_w) {
     const double t8 = 2*q_0*q_3;
     const double t9 = 2*(q_0*q_0);
     v_w[0] = v_b_0*(-t6 - t7) + v_b_1*(t1 - t3) + v_b_2*(t4 + t5);
-    v_w[1] = v_b_0*(t1 + t3) + v_b_1*(-t7 - t9) + v_b_2*(2*q_1*q_2 - t8);
+    v_w[1] = v_b_0*(t1 + t3) + v_b_1*(-t7 - t9) + v_b_2*(q_1*t2 - t8);
     v_w[2] = v_b_0*(t4 - t5) + v_b_1*(q_1*t2 + t8) + v_b_2*(-t6 - t9 + 1);
 }
 
@@ -397,11 +397,11 @@ void lv_quat_to_matrix(const double *q, double *R_wb) {
     const double q_1 = q[1];
     const double q_2 = q[2];
     const double q_3 = q[3];
+    const double t2 = 2*q_1;
+    const double t4 = 2*q_2;
     const double t0 = 2*(q_1*q_1);
     const double t1 = 2*(q_2*q_2) - 1;
-    const double t2 = 2*q_1;
     const double t3 = q_0*t2;
-    const double t4 = 2*q_2;
     const double t5 = q_3*t4;
     const double t6 = q_0*t4;
     const double t7 = q_3*t2;
@@ -412,7 +412,7 @@ void lv_quat_to_matrix(const double *q, double *R_wb) {
     R_wb[2] = t6 + t7;
     R_wb[3] = t3 + t5;
     R_wb[4] = -t1 - t8;
-    R_wb[5] = 2*q_1*q_2 - t9;
+    R_wb[5] = q_1*t4 - t9;
     R_wb[6] = t6 - t7;
     R_wb[7] = q_1*t4 + t9;
     R_wb[8] = -t0 - t8 + 1;
@@ -434,12 +434,12 @@ void lv_matrix_to_quat(const double *R_wb, double *q) {
     const double t3 = sqrt(t2 + 1);
     const double t4 = ((1.0/2.0))/t3;
     const double t5 = R_0 <= t2 && R_4 <= t2 && R_8 <= t2;
-    const double t6 = -R_4;
     const double t7 = R_0 - R_8;
-    const double t8 = sqrt(t6 + t7 + 1);
+    const double t8 = sqrt(-R_4 + t7 + 1);
     const double t9 = R_0 >= R_4 && R_0 >= R_8;
-    const double t10 = sqrt(-t1 - t6 + 1);
+    const double t10 = sqrt(R_4 - t1 + 1);
     const double t11 = (1.0/t10);
+    const double t22 = ((1.0/2.0))*t11;
     const double t12 = ((1.0/2.0))*R_1 + ((1.0/2.0))*R_3;
     const double t13 = R_4 >= R_8;
     const double t14 = R_2 + R_6;
@@ -447,10 +447,9 @@ void lv_matrix_to_quat(const double *R_wb, double *q) {
     const double t16 = ((1.0/2.0))/t15;
     const double t17 = R_2 - R_6;
     const double t18 = (1.0/t8);
+    const double t21 = ((1.0/2.0))*t18;
     const double t19 = R_5 + R_7;
     const double t20 = -R_1 + R_3;
-    const double t21 = ((1.0/2.0))*t18;
-    const double t22 = ((1.0/2.0))*t11;
     q[0] = ((t5) ? (
    t0*t4
 )
@@ -645,7 +644,7 @@ void lv_quat_error_chart(const double *q, const double *q_ref, double *dtheta) {
     const double t2 = q_0*t0 + q_1*t1 - 2*q_2*q_ref_1 - 2*q_3*q_ref_0;
     const double t3 = q_0*q_ref_0 + q_1*q_ref_1 + q_2*q_ref_2 + q_3*q_ref_3 < 0;
     const double t4 = q_0*t1 - q_1*t0 - 2*q_2*q_ref_0 + 2*q_3*q_ref_1;
-    const double t5 = 2*q_0*q_ref_1 - 2*q_1*q_ref_0 + q_2*t0 - 2*q_3*q_ref_2;
+    const double t5 = 2*q_0*q_ref_1 - 2*q_1*q_ref_0 + q_2*t0 - q_3*t1;
     dtheta[0] = ((t3) ? (
    -t2
 )
@@ -668,10 +667,10 @@ void lv_quat_error_chart(const double *q, const double *q_ref, double *dtheta) {
 
 void lv_euler_xyz_to_quat(double roll, double pitch, double yaw, double *q) {
     const double t0 = ((1.0/2.0))*yaw;
-    const double t1 = sin(t0);
     const double t2 = ((1.0/2.0))*roll;
-    const double t3 = cos(t2);
     const double t4 = ((1.0/2.0))*pitch;
+    const double t1 = sin(t0);
+    const double t3 = cos(t2);
     const double t5 = sin(t4);
     const double t6 = t3*t5;
     const double t7 = cos(t0);
@@ -691,8 +690,8 @@ void lv_quat_to_euler_xyz(const double *q, double *rpy) {
     const double q_2 = q[2];
     const double q_3 = q[3];
     const double t0 = 2*q_3;
-    const double t1 = q_0*t0;
     const double t2 = 2*q_2;
+    const double t1 = q_0*t0;
     const double t3 = q_1*t2;
     const double t4 = t1 - t3;
     const double t5 = 2*(q_0*q_0) - 1;
@@ -766,9 +765,9 @@ void lv_integrate_orientation(const double *q, const double *omega_w, double dt,
     const double t0 = ((1.0/2.0))*q_3;
     const double t1 = ((1.0/2.0))*q_2;
     const double t2 = ((1.0/2.0))*omega_w_2;
-    const double t3 = dt*(omega_w_0*t0 + omega_w_1*t1 - q_1*t2) + q_0;
     const double t4 = ((1.0/2.0))*omega_w_0;
     const double t5 = ((1.0/2.0))*omega_w_1;
+    const double t3 = dt*(omega_w_0*t0 + omega_w_1*t1 - q_1*t2) + q_0;
     const double t6 = dt*(-omega_w_2*t1 - q_0*t4 - q_1*t5) + q_3;
     const double t7 = dt*(omega_w_2*t0 - q_0*t5 + q_1*t4) + q_2;
     const double t8 = dt*(-omega_w_0*t1 + omega_w_1*t0 + q_0*t2) + q_1;
@@ -907,8 +906,8 @@ void lv_rigid_body_rhs(const double *x, double m, const double *I_b, const doubl
     const double t0 = ((1.0/2.0))*x_10;
     const double t1 = ((1.0/2.0))*x_11;
     const double t2 = ((1.0/2.0))*x_12;
-    const double t3 = (1.0/m);
     const double t4 = 2*tau_w_0;
+    const double t3 = (1.0/m);
     const double t5 = -t4*x_4 + 2*tau_w_1*x_3;
     const double t6 = t4*x_5 - 2*tau_w_2*x_3;
     const double t7 = -2*tau_w_1*x_5 + 2*tau_w_2*x_4;
@@ -973,10 +972,10 @@ void lv_apply_inv_inertia(const double *q, const double *I_b, const double *v, d
     const double v_0 = v[0];
     const double v_1 = v[1];
     const double v_2 = v[2];
-    const double t0 = (1.0/I_b_1);
     const double t1 = 2*q_1;
-    const double t2 = q_0*t1;
     const double t3 = 2*q_2;
+    const double t0 = (1.0/I_b_1);
+    const double t2 = q_0*t1;
     const double t4 = q_3*t3;
     const double t5 = t2 - t4;
     const double t6 = (1.0/I_b_2);
@@ -988,7 +987,7 @@ void lv_apply_inv_inertia(const double *q, const double *I_b, const double *v, d
     const double t12 = 2*(q_2*q_2) - 1;
     const double t13 = -t11 - t12;
     const double t14 = 2*q_0*q_3;
-    const double t15 = 2*q_1*q_2 - t14;
+    const double t15 = q_1*t3 - t14;
     const double t16 = t6*t9;
     const double t17 = t2 + t4;
     const double t18 = t10*t13;
@@ -1015,8 +1014,8 @@ void lv_world_to_body(const double *q, const double *v_w, double *v_b) {
     const double v_1 = v_w[1];
     const double v_2 = v_w[2];
     const double t0 = 2*q_1;
-    const double t1 = q_0*t0;
     const double t2 = 2*q_2;
+    const double t1 = q_0*t0;
     const double t3 = q_3*t2;
     const double t4 = q_0*t2;
     const double t5 = q_3*t0;
@@ -1026,7 +1025,7 @@ void lv_world_to_body(const double *q, const double *v_w, double *v_b) {
     const double t9 = 2*(q_0*q_0);
     v_b[0] = v_0*(-t6 - t7) + v_1*(t1 + t3) + v_2*(t4 - t5);
     v_b[1] = v_0*(t1 - t3) + v_1*(-t7 - t9) + v_2*(q_2*t0 + t8);
-    v_b[2] = v_0*(t4 + t5) + v_1*(2*q_1*q_2 - t8) + v_2*(-t6 - t9 + 1);
+    v_b[2] = v_0*(t4 + t5) + v_1*(q_1*t2 - t8) + v_2*(-t6 - t9 + 1);
 }
 
 void lv_kinetic_energy(double m, const double *I_b, const double *v_w, const double *omega_b, double *T) {
@@ -1054,8 +1053,8 @@ void lv_angular_momentum_world(const double *q, const double *I_b, const double 
     const double omega_b_1 = omega_b[1];
     const double omega_b_2 = omega_b[2];
     const double t0 = 2*q_1;
-    const double t1 = q_0*t0;
     const double t2 = 2*q_2;
+    const double t1 = q_0*t0;
     const double t3 = q_3*t2;
     const double t4 = I_b_1*omega_b_1;
     const double t5 = q_0*t2;
@@ -1067,7 +1066,7 @@ void lv_angular_momentum_world(const double *q, const double *I_b, const double 
     const double t11 = 2*q_0*q_3;
     const double t12 = 2*(q_0*q_0);
     L_w[0] = t10*(-t8 - t9) + t4*(t1 - t3) + t7*(t5 + t6);
-    L_w[1] = t10*(t1 + t3) + t4*(-t12 - t9) + t7*(2*q_1*q_2 - t11);
+    L_w[1] = t10*(t1 + t3) + t4*(-t12 - t9) + t7*(q_1*t2 - t11);
     L_w[2] = t10*(t5 - t6) + t4*(q_1*t2 + t11) + t7*(-t12 - t8 + 1);
 }
 
@@ -1234,8 +1233,8 @@ void lv_rigid_body_rhs_c(const double *x, double m, const double *c_b, const dou
     const double t0 = ((1.0/2.0))*x_10;
     const double t1 = ((1.0/2.0))*x_11;
     const double t2 = ((1.0/2.0))*x_12;
-    const double t3 = (1.0/m);
     const double t4 = 2*tau_w_0;
+    const double t3 = (1.0/m);
     const double t5 = -t4*x_4 + 2*tau_w_1*x_3;
     const double t6 = t4*x_5 - 2*tau_w_2*x_3;
     const double t7 = -2*tau_w_1*x_5 + 2*tau_w_2*x_4;
@@ -1341,10 +1340,10 @@ void lv_rigid_body_increments_c(const double *q, const double *omega_b, const do
     const double tau_w_0 = tau_w[0];
     const double tau_w_1 = tau_w[1];
     const double tau_w_2 = tau_w[2];
+    const double t3 = 2*q_0;
     const double t0 = S_b_6*omega_b_0;
     const double t1 = S_b_6*omega_b_2;
     const double t2 = S_b_6*omega_b_1;
-    const double t3 = 2*q_0;
     const double t4 = -2*q_1*tau_w_0 + t3*tau_w_1;
     const double t5 = 2*q_2*tau_w_0 - t3*tau_w_2;
     const double t6 = 2*q_1*tau_w_2 - 2*q_2*tau_w_1;
@@ -1385,10 +1384,10 @@ void lv_rigid_body_increments_torque_c(const double *q, const double *omega_b, c
     const double tau_w_0 = tau_w[0];
     const double tau_w_1 = tau_w[1];
     const double tau_w_2 = tau_w[2];
+    const double t3 = 2*q_0;
     const double t0 = S_b_6*omega_b_0;
     const double t1 = S_b_6*omega_b_2;
     const double t2 = S_b_6*omega_b_1;
-    const double t3 = 2*q_0;
     const double t4 = -2*q_1*tau_w_0 + t3*tau_w_1;
     const double t5 = 2*q_2*tau_w_0 - t3*tau_w_2;
     const double t6 = 2*q_1*tau_w_2 - 2*q_2*tau_w_1;
@@ -1699,18 +1698,18 @@ void lv_pivot_body_rhs(const double *q, const double *omega_b, const double *I_p
     const double t0 = ((1.0/2.0))*omega_b_0;
     const double t1 = ((1.0/2.0))*omega_b_1;
     const double t2 = ((1.0/2.0))*omega_b_2;
+    const double t8 = 2*q_0;
+    const double t10 = 2*q_1;
     const double t3 = (I_p_12*I_p_12);
     const double t4 = (I_p_01*I_p_01);
     const double t5 = (I_p_02*I_p_02);
     const double t6 = (1.0/(I_p_00*I_p_11*I_p_22 - I_p_00*t3 + 2*I_p_01*I_p_02*I_p_12 - I_p_11*t5 - I_p_22*t4));
     const double t7 = I_p_01*I_p_12 - I_p_02*I_p_11;
-    const double t8 = 2*q_0;
     const double t9 = q_2*t8;
-    const double t10 = 2*q_1;
     const double t11 = q_3*t10;
     const double t12 = t11 + t9;
     const double t13 = q_3*t8;
-    const double t14 = 2*q_1*q_2 - t13;
+    const double t14 = q_2*t10 - t13;
     const double t15 = I_p_00*omega_b_0 + I_p_01*omega_b_1 + I_p_02*omega_b_2;
     const double t16 = I_p_01*omega_b_0 + I_p_11*omega_b_1 + I_p_12*omega_b_2;
     const double t17 = 2*(q_0*q_0);
@@ -1758,8 +1757,8 @@ void lv_pivot_kinematics(const double *q, const double *omega_b, const double *a
     const double r_b_1 = r_b[1];
     const double r_b_2 = r_b[2];
     const double t0 = 2*q_1;
-    const double t1 = q_0*t0;
     const double t2 = 2*q_2;
+    const double t1 = q_0*t0;
     const double t3 = q_3*t2;
     const double t4 = t1 - t3;
     const double t5 = q_0*t2;
@@ -1770,7 +1769,7 @@ void lv_pivot_kinematics(const double *q, const double *omega_b, const double *a
     const double t10 = -t8 - t9;
     const double t11 = t1 + t3;
     const double t12 = 2*q_0*q_3;
-    const double t13 = 2*q_1*q_2 - t12;
+    const double t13 = q_1*t2 - t12;
     const double t14 = 2*(q_0*q_0);
     const double t15 = -t14 - t9;
     const double t16 = t5 - t6;
@@ -2030,11 +2029,11 @@ void lv_sphere_flow(const double *q, const double *L_b, double I_r, double tau, 
     const double L_b_0 = L_b[0];
     const double L_b_1 = L_b[1];
     const double L_b_2 = L_b[2];
+    const double t4 = ((1.0/2.0))*tau;
     const double t0 = (1.0/I_r);
     const double t1 = (L_b_0*L_b_0) + (L_b_1*L_b_1) + (L_b_2*L_b_2);
     const double t2 = sqrt(t1);
     const double t3 = t0*t2;
-    const double t4 = ((1.0/2.0))*tau;
     const double t5 = t3*t4;
     const double t6 = cos(t5);
     const double t7 = ((t3*fabs(tau) > (1.0/50000000.0)) ? (
@@ -2291,16 +2290,15 @@ void lv_wheel_saturation(const double *command, const double *Omega, double torq
     const double Omega_0 = Omega[0];
     const double Omega_1 = Omega[1];
     const double Omega_2 = Omega[2];
-    const double t0 = -torque_limit;
-    const double t1 = command_0 < t0;
+    const double t1 = command_0 < -torque_limit;
     const double t2 = speed_limit <= fabs(Omega_0);
     const double t3 = Omega_0*torque_limit;
     const double t4 = command_0 > torque_limit;
-    const double t5 = command_1 < t0;
+    const double t5 = command_1 < -torque_limit;
     const double t6 = speed_limit <= fabs(Omega_1);
     const double t7 = Omega_1*torque_limit;
     const double t8 = command_1 > torque_limit;
-    const double t9 = command_2 < t0;
+    const double t9 = command_2 < -torque_limit;
     const double t10 = speed_limit <= fabs(Omega_2);
     const double t11 = Omega_2*torque_limit;
     const double t12 = command_2 > torque_limit;
@@ -2319,7 +2317,7 @@ void lv_wheel_saturation(const double *command, const double *Omega, double torq
 )
 : (
    ((t1) ? (
-      t0
+      -torque_limit
    )
    : ((t4) ? (
       torque_limit
@@ -2343,7 +2341,7 @@ void lv_wheel_saturation(const double *command, const double *Omega, double torq
 )
 : (
    ((t5) ? (
-      t0
+      -torque_limit
    )
    : ((t8) ? (
       torque_limit
@@ -2367,7 +2365,7 @@ void lv_wheel_saturation(const double *command, const double *Omega, double torq
 )
 : (
    ((t9) ? (
-      t0
+      -torque_limit
    )
    : ((t12) ? (
       torque_limit
@@ -2385,14 +2383,13 @@ void lv_wheel_motor(const double *command, const double *Omega, double torque_li
     const double Omega_0 = Omega[0];
     const double Omega_1 = Omega[1];
     const double Omega_2 = Omega[2];
-    const double t0 = -torque_limit;
-    const double t1 = command_0 < t0;
+    const double t1 = command_0 < -torque_limit;
     const double t2 = fabs(Omega_0);
     const double t3 = speed_limit <= t2;
     const double t4 = Omega_0*torque_limit;
     const double t5 = command_0 > torque_limit;
     const double t6 = ((t1) ? (
-   t0
+   -torque_limit
 )
 : ((t5) ? (
    torque_limit
@@ -2404,18 +2401,16 @@ void lv_wheel_motor(const double *command, const double *Omega, double torque_li
     const double t8 = Omega_0 >= speed_limit;
     const double t9 = command_0 < 0;
     const double t10 = command_0 > 0;
-    const double t11 = -speed_limit;
-    const double t12 = Omega_0 <= t11;
+    const double t12 = Omega_0 <= -speed_limit;
     const double t13 = (1.0/speed_limit);
     const double t14 = torque_limit*(-t13*t2 + 1);
-    const double t15 = -t14;
-    const double t16 = command_1 < t0;
+    const double t16 = command_1 < -torque_limit;
     const double t17 = fabs(Omega_1);
     const double t18 = speed_limit <= t17;
     const double t19 = Omega_1*torque_limit;
     const double t20 = command_1 > torque_limit;
     const double t21 = ((t16) ? (
-   t0
+   -torque_limit
 )
 : ((t20) ? (
    torque_limit
@@ -2426,16 +2421,15 @@ void lv_wheel_motor(const double *command, const double *Omega, double torque_li
     const double t22 = Omega_1 >= speed_limit;
     const double t23 = command_1 < 0;
     const double t24 = command_1 > 0;
-    const double t25 = Omega_1 <= t11;
+    const double t25 = Omega_1 <= -speed_limit;
     const double t26 = torque_limit*(-t13*t17 + 1);
-    const double t27 = -t26;
-    const double t28 = command_2 < t0;
+    const double t28 = command_2 < -torque_limit;
     const double t29 = fabs(Omega_2);
     const double t30 = speed_limit <= t29;
     const double t31 = Omega_2*torque_limit;
     const double t32 = command_2 > torque_limit;
     const double t33 = ((t28) ? (
-   t0
+   -torque_limit
 )
 : ((t32) ? (
    torque_limit
@@ -2446,9 +2440,8 @@ void lv_wheel_motor(const double *command, const double *Omega, double torque_li
     const double t34 = Omega_2 >= speed_limit;
     const double t35 = command_2 < 0;
     const double t36 = command_2 > 0;
-    const double t37 = Omega_2 <= t11;
+    const double t37 = Omega_2 <= -speed_limit;
     const double t38 = torque_limit*(-t13*t29 + 1);
-    const double t39 = -t38;
     u[0] = ((t7) ? (
    ((((t1) ? (
       t3 && t4 < 0
@@ -2474,8 +2467,8 @@ void lv_wheel_motor(const double *command, const double *Omega, double torque_li
    : ((Omega_0 > 0 && command_0 > t14 && Omega_0 < speed_limit) ? (
       t14
    )
-   : ((Omega_0 > t11 && Omega_0 < 0 && command_0 < t15) ? (
-      t15
+   : ((Omega_0 > -speed_limit && Omega_0 < 0 && command_0 < -t14) ? (
+      -t14
    )
    : (
       t6
@@ -2506,8 +2499,8 @@ void lv_wheel_motor(const double *command, const double *Omega, double torque_li
    : ((Omega_1 > 0 && command_1 > t26 && Omega_1 < speed_limit) ? (
       t26
    )
-   : ((Omega_1 > t11 && Omega_1 < 0 && command_1 < t27) ? (
-      t27
+   : ((Omega_1 > -speed_limit && Omega_1 < 0 && command_1 < -t26) ? (
+      -t26
    )
    : (
       t21
@@ -2538,8 +2531,8 @@ void lv_wheel_motor(const double *command, const double *Omega, double torque_li
    : ((Omega_2 > 0 && command_2 > t38 && Omega_2 < speed_limit) ? (
       t38
    )
-   : ((Omega_2 > t11 && Omega_2 < 0 && command_2 < t39) ? (
-      t39
+   : ((Omega_2 > -speed_limit && Omega_2 < 0 && command_2 < -t38) ? (
+      -t38
    )
    : (
       t33
@@ -2638,11 +2631,11 @@ void lv_wheels3_body_rhs(const double *q, const double *omega_b, const double *O
     const double t1 = ((1.0/2.0))*omega_b_1;
     const double t2 = ((1.0/2.0))*omega_b_2;
     const double t3 = 2*q_0;
+    const double t8 = 2*q_1;
     const double t4 = q_1*t3;
     const double t5 = 2*q_2*q_3;
     const double t6 = t4 + t5;
     const double t7 = q_2*t3;
-    const double t8 = 2*q_1;
     const double t9 = q_3*t8;
     const double t10 = t7 - t9;
     const double t11 = 2*(q_2*q_2);
@@ -2650,7 +2643,7 @@ void lv_wheels3_body_rhs(const double *q, const double *omega_b, const double *O
     const double t13 = -t11 - t12;
     const double t14 = t7 + t9;
     const double t15 = q_3*t3;
-    const double t16 = 2*q_1*q_2 - t15;
+    const double t16 = q_2*t8 - t15;
     const double t17 = 2*(q_0*q_0);
     const double t18 = -t12 - t17;
     const double t19 = F_w_0*t14 + F_w_1*t16 + F_w_2*t18;
@@ -2707,8 +2700,8 @@ void lv_wheels3_momentum(const double *q, const double *omega_b, const double *O
     const double J_1 = J[1];
     const double J_2 = J[2];
     const double t0 = 2*q_1;
-    const double t1 = q_0*t0;
     const double t2 = 2*q_2;
+    const double t1 = q_0*t0;
     const double t3 = q_3*t2;
     const double t4 = t1 - t3;
     const double t5 = A_b_10*J_0;
@@ -2728,7 +2721,7 @@ void lv_wheels3_momentum(const double *q, const double *omega_b, const double *O
     const double t19 = omega_b_0*(-(A_b_00*A_b_00)*J_0 - (A_b_01*A_b_01)*J_1 - (A_b_02*A_b_02)*J_2 + I_p_00) + omega_b_1*t8 + omega_b_2*t14;
     const double t20 = t1 + t3;
     const double t21 = 2*q_0*q_3;
-    const double t22 = 2*q_1*q_2 - t21;
+    const double t22 = q_1*t2 - t21;
     const double t23 = 2*(q_0*q_0);
     const double t24 = -t17 - t23;
     const double t25 = t11 - t12;
@@ -2758,14 +2751,13 @@ void lv_wheels3_motor(const double *command, const double *Omega, double torque_
     const double Omega_0 = Omega[0];
     const double Omega_1 = Omega[1];
     const double Omega_2 = Omega[2];
-    const double t0 = -torque_limit;
-    const double t1 = command_0 < t0;
+    const double t1 = command_0 < -torque_limit;
     const double t2 = fabs(Omega_0);
     const double t3 = speed_limit <= t2;
     const double t4 = Omega_0*torque_limit;
     const double t5 = command_0 > torque_limit;
     const double t6 = ((t1) ? (
-   t0
+   -torque_limit
 )
 : ((t5) ? (
    torque_limit
@@ -2777,18 +2769,16 @@ void lv_wheels3_motor(const double *command, const double *Omega, double torque_
     const double t8 = Omega_0 >= speed_limit;
     const double t9 = command_0 < 0;
     const double t10 = command_0 > 0;
-    const double t11 = -speed_limit;
-    const double t12 = Omega_0 <= t11;
+    const double t12 = Omega_0 <= -speed_limit;
     const double t13 = (1.0/speed_limit);
     const double t14 = torque_limit*(-t13*t2 + 1);
-    const double t15 = -t14;
-    const double t16 = command_1 < t0;
+    const double t16 = command_1 < -torque_limit;
     const double t17 = fabs(Omega_1);
     const double t18 = speed_limit <= t17;
     const double t19 = Omega_1*torque_limit;
     const double t20 = command_1 > torque_limit;
     const double t21 = ((t16) ? (
-   t0
+   -torque_limit
 )
 : ((t20) ? (
    torque_limit
@@ -2799,16 +2789,15 @@ void lv_wheels3_motor(const double *command, const double *Omega, double torque_
     const double t22 = Omega_1 >= speed_limit;
     const double t23 = command_1 < 0;
     const double t24 = command_1 > 0;
-    const double t25 = Omega_1 <= t11;
+    const double t25 = Omega_1 <= -speed_limit;
     const double t26 = torque_limit*(-t13*t17 + 1);
-    const double t27 = -t26;
-    const double t28 = command_2 < t0;
+    const double t28 = command_2 < -torque_limit;
     const double t29 = fabs(Omega_2);
     const double t30 = speed_limit <= t29;
     const double t31 = Omega_2*torque_limit;
     const double t32 = command_2 > torque_limit;
     const double t33 = ((t28) ? (
-   t0
+   -torque_limit
 )
 : ((t32) ? (
    torque_limit
@@ -2819,9 +2808,8 @@ void lv_wheels3_motor(const double *command, const double *Omega, double torque_
     const double t34 = Omega_2 >= speed_limit;
     const double t35 = command_2 < 0;
     const double t36 = command_2 > 0;
-    const double t37 = Omega_2 <= t11;
+    const double t37 = Omega_2 <= -speed_limit;
     const double t38 = torque_limit*(-t13*t29 + 1);
-    const double t39 = -t38;
     u[0] = ((t7) ? (
    ((((t1) ? (
       t3 && t4 < 0
@@ -2847,8 +2835,8 @@ void lv_wheels3_motor(const double *command, const double *Omega, double torque_
    : ((Omega_0 > 0 && command_0 > t14 && Omega_0 < speed_limit) ? (
       t14
    )
-   : ((Omega_0 > t11 && Omega_0 < 0 && command_0 < t15) ? (
-      t15
+   : ((Omega_0 > -speed_limit && Omega_0 < 0 && command_0 < -t14) ? (
+      -t14
    )
    : (
       t6
@@ -2879,8 +2867,8 @@ void lv_wheels3_motor(const double *command, const double *Omega, double torque_
    : ((Omega_1 > 0 && command_1 > t26 && Omega_1 < speed_limit) ? (
       t26
    )
-   : ((Omega_1 > t11 && Omega_1 < 0 && command_1 < t27) ? (
-      t27
+   : ((Omega_1 > -speed_limit && Omega_1 < 0 && command_1 < -t26) ? (
+      -t26
    )
    : (
       t21
@@ -2911,8 +2899,8 @@ void lv_wheels3_motor(const double *command, const double *Omega, double torque_
    : ((Omega_2 > 0 && command_2 > t38 && Omega_2 < speed_limit) ? (
       t38
    )
-   : ((Omega_2 > t11 && Omega_2 < 0 && command_2 < t39) ? (
-      t39
+   : ((Omega_2 > -speed_limit && Omega_2 < 0 && command_2 < -t38) ? (
+      -t38
    )
    : (
       t33
@@ -3020,11 +3008,11 @@ void lv_wheels4_body_rhs(const double *q, const double *omega_b, const double *O
     const double t1 = ((1.0/2.0))*omega_b_1;
     const double t2 = ((1.0/2.0))*omega_b_2;
     const double t3 = 2*q_0;
+    const double t8 = 2*q_1;
     const double t4 = q_1*t3;
     const double t5 = 2*q_2*q_3;
     const double t6 = t4 + t5;
     const double t7 = q_2*t3;
-    const double t8 = 2*q_1;
     const double t9 = q_3*t8;
     const double t10 = t7 - t9;
     const double t11 = 2*(q_2*q_2);
@@ -3032,7 +3020,7 @@ void lv_wheels4_body_rhs(const double *q, const double *omega_b, const double *O
     const double t13 = -t11 - t12;
     const double t14 = t7 + t9;
     const double t15 = q_3*t3;
-    const double t16 = 2*q_1*q_2 - t15;
+    const double t16 = q_2*t8 - t15;
     const double t17 = 2*(q_0*q_0);
     const double t18 = -t12 - t17;
     const double t19 = F_w_0*t14 + F_w_1*t16 + F_w_2*t18;
@@ -3201,11 +3189,11 @@ void lv_wheels4_body_rhs_c(const double *q, const double *omega_b, const double 
     const double t1 = ((1.0/2.0))*omega_b_1;
     const double t2 = ((1.0/2.0))*omega_b_2;
     const double t3 = 2*q_0;
+    const double t8 = 2*q_1;
     const double t4 = q_1*t3;
     const double t5 = 2*q_2*q_3;
     const double t6 = t4 + t5;
     const double t7 = q_2*t3;
-    const double t8 = 2*q_1;
     const double t9 = q_3*t8;
     const double t10 = t7 - t9;
     const double t11 = 2*(q_2*q_2);
@@ -3213,7 +3201,7 @@ void lv_wheels4_body_rhs_c(const double *q, const double *omega_b, const double 
     const double t13 = -t11 - t12;
     const double t14 = t7 + t9;
     const double t15 = q_3*t3;
-    const double t16 = 2*q_1*q_2 - t15;
+    const double t16 = q_2*t8 - t15;
     const double t17 = 2*(q_0*q_0);
     const double t18 = -t12 - t17;
     const double t19 = F_w_0*t14 + F_w_1*t16 + F_w_2*t18;
@@ -3314,11 +3302,11 @@ void lv_wheels4_on_axes_rhs_c(const double *q, const double *omega_b, const doub
     const double t1 = ((1.0/2.0))*omega_b_1;
     const double t2 = ((1.0/2.0))*omega_b_2;
     const double t3 = 2*q_0;
+    const double t8 = 2*q_1;
     const double t4 = q_1*t3;
     const double t5 = 2*q_2*q_3;
     const double t6 = t4 + t5;
     const double t7 = q_2*t3;
-    const double t8 = 2*q_1;
     const double t9 = q_3*t8;
     const double t10 = t7 - t9;
     const double t11 = 2*(q_2*q_2);
@@ -3326,7 +3314,7 @@ void lv_wheels4_on_axes_rhs_c(const double *q, const double *omega_b, const doub
     const double t13 = -t11 - t12;
     const double t14 = t7 + t9;
     const double t15 = q_3*t3;
-    const double t16 = 2*q_1*q_2 - t15;
+    const double t16 = q_2*t8 - t15;
     const double t17 = 2*(q_0*q_0);
     const double t18 = -t12 - t17;
     const double t19 = F_w_0*t14 + F_w_1*t16 + F_w_2*t18;
@@ -3389,8 +3377,8 @@ void lv_wheels4_total_momentum(const double *q, const double *omega_b, const dou
     const double J_2 = J[2];
     const double J_3 = J[3];
     const double t0 = 2*q_1;
-    const double t1 = q_0*t0;
     const double t2 = 2*q_2;
+    const double t1 = q_0*t0;
     const double t3 = q_3*t2;
     const double t4 = J_0*Omega_0;
     const double t5 = J_1*Omega_1;
@@ -3406,7 +3394,7 @@ void lv_wheels4_total_momentum(const double *q, const double *omega_b, const dou
     const double t15 = 2*q_0*q_3;
     const double t16 = 2*(q_0*q_0);
     L_w[0] = t11*(t10 + t9) + t14*(-t12 - t13) + t8*(t1 - t3);
-    L_w[1] = t11*(2*q_1*q_2 - t15) + t14*(t1 + t3) + t8*(-t13 - t16);
+    L_w[1] = t11*(q_1*t2 - t15) + t14*(t1 + t3) + t8*(-t13 - t16);
     L_w[2] = t11*(-t12 - t16 + 1) + t14*(-t10 + t9) + t8*(q_1*t2 + t15);
 }
 
@@ -3445,8 +3433,8 @@ void lv_wheels4_momentum(const double *q, const double *omega_b, const double *O
     const double J_2 = J[2];
     const double J_3 = J[3];
     const double t0 = 2*q_1;
-    const double t1 = q_0*t0;
     const double t2 = 2*q_2;
+    const double t1 = q_0*t0;
     const double t3 = q_3*t2;
     const double t4 = t1 - t3;
     const double t5 = A_b_10*J_0;
@@ -3467,7 +3455,7 @@ void lv_wheels4_momentum(const double *q, const double *omega_b, const double *O
     const double t20 = omega_b_0*(-(A_b_00*A_b_00)*J_0 - (A_b_01*A_b_01)*J_1 - (A_b_02*A_b_02)*J_2 - (A_b_03*A_b_03)*J_3 + I_p_00) + omega_b_1*t9 + omega_b_2*t15;
     const double t21 = t1 + t3;
     const double t22 = 2*q_0*q_3;
-    const double t23 = 2*q_1*q_2 - t22;
+    const double t23 = q_1*t2 - t22;
     const double t24 = 2*(q_0*q_0);
     const double t25 = -t18 - t24;
     const double t26 = t12 - t13;
@@ -3501,14 +3489,13 @@ void lv_wheels4_motor(const double *command, const double *Omega, double torque_
     const double Omega_1 = Omega[1];
     const double Omega_2 = Omega[2];
     const double Omega_3 = Omega[3];
-    const double t0 = -torque_limit;
-    const double t1 = command_0 < t0;
+    const double t1 = command_0 < -torque_limit;
     const double t2 = fabs(Omega_0);
     const double t3 = speed_limit <= t2;
     const double t4 = Omega_0*torque_limit;
     const double t5 = command_0 > torque_limit;
     const double t6 = ((t1) ? (
-   t0
+   -torque_limit
 )
 : ((t5) ? (
    torque_limit
@@ -3520,18 +3507,16 @@ void lv_wheels4_motor(const double *command, const double *Omega, double torque_
     const double t8 = Omega_0 >= speed_limit;
     const double t9 = command_0 < 0;
     const double t10 = command_0 > 0;
-    const double t11 = -speed_limit;
-    const double t12 = Omega_0 <= t11;
+    const double t12 = Omega_0 <= -speed_limit;
     const double t13 = (1.0/speed_limit);
     const double t14 = torque_limit*(-t13*t2 + 1);
-    const double t15 = -t14;
-    const double t16 = command_1 < t0;
+    const double t16 = command_1 < -torque_limit;
     const double t17 = fabs(Omega_1);
     const double t18 = speed_limit <= t17;
     const double t19 = Omega_1*torque_limit;
     const double t20 = command_1 > torque_limit;
     const double t21 = ((t16) ? (
-   t0
+   -torque_limit
 )
 : ((t20) ? (
    torque_limit
@@ -3542,16 +3527,15 @@ void lv_wheels4_motor(const double *command, const double *Omega, double torque_
     const double t22 = Omega_1 >= speed_limit;
     const double t23 = command_1 < 0;
     const double t24 = command_1 > 0;
-    const double t25 = Omega_1 <= t11;
+    const double t25 = Omega_1 <= -speed_limit;
     const double t26 = torque_limit*(-t13*t17 + 1);
-    const double t27 = -t26;
-    const double t28 = command_2 < t0;
+    const double t28 = command_2 < -torque_limit;
     const double t29 = fabs(Omega_2);
     const double t30 = speed_limit <= t29;
     const double t31 = Omega_2*torque_limit;
     const double t32 = command_2 > torque_limit;
     const double t33 = ((t28) ? (
-   t0
+   -torque_limit
 )
 : ((t32) ? (
    torque_limit
@@ -3562,16 +3546,15 @@ void lv_wheels4_motor(const double *command, const double *Omega, double torque_
     const double t34 = Omega_2 >= speed_limit;
     const double t35 = command_2 < 0;
     const double t36 = command_2 > 0;
-    const double t37 = Omega_2 <= t11;
+    const double t37 = Omega_2 <= -speed_limit;
     const double t38 = torque_limit*(-t13*t29 + 1);
-    const double t39 = -t38;
-    const double t40 = command_3 < t0;
+    const double t40 = command_3 < -torque_limit;
     const double t41 = fabs(Omega_3);
     const double t42 = speed_limit <= t41;
     const double t43 = Omega_3*torque_limit;
     const double t44 = command_3 > torque_limit;
     const double t45 = ((t40) ? (
-   t0
+   -torque_limit
 )
 : ((t44) ? (
    torque_limit
@@ -3582,9 +3565,8 @@ void lv_wheels4_motor(const double *command, const double *Omega, double torque_
     const double t46 = Omega_3 >= speed_limit;
     const double t47 = command_3 < 0;
     const double t48 = command_3 > 0;
-    const double t49 = Omega_3 <= t11;
+    const double t49 = Omega_3 <= -speed_limit;
     const double t50 = torque_limit*(-t13*t41 + 1);
-    const double t51 = -t50;
     u[0] = ((t7) ? (
    ((((t1) ? (
       t3 && t4 < 0
@@ -3610,8 +3592,8 @@ void lv_wheels4_motor(const double *command, const double *Omega, double torque_
    : ((Omega_0 > 0 && command_0 > t14 && Omega_0 < speed_limit) ? (
       t14
    )
-   : ((Omega_0 > t11 && Omega_0 < 0 && command_0 < t15) ? (
-      t15
+   : ((Omega_0 > -speed_limit && Omega_0 < 0 && command_0 < -t14) ? (
+      -t14
    )
    : (
       t6
@@ -3642,8 +3624,8 @@ void lv_wheels4_motor(const double *command, const double *Omega, double torque_
    : ((Omega_1 > 0 && command_1 > t26 && Omega_1 < speed_limit) ? (
       t26
    )
-   : ((Omega_1 > t11 && Omega_1 < 0 && command_1 < t27) ? (
-      t27
+   : ((Omega_1 > -speed_limit && Omega_1 < 0 && command_1 < -t26) ? (
+      -t26
    )
    : (
       t21
@@ -3674,8 +3656,8 @@ void lv_wheels4_motor(const double *command, const double *Omega, double torque_
    : ((Omega_2 > 0 && command_2 > t38 && Omega_2 < speed_limit) ? (
       t38
    )
-   : ((Omega_2 > t11 && Omega_2 < 0 && command_2 < t39) ? (
-      t39
+   : ((Omega_2 > -speed_limit && Omega_2 < 0 && command_2 < -t38) ? (
+      -t38
    )
    : (
       t33
@@ -3706,8 +3688,8 @@ void lv_wheels4_motor(const double *command, const double *Omega, double torque_
    : ((Omega_3 > 0 && command_3 > t50 && Omega_3 < speed_limit) ? (
       t50
    )
-   : ((Omega_3 > t11 && Omega_3 < 0 && command_3 < t51) ? (
-      t51
+   : ((Omega_3 > -speed_limit && Omega_3 < 0 && command_3 < -t50) ? (
+      -t50
    )
    : (
       t45

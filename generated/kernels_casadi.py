@@ -154,8 +154,8 @@ def world_inertia(q, I_b):
     I_b_1 = I_b[1]
     I_b_2 = I_b[2]
     t0 = 2*q_1
-    t1 = q_0*t0
     t2 = 2*q_2
+    t1 = q_0*t0
     t3 = q_3*t2
     t4 = t1 - t3
     t5 = q_0*t2
@@ -165,7 +165,7 @@ def world_inertia(q, I_b):
     t9 = 2*(q_2*q_2) - 1
     t10 = -t8 - t9
     t11 = 2*q_0*q_3
-    t12 = 2*q_1*q_2 - t11
+    t12 = q_1*t2 - t11
     t13 = I_b_2*t7
     t14 = t1 + t3
     t15 = I_b_0*t10
@@ -293,9 +293,9 @@ def effect_angular_damping(q, omega_b, c):
     omega_b_0 = omega_b[0]
     omega_b_1 = omega_b[1]
     omega_b_2 = omega_b[2]
+    t2 = 2*q_1
     t0 = c*omega_b_0
     t1 = 2*c*omega_b_2*q_0 - 2*q_2*t0
-    t2 = 2*q_1
     t3 = c*omega_b_1
     t4 = 2*t3
     t5 = -q_0*t4 + t0*t2
@@ -415,8 +415,8 @@ def quat_rotate(q, v_b):
     v_b_1 = v_b[1]
     v_b_2 = v_b[2]
     t0 = 2*q_1
-    t1 = q_0*t0
     t2 = 2*q_2
+    t1 = q_0*t0
     t3 = q_3*t2
     t4 = q_0*t2
     t5 = q_3*t0
@@ -424,7 +424,7 @@ def quat_rotate(q, v_b):
     t7 = 2*(q_2*q_2) - 1
     t8 = 2*q_0*q_3
     t9 = 2*(q_0*q_0)
-    return casadi.vertcat(v_b_0*(-t6 - t7) + v_b_1*(t1 - t3) + v_b_2*(t4 + t5), v_b_0*(t1 + t3) + v_b_1*(-t7 - t9) + v_b_2*(2*q_1*q_2 - t8), v_b_0*(t4 - t5) + v_b_1*(q_1*t2 + t8) + v_b_2*(-t6 - t9 + 1))
+    return casadi.vertcat(v_b_0*(-t6 - t7) + v_b_1*(t1 - t3) + v_b_2*(t4 + t5), v_b_0*(t1 + t3) + v_b_1*(-t7 - t9) + v_b_2*(q_1*t2 - t8), v_b_0*(t4 - t5) + v_b_1*(q_1*t2 + t8) + v_b_2*(-t6 - t9 + 1))
 
 
 def quat_to_matrix(q):
@@ -435,17 +435,17 @@ def quat_to_matrix(q):
     q_1 = q[1]
     q_2 = q[2]
     q_3 = q[3]
+    t2 = 2*q_1
+    t4 = 2*q_2
     t0 = 2*(q_1*q_1)
     t1 = 2*(q_2*q_2) - 1
-    t2 = 2*q_1
     t3 = q_0*t2
-    t4 = 2*q_2
     t5 = q_3*t4
     t6 = q_0*t4
     t7 = q_3*t2
     t8 = 2*(q_0*q_0)
     t9 = 2*q_0*q_3
-    return casadi.vertcat(-t0 - t1, t3 - t5, t6 + t7, t3 + t5, -t1 - t8, 2*q_1*q_2 - t9, t6 - t7, q_1*t4 + t9, -t0 - t8 + 1)
+    return casadi.vertcat(-t0 - t1, t3 - t5, t6 + t7, t3 + t5, -t1 - t8, q_1*t4 - t9, t6 - t7, q_1*t4 + t9, -t0 - t8 + 1)
 
 
 def matrix_to_quat(R_wb):
@@ -467,12 +467,12 @@ def matrix_to_quat(R_wb):
     t3 = casadi.sqrt(t2 + 1)
     t4 = ((1.0/2.0))/t3
     t5 = casadi.logic_and(casadi.logic_and((R_0 <= t2), (R_4 <= t2)), (R_8 <= t2))
-    t6 = -R_4
     t7 = R_0 - R_8
-    t8 = casadi.sqrt(t6 + t7 + 1)
+    t8 = casadi.sqrt(-R_4 + t7 + 1)
     t9 = casadi.logic_and((R_0 >= R_4), (R_0 >= R_8))
-    t10 = casadi.sqrt(-t1 - t6 + 1)
+    t10 = casadi.sqrt(R_4 - t1 + 1)
     t11 = (1.0/t10)
+    t22 = ((1.0/2.0))*t11
     t12 = ((1.0/2.0))*R_1 + ((1.0/2.0))*R_3
     t13 = (R_4 >= R_8)
     t14 = R_2 + R_6
@@ -480,10 +480,9 @@ def matrix_to_quat(R_wb):
     t16 = ((1.0/2.0))/t15
     t17 = R_2 - R_6
     t18 = (1.0/t8)
+    t21 = ((1.0/2.0))*t18
     t19 = R_5 + R_7
     t20 = -R_1 + R_3
-    t21 = ((1.0/2.0))*t18
-    t22 = ((1.0/2.0))*t11
     return casadi.vertcat(casadi.if_else(t5, t0*t4, casadi.if_else(t9, ((1.0/2.0))*t8, casadi.if_else(t13, t11*t12, t14*t16))), casadi.if_else(t5, t17*t4, casadi.if_else(t9, t12*t18, casadi.if_else(t13, ((1.0/2.0))*t10, t16*t19))), casadi.if_else(t5, t20*t4, casadi.if_else(t9, t14*t21, casadi.if_else(t13, t19*t22, ((1.0/2.0))*t15))), casadi.if_else(t5, ((1.0/2.0))*t3, casadi.if_else(t9, t0*t21, casadi.if_else(t13, t17*t22, t16*t20))))
 
 
@@ -577,7 +576,7 @@ def quat_error_chart(q, q_ref):
     t2 = q_0*t0 + q_1*t1 - 2*q_2*q_ref_1 - 2*q_3*q_ref_0
     t3 = (q_0*q_ref_0 + q_1*q_ref_1 + q_2*q_ref_2 + q_3*q_ref_3 < 0)
     t4 = q_0*t1 - q_1*t0 - 2*q_2*q_ref_0 + 2*q_3*q_ref_1
-    t5 = 2*q_0*q_ref_1 - 2*q_1*q_ref_0 + q_2*t0 - 2*q_3*q_ref_2
+    t5 = 2*q_0*q_ref_1 - 2*q_1*q_ref_0 + q_2*t0 - q_3*t1
     return casadi.vertcat(casadi.if_else(t3, -t2, t2), casadi.if_else(t3, t4, -t4), casadi.if_else(t3, -t5, t5))
 
 
@@ -588,10 +587,10 @@ def euler_xyz_to_quat(roll, pitch, yaw):
       in  yaw scalar: rad
       out q [4]: quaternion (x, y, z, w), scalar last"""
     t0 = ((1.0/2.0))*yaw
-    t1 = casadi.sin(t0)
     t2 = ((1.0/2.0))*roll
-    t3 = casadi.cos(t2)
     t4 = ((1.0/2.0))*pitch
+    t1 = casadi.sin(t0)
+    t3 = casadi.cos(t2)
     t5 = casadi.sin(t4)
     t6 = t3*t5
     t7 = casadi.cos(t0)
@@ -611,8 +610,8 @@ def quat_to_euler_xyz(q):
     q_2 = q[2]
     q_3 = q[3]
     t0 = 2*q_3
-    t1 = q_0*t0
     t2 = 2*q_2
+    t1 = q_0*t0
     t3 = q_1*t2
     t4 = t1 - t3
     t5 = 2*(q_0*q_0) - 1
@@ -681,9 +680,9 @@ def integrate_orientation(q, omega_w, dt):
     t0 = ((1.0/2.0))*q_3
     t1 = ((1.0/2.0))*q_2
     t2 = ((1.0/2.0))*omega_w_2
-    t3 = dt*(omega_w_0*t0 + omega_w_1*t1 - q_1*t2) + q_0
     t4 = ((1.0/2.0))*omega_w_0
     t5 = ((1.0/2.0))*omega_w_1
+    t3 = dt*(omega_w_0*t0 + omega_w_1*t1 - q_1*t2) + q_0
     t6 = dt*(-omega_w_2*t1 - q_0*t4 - q_1*t5) + q_3
     t7 = dt*(omega_w_2*t0 - q_0*t5 + q_1*t4) + q_2
     t8 = dt*(-omega_w_0*t1 + omega_w_1*t0 + q_0*t2) + q_1
@@ -830,8 +829,8 @@ def rigid_body_rhs(x, m, I_b, F_w, tau_w):
     t0 = ((1.0/2.0))*x_10
     t1 = ((1.0/2.0))*x_11
     t2 = ((1.0/2.0))*x_12
-    t3 = (1.0/m)
     t4 = 2*tau_w_0
+    t3 = (1.0/m)
     t5 = -t4*x_4 + 2*tau_w_1*x_3
     t6 = t4*x_5 - 2*tau_w_2*x_3
     t7 = -2*tau_w_1*x_5 + 2*tau_w_2*x_4
@@ -881,10 +880,10 @@ def apply_inv_inertia(q, I_b, v):
     v_0 = v[0]
     v_1 = v[1]
     v_2 = v[2]
-    t0 = (1.0/I_b_1)
     t1 = 2*q_1
-    t2 = q_0*t1
     t3 = 2*q_2
+    t0 = (1.0/I_b_1)
+    t2 = q_0*t1
     t4 = q_3*t3
     t5 = t2 - t4
     t6 = (1.0/I_b_2)
@@ -896,7 +895,7 @@ def apply_inv_inertia(q, I_b, v):
     t12 = 2*(q_2*q_2) - 1
     t13 = -t11 - t12
     t14 = 2*q_0*q_3
-    t15 = 2*q_1*q_2 - t14
+    t15 = q_1*t3 - t14
     t16 = t6*t9
     t17 = t2 + t4
     t18 = t10*t13
@@ -925,8 +924,8 @@ def world_to_body(q, v_w):
     v_1 = v_w[1]
     v_2 = v_w[2]
     t0 = 2*q_1
-    t1 = q_0*t0
     t2 = 2*q_2
+    t1 = q_0*t0
     t3 = q_3*t2
     t4 = q_0*t2
     t5 = q_3*t0
@@ -934,7 +933,7 @@ def world_to_body(q, v_w):
     t7 = 2*(q_2*q_2) - 1
     t8 = 2*q_0*q_3
     t9 = 2*(q_0*q_0)
-    return casadi.vertcat(v_0*(-t6 - t7) + v_1*(t1 + t3) + v_2*(t4 - t5), v_0*(t1 - t3) + v_1*(-t7 - t9) + v_2*(q_2*t0 + t8), v_0*(t4 + t5) + v_1*(2*q_1*q_2 - t8) + v_2*(-t6 - t9 + 1))
+    return casadi.vertcat(v_0*(-t6 - t7) + v_1*(t1 + t3) + v_2*(t4 - t5), v_0*(t1 - t3) + v_1*(-t7 - t9) + v_2*(q_2*t0 + t8), v_0*(t4 + t5) + v_1*(q_1*t2 - t8) + v_2*(-t6 - t9 + 1))
 
 
 def kinetic_energy(m, I_b, v_w, omega_b):
@@ -973,8 +972,8 @@ def angular_momentum_world(q, I_b, omega_b):
     omega_b_1 = omega_b[1]
     omega_b_2 = omega_b[2]
     t0 = 2*q_1
-    t1 = q_0*t0
     t2 = 2*q_2
+    t1 = q_0*t0
     t3 = q_3*t2
     t4 = I_b_1*omega_b_1
     t5 = q_0*t2
@@ -985,7 +984,7 @@ def angular_momentum_world(q, I_b, omega_b):
     t10 = I_b_0*omega_b_0
     t11 = 2*q_0*q_3
     t12 = 2*(q_0*q_0)
-    return casadi.vertcat(t10*(-t8 - t9) + t4*(t1 - t3) + t7*(t5 + t6), t10*(t1 + t3) + t4*(-t12 - t9) + t7*(2*q_1*q_2 - t11), t10*(t5 - t6) + t4*(q_1*t2 + t11) + t7*(-t12 - t8 + 1))
+    return casadi.vertcat(t10*(-t8 - t9) + t4*(t1 - t3) + t7*(t5 + t6), t10*(t1 + t3) + t4*(-t12 - t9) + t7*(q_1*t2 - t11), t10*(t5 - t6) + t4*(q_1*t2 + t11) + t7*(-t12 - t8 + 1))
 
 
 def rigid_body_rhs_torque(x, I_b, tau_w):
@@ -1134,8 +1133,8 @@ def rigid_body_rhs_c(x, m, c_b, F_w, tau_w):
     t0 = ((1.0/2.0))*x_10
     t1 = ((1.0/2.0))*x_11
     t2 = ((1.0/2.0))*x_12
-    t3 = (1.0/m)
     t4 = 2*tau_w_0
+    t3 = (1.0/m)
     t5 = -t4*x_4 + 2*tau_w_1*x_3
     t6 = t4*x_5 - 2*tau_w_2*x_3
     t7 = -2*tau_w_1*x_5 + 2*tau_w_2*x_4
@@ -1235,10 +1234,10 @@ def rigid_body_increments_c(q, omega_b, v_w, S_b, F_w, tau_w):
     tau_w_0 = tau_w[0]
     tau_w_1 = tau_w[1]
     tau_w_2 = tau_w[2]
+    t3 = 2*q_0
     t0 = S_b_6*omega_b_0
     t1 = S_b_6*omega_b_2
     t2 = S_b_6*omega_b_1
-    t3 = 2*q_0
     t4 = -2*q_1*tau_w_0 + t3*tau_w_1
     t5 = 2*q_2*tau_w_0 - t3*tau_w_2
     t6 = 2*q_1*tau_w_2 - 2*q_2*tau_w_1
@@ -1274,10 +1273,10 @@ def rigid_body_increments_torque_c(q, omega_b, v_w, S_b, tau_w):
     tau_w_0 = tau_w[0]
     tau_w_1 = tau_w[1]
     tau_w_2 = tau_w[2]
+    t3 = 2*q_0
     t0 = S_b_6*omega_b_0
     t1 = S_b_6*omega_b_2
     t2 = S_b_6*omega_b_1
-    t3 = 2*q_0
     t4 = -2*q_1*tau_w_0 + t3*tau_w_1
     t5 = 2*q_2*tau_w_0 - t3*tau_w_2
     t6 = 2*q_1*tau_w_2 - 2*q_2*tau_w_1
@@ -1570,18 +1569,18 @@ def pivot_body_rhs(q, omega_b, I_p, r_b, F_w, tau_w):
     t0 = ((1.0/2.0))*omega_b_0
     t1 = ((1.0/2.0))*omega_b_1
     t2 = ((1.0/2.0))*omega_b_2
+    t8 = 2*q_0
+    t10 = 2*q_1
     t3 = (I_p_12*I_p_12)
     t4 = (I_p_01*I_p_01)
     t5 = (I_p_02*I_p_02)
     t6 = (1.0/(I_p_00*I_p_11*I_p_22 - I_p_00*t3 + 2*I_p_01*I_p_02*I_p_12 - I_p_11*t5 - I_p_22*t4))
     t7 = I_p_01*I_p_12 - I_p_02*I_p_11
-    t8 = 2*q_0
     t9 = q_2*t8
-    t10 = 2*q_1
     t11 = q_3*t10
     t12 = t11 + t9
     t13 = q_3*t8
-    t14 = 2*q_1*q_2 - t13
+    t14 = q_2*t10 - t13
     t15 = I_p_00*omega_b_0 + I_p_01*omega_b_1 + I_p_02*omega_b_2
     t16 = I_p_01*omega_b_0 + I_p_11*omega_b_1 + I_p_12*omega_b_2
     t17 = 2*(q_0*q_0)
@@ -1630,8 +1629,8 @@ def pivot_kinematics(q, omega_b, anchor_w, r_b):
     r_b_1 = r_b[1]
     r_b_2 = r_b[2]
     t0 = 2*q_1
-    t1 = q_0*t0
     t2 = 2*q_2
+    t1 = q_0*t0
     t3 = q_3*t2
     t4 = t1 - t3
     t5 = q_0*t2
@@ -1642,7 +1641,7 @@ def pivot_kinematics(q, omega_b, anchor_w, r_b):
     t10 = -t8 - t9
     t11 = t1 + t3
     t12 = 2*q_0*q_3
-    t13 = 2*q_1*q_2 - t12
+    t13 = q_1*t2 - t12
     t14 = 2*(q_0*q_0)
     t15 = -t14 - t9
     t16 = t5 - t6
@@ -1913,11 +1912,11 @@ def sphere_flow(q, L_b, I_r, tau):
     L_b_0 = L_b[0]
     L_b_1 = L_b[1]
     L_b_2 = L_b[2]
+    t4 = ((1.0/2.0))*tau
     t0 = (1.0/I_r)
     t1 = (L_b_0*L_b_0) + (L_b_1*L_b_1) + (L_b_2*L_b_2)
     t2 = casadi.sqrt(t1)
     t3 = t0*t2
-    t4 = ((1.0/2.0))*tau
     t5 = t3*t4
     t6 = casadi.cos(t5)
     t7 = casadi.if_else((t3*casadi.fabs(tau) > (1.0/50000000.0)), casadi.sin(t5)/t2, t0*t4*(1 - (1.0/24.0)*t1*(tau*tau)/(I_r*I_r)))
@@ -2192,20 +2191,19 @@ def wheel_saturation(command, Omega, torque_limit, speed_limit):
     Omega_0 = Omega[0]
     Omega_1 = Omega[1]
     Omega_2 = Omega[2]
-    t0 = -torque_limit
-    t1 = (command_0 < t0)
+    t1 = (command_0 < -torque_limit)
     t2 = (speed_limit <= casadi.fabs(Omega_0))
     t3 = Omega_0*torque_limit
     t4 = (command_0 > torque_limit)
-    t5 = (command_1 < t0)
+    t5 = (command_1 < -torque_limit)
     t6 = (speed_limit <= casadi.fabs(Omega_1))
     t7 = Omega_1*torque_limit
     t8 = (command_1 > torque_limit)
-    t9 = (command_2 < t0)
+    t9 = (command_2 < -torque_limit)
     t10 = (speed_limit <= casadi.fabs(Omega_2))
     t11 = Omega_2*torque_limit
     t12 = (command_2 > torque_limit)
-    return casadi.vertcat(casadi.if_else(casadi.if_else(t1, casadi.logic_and(t2, (t3 < 0)), casadi.if_else(t4, casadi.logic_and(t2, (t3 > 0)), casadi.logic_and(t2, (Omega_0*command_0 > 0)))), 0, casadi.if_else(t1, t0, casadi.if_else(t4, torque_limit, command_0))), casadi.if_else(casadi.if_else(t5, casadi.logic_and(t6, (t7 < 0)), casadi.if_else(t8, casadi.logic_and(t6, (t7 > 0)), casadi.logic_and(t6, (Omega_1*command_1 > 0)))), 0, casadi.if_else(t5, t0, casadi.if_else(t8, torque_limit, command_1))), casadi.if_else(casadi.if_else(t9, casadi.logic_and(t10, (t11 < 0)), casadi.if_else(t12, casadi.logic_and(t10, (t11 > 0)), casadi.logic_and(t10, (Omega_2*command_2 > 0)))), 0, casadi.if_else(t9, t0, casadi.if_else(t12, torque_limit, command_2))))
+    return casadi.vertcat(casadi.if_else(casadi.if_else(t1, casadi.logic_and(t2, (t3 < 0)), casadi.if_else(t4, casadi.logic_and(t2, (t3 > 0)), casadi.logic_and(t2, (Omega_0*command_0 > 0)))), 0, casadi.if_else(t1, -torque_limit, casadi.if_else(t4, torque_limit, command_0))), casadi.if_else(casadi.if_else(t5, casadi.logic_and(t6, (t7 < 0)), casadi.if_else(t8, casadi.logic_and(t6, (t7 > 0)), casadi.logic_and(t6, (Omega_1*command_1 > 0)))), 0, casadi.if_else(t5, -torque_limit, casadi.if_else(t8, torque_limit, command_1))), casadi.if_else(casadi.if_else(t9, casadi.logic_and(t10, (t11 < 0)), casadi.if_else(t12, casadi.logic_and(t10, (t11 > 0)), casadi.logic_and(t10, (Omega_2*command_2 > 0)))), 0, casadi.if_else(t9, -torque_limit, casadi.if_else(t12, torque_limit, command_2))))
 
 
 def wheel_motor(command, Omega, torque_limit, speed_limit, cutoff):
@@ -2222,47 +2220,42 @@ def wheel_motor(command, Omega, torque_limit, speed_limit, cutoff):
     Omega_0 = Omega[0]
     Omega_1 = Omega[1]
     Omega_2 = Omega[2]
-    t0 = -torque_limit
-    t1 = (command_0 < t0)
+    t1 = (command_0 < -torque_limit)
     t2 = casadi.fabs(Omega_0)
     t3 = (speed_limit <= t2)
     t4 = Omega_0*torque_limit
     t5 = (command_0 > torque_limit)
-    t6 = casadi.if_else(t1, t0, casadi.if_else(t5, torque_limit, command_0))
+    t6 = casadi.if_else(t1, -torque_limit, casadi.if_else(t5, torque_limit, command_0))
     t7 = (cutoff > 0)
     t8 = (Omega_0 >= speed_limit)
     t9 = (command_0 < 0)
     t10 = (command_0 > 0)
-    t11 = -speed_limit
-    t12 = (Omega_0 <= t11)
+    t12 = (Omega_0 <= -speed_limit)
     t13 = (1.0/speed_limit)
     t14 = torque_limit*(-t13*t2 + 1)
-    t15 = -t14
-    t16 = (command_1 < t0)
+    t16 = (command_1 < -torque_limit)
     t17 = casadi.fabs(Omega_1)
     t18 = (speed_limit <= t17)
     t19 = Omega_1*torque_limit
     t20 = (command_1 > torque_limit)
-    t21 = casadi.if_else(t16, t0, casadi.if_else(t20, torque_limit, command_1))
+    t21 = casadi.if_else(t16, -torque_limit, casadi.if_else(t20, torque_limit, command_1))
     t22 = (Omega_1 >= speed_limit)
     t23 = (command_1 < 0)
     t24 = (command_1 > 0)
-    t25 = (Omega_1 <= t11)
+    t25 = (Omega_1 <= -speed_limit)
     t26 = torque_limit*(-t13*t17 + 1)
-    t27 = -t26
-    t28 = (command_2 < t0)
+    t28 = (command_2 < -torque_limit)
     t29 = casadi.fabs(Omega_2)
     t30 = (speed_limit <= t29)
     t31 = Omega_2*torque_limit
     t32 = (command_2 > torque_limit)
-    t33 = casadi.if_else(t28, t0, casadi.if_else(t32, torque_limit, command_2))
+    t33 = casadi.if_else(t28, -torque_limit, casadi.if_else(t32, torque_limit, command_2))
     t34 = (Omega_2 >= speed_limit)
     t35 = (command_2 < 0)
     t36 = (command_2 > 0)
-    t37 = (Omega_2 <= t11)
+    t37 = (Omega_2 <= -speed_limit)
     t38 = torque_limit*(-t13*t29 + 1)
-    t39 = -t38
-    return casadi.vertcat(casadi.if_else(t7, casadi.if_else(casadi.if_else(t1, casadi.logic_and(t3, (t4 < 0)), casadi.if_else(t5, casadi.logic_and(t3, (t4 > 0)), casadi.logic_and(t3, (Omega_0*command_0 > 0)))), 0, t6), casadi.if_else(casadi.logic_and(casadi.logic_and(casadi.logic_and(casadi.logic_or(t10, t12), casadi.logic_or(t10, t9)), casadi.logic_or(t12, t8)), casadi.logic_or(t8, t9)), 0, casadi.if_else(casadi.logic_and(casadi.logic_and((Omega_0 > 0), (command_0 > t14)), (Omega_0 < speed_limit)), t14, casadi.if_else(casadi.logic_and(casadi.logic_and((Omega_0 > t11), (Omega_0 < 0)), (command_0 < t15)), t15, t6)))), casadi.if_else(t7, casadi.if_else(casadi.if_else(t16, casadi.logic_and(t18, (t19 < 0)), casadi.if_else(t20, casadi.logic_and(t18, (t19 > 0)), casadi.logic_and(t18, (Omega_1*command_1 > 0)))), 0, t21), casadi.if_else(casadi.logic_and(casadi.logic_and(casadi.logic_and(casadi.logic_or(t22, t23), casadi.logic_or(t22, t25)), casadi.logic_or(t23, t24)), casadi.logic_or(t24, t25)), 0, casadi.if_else(casadi.logic_and(casadi.logic_and((Omega_1 > 0), (command_1 > t26)), (Omega_1 < speed_limit)), t26, casadi.if_else(casadi.logic_and(casadi.logic_and((Omega_1 > t11), (Omega_1 < 0)), (command_1 < t27)), t27, t21)))), casadi.if_else(t7, casadi.if_else(casadi.if_else(t28, casadi.logic_and(t30, (t31 < 0)), casadi.if_else(t32, casadi.logic_and(t30, (t31 > 0)), casadi.logic_and(t30, (Omega_2*command_2 > 0)))), 0, t33), casadi.if_else(casadi.logic_and(casadi.logic_and(casadi.logic_and(casadi.logic_or(t34, t35), casadi.logic_or(t34, t37)), casadi.logic_or(t35, t36)), casadi.logic_or(t36, t37)), 0, casadi.if_else(casadi.logic_and(casadi.logic_and((Omega_2 > 0), (command_2 > t38)), (Omega_2 < speed_limit)), t38, casadi.if_else(casadi.logic_and(casadi.logic_and((Omega_2 > t11), (Omega_2 < 0)), (command_2 < t39)), t39, t33)))))
+    return casadi.vertcat(casadi.if_else(t7, casadi.if_else(casadi.if_else(t1, casadi.logic_and(t3, (t4 < 0)), casadi.if_else(t5, casadi.logic_and(t3, (t4 > 0)), casadi.logic_and(t3, (Omega_0*command_0 > 0)))), 0, t6), casadi.if_else(casadi.logic_and(casadi.logic_and(casadi.logic_and(casadi.logic_or(t10, t12), casadi.logic_or(t10, t9)), casadi.logic_or(t12, t8)), casadi.logic_or(t8, t9)), 0, casadi.if_else(casadi.logic_and(casadi.logic_and((Omega_0 > 0), (command_0 > t14)), (Omega_0 < speed_limit)), t14, casadi.if_else(casadi.logic_and(casadi.logic_and((Omega_0 < 0), (Omega_0 > -speed_limit)), (command_0 < -t14)), -t14, t6)))), casadi.if_else(t7, casadi.if_else(casadi.if_else(t16, casadi.logic_and(t18, (t19 < 0)), casadi.if_else(t20, casadi.logic_and(t18, (t19 > 0)), casadi.logic_and(t18, (Omega_1*command_1 > 0)))), 0, t21), casadi.if_else(casadi.logic_and(casadi.logic_and(casadi.logic_and(casadi.logic_or(t22, t23), casadi.logic_or(t22, t25)), casadi.logic_or(t23, t24)), casadi.logic_or(t24, t25)), 0, casadi.if_else(casadi.logic_and(casadi.logic_and((Omega_1 > 0), (command_1 > t26)), (Omega_1 < speed_limit)), t26, casadi.if_else(casadi.logic_and(casadi.logic_and((Omega_1 < 0), (Omega_1 > -speed_limit)), (command_1 < -t26)), -t26, t21)))), casadi.if_else(t7, casadi.if_else(casadi.if_else(t28, casadi.logic_and(t30, (t31 < 0)), casadi.if_else(t32, casadi.logic_and(t30, (t31 > 0)), casadi.logic_and(t30, (Omega_2*command_2 > 0)))), 0, t33), casadi.if_else(casadi.logic_and(casadi.logic_and(casadi.logic_and(casadi.logic_or(t34, t35), casadi.logic_or(t34, t37)), casadi.logic_or(t35, t36)), casadi.logic_or(t36, t37)), 0, casadi.if_else(casadi.logic_and(casadi.logic_and((Omega_2 > 0), (command_2 > t38)), (Omega_2 < speed_limit)), t38, casadi.if_else(casadi.logic_and(casadi.logic_and((Omega_2 < 0), (Omega_2 > -speed_limit)), (command_2 < -t38)), -t38, t33)))))
 
 
 def wheels3_body_rhs(q, omega_b, Omega, I_p, A_b, J, r_b, F_w, tau_w, u, c_w):
@@ -2371,11 +2364,11 @@ def wheels3_body_rhs(q, omega_b, Omega, I_p, A_b, J, r_b, F_w, tau_w, u, c_w):
     t1 = ((1.0/2.0))*omega_b_1
     t2 = ((1.0/2.0))*omega_b_2
     t3 = 2*q_0
+    t8 = 2*q_1
     t4 = q_1*t3
     t5 = 2*q_2*q_3
     t6 = t4 + t5
     t7 = q_2*t3
-    t8 = 2*q_1
     t9 = q_3*t8
     t10 = t7 - t9
     t11 = 2*(q_2*q_2)
@@ -2383,7 +2376,7 @@ def wheels3_body_rhs(q, omega_b, Omega, I_p, A_b, J, r_b, F_w, tau_w, u, c_w):
     t13 = -t11 - t12
     t14 = t7 + t9
     t15 = q_3*t3
-    t16 = 2*q_1*q_2 - t15
+    t16 = q_2*t8 - t15
     t17 = 2*(q_0*q_0)
     t18 = -t12 - t17
     t19 = F_w_0*t14 + F_w_1*t16 + F_w_2*t18
@@ -2441,8 +2434,8 @@ def wheels3_momentum(q, omega_b, Omega, I_p, A_b, J):
     J_1 = J[1]
     J_2 = J[2]
     t0 = 2*q_1
-    t1 = q_0*t0
     t2 = 2*q_2
+    t1 = q_0*t0
     t3 = q_3*t2
     t4 = t1 - t3
     t5 = A_b_10*J_0
@@ -2462,7 +2455,7 @@ def wheels3_momentum(q, omega_b, Omega, I_p, A_b, J):
     t19 = omega_b_0*(-(A_b_00*A_b_00)*J_0 - (A_b_01*A_b_01)*J_1 - (A_b_02*A_b_02)*J_2 + I_p_00) + omega_b_1*t8 + omega_b_2*t14
     t20 = t1 + t3
     t21 = 2*q_0*q_3
-    t22 = 2*q_1*q_2 - t21
+    t22 = q_1*t2 - t21
     t23 = 2*(q_0*q_0)
     t24 = -t17 - t23
     t25 = t11 - t12
@@ -2491,47 +2484,42 @@ def wheels3_motor(command, Omega, torque_limit, speed_limit, cutoff):
     Omega_0 = Omega[0]
     Omega_1 = Omega[1]
     Omega_2 = Omega[2]
-    t0 = -torque_limit
-    t1 = (command_0 < t0)
+    t1 = (command_0 < -torque_limit)
     t2 = casadi.fabs(Omega_0)
     t3 = (speed_limit <= t2)
     t4 = Omega_0*torque_limit
     t5 = (command_0 > torque_limit)
-    t6 = casadi.if_else(t1, t0, casadi.if_else(t5, torque_limit, command_0))
+    t6 = casadi.if_else(t1, -torque_limit, casadi.if_else(t5, torque_limit, command_0))
     t7 = (cutoff > 0)
     t8 = (Omega_0 >= speed_limit)
     t9 = (command_0 < 0)
     t10 = (command_0 > 0)
-    t11 = -speed_limit
-    t12 = (Omega_0 <= t11)
+    t12 = (Omega_0 <= -speed_limit)
     t13 = (1.0/speed_limit)
     t14 = torque_limit*(-t13*t2 + 1)
-    t15 = -t14
-    t16 = (command_1 < t0)
+    t16 = (command_1 < -torque_limit)
     t17 = casadi.fabs(Omega_1)
     t18 = (speed_limit <= t17)
     t19 = Omega_1*torque_limit
     t20 = (command_1 > torque_limit)
-    t21 = casadi.if_else(t16, t0, casadi.if_else(t20, torque_limit, command_1))
+    t21 = casadi.if_else(t16, -torque_limit, casadi.if_else(t20, torque_limit, command_1))
     t22 = (Omega_1 >= speed_limit)
     t23 = (command_1 < 0)
     t24 = (command_1 > 0)
-    t25 = (Omega_1 <= t11)
+    t25 = (Omega_1 <= -speed_limit)
     t26 = torque_limit*(-t13*t17 + 1)
-    t27 = -t26
-    t28 = (command_2 < t0)
+    t28 = (command_2 < -torque_limit)
     t29 = casadi.fabs(Omega_2)
     t30 = (speed_limit <= t29)
     t31 = Omega_2*torque_limit
     t32 = (command_2 > torque_limit)
-    t33 = casadi.if_else(t28, t0, casadi.if_else(t32, torque_limit, command_2))
+    t33 = casadi.if_else(t28, -torque_limit, casadi.if_else(t32, torque_limit, command_2))
     t34 = (Omega_2 >= speed_limit)
     t35 = (command_2 < 0)
     t36 = (command_2 > 0)
-    t37 = (Omega_2 <= t11)
+    t37 = (Omega_2 <= -speed_limit)
     t38 = torque_limit*(-t13*t29 + 1)
-    t39 = -t38
-    return casadi.vertcat(casadi.if_else(t7, casadi.if_else(casadi.if_else(t1, casadi.logic_and(t3, (t4 < 0)), casadi.if_else(t5, casadi.logic_and(t3, (t4 > 0)), casadi.logic_and(t3, (Omega_0*command_0 > 0)))), 0, t6), casadi.if_else(casadi.logic_and(casadi.logic_and(casadi.logic_and(casadi.logic_or(t10, t12), casadi.logic_or(t10, t9)), casadi.logic_or(t12, t8)), casadi.logic_or(t8, t9)), 0, casadi.if_else(casadi.logic_and(casadi.logic_and((Omega_0 > 0), (command_0 > t14)), (Omega_0 < speed_limit)), t14, casadi.if_else(casadi.logic_and(casadi.logic_and((Omega_0 > t11), (Omega_0 < 0)), (command_0 < t15)), t15, t6)))), casadi.if_else(t7, casadi.if_else(casadi.if_else(t16, casadi.logic_and(t18, (t19 < 0)), casadi.if_else(t20, casadi.logic_and(t18, (t19 > 0)), casadi.logic_and(t18, (Omega_1*command_1 > 0)))), 0, t21), casadi.if_else(casadi.logic_and(casadi.logic_and(casadi.logic_and(casadi.logic_or(t22, t23), casadi.logic_or(t22, t25)), casadi.logic_or(t23, t24)), casadi.logic_or(t24, t25)), 0, casadi.if_else(casadi.logic_and(casadi.logic_and((Omega_1 > 0), (command_1 > t26)), (Omega_1 < speed_limit)), t26, casadi.if_else(casadi.logic_and(casadi.logic_and((Omega_1 > t11), (Omega_1 < 0)), (command_1 < t27)), t27, t21)))), casadi.if_else(t7, casadi.if_else(casadi.if_else(t28, casadi.logic_and(t30, (t31 < 0)), casadi.if_else(t32, casadi.logic_and(t30, (t31 > 0)), casadi.logic_and(t30, (Omega_2*command_2 > 0)))), 0, t33), casadi.if_else(casadi.logic_and(casadi.logic_and(casadi.logic_and(casadi.logic_or(t34, t35), casadi.logic_or(t34, t37)), casadi.logic_or(t35, t36)), casadi.logic_or(t36, t37)), 0, casadi.if_else(casadi.logic_and(casadi.logic_and((Omega_2 > 0), (command_2 > t38)), (Omega_2 < speed_limit)), t38, casadi.if_else(casadi.logic_and(casadi.logic_and((Omega_2 > t11), (Omega_2 < 0)), (command_2 < t39)), t39, t33)))))
+    return casadi.vertcat(casadi.if_else(t7, casadi.if_else(casadi.if_else(t1, casadi.logic_and(t3, (t4 < 0)), casadi.if_else(t5, casadi.logic_and(t3, (t4 > 0)), casadi.logic_and(t3, (Omega_0*command_0 > 0)))), 0, t6), casadi.if_else(casadi.logic_and(casadi.logic_and(casadi.logic_and(casadi.logic_or(t10, t12), casadi.logic_or(t10, t9)), casadi.logic_or(t12, t8)), casadi.logic_or(t8, t9)), 0, casadi.if_else(casadi.logic_and(casadi.logic_and((Omega_0 > 0), (command_0 > t14)), (Omega_0 < speed_limit)), t14, casadi.if_else(casadi.logic_and(casadi.logic_and((Omega_0 < 0), (Omega_0 > -speed_limit)), (command_0 < -t14)), -t14, t6)))), casadi.if_else(t7, casadi.if_else(casadi.if_else(t16, casadi.logic_and(t18, (t19 < 0)), casadi.if_else(t20, casadi.logic_and(t18, (t19 > 0)), casadi.logic_and(t18, (Omega_1*command_1 > 0)))), 0, t21), casadi.if_else(casadi.logic_and(casadi.logic_and(casadi.logic_and(casadi.logic_or(t22, t23), casadi.logic_or(t22, t25)), casadi.logic_or(t23, t24)), casadi.logic_or(t24, t25)), 0, casadi.if_else(casadi.logic_and(casadi.logic_and((Omega_1 > 0), (command_1 > t26)), (Omega_1 < speed_limit)), t26, casadi.if_else(casadi.logic_and(casadi.logic_and((Omega_1 < 0), (Omega_1 > -speed_limit)), (command_1 < -t26)), -t26, t21)))), casadi.if_else(t7, casadi.if_else(casadi.if_else(t28, casadi.logic_and(t30, (t31 < 0)), casadi.if_else(t32, casadi.logic_and(t30, (t31 > 0)), casadi.logic_and(t30, (Omega_2*command_2 > 0)))), 0, t33), casadi.if_else(casadi.logic_and(casadi.logic_and(casadi.logic_and(casadi.logic_or(t34, t35), casadi.logic_or(t34, t37)), casadi.logic_or(t35, t36)), casadi.logic_or(t36, t37)), 0, casadi.if_else(casadi.logic_and(casadi.logic_and((Omega_2 > 0), (command_2 > t38)), (Omega_2 < speed_limit)), t38, casadi.if_else(casadi.logic_and(casadi.logic_and((Omega_2 < 0), (Omega_2 > -speed_limit)), (command_2 < -t38)), -t38, t33)))))
 
 
 def wheels4_body_rhs(q, omega_b, Omega, I_p, A_b, J, r_b, F_w, tau_w, u, c_w):
@@ -2649,11 +2637,11 @@ def wheels4_body_rhs(q, omega_b, Omega, I_p, A_b, J, r_b, F_w, tau_w, u, c_w):
     t1 = ((1.0/2.0))*omega_b_1
     t2 = ((1.0/2.0))*omega_b_2
     t3 = 2*q_0
+    t8 = 2*q_1
     t4 = q_1*t3
     t5 = 2*q_2*q_3
     t6 = t4 + t5
     t7 = q_2*t3
-    t8 = 2*q_1
     t9 = q_3*t8
     t10 = t7 - t9
     t11 = 2*(q_2*q_2)
@@ -2661,7 +2649,7 @@ def wheels4_body_rhs(q, omega_b, Omega, I_p, A_b, J, r_b, F_w, tau_w, u, c_w):
     t13 = -t11 - t12
     t14 = t7 + t9
     t15 = q_3*t3
-    t16 = 2*q_1*q_2 - t15
+    t16 = q_2*t8 - t15
     t17 = 2*(q_0*q_0)
     t18 = -t12 - t17
     t19 = F_w_0*t14 + F_w_1*t16 + F_w_2*t18
@@ -2829,11 +2817,11 @@ def wheels4_body_rhs_c(q, omega_b, Omega, I_p, A_b, J, k_w, r_b, F_w, tau_w, u, 
     t1 = ((1.0/2.0))*omega_b_1
     t2 = ((1.0/2.0))*omega_b_2
     t3 = 2*q_0
+    t8 = 2*q_1
     t4 = q_1*t3
     t5 = 2*q_2*q_3
     t6 = t4 + t5
     t7 = q_2*t3
-    t8 = 2*q_1
     t9 = q_3*t8
     t10 = t7 - t9
     t11 = 2*(q_2*q_2)
@@ -2841,7 +2829,7 @@ def wheels4_body_rhs_c(q, omega_b, Omega, I_p, A_b, J, k_w, r_b, F_w, tau_w, u, 
     t13 = -t11 - t12
     t14 = t7 + t9
     t15 = q_3*t3
-    t16 = 2*q_1*q_2 - t15
+    t16 = q_2*t8 - t15
     t17 = 2*(q_0*q_0)
     t18 = -t12 - t17
     t19 = F_w_0*t14 + F_w_1*t16 + F_w_2*t18
@@ -2947,11 +2935,11 @@ def wheels4_on_axes_rhs_c(q, omega_b, Omega, I_p, J, k_w, r_b, F_w, tau_w, u, c_
     t1 = ((1.0/2.0))*omega_b_1
     t2 = ((1.0/2.0))*omega_b_2
     t3 = 2*q_0
+    t8 = 2*q_1
     t4 = q_1*t3
     t5 = 2*q_2*q_3
     t6 = t4 + t5
     t7 = q_2*t3
-    t8 = 2*q_1
     t9 = q_3*t8
     t10 = t7 - t9
     t11 = 2*(q_2*q_2)
@@ -2959,7 +2947,7 @@ def wheels4_on_axes_rhs_c(q, omega_b, Omega, I_p, J, k_w, r_b, F_w, tau_w, u, c_
     t13 = -t11 - t12
     t14 = t7 + t9
     t15 = q_3*t3
-    t16 = 2*q_1*q_2 - t15
+    t16 = q_2*t8 - t15
     t17 = 2*(q_0*q_0)
     t18 = -t12 - t17
     t19 = F_w_0*t14 + F_w_1*t16 + F_w_2*t18
@@ -3020,8 +3008,8 @@ def wheels4_total_momentum(q, omega_b, Omega, I_p, A_b, J):
     J_2 = J[2]
     J_3 = J[3]
     t0 = 2*q_1
-    t1 = q_0*t0
     t2 = 2*q_2
+    t1 = q_0*t0
     t3 = q_3*t2
     t4 = J_0*Omega_0
     t5 = J_1*Omega_1
@@ -3036,7 +3024,7 @@ def wheels4_total_momentum(q, omega_b, Omega, I_p, A_b, J):
     t14 = A_b_00*t4 + A_b_01*t5 + A_b_02*t6 + A_b_03*t7 + I_p_00*omega_b_0 + I_p_01*omega_b_1 + I_p_02*omega_b_2
     t15 = 2*q_0*q_3
     t16 = 2*(q_0*q_0)
-    return casadi.vertcat(t11*(t10 + t9) + t14*(-t12 - t13) + t8*(t1 - t3), t11*(2*q_1*q_2 - t15) + t14*(t1 + t3) + t8*(-t13 - t16), t11*(-t12 - t16 + 1) + t14*(-t10 + t9) + t8*(q_1*t2 + t15))
+    return casadi.vertcat(t11*(t10 + t9) + t14*(-t12 - t13) + t8*(t1 - t3), t11*(q_1*t2 - t15) + t14*(t1 + t3) + t8*(-t13 - t16), t11*(-t12 - t16 + 1) + t14*(-t10 + t9) + t8*(q_1*t2 + t15))
 
 
 def wheels4_momentum(q, omega_b, Omega, I_p, A_b, J):
@@ -3084,8 +3072,8 @@ def wheels4_momentum(q, omega_b, Omega, I_p, A_b, J):
     J_2 = J[2]
     J_3 = J[3]
     t0 = 2*q_1
-    t1 = q_0*t0
     t2 = 2*q_2
+    t1 = q_0*t0
     t3 = q_3*t2
     t4 = t1 - t3
     t5 = A_b_10*J_0
@@ -3106,7 +3094,7 @@ def wheels4_momentum(q, omega_b, Omega, I_p, A_b, J):
     t20 = omega_b_0*(-(A_b_00*A_b_00)*J_0 - (A_b_01*A_b_01)*J_1 - (A_b_02*A_b_02)*J_2 - (A_b_03*A_b_03)*J_3 + I_p_00) + omega_b_1*t9 + omega_b_2*t15
     t21 = t1 + t3
     t22 = 2*q_0*q_3
-    t23 = 2*q_1*q_2 - t22
+    t23 = q_1*t2 - t22
     t24 = 2*(q_0*q_0)
     t25 = -t18 - t24
     t26 = t12 - t13
@@ -3138,59 +3126,53 @@ def wheels4_motor(command, Omega, torque_limit, speed_limit, cutoff):
     Omega_1 = Omega[1]
     Omega_2 = Omega[2]
     Omega_3 = Omega[3]
-    t0 = -torque_limit
-    t1 = (command_0 < t0)
+    t1 = (command_0 < -torque_limit)
     t2 = casadi.fabs(Omega_0)
     t3 = (speed_limit <= t2)
     t4 = Omega_0*torque_limit
     t5 = (command_0 > torque_limit)
-    t6 = casadi.if_else(t1, t0, casadi.if_else(t5, torque_limit, command_0))
+    t6 = casadi.if_else(t1, -torque_limit, casadi.if_else(t5, torque_limit, command_0))
     t7 = (cutoff > 0)
     t8 = (Omega_0 >= speed_limit)
     t9 = (command_0 < 0)
     t10 = (command_0 > 0)
-    t11 = -speed_limit
-    t12 = (Omega_0 <= t11)
+    t12 = (Omega_0 <= -speed_limit)
     t13 = (1.0/speed_limit)
     t14 = torque_limit*(-t13*t2 + 1)
-    t15 = -t14
-    t16 = (command_1 < t0)
+    t16 = (command_1 < -torque_limit)
     t17 = casadi.fabs(Omega_1)
     t18 = (speed_limit <= t17)
     t19 = Omega_1*torque_limit
     t20 = (command_1 > torque_limit)
-    t21 = casadi.if_else(t16, t0, casadi.if_else(t20, torque_limit, command_1))
+    t21 = casadi.if_else(t16, -torque_limit, casadi.if_else(t20, torque_limit, command_1))
     t22 = (Omega_1 >= speed_limit)
     t23 = (command_1 < 0)
     t24 = (command_1 > 0)
-    t25 = (Omega_1 <= t11)
+    t25 = (Omega_1 <= -speed_limit)
     t26 = torque_limit*(-t13*t17 + 1)
-    t27 = -t26
-    t28 = (command_2 < t0)
+    t28 = (command_2 < -torque_limit)
     t29 = casadi.fabs(Omega_2)
     t30 = (speed_limit <= t29)
     t31 = Omega_2*torque_limit
     t32 = (command_2 > torque_limit)
-    t33 = casadi.if_else(t28, t0, casadi.if_else(t32, torque_limit, command_2))
+    t33 = casadi.if_else(t28, -torque_limit, casadi.if_else(t32, torque_limit, command_2))
     t34 = (Omega_2 >= speed_limit)
     t35 = (command_2 < 0)
     t36 = (command_2 > 0)
-    t37 = (Omega_2 <= t11)
+    t37 = (Omega_2 <= -speed_limit)
     t38 = torque_limit*(-t13*t29 + 1)
-    t39 = -t38
-    t40 = (command_3 < t0)
+    t40 = (command_3 < -torque_limit)
     t41 = casadi.fabs(Omega_3)
     t42 = (speed_limit <= t41)
     t43 = Omega_3*torque_limit
     t44 = (command_3 > torque_limit)
-    t45 = casadi.if_else(t40, t0, casadi.if_else(t44, torque_limit, command_3))
+    t45 = casadi.if_else(t40, -torque_limit, casadi.if_else(t44, torque_limit, command_3))
     t46 = (Omega_3 >= speed_limit)
     t47 = (command_3 < 0)
     t48 = (command_3 > 0)
-    t49 = (Omega_3 <= t11)
+    t49 = (Omega_3 <= -speed_limit)
     t50 = torque_limit*(-t13*t41 + 1)
-    t51 = -t50
-    return casadi.vertcat(casadi.if_else(t7, casadi.if_else(casadi.if_else(t1, casadi.logic_and(t3, (t4 < 0)), casadi.if_else(t5, casadi.logic_and(t3, (t4 > 0)), casadi.logic_and(t3, (Omega_0*command_0 > 0)))), 0, t6), casadi.if_else(casadi.logic_and(casadi.logic_and(casadi.logic_and(casadi.logic_or(t10, t12), casadi.logic_or(t10, t9)), casadi.logic_or(t12, t8)), casadi.logic_or(t8, t9)), 0, casadi.if_else(casadi.logic_and(casadi.logic_and((Omega_0 > 0), (command_0 > t14)), (Omega_0 < speed_limit)), t14, casadi.if_else(casadi.logic_and(casadi.logic_and((Omega_0 > t11), (Omega_0 < 0)), (command_0 < t15)), t15, t6)))), casadi.if_else(t7, casadi.if_else(casadi.if_else(t16, casadi.logic_and(t18, (t19 < 0)), casadi.if_else(t20, casadi.logic_and(t18, (t19 > 0)), casadi.logic_and(t18, (Omega_1*command_1 > 0)))), 0, t21), casadi.if_else(casadi.logic_and(casadi.logic_and(casadi.logic_and(casadi.logic_or(t22, t23), casadi.logic_or(t22, t25)), casadi.logic_or(t23, t24)), casadi.logic_or(t24, t25)), 0, casadi.if_else(casadi.logic_and(casadi.logic_and((Omega_1 > 0), (command_1 > t26)), (Omega_1 < speed_limit)), t26, casadi.if_else(casadi.logic_and(casadi.logic_and((Omega_1 > t11), (Omega_1 < 0)), (command_1 < t27)), t27, t21)))), casadi.if_else(t7, casadi.if_else(casadi.if_else(t28, casadi.logic_and(t30, (t31 < 0)), casadi.if_else(t32, casadi.logic_and(t30, (t31 > 0)), casadi.logic_and(t30, (Omega_2*command_2 > 0)))), 0, t33), casadi.if_else(casadi.logic_and(casadi.logic_and(casadi.logic_and(casadi.logic_or(t34, t35), casadi.logic_or(t34, t37)), casadi.logic_or(t35, t36)), casadi.logic_or(t36, t37)), 0, casadi.if_else(casadi.logic_and(casadi.logic_and((Omega_2 > 0), (command_2 > t38)), (Omega_2 < speed_limit)), t38, casadi.if_else(casadi.logic_and(casadi.logic_and((Omega_2 > t11), (Omega_2 < 0)), (command_2 < t39)), t39, t33)))), casadi.if_else(t7, casadi.if_else(casadi.if_else(t40, casadi.logic_and(t42, (t43 < 0)), casadi.if_else(t44, casadi.logic_and(t42, (t43 > 0)), casadi.logic_and(t42, (Omega_3*command_3 > 0)))), 0, t45), casadi.if_else(casadi.logic_and(casadi.logic_and(casadi.logic_and(casadi.logic_or(t46, t47), casadi.logic_or(t46, t49)), casadi.logic_or(t47, t48)), casadi.logic_or(t48, t49)), 0, casadi.if_else(casadi.logic_and(casadi.logic_and((Omega_3 > 0), (command_3 > t50)), (Omega_3 < speed_limit)), t50, casadi.if_else(casadi.logic_and(casadi.logic_and((Omega_3 > t11), (Omega_3 < 0)), (command_3 < t51)), t51, t45)))))
+    return casadi.vertcat(casadi.if_else(t7, casadi.if_else(casadi.if_else(t1, casadi.logic_and(t3, (t4 < 0)), casadi.if_else(t5, casadi.logic_and(t3, (t4 > 0)), casadi.logic_and(t3, (Omega_0*command_0 > 0)))), 0, t6), casadi.if_else(casadi.logic_and(casadi.logic_and(casadi.logic_and(casadi.logic_or(t10, t12), casadi.logic_or(t10, t9)), casadi.logic_or(t12, t8)), casadi.logic_or(t8, t9)), 0, casadi.if_else(casadi.logic_and(casadi.logic_and((Omega_0 > 0), (command_0 > t14)), (Omega_0 < speed_limit)), t14, casadi.if_else(casadi.logic_and(casadi.logic_and((Omega_0 < 0), (Omega_0 > -speed_limit)), (command_0 < -t14)), -t14, t6)))), casadi.if_else(t7, casadi.if_else(casadi.if_else(t16, casadi.logic_and(t18, (t19 < 0)), casadi.if_else(t20, casadi.logic_and(t18, (t19 > 0)), casadi.logic_and(t18, (Omega_1*command_1 > 0)))), 0, t21), casadi.if_else(casadi.logic_and(casadi.logic_and(casadi.logic_and(casadi.logic_or(t22, t23), casadi.logic_or(t22, t25)), casadi.logic_or(t23, t24)), casadi.logic_or(t24, t25)), 0, casadi.if_else(casadi.logic_and(casadi.logic_and((Omega_1 > 0), (command_1 > t26)), (Omega_1 < speed_limit)), t26, casadi.if_else(casadi.logic_and(casadi.logic_and((Omega_1 < 0), (Omega_1 > -speed_limit)), (command_1 < -t26)), -t26, t21)))), casadi.if_else(t7, casadi.if_else(casadi.if_else(t28, casadi.logic_and(t30, (t31 < 0)), casadi.if_else(t32, casadi.logic_and(t30, (t31 > 0)), casadi.logic_and(t30, (Omega_2*command_2 > 0)))), 0, t33), casadi.if_else(casadi.logic_and(casadi.logic_and(casadi.logic_and(casadi.logic_or(t34, t35), casadi.logic_or(t34, t37)), casadi.logic_or(t35, t36)), casadi.logic_or(t36, t37)), 0, casadi.if_else(casadi.logic_and(casadi.logic_and((Omega_2 > 0), (command_2 > t38)), (Omega_2 < speed_limit)), t38, casadi.if_else(casadi.logic_and(casadi.logic_and((Omega_2 < 0), (Omega_2 > -speed_limit)), (command_2 < -t38)), -t38, t33)))), casadi.if_else(t7, casadi.if_else(casadi.if_else(t40, casadi.logic_and(t42, (t43 < 0)), casadi.if_else(t44, casadi.logic_and(t42, (t43 > 0)), casadi.logic_and(t42, (Omega_3*command_3 > 0)))), 0, t45), casadi.if_else(casadi.logic_and(casadi.logic_and(casadi.logic_and(casadi.logic_or(t46, t47), casadi.logic_or(t46, t49)), casadi.logic_or(t47, t48)), casadi.logic_or(t48, t49)), 0, casadi.if_else(casadi.logic_and(casadi.logic_and((Omega_3 > 0), (command_3 > t50)), (Omega_3 < speed_limit)), t50, casadi.if_else(casadi.logic_and(casadi.logic_and((Omega_3 < 0), (Omega_3 > -speed_limit)), (command_3 < -t50)), -t50, t45)))))
 
 
 def quat_error_chart_inverse(q_ref, dtheta):

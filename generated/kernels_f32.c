@@ -138,8 +138,8 @@ void lvf_world_inertia(const float *q, const float *I_b, float *I_w) {
     const float I_b_1 = I_b[1];
     const float I_b_2 = I_b[2];
     const float t0 = 2*q_1;
-    const float t1 = q_0*t0;
     const float t2 = 2*q_2;
+    const float t1 = q_0*t0;
     const float t3 = q_3*t2;
     const float t4 = t1 - t3;
     const float t5 = q_0*t2;
@@ -149,7 +149,7 @@ void lvf_world_inertia(const float *q, const float *I_b, float *I_w) {
     const float t9 = 2*(q_2*q_2) - 1;
     const float t10 = -t8 - t9;
     const float t11 = 2*q_0*q_3;
-    const float t12 = 2*q_1*q_2 - t11;
+    const float t12 = q_1*t2 - t11;
     const float t13 = I_b_2*t7;
     const float t14 = t1 + t3;
     const float t15 = I_b_0*t10;
@@ -269,9 +269,9 @@ void lvf_effect_angular_damping(const float *q, const float *omega_b, float c, f
     const float omega_b_0 = omega_b[0];
     const float omega_b_1 = omega_b[1];
     const float omega_b_2 = omega_b[2];
+    const float t2 = 2*q_1;
     const float t0 = c*omega_b_0;
     const float t1 = 2*c*omega_b_2*q_0 - 2*q_2*t0;
-    const float t2 = 2*q_1;
     const float t3 = c*omega_b_1;
     const float t4 = 2*t3;
     const float t5 = -q_0*t4 + t0*t2;
@@ -379,8 +379,8 @@ void lvf_quat_rotate(const float *q, const float *v_b, float *v_w) {
     const float v_b_1 = v_b[1];
     const float v_b_2 = v_b[2];
     const float t0 = 2*q_1;
-    const float t1 = q_0*t0;
     const float t2 = 2*q_2;
+    const float t1 = q_0*t0;
     const float t3 = q_3*t2;
     const float t4 = q_0*t2;
     const float t5 = q_3*t0;
@@ -389,7 +389,7 @@ void lvf_quat_rotate(const float *q, const float *v_b, float *v_w) {
     const float t8 = 2*q_0*q_3;
     const float t9 = 2*(q_0*q_0);
     v_w[0] = v_b_0*(-t6 - t7) + v_b_1*(t1 - t3) + v_b_2*(t4 + t5);
-    v_w[1] = v_b_0*(t1 + t3) + v_b_1*(-t7 - t9) + v_b_2*(2*q_1*q_2 - t8);
+    v_w[1] = v_b_0*(t1 + t3) + v_b_1*(-t7 - t9) + v_b_2*(q_1*t2 - t8);
     v_w[2] = v_b_0*(t4 - t5) + v_b_1*(q_1*t2 + t8) + v_b_2*(-t6 - t9 + 1);
 }
 
@@ -398,11 +398,11 @@ void lvf_quat_to_matrix(const float *q, float *R_wb) {
     const float q_1 = q[1];
     const float q_2 = q[2];
     const float q_3 = q[3];
+    const float t2 = 2*q_1;
+    const float t4 = 2*q_2;
     const float t0 = 2*(q_1*q_1);
     const float t1 = 2*(q_2*q_2) - 1;
-    const float t2 = 2*q_1;
     const float t3 = q_0*t2;
-    const float t4 = 2*q_2;
     const float t5 = q_3*t4;
     const float t6 = q_0*t4;
     const float t7 = q_3*t2;
@@ -413,7 +413,7 @@ void lvf_quat_to_matrix(const float *q, float *R_wb) {
     R_wb[2] = t6 + t7;
     R_wb[3] = t3 + t5;
     R_wb[4] = -t1 - t8;
-    R_wb[5] = 2*q_1*q_2 - t9;
+    R_wb[5] = q_1*t4 - t9;
     R_wb[6] = t6 - t7;
     R_wb[7] = q_1*t4 + t9;
     R_wb[8] = -t0 - t8 + 1;
@@ -435,12 +435,12 @@ void lvf_matrix_to_quat(const float *R_wb, float *q) {
     const float t3 = sqrtf(t2 + 1);
     const float t4 = ((1.0F/2.0F))/t3;
     const float t5 = R_0 <= t2 && R_4 <= t2 && R_8 <= t2;
-    const float t6 = -R_4;
     const float t7 = R_0 - R_8;
-    const float t8 = sqrtf(t6 + t7 + 1);
+    const float t8 = sqrtf(-R_4 + t7 + 1);
     const float t9 = R_0 >= R_4 && R_0 >= R_8;
-    const float t10 = sqrtf(-t1 - t6 + 1);
+    const float t10 = sqrtf(R_4 - t1 + 1);
     const float t11 = (1.0F/t10);
+    const float t22 = ((1.0F/2.0F))*t11;
     const float t12 = ((1.0F/2.0F))*R_1 + ((1.0F/2.0F))*R_3;
     const float t13 = R_4 >= R_8;
     const float t14 = R_2 + R_6;
@@ -448,10 +448,9 @@ void lvf_matrix_to_quat(const float *R_wb, float *q) {
     const float t16 = ((1.0F/2.0F))/t15;
     const float t17 = R_2 - R_6;
     const float t18 = (1.0F/t8);
+    const float t21 = ((1.0F/2.0F))*t18;
     const float t19 = R_5 + R_7;
     const float t20 = -R_1 + R_3;
-    const float t21 = ((1.0F/2.0F))*t18;
-    const float t22 = ((1.0F/2.0F))*t11;
     q[0] = ((t5) ? (
    t0*t4
 )
@@ -646,7 +645,7 @@ void lvf_quat_error_chart(const float *q, const float *q_ref, float *dtheta) {
     const float t2 = q_0*t0 + q_1*t1 - 2*q_2*q_ref_1 - 2*q_3*q_ref_0;
     const float t3 = q_0*q_ref_0 + q_1*q_ref_1 + q_2*q_ref_2 + q_3*q_ref_3 < 0;
     const float t4 = q_0*t1 - q_1*t0 - 2*q_2*q_ref_0 + 2*q_3*q_ref_1;
-    const float t5 = 2*q_0*q_ref_1 - 2*q_1*q_ref_0 + q_2*t0 - 2*q_3*q_ref_2;
+    const float t5 = 2*q_0*q_ref_1 - 2*q_1*q_ref_0 + q_2*t0 - q_3*t1;
     dtheta[0] = ((t3) ? (
    -t2
 )
@@ -669,10 +668,10 @@ void lvf_quat_error_chart(const float *q, const float *q_ref, float *dtheta) {
 
 void lvf_euler_xyz_to_quat(float roll, float pitch, float yaw, float *q) {
     const float t0 = ((1.0F/2.0F))*yaw;
-    const float t1 = sinf(t0);
     const float t2 = ((1.0F/2.0F))*roll;
-    const float t3 = cosf(t2);
     const float t4 = ((1.0F/2.0F))*pitch;
+    const float t1 = sinf(t0);
+    const float t3 = cosf(t2);
     const float t5 = sinf(t4);
     const float t6 = t3*t5;
     const float t7 = cosf(t0);
@@ -692,8 +691,8 @@ void lvf_quat_to_euler_xyz(const float *q, float *rpy) {
     const float q_2 = q[2];
     const float q_3 = q[3];
     const float t0 = 2*q_3;
-    const float t1 = q_0*t0;
     const float t2 = 2*q_2;
+    const float t1 = q_0*t0;
     const float t3 = q_1*t2;
     const float t4 = t1 - t3;
     const float t5 = 2*(q_0*q_0) - 1;
@@ -767,9 +766,9 @@ void lvf_integrate_orientation(const float *q, const float *omega_w, float dt, f
     const float t0 = ((1.0F/2.0F))*q_3;
     const float t1 = ((1.0F/2.0F))*q_2;
     const float t2 = ((1.0F/2.0F))*omega_w_2;
-    const float t3 = dt*(omega_w_0*t0 + omega_w_1*t1 - q_1*t2) + q_0;
     const float t4 = ((1.0F/2.0F))*omega_w_0;
     const float t5 = ((1.0F/2.0F))*omega_w_1;
+    const float t3 = dt*(omega_w_0*t0 + omega_w_1*t1 - q_1*t2) + q_0;
     const float t6 = dt*(-omega_w_2*t1 - q_0*t4 - q_1*t5) + q_3;
     const float t7 = dt*(omega_w_2*t0 - q_0*t5 + q_1*t4) + q_2;
     const float t8 = dt*(-omega_w_0*t1 + omega_w_1*t0 + q_0*t2) + q_1;
@@ -908,8 +907,8 @@ void lvf_rigid_body_rhs(const float *x, float m, const float *I_b, const float *
     const float t0 = ((1.0F/2.0F))*x_10;
     const float t1 = ((1.0F/2.0F))*x_11;
     const float t2 = ((1.0F/2.0F))*x_12;
-    const float t3 = (1.0F/m);
     const float t4 = 2*tau_w_0;
+    const float t3 = (1.0F/m);
     const float t5 = -t4*x_4 + 2*tau_w_1*x_3;
     const float t6 = t4*x_5 - 2*tau_w_2*x_3;
     const float t7 = -2*tau_w_1*x_5 + 2*tau_w_2*x_4;
@@ -974,10 +973,10 @@ void lvf_apply_inv_inertia(const float *q, const float *I_b, const float *v, flo
     const float v_0 = v[0];
     const float v_1 = v[1];
     const float v_2 = v[2];
-    const float t0 = (1.0F/I_b_1);
     const float t1 = 2*q_1;
-    const float t2 = q_0*t1;
     const float t3 = 2*q_2;
+    const float t0 = (1.0F/I_b_1);
+    const float t2 = q_0*t1;
     const float t4 = q_3*t3;
     const float t5 = t2 - t4;
     const float t6 = (1.0F/I_b_2);
@@ -989,7 +988,7 @@ void lvf_apply_inv_inertia(const float *q, const float *I_b, const float *v, flo
     const float t12 = 2*(q_2*q_2) - 1;
     const float t13 = -t11 - t12;
     const float t14 = 2*q_0*q_3;
-    const float t15 = 2*q_1*q_2 - t14;
+    const float t15 = q_1*t3 - t14;
     const float t16 = t6*t9;
     const float t17 = t2 + t4;
     const float t18 = t10*t13;
@@ -1016,8 +1015,8 @@ void lvf_world_to_body(const float *q, const float *v_w, float *v_b) {
     const float v_1 = v_w[1];
     const float v_2 = v_w[2];
     const float t0 = 2*q_1;
-    const float t1 = q_0*t0;
     const float t2 = 2*q_2;
+    const float t1 = q_0*t0;
     const float t3 = q_3*t2;
     const float t4 = q_0*t2;
     const float t5 = q_3*t0;
@@ -1027,7 +1026,7 @@ void lvf_world_to_body(const float *q, const float *v_w, float *v_b) {
     const float t9 = 2*(q_0*q_0);
     v_b[0] = v_0*(-t6 - t7) + v_1*(t1 + t3) + v_2*(t4 - t5);
     v_b[1] = v_0*(t1 - t3) + v_1*(-t7 - t9) + v_2*(q_2*t0 + t8);
-    v_b[2] = v_0*(t4 + t5) + v_1*(2*q_1*q_2 - t8) + v_2*(-t6 - t9 + 1);
+    v_b[2] = v_0*(t4 + t5) + v_1*(q_1*t2 - t8) + v_2*(-t6 - t9 + 1);
 }
 
 void lvf_kinetic_energy(float m, const float *I_b, const float *v_w, const float *omega_b, float *T) {
@@ -1055,8 +1054,8 @@ void lvf_angular_momentum_world(const float *q, const float *I_b, const float *o
     const float omega_b_1 = omega_b[1];
     const float omega_b_2 = omega_b[2];
     const float t0 = 2*q_1;
-    const float t1 = q_0*t0;
     const float t2 = 2*q_2;
+    const float t1 = q_0*t0;
     const float t3 = q_3*t2;
     const float t4 = I_b_1*omega_b_1;
     const float t5 = q_0*t2;
@@ -1068,7 +1067,7 @@ void lvf_angular_momentum_world(const float *q, const float *I_b, const float *o
     const float t11 = 2*q_0*q_3;
     const float t12 = 2*(q_0*q_0);
     L_w[0] = t10*(-t8 - t9) + t4*(t1 - t3) + t7*(t5 + t6);
-    L_w[1] = t10*(t1 + t3) + t4*(-t12 - t9) + t7*(2*q_1*q_2 - t11);
+    L_w[1] = t10*(t1 + t3) + t4*(-t12 - t9) + t7*(q_1*t2 - t11);
     L_w[2] = t10*(t5 - t6) + t4*(q_1*t2 + t11) + t7*(-t12 - t8 + 1);
 }
 
@@ -1235,8 +1234,8 @@ void lvf_rigid_body_rhs_c(const float *x, float m, const float *c_b, const float
     const float t0 = ((1.0F/2.0F))*x_10;
     const float t1 = ((1.0F/2.0F))*x_11;
     const float t2 = ((1.0F/2.0F))*x_12;
-    const float t3 = (1.0F/m);
     const float t4 = 2*tau_w_0;
+    const float t3 = (1.0F/m);
     const float t5 = -t4*x_4 + 2*tau_w_1*x_3;
     const float t6 = t4*x_5 - 2*tau_w_2*x_3;
     const float t7 = -2*tau_w_1*x_5 + 2*tau_w_2*x_4;
@@ -1342,10 +1341,10 @@ void lvf_rigid_body_increments_c(const float *q, const float *omega_b, const flo
     const float tau_w_0 = tau_w[0];
     const float tau_w_1 = tau_w[1];
     const float tau_w_2 = tau_w[2];
+    const float t3 = 2*q_0;
     const float t0 = S_b_6*omega_b_0;
     const float t1 = S_b_6*omega_b_2;
     const float t2 = S_b_6*omega_b_1;
-    const float t3 = 2*q_0;
     const float t4 = -2*q_1*tau_w_0 + t3*tau_w_1;
     const float t5 = 2*q_2*tau_w_0 - t3*tau_w_2;
     const float t6 = 2*q_1*tau_w_2 - 2*q_2*tau_w_1;
@@ -1386,10 +1385,10 @@ void lvf_rigid_body_increments_torque_c(const float *q, const float *omega_b, co
     const float tau_w_0 = tau_w[0];
     const float tau_w_1 = tau_w[1];
     const float tau_w_2 = tau_w[2];
+    const float t3 = 2*q_0;
     const float t0 = S_b_6*omega_b_0;
     const float t1 = S_b_6*omega_b_2;
     const float t2 = S_b_6*omega_b_1;
-    const float t3 = 2*q_0;
     const float t4 = -2*q_1*tau_w_0 + t3*tau_w_1;
     const float t5 = 2*q_2*tau_w_0 - t3*tau_w_2;
     const float t6 = 2*q_1*tau_w_2 - 2*q_2*tau_w_1;
@@ -1700,18 +1699,18 @@ void lvf_pivot_body_rhs(const float *q, const float *omega_b, const float *I_p, 
     const float t0 = ((1.0F/2.0F))*omega_b_0;
     const float t1 = ((1.0F/2.0F))*omega_b_1;
     const float t2 = ((1.0F/2.0F))*omega_b_2;
+    const float t8 = 2*q_0;
+    const float t10 = 2*q_1;
     const float t3 = (I_p_12*I_p_12);
     const float t4 = (I_p_01*I_p_01);
     const float t5 = (I_p_02*I_p_02);
     const float t6 = (1.0F/(I_p_00*I_p_11*I_p_22 - I_p_00*t3 + 2*I_p_01*I_p_02*I_p_12 - I_p_11*t5 - I_p_22*t4));
     const float t7 = I_p_01*I_p_12 - I_p_02*I_p_11;
-    const float t8 = 2*q_0;
     const float t9 = q_2*t8;
-    const float t10 = 2*q_1;
     const float t11 = q_3*t10;
     const float t12 = t11 + t9;
     const float t13 = q_3*t8;
-    const float t14 = 2*q_1*q_2 - t13;
+    const float t14 = q_2*t10 - t13;
     const float t15 = I_p_00*omega_b_0 + I_p_01*omega_b_1 + I_p_02*omega_b_2;
     const float t16 = I_p_01*omega_b_0 + I_p_11*omega_b_1 + I_p_12*omega_b_2;
     const float t17 = 2*(q_0*q_0);
@@ -1759,8 +1758,8 @@ void lvf_pivot_kinematics(const float *q, const float *omega_b, const float *anc
     const float r_b_1 = r_b[1];
     const float r_b_2 = r_b[2];
     const float t0 = 2*q_1;
-    const float t1 = q_0*t0;
     const float t2 = 2*q_2;
+    const float t1 = q_0*t0;
     const float t3 = q_3*t2;
     const float t4 = t1 - t3;
     const float t5 = q_0*t2;
@@ -1771,7 +1770,7 @@ void lvf_pivot_kinematics(const float *q, const float *omega_b, const float *anc
     const float t10 = -t8 - t9;
     const float t11 = t1 + t3;
     const float t12 = 2*q_0*q_3;
-    const float t13 = 2*q_1*q_2 - t12;
+    const float t13 = q_1*t2 - t12;
     const float t14 = 2*(q_0*q_0);
     const float t15 = -t14 - t9;
     const float t16 = t5 - t6;
@@ -2031,11 +2030,11 @@ void lvf_sphere_flow(const float *q, const float *L_b, float I_r, float tau, flo
     const float L_b_0 = L_b[0];
     const float L_b_1 = L_b[1];
     const float L_b_2 = L_b[2];
+    const float t4 = ((1.0F/2.0F))*tau;
     const float t0 = (1.0F/I_r);
     const float t1 = (L_b_0*L_b_0) + (L_b_1*L_b_1) + (L_b_2*L_b_2);
     const float t2 = sqrtf(t1);
     const float t3 = t0*t2;
-    const float t4 = ((1.0F/2.0F))*tau;
     const float t5 = t3*t4;
     const float t6 = cosf(t5);
     const float t7 = ((t3*fabsf(tau) > (1.0F/50000000.0F)) ? (
@@ -2292,16 +2291,15 @@ void lvf_wheel_saturation(const float *command, const float *Omega, float torque
     const float Omega_0 = Omega[0];
     const float Omega_1 = Omega[1];
     const float Omega_2 = Omega[2];
-    const float t0 = -torque_limit;
-    const float t1 = command_0 < t0;
+    const float t1 = command_0 < -torque_limit;
     const float t2 = speed_limit <= fabsf(Omega_0);
     const float t3 = Omega_0*torque_limit;
     const float t4 = command_0 > torque_limit;
-    const float t5 = command_1 < t0;
+    const float t5 = command_1 < -torque_limit;
     const float t6 = speed_limit <= fabsf(Omega_1);
     const float t7 = Omega_1*torque_limit;
     const float t8 = command_1 > torque_limit;
-    const float t9 = command_2 < t0;
+    const float t9 = command_2 < -torque_limit;
     const float t10 = speed_limit <= fabsf(Omega_2);
     const float t11 = Omega_2*torque_limit;
     const float t12 = command_2 > torque_limit;
@@ -2320,7 +2318,7 @@ void lvf_wheel_saturation(const float *command, const float *Omega, float torque
 )
 : (
    ((t1) ? (
-      t0
+      -torque_limit
    )
    : ((t4) ? (
       torque_limit
@@ -2344,7 +2342,7 @@ void lvf_wheel_saturation(const float *command, const float *Omega, float torque
 )
 : (
    ((t5) ? (
-      t0
+      -torque_limit
    )
    : ((t8) ? (
       torque_limit
@@ -2368,7 +2366,7 @@ void lvf_wheel_saturation(const float *command, const float *Omega, float torque
 )
 : (
    ((t9) ? (
-      t0
+      -torque_limit
    )
    : ((t12) ? (
       torque_limit
@@ -2386,14 +2384,13 @@ void lvf_wheel_motor(const float *command, const float *Omega, float torque_limi
     const float Omega_0 = Omega[0];
     const float Omega_1 = Omega[1];
     const float Omega_2 = Omega[2];
-    const float t0 = -torque_limit;
-    const float t1 = command_0 < t0;
+    const float t1 = command_0 < -torque_limit;
     const float t2 = fabsf(Omega_0);
     const float t3 = speed_limit <= t2;
     const float t4 = Omega_0*torque_limit;
     const float t5 = command_0 > torque_limit;
     const float t6 = ((t1) ? (
-   t0
+   -torque_limit
 )
 : ((t5) ? (
    torque_limit
@@ -2405,18 +2402,16 @@ void lvf_wheel_motor(const float *command, const float *Omega, float torque_limi
     const float t8 = Omega_0 >= speed_limit;
     const float t9 = command_0 < 0;
     const float t10 = command_0 > 0;
-    const float t11 = -speed_limit;
-    const float t12 = Omega_0 <= t11;
+    const float t12 = Omega_0 <= -speed_limit;
     const float t13 = (1.0F/speed_limit);
     const float t14 = torque_limit*(-t13*t2 + 1);
-    const float t15 = -t14;
-    const float t16 = command_1 < t0;
+    const float t16 = command_1 < -torque_limit;
     const float t17 = fabsf(Omega_1);
     const float t18 = speed_limit <= t17;
     const float t19 = Omega_1*torque_limit;
     const float t20 = command_1 > torque_limit;
     const float t21 = ((t16) ? (
-   t0
+   -torque_limit
 )
 : ((t20) ? (
    torque_limit
@@ -2427,16 +2422,15 @@ void lvf_wheel_motor(const float *command, const float *Omega, float torque_limi
     const float t22 = Omega_1 >= speed_limit;
     const float t23 = command_1 < 0;
     const float t24 = command_1 > 0;
-    const float t25 = Omega_1 <= t11;
+    const float t25 = Omega_1 <= -speed_limit;
     const float t26 = torque_limit*(-t13*t17 + 1);
-    const float t27 = -t26;
-    const float t28 = command_2 < t0;
+    const float t28 = command_2 < -torque_limit;
     const float t29 = fabsf(Omega_2);
     const float t30 = speed_limit <= t29;
     const float t31 = Omega_2*torque_limit;
     const float t32 = command_2 > torque_limit;
     const float t33 = ((t28) ? (
-   t0
+   -torque_limit
 )
 : ((t32) ? (
    torque_limit
@@ -2447,9 +2441,8 @@ void lvf_wheel_motor(const float *command, const float *Omega, float torque_limi
     const float t34 = Omega_2 >= speed_limit;
     const float t35 = command_2 < 0;
     const float t36 = command_2 > 0;
-    const float t37 = Omega_2 <= t11;
+    const float t37 = Omega_2 <= -speed_limit;
     const float t38 = torque_limit*(-t13*t29 + 1);
-    const float t39 = -t38;
     u[0] = ((t7) ? (
    ((((t1) ? (
       t3 && t4 < 0
@@ -2475,8 +2468,8 @@ void lvf_wheel_motor(const float *command, const float *Omega, float torque_limi
    : ((Omega_0 > 0 && command_0 > t14 && Omega_0 < speed_limit) ? (
       t14
    )
-   : ((Omega_0 > t11 && Omega_0 < 0 && command_0 < t15) ? (
-      t15
+   : ((Omega_0 > -speed_limit && Omega_0 < 0 && command_0 < -t14) ? (
+      -t14
    )
    : (
       t6
@@ -2507,8 +2500,8 @@ void lvf_wheel_motor(const float *command, const float *Omega, float torque_limi
    : ((Omega_1 > 0 && command_1 > t26 && Omega_1 < speed_limit) ? (
       t26
    )
-   : ((Omega_1 > t11 && Omega_1 < 0 && command_1 < t27) ? (
-      t27
+   : ((Omega_1 > -speed_limit && Omega_1 < 0 && command_1 < -t26) ? (
+      -t26
    )
    : (
       t21
@@ -2539,8 +2532,8 @@ void lvf_wheel_motor(const float *command, const float *Omega, float torque_limi
    : ((Omega_2 > 0 && command_2 > t38 && Omega_2 < speed_limit) ? (
       t38
    )
-   : ((Omega_2 > t11 && Omega_2 < 0 && command_2 < t39) ? (
-      t39
+   : ((Omega_2 > -speed_limit && Omega_2 < 0 && command_2 < -t38) ? (
+      -t38
    )
    : (
       t33
@@ -2639,11 +2632,11 @@ void lvf_wheels3_body_rhs(const float *q, const float *omega_b, const float *Ome
     const float t1 = ((1.0F/2.0F))*omega_b_1;
     const float t2 = ((1.0F/2.0F))*omega_b_2;
     const float t3 = 2*q_0;
+    const float t8 = 2*q_1;
     const float t4 = q_1*t3;
     const float t5 = 2*q_2*q_3;
     const float t6 = t4 + t5;
     const float t7 = q_2*t3;
-    const float t8 = 2*q_1;
     const float t9 = q_3*t8;
     const float t10 = t7 - t9;
     const float t11 = 2*(q_2*q_2);
@@ -2651,7 +2644,7 @@ void lvf_wheels3_body_rhs(const float *q, const float *omega_b, const float *Ome
     const float t13 = -t11 - t12;
     const float t14 = t7 + t9;
     const float t15 = q_3*t3;
-    const float t16 = 2*q_1*q_2 - t15;
+    const float t16 = q_2*t8 - t15;
     const float t17 = 2*(q_0*q_0);
     const float t18 = -t12 - t17;
     const float t19 = F_w_0*t14 + F_w_1*t16 + F_w_2*t18;
@@ -2708,8 +2701,8 @@ void lvf_wheels3_momentum(const float *q, const float *omega_b, const float *Ome
     const float J_1 = J[1];
     const float J_2 = J[2];
     const float t0 = 2*q_1;
-    const float t1 = q_0*t0;
     const float t2 = 2*q_2;
+    const float t1 = q_0*t0;
     const float t3 = q_3*t2;
     const float t4 = t1 - t3;
     const float t5 = A_b_10*J_0;
@@ -2729,7 +2722,7 @@ void lvf_wheels3_momentum(const float *q, const float *omega_b, const float *Ome
     const float t19 = omega_b_0*(-(A_b_00*A_b_00)*J_0 - (A_b_01*A_b_01)*J_1 - (A_b_02*A_b_02)*J_2 + I_p_00) + omega_b_1*t8 + omega_b_2*t14;
     const float t20 = t1 + t3;
     const float t21 = 2*q_0*q_3;
-    const float t22 = 2*q_1*q_2 - t21;
+    const float t22 = q_1*t2 - t21;
     const float t23 = 2*(q_0*q_0);
     const float t24 = -t17 - t23;
     const float t25 = t11 - t12;
@@ -2759,14 +2752,13 @@ void lvf_wheels3_motor(const float *command, const float *Omega, float torque_li
     const float Omega_0 = Omega[0];
     const float Omega_1 = Omega[1];
     const float Omega_2 = Omega[2];
-    const float t0 = -torque_limit;
-    const float t1 = command_0 < t0;
+    const float t1 = command_0 < -torque_limit;
     const float t2 = fabsf(Omega_0);
     const float t3 = speed_limit <= t2;
     const float t4 = Omega_0*torque_limit;
     const float t5 = command_0 > torque_limit;
     const float t6 = ((t1) ? (
-   t0
+   -torque_limit
 )
 : ((t5) ? (
    torque_limit
@@ -2778,18 +2770,16 @@ void lvf_wheels3_motor(const float *command, const float *Omega, float torque_li
     const float t8 = Omega_0 >= speed_limit;
     const float t9 = command_0 < 0;
     const float t10 = command_0 > 0;
-    const float t11 = -speed_limit;
-    const float t12 = Omega_0 <= t11;
+    const float t12 = Omega_0 <= -speed_limit;
     const float t13 = (1.0F/speed_limit);
     const float t14 = torque_limit*(-t13*t2 + 1);
-    const float t15 = -t14;
-    const float t16 = command_1 < t0;
+    const float t16 = command_1 < -torque_limit;
     const float t17 = fabsf(Omega_1);
     const float t18 = speed_limit <= t17;
     const float t19 = Omega_1*torque_limit;
     const float t20 = command_1 > torque_limit;
     const float t21 = ((t16) ? (
-   t0
+   -torque_limit
 )
 : ((t20) ? (
    torque_limit
@@ -2800,16 +2790,15 @@ void lvf_wheels3_motor(const float *command, const float *Omega, float torque_li
     const float t22 = Omega_1 >= speed_limit;
     const float t23 = command_1 < 0;
     const float t24 = command_1 > 0;
-    const float t25 = Omega_1 <= t11;
+    const float t25 = Omega_1 <= -speed_limit;
     const float t26 = torque_limit*(-t13*t17 + 1);
-    const float t27 = -t26;
-    const float t28 = command_2 < t0;
+    const float t28 = command_2 < -torque_limit;
     const float t29 = fabsf(Omega_2);
     const float t30 = speed_limit <= t29;
     const float t31 = Omega_2*torque_limit;
     const float t32 = command_2 > torque_limit;
     const float t33 = ((t28) ? (
-   t0
+   -torque_limit
 )
 : ((t32) ? (
    torque_limit
@@ -2820,9 +2809,8 @@ void lvf_wheels3_motor(const float *command, const float *Omega, float torque_li
     const float t34 = Omega_2 >= speed_limit;
     const float t35 = command_2 < 0;
     const float t36 = command_2 > 0;
-    const float t37 = Omega_2 <= t11;
+    const float t37 = Omega_2 <= -speed_limit;
     const float t38 = torque_limit*(-t13*t29 + 1);
-    const float t39 = -t38;
     u[0] = ((t7) ? (
    ((((t1) ? (
       t3 && t4 < 0
@@ -2848,8 +2836,8 @@ void lvf_wheels3_motor(const float *command, const float *Omega, float torque_li
    : ((Omega_0 > 0 && command_0 > t14 && Omega_0 < speed_limit) ? (
       t14
    )
-   : ((Omega_0 > t11 && Omega_0 < 0 && command_0 < t15) ? (
-      t15
+   : ((Omega_0 > -speed_limit && Omega_0 < 0 && command_0 < -t14) ? (
+      -t14
    )
    : (
       t6
@@ -2880,8 +2868,8 @@ void lvf_wheels3_motor(const float *command, const float *Omega, float torque_li
    : ((Omega_1 > 0 && command_1 > t26 && Omega_1 < speed_limit) ? (
       t26
    )
-   : ((Omega_1 > t11 && Omega_1 < 0 && command_1 < t27) ? (
-      t27
+   : ((Omega_1 > -speed_limit && Omega_1 < 0 && command_1 < -t26) ? (
+      -t26
    )
    : (
       t21
@@ -2912,8 +2900,8 @@ void lvf_wheels3_motor(const float *command, const float *Omega, float torque_li
    : ((Omega_2 > 0 && command_2 > t38 && Omega_2 < speed_limit) ? (
       t38
    )
-   : ((Omega_2 > t11 && Omega_2 < 0 && command_2 < t39) ? (
-      t39
+   : ((Omega_2 > -speed_limit && Omega_2 < 0 && command_2 < -t38) ? (
+      -t38
    )
    : (
       t33
@@ -3021,11 +3009,11 @@ void lvf_wheels4_body_rhs(const float *q, const float *omega_b, const float *Ome
     const float t1 = ((1.0F/2.0F))*omega_b_1;
     const float t2 = ((1.0F/2.0F))*omega_b_2;
     const float t3 = 2*q_0;
+    const float t8 = 2*q_1;
     const float t4 = q_1*t3;
     const float t5 = 2*q_2*q_3;
     const float t6 = t4 + t5;
     const float t7 = q_2*t3;
-    const float t8 = 2*q_1;
     const float t9 = q_3*t8;
     const float t10 = t7 - t9;
     const float t11 = 2*(q_2*q_2);
@@ -3033,7 +3021,7 @@ void lvf_wheels4_body_rhs(const float *q, const float *omega_b, const float *Ome
     const float t13 = -t11 - t12;
     const float t14 = t7 + t9;
     const float t15 = q_3*t3;
-    const float t16 = 2*q_1*q_2 - t15;
+    const float t16 = q_2*t8 - t15;
     const float t17 = 2*(q_0*q_0);
     const float t18 = -t12 - t17;
     const float t19 = F_w_0*t14 + F_w_1*t16 + F_w_2*t18;
@@ -3202,11 +3190,11 @@ void lvf_wheels4_body_rhs_c(const float *q, const float *omega_b, const float *O
     const float t1 = ((1.0F/2.0F))*omega_b_1;
     const float t2 = ((1.0F/2.0F))*omega_b_2;
     const float t3 = 2*q_0;
+    const float t8 = 2*q_1;
     const float t4 = q_1*t3;
     const float t5 = 2*q_2*q_3;
     const float t6 = t4 + t5;
     const float t7 = q_2*t3;
-    const float t8 = 2*q_1;
     const float t9 = q_3*t8;
     const float t10 = t7 - t9;
     const float t11 = 2*(q_2*q_2);
@@ -3214,7 +3202,7 @@ void lvf_wheels4_body_rhs_c(const float *q, const float *omega_b, const float *O
     const float t13 = -t11 - t12;
     const float t14 = t7 + t9;
     const float t15 = q_3*t3;
-    const float t16 = 2*q_1*q_2 - t15;
+    const float t16 = q_2*t8 - t15;
     const float t17 = 2*(q_0*q_0);
     const float t18 = -t12 - t17;
     const float t19 = F_w_0*t14 + F_w_1*t16 + F_w_2*t18;
@@ -3315,11 +3303,11 @@ void lvf_wheels4_on_axes_rhs_c(const float *q, const float *omega_b, const float
     const float t1 = ((1.0F/2.0F))*omega_b_1;
     const float t2 = ((1.0F/2.0F))*omega_b_2;
     const float t3 = 2*q_0;
+    const float t8 = 2*q_1;
     const float t4 = q_1*t3;
     const float t5 = 2*q_2*q_3;
     const float t6 = t4 + t5;
     const float t7 = q_2*t3;
-    const float t8 = 2*q_1;
     const float t9 = q_3*t8;
     const float t10 = t7 - t9;
     const float t11 = 2*(q_2*q_2);
@@ -3327,7 +3315,7 @@ void lvf_wheels4_on_axes_rhs_c(const float *q, const float *omega_b, const float
     const float t13 = -t11 - t12;
     const float t14 = t7 + t9;
     const float t15 = q_3*t3;
-    const float t16 = 2*q_1*q_2 - t15;
+    const float t16 = q_2*t8 - t15;
     const float t17 = 2*(q_0*q_0);
     const float t18 = -t12 - t17;
     const float t19 = F_w_0*t14 + F_w_1*t16 + F_w_2*t18;
@@ -3390,8 +3378,8 @@ void lvf_wheels4_total_momentum(const float *q, const float *omega_b, const floa
     const float J_2 = J[2];
     const float J_3 = J[3];
     const float t0 = 2*q_1;
-    const float t1 = q_0*t0;
     const float t2 = 2*q_2;
+    const float t1 = q_0*t0;
     const float t3 = q_3*t2;
     const float t4 = J_0*Omega_0;
     const float t5 = J_1*Omega_1;
@@ -3407,7 +3395,7 @@ void lvf_wheels4_total_momentum(const float *q, const float *omega_b, const floa
     const float t15 = 2*q_0*q_3;
     const float t16 = 2*(q_0*q_0);
     L_w[0] = t11*(t10 + t9) + t14*(-t12 - t13) + t8*(t1 - t3);
-    L_w[1] = t11*(2*q_1*q_2 - t15) + t14*(t1 + t3) + t8*(-t13 - t16);
+    L_w[1] = t11*(q_1*t2 - t15) + t14*(t1 + t3) + t8*(-t13 - t16);
     L_w[2] = t11*(-t12 - t16 + 1) + t14*(-t10 + t9) + t8*(q_1*t2 + t15);
 }
 
@@ -3446,8 +3434,8 @@ void lvf_wheels4_momentum(const float *q, const float *omega_b, const float *Ome
     const float J_2 = J[2];
     const float J_3 = J[3];
     const float t0 = 2*q_1;
-    const float t1 = q_0*t0;
     const float t2 = 2*q_2;
+    const float t1 = q_0*t0;
     const float t3 = q_3*t2;
     const float t4 = t1 - t3;
     const float t5 = A_b_10*J_0;
@@ -3468,7 +3456,7 @@ void lvf_wheels4_momentum(const float *q, const float *omega_b, const float *Ome
     const float t20 = omega_b_0*(-(A_b_00*A_b_00)*J_0 - (A_b_01*A_b_01)*J_1 - (A_b_02*A_b_02)*J_2 - (A_b_03*A_b_03)*J_3 + I_p_00) + omega_b_1*t9 + omega_b_2*t15;
     const float t21 = t1 + t3;
     const float t22 = 2*q_0*q_3;
-    const float t23 = 2*q_1*q_2 - t22;
+    const float t23 = q_1*t2 - t22;
     const float t24 = 2*(q_0*q_0);
     const float t25 = -t18 - t24;
     const float t26 = t12 - t13;
@@ -3502,14 +3490,13 @@ void lvf_wheels4_motor(const float *command, const float *Omega, float torque_li
     const float Omega_1 = Omega[1];
     const float Omega_2 = Omega[2];
     const float Omega_3 = Omega[3];
-    const float t0 = -torque_limit;
-    const float t1 = command_0 < t0;
+    const float t1 = command_0 < -torque_limit;
     const float t2 = fabsf(Omega_0);
     const float t3 = speed_limit <= t2;
     const float t4 = Omega_0*torque_limit;
     const float t5 = command_0 > torque_limit;
     const float t6 = ((t1) ? (
-   t0
+   -torque_limit
 )
 : ((t5) ? (
    torque_limit
@@ -3521,18 +3508,16 @@ void lvf_wheels4_motor(const float *command, const float *Omega, float torque_li
     const float t8 = Omega_0 >= speed_limit;
     const float t9 = command_0 < 0;
     const float t10 = command_0 > 0;
-    const float t11 = -speed_limit;
-    const float t12 = Omega_0 <= t11;
+    const float t12 = Omega_0 <= -speed_limit;
     const float t13 = (1.0F/speed_limit);
     const float t14 = torque_limit*(-t13*t2 + 1);
-    const float t15 = -t14;
-    const float t16 = command_1 < t0;
+    const float t16 = command_1 < -torque_limit;
     const float t17 = fabsf(Omega_1);
     const float t18 = speed_limit <= t17;
     const float t19 = Omega_1*torque_limit;
     const float t20 = command_1 > torque_limit;
     const float t21 = ((t16) ? (
-   t0
+   -torque_limit
 )
 : ((t20) ? (
    torque_limit
@@ -3543,16 +3528,15 @@ void lvf_wheels4_motor(const float *command, const float *Omega, float torque_li
     const float t22 = Omega_1 >= speed_limit;
     const float t23 = command_1 < 0;
     const float t24 = command_1 > 0;
-    const float t25 = Omega_1 <= t11;
+    const float t25 = Omega_1 <= -speed_limit;
     const float t26 = torque_limit*(-t13*t17 + 1);
-    const float t27 = -t26;
-    const float t28 = command_2 < t0;
+    const float t28 = command_2 < -torque_limit;
     const float t29 = fabsf(Omega_2);
     const float t30 = speed_limit <= t29;
     const float t31 = Omega_2*torque_limit;
     const float t32 = command_2 > torque_limit;
     const float t33 = ((t28) ? (
-   t0
+   -torque_limit
 )
 : ((t32) ? (
    torque_limit
@@ -3563,16 +3547,15 @@ void lvf_wheels4_motor(const float *command, const float *Omega, float torque_li
     const float t34 = Omega_2 >= speed_limit;
     const float t35 = command_2 < 0;
     const float t36 = command_2 > 0;
-    const float t37 = Omega_2 <= t11;
+    const float t37 = Omega_2 <= -speed_limit;
     const float t38 = torque_limit*(-t13*t29 + 1);
-    const float t39 = -t38;
-    const float t40 = command_3 < t0;
+    const float t40 = command_3 < -torque_limit;
     const float t41 = fabsf(Omega_3);
     const float t42 = speed_limit <= t41;
     const float t43 = Omega_3*torque_limit;
     const float t44 = command_3 > torque_limit;
     const float t45 = ((t40) ? (
-   t0
+   -torque_limit
 )
 : ((t44) ? (
    torque_limit
@@ -3583,9 +3566,8 @@ void lvf_wheels4_motor(const float *command, const float *Omega, float torque_li
     const float t46 = Omega_3 >= speed_limit;
     const float t47 = command_3 < 0;
     const float t48 = command_3 > 0;
-    const float t49 = Omega_3 <= t11;
+    const float t49 = Omega_3 <= -speed_limit;
     const float t50 = torque_limit*(-t13*t41 + 1);
-    const float t51 = -t50;
     u[0] = ((t7) ? (
    ((((t1) ? (
       t3 && t4 < 0
@@ -3611,8 +3593,8 @@ void lvf_wheels4_motor(const float *command, const float *Omega, float torque_li
    : ((Omega_0 > 0 && command_0 > t14 && Omega_0 < speed_limit) ? (
       t14
    )
-   : ((Omega_0 > t11 && Omega_0 < 0 && command_0 < t15) ? (
-      t15
+   : ((Omega_0 > -speed_limit && Omega_0 < 0 && command_0 < -t14) ? (
+      -t14
    )
    : (
       t6
@@ -3643,8 +3625,8 @@ void lvf_wheels4_motor(const float *command, const float *Omega, float torque_li
    : ((Omega_1 > 0 && command_1 > t26 && Omega_1 < speed_limit) ? (
       t26
    )
-   : ((Omega_1 > t11 && Omega_1 < 0 && command_1 < t27) ? (
-      t27
+   : ((Omega_1 > -speed_limit && Omega_1 < 0 && command_1 < -t26) ? (
+      -t26
    )
    : (
       t21
@@ -3675,8 +3657,8 @@ void lvf_wheels4_motor(const float *command, const float *Omega, float torque_li
    : ((Omega_2 > 0 && command_2 > t38 && Omega_2 < speed_limit) ? (
       t38
    )
-   : ((Omega_2 > t11 && Omega_2 < 0 && command_2 < t39) ? (
-      t39
+   : ((Omega_2 > -speed_limit && Omega_2 < 0 && command_2 < -t38) ? (
+      -t38
    )
    : (
       t33
@@ -3707,8 +3689,8 @@ void lvf_wheels4_motor(const float *command, const float *Omega, float torque_li
    : ((Omega_3 > 0 && command_3 > t50 && Omega_3 < speed_limit) ? (
       t50
    )
-   : ((Omega_3 > t11 && Omega_3 < 0 && command_3 < t51) ? (
-      t51
+   : ((Omega_3 > -speed_limit && Omega_3 < 0 && command_3 < -t50) ? (
+      -t50
    )
    : (
       t45

@@ -354,9 +354,10 @@ def world_inertia(q, I_b, *, out=None):
     I_b_0 = I_b[..., 0]
     I_b_1 = I_b[..., 1]
     I_b_2 = I_b[..., 2]
-    t0 = 2*q_1
+    t0_2 = 2 * q[..., 1:3]
+    t0 = t0_2[..., 0]
+    t2 = t0_2[..., 1]
     t1 = q_0*t0
-    t2 = 2*q_2
     t3 = q_3*t2
     t4 = t1 - t3
     t5 = q_0*t2
@@ -366,7 +367,7 @@ def world_inertia(q, I_b, *, out=None):
     t9 = 2*(q_2*q_2) - 1
     t10 = -t8 - t9
     t11 = 2*q_0*q_3
-    t12 = 2*q_1*q_2 - t11
+    t12 = q_1*t2 - t11
     t13 = I_b_2*t7
     t14 = t1 + t3
     t15 = I_b_0*t10
@@ -646,9 +647,9 @@ def effect_angular_damping(q, omega_b, c, *, out=None):
     omega_b_0 = omega_b[..., 0]
     omega_b_1 = omega_b[..., 1]
     omega_b_2 = omega_b[..., 2]
+    t2 = 2*q_1
     t0 = c*omega_b_0
     t1 = 2*c*omega_b_2*q_0 - 2*q_2*t0
-    t2 = 2*q_1
     t3 = c*omega_b_1
     t4 = 2*t3
     t5 = t0 * t2 - q_0 * t4
@@ -951,9 +952,10 @@ def quat_rotate(q, v_b, *, out=None):
     v_b_0 = v_b[..., 0]
     v_b_1 = v_b[..., 1]
     v_b_2 = v_b[..., 2]
-    t0 = 2*q_1
+    t0_2 = 2 * q[..., 1:3]
+    t0 = t0_2[..., 0]
+    t2 = t0_2[..., 1]
     t1 = q_0*t0
-    t2 = 2*q_2
     t3 = q_3*t2
     t4 = q_0*t2
     t5 = q_3*t0
@@ -963,7 +965,7 @@ def quat_rotate(q, v_b, *, out=None):
     t9 = 2*(q_0*q_0)
     v_w_out = numpy.empty(batch + (3,)) if out is None or out[0] is None else out[0]
     numpy.add(v_b_0 * (-t6 - t7) + v_b_1 * (t1 - t3), v_b_2 * (t4 + t5), out=v_w_out[..., 0])
-    numpy.add(v_b_0 * (t1 + t3) + v_b_1 * (-t7 - t9), v_b_2 * (2 * q_1 * q_2 - t8), out=v_w_out[..., 1])
+    numpy.add(v_b_0 * (t1 + t3) + v_b_1 * (-t7 - t9), v_b_2 * (q_1 * t2 - t8), out=v_w_out[..., 1])
     numpy.add(v_b_0 * (t4 - t5) + v_b_1 * (q_1 * t2 + t8), v_b_2 * (-t6 - t9 + 1), out=v_w_out[..., 2])
     return v_w_out
 
@@ -992,11 +994,12 @@ def quat_to_matrix(q, *, out=None):
     q_1 = q[..., 1]
     q_2 = q[..., 2]
     q_3 = q[..., 3]
+    t2_2 = 2 * q[..., 1:3]
+    t2 = t2_2[..., 0]
+    t4 = t2_2[..., 1]
     t0 = 2*(q_1*q_1)
     t1 = 2*(q_2*q_2) - 1
-    t2 = 2*q_1
     t3 = q_0*t2
-    t4 = 2*q_2
     t5 = q_3*t4
     t6 = q_0*t4
     t7 = q_3*t2
@@ -1008,7 +1011,7 @@ def quat_to_matrix(q, *, out=None):
     numpy.add(t6, t7, out=R_wb_out[..., 0, 2])
     numpy.add(t3, t5, out=R_wb_out[..., 1, 0])
     numpy.subtract(-t1, t8, out=R_wb_out[..., 1, 1])
-    numpy.subtract(2 * q_1 * q_2, t9, out=R_wb_out[..., 1, 2])
+    numpy.subtract(q_1 * t4, t9, out=R_wb_out[..., 1, 2])
     numpy.subtract(t6, t7, out=R_wb_out[..., 2, 0])
     numpy.add(q_1 * t4, t9, out=R_wb_out[..., 2, 1])
     numpy.add(-t0 - t8, 1, out=R_wb_out[..., 2, 2])
@@ -1051,12 +1054,12 @@ def matrix_to_quat(R_wb, *, out=None):
         t3 = numpy.sqrt(t2 + 1)
         t4 = ((1.0/2.0))/t3
         t5 = numpy.logical_and.reduce((numpy.less_equal(R_0, t2),numpy.less_equal(R_4, t2),numpy.less_equal(R_8, t2)))
-        t6 = -R_4
         t7 = R_0 - R_8
-        t8 = numpy.sqrt(t6 + t7 + 1)
+        t8 = numpy.sqrt(t7 - R_4 + 1)
         t9 = numpy.logical_and.reduce((numpy.greater_equal(R_0, R_4),numpy.greater_equal(R_0, R_8)))
-        t10 = numpy.sqrt(-t1 - t6 + 1)
+        t10 = numpy.sqrt(R_4 - t1 + 1)
         t11 = (1.0/t10)
+        t22 = ((1.0/2.0))*t11
         t12 = ((1.0/2.0))*R_1 + ((1.0/2.0))*R_3
         t13 = numpy.greater_equal(R_4, R_8)
         t14 = R_2 + R_6
@@ -1064,10 +1067,9 @@ def matrix_to_quat(R_wb, *, out=None):
         t16 = ((1.0/2.0))/t15
         t17 = R_2 - R_6
         t18 = (1.0/t8)
+        t21 = ((1.0/2.0))*t18
         t19 = R_5 + R_7
         t20 = R_3 - R_1
-        t21 = ((1.0/2.0))*t18
-        t22 = ((1.0/2.0))*t11
         q_out = numpy.empty(batch + (4,)) if out is None or out[0] is None else out[0]
         q_out[..., 0] = numpy.select([t5,t9,t13,True], [t0*t4,((1.0/2.0))*t8,t11*t12,t14*t16], default=numpy.nan)
         q_out[..., 1] = numpy.select([t5,t9,t13,True], [t17*t4,t12*t18,((1.0/2.0))*t10,t16*t19], default=numpy.nan)
@@ -1271,7 +1273,7 @@ def quat_error_chart(q, q_ref, *, out=None):
         t2 = q_0*t0 + q_1*t1 - 2*q_2*q_ref_1 - 2*q_3*q_ref_0
         t3 = numpy.less(q_0*q_ref_0 + q_1*q_ref_1 + q_2*q_ref_2 + q_3*q_ref_3, 0)
         t4 = q_0*t1 - q_1*t0 - 2*q_2*q_ref_0 + 2*q_3*q_ref_1
-        t5 = 2*q_0*q_ref_1 - 2*q_1*q_ref_0 + q_2*t0 - 2*q_3*q_ref_2
+        t5 = 2*q_0*q_ref_1 - 2*q_1*q_ref_0 + q_2*t0 - q_3*t1
         dtheta_out = numpy.empty(batch + (3,)) if out is None or out[0] is None else out[0]
         dtheta_out[..., 0] = numpy.select([t3,True], [-t2,t2], default=numpy.nan)
         dtheta_out[..., 1] = numpy.select([t3,True], [t4,-t4], default=numpy.nan)
@@ -1306,10 +1308,10 @@ def euler_xyz_to_quat(roll, pitch, yaw, *, out=None):
     if out is None or out[0] is None:
         batch = roll.shape if roll.shape == pitch.shape == yaw.shape else numpy.broadcast_shapes(roll.shape, pitch.shape, yaw.shape)
     t0 = ((1.0/2.0))*yaw
-    t1 = numpy.sin(t0)
     t2 = ((1.0/2.0))*roll
-    t3 = numpy.cos(t2)
     t4 = ((1.0/2.0))*pitch
+    t1 = numpy.sin(t0)
+    t3 = numpy.cos(t2)
     t5 = numpy.sin(t4)
     t6 = t3*t5
     t7 = numpy.cos(t0)
@@ -1351,8 +1353,8 @@ def quat_to_euler_xyz(q, *, out=None):
     q_3 = q[..., 3]
     with numpy.errstate(invalid='ignore', divide='ignore'):  # numpy.select evaluates every branch
         t0 = 2*q_3
-        t1 = q_0*t0
         t2 = 2*q_2
+        t1 = q_0*t0
         t3 = q_1*t2
         t4 = t1 - t3
         t5 = 2*(q_0*q_0) - 1
@@ -1490,10 +1492,10 @@ def integrate_orientation(q, omega_w, dt, *, out=None):
     t0 = ((1.0/2.0))*q_3
     t1 = ((1.0/2.0))*q_2
     t2 = ((1.0/2.0))*omega_w_2
-    t3 = dt*(omega_w_0*t0 + omega_w_1*t1 - q_1*t2) + q_0
     t4_2 = 1.0 / 2.0 * omega_w[..., 0:2]
     t4 = t4_2[..., 0]
     t5 = t4_2[..., 1]
+    t3 = dt*(omega_w_0*t0 + omega_w_1*t1 - q_1*t2) + q_0
     t6 = dt*(-omega_w_2*t1 - q_0*t4 - q_1*t5) + q_3
     t7 = dt*(omega_w_2*t0 - q_0*t5 + q_1*t4) + q_2
     t8 = dt * (omega_w_1 * t0 - omega_w_0 * t1 + q_0 * t2) + q_1
@@ -1775,8 +1777,8 @@ def rigid_body_rhs(x, m, I_b, F_w, tau_w, *, out=None):
     t0 = t0_3[..., 0]
     t1 = t0_3[..., 1]
     t2 = t0_3[..., 2]
-    t3 = (1.0/m)
     t4 = 2*tau_w_0
+    t3 = (1.0/m)
     t5 = 2 * tau_w_1 * x_3 - t4 * x_4
     t6 = t4*x_5 - 2*tau_w_2*x_3
     t7 = 2 * tau_w_2 * x_4 - 2 * tau_w_1 * x_5
@@ -1884,10 +1886,11 @@ def apply_inv_inertia(q, I_b, v, *, out=None):
     v_0 = v[..., 0]
     v_1 = v[..., 1]
     v_2 = v[..., 2]
+    t1_2 = 2 * q[..., 1:3]
+    t1 = t1_2[..., 0]
+    t3 = t1_2[..., 1]
     t0 = (1.0/I_b_1)
-    t1 = 2*q_1
     t2 = q_0*t1
-    t3 = 2*q_2
     t4 = q_3*t3
     t5 = t2 - t4
     t6 = (1.0/I_b_2)
@@ -1899,7 +1902,7 @@ def apply_inv_inertia(q, I_b, v, *, out=None):
     t12 = 2*(q_2*q_2) - 1
     t13 = -t11 - t12
     t14 = 2*q_0*q_3
-    t15 = 2*q_1*q_2 - t14
+    t15 = q_1*t3 - t14
     t16 = t6*t9
     t17 = t2 + t4
     t18 = t10*t13
@@ -1949,9 +1952,10 @@ def world_to_body(q, v_w, *, out=None):
     v_0 = v_w[..., 0]
     v_1 = v_w[..., 1]
     v_2 = v_w[..., 2]
-    t0 = 2*q_1
+    t0_2 = 2 * q[..., 1:3]
+    t0 = t0_2[..., 0]
+    t2 = t0_2[..., 1]
     t1 = q_0*t0
-    t2 = 2*q_2
     t3 = q_3*t2
     t4 = q_0*t2
     t5 = q_3*t0
@@ -1962,7 +1966,7 @@ def world_to_body(q, v_w, *, out=None):
     v_b_out = numpy.empty(batch + (3,)) if out is None or out[0] is None else out[0]
     numpy.add(v_0 * (-t6 - t7) + v_1 * (t1 + t3), v_2 * (t4 - t5), out=v_b_out[..., 0])
     numpy.add(v_0 * (t1 - t3) + v_1 * (-t7 - t9), v_2 * (q_2 * t0 + t8), out=v_b_out[..., 1])
-    numpy.add(v_0 * (t4 + t5) + v_1 * (2 * q_1 * q_2 - t8), v_2 * (-t6 - t9 + 1), out=v_b_out[..., 2])
+    numpy.add(v_0 * (t4 + t5) + v_1 * (q_1 * t2 - t8), v_2 * (-t6 - t9 + 1), out=v_b_out[..., 2])
     return v_b_out
 
 
@@ -2045,9 +2049,10 @@ def angular_momentum_world(q, I_b, omega_b, *, out=None):
     omega_b_0 = omega_b[..., 0]
     omega_b_1 = omega_b[..., 1]
     omega_b_2 = omega_b[..., 2]
-    t0 = 2*q_1
+    t0_2 = 2 * q[..., 1:3]
+    t0 = t0_2[..., 0]
+    t2 = t0_2[..., 1]
     t1 = q_0*t0
-    t2 = 2*q_2
     t3 = q_3*t2
     t4 = I_b_1*omega_b_1
     t5 = q_0*t2
@@ -2060,7 +2065,7 @@ def angular_momentum_world(q, I_b, omega_b, *, out=None):
     t12 = 2*(q_0*q_0)
     L_w_out = numpy.empty(batch + (3,)) if out is None or out[0] is None else out[0]
     numpy.add(t10 * (-t8 - t9) + t4 * (t1 - t3), t7 * (t5 + t6), out=L_w_out[..., 0])
-    numpy.add(t10 * (t1 + t3) + t4 * (-t12 - t9), t7 * (2 * q_1 * q_2 - t11), out=L_w_out[..., 1])
+    numpy.add(t10 * (t1 + t3) + t4 * (-t12 - t9), t7 * (q_1 * t2 - t11), out=L_w_out[..., 1])
     numpy.add(t10 * (t5 - t6) + t4 * (q_1 * t2 + t11), t7 * (-t12 - t8 + 1), out=L_w_out[..., 2])
     return L_w_out
 
@@ -2343,8 +2348,8 @@ def rigid_body_rhs_c(x, m, c_b, F_w, tau_w, *, out=None):
     t0 = t0_3[..., 0]
     t1 = t0_3[..., 1]
     t2 = t0_3[..., 2]
-    t3 = (1.0/m)
     t4 = 2*tau_w_0
+    t3 = (1.0/m)
     t5 = 2 * tau_w_1 * x_3 - t4 * x_4
     t6 = t4*x_5 - 2*tau_w_2*x_3
     t7 = 2 * tau_w_2 * x_4 - 2 * tau_w_1 * x_5
@@ -2561,10 +2566,10 @@ def rigid_body_increments_c(q, omega_b, v_w, S_b, F_w, tau_w, *, out=None):
     tau_w_0 = tau_w[..., 0]
     tau_w_1 = tau_w[..., 1]
     tau_w_2 = tau_w[..., 2]
+    t3 = 2*q_0
     t0 = S_b_6*omega_b_0
     t1 = S_b_6*omega_b_2
     t2 = S_b_6*omega_b_1
-    t3 = 2*q_0
     t4 = t3 * tau_w_1 - 2 * q_1 * tau_w_0
     t5 = 2*q_2*tau_w_0 - t3*tau_w_2
     t6 = 2*q_1*tau_w_2 - 2*q_2*tau_w_1
@@ -2638,10 +2643,10 @@ def rigid_body_increments_torque_c(q, omega_b, v_w, S_b, tau_w, *, out=None):
     tau_w_0 = tau_w[..., 0]
     tau_w_1 = tau_w[..., 1]
     tau_w_2 = tau_w[..., 2]
+    t3 = 2*q_0
     t0 = S_b_6*omega_b_0
     t1 = S_b_6*omega_b_2
     t2 = S_b_6*omega_b_1
-    t3 = 2*q_0
     t4 = t3 * tau_w_1 - 2 * q_1 * tau_w_0
     t5 = 2*q_2*tau_w_0 - t3*tau_w_2
     t6 = 2*q_1*tau_w_2 - 2*q_2*tau_w_1
@@ -3231,18 +3236,19 @@ def pivot_body_rhs(q, omega_b, I_p, r_b, F_w, tau_w, *, out=None):
     t0 = t0_3[..., 0]
     t1 = t0_3[..., 1]
     t2 = t0_3[..., 2]
+    t8_2 = 2 * q[..., 0:2]
+    t8 = t8_2[..., 0]
+    t10 = t8_2[..., 1]
     t3 = (I_p_12*I_p_12)
     t4 = (I_p_01*I_p_01)
     t5 = (I_p_02*I_p_02)
     t6 = (1.0/(I_p_00*I_p_11*I_p_22 - I_p_00*t3 + 2*I_p_01*I_p_02*I_p_12 - I_p_11*t5 - I_p_22*t4))
     t7 = I_p_01*I_p_12 - I_p_02*I_p_11
-    t8 = 2*q_0
     t9 = q_2*t8
-    t10 = 2*q_1
     t11 = q_3*t10
     t12 = t11 + t9
     t13 = q_3*t8
-    t14 = 2*q_1*q_2 - t13
+    t14 = q_2*t10 - t13
     t15 = I_p_00*omega_b_0 + I_p_01*omega_b_1 + I_p_02*omega_b_2
     t16 = I_p_01*omega_b_0 + I_p_11*omega_b_1 + I_p_12*omega_b_2
     t17 = 2*(q_0*q_0)
@@ -3322,9 +3328,10 @@ def pivot_kinematics(q, omega_b, anchor_w, r_b, *, out=None):
     r_b_0 = r_b[..., 0]
     r_b_1 = r_b[..., 1]
     r_b_2 = r_b[..., 2]
-    t0 = 2*q_1
+    t0_2 = 2 * q[..., 1:3]
+    t0 = t0_2[..., 0]
+    t2 = t0_2[..., 1]
     t1 = q_0*t0
-    t2 = 2*q_2
     t3 = q_3*t2
     t4 = t1 - t3
     t5 = q_0*t2
@@ -3335,7 +3342,7 @@ def pivot_kinematics(q, omega_b, anchor_w, r_b, *, out=None):
     t10 = -t8 - t9
     t11 = t1 + t3
     t12 = 2*q_0*q_3
-    t13 = 2*q_1*q_2 - t12
+    t13 = q_1*t2 - t12
     t14 = 2*(q_0*q_0)
     t15 = -t14 - t9
     t16 = t5 - t6
@@ -3902,11 +3909,11 @@ def sphere_flow(q, L_b, I_r, tau, *, out=None):
     L_b_1 = L_b[..., 1]
     L_b_2 = L_b[..., 2]
     with numpy.errstate(invalid='ignore', divide='ignore'):  # numpy.select evaluates every branch
+        t4 = ((1.0/2.0))*tau
         t0 = (1.0/I_r)
         t1 = (L_b_0*L_b_0) + (L_b_1*L_b_1) + (L_b_2*L_b_2)
         t2 = numpy.sqrt(t1)
         t3 = t0*t2
-        t4 = ((1.0/2.0))*tau
         t5 = t3*t4
         t6 = numpy.cos(t5)
         t7 = numpy.select([numpy.greater(t3*abs(tau), (1.0/50000000.0)),True], [numpy.sin(t5)/t2,t0*t4*(1 - (1.0/24.0)*t1*(tau*tau)/(I_r*I_r))], default=numpy.nan)
@@ -4452,23 +4459,22 @@ def wheel_saturation(command, Omega, torque_limit, speed_limit, *, out=None):
     Omega_1 = Omega[..., 1]
     Omega_2 = Omega[..., 2]
     with numpy.errstate(invalid='ignore', divide='ignore'):  # numpy.select evaluates every branch
-        t0 = -torque_limit
-        t1 = numpy.less(command_0, t0)
+        t1 = numpy.less(command_0, -torque_limit)
         t2 = numpy.less_equal(speed_limit, abs(Omega_0))
         t3 = Omega_0*torque_limit
         t4 = numpy.greater(command_0, torque_limit)
-        t5 = numpy.less(command_1, t0)
+        t5 = numpy.less(command_1, -torque_limit)
         t6 = numpy.less_equal(speed_limit, abs(Omega_1))
         t7 = Omega_1*torque_limit
         t8 = numpy.greater(command_1, torque_limit)
-        t9 = numpy.less(command_2, t0)
+        t9 = numpy.less(command_2, -torque_limit)
         t10 = numpy.less_equal(speed_limit, abs(Omega_2))
         t11 = Omega_2*torque_limit
         t12 = numpy.greater(command_2, torque_limit)
         u_out = numpy.empty(batch + (3,)) if out is None or out[0] is None else out[0]
-        u_out[..., 0] = numpy.select([numpy.logical_and.reduce((t2,numpy.logical_or.reduce((numpy.logical_not(t1),numpy.less(t3, 0))),numpy.logical_or.reduce((t1,numpy.logical_not(t4),numpy.greater(t3, 0))),numpy.logical_or.reduce((t1,t4,numpy.greater(Omega_0*command_0, 0))))),True], [0,numpy.select([t1,t4,True], [t0,torque_limit,command_0], default=numpy.nan)], default=numpy.nan)
-        u_out[..., 1] = numpy.select([numpy.logical_and.reduce((t6,numpy.logical_or.reduce((numpy.logical_not(t5),numpy.less(t7, 0))),numpy.logical_or.reduce((t5,numpy.logical_not(t8),numpy.greater(t7, 0))),numpy.logical_or.reduce((t5,t8,numpy.greater(Omega_1*command_1, 0))))),True], [0,numpy.select([t5,t8,True], [t0,torque_limit,command_1], default=numpy.nan)], default=numpy.nan)
-        u_out[..., 2] = numpy.select([numpy.logical_and.reduce((t10,numpy.logical_or.reduce((numpy.logical_not(t9),numpy.less(t11, 0))),numpy.logical_or.reduce((t9,numpy.logical_not(t12),numpy.greater(t11, 0))),numpy.logical_or.reduce((t12,t9,numpy.greater(Omega_2*command_2, 0))))),True], [0,numpy.select([t9,t12,True], [t0,torque_limit,command_2], default=numpy.nan)], default=numpy.nan)
+        u_out[..., 0] = numpy.select([numpy.logical_and.reduce((t2,numpy.logical_or.reduce((numpy.logical_not(t1),numpy.less(t3, 0))),numpy.logical_or.reduce((t1,numpy.logical_not(t4),numpy.greater(t3, 0))),numpy.logical_or.reduce((t1,t4,numpy.greater(Omega_0*command_0, 0))))),True], [0,numpy.select([t1,t4,True], [-torque_limit,torque_limit,command_0], default=numpy.nan)], default=numpy.nan)
+        u_out[..., 1] = numpy.select([numpy.logical_and.reduce((t6,numpy.logical_or.reduce((numpy.logical_not(t5),numpy.less(t7, 0))),numpy.logical_or.reduce((t5,numpy.logical_not(t8),numpy.greater(t7, 0))),numpy.logical_or.reduce((t5,t8,numpy.greater(Omega_1*command_1, 0))))),True], [0,numpy.select([t5,t8,True], [-torque_limit,torque_limit,command_1], default=numpy.nan)], default=numpy.nan)
+        u_out[..., 2] = numpy.select([numpy.logical_and.reduce((t10,numpy.logical_or.reduce((numpy.logical_not(t9),numpy.less(t11, 0))),numpy.logical_or.reduce((t9,numpy.logical_not(t12),numpy.greater(t11, 0))),numpy.logical_or.reduce((t12,t9,numpy.greater(Omega_2*command_2, 0))))),True], [0,numpy.select([t9,t12,True], [-torque_limit,torque_limit,command_2], default=numpy.nan)], default=numpy.nan)
     return u_out
 
 
@@ -4511,50 +4517,45 @@ def wheel_motor(command, Omega, torque_limit, speed_limit, cutoff, *, out=None):
     Omega_1 = Omega[..., 1]
     Omega_2 = Omega[..., 2]
     with numpy.errstate(invalid='ignore', divide='ignore'):  # numpy.select evaluates every branch
-        t0 = -torque_limit
-        t1 = numpy.less(command_0, t0)
+        t1 = numpy.less(command_0, -torque_limit)
         t2 = abs(Omega_0)
         t3 = numpy.less_equal(speed_limit, t2)
         t4 = Omega_0*torque_limit
         t5 = numpy.greater(command_0, torque_limit)
-        t6 = numpy.select([t1,t5,True], [t0,torque_limit,command_0], default=numpy.nan)
+        t6 = numpy.select([t1,t5,True], [-torque_limit,torque_limit,command_0], default=numpy.nan)
         t7 = numpy.greater(cutoff, 0)
         t8 = numpy.greater_equal(Omega_0, speed_limit)
         t9 = numpy.less(command_0, 0)
         t10 = numpy.greater(command_0, 0)
-        t11 = -speed_limit
-        t12 = numpy.less_equal(Omega_0, t11)
+        t12 = numpy.less_equal(Omega_0, -speed_limit)
         t13 = (1.0/speed_limit)
         t14 = torque_limit * (1 - t13 * t2)
-        t15 = -t14
-        t16 = numpy.less(command_1, t0)
+        t16 = numpy.less(command_1, -torque_limit)
         t17 = abs(Omega_1)
         t18 = numpy.less_equal(speed_limit, t17)
         t19 = Omega_1*torque_limit
         t20 = numpy.greater(command_1, torque_limit)
-        t21 = numpy.select([t16,t20,True], [t0,torque_limit,command_1], default=numpy.nan)
+        t21 = numpy.select([t16,t20,True], [-torque_limit,torque_limit,command_1], default=numpy.nan)
         t22 = numpy.greater_equal(Omega_1, speed_limit)
         t23 = numpy.less(command_1, 0)
         t24 = numpy.greater(command_1, 0)
-        t25 = numpy.less_equal(Omega_1, t11)
+        t25 = numpy.less_equal(Omega_1, -speed_limit)
         t26 = torque_limit * (1 - t13 * t17)
-        t27 = -t26
-        t28 = numpy.less(command_2, t0)
+        t28 = numpy.less(command_2, -torque_limit)
         t29 = abs(Omega_2)
         t30 = numpy.less_equal(speed_limit, t29)
         t31 = Omega_2*torque_limit
         t32 = numpy.greater(command_2, torque_limit)
-        t33 = numpy.select([t28,t32,True], [t0,torque_limit,command_2], default=numpy.nan)
+        t33 = numpy.select([t28,t32,True], [-torque_limit,torque_limit,command_2], default=numpy.nan)
         t34 = numpy.greater_equal(Omega_2, speed_limit)
         t35 = numpy.less(command_2, 0)
         t36 = numpy.greater(command_2, 0)
-        t37 = numpy.less_equal(Omega_2, t11)
+        t37 = numpy.less_equal(Omega_2, -speed_limit)
         t38 = torque_limit * (1 - t13 * t29)
-        t39 = -t38
         u_out = numpy.empty(batch + (3,)) if out is None or out[0] is None else out[0]
-        u_out[..., 0] = numpy.select([t7,True], [numpy.select([numpy.logical_and.reduce((t3,numpy.logical_or.reduce((numpy.logical_not(t1),numpy.less(t4, 0))),numpy.logical_or.reduce((t1,numpy.logical_not(t5),numpy.greater(t4, 0))),numpy.logical_or.reduce((t1,t5,numpy.greater(Omega_0*command_0, 0))))),True], [0,t6], default=numpy.nan),numpy.select([numpy.logical_and.reduce((numpy.logical_or.reduce((t10,t12)),numpy.logical_or.reduce((t10,t9)),numpy.logical_or.reduce((t12,t8)),numpy.logical_or.reduce((t8,t9)))),numpy.logical_and.reduce((numpy.greater(Omega_0, 0),numpy.greater(command_0, t14),numpy.less(Omega_0, speed_limit))),numpy.logical_and.reduce((numpy.greater(Omega_0, t11),numpy.less(Omega_0, 0),numpy.less(command_0, t15))),True], [0,t14,t15,t6], default=numpy.nan)], default=numpy.nan)
-        u_out[..., 1] = numpy.select([t7,True], [numpy.select([numpy.logical_and.reduce((t18,numpy.logical_or.reduce((numpy.logical_not(t16),numpy.less(t19, 0))),numpy.logical_or.reduce((t16,numpy.logical_not(t20),numpy.greater(t19, 0))),numpy.logical_or.reduce((t16,t20,numpy.greater(Omega_1*command_1, 0))))),True], [0,t21], default=numpy.nan),numpy.select([numpy.logical_and.reduce((numpy.logical_or.reduce((t22,t23)),numpy.logical_or.reduce((t22,t25)),numpy.logical_or.reduce((t23,t24)),numpy.logical_or.reduce((t24,t25)))),numpy.logical_and.reduce((numpy.greater(Omega_1, 0),numpy.greater(command_1, t26),numpy.less(Omega_1, speed_limit))),numpy.logical_and.reduce((numpy.greater(Omega_1, t11),numpy.less(Omega_1, 0),numpy.less(command_1, t27))),True], [0,t26,t27,t21], default=numpy.nan)], default=numpy.nan)
-        u_out[..., 2] = numpy.select([t7,True], [numpy.select([numpy.logical_and.reduce((t30,numpy.logical_or.reduce((numpy.logical_not(t28),numpy.less(t31, 0))),numpy.logical_or.reduce((t28,numpy.logical_not(t32),numpy.greater(t31, 0))),numpy.logical_or.reduce((t28,t32,numpy.greater(Omega_2*command_2, 0))))),True], [0,t33], default=numpy.nan),numpy.select([numpy.logical_and.reduce((numpy.logical_or.reduce((t34,t35)),numpy.logical_or.reduce((t34,t37)),numpy.logical_or.reduce((t35,t36)),numpy.logical_or.reduce((t36,t37)))),numpy.logical_and.reduce((numpy.greater(Omega_2, 0),numpy.greater(command_2, t38),numpy.less(Omega_2, speed_limit))),numpy.logical_and.reduce((numpy.greater(Omega_2, t11),numpy.less(Omega_2, 0),numpy.less(command_2, t39))),True], [0,t38,t39,t33], default=numpy.nan)], default=numpy.nan)
+        u_out[..., 0] = numpy.select([t7,True], [numpy.select([numpy.logical_and.reduce((t3,numpy.logical_or.reduce((numpy.logical_not(t1),numpy.less(t4, 0))),numpy.logical_or.reduce((t1,numpy.logical_not(t5),numpy.greater(t4, 0))),numpy.logical_or.reduce((t1,t5,numpy.greater(Omega_0*command_0, 0))))),True], [0,t6], default=numpy.nan),numpy.select([numpy.logical_and.reduce((numpy.logical_or.reduce((t10,t12)),numpy.logical_or.reduce((t10,t9)),numpy.logical_or.reduce((t12,t8)),numpy.logical_or.reduce((t8,t9)))),numpy.logical_and.reduce((numpy.greater(Omega_0, 0),numpy.greater(command_0, t14),numpy.less(Omega_0, speed_limit))),numpy.logical_and.reduce((numpy.less(Omega_0, 0),numpy.greater(Omega_0, -speed_limit),numpy.less(command_0, -t14))),True], [0,t14,-t14,t6], default=numpy.nan)], default=numpy.nan)
+        u_out[..., 1] = numpy.select([t7,True], [numpy.select([numpy.logical_and.reduce((t18,numpy.logical_or.reduce((numpy.logical_not(t16),numpy.less(t19, 0))),numpy.logical_or.reduce((t16,numpy.logical_not(t20),numpy.greater(t19, 0))),numpy.logical_or.reduce((t16,t20,numpy.greater(Omega_1*command_1, 0))))),True], [0,t21], default=numpy.nan),numpy.select([numpy.logical_and.reduce((numpy.logical_or.reduce((t22,t23)),numpy.logical_or.reduce((t22,t25)),numpy.logical_or.reduce((t23,t24)),numpy.logical_or.reduce((t24,t25)))),numpy.logical_and.reduce((numpy.greater(Omega_1, 0),numpy.greater(command_1, t26),numpy.less(Omega_1, speed_limit))),numpy.logical_and.reduce((numpy.less(Omega_1, 0),numpy.greater(Omega_1, -speed_limit),numpy.less(command_1, -t26))),True], [0,t26,-t26,t21], default=numpy.nan)], default=numpy.nan)
+        u_out[..., 2] = numpy.select([t7,True], [numpy.select([numpy.logical_and.reduce((t30,numpy.logical_or.reduce((numpy.logical_not(t28),numpy.less(t31, 0))),numpy.logical_or.reduce((t28,numpy.logical_not(t32),numpy.greater(t31, 0))),numpy.logical_or.reduce((t28,t32,numpy.greater(Omega_2*command_2, 0))))),True], [0,t33], default=numpy.nan),numpy.select([numpy.logical_and.reduce((numpy.logical_or.reduce((t34,t35)),numpy.logical_or.reduce((t34,t37)),numpy.logical_or.reduce((t35,t36)),numpy.logical_or.reduce((t36,t37)))),numpy.logical_and.reduce((numpy.greater(Omega_2, 0),numpy.greater(command_2, t38),numpy.less(Omega_2, speed_limit))),numpy.logical_and.reduce((numpy.less(Omega_2, 0),numpy.greater(Omega_2, -speed_limit),numpy.less(command_2, -t38))),True], [0,t38,-t38,t33], default=numpy.nan)], default=numpy.nan)
     return u_out
 
 
@@ -4699,12 +4700,13 @@ def wheels3_body_rhs(q, omega_b, Omega, I_p, A_b, J, r_b, F_w, tau_w, u, c_w, *,
     t0 = t0_3[..., 0]
     t1 = t0_3[..., 1]
     t2 = t0_3[..., 2]
-    t3 = 2*q_0
+    t3_2 = 2 * q[..., 0:2]
+    t3 = t3_2[..., 0]
+    t8 = t3_2[..., 1]
     t4 = q_1*t3
     t5 = 2*q_2*q_3
     t6 = t4 + t5
     t7 = q_2*t3
-    t8 = 2*q_1
     t9 = q_3*t8
     t10 = t7 - t9
     t11 = 2*(q_2*q_2)
@@ -4712,7 +4714,7 @@ def wheels3_body_rhs(q, omega_b, Omega, I_p, A_b, J, r_b, F_w, tau_w, u, c_w, *,
     t13 = -t11 - t12
     t14 = t7 + t9
     t15 = q_3*t3
-    t16 = 2*q_1*q_2 - t15
+    t16 = q_2*t8 - t15
     t17 = 2*(q_0*q_0)
     t18 = -t12 - t17
     t19 = F_w_0*t14 + F_w_1*t16 + F_w_2*t18
@@ -4810,9 +4812,10 @@ def wheels3_momentum(q, omega_b, Omega, I_p, A_b, J, *, out=None):
     J_0 = J[..., 0]
     J_1 = J[..., 1]
     J_2 = J[..., 2]
-    t0 = 2*q_1
+    t0_2 = 2 * q[..., 1:3]
+    t0 = t0_2[..., 0]
+    t2 = t0_2[..., 1]
     t1 = q_0*t0
-    t2 = 2*q_2
     t3 = q_3*t2
     t4 = t1 - t3
     t5 = A_b_10*J_0
@@ -4832,7 +4835,7 @@ def wheels3_momentum(q, omega_b, Omega, I_p, A_b, J, *, out=None):
     t19 = omega_b_0*(-(A_b_00*A_b_00)*J_0 - (A_b_01*A_b_01)*J_1 - (A_b_02*A_b_02)*J_2 + I_p_00) + omega_b_1*t8 + omega_b_2*t14
     t20 = t1 + t3
     t21 = 2*q_0*q_3
-    t22 = 2*q_1*q_2 - t21
+    t22 = q_1*t2 - t21
     t23 = 2*(q_0*q_0)
     t24 = -t17 - t23
     t25 = t11 - t12
@@ -4898,50 +4901,45 @@ def wheels3_motor(command, Omega, torque_limit, speed_limit, cutoff, *, out=None
     Omega_1 = Omega[..., 1]
     Omega_2 = Omega[..., 2]
     with numpy.errstate(invalid='ignore', divide='ignore'):  # numpy.select evaluates every branch
-        t0 = -torque_limit
-        t1 = numpy.less(command_0, t0)
+        t1 = numpy.less(command_0, -torque_limit)
         t2 = abs(Omega_0)
         t3 = numpy.less_equal(speed_limit, t2)
         t4 = Omega_0*torque_limit
         t5 = numpy.greater(command_0, torque_limit)
-        t6 = numpy.select([t1,t5,True], [t0,torque_limit,command_0], default=numpy.nan)
+        t6 = numpy.select([t1,t5,True], [-torque_limit,torque_limit,command_0], default=numpy.nan)
         t7 = numpy.greater(cutoff, 0)
         t8 = numpy.greater_equal(Omega_0, speed_limit)
         t9 = numpy.less(command_0, 0)
         t10 = numpy.greater(command_0, 0)
-        t11 = -speed_limit
-        t12 = numpy.less_equal(Omega_0, t11)
+        t12 = numpy.less_equal(Omega_0, -speed_limit)
         t13 = (1.0/speed_limit)
         t14 = torque_limit * (1 - t13 * t2)
-        t15 = -t14
-        t16 = numpy.less(command_1, t0)
+        t16 = numpy.less(command_1, -torque_limit)
         t17 = abs(Omega_1)
         t18 = numpy.less_equal(speed_limit, t17)
         t19 = Omega_1*torque_limit
         t20 = numpy.greater(command_1, torque_limit)
-        t21 = numpy.select([t16,t20,True], [t0,torque_limit,command_1], default=numpy.nan)
+        t21 = numpy.select([t16,t20,True], [-torque_limit,torque_limit,command_1], default=numpy.nan)
         t22 = numpy.greater_equal(Omega_1, speed_limit)
         t23 = numpy.less(command_1, 0)
         t24 = numpy.greater(command_1, 0)
-        t25 = numpy.less_equal(Omega_1, t11)
+        t25 = numpy.less_equal(Omega_1, -speed_limit)
         t26 = torque_limit * (1 - t13 * t17)
-        t27 = -t26
-        t28 = numpy.less(command_2, t0)
+        t28 = numpy.less(command_2, -torque_limit)
         t29 = abs(Omega_2)
         t30 = numpy.less_equal(speed_limit, t29)
         t31 = Omega_2*torque_limit
         t32 = numpy.greater(command_2, torque_limit)
-        t33 = numpy.select([t28,t32,True], [t0,torque_limit,command_2], default=numpy.nan)
+        t33 = numpy.select([t28,t32,True], [-torque_limit,torque_limit,command_2], default=numpy.nan)
         t34 = numpy.greater_equal(Omega_2, speed_limit)
         t35 = numpy.less(command_2, 0)
         t36 = numpy.greater(command_2, 0)
-        t37 = numpy.less_equal(Omega_2, t11)
+        t37 = numpy.less_equal(Omega_2, -speed_limit)
         t38 = torque_limit * (1 - t13 * t29)
-        t39 = -t38
         u_out = numpy.empty(batch + (3,)) if out is None or out[0] is None else out[0]
-        u_out[..., 0] = numpy.select([t7,True], [numpy.select([numpy.logical_and.reduce((t3,numpy.logical_or.reduce((numpy.logical_not(t1),numpy.less(t4, 0))),numpy.logical_or.reduce((t1,numpy.logical_not(t5),numpy.greater(t4, 0))),numpy.logical_or.reduce((t1,t5,numpy.greater(Omega_0*command_0, 0))))),True], [0,t6], default=numpy.nan),numpy.select([numpy.logical_and.reduce((numpy.logical_or.reduce((t10,t12)),numpy.logical_or.reduce((t10,t9)),numpy.logical_or.reduce((t12,t8)),numpy.logical_or.reduce((t8,t9)))),numpy.logical_and.reduce((numpy.greater(Omega_0, 0),numpy.greater(command_0, t14),numpy.less(Omega_0, speed_limit))),numpy.logical_and.reduce((numpy.greater(Omega_0, t11),numpy.less(Omega_0, 0),numpy.less(command_0, t15))),True], [0,t14,t15,t6], default=numpy.nan)], default=numpy.nan)
-        u_out[..., 1] = numpy.select([t7,True], [numpy.select([numpy.logical_and.reduce((t18,numpy.logical_or.reduce((numpy.logical_not(t16),numpy.less(t19, 0))),numpy.logical_or.reduce((t16,numpy.logical_not(t20),numpy.greater(t19, 0))),numpy.logical_or.reduce((t16,t20,numpy.greater(Omega_1*command_1, 0))))),True], [0,t21], default=numpy.nan),numpy.select([numpy.logical_and.reduce((numpy.logical_or.reduce((t22,t23)),numpy.logical_or.reduce((t22,t25)),numpy.logical_or.reduce((t23,t24)),numpy.logical_or.reduce((t24,t25)))),numpy.logical_and.reduce((numpy.greater(Omega_1, 0),numpy.greater(command_1, t26),numpy.less(Omega_1, speed_limit))),numpy.logical_and.reduce((numpy.greater(Omega_1, t11),numpy.less(Omega_1, 0),numpy.less(command_1, t27))),True], [0,t26,t27,t21], default=numpy.nan)], default=numpy.nan)
-        u_out[..., 2] = numpy.select([t7,True], [numpy.select([numpy.logical_and.reduce((t30,numpy.logical_or.reduce((numpy.logical_not(t28),numpy.less(t31, 0))),numpy.logical_or.reduce((t28,numpy.logical_not(t32),numpy.greater(t31, 0))),numpy.logical_or.reduce((t28,t32,numpy.greater(Omega_2*command_2, 0))))),True], [0,t33], default=numpy.nan),numpy.select([numpy.logical_and.reduce((numpy.logical_or.reduce((t34,t35)),numpy.logical_or.reduce((t34,t37)),numpy.logical_or.reduce((t35,t36)),numpy.logical_or.reduce((t36,t37)))),numpy.logical_and.reduce((numpy.greater(Omega_2, 0),numpy.greater(command_2, t38),numpy.less(Omega_2, speed_limit))),numpy.logical_and.reduce((numpy.greater(Omega_2, t11),numpy.less(Omega_2, 0),numpy.less(command_2, t39))),True], [0,t38,t39,t33], default=numpy.nan)], default=numpy.nan)
+        u_out[..., 0] = numpy.select([t7,True], [numpy.select([numpy.logical_and.reduce((t3,numpy.logical_or.reduce((numpy.logical_not(t1),numpy.less(t4, 0))),numpy.logical_or.reduce((t1,numpy.logical_not(t5),numpy.greater(t4, 0))),numpy.logical_or.reduce((t1,t5,numpy.greater(Omega_0*command_0, 0))))),True], [0,t6], default=numpy.nan),numpy.select([numpy.logical_and.reduce((numpy.logical_or.reduce((t10,t12)),numpy.logical_or.reduce((t10,t9)),numpy.logical_or.reduce((t12,t8)),numpy.logical_or.reduce((t8,t9)))),numpy.logical_and.reduce((numpy.greater(Omega_0, 0),numpy.greater(command_0, t14),numpy.less(Omega_0, speed_limit))),numpy.logical_and.reduce((numpy.less(Omega_0, 0),numpy.greater(Omega_0, -speed_limit),numpy.less(command_0, -t14))),True], [0,t14,-t14,t6], default=numpy.nan)], default=numpy.nan)
+        u_out[..., 1] = numpy.select([t7,True], [numpy.select([numpy.logical_and.reduce((t18,numpy.logical_or.reduce((numpy.logical_not(t16),numpy.less(t19, 0))),numpy.logical_or.reduce((t16,numpy.logical_not(t20),numpy.greater(t19, 0))),numpy.logical_or.reduce((t16,t20,numpy.greater(Omega_1*command_1, 0))))),True], [0,t21], default=numpy.nan),numpy.select([numpy.logical_and.reduce((numpy.logical_or.reduce((t22,t23)),numpy.logical_or.reduce((t22,t25)),numpy.logical_or.reduce((t23,t24)),numpy.logical_or.reduce((t24,t25)))),numpy.logical_and.reduce((numpy.greater(Omega_1, 0),numpy.greater(command_1, t26),numpy.less(Omega_1, speed_limit))),numpy.logical_and.reduce((numpy.less(Omega_1, 0),numpy.greater(Omega_1, -speed_limit),numpy.less(command_1, -t26))),True], [0,t26,-t26,t21], default=numpy.nan)], default=numpy.nan)
+        u_out[..., 2] = numpy.select([t7,True], [numpy.select([numpy.logical_and.reduce((t30,numpy.logical_or.reduce((numpy.logical_not(t28),numpy.less(t31, 0))),numpy.logical_or.reduce((t28,numpy.logical_not(t32),numpy.greater(t31, 0))),numpy.logical_or.reduce((t28,t32,numpy.greater(Omega_2*command_2, 0))))),True], [0,t33], default=numpy.nan),numpy.select([numpy.logical_and.reduce((numpy.logical_or.reduce((t34,t35)),numpy.logical_or.reduce((t34,t37)),numpy.logical_or.reduce((t35,t36)),numpy.logical_or.reduce((t36,t37)))),numpy.logical_and.reduce((numpy.greater(Omega_2, 0),numpy.greater(command_2, t38),numpy.less(Omega_2, speed_limit))),numpy.logical_and.reduce((numpy.less(Omega_2, 0),numpy.greater(Omega_2, -speed_limit),numpy.less(command_2, -t38))),True], [0,t38,-t38,t33], default=numpy.nan)], default=numpy.nan)
     return u_out
 
 
@@ -5093,12 +5091,13 @@ def wheels4_body_rhs(q, omega_b, Omega, I_p, A_b, J, r_b, F_w, tau_w, u, c_w, *,
     t0 = t0_3[..., 0]
     t1 = t0_3[..., 1]
     t2 = t0_3[..., 2]
-    t3 = 2*q_0
+    t3_2 = 2 * q[..., 0:2]
+    t3 = t3_2[..., 0]
+    t8 = t3_2[..., 1]
     t4 = q_1*t3
     t5 = 2*q_2*q_3
     t6 = t4 + t5
     t7 = q_2*t3
-    t8 = 2*q_1
     t9 = q_3*t8
     t10 = t7 - t9
     t11 = 2*(q_2*q_2)
@@ -5106,7 +5105,7 @@ def wheels4_body_rhs(q, omega_b, Omega, I_p, A_b, J, r_b, F_w, tau_w, u, c_w, *,
     t13 = -t11 - t12
     t14 = t7 + t9
     t15 = q_3*t3
-    t16 = 2*q_1*q_2 - t15
+    t16 = q_2*t8 - t15
     t17 = 2*(q_0*q_0)
     t18 = -t12 - t17
     t19 = F_w_0*t14 + F_w_1*t16 + F_w_2*t18
@@ -5349,12 +5348,13 @@ def wheels4_body_rhs_c(q, omega_b, Omega, I_p, A_b, J, k_w, r_b, F_w, tau_w, u, 
     t0 = t0_3[..., 0]
     t1 = t0_3[..., 1]
     t2 = t0_3[..., 2]
-    t3 = 2*q_0
+    t3_2 = 2 * q[..., 0:2]
+    t3 = t3_2[..., 0]
+    t8 = t3_2[..., 1]
     t4 = q_1*t3
     t5 = 2*q_2*q_3
     t6 = t4 + t5
     t7 = q_2*t3
-    t8 = 2*q_1
     t9 = q_3*t8
     t10 = t7 - t9
     t11 = 2*(q_2*q_2)
@@ -5362,7 +5362,7 @@ def wheels4_body_rhs_c(q, omega_b, Omega, I_p, A_b, J, k_w, r_b, F_w, tau_w, u, 
     t13 = -t11 - t12
     t14 = t7 + t9
     t15 = q_3*t3
-    t16 = 2*q_1*q_2 - t15
+    t16 = q_2*t8 - t15
     t17 = 2*(q_0*q_0)
     t18 = -t12 - t17
     t19 = F_w_0*t14 + F_w_1*t16 + F_w_2*t18
@@ -5511,12 +5511,13 @@ def wheels4_on_axes_rhs_c(q, omega_b, Omega, I_p, J, k_w, r_b, F_w, tau_w, u, c_
     t0 = t0_3[..., 0]
     t1 = t0_3[..., 1]
     t2 = t0_3[..., 2]
-    t3 = 2*q_0
+    t3_2 = 2 * q[..., 0:2]
+    t3 = t3_2[..., 0]
+    t8 = t3_2[..., 1]
     t4 = q_1*t3
     t5 = 2*q_2*q_3
     t6 = t4 + t5
     t7 = q_2*t3
-    t8 = 2*q_1
     t9 = q_3*t8
     t10 = t7 - t9
     t11 = 2*(q_2*q_2)
@@ -5524,7 +5525,7 @@ def wheels4_on_axes_rhs_c(q, omega_b, Omega, I_p, J, k_w, r_b, F_w, tau_w, u, c_
     t13 = -t11 - t12
     t14 = t7 + t9
     t15 = q_3*t3
-    t16 = 2*q_1*q_2 - t15
+    t16 = q_2*t8 - t15
     t17 = 2*(q_0*q_0)
     t18 = -t12 - t17
     t19 = F_w_0*t14 + F_w_1*t16 + F_w_2*t18
@@ -5616,9 +5617,10 @@ def wheels4_total_momentum(q, omega_b, Omega, I_p, A_b, J, *, out=None):
     A_b_21 = A_b[..., 2, 1]
     A_b_22 = A_b[..., 2, 2]
     A_b_23 = A_b[..., 2, 3]
-    t0 = 2*q_1
+    t0_2 = 2 * q[..., 1:3]
+    t0 = t0_2[..., 0]
+    t2 = t0_2[..., 1]
     t1 = q_0*t0
-    t2 = 2*q_2
     t3 = q_3*t2
     t4_4 = J[..., 0:4] * Omega[..., 0:4]
     t4 = t4_4[..., 0]
@@ -5636,7 +5638,7 @@ def wheels4_total_momentum(q, omega_b, Omega, I_p, A_b, J, *, out=None):
     t16 = 2*(q_0*q_0)
     L_w_out = numpy.empty(batch + (3,)) if out is None or out[0] is None else out[0]
     numpy.add(t11 * (t10 + t9) + t14 * (-t12 - t13), t8 * (t1 - t3), out=L_w_out[..., 0])
-    numpy.add(t11 * (2 * q_1 * q_2 - t15) + t14 * (t1 + t3), t8 * (-t13 - t16), out=L_w_out[..., 1])
+    numpy.add(t11 * (q_1 * t2 - t15) + t14 * (t1 + t3), t8 * (-t13 - t16), out=L_w_out[..., 1])
     numpy.add(t11 * (-t12 - t16 + 1) + t14 * (t9 - t10), t8 * (q_1 * t2 + t15), out=L_w_out[..., 2])
     return L_w_out
 
@@ -5713,9 +5715,10 @@ def wheels4_momentum(q, omega_b, Omega, I_p, A_b, J, *, out=None):
     J_1 = J[..., 1]
     J_2 = J[..., 2]
     J_3 = J[..., 3]
-    t0 = 2*q_1
+    t0_2 = 2 * q[..., 1:3]
+    t0 = t0_2[..., 0]
+    t2 = t0_2[..., 1]
     t1 = q_0*t0
-    t2 = 2*q_2
     t3 = q_3*t2
     t4 = t1 - t3
     t5 = A_b_10*J_0
@@ -5736,7 +5739,7 @@ def wheels4_momentum(q, omega_b, Omega, I_p, A_b, J, *, out=None):
     t20 = omega_b_0*(-(A_b_00*A_b_00)*J_0 - (A_b_01*A_b_01)*J_1 - (A_b_02*A_b_02)*J_2 - (A_b_03*A_b_03)*J_3 + I_p_00) + omega_b_1*t9 + omega_b_2*t15
     t21 = t1 + t3
     t22 = 2*q_0*q_3
-    t23 = 2*q_1*q_2 - t22
+    t23 = q_1*t2 - t22
     t24 = 2*(q_0*q_0)
     t25 = -t18 - t24
     t26 = t12 - t13
@@ -5806,63 +5809,57 @@ def wheels4_motor(command, Omega, torque_limit, speed_limit, cutoff, *, out=None
     Omega_2 = Omega[..., 2]
     Omega_3 = Omega[..., 3]
     with numpy.errstate(invalid='ignore', divide='ignore'):  # numpy.select evaluates every branch
-        t0 = -torque_limit
-        t1 = numpy.less(command_0, t0)
+        t1 = numpy.less(command_0, -torque_limit)
         t2 = abs(Omega_0)
         t3 = numpy.less_equal(speed_limit, t2)
         t4 = Omega_0*torque_limit
         t5 = numpy.greater(command_0, torque_limit)
-        t6 = numpy.select([t1,t5,True], [t0,torque_limit,command_0], default=numpy.nan)
+        t6 = numpy.select([t1,t5,True], [-torque_limit,torque_limit,command_0], default=numpy.nan)
         t7 = numpy.greater(cutoff, 0)
         t8 = numpy.greater_equal(Omega_0, speed_limit)
         t9 = numpy.less(command_0, 0)
         t10 = numpy.greater(command_0, 0)
-        t11 = -speed_limit
-        t12 = numpy.less_equal(Omega_0, t11)
+        t12 = numpy.less_equal(Omega_0, -speed_limit)
         t13 = (1.0/speed_limit)
         t14 = torque_limit * (1 - t13 * t2)
-        t15 = -t14
-        t16 = numpy.less(command_1, t0)
+        t16 = numpy.less(command_1, -torque_limit)
         t17 = abs(Omega_1)
         t18 = numpy.less_equal(speed_limit, t17)
         t19 = Omega_1*torque_limit
         t20 = numpy.greater(command_1, torque_limit)
-        t21 = numpy.select([t16,t20,True], [t0,torque_limit,command_1], default=numpy.nan)
+        t21 = numpy.select([t16,t20,True], [-torque_limit,torque_limit,command_1], default=numpy.nan)
         t22 = numpy.greater_equal(Omega_1, speed_limit)
         t23 = numpy.less(command_1, 0)
         t24 = numpy.greater(command_1, 0)
-        t25 = numpy.less_equal(Omega_1, t11)
+        t25 = numpy.less_equal(Omega_1, -speed_limit)
         t26 = torque_limit * (1 - t13 * t17)
-        t27 = -t26
-        t28 = numpy.less(command_2, t0)
+        t28 = numpy.less(command_2, -torque_limit)
         t29 = abs(Omega_2)
         t30 = numpy.less_equal(speed_limit, t29)
         t31 = Omega_2*torque_limit
         t32 = numpy.greater(command_2, torque_limit)
-        t33 = numpy.select([t28,t32,True], [t0,torque_limit,command_2], default=numpy.nan)
+        t33 = numpy.select([t28,t32,True], [-torque_limit,torque_limit,command_2], default=numpy.nan)
         t34 = numpy.greater_equal(Omega_2, speed_limit)
         t35 = numpy.less(command_2, 0)
         t36 = numpy.greater(command_2, 0)
-        t37 = numpy.less_equal(Omega_2, t11)
+        t37 = numpy.less_equal(Omega_2, -speed_limit)
         t38 = torque_limit * (1 - t13 * t29)
-        t39 = -t38
-        t40 = numpy.less(command_3, t0)
+        t40 = numpy.less(command_3, -torque_limit)
         t41 = abs(Omega_3)
         t42 = numpy.less_equal(speed_limit, t41)
         t43 = Omega_3*torque_limit
         t44 = numpy.greater(command_3, torque_limit)
-        t45 = numpy.select([t40,t44,True], [t0,torque_limit,command_3], default=numpy.nan)
+        t45 = numpy.select([t40,t44,True], [-torque_limit,torque_limit,command_3], default=numpy.nan)
         t46 = numpy.greater_equal(Omega_3, speed_limit)
         t47 = numpy.less(command_3, 0)
         t48 = numpy.greater(command_3, 0)
-        t49 = numpy.less_equal(Omega_3, t11)
+        t49 = numpy.less_equal(Omega_3, -speed_limit)
         t50 = torque_limit * (1 - t13 * t41)
-        t51 = -t50
         u_out = numpy.empty(batch + (4,)) if out is None or out[0] is None else out[0]
-        u_out[..., 0] = numpy.select([t7,True], [numpy.select([numpy.logical_and.reduce((t3,numpy.logical_or.reduce((numpy.logical_not(t1),numpy.less(t4, 0))),numpy.logical_or.reduce((t1,numpy.logical_not(t5),numpy.greater(t4, 0))),numpy.logical_or.reduce((t1,t5,numpy.greater(Omega_0*command_0, 0))))),True], [0,t6], default=numpy.nan),numpy.select([numpy.logical_and.reduce((numpy.logical_or.reduce((t10,t12)),numpy.logical_or.reduce((t10,t9)),numpy.logical_or.reduce((t12,t8)),numpy.logical_or.reduce((t8,t9)))),numpy.logical_and.reduce((numpy.greater(Omega_0, 0),numpy.greater(command_0, t14),numpy.less(Omega_0, speed_limit))),numpy.logical_and.reduce((numpy.greater(Omega_0, t11),numpy.less(Omega_0, 0),numpy.less(command_0, t15))),True], [0,t14,t15,t6], default=numpy.nan)], default=numpy.nan)
-        u_out[..., 1] = numpy.select([t7,True], [numpy.select([numpy.logical_and.reduce((t18,numpy.logical_or.reduce((numpy.logical_not(t16),numpy.less(t19, 0))),numpy.logical_or.reduce((t16,numpy.logical_not(t20),numpy.greater(t19, 0))),numpy.logical_or.reduce((t16,t20,numpy.greater(Omega_1*command_1, 0))))),True], [0,t21], default=numpy.nan),numpy.select([numpy.logical_and.reduce((numpy.logical_or.reduce((t22,t23)),numpy.logical_or.reduce((t22,t25)),numpy.logical_or.reduce((t23,t24)),numpy.logical_or.reduce((t24,t25)))),numpy.logical_and.reduce((numpy.greater(Omega_1, 0),numpy.greater(command_1, t26),numpy.less(Omega_1, speed_limit))),numpy.logical_and.reduce((numpy.greater(Omega_1, t11),numpy.less(Omega_1, 0),numpy.less(command_1, t27))),True], [0,t26,t27,t21], default=numpy.nan)], default=numpy.nan)
-        u_out[..., 2] = numpy.select([t7,True], [numpy.select([numpy.logical_and.reduce((t30,numpy.logical_or.reduce((numpy.logical_not(t28),numpy.less(t31, 0))),numpy.logical_or.reduce((t28,numpy.logical_not(t32),numpy.greater(t31, 0))),numpy.logical_or.reduce((t28,t32,numpy.greater(Omega_2*command_2, 0))))),True], [0,t33], default=numpy.nan),numpy.select([numpy.logical_and.reduce((numpy.logical_or.reduce((t34,t35)),numpy.logical_or.reduce((t34,t37)),numpy.logical_or.reduce((t35,t36)),numpy.logical_or.reduce((t36,t37)))),numpy.logical_and.reduce((numpy.greater(Omega_2, 0),numpy.greater(command_2, t38),numpy.less(Omega_2, speed_limit))),numpy.logical_and.reduce((numpy.greater(Omega_2, t11),numpy.less(Omega_2, 0),numpy.less(command_2, t39))),True], [0,t38,t39,t33], default=numpy.nan)], default=numpy.nan)
-        u_out[..., 3] = numpy.select([t7,True], [numpy.select([numpy.logical_and.reduce((t42,numpy.logical_or.reduce((numpy.logical_not(t40),numpy.less(t43, 0))),numpy.logical_or.reduce((t40,numpy.logical_not(t44),numpy.greater(t43, 0))),numpy.logical_or.reduce((t40,t44,numpy.greater(Omega_3*command_3, 0))))),True], [0,t45], default=numpy.nan),numpy.select([numpy.logical_and.reduce((numpy.logical_or.reduce((t46,t47)),numpy.logical_or.reduce((t46,t49)),numpy.logical_or.reduce((t47,t48)),numpy.logical_or.reduce((t48,t49)))),numpy.logical_and.reduce((numpy.greater(Omega_3, 0),numpy.greater(command_3, t50),numpy.less(Omega_3, speed_limit))),numpy.logical_and.reduce((numpy.greater(Omega_3, t11),numpy.less(Omega_3, 0),numpy.less(command_3, t51))),True], [0,t50,t51,t45], default=numpy.nan)], default=numpy.nan)
+        u_out[..., 0] = numpy.select([t7,True], [numpy.select([numpy.logical_and.reduce((t3,numpy.logical_or.reduce((numpy.logical_not(t1),numpy.less(t4, 0))),numpy.logical_or.reduce((t1,numpy.logical_not(t5),numpy.greater(t4, 0))),numpy.logical_or.reduce((t1,t5,numpy.greater(Omega_0*command_0, 0))))),True], [0,t6], default=numpy.nan),numpy.select([numpy.logical_and.reduce((numpy.logical_or.reduce((t10,t12)),numpy.logical_or.reduce((t10,t9)),numpy.logical_or.reduce((t12,t8)),numpy.logical_or.reduce((t8,t9)))),numpy.logical_and.reduce((numpy.greater(Omega_0, 0),numpy.greater(command_0, t14),numpy.less(Omega_0, speed_limit))),numpy.logical_and.reduce((numpy.less(Omega_0, 0),numpy.greater(Omega_0, -speed_limit),numpy.less(command_0, -t14))),True], [0,t14,-t14,t6], default=numpy.nan)], default=numpy.nan)
+        u_out[..., 1] = numpy.select([t7,True], [numpy.select([numpy.logical_and.reduce((t18,numpy.logical_or.reduce((numpy.logical_not(t16),numpy.less(t19, 0))),numpy.logical_or.reduce((t16,numpy.logical_not(t20),numpy.greater(t19, 0))),numpy.logical_or.reduce((t16,t20,numpy.greater(Omega_1*command_1, 0))))),True], [0,t21], default=numpy.nan),numpy.select([numpy.logical_and.reduce((numpy.logical_or.reduce((t22,t23)),numpy.logical_or.reduce((t22,t25)),numpy.logical_or.reduce((t23,t24)),numpy.logical_or.reduce((t24,t25)))),numpy.logical_and.reduce((numpy.greater(Omega_1, 0),numpy.greater(command_1, t26),numpy.less(Omega_1, speed_limit))),numpy.logical_and.reduce((numpy.less(Omega_1, 0),numpy.greater(Omega_1, -speed_limit),numpy.less(command_1, -t26))),True], [0,t26,-t26,t21], default=numpy.nan)], default=numpy.nan)
+        u_out[..., 2] = numpy.select([t7,True], [numpy.select([numpy.logical_and.reduce((t30,numpy.logical_or.reduce((numpy.logical_not(t28),numpy.less(t31, 0))),numpy.logical_or.reduce((t28,numpy.logical_not(t32),numpy.greater(t31, 0))),numpy.logical_or.reduce((t28,t32,numpy.greater(Omega_2*command_2, 0))))),True], [0,t33], default=numpy.nan),numpy.select([numpy.logical_and.reduce((numpy.logical_or.reduce((t34,t35)),numpy.logical_or.reduce((t34,t37)),numpy.logical_or.reduce((t35,t36)),numpy.logical_or.reduce((t36,t37)))),numpy.logical_and.reduce((numpy.greater(Omega_2, 0),numpy.greater(command_2, t38),numpy.less(Omega_2, speed_limit))),numpy.logical_and.reduce((numpy.less(Omega_2, 0),numpy.greater(Omega_2, -speed_limit),numpy.less(command_2, -t38))),True], [0,t38,-t38,t33], default=numpy.nan)], default=numpy.nan)
+        u_out[..., 3] = numpy.select([t7,True], [numpy.select([numpy.logical_and.reduce((t42,numpy.logical_or.reduce((numpy.logical_not(t40),numpy.less(t43, 0))),numpy.logical_or.reduce((t40,numpy.logical_not(t44),numpy.greater(t43, 0))),numpy.logical_or.reduce((t40,t44,numpy.greater(Omega_3*command_3, 0))))),True], [0,t45], default=numpy.nan),numpy.select([numpy.logical_and.reduce((numpy.logical_or.reduce((t46,t47)),numpy.logical_or.reduce((t46,t49)),numpy.logical_or.reduce((t47,t48)),numpy.logical_or.reduce((t48,t49)))),numpy.logical_and.reduce((numpy.greater(Omega_3, 0),numpy.greater(command_3, t50),numpy.less(Omega_3, speed_limit))),numpy.logical_and.reduce((numpy.less(Omega_3, 0),numpy.greater(Omega_3, -speed_limit),numpy.less(command_3, -t50))),True], [0,t50,-t50,t45], default=numpy.nan)], default=numpy.nan)
     return u_out
 
 

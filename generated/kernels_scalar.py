@@ -84,8 +84,8 @@ def world_inertia(q, I_b):
     q_0, q_1, q_2, q_3 = q
     I_b_0, I_b_1, I_b_2 = I_b
     t0 = 2*q_1
-    t1 = q_0*t0
     t2 = 2*q_2
+    t1 = q_0*t0
     t3 = q_3*t2
     t4 = t1 - t3
     t5 = q_0*t2
@@ -95,7 +95,7 @@ def world_inertia(q, I_b):
     t9 = 2*(q_2*q_2) - 1
     t10 = -t8 - t9
     t11 = 2*q_0*q_3
-    t12 = 2*q_1*q_2 - t11
+    t12 = q_1*t2 - t11
     t13 = I_b_2*t7
     t14 = t1 + t3
     t15 = I_b_0*t10
@@ -170,9 +170,9 @@ def effect_angular_damping(q, omega_b, c):
     """Viscous drag on the angular velocity (floats; see the module)."""
     q_0, q_1, q_2, q_3 = q
     omega_b_0, omega_b_1, omega_b_2 = omega_b
+    t2 = 2*q_1
     t0 = c*omega_b_0
     t1 = 2*c*omega_b_2*q_0 - 2*q_2*t0
-    t2 = 2*q_1
     t3 = c*omega_b_1
     t4 = 2*t3
     t5 = -q_0*t4 + t0*t2
@@ -237,8 +237,8 @@ def quat_rotate(q, v_b):
     q_0, q_1, q_2, q_3 = q
     v_b_0, v_b_1, v_b_2 = v_b
     t0 = 2*q_1
-    t1 = q_0*t0
     t2 = 2*q_2
+    t1 = q_0*t0
     t3 = q_3*t2
     t4 = q_0*t2
     t5 = q_3*t0
@@ -246,23 +246,23 @@ def quat_rotate(q, v_b):
     t7 = 2*(q_2*q_2) - 1
     t8 = 2*q_0*q_3
     t9 = 2*(q_0*q_0)
-    return (v_b_0*(-t6 - t7) + v_b_1*(t1 - t3) + v_b_2*(t4 + t5), v_b_0*(t1 + t3) + v_b_1*(-t7 - t9) + v_b_2*(2*q_1*q_2 - t8), v_b_0*(t4 - t5) + v_b_1*(q_1*t2 + t8) + v_b_2*(-t6 - t9 + 1))
+    return (v_b_0*(-t6 - t7) + v_b_1*(t1 - t3) + v_b_2*(t4 + t5), v_b_0*(t1 + t3) + v_b_1*(-t7 - t9) + v_b_2*(q_1*t2 - t8), v_b_0*(t4 - t5) + v_b_1*(q_1*t2 + t8) + v_b_2*(-t6 - t9 + 1))
 
 
 def quat_to_matrix(q):
     """Rotation matrix R_WB (floats; see the module)."""
     q_0, q_1, q_2, q_3 = q
+    t2 = 2*q_1
+    t4 = 2*q_2
     t0 = 2*(q_1*q_1)
     t1 = 2*(q_2*q_2) - 1
-    t2 = 2*q_1
     t3 = q_0*t2
-    t4 = 2*q_2
     t5 = q_3*t4
     t6 = q_0*t4
     t7 = q_3*t2
     t8 = 2*(q_0*q_0)
     t9 = 2*q_0*q_3
-    return (-t0 - t1, t3 - t5, t6 + t7, t3 + t5, -t1 - t8, 2*q_1*q_2 - t9, t6 - t7, q_1*t4 + t9, -t0 - t8 + 1)
+    return (-t0 - t1, t3 - t5, t6 + t7, t3 + t5, -t1 - t8, q_1*t4 - t9, t6 - t7, q_1*t4 + t9, -t0 - t8 + 1)
 
 
 def matrix_to_quat(R_wb):
@@ -274,12 +274,12 @@ def matrix_to_quat(R_wb):
     t3 = math.sqrt(t2 + 1)
     t4 = ((1.0/2.0))/t3
     t5 = (R_0 <= t2) and (R_4 <= t2) and (R_8 <= t2)
-    t6 = -R_4
     t7 = R_0 - R_8
-    t8 = math.sqrt(t6 + t7 + 1)
+    t8 = math.sqrt(-R_4 + t7 + 1)
     t9 = (R_0 >= R_4) and (R_0 >= R_8)
-    t10 = math.sqrt(-t1 - t6 + 1)
+    t10 = math.sqrt(R_4 - t1 + 1)
     t11 = (1.0/t10)
+    t22 = ((1.0/2.0))*t11
     t12 = ((1.0/2.0))*R_1 + ((1.0/2.0))*R_3
     t13 = (R_4 >= R_8)
     t14 = R_2 + R_6
@@ -287,10 +287,9 @@ def matrix_to_quat(R_wb):
     t16 = ((1.0/2.0))/t15
     t17 = R_2 - R_6
     t18 = (1.0/t8)
+    t21 = ((1.0/2.0))*t18
     t19 = R_5 + R_7
     t20 = -R_1 + R_3
-    t21 = ((1.0/2.0))*t18
-    t22 = ((1.0/2.0))*t11
     return (((t0*t4) if t5 else (((1.0/2.0))*t8) if t9 else (t11*t12) if t13 else (t14*t16)), ((t17*t4) if t5 else (t12*t18) if t9 else (((1.0/2.0))*t10) if t13 else (t16*t19)), ((t20*t4) if t5 else (t14*t21) if t9 else (t19*t22) if t13 else (((1.0/2.0))*t15)), ((((1.0/2.0))*t3) if t5 else (t0*t21) if t9 else (t17*t22) if t13 else (t16*t20)))
 
 
@@ -348,17 +347,17 @@ def quat_error_chart(q, q_ref):
     t2 = q_0*t0 + q_1*t1 - 2*q_2*q_ref_1 - 2*q_3*q_ref_0
     t3 = (q_0*q_ref_0 + q_1*q_ref_1 + q_2*q_ref_2 + q_3*q_ref_3 < 0)
     t4 = q_0*t1 - q_1*t0 - 2*q_2*q_ref_0 + 2*q_3*q_ref_1
-    t5 = 2*q_0*q_ref_1 - 2*q_1*q_ref_0 + q_2*t0 - 2*q_3*q_ref_2
+    t5 = 2*q_0*q_ref_1 - 2*q_1*q_ref_0 + q_2*t0 - q_3*t1
     return (((-t2) if t3 else (t2)), ((t4) if t3 else (-t4)), ((-t5) if t3 else (t5)))
 
 
 def euler_xyz_to_quat(roll, pitch, yaw):
     """Quaternion of intrinsic XYZ Euler angles, R = Rx(roll) Ry(pitch) Rz(yaw) (floats; see the module)."""
     t0 = ((1.0/2.0))*yaw
-    t1 = math.sin(t0)
     t2 = ((1.0/2.0))*roll
-    t3 = math.cos(t2)
     t4 = ((1.0/2.0))*pitch
+    t1 = math.sin(t0)
+    t3 = math.cos(t2)
     t5 = math.sin(t4)
     t6 = t3*t5
     t7 = math.cos(t0)
@@ -373,8 +372,8 @@ def quat_to_euler_xyz(q):
     """Intrinsic XYZ Euler angles of a unit quaternion, exact through gimbal lock (floats; see the module)."""
     q_0, q_1, q_2, q_3 = q
     t0 = 2*q_3
-    t1 = q_0*t0
     t2 = 2*q_2
+    t1 = q_0*t0
     t3 = q_1*t2
     t4 = t1 - t3
     t5 = 2*(q_0*q_0) - 1
@@ -418,9 +417,9 @@ def integrate_orientation(q, omega_w, dt):
     t0 = ((1.0/2.0))*q_3
     t1 = ((1.0/2.0))*q_2
     t2 = ((1.0/2.0))*omega_w_2
-    t3 = dt*(omega_w_0*t0 + omega_w_1*t1 - q_1*t2) + q_0
     t4 = ((1.0/2.0))*omega_w_0
     t5 = ((1.0/2.0))*omega_w_1
+    t3 = dt*(omega_w_0*t0 + omega_w_1*t1 - q_1*t2) + q_0
     t6 = dt*(-omega_w_2*t1 - q_0*t4 - q_1*t5) + q_3
     t7 = dt*(omega_w_2*t0 - q_0*t5 + q_1*t4) + q_2
     t8 = dt*(-omega_w_0*t1 + omega_w_1*t0 + q_0*t2) + q_1
@@ -494,8 +493,8 @@ def rigid_body_rhs(x, m, I_b, F_w, tau_w):
     t0 = ((1.0/2.0))*x_10
     t1 = ((1.0/2.0))*x_11
     t2 = ((1.0/2.0))*x_12
-    t3 = (1.0/m)
     t4 = 2*tau_w_0
+    t3 = (1.0/m)
     t5 = -t4*x_4 + 2*tau_w_1*x_3
     t6 = t4*x_5 - 2*tau_w_2*x_3
     t7 = -2*tau_w_1*x_5 + 2*tau_w_2*x_4
@@ -520,10 +519,10 @@ def apply_inv_inertia(q, I_b, v):
     q_0, q_1, q_2, q_3 = q
     I_b_0, I_b_1, I_b_2 = I_b
     v_0, v_1, v_2 = v
-    t0 = (1.0/I_b_1)
     t1 = 2*q_1
-    t2 = q_0*t1
     t3 = 2*q_2
+    t0 = (1.0/I_b_1)
+    t2 = q_0*t1
     t4 = q_3*t3
     t5 = t2 - t4
     t6 = (1.0/I_b_2)
@@ -535,7 +534,7 @@ def apply_inv_inertia(q, I_b, v):
     t12 = 2*(q_2*q_2) - 1
     t13 = -t11 - t12
     t14 = 2*q_0*q_3
-    t15 = 2*q_1*q_2 - t14
+    t15 = q_1*t3 - t14
     t16 = t6*t9
     t17 = t2 + t4
     t18 = t10*t13
@@ -556,8 +555,8 @@ def world_to_body(q, v_w):
     q_0, q_1, q_2, q_3 = q
     v_0, v_1, v_2 = v_w
     t0 = 2*q_1
-    t1 = q_0*t0
     t2 = 2*q_2
+    t1 = q_0*t0
     t3 = q_3*t2
     t4 = q_0*t2
     t5 = q_3*t0
@@ -565,7 +564,7 @@ def world_to_body(q, v_w):
     t7 = 2*(q_2*q_2) - 1
     t8 = 2*q_0*q_3
     t9 = 2*(q_0*q_0)
-    return (v_0*(-t6 - t7) + v_1*(t1 + t3) + v_2*(t4 - t5), v_0*(t1 - t3) + v_1*(-t7 - t9) + v_2*(q_2*t0 + t8), v_0*(t4 + t5) + v_1*(2*q_1*q_2 - t8) + v_2*(-t6 - t9 + 1))
+    return (v_0*(-t6 - t7) + v_1*(t1 + t3) + v_2*(t4 - t5), v_0*(t1 - t3) + v_1*(-t7 - t9) + v_2*(q_2*t0 + t8), v_0*(t4 + t5) + v_1*(q_1*t2 - t8) + v_2*(-t6 - t9 + 1))
 
 
 def kinetic_energy(m, I_b, v_w, omega_b):
@@ -582,8 +581,8 @@ def angular_momentum_world(q, I_b, omega_b):
     I_b_0, I_b_1, I_b_2 = I_b
     omega_b_0, omega_b_1, omega_b_2 = omega_b
     t0 = 2*q_1
-    t1 = q_0*t0
     t2 = 2*q_2
+    t1 = q_0*t0
     t3 = q_3*t2
     t4 = I_b_1*omega_b_1
     t5 = q_0*t2
@@ -594,7 +593,7 @@ def angular_momentum_world(q, I_b, omega_b):
     t10 = I_b_0*omega_b_0
     t11 = 2*q_0*q_3
     t12 = 2*(q_0*q_0)
-    return (t10*(-t8 - t9) + t4*(t1 - t3) + t7*(t5 + t6), t10*(t1 + t3) + t4*(-t12 - t9) + t7*(2*q_1*q_2 - t11), t10*(t5 - t6) + t4*(q_1*t2 + t11) + t7*(-t12 - t8 + 1))
+    return (t10*(-t8 - t9) + t4*(t1 - t3) + t7*(t5 + t6), t10*(t1 + t3) + t4*(-t12 - t9) + t7*(q_1*t2 - t11), t10*(t5 - t6) + t4*(q_1*t2 + t11) + t7*(-t12 - t8 + 1))
 
 
 def rigid_body_rhs_torque(x, I_b, tau_w):
@@ -664,8 +663,8 @@ def rigid_body_rhs_c(x, m, c_b, F_w, tau_w):
     t0 = ((1.0/2.0))*x_10
     t1 = ((1.0/2.0))*x_11
     t2 = ((1.0/2.0))*x_12
-    t3 = (1.0/m)
     t4 = 2*tau_w_0
+    t3 = (1.0/m)
     t5 = -t4*x_4 + 2*tau_w_1*x_3
     t6 = t4*x_5 - 2*tau_w_2*x_3
     t7 = -2*tau_w_1*x_5 + 2*tau_w_2*x_4
@@ -705,10 +704,10 @@ def rigid_body_increments_c(q, omega_b, v_w, S_b, F_w, tau_w):
     S_b_0, S_b_1, S_b_2, S_b_3, S_b_4, S_b_5, S_b_6, S_b_7, S_b_8 = S_b
     F_w_0, F_w_1, F_w_2 = F_w
     tau_w_0, tau_w_1, tau_w_2 = tau_w
+    t3 = 2*q_0
     t0 = S_b_6*omega_b_0
     t1 = S_b_6*omega_b_2
     t2 = S_b_6*omega_b_1
-    t3 = 2*q_0
     t4 = -2*q_1*tau_w_0 + t3*tau_w_1
     t5 = 2*q_2*tau_w_0 - t3*tau_w_2
     t6 = 2*q_1*tau_w_2 - 2*q_2*tau_w_1
@@ -722,10 +721,10 @@ def rigid_body_increments_torque_c(q, omega_b, v_w, S_b, tau_w):
     v_w_0, v_w_1, v_w_2 = v_w
     S_b_0, S_b_1, S_b_2, S_b_3, S_b_4, S_b_5, S_b_6, S_b_7, _ = S_b
     tau_w_0, tau_w_1, tau_w_2 = tau_w
+    t3 = 2*q_0
     t0 = S_b_6*omega_b_0
     t1 = S_b_6*omega_b_2
     t2 = S_b_6*omega_b_1
-    t3 = 2*q_0
     t4 = -2*q_1*tau_w_0 + t3*tau_w_1
     t5 = 2*q_2*tau_w_0 - t3*tau_w_2
     t6 = 2*q_1*tau_w_2 - 2*q_2*tau_w_1
@@ -849,18 +848,18 @@ def pivot_body_rhs(q, omega_b, I_p, r_b, F_w, tau_w):
     t0 = ((1.0/2.0))*omega_b_0
     t1 = ((1.0/2.0))*omega_b_1
     t2 = ((1.0/2.0))*omega_b_2
+    t8 = 2*q_0
+    t10 = 2*q_1
     t3 = (I_p_12*I_p_12)
     t4 = (I_p_01*I_p_01)
     t5 = (I_p_02*I_p_02)
     t6 = (1.0/(I_p_00*I_p_11*I_p_22 - I_p_00*t3 + 2*I_p_01*I_p_02*I_p_12 - I_p_11*t5 - I_p_22*t4))
     t7 = I_p_01*I_p_12 - I_p_02*I_p_11
-    t8 = 2*q_0
     t9 = q_2*t8
-    t10 = 2*q_1
     t11 = q_3*t10
     t12 = t11 + t9
     t13 = q_3*t8
-    t14 = 2*q_1*q_2 - t13
+    t14 = q_2*t10 - t13
     t15 = I_p_00*omega_b_0 + I_p_01*omega_b_1 + I_p_02*omega_b_2
     t16 = I_p_01*omega_b_0 + I_p_11*omega_b_1 + I_p_12*omega_b_2
     t17 = 2*(q_0*q_0)
@@ -894,8 +893,8 @@ def pivot_kinematics(q, omega_b, anchor_w, r_b):
     anchor_w_0, anchor_w_1, anchor_w_2 = anchor_w
     r_b_0, r_b_1, r_b_2 = r_b
     t0 = 2*q_1
-    t1 = q_0*t0
     t2 = 2*q_2
+    t1 = q_0*t0
     t3 = q_3*t2
     t4 = t1 - t3
     t5 = q_0*t2
@@ -906,7 +905,7 @@ def pivot_kinematics(q, omega_b, anchor_w, r_b):
     t10 = -t8 - t9
     t11 = t1 + t3
     t12 = 2*q_0*q_3
-    t13 = 2*q_1*q_2 - t12
+    t13 = q_1*t2 - t12
     t14 = 2*(q_0*q_0)
     t15 = -t14 - t9
     t16 = t5 - t6
@@ -1079,11 +1078,11 @@ def sphere_flow(q, L_b, I_r, tau):
     """Exact flow of |L|²/(2 I_r) on q for time τ (L_B is unchanged) (floats; see the module)."""
     q_0, q_1, q_2, q_3 = q
     L_b_0, L_b_1, L_b_2 = L_b
+    t4 = ((1.0/2.0))*tau
     t0 = (1.0/I_r)
     t1 = (L_b_0*L_b_0) + (L_b_1*L_b_1) + (L_b_2*L_b_2)
     t2 = math.sqrt(t1)
     t3 = t0*t2
-    t4 = ((1.0/2.0))*tau
     t5 = t3*t4
     t6 = math.cos(t5)
     t7 = ((math.sin(t5)/t2) if (t3*abs(tau) > (1.0/50000000.0)) else (t0*t4*(1 - (1.0/24.0)*t1*(tau*tau)/(I_r*I_r))))
@@ -1233,67 +1232,61 @@ def wheel_saturation(command, Omega, torque_limit, speed_limit):
     """Motor torques actually applied: clipped, and cut off beyond the speed limit (floats; see the module)."""
     command_0, command_1, command_2 = command
     Omega_0, Omega_1, Omega_2 = Omega
-    t0 = -torque_limit
-    t1 = (command_0 < t0)
+    t1 = (command_0 < -torque_limit)
     t2 = (speed_limit <= abs(Omega_0))
     t3 = Omega_0*torque_limit
     t4 = (command_0 > torque_limit)
-    t5 = (command_1 < t0)
+    t5 = (command_1 < -torque_limit)
     t6 = (speed_limit <= abs(Omega_1))
     t7 = Omega_1*torque_limit
     t8 = (command_1 > torque_limit)
-    t9 = (command_2 < t0)
+    t9 = (command_2 < -torque_limit)
     t10 = (speed_limit <= abs(Omega_2))
     t11 = Omega_2*torque_limit
     t12 = (command_2 > torque_limit)
-    return (((0) if ((t2 and (t3 < 0)) if t1 else (((t2 and (t3 > 0)) if t4 else (t2 and (Omega_0*command_0 > 0))))) else (((t0) if t1 else (torque_limit) if t4 else (command_0)))), ((0) if ((t6 and (t7 < 0)) if t5 else (((t6 and (t7 > 0)) if t8 else (t6 and (Omega_1*command_1 > 0))))) else (((t0) if t5 else (torque_limit) if t8 else (command_1)))), ((0) if ((t10 and (t11 < 0)) if t9 else (((t10 and (t11 > 0)) if t12 else (t10 and (Omega_2*command_2 > 0))))) else (((t0) if t9 else (torque_limit) if t12 else (command_2)))))
+    return (((0) if ((t2 and (t3 < 0)) if t1 else (((t2 and (t3 > 0)) if t4 else (t2 and (Omega_0*command_0 > 0))))) else (((-torque_limit) if t1 else (torque_limit) if t4 else (command_0)))), ((0) if ((t6 and (t7 < 0)) if t5 else (((t6 and (t7 > 0)) if t8 else (t6 and (Omega_1*command_1 > 0))))) else (((-torque_limit) if t5 else (torque_limit) if t8 else (command_1)))), ((0) if ((t10 and (t11 < 0)) if t9 else (((t10 and (t11 > 0)) if t12 else (t10 and (Omega_2*command_2 > 0))))) else (((-torque_limit) if t9 else (torque_limit) if t12 else (command_2)))))
 
 
 def wheel_motor(command, Omega, torque_limit, speed_limit, cutoff):
     """Motor torques actually applied: a torque–speed line from the stall torque to the no-load speed (cutoff = 0), or the hard cut-off of wheel_saturation (cutoff = 1) (floats; see the module)."""
     command_0, command_1, command_2 = command
     Omega_0, Omega_1, Omega_2 = Omega
-    t0 = -torque_limit
-    t1 = (command_0 < t0)
+    t1 = (command_0 < -torque_limit)
     t2 = abs(Omega_0)
     t3 = (speed_limit <= t2)
     t4 = Omega_0*torque_limit
     t5 = (command_0 > torque_limit)
-    t6 = ((t0) if t1 else (torque_limit) if t5 else (command_0))
+    t6 = ((-torque_limit) if t1 else (torque_limit) if t5 else (command_0))
     t7 = (cutoff > 0)
     t8 = (Omega_0 >= speed_limit)
     t9 = (command_0 < 0)
     t10 = (command_0 > 0)
-    t11 = -speed_limit
-    t12 = (Omega_0 <= t11)
+    t12 = (Omega_0 <= -speed_limit)
     t13 = (1.0/speed_limit)
     t14 = torque_limit*(-t13*t2 + 1)
-    t15 = -t14
-    t16 = (command_1 < t0)
+    t16 = (command_1 < -torque_limit)
     t17 = abs(Omega_1)
     t18 = (speed_limit <= t17)
     t19 = Omega_1*torque_limit
     t20 = (command_1 > torque_limit)
-    t21 = ((t0) if t16 else (torque_limit) if t20 else (command_1))
+    t21 = ((-torque_limit) if t16 else (torque_limit) if t20 else (command_1))
     t22 = (Omega_1 >= speed_limit)
     t23 = (command_1 < 0)
     t24 = (command_1 > 0)
-    t25 = (Omega_1 <= t11)
+    t25 = (Omega_1 <= -speed_limit)
     t26 = torque_limit*(-t13*t17 + 1)
-    t27 = -t26
-    t28 = (command_2 < t0)
+    t28 = (command_2 < -torque_limit)
     t29 = abs(Omega_2)
     t30 = (speed_limit <= t29)
     t31 = Omega_2*torque_limit
     t32 = (command_2 > torque_limit)
-    t33 = ((t0) if t28 else (torque_limit) if t32 else (command_2))
+    t33 = ((-torque_limit) if t28 else (torque_limit) if t32 else (command_2))
     t34 = (Omega_2 >= speed_limit)
     t35 = (command_2 < 0)
     t36 = (command_2 > 0)
-    t37 = (Omega_2 <= t11)
+    t37 = (Omega_2 <= -speed_limit)
     t38 = torque_limit*(-t13*t29 + 1)
-    t39 = -t38
-    return (((((0) if ((t3 and (t4 < 0)) if t1 else (((t3 and (t4 > 0)) if t5 else (t3 and (Omega_0*command_0 > 0))))) else (t6))) if t7 else (((0) if (t10 or t12) and (t10 or t9) and (t12 or t8) and (t8 or t9) else (t14) if (Omega_0 > 0) and (command_0 > t14) and (Omega_0 < speed_limit) else (t15) if (Omega_0 > t11) and (Omega_0 < 0) and (command_0 < t15) else (t6)))), ((((0) if ((t18 and (t19 < 0)) if t16 else (((t18 and (t19 > 0)) if t20 else (t18 and (Omega_1*command_1 > 0))))) else (t21))) if t7 else (((0) if (t22 or t23) and (t22 or t25) and (t23 or t24) and (t24 or t25) else (t26) if (Omega_1 > 0) and (command_1 > t26) and (Omega_1 < speed_limit) else (t27) if (Omega_1 > t11) and (Omega_1 < 0) and (command_1 < t27) else (t21)))), ((((0) if ((t30 and (t31 < 0)) if t28 else (((t30 and (t31 > 0)) if t32 else (t30 and (Omega_2*command_2 > 0))))) else (t33))) if t7 else (((0) if (t34 or t35) and (t34 or t37) and (t35 or t36) and (t36 or t37) else (t38) if (Omega_2 > 0) and (command_2 > t38) and (Omega_2 < speed_limit) else (t39) if (Omega_2 > t11) and (Omega_2 < 0) and (command_2 < t39) else (t33)))))
+    return (((((0) if ((t3 and (t4 < 0)) if t1 else (((t3 and (t4 > 0)) if t5 else (t3 and (Omega_0*command_0 > 0))))) else (t6))) if t7 else (((0) if (t10 or t12) and (t10 or t9) and (t12 or t8) and (t8 or t9) else (t14) if (Omega_0 > 0) and (command_0 > t14) and (Omega_0 < speed_limit) else (-t14) if (Omega_0 > -speed_limit) and (Omega_0 < 0) and (command_0 < -t14) else (t6)))), ((((0) if ((t18 and (t19 < 0)) if t16 else (((t18 and (t19 > 0)) if t20 else (t18 and (Omega_1*command_1 > 0))))) else (t21))) if t7 else (((0) if (t22 or t23) and (t22 or t25) and (t23 or t24) and (t24 or t25) else (t26) if (Omega_1 > 0) and (command_1 > t26) and (Omega_1 < speed_limit) else (-t26) if (Omega_1 > -speed_limit) and (Omega_1 < 0) and (command_1 < -t26) else (t21)))), ((((0) if ((t30 and (t31 < 0)) if t28 else (((t30 and (t31 > 0)) if t32 else (t30 and (Omega_2*command_2 > 0))))) else (t33))) if t7 else (((0) if (t34 or t35) and (t34 or t37) and (t35 or t36) and (t36 or t37) else (t38) if (Omega_2 > 0) and (command_2 > t38) and (Omega_2 < speed_limit) else (-t38) if (Omega_2 > -speed_limit) and (Omega_2 < 0) and (command_2 < -t38) else (t33)))))
 
 
 def wheels3_body_rhs(q, omega_b, Omega, I_p, A_b, J, r_b, F_w, tau_w, u, c_w):
@@ -1358,11 +1351,11 @@ def wheels3_body_rhs(q, omega_b, Omega, I_p, A_b, J, r_b, F_w, tau_w, u, c_w):
     t1 = ((1.0/2.0))*omega_b_1
     t2 = ((1.0/2.0))*omega_b_2
     t3 = 2*q_0
+    t8 = 2*q_1
     t4 = q_1*t3
     t5 = 2*q_2*q_3
     t6 = t4 + t5
     t7 = q_2*t3
-    t8 = 2*q_1
     t9 = q_3*t8
     t10 = t7 - t9
     t11 = 2*(q_2*q_2)
@@ -1370,7 +1363,7 @@ def wheels3_body_rhs(q, omega_b, Omega, I_p, A_b, J, r_b, F_w, tau_w, u, c_w):
     t13 = -t11 - t12
     t14 = t7 + t9
     t15 = q_3*t3
-    t16 = 2*q_1*q_2 - t15
+    t16 = q_2*t8 - t15
     t17 = 2*(q_0*q_0)
     t18 = -t12 - t17
     t19 = F_w_0*t14 + F_w_1*t16 + F_w_2*t18
@@ -1397,8 +1390,8 @@ def wheels3_momentum(q, omega_b, Omega, I_p, A_b, J):
     A_b_00, A_b_01, A_b_02, A_b_10, A_b_11, A_b_12, A_b_20, A_b_21, A_b_22 = A_b
     J_0, J_1, J_2 = J
     t0 = 2*q_1
-    t1 = q_0*t0
     t2 = 2*q_2
+    t1 = q_0*t0
     t3 = q_3*t2
     t4 = t1 - t3
     t5 = A_b_10*J_0
@@ -1418,7 +1411,7 @@ def wheels3_momentum(q, omega_b, Omega, I_p, A_b, J):
     t19 = omega_b_0*(-(A_b_00*A_b_00)*J_0 - (A_b_01*A_b_01)*J_1 - (A_b_02*A_b_02)*J_2 + I_p_00) + omega_b_1*t8 + omega_b_2*t14
     t20 = t1 + t3
     t21 = 2*q_0*q_3
-    t22 = 2*q_1*q_2 - t21
+    t22 = q_1*t2 - t21
     t23 = 2*(q_0*q_0)
     t24 = -t17 - t23
     t25 = t11 - t12
@@ -1437,47 +1430,42 @@ def wheels3_motor(command, Omega, torque_limit, speed_limit, cutoff):
     """Motor torques actually applied on 3 wheels (the wheel_motor line, per wheel) (floats; see the module)."""
     command_0, command_1, command_2 = command
     Omega_0, Omega_1, Omega_2 = Omega
-    t0 = -torque_limit
-    t1 = (command_0 < t0)
+    t1 = (command_0 < -torque_limit)
     t2 = abs(Omega_0)
     t3 = (speed_limit <= t2)
     t4 = Omega_0*torque_limit
     t5 = (command_0 > torque_limit)
-    t6 = ((t0) if t1 else (torque_limit) if t5 else (command_0))
+    t6 = ((-torque_limit) if t1 else (torque_limit) if t5 else (command_0))
     t7 = (cutoff > 0)
     t8 = (Omega_0 >= speed_limit)
     t9 = (command_0 < 0)
     t10 = (command_0 > 0)
-    t11 = -speed_limit
-    t12 = (Omega_0 <= t11)
+    t12 = (Omega_0 <= -speed_limit)
     t13 = (1.0/speed_limit)
     t14 = torque_limit*(-t13*t2 + 1)
-    t15 = -t14
-    t16 = (command_1 < t0)
+    t16 = (command_1 < -torque_limit)
     t17 = abs(Omega_1)
     t18 = (speed_limit <= t17)
     t19 = Omega_1*torque_limit
     t20 = (command_1 > torque_limit)
-    t21 = ((t0) if t16 else (torque_limit) if t20 else (command_1))
+    t21 = ((-torque_limit) if t16 else (torque_limit) if t20 else (command_1))
     t22 = (Omega_1 >= speed_limit)
     t23 = (command_1 < 0)
     t24 = (command_1 > 0)
-    t25 = (Omega_1 <= t11)
+    t25 = (Omega_1 <= -speed_limit)
     t26 = torque_limit*(-t13*t17 + 1)
-    t27 = -t26
-    t28 = (command_2 < t0)
+    t28 = (command_2 < -torque_limit)
     t29 = abs(Omega_2)
     t30 = (speed_limit <= t29)
     t31 = Omega_2*torque_limit
     t32 = (command_2 > torque_limit)
-    t33 = ((t0) if t28 else (torque_limit) if t32 else (command_2))
+    t33 = ((-torque_limit) if t28 else (torque_limit) if t32 else (command_2))
     t34 = (Omega_2 >= speed_limit)
     t35 = (command_2 < 0)
     t36 = (command_2 > 0)
-    t37 = (Omega_2 <= t11)
+    t37 = (Omega_2 <= -speed_limit)
     t38 = torque_limit*(-t13*t29 + 1)
-    t39 = -t38
-    return (((((0) if ((t3 and (t4 < 0)) if t1 else (((t3 and (t4 > 0)) if t5 else (t3 and (Omega_0*command_0 > 0))))) else (t6))) if t7 else (((0) if (t10 or t12) and (t10 or t9) and (t12 or t8) and (t8 or t9) else (t14) if (Omega_0 > 0) and (command_0 > t14) and (Omega_0 < speed_limit) else (t15) if (Omega_0 > t11) and (Omega_0 < 0) and (command_0 < t15) else (t6)))), ((((0) if ((t18 and (t19 < 0)) if t16 else (((t18 and (t19 > 0)) if t20 else (t18 and (Omega_1*command_1 > 0))))) else (t21))) if t7 else (((0) if (t22 or t23) and (t22 or t25) and (t23 or t24) and (t24 or t25) else (t26) if (Omega_1 > 0) and (command_1 > t26) and (Omega_1 < speed_limit) else (t27) if (Omega_1 > t11) and (Omega_1 < 0) and (command_1 < t27) else (t21)))), ((((0) if ((t30 and (t31 < 0)) if t28 else (((t30 and (t31 > 0)) if t32 else (t30 and (Omega_2*command_2 > 0))))) else (t33))) if t7 else (((0) if (t34 or t35) and (t34 or t37) and (t35 or t36) and (t36 or t37) else (t38) if (Omega_2 > 0) and (command_2 > t38) and (Omega_2 < speed_limit) else (t39) if (Omega_2 > t11) and (Omega_2 < 0) and (command_2 < t39) else (t33)))))
+    return (((((0) if ((t3 and (t4 < 0)) if t1 else (((t3 and (t4 > 0)) if t5 else (t3 and (Omega_0*command_0 > 0))))) else (t6))) if t7 else (((0) if (t10 or t12) and (t10 or t9) and (t12 or t8) and (t8 or t9) else (t14) if (Omega_0 > 0) and (command_0 > t14) and (Omega_0 < speed_limit) else (-t14) if (Omega_0 > -speed_limit) and (Omega_0 < 0) and (command_0 < -t14) else (t6)))), ((((0) if ((t18 and (t19 < 0)) if t16 else (((t18 and (t19 > 0)) if t20 else (t18 and (Omega_1*command_1 > 0))))) else (t21))) if t7 else (((0) if (t22 or t23) and (t22 or t25) and (t23 or t24) and (t24 or t25) else (t26) if (Omega_1 > 0) and (command_1 > t26) and (Omega_1 < speed_limit) else (-t26) if (Omega_1 > -speed_limit) and (Omega_1 < 0) and (command_1 < -t26) else (t21)))), ((((0) if ((t30 and (t31 < 0)) if t28 else (((t30 and (t31 > 0)) if t32 else (t30 and (Omega_2*command_2 > 0))))) else (t33))) if t7 else (((0) if (t34 or t35) and (t34 or t37) and (t35 or t36) and (t36 or t37) else (t38) if (Omega_2 > 0) and (command_2 > t38) and (Omega_2 < speed_limit) else (-t38) if (Omega_2 > -speed_limit) and (Omega_2 < 0) and (command_2 < -t38) else (t33)))))
 
 
 def wheels4_body_rhs(q, omega_b, Omega, I_p, A_b, J, r_b, F_w, tau_w, u, c_w):
@@ -1545,11 +1533,11 @@ def wheels4_body_rhs(q, omega_b, Omega, I_p, A_b, J, r_b, F_w, tau_w, u, c_w):
     t1 = ((1.0/2.0))*omega_b_1
     t2 = ((1.0/2.0))*omega_b_2
     t3 = 2*q_0
+    t8 = 2*q_1
     t4 = q_1*t3
     t5 = 2*q_2*q_3
     t6 = t4 + t5
     t7 = q_2*t3
-    t8 = 2*q_1
     t9 = q_3*t8
     t10 = t7 - t9
     t11 = 2*(q_2*q_2)
@@ -1557,7 +1545,7 @@ def wheels4_body_rhs(q, omega_b, Omega, I_p, A_b, J, r_b, F_w, tau_w, u, c_w):
     t13 = -t11 - t12
     t14 = t7 + t9
     t15 = q_3*t3
-    t16 = 2*q_1*q_2 - t15
+    t16 = q_2*t8 - t15
     t17 = 2*(q_0*q_0)
     t18 = -t12 - t17
     t19 = F_w_0*t14 + F_w_1*t16 + F_w_2*t18
@@ -1639,11 +1627,11 @@ def wheels4_body_rhs_c(q, omega_b, Omega, I_p, A_b, J, k_w, r_b, F_w, tau_w, u, 
     t1 = ((1.0/2.0))*omega_b_1
     t2 = ((1.0/2.0))*omega_b_2
     t3 = 2*q_0
+    t8 = 2*q_1
     t4 = q_1*t3
     t5 = 2*q_2*q_3
     t6 = t4 + t5
     t7 = q_2*t3
-    t8 = 2*q_1
     t9 = q_3*t8
     t10 = t7 - t9
     t11 = 2*(q_2*q_2)
@@ -1651,7 +1639,7 @@ def wheels4_body_rhs_c(q, omega_b, Omega, I_p, A_b, J, k_w, r_b, F_w, tau_w, u, 
     t13 = -t11 - t12
     t14 = t7 + t9
     t15 = q_3*t3
-    t16 = 2*q_1*q_2 - t15
+    t16 = q_2*t8 - t15
     t17 = 2*(q_0*q_0)
     t18 = -t12 - t17
     t19 = F_w_0*t14 + F_w_1*t16 + F_w_2*t18
@@ -1707,11 +1695,11 @@ def wheels4_on_axes_rhs_c(q, omega_b, Omega, I_p, J, k_w, r_b, F_w, tau_w, u, c_
     t1 = ((1.0/2.0))*omega_b_1
     t2 = ((1.0/2.0))*omega_b_2
     t3 = 2*q_0
+    t8 = 2*q_1
     t4 = q_1*t3
     t5 = 2*q_2*q_3
     t6 = t4 + t5
     t7 = q_2*t3
-    t8 = 2*q_1
     t9 = q_3*t8
     t10 = t7 - t9
     t11 = 2*(q_2*q_2)
@@ -1719,7 +1707,7 @@ def wheels4_on_axes_rhs_c(q, omega_b, Omega, I_p, J, k_w, r_b, F_w, tau_w, u, c_
     t13 = -t11 - t12
     t14 = t7 + t9
     t15 = q_3*t3
-    t16 = 2*q_1*q_2 - t15
+    t16 = q_2*t8 - t15
     t17 = 2*(q_0*q_0)
     t18 = -t12 - t17
     t19 = F_w_0*t14 + F_w_1*t16 + F_w_2*t18
@@ -1746,8 +1734,8 @@ def wheels4_total_momentum(q, omega_b, Omega, I_p, A_b, J):
     A_b_00, A_b_01, A_b_02, A_b_03, A_b_10, A_b_11, A_b_12, A_b_13, A_b_20, A_b_21, A_b_22, A_b_23 = A_b
     J_0, J_1, J_2, J_3 = J
     t0 = 2*q_1
-    t1 = q_0*t0
     t2 = 2*q_2
+    t1 = q_0*t0
     t3 = q_3*t2
     t4 = J_0*Omega_0
     t5 = J_1*Omega_1
@@ -1762,7 +1750,7 @@ def wheels4_total_momentum(q, omega_b, Omega, I_p, A_b, J):
     t14 = A_b_00*t4 + A_b_01*t5 + A_b_02*t6 + A_b_03*t7 + I_p_00*omega_b_0 + I_p_01*omega_b_1 + I_p_02*omega_b_2
     t15 = 2*q_0*q_3
     t16 = 2*(q_0*q_0)
-    return (t11*(t10 + t9) + t14*(-t12 - t13) + t8*(t1 - t3), t11*(2*q_1*q_2 - t15) + t14*(t1 + t3) + t8*(-t13 - t16), t11*(-t12 - t16 + 1) + t14*(-t10 + t9) + t8*(q_1*t2 + t15))
+    return (t11*(t10 + t9) + t14*(-t12 - t13) + t8*(t1 - t3), t11*(q_1*t2 - t15) + t14*(t1 + t3) + t8*(-t13 - t16), t11*(-t12 - t16 + 1) + t14*(-t10 + t9) + t8*(q_1*t2 + t15))
 
 
 def wheels4_momentum(q, omega_b, Omega, I_p, A_b, J):
@@ -1774,8 +1762,8 @@ def wheels4_momentum(q, omega_b, Omega, I_p, A_b, J):
     A_b_00, A_b_01, A_b_02, A_b_03, A_b_10, A_b_11, A_b_12, A_b_13, A_b_20, A_b_21, A_b_22, A_b_23 = A_b
     J_0, J_1, J_2, J_3 = J
     t0 = 2*q_1
-    t1 = q_0*t0
     t2 = 2*q_2
+    t1 = q_0*t0
     t3 = q_3*t2
     t4 = t1 - t3
     t5 = A_b_10*J_0
@@ -1796,7 +1784,7 @@ def wheels4_momentum(q, omega_b, Omega, I_p, A_b, J):
     t20 = omega_b_0*(-(A_b_00*A_b_00)*J_0 - (A_b_01*A_b_01)*J_1 - (A_b_02*A_b_02)*J_2 - (A_b_03*A_b_03)*J_3 + I_p_00) + omega_b_1*t9 + omega_b_2*t15
     t21 = t1 + t3
     t22 = 2*q_0*q_3
-    t23 = 2*q_1*q_2 - t22
+    t23 = q_1*t2 - t22
     t24 = 2*(q_0*q_0)
     t25 = -t18 - t24
     t26 = t12 - t13
@@ -1816,59 +1804,53 @@ def wheels4_motor(command, Omega, torque_limit, speed_limit, cutoff):
     """Motor torques actually applied on 4 wheels (the wheel_motor line, per wheel) (floats; see the module)."""
     command_0, command_1, command_2, command_3 = command
     Omega_0, Omega_1, Omega_2, Omega_3 = Omega
-    t0 = -torque_limit
-    t1 = (command_0 < t0)
+    t1 = (command_0 < -torque_limit)
     t2 = abs(Omega_0)
     t3 = (speed_limit <= t2)
     t4 = Omega_0*torque_limit
     t5 = (command_0 > torque_limit)
-    t6 = ((t0) if t1 else (torque_limit) if t5 else (command_0))
+    t6 = ((-torque_limit) if t1 else (torque_limit) if t5 else (command_0))
     t7 = (cutoff > 0)
     t8 = (Omega_0 >= speed_limit)
     t9 = (command_0 < 0)
     t10 = (command_0 > 0)
-    t11 = -speed_limit
-    t12 = (Omega_0 <= t11)
+    t12 = (Omega_0 <= -speed_limit)
     t13 = (1.0/speed_limit)
     t14 = torque_limit*(-t13*t2 + 1)
-    t15 = -t14
-    t16 = (command_1 < t0)
+    t16 = (command_1 < -torque_limit)
     t17 = abs(Omega_1)
     t18 = (speed_limit <= t17)
     t19 = Omega_1*torque_limit
     t20 = (command_1 > torque_limit)
-    t21 = ((t0) if t16 else (torque_limit) if t20 else (command_1))
+    t21 = ((-torque_limit) if t16 else (torque_limit) if t20 else (command_1))
     t22 = (Omega_1 >= speed_limit)
     t23 = (command_1 < 0)
     t24 = (command_1 > 0)
-    t25 = (Omega_1 <= t11)
+    t25 = (Omega_1 <= -speed_limit)
     t26 = torque_limit*(-t13*t17 + 1)
-    t27 = -t26
-    t28 = (command_2 < t0)
+    t28 = (command_2 < -torque_limit)
     t29 = abs(Omega_2)
     t30 = (speed_limit <= t29)
     t31 = Omega_2*torque_limit
     t32 = (command_2 > torque_limit)
-    t33 = ((t0) if t28 else (torque_limit) if t32 else (command_2))
+    t33 = ((-torque_limit) if t28 else (torque_limit) if t32 else (command_2))
     t34 = (Omega_2 >= speed_limit)
     t35 = (command_2 < 0)
     t36 = (command_2 > 0)
-    t37 = (Omega_2 <= t11)
+    t37 = (Omega_2 <= -speed_limit)
     t38 = torque_limit*(-t13*t29 + 1)
-    t39 = -t38
-    t40 = (command_3 < t0)
+    t40 = (command_3 < -torque_limit)
     t41 = abs(Omega_3)
     t42 = (speed_limit <= t41)
     t43 = Omega_3*torque_limit
     t44 = (command_3 > torque_limit)
-    t45 = ((t0) if t40 else (torque_limit) if t44 else (command_3))
+    t45 = ((-torque_limit) if t40 else (torque_limit) if t44 else (command_3))
     t46 = (Omega_3 >= speed_limit)
     t47 = (command_3 < 0)
     t48 = (command_3 > 0)
-    t49 = (Omega_3 <= t11)
+    t49 = (Omega_3 <= -speed_limit)
     t50 = torque_limit*(-t13*t41 + 1)
-    t51 = -t50
-    return (((((0) if ((t3 and (t4 < 0)) if t1 else (((t3 and (t4 > 0)) if t5 else (t3 and (Omega_0*command_0 > 0))))) else (t6))) if t7 else (((0) if (t10 or t12) and (t10 or t9) and (t12 or t8) and (t8 or t9) else (t14) if (Omega_0 > 0) and (command_0 > t14) and (Omega_0 < speed_limit) else (t15) if (Omega_0 > t11) and (Omega_0 < 0) and (command_0 < t15) else (t6)))), ((((0) if ((t18 and (t19 < 0)) if t16 else (((t18 and (t19 > 0)) if t20 else (t18 and (Omega_1*command_1 > 0))))) else (t21))) if t7 else (((0) if (t22 or t23) and (t22 or t25) and (t23 or t24) and (t24 or t25) else (t26) if (Omega_1 > 0) and (command_1 > t26) and (Omega_1 < speed_limit) else (t27) if (Omega_1 > t11) and (Omega_1 < 0) and (command_1 < t27) else (t21)))), ((((0) if ((t30 and (t31 < 0)) if t28 else (((t30 and (t31 > 0)) if t32 else (t30 and (Omega_2*command_2 > 0))))) else (t33))) if t7 else (((0) if (t34 or t35) and (t34 or t37) and (t35 or t36) and (t36 or t37) else (t38) if (Omega_2 > 0) and (command_2 > t38) and (Omega_2 < speed_limit) else (t39) if (Omega_2 > t11) and (Omega_2 < 0) and (command_2 < t39) else (t33)))), ((((0) if ((t42 and (t43 < 0)) if t40 else (((t42 and (t43 > 0)) if t44 else (t42 and (Omega_3*command_3 > 0))))) else (t45))) if t7 else (((0) if (t46 or t47) and (t46 or t49) and (t47 or t48) and (t48 or t49) else (t50) if (Omega_3 > 0) and (command_3 > t50) and (Omega_3 < speed_limit) else (t51) if (Omega_3 > t11) and (Omega_3 < 0) and (command_3 < t51) else (t45)))))
+    return (((((0) if ((t3 and (t4 < 0)) if t1 else (((t3 and (t4 > 0)) if t5 else (t3 and (Omega_0*command_0 > 0))))) else (t6))) if t7 else (((0) if (t10 or t12) and (t10 or t9) and (t12 or t8) and (t8 or t9) else (t14) if (Omega_0 > 0) and (command_0 > t14) and (Omega_0 < speed_limit) else (-t14) if (Omega_0 > -speed_limit) and (Omega_0 < 0) and (command_0 < -t14) else (t6)))), ((((0) if ((t18 and (t19 < 0)) if t16 else (((t18 and (t19 > 0)) if t20 else (t18 and (Omega_1*command_1 > 0))))) else (t21))) if t7 else (((0) if (t22 or t23) and (t22 or t25) and (t23 or t24) and (t24 or t25) else (t26) if (Omega_1 > 0) and (command_1 > t26) and (Omega_1 < speed_limit) else (-t26) if (Omega_1 > -speed_limit) and (Omega_1 < 0) and (command_1 < -t26) else (t21)))), ((((0) if ((t30 and (t31 < 0)) if t28 else (((t30 and (t31 > 0)) if t32 else (t30 and (Omega_2*command_2 > 0))))) else (t33))) if t7 else (((0) if (t34 or t35) and (t34 or t37) and (t35 or t36) and (t36 or t37) else (t38) if (Omega_2 > 0) and (command_2 > t38) and (Omega_2 < speed_limit) else (-t38) if (Omega_2 > -speed_limit) and (Omega_2 < 0) and (command_2 < -t38) else (t33)))), ((((0) if ((t42 and (t43 < 0)) if t40 else (((t42 and (t43 > 0)) if t44 else (t42 and (Omega_3*command_3 > 0))))) else (t45))) if t7 else (((0) if (t46 or t47) and (t46 or t49) and (t47 or t48) and (t48 or t49) else (t50) if (Omega_3 > 0) and (command_3 > t50) and (Omega_3 < speed_limit) else (-t50) if (Omega_3 > -speed_limit) and (Omega_3 < 0) and (command_3 < -t50) else (t45)))))
 
 
 def quat_error_chart_inverse(q_ref, dtheta):
