@@ -16,6 +16,8 @@ from . import effects as _effects
 from .generated import effects_meta as _META
 from .generated import tableaux as _TAB
 
+__all__ = ["Pipeline", "PathGroup"]   # what Sim.pipeline returns; the functions are the Sim's helpers
+
 
 def body_kind(flags: int) -> str:
     """The right-hand-side kind (TORQUE, FULL, FORCE, BODY, BODY_F) of a plain body whose effects' rhs_flags OR to
@@ -151,7 +153,7 @@ def path_keys(n: int, table: np.ndarray, extra: np.ndarray) -> np.ndarray:
 class PathGroup(NamedTuple):
     """The bodies of a scene whose steps run one path (Pipeline.groups).
 
-    Attributes
+    Parameters
     ----------
     path : str
         What their step runs: ``"<effect names> -> <kernels>"`` as a body line says it, without values.

@@ -27,7 +27,7 @@ PUBLIC_MODULES = [
     "lavendersim.errors", "lavendersim.validate", "lavendersim.oracle", "lavendersim.particles",
     "lavendersim.extending", "lavendersim.executor", "lavendersim.derive.symbolic", "lavendersim.backends",
     "lavendersim.labs", "lavendersim.labs.common",    # labs/, installed as lavendersim.labs
-    "lavendersim.scene_file", "lavendersim.spacecraft",
+    "lavendersim.scene_file", "lavendersim.spacecraft", "lavendersim.pipeline",
 ]
 # modules whose import needs an optional extra: checked when it is installed (CI installs all)
 OPTIONAL_MODULES = {"lavendersim.control": "control", "lavendersim.viewer": "viewer",
