@@ -1259,10 +1259,14 @@ class Sim:
 
     @staticmethod
     def _terms(mine: list, values: bool) -> str:
-        """A body line's effect terms: each effect with its values, or (values False) the effects' names once each."""
+        """A body line's effect terms: each effect with its values in the order they are summed, or (values False:
+        a path's words, the same for every body of the path) the effects' names once each, by effect code."""
         if not mine:
             return "torque- and force-free (no effect terms)"
-        return " + ".join(e.describe() for e in mine) if values else " + ".join(dict.fromkeys(e.name for e in mine))
+        if values:
+            return " + ".join(e.describe() for e in mine)
+        code = {e.name: e.code for e in mine}   # (models: code 0, then by name)
+        return " + ".join(sorted(code, key=lambda name: (code[name], name)))
 
     def _plain_line(self, mine: list, values: bool = True) -> str:
         """Sim.pipeline's line of a plain body with the effects mine: its terms, then the printed kernels its step
