@@ -6,6 +6,8 @@ A row is (what, kernels) pairs, what one of the words a pipeline line prints. It
 - how "rk4": the built-in RK4's scaled-increment paths (_rk4_paths); "rhs": a right-hand side that an explicit
   tableau (euler, semi_implicit_euler, a user's; rk4 where it has no scaled path) steps (_rhs_paths); "dopri5" where
   it differs from "rhs"; an integrator of the implicit or the Lie-group family by its name (_family_paths);
+- a body with a joint or wheels: "<integrator>:model_rotation:<rot>" (a user's tableau: "tableau:model_rotation:<rot>")
+  and "model_translation:<trans>" (_model_paths);
 - path FREE (no effect), a right-hand-side kind (effect_fuse.TILE_KINDS), CONST_<kind> / SPLIT_<kind> (RK4's
   constant and decoupled paths); float32: FREE, CONST_TORQUE / CONST_FORCE (every effect reads no state, without /
   with a force) and ANY, csrc/fixed_loop.h's LV_FIXED_* tiles (_float32_paths).
@@ -14,6 +16,7 @@ NumPy backend calls and the C sources call."""
 from __future__ import annotations
 
 from .effect_fuse import CONSTANT_KINDS, RHS_OF_KIND, SPLIT_OF_KIND, TILE_KINDS
+from .layout import WHEELS_MAX
 from .tableaux import INTEGRATORS, fixed_path
 
 Row = tuple[tuple[str, tuple[str, ...]], ...]
@@ -124,6 +127,38 @@ def _float32_paths(backend: str) -> dict[str, Row]:
     return out
 
 
+def _model_paths(backend: str) -> dict[str, Row]:
+    """A body with a joint or wheels (csrc/step.c model_rhs_of, advance_model, model_simd.h; numpy_backend _Group,
+    _Plan.rhs): its rotation, rot WHEELS_ON_AXES (wheels on the default layout A_b = [I | 0]), WHEELS (other axes) or
+    PIVOT (a joint alone), per integrator that steps such bodies: on C the fixed-step paths (euler,
+    semi_implicit_euler, rk4: lv_step_kind adds LV_ON_AXES) take the on-axes print for WHEELS_ON_AXES, the stage loop
+    (dopri5, a user's tableau: ctx_init's row kind) the general one; NumPy wheels<N>_body_rhs for every layout. With
+    wheels, the motors per step (zero-order hold) and, on C, the coefficients once per call. Its translation, trans
+    FREE (translation_rhs), JOINT (p_w, v_w from pivot_kinematics after each step; NumPy also forms the group's
+    translation_rhs and zeroes it) or JOINT_V (pivot_kinematics in the right-hand side too, for effects that read
+    v_w)."""
+    n = WHEELS_MAX
+    motor = ("wheel motors (per step, zero-order hold)", (f"wheels{n}_motor",))
+    coefficients = (("constants", (f"wheels{n}_coefficients",)),) if backend == "c" else ()
+    out: dict[str, Row] = {}
+    steppers = [(i.name, fixed_path(i) is not None) for i in INTEGRATORS if not i.plain_only] + [("tableau", False)]
+    for name, fixed in steppers:
+        general = f"wheels{n}_body_rhs_c" if backend == "c" else f"wheels{n}_body_rhs"
+        on_axes = f"wheels{n}_on_axes_rhs_c" if backend == "c" and fixed else general
+        for rot, kernel in (("WHEELS_ON_AXES", on_axes), ("WHEELS", general)):
+            out[f"{name}:model_rotation:{rot}"] = (("rotation and wheels", (kernel,)), motor) + coefficients
+        out[f"{name}:model_rotation:PIVOT"] = (("rotation about the pivot", ("pivot_body_rhs",)),)
+    # (NumPy forms translation_rhs for a whole group, wheeled and jointed bodies together, and zeroes a jointed
+    # body's: numpy_backend._Group.translation)
+    joint = ("pivot_kinematics",) if backend == "c" else ("pivot_kinematics", "translation_rhs")
+    zeroed = "" if backend == "c" else ", the group's translation_rhs zeroed"
+    out["model_translation:FREE"] = ((_TRANSLATION, ("translation_rhs",)),)
+    out["model_translation:JOINT"] = ((f"translation (p_w, v_w set from the joint after each step{zeroed})", joint),)
+    out["model_translation:JOINT_V"] = ((f"translation (p_w, v_w set from the joint after each step, v_w for the "
+                                         f"effects that read it{zeroed})", joint),)
+    return out
+
+
 def pipeline_kernels() -> dict[str, dict[str, Row]]:
     """The printed kernels a plain body's step runs, per backend ("c", "numpy") and key (the module's docstring).
     Printed into effects_meta (PIPELINE_KERNELS)."""
@@ -134,6 +169,7 @@ def pipeline_kernels() -> dict[str, dict[str, Row]]:
         if backend == "c":   # C's dopri5 steps a torque-free body on rigid_body_rhs_free_c (csrc/step.c dp_rhs)
             table["dopri5:FREE"] = ((_RHS, ("rigid_body_rhs_free_c",)),)
         table.update(_family_paths(backend))
+        table.update(_model_paths(backend))
         table.update({f"float32:{k}": v for k, v in _float32_paths(backend).items()})
         out[backend] = table
     return out

@@ -106,6 +106,35 @@ def plain_kernels(backend: str, integrator: str, flags: int, user: bool, dtype: 
     return "; ".join(f"{what}: {', '.join(names)}" for what, names in parts)
 
 
+def model_kernels(backend: str, integrator: str, wheels: bool, on_axes: bool, joint: bool, reads_v: bool) -> str:
+    """What the step of a body with a joint and/or wheels runs on backend with integrator, as Sim.pipeline prints it:
+    its rotation (with wheels: the wheel model, the motors, the constants) and its translation, from derive's rows
+    "<integrator>:model_rotation:<rot>" (a user's tableau: "tableau:...") and "model_translation:<trans>".
+
+    Parameters
+    ----------
+    backend : {"c", "numpy"}
+        The Sim's backend.
+    integrator : str
+        The Sim's integrator (one that steps such bodies: not PLAIN_ONLY).
+    wheels, on_axes, joint : bool
+        The body has wheels; on the default layout A_b = [I | 0] (backends.on_body_axes); a spherical joint.
+    reads_v : bool
+        A jointed body's effects read v_w (FLAG_USES_V): its kinematic velocity is formed in the right-hand side too.
+
+    Returns
+    -------
+    str
+        The parts, "; "-separated.
+    """
+    table = _META.PIPELINE_KERNELS[backend]
+    rot = ("WHEELS_ON_AXES" if on_axes else "WHEELS") if wheels else "PIVOT"
+    trans = ("JOINT_V" if reads_v else "JOINT") if joint else "FREE"
+    key = f"{integrator}:model_rotation:{rot}"
+    parts = table.get(key, table[f"tableau:model_rotation:{rot}"]) + table[f"model_translation:{trans}"]
+    return "; ".join(f"{what}: {', '.join(names)}" for what, names in parts)
+
+
 def kernel_names(lines: Sequence[str]) -> set[str]:
     """Every kernel name PIPELINE_KERNELS holds that occurs in lines (for tests and tools: which printed kernels a
     pipeline names)."""

@@ -1197,8 +1197,8 @@ class Sim:
         rigid_body_increments_free_c; translation: translation_drift; constants: rigid_body_increment_scale_free"
         for a torque-free RK4 body; a composition's flows; implicit_gyro's loads, Newton solve and exp-map update;
         rk4_expmap's right-hand side and exponential coordinates; a float32 body its tile's kernels), decided from
-        derive's tables (lavendersim/pipeline.py, derive/pipeline_meta.py); a body with a joint or wheels names its
-        model's right-hand side. Printed (``print(sim.pipeline)``), it is one
+        derive's tables (lavendersim/pipeline.py, derive/pipeline_meta.py); a body with a joint or wheels its model's
+        (rotation and wheels, the motors, the translation or the joint's kinematics; its wheel count and layout). Printed (``print(sim.pipeline)``), it is one
         line per distinct path with the bodies' indices as ranges and their count (``pipeline.groups()`` the same as
         data): readable at a million bodies, built in O(N).
 
@@ -1238,19 +1238,15 @@ class Sim:
         mine = model + forces
         kind = self._kind(i)
         if kind:
-            kernel = (f"wheels{LY.WHEELS_MAX}_body_rhs ({self._wheel_n[i]} wheels on "
-                      f"{'the body axes' if backends.on_body_axes(self._models.rows[i]) else 'axes_b'})"
-                      if kind & KIND_WHEELS else "pivot_body_rhs")
-            extra = []
-            if kind & KIND_WHEELS:
-                extra.append("wheel torques saturated per step (zero-order hold)")
-            if kind & KIND_JOINT:
-                r_b = (f"r_b={np.array2string(self._models.rows[i, LY.MODEL_R_B], precision=4)}; " if values else "")
-                extra.append(f"{r_b}p_w, v_w from pivot_kinematics after each step"
-                             + (" and for linear damping" if any(e.name == "linear_damping" for e in forces) else ""))
-            else:
-                extra.append("translation: v_dot = F/m")
-            line = f"{self._terms(mine, values)} -> {kernel} ({'; '.join(extra)})"
+            wheels, joint = bool(kind & KIND_WHEELS), bool(kind & KIND_JOINT)
+            on_axes = wheels and backends.on_body_axes(self._models.rows[i])
+            reads_v = any(e.spec.flags & _META.FLAG_USES_V for e in forces)
+            kernels = pipeline_mod.model_kernels(self.backend.name, self.integrator, wheels, on_axes, joint, reads_v)
+            line = f"{self._terms(mine, values)} -> {kernels}"
+            if wheels:
+                line += f"; wheels: {self._wheel_n[i]} on {'the body axes' if on_axes else 'axes_b'}"
+            if joint and values:
+                line += f"; pivot: r_b={np.array2string(self._models.rows[i, LY.MODEL_R_B], precision=4)}"
         else:
             line = self._plain_line(mine, values)
         if self._frames is not None and self._frames.rotation(i) is not None:

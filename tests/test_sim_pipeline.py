@@ -164,7 +164,7 @@ def test_no_kernel_is_named_in_lavendersim():
     from lavendersim.sim import Sim
 
     names = {n for table in effects_meta.PIPELINE_KERNELS.values() for ps in table.values() for _, ns in ps for n in ns}
-    code = inspect.getsource(PL) + inspect.getsource(Sim._plain_line)
+    code = inspect.getsource(PL) + inspect.getsource(Sim._plain_line) + inspect.getsource(Sim._body_line)
     assert not {n for n in names if re.search(rf"\b{n}\b", code)}
 
 
@@ -449,3 +449,75 @@ def test_every_member_of_a_group_has_its_groups_path(seed):
             for i in g.indices():
                 assert sim._body_line(int(i), False) == g.path, (backend, int(i))
         assert (seen == 1).all()
+
+
+# ---- bodies with a joint or wheels: their rows against the dispatch -------------------------------------------------
+def test_the_model_rows_are_what_numpy_runs(monkeypatch):
+    """NumPy: the wheel model and motor it binds (numpy_backend._WHEELS_RHS / _WHEELS_MOTOR) are the kernels the wheel
+    rows name; a step of a wheeled, a jointed and a jointed body whose effects read v_w calls the rows' other kernels
+    (pivot_body_rhs, translation_rhs, pivot_kinematics) and no model kernel its line does not name."""
+    from lavendersim.backends import numpy_backend
+    from lavendersim.generated import effects_meta
+
+    rows = effects_meta.PIPELINE_KERNELS["numpy"]
+    for integrator in ("rk4", "euler", "dopri5", "tableau"):
+        wheel, motor = rows[f"{integrator}:model_rotation:WHEELS_ON_AXES"][:2]
+        assert rows[f"{integrator}:model_rotation:WHEELS"][:2] == (wheel, motor)
+        assert numpy_backend._WHEELS_RHS is getattr(K, wheel[1][0]) and numpy_backend._WHEELS_MOTOR is getattr(K, motor[1][0])
+    models = {"pivot_body_rhs", "translation_rhs", "pivot_kinematics"}
+    cases = {"wheeled": ([("reaction_wheels", {"J": (5e-4, 5e-4, 5e-4), "torque_limit": 0.2, "speed_limit": 400.0})],
+                         {"translation_rhs"}),
+             "jointed": ([("spherical_joint", {"anchor_w": (0.0, 0.0, 1.0)}), ("gravity", {})],
+                         {"pivot_body_rhs", "pivot_kinematics", "translation_rhs"}),   # (the group's, zeroed)
+             "jointed_v": ([("spherical_joint", {"anchor_w": (0.0, 0.0, 1.0)}), ("linear_damping", {"c": 0.1})],
+                           {"pivot_body_rhs", "pivot_kinematics", "translation_rhs"})}
+    for name, (effs, expect) in cases.items():
+        s = lv.Scene()
+        s.add_body(lv.Body.box("b", 1.5, (0.3, 0.5, 0.7), omega_b=(0.1, 0.2, -0.3)))
+        for e, p in effs:
+            s.add_effect(e, body="b", **p)
+        sim = lv.Sim(s, dt=1e-3, backend="numpy")
+        named = {k for ks in parts(sim.pipeline[1]).values() for k in ks}
+        assert named & models == expect, (name, named)
+        called: set[str] = set()
+        with monkeypatch.context() as m:
+            for k in models:
+                f = getattr(K, k)
+                m.setattr(K, k, lambda *a, _f=f, _k=k, **kw: (called.add(_k), _f(*a, **kw))[1])
+            sim.run(2)
+        assert called == expect, (name, called)
+    assert "effects that read it" in lv.Sim(s, dt=1e-3, backend="numpy").pipeline[1]   # jointed_v: v_w formed too
+
+
+def test_the_model_rows_are_what_c_runs():
+    """C (csrc/step.c): model_rhs_of takes the on-axes print under LV_ON_AXES, the general one for other wheels,
+    pivot_body_rhs for a joint alone, translation_rhs off the joint and pivot_kinematics for the effects' v_w; the
+    fixed-step paths step with lv_step_kind (LV_ON_AXES added), the stage loop (dopri5, a user's tableau) with the
+    row's kind: the rows the pipeline reads say the same, each macro resolved through generated/layout.h."""
+    from lavendersim.generated import effects_meta
+    from lavendersim.generated import tableaux
+
+    rows = effects_meta.PIPELINE_KERNELS["c"]
+    text = (STEP_C / "step.c").read_text()
+    macros = dict(re.findall(r"#define (LV_WHEELS_\w+) lv_(\w+)", (KERNELS_H.parent / "layout.h").read_text()))
+    rhs = _c_function(text, "static inline void model_rhs_of(")
+    wheels = _c_function(text, "static inline void lv_wheels_rhs(")
+    on_axes = macros[re.search(r"if \(on_axes\)\s*(LV_WHEELS_\w+)\(", wheels)[1]]
+    general = macros[re.search(r"else\s*(LV_WHEELS_\w+)\(", wheels)[1]]
+    assert re.search(r"if \(kind & LV_ON_AXES\) \{\s*lv_wheels_rhs\(1,", rhs) and "lv_wheels_rhs_call(" in rhs
+    assert "lv_wheels_rhs(0," in _c_function(text, "static void lv_wheels_rhs_call(")
+    assert {"pivot_body_rhs", "translation_rhs", "pivot_kinematics"} <= set(re.findall(r"\blv_(\w+)\(", rhs))
+    assert "const int kind = model_step_kind(md, b);" in _c_function(text, "static long advance_model_body(")
+    assert "c->kind = md != NULL ? (int)md->rows[b * LV_MODEL_SIZE + LV_MODEL_KIND] : 0;" in text   # ctx_init
+    motor = macros[re.search(r"(LV_WHEELS_MOTOR)\(", _c_function(text, "static inline void lv_wheels_motor("))[1]]
+    coefficients = macros["LV_WHEELS_COEFFICIENTS"]
+    fixed = [i for i in ("euler", "semi_implicit_euler", "rk4") if i in tableaux.INTEGRATOR_CODES]
+    for integrator in fixed + ["dopri5", "tableau"]:
+        want = on_axes if integrator in fixed else general
+        assert rows[f"{integrator}:model_rotation:WHEELS_ON_AXES"] == (
+            ("rotation and wheels", (want,)), ("wheel motors (per step, zero-order hold)", (motor,)),
+            ("constants", (coefficients,))), integrator
+        assert rows[f"{integrator}:model_rotation:WHEELS"][0] == ("rotation and wheels", (general,))
+        assert rows[f"{integrator}:model_rotation:PIVOT"] == (("rotation about the pivot", ("pivot_body_rhs",)),)
+    assert [n for _, ns in rows["model_translation:FREE"] for n in ns] == ["translation_rhs"]
+    assert [n for _, ns in rows["model_translation:JOINT_V"] for n in ns] == ["pivot_kinematics"]

@@ -39,7 +39,7 @@ def test_a_layout_gets_the_axes_kernel_and_n_wheel_arrays():
     sim = lv.Sim(pyramid_scene(), dt=1e-3, backend="numpy")
     assert int(sim._models.rows[0, LY.MODEL_KIND]) == KIND_WHEELS and not on_body_axes(sim._models.rows[0])
     assert sim.wheel_rates("sc").shape == (4,) and sim.state("sc").Omega.shape == (4,)
-    assert any("wheels4_body_rhs (4 wheels on axes_b)" in line for line in sim.pipeline)
+    assert any("rotation and wheels: wheels4_body_rhs;" in line and "wheels: 4 on axes_b" in line for line in sim.pipeline)
     sim.set_wheel_command("sc", [0.1, -0.1, 0.05, 0.0])
     with pytest.raises(LavenderInputError, match="u"):
         sim.set_wheel_command("sc", [0.1, -0.1, 0.05])          # four wheels take four commands
@@ -56,8 +56,7 @@ def test_a_layout_gets_the_axes_kernel_and_n_wheel_arrays():
     cube.add_effect("reaction_wheels", body="c", J=(5e-4, 5e-4, 5e-4), **WHEELS)
     sc = lv.Sim(cube, dt=1e-3, backend="numpy")
     assert int(sc._models.rows[0, LY.MODEL_KIND]) == KIND_WHEELS and sc.wheel_rates("c").shape == (3,)
-    assert on_body_axes(sc._models.rows[0]) and any("wheels4_body_rhs (3 wheels on the body axes)" in line
-                                                    for line in sc.pipeline)
+    assert on_body_axes(sc._models.rows[0]) and any("wheels: 3 on the body axes" in line for line in sc.pipeline)
     np.testing.assert_array_equal(sc._models.A_b[0], np.eye(3, LY.WHEELS_MAX))
 
 

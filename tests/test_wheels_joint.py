@@ -385,10 +385,14 @@ def test_c_and_numpy_agree_on_a_mixed_scene(integrator):
 def test_pipeline_names_the_joint_wheels_and_kernels(backend):
     sim = lv.Sim(mixed_scene(), backend=backend)
     p = dict(line.split(": ", 1) for line in sim.pipeline[1:])
-    assert "spherical_joint" in p["cube"] and "reaction_wheels" in p["cube"] and "wheels4_body_rhs (3 wheels on the body axes)" in p["cube"]
+    wheel_rhs = "wheels4_on_axes_rhs_c" if backend == "c" else "wheels4_body_rhs"   # (rk4: C's on-axes print)
+    assert "spherical_joint" in p["cube"] and "reaction_wheels" in p["cube"] and f"rotation and wheels: {wheel_rhs};" in p["cube"]
+    # (C skips a jointed body's translation_rhs; NumPy forms it for the whole group and zeroes it)
+    assert "wheels: 3 on the body axes" in p["cube"] and ("translation_rhs" in p["cube"]) == (backend == "numpy")
     assert "pivot_kinematics" in p["cube"]
     assert "spherical_joint" in p["pend"] and "pivot_body_rhs" in p["pend"] and "reaction_wheels" not in p["pend"]
-    assert "reaction_wheels" in p["drone"] and "wheels4_body_rhs" in p["drone"] and "spherical_joint" not in p["drone"]
+    assert "reaction_wheels" in p["drone"] and wheel_rhs in p["drone"] and "spherical_joint" not in p["drone"]
+    assert "translation: translation_rhs" in p["drone"] and "pivot_kinematics" not in p["drone"]
     assert "rigid_body_increments_free_c" in p["free"] and "wheel" not in p["free"] and "joint" not in p["free"]
 
 
