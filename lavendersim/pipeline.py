@@ -144,23 +144,21 @@ def kernel_names(lines: Sequence[str]) -> set[str]:
 
 
 # ---- the scene's paths ----------------------------------------------------------------------------------------------
-def path_keys(n: int, table: np.ndarray, extra: np.ndarray) -> np.ndarray:
+def path_keys(table: np.ndarray, extra: np.ndarray) -> np.ndarray:
     """One int64 per body, equal for two bodies exactly when their steps run the same path: the codes of the effects
     the effect table holds for it (a row's body -1: every body) and `extra`'s per-body part (model kind, wheels, ...).
 
     Parameters
     ----------
-    n : int
-        Bodies.
     table : ndarray, shape (rows, width)
         The Sim's effect table ([code, body, parameters ...] per row; effects.ROW_CODE, ROW_BODY).
     extra : ndarray of int64, shape (n,)
-        The rest of each body's path, non-negative and below 2**16.
+        The rest of each body's path (n bodies), non-negative and below 2**16.
 
     Returns
     -------
     ndarray of int64, shape (n,)
-        O(n) per distinct effect code; the codes' bits are renumbered densely when more than 46 codes occur.
+        O(n) per distinct effect code; the keys so far are renumbered densely when the codes outrun int64's bits.
     """
     key = np.array(extra, dtype=np.int64)
     codes, bodies = table[:, _effects.ROW_CODE], table[:, _effects.ROW_BODY]

@@ -1220,15 +1220,14 @@ class Sim:
     def _path_keys(self) -> np.ndarray:
         """Sim.pipeline's path of each body as one int64 (pipeline.path_keys): its effects' codes from the effect
         table, its model kind, wheel count and layout, and whether it is stepped in a principal frame. O(N)."""
-        nb = len(self.names)
-        extra = self._kinds.astype(np.int64) | (self._wheel_n.astype(np.int64) << 2)
+        extra = self._kinds.astype(np.int64) | (self._wheel_n.astype(np.int64) << 2)   # (kind bits 0-1, count 2-9)
         wheeled = np.flatnonzero(self._kinds & KIND_WHEELS)
-        if wheeled.size:   # the default layout (backends.on_body_axes, per row): only the line's words depend on it
+        if wheeled.size:   # the default layout (backends.on_body_axes, per row: C's on-axes print)
             extra[wheeled] |= np.fromiter((backends.on_body_axes(self._models.rows[i]) for i in wheeled), bool,
                                           wheeled.size).astype(np.int64) << 10
         if self._frames is not None:
             extra[np.asarray(self._frames.idx, dtype=np.intp)] |= 1 << 11
-        return pipeline_mod.path_keys(nb, self._effects, extra)
+        return pipeline_mod.path_keys(self._effects, extra)
 
     def _body_line(self, i: int, values: bool = True) -> str:
         """Sim.pipeline's line of body i without its name: its effect terms (with their values, or, values False,

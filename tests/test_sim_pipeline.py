@@ -297,11 +297,11 @@ def test_the_c_structured_steps_call_what_the_rows_name():
         a = src.index("/* LV_PATH_SEMI_IMPLICIT */")
         return set(re.findall(pattern, src[a:src.index("normalize", a)]))
 
-    for integrator in ("semi_implicit_euler",):   # (the one member of fixed path semi_implicit: test_integrators)
-        positions = {n for what, ns in rows[f"{integrator}:FREE"] if what.startswith("positions") for n in ns}
-        assert semi_implicit(text, r"\blv_(\w+)\(") == positions
-        assert semi_implicit((STEP_C / "fixed_loop.h").read_text(), r"LV_K\((\w+)\)") == positions
-        assert rows[f"float32:{integrator}:ANY"][-1] == rows[f"{integrator}:FULL"][-1]
+    semi = "semi_implicit_euler"   # (the one integrator of fixed path semi_implicit)
+    positions = {n for what, ns in rows[f"{semi}:FREE"] if what.startswith("positions") for n in ns}
+    assert semi_implicit(text, r"\blv_(\w+)\(") == positions
+    assert semi_implicit((STEP_C / "fixed_loop.h").read_text(), r"LV_K\((\w+)\)") == positions
+    assert rows[f"float32:{semi}:ANY"][-1] == rows[f"{semi}:FULL"][-1]
     implicit = calls("static int gyro_step(", "static int gyro_newton(", "static void plain_loads(")
     lie = calls("static void rk4_expmap_step(", "static void expmap_stage(")
     assert "body_rhs(xs," in _c_function(text, "static void expmap_stage(")
@@ -405,7 +405,7 @@ def test_path_keys_part_every_code_set_beyond_64_codes():
     for every in ([], [(7, -1)]):
         table = np.zeros((len(rows) + len(every), 4))
         table[:, 0], table[:, 1] = [r[0] for r in rows + every], [r[1] for r in rows + every]
-        keys = PL.path_keys(n, table, extra)
+        keys = PL.path_keys(table, extra)
         sets = [(frozenset(c for c, b in rows + every if b in (i, -1)), int(extra[i])) for i in range(n)]
         same = keys[:, None] == keys[None, :]
         assert (same == np.array([[a == b for b in sets] for a in sets])).all()
