@@ -50,7 +50,8 @@ class RhsCall(NamedTuple):
 # LV_RHS_BODY_FRAME_<kind>: csrc/step.c's plain_rhs, batch_simd.h's effect tiles, the user's fused tiles of
 # effect_fuse_user) and effects_meta (RHS_KERNELS: Sim.pipeline). TORQUE runs the torque-only kernel, bitwise
 # rigid_body_rhs on a zero force (the NumPy backend runs that one: the pipeline names it); BODY's a_w is zero, bitwise
-# the +0/m of the NumPy backend.
+# the +0/m of the NumPy backend; BODY's increments have no force (rigid_body_increments_torque_b_c: H_v is -0, the
+# additive identity, so v_W stays v_W bitwise through the stages and a compiler keeps it).
 RHS_OF_KIND = {
     "TORQUE": RhsCall("rigid_body_rhs_torque_c", ("x", "cf", "t", "out"), False, False, "rigid_body_rhs (world torques)",
                       ("rigid_body_increments_torque_c", ("x", "sc", "t", "out"))),
@@ -61,7 +62,7 @@ RHS_OF_KIND = {
                      ("rigid_body_increments_force_c", ("x", "sc", "f", "out"))),
     "BODY": RhsCall("rigid_body_rhs_body_c", ("x", "cf", "zero", "t", "out"), False, True,
                     "rigid_body_rhs_body (torques declared in the body frame)",
-                    ("rigid_body_increments_body_c", ("x", "sc", "zero", "t", "out"))),
+                    ("rigid_body_increments_torque_b_c", ("x", "sc", "t", "out"))),
     "BODY_F": RhsCall("rigid_body_rhs_body_c", ("x", "cf", "f", "t", "out"), True, True,
                       "rigid_body_rhs_body (a force; torques declared in the body frame)",
                       ("rigid_body_increments_body_c", ("x", "sc", "f", "t", "out"))),

@@ -110,14 +110,48 @@ FLOW_SIZE = 8
 FLOW_R, FLOW_Q, FLOW_DV, FLOW_DP = 0, 1, slice(2, 5), slice(5, 8)
 
 
+class NegativeZero(sp.AtomicExpr):
+    """IEEE's -0.0 as a printed constant: the additive identity (-0 + x = x for every double x, signed zeros
+    included), so a compiler folds x + (-0.0) to x where it may not fold x + 0.0 ((-0) + (+0) = +0). An increment
+    that is exactly zero prints as it (NO_FORCE): a stage input x + m H and the step's end x + (acc + w H) e are then
+    x bitwise, and the compiler keeps x itself through the stages. SymPy has no signed zero (Float(-0.0) is 0), hence
+    an atom of its own; substitute 0 for it in a proof."""
+    is_commutative = True
+    is_real = True
+    is_number = True
+
+    def _eval_evalf(self, prec):
+        return sp.Float(0, precision=prec)
+
+    def __float__(self) -> float:
+        return -0.0
+
+    def _ccode(self, printer) -> str:
+        return "-0.0"
+
+    _numpycode = _pythoncode = _ccode
+
+    def _latex(self, printer) -> str:
+        return "-0"
+
+    def _sympystr(self, printer) -> str:
+        return "-0.0"
+
+
+NEG_ZERO = NegativeZero()
+# The velocity increments of a body without a force: -0, the additive identity (NegativeZero), so v_W + H_v is v_W.
+NO_FORCE = sp.Matrix([NEG_ZERO] * 3)
+
+
 def increments(xq, xw, xv, S, F_w, tau_b) -> sp.Matrix:
     """H = (s dt) x' of a body (q, omega_b, v_w) with the constants S (inc_scale): H_p = sdt v_W, H_q = q (x)
-    [h_q omega_B, 0], H_v = h_m F_W (0 when F_w is None), H_omega,x = C_x omega_y omega_z + R_x tau_B,x (cyclic; no
-    torque term when tau_b is None). On the symbols of rigid_body_increments_free_c (q, omega_b): the same printed
-    arithmetic for q and omega_b where the torque is zero (a body under a force alone turns bitwise as a free one)."""
+    [h_q omega_B, 0], H_v = h_m F_W (0 when F_w is None; NO_FORCE's -0 when F_w is NO_FORCE), H_omega,x = C_x omega_y
+    omega_z + R_x tau_B,x (cyclic; no torque term when tau_b is None). On the symbols of rigid_body_increments_free_c
+    (q, omega_b): the same printed arithmetic for q and omega_b where the torque is zero (a body under a force alone
+    turns bitwise as a free one)."""
     coef = EULER.assemble(k=list(S[INC_C]), r=list(S[INC_R]))
-    return X.assemble(p_w=S[INC_SDT] * xv, q=qmul(xq, pure(S[INC_HQ] * xw)),
-                      v_w=sp.zeros(3, 1) if F_w is None else S[INC_HM] * F_w,
+    v_inc = sp.zeros(3, 1) if F_w is None else F_w if F_w is NO_FORCE else S[INC_HM] * F_w
+    return X.assemble(p_w=S[INC_SDT] * xv, q=qmul(xq, pure(S[INC_HQ] * xw)), v_w=v_inc,
                       omega_b=euler_rhs_c(coef, xw, sp.zeros(3, 1) if tau_b is None else tau_b))
 
 
@@ -128,6 +162,16 @@ def _check_increments(xq, xw, xv, S, c_b, m, sdt, F_w, tau_w) -> None:
     H = increments(xq, xw, xv, S, F_w, rotate_to_body(xq, tau_w)).subs(dict(zip(S, inc_scale(c_b, m, sdt))))
     if (H - sdt * rate).applyfunc(sp.expand) != sp.zeros(X.size, 1):
         raise RuntimeError("derive: the scaled increments are not s dt times the rates")
+
+
+def _check_torque_b(H_tb: sp.Matrix, H_body: sp.Matrix, F_w: sp.Matrix) -> None:
+    """Proof that rigid_body_increments_torque_b_c is rigid_body_increments_body_c at a zero force, its -0 read as 0:
+    every row but v_W the very expression (the same printed arithmetic), v_W's the additive identity."""
+    vs = range(X.size)[X.slice("v_w")]
+    if any(H_tb[i] != H_body[i] for i in range(X.size) if i not in vs):
+        raise RuntimeError("derive: the torque-only increments differ from the body increments beyond v_W")
+    if any(H_tb[i] != NEG_ZERO or H_body[i].subs({f: 0 for f in F_w}) != 0 for i in vs):
+        raise RuntimeError("derive: the torque-only increments' v_W rows are not the body increments' at F_W = 0")
 
 
 def _check_torque_h(q, w, S_b, T_w) -> None:
@@ -199,6 +243,8 @@ def kernels() -> list[Kernel]:
     (steps_where, dv, dp), (flow_where, p_next, v_next) = constant_flow(m, F_w, h, p_w, v_w)
     S_expr = inc_scale(c_b, m, sdt)
     H_tq = increments(q, omega_b, v_w, S_b, None, rotate_to_body_doubled(q, T_w[:3, 0], T_w[3:, 0]))
+    H_tb = increments(q, omega_b, v_w, S_b, NO_FORCE, tau_b)
+    _check_torque_b(H_tb, increments(q, omega_b, v_w, S_b, F_w, tau_b), F_w)
     # c_b as named subexpressions of the kernels that take I_b: the same printed arithmetic as the *_c kernels
     where = list(zip(c_b, euler_coefficients(I_b)))
     xq, xv, xw = X.part(x, "q"), X.part(x, "v_w"), X.part(x, "omega_b")
@@ -330,6 +376,15 @@ def kernels() -> list[Kernel]:
                [*QWV, Arg(*SB), Arg("F_w", F_w, "total force at the COM, world frame, N (0 without a force)"),
                 Arg("tau_b", tau_b, "total torque about the COM, body frame, N·m")],
                [Arg("H", increments(q, omega_b, v_w, S_b, F_w, tau_b), "(s dt) d/dt of the state")], g, notes=[inc_note]),
+        Kernel("rigid_body_increments_torque_b_c", "An RK4 stage's scaled increments under a body-frame torque only (no "
+               "force)", r"H_v = -0,\ \text{else as rigid\_body\_increments\_body\_c}",
+               [*QWV, Arg(*SB), Arg("tau_b", tau_b, "total torque about the COM, body frame, N·m")],
+               [Arg("H", H_tb, "(s dt) d/dt of the state")], g,
+               notes=[inc_note, "H_v is printed as -0.0, IEEE's additive identity (NegativeZero): each stage's v_W + H_v "
+                      "and the step's end are v_W bitwise, so the compiler keeps v_W through the stages and forms H_p = "
+                      "sdt v_W once per step. rigid_body_increments_body_c on a zero force computes h_m 0 = +0 instead, "
+                      "and v_W + (+0) turns a -0 velocity component into +0: the steps differ only there (a v_W "
+                      "component of -0, and the sign of a zero H_p from it)."]),
         Kernel("rigid_body_increment_scale_free", "The constants of a torque-free RK4 stage's scaled increments "
                "(rigid_body_increments_free_c), once per body and call",
                r"C_B = s\,dt\,k_B,\ h_q = s\,dt\,\mathrm{QUAT\_RATE\_SCALE}",

@@ -1488,6 +1488,46 @@ void lv_rigid_body_increments_body_c(const double *q, const double *omega_b, con
     H[12] = S_b_2*omega_b_0*omega_b_1 + S_b_5*tau_b_2;
 }
 
+void lv_rigid_body_increments_torque_b_c(const double *q, const double *omega_b, const double *v_w, const double *S_b, const double *tau_b, double *H) {
+    const double q_0 = q[0];
+    const double q_1 = q[1];
+    const double q_2 = q[2];
+    const double q_3 = q[3];
+    const double omega_b_0 = omega_b[0];
+    const double omega_b_1 = omega_b[1];
+    const double omega_b_2 = omega_b[2];
+    const double v_w_0 = v_w[0];
+    const double v_w_1 = v_w[1];
+    const double v_w_2 = v_w[2];
+    const double S_b_0 = S_b[0];
+    const double S_b_1 = S_b[1];
+    const double S_b_2 = S_b[2];
+    const double S_b_3 = S_b[3];
+    const double S_b_4 = S_b[4];
+    const double S_b_5 = S_b[5];
+    const double S_b_6 = S_b[6];
+    const double S_b_7 = S_b[7];
+    const double tau_b_0 = tau_b[0];
+    const double tau_b_1 = tau_b[1];
+    const double tau_b_2 = tau_b[2];
+    const double t0 = S_b_6*omega_b_0;
+    const double t1 = S_b_6*omega_b_2;
+    const double t2 = S_b_6*omega_b_1;
+    H[0] = S_b_7*v_w_0;
+    H[1] = S_b_7*v_w_1;
+    H[2] = S_b_7*v_w_2;
+    H[3] = q_1*t1 - q_2*t2 + q_3*t0;
+    H[4] = -q_0*t1 + q_2*t0 + q_3*t2;
+    H[5] = q_0*t2 - q_1*t0 + q_3*t1;
+    H[6] = -q_0*t0 - q_1*t2 - q_2*t1;
+    H[7] = -0.0;
+    H[8] = -0.0;
+    H[9] = -0.0;
+    H[10] = S_b_0*omega_b_1*omega_b_2 + S_b_3*tau_b_0;
+    H[11] = S_b_1*omega_b_0*omega_b_2 + S_b_4*tau_b_1;
+    H[12] = S_b_2*omega_b_0*omega_b_1 + S_b_5*tau_b_2;
+}
+
 void lv_rigid_body_increment_scale_free(const double *c_b, double sdt, double *C_b, double *h_q) {
     const double c_b_0 = c_b[0];
     const double c_b_1 = c_b[1];
@@ -4072,6 +4112,7 @@ static void packed_rigid_body_increments_c(const double *in, double *out) { lv_r
 static void packed_rigid_body_increments_torque_c(const double *in, double *out) { lv_rigid_body_increments_torque_c(in + 0, in + 4, in + 7, in + 10, in + 19, out + 0); }
 static void packed_rigid_body_increments_force_c(const double *in, double *out) { lv_rigid_body_increments_force_c(in + 0, in + 4, in + 7, in + 10, in + 19, out + 0); }
 static void packed_rigid_body_increments_body_c(const double *in, double *out) { lv_rigid_body_increments_body_c(in + 0, in + 4, in + 7, in + 10, in + 19, in + 22, out + 0); }
+static void packed_rigid_body_increments_torque_b_c(const double *in, double *out) { lv_rigid_body_increments_torque_b_c(in + 0, in + 4, in + 7, in + 10, in + 19, out + 0); }
 static void packed_rigid_body_increment_scale_free(const double *in, double *out) { lv_rigid_body_increment_scale_free(in + 0, in[6], out + 0, out + 3); }
 static void packed_rigid_body_increments_torque_h(const double *in, double *out) { lv_rigid_body_increments_torque_h(in + 0, in + 4, in + 7, in + 16, out + 0, out + 4); }
 static void packed_rigid_body_torque_constants(const double *in, double *out) { lv_rigid_body_torque_constants(in + 0, out + 0); }
@@ -4184,6 +4225,7 @@ const lv_kernel_info lv_kernel_table[LV_KERNEL_COUNT] = {
     {"rigid_body_increments_torque_c", 22, 13, packed_rigid_body_increments_torque_c},
     {"rigid_body_increments_force_c", 22, 13, packed_rigid_body_increments_force_c},
     {"rigid_body_increments_body_c", 25, 13, packed_rigid_body_increments_body_c},
+    {"rigid_body_increments_torque_b_c", 22, 13, packed_rigid_body_increments_torque_b_c},
     {"rigid_body_increment_scale_free", 7, 4, packed_rigid_body_increment_scale_free},
     {"rigid_body_increments_torque_h", 22, 7, packed_rigid_body_increments_torque_h},
     {"rigid_body_torque_constants", 3, 6, packed_rigid_body_torque_constants},

@@ -11,7 +11,7 @@ typedef struct {
     void (*packed)(const double *in, double *out);
 } lv_kernel_info;
 
-#define LV_KERNEL_COUNT 110
+#define LV_KERNEL_COUNT 111
 extern const lv_kernel_info lv_kernel_table[LV_KERNEL_COUNT];
 
 /* particle_moments: One particle's mass moment and momentum (summed: m r_COM and p).
@@ -414,6 +414,15 @@ void lv_rigid_body_increments_force_c(const double *q, const double *omega_b, co
      in  tau_b [3]: total torque about the COM, body frame, N·m
      out H [13]: (s dt) d/dt of the state */
 void lv_rigid_body_increments_body_c(const double *q, const double *omega_b, const double *v_w, const double *S_b, const double *F_w, const double *tau_b, double *H);
+
+/* rigid_body_increments_torque_b_c: An RK4 stage's scaled increments under a body-frame torque only (no force).
+     in  q [4]: orientation (x, y, z, w), R_WB (a stage's value: unit to rounding)
+     in  omega_b [3]: angular velocity, body frame, rad/s
+     in  v_w [3]: COM velocity, world frame, m/s
+     in  S_b [9]: the increments' constants (C_x, C_y, C_z, R_x, R_y, R_z, h_q, sdt, h_m) of rigid_body_increment_scale, once per body and call
+     in  tau_b [3]: total torque about the COM, body frame, N·m
+     out H [13]: (s dt) d/dt of the state */
+void lv_rigid_body_increments_torque_b_c(const double *q, const double *omega_b, const double *v_w, const double *S_b, const double *tau_b, double *H);
 
 /* rigid_body_increment_scale_free: The constants of a torque-free RK4 stage's scaled increments (rigid_body_increments_free_c), once per body and call.
      in  c_b [6]: Euler coefficients (k_x, k_y, k_z, r_x, r_y, r_z), body frame: k_x = (I_y − I_z)/I_x (cyclic, dimensionless), r_x = 1/I_x (1/(kg·m²)); from euler_coefficients
@@ -989,7 +998,7 @@ const char *lv_effect_name(int code);
 #define LV_RHS_INC_FORCE(x, mass, sc, f, t, out) ((void)(mass), (void)(t), lv_rigid_body_increments_force_c((x) + LV_STATE_Q, (x) + LV_STATE_OMEGA_B, (x) + LV_STATE_V_W, sc, f, out))
 #define LV_RHS_BODY_FRAME_BODY 1
 #define LV_RHS_CALL_BODY(x, mass, cf, f, t, out) ((void)(mass), (void)(f), lv_rigid_body_rhs_body_c(x, cf, (const double[3]){0.0, 0.0, 0.0}, t, out))
-#define LV_RHS_INC_BODY(x, mass, sc, f, t, out) ((void)(mass), (void)(f), lv_rigid_body_increments_body_c((x) + LV_STATE_Q, (x) + LV_STATE_OMEGA_B, (x) + LV_STATE_V_W, sc, (const double[3]){0.0, 0.0, 0.0}, t, out))
+#define LV_RHS_INC_BODY(x, mass, sc, f, t, out) ((void)(mass), (void)(f), lv_rigid_body_increments_torque_b_c((x) + LV_STATE_Q, (x) + LV_STATE_OMEGA_B, (x) + LV_STATE_V_W, sc, t, out))
 #define LV_RHS_BODY_FRAME_BODY_F 1
 #define LV_RHS_CALL_BODY_F(x, mass, cf, f, t, out) (lv_linear_acceleration(mass, f, f), lv_rigid_body_rhs_body_c(x, cf, f, t, out))
 #define LV_RHS_INC_BODY_F(x, mass, sc, f, t, out) ((void)(mass), lv_rigid_body_increments_body_c((x) + LV_STATE_Q, (x) + LV_STATE_OMEGA_B, (x) + LV_STATE_V_W, sc, f, t, out))

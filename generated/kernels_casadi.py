@@ -1356,6 +1356,41 @@ def rigid_body_increments_body_c(q, omega_b, v_w, S_b, F_w, tau_b):
     return casadi.vertcat(S_b_7*v_w_0, S_b_7*v_w_1, S_b_7*v_w_2, q_1*t1 - q_2*t2 + q_3*t0, -q_0*t1 + q_2*t0 + q_3*t2, q_0*t2 - q_1*t0 + q_3*t1, -q_0*t0 - q_1*t2 - q_2*t1, F_w_0*S_b_8, F_w_1*S_b_8, F_w_2*S_b_8, S_b_0*omega_b_1*omega_b_2 + S_b_3*tau_b_0, S_b_1*omega_b_0*omega_b_2 + S_b_4*tau_b_1, S_b_2*omega_b_0*omega_b_1 + S_b_5*tau_b_2)
 
 
+def rigid_body_increments_torque_b_c(q, omega_b, v_w, S_b, tau_b):
+    """rigid_body_increments_torque_b_c: An RK4 stage's scaled increments under a body-frame torque only (no force).
+      in  q [4]: orientation (x, y, z, w), R_WB (a stage's value: unit to rounding)
+      in  omega_b [3]: angular velocity, body frame, rad/s
+      in  v_w [3]: COM velocity, world frame, m/s
+      in  S_b [9]: the increments' constants (C_x, C_y, C_z, R_x, R_y, R_z, h_q, sdt, h_m) of rigid_body_increment_scale, once per body and call
+      in  tau_b [3]: total torque about the COM, body frame, N·m
+      out H [13]: (s dt) d/dt of the state"""
+    q_0 = q[0]
+    q_1 = q[1]
+    q_2 = q[2]
+    q_3 = q[3]
+    omega_b_0 = omega_b[0]
+    omega_b_1 = omega_b[1]
+    omega_b_2 = omega_b[2]
+    v_w_0 = v_w[0]
+    v_w_1 = v_w[1]
+    v_w_2 = v_w[2]
+    S_b_0 = S_b[0]
+    S_b_1 = S_b[1]
+    S_b_2 = S_b[2]
+    S_b_3 = S_b[3]
+    S_b_4 = S_b[4]
+    S_b_5 = S_b[5]
+    S_b_6 = S_b[6]
+    S_b_7 = S_b[7]
+    tau_b_0 = tau_b[0]
+    tau_b_1 = tau_b[1]
+    tau_b_2 = tau_b[2]
+    t0 = S_b_6*omega_b_0
+    t1 = S_b_6*omega_b_2
+    t2 = S_b_6*omega_b_1
+    return casadi.vertcat(S_b_7*v_w_0, S_b_7*v_w_1, S_b_7*v_w_2, q_1*t1 - q_2*t2 + q_3*t0, -q_0*t1 + q_2*t0 + q_3*t2, q_0*t2 - q_1*t0 + q_3*t1, -q_0*t0 - q_1*t2 - q_2*t1, -0.0, -0.0, -0.0, S_b_0*omega_b_1*omega_b_2 + S_b_3*tau_b_0, S_b_1*omega_b_0*omega_b_2 + S_b_4*tau_b_1, S_b_2*omega_b_0*omega_b_1 + S_b_5*tau_b_2)
+
+
 def rigid_body_increment_scale_free(c_b, sdt):
     """rigid_body_increment_scale_free: The constants of a torque-free RK4 stage's scaled increments (rigid_body_increments_free_c), once per body and call.
       in  c_b [6]: Euler coefficients (k_x, k_y, k_z, r_x, r_y, r_z), body frame: k_x = (I_y − I_z)/I_x (cyclic, dimensionless), r_x = 1/I_x (1/(kg·m²)); from euler_coefficients

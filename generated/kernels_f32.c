@@ -1489,6 +1489,46 @@ void lvf_rigid_body_increments_body_c(const float *q, const float *omega_b, cons
     H[12] = S_b_2*omega_b_0*omega_b_1 + S_b_5*tau_b_2;
 }
 
+void lvf_rigid_body_increments_torque_b_c(const float *q, const float *omega_b, const float *v_w, const float *S_b, const float *tau_b, float *H) {
+    const float q_0 = q[0];
+    const float q_1 = q[1];
+    const float q_2 = q[2];
+    const float q_3 = q[3];
+    const float omega_b_0 = omega_b[0];
+    const float omega_b_1 = omega_b[1];
+    const float omega_b_2 = omega_b[2];
+    const float v_w_0 = v_w[0];
+    const float v_w_1 = v_w[1];
+    const float v_w_2 = v_w[2];
+    const float S_b_0 = S_b[0];
+    const float S_b_1 = S_b[1];
+    const float S_b_2 = S_b[2];
+    const float S_b_3 = S_b[3];
+    const float S_b_4 = S_b[4];
+    const float S_b_5 = S_b[5];
+    const float S_b_6 = S_b[6];
+    const float S_b_7 = S_b[7];
+    const float tau_b_0 = tau_b[0];
+    const float tau_b_1 = tau_b[1];
+    const float tau_b_2 = tau_b[2];
+    const float t0 = S_b_6*omega_b_0;
+    const float t1 = S_b_6*omega_b_2;
+    const float t2 = S_b_6*omega_b_1;
+    H[0] = S_b_7*v_w_0;
+    H[1] = S_b_7*v_w_1;
+    H[2] = S_b_7*v_w_2;
+    H[3] = q_1*t1 - q_2*t2 + q_3*t0;
+    H[4] = -q_0*t1 + q_2*t0 + q_3*t2;
+    H[5] = q_0*t2 - q_1*t0 + q_3*t1;
+    H[6] = -q_0*t0 - q_1*t2 - q_2*t1;
+    H[7] = -0.0;
+    H[8] = -0.0;
+    H[9] = -0.0;
+    H[10] = S_b_0*omega_b_1*omega_b_2 + S_b_3*tau_b_0;
+    H[11] = S_b_1*omega_b_0*omega_b_2 + S_b_4*tau_b_1;
+    H[12] = S_b_2*omega_b_0*omega_b_1 + S_b_5*tau_b_2;
+}
+
 void lvf_rigid_body_increment_scale_free(const float *c_b, float sdt, float *C_b, float *h_q) {
     const float c_b_0 = c_b[0];
     const float c_b_1 = c_b[1];

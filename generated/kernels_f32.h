@@ -121,6 +121,8 @@ void lvf_rigid_body_increments_torque_c(const float *q, const float *omega_b, co
 void lvf_rigid_body_increments_force_c(const float *q, const float *omega_b, const float *v_w, const float *S_b, const float *F_w, float *H);
 /* rigid_body_increments_body_c: An RK4 stage's scaled increments under a force and a body-frame torque (float; see kernels.h) */
 void lvf_rigid_body_increments_body_c(const float *q, const float *omega_b, const float *v_w, const float *S_b, const float *F_w, const float *tau_b, float *H);
+/* rigid_body_increments_torque_b_c: An RK4 stage's scaled increments under a body-frame torque only (no force) (float; see kernels.h) */
+void lvf_rigid_body_increments_torque_b_c(const float *q, const float *omega_b, const float *v_w, const float *S_b, const float *tau_b, float *H);
 /* rigid_body_increment_scale_free: The constants of a torque-free RK4 stage's scaled increments (rigid_body_increments_free_c), once per body and call (float; see kernels.h) */
 void lvf_rigid_body_increment_scale_free(const float *c_b, float sdt, float *C_b, float *h_q);
 /* rigid_body_increments_torque_h: A constant-torque RK4 stage's scaled increments of (q, ω_B) alone (float; see kernels.h) */

@@ -2813,6 +2813,74 @@ def rigid_body_increments_body_c(q, omega_b, v_w, S_b, F_w, tau_b, *, out=None):
     return H_out
 
 
+def rigid_body_increments_torque_b_c(q, omega_b, v_w, S_b, tau_b, *, out=None):
+    """An RK4 stage's scaled increments under a body-frame torque only (no force).
+
+    Generated kernel ``rigid_body_increments_torque_b_c``; inputs broadcast over leading batch axes.
+
+    Parameters
+    ----------
+    q : array_like, shape (..., 4)
+        orientation (x, y, z, w), R_WB (a stage's value: unit to rounding)
+    omega_b : array_like, shape (..., 3)
+        angular velocity, body frame, rad/s
+    v_w : array_like, shape (..., 3)
+        COM velocity, world frame, m/s
+    S_b : array_like, shape (..., 9)
+        the increments' constants (C_x, C_y, C_z, R_x, R_y, R_z, h_q, sdt, h_m) of rigid_body_increment_scale, once per body and call
+    tau_b : array_like, shape (..., 3)
+        total torque about the COM, body frame, N·m
+    out : tuple of (ndarray or None), optional
+        arrays the outputs are written into, in order (None: a new array); none may overlap an input
+
+    Returns
+    -------
+    H : ndarray, shape (..., 13)
+        (s dt) d/dt of the state
+    """
+    q = numpy.asarray(q, dtype=numpy.float64)
+    omega_b = numpy.asarray(omega_b, dtype=numpy.float64)
+    v_w = numpy.asarray(v_w, dtype=numpy.float64)
+    S_b = numpy.asarray(S_b, dtype=numpy.float64)
+    tau_b = numpy.asarray(tau_b, dtype=numpy.float64)
+    if out is None or out[0] is None:
+        batch = q.shape[:-1] if q.shape[:-1] == omega_b.shape[:-1] == v_w.shape[:-1] == S_b.shape[:-1] == tau_b.shape[:-1] else numpy.broadcast_shapes(q.shape[:-1], omega_b.shape[:-1], v_w.shape[:-1], S_b.shape[:-1], tau_b.shape[:-1])
+    q_0 = q[..., 0]
+    q_1 = q[..., 1]
+    q_2 = q[..., 2]
+    q_3 = q[..., 3]
+    omega_b_0 = omega_b[..., 0]
+    omega_b_1 = omega_b[..., 1]
+    omega_b_2 = omega_b[..., 2]
+    v_w_0 = v_w[..., 0]
+    v_w_1 = v_w[..., 1]
+    v_w_2 = v_w[..., 2]
+    S_b_0 = S_b[..., 0]
+    S_b_1 = S_b[..., 1]
+    S_b_2 = S_b[..., 2]
+    S_b_6 = S_b[..., 6]
+    S_b_7 = S_b[..., 7]
+    t0 = S_b_6*omega_b_0
+    t1 = S_b_6*omega_b_2
+    t2 = S_b_6*omega_b_1
+    H_out = numpy.empty(batch + (13,)) if out is None or out[0] is None else out[0]
+    numpy.multiply(S_b_7, v_w_0, out=H_out[..., 0])
+    numpy.multiply(S_b_7, v_w_1, out=H_out[..., 1])
+    numpy.multiply(S_b_7, v_w_2, out=H_out[..., 2])
+    numpy.add(q_1 * t1 - q_2 * t2, q_3 * t0, out=H_out[..., 3])
+    numpy.add(q_2 * t0 - q_0 * t1, q_3 * t2, out=H_out[..., 4])
+    numpy.add(q_0 * t2 - q_1 * t0, q_3 * t1, out=H_out[..., 5])
+    numpy.subtract(-q_0 * t0 - q_1 * t2, q_2 * t1, out=H_out[..., 6])
+    H_out[..., 7] = -0.0
+    H_out[..., 8] = -0.0
+    H_out[..., 9] = -0.0
+    H_10_13 = S_b[..., 3:6] * tau_b[..., 0:3]
+    numpy.add(S_b_0 * omega_b_1 * omega_b_2, H_10_13[..., 0], out=H_out[..., 10])
+    numpy.add(S_b_1 * omega_b_0 * omega_b_2, H_10_13[..., 1], out=H_out[..., 11])
+    numpy.add(S_b_2 * omega_b_0 * omega_b_1, H_10_13[..., 2], out=H_out[..., 12])
+    return H_out
+
+
 def rigid_body_increment_scale_free(c_b, sdt, *, out=None):
     """The constants of a torque-free RK4 stage's scaled increments (rigid_body_increments_free_c), once per body and call.
 
@@ -6339,6 +6407,7 @@ KERNELS = {
     'rigid_body_increments_torque_c': (rigid_body_increments_torque_c, [('q', (4,)), ('omega_b', (3,)), ('v_w', (3,)), ('S_b', (9,)), ('tau_w', (3,))], [('H', (13,))]),
     'rigid_body_increments_force_c': (rigid_body_increments_force_c, [('q', (4,)), ('omega_b', (3,)), ('v_w', (3,)), ('S_b', (9,)), ('F_w', (3,))], [('H', (13,))]),
     'rigid_body_increments_body_c': (rigid_body_increments_body_c, [('q', (4,)), ('omega_b', (3,)), ('v_w', (3,)), ('S_b', (9,)), ('F_w', (3,)), ('tau_b', (3,))], [('H', (13,))]),
+    'rigid_body_increments_torque_b_c': (rigid_body_increments_torque_b_c, [('q', (4,)), ('omega_b', (3,)), ('v_w', (3,)), ('S_b', (9,)), ('tau_b', (3,))], [('H', (13,))]),
     'rigid_body_increment_scale_free': (rigid_body_increment_scale_free, [('c_b', (6,)), ('sdt', ())], [('C_b', (3,)), ('h_q', ())]),
     'rigid_body_increments_torque_h': (rigid_body_increments_torque_h, [('q', (4,)), ('omega_b', (3,)), ('S_b', (9,)), ('T_w', (6,))], [('H_q', (4,)), ('H_omega', (3,))]),
     'rigid_body_torque_constants': (rigid_body_torque_constants, [('tau_w', (3,))], [('T_w', (6,))]),

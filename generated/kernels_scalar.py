@@ -758,6 +758,19 @@ def rigid_body_increments_body_c(q, omega_b, v_w, S_b, F_w, tau_b):
     return (S_b_7*v_w_0, S_b_7*v_w_1, S_b_7*v_w_2, q_1*t1 - q_2*t2 + q_3*t0, -q_0*t1 + q_2*t0 + q_3*t2, q_0*t2 - q_1*t0 + q_3*t1, -q_0*t0 - q_1*t2 - q_2*t1, F_w_0*S_b_8, F_w_1*S_b_8, F_w_2*S_b_8, S_b_0*omega_b_1*omega_b_2 + S_b_3*tau_b_0, S_b_1*omega_b_0*omega_b_2 + S_b_4*tau_b_1, S_b_2*omega_b_0*omega_b_1 + S_b_5*tau_b_2)
 
 
+def rigid_body_increments_torque_b_c(q, omega_b, v_w, S_b, tau_b):
+    """An RK4 stage's scaled increments under a body-frame torque only (no force) (floats; see the module)."""
+    q_0, q_1, q_2, q_3 = q
+    omega_b_0, omega_b_1, omega_b_2 = omega_b
+    v_w_0, v_w_1, v_w_2 = v_w
+    S_b_0, S_b_1, S_b_2, S_b_3, S_b_4, S_b_5, S_b_6, S_b_7, _ = S_b
+    tau_b_0, tau_b_1, tau_b_2 = tau_b
+    t0 = S_b_6*omega_b_0
+    t1 = S_b_6*omega_b_2
+    t2 = S_b_6*omega_b_1
+    return (S_b_7*v_w_0, S_b_7*v_w_1, S_b_7*v_w_2, q_1*t1 - q_2*t2 + q_3*t0, -q_0*t1 + q_2*t0 + q_3*t2, q_0*t2 - q_1*t0 + q_3*t1, -q_0*t0 - q_1*t2 - q_2*t1, -0.0, -0.0, -0.0, S_b_0*omega_b_1*omega_b_2 + S_b_3*tau_b_0, S_b_1*omega_b_0*omega_b_2 + S_b_4*tau_b_1, S_b_2*omega_b_0*omega_b_1 + S_b_5*tau_b_2)
+
+
 def rigid_body_increment_scale_free(c_b, sdt):
     """The constants of a torque-free RK4 stage's scaled increments (rigid_body_increments_free_c), once per body and call (floats; see the module)."""
     c_b_0, c_b_1, c_b_2, _, _, _ = c_b
@@ -2068,6 +2081,7 @@ READS = {
     'rigid_body_increments_torque_c': {'q': (0, 1, 2, 3), 'omega_b': (0, 1, 2), 'v_w': (0, 1, 2), 'S_b': (0, 1, 2, 3, 4, 5, 6, 7), 'tau_w': (0, 1, 2)},
     'rigid_body_increments_force_c': {'q': (0, 1, 2, 3), 'omega_b': (0, 1, 2), 'v_w': (0, 1, 2), 'S_b': (0, 1, 2, 6, 7, 8), 'F_w': (0, 1, 2)},
     'rigid_body_increments_body_c': {'q': (0, 1, 2, 3), 'omega_b': (0, 1, 2), 'v_w': (0, 1, 2), 'S_b': (0, 1, 2, 3, 4, 5, 6, 7, 8), 'F_w': (0, 1, 2), 'tau_b': (0, 1, 2)},
+    'rigid_body_increments_torque_b_c': {'q': (0, 1, 2, 3), 'omega_b': (0, 1, 2), 'v_w': (0, 1, 2), 'S_b': (0, 1, 2, 3, 4, 5, 6, 7), 'tau_b': (0, 1, 2)},
     'rigid_body_increment_scale_free': {'c_b': (0, 1, 2)},
     'rigid_body_increments_torque_h': {'q': (0, 1, 2, 3), 'omega_b': (0, 1, 2), 'S_b': (0, 1, 2, 3, 4, 5, 6), 'T_w': (0, 1, 2, 3, 4, 5)},
     'rigid_body_torque_constants': {'tau_w': (0, 1, 2)},
@@ -2181,6 +2195,7 @@ ZEROS = {
     'rigid_body_increments_torque_c': {'H': (7, 8, 9)},
     'rigid_body_increments_force_c': {'H': ()},
     'rigid_body_increments_body_c': {'H': ()},
+    'rigid_body_increments_torque_b_c': {'H': ()},
     'rigid_body_increment_scale_free': {'C_b': (), 'h_q': ()},
     'rigid_body_increments_torque_h': {'H_q': (), 'H_omega': ()},
     'rigid_body_torque_constants': {'T_w': ()},

@@ -19,6 +19,7 @@ import pytest
 
 import lavendersim as lv
 from lavendersim import effects as E
+from lavendersim.generated import layout as LY
 from lavendersim import extending
 from lavendersim.validate import LavenderInputError
 
@@ -390,7 +391,8 @@ def test_a_user_effects_fused_tile_is_its_stage_passes_bitwise(guide, monkeypatc
     library by derive/effect_fuse_user.py, the engine's RK4 tile with the effect inlined; gravity_gradient: the body
     torque's tile kind, quadratic_drag: a force's): at every instruction set it gives the bits of the effect tile's
     stage passes (the same table without its fused tiles), of the scalar path and of NumPy, each body its own
-    parameters."""
+    parameters. Signed zeros too: every third body starts with v_w = (-0, +0, v_z); a body-frame torque alone (no
+    force: its increments' H_v is -0, the additive identity) leaves v_w bitwise as it was, -0 included."""
     import platform
 
     from lavendersim import _lavender_c as C
@@ -398,9 +400,10 @@ def test_a_user_effects_fused_tile_is_its_stage_passes_bitwise(guide, monkeypatc
     rng = np.random.default_rng(n)
     s = lv.Scene()
     for i in range(n):
+        v_w = (-0.0, 0.0, rng.standard_normal()) if i % 3 == 0 else tuple(rng.standard_normal(3))
         s.add_body(lv.Body.box(f"b{i}", 1.0 + rng.random(), tuple(0.1 + rng.random(3)),
                                p_w=tuple(3.0 * rng.standard_normal(3)), q=tuple(rng.standard_normal(4)),
-                               v_w=tuple(rng.standard_normal(3)), omega_b=tuple(rng.standard_normal(3))))
+                               v_w=v_w, omega_b=tuple(rng.standard_normal(3))))
         if effect == "gravity_gradient":
             s.add_effect(effect, body=f"b{i}", mu=MU * (0.5 + rng.random()), center_w=tuple(0.1 * rng.random(3)))
         else:
@@ -410,7 +413,10 @@ def test_a_user_effects_fused_tile_is_its_stage_passes_bitwise(guide, monkeypatc
     if platform.machine() in ("x86_64", "AMD64"):
         assert (table[code, 10:] != 0).all()    # its fused tiles, q raw / normalized, at every instruction set
     ref = lv.Sim(s, dt=1e-3, integrator="rk4", backend="numpy", normalize=normalize)
+    v0 = ref.x[:, LY.STATE_V_W].copy()
     ref.run(90)
+    if effect == "gravity_gradient":
+        assert np.array_equal(ref.x[:, LY.STATE_V_W], v0) and np.signbit(ref.x[::3, LY.STATE_V_W][:, 0]).all()
     full = c_backend.user_effect_table
 
     def without_fused(effects):
@@ -428,6 +434,7 @@ def test_a_user_effects_fused_tile_is_its_stage_passes_bitwise(guide, monkeypatc
                 sim = lv.Sim(s, dt=1e-3, integrator="rk4", backend="c", normalize=normalize)
                 sim.run(90)
                 assert np.array_equal(sim.x, ref.x), (C.isa()[1], table_of.__name__)
+                assert np.array_equal(np.signbit(sim.x), np.signbit(ref.x)), (C.isa()[1], table_of.__name__)
     finally:
         C.isa(-1)
 

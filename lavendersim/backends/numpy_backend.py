@@ -552,7 +552,7 @@ class _ForcedGroup:
     def inc(self, K, x, buf, S, out):
         """The scaled increments H = s dt d/dt x of the group's bodies x (n, 13) into out: the effects' sums as rhs
         takes them, then the class's printed increments kernel (effect_fuse.RHS_OF_KIND's inc, csrc/step.c plain_inc;
-        a force is not divided: H_v = h_m F)."""
+        a force is not divided: H_v = h_m F; RHS_BODY's kernel has no force: H_v = -0)."""
         q, w, v = x[:, Q], x[:, W], x[:, V]
         F, tau = self.index.sums(x, v, buf)
         if self.cls == RHS_FORCE:
@@ -561,9 +561,7 @@ class _ForcedGroup:
             return K.rigid_body_increments_c(q, w, v, S, F, tau, out=(out,))
         if self.cls == RHS_BODY_F:
             return K.rigid_body_increments_body_c(q, w, v, S, F, tau, out=(out,))
-        if self.zeros is None:
-            self.zeros = _soa(np.zeros((self.m.shape[0], 3)))
-        return K.rigid_body_increments_body_c(q, w, v, S, self.zeros, tau, out=(out,))
+        return K.rigid_body_increments_torque_b_c(q, w, v, S, tau, out=(out,))
 
 
 def _forced_groups(plan) -> list[_ForcedGroup]:
