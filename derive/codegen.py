@@ -659,7 +659,7 @@ def render(progress=None) -> dict[str, str]:
     """Every file of generated/ (except manifest.json) as text, from a fresh derivation. progress: an optional
     callable given a short phrase before each phase (the CLI shows it)."""
     from . import all_effects, all_kernels, scalar_print
-    from . import effect_fuse
+    from . import effect_fuse, pipeline_meta
     from .effect_print import meta_module
 
     step = progress or (lambda _msg: None)
@@ -675,7 +675,7 @@ def render(progress=None) -> dict[str, str]:
     files = {"kernels.h": h, "kernels.c": c, "kernels_numpy.py": print_numpy(printed, forces),
              "kernels_f32.h": h32, "kernels_f32.c": c32,
              "kernels_numpy_f32.py": print_numpy(printed, forces, dtype="float32"),
-             "kernels_casadi.py": print_casadi(printed), "effects_meta.py": meta_module(effects, HEADER, effect_fuse.meta_extra()),
+             "kernels_casadi.py": print_casadi(printed), "effects_meta.py": meta_module(effects, HEADER, {**effect_fuse.meta_extra(), "pipeline_kernels": pipeline_meta.pipeline_kernels()}),
              "kernels_scalar.py": scalar_print.print_scalar(printed, forces)}
     step("printing EQUATIONS.md")
     files["EQUATIONS.md"] = print_markdown(printed, effects)

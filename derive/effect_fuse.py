@@ -165,15 +165,7 @@ def meta_extra() -> dict:
             "rhs_increments": {k: RHS_OF_KIND[k].inc[0] for k in TILE_KINDS},
             "flag_coupled": E.FLAG_COUPLED, "rhs_split": SPLIT_OF_KIND, "rhs_classes": NUMPY_CLASSES,
             "rhs_class_of_kind": NUMPY_CLASS_OF_KIND, "rhs_split_by_class": split_by_class(),
-            "inc_scale_c": (INC_C.start, INC_C.stop), "inc_scale_hq": INC_HQ, "rhs_constant": CONSTANT_KINDS,
-            "pipeline_kernels": _pipeline_kernels()}
-
-
-def _pipeline_kernels() -> dict:
-    """Sim.pipeline's table (derive/pipeline_meta.py; imported here: it reads this module's tables)."""
-    from . import pipeline_meta
-
-    return pipeline_meta.pipeline_kernels()
+            "inc_scale_c": (INC_C.start, INC_C.stop), "inc_scale_hq": INC_HQ, "rhs_constant": CONSTANT_KINDS}
 
 
 def _constant_flags(effects: Sequence[tuple[int, E.EffectDecl]]) -> set[int]:
