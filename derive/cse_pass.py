@@ -34,7 +34,7 @@ def tidy(temps: list, reduced: list) -> tuple[list, list]:
         The same kernel: fewer temporaries (a dropped one's name is not reused) and the outputs rewritten.
     """
     temps, reduced = _drop_negations(temps, reduced)
-    return _share_scaled(temps, reduced)
+    return late_factor_last(*_share_scaled(temps, reduced))
 
 
 def _negated_symbol(e) -> bool:
@@ -110,3 +110,63 @@ def _early(temps: list, movable: set) -> list:
         out.append((t, e))
         out.extend(after.get(t, []))
     return out
+
+
+# A rough latency model (cycles) of the printed operations, to find the factor of a product that is ready last.
+_LAT_ADD, _LAT_MUL, _LAT_DIV, _LAT_SQRT = 3, 3, 13, 20
+_LATE = 10            # a factor this much later than all the others is multiplied in last
+
+
+def _latency(e, ready: dict) -> int:
+    """When e's value is ready, in the model, given the ready times of the temporaries (inputs are ready at 0)."""
+    if e.is_Symbol:
+        return ready.get(e, 0)
+    if e.is_Atom or not e.args:
+        return 0
+    start = max(_latency(a, ready) for a in e.args)
+    if e.is_Pow:
+        x = e.exp
+        cost = (_LAT_SQRT if not x.is_Integer else _LAT_MUL) + (_LAT_DIV if x.is_negative else 0)
+        return start + cost
+    return start + (_LAT_ADD if e.is_Add else _LAT_MUL)
+
+
+def late_factor_last(temps: list, reduced: list) -> tuple[list, list]:
+    """Each product with one factor (a temporary) ready well after all its others printed as (the others) * late:
+    the others get a temporary of their own, computed while the late one (a square root, a division) is still on
+    its way, so one multiply, not several, follows it. As many multiplies; the product is reassociated, so its
+    value can change in the last bit (C and NumPy print the same form)."""
+    taken = [int(t.name[1:]) for t, _ in temps if t.name[:1] == "t" and t.name[1:].isdigit()]
+    names = sp.numbered_symbols("t", start=max(taken, default=-1) + 1)
+    ready: dict = {}
+    named: dict = {}      # a product of the others -> its temporary
+    out: list = []
+
+    def split(e):
+        if e.is_Atom or not e.args:
+            return e
+        args = [split(a) for a in e.args]
+        e = e.func(*args) if any(a is not b for a, b in zip(args, e.args)) else e
+        if not e.is_Mul or len(e.args) < 3:
+            return e
+        late = max((a for a in e.args if a.is_Symbol), key=lambda a: ready.get(a, 0), default=None)
+        if late is None:
+            return e
+        sign = -1 if e.args[0] == -1 else 1
+        others = [a for a in e.args if a is not late and not (sign < 0 and a == -1)]
+        if len(others) < 2 or ready.get(late, 0) < max(_latency(a, ready) for a in others) + _LATE:
+            return e
+        if e.as_ordered_factors()[-1] == late:      # printed last already (a left fold)
+            return e
+        rest = sp.Mul(*others)
+        if rest not in named:
+            named[rest] = next(names)
+            out.append((named[rest], rest))
+            ready[named[rest]] = _latency(rest, ready)
+        return sign * named[rest] * late
+
+    for t, e in temps:
+        e = split(e)
+        out.append((t, e))
+        ready[t] = _latency(e, ready)
+    return out, [split(e) for e in reduced]

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import keyword
 import re
+import dataclasses
 from dataclasses import dataclass, field
 
 import sympy as sp
@@ -347,7 +348,8 @@ class EffectDecl:
         ins += [Arg(p.name, p.symbol, f"{p.doc}, {p.unit}" if p.unit else p.doc, p.domain) for p in self.params]
         outs = [Arg(n, v, "force at the COM, world frame, N" if n == OUT_FORCE else "torque about the COM, world frame, N·m")
                 for n, v in self._printed(False)]
-        return Kernel(self.kernel_name, self.summary, self.caption, ins, outs, group, list(self.notes))
+        outs, where = constant_factors(outs, {s.name for a in ins for s in a.flat})
+        return Kernel(self.kernel_name, self.summary, self.caption, ins, outs, group, list(self.notes), where)
 
     def _printed(self, body: bool) -> list[tuple[str, sp.Matrix]]:
         """The outputs (body: the body-frame form's) as the kernels print them: printed_form of the declared ones,
@@ -370,13 +372,65 @@ class EffectDecl:
         ins += [Arg(p.name, p.symbol, f"{p.doc}, {p.unit}" if p.unit else p.doc, p.domain) for p in self.params]
         outs = [Arg(n, v, "force at the COM, world frame, N" if n == OUT_FORCE else "torque about the COM, body frame, N·m")
                 for n, v in self._printed(True)]
+        outs, where = constant_factors(outs, {s.name for a in ins for s in a.flat})
         return Kernel(self.kernel_name + "_b", self.summary + " (its body-frame form)", self.caption, ins, outs, group,
                       ["The torque as declared, in the body frame: plain bodies whose torques are all body-frame add "
-                       "it so and rotate nothing; effect_" + self.name + " gives it in the world frame."])
+                       "it so and rotate nothing; effect_" + self.name + " gives it in the world frame."], where)
 
 
 def _flat(v) -> list:
     return list(v) if isinstance(v, sp.MatrixBase) else [v]
+
+
+_VARYING = ("p_w", "q", "v_w", "omega_b")     # the state an integrator's stages change (m, I_b, parameters do not)
+
+
+def constant_factors(outs: list, taken: set) -> tuple[list, list]:
+    """outs (Arg list of a kernel) with, in each entry that reads the varying state (p_w, q, v_w, omega_b), the
+    product of its factors that do not (numbers, parameters, m, I_b: 3 μ (I_z − I_y); two or more, not a number
+    and one factor) named: a
+    Kernel.where symbol kc<i>, computed once per call as one rounded number. A caller that inlines the kernel
+    in every stage of a step (the fused RK4 tiles) then computes it once per body, not once per stage.
+
+    Parameters
+    ----------
+    outs : list of Arg
+        The kernel's outputs, 3×1 or scalar.
+    taken : set of str
+        Names already used by the kernel (its inputs): a where-symbol's name avoids them.
+
+    Returns
+    -------
+    (list of Arg, list of (Symbol, Expr))
+        The outputs with the products named, and the where list (empty when no entry has such a product).
+    """
+    varying = {x for f in _VARYING for x in STATE.symbols(f)}
+    names: dict = {}
+    where: list = []
+
+    def name(product):
+        if product not in names:
+            i, base = len(names), "kc"
+            while f"{base}{i}" in taken:
+                base += "_"
+            names[product] = sp.Symbol(f"{base}{i}", real=True)
+            where.append((names[product], product))
+        return names[product]
+
+    def group(e):
+        e = sp.sympify(e)
+        if not e.is_Mul or not (e.free_symbols & varying):
+            return e
+        fixed = [a for a in e.args if not (a.free_symbols & varying) and a != -1]
+        if len(fixed) < 2 or (len(fixed) == 2 and any(a.is_Number for a in fixed)):   # (k·μ·x prints as (k·μ)·x)
+            return e
+        return sp.Mul(*[a for a in e.args if a not in fixed], name(sp.Mul(*fixed)))
+
+    new = []
+    for a in outs:
+        v = a.value.applyfunc(group) if isinstance(a.value, sp.MatrixBase) else group(a.value)
+        new.append(dataclasses.replace(a, value=v))
+    return new, where
 
 
 def _ops_after_cse(exprs: list) -> int:

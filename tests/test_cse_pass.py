@@ -9,7 +9,7 @@ from pathlib import Path
 
 import sympy as sp
 
-from lavendersim.derive.cse_pass import _power_of_two, tidy
+from lavendersim.derive.cse_pass import _power_of_two, late_factor_last, tidy
 from lavendersim.derive.kernel import vec
 from lavendersim.derive.quaternion import rotate_to_body
 
@@ -95,3 +95,23 @@ def test_no_printed_kernel_keeps_a_negation_temporary():
     for name in ("kernels.c", "kernels_f32.c"):
         text = (GENERATED / name).read_text()
         assert not re.findall(r"const (?:double|float) t\d+ = -\w+;", text), name
+
+
+def test_a_late_factor_is_multiplied_in_last():
+    u, w, x = sp.symbols("u w x")
+    t0, t1 = sp.symbols("t0 t1")
+    temps = [(t0, 1 / sp.sqrt(x)), (t1, u * w)]          # t0 waits for a square root and a division
+    assert (3 * u * t0 * w).as_ordered_factors() == [3, t0, u, w]     # printed ((3*t0)*u)*w: t0 early in the chain
+    new_temps, new_reduced = late_factor_last(temps, [3 * u * t0 * w, -u * w * t0 * x, u * t1, 3 * u * w * t1])
+    rest = dict(new_temps)
+    s0 = new_reduced[0].args[0] if new_reduced[0].args[1] == t0 else new_reduced[0].args[1]
+    assert new_reduced[0] == s0 * t0 and rest[s0] == 3 * u * w
+    s1 = [a for a in new_reduced[1].args if a not in (-1, t0)]
+    assert new_reduced[1] == -s1[0] * t0 and rest[s1[0]] == u * w * x
+    assert new_reduced[2] == u * t1                       # two factors: nothing to reorder
+    assert new_reduced[3] == 3 * u * w * t1               # t1 = u*w is not late
+    assert [t for t, _ in new_temps][:2] == [t0, t1]
+    point = {u: 0.3, w: -1.7, x: 2.9}
+    value = [e.subs(list(reversed(new_temps))).subs(point) for e in new_reduced]
+    want = [e.subs(list(reversed(temps))).subs(point) for e in [3 * u * t0 * w, -u * w * t0 * x, u * t1, 3 * u * w * t1]]
+    assert all(abs(a - b) < 1e-12 for a, b in zip(value, want))

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 import sympy as sp
 
-from lavendersim.derive.effect import STATE, _ops_after_cse, effect, param, printed_form
-from lavendersim.derive.kernel import vec
+from lavendersim.derive.effect import STATE, _ops_after_cse, constant_factors, effect, param, printed_form
+from lavendersim.derive.kernel import Arg, vec
 from lavendersim.derive.quaternion import Rotation, rotate_to_body, rotate_to_world, rotation_matrix
 
 Q, V = vec("q", 4), vec("v", 3)
@@ -75,8 +75,12 @@ def test_the_gradient_torque_prints_factored_cheaper_and_equal():
         a, b = np.asarray(f_decl(*x), float), np.asarray(f_print(*x), float)
         assert np.allclose(a, b, rtol=1e-12, atol=0.0)
     # the effect's kernels print this form
+    # the effect's kernels print this form, each product of per-body constants (3 μ (I_z − I_y)) named once
     d = effect("gg", "gradient", params=params, torque_b=tau_b)
-    assert d.body_kernel().outputs[0].value == printed
+    k = d.body_kernel()
+    assert [s.name for s, _ in k.where] == ["kc0", "kc1", "kc2"]
+    assert all(not (e.free_symbols & set(STATE.q) or e.free_symbols & set(STATE.p_w)) for _, e in k.where)
+    assert k.outputs[0].value.xreplace(dict(k.where)) == printed
     assert d.torque_b == tau_b                       # the declaration itself is kept as written
 
 
@@ -86,3 +90,18 @@ def test_a_form_that_is_not_cheaper_is_kept_as_declared():
     assert printed_form([v])[0] is v
     w = sp.Matrix([a * b + a, 0, 0])                # a (b + 1): one multiply either way, no fewer operations
     assert printed_form([w])[0] is w
+
+
+def test_constant_factors_are_named_only_beside_the_state_and_avoid_input_names():
+    mu, kc0 = sp.symbols("mu kc0", real=True)
+    I0, I1, _ = STATE.I_b
+    q0, q1 = STATE.q[0], STATE.q[1]
+    outs = [Arg("tau", sp.Matrix([3 * mu * (I1 - I0) * q0 * q1, 2 * mu * q0, 3 * mu * (I1 - I0)]), "torque")]
+    new, where = constant_factors(outs, {"kc0", "mu"})
+    assert [s.name for s, _ in where] == ["kc_0"]                 # kc0 is an input name: not reused
+    assert where[0][1] == 3 * mu * (I1 - I0)
+    assert new[0].value[0] == where[0][0] * q0 * q1
+    assert new[0].value[1] == 2 * mu * q0                        # one constant factor beside 2: left as it is
+    assert new[0].value[2] == 3 * mu * (I1 - I0)                 # reads no state: nothing to hoist
+    assert outs[0].value[0] == 3 * mu * (I1 - I0) * q0 * q1      # the input is not changed
+    assert kc0 not in new[0].value.free_symbols
