@@ -18,6 +18,21 @@ from __future__ import annotations
 import sympy as sp
 
 
+def bottom_up(e, node):
+    """e with node applied to each of its compound subexpressions, innermost first (a node sees its arguments
+    already rewritten; an atom is returned as is)."""
+    if e.is_Atom or not e.args:
+        return e
+    args = [bottom_up(a, node) for a in e.args]
+    return node(e.func(*args) if any(a is not b for a, b in zip(args, e.args)) else e)
+
+
+def fresh_temps(temps: list):
+    """Names t<n> for new temporaries, numbered after the highest t<n> of temps (a pass may have dropped some)."""
+    taken = [int(t.name[1:]) for t, _ in temps if t.name[:1] == "t" and t.name[1:].isdigit()]
+    return sp.numbered_symbols("t", start=max(taken, default=-1) + 1)
+
+
 def tidy(temps: list, reduced: list) -> tuple[list, list]:
     """CSE's (temporaries, reduced outputs) without negation temporaries and with doubled temporaries shared.
 
@@ -68,11 +83,7 @@ def _share_scaled(temps: list, reduced: list) -> tuple[list, list]:
     """k*a*f printed as a*s where a temporary s = k*f exists (k a power of two; its sign may differ)."""
     scaled: dict = {}     # (|k|, f) -> s
 
-    def share(e):
-        if e.is_Atom or not e.args:
-            return e
-        args = [share(a) for a in e.args]
-        e = e.func(*args) if any(a is not b for a, b in zip(args, e.args)) else e
+    def share_node(e):
         if not e.is_Mul or len(e.args) != 3 or not e.args[0].is_Number:
             return e
         k, x, y = e.args
@@ -86,9 +97,12 @@ def _share_scaled(temps: list, reduced: list) -> tuple[list, list]:
     for t, e in temps:
         if _scaled_symbol(e):
             scaled.setdefault((abs(e.args[0]), e.args[1]), (t, e.args[0]))
-    shared = {t for t, _ in scaled.values()}
-    out = [(t, e) for t, e in _early(temps, shared)]
-    return [(t, e if t in shared else share(e)) for t, e in out], [share(e) for e in reduced]
+    movable = {t for t, _ in scaled.values()}
+    out = [(t, e) for t, e in _early(temps, movable)]
+    def share(e):
+        return bottom_up(e, share_node)
+
+    return [(t, e if t in movable else share(e)) for t, e in out], [share(e) for e in reduced]
 
 
 def _scaled_symbol(e) -> bool:
@@ -136,17 +150,12 @@ def late_factor_last(temps: list, reduced: list) -> tuple[list, list]:
     the others get a temporary of their own, computed while the late one (a square root, a division) is still on
     its way, so one multiply, not several, follows it. As many multiplies; the product is reassociated, so its
     value can change in the last bit (C and NumPy print the same form)."""
-    taken = [int(t.name[1:]) for t, _ in temps if t.name[:1] == "t" and t.name[1:].isdigit()]
-    names = sp.numbered_symbols("t", start=max(taken, default=-1) + 1)
+    names = fresh_temps(temps)
     ready: dict = {}
     named: dict = {}      # a product of the others -> its temporary
     out: list = []
 
-    def split(e):
-        if e.is_Atom or not e.args:
-            return e
-        args = [split(a) for a in e.args]
-        e = e.func(*args) if any(a is not b for a, b in zip(args, e.args)) else e
+    def split_node(e):
         if not e.is_Mul or len(e.args) < 3:
             return e
         late = max((a for a in e.args if a.is_Symbol), key=lambda a: ready.get(a, 0), default=None)
@@ -164,6 +173,9 @@ def late_factor_last(temps: list, reduced: list) -> tuple[list, list]:
             out.append((named[rest], rest))
             ready[named[rest]] = _latency(rest, ready)
         return sign * named[rest] * late
+
+    def split(e):
+        return bottom_up(e, split_node)
 
     for t, e in temps:
         e = split(e)

@@ -125,12 +125,7 @@ def test_the_numpy_backend_calls_what_the_pipeline_names(monkeypatch):
         sim = lv.Sim(s, dt=1e-3, backend="numpy")
         named = {k for ks in parts(sim.pipeline[1]).values() for k in ks}
         assert all(line.split(" -> ")[1] == sim.pipeline[1].split(" -> ")[1] for line in sim.pipeline[1:])
-        called: set[str] = set()
-        with monkeypatch.context() as m:
-            for k in named | stage_kernels | {"rigid_body_rhs_c", "rigid_body_rhs_free_c"}:
-                f = getattr(K, k)
-                m.setattr(K, k, lambda *a, _f=f, _k=k, **kw: (called.add(_k), _f(*a, **kw))[1])
-            sim.run(2)
+        called = _kernels_called(monkeypatch, K, named | stage_kernels | {"rigid_body_rhs_c", "rigid_body_rhs_free_c"}, sim)
         assert named <= called, (name, named - called)
         assert not (called & stage_kernels) - named, (name, called)
 
@@ -173,6 +168,17 @@ STEP_CASES = [("float64", "implicit_gyro"), ("float64", "rk4_expmap"), ("float64
               ("float64", "semi_implicit_euler"), ("float32", "rk4"), ("float32", "euler"), ("float32", "semi_implicit_euler")]
 STEP_C = Path(__file__).resolve().parents[1] / "lavendersim" / "csrc"
 
+
+
+def _kernels_called(monkeypatch, module, names, sim) -> set[str]:
+    """Which of module's kernels `names` two steps of sim call (each wrapped to record its name, then restored)."""
+    called: set[str] = set()
+    with monkeypatch.context() as m:
+        for k in names:
+            f = getattr(module, k)
+            m.setattr(module, k, lambda *a, _f=f, _k=k, **kw: (called.add(_k), _f(*a, **kw))[1])
+        sim.run(2)
+    return called
 
 def _c_function(text: str, head: str) -> str:
     """The body of the C function whose definition starts with `head` (up to the next line that is a lone '}')."""
@@ -248,12 +254,7 @@ def test_the_numpy_backend_calls_what_float32_and_structured_lines_name(monkeypa
         sim = lv.Sim(s, dt=1e-3, backend="numpy", integrator=integrator, dtype=dtype)
         named = {k for ks in parts(sim.pipeline[1]).values() for k in ks}
         assert len(sim.pipeline.groups()) == 1
-        called: set[str] = set()
-        with monkeypatch.context() as m:
-            for k in every:
-                f = getattr(mod, k)
-                m.setattr(mod, k, lambda *a, _f=f, _k=k, **kw: (called.add(_k), _f(*a, **kw))[1])
-            sim.run(2)
+        called = _kernels_called(monkeypatch, mod, every, sim)
         assert named <= called, (name, named - called)
         assert not (called & every) - named, (name, (called & every) - named)
 
@@ -479,12 +480,7 @@ def test_the_model_rows_are_what_numpy_runs(monkeypatch):
         sim = lv.Sim(s, dt=1e-3, backend="numpy")
         named = {k for ks in parts(sim.pipeline[1]).values() for k in ks}
         assert named & models == expect, (name, named)
-        called: set[str] = set()
-        with monkeypatch.context() as m:
-            for k in models:
-                f = getattr(K, k)
-                m.setattr(K, k, lambda *a, _f=f, _k=k, **kw: (called.add(_k), _f(*a, **kw))[1])
-            sim.run(2)
+        called = _kernels_called(monkeypatch, K, models, sim)
         assert called == expect, (name, called)
     assert "effects that read it" in lv.Sim(s, dt=1e-3, backend="numpy").pipeline[1]   # jointed_v: v_w formed too
 
