@@ -118,6 +118,12 @@ def kinds_by_flags() -> tuple[str, ...]:
     return tuple(tile_kind(sum(b for j, b in enumerate(RHS_BITS) if i >> j & 1)) for i in range(1 << len(RHS_BITS)))
 
 
+# Where every sum of effect contributions starts (C: kernels.h LV_SUM_START; NumPy: effects_meta.SUM_START): IEEE's
+# additive identity -0.0. -0 + x == x bitwise for every x (+0 and -0 included), so a sum from it equals the sum of its
+# terms alone (gcc folds the first add away), and a sum of nothing or of -0 terms is -0 (+0 + -0 would give +0).
+SUM_START = -0.0
+
+
 def rhs_c_header() -> list[str]:
     """kernels.h's printed rule: LV_RHS_FLAGS_INDEX(flags), the table index of an OR of effect flags,
     LV_RHS_KINDS_BY_FLAGS(K), the initializer of the table, each kind named K(kind) (kind in TILE_KINDS), and each
@@ -139,6 +145,10 @@ def rhs_c_header() -> list[str]:
            "   same sums, sc the body's LV_INC_SCALE_SIZE constants (rigid_body_increment_scale: s dt folded into the",
            "   Euler coefficients, 1/I, q's rate scale and 1/m, once per body and call). */",
            f"#define LV_INC_SCALE_SIZE {INC_SCALE_SIZE}",
+           "/* Every sum of effect contributions (force, torque, their constant prefixes) starts at LV_SUM_START, IEEE's",
+           "   additive identity (derive/effect_fuse.py SUM_START; NumPy: effects_meta.SUM_START): -0 + x == x bitwise. */",
+           f"#define LV_SUM_START ({SUM_START!r})",
+           "#define LV_SUM_START3 {LV_SUM_START, LV_SUM_START, LV_SUM_START} /* a 3-vector sum's start */",
            "/* A body whose effects all read no state (the constant kinds) stages only (q, omega_b) (csrc/step.c",
            "   lv_const_rk4_h): LV_CONST_SIZE constants per body and call, S (LV_INC_SCALE_SIZE) at 0, the world torque's",
            "   rigid_body_torque_constants (tau_w, 2 tau_w) at LV_CONST_TAU, constant_acceleration_steps' dv_w, dp_w at",
@@ -159,13 +169,14 @@ def rhs_c_header() -> list[str]:
 def meta_extra() -> dict:
     """effects_meta.py's printed rule (the NumPy backend's copy of the table): RHS_BITS, RHS_KINDS_BY_FLAGS,
     RHS_KERNELS (each kind's right-hand side as Sim.pipeline names it), the NumPy classes (RHS_CLASSES,
-    RHS_CLASS_OF_KIND) and how each steps decoupled (RHS_SPLIT_BY_CLASS)."""
+    RHS_CLASS_OF_KIND), how each steps decoupled (RHS_SPLIT_BY_CLASS) and where effect sums start (SUM_START)."""
     return {"rhs_bits": RHS_BITS, "rhs_kinds_by_flags": kinds_by_flags(),
             "rhs_kernels": {k: RHS_OF_KIND[k].pipeline for k in TILE_KINDS},
             "rhs_increments": {k: RHS_OF_KIND[k].inc[0] for k in TILE_KINDS},
             "flag_coupled": E.FLAG_COUPLED, "rhs_split": SPLIT_OF_KIND, "rhs_classes": NUMPY_CLASSES,
             "rhs_class_of_kind": NUMPY_CLASS_OF_KIND, "rhs_split_by_class": split_by_class(),
-            "inc_scale_c": (INC_C.start, INC_C.stop), "inc_scale_hq": INC_HQ, "rhs_constant": CONSTANT_KINDS}
+            "inc_scale_c": (INC_C.start, INC_C.stop), "inc_scale_hq": INC_HQ, "rhs_constant": CONSTANT_KINDS,
+            "sum_start": SUM_START}
 
 
 def _constant_flags(effects: Sequence[tuple[int, E.EffectDecl]]) -> set[int]:

@@ -10,10 +10,11 @@ kernels.h LV_RHS_INC_<kind> on the lane's rigid_body_increment_scale constants),
 include path (lavendersim.user_sets: ``-DLVU_ENGINE=<their hash>``), and exports that hash (``lvu_engine_hash``):
 the engine uses a fused tile only when it was compiled against the very sources it runs (else the stage passes).
 
-Every lane does the stage passes' IEEE operations in their order: the effect sums start at zero and the effect
-adds into them (its body-frame form for a body-frame torque alone, FLAG_TORQUE_B), then the tile kind's
-increments (derive.effect_fuse.tile_kind and RHS_OF_KIND: kernels.h's LV_RHS_INC_<kind>, as the stage passes
-call it); results are bitwise the stage passes' (tests/test_extending.py checks it at every instruction set).
+Every lane does the stage passes' IEEE operations in their order: the effect sums start at LV_SUM_START (-0.0, IEEE's
+additive identity, so gcc folds the first add) and the effect adds into them (its body-frame form for a body-frame
+torque alone, FLAG_TORQUE_B), then the tile kind's increments (derive.effect_fuse.tile_kind and RHS_OF_KIND:
+kernels.h's LV_RHS_INC_<kind>, as the stage passes call it); results are bitwise the stage passes'
+(tests/test_extending.py checks it at every instruction set).
 
 The copies keep GCC's default instruction scheduling, unlike the engine's AVX-512 tiles (batch_simd.h
 LV_TILE_H_SCHED_avx512, the pre-register-allocation scheduler): measured on the guide's gravity_gradient (session 24,
@@ -62,8 +63,8 @@ def c_fused_tiles(effects: list[E.EffectDecl], user_function) -> list[str]:
         body = RHS_OF_KIND[kind].body_frame
         np_ = max(d.n_params, 1)
         rhs = f"LVU_RHS_{d.name.upper()}"
-        c += [f"/* {d.name}: tile kind {kind}; the lane's effect sums start at zero, as the stage passes' do */",
-              f"#define {rhs}(in, out) do {{ double f[3] = {{0.0, 0.0, 0.0}}, t[3] = {{0.0, 0.0, 0.0}}; "
+        c += [f"/* {d.name}: tile kind {kind}; the lane's effect sums start at LV_SUM_START, as the stage passes' do */",
+              f"#define {rhs}(in, out) do {{ double f[3] = LV_SUM_START3, t[3] = LV_SUM_START3; "
               f"{user_function(d, body)}(pl, in, in + LV_STATE_V_W, mass, I, f, t); "
               f"LV_RHS_INC_{kind}(in, mass, sc, f, t, out); }} while (0)"]
         macro = f"LVU_FUSED_{d.name.upper()}"

@@ -251,7 +251,8 @@ def kernels() -> list[Kernel]:
     qdot = quat_rate_body(xq, xw)
     full = X.assemble(p_w=xv, q=qdot, v_w=F_w / m, omega_b=euler_rhs_c(c_b, xw, rotate_to_body(xq, tau_w)))
     free = X.assemble(p_w=xv, q=qdot, v_w=sp.zeros(3, 1), omega_b=euler_rhs_c(c_b, xw, sp.zeros(3, 1)))
-    torque = full.subs({F_w[i]: 0 for i in range(3)})
+    # a world torque only: the v rate of the sum of no force (SUM_START, -0: F_W/m with F_W = -0), printed as -0
+    torque = X.assemble(p_w=xv, q=qdot, v_w=NO_FORCE, omega_b=euler_rhs_c(c_b, xw, rotate_to_body(xq, tau_w)))
     a_w = vec("a_w", 3)
     force_only = X.assemble(p_w=xv, q=qdot, v_w=a_w, omega_b=euler_rhs_c(c_b, xw, sp.zeros(3, 1)))
     body = X.assemble(p_w=xv, q=qdot, v_w=a_w, omega_b=euler_rhs_c(c_b, xw, tau_b))
@@ -303,7 +304,9 @@ def kernels() -> list[Kernel]:
                r"\dot v_W = 0,\ \text{else as rigid\_body\_rhs}",
                [Arg(*XS), Arg(*IB), Arg("tau_w", tau_w, "total torque about the COM, world frame, N·m")],
                [Arg("x_dot", torque, "d/dt of the state")], g,
-               notes=["Bitwise rigid_body_rhs with F_W = 0 (its v rate F_W/m is then exactly +0)."], where=where),
+               notes=["Bitwise rigid_body_rhs with F_W the sum of no force, -0 (effect sums start at IEEE's additive "
+                      "identity, derive/effect_fuse.py SUM_START): its v rate F_W/m is then -0, printed as -0.0 "
+                      "(NegativeZero), so v_W + h v_dot is v_W bitwise."], where=where),
         Kernel("euler_coefficients", "The inertia-only coefficients of Euler's equations, computed once per body and call",
                r"k_x = (I_y - I_z)/I_x,\ r_x = 1/I_x\ \text{(cyclic)}",
                [Arg(*IB)], [Arg("c_b", c_b, "(k_x, k_y, k_z, r_x, r_y, r_z), body frame; k dimensionless, r 1/(kg·m²)")], g,
@@ -363,10 +366,11 @@ def kernels() -> list[Kernel]:
                [Arg("H", increments(q, omega_b, v_w, S_b, F_w, rotate_to_body(q, tau_w)), "(s dt) d/dt of the state")], g,
                notes=[inc_note]),
         Kernel("rigid_body_increments_torque_c", "An RK4 stage's scaled increments under a world torque only",
-               r"H_v = 0,\ \text{else as rigid\_body\_increments\_c}",
+               r"H_v = -0,\ \text{else as rigid\_body\_increments\_c}",
                [*QWV, Arg(*SB), Arg("tau_w", tau_w, "total torque about the COM, world frame, N·m")],
-               [Arg("H", increments(q, omega_b, v_w, S_b, None, rotate_to_body(q, tau_w)), "(s dt) d/dt of the state")], g,
-               notes=[inc_note]),
+               [Arg("H", increments(q, omega_b, v_w, S_b, NO_FORCE, rotate_to_body(q, tau_w)), "(s dt) d/dt of the state")],
+               g, notes=[inc_note, "H_v is printed as -0.0 (NO_FORCE): bitwise rigid_body_increments_c on the sum of no "
+                         "force (SUM_START, -0: h_m (-0) = -0), and v_W + H_v is v_W."]),
         Kernel("rigid_body_increments_force_c", "An RK4 stage's scaled increments under a force only (no torque)",
                r"H_{\omega,x} = C_x\omega_y\omega_z,\ H_v = h_m F_W,\ \text{else as rigid\_body\_increments\_c}",
                [*QWV, Arg(*SB), Arg("F_w", F_w, "total force at the COM, world frame, N")],

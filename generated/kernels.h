@@ -971,6 +971,10 @@ const char *lv_effect_name(int code);
    same sums, sc the body's LV_INC_SCALE_SIZE constants (rigid_body_increment_scale: s dt folded into the
    Euler coefficients, 1/I, q's rate scale and 1/m, once per body and call). */
 #define LV_INC_SCALE_SIZE 9
+/* Every sum of effect contributions (force, torque, their constant prefixes) starts at LV_SUM_START, IEEE's
+   additive identity (derive/effect_fuse.py SUM_START; NumPy: effects_meta.SUM_START): -0 + x == x bitwise. */
+#define LV_SUM_START (-0.0)
+#define LV_SUM_START3 {LV_SUM_START, LV_SUM_START, LV_SUM_START} /* a 3-vector sum's start */
 /* A body whose effects all read no state (the constant kinds) stages only (q, omega_b) (csrc/step.c
    lv_const_rk4_h): LV_CONST_SIZE constants per body and call, S (LV_INC_SCALE_SIZE) at 0, the world torque's
    rigid_body_torque_constants (tau_w, 2 tau_w) at LV_CONST_TAU, constant_acceleration_steps' dv_w, dp_w at

@@ -614,7 +614,7 @@ def rigid_body_rhs_torque(x, I_b, tau_w):
     t4 = -t3*x_4 + 2*tau_w_1*x_3
     t5 = t3*x_5 - 2*tau_w_2*x_3
     t6 = -2*tau_w_1*x_5 + 2*tau_w_2*x_4
-    return (x_7, x_8, x_9, t0*x_6 - t1*x_5 + t2*x_4, t0*x_5 + t1*x_6 - t2*x_3, -t0*x_4 + t1*x_3 + t2*x_6, -t0*x_3 - t1*x_4 - t2*x_5, 0.0, 0.0, 0.0, c_b_0*x_11*x_12 + c_b_3*(t4*x_4 - t5*x_5 - t6*x_6 + tau_w_0), c_b_1*x_10*x_12 + c_b_4*(-t4*x_3 - t5*x_6 + t6*x_5 + tau_w_1), c_b_2*x_10*x_11 + c_b_5*(-t4*x_6 + t5*x_3 - t6*x_4 + tau_w_2))
+    return (x_7, x_8, x_9, t0*x_6 - t1*x_5 + t2*x_4, t0*x_5 + t1*x_6 - t2*x_3, -t0*x_4 + t1*x_3 + t2*x_6, -t0*x_3 - t1*x_4 - t2*x_5, -0.0, -0.0, -0.0, c_b_0*x_11*x_12 + c_b_3*(t4*x_4 - t5*x_5 - t6*x_6 + tau_w_0), c_b_1*x_10*x_12 + c_b_4*(-t4*x_3 - t5*x_6 + t6*x_5 + tau_w_1), c_b_2*x_10*x_11 + c_b_5*(-t4*x_6 + t5*x_3 - t6*x_4 + tau_w_2))
 
 
 def euler_coefficients(I_b):
@@ -651,7 +651,7 @@ def rigid_body_rhs_torque_c(x, c_b, tau_w):
     t4 = -t3*x_4 + 2*tau_w_1*x_3
     t5 = t3*x_5 - 2*tau_w_2*x_3
     t6 = -2*tau_w_1*x_5 + 2*tau_w_2*x_4
-    return (x_7, x_8, x_9, t0*x_6 - t1*x_5 + t2*x_4, t0*x_5 + t1*x_6 - t2*x_3, -t0*x_4 + t1*x_3 + t2*x_6, -t0*x_3 - t1*x_4 - t2*x_5, 0.0, 0.0, 0.0, c_b_0*x_11*x_12 + c_b_3*(t4*x_4 - t5*x_5 - t6*x_6 + tau_w_0), c_b_1*x_10*x_12 + c_b_4*(-t4*x_3 - t5*x_6 + t6*x_5 + tau_w_1), c_b_2*x_10*x_11 + c_b_5*(-t4*x_6 + t5*x_3 - t6*x_4 + tau_w_2))
+    return (x_7, x_8, x_9, t0*x_6 - t1*x_5 + t2*x_4, t0*x_5 + t1*x_6 - t2*x_3, -t0*x_4 + t1*x_3 + t2*x_6, -t0*x_3 - t1*x_4 - t2*x_5, -0.0, -0.0, -0.0, c_b_0*x_11*x_12 + c_b_3*(t4*x_4 - t5*x_5 - t6*x_6 + tau_w_0), c_b_1*x_10*x_12 + c_b_4*(-t4*x_3 - t5*x_6 + t6*x_5 + tau_w_1), c_b_2*x_10*x_11 + c_b_5*(-t4*x_6 + t5*x_3 - t6*x_4 + tau_w_2))
 
 
 def rigid_body_rhs_c(x, m, c_b, F_w, tau_w):
@@ -728,7 +728,7 @@ def rigid_body_increments_torque_c(q, omega_b, v_w, S_b, tau_w):
     t4 = -2*q_1*tau_w_0 + t3*tau_w_1
     t5 = 2*q_2*tau_w_0 - t3*tau_w_2
     t6 = 2*q_1*tau_w_2 - 2*q_2*tau_w_1
-    return (S_b_7*v_w_0, S_b_7*v_w_1, S_b_7*v_w_2, q_1*t1 - q_2*t2 + q_3*t0, -q_0*t1 + q_2*t0 + q_3*t2, q_0*t2 - q_1*t0 + q_3*t1, -q_0*t0 - q_1*t2 - q_2*t1, 0.0, 0.0, 0.0, S_b_0*omega_b_1*omega_b_2 + S_b_3*(q_1*t4 - q_2*t5 - q_3*t6 + tau_w_0), S_b_1*omega_b_0*omega_b_2 + S_b_4*(-q_0*t4 + q_2*t6 - q_3*t5 + tau_w_1), S_b_2*omega_b_0*omega_b_1 + S_b_5*(q_0*t5 - q_1*t6 - q_3*t4 + tau_w_2))
+    return (S_b_7*v_w_0, S_b_7*v_w_1, S_b_7*v_w_2, q_1*t1 - q_2*t2 + q_3*t0, -q_0*t1 + q_2*t0 + q_3*t2, q_0*t2 - q_1*t0 + q_3*t1, -q_0*t0 - q_1*t2 - q_2*t1, -0.0, -0.0, -0.0, S_b_0*omega_b_1*omega_b_2 + S_b_3*(q_1*t4 - q_2*t5 - q_3*t6 + tau_w_0), S_b_1*omega_b_0*omega_b_2 + S_b_4*(-q_0*t4 + q_2*t6 - q_3*t5 + tau_w_1), S_b_2*omega_b_0*omega_b_1 + S_b_5*(q_0*t5 - q_1*t6 - q_3*t4 + tau_w_2))
 
 
 def rigid_body_increments_force_c(q, omega_b, v_w, S_b, F_w):
@@ -2183,16 +2183,16 @@ ZEROS = {
     'world_to_body': {'v_b': ()},
     'kinetic_energy': {'T': ()},
     'angular_momentum_world': {'L_w': ()},
-    'rigid_body_rhs_torque': {'x_dot': (7, 8, 9)},
+    'rigid_body_rhs_torque': {'x_dot': ()},
     'euler_coefficients': {'c_b': ()},
     'rigid_body_rhs_free_c': {'x_dot': (7, 8, 9)},
-    'rigid_body_rhs_torque_c': {'x_dot': (7, 8, 9)},
+    'rigid_body_rhs_torque_c': {'x_dot': ()},
     'rigid_body_rhs_c': {'x_dot': ()},
     'rigid_body_rates_free_c': {'g': (), 'omega_dot_b': ()},
     'rigid_body_increments_free_c': {'H_q': (), 'H_omega': ()},
     'rigid_body_increment_scale': {'S_b': ()},
     'rigid_body_increments_c': {'H': ()},
-    'rigid_body_increments_torque_c': {'H': (7, 8, 9)},
+    'rigid_body_increments_torque_c': {'H': ()},
     'rigid_body_increments_force_c': {'H': ()},
     'rigid_body_increments_body_c': {'H': ()},
     'rigid_body_increments_torque_b_c': {'H': ()},

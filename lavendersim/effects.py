@@ -56,6 +56,9 @@ _RHS_BY_INDEX = np.array([_RHS_OF_KIND[k] for k in _META.RHS_KINDS_BY_FLAGS], dt
 FLAG_COUPLED, FLAG_USES_STATE = _META.FLAG_COUPLED, _META.FLAG_USES_STATE
 RHS_SPLIT: tuple[int, ...] = _META.RHS_SPLIT_BY_CLASS   # by class (RHS_FULL ...)
 INC_SCALE_C, INC_SCALE_HQ = slice(*_META.INC_SCALE_C), _META.INC_SCALE_HQ   # C_b and h_q within the increments' S
+# where every sum of effect contributions starts (derive/effect_fuse.py SUM_START, C's LV_SUM_START): IEEE's additive
+# identity -0.0, so a sum is bitwise its terms' sum alone and a sum of nothing is -0, as in C
+SUM_START: float = float(_META.SUM_START)
 
 
 def rhs_classes(flags: np.ndarray) -> np.ndarray:
@@ -728,7 +731,7 @@ def net_load(effects, body) -> tuple[np.ndarray, np.ndarray]:
     from .generated.layout import STATE_V_W
 
     x = body.x0[None]
-    F, tau = np.zeros(3), np.zeros(3)
+    F, tau = np.zeros(3), np.zeros(3)   # a report (load_overflow's norms), not a stepped sum: no effect reads +0
     with np.errstate(all="ignore"):
         for e in effects:
             f, t = numpy_apply(e.code)(e.params_flat()[None], x, x[:, STATE_V_W], np.array([body.mass]), body.I_b[None])

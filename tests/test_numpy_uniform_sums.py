@@ -24,7 +24,7 @@ N = 12
 
 def states():
     """(N, 13) struct-of-arrays states; bodies 0-3 at rest with q = identity and v = -0 (zero forces and torques
-    whose sign the sum must fix: 0 + (-0) = +0)."""
+    whose sign the sum must keep: SUM_START + (-0) = -0)."""
     rng = np.random.default_rng(3)
     x = rng.normal(size=(N, LY.STATE_SIZE))
     x[:, LY.STATE_Q] /= np.linalg.norm(x[:, LY.STATE_Q], axis=1, keepdims=True)
@@ -49,11 +49,13 @@ def test_uniform_sums_are_the_per_body_sums_bitwise(name):
         got = uniform.sums(x, x[:, LY.STATE_V_W], out)
         for g, r in zip(got, ref):
             assert np.array_equal(g, r) and np.array_equal(np.signbit(g), np.signbit(r)), name
-    if name == "angular damping":     # at rest the sum, as C's, is +0 (0 + t_1). The kernel's own zero was -0 (-c
-        # times +0) while R_WB tau_b printed as the matrix product; printed as the sandwich (issue 30) it is +0, so
-        # this case no longer holds a -0 term of its own (the signed-zero check above still runs on every table)
+    if name == "angular damping":     # at rest the sum, as C's, is +0 (SUM_START + t_1 = t_1). The kernel's own
+        # zero was -0 (-c times +0) while R_WB tau_b printed as the matrix product; printed as the sandwich (issue 30)
+        # it is +0, so this case no longer holds a -0 term of its own (the signed-zero check above runs on every table)
         raw = E.numpy_apply(E.REGISTRY["angular_damping"].code)(every[:, E.ROW_PARAMS:].repeat(N, 0), x, None, m, I)
         assert not np.signbit(raw[1][:4]).any() and not np.signbit(got[1][:4]).any()
-    if name == "a negative zero term":  # the kernel's force x is m times -0 = -0 on every body; the sum, as C's, +0
+    if name == "a negative zero term":  # the kernel's force x is m times -0 = -0 on every body; the sum, as C's, starts
+        # at SUM_START (-0, IEEE's additive identity): -0 + (-0) = -0, the term itself (from +0 it was +0)
         raw = E.numpy_apply(E.REGISTRY["gravity"].code)(every[:, E.ROW_PARAMS:].repeat(N, 0), x, None, m, I)
-        assert np.signbit(raw[0][:, 0]).all() and not np.signbit(got[0][:, 0]).any()
+        assert E.SUM_START == 0.0 and np.signbit(E.SUM_START)
+        assert np.signbit(raw[0][:, 0]).all() and np.signbit(got[0][:, 0]).all()

@@ -27,7 +27,7 @@ from ..generated import layout as LY
 from ..generated import tableaux as T
 from ..kernels import K
 from . import numpy_scalar as SC
-from ..effects import INC_SCALE_C, INC_SCALE_HQ, RHS_BODY, RHS_BODY_F, RHS_FORCE, RHS_FULL
+from ..effects import INC_SCALE_C, INC_SCALE_HQ, RHS_BODY, RHS_BODY_F, RHS_FORCE, RHS_FULL, SUM_START
 from .base import (DOPRI5_HMIN_REL, DOPRI5_MAX_SUBSTEPS, FLOAT32_INTEGRATORS, KIND_JOINT, KIND_WHEELS, PLAIN_ONLY,
                Adaptive, Models, divergence_cause, no_root_cause, rk_weights, tableau_of, tolerance_cause,
                wheel_counts)
@@ -93,7 +93,7 @@ class _EffectIndex:
         # table order, with its own parameters: the same sums, no gather or scatter
         # An effect that reads no state value (its kernel's inputs: parameters, m, I_b) is evaluated once here.
         self.uniform = None
-        self.zeros: np.ndarray | None = None     # (n, 3) zeros, struct-of-arrays, made on first use (_zeros)
+        self.nothing: np.ndarray | None = None   # (n, 3) sum of no terms, struct-of-arrays, on first use (_nothing)
         self.program: tuple | None = None       # _uniform_sums' calls (_uniform_program), on first use
         self.bound: tuple | None = None         # ... bound to the last buffers it was given (_bind)
         if n and every.size == len(effects):
@@ -117,15 +117,15 @@ class _EffectIndex:
 
     def affine(self, kmod) -> tuple[np.ndarray, np.ndarray]:
         """The decoupled forces' sums per body (F0 (n, 3), k (n,)): each effect's printed affine form (kmod's
-        EFFECT_AFFINE: F = F0 − k v_W; an effect without a force adds nothing) added in table order from 0, as
-        csrc/step.c lv_split_flow_scale adds lv_effect_affine's."""
+        EFFECT_AFFINE: F = F0 − k v_W; an effect without a force adds nothing: SUM_START, -0) added in table order
+        from SUM_START, as csrc/step.c lv_split_flow_scale adds lv_effect_affine's."""
         n = self.m.shape[0]
-        cF, ck = np.zeros((self.npairs, 3)), np.zeros(self.npairs)
+        cF, ck = np.full((self.npairs, 3), SUM_START), np.full(self.npairs, SUM_START)
         for (_, sel, loc, p), name in zip(self.groups, self.names):
             fn = kmod.EFFECT_AFFINE.get(name)
             if fn is not None:
                 cF[sel], ck[sel] = fn(p, self.m[loc])
-        F0, k = np.zeros((n, 3)), np.zeros(n)
+        F0, k = np.full((n, 3), SUM_START), np.full(n, SUM_START)
         for locF, f, _, _ in self.ranks:
             F0[locF] += cF[f]
             k[locF] += ck[f]
@@ -133,12 +133,12 @@ class _EffectIndex:
 
     def _constant_prefix(self, j: int) -> tuple[int, np.ndarray | None]:
         """Scene-wide effects, output j (0: force, 1: torque): (how many of its leading terms are constant, their
-        sum 0 + c_1 + c_2 + ... in table order, struct-of-arrays, or None)."""
+        sum SUM_START + c_1 + c_2 + ... in table order, struct-of-arrays, or None)."""
         terms = [u[4] and u[4][j] for u in self.uniform if u[2 + j]]
         k = next((i for i, c in enumerate(terms) if c is None), len(terms))
         if not k:
             return 0, None
-        acc = _soa(np.zeros((self.m.shape[0], 3), self.dtype))
+        acc = _soa(np.full((self.m.shape[0], 3), SUM_START, self.dtype))
         for c in terms[:k]:
             acc += c
         return k, acc
@@ -146,8 +146,9 @@ class _EffectIndex:
     def _uniform_program(self) -> tuple:
         """_uniform_sums' calls, fixed once per plan: for each effect that adds a term each call (apply, p, its
         constant output or None, takes_out, the out slots its output is written into (None: not written), the adds
-        (j, prev): out[j] = prev + t_j with prev None (t + 0), an array (the constant prefix) or j (the running sum)),
-        and per output the array returned when no term is added each call (None: out[j])."""
+        (j, prev): out[j] = prev + t_j with prev None (t + SUM_START), an array (the constant prefix) or j (the
+        running sum)), and per output the array returned when no term is added each call (None: out[j]; the sum of
+        nothing is _nothing(), SUM_START)."""
         done, prog = [0, 0], []     # terms of each output summed so far
         for apply, p, has_F, has_T, const, takes_out in self.uniform:
             dest: list = [None, None]
@@ -155,18 +156,19 @@ class _EffectIndex:
             for j, has in enumerate((has_F, has_T)):
                 k, base = self.base[j]
                 done[j] += has
-                if has and done[j] > k:     # the first term is written into the sum itself, then + 0 in place
+                if has and done[j] > k:     # the first term is written into the sum itself, then + SUM_START
                     dest[j] = j if done[j] == 1 else 2 + j
                     adds.append((j, base if done[j] == k + 1 else j))
             if adds:
                 prog.append((apply, p, const, takes_out, tuple(dest), tuple(adds)))
-        fixed = tuple(None if done[j] > self.base[j][0] else (self.base[j][1] if self.base[j][0] else self._zeros())
+        fixed = tuple(None if done[j] > self.base[j][0] else (self.base[j][1] if self.base[j][0] else self._nothing())
                       for j in (0, 1))
         return tuple(prog), fixed
 
     def _bind(self, out) -> tuple:
         """_uniform_program's calls on the buffers out: (out, per effect (apply, p, its constant output or None, the
-        out= it takes or None, the adds (left operand or None for t + 0, destination, j)), the (F, tau) returned)."""
+        out= it takes or None, the adds (left operand or None for t + SUM_START, destination, j)), the (F, tau)
+        returned)."""
         if self.program is None:
             self.program = self._uniform_program()
         calls = []
@@ -189,17 +191,18 @@ class _EffectIndex:
         for apply, p, const, o, adds in bound[1]:
             ft = const if const is not None else apply(p, x, v, m, I) if o is None else apply(p, x, v, m, I, out=o)
             for left, dst, j in adds:
-                # the running sum 0 + t_1 + t_2 + ...: the first term as t + 0 (the same number, -0 included)
+                # the running sum SUM_START + t_1 + t_2 + ...: the first term as t + SUM_START (t itself, -0 kept)
                 if left is None:
-                    np.add(ft[j], 0.0, out=dst)
+                    np.add(ft[j], SUM_START, out=dst)
                 else:
                     np.add(left, ft[j], out=dst)
         return bound[2]
 
-    def _zeros(self) -> np.ndarray:
-        if self.zeros is None:
-            self.zeros = _soa(np.zeros((self.m.shape[0], 3), self.dtype))
-        return self.zeros
+    def _nothing(self) -> np.ndarray:
+        """The sum of no terms (SUM_START) per body, (n, 3) struct-of-arrays, made once."""
+        if self.nothing is None:
+            self.nothing = _soa(np.full((self.m.shape[0], 3), SUM_START, self.dtype))
+        return self.nothing
 
     def sums(self, x: np.ndarray, v: np.ndarray, out: tuple[np.ndarray, ...] | None = None
              ) -> tuple[np.ndarray, np.ndarray]:
@@ -209,7 +212,7 @@ class _EffectIndex:
         n = x.shape[0]
         if self.uniform is not None and self.npairs:
             return self._uniform_sums(x, v, out or tuple(np.empty((n, 3), self.dtype) for _ in range(4)))
-        F, tau = np.zeros((n, 3), self.dtype), np.zeros((n, 3), self.dtype)
+        F, tau = np.full((n, 3), SUM_START, self.dtype), np.full((n, 3), SUM_START, self.dtype)
         if not self.npairs:
             return F, tau
         cF, cT = np.empty((self.npairs, 3), self.dtype), np.empty((self.npairs, 3), self.dtype)
@@ -451,9 +454,10 @@ class _Plan:
         return out
 
     def loads(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Plain bodies: (F_w, tau_b) of their effects, (nb, 3) each; zeros for bodies without effects."""
-        F = np.zeros((x.shape[0], 3))
-        tau_b = np.zeros((x.shape[0], 3))
+        """Plain bodies: (F_w, tau_b) of their effects, (nb, 3) each; SUM_START (-0, the sum of nothing, as C's
+        plain_loads and gyro_step) for bodies without effects."""
+        F = np.full((x.shape[0], 3), SUM_START)
+        tau_b = np.full((x.shape[0], 3), SUM_START)
         if self.forced.size:
             xf = x[self.forced]
             Ff, tf = self.index.sums(xf, xf[:, V])

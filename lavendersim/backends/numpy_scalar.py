@@ -17,7 +17,8 @@ import math
 import numpy as np
 
 from ..effects import (FLAG_COUPLED, FLAG_USES_STATE, INC_SCALE_C, INC_SCALE_HQ, RHS_BODY, RHS_BODY_F, RHS_FORCE,
-                       RHS_FULL, RHS_SPLIT, ROW_BODY, ROW_CODE, ROW_PARAMS, constant_kind, rhs_classes, spec_for_code)
+                       RHS_FULL, RHS_SPLIT, ROW_BODY, ROW_CODE, ROW_PARAMS, SUM_START, constant_kind, rhs_classes,
+                       spec_for_code)
 from ..generated import kernels_scalar as KS
 from ..generated import layout as LY
 
@@ -59,7 +60,7 @@ class ScalarBodies:
             mine_fx = [(KS.EFFECT_APPLY_B_BY_CODE.get(codes[r], applies[r]) if body_form else applies[r], rows[r])
                        for r in mine]
             # decoupled (numpy_backend._forced_groups' rule): its rotation staged alone, its translation's flow on
-            # its affine forces' sums (table order from 0)
+            # its affine forces' sums (table order from SUM_START)
             split = RHS_SPLIT[cls] if f & FLAG_USES_STATE and not f & FLAG_COUPLED else 0
             aff = [(KS.EFFECT_AFFINE_BY_CODE[codes[r]], rows[r]) for r in mine if codes[r] in KS.EFFECT_AFFINE_BY_CODE]
             const = constant_kind(f, any(user[r] for r in mine)) if mine else None
@@ -68,8 +69,10 @@ class ScalarBodies:
 
 def _rhs(y, c, m, I, effects):
     """d/dt of one plain body's state y (13 floats) with effects (its class, [(apply, p)]): their sums in table order
-    (from 0.0, as the vectorized sums) and its class's right-hand side (numpy_backend._ForcedGroup.rhs)."""
+    (from SUM_START, as the vectorized sums) and its class's right-hand side (numpy_backend._ForcedGroup.rhs)."""
     cls, effects = effects[:2]
+    if not effects:   # no effect: torque-free, as C and the vectorized path step it (v_w' is the printed 0, +0)
+        return KS.rigid_body_rhs_free_c(y, c)
     F, T = _sums(y, m, I, effects)
     if cls == RHS_FULL:
         return KS.rigid_body_rhs_c(y, m, c, F, T)
@@ -81,8 +84,8 @@ def _rhs(y, c, m, I, effects):
 
 def _sums(y, m, I, effects):
     """The force and torque sums (F, T) of one plain body's effects [(apply, p)] at its state y (13 floats), in table
-    order from 0.0, as the vectorized sums."""
-    Fx = Fy = Fz = Tx = Ty = Tz = 0.0
+    order from SUM_START (-0.0, IEEE's additive identity), as the vectorized sums."""
+    Fx = Fy = Fz = Tx = Ty = Tz = SUM_START
     v = y[_V]
     for apply, p in effects:
         f, t = apply(p, y, v, m, I)
@@ -104,7 +107,7 @@ def _inc(y, S, effects):
         return KS.rigid_body_increments_c(q, w, v, S, F, T)
     if cls == RHS_FORCE:
         return KS.rigid_body_increments_force_c(q, w, v, S, F)
-    return KS.rigid_body_increments_body_c(q, w, v, S, F if cls != RHS_BODY else (0.0, 0.0, 0.0), T)
+    return KS.rigid_body_increments_body_c(q, w, v, S, F, T)   # BODY: F is the sum of no force, SUM_START
 
 
 def _sum(terms, stage: str, i: int, h: str) -> str:
@@ -280,8 +283,8 @@ _RUNS_HS: dict = {}
 
 def _flow_scale(aff, m: float, dt: float):
     """translation_flow_scale's constants of a decoupled body: its affine forces [(affine, p)] summed in table order
-    from 0.0 (numpy_backend._EffectIndex.affine, C's lv_split_flow_scale)."""
-    Fx = Fy = Fz = k = 0.0
+    from SUM_START (numpy_backend._EffectIndex.affine, C's lv_split_flow_scale)."""
+    Fx = Fy = Fz = k = SUM_START
     for fn, p in aff:
         f, r = fn(p, m)
         Fx, Fy, Fz, k = Fx + f[0], Fy + f[1], Fz + f[2], k + r

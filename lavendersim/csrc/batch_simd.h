@@ -250,7 +250,7 @@ typedef void (*lv_tile_fn)(double (*LV_RESTRICT T)[LV_TILE], const double (*LV_R
         for (i = 0; i < 3; i++) {                                                                       \
             f[i] = F[i][b];                                                                             \
             t[i] = TAU[i][b];                                                                           \
-            F[i][b] = TAU[i][b] = 0.0; /* the next stage's sums start at zero */                        \
+            F[i][b] = TAU[i][b] = LV_SUM_START; /* the next stage's sums start (kernels.h) */           \
         }                                                                                               \
         RHS;                                                                                            \
         if (STAGE < 4) {                                                                                \
@@ -275,7 +275,7 @@ typedef void (*lv_tile_fn)(double (*LV_RESTRICT T)[LV_TILE], const double (*LV_R
         for (b0 = 0; b0 < m; b0 = b1) {                                                                 \
             b1 = m - b0 < LV_TE_LANES ? m : b0 + LV_TE_LANES;                                           \
             for (i = 0; i < 3; i++)                                                                     \
-                for (b = b0; b < b1; b++) F[i][b] = TAU[i][b] = 0.0;                                    \
+                for (b = b0; b < b1; b++) F[i][b] = TAU[i][b] = LV_SUM_START;                           \
             for (s = 0; s < n_steps; s++) {                                                             \
                 LV_TE_SUMS(T, LV_TE_APPLY(KIND))                                                        \
                 LV_TE_STAGE(1, T, LV_TE_RHS(KIND), NORMALIZE)                                           \
@@ -292,7 +292,8 @@ typedef void (*lv_tile_fn)(double (*LV_RESTRICT T)[LV_TILE], const double (*LV_R
 /* The effect tiles' decoupled step (a body of class + LV_RHS_SPLIT, csrc/step.c rhs_kind: all effects built-in, none
    coupling, not all constant) when its effects fuse into no pattern: each lane one body's LV_SPLIT_RK4_H (step.c, as
    the scalar blocks), its torque sums through the body dispatch over the tile's codes in table order (LV_TE_SPLIT_SUMS)
-   and its flow constants from their affine forces (lv_effect_affine, table order from 0, as lv_split_flow_scale). */
+   and its flow constants from their affine forces (lv_effect_affine, table order from LV_SUM_START, as
+   lv_split_flow_scale). */
 #define LV_TE_SPLIT_SUMS(xs, F, t)                                                                      \
     for (e = 0; e < fx->n_eff; e++)                                                                     \
         (void)lv_effect_apply_b(fx->codes[e], pe[e], xs, (xs) + LV_STATE_V_W, mass, I, F, t)
@@ -312,7 +313,7 @@ typedef void (*lv_tile_fn)(double (*LV_RESTRICT T)[LV_TILE], const double (*LV_R
         LV_TILE_SCALES(SC)                                                                              \
         for (b = 0; b < m; b++) {                                                                       \
             LV_TE_SPLIT_LANE;                                                                           \
-            double f0[3] = {0.0, 0.0, 0.0}, kk = 0.0, tf[LV_FLOW_SIZE];                                 \
+            double f0[3] = LV_SUM_START3, kk = LV_SUM_START, tf[LV_FLOW_SIZE];                          \
             (void)I;                                                                                    \
             for (e = 0; e < fx->n_eff; e++) (void)lv_effect_affine(fx->codes[e], pe[e], mass, f0, &kk); \
             lv_translation_flow_scale(kk, f0, mass, dt, tf);                                            \
@@ -427,7 +428,7 @@ static int tile_fx_decoupled(const lv_tile_fx *fx)
         LV_TILE_SCALES(SC)                                                                              \
         for (b = 0; b < m; b++) {                                                                       \
             LV_TF_LOAD                                                                                  \
-            double f0[3] = {F0[0], F0[1], F0[2]}, kk = 0.0, tf[LV_FLOW_SIZE];                           \
+            double f0[3] = {F0[0], F0[1], F0[2]}, kk = LV_SUM_START, tf[LV_FLOW_SIZE];                  \
             (void)T0;                                                                                   \
             (void)I;                                                                                    \
             (void)lv_effect_affine(lv_c0, p0, mass, f0, &kk);                                           \
@@ -845,7 +846,7 @@ static long advance_free_soa(double *state, const double *params, const long *id
     }
     for (j = 0; j < m; j++) {
         const double *x = state + ids[j] * LV_STATE_SIZE, *prm = params + ids[j] * LV_PARAM_SIZE;
-        double F[3] = {0.0, 0.0, 0.0}, tau[3] = {0.0, 0.0, 0.0}, cf[LV_EULER_SIZE];
+        double F[3] = LV_SUM_START3, tau[3] = LV_SUM_START3, cf[LV_EULER_SIZE];
         for (k = 0; k < LV_STATE_SIZE; k++) T[k][j] = x[k];
         lv_euler_coefficients(prm + LV_PARAM_I_B, cf);
         for (k = 0; k < LV_EULER_SIZE; k++) J[k][j] = cf[k];

@@ -79,7 +79,8 @@ static void *LV_FN(line_up)(void *p)
    forms (*_c, bitwise the I_b kernels): no division but the full kernel's 1/m. */
 static inline void LV_FN(rhs)(const LV_FN(tile) *LV_RESTRICT t, long b, int kind, const LV_REAL *x, LV_REAL *xd)
 {
-    LV_REAL cf[LV_EULER_SIZE], F[3] = {0, 0, 0}, tau[3] = {0, 0, 0};
+    LV_REAL cf[LV_EULER_SIZE], F[3] = {(LV_REAL)LV_SUM_START, (LV_REAL)LV_SUM_START, (LV_REAL)LV_SUM_START},
+        tau[3] = {(LV_REAL)LV_SUM_START, (LV_REAL)LV_SUM_START, (LV_REAL)LV_SUM_START};
     long k;
     for (k = 0; k < LV_EULER_SIZE; k++) cf[k] = t->C[k][b];
     if (kind == LV_FIXED_FREE) {
@@ -286,7 +287,8 @@ static void LV_FN(tile_fill)(LV_FN(tile) *LV_RESTRICT t, const long *ids, int ki
     int i;
     for (b = 0; b < t->nt; b++) {
         const LV_REAL *x = state + ids[b] * LV_STATE_SIZE, *prm = params + ids[b] * LV_PARAM_SIZE;
-        LV_REAL F[3] = {0, 0, 0}, tau[3] = {0, 0, 0};
+        LV_REAL F[3] = {(LV_REAL)LV_SUM_START, (LV_REAL)LV_SUM_START, (LV_REAL)LV_SUM_START},
+            tau[3] = {(LV_REAL)LV_SUM_START, (LV_REAL)LV_SUM_START, (LV_REAL)LV_SUM_START};
         for (i = 0; i < LV_STATE_SIZE; i++) t->T[i][b] = x[i];
         for (i = 0; i < 3; i++) t->I[i][b] = prm[LV_PARAM_I_B + i];
         t->M[b] = prm[LV_PARAM_M];

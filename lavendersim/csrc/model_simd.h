@@ -122,7 +122,7 @@ typedef void (*lv_mtile_fn)(lv_mtile *LV_RESTRICT t, const lv_effect_ref *refs, 
         }                                                                                               \
     }                                                                                                   \
     for (i = 0; i < 3; i++)                                                                             \
-        for (b = 0; b < m; b++) t->F[i][b] = t->TAU[i][b] = 0.0;                                        \
+        for (b = 0; b < m; b++) t->F[i][b] = t->TAU[i][b] = LV_SUM_START;                               \
     for (e = 0; e < n_refs; e++) {                                                                      \
         const double *p = refs[e].p;                                                                    \
         switch (refs[e].code) { LV_EFFECT_BUILTINS(LV_MT_CASE) default: break; }                        \

@@ -240,7 +240,7 @@ static inline int rhs_class(long n_refs, int flags)
     static inline void NAME(int cls, const double *x, double m, const double *I_b, const double *K,     \
                             const lv_effect_ref *refs, long n_refs, double *out)                        \
     {                                                                                                   \
-        double F[3] = {0.0, 0.0, 0.0}, tau[3] = {0.0, 0.0, 0.0};                                        \
+        double F[3] = LV_SUM_START3, tau[3] = LV_SUM_START3;                                            \
         switch (cls) {                                                                                  \
         LV_RHS_KINDS(CASE)                                                                              \
         default: break;                                                                                 \
@@ -416,7 +416,7 @@ static inline void lv_h_store(const double *y, double *xn)
     sc[LV_INC_SCALE_HQ], out, out + LV_STATE_Q_LEN)
 #define LV_SPLIT_H_ROT_B(in, out, SUMS)                                                                    \
     do {                                                                                                \
-        double F_[3] = {0.0, 0.0, 0.0}, t_[3] = {0.0, 0.0, 0.0};                                        \
+        double F_[3] = LV_SUM_START3, t_[3] = LV_SUM_START3;                                            \
         for (i_ = 0; i_ < LV_STATE_Q_LEN; i_++) xs_[LV_STATE_Q + i_] = in[i_];                           \
         for (i_ = 0; i_ < LV_STATE_OMEGA_B_LEN; i_++) xs_[LV_STATE_OMEGA_B + i_] = in[LV_STATE_Q_LEN + i_]; \
         SUMS(xs_, F_, t_);                                                                              \
@@ -424,10 +424,10 @@ static inline void lv_h_store(const double *y, double *xn)
     } while (0)
 
 /* The translation flow's constants tf (translation_flow_scale) of a body with the effects refs (all built-in,
-   decoupled): their affine forces' F0 and k (lv_effect_affine) summed in table order from 0. */
+   decoupled): their affine forces' F0 and k (lv_effect_affine) summed in table order from LV_SUM_START. */
 static inline void lv_split_flow_scale(const lv_effect_ref *refs, long n, double m, double dt, double *tf)
 {
-    double F0[3] = {0.0, 0.0, 0.0}, k = 0.0;
+    double F0[3] = LV_SUM_START3, k = LV_SUM_START;
     long j;
     for (j = 0; j < n; j++) (void)lv_effect_affine(refs[j].code, refs[j].p, m, F0, &k);
     lv_translation_flow_scale(k, F0, m, dt, tf);
@@ -504,7 +504,7 @@ static inline void lv_const_scale(const double *c_b, double m, const double *F, 
     do {                                                                                                \
         if (forced == LV_RHS_TORQUE) {                                                                  \
             for (j = 0; j < n; j++) {                                                                   \
-                F[j][0] = F[j][1] = F[j][2] = tau[j][0] = tau[j][1] = tau[j][2] = 0.0;                  \
+                F[j][0] = F[j][1] = F[j][2] = tau[j][0] = tau[j][1] = tau[j][2] = LV_SUM_START;         \
                 effect_sums(in[j], in[j] + LV_STATE_V_W, m[j], I[j], refs[j], n_refs[j], F[j], tau[j]);  \
             }                                                                                           \
             for (j = 0; j < n; j++) LV_RHS_INC_TORQUE(in[j], m[j], S[j], F[j], tau[j], out[j]);\
@@ -583,7 +583,7 @@ static inline long advance_free_rk4(double *state, const double *params, const l
         m[j] = params[ids[j] * LV_PARAM_SIZE + LV_PARAM_M];
         refs[j] = ix->refs + ix->start[ids[j]];
         n_refs[j] = ix->start[ids[j] + 1] - ix->start[ids[j]];
-        F[j][0] = F[j][1] = F[j][2] = tau[j][0] = tau[j][1] = tau[j][2] = 0.0;
+        F[j][0] = F[j][1] = F[j][2] = tau[j][0] = tau[j][1] = tau[j][2] = LV_SUM_START;
         if (constant && forced != LV_RHS_FREE) {
             effect_sums(x[j], x[j] + LV_STATE_V_W, m[j], I[j], refs[j], n_refs[j], F[j], tau[j]);
             lv_const_scale(cf[j], m[j], F[j], tau[j], dt, LV_CONST_OF(FORCE, forced), Kc[j]);
@@ -920,7 +920,7 @@ static inline void model_rhs_of(const double *y, const double *u, double m, cons
                                 const double *kw, int kind, int needs_v, int builtin, const lv_effect_ref *refs,
                                 long n_refs, double *yd)
 {
-    double F[3] = {0.0, 0.0, 0.0}, tau[3] = {0.0, 0.0, 0.0}, pk[3], vk[3];
+    double F[3] = LV_SUM_START3, tau[3] = LV_SUM_START3, pk[3], vk[3];
     const double *v = y + LV_STATE_V_W;
     int i;
     if (needs_v) {
@@ -1570,8 +1570,8 @@ static long advance_rk(double *state, const double *params, long b, const lv_mod
 /* Force at the COM (world) and torque (body frame) of the effects on a plain body. */
 static void plain_loads(const body_ctx *c, const double *x, double *F, double *tau_b)
 {
-    double tau_w[3] = {0.0, 0.0, 0.0};
-    F[0] = F[1] = F[2] = 0.0;
+    double tau_w[3] = LV_SUM_START3;
+    F[0] = F[1] = F[2] = LV_SUM_START;
     effect_sums(x, x + LV_STATE_V_W, c->m, c->prm + LV_PARAM_I_B, c->refs, c->n_refs, F, tau_w);
     lv_world_to_body(x + LV_STATE_Q, tau_w, tau_b);
 }
@@ -1621,7 +1621,7 @@ static int gyro_newton(const double *I, const double *w, const double *tau_b, do
    Returns 0 when the Newton solve did not converge (x then holds an unspecified state). */
 static int gyro_step(const body_ctx *c, double *x, double h)
 {
-    double F[3] = {0.0, 0.0, 0.0}, tb[3] = {0.0, 0.0, 0.0}, w1[3];
+    double F[3] = LV_SUM_START3, tb[3] = LV_SUM_START3, w1[3];
     int ok;
     if (c->has) plain_loads(c, x, F, tb);
     ok = gyro_newton(c->prm + LV_PARAM_I_B, x + LV_STATE_OMEGA_B, tb, h, w1);
