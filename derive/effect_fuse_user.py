@@ -18,9 +18,10 @@ kernels.h's LV_RHS_INC_<kind>, as the stage passes call it); results are bitwise
 
 The copies keep GCC's default instruction scheduling, unlike the engine's AVX-512 tiles (batch_simd.h
 LV_TILE_H_SCHED_avx512, the pre-register-allocation scheduler): measured on the guide's gravity_gradient (session 24,
-GCC 12, Zen 4), that scheduler makes this tile slower. Its lane loop is 669 instructions per 8 bodies (286 vmulpd,
-223 vaddpd + 56 vsubpd, 9 vdivpd, 5 vsqrtpd; the plain torque-free tile's: 102 vmulpd, 101 adds); the scheduler
-keeps the same arithmetic and raises the stack references from 75 to 95. ``lavendersim bench --only effect_cost``:
+GCC 12, Zen 4), that scheduler makes this tile slower. Its lane loop was 669 instructions per 8 bodies then (286
+vmulpd, 223 vaddpd + 56 vsubpd, 9 vdivpd, 5 vsqrtpd; the plain torque-free tile's: 102 vmulpd, 101 adds; 512 in
+session 26: 228 vmulpd, 141 vaddpd + 68 vsubpd, 4 vdivpd, 4 vsqrtpd, 42 stack references); the scheduler kept the
+same arithmetic and raised the stack references from 75 to 95. ``lavendersim bench --only effect_cost``:
 14.0-14.2 against 13.6-13.7 ns per body-step at N = 1e3 (3 alternating runs, load 5-6); the tile alone, called
 through a pointer on 64 bodies: 12.9 against 12.3-12.5. "sched-pressure" with it, a 256-bit copy and a lane
 loop unrolled by 2 were no faster either.
